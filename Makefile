@@ -1,0 +1,35 @@
+# Hindrax onboard stack. `make run` runs the main job, `make test` the tests; both set up .venv first.
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.hindrax-setup-done
+# Every process started from here keeps ROS 2 discovery on loopback (ros2-pip.md, "Network").
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+
+SETUP_INPUTS := requirements.txt scripts/setup_venv.sh \
+	src/hindrax_msgs/CMakeLists.txt src/hindrax_msgs/package.xml \
+	$(wildcard src/hindrax_msgs/msg/*.msg src/hindrax_msgs/srv/*.srv src/hindrax_msgs/action/*.action) \
+	src/hindrax_drivers/setup.py src/hindrax_drivers/package.xml \
+	src/hindrax_ident/setup.py src/hindrax_ident/package.xml
+
+.PHONY: setup run test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): $(SETUP_INPUTS)
+	VENV=$(VENV) bash scripts/setup_venv.sh
+	touch $@
+
+# Main job: a complete virtual pool identification campaign (options: make run RUN_ARGS="--dofs surge").
+run: setup
+	$(VENV)/bin/hindrax run $(RUN_ARGS)
+
+# All tests (unit, emulator-to-driver, multi-process ROS, end to end). Extra pytest options: PYTEST_ARGS=...
+test: setup
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+bench: setup
+	$(PY) -m hindrax_ident.bench $(BENCH_ARGS)
+
+clean:
+	rm -rf build $(VENV) .pytest_cache .hypothesis

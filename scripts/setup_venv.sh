@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Create (or refresh) the project's virtual environment: ROS 2 Jazzy from the PyPI wheels, the project's
+# Python dependencies (requirements.txt), hindrax_msgs built with rosidl and installed into the venv, and
+# the two Python packages installed in editable mode. Called by `make setup`; safe to re-run.
+# Facts this relies on: ../shared/reference/ros2-pip.md ("Custom interfaces build the standard way").
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV=${VENV:-.venv}
+PYTHON=${PYTHON:-python3}
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+
+ver=$("$PYTHON" -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+if [ "$ver" != "3.11" ]; then
+  echo "setup: ROS 2 Jazzy wheels need CPython 3.11 (found $ver at $(command -v "$PYTHON")); set PYTHON=python3.11" >&2
+  exit 1
+fi
+arch=$(uname -m)
+if [ "$arch" != "x86_64" ]; then
+  echo "setup: the ros-jazzy-* wheels exist for x86_64 only (this is $arch). On the Raspberry Pi use ROS 2 Jazzy" \
+       "from apt or the docker/ image and build ros_ws with colcon (README, 'Running on the Pi')." >&2
+  exit 1
+fi
+for tool in cmake ninja; do
+  if ! command -v $tool >/dev/null 2>&1; then
+    echo "setup: $tool not found; installing it into the venv from PyPI" >&2
+    NEED_BUILD_TOOLS=1
+  fi
+done
+
+[ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"
+PY="$VENV/bin/python"
+"$PY" -m pip install -q --upgrade pip
+"$PY" -m pip install -q -r requirements.txt
+if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then "$PY" -m pip install -q 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
+export PATH="$PWD/$VENV/bin:$PATH"
+
+# The wheels' rosidl_generator_py CMake exports hard-code the wheel build host's include directories;
+# point them at this venv's Python and numpy headers (ros2-pip.md).
+py_inc=$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+np_inc=$("$PY" -c 'import numpy; print(numpy.get_include())')
+{ grep -rlZ --include='*.cmake' -e '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null || true; } | \
+  xargs -0 -r sed -i \
+    -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#${np_inc}#g" \
+    -e "s#/opt/python/cp311-cp311/include/python3.11#${py_inc}#g"
+
+# Build and install hindrax_msgs into the venv prefix (importable with no environment variables).
+venv_abs=$(cd "$VENV" && pwd)
+build=build/hindrax_msgs
+mkdir -p build
+cmake -S src/hindrax_msgs -B "$build" -G Ninja -Wno-dev \
+  -DCMAKE_PREFIX_PATH="$venv_abs" -DCMAKE_INSTALL_PREFIX="$venv_abs" \
+  -DPython3_EXECUTABLE="$venv_abs/bin/python3" -DBUILD_TESTING=OFF >"$build.configure.log" 2>&1 \
+  || { mkdir -p build; cat "$build.configure.log" >&2; exit 1; }
+cmake --build "$build" -j2 >"$build.build.log" 2>&1 || { cat "$build.build.log" >&2; exit 1; }
+cmake --install "$build" >/dev/null
+
+# The two ament_python packages, editable (colcon builds the same setup.py on the Pi).
+"$PY" -m pip install -q --no-deps --no-build-isolation -e src/hindrax_drivers -e src/hindrax_ident
+
+# Smoke check: the interfaces and rclpy import in the venv.
+"$PY" -c 'import rclpy, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_ident'
+echo "setup: ready in $VENV"

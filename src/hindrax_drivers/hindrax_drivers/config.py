@@ -1,0 +1,857 @@
+"""Vehicle configuration: schema, validation, typed objects and ROS-parameter conversion.
+
+One YAML file per vehicle (``ros_ws/config/hindrax.yaml``) in the ros-args params-file layout::
+
+    /**:
+      ros__parameters:
+        vehicle:
+          mass_kg: 15.22
+        ...
+
+Nested keys become dotted ROS parameter names (``vehicle.mass_kg``). Every key of the file is declared in
+:data:`SCHEMA` below with its type, unit (in the key name), allowed range and a one-line meaning; the
+loader rejects unknown keys, wrong types and out-of-range values, reporting each as one line naming the
+key, the value and the allowed range (design.md §4). Geometry is in the marine body frame FRD with the
+origin at the centre of gravity (design.md §3); hydrodynamic coefficients are stored as positive numbers
+(Fossen/SNAME).
+
+Thruster-specific keys use the thruster names of ``thrusters.names`` as a path segment
+(``thrusters.t3.esc_channel``); the schema writes that segment as ``<thruster>``.
+
+Why our own validator rather than a schema library: the errors must name ROS parameter keys in the exact
+one-line form users see from ``hindrax config check``, and the same checks must run on a YAML file and on
+the parameters of a running rclpy node. No maintained library covers ROS parameter overrides.
+
+Errors: :class:`ConfigError` (a ``ValueError``) carrying a list of :class:`ConfigIssue`.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+import yaml
+
+DOFS: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
+"""The six degrees of freedom in SNAME order (nu = [u v w p q r], tau = [X Y Z K M N])."""
+
+TRANSLATIONAL_DOFS = DOFS[:3]
+ROTATIONAL_DOFS = DOFS[3:]
+
+#: Sections a configuration file may contain (top level under ``ros__parameters``).
+SECTIONS: tuple[str, ...] = (
+    "vehicle", "environment", "hydrodynamics", "thrusters", "esc", "lights", "sensors", "pool", "limits",
+    "identification", "simulation", "recording",
+)
+
+_FLOAT = "float"
+_INT = "int"
+_STR = "str"
+_BOOL = "bool"
+_FLOATS = "float[]"
+_STRS = "str[]"
+
+
+@dataclass(frozen=True)
+class Spec:
+    """Declaration of one configuration key.
+
+    kind: one of "float", "int", "str", "bool", "float[]", "str[]".
+    lo/hi: inclusive numeric bounds (for lists: of every element). length: required list length.
+    choices: allowed values (str or int). doc: one-line meaning (with unit and source).
+    """
+
+    kind: str
+    doc: str
+    lo: float | None = None
+    hi: float | None = None
+    length: int | None = None
+    choices: tuple | None = None
+    unit_vector: bool = False
+
+    def allowed(self) -> str:
+        """Human-readable allowed range, as printed in error lines."""
+        if self.choices is not None:
+            return "one of " + ", ".join(str(c) for c in self.choices)
+        base = {_FLOAT: "number", _INT: "integer", _STR: "string", _BOOL: "true/false",
+                _FLOATS: "list of numbers", _STRS: "list of strings"}[self.kind]
+        if self.length is not None:
+            base += f" of length {self.length}"
+        if self.lo is not None or self.hi is not None:
+            lo = "-inf" if self.lo is None else f"{self.lo:g}"
+            hi = "+inf" if self.hi is None else f"{self.hi:g}"
+            base += f" in [{lo}, {hi}]"
+        if self.unit_vector:
+            base += ", unit length"
+        return base
+
+
+def _f(doc: str, lo: float | None = None, hi: float | None = None) -> Spec:
+    return Spec(_FLOAT, doc, lo, hi)
+
+
+def _i(doc: str, lo: int | None = None, hi: int | None = None, choices: tuple | None = None) -> Spec:
+    return Spec(_INT, doc, lo, hi, choices=choices)
+
+
+def _s(doc: str, choices: tuple | None = None) -> Spec:
+    return Spec(_STR, doc, choices=choices)
+
+
+def _b(doc: str) -> Spec:
+    return Spec(_BOOL, doc)
+
+
+def _v(doc: str, length: int, lo: float | None = None, hi: float | None = None, unit: bool = False) -> Spec:
+    return Spec(_FLOATS, doc, lo, hi, length=length, unit_vector=unit)
+
+
+_T = "<thruster>"
+
+SCHEMA: dict[str, Spec] = {
+    # --- vehicle (seed 000 §2, seed 003 §2.1) ---
+    "vehicle.name": _s("vehicle name"),
+    "vehicle.mass_kg": _f("total mass in air, kg (seed 003 §2.1)", 0.1, 1000.0),
+    "vehicle.displaced_volume_m3": _f("displaced volume, m^3 (seed 003 §2.1)", 1e-5, 10.0),
+    "vehicle.length_m": _f("overall length (x), m (seed 003 §2.1)", 0.01, 10.0),
+    "vehicle.width_m": _f("overall width (y), m (seed 003 §2.1)", 0.01, 10.0),
+    "vehicle.height_m": _f("overall height (z), m (seed 003 §2.1)", 0.01, 10.0),
+    "vehicle.net_buoyancy_n": _f("stated net buoyancy (buoyancy - weight), N; checked against (rho V - m) g",
+                                 -100.0, 100.0),
+    "vehicle.inertia_kg_m2": _v("principal moments of inertia [Ixx, Iyy, Izz] about the CG, kg m^2", 3, 1e-6, 1e4),
+    "vehicle.products_of_inertia_kg_m2": _v("products of inertia [Ixy, Ixz, Iyz], kg m^2", 3, -1e4, 1e4),
+    "vehicle.centre_of_gravity_frd_m": _v("CG relative to the body origin, FRD, m", 3, -5.0, 5.0),
+    "vehicle.centre_of_buoyancy_frd_m": _v("CB relative to the body origin, FRD, m", 3, -5.0, 5.0),
+    # --- environment ---
+    "environment.water_density_kg_m3": _f("water density, kg/m^3 (seeds use 1000)", 900.0, 1100.0),
+    "environment.gravity_m_s2": _f("gravitational acceleration, m/s^2", 9.7, 9.9),
+    "environment.kinematic_viscosity_m2_s": _f("kinematic viscosity of water, m^2/s (seed 000 §4)", 1e-7, 1e-5),
+    "environment.surface_pressure_pa": _f("atmospheric pressure at the surface, Pa", 50000.0, 120000.0),
+    # --- hydrodynamics (positive numbers; seed 000 Table 6, seed 003 Table 3) ---
+    "hydrodynamics.added_mass_coupling": _v(
+        "off-diagonal added-mass terms added to diag(added_mass), row-major 6x6 (kg, kg m, kg m^2); "
+        "diagonal entries must be 0", 36, -1e4, 1e4),
+}
+for _dof in TRANSLATIONAL_DOFS:
+    SCHEMA[f"hydrodynamics.{_dof}.added_mass_kg"] = _f(f"{_dof} added mass, kg", 0.0, 1e4)
+    if _dof == "heave":
+        for _d in ("positive", "negative"):
+            SCHEMA[f"hydrodynamics.heave.linear_damping_{_d}_kg_s"] = _f(
+                f"heave linear damping for {_d} w (positive = down), kg/s", 0.0, 1e4)
+            SCHEMA[f"hydrodynamics.heave.quadratic_damping_{_d}_kg_m"] = _f(
+                f"heave quadratic damping for {_d} w (positive = down), kg/m", 0.0, 1e4)
+    else:
+        SCHEMA[f"hydrodynamics.{_dof}.linear_damping_kg_s"] = _f(f"{_dof} linear damping, kg/s", 0.0, 1e4)
+        SCHEMA[f"hydrodynamics.{_dof}.quadratic_damping_kg_m"] = _f(f"{_dof} quadratic damping, kg/m", 0.0, 1e4)
+for _dof in ROTATIONAL_DOFS:
+    SCHEMA[f"hydrodynamics.{_dof}.added_mass_kg_m2"] = _f(f"{_dof} added moment of inertia, kg m^2", 0.0, 1e3)
+    SCHEMA[f"hydrodynamics.{_dof}.linear_damping_kg_m2_s"] = _f(
+        f"{_dof} linear damping, N m/(rad/s) = kg m^2/s", 0.0, 1e3)
+    SCHEMA[f"hydrodynamics.{_dof}.quadratic_damping_kg_m2"] = _f(
+        f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
+
+SCHEMA.update({
+    # --- thrusters (seed 003 §2.2, eq. 1, Table 2, §4 eq. 9) ---
+    "thrusters.names": Spec(_STRS, "thruster names in allocation order"),
+    "thrusters.pulse_width_min_us": _f("lowest pulse width (full reverse), us (seed 003 §2.2.1)", 500.0, 2500.0),
+    "thrusters.pulse_width_neutral_us": _f("neutral pulse width (stop), us (seed 003 §2.2.1)", 500.0, 2500.0),
+    "thrusters.pulse_width_max_us": _f("highest pulse width (full forward), us (seed 003 §2.2.1)", 500.0, 2500.0),
+    "thrusters.deadband_us": _f("half-width of the ESC deadband around neutral, us (hardware.md §5.2)", 0.0, 200.0),
+    "thrusters.curve_negative": _v("cubic [c4, c3, c2, c1] for P below neutral, N (seed 003 eq. 1)", 4),
+    "thrusters.curve_positive": _v("cubic [c4, c3, c2, c1] for P above neutral, N (seed 003 eq. 1)", 4),
+    "thrusters.time_constant_s": _f("first-order thruster lag time constant, s", 0.0, 5.0),
+    "thrusters.allocation_mode": _s("saturation handling", ("uniform", "priority")),
+    "thrusters.priority_dofs": Spec(_STRS, "DOFs kept exact in priority mode", choices=DOFS),
+    "thrusters.wrench_timeout_s": _f("wrench older than this is rejected as stale, s", 0.01, 10.0),
+    f"thrusters.{_T}.position_frd_m": _v("thruster position relative to the CG, FRD, m", 3, -5.0, 5.0),
+    f"thrusters.{_T}.direction_frd": _v("unit thrust direction for positive thrust, FRD", 3, -1.0, 1.0, unit=True),
+    f"thrusters.{_T}.esc_channel": _i("PCA9685 output channel", 0, 15),
+    f"thrusters.{_T}.reversed": _b("mirror the pulse width about neutral (propeller/wiring reversed)"),
+    f"thrusters.{_T}.trim_us": _f("pulse-width trim added after allocation, us", -100.0, 100.0),
+    f"thrusters.{_T}.allocation_weight": _f("weight of this thruster in the weighted pseudo-inverse", 1e-3, 1e3),
+    # --- ESC output: PCA9685 (hardware.md §5.1-5.2) ---
+    "esc.i2c_bus": _i("Linux I2C bus number (/dev/i2c-N)", 0, 31),
+    "esc.i2c_address": _i("PCA9685 7-bit address", 0x40, 0x7F),
+    "esc.pwm_frequency_hz": _f("PWM frequency, Hz (Basic ESC max 400 Hz)", 24.0, 400.0),
+    "esc.oscillator_hz": _f("calibrated PCA9685 oscillator frequency, Hz (23-27 MHz measured)", 20e6, 30e6),
+    "esc.arming_time_s": _f("time at neutral before arming is accepted, s (hardware.md §5.2: BR holds 7 s)",
+                            0.0, 60.0),
+    "esc.watchdog_timeout_s": _f("no command for this long -> all neutral, s", 0.02, 10.0),
+    "esc.output_rate_hz": _f("rate the outputs are refreshed and the watchdog checked, Hz", 1.0, 400.0),
+    "esc.slew_rate_us_per_s": _f("max pulse-width change rate, us/s (0 = off)", 0.0, 1e6),
+    # --- lights (seed 003 §2.1: PWM also drives the lights) ---
+    "lights.esc_channel": _i("PCA9685 channel of the lights", 0, 15),
+    "lights.pulse_width_off_us": _f("pulse width for lights off, us", 500.0, 2500.0),
+    "lights.pulse_width_full_us": _f("pulse width for full brightness, us", 500.0, 2500.0),
+    # --- sensors (seed 003 Table 1; hardware.md) ---
+    "sensors.dvl75.port": _s("serial device path or pyserial URL of the DVL-75"),
+    "sensors.dvl75.baud_rate": _i("baud rate (hardware.md §1.1)", choices=(9600, 19200, 38400, 57600, 115200,
+                                                                           230400, 460800, 921600)),
+    "sensors.dvl75.position_frd_m": _v("DVL position relative to the CG, FRD, m", 3, -5.0, 5.0),
+    "sensors.dvl75.sensor_orientation_rpy_rad": _v(
+        "SET-SENSOR-ORIENTATION roll, pitch, heading of the sensor in the vehicle, rad (hardware.md §1.4)",
+        3, -math.pi, math.pi),
+    "sensors.dvl75.speed_of_sound_m_s": _f("speed of sound sent to the DVL, m/s (hardware.md §1.4)", 1100.0, 1950.0),
+    "sensors.dvl75.velocity_std_m_s": _f("1-sigma velocity error used for the covariance, m/s", 0.0, 1.0),
+    "sensors.ping1d.port": _s("serial device path or pyserial URL of the Ping altimeter"),
+    "sensors.ping1d.baud_rate": _i("baud rate (hardware.md §2.1)", choices=(9600, 115200)),
+    "sensors.ping1d.position_frd_m": _v("sonar position relative to the CG, FRD, m", 3, -5.0, 5.0),
+    "sensors.ping1d.speed_of_sound_m_s": _f("speed of sound, m/s (fresh water about 1481)", 1000.0, 2000.0),
+    "sensors.ping1d.ping_interval_s": _f("interval between pings, s", 0.01, 10.0),
+    "sensors.ping1d.mode_auto": _b("let the sonar choose range and gain"),
+    "sensors.ping1d.field_of_view_rad": _f("beam width for sensor_msgs/Range, rad", 0.01, math.pi),
+    "sensors.ping1d.min_range_m": _f("minimum range for sensor_msgs/Range, m", 0.0, 100.0),
+    "sensors.ping1d.max_range_m": _f("maximum range for sensor_msgs/Range, m", 0.1, 300.0),
+    "sensors.ms5837.i2c_bus": _i("Linux I2C bus number", 0, 31),
+    "sensors.ms5837.i2c_address": _i("MS5837 7-bit address (fixed 0x76)", choices=(0x76,)),
+    "sensors.ms5837.variant": _s("sensor variant (auto = C1 heuristic, hardware.md §3.9)", ("30BA", "02BA", "auto")),
+    "sensors.ms5837.oversampling": _i("oversampling ratio (hardware.md §3.1)",
+                                      choices=(256, 512, 1024, 2048, 4096, 8192)),
+    "sensors.ms5837.rate_hz": _f("pressure publication rate, Hz", 0.1, 50.0),
+    "sensors.ms5837.position_frd_m": _v("pressure port position relative to the CG, FRD, m", 3, -5.0, 5.0),
+    "sensors.icm20948.i2c_bus": _i("Linux I2C bus number", 0, 31),
+    "sensors.icm20948.i2c_address": _i("ICM-20948 7-bit address (AD0 low 0x68, high 0x69)", choices=(0x68, 0x69)),
+    "sensors.icm20948.accel_full_scale_g": _i("accelerometer full scale, g", choices=(2, 4, 8, 16)),
+    "sensors.icm20948.gyro_full_scale_dps": _i("gyroscope full scale, deg/s", choices=(250, 500, 1000, 2000)),
+    "sensors.icm20948.dlpf_config": _i("ACCEL/GYRO_DLPFCFG register code (hardware.md §4.4)", 0, 7),
+    "sensors.icm20948.sample_rate_hz": _f("output data rate and publication rate, Hz", 1.0, 1125.0),
+    "sensors.icm20948.magnetometer_mode": _s("how the AK09916 is reached (hardware.md §4.6)",
+                                             ("i2c_master", "bypass")),
+    "sensors.icm20948.estimate_gyro_bias": _b("estimate gyro bias at start-up while the vehicle is still"),
+    "sensors.icm20948.gyro_bias_duration_s": _f("duration of the start-up gyro-bias estimate, s", 0.1, 60.0),
+    "sensors.icm20948.mounting_rpy_rad": _v("rotation of the sensor frame in base_link (FLU), rad",
+                                            3, -math.pi, math.pi),
+    # --- pool (seed 003 §4) ---
+    "pool.length_m": _f("pool length (north, x), m", 1.0, 200.0),
+    "pool.width_m": _f("pool width (east, y), m", 1.0, 200.0),
+    "pool.depth_m": _f("water depth, m", 0.3, 100.0),
+    "pool.margin_m": _f("keep-out margin from walls and floor for manoeuvres, m", 0.0, 10.0),
+    "pool.start_position_ned_m": _v("vehicle start position (north, east, down) from the pool corner, m", 3,
+                                    -1.0, 200.0),
+    "pool.start_heading_rad": _f("vehicle start heading, rad (NED yaw)", -math.pi, math.pi),
+    # --- limits (design.md §8) ---
+    "limits.max_depth_m": _f("abort below this depth, m", 0.0, 100.0),
+    "limits.min_altitude_m": _f("abort closer than this to the floor, m", 0.0, 10.0),
+    "limits.max_roll_rad": _f("abort beyond this roll, rad", 0.0, math.pi),
+    "limits.max_pitch_rad": _f("abort beyond this pitch, rad", 0.0, math.pi / 2),
+    # --- identification (design.md §5; seed 003 §4) ---
+    "identification.levels_per_dof": _i("thrust levels in each DOF's ladder", 1, 50),
+    "identification.level_fraction_min": _f("smallest level as a fraction of the DOF's authority", 0.01, 1.0),
+    "identification.level_fraction_max": _f("largest level as a fraction of the DOF's authority", 0.01, 1.0),
+    "identification.forgetting_factor": _f("RLS forgetting factor lambda", 0.9, 1.0),
+    "identification.estimate_rate_hz": _f("RLS update rate, Hz", 1.0, 400.0),
+    "identification.publish_rate_hz": _f("HydroEstimate publication rate, Hz", 0.1, 50.0),
+    "identification.altitude_setpoint_m": _f("altitude held during manoeuvres, m (seed 003 §4: 0.8-1.0 m)",
+                                             0.1, 50.0),
+    "identification.roll_test_angle_rad": _f("roll test turns back at this angle, rad (seed 003 §4.2: 30 deg)",
+                                             0.01, 1.5),
+    "identification.pitch_test_angle_rad": _f("pitch test turns back at this angle, rad (seed 003 §4.2: 40 deg)",
+                                              0.01, 1.5),
+    "identification.max_level_duration_s": _f("longest time one level is held, s", 1.0, 600.0),
+    "identification.converged_relative_std": _f("converged when every std/|value| is below this", 0.001, 1.0),
+    # --- simulation (design.md §6) ---
+    "simulation.step_s": _f("fixed integration step, s", 1e-4, 0.05),
+    "simulation.real_time_factor": _f("simulated seconds per wall second (0 = as fast as possible)", 0.0, 1000.0),
+    "simulation.seed": _i("random seed of the sensor noise", 0, 2**31 - 1),
+    "simulation.clock_rate_hz": _f("rate /clock is published, in simulated time, Hz", 1.0, 1000.0),
+    # --- recording (design.md §7) ---
+    "recording.output_root": _s("directory new bags are created in"),
+    "recording.compression": _s("chunk compression", ("zstd", "lz4", "none")),
+    "recording.chunk_size_bytes": _i("MCAP chunk size, bytes", 1024, 64 * 1024 * 1024),
+    "recording.split_size_bytes": _i("start a new file beyond this size, bytes (0 = never)", 0, 2**40),
+    "recording.split_duration_s": _f("start a new file after this duration, s (0 = never)", 0.0, 86400.0),
+})
+
+#: Optional keys: absent is fine; present must validate. Everything else in SCHEMA is required.
+OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics")
+
+# Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
+for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837", "pa", 1e4),
+                         ("icm20948_accel", "m_s2", 10.0), ("icm20948_gyro", "rad_s", 1.0),
+                         ("icm20948_mag", "t", 1e-3), ("dvl75_attitude", "rad", 1.0)):
+    SCHEMA[f"simulation.sensors.{_dev}.noise_std_{_unit}"] = _f(f"{_dev} white-noise 1-sigma, {_unit}", 0.0, _hi)
+    SCHEMA[f"simulation.sensors.{_dev}.bias_{_unit}"] = _f(f"{_dev} constant bias, {_unit}", -_hi, _hi)
+    SCHEMA[f"simulation.sensors.{_dev}.rate_hz"] = _f(f"{_dev} output rate, Hz", 0.1, 2000.0)
+    SCHEMA[f"simulation.sensors.{_dev}.dropout_probability"] = _f(f"{_dev} probability a sample is lost", 0.0, 1.0)
+SCHEMA["simulation.sensors.dvl75.scale_error_fraction"] = _f(
+    "1-sigma multiplicative velocity error per report (seed 003 Table 1: mean error about 5 %)", 0.0, 0.5)
+SCHEMA["simulation.sensors.dvl75.min_altitude_m"] = _f("DVL loses lock below this altitude, m", 0.0, 10.0)
+SCHEMA["simulation.sensors.dvl75.max_altitude_m"] = _f("DVL loses lock above this altitude, m", 0.1, 200.0)
+SCHEMA["simulation.sensors.dvl75.wall_lock_loss_distance_m"] = _f(
+    "DVL loses lock closer than this to a wall, m (0 = never)", 0.0, 10.0)
+SCHEMA["recording.topics"] = Spec(_STRS, "topics recorded by default (empty list not allowed by ROS: omit the key "
+                                         "to record all topics)")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Errors
+
+
+@dataclass(frozen=True)
+class ConfigIssue:
+    """One validation error: the key, the offending value and the allowed range."""
+
+    key: str
+    value: Any
+    allowed: str
+
+    def line(self) -> str:
+        """One line: ``key = value: allowed ...`` (``unknown key`` / ``missing`` where that is the problem)."""
+        if self.allowed.startswith("no such key"):
+            return f"{self.key} = {_show(self.value)}: unknown key{self.allowed[len('no such key'):]}"
+        if self.value == "<missing>":
+            return f"{self.key} is missing: allowed {self.allowed}"
+        return f"{self.key} = {_show(self.value)}: allowed {self.allowed}"
+
+
+class ConfigError(ValueError):
+    """Raised when a configuration does not validate. ``issues`` lists every problem found.
+
+    ``str(error)`` is the first issue as one line (what a node prints when it refuses to start).
+    """
+
+    def __init__(self, issues: Sequence[ConfigIssue], source: str = ""):
+        self.issues = list(issues)
+        self.source = source
+        prefix = f"{source}: " if source else ""
+        first = self.issues[0].line() if self.issues else "invalid configuration"
+        more = f" (and {len(self.issues) - 1} more)" if len(self.issues) > 1 else ""
+        super().__init__(f"{prefix}{first}{more}")
+
+    def lines(self) -> list[str]:
+        """Every issue as one line each."""
+        return [i.line() for i in self.issues]
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, str):
+        return repr(value)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_show(v) for v in value) + "]"
+    return str(value)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Flattening and validation
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Flatten nested mappings into dotted keys (``{"a": {"b": 1}} -> {"a.b": 1}``); lists are leaves."""
+    out: dict[str, Any] = {}
+    for k, v in tree.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _schema_key(key: str, thruster_names: Iterable[str]) -> str | None:
+    """Map a concrete key to its SCHEMA entry (thruster name -> <thruster>), or None if unknown."""
+    if key in SCHEMA:
+        return key
+    parts = key.split(".")
+    if len(parts) == 3 and parts[0] == "thrusters" and parts[1] in set(thruster_names):
+        generic = f"thrusters.{_T}.{parts[2]}"
+        if generic in SCHEMA:
+            return generic
+    return None
+
+
+def _is_optional(key: str) -> bool:
+    return any(key.startswith(p) for p in OPTIONAL_PREFIXES)
+
+
+def _check_value(key: str, spec: Spec, value: Any) -> tuple[Any, ConfigIssue | None]:
+    """Coerce and check one value. Returns (coerced value, issue or None)."""
+    bad = ConfigIssue(key, value, spec.allowed())
+
+    def number(x: Any) -> float | None:
+        if isinstance(x, bool) or not isinstance(x, (int, float, np.integer, np.floating)):
+            return None
+        x = float(x)
+        return x if math.isfinite(x) else None
+
+    if spec.kind == _FLOAT:
+        x = number(value)
+        if x is None:
+            return value, bad
+        if (spec.lo is not None and x < spec.lo) or (spec.hi is not None and x > spec.hi):
+            return value, bad
+        return x, None
+    if spec.kind == _INT:
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            return value, bad
+        x = int(value)
+        if spec.choices is not None and x not in spec.choices:
+            return value, bad
+        if (spec.lo is not None and x < spec.lo) or (spec.hi is not None and x > spec.hi):
+            return value, bad
+        return x, None
+    if spec.kind == _STR:
+        if not isinstance(value, str):
+            return value, bad
+        if spec.choices is not None and value not in spec.choices:
+            return value, bad
+        return value, None
+    if spec.kind == _BOOL:
+        if not isinstance(value, bool):
+            return value, bad
+        return value, None
+    if spec.kind == _FLOATS:
+        if not isinstance(value, (list, tuple, np.ndarray)):
+            return value, bad
+        xs = [number(v) for v in value]
+        if any(x is None for x in xs):
+            return value, bad
+        if spec.length is not None and len(xs) != spec.length:
+            return value, bad
+        if any((spec.lo is not None and x < spec.lo) or (spec.hi is not None and x > spec.hi) for x in xs):
+            return value, bad
+        if spec.unit_vector and abs(math.sqrt(sum(x * x for x in xs)) - 1.0) > 1e-3:
+            return value, bad
+        return xs, None
+    if spec.kind == _STRS:
+        if not isinstance(value, (list, tuple)) or not value or not all(isinstance(v, str) for v in value):
+            return value, bad
+        if spec.choices is not None and any(v not in spec.choices for v in value):
+            return value, bad
+        return list(value), None
+    raise AssertionError(f"unknown spec kind {spec.kind}")  # pragma: no cover - schema bug
+
+
+def validate_flat(flat: Mapping[str, Any], sections: Iterable[str] = SECTIONS,
+                  source: str = "") -> dict[str, Any]:
+    """Validate a flat dotted-key mapping against :data:`SCHEMA`.
+
+    Keys outside ``sections`` are an error (unknown section). Returns the coerced mapping.
+    Raises :class:`ConfigError` listing every issue (unknown keys, wrong types, out-of-range values,
+    missing required keys, cross-key inconsistencies).
+    """
+    issues: list[ConfigIssue] = []
+    sections = tuple(sections)
+    names_raw = flat.get("thrusters.names", [])
+    names = [n for n in names_raw if isinstance(n, str)] if isinstance(names_raw, (list, tuple)) else []
+    out: dict[str, Any] = {}
+    for key, value in flat.items():
+        if key.split(".")[0] not in sections:
+            issues.append(ConfigIssue(key, value, "no such key (sections: " + ", ".join(sections) + ")"))
+            continue
+        skey = _schema_key(key, names)
+        if skey is None:
+            issues.append(ConfigIssue(key, value, "no such key" + _suggest(key, names)))
+            continue
+        coerced, issue = _check_value(key, SCHEMA[skey], value)
+        if issue:
+            issues.append(issue)
+        else:
+            out[key] = coerced
+    # required keys
+    for skey, spec in SCHEMA.items():
+        if skey.split(".")[0] not in sections or _is_optional(skey):
+            continue
+        concrete = [skey.replace(_T, n) for n in names] if _T in skey else [skey]
+        for key in concrete:
+            if key not in flat:
+                issues.append(ConfigIssue(key, "<missing>", spec.allowed()))
+    if not issues:
+        issues.extend(_cross_checks(out))
+    if issues:
+        raise ConfigError(issues, source)
+    return out
+
+
+def _suggest(key: str, names: Sequence[str]) -> str:
+    import difflib
+
+    known = [k.replace(_T, names[0]) if (_T in k and names) else k for k in SCHEMA]
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.8)
+    return f" (did you mean {close[0]}?)" if close else ""
+
+
+def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
+    """Checks across keys. Only run when every key is individually valid."""
+    issues: list[ConfigIssue] = []
+    if "thrusters.names" in c:
+        names = c["thrusters.names"]
+        if len(set(names)) != len(names):
+            issues.append(ConfigIssue("thrusters.names", names, "unique names"))
+        for n in names:
+            if not re.fullmatch(r"[a-z][a-z0-9_]*", n):
+                issues.append(ConfigIssue("thrusters.names", names, "names matching [a-z][a-z0-9_]*"))
+        if "thrusters.pulse_width_min_us" in c:
+            lo, mid, hi = (c["thrusters.pulse_width_min_us"], c["thrusters.pulse_width_neutral_us"],
+                           c["thrusters.pulse_width_max_us"])
+            if not lo < mid < hi:
+                issues.append(ConfigIssue("thrusters.pulse_width_neutral_us", mid,
+                                          f"strictly between pulse_width_min_us ({lo:g}) and "
+                                          f"pulse_width_max_us ({hi:g})"))
+            db = c["thrusters.deadband_us"]
+            if db >= min(mid - lo, hi - mid):
+                issues.append(ConfigIssue("thrusters.deadband_us", db, f"below {min(mid - lo, hi - mid):g}"))
+        channels = {}
+        for n in names:
+            ch = c.get(f"thrusters.{n}.esc_channel")
+            if ch in channels:
+                issues.append(ConfigIssue(f"thrusters.{n}.esc_channel", ch,
+                                          f"a channel not already used by thrusters.{channels[ch]}"))
+            channels[ch] = n
+        light = c.get("lights.esc_channel")
+        if light in channels:
+            issues.append(ConfigIssue("lights.esc_channel", light,
+                                      f"a channel not used by a thruster (thrusters.{channels[light]})"))
+    if "vehicle.mass_kg" in c and "environment.water_density_kg_m3" in c:
+        m, vol = c["vehicle.mass_kg"], c["vehicle.displaced_volume_m3"]
+        rho, g = c["environment.water_density_kg_m3"], c["environment.gravity_m_s2"]
+        derived = (rho * vol - m) * g
+        stated = c["vehicle.net_buoyancy_n"]
+        tol = max(0.1, 0.1 * abs(derived))
+        if abs(derived - stated) > tol:
+            issues.append(ConfigIssue("vehicle.net_buoyancy_n", stated,
+                                      f"within {tol:.2f} N of (rho V - m) g = {derived:.3f} N"))
+    if "hydrodynamics.added_mass_coupling" in c:
+        coup = np.asarray(c["hydrodynamics.added_mass_coupling"]).reshape(6, 6)
+        if np.any(np.diag(coup) != 0.0):
+            issues.append(ConfigIssue("hydrodynamics.added_mass_coupling", c["hydrodynamics.added_mass_coupling"],
+                                      "a 6x6 row-major matrix with zero diagonal"))
+        elif "hydrodynamics.surge.added_mass_kg" in c:
+            ma = added_mass_matrix_from_flat(c)
+            if np.min(np.linalg.eigvalsh(0.5 * (ma + ma.T))) <= 0.0:
+                issues.append(ConfigIssue("hydrodynamics.added_mass_coupling",
+                                          c["hydrodynamics.added_mass_coupling"],
+                                          "couplings keeping the added-mass matrix positive definite"))
+    for a, b in (("identification.level_fraction_min", "identification.level_fraction_max"),
+                 ("sensors.ping1d.min_range_m", "sensors.ping1d.max_range_m"),
+                 ("simulation.sensors.dvl75.min_altitude_m", "simulation.sensors.dvl75.max_altitude_m")):
+        if a in c and b in c and c[a] > c[b]:
+            issues.append(ConfigIssue(a, c[a], f"at most {b} ({c[b]:g})"))
+    if "pool.depth_m" in c and "limits.max_depth_m" in c and c["limits.max_depth_m"] > c["pool.depth_m"]:
+        issues.append(ConfigIssue("limits.max_depth_m", c["limits.max_depth_m"],
+                                  f"at most pool.depth_m ({c['pool.depth_m']:g})"))
+    return issues
+
+
+def added_mass_matrix_from_flat(c: Mapping[str, Any]) -> np.ndarray:
+    """6x6 added-mass matrix M_A (positive definite, FRD, SNAME order) from validated flat keys."""
+    diag = [c[f"hydrodynamics.{d}.added_mass_kg"] for d in TRANSLATIONAL_DOFS] + \
+           [c[f"hydrodynamics.{d}.added_mass_kg_m2"] for d in ROTATIONAL_DOFS]
+    return np.diag(diag) + np.asarray(c["hydrodynamics.added_mass_coupling"], dtype=float).reshape(6, 6)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Typed objects
+
+
+@dataclass(frozen=True)
+class DofHydrodynamics:
+    """Hydrodynamic coefficients of one DOF (positive numbers, SI).
+
+    added_mass: kg (translation) or kg m^2 (rotation). linear_damping: kg/s or kg m^2/s.
+    quadratic_damping: kg/m or kg m^2. Heave has direction-dependent damping (seed 003 Table 3:
+    positive heave = moving down, w > 0 in FRD); for the other DOFs the positive and negative values are equal.
+    Damping force/moment opposing motion: D(v) = linear v + quadratic |v| v, with the coefficient
+    chosen by the sign of v.
+    """
+
+    dof: str
+    added_mass: float
+    linear_damping_positive: float
+    linear_damping_negative: float
+    quadratic_damping_positive: float
+    quadratic_damping_negative: float
+
+    def damping(self, velocity: float) -> float:
+        """Damping force (N) or moment (N m) opposing ``velocity`` (m/s or rad/s), signed like velocity."""
+        if velocity >= 0.0:
+            return self.linear_damping_positive * velocity + self.quadratic_damping_positive * velocity * velocity
+        return self.linear_damping_negative * velocity - self.quadratic_damping_negative * velocity * velocity
+
+
+@dataclass(frozen=True)
+class ThrusterConfig:
+    """One thruster: name, position relative to the CG (FRD, m), unit direction of positive thrust (FRD),
+    PCA9685 channel, reversal, trim (us) and allocation weight."""
+
+    name: str
+    position_frd_m: np.ndarray
+    direction_frd: np.ndarray
+    esc_channel: int
+    reversed: bool
+    trim_us: float
+    allocation_weight: float
+
+
+@dataclass(frozen=True)
+class ThrustersConfig:
+    """Thruster set: per-thruster geometry and the shared cubic thrust curves (seed 003 eq. 1, Table 2).
+
+    curve_negative/curve_positive: [c4, c3, c2, c1] with thrust_N = c4 P^3 + c3 P^2 + c2 P + c1, P in us.
+    """
+
+    thrusters: tuple[ThrusterConfig, ...]
+    pulse_width_min_us: float
+    pulse_width_neutral_us: float
+    pulse_width_max_us: float
+    deadband_us: float
+    curve_negative: tuple[float, float, float, float]
+    curve_positive: tuple[float, float, float, float]
+    time_constant_s: float
+    allocation_mode: str
+    priority_dofs: tuple[str, ...]
+    wrench_timeout_s: float
+
+    @property
+    def names(self) -> list[str]:
+        """Thruster names in allocation order."""
+        return [t.name for t in self.thrusters]
+
+    @property
+    def positions_frd_m(self) -> np.ndarray:
+        """(n, 3) positions relative to the CG, FRD, m."""
+        return np.array([t.position_frd_m for t in self.thrusters])
+
+    @property
+    def directions_frd(self) -> np.ndarray:
+        """(n, 3) unit directions of positive thrust, FRD."""
+        return np.array([t.direction_frd for t in self.thrusters])
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """The validated vehicle configuration.
+
+    ``flat`` holds every validated key (dotted names, SI values) for sections without a dedicated typed
+    view (``section(...)``). Typed views: rigid-body and hydrodynamic parameters, thrusters.
+    """
+
+    flat: Mapping[str, Any]
+    source: str = ""
+    sha256: str = ""
+
+    # -- convenient typed views --
+    def get(self, key: str) -> Any:
+        """Value of a dotted key (KeyError if absent)."""
+        return self.flat[key]
+
+    def section(self, prefix: str) -> dict[str, Any]:
+        """All keys under ``prefix.`` with the prefix removed, e.g. ``section("sensors.dvl75")``."""
+        p = prefix.rstrip(".") + "."
+        return {k[len(p):]: v for k, v in self.flat.items() if k.startswith(p)}
+
+    @property
+    def mass_kg(self) -> float:
+        return self.flat["vehicle.mass_kg"]
+
+    @property
+    def displaced_volume_m3(self) -> float:
+        return self.flat["vehicle.displaced_volume_m3"]
+
+    @property
+    def water_density_kg_m3(self) -> float:
+        return self.flat["environment.water_density_kg_m3"]
+
+    @property
+    def gravity_m_s2(self) -> float:
+        return self.flat["environment.gravity_m_s2"]
+
+    @property
+    def weight_n(self) -> float:
+        """W = m g, N."""
+        return self.mass_kg * self.gravity_m_s2
+
+    @property
+    def buoyancy_n(self) -> float:
+        """B = rho g V, N."""
+        return self.water_density_kg_m3 * self.gravity_m_s2 * self.displaced_volume_m3
+
+    @property
+    def inertia_matrix_kg_m2(self) -> np.ndarray:
+        """3x3 inertia tensor about the CG, kg m^2 (products of inertia with the usual minus sign)."""
+        ixx, iyy, izz = self.flat["vehicle.inertia_kg_m2"]
+        ixy, ixz, iyz = self.flat["vehicle.products_of_inertia_kg_m2"]
+        return np.array([[ixx, -ixy, -ixz], [-ixy, iyy, -iyz], [-ixz, -iyz, izz]])
+
+    @property
+    def centre_of_gravity_frd_m(self) -> np.ndarray:
+        return np.asarray(self.flat["vehicle.centre_of_gravity_frd_m"], dtype=float)
+
+    @property
+    def centre_of_buoyancy_frd_m(self) -> np.ndarray:
+        return np.asarray(self.flat["vehicle.centre_of_buoyancy_frd_m"], dtype=float)
+
+    @property
+    def added_mass_matrix(self) -> np.ndarray:
+        """6x6 positive-definite added-mass matrix M_A, FRD, SNAME order (kg, kg m, kg m^2)."""
+        return added_mass_matrix_from_flat(self.flat)
+
+    def hydrodynamics(self, dof: str) -> DofHydrodynamics:
+        """Typed hydrodynamic coefficients of one DOF (see :class:`DofHydrodynamics`)."""
+        if dof not in DOFS:
+            raise KeyError(f"unknown DOF {dof!r}; one of {', '.join(DOFS)}")
+        h = self.section(f"hydrodynamics.{dof}")
+        if dof in ROTATIONAL_DOFS:
+            return DofHydrodynamics(dof, h["added_mass_kg_m2"], h["linear_damping_kg_m2_s"],
+                                    h["linear_damping_kg_m2_s"], h["quadratic_damping_kg_m2"],
+                                    h["quadratic_damping_kg_m2"])
+        if dof == "heave":
+            return DofHydrodynamics(dof, h["added_mass_kg"], h["linear_damping_positive_kg_s"],
+                                    h["linear_damping_negative_kg_s"], h["quadratic_damping_positive_kg_m"],
+                                    h["quadratic_damping_negative_kg_m"])
+        return DofHydrodynamics(dof, h["added_mass_kg"], h["linear_damping_kg_s"], h["linear_damping_kg_s"],
+                                h["quadratic_damping_kg_m"], h["quadratic_damping_kg_m"])
+
+    @property
+    def thrusters(self) -> ThrustersConfig:
+        """Typed thruster set (positions/directions FRD relative to the CG)."""
+        f = self.flat
+        ts = tuple(
+            ThrusterConfig(
+                name=n,
+                position_frd_m=np.asarray(f[f"thrusters.{n}.position_frd_m"], dtype=float),
+                direction_frd=np.asarray(f[f"thrusters.{n}.direction_frd"], dtype=float)
+                / np.linalg.norm(f[f"thrusters.{n}.direction_frd"]),
+                esc_channel=f[f"thrusters.{n}.esc_channel"],
+                reversed=f[f"thrusters.{n}.reversed"],
+                trim_us=f[f"thrusters.{n}.trim_us"],
+                allocation_weight=f[f"thrusters.{n}.allocation_weight"],
+            )
+            for n in f["thrusters.names"]
+        )
+        return ThrustersConfig(
+            thrusters=ts,
+            pulse_width_min_us=f["thrusters.pulse_width_min_us"],
+            pulse_width_neutral_us=f["thrusters.pulse_width_neutral_us"],
+            pulse_width_max_us=f["thrusters.pulse_width_max_us"],
+            deadband_us=f["thrusters.deadband_us"],
+            curve_negative=tuple(f["thrusters.curve_negative"]),
+            curve_positive=tuple(f["thrusters.curve_positive"]),
+            time_constant_s=f["thrusters.time_constant_s"],
+            allocation_mode=f["thrusters.allocation_mode"],
+            priority_dofs=tuple(f["thrusters.priority_dofs"]),
+            wrench_timeout_s=f["thrusters.wrench_timeout_s"],
+        )
+
+    def summary(self) -> str:
+        """A short multi-line human summary of the vehicle (used by ``hindrax config check``)."""
+        t = self.thrusters
+        lines = [
+            f"vehicle {self.flat['vehicle.name']}: mass {self.mass_kg:g} kg, volume {self.displaced_volume_m3:g} m^3,"
+            f" net buoyancy {(self.buoyancy_n - self.weight_n):.3f} N (rho {self.water_density_kg_m3:g} kg/m^3)",
+            f"thrusters: {len(t.thrusters)} ({', '.join(t.names)}), pulse width "
+            f"{t.pulse_width_min_us:g}-{t.pulse_width_max_us:g} us, neutral {t.pulse_width_neutral_us:g} us",
+            "added mass (surge sway heave kg; roll pitch yaw kg m^2): "
+            + " ".join(f"{v:g}" for v in np.diag(self.added_mass_matrix)),
+            f"pool {self.flat['pool.length_m']:g} x {self.flat['pool.width_m']:g} x {self.flat['pool.depth_m']:g} m",
+            f"sha256 {self.sha256[:12]}" if self.sha256 else "",
+        ]
+        return "\n".join(x for x in lines if x)
+
+    def to_ros_parameters(self) -> dict[str, Any]:
+        """Flat dotted ROS parameter names -> values (lists as lists), for ``--params-file`` or declare."""
+        return {k: (list(v) if isinstance(v, (list, tuple, np.ndarray)) else v) for k, v in self.flat.items()}
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> "VehicleConfig":
+        """A new validated configuration with some dotted keys replaced (raises ConfigError)."""
+        flat = dict(self.flat)
+        flat.update(overrides)
+        return VehicleConfig(validate_flat(flat, source=self.source), self.source, self.sha256)
+
+
+def ros_parameters_from_yaml(doc: Any, source: str = "") -> dict[str, Any]:
+    """Extract the ``ros__parameters`` mapping of a params-file document (first node key) as a nested dict.
+
+    Accepts ``{"/**": {"ros__parameters": {...}}}`` or any single node name. Raises ConfigError otherwise.
+    """
+    if not isinstance(doc, Mapping) or not doc:
+        raise ConfigError([ConfigIssue("<file>", type(doc).__name__,
+                                       "a mapping {'/**': {'ros__parameters': {...}}}")], source)
+    if len(doc) != 1:
+        raise ConfigError([ConfigIssue("<file>", list(doc), "exactly one node key, e.g. '/**'")], source)
+    (node_key, body), = doc.items()
+    if not isinstance(body, Mapping) or "ros__parameters" not in body or set(body) != {"ros__parameters"}:
+        raise ConfigError([ConfigIssue(str(node_key), list(body) if isinstance(body, Mapping) else body,
+                                       "a mapping with the single key 'ros__parameters'")], source)
+    params = body["ros__parameters"]
+    if not isinstance(params, Mapping):
+        raise ConfigError([ConfigIssue(f"{node_key}.ros__parameters", params, "a mapping")], source)
+    return dict(params)
+
+
+def load_config(path: str | Path, overrides: Mapping[str, Any] | None = None) -> VehicleConfig:
+    """Load and validate a vehicle configuration file (ros-args params-file layout).
+
+    path: YAML file. overrides: dotted keys replacing file values before validation.
+    Returns a :class:`VehicleConfig`. Raises :class:`ConfigError` (with every issue) on an unreadable
+    file, bad YAML, unknown/missing keys, wrong types or out-of-range values.
+    """
+    path = Path(path)
+    src = str(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError([ConfigIssue("<file>", src, f"a readable file ({exc.strerror})")], src) from exc
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError([ConfigIssue("<file>", src, f"valid YAML ({str(exc).splitlines()[0]})")], src) from exc
+    flat = flatten(ros_parameters_from_yaml(doc, src))
+    if overrides:
+        flat.update(overrides)
+    valid = validate_flat(flat, source=src)
+    return VehicleConfig(valid, src, hashlib.sha256(text.encode()).hexdigest())
+
+
+def config_from_parameters(params: Mapping[str, Any], source: str = "ros parameters") -> VehicleConfig:
+    """Validate the vehicle keys among a node's parameters (dotted names -> values).
+
+    Parameters outside the configuration sections (``use_sim_time``, node-specific ones) are ignored;
+    inside the sections, unknown keys are errors. Raises :class:`ConfigError`.
+    """
+    flat = {k: v for k, v in params.items() if k.split(".")[0] in SECTIONS}
+    digest = hashlib.sha256(repr(sorted(flat.items())).encode()).hexdigest()
+    return VehicleConfig(validate_flat(flat, source=source), source, digest)
+
+
+def default_config_path() -> Path:
+    """Path of the vehicle configuration shipped with the repository (``ros_ws/config/hindrax.yaml``).
+
+    Looks next to the source tree (editable install / repository checkout) and then in the colcon
+    install's share directory. Raises FileNotFoundError naming the places searched.
+    """
+    here = Path(__file__).resolve()
+    candidates = [p / "ros_ws" / "config" / "hindrax.yaml" for p in here.parents]
+    try:  # colcon install on the Pi
+        from ament_index_python.packages import get_package_share_directory  # type: ignore
+
+        candidates.append(Path(get_package_share_directory("hindrax_drivers")) / "config" / "hindrax.yaml")
+    except Exception:  # noqa: BLE001 - ament index absent in the dev venv is fine
+        pass
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise FileNotFoundError("hindrax.yaml not found; searched: " + ", ".join(str(c) for c in candidates[:4]))
+
+
+def node_config(node: Any, on_error: Callable[[str], None] | None = None) -> VehicleConfig:
+    """Read and validate the vehicle configuration from an rclpy node's parameters.
+
+    The node must have been created with ``automatically_declare_parameters_from_overrides=True`` and started
+    with ``--ros-args --params-file hindrax.yaml``; or it may have a ``config_file`` parameter naming the
+    YAML file (used when no section keys were given). Raises :class:`ConfigError`; ``on_error`` (if given)
+    receives the one-line message first (nodes log it before exiting).
+    """
+    params = {name: p.value for name, p in node._parameters.items()}  # noqa: SLF001 - rclpy has no public dict
+    try:
+        if any(k.split(".")[0] in SECTIONS for k in params):
+            return config_from_parameters(params, source=f"parameters of {node.get_name()}")
+        path = params.get("config_file") or str(default_config_path())
+        return load_config(path)
+    except ConfigError as exc:
+        if on_error:
+            on_error(str(exc))
+        raise

@@ -1,0 +1,153 @@
+"""The one place that converts between ROS frames and marine (Fossen/SNAME) frames.
+
+ROS side (REP-103/105): ``base_link`` is FLU (x forward, y left, z up); ``odom`` is ENU (x east, y north,
+z up). Marine side (Fossen 2011 §2.1, hydrodynamics.md §0): body frame FRD (x forward, y starboard,
+z down); world frame NED (x north, y east, z down). Both pairs share their origin:
+
+- FLU <-> FRD is a rotation of pi about x: ``diag(1, -1, -1)``.
+- ENU <-> NED swaps x and y and negates z: ``[[0, 1, 0], [1, 0, 0], [0, 0, -1]]``.
+
+Both matrices are proper rotations (det = +1) and their own inverses, so the same matrix maps vectors
+*and* pseudo-vectors (angular velocity, torque) in both directions. Orientations are quaternions in ROS
+order (x, y, z, w), handled with :class:`scipy.spatial.transform.Rotation`.
+
+Nothing else in the stack converts frames: drivers and nodes call these functions at their ROS boundary.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+#: Rotation matrix between base_link (FLU) and the marine body frame (FRD); its own inverse.
+R_FLU_FRD = np.diag([1.0, -1.0, -1.0])
+#: Rotation matrix between odom (ENU) and the marine world frame (NED); its own inverse.
+R_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+_ROT_FLU_FRD = Rotation.from_matrix(R_FLU_FRD)
+_ROT_ENU_NED = Rotation.from_matrix(R_ENU_NED)
+
+
+def _vec3(v) -> np.ndarray:
+    a = np.asarray(v, dtype=float)
+    if a.shape[-1] != 3:
+        raise ValueError(f"expected vectors of length 3 (shape (..., 3)), got shape {a.shape}")
+    return a
+
+
+def flu_to_frd(v) -> np.ndarray:
+    """Vector(s) from base_link FLU to body FRD. v: (..., 3), any unit (m, m/s, rad/s, N, N m)."""
+    return _vec3(v) @ R_FLU_FRD.T
+
+
+def frd_to_flu(v) -> np.ndarray:
+    """Vector(s) from body FRD to base_link FLU. v: (..., 3)."""
+    return _vec3(v) @ R_FLU_FRD.T
+
+
+def enu_to_ned(v) -> np.ndarray:
+    """Vector(s) from odom ENU to world NED. v: (..., 3)."""
+    return _vec3(v) @ R_ENU_NED.T
+
+
+def ned_to_enu(v) -> np.ndarray:
+    """Vector(s) from world NED to odom ENU. v: (..., 3)."""
+    return _vec3(v) @ R_ENU_NED.T
+
+
+def _wrench6(w) -> np.ndarray:
+    a = np.asarray(w, dtype=float)
+    if a.shape[-1] != 6:
+        raise ValueError(f"expected 6-vectors [force(3), torque(3)] (shape (..., 6)), got shape {a.shape}")
+    return a
+
+
+def wrench_flu_to_frd(w) -> np.ndarray:
+    """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) from base_link FLU to body FRD tau = [X Y Z K M N]. w: (..., 6)."""
+    a = _wrench6(w)
+    return np.concatenate([flu_to_frd(a[..., :3]), flu_to_frd(a[..., 3:])], axis=-1)
+
+
+def wrench_frd_to_flu(w) -> np.ndarray:
+    """Wrench tau = [X Y Z K M N] (N, N m) from body FRD to base_link FLU. w: (..., 6)."""
+    a = _wrench6(w)
+    return np.concatenate([frd_to_flu(a[..., :3]), frd_to_flu(a[..., 3:])], axis=-1)
+
+
+def twist_flu_to_frd(t) -> np.ndarray:
+    """Twist [vx vy vz wx wy wz] (m/s, rad/s) from base_link FLU to nu = [u v w p q r] in FRD. t: (..., 6)."""
+    return wrench_flu_to_frd(t)
+
+
+def twist_frd_to_flu(nu) -> np.ndarray:
+    """Body velocity nu = [u v w p q r] (FRD) to a base_link FLU twist [vx vy vz wx wy wz]. nu: (..., 6)."""
+    return wrench_frd_to_flu(nu)
+
+
+def covariance_flu_to_frd(cov) -> np.ndarray:
+    """Covariance of a 3-vector (3x3) or of a twist/wrench (6x6, two 3-blocks) from FLU to FRD: R C R^T."""
+    c = np.asarray(cov, dtype=float)
+    if c.shape == (3, 3):
+        return R_FLU_FRD @ c @ R_FLU_FRD.T
+    if c.shape == (6, 6):
+        r6 = np.kron(np.eye(2), R_FLU_FRD)
+        return r6 @ c @ r6.T
+    raise ValueError(f"expected a 3x3 or 6x6 covariance, got shape {c.shape}")
+
+
+covariance_frd_to_flu = covariance_flu_to_frd  # the rotation is its own inverse
+
+
+def covariance_enu_to_ned(cov) -> np.ndarray:
+    """Covariance of a 3-vector (3x3) or pose/twist (6x6) from ENU to NED axes: R C R^T."""
+    c = np.asarray(cov, dtype=float)
+    if c.shape == (3, 3):
+        return R_ENU_NED @ c @ R_ENU_NED.T
+    if c.shape == (6, 6):
+        r6 = np.kron(np.eye(2), R_ENU_NED)
+        return r6 @ c @ r6.T
+    raise ValueError(f"expected a 3x3 or 6x6 covariance, got shape {c.shape}")
+
+
+covariance_ned_to_enu = covariance_enu_to_ned
+
+
+def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
+    """Orientation of base_link (FLU) in odom (ENU) -> orientation of the body (FRD) in NED.
+
+    q_xyzw: (..., 4) quaternion(s) in ROS order (x, y, z, w). Returns (..., 4) in the same order.
+    R_ned_frd = R_ned_enu . R_enu_flu . R_flu_frd.
+    """
+    r = Rotation.from_quat(np.asarray(q_xyzw, dtype=float))
+    return (_ROT_ENU_NED * r * _ROT_FLU_FRD).as_quat()
+
+
+def quaternion_marine_to_ros(q_xyzw) -> np.ndarray:
+    """Orientation of the body (FRD) in NED -> orientation of base_link (FLU) in odom (ENU). (..., 4) x,y,z,w."""
+    r = Rotation.from_quat(np.asarray(q_xyzw, dtype=float))
+    return (_ROT_ENU_NED * r * _ROT_FLU_FRD).as_quat()
+
+
+def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:
+    """Fossen ZYX Euler angles [phi theta psi] (rad) of a body-FRD-in-NED quaternion (x, y, z, w).
+
+    Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; hydrodynamics.md eq. 2.2).
+    """
+    return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_euler("ZYX")[..., ::-1]
+
+
+def quaternion_from_euler_ned(rpy) -> np.ndarray:
+    """Quaternion (x, y, z, w) of body FRD in NED from Fossen ZYX Euler angles [phi theta psi] in rad."""
+    a = np.asarray(rpy, dtype=float)
+    return Rotation.from_euler("ZYX", a[..., ::-1]).as_quat()
+
+
+def wrench_about_point(force, torque, application_point, reference_point=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Move a wrench to a new reference point: tau_ref = [F; T + (p_app - p_ref) x F].
+
+    force (N), torque (N m) and points (m) are 3-vectors in one and the same frame (any of FLU/FRD).
+    Returns the 6-vector [F; T_ref]. Seed 003 eq. 9 is the special case torque = 0, reference = CG.
+    """
+    f = _vec3(force)
+    t = _vec3(torque)
+    r = _vec3(application_point) - _vec3(reference_point)
+    return np.concatenate([f, t + np.cross(r, f)], axis=-1)

@@ -1,0 +1,94 @@
+"""Frames module: REP-103 (FLU/ENU) <-> marine (FRD/NED) conversions."""
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from hindrax_drivers import frames
+
+finite = st.floats(-1e3, 1e3, allow_nan=False)
+vec3 = st.lists(finite, min_size=3, max_size=3)
+
+
+@given(vec3)
+def test_vector_round_trips(v):
+    assert np.allclose(frames.frd_to_flu(frames.flu_to_frd(v)), v)
+    assert np.allclose(frames.ned_to_enu(frames.enu_to_ned(v)), v)
+
+
+def test_known_axes():
+    # forward stays forward, left becomes minus starboard, up becomes minus down
+    assert frames.flu_to_frd([1, 2, 3]).tolist() == [1, -2, -3]
+    # east -> NED y, north -> NED x, up -> -down
+    assert frames.enu_to_ned([1, 2, 3]).tolist() == [2, 1, -3]
+    # arrays of vectors
+    assert frames.flu_to_frd(np.ones((5, 3))).shape == (5, 3)
+    with pytest.raises(ValueError):
+        frames.flu_to_frd([1, 2])
+
+
+def test_wrench_and_twist():
+    w_flu = [10.0, 2.0, -3.0, 0.5, -0.25, 1.0]  # forward, left, down forces; torques about FLU axes
+    tau = frames.wrench_flu_to_frd(w_flu)
+    assert tau.tolist() == [10.0, -2.0, 3.0, 0.5, 0.25, -1.0]
+    # a positive yaw rate in ROS (counter-clockwise seen from above) is a negative r in FRD
+    nu = frames.twist_flu_to_frd([0, 0, 0, 0, 0, 0.3])
+    assert nu[5] == pytest.approx(-0.3)
+    assert np.allclose(frames.wrench_frd_to_flu(tau), w_flu)
+
+
+def test_covariances():
+    c = np.diag([1.0, 2.0, 3.0])
+    c[0, 1] = c[1, 0] = 0.5
+    out = frames.covariance_flu_to_frd(c)
+    assert out[0, 1] == pytest.approx(-0.5) and np.allclose(np.diag(out), [1, 2, 3])
+    ned = frames.covariance_enu_to_ned(c)
+    assert np.allclose(np.diag(ned), [2, 1, 3]) and ned[0, 1] == pytest.approx(0.5)
+    six = frames.covariance_flu_to_frd(np.eye(6) + 0.1)
+    assert np.allclose(frames.covariance_frd_to_flu(six), np.eye(6) + 0.1)
+    with pytest.raises(ValueError):
+        frames.covariance_flu_to_frd(np.eye(4))
+
+
+def test_known_orientations():
+    # base_link facing north in ENU is yaw +90 deg about up; in NED that is heading 0
+    q_north = Rotation.from_euler("z", 90, degrees=True).as_quat()
+    assert np.allclose(frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q_north)), 0, atol=1e-12)
+    # facing east: NED heading +90 deg (clockwise from north seen from above)
+    q_east = [0, 0, 0, 1]
+    assert np.allclose(frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q_east)),
+                       [0, 0, np.pi / 2])
+    # facing north, rotated +10 deg about world north (ENU +y): the port side rises, the starboard side goes
+    # down, i.e. the vehicle rolls right: NED roll +10 deg
+    q = (Rotation.from_euler("y", 10, degrees=True) * Rotation.from_quat(q_north)).as_quat()
+    assert np.allclose(np.degrees(frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q))),
+                       [10, 0, 0], atol=1e-9)
+
+
+@given(st.floats(-3, 3), st.floats(-1.5, 1.5), st.floats(-3, 3))
+def test_quaternion_round_trip(r, p, y):
+    q = frames.quaternion_from_euler_ned([r, p, y])
+    back = frames.quaternion_ros_to_marine(frames.quaternion_marine_to_ros(q))
+    assert abs(abs(np.dot(back, q)) - 1.0) < 1e-9
+
+
+@given(vec3)
+def test_rotating_a_vector_commutes_with_the_conversion(v):
+    # A body vector mapped to the world must agree in both conventions.
+    q_ros = Rotation.from_euler("zyx", [0.3, -0.2, 0.1]).as_quat()
+    world_enu = Rotation.from_quat(q_ros).apply(v)
+    q_mar = frames.quaternion_ros_to_marine(q_ros)
+    world_ned = Rotation.from_quat(q_mar).apply(frames.flu_to_frd(v))
+    assert np.allclose(frames.enu_to_ned(world_enu), world_ned, atol=1e-9)
+
+
+def test_wrench_at_an_offset():
+    # 10 N forward applied 0.2 m to starboard of the CG (FRD) turns the vehicle to port: N = -2 N m
+    w = frames.wrench_about_point([10.0, 0, 0], [0, 0, 0], [0, 0.2, 0])
+    assert w.tolist() == pytest.approx([10, 0, 0, 0, 0, -2.0])
+    # same physics expressed in FLU: starboard is -y, yaw moment about up is +2 N m (turning left)
+    w_flu = frames.wrench_about_point([10.0, 0, 0], [0, 0, 0], [0, -0.2, 0])
+    assert np.allclose(frames.wrench_flu_to_frd(w_flu), w)
+    # a pure couple is unchanged by moving the reference point
+    assert np.allclose(frames.wrench_about_point([0, 0, 0], [1, 2, 3], [5, 5, 5], [1, 1, 1])[3:], [1, 2, 3])

@@ -1,0 +1,67 @@
+"""The ``hindrax`` command: one entry point for pool-test engineers.
+
+Subcommands are registered in :data:`COMMANDS` as (path, module, help); each module provides
+``add_arguments(parser)`` and ``run(args) -> int``. Modules are imported only when their subcommand
+runs, so ``hindrax config check`` stays fast and does not import ROS.
+
+Exit status: 0 on success, 1 when the command ran and found a problem (e.g. an invalid configuration),
+2 on a usage error (argparse).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+from typing import Sequence
+
+# Every process the project starts keeps DDS discovery on loopback unless told otherwise (ros2-pip.md).
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+#: (command words, module implementing add_arguments/run, one-line help)
+COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
+    (("config", "check"), "hindrax_ident.commands.config_check",
+     "validate a vehicle configuration file; print each error as one line, or a summary"),
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse tree of all registered subcommands (modules imported lazily at run time)."""
+    parser = argparse.ArgumentParser(prog="hindrax", description="Hindrax ROV onboard stack")
+    groups: dict[tuple[str, ...], argparse._SubParsersAction] = {}
+    root = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    groups[()] = root
+    parsers: dict[tuple[str, ...], argparse.ArgumentParser] = {}
+    for words, module, help_text in COMMANDS:
+        for depth in range(1, len(words)):
+            prefix = words[:depth]
+            if prefix not in groups:
+                sub = groups[prefix[:-1]].add_parser(prefix[-1], help=f"{prefix[-1]} commands")
+                parsers[prefix] = sub
+                groups[prefix] = sub.add_subparsers(dest="_".join(prefix) + "_command", metavar="COMMAND",
+                                                    required=True)
+        p = groups[words[:-1]].add_parser(words[-1], help=help_text, description=help_text)
+        p.set_defaults(_module=module)
+        _add_module_arguments(p, module)
+    return parser
+
+
+def _add_module_arguments(parser: argparse.ArgumentParser, module: str) -> None:
+    mod = importlib.import_module(module)
+    mod.add_arguments(parser)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``hindrax`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    mod = importlib.import_module(args._module)
+    try:
+        return int(mod.run(args) or 0)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,26 @@
+"""``hindrax config check FILE``: validate a vehicle configuration before a pool test.
+
+Prints each error as one line (key, value, allowed range) on stdout and exits 1, or prints a short
+summary of the vehicle and exits 0. Validation rules: :mod:`hindrax_drivers.config`.
+"""
+from __future__ import annotations
+
+import argparse
+
+from hindrax_drivers.config import ConfigError, load_config
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="vehicle configuration YAML (ros-args params-file layout)")
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        cfg = load_config(args.file)
+    except ConfigError as exc:
+        for line in exc.lines():
+            print(f"{args.file}: {line}")
+        return 1
+    print(f"{args.file}: OK")
+    print(cfg.summary())
+    return 0

@@ -1,0 +1,41 @@
+"""`hindrax config check FILE` as users run it (the installed console script)."""
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+from hindrax_drivers.config import default_config_path
+
+HINDRAX = str(Path(sys.executable).with_name("hindrax"))
+
+
+def run(*args):
+    return subprocess.run([HINDRAX, *args], capture_output=True, text=True, timeout=60)
+
+
+def test_valid_file_prints_summary_and_exits_0():
+    r = run("config", "check", str(default_config_path()))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "OK" in r.stdout and "mass 15.22 kg" in r.stdout and "t1, t2, t3, t4, t5, t6, t7, t8" in r.stdout
+
+
+def test_each_error_is_one_line_and_exit_1(tmp_path):
+    doc = yaml.safe_load(default_config_path().read_text())
+    params = doc["/**"]["ros__parameters"]
+    params["thrusters"]["t3"]["esc_channel"] = 17
+    params["sensors"]["ms5837"]["variant"] = "100BA"
+    params["vehicle"]["colour"] = "yellow"
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    r = run("config", "check", str(bad))
+    assert r.returncode == 1
+    lines = r.stdout.strip().splitlines()
+    assert len(lines) == 3
+    assert f"{bad}: thrusters.t3.esc_channel = 17: allowed integer in [0, 15]" in lines
+    assert f"{bad}: sensors.ms5837.variant = '100BA': allowed one of 30BA, 02BA, auto" in lines
+    assert f"{bad}: vehicle.colour = 'yellow': unknown key" in lines
+
+
+def test_usage_error_exits_2():
+    assert run("config", "check").returncode == 2
