@@ -29,9 +29,14 @@ done
 
 [ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"
 PY="$VENV/bin/python"
-"$PY" -m pip install -q --upgrade pip
-"$PY" -m pip install -q -r requirements.txt
-if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then "$PY" -m pip install -q 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
+# pip, quiet, without the noise of index locations a machine's pip.conf may list but not have.
+pipq() {
+  "$PY" -m pip "$@" 2>&1 | { grep -v '^WARNING: Location .* is ignored' || true; }
+  return "${PIPESTATUS[0]}"
+}
+pipq install -q --upgrade pip
+pipq install -q -r requirements.txt
+if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then pipq install -q 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
 export PATH="$PWD/$VENV/bin:$PATH"
 
 # The wheels' rosidl_generator_py CMake exports hard-code the wheel build host's include directories;
@@ -55,7 +60,8 @@ cmake --build "$build" -j2 >"$build.build.log" 2>&1 || { cat "$build.build.log" 
 cmake --install "$build" >/dev/null
 
 # The two ament_python packages, editable (colcon builds the same setup.py on the Pi).
-"$PY" -m pip install -q --no-deps --no-build-isolation -e src/hindrax_drivers -e src/hindrax_ident
+pipq install -q --no-deps --no-build-isolation -e src/hindrax_drivers -e src/hindrax_ident >"build/editable-install.log" \
+  || { cat build/editable-install.log >&2; exit 1; }
 
 # Smoke check: the interfaces and rclpy import in the venv.
 "$PY" -c 'import rclpy, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_ident'

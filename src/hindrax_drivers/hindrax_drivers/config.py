@@ -842,7 +842,8 @@ def node_config(node: Any, on_error: Callable[[str], None] | None = None) -> Veh
 
     The node must have been created with ``automatically_declare_parameters_from_overrides=True`` and started
     with ``--ros-args --params-file hindrax.yaml``; or it may have a ``config_file`` parameter naming the
-    YAML file (used when no section keys were given). Raises :class:`ConfigError`; ``on_error`` (if given)
+    YAML file (used when no section keys were given; default: :func:`default_config_path`), whose values are
+    then declared as the node's parameters. Raises :class:`ConfigError`; ``on_error`` (if given)
     receives the one-line message first (nodes log it before exiting).
     """
     params = {name: p.value for name, p in node._parameters.items()}  # noqa: SLF001 - rclpy has no public dict
@@ -850,7 +851,10 @@ def node_config(node: Any, on_error: Callable[[str], None] | None = None) -> Veh
         if any(k.split(".")[0] in SECTIONS for k in params):
             return config_from_parameters(params, source=f"parameters of {node.get_name()}")
         path = params.get("config_file") or str(default_config_path())
-        return load_config(path)
+        cfg = load_config(path)
+        # Expose the file's values as the node's parameters (visible and settable like params-file ones).
+        node.declare_parameters("", [(k, v) for k, v in cfg.to_ros_parameters().items() if not node.has_parameter(k)])
+        return cfg
     except ConfigError as exc:
         if on_error:
             on_error(str(exc))

@@ -22,6 +22,10 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("config", "check"), "hindrax_ident.commands.config_check",
      "validate a vehicle configuration file; print each error as one line, or a summary"),
+    (("allocate",), "hindrax_ident.commands.allocate",
+     "allocate a base_link wrench X Y Z K M N (N, N m) to thruster forces and pulse widths (JSON)"),
+    (("thruster-test",), "hindrax_ident.commands.thruster_test",
+     "step each thruster alone and print the wrench the model expects (catch reversed/swapped thrusters)"),
 ]
 
 

@@ -1,0 +1,367 @@
+"""Thrust allocation: body wrench (FRD) -> thruster forces -> ESC pulse widths, pure numpy.
+
+Given the thrust allocation matrix ``B`` (6, n) of seed 003 eq. 9 (``tau = B F``, tau = [X Y Z K M N]
+in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster (seed 003 eq. 1),
+:class:`ThrustAllocator` turns a requested wrench into forces and pulse widths:
+
+1. **Weighted minimum-norm solution.** ``F = B_W^+ tau`` with ``B_W^+ = W^-1/2 pinv(B W^-1/2)``,
+   ``W = diag(weights)``: among the forces that best reproduce tau (least squares, exact when tau is
+   in the range of B), the one minimising ``sum w_i F_i^2``. It is computed once, in the constructor
+   and in :meth:`ThrustAllocator.reconfigure`, never per call. Axes with zero authority (an all-zero
+   row of B, e.g. heave for a planar layout) are ignored by the pseudo-inverse: they get no force and
+   their achieved component is 0. With a rank-deficient B the least squares is in the plain Euclidean
+   metric of [X Y Z K M N].
+2. **Saturation.** Each thruster has its own reverse (< 0) and forward (> 0) limit taken from its
+   curve (times the battery ``voltage_scale``); they may differ.
+
+   * ``mode="uniform"``: the wrench is multiplied by the largest ``s`` in (0, 1] for which every
+     force is within its limits, so the direction of the allocated wrench is kept exactly.
+   * ``mode="priority"``: a staged scheme. The six axes are split into ordered ``priority_groups``
+     (default heave and yaw first, ``(("heave", "yaw"),)``; axes not listed form a last group). For
+     each group in order, the group's part of the wrench (the other axes set to zero) is allocated with
+     the same pseudo-inverse and added to the forces of the earlier groups with the largest factor in
+     [0, 1] that keeps all forces feasible. So a group is reproduced exactly (with the other axes
+     unaffected) whenever that is feasible on top of the earlier groups, and otherwise scaled down
+     along its own direction; later groups get what headroom is left. This is cheaper and more
+     predictable for a controller than a bounded least squares (``scipy.optimize.lsq_linear``), which
+     could change the direction of the reduced axes and has no exact equality on the prioritised ones.
+     The null space of B is not used to enlarge the feasible set (neither mode does that).
+3. **Pulse widths and achieved wrench.** Each force is inverted on its curve (monotone branch, with
+   saturation and the small-force rule of :mod:`.thrust_curve`), optionally quantised to the PWM
+   generator's step (``pulse_width_step_us``, e.g. the PCA9685 tick of hardware.md section 5.1), and the
+   *actual* thrust at that pulse width is evaluated with the forward curve (deadband included). The
+   achieved wrench ``B @ force_n`` is what the thrusters will really apply according to the model, so
+   a controller can use it for anti-windup.
+
+Non-finite wrenches raise :class:`InvalidWrenchError` (design.md section 8).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .thrust_curve import ThrustCurve, forward_thrust
+
+__all__ = [
+    "AXIS_NAMES",
+    "DEFAULT_PRIORITY_GROUPS",
+    "InvalidWrenchError",
+    "AllocationResult",
+    "ThrustAllocator",
+    "weighted_pseudo_inverse",
+]
+
+#: Wrench axes in order (seed 003 section 3 notation, SNAME): tau = [X Y Z K M N].
+AXIS_NAMES: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
+#: Default priority: heave and yaw first (depth and heading holding during the seed 003 tests).
+DEFAULT_PRIORITY_GROUPS: tuple[tuple[str, ...], ...] = (("heave", "yaw"),)
+_MODES = ("uniform", "priority")
+_ZERO_ROW_TOLERANCE = 1e-12
+
+
+class InvalidWrenchError(ValueError):
+    """The requested wrench is not 6 finite numbers (NaN, inf, wrong shape or type)."""
+
+
+@dataclass(frozen=True)
+class AllocationResult:
+    """Outcome of one :meth:`ThrustAllocator.allocate` call (FRD, N and N m, us).
+
+    ``requested_wrench`` (6,): the request as given. ``allocated_force_n`` (n,): forces after
+    saturation handling, before the curves (``B @ allocated_force_n`` is the wrench the allocator aimed
+    for). ``pulse_width_us`` (n,): ESC commands. ``force_n`` (n,): thrust the curves give at those pulse
+    widths (deadband, small-force rule and quantisation included). ``achieved_wrench`` (6,):
+    ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``) or the smallest
+    group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
+    the request. ``saturated`` (n,) bool: the allocated force is at the thruster's forward or reverse
+    limit.
+    """
+
+    requested_wrench: np.ndarray
+    allocated_force_n: np.ndarray
+    force_n: np.ndarray
+    pulse_width_us: np.ndarray
+    achieved_wrench: np.ndarray
+    scale: float
+    axis_scale: np.ndarray
+    saturated: np.ndarray
+
+
+def weighted_pseudo_inverse(matrix, weights=None, rcond: float = 1e-10) -> np.ndarray:
+    """Weighted Moore-Penrose pseudo-inverse ``W^-1/2 pinv(B W^-1/2)``, shape (n, 6) for B (6, n).
+
+    ``F = result @ tau`` minimises ``sum w_i F_i^2`` among the least-squares solutions of ``B F = tau``
+    (unconstrained weighted least-squares control allocation, Fossen 2011, Handbook of Marine Craft
+    Hydrodynamics and Motion Control, control-allocation chapter). ``weights`` (n,) positive, default
+    ones. Raises ``ValueError`` for bad shapes, non-finite values or non-positive weights.
+    """
+    b = np.asarray(matrix, dtype=float)
+    if b.ndim != 2 or b.shape[0] != 6 or b.shape[1] < 1 or not np.all(np.isfinite(b)):
+        raise ValueError(f"matrix must be a finite (6, n) array with n >= 1, got shape {b.shape}")
+    n = b.shape[1]
+    w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
+    if w.shape != (n,) or not np.all(np.isfinite(w)) or not np.all(w > 0.0):
+        raise ValueError(f"weights must be {n} finite positive numbers, got {weights!r}")
+    root_inv = 1.0 / np.sqrt(w)
+    return root_inv[:, None] * np.linalg.pinv(b * root_inv[None, :], rcond=rcond)
+
+
+def _axis_index(axis) -> int:
+    if isinstance(axis, str):
+        if axis not in AXIS_NAMES:
+            raise ValueError(f"unknown axis name {axis!r}; expected one of {AXIS_NAMES}")
+        return AXIS_NAMES.index(axis)
+    if isinstance(axis, (int, np.integer)) and not isinstance(axis, bool) and 0 <= int(axis) < 6:
+        return int(axis)
+    raise ValueError(f"axis must be a name in {AXIS_NAMES} or an index 0-5, got {axis!r}")
+
+
+class ThrustAllocator:
+    """Wrench -> thruster forces and pulse widths with saturation handling (see module docstring).
+
+    Parameters
+    ----------
+    matrix:
+        Thrust allocation matrix (6, n), FRD, seed 003 eq. 9 (see :mod:`.matrix`).
+    curves:
+        One :class:`ThrustCurve` shared by all thrusters, or a sequence of n of them.
+    weights:
+        Optional (n,) positive weights of the minimum-norm solution (higher = used less).
+    mode:
+        ``"uniform"`` (default) or ``"priority"``.
+    priority_groups:
+        For ``"priority"``: ordered groups of axes (names from :data:`AXIS_NAMES` or indices 0-5),
+        highest priority first; axes not listed form a final group. Default
+        :data:`DEFAULT_PRIORITY_GROUPS`. Ignored in uniform mode.
+    pulse_width_step_us:
+        Optional quantisation step of the pulse-width generator (us), e.g. the PCA9685 tick
+        ``(PRE_SCALE + 1) * 1e6 / f_osc`` (hardware.md section 5.1: 1.24 us at PRE_SCALE 30). ``None``: no
+        quantisation.
+
+    Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n),
+    ``pseudo_inverse`` (n, 6), ``curves`` (n ThrustCurve), ``weights`` (n,), ``mode``,
+    ``priority_groups`` (tuples of axis indices, final group included), ``zero_authority_axes`` (6,)
+    bool, ``n_thrusters``.
+    """
+
+    def __init__(self, matrix, curves: ThrustCurve | Sequence[ThrustCurve], weights=None, mode: str = "uniform",
+                 priority_groups=DEFAULT_PRIORITY_GROUPS, pulse_width_step_us: float | None = None) -> None:
+        self.reconfigure(matrix=matrix, curves=curves, weights=weights, mode=mode, priority_groups=priority_groups,
+                         pulse_width_step_us=pulse_width_step_us)
+
+    # ----------------------------------------------------------------- configuration
+    _KEEP = object()
+
+    def reconfigure(self, matrix=_KEEP, curves=_KEEP, weights=_KEEP, mode=_KEEP, priority_groups=_KEEP,
+                    pulse_width_step_us=_KEEP) -> None:
+        """Change any of the constructor's parameters (others are kept) and recompute the pseudo-inverse.
+
+        A kept shared curve or default (``None``) weights follow a new number of thrusters; kept
+        per-thruster lists must still match it.
+
+        The new configuration is validated completely before anything is replaced; on ``ValueError`` the
+        allocator keeps its previous configuration.
+        """
+        keep = ThrustAllocator._KEEP
+        b = np.array(self._matrix if matrix is keep else matrix, dtype=float)
+        if b.ndim != 2 or b.shape[0] != 6 or b.shape[1] < 1 or not np.all(np.isfinite(b)):
+            raise ValueError(f"matrix must be a finite (6, n) array with n >= 1, got shape {b.shape}")
+        n = b.shape[1]
+        curve_arg = self._curves_arg if curves is keep else curves
+        try:
+            curve_list = [curve_arg] * n if isinstance(curve_arg, ThrustCurve) else list(curve_arg)
+        except TypeError:
+            curve_list = []
+        if len(curve_list) != n or not all(isinstance(c, ThrustCurve) for c in curve_list):
+            raise ValueError(f"curves must be one ThrustCurve or a sequence of {n} ThrustCurve objects")
+        weights_arg = self._weights_arg if weights is keep else weights
+        w = np.ones(n) if weights_arg is None else weights_arg
+        pinv = weighted_pseudo_inverse(b, w)
+        zero_rows = np.all(np.abs(b) <= _ZERO_ROW_TOLERANCE, axis=1)
+        pinv[:, zero_rows] = 0.0  # exact zero instead of SVD round-off: no force at all for those axes
+        w = np.array(w, dtype=float)
+        mode_value = self._mode if mode is keep else mode
+        if mode_value not in _MODES:
+            raise ValueError(f"mode must be one of {_MODES}, got {mode_value!r}")
+        groups_arg = self._priority_groups_arg if priority_groups is keep else priority_groups
+        groups = self._parse_groups(groups_arg)
+        step = self._step_us if pulse_width_step_us is keep else pulse_width_step_us
+        if step is not None:
+            try:
+                step = float(step)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"pulse_width_step_us must be None or a positive number, got {step!r}") from exc
+            if not (math.isfinite(step) and step > 0.0):
+                raise ValueError(f"pulse_width_step_us must be None or a finite positive number, got {step!r}")
+
+        # All valid: commit.
+        self._matrix, self._pinv, self._weights = b, pinv, w
+        for arr in (self._matrix, self._pinv, self._weights):
+            arr.flags.writeable = False
+        self._curves = tuple(curve_list)
+        self._curves_arg, self._weights_arg = curve_arg, weights_arg
+        self._mode, self._priority_groups_arg, self._groups, self._step_us = mode_value, groups_arg, groups, step
+        self._zero_rows = zero_rows
+        self._zero_rows.flags.writeable = False
+        # Thrusters grouped by equal curves, so each distinct curve is evaluated once, vectorised.
+        by_curve: dict[ThrustCurve, list[int]] = {}
+        for i, c in enumerate(self._curves):
+            by_curve.setdefault(c, []).append(i)
+        self._curve_groups = [(self._curves[idx[0]], np.array(idx)) for idx in by_curve.values()]
+        self._base_lower = np.array([c.max_reverse_n for c in self._curves])
+        self._base_upper = np.array([c.max_forward_n for c in self._curves])
+        self._pw_min = np.array([c.pulse_width_min_us for c in self._curves])
+        self._pw_max = np.array([c.pulse_width_max_us for c in self._curves])
+        # forward model of all thrusters in one vectorised call: coefficients as (4, n), the rest (n,)
+        params = list(zip(*(c.forward_parameters for c in self._curves)))
+        self._forward_params = tuple(np.array(v, dtype=float).T if i < 2 else np.array(v, dtype=float)
+                                     for i, v in enumerate(params))
+        self._group_masks = [np.isin(np.arange(6), g).astype(float) for g in groups]
+
+    @staticmethod
+    def _parse_groups(groups_arg) -> tuple[tuple[int, ...], ...]:
+        try:
+            groups = [tuple(_axis_index(a) for a in (g if not isinstance(g, (str, int)) else (g,))) for g in groups_arg]
+        except TypeError as exc:
+            raise ValueError(f"priority_groups must be a sequence of axis groups, got {groups_arg!r}") from exc
+        seen = [a for g in groups for a in g]
+        if len(seen) != len(set(seen)) or any(len(g) == 0 for g in groups):
+            raise ValueError(f"priority_groups must be non-empty and may name each axis once, got {groups_arg!r}")
+        rest = tuple(a for a in range(6) if a not in seen)
+        if rest:
+            groups.append(rest)
+        return tuple(groups)
+
+    # ----------------------------------------------------------------- read-only views
+    @property
+    def matrix(self) -> np.ndarray:
+        """Thrust allocation matrix (6, n), FRD (read-only array)."""
+        return self._matrix
+
+    @property
+    def pseudo_inverse(self) -> np.ndarray:
+        """Weighted pseudo-inverse (n, 6) used for every allocation (read-only array)."""
+        return self._pinv
+
+    @property
+    def curves(self) -> tuple[ThrustCurve, ...]:
+        """One thrust curve per thruster."""
+        return self._curves
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Weights (n,) of the minimum-norm solution (read-only array)."""
+        return self._weights
+
+    @property
+    def mode(self) -> str:
+        """``"uniform"`` or ``"priority"``."""
+        return self._mode
+
+    @property
+    def priority_groups(self) -> tuple[tuple[int, ...], ...]:
+        """Axis-index groups in priority order, final catch-all group included."""
+        return self._groups
+
+    @property
+    def pulse_width_step_us(self) -> float | None:
+        """Quantisation step of the pulse widths (us) or ``None``."""
+        return self._step_us
+
+    @property
+    def zero_authority_axes(self) -> np.ndarray:
+        """(6,) bool: axes whose row of the matrix is zero (no thruster acts on them)."""
+        return self._zero_rows
+
+    @property
+    def n_thrusters(self) -> int:
+        """Number of thrusters n."""
+        return self._matrix.shape[1]
+
+    def force_limits_n(self, voltage_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)`` force limits (n,) in N: each curve's max reverse (< 0) and forward (> 0)
+        thrust times ``voltage_scale``. Raises ``ValueError`` for a non-finite or non-positive scale."""
+        s = self._check_scale(voltage_scale)
+        return s * self._base_lower, s * self._base_upper
+
+    # ----------------------------------------------------------------- allocation
+    @staticmethod
+    def _check_scale(voltage_scale: float) -> float:
+        try:
+            s = float(voltage_scale)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"voltage_scale must be a finite positive number, got {voltage_scale!r}") from exc
+        if not (math.isfinite(s) and s > 0.0):
+            raise ValueError(f"voltage_scale must be a finite positive number, got {voltage_scale!r}")
+        return s
+
+    @staticmethod
+    def _max_multiplier(base: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
+        """Largest t >= 0 with lower <= base + t * step <= upper (inf if step is zero)."""
+        room = np.where(step > 0.0, upper - base, np.where(step < 0.0, lower - base, np.inf))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            ratio = np.where(step != 0.0, room / step, np.inf)
+        return max(float(np.min(ratio)), 0.0)
+
+    def allocate(self, wrench, voltage_scale: float = 1.0) -> AllocationResult:
+        """Allocate the wrench ``[X Y Z K M N]`` (6,) (FRD, N and N m) to the thrusters.
+
+        ``voltage_scale`` multiplies every curve's thrust (battery voltage hook, see
+        :func:`.thrust_curve.voltage_thrust_scale`). Returns an :class:`AllocationResult`. Raises
+        :class:`InvalidWrenchError` if the wrench is not 6 finite numbers, ``ValueError`` for a bad
+        ``voltage_scale``. Source: seed 003 eqs. 1 and 9; module docstring for the method.
+        """
+        try:
+            tau = np.array(wrench, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}") from exc
+        if tau.shape != (6,) or not np.all(np.isfinite(tau)):
+            raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}")
+        s_v = self._check_scale(voltage_scale)
+        lower, upper = s_v * self._base_lower, s_v * self._base_upper
+
+        # Work with the request normalised by its largest component, so huge finite requests cannot
+        # overflow; a multiplier t of the unit request corresponds to the scale factor t / peak.
+        peak = float(np.max(np.abs(tau)))
+        n = self._matrix.shape[1]
+        force = np.zeros(n)
+        axis_scale = np.ones(6)
+        scales = []
+        if peak > 0.0:
+            unit = tau / peak
+            if self._mode == "uniform":
+                step = self._pinv @ unit
+                t = min(peak, self._max_multiplier(force, step, lower, upper))
+                force = t * step
+                scales.append(t / peak)
+                axis_scale[:] = t / peak
+            else:
+                for group, mask in zip(self._groups, self._group_masks):
+                    step = self._pinv @ (unit * mask)
+                    t = min(peak, self._max_multiplier(force, step, lower, upper))
+                    force = force + t * step
+                    scales.append(t / peak)
+                    axis_scale[list(group)] = t / peak
+            force = np.clip(force, lower, upper)  # only removes rounding at the limits
+        scale = min(scales) if scales else 1.0
+
+        if len(self._curve_groups) == 1:
+            pulse = self._curves[0]._pulse_width_unchecked(force, s_v)
+        else:
+            pulse = np.empty(n)
+            for curve, idx in self._curve_groups:
+                pulse[idx] = curve._pulse_width_unchecked(force[idx], s_v)
+        if self._step_us is not None:
+            q = self._step_us
+            pulse = np.clip(np.round(pulse / q) * q, np.ceil(self._pw_min / q) * q, np.floor(self._pw_max / q) * q)
+        actual = s_v * forward_thrust(pulse, *self._forward_params)
+
+        tol = 1e-9 * np.maximum(np.abs(lower), np.abs(upper))
+        saturated = (force >= upper - tol) | (force <= lower + tol)
+        return AllocationResult(requested_wrench=tau, allocated_force_n=force, force_n=actual, pulse_width_us=pulse,
+                                achieved_wrench=self._matrix @ actual, scale=float(scale), axis_scale=axis_scale,
+                                saturated=saturated)

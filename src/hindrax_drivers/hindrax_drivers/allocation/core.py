@@ -1,0 +1,105 @@
+"""The thrust-allocation node's core, shared verbatim with ``hindrax allocate`` and ``hindrax thruster-test``.
+
+Input: a wrench in base_link (FLU, N and N m, about the CG). The core converts it to body FRD
+(:mod:`hindrax_drivers.frames`), allocates with the configuration's :class:`ThrustAllocator`
+(weighted pseudo-inverse, saturation handling, cubic-curve inversion: seed 003 eqs. 1 and 9), and returns
+per-thruster forces, pulse widths and the achieved wrench back in base_link.
+
+Thruster reversal and trim (``thrusters.<t>.reversed``/``trim_us``) are applied by the ESC output, not here:
+the pulse widths below are what the thrust curves need, in the thrusters' configured directions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import frames
+from ..config import VehicleConfig
+from .allocator import AllocationResult, InvalidWrenchError
+from .from_config import allocator_from_config
+
+
+@dataclass(frozen=True)
+class FluAllocation:
+    """One allocation in ROS terms.
+
+    requested_wrench_flu / achieved_wrench_flu: (6,) [Fx Fy Fz Tx Ty Tz] in base_link, N and N m.
+    force_n (n,): thrust of each thruster at its pulse width (curve output). pulse_width_us (n,).
+    scale: uniform scale in (0, 1] (priority mode: smallest group factor). saturated (n,) bool.
+    frd: the underlying :class:`AllocationResult` in body FRD.
+    """
+
+    requested_wrench_flu: np.ndarray
+    achieved_wrench_flu: np.ndarray
+    force_n: np.ndarray
+    pulse_width_us: np.ndarray
+    scale: float
+    saturated: np.ndarray
+    frd: AllocationResult
+
+    def to_json_dict(self) -> dict:
+        """The keys `hindrax allocate` prints (issue: force_n, pulse_width_us, achieved_wrench, scale, saturated)."""
+        return {
+            "force_n": [round(float(x), 6) for x in self.force_n],
+            "pulse_width_us": [round(float(x), 3) for x in self.pulse_width_us],
+            "achieved_wrench": [round(float(x), 6) for x in self.achieved_wrench_flu],
+            "scale": round(float(self.scale), 6),
+            "saturated": [bool(x) for x in self.saturated],
+        }
+
+
+class AllocationCore:
+    """Wrench (base_link FLU) -> thruster forces and pulse widths, from a vehicle configuration.
+
+    The allocator (matrix, pseudo-inverse, curves) is built once here and rebuilt only by
+    :meth:`reconfigure`, never per wrench. Raises :class:`InvalidWrenchError` for a NaN/inf or
+    malformed wrench; :meth:`neutral` gives the all-neutral pulse widths to command instead.
+    """
+
+    def __init__(self, cfg: VehicleConfig):
+        self.reconfigure(cfg)
+
+    def reconfigure(self, cfg: VehicleConfig) -> None:
+        """Rebuild the allocator from a (new) configuration."""
+        self.cfg = cfg
+        self.allocator = allocator_from_config(cfg)
+        self.names = cfg.thrusters.names
+        self.neutral_us = cfg.thrusters.pulse_width_neutral_us
+
+    @property
+    def matrix_frd(self) -> np.ndarray:
+        """Thrust allocation matrix (6, n), body FRD about the CG."""
+        return self.allocator.matrix
+
+    def neutral(self) -> np.ndarray:
+        """(n,) neutral pulse widths, us."""
+        return np.full(len(self.names), self.neutral_us)
+
+    def allocate(self, wrench_flu, voltage_scale: float = 1.0) -> FluAllocation:
+        """Allocate a base_link wrench [Fx Fy Fz Tx Ty Tz] (N, N m). Raises InvalidWrenchError."""
+        w = np.asarray(wrench_flu, dtype=float) if _is_numeric(wrench_flu) else None
+        if w is None or w.shape != (6,) or not np.all(np.isfinite(w)):
+            raise InvalidWrenchError(f"wrench must be 6 finite numbers (N, N m), got {wrench_flu!r}")
+        result = self.allocator.allocate(frames.wrench_flu_to_frd(w), voltage_scale=voltage_scale)
+        return FluAllocation(
+            requested_wrench_flu=w,
+            achieved_wrench_flu=frames.wrench_frd_to_flu(result.achieved_wrench),
+            force_n=result.force_n,
+            pulse_width_us=result.pulse_width_us,
+            scale=result.scale,
+            saturated=result.saturated,
+            frd=result,
+        )
+
+    def thruster_wrench_flu(self, index: int, force_n: float) -> np.ndarray:
+        """Wrench (base_link FLU) thruster ``index`` alone produces at ``force_n``: B[:, i] F, converted."""
+        return frames.wrench_frd_to_flu(self.matrix_frd[:, index] * force_n)
+
+
+def _is_numeric(x) -> bool:
+    try:
+        np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return True

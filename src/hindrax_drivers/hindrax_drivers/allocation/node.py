@@ -1,0 +1,143 @@
+"""Thrust-allocation node: ``geometry_msgs/WrenchStamped`` (base_link, FLU) -> thruster commands.
+
+Subscribes
+    ``wrench`` (geometry_msgs/WrenchStamped): requested wrench about the CG, base_link, N and N m.
+Publishes
+    ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm): pulse widths for the ESC node, us.
+    ``thrusters/forces`` (hindrax_msgs/ThrusterForces): thrust each thruster will produce, N.
+    ``allocation/status`` (hindrax_msgs/AllocationStatus): requested and achieved wrench (base_link),
+    scale, per-thruster saturation, rejection reason.
+
+A NaN/inf wrench, a wrench in another frame, or a stale one (stamp older than
+``thrusters.wrench_timeout_s`` by the node's clock) is rejected: the node commands neutral (1500 us) and
+the status says why. If no wrench arrives for ``wrench_timeout_s`` the node commands neutral once and
+reports ``stale``; the ESC node's watchdog is the second line of defence (design.md §8).
+
+The core (:class:`~hindrax_drivers.allocation.core.AllocationCore`) is built at start-up and rebuilt only
+when a parameter changes, never per message. Configuration: the vehicle file as ROS parameters
+(``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import Wrench, WrenchStamped
+from rclpy.node import Node
+from rcl_interfaces.msg import SetParametersResult
+
+from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
+
+from ..config import ConfigError, config_from_parameters
+from ..node_common import load_node_config, run_node
+from .allocator import InvalidWrenchError
+from .core import AllocationCore
+
+BASE_FRAME = "base_link"
+
+
+def _wrench_msg(w: np.ndarray) -> Wrench:
+    m = Wrench()
+    m.force.x, m.force.y, m.force.z, m.torque.x, m.torque.y, m.torque.z = (float(x) for x in w)
+    return m
+
+
+class ThrustAllocationNode(Node):
+    """ROS wrapper of :class:`AllocationCore` (see the module docstring for topics and behaviour)."""
+
+    def __init__(self, **kwargs: Any):
+        super().__init__("thrust_allocation", automatically_declare_parameters_from_overrides=True, **kwargs)
+        cfg = load_node_config(self)
+        self.core = AllocationCore(cfg)
+        self.timeout_s = cfg.thrusters.wrench_timeout_s
+        self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
+        self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
+        self.create_subscription(WrenchStamped, "wrench", self.on_wrench, 10)
+        self.last_wrench_time = None
+        self.stale_reported = True  # nothing to report before the first wrench
+        self.rejected = 0
+        self.allocations = 0
+        self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale)
+        self.add_on_set_parameters_callback(self.on_parameters)
+
+    # -- parameters: rebuild the core only when the configuration changes
+    def on_parameters(self, params) -> SetParametersResult:
+        current = {name: p.value for name, p in self._parameters.items()}
+        current.update({p.name: p.value for p in params})
+        try:
+            cfg = config_from_parameters(current, source="parameter update")
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.core.reconfigure(cfg)
+        self.timeout_s = cfg.thrusters.wrench_timeout_s
+        return SetParametersResult(successful=True)
+
+    # -- wrench path
+    def on_wrench(self, msg: WrenchStamped) -> None:
+        now = self.get_clock().now()
+        f, t = msg.wrench.force, msg.wrench.torque
+        w = np.array([f.x, f.y, f.z, t.x, t.y, t.z])
+        self.last_wrench_time = now
+        self.stale_reported = False
+        if msg.header.frame_id not in ("", BASE_FRAME):
+            self.reject(msg, w, f"wrench frame_id {msg.header.frame_id!r} is not {BASE_FRAME!r}")
+            return
+        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        if stamp_ns > 0:
+            age_s = (now.nanoseconds - stamp_ns) * 1e-9
+            if age_s > self.timeout_s:
+                self.reject(msg, w, f"stale wrench: {age_s:.3f} s old (limit {self.timeout_s:g} s)")
+                return
+        try:
+            result = self.core.allocate(w)
+        except InvalidWrenchError as exc:
+            self.reject(msg, w, str(exc))
+            return
+        self.allocations += 1
+        self.publish(msg, result.pulse_width_us, result.force_n, w, result.achieved_wrench_flu, result.scale,
+                     result.saturated, rejected=False,
+                     reason="saturated: scaled" if bool(np.any(result.saturated)) else "")
+
+    def reject(self, msg: WrenchStamped | None, requested: np.ndarray, reason: str) -> None:
+        """Command neutral and report why."""
+        self.rejected += 1
+        self.get_logger().warn(f"wrench rejected: {reason}", throttle_duration_sec=1.0)
+        n = len(self.core.names)
+        req = np.where(np.isfinite(requested), requested, 0.0)
+        self.publish(msg, self.core.neutral(), np.zeros(n), req, np.zeros(6), 0.0, np.zeros(n, bool),
+                     rejected=True, reason=reason)
+
+    def check_stale(self) -> None:
+        if self.last_wrench_time is None or self.stale_reported:
+            return
+        age_s = (self.get_clock().now() - self.last_wrench_time).nanoseconds * 1e-9
+        if age_s > self.timeout_s:
+            self.stale_reported = True
+            self.reject(None, np.zeros(6), f"stale: no wrench for {age_s:.3f} s (limit {self.timeout_s:g} s)")
+
+    def publish(self, msg: WrenchStamped | None, pulse_width_us: np.ndarray, force_n: np.ndarray,
+                requested: np.ndarray, achieved: np.ndarray, scale: float, saturated: np.ndarray,
+                rejected: bool, reason: str) -> None:
+        stamp = msg.header.stamp if msg is not None and (msg.header.stamp.sec or msg.header.stamp.nanosec) \
+            else self.get_clock().now().to_msg()
+        pwm = ThrusterPwm(pulse_width_us=[float(x) for x in pulse_width_us], armed=not rejected)
+        pwm.header.stamp, pwm.header.frame_id = stamp, BASE_FRAME
+        self.pub_pwm.publish(pwm)
+        forces = ThrusterForces(force_n=[float(x) for x in force_n])
+        forces.header.stamp, forces.header.frame_id = stamp, BASE_FRAME
+        self.pub_forces.publish(forces)
+        st = AllocationStatus(requested_wrench=_wrench_msg(requested), achieved_wrench=_wrench_msg(achieved),
+                              scale=float(scale), thruster_saturated=[bool(x) for x in saturated],
+                              saturated=bool(np.any(saturated)), rejected=rejected, reason=reason)
+        st.header.stamp, st.header.frame_id = stamp, BASE_FRAME
+        self.pub_status.publish(st)
+
+
+def main(args=None) -> int:
+    """``python -m hindrax_drivers.allocation.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
+    return run_node(ThrustAllocationNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

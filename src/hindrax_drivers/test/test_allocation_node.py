@@ -1,0 +1,114 @@
+"""Thrust-allocation node: wrench in, pulse widths/forces/status out; bad wrenches command neutral."""
+import math
+
+import numpy as np
+import pytest
+import rclpy
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.allocation.node import ThrustAllocationNode
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def graph():
+    with ros_context() as ctx:
+        node = ThrustAllocationNode(context=ctx)
+        probe = rclpy.create_node("probe", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        got = {"pwm": [], "forces": [], "status": []}
+        probe.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", got["pwm"].append, 10)
+        probe.create_subscription(ThrusterForces, "thrusters/forces", got["forces"].append, 10)
+        probe.create_subscription(AllocationStatus, "allocation/status", got["status"].append, 10)
+        pub = probe.create_publisher(WrenchStamped, "wrench", 10)
+        spin = lambda: ex.spin_once(timeout_sec=0.02)  # noqa: E731
+        wait_until(lambda: pub.get_subscription_count() > 0, 10, spin, "allocation node subscribed")
+
+        def send(w, frame="base_link", stamp=None):
+            m = WrenchStamped()
+            m.header.frame_id = frame
+            m.header.stamp = stamp if stamp is not None else probe.get_clock().now().to_msg()
+            (m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+             m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z) = w
+            n = len(got["status"])
+            pub.publish(m)
+            wait_until(lambda: len(got["status"]) > n, 10, spin, "allocation status")
+            return got["pwm"][-1], got["forces"][-1], got["status"][-1]
+
+        yield node, send, got, spin
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
+def test_wrench_is_allocated_by_the_shared_core(graph):
+    node, send, _, _ = graph
+    w = [12.0, -3.0, 6.0, 0.2, -0.1, 0.5]
+    pwm, forces, status = send(w)
+    expected = AllocationCore(load_config(default_config_path())).allocate(w)
+    assert np.allclose(pwm.pulse_width_us, expected.pulse_width_us)
+    assert np.allclose(forces.force_n, expected.force_n)
+    assert not status.rejected and status.scale == pytest.approx(1.0)
+    achieved = [status.achieved_wrench.force.x, status.achieved_wrench.force.y, status.achieved_wrench.force.z]
+    assert np.allclose(achieved, w[:3], atol=0.1 * 15.5)  # within the curves' small-force granularity
+    assert status.header.frame_id == "base_link" and pwm.armed
+
+
+def test_saturation_is_reported(graph):
+    _, send, _, _ = graph
+    pwm, _, status = send([500.0, 0, 0, 0, 0, 0])
+    assert status.saturated and 0 < status.scale < 1
+    assert any(status.thruster_saturated)
+    assert max(pwm.pulse_width_us) <= 1900.0 and min(pwm.pulse_width_us) >= 1100.0
+
+
+@pytest.mark.parametrize("bad", [[math.nan, 0, 0, 0, 0, 0], [0, 0, math.inf, 0, 0, 0], [0, 0, 0, 0, 0, -math.inf]])
+def test_nan_or_inf_wrench_commands_neutral(graph, bad):
+    _, send, _, _ = graph
+    send([5.0, 0, 0, 0, 0, 0])
+    pwm, forces, status = send(bad)
+    assert status.rejected and "finite" in status.reason
+    assert list(pwm.pulse_width_us) == [1500.0] * 8 and not pwm.armed
+    assert list(forces.force_n) == [0.0] * 8
+
+
+def test_stale_and_wrong_frame_wrenches_are_rejected(graph):
+    node, send, _, _ = graph
+    old = node.get_clock().now().nanoseconds - int(2e9)
+    _, _, status = send([5.0, 0, 0, 0, 0, 0], stamp=Time(sec=old // 10**9, nanosec=old % 10**9))
+    assert status.rejected and "stale wrench" in status.reason
+    pwm, _, status = send([5.0, 0, 0, 0, 0, 0], frame="odom")
+    assert status.rejected and "frame_id" in status.reason and set(pwm.pulse_width_us) == {1500.0}
+
+
+def test_wrench_stream_stopping_commands_neutral(graph):
+    node, send, got, spin = graph
+    send([8.0, 0, 0, 0, 0, 0])
+    n = len(got["status"])
+    wait_until(lambda: len(got["status"]) > n and got["status"][-1].rejected, 10, spin, "stale timeout")
+    assert "no wrench" in got["status"][-1].reason
+    assert set(got["pwm"][-1].pulse_width_us) == {1500.0}
+
+
+def test_allocator_is_rebuilt_on_parameter_change_only(graph):
+    node, send, _, _ = graph
+    before = node.core.allocator
+    send([1.0, 0, 0, 0, 0, 0])
+    assert node.core.allocator is before  # not rebuilt per message
+    from rclpy.parameter import Parameter
+
+    res = node.set_parameters([Parameter("thrusters.t1.allocation_weight", value=100.0)])
+    assert res[0].successful and node.core.allocator is not before
+    _, forces, _ = send([0.0, 10.0, 0, 0, 0, 0])
+    assert abs(forces.force_n[0]) < 0.5 < abs(forces.force_n[1])  # heavily weighted T1 is (almost) unused
+    res = node.set_parameters([Parameter("thrusters.t1.allocation_weight", value=-1.0)])
+    assert not res[0].successful and "allocation_weight = -1.0" in res[0].reason

@@ -1,0 +1,113 @@
+"""``hindrax thruster-test [--force-n F] [--dry-run] [--config FILE]``: catch a reversed thruster or a swapped
+channel before a pool test.
+
+Each thruster is stepped alone at a small thrust (default 3 N along its configured direction). For each
+step the command prints the pulse width, the ESC channel and the wrench the model expects (base_link FLU,
+N and N m: column i of the thrust allocation matrix times the force, seed 003 eq. 9), so the engineer can
+watch the vehicle (or a hand on the frame) and compare. Without ``--dry-run`` it drives the ESCs through
+the running stack: it arms through ``esc/set_armed`` (hindrax_msgs/SetArmed), publishes
+``thrusters/command_pulse_width`` for ``--step-s`` seconds per thruster with neutral in between, then
+disarms (also on Ctrl-C or any error).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.config import ConfigError, default_config_path, load_config
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--force-n", type=float, default=3.0, help="thrust per step, N (sign = direction)")
+    parser.add_argument("--step-s", type=float, default=2.0, help="duration of each step on hardware, s")
+    parser.add_argument("--dry-run", action="store_true", help="only print; do not drive the ESCs")
+    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+
+
+def plan(core: AllocationCore, force_n: float) -> list[dict]:
+    """One row per thruster: name, channel, pulse width, actual force and expected wrench (base_link)."""
+    curve = core.allocator.curves[0]
+    rows = []
+    for i, th in enumerate(core.cfg.thrusters.thrusters):
+        pw = float(np.asarray(curve.pulse_width_us(force_n)))
+        actual = float(np.asarray(curve.thrust_n(pw)))
+        rows.append({"thruster": th.name, "esc_channel": th.esc_channel, "pulse_width_us": round(pw, 2),
+                     "force_n": round(actual, 4),
+                     "expected_wrench_base_link": [round(float(x), 4) for x in core.thruster_wrench_flu(i, actual)]})
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        cfg = load_config(args.config or default_config_path())
+    except ConfigError as exc:
+        print(f"invalid configuration: {exc}", file=sys.stderr)
+        return 1
+    core = AllocationCore(cfg)
+    rows = plan(core, args.force_n)
+    for row in rows:
+        print(json.dumps(row))
+    if args.dry_run:
+        return 0
+    return _drive(core, rows, args.step_s)
+
+
+def _drive(core: AllocationCore, rows: list[dict], step_s: float) -> int:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hindrax_msgs.msg import ThrusterPwm
+    from hindrax_msgs.srv import SetArmed
+
+    rclpy.init()
+    node = rclpy.create_node("thruster_test")
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    pub = node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+    arm = node.create_client(SetArmed, "esc/set_armed")
+
+    def call_arm(value: bool) -> bool:
+        fut = arm.call_async(SetArmed.Request(arm=value))
+        ex.spin_until_future_complete(fut, timeout_sec=5.0)
+        res = fut.result()
+        if res is None or not res.success:
+            print(f"{'arm' if value else 'disarm'} refused: {res.message if res else 'no answer'}", file=sys.stderr)
+            return False
+        return True
+
+    def hold(widths, seconds: float) -> None:
+        end = node.get_clock().now().nanoseconds + int(seconds * 1e9)
+        while node.get_clock().now().nanoseconds < end:
+            msg = ThrusterPwm(pulse_width_us=[float(x) for x in widths], armed=True)
+            msg.header.stamp = node.get_clock().now().to_msg()
+            pub.publish(msg)
+            ex.spin_once(timeout_sec=0.05)
+
+    status = 1
+    try:
+        if not arm.wait_for_service(timeout_sec=10.0):
+            print("esc/set_armed not available: is the stack running (hindrax bringup)?", file=sys.stderr)
+            return 1
+        if not call_arm(True):
+            return 1
+        neutral = core.neutral()
+        for i, row in enumerate(rows):
+            widths = neutral.copy()
+            widths[i] = row["pulse_width_us"]
+            print(f"stepping {row['thruster']} (channel {row['esc_channel']}) at {row['pulse_width_us']} us",
+                  flush=True)
+            hold(widths, step_s)
+            hold(neutral, 1.0)
+        status = 0
+    except KeyboardInterrupt:
+        status = 130
+    finally:
+        call_arm(False)
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.shutdown()
+    return status
