@@ -71,3 +71,14 @@ def child_env(**extra: str) -> dict[str, str]:
 def python_executable() -> str:
     """The interpreter to start child processes with (this venv's python)."""
     return sys.executable
+
+
+def config_parameters(overrides: dict | None = None, path: str | None = None) -> list:
+    """The vehicle configuration (default file, with dotted-key ``overrides``) as rclpy Parameters, for
+    ``Node(..., parameter_overrides=config_parameters({...}))``; validated like a params file."""
+    from rclpy.parameter import Parameter
+
+    from .config import default_config_path, load_config
+
+    cfg = load_config(path or default_config_path(), overrides)
+    return [Parameter(k, value=v) for k, v in cfg.to_ros_parameters().items()]

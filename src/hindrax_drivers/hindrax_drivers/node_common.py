@@ -1,0 +1,235 @@
+"""Pieces every Hindrax driver node shares: diagnostics, raw-traffic publishing, stuck-value detection,
+configuration loading and the process entry point.
+
+Keeping them here (design.md §2: "no copy-paste between devices") means each device node only wires its
+transport to its protocol module. All time here is ROS time from the node's clock (``use_sim_time``
+supported), except rate windows, which use the same clock.
+"""
+from __future__ import annotations
+
+import collections
+import sys
+import threading
+from typing import Any, Callable, Iterable, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+from hindrax_msgs.msg import RawDeviceData
+
+from .config import ConfigError, VehicleConfig, node_config
+
+#: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
+DEFAULT_QOS_DEPTH = 10
+
+
+class DeviceDiagnostics:
+    """Counters and state of one device, rendered as a ``diagnostic_msgs/DiagnosticStatus``.
+
+    name: status name, e.g. ``"hindrax/dvl75"``; hardware_id: port or I2C address.
+    ``published()`` counts output messages (rate over a sliding window of ``window_s`` seconds);
+    ``count(kind, n)`` counts errors by kind (``"bad_checksum"``, ``"garbage_bytes"``, ``"i2c_error"`` ...);
+    ``set_state(state, level, message)`` sets the device state (``"connected"``, ``"disconnected"``...);
+    ``warn(key, message)`` raises a named warning until ``clear(key)``.
+    Thread-safe: transports may call ``count`` from their own threads.
+    """
+
+    def __init__(self, name: str, hardware_id: str, now_s: Callable[[], float], window_s: float = 5.0):
+        self.name = name
+        self.hardware_id = hardware_id
+        self._now_s = now_s
+        self._window_s = window_s
+        self._lock = threading.Lock()
+        self._stamps: collections.deque[float] = collections.deque()
+        self._counts: dict[str, int] = collections.Counter()
+        self._warnings: dict[str, str] = {}
+        self._state = "starting"
+        self._level = DiagnosticStatus.WARN
+        self._message = "starting"
+        self._last_publish_s: float | None = None
+        self.total_published = 0
+
+    def published(self) -> None:
+        """Record one published output message now."""
+        t = self._now_s()
+        with self._lock:
+            self._stamps.append(t)
+            self._last_publish_s = t
+            self.total_published += 1
+            while self._stamps and self._stamps[0] < t - self._window_s:
+                self._stamps.popleft()
+
+    def count(self, kind: str, n: int = 1) -> None:
+        """Add ``n`` to the error counter ``kind``."""
+        if n:
+            with self._lock:
+                self._counts[kind] += n
+
+    def counts(self) -> dict[str, int]:
+        """Snapshot of the error counters."""
+        with self._lock:
+            return dict(self._counts)
+
+    def set_state(self, state: str, level: int = DiagnosticStatus.OK, message: str = "") -> None:
+        """Set the device state (``level``: DiagnosticStatus.OK/WARN/ERROR/STALE)."""
+        with self._lock:
+            self._state, self._level, self._message = state, level, message or state
+
+    @property
+    def state(self) -> str:
+        return self._state
+
+    def warn(self, key: str, message: str) -> None:
+        """Raise (or update) a named warning, e.g. ``warn("stuck", "identical readings for 5 s")``."""
+        with self._lock:
+            self._warnings[key] = message
+
+    def clear(self, key: str) -> None:
+        """Clear a named warning."""
+        with self._lock:
+            self._warnings.pop(key, None)
+
+    def rate_hz(self) -> float:
+        """Published messages per second over the sliding window."""
+        t = self._now_s()
+        with self._lock:
+            while self._stamps and self._stamps[0] < t - self._window_s:
+                self._stamps.popleft()
+            n = len(self._stamps)
+        return n / self._window_s
+
+    def status(self, extra: Iterable[tuple[str, Any]] = ()) -> DiagnosticStatus:
+        """The DiagnosticStatus now: level = worst of the state level and any warning."""
+        rate = self.rate_hz()
+        t = self._now_s()
+        with self._lock:
+            level = self._level
+            message = self._message
+            if self._warnings and level < DiagnosticStatus.WARN:
+                level = DiagnosticStatus.WARN
+            if self._warnings:
+                message = "; ".join([message] + list(self._warnings.values()))
+            age = (t - self._last_publish_s) if self._last_publish_s is not None else float("inf")
+            values = [("state", self._state), ("rate_hz", f"{rate:.2f}"),
+                      ("last_message_age_s", f"{age:.3f}"), ("messages_published", str(self.total_published))]
+            values += [(f"errors.{k}", str(v)) for k, v in sorted(self._counts.items())]
+        values += [(k, str(v)) for k, v in extra]
+        st = DiagnosticStatus(level=bytes([level]) if isinstance(level, int) else level, name=self.name,
+                              message=message, hardware_id=self.hardware_id)
+        st.values = [KeyValue(key=k, value=v) for k, v in values]
+        return st
+
+
+class DiagnosticsPublisher:
+    """Publishes the statuses of one node's devices on ``/diagnostics`` at ``rate_hz`` (ROS timer)."""
+
+    def __init__(self, node: Any, devices: Sequence[DeviceDiagnostics],
+                 extra: Callable[[], Iterable[tuple[str, Any]]] | None = None, rate_hz: float = 1.0):
+        self._node = node
+        self._devices = list(devices)
+        self._extra = extra
+        self.publisher = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.timer = node.create_timer(1.0 / rate_hz, self.publish)
+
+    def publish(self) -> None:
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        extra = list(self._extra()) if self._extra else []
+        msg.status = [d.status(extra if i == 0 else ()) for i, d in enumerate(self._devices)]
+        self.publisher.publish(msg)
+
+
+class RawDataPublisher:
+    """Publishes raw device traffic as ``hindrax_msgs/RawDeviceData`` on ``raw/<device>``.
+
+    Use :meth:`serial_tap` as a serial transport's raw tap ``(direction 'rx'|'tx', data, t)`` and
+    :meth:`i2c_tap` as an I2C helper's raw tap ``(kind 'read'|'write', address, register, data, t)``.
+    Stamps are the node's ROS time at the tap (receive/send time). Safe to call from transport threads.
+    """
+
+    def __init__(self, node: Any, device_name: str, topic: str | None = None):
+        self._node = node
+        self.device_name = device_name
+        self.publisher = node.create_publisher(RawDeviceData, topic or f"raw/{device_name}", 100)
+
+    def _msg(self, transport: int, direction: int, data: bytes, address: int = 0, register: int = -1):
+        m = RawDeviceData()
+        m.header.stamp = self._node.get_clock().now().to_msg()
+        m.device_name = self.device_name
+        m.transport = transport
+        m.direction = direction
+        m.i2c_address = address
+        m.i2c_register = register
+        m.data = bytes(data)
+        return m
+
+    def serial_tap(self, direction: str, data: bytes, _t: float | None = None) -> None:
+        d = RawDeviceData.DIRECTION_DEVICE_TO_HOST if direction == "rx" else RawDeviceData.DIRECTION_HOST_TO_DEVICE
+        self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, d, data))
+
+    def i2c_tap(self, kind: str, address: int, register: int | None, data: bytes, _t: float | None = None) -> None:
+        d = RawDeviceData.DIRECTION_DEVICE_TO_HOST if kind == "read" else RawDeviceData.DIRECTION_HOST_TO_DEVICE
+        reg = -1 if register is None else int(register)
+        self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
+
+
+class StuckDetector:
+    """Flags a sensor whose readings stay bit-identical for ``limit`` consecutive samples.
+
+    ``update(value) -> bool`` returns True while stuck. Real sensors always show noise in the last bits,
+    so identical raw readings mean a frozen device or bus (hardware.md emulator checklists).
+    """
+
+    def __init__(self, limit: int = 50):
+        self.limit = limit
+        self._last: Any = None
+        self._repeats = 0
+
+    def update(self, value: Any) -> bool:
+        if value == self._last:
+            self._repeats += 1
+        else:
+            self._last = value
+            self._repeats = 0
+        return self._repeats >= self.limit
+
+
+def load_node_config(node: Any) -> VehicleConfig:
+    """The vehicle configuration from the node's parameters (see :func:`hindrax_drivers.config.node_config`).
+
+    Logs the one-line reason and re-raises :class:`ConfigError` so :func:`run_node` exits with status 1.
+    """
+    return node_config(node, on_error=lambda line: node.get_logger().fatal(f"invalid configuration: {line}"))
+
+
+def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> int:
+    """Process entry point of a node: init, build the node, spin a SingleThreadedExecutor, shut down cleanly.
+
+    factory: creates the node after ``rclpy.init``. Returns the exit status: 0 on SIGINT/SIGTERM,
+    1 on an invalid configuration (one line on stderr naming key, value, allowed range).
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    rclpy.init(args=list(args) if args is not None else sys.argv)
+    node = None
+    executor = SingleThreadedExecutor()
+    status = 0
+    try:
+        node = factory()
+        executor.add_node(node)
+        executor.spin()
+    except ConfigError as exc:
+        print(f"invalid configuration: {exc}", file=sys.stderr)
+        status = 1
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if callable(close):
+                close()
+            node.destroy_node()
+        executor.shutdown()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status

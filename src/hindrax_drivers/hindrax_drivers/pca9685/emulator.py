@@ -1,0 +1,202 @@
+"""NXP PCA9685 device emulator (register-exact, default address 0x40), for tests and simulation.
+
+Models hardware.md §5.1:
+
+* register file with reset values MODE1 = 0x11 (SLEEP, ALLCALL), MODE2 = 0x04, PRE_SCALE = 0x1E,
+  every LEDn full OFF (OFF_H bit 4 = 1); reserved H bits 7:5 read 0; ALL_LED registers are
+  write-only (read 0) and write all 16 channels; TestMode (0xFF) and 0x46..0xF9 ignore writes;
+* auto-increment only when MODE1.AI = 1 (otherwise every byte of a burst goes to the same
+  register), wrapping 0x45 -> 0x00 and 0xFE -> 0x00 (0xFA..0xFE increments through 0xFE);
+* PRE_SCALE writes are ignored unless SLEEP = 1; values below 3 are forced to 3;
+* SLEEP/RESTART: setting SLEEP while any channel is active sets RESTART = 1 and stops the
+  outputs; after clearing SLEEP the previously active channels stay stopped until 1 is written to
+  RESTART (which clears it) or a PWM register is written (which also clears RESTART) [Q1 §7.3.1.1];
+  writing 0 to RESTART has no effect; EXTCLK can only be set while sleeping and only a reset
+  clears it;
+* software reset through the general call (address 0x00, data 0x06) via ``i2c_general_call``;
+* :meth:`Pca9685Emulator.pulse_width_us` decodes the high time each channel actually produces from
+  the registers, the prescale and the oscillator (0 when sleeping/stopped/full OFF, the full period
+  when full ON, inverted with MODE2.INVRT);
+* a write log ``(t_s, register, value)`` per data byte, for latency tests.
+
+Not modelled: sub-addresses and All-Call address decoding, /OE and OUTNE, OCH (updates apply at
+the end of the transaction, i.e. at STOP, matching the default OCH = 0), the 500 us oscillator
+start-up, the update-at-end-of-cycle timing.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+from ..transport.emulated_i2c import RegisterPointerEmulator
+from . import protocol as p
+
+__all__ = ["Pca9685Emulator", "WriteLogEntry"]
+
+
+@dataclass(frozen=True)
+class WriteLogEntry:
+    """One register byte written over I2C: clock time (s), register address, value."""
+
+    t_s: float
+    register: int
+    value: int
+
+
+class Pca9685Emulator(RegisterPointerEmulator):
+    """Register-exact PCA9685 (see module docstring).
+
+    Args:
+        oscillator_hz: the part's real internal oscillator frequency (nominal 25 MHz; real parts
+            23-27 MHz, hardware.md §5.1) used to decode pulse widths.
+        clock: clock for the write log timestamps, s.
+        external_clock_hz: frequency used once EXTCLK is latched (None: keep ``oscillator_hz``).
+        write_log_max: maximum entries kept in the write log (oldest dropped).
+    """
+
+    def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ,
+                 clock: Callable[[], float] = time.monotonic, external_clock_hz: float | None = None,
+                 write_log_max: int = 100_000) -> None:
+        super().__init__()
+        if not oscillator_hz > 0.0:
+            raise ValueError(f"oscillator_hz must be > 0, got {oscillator_hz}")
+        self.oscillator_hz = float(oscillator_hz)
+        self.external_clock_hz = external_clock_hz
+        self.clock = clock
+        self.write_log: collections.deque[WriteLogEntry] = collections.deque(maxlen=write_log_max)
+        self._power_on_reset()
+
+    # ------------------------------------------------------------------ state
+    def _power_on_reset(self) -> None:
+        self._regs = bytearray(256)
+        self._regs[p.MODE1] = p.MODE1_RESET
+        self._regs[p.MODE2] = p.MODE2_RESET
+        self._regs[p.SUBADR1:p.SUBADR3 + 1] = bytes(p.SUBADR_RESET)
+        self._regs[p.ALLCALLADR] = p.ALLCALLADR_RESET
+        for channel in range(p.NUM_CHANNELS):
+            self._regs[p.led_register(channel) + 3] = p.FULL_BIT
+        self._regs[p.PRE_SCALE] = p.PRE_SCALE_RESET
+        self._restart_pending = False
+        self._extclk = False
+        self._pointer = 0
+
+    def reset(self) -> None:
+        """Power-on / software reset: every register to its reset value."""
+        with self._lock:
+            self._power_on_reset()
+
+    def i2c_general_call(self, data: bytes) -> None:
+        """General-call write: data 0x06 is SWRST (hardware.md §5.1); other data are ignored."""
+        if bytes(data[:1]) == bytes([p.SWRST_DATA]):
+            self.reset()
+
+    @property
+    def mode1(self) -> int:
+        """MODE1 as read over I2C (with RESTART and EXTCLK state)."""
+        with self._lock:
+            return self._read_register(p.MODE1)
+
+    @property
+    def prescale(self) -> int:
+        """Current PRE_SCALE."""
+        with self._lock:
+            return self._regs[p.PRE_SCALE]
+
+    @property
+    def sleeping(self) -> bool:
+        """MODE1.SLEEP."""
+        with self._lock:
+            return bool(self._regs[p.MODE1] & p.MODE1_SLEEP)
+
+    @property
+    def effective_oscillator_hz(self) -> float:
+        """Clock driving the prescaler: the external clock once EXTCLK is latched, else the oscillator."""
+        if self._extclk and self.external_clock_hz:
+            return float(self.external_clock_hz)
+        return self.oscillator_hz
+
+    def channel_registers(self, channel: int) -> p.ChannelRegisters:
+        """Decoded LEDn registers of ``channel``."""
+        base = p.led_register(channel)
+        with self._lock:
+            return p.ChannelRegisters.from_bytes(self._regs[base:base + 4])
+
+    def _any_active(self) -> bool:
+        return any(not (self._regs[p.led_register(c) + 3] & p.FULL_BIT) for c in range(p.NUM_CHANNELS))
+
+    # ------------------------------------------------------------------ outputs
+    def period_s(self) -> float:
+        """Actual PWM period from PRE_SCALE and the effective oscillator, s."""
+        with self._lock:
+            return p.COUNTS_PER_PERIOD * (self._regs[p.PRE_SCALE] + 1) / self.effective_oscillator_hz
+
+    def pulse_width_us(self, channel: int) -> float:
+        """High time per period that ``channel`` actually outputs, in us (hardware.md §5.1).
+
+        0 while sleeping, while stopped awaiting RESTART, or when full OFF; the full period when
+        full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement.
+        """
+        with self._lock:
+            period_us = self.period_s() * 1e6
+            if self._regs[p.MODE1] & p.MODE1_SLEEP or self._restart_pending:
+                high = 0.0
+            else:
+                high = p.high_time_counts(self.channel_registers(channel)) / p.COUNTS_PER_PERIOD * period_us
+            if self._regs[p.MODE2] & p.MODE2_INVRT:
+                return period_us - high
+            return high
+
+    # ------------------------------------------------------------------ register file
+    def _next_pointer(self, register: int) -> int:
+        """Auto-increment per hardware.md §5.1 (only with MODE1.AI = 1)."""
+        if not self._regs[p.MODE1] & p.MODE1_AI:
+            return register
+        if register == p.LAST_LED_REGISTER or register >= p.PRE_SCALE:
+            return 0x00
+        return register + 1
+
+    def _read_register(self, register: int) -> int:
+        if register == p.MODE1:
+            value = self._regs[p.MODE1] & ~(p.MODE1_RESTART | p.MODE1_EXTCLK)
+            return value | (p.MODE1_RESTART if self._restart_pending else 0) | (p.MODE1_EXTCLK if self._extclk else 0)
+        if p.ALL_LED_ON_L <= register <= p.ALL_LED_OFF_H or register == p.TESTMODE:
+            return 0
+        return self._regs[register]
+
+    def _write_led_byte(self, register: int, value: int) -> None:
+        offset = (register - p.LED0_ON_L) % 4
+        # H registers: bits 3:0 count, bit 4 full flag; reserved bits 7:5 read 0.
+        self._regs[register] = value & 0x1F if offset in (1, 3) else value
+
+    def _write_register(self, register: int, value: int) -> None:
+        self.write_log.append(WriteLogEntry(float(self.clock()), register, value))
+        regs = self._regs
+        if register == p.MODE1:
+            was_sleeping = bool(regs[p.MODE1] & p.MODE1_SLEEP)
+            sleep = bool(value & p.MODE1_SLEEP)
+            if value & p.MODE1_EXTCLK and was_sleeping:
+                self._extclk = True
+            if sleep and not was_sleeping and self._any_active():
+                self._restart_pending = True
+            elif value & p.MODE1_RESTART and self._restart_pending and not sleep:
+                self._restart_pending = False
+            regs[p.MODE1] = value & ~(p.MODE1_RESTART | p.MODE1_EXTCLK) & 0xFF
+        elif register == p.PRE_SCALE:
+            if regs[p.MODE1] & p.MODE1_SLEEP:
+                regs[p.PRE_SCALE] = max(p.PRESCALE_MIN, value)
+        elif p.LED0_ON_L <= register <= p.LAST_LED_REGISTER:
+            self._write_led_byte(register, value)
+            self._restart_pending = False
+        elif p.ALL_LED_ON_L <= register <= p.ALL_LED_OFF_H:
+            offset = register - p.ALL_LED_ON_L
+            for channel in range(p.NUM_CHANNELS):
+                self._write_led_byte(p.led_register(channel) + offset, value)
+            self._restart_pending = False
+        elif register == p.MODE2:
+            regs[p.MODE2] = value & 0x1F  # bits 7:5 reserved
+        elif register in (p.SUBADR1, p.SUBADR2, p.SUBADR3, p.ALLCALLADR):
+            regs[register] = value
+        # 0x46..0xF9 reserved and 0xFF TestMode: ignored

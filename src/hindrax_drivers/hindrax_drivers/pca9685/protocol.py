@@ -1,0 +1,318 @@
+"""NXP PCA9685 16-channel PWM controller and Basic ESC pulse conventions: pure protocol layer.
+
+Registers and bits (MODE1/MODE2, LEDn_ON/OFF_L/H, ALL_LED, PRE_SCALE), the prescale formula,
+pulse width <-> ON/OFF counts, full-ON/full-OFF bits, the sleep / prescale / restart sequence as
+data, and the ESC conventions (1100-1900 us, 1500 us neutral). Sources: hardware.md §5.1 (NXP
+datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2 (Blue Robotics Basic ESC [E1]-[E5]).
+
+Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an
+``smbus2.SMBus`` object, hides the register arithmetic, and computes counts from the *requested*
+frequency; hardware.md §5.1 requires using the actual prescale and (calibrated) oscillator
+frequency, which is what every function here takes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+from ..transport.i2c import RegisterWrite
+
+__all__ = [
+    "Pca9685Error", "ChannelRegisters", "led_register", "prescale_for_frequency",
+    "frequency_for_prescale", "period_s", "count_duration_us", "pulse_width_to_counts",
+    "counts_to_pulse_width_us", "high_time_counts", "channel_bytes_for_pulse",
+    "set_frequency_sequence", "startup_sequence", "clamp_esc_pulse_us", "esc_prescale",
+]
+
+
+class Pca9685Error(ValueError):
+    """Bad PCA9685/ESC input: channel, frequency, prescale, pulse width or register bytes."""
+
+
+# ------------------------------------------------------------------------------ addresses
+DEFAULT_ADDRESS = 0x40
+GENERAL_CALL_ADDRESS = 0x00
+#: Software reset: data byte 0x06 written to the general-call address (hardware.md §5.1 [Q1 §7.1.4]).
+SWRST_DATA = 0x06
+#: LED All-Call 7-bit address (ALLCALLADR reset 0xE0, 8-bit) [UNVERIFIED, §5.1].
+ALLCALL_ADDRESS = 0x70
+
+# ------------------------------------------------------------------------------ registers
+MODE1 = 0x00
+MODE2 = 0x01
+SUBADR1 = 0x02
+SUBADR2 = 0x03
+SUBADR3 = 0x04
+ALLCALLADR = 0x05
+LED0_ON_L = 0x06
+LAST_LED_REGISTER = 0x45
+ALL_LED_ON_L = 0xFA
+ALL_LED_ON_H = 0xFB
+ALL_LED_OFF_L = 0xFC
+ALL_LED_OFF_H = 0xFD
+PRE_SCALE = 0xFE
+TESTMODE = 0xFF
+
+MODE1_RESTART = 0x80
+MODE1_EXTCLK = 0x40
+MODE1_AI = 0x20
+MODE1_SLEEP = 0x10
+MODE1_SUB1 = 0x08
+MODE1_SUB2 = 0x04
+MODE1_SUB3 = 0x02
+MODE1_ALLCALL = 0x01
+MODE2_INVRT = 0x10
+MODE2_OCH = 0x08
+MODE2_OUTDRV = 0x04
+MODE2_OUTNE_MASK = 0x03
+#: Bit 4 of LEDn_ON_H (full ON) and LEDn_OFF_H (full OFF).
+FULL_BIT = 0x10
+
+#: Reset values (hardware.md §5.1; the MODE1 SLEEP default is UNVERIFIED there).
+MODE1_RESET = 0x11
+MODE2_RESET = 0x04
+PRE_SCALE_RESET = 0x1E
+SUBADR_RESET = (0xE2, 0xE4, 0xE8)
+ALLCALLADR_RESET = 0xE0
+
+NUM_CHANNELS = 16
+COUNTS_PER_PERIOD = 4096
+PRESCALE_MIN = 3
+PRESCALE_MAX = 255
+#: Nominal internal oscillator; real parts measure 23-27 MHz: calibrate (hardware.md §0.8, §5.1).
+INTERNAL_OSCILLATOR_HZ = 25_000_000.0
+#: Oscillator start-up wait after clearing SLEEP before RESTART (hardware.md §5.1 restart rules).
+RESTART_DELAY_S = 500e-6
+
+# ------------------------------------------------------------------------------ ESC (§5.2)
+ESC_MIN_US = 1100.0
+ESC_NEUTRAL_US = 1500.0
+ESC_MAX_US = 1900.0
+ESC_DEADBAND_US = 25.0  # [UNVERIFIED directly, §5.2]
+ESC_MAX_FREQUENCY_HZ = 400.0
+ESC_MIN_FREQUENCY_HZ = 50.0
+#: Blue Robotics' minimal example holds neutral 7 s before other commands (arming, §5.2 [E1]).
+ESC_ARMING_HOLD_S = 7.0
+
+
+def led_register(channel: int) -> int:
+    """LEDn_ON_L address for channel n = 0..15: 0x06 + 4n (hardware.md §5.1)."""
+    if not isinstance(channel, int) or isinstance(channel, bool) or not 0 <= channel < NUM_CHANNELS:
+        raise Pca9685Error(f"channel must be 0..15, got {channel!r}")
+    return LED0_ON_L + 4 * channel
+
+
+def _check_oscillator(oscillator_hz: float) -> float:
+    if not (math.isfinite(oscillator_hz) and oscillator_hz > 0.0):
+        raise Pca9685Error(f"oscillator_hz must be finite and > 0, got {oscillator_hz}")
+    return float(oscillator_hz)
+
+
+def _check_prescale(prescale: int) -> int:
+    if not isinstance(prescale, int) or not PRESCALE_MIN <= prescale <= PRESCALE_MAX:
+        raise Pca9685Error(f"prescale must be an int {PRESCALE_MIN}..{PRESCALE_MAX}, got {prescale!r}")
+    return prescale
+
+
+def prescale_for_frequency(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
+    """PRE_SCALE = round(f_osc / (4096 f)) - 1 (hardware.md §5.1 [Q1 §7.3.5]).
+
+    Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not
+    Python's banker's rounding.
+
+    Raises:
+        Pca9685Error: non-finite/non-positive inputs, or a result outside 3..255
+        (about 24..1526 Hz at 25 MHz).
+    """
+    osc = _check_oscillator(oscillator_hz)
+    if not (math.isfinite(frequency_hz) and frequency_hz > 0.0):
+        raise Pca9685Error(f"frequency_hz must be finite and > 0, got {frequency_hz}")
+    prescale = math.floor(osc / (COUNTS_PER_PERIOD * frequency_hz) + 0.5) - 1
+    if not PRESCALE_MIN <= prescale <= PRESCALE_MAX:
+        raise Pca9685Error(
+            f"{frequency_hz:g} Hz needs prescale {prescale}, outside {PRESCALE_MIN}..{PRESCALE_MAX} "
+            f"({frequency_for_prescale(PRESCALE_MAX, osc):.1f}..{frequency_for_prescale(PRESCALE_MIN, osc):.1f} Hz)")
+    return prescale
+
+
+def frequency_for_prescale(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
+    """Actual PWM frequency f = f_osc / (4096 (PRE_SCALE + 1)) in Hz (hardware.md §5.1)."""
+    return _check_oscillator(oscillator_hz) / (COUNTS_PER_PERIOD * (_check_prescale(prescale) + 1))
+
+
+def period_s(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
+    """PWM period in seconds for the actual prescale and oscillator."""
+    return 1.0 / frequency_for_prescale(prescale, oscillator_hz)
+
+
+def count_duration_us(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
+    """Duration of one of the 4096 counts in us: (PRE_SCALE + 1) / f_osc * 1e6 (hardware.md §5.1)."""
+    return (_check_prescale(prescale) + 1) / _check_oscillator(oscillator_hz) * 1e6
+
+
+def pulse_width_to_counts(pulse_width_us: float, prescale: int,
+                          oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
+    """Counts = round(pulse_us * f_osc / ((PRE_SCALE + 1) * 1e6)) (hardware.md §5.1 table note).
+
+    Raises:
+        Pca9685Error: non-finite or negative pulse, or one that needs more than 4095 counts
+        (use full ON for a constant high level).
+    """
+    if not (math.isfinite(pulse_width_us) and pulse_width_us >= 0.0):
+        raise Pca9685Error(f"pulse_width_us must be finite and >= 0, got {pulse_width_us}")
+    counts = math.floor(pulse_width_us / count_duration_us(prescale, oscillator_hz) + 0.5)
+    if counts > COUNTS_PER_PERIOD - 1:
+        raise Pca9685Error(f"{pulse_width_us:g} us needs {counts} counts, more than 4095 in the "
+                           f"{period_s(prescale, oscillator_hz) * 1e6:.0f} us period")
+    return counts
+
+
+def counts_to_pulse_width_us(counts: float, prescale: int,
+                             oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
+    """High time in us of ``counts`` counts (0..4096) at the given prescale and oscillator."""
+    if not 0 <= counts <= COUNTS_PER_PERIOD:
+        raise Pca9685Error(f"counts must be 0..4096, got {counts}")
+    return counts * count_duration_us(prescale, oscillator_hz)
+
+
+@dataclass(frozen=True)
+class ChannelRegisters:
+    """The four LEDn registers of one channel, decoded (hardware.md §5.1 register map).
+
+    Attributes:
+        on_count, off_count: 12-bit counts 0..4095 at which the output goes high / low.
+        full_on: LEDn_ON_H bit 4. full_off: LEDn_OFF_H bit 4 (takes precedence).
+    """
+
+    on_count: int = 0
+    off_count: int = 0
+    full_on: bool = False
+    full_off: bool = False
+
+    def __post_init__(self) -> None:
+        for name, value in (("on_count", self.on_count), ("off_count", self.off_count)):
+            if not isinstance(value, int) or not 0 <= value < COUNTS_PER_PERIOD:
+                raise Pca9685Error(f"{name} must be an int 0..4095, got {value!r}")
+
+    def to_bytes(self) -> bytes:
+        """ON_L, ON_H, OFF_L, OFF_H (H bits 3:0 = count bits 11:8, bit 4 = full flag)."""
+        return bytes([self.on_count & 0xFF, (self.on_count >> 8) | (FULL_BIT if self.full_on else 0),
+                      self.off_count & 0xFF, (self.off_count >> 8) | (FULL_BIT if self.full_off else 0)])
+
+    @classmethod
+    def from_bytes(cls, data: bytes | Sequence[int]) -> "ChannelRegisters":
+        """Decode 4 register bytes; reserved H bits 7:5 are ignored. Raises Pca9685Error on length."""
+        try:
+            raw = bytes(data)
+        except (TypeError, ValueError):
+            raise Pca9685Error(f"expected 4 bytes, got {data!r}") from None
+        if len(raw) != 4:
+            raise Pca9685Error(f"expected 4 bytes, got {len(raw)}")
+        return cls(on_count=raw[0] | ((raw[1] & 0x0F) << 8), off_count=raw[2] | ((raw[3] & 0x0F) << 8),
+                   full_on=bool(raw[1] & FULL_BIT), full_off=bool(raw[3] & FULL_BIT))
+
+    @classmethod
+    def full_off_setting(cls) -> "ChannelRegisters":
+        """Output constantly low (the power-up state, hardware.md §0.8)."""
+        return cls(full_off=True)
+
+    @classmethod
+    def full_on_setting(cls) -> "ChannelRegisters":
+        """Output constantly high."""
+        return cls(full_on=True)
+
+
+def high_time_counts(setting: ChannelRegisters) -> int:
+    """Counts per period the output is high, 0..4096 (hardware.md §5.1 output semantics).
+
+    Full OFF wins (0); full ON gives 4096; otherwise ``(OFF - ON) mod 4096``, with ON == OFF
+    giving 0 (the measured behaviour quoted in §5.1).
+    """
+    if setting.full_off:
+        return 0
+    if setting.full_on:
+        return COUNTS_PER_PERIOD
+    return (setting.off_count - setting.on_count) % COUNTS_PER_PERIOD
+
+
+def channel_bytes_for_pulse(pulse_width_us: float, prescale: int,
+                            oscillator_hz: float = INTERNAL_OSCILLATOR_HZ, on_count: int = 0) -> bytes:
+    """The 4 LEDn bytes producing ``pulse_width_us`` (ON at ``on_count``, OFF after the pulse).
+
+    A pulse of 0 counts is encoded as full OFF (never ON == OFF, §5.1).
+
+    Raises:
+        Pca9685Error: see :func:`pulse_width_to_counts`; ``on_count`` not 0..4095.
+    """
+    counts = pulse_width_to_counts(pulse_width_us, prescale, oscillator_hz)
+    if counts == 0:
+        return ChannelRegisters.full_off_setting().to_bytes()
+    if not isinstance(on_count, int) or not 0 <= on_count < COUNTS_PER_PERIOD:
+        raise Pca9685Error(f"on_count must be 0..4095, got {on_count!r}")
+    return ChannelRegisters(on_count, (on_count + counts) % COUNTS_PER_PERIOD).to_bytes()
+
+
+def set_frequency_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL) -> list[RegisterWrite]:
+    """Sleep, write PRE_SCALE, wake, wait 500 us, RESTART (hardware.md §5.1 [Q3][Q1 §7.3.1.1]).
+
+    Args:
+        prescale: 3..255.
+        mode1: the awake MODE1 value to return to (the "old" value of §5.1, SLEEP/RESTART ignored).
+
+    Returns:
+        MODE1 = (mode1 & ~RESTART) | SLEEP; PRE_SCALE = prescale; MODE1 = mode1 (wake), then wait
+        :data:`RESTART_DELAY_S`; MODE1 = mode1 | RESTART | AI. PRE_SCALE is only accepted while
+        SLEEP = 1, hence the order.
+    """
+    _check_prescale(prescale)
+    awake = mode1 & ~(MODE1_RESTART | MODE1_SLEEP) & 0xFF
+    return [
+        RegisterWrite(MODE1, awake | MODE1_SLEEP, 0.0, "sleep (PRE_SCALE writable only while asleep)"),
+        RegisterWrite(PRE_SCALE, prescale, 0.0, "prescale"),
+        RegisterWrite(MODE1, awake, RESTART_DELAY_S, "wake; oscillator start-up"),
+        RegisterWrite(MODE1, awake | MODE1_RESTART | MODE1_AI, 0.0, "restart PWM channels"),
+    ]
+
+
+def startup_sequence(prescale: int, mode2: int = MODE2_OUTDRV,
+                     mode1: int = MODE1_AI | MODE1_ALLCALL) -> list[RegisterWrite]:
+    """MODE2 (default totem-pole outputs, the reset value 0x04) then :func:`set_frequency_sequence`.
+
+    Channel registers are not touched: at power-up every channel is full OFF (no pulses, which the
+    ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel.
+    """
+    if not 0 <= mode2 <= 0xFF:
+        raise Pca9685Error(f"mode2 must be a byte, got {mode2}")
+    return [RegisterWrite(MODE2, mode2, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
+
+
+def clamp_esc_pulse_us(pulse_width_us: float, min_us: float = ESC_MIN_US, max_us: float = ESC_MAX_US) -> float:
+    """Clamp an ESC command to [min_us, max_us] (defaults 1100..1900 us, hardware.md §5.2).
+
+    Raises:
+        Pca9685Error: NaN/infinite pulse, or min_us > max_us.
+    """
+    if not math.isfinite(pulse_width_us):
+        raise Pca9685Error(f"pulse_width_us must be finite, got {pulse_width_us}")
+    if not min_us <= max_us:
+        raise Pca9685Error(f"min_us ({min_us}) must be <= max_us ({max_us})")
+    return min(max(float(pulse_width_us), min_us), max_us)
+
+
+def esc_prescale(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
+    """Prescale for an ESC update rate, checking the ACTUAL rate is within 50..400 Hz (§5.1, §5.2).
+
+    E.g. 400 Hz rounds to prescale 14 = 406.9 Hz at 25 MHz, above the Basic ESC's 400 Hz maximum,
+    and is rejected; use 381.5 Hz (prescale 15) or 200 Hz.
+
+    Raises:
+        Pca9685Error: the actual frequency is outside 50..400 Hz.
+    """
+    prescale = prescale_for_frequency(frequency_hz, oscillator_hz)
+    actual_hz = frequency_for_prescale(prescale, oscillator_hz)
+    if not ESC_MIN_FREQUENCY_HZ <= actual_hz <= ESC_MAX_FREQUENCY_HZ:
+        raise Pca9685Error(f"{frequency_hz:g} Hz gives an actual {actual_hz:.1f} Hz (prescale {prescale}), "
+                           f"outside the ESC range {ESC_MIN_FREQUENCY_HZ:g}..{ESC_MAX_FREQUENCY_HZ:g} Hz")
+    return prescale

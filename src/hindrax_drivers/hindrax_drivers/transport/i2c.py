@@ -1,0 +1,301 @@
+"""The one I2C access helper used by every I2C driver (MS5837, ICM-20948/AK09916, PCA9685).
+
+:class:`I2CDevice` wraps an object with the ``smbus2.SMBus`` interface (a real ``smbus2.SMBus(1)``
+on the Raspberry Pi, or :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` in tests and
+simulation; design.md §2) for one slave address and adds what smbus2 does not have:
+
+* retries with exponential backoff on ``OSError`` (typically errno 121 "Remote I/O error", a NACK
+  from a slave that is busy, browning out or has a bad connector), with counters of errors,
+  retries and failures for diagnostics;
+* a clear :class:`I2CError` (an ``OSError`` carrying the last errno) once retries are exhausted;
+* a *raw tap*: a callback ``(kind, address, register, data, t_monotonic_s)`` invoked for every
+  successful transaction, so the ROS node can publish the raw register traffic for recording and
+  bag replay (design.md §7);
+* :class:`RegisterWrite` sequences (the "sequence as data" produced by the protocol modules)
+  executed with their delays.
+
+The sleep function and the clock are injected, so tests run without real waiting.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Optional, Sequence
+
+__all__ = ["I2CDevice", "I2CError", "I2CStats", "RawTap", "RegisterWrite"]
+
+#: Raw tap signature: ``(kind, address, register, data, t_monotonic_s)``; ``kind`` is ``"write"``
+#: or ``"read"``; ``register`` is the register/command byte that started the transaction, or
+#: ``None`` for a plain read continuing from the device pointer; ``data`` are the data bytes
+#: written after the register byte, or the bytes read.
+RawTap = Callable[[str, int, Optional[int], bytes, float], None]
+
+_SMBUS_BLOCK_MAX = 32
+
+
+class I2CError(OSError):
+    """An I2C operation failed after all retries.
+
+    ``errno`` is the errno of the last failure (e.g. 121), ``device_name``/``address``/
+    ``operation`` identify the transfer, ``attempts`` is the number of attempts made.
+    """
+
+    def __init__(self, err_no: int | None, message: str, *, device_name: str, address: int,
+                 operation: str, attempts: int) -> None:
+        super().__init__(err_no, message)
+        self.device_name = device_name
+        self.address = address
+        self.operation = operation
+        self.attempts = attempts
+
+
+@dataclass(frozen=True)
+class RegisterWrite:
+    """One register write of an initialisation sequence, as data.
+
+    Attributes:
+        register: register address (8-bit).
+        value: byte to write (0..255).
+        delay_after_s: time to wait after the write, in seconds (>= 0).
+        note: short human description (which datasheet step), for logs.
+
+    Source: design.md §2 (protocol layer: command sequences as data).
+    """
+
+    register: int
+    value: int
+    delay_after_s: float = 0.0
+    note: str = ""
+
+    def __post_init__(self) -> None:
+        if not 0 <= int(self.register) <= 0xFF:
+            raise ValueError(f"register must be 0..255, got {self.register}")
+        if not 0 <= int(self.value) <= 0xFF:
+            raise ValueError(f"value must be 0..255, got {self.value}")
+        if not self.delay_after_s >= 0.0:
+            raise ValueError(f"delay_after_s must be >= 0, got {self.delay_after_s}")
+
+
+@dataclass
+class I2CStats:
+    """Counters of one :class:`I2CDevice`.
+
+    Attributes:
+        transactions: successful operations.
+        errors: failed attempts (each ``OSError`` caught).
+        retries: attempts made after a failure.
+        failures: operations abandoned (``I2CError`` raised).
+        last_error: text of the last ``OSError`` seen, or None.
+    """
+
+    transactions: int = 0
+    errors: int = 0
+    retries: int = 0
+    failures: int = 0
+    last_error: str | None = None
+
+
+class I2CDevice:
+    """One slave on an SMBus-like bus, with retries, counters and a raw tap.
+
+    Args:
+        bus: object with the ``smbus2.SMBus`` interface.
+        address: 7-bit address (0..0x7F; 0x00 is the general call, write-only).
+        name: device name used in messages and diagnostics (e.g. ``"ms5837"``).
+        retries: extra attempts after a failed one (>= 0); total attempts = retries + 1.
+        backoff_s: wait before the first retry, doubled for each further retry (>= 0).
+        raw_tap: optional :data:`RawTap`, called after every successful transaction.
+        sleep: ``sleep(seconds)`` used for backoff and sequence delays (inject a fake in tests).
+        clock: monotonic clock in seconds for the raw-tap timestamps.
+
+    Every operation holds ``self.lock`` (an ``RLock``); hold it yourself to make a multi-step
+    sequence (bank select + burst read) atomic with respect to other threads.
+
+    Retries cover ``OSError`` only; a ``ValueError`` from bad arguments propagates at once. Note
+    that a retried read re-issues the whole transfer; devices with read side effects
+    (e.g. the MS5837 ADC, which returns 0 on a second read) must be handled by the driver.
+
+    Raises:
+        I2CError: after ``retries + 1`` failed attempts (errno of the last failure).
+        ValueError: invalid address, register, value or length.
+    """
+
+    def __init__(
+        self,
+        bus: Any,
+        address: int,
+        name: str,
+        retries: int = 3,
+        backoff_s: float = 0.001,
+        raw_tap: RawTap | None = None,
+        sleep: Callable[[float], None] = time.sleep,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if not isinstance(address, int) or not 0 <= address <= 0x7F:
+            raise ValueError(f"I2C address must be 0..0x7f, got {address!r}")
+        if not isinstance(retries, int) or retries < 0:
+            raise ValueError(f"retries must be an int >= 0, got {retries!r}")
+        if not backoff_s >= 0.0:
+            raise ValueError(f"backoff_s must be >= 0, got {backoff_s!r}")
+        self.bus = bus
+        self.address = address
+        self.name = name
+        self.retries = retries
+        self.backoff_s = float(backoff_s)
+        self.raw_tap = raw_tap
+        self._sleep = sleep
+        self._clock = clock
+        self.lock = threading.RLock()
+        self.stats = I2CStats()
+
+    # ------------------------------------------------------------------ internals
+    def _run(self, operation: str, call: Callable[[], Any]) -> Any:
+        """Run ``call`` with retries; return its result. Lock must be held."""
+        attempts = 0
+        while True:
+            attempts += 1
+            try:
+                result = call()
+            except OSError as exc:
+                self.stats.errors += 1
+                self.stats.last_error = f"{operation}: {exc}"
+                if attempts > self.retries:
+                    self.stats.failures += 1
+                    raise I2CError(
+                        exc.errno,
+                        f"{self.name}@0x{self.address:02x}: {operation} failed after {attempts} "
+                        f"attempt(s): {exc}",
+                        device_name=self.name, address=self.address, operation=operation,
+                        attempts=attempts,
+                    ) from exc
+                self.stats.retries += 1
+                delay_s = self.backoff_s * (2 ** (attempts - 1))
+                if delay_s > 0.0:
+                    self._sleep(delay_s)
+                continue
+            self.stats.transactions += 1
+            return result
+
+    def _tap(self, kind: str, register: int | None, data: bytes) -> None:
+        if self.raw_tap is not None:
+            self.raw_tap(kind, self.address, register, bytes(data), float(self._clock()))
+
+    @staticmethod
+    def _byte(name: str, value: int) -> int:
+        if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 0xFF:
+            raise ValueError(f"{name} must be an int in 0..255, got {value!r}")
+        return value
+
+    # ------------------------------------------------------------------ operations
+    def write_byte(self, value: int) -> None:
+        """Send one command byte (SMBus send byte), e.g. an MS5837 command.
+
+        Raw tap: ``("write", address, value, b"")``.
+        """
+        self._byte("value", value)
+        with self.lock:
+            self._run(f"write_byte(0x{value:02x})", lambda: self.bus.write_byte(self.address, value))
+            self._tap("write", value, b"")
+
+    def read_byte(self) -> int:
+        """Read one byte continuing from the device pointer (SMBus receive byte).
+
+        Raw tap: ``("read", address, None, bytes([value]))``.
+        """
+        with self.lock:
+            value = int(self._run("read_byte()", lambda: self.bus.read_byte(self.address)))
+            self._tap("read", None, bytes([value]))
+            return value
+
+    def write_byte_data(self, register: int, value: int) -> None:
+        """Write one register: transaction ``[register, value]``.
+
+        Raw tap: ``("write", address, register, bytes([value]))``.
+        """
+        self._byte("register", register)
+        self._byte("value", value)
+        with self.lock:
+            self._run(f"write_byte_data(0x{register:02x}, 0x{value:02x})",
+                      lambda: self.bus.write_byte_data(self.address, register, value))
+            self._tap("write", register, bytes([value]))
+
+    def read_byte_data(self, register: int) -> int:
+        """Read one register (write pointer, repeated start, read 1 byte).
+
+        Raw tap: ``("read", address, register, bytes([value]))``.
+        """
+        self._byte("register", register)
+        with self.lock:
+            value = int(self._run(f"read_byte_data(0x{register:02x})",
+                                  lambda: self.bus.read_byte_data(self.address, register)))
+            self._tap("read", register, bytes([value]))
+            return value
+
+    def write_block(self, register: int, data: bytes | Sequence[int]) -> None:
+        """Write ``data`` starting at ``register`` in one transaction ``[register, *data]``.
+
+        Up to 32 bytes use ``write_i2c_block_data``; longer writes use ``i2c_rdwr`` (one message).
+        Raw tap: ``("write", address, register, data)``.
+        """
+        self._byte("register", register)
+        payload = bytes(data)
+        with self.lock:
+            if len(payload) <= _SMBUS_BLOCK_MAX:
+                call = lambda: self.bus.write_i2c_block_data(self.address, register, list(payload))  # noqa: E731
+            else:
+                from smbus2 import i2c_msg  # lazy: only long transfers need it
+
+                call = lambda: self.bus.i2c_rdwr(i2c_msg.write(self.address, bytes([register]) + payload))  # noqa: E731
+            self._run(f"write_block(0x{register:02x}, {len(payload)} bytes)", call)
+            self._tap("write", register, payload)
+
+    def read_block(self, register: int, length: int) -> bytes:
+        """Burst read of ``length`` bytes starting at ``register`` (or after command ``register``).
+
+        Up to 32 bytes use ``read_i2c_block_data``; longer reads use ``i2c_rdwr`` (write + read).
+        Raw tap: ``("read", address, register, data)``.
+
+        Returns:
+            ``bytes`` of length ``length``.
+        """
+        self._byte("register", register)
+        if not isinstance(length, int) or length < 1:
+            raise ValueError(f"length must be an int >= 1, got {length!r}")
+        with self.lock:
+            if length <= _SMBUS_BLOCK_MAX:
+                def call() -> bytes:
+                    return bytes(self.bus.read_i2c_block_data(self.address, register, length))
+            else:
+                from smbus2 import i2c_msg
+
+                def call() -> bytes:
+                    write = i2c_msg.write(self.address, [register])
+                    read = i2c_msg.read(self.address, length)
+                    self.bus.i2c_rdwr(write, read)
+                    return bytes(read)
+            data = self._run(f"read_block(0x{register:02x}, {length})", call)
+            if len(data) != length:
+                raise I2CError(None, f"{self.name}@0x{self.address:02x}: short read {len(data)}/{length}",
+                               device_name=self.name, address=self.address,
+                               operation="read_block", attempts=1)
+            self._tap("read", register, data)
+            return data
+
+    def write_sequence(self, writes: Iterable[RegisterWrite]) -> None:
+        """Execute register writes in order, sleeping ``delay_after_s`` after each.
+
+        Holds the lock for the whole sequence. Raises :class:`I2CError` on the first write that
+        fails after retries (later writes are not attempted).
+        """
+        with self.lock:
+            for write in writes:
+                self.write_byte_data(write.register, write.value)
+                if write.delay_after_s > 0.0:
+                    self._sleep(write.delay_after_s)
+
+    def sleep(self, seconds: float) -> None:
+        """Wait using the injected sleep function (for device conversion times)."""
+        if seconds > 0.0:
+            self._sleep(seconds)
