@@ -1,0 +1,62 @@
+"""``make bench``: run the benchmark scripts and print one table, writing JSON beside it.
+
+Each module in :mod:`hindrax_ident.benchmarks` (listed in :data:`BENCHMARKS`) provides
+``run(quick: bool) -> list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally
+``target`` and ``note``. Benchmarks measure; tests never time anything (README, "Tests").
+
+Usage: ``python -m hindrax_ident.bench [--only NAME[,NAME]] [--quick] [--out DIR]``.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import importlib
+import json
+import os
+import platform
+import sys
+from pathlib import Path
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+#: benchmark name -> module
+BENCHMARKS: dict[str, str] = {
+    "actuation": "hindrax_ident.benchmarks.actuation",
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="hindrax-bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--only", default="", help="comma-separated benchmark names")
+    parser.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the scripts)")
+    parser.add_argument("--out", default="bench-results", help="directory for results.json")
+    args = parser.parse_args(argv)
+    names = [n for n in args.only.split(",") if n] or list(BENCHMARKS)
+    unknown = [n for n in names if n not in BENCHMARKS]
+    if unknown:
+        print(f"unknown benchmark(s): {', '.join(unknown)}; available: {', '.join(BENCHMARKS)}", file=sys.stderr)
+        return 2
+    rows: list[dict] = []
+    for name in names:
+        mod = importlib.import_module(BENCHMARKS[name])
+        print(f"== {name}", flush=True)
+        for row in mod.run(quick=args.quick):
+            row = {"benchmark": name, **row}
+            rows.append(row)
+    width = max((len(r["name"]) for r in rows), default=10)
+    print(f"\n{'benchmark':<14} {'measure':<{width}} {'value':>12} unit         target")
+    for r in rows:
+        value = r["value"]
+        shown = f"{value:12.4g}" if isinstance(value, (int, float)) else f"{value!s:>12}"
+        print(f"{r['benchmark']:<14} {r['name']:<{width}} {shown} {r.get('unit', ''):<12} {r.get('target', '')}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    doc = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(), "machine": platform.platform(),
+           "cpus": os.cpu_count(), "rows": rows}
+    (out / "results.json").write_text(json.dumps(doc, indent=2))
+    print(f"\nwritten {out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

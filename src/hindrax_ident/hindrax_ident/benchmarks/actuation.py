@@ -1,0 +1,95 @@
+"""Actuation benchmark: wrench-in to PCA9685-registers-written latency and CPU per command at 50 Hz.
+
+One process, one SingleThreadedExecutor: a publisher of geometry_msgs/WrenchStamped at 50 Hz, the thrust
+allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated I2C bus.
+Wrenches alternate between two surge levels so T1's pulse width changes with every command; latency is
+the time from ``publish()`` to the I2C write after which the emulator decodes the new pulse width on
+T1's channel. It includes the wait for the ESC node's next output tick (``esc.output_rate_hz``), which is
+the design's bound. CPU per command is the process CPU time (all three nodes and DDS) divided by the
+commands sent.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+def run(quick: bool = False) -> list[dict]:
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hindrax_drivers.allocation.core import AllocationCore
+    from hindrax_drivers.allocation.node import ThrustAllocationNode
+    from hindrax_drivers.config import default_config_path, load_config
+    from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+    from hindrax_drivers.pca9685.node import EscNode
+    from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+    from hindrax_msgs.srv import SetArmed
+
+    n_commands = 150 if quick else 1500
+    cfg = load_config(default_config_path())
+    core = AllocationCore(cfg)
+    levels = [np.array([8.0, 0, 0, 0, 0, 0]), np.array([14.0, 0, 0, 0, 0, 0])]
+    expected = [core.allocate(w).pulse_width_us[0] for w in levels]
+    pending: dict = {}
+    latencies: list[float] = []
+
+    class TimedEmulator(Pca9685Emulator):
+        def i2c_write(self, data: bytes) -> None:
+            super().i2c_write(data)
+            if pending and abs(self.pulse_width_us(0) - pending["target"]) < 1.0:
+                latencies.append(time.monotonic() - pending.pop("t0"))
+                pending.clear()
+
+    emu = TimedEmulator()
+    bus = EmulatedI2CBus({cfg.get("esc.i2c_address"): emu})
+    with ros_context() as ctx:
+        params = config_parameters({"esc.arming_time_s": 0.0})
+        alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
+        esc = EscNode(bus=bus, context=ctx, parameter_overrides=params)
+        driver = rclpy.create_node("bench_driver", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        for n in (alloc, esc, driver):
+            ex.add_node(n)
+        pub = driver.create_publisher(WrenchStamped, "wrench", 10)
+        arm = driver.create_client(SetArmed, "esc/set_armed")
+        spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
+        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready(), 10, spin, "graph")
+        fut = arm.call_async(SetArmed.Request(arm=True))
+        wait_until(fut.done, 5, spin, "armed")
+        state = {"i": 0, "sent": 0}
+
+        def send() -> None:
+            w = levels[state["i"] % 2]
+            m = WrenchStamped()
+            m.header.frame_id = "base_link"
+            m.header.stamp = driver.get_clock().now().to_msg()
+            m.wrench.force.x = float(w[0])
+            pending.clear()
+            pending.update(t0=time.monotonic(), target=expected[state["i"] % 2])
+            pub.publish(m)
+            state["i"] += 1
+            state["sent"] += 1
+
+        driver.create_timer(1.0 / 50.0, send)
+        cpu0, wall0 = time.process_time(), time.monotonic()
+        wait_until(lambda: state["sent"] >= n_commands, n_commands / 50.0 + 30.0, spin, "commands sent")
+        cpu = time.process_time() - cpu0
+        wall = time.monotonic() - wall0
+        ex.shutdown()
+        for n in (alloc, esc, driver):
+            n.destroy_node()
+    lat_ms = np.array(latencies) * 1e3
+    return [
+        {"name": "wrench_to_registers_p50", "value": float(np.percentile(lat_ms, 50)), "unit": "ms",
+         "target": "< 20 ms (one 50 Hz output period)"},
+        {"name": "wrench_to_registers_p99", "value": float(np.percentile(lat_ms, 99)), "unit": "ms"},
+        {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count",
+         "note": f"of {state['sent']} sent"},
+        {"name": "cpu_per_command", "value": cpu / state["sent"] * 1e3, "unit": "ms",
+         "note": "whole process: publisher + allocation + ESC node"},
+        {"name": "cpu_load_at_50hz", "value": cpu / wall * 100.0, "unit": "% of a core"},
+    ]
