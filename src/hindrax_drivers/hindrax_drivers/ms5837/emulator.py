@@ -1,0 +1,224 @@
+"""TE MS5837-30BA / -02BA device emulator (command-exact, I2C address 0x76).
+
+Plugs into :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`. It models the device
+side of hardware.md §3.1 and §3.8:
+
+* commands: reset (0x1E), PROM read (0xA0 + 2k, 2 bytes MSB first), D1/D2 conversions with OSR
+  (0x40.../0x50...), ADC read (0x00 then 3 bytes MSB first);
+* ADC semantics: a read with no conversion done, a second read of the same result, or a read
+  before the conversion time has elapsed returns 0; a read during a conversion also corrupts that
+  conversion (its result becomes 0); starting a conversion while one runs gives an incorrect
+  result (modelled as 0);
+* PROM with a valid CRC-4 (§3.3), coefficients configurable (default: datasheet example values);
+* raw values from a truth source ``t_s -> (pressure_pa, temperature_c)`` sampled at the start of
+  each conversion, through the inversion of the compensation (§3.8, :func:`invert_to_raw`);
+* faults: stuck outputs (conversions repeat the last D1/D2), corrupted PROM CRC; bus-level NACKs
+  are injected by the bus.
+
+Modelling choices (not in the datasheets we have): reset is instantaneous; conversion time per OSR
+is :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S` (TE library waits, §3.1); unknown
+command bytes are ignored; reads not preceded by PROM/ADC commands return zeros.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable, Sequence
+
+from . import protocol as p
+
+__all__ = ["Ms5837Emulator", "invert_to_raw", "TruthSource"]
+
+#: Truth source: time in s -> (absolute pressure in Pa, temperature in degC).
+TruthSource = Callable[[float], "tuple[float, float]"]
+
+
+def _closest_monotonic(f: Callable[[int], int], target: float, lo: int, hi: int) -> int:
+    """Integer x in [lo, hi] whose non-decreasing f(x) is closest to target (bisection)."""
+    if f(hi) < target:
+        return hi
+    if f(lo) >= target:
+        return lo
+    a, b = lo, hi  # invariant: f(a) < target <= f(b)
+    while b - a > 1:
+        mid = (a + b) // 2
+        if f(mid) < target:
+            a = mid
+        else:
+            b = mid
+    return a if abs(f(a) - target) < abs(f(b) - target) else b
+
+
+def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calibration,
+                  variant: p.Variant, apply_second_order: bool = True) -> tuple[int, int]:
+    """Raw (D1, D2) whose compensation is closest to the given pressure and temperature.
+
+    Implements hardware.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
+    ``temperature_c * 100``; then D1 so that P (P2) is closest to the pressure in output counts.
+    Instead of the closed-form estimate plus +-1 adjustment we bisect on the exact integer forward
+    model (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives the same answer and
+    also covers the second-order branches. Both are clamped to 24 bits, so targets outside the
+    representable range saturate.
+
+    Args:
+        pressure_pa: absolute pressure, Pa.
+        temperature_c: temperature, degC.
+        calibration: PROM contents.
+        variant: sensor variant.
+        apply_second_order: invert the second-order model (as a driver using it will see).
+
+    Returns:
+        (D1, D2), each 0..2^24-1. The round trip error is within half an output LSB
+        (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range.
+
+    Raises:
+        Ms5837Error: non-finite inputs.
+    """
+    if not all(map(lambda v: v == v and abs(v) != float("inf"), (pressure_pa, temperature_c))):
+        raise p.Ms5837Error(f"truth values must be finite, got {pressure_pa}, {temperature_c}")
+    variant = p.Variant(variant)
+    reference_d1 = p.ADC_MAX // 2
+
+    def temp_of(d2: int) -> int:
+        return p.compensate(reference_d1, d2, calibration, variant, apply_second_order).compensation.temp
+
+    d2 = _closest_monotonic(temp_of, temperature_c * 100.0, 0, p.ADC_MAX)
+    target_p = pressure_pa * p.pressure_counts_per_pa(variant)
+
+    def p_of(d1: int) -> int:
+        return p.compensate(d1, d2, calibration, variant, apply_second_order).compensation.p
+
+    if p_of(p.ADC_MAX) >= p_of(0):
+        d1 = _closest_monotonic(p_of, target_p, 0, p.ADC_MAX)
+    else:  # non-physical calibration (SENS <= 0): pick the closer end
+        d1 = min((0, p.ADC_MAX), key=lambda x: abs(p_of(x) - target_p))
+    return d1, d2
+
+
+class Ms5837Emulator:
+    """Command-exact MS5837 device emulator (see module docstring).
+
+    Args:
+        truth: ``t_s -> (pressure_pa, temperature_c)``, evaluated at conversion start.
+        clock: monotonic clock in seconds (inject the simulator's or a test's clock).
+        variant: ``Variant`` (or "30BA"/"02BA") used for the inversion.
+        coefficients: C1..C6; default: the datasheet example of the variant (hardware.md §3.7).
+        word0: PROM word 0 bits 11:0 (product code and factory bits); default: 30BA26 product
+            code for 30BA, 0 for 02BA (hardware.md §3.3 vectors).
+        apply_second_order: invert with the second-order model.
+        conversion_time_s: optional override {osr: seconds}.
+
+    Fault injection attributes (thread-safe to set at any time):
+        ``stuck``: conversions return the previous D1/D2 instead of the truth.
+        ``corrupt_prom_crc``: PROM word 0 is read with a wrong CRC nibble.
+
+    Counters: ``conversions``, ``adc_reads``, ``zero_reads`` (ADC reads that returned 0).
+    """
+
+    address = p.ADDRESS
+
+    def __init__(self, truth: TruthSource, clock: Callable[[], float] = time.monotonic,
+                 variant: p.Variant | str = p.Variant.MS5837_30BA,
+                 coefficients: Sequence[int] | None = None, word0: int | None = None,
+                 apply_second_order: bool = True,
+                 conversion_time_s: dict[int, float] | None = None) -> None:
+        self._lock = threading.RLock()
+        self.truth = truth
+        self.clock = clock
+        parsed = p.parse_variant(variant)
+        if parsed is None:
+            raise p.Ms5837Error("the emulator needs an explicit variant ('30BA' or '02BA')")
+        self.variant = parsed
+        if coefficients is None:
+            coefficients = (p.EXAMPLE_COEFFICIENTS_30BA if self.variant is p.Variant.MS5837_30BA
+                            else p.EXAMPLE_COEFFICIENTS_02BA)
+        if word0 is None:
+            word0 = p.EXAMPLE_WORD0_30BA if self.variant is p.Variant.MS5837_30BA else p.EXAMPLE_WORD0_02BA
+        self.calibration = p.Calibration.from_coefficients(coefficients, word0)
+        self.apply_second_order = apply_second_order
+        self.conversion_time_s = dict(p.CONVERSION_TIME_S if conversion_time_s is None else conversion_time_s)
+        self.stuck = False
+        self.corrupt_prom_crc = False
+        self.conversions = 0
+        self.adc_reads = 0
+        self.zero_reads = 0
+        self._last_raw = {"convert_d1": 0, "convert_d2": 0}
+        self._reset_state()
+
+    # ------------------------------------------------------------------ state
+    def _reset_state(self) -> None:
+        self._conversion: dict | None = None  # {"kind", "value", "done_t", "corrupt"}
+        self._result: int | None = None       # completed, not yet read
+        self._output = b""                    # bytes for the next read transaction
+
+    def _settle(self, now: float) -> None:
+        """Move a finished conversion into the result register."""
+        conv = self._conversion
+        if conv is not None and now >= conv["done_t"]:
+            self._result = 0 if conv["corrupt"] else conv["value"]
+            self._conversion = None
+
+    @property
+    def prom_words(self) -> tuple[int, ...]:
+        """PROM as read over the bus (with the CRC fault applied if enabled)."""
+        words = list(self.calibration.words)
+        if self.corrupt_prom_crc:
+            words[0] = (((words[0] >> 12) + 1) & 0xF) << 12 | (words[0] & 0x0FFF)
+        return tuple(words)
+
+    def raw_for_truth(self, t_s: float) -> tuple[int, int]:
+        """(D1, D2) the device produces for the truth at ``t_s`` (no faults applied)."""
+        pressure_pa, temperature_c = self.truth(t_s)
+        return invert_to_raw(float(pressure_pa), float(temperature_c), self.calibration,
+                             self.variant, self.apply_second_order)
+
+    # ------------------------------------------------------------------ I2CDeviceEmulator
+    def i2c_write(self, data: bytes) -> None:
+        """One write transaction: a command byte (hardware.md §3.1). Extra bytes are ignored."""
+        with self._lock:
+            now = float(self.clock())
+            self._settle(now)
+            if not data:
+                return
+            try:
+                cmd = p.decode_command(data[0])
+            except p.Ms5837Error:
+                self._output = b""
+                return
+            if cmd.kind == "reset":
+                self._reset_state()
+            elif cmd.kind == "prom_read":
+                self._output = p.encode_prom_word(self.prom_words[cmd.index])
+            elif cmd.kind == "adc_read":
+                self.adc_reads += 1
+                if self._conversion is not None:  # read during conversion: 0, and corrupt it
+                    self._conversion["corrupt"] = True
+                    value = 0
+                else:
+                    value = self._result or 0
+                    self._result = None  # read twice -> 0
+                if value == 0:
+                    self.zero_reads += 1
+                self._output = p.encode_adc(value)
+            else:  # convert_d1 / convert_d2
+                self.conversions += 1
+                corrupt = self._conversion is not None  # new conversion during one: bad result
+                if self.stuck:
+                    value = self._last_raw[cmd.kind]
+                else:
+                    d1, d2 = self.raw_for_truth(now)
+                    value = d1 if cmd.kind == "convert_d1" else d2
+                    self._last_raw = {"convert_d1": d1, "convert_d2": d2}
+                self._result = None
+                self._conversion = {"kind": cmd.kind, "value": value, "corrupt": corrupt,
+                                    "done_t": now + self.conversion_time_s[cmd.osr]}
+                self._output = b""
+
+    def i2c_read(self, n: int) -> bytes:
+        """One read transaction: the pending PROM word / ADC bytes, then zeros."""
+        with self._lock:
+            self._settle(float(self.clock()))
+            out = (self._output + bytes(max(0, n - len(self._output))))[:n]
+            self._output = self._output[n:]
+            return out

@@ -1,0 +1,777 @@
+"""Blue Robotics Ping1D (Ping / Ping2 echosounder) binary protocol: pure frame codec and payloads.
+
+Layer 1 of the Ping1D altimeter driver (design.md §2): bytes in, typed values out, and the reverse.
+No I/O, no clocks, no ROS.  Source: /work/shared/reference/hardware.md §2.2-§2.5 (tags [P1]-[P10]).
+
+Frame (little-endian, hardware.md §2.2): ``'B' 'R'``, u16 payload_length, u16 message_id,
+u8 src_device_id, u8 dst_device_id, payload, u16 checksum = (sum of every preceding byte) & 0xFFFF.
+
+Why our own codec instead of the PyPI package ``bluerobotics-ping`` (``brping``): every 0.2.x release
+(0.2.0 ... 0.2.5) has a broken ``Ping1D`` class (hardware.md §0 item 4, §2.7): the S500 definitions
+overwrite the Ping1D ones in ``definitions.payload_dict_all``, so ``get_distance_simple()`` raises
+AttributeError, ``get_processor_temperature()`` fails to unpack, ``set_range``/``set_ping_interval``
+verification fail, and ``set_speed_of_sound(x)`` actually transmits **0 mm/s**.  The library also polls
+with blocking sleeps, has no locking and reports errors with ``print``.  The protocol is small; this
+module implements it exactly (verified against the byte-exact vectors of §2.5) with a declared parse
+error and a streaming framer that resynchronises on ``BR``.
+
+Units: payload fields are converted to SI on decode (mm -> m, mm/s -> m/s, ms/µs -> s, mV -> V,
+centi-degC -> degC; confidence stays in %), and back on encode with rounding to the wire resolution.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, fields as dc_fields
+from enum import IntEnum
+from typing import ClassVar, Dict, Optional, Tuple, Type, Union
+
+__all__ = [
+    "Ping1dParseError",
+    "Ping1dId",
+    "Ping1dMessage",
+    "Ping1dFramer",
+    "Ping1dPayload",
+    "Ack",
+    "Nack",
+    "AsciiText",
+    "DeviceInformation",
+    "ProtocolVersion",
+    "GeneralRequest",
+    "SetDeviceId",
+    "SetRange",
+    "SetSpeedOfSound",
+    "SetModeAuto",
+    "SetPingInterval",
+    "SetGainSetting",
+    "SetPingEnable",
+    "GotoBootloader",
+    "FirmwareVersion",
+    "DeviceId",
+    "Voltage5",
+    "SpeedOfSound",
+    "Range",
+    "ModeAuto",
+    "PingInterval",
+    "GainSetting",
+    "TransmitDuration",
+    "GeneralInfo",
+    "DistanceSimple",
+    "Distance",
+    "ProcessorTemperature",
+    "PcbTemperature",
+    "PingEnable",
+    "Profile",
+    "ContinuousStart",
+    "ContinuousStop",
+    "PAYLOAD_TYPES",
+    "GAIN_INDEX_TO_GAIN",
+    "HEADER_BYTES",
+    "CHECKSUM_BYTES",
+    "SYNC_BYTE",
+    "checksum",
+    "encode_frame",
+    "decode_frame",
+    "request_frame",
+    "encode_message",
+    "decode_message",
+    "is_legacy_request",
+]
+
+HEADER_BYTES = 8
+CHECKSUM_BYTES = 2
+#: Auto-baud sync byte ``U`` the host sends before its first message (firmware >= 3.28, §2.1).
+SYNC_BYTE = b"U"
+#: Gain index -> receiver gain (hardware.md §2.4 [P2]).
+GAIN_INDEX_TO_GAIN = (0.6, 1.8, 5.5, 12.9, 30.2, 66.1, 144.0)
+
+_HEADER = struct.Struct("<2sHHBB")
+_CHECKSUM = struct.Struct("<H")
+
+
+class Ping1dParseError(ValueError):
+    """Raised for any Ping1D frame or payload that cannot be decoded (wrong start bytes, length
+    mismatch, bad checksum, wrong payload size, unknown message id, out-of-range enum value).
+    Source: hardware.md §2.2-§2.4."""
+
+
+class Ping1dId(IntEnum):
+    """Message ids used by an altimeter driver (hardware.md §2.4 [P2])."""
+
+    ACK = 1
+    NACK = 2
+    ASCII_TEXT = 3
+    DEVICE_INFORMATION = 4
+    PROTOCOL_VERSION = 5
+    GENERAL_REQUEST = 6
+    SET_DEVICE_ID = 1000
+    SET_RANGE = 1001
+    SET_SPEED_OF_SOUND = 1002
+    SET_MODE_AUTO = 1003
+    SET_PING_INTERVAL = 1004
+    SET_GAIN_SETTING = 1005
+    SET_PING_ENABLE = 1006
+    GOTO_BOOTLOADER = 1100
+    FIRMWARE_VERSION = 1200
+    DEVICE_ID = 1201
+    VOLTAGE_5 = 1202
+    SPEED_OF_SOUND = 1203
+    RANGE = 1204
+    MODE_AUTO = 1205
+    PING_INTERVAL = 1206
+    GAIN_SETTING = 1207
+    TRANSMIT_DURATION = 1208
+    GENERAL_INFO = 1210
+    DISTANCE_SIMPLE = 1211
+    DISTANCE = 1212
+    PROCESSOR_TEMPERATURE = 1213
+    PCB_TEMPERATURE = 1214
+    PING_ENABLE = 1215
+    PROFILE = 1300
+    CONTINUOUS_START = 1400
+    CONTINUOUS_STOP = 1401
+
+
+# ---------------------------------------------------------------------------------------------
+# Frame codec
+# ---------------------------------------------------------------------------------------------
+
+
+def checksum(data: bytes) -> int:
+    """Ping protocol checksum: sum of all bytes, modulo 2**16 (hardware.md §2.2)."""
+    return sum(data) & 0xFFFF
+
+
+@dataclass(frozen=True)
+class Ping1dMessage:
+    """One decoded frame: raw message id and payload bytes (hardware.md §2.2).
+
+    Attributes:
+        message_id: u16 message id.
+        payload: payload bytes (may be empty: a legacy request, §2.3).
+        src_device_id, dst_device_id: u8 device ids (0 = not implemented / host; 255 = broadcast).
+    """
+
+    message_id: int
+    payload: bytes = b""
+    src_device_id: int = 0
+    dst_device_id: int = 0
+
+    def encode(self) -> bytes:
+        """This message as a complete frame (see :func:`encode_frame`)."""
+        return encode_frame(self.message_id, self.payload, self.src_device_id, self.dst_device_id)
+
+
+def encode_frame(message_id: int, payload: bytes = b"", src_device_id: int = 0,
+                 dst_device_id: int = 0) -> bytes:
+    """Build a complete frame: header, payload, checksum (hardware.md §2.2).
+
+    Raises:
+        ValueError: message id outside 0..65535, device ids outside 0..255, payload > 65535 bytes.
+    """
+    if not 0 <= int(message_id) <= 0xFFFF:
+        raise ValueError(f"message id {message_id} outside 0..65535")
+    if not (0 <= int(src_device_id) <= 0xFF and 0 <= int(dst_device_id) <= 0xFF):
+        raise ValueError(f"device ids ({src_device_id}, {dst_device_id}) outside 0..255")
+    payload = bytes(payload)
+    if len(payload) > 0xFFFF:
+        raise ValueError(f"payload of {len(payload)} bytes exceeds 65535")
+    body = _HEADER.pack(b"BR", len(payload), int(message_id), int(src_device_id),
+                        int(dst_device_id)) + payload
+    return body + _CHECKSUM.pack(checksum(body))
+
+
+def decode_frame(frame: Union[bytes, bytearray]) -> Ping1dMessage:
+    """Decode exactly one complete frame.
+
+    Raises:
+        Ping1dParseError: too short, not starting with ``BR``, payload_length inconsistent with the
+            frame length, or checksum mismatch.
+    """
+    frame = bytes(frame)
+    if len(frame) < HEADER_BYTES + CHECKSUM_BYTES:
+        raise Ping1dParseError(f"frame too short ({len(frame)} bytes)")
+    start, length, message_id, src, dst = _HEADER.unpack_from(frame)
+    if start != b"BR":
+        raise Ping1dParseError(f"frame does not start with 'BR': {frame[:2]!r}")
+    if len(frame) != HEADER_BYTES + length + CHECKSUM_BYTES:
+        raise Ping1dParseError(
+            f"payload_length {length} inconsistent with frame of {len(frame)} bytes")
+    (expected,) = _CHECKSUM.unpack_from(frame, HEADER_BYTES + length)
+    computed = checksum(frame[: HEADER_BYTES + length])
+    if computed != expected:
+        raise Ping1dParseError(f"checksum mismatch: frame says 0x{expected:04x}, computed 0x{computed:04x}")
+    return Ping1dMessage(message_id, frame[HEADER_BYTES: HEADER_BYTES + length], src, dst)
+
+
+def request_frame(requested_id: int, *, legacy: bool = False, src_device_id: int = 0,
+                  dst_device_id: int = 0) -> bytes:
+    """Frame asking the device for message ``requested_id`` (hardware.md §2.3): the official
+    ``general_request`` (id 6, u16 payload) or, with ``legacy=True``, a frame with that id and an
+    empty payload (what brping sends).
+
+    Raises:
+        ValueError: ids out of range.
+    """
+    if legacy:
+        return encode_frame(requested_id, b"", src_device_id, dst_device_id)
+    return encode_message(GeneralRequest(requested_id), src_device_id, dst_device_id)
+
+
+def is_legacy_request(message: Ping1dMessage) -> bool:
+    """True for a zero-payload frame whose id is a gettable message (hardware.md §2.3)."""
+    return not message.payload and message.message_id in _GETTABLE_IDS
+
+
+class Ping1dFramer:
+    """Streaming frame extractor: feed arbitrary byte chunks, get complete valid frames.
+
+    Resynchronisation (hardware.md §2.2 parser state machine, §2.6): bytes before ``BR`` are
+    discarded; a header whose payload_length exceeds ``max_payload_bytes`` is treated as a false start;
+    a frame with a bad checksum is counted and scanning resumes one byte after its ``B``, so a valid
+    frame hidden inside a corrupted or truncated one is still found.  Auto-baud ``U`` bytes and
+    garbage are counted as discarded.  Results do not depend on chunking.
+
+    Attributes:
+        discarded_bytes: bytes dropped while resynchronising.
+        bad_checksums: frames whose checksum did not verify.
+        oversize_headers: false starts rejected by the payload-length limit.
+        frames_ok: valid frames returned.
+    """
+
+    def __init__(self, max_payload_bytes: int = 1024) -> None:
+        if max_payload_bytes < 0 or max_payload_bytes > 0xFFFF:
+            raise ValueError("max_payload_bytes must be within 0..65535")
+        self.max_payload_bytes = int(max_payload_bytes)
+        self._buf = bytearray()
+        self.discarded_bytes = 0
+        self.bad_checksums = 0
+        self.oversize_headers = 0
+        self.frames_ok = 0
+
+    def reset(self) -> None:
+        """Drop any partial frame (counted as discarded); counters are kept."""
+        self.discarded_bytes += len(self._buf)
+        self._buf.clear()
+
+    def feed(self, data: Union[bytes, bytearray]) -> list:
+        """Add a chunk; return the list of :class:`Ping1dMessage` it completes."""
+        buf = self._buf
+        buf += data
+        out: list = []
+        while True:
+            idx = buf.find(b"BR")
+            if idx < 0:
+                keep = 1 if buf.endswith(b"B") else 0
+                self.discarded_bytes += len(buf) - keep
+                del buf[: len(buf) - keep]
+                break
+            if idx:
+                self.discarded_bytes += idx
+                del buf[:idx]
+            if len(buf) < HEADER_BYTES:
+                break
+            length = buf[2] | (buf[3] << 8)
+            if length > self.max_payload_bytes:
+                self.oversize_headers += 1
+                self.discarded_bytes += 1
+                del buf[:1]
+                continue
+            total = HEADER_BYTES + length + CHECKSUM_BYTES
+            if len(buf) < total:
+                break
+            if checksum(buf[: total - CHECKSUM_BYTES]) != (buf[total - 2] | (buf[total - 1] << 8)):
+                self.bad_checksums += 1
+                self.discarded_bytes += 1
+                del buf[:1]
+                continue
+            out.append(Ping1dMessage(buf[4] | (buf[5] << 8), bytes(buf[HEADER_BYTES: total - 2]),
+                                     buf[6], buf[7]))
+            del buf[:total]
+        self.frames_ok += len(out)
+        return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Typed payloads
+# ---------------------------------------------------------------------------------------------
+
+# Field conversions: "int" (raw integer), "bool" (u8 0/1), or an int divisor d with SI = raw / d.
+_Conv = Union[str, int]
+
+
+class Ping1dPayload:
+    """Base of the typed payload dataclasses.  Subclasses declare ``MESSAGE_ID``, ``LAYOUT`` (one
+    ``(struct code, conversion)`` per dataclass field, in wire order) and optionally ``TAIL``
+    (``"text"``: trailing char[]; ``"profile"``: u16 length + u8[] samples)."""
+
+    MESSAGE_ID: ClassVar[int]
+    LAYOUT: ClassVar[Tuple[Tuple[str, _Conv], ...]] = ()
+    TAIL: ClassVar[Optional[str]] = None
+
+    def pack(self) -> bytes:
+        """Payload bytes (little-endian).
+
+        Raises:
+            ValueError: a value that does not fit its wire type (negative, too large, non-finite,
+                non-integral where an integer is required, non-ASCII text).
+        """
+        names = [f.name for f in dc_fields(self)]  # type: ignore[arg-type]
+        raw = []
+        for name, (code, conv) in zip(names, self.LAYOUT):
+            raw.append(_to_raw(getattr(self, name), conv, name))
+        try:
+            data = struct.pack("<" + "".join(code for code, _ in self.LAYOUT), *raw)
+        except struct.error as exc:
+            raise ValueError(f"{type(self).__name__}: value out of range for its wire type: {exc}") from exc
+        if self.TAIL == "text":
+            data += getattr(self, names[-1]).encode("ascii")
+        elif self.TAIL == "profile":
+            samples = bytes(getattr(self, names[-1]))
+            if len(samples) > 0xFFFF:
+                raise ValueError("profile_data longer than 65535 samples")
+            data += struct.pack("<H", len(samples)) + samples
+        return data
+
+    @classmethod
+    def unpack(cls, payload: bytes):
+        """Decode payload bytes into this type.
+
+        Raises:
+            Ping1dParseError: wrong length or invalid boolean value.
+        """
+        fmt = "<" + "".join(code for code, _ in cls.LAYOUT)
+        size = struct.calcsize(fmt)
+        payload = bytes(payload)
+        if cls.TAIL is None and len(payload) != size:
+            raise Ping1dParseError(f"{cls.__name__}: payload of {len(payload)} bytes, expected {size}")
+        if cls.TAIL is not None and len(payload) < size:
+            raise Ping1dParseError(f"{cls.__name__}: payload of {len(payload)} bytes, expected >= {size}")
+        names = [f.name for f in dc_fields(cls)]  # type: ignore[arg-type]
+        values = [_from_raw(r, conv, name) for r, (_, conv), name in
+                  zip(struct.unpack_from(fmt, payload), cls.LAYOUT, names)]
+        rest = payload[size:]
+        if cls.TAIL == "text":
+            values.append(rest.rstrip(b"\x00").decode("ascii", errors="replace"))
+        elif cls.TAIL == "profile":
+            if len(rest) < 2:
+                raise Ping1dParseError(f"{cls.__name__}: missing profile_data_length")
+            (n,) = struct.unpack_from("<H", rest)
+            if len(rest) - 2 != n:
+                raise Ping1dParseError(
+                    f"{cls.__name__}: profile_data_length {n} but {len(rest) - 2} samples present")
+            values.append(bytes(rest[2:]))
+        return cls(*values)
+
+    def encode(self, src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
+        """Complete frame carrying this payload (see :func:`encode_message`)."""
+        return encode_message(self, src_device_id, dst_device_id)
+
+
+def _to_raw(value, conv: _Conv, name: str) -> int:
+    if conv == "bool":
+        return 1 if value else 0
+    if conv == "int":
+        if isinstance(value, float):
+            if not value.is_integer():
+                raise ValueError(f"{name}: {value} is not an integer")
+            value = int(value)
+        return int(value)
+    try:
+        scaled = float(value) * int(conv)
+        if not math.isfinite(scaled):
+            raise ValueError
+        return int(round(scaled))
+    except (ValueError, OverflowError, TypeError):
+        raise ValueError(f"{name}: invalid value {value!r}") from None
+
+
+def _from_raw(raw: int, conv: _Conv, name: str):
+    if conv == "bool":
+        if raw not in (0, 1):
+            raise Ping1dParseError(f"{name}: expected 0 or 1, got {raw}")
+        return bool(raw)
+    if conv == "int":
+        return raw
+    return raw / int(conv)
+
+
+_MM = 1000  # mm -> m, mm/s -> m/s, ms -> s, mV -> V
+_US = 1000000  # µs -> s
+_CC = 100  # centi-degC -> degC
+
+
+@dataclass(frozen=True)
+class Ack(Ping1dPayload):
+    """id 1 ack: ``acked_id`` u16 (hardware.md §2.3-§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.ACK
+    LAYOUT: ClassVar = (("H", "int"),)
+    acked_id: int
+
+
+@dataclass(frozen=True)
+class Nack(Ping1dPayload):
+    """id 2 nack: ``nacked_id`` u16 + ASCII text, not necessarily NUL-terminated (§2.3)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.NACK
+    LAYOUT: ClassVar = (("H", "int"),)
+    TAIL: ClassVar = "text"
+    nacked_id: int
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class AsciiText(Ping1dPayload):
+    """id 3 ascii_text: char[] (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.ASCII_TEXT
+    TAIL: ClassVar = "text"
+    text: str = ""
+
+
+@dataclass(frozen=True)
+class DeviceInformation(Ping1dPayload):
+    """id 4 device_information: device_type (0 unknown, 1 Ping Echosounder, 2 Ping360), device
+    revision, firmware major/minor/patch, reserved; 6 x u8 (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.DEVICE_INFORMATION
+    LAYOUT: ClassVar = (("B", "int"),) * 6
+    device_type: int
+    device_revision: int
+    firmware_version_major: int
+    firmware_version_minor: int
+    firmware_version_patch: int
+    reserved: int = 0
+
+
+@dataclass(frozen=True)
+class ProtocolVersion(Ping1dPayload):
+    """id 5 protocol_version: major, minor, patch, reserved; 4 x u8 (§2.4, vector §2.5)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.PROTOCOL_VERSION
+    LAYOUT: ClassVar = (("B", "int"),) * 4
+    version_major: int
+    version_minor: int
+    version_patch: int
+    reserved: int = 0
+
+
+@dataclass(frozen=True)
+class GeneralRequest(Ping1dPayload):
+    """id 6 general_request: u16 ``requested_id``; the device answers with that message (§2.3)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.GENERAL_REQUEST
+    LAYOUT: ClassVar = (("H", "int"),)
+    requested_id: int
+
+
+@dataclass(frozen=True)
+class SetDeviceId(Ping1dPayload):
+    """id 1000 set_device_id: u8 device_id 0..254 (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_DEVICE_ID
+    LAYOUT: ClassVar = (("B", "int"),)
+    device_id: int
+
+
+@dataclass(frozen=True)
+class SetRange(Ping1dPayload):
+    """id 1001 set_range: u32 scan_start mm, u32 scan_length mm (min 1000 mm); manual mode (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_RANGE
+    LAYOUT: ClassVar = (("I", _MM), ("I", _MM))
+    scan_start_m: float
+    scan_length_m: float
+
+
+@dataclass(frozen=True)
+class SetSpeedOfSound(Ping1dPayload):
+    """id 1002 set_speed_of_sound: u32 mm/s (about 1 500 000 in water) (§2.4, vector §2.5)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_SPEED_OF_SOUND
+    LAYOUT: ClassVar = (("I", _MM),)
+    speed_of_sound_m_s: float
+
+
+@dataclass(frozen=True)
+class SetModeAuto(Ping1dPayload):
+    """id 1003 set_mode_auto: u8 0 manual / 1 auto (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_MODE_AUTO
+    LAYOUT: ClassVar = (("B", "bool"),)
+    auto: bool
+
+
+@dataclass(frozen=True)
+class SetPingInterval(Ping1dPayload):
+    """id 1004 set_ping_interval: u16 ms between pings (§2.4, vector §2.5)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_PING_INTERVAL
+    LAYOUT: ClassVar = (("H", _MM),)
+    ping_interval_s: float
+
+
+@dataclass(frozen=True)
+class SetGainSetting(Ping1dPayload):
+    """id 1005 set_gain_setting: u8 gain index 0..6 (see :data:`GAIN_INDEX_TO_GAIN`) (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_GAIN_SETTING
+    LAYOUT: ClassVar = (("B", "int"),)
+    gain_setting: int
+
+
+@dataclass(frozen=True)
+class SetPingEnable(Ping1dPayload):
+    """id 1006 set_ping_enable: u8 0 off / 1 on (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_PING_ENABLE
+    LAYOUT: ClassVar = (("B", "bool"),)
+    enabled: bool
+
+
+@dataclass(frozen=True)
+class GotoBootloader(Ping1dPayload):
+    """id 1100 goto_bootloader: no payload (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.GOTO_BOOTLOADER
+
+
+@dataclass(frozen=True)
+class FirmwareVersion(Ping1dPayload):
+    """id 1200 firmware_version: u8 device_type, u8 device_model (1 = Ping1D), u16 firmware major,
+    u16 firmware minor (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.FIRMWARE_VERSION
+    LAYOUT: ClassVar = (("B", "int"), ("B", "int"), ("H", "int"), ("H", "int"))
+    device_type: int
+    device_model: int
+    firmware_version_major: int
+    firmware_version_minor: int
+
+
+@dataclass(frozen=True)
+class DeviceId(Ping1dPayload):
+    """id 1201 device_id: u8 (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.DEVICE_ID
+    LAYOUT: ClassVar = (("B", "int"),)
+    device_id: int
+
+
+@dataclass(frozen=True)
+class Voltage5(Ping1dPayload):
+    """id 1202 voltage_5: u16 mV -> V (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.VOLTAGE_5
+    LAYOUT: ClassVar = (("H", _MM),)
+    voltage_5_v: float
+
+
+@dataclass(frozen=True)
+class SpeedOfSound(Ping1dPayload):
+    """id 1203 speed_of_sound: u32 mm/s -> m/s (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.SPEED_OF_SOUND
+    LAYOUT: ClassVar = (("I", _MM),)
+    speed_of_sound_m_s: float
+
+
+@dataclass(frozen=True)
+class Range(Ping1dPayload):
+    """id 1204 range: u32 scan_start mm, u32 scan_length mm -> m (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.RANGE
+    LAYOUT: ClassVar = (("I", _MM), ("I", _MM))
+    scan_start_m: float
+    scan_length_m: float
+
+
+@dataclass(frozen=True)
+class ModeAuto(Ping1dPayload):
+    """id 1205 mode_auto: u8 0 manual / 1 auto (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.MODE_AUTO
+    LAYOUT: ClassVar = (("B", "bool"),)
+    auto: bool
+
+
+@dataclass(frozen=True)
+class PingInterval(Ping1dPayload):
+    """id 1206 ping_interval: u16 ms -> s (a minimum; the actual interval may be longer) (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.PING_INTERVAL
+    LAYOUT: ClassVar = (("H", _MM),)
+    ping_interval_s: float
+
+
+@dataclass(frozen=True)
+class GainSetting(Ping1dPayload):
+    """id 1207 gain_setting: **u32** gain index (the set message is u8) (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.GAIN_SETTING
+    LAYOUT: ClassVar = (("I", "int"),)
+    gain_setting: int
+
+
+@dataclass(frozen=True)
+class TransmitDuration(Ping1dPayload):
+    """id 1208 transmit_duration: u16 µs -> s (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.TRANSMIT_DURATION
+    LAYOUT: ClassVar = (("H", _US),)
+    transmit_duration_s: float
+
+
+@dataclass(frozen=True)
+class GeneralInfo(Ping1dPayload):
+    """id 1210 general_info: u16 fw major, u16 fw minor, u16 voltage_5 mV, u16 ping_interval ms,
+    u8 gain_setting, u8 mode_auto; 10 bytes (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.GENERAL_INFO
+    LAYOUT: ClassVar = (("H", "int"), ("H", "int"), ("H", _MM), ("H", _MM), ("B", "int"), ("B", "bool"))
+    firmware_version_major: int
+    firmware_version_minor: int
+    voltage_5_v: float
+    ping_interval_s: float
+    gain_setting: int
+    mode_auto: bool
+
+
+@dataclass(frozen=True)
+class DistanceSimple(Ping1dPayload):
+    """id 1211 distance_simple: u32 distance mm -> m, u8 confidence %; 5 bytes (§2.4, vector §2.5)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.DISTANCE_SIMPLE
+    LAYOUT: ClassVar = (("I", _MM), ("B", "int"))
+    distance_m: float
+    confidence_pct: int
+
+
+_DISTANCE_LAYOUT = (("I", _MM), ("H", "int"), ("H", _US), ("I", "int"), ("I", _MM), ("I", _MM),
+                    ("I", "int"))
+
+
+@dataclass(frozen=True)
+class Distance(Ping1dPayload):
+    """id 1212 distance, 24 bytes (§2.4): distance (u32 mm @0), confidence (u16 % @4),
+    transmit_duration (u16 µs @6), ping_number (u32 @8), scan_start (u32 mm @12), scan_length
+    (u32 mm @16), gain_setting (u32 @20)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.DISTANCE
+    LAYOUT: ClassVar = _DISTANCE_LAYOUT
+    distance_m: float
+    confidence_pct: int
+    transmit_duration_s: float
+    ping_number: int
+    scan_start_m: float
+    scan_length_m: float
+    gain_setting: int
+
+
+@dataclass(frozen=True)
+class ProcessorTemperature(Ping1dPayload):
+    """id 1213 processor_temperature: u16 centi-degC -> degC (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.PROCESSOR_TEMPERATURE
+    LAYOUT: ClassVar = (("H", _CC),)
+    temperature_degc: float
+
+
+@dataclass(frozen=True)
+class PcbTemperature(Ping1dPayload):
+    """id 1214 pcb_temperature: u16 centi-degC -> degC (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.PCB_TEMPERATURE
+    LAYOUT: ClassVar = (("H", _CC),)
+    temperature_degc: float
+
+
+@dataclass(frozen=True)
+class PingEnable(Ping1dPayload):
+    """id 1215 ping_enable: u8 0/1 (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.PING_ENABLE
+    LAYOUT: ClassVar = (("B", "bool"),)
+    enabled: bool
+
+
+@dataclass(frozen=True)
+class Profile(Ping1dPayload):
+    """id 1300 profile (§2.4): the 1212 distance fields (24 B), u16 profile_data_length @24, u8[]
+    profile_data @26 (first sample nearest the transducer, spanning scan_start .. scan_start +
+    scan_length)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.PROFILE
+    LAYOUT: ClassVar = _DISTANCE_LAYOUT
+    TAIL: ClassVar = "profile"
+    distance_m: float
+    confidence_pct: int
+    transmit_duration_s: float
+    ping_number: int
+    scan_start_m: float
+    scan_length_m: float
+    gain_setting: int
+    profile_data: bytes = b""
+
+
+@dataclass(frozen=True)
+class ContinuousStart(Ping1dPayload):
+    """id 1400 continuous_start: u16 id to stream (1300 = profile) (§2.4, vector §2.5)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.CONTINUOUS_START
+    LAYOUT: ClassVar = (("H", "int"),)
+    requested_id: int
+
+
+@dataclass(frozen=True)
+class ContinuousStop(Ping1dPayload):
+    """id 1401 continuous_stop: u16 id (§2.4)."""
+
+    MESSAGE_ID: ClassVar[int] = Ping1dId.CONTINUOUS_STOP
+    LAYOUT: ClassVar = (("H", "int"),)
+    requested_id: int
+
+
+#: message id -> payload class, for every message in hardware.md §2.4.
+PAYLOAD_TYPES: Dict[int, Type[Ping1dPayload]] = {
+    cls.MESSAGE_ID: cls for cls in (
+        Ack, Nack, AsciiText, DeviceInformation, ProtocolVersion, GeneralRequest, SetDeviceId,
+        SetRange, SetSpeedOfSound, SetModeAuto, SetPingInterval, SetGainSetting, SetPingEnable,
+        GotoBootloader, FirmwareVersion, DeviceId, Voltage5, SpeedOfSound, Range, ModeAuto,
+        PingInterval, GainSetting, TransmitDuration, GeneralInfo, DistanceSimple, Distance,
+        ProcessorTemperature, PcbTemperature, PingEnable, Profile, ContinuousStart, ContinuousStop)
+}
+
+# Messages a host can ask for (device -> host "get" messages, §2.4).
+_GETTABLE_IDS = frozenset({
+    Ping1dId.DEVICE_INFORMATION, Ping1dId.PROTOCOL_VERSION, Ping1dId.FIRMWARE_VERSION,
+    Ping1dId.DEVICE_ID, Ping1dId.VOLTAGE_5, Ping1dId.SPEED_OF_SOUND, Ping1dId.RANGE,
+    Ping1dId.MODE_AUTO, Ping1dId.PING_INTERVAL, Ping1dId.GAIN_SETTING, Ping1dId.TRANSMIT_DURATION,
+    Ping1dId.GENERAL_INFO, Ping1dId.DISTANCE_SIMPLE, Ping1dId.DISTANCE,
+    Ping1dId.PROCESSOR_TEMPERATURE, Ping1dId.PCB_TEMPERATURE, Ping1dId.PING_ENABLE, Ping1dId.PROFILE,
+})
+
+
+def encode_message(payload: Ping1dPayload, src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
+    """Complete frame for a typed payload.
+
+    Raises:
+        ValueError: a field does not fit its wire type, or ids out of range.
+    """
+    return encode_frame(payload.MESSAGE_ID, payload.pack(), src_device_id, dst_device_id)
+
+
+def decode_message(message: Union[Ping1dMessage, bytes, bytearray]) -> Ping1dPayload:
+    """Typed payload of a frame (a :class:`Ping1dMessage` or the raw frame bytes).
+
+    Raises:
+        Ping1dParseError: bad frame, unknown message id, or payload of the wrong size / content.
+    """
+    if not isinstance(message, Ping1dMessage):
+        message = decode_frame(message)
+    cls = PAYLOAD_TYPES.get(message.message_id)
+    if cls is None:
+        raise Ping1dParseError(f"unknown message id {message.message_id}")
+    return cls.unpack(message.payload)
