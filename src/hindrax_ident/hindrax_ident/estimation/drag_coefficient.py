@@ -1,0 +1,181 @@
+"""Drag coefficients and Reynolds numbers of the identified DOFs (seed 003 Table 4).
+
+Seed 003 Table 4 reports, per DOF, a mean drag coefficient C_D with its standard deviation and
+the Reynolds-number range of the self-propelled tests, but it prints neither the projected
+areas, nor the characteristic length, nor the definition used for the rotational DOFs. What we
+implement (and what we cannot verify against the paper):
+
+* Translational DOFs, from the quadratic damping (reference/hydrodynamics.md 1.A (h), [T] 4.6.3):
+  C_D = 2 k_q / (rho A_p), A_p the projected area normal to the motion (m^2). Valid when C_D
+  does not depend on Re (prisms above Re ~ 1e4, hydrodynamics.md 1.A flow physics).
+  :func:`drag_coefficient` propagates the std of k_q linearly.
+* Per-sample form (Blevins, hydrodynamics.md [T] eq. 3.6): C_D,i = F_i / (0.5 rho A_p v_i |v_i|),
+  then mean and standard deviation over samples: :func:`drag_coefficient_samples`. Table 4's
+  wording "mean values of the drag coefficients ... and the standard deviations" suggests this
+  form, but we cannot confirm it: with the Table 3 coefficients the implied areas
+  2 k_q / (rho C_D) are 0.058 m^2 (surge) and 0.041 m^2 (sway), i.e. sway smaller than surge,
+  which contradicts the paper's statement that surge has the smallest projected area.
+* Rotational DOFs (our definition; the seed gives none): M = 0.5 rho C_D A_p R^3 w |w|, i.e. the
+  plate-at-radius form with the edge speed w R ([T] quadrant method 3.9-3.10 uses the same edge
+  speed), so C_D = 2 k_q / (rho A_p R^3) with k_q in N m/(rad/s)^2 = kg m^2.
+  :func:`rotational_drag_coefficient`. Table 4's rotational values (0.022-0.049) cannot be
+  reproduced without the paper's A_p and R.
+* Reynolds number Re = U L / nu ([T] eq. 2.60; seed 000 section 4 uses U_m V^(1/3) / nu with
+  nu = 1.01e-6 m^2/s). Default characteristic length: L = V^(1/3) (seed 000 eq. 10 choice;
+  0.2483 m for the Hindrax prototype). For rotations U = |w| R. Seed 003 does not state its L;
+  with L = 0.2483 m its surge range 0.5e5-1.1e5 corresponds to 0.20-0.45 m/s, plausible for
+  the tests ("0.5 m/s needs about 25 N") but not verifiable.
+"""
+
+from __future__ import annotations
+
+from typing import Tuple
+
+import numpy as np
+
+from .least_squares import EstimationError, as_float_array, check_same_length
+
+__all__ = [
+    "KINEMATIC_VISCOSITY_WATER_M2_S",
+    "characteristic_length_from_volume",
+    "reynolds_number",
+    "reynolds_range",
+    "drag_coefficient",
+    "rotational_drag_coefficient",
+    "drag_coefficient_samples",
+]
+
+#: Kinematic viscosity of water used by seed 000 (section 4): 1.01e-6 m^2/s.
+KINEMATIC_VISCOSITY_WATER_M2_S = 1.01e-6
+
+
+def _positive(value: float, name: str) -> float:
+    value = float(value)
+    if not (np.isfinite(value) and value > 0):
+        raise EstimationError(f"{name} must be a finite number > 0, got {value}")
+    return value
+
+
+def characteristic_length_from_volume(volume_m3: float) -> float:
+    """L = V^(1/3) in m (seed 000 eq. 10: 0.0824 m for the 1:3 model, 0.2483 m prototype).
+
+    Raises:
+        EstimationError: volume not > 0.
+    """
+    return _positive(volume_m3, "volume_m3") ** (1.0 / 3.0)
+
+
+def reynolds_number(speed, characteristic_length_m: float,
+                    kinematic_viscosity_m2_s: float = KINEMATIC_VISCOSITY_WATER_M2_S):
+    """Re = |U| L / nu ([T] eq. 2.60; seed 000 section 4). Scalar or element-wise on arrays.
+
+    Args:
+        speed: U in m/s (for rotations pass |w| R).
+        characteristic_length_m: L in m (> 0).
+        kinematic_viscosity_m2_s: nu in m^2/s (> 0), default 1.01e-6 (seed 000).
+
+    Raises:
+        EstimationError: non-positive L or nu.
+    """
+    L = _positive(characteristic_length_m, "characteristic_length_m")
+    nu = _positive(kinematic_viscosity_m2_s, "kinematic_viscosity_m2_s")
+    re = np.abs(np.asarray(speed, dtype=float)) * L / nu
+    return float(re) if re.ndim == 0 else re
+
+
+def reynolds_range(speed, characteristic_length_m: float,
+                   kinematic_viscosity_m2_s: float = KINEMATIC_VISCOSITY_WATER_M2_S,
+                   min_speed: float = 0.0) -> Tuple[float, float]:
+    """(min, max) Reynolds number over the samples with |speed| > ``min_speed`` (Table 4 column).
+
+    Args:
+        speed: (n,) speeds in m/s (or |w| R for rotations); typically steady-window means.
+        characteristic_length_m: L in m.
+        kinematic_viscosity_m2_s: nu in m^2/s.
+        min_speed: ignore samples at or below this speed (e.g. the zero-thrust level).
+
+    Raises:
+        EstimationError: no sample above ``min_speed`` or bad input.
+    """
+    u = np.abs(as_float_array(speed, "speed", 1))
+    u = u[u > min_speed]
+    if u.size == 0:
+        raise EstimationError(f"no sample with |speed| > {min_speed}")
+    re = reynolds_number(u, characteristic_length_m, kinematic_viscosity_m2_s)
+    return float(np.min(re)), float(np.max(re))
+
+
+def drag_coefficient(quadratic_damping: float, projected_area_m2: float,
+                     fluid_density_kg_m3: float = 1000.0,
+                     quadratic_damping_std: float = 0.0) -> Tuple[float, float]:
+    """C_D = 2 k_q / (rho A_p) and its std (hydrodynamics.md 1.A (h); seed 003 Table 4).
+
+    Args:
+        quadratic_damping: k_q in N/(m/s)^2 = kg/m (seed 003 Table 3).
+        projected_area_m2: A_p normal to the motion in m^2 (> 0).
+        fluid_density_kg_m3: rho (> 0), default 1000 (seed 003 section 5).
+        quadratic_damping_std: std of k_q (>= 0), propagated linearly.
+
+    Returns:
+        (c_d, c_d_std), dimensionless.
+
+    Raises:
+        EstimationError: non-positive area/density or negative std.
+    """
+    A = _positive(projected_area_m2, "projected_area_m2")
+    rho = _positive(fluid_density_kg_m3, "fluid_density_kg_m3")
+    if not quadratic_damping_std >= 0:
+        raise EstimationError("quadratic_damping_std must be >= 0")
+    scale = 2.0 / (rho * A)
+    return float(scale * quadratic_damping), float(scale * quadratic_damping_std)
+
+
+def rotational_drag_coefficient(quadratic_damping: float, projected_area_m2: float,
+                                radius_m: float, fluid_density_kg_m3: float = 1000.0,
+                                quadratic_damping_std: float = 0.0) -> Tuple[float, float]:
+    """C_D = 2 k_q / (rho A_p R^3) for a rotational DOF (our definition, module docstring).
+
+    Args:
+        quadratic_damping: k_q in N m/(rad/s)^2 = kg m^2.
+        projected_area_m2: projected area swept by the rotation in m^2.
+        radius_m: characteristic radius R in m (e.g. half the vehicle length).
+        fluid_density_kg_m3: rho.
+        quadratic_damping_std: std of k_q.
+
+    Returns:
+        (c_d, c_d_std).
+    """
+    R = _positive(radius_m, "radius_m")
+    c, s = drag_coefficient(quadratic_damping, projected_area_m2, fluid_density_kg_m3,
+                            quadratic_damping_std)
+    return c / R**3, s / R**3
+
+
+def drag_coefficient_samples(velocity, force, projected_area_m2: float,
+                             fluid_density_kg_m3: float = 1000.0,
+                             min_speed: float = 0.05) -> Tuple[float, float, int]:
+    """Per-sample C_D,i = F_i / (0.5 rho A_p v_i |v_i|), then (mean, std, n) (Blevins form).
+
+    Args:
+        velocity: (n,) steady velocities in m/s (or w R in m/s for rotations).
+        force: (n,) force in N balancing the drag (bias already removed if relevant).
+        projected_area_m2: A_p in m^2.
+        fluid_density_kg_m3: rho.
+        min_speed: samples with |v| <= min_speed are dropped (C_D is ill-defined near 0).
+
+    Returns:
+        (mean C_D, sample std C_D (ddof=1), number of samples used).
+
+    Raises:
+        EstimationError: fewer than 2 usable samples, bad input.
+    """
+    v = as_float_array(velocity, "velocity", 1)
+    f = as_float_array(force, "force", 1)
+    check_same_length(velocity=v, force=f)
+    A = _positive(projected_area_m2, "projected_area_m2")
+    rho = _positive(fluid_density_kg_m3, "fluid_density_kg_m3")
+    keep = np.abs(v) > min_speed
+    if np.count_nonzero(keep) < 2:
+        raise EstimationError(f"need at least 2 samples with |v| > {min_speed}")
+    cd = f[keep] / (0.5 * rho * A * v[keep] * np.abs(v[keep]))
+    return float(np.mean(cd)), float(np.std(cd, ddof=1)), int(cd.size)

@@ -1,0 +1,562 @@
+"""Added mass from free-decay (spring-supported free vibration) tests: seed 000 eqs. 1-12.
+
+Seed 000 supports a 1:3 model of Hindrax on springs (equivalent stiffness k_eq), releases it
+from an initial displacement A and records its acceleration at 330 Hz for 10 s. The model is
+the 1-DOF damped oscillator m x'' + c x' + k_eq x = 0 with m = m_b + m_ad (eq. 1). From the
+displacement (double integral of the acceleration) it measures the damped frequency omega_d and
+the log decrement delta, and computes:
+
+    eq. 2   omega_d = omega_n sqrt(1 - zeta^2)
+    eq. 3   delta = ln(x_1 / x_2) = 2 pi zeta / sqrt(1 - zeta^2)
+            -> zeta = delta / sqrt(4 pi^2 + delta^2)            (hydrodynamics.md 1.D)
+    eq. 4   omega_n = sqrt(k_eq / (m_b + m_ad))
+    eq. 5   m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b           ("exact", based on omega_d)
+    eq. 6   c = 2 zeta sqrt(k_eq (m_b + m_ad))                    (N s/m; the seed prints N.m.s)
+    eq. 7   m_ad = k_eq / omega_n^2 - m_b with damping omitted, i.e. the measured frequency taken
+            as omega_n: m_ad = k_eq / omega_d^2 - m_b ("simplified"; this is how the sixth
+            column of seed 000 Tables 3-5 is computed, e.g. surge 1127.7 / 36.7824^2 - 0.39
+            = 0.4435 kg)
+    eq. 8   C_M = m_ad / (rho V)
+    eq. 9   KC = 2 pi A / D with D = V^(1/3) (section 3) and A = the initial displacement
+            (in :func:`analyse_free_decay`: the first peak, i.e. the release displacement)
+    eq. 11  error % = (m_ad,eq7 - m_ad,eq5) / m_ad,eq5 * 100
+    eq. 12  m_ad,prototype = C_M rho V_prototype
+    Re = U_m V^(1/3) / nu, nu = 1.01e-6 m^2/s (section 4)
+
+Signal processing (our choices; the seed only says "double integration" in MATLAB):
+
+* Release: the first sample whose |a - median(a)| exceeds ``release_threshold`` (0.5) times
+  the largest deviation (at release the acceleration jumps to its largest value, -omega_n^2 A).
+  The record is analysed from there on.
+* Displacement (:func:`displacement_from_acceleration`): the accelerometer bias is the
+  (trapezoid-weighted) mean of the acceleration over the analysed record (exact when it starts
+  and ends at rest, because the velocity change is then zero); velocity = cumulative
+  trapezoid (v = 0 at release, from rest); displacement = cumulative trapezoid of the
+  velocity minus its mean (equilibrium reference). Optionally a zero-phase Butterworth
+  high-pass (order 2, ``highpass_hz``) is applied to the velocity (odd padding: v is odd about
+  the release) and to the displacement (even padding) to suppress the random-walk drift of
+  integrated noise; :func:`analyse_free_decay` uses ``highpass_fraction`` (0.1) times the
+  damped frequency. The high-pass removes the genuine
+  low-frequency content of a decaying oscillation too (its integral is c A / k_eq), so it biases
+  the displacement by about 2 sigma omega_c A / omega_n^2 near the release; this is why the peak
+  amplitudes below are measured peak-to-trough.
+* Peaks: extrema of the displacement found with ``scipy.signal.find_peaks`` (release sample
+  included as the first peak; its sign is opposite to the acceleration at release; minimum
+  spacing 0.6 of the half period estimated from the acceleration spectrum); each
+  amplitude is measured as the peak-to-following-trough height H_k, which is insensitive to any
+  slowly varying offset. For a linear oscillator H_k / H_{k+n} = x_k / x_{k+n} = exp(n delta)
+  exactly, so delta = (1/n) ln(H_0 / H_n) is eq. 3 averaged over n periods, and the peak
+  amplitudes are x_k = H_k / (1 + exp(-delta / 2)). Peaks are used while H_k exceeds both
+  ``min_peak_fraction`` (0.05) H_0 and 6 times the std of the linearly detrended displacement
+  over the last 20 % of the record (noise floor).
+* omega_d from the spacing of the interior extrema (peaks and troughs, release excluded, times
+  refined by parabolic interpolation): least-squares slope of t_k against k is T_d / 2.
+* Cross-check: a damped sinusoid plus bias, a = exp(-s t) (C1 cos w t + C2 sin w t) + b, is fitted
+  to the acceleration by ``scipy.optimize.curve_fit`` (``omega_d_fit_rad_s``, ``zeta_fit``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Optional, Tuple
+
+import numpy as np
+from scipy import integrate, optimize, signal
+
+from .drag_coefficient import (KINEMATIC_VISCOSITY_WATER_M2_S,
+                               characteristic_length_from_volume, reynolds_number)
+from .least_squares import EstimationError, as_float_array, check_same_length, check_time_vector
+
+__all__ = [
+    "FreeDecayResult",
+    "analyse_free_decay",
+    "displacement_from_acceleration",
+    "find_release_index",
+    "log_decrement",
+    "damping_ratio_from_log_decrement",
+    "log_decrement_from_damping_ratio",
+    "natural_frequency",
+    "added_mass_exact",
+    "added_mass_simplified",
+    "added_mass_error_percent",
+    "damping_coefficient",
+    "inertia_coefficient",
+    "keulegan_carpenter",
+    "prototype_added_mass",
+    "free_decay_table_row",
+]
+
+
+# --------------------------------------------------------------------------------------
+# Closed-form relations (seed 000 eqs. 2-12)
+# --------------------------------------------------------------------------------------
+def _pos(x: float, name: str) -> float:
+    x = float(x)
+    if not (np.isfinite(x) and x > 0):
+        raise EstimationError(f"{name} must be a finite number > 0, got {x}")
+    return x
+
+
+def _zeta(z: float) -> float:
+    z = float(z)
+    if not (np.isfinite(z) and 0.0 <= z < 1.0):
+        raise EstimationError(f"zeta must be in [0, 1) (under-damped), got {z}")
+    return z
+
+
+def log_decrement(peak_amplitudes) -> float:
+    """delta = (1/n) ln(x_0 / x_n) over n periods (seed 000 eq. 3, averaged over n peaks).
+
+    Args:
+        peak_amplitudes: (n + 1,) successive same-sign peak amplitudes (> 0), one period apart.
+
+    Raises:
+        EstimationError: fewer than 2 peaks or non-positive amplitudes.
+    """
+    x = as_float_array(peak_amplitudes, "peak_amplitudes", 1)
+    if x.size < 2:
+        raise EstimationError("need at least 2 peaks for a log decrement")
+    if np.any(x <= 0):
+        raise EstimationError("peak amplitudes must be > 0")
+    return float(np.log(x[0] / x[-1]) / (x.size - 1))
+
+
+def damping_ratio_from_log_decrement(delta: float) -> float:
+    """zeta = delta / sqrt(4 pi^2 + delta^2) (seed 000 eq. 3 inverted)."""
+    delta = float(delta)
+    if not (np.isfinite(delta) and delta >= 0):
+        raise EstimationError(f"log decrement must be >= 0, got {delta}")
+    return delta / np.sqrt(4.0 * np.pi**2 + delta**2)
+
+
+def log_decrement_from_damping_ratio(zeta: float) -> float:
+    """delta = 2 pi zeta / sqrt(1 - zeta^2) (seed 000 eq. 3)."""
+    z = _zeta(zeta)
+    return 2.0 * np.pi * z / np.sqrt(1.0 - z * z)
+
+
+def natural_frequency(omega_d_rad_s: float, zeta: float) -> float:
+    """omega_n = omega_d / sqrt(1 - zeta^2) in rad/s (seed 000 eq. 2)."""
+    return _pos(omega_d_rad_s, "omega_d_rad_s") / np.sqrt(1.0 - _zeta(zeta) ** 2)
+
+
+def added_mass_exact(stiffness_n_per_m: float, omega_d_rad_s: float, zeta: float,
+                     mass_kg: float) -> float:
+    """m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b in kg (seed 000 eq. 5, based on omega_d)."""
+    k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
+    wd = _pos(omega_d_rad_s, "omega_d_rad_s")
+    return k * (1.0 - _zeta(zeta) ** 2) / wd**2 - _pos(mass_kg, "mass_kg")
+
+
+def added_mass_simplified(stiffness_n_per_m: float, omega_rad_s: float, mass_kg: float) -> float:
+    """m_ad = k_eq / omega^2 - m_b in kg (seed 000 eq. 7, damping omitted).
+
+    ``omega_rad_s`` is the measured oscillation frequency taken as omega_n (damping neglected);
+    seed 000 Tables 3-5 (sixth column) evaluate it with the measured omega_d.
+    """
+    k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
+    w = _pos(omega_rad_s, "omega_rad_s")
+    return k / w**2 - _pos(mass_kg, "mass_kg")
+
+
+def added_mass_error_percent(added_mass_simplified_kg: float, added_mass_exact_kg: float) -> float:
+    """(m_ad,eq7 - m_ad,eq5) / m_ad,eq5 * 100 (seed 000 eq. 11)."""
+    exact = float(added_mass_exact_kg)
+    if exact == 0.0 or not np.isfinite(exact):
+        raise EstimationError("exact added mass must be finite and non-zero")
+    return (float(added_mass_simplified_kg) - exact) / exact * 100.0
+
+
+def damping_coefficient(zeta: float, stiffness_n_per_m: float, total_mass_kg: float) -> float:
+    """c = 2 zeta sqrt(k_eq m) in N s/m, m = m_b + m_ad (seed 000 eq. 6)."""
+    return 2.0 * _zeta(zeta) * np.sqrt(_pos(stiffness_n_per_m, "stiffness_n_per_m")
+                                       * _pos(total_mass_kg, "total_mass_kg"))
+
+
+def inertia_coefficient(added_mass_kg: float, volume_m3: float,
+                        fluid_density_kg_m3: float = 1000.0) -> float:
+    """C_M = m_ad / (rho V), dimensionless (seed 000 eq. 8)."""
+    return float(added_mass_kg) / (_pos(fluid_density_kg_m3, "fluid_density_kg_m3")
+                                   * _pos(volume_m3, "volume_m3"))
+
+
+def keulegan_carpenter(amplitude_m: float, characteristic_length_m: float) -> float:
+    """KC = 2 pi A / D (seed 000 eq. 9; D = V^(1/3) for the ROV model)."""
+    return 2.0 * np.pi * abs(float(amplitude_m)) / _pos(characteristic_length_m,
+                                                         "characteristic_length_m")
+
+
+def prototype_added_mass(c_m: float, prototype_volume_m3: float,
+                         fluid_density_kg_m3: float = 1000.0) -> float:
+    """m_ad,prototype = C_M rho V_prototype in kg (seed 000 eq. 12; V = 0.0153 m^3 for Hindrax)."""
+    return float(c_m) * _pos(fluid_density_kg_m3, "fluid_density_kg_m3") * _pos(
+        prototype_volume_m3, "prototype_volume_m3")
+
+
+def free_decay_table_row(omega_d_rad_s: float, zeta: float, stiffness_n_per_m: float,
+                         mass_kg: float, initial_displacement_m: Optional[float] = None,
+                         characteristic_length_m: Optional[float] = None) -> dict:
+    """One row of seed 000 Tables 3-5 from (omega_d, zeta, k_eq, m_b) (and A, D for KC).
+
+    Returns a dict with ``omega_n_rad_s`` (eq. 2), ``damping_n_s_per_m`` (eq. 6 with the eq. 5
+    added mass, as the seed's text prescribes), ``added_mass_simplified_kg`` (eq. 7),
+    ``added_mass_kg`` (eq. 5), ``added_mass_error_percent`` (eq. 11) and, when both
+    ``initial_displacement_m`` and ``characteristic_length_m`` are given, ``kc`` (eq. 9).
+
+    Raises:
+        EstimationError: invalid inputs (non-positive k, m, omega; zeta outside [0, 1)).
+    """
+    m5 = added_mass_exact(stiffness_n_per_m, omega_d_rad_s, zeta, mass_kg)
+    m7 = added_mass_simplified(stiffness_n_per_m, omega_d_rad_s, mass_kg)
+    row = {
+        "omega_d_rad_s": float(omega_d_rad_s),
+        "zeta": float(zeta),
+        "omega_n_rad_s": natural_frequency(omega_d_rad_s, zeta),
+        "damping_n_s_per_m": damping_coefficient(zeta, stiffness_n_per_m, mass_kg + m5),
+        "added_mass_simplified_kg": m7,
+        "added_mass_kg": m5,
+        "added_mass_error_percent": added_mass_error_percent(m7, m5),
+    }
+    if initial_displacement_m is not None and characteristic_length_m is not None:
+        row["kc"] = keulegan_carpenter(initial_displacement_m, characteristic_length_m)
+    return row
+
+
+# --------------------------------------------------------------------------------------
+# Signal processing
+# --------------------------------------------------------------------------------------
+def _sample_rate(t: np.ndarray) -> float:
+    return 1.0 / float(np.median(np.diff(t)))
+
+
+def _highpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, padtype: str) -> np.ndarray:
+    sos = signal.butter(2, cutoff_hz, btype="highpass", fs=fs_hz, output="sos")
+    padlen = int(min(x.size - 1, np.ceil(3.0 * fs_hz / cutoff_hz)))
+    return signal.sosfiltfilt(sos, x, padtype=padtype, padlen=padlen)
+
+
+def displacement_from_acceleration(t_s, acceleration_m_s2, highpass_hz: Optional[float] = None,
+                                   remove_bias: bool = True) -> Tuple[np.ndarray, np.ndarray]:
+    """Displacement and velocity by double integration with drift removal (module docstring).
+
+    Steps: subtract the trapezoid-weighted mean acceleration (bias; exact for a record from rest
+    to rest) ->
+    cumulative trapezoid to velocity (0 at the first sample) -> optional zero-phase high-pass
+    (Butterworth order 2, odd padding) -> cumulative trapezoid to displacement -> subtract its
+    mean -> optional zero-phase high-pass (even padding).
+
+    Args:
+        t_s: (n,) strictly increasing times in s (should start at the release, from rest).
+        acceleration_m_s2: (n,) measured acceleration along the oscillation axis in m/s^2.
+        highpass_hz: high-pass cut-off in Hz (None: no filter). Must be below fs/2. The
+            filter assumes roughly uniform sampling (it uses the median sample rate).
+        remove_bias: subtract the mean acceleration first.
+
+    Returns:
+        (displacement_m, velocity_m_s), each (n,).
+
+    Raises:
+        EstimationError: bad shapes, NaN, non-increasing time, fewer than 8 samples, bad cut-off.
+    """
+    t = check_time_vector(t_s, "t_s", min_samples=8)
+    a = as_float_array(acceleration_m_s2, "acceleration_m_s2", 1)
+    check_same_length(t_s=t, acceleration_m_s2=a)
+    fs = _sample_rate(t)
+    if highpass_hz is not None and not (0.0 < float(highpass_hz) < 0.5 * fs):
+        raise EstimationError(f"highpass_hz must be in (0, {0.5 * fs}), got {highpass_hz}")
+    if remove_bias:
+        # trapezoid-weighted mean, so that the integrated velocity change is exactly zero
+        a = a - integrate.trapezoid(a, t) / (t[-1] - t[0])
+    v = integrate.cumulative_trapezoid(a, t, initial=0.0)
+    if highpass_hz is not None:
+        v = _highpass(v, fs, float(highpass_hz), "odd")
+    x = integrate.cumulative_trapezoid(v, t, initial=0.0)
+    x = x - np.mean(x)
+    if highpass_hz is not None:
+        x = _highpass(x, fs, float(highpass_hz), "even")
+    return x, v
+
+
+def find_release_index(acceleration_m_s2, release_threshold: float = 0.5) -> int:
+    """Index of the release: first |a - median(a)| > release_threshold * max |a - median(a)|.
+
+    Raises:
+        EstimationError: threshold outside (0, 1] or a constant signal.
+    """
+    a = as_float_array(acceleration_m_s2, "acceleration_m_s2", 1)
+    if not (0.0 < release_threshold <= 1.0):
+        raise EstimationError(f"release_threshold must be in (0, 1], got {release_threshold}")
+    dev = np.abs(a - np.median(a))
+    if dev.size == 0 or dev.max() == 0.0:
+        raise EstimationError("acceleration is constant: no release found")
+    return int(np.argmax(dev > release_threshold * dev.max()))
+
+
+def _dominant_frequency_hz(t: np.ndarray, a: np.ndarray) -> float:
+    fs = _sample_rate(t)
+    x = a - np.mean(a)
+    nfft = int(2 ** np.ceil(np.log2(8 * x.size)))
+    spec = np.abs(np.fft.rfft(x * np.hanning(x.size), nfft))
+    freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
+    spec[freqs < 2.0 / (t[-1] - t[0])] = 0.0   # ignore (near) DC
+    return float(freqs[int(np.argmax(spec))])
+
+
+def _parabolic_time(t: np.ndarray, y: np.ndarray, i: int) -> float:
+    """Vertex time of the parabola through samples i-1, i, i+1 (falls back to t[i] at edges)."""
+    if i <= 0 or i >= y.size - 1:
+        return float(t[i])
+    y0, y1, y2 = y[i - 1], y[i], y[i + 1]
+    den = y0 - 2.0 * y1 + y2
+    if den == 0.0:
+        return float(t[i])
+    off = 0.5 * (y0 - y2) / den
+    off = float(np.clip(off, -1.0, 1.0))
+    dt = 0.5 * (t[i + 1] - t[i - 1])
+    return float(t[i] + off * dt)
+
+
+def _alternating_extrema(sx: np.ndarray, distance: int):
+    """Alternating (peak, trough, peak, ...) indices of sx starting with a peak at index 0."""
+    padded = np.concatenate([[-np.inf], sx])
+    peaks = signal.find_peaks(padded, distance=distance)[0] - 1
+    troughs = signal.find_peaks(-sx, distance=distance)[0]
+    ext = sorted([(int(i), 1) for i in peaks] + [(int(i), -1) for i in troughs])
+    seq: list = []
+    for idx, kind in ext:
+        if not seq:
+            if kind == 1:
+                seq.append((idx, kind))
+            continue
+        if kind == seq[-1][1]:  # two of a kind in a row: keep the more extreme one
+            if kind * sx[idx] > kind * sx[seq[-1][0]]:
+                seq[-1] = (idx, kind)
+        else:
+            seq.append((idx, kind))
+    return seq
+
+
+@dataclass(frozen=True, eq=False)
+class FreeDecayResult:
+    """Result of :func:`analyse_free_decay` (seed 000 eqs. 1-12).
+
+    Scalar attributes (units in the names): ``omega_d_rad_s`` (extremum spacing),
+    ``zeta`` (eq. 3 from ``log_decrement``), ``log_decrement``, ``omega_n_rad_s`` (eq. 2),
+    ``added_mass_kg`` (eq. 5), ``added_mass_simplified_kg`` (eq. 7),
+    ``added_mass_error_percent`` (eq. 11), ``damping_n_s_per_m`` (eq. 6), ``c_m`` (eq. 8),
+    ``kc`` (eq. 9, A = ``first_peak_displacement_m``, D = V^(1/3)), ``reynolds``
+    (U_m V^(1/3) / nu), ``first_peak_displacement_m``, ``max_velocity_m_s``, ``n_periods``,
+    ``omega_d_fit_rad_s``/``zeta_fit`` and their ``_std`` (acceleration-fit cross-check, NaN if
+    the fit failed), the inputs ``stiffness_n_per_m``, ``mass_kg``, ``volume_m3``,
+    ``fluid_density_kg_m3``, and ``release_index`` (into the input arrays).
+
+    Array attributes for plots, all over the analysed record (from the release):
+    ``t_s``, ``acceleration_m_s2``, ``displacement_m``, ``velocity_m_s``, ``envelope_m``
+    (x_0 exp(-zeta omega_n (t - t_0)), the decay envelope through the first peak, positive;
+    the displacement keeps its sign, its first peak has the sign of the release), ``peaks``
+    (indices into these arrays of the peaks used), ``peak_times_s`` and ``peak_amplitudes_m``.
+    """
+
+    omega_d_rad_s: float
+    zeta: float
+    log_decrement: float
+    omega_n_rad_s: float
+    added_mass_kg: float
+    added_mass_simplified_kg: float
+    added_mass_error_percent: float
+    damping_n_s_per_m: float
+    c_m: float
+    kc: float
+    reynolds: float
+    first_peak_displacement_m: float
+    max_velocity_m_s: float
+    n_periods: int
+    omega_d_fit_rad_s: float
+    omega_d_fit_std_rad_s: float
+    zeta_fit: float
+    zeta_fit_std: float
+    stiffness_n_per_m: float
+    mass_kg: float
+    volume_m3: float
+    fluid_density_kg_m3: float
+    release_index: int
+    peaks: np.ndarray = field(repr=False)
+    peak_times_s: np.ndarray = field(repr=False)
+    peak_amplitudes_m: np.ndarray = field(repr=False)
+    t_s: np.ndarray = field(repr=False)
+    acceleration_m_s2: np.ndarray = field(repr=False)
+    displacement_m: np.ndarray = field(repr=False)
+    velocity_m_s: np.ndarray = field(repr=False)
+    envelope_m: np.ndarray = field(repr=False)
+
+    _SCALARS = ("omega_d_rad_s", "zeta", "log_decrement", "omega_n_rad_s", "added_mass_kg",
+                "added_mass_simplified_kg", "added_mass_error_percent", "damping_n_s_per_m",
+                "c_m", "kc", "reynolds", "first_peak_displacement_m", "max_velocity_m_s",
+                "n_periods", "omega_d_fit_rad_s", "omega_d_fit_std_rad_s", "zeta_fit",
+                "zeta_fit_std", "stiffness_n_per_m", "mass_kg", "volume_m3",
+                "fluid_density_kg_m3", "release_index")
+
+    def to_dict(self, include_signals: bool = False) -> dict:
+        """JSON-friendly dict: every scalar attribute (same keys), ``peaks`` (list of indices),
+        ``peak_times_s`` and ``peak_amplitudes_m`` (lists); with ``include_signals`` also the
+        plot arrays as lists."""
+        out = {}
+        for k in self._SCALARS:
+            v = getattr(self, k)
+            out[k] = int(v) if k in ("n_periods", "release_index") else float(v)
+        out["peaks"] = [int(i) for i in self.peaks]
+        out["peak_times_s"] = [float(x) for x in self.peak_times_s]
+        out["peak_amplitudes_m"] = [float(x) for x in self.peak_amplitudes_m]
+        if include_signals:
+            for k in ("t_s", "acceleration_m_s2", "displacement_m", "velocity_m_s", "envelope_m"):
+                out[k] = [float(x) for x in getattr(self, k)]
+        return out
+
+
+def _fit_damped_sinusoid(t: np.ndarray, a: np.ndarray, omega0: float, sigma0: float):
+    """curve_fit of exp(-s t)(C1 cos w t + C2 sin w t) + b; returns (w, w_std, zeta, zeta_std)."""
+    tt = t - t[0]
+    b0 = float(np.mean(a))
+
+    def model(tv, s, w, c1, c2, b):
+        e = np.exp(-s * tv)
+        return e * (c1 * np.cos(w * tv) + c2 * np.sin(w * tv)) + b
+
+    p0 = [sigma0, omega0, a[0] - b0, 0.0, b0]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optimize.OptimizeWarning)
+            popt, pcov = optimize.curve_fit(model, tt, a, p0=p0, maxfev=4000)
+    except (RuntimeError, ValueError):
+        return (np.nan,) * 4
+    s, w = popt[0], abs(popt[1])
+    if not (np.all(np.isfinite(pcov)) and s > 0):
+        return (np.nan,) * 4
+    wn2 = s * s + w * w
+    zeta = s / np.sqrt(wn2)
+    # gradient of zeta = s / sqrt(s^2 + w^2) w.r.t. (s, w)
+    g = np.array([w * w, -s * w]) / wn2**1.5
+    zeta_std = float(np.sqrt(max(0.0, g @ pcov[:2, :2] @ g)))
+    return float(w), float(np.sqrt(max(0.0, pcov[1, 1]))), float(zeta), zeta_std
+
+
+def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg: float,
+                       volume_m3: float, fluid_density_kg_m3: float = 1000.0,
+                       kinematic_viscosity_m2_s: float = KINEMATIC_VISCOSITY_WATER_M2_S,
+                       highpass_fraction: Optional[float] = 0.1,
+                       release_threshold: float = 0.5, min_peak_fraction: float = 0.05,
+                       max_periods: Optional[int] = None) -> FreeDecayResult:
+    """Full seed 000 analysis of one free-decay record (module docstring for the method).
+
+    Args:
+        t_s: (n,) strictly increasing sample times in s (seed: 330 Hz for 10 s).
+        acceleration_m_s2: (n,) acceleration along the tested axis in m/s^2 (any constant
+            bias, e.g. gravity on a tilted sensor, is removed).
+        stiffness_n_per_m: equivalent spring stiffness k_eq (seed 000: 1127.7 or 659.9 N/m).
+        mass_kg: body (model) mass m_b (seed 000: 0.39 kg).
+        volume_m3: displaced volume V of the body (seed 000 model: 0.00056 m^3).
+        fluid_density_kg_m3: rho (default 1000).
+        kinematic_viscosity_m2_s: nu for Re (default 1.01e-6, seed 000 section 4).
+        highpass_fraction: high-pass cut-off as a fraction of the damped frequency for the
+            displacement (None: no high-pass, only bias removal).
+        release_threshold: see :func:`find_release_index`.
+        min_peak_fraction: peaks smaller than this fraction of the first are not used.
+        max_periods: optional cap on the number of periods used for delta and omega_d.
+
+    Returns:
+        :class:`FreeDecayResult`.
+
+    Raises:
+        EstimationError: bad input, no oscillation, fewer than one full period above the noise,
+            or an over-damped/unphysical result (zeta >= 1).
+    """
+    t = check_time_vector(t_s, "t_s", min_samples=16)
+    a_all = as_float_array(acceleration_m_s2, "acceleration_m_s2", 1)
+    check_same_length(t_s=t, acceleration_m_s2=a_all)
+    k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
+    mb = _pos(mass_kg, "mass_kg")
+    vol = _pos(volume_m3, "volume_m3")
+    rho = _pos(fluid_density_kg_m3, "fluid_density_kg_m3")
+    if not (0.0 < min_peak_fraction < 1.0):
+        raise EstimationError(f"min_peak_fraction must be in (0, 1), got {min_peak_fraction}")
+
+    i_rel = find_release_index(a_all, release_threshold)
+    t = t[i_rel:]
+    a = a_all[i_rel:]
+    if t.size < 16:
+        raise EstimationError("record too short after the release")
+    f_est = _dominant_frequency_hz(t, a)
+    if not f_est > 0:
+        raise EstimationError("no oscillation found in the acceleration")
+    fs = _sample_rate(t)
+    hp = None if highpass_fraction is None else float(highpass_fraction) * f_est
+    x, v = displacement_from_acceleration(t, a, highpass_hz=hp)
+    # the release is a displacement extremum of sign opposite to the acceleration there
+    sign = -1.0 if a[0] - np.mean(a) > 0 else 1.0
+    sx = sign * x
+
+    distance = max(1, int(0.6 * fs / f_est / 2.0))  # extrema are half a period apart
+    seq = _alternating_extrema(sx, distance)
+    tail = sx[int(0.8 * sx.size):]
+    noise_floor = 6.0 * float(np.std(signal.detrend(tail))) if tail.size > 2 else 0.0
+    peaks_idx, heights = [], []
+    for j in range(0, len(seq) - 1, 2):
+        ip, it = seq[j][0], seq[j + 1][0]
+        h = sx[ip] - sx[it]
+        if heights and (h < min_peak_fraction * heights[0] or h < noise_floor):
+            break
+        if not heights and h <= 0:
+            break
+        peaks_idx.append(ip)
+        heights.append(h)
+        if max_periods is not None and len(heights) > max_periods:
+            break
+    if len(heights) < 2:
+        raise EstimationError(
+            "fewer than two peaks above the noise floor: cannot measure a period")
+    heights_arr = np.asarray(heights)
+    n_periods = len(heights) - 1
+    delta = log_decrement(heights_arr)
+    zeta = damping_ratio_from_log_decrement(delta)
+
+    # omega_d from interior extrema (peaks and troughs), release excluded
+    last = 2 * n_periods  # index in seq of the last used peak
+    times = np.array([_parabolic_time(t, sx * seq[j][1], seq[j][0])
+                      for j in range(1, min(len(seq), last + 2))])
+    if times.size >= 2:
+        kk = np.arange(times.size)
+        half_period = float(np.polyfit(kk, times, 1)[0])
+    else:  # pragma: no cover - two peaks imply at least one trough and one interior peak
+        half_period = 0.5 * (t[peaks_idx[1]] - t[peaks_idx[0]])
+    omega_d = np.pi / half_period
+
+    amp = heights_arr / (1.0 + np.exp(-0.5 * delta))
+    x0 = float(amp[0])
+    wn = natural_frequency(omega_d, zeta)
+    m5 = added_mass_exact(k, omega_d, zeta, mb)
+    m7 = added_mass_simplified(k, omega_d, mb)
+    c = damping_coefficient(zeta, k, mb + m5)
+    L = characteristic_length_from_volume(vol)
+    i_end = min(t.size, peaks_idx[-1] + 1)
+    u_max = float(np.max(np.abs(v[:i_end])))
+    sigma = zeta * wn
+    envelope = x0 * np.exp(-sigma * (t - t[0]))
+
+    fit_end = min(t.size, peaks_idx[-1] + int(round(0.5 * fs * 2 * np.pi / omega_d)) + 1)
+    w_fit, w_fit_std, z_fit, z_fit_std = _fit_damped_sinusoid(t[:fit_end], a[:fit_end],
+                                                              omega_d, sigma)
+    peaks_arr = np.asarray(peaks_idx, dtype=int)
+    return FreeDecayResult(
+        omega_d_rad_s=float(omega_d), zeta=float(zeta), log_decrement=float(delta),
+        omega_n_rad_s=float(wn), added_mass_kg=float(m5), added_mass_simplified_kg=float(m7),
+        added_mass_error_percent=float(added_mass_error_percent(m7, m5)),
+        damping_n_s_per_m=float(c), c_m=inertia_coefficient(m5, vol, rho),
+        kc=keulegan_carpenter(x0, L),
+        reynolds=float(reynolds_number(u_max, L, kinematic_viscosity_m2_s)),
+        first_peak_displacement_m=x0, max_velocity_m_s=u_max, n_periods=int(n_periods),
+        omega_d_fit_rad_s=w_fit, omega_d_fit_std_rad_s=w_fit_std, zeta_fit=z_fit,
+        zeta_fit_std=z_fit_std, stiffness_n_per_m=k, mass_kg=mb, volume_m3=vol,
+        fluid_density_kg_m3=rho, release_index=int(i_rel), peaks=peaks_arr,
+        peak_times_s=t[peaks_arr], peak_amplitudes_m=amp, t_s=t, acceleration_m_s2=a,
+        displacement_m=x, velocity_m_s=v, envelope_m=envelope)

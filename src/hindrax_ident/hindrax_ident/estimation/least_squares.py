@@ -1,0 +1,535 @@
+"""Batch least squares with parameter standard deviations (seed 003, eqs. 2-8).
+
+This module is the offline estimation core of the identification package:
+
+* :func:`fit_linear_model` is the ordinary least-squares estimator of seed 003 eq. 6,
+  theta = (X^T X)^-1 X^T Y, with the parameter covariance sigma^2 (X^T X)^-1 (eq. 7) and the
+  unbiased residual variance sigma^2 = S / (n - p) of eq. 8 (Beck and Arnold 1977; also
+  reference/hydrodynamics.md section 1.D "Ordinary LS covariance").
+* :func:`fit_drag` fits seed 003 eq. 2, F = k_q |v| v + k_l v + b, to steady-state samples.
+  Seed 003 eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state
+  ("the absolute value symbol is to conserve the velocity sign"), so that one model covers
+  both signs of the velocity.
+* :func:`fit_dynamic` fits the 1-DOF transient model
+  tau = m v_dot + k_q |v| v + k_l v + b (+ W*BG sin(angle)) (design.md section 5; Fossen/SNAME,
+  positive added mass and damping), optionally with separate quadratic damping for v > 0 and
+  v < 0 (heave: seed 003 Table 3 reports positive and negative heave separately).
+* :func:`confidence_interval` gives Student-t intervals for any estimate with n - p degrees of
+  freedom.
+
+Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a
+rank diagnosis we can turn into a clear error; we use an SVD of the column-equilibrated
+regressor (numerically equivalent to lstsq) and build the covariance from the same SVD.
+
+The module also hosts :class:`EstimationError` and the small input-validation helpers shared
+by the other estimation modules (one place, no copy-paste).
+
+Conventions: SI units; forces in N (moments in N m), velocities in m/s (rad/s), accelerations
+in m/s^2 (rad/s^2). Damping and inertia are reported as positive numbers (Fossen/SNAME,
+design.md section 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+from scipy import stats
+
+__all__ = [
+    "EstimationError",
+    "LsResult",
+    "DragFit",
+    "DynamicFit",
+    "fit_linear_model",
+    "fit_drag",
+    "fit_dynamic",
+    "confidence_interval",
+]
+
+
+class EstimationError(ValueError):
+    """Bad input to an estimation routine (shape, NaN, too few samples, rank deficiency).
+
+    Subclass of ``ValueError`` so callers can catch either. Raised by every module of
+    ``hindrax_ident.estimation`` for bad data; the message names the offending argument.
+    """
+
+
+# --------------------------------------------------------------------------------------
+# Shared validation helpers (used by rls, filters, steady_windows, free_decay, ...)
+# --------------------------------------------------------------------------------------
+def as_float_array(value, name: str, ndim: int, allow_nan: bool = False) -> np.ndarray:
+    """Convert ``value`` to a float ndarray with ``ndim`` dimensions or raise EstimationError.
+
+    Args:
+        value: array-like input.
+        name: argument name used in the error message.
+        ndim: required number of dimensions (1 or 2).
+        allow_nan: when False, NaN and +-inf raise; when True, NaN is accepted (inf never is).
+
+    Raises:
+        EstimationError: not numeric, wrong number of dimensions, or non-finite values.
+    """
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise EstimationError(f"{name}: not a numeric array ({exc})") from None
+    if arr.ndim != ndim:
+        raise EstimationError(f"{name}: expected a {ndim}-D array, got shape {arr.shape}")
+    if allow_nan:
+        if np.any(np.isinf(arr)):
+            raise EstimationError(f"{name}: contains infinite values")
+    elif not np.all(np.isfinite(arr)):
+        raise EstimationError(f"{name}: contains NaN or infinite values")
+    return arr
+
+
+def check_same_length(**arrays: np.ndarray) -> int:
+    """Return the common length of 1-D/2-D arrays (first axis) or raise EstimationError."""
+    lengths = {name: len(a) for name, a in arrays.items()}
+    if len(set(lengths.values())) != 1:
+        raise EstimationError(f"arrays must have the same length, got {lengths}")
+    return next(iter(lengths.values()))
+
+
+def check_time_vector(t, name: str = "t_s", min_samples: int = 2) -> np.ndarray:
+    """Validate a time vector: 1-D, finite, strictly increasing, at least ``min_samples`` long.
+
+    Raises:
+        EstimationError: on any violation.
+    """
+    t = as_float_array(t, name, 1)
+    if t.size < min_samples:
+        raise EstimationError(f"{name}: need at least {min_samples} samples, got {t.size}")
+    if np.any(np.diff(t) <= 0.0):
+        raise EstimationError(f"{name}: time stamps must be strictly increasing")
+    return t
+
+
+# --------------------------------------------------------------------------------------
+# Results
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class LsResult:
+    """Result of an ordinary least-squares fit (seed 003 eqs. 6-8).
+
+    Attributes:
+        theta: (p,) estimated parameters, eq. 6.
+        std: (p,) standard deviations sqrt(diag(covariance)), eq. 7.
+        covariance: (p, p) parameter covariance sigma2 (X^T X)^-1, eq. 7.
+        sigma2: residual variance S / (n - p), eq. 8 (units of y squared).
+        residuals: (n,) y - X theta.
+        n: number of samples.
+        p: number of parameters.
+        names: optional parameter names (length p), used by :meth:`to_dict`.
+    """
+
+    theta: np.ndarray
+    std: np.ndarray
+    covariance: np.ndarray
+    sigma2: float
+    residuals: np.ndarray
+    n: int
+    p: int
+    names: Optional[tuple] = field(default=None)
+
+    @property
+    def dof(self) -> int:
+        """Residual degrees of freedom n - p."""
+        return self.n - self.p
+
+    @property
+    def residual_std(self) -> float:
+        """sqrt(sigma2): standard deviation of the residuals (units of y)."""
+        return float(np.sqrt(self.sigma2))
+
+    def confidence_intervals(self, level: float = 0.95) -> np.ndarray:
+        """(p, 2) Student-t confidence intervals [low, high] of every parameter (n - p dof)."""
+        low, high = confidence_interval(self.theta, self.std, self.dof, level)
+        return np.column_stack([low, high])
+
+    def index(self, name: str) -> int:
+        """Index of the parameter called ``name``; KeyError if unknown or unnamed."""
+        if self.names is None or name not in self.names:
+            raise KeyError(f"no parameter named {name!r} (names: {self.names})")
+        return self.names.index(name)
+
+    def to_dict(self) -> dict:
+        """JSON/YAML-friendly dict: per-parameter value/std plus n, p, sigma2, residual_std."""
+        names = self.names or tuple(f"theta_{i}" for i in range(self.p))
+        return {
+            "parameters": {
+                nm: {"value": float(v), "std": float(s)}
+                for nm, v, s in zip(names, self.theta, self.std)
+            },
+            "n": int(self.n),
+            "p": int(self.p),
+            "sigma2": float(self.sigma2),
+            "residual_std": self.residual_std,
+        }
+
+
+class _NamedFit:
+    """Mixin giving value/std access by parameter name on top of an :class:`LsResult`."""
+
+    ls: LsResult
+
+    def _value(self, name: str) -> Optional[float]:
+        if self.ls.names is None or name not in self.ls.names:
+            return None
+        return float(self.ls.theta[self.ls.index(name)])
+
+    def _std(self, name: str) -> Optional[float]:
+        if self.ls.names is None or name not in self.ls.names:
+            return None
+        return float(self.ls.std[self.ls.index(name)])
+
+    def to_dict(self) -> dict:
+        """``{name: value, name_std: std, ..., "n": n, "residual_std": s}`` (plain floats)."""
+        out: dict = {}
+        for nm, v, s in zip(self.ls.names, self.ls.theta, self.ls.std):
+            out[nm] = float(v)
+            out[f"{nm}_std"] = float(s)
+        out["n"] = int(self.ls.n)
+        out["residual_std"] = self.ls.residual_std
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class DragFit(_NamedFit):
+    """Steady-state drag fit of seed 003 eq. 2: F = k_q |v| v + k_l v + b.
+
+    Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
+    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m); the last two only when
+    included in the model. Properties return ``None`` for terms not in the model.
+    """
+
+    ls: LsResult
+
+    @property
+    def quadratic_damping(self) -> Optional[float]:
+        """k_q, positive for a dissipative DOF (seed 003 Table 3 first column)."""
+        return self._value("quadratic_damping")
+
+    @property
+    def quadratic_damping_std(self) -> Optional[float]:
+        """Standard deviation of k_q (seed 003 eq. 7)."""
+        return self._std("quadratic_damping")
+
+    @property
+    def linear_damping(self) -> Optional[float]:
+        """k_l (seed 003 Table 3 second column)."""
+        return self._value("linear_damping")
+
+    @property
+    def linear_damping_std(self) -> Optional[float]:
+        """Standard deviation of k_l."""
+        return self._std("linear_damping")
+
+    @property
+    def bias(self) -> Optional[float]:
+        """b (seed 003 Table 3 third column; net buoyancy in heave)."""
+        return self._value("bias")
+
+    @property
+    def bias_std(self) -> Optional[float]:
+        """Standard deviation of b."""
+        return self._std("bias")
+
+    def predict(self, velocity) -> np.ndarray:
+        """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""
+        v = np.asarray(velocity, dtype=float)
+        return _drag_regressors(v, "quadratic_damping" in self.ls.names,
+                                "linear_damping" in self.ls.names,
+                                "bias" in self.ls.names) @ self.ls.theta
+
+    def predict_std(self, velocity) -> np.ndarray:
+        """Standard deviation of the fitted mean force at ``velocity`` (for plot bands)."""
+        v = np.asarray(velocity, dtype=float)
+        X = _drag_regressors(v, "quadratic_damping" in self.ls.names,
+                             "linear_damping" in self.ls.names, "bias" in self.ls.names)
+        return np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
+
+
+@dataclass(frozen=True, eq=False)
+class DynamicFit(_NamedFit):
+    """1-DOF transient fit tau = m v_dot + k_q |v| v + k_l v + b (+ k_r r).
+
+    Parameter names in ``ls.names``: ``inertia`` (rigid-body + added mass, kg or kg m^2),
+    either ``quadratic_damping`` or the pair ``quadratic_damping_positive`` /
+    ``quadratic_damping_negative``, ``linear_damping``, ``bias`` and ``restoring`` (the
+    coefficient of the restoring regressor, e.g. W*BG in N m when the regressor is sin(angle)).
+    Properties return ``None`` for terms not in the model.
+    """
+
+    ls: LsResult
+
+    @property
+    def inertia(self) -> Optional[float]:
+        """Total inertia m = m_RB + m_A (kg or kg m^2)."""
+        return self._value("inertia")
+
+    @property
+    def inertia_std(self) -> Optional[float]:
+        """Standard deviation of the total inertia."""
+        return self._std("inertia")
+
+    @property
+    def quadratic_damping(self) -> Optional[float]:
+        """Single quadratic damping k_q (None when fitted per direction)."""
+        return self._value("quadratic_damping")
+
+    @property
+    def quadratic_damping_std(self) -> Optional[float]:
+        """Standard deviation of k_q."""
+        return self._std("quadratic_damping")
+
+    @property
+    def quadratic_damping_positive(self) -> Optional[float]:
+        """k_q for v > 0 (heave: positive = down, seed 003 section 4.1)."""
+        return self._value("quadratic_damping_positive")
+
+    @property
+    def quadratic_damping_positive_std(self) -> Optional[float]:
+        """Standard deviation of k_q for v > 0."""
+        return self._std("quadratic_damping_positive")
+
+    @property
+    def quadratic_damping_negative(self) -> Optional[float]:
+        """k_q for v < 0 (heave: negative = up)."""
+        return self._value("quadratic_damping_negative")
+
+    @property
+    def quadratic_damping_negative_std(self) -> Optional[float]:
+        """Standard deviation of k_q for v < 0."""
+        return self._std("quadratic_damping_negative")
+
+    @property
+    def linear_damping(self) -> Optional[float]:
+        """Linear damping k_l."""
+        return self._value("linear_damping")
+
+    @property
+    def linear_damping_std(self) -> Optional[float]:
+        """Standard deviation of k_l."""
+        return self._std("linear_damping")
+
+    @property
+    def bias(self) -> Optional[float]:
+        """Constant force/moment b (e.g. net buoyancy W - B in heave)."""
+        return self._value("bias")
+
+    @property
+    def bias_std(self) -> Optional[float]:
+        """Standard deviation of b."""
+        return self._std("bias")
+
+    @property
+    def restoring(self) -> Optional[float]:
+        """Coefficient of the restoring regressor (W*BG in N m for sin(roll/pitch))."""
+        return self._value("restoring")
+
+    @property
+    def restoring_std(self) -> Optional[float]:
+        """Standard deviation of the restoring coefficient."""
+        return self._std("restoring")
+
+
+# --------------------------------------------------------------------------------------
+# Core estimator
+# --------------------------------------------------------------------------------------
+def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
+                     rcond: Optional[float] = None) -> LsResult:
+    """Ordinary least squares with parameter covariance (seed 003 eqs. 4-8).
+
+    theta = (X^T X)^-1 X^T y (eq. 6), sigma2 = |y - X theta|^2 / (n - p) (eq. 8),
+    covariance = sigma2 (X^T X)^-1 and std = sqrt(diag(covariance)) (eq. 7).
+
+    Numerics: the columns of X are scaled to unit Euclidean norm before an SVD (column
+    equilibration), so regressors with very different magnitudes (e.g. P^3 and 1 for thruster
+    curves) do not trigger false rank deficiency; theta and the covariance are mapped back
+    exactly to the original columns.
+
+    Args:
+        X: (n, p) regressor matrix (finite).
+        y: (n,) observations (finite), e.g. forces in N.
+        names: optional p parameter names carried into the result.
+        rcond: relative singular-value threshold for the rank test on the equilibrated
+            matrix; default ``max(n, p) * eps`` (as ``numpy.linalg.matrix_rank``).
+
+    Returns:
+        :class:`LsResult`.
+
+    Raises:
+        EstimationError (a ValueError): wrong shapes, NaN/inf, n <= p (eq. 8 needs n - p > 0),
+            an all-zero column, or a rank-deficient X (the message gives the rank).
+    """
+    X = as_float_array(X, "X", 2)
+    y = as_float_array(y, "y", 1)
+    n, p = X.shape
+    if y.shape[0] != n:
+        raise EstimationError(f"X has {n} rows but y has {y.shape[0]} samples")
+    if p == 0:
+        raise EstimationError("X has no columns")
+    if n <= p:
+        raise EstimationError(
+            f"need more samples than parameters for eq. 8 (n - p > 0): n={n}, p={p}")
+    if names is not None:
+        names = tuple(str(s) for s in names)
+        if len(names) != p:
+            raise EstimationError(f"names has {len(names)} entries for {p} parameters")
+    scale = np.linalg.norm(X, axis=0)
+    if np.any(scale == 0.0):
+        zero = [i if names is None else names[i] for i in np.flatnonzero(scale == 0.0)]
+        raise EstimationError(f"regressor column(s) {zero} are identically zero (rank deficient)")
+    Xs = X / scale
+    U, s, Vt = np.linalg.svd(Xs, full_matrices=False)
+    tol = (max(n, p) * np.finfo(float).eps if rcond is None else float(rcond)) * s[0]
+    rank = int(np.sum(s > tol))
+    if rank < p:
+        raise EstimationError(
+            f"regressor matrix is rank deficient (rank {rank} < {p} parameters): "
+            "the data do not excite every term; add excitation or remove a regressor")
+    theta_s = Vt.T @ ((U.T @ y) / s)
+    theta = theta_s / scale
+    residuals = y - X @ theta
+    dof = n - p
+    sigma2 = float(residuals @ residuals) / dof
+    inv_xtx_s = (Vt.T / s**2) @ Vt  # (Xs^T Xs)^-1
+    covariance = sigma2 * inv_xtx_s / np.outer(scale, scale)
+    covariance = 0.5 * (covariance + covariance.T)
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    return LsResult(theta=theta, std=std, covariance=covariance, sigma2=sigma2,
+                    residuals=residuals, n=n, p=p, names=names)
+
+
+def confidence_interval(value, std, dof: int, level: float = 0.95):
+    """Two-sided Student-t confidence interval value -+ t_{(1+level)/2, dof} * std.
+
+    Args:
+        value: estimate(s) (scalar or array).
+        std: standard deviation(s) of the estimate(s), same shape as ``value``.
+        dof: degrees of freedom (n - p for an LS fit, seed 003 eq. 8), integer >= 1.
+        level: confidence level in (0, 1), default 0.95.
+
+    Returns:
+        (low, high), scalars or arrays like ``value``.
+
+    Raises:
+        EstimationError: dof < 1, level outside (0, 1), negative std.
+    """
+    if not (0.0 < float(level) < 1.0):
+        raise EstimationError(f"level must be in (0, 1), got {level}")
+    if int(dof) != dof or dof < 1:
+        raise EstimationError(f"dof must be an integer >= 1, got {dof}")
+    value = np.asarray(value, dtype=float)
+    std = np.asarray(std, dtype=float)
+    if np.any(std < 0):
+        raise EstimationError("std must be non-negative")
+    half = stats.t.ppf(0.5 * (1.0 + float(level)), int(dof)) * std
+    low, high = value - half, value + half
+    if low.ndim == 0:
+        return float(low), float(high)
+    return low, high
+
+
+# --------------------------------------------------------------------------------------
+# Hydrodynamic models
+# --------------------------------------------------------------------------------------
+def _drag_regressors(v: np.ndarray, quadratic: bool, linear: bool, bias: bool) -> np.ndarray:
+    cols = []
+    if quadratic:
+        cols.append(np.abs(v) * v)
+    if linear:
+        cols.append(v)
+    if bias:
+        cols.append(np.ones_like(v))
+    return np.column_stack(cols)
+
+
+def fit_drag(velocity, force, include_linear: bool = True, include_bias: bool = True) -> DragFit:
+    """Fit seed 003 eq. 2, F = k_q |v| v + k_l v + b, by least squares (eqs. 3-8).
+
+    The regressor row is [|v| v, v, 1]: eq. 3 prints x^2, but eq. 2 and its text use |v| v to
+    keep the sign, which is what we fit (see module docstring).
+
+    Args:
+        velocity: (n,) steady velocity samples in m/s (rad/s for roll/pitch/yaw), body frame.
+        force: (n,) applied thrust in N (moment in N m) balancing the drag at that velocity.
+        include_linear: include the k_l v term (set False for a pure quadratic model).
+        include_bias: include b (set False for zero-intercept fits, hydrodynamics.md C8).
+
+    Returns:
+        :class:`DragFit` (values and standard deviations of k_q, k_l, b).
+
+    Raises:
+        EstimationError: shape mismatch, NaN, n <= p, or rank deficiency (e.g. one velocity).
+    """
+    v = as_float_array(velocity, "velocity", 1)
+    f = as_float_array(force, "force", 1)
+    check_same_length(velocity=v, force=f)
+    names = ["quadratic_damping"]
+    if include_linear:
+        names.append("linear_damping")
+    if include_bias:
+        names.append("bias")
+    X = _drag_regressors(v, True, include_linear, include_bias)
+    return DragFit(ls=fit_linear_model(X, f, names))
+
+
+def fit_dynamic(acceleration, velocity, force, separate_quadratic: bool = False,
+                restoring=None, include_linear: bool = True,
+                include_bias: bool = True) -> DynamicFit:
+    """Fit the 1-DOF transient model tau = m v_dot + k_q |v| v + k_l v + b (+ k_r r).
+
+    Regressor row: [v_dot, |v| v, v, 1] (design.md section 5), or with
+    ``separate_quadratic`` [v_dot, |v| v [v > 0], |v| v [v < 0], v, 1] (seed 003 Table 3
+    positive/negative heave), plus the optional restoring column r (e.g. sin(roll) so that the
+    coefficient is W*BG in N m, Fossen's g(eta) for roll/pitch, hydrodynamics.md C4).
+
+    Args:
+        acceleration: (n,) v_dot in m/s^2 (rad/s^2), from a filter (filters.py), body frame.
+        velocity: (n,) v in m/s (rad/s).
+        force: (n,) applied force in N (moment in N m).
+        separate_quadratic: fit one quadratic damping per velocity sign.
+        restoring: optional (n,) restoring regressor (dimensionless for sin(angle)).
+        include_linear: include k_l v.
+        include_bias: include b.
+
+    Returns:
+        :class:`DynamicFit` with names ``inertia``, ``quadratic_damping`` (or ``_positive``
+        and ``_negative``), ``linear_damping``, ``bias``, ``restoring`` as present.
+
+    Raises:
+        EstimationError: shape mismatch, NaN, n <= p, or rank deficiency (e.g. separate
+            quadratic terms without samples of both signs, or no acceleration excitation).
+    """
+    a = as_float_array(acceleration, "acceleration", 1)
+    v = as_float_array(velocity, "velocity", 1)
+    f = as_float_array(force, "force", 1)
+    arrays = dict(acceleration=a, velocity=v, force=f)
+    if restoring is not None:
+        r = as_float_array(restoring, "restoring", 1)
+        arrays["restoring"] = r
+    check_same_length(**arrays)
+    cols = [a]
+    names = ["inertia"]
+    q = np.abs(v) * v
+    if separate_quadratic:
+        cols += [np.where(v > 0, q, 0.0), np.where(v < 0, q, 0.0)]
+        names += ["quadratic_damping_positive", "quadratic_damping_negative"]
+    else:
+        cols.append(q)
+        names.append("quadratic_damping")
+    if include_linear:
+        cols.append(v)
+        names.append("linear_damping")
+    if include_bias:
+        cols.append(np.ones_like(v))
+        names.append("bias")
+    if restoring is not None:
+        cols.append(r)
+        names.append("restoring")
+    return DynamicFit(ls=fit_linear_model(np.column_stack(cols), f, names))

@@ -1,0 +1,75 @@
+"""Tests of hindrax_ident.estimation.drag_coefficient (seed 003 Table 4, hydrodynamics.md)."""
+
+import numpy as np
+import pytest
+
+from hindrax_ident.estimation.drag_coefficient import (
+    KINEMATIC_VISCOSITY_WATER_M2_S,
+    characteristic_length_from_volume,
+    drag_coefficient,
+    drag_coefficient_samples,
+    reynolds_number,
+    reynolds_range,
+    rotational_drag_coefficient,
+)
+from hindrax_ident.estimation.least_squares import EstimationError
+
+
+def test_characteristic_lengths_of_seed000():
+    """Seed 000 section 4: V^(1/3) = 0.0824 m (model, 0.00056 m^3), 0.2483 m (0.0153 m^3)."""
+    assert characteristic_length_from_volume(0.00056) == pytest.approx(0.0824, abs=5e-5)
+    assert characteristic_length_from_volume(0.0153) == pytest.approx(0.2483, abs=5e-5)
+
+
+def test_reynolds_number():
+    assert KINEMATIC_VISCOSITY_WATER_M2_S == 1.01e-6
+    # 0.5 m/s over 0.2483 m: 0.5 * 0.2483 / 1.01e-6 = 1.229e5
+    assert reynolds_number(0.5, 0.2483) == pytest.approx(1.2292e5, rel=1e-4)
+    assert reynolds_number(-0.5, 0.2483) == reynolds_number(0.5, 0.2483)
+    np.testing.assert_allclose(reynolds_number(np.array([0.1, 0.2]), 1.0, 1e-6), [1e5, 2e5])
+    lo, hi = reynolds_range([0.0, 0.2, -0.45, 0.3], 0.2483, min_speed=0.01)
+    assert lo == pytest.approx(0.2 * 0.2483 / 1.01e-6)
+    assert hi == pytest.approx(0.45 * 0.2483 / 1.01e-6)
+
+
+def test_drag_coefficient_definition():
+    """C_D = 2 k_q / (rho A_p): k_q = 66.48 kg/m on A_p = 0.188 m^2 (0.47 x 0.40 m front
+    bounding box) -> 2 * 66.48 / (1000 * 0.188) = 0.7072 (Table 4 prints 2.28 without areas)."""
+    cd, sd = drag_coefficient(66.48, 0.188, 1000.0, quadratic_damping_std=10.20)
+    assert cd == pytest.approx(0.70723, rel=1e-4)
+    assert sd == pytest.approx(2 * 10.20 / 188.0, rel=1e-9)
+    # the quadratic drag law it inverts: F = 0.5 rho C_D A v|v| = k_q v|v|
+    v = 0.4
+    assert 0.5 * 1000.0 * cd * 0.188 * v * v == pytest.approx(66.48 * v * v)
+
+
+def test_rotational_drag_coefficient_plate_at_radius():
+    """M = 0.5 rho C_D A (w R)^2 R -> k_q = 0.5 rho C_D A R^3."""
+    cd, _ = rotational_drag_coefficient(1.29, 0.236, 0.295)
+    assert 0.5 * 1000.0 * cd * 0.236 * 0.295**3 == pytest.approx(1.29)
+
+
+def test_per_sample_drag_coefficients():
+    rng = np.random.default_rng(0)
+    v = rng.uniform(0.1, 0.5, 50) * rng.choice([-1.0, 1.0], 50)
+    cd_true, area = 1.1, 0.2
+    f = 0.5 * 1000.0 * cd_true * area * np.abs(v) * v
+    mean, std, n = drag_coefficient_samples(np.r_[v, 0.0], np.r_[f, 0.3], area)
+    assert n == 50                              # the v = 0 sample is dropped
+    assert mean == pytest.approx(cd_true) and std == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("call", [
+    lambda: characteristic_length_from_volume(0.0),
+    lambda: reynolds_number(1.0, -1.0),
+    lambda: reynolds_number(1.0, 1.0, 0.0),
+    lambda: reynolds_range([0.0, 0.0], 1.0, min_speed=0.01),
+    lambda: drag_coefficient(66.0, 0.0),
+    lambda: drag_coefficient(66.0, 0.1, quadratic_damping_std=-1.0),
+    lambda: rotational_drag_coefficient(1.0, 0.1, 0.0),
+    lambda: drag_coefficient_samples([0.01, 0.02], [1.0, 2.0], 0.1),
+    lambda: drag_coefficient_samples([0.3, 0.4], [1.0], 0.1),
+])
+def test_errors(call):
+    with pytest.raises(EstimationError):
+        call()
