@@ -264,6 +264,9 @@ SCHEMA.update({
     "recording.chunk_size_bytes": _i("MCAP chunk size, bytes", 1024, 64 * 1024 * 1024),
     "recording.split_size_bytes": _i("start a new file beyond this size, bytes (0 = never)", 0, 2**40),
     "recording.split_duration_s": _f("start a new file after this duration, s (0 = never)", 0.0, 86400.0),
+    "recording.flush_interval_s": _f("close and fsync the open chunk once its oldest message is this old, s "
+                                     "(bounds the data lost on power loss; 0 = only when the chunk is full)",
+                                     0.0, 3600.0),
 })
 
 #: Optional keys: absent is fine; present must validate. Everything else in SCHEMA is required.
@@ -283,6 +286,8 @@ SCHEMA["simulation.sensors.dvl75.min_altitude_m"] = _f("DVL loses lock below thi
 SCHEMA["simulation.sensors.dvl75.max_altitude_m"] = _f("DVL loses lock above this altitude, m", 0.1, 200.0)
 SCHEMA["simulation.sensors.dvl75.wall_lock_loss_distance_m"] = _f(
     "DVL loses lock closer than this to a wall, m (0 = never)", 0.0, 10.0)
+SCHEMA["simulation.sensors.icm20948_mag.earth_field_ned_t"] = _v(
+    "earth magnetic field [north, east, down] seen by the simulated magnetometer, T", 3, -1e-4, 1e-4)
 SCHEMA["recording.topics"] = Spec(_STRS, "topics recorded by default (empty list not allowed by ROS: omit the key "
                                          "to record all topics)")
 

@@ -1,0 +1,10 @@
+"""The virtual pool: a 6-DOF Fossen model of Hindrax in a pool box, with thrusters and sensor models.
+
+Modules (pure numpy unless noted): :mod:`.model` (equations of motion), :mod:`.thrusters` (pulse width ->
+thrust -> lagged wrench), :mod:`.pool` (floor, walls, free surface, contacts), :mod:`.sensors` (what each
+device measures, with noise), :mod:`.simulator` (:class:`Simulator`: everything stepped together, no ROS),
+:mod:`.node` (rclpy node publishing /clock and ground truth; imported only on demand).
+"""
+from .simulator import PulseWidthError, Simulator
+
+__all__ = ["Simulator", "PulseWidthError"]

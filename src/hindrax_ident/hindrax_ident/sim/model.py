@@ -1,0 +1,358 @@
+"""6-DOF Fossen model of Hindrax: rigid body + added mass + Coriolis + damping + restoring, pure numpy.
+
+Equations of motion (Fossen 2011; hydrodynamics.md [T] eqs. 2.1, 2.6-2.7, 2.22-2.23, 2.80-2.83, 2.90),
+body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
+
+    eta_dot = J(eta) nu                      (position in NED, attitude as a unit quaternion)
+    (M_RB + M_A) nu_dot + C_RB(nu) nu + C_A(nu) nu + D(nu) nu + g(eta) = tau
+
+* Reference point: the body origin CO of the configuration. ``vehicle.centre_of_gravity_frd_m`` is r_g (CG
+  relative to CO) and ``vehicle.centre_of_buoyancy_frd_m`` is r_b (CB relative to CO); the Hindrax file
+  puts CO at the CG (r_g = 0), but any r_g is supported. ``vehicle.inertia_kg_m2`` and the products of
+  inertia are about the CG; the inertia about CO follows from the parallel-axis theorem
+  ``I_o = I_cg - m S(r_g)^2``.
+* M_RB = [m I3, -m S(r_g); m S(r_g), I_o]   ([T] eq. 2.7).
+* M_A: the positive 6x6 added-mass matrix of the configuration (``VehicleConfig.added_mass_matrix``,
+  diagonal from seed 000 Table 6 and assumptions, optional off-diagonal couplings; not forced symmetric).
+* C_RB: the coordinate-free form (hydrodynamics.md, Fossen 2011)
+  ``C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)]``,
+  whose product with nu equals the Newton-Euler terms of [T] eqs. 2.4-2.5.
+* C_A from M_A (Fossen 2011): with ``a = M_A nu = [a1; a2]``,
+  ``C_A = [0, -S(a1); -S(a1), -S(a2)]`` (skew-symmetric for any M_A; equals [T] eq. 2.83 in the diagonal case
+  with M_A = -diag(derivatives)).
+* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.hydrodynamics(dof)`` (seed 003 eq. 2 / Table 3), the
+  coefficient pair chosen by the sign of the velocity; heave uses the ``*_positive`` pair for w > 0 (moving
+  down, seed 003 §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
+* g(eta) = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B]
+  (hydrodynamics.md eq. 2.22-2.23 with the corrected sign of f_b). W = m g and B = rho g V from the
+  configuration; B is multiplied by the submerged fraction of a free-surface model when one is given (the
+  hull emerging at the surface, :mod:`.pool`), otherwise the vehicle is fully submerged.
+* Kinematics with a unit quaternion q = (x, y, z, w) of the body FRD in NED (no Euler singularity):
+  ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an output only.
+
+Fast path: :meth:`VehicleModel.derivative_list` evaluates the right-hand side on plain Python floats (3-vectors
+as scalars, the constant ``(M_RB + M_A)^-1`` precomputed), because numpy's per-call overhead dominates for
+6x6 problems. The matrix functions of this module (:func:`rigid_body_mass_matrix`, :func:`coriolis_rigid_body`,
+:func:`coriolis_added_mass`, :func:`damping_vector`, :func:`restoring_vector`) state the same equations in
+matrix form; the tests check the fast path against them.
+
+State vector (13,): ``[x_n, y_e, z_d (m, NED), q_x, q_y, q_z, q_w, u, v, w (m/s), p, q, r (rad/s)]``.
+Not modelled: currents (nu is relative to still water), the variation of added mass and damping near the
+surface, floor and walls, thruster-hull interaction (seed 003 §6).
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, Sequence
+
+import numpy as np
+
+from hindrax_drivers.config import DOFS, VehicleConfig
+
+__all__ = [
+    "STATE_SIZE",
+    "skew",
+    "rigid_body_mass_matrix",
+    "coriolis_rigid_body",
+    "coriolis_added_mass",
+    "damping_vector",
+    "restoring_vector",
+    "restoring_vector_euler",
+    "rotation_matrix_from_quaternion",
+    "euler_from_rotation_matrix",
+    "VehicleModel",
+]
+
+#: Length of the state vector [position NED (3), quaternion xyzw (4), nu (6)].
+STATE_SIZE = 13
+
+#: A free-surface model: (depth of CO m, R20, R21, R22) -> submerged fraction in [0, 1] (see pool.FreeSurface).
+SurfaceFraction = Callable[[float, float, float, float], float]
+
+
+# --------------------------------------------------------------------------------------------- matrix forms
+def skew(a) -> np.ndarray:
+    """Skew-symmetric matrix S(a) (3x3) with S(a) b = a x b ([T] eq. 2.7 notation). a: (3,)."""
+    x, y, z = np.asarray(a, dtype=float)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rigid_body_mass_matrix(mass_kg: float, r_g_m, inertia_cg_kg_m2) -> np.ndarray:
+    """M_RB (6x6) about the body origin CO: [m I3, -m S(r_g); m S(r_g), I_o] ([T] eq. 2.7).
+
+    mass_kg: m. r_g_m (3,): CG relative to CO, FRD, m. inertia_cg_kg_m2 (3, 3): inertia tensor about the CG;
+    moved to CO with the parallel-axis theorem I_o = I_cg - m S(r_g)^2.
+    """
+    s = skew(r_g_m)
+    i_o = np.asarray(inertia_cg_kg_m2, dtype=float) - mass_kg * s @ s
+    return np.block([[mass_kg * np.eye(3), -mass_kg * s], [mass_kg * s, i_o]])
+
+
+def coriolis_rigid_body(mass_kg: float, r_g_m, inertia_o_kg_m2, nu) -> np.ndarray:
+    """C_RB(nu) (6x6), coordinate-free form (hydrodynamics.md, Fossen 2011).
+
+    C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)],
+    v = nu[:3] (m/s), w = nu[3:] (rad/s), r_g (3,) in m, inertia_o_kg_m2 (3, 3) about CO.
+    """
+    nu = np.asarray(nu, dtype=float)
+    v, w = nu[:3], nu[3:]
+    r_g = np.asarray(r_g_m, dtype=float)
+    i_o = np.asarray(inertia_o_kg_m2, dtype=float)
+    off = -mass_kg * skew(v) - mass_kg * skew(skew(w) @ r_g)
+    return np.block([[np.zeros((3, 3)), off], [off, mass_kg * skew(skew(v) @ r_g) - skew(i_o @ w)]])
+
+
+def coriolis_added_mass(added_mass, nu) -> np.ndarray:
+    """C_A(nu) (6x6) from the positive added-mass matrix M_A (6x6): [0, -S(a1); -S(a1), -S(a2)], a = M_A nu.
+
+    Fossen 2011; equals hydrodynamics.md eq. 2.83 for a diagonal M_A = -diag(X_udot ... N_rdot).
+    """
+    a = np.asarray(added_mass, dtype=float) @ np.asarray(nu, dtype=float)
+    s1, s2 = skew(a[:3]), skew(a[3:])
+    return np.block([[np.zeros((3, 3)), -s1], [-s1, -s2]])
+
+
+def damping_vector(nu, linear_positive, linear_negative, quadratic_positive, quadratic_negative) -> np.ndarray:
+    """D(nu) nu (6,): per DOF k_l v + k_q |v| v, the coefficients chosen by the sign of v (seed 003 eq. 2).
+
+    All coefficient arguments are (6,) positive numbers in SNAME order (kg/s, kg/m; kg m^2/s, kg m^2).
+    """
+    nu = np.asarray(nu, dtype=float)
+    pos = nu >= 0.0
+    kl = np.where(pos, linear_positive, linear_negative)
+    kq = np.where(pos, quadratic_positive, quadratic_negative)
+    return kl * nu + kq * np.abs(nu) * nu
+
+
+def restoring_vector(rotation_ned_from_body, weight_n: float, buoyancy_n: float, r_g_m, r_b_m) -> np.ndarray:
+    """g(eta) (6,) on the left-hand side of the equations of motion (hydrodynamics.md eq. 2.22).
+
+    g = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B] (NED).
+    rotation_ned_from_body (3, 3): R, body FRD to NED. W, B in N; r_g, r_b (3,) from CO, FRD, m.
+    """
+    down_body = np.asarray(rotation_ned_from_body, dtype=float)[2]  # R^T [0, 0, 1]
+    f_g = weight_n * down_body
+    f_b = -buoyancy_n * down_body
+    return -np.concatenate([f_g + f_b, np.cross(r_g_m, f_g) + np.cross(r_b_m, f_b)])
+
+
+def restoring_vector_euler(roll_rad: float, pitch_rad: float, weight_n: float, buoyancy_n: float, r_g_m,
+                           r_b_m) -> np.ndarray:
+    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in hydrodynamics.md [T] §1.A.
+
+    Used to cross-check :func:`restoring_vector`. Angles in rad, forces in N, r_g and r_b (3,) in m (FRD).
+    """
+    xg, yg, zg = r_g_m
+    xb, yb, zb = r_b_m
+    w, b = weight_n, buoyancy_n
+    sph, cph, sth, cth = math.sin(roll_rad), math.cos(roll_rad), math.sin(pitch_rad), math.cos(pitch_rad)
+    return np.array([
+        (w - b) * sth,
+        -(w - b) * cth * sph,
+        -(w - b) * cth * cph,
+        -(yg * w - yb * b) * cth * cph + (zg * w - zb * b) * cth * sph,
+        (zg * w - zb * b) * sth + (xg * w - xb * b) * cth * cph,
+        -(xg * w - xb * b) * cth * sph - (yg * w - yb * b) * sth,
+    ])
+
+
+def rotation_matrix_from_quaternion(q_xyzw) -> np.ndarray:
+    """R (3, 3), body FRD to NED, of a unit quaternion (x, y, z, w) (normalised here)."""
+    x, y, z, w = np.asarray(q_xyzw, dtype=float) / np.linalg.norm(q_xyzw)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def euler_from_rotation_matrix(r) -> np.ndarray:
+    """Fossen ZYX Euler angles [phi theta psi] (rad) of R = Rz(psi) Ry(theta) Rx(phi) ([T] eq. 2.2).
+
+    phi = atan2(R21, R22), theta = -asin(R20), psi = atan2(R10, R00); psi in (-pi, pi].
+    """
+    r = np.asarray(r, dtype=float)
+    return np.array([math.atan2(r[2, 1], r[2, 2]), -math.asin(max(-1.0, min(1.0, r[2, 0]))),
+                     math.atan2(r[1, 0], r[0, 0])])
+
+
+# --------------------------------------------------------------------------------------------- the model
+class VehicleModel:
+    """Fossen 6-DOF model built from a :class:`~hindrax_drivers.config.VehicleConfig` (module docstring).
+
+    Parameters: ``config`` (every physical parameter comes from it: mass, volume, water density, gravity,
+    r_g, r_b, inertia, added-mass matrix, damping); ``surface_fraction`` optional free-surface model
+    ``(depth_co_m, R20, R21, R22) -> fraction in [0, 1]`` scaling the buoyancy (None: always submerged).
+
+    Read-only attributes: ``mass_kg``, ``weight_n``, ``buoyancy_n`` (fully submerged), ``r_g_m`` (3,),
+    ``r_b_m`` (3,), ``inertia_o_kg_m2`` (3, 3) about CO, ``mass_matrix_rigid_body`` (6, 6),
+    ``added_mass_matrix`` (6, 6), ``mass_matrix`` (6, 6) = M_RB + M_A, ``mass_matrix_inverse`` (6, 6),
+    ``damping_linear_positive`` / ``damping_linear_negative`` / ``damping_quadratic_positive`` /
+    ``damping_quadratic_negative`` (6,). Raises ``ValueError`` when M_RB + M_A is singular.
+    """
+
+    def __init__(self, config: VehicleConfig, surface_fraction: SurfaceFraction | None = None) -> None:
+        self.config = config
+        self.mass_kg = float(config.mass_kg)
+        self.gravity_m_s2 = float(config.gravity_m_s2)
+        self.weight_n = float(config.weight_n)
+        self.buoyancy_n = float(config.buoyancy_n)
+        self.r_g_m = np.array(config.centre_of_gravity_frd_m, dtype=float)
+        self.r_b_m = np.array(config.centre_of_buoyancy_frd_m, dtype=float)
+        self.mass_matrix_rigid_body = rigid_body_mass_matrix(self.mass_kg, self.r_g_m, config.inertia_matrix_kg_m2)
+        self.inertia_o_kg_m2 = self.mass_matrix_rigid_body[3:, 3:].copy()
+        self.added_mass_matrix = np.array(config.added_mass_matrix, dtype=float)
+        self.mass_matrix = self.mass_matrix_rigid_body + self.added_mass_matrix
+        if np.linalg.cond(self.mass_matrix) > 1e12:
+            raise ValueError("M_RB + M_A is singular; check vehicle.mass_kg, inertia and added masses")
+        self.mass_matrix_inverse = np.linalg.inv(self.mass_matrix)
+        hydro = [config.hydrodynamics(d) for d in DOFS]
+        self.damping_linear_positive = np.array([h.linear_damping_positive for h in hydro])
+        self.damping_linear_negative = np.array([h.linear_damping_negative for h in hydro])
+        self.damping_quadratic_positive = np.array([h.quadratic_damping_positive for h in hydro])
+        self.damping_quadratic_negative = np.array([h.quadratic_damping_negative for h in hydro])
+        for arr in (self.r_g_m, self.r_b_m, self.mass_matrix_rigid_body, self.inertia_o_kg_m2,
+                    self.added_mass_matrix, self.mass_matrix, self.mass_matrix_inverse, self.damping_linear_positive,
+                    self.damping_linear_negative, self.damping_quadratic_positive, self.damping_quadratic_negative):
+            arr.flags.writeable = False
+        self.surface_fraction = surface_fraction
+        # ---- plain-float copies for the fast path
+        self._minv = tuple(tuple(float(x) for x in row) for row in self.mass_matrix_inverse)
+        self._ma = tuple(tuple(float(x) for x in row) for row in self.added_mass_matrix)
+        self._ma_diagonal = bool(np.all(self.added_mass_matrix == np.diag(np.diag(self.added_mass_matrix))))
+        self._io = tuple(tuple(float(x) for x in row) for row in self.inertia_o_kg_m2)
+        self._rg = tuple(float(x) for x in self.r_g_m)
+        self._rb = tuple(float(x) for x in self.r_b_m)
+        self._damp = tuple(zip(*(a.tolist() for a in (self.damping_linear_positive, self.damping_linear_negative,
+                                                      self.damping_quadratic_positive,
+                                                      self.damping_quadratic_negative))))
+
+    # ------------------------------------------------------------------ helpers
+    def buoyancy_fraction(self, state) -> float:
+        """Submerged fraction in [0, 1] at ``state`` (1.0 without a free-surface model)."""
+        if self.surface_fraction is None:
+            return 1.0
+        r = rotation_matrix_from_quaternion(np.asarray(state, dtype=float)[3:7])
+        return float(self.surface_fraction(float(state[2]), r[2, 0], r[2, 1], r[2, 2]))
+
+    def generalized_forces(self, state, tau) -> dict[str, np.ndarray]:
+        """Each term of the equations of motion at ``state`` (13,) and ``tau`` (6,), in matrix form.
+
+        Returns a dict of (6,) arrays: ``coriolis_rigid_body`` (C_RB nu), ``coriolis_added_mass`` (C_A nu),
+        ``damping`` (D(nu) nu), ``restoring`` (g(eta), with the free-surface buoyancy), and ``nu_dot``
+        = (M_RB + M_A)^-1 (tau - C_RB nu - C_A nu - D nu - g). Slow (for tests and analysis).
+        """
+        s = np.asarray(state, dtype=float)
+        nu = s[7:13]
+        r = rotation_matrix_from_quaternion(s[3:7])
+        out = {
+            "coriolis_rigid_body": coriolis_rigid_body(self.mass_kg, self.r_g_m, self.inertia_o_kg_m2, nu) @ nu,
+            "coriolis_added_mass": coriolis_added_mass(self.added_mass_matrix, nu) @ nu,
+            "damping": damping_vector(nu, self.damping_linear_positive, self.damping_linear_negative,
+                                      self.damping_quadratic_positive, self.damping_quadratic_negative),
+            "restoring": restoring_vector(r, self.weight_n, self.buoyancy_n * self.buoyancy_fraction(s),
+                                          self.r_g_m, self.r_b_m),
+        }
+        rhs = np.asarray(tau, dtype=float) - sum(out.values())
+        out["nu_dot"] = self.mass_matrix_inverse @ rhs
+        return out
+
+    def derivative(self, state, tau) -> np.ndarray:
+        """State derivative (13,) at ``state`` (13,) for the body wrench ``tau`` (6,) about CO (FRD, N, N m)."""
+        return np.array(self.derivative_list(np.asarray(state, dtype=float).tolist(),
+                                             np.asarray(tau, dtype=float).tolist()))
+
+    # ------------------------------------------------------------------ fast path
+    def derivative_list(self, s: Sequence[float], tau: Sequence[float]) -> list[float]:
+        """Fast state derivative on plain floats: ``s`` (13 floats), ``tau`` (6 floats) -> 13 floats.
+
+        Same equations as :meth:`generalized_forces` (checked by the tests), written with scalar 3-vector
+        algebra. The quaternion need not be exactly unit (the integrator renormalises after each step).
+        """
+        _, _, z, qx, qy, qz, qw, u, v, w, p, q, r = s
+        # rotation body FRD -> NED
+        xx, yy, zz = qx * qx, qy * qy, qz * qz
+        xy, xz, yz = qx * qy, qx * qz, qy * qz
+        xw, yw, zw = qx * qw, qy * qw, qz * qw
+        r00 = 1.0 - 2.0 * (yy + zz)
+        r01 = 2.0 * (xy - zw)
+        r02 = 2.0 * (xz + yw)
+        r10 = 2.0 * (xy + zw)
+        r11 = 1.0 - 2.0 * (xx + zz)
+        r12 = 2.0 * (yz - xw)
+        r20 = 2.0 * (xz - yw)
+        r21 = 2.0 * (yz + xw)
+        r22 = 1.0 - 2.0 * (xx + yy)
+        # kinematics: p_dot = R v; q_dot = 1/2 q (x) [0; w]
+        xd = r00 * u + r01 * v + r02 * w
+        yd = r10 * u + r11 * v + r12 * w
+        zd = r20 * u + r21 * v + r22 * w
+        qxd = 0.5 * (qw * p + qy * r - qz * q)
+        qyd = 0.5 * (qw * q + qz * p - qx * r)
+        qzd = 0.5 * (qw * r + qx * q - qy * p)
+        qwd = -0.5 * (qx * p + qy * q + qz * r)
+
+        m = self.mass_kg
+        xg, yg, zg = self._rg
+        xb, yb, zb = self._rb
+        # restoring g(eta): -[(W - B) k; W r_g x k - B r_b x k], k = R^T e_z = (r20, r21, r22)
+        wt = self.weight_n
+        bu = self.buoyancy_n
+        if self.surface_fraction is not None:
+            bu *= self.surface_fraction(z, r20, r21, r22)
+        net = wt - bu
+        g0, g1, g2 = -net * r20, -net * r21, -net * r22
+        mx = wt * xg - bu * xb
+        my = wt * yg - bu * yb
+        mz = wt * zg - bu * zb  # sum W r_g - B r_b; moment part = -(that x k)
+        g3 = -(my * r22 - mz * r21)
+        g4 = -(mz * r20 - mx * r22)
+        g5 = -(mx * r21 - my * r20)
+
+        # rigid-body Coriolis: [m (w x v + w x (w x r_g)); m r_g x (w x v) + w x (I_o w)]
+        wvx = q * w - r * v
+        wvy = r * u - p * w
+        wvz = p * v - q * u
+        wrx = q * zg - r * yg
+        wry = r * xg - p * zg
+        wrz = p * yg - q * xg
+        c0 = m * (wvx + (q * wrz - r * wry))
+        c1 = m * (wvy + (r * wrx - p * wrz))
+        c2 = m * (wvz + (p * wry - q * wrx))
+        (i00, i01, i02), (i10, i11, i12), (i20, i21, i22) = self._io
+        hx = i00 * p + i01 * q + i02 * r
+        hy = i10 * p + i11 * q + i12 * r
+        hz = i20 * p + i21 * q + i22 * r
+        c3 = m * (yg * wvz - zg * wvy) + (q * hz - r * hy)
+        c4 = m * (zg * wvx - xg * wvz) + (r * hx - p * hz)
+        c5 = m * (xg * wvy - yg * wvx) + (p * hy - q * hx)
+
+        # added-mass Coriolis: a = M_A nu; [w x a1; v x a1 + w x a2]
+        ma = self._ma
+        if self._ma_diagonal:
+            a0, a1, a2 = ma[0][0] * u, ma[1][1] * v, ma[2][2] * w
+            a3, a4, a5 = ma[3][3] * p, ma[4][4] * q, ma[5][5] * r
+        else:
+            nu = (u, v, w, p, q, r)
+            a0, a1, a2, a3, a4, a5 = (row[0] * nu[0] + row[1] * nu[1] + row[2] * nu[2] + row[3] * nu[3]
+                                      + row[4] * nu[4] + row[5] * nu[5] for row in ma)
+        c0 += q * a2 - r * a1
+        c1 += r * a0 - p * a2
+        c2 += p * a1 - q * a0
+        c3 += (v * a2 - w * a1) + (q * a5 - r * a4)
+        c4 += (w * a0 - u * a2) + (r * a3 - p * a5)
+        c5 += (u * a1 - v * a0) + (p * a4 - q * a3)
+
+        # damping D(nu) nu and the right-hand side
+        rhs = []
+        for i, (vel, c, g, (klp, kln, kqp, kqn)) in enumerate(zip((u, v, w, p, q, r), (c0, c1, c2, c3, c4, c5),
+                                                                 (g0, g1, g2, g3, g4, g5), self._damp)):
+            if vel >= 0.0:
+                d = (klp + kqp * vel) * vel
+            else:
+                d = (kln - kqn * vel) * vel
+            rhs.append(tau[i] - c - d - g)
+        f0, f1, f2, f3, f4, f5 = rhs
+        acc = [row[0] * f0 + row[1] * f1 + row[2] * f2 + row[3] * f3 + row[4] * f4 + row[5] * f5
+               for row in self._minv]
+        return [xd, yd, zd, qxd, qyd, qzd, qwd, *acc]

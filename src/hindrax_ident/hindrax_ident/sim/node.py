@@ -1,0 +1,304 @@
+"""ROS 2 node of the virtual pool: steps :class:`~.simulator.Simulator`, publishes /clock and ground truth.
+
+Run alone: ``python -m hindrax_ident.sim.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+
+Interfaces
+----------
+Subscribes (default pulse-width source)
+    ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm): wire pulse widths in thruster order; ``armed``
+    false means neutral. The last valid message is held (a real PWM generator keeps its output).
+    Messages with the wrong length or non-finite values are ignored with a one-line warning.
+Publishes
+    ``/clock`` (rosgraph_msgs/Clock) at ``simulation.clock_rate_hz`` of simulated time;
+    ``sim/odometry`` (nav_msgs/Odometry): pose of base_link in odom (ENU, origin at the pool corner on the
+    surface), twist in base_link (FLU), converted with :mod:`hindrax_drivers.frames`; covariances zero
+    (exact ground truth);
+    ``sim/wrench`` (geometry_msgs/WrenchStamped, base_link FLU): the true thruster wrench about base_link;
+    ``sim/contact`` (diagnostic_msgs/DiagnosticArray): one status per pool face (``sim/contact/<face>``,
+    WARN while touching, value ``since_s``), on every change and once per simulated second.
+    Ground truth is for evaluation only: no node under test may read ``sim/*``.
+Parameters
+    The vehicle configuration (``--params-file hindrax.yaml``; or ``config_file``; or the shipped file).
+    Node-specific: ``truth_rate_hz`` (simulated-time rate of sim/odometry and sim/wrench, default
+    ``simulation.clock_rate_hz``).
+
+Time: the node steps the model from a timer on the steady (wall) clock, never on its own /clock. With
+``simulation.real_time_factor`` r > 0 the simulated time follows ``r`` x the wall time (if the machine cannot
+keep up, it re-anchors and warns). With r = 0 it runs as fast as possible: each timer callback advances
+one /clock period of simulated time (at most :data:`SLICE_S` of wall time) and returns to the executor,
+so that other nodes in the same SingleThreadedExecutor (e.g. nodes under test using ``use_sim_time``) run
+between clock ticks and see every /clock message.
+
+Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`),
+``add_sensor_listener(cb(device, sample))``, ``add_step_listener(cb(simulator))``, ``latest_sample(device)``,
+and the ``pulse_width_source`` constructor argument: a callable returning the widths (n,) in us the ESCs
+see (e.g. decoded from the PCA9685 emulator; None keeps the previous ones), called before every step; it
+replaces the ``thrusters/pulse_width`` subscription.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock as ClockMsg
+
+from hindrax_drivers import frames
+from hindrax_drivers.config import ConfigError, VehicleConfig, node_config
+from hindrax_msgs.msg import ThrusterPwm
+
+from .pool import FACES
+from .simulator import PulseWidthError, SensorListener, Simulator
+
+__all__ = ["SimulatorNode", "PulseWidthSource", "SLICE_S", "time_msg", "main"]
+
+#: A pulse-width source: () -> widths (n,) in us, or None to keep the previous widths.
+PulseWidthSource = Callable[[], "Sequence[float] | None"]
+#: Longest wall time spent stepping in one timer callback when running as fast as possible, s.
+SLICE_S = 0.005
+#: Largest lag behind the real-time schedule before re-anchoring, simulated s.
+_MAX_LAG_S = 0.5
+
+
+def time_msg(t_s: float) -> TimeMsg:
+    """builtin_interfaces/Time of a simulated time t_s >= 0 (s), rounded to the nanosecond."""
+    sec, nsec = divmod(int(round(t_s * 1e9)), 1_000_000_000)
+    return TimeMsg(sec=sec, nanosec=nsec)
+
+
+class SimulatorNode(Node):
+    """Thin rclpy node over :class:`Simulator` (module docstring).
+
+    config: a VehicleConfig (default: from the node's parameters, see :func:`node_config`).
+    pulse_width_source: optional callable replacing the ThrusterPwm subscription.
+    simulator: optional prebuilt Simulator (must use ``config``). Other keyword arguments go to ``Node``.
+    Raises :class:`ConfigError` for an invalid configuration (logged as one line first).
+    """
+
+    def __init__(self, *, config: VehicleConfig | None = None, pulse_width_source: PulseWidthSource | None = None,
+                 simulator: Simulator | None = None, node_name: str = "hindrax_simulator", **kwargs: Any) -> None:
+        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
+        super().__init__(node_name, **kwargs)
+        log = self.get_logger()
+        self.config = config if config is not None else node_config(self, on_error=log.error)
+        self.simulator = simulator if simulator is not None else Simulator(self.config)
+        f = self.config.flat
+        self.real_time_factor = float(f["simulation.real_time_factor"])
+        self.clock_period_s = 1.0 / float(f["simulation.clock_rate_hz"])
+        if not self.has_parameter("truth_rate_hz"):
+            self.declare_parameter("truth_rate_hz", float(f["simulation.clock_rate_hz"]))
+        truth_rate = float(self.get_parameter("truth_rate_hz").value)
+        if not (math.isfinite(truth_rate) and truth_rate > 0.0):
+            log.error(f"truth_rate_hz = {truth_rate}: allowed a positive number; using the clock rate")
+            truth_rate = float(f["simulation.clock_rate_hz"])
+        self.truth_period_s = 1.0 / truth_rate
+
+        self._n = self.simulator.thrusters.n
+        self._pulse_widths = np.full(self._n, self.simulator.thrusters.neutral_us)
+        self._armed = True
+        self._source = pulse_width_source
+        self._step_listeners: list[Callable[[Simulator], None]] = []
+        self._next_clock = 0.0
+        self._next_truth = 0.0
+        self._next_contact = 0.0
+        self._last_faces: tuple[str, ...] | None = None
+        self._last_bad_warning = -math.inf
+
+        self._pub_clock = self.create_publisher(ClockMsg, "/clock", QoSProfile(depth=1))
+        self._pub_odom = self.create_publisher(Odometry, "sim/odometry", 10)
+        self._pub_wrench = self.create_publisher(WrenchStamped, "sim/wrench", 10)
+        self._pub_contact = self.create_publisher(DiagnosticArray, "sim/contact", 10)
+        self._sub = None
+        if pulse_width_source is None:
+            self._sub = self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pulse_width, 10)
+
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._wall_anchor = time.monotonic()
+        self._sim_anchor = self.simulator.t_s
+        period = 0.0 if self.real_time_factor <= 0.0 else \
+            max(0.001, min(0.01, self.clock_period_s / self.real_time_factor))
+        self._timer = self.create_timer(period, self._on_timer, clock=self._steady)
+        self._publish_due()
+        log.info(f"virtual pool running: step {self.simulator.step_s * 1e3:g} ms, real-time factor "
+                 f"{self.real_time_factor:g} (0 = as fast as possible), /clock at {1 / self.clock_period_s:g} Hz")
+
+    # ------------------------------------------------------------------ API
+    def add_sensor_listener(self, callback: SensorListener) -> None:
+        """Call ``callback(device, sample)`` for every new sensor sample (see :mod:`.sensors`)."""
+        self.simulator.add_sensor_listener(callback)
+
+    def add_step_listener(self, callback: Callable[[Simulator], None]) -> None:
+        """Call ``callback(simulator)`` after every integration step."""
+        self._step_listeners.append(callback)
+
+    def latest_sample(self, device: str) -> Any | None:
+        """Newest sample of a sensor device, or None."""
+        return self.simulator.latest_sample(device)
+
+    @property
+    def pulse_widths_us(self) -> np.ndarray:
+        """The pulse widths currently applied (n,), us."""
+        return self._pulse_widths.copy()
+
+    # ------------------------------------------------------------------ input
+    def _on_pulse_width(self, msg: ThrusterPwm) -> None:
+        pw = np.asarray(msg.pulse_width_us, dtype=float)
+        if pw.shape != (self._n,) or not np.all(np.isfinite(pw)):
+            self._warn_bad(f"ignored thrusters/pulse_width: need {self._n} finite pulse widths (us), "
+                           f"got {pw.size} value(s)")
+            return
+        self._pulse_widths = pw
+        self._armed = bool(msg.armed)
+
+    def _warn_bad(self, text: str) -> None:
+        now = time.monotonic()
+        if now - self._last_bad_warning > 2.0:
+            self._last_bad_warning = now
+            self.get_logger().warning(text)
+
+    def _poll_source(self) -> None:
+        try:
+            value = self._source()  # type: ignore[misc]
+        except Exception as exc:  # noqa: BLE001 - an emulator fault must not stop the simulation
+            self._warn_bad(f"pulse-width source failed: {exc}")
+            return
+        if value is None:
+            return
+        pw = np.asarray(value, dtype=float).reshape(-1)
+        if pw.shape != (self._n,) or not np.all(np.isfinite(pw)):
+            self._warn_bad(f"ignored pulse widths from the source: need {self._n} finite values, got {value!r}")
+            return
+        self._pulse_widths = pw
+
+    # ------------------------------------------------------------------ stepping
+    def _step_once(self) -> None:
+        if self._source is not None:
+            self._poll_source()
+        try:
+            self.simulator.step(self._pulse_widths, armed=self._armed)
+        except PulseWidthError as exc:  # validated above; kept as a guard
+            self._warn_bad(str(exc))
+            self._pulse_widths = np.full(self._n, self.simulator.thrusters.neutral_us)
+            return
+        for cb in self._step_listeners:
+            cb(self.simulator)
+        self._publish_due()
+
+    def _on_timer(self) -> None:
+        dt = self.simulator.step_s
+        start = time.monotonic()
+        if self.real_time_factor <= 0.0:
+            # one /clock period of simulated time, then back to the executor (other nodes run in between)
+            end = self._next_clock
+            while self.simulator.t_s + 0.5 * dt < end:
+                self._step_once()
+                if time.monotonic() - start > SLICE_S:
+                    break
+            return
+        target = self._sim_anchor + (start - self._wall_anchor) * self.real_time_factor
+        if target - self.simulator.t_s > _MAX_LAG_S:
+            self._warn_bad(f"simulation cannot keep real_time_factor {self.real_time_factor:g}; re-anchoring")
+            self._wall_anchor, self._sim_anchor = start, self.simulator.t_s
+            target = self._sim_anchor
+        while self.simulator.t_s + 0.5 * dt <= target:
+            self._step_once()
+            if time.monotonic() - start > 0.05:  # keep the executor responsive
+                break
+
+    # ------------------------------------------------------------------ output
+    def _publish_due(self) -> None:
+        sim = self.simulator
+        t = sim.t_s
+        eps = 1e-9
+        if t + eps >= self._next_clock:
+            self._pub_clock.publish(ClockMsg(clock=time_msg(t)))
+            self._next_clock = (math.floor((t + eps) / self.clock_period_s) + 1) * self.clock_period_s
+        if t + eps >= self._next_truth:
+            self._publish_truth(t)
+            self._next_truth = (math.floor((t + eps) / self.truth_period_s) + 1) * self.truth_period_s
+        faces = sim.contact.faces
+        if faces != self._last_faces or t + eps >= self._next_contact:
+            self._publish_contact(t)
+            self._last_faces = faces
+            self._next_contact = math.floor(t + eps) + 1.0
+
+    def _publish_truth(self, t: float) -> None:
+        sim = self.simulator
+        stamp = time_msg(t)
+        odom = Odometry()
+        odom.header.stamp = stamp
+        odom.header.frame_id = "odom"
+        odom.child_frame_id = "base_link"
+        px, py, pz = frames.ned_to_enu(sim.position_ned_m)
+        pos = odom.pose.pose.position
+        pos.x, pos.y, pos.z = float(px), float(py), float(pz)
+        qx, qy, qz, qw = frames.quaternion_marine_to_ros(sim.quaternion_xyzw)
+        o = odom.pose.pose.orientation
+        o.x, o.y, o.z, o.w = float(qx), float(qy), float(qz), float(qw)
+        tw = frames.twist_frd_to_flu(sim.nu)
+        lin, ang = odom.twist.twist.linear, odom.twist.twist.angular
+        lin.x, lin.y, lin.z, ang.x, ang.y, ang.z = (float(v) for v in tw)
+        self._pub_odom.publish(odom)
+
+        w = frames.wrench_frd_to_flu(sim.wrench_frd)
+        msg = WrenchStamped()
+        msg.header.stamp = stamp
+        msg.header.frame_id = "base_link"
+        f, tq = msg.wrench.force, msg.wrench.torque
+        f.x, f.y, f.z, tq.x, tq.y, tq.z = (float(v) for v in w)
+        self._pub_wrench.publish(msg)
+
+    def _publish_contact(self, t: float) -> None:
+        contact = self.simulator.contact
+        arr = DiagnosticArray()
+        arr.header.stamp = time_msg(t)
+        arr.header.frame_id = "odom"
+        for face in FACES:
+            st = DiagnosticStatus(name=f"sim/contact/{face}", hardware_id="virtual_pool")
+            if face in contact.since_s:
+                st.level = DiagnosticStatus.WARN
+                st.message = "in contact"
+                st.values = [KeyValue(key="since_s", value=f"{contact.since_s[face]:.3f}")]
+            else:
+                st.level = DiagnosticStatus.OK
+                st.message = "clear"
+            arr.status.append(st)
+        self._pub_contact.publish(arr)
+
+
+def main(args: Sequence[str] | None = None) -> int:
+    """Run the simulator node alone (``python -m hindrax_ident.sim.node --ros-args --params-file ...``)."""
+    rclpy.init(args=args)
+    executor = SingleThreadedExecutor()
+    node: SimulatorNode | None = None
+    status = 0
+    try:
+        node = SimulatorNode()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ConfigError as exc:
+        print(f"hindrax_simulator: {exc}", file=sys.stderr)
+        status = 1
+    finally:
+        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

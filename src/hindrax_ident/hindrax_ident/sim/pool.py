@@ -1,0 +1,216 @@
+"""The pool box: floor, walls and free surface, with contact handling and reporting. Pure numpy.
+
+Geometry (seed 003 §4: a 10 x 6 x 1.8 m pool; configuration ``pool.length_m``, ``pool.width_m``,
+``pool.depth_m``): world frame NED with the origin at a pool corner on the water surface, x north along the
+length (0 .. length_m), y east along the width (0 .. width_m), z down (surface 0, floor depth_m).
+
+Hull (ASSUMPTION, the seeds give only the envelope): a box of ``vehicle.length_m x width_m x height_m``
+(seed 003 §2.1: 0.59 x 0.47 x 0.40 m) centred on the centre of buoyancy, aligned with the body axes. Its
+displaced volume is taken as uniformly distributed over its height, so the volume centroid is the CB.
+
+Free surface (:class:`FreeSurface`): the submerged fraction of the hull is the part of its vertical extent
+below z = 0, ``f = clip((z_c + h) / (2 h), 0, 1)`` with z_c the depth of the hull centre (CB) and
+``h = a |R20| + b |R21| + c |R22|`` the vertical half-extent of the (possibly tilted) box (a, b, c its half
+dimensions, R the body-to-NED rotation). The buoyancy is ``f B``; a vehicle with W < B therefore floats
+with ``f = W / B`` at a stable waterline (for Hindrax about 2 mm of the 0.40 m height out of the water,
+heave stiffness B / (2h) = 375 N/m) instead of leaving the water. Wave making at the surface and the
+shift of the CB of the emerged hull are not modelled (a vertical CB shift makes no moment).
+
+Contact (:meth:`Pool.resolve`): after every integration step, if the hull box crosses a wall or the
+floor, the position is clamped back (the box touches the face) and the NED velocity component into the
+face is removed (a perfectly inelastic, frictionless contact); the same happens at the surface if the
+hull were ever completely out of the water. Reported faces: ``north_wall`` (x = length), ``south_wall``
+(x = 0), ``east_wall`` (y = width), ``west_wall`` (y = 0), ``floor`` (z = depth) and ``surface`` (the hull
+breaks the surface: submerged fraction below 1), each with the time the contact started.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+
+from hindrax_drivers.config import VehicleConfig
+
+__all__ = ["FACES", "ContactState", "FreeSurface", "Pool"]
+
+#: Faces of the pool box in report order.
+FACES: tuple[str, ...] = ("north_wall", "south_wall", "east_wall", "west_wall", "floor", "surface")
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """Contact report at time ``t_s`` (s, simulated).
+
+    ``since_s``: face name -> simulated time the current contact with that face started (only faces in
+    contact now). ``faces``: the names, in :data:`FACES` order. ``any_solid``: a wall or the floor is touched.
+    """
+
+    t_s: float
+    since_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def faces(self) -> tuple[str, ...]:
+        return tuple(f for f in FACES if f in self.since_s)
+
+    @property
+    def any_solid(self) -> bool:
+        return any(f != "surface" for f in self.since_s)
+
+
+class FreeSurface:
+    """Submerged fraction of a box hull at the free surface (module docstring).
+
+    hull_half_extents_m (3,): half length, width and height of the hull box, m (> 0).
+    hull_centre_frd_m (3,): box centre relative to the body origin CO, FRD, m.
+    Raises ``ValueError`` for non-positive extents.
+    """
+
+    def __init__(self, hull_half_extents_m: Sequence[float], hull_centre_frd_m: Sequence[float]) -> None:
+        a, b, c = (float(x) for x in hull_half_extents_m)
+        if min(a, b, c) <= 0.0:
+            raise ValueError(f"hull half extents must be positive, got {list(hull_half_extents_m)}")
+        self.hull_half_extents_m = (a, b, c)
+        self.hull_centre_frd_m = tuple(float(x) for x in hull_centre_frd_m)
+
+    def vertical_half_extent_m(self, r20: float, r21: float, r22: float) -> float:
+        """Vertical half-extent h (m) of the hull box for the last row (R20, R21, R22) of body-to-NED R."""
+        a, b, c = self.hull_half_extents_m
+        return a * abs(r20) + b * abs(r21) + c * abs(r22)
+
+    def centre_depth_m(self, depth_co_m: float, r20: float, r21: float, r22: float) -> float:
+        """Depth (m, NED z) of the hull centre given the depth of CO and the last row of R."""
+        cx, cy, cz = self.hull_centre_frd_m
+        return depth_co_m + r20 * cx + r21 * cy + r22 * cz
+
+    def __call__(self, depth_co_m: float, r20: float, r21: float, r22: float) -> float:
+        """Submerged fraction in [0, 1]: clip((z_c + h) / (2 h), 0, 1) (module docstring)."""
+        a, b, c = self.hull_half_extents_m
+        h = a * abs(r20) + b * abs(r21) + c * abs(r22)
+        cx, cy, cz = self.hull_centre_frd_m
+        zc = depth_co_m + r20 * cx + r21 * cy + r22 * cz
+        f = (zc + h) / (2.0 * h)
+        return 0.0 if f <= 0.0 else (1.0 if f >= 1.0 else f)
+
+
+class Pool:
+    """Pool box with floor, walls and free surface (module docstring).
+
+    length_m, width_m, depth_m: box size (north, east, down), m. free_surface: the hull model (its box is
+    used for contacts too). Raises ``ValueError`` for a pool not larger than the hull in every direction.
+    """
+
+    def __init__(self, length_m: float, width_m: float, depth_m: float, free_surface: FreeSurface) -> None:
+        self.length_m, self.width_m, self.depth_m = float(length_m), float(width_m), float(depth_m)
+        self.free_surface = free_surface
+        a, b, c = free_surface.hull_half_extents_m
+        diag = 2.0 * math.sqrt(a * a + b * b + c * c)
+        if min(self.length_m, self.width_m, self.depth_m) <= diag:
+            raise ValueError(f"pool {self.length_m} x {self.width_m} x {self.depth_m} m must exceed the hull "
+                             f"diagonal {diag:.3f} m in every direction")
+        self._since: dict[str, float] = {}
+        self._t = 0.0
+
+    @classmethod
+    def from_config(cls, config: VehicleConfig) -> "Pool":
+        """Pool and hull from ``pool.*`` and ``vehicle.length_m/width_m/height_m``, hull centred on the CB."""
+        f = config.flat
+        surface = FreeSurface((0.5 * f["vehicle.length_m"], 0.5 * f["vehicle.width_m"], 0.5 * f["vehicle.height_m"]),
+                              config.centre_of_buoyancy_frd_m)
+        return cls(f["pool.length_m"], f["pool.width_m"], f["pool.depth_m"], surface)
+
+    # ------------------------------------------------------------------ geometry queries
+    def altitude_m(self, point_ned_m: Sequence[float]) -> float:
+        """Vertical distance (m) from a point to the floor (negative below the floor)."""
+        return self.depth_m - float(point_ned_m[2])
+
+    def wall_distance_m(self, point_ned_m: Sequence[float]) -> float:
+        """Horizontal distance (m) from a point to the nearest wall (negative outside the box)."""
+        x, y = float(point_ned_m[0]), float(point_ned_m[1])
+        return min(x, self.length_m - x, y, self.width_m - y)
+
+    def ray_distance_m(self, origin_ned_m: Sequence[float], direction_ned: Sequence[float]) -> float:
+        """Distance (m) along a unit ray from ``origin_ned_m`` to the first wall or the floor it hits.
+
+        Used for the sonar's slant range along the vehicle's down axis. Returns ``inf`` when the ray only
+        leaves through the surface (points upwards) or the origin is outside the box.
+        """
+        ox, oy, oz = (float(v) for v in origin_ned_m)
+        dx, dy, dz = (float(v) for v in direction_ned)
+        best = math.inf
+        for o, d, hi, has_low_face in ((ox, dx, self.length_m, True), (oy, dy, self.width_m, True),
+                                       (oz, dz, self.depth_m, False)):
+            if d > 1e-12:
+                best = min(best, (hi - o) / d)
+            elif d < -1e-12 and has_low_face:
+                best = min(best, (0.0 - o) / d)
+        return best if best >= 0.0 else math.inf
+
+    # ------------------------------------------------------------------ contact
+    @property
+    def contact(self) -> ContactState:
+        """The latest contact report (after the last :meth:`resolve`)."""
+        return ContactState(self._t, dict(self._since))
+
+    def reset_contacts(self) -> None:
+        """Forget all contacts (new run)."""
+        self._since.clear()
+        self._t = 0.0
+
+    def resolve(self, state: list[float], t_s: float) -> bool:
+        """Enforce the box on ``state`` (13 floats, modified in place) at simulated time ``t_s``.
+
+        Clamps the position so the hull box is inside the pool and removes the velocity into a touched face
+        (module docstring); updates the contact report. Returns True when a solid face (wall or floor) is
+        touched.
+        """
+        _, _, _, qx, qy, qz, qw = state[:7]
+        xx, yy, zz = qx * qx, qy * qy, qz * qz
+        r = ((1.0 - 2.0 * (yy + zz), 2.0 * (qx * qy - qz * qw), 2.0 * (qx * qz + qy * qw)),
+             (2.0 * (qx * qy + qz * qw), 1.0 - 2.0 * (xx + zz), 2.0 * (qy * qz - qx * qw)),
+             (2.0 * (qx * qz - qy * qw), 2.0 * (qy * qz + qx * qw), 1.0 - 2.0 * (xx + yy)))
+        a, b, c = self.free_surface.hull_half_extents_m
+        cx, cy, cz = self.free_surface.hull_centre_frd_m
+        touched: list[str] = []
+        v_ned = None
+        for axis, (lo_face, hi_face, hi) in enumerate((("south_wall", "north_wall", self.length_m),
+                                                       ("west_wall", "east_wall", self.width_m),
+                                                       (None, "floor", self.depth_m))):
+            row = r[axis]
+            centre = state[axis] + row[0] * cx + row[1] * cy + row[2] * cz
+            ext = a * abs(row[0]) + b * abs(row[1]) + c * abs(row[2])
+            if centre + ext > hi:
+                state[axis] -= centre + ext - hi
+                touched.append(hi_face)
+                v_ned = self._remove_velocity(state, r, axis, +1.0, v_ned)
+            elif lo_face is not None and centre - ext < 0.0:
+                state[axis] += ext - centre
+                touched.append(lo_face)
+                v_ned = self._remove_velocity(state, r, axis, -1.0, v_ned)
+            elif lo_face is None and centre + ext < 0.0:  # hull completely out of the water
+                state[axis] -= centre + ext
+                v_ned = self._remove_velocity(state, r, axis, -1.0, v_ned)
+        fraction = self.free_surface(state[2], r[2][0], r[2][1], r[2][2])
+        if fraction < 1.0:
+            touched.append("surface")
+        for face in list(self._since):
+            if face not in touched:
+                del self._since[face]
+        for face in touched:
+            self._since.setdefault(face, t_s)
+        self._t = t_s
+        return any(f != "surface" for f in touched)
+
+    @staticmethod
+    def _remove_velocity(state: list[float], r, axis: int, sign: float, v_ned):
+        """Remove the NED velocity component along ``sign * e_axis`` if it points into the face."""
+        u, v, w = state[7], state[8], state[9]
+        if v_ned is None:
+            v_ned = [r[i][0] * u + r[i][1] * v + r[i][2] * w for i in range(3)]
+        if v_ned[axis] * sign > 0.0:
+            v_ned[axis] = 0.0
+            # back to body: v_body = R^T v_ned
+            state[7] = r[0][0] * v_ned[0] + r[1][0] * v_ned[1] + r[2][0] * v_ned[2]
+            state[8] = r[0][1] * v_ned[0] + r[1][1] * v_ned[1] + r[2][1] * v_ned[2]
+            state[9] = r[0][2] * v_ned[0] + r[1][2] * v_ned[1] + r[2][2] * v_ned[2]
+        return v_ned

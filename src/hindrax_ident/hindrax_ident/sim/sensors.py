@@ -1,0 +1,485 @@
+"""Sensor truth and noise models: what each Hindrax device would measure in the virtual pool. Pure numpy.
+
+Each model samples the simulated vehicle at its own rate and returns a plain frozen dataclass holding the
+*measured* value (truth + bias + noise, with dropouts and lock rules) and the *true* value beside it.
+Device emulators (DVL-75, Ping1D, MS5837, ICM-20948) consume these as their truth source; ground truth
+topics use the true fields.
+
+Configuration (all optional keys under ``simulation.sensors.<device>``; absent = no noise, no bias, no
+dropout, the device's configured or default rate):
+``noise_std_<unit>`` (white noise 1-sigma), ``bias_<unit>`` (constant bias, every axis), ``rate_hz``,
+``dropout_probability`` (probability a sample is lost: no report at all). Devices and their models:
+
+* ``dvl75`` (:class:`DvlVelocitySample`, seed 003 Table 1, hardware.md §1): velocity over the bottom of the
+  DVL's position ``sensors.dvl75.position_frd_m``, ``v + w x r``, in the vehicle FRD axes (the DVL applies
+  its configured mounting orientation itself and reports in the vehicle frame, hardware.md §1.4). Measured
+  ``(1 + e) v_true + bias + n`` with one scale error ``e ~ N(0, scale_error_fraction)`` per report
+  (seed 003 Table 1: mean error about 5 %) and ``n ~ N(0, noise_std_m_s)`` per axis. No bottom lock when
+  the DVL is out of the water, its vertical altitude above the floor is outside
+  ``[min_altitude_m, max_altitude_m]``, or it is within ``wall_lock_loss_distance_m`` of a wall; unlocked
+  reports carry NaN velocities (the real DVL keeps reporting "searching").
+* ``dvl75_attitude`` (:class:`DvlAttitudeSample`): roll, pitch, yaw (Fossen ZYX, NED; yaw = heading from
+  north) of the DVL's own IMU, plus bias and noise (rad), yaw wrapped to (-pi, pi].
+* ``icm20948_accel`` / ``icm20948_gyro`` / ``icm20948_mag`` (seed 003 Table 1, hardware.md §4): specific
+  force ``f = a - g`` at the IMU position (lever arm ``imu_position_frd_m``, default the CG origin):
+  ``a = v_dot + w x v + w_dot x r + w x (w x r)``, ``g = R^T [0, 0, g]``, so a vehicle at rest reads
+  ``-g`` along body z (up); angular rate ``w``; the earth magnetic field ``R^T B_ned``. All three in the
+  ICM's sensor frame, given by ``sensors.icm20948.mounting_rpy_rad`` (rotation of the sensor frame in
+  base_link FLU, ROS fixed-axis roll-pitch-yaw): ``x_sensor = R_mount^T R_FLU_FRD x_frd``.
+  ``B_ned`` is ``simulation.sensors.icm20948_mag.earth_field_ned_t`` or :data:`DEFAULT_EARTH_FIELD_NED_T`.
+* ``ms5837`` (:class:`PressureSample`, hardware.md §3): absolute pressure at the port position
+  ``sensors.ms5837.position_frd_m``: ``p0 + rho g max(depth, 0)`` with ``environment.surface_pressure_pa``,
+  ``environment.water_density_kg_m3`` and ``environment.gravity_m_s2``; temperature = the water temperature.
+* ``ping1d`` (:class:`AltitudeSample`, hardware.md §2): distance from the sonar position
+  ``sensors.ping1d.position_frd_m`` along the vehicle's down axis to the floor (or a wall, whichever the
+  beam hits first), so the slant range ``h / (cos roll cos pitch)`` when tilted over a flat floor. Invalid
+  when the sonar is out of the water or the distance is outside ``sensors.ping1d.min_range_m .. max_range_m``.
+
+Sampling: a model is due at ``k / rate_hz`` (k = 0, 1, ...); the simulator calls it at the first step at or
+after that time and stamps the sample with the step time (jitter below one integration step).
+Determinism: one ``numpy.random.Generator`` per device, seeded from ``(seed, device index)``
+(:data:`DEVICE_INDEX`), so a device's noise does not depend on which other devices are enabled.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from hindrax_drivers import frames
+from hindrax_drivers.config import VehicleConfig
+
+from .pool import Pool
+
+__all__ = [
+    "DEFAULT_EARTH_FIELD_NED_T",
+    "DEFAULT_WATER_TEMPERATURE_C",
+    "DEVICE_INDEX",
+    "VehicleTruth",
+    "DvlVelocitySample",
+    "DvlAttitudeSample",
+    "AccelSample",
+    "GyroSample",
+    "MagSample",
+    "PressureSample",
+    "AltitudeSample",
+    "NoiseSpec",
+    "SensorModel",
+    "SensorSuite",
+    "specific_force_frd",
+    "point_velocity_frd",
+    "pressure_at_depth_pa",
+]
+
+#: Earth magnetic field in NED, tesla, used when ``simulation.sensors.icm20948_mag.earth_field_ned_t`` is absent.
+#: ASSUMPTION, approximate for the Peruvian coast (Paracas, 13.8 S 76.3 W), close to the magnetic dip equator
+#: (the Huancayo observatory, 12 S, lies on it): horizontal about 24 uT, declination about -3 deg, a small
+#: upward (negative down) component (inclination about -5 deg). Not from a geomagnetic model; only the
+#: magnitude and the direction matter to the simulation.
+DEFAULT_EARTH_FIELD_NED_T: tuple[float, float, float] = (24.0e-6, -1.3e-6, -2.0e-6)
+#: Water (and sensor) temperature, deg C. ASSUMPTION consistent with the configured fresh-water speed of sound
+#: of 1481 m/s (about 20 deg C).
+DEFAULT_WATER_TEMPERATURE_C = 20.0
+#: Fixed index of each device in the seed sequence (so streams do not depend on which devices are enabled).
+DEVICE_INDEX: dict[str, int] = {"dvl75": 1, "dvl75_attitude": 2, "ping1d": 3, "ms5837": 4, "icm20948_accel": 5,
+                                "icm20948_gyro": 6, "icm20948_mag": 7}
+
+
+# --------------------------------------------------------------------------------------------- truth & samples
+@dataclass(frozen=True)
+class VehicleTruth:
+    """Snapshot of the simulated vehicle at ``t_s`` (s, simulated time).
+
+    position_ned_m (3,): body origin CO in the pool frame (NED, origin at a pool corner on the surface).
+    quaternion_xyzw (4,): body FRD in NED. rotation (3, 3): R, body FRD -> NED. euler_rad (3,): Fossen ZYX
+    [roll, pitch, yaw]. nu (6,): [u v w (m/s) p q r (rad/s)], FRD. nu_dot (6,): its time derivative.
+    wrench_frd (6,): thruster wrench about CO [X Y Z K M N] (N, N m). buoyancy_fraction: submerged fraction.
+    """
+
+    t_s: float
+    position_ned_m: np.ndarray
+    quaternion_xyzw: np.ndarray
+    rotation: np.ndarray
+    euler_rad: np.ndarray
+    nu: np.ndarray
+    nu_dot: np.ndarray
+    wrench_frd: np.ndarray
+    buoyancy_fraction: float
+
+
+@dataclass(frozen=True)
+class DvlVelocitySample:
+    """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock;
+    altitude_m: true vertical distance DVL -> floor (NaN out of the water); true_velocity_frd_m_s: v + w x r."""
+
+    stamp_s: float
+    velocity_frd_m_s: tuple[float, float, float]
+    locked: bool
+    altitude_m: float
+    true_velocity_frd_m_s: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class DvlAttitudeSample:
+    """DVL-75 attitude report: measured roll, pitch, yaw (rad, Fossen ZYX in NED) and the true values."""
+
+    stamp_s: float
+    roll_rad: float
+    pitch_rad: float
+    yaw_rad: float
+    true_rpy_rad: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class AccelSample:
+    """ICM-20948 accelerometer: specific force (m/s^2) in the sensor frame, measured and true; temperature."""
+
+    stamp_s: float
+    specific_force_m_s2: tuple[float, float, float]
+    true_specific_force_m_s2: tuple[float, float, float]
+    temperature_c: float
+
+
+@dataclass(frozen=True)
+class GyroSample:
+    """ICM-20948 gyroscope: angular rate (rad/s) in the sensor frame, measured and true."""
+
+    stamp_s: float
+    angular_rate_rad_s: tuple[float, float, float]
+    true_angular_rate_rad_s: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class MagSample:
+    """AK09916 magnetometer (in the ICM sensor frame): magnetic field (T), measured and true."""
+
+    stamp_s: float
+    magnetic_field_t: tuple[float, float, float]
+    true_magnetic_field_t: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class PressureSample:
+    """MS5837: absolute pressure (Pa) measured and true, water temperature (deg C), true port depth (m, >= 0)."""
+
+    stamp_s: float
+    pressure_pa: float
+    temperature_c: float
+    true_pressure_pa: float
+    true_depth_m: float
+
+
+@dataclass(frozen=True)
+class AltitudeSample:
+    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid),
+    valid flag, and the true distance (inf when the beam hits nothing)."""
+
+    stamp_s: float
+    distance_m: float
+    valid: bool
+    true_distance_m: float
+
+
+# --------------------------------------------------------------------------------------------- physics
+def _cross(a, b) -> np.ndarray:
+    """a x b for 3-vectors (numpy's cross costs about 10x more for a single pair)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def point_velocity_frd(nu, r_frd_m) -> np.ndarray:
+    """Velocity (3,) in m/s, FRD, of the body point ``r_frd_m`` (3,) (relative to CO): v + w x r."""
+    nu = np.asarray(nu, dtype=float)
+    return nu[:3] + _cross(nu[3:], r_frd_m)
+
+
+def specific_force_frd(nu, nu_dot, rotation, gravity_m_s2: float, r_frd_m=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Specific force f = a - g (3,) in m/s^2, FRD, at the body point ``r_frd_m`` (relative to CO).
+
+    a = v_dot + w x v + w_dot x r + w x (w x r) (inertial acceleration of the point in body axes, nu and
+    nu_dot (6,) in FRD); g = R^T [0, 0, gravity] with R (3, 3) body -> NED. At rest f = [0, 0, -g] (level).
+    """
+    nu, nu_dot = np.asarray(nu, dtype=float), np.asarray(nu_dot, dtype=float)
+    w, w_dot = nu[3:], nu_dot[3:]
+    r = np.asarray(r_frd_m, dtype=float)
+    a = nu_dot[:3] + _cross(w, nu[:3]) + _cross(w_dot, r) + _cross(w, _cross(w, r))
+    return a - gravity_m_s2 * np.asarray(rotation, dtype=float)[2]
+
+
+def pressure_at_depth_pa(depth_m: float, density_kg_m3: float, gravity_m_s2: float,
+                         surface_pressure_pa: float) -> float:
+    """Hydrostatic absolute pressure p0 + rho g max(depth, 0) (Pa)."""
+    return surface_pressure_pa + density_kg_m3 * gravity_m_s2 * max(float(depth_m), 0.0)
+
+
+def _wrap(angle: float) -> float:
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+# --------------------------------------------------------------------------------------------- models
+@dataclass(frozen=True)
+class NoiseSpec:
+    """Noise settings of one device: white-noise 1-sigma, constant bias, rate (Hz), dropout probability."""
+
+    noise_std: float = 0.0
+    bias: float = 0.0
+    rate_hz: float = 10.0
+    dropout_probability: float = 0.0
+
+    @classmethod
+    def from_config(cls, config: VehicleConfig, device: str, unit: str, default_rate_hz: float) -> "NoiseSpec":
+        """Read ``simulation.sensors.<device>.{noise_std_<unit>, bias_<unit>, rate_hz, dropout_probability}``."""
+        s = config.section(f"simulation.sensors.{device}")
+        return cls(float(s.get(f"noise_std_{unit}", 0.0)), float(s.get(f"bias_{unit}", 0.0)),
+                   float(s.get("rate_hz", default_rate_hz)), float(s.get("dropout_probability", 0.0)))
+
+
+class SensorModel:
+    """Base of the device models: rate bookkeeping, a private Generator, noise and dropout helpers.
+
+    name: device key (one of :data:`DEVICE_INDEX`). spec: :class:`NoiseSpec`. seed: simulation seed.
+    Subclasses implement ``measure(truth) -> sample``; :meth:`sample` adds the rate and dropout logic.
+    """
+
+    def __init__(self, name: str, spec: NoiseSpec, seed: int) -> None:
+        if spec.rate_hz <= 0.0:
+            raise ValueError(f"{name}: rate_hz must be positive, got {spec.rate_hz}")
+        self.name = name
+        self.spec = spec
+        self.period_s = 1.0 / spec.rate_hz
+        self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX.get(name, 99)]))
+        self._k = 0
+        self._t0 = 0.0
+        self.next_due_s = 0.0
+
+    def reset(self, t_s: float = 0.0) -> None:
+        """Restart the sampling grid at ``t_s`` (the noise streams continue)."""
+        self._k = 0
+        self._t0 = t_s
+        self.next_due_s = t_s
+
+    def sample(self, t_s: float, truth: VehicleTruth) -> Any | None:
+        """If due at ``t_s``: advance the grid and return a sample (None when dropped). Else None."""
+        if t_s + 1e-9 < self.next_due_s:
+            return None
+        self._k = max(self._k + 1, int(math.floor((t_s - self._t0) / self.period_s + 1e-9)) + 1)
+        self.next_due_s = self._t0 + self._k * self.period_s
+        if self.spec.dropout_probability > 0.0 and self.rng.random() < self.spec.dropout_probability:
+            return None
+        return self.measure(truth)
+
+    def _noisy3(self, true3) -> tuple[float, float, float]:
+        n = self.rng.normal(0.0, self.spec.noise_std, 3) if self.spec.noise_std > 0.0 else (0.0, 0.0, 0.0)
+        b = self.spec.bias
+        return (float(true3[0] + b + n[0]), float(true3[1] + b + n[1]), float(true3[2] + b + n[2]))
+
+    def _noisy1(self, true1: float) -> float:
+        n = self.rng.normal(0.0, self.spec.noise_std) if self.spec.noise_std > 0.0 else 0.0
+        return float(true1 + self.spec.bias + n)
+
+    def measure(self, truth: VehicleTruth) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+class DvlVelocityModel(SensorModel):
+    """DVL-75 bottom-track velocity with scale error, noise, lock rules (module docstring)."""
+
+    def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
+        super().__init__("dvl75", NoiseSpec.from_config(config, "dvl75", "m_s", 10.0), seed)
+        s = config.section("simulation.sensors.dvl75")
+        self.scale_error_fraction = float(s.get("scale_error_fraction", 0.0))
+        self.min_altitude_m = float(s.get("min_altitude_m", 0.0))
+        self.max_altitude_m = float(s.get("max_altitude_m", math.inf))
+        self.wall_lock_loss_distance_m = float(s.get("wall_lock_loss_distance_m", 0.0))
+        self.position_frd_m = np.asarray(config.flat["sensors.dvl75.position_frd_m"], dtype=float)
+        self.pool = pool
+
+    def locked(self, point_ned_m) -> tuple[bool, float]:
+        """(bottom lock, vertical altitude m) for the DVL at ``point_ned_m`` (NED); altitude NaN out of the
+        water or without a pool."""
+        if point_ned_m[2] <= 0.0:
+            return False, math.nan
+        if self.pool is None:  # unbounded water: no floor to measure, treated as locked
+            return True, math.nan
+        altitude = self.pool.altitude_m(point_ned_m)
+        ok = self.min_altitude_m <= altitude <= self.max_altitude_m
+        near_wall = self.pool.wall_distance_m(point_ned_m) < self.wall_lock_loss_distance_m
+        if self.wall_lock_loss_distance_m > 0.0 and near_wall:
+            ok = False
+        return ok, altitude
+
+    def measure(self, truth: VehicleTruth) -> DvlVelocitySample:
+        point = truth.position_ned_m + truth.rotation @ self.position_frd_m
+        locked, altitude = self.locked(point)
+        v_true = point_velocity_frd(truth.nu, self.position_frd_m)
+        true3 = (float(v_true[0]), float(v_true[1]), float(v_true[2]))
+        if not locked:
+            return DvlVelocitySample(truth.t_s, (math.nan, math.nan, math.nan), False, altitude, true3)
+        scale = 1.0 + (self.rng.normal(0.0, self.scale_error_fraction) if self.scale_error_fraction > 0.0 else 0.0)
+        return DvlVelocitySample(truth.t_s, self._noisy3(scale * v_true), True, altitude, true3)
+
+
+class DvlAttitudeModel(SensorModel):
+    """DVL-75 attitude (roll, pitch, yaw) with bias and noise."""
+
+    def __init__(self, config: VehicleConfig, seed: int) -> None:
+        super().__init__("dvl75_attitude", NoiseSpec.from_config(config, "dvl75_attitude", "rad", 10.0), seed)
+
+    def measure(self, truth: VehicleTruth) -> DvlAttitudeSample:
+        e = truth.euler_rad
+        m = self._noisy3(e)
+        return DvlAttitudeSample(truth.t_s, m[0], m[1], _wrap(m[2]), (float(e[0]), float(e[1]), float(e[2])))
+
+
+class _ImuBase(SensorModel):
+    def __init__(self, name: str, unit: str, config: VehicleConfig, seed: int) -> None:
+        super().__init__(name, NoiseSpec.from_config(config, name, unit,
+                                                     float(config.flat["sensors.icm20948.sample_rate_hz"])), seed)
+        roll, pitch, yaw = config.flat["sensors.icm20948.mounting_rpy_rad"]
+        r_mount = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # sensor -> base_link (FLU)
+        self.sensor_from_frd = r_mount.T @ frames.R_FLU_FRD
+
+    def _to_sensor(self, v_frd) -> np.ndarray:
+        return self.sensor_from_frd @ v_frd
+
+
+class AccelModel(_ImuBase):
+    """ICM-20948 accelerometer: specific force at the IMU position, sensor frame (module docstring)."""
+
+    def __init__(self, config: VehicleConfig, seed: int, imu_position_frd_m=(0.0, 0.0, 0.0),
+                 water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
+        super().__init__("icm20948_accel", "m_s2", config, seed)
+        self.gravity_m_s2 = float(config.gravity_m_s2)
+        self.position_frd_m = np.asarray(imu_position_frd_m, dtype=float)
+        self.temperature_c = float(water_temperature_c)
+
+    def measure(self, truth: VehicleTruth) -> AccelSample:
+        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2,
+                                               self.position_frd_m))
+        return AccelSample(truth.t_s, self._noisy3(f), (float(f[0]), float(f[1]), float(f[2])), self.temperature_c)
+
+
+class GyroModel(_ImuBase):
+    """ICM-20948 gyroscope: body angular rate in the sensor frame."""
+
+    def __init__(self, config: VehicleConfig, seed: int) -> None:
+        super().__init__("icm20948_gyro", "rad_s", config, seed)
+
+    def measure(self, truth: VehicleTruth) -> GyroSample:
+        w = self._to_sensor(truth.nu[3:])
+        return GyroSample(truth.t_s, self._noisy3(w), (float(w[0]), float(w[1]), float(w[2])))
+
+
+class MagModel(_ImuBase):
+    """AK09916 magnetometer: the earth field R^T B_ned in the ICM sensor frame."""
+
+    def __init__(self, config: VehicleConfig, seed: int) -> None:
+        super().__init__("icm20948_mag", "t", config, seed)
+        field = config.section("simulation.sensors.icm20948_mag").get("earth_field_ned_t",
+                                                                     DEFAULT_EARTH_FIELD_NED_T)
+        self.earth_field_ned_t = np.asarray(field, dtype=float)
+
+    def measure(self, truth: VehicleTruth) -> MagSample:
+        b = self._to_sensor(truth.rotation.T @ self.earth_field_ned_t)
+        return MagSample(truth.t_s, self._noisy3(b), (float(b[0]), float(b[1]), float(b[2])))
+
+
+class PressureModel(SensorModel):
+    """MS5837 absolute pressure at the port position (module docstring)."""
+
+    def __init__(self, config: VehicleConfig, seed: int,
+                 water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
+        super().__init__("ms5837", NoiseSpec.from_config(config, "ms5837", "pa",
+                                                         float(config.flat["sensors.ms5837.rate_hz"])), seed)
+        self.position_frd_m = np.asarray(config.flat["sensors.ms5837.position_frd_m"], dtype=float)
+        self.density_kg_m3 = float(config.water_density_kg_m3)
+        self.gravity_m_s2 = float(config.gravity_m_s2)
+        self.surface_pressure_pa = float(config.flat["environment.surface_pressure_pa"])
+        self.temperature_c = float(water_temperature_c)
+
+    def measure(self, truth: VehicleTruth) -> PressureSample:
+        depth = float(truth.position_ned_m[2] + truth.rotation[2] @ self.position_frd_m)
+        p = pressure_at_depth_pa(depth, self.density_kg_m3, self.gravity_m_s2, self.surface_pressure_pa)
+        return PressureSample(truth.t_s, self._noisy1(p), self.temperature_c, p, max(depth, 0.0))
+
+
+class AltitudeModel(SensorModel):
+    """Ping1D slant range along the vehicle's down axis (module docstring)."""
+
+    def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
+        super().__init__("ping1d", NoiseSpec.from_config(config, "ping1d", "m",
+                                                         1.0 / float(config.flat["sensors.ping1d.ping_interval_s"])),
+                         seed)
+        self.position_frd_m = np.asarray(config.flat["sensors.ping1d.position_frd_m"], dtype=float)
+        self.min_range_m = float(config.flat["sensors.ping1d.min_range_m"])
+        self.max_range_m = float(config.flat["sensors.ping1d.max_range_m"])
+        self.pool = pool
+
+    def measure(self, truth: VehicleTruth) -> AltitudeSample:
+        point = truth.position_ned_m + truth.rotation @ self.position_frd_m
+        if self.pool is None:
+            return AltitudeSample(truth.t_s, math.nan, False, math.inf)
+        true_d = self.pool.ray_distance_m(point, truth.rotation[:, 2])
+        valid = point[2] > 0.0 and math.isfinite(true_d) and self.min_range_m <= true_d <= self.max_range_m
+        measured = self._noisy1(true_d) if valid else math.nan
+        return AltitudeSample(truth.t_s, measured, bool(valid), float(true_d))
+
+
+# --------------------------------------------------------------------------------------------- the suite
+class SensorSuite:
+    """All device models of a configuration, sampled by the simulator (module docstring).
+
+    config: the vehicle configuration. pool: the pool (None: no floor, walls or surface for the DVL and
+    sonar). seed: noise seed (default ``simulation.seed``). devices: names to enable (default all of
+    :data:`DEVICE_INDEX`). imu_position_frd_m (3,): IMU lever arm from CO, FRD, m. water_temperature_c.
+
+    ``latest``: device name -> its newest sample. ``next_due_s``: the earliest time any device is due.
+    Raises ``ValueError`` for an unknown device name.
+    """
+
+    def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int | None = None,
+                 devices: Sequence[str] | None = None, imu_position_frd_m=(0.0, 0.0, 0.0),
+                 water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
+        seed = int(config.flat["simulation.seed"] if seed is None else seed)
+        names = list(DEVICE_INDEX) if devices is None else list(devices)
+        unknown = [n for n in names if n not in DEVICE_INDEX]
+        if unknown:
+            raise ValueError(f"unknown sensor device(s) {unknown}; known: {', '.join(DEVICE_INDEX)}")
+        factories: Mapping[str, Callable[[], SensorModel]] = {
+            "dvl75": lambda: DvlVelocityModel(config, pool, seed),
+            "dvl75_attitude": lambda: DvlAttitudeModel(config, seed),
+            "ping1d": lambda: AltitudeModel(config, pool, seed),
+            "ms5837": lambda: PressureModel(config, seed, water_temperature_c),
+            "icm20948_accel": lambda: AccelModel(config, seed, imu_position_frd_m, water_temperature_c),
+            "icm20948_gyro": lambda: GyroModel(config, seed),
+            "icm20948_mag": lambda: MagModel(config, seed),
+        }
+        self.models: dict[str, SensorModel] = {n: factories[n]() for n in names}
+        self.latest: dict[str, Any] = {}
+        self.next_due_s = 0.0
+
+    def reset(self, t_s: float = 0.0) -> None:
+        """Restart every device's sampling grid at ``t_s`` and forget the latest samples."""
+        for m in self.models.values():
+            m.reset(t_s)
+        self.latest.clear()
+        self.next_due_s = t_s
+
+    def update(self, t_s: float, truth: Callable[[], VehicleTruth]) -> list[tuple[str, Any]]:
+        """Sample every device due at ``t_s``; ``truth`` is called (at most once) only if one is due.
+
+        Returns the new ``(device name, sample)`` pairs (dropped samples are absent).
+        """
+        if t_s + 1e-9 < self.next_due_s:
+            return []
+        snapshot = truth()
+        out = []
+        for name, model in self.models.items():
+            s = model.sample(t_s, snapshot)
+            if s is not None:
+                self.latest[name] = s
+                out.append((name, s))
+        self.next_due_s = min(m.next_due_s for m in self.models.values()) if self.models else math.inf
+        return out
