@@ -1,0 +1,120 @@
+"""Virtual hardware: the device emulators driven by the simulator (design.md §6).
+
+In simulation the real driver code reads real bytes and registers: the DVL-75 and Ping1D emulators are served
+on pseudo-terminals (:class:`~hindrax_drivers.transport.pty_device.PtyDevice`, so the drivers' pyserial path
+runs), and the MS5837, ICM-20948 (+ AK09916) and PCA9685 emulators sit on one
+:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` that the I2C drivers use in place of
+``smbus2.SMBus``. Each emulator's truth source is the simulator's latest *measured* sensor sample (noise,
+bias, rate and dropout come from :mod:`hindrax_ident.sim.sensors`); emulator clocks are the simulated time.
+
+The simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers
+(:meth:`VirtualHardware.pulse_widths_us`), so the whole path wrench -> allocation -> ESC node -> PCA9685
+registers -> thrust -> vehicle motion runs. A sleeping or full-OFF channel gives 0 us, i.e. no pulses and no
+thrust (hardware.md §5.2).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from hindrax_drivers.config import VehicleConfig
+from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlFlash, DvlTruth
+from hindrax_drivers.icm20948.emulator import Icm20948Emulator
+from hindrax_drivers.ms5837.emulator import Ms5837Emulator
+from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+from hindrax_drivers.ping1d.emulator import Ping1dEmulator, Ping1dTruth
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_drivers.transport.pty_device import PtyDevice
+
+from .simulator import Simulator
+
+#: devices whose first sample must exist before an emulator can answer
+_DEVICES = ("dvl75", "dvl75_attitude", "ping1d", "ms5837", "icm20948_accel", "icm20948_gyro", "icm20948_mag")
+
+
+class VirtualHardware:
+    """Emulators of every Hindrax device, fed by ``sim`` (see the module docstring).
+
+    Attributes: ``i2c_bus`` (EmulatedI2CBus with the MS5837, ICM-20948 and PCA9685), ``dvl_port`` and
+    ``ping_port`` (pty paths for the serial drivers), the emulators themselves (``dvl``, ``ping``,
+    ``ms5837``, ``icm20948``, ``pca9685``). Call :meth:`close` to stop the pty threads.
+    ``serve_serial=False`` skips the ptys (for tests that only need the I2C side).
+    """
+
+    def __init__(self, sim: Simulator, config: VehicleConfig, serve_serial: bool = True, seed: int = 0):
+        self.sim = sim
+        self.config = config
+        clock = lambda: sim.t_s  # noqa: E731 - emulators live in simulated time
+        self._ensure_samples()
+        c = config.flat
+        self.dvl = Dvl75Emulator(self._dvl_truth, rate_hz=c["simulation.sensors.dvl75.rate_hz"],
+                                 flash=DvlFlash(), min_altitude_m=c["simulation.sensors.dvl75.min_altitude_m"],
+                                 max_altitude_m=c["simulation.sensors.dvl75.max_altitude_m"], seed=seed)
+        self.ping = Ping1dEmulator(self._ping_truth, true_speed_of_sound_m_s=c["sensors.ping1d.speed_of_sound_m_s"],
+                                   seed=seed)
+        variant = c["sensors.ms5837.variant"]
+        self.ms5837 = Ms5837Emulator(self._pressure_truth, clock, variant="30BA" if variant == "auto" else variant)
+        self.icm20948 = Icm20948Emulator(self._imu_truth, clock, address=c["sensors.icm20948.i2c_address"])
+        self.pca9685 = Pca9685Emulator(oscillator_hz=c["esc.oscillator_hz"], clock=clock)
+        devices: dict[int, Any] = {
+            c["sensors.ms5837.i2c_address"]: self.ms5837,
+            c["sensors.icm20948.i2c_address"]: self.icm20948,
+            c["esc.i2c_address"]: self.pca9685,
+        }
+        if c["sensors.icm20948.magnetometer_mode"] == "bypass":
+            devices[0x0C] = self.icm20948.aux_port
+        self.i2c_bus = EmulatedI2CBus(devices)
+        self._channels = [t.esc_channel for t in config.thrusters.thrusters]
+        self._ptys: list[PtyDevice] = []
+        self.dvl_port = self.ping_port = None
+        if serve_serial:
+            self._ptys = [PtyDevice(self.dvl, clock=clock, link_name="dvl75"),
+                          PtyDevice(self.ping, clock=clock, link_name="ping1d")]
+            self.dvl_port, self.ping_port = (str(p.path) for p in self._ptys)
+
+    def _ensure_samples(self) -> None:
+        """Step the unpowered simulator until every device has produced a first sample (<= 1 s simulated)."""
+        for _ in range(int(1.0 / self.sim.step_s) + 1):
+            if all(self.sim.latest_sample(d) is not None for d in _DEVICES if d in self.sim.sensors.models):
+                return
+            self.sim.step(None)
+
+    # -- truth adapters (simulator samples -> emulator truth types)
+    def _dvl_truth(self, _t: float) -> DvlTruth:
+        v = self.sim.latest_sample("dvl75")
+        a = self.sim.latest_sample("dvl75_attitude")
+        locked = bool(v is not None and v.locked and all(math.isfinite(x) for x in v.velocity_frd_m_s))
+        altitude = v.altitude_m if v is not None and math.isfinite(v.altitude_m) else None
+        roll, pitch, yaw = (a.roll_rad, a.pitch_rad, a.yaw_rad) if a is not None else (0.0, 0.0, 0.0)
+        return DvlTruth(velocity_frd_m_s=tuple(v.velocity_frd_m_s) if locked else (0.0, 0.0, 0.0),
+                        altitude_m=altitude, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, bottom_lock=locked,
+                        confidence_pct=100.0 if locked else 0.0)
+
+    def _ping_truth(self, _t: float) -> Ping1dTruth:
+        s = self.sim.latest_sample("ping1d")
+        if s is None or not s.valid or not math.isfinite(s.distance_m):
+            return Ping1dTruth(altitude_m=None, confidence_pct=0.0)
+        return Ping1dTruth(altitude_m=float(s.distance_m), confidence_pct=100.0)
+
+    def _pressure_truth(self, _t: float) -> tuple[float, float]:
+        s = self.sim.latest_sample("ms5837")
+        return (float(s.pressure_pa), float(s.temperature_c))
+
+    def _imu_truth(self, _t: float):
+        a = self.sim.latest_sample("icm20948_accel")
+        g = self.sim.latest_sample("icm20948_gyro")
+        m = self.sim.latest_sample("icm20948_mag")
+        return (a.specific_force_m_s2, g.angular_rate_rad_s, m.magnetic_field_t, a.temperature_c)
+
+    # -- actuation
+    def pulse_widths_us(self) -> np.ndarray:
+        """(n,) pulse widths the PCA9685 actually outputs on the thrusters' channels, us (0 = no pulses)."""
+        return np.array([self.pca9685.pulse_width_us(ch) for ch in self._channels])
+
+    def close(self) -> None:
+        """Stop the pseudo-terminal threads (idempotent)."""
+        for p in self._ptys:
+            p.close()
+        self._ptys = []
