@@ -1,0 +1,680 @@
+"""ICM-20948 IMU node (TDK InvenSense ICM-20948 + AK09916 magnetometer on I2C; hardware.md §4).
+
+Start-up (hardware.md §4.3), executed step by step from ROS timers so the executor is never blocked
+(the datasheet waits are one-shot timers, not sleeps):
+
+1. Select bank 0, read WHO_AM_I and check 0xEA. A wrong identity or an I2C failure stops start-up with the
+   reason in ``/diagnostics`` (ERROR) and the log; the whole start-up is retried every
+   :data:`RETRY_PERIOD_S` seconds. Nothing crashes.
+2. DEVICE_RESET, wait 10 ms; wake (SLEEP = 0, CLKSEL = auto), wait 20 ms; all axes on
+   (:func:`~hindrax_drivers.icm20948.protocol.reset_wake_sequence`).
+3. Bank 2: sample-rate dividers, DLPF and full scale from the configuration
+   (``sensors.icm20948.accel_full_scale_g``, ``gyro_full_scale_dps``, ``dlpf_config`` for both sensors,
+   ``sample_rate_hz`` -> divider ``round(1125 / rate) - 1``; hardware.md §4.4). The chip can only run at
+   1125 / (1 + div) Hz (100 Hz configured -> 102.27 Hz): the node polls at that achieved rate and reports
+   both in the diagnostics.
+4. Magnetometer (``sensors.icm20948.magnetometer_mode``, hardware.md §4.6):
+   ``i2c_master``: BYPASS_EN = 0, I2C_MST_CTRL = 0x17, I2C_MST_EN, AK09916 soft reset and continuous mode
+   through SLV0 writes, then SLV0 reads the 9 bytes ST1..ST2 every master cycle into EXT_SLV_SENS_DATA
+   (:func:`~hindrax_drivers.icm20948.protocol.mag_master_sequence`); the AK09916 identity (WIA2 = 0x09) is
+   checked with one SLV4 read, retried up to :data:`MAG_ATTEMPTS` times with I2C_MST_RST in between
+   (hardware.md §4.3 step 7). ``bypass``: I2C_MST_EN = 0, BYPASS_EN = 1, then the AK09916 is talked to at
+   0x0C directly (WIA1/WIA2 check, soft reset, continuous mode). The continuous mode is the slowest of
+   10/20/50/100 Hz not below the IMU rate (100 Hz at most). A magnetometer that does not answer is a WARN:
+   the IMU keeps publishing without ``imu/mag``.
+   Every magnetometer read is the 9-byte burst ST1..ST2, so ST2 is always read last and the data
+   registers unlock (hardware.md §0 point 7, §4.5).
+
+Polling, at the achieved output data rate: one burst read from ACCEL_XOUT_H of 14 bytes (accel, gyro,
+temperature), 23 bytes in I2C-master mode (plus EXT_SLV_SENS_DATA_00..08 = ST1..ST2 of the AK09916); in
+bypass mode a second 9-byte burst at 0x0C:0x10. The register bank stays 0 between polls, so a poll is a
+single I2C transaction. The node does not gate on DATA_RDY: a poll may see the previous sample again or
+skip one when the chip and the host clocks drift (both run at the same nominal rate).
+
+Publishes (reliable, depth 10), all with frame ``imu_link``:
+
+- ``imu/data_raw`` sensor_msgs/Imu (REP-145): no orientation, ``orientation_covariance[0] = -1``;
+  ``linear_acceleration`` (specific force, m/s^2, +g on the up axis at rest) and ``angular_velocity``
+  (rad/s, gyro bias subtracted when estimated); covariances diagonal, from the datasheet noise densities
+  times the noise bandwidth of the configured DLPF plus the quantisation (:func:`imu_noise_variances`).
+- ``imu/mag`` sensor_msgs/MagneticField, tesla, rotated into the accel/gyro axes (m_x = hx, m_y = -hy,
+  m_z = -hz, hardware.md §4.7), only for new data (ST1.DRDY) without overflow (ST2.HOFL); covariance all 0
+  = unknown (the datasheet gives no magnetometer noise figure, DS-000189 Table 3).
+- ``imu/temperature`` sensor_msgs/Temperature, degC (raw / 333.87 + 21, room offset 0, hardware.md §4.4),
+  variance = one LSB squared.
+- ``raw/icm20948`` hindrax_msgs/RawDeviceData: every I2C transaction (ICM and, in bypass mode, AK09916).
+- ``/diagnostics``: state, rate, last message age, I2C transactions/errors/retries/failures, identity,
+  configuration, magnetometer state, gyro bias, stuck warning.
+
+Mounting: ``sensors.icm20948.mounting_rpy_rad`` = roll, pitch, yaw (extrinsic x-y-z, FLU) of the sensor
+axes in base_link. The node rotates every vector (and covariance) by R = Rz(yaw) Ry(pitch) Rx(roll), so
+``imu_link`` has the orientation of base_link (FLU, REP-103) and sits at the sensor; no TF is published by
+this node (there is no position key for the IMU in the configuration).
+
+Gyro bias (``sensors.icm20948.estimate_gyro_bias``): during the first ``gyro_bias_duration_s`` of data
+after start-up the node averages the gyro (publishing meanwhile without correction, state
+"estimating gyro bias"); if every axis's gyro and accelerometer standard deviation is below
+:data:`STILL_STD_FACTOR` times the expected noise (:class:`GyroBiasEstimator`) the vehicle was still and
+the mean is subtracted from then on; otherwise no bias is applied and a WARN says why. The result is in
+the diagnostics (``gyro_bias_rad_s``, ``gyro_bias_status``).
+
+Time stamps: the device has no clock usable by the host, so every message is stamped with the ROS time
+(``use_sim_time`` supported) right after the burst read returned (receive time). The sample is at most
+one output period (about 10 ms at 100 Hz) older than its stamp.
+
+Faults: an I2C failure after the transport's retries (immediate, ``backoff_s = 0``: no sleep in any
+callback) drops that poll only (counted). Failures lasting
+:data:`REINIT_AFTER_S` seconds restart the start-up. Bit-identical samples for :data:`STUCK_AFTER_S`
+seconds (:class:`StuckDetector`) raise a WARN and publishing continues; the node then reads PWR_MGMT_1
+and restarts the start-up if the chip is asleep (a power glitch resets it to sleep, hardware.md §4.3).
+
+The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi, an
+:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` with an
+:class:`~hindrax_drivers.icm20948.emulator.Icm20948Emulator` (and its ``aux_port`` at 0x0C for bypass)
+in tests and simulation.
+
+Run alone: ``python -m hindrax_drivers.icm20948.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+"""
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.node import Node
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import Imu, MagneticField, Temperature
+
+from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
+                           StuckDetector, load_node_config, run_node)
+from ..transport.i2c import I2CDevice, I2CError
+from . import protocol as p
+
+__all__ = ["Icm20948Node", "GyroBiasEstimator", "GyroBiasResult", "imu_config_from_settings",
+           "imu_noise_variances", "mounting_rotation", "mag_mode_for_rate", "main"]
+
+#: Wait between start-up attempts after a failure, s.
+RETRY_PERIOD_S = 1.0
+#: I2C failures lasting this long (ROS time) restart the start-up sequence, s.
+REINIT_AFTER_S = 1.0
+#: Identical samples for this long mean a stuck sensor, s.
+STUCK_AFTER_S = 2.0
+#: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, hardware.md §4.3 step 7).
+MAG_ATTEMPTS = 3
+#: Frame of every message (see the module docstring: base_link orientation, at the sensor).
+FRAME_ID = "imu_link"
+#: Accelerometer noise spectral density, g/sqrt(Hz): DS-000189 rev 1.3 Table 2 (p. 12), 230 ug/sqrt(Hz).
+ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ = 230e-6
+#: Gyroscope rate noise spectral density, deg/s/sqrt(Hz): DS-000189 rev 1.3 Table 1 (p. 11), 0.015.
+#: Not in hardware.md and that page was not re-read for this project: UNVERIFIED here.
+GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ = 0.015
+#: DLPF noise bandwidths in Hz per DLPFCFG 0..7 (FCHOICE = 1), hardware.md §4.4 table (from [I2]).
+GYRO_NOISE_BANDWIDTH_HZ = (229.8, 187.6, 154.3, 73.3, 35.9, 17.8, 8.9, 376.5)
+ACCEL_NOISE_BANDWIDTH_HZ = (265.0, 265.0, 136.0, 68.8, 34.4, 17.0, 8.3, 499.0)
+#: The vehicle is "still" when every axis's std is below this many times the expected noise std.
+STILL_STD_FACTOR = 5.0
+
+
+# ---------------------------------------------------------------------------------------- pure helpers
+def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,
+                             sample_rate_hz: float) -> p.ImuConfig:
+    """Register fields from the ``sensors.icm20948.*`` settings (hardware.md §4.4).
+
+    Full scale: the FS_SEL whose range equals the setting (2/4/8/16 g, 250/500/1000/2000 dps). DLPF: the
+    same DLPFCFG for accel and gyro (FCHOICE = 1). Divider for both: ``round(1125 / rate) - 1`` in 0..255.
+
+    Raises:
+        Icm20948Error: a full scale that is not a device range, DLPFCFG outside 0..7, or a non-positive rate.
+    """
+    try:
+        accel_fs = p.ACCEL_RANGE_G.index(float(accel_full_scale_g))
+        gyro_fs = p.GYRO_RANGE_DPS.index(float(gyro_full_scale_dps))
+    except ValueError:
+        raise p.Icm20948Error(f"full scale {accel_full_scale_g} g / {gyro_full_scale_dps} dps is not a device "
+                              f"range ({p.ACCEL_RANGE_G} g, {p.GYRO_RANGE_DPS} dps)") from None
+    if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0.0):
+        raise p.Icm20948Error(f"sample_rate_hz must be > 0, got {sample_rate_hz}")
+    div = min(255, max(0, round(p.BASE_ODR_HZ / sample_rate_hz) - 1))
+    return p.ImuConfig(accel_fs_sel=accel_fs, gyro_fs_sel=gyro_fs, accel_dlpfcfg=int(dlpf_config),
+                       gyro_dlpfcfg=int(dlpf_config), accel_smplrt_div=div, gyro_smplrt_div=div)
+
+
+def imu_noise_variances(config: p.ImuConfig) -> tuple[float, float]:
+    """Per-axis white-noise variances (accel m^2/s^4, gyro rad^2/s^2) for ``config``.
+
+    variance = density^2 * noise_bandwidth(DLPFCFG) + LSB^2 / 12, with the datasheet densities
+    (:data:`ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ`, :data:`GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ`), the noise
+    bandwidths of hardware.md §4.4 and the LSB of the full scale. With the DLPF bypassed the widest
+    bandwidth (DLPFCFG 7) is used.
+    """
+    a_cfg = 7 if config.accel_dlpfcfg is None else config.accel_dlpfcfg
+    g_cfg = 7 if config.gyro_dlpfcfg is None else config.gyro_dlpfcfg
+    a_density = ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ * p.GRAVITY_M_S2
+    g_density = math.radians(GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ)
+    a_lsb = p.GRAVITY_M_S2 / config.accel_lsb_per_g
+    g_lsb = math.radians(1.0 / config.gyro_lsb_per_dps)
+    accel_var = a_density ** 2 * ACCEL_NOISE_BANDWIDTH_HZ[a_cfg] + a_lsb ** 2 / 12.0
+    gyro_var = g_density ** 2 * GYRO_NOISE_BANDWIDTH_HZ[g_cfg] + g_lsb ** 2 / 12.0
+    return accel_var, gyro_var
+
+
+def mounting_rotation(rpy_rad: Sequence[float]) -> np.ndarray:
+    """3x3 rotation taking sensor-axis vectors into base_link (FLU) axes: Rz(yaw) Ry(pitch) Rx(roll)."""
+    rpy = np.asarray(rpy_rad, dtype=float)
+    if rpy.shape != (3,) or not np.all(np.isfinite(rpy)):
+        raise ValueError(f"mounting_rpy_rad must be 3 finite angles, got {rpy_rad!r}")
+    return Rotation.from_euler("xyz", rpy).as_matrix()
+
+
+def mag_mode_for_rate(rate_hz: float) -> int:
+    """AK09916 continuous mode: the slowest of 10/20/50/100 Hz not below ``rate_hz`` (100 Hz at most)."""
+    for mode, mode_rate in sorted(p.AK_CONTINUOUS_MODE_RATE_HZ.items(), key=lambda kv: kv[1]):
+        if mode_rate >= rate_hz - 1e-9:
+            return mode
+    return p.AK_MODE_CONTINUOUS_100HZ
+
+
+@dataclass(frozen=True)
+class GyroBiasResult:
+    """Outcome of a start-up gyro-bias estimate.
+
+    Attributes:
+        bias_rad_s: (3,) mean gyro rate in sensor axes, rad/s (applied only when ``still``).
+        gyro_std_rad_s, accel_std_m_s2: (3,) per-axis standard deviations during the window.
+        samples: number of samples averaged.
+        still: every std below its threshold.
+        message: one line for the diagnostics.
+    """
+
+    bias_rad_s: np.ndarray
+    gyro_std_rad_s: np.ndarray
+    accel_std_m_s2: np.ndarray
+    samples: int
+    still: bool
+    message: str
+
+
+class GyroBiasEstimator:
+    """Averages gyro samples over ``duration_s`` and decides whether the vehicle was still.
+
+    Args:
+        duration_s: averaging window (from the first sample), s.
+        gyro_std_threshold_rad_s, accel_std_threshold_m_s2: stillness thresholds on each axis's std.
+
+    ``add(t_s, gyro_rad_s (3,), accel_m_s2 (3,))`` returns None until the window is complete (at least
+    two samples and ``duration_s`` elapsed), then a :class:`GyroBiasResult` (once).
+    """
+
+    def __init__(self, duration_s: float, gyro_std_threshold_rad_s: float, accel_std_threshold_m_s2: float):
+        if not duration_s > 0.0:
+            raise ValueError(f"duration_s must be > 0, got {duration_s}")
+        self.duration_s = float(duration_s)
+        self.gyro_threshold = float(gyro_std_threshold_rad_s)
+        self.accel_threshold = float(accel_std_threshold_m_s2)
+        self._t0: float | None = None
+        self._gyro: list[np.ndarray] = []
+        self._accel: list[np.ndarray] = []
+        self.result: GyroBiasResult | None = None
+
+    def add(self, t_s: float, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> GyroBiasResult | None:
+        if self.result is not None:
+            return None
+        if self._t0 is None:
+            self._t0 = t_s
+        self._gyro.append(np.asarray(gyro_rad_s, dtype=float))
+        self._accel.append(np.asarray(accel_m_s2, dtype=float))
+        if t_s - self._t0 < self.duration_s or len(self._gyro) < 2:
+            return None
+        g = np.array(self._gyro)
+        a = np.array(self._accel)
+        g_std, a_std = g.std(axis=0, ddof=1), a.std(axis=0, ddof=1)
+        still = bool(np.all(g_std <= self.gyro_threshold) and np.all(a_std <= self.accel_threshold))
+        bias = g.mean(axis=0)
+        if still:
+            message = (f"gyro bias {np.array2string(bias, precision=5)} rad/s from {len(g)} samples "
+                       f"(std max {g_std.max():.2e} rad/s)")
+        else:
+            message = (f"vehicle not still during the gyro-bias estimate (gyro std max {g_std.max():.2e} rad/s, "
+                       f"limit {self.gyro_threshold:.2e}; accel std max {a_std.max():.2e} m/s^2, limit "
+                       f"{self.accel_threshold:.2e}): no bias applied")
+        self.result = GyroBiasResult(bias, g_std, a_std, len(g), still, message)
+        return self.result
+
+
+# ---------------------------------------------------------------------------------------- node
+class Icm20948Node(Node):
+    """ICM-20948 + AK09916 driver node (see the module docstring).
+
+    Args:
+        bus: object with the ``smbus2.SMBus`` interface; default ``smbus2.SMBus(sensors.icm20948.i2c_bus)``.
+        **kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``...).
+
+    Raises:
+        ConfigError: invalid configuration (one line naming key, value and range).
+    """
+
+    def __init__(self, bus: Any = None, **kwargs: Any):
+        super().__init__("icm20948", automatically_declare_parameters_from_overrides=True, **kwargs)
+        cfg = load_node_config(self)
+        s = cfg.section("sensors.icm20948")
+        self.i2c_bus_number = int(s["i2c_bus"])
+        self.address = int(s["i2c_address"])
+        self.sample_rate_hz = float(s["sample_rate_hz"])
+        self.config = imu_config_from_settings(s["accel_full_scale_g"], s["gyro_full_scale_dps"],
+                                               s["dlpf_config"], self.sample_rate_hz)
+        self.odr_hz = self.config.accel_odr_hz
+        self.mag_mode_name = str(s["magnetometer_mode"])
+        self.mag_mode = mag_mode_for_rate(self.odr_hz)
+        self.estimate_gyro_bias = bool(s["estimate_gyro_bias"])
+        self.gyro_bias_duration_s = float(s["gyro_bias_duration_s"])
+        self.rotation = mounting_rotation(s["mounting_rpy_rad"])
+        self.accel_var, self.gyro_var = imu_noise_variances(self.config)
+        self.accel_cov = (self.rotation * self.accel_var) @ self.rotation.T
+        self.gyro_cov = (self.rotation * self.gyro_var) @ self.rotation.T
+        self.temperature_var = (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2
+        if abs(self.odr_hz - self.sample_rate_hz) > 0.05 * self.sample_rate_hz:
+            self.get_logger().warn(f"sensors.icm20948.sample_rate_hz = {self.sample_rate_hz:g} Hz is not reachable: "
+                                   f"the chip runs at 1125 / (1 + div) Hz, here {self.odr_hz:.2f} Hz")
+        if not 0 < self.config.gyro_dlpfcfg < 7:
+            self.get_logger().warn(f"dlpf_config {self.config.gyro_dlpfcfg}: the gyro ignores its sample-rate "
+                                   "divider (hardware.md §4.4) and runs at 1125 Hz; polled at "
+                                   f"{self.odr_hz:.2f} Hz")
+
+        self._bus = bus
+        self._owns_bus = bus is None
+        self.raw = RawDataPublisher(self, "icm20948")
+        self.device: I2CDevice | None = None
+        self.mag_device: I2CDevice | None = None
+        self._bank: int | None = None
+        self.diag = DeviceDiagnostics("hindrax/icm20948", f"i2c-{self.i2c_bus_number}@0x{self.address:02x}",
+                                      self._now_s)
+        self.stuck = StuckDetector(max(3, round(STUCK_AFTER_S * self.odr_hz)))
+        self.is_stuck = False
+        self.who_am_i: int | None = None
+        self.mag_available = False
+        self.mag_failed = False
+        self._mag_attempt = 0
+        self.startup_attempts = 0
+        self.running = False
+        self.gyro_bias_rad_s = np.zeros(3)
+        self.bias_estimator: GyroBiasEstimator | None = None
+        self.bias_result: GyroBiasResult | None = None
+        self._fail_since_s: float | None = None
+        self._steps: collections.deque[Callable[[], float | None]] = collections.deque()
+        self.samples = 0
+        self.mag_samples = 0
+
+        qos = DEFAULT_QOS_DEPTH
+        self.pub_imu = self.create_publisher(Imu, "imu/data_raw", qos)
+        self.pub_mag = self.create_publisher(MagneticField, "imu/mag", qos)
+        self.pub_temperature = self.create_publisher(Temperature, "imu/temperature", qos)
+        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
+
+        self._step_timer = self.create_timer(1.0, self._on_step_timer, autostart=False)
+        self._step_fn: Callable[[], None] | None = None
+        self._poll_timer = self.create_timer(1.0 / self.odr_hz, self._poll, autostart=False)
+        self._schedule(0.0, self._start)  # first bus access from the executor, not the constructor
+
+    # ------------------------------------------------------------------ timer helpers
+    def _now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _schedule(self, delay_s: float, fn: Callable[[], None]) -> None:
+        """Run ``fn`` once after ``delay_s`` of ROS time."""
+        self._step_fn = fn
+        self._step_timer.timer_period_ns = max(1, int(delay_s * 1e9))
+        self._step_timer.reset()
+
+    def _on_step_timer(self) -> None:
+        self._step_timer.cancel()
+        fn, self._step_fn = self._step_fn, None
+        if fn is not None:
+            fn()
+
+    # ------------------------------------------------------------------ banked register access
+    def _select_bank(self, bank: int) -> None:
+        if self._bank != bank:
+            self._bank = None  # unknown until the write succeeds
+            self.device.write_byte_data(p.REG_BANK_SEL_ADDRESS, p.bank_select_value(bank))
+            self._bank = bank
+
+    def _write(self, register: p.Register, value: int) -> None:
+        self._select_bank(register.bank)
+        self.device.write_byte_data(register.address, value)
+        if register == p.PWR_MGMT_1 and value & p.PWR_MGMT_1_DEVICE_RESET:
+            self._bank = None  # reset-to-bank-0 is only assumed (hardware.md §4.1): re-select
+
+    def _read(self, register: p.Register, length: int = 1) -> bytes:
+        self._select_bank(register.bank)
+        return self.device.read_block(register.address, length)
+
+    def _write_step(self, write: p.BankedWrite) -> Callable[[], float]:
+        def step() -> float:
+            self._write(write.register, write.value)
+            return write.delay_after_s
+        return step
+
+    # ------------------------------------------------------------------ start-up
+    def _start(self) -> None:
+        """Open the bus if needed and run the start-up steps (hardware.md §4.3)."""
+        self.startup_attempts += 1
+        self._poll_timer.cancel()
+        self.running = False
+        self._fail_since_s = None
+        if self.device is None:
+            if self._bus is None:
+                try:
+                    import smbus2
+
+                    self._bus = smbus2.SMBus(self.i2c_bus_number)
+                except (OSError, ImportError) as exc:
+                    self._fail(f"cannot open I2C bus {self.i2c_bus_number} (/dev/i2c-{self.i2c_bus_number}): {exc}")
+                    return
+            self.device = I2CDevice(self._bus, self.address, "icm20948", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
+            self.mag_device = I2CDevice(self._bus, p.AK09916_ADDRESS, "ak09916", backoff_s=0.0,
+                                        raw_tap=self.raw.i2c_tap)
+        self._bank = None
+        self.mag_available = False
+        self.mag_failed = False
+        self._mag_attempt = 0
+        self.diag.set_state("starting", DiagnosticStatus.WARN, "identity check, reset and configuration")
+        steps: list[Callable[[], float | None]] = [self._check_who_am_i]
+        steps += [self._write_step(w) for w in p.reset_wake_sequence() + p.configure_sequence(self.config)]
+        steps += self._mag_steps()
+        self._steps = collections.deque(steps)
+        self._run_steps()
+
+    def _check_who_am_i(self) -> None:
+        self._bank = None
+        value = self._read(p.WHO_AM_I)[0]
+        self.who_am_i = value
+        if value != p.WHO_AM_I_VALUE:
+            raise p.Icm20948Error(f"WHO_AM_I = 0x{value:02x}, expected 0x{p.WHO_AM_I_VALUE:02x}: not an ICM-20948 "
+                                  f"at 0x{self.address:02x}")
+
+    def _run_steps(self) -> None:
+        """Execute start-up steps until one asks for a wait (then continue from a one-shot timer)."""
+        while self._steps:
+            step = self._steps.popleft()
+            try:
+                delay_s = step() or 0.0
+            except I2CError as exc:
+                self._bank = None
+                self.diag.count("i2c_failure")
+                self._fail(f"start-up I2C failure: {exc}")
+                return
+            except p.Icm20948Error as exc:
+                self._fail(str(exc))
+                return
+            if delay_s > 0.0:
+                self._schedule(delay_s, self._run_steps)
+                return
+        self._started()
+
+    def _fail(self, reason: str) -> None:
+        self._steps.clear()
+        self.diag.set_state("error", DiagnosticStatus.ERROR, f"{reason}; retrying every {RETRY_PERIOD_S:g} s")
+        self.get_logger().error(f"ICM-20948 start-up failed: {reason}", throttle_duration_sec=10.0)
+        self._schedule(RETRY_PERIOD_S, self._start)
+
+    # -- magnetometer
+    def _mag_steps(self) -> list[Callable[[], float | None]]:
+        if self.mag_mode_name == "bypass":
+            steps = [self._write_step(w) for w in p.mag_bypass_sequence()]
+            return steps + [self._bypass_mag_init]
+        steps = [self._write_step(w) for w in p.mag_master_sequence(self.config, self.mag_mode)]
+        return steps + [self._slv4_who_am_i_request, self._slv4_who_am_i_check]
+
+    def _mag_unavailable(self, reason: str) -> None:
+        self.mag_available = False
+        self.diag.warn("magnetometer", f"magnetometer unavailable: {reason}")
+        self.get_logger().warn(f"AK09916 unavailable, publishing without imu/mag: {reason}")
+
+    def _bypass_mag_init(self) -> float:
+        """Bypass: check WIA1/WIA2 at 0x0C, then queue soft reset and continuous mode (hardware.md §4.5-4.6a)."""
+        try:
+            wia = self.mag_device.read_block(p.AK_WIA1.address, 2)
+        except I2CError as exc:
+            self._mag_unavailable(f"no answer at 0x0c: {exc}")
+            return 0.0
+        if tuple(wia) != (p.AK09916_WIA1_VALUE, p.AK09916_WIA2_VALUE):
+            self._mag_unavailable(f"WIA1/WIA2 = {wia.hex()}, expected 4809")
+            return 0.0
+        steps = [self._mag_write_step(w) for w in p.ak09916_direct_init_writes(self.mag_mode)]
+        self._steps.extendleft(reversed(steps + [self._mag_ready]))
+        return 0.0
+
+    def _mag_write_step(self, write) -> Callable[[], float]:
+        """A direct AK09916 write (bypass); a failure marks the magnetometer unavailable, not the IMU."""
+        def step() -> float:
+            if self.mag_failed:
+                return 0.0
+            try:
+                self.mag_device.write_byte_data(write.register, write.value)
+            except I2CError as exc:
+                self.mag_failed = True
+                self._mag_unavailable(f"write of 0x{write.register:02x} failed: {exc}")
+                return 0.0
+            return write.delay_after_s
+        return step
+
+    def _mag_ready(self) -> float:
+        if not self.mag_failed:
+            self.mag_available = True
+            self.diag.clear("magnetometer")
+        return 0.0
+
+    def _slv4_who_am_i_request(self) -> float:
+        """I2C master: one SLV4 read of AK09916 WIA2; the answer comes after a master cycle."""
+        self._mag_attempt += 1
+        self._write(p.I2C_SLV4_ADDR, p.I2C_SLV_ADDR_RNW | p.AK09916_ADDRESS)
+        self._write(p.I2C_SLV4_REG, p.AK_WIA2.address)
+        self._write(p.I2C_SLV4_CTRL, p.I2C_SLV_CTRL_EN)
+        return max(3.0 / self.config.gyro_odr_hz, p.AK_RESET_WAIT_S)
+
+    def _slv4_who_am_i_check(self) -> float:
+        status = self._read(p.I2C_MST_STATUS)[0]
+        value = self._read(p.I2C_SLV4_DI)[0]
+        ok = bool(status & p.I2C_MST_STATUS_SLV4_DONE) and not status & p.I2C_MST_STATUS_SLV4_NACK \
+            and value == p.AK09916_WIA2_VALUE
+        if ok:
+            self.mag_available = True
+            self.diag.clear("magnetometer")
+        elif self._mag_attempt < MAG_ATTEMPTS:
+            # I2C_MST_RST, then the whole magnetometer sequence again (SparkFun, hardware.md §4.3 step 7)
+            retry = [self._write_step(p.BankedWrite(p.USER_CTRL, p.USER_CTRL_I2C_MST_EN | p.USER_CTRL_I2C_MST_RST,
+                                                    0.01, "I2C_MST_RST"))]
+            retry += [self._write_step(w) for w in p.mag_master_sequence(self.config, self.mag_mode)]
+            retry += [self._slv4_who_am_i_request, self._slv4_who_am_i_check]
+            self._steps.extendleft(reversed(retry))
+        else:
+            self._mag_unavailable(f"SLV4 read of WIA2: status 0x{status:02x}, value 0x{value:02x} after "
+                                  f"{self._mag_attempt} attempts")
+        return 0.0
+
+    def _started(self) -> None:
+        """Configuration done: select bank 0 for the polls and start the poll timer."""
+        try:
+            self._select_bank(0)
+        except I2CError as exc:
+            self._bank = None
+            self._fail(f"start-up I2C failure: {exc}")
+            return
+        self.running = True
+        if self.estimate_gyro_bias and self.bias_result is None:
+            self.bias_estimator = GyroBiasEstimator(self.gyro_bias_duration_s,
+                                                    STILL_STD_FACTOR * math.sqrt(self.gyro_var),
+                                                    STILL_STD_FACTOR * math.sqrt(self.accel_var))
+            self.diag.set_state("estimating gyro bias", DiagnosticStatus.OK,
+                                f"estimating gyro bias for {self.gyro_bias_duration_s:g} s (keep the vehicle still)")
+        else:
+            self.diag.set_state("running", DiagnosticStatus.OK, "running")
+        self.get_logger().info(
+            f"ICM-20948 ready at {self.odr_hz:.2f} Hz (FS {p.ACCEL_RANGE_G[self.config.accel_fs_sel]:g} g, "
+            f"{p.GYRO_RANGE_DPS[self.config.gyro_fs_sel]:g} dps, DLPFCFG {self.config.gyro_dlpfcfg}), magnetometer "
+            f"{self.mag_mode_name}: {'ok' if self.mag_available else 'unavailable'}")
+        self._poll_timer.reset()
+
+    # ------------------------------------------------------------------ polling
+    def _poll(self) -> None:
+        master = self.mag_mode_name == "i2c_master" and self.mag_available
+        length = p.SENSOR_BLOCK_LENGTH + (p.AK09916_BLOCK_LENGTH if master else 0)
+        try:
+            data = self._read(p.ACCEL_XOUT_H, length)
+        except I2CError as exc:
+            self._poll_failed(exc)
+            return
+        stamp = self.get_clock().now()
+        self._fail_since_s = None
+        mag_block = data[p.SENSOR_BLOCK_LENGTH:] if master else None
+        if self.mag_mode_name == "bypass" and self.mag_available:
+            try:
+                mag_block = self.mag_device.read_block(p.AK_ST1.address, p.AK09916_BLOCK_LENGTH)
+            except I2CError:
+                self.diag.count("mag_i2c_failure")
+        if self.diag.state == "i2c error":
+            self.diag.set_state("running", DiagnosticStatus.OK, "running")
+        self._process(data[:p.SENSOR_BLOCK_LENGTH], mag_block, stamp)
+
+    def _poll_failed(self, exc: Exception) -> None:
+        self._bank = None
+        self.diag.count("i2c_failure")
+        now = self._now_s()
+        if self._fail_since_s is None:
+            self._fail_since_s = now
+        self.get_logger().warn(f"ICM-20948 poll failed: {exc}", throttle_duration_sec=5.0)
+        if now - self._fail_since_s >= REINIT_AFTER_S:
+            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"no data for {REINIT_AFTER_S:g} s: {exc}")
+            self.get_logger().error("ICM-20948 unreachable, restarting the start-up sequence")
+            self._start()
+        elif self.diag.state == "running":
+            self.diag.set_state("i2c error", DiagnosticStatus.WARN, f"poll failed: {exc}")
+
+    def _process(self, block: bytes, mag_block: bytes | None, stamp) -> None:
+        sample = p.parse_sensor_block(block, self.config)
+        self.samples += 1
+        self._check_stuck(bytes(block))
+        if sample.accel_saturated or sample.gyro_saturated:
+            self.diag.count("saturated_samples")
+        if self.bias_estimator is not None:
+            result = self.bias_estimator.add(stamp.nanoseconds * 1e-9, sample.gyro_rad_s, sample.accel_m_s2)
+            if result is not None:
+                self._bias_done(result)
+        stamp_msg = stamp.to_msg()
+
+        imu = Imu()
+        imu.header.stamp, imu.header.frame_id = stamp_msg, FRAME_ID
+        imu.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
+        acc = self.rotation @ sample.accel_m_s2
+        gyr = self.rotation @ (sample.gyro_rad_s - self.gyro_bias_rad_s)
+        imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = (float(v) for v in acc)
+        imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = (float(v) for v in gyr)
+        imu.linear_acceleration_covariance = self.accel_cov.ravel()
+        imu.angular_velocity_covariance = self.gyro_cov.ravel()
+        self.pub_imu.publish(imu)
+
+        tm = Temperature()
+        tm.header.stamp, tm.header.frame_id = stamp_msg, FRAME_ID
+        tm.temperature = float(sample.temperature_c)
+        tm.variance = self.temperature_var
+        self.pub_temperature.publish(tm)
+
+        if mag_block is not None:
+            self._publish_mag(p.parse_ak09916_block(mag_block), stamp_msg)
+        self.diag.published()
+
+    def _publish_mag(self, mag: p.MagSample, stamp_msg) -> None:
+        if mag.data_overrun:
+            self.diag.count("mag_overrun")
+        if not mag.data_ready:
+            return
+        if mag.overflow:
+            self.diag.count("mag_overflow")
+            return
+        field_t = self.rotation @ mag.magnetic_field_t
+        msg = MagneticField()
+        msg.header.stamp, msg.header.frame_id = stamp_msg, FRAME_ID
+        msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = (float(v) for v in field_t)
+        # magnetic_field_covariance stays all 0: unknown (sensor_msgs/MagneticField definition)
+        self.pub_mag.publish(msg)
+        self.mag_samples += 1
+
+    def _bias_done(self, result: GyroBiasResult) -> None:
+        self.bias_result = result
+        self.bias_estimator = None
+        if result.still:
+            self.gyro_bias_rad_s = result.bias_rad_s
+            self.diag.clear("gyro_bias")
+            self.get_logger().info(result.message)
+        else:
+            self.diag.warn("gyro_bias", result.message)
+            self.get_logger().warn(result.message)
+        self.diag.set_state("running", DiagnosticStatus.OK, "running")
+
+    def _check_stuck(self, block: bytes) -> None:
+        stuck = self.stuck.update(block)
+        if stuck and not self.is_stuck:
+            self.get_logger().warn(f"ICM-20948 stuck: identical samples for {self.stuck.limit} polls")
+            self.diag.warn("stuck", f"stuck: identical accel/gyro/temperature for >= {self.stuck.limit} samples")
+            self.is_stuck = True
+            self._check_asleep()
+        elif not stuck and self.is_stuck:
+            self.diag.clear("stuck")
+            self.is_stuck = False
+
+    def _check_asleep(self) -> None:
+        """A frozen chip may have been reset by a power glitch (asleep after reset): start again if so."""
+        try:
+            pwr = self._read(p.PWR_MGMT_1)[0]
+        except I2CError:
+            self._bank = None
+            return
+        if pwr & p.PWR_MGMT_1_SLEEP:
+            self.get_logger().error("ICM-20948 found asleep (reset by a power glitch?): restarting the start-up")
+            self.diag.count("unexpected_sleep")
+            self.stuck = StuckDetector(self.stuck.limit)
+            self.is_stuck = False
+            self.diag.clear("stuck")
+            self._start()
+
+    # ------------------------------------------------------------------ diagnostics / shutdown
+    def _diag_extra(self):
+        c = self.config
+        out = [("who_am_i", f"0x{self.who_am_i:02x}" if self.who_am_i is not None else "unknown"),
+               ("sample_rate_configured_hz", f"{self.sample_rate_hz:g}"), ("output_data_rate_hz", f"{self.odr_hz:.3f}"),
+               ("accel_full_scale_g", f"{p.ACCEL_RANGE_G[c.accel_fs_sel]:g}"),
+               ("gyro_full_scale_dps", f"{p.GYRO_RANGE_DPS[c.gyro_fs_sel]:g}"), ("dlpf_config", c.gyro_dlpfcfg),
+               ("magnetometer_mode", self.mag_mode_name), ("magnetometer_available", self.mag_available),
+               ("magnetometer_messages", self.mag_samples), ("startup_attempts", self.startup_attempts),
+               ("gyro_bias_rad_s", " ".join(f"{v:.6f}" for v in self.gyro_bias_rad_s))]
+        if self.bias_result is not None:
+            out.append(("gyro_bias_status", self.bias_result.message))
+        elif self.bias_estimator is not None:
+            out.append(("gyro_bias_status", "estimating"))
+        if self.device is not None:
+            st = self.device.stats
+            out += [("i2c_transactions", st.transactions), ("i2c_errors", st.errors), ("i2c_retries", st.retries),
+                    ("i2c_failures", st.failures), ("i2c_last_error", st.last_error or "")]
+        return out
+
+    def close(self) -> None:
+        """Stop the timers and close the bus if this node opened it (run_node calls this on shutdown)."""
+        self._poll_timer.cancel()
+        self._step_timer.cancel()
+        if self._owns_bus and self._bus is not None:
+            try:
+                self._bus.close()
+            except Exception:  # noqa: BLE001 - closing a bus on shutdown must not raise
+                pass
+
+
+def main(args=None) -> int:
+    """``python -m hindrax_drivers.icm20948.node --ros-args --params-file ros_ws/config/hindrax.yaml`` (Pi)."""
+    return run_node(Icm20948Node, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

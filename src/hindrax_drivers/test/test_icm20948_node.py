@@ -1,0 +1,332 @@
+"""ICM-20948 node through the register-exact emulator (with its AK09916) on the emulated I2C bus.
+
+Expected values are the emulator's truth (sensor frame) within the device quantisation (hardware.md §4.4,
+§4.5, configuration ±4 g / ±500 dps): accel 1/8192 g, gyro 1/65.5 deg/s, magnetometer 0.15 uT,
+temperature 1/333.87 degC; the magnetometer truth is given in the accel/gyro frame and the emulator stores
+it in the AK09916's own axes (Y and Z inverted, hardware.md §4.7), so equality checks the axis flip.
+"""
+import math
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, MagneticField, Temperature
+
+from hindrax_drivers.config import default_config_path
+from hindrax_drivers.icm20948 import protocol as p
+from hindrax_drivers.icm20948.emulator import Icm20948Emulator
+from hindrax_drivers.icm20948.node import GyroBiasEstimator, Icm20948Node
+from hindrax_drivers.testing import child_env, config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_msgs.msg import RawDeviceData
+
+pytestmark = pytest.mark.ros
+
+G0 = 9.80665
+ACCEL_LSB = G0 / 8192.0  # ±4 g (sensors.icm20948.accel_full_scale_g: 4), hardware.md §4.4
+GYRO_LSB = math.radians(1.0 / 65.5)  # ±500 dps
+MAG_LSB = 0.15e-6  # T, hardware.md §4.5
+TEMP_LSB = 1.0 / 333.87  # degC
+ADDRESS = 0x69  # sensors.icm20948.i2c_address: 105
+
+ACCEL = np.array([0.52, -1.23, 9.61])
+GYRO = np.array([0.11, -0.23, 0.052])
+MAG = np.array([21.3e-6, -5.4e-6, 41.7e-6])
+TEMP_C = 27.3
+
+
+def constant_truth(t):
+    return ACCEL, GYRO, MAG, TEMP_C
+
+
+def live_truth(t):
+    """A moving sensor: every quantity changes by many LSBs within a few samples."""
+    s = math.sin(7.0 * t)
+    return ACCEL + 0.5 * s, GYRO + 0.1 * s, MAG + 5e-6 * s, TEMP_C + 0.5 * s
+
+
+class Rig:
+    def __init__(self, ctx, truth=constant_truth, overrides=None, emulator_cls=Icm20948Emulator, clock=None,
+                 sim_time=False, attach=True):
+        kwargs = {"clock": clock} if clock is not None else {}
+        self.emu = emulator_cls(truth, address=ADDRESS, **kwargs)
+        self.bus = EmulatedI2CBus(seed=3)
+        settings = {"sensors.icm20948.estimate_gyro_bias": False, **(overrides or {})}
+        if attach:
+            self.attach(settings)
+        self.settings = settings
+        params = config_parameters(settings)
+        if sim_time:
+            params.append(Parameter("use_sim_time", value=True))
+        self.node = Icm20948Node(bus=self.bus, context=ctx, parameter_overrides=params)
+        self.probe = rclpy.create_node("probe", context=ctx)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.node)
+        self.ex.add_node(self.probe)
+        self.imu, self.mag, self.temperature, self.raw, self.diag = [], [], [], [], []
+        self.probe.create_subscription(Imu, "imu/data_raw", self.imu.append, 200)
+        self.probe.create_subscription(MagneticField, "imu/mag", self.mag.append, 200)
+        self.probe.create_subscription(Temperature, "imu/temperature", self.temperature.append, 200)
+        self.probe.create_subscription(RawDeviceData, "raw/icm20948", self.raw.append, 1000)
+        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diag.append, 10)
+
+    def attach(self, settings=None):
+        self.bus.add_device(ADDRESS, self.emu)
+        if (settings or self.settings).get("sensors.icm20948.magnetometer_mode") == "bypass":
+            self.bus.add_device(p.AK09916_ADDRESS, self.emu.aux_port)
+
+    def spin(self):
+        self.ex.spin_once(timeout_sec=0.01)
+
+    def wait(self, predicate, timeout=10.0, message="condition"):
+        return wait_until(predicate, timeout, self.spin, message)
+
+    def wait_imu(self, n, timeout=10.0):
+        start = len(self.imu)
+        self.wait(lambda: len(self.imu) >= start + n, timeout, f"{n} Imu messages")
+        return self.imu[start:]
+
+    def diag_values(self):
+        return {kv.key: kv.value for kv in self.node.diag.status(self.node._diag_extra()).values}
+
+    def close(self):
+        self.ex.shutdown()
+        self.probe.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def rig():
+    rigs = []
+    with ros_context() as ctx:
+        def make(*args, **kwargs):
+            r = Rig(ctx, *args, **kwargs)
+            rigs.append(r)
+            return r
+        yield make
+        for r in rigs:
+            r.close()
+
+
+def vec(v):
+    return np.array([v.x, v.y, v.z])
+
+
+def assert_values(r, imus, rotation=np.eye(3)):
+    for m in imus:
+        assert np.allclose(vec(m.linear_acceleration), rotation @ ACCEL, rtol=0, atol=ACCEL_LSB / 2 + 1e-9)
+        assert np.allclose(vec(m.angular_velocity), rotation @ GYRO, rtol=0, atol=GYRO_LSB / 2 + 1e-9)
+        assert m.header.frame_id == "imu_link"
+        assert m.orientation_covariance[0] == -1.0  # REP-145: no orientation
+    r.wait(lambda: len(r.mag) >= 3 and len(r.temperature) >= 3, 5, "mag and temperature")
+    for m in r.mag[-3:]:
+        assert np.allclose(vec(m.magnetic_field), rotation @ MAG, rtol=0, atol=MAG_LSB / 2 + 1e-12)
+        assert m.header.frame_id == "imu_link"
+    assert all(abs(t.temperature - TEMP_C) <= TEMP_LSB / 2 + 1e-9 for t in r.temperature[-3:])
+
+
+def test_i2c_master_mode_configures_the_chip_and_publishes_the_truth(rig):
+    r = rig()
+    imus = r.wait_imu(10)
+    assert_values(r, imus)
+    emu = r.emu
+    # Registers from the configuration (hardware.md §4.2, §4.4): DLPFCFG 3, FS_SEL 1 (±4 g, ±500 dps), FCHOICE 1;
+    # divider round(1125 / 100) - 1 = 10; awake with CLKSEL auto; I2C master on, bypass off; AK09916 at 100 Hz.
+    assert emu.register_value(p.GYRO_CONFIG_1) == (3 << 3) | (1 << 1) | 1
+    assert emu.register_value(p.ACCEL_CONFIG) == (3 << 3) | (1 << 1) | 1
+    assert emu.register_value(p.GYRO_SMPLRT_DIV) == 10
+    assert emu.register_value(p.ACCEL_SMPLRT_DIV_2) == 10 and emu.register_value(p.ACCEL_SMPLRT_DIV_1) == 0
+    assert emu.register_value(p.PWR_MGMT_1) == 0x01
+    assert emu.master_enabled and not emu.bypass_active
+    assert emu.magnetometer.mode == 0x08
+    # Covariances: datasheet noise densities (230 ug/sqrt(Hz), 0.015 dps/sqrt(Hz)) times the noise bandwidth of
+    # DLPFCFG 3 (accel 68.8 Hz, gyro 73.3 Hz, hardware.md §4.4), plus the quantisation LSB^2/12.
+    accel_var = (230e-6 * G0) ** 2 * 68.8 + ACCEL_LSB ** 2 / 12
+    gyro_var = math.radians(0.015) ** 2 * 73.3 + GYRO_LSB ** 2 / 12
+    m = imus[-1]
+    assert np.allclose(m.linear_acceleration_covariance, np.diag([accel_var] * 3).ravel())
+    assert np.allclose(m.angular_velocity_covariance, np.diag([gyro_var] * 3).ravel())
+    # One 23-byte burst per poll from ACCEL_XOUT_H: accel, gyro, temperature and ST1..ST2 of the AK09916.
+    polls = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST and x.i2c_register == 0x2D]
+    assert polls and all(len(x.data) == 23 for x in polls)
+    values = r.diag_values()
+    assert values["who_am_i"] == "0xea" and values["magnetometer_available"] == "True"
+    assert float(values["output_data_rate_hz"]) == pytest.approx(1125 / 11, abs=1e-3)
+
+
+def test_bypass_mode_reads_the_ak09916_directly(rig):
+    r = rig(overrides={"sensors.icm20948.magnetometer_mode": "bypass"})
+    assert_values(r, r.wait_imu(10))
+    assert r.emu.bypass_active and not r.emu.master_enabled
+    mag_reads = [x for x in r.raw if x.i2c_address == p.AK09916_ADDRESS and x.i2c_register == 0x10]
+    assert mag_reads and all(len(x.data) == 9 for x in mag_reads)  # ST1..ST2: ST2 read last (hardware.md §4.5)
+
+
+def test_mounting_rotation_is_applied(rig):
+    # sensor yawed +90 deg in base_link: sensor x points left (FLU +y), sensor y points back (FLU -x)
+    r = rig(overrides={"sensors.icm20948.mounting_rpy_rad": [0.0, 0.0, math.pi / 2]})
+    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert_values(r, r.wait_imu(5), rotation=rz)
+
+
+def test_missing_magnetometer_is_a_warning_and_the_imu_keeps_publishing(rig):
+    r = rig()
+    r.emu.aux_connected = False  # the AK09916 NACKs on the auxiliary bus (before the start-up runs)
+    imus = r.wait_imu(10)
+    assert all(np.allclose(vec(m.linear_acceleration), ACCEL, atol=ACCEL_LSB / 2 + 1e-9) for m in imus)
+    assert not r.node.mag_available and r.mag == []
+    status = r.node.diag.status()
+    assert status.level == DiagnosticStatus.WARN and "magnetometer unavailable" in status.message
+    # three SLV4 identity attempts with I2C_MST_RST in between (hardware.md §4.3 step 7)
+    resets = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_HOST_TO_DEVICE
+              and x.i2c_register == p.USER_CTRL.address and x.data[0] & p.USER_CTRL_I2C_MST_RST]
+    assert len(resets) == 2
+    polls = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST and x.i2c_register == 0x2D]
+    assert all(len(x.data) == 14 for x in polls[-5:])  # no EXT_SLV_SENS_DATA read without a magnetometer
+
+
+def test_wrong_identity_is_reported_and_retried(rig):
+    class OtherChip(Icm20948Emulator):
+        def _read_register(self, register):
+            if self._bank == 0 and register == p.WHO_AM_I.address:
+                return 0x71  # an MPU-9250 answering at the address
+            return super()._read_register(register)
+
+    r = rig(emulator_cls=OtherChip)
+    r.wait(lambda: r.node.startup_attempts >= 2, 5, "retried start-up")
+    status = r.node.diag.status()
+    assert status.level == DiagnosticStatus.ERROR and "WHO_AM_I = 0x71" in status.message
+    assert r.imu == []
+
+
+def test_absent_device_then_plugged_in(rig):
+    r = rig(attach=False)
+    r.wait(lambda: any(s.level == DiagnosticStatus.ERROR and "I2C failure" in s.message
+                       for a in r.diag for s in a.status if s.name == "hindrax/icm20948"), 10, "error in diagnostics")
+    assert r.imu == []
+    r.attach()
+    assert_values(r, r.wait_imu(5))
+
+
+def test_i2c_errors_on_a_fifth_of_transactions_do_not_stop_the_data(rig):
+    r = rig()
+    r.wait_imu(5)
+    r.bus.set_fault_rate(0.2)  # errno 121 on 20 % of SMBus calls
+    assert_values(r, r.wait_imu(100, timeout=20))
+    assert r.bus.injected_faults > 0 and r.node.device.stats.retries > 0
+    assert int(r.diag_values()["i2c_errors"]) == r.node.device.stats.errors > 0
+
+
+def test_stuck_sensor_warns_keeps_publishing_and_recovers_from_a_reset(rig):
+    r = rig(truth=live_truth)
+    r.wait_imu(50)
+    assert not r.node.is_stuck
+    r.emu.stuck = True
+    r.wait(lambda: r.node.is_stuck, 10, "stuck detected")
+    assert "stuck" in r.node.diag.status().message and r.node.diag.status().level == DiagnosticStatus.WARN
+    r.wait_imu(10)  # still publishing
+    r.emu.stuck = False
+    r.wait(lambda: not r.node.is_stuck, 5, "stuck cleared")
+    # A power glitch resets the chip: asleep (PWR_MGMT_1 = 0x41, hardware.md §4.3), data frozen.
+    attempts = r.node.startup_attempts
+    r.emu.i2c_write(bytes([p.REG_BANK_SEL_ADDRESS, 0x00]))
+    r.emu.i2c_write(bytes([p.PWR_MGMT_1.address, p.PWR_MGMT_1_DEVICE_RESET]))
+    assert r.emu.sleeping
+    r.wait(lambda: r.node.startup_attempts > attempts and r.node.running, 10, "re-initialised after the reset")
+    assert not r.emu.sleeping and r.emu.register_value(p.GYRO_SMPLRT_DIV) == 10
+    imus = r.wait_imu(20)
+    assert len({m.linear_acceleration.x for m in imus}) > 1  # live data again
+
+
+def test_gyro_bias_is_estimated_and_subtracted_when_still(rig):
+    bias = np.array([0.021, -0.013, 0.0047])  # rad/s; the "true" rate is zero: a still vehicle
+    r = rig(truth=lambda t: (ACCEL, bias, MAG, TEMP_C),
+            overrides={"sensors.icm20948.estimate_gyro_bias": True, "sensors.icm20948.gyro_bias_duration_s": 0.3})
+    r.wait(lambda: r.node.bias_result is not None, 10, "bias estimate")
+    assert r.node.bias_result.still
+    assert np.allclose(r.node.gyro_bias_rad_s, bias, atol=GYRO_LSB / 2 + 1e-9)
+    for m in r.wait_imu(5):
+        assert np.allclose(vec(m.angular_velocity), 0.0, atol=1e-12)
+    values = r.diag_values()
+    assert np.allclose([float(v) for v in values["gyro_bias_rad_s"].split()], bias, atol=GYRO_LSB / 2 + 1e-6)
+    assert "gyro bias" in values["gyro_bias_status"]
+
+
+def test_gyro_bias_is_not_applied_when_the_vehicle_moves(rig):
+    r = rig(truth=lambda t: (ACCEL, GYRO * math.sin(12.0 * t), MAG, TEMP_C),
+            overrides={"sensors.icm20948.estimate_gyro_bias": True, "sensors.icm20948.gyro_bias_duration_s": 0.3})
+    r.wait(lambda: r.node.bias_result is not None, 10, "bias estimate")
+    assert not r.node.bias_result.still
+    assert np.all(r.node.gyro_bias_rad_s == 0.0)
+    status = r.node.diag.status()
+    assert status.level == DiagnosticStatus.WARN and "not still" in status.message
+
+
+def test_gyro_bias_estimator_thresholds():
+    est = GyroBiasEstimator(1.0, gyro_std_threshold_rad_s=0.01, accel_std_threshold_m_s2=0.1)
+    rng = np.random.default_rng(1)
+    result = None
+    for k in range(101):
+        result = est.add(k * 0.01, np.array([0.02, 0.0, -0.01]) + rng.normal(0, 0.002, 3),
+                         np.array([0, 0, G0]) + rng.normal(0, 0.02, 3)) or result
+    assert result is not None and result.still and result.samples == 101
+    assert np.allclose(result.bias_rad_s, [0.02, 0.0, -0.01], atol=4 * 0.002 / math.sqrt(101))  # 4 sigma of the mean
+    moving = GyroBiasEstimator(1.0, 0.01, 0.1)
+    out = [moving.add(k * 0.01, np.array([0.05 * math.sin(k * 0.3), 0, 0]), np.zeros(3)) for k in range(101)]
+    assert not out[-1].still and "not still" in out[-1].message
+
+
+def test_use_sim_time_stamps_follow_the_clock(rig):
+    sim = {"t": 500.0}
+    r = rig(clock=lambda: sim["t"], sim_time=True)
+    clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
+
+    def tick():  # a simulator publishing /clock in 2 ms steps, driving the emulator with the same time
+        sim["t"] += 0.002
+        sec = int(sim["t"])
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = sec, int(round((sim["t"] - sec) * 1e9))
+        clock_pub.publish(msg)
+        r.spin()
+
+    wait_until(lambda: len(r.imu) >= 5, 20, tick, "Imu under sim time")
+    stamp_s = r.imu[-1].header.stamp.sec + r.imu[-1].header.stamp.nanosec * 1e-9
+    assert 500.0 < stamp_s <= sim["t"] + 1e-6
+    assert np.allclose(vec(r.imu[-1].linear_acceleration), ACCEL, atol=ACCEL_LSB / 2 + 1e-9)
+
+
+def test_runs_as_a_process_and_reports_a_missing_bus():
+    """``python -m hindrax_drivers.icm20948.node --ros-args --params-file hindrax.yaml`` without the configured
+    /dev/i2c-N: the node stays up, reports it in /diagnostics and exits 0 on SIGINT."""
+    repo = Path(__file__).resolve().parents[3]
+    cmd = [sys.executable, "-m", "hindrax_drivers.icm20948.node", "--ros-args", "--params-file",
+           str(default_config_path()), "-p", "sensors.icm20948.i2c_bus:=31"]
+    assert not os.path.exists("/dev/i2c-31")
+    proc = subprocess.Popen(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        with ros_context() as ctx:
+            probe = rclpy.create_node("probe", context=ctx)
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(probe)
+            got = []
+            probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+            wait_until(lambda: any("cannot open I2C bus 31" in s.message and s.level == DiagnosticStatus.ERROR
+                                   for a in got for s in a.status), 20, lambda: ex.spin_once(timeout_sec=0.05),
+                       "bus error in diagnostics")
+            ex.shutdown()
+            probe.destroy_node()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)

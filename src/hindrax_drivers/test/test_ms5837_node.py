@@ -1,0 +1,250 @@
+"""MS5837 node through the command-exact emulator on the emulated I2C bus.
+
+Expected values come from the emulator's truth (pressure, temperature) and hydrostatics with the
+configured water density and gravity (hardware.md §3.6), within the device quantisation: one output LSB
+of P (30BA: 0.1 mbar = 10 Pa, 02BA: 0.01 mbar = 1 Pa) and of TEMP (0.01 degC) (hardware.md §3.4, §3.8).
+"""
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import FluidPressure, Temperature
+from std_srvs.srv import Trigger
+
+from hindrax_drivers.config import default_config_path
+from hindrax_drivers.ms5837.emulator import Ms5837Emulator
+from hindrax_drivers.ms5837.node import Ms5837Node
+from hindrax_drivers.testing import child_env, config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_msgs.msg import RawDeviceData
+
+pytestmark = pytest.mark.ros
+
+RHO_KG_M3 = 1000.0  # environment.water_density_kg_m3 in ros_ws/config/hindrax.yaml
+G_M_S2 = 9.81  # environment.gravity_m_s2
+SURFACE_PA = 101325.0  # environment.surface_pressure_pa
+LSB_PA = {"30BA": 10.0, "02BA": 1.0}  # hardware.md §3.4: P in 0.1 mbar (30BA) / 0.01 mbar (02BA)
+TEMP_LSB_C = 0.01
+
+
+class Rig:
+    """Node + emulator + probe subscriptions in one executor."""
+
+    def __init__(self, ctx, truth, emu_variant="30BA", overrides=None, bus_fault_rate=0.0, clock=None,
+                 sim_time=False, **emu_kwargs):
+        kwargs = {"clock": clock} if clock is not None else {}
+        self.emu = Ms5837Emulator(truth, variant=emu_variant, **kwargs, **emu_kwargs)
+        self.bus = EmulatedI2CBus({0x76: self.emu}, fault_rate=bus_fault_rate, seed=7)
+        params = config_parameters({"sensors.ms5837.rate_hz": 25.0, **(overrides or {})})
+        if sim_time:
+            params.append(Parameter("use_sim_time", value=True))
+        self.node = Ms5837Node(bus=self.bus, context=ctx, parameter_overrides=params)
+        self.probe = rclpy.create_node("probe", context=ctx)
+        self.ex = SingleThreadedExecutor(context=ctx)
+        self.ex.add_node(self.node)
+        self.ex.add_node(self.probe)
+        self.pressure, self.temperature, self.depth, self.raw, self.diag = [], [], [], [], []
+        self.probe.create_subscription(FluidPressure, "pressure/fluid_pressure", self.pressure.append, 50)
+        self.probe.create_subscription(Temperature, "pressure/temperature", self.temperature.append, 50)
+        self.probe.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.depth.append, 50)
+        self.probe.create_subscription(RawDeviceData, "raw/ms5837", self.raw.append, 500)
+        self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diag.append, 10)
+        self.zero = self.probe.create_client(Trigger, "pressure/zero_depth")
+
+    def spin(self):
+        self.ex.spin_once(timeout_sec=0.01)
+
+    def wait(self, predicate, timeout=10.0, message="condition"):
+        return wait_until(predicate, timeout, self.spin, message)
+
+    def wait_messages(self, n, timeout=10.0):
+        start = len(self.pressure)
+        self.wait(lambda: len(self.pressure) >= start + n and len(self.depth) >= start + n
+                  and len(self.temperature) >= start + n, timeout, f"{n} pressure messages")
+        return self.pressure[start:], self.temperature[start:], self.depth[start:]
+
+    def close(self):
+        self.ex.shutdown()
+        self.probe.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def rig():
+    rigs = []
+    with ros_context() as ctx:
+        def make(*args, **kwargs):
+            r = Rig(ctx, *args, **kwargs)
+            rigs.append(r)
+            return r
+        yield make
+        for r in rigs:
+            r.close()
+
+
+def expected_depth_m(pressure_pa, surface_pa=SURFACE_PA):
+    return (pressure_pa - surface_pa) / (RHO_KG_M3 * G_M_S2)
+
+
+@pytest.mark.parametrize("emu_variant,configured", [("30BA", "30BA"), ("30BA", "auto"), ("02BA", "auto"),
+                                                    ("02BA", "02BA")])
+def test_published_values_equal_truth_within_quantisation(rig, emu_variant, configured, monkeypatch):
+    sleeps = []
+    monkeypatch.setattr(time, "sleep", sleeps.append)  # the node must never block the executor
+    # 30BA at 1.9 m of water and 4 degC, 02BA at 104 kPa and 8 degC: both in the second-order
+    # low-temperature branch (hardware.md §3.5), where first order alone is off by 420 Pa / 87 Pa.
+    truth_pa, truth_c = (120000.0, 4.0) if emu_variant == "30BA" else (104000.0, 8.0)
+    r = rig(lambda t: (truth_pa, truth_c), emu_variant,
+            {"sensors.ms5837.variant": configured, "sensors.ms5837.oversampling": 4096})
+    pressures, temperatures, depths = r.wait_messages(5)
+    lsb = LSB_PA[emu_variant]
+    for fp, tm, dp in zip(pressures, temperatures, depths):
+        assert fp.fluid_pressure == pytest.approx(truth_pa, abs=lsb)
+        assert tm.temperature == pytest.approx(truth_c, abs=TEMP_LSB_C)
+        assert -dp.pose.pose.position.z == pytest.approx(expected_depth_m(truth_pa), abs=lsb / (RHO_KG_M3 * G_M_S2))
+        assert fp.header.frame_id == "pressure_link" and dp.header.frame_id == "odom"
+        assert fp.header.stamp == tm.header.stamp == dp.header.stamp
+        # variance: resolution^2 (25 Pa 30BA / 1 Pa 02BA, hardware.md §3.4) + LSB^2/12
+        resolution = 25.0 if emu_variant == "30BA" else 1.0
+        assert fp.variance == pytest.approx(resolution ** 2 + lsb ** 2 / 12)
+        assert dp.pose.covariance[14] == pytest.approx(fp.variance / (RHO_KG_M3 * G_M_S2) ** 2)
+        assert dp.pose.covariance[0] > 1e3  # x, y, orientation unknown
+    assert r.node.variant.value == emu_variant
+    assert r.emu.zero_reads == 0  # every ADC read came after the conversion time
+    assert sleeps == []
+    # The wire: D1 (0x48, OSR 4096), ADC read, D2 (0x58), ADC read, in that order (hardware.md §3.1).
+    seq = [(m.direction, m.i2c_register) for m in r.raw]
+    write, read = RawDeviceData.DIRECTION_HOST_TO_DEVICE, RawDeviceData.DIRECTION_DEVICE_TO_HOST
+    j = seq.index((read, 0xA0))
+    assert [(read, 0xA0 + 2 * k) for k in range(8)] == seq[j:j + 8]  # the 8 PROM words (after the reset)
+    i = seq.index((write, 0x48))
+    assert seq[i:i + 4] == [(write, 0x48), (read, 0x00), (write, 0x58), (read, 0x00)]
+
+
+def test_bad_prom_crc_reports_error_and_retries(rig):
+    r = rig(lambda t: (110000.0, 20.0), "30BA")
+    r.emu.corrupt_prom_crc = True  # before the PROM read, which runs in a timer 10 ms after the reset
+    r.wait(lambda: any(s.level == DiagnosticStatus.ERROR and "CRC" in s.message
+                       for a in r.diag for s in a.status if s.name == "hindrax/ms5837"), 10, "CRC error in diagnostics")
+    attempts = r.node.startup_attempts
+    n = len(r.pressure)
+    r.wait(lambda: r.node.startup_attempts >= attempts + 1, 5, "start-up retried")
+    assert len(r.pressure) == n  # nothing published while the PROM is bad
+    r.emu.corrupt_prom_crc = False
+    r.wait(lambda: len(r.pressure) > n, 5, "pressure after the PROM reads correctly")
+    assert r.pressure[-1].fluid_pressure == pytest.approx(110000.0, abs=10.0)
+
+
+def test_i2c_errors_on_a_fifth_of_transactions_do_not_stop_the_data(rig):
+    truth_pa, truth_c = 130000.0, 12.0
+    r = rig(lambda t: (truth_pa, truth_c), "30BA")
+    r.wait_messages(1)
+    r.bus.set_fault_rate(0.2)  # errno 121 on 20 % of SMBus calls
+    pressures, temperatures, _ = r.wait_messages(25, timeout=20.0)
+    assert all(fp.fluid_pressure == pytest.approx(truth_pa, abs=10.0) for fp in pressures)
+    assert all(tm.temperature == pytest.approx(truth_c, abs=TEMP_LSB_C) for tm in temperatures)
+    assert r.bus.injected_faults > 0 and r.node.device.stats.retries > 0
+    status = r.node.diag.status(r.node._diag_extra())
+    values = {kv.key: kv.value for kv in status.values}
+    assert int(values["i2c_errors"]) == r.node.device.stats.errors > 0
+
+
+def test_stuck_sensor_warns_and_keeps_publishing(rig):
+    # a live signal: 2 kPa sine on the pressure, so consecutive raw readings differ
+    r = rig(lambda t: (110000.0 + 2000.0 * math.sin(3.0 * t), 20.0 + math.sin(t)), "30BA",
+            {"sensors.ms5837.rate_hz": 50.0, "sensors.ms5837.oversampling": 1024})
+    r.wait_messages(20)
+    assert not r.node.is_stuck
+    r.emu.stuck = True
+    r.wait(lambda: r.node.is_stuck, 10, "stuck detected")
+    status = r.node.diag.status()
+    assert status.level == DiagnosticStatus.WARN and "stuck" in status.message
+    r.wait_messages(5)  # still publishing
+    r.emu.stuck = False
+    r.wait(lambda: not r.node.is_stuck, 5, "stuck cleared")
+    assert "stuck" not in r.node.diag.status().message
+
+
+def test_zero_depth_service_sets_surface_pressure(rig):
+    truth_pa = 102500.0  # at the surface on a high-pressure day
+    r = rig(lambda t: (truth_pa, 18.0), "30BA")
+    _, _, depths = r.wait_messages(3)
+    assert -depths[-1].pose.pose.position.z == pytest.approx(expected_depth_m(truth_pa), abs=10.0 / 9810.0)
+    r.wait(lambda: r.zero.service_is_ready(), 5, "zero_depth service")
+    fut = r.zero.call_async(Trigger.Request())
+    r.wait(fut.done, 5, "zero_depth answer")
+    assert fut.result().success
+    assert r.node.surface_pressure_pa == pytest.approx(truth_pa, abs=10.0)
+    assert r.node.get_parameter("environment.surface_pressure_pa").value == r.node.surface_pressure_pa
+    _, _, depths = r.wait_messages(3)
+    assert all(abs(d.pose.pose.position.z) <= 10.0 / 9810.0 for d in depths)
+
+
+def test_zero_depth_before_any_reading_is_refused(rig):
+    r = rig(lambda t: (101000.0, 18.0), "30BA")
+    r.bus.disconnected = True  # no reading can arrive
+    r.wait(lambda: r.zero.service_is_ready(), 5, "zero_depth service")
+    fut = r.zero.call_async(Trigger.Request())
+    r.wait(fut.done, 5, "zero_depth answer")
+    assert not fut.result().success and "no pressure reading" in fut.result().message
+    assert r.node.surface_pressure_pa == SURFACE_PA
+    assert r.node.diag.status().level == DiagnosticStatus.ERROR  # bus down reported, node alive
+
+
+def test_use_sim_time_stamps_and_timers_follow_the_clock(rig):
+    sim = {"t": 1000.0}
+    r = rig(lambda t: (115000.0, 14.0), "30BA", clock=lambda: sim["t"], sim_time=True)
+    clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
+
+    def tick():  # a simulator publishing /clock in 2 ms steps, driving the emulator with the same time
+        sim["t"] += 0.002
+        sec = int(sim["t"])
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = sec, int(round((sim["t"] - sec) * 1e9))
+        clock_pub.publish(msg)
+        r.spin()
+
+    wait_until(lambda: len(r.pressure) >= 3, 20, tick, "pressure under sim time")
+    stamp_s = r.pressure[-1].header.stamp.sec + r.pressure[-1].header.stamp.nanosec * 1e-9
+    assert 1000.0 < stamp_s <= sim["t"] + 1e-6
+    assert r.pressure[-1].fluid_pressure == pytest.approx(115000.0, abs=10.0)
+    assert r.emu.zero_reads == 0  # conversion waits were measured in simulated time
+
+
+def test_runs_as_a_process_and_reports_a_missing_bus():
+    """``python -m hindrax_drivers.ms5837.node --ros-args --params-file hindrax.yaml`` on a machine without the
+    configured /dev/i2c-N: the node stays up, reports the bus in /diagnostics, and exits 0 on SIGINT."""
+    repo = Path(__file__).resolve().parents[3]
+    cmd = [sys.executable, "-m", "hindrax_drivers.ms5837.node", "--ros-args", "--params-file",
+           str(default_config_path()), "-p", "sensors.ms5837.i2c_bus:=31"]
+    assert not os.path.exists("/dev/i2c-31")
+    proc = subprocess.Popen(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        with ros_context() as ctx:
+            probe = rclpy.create_node("probe", context=ctx)
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(probe)
+            got = []
+            probe.create_subscription(DiagnosticArray, "/diagnostics", got.append, 10)
+            wait_until(lambda: any("cannot open I2C bus 31" in s.message and s.level == DiagnosticStatus.ERROR
+                                   for a in got for s in a.status), 20, lambda: ex.spin_once(timeout_sec=0.05),
+                       "bus error in diagnostics")
+            ex.shutdown()
+            probe.destroy_node()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)

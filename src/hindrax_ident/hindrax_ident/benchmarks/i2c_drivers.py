@@ -1,0 +1,209 @@
+"""I2C sensor drivers benchmark: CPU per published message and register-read-to-topic latency.
+
+For each driver (MS5837 pressure node, ICM-20948 IMU node) one process runs the node over its
+device emulator on an :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`, plus a probe node
+subscribing to the main topic, all in one SingleThreadedExecutor, with the shipped configuration
+(MS5837: 10 Hz, OSR 4096; ICM-20948: 100 Hz configured = 102.27 Hz, I2C-master magnetometer).
+
+* Latency: from the emulator's ``i2c_read`` of the data (ICM-20948: the 23-byte burst; MS5837: the ADC read
+  of D2, the last read of a cycle) to the probe's callback for the message made from it, wall clock
+  (``time.time_ns``, the same clock as the ROS stamps). For the MS5837 the age of the stamp (the D1 read,
+  see the node docstring) at receipt is reported too; it includes the D2 conversion time.
+* CPU per message: process CPU time (node + probe + raw-traffic publication + DDS) over the run, minus
+  the CPU spent inside the emulator's ``i2c_read``/``i2c_write`` (reported separately: the MS5837
+  emulator inverts the compensation by bisection at every conversion start, which costs more than the
+  driver), divided by the messages published on the main topic; and the load in % of one core. The
+  ``_marginal`` rows also subtract the CPU an idle process with one DDS participant uses over the same
+  time (measured first), which dominates the per-message figure of a 10 Hz driver.
+"""
+from __future__ import annotations
+
+import bisect
+import time
+
+import numpy as np
+
+
+def _percentiles(values_s: list[float]) -> tuple[float, float]:
+    arr = np.array(values_s) * 1e3
+    return float(np.percentile(arr, 50)), float(np.percentile(arr, 99))
+
+
+def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s: float, extra_devices=None):
+    """Spin node + probe for ``duration_s``; return (cpu_s, wall_s, published, receipts [(t_ns, stamp_ns)])."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hindrax_drivers.testing import ros_context, wait_until
+    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+
+    bus = EmulatedI2CBus({address: emulator, **(extra_devices or {})})
+    receipts: list[tuple[int, int]] = []
+    with ros_context() as ctx:
+        node = node_factory(bus, ctx)
+        probe = rclpy.create_node("bench_probe", context=ctx)
+        probe.create_subscription(
+            msg_type, topic,
+            lambda m: receipts.append((time.time_ns(), m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)),
+            50)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        spin = lambda: ex.spin_once(timeout_sec=0.1)  # noqa: E731 - blocks until work, like spin()
+        wait_until(lambda: len(receipts) >= 3, 15, spin, f"first {topic} messages")
+        receipts.clear()
+        published0 = node.diag.total_published
+        cpu0, wall0 = time.process_time(), time.monotonic()
+        end = wall0 + duration_s
+        wait_until(lambda: time.monotonic() >= end, duration_s + 10, spin, "benchmark run")
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        published = node.diag.total_published - published0
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+    return cpu, wall, published, receipts
+
+
+def _idle_load(duration_s: float) -> float:
+    """CPU load (fraction of a core) of this process with an idle context and probe node: the DDS background."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hindrax_drivers.testing import ros_context, wait_until
+
+    with ros_context() as ctx:
+        probe = rclpy.create_node("bench_idle", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(probe)
+        cpu0, wall0 = time.process_time(), time.monotonic()
+        end = wall0 + duration_s
+        wait_until(lambda: time.monotonic() >= end, duration_s + 10, lambda: ex.spin_once(timeout_sec=0.1), "idle")
+        load = (time.process_time() - cpu0) / (time.monotonic() - wall0)
+        ex.shutdown()
+        probe.destroy_node()
+    return load
+
+
+def _marginal_row(prefix: str, cpu: float, emulator_cpu: float, wall: float, published: int, idle: float) -> dict:
+    marginal = (cpu - emulator_cpu - idle * wall) / max(published, 1) * 1e3
+    return {"name": f"{prefix}_cpu_per_message_marginal", "value": marginal, "unit": "ms",
+            "note": f"minus the idle DDS background ({idle * 100:.2f} % of a core)"}
+
+
+def _icm20948(duration_s: float, idle: float) -> list[dict]:
+    from sensor_msgs.msg import Imu
+
+    from hindrax_drivers.icm20948.emulator import Icm20948Emulator
+    from hindrax_drivers.icm20948.node import Icm20948Node
+    from hindrax_drivers.testing import config_parameters
+
+    reads_ns: list[int] = []
+
+    emulator_cpu = [0.0]
+
+    class TimedIcm(Icm20948Emulator):
+        def i2c_read(self, n: int) -> bytes:
+            c0 = time.process_time()
+            out = super().i2c_read(n)
+            if n >= 14:
+                reads_ns.append(time.time_ns())
+            emulator_cpu[0] += time.process_time() - c0
+            return out
+
+        def i2c_write(self, data: bytes) -> None:
+            c0 = time.process_time()
+            super().i2c_write(data)
+            emulator_cpu[0] += time.process_time() - c0
+
+    def truth(t):
+        s = np.sin(3.0 * t)
+        return (np.array([0.1, -0.2, 9.8]) + 0.3 * s, np.array([0.01, 0.02, -0.03]) * s,
+                np.array([2e-5, -5e-6, 4e-5]), 25.0 + s)
+
+    params = config_parameters({"sensors.icm20948.estimate_gyro_bias": False})
+    emu = TimedIcm(truth, address=0x69)
+    cpu, wall, published, receipts = _run(
+        lambda bus, ctx: Icm20948Node(bus=bus, context=ctx, parameter_overrides=params), emu, 0x69, Imu,
+        "imu/data_raw", duration_s)
+    latencies = []
+    for t_rx, stamp in receipts:
+        i = bisect.bisect_right(reads_ns, stamp) - 1  # the burst read just before the stamp
+        if i >= 0:
+            latencies.append((t_rx - reads_ns[i]) * 1e-9)
+    p50, p99 = _percentiles(latencies)
+    return [
+        {"name": "icm20948_read_to_topic_p50", "value": p50, "unit": "ms", "target": "< 10 ms (one 100 Hz period)"},
+        {"name": "icm20948_read_to_topic_p99", "value": p99, "unit": "ms"},
+        {"name": "icm20948_cpu_per_message", "value": (cpu - emulator_cpu[0]) / max(published, 1) * 1e3, "unit": "ms",
+         "note": "per Imu (+ Temperature, MagneticField, raw) cycle; node + probe + DDS, emulator excluded"},
+        {"name": "icm20948_cpu_load", "value": (cpu - emulator_cpu[0]) / wall * 100.0, "unit": "% of a core",
+         "note": f"{published / wall:.1f} Imu/s; emulator excluded"},
+        _marginal_row("icm20948", cpu, emulator_cpu[0], wall, published, idle),
+        {"name": "icm20948_emulator_cpu_per_message", "value": emulator_cpu[0] / max(published, 1) * 1e3,
+         "unit": "ms"},
+    ]
+
+
+def _ms5837(duration_s: float, idle: float) -> list[dict]:
+    from sensor_msgs.msg import FluidPressure
+
+    from hindrax_drivers.ms5837.emulator import Ms5837Emulator
+    from hindrax_drivers.ms5837.node import Ms5837Node
+    from hindrax_drivers.testing import config_parameters
+
+    adc_reads_ns: list[int] = []
+
+    emulator_cpu = [0.0]
+
+    class TimedMs5837(Ms5837Emulator):
+        def i2c_read(self, n: int) -> bytes:
+            c0 = time.process_time()
+            out = super().i2c_read(n)
+            if n == 3:
+                adc_reads_ns.append(time.time_ns())
+            emulator_cpu[0] += time.process_time() - c0
+            return out
+
+        def i2c_write(self, data: bytes) -> None:  # a conversion start inverts the compensation (costly)
+            c0 = time.process_time()
+            super().i2c_write(data)
+            emulator_cpu[0] += time.process_time() - c0
+
+    params = config_parameters({})
+    emu = TimedMs5837(lambda t: (110000.0 + 500.0 * np.sin(t), 18.0 + np.sin(0.5 * t)), variant="30BA")
+    cpu, wall, published, receipts = _run(
+        lambda bus, ctx: Ms5837Node(bus=bus, context=ctx, parameter_overrides=params), emu, 0x76, FluidPressure,
+        "pressure/fluid_pressure", duration_s)
+    latencies, ages = [], []
+    for t_rx, stamp in receipts:
+        i = bisect.bisect_right(adc_reads_ns, stamp)  # the first ADC read after the stamp (D1) is D2's
+        if i < len(adc_reads_ns) and adc_reads_ns[i] <= t_rx:
+            latencies.append((t_rx - adc_reads_ns[i]) * 1e-9)
+        ages.append((t_rx - stamp) * 1e-9)
+    p50, p99 = _percentiles(latencies)
+    a50, a99 = _percentiles(ages)
+    return [
+        {"name": "ms5837_read_to_topic_p50", "value": p50, "unit": "ms", "target": "< 5 ms"},
+        {"name": "ms5837_read_to_topic_p99", "value": p99, "unit": "ms"},
+        {"name": "ms5837_stamp_age_p50", "value": a50, "unit": "ms",
+         "note": "D1 read (stamp) to receipt: includes the D2 conversion (9 ms at OSR 4096)"},
+        {"name": "ms5837_stamp_age_p99", "value": a99, "unit": "ms"},
+        {"name": "ms5837_cpu_per_message", "value": (cpu - emulator_cpu[0]) / max(published, 1) * 1e3, "unit": "ms",
+         "note": "per cycle (FluidPressure + Temperature + depth + raw); node + probe + DDS, emulator excluded"},
+        {"name": "ms5837_cpu_load", "value": (cpu - emulator_cpu[0]) / wall * 100.0, "unit": "% of a core",
+         "note": f"{published / wall:.2f} cycles/s; emulator excluded"},
+        _marginal_row("ms5837", cpu, emulator_cpu[0], wall, published, idle),
+        {"name": "ms5837_emulator_cpu_per_message", "value": emulator_cpu[0] / max(published, 1) * 1e3,
+         "unit": "ms", "note": "two compensation inversions per conversion (bisection)"},
+    ]
+
+
+def run(quick: bool = False) -> list[dict]:
+    """Rows for ``make bench`` (see the module docstring). ``quick``: 3 s per driver instead of 20/30 s."""
+    idle = _idle_load(2.0 if quick else 10.0)
+    return _icm20948(3.0 if quick else 20.0, idle) + _ms5837(3.0 if quick else 30.0, idle)
+
+
+if __name__ == "__main__":
+    for row in run(quick=True):
+        print(row)
