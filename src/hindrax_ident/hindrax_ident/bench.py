@@ -22,6 +22,8 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 #: benchmark name -> module
 BENCHMARKS: dict[str, str] = {
     "actuation": "hindrax_ident.benchmarks.actuation",
+    "simulator": "hindrax_ident.benchmarks.simulator",
+    "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
 }
 
 
