@@ -1,0 +1,341 @@
+"""Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one tap.
+
+What every serial device node needs, written once (design.md §2 "the node owns a transport, calls the
+protocol layer, publishes, reports diagnostics"):
+
+- the configuration (``<section>.port``: device path or pyserial URL, ``<section>.baud_rate``) read
+  through :func:`hindrax_drivers.node_common.load_node_config` (invalid -> one line, exit 1);
+- a :class:`~hindrax_drivers.transport.serial_transport.SerialTransport` (reader thread, reconnect with
+  backoff 0.05 s doubling to 1 s, so a device that comes back is re-opened within about 1 s);
+- raw traffic on ``raw/<device>`` (hindrax_msgs/RawDeviceData) through ``RawDataPublisher.serial_tap``;
+- device state on ``/diagnostics``: ``disconnected`` (never opened; ERROR with the open error),
+  ``connected`` (OK; WARN "connected, no data" when nothing was published for ``NO_DATA_TIMEOUT_S``),
+  ``reconnecting`` (ERROR, link lost); the status is published at once on every change, and at 1 Hz;
+- a :class:`CommandSequencer` that sends the device's start-up commands after *every* (re)connect,
+  spaced by a gap, from its own thread (the reader keeps reading meanwhile);
+- stuck-value detection: :meth:`SerialDeviceNode.check_stuck` keeps one
+  :class:`~hindrax_drivers.node_common.StuckDetector` per named signal and raises the diagnostics
+  warning ``stuck`` while any is stuck; publishing continues.
+
+Threading: received bytes are decoded and published in the transport's reader thread (lowest
+latency; rclpy publishers are thread-safe), timers (diagnostics, housekeeping) run in the executor.
+Subclasses implement :meth:`handle_bytes` and :meth:`startup_commands`, and may override
+:meth:`on_link_up`, :meth:`housekeeping` and :meth:`extra_diagnostics`.
+
+Node parameter (besides the vehicle configuration): ``stuck_limit_samples`` (int >= 2, default 50):
+consecutive identical readings that count as a stuck sensor.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Any, Iterable, List, Optional, Sequence, Tuple
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.node import Node
+
+from .config import ConfigError, ConfigIssue
+from .node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector, load_node_config
+from .transport.serial_transport import SerialTransport, SerialTransportError
+
+__all__ = ["SerialDeviceNode", "CommandSequencer", "NO_DATA_TIMEOUT_S"]
+
+#: Connected but nothing published for this long (ROS time): diagnostics WARN "connected, no data", s.
+NO_DATA_TIMEOUT_S = 2.0
+_HOUSEKEEPING_PERIOD_S = 0.25
+
+
+class CommandSequencer:
+    """Send sequences of commands over a :class:`SerialTransport` from a background thread.
+
+    ``submit(commands)`` replaces whatever sequence is still pending (the newest start-up sequence wins)
+    and returns at once; the thread writes each command, then waits ``gap_s`` (wall time: the gap is a
+    property of the device's input handling, not of ROS time). A write that fails (port gone) abandons the
+    rest of the sequence; the next (re)connect submits a new one.
+
+    Args:
+        transport: the port to write to.
+        gap_s: pause after each command, s (>= 0).
+        name: thread name.
+    Attributes:
+        commands_sent, sequences_completed, write_failures: counters.
+    """
+
+    def __init__(self, transport: SerialTransport, gap_s: float, name: str = "CommandSequencer") -> None:
+        if gap_s < 0:
+            raise ValueError("gap_s must be >= 0")
+        self.transport = transport
+        self.gap_s = float(gap_s)
+        self._cond = threading.Condition()
+        self._pending: Optional[List[bytes]] = None
+        self._generation = 0
+        self._stop = False
+        self._wake = threading.Event()
+        self.commands_sent = 0
+        self.sequences_completed = 0
+        self.write_failures = 0
+        self.last_error: Optional[str] = None
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, commands: Sequence[bytes]) -> None:
+        """Queue ``commands`` (replacing a pending sequence)."""
+        with self._cond:
+            self._pending = [bytes(c) for c in commands]
+            self._generation += 1
+            self._cond.notify_all()
+        self._wake.set()  # cut short the gap of a superseded sequence
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._pending is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                commands, self._pending = self._pending, None
+                generation = self._generation
+                self._wake.clear()
+            for k, command in enumerate(commands):
+                with self._cond:
+                    if self._stop or generation != self._generation:
+                        break
+                try:
+                    self.transport.write(command)
+                    self.commands_sent += 1
+                except SerialTransportError as exc:
+                    self.write_failures += 1
+                    self.last_error = str(exc)
+                    break
+                if self.gap_s > 0 and k + 1 < len(commands):
+                    self._wake.wait(self.gap_s)
+            else:
+                self.sequences_completed += 1
+
+    def close(self) -> None:
+        """Stop the thread (idempotent)."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        self._wake.set()
+        if self._thread.is_alive() and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+
+
+class SerialDeviceNode(Node):
+    """Common part of the serial driver nodes (see the module docstring).
+
+    Args:
+        node_name: ROS node name.
+        device_name: short device name (``raw/<device_name>``, diagnostics ``hindrax/<device_name>``).
+        config_section: configuration prefix holding ``port`` and ``baud_rate`` (e.g. ``sensors.dvl75``).
+        command_gap_s: pause between start-up commands, s.
+        **kwargs: passed to ``rclpy.node.Node`` (context, parameter_overrides, namespace...).
+    Raises:
+        ConfigError: invalid vehicle configuration or ``stuck_limit_samples`` (after logging one line).
+    """
+
+    def __init__(self, node_name: str, *, device_name: str, config_section: str, command_gap_s: float,
+                 **kwargs: Any) -> None:
+        super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
+        self.cfg = load_node_config(self)
+        self.settings = self.cfg.section(config_section)
+        self.device_name = device_name
+        self.port = str(self.settings["port"])
+        self.baud_rate = int(self.settings["baud_rate"])
+        self.stuck_limit_samples = self._int_parameter("stuck_limit_samples", 50, minimum=2)
+        self._closed = False
+        self._ever_connected = False
+        self._no_data = False
+        self._last_publish_ns = 0
+        self._last_link_ns = 0
+        self._stuck: dict[str, StuckDetector] = {}
+        self._stuck_now: set[str] = set()
+        self.raw = RawDataPublisher(self, device_name)
+        self.diag = DeviceDiagnostics(f"hindrax/{device_name}", self.port, self.now_s)
+        self.diag.set_state("disconnected", DiagnosticStatus.ERROR, f"opening {self.port}")
+        self.transport = SerialTransport(self.port, self.baud_rate, on_data=self._on_data,
+                                         on_raw=self.raw.serial_tap, on_connect=self._on_connect,
+                                         on_disconnect=self._on_disconnect, start=False)
+        self.commands = CommandSequencer(self.transport, command_gap_s, name=f"{device_name}-commands")
+        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
+        self._housekeeping_timer = self.create_timer(_HOUSEKEEPING_PERIOD_S, self._housekeeping)
+
+    # -- helpers for subclasses
+    def _int_parameter(self, name: str, default: int, minimum: int) -> int:
+        value = (self.get_parameter(name).value if self.has_parameter(name)
+                 else self.declare_parameter(name, default).value)
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            issue = ConfigIssue(name, value, f"an integer >= {minimum}")
+            self.get_logger().fatal(f"invalid configuration: {issue.line()}")
+            raise ConfigError([issue], f"parameters of {self.get_name()}")
+        return int(value)
+
+    def now_ns(self) -> int:
+        """Current ROS time (sim time with ``use_sim_time``), ns."""
+        return self.get_clock().now().nanoseconds
+
+    def now_s(self) -> float:
+        """Current ROS time, s."""
+        return self.now_ns() * 1e-9
+
+    def start_transport(self) -> None:
+        """Start reading the port (subclasses call it at the end of their constructor)."""
+        self.transport.start()
+
+    def check_stuck(self, signal: str, value: Any) -> bool:
+        """Feed one reading of ``signal``; raise/clear the ``stuck`` warning. Returns True while stuck."""
+        det = self._stuck.get(signal)
+        if det is None:
+            det = self._stuck[signal] = StuckDetector(self.stuck_limit_samples)
+        stuck = det.update(value)
+        changed = (signal in self._stuck_now) != stuck
+        if stuck:
+            self._stuck_now.add(signal)
+        else:
+            self._stuck_now.discard(signal)
+        if changed:
+            if self._stuck_now:
+                text = (f"stuck: identical {', '.join(sorted(self._stuck_now))} for "
+                        f">= {self.stuck_limit_samples} samples")
+                self.diag.warn("stuck", text)
+                self.get_logger().warn(f"{self.device_name}: {text} (still publishing)")
+            else:
+                self.diag.clear("stuck")
+                self.get_logger().info(f"{self.device_name}: readings changing again")
+            self.diag.count("stuck_events", 1 if stuck else 0)
+        return stuck
+
+    def mark_published(self, now_ns: int) -> None:
+        """Count one output message for the diagnostics rate and the no-data watchdog."""
+        self.diag.published()
+        self._last_publish_ns = int(now_ns)
+        if self._no_data:
+            self._no_data = False
+            self.diag.set_state("connected", DiagnosticStatus.OK, f"connected to {self.port}")
+
+    @property
+    def stuck(self) -> bool:
+        """True while any signal is stuck."""
+        return bool(self._stuck_now)
+
+    # -- subclass interface
+    def startup_commands(self) -> List[bytes]:
+        """Command frames/lines to send after every (re)connect."""
+        return []
+
+    def handle_bytes(self, data: bytes, receive_ns: int) -> None:  # pragma: no cover - abstract
+        """Decode and publish a received chunk (reader thread); ``receive_ns``: ROS time of receipt."""
+        raise NotImplementedError
+
+    def on_link_up(self) -> None:
+        """Called in the reader thread after every (re)open, before the start-up commands are queued."""
+
+    def housekeeping(self, now_ns: int) -> None:
+        """Called from the executor every 0.25 s (ROS time)."""
+
+    def extra_diagnostics(self) -> Iterable[Tuple[str, Any]]:
+        """Device-specific key/values for the diagnostics status."""
+        return ()
+
+    def resend_startup(self, reason: str) -> None:
+        """Queue the start-up commands again (e.g. the device rebooted or stopped streaming)."""
+        self.diag.count("startup_resends")
+        self.get_logger().warn(f"{self.device_name}: {reason}; sending the start-up commands again")
+        self.commands.submit(self.startup_commands())
+
+    # -- transport callbacks (reader thread)
+    def _on_data(self, data: bytes) -> None:
+        receive_ns = self.now_ns()
+        try:
+            self.handle_bytes(data, receive_ns)
+        except Exception as exc:  # noqa: BLE001 - bad input must never stop the driver
+            self.diag.count("internal_error")
+            self.get_logger().error(f"{self.device_name}: error handling {len(data)} bytes: {exc!r}",
+                                    throttle_duration_sec=5.0)
+
+    def _on_connect(self) -> None:
+        again = self._ever_connected
+        self._ever_connected = True
+        self._last_link_ns = self.now_ns()
+        try:
+            self.on_link_up()
+        except Exception as exc:  # noqa: BLE001
+            self.diag.count("internal_error")
+            self.get_logger().error(f"{self.device_name}: on_link_up failed: {exc!r}")
+        self.commands.submit(self.startup_commands())
+        if again:
+            text = f"reconnected to {self.port} (reconnects: {self.transport.status().reconnects})"
+            self.get_logger().info(f"{self.device_name}: {text}")
+        else:
+            text = f"connected to {self.port}"
+            self.get_logger().info(f"{self.device_name}: {text} at {self.baud_rate} baud")
+        self._no_data = False
+        self.diag.set_state("connected", DiagnosticStatus.OK, text)
+        self._publish_diagnostics()
+
+    def _on_disconnect(self, error: str) -> None:
+        self._last_link_ns = self.now_ns()
+        self.diag.count("disconnects")
+        self.diag.set_state("reconnecting", DiagnosticStatus.ERROR, f"{self.port} lost ({error}); reconnecting")
+        self.get_logger().warn(f"{self.device_name}: {self.port} lost ({error}); reconnecting")
+        self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        if self._closed:
+            return
+        try:
+            self.diagnostics.publish()
+        except Exception:  # noqa: BLE001 - context shutting down
+            pass
+
+    # -- executor side
+    def _housekeeping(self) -> None:
+        now = self.now_ns()
+        st = self.transport.status()
+        if not st.connected and not self._ever_connected:
+            self.diag.set_state("disconnected", DiagnosticStatus.ERROR,
+                                f"cannot open {self.port}: {st.last_error or 'opening'}")
+            if st.open_failures:
+                self.get_logger().warn(f"{self.device_name}: cannot open {self.port} ({st.last_error}); retrying",
+                                       throttle_duration_sec=10.0)
+        elif st.connected:
+            no_data = now - max(self._last_publish_ns, self._last_link_ns) > NO_DATA_TIMEOUT_S * 1e9
+            if no_data != self._no_data:
+                self._no_data = no_data
+                if no_data:
+                    self.diag.set_state("connected", DiagnosticStatus.WARN, f"connected to {self.port}, no data")
+                else:
+                    self.diag.set_state("connected", DiagnosticStatus.OK, f"connected to {self.port}")
+        try:
+            self.housekeeping(now)
+        except Exception as exc:  # noqa: BLE001
+            self.diag.count("internal_error")
+            self.get_logger().error(f"{self.device_name}: housekeeping failed: {exc!r}", throttle_duration_sec=5.0)
+
+    def _diag_extra(self) -> List[Tuple[str, Any]]:
+        st = self.transport.status()
+        values: List[Tuple[str, Any]] = [
+            ("port", self.port), ("baud_rate", self.baud_rate), ("connected", st.connected),
+            ("reconnects", st.reconnects), ("open_failures", st.open_failures), ("bytes_rx", st.bytes_rx),
+            ("bytes_tx", st.bytes_tx), ("last_transport_error", st.last_error or ""),
+            ("startup_commands_sent", self.commands.commands_sent),
+            ("startup_sequences_completed", self.commands.sequences_completed),
+        ]
+        try:
+            values += list(self.extra_diagnostics())
+        except Exception as exc:  # noqa: BLE001
+            values.append(("extra_diagnostics_error", repr(exc)))
+        return values
+
+    def close(self) -> None:
+        """Stop the command thread and the transport (joins the reader thread). Idempotent; called by
+        :func:`~hindrax_drivers.node_common.run_node` on shutdown and by :meth:`destroy_node`."""
+        if self._closed:
+            return
+        self._closed = True
+        self.commands.close()
+        self.transport.close()
+
+    def destroy_node(self) -> None:
+        self.close()
+        super().destroy_node()
