@@ -1,0 +1,209 @@
+"""Player node: publishes a bag with its original timing (rate factor, start offset, topic subset, loop,
+optional /clock) (design.md §7).
+
+Thin rclpy node over :mod:`~hindrax_drivers.recording.reader` (raw CDR messages in log-time order) and
+:func:`~hindrax_drivers.recording.playback.play` (timing). Messages are published as the recorded bytes
+(``Publisher.publish(bytes)``), unchanged.
+
+- Publishers are created for every selected topic first; :meth:`BagPlayerNode.wait_for_subscribers` then
+  waits (up to ``wait_for_subscribers_timeout_s``) until each has at least one subscriber, so the first
+  messages are not lost to discovery (ros2-pip.md). Topics still without subscribers after the timeout
+  are reported and played anyway.
+- QoS per topic: the recorded publishers' profile when they agreed, else reliable/volatile
+  (:func:`~hindrax_drivers.recording.qos.playback_profile`), keep-last ``qos_depth``.
+- A topic whose message type is not installed cannot be published (rclpy needs the type support even for
+  raw bytes): it is skipped with a one-line warning naming the type. Its messages remain decodable from
+  the bag's own schema (``hindrax bag info``, :meth:`BagReader.decoded`).
+- ``clock:=true`` publishes rosgraph_msgs/Clock on /clock at ``clock_rate_hz`` (wall) with the bag time;
+  nodes under test then run with ``use_sim_time:=true``.
+
+Parameters: ``bag`` (string, required), ``rate`` (1.0), ``start_offset_s`` (0.0), ``topics`` (string[],
+empty = all), ``loop`` (false), ``clock`` (false), ``clock_rate_hz`` (100.0),
+``wait_for_subscribers_timeout_s`` (5.0), ``qos_depth`` (100).
+
+Run alone: ``python -m hindrax_drivers.recording.player_node --ros-args -p bag:=runs/BAG -p rate:=2.0``.
+Errors: :class:`PlayerError` (one line) for a missing bag, unknown topics or nothing publishable.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from typing import Any
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+
+from .msgtypes import TypeNotInstalledError, message_class
+from .playback import PlayStats, play
+from .qos import playback_profile, profiles_from_yaml
+from .reader import BagError, BagReader
+
+_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+_DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+class PlayerError(ValueError):
+    """The bag cannot be played as requested (message is one line)."""
+
+
+class BagPlayerNode(Node):
+    """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction."""
+
+    def __init__(self, node_name: str = "player", **kwargs: Any) -> None:
+        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
+        super().__init__(node_name, **kwargs)
+        bag = str(self._param("bag", ""))
+        self.rate = float(self._param("rate", 1.0))
+        self.start_offset_s = float(self._param("start_offset_s", 0.0))
+        requested = [t if t.startswith("/") else "/" + t for t in (self._param("topics", []) or []) if t]
+        self.loop = bool(self._param("loop", False))
+        self.publish_clock = bool(self._param("clock", False))
+        self.clock_rate_hz = float(self._param("clock_rate_hz", 100.0))
+        self.wait_timeout_s = float(self._param("wait_for_subscribers_timeout_s", 5.0))
+        depth = int(self._param("qos_depth", 100))
+        if not bag:
+            raise PlayerError("no bag given (parameter bag:=PATH)")
+        if not self.rate > 0:
+            raise PlayerError(f"rate {self.rate}: must be > 0")
+        if self.start_offset_s < 0:
+            raise PlayerError(f"start offset {self.start_offset_s} s: must be >= 0")
+        if self.publish_clock and not self.clock_rate_hz > 0:
+            raise PlayerError(f"clock rate {self.clock_rate_hz} Hz: must be > 0")
+        try:
+            self.reader = BagReader(bag)
+        except (FileNotFoundError, BagError) as exc:
+            raise PlayerError(str(exc)) from exc
+        if self.reader.truncated_files:
+            self.get_logger().warning(
+                f"{bag}: truncated file(s) {[f.name for f in self.reader.truncated_files]}; playing what is "
+                f"readable (run `hindrax bag recover {bag}`)")
+        unknown = [t for t in requested if t not in self.reader.channels]
+        if unknown:
+            raise PlayerError(f"topic(s) {' '.join(unknown)} not in {bag}; it has: "
+                              + " ".join(sorted(self.reader.channels)))
+        selected = requested or sorted(self.reader.channels)
+        self.skipped: dict[str, str] = {}
+        self.pubs: dict[str, Any] = {}
+        for topic in selected:
+            ch = self.reader.channels[topic]
+            try:
+                cls = message_class(ch.type)
+            except (TypeNotInstalledError, ValueError) as exc:
+                reason = f"{topic} not published: {exc}; decode it from the bag's stored schema instead"
+                self.skipped[topic] = reason
+                self.get_logger().warning(reason)
+                continue
+            try:
+                prof = playback_profile(profiles_from_yaml(ch.metadata.get("offered_qos_profiles", "")))
+            except ValueError:
+                prof = playback_profile([])
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=_RELIABILITY.get(prof["reliability"], ReliabilityPolicy.RELIABLE),
+                             durability=_DURABILITY.get(prof["durability"], DurabilityPolicy.VOLATILE))
+            self.pubs[topic] = self.create_publisher(cls, topic, qos)
+        if not self.pubs:
+            raise PlayerError("nothing to publish: " + "; ".join(self.skipped.values()))
+        self.clock_pub = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
+        if self.reader.start_ns is None:
+            raise PlayerError(f"{bag}: the bag holds no messages")
+        self.bag_start_ns = self.reader.start_ns
+        self.origin_ns = self.bag_start_ns + int(round(self.start_offset_s * 1e9))
+        if self.origin_ns > self.reader.end_ns:
+            raise PlayerError(f"start offset {self.start_offset_s:g} s is beyond the end of {bag} "
+                              f"({(self.reader.end_ns - self.bag_start_ns) / 1e9:.3f} s long)")
+        self._stop = threading.Event()
+
+    def _param(self, name: str, default: Any) -> Any:
+        if not self.has_parameter(name):
+            self.declare_parameter(name, default)
+        return self.get_parameter(name).value
+
+    def wait_for_subscribers(self, timeout_s: float | None = None) -> list[str]:
+        """Wait until every publisher has a subscriber or the timeout passes; returns topics without any."""
+        timeout_s = self.wait_timeout_s if timeout_s is None else timeout_s
+        waiting = lambda: [t for t, p in self.pubs.items() if p.get_subscription_count() == 0]  # noqa: E731
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        missing = waiting()
+        while missing and time.monotonic() < deadline and not self._stop.is_set():
+            self._wait(0.02)
+            missing = waiting()
+        if missing:
+            self.get_logger().warning(f"no subscriber after {timeout_s:g} s on: {' '.join(missing)}; playing anyway")
+        return missing
+
+    def _wait(self, seconds: float) -> None:
+        """Wait on the stop event in slices of <= 0.1 s; a shut-down context (SIGINT/SIGTERM) stops play."""
+        self._stop.wait(min(seconds, 0.1))
+        if not self.context.ok():
+            self._stop.set()
+
+    def stop(self) -> None:
+        """Ask :meth:`play` to return (thread-safe)."""
+        self._stop.set()
+
+    def play(self) -> PlayStats:
+        """Publish the selected topics from the start offset with the recorded timing (blocking)."""
+        topics = sorted(self.pubs)
+
+        def messages():
+            return self.reader.messages(topics, start_ns=self.origin_ns)
+
+        def publish(m) -> None:
+            self.pubs[m.topic].publish(m.data)
+
+        def publish_clock(t_ns: int) -> None:
+            msg = Clock()
+            msg.clock.sec, msg.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
+            self.clock_pub.publish(msg)
+
+        self.get_logger().info(
+            f"playing {len(topics)} topic(s) from {self.reader.path} at rate {self.rate:g}"
+            f"{f', from +{self.start_offset_s:g} s' if self.start_offset_s else ''}{', looping' if self.loop else ''}"
+            f"{', publishing /clock' if self.clock_pub else ''}")
+        stats = play(messages, publish, self.origin_ns, rate=self.rate, loop=self.loop,
+                     publish_clock=publish_clock if self.clock_pub is not None else None,
+                     clock_period_s=1.0 / self.clock_rate_hz, stop=self._stop, wait=self._wait)
+        self.wait_for_acknowledgements()
+        self.get_logger().info(f"published {stats.published} messages in {stats.passes} pass(es)")
+        return stats
+
+    def wait_for_acknowledgements(self, timeout_s: float = 2.0) -> bool:
+        """Wait (bounded) until reliable subscribers acknowledged everything, so exiting loses nothing."""
+        from rclpy.duration import Duration
+
+        ok = True
+        deadline = time.monotonic() + timeout_s
+        for pub in self.pubs.values():
+            left = max(0.0, deadline - time.monotonic())
+            ok = pub.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))) and ok
+        return ok
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m hindrax_drivers.recording.player_node --ros-args -p bag:=PATH ...``."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = BagPlayerNode()
+        except PlayerError as exc:
+            print(f"player: {exc}", file=sys.stderr)
+            return 1
+        node.wait_for_subscribers()
+        node.play()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

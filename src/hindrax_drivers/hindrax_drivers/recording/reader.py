@@ -1,0 +1,255 @@
+"""Reading bags: raw CDR messages in log-time order, decoded messages, raw device data for emulators.
+
+A *bag* is a rosbag2 directory (metadata.yaml + ``*.mcap``) or a single ``.mcap`` file. Files are read
+in the order of ``relative_file_paths`` (split files are consecutive in time); a directory without a
+usable metadata.yaml falls back to its ``*.mcap`` files sorted by their ``_<n>`` index.
+
+- :class:`BagReader` ``.messages(topics, start_ns, end_ns)`` yields :class:`RawMessage` (CDR bytes
+  unchanged) in ascending log time, using the MCAP chunk indexes;
+- ``.decoded(...)`` decodes with ``mcap_ros2`` from the bag's own ``ros2msg`` schemas, so custom types
+  decode without their Python package;
+- :func:`iter_raw_device_data` gives a device emulator the ``hindrax_msgs/RawDeviceData`` of one device.
+
+A file without a summary (recorder killed, not yet recovered) is read sequentially up to its last
+complete record (:func:`hindrax_drivers.recording.recover.iter_file_records`) and flagged in
+:attr:`BagReader.truncated_files`; run ``hindrax bag recover BAG`` to repair it.
+
+Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a readable bag).
+"""
+from __future__ import annotations
+
+import heapq
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Message, Schema
+
+from . import recover as _recover
+from .metadata import MetadataError, read_metadata
+
+RAW_DEVICE_DATA_TYPE = "hindrax_msgs/msg/RawDeviceData"
+
+
+class BagError(ValueError):
+    """The path exists but is not a readable rosbag2/MCAP bag."""
+
+
+@dataclass(frozen=True)
+class RawMessage:
+    """One recorded message: topic, ``pkg/msg/Type``, log/publish time (ns since epoch), CDR bytes."""
+
+    topic: str
+    type: str
+    log_time_ns: int
+    publish_time_ns: int
+    data: bytes
+
+
+@dataclass
+class ChannelInfo:
+    """A topic as found in the MCAP files: type, full definition, channel metadata."""
+
+    topic: str
+    type: str
+    schema_encoding: str
+    definition: str
+    metadata: dict[str, str]
+    message_count: int = 0
+
+
+def bag_files(path: str | Path) -> list[Path]:
+    """MCAP files of a bag (directory or single file), in recording order. Raises FileNotFoundError/BagError."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such bag (directory or .mcap file)")
+    if path.is_file():
+        return [path]
+    try:
+        meta = read_metadata(path)
+        files = [path / Path(p).name for p in meta.relative_file_paths]
+        present = [f for f in files if f.is_file()]
+    except MetadataError:
+        present = []
+    # metadata.yaml may be stale after a crash (written before the last split): add unlisted files
+    listed = {f.name for f in present}
+    extra = [f for f in sorted(path.glob("*.mcap"), key=_file_index) if f.name not in listed]
+    files = present + extra
+    if not files:
+        raise BagError(f"{path}: no .mcap files")
+    return files
+
+
+def _file_index(p: Path) -> tuple[int, str]:
+    m = re.search(r"_(\d+)\.mcap$", p.name)
+    return (int(m.group(1)) if m else -1, p.name)
+
+
+class BagReader:
+    """Read-only access to a bag's topics and messages (see module docstring)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.files = bag_files(self.path)
+        self.truncated_files: list[Path] = []
+        self.channels: dict[str, ChannelInfo] = {}
+        self._summaries: dict[Path, Any] = {}
+        self.start_ns: int | None = None
+        """First message log time of the bag (ns since epoch), None for an empty bag."""
+        self.end_ns: int | None = None
+        """Last message log time of the bag (ns since epoch), None for an empty bag."""
+        for f in self.files:
+            self._scan(f)
+
+    def _span(self, t0: int, t1: int) -> None:
+        self.start_ns = t0 if self.start_ns is None else min(self.start_ns, t0)
+        self.end_ns = t1 if self.end_ns is None else max(self.end_ns, t1)
+
+    def _scan(self, f: Path) -> None:
+        summary = None
+        try:
+            with open(f, "rb") as fh:
+                summary = make_reader(fh).get_summary()
+        except (McapError, OSError, ValueError, EOFError) as exc:
+            if not f.is_file():
+                raise BagError(f"{f}: cannot read ({exc})") from exc
+            summary = None
+        if summary is None or summary.statistics is None:
+            self.truncated_files.append(f)
+            counts: dict[int, int] = {}
+            schemas: dict[int, Schema] = {}
+            chans: dict[int, Channel] = {}
+            for rec in _recover.iter_file_records(f):
+                if isinstance(rec, Schema):
+                    schemas[rec.id] = rec
+                elif isinstance(rec, Channel):
+                    chans[rec.id] = rec
+                elif isinstance(rec, Message):
+                    counts[rec.channel_id] = counts.get(rec.channel_id, 0) + 1
+                    self._span(rec.log_time, rec.log_time)
+            self._summaries[f] = None
+            for cid, ch in chans.items():
+                self._add_channel(ch, schemas.get(ch.schema_id), counts.get(cid, 0))
+            return
+        self._summaries[f] = summary
+        if summary.statistics.message_count:
+            self._span(summary.statistics.message_start_time, summary.statistics.message_end_time)
+        for cid, ch in summary.channels.items():
+            self._add_channel(ch, summary.schemas.get(ch.schema_id),
+                              summary.statistics.channel_message_counts.get(cid, 0))
+
+    def _add_channel(self, ch: Channel, schema: Schema | None, count: int) -> None:
+        info = self.channels.get(ch.topic)
+        if info is None:
+            info = ChannelInfo(ch.topic, schema.name if schema else "", schema.encoding if schema else "",
+                               schema.data.decode(errors="replace") if schema else "", dict(ch.metadata))
+            self.channels[ch.topic] = info
+        info.message_count += count
+
+    @property
+    def topics(self) -> dict[str, str]:
+        """Topic name -> ``pkg/msg/Type``."""
+        return {t: c.type for t, c in self.channels.items()}
+
+    def messages(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
+                 end_ns: int | None = None) -> Iterator[RawMessage]:
+        """Raw messages of ``topics`` (all when None) with start_ns <= log time < end_ns, in log-time order."""
+        wanted = set(topics) if topics is not None else None
+        for f in self.files:
+            yield from self._file_messages(f, wanted, start_ns, end_ns)
+
+    def _file_messages(self, f: Path, wanted: set[str] | None, start_ns: int | None,
+                       end_ns: int | None) -> Iterator[RawMessage]:
+        summary = self._summaries.get(f)
+        if summary is None:
+            yield from _sorted_stream_messages(f, wanted, start_ns, end_ns)
+            return
+        with open(f, "rb") as fh:
+            reader = make_reader(fh)
+            kwargs: dict[str, Any] = {"log_time_order": True}
+            if wanted is not None:
+                kwargs["topics"] = sorted(wanted)
+            if start_ns is not None:
+                kwargs["starting_at"] = int(start_ns)
+            if end_ns is not None:
+                kwargs["ending_before"] = int(end_ns)
+            for schema, channel, msg in reader.iter_messages(**kwargs):
+                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time, msg.publish_time,
+                                 msg.data)
+
+    def decoded(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
+                end_ns: int | None = None) -> Iterator[tuple[RawMessage, Any]]:
+        """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas.
+
+        Raises :class:`BagError` naming the topic when its schema is missing or cannot be parsed.
+        """
+        from mcap_ros2._dynamic import generate_dynamic
+
+        decoders: dict[str, Any] = {}
+        for m in self.messages(topics, start_ns, end_ns):
+            dec = decoders.get(m.topic)
+            if dec is None:
+                ch = self.channels[m.topic]
+                if ch.schema_encoding != "ros2msg" or not ch.definition:
+                    raise BagError(f"{m.topic}: no ros2msg definition stored for {ch.type!r}; cannot decode")
+                try:
+                    dec = generate_dynamic(ch.type, ch.definition)[ch.type]
+                except Exception as exc:  # noqa: BLE001 - any parser failure is a bad schema
+                    raise BagError(f"{m.topic}: stored definition of {ch.type} does not parse ({exc})") from exc
+                decoders[m.topic] = dec
+            yield m, dec(m.data)
+
+
+def _sorted_stream_messages(f: Path, wanted: set[str] | None, start_ns: int | None,
+                            end_ns: int | None) -> Iterator[RawMessage]:
+    """Messages of a file without summary, tolerant of truncation, merged into log-time order per chunk."""
+    schemas: dict[int, Schema] = {}
+    chans: dict[int, Channel] = {}
+    heap: list[tuple[int, int, RawMessage]] = []
+    n = 0
+    for rec in _recover.iter_file_records(f):
+        if isinstance(rec, Schema):
+            schemas[rec.id] = rec
+        elif isinstance(rec, Channel):
+            chans[rec.id] = rec
+        elif isinstance(rec, Message):
+            ch = chans.get(rec.channel_id)
+            if ch is None or (wanted is not None and ch.topic not in wanted):
+                continue
+            if (start_ns is not None and rec.log_time < start_ns) or (end_ns is not None and rec.log_time >= end_ns):
+                continue
+            schema = schemas.get(ch.schema_id)
+            heapq.heappush(heap, (rec.log_time, n, RawMessage(ch.topic, schema.name if schema else "",
+                                                              rec.log_time, rec.publish_time, rec.data)))
+            n += 1
+    while heap:
+        yield heapq.heappop(heap)[2]
+
+
+def iter_raw_device_data(bag_path: str | Path, device_name: str) -> Iterator[tuple[int, Any]]:
+    """``(t_ns, hindrax_msgs.msg.RawDeviceData)`` of one device, in the order they were recorded.
+
+    For device emulators replaying a pool bag through the drivers (design.md §6-7). Every topic of type
+    ``hindrax_msgs/msg/RawDeviceData`` is read (merged in log-time order) and messages whose
+    ``device_name`` equals ``device_name`` are yielded. ``t_ns`` is the message's ``header.stamp`` (the
+    time the driver received or sent the bytes, ROS time) in ns, or the bag log time when the stamp is
+    zero. Both directions (DIRECTION_DEVICE_TO_HOST / HOST_TO_DEVICE) are yielded; filter on
+    ``msg.direction``. Raises FileNotFoundError/BagError for a bad path.
+    """
+    from rclpy.serialization import deserialize_message
+
+    from hindrax_msgs.msg import RawDeviceData
+
+    reader = BagReader(bag_path)
+    topics = [t for t, c in reader.channels.items() if c.type == RAW_DEVICE_DATA_TYPE]
+    if not topics:
+        return
+    for m in reader.messages(topics):
+        msg = deserialize_message(m.data, RawDeviceData)
+        if msg.device_name != device_name:
+            continue
+        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        yield (stamp_ns if stamp_ns > 0 else m.log_time_ns), msg

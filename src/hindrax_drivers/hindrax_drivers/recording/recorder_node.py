@@ -1,0 +1,307 @@
+"""Recorder node: records topics (parsed and raw device data) to rosbag2-compatible MCAP bags.
+
+Thin rclpy node over :class:`hindrax_drivers.recording.writer_thread.ThreadedBagWriter` (design.md §7).
+
+Behaviour
+- Topics: the parameters ``topics`` (names), ``topic_regex`` (``re.search``) and ``all_topics``
+  select topics (:class:`~hindrax_drivers.recording.selection.TopicSelection`); with none of them the
+  configuration key ``recording.topics`` is used, and without it every topic. The graph is polled every
+  ``discovery_period_s`` so topics that appear after the start are recorded too. A topic is subscribed
+  to once it has a publisher (its QoS is then known).
+- QoS: each subscription matches the topic's publishers as rosbag2 does
+  (:func:`~hindrax_drivers.recording.qos.subscription_policies`: best-effort if any publisher is
+  best-effort, transient-local only if all are), keep-last depth ``queue_depth``; the publishers'
+  profiles are stored in the bag (``offered_qos_profiles``).
+- Data: ``create_subscription(..., raw=True)``: CDR bytes are written unchanged. Log time = the node's
+  clock at reception (ROS time, so sim time with ``use_sim_time``); publish time = the DDS source
+  timestamp. Writing happens in one writer thread (the mcap writer is not thread-safe).
+- Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
+  (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
+  the bag (summary, metadata.yaml). A SIGKILL or power loss loses at most the open chunk
+  (:mod:`~hindrax_drivers.recording.writer`); ``hindrax bag recover`` repairs the bag.
+- Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag,
+  messages written and dropped, and one key per topic (``topic:/name`` -> count).
+
+Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.yaml):
+``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty =
+timestamped directory under ``recording.output_root``), ``autostart`` (bool, false),
+``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000).
+
+Run alone: ``python -m hindrax_drivers.recording.recorder_node --ros-args --params-file
+ros_ws/config/hindrax.yaml -p autostart:=true``.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+import sys
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from hindrax_msgs.srv import StartRecording, StopRecording
+
+from ..config import ConfigError, node_config
+from .metadata import BagMetadata
+from .msgdefs import normalize_type_name
+from .msgtypes import TypeNotInstalledError, message_class
+from .qos import profile_from_rclpy, subscription_policies
+from .selection import TopicSelection
+from .writer import WriterOptions
+from .writer_thread import ThreadedBagWriter
+
+_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+_DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+def default_bag_dir(output_root: str | Path, now: _dt.datetime | None = None) -> Path:
+    """``<output_root>/hindrax_YYYY_MM_DD-HH_MM_SS`` (rosbag2's naming, local time)."""
+    now = now or _dt.datetime.now()
+    return Path(output_root) / now.strftime("hindrax_%Y_%m_%d-%H_%M_%S")
+
+
+class RecorderNode(Node):
+    """Records selected topics to MCAP bags; see the module docstring for parameters and interfaces.
+
+    Raises :class:`hindrax_drivers.config.ConfigError` when the vehicle configuration is invalid and
+    ValueError for an invalid topic regex given at start-up.
+    """
+
+    def __init__(self, node_name: str = "recorder", **kwargs: Any) -> None:
+        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
+        super().__init__(node_name, **kwargs)
+        self._cfg = node_config(self, on_error=lambda m: self.get_logger().error(m))
+        self._topics_param = list(self._param("topics", []) or [])
+        self._regex_param = str(self._param("topic_regex", ""))
+        self._all_param = bool(self._param("all_topics", False))
+        self._output_dir_param = str(self._param("output_dir", ""))
+        self._discovery_period_s = float(self._param("discovery_period_s", 1.0))
+        self._status_period_s = float(self._param("status_period_s", 1.0))
+        self._queue_depth = int(self._param("queue_depth", 1000))
+        autostart = bool(self._param("autostart", False))
+        self._options = WriterOptions.from_flat(self._cfg.flat)
+        self._output_root = Path(self._cfg.flat.get("recording.output_root", "runs"))
+
+        self._writer: ThreadedBagWriter | None = None
+        self._selection: TopicSelection | None = None
+        self._subs: dict[str, Any] = {}
+        self._skipped: set[str] = set()
+        self._last_metadata: BagMetadata | None = None
+        self._last_bag: Path | None = None
+
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_service(StartRecording, "recorder/start", self._on_start)
+        self.create_service(StopRecording, "recorder/stop", self._on_stop)
+        self._discovery_timer = self.create_timer(self._discovery_period_s, self._discover)
+        self.create_timer(self._status_period_s, self._publish_status)
+        if autostart:
+            self.start_recording()
+
+    def _param(self, name: str, default: Any) -> Any:
+        if not self.has_parameter(name):
+            self.declare_parameter(name, default)
+        return self.get_parameter(name).value
+
+    # -- recording control ------------------------------------------------------------------------
+    @property
+    def recording(self) -> bool:
+        return self._writer is not None
+
+    @property
+    def bag_path(self) -> Path | None:
+        """Directory of the bag being written (or last written)."""
+        return self._writer.bag_dir if self._writer is not None else self._last_bag
+
+    def default_selection(self) -> TopicSelection:
+        """Selection from the node parameters, else ``recording.topics``, else all topics."""
+        if self._topics_param or self._regex_param or self._all_param:
+            return TopicSelection(tuple(self._topics_param), self._regex_param, self._all_param)
+        configured = self._cfg.flat.get("recording.topics")
+        if configured:
+            return TopicSelection(tuple(configured))
+        return TopicSelection(all_topics=True)
+
+    def start_recording(self, output_dir: str = "", selection: TopicSelection | None = None) -> Path:
+        """Open a new bag and subscribe to the selected topics. Returns the bag directory.
+
+        Raises RuntimeError when already recording, FileExistsError when the directory holds a bag,
+        OSError when it cannot be created.
+        """
+        if self._writer is not None:
+            raise RuntimeError(f"already recording to {self._writer.bag_dir}")
+        out = Path(output_dir or self._output_dir_param or default_bag_dir(self._output_root))
+        self._selection = selection or self.default_selection()
+        self._writer = ThreadedBagWriter(out, self._options)
+        self._skipped.clear()
+        self.get_logger().info(f"recording {self._selection.describe()} to {out}")
+        self._discover()
+        return out
+
+    def stop_recording(self) -> BagMetadata | None:
+        """Unsubscribe, finish the bag and return its metadata (None when not recording)."""
+        writer = self._writer
+        if writer is None:
+            return None
+        self._writer = None
+        for sub in self._subs.values():
+            self.destroy_subscription(sub)
+        self._subs.clear()
+        meta = writer.close()
+        for w in writer.warnings:
+            self._log(w, warning=True)
+        self._last_metadata = meta
+        self._last_bag = writer.bag_dir
+        self._log(f"bag {writer.bag_dir} closed: {meta.message_count} messages in {len(meta.files)} file(s), "
+                  f"{writer.dropped} dropped")
+        return meta
+
+    def _log(self, text: str, warning: bool = False) -> None:
+        """Log through ROS while the context is up; after SIGINT/SIGTERM (context shut down) to stderr."""
+        if self.context.ok():
+            (self.get_logger().warning if warning else self.get_logger().info)(text)
+        else:
+            print(f"[{self.get_name()}] {text}", file=sys.stderr)
+
+    # -- graph discovery --------------------------------------------------------------------------
+    def _discover(self) -> None:
+        if self._writer is None or self._selection is None:
+            return
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._subs or topic in self._skipped or not self._selection.matches(topic):
+                continue
+            if not types:
+                continue
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue  # no publisher yet: its QoS is unknown; try again at the next poll
+            type_name = normalize_type_name(types[0])
+            if len(types) > 1:
+                self.get_logger().warning(f"{topic}: several types {types}; recording {type_name}")
+            try:
+                cls = message_class(type_name)
+            except (TypeNotInstalledError, ValueError) as exc:
+                self.get_logger().warning(f"{topic}: not recorded: {exc}")
+                self._skipped.add(topic)
+                continue
+            profiles = [profile_from_rclpy(i.qos_profile) for i in infos if normalize_type_name(i.topic_type)
+                        == type_name]
+            reliability, durability = subscription_policies(profiles)
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._queue_depth,
+                             reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
+            self._writer.add_topic(topic, type_name, profiles)
+            self._subs[topic] = self.create_subscription(
+                cls, topic, functools.partial(self._on_message, topic), qos, raw=True)
+            self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
+
+    def _on_message(self, topic: str, data: bytes, info: Any) -> None:
+        writer = self._writer
+        if writer is None:
+            return
+        now_ns = self.get_clock().now().nanoseconds
+        source_ns = info.get("source_timestamp") if isinstance(info, dict) else None
+        writer.write(topic, now_ns, data, source_ns or now_ns)
+
+    # -- services and status ----------------------------------------------------------------------
+    def _on_start(self, request: StartRecording.Request, response: StartRecording.Response):
+        try:
+            sel = None
+            if list(request.topics) or request.topic_regex:
+                sel = TopicSelection(tuple(request.topics), request.topic_regex)
+            path = self.start_recording(request.output_dir, sel)
+        except (RuntimeError, ValueError, OSError) as exc:
+            response.success = False
+            response.message = str(exc)
+            response.bag_path = str(self.bag_path or "")
+            return response
+        response.success = True
+        response.bag_path = str(path)
+        response.message = f"recording {self._selection.describe() if self._selection else ''}"
+        return response
+
+    def _on_stop(self, request: StopRecording.Request, response: StopRecording.Response):
+        if self._writer is None:
+            response.success = False
+            response.message = "not recording"
+            response.bag_path = str(self._last_bag or "")
+            return response
+        try:
+            meta = self.stop_recording()
+        except Exception as exc:  # noqa: BLE001 - reported to the caller, the node keeps running
+            response.success = False
+            response.message = f"bag could not be finished: {exc}"
+            response.bag_path = str(self._last_bag or "")
+            return response
+        response.success = True
+        response.bag_path = str(self._last_bag)
+        response.message_count = int(meta.message_count if meta else 0)
+        response.message = f"{response.message_count} messages written"
+        return response
+
+    def status(self) -> DiagnosticStatus:
+        """The recorder's diagnostic status (also published on /diagnostics)."""
+        st = DiagnosticStatus(name=f"{self.get_name()}: recording", hardware_id="")
+        w = self._writer
+        values = [KeyValue(key="state", value="recording" if w else "idle"),
+                  KeyValue(key="bag", value=str(self.bag_path or ""))]
+        if w is None:
+            st.level = DiagnosticStatus.OK
+            st.message = "idle"
+        else:
+            st.level = DiagnosticStatus.ERROR if w.error else (DiagnosticStatus.WARN if w.dropped else
+                                                                DiagnosticStatus.OK)
+            st.message = f"writer failed: {w.error}" if w.error else f"recording to {w.bag_dir}"
+            values += [KeyValue(key="messages_written", value=str(w.written)),
+                       KeyValue(key="messages_dropped", value=str(w.dropped)),
+                       KeyValue(key="messages_queued", value=str(w.pending)),
+                       KeyValue(key="file", value=str(w.current_file.name))]
+            values += [KeyValue(key=f"topic:{t}", value=str(n)) for t, n in sorted(w.topic_counts().items())]
+        st.values = values
+        return st
+
+    def _publish_status(self) -> None:
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [self.status()]
+        self._diag_pub.publish(arr)
+
+    def shutdown(self) -> None:
+        """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM)."""
+        try:
+            self.stop_recording()
+        except Exception as exc:  # noqa: BLE001 - exiting: report, never hide the bag path
+            print(f"recorder: bag {self.bag_path} not finished cleanly: {exc}; run `hindrax bag recover "
+                  f"{self.bag_path}`", file=sys.stderr)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point: ``python -m hindrax_drivers.recording.recorder_node --ros-args ...``."""
+    rclpy.init(args=args)
+    node = None
+    executor = SingleThreadedExecutor()
+    try:
+        try:
+            node = RecorderNode()
+        except (ConfigError, ValueError) as exc:
+            print(f"recorder: {str(exc).splitlines()[0]}", file=sys.stderr)
+            return 1
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.shutdown()
+            executor.remove_node(node)
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

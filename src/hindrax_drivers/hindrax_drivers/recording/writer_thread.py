@@ -1,0 +1,148 @@
+"""One writer thread in front of a :class:`~hindrax_drivers.recording.writer.BagWriter`.
+
+``mcap.writer.Writer`` is not thread-safe and a chunk close (compression + fsync) can take milliseconds
+to tens of milliseconds on an SD card, so the recorder node's subscription callbacks only enqueue
+``(topic, log_time_ns, data, publish_time_ns)`` and this thread owns the BagWriter: it writes in arrival
+order, closes the open chunk when ``flush_interval_s`` has passed (crash safety, see :mod:`.writer`)
+and finishes the bag on :meth:`ThreadedBagWriter.close`.
+
+Back-pressure: the queue holds at most ``max_queue`` messages; beyond that (disk stalled) messages are
+counted in :attr:`ThreadedBagWriter.dropped` instead of growing memory without bound. A file-system
+error in the thread (disk full) is kept in :attr:`ThreadedBagWriter.error`; later messages are
+counted as dropped and :meth:`close` re-raises it.
+
+Pure (threads and queues only; no ROS).
+"""
+from __future__ import annotations
+
+import queue
+import threading
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+from .metadata import BagMetadata
+from .writer import BagWriter, WriterOptions
+
+_STOP = object()
+
+
+class ThreadedBagWriter:
+    """Thread-safe front of a BagWriter: ``add_topic``/``write`` from any thread, one writer thread.
+
+    bag_dir, options: as :class:`BagWriter` (the directory is created here, in the caller's thread, so
+    a bad path fails at once). max_queue: bound of the message queue (messages).
+    """
+
+    def __init__(self, bag_dir: str | Path, options: WriterOptions | None = None, max_queue: int = 100_000) -> None:
+        self._writer = BagWriter(bag_dir, options)
+        self.bag_dir = self._writer.bag_dir
+        self._queue: queue.Queue = queue.Queue(maxsize=max_queue)
+        self.dropped = 0
+        self.error: BaseException | None = None
+        self.written = 0
+        self._topic_counts: dict[str, int] = {}
+        self._lock = threading.Lock()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name=f"bag-writer:{self.bag_dir.name}", daemon=True)
+        self._thread.start()
+
+    # -- producer side (any thread) ---------------------------------------------------------------
+    def add_topic(self, name: str, type_name: str, offered_qos_profiles: Iterable[Mapping[str, Any]] = (),
+                  definition: str | None = None, type_hash: str | None = None) -> None:
+        """Queue a topic registration (see :meth:`BagWriter.add_topic`); ordered before later writes."""
+        self._put(("topic", name, type_name, [dict(p) for p in offered_qos_profiles], definition, type_hash),
+                  block=True)
+
+    def write(self, topic: str, log_time_ns: int, data: bytes, publish_time_ns: int | None = None) -> bool:
+        """Queue one message; False (and counted in :attr:`dropped`) if the queue is full or closed."""
+        if self._closed or self.error is not None:
+            self.dropped += 1
+            return False
+        try:
+            self._queue.put_nowait(("msg", topic, log_time_ns, data, publish_time_ns))
+        except queue.Full:
+            self.dropped += 1
+            return False
+        return True
+
+    def topic_counts(self) -> dict[str, int]:
+        """Messages written per topic so far (a copy; written by the writer thread)."""
+        with self._lock:
+            return dict(self._topic_counts)
+
+    @property
+    def current_file(self) -> Path:
+        return self._writer.current_file
+
+    @property
+    def pending(self) -> int:
+        """Messages queued and not yet handed to the BagWriter."""
+        return self._queue.qsize()
+
+    def close(self, timeout_s: float = 30.0) -> BagMetadata:
+        """Write everything queued, finish the bag and stop the thread; returns the final metadata.
+
+        Raises the writer thread's error if it failed, TimeoutError if it did not finish in time.
+        """
+        if not self._closed:
+            self._closed = True
+            self._put((_STOP,), block=True)
+        self._thread.join(timeout_s)
+        if self._thread.is_alive():
+            raise TimeoutError(f"{self.bag_dir}: writer thread did not finish within {timeout_s:g} s")
+        if self.error is not None:
+            raise self.error
+        return self._final
+
+    # -- writer thread ----------------------------------------------------------------------------
+    def _put(self, item: tuple, block: bool) -> None:
+        self._queue.put(item, block=block)
+
+    def _run(self) -> None:
+        w = self._writer
+        try:
+            while True:
+                try:
+                    item = self._queue.get(timeout=w.seconds_until_flush())
+                except queue.Empty:
+                    w.flush_if_due()
+                    continue
+                if item[0] is _STOP:
+                    break
+                self._handle(w, item)
+                w.flush_if_due()
+        except BaseException as exc:  # noqa: BLE001 - kept and re-raised by close()
+            self.error = exc
+            self._drain_after_error()
+        finally:
+            try:
+                self._final = w.close()
+            except BaseException as exc:  # noqa: BLE001
+                if self.error is None:
+                    self.error = exc
+                self._final = w.metadata()
+
+    def _handle(self, w: BagWriter, item: tuple) -> None:
+        if item[0] == "msg":
+            _, topic, t_ns, data, pub_ns = item
+            w.write(topic, t_ns, data, pub_ns)
+            self.written += 1
+            with self._lock:
+                self._topic_counts[topic] = self._topic_counts.get(topic, 0) + 1
+        else:
+            _, name, type_name, qos, definition, type_hash = item
+            w.add_topic(name, type_name, qos, definition, type_hash)
+            with self._lock:
+                self._topic_counts.setdefault(name, 0)
+
+    def _drain_after_error(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item[0] is _STOP:
+                return
+            if item[0] == "msg":
+                self.dropped += 1
+
+    @property
+    def warnings(self) -> list[str]:
+        return list(self._writer.warnings)

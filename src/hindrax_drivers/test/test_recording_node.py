@@ -1,0 +1,133 @@
+"""Recorder node in its own process: services, QoS matching, late topics, selection, bag content.
+
+The recorder (python -m hindrax_drivers.recording.recorder_node) is started idle; this test drives it through
+recorder/start and recorder/stop, publishes from its own process and checks the finished bag with rosbags.
+"""
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import Imu
+from std_msgs.msg import String
+
+from hindrax_drivers.recording.metadata import read_metadata
+from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_msgs.msg import RawDeviceData
+from hindrax_msgs.srv import StartRecording, StopRecording
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def recorder():
+    proc = subprocess.Popen(
+        [python_executable(), "-m", "hindrax_drivers.recording.recorder_node", "--ros-args",
+         "-p", "discovery_period_s:=0.2", "-p", "status_period_s:=0.2"],
+        env=child_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        with ros_context() as ctx:
+            node = rclpy.create_node("recorder_test", context=ctx)
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(node)
+            counts: dict[str, int] = {}
+
+            def on_diag(msg: DiagnosticArray) -> None:
+                for st in msg.status:
+                    if st.name.startswith("recorder"):
+                        counts.clear()
+                        counts.update({kv.key[6:]: int(kv.value) for kv in st.values if kv.key.startswith("topic:")})
+
+            node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+            start = node.create_client(StartRecording, "recorder/start")
+            stop = node.create_client(StopRecording, "recorder/stop")
+            spin = lambda: ex.spin_once(timeout_sec=0.02)  # noqa: E731
+
+            def call(client, request):
+                fut = client.call_async(request)
+                wait_until(fut.done, 15, spin, "service answer")
+                return fut.result()
+
+            wait_until(lambda: (start.service_is_ready() and stop.service_is_ready()) or proc.poll() is not None,
+                       20, spin, "recorder services")
+            assert proc.poll() is None, proc.stderr.read().decode()
+            yield dict(node=node, spin=spin, call=call, start=start, stop=stop, counts=counts, proc=proc)
+            ex.shutdown()
+            node.destroy_node()
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(10)
+
+
+def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
+    from rosbags.highlevel import AnyReader
+
+    r = recorder
+    node, spin, call, counts = r["node"], r["spin"], r["call"], r["counts"]
+    imu = node.create_publisher(Imu, "/n/imu", qos_profile_sensor_data)  # best effort
+    latched = node.create_publisher(String, "/n/latched",
+                                    QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    raw = node.create_publisher(RawDeviceData, "/n/raw", 100)
+    other = node.create_publisher(String, "/other/x", 10)
+    latched.publish(String(data="published before the recording started"))
+
+    bag1 = tmp_path / "bag1"
+    res = call(r["start"], StartRecording.Request(output_dir=str(bag1),
+                                                  topics=["/n/imu", "/n/latched", "/n/raw", "/n/late"]))
+    assert res.success and res.bag_path == str(bag1), res.message
+    again = call(r["start"], StartRecording.Request(output_dir=str(tmp_path / "other")))
+    assert not again.success and "already recording" in again.message
+
+    wait_until(lambda: imu.get_subscription_count() and raw.get_subscription_count()
+               and latched.get_subscription_count(), 15, spin, "recorder subscribed")
+    for i in range(50):
+        m = Imu()
+        m.linear_acceleration.x = float(i)
+        imu.publish(m)
+        raw.publish(RawDeviceData(device_name="ms5837", data=bytes([i, 255 - i])))
+        other.publish(String(data="not selected"))
+    late = node.create_publisher(String, "/n/late", 10)  # appears after the start: found by the graph poll
+    wait_until(lambda: late.get_subscription_count() > 0, 15, spin, "late topic subscribed")
+    for i in range(10):
+        late.publish(String(data=f"late {i}"))
+    expected = {"/n/imu": 50, "/n/raw": 50, "/n/latched": 1, "/n/late": 10}
+    wait_until(lambda: all(counts.get(t) == n for t, n in expected.items()), 15, spin,
+               f"recorder counts {expected}")
+    res = call(r["stop"], StopRecording.Request())
+    assert res.success and res.message_count == 111 and res.bag_path == str(bag1)
+
+    meta = read_metadata(bag1)
+    assert {t.name: t.message_count for t in meta.topics} == expected  # /other/x not selected
+    qos = {t.name: t.offered_qos_profiles[0] for t in meta.topics}
+    assert qos["/n/imu"]["reliability"] == "best_effort"  # the publisher's own QoS, as the graph reported it
+    assert qos["/n/latched"]["durability"] == "transient_local"
+    assert qos["/n/raw"]["reliability"] == "reliable"
+    with AnyReader([bag1]) as reader:
+        by_topic: dict[str, list] = {}
+        for c, _, data in reader.messages():
+            by_topic.setdefault(c.topic, []).append(reader.deserialize(data, c.msgtype))
+    assert [m.linear_acceleration.x for m in by_topic["/n/imu"]] == [float(i) for i in range(50)]
+    assert [bytes(m.data) for m in by_topic["/n/raw"]] == [bytes([i, 255 - i]) for i in range(50)]
+    assert by_topic["/n/latched"][0].data == "published before the recording started"
+
+    # a second recording selected by regular expression; stopping twice is reported, not fatal
+    bag2 = tmp_path / "bag2"
+    res = call(r["start"], StartRecording.Request(output_dir=str(bag2), topic_regex="^/other/"))
+    assert res.success, res.message
+    wait_until(lambda: "/other/x" in counts, 15, spin, "regex topic subscribed")
+    for _ in range(5):
+        other.publish(String(data="now selected"))
+    wait_until(lambda: counts.get("/other/x") == 5, 15, spin, "5 messages on /other/x")
+    assert call(r["stop"], StopRecording.Request()).message_count == 5
+    assert not call(r["stop"], StopRecording.Request()).success
+    assert [t.name for t in read_metadata(bag2).topics] == ["/other/x"]
+    bad = call(r["start"], StartRecording.Request(output_dir=str(tmp_path / "bag3"), topic_regex="("))
+    assert not bad.success and "regular expression" in bad.message

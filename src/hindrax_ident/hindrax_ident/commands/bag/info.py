@@ -1,0 +1,26 @@
+"""``hindrax bag info BAG``: topics, types, message counts, rates, duration and size of a bag.
+
+BAG is a bag directory (metadata.yaml + .mcap files) or one .mcap file. Exit 0, or 1 with one line
+on stderr when BAG is not a readable bag. Implementation: :mod:`hindrax_drivers.recording.info`.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="bag directory or .mcap file")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hindrax_drivers.recording.info import bag_info, format_bag_info
+    from hindrax_drivers.recording.reader import BagError
+
+    try:
+        info = bag_info(args.bag)
+    except (FileNotFoundError, BagError, OSError) as exc:
+        print(f"hindrax bag info: {exc}", file=sys.stderr)
+        return 1
+    print(format_bag_info(info))
+    return 0

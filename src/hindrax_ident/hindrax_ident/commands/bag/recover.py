@@ -1,0 +1,31 @@
+"""``hindrax bag recover BAG``: repair a bag whose recorder was killed or lost power.
+
+Rewrites every truncated .mcap file of BAG as a complete file (summary, indexes, rosbag2 metadata
+record) and rebuilds metadata.yaml from the files; complete files are left unchanged. Prints one line
+per file and a total. Exit 0, or 1 with one line on stderr. Implementation:
+:mod:`hindrax_drivers.recording.recover`.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("bag", help="bag directory or .mcap file")
+    parser.add_argument("--keep-original", action="store_true",
+                        help="keep each damaged file beside the repaired one as <name>.truncated")
+
+
+def run(args: argparse.Namespace) -> int:
+    from hindrax_drivers.recording.recover import RecoverError, recover_bag
+
+    try:
+        meta, results = recover_bag(args.bag, keep_original=args.keep_original)
+    except (FileNotFoundError, RecoverError, OSError) as exc:
+        print(f"hindrax bag recover: {exc}", file=sys.stderr)
+        return 1
+    for r in results:
+        print(r.summary_line())
+    print(f"{args.bag}: {meta.message_count} messages on {len(meta.topics)} topics in {len(meta.files)} file(s)")
+    return 0
