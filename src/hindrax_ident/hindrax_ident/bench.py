@@ -24,6 +24,9 @@ BENCHMARKS: dict[str, str] = {
     "actuation": "hindrax_ident.benchmarks.actuation",
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
+    "identification": "hindrax_ident.benchmarks.identification",
+    "recorder": "hindrax_ident.benchmarks.recorder",
+    "serial_drivers": "hindrax_ident.benchmarks.serial_drivers",
 }
 
 

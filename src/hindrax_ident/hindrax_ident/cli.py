@@ -26,6 +26,26 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "allocate a base_link wrench X Y Z K M N (N, N m) to thruster forces and pulse widths (JSON)"),
     (("thruster-test",), "hindrax_ident.commands.thruster_test",
      "step each thruster alone and print the wrench the model expects (catch reversed/swapped thrusters)"),
+    (("bringup",), "hindrax_ident.commands.bringup",
+     "start the node graph: drivers, ESC output, allocation (--sim: virtual pool and emulated devices)"),
+    (("decode",), "hindrax_ident.commands.decode",
+     "run a serial driver's parser (dvl75: text lines, ping1d: raw bytes) over a capture; one JSON record per line"),
+    (("bag", "record"), "hindrax_ident.commands.bag.record",
+     "record topics to a rosbag2-compatible MCAP bag (--topics/--regex/--all, --out, --duration)"),
+    (("bag", "play"), "hindrax_ident.commands.bag.play",
+     "publish a bag with its timing (--rate, --start-offset, --topics, --loop, --clock)"),
+    (("bag", "info"), "hindrax_ident.commands.bag.info",
+     "topics, types, counts, rates, duration and size of a bag"),
+    (("bag", "recover"), "hindrax_ident.commands.bag.recover",
+     "rebuild the summary and metadata.yaml of a bag whose recorder was killed"),
+    (("ident", "free-decay"), "hindrax_ident.commands.ident",
+     "added mass from a free-decay CSV (time s, acceleration m/s^2), seed 000 eqs. 2-9 (JSON)"),
+    (("ident", "thruster-fit"), "hindrax_ident.commands.ident",
+     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), seed 003 eq. 1 (JSON; --write CONFIG)"),
+    (("ident", "campaign"), "hindrax_ident.commands.ident",
+     "identification campaign in-process on the simulator (same as `hindrax run`)"),
+    (("run",), "hindrax_ident.commands.run",
+     "identification campaign in-process on the simulator (no ROS graph yet): identification.yaml + report"),
 ]
 
 
@@ -51,7 +71,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_module_arguments(parser: argparse.ArgumentParser, module: str) -> None:
-    mod = importlib.import_module(module)
+    """Let the subcommand's module declare its arguments. A module that fails to import does not take the
+    other subcommands down: its subcommand then reports the import error and exits 1."""
+    try:
+        mod = importlib.import_module(module)
+    except Exception as exc:  # noqa: BLE001 - reported when that subcommand is used
+        parser.set_defaults(_import_error=f"{type(exc).__name__}: {exc}")
+        parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+        return
     mod.add_arguments(parser)
 
 
@@ -59,6 +86,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hindrax`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if getattr(args, "_import_error", None):
+        print(f"hindrax: this command is unavailable ({args._import_error})", file=sys.stderr)
+        return 1
     mod = importlib.import_module(args._module)
     try:
         return int(mod.run(args) or 0)

@@ -1,0 +1,100 @@
+"""The whole stack on the virtual pool, in one process: simulator -> emulators -> real drivers, and
+wrench -> allocation -> ESC node -> PCA9685 registers -> thrust -> vehicle motion."""
+import math
+
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from sensor_msgs.msg import FluidPressure, Imu, Range
+
+from hindrax_drivers.config import default_config_path
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_ident.bringup import build_graph
+from hindrax_msgs.msg import Dvl, ThrusterPwm
+from hindrax_msgs.srv import SetArmed
+
+pytestmark = pytest.mark.ros
+
+
+def test_drivers_read_the_simulated_vehicle_and_thrust_moves_it():
+    with ros_context() as ctx:
+        graph = build_graph(default_config_path(), sim=True, context=ctx, seed=5,
+                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0,
+                                       "pool.start_position_ned_m": [3.0, 3.0, 0.9]})
+        probe = rclpy.create_node("probe", context=ctx)
+        graph.executor.add_node(probe)
+        got = {"dvl": [], "pressure": [], "imu": [], "ping": [], "pwm": []}
+        probe.create_subscription(Dvl, "dvl/data", got["dvl"].append, 10)
+        probe.create_subscription(FluidPressure, "pressure/fluid_pressure", got["pressure"].append, 10)
+        probe.create_subscription(Imu, "imu/data_raw", got["imu"].append, 10)
+        probe.create_subscription(Range, "ping/altitude", got["ping"].append, 10)
+        probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", got["pwm"].append, 10)
+        wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        sim = graph.nodes["simulator"].simulator
+        spin = lambda: graph.spin_once(0.005)  # noqa: E731
+        try:
+            wait_until(lambda: all(got[k] for k in ("dvl", "pressure", "imu", "ping")), 60, spin,
+                       "all four drivers publishing from the emulators")
+            truth = sim.truth()
+            # pressure driver vs simulated depth of the pressure port (fresh water), within a few cm
+            depth = (got["pressure"][-1].fluid_pressure - 101325.0) / (1000.0 * 9.81)
+            assert depth == pytest.approx(truth.position_ned_m[2] - 0.10, abs=0.1)
+            # IMU at rest-ish: specific force about +g upwards in base_link (FLU)
+            assert got["imu"][-1].linear_acceleration.z == pytest.approx(9.81, abs=0.5)
+            assert got["imu"][-1].orientation_covariance[0] == -1.0
+            # altimeter: pool 1.8 m deep, sonar 0.18 m below the origin
+            assert got["ping"][-1].range == pytest.approx(1.8 - truth.position_ned_m[2] - 0.18, abs=0.1)
+
+            wait_until(lambda: graph.nodes["esc"].arming_remaining_s() == 0.0, 60, spin, "arming time")
+            fut = arm.call_async(SetArmed.Request(arm=True))
+            wait_until(fut.done, 10, spin, "arm answer")
+            assert fut.result().success
+            x0 = sim.truth().position_ned_m[0]
+
+            def push():
+                m = WrenchStamped()
+                m.header.frame_id = "base_link"
+                m.header.stamp = probe.get_clock().now().to_msg()
+                m.wrench.force.x = 12.0  # forward, base_link
+                wrench.publish(m)
+                spin()
+
+            wait_until(lambda: sim.nu[0] > 0.15, 60, push, "vehicle surging under commanded thrust")
+            assert sim.truth().position_ned_m[0] > x0
+            assert got["pwm"][-1].armed and max(got["pwm"][-1].pulse_width_us) > 1550
+            valid = [m for m in got["dvl"][-5:] if m.velocity_valid]
+            assert valid and valid[-1].velocity_m_s.x == pytest.approx(sim.nu[0], abs=0.1)
+        finally:
+            graph.shutdown()
+            probe.destroy_node()
+        # shutdown wrote neutral on every thruster channel
+        assert np.allclose(graph.hardware.pulse_widths_us(), 1500.0, atol=1.3)
+
+
+def test_hindrax_bringup_sim_command_starts_and_stops_cleanly():
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from hindrax_drivers.testing import child_env
+
+    hindrax = str(Path(sys.executable).with_name("hindrax"))
+    proc = subprocess.Popen([hindrax, "bringup", "--sim", "--rtf", "1"], env=child_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        while not (lines and lines[-1].startswith("bringup:")):
+            line = proc.stdout.readline()
+            assert line, "bringup exited early: " + "".join(lines)
+            lines.append(line)
+        assert lines[-1].startswith("bringup: 7 nodes (simulator, dvl75, ping1d, ms5837, icm20948, esc, "
+                                    "thrust_allocation), virtual pool"), lines[-1]
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
