@@ -169,9 +169,9 @@ def test_real_time_factor_limits_simulated_time(cfg):
 
     rt = cfg.with_overrides({"simulation.real_time_factor": 1.0})
     with ros_context() as ctx:
+        t0 = time.monotonic()  # before the node exists: its wall-clock anchor is set at construction
         sim_node, probe, ex, _ = make(ctx, rt)
         try:
-            t0 = time.monotonic()
             spin_until(ex, lambda: probe.clock and probe.clock[-1] >= 0.3)
             assert sim_node.simulator.t_s <= (time.monotonic() - t0) + 0.05
         finally:
