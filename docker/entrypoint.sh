@@ -29,6 +29,8 @@ set +u
 source "${ROS_SETUP:-/opt/ros/jazzy/setup.bash}"
 # shellcheck disable=SC1090
 source "${WS_SETUP:-/ws/install/setup.bash}"
+# colcon installs ament_python console scripts in lib/<package> (the `ros2 run` location), not on PATH.
+export PATH="${HINDRAX_BIN_DIR:-/ws/install/lib/hindrax_ident}:$PATH"
 
 if [ "$#" -eq 0 ]; then
   set -- hindrax bringup
