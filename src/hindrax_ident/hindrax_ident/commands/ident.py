@@ -1,0 +1,152 @@
+"""``hindrax ident free-decay | thruster-fit | campaign``: offline identification tools.
+
+* ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO]``: seed 000 analysis of a
+  free-decay record (CSV with a header row; column 1 time in s, column 2 acceleration in m/s^2). Prints one
+  JSON object (:meth:`hindrax_ident.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
+  added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8), kc (eq. 9)...
+* ``hindrax ident thruster-fit FILE [--write CONFIG]``: seed 003 eq. 1 cubic per rotation direction from
+  bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints
+  ``{"negative": {c4..c1, c4_std..c1_std, ...}, "positive": {...}}``. ``--write`` replaces the
+  ``curve_negative:`` and ``curve_positive:`` lines of a configuration file in place (text edit, comments
+  kept) and validates the result with ``load_config`` (the file is restored if it no longer validates).
+* ``hindrax ident campaign``: the identification campaign on the simulator, same as ``hindrax run``
+  (:mod:`hindrax_ident.commands.run`).
+
+One module serves the three subcommands: :func:`add_arguments` reads the subcommand from the parser's prog.
+Exit status 0 on success, 1 on bad input (one-line message on stderr).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hindrax_drivers.config import ConfigError, load_config
+
+__all__ = ["add_arguments", "run", "read_two_columns", "write_thruster_curves"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of the subcommand named by ``parser.prog`` (…free-decay, …thruster-fit, …campaign)."""
+    which = parser.prog.split()[-1]
+    parser.set_defaults(_ident=which)
+    if which == "free-decay":
+        parser.add_argument("file", help="CSV with a header: time (s), acceleration (m/s^2)")
+        parser.add_argument("--stiffness", type=float, required=True, help="equivalent spring stiffness k_eq, N/m")
+        parser.add_argument("--mass", type=float, required=True, help="body mass m_b, kg")
+        parser.add_argument("--volume", type=float, required=True, help="displaced volume V, m^3")
+        parser.add_argument("--density", type=float, default=1000.0, help="water density, kg/m^3 (default 1000)")
+    elif which == "thruster-fit":
+        parser.add_argument("file", help="CSV with a header: pulse width (us), thrust (N)")
+        parser.add_argument("--write", metavar="CONFIG", default=None,
+                            help="update thrusters.curve_negative/curve_positive in this configuration file")
+        parser.add_argument("--neutral", type=float, default=1500.0, help="neutral pulse width, us")
+    else:
+        from . import run as run_cmd
+        run_cmd.add_arguments(parser)
+
+
+def read_two_columns(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """First two numeric columns of a CSV with one header row. Raises ``ValueError`` (one-line message)."""
+    try:
+        with open(path, newline="") as fh:
+            rows = list(csv.reader(fh))
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from exc
+    if len(rows) < 2:
+        raise ValueError(f"{path}: need a header row and data rows")
+    a, b = [], []
+    for n, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) < 2:
+            raise ValueError(f"{path}:{n}: need two columns, got {row!r}")
+        try:
+            a.append(float(row[0]))
+            b.append(float(row[1]))
+        except ValueError:
+            raise ValueError(f"{path}:{n}: not numbers: {row[:2]!r}") from None
+    x, y = np.asarray(a), np.asarray(b)
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+        raise ValueError(f"{path}: NaN or infinite values")
+    return x, y
+
+
+def _curve_text(coeffs) -> str:
+    return "[" + ", ".join(f"{float(c):.10g}" for c in coeffs) + "]"
+
+
+def write_thruster_curves(config_path: str, negative, positive) -> None:
+    """Replace the ``curve_negative:`` / ``curve_positive:`` values in a configuration file, keeping comments.
+
+    Validates with ``load_config`` afterwards and restores the original text on failure.
+    Raises ``ValueError`` (missing lines) or :class:`~hindrax_drivers.config.ConfigError`.
+    """
+    p = Path(config_path)
+    original = p.read_text()
+    text = original
+    for key, coeffs in (("curve_negative", negative), ("curve_positive", positive)):
+        pattern = re.compile(rf"^(\s*{key}:\s*)\[[^\]]*\](.*)$", re.MULTILINE)
+        if not pattern.search(text):
+            raise ValueError(f"{config_path}: no single-line '{key}: [...]' entry to update")
+        text = pattern.sub(lambda m: m.group(1) + _curve_text(coeffs) + m.group(2), text, count=1)
+    p.write_text(text)
+    try:
+        load_config(p)
+    except ConfigError:
+        p.write_text(original)
+        raise
+
+
+def _free_decay(args) -> int:
+    from ..estimation.free_decay import analyse_free_decay
+    from ..estimation.least_squares import EstimationError
+    try:
+        t, a = read_two_columns(args.file)
+        res = analyse_free_decay(t, a, args.stiffness, args.mass, args.volume, fluid_density_kg_m3=args.density)
+    except (ValueError, EstimationError) as exc:
+        print(f"free-decay: {exc}", file=sys.stderr)
+        return 1
+    print(json.dumps(res.to_dict()))
+    return 0
+
+
+def _thruster_fit(args) -> int:
+    from ..estimation.least_squares import EstimationError
+    from ..estimation.thruster_fit import fit_thruster_curve
+    try:
+        pw, thrust = read_two_columns(args.file)
+        fit = fit_thruster_curve(pw, thrust, neutral_us=args.neutral)
+    except (ValueError, EstimationError) as exc:
+        print(f"thruster-fit: {exc}", file=sys.stderr)
+        return 1
+    out = fit.to_dict()
+    print(json.dumps({"negative": out["negative"], "positive": out["positive"]}))
+    if args.write:
+        try:
+            write_thruster_curves(args.write, fit.negative.coefficients, fit.positive.coefficients)
+        except ConfigError as exc:
+            print(f"thruster-fit: {args.write} would be invalid, left unchanged: {'; '.join(exc.lines())}",
+                  file=sys.stderr)
+            return 1
+        except (OSError, ValueError) as exc:
+            print(f"thruster-fit: {exc}", file=sys.stderr)
+            return 1
+        print(f"updated {args.write}", file=sys.stderr)
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch on the subcommand."""
+    which = getattr(args, "_ident", "")
+    if which == "free-decay":
+        return _free_decay(args)
+    if which == "thruster-fit":
+        return _thruster_fit(args)
+    from . import run as run_cmd
+    return run_cmd.run(args)

@@ -1,0 +1,120 @@
+"""``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR]``: identification campaign.
+
+FOR NOW the campaign runs IN-PROCESS on the simulator (:class:`hindrax_ident.sim.simulator.Simulator`):
+there is no ROS graph yet (no nodes, topics or bag). The manoeuvres, estimators and outputs are those the
+pool campaign will use (:mod:`hindrax_ident.identification`). Progress lines go to the terminal; the output
+directory is ``<recording.output_root>/<UTC timestamp>/`` with a ``latest`` symlink beside it, or ``--out``.
+It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.results`) and ``report/index.html``.
+At the end a table is printed: per DOF and parameter the identified value with its std, the configured
+value ("truth" in simulation) and the relative error. Exit 0, or 1 when the campaign aborted on a limit or
+produced no estimate.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+from hindrax_drivers.config import DOFS, ConfigError, default_config_path, load_config
+
+__all__ = ["add_arguments", "run", "format_summary"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``hindrax run`` (and ``hindrax ident campaign``)."""
+    parser.description = ("Run the identification campaign IN-PROCESS on the simulator (no ROS graph yet) and "
+                          "write identification.yaml and report/index.html.")
+    parser.add_argument("--dofs", default=",".join(DOFS), help=f"comma-separated DOFs (default {','.join(DOFS)})")
+    parser.add_argument("--levels", type=int, default=None,
+                        help="levels per DOF (default identification.levels_per_dof)")
+    parser.add_argument("--rtf", type=float, default=0.0, help="real-time factor, 0 = as fast as possible (default)")
+    parser.add_argument("--seed", type=int, default=None, help="simulation seed (default simulation.seed)")
+    parser.add_argument("--out", default=None, help="output directory (default runs/<UTC timestamp>/)")
+    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+    parser.add_argument("--max-level-duration", type=float, default=None,
+                        help="longest run of one level, s (default identification.max_level_duration_s)")
+
+
+def format_summary(identifications: dict) -> str:
+    """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error."""
+    from ..identification.report import summary_rows
+    lines = [f"{'DOF':6s} {'parameter':28s} {'identified':>12s} {'std':>9s} {'unit':9s} {'configured':>11s} "
+             f"{'rel.err':>8s}"]
+    for r in summary_rows(identifications):
+        err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f}%"
+        tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
+        lines.append(f"{r['dof']:6s} {r['parameter']:28s} {r['value']:12.5g} {r['std']:9.3g} {r['unit']:9s} "
+                     f"{tr:>11s} {err:>8s}")
+    return "\n".join(lines)
+
+
+def _output_dir(cfg, out: str | None) -> Path:
+    if out:
+        p = Path(out)
+        p.mkdir(parents=True, exist_ok=True)
+        return p
+    root = Path(str(cfg.flat.get("recording.output_root", "runs")))
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    p = root / stamp
+    p.mkdir(parents=True, exist_ok=True)
+    latest = root / "latest"
+    try:
+        if latest.is_symlink() or latest.exists():
+            latest.unlink()
+        os.symlink(stamp, latest)
+    except OSError:
+        pass
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the campaign, identify, write the outputs, print the summary."""
+    from ..identification.campaign import Campaign
+    from ..identification.estimators import identify_all_with_errors
+    from ..identification.report import write_report
+    from ..identification.results import build_results, write_identification
+
+    try:
+        cfg = load_config(args.config or default_config_path())
+    except ConfigError as exc:
+        print(f"invalid configuration: {exc}", file=sys.stderr)
+        return 1
+    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
+    bad = [d for d in dofs if d not in DOFS]
+    if bad or not dofs:
+        print(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}", file=sys.stderr)
+        return 1
+    if args.levels is not None and args.levels < 1:
+        print("--levels must be >= 1", file=sys.stderr)
+        return 1
+    if args.rtf < 0:
+        print("--rtf must be >= 0", file=sys.stderr)
+        return 1
+    wall0 = time.monotonic()
+
+    def progress(msg: str) -> None:
+        print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
+
+    print("hindrax run: campaign in-process on the simulator (no ROS graph yet)", flush=True)
+    campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
+                        max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf)
+    record = campaign.run()
+    progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
+             + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
+    idents, errors = identify_all_with_errors(record, cfg)
+    for dof, msg in errors.items():
+        progress(f"{dof}: no estimate ({msg})")
+    out = _output_dir(cfg, args.out)
+    if idents:
+        doc = build_results(idents, cfg, source="simulation", seed=record.seed)
+        write_identification(out / "identification.yaml", doc)
+        note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
+                + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
+        write_report(out / "report", idents, doc, campaign_note=note)
+        print(format_summary(idents))
+    print(f"output: {out}  (wall time {time.monotonic() - wall0:.0f} s)")
+    return 1 if (record.aborted or not idents) else 0

@@ -1,0 +1,598 @@
+"""Per-DOF estimators: online (Kalman filter + RLS), offline batch LS + output-error, steady-state LS.
+
+Model per DOF (design.md §5; seed 003 eq. 2 extended with the inertia term; Fossen/SNAME positive
+coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
+
+    tau = M nu_dot + k_q |nu| nu + k_l nu + b (+ k_r s(eta))
+
+* M: inertia, rigid + added (kg or kg m^2); added mass = M - rigid (rigid from the configuration).
+* heave: separate quadratic AND linear damping for w > 0 (down, "positive heave", seed 003 §4.1) and w < 0
+  (the simulator and configuration carry both pairs; seed 003 Table 3 reports both). The configured
+  truth has different linear terms per direction (5.26 / 11.84 kg/s), so a single linear column would bias
+  the quadratic terms. b is the force holding depth, (rho V - m) g = +0.785 N FRD (seed 003 §5).
+* roll: s = cos(theta) sin(phi); pitch: s = sin(theta); k_r = z_g W - z_b B (Fossen g(eta),
+  hydrodynamics.md eq. 2.23; "W*BG" when W = B), 4.50 N m for Hindrax.
+
+Signals: velocity and acceleration come from filters, never raw differences (design.md §5): surge/sway
+from the DVL velocity, heave from the pressure depth, each aided by the 100 Hz accelerometer
+(:mod:`.fusion`: same state model and filterpy Kalman filter / RTS smoother as
+:mod:`hindrax_ident.estimation.filters`, with a second measurement); roll/pitch/yaw from the gyro rate with
+:class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter` online and
+:func:`~hindrax_ident.estimation.filters.smooth_kinematics` (RTS) offline.
+
+Methods:
+
+1. Online (:class:`OnlineDofEstimator`): RLS with forgetting (``identification.forgetting_factor``) on the
+   regressor row, with calibrated covariance and the persistence-of-excitation measure of
+   :class:`~hindrax_ident.estimation.rls.RecursiveLeastSquares`. The causal filter lags the fast transients
+   and the forgetting window (1 / (1 - lambda) = 20 s at 50 Hz) is short, so the online values are a live
+   indicator (a few per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly
+   conditioned online), not the reported estimate.
+2. Offline equation-error batch LS on the smoothed signals (seed 003 eqs. 6-8,
+   :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`).
+3. Offline output-error refinement (the reported result): starting from (2), ``scipy.optimize.least_squares``
+   integrates the 1-DOF ODE over 3 s segments (initial velocity from the smoother; RK4 at the tick rate;
+   the lagged thrust evaluated exactly inside each tick) and fits the simulated velocity (or depth for heave,
+   with one free offset per segment eliminated by projection) to the RAW sensor samples. Reason: the
+   smoother attenuates the fast thrust transients in nu_dot (the thruster lag is 0.1 s), biasing the
+   equation-error inertia by several per cent (by 10-40 % without the accelerometer). For heave the initial
+   velocity of every segment is a free parameter too. Covariance: sigma^2 (J^T J)^-1 with sigma^2 = SSR / (n - p)
+   (seed 003 eq. 8 analogue), inflated by (1 + rho) / (1 - rho) for the lag-1 autocorrelation rho of the
+   residuals within segments (effective sample size of AR(1) residuals). 95 % intervals are Student-t.
+4. The seed's own method (:func:`steady_state_fit`): steady windows detected automatically
+   (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity per run,
+   then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means (seed 003 eqs. 2-8).
+   Roll/pitch windows are corrected by the output-error restoring term; heave fits each direction
+   separately and usually has too few windows (no steady state in the depth available, seed 003 §5).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+from scipy import optimize, stats
+
+from hindrax_drivers.config import DOFS, VehicleConfig
+
+from ..estimation.filters import KinematicKalmanFilter, smooth_kinematics
+from ..estimation.least_squares import EstimationError, fit_drag, fit_linear_model
+from ..estimation.rls import RecursiveLeastSquares
+from ..estimation.steady_windows import detect_steady_windows
+from ..sim.model import rigid_body_mass_matrix
+from .fusion import AccelAidedFilter, smooth_with_acceleration
+
+__all__ = [
+    "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
+    "measurement_settings", "OnlineDofEstimator", "DofIdentification", "identify_dof", "steady_state_fit",
+    "identify_all", "identify_all_with_errors",
+]
+
+#: White-jerk PSD (m^2/s^5) of the accelerometer-aided filter (fusion.py) for surge, sway and heave.
+ACCEL_JERK_PSD = 20.0
+
+
+def parameter_names(dof: str) -> list[str]:
+    """Parameter names of a DOF's regression, in regressor-column order (module docstring)."""
+    if dof == "heave":
+        return ["inertia", "quadratic_damping_positive", "quadratic_damping_negative",
+                "linear_damping_positive", "linear_damping_negative", "bias"]
+    names = ["inertia", "quadratic_damping", "linear_damping", "bias"]
+    if dof in ("roll", "pitch"):
+        names.append("restoring")
+    return names
+
+
+def parameter_units(dof: str) -> dict[str, str]:
+    """Unit of every reported parameter (SI, as the configuration keys)."""
+    rot = dof in ("roll", "pitch", "yaw")
+    u = {"inertia": "kg m^2" if rot else "kg", "added_mass": "kg m^2" if rot else "kg",
+         "bias": "N m" if rot else "N", "restoring": "N m"}
+    for n in parameter_names(dof):
+        if n.startswith("quadratic"):
+            u[n] = "kg m^2" if rot else "kg/m"
+        elif n.startswith("linear"):
+            u[n] = "kg m^2/s" if rot else "kg/s"
+    return u
+
+
+def restoring_regressor(dof: str, roll_rad, pitch_rad) -> np.ndarray:
+    """Restoring column s(eta): roll cos(theta) sin(phi), pitch sin(theta) (hydrodynamics.md eq. 2.23)."""
+    if dof == "roll":
+        return np.cos(pitch_rad) * np.sin(roll_rad)
+    return np.sin(pitch_rad)
+
+
+def _rest_terms(dof: str, v, rr=None) -> np.ndarray:
+    """Columns after the acceleration column, (..., p - 1), for velocity v and restoring regressor rr."""
+    v = np.asarray(v, dtype=float)
+    q = np.abs(v) * v
+    one = np.ones_like(v)
+    if dof == "heave":
+        pos = v > 0
+        cols = [np.where(pos, q, 0.0), np.where(pos, 0.0, q), np.where(pos, v, 0.0), np.where(pos, 0.0, v), one]
+    else:
+        cols = [q, v, one]
+        if dof in ("roll", "pitch"):
+            cols.append(np.zeros_like(v) if rr is None else np.asarray(rr, dtype=float))
+    return np.stack(cols, axis=-1)
+
+
+def regressor_matrix(dof: str, acceleration, velocity, restoring=None) -> np.ndarray:
+    """Regressor (n, p): [nu_dot, |nu| nu (per sign for heave), nu (per sign for heave), 1, (s(eta))]."""
+    a = np.asarray(acceleration, dtype=float)
+    return np.concatenate([a[..., None], _rest_terms(dof, velocity, restoring)], axis=-1)
+
+
+def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
+    """Rigid-body mass or moment of inertia about the body origin (kg, kg m^2): diag of M_RB (Fossen eq. 2.7)."""
+    m = rigid_body_mass_matrix(cfg.mass_kg, cfg.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
+    return float(m[DOFS.index(dof), DOFS.index(dof)])
+
+
+def truth_parameters(cfg: VehicleConfig, dof: str) -> dict[str, float]:
+    """Configured ("true") values of every parameter of :func:`parameter_names` plus added_mass.
+
+    inertia = rigid + added mass (configuration hydrodynamics); bias: heave (rho V - m) g, FRD force holding
+    depth (+0.785 N for Hindrax), 0 otherwise; restoring: z_g W - z_b B (module docstring).
+    """
+    h = cfg.hydrodynamics(dof)
+    rigid = rigid_inertia(cfg, dof)
+    out = {"inertia": rigid + float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)]),
+           "added_mass": float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)])}
+    if dof == "heave":
+        out.update(quadratic_damping_positive=h.quadratic_damping_positive,
+                   quadratic_damping_negative=h.quadratic_damping_negative,
+                   linear_damping_positive=h.linear_damping_positive,
+                   linear_damping_negative=h.linear_damping_negative,
+                   bias=float(cfg.buoyancy_n - cfg.weight_n))
+    else:
+        out.update(quadratic_damping=h.quadratic_damping_positive, linear_damping=h.linear_damping_positive,
+                   bias=0.0)
+    if dof in ("roll", "pitch"):
+        out["restoring"] = float(cfg.centre_of_gravity_frd_m[2] * cfg.weight_n
+                                 - cfg.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n)
+    return {k: float(v) for k, v in out.items()}
+
+
+def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
+    """Which conditioned signal measures a DOF and the filter tuning.
+
+    Returns {"log": SensorState log key, "column": index, "measured": 'position'|'velocity',
+    "std": measurement std, "jerk_psd": q, "accel": True when the accelerometer aids the filter (surge, sway,
+    heave; then also "accel_std" and "accel_jerk_psd", :mod:`.fusion`)}. The noise std comes from
+    ``simulation.sensors.*`` when present (else ``sensors.dvl75.velocity_std_m_s`` / typical values); q = std^2 w^k puts the filter bandwidth near
+    w = 12 rad/s (translation) or 20 rad/s (rotation) (filters.py: bandwidth ~ (q / std^2)^(1/4) for
+    velocity and ^(1/6) for position measurements).
+    """
+    f = cfg.flat
+    k = DOFS.index(dof)
+    acc = max(float(f.get("simulation.sensors.icm20948_accel.noise_std_m_s2", 0.05)), 1e-3)
+    att = float(f.get("simulation.sensors.dvl75_attitude.noise_std_rad", 0.005))
+    accel = {"accel": True, "accel_std": math.hypot(acc, cfg.gravity_m_s2 * att), "accel_jerk_psd": ACCEL_JERK_PSD}
+    if dof in ("surge", "sway"):
+        std = max(float(f.get("simulation.sensors.dvl75.noise_std_m_s", f["sensors.dvl75.velocity_std_m_s"])),
+                  1e-3)
+        std = math.hypot(std, 0.5 * float(f.get("simulation.sensors.dvl75.scale_error_fraction", 0.0)))
+        return {"log": "dvl", "column": k, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 12.0 ** 4,
+                **accel}
+    if dof == "heave":
+        pa = float(f.get("simulation.sensors.ms5837.noise_std_pa", 20.0))
+        std = max(pa / (cfg.water_density_kg_m3 * cfg.gravity_m_s2), 5e-4)
+        return {"log": "depth", "column": 0, "measured": "position", "std": std, "jerk_psd": std ** 2 * 12.0 ** 6,
+                **accel}
+    std = max(float(f.get("simulation.sensors.icm20948_gyro.noise_std_rad_s", 0.003)), 5e-4)
+    return {"log": "gyro", "column": k - 3, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 20.0 ** 4,
+            "accel": False}
+
+
+# ============================================================================ online
+class OnlineDofEstimator:
+    """Online estimator of one DOF: KinematicKalmanFilter on its sensor + RLS with forgetting.
+
+    ``on_sample(device, stamp_s, state)`` feeds the filter from the conditioned
+    :class:`~.maneuvers.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
+    one regressor row (``force``: thrust-model force/moment on the axis, N or N m). ``history`` holds
+    (t, theta, std, excitation_normalised) every ``history_every`` updates; ``converged_at_s`` is the
+    first time the inertia, quadratic damping and restoring have std <= ``identification.converged_relative_std``
+    |value| and the bias std <= 0.1 N (0.02 N m) (:meth:`_converged`).
+    """
+
+    _DEVICE = {"dvl": "dvl75", "depth": "ms5837", "gyro": "icm20948_gyro"}
+
+    def __init__(self, cfg: VehicleConfig, dof: str, history_every: int = 5) -> None:
+        self.dof = dof
+        self.settings = measurement_settings(cfg, dof)
+        s = self.settings
+        if s["accel"]:
+            self.kf = AccelAidedFilter(s["measured"], s["std"], s["accel_std"], s["accel_jerk_psd"])
+        else:
+            self.kf = KinematicKalmanFilter(s["measured"], jerk_psd=s["jerk_psd"], measurement_std=s["std"])
+        self.names = parameter_names(dof)
+        self.rls = RecursiveLeastSquares(len(self.names),
+                                         forgetting=float(cfg.flat["identification.forgetting_factor"]),
+                                         initial_covariance=1e4, names=self.names)
+        self.rel_tol = float(cfg.flat["identification.converged_relative_std"])
+        self.history_every = int(history_every)
+        self.history: dict[str, list] = {"t": [], "theta": [], "std": [], "excitation": []}
+        self.converged_at_s: Optional[float] = None
+        self._n = 0
+        self._device = self._DEVICE[s["log"]]
+
+    def on_sample(self, device: str, stamp_s: float, state) -> None:
+        """Feed the filter when ``device`` is this DOF's sensor (or the accelerometer, when aided)."""
+        s = self.settings
+        if self.kf.initialised and self.kf.t_s is not None and stamp_s < self.kf.t_s:
+            return
+        if device == "icm20948_accel" and s["accel"]:
+            if state.log["accel"]:
+                self.kf.step(stamp_s, None, state.log["accel"][-1][1][DOFS.index(self.dof)])
+            return
+        if device != self._device:
+            return
+        log = state.log[s["log"]]
+        if not log:
+            return
+        z = log[-1][1][s["column"]]
+        self.kf.step(stamp_s, z if math.isfinite(z) else None)
+
+    def update(self, t_s: float, force: float, state) -> None:
+        """One RLS row at ``t_s`` with the filtered velocity/acceleration and ``force``."""
+        if not self.kf.initialised:
+            return
+        _, v, a = self.kf.predict_to(t_s)
+        if not (math.isfinite(v) and math.isfinite(a)):
+            return
+        rr = None
+        if self.dof in ("roll", "pitch"):
+            rpy = np.nan_to_num(state.rpy_rad)
+            if state.log["attitude"]:  # the 10 Hz attitude carried forward with the gyro rate to t_s
+                rpy = rpy + np.nan_to_num(state.rates_frd_rad_s) * max(0.0, t_s - state.log["attitude"][-1][0])
+            rr = restoring_regressor(self.dof, rpy[0], rpy[1])
+        phi = regressor_matrix(self.dof, np.array([a]), np.array([v]), None if rr is None else np.array([rr]))[0]
+        if not (np.all(np.isfinite(phi)) and math.isfinite(force)):
+            return
+        self.rls.update(phi, force)
+        self._n += 1
+        if self._n % self.history_every == 0:
+            std = self.rls.std
+            self.history["t"].append(t_s)
+            self.history["theta"].append(self.rls.theta.copy())
+            self.history["std"].append(std.copy())
+            self.history["excitation"].append(self.rls.excitation_normalised)
+            if self.converged_at_s is None and self._converged(std):
+                self.converged_at_s = t_s
+
+    def _converged(self, std: np.ndarray) -> bool:
+        """Inertia, quadratic damping and restoring: std <= rel_tol |value|; bias: std <= 0.1 N (0.02 N m).
+        Linear damping is left out (small and weakly excited at the seed's speeds, seed 003 Table 3)."""
+        if self.rls.n_samples < 500 or not np.all(np.isfinite(std)):
+            return False
+        th = self.rls.theta
+        for i, name in enumerate(self.names):
+            if name.startswith("linear"):
+                continue
+            tol = (0.02 if self.dof in ("roll", "pitch", "yaw") else 0.1) if name == "bias" \
+                else self.rel_tol * abs(th[i])
+            if std[i] > tol:
+                return False
+        return True
+
+    def result(self) -> dict:
+        """Final {name: (value, std)} plus n_samples, excitation, converged_at_s."""
+        th, sd = self.rls.theta, self.rls.std
+        return {"parameters": {n: (float(v), float(s)) for n, v, s in zip(self.names, th, sd)},
+                "n_samples": self.rls.n_samples, "excitation_normalised": self.rls.excitation_normalised,
+                "converged_at_s": self.converged_at_s}
+
+
+# ============================================================================ offline
+@dataclass
+class DofIdentification:
+    """Offline identification of one DOF.
+
+    values/std/ci95 (dict name -> float / float / (low, high)): the reported (output-error) estimate of every
+    parameter of :func:`parameter_names` plus ``added_mass``; method: "output-error" (or "equation-error"
+    when the refinement failed). equation_error / online / steady: the other methods' {name: (value, std)}
+    (steady: None when too few windows, with ``steady_note``). truth: configured values (simulation only).
+    pool_time_s: duration of the DOF's manoeuvres; rls_time_s: pool time until the RLS converged (None:
+    never); steady_time_s: pool time until the end of the last steady window used. signals: arrays for the
+    report (t, velocity, acceleration, force, fitted velocity, steady window means).
+    """
+
+    dof: str
+    names: list
+    values: dict
+    std: dict
+    ci95: dict
+    method: str
+    residual_dof: int
+    equation_error: dict
+    online: dict
+    steady: Optional[dict]
+    steady_note: str
+    truth: dict
+    units: dict
+    pool_time_s: float
+    rls_time_s: Optional[float]
+    steady_time_s: Optional[float]
+    signals: dict = field(default_factory=dict)
+
+    def relative_error(self, name: str, source: str = "final") -> float:
+        """(estimate - truth) / |truth| of one parameter (NaN when unknown or truth 0)."""
+        est = {"final": self.values, "equation_error": {k: v[0] for k, v in self.equation_error.items()},
+               "online": {k: v[0] for k, v in self.online.items()},
+               "steady": {k: v[0] for k, v in (self.steady or {}).items()}}[source].get(name)
+        tr = self.truth.get(name)
+        if est is None or tr is None or tr == 0.0:
+            return math.nan
+        return (est - tr) / abs(tr)
+
+
+def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+    if not log:
+        return np.zeros(0), np.zeros(0)
+    t = np.array([s[0] for s in log])
+    z = np.array([s[1][column] for s in log], dtype=float)
+    m = (t >= t0) & (t <= t1)
+    return t[m], z[m]
+
+
+def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured, jerk_psd, std, accel=None):
+    """RTS-smoothed (pos, vel, acc) at the tick times from measurements at their own times.
+
+    accel: optional (t_acc, a_acc, accel_std, accel_jerk_psd) to use the accelerometer-aided smoother."""
+    key_ticks = np.rint(np.asarray(t_ticks) * 1e6).astype(np.int64)
+    key_meas = np.rint(np.asarray(t_meas) * 1e6).astype(np.int64)
+    keys = np.union1d(key_ticks, key_meas)
+    if accel is not None:
+        key_acc = np.rint(np.asarray(accel[0]) * 1e6).astype(np.int64)
+        keys = np.union1d(keys, key_acc)
+    z = np.full(keys.size, np.nan)
+    z[np.searchsorted(keys, key_meas)] = z_meas
+    if accel is None:
+        pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd,
+                                          measurement_std=std)
+    else:
+        a = np.full(keys.size, np.nan)
+        a[np.searchsorted(keys, key_acc)] = accel[1]
+        pos, vel, acc = smooth_with_acceleration(keys * 1e-6, z, a, measured, std, accel[2], accel[3])
+    idx = np.searchsorted(keys, key_ticks)
+    return pos[idx], vel[idx], acc[idx]
+
+
+def _output_error(dof: str, theta0: np.ndarray, t: np.ndarray, force: np.ndarray, force_cmd: np.ndarray,
+                  tau_lag_s: float, rr: Optional[np.ndarray], x_s: np.ndarray, v_s: np.ndarray,
+                  z_tick: np.ndarray, measured: str, segment_s: float = 3.0):
+    """Output-error fit (module docstring, method 3). Returns (theta, covariance, n - p, fitted velocity)."""
+    h = float(np.median(np.diff(t)))
+    seg = max(10, int(round(segment_s / h)))
+    nseg = len(t) // seg
+    if nseg < 2:
+        raise EstimationError("record too short for the output-error refinement")
+    idx = np.arange(nseg * seg).reshape(nseg, seg)
+    F, Fc = force[idx], force_cmd[idx]
+    R = None if rr is None else rr[idx]
+    Z = z_tick[idx]
+    mask = np.isfinite(Z)
+    mask[:, 0] = False
+    ok_seg = np.isfinite(v_s[idx[:, 0]]) & np.isfinite(x_s[idx[:, 0]]) & (mask.sum(axis=1) >= 3)
+    if ok_seg.sum() < 2:
+        raise EstimationError("too few usable segments for the output-error refinement")
+    F, Fc, Z, mask, idx = F[ok_seg], Fc[ok_seg], Z[ok_seg], mask[ok_seg], idx[ok_seg]
+    if R is not None:
+        R = R[ok_seg]
+    v0 = v_s[idx[:, 0]]
+    x0 = x_s[idx[:, 0]]
+    decay = [math.exp(-s / tau_lag_s) if tau_lag_s > 0 else 0.0 for s in (0.0, 0.5 * h, h)]
+
+    p_model = theta0.size
+    free_v0 = measured == "position"
+
+    def simulate(params):
+        theta = params[:p_model]
+        m = theta[0]
+        rest = theta[1:]
+        v = params[p_model:].copy() if free_v0 else v0.copy()
+        x = x0.copy()
+        V = np.empty(F.shape)
+        X = np.empty(F.shape)
+        V[:, 0], X[:, 0] = v, x
+        for i in range(F.shape[1] - 1):
+            f0 = Fc[:, i] + (F[:, i] - Fc[:, i]) * decay[0]
+            fh = Fc[:, i] + (F[:, i] - Fc[:, i]) * decay[1]
+            f1 = Fc[:, i] + (F[:, i] - Fc[:, i]) * decay[2]
+            r0 = rh = r1 = None
+            if R is not None:
+                r0, r1 = R[:, i], R[:, i + 1]
+                rh = 0.5 * (r0 + r1)
+
+            def acc(vv, ff, r):
+                return (ff - _rest_terms(dof, vv, r) @ rest) / m
+            k1 = acc(v, f0, r0)
+            k2 = acc(v + 0.5 * h * k1, fh, rh)
+            k3 = acc(v + 0.5 * h * k2, fh, rh)
+            k4 = acc(v + h * k3, f1, r1)
+            x = x + h * v + h * h / 6.0 * (k1 + k2 + k3)
+            v = v + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            V[:, i + 1], X[:, i + 1] = v, x
+        return V, X
+
+    def residuals(theta):
+        V, X = simulate(theta)
+        if measured == "velocity":
+            r = np.where(mask, V - np.nan_to_num(Z), 0.0)
+        else:
+            r = np.where(mask, X - np.nan_to_num(Z), 0.0)
+            off = r.sum(axis=1) / mask.sum(axis=1)
+            r = np.where(mask, r - off[:, None], 0.0)
+        return r[mask]
+
+    th0 = theta0.copy()
+    th0[0] = max(th0[0], 1e-2)
+    if free_v0:  # initial velocity of every segment free (a wrong v0 would bias the integrated depth)
+        th0 = np.concatenate([th0, v0])
+    lower = np.full(th0.size, -np.inf)
+    lower[0] = 1e-3
+    sol = optimize.least_squares(residuals, th0, bounds=(lower, np.inf), x_scale="jac", method="trf")
+    r = sol.fun
+    n, p = r.size, th0.size
+    n_extra = mask.shape[0] if measured == "position" else 0
+    dof_res = n - p - n_extra
+    sigma2 = float(r @ r) / max(dof_res, 1)
+    J = sol.jac
+    cov = (sigma2 * np.linalg.pinv(J.T @ J))[:p_model, :p_model]
+    # AR(1) inflation from consecutive residuals inside segments
+    res_mat = np.zeros(mask.shape)
+    res_mat[mask] = r
+    pair = mask[:, 1:] & mask[:, :-1]
+    num = float(np.sum(np.where(pair, res_mat[:, 1:] * res_mat[:, :-1], 0.0)))
+    den = float(np.sum(res_mat ** 2))
+    rho = max(0.0, min(0.95, num / den)) if den > 0 else 0.0
+    cov *= (1.0 + rho) / (1.0 - rho)
+    V, _ = simulate(sol.x)
+    v_fit = np.full(len(t), np.nan)
+    v_fit[idx.ravel()] = V.ravel()
+    return sol.x[:p_model], cov, dof_res, v_fit, rho
+
+
+def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, restoring_coefficient: float = 0.0,
+                     min_duration_s: float = 2.0, max_std: float = 0.02, max_slope: float = 0.02):
+    """The seed's method: steady windows per run, fit_drag on window means (seed 003 eqs. 2-8).
+
+    t, velocity (smoothed), force (thrust model), run_id (-1 outside runs) (n,); restoring (n,) and its
+    coefficient are subtracted from the force for roll/pitch. Returns (params {name: (value, std)},
+    windows list, note, end time of the last window). Heave: one fit per direction (names with
+    _positive/_negative). params is None when there are too few windows (note says why).
+    """
+    t = np.asarray(t, dtype=float)
+    v = np.asarray(velocity, dtype=float)
+    f = np.asarray(force, dtype=float)
+    if restoring is not None:
+        f = f - restoring_coefficient * np.asarray(restoring, dtype=float)
+    ok = np.isfinite(v) & np.isfinite(f)
+    t, v, f, run = t[ok], v[ok], f[ok], np.asarray(run_id)[ok]
+    wins = [w for w in detect_steady_windows(t, v, run.astype(float), min_duration_s=min_duration_s,
+                                             max_slope=max_slope, max_std=max_std, force_tolerance=0.5)
+            if run[w.start] >= 0]
+    vm = np.array([w.velocity_mean for w in wins])
+    fm = np.array([float(np.mean(f[w.start:w.stop])) for w in wins])
+    t_end = max((w.t_stop_s for w in wins), default=None)
+    out: dict = {}
+    try:
+        if dof == "heave":
+            for sign, suffix in ((1, "positive"), (-1, "negative")):
+                sel = np.sign(vm) == sign
+                if sel.sum() < 4:
+                    return None, wins, f"{int(sel.sum())} steady windows in {suffix} heave (need 4)", t_end
+                fit = fit_drag(vm[sel], fm[sel])
+                out[f"quadratic_damping_{suffix}"] = (fit.quadratic_damping, fit.quadratic_damping_std)
+                out[f"linear_damping_{suffix}"] = (fit.linear_damping, fit.linear_damping_std)
+                out[f"bias_{suffix}"] = (fit.bias, fit.bias_std)
+        else:
+            if len(wins) < 4:
+                return None, wins, f"{len(wins)} steady windows (need 4)", t_end
+            fit = fit_drag(vm, fm)
+            out = {"quadratic_damping": (fit.quadratic_damping, fit.quadratic_damping_std),
+                   "linear_damping": (fit.linear_damping, fit.linear_damping_std),
+                   "bias": (fit.bias, fit.bias_std)}
+    except EstimationError as exc:
+        return None, wins, f"steady-state fit failed: {exc}", t_end
+    return out, wins, f"{len(wins)} steady windows", t_end
+
+
+def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True) -> DofIdentification:
+    """Offline identification of one DOF from a :class:`~.campaign.CampaignRecord` (module docstring).
+
+    Raises :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the DOF has no usable data.
+    """
+    k = DOFS.index(dof)
+    sl = record.dof_slice(dof)
+    t = record.t_s[sl]
+    if t.size < 50:
+        raise EstimationError(f"{dof}: no manoeuvre data")
+    force = record.wrench_frd[sl, k]
+    force_cmd = record.wrench_cmd_frd[sl, k]
+    run_id = record.run_id[sl]
+    ms = measurement_settings(cfg, dof)
+    tm, zm = _log_arrays(record.sensors[ms["log"]], ms["column"], t[0] - 2.0, t[-1])
+    if np.sum(np.isfinite(zm)) < 20:
+        raise EstimationError(f"{dof}: too few sensor samples")
+    aid = None
+    if ms["accel"] and record.sensors.get("accel"):
+        ta, aa = _log_arrays(record.sensors["accel"], k, t[0] - 2.0, t[-1])
+        aid = (ta, aa, ms["accel_std"], ms["accel_jerk_psd"])
+    x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
+    rr = None
+    if dof in ("roll", "pitch"):
+        ta, roll = _log_arrays(record.sensors["attitude"], 0, t[0] - 2.0, t[-1])
+        _, pitch = _log_arrays(record.sensors["attitude"], 1, t[0] - 2.0, t[-1])
+        std_att = max(float(cfg.flat.get("simulation.sensors.dvl75_attitude.noise_std_rad", 0.005)), 1e-4)
+        roll_s = _smooth_on_ticks(t, ta, roll, "position", std_att ** 2 * 15.0 ** 6, std_att)[0]
+        pitch_s = _smooth_on_ticks(t, ta, pitch, "position", std_att ** 2 * 15.0 ** 6, std_att)[0]
+        rr = restoring_regressor(dof, roll_s, pitch_s)
+    names = parameter_names(dof)
+    X = regressor_matrix(dof, a_s, v_s, rr)
+    ok = np.all(np.isfinite(X), axis=1) & np.isfinite(force)
+    ee = fit_linear_model(X[ok], force[ok], names)
+    theta, std, dof_res, method = ee.theta, ee.std, ee.n - ee.p, "equation-error"
+    cov = ee.covariance
+    v_fit = np.full(t.size, np.nan)
+    rho = math.nan
+    if output_error:
+        # measured samples on the tick grid (samples exactly at a tick; others are skipped)
+        z_tick = np.full(t.size, np.nan)
+        pos = np.rint((tm - t[0]) / record.tick_s).astype(int)
+        good = (pos >= 0) & (pos < t.size)
+        good &= np.abs(tm - t[np.clip(pos, 0, t.size - 1)]) < 1e-6
+        z_tick[pos[good]] = zm[good]
+        try:
+            th, cv, dres, v_fit, rho = _output_error(dof, ee.theta, t, force, force_cmd, record.time_constant_s,
+                                                     rr, x_s, v_s, z_tick, ms["measured"])
+            if np.all(np.isfinite(th)) and np.all(np.isfinite(np.diag(cv))):
+                theta, cov, dof_res, method = th, cv, dres, "output-error"
+                std = np.sqrt(np.clip(np.diag(cv), 0.0, None))
+        except (EstimationError, ValueError, np.linalg.LinAlgError):
+            pass
+    tcrit = float(stats.t.ppf(0.975, max(int(dof_res), 1)))
+    values = {n: float(v) for n, v in zip(names, theta)}
+    stds = {n: float(s) for n, s in zip(names, std)}
+    rigid = rigid_inertia(cfg, dof)
+    values["added_mass"] = values["inertia"] - rigid
+    stds["added_mass"] = stds["inertia"]
+    ci = {n: (values[n] - tcrit * stds[n], values[n] + tcrit * stds[n]) for n in values}
+    steady, wins, note, t_end = steady_state_fit(dof, t, v_s, force, run_id, rr, values.get("restoring", 0.0))
+    online = record.online[dof].result() if dof in record.online else {"parameters": {}, "converged_at_s": None}
+    t0 = float(t[0])
+    conv = online.get("converged_at_s")
+    return DofIdentification(
+        dof=dof, names=names, values=values, std=stds, ci95=ci, method=method, residual_dof=int(dof_res),
+        equation_error={n: (float(v), float(s)) for n, v, s in zip(names, ee.theta, ee.std)},
+        online=online["parameters"], steady=steady, steady_note=note, truth=truth_parameters(cfg, dof),
+        units=parameter_units(dof), pool_time_s=float(t[-1] - t0),
+        rls_time_s=None if conv is None else float(conv - t0),
+        steady_time_s=None if (steady is None or t_end is None) else float(t_end - t0),
+        signals={"t": t, "velocity": v_s, "acceleration": a_s, "force": force, "velocity_fit": v_fit,
+                 "restoring": rr, "windows": [(w.velocity_mean, float(np.mean(force[w.start:w.stop])))
+                                              for w in wins], "residual_autocorrelation": rho,
+                 "covariance": cov, "online_history": record.online[dof].history if dof in record.online else {}})
+
+
+def identify_all(record, cfg: VehicleConfig, output_error: bool = True) -> dict:
+    """:func:`identify_dof` for every DOF with a manoeuvre window in ``record`` (DOFs without usable data are
+    left out; :func:`identify_all_with_errors` also returns why)."""
+    return identify_all_with_errors(record, cfg, output_error)[0]
+
+
+def identify_all_with_errors(record, cfg: VehicleConfig, output_error: bool = True) -> tuple[dict, dict]:
+    """({dof: DofIdentification}, {dof: error message}) for every DOF run in ``record``."""
+    out, errors = {}, {}
+    for dof in DOFS:
+        if dof not in record.windows:
+            continue
+        try:
+            out[dof] = identify_dof(record, dof, cfg, output_error)
+        except EstimationError as exc:
+            errors[dof] = str(exc)
+    return out, errors

@@ -1,0 +1,182 @@
+"""Identification report: report/index.html with PNG plots (matplotlib, Agg backend; design.md §5).
+
+Plots per DOF:
+
+* ``<dof>_force_velocity.png`` - force (moment) vs velocity as seed 003 Figs. 8-10: the drag samples
+  tau - M nu_dot - k_r s(eta) (thrust model minus the identified inertial and restoring terms) against the
+  smoothed velocity, the steady-window means of the seed's method, and the fitted curve
+  k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
+* ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band and the
+  reported (offline) value.
+* ``free_decay.png`` - when a :class:`~hindrax_ident.estimation.free_decay.FreeDecayResult` is given: the
+  displacement record, its peaks and the fitted envelope (seed 000 Figs. 6-7).
+"""
+from __future__ import annotations
+
+import html
+import math
+from pathlib import Path
+from typing import Any, Mapping, Optional
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy import stats  # noqa: E402
+
+from .estimators import _rest_terms  # noqa: E402
+
+__all__ = ["write_report", "summary_rows"]
+
+
+def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
+    """One row per DOF and parameter: value, std, ci95, configured truth, relative error, other methods."""
+    rows = []
+    for dof, r in identifications.items():
+        for name in list(r.names) + ["added_mass"]:
+            tr = r.truth.get(name)
+            v = r.values[name]
+            err = (v - tr) / abs(tr) if tr not in (None, 0.0) else math.nan
+            rows.append({"dof": dof, "parameter": name, "value": v, "std": r.std[name], "unit": r.units[name],
+                         "ci95": r.ci95[name], "truth": tr, "relative_error": err,
+                         "equation_error": r.equation_error.get(name, (math.nan, math.nan))[0],
+                         "rls": r.online.get(name, (math.nan, math.nan))[0],
+                         "steady": (r.steady or {}).get(name, (math.nan, math.nan))[0]})
+    return rows
+
+
+def _force_velocity_plot(r, path: Path) -> None:
+    s = r.signals
+    v, a, f = s["velocity"], s["acceleration"], s["force"]
+    drag = f - r.values["inertia"] * a
+    if s.get("restoring") is not None:
+        drag = drag - r.values.get("restoring", 0.0) * s["restoring"]
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    ok = np.isfinite(v) & np.isfinite(drag)
+    ax.plot(v[ok][::3], drag[ok][::3], ".", ms=2, alpha=0.35, color="0.5", label="tau - M nu_dot (samples)")
+    if s.get("windows"):
+        wv, wf = zip(*s["windows"])
+        ax.plot(wv, wf, "s", color="C3", label="steady-window means (seed 003)")
+    vmax = float(np.nanmax(np.abs(v[ok]))) if np.any(ok) else 1.0
+    grid = np.linspace(-vmax, vmax, 201)
+    rest = _rest_terms(r.dof, grid, np.zeros_like(grid))
+    names = list(r.names)[1:]
+    theta = np.array([r.values[n] for n in names])
+    curve = rest @ theta
+    cov = np.asarray(s.get("covariance"))
+    if cov.ndim == 2 and cov.shape[0] == len(r.names):
+        c = cov[1:, 1:]
+        sd = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", rest, c, rest), 0.0, None))
+        tcrit = float(stats.t.ppf(0.975, max(r.residual_dof, 1)))
+        ax.fill_between(grid, curve - tcrit * sd, curve + tcrit * sd, color="C0", alpha=0.3, label="95 % band")
+    ax.plot(grid, curve, "C0", label="fit k_q|v|v + k_l v + b")
+    rot = r.dof in ("roll", "pitch", "yaw")
+    ax.set_xlabel(f"{r.dof} velocity ({'rad/s' if rot else 'm/s'})")
+    ax.set_ylabel(f"{'moment (N m)' if rot else 'force (N)'}")
+    ax.set_title(f"{r.dof}: force vs velocity ({r.method})")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _rls_plot(r, path: Path) -> bool:
+    h = r.signals.get("online_history") or {}
+    if not h or not h.get("t"):
+        return False
+    t = np.asarray(h["t"]) - h["t"][0]
+    th = np.asarray(h["theta"])
+    sd = np.asarray(h["std"])
+    n = th.shape[1]
+    fig, axes = plt.subplots(n, 1, figsize=(6, 1.6 * n), sharex=True)
+    for i, name in enumerate(r.names):
+        ax = axes[i]
+        ax.plot(t, th[:, i], "C0", lw=1)
+        band = np.nan_to_num(1.96 * sd[:, i], nan=0.0)
+        ax.fill_between(t, th[:, i] - band, th[:, i] + band, color="C0", alpha=0.25)
+        ax.axhline(r.values[name], color="C2", ls="--", lw=1, label="offline")
+        tr = r.truth.get(name)
+        if tr is not None:
+            ax.axhline(tr, color="k", ls=":", lw=1, label="configured")
+        ax.set_ylabel(name.replace("_damping", "").replace("_", " "), fontsize=7)
+        lo, hi = np.nanpercentile(th[len(th) // 5:, i], [2, 98]) if len(th) > 5 else (None, None)
+        if lo is not None and np.isfinite(lo):
+            span = max(hi - lo, 0.2 * abs(r.values[name]) + 1e-3)
+            ax.set_ylim(min(lo, r.values[name]) - 0.5 * span, max(hi, r.values[name]) + 0.5 * span)
+    axes[0].legend(fontsize=6)
+    axes[0].set_title(f"{r.dof}: RLS convergence (+-1.96 std)")
+    axes[-1].set_xlabel("time in the DOF's manoeuvres (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return True
+
+
+def _free_decay_plot(fd, path: Path) -> None:
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.plot(fd.t_s, fd.displacement_m * 1e3, lw=1, label="displacement")
+    ax.plot(fd.peak_times_s, fd.peak_amplitudes_m * 1e3, "o", ms=3, label="peaks")
+    if getattr(fd, "envelope_m", None) is not None and len(fd.envelope_m) == len(fd.t_s):
+        ax.plot(fd.t_s, fd.envelope_m * 1e3, "--", lw=1, label="envelope")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("displacement (mm)")
+    ax.set_title(f"free decay: omega_d {fd.omega_d_rad_s:.2f} rad/s, zeta {fd.zeta:.3f}, "
+                 f"m_ad {fd.added_mass_kg:.3f} kg")
+    ax.legend(fontsize=7)
+    ax.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _fmt(x, digits: int = 4) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "-"
+    return f"{x:.{digits}g}"
+
+
+def write_report(out_dir: str | Path, identifications: Mapping[str, Any], document: Mapping,
+                 free_decay: Optional[Any] = None, campaign_note: str = "") -> Path:
+    """Write ``out_dir/index.html`` and the PNGs; returns the index path."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>Hindrax identification</title>",
+             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto} table{border-collapse:collapse}"
+             " td,th{border:1px solid #ccc;padding:2px 6px;font-size:13px;text-align:right}</style></head><body>",
+             "<h1>Hindrax hydrodynamic identification</h1>"]
+    prov = document.get("provenance", {})
+    parts.append("<p>" + "<br>".join(f"<b>{html.escape(str(k))}</b>: {html.escape(str(v))}" for k, v in prov.items())
+                 + "</p>")
+    if campaign_note:
+        parts.append(f"<p>{html.escape(campaign_note)}</p>")
+    parts.append("<h2>Summary</h2><table><tr><th>DOF</th><th>parameter</th><th>value</th><th>std</th><th>unit</th>"
+                 "<th>95 % interval</th><th>configured</th><th>rel. error</th><th>equation-error LS</th>"
+                 "<th>RLS</th><th>steady-state LS</th></tr>")
+    for row in summary_rows(identifications):
+        lo, hi = row["ci95"]
+        parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
+            row["dof"], row["parameter"], _fmt(row["value"]), _fmt(row["std"], 2), row["unit"],
+            f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(row["truth"]),
+            "-" if not math.isfinite(row["relative_error"]) else f"{100 * row['relative_error']:+.2f} %",
+            _fmt(row["equation_error"]), _fmt(row["rls"]), _fmt(row["steady"]))) + "</tr>")
+    parts.append("</table>")
+    for dof, r in identifications.items():
+        parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time "
+                     f"{r.pool_time_s:.0f} s; RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: "
+                     f"{html.escape(r.steady_note)}</p>")
+        fv = out / f"{dof}_force_velocity.png"
+        _force_velocity_plot(r, fv)
+        parts.append(f"<img src='{fv.name}' alt='{dof} force vs velocity'>")
+        rl = out / f"{dof}_rls.png"
+        if _rls_plot(r, rl):
+            parts.append(f"<img src='{rl.name}' alt='{dof} RLS convergence'>")
+    if free_decay is not None:
+        fd = out / "free_decay.png"
+        _free_decay_plot(free_decay, fd)
+        parts.append("<h2>Free decay (seed 000)</h2><img src='free_decay.png' alt='free decay'>")
+    parts.append("</body></html>")
+    index = out / "index.html"
+    index.write_text("\n".join(parts))
+    return index

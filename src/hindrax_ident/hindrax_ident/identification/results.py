@@ -1,0 +1,180 @@
+"""identification.yaml: identified hydrodynamic parameters with provenance, and configuration overrides.
+
+Schema (design.md §5; version :data:`SCHEMA_VERSION`)::
+
+    schema_version: 1
+    provenance: {source: "simulation" | <bag path>, date: <UTC ISO 8601>, configuration_sha256: <hex>,
+                 water_density_kg_m3: <float>, method: <text>, seed: <int or null>}
+    dofs:
+      <dof>:                        # surge sway heave roll pitch yaw
+        <parameter>: {value: <float>, std: <float>, unit: <text>, ci95: [<low>, <high>]}
+        method: "output-error" | "equation-error"
+        pool_time_s: <float>
+        comparison: {equation_error: {<parameter>: [value, std]}, rls: {...}, steady_state: {...} | null,
+                     steady_state_note: <text>, rls_time_s: <float|null>, steady_state_time_s: <float|null>}
+        configured: {<parameter>: <float>}     # optional: the configuration's values (simulation runs)
+
+<parameter>: ``inertia`` (rigid + added; kg or kg m^2), ``added_mass`` (inertia - rigid),
+``quadratic_damping`` and ``linear_damping`` (heave: ``*_positive`` and ``*_negative``, positive heave = down,
+seed 003 §4.1), ``bias`` (N or N m; heave: the FRD force holding depth), roll/pitch also ``restoring`` (N m).
+Values are positive Fossen/SNAME coefficients in SI (as the configuration, ros_ws/config/hindrax.yaml).
+
+:func:`to_config_overrides` maps the file onto ``hydrodynamics.*`` configuration keys, so
+``load_config(path, overrides=...)`` (and hence the simulator) can use the identified model.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
+
+__all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "write_identification",
+           "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS"]
+
+SCHEMA_VERSION = 1
+
+
+class IdentificationFileError(ValueError):
+    """identification.yaml is unreadable or does not follow the schema (message names the key)."""
+
+
+def REQUIRED_PARAMETERS(dof: str) -> tuple[str, ...]:  # noqa: N802 - reads like a table
+    """Parameters every DOF entry must carry."""
+    damping = (("quadratic_damping_positive", "quadratic_damping_negative", "linear_damping_positive",
+                "linear_damping_negative") if dof == "heave" else ("quadratic_damping", "linear_damping"))
+    extra = ("restoring",) if dof in ("roll", "pitch") else ()
+    return ("inertia", "added_mass") + damping + ("bias",) + extra
+
+
+def _f(x) -> float | None:
+    return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
+
+
+def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
+                  seed: int | None = None, method: str | None = None,
+                  include_configured: bool = True) -> dict:
+    """The identification.yaml document from :class:`~.estimators.DofIdentification` objects (per DOF)."""
+    dofs: dict = {}
+    for dof, r in identifications.items():
+        entry: dict = {}
+        for name in REQUIRED_PARAMETERS(dof):
+            lo, hi = r.ci95[name]
+            entry[name] = {"value": float(r.values[name]), "std": float(r.std[name]), "unit": r.units[name],
+                           "ci95": [float(lo), float(hi)]}
+        entry["method"] = r.method
+        entry["pool_time_s"] = float(r.pool_time_s)
+        entry["comparison"] = {
+            "equation_error": {k: [float(v), float(s)] for k, (v, s) in r.equation_error.items()},
+            "rls": {k: [float(v), _f(s)] for k, (v, s) in r.online.items()},
+            "steady_state": None if r.steady is None else {k: [float(v), _f(s)] for k, (v, s) in r.steady.items()},
+            "steady_state_note": r.steady_note,
+            "rls_time_s": _f(r.rls_time_s),
+            "steady_state_time_s": _f(r.steady_time_s),
+        }
+        if include_configured:
+            entry["configured"] = {k: float(v) for k, v in r.truth.items()}
+        dofs[dof] = entry
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "provenance": {
+            "source": source,
+            "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
+            "configuration_sha256": cfg.sha256,
+            "water_density_kg_m3": float(cfg.water_density_kg_m3),
+            "method": method or ("seed 003 §4 self-propelled ladder; output-error refinement of equation-error "
+                                 "batch LS on RTS-smoothed sensor signals; RLS online; steady-state LS "
+                                 "(seed 003 eqs. 2-8) for comparison"),
+            "seed": seed,
+        },
+        "dofs": dofs,
+    }
+
+
+def write_identification(path: str | Path, document: Mapping) -> Path:
+    """Validate ``document`` (:func:`validate`) and write it as YAML; returns the path."""
+    validate(document)
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text("# Hindrax identified hydrodynamics (hindrax_ident.identification.results, schema "
+                 f"{SCHEMA_VERSION})\n" + yaml.safe_dump(dict(document), sort_keys=False, default_flow_style=None))
+    return p
+
+
+def validate(doc: Any) -> dict:
+    """Check the schema; returns the document. Raises :class:`IdentificationFileError` naming the bad key."""
+    if not isinstance(doc, Mapping):
+        raise IdentificationFileError("identification file: top level must be a mapping")
+    if doc.get("schema_version") != SCHEMA_VERSION:
+        raise IdentificationFileError(f"schema_version: expected {SCHEMA_VERSION}, got {doc.get('schema_version')!r}")
+    prov = doc.get("provenance")
+    if not isinstance(prov, Mapping):
+        raise IdentificationFileError("provenance: missing mapping")
+    for key in ("source", "date", "configuration_sha256", "water_density_kg_m3", "method", "seed"):
+        if key not in prov:
+            raise IdentificationFileError(f"provenance.{key}: missing")
+    dofs = doc.get("dofs")
+    if not isinstance(dofs, Mapping) or not dofs:
+        raise IdentificationFileError("dofs: missing or empty mapping")
+    for dof, entry in dofs.items():
+        if dof not in DOFS:
+            raise IdentificationFileError(f"dofs.{dof}: unknown DOF (one of {', '.join(DOFS)})")
+        if not isinstance(entry, Mapping):
+            raise IdentificationFileError(f"dofs.{dof}: must be a mapping")
+        for name in REQUIRED_PARAMETERS(dof):
+            par = entry.get(name)
+            if not isinstance(par, Mapping):
+                raise IdentificationFileError(f"dofs.{dof}.{name}: missing")
+            for key in ("value", "std", "unit"):
+                if key not in par:
+                    raise IdentificationFileError(f"dofs.{dof}.{name}.{key}: missing")
+            for key in ("value", "std"):
+                v = par[key]
+                if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(float(v)):
+                    raise IdentificationFileError(f"dofs.{dof}.{name}.{key}: must be a finite number, got {v!r}")
+            if par["std"] < 0:
+                raise IdentificationFileError(f"dofs.{dof}.{name}.std: must be >= 0")
+    return dict(doc)
+
+
+def read_identification(path: str | Path) -> dict:
+    """Read and validate identification.yaml. Raises :class:`IdentificationFileError` (one-line message)."""
+    p = Path(path)
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise IdentificationFileError(f"{p}: cannot read ({exc.strerror})") from exc
+    except yaml.YAMLError as exc:
+        raise IdentificationFileError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from exc
+    return validate(doc)
+
+
+def to_config_overrides(document: Mapping) -> dict[str, float]:
+    """``hydrodynamics.*`` configuration keys -> identified values (for ``load_config(..., overrides=)``).
+
+    Added mass and damping only (the configuration's inertia and buoyancy come from mass, volume and
+    geometry). Negative damping estimates (unphysical; the schema requires >= 0) are clipped to 0.
+    """
+    validate(document)
+    out: dict[str, float] = {}
+    for dof, e in document["dofs"].items():
+        base = f"hydrodynamics.{dof}."
+        val = {k: float(v["value"]) for k, v in e.items() if isinstance(v, Mapping) and "value" in v}
+        if dof in ROTATIONAL_DOFS:
+            out[base + "added_mass_kg_m2"] = max(0.0, val["added_mass"])
+            out[base + "linear_damping_kg_m2_s"] = max(0.0, val["linear_damping"])
+            out[base + "quadratic_damping_kg_m2"] = max(0.0, val["quadratic_damping"])
+        elif dof == "heave":
+            out[base + "added_mass_kg"] = max(0.0, val["added_mass"])
+            for d in ("positive", "negative"):
+                out[base + f"linear_damping_{d}_kg_s"] = max(0.0, val[f"linear_damping_{d}"])
+                out[base + f"quadratic_damping_{d}_kg_m"] = max(0.0, val[f"quadratic_damping_{d}"])
+        else:
+            out[base + "added_mass_kg"] = max(0.0, val["added_mass"])
+            out[base + "linear_damping_kg_s"] = max(0.0, val["linear_damping"])
+            out[base + "quadratic_damping_kg_m"] = max(0.0, val["quadratic_damping"])
+    return out

@@ -1,0 +1,157 @@
+"""`hindrax ident free-decay`, `hindrax ident thruster-fit` and `hindrax run` with synthetic inputs.
+
+Free decay: an analytic damped oscillator released from rest (seed 000 eq. 1) with the seed 000 Table 5
+conditions (k_eq 659.9 N/m, m_b 0.39 kg, added mass 0.82 kg, zeta 0.15, A 20 mm, V 0.00056 m^3, 330 Hz, 10 s);
+expected values from seed 000 eqs. 5-9. Thruster fit: the configured cubic (seed 003 Table 2 negative row)
+and its point reflection, plus 0.05 N noise.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident import cli
+from hindrax_ident.estimation.thruster_fit import evaluate_cubic, point_reflection
+from hindrax_ident.identification.results import read_identification
+
+K, MB, MAD, ZETA, A, V = 659.9, 0.39, 0.82, 0.15, 0.02, 0.00056
+
+
+def _free_decay_csv(path):
+    m = MB + MAD
+    wn = math.sqrt(K / m)
+    wd = wn * math.sqrt(1 - ZETA ** 2)
+    t = np.arange(0, 10.0, 1 / 330.0)
+    tau = np.clip(t - 0.5, 0.0, None)  # held at A until release at 0.5 s
+    env = np.exp(-ZETA * wn * tau)
+    x = A * env * (np.cos(wd * tau) + ZETA * wn / wd * np.sin(wd * tau))
+    xd = -A * wn ** 2 / wd * env * np.sin(wd * tau)
+    acc = np.where(t < 0.5, 0.0, -wn ** 2 * x - 2 * ZETA * wn * xd)
+    with open(path, "w") as fh:
+        fh.write("time_s,acceleration_m_s2\n")
+        for ti, ai in zip(t, acc):
+            fh.write(f"{ti:.6f},{ai:.9f}\n")
+    return wd
+
+
+def test_free_decay_prints_seed_000_quantities(tmp_path, capsys):
+    f = tmp_path / "decay.csv"
+    wd = _free_decay_csv(f)
+    rc = cli.main(["ident", "free-decay", str(f), "--stiffness", str(K), "--mass", str(MB), "--volume", str(V)])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["omega_d_rad_s"] == pytest.approx(wd, rel=0.01)
+    assert out["zeta"] == pytest.approx(ZETA, rel=0.05)
+    assert out["added_mass_kg"] == pytest.approx(MAD, rel=0.02)  # eq. 5
+    assert out["added_mass_simplified_kg"] == pytest.approx(K / wd ** 2 - MB, rel=0.02)  # eq. 7
+    assert out["damping_n_s_per_m"] == pytest.approx(2 * ZETA * math.sqrt(K * (MB + MAD)), rel=0.06)  # eq. 6
+    assert out["c_m"] == pytest.approx(MAD / (1000.0 * V), rel=0.02)  # eq. 8
+    assert out["kc"] == pytest.approx(2 * math.pi * A / V ** (1 / 3), rel=0.05)  # eq. 9
+
+
+def test_free_decay_bad_input(tmp_path, capsys):
+    rc = cli.main(["ident", "free-decay", str(tmp_path / "nope.csv"), "--stiffness", "1", "--mass", "1",
+                   "--volume", "1"])
+    assert rc == 1
+    err = capsys.readouterr().err.strip()
+    assert "cannot read" in err and len(err.splitlines()) == 1
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,a\n0,abc\n")
+    assert cli.main(["ident", "free-decay", str(bad), "--stiffness", "1", "--mass", "1", "--volume", "1"]) == 1
+    assert "not numbers" in capsys.readouterr().err
+
+
+def _thrust_csv(path, cfg):
+    neg = cfg.thrusters.curve_negative
+    pos = point_reflection(*neg)
+    rng = np.random.default_rng(4)
+    # outside the ESC dead band only (the cubic branches end at +-1.09 N, not at 0 N, seed 003 Table 2)
+    pw = np.concatenate([np.arange(1100, 1480, 10.0), np.arange(1530, 1901, 10.0)])
+    thrust = np.where(pw < 1500, evaluate_cubic(*neg, pw), evaluate_cubic(*pos, pw))
+    thrust = thrust + rng.normal(0, 0.05, pw.size)
+    with open(path, "w") as fh:
+        fh.write("pulse_width_us,thrust_n\n")
+        for p, f in zip(pw, thrust):
+            fh.write(f"{p},{f}\n")
+    return neg, pos
+
+
+def test_thruster_fit_prints_cubics_and_writes_config(tmp_path, capsys):
+    cfg = load_config(default_config_path())
+    csv = tmp_path / "bollard.csv"
+    neg, pos = _thrust_csv(csv, cfg)
+    conf = tmp_path / "hindrax.yaml"
+    shutil.copy(default_config_path(), conf)
+    rc = cli.main(["ident", "thruster-fit", str(csv), "--write", str(conf)])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out) == {"negative", "positive"}
+    for side, truth, pws in (("negative", neg, [1100, 1250, 1400]), ("positive", pos, [1600, 1750, 1900])):
+        c = out[side]
+        for k in ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std"):
+            assert math.isfinite(c[k])
+        fitted = evaluate_cubic(c["c4"], c["c3"], c["c2"], c["c1"], np.array(pws, dtype=float))
+        assert np.allclose(fitted, evaluate_cubic(*truth, np.array(pws, dtype=float)), atol=0.1)
+    text = conf.read_text()
+    assert "# Seed 003 Table 2 prints for the positive direction" in text  # comments kept
+    cfg2 = load_config(conf)
+    assert np.allclose(cfg2.thrusters.curve_negative, [out["negative"][k] for k in ("c4", "c3", "c2", "c1")],
+                       rtol=1e-8)
+    assert np.allclose(cfg2.thrusters.curve_positive, [out["positive"][k] for k in ("c4", "c3", "c2", "c1")],
+                       rtol=1e-8)
+    # everything else unchanged
+    changed = [a for a, b in zip(text.splitlines(), open(default_config_path()).read().splitlines()) if a != b]
+    assert len(changed) == 2
+
+
+def test_thruster_fit_bad_csv(tmp_path, capsys):
+    f = tmp_path / "t.csv"
+    f.write_text("pw,thrust\n1500\n")
+    assert cli.main(["ident", "thruster-fit", str(f)]) == 1
+    assert "need two columns" in capsys.readouterr().err
+
+
+def test_run_writes_identification_report_and_summary(tmp_path, capsys):
+    out = tmp_path / "out"
+    rc = cli.main(["run", "--dofs", "surge", "--levels", "2", "--max-level-duration", "8", "--seed", "3",
+                   "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0
+    assert "no ROS graph" in text
+    doc = read_identification(out / "identification.yaml")
+    assert set(doc["dofs"]) == {"surge"}
+    assert doc["provenance"]["source"] == "simulation" and doc["provenance"]["seed"] == 3
+    assert (out / "report" / "index.html").exists()
+    assert (out / "report" / "surge_force_velocity.png").exists()
+    # summary table: DOF, parameter, value, std, configured value, relative error
+    line = next(x for x in text.splitlines() if x.startswith("surge") and " inertia " in x)
+    assert "27.3" in line and "%" in line
+
+
+def test_run_default_directory_and_latest_link(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc = cli.main(["run", "--dofs", "yaw", "--levels", "1", "--max-level-duration", "4"])
+    capsys.readouterr()
+    assert rc == 0
+    latest = tmp_path / "runs" / "latest"
+    assert latest.is_symlink()
+    assert (latest / "identification.yaml").exists()
+    assert os.readlink(latest).endswith("Z")
+
+
+def test_run_rejects_unknown_dof(capsys):
+    assert cli.main(["run", "--dofs", "surge,spin"]) == 1
+    assert "spin" in capsys.readouterr().err
+
+
+def test_ident_campaign_is_registered(capsys):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["ident", "campaign", "--help"])
+    assert exc.value.code == 0
+    assert "no ROS graph" in capsys.readouterr().out
