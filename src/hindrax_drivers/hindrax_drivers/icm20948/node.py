@@ -90,7 +90,7 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, load_node_config, run_node)
-from ..transport.i2c import I2CDevice, I2CError
+from ..transport.i2c import I2CDevice, I2CError, close_quietly, open_smbus
 from . import protocol as p
 
 __all__ = ["Icm20948Node", "GyroBiasEstimator", "GyroBiasResult", "imu_config_from_settings",
@@ -367,11 +367,9 @@ class Icm20948Node(Node):
         if self.device is None:
             if self._bus is None:
                 try:
-                    import smbus2
-
-                    self._bus = smbus2.SMBus(self.i2c_bus_number)
+                    self._bus = open_smbus(self.i2c_bus_number)
                 except (OSError, ImportError) as exc:
-                    self._fail(f"cannot open I2C bus {self.i2c_bus_number} (/dev/i2c-{self.i2c_bus_number}): {exc}")
+                    self._fail(str(exc))
                     return
             self.device = I2CDevice(self._bus, self.address, "icm20948", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
             self.mag_device = I2CDevice(self._bus, p.AK09916_ADDRESS, "ak09916", backoff_s=0.0,
@@ -655,9 +653,7 @@ class Icm20948Node(Node):
         elif self.bias_estimator is not None:
             out.append(("gyro_bias_status", "estimating"))
         if self.device is not None:
-            st = self.device.stats
-            out += [("i2c_transactions", st.transactions), ("i2c_errors", st.errors), ("i2c_retries", st.retries),
-                    ("i2c_failures", st.failures), ("i2c_last_error", st.last_error or "")]
+            out += self.device.stats.diagnostics()
         return out
 
     def close(self) -> None:
@@ -665,10 +661,7 @@ class Icm20948Node(Node):
         self._poll_timer.cancel()
         self._step_timer.cancel()
         if self._owns_bus and self._bus is not None:
-            try:
-                self._bus.close()
-            except Exception:  # noqa: BLE001 - closing a bus on shutdown must not raise
-                pass
+            close_quietly(self._bus)
 
 
 def main(args=None) -> int:

@@ -73,7 +73,7 @@ from std_srvs.srv import Trigger
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, load_node_config, run_node)
-from ..transport.i2c import I2CDevice, I2CError
+from ..transport.i2c import I2CDevice, I2CError, close_quietly, open_smbus
 from . import protocol as p
 
 __all__ = ["Ms5837Node", "pressure_variance_pa2", "PRESSURE_RESOLUTION_PA", "main"]
@@ -201,11 +201,9 @@ class Ms5837Node(Node):
         if self.device is None:
             if self._bus is None:
                 try:
-                    import smbus2
-
-                    self._bus = smbus2.SMBus(self.i2c_bus_number)
+                    self._bus = open_smbus(self.i2c_bus_number)
                 except (OSError, ImportError) as exc:
-                    self._fail(f"cannot open I2C bus {self.i2c_bus_number} (/dev/i2c-{self.i2c_bus_number}): {exc}")
+                    self._fail(str(exc))
                     return
             self.device = I2CDevice(self._bus, self.address, "ms5837", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
         self.diag.set_state("starting", DiagnosticStatus.WARN, "reset and PROM read")
@@ -381,9 +379,7 @@ class Ms5837Node(Node):
         if self.calibration is not None:
             out.append(("prom_c1_c6", " ".join(str(c) for c in self.calibration.words[1:7])))
         if self.device is not None:
-            s = self.device.stats
-            out += [("i2c_transactions", s.transactions), ("i2c_errors", s.errors), ("i2c_retries", s.retries),
-                    ("i2c_failures", s.failures), ("i2c_last_error", s.last_error or "")]
+            out += self.device.stats.diagnostics()
         return out
 
     def close(self) -> None:
@@ -391,10 +387,7 @@ class Ms5837Node(Node):
         self._cycle_timer.cancel()
         self._step_timer.cancel()
         if self._owns_bus and self._bus is not None:
-            try:
-                self._bus.close()
-            except Exception:  # noqa: BLE001 - closing a bus on shutdown must not raise
-                pass
+            close_quietly(self._bus)
 
 
 def main(args=None) -> int:

@@ -39,7 +39,7 @@ from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
-from ..transport.i2c import I2CDevice, I2CError
+from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from . import protocol as p
 
 
@@ -106,9 +106,7 @@ class EscNode(Node):
         self.prescale = p.esc_prescale(esc["pwm_frequency_hz"], self.oscillator_hz)
 
         if bus is None:
-            import smbus2
-
-            bus = smbus2.SMBus(esc["i2c_bus"])
+            bus = open_smbus(esc["i2c_bus"])
         self.raw = RawDataPublisher(self, "pca9685")
         self.device = I2CDevice(bus, esc["i2c_address"], "pca9685", raw_tap=self.raw.i2c_tap)
         now_s = lambda: self.get_clock().now().nanoseconds * 1e-9  # noqa: E731
@@ -242,10 +240,9 @@ class EscNode(Node):
         self.diag.published()
 
     def _diag_extra(self):
-        s = self.device.stats
         return [("armed", self.armed), ("watchdog_trips", self.watchdog_trips),
-                ("arming_remaining_s", f"{self.arming_remaining_s():.1f}"), ("i2c_transactions", s.transactions),
-                ("i2c_errors", s.errors), ("i2c_failures", s.failures), ("prescale", self.prescale)]
+                ("arming_remaining_s", f"{self.arming_remaining_s():.1f}"), ("prescale", self.prescale),
+                *self.device.stats.diagnostics()]
 
     def close(self) -> None:
         """Shutdown path: disarm and write neutral (SIGINT/SIGTERM via run_node, or destroy by the owner)."""

@@ -96,6 +96,32 @@ class I2CStats:
     failures: int = 0
     last_error: str | None = None
 
+    def diagnostics(self) -> list[tuple[str, Any]]:
+        """The counters as (key, value) pairs for a node's /diagnostics (same keys for every I2C device)."""
+        return [("i2c_transactions", self.transactions), ("i2c_errors", self.errors), ("i2c_retries", self.retries),
+                ("i2c_failures", self.failures), ("i2c_last_error", self.last_error or "")]
+
+
+def open_smbus(bus_number: int) -> Any:
+    """Open ``/dev/i2c-<bus_number>`` with smbus2 (what the nodes use on the Pi when no bus is injected).
+
+    Raises OSError (or ImportError without smbus2) with a message naming the device file.
+    """
+    import smbus2
+
+    try:
+        return smbus2.SMBus(bus_number)
+    except OSError as exc:
+        raise OSError(exc.errno, f"cannot open I2C bus {bus_number} (/dev/i2c-{bus_number}): {exc}") from exc
+
+
+def close_quietly(bus: Any) -> None:
+    """Close a bus on shutdown; errors are swallowed (shutdown must not raise)."""
+    try:
+        bus.close()
+    except Exception:  # noqa: BLE001 - closing a bus on shutdown must not raise
+        pass
+
 
 class I2CDevice:
     """One slave on an SMBus-like bus, with retries, counters and a raw tap.
