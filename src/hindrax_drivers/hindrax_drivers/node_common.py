@@ -12,6 +12,7 @@ import sys
 import threading
 from typing import Any, Callable, Iterable, Sequence
 
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 from hindrax_msgs.msg import RawDeviceData
@@ -20,6 +21,12 @@ from .config import ConfigError, VehicleConfig, node_config
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
+
+
+def time_from_ns(ns: int) -> Time:
+    """builtin_interfaces/Time from integer nanoseconds (negative values clamp to 0)."""
+    ns = max(0, int(ns))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 class DeviceDiagnostics:

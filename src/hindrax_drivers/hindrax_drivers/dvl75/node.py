@@ -52,12 +52,11 @@ from typing import Any, Iterable, List, Optional, Tuple
 
 from geometry_msgs.msg import Quaternion, TwistWithCovarianceStamped, Vector3
 from sensor_msgs.msg import Range
-from builtin_interfaces.msg import Time
 
 from hindrax_msgs.msg import Dvl
 
 from ..device_clock import DeviceClockSync
-from ..node_common import DEFAULT_QOS_DEPTH, run_node
+from ..node_common import DEFAULT_QOS_DEPTH, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
 from .protocol import DvlExtended, DvlGprmc, DvlPositionDelta, DvlText, startup_commands
 from .report import DvlReport, DvlReportBuilder, altitude_range_m
@@ -78,11 +77,6 @@ ALTITUDE_FIELD_OF_VIEW_RAD = math.radians(45.0)
 MISSING_DVPDL_TIMEOUT_S = 3.0
 #: Without ``$DVPDL`` for this long, ``dvl/data`` is published from each ``$DVEXT`` instead, s.
 DVEXT_ONLY_AFTER_S = 1.0
-
-
-def _stamp(ns: int) -> Time:
-    ns = max(0, int(ns))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 class Dvl75Node(SerialDeviceNode):
@@ -178,7 +172,7 @@ class Dvl75Node(SerialDeviceNode):
         self.builder.update_extended(ext, receive_ns)
         self._last_dvext_ns = receive_ns
         rng = Range()
-        rng.header.stamp = _stamp(receive_ns)
+        rng.header.stamp = time_from_ns(receive_ns)
         rng.header.frame_id = "dvl_link"
         rng.radiation_type = Range.ULTRASOUND
         rng.field_of_view = float(ALTITUDE_FIELD_OF_VIEW_RAD)
@@ -195,7 +189,7 @@ class Dvl75Node(SerialDeviceNode):
 
     def _publish(self, r: DvlReport, stamp_ns: int, receive_ns: int) -> None:
         msg = Dvl()
-        msg.header.stamp = _stamp(stamp_ns)
+        msg.header.stamp = time_from_ns(stamp_ns)
         msg.header.frame_id = "base_link"
         msg.velocity_m_s = Vector3(x=r.velocity_flu_m_s[0], y=r.velocity_flu_m_s[1], z=r.velocity_flu_m_s[2])
         msg.velocity_covariance = list(r.velocity_covariance)

@@ -44,9 +44,8 @@ from typing import Any, Iterable, List, Optional, Tuple
 
 from sensor_msgs.msg import Range
 from std_msgs.msg import Float32
-from builtin_interfaces.msg import Time
 
-from ..node_common import DEFAULT_QOS_DEPTH, run_node
+from ..node_common import DEFAULT_QOS_DEPTH, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
 from .protocol import (
     SYNC_BYTE,
@@ -94,11 +93,6 @@ def startup_frames(speed_of_sound_m_s: float, ping_interval_s: float, mode_auto:
         request_frame(Ping1dId.GENERAL_INFO),
         request_frame(Ping1dId.SPEED_OF_SOUND),
     ]
-
-
-def _stamp(ns: int) -> Time:
-    ns = max(0, int(ns))
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 class Ping1dNode(SerialDeviceNode):
@@ -203,7 +197,7 @@ class Ping1dNode(SerialDeviceNode):
                 return  # the same ping reported twice (stream and a reply)
             self._last_ping_number = number
         self._last_distance_ns = receive_ns
-        stamp = _stamp(receive_ns)
+        stamp = time_from_ns(receive_ns)
         rng = Range()
         rng.header.stamp = stamp
         rng.header.frame_id = "ping_link"
