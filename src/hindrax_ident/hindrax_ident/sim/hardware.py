@@ -5,7 +5,8 @@ on pseudo-terminals (:class:`~hindrax_drivers.transport.pty_device.PtyDevice`, s
 runs), and the MS5837, ICM-20948 (+ AK09916) and PCA9685 emulators sit on one
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` that the I2C drivers use in place of
 ``smbus2.SMBus``. Each emulator's truth source is the simulator's latest *measured* sensor sample (noise,
-bias, rate and dropout come from :mod:`hindrax_ident.sim.sensors`); emulator clocks are the simulated time.
+bias, rate and dropout come from :mod:`hindrax_ident.sim.sensors`); emulator clocks are the simulated time as
+published on ``/clock`` (quantised to ``simulation.clock_rate_hz``).
 
 The simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers
 (:meth:`VirtualHardware.pulse_widths_us`), so the whole path wrench -> allocation -> ESC node -> PCA9685
@@ -46,7 +47,12 @@ class VirtualHardware:
     def __init__(self, sim: Simulator, config: VehicleConfig, serve_serial: bool = True, seed: int = 0):
         self.sim = sim
         self.config = config
-        clock = lambda: sim.t_s  # noqa: E731 - emulators live in simulated time
+        # Emulators live in simulated time, quantised like the /clock the drivers see (simulation.clock_rate_hz):
+        # a driver that waits a conversion time on its clock then never reads an emulator that is, on the finer
+        # simulator time, a fraction of a clock period short of it (MS5837 ADC read returning 0).
+        period_s = 1.0 / config.get("simulation.clock_rate_hz")
+        self._clock_fn = lambda: math.floor(sim.t_s / period_s + 1e-9) * period_s  # noqa: E731
+        clock = lambda: self._clock_fn()  # noqa: E731 - indirection so use_clock() can swap it later
         self._ensure_samples()
         c = config.flat
         self.dvl = Dvl75Emulator(self._dvl_truth, rate_hz=c["simulation.sensors.dvl75.rate_hz"],
@@ -73,6 +79,11 @@ class VirtualHardware:
             self._ptys = [PtyDevice(self.dvl, clock=clock, link_name="dvl75"),
                           PtyDevice(self.ping, clock=clock, link_name="ping1d")]
             self.dvl_port, self.ping_port = (str(p.path) for p in self._ptys)
+
+    def use_clock(self, clock_s) -> None:
+        """Run the emulators on ``clock_s()`` (s), e.g. the ROS clock of the drivers' process, so a driver's
+        wait measured on its own clock is exactly what the emulator sees (no lag between /clock receptions)."""
+        self._clock_fn = clock_s
 
     def _ensure_samples(self) -> None:
         """Step the unpowered simulator until every device has produced a first sample (<= 1 s simulated)."""
