@@ -1,34 +1,42 @@
-"""Write the small test bags under ``src/hindrax_drivers/test/data/`` from synthetic messages.
+"""Write the small test bags under ``src/hindrax_drivers/test/data/`` (synthetic, default) or record them from the simulator (``--from-sim``).
 
 Usage: ``python -m hindrax_drivers.recording.make_test_bags [--out DIR]`` (default: the repository's
-``src/hindrax_drivers/test/data``). Existing bags of the same names are replaced. The output is
-deterministic (fixed start time, seeded noise), so regenerating gives the same messages.
+``src/hindrax_drivers/test/data``). Existing bags of the same names are replaced.
 
-Content (until the simulator exists, the values are synthetic; see test/data/README.md): a vehicle at
-1 m depth surging sinusoidally, u(t) = 0.2 sin(2 pi 0.25 t) m/s, at the stack's nominal rates (recorder
-benchmark load, design.md §7):
+Content: the whole driver graph on the virtual pool (:func:`hindrax_ident.bringup.build_graph` with
+``sim=True``: simulator -> device emulators -> pty / emulated I2C bus -> the real DVL-75, Ping1D, MS5837,
+ICM-20948 and ESC driver nodes), recorded by the stack's own recorder node (all topics), simulated time
+starting at 0 (``/clock``), as fast as possible. The vehicle floats passively from
+``pool.start_position_ned_m`` = :data:`START_POSITION_NED_M` (ESC disarmed, neutral): every parsed topic
+(``dvl/*``, ``ping/*``, ``pressure/*``, ``imu/*``, ``thrusters/pulse_width``) beside the raw device data
+(``raw/<device>``, hindrax_msgs/RawDeviceData: every serial chunk and I2C transaction), the simulator's
+ground truth (``sim/*``) and ``/clock``.
 
-- /imu/data          sensor_msgs/msg/Imu              100 Hz  best_effort
-- /imu/mag           sensor_msgs/msg/MagneticField    100 Hz  best_effort
-- /dvl/data          hindrax_msgs/msg/Dvl              10 Hz  reliable
-- /dvl/range         sensor_msgs/msg/Range             10 Hz  reliable
-- /ping1d/range      sensor_msgs/msg/Range             10 Hz  reliable
-- /depth/pressure    sensor_msgs/msg/FluidPressure     10 Hz  reliable
-- /thrusters/pwm     hindrax_msgs/msg/ThrusterPwm      50 Hz  reliable
-- /thrusters/wrench  geometry_msgs/msg/WrenchStamped   50 Hz  reliable
-- /raw/dvl75         hindrax_msgs/msg/RawDeviceData    10 Hz  reliable (serial $DVEXT-like line, device->host)
-- /raw/ms5837        hindrax_msgs/msg/RawDeviceData    20 Hz  reliable (I2C ADC read, 3 bytes, register 0x00)
-- /raw/icm20948      hindrax_msgs/msg/RawDeviceData   100 Hz  reliable (I2C burst read, 12 bytes, register 0x2D)
+A clean start and end, so that a replay of the raw data through fresh drivers reproduces the parsed topics
+exactly (:mod:`hindrax_drivers.recording.replay_devices`): simulated time is held at 0 until the recorder
+has subscribed to and matched every topic (the serial drivers' start-up commands and their replies, sent
+in wall time meanwhile, are therefore mostly not recorded: they carry no parsed data); at the end
+simulated time is frozen and the recorder is stopped only once it has written every message the drivers
+published. The only driver traffic before the recording are the ESC node's constructor writes
+(PCA9685 configuration and first neutral), which happen inside ``build_graph``.
 
-Bags: ``sensors_4s`` (all topics, 4 s, one file) and ``split_3s`` (3 s split every 1 s of log time into
-three files). Each message is stamped at its sample time; its log time is 1 ms later (receive latency).
+The synthetic streams of the first version (:data:`STREAMS`, :func:`synthetic_messages`,
+:func:`write_bag`: a vehicle at 1 m depth surging sinusoidally at the stack's nominal rates) stay
+for the recorder benchmark and writer tests that need a known, fixed load.
+
+Simulator bags (``--from-sim``): :data:`SIM_BAGS` (``sensors_4s``: 4 s in one file; ``split_3s``: 3 s split every 1 s of log time).
+Simulated content is deterministic for a seed, but the exact message count is not (how the executor
+interleaves the driver timers with /clock steps varies with machine load), so tests check properties,
+not counts fixed in advance.
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import math
 import shutil
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -231,6 +239,7 @@ STREAMS: tuple[StreamSpec, ...] = (
 """The synthetic topics (see module docstring)."""
 
 #: bag name -> (duration s, WriterOptions)
+#: bag name -> (duration s, WriterOptions)
 BAGS: dict[str, tuple[float, WriterOptions]] = {
     "sensors_4s": (4.0, WriterOptions(chunk_size_bytes=64 * 1024, fsync=False)),
     "split_3s": (3.0, WriterOptions(chunk_size_bytes=32 * 1024, split_duration_s=1.0, fsync=False)),
@@ -257,7 +266,7 @@ def synthetic_messages(duration_s: float, streams: tuple[StreamSpec, ...] = STRE
 
 
 def write_bag(bag_dir: Path, duration_s: float, options: WriterOptions) -> int:
-    """Write one synthetic bag; returns its message count. Replaces an existing directory."""
+    """Write one bag of :data:`STREAMS`; returns its message count. Replaces an existing directory."""
     from rclpy.serialization import serialize_message
 
     if bag_dir.exists():
@@ -272,6 +281,135 @@ def write_bag(bag_dir: Path, duration_s: float, options: WriterOptions) -> int:
     return n
 
 
+
+__all__ = ["STREAMS", "synthetic_messages", "messages_per_stream", "write_bag", "BAGS", "SIM_BAGS", "write_sim_bag", "START_POSITION_NED_M", "SIM_SEED", "record_simulated_run", "write_bag", "default_output_dir",
+           "main"]
+
+SIM_SEED = 7
+"""Simulation seed of the committed bags."""
+START_POSITION_NED_M = [3.0, 3.0, 0.9]
+"""Start position of base_link in the pool (NED, m): 0.9 m deep in the 1.8 m deep pool."""
+
+#: bag name -> (simulated duration s, configuration overrides of the recorder's writer)
+SIM_BAGS: dict[str, tuple[float, dict[str, Any]]] = {
+    "sensors_4s": (4.0, {"recording.chunk_size_bytes": 64 * 1024}),
+    "split_3s": (3.0, {"recording.chunk_size_bytes": 32 * 1024, "recording.split_duration_s": 1.0}),
+}
+
+
+def _spin_until(graph: Any, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"make_test_bags: timed out waiting for {what}")
+        graph.spin_once(0.005)
+
+
+def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any, overrides: dict | None = None,
+                         seed: int = SIM_SEED, config_path: str | Path | None = None, timeout_s: float = 60.0) -> dict:
+    """Record ``duration_s`` of simulated time of the whole driver graph into ``bag_dir`` (replaced).
+
+    Args:
+        bag_dir: output bag directory (removed first if it exists).
+        duration_s: simulated time to record, s.
+        context: an initialised rclpy context.
+        overrides: extra configuration overrides (dotted keys).
+        seed: simulation seed.
+        config_path: vehicle configuration (default: the shipped hindrax.yaml).
+        timeout_s: wall-clock limit of each wait.
+    Returns:
+        topic -> number of messages the graph's nodes published while recording (every one is in the bag).
+    Raises:
+        TimeoutError: naming the condition not reached; ConfigError for bad overrides.
+    """
+    from hindrax_ident.bringup import build_graph
+
+    from ..config import default_config_path
+
+    bag_dir = Path(bag_dir)
+    if bag_dir.exists():
+        shutil.rmtree(bag_dir)
+    ov = {"simulation.real_time_factor": 0.0, "pool.start_position_ned_m": list(START_POSITION_NED_M),
+          "recording.flush_interval_s": 60.0}
+    ov.update(overrides or {})
+    graph = build_graph(config_path or default_config_path(), sim=True, record=True, record_dir=str(bag_dir),
+                        context=context, seed=seed, overrides=ov)
+    sim_node = graph.nodes["simulator"]
+    recorder = graph.nodes["recorder"]
+    published: collections.Counter[str] = collections.Counter()
+    counting = [False]
+
+    def count(pub: Any) -> None:
+        topic, original = pub.topic_name, pub.publish
+
+        def publish(msg: Any) -> None:
+            original(msg)
+            if counting[0]:
+                published[topic] += 1
+        pub.publish = publish
+
+    drivers = [graph.nodes[n] for n in ("dvl75", "ping1d", "ms5837", "icm20948", "esc")]
+    for node in drivers + [sim_node]:
+        for pub in node.publishers:
+            count(pub)
+    wanted = {pub.topic_name for node in drivers + [sim_node] for pub in node.publishers}
+    try:
+        # hold simulated time at 0 until the recorder is subscribed to and matched with every topic
+        graph.executor.remove_node(sim_node)
+
+        def ready() -> bool:
+            recorder._discover()  # the discovery timer runs on (frozen) ROS time
+            subs = recorder._subs
+            return (all(t in subs and subs[t].get_publisher_count() > 0 for t in wanted)
+                    and all(n.commands.sequences_completed >= 1 for n in drivers[:2]))
+        _spin_until(graph, ready, timeout_s, "the recorder matched with every driver topic")
+        ptys = dict(zip(("dvl75", "ping1d"), graph.hardware._ptys))
+
+        def unread() -> dict[str, int]:
+            return {n: ptys[n].bytes_to_host - graph.nodes[n].transport.status().bytes_rx for n in ptys}
+        # bytes written to a pty before its driver opened it never reach the driver (the DVL's boot banner)
+        lost = unread()
+        counting[0] = True
+        graph.executor.add_node(sim_node)
+        sim = sim_node.simulator
+        _spin_until(graph, lambda: sim.t_s >= duration_s, timeout_s, f"{duration_s} s of simulated time")
+        graph.executor.remove_node(sim_node)  # freeze simulated time
+
+        def flushed() -> bool:
+            serial = unread() == lost
+            got = recorder._writer.topic_counts() if recorder._writer is not None else {}
+            return serial and all(got.get(t, 0) >= n for t, n in published.items() if t in wanted)
+        try:
+            _spin_until(graph, flushed, timeout_s, "the recorder wrote every published message")
+        except TimeoutError:
+            got = recorder._writer.topic_counts()
+            raise TimeoutError("lagging: " + str({t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}) + str((unread(), lost)))
+        counting[0] = False
+        recorder.stop_recording()
+    finally:
+        if sim_node.executor is None:
+            try:
+                graph.executor.add_node(sim_node)
+            except Exception:  # noqa: BLE001 - shutting down anyway
+                pass
+        graph.shutdown()
+    return dict(published)
+
+
+def write_sim_bag(bag_dir: Path, duration_s: float, overrides: dict[str, Any], context: Any = None) -> int:
+    """Record one bag (see :func:`record_simulated_run`); returns its message count."""
+    from hindrax_drivers.testing import ros_context
+
+    from .reader import BagReader
+
+    if context is None:
+        with ros_context() as ctx:
+            record_simulated_run(bag_dir, duration_s, context=ctx, overrides=overrides)
+    else:
+        record_simulated_run(bag_dir, duration_s, context=context, overrides=overrides)
+    return sum(c.message_count for c in BagReader(bag_dir).channels.values())
+
+
 def default_output_dir() -> Path:
     """``src/hindrax_drivers/test/data`` of the source checkout this module lives in."""
     return Path(__file__).resolve().parents[2] / "test" / "data"
@@ -280,11 +418,13 @@ def default_output_dir() -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="make_test_bags", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(default_output_dir()), help="directory to write the bags into")
+    parser.add_argument("--from-sim", action="store_true",
+                        help="record the simulator (SIM_BAGS) instead of writing the synthetic bags (BAGS)")
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    for name, (duration_s, options) in BAGS.items():
-        n = write_bag(out / name, duration_s, options)
+    for name, (duration_s, arg) in (SIM_BAGS if args.from_sim else BAGS).items():
+        n = (write_sim_bag if args.from_sim else write_bag)(out / name, duration_s, arg)
         size = sum(p.stat().st_size for p in (out / name).iterdir())
         print(f"{out / name}: {n} messages, {size / 1024:.1f} KiB")
     return 0
