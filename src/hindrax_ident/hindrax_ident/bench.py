@@ -21,6 +21,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 #: benchmark name -> module
 BENCHMARKS: dict[str, str] = {
+    "stack": "hindrax_ident.benchmarks.stack",
     "actuation": "hindrax_ident.benchmarks.actuation",
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
