@@ -208,6 +208,17 @@ def load_node_config(node: Any) -> VehicleConfig:
     return node_config(node, on_error=lambda line: node.get_logger().fatal(f"invalid configuration: {line}"))
 
 
+def shutdown_in_progress(context: Any = None) -> bool:
+    """True once SIGINT/SIGTERM (or anyone) has shut the rclpy context down.
+
+    A callback that is running when the signal arrives can then fail inside rcl ("publisher's context is
+    invalid"); entry points treat such an exception as part of the orderly shutdown, not as a crash.
+    """
+    import rclpy
+
+    return not rclpy.ok(context=context)
+
+
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> int:
     """Process entry point of a node: init, build the node, spin a SingleThreadedExecutor, shut down cleanly.
 
@@ -230,6 +241,9 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> i
         status = 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not shutdown_in_progress():
+            raise
     finally:
         if node is not None:
             close = getattr(node, "close", None)

@@ -37,6 +37,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from ..node_common import shutdown_in_progress
 from .msgtypes import TypeNotInstalledError, message_class
 from .playback import PlayStats, play
 from .qos import playback_profile, profiles_from_yaml
@@ -197,6 +198,9 @@ def main(args: list[str] | None = None) -> int:
         node.play()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not shutdown_in_progress():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

@@ -49,13 +49,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hindrax_drivers import frames
-from hindrax_drivers.config import ConfigError, VehicleConfig, node_config
+from hindrax_drivers.config import VehicleConfig, node_config
 from hindrax_msgs.msg import ThrusterPwm
 
 from .pool import FACES
@@ -279,25 +278,9 @@ class SimulatorNode(Node):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the simulator node alone (``python -m hindrax_ident.sim.node --ros-args --params-file ...``)."""
-    rclpy.init(args=args)
-    executor = SingleThreadedExecutor()
-    node: SimulatorNode | None = None
-    status = 0
-    try:
-        node = SimulatorNode()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ConfigError as exc:
-        print(f"hindrax_simulator: {exc}", file=sys.stderr)
-        status = 1
-    finally:
-        executor.shutdown()
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    from hindrax_drivers.node_common import run_node
+
+    return run_node(SimulatorNode, args)
 
 
 if __name__ == "__main__":

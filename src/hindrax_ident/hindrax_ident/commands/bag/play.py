@@ -31,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.executors import ExternalShutdownException
     from rclpy.parameter import Parameter
 
+    from hindrax_drivers.node_common import shutdown_in_progress
     from hindrax_drivers.recording.player_node import BagPlayerNode, PlayerError
 
     overrides = [Parameter("bag", value=str(args.bag)), Parameter("rate", value=float(args.rate)),
@@ -53,6 +54,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.bag}: published {stats.published} messages in {stats.passes} pass(es)")
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not shutdown_in_progress():
+            raise
     finally:
         if node is not None:
             node.destroy_node()
