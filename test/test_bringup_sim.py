@@ -20,7 +20,7 @@ pytestmark = pytest.mark.ros
 def test_drivers_read_the_simulated_vehicle_and_thrust_moves_it():
     with ros_context() as ctx:
         graph = build_graph(default_config_path(), sim=True, context=ctx, seed=5,
-                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0,
+                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 1.0,
                                        "pool.start_position_ned_m": [3.0, 3.0, 0.9]})
         probe = rclpy.create_node("probe", context=ctx)
         graph.executor.add_node(probe)

@@ -143,6 +143,11 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
         status = 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        from hindrax_drivers.node_common import shutdown_in_progress
+
+        if not shutdown_in_progress():
+            raise
     finally:
         if graph is not None:
             graph.shutdown()
