@@ -49,12 +49,26 @@ def recorder():
 
             def call(client, request):
                 fut = client.call_async(request)
-                wait_until(fut.done, 15, spin, "service answer")
+                wait_until(fut.done, 30, spin, "service answer")
                 return fut.result()
 
             wait_until(lambda: (start.service_is_ready() and stop.service_is_ready()) or proc.poll() is not None,
                        20, spin, "recorder services")
             assert proc.poll() is None, proc.stderr.read().decode()
+            # Handshake: service_is_ready() can turn true before the server has matched this client's response
+            # reader, and a response sent then is lost (DDS discovery race). A stop with nothing recording has no
+            # side effect, so repeat it until one is answered; after that the response paths are matched.
+            answered = []
+
+            def handshake():
+                fut = stop.call_async(StopRecording.Request())
+                try:
+                    wait_until(fut.done, 3, spin, "handshake")
+                    answered.append(fut.result())
+                except AssertionError:
+                    pass
+            wait_until(lambda: answered, 40, handshake, "recorder answering its services")
+            assert not answered[0].success  # nothing was being recorded
             yield dict(node=node, spin=spin, call=call, start=start, stop=stop, counts=counts, proc=proc)
             ex.shutdown()
             node.destroy_node()
