@@ -2,7 +2,8 @@
 MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust
-allocation and, optionally, the recorder. On the vehicle they open the configured serial ports and
+allocation, the identification executive (:mod:`hindrax_ident.identification.node`, on by default with
+``sim``) and, optionally, the recorder. On the vehicle they open the configured serial ports and
 ``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
 ``/clock`` and :class:`~hindrax_ident.sim.hardware.VirtualHardware` (the five device emulators fed by the
 simulator: serial devices on pseudo-terminals, I2C devices on an emulated bus); every other node then runs
@@ -54,12 +55,13 @@ class Graph:
 
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
-                real_time_factor: float | None = None) -> Graph:
+                real_time_factor: float | None = None, identification: bool | None = None) -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
     (all topics) writing to ``record_dir`` (empty: timestamped directory under ``recording.output_root``).
     overrides: dotted configuration keys. seed / real_time_factor: simulation settings.
+    identification: add the identification node (action ``run_identification``); default: ``sim``.
     Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration.
     """
     from rclpy.executors import SingleThreadedExecutor
@@ -104,6 +106,10 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes["icm20948"] = Icm20948Node(bus=bus, **common)
     nodes["esc"] = EscNode(bus=bus, **common)
     nodes["thrust_allocation"] = ThrustAllocationNode(**common)
+    if (sim if identification is None else identification):
+        from .identification.node import IdentificationNode
+
+        nodes["identification"] = IdentificationNode(config=cfg, **common)
     if hardware is not None:
         # emulators on the drivers' ROS clock (the MS5837 driver's): conversion waits line up exactly
         ms5837_clock = nodes["ms5837"].get_clock()

@@ -44,8 +44,12 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), seed 003 eq. 1 (JSON; --write CONFIG)"),
     (("ident", "campaign"), "hindrax_ident.commands.ident",
      "identification campaign in-process on the simulator (same as `hindrax run`)"),
+    (("ident", "bag"), "hindrax_ident.identification.from_bag",
+     "offline identification (batch LS + output error, seed 003 eqs. 6-8) of a recorded campaign bag: "
+     "identification.yaml + report"),
     (("run",), "hindrax_ident.commands.run",
-     "identification campaign in-process on the simulator (no ROS graph yet): identification.yaml + report"),
+     "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
+     "identification.yaml, report"),
 ]
 
 

@@ -119,8 +119,8 @@ def test_thruster_fit_bad_csv(tmp_path, capsys):
 
 def test_run_writes_identification_report_and_summary(tmp_path, capsys):
     out = tmp_path / "out"
-    rc = cli.main(["run", "--dofs", "surge", "--levels", "2", "--max-level-duration", "8", "--seed", "3",
-                   "--out", str(out)])
+    rc = cli.main(["run", "--dofs", "surge", "--levels", "2", "--max-level-duration", "8",
+                   "--seed", "3", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0
     assert "no ROS graph" in text

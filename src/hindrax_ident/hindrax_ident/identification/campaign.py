@@ -398,7 +398,7 @@ class Campaign:
             self._dive()
             for dof in self.dofs:
                 self._move_to_centre()
-                ladder = level_ladder(self.cfg, min(self.authority[dof]), self.levels_per_dof)
+                ladder = self.ladder(dof)
                 self.levels[dof] = ladder
                 t0 = self.sim.t_s
                 self._active = DOF_INDEX[dof]
@@ -429,6 +429,10 @@ class Campaign:
             aborted=aborted, abort_reason=reason, wall_time_s=time.monotonic() - self._wall0, tick_s=self.tick_s,
             time_constant_s=self.time_constant_s, seed=self.seed,
             final_pulse_width_us=np.array(self.sim.thrusters.pulse_width_us, copy=True))
+
+    def ladder(self, dof: str) -> list[float]:
+        """Levels of one DOF (N or N m): :func:`.maneuvers.level_ladder` of the DOF's smaller authority."""
+        return level_ladder(self.cfg, min(self.authority[dof]), self.levels_per_dof)
 
     def _dof_start(self) -> float:
         act = np.asarray(self._rec["active"])

@@ -1,0 +1,277 @@
+"""Offline identification from a recorded bag: rebuild the campaign record from the bag's topics.
+
+``hindrax ident bag BAG [--out DIR] [--config FILE]`` writes ``identification.yaml`` and ``report/index.html``
+(same analyses as the in-process campaign: :func:`~.estimators.identify_all_with_errors`, i.e. equation-error
+batch LS with standard deviations, seed 003 eqs. 6-8, refined by output error, plus the seed's steady-state
+LS; "Batch least squares from a bag").
+
+Topics read (the identification node's inputs and outputs, README "Topics"):
+``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the
+same adapters as the node, :mod:`.node`, into :class:`~.maneuvers.SensorState`), ``thrusters/pulse_width``
+(the widths the ESC node wrote: thrust model of seed 003 eq. 1, first-order lag, thrust allocation matrix),
+``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
+accelerometer biases) and ``identification/estimates`` (the online RLS history, for the report).
+
+Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10 ms,
+the simulator's /clock period): the ESC widths and the status are held from their stamps (zero-order
+hold, as the ESC output), and every sensor stamp is rounded to the grid (the drivers stamp with the ROS
+time, already on the /clock grid, except the DVL's device time of validity: <= grid_s / 2 moved), because
+the output-error fit compares the model with samples at grid instants.
+Raises :class:`BagContentError` (one line) when the bag lacks what is needed.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.config import DOFS, ConfigError, VehicleConfig, default_config_path, load_config
+
+from .campaign import CampaignRecord
+from .maneuvers import SensorState
+
+__all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "identify_bag",
+           "add_arguments", "run"]
+
+SENSOR_TOPICS = ("dvl/data", "pressure/fluid_pressure", "imu/data_raw", "ping/altitude")
+TOPICS = SENSOR_TOPICS + ("thrusters/pulse_width", "identification/status", "identification/estimates")
+_RUNNING = 2  # ManeuverStatus.PHASE_RUNNING
+
+
+class BagContentError(ValueError):
+    """The bag misses a topic or an identification window (the message says which)."""
+
+
+class OnlineHistory:
+    """Stand-in for :class:`~.estimators.OnlineDofEstimator` built from recorded HydroEstimate messages.
+
+    ``history`` {t, theta, std, excitation} and :meth:`result` as the live estimator provides them.
+    """
+
+    def __init__(self, dof: str) -> None:
+        self.dof = dof
+        self.history: dict[str, list] = {"t": [], "theta": [], "std": [], "excitation": []}
+        self.names: list[str] = []
+        self.n_samples = 0
+        self.converged_at_s: float | None = None
+
+    def add(self, t_s: float, msg) -> None:
+        """Append one HydroEstimate (``method`` rls)."""
+        self.names = list(msg.parameter_names)
+        self.history["t"].append(t_s)
+        self.history["theta"].append(np.asarray(msg.values, dtype=float))
+        self.history["std"].append(np.where(np.asarray(msg.std, dtype=float) < 0, np.nan,
+                                            np.asarray(msg.std, dtype=float)))
+        self.history["excitation"].append(float(msg.excitation))
+        self.n_samples = int(msg.sample_count)
+        if msg.converged and self.converged_at_s is None:
+            self.converged_at_s = t_s
+
+    def result(self) -> dict:
+        """Last {name: (value, std)}, n_samples, excitation, converged_at_s."""
+        if not self.history["t"]:
+            return {"parameters": {}, "n_samples": 0, "excitation_normalised": math.nan, "converged_at_s": None}
+        th, sd = self.history["theta"][-1], self.history["std"][-1]
+        return {"parameters": {n: (float(v), float(s)) for n, v, s in zip(self.names, th, sd)},
+                "n_samples": self.n_samples, "excitation_normalised": self.history["excitation"][-1],
+                "converged_at_s": self.converged_at_s}
+
+
+def _stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> CampaignRecord:
+    """CampaignRecord from (topic, message) pairs (any order; rclpy or bag-decoded messages).
+
+    Raises :class:`BagContentError` without ESC widths, status or an identification run.
+    """
+    from .node import (STILL_MESSAGE, sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu,
+                       thrust_of_written_widths)
+    from hindrax_drivers.icm20948.node import mounting_rotation
+
+    mount_t = mounting_rotation(cfg.flat["sensors.icm20948.mounting_rpy_rad"]).T
+    samples: list = []
+    pwm: list = []
+    status: list = []
+    online: dict[str, OnlineHistory] = {}
+    estimates: list = []
+    for topic, msg in messages:
+        if topic == "dvl/data":
+            samples.extend(samples_from_dvl(msg))
+        elif topic == "imu/data_raw":
+            samples.extend(samples_from_imu(msg, mount_t))
+        elif topic == "pressure/fluid_pressure":
+            samples.append(sample_from_pressure(msg))
+        elif topic == "ping/altitude":
+            samples.append(sample_from_range(msg))
+        elif topic == "thrusters/pulse_width":
+            pwm.append((_stamp(msg), np.asarray(msg.pulse_width_us, dtype=float), bool(msg.armed)))
+        elif topic == "identification/status":
+            status.append((_stamp(msg), msg))
+        elif topic == "identification/estimates":
+            estimates.append((_stamp(msg), msg))
+    if not pwm:
+        raise BagContentError("no thrusters/pulse_width messages (the widths the ESC wrote)")
+    if not status:
+        raise BagContentError("no identification/status messages (was the identification node running?)")
+    status.sort(key=lambda x: x[0])
+    pwm.sort(key=lambda x: x[0])
+    active_t = [t for t, m in status if m.dof in DOFS]
+    if not active_t:
+        raise BagContentError("identification/status never names a DOF under test: no manoeuvre in this bag")
+    busy = [ts for ts, m in status if m.phase != 0]  # not PHASE_IDLE
+    t_first = busy[0] if busy else status[0][0]
+    t_last = busy[-1] if busy else status[-1][0]
+    n = int(math.floor((t_last - t_first) / grid_s)) + 1
+    t = np.round((t_first + grid_s * np.arange(n)) / grid_s) * grid_s
+    # zero-order hold of status and widths on the grid
+    st_t = np.array([s[0] for s in status])
+    ist = np.clip(np.searchsorted(st_t, t + 1e-9, side="right") - 1, 0, len(status) - 1)
+    pw_t = np.array([p[0] for p in pwm])
+    ipw = np.searchsorted(pw_t, t + 1e-9, side="right") - 1
+    core = AllocationCore(cfg)
+    curve = core.allocator.curves[0]
+    matrix = np.asarray(core.matrix_frd, dtype=float)
+    n_thr = matrix.shape[1]
+    neutral = np.full(n_thr, float(cfg.thrusters.pulse_width_neutral_us))
+    forces = np.array([thrust_of_written_widths(cfg, curve, p[1] if p[2] else neutral) for p in pwm])
+    f_cmd = np.where(ipw[:, None] >= 0, forces[np.clip(ipw, 0, None)], 0.0)
+    tau = float(cfg.thrusters.time_constant_s)
+    k = math.exp(-grid_s / tau) if tau > 0 else 0.0
+    f_lag = np.zeros_like(f_cmd)
+    lag = np.zeros(n_thr)
+    for i in range(n):
+        f_lag[i] = lag
+        lag = f_cmd[i] + (lag - f_cmd[i]) * k
+    dof_of = np.array([DOFS.index(m.dof) if m.dof in DOFS else -1 for _, m in status])
+    running = np.array([m.phase == _RUNNING for _, m in status])
+    level = np.array([m.level_command if m.phase == _RUNNING else math.nan for _, m in status], dtype=float)
+    active = dof_of[ist]
+    # run counter: a new run at every status that starts RUNNING (or changes the level while running)
+    run_of_status = np.full(len(status), -1)
+    run = -1
+    for j in range(len(status)):
+        if running[j]:
+            if j == 0 or not running[j - 1] or level[j] != level[j - 1]:
+                run += 1
+            run_of_status[j] = run
+    run_id = run_of_status[ist]
+    windows: dict[str, tuple[float, float]] = {}
+    for d, name in enumerate(DOFS):
+        idx = np.flatnonzero(active == d)
+        if idx.size:
+            windows[name] = (float(t[idx[0]]), float(t[idx[-1]]))
+    still = [ts for ts, m in status if m.message.startswith(STILL_MESSAGE)]
+    # sensor samples through SensorState, oldest first, stamps on the grid
+    state = SensorState(cfg)
+    samples.sort(key=lambda ds: ds[1].stamp_s)
+    bias_on = False
+    for dev, s in samples:
+        s.stamp_s = round(s.stamp_s / grid_s) * grid_s
+        if still:
+            if not bias_on and still[0] <= s.stamp_s <= still[-1]:
+                state.start_gyro_bias()
+                bias_on = True
+            elif bias_on and state.collecting_gyro_bias and s.stamp_s > still[-1]:
+                state.finish_gyro_bias()
+        state.on_sample(dev, s)
+    if state.collecting_gyro_bias:
+        state.finish_gyro_bias()
+    for ts, m in estimates:
+        if m.dof in DOFS and m.method == "rls":
+            online.setdefault(m.dof, OnlineHistory(m.dof)).add(ts, m)
+    last = [m for _, m in status if m.phase != 0][-1] if busy else status[-1][1]
+    aborted = last.phase == 5  # PHASE_ABORTED
+    return CampaignRecord(
+        t_s=t, wrench_frd=f_lag @ matrix.T, wrench_cmd_frd=f_cmd @ matrix.T, active=active.astype(int),
+        level=level[ist], run_id=run_id.astype(int), truth_position_ned_m=np.full((n, 3), np.nan),
+        truth_euler_rad=np.full((n, 3), np.nan), sensors=state.log, windows=windows, online=online,
+        levels={}, authority={}, aborted=aborted, abort_reason=last.message if aborted else "", wall_time_s=0.0,
+        tick_s=grid_s, time_constant_s=tau, seed=-1, final_pulse_width_us=pwm[-1][1])
+
+
+def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01) -> CampaignRecord:
+    """:func:`record_from_messages` over the topics of a bag (:class:`~hindrax_drivers.recording.reader.BagReader`).
+
+    Raises :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag and
+    :class:`BagContentError` when a needed topic is missing.
+    """
+    from hindrax_drivers.recording.reader import BagReader
+
+    reader = BagReader(bag_path)
+    present = set(reader.topics)
+    missing = [tp for tp in ("thrusters/pulse_width", "identification/status", "dvl/data", "imu/data_raw",
+                             "pressure/fluid_pressure") if tp not in present and "/" + tp not in present]
+    if missing:
+        raise BagContentError(f"{bag_path}: missing topic(s) {', '.join(missing)}")
+    wanted = [tp for tp in present if tp.lstrip("/") in TOPICS]
+    return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.decoded(wanted)), cfg, grid_s)
+
+
+def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01):
+    """(record, {dof: DofIdentification}, {dof: error}) of a bag."""
+    from .estimators import identify_all_with_errors
+
+    record = record_from_bag(bag_path, cfg, grid_s)
+    idents, errors = identify_all_with_errors(record, cfg)
+    return record, idents, errors
+
+
+def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | Path, note: str,
+                  source: str = "bag", seed: int | None = None) -> Path:
+    """identification.yaml (provenance names the bag) and report/index.html in ``out``; returns the yaml path."""
+    from .report import write_report
+    from .results import build_results, write_identification
+
+    doc = build_results(idents, cfg, source=source, seed=seed)
+    doc["provenance"]["bag"] = str(bag_path)
+    path = write_identification(out / "identification.yaml", doc)
+    write_report(out / "report", idents, doc, campaign_note=note)
+    return path
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``hindrax ident bag``."""
+    parser.add_argument("bag", help="bag directory (or .mcap file) recorded during an identification campaign")
+    parser.add_argument("--out", default=None, help="output directory (default: the bag's parent directory)")
+    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Identify from a bag, write the outputs, print the summary. Exit 1 with one line on bad input."""
+    from hindrax_drivers.recording.reader import BagError
+
+    from ..commands.run import format_summary
+
+    try:
+        cfg = load_config(args.config or default_config_path())
+    except ConfigError as exc:
+        print(f"invalid configuration: {exc}", file=sys.stderr)
+        return 1
+    bag = Path(args.bag)
+    if not bag.exists():
+        print(f"ident bag: {bag}: no such file or directory", file=sys.stderr)
+        return 1
+    try:
+        record, idents, errors = identify_bag(bag, cfg)
+    except (BagError, BagContentError, OSError) as exc:
+        print(f"ident bag: {exc}", file=sys.stderr)
+        return 1
+    for dof, msg in errors.items():
+        print(f"{dof}: no estimate ({msg})")
+    if not idents:
+        print("ident bag: no DOF could be identified", file=sys.stderr)
+        return 1
+    out = Path(args.out) if args.out else bag.resolve().parent
+    out.mkdir(parents=True, exist_ok=True)
+    note = (f"Offline identification of bag {bag}, {record.t_s[-1] - record.t_s[0]:.0f} s of campaign"
+            + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
+    path = write_outputs(out, idents, cfg, bag, note)
+    print(format_summary(idents))
+    print(f"output: {path} and {out / 'report' / 'index.html'}")
+    return 0

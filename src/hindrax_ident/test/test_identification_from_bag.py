@@ -1,0 +1,100 @@
+"""Rebuilding the campaign record from recorded topics (identification/from_bag.py): the thrust-model wrench
+from the widths the ESC wrote (lag, allocation matrix), the DOF windows and runs from identification/status,
+and clear errors for bags without what is needed."""
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sensor_msgs.msg import FluidPressure
+
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.testing import child_env
+from hindrax_ident.identification.from_bag import BagContentError, record_from_messages
+from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
+
+
+def _stamped(msg, t):
+    msg.header.stamp.sec = int(t)
+    msg.header.stamp.nanosec = int(round((t - int(t)) * 1e9))
+    return msg
+
+
+def _messages(cfg, level_pw_us=1700.0):
+    """10 s: idle 1 s, positioning 1 s, a surge run 4 s at fixed widths, returning 2 s, done."""
+    n = len(cfg.thrusters.thrusters)
+    rev = np.array([t.reversed for t in cfg.thrusters.thrusters])
+    msgs = []
+    for k in range(501):
+        t = 0.02 * k
+        if t < 1.0:
+            st = ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE)
+        elif t < 2.0:
+            st = ManeuverStatus(phase=ManeuverStatus.PHASE_POSITIONING)
+        elif t < 6.0:
+            st = ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING, dof="surge", level_command=10.0, level_count=1)
+        elif t < 9.0:
+            st = ManeuverStatus(phase=ManeuverStatus.PHASE_RETURNING, dof="surge", level_count=1)
+        else:
+            st = ManeuverStatus(phase=ManeuverStatus.PHASE_DONE)
+        msgs.append(("identification/status", _stamped(st, t)))
+        logical = np.full(n, level_pw_us if 2.0 <= t < 6.0 else 1500.0)
+        wire = np.where(rev, 3000.0 - logical, logical)  # as EscOutput writes them
+        msgs.append(("thrusters/pulse_width", _stamped(ThrusterPwm(pulse_width_us=list(wire), armed=True), t)))
+        if k % 5 == 0:
+            msgs.append(("pressure/fluid_pressure", _stamped(FluidPressure(fluid_pressure=101325.0 + 9810.0), t)))
+    return msgs
+
+
+def test_record_wrench_windows_and_runs_from_status_and_esc_widths():
+    cfg = load_config(default_config_path())
+    core = AllocationCore(cfg)
+    curve, matrix = core.allocator.curves[0], np.asarray(core.matrix_frd)
+    msgs = _messages(cfg)
+    rec = record_from_messages(reversed(msgs), cfg)  # order of arrival does not matter
+    assert rec.tick_s == 0.01 and rec.t_s[0] == pytest.approx(1.0) and rec.t_s[-1] == pytest.approx(10.0)
+    assert np.allclose(np.diff(rec.t_s), 0.01)
+    t0, t1 = rec.windows["surge"]
+    assert t0 == pytest.approx(2.0) and t1 == pytest.approx(8.99, abs=0.011)
+    assert set(rec.run_id[(rec.t_s > 2.0) & (rec.t_s < 6.0)]) == {0}
+    assert set(rec.run_id[rec.t_s > 6.05]) == {-1} and np.all(np.isnan(rec.level[rec.t_s > 6.05]))
+    # commanded wrench: the same thrust on every thruster through the thrust allocation matrix (seed 003 eq. 9)
+    expected = matrix @ np.full(matrix.shape[1], float(curve.thrust_n(1700.0)))
+    mid = np.argmin(np.abs(rec.t_s - 4.0))
+    assert rec.wrench_cmd_frd[mid] == pytest.approx(expected, abs=1e-9)
+    # first-order lag: after 5 time constants within 1 %, and 63 % after one time constant
+    tau = cfg.thrusters.time_constant_s
+    k_big = int(np.argmax(np.abs(expected)))
+    assert rec.wrench_frd[mid, k_big] == pytest.approx(expected[k_big], rel=0.01)
+    i_tau = np.argmin(np.abs(rec.t_s - (2.0 + tau)))
+    assert rec.wrench_frd[i_tau, k_big] / expected[k_big] == pytest.approx(1 - math.exp(-1), abs=0.05)
+    # depth log from the pressure: 9810 Pa above the surface pressure = 1 m of fresh water at the port
+    depth = np.array([v[0] for _, v in rec.sensors["depth"]])
+    port_above_origin = -cfg.flat["sensors.ms5837.position_frd_m"][2]
+    assert depth == pytest.approx(np.full(depth.size, 1000.0 * 9.81 / (cfg.water_density_kg_m3 * cfg.gravity_m_s2)
+                                          + port_above_origin), abs=1e-6)
+    assert not rec.aborted
+
+
+def test_missing_topics_and_runs_are_reported():
+    cfg = load_config(default_config_path())
+    msgs = _messages(cfg)
+    with pytest.raises(BagContentError, match="thrusters/pulse_width"):
+        record_from_messages([m for m in msgs if m[0] != "thrusters/pulse_width"], cfg)
+    with pytest.raises(BagContentError, match="no manoeuvre"):
+        record_from_messages([m for m in msgs if m[0] != "identification/status"
+                              or m[1].phase in (0, 1)], cfg)
+
+
+def test_ident_bag_command_rejects_a_missing_or_wrong_bag(tmp_path):
+    hindrax = str(Path(sys.executable).with_name("hindrax"))
+    p = subprocess.run([hindrax, "ident", "bag", str(tmp_path / "nope")], env=child_env(), capture_output=True,
+                       text=True, timeout=60)
+    assert p.returncode == 1 and "no such file" in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    (tmp_path / "empty").mkdir()
+    p = subprocess.run([hindrax, "ident", "bag", str(tmp_path / "empty")], env=child_env(), capture_output=True,
+                       text=True, timeout=60)
+    assert p.returncode == 1 and p.stderr.startswith("ident bag:") and len(p.stderr.strip().splitlines()) == 1

@@ -1,0 +1,141 @@
+"""Identification node: ROS message adapters (frames, reversal) and the run_identification action on the
+virtual pool (goal validation, refusal while disarmed, feedback, HydroEstimate >= 1 Hz, cancel -> neutral)."""
+import math
+
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from rclpy.action import ActionClient
+from sensor_msgs.msg import Imu, Range
+
+from hindrax_drivers import frames
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_ident.bringup import build_graph
+from hindrax_ident.identification.node import (sample_from_range, samples_from_dvl, samples_from_imu,
+                                               thrust_of_written_widths)
+from hindrax_msgs.action import RunIdentification
+from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
+from hindrax_msgs.srv import SetArmed
+
+
+def test_dvl_message_becomes_frd_velocity_and_ned_attitude():
+    m = Dvl()
+    m.header.stamp.sec, m.header.stamp.nanosec = 12, 500_000_000
+    m.velocity_m_s.x, m.velocity_m_s.y, m.velocity_m_s.z = 0.4, 0.1, -0.05  # forward, left, down (FLU)
+    m.velocity_valid = True
+    rpy = [0.1, -0.2, 1.0]  # roll, pitch, yaw of body FRD in NED
+    q = frames.quaternion_marine_to_ros(frames.quaternion_from_euler_ned(rpy))
+    m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = (float(v) for v in q)
+    (att_dev, att), (vel_dev, vel) = samples_from_dvl(m)
+    assert (att_dev, vel_dev) == ("dvl75_attitude", "dvl75")
+    assert att.stamp_s == pytest.approx(12.5) and vel.stamp_s == pytest.approx(12.5)
+    assert [att.roll_rad, att.pitch_rad, att.yaw_rad] == pytest.approx(rpy, abs=1e-9)
+    assert vel.locked and vel.velocity_frd_m_s == pytest.approx([0.4, -0.1, 0.05])  # FRD: right and down +
+    m.velocity_valid = False
+    m.orientation.x = m.orientation.y = m.orientation.z = m.orientation.w = 0.0  # DVL gave no attitude
+    (dev, s), = samples_from_dvl(m)
+    assert dev == "dvl75" and not s.locked and np.all(np.isnan(s.velocity_frd_m_s))
+
+
+def test_imu_and_range_messages():
+    imu = Imu()
+    imu.angular_velocity.z = 0.3          # turning left (FLU)
+    imu.linear_acceleration.z = 9.81      # at rest: specific force up
+    (g_dev, g), (a_dev, a) = samples_from_imu(imu)
+    assert (g_dev, a_dev) == ("icm20948_gyro", "icm20948_accel")
+    assert g.angular_rate_rad_s == pytest.approx([0, 0, 0.3]) and a.specific_force_m_s2 == pytest.approx([0, 0, 9.81])
+    r = Range(range=0.9, min_range=0.3, max_range=50.0)
+    assert sample_from_range(r)[1].valid and sample_from_range(r)[1].distance_m == pytest.approx(0.9)
+    assert not sample_from_range(Range(range=float("nan"), min_range=0.3, max_range=50.0))[1].valid
+    assert not sample_from_range(Range(range=0.1, min_range=0.3, max_range=50.0))[1].valid
+
+
+def test_force_from_written_widths_undoes_the_esc_reversal_and_trim():
+    cfg = load_config(default_config_path())
+    core = AllocationCore(cfg)
+    curve = core.allocator.curves[0]
+    n = len(cfg.thrusters.thrusters)
+    rev = [t.reversed for t in cfg.thrusters.thrusters]
+    trim = np.array([t.trim_us for t in cfg.thrusters.thrusters])
+    logical = np.full(n, 1650.0)  # forward thrust on every thruster
+    wire = np.where(rev, 3000.0 - logical, logical) + trim  # what EscOutput writes (pca9685/node.py)
+    f = thrust_of_written_widths(cfg, curve, wire)
+    assert np.all(f > 0) and f == pytest.approx(np.full(n, float(curve.thrust_n(1650.0))))
+    assert thrust_of_written_widths(cfg, curve, np.full(n, 1500.0) + trim * 0) == pytest.approx(np.zeros(n), abs=0.2)
+    with pytest.raises(ValueError, match="expected"):
+        thrust_of_written_widths(cfg, curve, [1500.0])
+
+
+@pytest.mark.ros
+def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
+    with ros_context() as ctx:
+        graph = build_graph(default_config_path(), sim=True, context=ctx, seed=3,
+                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0})
+        probe = rclpy.create_node("probe", context=ctx)
+        graph.executor.add_node(probe)
+        got = {"est": [], "status": [], "wrench": [], "pwm": [], "fb": []}
+        probe.create_subscription(HydroEstimate, "identification/estimates", got["est"].append, 50)
+        probe.create_subscription(ManeuverStatus, "identification/status", got["status"].append, 100)
+        probe.create_subscription(WrenchStamped, "wrench", got["wrench"].append, 100)
+        probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", got["pwm"].append, 100)
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        action = ActionClient(probe, RunIdentification, "run_identification")
+        spin = lambda: graph.spin_once(0.005)  # noqa: E731
+        sim = graph.nodes["simulator"].simulator
+        try:
+            wait_until(action.server_is_ready, 30, spin, "action server")
+            # unknown DOF and out-of-range fractions: rejected
+            for goal in (RunIdentification.Goal(dofs=["swirl"]),
+                         RunIdentification.Goal(dofs=["surge"], level_fractions=[1.5])):
+                f = action.send_goal_async(goal)
+                wait_until(f.done, 10, spin, "goal answer")
+                assert not f.result().accepted
+            # disarmed: the goal fails at once, nothing is commanded
+            f = action.send_goal_async(RunIdentification.Goal(dofs=["surge"]))
+            wait_until(f.done, 10, spin, "goal answer")
+            r = f.result().get_result_async()
+            wait_until(r.done, 10, spin, "result")
+            assert not r.result().result.success and "armed" in r.result().result.message
+            assert not any(abs(w.wrench.force.x) > 0 for w in got["wrench"])
+
+            wait_until(lambda: graph.nodes["esc"].arming_remaining_s() == 0.0, 30, spin, "arming time")
+            a = arm.call_async(SetArmed.Request(arm=True))
+            wait_until(a.done, 10, spin, "arm")
+            assert a.result().success
+            wait_until(lambda: got["pwm"] and got["pwm"][-1].armed, 10, spin, "armed")
+            f = action.send_goal_async(RunIdentification.Goal(dofs=["surge"], level_fractions=[0.6]),
+                                       feedback_callback=lambda fb: got["fb"].append(fb.feedback))
+            wait_until(f.done, 10, spin, "goal answer")
+            handle = f.result()
+            assert handle.accepted
+            running = lambda: any(s.phase == ManeuverStatus.PHASE_RUNNING for s in got["status"])  # noqa: E731
+            wait_until(running, 120, spin, "surge run under way")
+            t_run = sim.t_s
+            wait_until(lambda: sim.t_s > t_run + 2.0, 30, spin, "two seconds of the run")
+            fb = [x for x in got["fb"] if x.level_command != 0.0]
+            assert fb and fb[-1].dof == "surge" and fb[-1].level_count == 1 and 0.0 < fb[-1].progress < 1.0
+            # the level is 0.6 of the surge authority, pushed forward or backward along the body x axis
+            forces = [w.wrench.force.x for w in got["wrench"][-20:]]
+            assert max(abs(x) for x in forces) > 0.5 * abs(fb[-1].level_command)
+            est = [e for e in got["est"] if e.dof == "surge"]
+            assert est and est[-1].parameter_names[:2] == ["inertia", "quadratic_damping"]
+            stamps = [e.header.stamp.sec + 1e-9 * e.header.stamp.nanosec for e in got["est"]]
+            assert len(stamps) >= 2 and max(np.diff(stamps)) <= 1.0 + 0.05  # at least 1 Hz
+            cancel = handle.cancel_goal_async()
+            wait_until(cancel.done, 10, spin, "cancel answer")
+            res = handle.get_result_async()
+            wait_until(res.done, 30, spin, "result after cancel")
+            assert not res.result().result.success and "cancel" in res.result().result.message
+            assert got["wrench"][-1].wrench.force.x == 0.0 and got["wrench"][-1].wrench.force.z == 0.0
+            n_wrench = len(got["wrench"])
+            t_end = sim.t_s
+            wait_until(lambda: sim.t_s > t_end + 1.0, 30, spin, "a second after the cancel")
+            assert len(got["wrench"]) == n_wrench  # no more commands after the neutral one
+            assert got["pwm"][-1].pulse_width_us == pytest.approx([1500.0] * 8, abs=1.3)  # neutral thrust
+            assert got["status"][-1].phase in (ManeuverStatus.PHASE_ABORTED, ManeuverStatus.PHASE_IDLE)
+        finally:
+            graph.shutdown()
+            probe.destroy_node()
