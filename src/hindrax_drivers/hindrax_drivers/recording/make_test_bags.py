@@ -24,7 +24,7 @@ The synthetic streams of the first version (:data:`STREAMS`, :func:`synthetic_me
 :func:`write_bag`: a vehicle at 1 m depth surging sinusoidally at the stack's nominal rates) stay
 for the recorder benchmark and writer tests that need a known, fixed load.
 
-Simulator bags (``--from-sim``): :data:`SIM_BAGS` (``sensors_4s``: 4 s in one file; ``split_3s``: 3 s split every 1 s of log time).
+Simulator bags (``--from-sim``): :data:`SIM_BAGS` (``sim_drivers_3s``: 3 s of every driver, raw and parsed).
 Simulated content is deterministic for a seed, but the exact message count is not (how the executor
 interleaves the driver timers with /clock steps varies with machine load), so tests check properties,
 not counts fixed in advance.
@@ -292,8 +292,9 @@ START_POSITION_NED_M = [3.0, 3.0, 0.9]
 
 #: bag name -> (simulated duration s, configuration overrides of the recorder's writer)
 SIM_BAGS: dict[str, tuple[float, dict[str, Any]]] = {
-    "sensors_4s": (4.0, {"recording.chunk_size_bytes": 64 * 1024}),
-    "split_3s": (3.0, {"recording.chunk_size_bytes": 32 * 1024, "recording.split_duration_s": 1.0}),
+    # every driver on the virtual pool, raw and parsed topics; the gyro-bias estimate is off so that a replay
+    # through fresh drivers reproduces every field exactly (test/test_bag_replay_drivers.py)
+    "sim_drivers_3s": (3.0, {"recording.chunk_size_bytes": 64 * 1024, "sensors.icm20948.estimate_gyro_bias": False}),
 }
 
 
