@@ -186,6 +186,36 @@ class _NamedFit:
             return None
         return float(self.ls.std[self.ls.index(name)])
 
+    @property
+    def quadratic_damping(self) -> Optional[float]:
+        """Quadratic damping k_q of seed 003 eq. 2 (None when not fitted, e.g. fitted per direction)."""
+        return self._value("quadratic_damping")
+
+    @property
+    def quadratic_damping_std(self) -> Optional[float]:
+        """Standard deviation of k_q (seed 003 eq. 7)."""
+        return self._std("quadratic_damping")
+
+    @property
+    def linear_damping(self) -> Optional[float]:
+        """Linear damping k_l of seed 003 eq. 2 (Table 3 second column)."""
+        return self._value("linear_damping")
+
+    @property
+    def linear_damping_std(self) -> Optional[float]:
+        """Standard deviation of k_l."""
+        return self._std("linear_damping")
+
+    @property
+    def bias(self) -> Optional[float]:
+        """Constant force/moment b of seed 003 eq. 2 (Table 3 third column; net buoyancy in heave)."""
+        return self._value("bias")
+
+    @property
+    def bias_std(self) -> Optional[float]:
+        """Standard deviation of b."""
+        return self._std("bias")
+
     def to_dict(self) -> dict:
         """``{name: value, name_std: std, ..., "n": n, "residual_std": s}`` (plain floats)."""
         out: dict = {}
@@ -207,36 +237,6 @@ class DragFit(_NamedFit):
     """
 
     ls: LsResult
-
-    @property
-    def quadratic_damping(self) -> Optional[float]:
-        """k_q, positive for a dissipative DOF (seed 003 Table 3 first column)."""
-        return self._value("quadratic_damping")
-
-    @property
-    def quadratic_damping_std(self) -> Optional[float]:
-        """Standard deviation of k_q (seed 003 eq. 7)."""
-        return self._std("quadratic_damping")
-
-    @property
-    def linear_damping(self) -> Optional[float]:
-        """k_l (seed 003 Table 3 second column)."""
-        return self._value("linear_damping")
-
-    @property
-    def linear_damping_std(self) -> Optional[float]:
-        """Standard deviation of k_l."""
-        return self._std("linear_damping")
-
-    @property
-    def bias(self) -> Optional[float]:
-        """b (seed 003 Table 3 third column; net buoyancy in heave)."""
-        return self._value("bias")
-
-    @property
-    def bias_std(self) -> Optional[float]:
-        """Standard deviation of b."""
-        return self._std("bias")
 
     def predict(self, velocity) -> np.ndarray:
         """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""
@@ -277,16 +277,6 @@ class DynamicFit(_NamedFit):
         return self._std("inertia")
 
     @property
-    def quadratic_damping(self) -> Optional[float]:
-        """Single quadratic damping k_q (None when fitted per direction)."""
-        return self._value("quadratic_damping")
-
-    @property
-    def quadratic_damping_std(self) -> Optional[float]:
-        """Standard deviation of k_q."""
-        return self._std("quadratic_damping")
-
-    @property
     def quadratic_damping_positive(self) -> Optional[float]:
         """k_q for v > 0 (heave: positive = down, seed 003 section 4.1)."""
         return self._value("quadratic_damping_positive")
@@ -305,26 +295,6 @@ class DynamicFit(_NamedFit):
     def quadratic_damping_negative_std(self) -> Optional[float]:
         """Standard deviation of k_q for v < 0."""
         return self._std("quadratic_damping_negative")
-
-    @property
-    def linear_damping(self) -> Optional[float]:
-        """Linear damping k_l."""
-        return self._value("linear_damping")
-
-    @property
-    def linear_damping_std(self) -> Optional[float]:
-        """Standard deviation of k_l."""
-        return self._std("linear_damping")
-
-    @property
-    def bias(self) -> Optional[float]:
-        """Constant force/moment b (e.g. net buoyancy W - B in heave)."""
-        return self._value("bias")
-
-    @property
-    def bias_std(self) -> Optional[float]:
-        """Standard deviation of b."""
-        return self._std("bias")
 
     @property
     def restoring(self) -> Optional[float]:
