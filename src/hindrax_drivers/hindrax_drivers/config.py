@@ -183,6 +183,8 @@ SCHEMA.update({
     "esc.watchdog_timeout_s": _f("no command for this long -> all neutral, s", 0.02, 10.0),
     "esc.output_rate_hz": _f("rate the outputs are refreshed and the watchdog checked, Hz", 1.0, 400.0),
     "esc.slew_rate_us_per_s": _f("max pulse-width change rate, us/s (0 = off)", 0.0, 1e6),
+    "esc.output_latency_s": _f("delay from the ESC node's stamp of a written width (thrusters/pulse_width) to the "
+                               "thrust starting to change, s: the identification's force timing", 0.0, 0.5),
     # --- lights (seed 003 §2.1: PWM also drives the lights) ---
     "lights.esc_channel": _i("PCA9685 channel of the lights", 0, 15),
     "lights.pulse_width_off_us": _f("pulse width for lights off, us", 500.0, 2500.0),

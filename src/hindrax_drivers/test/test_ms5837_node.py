@@ -222,6 +222,30 @@ def test_use_sim_time_stamps_and_timers_follow_the_clock(rig):
     assert r.emu.zero_reads == 0  # conversion waits were measured in simulated time
 
 
+def test_stamp_is_the_time_of_validity_of_the_pressure(rig):
+    """The stamp is the D1 command time plus half the conversion time (4.5 ms at OSR 4096), not the read time:
+    with a pressure ramp of 1e5 Pa/s sampled by the emulator when D1 is commanded, the published pressure
+    dates the sample to within one 2 ms clock step of stamp - 4.5 ms."""
+    sim = {"t": 1000.0}
+    ramp_pa_s = 1.0e5
+    r = rig(lambda t: (101000.0 + ramp_pa_s * (t - 1000.0), 14.0), "30BA", clock=lambda: sim["t"], sim_time=True)
+    clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
+
+    def tick():
+        sim["t"] += 0.002
+        sec = int(sim["t"])
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = sec, int(round((sim["t"] - sec) * 1e9))
+        clock_pub.publish(msg)
+        r.spin()
+
+    wait_until(lambda: len(r.pressure) >= 4, 20, tick, "pressure under sim time")
+    for m in r.pressure[1:]:
+        stamp_s = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        sampled_s = 1000.0 + (m.fluid_pressure - 101000.0) / ramp_pa_s
+        assert stamp_s - sampled_s == pytest.approx(0.5 * 0.009, abs=0.0025)
+
+
 def test_runs_as_a_process_and_reports_a_missing_bus():
     """``python -m hindrax_drivers.ms5837.node --ros-args --params-file hindrax.yaml`` on a machine without the
     configured /dev/i2c-N: the node stays up, reports the bus in /diagnostics, and exits 0 on SIGINT."""

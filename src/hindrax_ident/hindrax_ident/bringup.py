@@ -110,6 +110,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         from .identification.node import IdentificationNode
 
         nodes["identification"] = IdentificationNode(config=cfg, **common)
+        if sim:  # lock-step: simulated time waits for every control tick of a running manoeuvre
+            nodes["simulator"].add_step_gate(nodes["identification"].clock_may_advance)
     if hardware is not None:
         # emulators on the drivers' ROS clock (the MS5837 driver's): conversion waits line up exactly
         ms5837_clock = nodes["ms5837"].get_clock()

@@ -79,6 +79,15 @@ def test_record_wrench_windows_and_runs_from_status_and_esc_widths():
     assert not rec.aborted
 
 
+def test_esc_widths_act_after_the_configured_output_latency():
+    """The force of a width stamped t starts at t + esc.output_latency_s (rounded to the 10 ms grid)."""
+    for latency in (0.0, 0.03):
+        cfg = load_config(default_config_path(), overrides={"esc.output_latency_s": latency})
+        rec = record_from_messages(_messages(cfg), cfg)
+        first = rec.t_s[np.flatnonzero(np.linalg.norm(rec.wrench_cmd_frd, axis=1) > 1e-9)[0]]
+        assert first == pytest.approx(2.0 + latency, abs=1e-6)
+
+
 def test_missing_topics_and_runs_are_reported():
     cfg = load_config(default_config_path())
     msgs = _messages(cfg)

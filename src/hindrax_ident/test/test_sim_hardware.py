@@ -61,3 +61,25 @@ def test_dvl_emulator_on_a_pty_reports_the_simulated_velocity(hw):
         assert v is not None and abs(v[0] - sim.nu[0]) < 0.1  # 5 % scale noise + 0.01 m/s, plus decay
     finally:
         port.close()
+
+
+
+def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample(hw):
+    """The MS5837 and ICM-20948 emulators sample the vehicle at that moment: while sinking at 0.3 m/s the pressure
+    they are given follows the current depth, not the 10 Hz sensor-model sample (up to 100 ms, 3 cm, old)."""
+    sim, vh, cfg = hw
+    sim.reset(position_ned_m=[5.0, 3.0, 0.5], nu=[0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
+    rho_g = cfg.water_density_kg_m3 * cfg.gravity_m_s2
+    port_z = cfg.flat["sensors.ms5837.position_frd_m"][2]
+    errors, stale = [], []
+    for _ in range(12):
+        sim.advance(0.035)  # off the 10 Hz grid of the pressure model
+        pressure_pa = float(np.mean([vh.ms5837.truth(0.0)[0] for _ in range(20)]))  # what a conversion samples
+        port_depth = (pressure_pa - cfg.flat["environment.surface_pressure_pa"]) / rho_g
+        errors.append(port_depth - port_z - sim.position_ned_m[2])
+        stale.append(sim.t_s - sim.latest_sample("ms5837").stamp_s)
+    assert max(stale) > 0.05  # the grid sample was old at several of these reads
+    noise_m = cfg.flat["simulation.sensors.ms5837.noise_std_pa"] / rho_g / np.sqrt(20)
+    assert np.max(np.abs(errors)) < 0.002 + 4 * noise_m  # the depth now (a 50 ms old sample is 15 mm off)
+    spec_gyro = vh.icm20948.truth(0.0)[1]
+    assert np.allclose(spec_gyro, sim.measure("icm20948_gyro").angular_rate_rad_s, atol=0.05)

@@ -178,6 +178,28 @@ def test_real_time_factor_limits_simulated_time(cfg):
             close(ex, sim_node, probe.node)
 
 
+def test_step_gate_holds_simulated_time_until_it_opens(cfg):
+    """Lock-step: a closed gate stops the clock at a /clock boundary; opening it lets time run on."""
+    state = {"open_after_s": 0.5, "asked": []}
+
+    def gate(t_s):
+        state["asked"].append(t_s)
+        return t_s < state["open_after_s"] - 1e-9
+
+    with ros_context() as ctx:
+        sim_node, probe, ex, _ = make(ctx, cfg)
+        sim_node.add_step_gate(gate)
+        try:
+            spin_until(ex, lambda: state["asked"] and state["asked"][-1] >= 0.5 and len(state["asked"]) > 60)
+            for _ in range(50):  # the executor keeps spinning; the simulation must not move
+                ex.spin_once(timeout_sec=0.001)
+            assert sim_node.simulator.t_s == pytest.approx(0.5, abs=1e-9)
+            state["open_after_s"] = math.inf
+            spin_until(ex, lambda: sim_node.simulator.t_s >= 1.0)
+        finally:
+            close(ex, sim_node, probe.node)
+
+
 def test_time_msg_rounding():
     assert time_msg(1.5).sec == 1 and time_msg(1.5).nanosec == 500_000_000
     m = time_msg(2.9999999999)

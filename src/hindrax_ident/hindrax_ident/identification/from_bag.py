@@ -13,10 +13,12 @@ same adapters as the node, :mod:`.node`, into :class:`~.maneuvers.SensorState`),
 accelerometer biases) and ``identification/estimates`` (the online RLS history, for the report).
 
 Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10 ms,
-the simulator's /clock period): the ESC widths and the status are held from their stamps (zero-order
-hold, as the ESC output), and every sensor stamp is rounded to the grid (the drivers stamp with the ROS
-time, already on the /clock grid, except the DVL's device time of validity: <= grid_s / 2 moved), because
-the output-error fit compares the model with samples at grid instants.
+the simulator's /clock period): the status is held from its stamps and the ESC widths from their stamps plus
+``esc.output_latency_s`` (zero-order hold, as the ESC output; without the latency the force led the true
+thrust by one 10 ms tick in the virtual pool, which put the heave bias 2 N and the downward quadratic damping
+90 % off), and every sensor stamp is rounded to the grid (<= grid_s / 2 moved), because the output-error fit
+compares the model with samples at grid instants. Sensor stamps are the drivers' times of validity (the DVL's
+device time, the MS5837's conversion midpoint), which is what the fit needs.
 Raises :class:`BagContentError` (one line) when the bag lacks what is needed.
 """
 from __future__ import annotations
@@ -132,7 +134,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     # zero-order hold of status and widths on the grid
     st_t = np.array([s[0] for s in status])
     ist = np.clip(np.searchsorted(st_t, t + 1e-9, side="right") - 1, 0, len(status) - 1)
-    pw_t = np.array([p[0] for p in pwm])
+    pw_t = np.array([p[0] for p in pwm]) + float(cfg.flat["esc.output_latency_s"])
     ipw = np.searchsorted(pw_t, t + 1e-9, side="right") - 1
     core = AllocationCore(cfg)
     curve = core.allocator.curves[0]

@@ -359,6 +359,7 @@ class IdentificationNode(Node):
         self._goal = None
         self._done: Future | None = None
         self._waiting_first = False
+        self._last_tick_s: float | None = None  # ROS time of the last control tick answered (step gate)
         self._waiting_sensors_since: float | None = None
         self._last_feedback = (None, -1)
         self._last_feedback_t = -math.inf
@@ -480,6 +481,7 @@ class IdentificationNode(Node):
 
     def _start_worker(self) -> None:
         campaign = self._campaign
+        self._last_tick_s = None
         to_ros = self._link[1]
 
         def work() -> None:
@@ -538,12 +540,21 @@ class IdentificationNode(Node):
             self._finish(None, f"executive did not answer within {self.tick_timeout_s:g} s")
             return
         if kind == "wrench":
+            self._last_tick_s = t
             self._publish_wrench(payload, now)
             self._publish_progress(c, t)
         elif kind == "done":
             self._finish(payload, "")
         else:
             self._finish(None, str(payload))
+
+    def clock_may_advance(self, t_s: float) -> bool:
+        """Step gate for a simulator in the same process (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`):
+        False while a manoeuvre runs and the control tick due at simulated time ``t_s`` (s) has not run yet, so
+        the simulation never runs ahead of the control loop."""
+        if self._campaign is None or self._thread is None or self._last_tick_s is None:
+            return True
+        return t_s + 1e-6 < self._last_tick_s + self.tick_s
 
     def _finish(self, record, error: str) -> None:
         self._publish_wrench(np.zeros(6), self.get_clock().now())  # neutral thrust

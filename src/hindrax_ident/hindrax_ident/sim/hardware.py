@@ -4,9 +4,11 @@ In simulation the real driver code reads real bytes and registers: the DVL-75 an
 on pseudo-terminals (:class:`~hindrax_drivers.transport.pty_device.PtyDevice`, so the drivers' pyserial path
 runs), and the MS5837, ICM-20948 (+ AK09916) and PCA9685 emulators sit on one
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` that the I2C drivers use in place of
-``smbus2.SMBus``. Each emulator's truth source is the simulator's latest *measured* sensor sample (noise,
-bias, rate and dropout come from :mod:`hindrax_ident.sim.sensors`); emulator clocks are the simulated time as
-published on ``/clock`` (quantised to ``simulation.clock_rate_hz``).
+``smbus2.SMBus``. Each emulator's truth source is a *measured* sensor sample of the vehicle at the moment the
+emulated device samples (an MS5837 conversion start, an ICM-20948 data-rate tick, a DVL ping, through
+:meth:`~hindrax_ident.sim.simulator.Simulator.measure`: noise, bias and the DVL's dropouts from
+:mod:`hindrax_ident.sim.sensors`; the Ping1D uses the newest rate-grid sample); emulator clocks are the
+simulated time as published on ``/clock`` (quantised to ``simulation.clock_rate_hz``).
 
 The simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers
 (:meth:`VirtualHardware.pulse_widths_us`), so the whole path wrench -> allocation -> ESC node -> PCA9685
@@ -94,8 +96,10 @@ class VirtualHardware:
 
     # -- truth adapters (simulator samples -> emulator truth types)
     def _dvl_truth(self, _t: float) -> DvlTruth:
-        v = self.sim.latest_sample("dvl75")
-        a = self.sim.latest_sample("dvl75_attitude")
+        # measured at the ping (the emulator's cycle): the driver's time of validity (middle of the $DVPDL
+        # interval of the trapezoidal deltas) is then exact; a dropout is a ping without bottom lock
+        v = self.sim.measure("dvl75", dropout=True)
+        a = self.sim.measure("dvl75_attitude", dropout=True) or self.sim.latest_sample("dvl75_attitude")
         locked = bool(v is not None and v.locked and all(math.isfinite(x) for x in v.velocity_frd_m_s))
         altitude = v.altitude_m if v is not None and math.isfinite(v.altitude_m) else None
         roll, pitch, yaw = (a.roll_rad, a.pitch_rad, a.yaw_rad) if a is not None else (0.0, 0.0, 0.0)
@@ -109,14 +113,17 @@ class VirtualHardware:
             return Ping1dTruth(altitude_m=None, confidence_pct=0.0)
         return Ping1dTruth(altitude_m=float(s.distance_m), confidence_pct=100.0)
 
+    # The I2C devices sample the vehicle when the emulator asks (start of an MS5837 conversion, an ICM-20948
+    # output-data-rate tick), as the real parts do; the newest rate-grid sample would be up to one model period
+    # old (100 ms for the pressure model) and showed up as a 60 ms late depth in graph bags.
     def _pressure_truth(self, _t: float) -> tuple[float, float]:
-        s = self.sim.latest_sample("ms5837")
+        s = self.sim.measure("ms5837")
         return (float(s.pressure_pa), float(s.temperature_c))
 
     def _imu_truth(self, _t: float):
-        a = self.sim.latest_sample("icm20948_accel")
-        g = self.sim.latest_sample("icm20948_gyro")
-        m = self.sim.latest_sample("icm20948_mag")
+        a = self.sim.measure("icm20948_accel")
+        g = self.sim.measure("icm20948_gyro")
+        m = self.sim.measure("icm20948_mag")
         return (a.specific_force_m_s2, g.angular_rate_rad_s, m.magnetic_field_t, a.temperature_c)
 
     # -- actuation

@@ -29,6 +29,13 @@ one /clock period of simulated time (at most :data:`SLICE_S` of wall time) and r
 so that other nodes in the same SingleThreadedExecutor (e.g. nodes under test using ``use_sim_time``) run
 between clock ticks and see every /clock message.
 
+Lock-step (``add_step_gate(gate)``): a gate is a callable ``gate(t_s) -> bool`` asked at every /clock boundary
+whether simulated time may advance past ``t_s``; while one says no, the node does not step (and checks again
+at its next timer callback). In one process with the identification node this keeps the 50 Hz control loop
+on every control tick whatever the CPU load (a loaded machine otherwise lets the simulation run ahead of the
+controller, which then overshoots its planned runs). A gate that has refused for :data:`GATE_TIMEOUT_S` of
+wall time is overridden with a warning, so a stalled node cannot freeze the simulation.
+
 Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`),
 ``add_sensor_listener(cb(device, sample))``, ``add_step_listener(cb(simulator))``, ``latest_sample(device)``,
 and the ``pulse_width_source`` constructor argument: a callable returning the widths (n,) in us the ESCs
@@ -68,6 +75,8 @@ PulseWidthSource = Callable[[], "Sequence[float] | None"]
 SLICE_S = 0.005
 #: Largest lag behind the real-time schedule before re-anchoring, simulated s.
 _MAX_LAG_S = 0.5
+#: Wall time a step gate may hold the simulation before it is overridden (with a warning), s.
+GATE_TIMEOUT_S = 10.0
 
 
 def time_msg(t_s: float) -> TimeMsg:
@@ -108,6 +117,8 @@ class SimulatorNode(Node):
         self._armed = True
         self._source = pulse_width_source
         self._step_listeners: list[Callable[[Simulator], None]] = []
+        self._gates: list[Callable[[float], bool]] = []
+        self._gate_blocked_since: float | None = None
         self._next_clock = 0.0
         self._next_truth = 0.0
         self._next_contact = 0.0
@@ -194,9 +205,39 @@ class SimulatorNode(Node):
             cb(self.simulator)
         self._publish_due()
 
+    def add_step_gate(self, gate: Callable[[float], bool]) -> None:
+        """Lock-step with another node: ``gate(t_s)`` must be True for time to advance past ``t_s`` (module
+        docstring)."""
+        self._gates.append(gate)
+
+    def _gates_open(self) -> bool:
+        """True when every gate lets the time advance (or they have refused for longer than GATE_TIMEOUT_S)."""
+        t = self.simulator.t_s
+        if all(g(t) for g in self._gates):
+            self._gate_blocked_since = None
+            return True
+        now = time.monotonic()
+        if self._gate_blocked_since is None:
+            self._gate_blocked_since = now
+        elif now - self._gate_blocked_since > GATE_TIMEOUT_S:
+            self.get_logger().warn(f"a step gate held simulated time {t:.2f} s for {GATE_TIMEOUT_S:g} s of wall time; "
+                                   "stepping on", throttle_duration_sec=10.0)
+            self._gate_blocked_since = None
+            return True
+        return False
+
+    def _at_clock_boundary(self) -> bool:
+        t = self.simulator.t_s
+        k = round(t / self.clock_period_s)
+        return abs(t - k * self.clock_period_s) < 0.25 * self.simulator.step_s
+
     def _on_timer(self) -> None:
         dt = self.simulator.step_s
         start = time.monotonic()
+        if self._gates and self._at_clock_boundary() and not self._gates_open():
+            if self.real_time_factor > 0.0:  # the wall clock keeps running: do not try to catch up afterwards
+                self._wall_anchor, self._sim_anchor = start, self.simulator.t_s
+            return
         if self.real_time_factor <= 0.0:
             # one /clock period of simulated time, then back to the executor (other nodes run in between)
             end = self._next_clock
@@ -211,6 +252,9 @@ class SimulatorNode(Node):
             self._wall_anchor, self._sim_anchor = start, self.simulator.t_s
             target = self._sim_anchor
         while self.simulator.t_s + 0.5 * dt <= target:
+            if self._gates and self._at_clock_boundary() and not self._gates_open():
+                self._wall_anchor, self._sim_anchor = time.monotonic(), self.simulator.t_s
+                break
             self._step_once()
             if time.monotonic() - start > 0.05:  # keep the executor responsive
                 break

@@ -467,6 +467,20 @@ class SensorSuite:
         self.latest.clear()
         self.next_due_s = t_s
 
+    def measure(self, name: str, truth: VehicleTruth, dropout: bool = False) -> Any | None:
+        """One sample of device ``name`` on ``truth``, off its rate grid (noise and bias; with ``dropout`` the
+        device's ``dropout_probability`` applies and a dropped sample is None).
+
+        For the device emulators, which sample their truth when the real device would (the MS5837 at the start
+        of a conversion, the ICM-20948 at its output data rate): reading the newest grid sample instead would
+        add up to one model period (100 ms for the MS5837) of staleness that the real sensor does not have.
+        The grid (``latest``, :meth:`update`) is unchanged. Raises ``KeyError`` for a disabled device.
+        """
+        model = self.models[name]
+        if dropout and model.spec.dropout_probability > 0.0 and model.rng.random() < model.spec.dropout_probability:
+            return None
+        return model.measure(truth)
+
     def update(self, t_s: float, truth: Callable[[], VehicleTruth]) -> list[tuple[str, Any]]:
         """Sample every device due at ``t_s``; ``truth`` is called (at most once) only if one is due.
 

@@ -282,3 +282,9 @@ class Simulator:
         """Newest sample of a sensor device (None before its first sample or when disabled)."""
         return self.sensors.latest.get(device)
 
+    def measure(self, device: str, dropout: bool = False) -> Any | None:
+        """A sample of ``device`` on the vehicle as it is now (:meth:`SensorSuite.measure`: noise and bias, off the
+        device's rate grid; None when ``dropout`` and the device drops it). Raises ``KeyError`` for a disabled
+        device."""
+        return self.sensors.measure(device, self.truth(), dropout)
+
