@@ -1,23 +1,24 @@
-"""``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR] [--graph]``: the main job.
+"""``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR] [--in-process]``: the main job.
 
-Default: the identification campaign stepped in-process on the simulator (:mod:`hindrax_ident.identification
-.campaign`, the same manoeuvres, sensor models and estimators as on the vehicle, no ROS graph): fast and the
-accuracy the identification issue asks for.
-
-``--graph``: through the ROS graph, in one process with a SingleThreadedExecutor
+Default: the campaign through the ROS graph, in one process with a SingleThreadedExecutor
 (:func:`hindrax_ident.bringup.build_graph`): the virtual pool simulator, the five device emulators, the four
 sensor drivers, the ESC node, the thrust allocation, the identification node and the recorder. The vehicle is
 armed through ``esc/set_armed`` (the operator's service, after ``esc.arming_time_s`` at neutral), the campaign
 runs as one ``run_identification`` action goal (progress lines from its feedback), then the vehicle is
 disarmed, the bag closed and the offline identification runs on the bag
-(:mod:`hindrax_ident.identification.from_bag`). Known limitation: the estimates from the graph path do not yet
-meet the 5 % targets (heave especially); see the README.
+(:mod:`hindrax_ident.identification.from_bag`). The simulator runs in lock-step with the identification
+node's control tick (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`), so CPU load slows the run
+but does not change it.
+
+``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the simulator
+(:mod:`hindrax_ident.identification.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
+no ROS graph, no bag), about four times faster; for quick studies of the method.
 
 Output directory: ``<recording.output_root>/<UTC timestamp>/`` with a ``latest`` symlink beside it, or
 ``--out``. It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.results`),
-``report/index.html`` with its plots, and with ``--graph`` also ``bag/`` (rosbag2 MCAP layout). At the end a
-table is printed: per DOF and parameter the identified value with its std, the configured value ("truth" in
-simulation) and the relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
+``report/index.html`` with its plots, and (graph) ``bag/`` (rosbag2 MCAP layout). At the end a table is printed:
+per DOF and parameter the identified value with its std, the configured value ("truth" in simulation) and the
+relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
 """
 from __future__ import annotations
 
@@ -40,9 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.description = ("Run the identification campaign in-process on the simulator (no ROS graph, no bag) "
                               "and write identification.yaml and report/index.html.")
     else:
-        parser.description = ("Run the identification campaign on the virtual pool (stepped in-process; with --graph "
-                              "through the whole ROS node graph, recording bag/) and write identification.yaml and "
-                              "report/index.html.")
+        parser.description = ("Run the identification campaign on the virtual pool through the whole ROS node graph "
+                              "(simulator, device emulators, drivers, ESC, allocation, identification node, recorder "
+                              "-> bag/), identify from the bag and write identification.yaml and report/index.html.")
     parser.add_argument("--dofs", default=",".join(DOFS), help=f"comma-separated DOFs (default {','.join(DOFS)})")
     parser.add_argument("--levels", type=int, default=None,
                         help="levels per DOF (default identification.levels_per_dof)")
@@ -53,10 +54,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     if not parser.prog.endswith("campaign"):
-        parser.add_argument("--graph", action="store_true",
-                            help="run through the whole ROS graph (drivers on emulated devices, identification action, "
-                                 "recorder -> bag/) and identify from the bag; its accuracy does not yet meet the "
-                                 "5 %% targets (see README)")
+        parser.add_argument("--in-process", action="store_true",
+                            help="step the simulator in-process instead (no drivers, no ROS graph, no bag; about 4x "
+                                 "faster), as `hindrax ident campaign`")
 
 
 def format_summary(identifications: dict) -> str:
@@ -92,9 +92,9 @@ def _output_dir(cfg, out: str | None) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    """``hindrax run``: in-process on the simulator (default, also ``ident campaign``) or through the ROS graph
-    (``--graph``)."""
-    if getattr(args, "graph", False):
+    """``hindrax run``: through the ROS graph (default) or in-process on the simulator (``--in-process``, and
+    ``hindrax ident campaign``)."""
+    if hasattr(args, "in_process") and not args.in_process:
         return run_graph(args)
     return run_in_process(args)
 
