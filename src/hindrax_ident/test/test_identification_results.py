@@ -3,6 +3,7 @@ simulator reads; plus the configured truth used by the acceptance test (seed 003
 from __future__ import annotations
 
 
+import numpy as np
 import pytest
 import yaml
 
@@ -69,6 +70,26 @@ def test_round_trip_and_schema(cfg, tmp_path):
     assert back["dofs"]["yaw"]["quadratic_damping"]["unit"] == "kg m^2"
     assert back["dofs"]["heave"]["quadratic_damping_negative"]["std"] > 0
     assert "restoring" in back["dofs"]["pitch"]
+
+
+def test_drag_coefficient_and_reynolds_range_of_table_4(cfg):
+    """Seed 003 Table 4 columns: C_D = 2 k_q / (rho A_p) with A_p the box face normal to the motion, and the
+    Reynolds range |v| V^(1/3) / nu of the speeds above 0.05 m/s; none for rotations."""
+    surge = _fake(cfg, "surge", scale=1.0)
+    surge.signals = {"velocity": np.array([0.0, 0.02, 0.2, -0.45, 0.3])}
+    doc = build_results({"surge": surge, "heave": _fake(cfg, "heave", scale=1.0), "yaw": _fake(cfg, "yaw")}, cfg)
+    d = doc["dofs"]["surge"]["drag_coefficient"]
+    area = 0.47 * 0.40  # width x height, seed 003 §2.1
+    assert d["projected_area_m2"] == pytest.approx(area)
+    assert d["c_d"][0] == pytest.approx(2 * 66.48 / (1000.0 * area))  # k_q of seed 003 Table 3 -> 0.707
+    assert d["c_d"][1] == pytest.approx(2 * surge.std["quadratic_damping"] / (1000.0 * area))
+    length = 0.0153 ** (1 / 3)  # seed 000 eq. 10: V^(1/3) = 0.2483 m
+    assert d["reynolds_range"] == pytest.approx([0.2 * length / 1.01e-6, 0.45 * length / 1.01e-6])
+    h = doc["dofs"]["heave"]["drag_coefficient"]
+    assert h["c_d_positive"][0] == pytest.approx(2 * 93.52 / (1000.0 * 0.59 * 0.47))
+    assert h["c_d_negative"][0] == pytest.approx(2 * 56.57 / (1000.0 * 0.59 * 0.47))
+    assert h["reynolds_range"] is None  # no speeds recorded in this fake
+    assert "drag_coefficient" not in doc["dofs"]["yaw"]
 
 
 @pytest.mark.parametrize("mutate, key", [

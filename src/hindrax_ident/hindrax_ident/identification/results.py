@@ -13,6 +13,8 @@ Schema (design.md §5; version :data:`SCHEMA_VERSION`)::
         comparison: {equation_error: {<parameter>: [value, std]}, rls: {...}, steady_state: {...} | null,
                      steady_state_note: <text>, rls_time_s: <float|null>, steady_state_time_s: <float|null>}
         configured: {<parameter>: <float>}     # optional: the configuration's values (simulation runs)
+        drag_coefficient: {c_d: [value, std] (heave: c_d_positive, c_d_negative), projected_area_m2,
+                           characteristic_length_m, reynolds_range: [low, high], definition}  # surge/sway/heave
 
 <parameter>: ``inertia`` (rigid + added; kg or kg m^2), ``added_mass`` (inertia - rigid),
 ``quadratic_damping`` and ``linear_damping`` (heave: ``*_positive`` and ``*_negative``, positive heave = down,
@@ -33,7 +35,7 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-__all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "write_identification",
+__all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry", "write_identification",
            "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS"]
 
 SCHEMA_VERSION = 1
@@ -53,6 +55,48 @@ def REQUIRED_PARAMETERS(dof: str) -> tuple[str, ...]:  # noqa: N802 - reads like
 
 def _f(x) -> float | None:
     return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
+
+
+#: Projected area of each translational DOF from the configured bounding box (vehicle.length_m, width_m,
+#: height_m): the two dimensions normal to the motion. ASSUMPTION: seed 003 Table 4 prints no areas.
+_AREA_DIMENSIONS = {"surge": ("width_m", "height_m"), "sway": ("length_m", "height_m"),
+                    "heave": ("length_m", "width_m")}
+#: Speeds at or below this are left out of the Reynolds range (the vehicle between levels), m/s.
+REYNOLDS_MIN_SPEED_M_S = 0.05
+
+
+def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
+    """Seed 003 Table 4 for a translational DOF: C_D = 2 k_q / (rho A_p) with its std from the std of k_q
+    (:func:`~hindrax_ident.estimation.drag_coefficient.drag_coefficient`; heave per direction), A_p the
+    bounding-box area normal to the motion (:data:`_AREA_DIMENSIONS`), and the Reynolds range Re = |v| L / nu
+    with L = V^(1/3) (seed 000 eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
+    None for rotational DOFs (the seed defines neither their area nor their radius)."""
+    from ..estimation.drag_coefficient import (EstimationError, characteristic_length_from_volume,
+                                               drag_coefficient, reynolds_range)
+
+    if r.dof not in _AREA_DIMENSIONS:
+        return None
+    a, b = _AREA_DIMENSIONS[r.dof]
+    area = float(cfg.flat[f"vehicle.{a}"]) * float(cfg.flat[f"vehicle.{b}"])
+    rho = float(cfg.water_density_kg_m3)
+    length = characteristic_length_from_volume(float(cfg.displaced_volume_m3))
+    out: dict = {}
+    names = (("c_d_positive", "quadratic_damping_positive"), ("c_d_negative", "quadratic_damping_negative")) \
+        if r.dof == "heave" else (("c_d", "quadratic_damping"),)
+    for key, name in names:
+        c, sd = drag_coefficient(max(float(r.values[name]), 0.0), area, rho, float(r.std[name]))
+        out[key] = [c, sd]
+    out["projected_area_m2"] = area
+    out["characteristic_length_m"] = length
+    try:
+        lo, hi = reynolds_range(r.signals.get("velocity", []), length, min_speed=REYNOLDS_MIN_SPEED_M_S)
+        out["reynolds_range"] = [lo, hi]
+    except (EstimationError, ValueError):
+        out["reynolds_range"] = None
+    out["definition"] = (f"C_D = 2 k_q / (rho A_p), A_p = {a} x {b} of the configuration (assumed: seed 003 prints "
+                         "no areas); Re = |v| V^(1/3) / 1.01e-6 m^2/s over speeds above "
+                         f"{REYNOLDS_MIN_SPEED_M_S:g} m/s")
+    return out
 
 
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
@@ -78,6 +122,9 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         }
         if include_configured:
             entry["configured"] = {k: float(v) for k, v in r.truth.items()}
+        drag = drag_coefficient_entry(r, cfg)
+        if drag is not None:
+            entry["drag_coefficient"] = drag
         dofs[dof] = entry
     return {
         "schema_version": SCHEMA_VERSION,
