@@ -26,6 +26,7 @@ Errors: :class:`ConfigError` (a ``ValueError``) carrying a list of :class:`Confi
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import re
@@ -712,9 +713,10 @@ class VehicleConfig:
         return DofHydrodynamics(dof, h["added_mass_kg"], h["linear_damping_kg_s"], h["linear_damping_kg_s"],
                                 h["quadratic_damping_kg_m"], h["quadratic_damping_kg_m"])
 
-    @property
+    @functools.cached_property
     def thrusters(self) -> ThrustersConfig:
-        """Typed thruster set (positions/directions FRD relative to the CG)."""
+        """Typed thruster set (positions/directions FRD relative to the CG); built once per configuration (the
+        configuration is immutable; the control and identification loops read it at every tick)."""
         f = self.flat
         ts = tuple(
             ThrusterConfig(

@@ -34,6 +34,10 @@ def test_dvl_message_becomes_frd_velocity_and_ned_attitude():
     assert att.stamp_s == pytest.approx(12.5) and vel.stamp_s == pytest.approx(12.5)
     assert [att.roll_rad, att.pitch_rad, att.yaw_rad] == pytest.approx(rpy, abs=1e-9)
     assert vel.locked and vel.velocity_frd_m_s == pytest.approx([0.4, -0.1, 0.05])  # FRD: right and down +
+    # with the $DVPDL interval known, the attitude (from the ping's $DVEXT) is dated at the end of the interval
+    m.delta_time_s = 0.1
+    (_, att), (_, vel) = samples_from_dvl(m)
+    assert att.stamp_s == pytest.approx(12.55) and vel.stamp_s == pytest.approx(12.5)
     m.velocity_valid = False
     m.orientation.x = m.orientation.y = m.orientation.z = m.orientation.w = 0.0  # DVL gave no attitude
     (dev, s), = samples_from_dvl(m)

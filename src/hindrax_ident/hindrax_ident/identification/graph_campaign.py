@@ -77,7 +77,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     ov["simulation.real_time_factor"] = float(real_time_factor)
     with ros_context() as ctx:
         graph = build_graph(config_path, sim=True, record=True, record_dir=str(bag_dir), context=ctx, seed=seed,
-                            overrides=ov, identification=True)
+                            overrides=ov, identification=True, drive_clocks=True)
         cfg = graph.config
         sim = graph.nodes["simulator"].simulator
         client = rclpy.create_node("hindrax_run", context=ctx)

@@ -57,6 +57,7 @@ from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.time import Time
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 
@@ -118,6 +119,9 @@ class SimulatorNode(Node):
         self._source = pulse_width_source
         self._step_listeners: list[Callable[[Simulator], None]] = []
         self._gates: list[Callable[[float], bool]] = []
+        self._driven_clocks: list = []
+        #: False: /clock is not published (every consumer in the process is driven through drive_clock)
+        self.publish_clock_topic = True
         self._gate_blocked_since: float | None = None
         self._next_clock = 0.0
         self._next_truth = 0.0
@@ -205,6 +209,15 @@ class SimulatorNode(Node):
             cb(self.simulator)
         self._publish_due()
 
+    def drive_clock(self, clock) -> None:
+        """Set the ROS time of ``clock`` (an rclpy ROS_TIME clock with ``use_sim_time`` active, e.g. another node's
+        ``get_clock()`` in this process) at every /clock tick, directly: the in-process alternative to each node
+        taking /clock from DDS (``rclpy.clock.ROSClock.set_ros_time_override``, what a TimeSource does on each
+        /clock message). All driven clocks change together, before any node runs; with every in-process node
+        driven, ``publish_clock_topic = False`` saves the /clock messages (in the one-process graph they were 43 %
+        of all messages taken by the executor)."""
+        self._driven_clocks.append(clock)
+
     def add_step_gate(self, gate: Callable[[float], bool]) -> None:
         """Lock-step with another node: ``gate(t_s)`` must be True for time to advance past ``t_s`` (module
         docstring)."""
@@ -265,7 +278,12 @@ class SimulatorNode(Node):
         t = sim.t_s
         eps = 1e-9
         if t + eps >= self._next_clock:
-            self._pub_clock.publish(ClockMsg(clock=time_msg(t)))
+            if self._driven_clocks:
+                now = Time(nanoseconds=int(round(t * 1e9)), clock_type=ClockType.ROS_TIME)
+                for c in self._driven_clocks:
+                    c.set_ros_time_override(now)
+            if self.publish_clock_topic:
+                self._pub_clock.publish(ClockMsg(clock=time_msg(t)))
             self._next_clock = (math.floor((t + eps) / self.clock_period_s) + 1) * self.clock_period_s
         if t + eps >= self._next_truth:
             self._publish_truth(t)
