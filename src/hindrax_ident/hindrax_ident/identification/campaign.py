@@ -241,6 +241,11 @@ class Campaign:
             return float(self.ctrl.depth_rate_m_s)
         return float(np.nan_to_num(st.rates_frd_rad_s[k - 3]))
 
+    def _attitude_age_s(self) -> float:
+        """Time since the time of validity of the newest attitude sample, s (0 before the first one)."""
+        log = self.state.log["attitude"]
+        return max(0.0, float(self.sim.t_s) - float(log[-1][0])) if log else 0.0
+
     def _wait_still(self, k: int, tol: float, max_s: float, free: Sequence[str] = ()) -> None:
         still = 0.0
         t0 = self.sim.t_s
@@ -369,6 +374,10 @@ class Campaign:
                     rate = max(0.0, s * self._axis_velocity(k))
                     stop = rate * rate / (2.0 * alpha) + 0.1 * rate
                     ang = float(np.nan_to_num(self.state.rpy_rad[k - 3]))
+                    if dof != "yaw":
+                        # the attitude comes at 10 Hz: extrapolate it to now with the 100 Hz gyro rate (at 2 rad/s
+                        # a 100 ms old angle is 0.2 rad short, which let the graph overshoot the pitch limit)
+                        ang += self._axis_velocity(k) * self._attitude_age_s()
                     if dof == "yaw":
                         turned += abs(wrap_angle(ang - prev))
                         prev = ang
