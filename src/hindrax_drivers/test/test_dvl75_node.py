@@ -27,7 +27,7 @@ from hindrax_drivers.config import default_config_path
 from hindrax_drivers.device_clock import DeviceClockSync
 from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
 from hindrax_drivers.dvl75.node import Dvl75Node
-from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvext, format_dvpdl, format_sentence, parse_line
+from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvpdl, format_sentence, parse_line
 from hindrax_drivers.dvl75.report import DvlReportBuilder
 from hindrax_drivers.dvl75.stream import DvlStreamDecoder
 from hindrax_drivers.frames import quaternion_from_euler_ned, quaternion_marine_to_ros
@@ -415,32 +415,6 @@ def test_lever_arm_rolling_in_place_gives_zero_base_link_velocity():
     assert rep.delta_position_flu_m == pytest.approx((0.05, 0.0, 0.0), abs=1e-12)
     # the midpoint of the interval is the time of validity
     assert rep.device_time_ns == 10_000_000_000 - 50_000_000
-
-
-@pytest.mark.parametrize("dvpdl_first", [True, False])
-def test_dvpdl_takes_the_dvext_of_its_own_ping_in_either_sentence_order(dvpdl_first):
-    """Each dvl/data message carries the altitude (and attitude, lock, beams) of the $DVEXT of the same ping,
-    whichever sentence of the ping arrives first (hardware.md does not document the order); a $DVPDL whose
-    $DVEXT never comes is still published, with the older $DVEXT, when the next ping starts."""
-    with rig(lambda t: STEADY, start_disconnected=True) as r:
-        t0 = r.node.now_ns()
-        altitudes = [2.0, 2.5, 3.0, 3.5]
-        for k, alt in enumerate(altitudes):
-            base = t0 + k * 100_000_000
-            pdl = format_dvpdl(_pdl(time_since_boot_s=10.0 + 0.1 * k, delta_x_m=0.03))
-            ext = format_dvext(_ext(locked=True, altitude_m=alt))
-            if k == len(altitudes) - 1:  # the last ping loses its $DVEXT: flushed by the next $DVPDL
-                r.node.handle_bytes(pdl, base)
-                r.node.handle_bytes(format_dvpdl(_pdl(time_since_boot_s=10.5, delta_x_m=0.03)), base + 100_000_000)
-                continue
-            first, second = (pdl, ext) if dvpdl_first else (ext, pdl)
-            r.node.handle_bytes(first, base)
-            r.node.handle_bytes(second, base + 20_000_000)
-        # (a $DVEXT before any $DVPDL also gives a DVEXT-only message, velocity invalid: not counted)
-        r.wait(lambda: len(r.valid()) >= len(altitudes), message="one dvl/data per ping")
-        got = [m.altitude_m for m in r.valid()[:len(altitudes)]]
-        assert got[:3] == pytest.approx(altitudes[:3], rel=0.01)  # vertical projection of the beam altitude
-        assert got[3] == pytest.approx(altitudes[2], rel=0.01)  # no $DVEXT of its own: the previous one
 
 
 def test_validity_gating_uses_confidence_dtu_and_a_fresh_dvext_lock():

@@ -16,14 +16,9 @@ arriving without ``$DVPDL`` for ``MISSING_DVPDL_TIMEOUT_S``.
 Publishes (QoS reliable, depth 10):
 
 - ``dvl/data`` (hindrax_msgs/Dvl, frame ``base_link``): one message per ``$DVPDL``, with lock, attitude,
-  altitude and beams from the ``$DVEXT`` of the same ping (see :mod:`hindrax_drivers.dvl75.report` for
-  every field, the FRD -> FLU conversion, the lever-arm correction and the validity rule). The order of the
-  two sentences within a ping is not documented (hardware.md §1.3), so they are paired by arrival: a
-  ``$DVEXT`` received within :data:`PING_PAIR_WINDOW_S` before a ``$DVPDL`` belongs to its ping (publish at
-  once); otherwise the ``$DVPDL`` waits for the next ``$DVEXT`` within that window (and is published with the
-  older one when the next ping's ``$DVPDL`` comes first). Without pairing, an emitter that sends ``$DVPDL``
-  first would give every message the attitude of the previous ping, 100 ms late at 10 Hz, which in the
-  virtual pool put the identification's pitch and depth holds into a 0.8 Hz limit cycle. A velocity is **never** published from an unlocked or
+  altitude and beams from the latest ``$DVEXT`` (at most one ping cycle older; see
+  :mod:`hindrax_drivers.dvl75.report` for every field, the FRD -> FLU conversion, the lever-arm
+  correction and the validity rule). A velocity is **never** published from an unlocked or
   zero-confidence report: ``velocity_valid`` false, NaN velocity and delta position. When no ``$DVPDL``
   has arrived for 1 s, one message per ``$DVEXT`` is published instead (velocity never valid).
 - ``dvl/twist`` (geometry_msgs/TwistWithCovarianceStamped, ``base_link``): the same velocity, only when
@@ -82,9 +77,6 @@ ALTITUDE_FIELD_OF_VIEW_RAD = math.radians(45.0)
 MISSING_DVPDL_TIMEOUT_S = 3.0
 #: Without ``$DVPDL`` for this long, ``dvl/data`` is published from each ``$DVEXT`` instead, s.
 DVEXT_ONLY_AFTER_S = 1.0
-#: Sentences of one ping arrive within this, s: a $DVEXT (~200 bytes) takes 17 ms at 115200 baud; pings are at
-#: least 50 ms apart (20 Hz at most, hardware.md §1.1).
-PING_PAIR_WINDOW_S = 0.04
 
 
 class Dvl75Node(SerialDeviceNode):
@@ -108,7 +100,6 @@ class Dvl75Node(SerialDeviceNode):
         self._last_tu_s: Optional[float] = None
         self._last_dvpdl_ns: Optional[int] = None
         self._last_dvext_ns: Optional[int] = None
-        self._pending_dvpdl: Optional[tuple] = None  # (record, stamp ns, receive ns) waiting for its $DVEXT
         self._last_startup_ns = 0
         self._text_lines = 0
         self._last_text = ""
@@ -136,7 +127,6 @@ class Dvl75Node(SerialDeviceNode):
         self._sync_counts()
         self.clock_sync.reset()
         self._last_tu_s = None
-        self._pending_dvpdl = None
 
     # -- data path (reader thread)
     def handle_bytes(self, data: bytes, receive_ns: int) -> None:
@@ -163,15 +153,6 @@ class Dvl75Node(SerialDeviceNode):
                 self.diag.count(kind, delta)
                 self._reported_counts[kind] = total
 
-    def _publish_dvpdl(self, pdl: DvlPositionDelta, stamp_ns: Optional[int], receive_ns: int) -> None:
-        report = self.builder.from_position_delta(pdl, receive_ns)
-        self._publish(report, receive_ns if stamp_ns is None else stamp_ns, receive_ns)
-
-    def _flush_pending(self) -> None:
-        pending, self._pending_dvpdl = self._pending_dvpdl, None
-        if pending is not None:
-            self._publish_dvpdl(*pending)
-
     def _on_dvpdl(self, pdl: DvlPositionDelta, receive_ns: int) -> None:
         if self._last_tu_s is not None and pdl.time_since_boot_s < self._last_tu_s:
             self.diag.count("device_reboots")
@@ -182,23 +163,14 @@ class Dvl75Node(SerialDeviceNode):
         self.clock_sync.update(round(pdl.time_since_boot_s * 1e9), receive_ns)
         report = self.builder.from_position_delta(pdl, receive_ns)
         stamp_ns = self.clock_sync.to_ros_ns(report.device_time_ns)  # type: ignore[arg-type]
-        self._flush_pending()  # the previous ping's $DVPDL never got its $DVEXT
-        window_ns = PING_PAIR_WINDOW_S * 1e9
-        if self._last_dvext_ns is not None and 0 <= receive_ns - self._last_dvext_ns <= window_ns:
-            self._publish_dvpdl(pdl, stamp_ns, receive_ns)  # this ping's $DVEXT came first
-        else:
-            self._pending_dvpdl = (pdl, stamp_ns, receive_ns)
+        self._publish(report, receive_ns if stamp_ns is None else stamp_ns, receive_ns)
         if pdl.confidence_pct > 0:
             self.check_stuck("dvpdl", (pdl.delta_roll_rad, pdl.delta_pitch_rad, pdl.delta_yaw_rad,
                                        pdl.delta_x_m, pdl.delta_y_m, pdl.delta_z_m))
 
     def _on_dvext(self, ext: DvlExtended, receive_ns: int) -> None:
-        pending = self._pending_dvpdl
-        if pending is not None and receive_ns - pending[2] > PING_PAIR_WINDOW_S * 1e9:
-            self._flush_pending()  # too late to be the same ping: publish with the older $DVEXT
         self.builder.update_extended(ext, receive_ns)
         self._last_dvext_ns = receive_ns
-        self._flush_pending()  # the waiting $DVPDL of this ping, now with its attitude, lock and beams
         rng = Range()
         rng.header.stamp = time_from_ns(receive_ns)
         rng.header.frame_id = "dvl_link"
