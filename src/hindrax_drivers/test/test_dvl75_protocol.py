@@ -564,9 +564,9 @@ def test_emulator_faults():
     before = framer.discarded_bytes
     lines = framer.feed(emu.poll(0.7))
     assert len(lines) == 1 and framer.discarded_bytes > before
-    assert isinstance(parse_line(lines[0]), DvlExtended)
-    # dropped line: one DVPDL missing
-    emu.faults.drop(1)
+    assert isinstance(parse_line(lines[0]), DvlPositionDelta)  # the $DVEXT (sent first) was truncated
+    # dropped lines: the cycle's $DVEXT (sent first) and $DVPDL missing
+    emu.faults.drop(2)
     assert len(_of([parse_line(x) for x in framer.feed(emu.poll(0.8))], DvlPositionDelta)) == 0
     # stuck: truth changes, output does not
     emu.faults.set_stuck(True)

@@ -119,7 +119,7 @@ def test_thruster_fit_bad_csv(tmp_path, capsys):
 
 def test_run_writes_identification_report_and_summary(tmp_path, capsys):
     out = tmp_path / "out"
-    rc = cli.main(["run", "--dofs", "surge", "--levels", "2", "--max-level-duration", "8",
+    rc = cli.main(["run", "--in-process", "--dofs", "surge", "--levels", "2", "--max-level-duration", "8",
                    "--seed", "3", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0
@@ -136,7 +136,7 @@ def test_run_writes_identification_report_and_summary(tmp_path, capsys):
 
 def test_run_default_directory_and_latest_link(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    rc = cli.main(["run", "--dofs", "yaw", "--levels", "1", "--max-level-duration", "4"])
+    rc = cli.main(["run", "--in-process", "--dofs", "yaw", "--levels", "1", "--max-level-duration", "4"])
     capsys.readouterr()
     assert rc == 0
     latest = tmp_path / "runs" / "latest"

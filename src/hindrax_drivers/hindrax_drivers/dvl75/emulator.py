@@ -330,7 +330,9 @@ class Dvl75Emulator:
         return tilt <= self.max_tilt_rad
 
     def _cycle(self, t: float) -> None:
-        """One ping cycle at time ``t``: queues the enabled sentences."""
+        """One ping cycle at time ``t``: queues the enabled sentences, ``$DVEXT`` before ``$DVPDL`` (the order on the
+        real DVL is not documented, hardware.md §1.3; with this order the driver's latest ``$DVEXT`` is the one of
+        the same ping when the ``$DVPDL`` arrives, so the attitude published with a velocity is not a ping old)."""
         truth = self.faults.hold(self._truth_source(t))
         assert self._boot_t is not None
         tu = round((t - self._boot_t) * 1000.0) * 1000  # captures show whole milliseconds
@@ -342,6 +344,17 @@ class Dvl75Emulator:
         r_nb = Rotation.from_euler("ZYX", [truth.yaw_rad, truth.pitch_rad, truth.roll_rad]).as_matrix()
         self._data_skips = 0 if locked else self._data_skips + 1
 
+        v_ned = r_nb @ velocity if locked else np.zeros(3)
+        if locked:
+            self._latitude_deg += math.degrees(v_ned[0] * dt / EARTH_RADIUS_M)
+            cos_lat = max(1e-6, math.cos(math.radians(self._latitude_deg)))
+            self._longitude_deg += math.degrees(v_ned[1] * dt / (EARTH_RADIUS_M * cos_lat))
+            self._longitude_deg = (self._longitude_deg + 180.0) % 360.0 - 180.0
+        gps_fresh = self._fix_t is not None and t - self._fix_t < _GPS_FRESH_S
+
+        if self.flash.send_dvext:
+            self._emit("DVEXT", format_dvext(self._extended(truth, locked, dt, velocity, v_ned, r_nb,
+                                                            range_scale, gps_fresh)))
         if self.flash.send_dvpdl:
             confidence = int(round(min(100.0, max(0.0, truth.confidence_pct))))
             if not locked or self._force_zero_confidence:
@@ -357,17 +370,6 @@ class Dvl75Emulator:
             record = DvlPositionDelta(tu / 1e6, dt, *d_att, *(float(x) for x in delta), confidence)
             self._emit("DVPDL", format_dvpdl(record))
 
-        v_ned = r_nb @ velocity if locked else np.zeros(3)
-        if locked:
-            self._latitude_deg += math.degrees(v_ned[0] * dt / EARTH_RADIUS_M)
-            cos_lat = max(1e-6, math.cos(math.radians(self._latitude_deg)))
-            self._longitude_deg += math.degrees(v_ned[1] * dt / (EARTH_RADIUS_M * cos_lat))
-            self._longitude_deg = (self._longitude_deg + 180.0) % 360.0 - 180.0
-        gps_fresh = self._fix_t is not None and t - self._fix_t < _GPS_FRESH_S
-
-        if self.flash.send_dvext:
-            self._emit("DVEXT", format_dvext(self._extended(truth, locked, dt, velocity, v_ned, r_nb,
-                                                            range_scale, gps_fresh)))
         if self.flash.send_gprmc:
             valid = gps_fresh or (self._position_set and locked)
             self._emit("GPRMC", format_gprmc(

@@ -92,8 +92,9 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
     ``locked`` False without a valid velocity). Works on rclpy and bag-decoded messages alike.
 
     Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
-    attitude comes from the ``$DVEXT`` of the same ping (the driver pairs them), measured at the ping, i.e.
-    at the end of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A
+    attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
+    first (as the emulator does; the real order is undocumented, hardware.md §1.3: check a pool capture), i.e.
+    measured at the end of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A
     50 ms error there shows up in roll and pitch as a restoring moment out of phase, i.e. as damping
     (measured in the virtual pool: roll quadratic damping +14 %, linear damping of the wrong sign).
     """
