@@ -132,6 +132,9 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             wait_until(lambda: armed_state[0] is False, 30, spin, "ESC reporting disarmed")
             outcome.disarmed = True
             say("disarmed through esc/set_armed")
+            # let the recorder take the ESC's disarmed, neutral outputs too (ten 50 Hz output ticks)
+            t_disarmed = sim.t_s
+            wait_until(lambda: sim.t_s >= t_disarmed + 0.2, 30, spin, "disarmed outputs recorded")
             graph.nodes["recorder"].stop_recording()
         finally:
             outcome.sim_time_s = sim.t_s
