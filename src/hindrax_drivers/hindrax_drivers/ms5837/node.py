@@ -157,8 +157,7 @@ class Ms5837Node(Node):
         self._failed_cycles = 0
         self._phase = "idle"  # idle | d1 | d2
         self._d1 = 0
-        self._d1_stamp = None
-        self._d1_validity = None
+        self._d1_stamp = None  # time of validity of the pressure of the running cycle
         self._recent: collections.deque[tuple[float, float]] = collections.deque()
         self.last_reading: p.Reading | None = None
 
@@ -260,7 +259,7 @@ class Ms5837Node(Node):
         except I2CError as exc:
             self._cycle_failed("i2c_failure", exc)
             return
-        self._d1_validity = commanded + Duration(nanoseconds=int(0.5e9 * p.conversion_time_s(self.osr)))
+        self._d1_stamp = commanded + Duration(nanoseconds=int(0.5e9 * p.conversion_time_s(self.osr)))
         self._phase = "d1"
         self._schedule(self.conversion_wait_s, self._read_d1)
 
@@ -278,7 +277,7 @@ class Ms5837Node(Node):
         d1 = self._read_adc()
         if d1 is None:
             return
-        self._d1, self._d1_stamp = d1, self._d1_validity
+        self._d1 = d1
         try:
             self.device.write_byte(self.d2_command)
         except I2CError as exc:

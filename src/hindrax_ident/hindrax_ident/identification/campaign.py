@@ -374,15 +374,14 @@ class Campaign:
                     rate = max(0.0, s * self._axis_velocity(k))
                     stop = rate * rate / (2.0 * alpha) + 0.1 * rate
                     ang = float(np.nan_to_num(self.state.rpy_rad[k - 3]))
-                    if dof != "yaw":
-                        # the attitude comes at 10 Hz: extrapolate it to now with the 100 Hz gyro rate (at 2 rad/s
-                        # a 100 ms old angle is 0.2 rad short, which let the graph overshoot the pitch limit)
-                        ang += self._axis_velocity(k) * self._attitude_age_s()
                     if dof == "yaw":
                         turned += abs(wrap_angle(ang - prev))
                         prev = ang
                         done = turned + stop >= limit
                     else:
+                        # the attitude comes at 10 Hz: extrapolate it to now with the 100 Hz gyro rate (at 2 rad/s
+                        # a 100 ms old angle is 0.2 rad short, which let the graph overshoot the pitch limit)
+                        ang += self._axis_velocity(k) * self._attitude_age_s()
                         done = s * ang + stop >= limit
                     if done:
                         break
