@@ -368,7 +368,15 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
 
         def unread() -> dict[str, int]:
             return {n: ptys[n].bytes_to_host - graph.nodes[n].transport.status().bytes_rx for n in ptys}
-        # bytes written to a pty before its driver opened it never reach the driver (the DVL's boot banner)
+        # bytes written to a pty before its driver opened it never reach the driver (the DVL's boot banner), but
+        # the reader threads may still be taking bytes that were already readable: with simulated time frozen
+        # nothing new is written, so wait until the unread count has not changed for 50 executor spins
+        history: list[dict[str, int]] = []
+
+        def settled() -> bool:
+            history.append(unread())
+            return len(history) > 50 and all(h == history[-1] for h in history[-50:])
+        _spin_until(graph, settled, timeout_s, "the serial readers to drain before the run")
         lost = unread()
         counting[0] = True
         graph.executor.add_node(sim_node)
