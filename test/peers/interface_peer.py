@@ -6,6 +6,7 @@ one HydroEstimate per requested DOF). Exits on SIGTERM/SIGINT.
 """
 import math
 import sys
+import time
 
 import rclpy
 from rclpy.action import ActionServer
@@ -15,6 +16,8 @@ from rclpy.node import Node
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate
 from hindrax_msgs.srv import SetArmed
+
+FEEDBACK_TOPIC = "/peer/run_identification/_action/feedback"
 
 
 class Peer(Node):
@@ -55,6 +58,11 @@ class Peer(Node):
 
     def execute(self, goal_handle):
         dofs = list(goal_handle.request.dofs)
+        # Feedback is a plain topic: sent before discovery has matched the client's feedback subscription (slow
+        # on a loaded machine) it is lost. Wait (bounded) until the client's subscription is seen.
+        deadline = time.monotonic() + 10.0
+        while self.count_subscribers(FEEDBACK_TOPIC) == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
         for i, dof in enumerate(dofs):
             fb = RunIdentification.Feedback()
             fb.dof = dof
