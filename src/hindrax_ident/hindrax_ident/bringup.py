@@ -6,7 +6,8 @@ allocation, the identification executive (:mod:`hindrax_ident.identification.nod
 ``sim``) and, optionally, the recorder. On the vehicle they open the configured serial ports and
 ``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
 ``/clock`` and :class:`~hindrax_ident.sim.hardware.VirtualHardware` (the five device emulators fed by the
-simulator: serial devices on pseudo-terminals, I2C devices on an emulated bus); every other node then runs
+simulator: serial devices on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an
+emulated bus); every other node then runs
 with ``use_sim_time`` and the simulator takes the thrusters' pulse widths from the PCA9685 registers.
 
 Each node class also runs alone (``python -m hindrax_drivers.<device>.node --ros-args --params-file ...``).
@@ -23,7 +24,13 @@ from hindrax_drivers.config import VehicleConfig, load_config
 
 @dataclass
 class Graph:
-    """A running node graph: ``nodes`` (name -> node), the executor, the virtual hardware (sim only)."""
+    """A running node graph: ``nodes`` (name -> node), the executor, the virtual hardware (sim only).
+
+    ``stepped`` (sim with driven clocks, :func:`build_graph`): the simulator node is not in the executor; each
+    :meth:`spin_once` advances it by one /clock period and then runs every other node until none has work left
+    at that instant. What runs at a tick then never depends on wall-clock timing (on a timer, the simulator
+    could advance again before a driver's timer due at this tick had run, or not, depending on the load).
+    """
 
     config: VehicleConfig
     nodes: dict[str, Any]
@@ -31,9 +38,79 @@ class Graph:
     hardware: Any = None
     context: Any = None
     closers: list[Callable[[], None]] = field(default_factory=list)
+    stepped: bool = False
+    _frozen: bool = False
 
     def spin_once(self, timeout_sec: float = 0.01) -> None:
-        self.executor.spin_once(timeout_sec=timeout_sec)
+        """Run the graph a little: one executor callback (waiting up to ``timeout_sec``), or, when ``stepped`` and
+        time is not frozen, one /clock period of the simulator followed by every callback due (see the class
+        docstring; at a real-time factor > 0 it first waits, handling callbacks, until the tick is due)."""
+        if not self.stepped or self._frozen:
+            self.executor.spin_once(timeout_sec=timeout_sec)
+            return
+        sim = self.nodes["simulator"]
+        wait_s = sim.wall_time_until_next_tick_s()
+        if wait_s > 0.0:
+            self.executor.spin_once(timeout_sec=min(timeout_sec, wait_s))
+            return
+        sim.advance_clock_period()  # False while a step gate holds the time: the nodes run, then it asks again
+        self.spin_until_idle()
+
+    def spin_until_idle(self, max_callbacks: int = 100_000) -> int:
+        """Run executor callbacks until a wait with zero timeout finds nothing ready; returns how many ran."""
+        from rclpy.executors import ShutdownException, TimeoutException
+
+        for n in range(max_callbacks):
+            try:
+                handler, _entity, _node = self.executor.wait_for_ready_callbacks(0.0)
+            except (TimeoutException, ShutdownException):
+                return n
+            handler()
+            if handler.exception() is not None:
+                raise handler.exception()
+        return max_callbacks
+
+    # -- simulated time (sim only): hold it while something happens at one simulated instant
+    @property
+    def time_frozen(self) -> bool:
+        """True while :meth:`freeze_time` holds the simulated time."""
+        if self.stepped:
+            return self._frozen
+        sim = self.nodes.get("simulator")
+        return sim is not None and sim not in self.executor.get_nodes()
+
+    def freeze_time(self) -> None:
+        """Stop simulated time (every other node keeps running at the frozen instant), e.g. while an operator's
+        service call or goal is answered, so that it takes effect at the same simulated instant whatever the wall
+        time it needs. No-op without a simulator."""
+        if self.stepped:
+            self._frozen = True
+        elif "simulator" in self.nodes and not self.time_frozen:
+            self.executor.remove_node(self.nodes["simulator"])
+
+    def resume_time(self) -> None:
+        """Let simulated time run again after :meth:`freeze_time`. Stepped, the nodes first finish what is due at
+        the frozen instant, so the state from which time resumes does not depend on how long the freeze took."""
+        if self.stepped:
+            if self._frozen:
+                self.spin_until_idle()
+            self._frozen = False
+        elif self.time_frozen:
+            self.executor.add_node(self.nodes["simulator"])
+
+    def startup_complete(self) -> bool:
+        """Poll (with time frozen, between executor spins) until True: the serial drivers are connected with their
+        start-up commands taken and answered (:meth:`~.sim.hardware.VirtualHardware.serial_startup_done`), and
+        the recorder, if any, is subscribed to every topic a node of the graph publishes. Starting the
+        simulated clock only then makes a run independent of how long discovery and port opening took."""
+        if self.hardware is not None and not self.hardware.serial_startup_done():
+            return False
+        recorder = self.nodes.get("recorder")
+        if recorder is None:
+            return True
+        recorder.discover_now()
+        wanted = {pub.topic_name for name, node in self.nodes.items() if name != "recorder" for pub in node.publishers}
+        return recorder.subscribed_to(wanted)
 
     def shutdown(self) -> None:
         """Close every node (the ESC node writes neutral), stop the emulators, destroy the nodes."""
@@ -53,6 +130,38 @@ class Graph:
             self.hardware.close()
 
 
+def ordered_executor(**kwargs: Any) -> Any:
+    """A ``SingleThreadedExecutor`` that visits its nodes in the order they were added.
+
+    rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready at the same
+    instant run (e.g. the allocation's wrench subscription and the ESC node's output timer) follows the nodes'
+    memory addresses and changes from one run to the next; with a fixed order a stepped simulation is
+    reproducible. ``kwargs`` go to the executor (``context``)."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    class _OrderedExecutor(SingleThreadedExecutor):
+        def __init__(self, **kw: Any) -> None:
+            self._order: list = []
+            super().__init__(**kw)
+
+        def add_node(self, node: Any) -> bool:
+            added = super().add_node(node)
+            if node not in self._order:
+                self._order.append(node)
+            return added
+
+        def remove_node(self, node: Any) -> None:
+            super().remove_node(node)
+            if node in self._order:
+                self._order.remove(node)
+
+        def get_nodes(self) -> list:
+            present = set(super().get_nodes())
+            return [n for n in self._order if n in present]
+
+    return _OrderedExecutor(**kwargs)
+
+
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool | None = None,
@@ -64,10 +173,10 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     overrides: dotted configuration keys. seed / real_time_factor: simulation settings.
     identification: add the identification node (action ``run_identification``); default: ``sim``.
     drive_clocks (sim only): the simulator sets the nodes' clocks directly and publishes no /clock (about 20 %
-    faster; for a graph nothing outside this process needs simulated time from, e.g. ``hindrax run``).
+    faster; for a graph nothing outside this process needs simulated time from, e.g. ``hindrax run``), and the
+    graph is ``stepped``: drive it with :meth:`Graph.spin_once`, not ``executor.spin()``.
     Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration.
     """
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     from hindrax_drivers.allocation.node import ThrustAllocationNode
@@ -92,7 +201,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         from .sim.simulator import Simulator
 
         simulator = Simulator(cfg)
-        hardware = VirtualHardware(simulator, cfg, seed=cfg.get("simulation.seed"))
+        hardware = VirtualHardware(simulator, cfg, seed=cfg.get("simulation.seed"), serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
         cfg = cfg.with_overrides({"sensors.dvl75.port": hardware.dvl_port, "sensors.ping1d.port": hardware.ping_port})
@@ -119,6 +228,10 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         # emulators on the drivers' ROS clock (the MS5837 driver's): conversion waits line up exactly
         ms5837_clock = nodes["ms5837"].get_clock()
         hardware.use_clock(lambda: ms5837_clock.now().nanoseconds * 1e-9)
+        # serial devices in lock-step: sent at the clock tick, handled by the driver before time moves on
+        serial = ("dvl75", "ping1d")
+        hardware.lock_step_serial(nodes["simulator"], {n: nodes[n].transport for n in serial},
+                                  ready={n: (lambda c=nodes[n].commands: c.sequences_completed >= 1) for n in serial})
     if record:
         from hindrax_drivers.recording.recorder_node import RecorderNode
 
@@ -135,10 +248,12 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
             if name != "simulator":
                 sim_node.drive_clock(node.get_clock())
         sim_node.publish_clock_topic = False
-    executor = SingleThreadedExecutor(**kw)
-    for node in nodes.values():
-        executor.add_node(node)
-    return Graph(cfg, nodes, executor, hardware, context)
+    executor = ordered_executor(**kw)
+    stepped = bool(sim and drive_clocks)
+    for name, node in nodes.items():
+        if not (stepped and name == "simulator"):  # stepped: Graph.spin_once advances the simulator
+            executor.add_node(node)
+    return Graph(cfg, nodes, executor, hardware, context, stepped=stepped)
 
 
 def run(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",

@@ -355,52 +355,31 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
             count(pub)
     wanted = {pub.topic_name for node in drivers + [sim_node] for pub in node.publishers}
     try:
-        # hold simulated time at 0 until the recorder is subscribed to and matched with every topic
-        graph.executor.remove_node(sim_node)
-
-        def ready() -> bool:
-            recorder._discover()  # the discovery timer runs on (frozen) ROS time
-            subs = recorder._subs
-            return (all(t in subs and subs[t].get_publisher_count() > 0 for t in wanted)
-                    and all(n.commands.sequences_completed >= 1 for n in drivers[:2]))
-        _spin_until(graph, ready, timeout_s, "the recorder matched with every driver topic")
-        ptys = dict(zip(("dvl75", "ping1d"), graph.hardware._ptys))
-
-        def unread() -> dict[str, int]:
-            return {n: ptys[n].bytes_to_host - graph.nodes[n].transport.status().bytes_rx for n in ptys}
-        # bytes written to a pty before its driver opened it never reach the driver (the DVL's boot banner), but
-        # the reader threads may still be taking bytes that were already readable: with simulated time frozen
-        # nothing new is written, so wait until the unread count has not changed for 50 executor spins
-        history: list[dict[str, int]] = []
-
-        def settled() -> bool:
-            history.append(unread())
-            return len(history) > 50 and all(h == history[-1] for h in history[-50:])
-        _spin_until(graph, settled, timeout_s, "the serial readers to drain before the run")
-        lost = unread()
+        # hold simulated time at 0 until the serial drivers have finished their start-up exchange and the
+        # recorder is subscribed to every topic (Graph.startup_complete)
+        graph.freeze_time()
+        _spin_until(graph, graph.startup_complete, timeout_s, "the drivers' start-up and the recorder's subscriptions")
+        links = list(graph.hardware.serial_lock_steps.values())
         counting[0] = True
-        graph.executor.add_node(sim_node)
+        graph.resume_time()
         sim = sim_node.simulator
         _spin_until(graph, lambda: sim.t_s >= duration_s, timeout_s, f"{duration_s} s of simulated time")
-        graph.executor.remove_node(sim_node)  # freeze simulated time
+        graph.freeze_time()
 
         def flushed() -> bool:
-            serial = unread() == lost
+            # the serial devices are in lock-step: every byte sent was handled by its driver before time moved on
             got = recorder._writer.topic_counts() if recorder._writer is not None else {}
-            return serial and all(got.get(t, 0) >= n for t, n in published.items() if t in wanted)
+            return all(link.settled() for link in links) and all(
+                got.get(t, 0) >= n for t, n in published.items() if t in wanted)
         try:
             _spin_until(graph, flushed, timeout_s, "the recorder wrote every published message")
         except TimeoutError:
             got = recorder._writer.topic_counts()
-            raise TimeoutError("lagging: " + str({t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}) + str((unread(), lost)))
+            raise TimeoutError("lagging: " + str({t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}))
         counting[0] = False
         recorder.stop_recording()
     finally:
-        if sim_node.executor is None:
-            try:
-                graph.executor.add_node(sim_node)
-            except Exception:  # noqa: BLE001 - shutting down anyway
-                pass
+        graph.resume_time()
         graph.shutdown()
     return dict(published)
 

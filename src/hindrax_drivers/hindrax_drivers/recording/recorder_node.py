@@ -168,6 +168,23 @@ class RecorderNode(Node):
             print(f"[{self.get_name()}] {text}", file=sys.stderr)
 
     # -- graph discovery --------------------------------------------------------------------------
+    def discover_now(self) -> None:
+        """Subscribe to newly published topics now (the discovery timer runs on ROS time, which may be frozen)."""
+        self._discover()
+
+    def subscribed_to(self, topics) -> bool:
+        """True while recording and every topic of ``topics`` (iterable of names) that the selection records has
+        a subscription matched with at least one publisher: from then on none of their messages is missed."""
+        if self._writer is None or self._selection is None:
+            return False
+        for topic in topics:
+            if topic in self._skipped or not self._selection.matches(topic):
+                continue
+            sub = self._subs.get(topic)
+            if sub is None or sub.get_publisher_count() == 0:
+                return False
+        return True
+
     def _discover(self) -> None:
         if self._writer is None or self._selection is None:
             return

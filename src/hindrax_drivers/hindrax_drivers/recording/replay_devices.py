@@ -505,14 +505,15 @@ class DriverReplay:
             node = self.nodes.get(name)
             if node is None:
                 continue
-            if hw.ptys[name].bytes_to_host > node.transport.status().bytes_rx:
+            if hw.ptys[name].bytes_to_host > node.transport.status().bytes_handled:
                 return False
         return True
 
     def consumed(self) -> bool:
-        """True when every recorded device->host byte was read by its driver and every I2C read served."""
+        """True when every recorded device->host byte was read and handled (parsed, published) by its driver and
+        every I2C read served."""
         hw = self.hardware
-        serial = all(hw.serial_done(n, self.nodes[n].transport.status().bytes_rx) for n in hw.serial if n in self.nodes)
+        serial = all(hw.serial_done(n, self.nodes[n].transport.status().bytes_handled) for n in hw.serial if n in self.nodes)
         return serial and hw.i2c_done()
 
     def run(self, timeout_s: float = 60.0, extra_s: float = 5.0) -> None:

@@ -251,6 +251,8 @@ class PtyDevice:
     to the master side.  Output that cannot be written (nobody reading, tty buffer full) is dropped
     and counted in :attr:`bytes_dropped`, as on a real UART.  Every emulator call happens with
     :attr:`lock` held, so test code can mutate the emulator safely with ``with device.lock: ...``.
+    With ``start=False`` the caller drives the device instead, one :meth:`service` call per tick of its
+    own clock (lock-step with a simulator).
 
     Args:
         emulator: the device emulator.
@@ -347,6 +349,11 @@ class PtyDevice:
             self.reconnects += 1
 
     # --- service thread ---------------------------------------------------------------------------
+    @property
+    def threaded(self) -> bool:
+        """True while the service thread drives the device (then :meth:`service` is refused)."""
+        return self._thread is not None
+
     def start(self) -> None:
         """Start the service thread (idempotent)."""
         if self._thread is None:
@@ -355,29 +362,53 @@ class PtyDevice:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            # The fd lock is held across select/read so disconnect() cannot close the fd (and the
-            # number be reused by another open) underneath this thread.
-            with self._fd_lock:
-                master = self._master
-                data = self._read_host(master) if master is not None else b""
-            if master is None:
+            if not self._cycle(self.poll_period_s, None, True):
                 self._stop.wait(self.poll_period_s)
-            try:
-                with self.lock:
-                    if data:
-                        self.bytes_from_host += len(data)
-                        self.emulator.feed_host_bytes(data)
-                    out = self.emulator.poll(self.clock())  # while disconnected the output is lost
-            except Exception as exc:  # noqa: BLE001 - keep serving; the error is reported
-                self.emulator_errors += 1
-                self.last_error = repr(exc)
-                continue
-            if out:
-                self._write(out)
 
-    def _read_host(self, master: int) -> bytes:
+    def service(self, t_s: Optional[float] = None, deliver: bool = True) -> int:
+        """One service cycle, synchronously and without waiting, for a caller that drives the device itself
+        instead of the thread (``start=False``; e.g. a simulator at every clock tick, so the bytes go out at
+        the simulated instant they are due): take the bytes the host wrote, then write
+        ``emulator.poll(t_s)`` (``t_s`` None: ``clock()``). ``deliver=False`` discards the output (counted in
+        :attr:`bytes_dropped`), as a UART nobody listens to. Returns the number of bytes delivered.
+
+        Raises:
+            RuntimeError: while the service thread runs (one driver of the emulator at a time).
+        """
+        if self._thread is not None:
+            raise RuntimeError("PtyDevice.service() needs start=False: the service thread drives this device")
+        before = self.bytes_to_host
+        self._cycle(0.0, t_s, deliver)
+        return self.bytes_to_host - before
+
+    def _cycle(self, wait_s: float, t_s: Optional[float], deliver: bool) -> bool:
+        """Read host bytes (waiting up to ``wait_s`` for the first), feed them, poll, write. False while the
+        pty is disconnected."""
+        # The fd lock is held across select/read so disconnect() cannot close the fd (and the
+        # number be reused by another open) underneath this thread.
+        with self._fd_lock:
+            master = self._master
+            data = self._read_host(master, wait_s) if master is not None else b""
         try:
-            ready, _, _ = select.select([master], [], [], self.poll_period_s)
+            with self.lock:
+                if data:
+                    self.bytes_from_host += len(data)
+                    self.emulator.feed_host_bytes(data)
+                out = self.emulator.poll(self.clock() if t_s is None else t_s)  # disconnected: the output is lost
+        except Exception as exc:  # noqa: BLE001 - keep serving; the error is reported
+            self.emulator_errors += 1
+            self.last_error = repr(exc)
+            return master is not None
+        if out:
+            if deliver:
+                self._write(out)
+            else:
+                self.bytes_dropped += len(out)
+        return master is not None
+
+    def _read_host(self, master: int, wait_s: float) -> bytes:
+        try:
+            ready, _, _ = select.select([master], [], [], wait_s)
             return os.read(master, 4096) if ready else b""
         except OSError as exc:
             if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK, errno.EIO, errno.EBADF, errno.EINTR):

@@ -19,6 +19,10 @@ Features
   node can publish/record the raw traffic (design.md §7).
 - Callback exceptions are caught and counted; they never kill the reader thread.
 - ``close()`` stops and joins the thread.
+- ``wait_handled(n, timeout_s)`` blocks until ``n`` received bytes have been through the callbacks: a
+  simulator in the same process holds simulated time on it so a driver stamps what it reads at the time
+  it was sent (lock-step, see :mod:`hindrax_ident.sim.hardware`); a bag replay waits on it before it
+  compares what the driver published.
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
 error and has no reconnect, state, or tap.
@@ -53,6 +57,9 @@ class TransportStatus:
         open_failures: failed open attempts.
         callback_errors: exceptions raised by user callbacks.
         closed: True after :meth:`SerialTransport.close`.
+        bytes_handled: received bytes whose raw tap and ``on_data`` callback have returned (``bytes_rx`` counts
+            a chunk as soon as it is read); equal to ``bytes_rx`` when the reader has nothing in hand.
+        connections: successful opens (1 + reconnects once connected).
     """
 
     port: str
@@ -64,6 +71,8 @@ class TransportStatus:
     open_failures: int
     callback_errors: int
     closed: bool
+    bytes_handled: int = 0
+    connections: int = 0
 
 
 class SerialTransport:
@@ -116,12 +125,15 @@ class SerialTransport:
         self._ser: Optional[serial.SerialBase] = None
         self._ser_lock = threading.Lock()  # guards _ser swaps and writes
         self._stats_lock = threading.Lock()
+        self._handled = threading.Condition(self._stats_lock)
         self._stop = threading.Event()
         self._connected_event = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self._ever_connected = False
         self._last_error: Optional[str] = None
         self._bytes_rx = 0
+        self._bytes_handled = 0
+        self._connections = 0
         self._bytes_tx = 0
         self._reconnects = 0
         self._open_failures = 0
@@ -154,11 +166,19 @@ class SerialTransport:
         with self._stats_lock:
             return TransportStatus(self.port, self.connected, self._last_error, self._bytes_rx,
                                    self._bytes_tx, self._reconnects, self._open_failures,
-                                   self._callback_errors, self._closed)
+                                   self._callback_errors, self._closed, self._bytes_handled,
+                                   self._connections)
 
     def wait_connected(self, timeout_s: float) -> bool:
         """Block until connected or ``timeout_s`` passes; returns :attr:`connected`."""
         return self._connected_event.wait(timeout_s)
+
+    def wait_handled(self, n_bytes: int, timeout_s: float) -> bool:
+        """Block until at least ``n_bytes`` received bytes (counted since construction, as
+        ``status().bytes_handled``) have been through the raw tap and ``on_data``, or ``timeout_s`` of wall
+        time passes (the GIL is released meanwhile). Returns True when they have."""
+        with self._handled:
+            return self._handled.wait_for(lambda: self._bytes_handled >= n_bytes, timeout=max(0.0, timeout_s))
 
     def write(self, data: bytes) -> int:
         """Write all of ``data``; returns the number of bytes written.  Thread-safe.
@@ -255,6 +275,8 @@ class SerialTransport:
                 ser.close()
                 return False
             self._ser = ser
+            with self._stats_lock:
+                self._connections += 1  # before `connected` turns True: a watcher never sees the old count then
             self._connected_event.set()
         with self._stats_lock:
             if self._ever_connected:
@@ -297,3 +319,6 @@ class SerialTransport:
                 self._tap("rx", data)
                 if self.on_data is not None:
                     self._call(self.on_data, data)
+                with self._handled:
+                    self._bytes_handled += len(data)
+                    self._handled.notify_all()

@@ -6,6 +6,11 @@ SingleThreadedExecutor; wait for the sensors and the ESC arming time; arm throug
 operator's service); send one ``run_identification`` goal and report its feedback; disarm; close the bag;
 run the offline identification on the bag (:mod:`.from_bag`) and write ``identification.yaml`` and the report.
 All waits are on simulated-time conditions with wall-clock deadlines.
+
+Reproducibility: with the serial devices in lock-step (:class:`~hindrax_ident.sim.hardware.SerialLockStep`),
+simulated time frozen until every driver has finished its start-up exchange and the recorder is subscribed to
+every topic, and frozen again while each operator call (arm, goal, disarm) is answered, what happens at each
+simulated instant no longer depends on wall-clock timing, so the same seed gives the same run.
 """
 from __future__ import annotations
 
@@ -90,10 +95,18 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         spin = lambda: graph.spin_once(0.01)  # noqa: E731
         try:
             say(f"graph up: {', '.join(graph.nodes)}; recording to {bag_dir}")
-            wait_until(lambda: graph.nodes["esc"].arming_remaining_s() == 0.0 and arm.service_is_ready()
-                       and action.server_is_ready(), 120, spin, "ESC arming time and services")
+            # Simulated time starts only when discovery, port opening and the devices' start-up exchanges are
+            # over, and stands still while the operator's calls are answered: the run then depends on the seed
+            # alone, not on how long those took in wall time (graph_campaign module docstring).
+            graph.freeze_time()
+            wait_until(lambda: graph.startup_complete() and arm.service_is_ready() and action.server_is_ready(),
+                       120, spin, "drivers' start-up, recorder subscriptions and services")
+            graph.resume_time()
+            wait_until(lambda: graph.nodes["esc"].arming_remaining_s() == 0.0, 120, spin, "ESC arming time")
+            graph.freeze_time()
             fut = arm.call_async(SetArmed.Request(arm=True))
             wait_until(fut.done, 30, spin, "arm answer")
+            graph.resume_time()
             if not fut.result().success:
                 outcome.message = f"arming refused: {fut.result().message}"
                 say(outcome.message)
@@ -115,8 +128,10 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
 
             goal = RunIdentification.Goal(dofs=list(dofs), levels_per_dof=int(levels or 0),
                                           level_fractions=[float(x) for x in level_fractions])
+            graph.freeze_time()
             gf = action.send_goal_async(goal, feedback_callback=on_feedback)
             wait_until(gf.done, 30, spin, "goal acceptance")
+            graph.resume_time()
             handle = gf.result()
             if not handle.accepted:
                 outcome.message = "goal rejected by the identification node"
@@ -127,8 +142,10 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             res = rf.result().result
             outcome.success, outcome.message, outcome.estimates = bool(res.success), res.message, list(res.estimates)
             say(f"campaign finished after {sim.t_s:.0f} s simulated: {res.message}")
+            graph.freeze_time()
             fut = arm.call_async(SetArmed.Request(arm=False))
             wait_until(fut.done, 30, spin, "disarm answer")
+            graph.resume_time()
             wait_until(lambda: armed_state[0] is False, 30, spin, "ESC reporting disarmed")
             outcome.disarmed = True
             say("disarmed through esc/set_armed")

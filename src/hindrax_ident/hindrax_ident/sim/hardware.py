@@ -18,7 +18,8 @@ thrust (hardware.md §5.2).
 from __future__ import annotations
 
 import math
-from typing import Any
+import time
+from typing import Any, Callable
 
 import numpy as np
 
@@ -33,8 +34,88 @@ from hindrax_drivers.transport.pty_device import PtyDevice
 
 from .simulator import Simulator
 
+#: Wall time a serial step gate waits with its driver's reader idle before it re-bases its byte count, s.
+RESYNC_AFTER_S = 1.0
+#: Wall time a clock tick waits for a driver to handle the bytes it was just sent, s (then the gate holds on).
+HANDOFF_TIMEOUT_S = 0.5
 #: devices whose first sample must exist before an emulator can answer
 _DEVICES = ("dvl75", "dvl75_attitude", "ping1d", "ms5837", "icm20948_accel", "icm20948_gyro", "icm20948_mag")
+
+
+class SerialLockStep:
+    """Serve one serial device emulator at the simulator's clock ticks and hold simulated time until its driver has
+    handled every byte sent: the serial counterpart of the I2C emulators, which answer inside the driver's call.
+
+    On a free-running pty thread (:class:`PtyDevice` default) the bytes of a ping leave when the thread next wakes
+    (wall time) and the driver stamps them when its reader thread next runs, so on a loaded machine a DVL report
+    went out and was stamped tens of simulated milliseconds after the instant it describes, by an amount that
+    changed from run to run. Here :meth:`tick` (a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode`)
+    writes what is due at tick ``t`` with the driver's clock already at ``t``, and :meth:`settled` (a step gate)
+    lets time advance only when the driver's transport has read and handled all of it
+    (:meth:`~hindrax_drivers.transport.serial_transport.SerialTransport.wait_handled`): the driver stamps every
+    message at the tick it was sent, whatever the load.
+
+    Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
+    on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
+    reconnect between a write and the check), a gate that has waited :data:`RESYNC_AFTER_S` of wall time with the
+    reader idle re-bases the count (``resyncs``) rather than stall the simulation.
+
+    Args:
+        pty: the emulator's pseudo-terminal, created with ``start=False``.
+        transport: the driver's :class:`~hindrax_drivers.transport.serial_transport.SerialTransport`.
+        wait_s: wall time :meth:`settled` blocks for the reader (GIL released) before it answers False, s.
+        ready: extra start-up condition for :meth:`startup_done` (the driver's start-up commands are sent).
+    """
+
+    def __init__(self, pty: PtyDevice, transport: Any, wait_s: float = 0.002,
+                 ready: Callable[[], bool] = lambda: True) -> None:
+        self.pty, self.transport, self.wait_s, self.ready = pty, transport, float(wait_s), ready
+        self._connection: int | None = None
+        self._written0 = self._handled0 = 0
+        self._stalled_since: float | None = None
+        #: re-based counts (see the class docstring)
+        self.resyncs = 0
+
+    def tick(self, _t_s: float = 0.0) -> None:
+        """Send what the emulator has due now (its clock: the drivers' clock), if the driver's port is open, and
+        wait (up to :data:`HANDOFF_TIMEOUT_S` of wall time) until the driver has handled it: its messages are
+        then published before any other node runs at this tick, whatever the load."""
+        st = self.transport.status()
+        if not st.connected:
+            self.pty.service(deliver=False)
+            return
+        if st.connections != self._connection:
+            self._connection = st.connections
+            self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
+        if self.pty.service():
+            self.transport.wait_handled(self._handled0 + self.pty.bytes_to_host - self._written0, HANDOFF_TIMEOUT_S)
+
+    def startup_done(self) -> bool:
+        """With simulated time frozen (call repeatedly, it serves the device at the frozen instant): True when the
+        driver's port is open, ``ready()`` holds (e.g. its start-up commands are sent), the emulator has taken
+        every byte the driver wrote and the driver has handled every reply."""
+        self.tick()
+        st = self.transport.status()
+        return (st.connected and self._connection == st.connections and self.ready()
+                and self.pty.bytes_from_host == st.bytes_tx and self.settled())
+
+    def settled(self, _t_s: float = 0.0) -> bool:
+        """Step gate: True when the driver has handled every byte sent on this connection (or is not connected)."""
+        if self._connection is None or not self.transport.connected:
+            return True
+        target = self._handled0 + self.pty.bytes_to_host - self._written0
+        if self.transport.wait_handled(target, self.wait_s):
+            self._stalled_since = None
+            return True
+        st, now = self.transport.status(), time.monotonic()
+        if self._stalled_since is None:
+            self._stalled_since = now
+        elif now - self._stalled_since > RESYNC_AFTER_S and st.bytes_rx == st.bytes_handled:
+            self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
+            self.resyncs += 1
+            self._stalled_since = None
+            return True
+        return False
 
 
 class VirtualHardware:
@@ -43,10 +124,13 @@ class VirtualHardware:
     Attributes: ``i2c_bus`` (EmulatedI2CBus with the MS5837, ICM-20948 and PCA9685), ``dvl_port`` and
     ``ping_port`` (pty paths for the serial drivers), the emulators themselves (``dvl``, ``ping``,
     ``ms5837``, ``icm20948``, ``pca9685``). Call :meth:`close` to stop the pty threads.
-    ``serve_serial=False`` skips the ptys (for tests that only need the I2C side).
+    ``serve_serial=False`` skips the ptys (for tests that only need the I2C side). The ptys are served by their own
+    threads, or, with ``serial_threads=False``, in lock-step with a simulator node once :meth:`lock_step_serial`
+    is called (what :func:`~hindrax_ident.bringup.build_graph` does).
     """
 
-    def __init__(self, sim: Simulator, config: VehicleConfig, serve_serial: bool = True, seed: int = 0):
+    def __init__(self, sim: Simulator, config: VehicleConfig, serve_serial: bool = True, seed: int = 0,
+                 serial_threads: bool = True):
         self.sim = sim
         self.config = config
         # Emulators live in simulated time, quantised like the /clock the drivers see (simulation.clock_rate_hz):
@@ -78,14 +162,39 @@ class VirtualHardware:
         self._ptys: list[PtyDevice] = []
         self.dvl_port = self.ping_port = None
         if serve_serial:
-            self._ptys = [PtyDevice(self.dvl, clock=clock, link_name="dvl75"),
-                          PtyDevice(self.ping, clock=clock, link_name="ping1d")]
+            self._ptys = [PtyDevice(self.dvl, clock=clock, link_name="dvl75", start=serial_threads),
+                          PtyDevice(self.ping, clock=clock, link_name="ping1d", start=serial_threads)]
             self.dvl_port, self.ping_port = (str(p.path) for p in self._ptys)
+        #: the serial lock-steps by device name ("dvl75", "ping1d") after :meth:`lock_step_serial`
+        self.serial_lock_steps: dict[str, SerialLockStep] = {}
 
     def use_clock(self, clock_s) -> None:
         """Run the emulators on ``clock_s()`` (s), e.g. the ROS clock of the drivers' process, so a driver's
         wait measured on its own clock is exactly what the emulator sees (no lag between /clock receptions)."""
         self._clock_fn = clock_s
+
+    def lock_step_serial(self, sim_node: Any, transports: dict[str, Any],
+                         ready: dict[str, Callable[[], bool]] | None = None) -> None:
+        """Serve the DVL-75 and Ping1D ptys from ``sim_node``'s clock ticks and gate its time on their drivers
+        (:class:`SerialLockStep`). ``transports``: the drivers' transports by device name, ``"dvl75"`` and/or
+        ``"ping1d"``; a device left out is not served at all. ``ready``: optional start-up conditions by device
+        name (:meth:`SerialLockStep.startup_done`).
+
+        Raises:
+            RuntimeError: the ptys are already served by threads (``serial_threads=True``), or there are none.
+        """
+        ptys = dict(zip(("dvl75", "ping1d"), self._ptys))
+        if not ptys or any(p.threaded for p in ptys.values()):
+            raise RuntimeError("lock_step_serial needs VirtualHardware(serve_serial=True, serial_threads=False)")
+        for name, transport in transports.items():
+            link = SerialLockStep(ptys[name], transport, ready=(ready or {}).get(name, lambda: True))
+            self.serial_lock_steps[name] = link
+            sim_node.add_clock_listener(link.tick)
+            sim_node.add_step_gate(link.settled)
+
+    def serial_startup_done(self) -> bool:
+        """:meth:`SerialLockStep.startup_done` of every lock-stepped serial device (True when there is none)."""
+        return all([link.startup_done() for link in self.serial_lock_steps.values()])
 
     def _ensure_samples(self) -> None:
         """Step the unpowered simulator until every device has produced a first sample (<= 1 s simulated)."""
@@ -108,7 +217,7 @@ class VirtualHardware:
                         confidence_pct=100.0 if locked else 0.0)
 
     def _ping_truth(self, _t: float) -> Ping1dTruth:
-        s = self.sim.latest_sample("ping1d")
+        s = self.sim.measure("ping1d", dropout=True)  # at the ping, as the DVL
         if s is None or not s.valid or not math.isfinite(s.distance_m):
             return Ping1dTruth(altitude_m=None, confidence_pct=0.0)
         return Ping1dTruth(altitude_m=float(s.distance_m), confidence_pct=100.0)

@@ -25,9 +25,10 @@ Parameters
 Time: the node steps the model from a timer on the steady (wall) clock, never on its own /clock. With
 ``simulation.real_time_factor`` r > 0 the simulated time follows ``r`` x the wall time (if the machine cannot
 keep up, it re-anchors and warns). With r = 0 it runs as fast as possible: each timer callback advances
-one /clock period of simulated time (at most :data:`SLICE_S` of wall time) and returns to the executor,
-so that other nodes in the same SingleThreadedExecutor (e.g. nodes under test using ``use_sim_time``) run
-between clock ticks and see every /clock message.
+one whole /clock period of simulated time and returns to the executor, so that other nodes in the same
+SingleThreadedExecutor (e.g. nodes under test using ``use_sim_time``) run between clock ticks and see every
+/clock message. (It never stops inside a period: an in-process emulator sampling the vehicle between two
+ticks would then see a state ahead of the clock by an amount that depends on the machine's load.)
 
 Lock-step (``add_step_gate(gate)``): a gate is a callable ``gate(t_s) -> bool`` asked at every /clock boundary
 whether simulated time may advance past ``t_s``; while one says no, the node does not step (and checks again
@@ -37,7 +38,8 @@ controller, which then overshoots its planned runs). A gate that has refused for
 wall time is overridden with a warning, so a stalled node cannot freeze the simulation.
 
 Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`),
-``add_sensor_listener(cb(device, sample))``, ``add_step_listener(cb(simulator))``, ``latest_sample(device)``,
+``add_sensor_listener(cb(device, sample))``, ``add_step_listener(cb(simulator))``,
+``add_clock_listener(cb(t_s))`` (at every /clock tick, after the driven clocks moved), ``latest_sample(device)``,
 and the ``pulse_width_source`` constructor argument: a callable returning the widths (n,) in us the ESCs
 see (e.g. decoded from the PCA9685 emulator; None keeps the previous ones), called before every step; it
 replaces the ``thrusters/pulse_width`` subscription.
@@ -68,12 +70,10 @@ from hindrax_msgs.msg import ThrusterPwm
 from .pool import FACES
 from .simulator import PulseWidthError, SensorListener, Simulator
 
-__all__ = ["SimulatorNode", "PulseWidthSource", "SLICE_S", "time_msg", "main"]
+__all__ = ["SimulatorNode", "PulseWidthSource", "time_msg", "main"]
 
 #: A pulse-width source: () -> widths (n,) in us, or None to keep the previous widths.
 PulseWidthSource = Callable[[], "Sequence[float] | None"]
-#: Longest wall time spent stepping in one timer callback when running as fast as possible, s.
-SLICE_S = 0.005
 #: Largest lag behind the real-time schedule before re-anchoring, simulated s.
 _MAX_LAG_S = 0.5
 #: Wall time a step gate may hold the simulation before it is overridden (with a warning), s.
@@ -118,6 +118,7 @@ class SimulatorNode(Node):
         self._armed = True
         self._source = pulse_width_source
         self._step_listeners: list[Callable[[Simulator], None]] = []
+        self._clock_listeners: list[Callable[[float], None]] = []
         self._gates: list[Callable[[float], bool]] = []
         self._driven_clocks: list = []
         #: False: /clock is not published (every consumer in the process is driven through drive_clock)
@@ -155,6 +156,12 @@ class SimulatorNode(Node):
     def add_step_listener(self, callback: Callable[[Simulator], None]) -> None:
         """Call ``callback(simulator)`` after every integration step."""
         self._step_listeners.append(callback)
+
+    def add_clock_listener(self, callback: Callable[[float], None]) -> None:
+        """Call ``callback(t_s)`` at every /clock tick (simulated time ``t_s``, s), after the driven clocks show
+        ``t_s`` and /clock is published: the instant an in-process emulator sends what is due, so that a driver
+        reading it sees the same time on its own clock."""
+        self._clock_listeners.append(callback)
 
     def latest_sample(self, device: str) -> Any | None:
         """Newest sample of a sensor device, or None."""
@@ -244,31 +251,56 @@ class SimulatorNode(Node):
         k = round(t / self.clock_period_s)
         return abs(t - k * self.clock_period_s) < 0.25 * self.simulator.step_s
 
+    # ------------------------------------------------------------------ stepping by the caller
+    def advance_clock_period(self) -> bool:
+        """Step to the next /clock tick (one whole period), unless a step gate holds the time: returns False then.
+        For a caller that drives the simulation itself instead of the timer (the node is then not added to an
+        executor; :meth:`hindrax_ident.bringup.Graph.spin_once`)."""
+        if self._gates and self._at_clock_boundary() and not self._gates_open():
+            if self.real_time_factor > 0.0:  # the wall clock keeps running: do not try to catch up afterwards
+                self._wall_anchor, self._sim_anchor = time.monotonic(), self.simulator.t_s
+            return False
+        end, dt = self._next_clock, self.simulator.step_s
+        while self.simulator.t_s + 0.5 * dt < end:
+            self._step_once()
+        return True
+
+    def wall_time_until_next_tick_s(self) -> float:
+        """Wall time until the next /clock tick is due at ``simulation.real_time_factor`` (<= 0: due now; always 0
+        when running as fast as possible). Re-anchors (with a warning) when the simulation lags more than 0.5 s."""
+        if self.real_time_factor <= 0.0:
+            return 0.0
+        now = time.monotonic()
+        target = self._sim_anchor + (now - self._wall_anchor) * self.real_time_factor
+        if target - self.simulator.t_s > _MAX_LAG_S:
+            self._warn_bad(f"simulation cannot keep real_time_factor {self.real_time_factor:g}; re-anchoring")
+            self._wall_anchor, self._sim_anchor = now, self.simulator.t_s
+            target = self._sim_anchor
+        return (self._next_clock - target) / self.real_time_factor
+
     def _on_timer(self) -> None:
         dt = self.simulator.step_s
         start = time.monotonic()
-        if self._gates and self._at_clock_boundary() and not self._gates_open():
-            if self.real_time_factor > 0.0:  # the wall clock keeps running: do not try to catch up afterwards
-                self._wall_anchor, self._sim_anchor = start, self.simulator.t_s
-            return
         if self.real_time_factor <= 0.0:
             # one /clock period of simulated time, then back to the executor (other nodes run in between)
-            end = self._next_clock
-            while self.simulator.t_s + 0.5 * dt < end:
-                self._step_once()
-                if time.monotonic() - start > SLICE_S:
-                    break
+            self.advance_clock_period()
+            return
+        if self._gates and self._at_clock_boundary() and not self._gates_open():
+            self._wall_anchor, self._sim_anchor = start, self.simulator.t_s  # do not try to catch up afterwards
             return
         target = self._sim_anchor + (start - self._wall_anchor) * self.real_time_factor
         if target - self.simulator.t_s > _MAX_LAG_S:
             self._warn_bad(f"simulation cannot keep real_time_factor {self.real_time_factor:g}; re-anchoring")
             self._wall_anchor, self._sim_anchor = start, self.simulator.t_s
             target = self._sim_anchor
-        while self.simulator.t_s + 0.5 * dt <= target:
+        # whole /clock periods only (module docstring), up to the last tick at or before the target
+        while self._next_clock <= target + 0.5 * dt:
             if self._gates and self._at_clock_boundary() and not self._gates_open():
                 self._wall_anchor, self._sim_anchor = time.monotonic(), self.simulator.t_s
                 break
-            self._step_once()
+            end = self._next_clock
+            while self.simulator.t_s + 0.5 * dt < end:
+                self._step_once()
             if time.monotonic() - start > 0.05:  # keep the executor responsive
                 break
 
@@ -285,6 +317,8 @@ class SimulatorNode(Node):
             if self.publish_clock_topic:
                 self._pub_clock.publish(ClockMsg(clock=time_msg(t)))
             self._next_clock = (math.floor((t + eps) / self.clock_period_s) + 1) * self.clock_period_s
+            for cb in self._clock_listeners:
+                cb(t)
         if t + eps >= self._next_truth:
             self._publish_truth(t)
             self._next_truth = (math.floor((t + eps) / self.truth_period_s) + 1) * self.truth_period_s
