@@ -276,31 +276,16 @@ class SimulatorNode(Node):
             self._warn_bad(f"simulation cannot keep real_time_factor {self.real_time_factor:g}; re-anchoring")
             self._wall_anchor, self._sim_anchor = now, self.simulator.t_s
             target = self._sim_anchor
-        return (self._next_clock - target) / self.real_time_factor
+        return (self._next_clock - 0.5 * self.simulator.step_s - target) / self.real_time_factor
 
     def _on_timer(self) -> None:
-        dt = self.simulator.step_s
         start = time.monotonic()
         if self.real_time_factor <= 0.0:
             # one /clock period of simulated time, then back to the executor (other nodes run in between)
             self.advance_clock_period()
             return
-        if self._gates and self._at_clock_boundary() and not self._gates_open():
-            self._wall_anchor, self._sim_anchor = start, self.simulator.t_s  # do not try to catch up afterwards
-            return
-        target = self._sim_anchor + (start - self._wall_anchor) * self.real_time_factor
-        if target - self.simulator.t_s > _MAX_LAG_S:
-            self._warn_bad(f"simulation cannot keep real_time_factor {self.real_time_factor:g}; re-anchoring")
-            self._wall_anchor, self._sim_anchor = start, self.simulator.t_s
-            target = self._sim_anchor
-        # whole /clock periods only (module docstring), up to the last tick at or before the target
-        while self._next_clock <= target + 0.5 * dt:
-            if self._gates and self._at_clock_boundary() and not self._gates_open():
-                self._wall_anchor, self._sim_anchor = time.monotonic(), self.simulator.t_s
-                break
-            end = self._next_clock
-            while self.simulator.t_s + 0.5 * dt < end:
-                self._step_once()
+        # whole /clock periods only (module docstring), up to the last tick due on the wall clock
+        while self.wall_time_until_next_tick_s() <= 0.0 and self.advance_clock_period():
             if time.monotonic() - start > 0.05:  # keep the executor responsive
                 break
 
