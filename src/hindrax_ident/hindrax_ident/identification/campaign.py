@@ -34,11 +34,10 @@ from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 
-from ..estimation.filters import KinematicKalmanFilter
 from ..sim.simulator import Simulator
-from .estimators import OnlineDofEstimator
-from .maneuvers import (DOF_INDEX, HoldController, PoolBox, SensorState, dof_authority, level_ladder,
-                        prior_inertia, wrap_angle)
+from .estimators import OnlineDofEstimator, measurement_settings
+from .maneuvers import (DOF_INDEX, DepthEstimator, HoldController, PoolBox, SensorState, dof_authority,
+                        level_ladder, prior_inertia, wrap_angle)
 
 __all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign"]
 
@@ -136,7 +135,8 @@ class Campaign:
         self.authority = {d: dof_authority(self.core, d) for d in DOFS}
         self.ctrl = HoldController(cfg, [min(self.authority[d]) for d in DOFS])
         self.state = SensorState(cfg)
-        self.depth_kf = KinematicKalmanFilter("position", jerk_psd=1.0, measurement_std=0.005)
+        hv = measurement_settings(cfg, "heave")
+        self.depth_estimator = DepthEstimator(hv["std"], hv["accel_std"], hv["accel_jerk_psd"])
         self.online = {d: OnlineDofEstimator(cfg, d) for d in self.dofs}
         self._pending: list = []
         self.sim.add_sensor_listener(lambda dev, s: self._pending.append((dev, s)))
@@ -182,9 +182,7 @@ class Campaign:
             self.f_lag = f_cmd
         self._process_samples()
         t_new = self.sim.t_s
-        self.depth_kf.predict_to(t_new)
-        if self.depth_kf.initialised:
-            self.ctrl.depth_rate_m_s = self.depth_kf.velocity
+        self._update_depth_hold(t_new)
         if self._active >= 0:
             dof = DOFS[self._active]
             if dof in self.online:
@@ -199,10 +197,16 @@ class Campaign:
         pending, self._pending = self._pending, []
         for dev, s in pending:
             self.state.on_sample(dev, s)
-            if dev == "ms5837":
-                self.depth_kf.step(s.stamp_s, self.state.depth_m)
+            self.depth_estimator.on_sample(dev, s.stamp_s, self.state)
             for est in self.online.values():
                 est.on_sample(dev, s.stamp_s, self.state)
+
+    def _update_depth_hold(self, t_s: float) -> None:
+        """Depth and depth rate of the hold predicted to the tick time ``t_s`` (:class:`DepthEstimator`)."""
+        depth, rate = self.depth_estimator.predict_to(t_s)
+        if math.isfinite(rate):
+            self.ctrl.depth_rate_m_s = rate
+            self.ctrl.depth_estimate_m = depth
 
     def _check_limits(self) -> None:
         f = self.cfg.flat

@@ -18,7 +18,10 @@ from the DVL velocity, heave from the pressure depth, each aided by the 100 Hz a
 (:mod:`.fusion`: same state model and filterpy Kalman filter / RTS smoother as
 :mod:`hindrax_ident.estimation.filters`, with a second measurement); roll/pitch/yaw from the gyro rate with
 :class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter` online and
-:func:`~hindrax_ident.estimation.filters.smooth_kinematics` (RTS) offline.
+:func:`~hindrax_ident.estimation.filters.smooth_kinematics` (RTS) offline. Offline, the roll/pitch restoring
+regressor comes from the 10 Hz DVL attitude fused with the gyro's Euler-angle rates
+(:func:`~.fusion.smooth_with_rate`), after removing the gyro bias measured against the attitude
+(:func:`rate_bias_against_angle`; also removed from the measured rate).
 
 Methods:
 
@@ -65,12 +68,12 @@ from ..estimation.least_squares import EstimationError, fit_drag, fit_linear_mod
 from ..estimation.rls import RecursiveLeastSquares
 from ..estimation.steady_windows import detect_steady_windows
 from ..sim.model import rigid_body_mass_matrix
-from .fusion import AccelAidedFilter, smooth_with_acceleration
+from .fusion import AccelAidedFilter, smooth_with_acceleration, smooth_with_rate
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
     "measurement_settings", "OnlineDofEstimator", "DofIdentification", "identify_dof", "steady_state_fit",
-    "identify_all", "identify_all_with_errors",
+    "identify_all", "identify_all_with_errors", "rate_bias_against_angle",
 ]
 
 #: White-jerk PSD (m^2/s^5) of the accelerometer-aided filter (fusion.py) for surge, sway and heave.
@@ -347,27 +350,86 @@ def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarra
     return t[m], z[m]
 
 
-def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured, jerk_psd, std, accel=None):
+def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured, jerk_psd, std, accel=None, rate=None):
     """RTS-smoothed (pos, vel, acc) at the tick times from measurements at their own times.
 
-    accel: optional (t_acc, a_acc, accel_std, accel_jerk_psd) to use the accelerometer-aided smoother."""
+    accel: optional (t_acc, a_acc, accel_std, accel_jerk_psd) to use the accelerometer-aided smoother;
+    rate: optional (t_rate, rate, rate_std) to use the rate-aided smoother (:func:`~.fusion.smooth_with_rate`;
+    ``z_meas`` is then an angle)."""
     key_ticks = np.rint(np.asarray(t_ticks) * 1e6).astype(np.int64)
     key_meas = np.rint(np.asarray(t_meas) * 1e6).astype(np.int64)
     keys = np.union1d(key_ticks, key_meas)
-    if accel is not None:
-        key_acc = np.rint(np.asarray(accel[0]) * 1e6).astype(np.int64)
-        keys = np.union1d(keys, key_acc)
+    aid = accel if accel is not None else rate
+    if aid is not None:
+        key_aid = np.rint(np.asarray(aid[0]) * 1e6).astype(np.int64)
+        keys = np.union1d(keys, key_aid)
     z = np.full(keys.size, np.nan)
     z[np.searchsorted(keys, key_meas)] = z_meas
-    if accel is None:
+    if aid is None:
         pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd,
                                           measurement_std=std)
     else:
         a = np.full(keys.size, np.nan)
-        a[np.searchsorted(keys, key_acc)] = accel[1]
-        pos, vel, acc = smooth_with_acceleration(keys * 1e-6, z, a, measured, std, accel[2], accel[3])
+        a[np.searchsorted(keys, key_aid)] = aid[1]
+        if accel is not None:
+            pos, vel, acc = smooth_with_acceleration(keys * 1e-6, z, a, measured, std, accel[2], accel[3])
+        else:
+            pos, vel, acc = smooth_with_rate(keys * 1e-6, z, a, std, rate[2], jerk_psd)
     idx = np.searchsorted(keys, key_ticks)
     return pos[idx], vel[idx], acc[idx]
+
+
+def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
+    """Constant bias (rad/s) of a rate record against an angle record of the same axis: least squares of
+    ``integral(rate) - angle = c + b (t - t0)`` at the angle times (the integral by the trapezoid rule at the rate
+    times, interpolated). ``t_angle``, ``angle`` (m,), ``t_rate``, ``rate`` (n,); NaN samples ignored. Returns 0.0
+    with fewer than 3 usable angle samples or a rate record that does not span them.
+
+    Why: the still window that gives the gyro bias on board is short and the vehicle is rarely quite still
+    (a residual of 2-4 mrad/s in the graph campaign), and once the gyro aids the attitude
+    (:func:`~.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude samples: roll and
+    pitch quadratic damping std rose from about 1 % to 5-10 % (measured through the ROS graph)."""
+    ta, a = np.asarray(t_angle, dtype=float), np.asarray(angle, dtype=float)
+    tr, r = np.asarray(t_rate, dtype=float), np.asarray(rate, dtype=float)
+    okr = np.isfinite(r) & np.isfinite(tr)
+    tr, r = tr[okr], r[okr]
+    if tr.size < 2:
+        return 0.0
+    ok = np.isfinite(a) & np.isfinite(ta) & (ta >= tr[0]) & (ta <= tr[-1])
+    if ok.sum() < 3:
+        return 0.0
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(tr))])
+    y = np.interp(ta[ok], tr, integral) - a[ok]
+    x = np.column_stack([np.ones(ok.sum()), ta[ok] - ta[ok][0]])
+    return float(np.linalg.lstsq(x, y, rcond=None)[0][1])
+
+
+def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Roll and pitch (rad) at the tick times ``t`` (n,) and the Euler-rate biases (2,) rad/s removed: the DVL-75
+    attitude fused with the Euler-angle rates of the gyro (Fossen eq. 2.29, attitude interpolated to the gyro
+    times; constant bias removed by :func:`rate_bias_against_angle`) by :func:`~.fusion.smooth_with_rate` (the
+    attitude alone, zero biases, when there is no gyro record). Angle noise from
+    ``simulation.sensors.dvl75_attitude.noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
+    of the roll filter (:func:`measurement_settings`)."""
+    ta, roll = _log_arrays(record.sensors["attitude"], 0, t[0] - 2.0, t[-1])
+    _, pitch = _log_arrays(record.sensors["attitude"], 1, t[0] - 2.0, t[-1])
+    std_att = max(float(cfg.flat.get("simulation.sensors.dvl75_attitude.noise_std_rad", 0.005)), 1e-4)
+    tg, p = _log_arrays(record.sensors.get("gyro", []), 0, t[0] - 2.0, t[-1])
+    _, q = _log_arrays(record.sensors.get("gyro", []), 1, t[0] - 2.0, t[-1])
+    _, r = _log_arrays(record.sensors.get("gyro", []), 2, t[0] - 2.0, t[-1])
+    if tg.size < 10 or ta.size < 2:
+        jerk = std_att ** 2 * 15.0 ** 6
+        return (_smooth_on_ticks(t, ta, roll, "position", jerk, std_att)[0],
+                _smooth_on_ticks(t, ta, pitch, "position", jerk, std_att)[0], np.zeros(2))
+    phi, theta = np.interp(tg, ta, roll), np.interp(tg, ta, pitch)
+    roll_rate = p + np.sin(phi) * np.tan(theta) * q + np.cos(phi) * np.tan(theta) * r
+    pitch_rate = np.cos(phi) * q - np.sin(phi) * r
+    bias = np.array([rate_bias_against_angle(ta, roll, tg, roll_rate),
+                     rate_bias_against_angle(ta, pitch, tg, pitch_rate)])
+    ms = measurement_settings(cfg, "roll")
+    out = [_smooth_on_ticks(t, ta, ang, "position", ms["jerk_psd"], std_att, rate=(tg, rate - b, ms["std"]))[0]
+           for ang, rate, b in ((roll, roll_rate, bias[0]), (pitch, pitch_rate, bias[1]))]
+    return out[0], out[1], bias
 
 
 def _output_error(dof: str, theta0: np.ndarray, t: np.ndarray, force: np.ndarray, force_cmd: np.ndarray,
@@ -557,12 +619,12 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
     x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
     rr = None
     if dof in ("roll", "pitch"):
-        ta, roll = _log_arrays(record.sensors["attitude"], 0, t[0] - 2.0, t[-1])
-        _, pitch = _log_arrays(record.sensors["attitude"], 1, t[0] - 2.0, t[-1])
-        std_att = max(float(cfg.flat.get("simulation.sensors.dvl75_attitude.noise_std_rad", 0.005)), 1e-4)
-        roll_s = _smooth_on_ticks(t, ta, roll, "position", std_att ** 2 * 15.0 ** 6, std_att)[0]
-        pitch_s = _smooth_on_ticks(t, ta, pitch, "position", std_att ** 2 * 15.0 ** 6, std_att)[0]
+        roll_s, pitch_s, rate_bias = _smoothed_roll_pitch(record, cfg, t)
         rr = restoring_regressor(dof, roll_s, pitch_s)
+        # the gyro bias left after the on-board still window, measured against the attitude: removed from the
+        # measured rate too (roll and pitch angles stay small in each other's runs, so Euler rate ~ body rate)
+        zm = zm - rate_bias[k - 3]
+        x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
     names = parameter_names(dof)
     X = regressor_matrix(dof, a_s, v_s, rr)
     ok = np.all(np.isfinite(X), axis=1) & np.isfinite(force)

@@ -15,7 +15,8 @@ simulator's truth):
 * :class:`SensorState` - conditions the raw samples: depth of the body origin from the MS5837 pressure
   (lever arm corrected with the DVL attitude), roll/pitch/heading from the DVL attitude, body rates from
   the ICM-20948 gyro (mounting rotation and FLU->FRD applied, bias removed after a still period), body
-  velocity from the DVL (lever arm ``w x r`` removed with the gyro), altitude from the Ping1D, and a
+  velocity from the DVL (lever arm ``w x r`` removed with the gyro rate at the sample's time, unless the
+  sample is already at the body origin, as the DVL driver's ``dvl/data`` is), altitude from the Ping1D, and a
   dead-reckoned horizontal position (DVL velocity rotated by the DVL heading, from the known start).
 * :class:`HoldController` - PD/PI holds for depth, roll, pitch, heading and surge/sway velocity, gains from
   the a-priori (configured) rigid + added inertia: ``k_p = I w_n^2``, ``k_d = 2 zeta w_n I``.
@@ -35,9 +36,11 @@ from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 
+from .fusion import AccelAidedFilter
+
 __all__ = [
     "DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority", "level_ladder",
-    "prior_inertia", "PoolBox", "SensorState", "HoldController", "wrap_angle",
+    "prior_inertia", "PoolBox", "SensorState", "DepthEstimator", "HoldController", "wrap_angle", "euler_rates",
 ]
 
 #: DOF name -> index in nu / tau (SNAME order).
@@ -150,13 +153,52 @@ class PoolBox:
         return max(0.0, best)
 
 
+def euler_rates(rpy_rad, rates_frd_rad_s) -> np.ndarray:
+    """Euler-angle rates (3,) rad/s of roll, pitch, yaw (zyx convention) from body rates p, q, r (3,) rad/s:
+    d Theta / dt = T(Theta) omega (Fossen 2021 eq. 2.29; singular at pitch +-90 deg, where T's tan/sec grow
+    without bound)."""
+    phi, theta = float(rpy_rad[0]), float(rpy_rad[1])
+    p, q, r = (float(x) for x in rates_frd_rad_s)
+    sp, cp, ct, tt = math.sin(phi), math.cos(phi), math.cos(theta), math.tan(theta)
+    return np.array([p + sp * tt * q + cp * tt * r, cp * q - sp * r, (sp * q + cp * r) / ct])
+
+
+def _interpolate_log(log: list, t_s: float, fallback, wrap: Sequence[int] = ()) -> np.ndarray:
+    """Value (k,) of a SensorState log (list of (stamp, tuple), stamps non-decreasing) at ``t_s``: linear
+    between the samples around ``t_s``, the nearest sample outside the logged span, ``fallback`` when empty.
+    Components listed in ``wrap`` are angles interpolated along the shorter arc. Searches from the newest
+    sample backwards (callers ask for recent times)."""
+    if not log:
+        return np.asarray(fallback, dtype=float).copy()
+    i = len(log) - 1
+    while i >= 0 and log[i][0] > t_s:
+        i -= 1
+    if i < 0:
+        return np.asarray(log[0][1], dtype=float)
+    t0, v0 = log[i]
+    v0 = np.asarray(v0, dtype=float)
+    if i == len(log) - 1 or t0 == t_s:
+        return v0.copy()
+    t1, v1 = log[i + 1]
+    d = np.asarray(v1, dtype=float) - v0
+    for k in wrap:
+        d[k] = wrap_angle(float(d[k]))
+    out = v0 + d * ((t_s - t0) / (t1 - t0))
+    for k in wrap:
+        out[k] = wrap_angle(float(out[k]))
+    return out
+
+
 @dataclass
 class SensorState:
     """Latest conditioned sensor values and a raw log of every sample (module docstring).
 
     Attributes (NaN until a first sample): ``depth_m`` (body origin, m, NED z), ``rpy_rad`` (3,),
-    ``rates_frd_rad_s`` (3,), ``velocity_frd_m_s`` (3,) (DVL, lever arm removed; NaN without lock),
-    ``altitude_m`` (Ping1D, NaN when invalid), ``position_ned_m`` (3,) dead-reckoned x, y and depth.
+    ``rates_frd_rad_s`` (3,), ``velocity_frd_m_s`` (3,) (DVL, lever arm removed; NaN without lock; a ``dvl75``
+    sample with ``at_body_origin`` true is taken as it is, as the DVL driver has removed the lever arm),
+    ``altitude_m`` (Ping1D, NaN when invalid), ``position_ned_m`` (3,) dead-reckoned x, y and depth,
+    ``acceleration_frd_m_s2`` (3,) nu_dot of the body origin and ``acceleration_ned_m_s2`` (3,) its acceleration in
+    NED (accelerometer: specific force + gravity, bias removed; NaN before the first sample).
     ``log``: device -> list of (stamp_s, value tuple) with the conditioned values (what the estimators use).
     """
 
@@ -187,19 +229,53 @@ class SensorState:
         self._acc_n = 0
         self.accel_bias_frd_m_s2 = np.zeros(3)
         self.acceleration_frd_m_s2 = np.full(3, np.nan)
+        self.acceleration_ned_m_s2 = np.full(3, np.nan)
         self._g = float(self.cfg.gravity_m_s2)
         self.collecting_gyro_bias = False
         self.log = {k: [] for k in ("depth", "attitude", "gyro", "dvl", "altitude", "accel")}
 
-    def _rotation(self) -> np.ndarray:
-        rpy = np.nan_to_num(self.rpy_rad)
+    def _rotation(self, rpy=None) -> np.ndarray:
+        rpy = np.nan_to_num(self.rpy_rad if rpy is None else rpy)
         return Rotation.from_euler("ZYX", [rpy[2], rpy[1], rpy[0]]).as_matrix()
+
+    def rates_at(self, t_s: float) -> np.ndarray:
+        """Body rates (3,) rad/s FRD at time ``t_s``, linear between the two gyro samples around it (the nearest
+        one outside the logged span; the latest rates when the log is empty).
+
+        The DVL and pressure samples reach the node tens of ms after their time of validity (the DVL stamp is
+        the middle of its ping interval, the MS5837 stamp its conversion; hardware.md §1, §3), by which time
+        newer gyro samples have arrived; lever-arm corrections use the rate at the sample's own time."""
+        return _interpolate_log(self.log["gyro"], t_s, self.rates_frd_rad_s)
+
+    def rpy_now(self) -> np.ndarray:
+        """Roll, pitch, yaw (3,) rad at the newest sample time of the attitude and the gyro: the 10 Hz attitude
+        carried forward with the 100 Hz gyro (:meth:`rpy_at`). The holds use it: the attitude alone is up to
+        100 ms old, plus its delivery latency. NaN before the first attitude sample."""
+        t = max(self.log["attitude"][-1][0] if self.log["attitude"] else -math.inf,
+                self.log["gyro"][-1][0] if self.log["gyro"] else -math.inf)
+        return self.rpy_at(t)
+
+    def rpy_at(self, t_s: float) -> np.ndarray:
+        """Roll, pitch, yaw (3,) rad at ``t_s``: linear between the two attitude samples around it, or from
+        the newest one before it carried forward with the gyro rates through the Euler-angle kinematics
+        (Fossen eq. 2.29, d Theta / dt = T(Theta) omega). NaN before the first attitude sample."""
+        log = self.log["attitude"]
+        if not log:
+            return np.full(3, np.nan)
+        t_last, last = log[-1]
+        if t_s <= t_last:
+            return _interpolate_log(log, t_s, np.asarray(last, dtype=float), wrap=(2,))
+        rpy = np.asarray(last, dtype=float)
+        rates = self.rates_at(0.5 * (t_last + t_s))
+        if not np.all(np.isfinite(rates)):
+            return rpy.copy()
+        return rpy + (t_s - t_last) * euler_rates(rpy, rates)
 
     def on_sample(self, device: str, s) -> None:
         """Condition and store one simulator/driver sample (device names of :mod:`hindrax_ident.sim.sensors`)."""
         if device == "ms5837":
             depth_port = (s.pressure_pa - self._p0) / self._rho_g
-            self.depth_m = float(depth_port - self._rotation()[2] @ self._r_pressure)
+            self.depth_m = float(depth_port - self._rotation(self.rpy_at(s.stamp_s))[2] @ self._r_pressure)
             self.position_ned_m[2] = self.depth_m
             self.log["depth"].append((s.stamp_s, (self.depth_m,)))
         elif device == "dvl75_attitude":
@@ -215,8 +291,8 @@ class SensorState:
         elif device == "dvl75":
             v = np.asarray(s.velocity_frd_m_s, dtype=float)
             if s.locked and np.all(np.isfinite(v)):
-                w = np.nan_to_num(self.rates_frd_rad_s)
-                v = v - np.cross(w, self._r_dvl)
+                if not getattr(s, "at_body_origin", False):
+                    v = v - np.cross(np.nan_to_num(self.rates_at(s.stamp_s)), self._r_dvl)
             else:
                 v = np.full(3, np.nan)
             self._dead_reckon(s.stamp_s, v)
@@ -224,7 +300,8 @@ class SensorState:
             self.log["dvl"].append((s.stamp_s, tuple(v)))
         elif device == "icm20948_accel":
             f_frd = self._frd_from_sensor @ np.asarray(s.specific_force_m_s2, dtype=float)
-            g_body = self._rotation().T @ np.array([0.0, 0.0, self._g])
+            rot = self._rotation()
+            g_body = rot.T @ np.array([0.0, 0.0, self._g])
             raw = f_frd + g_body  # a = f + R^T g (sim/sensors.py: f = a - g)
             if self.collecting_gyro_bias:
                 self._acc_sum += raw
@@ -232,6 +309,7 @@ class SensorState:
             w = np.nan_to_num(self.rates_frd_rad_s)
             v = np.nan_to_num(self.velocity_frd_m_s)
             self.acceleration_frd_m_s2 = raw - self.accel_bias_frd_m_s2 - np.cross(w, v)  # nu_dot = a - w x v
+            self.acceleration_ned_m_s2 = rot @ (raw - self.accel_bias_frd_m_s2)  # d^2 p / dt^2 in NED
             self.log["accel"].append((s.stamp_s, tuple(self.acceleration_frd_m_s2)))
         elif device == "ping1d":
             self.altitude_m = float(s.distance_m) if s.valid else math.nan
@@ -263,11 +341,55 @@ class SensorState:
             self.accel_bias_frd_m_s2 = self._acc_sum / self._acc_n
 
 
+class DepthEstimator:
+    """Depth and depth rate of the body origin for the depth hold: the MS5837 depth (10 Hz, arriving tens of
+    ms after its conversion) fused with the 100 Hz vertical acceleration (:class:`~.fusion.AccelAidedFilter`,
+    position measured, NED z).
+
+    Why: the hold's rate feedback from the 10 Hz depth alone lagged by about its own filter bandwidth (6 rad/s),
+    close to the loop's crossover (about 4 rad/s at ``natural_frequency_rad_s`` 2); with the latencies of the
+    ROS graph (depth used 30-40 ms after its conversion, wrench on the thrusters 30-40 ms after it was
+    computed) the depth hold went into a limit cycle of +-25-35 N at 0.7 Hz, and the 0.1-0.2 m/s heave it
+    caused coupled into the roll and pitch runs (Munk moment, Fossen eq. 6.55). The acceleration gives the
+    rate without that lag.
+
+    ``on_sample(device, stamp_s, state)`` takes every conditioned sample (``ms5837``: ``state.depth_m``;
+    ``icm20948_accel``: ``state.acceleration_ned_m_s2[2]``); a sample older than the filter's time is fused at
+    the filter's time (samples come in stamp order per control tick; a late depth is not dropped).
+    ``predict_to(t_s)`` returns (depth m, depth rate m/s), NaN before the first depth sample.
+    depth_std_m, accel_std_m_s2, jerk_psd: the filter's noise settings (the campaign passes those of
+    :func:`~.estimators.measurement_settings` for heave). Raises
+    :class:`~hindrax_ident.estimation.least_squares.EstimationError` for a setting that is not > 0.
+    """
+
+    def __init__(self, depth_std_m: float = 0.005, accel_std_m_s2: float = 0.07, jerk_psd: float = 20.0) -> None:
+        self.kf = AccelAidedFilter("position", depth_std_m, accel_std_m_s2, jerk_psd)
+
+    def on_sample(self, device: str, stamp_s: float, state: SensorState) -> None:
+        """Fuse one sample (module docstring of the class)."""
+        t = float(stamp_s) if self.kf.t_s is None else max(float(stamp_s), self.kf.t_s)
+        if device == "ms5837" and math.isfinite(state.depth_m):
+            self.kf.step(t, state.depth_m, None)
+        elif device == "icm20948_accel" and self.kf.initialised:
+            a = float(state.acceleration_ned_m_s2[2])
+            if math.isfinite(a):
+                self.kf.step(t, None, a)
+
+    def predict_to(self, t_s: float) -> tuple[float, float]:
+        """(depth m, depth rate m/s) predicted to ``t_s`` (never before the last fused sample)."""
+        if not self.kf.initialised:
+            return math.nan, math.nan
+        x, v, _ = self.kf.predict_to(max(float(t_s), self.kf.t_s))
+        return x, v
+
+
 class HoldController:
     """Holds for depth, roll, pitch, heading and body velocities from sensor values (module docstring).
 
     ``wrench(state, free)`` returns the FRD wrench (6,) holding every DOF not in ``free``: depth (Z) to
-    ``depth_setpoint_m`` (PI + D on the filtered depth rate, net-buoyancy feed-forward), roll/pitch to 0,
+    ``depth_setpoint_m`` (PI + D, net-buoyancy feed-forward; on ``depth_estimate_m`` and ``depth_rate_m_s``,
+    which the caller sets from a :class:`DepthEstimator`, or on the latest ``state.depth_m`` while
+    ``depth_estimate_m`` is NaN), roll/pitch to 0,
     heading to ``heading_setpoint_rad``, surge/sway body velocity to ``velocity_setpoint_m_s``. Each hold
     is limited to ``hold_fraction`` of the axis authority.
     """
@@ -286,6 +408,7 @@ class HoldController:
         self.attitude_setpoint_rad = np.zeros(2)
         self._depth_integral = 0.0
         self.depth_rate_m_s = 0.0
+        self.depth_estimate_m = math.nan
 
     def reset_integral(self) -> None:
         """Clear the depth integrator."""
@@ -298,23 +421,23 @@ class HoldController:
         wn, zeta = self.wn, 1.0
         lim = self.hold_fraction * self.authority
         rates = np.nan_to_num(st.rates_frd_rad_s)
-        rpy = np.nan_to_num(st.rpy_rad)
+        rpy = np.nan_to_num(st.rpy_now())
         for k, dof in enumerate(("surge", "sway")):
             if dof not in free:
                 v = st.velocity_frd_m_s[k]
                 if np.isfinite(v):
                     w[k] = -velocity_gain * wn * self.inertia[k] * (v - self.velocity_setpoint_m_s[k])
-        if "heave" not in free and math.isfinite(self.depth_setpoint_m) and math.isfinite(st.depth_m):
+        depth = self.depth_estimate_m if math.isfinite(self.depth_estimate_m) else st.depth_m
+        if "heave" not in free and math.isfinite(self.depth_setpoint_m) and math.isfinite(depth):
             m = self.inertia[2]
-            err = self.depth_setpoint_m - st.depth_m
+            err = self.depth_setpoint_m - depth
             self._depth_integral = float(np.clip(self._depth_integral + err * dt_s, -0.5, 0.5))
             w[2] = (self.net_buoyancy_n + m * wn * wn * err - 2.0 * zeta * wn * m * self.depth_rate_m_s
                     + 0.5 * m * wn ** 3 * self._depth_integral)
         for k, dof in ((3, "roll"), (4, "pitch")):
             if dof not in free:
                 i = self.inertia[k]
-                w[k] = i * (2 * wn) ** 2 * (self.attitude_setpoint_rad[k - 3] - rpy[k - 3]) \
-                    - 2.0 * zeta * (2 * wn) * i * rates[k - 3]
+                w[k] = i * wn ** 2 * (self.attitude_setpoint_rad[k - 3] - rpy[k - 3]) - 2.0 * zeta * wn * i * rates[k - 3]
         if "yaw" not in free:
             i = self.inertia[5]
             w[5] = i * wn * wn * wrap_angle(self.heading_setpoint_rad - rpy[2]) - 2.0 * zeta * wn * i * rates[2]

@@ -88,8 +88,14 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 
     Returns ``[("dvl75_attitude", ns(stamp_s, roll_rad, pitch_rad, yaw_rad))]`` (NED Euler angles of body FRD,
     via :func:`hindrax_drivers.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
-    followed by ``("dvl75", ns(stamp_s, velocity_frd_m_s (3,), locked))`` (velocity FLU -> FRD; NaN and
-    ``locked`` False without a valid velocity). Works on rclpy and bag-decoded messages alike.
+    followed by ``("dvl75", ns(stamp_s, velocity_frd_m_s (3,), locked, at_body_origin=True))`` (velocity FLU ->
+    FRD; NaN and ``locked`` False without a valid velocity). Works on rclpy and bag-decoded messages alike.
+
+    ``at_body_origin``: the driver publishes the velocity of base_link (it removes the lever arm with the
+    ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
+    samples, so :class:`~.maneuvers.SensorState` must not remove it again. (It did: at 1-2 rad/s of pitch
+    the surge velocity was 0.18 m x q off, 0.27 m/s rms, and the surge hold pushed the vehicle to 0.28 m/s
+    during the pitch runs; measured through the ROS graph in the virtual pool.)
 
     Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
     attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
@@ -110,7 +116,7 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
     v = np.array([msg.velocity_m_s.x, msg.velocity_m_s.y, msg.velocity_m_s.z], dtype=float)
     locked = bool(msg.velocity_valid) and bool(np.all(np.isfinite(v)))
     out.append(("dvl75", SimpleNamespace(stamp_s=t, velocity_frd_m_s=frames.flu_to_frd(v) if locked
-                                         else np.full(3, np.nan), locked=locked)))
+                                         else np.full(3, np.nan), locked=locked, at_body_origin=True)))
     return out
 
 
@@ -299,9 +305,7 @@ class RosCampaign(Campaign):
             self.plant.thrusters.pulse_width_us = self.written_us.copy()
         self.plant.deliver(inp.samples, previous_tick_s)
         self._process_samples()
-        self.depth_kf.predict_to(inp.t_s)
-        if self.depth_kf.initialised:
-            self.ctrl.depth_rate_m_s = self.depth_kf.velocity
+        self._update_depth_hold(inp.t_s)
         if self._active >= 0:
             dof = DOFS[self._active]
             if dof in self.online:
