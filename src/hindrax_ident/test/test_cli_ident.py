@@ -155,3 +155,12 @@ def test_ident_campaign_is_registered(capsys):
         cli.main(["ident", "campaign", "--help"])
     assert exc.value.code == 0
     assert "no ROS graph" in capsys.readouterr().out
+
+
+def test_run_refuses_an_output_directory_that_holds_a_run(tmp_path, capsys):
+    (tmp_path / "bag").mkdir()
+    (tmp_path / "bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    assert cli.main(["run", "--dofs", "surge", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err
+    assert "already holds a run" in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # nothing started, nothing written

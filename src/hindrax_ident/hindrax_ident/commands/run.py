@@ -133,6 +133,9 @@ def run_graph(args: argparse.Namespace) -> int:
         print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
 
     out = _output_dir(cfg, args.out)
+    if (out / "bag").exists():
+        print(f"--out: {out} already holds a run (bag/); choose a new output directory", file=sys.stderr)
+        return 1
     overrides = {}
     if args.max_level_duration is not None:
         overrides["identification.max_level_duration_s"] = float(args.max_level_duration)
