@@ -6,12 +6,13 @@ action, identified offline from the recorded bag.
 The campaign is the default one (5 levels) restricted to surge and heave, seed 1. The graph run is
 reproducible (serial devices in lock-step with simulated time, stepped simulator, fixed callback order,
 time frozen while start-up and operator calls complete: see ``test_bringup_sim``), so this checks one fixed
-outcome, the same on every machine and under any load. Measured: surge inertia -1.0 %, quadratic damping
--1.4 %; heave inertia -0.05 %, quadratic damping down +0.8 %, up -0.3 %, bias +0.014 N; about 265 s alone.
+outcome, the same on every machine and under any load. Measured: surge inertia +0.66 %, quadratic damping
++0.49 %; heave inertia -0.02 %, quadratic damping down -0.39 %, up +0.02 %, bias -0.012 N; about 265 s alone.
 
 Checked from the outside, as a user sees it: exit status 0 and the summary table; ``identification.yaml``
 (validated on read) within the identification issue's tolerances of the configured truth (inertia and
-quadratic damping within 5 %, bias within 0.2 N); the report; the bag exists and replays (every message of
+quadratic damping within 5 %, bias within 0.2 N, and each of their 95 % intervals contains the configured value);
+the report; the bag exists and replays (every message of
 the identification's topics decodes); the last widths the ESC node wrote are neutral with the output disarmed.
 """
 import subprocess
@@ -55,6 +56,9 @@ def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
                     problems.append(f"{dof} bias {got:.3f} N, configured {value:.3f} N (limit 0.2 N)")
             elif abs(got - value) > 0.05 * value:
                 problems.append(f"{dof} {name} {got:.4g}, configured {value:.4g} (limit 5 %)")
+            low, high = doc["dofs"][dof][name]["ci95"]
+            if not low <= value <= high:
+                problems.append(f"{dof} {name}: 95 % interval [{low:.4g}, {high:.4g}] misses {value:.4g}")
     assert not problems, "; ".join(problems) + "\n" + log
     assert doc["provenance"]["bag"].endswith("bag")
     assert (out / "report" / "index.html").is_file()
