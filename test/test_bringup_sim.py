@@ -134,14 +134,7 @@ def _stepped_run(seed: int, duration_s: float) -> dict:
         sim = graph.nodes["simulator"].simulator
         spin = lambda: graph.spin_once(0.005)  # noqa: E731
         try:
-            graph.freeze_time()
-            wait_until(lambda: graph.startup_complete() and arm.service_is_ready(), 60, spin, "drivers' start-up")
-            graph.resume_time()
-            wait_until(lambda: graph.nodes["esc"].arming_remaining_s() == 0.0, 60, spin, "arming time")
-            graph.freeze_time()
-            fut = arm.call_async(SetArmed.Request(arm=True))
-            wait_until(fut.done, 10, spin, "arm answer")
-            graph.resume_time()
+            graph.start_and_arm(arm, 60, spin_timeout_s=0.005)
             m = WrenchStamped()
             m.header.frame_id = "base_link"
             m.wrench.force.x = 20.0

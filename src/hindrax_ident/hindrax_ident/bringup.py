@@ -112,6 +112,29 @@ class Graph:
         wanted = {pub.topic_name for name, node in self.nodes.items() if name != "recorder" for pub in node.publishers}
         return recorder.subscribed_to(wanted)
 
+    def start_and_arm(self, arm_client: Any, timeout_s: float, ready: Callable[[], bool] = lambda: True,
+                      spin_timeout_s: float = 0.01) -> Any:
+        """The operator's start of a simulated run, each step at a simulated instant independent of wall time:
+        with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready and
+        ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); answer the arm
+        request with time frozen again. Returns the SetArmed response. Raises
+        :class:`~hindrax_drivers.testing.ConditionTimeout` when a step takes longer than ``timeout_s`` of wall time.
+        """
+        from hindrax_drivers.testing import wait_until
+        from hindrax_msgs.srv import SetArmed
+
+        spin = lambda: self.spin_once(spin_timeout_s)  # noqa: E731
+        self.freeze_time()
+        wait_until(lambda: self.startup_complete() and arm_client.service_is_ready() and ready(), timeout_s, spin,
+                   "drivers' start-up, recorder subscriptions and services")
+        self.resume_time()
+        wait_until(lambda: self.nodes["esc"].arming_remaining_s() == 0.0, timeout_s, spin, "ESC arming time")
+        self.freeze_time()
+        fut = arm_client.call_async(SetArmed.Request(arm=True))
+        wait_until(fut.done, timeout_s, spin, "arm answer")
+        self.resume_time()
+        return fut.result()
+
     def shutdown(self) -> None:
         """Close every node (the ESC node writes neutral), stop the emulators, destroy the nodes."""
         for name in reversed(list(self.nodes)):

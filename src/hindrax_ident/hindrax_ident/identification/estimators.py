@@ -69,6 +69,7 @@ from ..estimation.rls import RecursiveLeastSquares
 from ..estimation.steady_windows import detect_steady_windows
 from ..sim.model import rigid_body_mass_matrix
 from .fusion import AccelAidedFilter, smooth_with_acceleration, smooth_with_rate
+from .maneuvers import euler_rates
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
@@ -404,20 +405,38 @@ def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
     return float(np.linalg.lstsq(x, y, rcond=None)[0][1])
 
 
+def _attitude_and_euler_rates(record, t: np.ndarray):
+    """(t_att (m,), rpy (m, 3), t_gyro (n,), Euler-angle rates (n, 3)) over ``t`` (n,) plus 2 s before: the
+    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~.maneuvers.euler_rates`) at the
+    attitude interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude
+    samples."""
+    t0, t1 = t[0] - 2.0, t[-1]
+    ta, rpy = _log_matrix(record.sensors["attitude"], t0, t1)
+    tg, w = _log_matrix(record.sensors.get("gyro", []), t0, t1)
+    if tg.size < 10 or ta.size < 2:
+        return ta, rpy, np.zeros(0), np.zeros((0, 3))
+    rpy_g = np.column_stack([np.interp(tg, ta, rpy[:, 0]), np.interp(tg, ta, rpy[:, 1]), np.zeros(tg.size)])
+    return ta, rpy, tg, euler_rates(rpy_g, w)
+
+
+def _log_matrix(log: list, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+    """(times (m,), values (m, 3)) of a three-component SensorState log within [t0, t1]."""
+    if not log:
+        return np.zeros(0), np.zeros((0, 3))
+    t = np.array([s[0] for s in log])
+    v = np.array([s[1] for s in log], dtype=float).reshape(len(log), -1)
+    m = (t >= t0) & (t <= t1)
+    return t[m], v[m]
+
+
 def _yaw_rate_bias(record, t: np.ndarray) -> float:
     """Bias (rad/s) of the gyro's yaw Euler rate against the unwrapped DVL heading over ``t`` (n,) plus 2 s before
     (:func:`rate_bias_against_angle`); 0.0 without enough samples."""
-    ta, roll = _log_arrays(record.sensors["attitude"], 0, t[0] - 2.0, t[-1])
-    _, pitch = _log_arrays(record.sensors["attitude"], 1, t[0] - 2.0, t[-1])
-    _, yaw = _log_arrays(record.sensors["attitude"], 2, t[0] - 2.0, t[-1])
-    tg, q = _log_arrays(record.sensors.get("gyro", []), 1, t[0] - 2.0, t[-1])
-    _, r = _log_arrays(record.sensors.get("gyro", []), 2, t[0] - 2.0, t[-1])
-    ok = np.isfinite(yaw)
-    if tg.size < 10 or ok.sum() < 3:
+    ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
+    ok = np.isfinite(rpy[:, 2])
+    if tg.size == 0 or ok.sum() < 3:
         return 0.0
-    ta, roll, pitch, yaw = ta[ok], roll[ok], pitch[ok], np.unwrap(yaw[ok])
-    phi, theta = np.interp(tg, ta, roll), np.interp(tg, ta, pitch)
-    return rate_bias_against_angle(ta, yaw, tg, (np.sin(phi) * q + np.cos(phi) * r) / np.cos(theta))
+    return rate_bias_against_angle(ta[ok], np.unwrap(rpy[ok, 2]), tg, rates[:, 2])
 
 
 def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -427,24 +446,16 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     attitude alone, zero biases, when there is no gyro record). Angle noise from
     ``simulation.sensors.dvl75_attitude.noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
     of the roll filter (:func:`measurement_settings`)."""
-    ta, roll = _log_arrays(record.sensors["attitude"], 0, t[0] - 2.0, t[-1])
-    _, pitch = _log_arrays(record.sensors["attitude"], 1, t[0] - 2.0, t[-1])
+    ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
     std_att = max(float(cfg.flat.get("simulation.sensors.dvl75_attitude.noise_std_rad", 0.005)), 1e-4)
-    tg, p = _log_arrays(record.sensors.get("gyro", []), 0, t[0] - 2.0, t[-1])
-    _, q = _log_arrays(record.sensors.get("gyro", []), 1, t[0] - 2.0, t[-1])
-    _, r = _log_arrays(record.sensors.get("gyro", []), 2, t[0] - 2.0, t[-1])
-    if tg.size < 10 or ta.size < 2:
+    if tg.size == 0:
         jerk = std_att ** 2 * 15.0 ** 6
-        return (_smooth_on_ticks(t, ta, roll, "position", jerk, std_att)[0],
-                _smooth_on_ticks(t, ta, pitch, "position", jerk, std_att)[0], np.zeros(2))
-    phi, theta = np.interp(tg, ta, roll), np.interp(tg, ta, pitch)
-    roll_rate = p + np.sin(phi) * np.tan(theta) * q + np.cos(phi) * np.tan(theta) * r
-    pitch_rate = np.cos(phi) * q - np.sin(phi) * r
-    bias = np.array([rate_bias_against_angle(ta, roll, tg, roll_rate),
-                     rate_bias_against_angle(ta, pitch, tg, pitch_rate)])
+        return (_smooth_on_ticks(t, ta, rpy[:, 0], "position", jerk, std_att)[0],
+                _smooth_on_ticks(t, ta, rpy[:, 1], "position", jerk, std_att)[0], np.zeros(2))
+    bias = np.array([rate_bias_against_angle(ta, rpy[:, i], tg, rates[:, i]) for i in (0, 1)])
     ms = measurement_settings(cfg, "roll")
-    out = [_smooth_on_ticks(t, ta, ang, "position", ms["jerk_psd"], std_att, rate=(tg, rate - b, ms["std"]))[0]
-           for ang, rate, b in ((roll, roll_rate, bias[0]), (pitch, pitch_rate, bias[1]))]
+    out = [_smooth_on_ticks(t, ta, rpy[:, i], "position", ms["jerk_psd"], std_att,
+                            rate=(tg, rates[:, i] - bias[i], ms["std"]))[0] for i in (0, 1)]
     return out[0], out[1], bias
 
 
@@ -632,7 +643,6 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
     if ms["accel"] and record.sensors.get("accel"):
         ta, aa = _log_arrays(record.sensors["accel"], k, t[0] - 2.0, t[-1])
         aid = (ta, aa, ms["accel_std"], ms["accel_jerk_psd"])
-    x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
     rr = None
     if dof in ("roll", "pitch"):
         roll_s, pitch_s, rate_bias = _smoothed_roll_pitch(record, cfg, t)
@@ -640,12 +650,11 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
         # the gyro bias left after the on-board still window, measured against the attitude: removed from the
         # measured rate too (roll and pitch angles stay small in each other's runs, so Euler rate ~ body rate)
         zm = zm - rate_bias[k - 3]
-        x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
     elif dof == "yaw":
         # the same for yaw against the DVL heading (unwrapped): a rate bias b would otherwise appear as a moment
         # bias of about linear damping x b (1.47 x 0.003 = 0.004 N m; measured over in-process campaigns)
         zm = zm - _yaw_rate_bias(record, t)
-        x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
+    x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
     names = parameter_names(dof)
     X = regressor_matrix(dof, a_s, v_s, rr)
     ok = np.all(np.isfinite(X), axis=1) & np.isfinite(force)

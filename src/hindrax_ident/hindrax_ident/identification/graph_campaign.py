@@ -98,17 +98,9 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             # Simulated time starts only when discovery, port opening and the devices' start-up exchanges are
             # over, and stands still while the operator's calls are answered: the run then depends on the seed
             # alone, not on how long those took in wall time (graph_campaign module docstring).
-            graph.freeze_time()
-            wait_until(lambda: graph.startup_complete() and arm.service_is_ready() and action.server_is_ready(),
-                       120, spin, "drivers' start-up, recorder subscriptions and services")
-            graph.resume_time()
-            wait_until(lambda: graph.nodes["esc"].arming_remaining_s() == 0.0, 120, spin, "ESC arming time")
-            graph.freeze_time()
-            fut = arm.call_async(SetArmed.Request(arm=True))
-            wait_until(fut.done, 30, spin, "arm answer")
-            graph.resume_time()
-            if not fut.result().success:
-                outcome.message = f"arming refused: {fut.result().message}"
+            armed = graph.start_and_arm(arm, 120, action.server_is_ready)
+            if not armed.success:
+                outcome.message = f"arming refused: {armed.message}"
                 say(outcome.message)
                 return outcome
             wait_until(lambda: armed_state[0] is True, 30, spin, "ESC reporting armed")

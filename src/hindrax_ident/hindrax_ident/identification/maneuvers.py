@@ -154,13 +154,15 @@ class PoolBox:
 
 
 def euler_rates(rpy_rad, rates_frd_rad_s) -> np.ndarray:
-    """Euler-angle rates (3,) rad/s of roll, pitch, yaw (zyx convention) from body rates p, q, r (3,) rad/s:
-    d Theta / dt = T(Theta) omega (Fossen 2021 eq. 2.29; singular at pitch +-90 deg, where T's tan/sec grow
-    without bound)."""
-    phi, theta = float(rpy_rad[0]), float(rpy_rad[1])
-    p, q, r = (float(x) for x in rates_frd_rad_s)
-    sp, cp, ct, tt = math.sin(phi), math.cos(phi), math.cos(theta), math.tan(theta)
-    return np.array([p + sp * tt * q + cp * tt * r, cp * q - sp * r, (sp * q + cp * r) / ct])
+    """Euler-angle rates (..., 3) rad/s of roll, pitch, yaw (zyx convention) from body rates p, q, r (..., 3)
+    rad/s at attitudes ``rpy_rad`` (..., 3) (broadcast): d Theta / dt = T(Theta) omega (Fossen 2021 eq. 2.29;
+    singular at pitch +-90 deg, where T's tan/sec grow without bound)."""
+    rpy = np.asarray(rpy_rad, dtype=float)
+    w = np.asarray(rates_frd_rad_s, dtype=float)
+    phi, theta = rpy[..., 0], rpy[..., 1]
+    p, q, r = w[..., 0], w[..., 1], w[..., 2]
+    sp, cp, ct, tt = np.sin(phi), np.cos(phi), np.cos(theta), np.tan(theta)
+    return np.stack([p + sp * tt * q + cp * tt * r, cp * q - sp * r, (sp * q + cp * r) / ct], axis=-1)
 
 
 def _interpolate_log(log: list, t_s: float, fallback, wrap: Sequence[int] = ()) -> np.ndarray:
@@ -366,7 +368,7 @@ class DepthEstimator:
         self.kf = AccelAidedFilter("position", depth_std_m, accel_std_m_s2, jerk_psd)
 
     def on_sample(self, device: str, stamp_s: float, state: SensorState) -> None:
-        """Fuse one sample (module docstring of the class)."""
+        """Fuse one sample (class docstring)."""
         t = float(stamp_s) if self.kf.t_s is None else max(float(stamp_s), self.kf.t_s)
         if device == "ms5837" and math.isfinite(state.depth_m):
             self.kf.step(t, state.depth_m, None)
@@ -437,7 +439,8 @@ class HoldController:
         for k, dof in ((3, "roll"), (4, "pitch")):
             if dof not in free:
                 i = self.inertia[k]
-                w[k] = i * wn ** 2 * (self.attitude_setpoint_rad[k - 3] - rpy[k - 3]) - 2.0 * zeta * wn * i * rates[k - 3]
+                w[k] = (i * wn ** 2 * (self.attitude_setpoint_rad[k - 3] - rpy[k - 3])
+                        - 2.0 * zeta * wn * i * rates[k - 3])
         if "yaw" not in free:
             i = self.inertia[5]
             w[5] = i * wn * wn * wrap_angle(self.heading_setpoint_rad - rpy[2]) - 2.0 * zeta * wn * i * rates[2]
