@@ -1,6 +1,6 @@
-"""ICM-20948 IMU node (TDK InvenSense ICM-20948 + AK09916 magnetometer on I2C; hardware.md §4).
+"""ICM-20948 IMU node (TDK InvenSense ICM-20948 + AK09916 magnetometer on I2C; docs/devices.md §4).
 
-Start-up (hardware.md §4.3), executed step by step from ROS timers so the executor is never blocked
+Start-up (docs/devices.md §4.3), executed step by step from ROS timers so the executor is never blocked
 (the datasheet waits are one-shot timers, not sleeps):
 
 1. Select bank 0, read WHO_AM_I and check 0xEA. A wrong identity or an I2C failure stops start-up with the
@@ -10,20 +10,20 @@ Start-up (hardware.md §4.3), executed step by step from ROS timers so the execu
    (:func:`~hindrax_drivers.icm20948.protocol.reset_wake_sequence`).
 3. Bank 2: sample-rate dividers, DLPF and full scale from the configuration
    (``sensors.icm20948.accel_full_scale_g``, ``gyro_full_scale_dps``, ``dlpf_config`` for both sensors,
-   ``sample_rate_hz`` -> divider ``round(1125 / rate) - 1``; hardware.md §4.4). The chip can only run at
+   ``sample_rate_hz`` -> divider ``round(1125 / rate) - 1``; docs/devices.md §4.4). The chip can only run at
    1125 / (1 + div) Hz (100 Hz configured -> 102.27 Hz): the node polls at that achieved rate and reports
    both in the diagnostics.
-4. Magnetometer (``sensors.icm20948.magnetometer_mode``, hardware.md §4.6):
+4. Magnetometer (``sensors.icm20948.magnetometer_mode``, docs/devices.md §4.6):
    ``i2c_master``: BYPASS_EN = 0, I2C_MST_CTRL = 0x17, I2C_MST_EN, AK09916 soft reset and continuous mode
    through SLV0 writes, then SLV0 reads the 9 bytes ST1..ST2 every master cycle into EXT_SLV_SENS_DATA
    (:func:`~hindrax_drivers.icm20948.protocol.mag_master_sequence`); the AK09916 identity (WIA2 = 0x09) is
    checked with one SLV4 read, retried up to :data:`MAG_ATTEMPTS` times with I2C_MST_RST in between
-   (hardware.md §4.3 step 7). ``bypass``: I2C_MST_EN = 0, BYPASS_EN = 1, then the AK09916 is talked to at
+   (docs/devices.md §4.3 step 7). ``bypass``: I2C_MST_EN = 0, BYPASS_EN = 1, then the AK09916 is talked to at
    0x0C directly (WIA1/WIA2 check, soft reset, continuous mode). The continuous mode is the slowest of
    10/20/50/100 Hz not below the IMU rate (100 Hz at most). A magnetometer that does not answer is a WARN:
    the IMU keeps publishing without ``imu/mag``.
    Every magnetometer read is the 9-byte burst ST1..ST2, so ST2 is always read last and the data
-   registers unlock (hardware.md §0 point 7, §4.5).
+   registers unlock (docs/devices.md §0 point 7, §4.5).
 
 Polling, at the achieved output data rate: one burst read from ACCEL_XOUT_H of 14 bytes (accel, gyro,
 temperature), 23 bytes in I2C-master mode (plus EXT_SLV_SENS_DATA_00..08 = ST1..ST2 of the AK09916); in
@@ -38,9 +38,9 @@ Publishes (reliable, depth 10), all with frame ``imu_link``:
   (rad/s, gyro bias subtracted when estimated); covariances diagonal, from the datasheet noise densities
   times the noise bandwidth of the configured DLPF plus the quantisation (:func:`imu_noise_variances`).
 - ``imu/mag`` sensor_msgs/MagneticField, tesla, rotated into the accel/gyro axes (m_x = hx, m_y = -hy,
-  m_z = -hz, hardware.md §4.7), only for new data (ST1.DRDY) without overflow (ST2.HOFL); covariance all 0
+  m_z = -hz, docs/devices.md §4.7), only for new data (ST1.DRDY) without overflow (ST2.HOFL); covariance all 0
   = unknown (the datasheet gives no magnetometer noise figure, DS-000189 Table 3).
-- ``imu/temperature`` sensor_msgs/Temperature, degC (raw / 333.87 + 21, room offset 0, hardware.md §4.4),
+- ``imu/temperature`` sensor_msgs/Temperature, degC (raw / 333.87 + 21, room offset 0, docs/devices.md §4.4),
   variance = one LSB squared.
 - ``raw/icm20948`` hindrax_msgs/RawDeviceData: every I2C transaction (ICM and, in bypass mode, AK09916).
 - ``/diagnostics``: state, rate, last message age, I2C transactions/errors/retries/failures, identity,
@@ -66,7 +66,7 @@ Faults: an I2C failure after the transport's retries (immediate, ``backoff_s = 0
 callback) drops that poll only (counted). Failures lasting
 :data:`REINIT_AFTER_S` seconds restart the start-up. Bit-identical samples for :data:`STUCK_AFTER_S`
 seconds (:class:`StuckDetector`) raise a WARN and publishing continues; the node then reads PWR_MGMT_1
-and restarts the start-up if the chip is asleep (a power glitch resets it to sleep, hardware.md §4.3).
+and restarts the start-up if the chip is asleep (a power glitch resets it to sleep, docs/devices.md §4.3).
 
 The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi, an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` with an
@@ -80,18 +80,18 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
-from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, load_node_config, run_node)
 from ..transport.i2c import I2CDevice, I2CError, close_quietly, open_smbus
 from . import protocol as p
+from .mounting import mounting_rotation
 
 __all__ = ["Icm20948Node", "GyroBiasEstimator", "GyroBiasResult", "imu_config_from_settings",
            "imu_noise_variances", "mounting_rotation", "mag_mode_for_rate", "main"]
@@ -102,16 +102,16 @@ RETRY_PERIOD_S = 1.0
 REINIT_AFTER_S = 1.0
 #: Identical samples for this long mean a stuck sensor, s.
 STUCK_AFTER_S = 2.0
-#: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, hardware.md §4.3 step 7).
+#: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, docs/devices.md §4.3 step 7).
 MAG_ATTEMPTS = 3
 #: Frame of every message (see the module docstring: base_link orientation, at the sensor).
 FRAME_ID = "imu_link"
 #: Accelerometer noise spectral density, g/sqrt(Hz): DS-000189 rev 1.3 Table 2 (p. 12), 230 ug/sqrt(Hz).
 ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ = 230e-6
 #: Gyroscope rate noise spectral density, deg/s/sqrt(Hz): DS-000189 rev 1.3 Table 1 (p. 11), 0.015.
-#: Not in hardware.md and that page was not re-read for this project: UNVERIFIED here.
+#: Not in docs/devices.md and that page was not re-read for this project: UNVERIFIED here.
 GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ = 0.015
-#: DLPF noise bandwidths in Hz per DLPFCFG 0..7 (FCHOICE = 1), hardware.md §4.4 table (from [I2]).
+#: DLPF noise bandwidths in Hz per DLPFCFG 0..7 (FCHOICE = 1), docs/devices.md §4.4 table (from [I2]).
 GYRO_NOISE_BANDWIDTH_HZ = (229.8, 187.6, 154.3, 73.3, 35.9, 17.8, 8.9, 376.5)
 ACCEL_NOISE_BANDWIDTH_HZ = (265.0, 265.0, 136.0, 68.8, 34.4, 17.0, 8.3, 499.0)
 #: The vehicle is "still" when every axis's std is below this many times the expected noise std.
@@ -121,7 +121,7 @@ STILL_STD_FACTOR = 5.0
 # ---------------------------------------------------------------------------------------- pure helpers
 def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,
                              sample_rate_hz: float) -> p.ImuConfig:
-    """Register fields from the ``sensors.icm20948.*`` settings (hardware.md §4.4).
+    """Register fields from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4).
 
     Full scale: the FS_SEL whose range equals the setting (2/4/8/16 g, 250/500/1000/2000 dps). DLPF: the
     same DLPFCFG for accel and gyro (FCHOICE = 1). Divider for both: ``round(1125 / rate) - 1`` in 0..255.
@@ -147,7 +147,7 @@ def imu_noise_variances(config: p.ImuConfig) -> tuple[float, float]:
 
     variance = density^2 * noise_bandwidth(DLPFCFG) + LSB^2 / 12, with the datasheet densities
     (:data:`ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ`, :data:`GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ`), the noise
-    bandwidths of hardware.md §4.4 and the LSB of the full scale. With the DLPF bypassed the widest
+    bandwidths of docs/devices.md §4.4 and the LSB of the full scale. With the DLPF bypassed the widest
     bandwidth (DLPFCFG 7) is used.
     """
     a_cfg = 7 if config.accel_dlpfcfg is None else config.accel_dlpfcfg
@@ -159,14 +159,6 @@ def imu_noise_variances(config: p.ImuConfig) -> tuple[float, float]:
     accel_var = a_density ** 2 * ACCEL_NOISE_BANDWIDTH_HZ[a_cfg] + a_lsb ** 2 / 12.0
     gyro_var = g_density ** 2 * GYRO_NOISE_BANDWIDTH_HZ[g_cfg] + g_lsb ** 2 / 12.0
     return accel_var, gyro_var
-
-
-def mounting_rotation(rpy_rad: Sequence[float]) -> np.ndarray:
-    """3x3 rotation taking sensor-axis vectors into base_link (FLU) axes: Rz(yaw) Ry(pitch) Rx(roll)."""
-    rpy = np.asarray(rpy_rad, dtype=float)
-    if rpy.shape != (3,) or not np.all(np.isfinite(rpy)):
-        raise ValueError(f"mounting_rpy_rad must be 3 finite angles, got {rpy_rad!r}")
-    return Rotation.from_euler("xyz", rpy).as_matrix()
 
 
 def mag_mode_for_rate(rate_hz: float) -> int:
@@ -280,7 +272,7 @@ class Icm20948Node(Node):
                                    f"the chip runs at 1125 / (1 + div) Hz, here {self.odr_hz:.2f} Hz")
         if not 0 < self.config.gyro_dlpfcfg < 7:
             self.get_logger().warn(f"dlpf_config {self.config.gyro_dlpfcfg}: the gyro ignores its sample-rate "
-                                   "divider (hardware.md §4.4) and runs at 1125 Hz; polled at "
+                                   "divider (docs/devices.md §4.4) and runs at 1125 Hz; polled at "
                                    f"{self.odr_hz:.2f} Hz")
 
         self._bus = bus
@@ -345,7 +337,7 @@ class Icm20948Node(Node):
         self._select_bank(register.bank)
         self.device.write_byte_data(register.address, value)
         if register == p.PWR_MGMT_1 and value & p.PWR_MGMT_1_DEVICE_RESET:
-            self._bank = None  # reset-to-bank-0 is only assumed (hardware.md §4.1): re-select
+            self._bank = None  # reset-to-bank-0 is only assumed (docs/devices.md §4.1): re-select
 
     def _read(self, register: p.Register, length: int = 1) -> bytes:
         self._select_bank(register.bank)
@@ -359,7 +351,7 @@ class Icm20948Node(Node):
 
     # ------------------------------------------------------------------ start-up
     def _start(self) -> None:
-        """Open the bus if needed and run the start-up steps (hardware.md §4.3)."""
+        """Open the bus if needed and run the start-up steps (docs/devices.md §4.3)."""
         self.startup_attempts += 1
         self._poll_timer.cancel()
         self.running = False
@@ -432,7 +424,7 @@ class Icm20948Node(Node):
         self.get_logger().warn(f"AK09916 unavailable, publishing without imu/mag: {reason}")
 
     def _bypass_mag_init(self) -> float:
-        """Bypass: check WIA1/WIA2 at 0x0C, then queue soft reset and continuous mode (hardware.md §4.5-4.6a)."""
+        """Bypass: check WIA1/WIA2 at 0x0C, then queue soft reset and continuous mode (docs/devices.md §4.5-4.6a)."""
         try:
             wia = self.mag_device.read_block(p.AK_WIA1.address, 2)
         except I2CError as exc:
@@ -482,7 +474,7 @@ class Icm20948Node(Node):
             self.mag_available = True
             self.diag.clear("magnetometer")
         elif self._mag_attempt < MAG_ATTEMPTS:
-            # I2C_MST_RST, then the whole magnetometer sequence again (SparkFun, hardware.md §4.3 step 7)
+            # I2C_MST_RST, then the whole magnetometer sequence again (SparkFun, docs/devices.md §4.3 step 7)
             retry = [self._write_step(p.BankedWrite(p.USER_CTRL, p.USER_CTRL_I2C_MST_EN | p.USER_CTRL_I2C_MST_RST,
                                                     0.01, "I2C_MST_RST"))]
             retry += [self._write_step(w) for w in p.mag_master_sequence(self.config, self.mag_mode)]

@@ -1,4 +1,4 @@
-"""Identification node: the manoeuvre executive of seed 003 §4 as the ``run_identification`` action.
+"""Identification node: the manoeuvre executive of [Hindrax-Drag] (seed 003) §4 as the ``run_identification`` action.
 
 Thin rclpy node over the pure campaign logic (:class:`~.campaign.Campaign`, :mod:`.maneuvers`,
 :class:`~.estimators.OnlineDofEstimator`): the same dive, positioning, level ladders, holds, pool-box planning,
@@ -6,8 +6,8 @@ limits and online Kalman + RLS run here, fed from the ROS sensor topics instead 
 plant differs (:class:`RosCampaign`): a tick publishes the wrench to the thrust allocation and waits for the
 next tick of the ROS clock; the force in the regression is the thrust model of the pulse widths the ESC node
 actually wrote (``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed here, through the
-allocation's cubic curves, seed 003 eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust
-allocation matrix, seed 003 eq. 9), body FRD.
+allocation's cubic curves, [Hindrax-Drag] (seed 003) eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust
+allocation matrix, [Hindrax-Drag] (seed 003) eq. 9), body FRD.
 
 Run alone: ``python -m hindrax_ident.identification.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 
@@ -32,9 +32,9 @@ Publishes
     while a goal runs (phase, DOF, level, progress, message = current step) and at 1 Hz when idle.
 Parameters
     The vehicle configuration; node-specific ``dvl_lock_timeout_s`` (default 3.0): a surge or sway run
-    aborts when the DVL had no valid velocity for this long (design.md §8), and ``tick_timeout_s`` (wall
+    aborts when the DVL had no valid velocity for this long (docs/architecture.md §8), and ``tick_timeout_s`` (wall
     time the executor waits for one tick of the executive, default 30).
-Safety (design.md §8)
+Safety (docs/architecture.md §8)
     Limits of :meth:`~.campaign.Campaign._check_limits` (depth, altitude, roll, pitch, pool box) plus DVL lock
     and ESC disarm abort the goal; the vehicle is left at neutral thrust at the end, on abort and on cancel.
 
@@ -99,7 +99,7 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 
     Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
     attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
-    first (as the emulator does; the real order is undocumented, hardware.md §1.3: check a pool capture), i.e.
+    first (as the emulator does; the real order is undocumented, docs/devices.md §1.3: check a pool capture), i.e.
     measured at the end of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A
     50 ms error there shows up in roll and pitch as a restoring moment out of phase, i.e. as damping
     (measured in the virtual pool: roll quadratic damping +14 %, linear damping of the wrong sign).
@@ -153,7 +153,7 @@ def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[flo
     """Thruster forces (n,) N of the WIRE pulse widths the ESC node wrote (ThrusterPwm of ``thrusters/pulse_width``).
 
     The ESC applies reversal (2 neutral - w) and trim after the allocation (pca9685/node.py ``EscOutput``);
-    both are undone here, then the allocation's thrust curve (seed 003 eq. 1) gives the force along each
+    both are undone here, then the allocation's thrust curve ([Hindrax-Drag] (seed 003) eq. 1) gives the force along each
     thruster's configured direction. Raises ``ValueError`` for a wrong number of widths.
     """
     w = np.asarray(written_us, dtype=float)
@@ -286,7 +286,7 @@ class RosCampaign(Campaign):
         self._rec["active"].append(self._active)
         self._rec["level"].append(self._level)
         self._rec["run"].append(self._run)
-        self._rec["pos"].append(np.full(3, np.nan))  # no ground truth from ROS (design.md §6)
+        self._rec["pos"].append(np.full(3, np.nan))  # no ground truth from ROS (docs/architecture.md §6)
         self._rec["eul"].append(np.full(3, np.nan))
         self.to_ros.put(("wrench", w))
         inp: TickInput = self.to_worker.get()
@@ -360,7 +360,7 @@ class IdentificationNode(Node):
         self.dvl_lock_timeout_s = float(self._param("dvl_lock_timeout_s", 3.0))
         self.tick_timeout_s = float(self._param("tick_timeout_s", 30.0))
         from .maneuvers import SensorState  # noqa: F401 - documented dependency
-        from hindrax_drivers.icm20948.node import mounting_rotation
+        from hindrax_drivers.icm20948.mounting import mounting_rotation
         self._mount_t = mounting_rotation(f["sensors.icm20948.mounting_rpy_rad"]).T
         self._samples: list = []
         self._seen: set[str] = set()
