@@ -3,7 +3,7 @@ SHELL := /bin/bash
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.hindrax-setup-done
-# Every process started from here keeps ROS 2 discovery on loopback (ros2-pip.md, "Network").
+# Every process started from here keeps ROS 2 discovery on loopback (docs/architecture.md §11.4).
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
 SETUP_INPUTS := requirements.txt scripts/setup_venv.sh \

@@ -1,6 +1,6 @@
 """Test-session set-up shared by every test directory.
 
-- Discovery stays on loopback: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (ros2-pip.md, "Network").
+- Discovery stays on loopback: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (docs/architecture.md §11.4).
 - Each pytest-xdist worker (and a plain run) reserves its own ROS domain ID through
   ``domain_coordinator`` (a port lock, so concurrent test runs on one machine never share a domain) and
   exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it.

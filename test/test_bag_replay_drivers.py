@@ -1,4 +1,4 @@
-"""Mock hardware from a bag (design.md §6-7): record a simulated run of every driver (raw and parsed topics),
+"""Mock hardware from a bag (docs/architecture.md §6-7): record a simulated run of every driver (raw and parsed topics),
 serve its raw device data again through ptys and the emulated I2C bus to fresh driver nodes, and check that
 the drivers re-publish the same parsed messages (same values, same count)."""
 import pytest

@@ -1,7 +1,7 @@
 """Map a device's own clock onto ROS time (offset estimation by the minimum-latency filter).
 
 A device that timestamps its reports (the DVL-75 ``$DVPDL`` field ``tu``, microseconds since the DVL
-booted, hardware.md §1.3.1) gives better timing than the host's receive time: the receive time adds the
+booted, docs/devices.md §1.3.1) gives better timing than the host's receive time: the receive time adds the
 serial transmission time, the OS and reader-thread latency, and their jitter. The two clocks differ by an
 unknown offset. Every report received at ROS time ``r_k`` with device time ``d_k`` satisfies
 

@@ -1,7 +1,7 @@
 """The one place that converts between ROS frames and marine (Fossen/SNAME) frames.
 
 ROS side (REP-103/105): ``base_link`` is FLU (x forward, y left, z up); ``odom`` is ENU (x east, y north,
-z up). Marine side (Fossen 2011 §2.1, hydrodynamics.md §0): body frame FRD (x forward, y starboard,
+z up). Marine side (Fossen 2011 §2.1, docs/identification.md §0): body frame FRD (x forward, y starboard,
 z down); world frame NED (x north, y east, z down). Both pairs share their origin:
 
 - FLU <-> FRD is a rotation of pi about x: ``diag(1, -1, -1)``.
@@ -130,7 +130,7 @@ def quaternion_marine_to_ros(q_xyzw) -> np.ndarray:
 def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:
     """Fossen ZYX Euler angles [phi theta psi] (rad) of a body-FRD-in-NED quaternion (x, y, z, w).
 
-    Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; hydrodynamics.md eq. 2.2).
+    Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; docs/identification.md §1.A, [NTNU-Thesis] eq. 2.2).
     """
     return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_euler("ZYX")[..., ::-1]
 
@@ -145,7 +145,7 @@ def wrench_about_point(force, torque, application_point, reference_point=(0.0, 0
     """Move a wrench to a new reference point: tau_ref = [F; T + (p_app - p_ref) x F].
 
     force (N), torque (N m) and points (m) are 3-vectors in one and the same frame (any of FLU/FRD).
-    Returns the 6-vector [F; T_ref]. Seed 003 eq. 9 is the special case torque = 0, reference = CG.
+    Returns the 6-vector [F; T_ref]. [Hindrax-Drag] (Seed 003) eq. 9 is the special case torque = 0, reference = CG.
     """
     f = _vec3(force)
     t = _vec3(torque)

@@ -1,8 +1,8 @@
 """DVL-75 driver node through the real pyserial path: emulator on a pty -> SerialTransport -> node -> topics.
 
-Expected values come from the emulator truth and the wire quantisation of hardware.md §1.3 ($DVPDL: 1 mm
+Expected values come from the emulator truth and the wire quantisation of docs/devices.md §1.3 ($DVPDL: 1 mm
 position deltas over dtu, 1 us times; $DVEXT: cm altitude, 0.1 deg attitude, 1e-6 quaternion), from the
-frame definitions of hardware.md §1.5 / REP-103, and from rigid-body kinematics for the lever arm.
+frame definitions of docs/devices.md §1.5 / REP-103, and from rigid-body kinematics for the lever arm.
 Every wait is on a condition with a deadline.
 """
 import contextlib
@@ -39,10 +39,10 @@ pytestmark = pytest.mark.ros
 
 RATE_HZ = 20.0
 DT_S = 1.0 / RATE_HZ
-VEL_TOL = 0.0005 / DT_S + 1e-6  # +-0.5 mm position quantisation over one dtu (hardware.md §1.3.1)
+VEL_TOL = 0.0005 / DT_S + 1e-6  # +-0.5 mm position quantisation over one dtu (docs/devices.md §1.3.1)
 REAL_DVEXT = (b"$DVEXT,F,X,3330,-1.8,2.4,259.5,-1175,0.000,0.00,-0.000,0.000,0.000000000,0.000000000,0.100,"
               b"0.091711,0.019853,0.017436,-0.995435,25,25,25,25,F,F,F,F,0.0000,0.0000,0.0000,0.0000,-1.000,"
-              b"-1.000,-1.000,-1.000,*54")  # real capture, hardware.md §1.2
+              b"-1.000,-1.000,-1.000,*54")  # real capture, docs/devices.md §1.2
 
 
 def stamp_s(header) -> float:
@@ -133,7 +133,7 @@ def test_startup_commands_and_published_values_match_truth():
         r.dev.reconnect()
         r.wait(lambda: len(r.valid()) >= 5 and len(r.twist) >= 5 and len(r.altitude) >= 5
                and "CONFIGURATION" in r.emu.commands_received, message="DVL data and the whole start-up sequence")
-        # start-up commands seen by the device (hardware.md §0 item 1, §1.4; orientation sent in degrees)
+        # start-up commands seen by the device (docs/devices.md §0 item 1, §1.4; orientation sent in degrees)
         cmds = r.emu.commands_received
         for expected in ("SEND-DVPDL ON", "SEND-DVEXT ON", "SET-SENSOR-ORIENTATION 1,-2,45", "SET-SPEED-OF-SOUND 1500"):
             assert expected in cmds, cmds
@@ -151,7 +151,7 @@ def test_startup_commands_and_published_values_match_truth():
         assert list(m.velocity_covariance) == pytest.approx([0.02 ** 2, 0, 0, 0, 0.02 ** 2, 0, 0, 0, 0.02 ** 2])
         # vertical altitude over a flat bottom: along-axis (cm) projected with the 0.1 deg attitude
         assert m.altitude_m == pytest.approx(4.0, abs=0.006)
-        # orientation: FLU body in ENU (hardware.md §1.5), the REP-103 form of the NED/FRD truth
+        # orientation: FLU body in ENU (docs/devices.md §1.5), the REP-103 form of the NED/FRD truth
         q_expected = quaternion_marine_to_ros(quaternion_from_euler_ned([0.1, -0.05, 1.0]))
         q = np.array([m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w])
         assert min(np.abs(q - q_expected).max(), np.abs(q + q_expected).max()) < 2e-5
@@ -291,7 +291,7 @@ def test_device_disappears_and_comes_back_node_reconnects_within_2_s_and_resends
 
 
 def test_dvpdl_switched_off_behind_the_drivers_back_is_switched_on_again():
-    """$DVEXT flowing without $DVPDL (e.g. a DVL reset to factory defaults, hardware.md §0 item 1): the node
+    """$DVEXT flowing without $DVPDL (e.g. a DVL reset to factory defaults, docs/devices.md §0 item 1): the node
     keeps publishing dvl/data from $DVEXT with no velocity, warns, and resends its start-up commands."""
     with rig(STEADY) as r:
         r.wait(lambda: len(r.valid()) >= 3 and r.node.commands.sequences_completed >= 1, message="data")
@@ -311,19 +311,52 @@ def _moving_truth(t):
                     altitude_m=3.0 + 0.2 * math.sin(t), roll_rad=0.0, pitch_rad=0.0, yaw_rad=0.5 * math.sin(t))
 
 
-def test_stuck_sensor_warns_and_keeps_publishing():
+def test_stuck_sensor_is_an_error_and_its_velocity_and_altitude_are_withdrawn():
     with rig(_moving_truth, extra_params=[Parameter("stuck_limit_samples", value=10)]) as r:
         r.wait(lambda: len(r.valid()) >= 15, message="data")
         assert not r.node.stuck
         with r.dev.lock:
             r.emu.faults.set_stuck(True)
-        r.wait(lambda: r.diag and "stuck" in r.diag[-1].message, 5.0, "stuck warning in diagnostics")
-        assert r.diag[-1].level == DiagnosticStatus.WARN
-        n = len(r.valid())
-        r.wait(lambda: len(r.valid()) >= n + 5, message="still publishing while stuck")
+        r.wait(lambda: r.node.stuck, 5.0, "stuck detected")
+        n_data, n_twist, n_alt = len(r.data), len(r.twist), len(r.altitude)
+        r.wait(lambda: len(r.data) >= n_data + 5 and r.diag and "stuck" in r.diag[-1].message, 5.0,
+               "stuck reports and the stuck error in diagnostics")
+        assert r.diag[-1].level == DiagnosticStatus.ERROR
+        assert r.node.stuck  # still frozen: every report since is published without a velocity
+        assert not any(m.velocity_valid for m, _ in r.data[n_data:])
+        assert all(math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0 for m, _ in r.data[n_data:])
+        assert len(r.twist) == n_twist and len(r.altitude) <= n_alt + 1  # (one may have been in flight)
         with r.dev.lock:
             r.emu.faults.set_stuck(False)
-        r.wait(lambda: not r.node.stuck, message="warning cleared")
+        r.wait(lambda: not r.node.stuck, message="stuck cleared")
+        n = len(r.valid())
+        r.wait(lambda: len(r.valid()) >= n + 3 and len(r.altitude) > n_alt + 2, message="valid data again")
+        r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 5.0, "error cleared")
+
+
+def test_implausible_but_checksum_valid_dvpdl_is_published_not_valid_with_an_error():
+    """$DVPDL with 999.999 m over 0.1 s (9999.99 m/s) and with a 1 us interval (1e306 m/s from a 1e300 m
+    field): both pass the XOR checksum and the parser; the gates sensors.dvl75.max_speed_m_s (4.1 m/s) and
+    min_interval_s (25 ms) of the vehicle file publish them with velocity_valid false and raise ERROR."""
+    with rig(STEADY) as r:
+        r.wait(lambda: len(r.valid()) >= 3 and r.node.commands.sequences_completed >= 1, message="data")
+        tu = time.time() - r.first_poll_s[0]  # the emulator's clock: after every $DVPDL sent so far
+        bad = [format_dvpdl(_pdl(time_since_boot_s=tu, delta_time_s=0.1, delta_x_m=999.999)),
+               format_dvpdl(_pdl(time_since_boot_s=tu + 1e-6, delta_time_s=1e-6, delta_x_m=1e300))]
+        assert all(parse_line(line.strip()).confidence_pct == 100 for line in bad)  # checksum and fields parse
+        with r.dev.lock:
+            r.emu.faults.inject_garbage(data=b"".join(bad))
+        r.wait(lambda: r.node.diag.counts().get("implausible_velocity", 0) >= 2, message="both rejected")
+        r.wait(lambda: any(st.level == DiagnosticStatus.ERROR and "implausible" in st.message for st in r.diag),
+               5.0, "ERROR in diagnostics")
+        rejected = [m for m, _ in r.data if m.confidence_percent == 100.0 and m.delta_time_s in (0.1, 1e-6)]
+        assert len(rejected) == 2
+        assert all(not m.velocity_valid and math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0
+                   for m in rejected)
+        assert all(abs(tw.twist.twist.linear.x) < 1.0 for tw, _ in r.twist)  # no twist from them
+        n = len(r.valid())
+        r.wait(lambda: len(r.valid()) >= n + 3, message="plausible data again")
+        r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 5.0, "error cleared by plausible reports")
 
 
 def test_use_sim_time_stamps_follow_the_clock_topic():
@@ -428,6 +461,24 @@ def test_validity_gating_uses_confidence_dtu_and_a_fresh_dvext_lock():
     assert rep.twist_covariance[0] == -1.0 and rep.velocity_covariance[0] == -1.0
     rep = b.from_position_delta(_pdl(delta_x_m=0.03), receive_ns=2_500_000_000)  # that DVEXT is 1.5 s old
     assert rep.velocity_valid and rep.velocity_flu_m_s[0] == pytest.approx(0.3)
+
+
+def test_plausibility_gates_speed_and_interval():
+    b = DvlReportBuilder(max_speed_m_s=4.1, min_interval_s=0.025, max_interval_s=1.0)
+    ok = b.from_position_delta(_pdl(delta_x_m=0.4, delta_y_m=0.1), 0)  # 4.12 m/s over 0.1 s
+    assert not ok.velocity_valid and "speed" in ok.rejection
+    ok = b.from_position_delta(_pdl(delta_x_m=0.4), 0)  # 4.0 m/s: inside the envelope
+    assert ok.velocity_valid and ok.rejection == "" and ok.velocity_flu_m_s[0] == pytest.approx(4.0)
+    for pdl, word in ((_pdl(delta_x_m=999.999), "speed"), (_pdl(delta_time_s=1e-6, delta_x_m=1e300), "dtu"),
+                      (_pdl(delta_time_s=0.024, delta_x_m=0.001), "dtu"), (_pdl(delta_time_s=1.001), "dtu"),
+                      (_pdl(delta_x_m=math.inf), "finite"), (_pdl(delta_x_m=math.nan), "finite")):
+        rep = b.from_position_delta(pdl, 0)
+        assert not rep.velocity_valid and word in rep.rejection, (pdl, rep.rejection)
+        assert all(math.isnan(v) for v in rep.velocity_flu_m_s) and rep.twist_covariance[0] == -1.0
+    # without gates only finiteness is checked; zero confidence is never a candidate (no rejection reason)
+    assert DvlReportBuilder().from_position_delta(_pdl(delta_x_m=999.999), 0).velocity_valid
+    assert DvlReportBuilder().from_position_delta(_pdl(delta_x_m=math.inf), 0).rejection
+    assert b.from_position_delta(_pdl(delta_x_m=999.999, confidence_pct=0), 0).rejection == ""
 
 
 def test_dvext_fields_altitude_projection_beams_and_quaternion():

@@ -1,6 +1,6 @@
 """Tests of the DVL-75 protocol layer and its I/O-free emulator.
 
-Expected values come from /work/shared/reference/hardware.md (§0, §1.2-§1.6: real captures [D21],
+Expected values come from docs/devices.md (§0, §1.2-§1.6: real captures [D21],
 vendor examples, factory defaults) and from independent geometry (rotation of a body velocity, the
 Cerulean Euler->quaternion formula of §1.5), never from the code under test.
 """
@@ -38,15 +38,15 @@ from hindrax_drivers.dvl75.protocol import (
     startup_commands,
 )
 
-# Real captures, hardware.md §1.2 [D21].
+# Real captures, docs/devices.md §1.2 [D21].
 PDL_1 = b"$DVPDL,160401000,100000,0.000000,-0.000000,-0.000000,0.000,-0.000,-0.000,0*55"
 PDL_2 = b"$DVPDL,1398604000,50000,0.000000,-0.000000,-0.000000,-0.003,0.017,0.002,100*79"
 EXT_1 = (b"$DVEXT,F,X,3330,-1.8,2.4,259.5,-1175,0.000,0.00,-0.000,0.000,0.000000000,0.000000000,"
          b"0.100,0.091711,0.019853,0.017436,-0.995435,25,25,25,25,F,F,F,F,0.0000,0.0000,0.0000,"
          b"0.0000,-1.000,-1.000,-1.000,-1.000,*54")
-# Vendor doc example with a wrong checksum (hardware.md §0 item 2: printed *22, computed 6E).
+# Vendor doc example with a wrong checksum (docs/devices.md §0 item 2: printed *22, computed 6E).
 DOC_PDL_BODY = b"DVPDL,101234000,50000,0.001263,-0.019663,-0.745226,-0.000,0.001,-0.005,100"
-# Vendor doc $GPRMC example, checksum correct (hardware.md §1.3.3).
+# Vendor doc $GPRMC example, checksum correct (docs/devices.md §1.3.3).
 DOC_RMC = b"$GPRMC,192921.000,A,4458.1690,N,09331.0392,W,0.01,36.57,280720,,,D*43"
 
 
@@ -106,7 +106,7 @@ def test_parse_dvpdl_capture_full_confidence_and_velocity():
     assert rec.delta_time_s == pytest.approx(0.05)  # 20 Hz
     assert (rec.delta_x_m, rec.delta_y_m, rec.delta_z_m) == pytest.approx((-0.003, 0.017, 0.002))
     assert rec.confidence_pct == 100
-    # velocity = pd / (dtu * 1e-6) ([D22], hardware.md §1.3.1)
+    # velocity = pd / (dtu * 1e-6) ([D22], docs/devices.md §1.3.1)
     assert rec.velocity_frd_m_s() == pytest.approx((-0.06, 0.34, 0.04))
 
 
@@ -143,7 +143,7 @@ def test_parse_dvext_capture_every_field():
     assert rec.roll_rad == pytest.approx(math.radians(-1.8))
     assert rec.pitch_rad == pytest.approx(math.radians(2.4))
     assert rec.heading_rad == pytest.approx(math.radians(259.5))
-    assert rec.data_skips == -1175  # signed (hardware.md §1.3.2 field 7)
+    assert rec.data_skips == -1175  # signed (docs/devices.md §1.3.2 field 7)
     assert rec.velocity_up_m_s == 0.0 and rec.altitude_m == 0.0
     assert rec.velocity_north_m_s == 0.0 and math.copysign(1, rec.velocity_north_m_s) == -1
     assert rec.velocity_east_m_s == 0.0
@@ -179,7 +179,7 @@ def test_dvext_trailing_empty_field_variants():
 
 
 def test_capture_round_trip_is_byte_exact():
-    """The formatter reproduces the DVL's own number formats (captures, hardware.md §1.2)."""
+    """The formatter reproduces the DVL's own number formats (captures, docs/devices.md §1.2)."""
     for line in (PDL_1, PDL_2, EXT_1):
         rec = parse_line(line)
         out = format_dvpdl(rec) if isinstance(rec, DvlPositionDelta) else format_dvext(rec)
@@ -351,8 +351,8 @@ def test_dvpdl_format_parse_round_trip(tu, dtu, ang, pos, c):
 
 def test_startup_commands_enable_dvpdl_first_and_are_plain_lines():
     cmds = startup_commands(sensor_orientation_rad=(0.0, math.pi / 2, 0.0), speed_of_sound_m_s=1500)
-    assert cmds[0] == b"SEND-DVPDL ON\r\n"  # factory OFF (hardware.md §0 item 1)
-    # BlueOS forward-looking mount sends 0,90,0 (hardware.md §1.4)
+    assert cmds[0] == b"SEND-DVPDL ON\r\n"  # factory OFF (docs/devices.md §0 item 1)
+    # BlueOS forward-looking mount sends 0,90,0 (docs/devices.md §1.4)
     assert b"SET-SENSOR-ORIENTATION 0,90,0\r\n" in cmds
     assert b"SET-SPEED-OF-SOUND 1500\r\n" in cmds and b"RESUME\r\n" in cmds
     assert cmds[-1] == b"CONFIGURATION\r\n"
@@ -485,7 +485,7 @@ def test_emulator_attitude_and_quaternion_follow_cerulean_conventions():
                                    DvlTruth(altitude_m=45.0), DvlTruth(altitude_m=None),
                                    DvlTruth(roll_rad=math.radians(25.0))])
 def test_emulator_unlocked_reports(truth):
-    """Outside the lock envelope (hardware.md §1.1: 0.3-40 m, <= 20 deg) or without lock: c=0 with
+    """Outside the lock envelope (docs/devices.md §1.1: 0.3-40 m, <= 20 deg) or without lock: c=0 with
     zero deltas, lock F, ranges -1 (§1.6 item 3), data skips counting up."""
     emu = Dvl75Emulator(replace(truth, velocity_frd_m_s=(0.3, 0.1, 0.0)), flash=DvlFlash(send_dvpdl=True))
     recs = _records(emu, 0.0, 0.5)

@@ -16,7 +16,7 @@ from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 pytestmark = pytest.mark.ros
-TICK_US = 1.24  # one PCA9685 count at 200 Hz (prescale 30) and 25 MHz, hardware.md §5.1
+TICK_US = 1.24  # one PCA9685 count at 200 Hz (prescale 30) and 25 MHz, docs/devices.md §5.1
 PERIOD_S = 1 / 50.0  # esc.output_rate_hz
 
 

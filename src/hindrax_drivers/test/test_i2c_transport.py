@@ -1,5 +1,5 @@
 """Tests of the emulated I2C bus, the I2CDevice helper, and driver-style round trips through the
-MS5837 and ICM-20948 emulators (design.md §2; hardware.md §3, §4)."""
+MS5837 and ICM-20948 emulators (docs/architecture.md §2; docs/devices.md §3, §4)."""
 
 from __future__ import annotations
 
@@ -290,7 +290,7 @@ def test_write_sequence_applies_delays():
 
 # ----------------------------------------------------------------------------- round trips
 def read_ms5837(dev: I2CDevice, variant_config: str | None, osr: int = 8192) -> ms.Reading:
-    """Minimal MS5837 driver built only from the protocol module and I2CDevice (hardware.md §3)."""
+    """Minimal MS5837 driver built only from the protocol module and I2CDevice (docs/devices.md §3)."""
     dev.write_byte(ms.CMD_RESET)
     dev.sleep(ms.RESET_TIME_S)
     words = [ms.parse_prom_word(dev.read_block(ms.prom_read_command(k), 2)) for k in range(7)]

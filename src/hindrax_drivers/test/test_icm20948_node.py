@@ -1,9 +1,9 @@
 """ICM-20948 node through the register-exact emulator (with its AK09916) on the emulated I2C bus.
 
-Expected values are the emulator's truth (sensor frame) within the device quantisation (hardware.md §4.4,
+Expected values are the emulator's truth (sensor frame) within the device quantisation (docs/devices.md §4.4,
 §4.5, configuration ±4 g / ±500 dps): accel 1/8192 g, gyro 1/65.5 deg/s, magnetometer 0.15 uT,
 temperature 1/333.87 degC; the magnetometer truth is given in the accel/gyro frame and the emulator stores
-it in the AK09916's own axes (Y and Z inverted, hardware.md §4.7), so equality checks the axis flip.
+it in the AK09916's own axes (Y and Z inverted, docs/devices.md §4.7), so equality checks the axis flip.
 """
 import math
 import os
@@ -32,9 +32,9 @@ from hindrax_msgs.msg import RawDeviceData
 pytestmark = pytest.mark.ros
 
 G0 = 9.80665
-ACCEL_LSB = G0 / 8192.0  # ±4 g (sensors.icm20948.accel_full_scale_g: 4), hardware.md §4.4
+ACCEL_LSB = G0 / 8192.0  # ±4 g (sensors.icm20948.accel_full_scale_g: 4), docs/devices.md §4.4
 GYRO_LSB = math.radians(1.0 / 65.5)  # ±500 dps
-MAG_LSB = 0.15e-6  # T, hardware.md §4.5
+MAG_LSB = 0.15e-6  # T, docs/devices.md §4.5
 TEMP_LSB = 1.0 / 333.87  # degC
 ADDRESS = 0x69  # sensors.icm20948.i2c_address: 105
 
@@ -139,7 +139,7 @@ def test_i2c_master_mode_configures_the_chip_and_publishes_the_truth(rig):
     imus = r.wait_imu(10)
     assert_values(r, imus)
     emu = r.emu
-    # Registers from the configuration (hardware.md §4.2, §4.4): DLPFCFG 3, FS_SEL 1 (±4 g, ±500 dps), FCHOICE 1;
+    # Registers from the configuration (docs/devices.md §4.2, §4.4): DLPFCFG 3, FS_SEL 1 (±4 g, ±500 dps), FCHOICE 1;
     # divider round(1125 / 100) - 1 = 10; awake with CLKSEL auto; I2C master on, bypass off; AK09916 at 100 Hz.
     assert emu.register_value(p.GYRO_CONFIG_1) == (3 << 3) | (1 << 1) | 1
     assert emu.register_value(p.ACCEL_CONFIG) == (3 << 3) | (1 << 1) | 1
@@ -149,7 +149,7 @@ def test_i2c_master_mode_configures_the_chip_and_publishes_the_truth(rig):
     assert emu.master_enabled and not emu.bypass_active
     assert emu.magnetometer.mode == 0x08
     # Covariances: datasheet noise densities (230 ug/sqrt(Hz), 0.015 dps/sqrt(Hz)) times the noise bandwidth of
-    # DLPFCFG 3 (accel 68.8 Hz, gyro 73.3 Hz, hardware.md §4.4), plus the quantisation LSB^2/12.
+    # DLPFCFG 3 (accel 68.8 Hz, gyro 73.3 Hz, docs/devices.md §4.4), plus the quantisation LSB^2/12.
     accel_var = (230e-6 * G0) ** 2 * 68.8 + ACCEL_LSB ** 2 / 12
     gyro_var = math.radians(0.015) ** 2 * 73.3 + GYRO_LSB ** 2 / 12
     m = imus[-1]
@@ -168,7 +168,7 @@ def test_bypass_mode_reads_the_ak09916_directly(rig):
     assert_values(r, r.wait_imu(10))
     assert r.emu.bypass_active and not r.emu.master_enabled
     mag_reads = [x for x in r.raw if x.i2c_address == p.AK09916_ADDRESS and x.i2c_register == 0x10]
-    assert mag_reads and all(len(x.data) == 9 for x in mag_reads)  # ST1..ST2: ST2 read last (hardware.md §4.5)
+    assert mag_reads and all(len(x.data) == 9 for x in mag_reads)  # ST1..ST2: ST2 read last (docs/devices.md §4.5)
 
 
 def test_mounting_rotation_is_applied(rig):
@@ -186,7 +186,7 @@ def test_missing_magnetometer_is_a_warning_and_the_imu_keeps_publishing(rig):
     assert not r.node.mag_available and r.mag == []
     status = r.node.diag.status()
     assert status.level == DiagnosticStatus.WARN and "magnetometer unavailable" in status.message
-    # three SLV4 identity attempts with I2C_MST_RST in between (hardware.md §4.3 step 7)
+    # three SLV4 identity attempts with I2C_MST_RST in between (docs/devices.md §4.3 step 7)
     resets = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_HOST_TO_DEVICE
               and x.i2c_register == p.USER_CTRL.address and x.data[0] & p.USER_CTRL_I2C_MST_RST]
     assert len(resets) == 2
@@ -236,7 +236,7 @@ def test_stuck_sensor_warns_keeps_publishing_and_recovers_from_a_reset(rig):
     r.wait_imu(10)  # still publishing
     r.emu.stuck = False
     r.wait(lambda: not r.node.is_stuck, 5, "stuck cleared")
-    # A power glitch resets the chip: asleep (PWR_MGMT_1 = 0x41, hardware.md §4.3), data frozen.
+    # A power glitch resets the chip: asleep (PWR_MGMT_1 = 0x41, docs/devices.md §4.3), data frozen.
     attempts = r.node.startup_attempts
     r.emu.i2c_write(bytes([p.REG_BANK_SEL_ADDRESS, 0x00]))
     r.emu.i2c_write(bytes([p.PWR_MGMT_1.address, p.PWR_MGMT_1_DEVICE_RESET]))

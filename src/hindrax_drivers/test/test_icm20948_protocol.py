@@ -1,5 +1,5 @@
 """ICM-20948 / AK09916 protocol and emulator tests. Expected register addresses, bit positions,
-scale factors and sequences are those of hardware.md §4."""
+scale factors and sequences are those of docs/devices.md §4."""
 
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ def test_config_register_values():
     assert cfg.accel_config_value == 0b00_011_01_1 == 0x1B
     assert cfg.gyro_config_1_value == 0b00_101_01_1 == 0x2B
     assert icm.ImuConfig(accel_dlpfcfg=None, accel_fs_sel=3).accel_config_value == 0b110
-    assert cfg.gyro_odr_hz == pytest.approx(102.27, abs=0.01)   # div 10 (hardware.md §4.4)
+    assert cfg.gyro_odr_hz == pytest.approx(102.27, abs=0.01)   # div 10 (docs/devices.md §4.4)
     assert cfg.accel_lsb_per_g == 8192 and cfg.gyro_lsb_per_dps == 65.5
     decoded = icm.ImuConfig.from_registers(10, 0x2B, 0x01, 0x23, 0x1B)
     assert decoded == cfg

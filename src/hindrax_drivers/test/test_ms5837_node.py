@@ -1,8 +1,8 @@
 """MS5837 node through the command-exact emulator on the emulated I2C bus.
 
 Expected values come from the emulator's truth (pressure, temperature) and hydrostatics with the
-configured water density and gravity (hardware.md §3.6), within the device quantisation: one output LSB
-of P (30BA: 0.1 mbar = 10 Pa, 02BA: 0.01 mbar = 1 Pa) and of TEMP (0.01 degC) (hardware.md §3.4, §3.8).
+configured water density and gravity (docs/devices.md §3.6), within the device quantisation: one output LSB
+of P (30BA: 0.1 mbar = 10 Pa, 02BA: 0.01 mbar = 1 Pa) and of TEMP (0.01 degC) (docs/devices.md §3.4, §3.8).
 """
 import math
 import os
@@ -34,7 +34,7 @@ pytestmark = pytest.mark.ros
 RHO_KG_M3 = 1000.0  # environment.water_density_kg_m3 in ros_ws/config/hindrax.yaml
 G_M_S2 = 9.81  # environment.gravity_m_s2
 SURFACE_PA = 101325.0  # environment.surface_pressure_pa
-LSB_PA = {"30BA": 10.0, "02BA": 1.0}  # hardware.md §3.4: P in 0.1 mbar (30BA) / 0.01 mbar (02BA)
+LSB_PA = {"30BA": 10.0, "02BA": 1.0}  # docs/devices.md §3.4: P in 0.1 mbar (30BA) / 0.01 mbar (02BA)
 TEMP_LSB_C = 0.01
 
 
@@ -103,7 +103,7 @@ def test_published_values_equal_truth_within_quantisation(rig, emu_variant, conf
     sleeps = []
     monkeypatch.setattr(time, "sleep", sleeps.append)  # the node must never block the executor
     # 30BA at 1.9 m of water and 4 degC, 02BA at 104 kPa and 8 degC: both in the second-order
-    # low-temperature branch (hardware.md §3.5), where first order alone is off by 420 Pa / 87 Pa.
+    # low-temperature branch (docs/devices.md §3.5), where first order alone is off by 420 Pa / 87 Pa.
     truth_pa, truth_c = (120000.0, 4.0) if emu_variant == "30BA" else (104000.0, 8.0)
     r = rig(lambda t: (truth_pa, truth_c), emu_variant,
             {"sensors.ms5837.variant": configured, "sensors.ms5837.oversampling": 4096})
@@ -115,7 +115,7 @@ def test_published_values_equal_truth_within_quantisation(rig, emu_variant, conf
         assert -dp.pose.pose.position.z == pytest.approx(expected_depth_m(truth_pa), abs=lsb / (RHO_KG_M3 * G_M_S2))
         assert fp.header.frame_id == "pressure_link" and dp.header.frame_id == "odom"
         assert fp.header.stamp == tm.header.stamp == dp.header.stamp
-        # variance: resolution^2 (25 Pa 30BA / 1 Pa 02BA, hardware.md §3.4) + LSB^2/12
+        # variance: resolution^2 (25 Pa 30BA / 1 Pa 02BA, docs/devices.md §3.4) + LSB^2/12
         resolution = 25.0 if emu_variant == "30BA" else 1.0
         assert fp.variance == pytest.approx(resolution ** 2 + lsb ** 2 / 12)
         assert dp.pose.covariance[14] == pytest.approx(fp.variance / (RHO_KG_M3 * G_M_S2) ** 2)
@@ -123,7 +123,7 @@ def test_published_values_equal_truth_within_quantisation(rig, emu_variant, conf
     assert r.node.variant.value == emu_variant
     assert r.emu.zero_reads == 0  # every ADC read came after the conversion time
     assert sleeps == []
-    # The wire: D1 (0x48, OSR 4096), ADC read, D2 (0x58), ADC read, in that order (hardware.md §3.1).
+    # The wire: D1 (0x48, OSR 4096), ADC read, D2 (0x58), ADC read, in that order (docs/devices.md §3.1).
     seq = [(m.direction, m.i2c_register) for m in r.raw]
     write, read = RawDeviceData.DIRECTION_HOST_TO_DEVICE, RawDeviceData.DIRECTION_DEVICE_TO_HOST
     j = seq.index((read, 0xA0))

@@ -1,4 +1,4 @@
-"""MS5837-30BA / -02BA protocol and emulator tests. Expected values are from hardware.md §3
+"""MS5837-30BA / -02BA protocol and emulator tests. Expected values are from docs/devices.md §3
 (datasheet worked examples, CRC-4 vectors, command table) or restate its formulas."""
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ def test_30ba_datasheet_example_with_documented_off_typo():
     assert r.dt == -5962
     assert r.temp == 1981          # C truncation would give 1982
     assert r.sens == 1145816755    # C truncation would give 1145816756
-    # The datasheet prints OFF = 2381326464, a digit typo (hardware.md §3.7); the formula gives:
+    # The datasheet prints OFF = 2381326464, a digit typo (docs/devices.md §3.7); the formula gives:
     assert r.off == 2381323464 and r.off != 2381326464
     assert r.p == 39998            # 3999.8 mbar, as printed
     second = ms.second_order(ms.EXAMPLE_D1_30BA, r, V30)
@@ -138,7 +138,7 @@ def test_second_order_branches(variant, cal, temp_target):
     first = ms.first_order(d1, d2, cal, variant)
     dt, temp = first.dt, first.temp
     assert abs(temp - temp_target) <= 1
-    # Formulas of hardware.md §3.5, written out independently.
+    # Formulas of docs/devices.md §3.5, written out independently.
     if variant is V30 and temp < 2000:
         ti, offi, sensi = 3 * dt ** 2 // 2 ** 33, 3 * (temp - 2000) ** 2 // 2, 5 * (temp - 2000) ** 2 // 2 ** 3
         if temp < -1500:
@@ -255,7 +255,7 @@ def test_emulator_prom_has_valid_crc_and_configured_coefficients():
     h = Harness("02BA")
     words = [int.from_bytes(bytes(h.bus.read_i2c_block_data(0x76, 0xA0 + 2 * k, 2)), "big") for k in range(8)]
     assert words[:7] == [0x8000, *ms.EXAMPLE_COEFFICIENTS_02BA]
-    # SMBus read_word_data is little-endian: the driver must swap (hardware.md §3.1).
+    # SMBus read_word_data is little-endian: the driver must swap (docs/devices.md §3.1).
     assert h.bus.read_word_data(0x76, 0xA0) == 0x0080
     h.emu.corrupt_prom_crc = True
     words[0] = int.from_bytes(bytes(h.bus.read_i2c_block_data(0x76, 0xA0, 2)), "big")

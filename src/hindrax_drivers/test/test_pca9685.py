@@ -1,5 +1,5 @@
 """PCA9685 protocol and emulator tests, with ESC conventions. Expected values are from
-hardware.md §5.1 (register map, prescale formula and the resolution table) and §5.2."""
+docs/devices.md §5.1 (register map, prescale formula and the resolution table) and §5.2."""
 
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ def test_register_map():
 
 
 def test_prescale_examples():
-    # hardware.md §5.1 resolution table and datasheet range (25 MHz).
+    # docs/devices.md §5.1 resolution table and datasheet range (25 MHz).
     assert pca.prescale_for_frequency(50) == 121 == 0x79
     assert pca.prescale_for_frequency(200) == 30 == 0x1E
     assert pca.prescale_for_frequency(400) == 14 == 0x0E

@@ -1,7 +1,7 @@
 """Ping1D altimeter node through the real pyserial path: emulator on a pty -> SerialTransport -> node -> topics.
 
-Expected bytes are the verified vectors of hardware.md §2.5; expected ranges are the emulator truth within
-the 1 mm wire resolution of hardware.md §2.4 (and float32 of sensor_msgs/Range). Every wait is on a
+Expected bytes are the verified vectors of docs/devices.md §2.5; expected ranges are the emulator truth within
+the 1 mm wire resolution of docs/devices.md §2.4 (and float32 of sensor_msgs/Range). Every wait is on a
 condition with a deadline.
 """
 import contextlib
@@ -32,8 +32,8 @@ from hindrax_msgs.msg import RawDeviceData
 
 pytestmark = pytest.mark.ros
 
-SPEED_OF_SOUND_M_S = 1480.0  # the value of the hardware.md §2.5 set_speed_of_sound vector
-# hardware.md §2.5 (verified vectors)
+SPEED_OF_SOUND_M_S = 1480.0  # the value of the docs/devices.md §2.5 set_speed_of_sound vector
+# docs/devices.md §2.5 (verified vectors)
 SET_SPEED_OF_SOUND_1480000 = bytes.fromhex("42 52 04 00 ea 03 00 00 40 95 16 00 70 02")
 SET_PING_INTERVAL_100 = bytes.fromhex("42 52 02 00 ec 03 00 00 64 00 e9 01")
 CONTINUOUS_START_1300 = bytes.fromhex("42 52 02 00 78 05 00 00 14 05 2c 01")
@@ -96,7 +96,7 @@ def test_startup_frames_settings_and_published_range_match_truth():
                and r.values().get("state") == "disconnected", message="probe matched, device absent")
         r.dev.reconnect()
         r.wait(lambda: len(r.ranges) >= 5 and r.node.settings_verified is not None, message="ranges and settings")
-        # start-up frames, byte-exact against hardware.md §2.5 (auto-baud 'U' first, §2.1)
+        # start-up frames, byte-exact against docs/devices.md §2.5 (auto-baud 'U' first, §2.1)
         r.wait(lambda: r.emu.received.get(Ping1dId.GENERAL_REQUEST, 0) >= 3, message="verification requests")
         tx = b"".join(bytes(m.data) for m in r.raw if m.direction == RawDeviceData.DIRECTION_HOST_TO_DEVICE)
         assert tx.startswith(b"U" + SET_SPEED_OF_SOUND_1480000 + SET_PING_INTERVAL_100)

@@ -1,6 +1,6 @@
 """Tests of the Ping1D protocol codec and its I/O-free emulator.
 
-Expected bytes are the byte-exact vectors of /work/shared/reference/hardware.md §2.5; payload layouts
+Expected bytes are the byte-exact vectors of docs/devices.md §2.5; payload layouts
 and sizes come from the table in §2.4; emulator behaviour from the §2.6 checklist.
 """
 
@@ -55,7 +55,7 @@ def h(text: str) -> bytes:
     return bytes.fromhex(text)
 
 
-# hardware.md §2.5 (verified with the checksum rule)
+# docs/devices.md §2.5 (verified with the checksum rule)
 REQ_PROTOCOL_VERSION = h("42 52 02 00 06 00 00 00 05 00 a1 00")
 REPLY_PROTOCOL_VERSION_123 = h("42 52 04 00 05 00 00 00 01 02 03 00 a3 00")
 GENERAL_REQUEST_1211 = h("42 52 02 00 06 00 00 00 bb 04 5b 01")

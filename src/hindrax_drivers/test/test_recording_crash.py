@@ -1,4 +1,4 @@
-"""Crash safety (design.md §7): a recorder SIGKILLed mid-run loses at most the chunk it was filling.
+"""Crash safety (docs/architecture.md §7): a recorder SIGKILLed mid-run loses at most the chunk it was filling.
 
 The recorder runs in a child process (python -m hindrax_drivers.recording.recorder_node) with small chunks;
 this test publishes N numbered RawDeviceData messages, waits until the recorder reports (on /diagnostics)

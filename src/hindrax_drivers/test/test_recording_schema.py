@@ -1,6 +1,6 @@
 """Schemas, type hashes, QoS metadata and topic selection as rosbag2 (Jazzy) writes them.
 
-Expected values follow the rules in ros2-pip.md ("MCAP bags without rosbag2") and rosbag2's
+Expected values follow the rules in docs/architecture.md §11.6 and rosbag2's
 local_message_definition_source.cpp / qos.cpp; the type hash is cross-checked against the hash the
 ROS graph itself reports for a live publisher.
 """

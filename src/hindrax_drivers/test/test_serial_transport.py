@@ -1,7 +1,7 @@
 """End-to-end tests: device emulators on a pseudo-terminal, read through the real pyserial path by
 :class:`SerialTransport`.
 
-Expected values are the emulator truth within the wire quantisation of hardware.md (§1.3.1: mm
+Expected values are the emulator truth within the wire quantisation of docs/devices.md (§1.3.1: mm
 position deltas over dtu; §2.4: mm distances).  Every wait is on a condition with a timeout.
 """
 

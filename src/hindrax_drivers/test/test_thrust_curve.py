@@ -1,4 +1,4 @@
-"""Tests of hindrax_drivers.allocation.thrust_curve (seed 003 eq. 1 / Table 2, hardware.md 5.2-5.3).
+"""Tests of hindrax_drivers.allocation.thrust_curve ([Hindrax-Drag] (seed 003) eq. 1 / Table 2, docs/devices.md 5.2-5.3).
 
 Expected values are computed here directly from the printed coefficients (plain Horner evaluation),
 from numpy.roots as an independent inverse, or taken from the reference tables.
@@ -21,13 +21,13 @@ from hindrax_drivers.allocation.thrust_curve import (
     voltage_thrust_scale,
 )
 
-# Seed 003 Table 2, typed in again here (not imported) so that a typo in the module is caught.
+# [Hindrax-Drag] (Seed 003) Table 2, typed in again here (not imported) so that a typo in the module is caught.
 C4, C3, C2, C1 = -4.61e-7, 0.001794, -2.2726, 927.1827
 P4, P3, P2, P1 = -3.52e-7, 1.82e-4, -0.3106, 174.3542
 
 
 def f_neg(p):
-    """Seed 003 eq. 1 with the Table 2 negative row."""
+    """[Hindrax-Drag] (Seed 003) eq. 1 with the Table 2 negative row."""
     p = np.asarray(p, dtype=float)
     return ((C4 * p + C3) * p + C2) * p + C1
 
@@ -38,13 +38,13 @@ def df_neg(p, h=1e-3):
 
 
 def f_pos_reflected(p):
-    """Project default positive curve: point reflection about (1500 us, 0 N), design.md section 4."""
+    """Project default positive curve: point reflection about (1500 us, 0 N), docs/architecture.md §4."""
     return -f_neg(3000.0 - np.asarray(p, dtype=float))
 
 
 # ---------------------------------------------------------------- facts about the seed's coefficients
 def test_seed_negative_row_values_at_ends():
-    # design.md section 4: about -15.6 N at 1100 us and -1.1 N at 1500 us (computed: -15.53 N, -1.09 N).
+    # docs/architecture.md §4: about -15.6 N at 1100 us and -1.1 N at 1500 us (computed: -15.53 N, -1.09 N).
     assert f_neg(1100.0) == pytest.approx(-15.5283, abs=1e-4)
     assert f_neg(1500.0) == pytest.approx(-1.0923, abs=1e-4)
     assert SEED_003_NEGATIVE_COEFFS == (C4, C3, C2, C1)
@@ -101,7 +101,7 @@ def test_point_reflection_rejects_bad_input():
 
 # ---------------------------------------------------------------- forward model
 def test_forward_zero_in_deadband_and_cubic_outside():
-    curve = hindrax_default_curve()  # deadband 25 us, hardware.md section 5.2
+    curve = hindrax_default_curve()  # deadband 25 us, docs/devices.md §5.2
     inside = np.arange(1475.5, 1525.0, 0.5)
     np.testing.assert_array_equal(curve.thrust_n(inside), 0.0)
     below = np.arange(1100.0, 1475.01, 0.5)
@@ -132,7 +132,7 @@ def test_forward_clamps_pulse_range_and_keeps_shapes():
 
 
 def test_forward_clips_wrong_sign_of_a_curve_crossing_zero():
-    # A straight line through zero at 1460 us on the reverse side (a T200-like zero band, hardware.md 5.3):
+    # A straight line through zero at 1460 us on the reverse side (a T200-like zero band, docs/devices.md 5.3):
     # between 1460 and the deadband edge 1475 the cubic is positive; a reversing thruster gives 0 N there.
     line = (0.0, 0.0, 0.04, -0.04 * 1460.0)
     curve = ThrustCurve(line, point_reflection(line))
@@ -206,10 +206,10 @@ def test_voltage_scale_multiplies_forward_and_divides_inverse():
 
 
 def test_voltage_thrust_scale_matches_t200_table():
-    # hardware.md section 5.3: full-throttle forward thrust 2.93 kgf at 10 V, 6.72 at 20 V, 3.71 at 12 V, 5.25 at 16 V
+    # docs/devices.md §5.3: full-throttle forward thrust 2.93 kgf at 10 V, 6.72 at 20 V, 3.71 at 12 V, 5.25 at 16 V
     assert voltage_thrust_scale(20.0, nominal_voltage_v=10.0) == pytest.approx(6.72 / 2.93, rel=0.01)
     assert voltage_thrust_scale(16.0, nominal_voltage_v=12.0) == pytest.approx(5.245 / 3.714, rel=0.01)
-    assert voltage_thrust_scale(14.8) == 1.0  # nominal Hindrax battery, seed 003 section 2.1
+    assert voltage_thrust_scale(14.8) == 1.0  # nominal Hindrax battery, [Hindrax-Drag] (seed 003) section 2.1
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ThrustCurveError):
             voltage_thrust_scale(bad)

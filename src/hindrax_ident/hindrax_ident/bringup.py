@@ -1,4 +1,4 @@
-"""Bring up the Hindrax node graph in one process (SingleThreadedExecutor; ros2-pip.md: the
+"""Bring up the Hindrax node graph in one process (SingleThreadedExecutor; docs/architecture.md §11.5: the
 MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust

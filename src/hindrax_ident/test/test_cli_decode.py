@@ -1,4 +1,4 @@
-"""`hindrax decode dvl75|ping1d FILE` as users run it: real captures of hardware.md, emulator captures with
+"""`hindrax decode dvl75|ping1d FILE` as users run it: real captures of docs/devices.md, emulator captures with
 faults, and files that hold nothing decodable."""
 import json
 import math
@@ -15,13 +15,13 @@ from hindrax_drivers.ping1d.protocol import ContinuousStart, Ping1dId, request_f
 
 HINDRAX = str(Path(sys.executable).with_name("hindrax"))
 
-# Real captured sentences with verified checksums (hardware.md §1.2 [D21]).
+# Real captured sentences with verified checksums (docs/devices.md §1.2 [D21]).
 REAL_DVPDL_1 = b"$DVPDL,160401000,100000,0.000000,-0.000000,-0.000000,0.000,-0.000,-0.000,0*55"
 REAL_DVPDL_2 = b"$DVPDL,1398604000,50000,0.000000,-0.000000,-0.000000,-0.003,0.017,0.002,100*79"
 REAL_DVEXT = (b"$DVEXT,F,X,3330,-1.8,2.4,259.5,-1175,0.000,0.00,-0.000,0.000,0.000000000,0.000000000,0.100,"
               b"0.091711,0.019853,0.017436,-0.995435,25,25,25,25,F,F,F,F,0.0000,0.0000,0.0000,0.0000,-1.000,"
               b"-1.000,-1.000,-1.000,*54")
-# Byte-exact Ping1D vectors (hardware.md §2.5)
+# Byte-exact Ping1D vectors (docs/devices.md §2.5)
 PING_VECTORS = bytes.fromhex(
     "42 52 04 00 05 00 00 00 01 02 03 00 a3 00"        # protocol_version reply v1.2.3
     "42 52 05 00 bb 04 01 00 d2 04 00 00 57 86 02"     # distance_simple 1234 mm, 87 %, src 1
@@ -80,7 +80,7 @@ def test_dvl_emulator_capture_with_faults(tmp_path):
     sent = emu.sent_counts["DVPDL"] + emu.sent_counts["DVEXT"] + emu.sent_counts["DVTXT"]
     assert len(recs) == sent - 3  # two corrupted, one truncated
     pdl = [r for r in recs if r["type"] == "DvlPositionDelta"]
-    for r in pdl[1:]:  # mean velocity = delta / dtu, 1 mm quantisation (hardware.md §1.3.1)
+    for r in pdl[1:]:  # mean velocity = delta / dtu, 1 mm quantisation (docs/devices.md §1.3.1)
         assert r["delta_x_m"] / r["delta_time_s"] == pytest.approx(0.25, abs=0.0051)
         assert r["delta_z_m"] / r["delta_time_s"] == pytest.approx(-0.1, abs=0.0051)
     summary = err.splitlines()[-1]

@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.rls (recursive LS with forgetting, hydrodynamics.md 1.D)."""
+"""Tests of hindrax_ident.estimation.rls (recursive LS with forgetting, docs/identification.md §1.D)."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from hindrax_ident.estimation.least_squares import EstimationError, fit_linear_model
 from hindrax_ident.estimation.rls import RecursiveLeastSquares
 
-THETA = np.array([35.0, 70.0, 6.0, 0.78])   # inertia, k_q, k_l, bias (design.md section 5)
+THETA = np.array([35.0, 70.0, 6.0, 0.78])   # inertia, k_q, k_l, bias (docs/architecture.md §5)
 NAMES = ("inertia", "quadratic_damping", "linear_damping", "bias")
 
 
@@ -19,7 +19,7 @@ def regressors(n, dt=0.02, phase=0.0):
 
 
 def test_lambda_one_equals_batch_least_squares():
-    """With lambda = 1 and a diffuse prior RLS is the batch LS of seed 003 eqs. 6-8."""
+    """With lambda = 1 and a diffuse prior RLS is the batch LS of [Hindrax-Drag] (seed 003) eqs. 6-8."""
     rng = np.random.default_rng(0)
     Phi = regressors(1500)
     y = Phi @ THETA + rng.normal(0, 0.4, Phi.shape[0])

@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.thruster_fit (seed 003 eq. 1, section 2.2.1, Table 2)."""
+"""Tests of hindrax_ident.estimation.thruster_fit ([Hindrax-Drag] (seed 003) eq. 1, section 2.2.1, Table 2)."""
 
 import numpy as np
 import pytest
@@ -13,7 +13,7 @@ from hindrax_ident.estimation.thruster_fit import (
     point_reflection,
 )
 
-# Seed 003 Table 2 as printed: (c4, c3, c2, c1) of tau = c4 P^3 + c3 P^2 + c2 P + c1
+# [Hindrax-Drag] (Seed 003) Table 2 as printed: (c4, c3, c2, c1) of tau = c4 P^3 + c3 P^2 + c2 P + c1
 TABLE2_NEGATIVE = (-4.61e-7, 0.001794, -2.2726, 927.1827)
 TABLE2_POSITIVE = (-3.52e-7, 1.82e-4, -0.3106, 174.3542)
 # half a unit of the last printed digit of each coefficient
@@ -27,7 +27,7 @@ def rounding_bound(half_ulps, p_us):
 
 
 def test_table2_negative_row_is_consistent():
-    """design.md section 4: -15.6 N at 1100 us and about -1.1 N at 1500 us (the coefficients
+    """docs/architecture.md §4: -15.6 N at 1100 us and about -1.1 N at 1500 us (the coefficients
     are printed to 3-5 significant digits; c4's rounding alone moves tau by 0.67 N at 1100 us)."""
     at_1100 = evaluate_cubic(*TABLE2_NEGATIVE, 1100.0)
     at_1500 = evaluate_cubic(*TABLE2_NEGATIVE, 1500.0)
@@ -38,7 +38,7 @@ def test_table2_negative_row_is_consistent():
 
 
 def test_table2_positive_row_as_printed_is_inconsistent():
-    """design.md section 4: the printed positive row gives about -1070 N at 1500 us, far outside
+    """docs/architecture.md §4: the printed positive row gives about -1070 N at 1500 us, far outside
     what coefficient rounding can explain (bound ~ 1.7 N); hence the point reflection."""
     at_1500 = evaluate_cubic(*TABLE2_POSITIVE, 1500.0)
     # hand arithmetic: -1188.000 + 409.500 - 465.900 + 174.354 = -1070.046 N
@@ -68,7 +68,7 @@ def test_point_reflection_identity(c, d, neutral):
 
 
 def synthetic_bollard(rng, noise_n=0.3, with_neutral=False):
-    """Negative rotation = Table 2 negative row; positive = its reflection (design.md 4)."""
+    """Negative rotation = Table 2 negative row; positive = its reflection (docs/architecture.md §4)."""
     neg = TABLE2_NEGATIVE
     pos = point_reflection(*neg)
     P = np.concatenate([np.repeat(np.arange(1100.0, 1500.0, 25.0), 2),

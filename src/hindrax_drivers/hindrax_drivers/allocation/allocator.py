@@ -1,7 +1,7 @@
 """Thrust allocation: body wrench (FRD) -> thruster forces -> ESC pulse widths, pure numpy.
 
-Given the thrust allocation matrix ``B`` (6, n) of seed 003 eq. 9 (``tau = B F``, tau = [X Y Z K M N]
-in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster (seed 003 eq. 1),
+Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] (seed 003) eq. 9 (``tau = B F``, tau = [X Y Z K M N]
+in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hindrax-Drag] (seed 003) eq. 1),
 :class:`ThrustAllocator` turns a requested wrench into forces and pulse widths:
 
 1. **Weighted minimum-norm solution.** ``F = B_W^+ tau`` with ``B_W^+ = W^-1/2 pinv(B W^-1/2)``,
@@ -28,12 +28,12 @@ in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thr
      The null space of B is not used to enlarge the feasible set (neither mode does that).
 3. **Pulse widths and achieved wrench.** Each force is inverted on its curve (monotone branch, with
    saturation and the small-force rule of :mod:`.thrust_curve`), optionally quantised to the PWM
-   generator's step (``pulse_width_step_us``, e.g. the PCA9685 tick of hardware.md section 5.1), and the
+   generator's step (``pulse_width_step_us``, e.g. the PCA9685 tick of docs/devices.md §5.1), and the
    *actual* thrust at that pulse width is evaluated with the forward curve (deadband included). The
    achieved wrench ``B @ force_n`` is what the thrusters will really apply according to the model, so
    a controller can use it for anti-windup.
 
-Non-finite wrenches raise :class:`InvalidWrenchError` (design.md section 8).
+Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8).
 """
 
 from __future__ import annotations
@@ -55,9 +55,9 @@ __all__ = [
     "weighted_pseudo_inverse",
 ]
 
-#: Wrench axes in order (seed 003 section 3 notation, SNAME): tau = [X Y Z K M N].
+#: Wrench axes in order ([Hindrax-Drag] (seed 003) section 3 notation, SNAME): tau = [X Y Z K M N].
 AXIS_NAMES: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
-#: Default priority: heave and yaw first (depth and heading holding during the seed 003 tests).
+#: Default priority: heave and yaw first (depth and heading holding during the [Hindrax-Drag] (seed 003) tests).
 DEFAULT_PRIORITY_GROUPS: tuple[tuple[str, ...], ...] = (("heave", "yaw"),)
 _MODES = ("uniform", "priority")
 _ZERO_ROW_TOLERANCE = 1e-12
@@ -126,7 +126,7 @@ class ThrustAllocator:
     Parameters
     ----------
     matrix:
-        Thrust allocation matrix (6, n), FRD, seed 003 eq. 9 (see :mod:`.matrix`).
+        Thrust allocation matrix (6, n), FRD, [Hindrax-Drag] (seed 003) eq. 9 (see :mod:`.matrix`).
     curves:
         One :class:`ThrustCurve` shared by all thrusters, or a sequence of n of them.
     weights:
@@ -139,7 +139,7 @@ class ThrustAllocator:
         :data:`DEFAULT_PRIORITY_GROUPS`. Ignored in uniform mode.
     pulse_width_step_us:
         Optional quantisation step of the pulse-width generator (us), e.g. the PCA9685 tick
-        ``(PRE_SCALE + 1) * 1e6 / f_osc`` (hardware.md section 5.1: 1.24 us at PRE_SCALE 30). ``None``: no
+        ``(PRE_SCALE + 1) * 1e6 / f_osc`` (docs/devices.md §5.1: 1.24 us at PRE_SCALE 30). ``None``: no
         quantisation.
 
     Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n),
@@ -313,7 +313,7 @@ class ThrustAllocator:
         ``voltage_scale`` multiplies every curve's thrust (battery voltage hook, see
         :func:`.thrust_curve.voltage_thrust_scale`). Returns an :class:`AllocationResult`. Raises
         :class:`InvalidWrenchError` if the wrench is not 6 finite numbers, ``ValueError`` for a bad
-        ``voltage_scale``. Source: seed 003 eqs. 1 and 9; module docstring for the method.
+        ``voltage_scale``. Source: [Hindrax-Drag] (seed 003) eqs. 1 and 9; module docstring for the method.
         """
         try:
             tau = np.array(wrench, dtype=float)

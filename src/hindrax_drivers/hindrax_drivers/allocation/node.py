@@ -11,7 +11,7 @@ Publishes
 A NaN/inf wrench, a wrench in another frame, or a stale one (stamp older than
 ``thrusters.wrench_timeout_s`` by the node's clock) is rejected: the node commands neutral (1500 us) and
 the status says why. If no wrench arrives for ``wrench_timeout_s`` the node commands neutral once and
-reports ``stale``; the ESC node's watchdog is the second line of defence (design.md §8).
+reports ``stale``; the ESC node's watchdog is the second line of defence (docs/architecture.md §8).
 
 The core (:class:`~hindrax_drivers.allocation.core.AllocationCore`) is built at start-up and rebuilt only
 when a parameter changes, never per message. Configuration: the vehicle file as ROS parameters

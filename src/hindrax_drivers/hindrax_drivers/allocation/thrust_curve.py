@@ -1,6 +1,6 @@
 """Thruster thrust curve: pulse width (us) <-> bollard-pull thrust (N), pure numpy.
 
-Model (seed 003, section 2.2.1, eq. 1 and Table 2): the thrust of one thruster is a cubic in the ESC
+Model ([Hindrax-Drag] (seed 003), section 2.2.1, eq. 1 and Table 2): the thrust of one thruster is a cubic in the ESC
 pulse width P (us), ``tau = c4 P^3 + c3 P^2 + c2 P + c1``, with one cubic for negative rotation
 (1100-1500 us) and one for positive rotation (1500-1900 us); 1500 us stops the motor. Coefficient
 tuples are always ordered ``(c4, c3, c2, c1)``, i.e. highest power first (``numpy.polyval`` order).
@@ -16,9 +16,9 @@ Facts about the seed's coefficients (computed, and asserted in ``test/test_thrus
   1500 us and -2173 N at 1900 us: unusable (``ThrustCurve`` rejects it, because it is negative and
   decreasing on the forward side). Until a bollard-pull fit replaces it, the project's default
   positive curve is the point reflection of the negative one about (1500 us, 0 N):
-  ``f_pos(P) = -f_neg(3000 - P)`` (design.md section 4), see :func:`point_reflection`.
+  ``f_pos(P) = -f_neg(3000 - P)`` (docs/architecture.md §4), see :func:`point_reflection`.
 
-ESC conventions (hardware.md section 5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop,
+ESC conventions (docs/devices.md §5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop,
 1900 us full forward, deadband 1500 +- 25 us (secondary source, marked UNVERIFIED there). The forward
 model returns 0 N inside the deadband; outside it the cubic applies.
 
@@ -40,7 +40,7 @@ inverses every 10 ms. Each monotone branch is tabulated once at construction on 
 that brackets the exact root, so the inverse is exact to 0.005 us by construction, vectorised, and of
 fixed cost (about 2.4 MB of tables per distinct curve). The tests check it against ``numpy.roots``.
 
-Battery voltage: the ESCs are open loop, so thrust changes with supply voltage (hardware.md section 5.3:
+Battery voltage: the ESCs are open loop, so thrust changes with supply voltage (docs/devices.md §5.3:
 full-throttle thrust scales roughly with V^1.2). Both directions accept ``voltage_scale``: the forward
 model multiplies the curve by it and the inverse divides the requested force by it.
 :func:`voltage_thrust_scale` gives that factor from a measured battery voltage.
@@ -66,14 +66,14 @@ __all__ = [
     "forward_thrust",
 ]
 
-#: Seed 003 Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).
+#: [Hindrax-Drag] (Seed 003) Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).
 SEED_003_NEGATIVE_COEFFS: tuple[float, float, float, float] = (-4.61e-7, 0.001794, -2.2726, 927.1827)
-#: Seed 003 Table 2, positive direction exactly as printed. Inconsistent (about -1070 N at 1500 us);
+#: [Hindrax-Drag] (Seed 003) Table 2, positive direction exactly as printed. Inconsistent (about -1070 N at 1500 us);
 #: kept only to document and test that it is rejected.
 SEED_003_POSITIVE_COEFFS_AS_PRINTED: tuple[float, float, float, float] = (-3.52e-7, 1.82e-4, -0.3106, 174.3542)
-#: Hindrax battery nominal voltage, seed 003 section 2.1 (14.8 V, 19.2 Ah).
+#: Hindrax battery nominal voltage, [Hindrax-Drag] (seed 003) section 2.1 (14.8 V, 19.2 Ah).
 HINDRAX_NOMINAL_VOLTAGE_V = 14.8
-#: Blue Robotics Basic ESC deadband half-width, hardware.md section 5.2 (1500 +- 25 us; UNVERIFIED there).
+#: Blue Robotics Basic ESC deadband half-width, docs/devices.md §5.2 (1500 +- 25 us; UNVERIFIED there).
 BASIC_ESC_DEADBAND_US = 25.0
 
 _TABLE_STEP_US = 0.005  # upper bound of the inverse's error (one table cell)
@@ -98,8 +98,8 @@ def point_reflection(coeffs: Sequence[float], neutral_us: float = 1500.0) -> tup
     """Coefficients of the cubic point-reflected about (``neutral_us``, 0 N).
 
     Returns ``g`` with ``g(P) = -f(2 * neutral_us - P)`` for the cubic ``f`` given by ``coeffs``
-    ``(c4, c3, c2, c1)`` (N as a function of P in us), in the same order. With the seed 003 Table 2
-    negative row this is the project's default positive-rotation curve (design.md section 4): it gives
+    ``(c4, c3, c2, c1)`` (N as a function of P in us), in the same order. With the [Hindrax-Drag] (seed 003) Table 2
+    negative row this is the project's default positive-rotation curve (docs/architecture.md §4): it gives
     +15.53 N at 1900 us. Applying it twice returns the original coefficients.
 
     Raises :class:`ThrustCurveError` for anything but 4 finite numbers or a non-finite ``neutral_us``.
@@ -117,9 +117,9 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
                          exponent: float = 1.2) -> float:
     """Thrust factor ``(battery_voltage_v / nominal_voltage_v) ** exponent`` for ``voltage_scale``.
 
-    Source: hardware.md section 5.3 (Blue Robotics T200 data, DERIVED there): full-throttle thrust
+    Source: docs/devices.md §5.3 (Blue Robotics T200 data, DERIVED there): full-throttle thrust
     scales roughly with V^1.2 (10 V -> 20 V gives x2.29, 12 V -> 16 V gives x1.41). The nominal
-    voltage is the Hindrax battery, 14.8 V (seed 003 section 2.1), at which the curves are taken to be
+    voltage is the Hindrax battery, 14.8 V ([Hindrax-Drag] (seed 003) section 2.1), at which the curves are taken to be
     valid. Raises :class:`ThrustCurveError` unless both voltages are finite and positive and the
     exponent is finite.
     """
@@ -152,7 +152,7 @@ def _finite_array(values, name: str) -> np.ndarray:
 
 
 def _cubic(coeffs: np.ndarray, p):
-    """Seed 003 eq. 1 by Horner's rule: c4 P^3 + c3 P^2 + c2 P + c1 (N), coeffs ordered (c4, c3, c2, c1)."""
+    """[Hindrax-Drag] (Seed 003) eq. 1 by Horner's rule: c4 P^3 + c3 P^2 + c2 P + c1 (N), coeffs ordered (c4, c3, c2, c1)."""
     return ((coeffs[0] * p + coeffs[1]) * p + coeffs[2]) * p + coeffs[3]
 
 
@@ -161,10 +161,10 @@ def forward_thrust(pulse_width_us, negative, positive, pulse_width_min_us, pulse
     """Forward thrust model (N) of :meth:`ThrustCurve.thrust_n` at ``voltage_scale = 1``, vectorised.
 
     Every parameter broadcasts against ``pulse_width_us``: ``negative`` and ``positive`` are
-    ``(c4, c3, c2, c1)`` of seed 003 eq. 1 with shape (4,) or (4, n) (one column per thruster), the others
+    ``(c4, c3, c2, c1)`` of [Hindrax-Drag] (seed 003) eq. 1 with shape (4,) or (4, n) (one column per thruster), the others
     scalars or (n,). Pulse widths are clamped to ``[pulse_width_min_us, pulse_width_max_us]``; the negative
     cubic (clipped to <= 0) applies at ``P <= negative_edge_us``, the positive one (clipped to >= 0) at
-    ``P >= positive_edge_us``, 0 N between (deadband, hardware.md section 5.2); the result is clipped to
+    ``P >= positive_edge_us``, 0 N between (deadband, docs/devices.md §5.2); the result is clipped to
     ``[max_reverse_n, max_forward_n]``. Inputs are not validated: use :meth:`ThrustCurve.thrust_n`
     unless the values come from :attr:`ThrustCurve.forward_parameters`.
     """
@@ -180,7 +180,7 @@ def _out(arr: np.ndarray):
 
 
 class ThrustCurve:
-    """Two-branch cubic thrust curve of one thruster (seed 003 eq. 1), with its inverse.
+    """Two-branch cubic thrust curve of one thruster ([Hindrax-Drag] (seed 003) eq. 1), with its inverse.
 
     Parameters
     ----------
@@ -188,10 +188,10 @@ class ThrustCurve:
         ``(c4, c3, c2, c1)`` of eq. 1 for negative rotation (``pulse_width_min_us`` to neutral) and
         positive rotation (neutral to ``pulse_width_max_us``); thrust in N, pulse width in us.
     pulse_width_min_us, pulse_width_neutral_us, pulse_width_max_us:
-        ESC range and stop value (seed 003 section 2.2.1; hardware.md section 5.2): 1100, 1500, 1900 us.
+        ESC range and stop value ([Hindrax-Drag] (seed 003) section 2.2.1; docs/devices.md §5.2): 1100, 1500, 1900 us.
     deadband_us:
         Half-width of the ESC deadband around neutral; thrust is 0 N for
-        ``|P - neutral| < deadband_us`` and at neutral itself. Default 25 us (hardware.md section 5.2).
+        ``|P - neutral| < deadband_us`` and at neutral itself. Default 25 us (docs/devices.md §5.2).
     small_force:
         ``"nearest"`` (default) or ``"neutral"``: what the inverse does with a force smaller in magnitude
         than the branch's smallest producible force (see the module docstring).
@@ -359,11 +359,11 @@ class ThrustCurve:
         """Thrust (N) at pulse width(s) ``pulse_width_us`` (us); scalar in, float out; array in, array out.
 
         Pulse widths are first clamped to ``[pulse_width_min_us, pulse_width_max_us]`` (the ESC output is
-        clamped there, design.md section 8). Result: 0 N at neutral and for ``|P - neutral| <
+        clamped there, docs/architecture.md §8). Result: 0 N at neutral and for ``|P - neutral| <
         deadband_us``; otherwise the negative cubic (below neutral) or positive cubic (above), clipped to
         the side's sign (a thruster in reverse rotation does not push forward) and to
         ``[max_reverse_n, max_forward_n]``, times ``voltage_scale``.
-        Source: seed 003 eq. 1, hardware.md section 5.2. Raises :class:`ThrustCurveError` for non-finite
+        Source: [Hindrax-Drag] (seed 003) eq. 1, docs/devices.md §5.2. Raises :class:`ThrustCurveError` for non-finite
         input or a bad ``voltage_scale``.
         """
         s = _check_voltage_scale(voltage_scale)
@@ -378,7 +378,7 @@ class ThrustCurve:
         sign (exact to 0.005 us). 0 N gives neutral. Forces beyond ``max_forward_n`` / ``max_reverse_n``
         saturate at ``pulse_width_max_us`` / ``pulse_width_min_us``. Forces smaller in magnitude than the
         branch's smallest thrust go to neutral or to the branch's inner end according to
-        ``small_force`` (module docstring). Source: inverse of seed 003 eq. 1. Raises
+        ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] (seed 003) eq. 1. Raises
         :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``.
         """
         s = _check_voltage_scale(voltage_scale)
@@ -421,8 +421,8 @@ class ThrustCurve:
 
 
 def hindrax_default_curve(deadband_us: float = BASIC_ESC_DEADBAND_US, small_force: str = "nearest") -> ThrustCurve:
-    """The project's default thruster curve: seed 003 Table 2 negative row, and its point reflection
-    about (1500 us, 0 N) as positive row (design.md section 4), ESC range 1100/1500/1900 us.
+    """The project's default thruster curve: [Hindrax-Drag] (seed 003) Table 2 negative row, and its point reflection
+    about (1500 us, 0 N) as positive row (docs/architecture.md §4), ESC range 1100/1500/1900 us.
 
     Raises :class:`ThrustCurveError` for a bad ``deadband_us`` or ``small_force``.
     """

@@ -1,13 +1,13 @@
 """Cerulean DVL-75 device emulator (device side of the serial protocol), I/O-free.
 
-Layer 2 of the DVL-75 driver (design.md §2): it speaks the DVL's ASCII protocol byte-exactly from the
+Layer 2 of the DVL-75 driver (docs/architecture.md §2): it speaks the DVL's ASCII protocol byte-exactly from the
 device side, driven by a *truth source* (simulator, bag replay or test script), with fault injection
 in its API.  It does no I/O and reads no clock: the host's bytes come in through
 :meth:`Dvl75Emulator.feed_host_bytes` and the device's bytes come out of
 :meth:`Dvl75Emulator.poll` ``(t_s)``; :class:`hindrax_drivers.transport.pty_device.PtyDevice` serves
 it on a pseudo-terminal so the real pyserial path runs against it.
 
-Behaviour (hardware.md §1.1-§1.6, especially the §1.6 checklist):
+Behaviour (docs/devices.md §1.1-§1.6, especially the §1.6 checklist):
 - Factory defaults [D11]: ``$DVPDL`` **OFF**, ``$DVEXT`` ON, free-form text ON, ``$GPRMC`` OFF,
   DVKFA/B OFF, re-tweets OFF, declination 0, speed of sound 1484 m/s, orientation (0,0,0).  Settings
   live in :class:`DvlFlash` ("emulated flash", sticky across REBOOT and across emulator instances
@@ -27,16 +27,16 @@ Truth -> measurement model (the emulator's own modelling choices are marked [EMU
 - ``$DVPDL`` deltas: trapezoidal integral of the FRD velocity over ``dtu``; angle deltas are wrapped
   differences of (roll, pitch, yaw) [EMULATOR: the firmware's exact definition is undocumented].
 - ``$DVEXT``: roll as is, pitch negated (DVL Euler angles are right-handed about X bow / Y port,
-  hardware.md §1.5, so + = bow down [DERIVED]), heading = yaw in 0..360 deg; quaternion = FLU body in
+  docs/devices.md §1.5, so + = bow down [DERIVED]), heading = yaw in 0..360 deg; quaternion = FLU body in
   ENU; north/east/up velocities = R_nb v; altitude along the sensor (body z) axis =
   altitude / (cos roll cos pitch); per-beam ranges and velocities from a four-beam Janus geometry
   (A port, B stern, C starboard, D bow) tilted ``beam_tilt_rad`` from the sensor axis [EMULATOR: the
-  DVL-75 beam angle is not in hardware.md], beam velocity + = approaching along the beam (the only
+  DVL-75 beam angle is not in docs/devices.md], beam velocity + = approaching along the beam (the only
   documented sign, Tracker-650 [D16]).  Per-beam data in the truth override the geometry.
 - Lock: truth flag, altitude within 0.3..40 m and tilt within 20 deg (operating envelope, §1.1).
 - Speed of sound: velocities and ranges scale by (configured c / true c) when
   ``true_speed_of_sound_m_s`` is given; SET-VELOCITY-ADJUSTMENT multiplies velocities.
-- Not emulated: re-tweeted IMU/GPS lines, ``$DVKFA``/``$DVKFB`` (layout unverified, hardware.md §6),
+- Not emulated: re-tweeted IMU/GPS lines, ``$DVKFA``/``$DVKFB`` (layout unverified, docs/devices.md §6),
   Ethernet/UDP, mounting-orientation mismatch (the truth is taken to be in the configured vehicle
   frame), declination effects on heading.
 """
@@ -71,8 +71,8 @@ __all__ = ["DvlTruth", "DvlFlash", "Dvl75Emulator", "EARTH_RADIUS_M"]
 
 #: Mean Earth radius used for dead-reckoned latitude/longitude [EMULATOR].
 EARTH_RADIUS_M = 6371000.0
-_GPS_FRESH_S = 1.5  # SET-POSITION counts as a fix, fresh for 1.5 s (hardware.md §1.3.2, §1.4)
-# NED <-> ENU axis swap and FRD <-> FLU axis flip (hardware.md §1.5, REP-103).
+_GPS_FRESH_S = 1.5  # SET-POSITION counts as a fix, fresh for 1.5 s (docs/devices.md §1.3.2, §1.4)
+# NED <-> ENU axis swap and FRD <-> FLU axis flip (docs/devices.md §1.5, REP-103).
 _T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 _T_FRD_FLU = np.diag([1.0, -1.0, -1.0])
 
@@ -108,7 +108,7 @@ class DvlTruth:
 
 @dataclass
 class DvlFlash:
-    """Sticky DVL settings ("emulated flash", hardware.md §1.4 "Sticky" column), at factory defaults
+    """Sticky DVL settings ("emulated flash", docs/devices.md §1.4 "Sticky" column), at factory defaults
     [D11] when constructed without arguments.  Survives REBOOT; share one instance between emulators
     to model power cycles."""
 
@@ -152,7 +152,7 @@ def _wrap(angle_rad: float) -> float:
 
 
 def _parse_coordinate(text: str) -> float:
-    """One SET-POSITION coordinate: DD, ``D M.m H`` or ``DDMM.m H`` (hardware.md §1.4)."""
+    """One SET-POSITION coordinate: DD, ``D M.m H`` or ``DDMM.m H`` (docs/devices.md §1.4)."""
     m = _COORD_RE.fullmatch(text)
     if m is None:
         raise ValueError(f"bad coordinate {text!r}")
@@ -171,13 +171,13 @@ class Dvl75Emulator:
 
     Args:
         truth_source: callable ``t_s -> DvlTruth`` (or a constant :class:`DvlTruth`).
-        rate_hz: ping/output rate, 5..20 Hz (hardware.md §1.1).
+        rate_hz: ping/output rate, 5..20 Hz (docs/devices.md §1.1).
         flash: sticky settings; default factory settings.
         beam_tilt_rad: beam angle from the sensor axis for the geometric beam model [EMULATOR].
         true_speed_of_sound_m_s: water's true c; None = equal to the configured c (no scale error).
         imu_calibration: ``$DVEXT`` field 3 text (4 digits 0-3, e.g. "3333").
         default_gain_db: per-beam gain reported when the truth gives none (the capture shows 25).
-        min_altitude_m, max_altitude_m, max_tilt_rad: lock envelope (hardware.md §1.1).
+        min_altitude_m, max_altitude_m, max_tilt_rad: lock envelope (docs/devices.md §1.1).
         max_backlog_s: when polled late, cycles older than this are skipped rather than emitted.
         seed: seed of the fault generator.
     Attributes:
@@ -224,7 +224,7 @@ class Dvl75Emulator:
 
     # --- configuration / faults -----------------------------------------------------------------
     def set_rate_hz(self, rate_hz: float) -> None:
-        """Change the output rate (5..20 Hz, hardware.md §1.1); takes effect from the next cycle.
+        """Change the output rate (5..20 Hz, docs/devices.md §1.1); takes effect from the next cycle.
 
         Raises:
             ValueError: outside 5..20 Hz.
@@ -331,7 +331,7 @@ class Dvl75Emulator:
 
     def _cycle(self, t: float) -> None:
         """One ping cycle at time ``t``: queues the enabled sentences, ``$DVEXT`` before ``$DVPDL`` (the order on the
-        real DVL is not documented, hardware.md §1.3; with this order the driver's latest ``$DVEXT`` is the one of
+        real DVL is not documented, docs/devices.md §1.3; with this order the driver's latest ``$DVEXT`` is the one of
         the same ping when the ``$DVPDL`` arrives, so the attitude published with a velocity is not a ping old)."""
         truth = self.faults.hold(self._truth_source(t))
         assert self._boot_t is not None
@@ -478,7 +478,7 @@ class Dvl75Emulator:
                     raise ValueError("expected ip:port")
                 flash.host_address = f"{_ipv4(ip)}:{int(port)}"
             elif k == "UNICAST-TO-ME":
-                pass  # Ethernet only; undefined on serial (hardware.md §1.4)
+                pass  # Ethernet only; undefined on serial (docs/devices.md §1.4)
             elif k == "SET-POSITION":
                 lat_s, sep, lon_s = arg.partition(",")
                 if not sep:
@@ -536,7 +536,7 @@ class Dvl75Emulator:
 
 def _on_off(arg: str) -> bool:
     """SEND-/RETWEET- argument: ``OFF`` -> False, anything starting with ``ON`` -> True ("parser is
-    more lenient with on than off", hardware.md §1.4)."""
+    more lenient with on than off", docs/devices.md §1.4)."""
     a = arg.strip().upper()
     if a == "OFF":
         return False

@@ -1,13 +1,13 @@
 """Cerulean DVL-75 serial protocol: pure framing, checksum, sentence parsing/formatting, commands.
 
-This is the protocol layer of the DVL-75 driver (design.md §2): bytes in, typed records out, and the
+This is the protocol layer of the DVL-75 driver (docs/architecture.md §2): bytes in, typed records out, and the
 reverse for the commands a driver sends.  No I/O, no clocks, no ROS.
 
-Source: /work/shared/reference/hardware.md §0, §1.2-§1.5 (tags [D3]-[D21] there).
+Source: docs/devices.md §0, §1.2-§1.5 (tags [D3]-[D21] there).
 
 What is implemented
 - NMEA-style framing: ``$`` + sentence id + ``,`` + fields + ``*`` + two hex digits + CR LF; the checksum
-  is the XOR of every byte strictly between ``$`` and ``*`` (hardware.md §1.2, verified on real
+  is the XOR of every byte strictly between ``$`` and ``*`` (docs/devices.md §1.2, verified on real
   captures).  Uppercase hex is emitted; both cases are accepted.
 - ``$DVPDL`` (position/angle deltas, §1.3.1) and ``$DVEXT`` (extended data, §1.3.2) are parsed
   completely into dataclasses with SI field names.  ``$DVEXT`` keeps its trailing empty field
@@ -19,11 +19,11 @@ What is implemented
 - :class:`DvlLineFramer` splits an arbitrary byte stream into lines (split on LF, strip CR, as the
   BlueOS driver does [D17]) and counts discarded garbage bytes.
 - Command builders for host -> DVL lines (§1.4).  The commands are plain ASCII lines terminated by
-  LF with an optional CR; they carry **no** checksum (hardware.md §1.4 shows none, and the BlueOS
+  LF with an optional CR; they carry **no** checksum (docs/devices.md §1.4 shows none, and the BlueOS
   driver sends them bare).  Only NMEA sentences (``$GPRMC`` used as a position command) carry one,
   built with :func:`format_sentence`.
 
-Vendor-document errors handled here (hardware.md §0 item 2, §1.2): the ``$DVPDL`` example printed
+Vendor-document errors handled here (docs/devices.md §0 item 2, §1.2): the ``$DVPDL`` example printed
 in Cerulean's documentation ends in ``*22`` although its checksum is ``6E``; this module rejects it,
 as it rejects every sentence whose checksum does not verify.  The ``$DVEXT`` format line in the
 vendor doc shows ``u.uu`` (two decimals) for velocity-up, but real captures print three; the
@@ -33,7 +33,7 @@ Why our own code: there is no maintained Python parser for these sentences (the 
 [D18] only adds two sentence types and raises generic errors), and the checksum, signed fields and
 trailing empty field need exact control.
 
-Frames (hardware.md §1.3.1, §1.5)
+Frames (docs/devices.md §1.3.1, §1.5)
 - ``$DVPDL`` deltas: DVL "ArduSub" vehicle frame = FRD: X bow (+forward), Y starboard (+right), Z down,
   rotations right-handed about those axes (i.e. the Fossen/SNAME body frame).
 - ``$DVEXT`` roll/pitch/heading: DVL Euler angles about X bow, Y port, Z up (right-handed, so positive
@@ -93,7 +93,7 @@ __all__ = [
     "iter_records",
 ]
 
-#: Line terminator the DVL uses and the driver sends (CR LF; hardware.md §1.2, §1.4).
+#: Line terminator the DVL uses and the driver sends (CR LF; docs/devices.md §1.2, §1.4).
 LINE_TERMINATOR = b"\r\n"
 #: Beam order of the per-beam ``$DVEXT`` fields: A = port, B = stern, C = starboard, D = bow (§1.3.2).
 BEAM_NAMES = ("port", "stern", "starboard", "bow")
@@ -112,7 +112,7 @@ _HEX = b"0123456789abcdefABCDEF"
 
 class DvlParseError(ValueError):
     """Raised for any DVL line, sentence or command that cannot be parsed (bad checksum, wrong field
-    count, malformed number, out-of-range value, non-printable bytes).  Source: hardware.md §1.2."""
+    count, malformed number, out-of-range value, non-printable bytes).  Source: docs/devices.md §1.2."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -122,7 +122,7 @@ class DvlParseError(ValueError):
 
 @dataclass(frozen=True)
 class DvlPositionDelta:
-    """One ``$DVPDL`` sentence: motion since the previous ``$DVPDL`` (hardware.md §1.3.1).
+    """One ``$DVPDL`` sentence: motion since the previous ``$DVPDL`` (docs/devices.md §1.3.1).
 
     All deltas are in the DVL's ArduSub vehicle frame, which is FRD (X bow, Y starboard, Z down;
     rotations right-handed about those axes), after the SET-SENSOR-ORIENTATION rotation [D4][D20].
@@ -149,7 +149,7 @@ class DvlPositionDelta:
 
     def velocity_frd_m_s(self) -> Optional[Tuple[float, float, float]]:
         """Mean velocity over the interval, (surge, sway, heave) m/s in FRD: position delta / dtu
-        (the usage in [D22], hardware.md §1.3.1).  ``None`` when ``confidence_pct`` is 0 or
+        (the usage in [D22], docs/devices.md §1.3.1).  ``None`` when ``confidence_pct`` is 0 or
         ``delta_time_s`` is not positive (no usable data)."""
         if self.confidence_pct <= 0 or self.delta_time_s <= 0.0:
             return None
@@ -159,7 +159,7 @@ class DvlPositionDelta:
 
 @dataclass(frozen=True)
 class DvlExtended:
-    """One ``$DVEXT`` sentence (hardware.md §1.3.2); every field, in SI units.
+    """One ``$DVEXT`` sentence (docs/devices.md §1.3.2); every field, in SI units.
 
     Per-beam tuples are ordered A, B, C, D = port, stern, starboard, bow (:data:`BEAM_NAMES`).
     Check ``locked`` (and ``beam_locked``) before using altitude, velocities or ranges [D5].
@@ -211,7 +211,7 @@ class DvlExtended:
 
 @dataclass(frozen=True)
 class DvlGprmc:
-    """A ``$GPRMC`` sentence as emitted by the DVL's GPS emulation (hardware.md §1.3.3) or sent to it
+    """A ``$GPRMC`` sentence as emitted by the DVL's GPS emulation (docs/devices.md §1.3.3) or sent to it
     as a position command (§1.4).
 
     Attributes:
@@ -237,7 +237,7 @@ class DvlGprmc:
 class DvlText:
     """Free-form text from the DVL: a ``$DVTXT,<text>`` sentence (``sentence_id == 'DVTXT'``) or a bare
     printable line from older firmware (``sentence_id == ''``), e.g. CONFIGURATION output
-    (hardware.md §1.2, [D10][D3]).  ``checksum_ok`` is None when the line carried no checksum."""
+    (docs/devices.md §1.2, [D10][D3]).  ``checksum_ok`` is None when the line carried no checksum."""
 
     text: str
     sentence_id: str
@@ -246,7 +246,7 @@ class DvlText:
 
 @dataclass(frozen=True)
 class DvlUnknown:
-    """Any other line sharing the stream, kept rather than rejected (hardware.md §1.2): unknown
+    """Any other line sharing the stream, kept rather than rejected (docs/devices.md §1.2): unknown
     ``$`` sentences (``$DVNVM``, ``$DVKFA``...), ``IMU:`` lines (``sentence_id == 'IMU'``) and re-tweeted
     ``GPS:$...`` lines (``sentence_id == 'GPS'``).
 
@@ -269,7 +269,7 @@ DvlRecord = Union[DvlPositionDelta, DvlExtended, DvlGprmc, DvlText, DvlUnknown]
 @dataclass(frozen=True)
 class DvlCommand:
     """A host -> DVL command line split into an upper-cased keyword and its argument text
-    (hardware.md §1.4).  ``?``-lines map to keyword ``CONFIGURATION``; a ``$GPRMC`` sentence maps to
+    (docs/devices.md §1.4).  ``?``-lines map to keyword ``CONFIGURATION``; a ``$GPRMC`` sentence maps to
     keyword ``$GPRMC`` with the whole sentence as argument."""
 
     keyword: str
@@ -294,13 +294,13 @@ def nmea_checksum(body: Union[bytes, str]) -> int:
         body: sentence body without ``$`` and ``*hh``; str is encoded as UTF-8.
     Returns:
         int 0..255.
-    Source: hardware.md §1.2 ("NMEA standard", verified on real captures [D21]).
+    Source: docs/devices.md §1.2 ("NMEA standard", verified on real captures [D21]).
     """
     return reduce(lambda acc, b: acc ^ b, _to_bytes(body), 0)
 
 
 def format_sentence(body: str, *, with_checksum: bool = True) -> bytes:
-    """Build one complete sentence ``$<body>*HH\\r\\n`` (uppercase hex, hardware.md §1.2).
+    """Build one complete sentence ``$<body>*HH\\r\\n`` (uppercase hex, docs/devices.md §1.2).
 
     Args:
         body: printable ASCII without ``$``, ``*``, CR or LF, e.g. ``"DVPDL,1,2,..."``.
@@ -324,7 +324,7 @@ def split_sentence(line: Union[bytes, bytearray, str]) -> Tuple[str, Tuple[str, 
 
     Raises:
         DvlParseError: line does not start with ``$``, has a malformed sentence id, or its checksum
-            does not verify (hardware.md §1.2).
+            does not verify (docs/devices.md §1.2).
     """
     raw = _to_bytes(line).rstrip(b"\r\n")
     if not raw.startswith(b"$"):
@@ -390,7 +390,7 @@ def _require_checksum(sentence_id: str, checksum_ok: Optional[bool]) -> None:
 
 
 def parse_dvpdl(fields: Sequence[str]) -> DvlPositionDelta:
-    """Parse the 9 data fields of ``$DVPDL`` (``tu,dtu,adr,adp,ady,pdx,pdy,pdz,c``; hardware.md §1.3.1).
+    """Parse the 9 data fields of ``$DVPDL`` (``tu,dtu,adr,adp,ady,pdx,pdy,pdz,c``; docs/devices.md §1.3.1).
 
     Args:
         fields: the fields after the sentence id (checksum already verified and removed).
@@ -420,7 +420,7 @@ def parse_dvpdl(fields: Sequence[str]) -> DvlPositionDelta:
 
 
 def format_dvpdl(record: DvlPositionDelta) -> bytes:
-    """Format a ``$DVPDL`` sentence exactly as the DVL prints it (hardware.md §1.3.1 "Observed
+    """Format a ``$DVPDL`` sentence exactly as the DVL prints it (docs/devices.md §1.3.1 "Observed
     format"): integer µs times, ``%.6f`` angle deltas, ``%.3f`` position deltas, integer confidence,
     ``*HH`` checksum, CR LF.  Quantisation: 1 µs, 1e-6 rad, 1 mm.
 
@@ -448,7 +448,7 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
 
 
 def parse_dvext(fields: Sequence[str]) -> DvlExtended:
-    """Parse the data fields of ``$DVEXT`` (hardware.md §1.3.2): 34 fields plus the trailing empty
+    """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty
     field 35 that real sentences carry (``...,rd,*hh``); a sentence without the trailing comma is
     accepted too.
 
@@ -502,7 +502,7 @@ def _fmt_gain(gain_db: float) -> str:
 def format_dvext(record: DvlExtended) -> bytes:
     """Format a ``$DVEXT`` sentence as the DVL prints it, including the trailing empty field.
 
-    Number formats follow the real capture in hardware.md §1.2 (the vendor format line differs for
+    Number formats follow the real capture in docs/devices.md §1.2 (the vendor format line differs for
     velocity-up): attitude ``%.1f`` deg, data skips integer, velocity-up ``%.3f``, altitude ``%.2f``,
     north/east ``%.3f``, lat/lon ``%.9f``, elapsed time ``%.3f``, quaternion ``%.6f``, gains integer
     dB, beam velocities ``%.4f``, beam ranges ``%.3f``.
@@ -568,7 +568,7 @@ def _parse_ddmm(value: str, hemi: str, deg_digits: int, name: str, positive: str
 
 
 def parse_gprmc(fields: Sequence[str]) -> DvlGprmc:
-    """Parse the data fields of ``$GPRMC`` (hardware.md §1.3.3): time, status, lat, N/S, lon, E/W,
+    """Parse the data fields of ``$GPRMC`` (docs/devices.md §1.3.3): time, status, lat, N/S, lon, E/W,
     speed (knots), track (deg), date, magnetic variation, E/W, and an optional mode field.
 
     Raises:
@@ -598,7 +598,7 @@ def parse_gprmc(fields: Sequence[str]) -> DvlGprmc:
 def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float],
                  longitude_deg: Optional[float], speed_m_s: float, track_rad: float,
                  date_ddmmyy: str = "010120") -> bytes:
-    """Format ``$GPRMC`` as the DVL's GPS emulation does (hardware.md §1.3.3): ``hhmmss.ss`` time,
+    """Format ``$GPRMC`` as the DVL's GPS emulation does (docs/devices.md §1.3.3): ``hhmmss.ss`` time,
     lat ``ddmm.mmmm`` + N/S, lon ``dddmm.mmmm`` + E/W (empty when None), speed in knots and track in
     degrees (``%.2f``), date (the DVL always sends ``010120``), empty magnetic-variation fields.
 
@@ -655,7 +655,7 @@ def _printable(raw: bytes) -> bool:
 def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
     """Parse one line from the DVL (terminator optional) into a typed record.
 
-    Dispatch (hardware.md §1.2-§1.3): ``$DVPDL`` -> :class:`DvlPositionDelta`, ``$DVEXT`` ->
+    Dispatch (docs/devices.md §1.2-§1.3): ``$DVPDL`` -> :class:`DvlPositionDelta`, ``$DVEXT`` ->
     :class:`DvlExtended`, ``$GPRMC`` -> :class:`DvlGprmc` (these three require a valid checksum),
     ``$DVTXT`` and bare printable lines -> :class:`DvlText`, anything else (``$DVNVM``, ``IMU:``,
     ``GPS:$``, unknown ``$`` sentences) -> :class:`DvlUnknown`.  Bytes that are not UTF-8 are
@@ -700,7 +700,7 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
 
 
 class DvlLineFramer:
-    """Incremental line splitter for the DVL byte stream (hardware.md §1.2: split on LF, strip CR).
+    """Incremental line splitter for the DVL byte stream (docs/devices.md §1.2: split on LF, strip CR).
 
     Feed arbitrary chunks; complete lines come out without CR/LF.  Garbage handling:
     - bytes before the last ``$`` of a line are discarded (resynchronisation after line noise or a
@@ -789,7 +789,7 @@ class DvlLineFramer:
 
 
 def parse_command(line: Union[bytes, bytearray, str]) -> DvlCommand:
-    """Split one host command line into keyword and argument (hardware.md §1.4: one ASCII line per
+    """Split one host command line into keyword and argument (docs/devices.md §1.4: one ASCII line per
     command, LF-terminated, CR ignored).  Keywords are upper-cased (case sensitivity of the real
     firmware is undocumented).
 
@@ -811,7 +811,7 @@ def parse_command(line: Union[bytes, bytearray, str]) -> DvlCommand:
 
 
 def build_command(keyword: str, argument: Optional[str] = None) -> bytes:
-    """Build one command line ``KEYWORD[ argument]\\r\\n`` (hardware.md §1.4; CR LF as the BlueOS
+    """Build one command line ``KEYWORD[ argument]\\r\\n`` (docs/devices.md §1.4; CR LF as the BlueOS
     driver sends [D17]).  Commands carry no checksum.
 
     Raises:
@@ -841,7 +841,7 @@ _SEND_TARGETS = ("DVPDL", "DVEXT", "GPRMC", "FREEFORM", "DVKFA", "DVKFB", "DVFKA
 
 
 def cmd_send(message: str, enabled: bool) -> bytes:
-    """``SEND-<message> ON|OFF`` (hardware.md §1.4, sticky).  ``message`` is one of DVPDL, DVEXT,
+    """``SEND-<message> ON|OFF`` (docs/devices.md §1.4, sticky).  ``message`` is one of DVPDL, DVEXT,
     GPRMC, FREEFORM, DVKFA/DVKFB (the command table spells DVFKA/DVFKB, possibly a typo [UNVERIFIED];
     both spellings pass through verbatim).
 
@@ -855,7 +855,7 @@ def cmd_send(message: str, enabled: bool) -> bytes:
 
 
 def cmd_retweet(source: str, enabled: bool) -> bytes:
-    """``RETWEET-GPS|RETWEET-IMU ON|OFF`` (hardware.md §1.4, sticky).
+    """``RETWEET-GPS|RETWEET-IMU ON|OFF`` (docs/devices.md §1.4, sticky).
 
     Raises:
         ValueError: source not GPS or IMU.
@@ -867,7 +867,7 @@ def cmd_retweet(source: str, enabled: bool) -> bytes:
 
 
 def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: float) -> bytes:
-    """``SET-SENSOR-ORIENTATION <roll>,<pitch>,<heading>`` in degrees (hardware.md §1.4): the
+    """``SET-SENSOR-ORIENTATION <roll>,<pitch>,<heading>`` in degrees (docs/devices.md §1.4): the
     sensor -> vehicle rotation, each angle within ±180 deg; factory (0,0,0) = downward-looking.
 
     Raises:
@@ -881,7 +881,7 @@ def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: f
 
 
 def cmd_set_speed_of_sound(speed_of_sound_m_s: float) -> bytes:
-    """``SET-SPEED-OF-SOUND <m/s>`` (hardware.md §1.4: 1100..1950 m/s, sticky; factory 1484).
+    """``SET-SPEED-OF-SOUND <m/s>`` (docs/devices.md §1.4: 1100..1950 m/s, sticky; factory 1484).
 
     Raises:
         ValueError: outside 1100..1950 m/s.
@@ -903,7 +903,7 @@ def cmd_set_velocity_adjustment(factor: float) -> bytes:
 
 
 def cmd_declination(declination_rad: float) -> bytes:
-    """``DECLINATION <deg>`` (hardware.md §1.4; + = magnetic north east of true, sticky).
+    """``DECLINATION <deg>`` (docs/devices.md §1.4; + = magnetic north east of true, sticky).
 
     Raises:
         ValueError: outside ±pi rad or non-finite.
@@ -914,7 +914,7 @@ def cmd_declination(declination_rad: float) -> bytes:
 
 
 def cmd_set_position(latitude_deg: float, longitude_deg: float) -> bytes:
-    """``SET-POSITION <lat>,<lon>`` in decimal degrees (hardware.md §1.4; counts as a GPS fix, fresh
+    """``SET-POSITION <lat>,<lon>`` in decimal degrees (docs/devices.md §1.4; counts as a GPS fix, fresh
     for 1.5 s).
 
     Raises:
@@ -926,7 +926,7 @@ def cmd_set_position(latitude_deg: float, longitude_deg: float) -> bytes:
 
 
 def cmd_suppress_gps(duration_s: float) -> bytes:
-    """``SUPPRESS-GPS <s>``: ignore the GPS while submerging (hardware.md §1.4).
+    """``SUPPRESS-GPS <s>``: ignore the GPS while submerging (docs/devices.md §1.4).
 
     Raises:
         ValueError: negative or non-finite duration.
@@ -937,7 +937,7 @@ def cmd_suppress_gps(duration_s: float) -> bytes:
 
 
 def cmd_baud_rate(baud: int) -> bytes:
-    """``BAUD-RATE <n>`` (hardware.md §1.1/§1.4: 9600..921600, sticky, applied at next boot).
+    """``BAUD-RATE <n>`` (docs/devices.md §1.1/§1.4: 9600..921600, sticky, applied at next boot).
 
     Raises:
         ValueError: outside 9600..921600.
@@ -948,22 +948,22 @@ def cmd_baud_rate(baud: int) -> bytes:
 
 
 def cmd_pause() -> bytes:
-    """``PAUSE``: stop pinging (hardware.md §1.4)."""
+    """``PAUSE``: stop pinging (docs/devices.md §1.4)."""
     return build_command("PAUSE")
 
 
 def cmd_resume() -> bytes:
-    """``RESUME``: restart pinging (hardware.md §1.4)."""
+    """``RESUME``: restart pinging (docs/devices.md §1.4)."""
     return build_command("RESUME")
 
 
 def cmd_reboot() -> bytes:
-    """``REBOOT``: restart all processors (hardware.md §1.4)."""
+    """``REBOOT``: restart all processors (docs/devices.md §1.4)."""
     return build_command("REBOOT")
 
 
 def cmd_configuration() -> bytes:
-    """``CONFIGURATION``: dump the configuration as free-form lines (hardware.md §1.4)."""
+    """``CONFIGURATION``: dump the configuration as free-form lines (docs/devices.md §1.4)."""
     return build_command("CONFIGURATION")
 
 
@@ -975,7 +975,7 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
                      retweet_gps: bool = False,
                      request_configuration: bool = True) -> list:
     """The command lines a driver sends at start-up, modelled on the BlueOS sequence [D17]
-    (hardware.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT``,
+    (docs/devices.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT``,
     ``SEND-GPRMC``, ``RETWEET-IMU``, ``RETWEET-GPS``, ``SET-SENSOR-ORIENTATION``, optionally
     ``SET-SPEED-OF-SOUND``, ``RESUME`` and optionally ``CONFIGURATION``.
 

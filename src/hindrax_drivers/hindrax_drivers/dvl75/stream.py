@@ -3,7 +3,7 @@
 The one decoding path of the DVL driver: the ROS node (:mod:`hindrax_drivers.dvl75.node`) and
 ``hindrax decode dvl75`` both use :class:`DvlStreamDecoder`, which wraps the protocol layer's
 :class:`~hindrax_drivers.dvl75.protocol.DvlLineFramer` and :func:`~hindrax_drivers.dvl75.protocol.parse_line`
-(hardware.md §1.2-§1.3) and adds the accounting a driver reports in its diagnostics.
+(docs/devices.md §1.2-§1.3) and adds the accounting a driver reports in its diagnostics.
 
 Error kinds (keys of :attr:`DvlStreamDecoder.counts`):
 
@@ -12,7 +12,7 @@ Error kinds (keys of :attr:`DvlStreamDecoder.counts`):
 - ``truncated``: sentences cut short: a ``$`` whose sentence never reached its line end because another
   sentence started first (the framer keeps only the last ``$`` of a line), a partial line dropped at a
   reconnect, or a ``$`` data sentence ending without its ``*hh`` checksum.
-- ``bad_checksum``: complete ``$...*hh`` sentences whose checksum does not verify (hardware.md §1.2:
+- ``bad_checksum``: complete ``$...*hh`` sentences whose checksum does not verify (docs/devices.md §1.2:
   XOR of the bytes between ``$`` and ``*``).
 - ``malformed``: sentences with a valid checksum whose fields do not parse (wrong count, bad number).
 - ``unknown_sentence``: well-formed lines of a type the driver does not use (``$DVNVM``, ``IMU:``,

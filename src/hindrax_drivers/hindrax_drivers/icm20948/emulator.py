@@ -1,6 +1,6 @@
 """ICM-20948 and AK09916 device emulators (register-exact), for tests and simulation.
 
-:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of hardware.md §4.8:
+:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of docs/devices.md §4.8:
 
 * four 128-byte banks selected by REG_BANK_SEL (0x7F in every bank, bits 5:4), WHO_AM_I = 0xEA,
   reset values PWR_MGMT_1 = 0x41 (asleep), LP_CONFIG = 0x40, ACCEL_CONFIG = 0x01,
@@ -44,13 +44,13 @@ ImuTruth = Callable[[float], "tuple[Sequence[float], Sequence[float], Sequence[f
 
 
 class Ak09916Emulator(RegisterPointerEmulator):
-    """AK09916 magnetometer register file (hardware.md §4.5, address 0x0C).
+    """AK09916 magnetometer register file (docs/devices.md §4.5, address 0x0C).
 
     Args:
         field_truth: ``t_s -> magnetic_field_t (3,)`` in the ICM accel/gyro frame; the emulator
             applies the axis flip of §4.7 (hx = Bx, hy = -By, hz = -Bz).
         clock: monotonic clock, s.
-        single_measurement_time_s: time from CNTL2 = 0x01 to DRDY (not in hardware.md; assumed).
+        single_measurement_time_s: time from CNTL2 = 0x01 to DRDY (not in docs/devices.md; assumed).
 
     Semantics: continuous modes measure every 1/rate s from the mode write; a measurement that
     finds unread data (DRDY = 1), or arrives while a read is in progress (a data register was read
@@ -129,7 +129,7 @@ class Ak09916Emulator(RegisterPointerEmulator):
 
     # ------------------------------------------------------------------ register file
     def _next_pointer(self, register: int) -> int:
-        """Auto-increment 00..03 -> 10..18 -> 00; 30..32 -> 30 (hardware.md §4.5)."""
+        """Auto-increment 00..03 -> 10..18 -> 00; 30..32 -> 30 (docs/devices.md §4.5)."""
         if register == 0x03:
             return 0x10
         if register == 0x18:
@@ -177,7 +177,7 @@ class Ak09916Emulator(RegisterPointerEmulator):
 
 
 class _AuxBusPort:
-    """The AK09916 as seen at 0x0C on the host bus: present only in bypass mode (hardware.md §4.6a)."""
+    """The AK09916 as seen at 0x0C on the host bus: present only in bypass mode (docs/devices.md §4.6a)."""
 
     def __init__(self, icm: "Icm20948Emulator") -> None:
         self._icm = icm
@@ -381,7 +381,7 @@ class Icm20948Emulator(RegisterPointerEmulator):
         self._set(p.I2C_MST_STATUS, self._get(p.I2C_MST_STATUS) | status)
 
     def _run_master_cycle(self) -> None:
-        """One I2C-master cycle: SLV4 (if pending), then SLV0..SLV3 in order (hardware.md §4.6b)."""
+        """One I2C-master cycle: SLV4 (if pending), then SLV0..SLV3 in order (docs/devices.md §4.6b)."""
         self._run_slv4()
         offset = 0
         status = 0

@@ -4,16 +4,16 @@ Register map with banks, identity values, the reset/wake and configuration seque
 (lists of register writes), full-scale / DLPF / sample-rate register values from SI settings,
 conversion of raw burst reads to SI (accel m/s^2, gyro rad/s, temperature degC, magnetic field T
 rotated into the accel/gyro frame), the AK09916 status flags, and the device-side quantisation
-used by the emulator. Everything is from hardware.md §4 (datasheet DS-000189 [I1], SparkFun [I2],
+used by the emulator. Everything is from docs/devices.md §4 (datasheet DS-000189 [I1], SparkFun [I2],
 Pimoroni [I3], PX4 [I4]).
 
 Why our own code: the available Python packages (Pimoroni ``icm20948``) do I/O inside the
 conversion code, hard-code one configuration and write a questionable I2C_MST_CTRL value
-(hardware.md §4.6); the drivers need a pure, testable layer shared with the emulator.
+(docs/devices.md §4.6); the drivers need a pure, testable layer shared with the emulator.
 
-Facts used that hardware.md marks as unverified or that go beyond it are flagged in the
+Facts used that docs/devices.md marks as unverified or that go beyond it are flagged in the
 docstrings: gyro base rate 1125 Hz (§4.4 discrepancy), gyro ODR with the DLPF bypassed (9 kHz,
-datasheet spec table, not in hardware.md), INT_STATUS_1 / I2C_MST_STATUS bit positions (datasheet
+datasheet spec table, not in docs/devices.md), INT_STATUS_1 / I2C_MST_STATUS bit positions (datasheet
 register descriptions), temperature room offset 0 (§4.4).
 """
 
@@ -83,7 +83,7 @@ FIFO_COUNTL = Register(0, 0x71, "FIFO_COUNTL")
 FIFO_R_W = Register(0, 0x72, "FIFO_R_W")
 DATA_RDY_STATUS = Register(0, 0x74, "DATA_RDY_STATUS")
 FIFO_CFG = Register(0, 0x76, "FIFO_CFG")
-#: REG_BANK_SEL is at 0x7F in every bank, bank in bits 5:4 (hardware.md §4.1).
+#: REG_BANK_SEL is at 0x7F in every bank, bank in bits 5:4 (docs/devices.md §4.1).
 REG_BANK_SEL_ADDRESS = 0x7F
 EXT_SLV_SENS_DATA_LENGTH = 24
 
@@ -115,7 +115,7 @@ I2C_SLV4_DI = Register(3, 0x17, "I2C_SLV4_DI")
 
 
 def slave_registers(slave: int) -> tuple[Register, Register, Register, Register]:
-    """(I2C_SLVn_ADDR, _REG, _CTRL, _DO) for slave n = 0..3 (bank 3, 0x03 + 4n; hardware.md §4.2)."""
+    """(I2C_SLVn_ADDR, _REG, _CTRL, _DO) for slave n = 0..3 (bank 3, 0x03 + 4n; docs/devices.md §4.2)."""
     if not isinstance(slave, int) or not 0 <= slave <= 3:
         raise Icm20948Error(f"I2C master slave index must be 0..3, got {slave!r}")
     base = 0x03 + 4 * slave
@@ -139,9 +139,9 @@ PWR_MGMT_1_CLKSEL_MASK = 0x07
 CLKSEL_AUTO = 0x01
 INT_PIN_CFG_BYPASS_EN = 0x02
 INT_ENABLE_1_RAW_DATA_0_RDY_EN = 0x01
-#: INT_STATUS_1 bit 0 RAW_DATA_0_RDY_INT (datasheet register description; not in hardware.md).
+#: INT_STATUS_1 bit 0 RAW_DATA_0_RDY_INT (datasheet register description; not in docs/devices.md).
 INT_STATUS_1_RAW_DATA_0_RDY = 0x01
-#: I2C_MST_STATUS bits (hardware.md gives bit 7 PASS_THROUGH; the others follow the datasheet
+#: I2C_MST_STATUS bits (docs/devices.md gives bit 7 PASS_THROUGH; the others follow the datasheet
 #: register description: 6 SLV4_DONE, 5 LOST_ARB, 4 SLV4_NACK, 3..0 SLV3..SLV0_NACK).
 I2C_MST_STATUS_PASS_THROUGH = 0x80
 I2C_MST_STATUS_SLV4_DONE = 0x40
@@ -157,10 +157,10 @@ I2C_SLV4_CTRL_INT_EN = 0x40
 I2C_MST_CTRL_MULT_MST_EN = 0x80
 I2C_MST_CTRL_P_NSR = 0x10
 I2C_MST_CTRL_CLK_MASK = 0x0F
-#: P_NSR | CLK = 7 (345.6 kHz), the recommended value used by SparkFun (hardware.md §4.6).
+#: P_NSR | CLK = 7 (345.6 kHz), the recommended value used by SparkFun (docs/devices.md §4.6).
 I2C_MST_CTRL_RECOMMENDED = I2C_MST_CTRL_P_NSR | 0x07
 
-#: Reset values that differ from 0 (hardware.md §4.2, §4.8). GYRO_CONFIG_1 = 0x01 is UNVERIFIED.
+#: Reset values that differ from 0 (docs/devices.md §4.2, §4.8). GYRO_CONFIG_1 = 0x01 is UNVERIFIED.
 RESET_VALUES: dict[Register, int] = {
     WHO_AM_I: WHO_AM_I_VALUE,
     LP_CONFIG: 0x40,
@@ -170,30 +170,30 @@ RESET_VALUES: dict[Register, int] = {
 }
 
 # ------------------------------------------------------------------------------ scales
-#: Accel sensitivity per ACCEL_FS_SEL 0..3 (+-2/4/8/16 g) in LSB/g [I1 p12] (hardware.md §4.4).
+#: Accel sensitivity per ACCEL_FS_SEL 0..3 (+-2/4/8/16 g) in LSB/g [I1 p12] (docs/devices.md §4.4).
 ACCEL_LSB_PER_G = (16384.0, 8192.0, 4096.0, 2048.0)
 ACCEL_RANGE_G = (2.0, 4.0, 8.0, 16.0)
 #: Gyro sensitivity per GYRO_FS_SEL 0..3 (+-250/500/1000/2000 dps) in LSB/(deg/s) [I2][I3].
 GYRO_LSB_PER_DPS = (131.0, 65.5, 32.8, 16.4)
 GYRO_RANGE_DPS = (250.0, 500.0, 1000.0, 2000.0)
-#: Temperature: degC = (TEMP_OUT - offset)/333.87 + 21, offset taken as 0 (hardware.md §4.4, PX4).
+#: Temperature: degC = (TEMP_OUT - offset)/333.87 + 21, offset taken as 0 (docs/devices.md §4.4, PX4).
 TEMP_SENSITIVITY_LSB_PER_C = 333.87
 TEMP_OFFSET_C = 21.0
-#: AK09916: 0.15 uT/LSB, valid range +-32752 counts (hardware.md §4.5).
+#: AK09916: 0.15 uT/LSB, valid range +-32752 counts (docs/devices.md §4.5).
 AK09916_TESLA_PER_LSB = 0.15e-6
 AK09916_MAX_COUNTS = 32752
 #: Standard gravity used for the g <-> m/s^2 conversion.
 GRAVITY_M_S2 = 9.80665
 
-#: Base output data rate of accel and gyro with FCHOICE = 1: 1125 Hz (hardware.md §4.4; the
+#: Base output data rate of accel and gyro with FCHOICE = 1: 1125 Hz (docs/devices.md §4.4; the
 #: datasheet's "1.1 kHz" for the gyro is the documented discrepancy, resolved as 1125 Hz).
 BASE_ODR_HZ = 1125.0
 #: Accel ODR with the DLPF bypassed (FCHOICE = 0) [I1 p12].
 ACCEL_BYPASS_ODR_HZ = 4500.0
-#: Gyro ODR with the DLPF bypassed: 9 kHz, from the datasheet spec table (NOT in hardware.md;
+#: Gyro ODR with the DLPF bypassed: 9 kHz, from the datasheet spec table (NOT in docs/devices.md;
 #: only affects how often the emulator's data registers change).
 GYRO_BYPASS_ODR_HZ = 9000.0
-#: DLPF 3 dB bandwidths in Hz per DLPFCFG 0..7 with FCHOICE = 1 (hardware.md §4.4, from [I2]).
+#: DLPF 3 dB bandwidths in Hz per DLPFCFG 0..7 with FCHOICE = 1 (docs/devices.md §4.4, from [I2]).
 GYRO_DLPF_3DB_HZ = (196.6, 151.8, 119.5, 51.2, 23.9, 11.6, 5.7, 361.4)
 ACCEL_DLPF_3DB_HZ = (246.0, 246.0, 111.4, 50.4, 23.9, 11.5, 5.7, 473.0)
 
@@ -225,16 +225,16 @@ AK_MODE_CONTINUOUS_20HZ = 0x04
 AK_MODE_CONTINUOUS_50HZ = 0x06
 AK_MODE_CONTINUOUS_100HZ = 0x08
 AK_MODE_SELF_TEST = 0x10
-#: Continuous-mode rates (hardware.md §4.5 CNTL2 table).
+#: Continuous-mode rates (docs/devices.md §4.5 CNTL2 table).
 AK_CONTINUOUS_MODE_RATE_HZ = {AK_MODE_CONTINUOUS_10HZ: 10.0, AK_MODE_CONTINUOUS_20HZ: 20.0,
                               AK_MODE_CONTINUOUS_50HZ: 50.0, AK_MODE_CONTINUOUS_100HZ: 100.0}
-#: Wait after an AK09916 soft reset before the next command. Not given in hardware.md (SparkFun
+#: Wait after an AK09916 soft reset before the next command. Not given in docs/devices.md (SparkFun
 #: polls CNTL3 until it reads 0); 1 ms is our assumption, enough for the emulator (instant reset).
 AK_RESET_WAIT_S = 0.001
 
 
 def bank_select_value(bank: int) -> int:
-    """REG_BANK_SEL value for ``bank`` 0..3: ``bank << 4`` (hardware.md §4.1)."""
+    """REG_BANK_SEL value for ``bank`` 0..3: ``bank << 4`` (docs/devices.md §4.1)."""
     if not isinstance(bank, int) or not 0 <= bank <= 3:
         raise Icm20948Error(f"bank must be 0..3, got {bank!r}")
     return bank << 4
@@ -242,14 +242,14 @@ def bank_select_value(bank: int) -> int:
 
 # ------------------------------------------------------------------------------ configuration
 def accel_odr_hz(smplrt_div: int, fchoice: int) -> float:
-    """Accel output data rate: 1125/(1 + div) with FCHOICE = 1, 4500 Hz bypassed (hardware.md §4.4)."""
+    """Accel output data rate: 1125/(1 + div) with FCHOICE = 1, 4500 Hz bypassed (docs/devices.md §4.4)."""
     if not fchoice:
         return ACCEL_BYPASS_ODR_HZ
     return BASE_ODR_HZ / (1 + (int(smplrt_div) & 0xFFF))
 
 
 def gyro_odr_hz(smplrt_div: int, fchoice: int, dlpfcfg: int) -> float:
-    """Gyro output data rate (hardware.md §4.4).
+    """Gyro output data rate (docs/devices.md §4.4).
 
     1125/(1 + div) when FCHOICE = 1 and 0 < DLPFCFG < 7 (the divider only takes effect then);
     1125 Hz for FCHOICE = 1 with DLPFCFG 0 or 7; 9 kHz with the DLPF bypassed (flagged, see
@@ -264,7 +264,7 @@ def gyro_odr_hz(smplrt_div: int, fchoice: int, dlpfcfg: int) -> float:
 
 @dataclass(frozen=True)
 class ImuConfig:
-    """Accel/gyro configuration as register fields (hardware.md §4.2, §4.4).
+    """Accel/gyro configuration as register fields (docs/devices.md §4.2, §4.4).
 
     Attributes:
         accel_fs_sel, gyro_fs_sel: full-scale selectors 0..3.
@@ -366,7 +366,7 @@ def _pick_dlpf(bandwidth_hz: float | None, table: Sequence[float], what: str) ->
         return None
     if not (math.isfinite(bandwidth_hz) and bandwidth_hz > 0.0):
         raise Icm20948Error(f"{what} must be finite and > 0 (or None for DLPF bypass), got {bandwidth_hz}")
-    # DLPFCFG 1..6 only: with 0 or 7 the gyro sample-rate divider is ignored (hardware.md §4.4).
+    # DLPFCFG 1..6 only: with 0 or 7 the gyro sample-rate divider is ignored (docs/devices.md §4.4).
     return min(range(1, 7), key=lambda cfg: (abs(math.log(table[cfg] / bandwidth_hz)), cfg))
 
 
@@ -375,7 +375,7 @@ def imu_config_from_si(accel_range_m_s2: float = 2.0 * GRAVITY_M_S2,
                        accel_bandwidth_hz: float | None = 50.4,
                        gyro_bandwidth_hz: float | None = 51.2,
                        sample_rate_hz: float = 225.0) -> ImuConfig:
-    """Register fields from SI settings (hardware.md §4.4).
+    """Register fields from SI settings (docs/devices.md §4.4).
 
     * Full scale: the smallest range >= the requested magnitude (m/s^2, rad/s).
     * DLPF: DLPFCFG 1..6 whose 3 dB bandwidth is closest (log scale) to the request; ``None``
@@ -415,7 +415,7 @@ def flatten_writes(writes: Iterable[BankedWrite], current_bank: int | None = Non
 
     A bank select is emitted whenever the bank differs from the last selected one; the bank is
     treated as unknown at the start (``current_bank=None``) and after a DEVICE_RESET write (the
-    reset-to-bank-0 behaviour is only assumed in hardware.md §4.1), so it is always re-selected.
+    reset-to-bank-0 behaviour is only assumed in docs/devices.md §4.1), so it is always re-selected.
 
     Raises:
         Icm20948Error: a value outside 0..255 or an AK09916 register (bank None).
@@ -439,7 +439,7 @@ def flatten_writes(writes: Iterable[BankedWrite], current_bank: int | None = Non
 
 
 def reset_wake_sequence(reset_wait_s: float = 0.010, wake_wait_s: float = 0.020) -> list[BankedWrite]:
-    """Reset and wake (hardware.md §4.3 steps 2-4).
+    """Reset and wake (docs/devices.md §4.3 steps 2-4).
 
     PWR_MGMT_1 = 0x80 (DEVICE_RESET), wait ~10 ms; PWR_MGMT_1 = 0x01 (SLEEP = 0, CLKSEL auto),
     wait 20 ms (accel start-up from sleep [I1 p12]); PWR_MGMT_2 = 0x00 (all axes on). Check
@@ -453,7 +453,7 @@ def reset_wake_sequence(reset_wait_s: float = 0.010, wake_wait_s: float = 0.020)
 
 
 def configure_sequence(config: ImuConfig) -> list[BankedWrite]:
-    """Bank-2 writes for divider, DLPF and full scale (hardware.md §4.3 step 5, §4.2 bank 2)."""
+    """Bank-2 writes for divider, DLPF and full scale (docs/devices.md §4.3 step 5, §4.2 bank 2)."""
     return [
         BankedWrite(GYRO_SMPLRT_DIV, config.gyro_smplrt_div),
         BankedWrite(GYRO_CONFIG_1, config.gyro_config_1_value),
@@ -465,7 +465,7 @@ def configure_sequence(config: ImuConfig) -> list[BankedWrite]:
 
 def slave_read_writes(slave: int, address: int, register: int, length: int,
                       byte_swap: bool = False) -> list[BankedWrite]:
-    """Configure I2C master slave ``slave`` to read ``length`` bytes each cycle (hardware.md §4.6b).
+    """Configure I2C master slave ``slave`` to read ``length`` bytes each cycle (docs/devices.md §4.6b).
 
     The slave is disabled first, so no master cycle can run with a half-updated configuration;
     the bytes land in EXT_SLV_SENS_DATA in slave order.
@@ -480,7 +480,7 @@ def slave_read_writes(slave: int, address: int, register: int, length: int,
 
 def slave_write_writes(slave: int, address: int, register: int, value: int,
                        wait_s: float = 0.0) -> list[BankedWrite]:
-    """Make the I2C master write ``value`` to ``register`` of ``address`` (hardware.md §4.6b step 4).
+    """Make the I2C master write ``value`` to ``register`` of ``address`` (docs/devices.md §4.6b step 4).
 
     SLVn_ADDR = address (RNW = 0), SLVn_REG, SLVn_DO, then SLVn_CTRL = 0x81 (EN, length 1). The
     master repeats the write every cycle until the slave is reconfigured; wait ``wait_s`` (at
@@ -492,7 +492,7 @@ def slave_write_writes(slave: int, address: int, register: int, value: int,
 
 
 def mag_master_sequence(config: ImuConfig, mode: int = AK_MODE_CONTINUOUS_100HZ) -> list[BankedWrite]:
-    """Reach the AK09916 through the ICM I2C master (hardware.md §4.6 (b)).
+    """Reach the AK09916 through the ICM I2C master (docs/devices.md §4.6 (b)).
 
     BYPASS_EN = 0; I2C_MST_CTRL = 0x17; USER_CTRL = I2C_MST_EN; via SLV0: CNTL3 = SRST, then
     CNTL2 = ``mode``; finally SLV0 reads 9 bytes from ST1 (0x10) every cycle into
@@ -516,7 +516,7 @@ def mag_master_sequence(config: ImuConfig, mode: int = AK_MODE_CONTINUOUS_100HZ)
 
 
 def mag_bypass_sequence() -> list[BankedWrite]:
-    """Expose the AK09916 at 0x0C on the host bus (hardware.md §4.6 (a)): I2C_MST_EN = 0, BYPASS_EN = 1."""
+    """Expose the AK09916 at 0x0C on the host bus (docs/devices.md §4.6 (a)): I2C_MST_EN = 0, BYPASS_EN = 1."""
     return [BankedWrite(USER_CTRL, 0x00, note="I2C master off"),
             BankedWrite(INT_PIN_CFG, INT_PIN_CFG_BYPASS_EN, note="BYPASS_EN")]
 
@@ -530,7 +530,7 @@ def ak09916_direct_init_writes(mode: int = AK_MODE_CONTINUOUS_100HZ) -> list[Reg
 
 
 def ak09916_mode_for_rate(rate_hz: float) -> int:
-    """CNTL2 continuous mode for 10/20/50/100 Hz (hardware.md §4.5). Raises Icm20948Error otherwise."""
+    """CNTL2 continuous mode for 10/20/50/100 Hz (docs/devices.md §4.5). Raises Icm20948Error otherwise."""
     for mode, rate in AK_CONTINUOUS_MODE_RATE_HZ.items():
         if math.isclose(rate, rate_hz):
             return mode
@@ -553,7 +553,7 @@ class ImuSample:
     """One accel/gyro/temperature sample in the SENSOR (accel/gyro) frame.
 
     Attributes:
-        accel_m_s2: specific force, shape (3,), m/s^2 (+g on Z when flat, hardware.md §4.4).
+        accel_m_s2: specific force, shape (3,), m/s^2 (+g on Z when flat, docs/devices.md §4.4).
         gyro_rad_s: angular rate, shape (3,), rad/s.
         temperature_c: die temperature, degC.
         accel_raw, gyro_raw: int16 counts (x, y, z); temp_raw: int16.
@@ -575,7 +575,7 @@ def _saturated(raw: Sequence[int]) -> bool:
 
 
 def parse_sensor_block(data: bytes | Sequence[int], config: ImuConfig) -> ImuSample:
-    """Convert the 14-byte burst from ACCEL_XOUT_H (0x2D, bank 0) to SI (hardware.md §4.2, §4.4).
+    """Convert the 14-byte burst from ACCEL_XOUT_H (0x2D, bank 0) to SI (docs/devices.md §4.2, §4.4).
 
     Layout: accel X/Y/Z, gyro X/Y/Z, temperature, each int16 big-endian. accel = raw/LSB_per_g * g;
     gyro = raw/LSB_per_dps in rad/s; temperature = raw/333.87 + 21 degC.
@@ -598,7 +598,7 @@ def parse_sensor_block(data: bytes | Sequence[int], config: ImuConfig) -> ImuSam
 
 @dataclass(frozen=True)
 class MagSample:
-    """One AK09916 reading, rotated into the accel/gyro frame (hardware.md §4.7).
+    """One AK09916 reading, rotated into the accel/gyro frame (docs/devices.md §4.7).
 
     Attributes:
         magnetic_field_t: shape (3,), tesla, accel frame: (hx, -hy, -hz) * 0.15 uT.
@@ -624,7 +624,7 @@ def parse_ak09916_block(data: bytes | Sequence[int]) -> MagSample:
     """Convert the 9 bytes ST1, HXL..HZH, TMPS, ST2 (from 0x10) to a :class:`MagSample`.
 
     Works for both paths: the bypass burst read of 9 bytes from 0x0C:0x10, and
-    EXT_SLV_SENS_DATA_00..08 filled by SLV0 (hardware.md §4.5-4.7). Data are int16
+    EXT_SLV_SENS_DATA_00..08 filled by SLV0 (docs/devices.md §4.5-4.7). Data are int16
     little-endian; 0.15 uT/LSB; axes flipped to the accel frame (m_x = hx, m_y = -hy, m_z = -hz).
 
     Raises:
@@ -651,19 +651,19 @@ def _to_int16(scaled: np.ndarray) -> tuple[int, ...]:
 
 
 def accel_to_raw(specific_force_m_s2: Sequence[float], fs_sel: int) -> tuple[int, int, int]:
-    """Device side: round(a/g * LSB_per_g), clamped to int16 (hardware.md §4.8 item 3)."""
+    """Device side: round(a/g * LSB_per_g), clamped to int16 (docs/devices.md §4.8 item 3)."""
     f = _vector3(specific_force_m_s2, "specific_force_m_s2")
     return _to_int16(f / GRAVITY_M_S2 * ACCEL_LSB_PER_G[fs_sel])  # type: ignore[return-value]
 
 
 def gyro_to_raw(angular_rate_rad_s: Sequence[float], fs_sel: int) -> tuple[int, int, int]:
-    """Device side: round(w_dps * LSB_per_dps), clamped to int16 (hardware.md §4.8 item 3)."""
+    """Device side: round(w_dps * LSB_per_dps), clamped to int16 (docs/devices.md §4.8 item 3)."""
     w = _vector3(angular_rate_rad_s, "angular_rate_rad_s")
     return _to_int16(np.degrees(w) * GYRO_LSB_PER_DPS[fs_sel])  # type: ignore[return-value]
 
 
 def temperature_to_raw(temperature_c: float) -> int:
-    """Device side: round((T - 21) * 333.87), clamped to int16 (hardware.md §4.8 item 3)."""
+    """Device side: round((T - 21) * 333.87), clamped to int16 (docs/devices.md §4.8 item 3)."""
     if not math.isfinite(temperature_c):
         raise Icm20948Error(f"temperature_c must be finite, got {temperature_c}")
     return _to_int16(np.array([(temperature_c - TEMP_OFFSET_C) * TEMP_SENSITIVITY_LSB_PER_C]))[0]
@@ -672,8 +672,8 @@ def temperature_to_raw(temperature_c: float) -> int:
 def mag_to_raw(magnetic_field_t: Sequence[float]) -> tuple[tuple[int, int, int], bool]:
     """Device side: accel-frame field (T) -> AK09916 counts (hx, hy, hz) and overflow flag.
 
-    hx = Bx, hy = -By, hz = -Bz (hardware.md §4.7); counts = round(B_uT / 0.15) clamped to
-    +-32752; overflow (HOFL) when any axis had to be clamped (hardware.md §4.8 item 4).
+    hx = Bx, hy = -By, hz = -Bz (docs/devices.md §4.7); counts = round(B_uT / 0.15) clamped to
+    +-32752; overflow (HOFL) when any axis had to be clamped (docs/devices.md §4.8 item 4).
     """
     b = _vector3(magnetic_field_t, "magnetic_field_t")
     counts = np.rint(np.array([b[0], -b[1], -b[2]]) / AK09916_TESLA_PER_LSB)
@@ -683,7 +683,7 @@ def mag_to_raw(magnetic_field_t: Sequence[float]) -> tuple[tuple[int, int, int],
 
 
 def encode_sensor_block(accel_raw: Sequence[int], gyro_raw: Sequence[int], temp_raw: int) -> bytes:
-    """Device side: the 14 bytes at 0x2D..0x3A, int16 big-endian (hardware.md §4.2)."""
+    """Device side: the 14 bytes at 0x2D..0x3A, int16 big-endian (docs/devices.md §4.2)."""
     values = [*accel_raw, *gyro_raw, temp_raw]
     if len(values) != 7:
         raise Icm20948Error("need 3 accel, 3 gyro and 1 temperature values")

@@ -1,7 +1,7 @@
 """TE MS5837-30BA / -02BA device emulator (command-exact, I2C address 0x76).
 
 Plugs into :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`. It models the device
-side of hardware.md §3.1 and §3.8:
+side of docs/devices.md §3.1 and §3.8:
 
 * commands: reset (0x1E), PROM read (0xA0 + 2k, 2 bytes MSB first), D1/D2 conversions with OSR
   (0x40.../0x50...), ADC read (0x00 then 3 bytes MSB first);
@@ -54,7 +54,7 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
                   variant: p.Variant, apply_second_order: bool = True) -> tuple[int, int]:
     """Raw (D1, D2) whose compensation is closest to the given pressure and temperature.
 
-    Implements hardware.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
+    Implements docs/devices.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
     ``temperature_c * 100``; then D1 so that P (P2) is closest to the pressure in output counts.
     Instead of the closed-form estimate plus +-1 adjustment we bisect on the exact integer forward
     model (:func:`~hindrax_drivers.ms5837.protocol.compensate`), which gives the same answer and
@@ -103,9 +103,9 @@ class Ms5837Emulator:
         truth: ``t_s -> (pressure_pa, temperature_c)``, evaluated at conversion start.
         clock: monotonic clock in seconds (inject the simulator's or a test's clock).
         variant: ``Variant`` (or "30BA"/"02BA") used for the inversion.
-        coefficients: C1..C6; default: the datasheet example of the variant (hardware.md §3.7).
+        coefficients: C1..C6; default: the datasheet example of the variant (docs/devices.md §3.7).
         word0: PROM word 0 bits 11:0 (product code and factory bits); default: 30BA26 product
-            code for 30BA, 0 for 02BA (hardware.md §3.3 vectors).
+            code for 30BA, 0 for 02BA (docs/devices.md §3.3 vectors).
         apply_second_order: invert with the second-order model.
         conversion_time_s: optional override {osr: seconds}.
 
@@ -175,7 +175,7 @@ class Ms5837Emulator:
 
     # ------------------------------------------------------------------ I2CDeviceEmulator
     def i2c_write(self, data: bytes) -> None:
-        """One write transaction: a command byte (hardware.md §3.1). Extra bytes are ignored."""
+        """One write transaction: a command byte (docs/devices.md §3.1). Extra bytes are ignored."""
         with self._lock:
             now = float(self.clock())
             self._settle(now)

@@ -1,6 +1,6 @@
-"""MS5837 pressure-sensor node (TE MS5837-30BA / -02BA on I2C, address 0x76; hardware.md §3).
+"""MS5837 pressure-sensor node (TE MS5837-30BA / -02BA on I2C, address 0x76; docs/devices.md §3).
 
-Start-up (hardware.md §3.1-3.3, §3.9):
+Start-up (docs/devices.md §3.1-3.3, §3.9):
 
 1. Reset command 0x1E, then wait :data:`~hindrax_drivers.ms5837.protocol.RESET_TIME_S` (10 ms).
 2. Read the 8 PROM words (0xA0 + 2k, 2 bytes MSB first) and check the CRC-4. A bad CRC (or an I2C
@@ -8,16 +8,16 @@ Start-up (hardware.md §3.1-3.3, §3.9):
    state goes to ERROR with the reason in ``/diagnostics`` and the log, and the whole start-up is
    retried every :data:`RETRY_PERIOD_S` seconds. The node never crashes on it.
 3. Variant: ``sensors.ms5837.variant`` (``30BA`` / ``02BA``), or ``auto`` for Blue Robotics' C1
-   heuristic (hardware.md §3.9), reported in the diagnostics.
+   heuristic (docs/devices.md §3.9), reported in the diagnostics.
 
 Measurement cycle, every 1 / ``sensors.ms5837.rate_hz`` seconds, as a state machine driven by ROS timers
 so that the executor is never blocked (no sleep in any callback):
 ``convert D1 (OSR)`` -> one-shot timer (conversion time of the OSR + :data:`CONVERSION_MARGIN_S`) ->
 ``ADC read (D1)`` -> ``convert D2 (OSR)`` -> one-shot timer -> ``ADC read (D2)`` -> compensate -> publish.
-Conversion times are TE's library waits (hardware.md §3.1, :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S`;
+Conversion times are TE's library waits (docs/devices.md §3.1, :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S`;
 the datasheet table is UNVERIFIED). Compensation is the datasheet's first- and second-order integer
-arithmetic with floor semantics (:func:`hindrax_drivers.ms5837.protocol.compensate`, hardware.md §3.4-3.7).
-An ADC read of 0 (no completed conversion, hardware.md §3.1) or an I2C failure after the transport's
+arithmetic with floor semantics (:func:`hindrax_drivers.ms5837.protocol.compensate`, docs/devices.md §3.4-3.7).
+An ADC read of 0 (no completed conversion, docs/devices.md §3.1) or an I2C failure after the transport's
 retries abandons that cycle only (counted in the diagnostics); the next cycle starts afresh. The
 transport retries at once (``backoff_s = 0``), so even a failing bus never sleeps inside a callback. A cycle that
 is still running when the next one is due is skipped (``cycle_overrun``): with OSR 8192 two conversions
@@ -30,9 +30,9 @@ Publishes (reliable, depth 10):
   at ``sensors.ms5837.position_frd_m`` from the CG).
 - ``pressure/temperature`` sensor_msgs/Temperature: degC, variance = (0.01 degC)^2 (output resolution).
 - ``pressure/depth`` geometry_msgs/PoseWithCovarianceStamped (chosen over std_msgs/Float64 because it
-  carries a stamp, a frame and a variance, which a depth filter needs; design.md §3): frame ``odom``
+  carries a stamp, a frame and a variance, which a depth filter needs; docs/architecture.md §3): frame ``odom``
   (REP-105, ENU, z up), ``position.z = -depth_m`` of the pressure port, where depth_m =
-  (P - surface_pressure_pa) / (water_density_kg_m3 * gravity_m_s2) (hardware.md §3.6) with the
+  (P - surface_pressure_pa) / (water_density_kg_m3 * gravity_m_s2) (docs/devices.md §3.6) with the
   ``environment.*`` values of the configuration; ``covariance[14]`` (z, z) = variance_P / (rho g)^2.
   x, y and the orientation are not measured: their diagonal variances are :data:`UNKNOWN_VARIANCE`
   (1e6), off-diagonals 0, orientation the identity. Correcting the port depth to base_link needs the
@@ -48,7 +48,7 @@ the value is also written to the node's ``environment.surface_pressure_pa`` para
 Time stamps: the device has no clock, so every message is stamped with the time of validity of its
 pressure: the ROS time (``use_sim_time`` supported) at which the D1 conversion was commanded plus half the
 OSR's conversion time (4.5 ms at OSR 4096), the middle of the interval over which the ADC integrates the
-pressure (hardware.md §3.1). The read time is later by at least the full conversion wait plus the timer's
+pressure (docs/devices.md §3.1). The read time is later by at least the full conversion wait plus the timer's
 latency; for a depth rate of 0.3 m/s in a heave test, 10 ms of stamp error is 3 mm of depth, which biases the
 identified heave inertia and damping.
 
@@ -98,18 +98,18 @@ UNKNOWN_VARIANCE = 1.0e6
 SENSOR_FRAME_ID = "pressure_link"
 #: Frame of the depth pose (REP-105 odom, ENU, z up, 0 at the water surface).
 DEPTH_FRAME_ID = "odom"
-#: Pressure resolution per variant, Pa: hardware.md §3.4 table ("0.25 mbar resolution" 30BA,
+#: Pressure resolution per variant, Pa: docs/devices.md §3.4 table ("0.25 mbar resolution" 30BA,
 #: "0.01 mbar" 02BA). The per-OSR RMS table of the datasheet was not retrieved, so one figure is used
 #: for every OSR (it is the figure for the highest OSR; lower OSRs are noisier).
 PRESSURE_RESOLUTION_PA = {p.Variant.MS5837_30BA: 25.0, p.Variant.MS5837_02BA: 1.0}
-#: Temperature output resolution, degC (TEMP in 0.01 degC, hardware.md §3.4).
+#: Temperature output resolution, degC (TEMP in 0.01 degC, docs/devices.md §3.4).
 TEMPERATURE_RESOLUTION_C = 0.01
 
 
 def pressure_variance_pa2(variant: p.Variant) -> float:
     """Variance of one pressure reading, Pa^2: resolution^2 (taken as 1 sigma) + output LSB^2 / 12.
 
-    Output LSB: 10 Pa (30BA, 0.1 mbar) or 1 Pa (02BA, 0.01 mbar) (hardware.md §3.4, §3.6).
+    Output LSB: 10 Pa (30BA, 0.1 mbar) or 1 Pa (02BA, 0.01 mbar) (docs/devices.md §3.4, §3.6).
     """
     lsb_pa = 1.0 / p.pressure_counts_per_pa(variant)
     return PRESSURE_RESOLUTION_PA[p.Variant(variant)] ** 2 + lsb_pa ** 2 / 12.0
@@ -324,7 +324,7 @@ class Ms5837Node(Node):
 
     # ------------------------------------------------------------------ output
     def depth_m(self, pressure_pa: float) -> float:
-        """Depth of the pressure port below the surface, m (hardware.md §3.6, configured rho, g, P_surface)."""
+        """Depth of the pressure port below the surface, m (docs/devices.md §3.6, configured rho, g, P_surface)."""
         return p.depth_m(pressure_pa, self.water_density_kg_m3, self.surface_pressure_pa, self.gravity_m_s2)
 
     def _publish(self, reading: p.Reading, stamp) -> None:

@@ -1,17 +1,17 @@
 """TE MS5837-30BA / MS5837-02BA pressure sensor: pure protocol layer (no I/O, no clocks).
 
 Commands, PROM parsing and CRC-4, first- and second-order compensation, variant detection, unit
-conversion and depth, all from hardware.md §3 (TE datasheets [M1][M2][M3], Blue Robotics and TE
+conversion and depth, all from docs/devices.md §3 (TE datasheets [M1][M2][M3], Blue Robotics and TE
 libraries [M4][M5][M6]).
 
 Why our own code instead of Blue Robotics' ``ms5837-python``: that library is not in the local
 package index, needs I/O in the same class, and uses float division, which does not reproduce the
-datasheet's integer examples (hardware.md §0.5, §3.7). Here every step uses the datasheet's integer
+datasheet's integer examples (docs/devices.md §0 item 5, §3.7). Here every step uses the datasheet's integer
 arithmetic with **floor** semantics (Python ``//``, equal to an arithmetic right shift), which
 reproduces both worked examples exactly.
 
 Vendor-document issue handled here: the 30BA datasheet example prints OFF = 2381326464, a digit
-typo for 2381323464 (hardware.md §3.7); we implement the formula, and the tests check the corrected
+typo for 2381323464 (docs/devices.md §3.7); we implement the formula, and the tests check the corrected
 value together with the printed P = 39998.
 """
 
@@ -43,53 +43,53 @@ class Ms5837Error(ValueError):
 
 
 class Variant(enum.Enum):
-    """Sensor variant; selects the compensation constants (hardware.md §3.4-3.5)."""
+    """Sensor variant; selects the compensation constants (docs/devices.md §3.4-3.5)."""
 
     MS5837_30BA = "30BA"
     MS5837_02BA = "02BA"
 
 
 # ---------------------------------------------------------------------------- bus and commands
-#: I2C address, both variants, not configurable (hardware.md §3.1).
+#: I2C address, both variants, not configurable (docs/devices.md §3.1).
 ADDRESS = 0x76
 CMD_RESET = 0x1E
 CMD_ADC_READ = 0x00
 CMD_PROM_READ_BASE = 0xA0
 CMD_CONVERT_D1_BASE = 0x40
 CMD_CONVERT_D2_BASE = 0x50
-#: Oversampling ratios; command offset = 2 * index (hardware.md §3.1).
+#: Oversampling ratios; command offset = 2 * index (docs/devices.md §3.1).
 OSR_VALUES = (256, 512, 1024, 2048, 4096, 8192)
-#: Conversion time per OSR in seconds. The datasheet table was not retrieved (hardware.md §3.1,
+#: Conversion time per OSR in seconds. The datasheet table was not retrieved (docs/devices.md §3.1,
 #: §6 item 5); these are TE's own Arduino-library waits [M6] (1/2/3/5/9/17 ms), used both as the
 #: emulator's conversion time and as the minimum wait for drivers.
 CONVERSION_TIME_S = {256: 0.001, 512: 0.002, 1024: 0.003, 2048: 0.005, 4096: 0.009, 8192: 0.017}
-#: Wait after the reset command (both Blue Robotics libraries wait ~10 ms, hardware.md §3.1).
+#: Wait after the reset command (both Blue Robotics libraries wait ~10 ms, docs/devices.md §3.1).
 RESET_TIME_S = 0.010
-#: Largest 24-bit ADC value (hardware.md §3.4).
+#: Largest 24-bit ADC value (docs/devices.md §3.4).
 ADC_MAX = (1 << 24) - 1
 
-#: Product-code values (PROM word 0 bits 11:5) per hardware.md §3.2; unreliable for detection (§3.9).
+#: Product-code values (PROM word 0 bits 11:5) per docs/devices.md §3.2; unreliable for detection (§3.9).
 PRODUCT_CODE_30BA26 = 0b0011010
 PRODUCT_CODE_02BA01 = 0b0000000
 PRODUCT_CODE_02BA21 = 0b0010101
 
-#: Datasheet typical coefficients C1..C6 and example ADC values (hardware.md §3.7).
+#: Datasheet typical coefficients C1..C6 and example ADC values (docs/devices.md §3.7).
 EXAMPLE_COEFFICIENTS_30BA = (34982, 36352, 20328, 22354, 26646, 26146)
 EXAMPLE_D1_30BA = 4958179
 EXAMPLE_D2_30BA = 6815414
 EXAMPLE_COEFFICIENTS_02BA = (46372, 43981, 29059, 27842, 31553, 28165)
 EXAMPLE_D1_02BA = 6465444
 EXAMPLE_D2_02BA = 8077636
-#: PROM word 0 without CRC for the examples (hardware.md §3.3 test vectors).
+#: PROM word 0 without CRC for the examples (docs/devices.md §3.3 test vectors).
 EXAMPLE_WORD0_30BA = PRODUCT_CODE_30BA26 << 5  # 0x0340
 EXAMPLE_WORD0_02BA = 0x0000
 
-#: Depth constants (hardware.md §3.6).
+#: Depth constants (docs/devices.md §3.6).
 GRAVITY_M_S2 = 9.80665
 FRESH_WATER_DENSITY_KG_M3 = 997.0
 SALT_WATER_DENSITY_KG_M3 = 1029.0
 STANDARD_SURFACE_PRESSURE_PA = 101300.0
-#: Specified operating temperature range (hardware.md §3.4).
+#: Specified operating temperature range (docs/devices.md §3.4).
 TEMPERATURE_MIN_C = -40.0
 TEMPERATURE_MAX_C = 85.0
 
@@ -117,7 +117,7 @@ def _osr_index(osr: int) -> int:
 
 
 def convert_d1_command(osr: int) -> int:
-    """Command byte starting a pressure (D1) conversion: 0x40 + 2*index(osr) (hardware.md §3.1).
+    """Command byte starting a pressure (D1) conversion: 0x40 + 2*index(osr) (docs/devices.md §3.1).
 
     Raises Ms5837Error for an OSR not in :data:`OSR_VALUES`.
     """
@@ -125,19 +125,19 @@ def convert_d1_command(osr: int) -> int:
 
 
 def convert_d2_command(osr: int) -> int:
-    """Command byte starting a temperature (D2) conversion: 0x50 + 2*index(osr) (hardware.md §3.1)."""
+    """Command byte starting a temperature (D2) conversion: 0x50 + 2*index(osr) (docs/devices.md §3.1)."""
     return CMD_CONVERT_D2_BASE + 2 * _osr_index(osr)
 
 
 def prom_read_command(index: int) -> int:
-    """Command byte reading PROM word ``index`` (0..7): 0xA0 + 2*index (hardware.md §3.1)."""
+    """Command byte reading PROM word ``index`` (0..7): 0xA0 + 2*index (docs/devices.md §3.1)."""
     if not isinstance(index, int) or not 0 <= index <= 7:
         raise Ms5837Error(f"PROM index must be 0..7, got {index!r}")
     return CMD_PROM_READ_BASE + 2 * index
 
 
 def decode_command(byte: int) -> Command:
-    """Decode a command byte (device side; used by the emulator). Source: hardware.md §3.1.
+    """Decode a command byte (device side; used by the emulator). Source: docs/devices.md §3.1.
 
     Raises:
         Ms5837Error: the byte is not an MS5837 command.
@@ -159,7 +159,7 @@ def decode_command(byte: int) -> Command:
 
 
 def conversion_time_s(osr: int) -> float:
-    """Conversion time for ``osr`` in seconds (see :data:`CONVERSION_TIME_S`; hardware.md §3.1 [M6])."""
+    """Conversion time for ``osr`` in seconds (see :data:`CONVERSION_TIME_S`; docs/devices.md §3.1 [M6])."""
     return CONVERSION_TIME_S[OSR_VALUES[_osr_index(osr)]]
 
 
@@ -174,7 +174,7 @@ def _as_bytes(data: bytes | Sequence[int], n: int, what: str) -> bytes:
 
 
 def parse_adc(data: bytes | Sequence[int]) -> int:
-    """24-bit ADC result from the 3 bytes read after command 0x00, MSB first (hardware.md §3.1).
+    """24-bit ADC result from the 3 bytes read after command 0x00, MSB first (docs/devices.md §3.1).
 
     A value of 0 means "no completed conversion" (read too early, twice, or corrupted) and raises.
 
@@ -197,7 +197,7 @@ def encode_adc(value: int) -> bytes:
 
 
 def parse_prom_word(data: bytes | Sequence[int]) -> int:
-    """16-bit PROM word from the 2 bytes read after 0xA0+2k, MSB first (hardware.md §3.1).
+    """16-bit PROM word from the 2 bytes read after 0xA0+2k, MSB first (docs/devices.md §3.1).
 
     Note that ``SMBus.read_word_data`` returns the bytes little-endian; use a 2-byte block read.
     """
@@ -224,7 +224,7 @@ def _prom_words(words: Sequence[int]) -> list[int]:
 
 
 def crc4(words: Sequence[int]) -> int:
-    """CRC-4 of the MS5837 PROM (7-word variant, hardware.md §3.3 [M4][M5][M6]).
+    """CRC-4 of the MS5837 PROM (7-word variant, docs/devices.md §3.3 [M4][M5][M6]).
 
     Args:
         words: PROM words 0..6 (word 7, if given, is ignored and taken as 0); word 0's CRC nibble
@@ -249,7 +249,7 @@ def crc4(words: Sequence[int]) -> int:
 
 
 def prom_with_crc(word0: int, coefficients: Sequence[int], word7: int = 0) -> tuple[int, ...]:
-    """Build an 8-word PROM image with a valid CRC nibble (device side; hardware.md §3.2-3.3).
+    """Build an 8-word PROM image with a valid CRC nibble (device side; docs/devices.md §3.2-3.3).
 
     Args:
         word0: product/version and factory bits (bits 11:0; bits 15:12 are replaced by the CRC).
@@ -266,7 +266,7 @@ def prom_with_crc(word0: int, coefficients: Sequence[int], word7: int = 0) -> tu
 
 @dataclass(frozen=True)
 class Calibration:
-    """Parsed PROM (hardware.md §3.2).
+    """Parsed PROM (docs/devices.md §3.2).
 
     Attributes:
         words: the 8 PROM words (word 7 may be 0).
@@ -365,7 +365,7 @@ def parse_variant(value: Variant | str | None) -> Variant | None:
 def detect_variant(calibration: Calibration, configured: Variant | str | None = None) -> Variant:
     """Sensor variant: the configured one if given, else Blue Robotics' C1 heuristic.
 
-    Heuristic (hardware.md §3.9 [M5][M9]): C1 < 26000 or C1 > 49000 -> unrecognised;
+    Heuristic (docs/devices.md §3.9 [M5][M9]): C1 < 26000 or C1 > 49000 -> unrecognised;
     C1 > 37000 -> 02BA; otherwise 30BA. The product-code bits are not used (unreliable [M8]).
 
     Args:
@@ -422,7 +422,7 @@ def _pressure(d1: int, sens: int, off: int, p_shift: int) -> int:
 
 
 def first_order(d1: int, d2: int, calibration: Calibration, variant: Variant) -> Compensation:
-    """First-order compensation with floor arithmetic (hardware.md §3.4, §3.7).
+    """First-order compensation with floor arithmetic (docs/devices.md §3.4, §3.7).
 
     dT = D2 - C5*2^8; TEMP = 2000 + dT*C6/2^23; OFF/SENS/P per variant table.
 
@@ -442,7 +442,7 @@ def first_order(d1: int, d2: int, calibration: Calibration, variant: Variant) ->
 
 
 def _second_order_terms(dt: int, temp: int, variant: Variant) -> tuple[int, int, int]:
-    """(Ti, OFFi, SENSi) per hardware.md §3.5."""
+    """(Ti, OFFi, SENSi) per docs/devices.md §3.5."""
     if variant is Variant.MS5837_30BA:
         if temp < 2000:
             ti = 3 * dt * dt // (1 << 33)
@@ -466,7 +466,7 @@ def _second_order_terms(dt: int, temp: int, variant: Variant) -> tuple[int, int,
 
 
 def second_order(d1: int, first: Compensation, variant: Variant) -> Compensation:
-    """Apply the second-order correction to a first-order result (hardware.md §3.5).
+    """Apply the second-order correction to a first-order result (docs/devices.md §3.5).
 
     OFF2 = OFF - OFFi, SENS2 = SENS - SENSi, TEMP2 = TEMP - Ti, P recomputed with the same
     divisors. Raises Ms5837Error if D1 is not 24-bit.
@@ -487,7 +487,7 @@ def pressure_counts_per_pa(variant: Variant) -> float:
 
 
 def pressure_pa_from_counts(p: int, variant: Variant) -> float:
-    """Pressure in Pa from the integer P (hardware.md §3.4, §3.6)."""
+    """Pressure in Pa from the integer P (docs/devices.md §3.4, §3.6)."""
     return float(p) / pressure_counts_per_pa(variant)
 
 
@@ -499,7 +499,7 @@ class Reading:
         pressure_pa: absolute pressure, Pa.
         temperature_c: temperature, degC (TEMP/100).
         compensation: integer values it was computed from (second order if applied).
-        temperature_in_range: TEMP within the specified -40..85 degC (hardware.md §3.4).
+        temperature_in_range: TEMP within the specified -40..85 degC (docs/devices.md §3.4).
     """
 
     pressure_pa: float
@@ -515,7 +515,7 @@ class Reading:
 
 def compensate(d1: int, d2: int, calibration: Calibration, variant: Variant,
                apply_second_order: bool = True) -> Reading:
-    """Pressure (Pa) and temperature (degC) from raw D1/D2 (hardware.md §3.4-3.7).
+    """Pressure (Pa) and temperature (degC) from raw D1/D2 (docs/devices.md §3.4-3.7).
 
     Never raises for 24-bit D1/D2 and any calibration (Python integers do not overflow); a result
     outside the specified temperature range is flagged, not rejected.
@@ -549,7 +549,7 @@ def _check_density_gravity(fluid_density_kg_m3: float, gravity_m_s2: float) -> N
 def depth_m(pressure_pa: float, fluid_density_kg_m3: float = FRESH_WATER_DENSITY_KG_M3,
             surface_pressure_pa: float = STANDARD_SURFACE_PRESSURE_PA,
             gravity_m_s2: float = GRAVITY_M_S2) -> float:
-    """Depth below the surface: (P - P_surface) / (rho * g), in m (positive down; hardware.md §3.6).
+    """Depth below the surface: (P - P_surface) / (rho * g), in m (positive down; docs/devices.md §3.6).
 
     Defaults: fresh water 997 kg/m^3, P_surface 101300 Pa, g = 9.80665 m/s^2. Measure the surface
     pressure at the start of a dive and pass it for best accuracy (§3.6).

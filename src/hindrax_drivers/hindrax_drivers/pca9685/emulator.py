@@ -1,6 +1,6 @@
 """NXP PCA9685 device emulator (register-exact, default address 0x40), for tests and simulation.
 
-Models hardware.md §5.1:
+Models docs/devices.md §5.1:
 
 * register file with reset values MODE1 = 0x11 (SLEEP, ALLCALL), MODE2 = 0x04, PRE_SCALE = 0x1E,
   every LEDn full OFF (OFF_H bit 4 = 1); reserved H bits 7:5 read 0; ALL_LED registers are
@@ -51,7 +51,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
 
     Args:
         oscillator_hz: the part's real internal oscillator frequency (nominal 25 MHz; real parts
-            23-27 MHz, hardware.md §5.1) used to decode pulse widths.
+            23-27 MHz, docs/devices.md §5.1) used to decode pulse widths.
         clock: clock for the write log timestamps, s.
         external_clock_hz: frequency used once EXTCLK is latched (None: keep ``oscillator_hz``).
         write_log_max: maximum entries kept in the write log (oldest dropped).
@@ -89,7 +89,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
             self._power_on_reset()
 
     def i2c_general_call(self, data: bytes) -> None:
-        """General-call write: data 0x06 is SWRST (hardware.md §5.1); other data are ignored."""
+        """General-call write: data 0x06 is SWRST (docs/devices.md §5.1); other data are ignored."""
         if bytes(data[:1]) == bytes([p.SWRST_DATA]):
             self.reset()
 
@@ -134,7 +134,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
             return p.COUNTS_PER_PERIOD * (self._regs[p.PRE_SCALE] + 1) / self.effective_oscillator_hz
 
     def pulse_width_us(self, channel: int) -> float:
-        """High time per period that ``channel`` actually outputs, in us (hardware.md §5.1).
+        """High time per period that ``channel`` actually outputs, in us (docs/devices.md §5.1).
 
         0 while sleeping, while stopped awaiting RESTART, or when full OFF; the full period when
         full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement.
@@ -151,7 +151,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
 
     # ------------------------------------------------------------------ register file
     def _next_pointer(self, register: int) -> int:
-        """Auto-increment per hardware.md §5.1 (only with MODE1.AI = 1)."""
+        """Auto-increment per docs/devices.md §5.1 (only with MODE1.AI = 1)."""
         if not self._regs[p.MODE1] & p.MODE1_AI:
             return register
         if register == p.LAST_LED_REGISTER or register >= p.PRE_SCALE:

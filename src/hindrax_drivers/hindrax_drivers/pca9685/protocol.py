@@ -2,12 +2,12 @@
 
 Registers and bits (MODE1/MODE2, LEDn_ON/OFF_L/H, ALL_LED, PRE_SCALE), the prescale formula,
 pulse width <-> ON/OFF counts, full-ON/full-OFF bits, the sleep / prescale / restart sequence as
-data, and the ESC conventions (1100-1900 us, 1500 us neutral). Sources: hardware.md §5.1 (NXP
+data, and the ESC conventions (1100-1900 us, 1500 us neutral). Sources: docs/devices.md §5.1 (NXP
 datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2 (Blue Robotics Basic ESC [E1]-[E5]).
 
 Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an
 ``smbus2.SMBus`` object, hides the register arithmetic, and computes counts from the *requested*
-frequency; hardware.md §5.1 requires using the actual prescale and (calibrated) oscillator
+frequency; docs/devices.md §5.1 requires using the actual prescale and (calibrated) oscillator
 frequency, which is what every function here takes.
 """
 
@@ -23,7 +23,7 @@ __all__ = [
     "Pca9685Error", "ChannelRegisters", "led_register", "prescale_for_frequency",
     "frequency_for_prescale", "period_s", "count_duration_us", "pulse_width_to_counts",
     "counts_to_pulse_width_us", "high_time_counts", "channel_bytes_for_pulse",
-    "set_frequency_sequence", "startup_sequence", "clamp_esc_pulse_us", "esc_prescale",
+    "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "clamp_esc_pulse_us", "esc_prescale",
 ]
 
 
@@ -34,7 +34,7 @@ class Pca9685Error(ValueError):
 # ------------------------------------------------------------------------------ addresses
 DEFAULT_ADDRESS = 0x40
 GENERAL_CALL_ADDRESS = 0x00
-#: Software reset: data byte 0x06 written to the general-call address (hardware.md §5.1 [Q1 §7.1.4]).
+#: Software reset: data byte 0x06 written to the general-call address (docs/devices.md §5.1 [Q1 §7.1.4]).
 SWRST_DATA = 0x06
 #: LED All-Call 7-bit address (ALLCALLADR reset 0xE0, 8-bit) [UNVERIFIED, §5.1].
 ALLCALL_ADDRESS = 0x70
@@ -70,7 +70,7 @@ MODE2_OUTNE_MASK = 0x03
 #: Bit 4 of LEDn_ON_H (full ON) and LEDn_OFF_H (full OFF).
 FULL_BIT = 0x10
 
-#: Reset values (hardware.md §5.1; the MODE1 SLEEP default is UNVERIFIED there).
+#: Reset values (docs/devices.md §5.1; the MODE1 SLEEP default is UNVERIFIED there).
 MODE1_RESET = 0x11
 MODE2_RESET = 0x04
 PRE_SCALE_RESET = 0x1E
@@ -81,9 +81,9 @@ NUM_CHANNELS = 16
 COUNTS_PER_PERIOD = 4096
 PRESCALE_MIN = 3
 PRESCALE_MAX = 255
-#: Nominal internal oscillator; real parts measure 23-27 MHz: calibrate (hardware.md §0.8, §5.1).
+#: Nominal internal oscillator; real parts measure 23-27 MHz: calibrate (docs/devices.md §0 item 8, §5.1).
 INTERNAL_OSCILLATOR_HZ = 25_000_000.0
-#: Oscillator start-up wait after clearing SLEEP before RESTART (hardware.md §5.1 restart rules).
+#: Oscillator start-up wait after clearing SLEEP before RESTART (docs/devices.md §5.1 restart rules).
 RESTART_DELAY_S = 500e-6
 
 # ------------------------------------------------------------------------------ ESC (§5.2)
@@ -98,7 +98,7 @@ ESC_ARMING_HOLD_S = 7.0
 
 
 def led_register(channel: int) -> int:
-    """LEDn_ON_L address for channel n = 0..15: 0x06 + 4n (hardware.md §5.1)."""
+    """LEDn_ON_L address for channel n = 0..15: 0x06 + 4n (docs/devices.md §5.1)."""
     if not isinstance(channel, int) or isinstance(channel, bool) or not 0 <= channel < NUM_CHANNELS:
         raise Pca9685Error(f"channel must be 0..15, got {channel!r}")
     return LED0_ON_L + 4 * channel
@@ -117,7 +117,7 @@ def _check_prescale(prescale: int) -> int:
 
 
 def prescale_for_frequency(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
-    """PRE_SCALE = round(f_osc / (4096 f)) - 1 (hardware.md §5.1 [Q1 §7.3.5]).
+    """PRE_SCALE = round(f_osc / (4096 f)) - 1 (docs/devices.md §5.1 [Q1 §7.3.5]).
 
     Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not
     Python's banker's rounding.
@@ -138,7 +138,7 @@ def prescale_for_frequency(frequency_hz: float, oscillator_hz: float = INTERNAL_
 
 
 def frequency_for_prescale(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
-    """Actual PWM frequency f = f_osc / (4096 (PRE_SCALE + 1)) in Hz (hardware.md §5.1)."""
+    """Actual PWM frequency f = f_osc / (4096 (PRE_SCALE + 1)) in Hz (docs/devices.md §5.1)."""
     return _check_oscillator(oscillator_hz) / (COUNTS_PER_PERIOD * (_check_prescale(prescale) + 1))
 
 
@@ -148,13 +148,13 @@ def period_s(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> fl
 
 
 def count_duration_us(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
-    """Duration of one of the 4096 counts in us: (PRE_SCALE + 1) / f_osc * 1e6 (hardware.md §5.1)."""
+    """Duration of one of the 4096 counts in us: (PRE_SCALE + 1) / f_osc * 1e6 (docs/devices.md §5.1)."""
     return (_check_prescale(prescale) + 1) / _check_oscillator(oscillator_hz) * 1e6
 
 
 def pulse_width_to_counts(pulse_width_us: float, prescale: int,
                           oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
-    """Counts = round(pulse_us * f_osc / ((PRE_SCALE + 1) * 1e6)) (hardware.md §5.1 table note).
+    """Counts = round(pulse_us * f_osc / ((PRE_SCALE + 1) * 1e6)) (docs/devices.md §5.1 table note).
 
     Raises:
         Pca9685Error: non-finite or negative pulse, or one that needs more than 4095 counts
@@ -179,7 +179,7 @@ def counts_to_pulse_width_us(counts: float, prescale: int,
 
 @dataclass(frozen=True)
 class ChannelRegisters:
-    """The four LEDn registers of one channel, decoded (hardware.md §5.1 register map).
+    """The four LEDn registers of one channel, decoded (docs/devices.md §5.1 register map).
 
     Attributes:
         on_count, off_count: 12-bit counts 0..4095 at which the output goes high / low.
@@ -215,7 +215,7 @@ class ChannelRegisters:
 
     @classmethod
     def full_off_setting(cls) -> "ChannelRegisters":
-        """Output constantly low (the power-up state, hardware.md §0.8)."""
+        """Output constantly low (the power-up state, docs/devices.md §0 item 8)."""
         return cls(full_off=True)
 
     @classmethod
@@ -225,7 +225,7 @@ class ChannelRegisters:
 
 
 def high_time_counts(setting: ChannelRegisters) -> int:
-    """Counts per period the output is high, 0..4096 (hardware.md §5.1 output semantics).
+    """Counts per period the output is high, 0..4096 (docs/devices.md §5.1 output semantics).
 
     Full OFF wins (0); full ON gives 4096; otherwise ``(OFF - ON) mod 4096``, with ON == OFF
     giving 0 (the measured behaviour quoted in §5.1).
@@ -255,7 +255,7 @@ def channel_bytes_for_pulse(pulse_width_us: float, prescale: int,
 
 
 def set_frequency_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL) -> list[RegisterWrite]:
-    """Sleep, write PRE_SCALE, wake, wait 500 us, RESTART (hardware.md §5.1 [Q3][Q1 §7.3.1.1]).
+    """Sleep, write PRE_SCALE, wake, wait 500 us, RESTART (docs/devices.md §5.1 [Q3][Q1 §7.3.1.1]).
 
     Args:
         prescale: 3..255.
@@ -288,8 +288,30 @@ def startup_sequence(prescale: int, mode2: int = MODE2_OUTDRV,
     return [RegisterWrite(MODE2, mode2, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
 
 
+def safe_startup_sequence(prescale: int, mode2: int = MODE2_OUTDRV, mode1: int = MODE1_AI | MODE1_ALLCALL
+                          ) -> tuple[list[RegisterWrite], list[RegisterWrite]]:
+    """Start-up in two halves, with the channel registers written in between: ``(before, after)``.
+
+    ``before``: MODE2; every output full OFF (ALL_LED_OFF_H = bit 4, one byte to the All-LED registers,
+    datasheet §7.3.4: full OFF takes precedence), so no channel is active when SLEEP is set; SLEEP; PRE_SCALE.
+    The caller then writes neutral into the channel registers (the chip is asleep: the registers take the
+    values, nothing runs). ``after``: wake, wait :data:`RESTART_DELAY_S`, RESTART.
+
+    Why: :func:`startup_sequence` wakes and RESTARTs first, and RESTART resumes whatever the channel registers
+    still hold (datasheet §7.3.1.1), e.g. the 1700 us of a previous process that died while armed, until the
+    driver writes neutral. Here the registers hold neutral (or full OFF) before RESTART.
+    """
+    if not 0 <= mode2 <= 0xFF:
+        raise Pca9685Error(f"mode2 must be a byte, got {mode2}")
+    freq = set_frequency_sequence(prescale, mode1)
+    before = [RegisterWrite(MODE2, mode2, 0.0, "MODE2"),
+              RegisterWrite(ALL_LED_OFF_H, FULL_BIT, 0.0, "every output full OFF before anything can restart"),
+              *freq[:2]]
+    return before, freq[2:]
+
+
 def clamp_esc_pulse_us(pulse_width_us: float, min_us: float = ESC_MIN_US, max_us: float = ESC_MAX_US) -> float:
-    """Clamp an ESC command to [min_us, max_us] (defaults 1100..1900 us, hardware.md §5.2).
+    """Clamp an ESC command to [min_us, max_us] (defaults 1100..1900 us, docs/devices.md §5.2).
 
     Raises:
         Pca9685Error: NaN/infinite pulse, or min_us > max_us.

@@ -1,11 +1,11 @@
 """Blue Robotics Ping1D device emulator (device side of the binary protocol), I/O-free.
 
-Layer 2 of the Ping1D altimeter driver (design.md §2).  The host's bytes go into
+Layer 2 of the Ping1D altimeter driver (docs/architecture.md §2).  The host's bytes go into
 :meth:`Ping1dEmulator.feed_host_bytes`; :meth:`Ping1dEmulator.poll` ``(t_s)`` returns the device's
 bytes up to time ``t_s``.  Serve it on a pty with
 :class:`hindrax_drivers.transport.pty_device.PtyDevice` so the real pyserial path runs.
 
-Behaviour (hardware.md §2.1-§2.6, the §2.6 checklist):
+Behaviour (docs/devices.md §2.1-§2.6, the §2.6 checklist):
 - Frames are extracted with :class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer`, so auto-baud
   ``U`` (0x55) bytes, BREAK-induced NULs and garbage are skipped, the stream resynchronises on
   ``BR`` and frames with a bad checksum are dropped.
@@ -103,9 +103,9 @@ class Ping1dTruth:
 
 @dataclass
 class Ping1dSettings:
-    """Device settings changed by the set messages (hardware.md §2.4).  Defaults: speed of sound
+    """Device settings changed by the set messages (docs/devices.md §2.4).  Defaults: speed of sound
     1500 m/s [P10], auto mode, pinging enabled; ping interval 0.1 s, gain index 6 and the manual scan
-    window 0..30 m are [EMULATOR] choices (real defaults unverified, hardware.md §6)."""
+    window 0..30 m are [EMULATOR] choices (real defaults unverified, docs/devices.md §6)."""
 
     device_id: int = 1
     speed_of_sound_m_s: float = 1500.0

@@ -1,13 +1,13 @@
 """Blue Robotics Ping1D (Ping / Ping2 echosounder) binary protocol: pure frame codec and payloads.
 
-Layer 1 of the Ping1D altimeter driver (design.md §2): bytes in, typed values out, and the reverse.
-No I/O, no clocks, no ROS.  Source: /work/shared/reference/hardware.md §2.2-§2.5 (tags [P1]-[P10]).
+Layer 1 of the Ping1D altimeter driver (docs/architecture.md §2): bytes in, typed values out, and the reverse.
+No I/O, no clocks, no ROS.  Source: docs/devices.md §2.2-§2.5 (tags [P1]-[P10]).
 
-Frame (little-endian, hardware.md §2.2): ``'B' 'R'``, u16 payload_length, u16 message_id,
+Frame (little-endian, docs/devices.md §2.2): ``'B' 'R'``, u16 payload_length, u16 message_id,
 u8 src_device_id, u8 dst_device_id, payload, u16 checksum = (sum of every preceding byte) & 0xFFFF.
 
 Why our own codec instead of the PyPI package ``bluerobotics-ping`` (``brping``): every 0.2.x release
-(0.2.0 ... 0.2.5) has a broken ``Ping1D`` class (hardware.md §0 item 4, §2.7): the S500 definitions
+(0.2.0 ... 0.2.5) has a broken ``Ping1D`` class (docs/devices.md §0 item 4, §2.7): the S500 definitions
 overwrite the Ping1D ones in ``definitions.payload_dict_all``, so ``get_distance_simple()`` raises
 AttributeError, ``get_processor_temperature()`` fails to unpack, ``set_range``/``set_ping_interval``
 verification fail, and ``set_speed_of_sound(x)`` actually transmits **0 mm/s**.  The library also polls
@@ -83,7 +83,7 @@ HEADER_BYTES = 8
 CHECKSUM_BYTES = 2
 #: Auto-baud sync byte ``U`` the host sends before its first message (firmware >= 3.28, §2.1).
 SYNC_BYTE = b"U"
-#: Gain index -> receiver gain (hardware.md §2.4 [P2]).
+#: Gain index -> receiver gain (docs/devices.md §2.4 [P2]).
 GAIN_INDEX_TO_GAIN = (0.6, 1.8, 5.5, 12.9, 30.2, 66.1, 144.0)
 
 _HEADER = struct.Struct("<2sHHBB")
@@ -93,11 +93,11 @@ _CHECKSUM = struct.Struct("<H")
 class Ping1dParseError(ValueError):
     """Raised for any Ping1D frame or payload that cannot be decoded (wrong start bytes, length
     mismatch, bad checksum, wrong payload size, unknown message id, out-of-range enum value).
-    Source: hardware.md §2.2-§2.4."""
+    Source: docs/devices.md §2.2-§2.4."""
 
 
 class Ping1dId(IntEnum):
-    """Message ids used by an altimeter driver (hardware.md §2.4 [P2])."""
+    """Message ids used by an altimeter driver (docs/devices.md §2.4 [P2])."""
 
     ACK = 1
     NACK = 2
@@ -139,13 +139,13 @@ class Ping1dId(IntEnum):
 
 
 def checksum(data: bytes) -> int:
-    """Ping protocol checksum: sum of all bytes, modulo 2**16 (hardware.md §2.2)."""
+    """Ping protocol checksum: sum of all bytes, modulo 2**16 (docs/devices.md §2.2)."""
     return sum(data) & 0xFFFF
 
 
 @dataclass(frozen=True)
 class Ping1dMessage:
-    """One decoded frame: raw message id and payload bytes (hardware.md §2.2).
+    """One decoded frame: raw message id and payload bytes (docs/devices.md §2.2).
 
     Attributes:
         message_id: u16 message id.
@@ -165,7 +165,7 @@ class Ping1dMessage:
 
 def encode_frame(message_id: int, payload: bytes = b"", src_device_id: int = 0,
                  dst_device_id: int = 0) -> bytes:
-    """Build a complete frame: header, payload, checksum (hardware.md §2.2).
+    """Build a complete frame: header, payload, checksum (docs/devices.md §2.2).
 
     Raises:
         ValueError: message id outside 0..65535, device ids outside 0..255, payload > 65535 bytes.
@@ -207,7 +207,7 @@ def decode_frame(frame: Union[bytes, bytearray]) -> Ping1dMessage:
 
 def request_frame(requested_id: int, *, legacy: bool = False, src_device_id: int = 0,
                   dst_device_id: int = 0) -> bytes:
-    """Frame asking the device for message ``requested_id`` (hardware.md §2.3): the official
+    """Frame asking the device for message ``requested_id`` (docs/devices.md §2.3): the official
     ``general_request`` (id 6, u16 payload) or, with ``legacy=True``, a frame with that id and an
     empty payload (what brping sends).
 
@@ -220,14 +220,14 @@ def request_frame(requested_id: int, *, legacy: bool = False, src_device_id: int
 
 
 def is_legacy_request(message: Ping1dMessage) -> bool:
-    """True for a zero-payload frame whose id is a gettable message (hardware.md §2.3)."""
+    """True for a zero-payload frame whose id is a gettable message (docs/devices.md §2.3)."""
     return not message.payload and message.message_id in _GETTABLE_IDS
 
 
 class Ping1dFramer:
     """Streaming frame extractor: feed arbitrary byte chunks, get complete valid frames.
 
-    Resynchronisation (hardware.md §2.2 parser state machine, §2.6): bytes before ``BR`` are
+    Resynchronisation (docs/devices.md §2.2 parser state machine, §2.6): bytes before ``BR`` are
     discarded; a header whose payload_length exceeds ``max_payload_bytes`` is treated as a false start;
     a frame with a bad checksum is counted and scanning resumes one byte after its ``B``, so a valid
     frame hidden inside a corrupted or truncated one is still found.  Auto-baud ``U`` bytes and
@@ -404,7 +404,7 @@ _CC = 100  # centi-degC -> degC
 
 @dataclass(frozen=True)
 class Ack(Ping1dPayload):
-    """id 1 ack: ``acked_id`` u16 (hardware.md §2.3-§2.4)."""
+    """id 1 ack: ``acked_id`` u16 (docs/devices.md §2.3-§2.4)."""
 
     MESSAGE_ID: ClassVar[int] = Ping1dId.ACK
     LAYOUT: ClassVar = (("H", "int"),)
@@ -734,7 +734,7 @@ class ContinuousStop(Ping1dPayload):
     requested_id: int
 
 
-#: message id -> payload class, for every message in hardware.md §2.4.
+#: message id -> payload class, for every message in docs/devices.md §2.4.
 PAYLOAD_TYPES: Dict[int, Type[Ping1dPayload]] = {
     cls.MESSAGE_ID: cls for cls in (
         Ack, Nack, AsciiText, DeviceInformation, ProtocolVersion, GeneralRequest, SetDeviceId,

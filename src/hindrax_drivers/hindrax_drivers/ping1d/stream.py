@@ -2,7 +2,7 @@
 
 The one decoding path of the Ping altimeter driver: the ROS node (:mod:`hindrax_drivers.ping1d.node`)
 and ``hindrax decode ping1d`` both use :class:`Ping1dStreamDecoder`. Frames are extracted by the
-protocol layer's :class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer` (hardware.md §2.2: ``BR``,
+protocol layer's :class:`~hindrax_drivers.ping1d.protocol.Ping1dFramer` (docs/devices.md §2.2: ``BR``,
 u16 length, u16 id, src, dst, payload, u16 sum checksum) and decoded with
 :func:`~hindrax_drivers.ping1d.protocol.decode_message`.
 
@@ -21,7 +21,7 @@ frames (the "gap"), which it keeps in a window with their stream offsets:
 - a header claiming more than ``max_payload_bytes`` is a false start, and every other byte is
   ``garbage_bytes`` (line noise, auto-baud ``U``...).
 
-Frames that pass the checksum but cannot be decoded are ``unknown_message`` (id not in hardware.md §2.4)
+Frames that pass the checksum but cannot be decoded are ``unknown_message`` (id not in docs/devices.md §2.4)
 or ``malformed`` (wrong payload size or value). Bytes older than two maximal frames are classified
 without waiting for the next good frame, so a stream of pure garbage is still reported.
 """

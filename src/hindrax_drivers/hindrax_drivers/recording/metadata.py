@@ -1,6 +1,6 @@
 """rosbag2 bag metadata (``metadata.yaml``, version 9, Jazzy) as typed objects, written and read.
 
-Layout (rosbag2_storage ``yaml.hpp`` / ``metadata_io.cpp``, Jazzy; ros2-pip.md)::
+Layout (rosbag2_storage ``yaml.hpp`` / ``metadata_io.cpp``, Jazzy; docs/architecture.md §11.6)::
 
     rosbag2_bagfile_information:
       version: 9

@@ -1,7 +1,7 @@
 """Message definitions for MCAP schemas, exactly as rosbag2 (Jazzy) writes them.
 
 An MCAP channel of the ``ros2`` profile points at a schema named ``pkg/msg/Type`` with encoding
-``ros2msg`` whose data is the *full* definition (ros2-pip.md, "MCAP bags without rosbag2"; rosbag2
+``ros2msg`` whose data is the *full* definition (docs/architecture.md §11.6; rosbag2
 ``rosbag2_cpp/message_definitions/local_message_definition_source.cpp``, Jazzy):
 
 - the type's own ``.msg`` text, verbatim (comments included);
@@ -13,7 +13,7 @@ Dependencies are the first word of each line (``[a-zA-Z0-9_/]+``, optional ``[..
 then whitespace) that is not a primitive type; a bare ``Type`` means ``<same package>/Type``.
 
 Files come from ``share/<pkg>/msg/`` of every prefix of ``AMENT_PREFIX_PATH`` (colcon / apt on the Pi),
-then of the running interpreter's prefix (the pip-wheel venv installs ``share/`` there, ros2-pip.md).
+then of the running interpreter's prefix (the pip-wheel venv installs ``share/`` there, docs/architecture.md §11.1).
 The RIHS01 type hash comes from ``share/<pkg>/msg/<Type>.json`` (written by
 rosidl_generator_type_description), as rosbag2 stores it in ``topic_type_hash``/``type_description_hash``.
 

@@ -1,5 +1,5 @@
 """Player node: publishes a bag with its original timing (rate factor, start offset, topic subset, loop,
-optional /clock) (design.md §7).
+optional /clock) (docs/architecture.md §7).
 
 Thin rclpy node over :mod:`~hindrax_drivers.recording.reader` (raw CDR messages in log-time order) and
 :func:`~hindrax_drivers.recording.playback.play` (timing). Messages are published as the recorded bytes
@@ -7,7 +7,7 @@ Thin rclpy node over :mod:`~hindrax_drivers.recording.reader` (raw CDR messages 
 
 - Publishers are created for every selected topic first; :meth:`BagPlayerNode.wait_for_subscribers` then
   waits (up to ``wait_for_subscribers_timeout_s``) until each has at least one subscriber, so the first
-  messages are not lost to discovery (ros2-pip.md). Topics still without subscribers after the timeout
+  messages are not lost to discovery (docs/architecture.md §11). Topics still without subscribers after the timeout
   are reported and played anyway.
 - QoS per topic: the recorded publishers' profile when they agreed, else reliable/volatile
   (:func:`~hindrax_drivers.recording.qos.playback_profile`), keep-last ``qos_depth``.

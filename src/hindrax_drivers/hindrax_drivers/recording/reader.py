@@ -232,7 +232,7 @@ def _sorted_stream_messages(f: Path, wanted: set[str] | None, start_ns: int | No
 def iter_raw_device_data(bag_path: str | Path, device_name: str) -> Iterator[tuple[int, Any]]:
     """``(t_ns, hindrax_msgs.msg.RawDeviceData)`` of one device, in the order they were recorded.
 
-    For device emulators replaying a pool bag through the drivers (design.md §6-7). Every topic of type
+    For device emulators replaying a pool bag through the drivers (docs/architecture.md §6-7). Every topic of type
     ``hindrax_msgs/msg/RawDeviceData`` is read (merged in log-time order) and messages whose
     ``device_name`` equals ``device_name`` are yielded. ``t_ns`` is the message's ``header.stamp`` (the
     time the driver received or sent the bytes, ROS time) in ns, or the bag log time when the stamp is

@@ -1,6 +1,6 @@
 """Recorder node: records topics (parsed and raw device data) to rosbag2-compatible MCAP bags.
 
-Thin rclpy node over :class:`hindrax_drivers.recording.writer_thread.ThreadedBagWriter` (design.md §7).
+Thin rclpy node over :class:`hindrax_drivers.recording.writer_thread.ThreadedBagWriter` (docs/architecture.md §7).
 
 Behaviour
 - Topics: the parameters ``topics`` (names), ``topic_regex`` (``re.search``) and ``all_topics``

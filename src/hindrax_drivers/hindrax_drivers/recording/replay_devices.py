@@ -1,6 +1,6 @@
 """Mock hardware from a bag: the device emulators take their truth from recorded raw device data.
 
-design.md §6-7: "the same emulators can be driven from a recorded bag (raw device data replayed through the
+docs/architecture.md §6-7: "the same emulators can be driven from a recorded bag (raw device data replayed through the
 drivers)". A bag recorded by the stack holds every byte and register transaction of every driver
 (``hindrax_msgs/RawDeviceData`` on ``raw/<device>``, see :class:`~hindrax_drivers.node_common.RawDataPublisher`).
 This module serves them again to *fresh, unmodified* driver nodes through the same transports the simulator

@@ -1,7 +1,7 @@
 """Which topics a recording takes: an explicit list, a regular expression, or everything.
 
 Pure. :class:`TopicSelection` is what the recorder node evaluates against the ROS graph on every poll,
-so topics that appear after the recording started are picked up (design.md §7).
+so topics that appear after the recording started are picked up (docs/architecture.md §7).
 """
 from __future__ import annotations
 

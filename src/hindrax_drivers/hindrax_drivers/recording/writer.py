@@ -1,4 +1,4 @@
-"""Bag writer: rosbag2-compatible MCAP files (design.md §7, ros2-pip.md "MCAP bags without rosbag2").
+"""Bag writer: rosbag2-compatible MCAP files (docs/architecture.md §7, docs/architecture.md §11.6).
 
 :class:`BagWriter` is the pure core of the recorder (no ROS runtime, no threads). It takes CDR bytes as
 received and writes a bag *directory*::

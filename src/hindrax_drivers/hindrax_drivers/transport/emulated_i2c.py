@@ -1,6 +1,6 @@
 """Emulated I2C bus with the ``smbus2.SMBus`` interface, for tests and simulation.
 
-The onboard I2C drivers talk to an object with the ``smbus2.SMBus`` interface (design.md §2): on the
+The onboard I2C drivers talk to an object with the ``smbus2.SMBus`` interface (docs/architecture.md §2): on the
 Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an
 :class:`EmulatedI2CBus` holding register- or command-exact device emulators (MS5837, ICM-20948,
 AK09916, PCA9685).
@@ -10,7 +10,7 @@ Linux i2c-dev driver does on the wire, so that the real driver code paths run un
 
 * every SMBus call is broken into the I2C transactions the kernel issues, e.g.
   ``read_i2c_block_data(addr, reg, n)`` is a 1-byte write of ``reg`` followed (repeated start) by an
-  ``n``-byte read; ``read_word_data`` returns the two bytes little-endian (hardware.md §3.1 "SMBus
+  ``n``-byte read; ``read_word_data`` returns the two bytes little-endian (docs/devices.md §3.1 "SMBus
   detail");
 * each device emulator sees only ``i2c_write(data)`` (one write transaction; ``data[0]`` is the
   register or command byte) and ``i2c_read(n)`` (one read transaction continuing from the device's
@@ -48,7 +48,7 @@ __all__ = [
 I2C_SMBUS_BLOCK_MAX = 32
 #: ``i2c_msg.flags`` bit marking a read message (Linux ``I2C_M_RD``, as used by smbus2).
 I2C_M_RD = 0x0001
-#: I2C general-call address (writes only), used e.g. for the PCA9685 software reset (hardware.md §5.1).
+#: I2C general-call address (writes only), used e.g. for the PCA9685 software reset (docs/devices.md §5.1).
 GENERAL_CALL_ADDRESS = 0x00
 
 
@@ -124,7 +124,7 @@ class EmulatedI2CBus:
     serialises transfers the same way), so calls from several threads interleave only at call
     boundaries.
 
-    Source: semantics of Linux i2c-dev/SMBus transfers; smbus2 0.6 API; design.md §2.
+    Source: semantics of Linux i2c-dev/SMBus transfers; smbus2 0.6 API; docs/architecture.md §2.
     """
 
     def __init__(
@@ -312,7 +312,7 @@ class EmulatedI2CBus:
     def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
         """SMBus read word data: write ``[register]``, read 2 bytes, return them little-endian.
 
-        Source: SMBus specification; hardware.md §3.1 (swap for MSB-first devices).
+        Source: SMBus specification; docs/devices.md §3.1 (swap for MSB-first devices).
         """
         _check_byte("register", register)
         with self._lock:

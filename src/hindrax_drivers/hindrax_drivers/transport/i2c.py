@@ -2,7 +2,7 @@
 
 :class:`I2CDevice` wraps an object with the ``smbus2.SMBus`` interface (a real ``smbus2.SMBus(1)``
 on the Raspberry Pi, or :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` in tests and
-simulation; design.md §2) for one slave address and adds what smbus2 does not have:
+simulation; docs/architecture.md §2) for one slave address and adds what smbus2 does not have:
 
 * retries with exponential backoff on ``OSError`` (typically errno 121 "Remote I/O error", a NACK
   from a slave that is busy, browning out or has a bad connector), with counters of errors,
@@ -10,7 +10,7 @@ simulation; design.md §2) for one slave address and adds what smbus2 does not h
 * a clear :class:`I2CError` (an ``OSError`` carrying the last errno) once retries are exhausted;
 * a *raw tap*: a callback ``(kind, address, register, data, t_monotonic_s)`` invoked for every
   successful transaction, so the ROS node can publish the raw register traffic for recording and
-  bag replay (design.md §7);
+  bag replay (docs/architecture.md §7);
 * :class:`RegisterWrite` sequences (the "sequence as data" produced by the protocol modules)
   executed with their delays.
 
@@ -61,7 +61,7 @@ class RegisterWrite:
         delay_after_s: time to wait after the write, in seconds (>= 0).
         note: short human description (which datasheet step), for logs.
 
-    Source: design.md §2 (protocol layer: command sequences as data).
+    Source: docs/architecture.md §2 (protocol layer: command sequences as data).
     """
 
     register: int

@@ -1,6 +1,6 @@
 """Serve an I/O-free byte-stream device emulator on a pseudo-terminal, plus the emulator fault helper.
 
-Two things every serial device emulator in this package shares (design.md §2, §6):
+Two things every serial device emulator in this package shares (docs/architecture.md §2, §6):
 
 1. :class:`PtyDevice` runs an emulator -- any object with ``feed_host_bytes(data: bytes)`` and
    ``poll(t_s: float) -> bytes`` (:class:`ByteStreamEmulator`) -- behind a Linux pseudo-terminal in a
@@ -45,7 +45,7 @@ _TICK_TOLERANCE_S = 1e-9
 
 @runtime_checkable
 class ByteStreamEmulator(Protocol):
-    """Contract of an I/O-free serial device emulator (design.md §2 layer 2).
+    """Contract of an I/O-free serial device emulator (docs/architecture.md §2 layer 2).
 
     ``feed_host_bytes(data)`` receives bytes the host wrote; ``poll(t_s)`` returns the bytes the device
     sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls).
@@ -59,7 +59,7 @@ class ByteStreamEmulator(Protocol):
 
 
 class StreamFaults:
-    """Fault injection shared by the byte-stream device emulators (design.md §2: "fault injection is
+    """Fault injection shared by the byte-stream device emulators (docs/architecture.md §2: "fault injection is
     part of its API").  Thread-safe: test code may call it while a :class:`PtyDevice` thread polls.
 
     Per-message faults are queued and consumed, in this order of precedence, by the next messages

@@ -1,13 +1,13 @@
 """The one serial transport used by every serial driver (DVL-75, Ping1D): pyserial + reader thread.
 
-design.md §2: transports are injected; serial goes through pyserial device paths or URLs (tests and the
+docs/architecture.md §2: transports are injected; serial goes through pyserial device paths or URLs (tests and the
 simulator use pseudo-terminals so the real pyserial code path runs).  This module owns a port, reads it
 in a background thread and hands byte chunks to a callback; drivers stay protocol-only.
 
 Features
 - Opens ``port`` with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a pyserial
   URL such as ``loop://`` / ``socket://host:port``), 8N1 at ``baudrate`` (both devices use
-  115200 8N1, hardware.md §1.1 and §2.1).
+  115200 8N1, docs/devices.md §1.1 and §2.1).
 - Reader thread delivers every received chunk to ``on_data(bytes)``.
 - ``write(bytes)`` from any thread.
 - When the port disappears (read/write error, USB unplug, pty closed) the thread closes it and
@@ -16,7 +16,7 @@ Features
   (the DVL's ``SEND-DVPDL ON`` etc.).
 - State for diagnostics: connected, last_error, bytes_rx/tx, reconnects, open failures.
 - Raw-data tap ``on_raw(direction, data, t_monotonic_s)`` with direction ``'rx'`` or ``'tx'``, so a ROS
-  node can publish/record the raw traffic (design.md §7).
+  node can publish/record the raw traffic (docs/architecture.md §7).
 - Callback exceptions are caught and counted; they never kill the reader thread.
 - ``close()`` stops and joins the thread.
 - ``wait_handled(n, timeout_s)`` blocks until ``n`` received bytes have been through the callbacks: a

@@ -6,7 +6,7 @@ hindrax_drivers.recording.recorder_node``, default configuration: zstd chunks of
 every ``recording.flush_interval_s``), recording every ``/bench/...`` topic. This process publishes
 pre-serialized messages of realistic size (the synthetic test-bag messages) on a wall-clock schedule:
 
-- nominal load (design.md §7; the issue's figures): Imu 100 Hz and MagneticField 100 Hz (best effort, like
+- nominal load (docs/architecture.md §7; the issue's figures): Imu 100 Hz and MagneticField 100 Hz (best effort, like
   sensor drivers), Dvl 10 Hz, Range 10 Hz x2, FluidPressure 10 Hz, ThrusterPwm 50 Hz, and raw device data
   (hindrax_msgs/RawDeviceData) 300 msg/s over five devices: 590 msg/s in all;
 - ramp: one reliable Imu stream at increasing rates; each stage's drops = published - recorded.

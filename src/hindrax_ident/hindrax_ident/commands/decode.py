@@ -2,11 +2,11 @@
 
 Devices:
 
-- ``dvl75``: a text capture of the DVL-75 serial stream (hardware.md §1.2-§1.3). Decoded with
+- ``dvl75``: a text capture of the DVL-75 serial stream (docs/devices.md §1.2-§1.3). Decoded with
   :class:`hindrax_drivers.dvl75.stream.DvlStreamDecoder`, the path the DVL node uses, fed one line
   (LF-terminated segment) at a time so every problem is reported with its line number. A last line
   without LF is decoded as a complete line.
-- ``ping1d``: a raw binary capture of the Ping1D stream, either direction (hardware.md §2.2-§2.4).
+- ``ping1d``: a raw binary capture of the Ping1D stream, either direction (docs/devices.md §2.2-§2.4).
   Decoded with :class:`hindrax_drivers.ping1d.stream.Ping1dStreamDecoder`, the path the Ping node uses;
   problems are reported with their byte offset.
 

@@ -1,10 +1,10 @@
 """``hindrax ident free-decay | thruster-fit | campaign``: offline identification tools.
 
-* ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO]``: seed 000 analysis of a
+* ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO]``: [Hindrax-AM] (seed 000) analysis of a
   free-decay record (CSV with a header row; column 1 time in s, column 2 acceleration in m/s^2). Prints one
   JSON object (:meth:`hindrax_ident.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
   added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8), kc (eq. 9)...
-* ``hindrax ident thruster-fit FILE [--write CONFIG]``: seed 003 eq. 1 cubic per rotation direction from
+* ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] (seed 003) eq. 1 cubic per rotation direction from
   bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints
   ``{"negative": {c4..c1, c4_std..c1_std, ...}, "positive": {...}}``. ``--write`` replaces the
   ``curve_negative:`` and ``curve_positive:`` lines of a configuration file in place (text edit, comments

@@ -1,7 +1,7 @@
 """Recursive least squares with exponential forgetting, calibrated covariance and an
-excitation measure (online identification per DOF, design.md section 5).
+excitation measure (online identification per DOF, docs/architecture.md §5).
 
-Update (reference/hydrodynamics.md section 1.D, forgetting factor lambda in (0, 1]):
+Update (docs/identification.md §1.D, forgetting factor lambda in (0, 1]):
 
     e     = y - phi^T theta                      (a-priori error, returned by ``update``)
     K     = P phi / (lambda + phi^T P phi)
@@ -19,11 +19,11 @@ Noise variance and calibrated covariance (our estimator; the seeds contain no re
 * Its expectation is sigma^2 (sum_j w_j - tr(P Q)) with Q_k = lambda^2 Q_{k-1} + phi phi^T
   (the information matrix with squared weights), so
   sigma2_hat = S_k / (N_eff - tr(P Q)), N_eff = sum_j lambda^(k-j).
-  With lambda = 1 this is seed 003 eq. 8, S / (n - p).
+  With lambda = 1 this is [Hindrax-Drag] (seed 003) eq. 8, S / (n - p).
 * The covariance of a weighted LS estimate is sigma^2 P Q P (sandwich form). The prior is
   treated as a pseudo-measurement, Q_0 = P0^-1, so that the covariance starts at
   sigma^2 P0 and, for lambda = 1, P Q P = P exactly: the covariance is sigma2_hat * P, the
-  batch covariance of seed 003 eq. 7 (plus the negligible diffuse prior).
+  batch covariance of [Hindrax-Drag] (seed 003) eq. 7 (plus the negligible diffuse prior).
   :meth:`RecursiveLeastSquares.reset_covariance` restarts Q = P^-1 in the same way.
   For lambda < 1 the plain sigma2_hat * P (i.e. std = sqrt(diag(P) sigma2_hat)) overstates
   the variance (by the factor 1 + lambda, about 2, for a constant regressor in steady state);
@@ -59,10 +59,10 @@ __all__ = ["RecursiveLeastSquares"]
 
 
 class RecursiveLeastSquares:
-    """Recursive least squares with exponential forgetting (hydrodynamics.md section 1.D).
+    """Recursive least squares with exponential forgetting (docs/identification.md §1.D).
 
     Model: y_k = phi_k^T theta + e_k with white e_k of variance sigma^2. Typical use, one
-    instance per DOF with regressor [nu_dot, |nu| nu, nu, 1] -> tau (design.md section 5).
+    instance per DOF with regressor [nu_dot, |nu| nu, nu, 1] -> tau (docs/architecture.md §5).
 
     Args:
         n_params: number of parameters p (>= 1).

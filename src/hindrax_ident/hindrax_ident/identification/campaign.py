@@ -1,4 +1,4 @@
-"""Identification campaign on the simulator (no ROS graph): seed 003 §4 manoeuvres, one DOF at a time.
+"""Identification campaign on the simulator (no ROS graph): [Hindrax-Drag] (seed 003) §4 manoeuvres, one DOF at a time.
 
 Sequence: dive to the altitude setpoint (``identification.altitude_setpoint_m``, Ping1D) and settle (the gyro
 bias is averaged while still), then for each requested DOF: move to the pool-box centre and run the ladder
@@ -9,15 +9,15 @@ of constant levels (:func:`.maneuvers.level_ladder`) with the other DOFs held by
   a run ends when the dead-reckoned stopping point reaches the :class:`.maneuvers.PoolBox` boundary or after
   ``identification.max_level_duration_s``; the larger room is used first, so both directions are tested.
 * heave: down then up within the box depth range, ``heave_repeats`` pairs per level (3); no steady state is
-  required (estimated through the transient, design.md §5).
+  required (estimated through the transient, docs/architecture.md §5).
 * roll, pitch: rotate until the predicted stopping angle reaches ``identification.roll_test_angle_rad`` /
-  ``pitch_test_angle_rad``, then return to level (seed 003 §4.2), both directions.
-* yaw: one turn (2 pi) per run (seed 003 §4.2: 360 deg rotations), both directions.
+  ``pitch_test_angle_rad``, then return to level ([Hindrax-Drag] (seed 003) §4.2), both directions.
+* yaw: one turn (2 pi) per run ([Hindrax-Drag] (seed 003) §4.2: 360 deg rotations), both directions.
 
 Control/estimation rate ``identification.estimate_rate_hz`` (the simulator steps in between). Every tick
 records the thrust-model wrench: the thrust of the commanded pulse widths through the allocator's curves
-(seed 003 eq. 1), passed through the configured first-order lag ``thrusters.time_constant_s`` (exact for the
-held command), times the thrust allocation matrix (seed 003 eq. 9), body FRD. Limits (``limits.*``: depth,
+([Hindrax-Drag] (seed 003) eq. 1), passed through the configured first-order lag ``thrusters.time_constant_s`` (exact for the
+held command), times the thrust allocation matrix ([Hindrax-Drag] (seed 003) eq. 9), body FRD. Limits (``limits.*``: depth,
 altitude, roll, pitch; the pool box grown by half the margin) abort the campaign; at the end or on abort
 all thrusters are commanded neutral.
 """
@@ -332,7 +332,7 @@ class Campaign:
         for i, lvl in enumerate(ladder):
             p = self.state.position_ned_m
             if k == 2:
-                signs = (1.0, -1.0)  # heave: down, then up (design.md §5)
+                signs = (1.0, -1.0)  # heave: down, then up (docs/architecture.md §5)
             else:
                 signs = (1.0, -1.0) if self.box.room_m(p, axis) >= self.box.room_m(p, -axis) else (-1.0, 1.0)
             for s in signs * repeats:

@@ -1,12 +1,12 @@
-"""Manoeuvre planning and holding control for the self-propelled tests (seed 003 §4; design.md §5).
+"""Manoeuvre planning and holding control for the self-propelled tests ([Hindrax-Drag] (seed 003) §4; docs/architecture.md §5).
 
 Pure numpy, no ROS. Everything here uses the vehicle configuration and SENSOR samples only (never the
 simulator's truth):
 
 * :func:`dof_authority` - the largest feasible wrench along one body axis, from the thrust allocator
-  (same curves and thrust allocation matrix as the allocation node, seed 003 eqs. 1 and 9).
+  (same curves and thrust allocation matrix as the allocation node, [Hindrax-Drag] (seed 003) eqs. 1 and 9).
 * :func:`level_ladder` - the ladder of constant thrust/moment levels, fractions
-  ``identification.level_fraction_min .. level_fraction_max`` of the authority (seed 003 §4: constant
+  ``identification.level_fraction_min .. level_fraction_max`` of the authority ([Hindrax-Drag] (seed 003) §4: constant
   known forces/torques, one DOF at a time).
 * :class:`PoolBox` - where the body origin may go: the pool (``pool.*``) shrunk by ``pool.margin_m`` plus
   half the vehicle's extent at walls and floor, ``limits.max_depth_m`` / ``limits.min_altitude_m`` below
@@ -21,7 +21,7 @@ simulator's truth):
 * :class:`HoldController` - PD/PI holds for depth, roll, pitch, heading and surge/sway velocity, gains from
   the a-priori (configured) rigid + added inertia: ``k_p = I w_n^2``, ``k_d = 2 zeta w_n I``.
 
-Frames: body FRD, world NED (design.md §3); conversions through :mod:`hindrax_drivers.frames`.
+Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_drivers.frames`.
 """
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def dof_authority(core: AllocationCore, dof: str) -> tuple[float, float]:
 
 
 def level_ladder(cfg: VehicleConfig, authority: float, levels: int | None = None) -> list[float]:
-    """Constant levels (N or N m), evenly spaced fractions of ``authority`` (seed 003 §4).
+    """Constant levels (N or N m), evenly spaced fractions of ``authority`` ([Hindrax-Drag] (seed 003) §4).
 
     Fractions from ``identification.level_fraction_min`` to ``level_fraction_max``;
     ``levels`` defaults to ``identification.levels_per_dof``. Raises ``ValueError`` for levels < 1.
@@ -245,7 +245,7 @@ class SensorState:
         one outside the logged span; the latest rates when the log is empty).
 
         The DVL and pressure samples reach the node tens of ms after their time of validity (the DVL stamp is
-        the middle of its ping interval, the MS5837 stamp its conversion; hardware.md §1, §3), by which time
+        the middle of its ping interval, the MS5837 stamp its conversion; docs/devices.md §1, §3), by which time
         newer gyro samples have arrived; lever-arm corrections use the rate at the sample's own time."""
         return _interpolate_log(self.log["gyro"], t_s, self.rates_frd_rad_s)
 

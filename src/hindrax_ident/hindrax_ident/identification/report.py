@@ -1,15 +1,15 @@
-"""Identification report: report/index.html with PNG plots (matplotlib, Agg backend; design.md §5).
+"""Identification report: report/index.html with PNG plots (matplotlib, Agg backend; docs/architecture.md §5).
 
 Plots per DOF:
 
-* ``<dof>_force_velocity.png`` - force (moment) vs velocity as seed 003 Figs. 8-10: the drag samples
+* ``<dof>_force_velocity.png`` - force (moment) vs velocity as [Hindrax-Drag] (seed 003) Figs. 8-10: the drag samples
   tau - M nu_dot - k_r s(eta) (thrust model minus the identified inertial and restoring terms) against the
   smoothed velocity, the steady-window means of the seed's method, and the fitted curve
   k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
 * ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band and the
   reported (offline) value.
 * ``free_decay.png`` - when a :class:`~hindrax_ident.estimation.free_decay.FreeDecayResult` is given: the
-  displacement record, its peaks and the fitted envelope (seed 000 Figs. 6-7).
+  displacement record, its peaks and the fitted envelope ([Hindrax-AM] (seed 000) Figs. 6-7).
 """
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def _force_velocity_plot(r, path: Path) -> None:
     ax.plot(v[ok][::3], drag[ok][::3], ".", ms=2, alpha=0.35, color="0.5", label="tau - M nu_dot (samples)")
     if s.get("windows"):
         wv, wf = zip(*s["windows"])
-        ax.plot(wv, wf, "s", color="C3", label="steady-window means (seed 003)")
+        ax.plot(wv, wf, "s", color="C3", label="steady-window means ([Hindrax-Drag] (seed 003))")
     vmax = float(np.nanmax(np.abs(v[ok]))) if np.any(ok) else 1.0
     grid = np.linspace(-vmax, vmax, 201)
     rest = _rest_terms(r.dof, grid, np.zeros_like(grid))
@@ -175,7 +175,7 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
     if free_decay is not None:
         fd = out / "free_decay.png"
         _free_decay_plot(free_decay, fd)
-        parts.append("<h2>Free decay (seed 000)</h2><img src='free_decay.png' alt='free decay'>")
+        parts.append("<h2>Free decay ([Hindrax-AM] (seed 000))</h2><img src='free_decay.png' alt='free decay'>")
     parts.append("</body></html>")
     index = out / "index.html"
     index.write_text("\n".join(parts))

@@ -1,6 +1,6 @@
 """identification.yaml: identified hydrodynamic parameters with provenance, and configuration overrides.
 
-Schema (design.md §5; version :data:`SCHEMA_VERSION`)::
+Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
 
     schema_version: 1
     provenance: {source: "simulation" | <bag path>, date: <UTC ISO 8601>, configuration_sha256: <hex>,
@@ -18,7 +18,7 @@ Schema (design.md §5; version :data:`SCHEMA_VERSION`)::
 
 <parameter>: ``inertia`` (rigid + added; kg or kg m^2), ``added_mass`` (inertia - rigid),
 ``quadratic_damping`` and ``linear_damping`` (heave: ``*_positive`` and ``*_negative``, positive heave = down,
-seed 003 §4.1), ``bias`` (N or N m; heave: the FRD force holding depth), roll/pitch also ``restoring`` (N m).
+[Hindrax-Drag] (seed 003) §4.1), ``bias`` (N or N m; heave: the FRD force holding depth), roll/pitch also ``restoring`` (N m).
 Values are positive Fossen/SNAME coefficients in SI (as the configuration, ros_ws/config/hindrax.yaml).
 
 :func:`to_config_overrides` maps the file onto ``hydrodynamics.*`` configuration keys, so
@@ -58,7 +58,7 @@ def _f(x) -> float | None:
 
 
 #: Projected area of each translational DOF from the configured bounding box (vehicle.length_m, width_m,
-#: height_m): the two dimensions normal to the motion. ASSUMPTION: seed 003 Table 4 prints no areas.
+#: height_m): the two dimensions normal to the motion. ASSUMPTION: [Hindrax-Drag] (seed 003) Table 4 prints no areas.
 _AREA_DIMENSIONS = {"surge": ("width_m", "height_m"), "sway": ("length_m", "height_m"),
                     "heave": ("length_m", "width_m")}
 #: Speeds at or below this are left out of the Reynolds range (the vehicle between levels), m/s.
@@ -66,10 +66,10 @@ REYNOLDS_MIN_SPEED_M_S = 0.05
 
 
 def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
-    """Seed 003 Table 4 for a translational DOF: C_D = 2 k_q / (rho A_p) with its std from the std of k_q
+    """[Hindrax-Drag] (Seed 003) Table 4 for a translational DOF: C_D = 2 k_q / (rho A_p) with its std from the std of k_q
     (:func:`~hindrax_ident.estimation.drag_coefficient.drag_coefficient`; heave per direction), A_p the
     bounding-box area normal to the motion (:data:`_AREA_DIMENSIONS`), and the Reynolds range Re = |v| L / nu
-    with L = V^(1/3) (seed 000 eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
+    with L = V^(1/3) ([Hindrax-AM] (seed 000) eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
     None for rotational DOFs (the seed defines neither their area nor their radius)."""
     from ..estimation.drag_coefficient import (EstimationError, characteristic_length_from_volume,
                                                drag_coefficient, reynolds_range)
@@ -93,7 +93,7 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
         out["reynolds_range"] = [lo, hi]
     except (EstimationError, ValueError):
         out["reynolds_range"] = None
-    out["definition"] = (f"C_D = 2 k_q / (rho A_p), A_p = {a} x {b} of the configuration (assumed: seed 003 prints "
+    out["definition"] = (f"C_D = 2 k_q / (rho A_p), A_p = {a} x {b} of the configuration (assumed: [Hindrax-Drag] (seed 003) prints "
                          "no areas); Re = |v| V^(1/3) / 1.01e-6 m^2/s over speeds above "
                          f"{REYNOLDS_MIN_SPEED_M_S:g} m/s")
     return out
@@ -133,9 +133,9 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
             "configuration_sha256": cfg.sha256,
             "water_density_kg_m3": float(cfg.water_density_kg_m3),
-            "method": method or ("seed 003 §4 self-propelled ladder; output-error refinement of equation-error "
+            "method": method or ("[Hindrax-Drag] (seed 003) §4 self-propelled ladder; output-error refinement of equation-error "
                                  "batch LS on RTS-smoothed sensor signals; RLS online; steady-state LS "
-                                 "(seed 003 eqs. 2-8) for comparison"),
+                                 "([Hindrax-Drag] (seed 003) eqs. 2-8) for comparison"),
             "seed": seed,
         },
         "dofs": dofs,

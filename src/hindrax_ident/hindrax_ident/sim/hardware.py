@@ -1,4 +1,4 @@
-"""Virtual hardware: the device emulators driven by the simulator (design.md §6).
+"""Virtual hardware: the device emulators driven by the simulator (docs/architecture.md §6).
 
 In simulation the real driver code reads real bytes and registers: the DVL-75 and Ping1D emulators are served
 on pseudo-terminals (:class:`~hindrax_drivers.transport.pty_device.PtyDevice`, so the drivers' pyserial path
@@ -13,7 +13,7 @@ simulated time as published on ``/clock`` (quantised to ``simulation.clock_rate_
 The simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers
 (:meth:`VirtualHardware.pulse_widths_us`), so the whole path wrench -> allocation -> ESC node -> PCA9685
 registers -> thrust -> vehicle motion runs. A sleeping or full-OFF channel gives 0 us, i.e. no pulses and no
-thrust (hardware.md §5.2).
+thrust (docs/devices.md §5.2).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """6-DOF Fossen model of Hindrax: rigid body + added mass + Coriolis + damping + restoring, pure numpy.
 
-Equations of motion (Fossen 2011; hydrodynamics.md [T] eqs. 2.1, 2.6-2.7, 2.22-2.23, 2.80-2.83, 2.90),
+Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eqs. 2.1, 2.6-2.7, 2.22-2.23, 2.80-2.83, 2.90),
 body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
 
     eta_dot = J(eta) nu                      (position in NED, attitude as a unit quaternion)
@@ -13,18 +13,18 @@ body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
   ``I_o = I_cg - m S(r_g)^2``.
 * M_RB = [m I3, -m S(r_g); m S(r_g), I_o]   ([T] eq. 2.7).
 * M_A: the positive 6x6 added-mass matrix of the configuration (``VehicleConfig.added_mass_matrix``,
-  diagonal from seed 000 Table 6 and assumptions, optional off-diagonal couplings; not forced symmetric).
-* C_RB: the coordinate-free form (hydrodynamics.md, Fossen 2011)
+  diagonal from [Hindrax-AM] (seed 000) Table 6 and assumptions, optional off-diagonal couplings; not forced symmetric).
+* C_RB: the coordinate-free form (docs/identification.md, Fossen 2011)
   ``C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)]``,
   whose product with nu equals the Newton-Euler terms of [T] eqs. 2.4-2.5.
 * C_A from M_A (Fossen 2011): with ``a = M_A nu = [a1; a2]``,
   ``C_A = [0, -S(a1); -S(a1), -S(a2)]`` (skew-symmetric for any M_A; equals [T] eq. 2.83 in the diagonal case
   with M_A = -diag(derivatives)).
-* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.hydrodynamics(dof)`` (seed 003 eq. 2 / Table 3), the
+* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.hydrodynamics(dof)`` ([Hindrax-Drag] (seed 003) eq. 2 / Table 3), the
   coefficient pair chosen by the sign of the velocity; heave uses the ``*_positive`` pair for w > 0 (moving
-  down, seed 003 §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
+  down, [Hindrax-Drag] (seed 003) §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
 * g(eta) = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B]
-  (hydrodynamics.md eq. 2.22-2.23 with the corrected sign of f_b). W = m g and B = rho g V from the
+  (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.22-2.23 with the corrected sign of f_b). W = m g and B = rho g V from the
   configuration; B is multiplied by the submerged fraction of a free-surface model when one is given (the
   hull emerging at the surface, :mod:`.pool`), otherwise the vehicle is fully submerged.
 * Kinematics with a unit quaternion q = (x, y, z, w) of the body FRD in NED (no Euler singularity):
@@ -38,7 +38,7 @@ matrix form; the tests check the fast path against them.
 
 State vector (13,): ``[x_n, y_e, z_d (m, NED), q_x, q_y, q_z, q_w, u, v, w (m/s), p, q, r (rad/s)]``.
 Not modelled: currents (nu is relative to still water), the variation of added mass and damping near the
-surface, floor and walls, thruster-hull interaction (seed 003 §6).
+surface, floor and walls, thruster-hull interaction ([Hindrax-Drag] (seed 003) §6).
 """
 from __future__ import annotations
 
@@ -89,7 +89,7 @@ def rigid_body_mass_matrix(mass_kg: float, r_g_m, inertia_cg_kg_m2) -> np.ndarra
 
 
 def coriolis_rigid_body(mass_kg: float, r_g_m, inertia_o_kg_m2, nu) -> np.ndarray:
-    """C_RB(nu) (6x6), coordinate-free form (hydrodynamics.md, Fossen 2011).
+    """C_RB(nu) (6x6), coordinate-free form (docs/identification.md, Fossen 2011).
 
     C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)],
     v = nu[:3] (m/s), w = nu[3:] (rad/s), r_g (3,) in m, inertia_o_kg_m2 (3, 3) about CO.
@@ -105,7 +105,7 @@ def coriolis_rigid_body(mass_kg: float, r_g_m, inertia_o_kg_m2, nu) -> np.ndarra
 def coriolis_added_mass(added_mass, nu) -> np.ndarray:
     """C_A(nu) (6x6) from the positive added-mass matrix M_A (6x6): [0, -S(a1); -S(a1), -S(a2)], a = M_A nu.
 
-    Fossen 2011; equals hydrodynamics.md eq. 2.83 for a diagonal M_A = -diag(X_udot ... N_rdot).
+    Fossen 2011; equals docs/identification.md §1.A, [NTNU-Thesis] eq. 2.83 for a diagonal M_A = -diag(X_udot ... N_rdot).
     """
     a = np.asarray(added_mass, dtype=float) @ np.asarray(nu, dtype=float)
     s1, s2 = skew(a[:3]), skew(a[3:])
@@ -113,7 +113,7 @@ def coriolis_added_mass(added_mass, nu) -> np.ndarray:
 
 
 def damping_vector(nu, linear_positive, linear_negative, quadratic_positive, quadratic_negative) -> np.ndarray:
-    """D(nu) nu (6,): per DOF k_l v + k_q |v| v, the coefficients chosen by the sign of v (seed 003 eq. 2).
+    """D(nu) nu (6,): per DOF k_l v + k_q |v| v, the coefficients chosen by the sign of v ([Hindrax-Drag] (seed 003) eq. 2).
 
     All coefficient arguments are (6,) positive numbers in SNAME order (kg/s, kg/m; kg m^2/s, kg m^2).
     """
@@ -125,7 +125,7 @@ def damping_vector(nu, linear_positive, linear_negative, quadratic_positive, qua
 
 
 def restoring_vector(rotation_ned_from_body, weight_n: float, buoyancy_n: float, r_g_m, r_b_m) -> np.ndarray:
-    """g(eta) (6,) on the left-hand side of the equations of motion (hydrodynamics.md eq. 2.22).
+    """g(eta) (6,) on the left-hand side of the equations of motion (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.22).
 
     g = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B] (NED).
     rotation_ned_from_body (3, 3): R, body FRD to NED. W, B in N; r_g, r_b (3,) from CO, FRD, m.
@@ -138,7 +138,7 @@ def restoring_vector(rotation_ned_from_body, weight_n: float, buoyancy_n: float,
 
 def restoring_vector_euler(roll_rad: float, pitch_rad: float, weight_n: float, buoyancy_n: float, r_g_m,
                            r_b_m) -> np.ndarray:
-    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in hydrodynamics.md [T] §1.A.
+    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in docs/identification.md §1.A.
 
     Used to cross-check :func:`restoring_vector`. Angles in rad, forces in N, r_g and r_b (3,) in m (FRD).
     """

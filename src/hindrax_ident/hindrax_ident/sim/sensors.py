@@ -10,27 +10,27 @@ dropout, the device's configured or default rate):
 ``noise_std_<unit>`` (white noise 1-sigma), ``bias_<unit>`` (constant bias, every axis), ``rate_hz``,
 ``dropout_probability`` (probability a sample is lost: no report at all). Devices and their models:
 
-* ``dvl75`` (:class:`DvlVelocitySample`, seed 003 Table 1, hardware.md §1): velocity over the bottom of the
+* ``dvl75`` (:class:`DvlVelocitySample`, [Hindrax-Drag] (seed 003) Table 1, docs/devices.md §1): velocity over the bottom of the
   DVL's position ``sensors.dvl75.position_frd_m``, ``v + w x r``, in the vehicle FRD axes (the DVL applies
-  its configured mounting orientation itself and reports in the vehicle frame, hardware.md §1.4). Measured
+  its configured mounting orientation itself and reports in the vehicle frame, docs/devices.md §1.4). Measured
   ``(1 + e) v_true + bias + n`` with one scale error ``e ~ N(0, scale_error_fraction)`` per report
-  (seed 003 Table 1: mean error about 5 %) and ``n ~ N(0, noise_std_m_s)`` per axis. No bottom lock when
+  ([Hindrax-Drag] (seed 003) Table 1: mean error about 5 %) and ``n ~ N(0, noise_std_m_s)`` per axis. No bottom lock when
   the DVL is out of the water, its vertical altitude above the floor is outside
   ``[min_altitude_m, max_altitude_m]``, or it is within ``wall_lock_loss_distance_m`` of a wall; unlocked
   reports carry NaN velocities (the real DVL keeps reporting "searching").
 * ``dvl75_attitude`` (:class:`DvlAttitudeSample`): roll, pitch, yaw (Fossen ZYX, NED; yaw = heading from
   north) of the DVL's own IMU, plus bias and noise (rad), yaw wrapped to (-pi, pi].
-* ``icm20948_accel`` / ``icm20948_gyro`` / ``icm20948_mag`` (seed 003 Table 1, hardware.md §4): specific
+* ``icm20948_accel`` / ``icm20948_gyro`` / ``icm20948_mag`` ([Hindrax-Drag] (seed 003) Table 1, docs/devices.md §4): specific
   force ``f = a - g`` at the IMU position (lever arm ``imu_position_frd_m``, default the CG origin):
   ``a = v_dot + w x v + w_dot x r + w x (w x r)``, ``g = R^T [0, 0, g]``, so a vehicle at rest reads
   ``-g`` along body z (up); angular rate ``w``; the earth magnetic field ``R^T B_ned``. All three in the
   ICM's sensor frame, given by ``sensors.icm20948.mounting_rpy_rad`` (rotation of the sensor frame in
   base_link FLU, ROS fixed-axis roll-pitch-yaw): ``x_sensor = R_mount^T R_FLU_FRD x_frd``.
   ``B_ned`` is ``simulation.sensors.icm20948_mag.earth_field_ned_t`` or :data:`DEFAULT_EARTH_FIELD_NED_T`.
-* ``ms5837`` (:class:`PressureSample`, hardware.md §3): absolute pressure at the port position
+* ``ms5837`` (:class:`PressureSample`, docs/devices.md §3): absolute pressure at the port position
   ``sensors.ms5837.position_frd_m``: ``p0 + rho g max(depth, 0)`` with ``environment.surface_pressure_pa``,
   ``environment.water_density_kg_m3`` and ``environment.gravity_m_s2``; temperature = the water temperature.
-* ``ping1d`` (:class:`AltitudeSample`, hardware.md §2): distance from the sonar position
+* ``ping1d`` (:class:`AltitudeSample`, docs/devices.md §2): distance from the sonar position
   ``sensors.ping1d.position_frd_m`` along the vehicle's down axis to the floor (or a wall, whichever the
   beam hits first), so the slant range ``h / (cos roll cos pitch)`` when tilted over a flat floor. Invalid
   when the sonar is out of the water or the distance is outside ``sensors.ping1d.min_range_m .. max_range_m``.
