@@ -1,10 +1,13 @@
 """The ``hindrax`` command: one entry point for pool-test engineers.
 
 Subcommands are registered in :data:`COMMANDS` as (path, module, help); each module provides
-``add_arguments(parser)`` and ``run(args) -> int``. Modules are imported only when their subcommand
-runs, so ``hindrax config check`` stays fast and does not import ROS.
+``add_arguments(parser)`` and ``run(args) -> int``. The command tree is built from :data:`COMMANDS` alone;
+only the module of the subcommand named on the command line is imported (to add its arguments, then to run
+it), so ``hindrax --help`` and ``hindrax bag --help`` import nothing but argparse, and ``hindrax config check``
+does not import ROS (checked by ``src/hindrax_ident/test/test_cli_help.py``; time in ``make bench``, ``cli``).
 
-Exit status: 0 on success, 1 when the command ran and found a problem (e.g. an invalid configuration),
+Exit status: 0 on success, 1 when the command ran and found a problem (e.g. an invalid configuration: the
+command raises :class:`~hindrax_ident.commands.common.CommandError`, whose one-line message goes to stderr),
 2 on a usage error (argparse).
 """
 from __future__ import annotations
@@ -15,7 +18,7 @@ import os
 import sys
 from typing import Sequence
 
-# Every process the project starts keeps DDS discovery on loopback unless told otherwise (ros2-pip.md).
+# Every process the project starts keeps DDS discovery on loopback unless told otherwise (docs/architecture.md §11.4).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 #: (command words, module implementing add_arguments/run, one-line help)
@@ -39,13 +42,13 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("bag", "recover"), "hindrax_ident.commands.bag.recover",
      "rebuild the summary and metadata.yaml of a bag whose recorder was killed"),
     (("ident", "free-decay"), "hindrax_ident.commands.ident",
-     "added mass from a free-decay CSV (time s, acceleration m/s^2), seed 000 eqs. 2-9 (JSON)"),
+     "added mass from a free-decay CSV (time s, acceleration m/s^2), [Hindrax-AM] (seed 000) eqs. 2-9 (JSON)"),
     (("ident", "thruster-fit"), "hindrax_ident.commands.ident",
-     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), seed 003 eq. 1 (JSON; --write CONFIG)"),
+     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] (seed 003) eq. 1 (JSON; --write CONFIG)"),
     (("ident", "campaign"), "hindrax_ident.commands.ident",
      "identification campaign in-process on the simulator (same as `hindrax run`)"),
-    (("ident", "bag"), "hindrax_ident.identification.from_bag",
-     "offline identification (batch LS + output error, seed 003 eqs. 6-8) of a recorded campaign bag: "
+    (("ident", "bag"), "hindrax_ident.commands.ident_bag",
+     "offline identification (batch LS + output error, [Hindrax-Drag] (seed 003) eqs. 6-8) of a recorded campaign bag: "
      "identification.yaml + report"),
     (("run",), "hindrax_ident.commands.run",
      "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
@@ -53,25 +56,46 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
 ]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argparse tree of all registered subcommands (modules imported lazily at run time)."""
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argparse tree of all registered subcommands, with the arguments of the one ``argv`` names.
+
+    argv: the command line (without the program name; default ``sys.argv[1:]``). Only the module of the
+    subcommand its leading words name is imported (:func:`_add_module_arguments`); the other subcommands get
+    their help line only, which is all ``hindrax --help`` and ``hindrax <group> --help`` print.
+    """
+    words_given = _command_words(sys.argv[1:] if argv is None else argv)
     parser = argparse.ArgumentParser(prog="hindrax", description="Hindrax ROV onboard stack")
     groups: dict[tuple[str, ...], argparse._SubParsersAction] = {}
     root = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     groups[()] = root
-    parsers: dict[tuple[str, ...], argparse.ArgumentParser] = {}
     for words, module, help_text in COMMANDS:
         for depth in range(1, len(words)):
             prefix = words[:depth]
             if prefix not in groups:
                 sub = groups[prefix[:-1]].add_parser(prefix[-1], help=f"{prefix[-1]} commands")
-                parsers[prefix] = sub
                 groups[prefix] = sub.add_subparsers(dest="_".join(prefix) + "_command", metavar="COMMAND",
                                                     required=True)
         p = groups[words[:-1]].add_parser(words[-1], help=help_text, description=help_text)
         p.set_defaults(_module=module)
-        _add_module_arguments(p, module)
+        if words == words_given:
+            _add_module_arguments(p, module)
     return parser
+
+
+def _command_words(argv: Sequence[str]) -> tuple[str, ...]:
+    """The registered command path that the leading non-option words of ``argv`` spell, or ``()``."""
+    prefixes = {words[:i] for words, _m, _h in COMMANDS for i in range(1, len(words) + 1)}
+    full = {words for words, _m, _h in COMMANDS}
+    path: tuple[str, ...] = ()
+    for token in argv:
+        if token.startswith("-"):
+            continue
+        if path + (token,) not in prefixes:
+            break
+        path += (token,)
+        if path in full:
+            return path
+    return ()
 
 
 def _add_module_arguments(parser: argparse.ArgumentParser, module: str) -> None:
@@ -88,14 +112,19 @@ def _add_module_arguments(parser: argparse.ArgumentParser, module: str) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hindrax`` console script."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv).parse_args(argv)
     if getattr(args, "_import_error", None):
         print(f"hindrax: this command is unavailable ({args._import_error})", file=sys.stderr)
         return 1
+    from .commands.common import CommandError
+
     mod = importlib.import_module(args._module)
     try:
         return int(mod.run(args) or 0)
+    except CommandError as exc:
+        print(str(exc), file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

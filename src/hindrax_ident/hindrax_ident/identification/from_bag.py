@@ -1,14 +1,15 @@
 """Offline identification from a recorded bag: rebuild the campaign record from the bag's topics.
 
-``hindrax ident bag BAG [--out DIR] [--config FILE]`` writes ``identification.yaml`` and ``report/index.html``
-(same analyses as the in-process campaign: :func:`~.estimators.identify_all_with_errors`, i.e. equation-error
-batch LS with standard deviations, seed 003 eqs. 6-8, refined by output error, plus the seed's steady-state
+``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_ident.commands.ident_bag`) writes
+``identification.yaml`` and ``report/index.html`` through :func:`identify_bag` and :func:`write_outputs`: the
+same analyses as the in-process campaign (:func:`~.estimators.identify_all_with_errors`, i.e. equation-error
+batch LS with standard deviations, [Hindrax-Drag] (seed 003) eqs. 6-8, refined by output error, plus the seed's steady-state
 LS; "Batch least squares from a bag").
 
 Topics read (the identification node's inputs and outputs, README "Topics"):
 ``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the
-same adapters as the node, :mod:`.node`, into :class:`~.maneuvers.SensorState`), ``thrusters/pulse_width``
-(the widths the ESC node wrote: thrust model of seed 003 eq. 1, first-order lag, thrust allocation matrix),
+same adapters as the node, :mod:`.signals`, into :class:`~.maneuvers.SensorState`), ``thrusters/pulse_width``
+(the widths the ESC node wrote: thrust model of [Hindrax-Drag] (seed 003) eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases) and ``identification/estimates`` (the online RLS history, for the report).
 
@@ -23,21 +24,23 @@ Raises :class:`BagContentError` (one line) when the bag lacks what is needed.
 """
 from __future__ import annotations
 
-import argparse
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, ConfigError, VehicleConfig, default_config_path, load_config
+from hindrax_drivers.config import DOFS, VehicleConfig
+
+from hindrax_drivers.icm20948.mounting import mounting_rotation
 
 from .campaign import CampaignRecord
 from .maneuvers import SensorState
+from .signals import (STILL_MESSAGE, sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu,
+                      thrust_of_written_widths)
 
 __all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "identify_bag",
-           "add_arguments", "run"]
+           "write_outputs"]
 
 SENSOR_TOPICS = ("dvl/data", "pressure/fluid_pressure", "imu/data_raw", "ping/altitude")
 TOPICS = SENSOR_TOPICS + ("thrusters/pulse_width", "identification/status", "identification/estimates")
@@ -92,10 +95,6 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
 
     Raises :class:`BagContentError` without ESC widths, status or an identification run.
     """
-    from .node import (STILL_MESSAGE, sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu,
-                       thrust_of_written_widths)
-    from hindrax_drivers.icm20948.node import mounting_rotation
-
     mount_t = mounting_rotation(cfg.flat["sensors.icm20948.mounting_rpy_rad"]).T
     samples: list = []
     pwm: list = []
@@ -235,45 +234,3 @@ def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | P
     path = write_identification(out / "identification.yaml", doc)
     write_report(out / "report", idents, doc, campaign_note=note)
     return path
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Arguments of ``hindrax ident bag``."""
-    parser.add_argument("bag", help="bag directory (or .mcap file) recorded during an identification campaign")
-    parser.add_argument("--out", default=None, help="output directory (default: the bag's parent directory)")
-    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
-
-
-def run(args: argparse.Namespace) -> int:
-    """Identify from a bag, write the outputs, print the summary. Exit 1 with one line on bad input."""
-    from hindrax_drivers.recording.reader import BagError
-
-    from ..commands.run import format_summary
-
-    try:
-        cfg = load_config(args.config or default_config_path())
-    except ConfigError as exc:
-        print(f"invalid configuration: {exc}", file=sys.stderr)
-        return 1
-    bag = Path(args.bag)
-    if not bag.exists():
-        print(f"ident bag: {bag}: no such file or directory", file=sys.stderr)
-        return 1
-    try:
-        record, idents, errors = identify_bag(bag, cfg)
-    except (BagError, BagContentError, OSError) as exc:
-        print(f"ident bag: {exc}", file=sys.stderr)
-        return 1
-    for dof, msg in errors.items():
-        print(f"{dof}: no estimate ({msg})")
-    if not idents:
-        print("ident bag: no DOF could be identified", file=sys.stderr)
-        return 1
-    out = Path(args.out) if args.out else bag.resolve().parent
-    out.mkdir(parents=True, exist_ok=True)
-    note = (f"Offline identification of bag {bag}, {record.t_s[-1] - record.t_s[0]:.0f} s of campaign"
-            + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
-    path = write_outputs(out, idents, cfg, bag, note)
-    print(format_summary(idents))
-    print(f"output: {path} and {out / 'report' / 'index.html'}")
-    return 0
