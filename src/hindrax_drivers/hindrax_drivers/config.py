@@ -827,43 +827,49 @@ def config_from_parameters(params: Mapping[str, Any], source: str = "ros paramet
 
 
 def default_config_path() -> Path:
-    """Path of the vehicle configuration shipped with the repository (``ros_ws/config/hindrax.yaml``).
+    """Path of the vehicle file used when none is given (``--config``, ``config_file``, ``--params-file``).
 
-    Looks next to the source tree (editable install / repository checkout) and then in the colcon
-    install's share directory. Raises FileNotFoundError naming the places searched.
+    Order: in an installed workspace (this module imported from a colcon install space, e.g.
+    ``ros_ws/install`` or ``/ws/install``), ``share/hindrax_drivers/config/hindrax.yaml`` of that install;
+    otherwise (repository checkout, editable dev venv) the repository's ``ros_ws/config/hindrax.yaml``, found
+    by walking up from this file, then the installed share directory. The canonical file is the
+    repository's ``ros_ws/config/hindrax.yaml``; the package installs it through the symlink
+    ``src/hindrax_drivers/config -> ../../ros_ws/config``. Raises FileNotFoundError naming the places searched.
     """
     here = Path(__file__).resolve()
-    candidates = [p / "ros_ws" / "config" / "hindrax.yaml" for p in here.parents]
-    try:  # colcon install on the Pi
-        from ament_index_python.packages import get_package_share_directory  # type: ignore
+    source_tree = [p / "ros_ws" / "config" / "hindrax.yaml" for p in here.parents]
+    installed: list[Path] = []
+    in_install_space = False
+    try:  # colcon install (the vehicle) or the ament index of the dev venv
+        from ament_index_python.packages import get_package_prefix, get_package_share_directory  # type: ignore
 
-        candidates.append(Path(get_package_share_directory("hindrax_drivers")) / "config" / "hindrax.yaml")
-    except Exception:  # noqa: BLE001 - ament index absent in the dev venv is fine
+        installed.append(Path(get_package_share_directory("hindrax_drivers")) / "config" / "hindrax.yaml")
+        in_install_space = Path(get_package_prefix("hindrax_drivers")).resolve() in here.parents
+    except Exception:  # noqa: BLE001 - no ament index entry (plain checkout) is fine
         pass
+    candidates = installed + source_tree if in_install_space else source_tree + installed
     for c in candidates:
         if c.is_file():
             return c
     raise FileNotFoundError("hindrax.yaml not found; searched: " + ", ".join(str(c) for c in candidates[:4]))
 
 
-def node_config(node: Any, on_error: Callable[[str], None] | None = None) -> VehicleConfig:
-    """Read and validate the vehicle configuration from an rclpy node's parameters.
+def node_config(node: Any, on_error: Callable[[str], None] | None = None, keys: Sequence[str] | None = None,
+                dynamic: Sequence[str] = (), on_change: Callable[["VehicleConfig"], None] | None = None
+                ) -> VehicleConfig:
+    """Declare the node's vehicle keys as described ROS parameters and return them validated.
 
-    The node must have been created with ``automatically_declare_parameters_from_overrides=True`` and started
-    with ``--ros-args --params-file hindrax.yaml``; or it may have a ``config_file`` parameter naming the
-    YAML file (used when no section keys were given; default: :func:`default_config_path`), whose values are
-    then declared as the node's parameters. Raises :class:`ConfigError`; ``on_error`` (if given)
-    receives the one-line message first (nodes log it before exiting).
+    See :func:`hindrax_drivers.node_parameters.declare_vehicle_parameters`: the node must be created
+    without ``automatically_declare_parameters_from_overrides``; ``keys`` are the SCHEMA prefixes it reads
+    (None: all sections), ``dynamic`` those it applies while running (the others are read-only) and
+    ``on_change`` applies a validated change. Values: overrides (``--params-file``, ``-p``,
+    ``parameter_overrides``), else the ``config_file`` parameter's file, else :func:`default_config_path`.
+    Raises :class:`ConfigError`; ``on_error`` (if given) receives the one-line message first.
     """
-    params = {name: p.value for name, p in node._parameters.items()}  # noqa: SLF001 - rclpy has no public dict
+    from .node_parameters import declare_vehicle_parameters
+
     try:
-        if any(k.split(".")[0] in SECTIONS for k in params):
-            return config_from_parameters(params, source=f"parameters of {node.get_name()}")
-        path = params.get("config_file") or str(default_config_path())
-        cfg = load_config(path)
-        # Expose the file's values as the node's parameters (visible and settable like params-file ones).
-        node.declare_parameters("", [(k, v) for k, v in cfg.to_ros_parameters().items() if not node.has_parameter(k)])
-        return cfg
+        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change)
     except ConfigError as exc:
         if on_error:
             on_error(str(exc))

@@ -200,12 +200,17 @@ class StuckDetector:
         return self._repeats >= self.limit
 
 
-def load_node_config(node: Any) -> VehicleConfig:
-    """The vehicle configuration from the node's parameters (see :func:`hindrax_drivers.config.node_config`).
+def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
+                     on_change: Callable[[VehicleConfig], None] | None = None) -> VehicleConfig:
+    """Declare the node's own vehicle keys (with descriptors) and return them validated.
 
-    Logs the one-line reason and re-raises :class:`ConfigError` so :func:`run_node` exits with status 1.
+    keys: SCHEMA prefixes the node reads (None: all sections); dynamic: prefixes it applies while running
+    (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason.
+    See :func:`hindrax_drivers.config.node_config`. Logs the one-line reason and re-raises
+    :class:`ConfigError` so :func:`run_node` exits with status 1.
     """
-    return node_config(node, on_error=lambda line: node.get_logger().fatal(f"invalid configuration: {line}"))
+    return node_config(node, on_error=lambda line: node.get_logger().fatal(f"invalid configuration: {line}"),
+                       keys=keys, dynamic=dynamic, on_change=on_change)
 
 
 def shutdown_in_progress(context: Any = None) -> bool:

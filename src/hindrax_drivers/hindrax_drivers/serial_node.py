@@ -136,8 +136,8 @@ class SerialDeviceNode(Node):
 
     def __init__(self, node_name: str, *, device_name: str, config_section: str, command_gap_s: float,
                  **kwargs: Any) -> None:
-        super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
-        self.cfg = load_node_config(self)
+        super().__init__(node_name, **kwargs)
+        self.cfg = load_node_config(self, (config_section,))
         self.settings = self.cfg.section(config_section)
         self.device_name = device_name
         self.port = str(self.settings["port"])

@@ -24,11 +24,9 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import Wrench, WrenchStamped
 from rclpy.node import Node
-from rcl_interfaces.msg import SetParametersResult
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
-from ..config import ConfigError, config_from_parameters
 from ..node_common import load_node_config, run_node
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
@@ -42,12 +40,19 @@ def _wrench_msg(w: np.ndarray) -> Wrench:
     return m
 
 
+#: Vehicle keys the allocation reads: thrusters, the CG the moments are taken about, the PCA9685 timing that
+#: sets the pulse-width step (hindrax_drivers.allocation.from_config).
+ALLOCATION_KEYS = ("thrusters", "vehicle.centre_of_gravity_frd_m", "esc.oscillator_hz", "esc.pwm_frequency_hz")
+
+
 class ThrustAllocationNode(Node):
     """ROS wrapper of :class:`AllocationCore` (see the module docstring for topics and behaviour)."""
 
     def __init__(self, **kwargs: Any):
-        super().__init__("thrust_allocation", automatically_declare_parameters_from_overrides=True, **kwargs)
-        cfg = load_node_config(self)
+        super().__init__("thrust_allocation", **kwargs)
+        # Thruster geometry, curves and weights are applied while running (ros2 param set); the PCA9685
+        # timing that sets the pulse-width step and the CG need a restart.
+        cfg = load_node_config(self, ALLOCATION_KEYS, dynamic=("thrusters",), on_change=self.on_configuration)
         self.core = AllocationCore(cfg)
         self.timeout_s = cfg.thrusters.wrench_timeout_s
         self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
@@ -59,19 +64,12 @@ class ThrustAllocationNode(Node):
         self.rejected = 0
         self.allocations = 0
         self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale)
-        self.add_on_set_parameters_callback(self.on_parameters)
 
-    # -- parameters: rebuild the core only when the configuration changes
-    def on_parameters(self, params) -> SetParametersResult:
-        current = {name: p.value for name, p in self._parameters.items()}
-        current.update({p.name: p.value for p in params})
-        try:
-            cfg = config_from_parameters(current, source="parameter update")
-        except ConfigError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
+    # -- parameters: rebuild the core when a validated change of the thruster keys arrives
+    def on_configuration(self, cfg) -> None:
+        """Apply a validated configuration change (called by the parameter callback; raise to refuse)."""
         self.core.reconfigure(cfg)
         self.timeout_s = cfg.thrusters.wrench_timeout_s
-        return SetParametersResult(successful=True)
 
     # -- wrench path
     def on_wrench(self, msg: WrenchStamped) -> None:

@@ -249,8 +249,8 @@ class Icm20948Node(Node):
     """
 
     def __init__(self, bus: Any = None, **kwargs: Any):
-        super().__init__("icm20948", automatically_declare_parameters_from_overrides=True, **kwargs)
-        cfg = load_node_config(self)
+        super().__init__("icm20948", **kwargs)
+        cfg = load_node_config(self, ("sensors.icm20948",))
         s = cfg.section("sensors.icm20948")
         self.i2c_bus_number = int(s["i2c_bus"])
         self.address = int(s["i2c_address"])

@@ -127,8 +127,10 @@ class Ms5837Node(Node):
     """
 
     def __init__(self, bus: Any = None, **kwargs: Any):
-        super().__init__("ms5837", automatically_declare_parameters_from_overrides=True, **kwargs)
-        cfg = load_node_config(self)
+        super().__init__("ms5837", **kwargs)
+        # The surface pressure is the one key applied while running (hindrax zero_depth and ros2 param set).
+        cfg = load_node_config(self, ("sensors.ms5837", "environment"), dynamic=("environment.surface_pressure_pa",),
+                               on_change=self._on_vehicle_parameters)
         s = cfg.section("sensors.ms5837")
         self.i2c_bus_number = int(s["i2c_bus"])
         self.address = int(s["i2c_address"])
@@ -357,6 +359,10 @@ class Ms5837Node(Node):
         depth.pose.covariance = cov
         self.pub_depth.publish(depth)
         self.diag.published()
+
+    def _on_vehicle_parameters(self, cfg) -> None:
+        """Apply a validated change of ``environment.surface_pressure_pa`` (this node's one writable key)."""
+        self.surface_pressure_pa = float(cfg.get("environment.surface_pressure_pa"))
 
     def on_zero_depth(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Set the surface pressure to the mean pressure of the last ZERO_DEPTH_WINDOW_S seconds."""

@@ -87,8 +87,8 @@ class EscNode(Node):
     """PCA9685 ESC output node (see the module docstring). ``bus``: SMBus-like object (default smbus2)."""
 
     def __init__(self, bus: Any = None, **kwargs: Any):
-        super().__init__("esc", automatically_declare_parameters_from_overrides=True, **kwargs)
-        cfg = load_node_config(self)
+        super().__init__("esc", **kwargs)
+        cfg = load_node_config(self, ("thrusters", "esc", "lights"))
         self.cfg = cfg
         t = cfg.thrusters
         esc = cfg.section("esc")

@@ -55,7 +55,6 @@ class BagPlayerNode(Node):
     """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction."""
 
     def __init__(self, node_name: str = "player", **kwargs: Any) -> None:
-        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
         super().__init__(node_name, **kwargs)
         bag = str(self._param("bag", ""))
         self.rate = float(self._param("rate", 1.0))

@@ -350,7 +350,6 @@ class IdentificationNode(Node):
 
     def __init__(self, *, config: VehicleConfig | None = None, node_name: str = "identification",
                  **kwargs: Any) -> None:
-        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
         self.config = config if config is not None else node_config(self, on_error=log.error)

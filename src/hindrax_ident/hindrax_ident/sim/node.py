@@ -97,7 +97,6 @@ class SimulatorNode(Node):
 
     def __init__(self, *, config: VehicleConfig | None = None, pulse_width_source: PulseWidthSource | None = None,
                  simulator: Simulator | None = None, node_name: str = "hindrax_simulator", **kwargs: Any) -> None:
-        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
         self.config = config if config is not None else node_config(self, on_error=log.error)

@@ -1,0 +1,256 @@
+"""Vehicle configuration as the ROS 2 parameters of one node: declared per node, described, validated.
+
+Each node declares only the vehicle keys it reads (``keys``: prefixes of :data:`hindrax_drivers.config.SCHEMA`
+keys, e.g. ``("sensors.dvl75",)`` or ``("thrusters.names", "thrusters.<thruster>.position_frd_m")``); every
+other key of a params file or of ``parameter_overrides`` is ignored, as ROS 2 does for undeclared overrides.
+Each declared parameter gets a ``rcl_interfaces/ParameterDescriptor`` built from the schema: description
+(meaning and unit), ``additional_constraints`` (the allowed range as the loader prints it), a
+floating-point or integer range where the schema has both bounds, a static type, and ``read_only`` unless
+the node can apply a change while running (``dynamic``). A change to a dynamic key is validated like the
+file (type, range, cross-key checks) and then handed to the node's ``on_change``; a rejected change returns
+``SetParametersResult(successful=False, reason=<one line naming key, value and allowed range>)``. A change
+to a read-only key is refused by rclpy with the reason ``Trying to set a read-only parameter: <name>.``
+
+Where the values come from, per key: an override (``--ros-args --params-file hindrax.yaml``, ``-p``,
+``parameter_overrides``) if there is one, else the node's ``config_file`` parameter's file, else the
+vehicle file found by :func:`hindrax_drivers.config.default_config_path` (the repository's
+``ros_ws/config/hindrax.yaml`` in a checkout, ``share/hindrax_drivers/config/hindrax.yaml`` when installed).
+So ``ros2 run hindrax_drivers dvl75_node --ros-args -p sensors.dvl75.port:=/dev/ttyUSB0`` works without a
+params file. A file named by ``config_file`` is validated whole by :func:`hindrax_drivers.config.load_config`;
+the node's own keys are validated again after the overrides are applied.
+
+Only public rclpy API is used (declare_parameter, get_parameter, set_parameters, set_descriptor,
+add_on_set_parameters_callback).
+"""
+from __future__ import annotations
+
+import array
+import functools
+import hashlib
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+from . import config as _c
+from .config import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
+
+__all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
+           "declare_vehicle_parameters", "CONFIG_FILE_PARAMETER"]
+
+#: Name of the parameter naming a vehicle file to take defaults from ("" = the shipped file).
+CONFIG_FILE_PARAMETER = "config_file"
+_T = "<thruster>"
+
+
+def _matches(key: str, prefixes: Iterable[str]) -> bool:
+    return any(key == p or key.startswith(p.rstrip(".") + ".") for p in prefixes)
+
+
+def select_schema_keys(prefixes: Sequence[str] | None = None) -> list[str]:
+    """SCHEMA keys (generic, ``<thruster>`` unexpanded) under any of ``prefixes`` (None: every section).
+
+    ``thrusters.names`` is added whenever a per-thruster key is selected (it names the thrusters).
+    Raises ValueError for a prefix that selects nothing (a typo in a node's key list).
+    """
+    if prefixes is None:
+        prefixes = SECTIONS
+    prefixes = tuple(prefixes)
+    for p in prefixes:
+        if not any(_matches(k, [p]) for k in SCHEMA):
+            raise ValueError(f"no vehicle configuration key under {p!r}")
+    keys = [k for k in SCHEMA if _matches(k, prefixes)]
+    if any(_T in k for k in keys) and "thrusters.names" not in keys:
+        keys.insert(0, "thrusters.names")
+    return keys
+
+
+def concrete_keys(generic: Sequence[str], thruster_names: Sequence[str]) -> list[str]:
+    """Expand ``<thruster>`` in generic SCHEMA keys with the configured thruster names (order kept)."""
+    out: list[str] = []
+    for k in generic:
+        out.extend([k.replace(_T, n) for n in thruster_names] if _T in k else [k])
+    return out
+
+
+def _generic(key: str) -> str:
+    parts = key.split(".")
+    if key not in SCHEMA and len(parts) == 3 and parts[0] == "thrusters":
+        return f"thrusters.{_T}.{parts[2]}"
+    return key
+
+
+def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: str = "") -> dict[str, Any]:
+    """Validate the values of a node's selected keys like the file loader does.
+
+    flat: concrete key -> value (None or absent = not given). generic: the node's SCHEMA keys.
+    Returns the coerced values (absent optional keys left out). Raises :class:`ConfigError` listing every
+    issue: wrong type, out of range, missing required key, cross-key inconsistency among the selected keys.
+    """
+    names_raw = flat.get("thrusters.names")
+    names = [n for n in names_raw if isinstance(n, str)] if isinstance(names_raw, (list, tuple)) else []
+    issues: list[ConfigIssue] = []
+    out: dict[str, Any] = {}
+    for key in concrete_keys(generic, names):
+        spec = SCHEMA[_generic(key)]
+        value = flat.get(key)
+        if value is None:
+            if not _c._is_optional(key):  # noqa: SLF001 - same module family, one definition of "optional"
+                issues.append(ConfigIssue(key, "<missing>", spec.allowed()))
+            continue
+        coerced, issue = _c._check_value(key, spec, value)  # noqa: SLF001
+        if issue:
+            issues.append(issue)
+        else:
+            out[key] = coerced
+    if not issues:
+        issues.extend(_c._cross_checks(out))  # noqa: SLF001
+    if issues:
+        raise ConfigError(issues, source)
+    return out
+
+
+def parameter_descriptor(key: str, read_only: bool = True):
+    """``rcl_interfaces/ParameterDescriptor`` of a vehicle key from its SCHEMA entry.
+
+    description: the schema's one-line meaning; additional_constraints: "allowed <range>"; ranges for
+    scalar numbers with both bounds; read_only as given. The type is left to the caller.
+    """
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    spec: Spec = SCHEMA[_generic(key)]
+    d = ParameterDescriptor(name=key, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
+                            read_only=read_only)
+    if spec.kind == "float" and spec.lo is not None and spec.hi is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi), step=0.0)]
+    elif spec.kind == "int" and spec.lo is not None and spec.hi is not None and spec.choices is None:
+        d.integer_range = [IntegerRange(from_value=int(spec.lo), to_value=int(spec.hi), step=1)]
+    return d
+
+
+@functools.lru_cache(maxsize=8)
+def _load_cached(path: str, mtime_ns: int, size: int) -> VehicleConfig:
+    return _c.load_config(path)
+
+
+def _load(path: str | Path) -> VehicleConfig:
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError:
+        return _c.load_config(p)  # raises the loader's one-line "a readable file" error
+    return _load_cached(str(p), st.st_mtime_ns, st.st_size)
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, array.array):
+        return list(value)
+    if isinstance(value, tuple):
+        return list(value)
+    return value
+
+
+def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
+                               on_change: Callable[[VehicleConfig], None] | None = None) -> VehicleConfig:
+    """Declare the node's vehicle keys as described ROS parameters and return them validated.
+
+    node: an rclpy Node created *without* ``automatically_declare_parameters_from_overrides``.
+    keys: SCHEMA key prefixes the node reads (None: every section, for nodes that use the whole vehicle,
+    such as the simulator). dynamic: prefixes (within ``keys``) the node applies while running; they stay
+    writable, everything else is read-only. on_change(cfg): called with the validated configuration after
+    a change to dynamic keys; raise ValueError (or ConfigError) with the reason to refuse it.
+    Returns a :class:`VehicleConfig` holding the node's keys only (``flat``). Raises :class:`ConfigError`
+    (one line per issue) on a missing, mistyped or out-of-range value.
+    """
+    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+    from rclpy.parameter import Parameter
+
+    generic = select_schema_keys(keys)
+    dynamic = tuple(dynamic)
+    if dynamic and on_change is None:
+        raise ValueError("dynamic keys need an on_change callback that applies them")
+    if node.has_parameter(CONFIG_FILE_PARAMETER):
+        config_file = node.get_parameter(CONFIG_FILE_PARAMETER).value or ""
+    else:
+        config_file = node.declare_parameter(
+            CONFIG_FILE_PARAMETER, "", ParameterDescriptor(
+                description="vehicle file giving the values of vehicle keys that no override sets "
+                            "(empty: the shipped hindrax.yaml)", read_only=True)).value or ""
+
+    defaults: dict[str, Any] = {}
+    file_cfg: VehicleConfig | None = None
+    default_error: ConfigError | None = None
+    if config_file:
+        file_cfg = _load(config_file)  # explicit file: its errors stop the node
+    else:
+        try:
+            file_cfg = _load(_c.default_config_path())
+        except FileNotFoundError:
+            file_cfg = None
+        except ConfigError as exc:  # reported only if the overrides do not supply the node's keys
+            default_error = exc
+    if file_cfg is not None:
+        defaults = file_cfg.to_ros_parameters()
+
+    source = config_file or (file_cfg.source if file_cfg else "")
+    values: dict[str, Any] = {}
+
+    def declare(key: str) -> Any:
+        desc = ParameterDescriptor(description=SCHEMA[_generic(key)].doc, dynamic_typing=True)
+        try:
+            p = node.declare_parameter(key, defaults.get(key), desc)
+        except (InvalidParameterValueException, InvalidParameterTypeException) as exc:  # pragma: no cover
+            raise ConfigError([ConfigIssue(key, str(exc), SCHEMA[_generic(key)].allowed())], source) from exc
+        v = _plain(p.value)
+        values[key] = v
+        return v
+
+    # thrusters.names first: it names the per-thruster keys.
+    names = declare("thrusters.names") if "thrusters.names" in generic else []
+    names = [n for n in names if isinstance(n, str)] if isinstance(names, list) else []
+    declared = concrete_keys(generic, names)
+    for key in declared:
+        if key not in values:
+            declare(key)
+    overridden = any(values[k] is not None and values[k] != defaults.get(k) for k in declared)
+    if default_error is not None and not overridden:
+        raise default_error
+    src = f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else "")
+    valid = validate_selection(values, generic, source=src)
+
+    # Canonical types (an integer written for a float key becomes a float), then the final descriptors:
+    # static type, range, read-only unless the node applies changes to the key.
+    fix = [Parameter(k, value=v) for k, v in valid.items() if type(values[k]) is not type(v) or values[k] != v]
+    if fix:
+        node.set_parameters(fix)
+    for key in declared:
+        if key not in valid:
+            continue  # optional key with no value: stays declared without one
+        d = parameter_descriptor(key, read_only=not _matches(_generic(key), dynamic) and not _matches(key, dynamic))
+        d.type = Parameter(key, value=valid[key]).type_.value
+        node.set_descriptor(key, d)
+
+    digest = (file_cfg.sha256 if (file_cfg is not None and not overridden)
+              else hashlib.sha256(repr(sorted(valid.items())).encode()).hexdigest())
+    state = {"cfg": VehicleConfig(valid, src, digest)}
+    declared_set = set(declared)
+
+    def on_set(params) -> SetParametersResult:
+        changed = {p.name: _plain(p.value) for p in params if p.name in declared_set}
+        if not changed:
+            return SetParametersResult(successful=True)
+        candidate = dict(state["cfg"].flat)
+        candidate.update(changed)
+        try:
+            new = VehicleConfig(validate_selection(candidate, generic, source="parameter update"),
+                                "parameter update", state["cfg"].sha256)
+            if on_change is not None:
+                on_change(new)
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=exc.lines()[0])
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        state["cfg"] = new
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(on_set)
+    return state["cfg"]
