@@ -11,8 +11,8 @@ One YAML file per vehicle (``ros_ws/config/hindrax.yaml``) in the ros-args param
 Nested keys become dotted ROS parameter names (``vehicle.mass_kg``). Every key of the file is declared in
 :data:`SCHEMA` below with its type, unit (in the key name), allowed range and a one-line meaning; the
 loader rejects unknown keys, wrong types and out-of-range values, reporting each as one line naming the
-key, the value and the allowed range (design.md §4). Geometry is in the marine body frame FRD with the
-origin at the centre of gravity (design.md §3); hydrodynamic coefficients are stored as positive numbers
+key, the value and the allowed range (docs/architecture.md §4). Geometry is in the marine body frame FRD with the
+origin at the centre of gravity (docs/architecture.md §3); hydrodynamic coefficients are stored as positive numbers
 (Fossen/SNAME).
 
 Thruster-specific keys use the thruster names of ``thrusters.names`` as a path segment
@@ -46,7 +46,7 @@ ROTATIONAL_DOFS = DOFS[3:]
 #: Sections a configuration file may contain (top level under ``ros__parameters``).
 SECTIONS: tuple[str, ...] = (
     "vehicle", "environment", "hydrodynamics", "thrusters", "esc", "lights", "sensors", "pool", "limits",
-    "identification", "simulation", "recording",
+    "identification", "simulation", "recording", "supervisor",
 )
 
 _FLOAT = "float"
@@ -114,13 +114,13 @@ def _v(doc: str, length: int, lo: float | None = None, hi: float | None = None, 
 _T = "<thruster>"
 
 SCHEMA: dict[str, Spec] = {
-    # --- vehicle (seed 000 §2, seed 003 §2.1) ---
+    # --- vehicle ([Hindrax-AM] (seed 000) §2, [Hindrax-Drag] (seed 003) §2.1) ---
     "vehicle.name": _s("vehicle name"),
-    "vehicle.mass_kg": _f("total mass in air, kg (seed 003 §2.1)", 0.1, 1000.0),
-    "vehicle.displaced_volume_m3": _f("displaced volume, m^3 (seed 003 §2.1)", 1e-5, 10.0),
-    "vehicle.length_m": _f("overall length (x), m (seed 003 §2.1)", 0.01, 10.0),
-    "vehicle.width_m": _f("overall width (y), m (seed 003 §2.1)", 0.01, 10.0),
-    "vehicle.height_m": _f("overall height (z), m (seed 003 §2.1)", 0.01, 10.0),
+    "vehicle.mass_kg": _f("total mass in air, kg ([Hindrax-Drag] (seed 003) §2.1)", 0.1, 1000.0),
+    "vehicle.displaced_volume_m3": _f("displaced volume, m^3 ([Hindrax-Drag] (seed 003) §2.1)", 1e-5, 10.0),
+    "vehicle.length_m": _f("overall length (x), m ([Hindrax-Drag] (seed 003) §2.1)", 0.01, 10.0),
+    "vehicle.width_m": _f("overall width (y), m ([Hindrax-Drag] (seed 003) §2.1)", 0.01, 10.0),
+    "vehicle.height_m": _f("overall height (z), m ([Hindrax-Drag] (seed 003) §2.1)", 0.01, 10.0),
     "vehicle.net_buoyancy_n": _f("stated net buoyancy (buoyancy - weight), N; checked against (rho V - m) g",
                                  -100.0, 100.0),
     "vehicle.inertia_kg_m2": _v("principal moments of inertia [Ixx, Iyy, Izz] about the CG, kg m^2", 3, 1e-6, 1e4),
@@ -130,9 +130,9 @@ SCHEMA: dict[str, Spec] = {
     # --- environment ---
     "environment.water_density_kg_m3": _f("water density, kg/m^3 (seeds use 1000)", 900.0, 1100.0),
     "environment.gravity_m_s2": _f("gravitational acceleration, m/s^2", 9.7, 9.9),
-    "environment.kinematic_viscosity_m2_s": _f("kinematic viscosity of water, m^2/s (seed 000 §4)", 1e-7, 1e-5),
+    "environment.kinematic_viscosity_m2_s": _f("kinematic viscosity of water, m^2/s ([Hindrax-AM] (seed 000) §4)", 1e-7, 1e-5),
     "environment.surface_pressure_pa": _f("atmospheric pressure at the surface, Pa", 50000.0, 120000.0),
-    # --- hydrodynamics (positive numbers; seed 000 Table 6, seed 003 Table 3) ---
+    # --- hydrodynamics (positive numbers; [Hindrax-AM] (seed 000) Table 6, [Hindrax-Drag] (seed 003) Table 3) ---
     "hydrodynamics.added_mass_coupling": _v(
         "off-diagonal added-mass terms added to diag(added_mass), row-major 6x6 (kg, kg m, kg m^2); "
         "diagonal entries must be 0", 36, -1e4, 1e4),
@@ -156,14 +156,14 @@ for _dof in ROTATIONAL_DOFS:
         f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
 
 SCHEMA.update({
-    # --- thrusters (seed 003 §2.2, eq. 1, Table 2, §4 eq. 9) ---
+    # --- thrusters ([Hindrax-Drag] (seed 003) §2.2, eq. 1, Table 2, §4 eq. 9) ---
     "thrusters.names": Spec(_STRS, "thruster names in allocation order"),
-    "thrusters.pulse_width_min_us": _f("lowest pulse width (full reverse), us (seed 003 §2.2.1)", 500.0, 2500.0),
-    "thrusters.pulse_width_neutral_us": _f("neutral pulse width (stop), us (seed 003 §2.2.1)", 500.0, 2500.0),
-    "thrusters.pulse_width_max_us": _f("highest pulse width (full forward), us (seed 003 §2.2.1)", 500.0, 2500.0),
-    "thrusters.deadband_us": _f("half-width of the ESC deadband around neutral, us (hardware.md §5.2)", 0.0, 200.0),
-    "thrusters.curve_negative": _v("cubic [c4, c3, c2, c1] for P below neutral, N (seed 003 eq. 1)", 4),
-    "thrusters.curve_positive": _v("cubic [c4, c3, c2, c1] for P above neutral, N (seed 003 eq. 1)", 4),
+    "thrusters.pulse_width_min_us": _f("lowest pulse width (full reverse), us ([Hindrax-Drag] (seed 003) §2.2.1)", 500.0, 2500.0),
+    "thrusters.pulse_width_neutral_us": _f("neutral pulse width (stop), us ([Hindrax-Drag] (seed 003) §2.2.1)", 500.0, 2500.0),
+    "thrusters.pulse_width_max_us": _f("highest pulse width (full forward), us ([Hindrax-Drag] (seed 003) §2.2.1)", 500.0, 2500.0),
+    "thrusters.deadband_us": _f("half-width of the ESC deadband around neutral, us (docs/devices.md §5.2)", 0.0, 200.0),
+    "thrusters.curve_negative": _v("cubic [c4, c3, c2, c1] for P below neutral, N ([Hindrax-Drag] (seed 003) eq. 1)", 4),
+    "thrusters.curve_positive": _v("cubic [c4, c3, c2, c1] for P above neutral, N ([Hindrax-Drag] (seed 003) eq. 1)", 4),
     "thrusters.time_constant_s": _f("first-order thruster lag time constant, s", 0.0, 5.0),
     "thrusters.allocation_mode": _s("saturation handling", ("uniform", "priority")),
     "thrusters.priority_dofs": Spec(_STRS, "DOFs kept exact in priority mode", choices=DOFS),
@@ -174,34 +174,43 @@ SCHEMA.update({
     f"thrusters.{_T}.reversed": _b("mirror the pulse width about neutral (propeller/wiring reversed)"),
     f"thrusters.{_T}.trim_us": _f("pulse-width trim added after allocation, us", -100.0, 100.0),
     f"thrusters.{_T}.allocation_weight": _f("weight of this thruster in the weighted pseudo-inverse", 1e-3, 1e3),
-    # --- ESC output: PCA9685 (hardware.md §5.1-5.2) ---
+    # --- ESC output: PCA9685 (docs/devices.md §5.1-5.2) ---
     "esc.i2c_bus": _i("Linux I2C bus number (/dev/i2c-N)", 0, 31),
     "esc.i2c_address": _i("PCA9685 7-bit address", 0x40, 0x7F),
     "esc.pwm_frequency_hz": _f("PWM frequency, Hz (Basic ESC max 400 Hz)", 24.0, 400.0),
     "esc.oscillator_hz": _f("calibrated PCA9685 oscillator frequency, Hz (23-27 MHz measured)", 20e6, 30e6),
-    "esc.arming_time_s": _f("time at neutral before arming is accepted, s (hardware.md §5.2: BR holds 7 s)",
+    "esc.arming_time_s": _f("time at neutral before arming is accepted, s (docs/devices.md §5.2: BR holds 7 s)",
                             0.0, 60.0),
     "esc.watchdog_timeout_s": _f("no command for this long -> all neutral, s", 0.02, 10.0),
     "esc.output_rate_hz": _f("rate the outputs are refreshed and the watchdog checked, Hz", 1.0, 400.0),
     "esc.slew_rate_us_per_s": _f("max pulse-width change rate, us/s (0 = off)", 0.0, 1e6),
     "esc.output_latency_s": _f("delay from the ESC node's stamp of a written width (thrusters/pulse_width) to the "
                                "thrust starting to change, s: the identification's force timing", 0.0, 0.5),
-    # --- lights (seed 003 §2.1: PWM also drives the lights) ---
+    "esc.oscillator_calibrated": _b("esc.oscillator_hz was measured on this board (`hindrax esc calibrate`); "
+                                    "arming is refused while false"),
+    "esc.readback_interval_s": _f("MODE1, PRE_SCALE and the channel registers are read back this often; a "
+                                  "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
+    # --- lights ([Hindrax-Drag] (seed 003) §2.1: PWM also drives the lights) ---
     "lights.esc_channel": _i("PCA9685 channel of the lights", 0, 15),
     "lights.pulse_width_off_us": _f("pulse width for lights off, us", 500.0, 2500.0),
     "lights.pulse_width_full_us": _f("pulse width for full brightness, us", 500.0, 2500.0),
-    # --- sensors (seed 003 Table 1; hardware.md) ---
+    # --- sensors ([Hindrax-Drag] (seed 003) Table 1; docs/devices.md) ---
     "sensors.dvl75.port": _s("serial device path or pyserial URL of the DVL-75"),
-    "sensors.dvl75.baud_rate": _i("baud rate (hardware.md §1.1)", choices=(9600, 19200, 38400, 57600, 115200,
+    "sensors.dvl75.baud_rate": _i("baud rate (docs/devices.md §1.1)", choices=(9600, 19200, 38400, 57600, 115200,
                                                                            230400, 460800, 921600)),
     "sensors.dvl75.position_frd_m": _v("DVL position relative to the CG, FRD, m", 3, -5.0, 5.0),
     "sensors.dvl75.sensor_orientation_rpy_rad": _v(
-        "SET-SENSOR-ORIENTATION roll, pitch, heading of the sensor in the vehicle, rad (hardware.md §1.4)",
+        "SET-SENSOR-ORIENTATION roll, pitch, heading of the sensor in the vehicle, rad (docs/devices.md §1.4)",
         3, -math.pi, math.pi),
-    "sensors.dvl75.speed_of_sound_m_s": _f("speed of sound sent to the DVL, m/s (hardware.md §1.4)", 1100.0, 1950.0),
+    "sensors.dvl75.speed_of_sound_m_s": _f("speed of sound sent to the DVL, m/s (docs/devices.md §1.4)", 1100.0, 1950.0),
     "sensors.dvl75.velocity_std_m_s": _f("1-sigma velocity error used for the covariance, m/s", 0.0, 1.0),
+    "sensors.dvl75.max_speed_m_s": _f("plausibility gate: a faster $DVPDL velocity is published invalid, m/s "
+                                      "(DVL-75 envelope <= 8 kn = 4.1 m/s, docs/devices.md §1.1)", 0.1, 10.0),
+    "sensors.dvl75.min_interval_s": _f("plausibility gate: a shorter $DVPDL dtu is published invalid, s "
+                                       "(ping rate 5-20 Hz, docs/devices.md §1.1)", 0.001, 1.0),
+    "sensors.dvl75.max_interval_s": _f("plausibility gate: a longer $DVPDL dtu is published invalid, s", 0.05, 10.0),
     "sensors.ping1d.port": _s("serial device path or pyserial URL of the Ping altimeter"),
-    "sensors.ping1d.baud_rate": _i("baud rate (hardware.md §2.1)", choices=(9600, 115200)),
+    "sensors.ping1d.baud_rate": _i("baud rate (docs/devices.md §2.1)", choices=(9600, 115200)),
     "sensors.ping1d.position_frd_m": _v("sonar position relative to the CG, FRD, m", 3, -5.0, 5.0),
     "sensors.ping1d.speed_of_sound_m_s": _f("speed of sound, m/s (fresh water about 1481)", 1000.0, 2000.0),
     "sensors.ping1d.ping_interval_s": _f("interval between pings, s", 0.01, 10.0),
@@ -211,24 +220,34 @@ SCHEMA.update({
     "sensors.ping1d.max_range_m": _f("maximum range for sensor_msgs/Range, m", 0.1, 300.0),
     "sensors.ms5837.i2c_bus": _i("Linux I2C bus number", 0, 31),
     "sensors.ms5837.i2c_address": _i("MS5837 7-bit address (fixed 0x76)", choices=(0x76,)),
-    "sensors.ms5837.variant": _s("sensor variant (auto = C1 heuristic, hardware.md §3.9)", ("30BA", "02BA", "auto")),
-    "sensors.ms5837.oversampling": _i("oversampling ratio (hardware.md §3.1)",
+    "sensors.ms5837.variant": _s("sensor variant (auto = C1 heuristic, docs/devices.md §3.9)", ("30BA", "02BA", "auto")),
+    "sensors.ms5837.oversampling": _i("oversampling ratio (docs/devices.md §3.1)",
                                       choices=(256, 512, 1024, 2048, 4096, 8192)),
     "sensors.ms5837.rate_hz": _f("pressure publication rate, Hz", 0.1, 50.0),
     "sensors.ms5837.position_frd_m": _v("pressure port position relative to the CG, FRD, m", 3, -5.0, 5.0),
+    "sensors.ms5837.min_pressure_pa": _f("plausibility gate: a lower compensated pressure is not published, Pa",
+                                         0.0, 2e5),
+    "sensors.ms5837.max_pressure_pa": _f("plausibility gate: a higher compensated pressure is not published, Pa "
+                                         "(30BA full scale 30 bar)", 1e4, 3.1e6),
     "sensors.icm20948.i2c_bus": _i("Linux I2C bus number", 0, 31),
     "sensors.icm20948.i2c_address": _i("ICM-20948 7-bit address (AD0 low 0x68, high 0x69)", choices=(0x68, 0x69)),
     "sensors.icm20948.accel_full_scale_g": _i("accelerometer full scale, g", choices=(2, 4, 8, 16)),
     "sensors.icm20948.gyro_full_scale_dps": _i("gyroscope full scale, deg/s", choices=(250, 500, 1000, 2000)),
-    "sensors.icm20948.dlpf_config": _i("ACCEL/GYRO_DLPFCFG register code (hardware.md §4.4)", 0, 7),
+    "sensors.icm20948.dlpf_config": _i("ACCEL/GYRO_DLPFCFG register code (docs/devices.md §4.4)", 0, 7),
     "sensors.icm20948.sample_rate_hz": _f("output data rate and publication rate, Hz", 1.0, 1125.0),
-    "sensors.icm20948.magnetometer_mode": _s("how the AK09916 is reached (hardware.md §4.6)",
+    "sensors.icm20948.magnetometer_mode": _s("how the AK09916 is reached (docs/devices.md §4.6)",
                                              ("i2c_master", "bypass")),
     "sensors.icm20948.estimate_gyro_bias": _b("estimate gyro bias at start-up while the vehicle is still"),
     "sensors.icm20948.gyro_bias_duration_s": _f("duration of the start-up gyro-bias estimate, s", 0.1, 60.0),
     "sensors.icm20948.mounting_rpy_rad": _v("rotation of the sensor frame in base_link (FLU), rad",
                                             3, -math.pi, math.pi),
-    # --- pool (seed 003 §4) ---
+    "sensors.icm20948.position_frd_m": _v("IMU chip position relative to the CG, FRD, m (the imu_link origin)",
+                                          3, -5.0, 5.0),
+    "sensors.icm20948.frozen_check_samples": _i("data-ready gate: after this many bit-identical samples in a row "
+                                                "the chip's PWR_MGMT_1/USER_CTRL are read back (reset check)", 1, 100),
+    "sensors.icm20948.mag_stale_timeout_s": _f("data-ready gate: no new magnetometer sample (ST1.DRDY, SLV0 "
+                                               "answered) for this long -> ERROR and re-initialisation, s", 0.05, 10.0),
+    # --- pool ([Hindrax-Drag] (seed 003) §4) ---
     "pool.length_m": _f("pool length (north, x), m", 1.0, 200.0),
     "pool.width_m": _f("pool width (east, y), m", 1.0, 200.0),
     "pool.depth_m": _f("water depth, m", 0.3, 100.0),
@@ -236,32 +255,48 @@ SCHEMA.update({
     "pool.start_position_ned_m": _v("vehicle start position (north, east, down) from the pool corner, m", 3,
                                     -1.0, 200.0),
     "pool.start_heading_rad": _f("vehicle start heading, rad (NED yaw)", -math.pi, math.pi),
-    # --- limits (design.md §8) ---
+    # --- limits (docs/architecture.md §8) ---
     "limits.max_depth_m": _f("abort below this depth, m", 0.0, 100.0),
     "limits.min_altitude_m": _f("abort closer than this to the floor, m", 0.0, 10.0),
     "limits.max_roll_rad": _f("abort beyond this roll, rad", 0.0, math.pi),
     "limits.max_pitch_rad": _f("abort beyond this pitch, rad", 0.0, math.pi / 2),
-    # --- identification (design.md §5; seed 003 §4) ---
+    # --- safety supervisor (hindrax_drivers.supervisor): the last line after the identification's own limits ---
+    "supervisor.check_rate_hz": _f("rate of the supervisor's rate and run-time checks, Hz", 1.0, 200.0),
+    "supervisor.rate_window_s": _f("window the sensor rates are measured over, s", 0.2, 60.0),
+    "supervisor.min_rate.dvl_hz": _f("minimum dvl/data rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
+    "supervisor.min_rate.altimeter_hz": _f("minimum ping/altitude rate while armed, Hz (0 = not watched)",
+                                           0.0, 1000.0),
+    "supervisor.min_rate.pressure_hz": _f("minimum pressure/depth rate while armed, Hz (0 = not watched)",
+                                          0.0, 1000.0),
+    "supervisor.min_rate.imu_hz": _f("minimum imu/data_raw rate while armed, Hz (0 = not watched)", 0.0, 2000.0),
+    "supervisor.max_depth_m": _f("disarm below this depth (pressure port), m", 0.0, 100.0),
+    "supervisor.min_altitude_m": _f("disarm closer than this to the floor (altimeter), m", 0.0, 10.0),
+    "supervisor.max_roll_rad": _f("disarm beyond this roll (DVL attitude), rad", 0.0, math.pi),
+    "supervisor.max_pitch_rad": _f("disarm beyond this pitch (DVL attitude), rad", 0.0, math.pi / 2),
+    "supervisor.cage_margin_m": _f("disarm when the DVL dead-reckoned position comes closer than this to a pool "
+                                   "wall (pool.* box), m", 0.0, 10.0),
+    "supervisor.max_run_time_s": _f("disarm after this long armed, s", 1.0, 86400.0),
+    # --- identification (docs/architecture.md §5; [Hindrax-Drag] (seed 003) §4) ---
     "identification.levels_per_dof": _i("thrust levels in each DOF's ladder", 1, 50),
     "identification.level_fraction_min": _f("smallest level as a fraction of the DOF's authority", 0.01, 1.0),
     "identification.level_fraction_max": _f("largest level as a fraction of the DOF's authority", 0.01, 1.0),
     "identification.forgetting_factor": _f("RLS forgetting factor lambda", 0.9, 1.0),
     "identification.estimate_rate_hz": _f("RLS update rate, Hz", 1.0, 400.0),
     "identification.publish_rate_hz": _f("HydroEstimate publication rate, Hz", 0.1, 50.0),
-    "identification.altitude_setpoint_m": _f("altitude held during manoeuvres, m (seed 003 §4: 0.8-1.0 m)",
+    "identification.altitude_setpoint_m": _f("altitude held during manoeuvres, m ([Hindrax-Drag] (seed 003) §4: 0.8-1.0 m)",
                                              0.1, 50.0),
-    "identification.roll_test_angle_rad": _f("roll test turns back at this angle, rad (seed 003 §4.2: 30 deg)",
+    "identification.roll_test_angle_rad": _f("roll test turns back at this angle, rad ([Hindrax-Drag] (seed 003) §4.2: 30 deg)",
                                              0.01, 1.5),
-    "identification.pitch_test_angle_rad": _f("pitch test turns back at this angle, rad (seed 003 §4.2: 40 deg)",
+    "identification.pitch_test_angle_rad": _f("pitch test turns back at this angle, rad ([Hindrax-Drag] (seed 003) §4.2: 40 deg)",
                                               0.01, 1.5),
     "identification.max_level_duration_s": _f("longest time one level is held, s", 1.0, 600.0),
     "identification.converged_relative_std": _f("converged when every std/|value| is below this", 0.001, 1.0),
-    # --- simulation (design.md §6) ---
+    # --- simulation (docs/architecture.md §6) ---
     "simulation.step_s": _f("fixed integration step, s", 1e-4, 0.05),
     "simulation.real_time_factor": _f("simulated seconds per wall second (0 = as fast as possible)", 0.0, 1000.0),
     "simulation.seed": _i("random seed of the sensor noise", 0, 2**31 - 1),
     "simulation.clock_rate_hz": _f("rate /clock is published, in simulated time, Hz", 1.0, 1000.0),
-    # --- recording (design.md §7) ---
+    # --- recording (docs/architecture.md §7) ---
     "recording.output_root": _s("directory new bags are created in"),
     "recording.compression": _s("chunk compression", ("zstd", "lz4", "none")),
     "recording.chunk_size_bytes": _i("MCAP chunk size, bytes", 1024, 64 * 1024 * 1024),
@@ -273,7 +308,10 @@ SCHEMA.update({
 })
 
 #: Optional keys: absent is fine; present must validate. Everything else in SCHEMA is required.
-OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics")
+OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics", "sensors.dvl75.noise_std_m_s",
+                                      "sensors.dvl75.scale_error_fraction", "sensors.dvl75.attitude_noise_std_rad",
+                                      "sensors.ms5837.noise_std_pa", "sensors.icm20948.accel_noise_std_m_s2",
+                                      "sensors.icm20948.gyro_noise_std_rad_s", "thrusters.thrust_uncertainty_rel")
 
 # Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
 for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837", "pa", 1e4),
@@ -284,13 +322,25 @@ for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837",
     SCHEMA[f"simulation.sensors.{_dev}.rate_hz"] = _f(f"{_dev} output rate, Hz", 0.1, 2000.0)
     SCHEMA[f"simulation.sensors.{_dev}.dropout_probability"] = _f(f"{_dev} probability a sample is lost", 0.0, 1.0)
 SCHEMA["simulation.sensors.dvl75.scale_error_fraction"] = _f(
-    "1-sigma multiplicative velocity error per report (seed 003 Table 1: mean error about 5 %)", 0.0, 0.5)
+    "1-sigma multiplicative velocity error per report ([Hindrax-Drag] (seed 003) Table 1: mean error about 5 %)", 0.0, 0.5)
 SCHEMA["simulation.sensors.dvl75.min_altitude_m"] = _f("DVL loses lock below this altitude, m", 0.0, 10.0)
 SCHEMA["simulation.sensors.dvl75.max_altitude_m"] = _f("DVL loses lock above this altitude, m", 0.1, 200.0)
 SCHEMA["simulation.sensors.dvl75.wall_lock_loss_distance_m"] = _f(
     "DVL loses lock closer than this to a wall, m (0 = never)", 0.0, 10.0)
 SCHEMA["simulation.sensors.icm20948_mag.earth_field_ned_t"] = _v(
     "earth magnetic field [north, east, down] seen by the simulated magnetometer, T", 3, -1e-4, 1e-4)
+# Declared (datasheet / bench) noise of the sensors: what the vehicle's estimators assume. The virtual pool's own
+# noise lives in the truth file (ros_ws/config/truth/*.yaml, ``simulation.sensors.*``), never read by a node.
+SCHEMA["sensors.dvl75.noise_std_m_s"] = _f("declared DVL velocity white noise 1-sigma per axis, m/s", 0.0, 1.0)
+SCHEMA["sensors.dvl75.scale_error_fraction"] = _f("declared DVL 1-sigma multiplicative velocity error per report",
+                                                  0.0, 0.5)
+SCHEMA["sensors.dvl75.attitude_noise_std_rad"] = _f("declared DVL attitude white noise 1-sigma, rad", 0.0, 1.0)
+SCHEMA["sensors.ms5837.noise_std_pa"] = _f("declared pressure white noise 1-sigma, Pa", 0.0, 1e4)
+SCHEMA["sensors.icm20948.accel_noise_std_m_s2"] = _f("declared accelerometer white noise 1-sigma, m/s^2", 0.0, 10.0)
+SCHEMA["sensors.icm20948.gyro_noise_std_rad_s"] = _f("declared gyro white noise 1-sigma, rad/s", 0.0, 1.0)
+SCHEMA["thrusters.thrust_uncertainty_rel"] = _v(
+    "declared 1-sigma relative uncertainty of the thrust curves [negative, positive direction] (battery state, "
+    "curve fit), added to the identification intervals", 2, 0.0, 1.0)
 SCHEMA["recording.topics"] = Spec(_STRS, "topics recorded by default (empty list not allowed by ROS: omit the key "
                                          "to record all topics)")
 
@@ -535,6 +585,8 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
                                           "couplings keeping the added-mass matrix positive definite"))
     for a, b in (("identification.level_fraction_min", "identification.level_fraction_max"),
                  ("sensors.ping1d.min_range_m", "sensors.ping1d.max_range_m"),
+                 ("sensors.dvl75.min_interval_s", "sensors.dvl75.max_interval_s"),
+                 ("sensors.ms5837.min_pressure_pa", "sensors.ms5837.max_pressure_pa"),
                  ("simulation.sensors.dvl75.min_altitude_m", "simulation.sensors.dvl75.max_altitude_m")):
         if a in c and b in c and c[a] > c[b]:
             issues.append(ConfigIssue(a, c[a], f"at most {b} ({c[b]:g})"))
@@ -560,7 +612,7 @@ class DofHydrodynamics:
     """Hydrodynamic coefficients of one DOF (positive numbers, SI).
 
     added_mass: kg (translation) or kg m^2 (rotation). linear_damping: kg/s or kg m^2/s.
-    quadratic_damping: kg/m or kg m^2. Heave has direction-dependent damping (seed 003 Table 3:
+    quadratic_damping: kg/m or kg m^2. Heave has direction-dependent damping ([Hindrax-Drag] (seed 003) Table 3:
     positive heave = moving down, w > 0 in FRD); for the other DOFs the positive and negative values are equal.
     Damping force/moment opposing motion: D(v) = linear v + quadratic |v| v, with the coefficient
     chosen by the sign of v.
@@ -596,7 +648,7 @@ class ThrusterConfig:
 
 @dataclass(frozen=True)
 class ThrustersConfig:
-    """Thruster set: per-thruster geometry and the shared cubic thrust curves (seed 003 eq. 1, Table 2).
+    """Thruster set: per-thruster geometry and the shared cubic thrust curves ([Hindrax-Drag] (seed 003) eq. 1, Table 2).
 
     curve_negative/curve_positive: [c4, c3, c2, c1] with thrust_N = c4 P^3 + c3 P^2 + c2 P + c1, P in us.
     """

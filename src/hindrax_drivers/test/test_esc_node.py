@@ -1,4 +1,5 @@
 """ESC node at the register "wire": the PCA9685 emulator decodes what each channel actually outputs."""
+import itertools
 import math
 import threading
 
@@ -6,6 +7,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+from diagnostic_msgs.msg import DiagnosticStatus
 from std_msgs.msg import Float64
 
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
@@ -18,6 +20,8 @@ from hindrax_msgs.srv import SetArmed
 pytestmark = pytest.mark.ros
 TICK_US = 1.24  # one PCA9685 count at 200 Hz (prescale 30) and 25 MHz, docs/devices.md §5.1
 PERIOD_S = 1 / 50.0  # esc.output_rate_hz
+#: neutral of the fixture's channels: 1500 us plus each thruster's trim (t3: +10 us)
+NEUTRAL = np.array([1500.0, 1500.0, 1510.0, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0])
 
 
 def wire(emu, channels=range(8)):
@@ -29,7 +33,7 @@ def esc():
     with ros_context() as ctx:
         emu = Pca9685Emulator()
         bus = EmulatedI2CBus({0x40: emu})
-        params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2,
+        params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True,
                                     "thrusters.t2.reversed": True, "thrusters.t3.trim_us": 10.0})
         node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         probe = rclpy.create_node("probe", context=ctx)
@@ -71,11 +75,11 @@ def stream(e, widths, until, timeout=5.0):
 
 def test_neutral_from_start_and_commands_ignored_until_armed(esc):
     emu = esc["emu"]
-    assert np.allclose(wire(emu), 1500.0, atol=TICK_US)  # before any command
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)  # before any command
     assert emu.pulse_width_us(8) == pytest.approx(1100.0, abs=TICK_US)  # lights off
     esc["command"]([1700.0] * 8)
     wait_until(lambda: len(esc["written"]) >= 3, 5, esc["spin"], "output ticks")
-    assert np.allclose(wire(emu), 1500.0, atol=TICK_US)
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
     assert not esc["written"][-1].armed
 
 
@@ -108,7 +112,7 @@ def test_watchdog_returns_to_neutral_within_one_period():
 
     with ros_context() as ctx:
         emu = Pca9685Emulator()
-        params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2})
+        params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True})
         node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
                        parameter_overrides=params + [Parameter("use_sim_time", value=True)])
         probe = rclpy.create_node("probe", context=ctx)
@@ -153,13 +157,13 @@ def test_disarm_and_fault_and_shutdown_go_neutral(esc):
     arm(esc)
     emu, node = esc["emu"], esc["node"]
     assert esc["set_armed"](False).success
-    assert np.allclose(wire(emu), 1500.0, atol=TICK_US)  # at once, in the service call
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)  # at once, in the service call
     arm(esc)
     stream(esc, [math.nan] * 8, lambda: node.diag.counts().get("output_exception", 0) > 0)
-    assert np.allclose(wire(emu), 1500.0, atol=TICK_US)  # a NaN command is a fault: neutral
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)  # a NaN command is a fault: neutral
     stream(esc, [1650.0] * 8, lambda: wire(emu)[0] > 1600)
     node.close()
-    assert np.allclose(wire(emu), 1500.0, atol=TICK_US)
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
 
 
 def test_lights_channel(esc):
@@ -169,11 +173,21 @@ def test_lights_channel(esc):
 
 
 def test_i2c_errors_are_retried_and_reported(esc):
+    arm(esc)
     esc["bus"].set_fault_rate(0.3)
-    n = len(esc["written"])
-    wait_until(lambda: len(esc["written"]) > n + 10, 5, esc["spin"], "ticks under bus faults")
-    assert esc["node"].device.stats.retries > 0
-    assert np.allclose(wire(esc["emu"]), 1500.0, atol=TICK_US)
+    widths = itertools.cycle([1640.0, 1660.0])  # a new command each time: each one is written at once
+    emu = esc["emu"]
+
+    def poll():
+        esc["command"]([next(widths)] * 8)
+        esc["spin"]()
+    # the wire carries the commands (not neutral) while the bus fails 30 % of the transactions
+    wait_until(lambda: esc["node"].device.stats.retries > 3 and min(abs(wire(emu)[0] - 1640.0),
+                                                                   abs(wire(emu)[0] - 1660.0)) < TICK_US,
+               10, poll, "commands written under bus faults")
+    esc["bus"].set_fault_rate(0.0)
+    assert esc["set_armed"](False).success
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
 
 
 def test_sigterm_path_writes_neutral():
@@ -185,7 +199,7 @@ def test_sigterm_path_writes_neutral():
     holder = {}
 
     def factory():
-        node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0}))
+        node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True}))
         node.armed = True
         node.command = np.full(8, 1700.0)
         node.command_time = node.get_clock().now()
@@ -209,3 +223,196 @@ def test_output_logic_slew_and_errors():
         out.target([1500], 0.1)
     with pytest.raises(ValueError):
         out.target([1500, math.inf], 0.1)
+
+
+# ------------------------------------------------------------------ issue 19, faults 1-5 (each failed before the fix)
+class _SampledBus:
+    """Delegates to an EmulatedI2CBus and records, after every SMBus call, what each channel puts on the wire."""
+
+    def __init__(self, bus, emu, channels=range(9)):
+        self._bus, self._emu, self._channels = bus, emu, list(channels)
+        self.samples: list[np.ndarray] = []
+
+    def __getattr__(self, name):
+        attr = getattr(self._bus, name)
+        if not callable(attr):
+            return attr
+
+        def call(*args, **kwargs):
+            try:
+                return attr(*args, **kwargs)
+            finally:
+                self.samples.append(wire(self._emu, self._channels))
+        return call
+
+
+def _node(emu_or_bus, overrides, sim_time=False, ctx=None):
+    from rclpy.parameter import Parameter
+
+    bus = emu_or_bus if not isinstance(emu_or_bus, Pca9685Emulator) else EmulatedI2CBus({0x40: emu_or_bus})
+    params = config_parameters({"esc.oscillator_calibrated": True, **overrides})
+    if sim_time:
+        params.append(Parameter("use_sim_time", value=True))
+    return EscNode(bus=bus, context=ctx, parameter_overrides=params)
+
+
+def test_fault1_chip_reset_while_armed_is_detected_reinitialised_and_disarms(esc):
+    """A brown-out reset of the PCA9685 (all registers to their reset values: asleep, outputs off) while armed at
+    1700 us: the read-back finds MODE1 wrong, re-initialises the chip at neutral, disarms and says so."""
+    emu, node = esc["emu"], esc["node"]
+    node.readback_interval_s = 0.2
+    arm(esc)
+    stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
+    emu.reset()  # brown-out: MODE1 = 0x11 (SLEEP), every channel full OFF
+    assert np.allclose(wire(emu), 0.0)
+    # a controller keeps streaming 1700 us: the node must not keep reporting "armed, commanding" at 1700
+    stream(esc, [1700.0] * 8, lambda: node.chip_reinits >= 1 and not node.armed)
+    wait_until(lambda: np.allclose(wire(emu), NEUTRAL, atol=TICK_US), 5, esc["spin"], "neutral after re-init")
+    assert emu.mode1 == 0x21 and emu.prescale == 30  # awake, auto-increment, 200 Hz again
+    status = node.diag.status()
+    assert "read-back mismatch" in status.message and "MODE1 0x11" in status.message
+    assert status.level == DiagnosticStatus.WARN
+    assert node.diag.counts()["chip_reinit"] == 1
+    wait_until(lambda: esc["written"] and not esc["written"][-1].armed, 5, esc["spin"], "disarmed reported")
+    # re-arming needs the arming time at neutral again, counted from the re-initialisation
+    assert 0.0 < node.arming_remaining_s() <= node.arming_time_s
+
+
+def test_fault2_arming_time_counts_from_neutral_confirmed_on_the_chip():
+    """Bus down at start, back later: the arming time starts when neutral is read back from the chip."""
+    with ros_context() as ctx:
+        emu = Pca9685Emulator()
+        bus = EmulatedI2CBus({0x40: emu})
+        bus.disconnected = True
+        node = _node(bus, {"esc.arming_time_s": 0.3, "esc.readback_interval_s": 0.1}, ctx=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+        created = node.get_clock().now()
+        wait_until(lambda: (node.get_clock().now() - created).nanoseconds > 0.6e9, 5, spin, "0.6 s with the bus down")
+        res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+        assert not res.success and "not confirmed at neutral" in res.message
+        bus.disconnected = False
+        wait_until(lambda: node.neutral_confirmed_time is not None, 5, spin, "chip configured after the bus returned")
+        assert np.allclose(wire(emu), 1500.0, atol=TICK_US)
+        res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+        assert not res.success and "more at neutral" in res.message  # 0.6 s since creation do not count
+        wait_until(lambda: node.arming_remaining_s() == 0.0, 5, spin, "arming time")
+        assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
+        ex.shutdown()
+        node.destroy_node()
+
+
+def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
+    """use_sim_time with a /clock that stops: ROS time stands still, so the ROS-time watchdog cannot trip; the
+    steady-clock watchdog brings every channel to neutral."""
+    import time
+
+    from rosgraph_msgs.msg import Clock as ClockMsg
+
+    with ros_context() as ctx:
+        emu = Pca9685Emulator()
+        node = _node(emu, {"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2}, sim_time=True, ctx=ctx)
+        probe = rclpy.create_node("probe", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        clock_pub = probe.create_publisher(ClockMsg, "/clock", 10)
+        pub = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        now = {"ns": 1_000_000_000}
+
+        def advance():
+            now["ns"] += 5_000_000
+            m = ClockMsg()
+            m.clock.sec, m.clock.nanosec = divmod(now["ns"], 1_000_000_000)
+            clock_pub.publish(m)
+            ex.spin_once(timeout_sec=0.01)
+
+        wait_until(lambda: clock_pub.get_subscription_count() > 0 and pub.get_subscription_count() > 0, 10, advance)
+        wait_until(lambda: node.arming_remaining_s() == 0.0 and node.get_clock().now().nanoseconds > 0, 10, advance)
+        assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
+
+        def command_and_advance():
+            pub.publish(ThrusterPwm(pulse_width_us=[1650.0] * 8, armed=True))
+            advance()
+        wait_until(lambda: wire(emu)[0] > 1600, 10, command_and_advance, "commanded output")
+        t_last = time.monotonic()  # /clock and the commands stop here
+        wait_until(lambda: np.allclose(wire(emu), 1500.0, atol=TICK_US), 10, lambda: ex.spin_once(timeout_sec=0.01),
+                   "neutral with the clock dead")
+        wall_s = time.monotonic() - t_last
+        # ROS time stood still: by it the last command is younger than the timeout (the ROS watchdog cannot trip)
+        assert (node.get_clock().now() - node.command_time).nanoseconds * 1e-9 < 0.2
+        assert node.steady_watchdog_trips == 1
+        assert wall_s >= 0.2  # not before the timeout
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
+def test_fault4_restart_never_resumes_the_previous_process_outputs():
+    """A previous process died armed at 1700 us: the new node's start-up puts only nothing (no pulses) or neutral
+    on the wire, sampled after every I2C transaction (before the fix RESTART resumed 1700 us first)."""
+    from hindrax_drivers.pca9685 import protocol as pca
+    from hindrax_drivers.transport.i2c import I2CDevice
+
+    emu = Pca9685Emulator()
+    bus = EmulatedI2CBus({0x40: emu})
+    old = I2CDevice(bus, 0x40, "previous process")
+    old.write_sequence(pca.startup_sequence(30))
+    for ch in range(8):
+        old.write_block(pca.led_register(ch), pca.channel_bytes_for_pulse(1700.0, 30))
+    assert np.allclose(wire(emu, range(8)), 1700.0, atol=TICK_US)
+    sampled = _SampledBus(bus, emu, range(8))
+    with ros_context() as ctx:
+        node = _node(sampled, {}, ctx=ctx)
+        assert node.neutral_confirmed_time is not None
+        node.destroy_node()
+    assert len(sampled.samples) >= 6
+    # the old outputs run until the first transactions reach the chip; from the first change on, only "no
+    # pulses" or neutral, and the change comes within the first two transactions (MODE2, all outputs off)
+    first = next(i for i, s in enumerate(sampled.samples) if not np.allclose(s, 1700.0, atol=TICK_US))
+    assert first <= 1
+    for s in sampled.samples[first:]:
+        assert np.all((s == 0.0) | (np.abs(s - 1500.0) <= TICK_US)), s
+    assert np.allclose(sampled.samples[-1], 1500.0, atol=TICK_US)
+
+
+def test_fault5_uncalibrated_oscillator_refuses_arming_and_neutral_applies_trim():
+    with ros_context() as ctx:
+        node = EscNode(bus=EmulatedI2CBus({0x40: Pca9685Emulator()}), context=ctx,
+                       parameter_overrides=config_parameters({"esc.arming_time_s": 0.0}))  # the shipped default
+        res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+        assert not res.success and "oscillator_calibrated" in res.message and "hindrax esc calibrate" in res.message
+        node.destroy_node()
+    # trim moves neutral too (the ESC's own stop point): 1500 + 10 and 1500 - 7 us, independent arithmetic
+    out = EscOutput(range(3), [False, True, False], [10.0, -7.0, 0.0], 1100, 1500, 1900)
+    assert out.neutral().tolist() == [1510.0, 1493.0, 1500.0]
+    assert out.target([1500.0, 1500.0, 1500.0], 0.02).tolist() == out.neutral().tolist()
+
+
+def test_fault5_oscillator_calibration_from_one_scope_reading():
+    """A 24.06 MHz part with the nominal 25 MHz configured: neutral on the wire is 1500 * 25 / 24.06 = 1558.6 us
+    (outside the 1475-1525 us deadband). One reading of it calibrates the oscillator; then neutral is 1500 us."""
+    from hindrax_drivers.pca9685 import protocol as pca
+
+    with ros_context() as ctx:
+        emu = Pca9685Emulator(oscillator_hz=24.06e6)
+        node = _node(emu, {}, ctx=ctx)
+        scope_us = emu.pulse_width_us(0)
+        assert scope_us == pytest.approx(1500.0 * 25.0 / 24.06, abs=1.3)  # one count at 24.06 MHz, 1.29 us
+        f = pca.oscillator_from_measurement(scope_us, 1500.0, node.prescale, 25e6)
+        node.destroy_node()
+        assert f == pytest.approx(24.06e6, rel=1e-9)  # the emulator decodes exactly: no scope noise here
+        emu2 = Pca9685Emulator(oscillator_hz=24.06e6)
+        node2 = _node(emu2, {"esc.oscillator_hz": f}, ctx=ctx)
+        assert np.allclose(wire(emu2, range(8)), 1500.0, atol=pca.count_duration_us(node2.prescale, f) / 2 + 1e-9)
+        node2.destroy_node()
+
+
+def test_event_driven_output_writes_the_command_on_arrival(esc):
+    """Issue 15 item 3: a command reaches the registers in its own callback, not at the next output tick."""
+    arm(esc)
+    node, emu = esc["node"], esc["emu"]
+    msg = ThrusterPwm(pulse_width_us=[1720.0] * 8, armed=True)
+    node.on_command(msg)  # as the subscription does, outside any tick
+    assert wire(emu)[0] == pytest.approx(1720.0, abs=TICK_US)

@@ -2,8 +2,9 @@
 MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust
-allocation, the identification executive (:mod:`hindrax_ident.identification.node`, on by default with
-``sim``) and, optionally, the recorder. On the vehicle they open the configured serial ports and
+allocation, the identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as
+in the virtual pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the
+recorder. On the vehicle they open the configured serial ports and
 ``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
 ``/clock`` and :class:`~hindrax_ident.sim.hardware.VirtualHardware` (the five device emulators fed by the
 simulator: serial devices on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an
@@ -187,14 +188,17 @@ def ordered_executor(**kwargs: Any) -> Any:
 
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
-                real_time_factor: float | None = None, identification: bool | None = None,
-                drive_clocks: bool = False) -> Graph:
+                real_time_factor: float | None = None, identification: bool = True,
+                drive_clocks: bool = False, i2c_bus: Any = None) -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
     (all topics) writing to ``record_dir`` (empty: timestamped directory under ``recording.output_root``).
     overrides: dotted configuration keys. seed / real_time_factor: simulation settings.
-    identification: add the identification node (action ``run_identification``); default: ``sim``.
+    identification: add the identification node (action ``run_identification``; default True, with or without
+    ``sim``). i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
+    of opening its configured ``/dev/i2c-N`` (e.g. the emulated bus of
+    :class:`~hindrax_ident.sim.hardware.VirtualHardware`, to run the vehicle graph against emulated devices).
     drive_clocks (sim only): the simulator sets the nodes' clocks directly and publishes no /clock (about 20 %
     faster; for a graph nothing outside this process needs simulated time from, e.g. ``hindrax run``), and the
     graph is ``stepped``: drive it with :meth:`Graph.spin_once`, not ``executor.spin()``.
@@ -227,10 +231,13 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         hardware = VirtualHardware(simulator, cfg, seed=cfg.get("simulation.seed"), serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
-        cfg = cfg.with_overrides({"sensors.dvl75.port": hardware.dvl_port, "sensors.ping1d.port": hardware.ping_port})
+        # The emulated PCA9685 runs at exactly esc.oscillator_hz (VirtualHardware builds it from the configuration):
+        # calibrated by construction, so the ESC node may arm (on the vehicle a scope measurement sets the flag).
+        cfg = cfg.with_overrides({"sensors.dvl75.port": hardware.dvl_port, "sensors.ping1d.port": hardware.ping_port,
+                                  "esc.oscillator_calibrated": True})
         bus = hardware.i2c_bus
     else:
-        bus = None  # each I2C node opens smbus2.SMBus(<its configured bus>)
+        bus = i2c_bus  # None: each I2C node opens smbus2.SMBus(<its configured bus>)
     params = [Parameter(k, value=v) for k, v in cfg.to_ros_parameters().items()]
     if sim:
         params.append(Parameter("use_sim_time", value=True))
@@ -241,7 +248,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes["icm20948"] = Icm20948Node(bus=bus, **common)
     nodes["esc"] = EscNode(bus=bus, **common)
     nodes["thrust_allocation"] = ThrustAllocationNode(**common)
-    if (sim if identification is None else identification):
+    if identification:
         from .identification.node import IdentificationNode
 
         nodes["identification"] = IdentificationNode(config=cfg, **common)
@@ -271,6 +278,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
             if name != "simulator":
                 sim_node.drive_clock(node.get_clock())
         sim_node.publish_clock_topic = False
+        # Simulated time stands still on purpose here (step gates, freeze_time): the ESC's wall-clock watchdog (for a
+        # dead /clock) must not trip during such a hold, or the run would depend on the machine's speed.
+        nodes["esc"].set_steady_watchdog_timeout(30.0)
     executor = ordered_executor(**kw)
     stepped = bool(sim and drive_clocks)
     for name, node in nodes.items():

@@ -47,12 +47,21 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] (seed 003) eq. 1 (JSON; --write CONFIG)"),
     (("ident", "campaign"), "hindrax_ident.commands.ident",
      "identification campaign in-process on the simulator (same as `hindrax run`)"),
+    (("ident", "scenarios"), "hindrax_ident.commands.scenarios",
+     "scenario suite: in-process campaigns on named truth files (disturbed pools); error, z, coverage, verdicts"),
+    (("ident", "start"), "hindrax_ident.commands.ident_live",
+     "send the identification campaign to a running stack (action run_identification), print its feedback; "
+     "Ctrl-C cancels to a zero wrench"),
+    (("ident", "status"), "hindrax_ident.commands.ident_live",
+     "print where a running identification campaign is (identification/status)"),
     (("ident", "bag"), "hindrax_ident.commands.ident_bag",
      "offline identification (batch LS + output error, [Hindrax-Drag] (seed 003) eqs. 6-8) of a recorded campaign bag: "
      "identification.yaml + report"),
     (("run",), "hindrax_ident.commands.run",
      "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
      "identification.yaml, report"),
+    (("esc", "calibrate"), "hindrax_ident.commands.esc",
+     "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
 ]
 
 

@@ -1,6 +1,6 @@
 """ESC output node: thruster pulse widths and the lights channel through a PCA9685 on I2C.
 
-Safety behaviour (design.md §8, hardware.md §5.2):
+Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
 
 - From start-up every thruster channel is held at neutral (``thrusters.pulse_width_neutral_us``, 1500 us)
   and the lights at ``lights.pulse_width_off_us``: the ESC arms only after seeing neutral for a few seconds.
@@ -28,10 +28,12 @@ Time: ROS time (``use_sim_time`` supported) for the watchdog and arming timer.
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64
 
@@ -62,8 +64,9 @@ class EscOutput:
         self.current = np.full(len(self.channels), self.neutral_us)
 
     def neutral(self) -> np.ndarray:
-        """(n,) neutral widths; also resets the slew-limiter state (neutral is always immediate)."""
-        self.current = np.full(len(self.channels), self.neutral_us)
+        """(n,) neutral widths: ``neutral_us + trim_us`` per channel, clamped to the limits (the same widths
+        :meth:`target` gives for a neutral command). Also resets the slew-limiter state (neutral is immediate)."""
+        self.current = np.clip(np.full(len(self.channels), self.neutral_us) + self.trim_us, self.min_us, self.max_us)
         return self.current.copy()
 
     def target(self, command, dt_s: float) -> np.ndarray:
@@ -86,6 +89,9 @@ class EscOutput:
 class EscNode(Node):
     """PCA9685 ESC output node (see the module docstring). ``bus``: SMBus-like object (default smbus2)."""
 
+    #: MODE1 as read back from a configured chip: awake, auto-increment, All-Call, no RESTART pending.
+    EXPECTED_MODE1 = p.MODE1_AI | p.MODE1_ALLCALL
+
     def __init__(self, bus: Any = None, **kwargs: Any):
         super().__init__("esc", **kwargs)
         cfg = load_node_config(self, ("thrusters", "esc", "lights"))
@@ -94,7 +100,11 @@ class EscNode(Node):
         esc = cfg.section("esc")
         self.period_s = 1.0 / esc["output_rate_hz"]
         self.watchdog_s = esc["watchdog_timeout_s"]
+        #: steady-clock (time.monotonic) watchdog: see :meth:`set_steady_watchdog_timeout`
+        self.steady_watchdog_s = esc["watchdog_timeout_s"]
         self.arming_time_s = esc["arming_time_s"]
+        self.readback_interval_s = esc["readback_interval_s"]
+        self.oscillator_calibrated = bool(esc["oscillator_calibrated"])
         self.output = EscOutput([th.esc_channel for th in t.thrusters], [th.reversed for th in t.thrusters],
                                 [th.trim_us for th in t.thrusters], t.pulse_width_min_us, t.pulse_width_neutral_us,
                                 t.pulse_width_max_us, esc["slew_rate_us_per_s"])
@@ -113,10 +123,23 @@ class EscNode(Node):
         self.diag = DeviceDiagnostics("hindrax/esc_pca9685", f"i2c-{esc['i2c_bus']}@0x{esc['i2c_address']:02x}",
                                       now_s)
         self.watchdog_trips = 0
+        self.steady_watchdog_trips = 0
+        self.chip_reinits = 0
         self.armed = False
         self.command: np.ndarray | None = None
         self.command_time = None
         self.written = self.output.neutral()
+        self._expected: dict[int, bytes] = {}  # channel -> the 4 LEDn bytes last written
+        self._written_key: tuple | None = None  # (widths, lights) last written, to skip identical writes
+        self._last_target_time = None
+        #: ROS time at which neutral was read back from the chip (the arming timer starts here), or None
+        self.neutral_confirmed_time = None
+        self._last_readback = None
+        self._last_configure_attempt = None
+        self._published_since_tick = False
+        self._steady_last = time.monotonic()
+        self._steady_command = self._steady_last
+        self._steady_age_s = 0.0
         self.start_time = self.get_clock().now()
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
@@ -126,35 +149,106 @@ class EscNode(Node):
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._configure_chip()
         self.timer = self.create_timer(self.period_s, self.tick)
+        self.steady_timer = self.create_timer(self.period_s, self.steady_check,
+                                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def set_steady_watchdog_timeout(self, seconds: float) -> None:
+        """Steady-clock watchdog timeout, s (default ``esc.watchdog_timeout_s``).
+
+        The steady watchdog counts wall time (``time.monotonic``) during which the executor runs but no command
+        arrives; it covers a ROS clock that stops (``use_sim_time`` with a dead ``/clock``), where the ROS-time
+        watchdog and output tick stand still. An in-process simulator that holds simulated time on purpose (the
+        stepped graph of :func:`hindrax_ident.bringup.build_graph`) widens it so that a hold never trips it.
+        """
+        if not seconds > 0.0:
+            raise ValueError(f"steady watchdog timeout must be > 0 s, got {seconds}")
+        self.steady_watchdog_s = float(seconds)
 
     # -- device
-    def _configure_chip(self) -> None:
-        """MODE2, frequency (sleep, PRE_SCALE, wake, restart), then neutral on every used channel."""
+    def _configure_chip(self) -> bool:
+        """Put the chip in a known state with neutral on every used channel, then confirm it by reading it back.
+
+        Order (fault-safe): MODE2; every output full OFF (ALL_LED_OFF_H bit 4) so that nothing a previous process
+        left in the channel registers can run again; sleep; PRE_SCALE; neutral (and lights off) written into the
+        channel registers while asleep; wake; RESTART (:func:`~.protocol.safe_startup_sequence`, datasheet
+        §7.3.1.1: RESTART resumes the channel registers, which now hold neutral). The arming timer starts when
+        the read-back matches (:meth:`arming_remaining_s`). Returns True on success.
+        """
+        self._last_configure_attempt = self.get_clock().now()
+        self.neutral_confirmed_time = None
+        before, after = p.safe_startup_sequence(self.prescale)
         try:
-            self.device.write_sequence(p.startup_sequence(self.prescale))
+            self.device.write_sequence(before)
+            self._written_key = None
             self._write(self.output.neutral(), self.lights_off_us)
-            self.diag.set_state("holding neutral", DiagnosticStatus.OK, "holding neutral, disarmed")
+            self.device.write_sequence(after)
+            mismatch = self._readback_mismatch()
         except I2CError as exc:
             self.diag.count("i2c_error")
-            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, str(exc))
-            self.get_logger().error(f"PCA9685 start-up failed: {exc}")
+            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"PCA9685 start-up failed: {exc}")
+            self.get_logger().error(f"PCA9685 start-up failed: {exc}", throttle_duration_sec=5.0)
+            return False
+        if mismatch:
+            self.diag.count("readback_mismatch")
+            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"PCA9685 start-up not confirmed: {mismatch}")
+            return False
+        now = self.get_clock().now()
+        self.neutral_confirmed_time = now
+        self._last_readback = now
+        self.diag.set_state("holding neutral", DiagnosticStatus.OK, "holding neutral, disarmed")
+        return True
 
-    def _write(self, widths_us: np.ndarray, lights_us: float) -> None:
-        """Write the thruster channels (and the lights channel), grouped in auto-increment block writes."""
+    def _readback_mismatch(self) -> str:
+        """Read MODE1, PRE_SCALE and every written channel back; '' when they match what was written, else why.
+
+        Raises :class:`I2CError` when the chip does not answer."""
+        mode1 = self.device.read_byte_data(p.MODE1)
+        if mode1 != self.EXPECTED_MODE1:
+            return f"MODE1 0x{mode1:02x}, expected 0x{self.EXPECTED_MODE1:02x} (chip reset or asleep)"
+        prescale = self.device.read_byte_data(p.PRE_SCALE)
+        if prescale != self.prescale:
+            return f"PRE_SCALE {prescale}, expected {self.prescale}"
+        for run in self._channel_runs(sorted(self._expected)):
+            data = self.device.read_block(p.led_register(run[0]), 4 * len(run))
+            for i, ch in enumerate(run):
+                want = self._expected[ch]
+                got = bytes(data[4 * i:4 * i + 4])
+                # reserved H bits 7:5 read 0 (datasheet §7.3.3); compare what the chip keeps
+                if bytes(b & m for b, m in zip(got, (0xFF, 0x1F, 0xFF, 0x1F))) != \
+                        bytes(b & m for b, m in zip(want, (0xFF, 0x1F, 0xFF, 0x1F))):
+                    return f"channel {ch} registers {got.hex()}, expected {want.hex()}"
+        return ""
+
+    @staticmethod
+    def _channel_runs(channels: list[int]) -> list[list[int]]:
+        """Consecutive channels in runs of at most 8 (32-byte SMBus blocks)."""
+        runs: list[list[int]] = []
+        for ch in channels:
+            if runs and ch == runs[-1][-1] + 1 and len(runs[-1]) < 8:
+                runs[-1].append(ch)
+            else:
+                runs.append([ch])
+        return runs
+
+    def _write(self, widths_us: np.ndarray, lights_us: float) -> bool:
+        """Write the thruster channels (and the lights channel), grouped in auto-increment block writes.
+
+        Skips the bus when the same widths are already on the chip (the read-back confirms them once per
+        ``esc.readback_interval_s``). Returns True when it wrote."""
+        key = (tuple(float(w) for w in widths_us), float(lights_us))
+        if key == self._written_key:
+            return False
         per_channel = {int(ch): float(w) for ch, w in zip(self.output.channels, widths_us)}
         per_channel[self.lights_channel] = float(lights_us)
-        chans = sorted(per_channel)
-        run: list[int] = []
-        for ch in chans + [None]:
-            if ch is not None and (not run or (ch == run[-1] + 1 and len(run) < 8)):
-                run.append(ch)
-                continue
-            data = b"".join(p.channel_bytes_for_pulse(per_channel[c], self.prescale, self.oscillator_hz)
-                            for c in run)
-            self.device.write_block(p.led_register(run[0]), data)
-            run = [ch] if ch is not None else []
+        for run in self._channel_runs(sorted(per_channel)):
+            blocks = [p.channel_bytes_for_pulse(per_channel[c], self.prescale, self.oscillator_hz) for c in run]
+            self._written_key = None  # unknown until the whole write succeeded
+            self.device.write_block(p.led_register(run[0]), b"".join(blocks))
+            self._expected.update(zip(run, blocks))
         self.written = np.array([self._decoded(w) for w in widths_us])
         self.lights_us = lights_us
+        self._written_key = key
+        return True
 
     def _decoded(self, width_us: float) -> float:
         counts = p.pulse_width_to_counts(width_us, self.prescale, self.oscillator_hz)
@@ -162,8 +256,14 @@ class EscNode(Node):
 
     # -- inputs
     def on_command(self, msg: ThrusterPwm) -> None:
+        """Store the command and, armed, write it at once (event-driven output; the tick is the watchdog)."""
         self.command = np.array(msg.pulse_width_us, dtype=float)
-        self.command_time = self.get_clock().now()
+        now = self.get_clock().now()
+        self.command_time = now
+        self._steady_age_s = 0.0
+        self._steady_command = time.monotonic()
+        if self.armed and self.neutral_confirmed_time is not None:
+            self._output(now)
 
     def on_lights(self, msg: Float64) -> None:
         b = msg.data
@@ -174,33 +274,54 @@ class EscNode(Node):
         self.lights_us = self.lights_off_us + b * (self.lights_full_us - self.lights_off_us)
 
     def arming_remaining_s(self) -> float:
-        """Seconds still needed at neutral before arming is accepted (0 when ready)."""
-        held = (self.get_clock().now() - self.start_time).nanoseconds * 1e-9
+        """Seconds still needed at neutral before arming is accepted (0 when ready).
+
+        The time counts from the moment neutral was read back from the chip (not from node creation): while the
+        chip has not been configured and confirmed, the whole ``esc.arming_time_s`` remains."""
+        if self.neutral_confirmed_time is None:
+            return self.arming_time_s
+        held = (self.get_clock().now() - self.neutral_confirmed_time).nanoseconds * 1e-9
         return max(0.0, self.arming_time_s - held)
+
+    def arm_refusal(self) -> str:
+        """Why an arm request would be refused now ('' when it would be accepted)."""
+        if not self.oscillator_calibrated:
+            return ("esc.oscillator_calibrated is false: neutral on the wire depends on this PCA9685's oscillator "
+                    "(nominal 25 MHz, parts measure 23-27 MHz). Measure the neutral pulse with a scope and run "
+                    "`hindrax esc calibrate --measured-us X --write`")
+        if self.neutral_confirmed_time is None:
+            return "PCA9685 not confirmed at neutral (not reachable or its registers did not read back)"
+        remaining = self.arming_remaining_s()
+        if remaining > 0.0:
+            return f"ESC arming: {remaining:.1f} s more at neutral needed (esc.arming_time_s)"
+        return ""
 
     def on_set_armed(self, request: SetArmed.Request, response: SetArmed.Response) -> SetArmed.Response:
         if not request.arm:
-            self.armed = False
-            self.command = None
-            self._safe_neutral("disarmed")
+            self.disarm("disarmed")
             response.success, response.armed, response.message = True, False, "disarmed"
             return response
-        remaining = self.arming_remaining_s()
-        if remaining > 0.0:
-            response.success, response.armed = False, self.armed
-            response.message = f"ESC arming: {remaining:.1f} s more at neutral needed (esc.arming_time_s)"
-            return response
-        if self.diag.state == "i2c error":
-            response.success, response.armed, response.message = False, False, "PCA9685 not reachable"
+        refusal = self.arm_refusal()
+        if refusal:
+            response.success, response.armed, response.message = False, self.armed, refusal
             return response
         self.armed = True
         self.command = None  # thrust only from commands that arrive after arming
+        self.diag.clear("chip_reset")
+        self.diag.set_state("armed, neutral", DiagnosticStatus.OK)
         response.success, response.armed, response.message = True, True, "armed"
         return response
 
-    # -- output tick
-    def tick(self) -> None:
-        now = self.get_clock().now()
+    def disarm(self, reason: str) -> None:
+        """Disarm and write neutral now (the disarm service, the supervisor, shutdown)."""
+        self.armed = False
+        self.command = None
+        self._safe_neutral(reason)
+        self._publish_written(self.get_clock().now())
+
+    # -- output
+    def _output(self, now) -> None:
+        """Compute and write the widths for the current state (neutral unless armed with a fresh command)."""
         try:
             fresh = (self.command is not None and self.command_time is not None
                      and (now - self.command_time).nanoseconds * 1e-9 <= self.watchdog_s)
@@ -209,22 +330,90 @@ class EscNode(Node):
                 self.command = None
                 self.get_logger().warn(f"watchdog: no command for {self.watchdog_s:g} s, outputs neutral")
             if self.armed and fresh:
-                widths = self.output.target(self.command, self.period_s)
+                dt_s = self.period_s if self._last_target_time is None else \
+                    min(self.period_s, max(0.0, (now - self._last_target_time).nanoseconds * 1e-9))
+                widths = self.output.target(self.command, dt_s)
+                self._last_target_time = now
                 state = "armed, commanding"
             else:
                 widths = self.output.neutral()
+                self._last_target_time = None
                 state = "armed, neutral" if self.armed else "disarmed, neutral"
-            self._write(widths, self.lights_us)
-            self.diag.set_state(state, DiagnosticStatus.OK)
+            wrote = self._write(widths, self.lights_us)
+            if self.diag.state not in ("i2c error",) or wrote:
+                self.diag.set_state(state, DiagnosticStatus.OK)
+            if wrote:
+                self._publish_written(now)
         except Exception as exc:  # noqa: BLE001 - any fault in the output path must end at neutral
             self.diag.count("output_exception")
             self.get_logger().error(f"output fault, writing neutral: {exc}", throttle_duration_sec=1.0)
             self.command = None
             self._safe_neutral(f"fault: {exc}")
-        self._publish_written(now)
+            self._publish_written(now)
+
+    def tick(self) -> None:
+        """Output tick (ROS time, ``esc.output_rate_hz``): the ROS-time watchdog, (re)configuration of a chip
+        that was not reachable, the register read-back every ``esc.readback_interval_s``, and the output."""
+        now = self.get_clock().now()
+        if self.neutral_confirmed_time is None:
+            since = (now - self._last_configure_attempt).nanoseconds * 1e-9 if self._last_configure_attempt else 1e9
+            if since >= self.readback_interval_s:
+                self._configure_chip()
+        elif (now - self._last_readback).nanoseconds * 1e-9 >= self.readback_interval_s:
+            self._last_readback = now
+            self._check_chip()
+        if self.neutral_confirmed_time is not None:
+            self._output(now)
+        if not self._published_since_tick:
+            self._publish_written(now)
+        self._published_since_tick = False
+
+    def _check_chip(self) -> None:
+        """Read the chip back; on a mismatch (brown-out reset, sleep, lost registers) re-initialise it, disarm,
+        and restart the arming timer (the ESCs must see neutral again), reporting it in diagnostics."""
+        try:
+            mismatch = self._readback_mismatch()
+        except I2CError as exc:
+            self.diag.count("i2c_error")
+            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"PCA9685 read-back failed: {exc}")
+            return
+        if not mismatch:
+            return
+        self.chip_reinits += 1
+        self.diag.count("chip_reinit")
+        was_armed = self.armed
+        self.armed = False
+        self.command = None
+        message = f"PCA9685 read-back mismatch: {mismatch}; re-initialised at neutral" + \
+            (", disarmed (re-arm after esc.arming_time_s)" if was_armed else "")
+        self.diag.warn("chip_reset", message)
+        self.get_logger().error(message)
+        self._configure_chip()
+        self._publish_written(self.get_clock().now())
+
+    def steady_check(self) -> None:
+        """Steady-clock watchdog (``time.monotonic``, independent of ROS time; see
+        :meth:`set_steady_watchdog_timeout`). Only executor-alive time counts (a gap between two checks counts at
+        most two output periods), so a stalled process does not trip it when it resumes."""
+        t = time.monotonic()
+        gap, self._steady_last = t - self._steady_last, t
+        if not (self.armed and self.command is not None):
+            self._steady_age_s = 0.0
+            return
+        self._steady_age_s += min(max(gap, 0.0), t - self._steady_command, 2.0 * self.period_s)
+        if self._steady_age_s > self.steady_watchdog_s:
+            self.steady_watchdog_trips += 1
+            self.watchdog_trips += 1
+            self.command = None
+            self.get_logger().warn(f"steady-clock watchdog: no command for {self.steady_watchdog_s:g} s of wall "
+                                   f"time (ROS time stalled?), outputs neutral")
+            self._safe_neutral("steady-clock watchdog")
+            self._publish_written(self.get_clock().now())
 
     def _safe_neutral(self, reason: str) -> None:
         try:
+            self._written_key = None  # always write: neutral must reach the chip even if we believe it is there
+            self._last_target_time = None
             self._write(self.output.neutral(), self.lights_us)
             self.diag.set_state("neutral", DiagnosticStatus.WARN if reason.startswith("fault") else DiagnosticStatus.OK,
                                 reason)
@@ -238,9 +427,13 @@ class EscNode(Node):
         msg.header.frame_id = "base_link"
         self.pub_written.publish(msg)
         self.diag.published()
+        self._published_since_tick = True
 
     def _diag_extra(self):
         return [("armed", self.armed), ("watchdog_trips", self.watchdog_trips),
+                ("steady_watchdog_trips", self.steady_watchdog_trips), ("chip_reinits", self.chip_reinits),
+                ("neutral_confirmed", self.neutral_confirmed_time is not None),
+                ("oscillator_calibrated", self.oscillator_calibrated),
                 ("arming_remaining_s", f"{self.arming_remaining_s():.1f}"), ("prescale", self.prescale),
                 *self.device.stats.diagnostics()]
 

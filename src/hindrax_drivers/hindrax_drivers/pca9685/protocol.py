@@ -23,7 +23,7 @@ __all__ = [
     "Pca9685Error", "ChannelRegisters", "led_register", "prescale_for_frequency",
     "frequency_for_prescale", "period_s", "count_duration_us", "pulse_width_to_counts",
     "counts_to_pulse_width_us", "high_time_counts", "channel_bytes_for_pulse",
-    "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "clamp_esc_pulse_us", "esc_prescale",
+    "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "oscillator_from_measurement", "clamp_esc_pulse_us", "esc_prescale",
 ]
 
 
@@ -308,6 +308,32 @@ def safe_startup_sequence(prescale: int, mode2: int = MODE2_OUTDRV, mode1: int =
               RegisterWrite(ALL_LED_OFF_H, FULL_BIT, 0.0, "every output full OFF before anything can restart"),
               *freq[:2]]
     return before, freq[2:]
+
+
+def oscillator_from_measurement(measured_us: float, commanded_us: float, prescale: int,
+                                 oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
+    """The part's real oscillator frequency, Hz, from one scope reading of a commanded pulse.
+
+    The driver wrote ``counts = round(commanded_us * oscillator_hz / ((PRE_SCALE + 1) 1e6))`` (assumed
+    oscillator); the chip holds the output high for ``counts (PRE_SCALE + 1) / f_true`` (datasheet §7.3.5), so
+    ``f_true = counts (PRE_SCALE + 1) / (measured_us 1e-6)``. Using the counts actually written (not
+    ``commanded_us``) removes the rounding to one count. E.g. 1500 us commanded at 25 MHz, prescale 30: 1210
+    counts; a 24.06 MHz part shows 1559.0 us, giving 24.06 MHz back.
+
+    Raises:
+        Pca9685Error: non-finite or non-positive reading, or a result outside 20-30 MHz (a wrong channel,
+        trigger or unit: real parts measure 23-27 MHz, docs/devices.md §5.1).
+    """
+    if not (math.isfinite(measured_us) and measured_us > 0.0):
+        raise Pca9685Error(f"measured pulse must be finite and > 0 us, got {measured_us}")
+    counts = pulse_width_to_counts(commanded_us, prescale, oscillator_hz)
+    if counts == 0:
+        raise Pca9685Error(f"commanded {commanded_us} us is 0 counts: command a pulse, e.g. 1500 us")
+    f_true = counts * (_check_prescale(prescale) + 1) / (measured_us * 1e-6)
+    if not 20e6 <= f_true <= 30e6:
+        raise Pca9685Error(f"{measured_us:g} us measured for {commanded_us:g} us commanded gives "
+                           f"{f_true / 1e6:.3f} MHz, outside 20-30 MHz: check channel, trigger and units")
+    return f_true
 
 
 def clamp_esc_pulse_us(pulse_width_us: float, min_us: float = ESC_MIN_US, max_us: float = ESC_MAX_US) -> float:

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import argparse
 
-from hindrax_drivers.config import ConfigError, load_config
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="vehicle configuration YAML (ros-args params-file layout)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from hindrax_drivers.config import ConfigError, load_config
+
     try:
         cfg = load_config(args.file)
     except ConfigError as exc:
@@ -23,4 +23,8 @@ def run(args: argparse.Namespace) -> int:
         return 1
     print(f"{args.file}: OK")
     print(cfg.summary())
+    if not cfg.get("esc.oscillator_calibrated"):
+        print(f"note: esc.oscillator_calibrated is false: the ESC node will refuse to arm. Hold neutral (hindrax "
+              f"bringup), measure one thruster channel's pulse with a scope, then run `hindrax esc calibrate "
+              f"--measured-us X --config {args.file} --write` (sets esc.oscillator_hz and the flag).")
     return 0

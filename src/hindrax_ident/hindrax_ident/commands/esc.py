@@ -1,0 +1,99 @@
+"""``hindrax esc calibrate --measured-us X [--commanded-us 1500] [--config FILE] [--write]``.
+
+Calibrates the PCA9685's internal oscillator (``esc.oscillator_hz``) from one oscilloscope reading, so that
+"neutral" on the wire is really neutral: real parts run at 23-27 MHz (docs/devices.md §5.1), and with the
+nominal 25 MHz a 24.06 MHz part puts 1559 us on the wire for 1500 us, outside the ESC deadband. The ESC node
+refuses to arm until ``esc.oscillator_calibrated`` is true.
+
+Procedure: start the stack (``hindrax bringup``; the ESC node holds every thruster channel at neutral,
+``thrusters.pulse_width_neutral_us``, from start-up, no arming needed), measure the high time of one thruster
+channel's pulse with a scope (trim 0 on that channel), and run this command with the reading. It prints one JSON
+object (assumed and calibrated oscillator, prescale, counts, the pulse width the calibrated value gives);
+``--write`` sets ``esc.oscillator_hz`` and ``esc.oscillator_calibrated: true`` in the configuration file (comments
+kept, validated, the original restored if the result is invalid). Arithmetic:
+:func:`hindrax_drivers.pca9685.protocol.oscillator_from_measurement`.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+from .common import CommandError, add_config_argument
+
+__all__ = ["add_arguments", "run", "write_oscillator"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--measured-us", type=float, required=True,
+                        help="high time of the pulse measured on the scope, us")
+    parser.add_argument("--commanded-us", type=float, default=None,
+                        help="pulse width the ESC node commanded on that channel, us "
+                             "(default thrusters.pulse_width_neutral_us, what it holds from start-up)")
+    add_config_argument(parser)
+    parser.add_argument("--write", action="store_true",
+                        help="write esc.oscillator_hz and esc.oscillator_calibrated: true into --config")
+
+
+def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
+    """Set ``oscillator_hz:`` and ``oscillator_calibrated: true`` (the ``esc`` section's lines) in place.
+
+    Raises ValueError when a line is missing, :class:`ConfigError` when the result is invalid (file restored).
+    """
+    from hindrax_drivers.config import ConfigError, load_config
+
+    p = Path(config_path)
+    original = p.read_text()
+    text = original
+    for key, value in (("oscillator_hz", f"{oscillator_hz:.1f}"), ("oscillator_calibrated", "true")):
+        pattern = re.compile(rf"^(\s*{key}:\s*)([^\s#]+)(.*)$", re.MULTILINE)
+        if len(pattern.findall(text)) != 1:
+            raise ValueError(f"{config_path}: expected exactly one '{key}:' line to update")
+        text = pattern.sub(lambda m: m.group(1) + value + m.group(3), text, count=1)
+    p.write_text(text)
+    try:
+        load_config(p)
+    except ConfigError:
+        p.write_text(original)
+        raise
+
+
+def run(args: argparse.Namespace) -> int:
+    from hindrax_drivers.config import ConfigError, default_config_path, load_config
+    from hindrax_drivers.pca9685 import protocol as p
+
+    path = args.config or str(default_config_path())
+    try:
+        cfg = load_config(path)
+    except ConfigError as exc:
+        raise CommandError(f"esc calibrate: {path}: {exc}") from None
+    assumed = float(cfg.get("esc.oscillator_hz"))
+    commanded = float(args.commanded_us if args.commanded_us is not None
+                      else cfg.get("thrusters.pulse_width_neutral_us"))
+    try:
+        prescale = p.esc_prescale(cfg.get("esc.pwm_frequency_hz"), assumed)
+        f_true = p.oscillator_from_measurement(args.measured_us, commanded, prescale, assumed)
+        new_prescale = p.esc_prescale(cfg.get("esc.pwm_frequency_hz"), f_true)
+        counts = p.pulse_width_to_counts(commanded, new_prescale, f_true)
+    except p.Pca9685Error as exc:
+        raise CommandError(f"esc calibrate: {exc}") from None
+    result = {
+        "assumed_oscillator_hz": assumed,
+        "commanded_us": commanded,
+        "measured_us": float(args.measured_us),
+        "prescale_used": prescale,
+        "oscillator_hz": round(f_true, 1),
+        "calibrated_prescale": new_prescale,
+        "calibrated_pwm_frequency_hz": p.frequency_for_prescale(new_prescale, f_true),
+        "calibrated_pulse_us": p.counts_to_pulse_width_us(counts, new_prescale, f_true),
+        "written": False,
+    }
+    if args.write:
+        try:
+            write_oscillator(path, f_true)
+        except (ValueError, ConfigError) as exc:
+            raise CommandError(f"esc calibrate: {path} left unchanged: {exc}") from None
+        result["written"] = True
+    print(json.dumps(result))
+    return 0
