@@ -474,3 +474,51 @@ def test_property_any_finite_wrench_gives_feasible_output(layout, curve, wrench,
     assert 0.0 <= res.scale <= 1.0
     if mode == "uniform":
         assert res.scale > 0.0 or not np.any(wrench)
+
+
+# ---------------------------------------------------------------- issue 19, faults 10 and 11
+TICK_US = 31 * 1e6 / 25e6  # PCA9685 PRE_SCALE 30 at 25 MHz: one count = 1.24 us (docs/devices.md §5.1)
+
+
+def test_fault10_quantisation_never_rounds_into_the_deadband(layout, curve):
+    """1475.00 us (the reverse deadband edge, -1.20 N) used to become 1475.60 us (0 N); now every width outside the
+    1475-1525 us deadband stays outside it after quantisation, and moves less than one count, away from 1500."""
+    exact = ThrustAllocator(layout.matrix(), curve)
+    grid = ThrustAllocator(layout.matrix(), curve, pulse_width_step_us=TICK_US)
+    rng = np.random.default_rng(19)
+    wrenches = rng.uniform(-1.0, 1.0, (5000, 6)) * np.array([4.0, 4.0, 4.0, 0.4, 0.4, 0.4])
+    inside_before = inside_after = moved_towards = 0
+    for w in wrenches:
+        p0 = exact.allocate(w).pulse_width_us
+        p1 = grid.allocate(w).pulse_width_us
+        counts = p1 / TICK_US
+        np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)  # on the PCA9685 grid
+        assert np.all(np.abs(p1 - p0) < TICK_US + 1e-9)
+        outside0 = (p0 <= 1475.0) | (p0 >= 1525.0)
+        inside_before += int(np.sum(outside0))
+        inside_after += int(np.sum(outside0 & (p1 > 1475.0) & (p1 < 1525.0)))
+        moved_towards += int(np.sum(outside0 & (np.abs(p1 - 1500.0) < np.abs(p0 - 1500.0) - 1e-9)))
+    assert inside_before > 10_000  # the sample exercises the small forces near the deadband edges
+    assert (inside_after, moved_towards) == (0, 0)
+    # the edge itself, by hand: 1475 / 1.24 = 1189.52 counts -> 1189 counts = 1474.36 us (not 1190 = 1475.60 us)
+    one = ThrustAllocator(np.array([[1.0], [0], [0], [0], [0], [0]]), curve, pulse_width_step_us=TICK_US)
+    edge_force = curve.thrust_n(1475.0)
+    res = one.allocate([edge_force, 0, 0, 0, 0, 0])
+    assert res.pulse_width_us[0] == pytest.approx(1189 * TICK_US, abs=1e-9) and res.force_n[0] < edge_force + 1e-12
+    mirror = one.allocate([-edge_force, 0, 0, 0, 0, 0])  # forward edge 1525 / 1.24 = 1229.8 -> 1230 counts
+    assert mirror.pulse_width_us[0] == pytest.approx(1230 * TICK_US, abs=1e-9) and mirror.force_n[0] > 0.0
+
+
+def test_fault11_default_mode_keeps_depth_when_surge_saturates():
+    """The shipped configuration: [60, 0, -40, 0, 0, 3] (base_link FLU, N and N m) keeps the -40 N heave and the
+    3 N m yaw (to the PCA9685 quantisation) and gives surge what is left (it was -17.6 N heave with "uniform")."""
+    from hindrax_drivers.allocation.core import AllocationCore
+    from hindrax_drivers.config import default_config_path, load_config
+
+    cfg = load_config(default_config_path())
+    res = AllocationCore(cfg).allocate(np.array([60.0, 0.0, -40.0, 0.0, 0.0, 3.0]))
+    achieved = res.achieved_wrench_flu
+    assert achieved[2] == pytest.approx(-40.0, abs=0.5)  # a few counts of 1.24 us on four thrusters
+    assert achieved[5] == pytest.approx(3.0, abs=0.05)
+    assert 0.0 < achieved[0] < 60.0  # surge reduced, same sign
+    assert bool(np.any(res.saturated))

@@ -28,7 +28,8 @@ in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thr
      The null space of B is not used to enlarge the feasible set (neither mode does that).
 3. **Pulse widths and achieved wrench.** Each force is inverted on its curve (monotone branch, with
    saturation and the small-force rule of :mod:`.thrust_curve`), optionally quantised to the PWM
-   generator's step (``pulse_width_step_us``, e.g. the PCA9685 tick of docs/devices.md §5.1), and the
+   generator's step (``pulse_width_step_us``, e.g. the PCA9685 tick of docs/devices.md §5.1; rounded away
+   from neutral, never into the deadband), and the
    *actual* thrust at that pulse width is evaluated with the forward curve (deadband included). The
    achieved wrench ``B @ force_n`` is what the thrusters will really apply according to the model, so
    a controller can use it for anti-windup.
@@ -216,6 +217,7 @@ class ThrustAllocator:
         self._base_upper = np.array([c.max_forward_n for c in self._curves])
         self._pw_min = np.array([c.pulse_width_min_us for c in self._curves])
         self._pw_max = np.array([c.pulse_width_max_us for c in self._curves])
+        self._pw_neutral = np.array([c.pulse_width_neutral_us for c in self._curves])
         # forward model of all thrusters in one vectorised call: coefficients as (4, n), the rest (n,)
         params = list(zip(*(c.forward_parameters for c in self._curves)))
         self._forward_params = tuple(np.array(v, dtype=float).T if i < 2 else np.array(v, dtype=float)
@@ -307,6 +309,24 @@ class ThrustAllocator:
             ratio = np.where(step != 0.0, room / step, np.inf)
         return max(float(np.min(ratio)), 0.0)
 
+    def _quantise_away_from_neutral(self, pulse: np.ndarray) -> np.ndarray:
+        """Pulse widths (n,) on the generator's grid (multiples of ``pulse_width_step_us``), rounded AWAY from
+        neutral: above neutral up, below it down, neutral itself to the nearest step.
+
+        Rounding to the nearest step moved e.g. 1475.00 us (the reverse deadband edge, about -1.2 N) to 1475.60
+        us, inside the ESC deadband (0 N): every reverse request between -1.20 and -0.60 N became 0 N while the
+        mirror forward requests were honoured (issue 19, fault 10). Away from neutral a width outside the
+        deadband stays outside it (the thrust is at most one step's worth larger in magnitude). Widths stay
+        within [pulse_width_min_us, pulse_width_max_us] (the grid points inside them)."""
+        q = self._step_us
+        k = pulse / q
+        # a width already on the grid (within float round-off) stays where it is
+        k_near = np.round(k)
+        on_grid = np.abs(k - k_near) < 1e-9
+        k = np.where(on_grid, k_near, np.where(pulse > self._pw_neutral, np.ceil(k),
+                                               np.where(pulse < self._pw_neutral, np.floor(k), k_near)))
+        return np.clip(k * q, np.ceil(self._pw_min / q - 1e-9) * q, np.floor(self._pw_max / q + 1e-9) * q)
+
     def allocate(self, wrench, voltage_scale: float = 1.0) -> AllocationResult:
         """Allocate the wrench ``[X Y Z K M N]`` (6,) (FRD, N and N m) to the thrusters.
 
@@ -356,8 +376,7 @@ class ThrustAllocator:
             for curve, idx in self._curve_groups:
                 pulse[idx] = curve._pulse_width_unchecked(force[idx], s_v)
         if self._step_us is not None:
-            q = self._step_us
-            pulse = np.clip(np.round(pulse / q) * q, np.ceil(self._pw_min / q) * q, np.floor(self._pw_max / q) * q)
+            pulse = self._quantise_away_from_neutral(pulse)
         actual = s_v * forward_thrust(pulse, *self._forward_params)
 
         tol = 1e-9 * np.maximum(np.abs(lower), np.abs(upper))

@@ -33,10 +33,10 @@ def pca9685_pulse_step_us(cfg: VehicleConfig) -> float:
 
     PRE_SCALE = round(f_osc / (4096 f)) - 1; one count = (PRE_SCALE + 1) / f_osc (docs/devices.md §5.1).
     """
+    from ..pca9685 import protocol as pca  # the ESC node's own prescale arithmetic (half-up rounding)
+
     f_osc = cfg.get("esc.oscillator_hz")
-    prescale = round(f_osc / (4096.0 * cfg.get("esc.pwm_frequency_hz"))) - 1
-    prescale = min(255, max(3, prescale))
-    return (prescale + 1) * 1e6 / f_osc
+    return pca.count_duration_us(pca.prescale_for_frequency(cfg.get("esc.pwm_frequency_hz"), f_osc), f_osc)
 
 
 def allocator_from_config(cfg: VehicleConfig, quantise: bool = True) -> ThrustAllocator:
