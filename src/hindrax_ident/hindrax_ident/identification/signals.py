@@ -100,7 +100,7 @@ def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[flo
     """Thruster forces (n,) N of the WIRE pulse widths the ESC node wrote (ThrusterPwm of ``thrusters/pulse_width``).
 
     The ESC applies reversal (2 neutral - w) and trim after the allocation (pca9685/node.py ``EscOutput``);
-    both are undone here, then the allocation's thrust curve (seed 003 eq. 1) gives the force along each
+    both are undone here, then the allocation's thrust curve ([Hindrax-Drag] (seed 003) eq. 1) gives the force along each
     thruster's configured direction. Raises ``ValueError`` for a wrong number of widths.
     """
     w = np.asarray(written_us, dtype=float)
