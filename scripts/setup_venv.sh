@@ -2,7 +2,7 @@
 # Create (or refresh) the project's virtual environment: ROS 2 Jazzy from the PyPI wheels, the project's
 # Python dependencies (requirements.txt), hindrax_msgs built with rosidl and installed into the venv, and
 # the two Python packages installed in editable mode. Called by `make setup`; safe to re-run.
-# Facts this relies on: ../shared/reference/ros2-pip.md ("Custom interfaces build the standard way").
+# Facts this relies on: docs/architecture.md §11.2.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
@@ -40,7 +40,7 @@ if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then pipq install -q 'cmake>=3.22,<4' 'ninj
 export PATH="$PWD/$VENV/bin:$PATH"
 
 # The wheels' rosidl_generator_py CMake exports hard-code the wheel build host's include directories;
-# point them at this venv's Python and numpy headers (ros2-pip.md).
+# point them at this venv's Python and numpy headers (docs/architecture.md §11.2).
 py_inc=$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
 np_inc=$("$PY" -c 'import numpy; print(numpy.get_include())')
 { grep -rlZ --include='*.cmake' -e '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null || true; } | \

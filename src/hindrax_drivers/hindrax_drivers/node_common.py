@@ -1,7 +1,7 @@
 """Pieces every Hindrax driver node shares: diagnostics, raw-traffic publishing, stuck-value detection,
 configuration loading and the process entry point.
 
-Keeping them here (design.md §2: "no copy-paste between devices") means each device node only wires its
+Keeping them here (docs/architecture.md §2: "no copy-paste between devices") means each device node only wires its
 transport to its protocol module. All time here is ROS time from the node's clock (``use_sim_time``
 supported), except rate windows, which use the same clock.
 """
@@ -183,7 +183,7 @@ class StuckDetector:
     """Flags a sensor whose readings stay bit-identical for ``limit`` consecutive samples.
 
     ``update(value) -> bool`` returns True while stuck. Real sensors always show noise in the last bits,
-    so identical raw readings mean a frozen device or bus (hardware.md emulator checklists).
+    so identical raw readings mean a frozen device or bus (docs/devices.md emulator checklists).
     """
 
     def __init__(self, limit: int = 50):

@@ -1,6 +1,6 @@
 """Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one tap.
 
-What every serial device node needs, written once (design.md §2 "the node owns a transport, calls the
+What every serial device node needs, written once (docs/architecture.md §2 "the node owns a transport, calls the
 protocol layer, publishes, reports diagnostics"):
 
 - the configuration (``<section>.port``: device path or pyserial URL, ``<section>.baud_rate``) read

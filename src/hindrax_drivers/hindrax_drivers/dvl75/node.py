@@ -5,7 +5,7 @@ Run alone: ``python -m hindrax_drivers.dvl75.node --ros-args --params-file ros_w
 (device path or pyserial URL), ``baud_rate``, ``position_frd_m`` (lever arm), ``sensor_orientation_rpy_rad``,
 ``speed_of_sound_m_s``, ``velocity_std_m_s``. Node parameter ``stuck_limit_samples`` (default 50).
 
-Start-up (hardware.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as the BlueOS
+Start-up (docs/devices.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as the BlueOS
 driver does [D17], the sequence of :func:`hindrax_drivers.dvl75.protocol.startup_commands`:
 ``SEND-DVPDL ON`` (factory default is OFF), ``SEND-DVEXT ON``, ``SEND-GPRMC OFF``, ``RETWEET-IMU OFF``,
 ``RETWEET-GPS OFF``, ``SET-SENSOR-ORIENTATION r,p,h`` (``sensor_orientation_rpy_rad`` in degrees),
@@ -26,7 +26,7 @@ Publishes (QoS reliable, depth 10):
   (angular velocity not measured here: 0 with unknown variance), 0 elsewhere.
 - ``dvl/altitude`` (sensor_msgs/Range, frame ``dvl_link``, ULTRASOUND): one per ``$DVEXT``, the distance
   to the bottom along the sensor axis; ``+inf`` when unlocked (REP-117 "no detection"). Limits
-  0.3..40 m and field of view :data:`ALTITUDE_FIELD_OF_VIEW_RAD` (hardware.md §1.1 envelope); variance 0
+  0.3..40 m and field of view :data:`ALTITUDE_FIELD_OF_VIEW_RAD` (docs/devices.md §1.1 envelope); variance 0
   (unknown, as Range.msg defines).
 - ``raw/dvl75`` (hindrax_msgs/RawDeviceData): every byte in both directions, receive/send time stamps.
 - ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
@@ -35,15 +35,15 @@ Publishes (QoS reliable, depth 10):
   (identical ``$DVPDL`` deltas with confidence > 0, or identical ``$DVEXT`` attitude/altitude/beam data,
   for ``stuck_limit_samples`` reports: warn, keep publishing), clock-offset estimate, start-up state.
 
-Time stamps (design.md §3; every stamp is ROS time, ``use_sim_time`` supported):
+Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time`` supported):
 
 - ``dvl/data`` and ``dvl/twist`` carry the DVL's own time of validity: ``$DVPDL`` field ``tu``
-  (microseconds since DVL boot, hardware.md §1.3.1) minus ``dtu/2`` (the velocity is the mean over the
+  (microseconds since DVL boot, docs/devices.md §1.3.1) minus ``dtu/2`` (the velocity is the mean over the
   interval ``dtu`` that ends at ``tu``), mapped to ROS time by :class:`hindrax_drivers.device_clock.DeviceClockSync`:
   offset = minimum over the last 10 s of (receive ROS time - ``tu``), i.e. ``tu`` plus the smallest
   transport latency seen, re-estimated after a DVL reboot (``tu`` backwards) or a ROS time jump.
 - ``dvl/altitude`` and messages built from ``$DVEXT`` alone use the receive time: ``$DVEXT`` carries no
-  device time (its field 14 is an EKF step length, hardware.md §1.3.2).
+  device time (its field 14 is an EKF step length, docs/devices.md §1.3.2).
 """
 from __future__ import annotations
 
@@ -65,12 +65,12 @@ from .stream import DvlStreamDecoder
 __all__ = ["Dvl75Node", "main", "COMMAND_GAP_S", "ALTITUDE_MIN_RANGE_M", "ALTITUDE_MAX_RANGE_M",
            "ALTITUDE_FIELD_OF_VIEW_RAD", "MISSING_DVPDL_TIMEOUT_S"]
 
-#: Pause between start-up commands, s (the BlueOS driver sleeps 0.1 s between them, hardware.md §1.4 [D17]).
+#: Pause between start-up commands, s (the BlueOS driver sleeps 0.1 s between them, docs/devices.md §1.4 [D17]).
 COMMAND_GAP_S = 0.1
-#: Altitude envelope of the DVL-75, m (hardware.md §1.1 "Operating envelope": 0.3-40 m).
+#: Altitude envelope of the DVL-75, m (docs/devices.md §1.1 "Operating envelope": 0.3-40 m).
 ALTITUDE_MIN_RANGE_M = 0.3
 ALTITUDE_MAX_RANGE_M = 40.0
-#: Field of view reported with dvl/altitude, rad. ASSUMPTION: hardware.md gives no beam angle; the
+#: Field of view reported with dvl/altitude, rad. ASSUMPTION: docs/devices.md gives no beam angle; the
 #: emulator's four-beam Janus model tilts beams 22.5 deg from the axis, i.e. a 45 deg cone.
 ALTITUDE_FIELD_OF_VIEW_RAD = math.radians(45.0)
 #: ``$DVEXT`` flowing but no ``$DVPDL`` for this long after the last start-up sequence: send it again, s.
@@ -116,7 +116,7 @@ class Dvl75Node(SerialDeviceNode):
 
     # -- start-up
     def startup_commands(self) -> List[bytes]:
-        """The start-up command lines (hardware.md §1.4), sensor orientation converted to degrees."""
+        """The start-up command lines (docs/devices.md §1.4), sensor orientation converted to degrees."""
         self._last_startup_ns = self.now_ns()
         return startup_commands(sensor_orientation_rad=self.sensor_orientation_rpy_rad,  # type: ignore[arg-type]
                                 speed_of_sound_m_s=self.speed_of_sound_m_s)

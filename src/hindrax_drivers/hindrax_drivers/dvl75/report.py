@@ -6,21 +6,21 @@
 messages. No ROS, no clocks: receive times are passed in (ns).
 
 Conventions and sources
-- ``$DVPDL`` deltas are in the DVL's vehicle frame, FRD (X bow, Y starboard, Z down; hardware.md §1.3.1,
+- ``$DVPDL`` deltas are in the DVL's vehicle frame, FRD (X bow, Y starboard, Z down; docs/devices.md §1.3.1,
   §1.5), after SET-SENSOR-ORIENTATION. Velocity = position delta / ``dtu`` (the mean over the interval,
-  hardware.md §1.3.1 "common use"), so its time of validity is the middle of the interval.
+  docs/devices.md §1.3.1 "common use"), so its time of validity is the middle of the interval.
 - Lever arm: the DVL measures the velocity of its transducer, at ``position_frd_m`` from the centre of
   gravity (the base_link origin, README "Vehicle configuration"). Rigid-body kinematics
   v_CG = v_DVL - omega x r gives the base_link velocity; omega is taken from the ``$DVPDL`` angle
   deltas over ``dtu`` (small-angle: Euler-angle increments ~ body rotation increments). The position
   delta is corrected the same way (delta_p_CG = delta_p_DVL - delta_theta x r), so velocity equals
   delta_position / delta_time. Conversion FRD -> FLU through :mod:`hindrax_drivers.frames` only.
-- Validity (design.md §8 "lost DVL lock"): a velocity is published only when ``$DVPDL`` confidence > 0,
+- Validity (docs/architecture.md §8 "lost DVL lock"): a velocity is published only when ``$DVPDL`` confidence > 0,
   ``dtu`` > 0, and the latest ``$DVEXT`` (if one arrived within ``max_extended_age_s``) reports bottom
   lock. Otherwise velocity and delta position are NaN, ``velocity_valid`` is False and the covariance
   is marked unknown (``[0] = -1``, hindrax_msgs/Dvl). Confidence 0 means every field after ``dtu`` is
-  garbage (Tracker-650 doc, hardware.md §1.3.1 [D4b]).
-- ``$DVEXT`` (hardware.md §1.3.2, §1.5):
+  garbage (Tracker-650 doc, docs/devices.md §1.3.1 [D4b]).
+- ``$DVEXT`` (docs/devices.md §1.3.2, §1.5):
   - quaternion (w, x, y, z) = FLU body in ENU, neutral bow east: already REP-103; reordered to
     (x, y, z, w) and normalised (6 printed decimals). Taken as the vehicle's orientation, as the
     emulator does [UNVERIFIED: the vendor text says "relative to sensor head"; identical for the
@@ -29,7 +29,7 @@ Conventions and sources
     over a flat bottom, ``altitude * cos(roll) * cos(pitch)`` (DVEXT vehicle-frame Euler angles), NaN
     when unlocked or not positive.
   - beam velocities: the DVL's sign is + approaching (the only documented sign, Tracker-650 [D16],
-    hardware.md §1.3.4; [UNVERIFIED for the DVL-75]); ``hindrax_msgs/Dvl`` wants + away from the
+    docs/devices.md §1.3.4; [UNVERIFIED for the DVL-75]); ``hindrax_msgs/Dvl`` wants + away from the
     transducer, so the sign is flipped. Beams without lock report NaN range and velocity.
 """
 from __future__ import annotations

@@ -6,10 +6,10 @@ or pyserial URL), ``baud_rate``, ``speed_of_sound_m_s``, ``ping_interval_s``, ``
 ``field_of_view_rad``, ``min_range_m``, ``max_range_m``. Node parameter ``stuck_limit_samples`` (default 50).
 
 Why not the PyPI ``bluerobotics-ping`` package: its 0.2.x ``Ping1D`` sends speed of sound 0 and fails
-several getters (hardware.md §0 item 4, §2.7); the protocol layer :mod:`hindrax_drivers.ping1d.protocol`
+several getters (docs/devices.md §0 item 4, §2.7); the protocol layer :mod:`hindrax_drivers.ping1d.protocol`
 is used instead.
 
-Start-up (hardware.md §2.1, §2.3, §2.4), after every (re)connect, 20 ms apart: the auto-baud sync byte
+Start-up (docs/devices.md §2.1, §2.3, §2.4), after every (re)connect, 20 ms apart: the auto-baud sync byte
 ``U``; ``set_speed_of_sound`` (1002), ``set_ping_interval`` (1004), ``set_mode_auto`` (1003; in manual
 mode the device keeps its configured range and gain), ``set_ping_enable(1)`` (1006),
 ``continuous_start(1300)`` (1400: the device streams a ``profile`` at every ping, which carries distance
@@ -26,7 +26,7 @@ Publishes (QoS reliable, depth 10), for every ``profile`` (1300), ``distance`` (
   ``min_range``, ``max_range`` from the configuration): the distance along the sonar axis, m; ``+inf``
   when the confidence is 0 (REP-117 "no detection"). Values outside the limits are published as
   measured (Range.msg: consumers discard them); variance 0 (unknown, as Range.msg defines).
-- ``ping/confidence`` (std_msgs/Float32): the device's confidence, percent 0-100 (hardware.md §2.4).
+- ``ping/confidence`` (std_msgs/Float32): the device's confidence, percent 0-100 (docs/devices.md §2.4).
 - ``raw/ping1d`` (hindrax_msgs/RawDeviceData): every byte in both directions.
 - ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
   ``errors.garbage_bytes``, ``errors.truncated``, ``errors.bad_checksum``, ``errors.unknown_message``,
@@ -35,7 +35,7 @@ Publishes (QoS reliable, depth 10), for every ``profile`` (1300), ``distance`` (
   publishing), firmware version and verified settings.
 
 Time stamps: receive time (ROS time, ``use_sim_time`` supported): the Ping1D messages carry no device
-time (hardware.md §2.4).
+time (docs/devices.md §2.4).
 """
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ __all__ = ["Ping1dNode", "main", "COMMAND_GAP_S", "startup_frames"]
 
 #: Pause between start-up frames, s (no documented requirement; keeps the device's input queue short).
 COMMAND_GAP_S = 0.02
-_SPEED_TOLERANCE_M_S = 0.0015  # wire resolution 1 mm/s (hardware.md §2.4)
+_SPEED_TOLERANCE_M_S = 0.0015  # wire resolution 1 mm/s (docs/devices.md §2.4)
 _INTERVAL_TOLERANCE_S = 0.0015  # wire resolution 1 ms
 
 

@@ -1,19 +1,19 @@
 """Per-DOF estimators: online (Kalman filter + RLS), offline batch LS + output-error, steady-state LS.
 
-Model per DOF (design.md §5; seed 003 eq. 2 extended with the inertia term; Fossen/SNAME positive
+Model per DOF (docs/architecture.md §5; [Hindrax-Drag] (seed 003) eq. 2 extended with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
 
     tau = M nu_dot + k_q |nu| nu + k_l nu + b (+ k_r s(eta))
 
 * M: inertia, rigid + added (kg or kg m^2); added mass = M - rigid (rigid from the configuration).
-* heave: separate quadratic AND linear damping for w > 0 (down, "positive heave", seed 003 §4.1) and w < 0
-  (the simulator and configuration carry both pairs; seed 003 Table 3 reports both). The configured
+* heave: separate quadratic AND linear damping for w > 0 (down, "positive heave", [Hindrax-Drag] (seed 003) §4.1) and w < 0
+  (the simulator and configuration carry both pairs; [Hindrax-Drag] (seed 003) Table 3 reports both). The configured
   truth has different linear terms per direction (5.26 / 11.84 kg/s), so a single linear column would bias
-  the quadratic terms. b is the force holding depth, (rho V - m) g = +0.785 N FRD (seed 003 §5).
+  the quadratic terms. b is the force holding depth, (rho V - m) g = +0.785 N FRD ([Hindrax-Drag] (seed 003) §5).
 * roll: s = cos(theta) sin(phi); pitch: s = sin(theta); k_r = z_g W - z_b B (Fossen g(eta),
-  hydrodynamics.md eq. 2.23; "W*BG" when W = B), 4.50 N m for Hindrax.
+  docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23; "W*BG" when W = B), 4.50 N m for Hindrax.
 
-Signals: velocity and acceleration come from filters, never raw differences (design.md §5): surge/sway
+Signals: velocity and acceleration come from filters, never raw differences (docs/architecture.md §5): surge/sway
 from the DVL velocity, heave from the pressure depth, each aided by the 100 Hz accelerometer
 (:mod:`.fusion`: same state model and filterpy Kalman filter / RTS smoother as
 :mod:`hindrax_ident.estimation.filters`, with a second measurement); roll/pitch/yaw from the gyro rate with
@@ -31,7 +31,7 @@ Methods:
    and the forgetting window (1 / (1 - lambda) = 20 s at 50 Hz) is short, so the online values are a live
    indicator (a few per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly
    conditioned online), not the reported estimate.
-2. Offline equation-error batch LS on the smoothed signals (seed 003 eqs. 6-8,
+2. Offline equation-error batch LS on the smoothed signals ([Hindrax-Drag] (seed 003) eqs. 6-8,
    :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`).
 3. Offline output-error refinement (the reported result): starting from (2), ``scipy.optimize.least_squares``
    integrates the 1-DOF ODE over segments (3 s; initial velocity from the smoother; RK4 at the tick rate;
@@ -44,13 +44,13 @@ Methods:
    more than the curvature of the depth, and 3 s segments left the upward quadratic damping with a 3 % standard
    deviation (measured on one graph campaign: 3.0 % at 3 s, 1.6 % at 5 s, 0.65 % at 10 s, errors within
    about one of them). Covariance: sigma^2 (J^T J)^-1 with sigma^2 = SSR / (n - p)
-   (seed 003 eq. 8 analogue), inflated by (1 + rho) / (1 - rho) for the lag-1 autocorrelation rho of
+   ([Hindrax-Drag] (seed 003) eq. 8 analogue), inflated by (1 + rho) / (1 - rho) for the lag-1 autocorrelation rho of
    consecutive residual samples within segments (effective sample size of AR(1) residuals). 95 % intervals are Student-t.
 4. The seed's own method (:func:`steady_state_fit`): steady windows detected automatically
    (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity per run,
-   then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means (seed 003 eqs. 2-8).
+   then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag] (seed 003) eqs. 2-8).
    Roll/pitch windows are corrected by the output-error restoring term; heave fits each direction
-   separately and usually has too few windows (no steady state in the depth available, seed 003 §5).
+   separately and usually has too few windows (no steady state in the depth available, [Hindrax-Drag] (seed 003) §5).
 """
 from __future__ import annotations
 
@@ -110,7 +110,7 @@ def parameter_units(dof: str) -> dict[str, str]:
 
 
 def restoring_regressor(dof: str, roll_rad, pitch_rad) -> np.ndarray:
-    """Restoring column s(eta): roll cos(theta) sin(phi), pitch sin(theta) (hydrodynamics.md eq. 2.23)."""
+    """Restoring column s(eta): roll cos(theta) sin(phi), pitch sin(theta) (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23)."""
     if dof == "roll":
         return np.cos(pitch_rad) * np.sin(roll_rad)
     return np.sin(pitch_rad)
@@ -278,7 +278,7 @@ class OnlineDofEstimator:
 
     def _converged(self, std: np.ndarray) -> bool:
         """Inertia, quadratic damping and restoring: std <= rel_tol |value|; bias: std <= 0.1 N (0.02 N m).
-        Linear damping is left out (small and weakly excited at the seed's speeds, seed 003 Table 3)."""
+        Linear damping is left out (small and weakly excited at the seed's speeds, [Hindrax-Drag] (seed 003) Table 3)."""
         if self.rls.n_samples < 500 or not np.all(np.isfinite(std)):
             return False
         th = self.rls.theta
@@ -579,7 +579,7 @@ def _at_least_cluster_robust(cov: np.ndarray, J: np.ndarray, r: np.ndarray, clus
 
 def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, restoring_coefficient: float = 0.0,
                      min_duration_s: float = 2.0, max_std: float = 0.02, max_slope: float = 0.02):
-    """The seed's method: steady windows per run, fit_drag on window means (seed 003 eqs. 2-8).
+    """The seed's method: steady windows per run, fit_drag on window means ([Hindrax-Drag] (seed 003) eqs. 2-8).
 
     t, velocity (smoothed), force (thrust model), run_id (-1 outside runs) (n,); restoring (n,) and its
     coefficient are subtracted from the force for roll/pitch. Returns (params {name: (value, std)},
