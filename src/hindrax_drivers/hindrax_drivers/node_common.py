@@ -228,34 +228,13 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> i
     """Process entry point of a node: init, build the node, spin a SingleThreadedExecutor, shut down cleanly.
 
     factory: creates the node after ``rclpy.init``. Returns the exit status: 0 on SIGINT/SIGTERM,
-    1 on an invalid configuration (one line on stderr naming key, value, allowed range).
+    1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
+    (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
     """
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from .ros_process import RosProcess
 
-    rclpy.init(args=list(args) if args is not None else sys.argv)
-    node = None
-    executor = SingleThreadedExecutor()
-    status = 0
-    try:
-        node = factory()
-        executor.add_node(node)
-        executor.spin()
-    except ConfigError as exc:
-        print(f"invalid configuration: {exc}", file=sys.stderr)
-        status = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if not shutdown_in_progress():
-            raise
-    finally:
-        if node is not None:
-            close = getattr(node, "close", None)
-            if callable(close):
-                close()
-            node.destroy_node()
-        executor.shutdown()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return status
+    with RosProcess(args, errors={ConfigError: "invalid configuration"}) as proc:
+        node = proc.own(factory())
+        proc.executor.add_node(node)
+        proc.executor.spin()
+    return proc.status

@@ -31,13 +31,12 @@ import threading
 import time
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from ..node_common import shutdown_in_progress
+from ..ros_process import RosProcess
 from .msgtypes import TypeNotInstalledError, message_class
 from .playback import PlayStats, play
 from .qos import playback_profile, profiles_from_yaml
@@ -118,9 +117,14 @@ class BagPlayerNode(Node):
         self._stop = threading.Event()
 
     def _param(self, name: str, default: Any) -> Any:
+        """Declare (once) and read a parameter. A list is declared as a string array without a value: rclpy
+        types an empty list as a byte array and would then refuse a ``topics`` override of strings."""
         if not self.has_parameter(name):
-            self.declare_parameter(name, default)
-        return self.get_parameter(name).value
+            if isinstance(default, list):
+                self.declare_parameter(name, Parameter.Type.STRING_ARRAY)
+            else:
+                self.declare_parameter(name, default)
+        return self.get_parameter_or(name, Parameter(name, value=default)).value
 
     def wait_for_subscribers(self, timeout_s: float | None = None) -> list[str]:
         """Wait until every publisher has a subscriber or the timeout passes; returns topics without any."""
@@ -184,27 +188,15 @@ class BagPlayerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Entry point: ``python -m hindrax_drivers.recording.player_node --ros-args -p bag:=PATH ...``."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = BagPlayerNode()
-        except PlayerError as exc:
-            print(f"player: {exc}", file=sys.stderr)
-            return 1
+    """Entry point: ``python -m hindrax_drivers.recording.player_node --ros-args -p bag:=PATH ...``.
+
+    Exit 0 when played (or stopped by SIGINT/SIGTERM), 1 with one line on stderr for a :class:`PlayerError`.
+    """
+    with RosProcess(args, errors={PlayerError: "player"}) as proc:
+        node = proc.own(BagPlayerNode())
         node.wait_for_subscribers()
         node.play()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if not shutdown_in_progress():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return proc.status
 
 
 if __name__ == "__main__":

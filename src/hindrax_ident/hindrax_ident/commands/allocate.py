@@ -10,29 +10,24 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 
-from hindrax_drivers.allocation.allocator import InvalidWrenchError
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import ConfigError, default_config_path, load_config
+from .common import CommandError, add_config_argument, load_vehicle
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     for name, unit in zip("XYZKMN", ["N"] * 3 + ["N m"] * 3):
         parser.add_argument(name, type=float, help=f"{name} in base_link (FLU), {unit}")
-    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+    add_config_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        cfg = load_config(args.config or default_config_path())
-    except ConfigError as exc:
-        print(f"invalid configuration: {exc}", file=sys.stderr)
-        return 1
+    from hindrax_drivers.allocation.allocator import InvalidWrenchError
+    from hindrax_drivers.allocation.core import AllocationCore
+
+    cfg = load_vehicle(args.config)
     try:
         result = AllocationCore(cfg).allocate([args.X, args.Y, args.Z, args.K, args.M, args.N])
     except InvalidWrenchError as exc:
-        print(f"rejected: {exc}", file=sys.stderr)
-        return 1
+        raise CommandError(f"rejected: {exc}") from exc
     print(json.dumps(result.to_json_dict()))
     return 0

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import argparse
 
-from hindrax_drivers.config import default_config_path
+from .common import add_config_argument
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+    add_config_argument(parser)
     parser.add_argument("--sim", action="store_true", help="virtual pool and emulated devices instead of hardware")
     parser.add_argument("--record", action="store_true", help="record every topic to an MCAP bag")
     parser.add_argument("--record-dir", default="", help="bag directory (default: under recording.output_root)")
@@ -21,6 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from hindrax_drivers.config import default_config_path
+
     from hindrax_ident.bringup import run as run_graph
 
     return run_graph(args.config or default_config_path(), sim=args.sim, record=args.record,

@@ -26,17 +26,18 @@ import argparse
 import datetime as _dt
 import math
 import os
-import sys
 import time
 from pathlib import Path
 
-from hindrax_drivers.config import DOFS, ConfigError, default_config_path, load_config
+from .common import CommandError, add_config_argument, load_vehicle
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``hindrax run`` (and ``hindrax ident campaign``)."""
+    from hindrax_drivers.config import DOFS
+
     if parser.prog.endswith("campaign"):
         parser.description = ("Run the identification campaign in-process on the simulator (no ROS graph, no bag) "
                               "and write identification.yaml and report/index.html.")
@@ -50,7 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rtf", type=float, default=0.0, help="real-time factor, 0 = as fast as possible (default)")
     parser.add_argument("--seed", type=int, default=None, help="simulation seed (default simulation.seed)")
     parser.add_argument("--out", default=None, help="output directory (default runs/<UTC timestamp>/)")
-    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+    add_config_argument(parser)
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     if not parser.prog.endswith("campaign"):
@@ -99,33 +100,29 @@ def run(args: argparse.Namespace) -> int:
     return run_in_process(args)
 
 
-def _check_args(args) -> tuple[object, list[str]] | None:
-    try:
-        cfg = load_config(args.config or default_config_path())
-    except ConfigError as exc:
-        print(f"invalid configuration: {exc}", file=sys.stderr)
-        return None
+def _check_args(args) -> tuple[object, list[str]]:
+    """(vehicle configuration, DOFs to identify). Raises :class:`~.common.CommandError` on a bad argument."""
+    from hindrax_drivers.config import DOFS
+
+    cfg = load_vehicle(args.config)
     dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
     bad = [d for d in dofs if d not in DOFS]
     if bad or not dofs:
-        print(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}", file=sys.stderr)
-        return None
+        raise CommandError(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
     if args.levels is not None and args.levels < 1:
-        print("--levels must be >= 1", file=sys.stderr)
-        return None
+        raise CommandError("--levels must be >= 1")
     if args.rtf < 0:
-        print("--rtf must be >= 0", file=sys.stderr)
-        return None
+        raise CommandError("--rtf must be >= 0")
     return cfg, dofs
 
 
 def run_graph(args: argparse.Namespace) -> int:
     """The campaign through the ROS graph (module docstring). Returns the exit status."""
-    checked = _check_args(args)
-    if checked is None:
-        return 1
-    cfg, dofs = checked
+    from hindrax_drivers.config import default_config_path
+
     from ..identification.graph_campaign import run_graph_campaign
+
+    cfg, dofs = _check_args(args)
 
     wall0 = time.monotonic()
 
@@ -134,8 +131,7 @@ def run_graph(args: argparse.Namespace) -> int:
 
     out = _output_dir(cfg, args.out)
     if (out / "bag").exists():
-        print(f"--out: {out} already holds a run (bag/); choose a new output directory", file=sys.stderr)
-        return 1
+        raise CommandError(f"--out: {out} already holds a run (bag/); choose a new output directory")
     overrides = {}
     if args.max_level_duration is not None:
         overrides["identification.max_level_duration_s"] = float(args.max_level_duration)
@@ -157,10 +153,7 @@ def run_in_process(args: argparse.Namespace) -> int:
     from ..identification.report import write_report
     from ..identification.results import build_results, write_identification
 
-    checked = _check_args(args)
-    if checked is None:
-        return 1
-    cfg, dofs = checked
+    cfg, dofs = _check_args(args)
     wall0 = time.monotonic()
 
     def progress(msg: str) -> None:

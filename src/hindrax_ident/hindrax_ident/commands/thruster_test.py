@@ -14,22 +14,25 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import TYPE_CHECKING
 
-import numpy as np
+from .common import add_config_argument, load_vehicle
 
-from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import ConfigError, default_config_path, load_config
+if TYPE_CHECKING:
+    from hindrax_drivers.allocation.core import AllocationCore
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force-n", type=float, default=3.0, help="thrust per step, N (sign = direction)")
     parser.add_argument("--step-s", type=float, default=2.0, help="duration of each step on hardware, s")
     parser.add_argument("--dry-run", action="store_true", help="only print; do not drive the ESCs")
-    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+    add_config_argument(parser)
 
 
 def plan(core: AllocationCore, force_n: float) -> list[dict]:
     """One row per thruster: name, channel, pulse width, actual force and expected wrench (base_link)."""
+    import numpy as np
+
     curve = core.allocator.curves[0]
     rows = []
     for i, th in enumerate(core.cfg.thrusters.thrusters):
@@ -42,12 +45,9 @@ def plan(core: AllocationCore, force_n: float) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
-    try:
-        cfg = load_config(args.config or default_config_path())
-    except ConfigError as exc:
-        print(f"invalid configuration: {exc}", file=sys.stderr)
-        return 1
-    core = AllocationCore(cfg)
+    from hindrax_drivers.allocation.core import AllocationCore
+
+    core = AllocationCore(load_vehicle(args.config))
     rows = plan(core, args.force_n)
     for row in rows:
         print(json.dumps(row))

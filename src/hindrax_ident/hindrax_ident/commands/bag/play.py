@@ -10,7 +10,6 @@ Implementation: :class:`hindrax_drivers.recording.player_node.BagPlayerNode`.
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,12 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.parameter import Parameter
 
-    from hindrax_drivers.node_common import shutdown_in_progress
     from hindrax_drivers.recording.player_node import BagPlayerNode, PlayerError
+    from hindrax_drivers.ros_process import RosProcess
 
     overrides = [Parameter("bag", value=str(args.bag)), Parameter("rate", value=float(args.rate)),
                  Parameter("start_offset_s", value=float(args.start_offset)), Parameter("loop", value=bool(args.loop)),
@@ -41,24 +38,9 @@ def run(args: argparse.Namespace) -> int:
                  Parameter("wait_for_subscribers_timeout_s", value=float(args.wait_subscribers))]
     if args.topics:
         overrides.append(Parameter("topics", value=list(args.topics)))
-    rclpy.init(args=[])
-    node = None
-    try:
-        try:
-            node = BagPlayerNode(parameter_overrides=overrides)
-        except PlayerError as exc:
-            print(f"hindrax bag play: {exc}", file=sys.stderr)
-            return 1
+    with RosProcess([], errors={PlayerError: "hindrax bag play"}) as proc:
+        node = proc.own(BagPlayerNode(parameter_overrides=overrides))
         node.wait_for_subscribers()
         stats = node.play()
         print(f"{args.bag}: published {stats.published} messages in {stats.passes} pass(es)")
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if not shutdown_in_progress():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return proc.status

@@ -13,6 +13,8 @@ import argparse
 import sys
 import time
 
+from ..common import CommandError, add_config_argument
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="topics to record")
@@ -22,56 +24,48 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="bag directory to create (default: timestamped under recording.output_root)")
     parser.add_argument("--duration", type=float, default=0.0, metavar="S",
                         help="stop after S seconds (default: until Ctrl-C)")
-    parser.add_argument("--config", default="", metavar="FILE",
-                        help="vehicle configuration (default: ros_ws/config/hindrax.yaml)")
+    add_config_argument(parser, default="")
 
 
 def run(args: argparse.Namespace) -> int:
     import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
     from hindrax_drivers.config import ConfigError
     from hindrax_drivers.recording.recorder_node import RecorderNode
+    from hindrax_drivers.ros_process import RosProcess
 
     if args.duration < 0:
-        print("hindrax bag record: --duration must be >= 0", file=sys.stderr)
-        return 1
+        raise CommandError("hindrax bag record: --duration must be >= 0")
     overrides = [Parameter("autostart", value=True), Parameter("all_topics", value=bool(args.all_topics)),
                  Parameter("topic_regex", value=args.regex), Parameter("output_dir", value=args.out)]
     if args.topics:
         overrides.append(Parameter("topics", value=list(args.topics)))
     if args.config:
         overrides.append(Parameter("config_file", value=args.config))
-    rclpy.init(args=[])
-    node = None
-    executor = SingleThreadedExecutor()
-    status = 0
-    try:
+    with RosProcess([]) as proc:
         try:
             node = RecorderNode(parameter_overrides=overrides)
         except (ConfigError, ValueError, OSError, RuntimeError) as exc:
-            print(f"hindrax bag record: {str(exc).splitlines()[0]}", file=sys.stderr)
-            return 1
-        executor.add_node(node)
-        deadline = time.monotonic() + args.duration if args.duration > 0 else None
-        while rclpy.ok() and (deadline is None or time.monotonic() < deadline):
-            executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
+            raise CommandError(f"hindrax bag record: {str(exc).splitlines()[0]}") from exc
+
+        def finish() -> None:
+            """Close the bag (also after SIGINT/SIGTERM); a failure points at ``hindrax bag recover``."""
             try:
                 meta = node.stop_recording()
             except Exception as exc:  # noqa: BLE001 - report and point at recovery
                 print(f"hindrax bag record: bag {node.bag_path} not finished: {exc}; run `hindrax bag recover "
                       f"{node.bag_path}`", file=sys.stderr)
-                status = 1
+                proc.status = 1
             else:
                 if meta is not None:
                     print(f"{node.bag_path}: {meta.message_count} messages on {len(meta.topics)} topics")
-            executor.remove_node(node)
+            proc.executor.remove_node(node)
             node.destroy_node()
-        executor.shutdown()
-        rclpy.try_shutdown()
-    return status
+
+        proc.at_exit(finish)
+        proc.executor.add_node(node)
+        deadline = time.monotonic() + args.duration if args.duration > 0 else None
+        while rclpy.ok() and (deadline is None or time.monotonic() < deadline):
+            proc.executor.spin_once(timeout_sec=0.1)
+    return proc.status
