@@ -361,7 +361,7 @@ def test_startup_commands_enable_dvpdl_first_and_are_plain_lines():
         parse_command(c)
 
 
-def test_command_builder_ranges_match_hardware_md():
+def test_command_builder_ranges_match_devices_doc():
     assert cmd_set_speed_of_sound(1100) == b"SET-SPEED-OF-SOUND 1100\r\n"
     assert cmd_set_speed_of_sound(1950) == b"SET-SPEED-OF-SOUND 1950\r\n"
     for bad in (1099.9, 1950.1):

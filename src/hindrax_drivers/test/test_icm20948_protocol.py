@@ -19,7 +19,7 @@ G = 9.80665
 
 
 # ----------------------------------------------------------------------------- register map (§4.1-4.2)
-def test_register_map_matches_hardware_md():
+def test_register_map_matches_devices_doc():
     assert (icm.ADDRESS_AD0_LOW, icm.ADDRESS_AD0_HIGH, icm.WHO_AM_I_VALUE) == (0x68, 0x69, 0xEA)
     expected = {
         "WHO_AM_I": (0, 0x00), "USER_CTRL": (0, 0x03), "LP_CONFIG": (0, 0x05), "PWR_MGMT_1": (0, 0x06),

@@ -75,7 +75,7 @@ def test_parsers_raise_only_declared_error(data):
 
 
 # ----------------------------------------------------------------------------- CRC (§3.3)
-def test_crc4_vectors_from_hardware_md():
+def test_crc4_vectors_from_devices_doc():
     assert ms.crc4([0x0340, *ms.EXAMPLE_COEFFICIENTS_30BA]) == 0x9
     assert CAL_30BA.words[0] == 0x9340
     assert ms.crc4([0x0000, *ms.EXAMPLE_COEFFICIENTS_02BA, 0]) == 0x8
