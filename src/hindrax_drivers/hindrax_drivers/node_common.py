@@ -36,7 +36,8 @@ class DeviceDiagnostics:
     ``published()`` counts output messages (rate over a sliding window of ``window_s`` seconds);
     ``count(kind, n)`` counts errors by kind (``"bad_checksum"``, ``"garbage_bytes"``, ``"i2c_error"`` ...);
     ``set_state(state, level, message)`` sets the device state (``"connected"``, ``"disconnected"``...);
-    ``warn(key, message)`` raises a named warning until ``clear(key)``.
+    ``warn(key, message)`` raises a named warning until ``clear(key)``; ``error(key, message)`` raises a
+    named ERROR condition (an implausible or stuck reading the node no longer publishes) until ``clear(key)``.
     Thread-safe: transports may call ``count`` from their own threads.
     """
 
@@ -49,6 +50,7 @@ class DeviceDiagnostics:
         self._stamps: collections.deque[float] = collections.deque()
         self._counts: dict[str, int] = collections.Counter()
         self._warnings: dict[str, str] = {}
+        self._errors: dict[str, str] = {}
         self._state = "starting"
         self._level = DiagnosticStatus.WARN
         self._message = "starting"
@@ -90,10 +92,21 @@ class DeviceDiagnostics:
         with self._lock:
             self._warnings[key] = message
 
+    def error(self, key: str, message: str) -> None:
+        """Raise (or update) a named ERROR condition, e.g. ``error("stuck", "identical readings for 2 s")``."""
+        with self._lock:
+            self._errors[key] = message
+
+    def has_error(self, key: str | None = None) -> bool:
+        """True while the named ERROR condition (any, with ``key`` None) is raised."""
+        with self._lock:
+            return bool(self._errors) if key is None else key in self._errors
+
     def clear(self, key: str) -> None:
-        """Clear a named warning."""
+        """Clear a named warning or ERROR condition."""
         with self._lock:
             self._warnings.pop(key, None)
+            self._errors.pop(key, None)
 
     def rate_hz(self) -> float:
         """Published messages per second over the sliding window."""
@@ -113,8 +126,10 @@ class DeviceDiagnostics:
             message = self._message
             if self._warnings and level < DiagnosticStatus.WARN:
                 level = DiagnosticStatus.WARN
-            if self._warnings:
-                message = "; ".join([message] + list(self._warnings.values()))
+            if self._errors and level < DiagnosticStatus.ERROR:
+                level = DiagnosticStatus.ERROR
+            if self._warnings or self._errors:
+                message = "; ".join([message] + list(self._errors.values()) + list(self._warnings.values()))
             age = (t - self._last_publish_s) if self._last_publish_s is not None else float("inf")
             values = [("state", self._state), ("rate_hz", f"{rate:.2f}"),
                       ("last_message_age_s", f"{age:.3f}"), ("messages_published", str(self.total_published))]

@@ -7,7 +7,8 @@ protocol layer, publishes, reports diagnostics"):
   through :func:`hindrax_drivers.node_common.load_node_config` (invalid -> one line, exit 1);
 - a :class:`~hindrax_drivers.transport.serial_transport.SerialTransport` (reader thread, reconnect with
   backoff 0.05 s doubling to 1 s, so a device that comes back is re-opened within about 1 s);
-- raw traffic on ``raw/<device>`` (hindrax_msgs/RawDeviceData) through ``RawDataPublisher.serial_tap``;
+- raw traffic on ``raw/<device>`` (hindrax_msgs/RawDeviceData) through ``RawDataPublisher.serial_tap``,
+  one message per parsed report (the chunks received since the last one, concatenated);
 - device state on ``/diagnostics``: ``disconnected`` (never opened; ERROR with the open error),
   ``connected`` (OK; WARN "connected, no data" when nothing was published for ``NO_DATA_TIMEOUT_S``),
   ``reconnecting`` (ERROR, link lost); the status is published at once on every change, and at 1 Hz;
@@ -15,7 +16,8 @@ protocol layer, publishes, reports diagnostics"):
   spaced by a gap, from its own thread (the reader keeps reading meanwhile);
 - stuck-value detection: :meth:`SerialDeviceNode.check_stuck` keeps one
   :class:`~hindrax_drivers.node_common.StuckDetector` per named signal and raises the diagnostics
-  warning ``stuck`` while any is stuck; publishing continues.
+  ERROR ``stuck`` while any is stuck; the subclass then stops publishing the stuck values as valid
+  (:attr:`SerialDeviceNode.stuck`): a frozen reading is not a measurement.
 
 Threading: received bytes are decoded and published in the transport's reader thread (lowest
 latency; rclpy publishers are thread-safe), timers (diagnostics, housekeeping) run in the executor.
@@ -42,6 +44,8 @@ __all__ = ["SerialDeviceNode", "CommandSequencer", "NO_DATA_TIMEOUT_S"]
 #: Connected but nothing published for this long (ROS time): diagnostics WARN "connected, no data", s.
 NO_DATA_TIMEOUT_S = 2.0
 _HOUSEKEEPING_PERIOD_S = 0.25
+#: Received bytes collected for raw/<device> are published at the latest when they exceed this, bytes.
+RAW_FLUSH_BYTES = 4096
 
 
 class CommandSequencer:
@@ -151,6 +155,7 @@ class SerialDeviceNode(Node):
         self._stuck: dict[str, StuckDetector] = {}
         self._stuck_now: set[str] = set()
         self.raw = RawDataPublisher(self, device_name)
+        self.raw.begin_batch()  # raw/<device>: one message per parsed report (see _on_data), not per read chunk
         self.diag = DeviceDiagnostics(f"hindrax/{device_name}", self.port, self.now_s)
         self.diag.set_state("disconnected", DiagnosticStatus.ERROR, f"opening {self.port}")
         self.transport = SerialTransport(self.port, self.baud_rate, on_data=self._on_data,
@@ -197,8 +202,8 @@ class SerialDeviceNode(Node):
             if self._stuck_now:
                 text = (f"stuck: identical {', '.join(sorted(self._stuck_now))} for "
                         f">= {self.stuck_limit_samples} samples")
-                self.diag.warn("stuck", text)
-                self.get_logger().warn(f"{self.device_name}: {text} (still publishing)")
+                self.diag.error("stuck", text)
+                self.get_logger().error(f"{self.device_name}: {text} (not published as valid)")
             else:
                 self.diag.clear("stuck")
                 self.get_logger().info(f"{self.device_name}: readings changing again")
@@ -247,7 +252,10 @@ class SerialDeviceNode(Node):
     def _on_data(self, data: bytes) -> None:
         receive_ns = self.now_ns()
         try:
+            published = self.diag.total_published
             self.handle_bytes(data, receive_ns)
+            if self.diag.total_published != published or self.raw.pending_bytes > RAW_FLUSH_BYTES:
+                self.raw.flush(end_batch=False)
         except Exception as exc:  # noqa: BLE001 - bad input must never stop the driver
             self.diag.count("internal_error")
             self.get_logger().error(f"{self.device_name}: error handling {len(data)} bytes: {exc!r}",
@@ -291,6 +299,7 @@ class SerialDeviceNode(Node):
     # -- executor side
     def _housekeeping(self) -> None:
         now = self.now_ns()
+        self.raw.flush(end_batch=False)  # bytes of a report that never completed: recorded all the same
         st = self.transport.status()
         if not st.connected and not self._ever_connected:
             self.diag.set_state("disconnected", DiagnosticStatus.ERROR,

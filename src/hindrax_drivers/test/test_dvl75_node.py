@@ -66,6 +66,10 @@ class Rig:
         self.dev = PtyDevice(self.emu, clock=emulator_clock)
         if start_disconnected:
             self.dev.disconnect()  # the device is plugged in later: nothing is lost to discovery
+        if not any(p.name == "stuck_limit_samples" for p in extra_params):
+            # a constant truth gives bit-identical reports (a real DVL's never are): only the stuck test
+            # below may see the stuck detector fire, so the others run with a limit of 50 s at 20 Hz
+            extra_params = [*extra_params, Parameter("stuck_limit_samples", value=1000)]
         params = config_parameters({"sensors.dvl75.port": self.dev.path, **(overrides or {})}) + list(extra_params)
         self.node = Dvl75Node(context=ctx, parameter_overrides=params)
         self.probe = rclpy.create_node("probe", context=ctx)
@@ -349,14 +353,15 @@ def test_implausible_but_checksum_valid_dvpdl_is_published_not_valid_with_an_err
         r.wait(lambda: r.node.diag.counts().get("implausible_velocity", 0) >= 2, message="both rejected")
         r.wait(lambda: any(st.level == DiagnosticStatus.ERROR and "implausible" in st.message for st in r.diag),
                5.0, "ERROR in diagnostics")
-        rejected = [m for m, _ in r.data if m.confidence_percent == 100.0 and m.delta_time_s in (0.1, 1e-6)]
+        rejected = [m for m, _ in r.data if m.confidence_percent == 100.0
+                    and any(abs(m.delta_time_s - dt) < 1e-9 * 1e3 * dt for dt in (0.1, 1e-6))]
         assert len(rejected) == 2
         assert all(not m.velocity_valid and math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0
                    for m in rejected)
         assert all(abs(tw.twist.twist.linear.x) < 1.0 for tw, _ in r.twist)  # no twist from them
         n = len(r.valid())
         r.wait(lambda: len(r.valid()) >= n + 3, message="plausible data again")
-        r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 5.0, "error cleared by plausible reports")
+        r.wait(lambda: r.diag[-1].level == DiagnosticStatus.OK, 8.0, "error cleared 2 s after the last rejection")
 
 
 def test_use_sim_time_stamps_follow_the_clock_topic():

@@ -226,25 +226,86 @@ def test_i2c_errors_on_a_fifth_of_transactions_do_not_stop_the_data(rig):
     assert int(r.diag_values()["i2c_errors"]) == r.node.device.stats.errors > 0
 
 
-def test_stuck_sensor_warns_keeps_publishing_and_recovers_from_a_reset(rig):
+def test_stuck_sensor_is_an_error_and_is_not_published(rig):
     r = rig(truth=live_truth)
     r.wait_imu(50)
     assert not r.node.is_stuck
     r.emu.stuck = True
     r.wait(lambda: r.node.is_stuck, 10, "stuck detected")
-    assert "stuck" in r.node.diag.status().message and r.node.diag.status().level == DiagnosticStatus.WARN
-    r.wait_imu(10)  # still publishing
+    status = r.node.diag.status()
+    assert "stuck" in status.message and status.level == DiagnosticStatus.ERROR
+    n, samples = len(r.imu), r.node.samples
+    r.wait(lambda: r.node.samples >= samples + 20, 5, "20 more stuck polls")
+    assert len(r.imu) <= n + 1  # nothing published while stuck (one may have been in flight)
     r.emu.stuck = False
     r.wait(lambda: not r.node.is_stuck, 5, "stuck cleared")
-    # A power glitch resets the chip: asleep (PWR_MGMT_1 = 0x41, docs/devices.md §4.3), data frozen.
-    attempts = r.node.startup_attempts
-    r.emu.i2c_write(bytes([p.REG_BANK_SEL_ADDRESS, 0x00]))
-    r.emu.i2c_write(bytes([p.PWR_MGMT_1.address, p.PWR_MGMT_1_DEVICE_RESET]))
-    assert r.emu.sleeping
-    r.wait(lambda: r.node.startup_attempts > attempts and r.node.running, 10, "re-initialised after the reset")
-    assert not r.emu.sleeping and r.emu.register_value(p.GYRO_SMPLRT_DIV) == 10
-    imus = r.wait_imu(20)
+    imus = r.wait_imu(10)
     assert len({m.linear_acceleration.x for m in imus}) > 1  # live data again
+
+
+
+
+def test_chip_reset_is_detected_at_once_and_no_frozen_sample_is_published(rig):
+    """A power glitch resets the ICM-20948: asleep (PWR_MGMT_1 = 0x41, docs/devices.md §4.3), data registers at
+    their reset value 0, I2C master off. The old driver published 206 frozen samples before its 2 s stuck
+    check; now the all-zero block triggers the chip-state read-back and the start-up at once."""
+    r = rig(truth=live_truth)
+    r.wait_imu(20)
+    r.wait(lambda: len(r.mag) >= 5, 5, "magnetometer data")
+    attempts, n_imu, n_mag = r.node.startup_attempts, len(r.imu), len(r.mag)
+    r.emu.power_glitch()
+    assert r.emu.sleeping and not r.emu.master_enabled
+    r.wait(lambda: r.node.startup_attempts > attempts and r.node.running, 5, "re-initialised after the reset")
+    assert r.node.diag.counts().get("chip_resets") == 1
+    imus = r.wait_imu(20)
+    assert len({m.linear_acceleration.x for m in imus}) > 1 and not r.emu.sleeping  # live data again
+    after = r.imu[n_imu:]
+    assert all(abs(m.linear_acceleration.z) > 5.0 for m in after)  # never the all-zero reset value
+    r.wait(lambda: len(r.mag) >= n_mag + 5, 5, "magnetometer re-initialised through the I2C master")
+    assert r.emu.magnetometer.mode == 0x08
+    assert any(s.level == DiagnosticStatus.ERROR and "chip reset" in s.message
+               for a in r.diag for s in a.status if s.name == "hindrax/icm20948")
+
+
+def test_chip_reset_that_keeps_stale_data_is_caught_after_frozen_check_samples(rig):
+    """A reset that leaves the old data in the registers (no zero block): after frozen_check_samples (3)
+    identical samples the chip state is read back; at most that many frozen samples go out."""
+    class KeepsData(Icm20948Emulator):
+        def power_glitch(self, magnetometer=True):
+            with self._lock:
+                data = bytes(self._banks[0][p.ACCEL_XOUT_H.address:p.ACCEL_XOUT_H.address + 14])
+                super().power_glitch(magnetometer)
+                self._banks[0][p.ACCEL_XOUT_H.address:p.ACCEL_XOUT_H.address + 14] = data
+
+    r = rig(truth=live_truth, emulator_cls=KeepsData)
+    r.wait_imu(20)
+    attempts, n = r.node.startup_attempts, len(r.imu)
+    r.emu.power_glitch()
+    r.wait(lambda: r.node.startup_attempts > attempts and r.node.running, 5, "re-initialised after the reset")
+    r.wait_imu(10)
+    frozen = [m for m in r.imu[n:] if m.linear_acceleration.x == r.imu[n].linear_acceleration.x]
+    assert len(frozen) <= 3 + 1  # the last live sample repeated at most frozen_check_samples times
+    assert r.node.diag.counts().get("chip_resets") == 1
+
+
+def test_magnetometer_nack_stops_imu_mag_and_raises_error(rig):
+    """The AK09916 stops answering the ICM's I2C master: SLV0_NACK in I2C_MST_STATUS, EXT_SLV_SENS_DATA frozen
+    with DRDY set. The old driver published that frozen field 100 times a second with state "running"."""
+    r = rig(truth=live_truth)
+    r.wait(lambda: len(r.mag) >= 10 and len(r.imu) >= 10, 5, "IMU and magnetometer data")
+    n_mag = len(r.mag)
+    r.emu.aux_connected = False
+    r.wait(lambda: r.node.diag.counts().get("mag_nack", 0) >= 5, 5, "NACKs seen")
+    r.wait(lambda: any(s.level == DiagnosticStatus.ERROR and "magnetometer" in s.message
+                       for a in r.diag for s in a.status if s.name == "hindrax/icm20948"), 5, "magnetometer ERROR")
+    late = r.mag[n_mag + 1:]  # (one may have been in flight)
+    assert len(late) == 0, [vec(m.magnetic_field) for m in late]
+    # the re-initialisation finds no AK09916: the IMU goes on without imu/mag, the ERROR stays
+    r.wait(lambda: r.node.running and not r.node.mag_available, 5, "running without magnetometer")
+    r.wait_imu(20)
+    status = r.node.diag.status()
+    assert status.level == DiagnosticStatus.ERROR and "magnetometer" in status.message
+    assert len(r.mag) <= n_mag + 1
 
 
 def test_gyro_bias_is_estimated_and_subtracted_when_still(rig):

@@ -51,6 +51,10 @@ class Rig:
             self.dev.disconnect()
         params = config_parameters({"sensors.ping1d.port": self.dev.path,
                                     "sensors.ping1d.speed_of_sound_m_s": SPEED_OF_SOUND_M_S, **(overrides or {})})
+        if not any(p.name == "stuck_limit_samples" for p in extra_params):
+            # a constant truth gives bit-identical pings (a real sonar's profile never is): only the stuck
+            # test may see the stuck detector fire
+            extra_params = [*extra_params, Parameter("stuck_limit_samples", value=1000)]
         self.node = Ping1dNode(context=ctx, parameter_overrides=params + list(extra_params))
         self.probe = rclpy.create_node("probe", context=ctx)
         self.ranges, self.confidence, self.raw, self.diag = [], [], [], []
@@ -200,20 +204,23 @@ def test_silent_device_warns_no_data_and_gets_its_startup_frames_again():
         assert r.emu.streaming == {Ping1dId.PROFILE: 0}
 
 
-def test_stuck_sensor_warns_and_keeps_publishing():
+def test_stuck_sensor_is_an_error_and_is_not_published():
     with rig(lambda t: Ping1dTruth(altitude_m=3.0 + 0.3 * math.sin(2.0 * t), confidence_pct=95),
              extra_params=[Parameter("stuck_limit_samples", value=8)]) as r:
         r.wait(lambda: len(r.ranges) >= 12, message="ranges")
         assert not r.node.stuck
         with r.dev.lock:
             r.emu.faults.set_stuck(True)
-        r.wait(lambda: r.diag and "stuck" in r.diag[-1].message, 5.0, "stuck warning")
-        assert r.diag[-1].level == DiagnosticStatus.WARN
-        n = len(r.ranges)
-        r.wait(lambda: len(r.ranges) >= n + 3, message="still publishing")
+        r.wait(lambda: r.node.stuck, 5.0, "stuck detected")
+        n, pings = len(r.ranges), r.node._last_distance_ns
+        r.wait(lambda: r.diag and "stuck" in r.diag[-1].message, 5.0, "stuck error in diagnostics")
+        assert r.diag[-1].level == DiagnosticStatus.ERROR
+        r.wait(lambda: r.node.stuck and r.node._last_distance_ns > pings + 5e8, 5.0, "0.5 s of stuck pings")
+        assert len(r.ranges) <= n + 1  # (one may have been in flight at detection)
         with r.dev.lock:
             r.emu.faults.set_stuck(False)
         r.wait(lambda: not r.node.stuck, message="cleared")
+        r.wait(lambda: len(r.ranges) >= n + 3, message="published again")
 
 
 def test_use_sim_time_stamps_follow_the_clock_topic():

@@ -31,9 +31,14 @@ Publishes (QoS reliable, depth 10):
 - ``raw/dvl75`` (hindrax_msgs/RawDeviceData): every byte in both directions, receive/send time stamps.
 - ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
   ``errors.garbage_bytes``, ``errors.truncated``, ``errors.bad_checksum``, ``errors.malformed``,
-  ``errors.unknown_sentence`` (see :mod:`hindrax_drivers.dvl75.stream`), the ``stuck`` warning
+  ``errors.unknown_sentence`` (see :mod:`hindrax_drivers.dvl75.stream`), ``errors.implausible_velocity``
+  and the ERROR ``implausible`` (a ``$DVPDL`` outside the plausibility gates ``sensors.dvl75.max_speed_m_s``,
+  ``min_interval_s``, ``max_interval_s``: published with ``velocity_valid`` false, see
+  :mod:`hindrax_drivers.dvl75.report`; diagnostics published at once, cleared ``IMPLAUSIBLE_HOLD_S`` after the
+  last rejected report), the ERROR ``stuck``
   (identical ``$DVPDL`` deltas with confidence > 0, or identical ``$DVEXT`` attitude/altitude/beam data,
-  for ``stuck_limit_samples`` reports: warn, keep publishing), clock-offset estimate, start-up state.
+  for ``stuck_limit_samples`` reports: from then on, until the data change, every velocity is published
+  not valid and ``dvl/altitude`` is not published), clock-offset estimate, start-up state.
 
 Time stamps (docs/architecture.md §3; every stamp is ROS time, ``use_sim_time`` supported):
 
@@ -77,6 +82,9 @@ ALTITUDE_FIELD_OF_VIEW_RAD = math.radians(45.0)
 MISSING_DVPDL_TIMEOUT_S = 3.0
 #: Without ``$DVPDL`` for this long, ``dvl/data`` is published from each ``$DVEXT`` instead, s.
 DVEXT_ONLY_AFTER_S = 1.0
+#: The ERROR ``implausible`` stays raised this long after the last rejected ``$DVPDL`` (ROS time), s, so that
+#: a 1 Hz diagnostics reader sees a single rejected report.
+IMPLAUSIBLE_HOLD_S = 2.0
 
 
 class Dvl75Node(SerialDeviceNode):
@@ -93,7 +101,10 @@ class Dvl75Node(SerialDeviceNode):
         self.sensor_orientation_rpy_rad = tuple(float(a) for a in s["sensor_orientation_rpy_rad"])
         self.speed_of_sound_m_s = float(s["speed_of_sound_m_s"])
         self.builder = DvlReportBuilder(position_frd_m=s["position_frd_m"],
-                                        velocity_std_m_s=float(s["velocity_std_m_s"]))
+                                        velocity_std_m_s=float(s["velocity_std_m_s"]),
+                                        max_speed_m_s=float(s["max_speed_m_s"]),
+                                        min_interval_s=float(s["min_interval_s"]),
+                                        max_interval_s=float(s["max_interval_s"]))
         self.decoder = DvlStreamDecoder()
         self.clock_sync = DeviceClockSync()
         self._reported_counts = dict(self.decoder.counts)
@@ -106,6 +117,7 @@ class Dvl75Node(SerialDeviceNode):
         self._valid_count = 0
         self._invalid_count = 0
         self._last_report: Optional[DvlReport] = None
+        self._last_implausible_ns: Optional[int] = None
         self.pub_data = self.create_publisher(Dvl, "dvl/data", DEFAULT_QOS_DEPTH)
         self.pub_twist = self.create_publisher(TwistWithCovarianceStamped, "dvl/twist", DEFAULT_QOS_DEPTH)
         self.pub_altitude = self.create_publisher(Range, "dvl/altitude", DEFAULT_QOS_DEPTH)
@@ -161,16 +173,31 @@ class Dvl75Node(SerialDeviceNode):
         self._last_tu_s = pdl.time_since_boot_s
         self._last_dvpdl_ns = receive_ns
         self.clock_sync.update(round(pdl.time_since_boot_s * 1e9), receive_ns)
-        report = self.builder.from_position_delta(pdl, receive_ns)
-        stamp_ns = self.clock_sync.to_ros_ns(report.device_time_ns)  # type: ignore[arg-type]
-        self._publish(report, receive_ns if stamp_ns is None else stamp_ns, receive_ns)
         if pdl.confidence_pct > 0:
             self.check_stuck("dvpdl", (pdl.delta_roll_rad, pdl.delta_pitch_rad, pdl.delta_yaw_rad,
                                        pdl.delta_x_m, pdl.delta_y_m, pdl.delta_z_m))
+        report = self.builder.from_position_delta(pdl, receive_ns)
+        if report.rejection:
+            self.diag.count("implausible_velocity")
+            self.diag.error("implausible", f"implausible $DVPDL published not valid: {report.rejection}")
+            self.get_logger().error(f"DVL: implausible $DVPDL, velocity not valid: {report.rejection}",
+                                    throttle_duration_sec=5.0)
+            if self._last_implausible_ns is None:
+                self._publish_diagnostics()
+            self._last_implausible_ns = receive_ns
+        if self.stuck:
+            report = self.builder.invalidated(report, "stuck")
+        stamp_ns = self.clock_sync.to_ros_ns(report.device_time_ns)  # type: ignore[arg-type]
+        self._publish(report, receive_ns if stamp_ns is None else stamp_ns, receive_ns)
 
     def _on_dvext(self, ext: DvlExtended, receive_ns: int) -> None:
         self.builder.update_extended(ext, receive_ns)
         self._last_dvext_ns = receive_ns
+        self.check_stuck("dvext", (ext.orientation_wxyz, ext.roll_rad, ext.pitch_rad, ext.heading_rad,
+                                   ext.altitude_m, ext.beam_range_m, ext.beam_velocity_m_s,
+                                   ext.velocity_north_m_s, ext.velocity_east_m_s, ext.velocity_up_m_s))
+        if self.stuck:
+            return  # a stuck DVL's altitude is not published (ERROR "stuck" in /diagnostics)
         rng = Range()
         rng.header.stamp = time_from_ns(receive_ns)
         rng.header.frame_id = "dvl_link"
@@ -183,9 +210,6 @@ class Dvl75Node(SerialDeviceNode):
         self.pub_altitude.publish(rng)
         if self._last_dvpdl_ns is None or receive_ns - self._last_dvpdl_ns > DVEXT_ONLY_AFTER_S * 1e9:
             self._publish(self.builder.from_extended(ext), receive_ns, receive_ns)
-        self.check_stuck("dvext", (ext.orientation_wxyz, ext.roll_rad, ext.pitch_rad, ext.heading_rad,
-                                   ext.altitude_m, ext.beam_range_m, ext.beam_velocity_m_s,
-                                   ext.velocity_north_m_s, ext.velocity_east_m_s, ext.velocity_up_m_s))
 
     def _publish(self, r: DvlReport, stamp_ns: int, receive_ns: int) -> None:
         msg = Dvl()
@@ -221,7 +245,11 @@ class Dvl75Node(SerialDeviceNode):
 
     # -- executor side
     def housekeeping(self, now_ns: int) -> None:
-        """Resend the start-up commands when ``$DVEXT`` flows but ``$DVPDL`` does not."""
+        """Clear the ``implausible`` ERROR :data:`IMPLAUSIBLE_HOLD_S` after the last rejected report; resend the
+        start-up commands when ``$DVEXT`` flows but ``$DVPDL`` does not."""
+        if self._last_implausible_ns is not None and now_ns - self._last_implausible_ns > IMPLAUSIBLE_HOLD_S * 1e9:
+            self._last_implausible_ns = None
+            self.diag.clear("implausible")
         if not self.transport.connected or self._last_dvext_ns is None:
             return
         dvext_recent = now_ns - self._last_dvext_ns < 1e9

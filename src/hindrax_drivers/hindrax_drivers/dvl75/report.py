@@ -20,6 +20,13 @@ Conventions and sources
   lock. Otherwise velocity and delta position are NaN, ``velocity_valid`` is False and the covariance
   is marked unknown (``[0] = -1``, hindrax_msgs/Dvl). Confidence 0 means every field after ``dtu`` is
   garbage (Tracker-650 doc, docs/devices.md §1.3.1 [D4b]).
+- Plausibility gates (``sensors.dvl75.max_speed_m_s``, ``min_interval_s``, ``max_interval_s``): a
+  checksum-valid ``$DVPDL`` whose ``dtu`` lies outside [min_interval_s, max_interval_s] or whose speed
+  |delta_p| / dtu exceeds max_speed_m_s (or is not finite) is published not valid, like an unlocked one,
+  with the reason in :attr:`DvlReport.rejection`. The XOR checksum passes about 1 in 256 random
+  corruptions of a line, so a corrupted number can reach the parser: 999.999 m over 0.1 s would otherwise
+  be 9999.99 m/s, a 1 us interval 1e306 m/s. The DVL-75 envelope is <= 8 kn (4.1 m/s) and its pings come
+  at 5-20 Hz (docs/devices.md §1.1).
 - ``$DVEXT`` (docs/devices.md §1.3.2, §1.5):
   - quaternion (w, x, y, z) = FLU body in ENU, neutral bow east: already REP-103; reordered to
     (x, y, z, w) and normalised (6 printed decimals). Taken as the vehicle's orientation, as the
@@ -35,7 +42,7 @@ Conventions and sources
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence, Tuple
 
 import numpy as np
@@ -72,6 +79,8 @@ class DvlReport:
         beam_lock: (4,) per-beam lock.
         orientation_xyzw: (4,) base_link in ENU, (0, 0, 0, 0) when no attitude.
         orientation_covariance: 9 floats, ``[-1, 0...]`` (unknown).
+        rejection: why a report with confidence > 0 failed a plausibility gate ("" when it passed or
+            was never a candidate).
     """
 
     device_time_ns: Optional[int]
@@ -89,6 +98,7 @@ class DvlReport:
     beam_lock: Tuple[bool, bool, bool, bool]
     orientation_xyzw: Tuple[float, float, float, float]
     orientation_covariance: Tuple[float, ...] = field(default=UNKNOWN_COVARIANCE_3X3)
+    rejection: str = ""
 
 
 def altitude_range_m(ext: DvlExtended) -> float:
@@ -106,17 +116,27 @@ class DvlReportBuilder:
         position_frd_m: (3,) DVL position relative to the CG in FRD, m (``sensors.dvl75.position_frd_m``).
         velocity_std_m_s: 1-sigma velocity error per axis, m/s (``sensors.dvl75.velocity_std_m_s``).
         max_extended_age_s: a ``$DVEXT`` older than this (receive time) is not used, s.
+        max_speed_m_s: speed gate, m/s (``sensors.dvl75.max_speed_m_s``); None: only finiteness.
+        min_interval_s, max_interval_s: ``dtu`` gate, s (``sensors.dvl75.min/max_interval_s``); None: off.
     Raises:
-        ValueError: position not 3 finite numbers, negative std or age.
+        ValueError: position not 3 finite numbers, negative std or age, non-positive gate.
     """
 
     def __init__(self, position_frd_m: Sequence[float] = (0.0, 0.0, 0.0), velocity_std_m_s: float = 0.02,
-                 max_extended_age_s: float = 1.0) -> None:
+                 max_extended_age_s: float = 1.0, max_speed_m_s: Optional[float] = None,
+                 min_interval_s: Optional[float] = None, max_interval_s: Optional[float] = None) -> None:
         r = np.asarray(position_frd_m, dtype=float)
         if r.shape != (3,) or not np.all(np.isfinite(r)):
             raise ValueError(f"position_frd_m must be 3 finite numbers, got {position_frd_m!r}")
         if not velocity_std_m_s >= 0 or not max_extended_age_s >= 0:
             raise ValueError("velocity_std_m_s and max_extended_age_s must be >= 0")
+        for name, gate in (("max_speed_m_s", max_speed_m_s), ("min_interval_s", min_interval_s),
+                           ("max_interval_s", max_interval_s)):
+            if gate is not None and not gate > 0:
+                raise ValueError(f"{name} must be > 0, got {gate!r}")
+        self.max_speed_m_s = None if max_speed_m_s is None else float(max_speed_m_s)
+        self.min_interval_s = None if min_interval_s is None else float(min_interval_s)
+        self.max_interval_s = None if max_interval_s is None else float(max_interval_s)
         self.position_frd_m = r
         self._r = tuple(float(x) for x in r)
         self.velocity_std_m_s = float(velocity_std_m_s)
@@ -144,11 +164,27 @@ class DvlReportBuilder:
         return self._ext
 
     # -- outputs
+    def plausibility(self, pdl: DvlPositionDelta) -> str:
+        """Why ``pdl`` (confidence > 0, dtu > 0) is implausible, or "" (see the module docstring)."""
+        dt = pdl.delta_time_s
+        if self.min_interval_s is not None and dt < self.min_interval_s:
+            return f"dtu {dt * 1e3:.3f} ms below {self.min_interval_s * 1e3:g} ms"
+        if self.max_interval_s is not None and dt > self.max_interval_s:
+            return f"dtu {dt:.3f} s above {self.max_interval_s:g} s"
+        speed = math.sqrt(pdl.delta_x_m ** 2 + pdl.delta_y_m ** 2 + pdl.delta_z_m ** 2) / dt
+        if not math.isfinite(speed):
+            return "velocity not finite"
+        if self.max_speed_m_s is not None and speed > self.max_speed_m_s:
+            return f"speed {speed:.3g} m/s above {self.max_speed_m_s:g} m/s"
+        return ""
+
     def from_position_delta(self, pdl: DvlPositionDelta, receive_ns: int) -> DvlReport:
         """Report for one ``$DVPDL`` (received at ``receive_ns``), with the fresh ``$DVEXT`` fields."""
         ext = self.fresh_extended(receive_ns)
         dt = pdl.delta_time_s
         valid = pdl.confidence_pct > 0 and dt > 0.0 and (ext is None or ext.locked)
+        rejection = self.plausibility(pdl) if pdl.confidence_pct > 0 and dt > 0.0 else ""
+        valid = valid and not rejection
         if valid:
             a, b, c = pdl.delta_roll_rad, pdl.delta_pitch_rad, pdl.delta_yaw_rad
             rx, ry, rz = self._r
@@ -163,19 +199,28 @@ class DvlReportBuilder:
         device_mid_ns = round(pdl.time_since_boot_s * 1e9 - 0.5 * dt * 1e9)
         return self._report(ext, device_time_ns=device_mid_ns, valid=valid, velocity=velocity, delta=delta,
                             delta_time_s=dt, confidence=float(pdl.confidence_pct),
-                            lock_fallback=pdl.confidence_pct > 0)
+                            lock_fallback=pdl.confidence_pct > 0, rejection=rejection)
 
     def from_extended(self, ext: DvlExtended) -> DvlReport:
         """Report built from a ``$DVEXT`` alone (no ``$DVPDL`` stream): velocity never valid."""
         return self._report(ext, device_time_ns=None, valid=False, velocity=_NAN3, delta=_NAN3,
                             delta_time_s=math.nan, confidence=0.0, lock_fallback=False)
 
+    @staticmethod
+    def invalidated(report: DvlReport, reason: str) -> DvlReport:
+        """``report`` with its velocity withdrawn (NaN, not valid, covariances unknown) for ``reason``
+        (e.g. a stuck device): everything else (attitude, altitude, beams) is kept."""
+        return replace(report, velocity_valid=False, velocity_flu_m_s=_NAN3, delta_position_flu_m=_NAN3,
+                       velocity_covariance=UNKNOWN_COVARIANCE_3X3,
+                       twist_covariance=tuple(float(x) for x in (-np.eye(6)).ravel()),
+                       rejection=report.rejection or reason)
+
     def twist_covariance(self, valid: bool) -> Tuple[float, ...]:
         """36-element twist covariance (see :class:`DvlReport`); all-unknown when not valid."""
         return self._twist_cov if valid else self._unknown_twist
 
     def _report(self, ext: Optional[DvlExtended], *, device_time_ns, valid, velocity, delta, delta_time_s,
-                confidence, lock_fallback) -> DvlReport:
+                confidence, lock_fallback, rejection: str = "") -> DvlReport:
         if ext is not None:
             lock = ext.locked
             altitude = (ext.altitude_m * math.cos(ext.roll_rad) * math.cos(ext.pitch_rad)
@@ -196,7 +241,7 @@ class DvlReportBuilder:
             twist_covariance=self.twist_covariance(valid), delta_position_flu_m=delta,
             delta_time_s=float(delta_time_s), confidence_pct=confidence, bottom_lock=bool(lock),
             altitude_m=float(altitude), beam_range_m=ranges, beam_velocity_m_s=beam_vel,  # type: ignore[arg-type]
-            beam_lock=beam_lock, orientation_xyzw=orientation)  # type: ignore[arg-type]
+            beam_lock=beam_lock, orientation_xyzw=orientation, rejection=rejection)  # type: ignore[arg-type]
 
 
 def _normalised_xyzw(wxyz: Sequence[float]) -> Tuple[float, float, float, float]:

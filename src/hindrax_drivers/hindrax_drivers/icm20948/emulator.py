@@ -18,8 +18,10 @@
   a rising edge of I2C_MST_EN), reads land in EXT_SLV_SENS_DATA in slave order, writes repeat every
   cycle; SLV4 runs one transaction immediately and sets I2C_MST_STATUS.SLV4_DONE;
 * faults: ``stuck`` (data registers and magnetometer freeze), ``aux_connected = False``
-  (magnetometer NACKs: I2C_MST_STATUS.SLVn_NACK bits, bypass port errno 121); errno 121 on the
-  host bus is injected by the bus.
+  (magnetometer NACKs: I2C_MST_STATUS.SLVn_NACK bits, EXT_SLV_SENS_DATA keeps the last sample read,
+  bypass port errno 121), :meth:`Icm20948Emulator.power_glitch` (both chips back to their power-on
+  state: ICM registers at reset values, asleep, data registers 0, I2C master off; AK09916 powered
+  down); errno 121 on the host bus is injected by the bus.
 
 Not modelled: FIFO, DMP, interrupts pins, low-power cycling, self-test, the accel/gyro start-up
 delay after wake, filter dynamics (the DLPF only sets the output rate here).
@@ -284,6 +286,14 @@ class Icm20948Emulator(RegisterPointerEmulator):
         with self._lock:
             self._stuck = bool(value)
             self.magnetometer.stuck = bool(value)
+
+    def power_glitch(self, magnetometer: bool = True) -> None:
+        """Fault: a supply glitch resets the ICM-20948 (and, with ``magnetometer``, the AK09916) to the
+        power-on state, as DEVICE_RESET does (docs/devices.md §4.3: PWR_MGMT_1 = 0x41, asleep)."""
+        with self._lock:
+            self._device_reset()
+            if magnetometer:
+                self.magnetometer._soft_reset()
 
     def register_value(self, register: p.Register) -> int:
         """Stored value of a banked register (for tests; no side effects)."""

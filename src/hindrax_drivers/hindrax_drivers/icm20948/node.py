@@ -64,9 +64,28 @@ one output period (about 10 ms at 100 Hz) older than its stamp.
 
 Faults: an I2C failure after the transport's retries (immediate, ``backoff_s = 0``: no sleep in any
 callback) drops that poll only (counted). Failures lasting
-:data:`REINIT_AFTER_S` seconds restart the start-up. Bit-identical samples for :data:`STUCK_AFTER_S`
-seconds (:class:`StuckDetector`) raise a WARN and publishing continues; the node then reads PWR_MGMT_1
-and restarts the start-up if the chip is asleep (a power glitch resets it to sleep, docs/devices.md §4.3).
+:data:`REINIT_AFTER_S` seconds restart the start-up.
+
+Data-ready gates (``sensors.icm20948.frozen_check_samples``, ``mag_stale_timeout_s``; the poll itself stays
+one burst, so the raw traffic of a healthy chip is unchanged):
+
+- Chip reset (power glitch): the data registers of a chip that reset read their reset value 0 and stop
+  updating, PWR_MGMT_1 reads 0x41 (asleep) and USER_CTRL 0 (I2C master off) (docs/devices.md §4.3). An
+  all-zero sensor block, or ``frozen_check_samples`` bit-identical blocks in a row (a live sensor's noise
+  changes the low bits of every new sample; one repeat is a poll that came before the next sample),
+  makes the node read USER_CTRL..PWR_MGMT_1 back (one 4-byte read). A chip asleep, or with the I2C master
+  off in ``i2c_master`` mode, is a reset: counted (``chip_resets``), ERROR, the suspect samples are not
+  published, and the start-up runs again at once. The all-zero block itself is never published.
+- Stuck: bit-identical samples for :data:`STUCK_AFTER_S` seconds with the chip state intact raise the ERROR
+  ``stuck``; nothing is published until the data change.
+- Magnetometer in ``i2c_master`` mode: after each poll the node reads I2C_MST_STATUS (clears on read);
+  SLV0_NACK set means the AK09916 did not answer and EXT_SLV_SENS_DATA holds an old sample: ``imu/mag`` is
+  not published (counted ``mag_nack``) until that block changes (a new sample; a poll between two master
+  cycles re-reads the same block, so the NACK of one cycle covers every poll that sees its data). If the
+  status read itself fails the sample is published (the NACK bit stays set until read, the next poll sees it). No fresh magnetometer sample (DRDY without
+  NACK) for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-runs the start-up once (the
+  AK09916 may have reset to power-down); if it is still missing the IMU publishes without ``imu/mag`` and
+  the ERROR stays until a start-up finds it again.
 
 The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi, an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` with an
@@ -102,6 +121,8 @@ RETRY_PERIOD_S = 1.0
 REINIT_AFTER_S = 1.0
 #: Identical samples for this long mean a stuck sensor, s.
 STUCK_AFTER_S = 2.0
+#: Bytes read back by the chip-state check: USER_CTRL (0x03), reserved 0x04, LP_CONFIG 0x05, PWR_MGMT_1 0x06.
+CHIP_STATE_LENGTH = 4
 #: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, docs/devices.md §4.3 step 7).
 MAG_ATTEMPTS = 3
 #: Frame of every message (see the module docstring: base_link orientation, at the sensor).
@@ -284,6 +305,14 @@ class Icm20948Node(Node):
         self.diag = DeviceDiagnostics("hindrax/icm20948", f"i2c-{self.i2c_bus_number}@0x{self.address:02x}",
                                       self._now_s)
         self.stuck = StuckDetector(max(3, round(STUCK_AFTER_S * self.odr_hz)))
+        self.frozen_check_samples = int(s["frozen_check_samples"])
+        self.mag_stale_timeout_s = float(s["mag_stale_timeout_s"])
+        self._repeats = 0
+        self._last_block: bytes | None = None
+        self._mag_fresh_s: float | None = None
+        self._mag_frozen_block: bytes | None = None
+        self._mag_lost = False
+        self.chip_state_checks = 0
         self.is_stuck = False
         self.who_am_i: int | None = None
         self.mag_available = False
@@ -494,6 +523,11 @@ class Icm20948Node(Node):
             self._fail(f"start-up I2C failure: {exc}")
             return
         self.running = True
+        self.diag.clear("chip_reset")
+        self._mag_frozen_block = None
+        self._mag_fresh_s = self._now_s() if self.mag_available else None
+        if self.mag_available:
+            self._mag_lost = False
         if self.estimate_gyro_bias and self.bias_result is None:
             self.bias_estimator = GyroBiasEstimator(self.gyro_bias_duration_s,
                                                     STILL_STD_FACTOR * math.sqrt(self.gyro_var),
@@ -520,6 +554,20 @@ class Icm20948Node(Node):
         stamp = self.get_clock().now()
         self._fail_since_s = None
         mag_block = data[p.SENSOR_BLOCK_LENGTH:] if master else None
+        if master:
+            try:
+                nack = bool(self.device.read_block(p.I2C_MST_STATUS.address, 1)[0] & p.I2C_MST_STATUS_SLV0_NACK)
+            except I2CError:
+                nack = False
+                self.diag.count("mag_status_failure")
+            if nack:
+                self.diag.count("mag_nack")
+                self._mag_frozen_block = bytes(mag_block)
+            if self._mag_frozen_block is not None:
+                if bytes(mag_block) == self._mag_frozen_block:
+                    mag_block = None  # EXT_SLV_SENS_DATA still holds the sample of before the NACK
+                else:
+                    self._mag_frozen_block = None  # the AK09916 answered again: a new sample
         if self.mag_mode_name == "bypass" and self.mag_available:
             try:
                 mag_block = self.mag_device.read_block(p.AK_ST1.address, p.AK09916_BLOCK_LENGTH)
@@ -544,9 +592,18 @@ class Icm20948Node(Node):
             self.diag.set_state("i2c error", DiagnosticStatus.WARN, f"poll failed: {exc}")
 
     def _process(self, block: bytes, mag_block: bytes | None, stamp) -> None:
+        block = bytes(block)
+        self._repeats = self._repeats + 1 if block == self._last_block else 0
+        self._last_block = block
+        if not any(block) or self._repeats == self.frozen_check_samples:
+            if self._reset_detected(zero_block=not any(block)):
+                return
+        if not any(block):
+            return  # the reset value of every data register: never a measurement
         sample = p.parse_sensor_block(block, self.config)
         self.samples += 1
-        self._check_stuck(bytes(block))
+        if self._check_stuck(block):
+            return  # a stuck sensor is not published (ERROR "stuck")
         if sample.accel_saturated or sample.gyro_saturated:
             self.diag.count("saturated_samples")
         if self.bias_estimator is not None:
@@ -575,12 +632,30 @@ class Icm20948Node(Node):
         if mag_block is not None:
             self._publish_mag(p.parse_ak09916_block(mag_block), stamp_msg)
         self.diag.published()
+        if self.mag_available and self._mag_stale(self._now_s()):
+            return
+
+    def _mag_stale(self, now_s: float) -> bool:
+        """True (and re-initialisation started) when no fresh magnetometer sample came for the timeout."""
+        if self._mag_fresh_s is None or now_s - self._mag_fresh_s <= self.mag_stale_timeout_s:
+            return False
+        text = (f"magnetometer: no new AK09916 sample for {now_s - self._mag_fresh_s:.2f} s (SLV0 NACK or no "
+                "DRDY): imu/mag not published, re-initialising")
+        self.diag.error("magnetometer", text)
+        self.diag.count("mag_lost")
+        self.get_logger().error(f"ICM-20948 {text}")
+        self._mag_lost = True
+        self._mag_fresh_s = None
+        self.diagnostics.publish()
+        self._start()
+        return True
 
     def _publish_mag(self, mag: p.MagSample, stamp_msg) -> None:
         if mag.data_overrun:
             self.diag.count("mag_overrun")
         if not mag.data_ready:
             return
+        self._mag_fresh_s = self._now_s()
         if mag.overflow:
             self.diag.count("mag_overflow")
             return
@@ -604,16 +679,50 @@ class Icm20948Node(Node):
             self.get_logger().warn(result.message)
         self.diag.set_state("running", DiagnosticStatus.OK, "running")
 
-    def _check_stuck(self, block: bytes) -> None:
+    def _check_stuck(self, block: bytes) -> bool:
+        """Feed one sensor block; raise/clear the ERROR ``stuck``. Returns True while stuck."""
         stuck = self.stuck.update(block)
         if stuck and not self.is_stuck:
-            self.get_logger().warn(f"ICM-20948 stuck: identical samples for {self.stuck.limit} polls")
-            self.diag.warn("stuck", f"stuck: identical accel/gyro/temperature for >= {self.stuck.limit} samples")
+            self.get_logger().error(f"ICM-20948 stuck: identical samples for {self.stuck.limit} polls: not published")
+            self.diag.error("stuck", f"stuck: identical accel/gyro/temperature for >= {self.stuck.limit} samples")
+            self.diag.count("stuck_events")
             self.is_stuck = True
+            self.diagnostics.publish()
             self._check_asleep()
         elif not stuck and self.is_stuck:
             self.diag.clear("stuck")
             self.is_stuck = False
+        return self.is_stuck
+
+    def _reset_detected(self, zero_block: bool) -> bool:
+        """Read USER_CTRL..PWR_MGMT_1 back; on the state of a reset chip restart the start-up (True)."""
+        self.chip_state_checks += 1
+        try:
+            state = self._read(p.USER_CTRL, CHIP_STATE_LENGTH)
+        except I2CError as exc:
+            self._poll_failed(exc)
+            return True  # unknown: the suspect sample is dropped
+        user_ctrl, pwr = state[0], state[CHIP_STATE_LENGTH - 1]
+        problems = []
+        if pwr & p.PWR_MGMT_1_SLEEP:
+            problems.append(f"PWR_MGMT_1 = 0x{pwr:02x} (asleep)")
+        if self.mag_mode_name == "i2c_master" and self.mag_available and not user_ctrl & p.USER_CTRL_I2C_MST_EN:
+            problems.append(f"USER_CTRL = 0x{user_ctrl:02x} (I2C master off)")
+        if not problems:
+            return False
+        text = (f"chip reset detected ({', '.join(problems)}; "
+                f"{'all-zero data' if zero_block else f'{self._repeats + 1} identical samples'}): re-initialising")
+        self.get_logger().error(f"ICM-20948 {text}")
+        self.diag.count("chip_resets")
+        self.diag.error("chip_reset", text)
+        self.diagnostics.publish()
+        self._repeats = 0
+        self._last_block = None
+        self.stuck = StuckDetector(self.stuck.limit)
+        self.is_stuck = False
+        self.diag.clear("stuck")
+        self._start()
+        return True
 
     def _check_asleep(self) -> None:
         """A frozen chip may have been reset by a power glitch (asleep after reset): start again if so."""

@@ -12,8 +12,11 @@ side of docs/devices.md §3.1 and §3.8:
 * PROM with a valid CRC-4 (§3.3), coefficients configurable (default: datasheet example values);
 * raw values from a truth source ``t_s -> (pressure_pa, temperature_c)`` sampled at the start of
   each conversion, through the inversion of the compensation (§3.8, :func:`invert_to_raw`);
-* faults: stuck outputs (conversions repeat the last D1/D2), corrupted PROM CRC; bus-level NACKs
-  are injected by the bus.
+* faults: stuck outputs (conversions repeat the last D1/D2), corrupted PROM CRC, a blank (all-zero)
+  PROM, raw ADC counts forced by the test (``raw_override``, e.g. a saturated 0xFFFFFF or datasheet
+  vectors), and a power cycle (:meth:`Ms5837Emulator.power_cycle`: until the next reset command every
+  ADC read returns 0, the PROM not being loaded, datasheet "Reset sequence"); bus-level NACKs are
+  injected by the bus.
 
 Modelling choices (not in the datasheets we have): reset is instantaneous; conversion time per OSR
 is :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S` (TE library waits, §3.1); unknown
@@ -112,6 +115,8 @@ class Ms5837Emulator:
     Fault injection attributes (thread-safe to set at any time):
         ``stuck``: conversions return the previous D1/D2 instead of the truth.
         ``corrupt_prom_crc``: PROM word 0 is read with a wrong CRC nibble.
+        ``blank_prom``: every PROM word reads 0 (whose CRC-4 is 0: it passes the CRC check).
+        ``raw_override``: (D1, D2) counts every conversion returns instead of the truth's, or None.
 
     Counters: ``conversions``, ``adc_reads``, ``zero_reads`` (ADC reads that returned 0).
     """
@@ -140,6 +145,10 @@ class Ms5837Emulator:
         self.conversion_time_s = dict(p.CONVERSION_TIME_S if conversion_time_s is None else conversion_time_s)
         self.stuck = False
         self.corrupt_prom_crc = False
+        self.blank_prom = False
+        self.raw_override: tuple[int, int] | None = None
+        self.needs_reset = False
+        self.resets = 0
         self.conversions = 0
         self.adc_reads = 0
         self.zero_reads = 0
@@ -163,9 +172,17 @@ class Ms5837Emulator:
     def prom_words(self) -> tuple[int, ...]:
         """PROM as read over the bus (with the CRC fault applied if enabled)."""
         words = list(self.calibration.words)
+        if self.blank_prom:
+            return (0,) * 8
         if self.corrupt_prom_crc:
             words[0] = (((words[0] >> 12) + 1) & 0xF) << 12 | (words[0] & 0x0FFF)
         return tuple(words)
+
+    def power_cycle(self) -> None:
+        """Fault: the part lost power (e.g. during an I2C outage): conversions give 0 until a reset command."""
+        with self._lock:
+            self._reset_state()
+            self.needs_reset = True
 
     def raw_for_truth(self, t_s: float) -> tuple[int, int]:
         """(D1, D2) the device produces for the truth at ``t_s`` (no faults applied)."""
@@ -188,6 +205,8 @@ class Ms5837Emulator:
                 return
             if cmd.kind == "reset":
                 self._reset_state()
+                self.needs_reset = False
+                self.resets += 1
             elif cmd.kind == "prom_read":
                 self._output = p.encode_prom_word(self.prom_words[cmd.index])
             elif cmd.kind == "adc_read":
@@ -204,7 +223,11 @@ class Ms5837Emulator:
             else:  # convert_d1 / convert_d2
                 self.conversions += 1
                 corrupt = self._conversion is not None  # new conversion during one: bad result
-                if self.stuck:
+                if self.needs_reset:
+                    value = 0
+                elif self.raw_override is not None:
+                    value = self.raw_override[0 if cmd.kind == "convert_d1" else 1]
+                elif self.stuck:
                     value = self._last_raw[cmd.kind]
                 else:
                     d1, d2 = self.raw_for_truth(now)

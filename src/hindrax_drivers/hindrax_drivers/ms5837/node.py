@@ -3,7 +3,9 @@
 Start-up (docs/devices.md §3.1-3.3, §3.9):
 
 1. Reset command 0x1E, then wait :data:`~hindrax_drivers.ms5837.protocol.RESET_TIME_S` (10 ms).
-2. Read the 8 PROM words (0xA0 + 2k, 2 bytes MSB first) and check the CRC-4. A bad CRC (or an I2C
+2. Read the 8 PROM words (0xA0 + 2k, 2 bytes MSB first) and check the CRC-4 and the PROM sanity
+   (:func:`~hindrax_drivers.ms5837.protocol.prom_sanity_issue`: no coefficient 0x0000/0xFFFF; an all-zero
+   PROM passes CRC-4). A bad CRC or PROM (or an I2C
    failure, or a C1 outside the heuristic's range with ``variant: auto``) stops start-up: the device
    state goes to ERROR with the reason in ``/diagnostics`` and the log, and the whole start-up is
    retried every :data:`RETRY_PERIOD_S` seconds. The node never crashes on it.
@@ -17,8 +19,12 @@ so that the executor is never blocked (no sleep in any callback):
 Conversion times are TE's library waits (docs/devices.md §3.1, :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S`;
 the datasheet table is UNVERIFIED). Compensation is the datasheet's first- and second-order integer
 arithmetic with floor semantics (:func:`hindrax_drivers.ms5837.protocol.compensate`, docs/devices.md §3.4-3.7).
-An ADC read of 0 (no completed conversion, docs/devices.md §3.1) or an I2C failure after the transport's
-retries abandons that cycle only (counted in the diagnostics); the next cycle starts afresh. The
+An ADC read of 0 (no completed conversion, docs/devices.md §3.1), a saturated ADC read (0xFFFFFF: a bus
+held high or a broken bridge; no reading in the sensor's range comes near it) or an I2C failure after the
+transport's retries abandons that cycle only (counted in the diagnostics: ``adc_zero``, ``adc_saturated``,
+``i2c_failure``); the next cycle starts afresh. After :data:`FAILED_CYCLES_FOR_ERROR` consecutive failed
+cycles the state turns to ERROR and the whole start-up (reset command, PROM read) runs again: a part
+that lost power during an I2C outage needs the reset to reload its PROM (datasheet "Reset sequence"). The
 transport retries at once (``backoff_s = 0``), so even a failing bus never sleeps inside a callback. A cycle that
 is still running when the next one is due is skipped (``cycle_overrun``): with OSR 8192 two conversions
 take 34 ms, so rates above ~28 Hz are not reachable and a warning is logged at start-up.
@@ -37,7 +43,8 @@ Publishes (reliable, depth 10):
   x, y and the orientation are not measured: their diagonal variances are :data:`UNKNOWN_VARIANCE`
   (1e6), off-diagonals 0, orientation the identity. Correcting the port depth to base_link needs the
   attitude and the lever arm ``sensors.ms5837.position_frd_m``; that is the state estimator's job.
-- ``raw/ms5837`` hindrax_msgs/RawDeviceData: every I2C transaction (command bytes and ADC/PROM reads).
+- ``raw/ms5837`` hindrax_msgs/RawDeviceData: every I2C transaction (command bytes and ADC/PROM reads); the
+  four of a measurement cycle in one message (:class:`~hindrax_drivers.node_common.RawDataPublisher` batch).
 - ``/diagnostics``: state, rate, last message age, I2C transactions/errors/retries/failures, ADC zero
   reads, cycle overruns, variant, OSR, surface pressure, stuck warning.
 
@@ -52,8 +59,13 @@ pressure (docs/devices.md §3.1). The read time is later by at least the full co
 latency; for a depth rate of 0.3 m/s in a heave test, 10 ms of stamp error is 3 mm of depth, which biases the
 identified heave inertia and damping.
 
+Plausibility (ERROR ``implausible`` in the diagnostics, held :data:`IMPLAUSIBLE_HOLD_S` after the last
+rejection; nothing is published for that cycle, counted ``implausible_pressure``): a compensated pressure
+outside [``sensors.ms5837.min_pressure_pa``, ``max_pressure_pa``] of the vehicle file.
+
 A stuck sensor (bit-identical D1 and D2 for :data:`STUCK_AFTER_S` seconds, :class:`StuckDetector`)
-raises a WARN in the diagnostics and a log warning; publishing continues.
+raises the ERROR ``stuck`` in the diagnostics and a log error, and its readings are not published until
+they change.
 
 The bus is injected: ``smbus2.SMBus(sensors.ms5837.i2c_bus)`` on the Pi (opened at start-up; if it cannot
 be opened the node reports it and retries), an
@@ -88,8 +100,10 @@ RETRY_PERIOD_S = 1.0
 CONVERSION_MARGIN_S = 0.0005
 #: Identical raw readings for this long mean a stuck sensor, s.
 STUCK_AFTER_S = 2.0
-#: Consecutive failed cycles after which the device state turns to ERROR.
+#: Consecutive failed cycles after which the device state turns to ERROR and the start-up (reset, PROM) reruns.
 FAILED_CYCLES_FOR_ERROR = 3
+#: The ERROR ``implausible`` stays raised this long after the last rejected reading (ROS time), s.
+IMPLAUSIBLE_HOLD_S = 2.0
 #: Window of readings averaged by the zero_depth service, s.
 ZERO_DEPTH_WINDOW_S = 1.0
 #: Variance used for the pose components a depth sensor does not measure (x, y, orientation).
@@ -141,6 +155,9 @@ class Ms5837Node(Node):
         self.gravity_m_s2 = float(cfg.gravity_m_s2)
         self.surface_pressure_pa = float(cfg.get("environment.surface_pressure_pa"))
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
+        self.min_pressure_pa = float(s["min_pressure_pa"])
+        self.max_pressure_pa = float(s["max_pressure_pa"])
+        self._last_implausible_s: float | None = None
         self.d1_command = p.convert_d1_command(self.osr)
         self.d2_command = p.convert_d2_command(self.osr)
 
@@ -227,6 +244,9 @@ class Ms5837Node(Node):
         try:
             words = [p.parse_prom_word(self.device.read_block(p.prom_read_command(k), 2)) for k in range(8)]
             calibration = p.Calibration.from_words(words, check_crc=True)
+            issue = p.prom_sanity_issue(calibration)
+            if issue:
+                raise p.Ms5837Error(issue)
             variant = p.detect_variant(calibration, self.configured_variant)
         except I2CError as exc:
             self.diag.count("i2c_failure")
@@ -256,6 +276,7 @@ class Ms5837Node(Node):
             self.diag.count("cycle_overrun")
             return
         commanded = self.get_clock().now()
+        self.raw.begin_batch()  # raw/ms5837: the cycle's four transactions in one message
         try:
             self.device.write_byte(self.d1_command)
         except I2CError as exc:
@@ -266,14 +287,20 @@ class Ms5837Node(Node):
         self._schedule(self.conversion_wait_s, self._read_d1)
 
     def _read_adc(self) -> int | None:
-        """ADC read (0x00 + 3 bytes); None (cycle abandoned, counted) on an I2C failure or a 0 result."""
+        """ADC read (0x00 + 3 bytes); None (cycle abandoned, counted) on an I2C failure, a 0 or a saturated
+        (0xFFFFFF) result."""
         try:
-            return p.parse_adc(self.device.read_block(p.CMD_ADC_READ, 3))
+            value = p.parse_adc(self.device.read_block(p.CMD_ADC_READ, 3))
         except I2CError as exc:
             self._cycle_failed("i2c_failure", exc)
+            return None
         except p.Ms5837Error as exc:
             self._cycle_failed("adc_zero", exc)
-        return None
+            return None
+        if value >= p.ADC_MAX:
+            self._cycle_failed("adc_saturated", p.Ms5837Error("ADC read 0xFFFFFF (saturated): reading rejected"))
+            return None
+        return value
 
     def _read_d1(self) -> None:
         d1 = self._read_adc()
@@ -298,31 +325,57 @@ class Ms5837Node(Node):
         self._failed_cycles = 0
         if self.diag.state != "running":
             self.diag.set_state("running", DiagnosticStatus.OK, f"MS5837-{self.variant.value} running")
-        self._check_stuck(self._d1, d2)
+        if self._check_stuck(self._d1, d2):
+            return  # a stuck sensor's reading is not published (ERROR "stuck")
+        now_s = self._now_s()
+        if not self.min_pressure_pa <= reading.pressure_pa <= self.max_pressure_pa:
+            self.diag.count("implausible_pressure")
+            text = (f"implausible pressure {reading.pressure_pa:.0f} Pa outside {self.min_pressure_pa:g}.."
+                    f"{self.max_pressure_pa:g} Pa (D1 = {self._d1}, D2 = {d2}): not published")
+            self.diag.error("implausible", text)
+            self.get_logger().error(f"MS5837: {text}", throttle_duration_sec=5.0)
+            if self._last_implausible_s is None:
+                self.diagnostics.publish()
+            self._last_implausible_s = now_s
+            return
+        if self._last_implausible_s is not None and now_s - self._last_implausible_s > IMPLAUSIBLE_HOLD_S:
+            self._last_implausible_s = None
+            self.diag.clear("implausible")
         if reading.temperature_in_range:
             self.diag.clear("temperature_range")
         else:
             self.diag.warn("temperature_range", f"temperature {reading.temperature_c:.2f} degC outside "
                                                 f"{p.TEMPERATURE_MIN_C:g}..{p.TEMPERATURE_MAX_C:g} degC")
         self._publish(reading, self._d1_stamp)
+        self.raw.flush()
 
     def _cycle_failed(self, kind: str, exc: Exception) -> None:
         self._phase = "idle"
+        self.raw.flush()
         self.diag.count(kind)
         self._failed_cycles += 1
         self.get_logger().warn(f"MS5837 cycle abandoned ({kind}): {exc}", throttle_duration_sec=5.0)
         if self._failed_cycles >= FAILED_CYCLES_FOR_ERROR:
             self.diag.set_state("i2c error", DiagnosticStatus.ERROR,
-                                f"{self._failed_cycles} consecutive failed cycles: {exc}")
+                                f"{self._failed_cycles} consecutive failed cycles: {exc}; reset and PROM read again")
+            self.get_logger().error(f"MS5837: {self._failed_cycles} consecutive failed cycles ({exc}): "
+                                    "re-running the start-up (reset, PROM)", throttle_duration_sec=5.0)
+            self._failed_cycles = 0
+            self.diag.count("restarts")
+            self._start()
 
-    def _check_stuck(self, d1: int, d2: int) -> None:
+    def _check_stuck(self, d1: int, d2: int) -> bool:
+        """Feed one raw pair; raise/clear the ERROR ``stuck``. Returns True while stuck."""
         stuck = self.stuck.update((d1, d2))
         if stuck and not self.is_stuck:
-            self.get_logger().warn(f"MS5837 stuck: identical D1/D2 for {self.stuck.limit} readings")
-            self.diag.warn("stuck", f"stuck: identical D1/D2 ({d1}, {d2}) for >= {self.stuck.limit} readings")
+            self.get_logger().error(f"MS5837 stuck: identical D1/D2 for {self.stuck.limit} readings: not published")
+            self.diag.error("stuck", f"stuck: identical D1/D2 ({d1}, {d2}) for >= {self.stuck.limit} readings")
+            self.diag.count("stuck_events")
+            self.diagnostics.publish()
         elif not stuck and self.is_stuck:
             self.diag.clear("stuck")
         self.is_stuck = stuck
+        return stuck
 
     # ------------------------------------------------------------------ output
     def depth_m(self, pressure_pa: float) -> float:

@@ -30,7 +30,8 @@ __all__ = [
     "EXAMPLE_WORD0_02BA", "EXAMPLE_D1_30BA", "EXAMPLE_D2_30BA", "EXAMPLE_D1_02BA", "EXAMPLE_D2_02BA",
     "GRAVITY_M_S2", "FRESH_WATER_DENSITY_KG_M3", "SALT_WATER_DENSITY_KG_M3",
     "STANDARD_SURFACE_PRESSURE_PA", "TEMPERATURE_MIN_C", "TEMPERATURE_MAX_C",
-    "Command", "parse_variant", "convert_d1_command", "convert_d2_command", "prom_read_command", "decode_command",
+    "Command", "parse_variant", "prom_sanity_issue", "convert_d1_command", "convert_d2_command",
+    "prom_read_command", "decode_command",
     "conversion_time_s", "parse_adc", "encode_adc", "parse_prom_word", "encode_prom_word",
     "crc4", "prom_with_crc", "Calibration", "detect_variant", "Compensation", "Reading",
     "first_order", "second_order", "compensate", "pressure_pa_from_counts",
@@ -342,6 +343,21 @@ class Calibration:
     def factory_bits(self) -> int:
         """Factory settings (word 0 bits 4:0)."""
         return self.words[0] & 0x1F
+
+
+def prom_sanity_issue(calibration: Calibration) -> str:
+    """Why ``calibration`` cannot be a factory-programmed PROM, or "" when it can.
+
+    A blank (all-zero) PROM has CRC-4 0 and passes the check of docs/devices.md §3.3; an unanswered read
+    on a bus held high gives 0xFFFF words. Every coefficient C1..C6 of a real part is a non-zero 16-bit
+    value (the datasheet examples: 34982 ... 26146, docs/devices.md §3.7), so a coefficient of 0x0000
+    or 0xFFFF rejects the PROM.
+    """
+    bad = [f"C{k}" for k, c in enumerate(calibration.words[1:7], start=1) if c in (0, 0xFFFF)]
+    if bad:
+        return (f"PROM coefficient(s) {', '.join(bad)} read 0x0000 or 0xFFFF (blank or unread PROM; an all-zero "
+                "PROM passes CRC-4)")
+    return ""
 
 
 def parse_variant(value: Variant | str | None) -> Variant | None:

@@ -30,9 +30,10 @@ Publishes (QoS reliable, depth 10), for every ``profile`` (1300), ``distance`` (
 - ``raw/ping1d`` (hindrax_msgs/RawDeviceData): every byte in both directions.
 - ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
   ``errors.garbage_bytes``, ``errors.truncated``, ``errors.bad_checksum``, ``errors.unknown_message``,
-  ``errors.malformed`` (see :mod:`hindrax_drivers.ping1d.stream`), ``errors.nack``, the ``stuck`` warning
-  (identical distance, confidence and profile samples for ``stuck_limit_samples`` pings: warn, keep
-  publishing), firmware version and verified settings.
+  ``errors.malformed`` (see :mod:`hindrax_drivers.ping1d.stream`), ``errors.nack``, the ERROR ``stuck``
+  (identical distance, confidence and profile samples for ``stuck_limit_samples`` pings: from then on,
+  until the data change, nothing is published on ``ping/altitude`` and ``ping/confidence``), firmware
+  version and verified settings.
 
 Time stamps: receive time (ROS time, ``use_sim_time`` supported): the Ping1D messages carry no device
 time (docs/devices.md §2.4).
@@ -197,6 +198,8 @@ class Ping1dNode(SerialDeviceNode):
                 return  # the same ping reported twice (stream and a reply)
             self._last_ping_number = number
         self._last_distance_ns = receive_ns
+        if self.check_stuck("distance", (p.distance_m, p.confidence_pct, getattr(p, "profile_data", None))):
+            return  # a stuck sonar's distance is not published (ERROR "stuck" in /diagnostics)
         stamp = time_from_ns(receive_ns)
         rng = Range()
         rng.header.stamp = stamp
@@ -210,7 +213,6 @@ class Ping1dNode(SerialDeviceNode):
         self.pub_range.publish(rng)
         self.pub_confidence.publish(Float32(data=float(p.confidence_pct)))
         self.mark_published(receive_ns)
-        self.check_stuck("distance", (p.distance_m, p.confidence_pct, getattr(p, "profile_data", None)))
 
     # -- executor side
     def housekeeping(self, now_ns: int) -> None:
