@@ -51,7 +51,7 @@ class RawMessage:
 
 @dataclass
 class ChannelInfo:
-    """A topic as found in the MCAP files: type, full definition, channel metadata."""
+    """A topic as found in the MCAP files: type, full definition, channel metadata, message encoding."""
 
     topic: str
     type: str
@@ -59,6 +59,7 @@ class ChannelInfo:
     definition: str
     metadata: dict[str, str]
     message_count: int = 0
+    message_encoding: str = "cdr"
 
 
 def bag_files(path: str | Path) -> list[Path]:
@@ -145,7 +146,8 @@ class BagReader:
         info = self.channels.get(ch.topic)
         if info is None:
             info = ChannelInfo(ch.topic, schema.name if schema else "", schema.encoding if schema else "",
-                               schema.data.decode(errors="replace") if schema else "", dict(ch.metadata))
+                               schema.data.decode(errors="replace") if schema else "", dict(ch.metadata),
+                               message_encoding=ch.message_encoding)
             self.channels[ch.topic] = info
         info.message_count += count
 
@@ -182,12 +184,14 @@ class BagReader:
 
     def decoded(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
                 end_ns: int | None = None) -> Iterator[tuple[RawMessage, Any]]:
-        """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas.
+        """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas
+        (``mcap_ros2.decoder.DecoderFactory``, the decoder an ``mcap`` reader uses).
 
         Raises :class:`BagError` naming the topic when its schema is missing or cannot be parsed.
         """
-        from mcap_ros2._dynamic import generate_dynamic
+        from mcap_ros2.decoder import DecoderFactory
 
+        factory = DecoderFactory()
         decoders: dict[str, Any] = {}
         for m in self.messages(topics, start_ns, end_ns):
             dec = decoders.get(m.topic)
@@ -195,10 +199,15 @@ class BagReader:
                 ch = self.channels[m.topic]
                 if ch.schema_encoding != "ros2msg" or not ch.definition:
                     raise BagError(f"{m.topic}: no ros2msg definition stored for {ch.type!r}; cannot decode")
+                # one schema id per topic: the factory caches its decoders by schema id
+                schema = Schema(id=len(decoders) + 1, name=ch.type, encoding=ch.schema_encoding,
+                                data=ch.definition.encode())
                 try:
-                    dec = generate_dynamic(ch.type, ch.definition)[ch.type]
+                    dec = factory.decoder_for(ch.message_encoding, schema)
                 except Exception as exc:  # noqa: BLE001 - any parser failure is a bad schema
                     raise BagError(f"{m.topic}: stored definition of {ch.type} does not parse ({exc})") from exc
+                if dec is None:
+                    raise BagError(f"{m.topic}: mcap_ros2 has no decoder for {ch.message_encoding!r} messages")
                 decoders[m.topic] = dec
             yield m, dec(m.data)
 

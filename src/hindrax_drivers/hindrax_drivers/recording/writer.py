@@ -256,7 +256,7 @@ class BagWriter:
         assert f is not None
         if self._oldest_unflushed is None:
             return
-        _finish_chunk(f.writer, f.stream)
+        f.writer.flush()  # closes the open chunk, writes it out and flushes the stream (mcap >= 1.6)
         self._sync(f)
         self._chunk_done(f)
 
@@ -379,13 +379,3 @@ class BagWriter:
     def _split(self) -> None:
         self._close_file()
         self._open_file()
-
-
-def _finish_chunk(writer: Writer, stream: Any) -> None:
-    """Close the writer's open chunk and push it to the stream (public ``Writer.flush`` in recent mcap)."""
-    if hasattr(writer, "flush"):
-        writer.flush()
-        return
-    finalize = getattr(writer, "_Writer__finalize_chunk")  # older mcap: same operation, private name
-    finalize()
-    stream.flush()
