@@ -51,7 +51,7 @@ def test_driver_dvl_velocity_is_already_at_the_body_origin(cfg):
     """dvl/data carries the base_link velocity (the driver removed the lever arm): not corrected twice."""
     from hindrax_msgs.msg import Dvl
 
-    from hindrax_ident.identification.node import samples_from_dvl
+    from hindrax_ident.identification.signals import samples_from_dvl
 
     st = SensorState(cfg)
     _gyro(st, 0.0, [0.0, 1.5, 0.0])
@@ -179,7 +179,7 @@ def test_holds_stay_calm_with_80_ms_of_command_latency(cfg):
     def late_tick(w):
         heave.append((c.sim.t_s, float(c.sim.nu[2])))
         queue.append(np.asarray(w, dtype=float))
-        tick(queue.popleft())
+        return tick(queue.popleft())
 
     c.tick = late_tick
     rec = c.run()

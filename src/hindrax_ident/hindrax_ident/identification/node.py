@@ -1,13 +1,17 @@
-"""Identification node: the manoeuvre executive of [Hindrax-Drag] (seed 003) §4 as the ``run_identification`` action.
+"""Identification node: the ``run_identification`` action over the identification executive.
 
-Thin rclpy node over the pure campaign logic (:class:`~.campaign.Campaign`, :mod:`.maneuvers`,
-:class:`~.estimators.OnlineDofEstimator`): the same dive, positioning, level ladders, holds, pool-box planning,
-limits and online Kalman + RLS run here, fed from the ROS sensor topics instead of the simulator. Only the
-plant differs (:class:`RosCampaign`): a tick publishes the wrench to the thrust allocation and waits for the
-next tick of the ROS clock; the force in the regression is the thrust model of the pulse widths the ESC node
-actually wrote (``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed here, through the
-allocation's cubic curves, [Hindrax-Drag] (seed 003) eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust
-allocation matrix, [Hindrax-Drag] (seed 003) eq. 9), body FRD.
+A thin rclpy node over :class:`~.executive.Executive` (pure: the dive, positioning, level ladders, holds, pool-box
+planning, limits and online Kalman + RLS of [Hindrax-Drag] (seed 003) §4; the same object the in-process campaign
+steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples (:mod:`.signals`), and at
+every tick of its control timer (``identification.estimate_rate_hz``, ROS clock) hands the executive the samples
+that came in since the last tick and publishes the wrench it returns. Nothing in a callback waits: the action's
+execute callback is a coroutine that awaits a future the control timer completes. The node does not know whether
+the vehicle is simulated: it sees the same topics from the drivers either way.
+
+The force in the regression is the thrust model of the pulse widths the ESC node actually wrote
+(``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed, through the allocation's cubic curves,
+[Hindrax-Drag] (seed 003) eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust allocation
+matrix, [Hindrax-Drag] (seed 003) eq. 9), body FRD.
 
 Run alone: ``python -m hindrax_ident.identification.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 
@@ -18,9 +22,11 @@ Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     ``level_fractions`` (optional explicit fractions of the DOF's authority, each in (0, 1]). Rejected when
     a goal is running or the goal is invalid (unknown DOF, fraction out of range). The goal fails at once
     when the ESC output is not armed. Feedback at every level change and once per second: DOF, level index
-    and count, level command (N or N m, FRD), progress 0-1. Cancel: the manoeuvre stops, the vehicle is
-    left at neutral thrust (zero wrench, then no more wrench messages: the allocation's wrench timeout
-    keeps it neutral). Result: success, message (abort reason), the final online estimate of every DOF.
+    and count, level command (N or N m, FRD), progress 0-1. End (done, abort or cancel): the node publishes a
+    zero wrench every tick until the ESC node reports neutral widths (zero thrust on every thruster, or
+    disarmed) or ``stop_timeout_s`` has passed, and only then ends the action; afterwards it publishes no
+    wrench (the allocation's wrench timeout keeps the thrusters neutral). Result: success, message (abort
+    reason, ``cancelled``), the final online estimate of every DOF.
 Subscribes
     ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure``
     (FluidPressure, Pa), ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range),
@@ -29,28 +35,23 @@ Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.estimate_rate_hz`` while a
     goal runs; ``identification/estimates`` (HydroEstimate, method ``rls``, one per DOF with data) at
     ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) at every tick
-    while a goal runs (phase, DOF, level, progress, message = current step) and at 1 Hz when idle.
+    while a goal runs (phase, DOF, level, progress, message = current step), once at its end (DONE or ABORTED
+    with the reason) and at 1 Hz when idle.
 Parameters
     The vehicle configuration; node-specific ``dvl_lock_timeout_s`` (default 3.0): a surge or sway run
-    aborts when the DVL had no valid velocity for this long (docs/architecture.md §8), and ``tick_timeout_s`` (wall
-    time the executor waits for one tick of the executive, default 30).
+    aborts when the DVL had no valid velocity for this long (docs/architecture.md §8); ``sensor_timeout_s``
+    (default 30): a goal fails when a sensor has not published this long after it was accepted;
+    ``stop_timeout_s`` (default 2.0): longest zero-wrench hold at the end while waiting for neutral widths.
 Safety (docs/architecture.md §8)
-    Limits of :meth:`~.campaign.Campaign._check_limits` (depth, altitude, roll, pitch, pool box) plus DVL lock
-    and ESC disarm abort the goal; the vehicle is left at neutral thrust at the end, on abort and on cancel.
-
-Threading: the executive runs in a worker thread in strict lock-step with the executor (the executor hands
-it the new samples of one tick and waits for its wrench), so the SingleThreadedExecutor remains the only
-thread touching rclpy and runs are deterministic for a given sample sequence.
+    Limits of the executive (depth, altitude, roll, pitch, pool box) plus DVL lock and ESC disarm abort the
+    goal; the vehicle is brought to neutral thrust at the end, on abort and on cancel, before the action ends.
 """
 from __future__ import annotations
 
 import math
-import queue
 import sys
-import threading
-from dataclasses import dataclass
-from types import SimpleNamespace
-from typing import Any, Sequence
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -63,109 +64,22 @@ from sensor_msgs.msg import FluidPressure, Imu, Range
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, ConfigError, VehicleConfig, node_config
+from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
-from .campaign import Campaign, CampaignAbort, CampaignRecord
 from .estimators import parameter_units
-from .maneuvers import DOF_INDEX, level_ladder  # noqa: F401 - level_ladder documented as the default ladder
+from .executive import CampaignRecord, Executive, ExecutiveStatus, TickInput, ordered_samples
+from .signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu, thrust_of_written_widths
 
-__all__ = ["IdentificationNode", "RosCampaign", "RosPlant", "samples_from_dvl", "samples_from_imu",
-           "sample_from_pressure", "sample_from_range", "thrust_of_written_widths", "hydro_estimate", "main"]
+__all__ = ["IdentificationNode", "hydro_estimate", "main"]
 
-#: Message prefix of the status while the gyro/accelerometer biases are averaged (the vehicle is held still);
-#: :mod:`.from_bag` finds the still window by it.
-STILL_MESSAGE = "still: averaging gyro and accelerometer bias"
+#: sensors that must have published before a goal starts moving the vehicle
+NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
 
-
-# ============================================================================ ROS message -> sample adapters
-def _stamp_s(header) -> float:
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
-
-
-def samples_from_dvl(msg) -> list[tuple[str, Any]]:
-    """Samples of one hindrax_msgs/Dvl message in the simulator's sample form (:mod:`hindrax_ident.sim.sensors`).
-
-    Returns ``[("dvl75_attitude", ns(stamp_s, roll_rad, pitch_rad, yaw_rad))]`` (NED Euler angles of body FRD,
-    via :func:`hindrax_drivers.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
-    followed by ``("dvl75", ns(stamp_s, velocity_frd_m_s (3,), locked, at_body_origin=True))`` (velocity FLU ->
-    FRD; NaN and ``locked`` False without a valid velocity). Works on rclpy and bag-decoded messages alike.
-
-    ``at_body_origin``: the driver publishes the velocity of base_link (it removes the lever arm with the
-    ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
-    samples, so :class:`~.maneuvers.SensorState` must not remove it again. (It did: at 1-2 rad/s of pitch
-    the surge velocity was 0.18 m x q off, 0.27 m/s rms, and the surge hold pushed the vehicle to 0.28 m/s
-    during the pitch runs; measured through the ROS graph in the virtual pool.)
-
-    Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
-    attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
-    first (as the emulator does; the real order is undocumented, docs/devices.md §1.3: check a pool capture), i.e.
-    measured at the end of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A
-    50 ms error there shows up in roll and pitch as a restoring moment out of phase, i.e. as damping
-    (measured in the virtual pool: roll quadratic damping +14 %, linear damping of the wrong sign).
-    """
-    t = _stamp_s(msg.header)
-    half = 0.5 * float(msg.delta_time_s)
-    t_att = t + half if math.isfinite(half) and half > 0.0 else t
-    out: list[tuple[str, Any]] = []
-    q = np.array([msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w], dtype=float)
-    if np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5:
-        rpy = frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q))
-        out.append(("dvl75_attitude", SimpleNamespace(stamp_s=t_att, roll_rad=float(rpy[0]), pitch_rad=float(rpy[1]),
-                                                      yaw_rad=float(rpy[2]))))
-    v = np.array([msg.velocity_m_s.x, msg.velocity_m_s.y, msg.velocity_m_s.z], dtype=float)
-    locked = bool(msg.velocity_valid) and bool(np.all(np.isfinite(v)))
-    out.append(("dvl75", SimpleNamespace(stamp_s=t, velocity_frd_m_s=frames.flu_to_frd(v) if locked
-                                         else np.full(3, np.nan), locked=locked, at_body_origin=True)))
-    return out
-
-
-def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> list[tuple[str, Any]]:
-    """``icm20948_gyro`` and ``icm20948_accel`` samples of a sensor_msgs/Imu (base_link FLU).
-
-    The simulator's samples are in the sensor axes, which :class:`~.maneuvers.SensorState` rotates with the
-    configured mounting; the driver has already applied it, so the FLU vectors are taken back to sensor axes
-    with ``mounting_frd_from_flu`` = R_mount^T (3, 3) (identity when None). Angular rate rad/s, specific
-    force m/s^2.
-    """
-    t = _stamp_s(msg.header)
-    r = np.eye(3) if mounting_frd_from_flu is None else mounting_frd_from_flu
-    w = r @ np.array([msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z], dtype=float)
-    a = r @ np.array([msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z],
-                     dtype=float)
-    return [("icm20948_gyro", SimpleNamespace(stamp_s=t, angular_rate_rad_s=w)),
-            ("icm20948_accel", SimpleNamespace(stamp_s=t, specific_force_m_s2=a))]
-
-
-def sample_from_pressure(msg) -> tuple[str, Any]:
-    """``ms5837`` sample (absolute pressure, Pa) of a sensor_msgs/FluidPressure."""
-    return "ms5837", SimpleNamespace(stamp_s=_stamp_s(msg.header), pressure_pa=float(msg.fluid_pressure))
-
-
-def sample_from_range(msg) -> tuple[str, Any]:
-    """``ping1d`` sample of a sensor_msgs/Range: distance (m), valid when finite and within [min, max] range."""
-    r = float(msg.range)
-    valid = math.isfinite(r) and msg.min_range <= r <= msg.max_range
-    return "ping1d", SimpleNamespace(stamp_s=_stamp_s(msg.header), distance_m=r, valid=valid)
-
-
-def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[float]) -> np.ndarray:
-    """Thruster forces (n,) N of the WIRE pulse widths the ESC node wrote (ThrusterPwm of ``thrusters/pulse_width``).
-
-    The ESC applies reversal (2 neutral - w) and trim after the allocation (pca9685/node.py ``EscOutput``);
-    both are undone here, then the allocation's thrust curve ([Hindrax-Drag] (seed 003) eq. 1) gives the force along each
-    thruster's configured direction. Raises ``ValueError`` for a wrong number of widths.
-    """
-    w = np.asarray(written_us, dtype=float)
-    th = cfg.thrusters.thrusters
-    if w.shape != (len(th),):
-        raise ValueError(f"{w.size} pulse widths, expected {len(th)}")
-    neutral = float(cfg.thrusters.pulse_width_neutral_us)
-    trim = np.array([t.trim_us for t in th], dtype=float)
-    rev = np.array([t.reversed for t in th], dtype=bool)
-    logical = w - trim
-    logical = np.where(rev, 2.0 * neutral - logical, logical)
-    return np.asarray(curve.thrust_n(logical), dtype=float)
+_PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverStatus.PHASE_RUNNING,
+           "returning": ManeuverStatus.PHASE_RETURNING, "done": ManeuverStatus.PHASE_DONE,
+           "aborted": ManeuverStatus.PHASE_ABORTED}
 
 
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
@@ -188,161 +102,26 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
     return msg
 
 
-# ============================================================================ the plant seen from ROS
-class _Thrusters:
-    def __init__(self, n: int, neutral_us: float) -> None:
-        self.pulse_width_us = np.full(n, neutral_us)
-
-
-class RosPlant:
-    """The part of :class:`~hindrax_ident.sim.simulator.Simulator` the campaign uses, backed by ROS.
-
-    ``t_s``: ROS time of the current tick (s); ``step_s``: the tick period (s), so one campaign tick is one
-    plant step; ``add_sensor_listener(cb)``: ``cb(device, sample)`` gets every sample handed over by the node;
-    ``thrusters.pulse_width_us``: last widths written by the ESC node (wire, us).
-    """
-
-    def __init__(self, tick_s: float, n_thrusters: int, neutral_us: float, t0_s: float) -> None:
-        self.step_s = float(tick_s)
-        self.t_s = float(t0_s)
-        self.thrusters = _Thrusters(n_thrusters, neutral_us)
-        self._listeners: list = []
-
-    def add_sensor_listener(self, cb) -> None:
-        """Register ``cb(device, sample)``."""
-        self._listeners.append(cb)
-
-    def deliver(self, samples: Sequence[tuple[str, Any]], not_before_s: float = -math.inf) -> None:
-        """Hand samples to the listeners, oldest stamp first (stable).
-
-        A sample stamped before ``not_before_s`` (the previous tick, to which the online filters have already
-        been predicted: sensor latency, e.g. the MS5837 stamp of its conversion start or the DVL time of
-        validity) is handed over with its stamp moved to ``not_before_s`` (a copy; the messages and the bag
-        keep the original stamps, which the offline analysis uses).
-        """
-        for dev, s in sorted(samples, key=lambda ds: ds[1].stamp_s):
-            if s.stamp_s < not_before_s:
-                s = SimpleNamespace(**{**vars(s), "stamp_s": not_before_s})
-            for cb in self._listeners:
-                cb(dev, s)
-
-
 @dataclass
-class TickInput:
-    """What the executor hands the executive at a tick: ROS time (s), new samples, written widths, flags."""
+class _GoalRun:
+    """One accepted goal: its handle, executive, the future the execute coroutine awaits, and the end state."""
 
-    t_s: float
-    samples: list
-    written_us: np.ndarray | None
-    armed: bool
-    cancel: bool
-
-
-class RosCampaign(Campaign):
-    """:class:`~.campaign.Campaign` whose plant is the ROS graph (module docstring).
-
-    link: (to_worker, to_ros) queues of the lock-step exchange. fractions: optional explicit level fractions.
-    dvl_lock_timeout_s: longest time without a valid DVL velocity during surge/sway manoeuvres.
-    """
-
-    def __init__(self, cfg: VehicleConfig, plant: RosPlant, dofs: Sequence[str], levels: int | None,
-                 fractions: Sequence[float] | None, link: tuple[queue.Queue, queue.Queue],
-                 dvl_lock_timeout_s: float = 3.0) -> None:
-        super().__init__(cfg, dofs=dofs, levels=levels, seed=0, sim=plant)
-        self.plant = plant
-        self.fractions = [float(f) for f in fractions] if fractions else None
-        self.to_worker, self.to_ros = link
-        self.dvl_lock_timeout_s = float(dvl_lock_timeout_s)
-        self.written_us = np.full(len(self.core.names), self.neutral_us)
-        self.armed = True
-        self.last_dvl_valid_s = plant.t_s
-        self.message = ""
-        self.progress = self._remember
-        self.sim.add_sensor_listener(self._watch_dvl)
-
-    def _remember(self, msg: str) -> None:
-        self.message = msg
-
-    def _watch_dvl(self, dev: str, s) -> None:
-        if dev == "dvl75" and s.locked:
-            self.last_dvl_valid_s = max(self.last_dvl_valid_s, s.stamp_s)
-
-    def ladder(self, dof: str) -> list[float]:
-        """The goal's explicit fractions times the DOF's smaller authority, else the configured ladder."""
-        if self.fractions:
-            return [f * min(self.authority[dof]) for f in self.fractions]
-        return super().ladder(dof)
-
-    def tick(self, wrench_frd: np.ndarray) -> None:
-        """Publish ``wrench_frd`` (6,) for one tick, wait for the next ROS tick, process its samples, check limits.
-
-        Raises :class:`CampaignAbort` on a limit, a cancel request, a disarmed ESC or DVL lock loss.
-        """
-        w = np.asarray(wrench_frd, dtype=float)
-        f_cmd = thrust_of_written_widths(self.cfg, self.curve, self.written_us)
-        self._rec["t"].append(self.plant.t_s)
-        self._rec["w"].append(self.matrix @ self.f_lag)
-        self._rec["wc"].append(self.matrix @ f_cmd)
-        self._rec["active"].append(self._active)
-        self._rec["level"].append(self._level)
-        self._rec["run"].append(self._run)
-        self._rec["pos"].append(np.full(3, np.nan))  # no ground truth from ROS (docs/architecture.md §6)
-        self._rec["eul"].append(np.full(3, np.nan))
-        self.to_ros.put(("wrench", w))
-        inp: TickInput = self.to_worker.get()
-        if inp is None:
-            raise CampaignAbort("node shutting down")
-        dt = max(0.0, inp.t_s - self.plant.t_s)
-        previous_tick_s = self.plant.t_s
-        self.plant.t_s = inp.t_s
-        if self.time_constant_s > 0.0:
-            k = math.exp(-dt / self.time_constant_s)
-            self.f_lag = f_cmd + (self.f_lag - f_cmd) * k
-        else:
-            self.f_lag = f_cmd
-        if inp.written_us is not None:
-            self.written_us = np.asarray(inp.written_us, dtype=float)
-            self.plant.thrusters.pulse_width_us = self.written_us.copy()
-        self.plant.deliver(inp.samples, previous_tick_s)
-        self._process_samples()
-        self._update_depth_hold(inp.t_s)
-        if self._active >= 0:
-            dof = DOFS[self._active]
-            if dof in self.online:
-                self.online[dof].update(inp.t_s, float((self.matrix @ self.f_lag)[self._active]), self.state)
-        if inp.cancel:
-            raise CampaignAbort("cancelled")
-        if not inp.armed:
-            raise CampaignAbort("ESC output disarmed")
-        self._check_limits()
-
-    def _check_limits(self) -> None:
-        super()._check_limits()
-        if self._active in (0, 1) and self.plant.t_s - self.last_dvl_valid_s > self.dvl_lock_timeout_s:
-            raise CampaignAbort(f"DVL lock lost for {self.plant.t_s - self.last_dvl_valid_s:.1f} s during "
-                                f"{DOFS[self._active]} (dvl_lock_timeout_s {self.dvl_lock_timeout_s:g})")
-
-    def _neutral(self) -> None:
-        """Neutral at the end: the node publishes a zero wrench when the executive finishes."""
-        self.f_lag = np.zeros_like(self.f_lag)
-
-    def level_position(self) -> tuple[str, int, int, float]:
-        """(DOF, level index, level count, level command) of the current tick ('' / 0 / 0 / 0 when none)."""
-        if self._active < 0:
-            return "", 0, 0, 0.0
-        dof = DOFS[self._active]
-        ladder = self.levels.get(dof, [])
-        last = getattr(self, "_last_level", ("", 0))
-        if not math.isfinite(self._level) or not ladder:
-            return dof, last[1] if last[0] == dof else 0, len(ladder), 0.0
-        i = int(np.argmin([abs(abs(self._level) - lv) for lv in ladder]))
-        self._last_level = (dof, i)
-        return dof, i, len(ladder), float(self._level)
+    handle: Any
+    executive: Executive
+    done: Future
+    accepted_s: float
+    written_us: np.ndarray
+    stop_since_s: float | None = None
+    pwm_count_at_stop: int = 0
+    error: str = ""
+    record: CampaignRecord | None = None
+    status: ExecutiveStatus | None = None
+    last_feedback: tuple = field(default_factory=lambda: (None, -1))
+    last_feedback_s: float = -math.inf
 
 
-# ============================================================================ the node
 class IdentificationNode(Node):
-    """The identification manoeuvre executive as a ROS node (module docstring).
+    """The identification executive as a ROS node (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters, :func:`node_config`). Other keyword
     arguments go to ``Node``. Raises :class:`ConfigError` for an invalid configuration.
@@ -357,24 +136,18 @@ class IdentificationNode(Node):
         self.tick_s = 1.0 / float(f["identification.estimate_rate_hz"])
         self.publish_period_s = 1.0 / max(1.0, float(f["identification.publish_rate_hz"]))
         self.dvl_lock_timeout_s = float(self._param("dvl_lock_timeout_s", 3.0))
-        self.tick_timeout_s = float(self._param("tick_timeout_s", 30.0))
-        from .maneuvers import SensorState  # noqa: F401 - documented dependency
-        from hindrax_drivers.icm20948.mounting import mounting_rotation
+        self.sensor_timeout_s = float(self._param("sensor_timeout_s", 30.0))
+        self.stop_timeout_s = float(self._param("stop_timeout_s", 2.0))
         self._mount_t = mounting_rotation(f["sensors.icm20948.mounting_rpy_rad"]).T
+        self._n_thrusters = len(self.config.thrusters.thrusters)
+        self._neutral_us = float(self.config.thrusters.pulse_width_neutral_us)
         self._samples: list = []
         self._seen: set[str] = set()
         self._written: np.ndarray | None = None
+        self._pwm_count = 0
         self._armed = False
-        self._campaign: RosCampaign | None = None
-        self._thread: threading.Thread | None = None
-        self._link: tuple[queue.Queue, queue.Queue] | None = None
-        self._goal = None
-        self._done: Future | None = None
-        self._waiting_first = False
-        self._last_tick_s: float | None = None  # ROS time of the last control tick answered (step gate)
-        self._waiting_sensors_since: float | None = None
-        self._last_feedback = (None, -1)
-        self._last_feedback_t = -math.inf
+        self._run: _GoalRun | None = None
+        self._last_tick_s: float | None = None  # ROS time of the last control tick of a goal (step gate)
         self._last_publish_t = -math.inf
         self._last_idle_status_t = -math.inf
         self.last_record: CampaignRecord | None = None
@@ -414,19 +187,20 @@ class IdentificationNode(Node):
 
     def _on_pwm(self, msg: ThrusterPwm) -> None:
         w = np.asarray(msg.pulse_width_us, dtype=float)
-        if w.size == len(self.config.thrusters.thrusters) and np.all(np.isfinite(w)):
+        if w.size == self._n_thrusters and np.all(np.isfinite(w)):
             self._written = w
         self._armed = bool(msg.armed)
+        self._pwm_count += 1
 
     def _add(self, samples: list) -> None:
-        for dev, s in samples:
+        for dev, _s in samples:
             self._seen.add(dev)
-        if self._campaign is not None:
+        if self._run is not None:
             self._samples.extend(samples)
 
     # ------------------------------------------------------------------ action
     def _on_goal(self, goal) -> GoalResponse:
-        if self._goal is not None:
+        if self._run is not None:
             self.get_logger().warn("run_identification: a goal is already running; rejected")
             return GoalResponse.REJECT
         problem = self._goal_problem(goal)
@@ -446,41 +220,30 @@ class IdentificationNode(Node):
         return ""
 
     async def _execute(self, goal_handle):
+        """Execute callback: set up the goal and await its end, which the control timer signals (no wait here)."""
         goal = goal_handle.request
         dofs = list(goal.dofs) or list(DOFS)
         if not self._armed:
             goal_handle.abort()
             return RunIdentification.Result(success=False, message="ESC output not armed: call esc/set_armed first")
-        self._goal = goal_handle
-        self._done = Future()
-        to_worker: queue.Queue = queue.Queue(maxsize=1)
-        to_ros: queue.Queue = queue.Queue(maxsize=1)
-        self._link = (to_worker, to_ros)
-        t0 = self.get_clock().now().nanoseconds * 1e-9
-        plant = RosPlant(self.tick_s, len(self.config.thrusters.thrusters),
-                         float(self.config.thrusters.pulse_width_neutral_us), t0)
-        self._campaign = RosCampaign(self.config, plant, dofs, int(goal.levels_per_dof) or None,
-                                     list(goal.level_fractions) or None, self._link, self.dvl_lock_timeout_s)
+        executive = Executive(self.config, dofs, int(goal.levels_per_dof) or None, tick_s=self.tick_s,
+                              fractions=list(goal.level_fractions) or None,
+                              dvl_lock_timeout_s=self.dvl_lock_timeout_s)
+        run = _GoalRun(goal_handle, executive, Future(), self._now_s(), np.full(self._n_thrusters, self._neutral_us))
         self._samples = []
-        self._seen_at_start = set(self._seen)
-        self._waiting_sensors_since = t0
-        self._last_feedback = (None, -1)
+        self._run = run
         self.get_logger().info(f"run_identification: {', '.join(dofs)}")
-        record, error = await self._done
-        self._stop_worker()
-        self.last_record = record
-        campaign = self._campaign
-        self._campaign = None
-        self._goal = None
-        ok = record is not None and not record.aborted and not error
-        message = error or ("" if record is None else record.abort_reason) or "campaign complete"
+        await run.done
+        self._run = None
+        self._last_tick_s = None
+        self.last_record = run.record
+        ok = run.record is not None and not run.record.aborted and not run.error
+        message = run.error or ("" if run.record is None else run.record.abort_reason) or "campaign complete"
         self.last_result = message
-        self._publish_status(ManeuverStatus.PHASE_DONE if ok else ManeuverStatus.PHASE_ABORTED, campaign,
-                             message)
         result = RunIdentification.Result(success=ok, message=message)
-        if campaign is not None:
+        if executive.started:
             stamp = self.get_clock().now().to_msg()
-            result.estimates = [hydro_estimate(d, est, stamp) for d, est in campaign.online.items()
+            result.estimates = [hydro_estimate(d, est, stamp) for d, est in executive.online.items()
                                 if est.rls.n_samples > 0]
         if goal_handle.is_cancel_requested:
             goal_handle.canceled()
@@ -491,88 +254,92 @@ class IdentificationNode(Node):
         self.get_logger().info(f"run_identification finished: {message}")
         return result
 
-    def _start_worker(self) -> None:
-        campaign = self._campaign
-        self._last_tick_s = None
-        to_ros = self._link[1]
+    # ------------------------------------------------------------------ control tick
+    def _now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
 
-        def work() -> None:
-            try:
-                rec = campaign.run()
-                to_ros.put(("done", rec))
-            except Exception as exc:  # noqa: BLE001 - reported as the goal's failure, vehicle left neutral
-                to_ros.put(("error", f"{type(exc).__name__}: {exc}"))
-
-        self._thread = threading.Thread(target=work, name="identification-executive", daemon=True)
-        self._thread.start()
-        self._waiting_first = True
-
-    def _stop_worker(self) -> None:
-        if self._thread is not None and self._thread.is_alive() and self._link is not None:
-            try:
-                self._link[0].put_nowait(None)
-            except queue.Full:
-                pass
-            self._thread.join(timeout=5.0)
-        self._thread = None
-
-    # ------------------------------------------------------------------ tick
     def _on_tick(self) -> None:
         now = self.get_clock().now()
         t = now.nanoseconds * 1e-9
-        c = self._campaign
-        if c is None:
+        run = self._run
+        if run is None:
             if t - self._last_idle_status_t >= 1.0:
                 self._last_idle_status_t = t
                 self._publish_status(ManeuverStatus.PHASE_IDLE, None, "idle")
             return
-        if self._thread is None:
-            needed = {"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"}
-            cancel = self._goal is not None and self._goal.is_cancel_requested
-            if cancel or t - self._waiting_sensors_since > 30.0:
-                self._finish(None, "cancelled" if cancel else f"sensors not publishing: {sorted(needed - self._seen)}")
-                return
-            if needed <= self._seen:
-                c.plant.t_s = t
-                self._samples = []
-                self._start_worker()
-            else:
-                self._publish_status(ManeuverStatus.PHASE_POSITIONING, c, "waiting for the sensors")
-                return
-        to_worker, to_ros = self._link
-        if self._waiting_first:
-            self._waiting_first = False
-        else:
-            cancel = self._goal is not None and self._goal.is_cancel_requested
-            samples, self._samples = self._samples, []
-            to_worker.put(TickInput(t, samples, self._written, self._armed, cancel))
-        try:
-            kind, payload = to_ros.get(timeout=self.tick_timeout_s)
-        except queue.Empty:
-            self._finish(None, f"executive did not answer within {self.tick_timeout_s:g} s")
+        if run.done.done():
             return
-        if kind == "wrench":
-            self._last_tick_s = t
-            self._publish_wrench(payload, now)
-            self._publish_progress(c, t)
-        elif kind == "done":
-            self._finish(payload, "")
+        if run.stop_since_s is not None:
+            self._hold_neutral(run, t, now)
+            return
+        ex = run.executive
+        cancel = run.handle.is_cancel_requested
+        if not ex.started:
+            if cancel or t - run.accepted_s > self.sensor_timeout_s:
+                self._stop(run, t, now, "cancelled" if cancel
+                           else f"sensors not publishing: {sorted(NEEDED_SENSORS - self._seen)}")
+                return
+            if not NEEDED_SENSORS <= self._seen:
+                self._publish_status(ManeuverStatus.PHASE_POSITIONING, None, "waiting for the sensors")
+                return
+            self._samples = []
+            w = ex.start(t)
         else:
-            self._finish(None, str(payload))
+            samples, self._samples = self._samples, []
+            previous = ex.t_s
+            w = ex.step(TickInput(t, max(0.0, t - previous), ordered_samples(samples, previous), self._armed, cancel))
+            if self._written is not None:
+                run.written_us = self._written
+        self._last_tick_s = t
+        if w is None:
+            self._stop(run, t, now, "")
+            return
+        ex.command(thrust_of_written_widths(self.config, ex.curve, run.written_us))
+        self._publish_wrench(w, now)
+        self._publish_progress(run, t)
+
+    def _stop(self, run: _GoalRun, t: float, now, error: str) -> None:
+        """End of the goal: record, final status, zero wrench; the action ends once the thrusters are neutral."""
+        run.error = error
+        run.stop_since_s = t
+        run.pwm_count_at_stop = self._pwm_count
+        if run.executive.started:
+            run.record = run.executive.record()
+            st = run.executive.status()
+            phase = ManeuverStatus.PHASE_ABORTED if (error or st.phase == "aborted") else ManeuverStatus.PHASE_DONE
+            self._publish_status(phase, st, error or st.message)
+        else:
+            self._publish_status(ManeuverStatus.PHASE_ABORTED, None, error)
+        self._publish_wrench(np.zeros(6), now)
+        self._hold_neutral(run, t, now)
+
+    def _hold_neutral(self, run: _GoalRun, t: float, now) -> None:
+        """Zero wrench at every tick until the ESC node reported, after the stop, neutral widths (or disarmed), or
+        ``stop_timeout_s``; then complete the goal."""
+        self._last_tick_s = t
+        neutral = False
+        if self._pwm_count > run.pwm_count_at_stop:
+            if not self._armed:
+                neutral = True
+            elif self._written is not None:
+                f = thrust_of_written_widths(self.config, run.executive.curve, self._written)
+                neutral = bool(np.all(np.abs(f) < 1e-9))
+        if neutral or t - run.stop_since_s >= self.stop_timeout_s - 1e-9:
+            if not neutral:
+                self.get_logger().warn(f"run_identification: thrusters not reported neutral within "
+                                       f"{self.stop_timeout_s:g} s of the stop")
+            run.done.set_result(True)
+            return
+        if t > run.stop_since_s:
+            self._publish_wrench(np.zeros(6), now)
 
     def clock_may_advance(self, t_s: float) -> bool:
         """Step gate for a simulator in the same process (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`):
-        False while a manoeuvre runs and the control tick due at simulated time ``t_s`` (s) has not run yet, so
-        the simulation never runs ahead of the control loop."""
-        if self._campaign is None or self._thread is None or self._last_tick_s is None:
+        False while a goal's control ticks run (manoeuvre and the neutral hold at its end) and the tick due at
+        simulated time ``t_s`` (s) has not run yet, so the simulation never runs ahead of the control loop."""
+        if self._run is None or self._last_tick_s is None:
             return True
         return t_s + 1e-6 < self._last_tick_s + self.tick_s
-
-    def _finish(self, record, error: str) -> None:
-        self._publish_wrench(np.zeros(6), self.get_clock().now())  # neutral thrust
-        self._thread = None if (self._thread is None or not self._thread.is_alive()) else self._thread
-        if self._done is not None and not self._done.done():
-            self._done.set_result((record, error))
 
     def _publish_wrench(self, w_frd: np.ndarray, now) -> None:
         w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
@@ -583,51 +350,42 @@ class IdentificationNode(Node):
         m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(x) for x in w[3:])
         self.pub_wrench.publish(m)
 
-    def _progress_fraction(self, c: RosCampaign) -> float:
-        n = max(1, len(c.dofs))
-        done = len(c.windows)
-        dof, i, count, _ = c.level_position()
-        inner = (i + 0.5) / count if (dof and count and dof not in c.windows) else 0.0
-        return float(min(1.0, (done + inner) / n))
-
-    def _publish_progress(self, c: RosCampaign, t: float) -> None:
-        dof, i, count, cmd = c.level_position()
-        if c._run >= 0:
-            phase = ManeuverStatus.PHASE_RUNNING
-        elif dof:
-            phase = ManeuverStatus.PHASE_RETURNING
-        else:
-            phase = ManeuverStatus.PHASE_POSITIONING
-        msg = STILL_MESSAGE if c.state.collecting_gyro_bias else c.message
-        self._publish_status(phase, c, msg)
-        key = (dof, i, math.copysign(1.0, cmd) if cmd else 0.0)
-        if self._goal is not None and (key != self._last_feedback or t - self._last_feedback_t >= 1.0):
-            self._last_feedback, self._last_feedback_t = key, t
-            fb = RunIdentification.Feedback(dof=dof, level_index=i, level_count=count, level_command=cmd,
-                                            progress=self._progress_fraction(c))
-            self._goal.publish_feedback(fb)
+    def _publish_progress(self, run: _GoalRun, t: float) -> None:
+        ex = run.executive
+        st = ex.status()
+        self._publish_status(_PHASES[st.phase], st, st.message)
+        key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0)
+        if key != run.last_feedback or t - run.last_feedback_s >= 1.0:
+            run.last_feedback, run.last_feedback_s = key, t
+            run.handle.publish_feedback(RunIdentification.Feedback(
+                dof=st.dof, level_index=st.level_index, level_count=st.level_count, level_command=st.level_command,
+                progress=st.progress))
         if t - self._last_publish_t >= self.publish_period_s - 1e-9:
             self._last_publish_t = t
             stamp = self.get_clock().now().to_msg()
-            for d, est in c.online.items():
+            for d, est in ex.online.items():
                 if est.rls.n_samples > 0:
                     self.pub_estimate.publish(hydro_estimate(d, est, stamp))
 
-    def _publish_status(self, phase: int, c: RosCampaign | None, message: str) -> None:
+    def _publish_status(self, phase: int, st: ExecutiveStatus | None, message: str) -> None:
         m = ManeuverStatus(phase=phase, message=message)
         m.header.stamp = self.get_clock().now().to_msg()
         m.header.frame_id = "base_link"
-        if c is not None:
-            dof, i, count, cmd = c.level_position()
-            m.dof, m.level_index, m.level_count, m.level_command = dof, i, count, cmd
-            m.progress = 1.0 if phase == ManeuverStatus.PHASE_DONE else self._progress_fraction(c)
+        if st is not None:
+            m.dof, m.level_index, m.level_count, m.level_command = st.dof, st.level_index, st.level_count, \
+                st.level_command
+            m.progress = 1.0 if phase == ManeuverStatus.PHASE_DONE else st.progress
         self.pub_status.publish(m)
 
     def close(self) -> None:
-        """Stop a running executive (the graph's shutdown path): zero wrench, worker released."""
-        if self._campaign is not None:
+        """The graph's shutdown path: a running goal gets a zero wrench and ends ("node shutting down")."""
+        run = self._run
+        if run is not None and not run.done.done():
             self._publish_wrench(np.zeros(6), self.get_clock().now())
-        self._stop_worker()
+            run.error = run.error or "node shutting down"
+            if run.record is None and run.executive.started:
+                run.record = run.executive.record()
+            run.done.set_result(True)
 
 
 def main(args: list[str] | None = None) -> int:

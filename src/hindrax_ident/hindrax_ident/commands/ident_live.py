@@ -1,0 +1,187 @@
+"""``hindrax ident start | status``: the identification campaign on a running stack (vehicle or virtual pool).
+
+* ``hindrax ident start [--dofs surge,heave,...] [--levels N] [--fractions F1,F2,...] [--server-timeout S]``
+  sends one ``run_identification`` goal (hindrax_msgs/action/RunIdentification) to the identification node of a
+  running graph (``hindrax bringup``, with or without ``--sim``) and prints its feedback, one line per level change
+  and once a second: DOF, level, command, progress. Ctrl-C cancels the goal: the node brings the vehicle to a
+  zero wrench and holds it until the ESC reports neutral widths, then the action ends; the command waits for that
+  end (a second Ctrl-C stops waiting). The result line carries the node's message and the final online estimates.
+  Exit 0 when the campaign completed, 1 when it was rejected, aborted or cancelled, or no server answered.
+* ``hindrax ident status [--timeout S]`` prints the next ``identification/status`` message (ManeuverStatus):
+  phase, DOF, level, command, progress and the current step. Exit 1 when none arrives within the timeout.
+
+The ESC output must be armed first (``esc/set_armed``, e.g. ``hindrax thruster-test``'s arming or a service call);
+the node refuses a goal otherwise.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import time
+from typing import Any, Callable
+
+from .common import CommandError
+
+__all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign"]
+
+_PHASE_NAMES = {0: "idle", 1: "positioning", 2: "running", 3: "returning", 4: "done", 5: "aborted"}
+_ROTATIONS = ("roll", "pitch", "yaw")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``start`` or ``status`` (the subcommand is the last word of ``parser.prog``)."""
+    which = parser.prog.split()[-1]
+    parser.set_defaults(_live=which)
+    if which == "start":
+        parser.add_argument("--dofs", default="", help="comma-separated DOFs, in order (default: all six)")
+        parser.add_argument("--levels", type=int, default=0,
+                            help="levels per DOF (default 0: identification.levels_per_dof of the running node)")
+        parser.add_argument("--fractions", default="",
+                            help="explicit level fractions of each DOF's authority, comma-separated, each in (0, 1]")
+        parser.add_argument("--server-timeout", type=float, default=10.0,
+                            help="wall time to wait for the run_identification server, s (default 10)")
+    else:
+        parser.add_argument("--timeout", type=float, default=5.0,
+                            help="wall time to wait for a status message, s (default 5)")
+
+
+def _unit(dof: str) -> str:
+    return "N m" if dof in _ROTATIONS else "N"
+
+
+def format_feedback(fb: Any) -> str:
+    """One line of a RunIdentification feedback: DOF, level i/n, command with its unit, progress."""
+    where = (f"{fb.dof} level {fb.level_index + 1}/{fb.level_count} {fb.level_command:+.2f} {_unit(fb.dof)}"
+             if fb.dof else "positioning")
+    return f"{where}  progress {100.0 * fb.progress:5.1f} %"
+
+
+def format_status(msg: Any) -> str:
+    """One line of a ManeuverStatus: phase, DOF, level, command, progress, message."""
+    phase = _PHASE_NAMES.get(int(msg.phase), str(msg.phase))
+    parts = [f"phase {phase}"]
+    if msg.dof:
+        parts.append(f"dof {msg.dof} level {msg.level_index + 1}/{msg.level_count} "
+                     f"command {msg.level_command:+.2f} {_unit(msg.dof)}")
+    parts.append(f"progress {100.0 * msg.progress:.1f} %")
+    if msg.message:
+        parts.append(msg.message)
+    return "  ".join(parts)
+
+
+def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float]]:
+    from hindrax_drivers.config import DOFS
+
+    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
+    bad = [d for d in dofs if d not in DOFS]
+    if bad:
+        raise CommandError(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
+    if args.levels < 0:
+        raise CommandError(f"--levels: {args.levels} is not >= 0")
+    try:
+        fractions = [float(x) for x in str(args.fractions).split(",") if x.strip()]
+    except ValueError:
+        raise CommandError(f"--fractions: not numbers: {args.fractions!r}") from None
+    if any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in fractions):
+        raise CommandError(f"--fractions: each must be in (0, 1], got {fractions}")
+    return dofs, int(args.levels), fractions
+
+
+def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fractions: list[float],
+                   server_timeout_s: float, print_line: Callable[[str], None] = print,
+                   cancel_requested: Callable[[], bool] = lambda: False,
+                   give_up: Callable[[], bool] = lambda: False) -> tuple[bool, str]:
+    """Send one goal from ``node`` (spun by ``executor``), print its feedback, cancel it once
+    ``cancel_requested()`` turns True, and wait for its end (``give_up()`` True stops waiting after a cancel).
+    Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
+    from rclpy.action import ActionClient
+
+    from hindrax_msgs.action import RunIdentification
+
+    client = ActionClient(node, RunIdentification, "run_identification")
+    deadline = time.monotonic() + server_timeout_s
+    while not client.server_is_ready():
+        if time.monotonic() > deadline:
+            raise CommandError(f"no run_identification server within {server_timeout_s:g} s: is the stack running "
+                               "(hindrax bringup)?")
+        executor.spin_once(timeout_sec=0.1)
+    goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions)
+    sent = client.send_goal_async(goal, feedback_callback=lambda m: print_line(format_feedback(m.feedback)))
+    while not sent.done():
+        executor.spin_once(timeout_sec=0.1)
+    handle = sent.result()
+    if not handle.accepted:
+        raise CommandError("goal rejected: a campaign is already running or the goal is invalid "
+                           "(see the identification node's log)")
+    print_line(f"campaign started: {', '.join(dofs) or 'all DOFs'}; Ctrl-C cancels")
+    result = handle.get_result_async()
+    cancelled = False
+    while not result.done():
+        if not cancelled and cancel_requested():
+            cancelled = True
+            print_line("cancelling: the vehicle is brought to a zero wrench and held ...")
+            handle.cancel_goal_async()
+        if cancelled and give_up():
+            return False, "stopped waiting for the end of the cancelled goal"
+        executor.spin_once(timeout_sec=0.1)
+    res = result.result().result
+    for e in res.estimates:
+        values = ", ".join(f"{n} {v:.4g}" for n, v in zip(e.parameter_names, e.values))
+        print_line(f"  {e.dof}: {values}")
+    return bool(res.success), str(res.message)
+
+
+def _with_ros(body: Callable[[Any, Any], int]) -> int:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C is ours (cancel)
+    node = rclpy.create_node("hindrax_ident_cli", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        return body(node, executor)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()
+
+
+def _start(args: argparse.Namespace) -> int:
+    dofs, levels, fractions = _parse(args)
+    interrupts = []
+    previous = signal.signal(signal.SIGINT, lambda *_: interrupts.append(time.monotonic()))
+    try:
+        ok, message = _with_ros(lambda node, ex: start_campaign(
+            node, ex, dofs, levels, fractions, args.server_timeout, lambda s: print(s, flush=True),
+            cancel_requested=lambda: len(interrupts) >= 1, give_up=lambda: len(interrupts) >= 2))
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    print(f"result: {'complete' if ok else 'not complete'}: {message}", flush=True)
+    return 0 if ok else 1
+
+
+def _status(args: argparse.Namespace) -> int:
+    from hindrax_msgs.msg import ManeuverStatus
+
+    def body(node, executor) -> int:
+        got: list = []
+        node.create_subscription(ManeuverStatus, "identification/status", got.append, 10)
+        deadline = time.monotonic() + args.timeout
+        while not got and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        if not got:
+            raise CommandError(f"no identification/status within {args.timeout:g} s: is the stack running "
+                               "(hindrax bringup)?")
+        print(format_status(got[-1]), flush=True)
+        return 0
+
+    return _with_ros(body)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch on the subcommand."""
+    return _start(args) if getattr(args, "_live", "") == "start" else _status(args)
