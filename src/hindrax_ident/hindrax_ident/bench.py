@@ -28,6 +28,7 @@ BENCHMARKS: dict[str, str] = {
     "identification": "hindrax_ident.benchmarks.identification",
     "recorder": "hindrax_ident.benchmarks.recorder",
     "serial_drivers": "hindrax_ident.benchmarks.serial_drivers",
+    "cli": "hindrax_ident.benchmarks.cli",
 }
 
 
