@@ -10,9 +10,10 @@ SETUP_INPUTS := requirements.txt scripts/setup_venv.sh \
 	src/hindrax_msgs/CMakeLists.txt src/hindrax_msgs/package.xml \
 	$(wildcard src/hindrax_msgs/msg/*.msg src/hindrax_msgs/srv/*.srv src/hindrax_msgs/action/*.action) \
 	src/hindrax_drivers/setup.py src/hindrax_drivers/package.xml \
-	src/hindrax_ident/setup.py src/hindrax_ident/package.xml
+	src/hindrax_ident/setup.py src/hindrax_ident/package.xml \
+	third_party/tf2_msgs/CMakeLists.txt third_party/tf2_msgs/package.xml $(wildcard third_party/tf2_msgs/msg/*.msg)
 
-.PHONY: setup run test bench clean
+.PHONY: setup run test bench clean ros-install
 
 setup: $(STAMP)
 
@@ -30,6 +31,15 @@ test: setup
 
 bench: setup
 	$(PY) -m hindrax_ident.bench $(BENCH_ARGS)
+
+# The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels
+# (the Pi builds the same packages against /opt/ros/jazzy). Then: source .venv/bin/activate &&
+# source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/) and share/ are there.
+ros-install: setup
+	$(PY) -m pip install -q -r requirements-colcon.txt 2>&1 | { grep -v '^WARNING: Location .* is ignored' || true; }
+	cd ros_ws && source $(abspath $(VENV))/bin/activate && \
+	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV colcon build --merge-install \
+	    --event-handlers console_cohesion- --cmake-args -DPython3_EXECUTABLE=$$VIRTUAL_ENV/bin/python3 -DBUILD_TESTING=OFF
 
 clean:
 	rm -rf build $(VENV) .pytest_cache .hypothesis

@@ -48,21 +48,24 @@ np_inc=$("$PY" -c 'import numpy; print(numpy.get_include())')
     -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#${np_inc}#g" \
     -e "s#/opt/python/cp311-cp311/include/python3.11#${py_inc}#g"
 
-# Build and install hindrax_msgs into the venv prefix (importable with no environment variables).
+# Build and install hindrax_msgs into the venv prefix (importable with no environment variables), and
+# third_party/tf2_msgs: a stand-in holding tf2_msgs/TFMessage, which the wheels lack (the vehicle's ROS has it).
 venv_abs=$(cd "$VENV" && pwd)
-build=build/hindrax_msgs
 mkdir -p build
-cmake -S src/hindrax_msgs -B "$build" -G Ninja -Wno-dev \
-  -DCMAKE_PREFIX_PATH="$venv_abs" -DCMAKE_INSTALL_PREFIX="$venv_abs" \
-  -DPython3_EXECUTABLE="$venv_abs/bin/python3" -DBUILD_TESTING=OFF >"$build.configure.log" 2>&1 \
-  || { mkdir -p build; cat "$build.configure.log" >&2; exit 1; }
-cmake --build "$build" -j2 >"$build.build.log" 2>&1 || { cat "$build.build.log" >&2; exit 1; }
-cmake --install "$build" >/dev/null
+for pkg_dir in src/hindrax_msgs third_party/tf2_msgs; do
+  build=build/$(basename "$pkg_dir")
+  cmake -S "$pkg_dir" -B "$build" -G Ninja -Wno-dev \
+    -DCMAKE_PREFIX_PATH="$venv_abs" -DCMAKE_INSTALL_PREFIX="$venv_abs" \
+    -DPython3_EXECUTABLE="$venv_abs/bin/python3" -DBUILD_TESTING=OFF >"$build.configure.log" 2>&1 \
+    || { mkdir -p build; cat "$build.configure.log" >&2; exit 1; }
+  cmake --build "$build" -j2 >"$build.build.log" 2>&1 || { cat "$build.build.log" >&2; exit 1; }
+  cmake --install "$build" >/dev/null
+done
 
 # The two ament_python packages, editable (colcon builds the same setup.py on the Pi).
 pipq install -q --no-deps --no-build-isolation -e src/hindrax_drivers -e src/hindrax_ident >"build/editable-install.log" \
   || { cat build/editable-install.log >&2; exit 1; }
 
 # Smoke check: the interfaces and rclpy import in the venv.
-"$PY" -c 'import rclpy, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_ident'
+"$PY" -c 'import rclpy, tf2_msgs.msg, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_ident'
 echo "setup: ready in $VENV"

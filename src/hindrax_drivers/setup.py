@@ -2,10 +2,40 @@
 
 Python dependencies are declared once, in the repository's requirements.txt (dev venv) and package.xml
 (rosdep on the Pi); they are deliberately not repeated here.
+
+Installed (colcon): every node as a console script in ``lib/hindrax_drivers`` (``ros2 run hindrax_drivers
+<node>``; setup.cfg puts scripts there), the vehicle file in ``share/hindrax_drivers/config/hindrax.yaml``
+(``config`` is a symlink to the repository's ``ros_ws/config``, the one vehicle file) and the launch files
+in ``share/hindrax_drivers/launch``.
 """
+from glob import glob
+from pathlib import Path
+
 from setuptools import find_packages, setup
 
 PACKAGE = "hindrax_drivers"
+HERE = Path(__file__).resolve().parent
+
+#: console script -> module with main(); the names `ros2 run hindrax_drivers <name>` and launch files use.
+NODES = {
+    "dvl75_node": "hindrax_drivers.dvl75.node",
+    "ping1d_node": "hindrax_drivers.ping1d.node",
+    "ms5837_node": "hindrax_drivers.ms5837.node",
+    "icm20948_node": "hindrax_drivers.icm20948.node",
+    "esc_node": "hindrax_drivers.pca9685.node",
+    "allocation_node": "hindrax_drivers.allocation.node",
+    "recorder_node": "hindrax_drivers.recording.recorder_node",
+    "player_node": "hindrax_drivers.recording.player_node",
+    "static_tf_node": "hindrax_drivers.tf.node",
+    "supervisor_node": "hindrax_drivers.supervisor.node",
+}
+# A node whose module is not in this checkout is not installed (no entry point to a missing module).
+NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
+
+
+def _files(pattern: str) -> list[str]:
+    return sorted(p for p in glob(pattern) if Path(p).is_file())
+
 
 setup(
     name=PACKAGE,
@@ -14,6 +44,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", _files("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", _files("launch/*.launch.xml")),
     ],
     zip_safe=True,
     maintainer="Hindrax onboard team",
@@ -21,7 +53,6 @@ setup(
     description="Hindrax ROV device drivers, emulators, thrust allocation, configuration and recording",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": [
-        ],
+        "console_scripts": [f"{name} = {mod}:main" for name, mod in NODES.items()],
     },
 )

@@ -2,10 +2,29 @@
 
 Python dependencies are declared once, in the repository's requirements.txt (dev venv) and package.xml
 (rosdep on the Pi); they are deliberately not repeated here.
+
+Installed (colcon): ``identification_node`` and ``simulator_node`` and the ``hindrax`` command as console
+scripts in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source
+install/setup.bash``), the launch files in ``share/hindrax_ident/launch`` and the Foxglove layout in
+``share/hindrax_ident/foxglove``.
 """
+import sys
+from glob import glob
+from pathlib import Path
+
 from setuptools import find_packages, setup
 
 PACKAGE = "hindrax_ident"
+
+
+#: bin/hindrax only for `setup.py install` (what colcon runs): a pip install (editable or wheel) already puts
+#: the console script itself in the environment's bin/, which the wrapper must not replace.
+BIN = [("bin", ["bin/hindrax"])] if "install" in sys.argv[1:] else []
+
+
+def _files(pattern: str) -> list[str]:
+    return sorted(p for p in glob(pattern) if Path(p).is_file())
+
 
 setup(
     name=PACKAGE,
@@ -14,7 +33,9 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-    ],
+        (f"share/{PACKAGE}/launch", _files("launch/*.launch.xml")),
+        (f"share/{PACKAGE}/foxglove", _files("foxglove/*.json")),
+    ] + BIN,
     zip_safe=True,
     maintainer="Hindrax onboard team",
     maintainer_email="dev@hindrax.invalid",
@@ -23,6 +44,8 @@ setup(
     entry_points={
         "console_scripts": [
             "hindrax = hindrax_ident.cli:main",
+            "identification_node = hindrax_ident.identification.node:main",
+            "simulator_node = hindrax_ident.sim.node:main",
         ],
     },
 )

@@ -1,0 +1,1 @@
+"""Static TF of the vehicle: ``base_link`` to every sensor and thruster frame, from the vehicle file."""
