@@ -8,6 +8,7 @@ supported), except rate windows, which use the same clock.
 from __future__ import annotations
 
 import collections
+import struct
 import sys
 import threading
 from typing import Any, Callable, Iterable, Sequence
@@ -160,18 +161,35 @@ class DiagnosticsPublisher:
         self.publisher.publish(msg)
 
 
+#: ``i2c_register`` of a RawDeviceData message that carries several I2C transactions (see RawDataPublisher)
+RAW_BATCH_REGISTER = -2
+_RAW_RECORD = struct.Struct("<BBhH")  # direction, 7-bit address, register (-1 none), data length
+
+
 class RawDataPublisher:
     """Publishes raw device traffic as ``hindrax_msgs/RawDeviceData`` on ``raw/<device>``.
 
     Use :meth:`serial_tap` as a serial transport's raw tap ``(direction 'rx'|'tx', data, t)`` and
     :meth:`i2c_tap` as an I2C helper's raw tap ``(kind 'read'|'write', address, register, data, t)``.
-    Stamps are the node's ROS time at the tap (receive/send time). Safe to call from transport threads.
+    Stamps are the node's ROS time at publication. Safe to call from transport threads.
+
+    Batching (one message per device read cycle instead of one per transaction or chunk): between
+    :meth:`begin_batch` and :meth:`flush` the taps are collected and :meth:`flush` publishes them as one
+    message. Serial: the received chunks are concatenated into one chunk (a host->device write flushes first,
+    so each message has one direction). I2C: one transaction is published as before; several are packed into
+    ``data`` as records ``<direction u8, address u8, register i16, length u16 (little-endian), data>`` with
+    ``i2c_register = RAW_BATCH_REGISTER`` (-2); :func:`raw_transactions` unpacks both forms. Outside a batch
+    every tap is published at once.
     """
 
     def __init__(self, node: Any, device_name: str, topic: str | None = None):
         self._node = node
         self.device_name = device_name
         self.publisher = node.create_publisher(RawDeviceData, topic or f"raw/{device_name}", 100)
+        self._lock = threading.Lock()
+        self._batching = False
+        self._serial: bytearray = bytearray()
+        self._i2c: list[tuple[int, int, int, bytes]] = []
 
     def _msg(self, transport: int, direction: int, data: bytes, address: int = 0, register: int = -1):
         m = RawDeviceData()
@@ -184,14 +202,77 @@ class RawDataPublisher:
         m.data = bytes(data)
         return m
 
+    def begin_batch(self) -> None:
+        """Collect the taps from now on until :meth:`flush` (see the class docstring)."""
+        with self._lock:
+            self._batching = True
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes collected and not yet published."""
+        with self._lock:
+            return len(self._serial) + sum(len(r[3]) + _RAW_RECORD.size for r in self._i2c)
+
+    def flush(self, end_batch: bool = True) -> None:
+        """Publish what was collected (nothing when nothing was); ``end_batch``: publish taps at once again."""
+        with self._lock:
+            serial, self._serial = self._serial, bytearray()
+            i2c, self._i2c = self._i2c, []
+            if end_batch:
+                self._batching = False
+        if serial:
+            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
+                                             serial))
+        if len(i2c) == 1:
+            d, address, reg, data = i2c[0]
+            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
+        elif i2c:
+            packed = b"".join(_RAW_RECORD.pack(d, a, r, len(data)) + data for d, a, r, data in i2c)
+            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, i2c[0][0], packed, i2c[0][1],
+                                             RAW_BATCH_REGISTER))
+
     def serial_tap(self, direction: str, data: bytes, _t: float | None = None) -> None:
-        d = RawDeviceData.DIRECTION_DEVICE_TO_HOST if direction == "rx" else RawDeviceData.DIRECTION_HOST_TO_DEVICE
-        self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, d, data))
+        if direction == "rx":
+            with self._lock:
+                if self._batching:
+                    self._serial += data
+                    return
+            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
+                                             data))
+            return
+        self.flush(end_batch=False)  # received bytes first: one direction per message, in wire order
+        self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_HOST_TO_DEVICE, data))
 
     def i2c_tap(self, kind: str, address: int, register: int | None, data: bytes, _t: float | None = None) -> None:
         d = RawDeviceData.DIRECTION_DEVICE_TO_HOST if kind == "read" else RawDeviceData.DIRECTION_HOST_TO_DEVICE
         reg = -1 if register is None else int(register)
+        with self._lock:
+            if self._batching:
+                self._i2c.append((d, int(address), reg, bytes(data)))
+                return
         self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
+
+
+def raw_transactions(msg: Any) -> list[tuple[int, int, int, bytes]]:
+    """The I2C transactions of one RawDeviceData message: ``[(direction, address, register, data)]`` in wire
+    order (one for a plain message, several for a batch, see :class:`RawDataPublisher`; ``register`` -1 = none).
+
+    Raises ValueError for a batch whose records do not add up to its data.
+    """
+    data = bytes(msg.data)
+    if int(msg.i2c_register) != RAW_BATCH_REGISTER:
+        return [(int(msg.direction), int(msg.i2c_address), int(msg.i2c_register), data)]
+    out, k = [], 0
+    while k < len(data):
+        if k + _RAW_RECORD.size > len(data):
+            raise ValueError(f"raw batch of {msg.device_name}: truncated record header at byte {k}")
+        d, a, r, n = _RAW_RECORD.unpack_from(data, k)
+        k += _RAW_RECORD.size
+        if k + n > len(data):
+            raise ValueError(f"raw batch of {msg.device_name}: record of {n} bytes at byte {k} runs past the end")
+        out.append((d, a, r, data[k:k + n]))
+        k += n
+    return out
 
 
 class StuckDetector:

@@ -240,11 +240,13 @@ class EscNode(Node):
             return False
         per_channel = {int(ch): float(w) for ch, w in zip(self.output.channels, widths_us)}
         per_channel[self.lights_channel] = float(lights_us)
+        self.raw.begin_batch()  # raw/pca9685: the block writes of one update in one message
         for run in self._channel_runs(sorted(per_channel)):
             blocks = [p.channel_bytes_for_pulse(per_channel[c], self.prescale, self.oscillator_hz) for c in run]
             self._written_key = None  # unknown until the whole write succeeded
             self.device.write_block(p.led_register(run[0]), b"".join(blocks))
             self._expected.update(zip(run, blocks))
+        self.raw.flush()  # (after a failed write the records are published with the next update's)
         self.written = np.array([self._decoded(w) for w in widths_us])
         self.lights_us = lights_us
         self._written_key = key

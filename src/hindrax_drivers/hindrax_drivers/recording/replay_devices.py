@@ -127,16 +127,18 @@ def i2c_transactions(items: Iterable[tuple[int, Any]]) -> dict[int, I2CTransacti
     """
     from hindrax_msgs.msg import RawDeviceData
 
+    from ..node_common import raw_transactions
+
     out: dict[int, I2CTransactions] = {}
     for _t, m in items:
         if m.transport != RawDeviceData.TRANSPORT_I2C:
             continue
-        tr = out.setdefault(int(m.i2c_address), I2CTransactions())
-        if m.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST:
-            tr.reads.setdefault(int(m.i2c_register), []).append(bytes(m.data))
-        else:
-            reg = int(m.i2c_register)
-            tr.writes.append((bytes([reg]) if reg >= 0 else b"") + bytes(m.data))
+        for direction, address, reg, data in raw_transactions(m):  # one, or a read cycle's batch
+            tr = out.setdefault(address, I2CTransactions())
+            if direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST:
+                tr.reads.setdefault(reg, []).append(data)
+            else:
+                tr.writes.append((bytes([reg]) if reg >= 0 else b"") + data)
     return out
 
 

@@ -1,0 +1,90 @@
+"""Raw device data batched per read cycle (node_common.RawDataPublisher): one message per cycle, unpacked again
+by raw_transactions and by the replay's I2C grouping, in wire order; a serial report's chunks concatenated."""
+from hindrax_drivers.node_common import RAW_BATCH_REGISTER, RawDataPublisher, raw_transactions
+from hindrax_drivers.recording.replay_devices import i2c_transactions
+from hindrax_msgs.msg import RawDeviceData
+
+READ, WRITE = RawDeviceData.DIRECTION_DEVICE_TO_HOST, RawDeviceData.DIRECTION_HOST_TO_DEVICE
+
+
+class _Clock:
+    def now(self):
+        class _T:
+            def to_msg(self):
+                from builtin_interfaces.msg import Time
+                return Time(sec=1, nanosec=2)
+        return _T()
+
+
+class _Node:
+    """Just what RawDataPublisher uses of a node: create_publisher and get_clock."""
+
+    def __init__(self):
+        self.sent = []
+
+    def create_publisher(self, _type, _topic, _depth):
+        node = self
+
+        class _Pub:
+            def publish(self, msg):
+                node.sent.append(msg)
+        return _Pub()
+
+    def get_clock(self):
+        return _Clock()
+
+
+def test_i2c_cycle_is_one_message_and_unpacks_in_wire_order():
+    node = _Node()
+    raw = RawDataPublisher(node, "ms5837")
+    raw.begin_batch()
+    raw.i2c_tap("write", 0x76, 0x48, b"")
+    raw.i2c_tap("read", 0x76, 0x00, b"\x01\x02\x03")
+    raw.i2c_tap("write", 0x76, 0x58, b"")
+    raw.i2c_tap("read", 0x76, 0x00, b"\x04\x05\x06")
+    assert node.sent == []  # nothing before the flush
+    raw.flush()
+    assert len(node.sent) == 1
+    m = node.sent[0]
+    assert m.i2c_register == RAW_BATCH_REGISTER and m.transport == RawDeviceData.TRANSPORT_I2C
+    assert raw_transactions(m) == [(WRITE, 0x76, 0x48, b""), (READ, 0x76, 0x00, b"\x01\x02\x03"),
+                                   (WRITE, 0x76, 0x58, b""), (READ, 0x76, 0x00, b"\x04\x05\x06")]
+    # the replay sees the same transactions as from four separate messages
+    tr = i2c_transactions([(0, m)])[0x76]
+    assert tr.reads == {0x00: [b"\x01\x02\x03", b"\x04\x05\x06"]} and tr.writes == [b"\x48", b"\x58"]
+    # after the flush, taps are published at once again, as plain messages
+    raw.i2c_tap("read", 0x76, 0xA0, b"\x00\x01")
+    assert len(node.sent) == 2 and node.sent[1].i2c_register == 0xA0
+    assert raw_transactions(node.sent[1]) == [(READ, 0x76, 0xA0, b"\x00\x01")]
+
+
+def test_single_transaction_batch_stays_a_plain_message():
+    node = _Node()
+    raw = RawDataPublisher(node, "icm20948")
+    raw.begin_batch()
+    raw.i2c_tap("read", 0x69, 0x2D, bytes(range(23)))
+    raw.flush()
+    raw.flush()  # nothing left: nothing published
+    assert len(node.sent) == 1 and node.sent[0].i2c_register == 0x2D and bytes(node.sent[0].data) == bytes(range(23))
+
+
+def test_serial_chunks_concatenate_and_a_write_flushes_first():
+    node = _Node()
+    raw = RawDataPublisher(node, "dvl75")
+    raw.begin_batch()
+    raw.serial_tap("rx", b"$DVPDL,1,")
+    raw.serial_tap("rx", b"2,3*00\r\n")
+    raw.serial_tap("tx", b"wcr\n")
+    raw.serial_tap("rx", b"ok\r\n")
+    raw.flush(end_batch=False)
+    assert [(m.direction, bytes(m.data)) for m in node.sent] == [
+        (READ, b"$DVPDL,1,2,3*00\r\n"), (WRITE, b"wcr\n"), (READ, b"ok\r\n")]
+
+
+def test_truncated_batch_is_an_error():
+    import pytest
+
+    m = RawDeviceData(device_name="ms5837", transport=RawDeviceData.TRANSPORT_I2C, i2c_register=RAW_BATCH_REGISTER,
+                      data=b"\x00\x76\x00\x00\x05\x00\x01")
+    with pytest.raises(ValueError, match="runs past the end"):
+        raw_transactions(m)
