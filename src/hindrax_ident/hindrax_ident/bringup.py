@@ -291,35 +291,18 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
 
 def run(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
         seed: int | None = None, real_time_factor: float | None = None) -> int:
-    """Process entry point of ``hindrax bringup``: build the graph, spin until SIGINT/SIGTERM, shut down."""
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
+    """Process entry point of ``hindrax bringup``: build the graph, spin until SIGINT/SIGTERM, shut down
+    (:class:`~hindrax_drivers.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
+    status: 1 with one line on stderr for an invalid configuration."""
     from hindrax_drivers.config import ConfigError
+    from hindrax_drivers.ros_process import RosProcess
 
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
-    rclpy.init()
-    graph = None
-    status = 0
-    try:
+    with RosProcess(errors={ConfigError: "invalid configuration"}) as proc:
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,
                             real_time_factor=real_time_factor)
+        proc.at_exit(graph.shutdown)
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)
         graph.executor.spin()
-    except ConfigError as exc:
-        print(f"invalid configuration: {exc}")
-        status = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        from hindrax_drivers.node_common import shutdown_in_progress
-
-        if not shutdown_in_progress():
-            raise
-    finally:
-        if graph is not None:
-            graph.shutdown()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return status
+    return proc.status
