@@ -44,7 +44,8 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("ident", "free-decay"), "hindrax_ident.commands.ident",
      "added mass from a free-decay CSV (time s, acceleration m/s^2), [Hindrax-AM] (seed 000) eqs. 2-9 (JSON)"),
     (("ident", "thruster-fit"), "hindrax_ident.commands.ident",
-     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] (seed 003) eq. 1 (JSON; --write CONFIG)"),
+     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] (seed 003) eq. 1 "
+     "(JSON; --write CONFIG)"),
     (("ident", "campaign"), "hindrax_ident.commands.ident",
      "identification campaign in-process on the simulator (same as `hindrax run`)"),
     (("ident", "scenarios"), "hindrax_ident.commands.scenarios",

@@ -99,9 +99,10 @@ def sample_from_range(msg) -> tuple[str, Any]:
 def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[float]) -> np.ndarray:
     """Thruster forces (n,) N of the WIRE pulse widths the ESC node wrote (ThrusterPwm of ``thrusters/pulse_width``).
 
-    The ESC applies reversal (2 neutral - w) and trim after the allocation (pca9685/node.py ``EscOutput``);
-    both are undone here, then the allocation's thrust curve ([Hindrax-Drag] (seed 003) eq. 1) gives the force along each
-    thruster's configured direction. Raises ``ValueError`` for a wrong number of widths.
+    The ESC applies reversal (2 neutral - w) and trim after the allocation
+    (:class:`hindrax_drivers.pca9685.node.EscOutput`); both are undone here, then the allocation's thrust curve
+    ([Hindrax-Drag] (seed 003) eq. 1) gives the force along each thruster's configured direction. Raises
+    ``ValueError`` for a wrong number of widths.
     """
     w = np.asarray(written_us, dtype=float)
     th = cfg.thrusters.thrusters
