@@ -56,12 +56,12 @@ def bag_info(path: str | Path) -> BagInfo:
     last: dict[str, int] = {}
     compression = ""
     for f in reader.files:
-        summary = reader._summaries.get(f)  # noqa: SLF001 - same package
+        summary = reader.summary(f)
         if summary is not None:
             if summary.chunk_indexes and not compression:
                 compression = summary.chunk_indexes[0].compression or "none"
         else:
-            for m in reader._file_messages(f, None, None, None):  # noqa: SLF001
+            for m in reader.file_messages(f):
                 first[m.topic] = min(first.get(m.topic, m.log_time_ns), m.log_time_ns)
                 last[m.topic] = max(last.get(m.topic, m.log_time_ns), m.log_time_ns)
     _exact_times(reader, first, last)
@@ -91,7 +91,7 @@ def _exact_times(reader: BagReader, first: dict[str, int], last: dict[str, int])
     exact_first: dict[str, int] = {}
     exact_last: dict[str, int] = {}
     for f in reader.files:
-        summary = reader._summaries.get(f)  # noqa: SLF001
+        summary = reader.summary(f)
         if summary is None:
             continue
         with open(f, "rb") as fh:

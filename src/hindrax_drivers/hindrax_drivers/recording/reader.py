@@ -151,6 +151,16 @@ class BagReader:
             self.channels[ch.topic] = info
         info.message_count += count
 
+    def summary(self, f: Path) -> Any:
+        """The MCAP summary (``mcap.records`` Summary) of file ``f`` of :attr:`files`; None for a file without
+        one (truncated: see :attr:`truncated_files`)."""
+        return self._summaries.get(f)
+
+    def file_messages(self, f: Path, topics: Iterable[str] | None = None, start_ns: int | None = None,
+                      end_ns: int | None = None) -> Iterator[RawMessage]:
+        """:meth:`messages` of one file ``f`` of :attr:`files` (log-time order within the file)."""
+        yield from self._file_messages(f, set(topics) if topics is not None else None, start_ns, end_ns)
+
     @property
     def topics(self) -> dict[str, str]:
         """Topic name -> ``pkg/msg/Type``."""
