@@ -276,7 +276,7 @@ def test_garbage_bad_checksums_truncated_lines_and_unknown_sentences_are_counted
         assert r.node.transport.status().callback_errors == 0
 
 
-def test_device_disappears_and_comes_back_node_reconnects_within_2_s_and_resends_startup():
+def test_device_disappears_and_comes_back_node_reconnects_at_the_next_attempt_and_resends_startup():
     with rig(STEADY) as r:
         r.wait(lambda: len(r.valid()) >= 3, message="data")
         assert r.emu.commands_received.count("SEND-DVPDL ON") == 1
@@ -285,9 +285,13 @@ def test_device_disappears_and_comes_back_node_reconnects_within_2_s_and_resends
             r.emu.flash.send_dvpdl = False  # a DVL at factory settings comes back: the node must re-enable it
         _diag_until(r, lambda v: v["state"] == "reconnecting", message="reconnecting in diagnostics")
         assert r.diag[-1].level == DiagnosticStatus.ERROR
+        failures = r.node.transport.status().open_failures
         r.dev.reconnect()
-        _diag_until(r, lambda v: v["state"] == "connected" and v["reconnects"] == "1", timeout_s=2.0,
-                    message="reconnected within 2 s")
+        # reconnected at the first open attempt after the device came back (at most one was under way), i.e.
+        # within one backoff period (1 s); counted in attempts because a loaded CI can miss a wall-clock deadline
+        _diag_until(r, lambda v: v["state"] == "connected" and v["reconnects"] == "1", timeout_s=30.0,
+                    message="reconnected")
+        assert r.node.transport.status().open_failures <= failures + 1
         assert "reconnected" in r.diag[-1].message
         n = len(r.valid())
         r.wait(lambda: r.emu.commands_received.count("SEND-DVPDL ON") == 2 and len(r.valid()) >= n + 3,
@@ -353,9 +357,11 @@ def test_implausible_but_checksum_valid_dvpdl_is_published_not_valid_with_an_err
         r.wait(lambda: r.node.diag.counts().get("implausible_velocity", 0) >= 2, message="both rejected")
         r.wait(lambda: any(st.level == DiagnosticStatus.ERROR and "implausible" in st.message for st in r.diag),
                5.0, "ERROR in diagnostics")
-        rejected = [m for m, _ in r.data if m.confidence_percent == 100.0
-                    and any(abs(m.delta_time_s - dt) < 1e-9 * 1e3 * dt for dt in (0.1, 1e-6))]
-        assert len(rejected) == 2
+        def rejected():
+            return [m for m, _ in r.data if m.confidence_percent == 100.0
+                    and any(abs(m.delta_time_s - dt) < 1e-6 * dt for dt in (0.1, 1e-6))]
+
+        rejected = r.wait(lambda: len(rejected()) == 2 and rejected(), 5.0, "both reports received")
         assert all(not m.velocity_valid and math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0
                    for m in rejected)
         assert all(abs(tw.twist.twist.linear.x) < 1.0 for tw, _ in r.twist)  # no twist from them
@@ -393,7 +399,8 @@ def test_main_runs_with_the_params_file_and_stops_cleanly_on_sigint():
     emu = Dvl75Emulator(STEADY, rate_hz=RATE_HZ)
     dev = PtyDevice(emu)
     cmd = [python_executable(), "-m", "hindrax_drivers.dvl75.node", "--ros-args", "--params-file",
-           str(default_config_path()), "-p", f"sensors.dvl75.port:={dev.path}"]
+           str(default_config_path()), "-p", f"sensors.dvl75.port:={dev.path}",
+           "-p", "stuck_limit_samples:=100000"]  # constant truth: identical reports, however slow the start
     proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         with ros_context() as ctx:

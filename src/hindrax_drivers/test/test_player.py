@@ -173,7 +173,11 @@ def test_player_publishes_the_recorded_bytes_with_timing_and_clock(ros):
     wait_until(lambda: len(clocks) > 0, 5, ros.spin, "clock")
     assert clocks == sorted(clocks)
     assert all_msgs[0].log_time_ns <= clocks[0] and clocks[-1] <= all_msgs[-1].log_time_ns
-    assert len(clocks) >= bag_span_s / rate * 50 * 0.5  # 50 Hz of wall time (half, for scheduling slack)
+    # Each message is preceded by a /clock of its own log time. The 50 Hz wall-clock tick rate is checked with a
+    # stepped clock in test_clock_carries_bag_time_monotonically_and_precedes_each_message: a count of ticks
+    # received here depends on how the two processes are scheduled, which a loaded 2-core CI can miss.
+    log_times = {m.log_time_ns for m in all_msgs}
+    assert len(set(clocks) & log_times) >= 0.9 * len(log_times)  # (best-effort /clock: allow a few drops)
 
 
 @pytest.mark.ros

@@ -153,7 +153,7 @@ def test_dvl_faults_are_counted_not_fatal(dvl_setup):
     assert tr.connected and tr.status().callback_errors == 0
 
 
-def test_dvl_device_disappears_and_transport_reconnects_within_2_s(dvl_setup):
+def test_dvl_device_disappears_and_transport_reconnects_at_the_next_attempt(dvl_setup):
     truth, emu, dev, col, tr = dvl_setup
     lost = threading.Event()
     tr.on_disconnect = lambda text: lost.set()
@@ -164,10 +164,13 @@ def test_dvl_device_disappears_and_transport_reconnects_within_2_s(dvl_setup):
     with pytest.raises(SerialTransportError):
         tr.write(b"SEND-DVPDL ON\r\n")
     n = col.count(DvlExtended)
-    t0 = time.monotonic()
+    failures = tr.status().open_failures
     dev.reconnect()
-    assert tr.wait_connected(2.0)
-    assert time.monotonic() - t0 < 2.0
+    # The first open attempt after the device is back succeeds (at most one attempt was already under way
+    # when it came back), so the reconnect comes within one backoff period (reconnect_max_s = 1 s). Counted
+    # in attempts, not in wall time: a loaded 2-core CI can delay the reader thread past any fixed deadline.
+    assert tr.wait_connected(30.0)
+    assert tr.status().open_failures <= failures + 1
     assert tr.status().reconnects == 1
     assert col.wait_for(lambda c: c.count(DvlExtended) >= n + 3)
     tr.write(b"SEND-DVPDL ON\r\n")  # writes work again on the new pty
@@ -183,8 +186,10 @@ def test_transport_started_before_device_exists_connects_when_it_appears():
     try:
         assert wait_until(lambda: tr.status().open_failures >= 2)  # backoff in progress
         assert not tr.connected
+        failures = tr.status().open_failures
         dev.reconnect()
-        assert tr.wait_connected(2.0)
+        assert tr.wait_connected(30.0)
+        assert tr.status().open_failures <= failures + 1  # the next attempt after it appeared succeeded
         assert tr.status().reconnects == 0  # first successful open is not a reconnect
         assert col.wait_for(lambda c: c.count(DvlExtended) >= 1)
     finally:
