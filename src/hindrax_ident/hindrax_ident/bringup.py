@@ -2,7 +2,7 @@
 MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust
-allocation, the identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as
+allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as
 in the virtual pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the
 recorder. On the vehicle they open the configured serial ports and
 ``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
@@ -189,7 +189,7 @@ def ordered_executor(**kwargs: Any) -> Any:
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
-                drive_clocks: bool = False, i2c_bus: Any = None) -> Graph:
+                drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None) -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
@@ -227,8 +227,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         from .sim.node import SimulatorNode
         from .sim.simulator import Simulator
 
-        simulator = Simulator(cfg)
-        hardware = VirtualHardware(simulator, cfg, seed=cfg.get("simulation.seed"), serial_threads=False)
+        simulator = Simulator(cfg, truth=truth)  # the pool's truth (sim/truth.py); the nodes keep cfg
+        hardware = VirtualHardware(simulator, simulator.config, seed=cfg.get("simulation.seed"), serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
         # The emulated PCA9685 runs at exactly esc.oscillator_hz (VirtualHardware builds it from the configuration):
@@ -248,6 +248,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes["icm20948"] = Icm20948Node(bus=bus, **common)
     nodes["esc"] = EscNode(bus=bus, **common)
     nodes["thrust_allocation"] = ThrustAllocationNode(**common)
+    from hindrax_drivers.supervisor.node import SupervisorNode
+
+    nodes["supervisor"] = SupervisorNode(**common)  # disarms the ESC on a breach (supervisor.*)
     if identification:
         from .identification.node import IdentificationNode
 

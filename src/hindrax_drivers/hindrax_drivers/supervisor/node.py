@@ -1,0 +1,183 @@
+"""Safety supervisor node: disarms the ESC output when the vehicle leaves its safe envelope.
+
+Thin rclpy wrapper of :class:`~hindrax_drivers.supervisor.core.SupervisorCore` (the checks and their keys are
+documented there). On a breach it calls ``esc/set_armed`` with ``arm=False`` (the ESC node writes neutral on
+every channel in that service callback, i.e. at once, well within one output period), latches the reason, says
+why on ``supervisor/status`` and in ``/diagnostics`` (level ERROR), and disarms again whenever the ESC reports
+armed while the breach is latched.
+
+Subscribes (ROS time of arrival is used for rates and run time; ``use_sim_time`` supported)
+    ``dvl/data`` (hindrax_msgs/Dvl: attitude, velocity for the dead reckoning), ``ping/altitude``
+    (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
+    ``imu/data_raw`` (sensor_msgs/Imu, rate only), ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the
+    ESC's armed flag), ``supervisor/abort`` (std_msgs/String: any node trips the supervisor with a reason,
+    e.g. the identification node when it aborts a manoeuvre on a limit).
+Services
+    ``supervisor/estop`` (std_srvs/Trigger): operator emergency stop: trip and disarm now.
+    ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again).
+Publishes
+    ``supervisor/status`` (diagnostic_msgs/DiagnosticStatus: level OK or ERROR, message = the breach reason, values
+    = the supervised quantities) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
+Configuration
+    ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``).
+
+Run alone: ``python -m hindrax_drivers.supervisor.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.node import Node
+from sensor_msgs.msg import Imu, Range
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from hindrax_msgs.msg import Dvl, ThrusterPwm
+from hindrax_msgs.srv import SetArmed
+
+from .. import frames
+from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from .core import SupervisorCore, SupervisorLimits
+
+__all__ = ["SupervisorNode", "main"]
+
+#: A disarm request is repeated this often while the ESC still reports armed after a breach, s.
+DISARM_RETRY_S = 0.2
+
+
+class SupervisorNode(Node):
+    """The safety supervisor (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any):
+        super().__init__("supervisor", **kwargs)
+        cfg = load_node_config(self, ("supervisor", "pool"))
+        self.core = SupervisorCore(SupervisorLimits.from_config(cfg))
+        self.diag = DeviceDiagnostics("hindrax/supervisor", "supervisor", self._now_s)
+        self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
+        self.esc_armed = False
+        self.breaches = 0
+        self.last_breach_time_s: float | None = None
+        self._last_disarm_request_s = -math.inf
+        self._status_dirty = True
+        self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10)
+        self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10)
+        self.create_subscription(Range, "ping/altitude", self.on_altitude, 10)
+        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10)
+        self.create_subscription(Imu, "imu/data_raw", self.on_imu, 10)
+        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10)
+        self.create_subscription(String, "supervisor/abort", self.on_abort, 10)
+        self.create_service(Trigger, "supervisor/estop", self.on_estop)
+        self.create_service(Trigger, "supervisor/reset", self.on_reset)
+        self.esc_client = self.create_client(SetArmed, "esc/set_armed")
+        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=lambda: self.core.values(self._now_s()))
+        self.create_timer(1.0 / cfg.get("supervisor.check_rate_hz"), self.on_check)
+        self.create_timer(1.0, self._publish_status)
+
+    def _now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    # ------------------------------------------------------------------ inputs
+    def on_dvl(self, msg: Dvl) -> None:
+        t = self._now_s()
+        q = np.array([msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w], dtype=float)
+        if np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5:
+            rpy = frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q))
+            self._handle(self.core.on_attitude(float(rpy[0]), float(rpy[1]), float(rpy[2])))
+        v = np.array([msg.velocity_m_s.x, msg.velocity_m_s.y, msg.velocity_m_s.z], dtype=float)
+        valid = bool(msg.velocity_valid) and bool(np.all(np.isfinite(v)))
+        self._handle(self.core.on_dvl(t, frames.flu_to_frd(v) if valid else None))
+
+    def on_altitude(self, msg: Range) -> None:
+        self._handle(self.core.on_altitude(self._now_s(), float(msg.range)))
+
+    def on_depth(self, msg: PoseWithCovarianceStamped) -> None:
+        self._handle(self.core.on_depth(self._now_s(), -float(msg.pose.pose.position.z)))
+
+    def on_imu(self, _msg: Imu) -> None:
+        self.core.on_message("imu", self._now_s())
+
+    def on_esc(self, msg: ThrusterPwm) -> None:
+        armed = bool(msg.armed)
+        if armed != self.esc_armed:
+            self._status_dirty = True
+        self.esc_armed = armed
+        self.core.set_armed(self._now_s(), armed)
+        if armed and self.core.tripped:
+            self._disarm()
+
+    def on_abort(self, msg: String) -> None:
+        self._handle(self.core.trip(f"abort requested: {msg.data}"), force=True)
+
+    def on_estop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        new = self.core.trip("operator e-stop (supervisor/estop)")
+        self._handle(new, force=True)
+        response.success = True
+        response.message = f"tripped: {self.core.tripped}; disarm requested" if new else \
+            f"already tripped: {self.core.tripped}; disarm requested"
+        return response
+
+    def on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        was = self.core.tripped
+        self.core.reset()
+        self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
+        self._status_dirty = True
+        self._publish_status()
+        response.success = True
+        response.message = f"cleared: {was}" if was else "was not tripped"
+        return response
+
+    def on_check(self) -> None:
+        self._handle(self.core.check(self._now_s()))
+        if self.core.tripped and self.esc_armed:
+            self._disarm()
+        if self._status_dirty:
+            self._publish_status()
+
+    # ------------------------------------------------------------------ breach
+    def _handle(self, reason: str, force: bool = False) -> None:
+        """A new breach (non-empty ``reason``): disarm, report. ``force``: disarm even if the ESC is not
+        known to be armed (e-stop, abort)."""
+        if not reason:
+            return
+        self.breaches += 1
+        self.last_breach_time_s = self._now_s()
+        self.diag.count("breach")
+        self.diag.set_state("tripped", DiagnosticStatus.ERROR, reason)
+        self.get_logger().error(f"supervisor breach: {reason}; disarming the ESC")
+        self._status_dirty = True
+        self._disarm(force=True)
+        self._publish_status()
+
+    def _disarm(self, force: bool = False) -> None:
+        now = self._now_s()
+        if not force and now - self._last_disarm_request_s < DISARM_RETRY_S:
+            return
+        self._last_disarm_request_s = now
+        if not self.esc_client.service_is_ready():
+            self.get_logger().error("esc/set_armed not available: cannot disarm", throttle_duration_sec=1.0)
+            return
+        self.esc_client.call_async(SetArmed.Request(arm=False))
+
+    def _publish_status(self) -> None:
+        t = self._now_s()
+        tripped = self.core.tripped
+        st = DiagnosticStatus(level=DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK,
+                              name="hindrax/supervisor", message=tripped or "within the envelope",
+                              hardware_id="supervisor")
+        st.values = [KeyValue(key=k, value=v) for k, v in self.core.values(t)]
+        self.pub_status.publish(st)
+        self.diag.published()
+        self._status_dirty = False
+
+
+def main(args=None) -> int:
+    """``python -m hindrax_drivers.supervisor.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
+    return run_node(SupervisorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

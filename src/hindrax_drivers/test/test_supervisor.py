@@ -1,0 +1,281 @@
+"""Safety supervisor: the pure checks, and the node disarming the ESC output on every kind of breach.
+
+The graph test runs the ESC node (on an emulated PCA9685) and the supervisor on a /clock the test drives, with a
+probe publishing the sensor topics; for each breach it reads the emulated chip back: every thruster channel must
+be at neutral within one output period (1 / esc.output_rate_hz of simulated time) of the breach.
+"""
+import math
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu, Range
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from hindrax_drivers import frames
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+from hindrax_drivers.pca9685.node import EscNode
+from hindrax_drivers.supervisor.core import SupervisorCore, SupervisorLimits
+from hindrax_drivers.supervisor.node import SupervisorNode
+from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_msgs.msg import Dvl, ThrusterPwm
+from hindrax_msgs.srv import SetArmed
+
+TICK_US = 1.24
+PERIOD_S = 1 / 50.0  # esc.output_rate_hz
+
+
+def limits(**kw):
+    base = dict(min_rate_hz={"dvl": 1.0, "altimeter": 1.0, "pressure": 2.0, "imu": 20.0}, rate_window_s=2.0,
+                max_depth_m=1.6, min_altitude_m=0.2, max_roll_rad=1.0, max_pitch_rad=1.1,
+                cage_min_ne=(0.1, 0.1), cage_max_ne=(9.9, 5.9), max_run_time_s=100.0,
+                start_position_ne=(2.0, 3.0), start_heading_rad=0.0)
+    base.update(kw)
+    return SupervisorLimits(**base)
+
+
+# ------------------------------------------------------------------ core
+def test_limits_from_the_shipped_configuration():
+    lim = SupervisorLimits.from_config(load_config(default_config_path()))
+    assert lim.cage_min_ne == (0.1, 0.1) and lim.cage_max_ne == (9.9, 5.9)  # 10 x 6 m pool, 0.1 m margin
+    assert lim.start_position_ne == (2.0, 3.0) and lim.max_depth_m == 1.65
+
+
+def test_nothing_trips_while_disarmed_and_each_limit_trips_once_armed():
+    c = SupervisorCore(limits())
+    assert c.on_depth(0.0, 5.0) == "" and c.on_altitude(0.0, 0.0) == "" and c.on_attitude(2.0, 0.0, 0.0) == ""
+    assert c.tripped == ""
+    for feed, expect in ((lambda c: c.on_depth(1.0, 1.61), "depth 1.61 m"),
+                         (lambda c: c.on_altitude(1.0, 0.19), "altitude 0.19 m"),
+                         (lambda c: c.on_attitude(-1.01, 0.0, 0.0), "roll -1.01"),
+                         (lambda c: c.on_attitude(0.0, 1.2, 0.0), "pitch 1.20"),
+                         (lambda c: c.trip("operator e-stop"), "operator e-stop")):
+        c = SupervisorCore(limits())
+        c.set_armed(0.0, True)
+        assert c.on_depth(0.5, 1.59) == "" and c.on_altitude(0.5, 0.21) == ""
+        reason = feed(c)
+        assert expect in reason and c.tripped == reason
+        assert feed(c) == ""  # latched: reported once
+        c.reset()
+        assert c.tripped == ""
+
+
+def test_dead_reckoning_and_cage():
+    """Heading 90 deg (east), 0.5 m/s surge for 5 s from (2, 3): 2.5 m east -> (2, 5.5), inside; 1 s more ->
+    east 6.0, beyond the 5.9 m cage edge (hand arithmetic)."""
+    c = SupervisorCore(limits())
+    c.set_armed(0.0, True)
+    c.on_attitude(0.0, 0.0, math.pi / 2)
+    v = np.array([0.5, 0.0, 0.0])
+    t = 0.0
+    reasons = []
+    for _ in range(51):
+        reasons.append(c.on_dvl(t, v))
+        t += 0.1
+    np.testing.assert_allclose(c.position_ne, [2.0, 5.5], atol=1e-9)
+    assert not any(reasons)
+    for _ in range(10):
+        reasons.append(c.on_dvl(t, v))
+        t += 0.1
+    assert any("outside the cage" in r for r in reasons)
+    # invalid velocities and long gaps are not integrated
+    c2 = SupervisorCore(limits())
+    c2.on_dvl(0.0, v)
+    c2.on_dvl(0.1, None)
+    c2.on_dvl(5.0, v)
+    c2.on_dvl(7.0, v)  # 2 s gap
+    np.testing.assert_allclose(c2.position_ne, [2.0, 3.0])
+
+
+def test_rates_and_run_time():
+    c = SupervisorCore(limits())
+    c.set_armed(0.0, True)
+    reason = ""
+    for k in range(600):  # 10 ms steps; IMU 100 Hz, the others 10 Hz; the pressure sensor stops after t = 2.9 s
+        t = k / 100.0
+        c.on_message("imu", t)
+        if k % 10 == 0:
+            c.on_dvl(t, None)
+            c.on_altitude(t, 1.0)
+            if k <= 290:
+                c.on_depth(t, 0.5)
+        reason = c.check(t)
+        if reason:
+            break
+    assert "pressure/depth" in reason and "below supervisor.min_rate.pressure_hz 2" in reason
+    # below 2 Hz over the 2 s window = fewer than 4 messages in it: only 2.7, 2.8 and 2.9 s remain once
+    # t - 2 s > 2.6 s, first at t = 4.61 s (hand arithmetic)
+    assert t == pytest.approx(4.61)
+    c2 = SupervisorCore(limits(min_rate_hz={"dvl": 0.0, "altimeter": 0.0, "pressure": 0.0, "imu": 0.0}))
+    c2.set_armed(10.0, True)
+    assert c2.check(109.0) == "" and "max_run_time_s 100" in c2.check(110.5)
+
+
+# ------------------------------------------------------------------ graph: every breach -> neutral on the chip
+@pytest.fixture
+def graph():
+    with ros_context() as ctx:
+        emu = Pca9685Emulator()
+        sim = [Parameter("use_sim_time", value=True)]
+        over = {"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True, "esc.watchdog_timeout_s": 5.0,
+                "supervisor.rate_window_s": 1.0, "supervisor.max_run_time_s": 30.0}
+        esc = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx, parameter_overrides=config_parameters(over) + sim)
+        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(over) + sim)
+        probe = rclpy.create_node("probe", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        for n in (esc, sup, probe):
+            ex.add_node(n)
+        pubs = {"clock": probe.create_publisher(Clock, "/clock", 10),
+                "cmd": probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10),
+                "dvl": probe.create_publisher(Dvl, "dvl/data", 10),
+                "alt": probe.create_publisher(Range, "ping/altitude", 10),
+                "depth": probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
+                "imu": probe.create_publisher(Imu, "imu/data_raw", 10),
+                "abort": probe.create_publisher(String, "supervisor/abort", 10)}
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        estop = probe.create_client(Trigger, "supervisor/estop")
+        reset = probe.create_client(Trigger, "supervisor/reset")
+        statuses = []
+        probe.create_subscription(DiagnosticStatus, "supervisor/status", statuses.append, 10)
+        g = dict(ns=1_000_000_000, emu=emu, esc=esc, sup=sup, ex=ex, pubs=pubs, statuses=statuses,
+                 state=dict(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set()))
+
+        def spin_idle():
+            """Run callbacks until none is ready (as hindrax_ident.bringup.Graph.spin_until_idle)."""
+            from rclpy.executors import ShutdownException, TimeoutException
+
+            for _ in range(10_000):
+                try:
+                    handler, _entity, _node = ex.wait_for_ready_callbacks(0.0)
+                except (TimeoutException, ShutdownException):
+                    return
+                handler()
+
+        def step(dt_s=0.01):
+            """Publish the sensors for this instant, then advance /clock by dt_s and let every node run."""
+            st = g["state"]
+            t_ms = (g["ns"] // 1_000_000)
+            if t_ms % 100 == 0:
+                if "dvl" not in st["quiet"]:
+                    m = Dvl(velocity_valid=True)
+                    m.velocity_m_s.x, m.velocity_m_s.y = st["v"]
+                    q = frames.quaternion_marine_to_ros(frames.quaternion_from_euler_ned([st["roll"], 0.0, 0.0]))
+                    m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = (float(x) for x in q)
+                    pubs["dvl"].publish(m)
+                if "alt" not in st["quiet"]:
+                    pubs["alt"].publish(Range(range=float(st["alt"])))
+                if "depth" not in st["quiet"]:
+                    d = PoseWithCovarianceStamped()
+                    d.pose.pose.position.z = -float(st["depth"])
+                    pubs["depth"].publish(d)
+            if "imu" not in st["quiet"]:
+                pubs["imu"].publish(Imu())
+            g["ns"] += int(dt_s * 1e9)
+            c = Clock()
+            c.clock.sec, c.clock.nanosec = divmod(g["ns"], 1_000_000_000)
+            pubs["clock"].publish(c)
+            ex.spin_once(timeout_sec=0.01)
+            spin_idle()
+
+        def call(client, request):
+            fut = client.call_async(request)
+            wait_until(fut.done, 5, lambda: ex.spin_once(timeout_sec=0.01), "service answer")
+            return fut.result()
+
+        g.update(step=step, call=call, arm=arm, estop=estop, reset=reset, spin_idle=spin_idle)
+        wait_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()) and arm.service_is_ready()
+                   and estop.service_is_ready() and sup.esc_client.service_is_ready(), 10, step, "graph ready")
+        yield g
+        ex.shutdown()
+        for n in (probe, sup, esc):
+            n.destroy_node()
+
+
+def wire(emu):
+    return np.array([emu.pulse_width_us(c) for c in range(8)])
+
+
+def sim_s(g):
+    return g["ns"] * 1e-9
+
+
+def arm_and_thrust(g):
+    """Reset the supervisor, arm, and command 1700 us until it is on the wire and the supervisor sees armed."""
+    g["call"](g["reset"], Trigger.Request())
+    st = g["state"]
+    st.update(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set())
+    g["sup"].core.position_ne = np.array(g["sup"].core.limits.start_position_ne)
+    for _ in range(120):  # 1.2 s of sensors: a whole rate window before arming
+        g["step"]()
+    assert g["call"](g["arm"], SetArmed.Request(arm=True)).success
+
+    def go():
+        g["pubs"]["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
+        g["step"]()
+    wait_until(lambda: wire(g["emu"])[0] > 1690 and g["sup"].core.armed, 10, go, "thrust on the wire")
+
+
+def until_neutral(g, keep_commanding=True, max_steps=400):
+    """Step (commanding 1700 us like a controller that did not notice) until the chip is at neutral; returns the
+    simulated time at which neutral was read back."""
+    for _ in range(max_steps):
+        if np.allclose(wire(g["emu"]), 1500.0, atol=TICK_US):
+            return sim_s(g)
+        if keep_commanding:
+            g["pubs"]["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
+        g["step"](0.001)
+    raise AssertionError(f"not neutral: {wire(g['emu'])}")
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("breach", ["depth", "altitude", "attitude", "cage", "sensor_rate", "run_time", "estop",
+                                    "abort"])
+def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, breach):
+    g = graph
+    arm_and_thrust(g)
+    st = g["state"]
+    breach_at = None
+    if breach == "estop":
+        breach_at = sim_s(g)
+        res = g["call"](g["estop"], Trigger.Request())
+        assert res.success
+    elif breach == "abort":
+        breach_at = sim_s(g)
+        g["pubs"]["abort"].publish(String(data="limits.max_depth_m"))
+    elif breach == "run_time":
+        g["sup"].core.armed_since_s -= 29.9  # 0.1 s of simulated time before supervisor.max_run_time_s
+    else:
+        st.update({"depth": dict(depth=1.7), "altitude": dict(alt=0.1), "attitude": dict(roll=1.2),
+                   "cage": dict(v=(0.0, 0.0)), "sensor_rate": dict(quiet={"depth"})}[breach])
+        if breach == "cage":
+            g["sup"].core.position_ne = np.array([9.95, 3.0])  # beyond the 9.9 m north cage edge
+            st["v"] = (0.01, 0.0)
+    # step in 1 ms slices while commanding thrust, until the supervisor trips
+    for _ in range(3000):
+        if g["sup"].core.tripped:
+            break
+        g["pubs"]["cmd"].publish(ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True))
+        g["step"](0.001)
+    assert g["sup"].core.tripped, breach
+    trip_s = g["sup"].last_breach_time_s
+    neutral_s = until_neutral(g)
+    assert neutral_s - trip_s <= PERIOD_S + 1e-9, (breach, neutral_s - trip_s)
+    if breach_at is not None:
+        assert neutral_s - breach_at <= PERIOD_S + 1e-9
+    assert not g["esc"].armed
+    wait_until(lambda: g["statuses"] and g["statuses"][-1].level == DiagnosticStatus.ERROR, 5, g["step"], "status")
+    expected_words = {"depth": "depth 1.70 m", "altitude": "altitude 0.10 m", "attitude": "roll 1.20",
+                      "cage": "outside the cage", "sensor_rate": "pressure/depth", "run_time": "max_run_time_s",
+                      "estop": "e-stop", "abort": "limits.max_depth_m"}[breach]
+    assert expected_words in g["statuses"][-1].message
+    # latched: re-arming is undone by the supervisor until it is reset
+    g["esc"].on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+    wait_until(lambda: not g["esc"].armed, 5, g["step"], "disarmed again while tripped")
