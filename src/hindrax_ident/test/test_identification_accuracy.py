@@ -13,13 +13,15 @@ import math
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.campaign import Campaign
 from hindrax_ident.identification.estimators import identify_all_with_errors
+from hindrax_ident.sim.truth import load_truth
 
 
 def test_surge_and_heave_recover_the_configured_hydrodynamics():
     cfg = load_config(default_config_path())
     # the simulator's noise is on (DVL noise and 5 % scale error, pressure noise, IMU noise and bias)
-    assert cfg.flat["simulation.sensors.dvl75.noise_std_m_s"] > 0
-    assert cfg.flat["simulation.sensors.ms5837.noise_std_pa"] > 0
+    truth = load_truth(cfg).config  # what the simulator runs on (the default truth: sim/truth.py)
+    assert truth.flat["simulation.sensors.dvl75.noise_std_m_s"] > 0
+    assert truth.flat["simulation.sensors.ms5837.noise_std_pa"] > 0
     record = Campaign(cfg, dofs=("surge", "heave"), levels=3, seed=1).run()  # seed 1 = simulation.seed
     assert not record.aborted, record.abort_reason
     idents, errors = identify_all_with_errors(record, cfg)

@@ -14,8 +14,8 @@ from hindrax_ident.sim.simulator import Simulator
 
 @pytest.fixture
 def hw():
-    cfg = load_config(default_config_path())
-    sim = Simulator(cfg, seed=3)
+    sim = Simulator(load_config(default_config_path()), seed=3)
+    cfg = sim.config  # the truth (vehicle file + default truth): what the emulators read
     vh = VirtualHardware(sim, cfg)
     yield sim, vh, cfg
     vh.close()

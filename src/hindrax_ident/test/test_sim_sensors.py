@@ -10,13 +10,15 @@ from hindrax_ident.sim import sensors as sn
 from hindrax_ident.sim.model import rotation_matrix_from_quaternion
 from hindrax_ident.sim.pool import Pool
 from hindrax_ident.sim.simulator import Simulator
+from hindrax_ident.sim.truth import load_truth
 
 G = 9.81
 
 
 @pytest.fixture(scope="module")
 def cfg():
-    return load_config(default_config_path())
+    """The simulator's configuration: the vehicle file with the default truth (sim/truth.py: sensor noise)."""
+    return load_truth(load_config(default_config_path())).config
 
 
 @pytest.fixture(scope="module")

@@ -52,6 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=None, help="simulation seed (default simulation.seed)")
     parser.add_argument("--out", default=None, help="output directory (default runs/<UTC timestamp>/)")
     add_config_argument(parser)
+    parser.add_argument("--truth", default=None,
+                        help="truth file of the virtual pool: overlay of the vehicle file + disturbances, read by the "
+                             "simulator and emulators only (default ros_ws/config/truth/default.yaml)")
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     if not parser.prog.endswith("campaign"):
@@ -64,12 +67,13 @@ def format_summary(identifications: dict) -> str:
     """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error."""
     from ..identification.report import summary_rows
     lines = [f"{'DOF':6s} {'parameter':28s} {'identified':>12s} {'std':>9s} {'unit':9s} {'configured':>11s} "
-             f"{'rel.err':>8s}"]
+             f"{'rel.err':>8s}  verdict"]
     for r in summary_rows(identifications):
         err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f}%"
         tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
+        why = f" ({r['reasons'][0]})" if r.get("reasons") else ""
         lines.append(f"{r['dof']:6s} {r['parameter']:28s} {r['value']:12.5g} {r['std']:9.3g} {r['unit']:9s} "
-                     f"{tr:>11s} {err:>8s}")
+                     f"{tr:>11s} {err:>8s}  {r.get('verdict', '-')}{why}")
     return "\n".join(lines)
 
 
@@ -137,7 +141,7 @@ def run_graph(args: argparse.Namespace) -> int:
         overrides["identification.max_level_duration_s"] = float(args.max_level_duration)
     outcome = run_graph_campaign(args.config or default_config_path(), out, dofs=dofs, levels=args.levels,
                                  seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
-                                 progress=progress)
+                                 progress=progress, truth=getattr(args, "truth", None))
     for dof, msg in outcome.errors.items():
         progress(f"{dof}: no estimate ({msg})")
     if outcome.identifications:
@@ -160,8 +164,15 @@ def run_in_process(args: argparse.Namespace) -> int:
         print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
 
     print("campaign in-process on the simulator (no ROS graph, no bag)", flush=True)
+    from ..sim.simulator import Simulator
+    from ..sim.truth import TruthError
+    try:
+        sim = Simulator(cfg, seed=args.seed, truth=getattr(args, "truth", None))
+    except TruthError as exc:
+        raise CommandError(f"--truth: {exc}") from exc
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
-                        max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf)
+                        max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
+                        sim=sim)
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))

@@ -174,27 +174,29 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
     Returns {"log": SensorState log key, "column": index, "measured": 'position'|'velocity',
     "std": measurement std, "jerk_psd": q, "accel": True when the accelerometer aids the filter (surge, sway,
     heave; then also "accel_std" and "accel_jerk_psd", :mod:`.fusion`)}. The noise std comes from
-    ``simulation.sensors.*`` when present (else ``sensors.dvl75.velocity_std_m_s`` / typical values); q = std^2 w^k puts the filter bandwidth near
+    the noise the vehicle file declares (``sensors.dvl75.noise_std_m_s``, ``scale_error_fraction``,
+    ``attitude_noise_std_rad``, ``sensors.ms5837.noise_std_pa``, ``sensors.icm20948.*_noise_std_*``; else
+    ``sensors.dvl75.velocity_std_m_s`` / typical values), never the simulator's truth; q = std^2 w^k puts the filter bandwidth near
     w = 12 rad/s (translation) or 20 rad/s (rotation) (filters.py: bandwidth ~ (q / std^2)^(1/4) for
     velocity and ^(1/6) for position measurements).
     """
     f = cfg.flat
     k = DOFS.index(dof)
-    acc = max(float(f.get("simulation.sensors.icm20948_accel.noise_std_m_s2", 0.05)), 1e-3)
-    att = float(f.get("simulation.sensors.dvl75_attitude.noise_std_rad", 0.005))
+    acc = max(float(f.get("sensors.icm20948.accel_noise_std_m_s2", 0.05)), 1e-3)
+    att = float(f.get("sensors.dvl75.attitude_noise_std_rad", 0.005))
     accel = {"accel": True, "accel_std": math.hypot(acc, cfg.gravity_m_s2 * att), "accel_jerk_psd": ACCEL_JERK_PSD}
     if dof in ("surge", "sway"):
-        std = max(float(f.get("simulation.sensors.dvl75.noise_std_m_s", f["sensors.dvl75.velocity_std_m_s"])),
+        std = max(float(f.get("sensors.dvl75.noise_std_m_s", f["sensors.dvl75.velocity_std_m_s"])),
                   1e-3)
-        std = math.hypot(std, 0.5 * float(f.get("simulation.sensors.dvl75.scale_error_fraction", 0.0)))
+        std = math.hypot(std, 0.5 * float(f.get("sensors.dvl75.scale_error_fraction", 0.0)))
         return {"log": "dvl", "column": k, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 12.0 ** 4,
                 **accel}
     if dof == "heave":
-        pa = float(f.get("simulation.sensors.ms5837.noise_std_pa", 20.0))
+        pa = float(f.get("sensors.ms5837.noise_std_pa", 20.0))
         std = max(pa / (cfg.water_density_kg_m3 * cfg.gravity_m_s2), 5e-4)
         return {"log": "depth", "column": 0, "measured": "position", "std": std, "jerk_psd": std ** 2 * 12.0 ** 6,
                 **accel}
-    std = max(float(f.get("simulation.sensors.icm20948_gyro.noise_std_rad_s", 0.003)), 5e-4)
+    std = max(float(f.get("sensors.icm20948.gyro_noise_std_rad_s", 0.003)), 5e-4)
     return {"log": "gyro", "column": k - 3, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 20.0 ** 4,
             "accel": False}
 
@@ -444,10 +446,10 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     attitude fused with the Euler-angle rates of the gyro (Fossen eq. 2.29, attitude interpolated to the gyro
     times; constant bias removed by :func:`rate_bias_against_angle`) by :func:`~.fusion.smooth_with_rate` (the
     attitude alone, zero biases, when there is no gyro record). Angle noise from
-    ``simulation.sensors.dvl75_attitude.noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
+    ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
     of the roll filter (:func:`measurement_settings`)."""
     ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
-    std_att = max(float(cfg.flat.get("simulation.sensors.dvl75_attitude.noise_std_rad", 0.005)), 1e-4)
+    std_att = max(float(cfg.flat.get("sensors.dvl75.attitude_noise_std_rad", 0.005)), 1e-4)
     if tg.size == 0:
         jerk = std_att ** 2 * 15.0 ** 6
         return (_smooth_on_ticks(t, ta, rpy[:, 0], "position", jerk, std_att)[0],

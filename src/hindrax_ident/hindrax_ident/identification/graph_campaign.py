@@ -49,7 +49,7 @@ class GraphCampaignOutcome:
 def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int | None = None,
                        seed: int | None = None, real_time_factor: float = 0.0, overrides: dict | None = None,
                        progress: Callable[[str], None] | None = None, deadline_s: float = 3600.0,
-                       level_fractions: Sequence[float] = ()) -> GraphCampaignOutcome:
+                       level_fractions: Sequence[float] = (), truth=None) -> GraphCampaignOutcome:
     """Run the campaign (module docstring); outputs in ``out`` (bag/, identification.yaml, report/).
 
     Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration and ``TimeoutError`` when a
@@ -58,11 +58,11 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
     say = progress or (lambda _m: None)
     wall0 = time.monotonic()
     return _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s,
-                level_fractions, wall0)
+                level_fractions, wall0, truth)
 
 
 def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s, level_fractions,
-         wall0) -> GraphCampaignOutcome:
+         wall0, truth=None) -> GraphCampaignOutcome:
     import rclpy
     from rclpy.action import ActionClient
 
@@ -82,7 +82,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     ov["simulation.real_time_factor"] = float(real_time_factor)
     with ros_context() as ctx:
         graph = build_graph(config_path, sim=True, record=True, record_dir=str(bag_dir), context=ctx, seed=seed,
-                            overrides=ov, identification=True, drive_clocks=True)
+                            overrides=ov, identification=True, drive_clocks=True, truth=truth)
         cfg = graph.config
         sim = graph.nodes["simulator"].simulator
         client = rclpy.create_node("hindrax_run", context=ctx)

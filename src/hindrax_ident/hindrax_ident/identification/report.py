@@ -30,6 +30,15 @@ from .estimators import _rest_terms  # noqa: E402
 __all__ = ["write_report", "summary_rows"]
 
 
+def _assessment(r, name: str) -> tuple[str, list]:
+    """(verdict, reasons) of one parameter from :func:`~.verdicts.apply_verdicts` ("-", [] when not assessed)."""
+    a = r.signals.get("assessment") if isinstance(getattr(r, "signals", None), dict) else None
+    if not a or name not in a["parameters"]:
+        return "-", []
+    p = a["parameters"][name]
+    return p["verdict"], list(p["reasons"])
+
+
 def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
     """One row per DOF and parameter: value, std, ci95, configured truth, relative error, other methods."""
     rows = []
@@ -42,7 +51,8 @@ def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
                          "ci95": r.ci95[name], "truth": tr, "relative_error": err,
                          "equation_error": r.equation_error.get(name, (math.nan, math.nan))[0],
                          "rls": r.online.get(name, (math.nan, math.nan))[0],
-                         "steady": (r.steady or {}).get(name, (math.nan, math.nan))[0]})
+                         "steady": (r.steady or {}).get(name, (math.nan, math.nan))[0],
+                         "verdict": _assessment(r, name)[0], "reasons": _assessment(r, name)[1]})
     return rows
 
 
@@ -153,16 +163,24 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
         parts.append(f"<p>{html.escape(campaign_note)}</p>")
     parts.append("<h2>Summary</h2><table><tr><th>DOF</th><th>parameter</th><th>value</th><th>std</th><th>unit</th>"
                  "<th>95 % interval</th><th>configured</th><th>rel. error</th><th>equation-error LS</th>"
-                 "<th>RLS</th><th>steady-state LS</th></tr>")
+                 "<th>RLS</th><th>steady-state LS</th><th>verdict</th><th>reasons</th></tr>")
     for row in summary_rows(identifications):
         lo, hi = row["ci95"]
         parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
             row["dof"], row["parameter"], _fmt(row["value"]), _fmt(row["std"], 2), row["unit"],
             f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(row["truth"]),
             "-" if not math.isfinite(row["relative_error"]) else f"{100 * row['relative_error']:+.2f} %",
-            _fmt(row["equation_error"]), _fmt(row["rls"]), _fmt(row["steady"]))) + "</tr>")
+            _fmt(row["equation_error"]), _fmt(row["rls"]), _fmt(row["steady"]), row["verdict"],
+            "; ".join(row["reasons"]))) + "</tr>")
     parts.append("</table>")
     for dof, r in identifications.items():
+        a = r.signals.get("assessment")
+        if a:
+            parts.append(f"<h2>{html.escape(dof)}: {a['verdict']}</h2>" + (
+                "<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in a["reasons"]) + "</ul>" if a["reasons"] else
+                "<p>no DOF-wide check failed</p>") + "<p>intervals: fit covariance + thrust-curve uncertainty "
+                f"{a['checks'].get('thrust_uncertainty_rel')} (1-sigma, [negative, positive]), Student t with "
+                f"{a['checks'].get('segments')} segments</p>")
         parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time "
                      f"{r.pool_time_s:.0f} s; RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: "
                      f"{html.escape(r.steady_note)}</p>")

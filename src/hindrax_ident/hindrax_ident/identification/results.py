@@ -7,7 +7,10 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
                  water_density_kg_m3: <float>, method: <text>, seed: <int or null>}
     dofs:
       <dof>:                        # surge sway heave roll pitch yaw
-        <parameter>: {value: <float>, std: <float>, unit: <text>, ci95: [<low>, <high>]}
+        <parameter>: {value: <float>, std: <float>, unit: <text>, ci95: [<low>, <high>], std_fit: <float>,
+                      verdict: trusted | suspect, reasons: [<text>, ...]}   # identification/verdicts.py
+        verdict: trusted | suspect          # suspect when any parameter is
+        reasons: [<text>, ...]              # the DOF-wide checks that failed
         method: "output-error" | "equation-error"
         pool_time_s: <float>
         comparison: {equation_error: {<parameter>: [value, std]}, rls: {...}, steady_state: {...} | null,
@@ -102,14 +105,27 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
                   seed: int | None = None, method: str | None = None,
                   include_configured: bool = True) -> dict:
-    """The identification.yaml document from :class:`~.estimators.DofIdentification` objects (per DOF)."""
+    """The identification.yaml document from :class:`~.estimators.DofIdentification` objects (per DOF).
+
+    The intervals are the honest ones of :func:`~.verdicts.apply_verdicts` (fit covariance + thrust-curve
+    uncertainty, Student t on the independent segments; applied here if not yet), each parameter with ``std_fit``
+    (the fit alone), ``verdict`` (trusted | suspect) and ``reasons``; each DOF with ``verdict`` and ``reasons``.
+    """
+    from .verdicts import apply_verdicts
+
+    assessments = apply_verdicts(identifications, cfg)
     dofs: dict = {}
     for dof, r in identifications.items():
         entry: dict = {}
+        a = assessments[dof]
         for name in REQUIRED_PARAMETERS(dof):
             lo, hi = r.ci95[name]
+            pa = a["parameters"].get(name, {})
             entry[name] = {"value": float(r.values[name]), "std": float(r.std[name]), "unit": r.units[name],
-                           "ci95": [float(lo), float(hi)]}
+                           "ci95": [float(lo), float(hi)], "std_fit": float(pa.get("std_fit", r.std[name])),
+                           "verdict": pa.get("verdict", "trusted"), "reasons": list(pa.get("reasons", []))}
+        entry["verdict"] = a["verdict"]
+        entry["reasons"] = list(a["reasons"])
         entry["method"] = r.method
         entry["pool_time_s"] = float(r.pool_time_s)
         entry["comparison"] = {

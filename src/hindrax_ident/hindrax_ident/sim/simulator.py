@@ -12,10 +12,18 @@ first-order lag exactly (:mod:`.thrusters`), evaluated at the Runge-Kutta stage 
 pool's contact constraints are applied (:meth:`.pool.Pool.resolve`), the time advances to ``k * step_s``
 (no accumulated rounding) and the sensors due at that time are sampled. Everything is deterministic for a
 given configuration and seed.
+
+Truth (:mod:`.truth`): the simulator runs on the truth configuration (the vehicle file overlaid with a truth file,
+default ``ros_ws/config/truth/default.yaml``) and applies its disturbances (:mod:`.disturbances`): the thrust factor
+per thruster (scales, battery, inflow) on the curve thrust, the truth's ESC latency ``esc.output_latency_s`` as a
+queue of written widths, the extra wrench (current, coupled damping, drag centre, tether, floor) held over each
+step, and the sensor disturbances (:meth:`.sensors.SensorSuite.apply_disturbances`; the DVL latency reads a
+history of states kept for that long).
 """
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -27,6 +35,8 @@ from .model import VehicleModel, euler_from_rotation_matrix, rotation_matrix_fro
 from .pool import ContactState, Pool
 from .sensors import SensorSuite, VehicleTruth
 from .thrusters import PulseWidthError, Thrusters
+from .truth import Truth, load_truth
+from .disturbances import DisturbanceModel
 
 __all__ = ["Simulator", "SensorListener", "PulseWidthError"]
 
@@ -46,13 +56,22 @@ class Simulator:
     pool: False removes the pool (no walls, floor or free surface: a fully submerged vehicle in unbounded
         water), for model tests.
     imu_position_frd_m: IMU lever arm from the body origin (FRD, m); the configuration has no such key.
+    truth: the pool's truth (:mod:`.truth`): a truth file path, a :class:`~.truth.Truth`, or None (the shipped
+        ``truth/default.yaml`` fills the keys ``config`` lacks: the sensor noise, no disturbance). The simulator
+        runs on ``truth.config``; ``config`` is kept as ``vehicle_config`` (what the nodes believe).
 
-    Raises ``ValueError`` for a non-positive step or an unknown sensor device.
+    Raises ``ValueError`` for a non-positive step or an unknown sensor device, :class:`~.truth.TruthError` for a
+    bad truth file.
     """
 
     def __init__(self, config: VehicleConfig, *, seed: int | None = None, step_s: float | None = None,
                  sensors: bool | Sequence[str] | None = True, pool: bool = True,
-                 imu_position_frd_m: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+                 imu_position_frd_m: Sequence[float] = (0.0, 0.0, 0.0), truth: Any = None) -> None:
+        if not isinstance(truth, Truth):
+            truth = load_truth(config, truth)
+        self.truth_model: Truth = truth
+        self.vehicle_config = config
+        config = truth.config
         self.config = config
         self.step_s = float(config.flat["simulation.step_s"] if step_s is None else step_s)
         if not (math.isfinite(self.step_s) and self.step_s > 0.0):
@@ -69,6 +88,10 @@ class Simulator:
             devices = list(sensors)
         self.sensors = SensorSuite(config, self.pool, self.seed, devices=devices,
                                    imu_position_frd_m=imu_position_frd_m)
+        self.disturbances = DisturbanceModel(config, truth.disturbances, self.model, self.pool)
+        self.sensors.apply_disturbances(truth.disturbances, self._delayed_state)
+        self._history: deque = deque()
+        self._keep_history_s = float(truth.disturbances.get("dvl.latency_s"))
         self._listeners: list[SensorListener] = []
         self._external = [0.0] * 6
         self._last_pw: np.ndarray | None = None
@@ -107,6 +130,11 @@ class Simulator:
         self._t = 0.0
         self._external = [0.0] * 6
         self._last_pw = None
+        self._esc_queue: deque = deque()
+        self._base_force = np.zeros(self.thrusters.n)
+        self._dist_wrench = [0.0] * 6
+        self._nu_dot_prev = [0.0] * 6
+        self._history = deque([(0.0, list(self._state))]) if self._keep_history_s > 0.0 else deque()
         self.thrusters.reset()
         self._truth_cache: VehicleTruth | None = None
         if self.pool is not None:
@@ -144,6 +172,7 @@ class Simulator:
             if len(new_external) != 6 or not all(math.isfinite(x) for x in new_external):
                 raise ValueError(f"external_wrench_frd must be 6 finite numbers, got {external_wrench_frd!r}")
         thr = self.thrusters
+        dist = self.disturbances
         pw = self._neutral if not armed else pulse_widths_us
         if pw is not None:
             try:
@@ -151,10 +180,20 @@ class Simulator:
             except (TypeError, ValueError) as exc:
                 raise PulseWidthError(f"pulse widths must be {thr.n} numbers (us), got {pw!r}") from exc
             if self._last_pw is None or arr.shape != self._last_pw.shape or not np.array_equal(arr, self._last_pw):
-                thr.command(arr)  # raises PulseWidthError before anything changes
+                if dist.esc_latency_s > 0.0:  # the truth's ESC delay: widths act latency_s after they were written
+                    thr.thrust_from_pulse_width(arr)  # raises PulseWidthError before anything changes
+                    self._esc_queue.append((self._t + dist.esc_latency_s, arr.copy()))
+                else:
+                    thr.command(arr)  # raises PulseWidthError before anything changes
+                    self._base_force = thr.commanded_force_n.copy()
                 self._last_pw = arr.copy()
+        while self._esc_queue and self._esc_queue[0][0] <= self._t + 1e-9:
+            thr.command(self._esc_queue.popleft()[1])
+            self._base_force = thr.commanded_force_n.copy()
         if new_external is not None:
             self._external = new_external
+        if dist.thrust_active:
+            thr.commanded_force_n = self._base_force * dist.thrust_factor(self._t, self._state, self._base_force)
 
         dt = self.step_s
         if thr.time_constant_s <= 0.0:  # no lag: a new command acts from the start of the step
@@ -165,6 +204,9 @@ class Simulator:
         tau_c = (b @ fc).tolist()
         dtau = (b @ (f0 - fc)).tolist()
         ext = self._external
+        if dist.wrench_active:
+            self._dist_wrench = dist.wrench(self._t, self._state, self._nu_dot_prev)
+            ext = [a + b for a, b in zip(ext, self._dist_wrench)]
         eh, ef = self._lag_half, self._lag_full
         tau0 = [tc + d + e for tc, d, e in zip(tau_c, dtau, ext)]
         tauh = [tc + eh * d + e for tc, d, e in zip(tau_c, dtau, ext)]
@@ -187,7 +229,13 @@ class Simulator:
         self._t = self._k * dt
         if self.pool is not None:
             self.pool.resolve(new, self._t)
+        if dist.wrench_active:
+            self._nu_dot_prev = [(a - b) / dt for a, b in zip(new[7:13], s[7:13])]
         self._state = new
+        if self._keep_history_s > 0.0:
+            self._history.append((self._t, list(new)))
+            while len(self._history) > 1 and self._history[1][0] <= self._t - self._keep_history_s - 1e-9:
+                self._history.popleft()
         self._truth_cache = None
         samples = self.sensors.update(self._t, self.truth)
         if samples and self._listeners:
@@ -245,7 +293,7 @@ class Simulator:
     @property
     def nu_dot(self) -> np.ndarray:
         """d nu / dt (6,) at the current state with the current thrust and external wrench."""
-        tau = (self.thrusters.wrench_co() + np.asarray(self._external)).tolist()
+        tau = (self.thrusters.wrench_co() + np.asarray(self._external) + np.asarray(self._dist_wrench)).tolist()
         return np.array(self.model.derivative_list(self._state, tau)[7:13])
 
     @property
@@ -277,6 +325,18 @@ class Simulator:
                 euler_rad=euler_from_rotation_matrix(r), nu=self.nu, nu_dot=self.nu_dot, wrench_frd=self.wrench_frd,
                 buoyancy_fraction=self.buoyancy_fraction)
         return self._truth_cache
+
+    def _delayed_state(self, delay_s: float) -> list[float]:
+        """The state (13,) ``delay_s`` ago (the newest kept one at or before it; for the DVL latency)."""
+        if not self._history:
+            return list(self._state)
+        target = self._t - delay_s + 1e-9
+        best = self._history[0][1]
+        for t, st in self._history:
+            if t > target:
+                break
+            best = st
+        return list(best)
 
     def latest_sample(self, device: str) -> Any | None:
         """Newest sample of a sensor device (None before its first sample or when disabled)."""

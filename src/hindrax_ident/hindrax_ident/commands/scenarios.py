@@ -1,0 +1,269 @@
+"""``hindrax ident scenarios [--scenarios NAMES] [--seeds N] [--dofs ...] [--out DIR] [--jobs N]``: the scenario suite.
+
+For every named scenario (a truth file in ``ros_ws/config/truth/scenarios/``, :mod:`hindrax_ident.sim.truth`) and
+every seed 1..N, one in-process identification campaign (:class:`~hindrax_ident.identification.campaign.Campaign`,
+the simulator running on the scenario's truth, every estimator on the vehicle file), the offline identification
+and the verdicts (:mod:`hindrax_ident.identification.verdicts`). Each parameter is compared with the truth's
+value (:func:`~hindrax_ident.identification.estimators.truth_parameters` of the truth configuration): relative
+error, z = (estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its
+reasons.
+
+Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenance) and ``<out>/scenarios.md`` (the
+table) and prints the table. A scenario *meets the target* (issue 16) when every parameter's interval covers the
+truth in at least 90 % of the seeds or the parameter is suspect in every case where it does not; the
+no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Sequence
+
+__all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED"]
+
+#: DOFs of the full suite (issue 16: surge, sway, heave, yaw).
+DEFAULT_DOFS = ("surge", "sway", "heave", "yaw")
+#: Parameters compared with the truth (added_mass is inertia minus a constant, so it is left out).
+REPORTED = ("inertia", "quadratic_damping", "quadratic_damping_positive", "quadratic_damping_negative",
+            "linear_damping", "linear_damping_positive", "linear_damping_negative", "bias", "restoring")
+
+
+def scenario_dir() -> Path:
+    """``ros_ws/config/truth/scenarios/``."""
+    from ..sim.truth import truth_dir
+    return truth_dir() / "scenarios"
+
+
+def scenario_names() -> list[str]:
+    """Shipped scenarios, ``none`` first then alphabetical (``all_combined`` last)."""
+    names = sorted(p.stem for p in scenario_dir().glob("*.yaml"))
+    first = [n for n in ("none",) if n in names]
+    last = [n for n in ("all_combined",) if n in names]
+    return first + [n for n in names if n not in first + last] + last
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``hindrax ident scenarios``."""
+    parser.add_argument("--scenarios", default=None,
+                        help="comma-separated scenario names or truth files (default: every shipped scenario)")
+    parser.add_argument("--seeds", type=int, default=5, help="seeds 1..N per scenario (default 5)")
+    parser.add_argument("--dofs", default=",".join(DEFAULT_DOFS), help="comma-separated DOFs (default surge,sway,"
+                        "heave,yaw)")
+    parser.add_argument("--levels", type=int, default=None, help="levels per DOF (default identification.levels_per_dof)")
+    parser.add_argument("--out", default="scenario-results", help="output directory (default scenario-results/)")
+    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+    parser.add_argument("--jobs", type=int, default=1, help="campaigns run in parallel processes (default 1)")
+    parser.add_argument("--cache", default=None,
+                        help="directory keeping each campaign's identification (pickle): a case found there is not "
+                             "run again, so the verdicts can be re-assessed and seeds added without re-running (keyed by "
+                             "scenario, seed, DOFs and levels: empty it when the vehicle file or the code changes)")
+
+
+def _truth_path(name: str) -> Path:
+    p = Path(name)
+    if p.suffix in (".yaml", ".yml") and p.is_file():
+        return p
+    return scenario_dir() / f"{name}.yaml"
+
+
+def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[str],
+             levels: int | None = None, cache: str | None = None) -> dict:
+    """One campaign of ``scenario`` (name or truth file) with ``seed``: the compared parameters.
+
+    Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
+    "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
+    covered, verdict, reasons, t_dof.
+    """
+    from hindrax_drivers.config import default_config_path, load_config
+
+    from ..identification.campaign import Campaign
+    from ..identification.estimators import identify_all_with_errors, truth_parameters
+    from ..identification.verdicts import apply_verdicts
+    from ..sim.simulator import Simulator
+    from ..sim.truth import load_truth
+
+    import pickle
+
+    cfg = load_config(config_path or default_config_path())
+    truth = load_truth(cfg, _truth_path(scenario))
+    label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
+    wall0 = time.monotonic()
+    cached = None
+    if cache:
+        cached = Path(cache) / f"{label}-seed{seed}-{'_'.join(dofs)}-levels{levels}.pickle"
+    if cached is not None and cached.is_file():
+        idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
+    else:
+        sim = Simulator(cfg, seed=seed, truth=truth)
+        record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim).run()
+        idents, errors = identify_all_with_errors(record, cfg)
+        aborted, abort_reason, campaign_wall = bool(record.aborted), record.abort_reason, time.monotonic() - wall0
+        if cached is not None:
+            for r in idents.values():
+                r.signals.pop("online_history", None)
+            cached.parent.mkdir(parents=True, exist_ok=True)
+            cached.write_bytes(pickle.dumps((idents, errors, aborted, abort_reason, campaign_wall)))
+    verdicts = apply_verdicts(idents, cfg)
+    rows = []
+    for dof, r in idents.items():
+        true = truth_parameters(truth.config, dof)
+        a = verdicts[dof]["parameters"]
+        for name in REPORTED:
+            if name not in r.values:
+                continue
+            v, s, tr = float(r.values[name]), float(r.std[name]), float(true[name])
+            lo, hi = r.ci95[name]
+            rows.append({"dof": dof, "parameter": name, "value": v, "std": s, "std_fit": a[name]["std_fit"],
+                         "truth": tr, "rel_error": (v - tr) / abs(tr) if tr != 0.0 else None,
+                         "z": (v - tr) / s if s > 0 else None, "covered": bool(lo <= tr <= hi),
+                         "verdict": a[name]["verdict"], "reasons": a[name]["reasons"], "t_dof": a[name]["t_dof"]})
+    return {"scenario": label, "seed": int(seed), "wall_s": campaign_wall, "aborted": aborted,
+            "abort_reason": abort_reason, "errors": errors, "cases": rows,
+            "dofs": {d: {"verdict": v["verdict"], "reasons": v["reasons"], "checks": v["checks"]}
+                     for d, v in verdicts.items()}}
+
+
+def _case_star(args):
+    return run_case(*args)
+
+
+def summarise(results: Sequence[dict]) -> dict:
+    """Per scenario: per DOF and parameter the mean error, max |z|, covered / suspect / ok counts (ok = covered
+    or suspect); totals; whether the scenario meets the target (module docstring)."""
+    from ..identification.verdicts import spread_reasons
+
+    out: dict = {}
+    by: dict = {}
+    for res in results:
+        for row in res["cases"]:
+            by.setdefault(res["scenario"], {}).setdefault((row["dof"], row["parameter"]), []).append(row)
+    for sc, params in by.items():
+        table = []
+        n_cases = n_cov = n_sus = n_ok = 0
+        meets = True
+        for (dof, name), rows in params.items():
+            extra = spread_reasons([r["value"] for r in rows], [r["std"] for r in rows])
+            if extra:  # run-to-run spread: suspect in every case of this parameter
+                for r in rows:
+                    if r["verdict"] != "suspect":
+                        r["verdict"] = "suspect"
+                    r["reasons"] = list(r["reasons"]) + extra
+            cov = sum(r["covered"] for r in rows)
+            sus = sum(r["verdict"] == "suspect" for r in rows)
+            ok = sum(r["covered"] or r["verdict"] == "suspect" for r in rows)
+            errs = [r["rel_error"] for r in rows if r["rel_error"] is not None]
+            zs = [abs(r["z"]) for r in rows if r["z"] is not None]
+            param_ok = cov >= 0.9 * len(rows) or ok == len(rows)
+            meets &= param_ok
+            reasons = sorted({x for r in rows for x in r["reasons"]})
+            table.append({"dof": dof, "parameter": name, "n": len(rows), "covered": cov, "suspect": sus, "ok": ok,
+                          "mean_rel_error": (sum(errs) / len(errs)) if errs else None,
+                          "max_abs_z": max(zs) if zs else None, "meets": param_ok,
+                          "reasons": reasons[:4]})
+            n_cases += len(rows)
+            n_cov += cov
+            n_sus += sus
+            n_ok += ok
+        if sc == "none" and n_cases and n_sus > 0.1 * n_cases:
+            meets = False
+        out[sc] = {"parameters": table, "cases": n_cases, "covered": n_cov, "suspect": n_sus, "ok": n_ok,
+                   "meets_target": bool(meets)}
+    return out
+
+
+def _pct(a: int, n: int) -> str:
+    return f"{100.0 * a / n:.0f} %" if n else "-"
+
+
+def format_table(summary: dict, detail: bool = True) -> str:
+    """Markdown: one line per scenario (coverage, suspect, ok, target), then per scenario, DOF and parameter."""
+    lines = ["| scenario | cases | interval covers truth | suspect | covered or suspect | target met |",
+             "|---|---|---|---|---|---|"]
+    for sc, s in summary.items():
+        lines.append(f"| {sc} | {s['cases']} | {s['covered']} ({_pct(s['covered'], s['cases'])}) | "
+                     f"{s['suspect']} ({_pct(s['suspect'], s['cases'])}) | {s['ok']} ({_pct(s['ok'], s['cases'])}) | "
+                     f"{'yes' if s['meets_target'] else 'no'} |")
+    if not detail:
+        return "\n".join(lines)
+    lines += ["", "| scenario | DOF | parameter | mean error | max abs z | covers | suspect | main reason |",
+              "|---|---|---|---|---|---|---|---|"]
+    for sc, s in summary.items():
+        for p in s["parameters"]:
+            err = "-" if p["mean_rel_error"] is None else f"{100 * p['mean_rel_error']:+.1f} %"
+            z = "-" if p["max_abs_z"] is None else f"{p['max_abs_z']:.1f}"
+            reason = (p["reasons"][0] if p["reasons"] else "").replace("|", "/")
+            if len(reason) > 70:
+                reason = reason[:67] + "..."
+            lines.append(f"| {sc} | {p['dof']} | {p['parameter']} | {err} | {z} | {p['covered']}/{p['n']} | "
+                         f"{p['suspect']}/{p['n']} | {reason} |")
+    return "\n".join(lines)
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                              cwd=Path(__file__).resolve().parent, timeout=10).stdout.strip() or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the suite (module docstring)."""
+    from hindrax_drivers.config import DOFS
+
+    names = [s.strip() for s in (args.scenarios.split(",") if args.scenarios else scenario_names()) if s.strip()]
+    missing = [n for n in names if not _truth_path(n).is_file()]
+    if missing:
+        print(f"--scenarios: no truth file for {missing}; shipped: {', '.join(scenario_names())}", file=sys.stderr)
+        return 1
+    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
+    if not dofs or any(d not in DOFS for d in dofs):
+        print(f"--dofs: {args.dofs!r}: comma-separated DOFs from {', '.join(DOFS)}", file=sys.stderr)
+        return 1
+    if args.seeds < 1 or args.jobs < 1:
+        print("--seeds and --jobs must be >= 1", file=sys.stderr)
+        return 1
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [(args.config, n, seed, dofs, args.levels, args.cache) for n in names
+            for seed in range(1, args.seeds + 1)]
+    wall0 = time.monotonic()
+    results = []
+    if args.jobs > 1:
+        import multiprocessing as mp
+        with mp.get_context("fork").Pool(args.jobs) as pool:
+            for res in pool.imap(_case_star, jobs):
+                results.append(res)
+                print(f"[{time.monotonic() - wall0:6.0f} s] {res['scenario']} seed {res['seed']}: "
+                      f"{res['wall_s']:.0f} s", flush=True)
+    else:
+        for job in jobs:
+            res = run_case(*job)
+            results.append(res)
+            print(f"[{time.monotonic() - wall0:6.0f} s] {res['scenario']} seed {res['seed']}: {res['wall_s']:.0f} s"
+                  + (f", ABORTED: {res['abort_reason']}" if res["aborted"] else ""), flush=True)
+    summary = summarise(results)
+    date = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
+    doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names,
+           "wall_time_s": time.monotonic() - wall0, "summary": summary, "runs": results}
+    (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
+    table = format_table(summary)
+    (out / "scenarios.md").write_text(f"Scenario suite, {date}, commit {doc['commit']}, seeds 1-{args.seeds}, "
+                                      f"DOFs {', '.join(dofs)}\n\n{table}\n")
+    print(table)
+    print(f"output: {out / 'scenarios.json'}, {out / 'scenarios.md'} (wall time {doc['wall_time_s']:.0f} s)")
+    return 0
+
+
+def _json_default(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if hasattr(x, "tolist"):
+        return x.tolist()
+    return str(x)

@@ -1,0 +1,245 @@
+"""Honest intervals and a verdict for every identified parameter, added after the fit (the fit is not touched).
+
+:func:`apply_verdicts` takes the :class:`~.estimators.DofIdentification` of each DOF and the vehicle configuration
+and
+
+1. **adds the force model's uncertainty** to the fit covariance. Every parameter of the self-propelled model
+   ``tau = M nu_dot + D(nu) nu + b`` scales with the thrust: thrust s times the curve's gives parameters s times
+   the identified ones ([Hindrax-Drag] (seed 003) eq. 1 curve and eq. 9 allocation feed tau). With independent
+   relative thrust errors s_neg, s_pos of the two rotation directions (1-sigma ``thrusters.thrust_uncertainty_rel``
+   = [negative, positive], default [0.05, 0.10], see ros_ws/config/hindrax.yaml for why), parameter i moves by
+   ``theta_i (a_i ds_pos + b_i ds_neg)`` and ``cov += sum_k sigma_k^2 (theta o w_k)(theta o w_k)^T``. The weights:
+   surge, sway, yaw, roll and pitch use two thrusters in each direction of rotation for either sign of the
+   command (55-degree layout, seed 003 Fig. 5), so a = b = 1/2; heave moves down on positive and up on negative
+   thrust: ``*_positive`` (and the bias holding the net buoyancy, a downward force) a = 1, ``*_negative`` b = 1,
+   inertia a = b = 1/2. When a thrust-curve fit covariance is known (``thruster_fit_rel``: from
+   ``hindrax ident thruster-fit``, the relative std of the fitted thrust over the pulse widths used) it replaces the
+   declared value;
+2. **uses degrees of freedom that match the independent information**: the output-error residuals are correlated
+   inside a segment (3 s for a velocity-measured DOF, 10 s for heave), so the 95 % interval uses the Student t
+   quantile with (number of segments - number of parameters) degrees of freedom, not (samples - parameters);
+3. **gives each parameter ``verdict: trusted | suspect`` and the reasons**, from the checks a pool engineer makes:
+
+   * ``bias``: the constant force differs significantly from the one expected (0; heave: the configured net
+     buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide.
+   * ``methods``: the seed's steady-state fit ([Hindrax-Drag] (seed 003) eqs. 2-8) disagrees with the reported
+     quadratic damping beyond 3 combined standard deviations: the model does not explain the transients and the
+     steady states with the same numbers (lag, latency, coupling). DOF-wide. (The equation-error fit is not used:
+     its inertia is biased low by the noise of the differentiated velocity even when nothing is wrong.)
+   * ``direction``: the steady-window residuals of the two directions of motion differ beyond their scatter
+     (heave: up/down; others: forward/backward), a level-to-level inconsistency. DOF-wide.
+   * ``whiteness``: the lag-1 autocorrelation of the output-error residuals between consecutive samples is above
+     :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit). DOF-wide.
+   * ``width``: the 95 % half-width is too wide to design a controller from: above :data:`WIDTH_MAX` of the value
+     (inertia, quadratic damping), or for linear damping and bias of the total damping force at the typical
+     speed of the test (the 75th percentile of |velocity|).
+   * ``spread`` (scenario suite only, :func:`spread_reasons`): over repeated campaigns the estimates scatter more
+     than their own intervals say.
+
+All quantities SI, the parameters and units of :func:`~.estimators.parameter_names`.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy import stats
+
+from hindrax_drivers.config import VehicleConfig
+
+__all__ = ["DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
+           "segment_count", "assess_dof", "apply_verdicts", "spread_reasons"]
+
+#: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
+DEFAULT_THRUST_UNCERTAINTY_REL = (0.05, 0.10)
+#: Residual lag-1 autocorrelation above which the fit is not trusted.
+WHITENESS_MAX = 0.9
+#: Relative 95 % half-width above which a parameter is too uncertain for controller design.
+WIDTH_MAX = 0.3
+#: Segment length of the output-error fit, s (estimators.VELOCITY_SEGMENT_S / POSITION_SEGMENT_S).
+_SEGMENT_S = {"heave": 10.0}
+_SEGMENT_S_DEFAULT = 3.0
+
+
+def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
+    """(p, 2) weights [a_pos, b_neg] of each parameter on the positive / negative thrust scale (module docstring)."""
+    w = np.full((len(names), 2), 0.5)
+    if dof == "heave":
+        for i, n in enumerate(names):
+            if n.endswith("_positive") or n == "bias":
+                w[i] = (1.0, 0.0)
+            elif n.endswith("_negative"):
+                w[i] = (0.0, 1.0)
+    return w
+
+
+def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float]) -> np.ndarray:
+    """(p, p) covariance of the parameters from the thrust-scale uncertainty ``rel`` = [neg, pos] (1-sigma)."""
+    theta = np.asarray(theta, dtype=float)
+    w = thrust_weights(dof, names)
+    cov = np.zeros((theta.size, theta.size))
+    for k, sigma in ((0, float(rel[1])), (1, float(rel[0]))):
+        g = theta * w[:, k]
+        cov += sigma ** 2 * np.outer(g, g)
+    return cov
+
+
+def segment_count(dof: str, pool_time_s: float) -> int:
+    """Independent segments of the output-error fit (pool time / segment length)."""
+    return max(1, int(pool_time_s // _SEGMENT_S.get(dof, _SEGMENT_S_DEFAULT)))
+
+
+def _declared_rel(cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None) -> tuple[float, float]:
+    if thruster_fit_rel is not None:
+        return float(thruster_fit_rel[0]), float(thruster_fit_rel[1])
+    v = cfg.flat.get("thrusters.thrust_uncertainty_rel")
+    return tuple(float(x) for x in v) if v is not None else DEFAULT_THRUST_UNCERTAINTY_REL  # type: ignore
+
+
+def _expected_bias(cfg: VehicleConfig, dof: str) -> float:
+    return float(cfg.buoyancy_n - cfg.weight_n) if dof == "heave" else 0.0
+
+
+def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None = None) -> dict:
+    """Honest covariance, intervals and verdicts of one DOF (module docstring); ``r`` is not modified.
+
+    Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons}}, "verdict",
+    "reasons" (DOF-wide), "checks": {name: number}}.
+    """
+    names = list(r.names)
+    theta = np.array([r.values[n] for n in names])
+    cov_fit = r.signals.get("covariance")
+    if cov_fit is None or np.shape(cov_fit) != (len(names), len(names)):
+        cov_fit = np.diag([r.std[n] ** 2 for n in names])
+    rel = _declared_rel(cfg, thruster_fit_rel)
+    cov = np.asarray(cov_fit, dtype=float) + thrust_covariance(r.dof, names, theta, rel)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    nseg = segment_count(r.dof, r.pool_time_s)
+    t_dof = max(1, nseg - len(names))
+    tq = float(stats.t.ppf(0.975, t_dof))
+    out: dict = {}
+    for n, v, s, sf in zip(names, theta, std, np.sqrt(np.clip(np.diag(cov_fit), 0.0, None))):
+        out[n] = {"value": float(v), "std": float(s), "std_fit": float(sf), "ci95": (v - tq * s, v + tq * s),
+                  "t_dof": t_dof, "reasons": []}
+    rigid = r.values["inertia"] - r.values["added_mass"]
+    s_in = out["inertia"]["std"]
+    out["added_mass"] = {"value": float(r.values["added_mass"]), "std": s_in, "std_fit": out["inertia"]["std_fit"],
+                         "ci95": (r.values["added_mass"] - tq * s_in, r.values["added_mass"] + tq * s_in),
+                         "t_dof": t_dof, "reasons": []}
+    _ = rigid
+    dof_reasons: list[str] = []
+    checks: dict = {"segments": nseg, "t_quantile": tq, "thrust_uncertainty_rel": list(rel)}
+    # --- bias
+    b, sb = out["bias"]["value"], out["bias"]["std"]
+    expected = _expected_bias(cfg, r.dof)
+    z = (b - expected) / sb if sb > 0 else 0.0
+    checks["bias_z"] = z
+    if abs(z) > tq:
+        unit = r.units.get("bias", "")
+        dof_reasons.append(f"bias {b:+.3g} {unit} differs from the expected {expected:+.3g} {unit} (z = {z:+.1f}): "
+                           "an unmodelled force (current, tether, thrust offset)")
+    # --- methods: steady-state and equation-error against the reported fit
+    quad = [n for n in names if n.startswith("quadratic")]
+    if r.steady:
+        for n in quad:
+            if n in r.steady and r.steady[n][1] is not None and math.isfinite(r.steady[n][1] or math.nan):
+                vs, ss = r.steady[n]
+                zz = (vs - out[n]["value"]) / math.hypot(ss, out[n]["std_fit"]) if (ss or out[n]["std_fit"]) else 0.0
+                checks[f"steady_z_{n}"] = zz
+                if abs(zz) > 3.0:
+                    dof_reasons.append(f"steady-state {n} {vs:.4g} disagrees with the transient fit "
+                                       f"{out[n]['value']:.4g} (z = {zz:+.1f})")
+    # --- direction consistency of the steady windows
+    wins = r.signals.get("windows") or []
+    if len(wins) >= 4:
+        wv = np.array([w[0] for w in wins], dtype=float)
+        wf = np.array([w[1] for w in wins], dtype=float)
+        pred = _drag(r.dof, r.values, wv)
+        res = wf - pred
+        pos, neg = res[wv > 0], res[wv < 0]
+        if pos.size >= 2 and neg.size >= 2:
+            se = math.sqrt(np.var(pos, ddof=1) / pos.size + np.var(neg, ddof=1) / neg.size)
+            scale = max(float(np.median(np.abs(wf))), 1e-9)
+            se = max(se, 0.01 * scale)
+            zz = (float(np.mean(pos)) - float(np.mean(neg))) / se
+            checks["direction_z"] = zz
+            if abs(zz) > 4.0:
+                which = "down/up" if r.dof == "heave" else "positive/negative"
+                dof_reasons.append(f"{which} steady windows disagree with the model by "
+                                   f"{np.mean(pos):+.3g} / {np.mean(neg):+.3g} (z = {zz:+.1f})")
+    # --- whiteness
+    rho = r.signals.get("residual_autocorrelation")
+    if rho is not None and math.isfinite(rho):
+        checks["residual_lag1"] = float(rho)
+        if rho > WHITENESS_MAX:
+            dof_reasons.append(f"residuals not white (lag-1 autocorrelation {rho:.2f} > {WHITENESS_MAX})")
+    # --- width
+    v = np.asarray(r.signals.get("velocity", []), dtype=float)
+    v = v[np.isfinite(v)]
+    v_typ = float(np.percentile(np.abs(v), 75)) if v.size else 0.0
+    total = float(np.mean(np.abs(_drag(r.dof, r.values, np.array([v_typ, -v_typ]), bias=False)))) if v_typ else 0.0
+    for n, e in out.items():
+        half = 0.5 * (e["ci95"][1] - e["ci95"][0])
+        if n in ("inertia", "added_mass") or n.startswith("quadratic") or n == "restoring":
+            base = abs(e["value"])
+            if n == "added_mass":
+                base = abs(out["inertia"]["value"])
+            if base > 0 and half / base > WIDTH_MAX:
+                e["reasons"].append(f"95 % interval +-{100 * half / base:.0f} % of the value, too wide for controller "
+                                    "design")
+        elif total > 0:
+            contrib = half * (v_typ if n.startswith("linear") else 1.0)
+            if contrib / total > WIDTH_MAX:
+                e["reasons"].append(f"95 % interval +-{contrib:.3g} at {v_typ:.2f} (typical speed) is "
+                                    f"{100 * contrib / total:.0f} % of the damping force there")
+    for e in out.values():
+        e["reasons"] = dof_reasons + e["reasons"]
+        e["verdict"] = "suspect" if e["reasons"] else "trusted"
+    return {"parameters": out, "verdict": "suspect" if any(e["reasons"] for e in out.values()) else "trusted",
+            "reasons": dof_reasons, "checks": checks}
+
+
+def _drag(dof: str, values: Mapping[str, float], v: np.ndarray, bias: bool = True) -> np.ndarray:
+    """Damping (+ bias) force of the identified model at velocities ``v`` (restoring left out)."""
+    v = np.asarray(v, dtype=float)
+    if dof == "heave":
+        kq = np.where(v > 0, values["quadratic_damping_positive"], values["quadratic_damping_negative"])
+        kl = np.where(v > 0, values["linear_damping_positive"], values["linear_damping_negative"])
+    else:
+        kq, kl = values["quadratic_damping"], values["linear_damping"]
+    return kq * np.abs(v) * v + kl * v + (values["bias"] if bias else 0.0)
+
+
+def apply_verdicts(identifications: Mapping[str, Any], cfg: VehicleConfig,
+                   thruster_fit_rel: Sequence[float] | None = None) -> dict:
+    """:func:`assess_dof` for every DOF, written into each identification (idempotent): ``std`` and ``ci95``
+    become the honest ones, the fit-only std moves to ``signals["std_fit"]``, ``signals["assessment"]`` holds
+    the verdicts. Returns {dof: assessment}."""
+    out = {}
+    for dof, r in identifications.items():
+        if "assessment" in r.signals:
+            out[dof] = r.signals["assessment"]
+            continue
+        a = assess_dof(r, cfg, thruster_fit_rel)
+        r.signals["std_fit"] = dict(r.std)
+        for n, e in a["parameters"].items():
+            r.std[n] = e["std"]
+            r.ci95[n] = tuple(e["ci95"])
+        r.signals["assessment"] = a
+        out[dof] = a
+    return out
+
+
+def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float = 2.0) -> list[str]:
+    """Run-to-run check over repeated campaigns: the sample std of ``values`` above ``factor`` times the median
+    reported std (needs 3 or more runs)."""
+    x = np.asarray(values, dtype=float)
+    s = np.asarray(stds, dtype=float)
+    if x.size < 3:
+        return []
+    spread = float(np.std(x, ddof=1))
+    med = float(np.median(s))
+    if med > 0 and spread > factor * med:
+        return [f"run-to-run spread {spread:.3g} is {spread / med:.1f} x the reported std"]
+    return []

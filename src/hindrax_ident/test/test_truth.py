@@ -1,0 +1,118 @@
+"""Truth apart from belief (issue 16): the simulator reads the truth file, the nodes and estimators the vehicle file."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident.identification.estimators import OnlineDofEstimator, measurement_settings
+from hindrax_ident.sim.simulator import Simulator
+from hindrax_ident.sim.truth import TruthError, default_truth_path, load_truth, truth_dir, truth_from_mapping
+
+SRC = Path(__file__).resolve().parents[2]  # src/
+
+
+@pytest.fixture(scope="module")
+def vehicle():
+    return load_config(default_config_path())
+
+
+def test_vehicle_file_has_no_truth_only_keys(vehicle):
+    assert not [k for k in vehicle.flat if k.startswith(("simulation.sensors", "disturbances"))]
+
+
+def test_default_truth_is_the_shipped_noise_and_no_disturbance(vehicle):
+    doc = yaml.safe_load(default_truth_path().read_text())
+    sim = Simulator(vehicle)
+    assert sim.config.flat["simulation.sensors.dvl75.noise_std_m_s"] == doc["simulation"]["sensors"]["dvl75"][
+        "noise_std_m_s"] == 0.01
+    assert sim.config.flat["simulation.sensors.ms5837.noise_std_pa"] == 20.0
+    assert sim.truth_model.disturbances.active == []
+    assert sim.vehicle_config is vehicle
+    # the vehicle file's own values are untouched
+    assert {k: v for k, v in sim.config.flat.items() if not k.startswith("simulation.sensors")} == vehicle.flat
+
+
+def test_default_truth_fills_only_missing_keys(vehicle):
+    quiet = vehicle.with_overrides({"simulation.sensors.dvl75.noise_std_m_s": 0.0})
+    assert Simulator(quiet).config.flat["simulation.sensors.dvl75.noise_std_m_s"] == 0.0
+
+
+def test_truth_file_overrides_the_vehicle_file_for_the_simulator_only(vehicle, tmp_path):
+    p = tmp_path / "t.yaml"
+    p.write_text("thrusters: {time_constant_s: 0.3}\nsimulation: {sensors: {ms5837: {noise_std_pa: 5.0}}}\n"
+                 "disturbances: {thrust: {scale: 0.9}}\n")
+    t = load_truth(vehicle, p)
+    assert t.config.thrusters.time_constant_s == 0.3 and vehicle.thrusters.time_constant_s == 0.1
+    assert t.config.flat["simulation.sensors.ms5837.noise_std_pa"] == 5.0
+    assert t.config.flat["simulation.sensors.dvl75.noise_std_m_s"] == 0.01  # from the default truth
+    assert t.disturbances.get("thrust.scale") == 0.9 and t.disturbances.active == ["thrust.scale"]
+    assert t.differs == {"thrusters.time_constant_s": (0.1, 0.3)}
+    sim = Simulator(vehicle, truth=p)
+    assert sim.thrusters.time_constant_s == 0.3
+
+
+@pytest.mark.parametrize("text, key", [
+    ("disturbances: {thrust: {scal: 0.9}}", "disturbances.thrust.scal"),
+    ("disturbances: {thrust: {scale: -1}}", "disturbances.thrust.scale"),
+    ("disturbances: {thrust: {per_thruster: [1.0, 1.0]}}", "disturbances.thrust.per_thruster"),
+    ("thrusters: {time_constant_s: -1}", "thrusters.time_constant_s"),
+    ("'/**': {ros__parameters: {thrusters: {time_constant_s: 0.2}}}", "ros__parameters"),
+])
+def test_bad_truth_files_name_the_key(vehicle, tmp_path, text, key):
+    p = tmp_path / "bad.yaml"
+    p.write_text(text + "\n")
+    with pytest.raises(TruthError) as exc:
+        load_truth(vehicle, p)
+    assert key in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_every_shipped_truth_file_loads(vehicle):
+    files = sorted(truth_dir().rglob("*.yaml"))
+    assert len(files) >= 14
+    for f in files:
+        Simulator(vehicle, truth=f, sensors=False)
+
+
+def _string_constants(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text())
+    return [n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str)]
+
+
+def test_no_node_or_estimator_names_a_truth_only_key():
+    """Outside the simulator package (and the config schema that declares them), no module's code names
+    ``simulation.sensors.*`` or ``disturbances.*``: docstrings aside, they are not read."""
+    offenders = []
+    roots = [SRC / "hindrax_drivers" / "hindrax_drivers", SRC / "hindrax_ident" / "hindrax_ident"]
+    for root in roots:
+        for path in root.rglob("*.py"):
+            rel = path.relative_to(root).as_posix()
+            if rel.startswith("sim/") or rel == "config.py":
+                continue
+            tree = ast.parse(path.read_text())
+            docstrings = {id(n.body[0].value) for n in ast.walk(tree)
+                          if isinstance(n, (ast.Module, ast.FunctionDef, ast.ClassDef, ast.AsyncFunctionDef))
+                          and n.body and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+            for n in ast.walk(tree):
+                if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docstrings and \
+                        ("simulation.sensors" in n.value or n.value.startswith("disturbances.")):
+                    offenders.append(f"{rel}: {n.value!r}")
+    assert not offenders, offenders
+
+
+def test_estimators_tune_from_the_declared_noise(vehicle):
+    """The filters read sensors.* of the vehicle file; a different truth noise leaves them unchanged."""
+    base = measurement_settings(vehicle, "surge")
+    noisier_truth = truth_from_mapping(vehicle, {"simulation": {"sensors": {"dvl75": {"noise_std_m_s": 0.2}}}}).config
+    assert measurement_settings(noisier_truth, "surge")["std"] == base["std"]
+    declared = vehicle.with_overrides({"sensors.dvl75.noise_std_m_s": 0.05})
+    assert measurement_settings(declared, "surge")["std"] == pytest.approx(np.hypot(0.05, 0.5 * 0.05))
+    heave = vehicle.with_overrides({"sensors.ms5837.noise_std_pa": 100.0})
+    assert measurement_settings(heave, "heave")["std"] == pytest.approx(100.0 / (1000.0 * 9.81))
+    # an online estimator builds and updates from a vehicle file that has no simulation.sensors section
+    est = OnlineDofEstimator(vehicle, "surge")
+    assert est is not None
