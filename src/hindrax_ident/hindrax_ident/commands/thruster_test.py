@@ -16,7 +16,7 @@ import json
 import sys
 from typing import TYPE_CHECKING
 
-from .common import add_config_argument, load_vehicle
+from .common import CommandError, add_config_argument, load_vehicle
 
 if TYPE_CHECKING:
     from hindrax_drivers.allocation.core import AllocationCore
@@ -57,57 +57,53 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _drive(core: AllocationCore, rows: list[dict], step_s: float) -> int:
+    """Arm, step each thruster for ``step_s`` s with 1 s of neutral after it, disarm (also on Ctrl-C or any
+    error: registered before the node's clean-up, :class:`~hindrax_drivers.ros_process.RosProcess`)."""
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
 
+    from hindrax_drivers.ros_process import RosProcess
     from hindrax_msgs.msg import ThrusterPwm
     from hindrax_msgs.srv import SetArmed
 
-    rclpy.init()
-    node = rclpy.create_node("thruster_test")
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    pub = node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
-    arm = node.create_client(SetArmed, "esc/set_armed")
+    with RosProcess([]) as proc:
+        node = proc.own(rclpy.create_node("thruster_test"))
+        ex = proc.executor
+        ex.add_node(node)
+        pub = node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        arm = node.create_client(SetArmed, "esc/set_armed")
 
-    def call_arm(value: bool) -> bool:
-        fut = arm.call_async(SetArmed.Request(arm=value))
-        ex.spin_until_future_complete(fut, timeout_sec=5.0)
-        res = fut.result()
-        if res is None or not res.success:
-            print(f"{'arm' if value else 'disarm'} refused: {res.message if res else 'no answer'}", file=sys.stderr)
-            return False
-        return True
+        def call_arm(value: bool) -> bool:
+            fut = arm.call_async(SetArmed.Request(arm=value))
+            ex.spin_until_future_complete(fut, timeout_sec=5.0)
+            res = fut.result()
+            if res is None or not res.success:
+                print(f"{'arm' if value else 'disarm'} refused: {res.message if res else 'no answer'}",
+                      file=sys.stderr)
+                return False
+            return True
 
-    def hold(widths, seconds: float) -> None:
-        end = node.get_clock().now().nanoseconds + int(seconds * 1e9)
-        while node.get_clock().now().nanoseconds < end:
-            msg = ThrusterPwm(pulse_width_us=[float(x) for x in widths], armed=True)
-            msg.header.stamp = node.get_clock().now().to_msg()
-            pub.publish(msg)
-            ex.spin_once(timeout_sec=0.05)
+        def hold(widths, seconds: float) -> None:
+            end = node.get_clock().now().nanoseconds + int(seconds * 1e9)
+            while node.get_clock().now().nanoseconds < end:
+                msg = ThrusterPwm(pulse_width_us=[float(x) for x in widths], armed=True)
+                msg.header.stamp = node.get_clock().now().to_msg()
+                pub.publish(msg)
+                ex.spin_once(timeout_sec=0.05)
 
-    status = 1
-    try:
         if not arm.wait_for_service(timeout_sec=10.0):
-            print("esc/set_armed not available: is the stack running (hindrax bringup)?", file=sys.stderr)
-            return 1
+            raise CommandError("esc/set_armed not available: is the stack running (hindrax bringup)?")
+        proc.at_exit(lambda: call_arm(False))
         if not call_arm(True):
             return 1
         neutral = core.neutral()
-        for i, row in enumerate(rows):
-            widths = neutral.copy()
-            widths[i] = row["pulse_width_us"]
-            print(f"stepping {row['thruster']} (channel {row['esc_channel']}) at {row['pulse_width_us']} us",
-                  flush=True)
-            hold(widths, step_s)
-            hold(neutral, 1.0)
-        status = 0
-    except KeyboardInterrupt:
-        status = 130
-    finally:
-        call_arm(False)
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.shutdown()
-    return status
+        try:
+            for i, row in enumerate(rows):
+                widths = neutral.copy()
+                widths[i] = row["pulse_width_us"]
+                print(f"stepping {row['thruster']} (channel {row['esc_channel']}) at {row['pulse_width_us']} us",
+                      flush=True)
+                hold(widths, step_s)
+                hold(neutral, 1.0)
+        except KeyboardInterrupt:
+            proc.status = 130
+    return proc.status
