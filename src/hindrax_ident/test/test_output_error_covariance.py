@@ -1,11 +1,11 @@
 """The output-error covariance is widened to the cluster-robust (sandwich) covariance, one cluster per
-segment (estimators._at_least_cluster_robust): with residuals correlated inside segments, as a 1-DOF model
+segment (output_error.at_least_cluster_robust): with residuals correlated inside segments, as a 1-DOF model
 leaves them when the other DOFs move, the residual-variance covariance is too narrow and its 95 % intervals
 miss the truth far more often than 5 %; the widened one keeps close to 95 %."""
 import numpy as np
 from scipy import stats
 
-from hindrax_ident.identification.estimators import _at_least_cluster_robust
+from hindrax_ident.identification.output_error import at_least_cluster_robust as _at_least_cluster_robust
 
 
 def _fit(rng, n_groups=40, per_group=50, group_std=0.5, noise_std=0.2):

@@ -33,7 +33,7 @@ Methods:
    conditioned online), not the reported estimate.
 2. Offline equation-error batch LS on the smoothed signals ([Hindrax-Drag] (seed 003) eqs. 6-8,
    :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`).
-3. Offline output-error refinement (the reported result): starting from (2), ``scipy.optimize.least_squares``
+3. Offline output-error refinement (the reported result, :class:`.output_error.OutputErrorFit`): starting from (2), ``scipy.optimize.least_squares``
    integrates the 1-DOF ODE over segments (3 s; initial velocity from the smoother; RK4 at the tick rate;
    the lagged thrust evaluated exactly inside each tick) and fits the simulated velocity (or depth for heave,
    with one free offset per segment eliminated by projection) to the RAW sensor samples. Reason: the
@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import stats
 
 from hindrax_drivers.config import DOFS, VehicleConfig
 
@@ -70,6 +70,7 @@ from ..estimation.steady_windows import detect_steady_windows
 from ..sim.model import rigid_body_mass_matrix
 from .fusion import AccelAidedFilter, smooth_with_acceleration, smooth_with_rate
 from .maneuvers import euler_rates
+from .output_error import OutputErrorFit, model_terms
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
@@ -116,19 +117,8 @@ def restoring_regressor(dof: str, roll_rad, pitch_rad) -> np.ndarray:
     return np.sin(pitch_rad)
 
 
-def _rest_terms(dof: str, v, rr=None) -> np.ndarray:
-    """Columns after the acceleration column, (..., p - 1), for velocity v and restoring regressor rr."""
-    v = np.asarray(v, dtype=float)
-    q = np.abs(v) * v
-    one = np.ones_like(v)
-    if dof == "heave":
-        pos = v > 0
-        cols = [np.where(pos, q, 0.0), np.where(pos, 0.0, q), np.where(pos, v, 0.0), np.where(pos, 0.0, v), one]
-    else:
-        cols = [q, v, one]
-        if dof in ("roll", "pitch"):
-            cols.append(np.zeros_like(v) if rr is None else np.asarray(rr, dtype=float))
-    return np.stack(cols, axis=-1)
+#: the model's columns after the inertia column (:func:`.output_error.model_terms`)
+_rest_terms = model_terms
 
 
 def regressor_matrix(dof: str, acceleration, velocity, restoring=None) -> np.ndarray:
@@ -353,18 +343,40 @@ def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarra
     return t[m], z[m]
 
 
-def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured, jerk_psd, std, accel=None, rate=None):
-    """RTS-smoothed (pos, vel, acc) at the tick times from measurements at their own times.
+@dataclass(frozen=True)
+class AccelerometerAid:
+    """An accelerometer record aiding the smoother (:func:`~.fusion.smooth_with_acceleration`): sample times
+    ``t_s`` (m,) s, ``acceleration`` (m,) along the DOF's axis (m/s^2), its noise ``std`` (m/s^2) and the aided
+    model's white-jerk PSD ``jerk_psd`` (m^2/s^5)."""
 
-    accel: optional (t_acc, a_acc, accel_std, accel_jerk_psd) to use the accelerometer-aided smoother;
-    rate: optional (t_rate, rate, rate_std) to use the rate-aided smoother (:func:`~.fusion.smooth_with_rate`;
-    ``z_meas`` is then an angle)."""
+    t_s: np.ndarray
+    acceleration: np.ndarray
+    std: float
+    jerk_psd: float
+
+
+@dataclass(frozen=True)
+class RateAid:
+    """A rate record aiding an angle smoother (:func:`~.fusion.smooth_with_rate`): sample times ``t_s`` (m,) s,
+    ``rate`` (m,) rad/s (Euler-angle rate of the smoothed angle) and its noise ``std`` (rad/s)."""
+
+    t_s: np.ndarray
+    rate: np.ndarray
+    std: float
+
+
+def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured: str, jerk_psd: float, std: float,
+                     aid: AccelerometerAid | RateAid | None = None):
+    """RTS-smoothed (pos, vel, acc) (each (n,)) at the tick times ``t_ticks`` (n,) from measurements ``z_meas`` at
+    their own times ``t_meas`` (m,): ``measured`` "position" or "velocity", noise ``std``, white-jerk PSD
+    ``jerk_psd``; with an :class:`AccelerometerAid` the accelerometer-aided smoother, with a :class:`RateAid` the
+    rate-aided one (``z_meas`` is then an angle), else :func:`~hindrax_ident.estimation.filters.smooth_kinematics`.
+    All records are merged on one time grid (microsecond keys)."""
     key_ticks = np.rint(np.asarray(t_ticks) * 1e6).astype(np.int64)
     key_meas = np.rint(np.asarray(t_meas) * 1e6).astype(np.int64)
     keys = np.union1d(key_ticks, key_meas)
-    aid = accel if accel is not None else rate
     if aid is not None:
-        key_aid = np.rint(np.asarray(aid[0]) * 1e6).astype(np.int64)
+        key_aid = np.rint(np.asarray(aid.t_s) * 1e6).astype(np.int64)
         keys = np.union1d(keys, key_aid)
     z = np.full(keys.size, np.nan)
     z[np.searchsorted(keys, key_meas)] = z_meas
@@ -373,11 +385,12 @@ def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured, jerk_psd, std, accel=Non
                                           measurement_std=std)
     else:
         a = np.full(keys.size, np.nan)
-        a[np.searchsorted(keys, key_aid)] = aid[1]
-        if accel is not None:
-            pos, vel, acc = smooth_with_acceleration(keys * 1e-6, z, a, measured, std, accel[2], accel[3])
+        if isinstance(aid, AccelerometerAid):
+            a[np.searchsorted(keys, key_aid)] = aid.acceleration
+            pos, vel, acc = smooth_with_acceleration(keys * 1e-6, z, a, measured, std, aid.std, aid.jerk_psd)
         else:
-            pos, vel, acc = smooth_with_rate(keys * 1e-6, z, a, std, rate[2], jerk_psd)
+            a[np.searchsorted(keys, key_aid)] = aid.rate
+            pos, vel, acc = smooth_with_rate(keys * 1e-6, z, a, std, aid.std, jerk_psd)
     idx = np.searchsorted(keys, key_ticks)
     return pos[idx], vel[idx], acc[idx]
 
@@ -457,126 +470,8 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     bias = np.array([rate_bias_against_angle(ta, rpy[:, i], tg, rates[:, i]) for i in (0, 1)])
     ms = measurement_settings(cfg, "roll")
     out = [_smooth_on_ticks(t, ta, rpy[:, i], "position", ms["jerk_psd"], std_att,
-                            rate=(tg, rates[:, i] - bias[i], ms["std"]))[0] for i in (0, 1)]
+                            RateAid(tg, rates[:, i] - bias[i], ms["std"]))[0] for i in (0, 1)]
     return out[0], out[1], bias
-
-
-def _output_error(dof: str, theta0: np.ndarray, t: np.ndarray, force: np.ndarray, force_cmd: np.ndarray,
-                  tau_lag_s: float, rr: Optional[np.ndarray], x_s: np.ndarray, v_s: np.ndarray,
-                  z_tick: np.ndarray, measured: str, segment_s: Optional[float] = None):
-    """Output-error fit (module docstring, method 3). Returns (theta, covariance, n - p, fitted velocity)."""
-    h = float(np.median(np.diff(t)))
-    if segment_s is None:
-        segment_s = POSITION_SEGMENT_S if measured == "position" else VELOCITY_SEGMENT_S
-    seg = max(10, int(round(segment_s / h)))
-    nseg = len(t) // seg
-    if nseg < 2:
-        raise EstimationError("record too short for the output-error refinement")
-    idx = np.arange(nseg * seg).reshape(nseg, seg)
-    F, Fc = force[idx], force_cmd[idx]
-    R = None if rr is None else rr[idx]
-    Z = z_tick[idx]
-    mask = np.isfinite(Z)
-    mask[:, 0] = False
-    ok_seg = np.isfinite(v_s[idx[:, 0]]) & np.isfinite(x_s[idx[:, 0]]) & (mask.sum(axis=1) >= 3)
-    if ok_seg.sum() < 2:
-        raise EstimationError("too few usable segments for the output-error refinement")
-    F, Fc, Z, mask, idx = F[ok_seg], Fc[ok_seg], Z[ok_seg], mask[ok_seg], idx[ok_seg]
-    if R is not None:
-        R = R[ok_seg]
-    v0 = v_s[idx[:, 0]]
-    x0 = x_s[idx[:, 0]]
-    decay = [math.exp(-s / tau_lag_s) if tau_lag_s > 0 else 0.0 for s in (0.0, 0.5 * h, h)]
-
-    p_model = theta0.size
-    free_v0 = measured == "position"
-
-    def simulate(params):
-        theta = params[:p_model]
-        m = theta[0]
-        rest = theta[1:]
-        v = params[p_model:].copy() if free_v0 else v0.copy()
-        x = x0.copy()
-        V = np.empty(F.shape)
-        X = np.empty(F.shape)
-        V[:, 0], X[:, 0] = v, x
-        for i in range(F.shape[1] - 1):
-            f0 = Fc[:, i] + (F[:, i] - Fc[:, i]) * decay[0]
-            fh = Fc[:, i] + (F[:, i] - Fc[:, i]) * decay[1]
-            f1 = Fc[:, i] + (F[:, i] - Fc[:, i]) * decay[2]
-            r0 = rh = r1 = None
-            if R is not None:
-                r0, r1 = R[:, i], R[:, i + 1]
-                rh = 0.5 * (r0 + r1)
-
-            def acc(vv, ff, r):
-                return (ff - _rest_terms(dof, vv, r) @ rest) / m
-            k1 = acc(v, f0, r0)
-            k2 = acc(v + 0.5 * h * k1, fh, rh)
-            k3 = acc(v + 0.5 * h * k2, fh, rh)
-            k4 = acc(v + h * k3, f1, r1)
-            x = x + h * v + h * h / 6.0 * (k1 + k2 + k3)
-            v = v + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-            V[:, i + 1], X[:, i + 1] = v, x
-        return V, X
-
-    def residuals(theta):
-        V, X = simulate(theta)
-        if measured == "velocity":
-            r = np.where(mask, V - np.nan_to_num(Z), 0.0)
-        else:
-            r = np.where(mask, X - np.nan_to_num(Z), 0.0)
-            off = r.sum(axis=1) / mask.sum(axis=1)
-            r = np.where(mask, r - off[:, None], 0.0)
-        return r[mask]
-
-    th0 = theta0.copy()
-    th0[0] = max(th0[0], 1e-2)
-    if free_v0:  # initial velocity of every segment free (a wrong v0 would bias the integrated depth)
-        th0 = np.concatenate([th0, v0])
-    lower = np.full(th0.size, -np.inf)
-    lower[0] = 1e-3
-    sol = optimize.least_squares(residuals, th0, bounds=(lower, np.inf), x_scale="jac", method="trf")
-    r = sol.fun
-    n, p = r.size, th0.size
-    n_extra = mask.shape[0] if measured == "position" else 0
-    dof_res = n - p - n_extra
-    sigma2 = float(r @ r) / max(dof_res, 1)
-    J = sol.jac
-    cov = (sigma2 * np.linalg.pinv(J.T @ J))[:p_model, :p_model]
-    # AR(1) inflation from consecutive residuals inside segments: consecutive *samples* (a 10 Hz sensor on the
-    # 100 Hz tick grid has no two samples on adjacent ticks, so pairs of adjacent ticks would find none)
-    seg_of = np.broadcast_to(np.arange(mask.shape[0])[:, None], mask.shape)[mask]  # row-major, as r
-    same = seg_of[1:] == seg_of[:-1]
-    num = float(np.sum((r[1:] * r[:-1])[same]))
-    den = float(r @ r)
-    rho = max(0.0, min(0.95, num / den)) if den > 0 else 0.0
-    cov *= (1.0 + rho) / (1.0 - rho)
-    cov = _at_least_cluster_robust(cov, J, r, seg_of, p_model)
-    V, _ = simulate(sol.x)
-    v_fit = np.full(len(t), np.nan)
-    v_fit[idx.ravel()] = V.ravel()
-    return sol.x[:p_model], cov, dof_res, v_fit, rho
-
-
-def _at_least_cluster_robust(cov: np.ndarray, J: np.ndarray, r: np.ndarray, cluster: np.ndarray,
-                             p_model: int) -> np.ndarray:
-    """``cov`` (p_model, p_model) widened, parameter by parameter, to at least the cluster-robust (sandwich)
-    covariance with one cluster per segment: ``G / (G - 1) (J^T J)^-1 (sum_g J_g^T r_g r_g^T J_g) (J^T J)^-1``
-    (Liang and Zeger 1986). It holds whatever the correlation of the residuals inside a segment, e.g. the slowly
-    varying misfit a 1-DOF model leaves when the vehicle's other DOFs move, which the residual variance and
-    the lag-1 correction miss. Scaling is ``D cov D`` with ``D = diag(max(1, sandwich_ii / cov_ii))^(1/2)``, so the
-    result stays a covariance. Fewer than 3 clusters: ``cov`` unchanged."""
-    groups = np.unique(cluster)
-    if groups.size < 3:
-        return cov
-    JtJ_inv = np.linalg.pinv(J.T @ J)
-    scores = np.array([J[cluster == g].T @ r[cluster == g] for g in groups])  # (G, p)
-    sandwich = (JtJ_inv @ (scores.T @ scores) @ JtJ_inv)[:p_model, :p_model] * groups.size / (groups.size - 1)
-    var = np.diag(cov)
-    ratio = np.where(var > 0, np.diag(sandwich) / np.where(var > 0, var, 1.0), 1.0)
-    d = np.sqrt(np.maximum(1.0, ratio))
-    return cov * np.outer(d, d)
 
 
 def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, restoring_coefficient: float = 0.0,
@@ -644,7 +539,7 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
     aid = None
     if ms["accel"] and record.sensors.get("accel"):
         ta, aa = _log_arrays(record.sensors["accel"], k, t[0] - 2.0, t[-1])
-        aid = (ta, aa, ms["accel_std"], ms["accel_jerk_psd"])
+        aid = AccelerometerAid(ta, aa, ms["accel_std"], ms["accel_jerk_psd"])
     rr = None
     if dof in ("roll", "pitch"):
         roll_s, pitch_s, rate_bias = _smoothed_roll_pitch(record, cfg, t)
@@ -673,8 +568,10 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
         good &= np.abs(tm - t[np.clip(pos, 0, t.size - 1)]) < 1e-6
         z_tick[pos[good]] = zm[good]
         try:
-            th, cv, dres, v_fit, rho = _output_error(dof, ee.theta, t, force, force_cmd, record.time_constant_s,
-                                                     rr, x_s, v_s, z_tick, ms["measured"])
+            segment_s = POSITION_SEGMENT_S if ms["measured"] == "position" else VELOCITY_SEGMENT_S
+            oe = OutputErrorFit(dof, t, force, force_cmd, record.time_constant_s, rr, z_tick, ms["measured"], x_s,
+                                v_s, segment_s).fit(ee.theta)
+            th, cv, dres, v_fit, rho = oe.theta, oe.covariance, oe.residual_dof, oe.velocity_fit, oe.rho
             if np.all(np.isfinite(th)) and np.all(np.isfinite(np.diag(cv))):
                 theta, cov, dof_res, method = th, cv, dres, "output-error"
                 std = np.sqrt(np.clip(np.diag(cv), 0.0, None))
