@@ -43,6 +43,26 @@ P are clipped to it after each update (the eigen-decomposition is only computed 
 exceeds the bound, which is cheap to test). :meth:`RecursiveLeastSquares.reset_covariance`
 restarts P explicitly.
 
+Honesty options (issue 16; all off by default, so the plain algorithm above is unchanged):
+
+* ``directional=True``: directional forgetting (Bittanti, Bolzern and Campi 1990, "Recursive least squares
+  identification algorithms with incomplete excitation", IEEE TAC 35(12); Kulhavy 1987): information is forgotten
+  only along the current regressor, ``P^-1 <- P^-1 + eps phi phi^T`` with ``eps = mu - (1 - mu) / (phi^T P phi)``
+  (mu = the forgetting factor), i.e. ``P <- P - P phi phi^T P / (1 / eps + phi^T P phi)``: directions the
+  manoeuvre does not excite keep their information instead of winding up. Its covariance is sigma2_hat * P
+  (P^-1 is the retained information).
+* ``min_excitation``: the estimate and P are updated only while :attr:`excitation_normalised` (which always
+  accumulates) is at least this value: samples that cannot separate the parameters do not move them.
+* ``lower_bounds`` (p,): after each update the estimate is projected onto theta >= lower bound (physical signs:
+  positive inertia, non-negative damping; NaN = unbounded).
+* ``change_threshold``: a change detector on the normalised a-priori error ``e^2 / (sigma2_hat (1 + phi^T P phi))``
+  (chi-square with 1 degree of freedom for a correct model): when its mean over ``change_samples`` consecutive
+  samples exceeds the threshold, the covariance is reset (:meth:`reset_covariance`) and the residual statistics
+  restart, so the estimate re-adapts to the changed parameters (:attr:`changes_detected` counts them).
+* :meth:`published_std`: the standard deviation where the estimate has converged (std <= rel_tol |theta| + abs_tol,
+  enough samples, excitation above ``min_excitation``), NaN elsewhere: "not converged" rather than a number that
+  does not cover the truth.
+
 Everything is a few small dense numpy operations per sample (p = 4..6), fast enough for
 50-100 Hz per DOF.
 """
@@ -73,6 +93,12 @@ class RecursiveLeastSquares:
         names: optional p parameter names (for :meth:`to_dict`).
         max_covariance: upper bound on the eigenvalues of P (anti wind-up); ``None`` (default)
             means the largest eigenvalue of P0; pass ``float('inf')`` to disable bounding.
+        directional: directional forgetting instead of exponential (module docstring).
+        min_excitation: update only while excitation_normalised >= this (0 = always).
+        lower_bounds: optional (p,) lower bounds on theta (NaN = none), e.g. 0 for damping.
+        change_threshold: mean normalised a-priori error over ``change_samples`` samples above which a change is
+            declared and the covariance reset (None = off).
+        change_samples: window of the change detector (samples).
 
     Raises:
         EstimationError: invalid sizes or values.
@@ -81,7 +107,9 @@ class RecursiveLeastSquares:
     def __init__(self, n_params: int, forgetting: float = 0.995,
                  initial_covariance=1e3, initial_theta=None,
                  names: Optional[Sequence[str]] = None,
-                 max_covariance: Optional[float] = None):
+                 max_covariance: Optional[float] = None, directional: bool = False,
+                 min_excitation: float = 0.0, lower_bounds=None,
+                 change_threshold: Optional[float] = None, change_samples: int = 50):
         if int(n_params) != n_params or n_params < 1:
             raise EstimationError(f"n_params must be a positive integer, got {n_params}")
         self._p = int(n_params)
@@ -118,6 +146,21 @@ class RecursiveLeastSquares:
             if len(names) != self._p:
                 raise EstimationError(f"names has {len(names)} entries for {self._p} parameters")
         self.names = names
+        self.directional = bool(directional)
+        self.min_excitation = float(min_excitation)
+        if not (0.0 <= self.min_excitation <= 1.0):
+            raise EstimationError(f"min_excitation must be in [0, 1], got {min_excitation}")
+        if lower_bounds is None:
+            self._lb = None
+        else:
+            lb = np.asarray(lower_bounds, dtype=float)
+            if lb.shape != (self._p,):
+                raise EstimationError(f"lower_bounds must have {self._p} entries")
+            self._lb = np.where(np.isnan(lb), -np.inf, lb)
+        if change_threshold is not None and not change_threshold > 1.0:
+            raise EstimationError(f"change_threshold must be > 1 (chi-square mean), got {change_threshold}")
+        self.change_threshold = change_threshold
+        self.change_samples = max(1, int(change_samples))
         self.reset()
 
     # ------------------------------------------------------------------ state management
@@ -129,9 +172,13 @@ class RecursiveLeastSquares:
         self._Q = np.linalg.inv(self._P0)  # prior pseudo-data + sum lambda^(2(k-j)) phi phi^T
         self._R = np.zeros((p, p))      # sum lambda^(k-j) phi phi^T (excitation)
         self._S = 0.0                   # weighted residual sum of squares
-        self._w = 0.0                   # effective window sum lambda^(k-j)
+        self._w = 0.0                   # effective window sum lambda^(k-j) of the samples that updated theta
+        self._wr = 0.0                  # the same over every sample (normalises the excitation)
         self._n = 0
         self._covariance_resets = 0
+        self._changes = 0
+        self._nis: list[float] = []
+        self._gated = 0
 
     def reset_covariance(self, covariance=None) -> None:
         """Restart P (to P0 or to ``covariance`` * I / matrix) keeping theta and statistics.
@@ -175,23 +222,54 @@ class RecursiveLeastSquares:
         lam = self._lambda
         P = self._P
         Pphi = P @ phi
-        denom = lam + phi @ Pphi
+        r = float(phi @ Pphi)
         err = y - phi @ self._theta
-        K = Pphi / denom
-        self._theta = self._theta + K * err
-        P = (P - np.outer(K, Pphi)) / lam
-        P = 0.5 * (P + P.T)
+        outer = np.outer(phi, phi)
+        self._R = lam * self._R + outer
+        self._wr = lam * self._wr + 1.0
+        self._n += 1
+        if self.min_excitation > 0.0 and self.excitation_normalised < self.min_excitation:
+            self._gated += 1  # not informative enough: theta and P stay (the excitation keeps accumulating)
+            return float(err)
+        self._w = lam * self._w + 1.0
+        if self.directional:
+            denom = 1.0 + r
+            K = Pphi / denom
+            self._theta = self._theta + K * err
+            eps = lam - (1.0 - lam) / r if r > 1e-12 else 1.0
+            if eps > 0.0:
+                P = P - np.outer(Pphi, Pphi) / (1.0 / eps + r)
+            P = 0.5 * (P + P.T)
+            self._S = lam * self._S + err * err / denom
+        else:
+            denom = lam + r
+            K = Pphi / denom
+            self._theta = self._theta + K * err
+            P = (P - np.outer(K, Pphi)) / lam
+            P = 0.5 * (P + P.T)
+            self._S = lam * self._S + lam * err * err / denom
         if np.trace(P) > self._max_cov:
             ev, V = np.linalg.eigh(P)
             if ev[-1] > self._max_cov:
                 P = (V * np.clip(ev, 0.0, self._max_cov)) @ V.T
         self._P = P
-        outer = np.outer(phi, phi)
         self._Q = (lam * lam) * self._Q + outer
-        self._R = lam * self._R + outer
-        self._S = lam * self._S + lam * err * err / denom
-        self._w = lam * self._w + 1.0
-        self._n += 1
+        if self._lb is not None:
+            self._theta = np.maximum(self._theta, self._lb)
+        if self.change_threshold is not None:
+            s2 = self.sigma2
+            if np.isfinite(s2) and s2 > 0.0:
+                self._nis.append(err * err / (s2 * (1.0 + r)))
+                if len(self._nis) > self.change_samples:
+                    self._nis.pop(0)
+                if len(self._nis) == self.change_samples and \
+                        sum(self._nis) / self.change_samples > self.change_threshold:
+                    self._changes += 1
+                    self._nis.clear()
+                    self.reset_covariance()
+                    self._S = 0.0
+                    self._w = 0.0
+                    self._Q = np.linalg.inv(self._P)
         return float(err)
 
     def update_batch(self, Phi, Y) -> np.ndarray:
@@ -240,6 +318,8 @@ class RecursiveLeastSquares:
     @property
     def dof(self) -> float:
         """Effective residual degrees of freedom N_eff - tr(P Q) (= n - p for lambda = 1)."""
+        if self.directional:
+            return self._w - self._p
         return self._w - float(np.sum(self._P * self._Q))  # tr(P Q), both symmetric
 
     @property
@@ -259,6 +339,8 @@ class RecursiveLeastSquares:
         s2 = self.sigma2
         if not np.isfinite(s2):
             return np.full((self._p, self._p), np.nan)
+        if self.directional:  # P^-1 is the retained information (module docstring)
+            return s2 * self._P.copy()
         C = s2 * (self._P @ self._Q @ self._P)
         return 0.5 * (C + C.T)
 
@@ -273,9 +355,9 @@ class RecursiveLeastSquares:
 
         R = sum lambda^(k-j) phi phi^T: near zero when a parameter direction is not excited.
         """
-        if self._w == 0.0:
+        if self._wr == 0.0:
             return 0.0
-        return float(np.linalg.eigvalsh(self._R / self._w)[0])
+        return float(np.linalg.eigvalsh(self._R / self._wr)[0])
 
     @property
     def excitation_normalised(self) -> float:
@@ -285,10 +367,35 @@ class RecursiveLeastSquares:
         phi); approaches 1 for orthogonal, equally weighted regressors.
         """
         d = np.diag(self._R)
-        if self._w == 0.0 or np.any(d <= 0.0):
+        if self._wr == 0.0 or np.any(d <= 0.0):
             return 0.0
         s = 1.0 / np.sqrt(d)
         return float(max(0.0, np.linalg.eigvalsh(self._R * np.outer(s, s))[0]))
+
+    @property
+    def changes_detected(self) -> int:
+        """Number of parameter changes the detector declared (each reset the covariance)."""
+        return self._changes
+
+    @property
+    def gated_samples(self) -> int:
+        """Samples skipped by the excitation gate."""
+        return self._gated
+
+    def converged_mask(self, rel_tol: float = 0.05, abs_tol=0.0, min_samples: Optional[int] = None) -> np.ndarray:
+        """(p,) bool: std <= rel_tol |theta| + abs_tol per parameter (abs_tol scalar or (p,)), with at least
+        ``min_samples`` samples (default 10 p) and the excitation at or above ``min_excitation``."""
+        if min_samples is None:
+            min_samples = 10 * self._p
+        std = self.std
+        if self._n < min_samples or self.excitation_normalised < self.min_excitation:
+            return np.zeros(self._p, dtype=bool)
+        ok = np.isfinite(std) & (std <= rel_tol * np.abs(self._theta) + np.asarray(abs_tol, dtype=float))
+        return ok
+
+    def published_std(self, rel_tol: float = 0.05, abs_tol=0.0, min_samples: Optional[int] = None) -> np.ndarray:
+        """(p,) the std where :meth:`converged_mask` holds, NaN ("not converged") elsewhere."""
+        return np.where(self.converged_mask(rel_tol, abs_tol, min_samples), self.std, np.nan)
 
     @property
     def covariance_resets(self) -> int:

@@ -1,0 +1,82 @@
+"""The honesty options of the online RLS (issue 16 item 5): directional forgetting, excitation gate, physical
+signs, change detection with covariance reset, and a standard deviation published only when converged."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hindrax_ident.estimation.rls import RecursiveLeastSquares
+
+
+def _feed(rls, rng, theta, n, cols=(0, 1), noise=0.05):
+    for _ in range(n):
+        phi = np.zeros(rls.n_params)
+        for c in cols:
+            phi[c] = rng.normal()
+        rls.update(phi, float(phi @ theta) + rng.normal(0.0, noise))
+
+
+def test_directional_forgetting_keeps_unexcited_directions():
+    """Exciting only parameter 0 for a long time: exponential forgetting winds P[1, 1] up to its bound,
+    directional forgetting leaves it where the excited phase put it."""
+    rng = np.random.default_rng(1)
+    theta = np.array([2.0, -1.0])
+    runs = {}
+    for directional in (False, True):
+        r = RecursiveLeastSquares(2, forgetting=0.99, initial_covariance=100.0, directional=directional)
+        _feed(r, rng, theta, 500)
+        p11_before = r.P[1, 1]
+        _feed(r, rng, theta, 3000, cols=(0,))
+        runs[directional] = (p11_before, r.P[1, 1], r.theta)
+    assert runs[False][1] > 100 * runs[False][0]  # wound up
+    assert runs[True][1] < 2.0 * runs[True][0]  # kept
+    assert np.allclose(runs[True][2], theta, atol=0.05)
+
+
+def test_excitation_gate_freezes_the_estimate():
+    r = RecursiveLeastSquares(2, forgetting=0.999, min_excitation=0.05)
+    for _ in range(200):  # collinear regressors: the two parameters cannot be separated
+        r.update([1.0, 1.0], 3.0)
+    assert np.all(r.theta == 0.0) and r.gated_samples == 200
+    assert r.excitation_normalised < 0.05
+    rng = np.random.default_rng(2)
+    _feed(r, rng, np.array([1.0, 2.0]), 400, noise=0.01)
+    assert np.allclose(r.theta, [1.0, 2.0], atol=0.05)
+
+
+def test_lower_bounds_keep_physical_signs():
+    rng = np.random.default_rng(3)
+    r = RecursiveLeastSquares(2, forgetting=1.0, lower_bounds=[0.0, math.nan])
+    for _ in range(300):  # true first parameter slightly negative: projected onto 0
+        phi = rng.normal(size=2)
+        r.update(phi, float(phi @ [-0.5, 1.0]) + rng.normal(0.0, 0.01))
+        assert r.theta[0] >= 0.0
+    assert r.theta[0] == 0.0
+
+
+def test_change_is_detected_and_the_estimate_follows():
+    rng = np.random.default_rng(4)
+    r = RecursiveLeastSquares(2, forgetting=0.999, change_threshold=4.0, change_samples=30)
+    _feed(r, rng, np.array([1.0, 1.0]), 3000)
+    assert r.changes_detected == 0  # no false alarm on 3000 samples of a correct model
+    _feed(r, rng, np.array([1.5, 0.5]), 400)
+    assert r.changes_detected >= 1 and r.covariance_resets >= 1
+    assert np.allclose(r.theta, [1.5, 0.5], atol=0.05)
+    plain = RecursiveLeastSquares(2, forgetting=0.999)
+    rng = np.random.default_rng(4)
+    _feed(plain, rng, np.array([1.0, 1.0]), 3000)
+    _feed(plain, rng, np.array([1.5, 0.5]), 400)
+    assert abs(plain.theta[0] - 1.5) > 0.1  # without the reset the old data still pull (memory 1000 samples)
+
+
+def test_std_published_only_when_converged():
+    r = RecursiveLeastSquares(2, forgetting=1.0)
+    r.update([1.0, 0.0], 1.0)
+    assert np.all(np.isnan(r.published_std()))
+    rng = np.random.default_rng(5)
+    _feed(r, rng, np.array([2.0, 0.001]), 2000, noise=0.05)
+    pub = r.published_std(rel_tol=0.05)
+    assert math.isfinite(pub[0]) and pub[0] == r.std[0]
+    assert math.isnan(pub[1])  # std of a tiny parameter is not 5 % of it
+    assert math.isfinite(r.published_std(rel_tol=0.05, abs_tol=[0.0, 0.01])[1])
