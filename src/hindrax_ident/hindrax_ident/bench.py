@@ -23,9 +23,11 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 BENCHMARKS: dict[str, str] = {
     "stack": "hindrax_ident.benchmarks.stack",
     "actuation": "hindrax_ident.benchmarks.actuation",
+    "safety": "hindrax_ident.benchmarks.safety",
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
     "identification": "hindrax_ident.benchmarks.identification",
+    "scenarios": "hindrax_ident.benchmarks.scenarios",
     "recorder": "hindrax_ident.benchmarks.recorder",
     "serial_drivers": "hindrax_ident.benchmarks.serial_drivers",
     "cli": "hindrax_ident.benchmarks.cli",

@@ -125,6 +125,7 @@ class EscNode(Node):
         self.watchdog_trips = 0
         self.steady_watchdog_trips = 0
         self.chip_reinits = 0
+        self.last_chip_reinit_monotonic: float | None = None  # time.monotonic() of the last detection
         self.armed = False
         self.command: np.ndarray | None = None
         self.command_time = None
@@ -382,6 +383,7 @@ class EscNode(Node):
         if not mismatch:
             return
         self.chip_reinits += 1
+        self.last_chip_reinit_monotonic = time.monotonic()
         self.diag.count("chip_reinit")
         was_armed = self.armed
         self.armed = False

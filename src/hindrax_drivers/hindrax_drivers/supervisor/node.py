@@ -14,7 +14,8 @@ Subscribes (ROS time of arrival is used for rates and run time; ``use_sim_time``
     e.g. the identification node when it aborts a manoeuvre on a limit).
 Services
     ``supervisor/estop`` (std_srvs/Trigger): operator emergency stop: trip and disarm now.
-    ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again).
+    ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again; a disarm
+    request still in flight, :attr:`SupervisorNode.disarm_future`, may land after a very quick re-arm).
 Publishes
     ``supervisor/status`` (diagnostic_msgs/DiagnosticStatus: level OK or ERROR, message = the breach reason, values
     = the supervised quantities) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
@@ -63,6 +64,7 @@ class SupervisorNode(Node):
         self.last_breach_time_s: float | None = None
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
+        self.disarm_future = None  # the last esc/set_armed(arm=False) request
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10)
         self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10)
         self.create_subscription(Range, "ping/altitude", self.on_altitude, 10)
@@ -160,7 +162,7 @@ class SupervisorNode(Node):
         if not self.esc_client.service_is_ready():
             self.get_logger().error("esc/set_armed not available: cannot disarm", throttle_duration_sec=1.0)
             return
-        self.esc_client.call_async(SetArmed.Request(arm=False))
+        self.disarm_future = self.esc_client.call_async(SetArmed.Request(arm=False))
 
     def _publish_status(self) -> None:
         t = self._now_s()
