@@ -307,6 +307,8 @@ SCHEMA.update({
     "recording.flush_interval_s": _f("close and fsync the open chunk once its oldest message is this old, s "
                                      "(bounds the data lost on power loss; 0 = only when the chunk is full)",
                                      0.0, 3600.0),
+    "recording.min_free_disk_mb": _f("stop recording cleanly (bag finished) when the free space of the bag's "
+                                     "filesystem falls below this, MB (1e6 bytes; 0 = no check)", 0.0, 1e7),
 })
 
 #: Optional keys: absent is fine; present must validate. Everything else in SCHEMA is required.

@@ -21,11 +21,15 @@ Behaviour
   (:mod:`~hindrax_drivers.recording.writer`); ``hindrax bag recover`` repairs the bag.
 - Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag,
   messages written and dropped, and one key per topic (``topic:/name`` -> count).
+- Disk floor: every ``disk_check_period_s`` (and before a start) the free space of the filesystem the bag
+  goes to is compared with ``recording.min_free_disk_mb``; below it the recorder stops cleanly (the bag is
+  finished: summary, metadata.yaml), refuses new starts, and reports the reason at level ERROR on
+  ``/diagnostics`` until space is freed. 0 turns the check off.
 
 Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.yaml):
 ``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty =
 timestamped directory under ``recording.output_root``), ``autostart`` (bool, false),
-``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000).
+``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000), ``disk_check_period_s`` (1.0).
 
 Run alone: ``python -m hindrax_drivers.recording.recorder_node --ros-args --params-file
 ros_ws/config/hindrax.yaml -p autostart:=true``.
@@ -34,12 +38,14 @@ from __future__ import annotations
 
 import datetime as _dt
 import functools
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -72,10 +78,12 @@ class RecorderNode(Node):
     ValueError for an invalid topic regex given at start-up.
     """
 
-    def __init__(self, node_name: str = "recorder", **kwargs: Any) -> None:
-        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
+    def __init__(self, node_name: str = "recorder", *, statvfs: Any = None, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self._cfg = node_config(self, on_error=lambda m: self.get_logger().error(m))
+        #: os.statvfs, or a stand-in with the same result fields (tests)
+        self._statvfs = statvfs or os.statvfs
+        self._disk_full: str = ""
+        self._cfg = node_config(self, on_error=lambda m: self.get_logger().error(m), keys=("recording",))
         self._topics_param = list(self._param("topics", []) or [])
         self._regex_param = str(self._param("topic_regex", ""))
         self._all_param = bool(self._param("all_topics", False))
@@ -86,6 +94,8 @@ class RecorderNode(Node):
         autostart = bool(self._param("autostart", False))
         self._options = WriterOptions.from_flat(self._cfg.flat)
         self._output_root = Path(self._cfg.flat.get("recording.output_root", "runs"))
+        self._min_free_bytes = float(self._cfg.flat.get("recording.min_free_disk_mb", 0.0)) * 1e6
+        self._disk_check_period_s = float(self._param("disk_check_period_s", 1.0))
 
         self._writer: ThreadedBagWriter | None = None
         self._selection: TopicSelection | None = None
@@ -99,13 +109,56 @@ class RecorderNode(Node):
         self.create_service(StopRecording, "recorder/stop", self._on_stop)
         self._discovery_timer = self.create_timer(self._discovery_period_s, self._discover)
         self.create_timer(self._status_period_s, self._publish_status)
+        if self._min_free_bytes > 0.0:
+            self.create_timer(self._disk_check_period_s, self.check_disk)
         if autostart:
             self.start_recording()
 
+    _PARAM_DOCS = {
+        "topics": "topics to record (names); with topic_regex and all_topics empty: recording.topics, else all",
+        "topic_regex": "record topics matching this regular expression (re.search)",
+        "all_topics": "record every topic",
+        "output_dir": "bag directory (empty: a timestamped directory under recording.output_root)",
+        "discovery_period_s": "period of the graph poll that subscribes to new topics, s",
+        "status_period_s": "period of the /diagnostics status, s",
+        "queue_depth": "subscription queue depth (keep last)",
+        "autostart": "start recording at start-up",
+        "disk_check_period_s": "period of the free-disk check against recording.min_free_disk_mb, s",
+    }
+
     def _param(self, name: str, default: Any) -> Any:
         if not self.has_parameter(name):
-            self.declare_parameter(name, default)
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description=self._PARAM_DOCS.get(name, ""), read_only=True, dynamic_typing=True))
         return self.get_parameter(name).value
+
+    # -- disk floor -------------------------------------------------------------------------------
+    def free_disk_bytes(self, path: Path) -> float:
+        """Free bytes available to this user on the filesystem holding ``path`` (its nearest existing parent)."""
+        p = Path(path).absolute()
+        while not p.exists() and p != p.parent:
+            p = p.parent
+        st = self._statvfs(str(p))
+        return float(st.f_bavail) * float(st.f_frsize)
+
+    def _below_floor(self, path: Path) -> str:
+        """The reason (one line) when the free space at ``path`` is below the floor, else ""."""
+        if self._min_free_bytes <= 0.0:
+            return ""
+        free = self.free_disk_bytes(path)
+        if free >= self._min_free_bytes:
+            return ""
+        return (f"free disk space {free / 1e6:.1f} MB at {path} is below recording.min_free_disk_mb = "
+                f"{self._min_free_bytes / 1e6:g}")
+
+    def check_disk(self) -> None:
+        """Stop recording cleanly (bag finished) when the free space falls below ``recording.min_free_disk_mb``."""
+        target = self.bag_path if self._writer is not None else (self._output_dir_param or self._output_root)
+        reason = self._below_floor(Path(target))
+        self._disk_full = reason
+        if reason and self._writer is not None:
+            self._log(f"{reason}: stopping the recording", warning=True)
+            self.stop_recording()
 
     # -- recording control ------------------------------------------------------------------------
     @property
@@ -135,6 +188,10 @@ class RecorderNode(Node):
         if self._writer is not None:
             raise RuntimeError(f"already recording to {self._writer.bag_dir}")
         out = Path(output_dir or self._output_dir_param or default_bag_dir(self._output_root))
+        reason = self._below_floor(out)
+        if reason:
+            self._disk_full = reason
+            raise OSError(f"not recording: {reason}")
         self._selection = selection or self.default_selection()
         self._writer = ThreadedBagWriter(out, self._options)
         self._skipped.clear()
@@ -162,8 +219,11 @@ class RecorderNode(Node):
 
     def _log(self, text: str, warning: bool = False) -> None:
         """Log through ROS while the context is up; after SIGINT/SIGTERM (context shut down) to stderr."""
-        if self.context.ok():
-            (self.get_logger().warning if warning else self.get_logger().info)(text)
+        if self.context.ok():  # one call site per severity: rclpy refuses two severities from one line
+            if warning:
+                self.get_logger().warning(text)
+            else:
+                self.get_logger().info(text)
         else:
             print(f"[{self.get_name()}] {text}", file=sys.stderr)
 
@@ -265,7 +325,10 @@ class RecorderNode(Node):
         w = self._writer
         values = [KeyValue(key="state", value="recording" if w else "idle"),
                   KeyValue(key="bag", value=str(self.bag_path or ""))]
-        if w is None:
+        if w is None and self._disk_full:
+            st.level = DiagnosticStatus.ERROR
+            st.message = f"stopped: {self._disk_full}"
+        elif w is None:
             st.level = DiagnosticStatus.OK
             st.message = "idle"
         else:

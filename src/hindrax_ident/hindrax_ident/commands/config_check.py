@@ -9,12 +9,21 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", help="vehicle configuration YAML (ros-args params-file layout)")
+    parser.add_argument("file", nargs="?", default=None,
+                        help="vehicle configuration YAML (ros-args params-file layout); default: the "
+                             "installed share/hindrax_drivers/config/hindrax.yaml, or the repository's "
+                             "ros_ws/config/hindrax.yaml in a checkout")
 
 
 def run(args: argparse.Namespace) -> int:
-    from hindrax_drivers.config import ConfigError, load_config
+    from hindrax_drivers.config import ConfigError, default_config_path, load_config
 
+    if args.file is None:
+        try:
+            args.file = str(default_config_path())
+        except FileNotFoundError as exc:
+            print(exc)
+            return 1
     try:
         cfg = load_config(args.file)
     except ConfigError as exc:

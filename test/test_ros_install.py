@@ -1,0 +1,200 @@
+"""`make ros-install` as a new user on the vehicle would use it: colcon builds a copy of the workspace, and the
+installed executables run from the install space with the installed vehicle file.
+
+Built once per module in a temporary copy of the repository's ros_ws + src (about 50 s on 2 cores). Checks:
+every node's console script is installed in lib/<package>, `hindrax` is on PATH after sourcing the install and
+finds the installed vehicle file without --config, the launch files and the Foxglove layout are in share/,
+installed allocation_node answers a wrench and installed static_tf_node publishes /tf_static (both started
+with `--ros-args --params-file <installed hindrax.yaml>`), and a driver whose device is absent keeps running
+and reports the error on /diagnostics.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from hindrax_drivers.testing import ros_context, wait_until
+
+
+@contextlib.contextmanager
+def graph():
+    """A test node in an isolated context (the domain of ROS_DOMAIN_ID) and a spin-once function."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    with ros_context() as ctx:
+        node = rclpy.create_node("install_test", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        try:
+            yield ctx, node, lambda: ex.spin_once(timeout_sec=0.05)
+        finally:
+            ex.shutdown()
+            node.destroy_node()
+
+REPO = Path(__file__).resolve().parents[1]
+VENV = Path(sys.prefix)
+
+DRIVER_NODES = ["dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
+                "recorder_node", "player_node", "static_tf_node", "supervisor_node"]
+IDENT_NODES = ["identification_node", "simulator_node", "hindrax"]
+
+
+@pytest.fixture(scope="module")
+def install(tmp_path_factory):
+    """A colcon install of a copy of the workspace; returns (install dir, environment after sourcing it)."""
+    root = tmp_path_factory.mktemp("repo")
+    ignore = shutil.ignore_patterns("__pycache__", "*.egg-info", "*.pyc", "test")
+    shutil.copytree(REPO / "src", root / "src", symlinks=True, ignore=ignore)
+    shutil.copytree(REPO / "ros_ws" / "config", root / "ros_ws" / "config")
+    (root / "ros_ws" / "src").symlink_to("../src")
+    for f in ("Makefile", "requirements-colcon.txt"):
+        shutil.copy2(REPO / f, root / f)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT_", "COLCON_", "PYTHONPATH"))}
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    # `-o setup`: the shared venv is set up already; only the ros-install recipe runs.
+    r = subprocess.run(["make", "-o", "setup", "ros-install", f"VENV={VENV}"], cwd=root, env=env,
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    inst = root / "ros_ws" / "install"
+    out = subprocess.run(["bash", "-c", f"source {VENV}/bin/activate && source {inst}/setup.bash && env -0"],
+                         env=env, capture_output=True, timeout=60, check=True).stdout
+    sourced = dict(kv.split("=", 1) for kv in out.decode().split("\0") if "=" in kv)
+    sourced["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    sourced["ROS_DOMAIN_ID"] = os.environ.get("ROS_DOMAIN_ID", "0")
+    print("colcon:", r.stdout.strip().splitlines()[-1] if r.stdout.strip() else "")
+    return inst, sourced
+
+
+def test_every_node_and_hindrax_are_installed(install):
+    inst, env = install
+    for node in DRIVER_NODES:
+        assert os.access(inst / "lib" / "hindrax_drivers" / node, os.X_OK), node
+    for node in IDENT_NODES:
+        assert os.access(inst / "lib" / "hindrax_ident" / node, os.X_OK), node
+    installed = sorted(p.name for pkg in ("hindrax_drivers", "hindrax_ident") for p in (inst / "lib" / pkg).iterdir())
+    print("installed executables:", " ".join(installed))
+    # the installed package is the one imported, not the repository's
+    r = subprocess.run(["python3", "-c", "import hindrax_drivers, hindrax_ident; print(hindrax_drivers.__file__); "
+                        "print(hindrax_ident.__file__)"], env=env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and all(line.startswith(str(inst)) for line in r.stdout.split()), r.stdout + r.stderr
+
+
+def test_share_holds_vehicle_file_launch_files_and_layout(install):
+    inst, _ = install
+    share = inst / "share"
+    installed_cfg = share / "hindrax_drivers" / "config" / "hindrax.yaml"
+    assert installed_cfg.read_text() == (REPO / "ros_ws" / "config" / "hindrax.yaml").read_text()
+    launches = sorted(p.name for p in share.glob("*/launch/*.launch.xml"))
+    assert launches == sorted(p.name for p in REPO.glob("src/*/launch/*.launch.xml")) and launches
+    assert list((share / "hindrax_ident" / "foxglove").glob("*.json"))
+    for launch in share.glob("*/launch/*.launch.xml"):
+        for node in ET.parse(launch).getroot().iter("node"):
+            pkg, exe = node.get("pkg"), node.get("exec")
+            if pkg.startswith("hindrax_"):
+                assert os.access(inst / "lib" / pkg / exe, os.X_OK), f"{launch.name}: {pkg}/{exe} not installed"
+
+
+def test_installed_hindrax_is_on_path_and_finds_the_installed_vehicle_file(install, tmp_path):
+    inst, env = install
+    which = shutil.which("hindrax", path=env["PATH"])
+    assert which == str(inst / "bin" / "hindrax")
+    r = subprocess.run(["hindrax", "config", "check"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stdout.startswith(f"{inst / 'share' / 'hindrax_drivers' / 'config' / 'hindrax.yaml'}: OK"), r.stdout
+
+
+def _start(inst, env, exe, *ros_args):
+    params = inst / "share" / "hindrax_drivers" / "config" / "hindrax.yaml"
+    return subprocess.Popen([str(exe), "--ros-args", "--params-file", str(params), *ros_args], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _stop(*procs):
+    out = []
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(2)
+        try:
+            out.append(p.communicate(timeout=15)[0])
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out.append(p.communicate()[0])
+    return out
+
+
+def test_installed_allocation_answers_a_wrench_and_static_tf_is_latched(install):
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from tf2_msgs.msg import TFMessage
+
+    from hindrax_msgs.msg import ThrusterPwm
+
+    inst, env = install
+    with graph() as (ctx, node, spin):
+        env = dict(env, ROS_DOMAIN_ID=str(ctx.get_domain_id()))
+        alloc = _start(inst, env, inst / "lib" / "hindrax_drivers" / "allocation_node")
+        tf = _start(inst, env, inst / "lib" / "hindrax_drivers" / "static_tf_node")
+        try:
+            pwm, tfs = [], []
+            node.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", pwm.append, 10)
+            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            node.create_subscription(TFMessage, "/tf_static", tfs.append, latched)
+            pub = node.create_publisher(WrenchStamped, "wrench", 10)
+            wait_until(lambda: pub.get_subscription_count() > 0, 30, spin, "installed allocation_node subscribed")
+            w = WrenchStamped()
+            w.header.frame_id = "base_link"
+
+            def send():
+                w.header.stamp = node.get_clock().now().to_msg()
+                w.wrench.force.x = 10.0
+                pub.publish(w)
+                spin()
+            wait_until(lambda: pwm, 20, send, "pulse widths from the installed allocation_node")
+            assert len(pwm[-1].pulse_width_us) == 8 and max(pwm[-1].pulse_width_us) > 1500.0
+            wait_until(lambda: tfs, 20, spin, "/tf_static from the installed static_tf_node")
+            children = {t.child_frame_id for t in tfs[-1].transforms}
+            assert {"imu_link", "dvl_link", "ping_link", "pressure_link"} | {f"thruster_{i}" for i in range(1, 9)} \
+                == children
+            assert {t.header.frame_id for t in tfs[-1].transforms} == {"base_link"}
+        finally:
+            outs = _stop(alloc, tf)
+        assert alloc.returncode == 0 and tf.returncode == 0, outs
+
+
+def test_installed_driver_with_absent_device_keeps_running_and_reports_on_diagnostics(install):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+
+    inst, env = install
+    with graph() as (ctx, node, spin):
+        env = dict(env, ROS_DOMAIN_ID=str(ctx.get_domain_id()))
+        dvl = _start(inst, env, inst / "lib" / "hindrax_drivers" / "dvl75_node",
+                     "-p", "sensors.dvl75.port:=/dev/hindrax-absent-dvl")
+        baro = _start(inst, env, inst / "lib" / "hindrax_drivers" / "ms5837_node", "-p", "sensors.ms5837.i2c_bus:=29")
+        try:
+            statuses: dict[str, list] = {}
+
+            def on_diag(msg):
+                for s in msg.status:
+                    statuses.setdefault(s.name, []).append(s)
+            node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+
+            def bad(word):
+                return [s for name, ss in statuses.items() if word in name for s in ss
+                        if s.level[0] >= DiagnosticStatus.WARN[0]]
+            # repeated reports (the node keeps running and retrying), each one not OK
+            wait_until(lambda: len(bad("dvl")) >= 2 and len(bad("ms5837")) >= 2, 30, spin,
+                       "absent devices reported on /diagnostics")
+            assert dvl.poll() is None and baro.poll() is None
+        finally:
+            outs = _stop(dvl, baro)
+        assert "Traceback" not in "".join(outs), outs
