@@ -597,3 +597,27 @@ def test_emulator_rate_limits():
         Dvl75Emulator(DvlTruth(), rate_hz=25)
     with pytest.raises(ValueError):
         Dvl75Emulator(DvlTruth(), rate_hz=4)
+
+
+_NUMBER = st.one_of(st.floats(allow_nan=False, allow_infinity=False, width=32).map(lambda v: f"{v:.6g}"),
+                    st.integers(-10**9, 10**9).map(str), st.sampled_from(["1e999", "-1e999", "999.999", "1e300"]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 10**9), st.integers(0, 10**7), st.lists(_NUMBER, min_size=6, max_size=6), st.integers(1, 100))
+def test_checksum_valid_dvpdl_never_yields_a_valid_velocity_outside_the_gates(tu, dtu, numbers, confidence):
+    """Property behind issue 19 fault 8: whatever a checksum-valid $DVPDL carries, the report builder with the
+    gates of the vehicle file (4.1 m/s, dtu 25 ms..1 s) publishes a valid velocity only when it is finite and
+    within the envelope (|v| of the transducer <= 4.1 m/s; the lever arm here is 0)."""
+    from hindrax_drivers.dvl75.report import DvlReportBuilder
+    from hindrax_drivers.dvl75.stream import DvlStreamDecoder
+
+    line = format_sentence(",".join(["DVPDL", str(tu), str(dtu), *numbers, str(confidence)]))
+    builder = DvlReportBuilder(max_speed_m_s=4.1, min_interval_s=0.025, max_interval_s=1.0)
+    for record in DvlStreamDecoder().feed(line):
+        rep = builder.from_position_delta(record, 0)
+        if rep.velocity_valid:
+            speed = math.sqrt(sum(v * v for v in rep.velocity_flu_m_s))
+            assert math.isfinite(speed) and speed <= 4.1 * (1 + 1e-12) and 0.025 <= rep.delta_time_s <= 1.0
+        else:
+            assert all(math.isnan(v) for v in rep.velocity_flu_m_s)

@@ -377,3 +377,18 @@ def test_i2c_master_slv4_and_nack():
     bus.write_byte_data(0x68, 0x7F, 0x00)
     clock.advance(0.02)
     assert bus.read_byte_data(0x68, 0x17) & 0x01        # SLV0_NACK
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(min_size=14, max_size=14), st.binary(min_size=9, max_size=9),
+       st.lists(st.integers(0, 255), min_size=5, max_size=5))
+def test_any_registers_decode_to_finite_values_or_the_declared_error(block, mag_block, regs):
+    try:
+        config = icm.ImuConfig.from_registers(*regs)
+    except icm.Icm20948Error:
+        return
+    sample = icm.parse_sensor_block(block, config)
+    mag = icm.parse_ak09916_block(mag_block)
+    values = np.concatenate([sample.accel_m_s2, sample.gyro_rad_s, [sample.temperature_c], mag.magnetic_field_t])
+    assert np.all(np.isfinite(values))
+    assert mag.data_ready == bool(mag_block[0] & 0x01) and mag.overflow == bool(mag_block[8] & 0x08)

@@ -299,3 +299,29 @@ def test_emulator_follows_truth_and_stuck_fault():
 def test_emulator_requires_explicit_variant():
     with pytest.raises(ms.Ms5837Error):
         Ms5837Emulator(lambda t: (1e5, 20.0), variant="auto")
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(st.integers(0, 0xFFFF), st.sampled_from([0, 0xFFFF])), min_size=8, max_size=8),
+       st.integers(1, 0xFFFFFF), st.integers(1, 0xFFFFFF), st.sampled_from(list(ms.Variant)))
+def test_any_prom_and_adc_give_a_declared_error_a_rejection_or_finite_values(words, d1, d2, variant):
+    """PROM words as read -> CRC-4 (Ms5837Error only) -> sanity (a coefficient 0x0000/0xFFFF is always named)
+    -> compensation of any 24-bit D1/D2: finite pressure and temperature."""
+    import math
+
+    try:
+        ms.Calibration.from_words(words, check_crc=True)
+    except ms.Ms5837Error:
+        pass
+    cal = ms.Calibration.from_words(words, check_crc=False)
+    issue = ms.prom_sanity_issue(cal)
+    assert bool(issue) == any(c in (0, 0xFFFF) for c in words[1:7])
+    reading = ms.compensate(d1, d2, cal, variant)
+    assert math.isfinite(reading.pressure_pa) and math.isfinite(reading.temperature_c)
+
+
+def test_all_zero_prom_passes_crc4_but_not_the_sanity_check():
+    """Issue 19 fault 9: the blank PROM's CRC-4 is 0, equal to its stored nibble."""
+    cal = ms.Calibration.from_words([0] * 8, check_crc=True)
+    assert "C1" in ms.prom_sanity_issue(cal) and "C6" in ms.prom_sanity_issue(cal)
+    assert ms.prom_sanity_issue(ms.Calibration.from_coefficients((34982, 36352, 20328, 22354, 26646, 26146))) == ""

@@ -450,3 +450,16 @@ def test_emulator_faults():
     assert emu.poll(1.1) == b""
     emu.faults.set_disconnected(False)
     assert len(_exchange(emu, request_frame(1211), 1.2, framer)) == 1
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from([1, 2, 3, 5, 1200, 1203, 1210, 1211, 1212, 1300, 1400, 65535]), st.binary(max_size=300),
+       st.binary(max_size=40))
+def test_stream_decoder_never_raises_on_checksum_valid_frames_with_arbitrary_payloads(mid, payload, noise):
+    """The node's decoding path (Ping1dStreamDecoder) on frames whose checksum is right around any payload:
+    every frame is either decoded or counted as an error, nothing raises."""
+    from hindrax_drivers.ping1d.protocol import encode_frame
+    from hindrax_drivers.ping1d.stream import Ping1dStreamDecoder
+
+    decoder = Ping1dStreamDecoder()
+    decoder.feed(noise + encode_frame(mid, payload) + noise)

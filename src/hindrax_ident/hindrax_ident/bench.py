@@ -30,6 +30,7 @@ BENCHMARKS: dict[str, str] = {
     "scenarios": "hindrax_ident.benchmarks.scenarios",
     "recorder": "hindrax_ident.benchmarks.recorder",
     "serial_drivers": "hindrax_ident.benchmarks.serial_drivers",
+    "robustness": "hindrax_ident.benchmarks.robustness",
     "cli": "hindrax_ident.benchmarks.cli",
 }
 
