@@ -130,7 +130,14 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
 
 def _case_star(args):
-    return run_case(*args)
+    """run_case in a worker: an exception becomes an ``error`` entry (an exception that does not pickle back
+    would stop the pool)."""
+    try:
+        return run_case(*args)
+    except Exception as exc:  # noqa: BLE001 - reported per case, the suite goes on
+        return {"scenario": Path(str(args[1])).stem if str(args[1]).endswith((".yaml", ".yml")) else str(args[1]),
+                "seed": int(args[2]), "wall_s": 0.0, "aborted": True, "abort_reason": "",
+                "error": f"{type(exc).__name__}: {exc}", "errors": {}, "cases": [], "dofs": {}}
 
 
 def summarise(results: Sequence[dict]) -> dict:
@@ -235,19 +242,20 @@ def run(args: argparse.Namespace) -> int:
             for seed in range(1, args.seeds + 1)]
     wall0 = time.monotonic()
     results = []
+    # import everything the workers need before they fork (the tree may change during a long suite)
+    from ..identification import campaign, estimators, verdicts  # noqa: F401
+    from ..sim import disturbances, simulator, truth  # noqa: F401
     if args.jobs > 1:
         import multiprocessing as mp
         with mp.get_context("fork").Pool(args.jobs) as pool:
             for res in pool.imap(_case_star, jobs):
                 results.append(res)
-                print(f"[{time.monotonic() - wall0:6.0f} s] {res['scenario']} seed {res['seed']}: "
-                      f"{res['wall_s']:.0f} s", flush=True)
+                _say(res, wall0)
     else:
         for job in jobs:
-            res = run_case(*job)
+            res = _case_star(job)
             results.append(res)
-            print(f"[{time.monotonic() - wall0:6.0f} s] {res['scenario']} seed {res['seed']}: {res['wall_s']:.0f} s"
-                  + (f", ABORTED: {res['abort_reason']}" if res["aborted"] else ""), flush=True)
+            _say(res, wall0)
     summary = summarise(results)
     date = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names,
@@ -259,6 +267,13 @@ def run(args: argparse.Namespace) -> int:
     print(table)
     print(f"output: {out / 'scenarios.json'}, {out / 'scenarios.md'} (wall time {doc['wall_time_s']:.0f} s)")
     return 0
+
+
+def _say(res: dict, wall0: float) -> None:
+    extra = f", ERROR {res['error']}" if res.get("error") else (
+        f", ABORTED: {res['abort_reason']}" if res["aborted"] else "")
+    print(f"[{time.monotonic() - wall0:6.0f} s] {res['scenario']} seed {res['seed']}: {res['wall_s']:.0f} s{extra}",
+          flush=True)
 
 
 def _json_default(x):
