@@ -43,16 +43,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hindrax_msgs.srv import StartRecording, StopRecording
 
 from ..config import ConfigError, node_config
+from ..ros_process import RosProcess
 from .metadata import BagMetadata
 from .msgdefs import normalize_type_name
 from .msgtypes import TypeNotInstalledError, message_class
@@ -359,28 +358,26 @@ class RecorderNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Entry point: ``python -m hindrax_drivers.recording.recorder_node --ros-args ...``."""
-    rclpy.init(args=args)
-    node = None
-    executor = SingleThreadedExecutor()
-    try:
+    """Entry point: ``python -m hindrax_drivers.recording.recorder_node --ros-args ...``.
+
+    Exit 0 (also after SIGINT/SIGTERM, the bag finished), 1 with one line on stderr when the node cannot start.
+    """
+    with RosProcess(args) as proc:
         try:
             node = RecorderNode()
         except (ConfigError, ValueError) as exc:
             print(f"recorder: {str(exc).splitlines()[0]}", file=sys.stderr)
             return 1
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.shutdown()
-            executor.remove_node(node)
+
+        def finish() -> None:
+            node.shutdown()  # finishes the bag
+            proc.executor.remove_node(node)
             node.destroy_node()
-        executor.shutdown()
-        rclpy.try_shutdown()
-    return 0
+
+        proc.at_exit(finish)
+        proc.executor.add_node(node)
+        proc.executor.spin()
+    return proc.status
 
 
 if __name__ == "__main__":
