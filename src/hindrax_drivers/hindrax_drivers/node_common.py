@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import collections
 import struct
-import sys
 import threading
 from typing import Any, Callable, Iterable, Sequence
 
@@ -307,17 +306,6 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
     """
     return node_config(node, on_error=lambda line: node.get_logger().fatal(f"invalid configuration: {line}"),
                        keys=keys, dynamic=dynamic, on_change=on_change)
-
-
-def shutdown_in_progress(context: Any = None) -> bool:
-    """True once SIGINT/SIGTERM (or anyone) has shut the rclpy context down.
-
-    A callback that is running when the signal arrives can then fail inside rcl ("publisher's context is
-    invalid"); entry points treat such an exception as part of the orderly shutdown, not as a crash.
-    """
-    import rclpy
-
-    return not rclpy.ok(context=context)
 
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> int:
