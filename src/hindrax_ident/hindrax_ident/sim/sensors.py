@@ -250,6 +250,13 @@ class SensorModel:
         self.spec = spec
         self.period_s = 1.0 / spec.rate_hz
         self.rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX.get(name, 99)]))
+        # truth disturbances (SensorSuite.apply_disturbances): bias random walk per sqrt(s) and drift per s, drawn
+        # from a stream of their own so that the white noise is the same with and without them
+        self.walk_std = 0.0
+        self.drift_per_s = 0.0
+        self._walk = np.zeros(3)
+        self._walk_t: float | None = None
+        self.walk_rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX.get(name, 99), 1000]))
         self._k = 0
         self._t0 = 0.0
         self.next_due_s = 0.0
@@ -269,6 +276,20 @@ class SensorModel:
         if self.spec.dropout_probability > 0.0 and self.rng.random() < self.spec.dropout_probability:
             return None
         return self.measure(truth)
+
+    def extra_bias(self, t_s: float) -> np.ndarray:
+        """Bias (3,) of the truth disturbances at ``t_s``: random walk (``walk_std`` per sqrt(s), advanced from
+        the previous call) plus ``drift_per_s`` t. Zeros when neither is set."""
+        if self.walk_std > 0.0:
+            if self._walk_t is not None and t_s > self._walk_t:
+                self._walk = self._walk + self.walk_rng.normal(0.0, self.walk_std * math.sqrt(t_s - self._walk_t), 3)
+            self._walk_t = t_s if self._walk_t is None else max(self._walk_t, t_s)
+        return self._walk + self.drift_per_s * t_s
+
+    @property
+    def disturbed(self) -> bool:
+        """True when a bias walk or drift applies."""
+        return self.walk_std > 0.0 or self.drift_per_s != 0.0
 
     def _noisy3(self, true3) -> tuple[float, float, float]:
         n = self.rng.normal(0.0, self.spec.noise_std, 3) if self.spec.noise_std > 0.0 else (0.0, 0.0, 0.0)
@@ -295,6 +316,14 @@ class DvlVelocityModel(SensorModel):
         self.wall_lock_loss_distance_m = float(s.get("wall_lock_loss_distance_m", 0.0))
         self.position_frd_m = np.asarray(config.flat["sensors.dvl75.position_frd_m"], dtype=float)
         self.pool = pool
+        # truth disturbances (SensorSuite.apply_disturbances; sim/truth.py): off
+        self.matrix: np.ndarray | None = None  # scale factor x misalignment applied to the true velocity
+        self.latency_s = 0.0
+        self.delayed_state: Callable[[float], list] | None = None
+        self.multipath_distance_m = 0.0
+        self.multipath_probability = 0.0
+        self.floor_noise_gain = 0.0
+        self.floor_reference_m = 0.5
 
     def locked(self, point_ned_m) -> tuple[bool, float]:
         """(bottom lock, vertical altitude m) for the DVL at ``point_ned_m`` (NED); altitude NaN out of the
@@ -310,15 +339,31 @@ class DvlVelocityModel(SensorModel):
             ok = False
         return ok, altitude
 
-    def measure(self, truth: VehicleTruth) -> DvlVelocitySample:
+    def measure(self, truth: VehicleTruth) -> DvlVelocitySample | None:
         point = truth.position_ned_m + truth.rotation @ self.position_frd_m
         locked, altitude = self.locked(point)
         v_true = point_velocity_frd(truth.nu, self.position_frd_m)
         true3 = (float(v_true[0]), float(v_true[1]), float(v_true[2]))
         if not locked:
             return DvlVelocitySample(truth.t_s, (math.nan, math.nan, math.nan), False, altitude, true3)
+        if self.multipath_probability > 0.0 and self.pool is not None:
+            d = self.pool.wall_distance_m(point)
+            if d < self.multipath_distance_m and \
+                    self.walk_rng.random() < self.multipath_probability * (1.0 - d / self.multipath_distance_m):
+                return None  # side-lobe return from the wall: the report is lost
+        v_meas = v_true
+        if self.latency_s > 0.0 and self.delayed_state is not None:
+            st = self.delayed_state(self.latency_s)
+            v_meas = point_velocity_frd(np.asarray(st[7:13]), self.position_frd_m)
+        if self.matrix is not None:
+            v_meas = self.matrix @ v_meas
         scale = 1.0 + (self.rng.normal(0.0, self.scale_error_fraction) if self.scale_error_fraction > 0.0 else 0.0)
-        return DvlVelocitySample(truth.t_s, self._noisy3(scale * v_true), True, altitude, true3)
+        out = self._noisy3(scale * v_meas)
+        if self.floor_noise_gain > 0.0 and math.isfinite(altitude) and self.spec.noise_std > 0.0:
+            g = 1.0 + self.floor_noise_gain * (self.floor_reference_m / max(altitude, 0.05)) ** 2
+            extra = self.walk_rng.normal(0.0, self.spec.noise_std * math.sqrt(g * g - 1.0), 3)
+            out = (out[0] + float(extra[0]), out[1] + float(extra[1]), out[2] + float(extra[2]))
+        return DvlVelocitySample(truth.t_s, out, True, altitude, true3)
 
 
 class DvlAttitudeModel(SensorModel):
@@ -358,7 +403,8 @@ class AccelModel(_ImuBase):
     def measure(self, truth: VehicleTruth) -> AccelSample:
         f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2,
                                                self.position_frd_m))
-        return AccelSample(truth.t_s, self._noisy3(f), (float(f[0]), float(f[1]), float(f[2])), self.temperature_c)
+        m = f + self.extra_bias(truth.t_s) if self.disturbed else f
+        return AccelSample(truth.t_s, self._noisy3(m), (float(f[0]), float(f[1]), float(f[2])), self.temperature_c)
 
 
 class GyroModel(_ImuBase):
@@ -369,7 +415,8 @@ class GyroModel(_ImuBase):
 
     def measure(self, truth: VehicleTruth) -> GyroSample:
         w = self._to_sensor(truth.nu[3:])
-        return GyroSample(truth.t_s, self._noisy3(w), (float(w[0]), float(w[1]), float(w[2])))
+        m = w + self.extra_bias(truth.t_s) if self.disturbed else w
+        return GyroSample(truth.t_s, self._noisy3(m), (float(w[0]), float(w[1]), float(w[2])))
 
 
 class MagModel(_ImuBase):
@@ -402,7 +449,8 @@ class PressureModel(SensorModel):
     def measure(self, truth: VehicleTruth) -> PressureSample:
         depth = float(truth.position_ned_m[2] + truth.rotation[2] @ self.position_frd_m)
         p = pressure_at_depth_pa(depth, self.density_kg_m3, self.gravity_m_s2, self.surface_pressure_pa)
-        return PressureSample(truth.t_s, self._noisy1(p), self.temperature_c, p, max(depth, 0.0))
+        m = p + float(self.extra_bias(truth.t_s)[0]) if self.disturbed else p
+        return PressureSample(truth.t_s, self._noisy1(m), self.temperature_c, p, max(depth, 0.0))
 
 
 class AltitudeModel(SensorModel):
@@ -459,6 +507,31 @@ class SensorSuite:
         self.models: dict[str, SensorModel] = {n: factories[n]() for n in names}
         self.latest: dict[str, Any] = {}
         self.next_due_s = 0.0
+
+    def apply_disturbances(self, dist, delayed_state: Callable[[float], list] | None = None) -> None:
+        """Set the sensor disturbances of a truth file (:class:`~.truth.Disturbances`, :mod:`.truth`): DVL scale
+        factor, misalignment, latency (``delayed_state(delay_s)`` returns the state that long ago), wall multipath
+        dropouts and floor noise; IMU bias random walks; pressure drift and random walk."""
+        dvl = self.models.get("dvl75")
+        if isinstance(dvl, DvlVelocityModel):
+            roll, pitch, yaw = dist.get("dvl.misalignment_rpy_rad")
+            mis = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+            scale = float(dist.get("dvl.scale_factor"))
+            dvl.matrix = None if (scale == 1.0 and not any((roll, pitch, yaw))) else scale * mis
+            dvl.latency_s = float(dist.get("dvl.latency_s"))
+            dvl.delayed_state = delayed_state
+            dvl.multipath_distance_m = float(dist.get("dvl.multipath_distance_m"))
+            dvl.multipath_probability = float(dist.get("dvl.multipath_dropout_probability")) \
+                if dvl.multipath_distance_m > 0.0 else 0.0
+            dvl.floor_noise_gain = float(dist.get("floor.dvl_noise_gain"))
+            dvl.floor_reference_m = float(dist.get("floor.reference_altitude_m"))
+        for name, key in (("icm20948_gyro", "imu.gyro_bias_walk_rad_s_sqrt_s"),
+                          ("icm20948_accel", "imu.accel_bias_walk_m_s2_sqrt_s"),
+                          ("ms5837", "pressure.random_walk_pa_sqrt_s")):
+            if name in self.models:
+                self.models[name].walk_std = float(dist.get(key))
+        if "ms5837" in self.models:
+            self.models["ms5837"].drift_per_s = float(dist.get("pressure.drift_pa_per_s"))
 
     def reset(self, t_s: float = 0.0) -> None:
         """Restart every device's sampling grid at ``t_s`` and forget the latest samples."""
