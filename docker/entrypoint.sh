@@ -7,7 +7,9 @@
 #   ROS_DOMAIN_ID            0-101 (default 0)
 #   HINDRAX_CONFIG           vehicle configuration (default /ws/config/hindrax.yaml)
 #   ROS_SETUP, WS_SETUP      setup scripts to source (defaults: /opt/ros/jazzy/setup.bash, /ws/install/setup.bash)
-# With no arguments it runs `hindrax bringup --config "$HINDRAX_CONFIG"`.
+#   HINDRAX_RECORD           1 (default): the default bringup records every topic to recording.output_root
+#                            (/ws/runs, a mounted folder); 0: no recording
+# With no arguments it runs `hindrax bringup --config "$HINDRAX_CONFIG" --record`.
 set -eo pipefail
 
 range=${HINDRAX_DISCOVERY_RANGE:-SUBNET}
@@ -23,6 +25,7 @@ fi
 export ROS_AUTOMATIC_DISCOVERY_RANGE="$range"
 export ROS_DOMAIN_ID="$domain"
 config=${HINDRAX_CONFIG:-/ws/config/hindrax.yaml}
+export HINDRAX_CONFIG="$config"
 
 set +u
 # shellcheck disable=SC1090
@@ -37,5 +40,9 @@ if [ "$#" -eq 0 ]; then
 fi
 if [ "$1" = "hindrax" ] && [ "${2:-}" = "bringup" ] && [[ " $* " != *" --config "* ]]; then
   set -- "$@" --config "$config"
+fi
+if [ "$1" = "hindrax" ] && [ "${2:-}" = "bringup" ] && [ "${HINDRAX_RECORD:-1}" = "1" ] \
+   && [[ " $* " != *" --record "* ]] && [[ " $* " != *" --sim "* ]]; then
+  set -- "$@" --record
 fi
 exec "$@"

@@ -890,8 +890,17 @@ def default_config_path() -> Path:
     otherwise (repository checkout, editable dev venv) the repository's ``ros_ws/config/hindrax.yaml``, found
     by walking up from this file, then the installed share directory. The canonical file is the
     repository's ``ros_ws/config/hindrax.yaml``; the package installs it through the symlink
-    ``src/hindrax_drivers/config -> ../../ros_ws/config``. Raises FileNotFoundError naming the places searched.
+    ``src/hindrax_drivers/config -> ../../ros_ws/config``. The environment variable ``HINDRAX_CONFIG``, when set,
+    names the file instead (the Docker image sets it to the mounted vehicle file). Raises FileNotFoundError
+    naming the places searched.
     """
+    import os
+
+    env = os.environ.get("HINDRAX_CONFIG")
+    if env:
+        if Path(env).is_file():
+            return Path(env)
+        raise FileNotFoundError(f"HINDRAX_CONFIG={env}: no such file")
     here = Path(__file__).resolve()
     source_tree = [p / "ros_ws" / "config" / "hindrax.yaml" for p in here.parents]
     installed: list[Path] = []

@@ -102,7 +102,9 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
         else:
             out[key] = coerced
     if not issues:
-        issues.extend(_c._cross_checks(out))  # noqa: SLF001
+        # cross-key checks among the selected keys only (a check on keys the node does not read is the file
+        # loader's, which `hindrax config check` and every node reading those keys run)
+        issues.extend(i for i in _c._cross_checks(out) if i.key in out)  # noqa: SLF001
     if issues:
         raise ConfigError(issues, source)
     return out

@@ -1,0 +1,154 @@
+"""What rosdep and Docker on the vehicle rely on, checked here: each package.xml lists what its package imports
+(with rosdep keys), the workspace's own pip keys are defined in rosdep.yaml, the image registers them and puts
+`hindrax` with the ROS environment in every process (`docker exec` included), and the container records by
+default."""
+from __future__ import annotations
+
+import ast
+import os
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+DOCKER = REPO / "docker"
+
+#: imported top-level module -> rosdep key (ROS packages and our own map to their own name)
+ROSDEP_KEY = {
+    "numpy": "python3-numpy", "scipy": "python3-scipy", "serial": "python3-serial", "yaml": "python3-yaml",
+    "matplotlib": "python3-matplotlib", "smbus2": "python3-smbus2-pip", "mcap": "python3-mcap-pip",
+    "mcap_ros2": "python3-mcap-ros2-support-pip", "filterpy": "python3-filterpy-pip",
+    "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest", "hypothesis": "python3-hypothesis",
+}
+ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "std_msgs", "std_srvs",
+                "geometry_msgs", "sensor_msgs", "nav_msgs", "diagnostic_msgs", "rosgraph_msgs", "tf2_msgs",
+                "domain_coordinator", "hindrax_msgs", "hindrax_drivers", "hindrax_ident"}
+#: a development tool inside hindrax_drivers that drives the hindrax_ident graph to regenerate test bags; a
+#: package dependency on hindrax_ident would be a cycle (dependencies flow msgs <- drivers <- ident)
+DEV_TOOLS = {"hindrax_drivers/hindrax_drivers/recording/make_test_bags.py"}
+
+
+def imports(files) -> set[str]:
+    out: set[str] = set()
+    for f in files:
+        if str(f.relative_to(REPO / "src")) in DEV_TOOLS:
+            continue
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Import):
+                out |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                out.add(node.module.split(".")[0])
+    return {m for m in out if m not in sys.stdlib_module_names and m != "__future__"}
+
+
+def depends(pkg: str) -> dict[str, set[str]]:
+    root = ET.parse(REPO / "src" / pkg / "package.xml").getroot()
+    return {tag: {e.text.strip() for e in root.iter(tag)} for tag in
+            ("exec_depend", "test_depend", "depend", "build_depend", "buildtool_depend")}
+
+
+def key_of(module: str) -> str:
+    if module in ROS_PACKAGES:
+        return module
+    assert module in ROSDEP_KEY, f"import {module}: add its rosdep key to package.xml and to this table"
+    return ROSDEP_KEY[module]
+
+
+def test_each_package_xml_lists_what_its_package_imports():
+    for pkg in ("hindrax_drivers", "hindrax_ident"):
+        deps = depends(pkg)
+        run_keys = deps["exec_depend"] | deps["depend"]
+        code = imports((REPO / "src" / pkg / pkg).rglob("*.py")) - {pkg}
+        missing = sorted(key_of(m) for m in code if key_of(m) not in run_keys)
+        assert not missing, f"{pkg}/package.xml lacks exec_depend {missing}"
+        tests = imports((REPO / "src" / pkg / "test").rglob("*.py")) - {pkg}
+        missing = sorted(key_of(m) for m in tests if key_of(m) not in run_keys | deps["test_depend"])
+        assert not missing, f"{pkg}/package.xml lacks test_depend {missing}"
+        assert "hindrax_ident" not in run_keys or pkg == "hindrax_ident"
+
+
+def test_the_workspaces_pip_keys_are_defined_in_rosdep_yaml_with_the_requirements_packages():
+    rosdep = yaml.safe_load((REPO / "rosdep.yaml").read_text())
+    requirements = {re.split(r"[<>=\[ ]", line.strip())[0].lower() for line in
+                    (REPO / "requirements.txt").read_text().splitlines() if line.strip() and not line.startswith("#")}
+    used = set()
+    for pkg in ("hindrax_drivers", "hindrax_ident"):
+        for keys in depends(pkg).values():
+            used |= {k for k in keys if k.endswith("-pip")}
+    assert used and used <= set(rosdep), sorted(used - set(rosdep))
+    for key in used:
+        for os_name in ("ubuntu", "debian"):
+            packages = rosdep[key][os_name]["pip"]["packages"]
+            assert packages and {p.lower() for p in packages} <= requirements, (key, packages)
+
+
+def test_dockerfile_uses_rosdep_yaml_and_puts_hindrax_with_ros_in_every_process():
+    text = (DOCKER / "Dockerfile").read_text()
+    assert "COPY rosdep.yaml /etc/ros/rosdep/hindrax.yaml" in text
+    assert 'yaml file:///etc/ros/rosdep/hindrax.yaml" > /etc/ros/rosdep/sources.list.d/' in text
+    assert "rosdep install --from-paths src --ignore-src" in text
+    # the config symlink of hindrax_drivers resolves inside the image
+    link = os.readlink(REPO / "src" / "hindrax_drivers" / "config")
+    assert link == "../../ros_ws/config" and "COPY ros_ws/config /ws/ros_ws/config" in text
+    assert "COPY docker/hindrax-exec.sh /usr/local/bin/hindrax" in text
+    assert "/etc/profile.d/hindrax.sh" in text and "HINDRAX_CONFIG=/ws/config/hindrax.yaml" in text
+    compose = yaml.safe_load((DOCKER / "compose.yaml").read_text())["services"]["hindrax"]
+    assert any(v.endswith(":/ws/runs") for v in compose["volumes"])  # the default bag folder is mounted
+
+
+def _fakes(tmp_path):
+    ros = tmp_path / "ros_setup.bash"
+    ros.write_text("export FAKE_ROS_SOURCED=1\n")
+    ws = tmp_path / "ws_setup.bash"
+    ws.write_text("export FAKE_WS_SOURCED=1\n")
+    cmd = tmp_path / "hindrax"
+    cmd.write_text("#!/usr/bin/env bash\necho \"ARGS=$*\"\necho \"RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE\"\n"
+                   "echo \"SOURCED=$FAKE_ROS_SOURCED$FAKE_WS_SOURCED\"\necho \"CONFIG=$HINDRAX_CONFIG\"\n")
+    cmd.chmod(0o755)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_AUTOMATIC", "HINDRAX"))}
+    env.update(ROS_SETUP=str(ros), WS_SETUP=str(ws), PATH=f"{tmp_path}:{os.environ['PATH']}")
+    return cmd, env
+
+
+def test_docker_exec_hindrax_runs_with_the_containers_ros_environment(tmp_path):
+    cmd, env = _fakes(tmp_path)
+    env.update(HINDRAX_ENTRYPOINT=str(DOCKER / "entrypoint.sh"), HINDRAX_COMMAND=str(cmd),
+               HINDRAX_CONFIG="/ws/config/hindrax.yaml")
+    r = subprocess.run([str(DOCKER / "hindrax-exec.sh"), "thruster-test", "--help"], env=env, capture_output=True,
+                       text=True, timeout=30)
+    assert r.returncode == 0, r.stderr
+    assert "ARGS=thruster-test --help" in r.stdout and "RANGE=SUBNET" in r.stdout and "SOURCED=11" in r.stdout
+    assert "CONFIG=/ws/config/hindrax.yaml" in r.stdout
+
+
+def test_the_container_records_by_default(tmp_path):
+    cmd, env = _fakes(tmp_path)
+
+    def entry(*args, **extra):
+        r = subprocess.run([str(DOCKER / "entrypoint.sh"), *args], env=dict(env, **extra), capture_output=True,
+                           text=True, timeout=30)
+        assert r.returncode == 0, r.stderr
+        return r.stdout
+    assert "ARGS=bringup --config /ws/config/hindrax.yaml --record" in entry()
+    assert "--record" not in entry(HINDRAX_RECORD="0")
+    assert "--record" not in entry("hindrax", "bringup", "--sim")
+
+
+def test_default_config_path_follows_hindrax_config(tmp_path, monkeypatch):
+    from hindrax_drivers.config import default_config_path
+
+    f = tmp_path / "vehicle.yaml"
+    f.write_text("x")
+    monkeypatch.setenv("HINDRAX_CONFIG", str(f))
+    assert default_config_path() == f
+    monkeypatch.setenv("HINDRAX_CONFIG", str(tmp_path / "missing.yaml"))
+    try:
+        default_config_path()
+    except FileNotFoundError as exc:
+        assert "HINDRAX_CONFIG" in str(exc)
+    else:
+        raise AssertionError("a missing HINDRAX_CONFIG file was accepted")

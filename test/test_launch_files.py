@@ -1,0 +1,228 @@
+"""Launch files (ROS 2 launch XML) checked without the `launch` package, which is not installable here.
+
+Every ``src/*/launch/*.launch.xml`` is parsed with xml.etree; ``$(var ...)`` and ``$(find-pkg-share ...)`` are
+substituted the way ros2 launch does, with find-pkg-share resolved through the packages' setup.py data_files
+(what colcon installs under share/). Checked: each ``<node pkg exec>`` of our packages is a console script of
+that package's setup.py (an external package only behind a condition that is off by default, and declared in
+package.xml), each ``<param from>`` file and ``<include file>`` resolves to a file that is installed, include
+arguments are declared by the included file, and conditions are booleans. The README's ``ros2 launch`` and
+``ros2 run`` lines name existing launch files, declared arguments and installed executables.
+"""
+from __future__ import annotations
+
+import os
+import re
+import runpy
+import shlex
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from unittest import mock
+
+import pytest
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGES = ("hindrax_drivers", "hindrax_ident")
+
+
+def setup_kwargs(pkg: str) -> dict:
+    """The keyword arguments a package's setup.py passes to setuptools.setup (as `setup.py install` sees them)."""
+    captured = {}
+    cwd = os.getcwd()
+    os.chdir(REPO / "src" / pkg)
+    try:
+        with mock.patch("setuptools.setup", lambda **kw: captured.update(kw)), \
+                mock.patch("sys.argv", ["setup.py", "install"]):
+            runpy.run_path("setup.py", run_name="__main__")
+    finally:
+        os.chdir(cwd)
+    return captured
+
+
+@pytest.fixture(scope="module")
+def packages():
+    """package -> (console script names, {installed share path relative to the prefix: source file})."""
+    out = {}
+    for pkg in PACKAGES:
+        kw = setup_kwargs(pkg)
+        scripts = {s.split("=")[0].strip() for s in kw["entry_points"]["console_scripts"]}
+        for s in kw["entry_points"]["console_scripts"]:
+            module = s.split("=")[1].split(":")[0].strip()
+            assert (REPO / "src" / pkg / (module.replace(".", "/") + ".py")).is_file(), s
+        installed = {}
+        for dest, files in kw["data_files"]:
+            for f in files:
+                installed[f"{dest}/{Path(f).name}"] = REPO / "src" / pkg / f
+        out[pkg] = (scripts, installed)
+    return out
+
+
+def find_pkg_share(packages, pkg: str, rel: str) -> Path:
+    key = f"share/{pkg}/{rel.lstrip('/')}"
+    assert pkg in packages, f"$(find-pkg-share {pkg}): not a package of this workspace"
+    assert key in packages[pkg][1], f"{key} is not installed by {pkg}'s setup.py"
+    return packages[pkg][1][key]
+
+
+def substitute(text: str, args: dict[str, str], packages) -> str:
+    def var(m):
+        assert m.group(1) in args, f"$(var {m.group(1)}) is not a declared argument"
+        return args[m.group(1)]
+    text = re.sub(r"\$\(var (\w+)\)", var, text)
+    m = re.fullmatch(r"\$\(find-pkg-share (\w+)\)(/.*)?", text)
+    if m:
+        return str(find_pkg_share(packages, m.group(1), m.group(2) or ""))
+    assert "$(" not in text, f"unsupported substitution in {text!r}"
+    return text
+
+
+def declared_args(path: Path) -> dict[str, str | None]:
+    return {a.get("name"): a.get("default") for a in ET.parse(path).getroot().findall("arg")}
+
+
+def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> list[tuple[str, str]]:
+    """Validate one launch file with the given argument values; returns the (pkg, exec) of its nodes, includes too."""
+    root = ET.parse(path).getroot()
+    assert root.tag == "launch"
+    args: dict[str, str] = {}
+    for a in root.findall("arg"):
+        assert a.get("description"), f"{path.name}: argument {a.get('name')} has no description"
+        value = (given or {}).get(a.get("name"), a.get("default"))
+        assert value is not None, f"{path.name}: argument {a.get('name')} has no value"
+        args[a.get("name")] = substitute(value, args, packages)
+    for name in given or {}:
+        assert name in args, f"{path.name}: no argument {name!r}"
+    nodes = []
+    for el in root:
+        cond = el.get("if")
+        enabled = True
+        if cond is not None:
+            enabled = substitute(cond, args, packages)
+            assert enabled in ("true", "false"), f"{path.name}: condition {cond} is not a boolean"
+            enabled = enabled == "true"
+        if el.tag == "node":
+            pkg, exe = el.get("pkg"), el.get("exec")
+            if pkg in packages:
+                assert exe in packages[pkg][0], f"{path.name}: {pkg}/{exe} is not an installed executable"
+            else:  # an external package: optional, off by default, declared as a dependency
+                default = substitute(cond, {k: v or "" for k, v in declared_args(path).items()}, packages) \
+                    if cond else "true"
+                assert default == "false", f"{path.name}: external {pkg}/{exe} must be optional and off by default"
+                deps = "".join((REPO / "src" / p / "package.xml").read_text() for p in PACKAGES)
+                assert f"<exec_depend>{pkg}</exec_depend>" in deps, f"{pkg} not declared in a package.xml"
+            for p in el.findall("param"):
+                if p.get("from"):
+                    f = Path(substitute(p.get("from"), args, packages))
+                    assert f.is_file(), f"{path.name}: parameter file {f} does not exist"
+                    doc = yaml.safe_load(f.read_text())
+                    assert any("ros__parameters" in v for v in doc.values()), f"{f} is not a params file"
+                else:
+                    assert p.get("name") and p.get("value") is not None
+                    substitute(p.get("value"), args, packages)
+            if enabled:
+                nodes.append((pkg, exe))
+        elif el.tag == "include":
+            inc = Path(substitute(el.get("file"), args, packages))
+            assert inc.is_file(), f"{path.name}: include {inc} does not exist"
+            passed = {a.get("name"): substitute(a.get("value"), args, packages) for a in el.findall("arg")}
+            if enabled:
+                nodes += check_launch(inc, packages, passed)
+        else:
+            assert el.tag == "arg", f"{path.name}: unexpected element <{el.tag}>"
+    return nodes
+
+
+def launch_files():
+    return sorted(REPO.glob("src/*/launch/*.launch.xml"))
+
+
+def test_there_are_vehicle_and_pool_test_launch_files():
+    names = {p.name for p in launch_files()}
+    assert {"vehicle.launch.xml", "pool_test.launch.xml"} <= names
+
+
+@pytest.mark.parametrize("path", launch_files(), ids=lambda p: p.name)
+def test_launch_file_executables_and_parameter_files_resolve(path, packages):
+    nodes = check_launch(path, packages)
+    assert nodes
+    # every launch file is installed
+    pkg = path.parents[1].name
+    assert find_pkg_share(packages, pkg, f"launch/{path.name}") == path
+
+
+def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
+    root = REPO / "src"
+    vehicle = dict.fromkeys(check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages))
+    for exe in ("dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
+                "static_tf_node", "supervisor_node"):
+        assert ("hindrax_drivers", exe) in vehicle
+    assert ("hindrax_drivers", "recorder_node") not in vehicle  # recording is optional there
+    recorded = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
+                            {"record": "true", "output_dir": "/ws/runs"})
+    assert ("hindrax_drivers", "recorder_node") in recorded
+    pool = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages)
+    assert ("hindrax_ident", "identification_node") in pool and ("hindrax_drivers", "recorder_node") in pool
+    assert ("foxglove_bridge", "foxglove_bridge") not in pool
+    live = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
+    assert ("foxglove_bridge", "foxglove_bridge") in live
+
+
+def test_checker_rejects_a_missing_executable_and_a_missing_parameter_file(packages, tmp_path):
+    bad = tmp_path / "bad.launch.xml"
+    bad.write_text('<launch><node pkg="hindrax_drivers" exec="no_such_node"/></launch>')
+    with pytest.raises(AssertionError, match="no_such_node"):
+        check_launch(bad, packages)
+    bad.write_text('<launch><node pkg="hindrax_drivers" exec="dvl75_node">'
+                   '<param from="$(find-pkg-share hindrax_drivers)/config/missing.yaml"/></node></launch>')
+    with pytest.raises(AssertionError, match="missing.yaml"):
+        check_launch(bad, packages)
+
+
+def readme_commands(section: str = "## Running on the Pi") -> list[str]:
+    text = (REPO / "README.md").read_text()
+    start = text.index(section)
+    end = text.find("\n## ", start + 1)
+    body = text[start:end if end > 0 else None]
+    lines = []
+    for block in re.findall(r"```(?:bash|sh)?\n(.*?)```", body, re.S):
+        for line in block.splitlines():
+            line = line.split(" #")[0].strip()
+            if line and not line.startswith("#"):
+                lines.append(line)
+    return lines
+
+
+def test_readme_ros2_launch_and_run_lines_name_installed_files_and_arguments(packages):
+    commands = readme_commands()
+    launches = [c for c in commands if c.startswith("ros2 launch ")]
+    runs = [c for c in commands if c.startswith("ros2 run ")]
+    assert launches and runs
+    for c in launches:
+        words = shlex.split(c)
+        pkg, name = words[2], words[3]
+        path = find_pkg_share(packages, pkg, f"launch/{name}")
+        given = dict(w.split(":=", 1) for w in words[4:])
+        check_launch(path, packages, given)
+    for c in runs:
+        words = shlex.split(c)
+        assert words[3] in packages[words[2]][0], c
+
+
+#: The build-and-run lines of the README's "Running on the Pi", as test/test_ros_install.py runs them (there in a
+#: temporary copy of the workspace, with the install space's absolute paths).
+TESTED_BY_INSTALL_TEST = {
+    "make ros-install",
+    "source .venv/bin/activate && source ros_ws/install/setup.bash",
+    "hindrax config check",
+    "ros_ws/install/lib/hindrax_drivers/allocation_node --ros-args --params-file "
+    "ros_ws/install/share/hindrax_drivers/config/hindrax.yaml",
+    "ros_ws/install/lib/hindrax_drivers/static_tf_node --ros-args --params-file "
+    "ros_ws/install/share/hindrax_drivers/config/hindrax.yaml",
+}
+
+
+def test_every_readme_pi_command_is_a_tested_one():
+    commands = readme_commands()
+    assert TESTED_BY_INSTALL_TEST <= set(commands)
+    for c in commands:
+        assert c in TESTED_BY_INSTALL_TEST or c.startswith(("ros2 launch ", "ros2 run ")), f"untested README line: {c}"
