@@ -283,9 +283,21 @@ class OnlineDofEstimator:
                 return False
         return True
 
+    def published_std(self) -> np.ndarray:
+        """The RLS std where converged (inertia, damping, restoring: std <= converged_relative_std |value|; bias:
+        std <= 0.1 N / 0.02 N m; linear damping: std <= 0.5 |value| + its bias tolerance), NaN = not converged."""
+        tol_abs = [(0.02 if self.dof in ("roll", "pitch", "yaw") else 0.1) if n in ("bias",) or n.startswith("linear")
+                   else 0.0 for n in self.names]
+        rel = np.array([0.5 if n.startswith("linear") else 0.0 if n == "bias" else self.rel_tol for n in self.names])
+        std = self.rls.std
+        ok = np.isfinite(std) & (std <= rel * np.abs(self.rls.theta) + np.asarray(tol_abs))
+        if self.rls.n_samples < 500 or self.rls.excitation_normalised < self.rls.min_excitation:
+            ok[:] = False
+        return np.where(ok, std, np.nan)
+
     def result(self) -> dict:
         """Final {name: (value, std)} plus n_samples, excitation, converged_at_s."""
-        th, sd = self.rls.theta, self.rls.std
+        th, sd = self.rls.theta, self.published_std()
         return {"parameters": {n: (float(v), float(s)) for n, v, s in zip(self.names, th, sd)},
                 "n_samples": self.rls.n_samples, "excitation_normalised": self.rls.excitation_normalised,
                 "converged_at_s": self.converged_at_s}
