@@ -119,7 +119,11 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
                 continue
             v, s, tr = float(r.values[name]), float(r.std[name]), float(true[name])
             lo, hi = r.ci95[name]
-            rows.append({"dof": dof, "parameter": name, "value": v, "std": s, "std_fit": a[name]["std_fit"],
+            rv, rs = r.online.get(name, (math.nan, math.nan))
+            rs = math.nan if rs is None else float(rs)
+            rls = {"rls_value": float(rv), "rls_std": rs if math.isfinite(rs) else None,
+                   "rls_covers": bool(math.isfinite(rs) and abs(float(rv) - tr) <= 1.96 * rs)}
+            rows.append({**rls, "dof": dof, "parameter": name, "value": v, "std": s, "std_fit": a[name]["std_fit"],
                          "truth": tr, "rel_error": (v - tr) / abs(tr) if tr != 0.0 else None,
                          "z": (v - tr) / s if s > 0 else None, "covered": bool(lo <= tr <= hi),
                          "verdict": a[name]["verdict"], "reasons": a[name]["reasons"], "t_dof": a[name]["t_dof"]})
@@ -179,8 +183,11 @@ def summarise(results: Sequence[dict]) -> dict:
             n_ok += ok
         if sc == "none" and n_cases and n_sus > 0.1 * n_cases:
             meets = False
+        all_rows = [r for rows in params.values() for r in rows]
+        pub = [r for r in all_rows if r.get("rls_std") is not None]
         out[sc] = {"parameters": table, "cases": n_cases, "covered": n_cov, "suspect": n_sus, "ok": n_ok,
-                   "meets_target": bool(meets)}
+                   "meets_target": bool(meets), "rls_published": len(pub),
+                   "rls_published_covers": sum(r["rls_covers"] for r in pub)}
     return out
 
 
@@ -190,12 +197,14 @@ def _pct(a: int, n: int) -> str:
 
 def format_table(summary: dict, detail: bool = True) -> str:
     """Markdown: one line per scenario (coverage, suspect, ok, target), then per scenario, DOF and parameter."""
-    lines = ["| scenario | cases | interval covers truth | suspect | covered or suspect | target met |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| scenario | cases | interval covers truth | suspect | covered or suspect | target met | "
+             "RLS std published (covers) |",
+             "|---|---|---|---|---|---|---|"]
     for sc, s in summary.items():
         lines.append(f"| {sc} | {s['cases']} | {s['covered']} ({_pct(s['covered'], s['cases'])}) | "
                      f"{s['suspect']} ({_pct(s['suspect'], s['cases'])}) | {s['ok']} ({_pct(s['ok'], s['cases'])}) | "
-                     f"{'yes' if s['meets_target'] else 'no'} |")
+                     f"{'yes' if s['meets_target'] else 'no'} | {s.get('rls_published', 0)} "
+                     f"({s.get('rls_published_covers', 0)}) |")
     if not detail:
         return "\n".join(lines)
     lines += ["", "| scenario | DOF | parameter | mean error | max abs z | covers | suspect | main reason |",
