@@ -10,7 +10,7 @@ and
    = [negative, positive], default [0.05, 0.10], see ros_ws/config/hindrax.yaml for why), parameter i moves by
    ``theta_i (a_i ds_pos + b_i ds_neg)`` and ``cov += sum_k sigma_k^2 (theta o w_k)(theta o w_k)^T``. The weights:
    surge, sway, yaw, roll and pitch use two thrusters in each direction of rotation for either sign of the
-   command (55-degree layout, seed 003 Fig. 5), so a = b = 1/2; heave moves down on positive and up on negative
+   command (55-degree layout, [Hindrax-Drag] (seed 003) Fig. 5), so a = b = 1/2; heave moves down on positive and up on negative
    thrust: ``*_positive`` (and the bias holding the net buoyancy, a downward force) a = 1, ``*_negative`` b = 1,
    inertia a = b = 1/2. When a thrust-curve fit covariance is known (``thruster_fit_rel``: from
    ``hindrax ident thruster-fit``, the relative std of the fitted thrust over the pulse widths used) it replaces the
