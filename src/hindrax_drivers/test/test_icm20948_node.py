@@ -25,6 +25,7 @@ from hindrax_drivers.config import default_config_path
 from hindrax_drivers.icm20948 import protocol as p
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.icm20948.node import GyroBiasEstimator, Icm20948Node
+from hindrax_drivers.node_common import unbatch_raw
 from hindrax_drivers.testing import child_env, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData
@@ -76,7 +77,8 @@ class Rig:
         self.probe.create_subscription(Imu, "imu/data_raw", self.imu.append, 200)
         self.probe.create_subscription(MagneticField, "imu/mag", self.mag.append, 200)
         self.probe.create_subscription(Temperature, "imu/temperature", self.temperature.append, 200)
-        self.probe.create_subscription(RawDeviceData, "raw/icm20948", self.raw.append, 1000)
+        self.probe.create_subscription(RawDeviceData, "raw/icm20948", lambda m: self.raw.extend(unbatch_raw(m)),
+                                       1000)  # a poll's transactions arrive in one message
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diag.append, 10)
 
     def attach(self, settings=None):

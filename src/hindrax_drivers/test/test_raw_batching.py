@@ -88,3 +88,20 @@ def test_truncated_batch_is_an_error():
                       data=b"\x00\x76\x00\x00\x05\x00\x01")
     with pytest.raises(ValueError, match="runs past the end"):
         raw_transactions(m)
+
+
+def test_unbatch_raw_gives_one_message_per_transaction():
+    from hindrax_drivers.node_common import unbatch_raw
+
+    node = _Node()
+    raw = RawDataPublisher(node, "icm20948")
+    raw.begin_batch()
+    raw.i2c_tap("read", 0x69, 0x2D, bytes(23))
+    raw.i2c_tap("read", 0x69, 0x17, b"\x00")
+    raw.flush()
+    parts = unbatch_raw(node.sent[0])
+    assert [(m.direction, m.i2c_address, m.i2c_register, len(m.data)) for m in parts] == [
+        (READ, 0x69, 0x2D, 23), (READ, 0x69, 0x17, 1)]
+    assert all(m.device_name == "icm20948" and m.transport == RawDeviceData.TRANSPORT_I2C for m in parts)
+    plain = RawDeviceData(i2c_register=0x2D)
+    assert unbatch_raw(plain) == [plain]

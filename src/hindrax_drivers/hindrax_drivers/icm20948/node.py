@@ -42,7 +42,8 @@ Publishes (reliable, depth 10), all with frame ``imu_link``:
   = unknown (the datasheet gives no magnetometer noise figure, DS-000189 Table 3).
 - ``imu/temperature`` sensor_msgs/Temperature, degC (raw / 333.87 + 21, room offset 0, docs/devices.md §4.4),
   variance = one LSB squared.
-- ``raw/icm20948`` hindrax_msgs/RawDeviceData: every I2C transaction (ICM and, in bypass mode, AK09916).
+- ``raw/icm20948`` hindrax_msgs/RawDeviceData: every I2C transaction (ICM and, in bypass mode, AK09916);
+  those of one poll in one message (:class:`~hindrax_drivers.node_common.RawDataPublisher` batch).
 - ``/diagnostics``: state, rate, last message age, I2C transactions/errors/retries/failures, identity,
   configuration, magnetometer state, gyro bias, stuck warning.
 
@@ -546,9 +547,11 @@ class Icm20948Node(Node):
     def _poll(self) -> None:
         master = self.mag_mode_name == "i2c_master" and self.mag_available
         length = p.SENSOR_BLOCK_LENGTH + (p.AK09916_BLOCK_LENGTH if master else 0)
+        self.raw.begin_batch()  # raw/icm20948: the poll's transactions in one message
         try:
             data = self._read(p.ACCEL_XOUT_H, length)
         except I2CError as exc:
+            self.raw.flush()
             self._poll_failed(exc)
             return
         stamp = self.get_clock().now()
@@ -576,6 +579,7 @@ class Icm20948Node(Node):
         if self.diag.state == "i2c error":
             self.diag.set_state("running", DiagnosticStatus.OK, "running")
         self._process(data[:p.SENSOR_BLOCK_LENGTH], mag_block, stamp)
+        self.raw.flush()
 
     def _poll_failed(self, exc: Exception) -> None:
         self._bank = None
