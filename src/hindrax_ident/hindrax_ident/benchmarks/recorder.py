@@ -64,8 +64,8 @@ def run(quick: bool = False) -> list[dict]:
 
     import numpy as np
 
-    nominal_s = 5.0 if quick else 30.0
-    stage_s = 2.0 if quick else 6.0
+    nominal_s = 5.0 if quick else 15.0
+    stage_s = 2.0 if quick else 3.0
     streams = {s.topic: s for s in STREAMS}
     rng = np.random.default_rng(1)
     rows: list[dict] = []

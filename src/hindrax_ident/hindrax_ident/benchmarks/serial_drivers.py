@@ -206,9 +206,9 @@ def _bench_ping(duration_s: float) -> list[dict]:
 
 
 def run(quick: bool = False) -> list[dict]:
-    """Benchmark rows (see the module docstring). ``quick``: 3 s per driver instead of 30 s / 20 s."""
-    rows = _bench_dvl(3.0 if quick else 30.0)
-    rows += _bench_ping(3.0 if quick else 20.0)
+    """Benchmark rows (see the module docstring). ``quick``: 3 s per driver instead of 10 s."""
+    rows = _bench_dvl(3.0 if quick else 10.0)
+    rows += _bench_ping(3.0 if quick else 10.0)
     return rows
 
 

@@ -71,7 +71,7 @@ def _node_rate(wall_s: float) -> float:
 
 def run(quick: bool = False) -> list[dict]:
     """Rows {name, value, unit, target?, note} (see module docstring)."""
-    steps, rtf, samples = _simulator_rate(5.0 if quick else 60.0)
+    steps, rtf, samples = _simulator_rate(5.0 if quick else 15.0)
     rows = [
         {"name": "steps_per_s", "value": round(steps), "unit": "steps/s",
          "note": f"RK4, default step, all 7 sensor models on ({samples} samples)"},
