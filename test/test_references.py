@@ -36,7 +36,7 @@ FORBIDDEN = [
 SEED_KEYS = {"000": "[Hindrax-AM]", "002": "[NTNU-Thesis]", "003": "[Hindrax-Drag]", "004": "[SmallROV]"}
 
 _ID = r"\d+(?:\.\d+)*(?:\.[A-Z](?![A-Za-z]))?"
-_CITE = re.compile(r"docs/([\w-]+\.md)")
+_CITE = re.compile(r"(?<![\w/.-])docs/([\w-]+\.md)")  # not another repository's .../docs/x.md
 _FIRST = re.compile(r"\s?§\s?(" + _ID + r")")
 _NEXT = re.compile(r"(?:[a-z](?![a-z]))?(?:\s*(?:,|and|or)\s*§\s?|\s*[-–]\s*§?\s?)(" + _ID + r")")
 _HEADING = re.compile(r"^#{1,6}\s+(" + _ID + r")\.?(?:\s|$)")
