@@ -101,9 +101,11 @@ def _rig(ctx, sim_time: bool = False):
         emu.watch = False
         if esc.armed:  # the watchdog neutralises but stays armed
             call(r["arm"], SetArmed.Request(arm=False))
-        wait_until(lambda: not esc.armed and not sup.esc_armed and (sup.disarm_future is None
-                                                                     or sup.disarm_future.done()), 10, spin,
-                   "previous disarm settled")
+        settled = lambda: not esc.armed and not sup.esc_armed and (  # noqa: E731
+            sup.disarm_future is None or sup.disarm_future.done())
+        wait_until(settled, 10, spin, "previous disarm settled")
+        t_quiet = time.monotonic() + 0.3  # > DISARM_RETRY_S: no supervisor retry still on its way
+        wait_until(lambda: time.monotonic() > t_quiet and settled(), 10, spin, "previous disarm settled")
         call(r["reset"], Trigger.Request())
         emu.watch, emu.neutral_at = False, None
         wait_until(lambda: esc.neutral_confirmed_time is not None and esc.arming_remaining_s() == 0.0, 20, spin,
