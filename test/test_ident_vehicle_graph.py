@@ -45,7 +45,7 @@ def test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral(
     neutral = cfg.thrusters.pulse_width_neutral_us
     trims = np.array([t.trim_us for t in cfg.thrusters.thrusters])
     simulator = Simulator(cfg, seed=4)
-    hardware = VirtualHardware(simulator, cfg, seed=4)  # ptys served by their own threads, as real UARTs
+    hardware = VirtualHardware(simulator, simulator.config, seed=4)  # ptys served by own threads, as real UARTs
     hardware.use_clock(time.monotonic)  # the devices live on the wall clock, like the drivers of this graph
     hindrax = str(Path(sys.executable).with_name("hindrax"))
     with ros_context() as ctx:
