@@ -47,7 +47,10 @@ def run(quick: bool = False) -> list[dict]:
 
     emu = TimedEmulator()
     bus = EmulatedI2CBus({cfg.get("esc.i2c_address"): emu})
-    with ros_context() as ctx:
+    from domain_coordinator import domain_id
+
+    # a reserved ROS domain: the bench publishes wrenches and arms, which must never reach another graph
+    with domain_id() as did, ros_context(domain_id=did) as ctx:
         # the emulated PCA9685 runs at exactly esc.oscillator_hz: calibrated by construction
         params = config_parameters({"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True})
         alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
