@@ -1,0 +1,43 @@
+"""`hindrax esc calibrate` as users run it (the installed console script), and `config check`'s note about it."""
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from hindrax_drivers.config import default_config_path, load_config
+
+HINDRAX = str(Path(sys.executable).with_name("hindrax"))
+
+
+def run(*args):
+    return subprocess.run([HINDRAX, *args], capture_output=True, text=True, timeout=60)
+
+
+def test_calibrate_from_one_scope_reading_and_write(tmp_path):
+    """A 24.06 MHz part, 25 MHz assumed, 200 Hz: prescale 30, 1500 us is round(1500 * 25e6 / 31e6) = 1210 counts;
+    the part holds them for 1210 * 31 / 24.06e6 s = 1559.02 us (hand arithmetic). The reading gives the part's
+    oscillator back, and --write stores it with the calibrated flag, comments kept."""
+    cfg = tmp_path / "vehicle.yaml"
+    shutil.copy(default_config_path(), cfg)
+    measured = 1210 * 31 / 24.06e6 * 1e6
+    r = run("esc", "calibrate", "--measured-us", f"{measured:.4f}", "--config", str(cfg), "--write")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert abs(out["oscillator_hz"] - 24.06e6) < 50.0 and out["prescale_used"] == 30 and out["written"]
+    assert abs(out["calibrated_pulse_us"] - 1500.0) < 1.3  # within one count at the calibrated prescale
+    c = load_config(cfg)
+    assert c.get("esc.oscillator_calibrated") is True and abs(c.get("esc.oscillator_hz") - 24.06e6) < 50.0
+    assert "# nominal; calibrate per board" in cfg.read_text()  # the file's comments survive
+    # config check no longer prints the calibration note
+    assert "oscillator_calibrated is false" not in run("config", "check", str(cfg)).stdout
+    assert "hindrax esc calibrate" in run("config", "check", str(default_config_path())).stdout
+
+
+def test_calibrate_rejects_an_impossible_reading_and_leaves_the_file(tmp_path):
+    cfg = tmp_path / "vehicle.yaml"
+    shutil.copy(default_config_path(), cfg)
+    before = cfg.read_text()
+    r = run("esc", "calibrate", "--measured-us", "15.6", "--config", str(cfg), "--write")
+    assert r.returncode == 1 and "outside 20-30 MHz" in r.stderr
+    assert cfg.read_text() == before
