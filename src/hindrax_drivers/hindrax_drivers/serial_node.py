@@ -167,8 +167,13 @@ class SerialDeviceNode(Node):
 
     # -- helpers for subclasses
     def _int_parameter(self, name: str, default: int, minimum: int) -> int:
+        from rcl_interfaces.msg import ParameterDescriptor
+
+        docs = {"stuck_limit_samples": "identical consecutive readings after which a sensor is reported stuck"}
         value = (self.get_parameter(name).value if self.has_parameter(name)
-                 else self.declare_parameter(name, default).value)
+                 else self.declare_parameter(name, default, ParameterDescriptor(
+                     description=docs.get(name, name), read_only=True, dynamic_typing=True,
+                     additional_constraints=f"allowed an integer >= {minimum}")).value)
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
             issue = ConfigIssue(name, value, f"an integer >= {minimum}")
             self.get_logger().fatal(f"invalid configuration: {issue.line()}")

@@ -38,4 +38,11 @@ def test_each_error_is_one_line_and_exit_1(tmp_path):
 
 
 def test_usage_error_exits_2():
-    assert run("config", "check").returncode == 2
+    assert run("config", "check", "a.yaml", "b.yaml").returncode == 2  # one file at most
+
+
+def test_without_a_file_the_shipped_vehicle_file_is_checked():
+    from hindrax_drivers.config import default_config_path
+
+    r = run("config", "check")
+    assert r.returncode == 0 and r.stdout.startswith(f"{default_config_path()}: OK")
