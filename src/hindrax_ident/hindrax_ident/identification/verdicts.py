@@ -26,8 +26,9 @@ and
      quadratic damping beyond 3 combined standard deviations: the model does not explain the transients and the
      steady states with the same numbers (lag, latency, coupling). DOF-wide. (The equation-error fit is not used:
      its inertia is biased low by the noise of the differentiated velocity even when nothing is wrong.)
-   * ``direction``: the steady-window residuals of the two directions of motion differ beyond their scatter
-     (heave: up/down; others: forward/backward), a level-to-level inconsistency. DOF-wide.
+   * ``direction``: the steady-window misfits (relative to the model force) of the two directions of motion differ
+     by more than :data:`DIRECTION_MAX` and beyond their scatter (z > 4) (heave: up/down; others: forward/backward),
+     a level-to-level inconsistency. DOF-wide.
    * ``whiteness``: the lag-1 autocorrelation of the output-error residuals between consecutive samples is above
      :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit). DOF-wide.
    * ``width``: the 95 % half-width is too wide to design a controller from: above :data:`WIDTH_MAX` of the value
@@ -55,6 +56,8 @@ __all__ = ["DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thru
 DEFAULT_THRUST_UNCERTAINTY_REL = (0.05, 0.10)
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
 WHITENESS_MAX = 0.9
+#: Difference of the mean relative steady-window misfit between the two directions of motion flagged (with z > 4).
+DIRECTION_MAX = 0.05
 #: Relative 95 % half-width above which a parameter is too uncertain for controller design.
 WIDTH_MAX = 0.3
 #: Segment length of the output-error fit, s (estimators.VELOCITY_SEGMENT_S / POSITION_SEGMENT_S).
@@ -156,18 +159,18 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
         wv = np.array([w[0] for w in wins], dtype=float)
         wf = np.array([w[1] for w in wins], dtype=float)
         pred = _drag(r.dof, r.values, wv)
-        res = wf - pred
+        scale = np.maximum(np.abs(pred), 0.1 * float(np.max(np.abs(pred))) + 1e-9)
+        res = (wf - pred) / scale  # relative misfit of each steady window
         pos, neg = res[wv > 0], res[wv < 0]
         if pos.size >= 2 and neg.size >= 2:
-            se = math.sqrt(np.var(pos, ddof=1) / pos.size + np.var(neg, ddof=1) / neg.size)
-            scale = max(float(np.median(np.abs(wf))), 1e-9)
-            se = max(se, 0.01 * scale)
-            zz = (float(np.mean(pos)) - float(np.mean(neg))) / se
+            se = max(math.sqrt(np.var(pos, ddof=1) / pos.size + np.var(neg, ddof=1) / neg.size), 0.01)
+            diff = float(np.mean(pos)) - float(np.mean(neg))
+            zz = diff / se
             checks["direction_z"] = zz
-            if abs(zz) > 4.0:
+            if abs(zz) > 4.0 and abs(diff) > DIRECTION_MAX:
                 which = "down/up" if r.dof == "heave" else "positive/negative"
-                dof_reasons.append(f"{which} steady windows disagree with the model by "
-                                   f"{np.mean(pos):+.3g} / {np.mean(neg):+.3g} (z = {zz:+.1f})")
+                dof_reasons.append(f"{which} steady windows disagree with the model by {100 * np.mean(pos):+.0f} % / "
+                                   f"{100 * np.mean(neg):+.0f} % of the force (z = {zz:+.1f})")
     # --- whiteness
     rho = r.signals.get("residual_autocorrelation")
     if rho is not None and math.isfinite(rho):
