@@ -483,7 +483,8 @@ def test_plausibility_gates_speed_and_interval():
     assert ok.velocity_valid and ok.rejection == "" and ok.velocity_flu_m_s[0] == pytest.approx(4.0)
     for pdl, word in ((_pdl(delta_x_m=999.999), "speed"), (_pdl(delta_time_s=1e-6, delta_x_m=1e300), "dtu"),
                       (_pdl(delta_time_s=0.024, delta_x_m=0.001), "dtu"), (_pdl(delta_time_s=1.001), "dtu"),
-                      (_pdl(delta_x_m=math.inf), "finite"), (_pdl(delta_x_m=math.nan), "finite")):
+                      (_pdl(delta_x_m=math.inf), "finite"), (_pdl(delta_x_m=math.nan), "finite"),
+                      (_pdl(delta_z_m=1e300), "speed")):  # 1e300 ** 2 overflowed (found by the property test)
         rep = b.from_position_delta(pdl, 0)
         assert not rep.velocity_valid and word in rep.rejection, (pdl, rep.rejection)
         assert all(math.isnan(v) for v in rep.velocity_flu_m_s) and rep.twist_covariance[0] == -1.0

@@ -171,7 +171,7 @@ class DvlReportBuilder:
             return f"dtu {dt * 1e3:.3f} ms below {self.min_interval_s * 1e3:g} ms"
         if self.max_interval_s is not None and dt > self.max_interval_s:
             return f"dtu {dt:.3f} s above {self.max_interval_s:g} s"
-        speed = math.sqrt(pdl.delta_x_m ** 2 + pdl.delta_y_m ** 2 + pdl.delta_z_m ** 2) / dt
+        speed = math.hypot(pdl.delta_x_m, pdl.delta_y_m, pdl.delta_z_m) / dt  # hypot: no OverflowError at 1e300
         if not math.isfinite(speed):
             return "velocity not finite"
         if self.max_speed_m_s is not None and speed > self.max_speed_m_s:

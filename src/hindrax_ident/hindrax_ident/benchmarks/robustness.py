@@ -148,6 +148,7 @@ def _dvl_strategy():
 
     numbers = st.one_of(st.integers(-10**12, 10**12).map(str),
                         st.floats(allow_nan=False, allow_infinity=False, width=32).map(lambda v: f"{v:.6g}"),
+                        st.floats(allow_nan=False, allow_infinity=False).map(repr),  # up to 1.8e308
                         st.sampled_from(["", "1e999", "-1e999", "nan", "inf", "0", "-0", "999.999", "1e300", "F",
                                          "T", "X", "0x10", "+", "-", ".", "1..2", "100", "101", "-1"]),
                         st.text(alphabet="0123456789.-+eE,TFX ", max_size=12))
@@ -160,11 +161,16 @@ def _dvl_strategy():
     field_counts = st.sampled_from([9, 35, 12, 8, 10, 34, 36, 0, 1])
     valid_checksum = st.tuples(sentence_ids, field_counts).flatmap(
         lambda t: st.tuples(st.just(t[0]), st.lists(numbers, min_size=t[1], max_size=t[1]))).map(body)
+    numeric = st.one_of(st.integers(-10**12, 10**12).map(str), st.floats(allow_nan=False).map(repr),
+                        st.sampled_from(["1e999", "-1e999", "999.999", "1e300", "-1e300", "0", "-0", "1e-300"]))
+    dvpdl = st.tuples(st.integers(0, 10**10), st.sampled_from([0, 1, 999, 25000, 50000, 100000, 10**6, 10**7]),
+                      st.lists(numeric, min_size=6, max_size=6), st.integers(0, 100)).map(
+        lambda t: format_sentence(",".join(["DVPDL", str(t[0]), str(t[1]), *t[2], str(t[3])])))
     good = format_dvpdl(DvlPositionDelta(12.345678, 0.1, 0.001, -0.002, 0.003, 0.0123, -0.0045, 0.0007, 87))
     real_dvext = (b"$DVEXT,F,X,3330,-1.8,2.4,259.5,-1175,0.000,0.00,-0.000,0.000,0.000000000,0.000000000,0.100,"
                   b"0.091711,0.019853,0.017436,-0.995435,25,25,25,25,F,F,F,F,0.0000,0.0000,0.0000,0.0000,-1.000,"
                   b"-1.000,-1.000,-1.000,*54\r\n")
-    return st.one_of(st.binary(max_size=300), valid_checksum, _flips(st, good), _flips(st, real_dvext))
+    return st.one_of(st.binary(max_size=300), valid_checksum, dvpdl, dvpdl, _flips(st, good), _flips(st, real_dvext))
 
 
 def _dvl_check_factory():
