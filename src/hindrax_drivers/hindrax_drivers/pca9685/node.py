@@ -2,28 +2,42 @@
 
 Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
 
-- From start-up every thruster channel is held at neutral (``thrusters.pulse_width_neutral_us``, 1500 us)
-  and the lights at ``lights.pulse_width_off_us``: the ESC arms only after seeing neutral for a few seconds.
-- Thrust is accepted only after ``esc.arming_time_s`` at neutral **and** an explicit arm request on the
-  ``esc/set_armed`` service (hindrax_msgs/SetArmed). Disarm is always accepted.
-- Watchdog: if no command arrives on ``thrusters/command_pulse_width`` for ``esc.watchdog_timeout_s``, every
-  channel is written neutral at the next output tick, i.e. within one output period
-  (1 / ``esc.output_rate_hz``). The same on disarm, on any exception in the output path, and on
-  shutdown (:meth:`EscNode.close`, called for SIGINT/SIGTERM by :func:`run_node`).
+- From start-up every thruster channel is held at neutral (``thrusters.pulse_width_neutral_us`` plus the
+  channel's ``trim_us``) and the lights at ``lights.pulse_width_off_us``: the ESC arms only after seeing neutral
+  for a few seconds. Start-up never lets old channel values run: every output is switched full OFF, the chip is
+  put to sleep, PRE_SCALE and neutral are written, and only then is it woken and restarted
+  (:func:`~.protocol.safe_startup_sequence`); the result is read back before anything else happens.
+- Thrust is accepted only after an explicit arm request on the ``esc/set_armed`` service (hindrax_msgs/SetArmed),
+  with ``esc.oscillator_calibrated`` true (neutral on the wire depends on the part's oscillator, 23-27 MHz; see
+  ``hindrax esc calibrate``) and ``esc.arming_time_s`` after neutral was confirmed on the chip by read-back (not
+  after node creation: a bus that was down at start delays it). Disarm is always accepted.
+- Event-driven output: an armed command is written to the chip in its own subscription callback. The output
+  tick (``esc.output_rate_hz``, ROS time) is the watchdog: if no command arrives on
+  ``thrusters/command_pulse_width`` for ``esc.watchdog_timeout_s``, every channel is written neutral at the next
+  tick, i.e. within one output period. A second, steady-clock watchdog (``time.monotonic``) does the same when
+  ROS time stops (``use_sim_time`` with a dead ``/clock``, where the ROS timers stand still). Neutral is also
+  written on disarm, on any exception in the output path, and on shutdown (:meth:`EscNode.close`, called for
+  SIGINT/SIGTERM by :func:`run_node`).
+- Read-back: every ``esc.readback_interval_s`` the tick reads MODE1, PRE_SCALE and the written channel registers;
+  a mismatch (a brown-out reset leaves the chip asleep with every output off) re-initialises the chip at neutral,
+  disarms (the ESCs must see neutral for the arming time again) and raises a ``/diagnostics`` warning
+  (``errors.chip_reinit``, message "read-back mismatch ...").
 - Commands are clamped to [``pulse_width_min_us``, ``pulse_width_max_us``]; per-channel reversal (mirror
   about neutral) and trim are applied after the clamp, and the result is clamped again; an optional slew
-  limit ``esc.slew_rate_us_per_s`` bounds the change per tick.
+  limit ``esc.slew_rate_us_per_s`` bounds the change per step.
 
 Subscribes ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm, thruster order) and
 ``lights/brightness`` (std_msgs/Float64, 0-1, mapped linearly from ``pulse_width_off_us`` to
 ``pulse_width_full_us``). Publishes ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the widths actually
-written, decoded back from the register counts, and the armed state), ``raw/pca9685``
+written, decoded back from the register counts, and the armed state; on every write, and at a tick when nothing
+was written since the previous one), ``raw/pca9685``
 (hindrax_msgs/RawDeviceData of every I2C transaction) and ``/diagnostics``.
 
 The bus is injected: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding a
 :class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation.
-Time: ROS time (``use_sim_time`` supported) for the watchdog and arming timer.
+Time: ROS time (``use_sim_time`` supported) for the output tick, watchdog, read-back and arming timer;
+the steady clock only for the second watchdog.
 """
 from __future__ import annotations
 
