@@ -243,8 +243,6 @@ SCHEMA.update({
                                             3, -math.pi, math.pi),
     "sensors.icm20948.position_frd_m": _v("IMU chip position relative to the CG, FRD, m (the imu_link origin)",
                                           3, -5.0, 5.0),
-    "sensors.icm20948.position_frd_m": _v("IMU chip position relative to the CG, FRD, m (the imu_link origin)",
-                                          3, -5.0, 5.0),
     "sensors.icm20948.frozen_check_samples": _i("data-ready gate: after this many bit-identical samples in a row "
                                                 "the chip's PWR_MGMT_1/USER_CTRL are read back (reset check)", 1, 100),
     "sensors.icm20948.mag_stale_timeout_s": _f("data-ready gate: no new magnetometer sample (ST1.DRDY, SLV0 "
