@@ -27,9 +27,10 @@ Start-up (docs/devices.md §4.3), executed step by step from ROS timers so the e
 
 Polling, at the achieved output data rate: one burst read from ACCEL_XOUT_H of 14 bytes (accel, gyro,
 temperature), 23 bytes in I2C-master mode (plus EXT_SLV_SENS_DATA_00..08 = ST1..ST2 of the AK09916); in
-bypass mode a second 9-byte burst at 0x0C:0x10. The register bank stays 0 between polls, so a poll is a
-single I2C transaction. The node does not gate on DATA_RDY: a poll may see the previous sample again or
-skip one when the chip and the host clocks drift (both run at the same nominal rate).
+bypass mode a second 9-byte burst at 0x0C:0x10; in I2C-master mode a 1-byte read of I2C_MST_STATUS (the
+AK09916's NACK bit, see "Data-ready gates" below). The register bank stays 0 between polls. The node does not
+read INT_STATUS_1.RAW_DATA_0_RDY: a poll may see the previous sample again or skip one when the chip and the
+host clocks drift (both run at the same nominal rate); repeated samples are handled by the data-ready gates.
 
 Publishes (reliable, depth 10), all with frame ``imu_link``:
 
@@ -45,7 +46,8 @@ Publishes (reliable, depth 10), all with frame ``imu_link``:
 - ``raw/icm20948`` hindrax_msgs/RawDeviceData: every I2C transaction (ICM and, in bypass mode, AK09916);
   those of one poll in one message (:class:`~hindrax_drivers.node_common.RawDataPublisher` batch).
 - ``/diagnostics``: state, rate, last message age, I2C transactions/errors/retries/failures, identity,
-  configuration, magnetometer state, gyro bias, stuck warning.
+  configuration, magnetometer state, gyro bias, the ERRORs ``stuck``, ``chip_reset`` and ``magnetometer``,
+  the counters ``chip_resets``, ``mag_nack``, ``mag_lost``, ``stuck_events``.
 
 Mounting: ``sensors.icm20948.mounting_rpy_rad`` = roll, pitch, yaw (extrinsic x-y-z, FLU) of the sensor
 axes in base_link. The node rotates every vector (and covariance) by R = Rz(yaw) Ry(pitch) Rx(roll), so

@@ -46,7 +46,8 @@ Publishes (reliable, depth 10):
 - ``raw/ms5837`` hindrax_msgs/RawDeviceData: every I2C transaction (command bytes and ADC/PROM reads); the
   four of a measurement cycle in one message (:class:`~hindrax_drivers.node_common.RawDataPublisher` batch).
 - ``/diagnostics``: state, rate, last message age, I2C transactions/errors/retries/failures, ADC zero
-  reads, cycle overruns, variant, OSR, surface pressure, stuck warning.
+  reads, saturated reads, cycle overruns, restarts, variant, OSR, surface pressure, the ERRORs ``stuck`` and
+  ``implausible``.
 
 Service ``pressure/zero_depth`` (std_srvs/Trigger): sets the surface pressure to the mean of the
 pressures of the last :data:`ZERO_DEPTH_WINDOW_S` seconds (run it with the vehicle at the surface);
