@@ -116,3 +116,29 @@ def test_estimators_tune_from_the_declared_noise(vehicle):
     # an online estimator builds and updates from a vehicle file that has no simulation.sensors section
     est = OnlineDofEstimator(vehicle, "surge")
     assert est is not None
+
+
+def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp_path):
+    """``hindrax run --truth FILE``'s graph: the simulator and the emulators get the truth, every node the vehicle
+    file (their parameters hold no truth-only key and the vehicle's thrust lag)."""
+    from hindrax_drivers.testing import ros_context
+    from hindrax_ident.bringup import build_graph
+
+    p = tmp_path / "truth.yaml"
+    p.write_text("thrusters: {time_constant_s: 0.25}\ndisturbances: {thrust: {scale: 0.9}}\n")
+    with ros_context() as ctx:
+        graph = build_graph(default_config_path(), sim=True, context=ctx, seed=2, drive_clocks=True, truth=str(p))
+        try:
+            sim = graph.nodes["simulator"].simulator
+            assert sim.thrusters.time_constant_s == 0.25
+            assert sim.truth_model.disturbances.get("thrust.scale") == 0.9
+            assert graph.hardware.config.flat["thrusters.time_constant_s"] == 0.25
+            for name, node in graph.nodes.items():
+                if name == "simulator":
+                    continue
+                params = {k: v.value for k, v in node.get_parameters_by_prefix("").items()}
+                assert not [k for k in params if k.startswith(("simulation.sensors", "disturbances"))], name
+                if "thrusters.time_constant_s" in params:
+                    assert params["thrusters.time_constant_s"] == 0.1, name
+        finally:
+            graph.shutdown()
