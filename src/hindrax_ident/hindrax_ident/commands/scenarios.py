@@ -63,6 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="directory keeping each campaign's identification (pickle): a case found there is not "
                              "run again, so the verdicts can be re-assessed and seeds added without re-running (keyed by "
                              "scenario, seed, DOFs and levels: empty it when the vehicle file or the code changes)")
+    parser.add_argument("--cached-only", action="store_true",
+                        help="with --cache: use only the cases found there (re-assess them with the current verdicts "
+                             "and tables; the others are listed as not run)")
 
 
 def _truth_path(name: str) -> Path:
@@ -94,9 +97,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     truth = load_truth(cfg, _truth_path(scenario))
     label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
     wall0 = time.monotonic()
-    cached = None
-    if cache:
-        cached = Path(cache) / f"{label}-seed{seed}-{'_'.join(dofs)}-levels{levels}.pickle"
+    cached = _cache_file(cache, label, seed, dofs, levels) if cache else None
     if cached is not None and cached.is_file():
         idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
     else:
@@ -131,6 +132,11 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
             "abort_reason": abort_reason, "errors": errors, "cases": rows,
             "dofs": {d: {"verdict": v["verdict"], "reasons": v["reasons"], "checks": v["checks"]}
                      for d, v in verdicts.items()}}
+
+
+def _cache_file(cache: str, scenario: str, seed: int, dofs: Sequence[str], levels: int | None) -> Path:
+    label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
+    return Path(cache) / f"{label}-seed{seed}-{'_'.join(dofs)}-levels{levels}.pickle"
 
 
 def _case_star(args):
@@ -248,11 +254,19 @@ def run(args: argparse.Namespace) -> int:
     if args.seeds < 1 or args.jobs < 1:
         print("--seeds and --jobs must be >= 1", file=sys.stderr)
         return 1
+    if args.cached_only and not args.cache:
+        print("--cached-only needs --cache DIR", file=sys.stderr)
+        return 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # seed-major: every scenario's seed 1 first, so that a suite cut short still covers every scenario
     jobs = [(args.config, n, seed, dofs, args.levels, args.cache) for seed in range(1, args.seeds + 1)
             for n in names]
+    not_run = []
+    if args.cached_only:
+        keep = [j for j in jobs if _cache_file(args.cache, j[1], j[2], dofs, args.levels).is_file()]
+        not_run = [f"{j[1]} seed {j[2]}" for j in jobs if j not in keep]
+        jobs = keep
     wall0 = time.monotonic()
     results = []
     # import everything the workers need before they fork (the tree may change during a long suite)
@@ -272,11 +286,14 @@ def run(args: argparse.Namespace) -> int:
     summary = summarise(results)
     date = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names,
+           "levels": args.levels, "not_run": not_run,
            "wall_time_s": time.monotonic() - wall0, "summary": summary, "runs": results}
     (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
     table = format_table(summary)
+    missing = f"; not run: {', '.join(not_run)}" if not_run else ""
     (out / "scenarios.md").write_text(f"Scenario suite, {date}, commit {doc['commit']}, seeds 1-{args.seeds}, "
-                                      f"DOFs {', '.join(dofs)}\n\n{table}\n")
+                                      f"DOFs {', '.join(dofs)}, levels {args.levels or 'default'}{missing}\n\n"
+                                      f"{table}\n")
     print(table)
     print(f"output: {out / 'scenarios.json'}, {out / 'scenarios.md'} (wall time {doc['wall_time_s']:.0f} s)")
     return 0
