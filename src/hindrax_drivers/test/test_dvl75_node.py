@@ -325,15 +325,19 @@ def test_stuck_sensor_is_an_error_and_its_velocity_and_altitude_are_withdrawn():
         assert not r.node.stuck
         with r.dev.lock:
             r.emu.faults.set_stuck(True)
-        r.wait(lambda: r.node.stuck, 5.0, "stuck detected")
-        n_data, n_twist, n_alt = len(r.data), len(r.twist), len(r.altitude)
+        r.wait(lambda: "dvext" in r.node._stuck_now and "dvpdl" in r.node._stuck_now, 5.0, "stuck detected")
+        detected_ns = r.node.now_ns()  # at or after the detection of both sentences
+        n_data, n_alt = len(r.data), len(r.altitude)
         r.wait(lambda: len(r.data) >= n_data + 5 and r.diag and "stuck" in r.diag[-1].message, 5.0,
                "stuck reports and the stuck error in diagnostics")
         assert r.diag[-1].level == DiagnosticStatus.ERROR
-        assert r.node.stuck  # still frozen: every report since is published without a velocity
-        assert not any(m.velocity_valid for m, _ in r.data[n_data:])
-        assert all(math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0 for m, _ in r.data[n_data:])
-        assert len(r.twist) == n_twist and len(r.altitude) <= n_alt + 1  # (one may have been in flight)
+        assert r.node.stuck  # still frozen: from the first withdrawn report on, none has a velocity
+        first = next(i for i in range(n_data, len(r.data)) if not r.data[i][0].velocity_valid)
+        assert first < len(r.data) - 3  # (reports published before the detection may arrive after n_data)
+        assert not any(m.velocity_valid for m, _ in r.data[first:])
+        assert all(math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0 for m, _ in r.data[first:])
+        assert all(stamp_s(tw.header) < stamp_s(r.data[first][0].header) for tw, _ in r.twist)  # no twist since
+        assert not [a for a, _ in r.altitude if stamp_s(a.header) * 1e9 > detected_ns + 1e3]  # no altitude since
         with r.dev.lock:
             r.emu.faults.set_stuck(False)
         r.wait(lambda: not r.node.stuck, message="stuck cleared")
