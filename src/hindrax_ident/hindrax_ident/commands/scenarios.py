@@ -93,6 +93,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     import pickle
 
+    from scipy import stats
+
     cfg = load_config(config_path or default_config_path())
     truth = load_truth(cfg, _truth_path(scenario))
     label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
@@ -124,7 +126,11 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
             rs = math.nan if rs is None else float(rs)
             rls = {"rls_value": float(rv), "rls_std": rs if math.isfinite(rs) else None,
                    "rls_covers": bool(math.isfinite(rs) and abs(float(rv) - tr) <= 1.96 * rs)}
-            rows.append({**rls, "dof": dof, "parameter": name, "value": v, "std": s, "std_fit": a[name]["std_fit"],
+            # before issue 16: the fit's own std and the t quantile of (samples - parameters), no verdict
+            t_before = float(stats.t.ppf(0.975, max(int(r.residual_dof), 1)))
+            before = bool(abs(v - tr) <= t_before * a[name]["std_fit"])
+            rows.append({**rls, "covered_before": before, "dof": dof, "parameter": name, "value": v, "std": s,
+                         "std_fit": a[name]["std_fit"],
                          "truth": tr, "rel_error": (v - tr) / abs(tr) if tr != 0.0 else None,
                          "z": (v - tr) / s if s > 0 else None, "covered": bool(lo <= tr <= hi),
                          "verdict": a[name]["verdict"], "reasons": a[name]["reasons"], "t_dof": a[name]["t_dof"]})
@@ -192,6 +198,7 @@ def summarise(results: Sequence[dict]) -> dict:
         all_rows = [r for rows in params.values() for r in rows]
         pub = [r for r in all_rows if r.get("rls_std") is not None]
         out[sc] = {"parameters": table, "cases": n_cases, "covered": n_cov, "suspect": n_sus, "ok": n_ok,
+                   "covered_before": sum(r.get("covered_before", False) for r in all_rows),
                    "meets_target": bool(meets), "rls_published": len(pub),
                    "rls_published_covers": sum(r["rls_covers"] for r in pub)}
     return out
@@ -203,11 +210,13 @@ def _pct(a: int, n: int) -> str:
 
 def format_table(summary: dict, detail: bool = True) -> str:
     """Markdown: one line per scenario (coverage, suspect, ok, target), then per scenario, DOF and parameter."""
-    lines = ["| scenario | cases | interval covers truth | suspect | covered or suspect | target met | "
-             "RLS std published (covers) |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| scenario | cases | before: interval covers truth | after: interval covers truth | suspect | "
+             "covered or suspect | target met | RLS std published (covers) |",
+             "|---|---|---|---|---|---|---|---|"]
     for sc, s in summary.items():
-        lines.append(f"| {sc} | {s['cases']} | {s['covered']} ({_pct(s['covered'], s['cases'])}) | "
+        cb = s.get("covered_before", 0)
+        lines.append(f"| {sc} | {s['cases']} | {cb} ({_pct(cb, s['cases'])}) | "
+                     f"{s['covered']} ({_pct(s['covered'], s['cases'])}) | "
                      f"{s['suspect']} ({_pct(s['suspect'], s['cases'])}) | {s['ok']} ({_pct(s['ok'], s['cases'])}) | "
                      f"{'yes' if s['meets_target'] else 'no'} | {s.get('rls_published', 0)} "
                      f"({s.get('rls_published_covers', 0)}) |")
