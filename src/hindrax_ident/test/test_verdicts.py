@@ -57,12 +57,12 @@ def test_interval_uses_thrust_uncertainty_and_segment_dof(cfg):
     nseg = segment_count("surge", 90.0)
     assert nseg == 30
     p = a["parameters"]["inertia"]
-    assert p["t_dof"] == nseg - 4
+    assert p["t_dof"] == nseg - 1  # cluster-robust: segments - 1
     rel = cfg.flat["thrusters.thrust_uncertainty_rel"]
     expected_std = math.sqrt(r.std["inertia"] ** 2 + r.values["inertia"] ** 2 * (0.25 * rel[0] ** 2 +
                                                                                 0.25 * rel[1] ** 2))
     assert p["std"] == pytest.approx(expected_std)
-    tq = stats.t.ppf(0.975, nseg - 4)
+    tq = stats.t.ppf(0.975, nseg - 1)
     assert p["ci95"][1] - p["value"] == pytest.approx(tq * expected_std)
     assert a["verdict"] == "trusted" and p["reasons"] == []
 

@@ -16,14 +16,17 @@ and
    ``hindrax ident thruster-fit``, the relative std of the fitted thrust over the pulse widths used) it replaces the
    declared value;
 2. **uses degrees of freedom that match the independent information**: the output-error residuals are correlated
-   inside a segment (3 s for a velocity-measured DOF, 10 s for heave), so the 95 % interval uses the Student t
-   quantile with (number of segments - number of parameters) degrees of freedom, not (samples - parameters);
+   inside a segment (3 s for a velocity-measured DOF, 10 s for heave) and the fit's covariance is at least the
+   cluster-robust one with one cluster per segment, so the 95 % interval uses the Student t quantile with
+   (number of segments - 1) degrees of freedom, as for cluster-robust inference with few clusters (Cameron and
+   Miller 2015, "A practitioner's guide to cluster-robust inference", J. Human Resources 50(2), §VI), not
+   (samples - parameters);
 3. **gives each parameter ``verdict: trusted | suspect`` and the reasons**, from the checks a pool engineer makes:
 
    * ``bias``: the constant force differs significantly from the one expected (0; heave: the configured net
      buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide.
    * ``methods``: the seed's steady-state fit ([Hindrax-Drag] (seed 003) eqs. 2-8) disagrees with the reported
-     quadratic damping beyond 3 combined standard deviations: the model does not explain the transients and the
+     quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not explain the transients and the
      steady states with the same numbers (lag, latency, coupling). DOF-wide. (The equation-error fit is not used:
      its inertia is biased low by the noise of the differentiated velocity even when nothing is wrong.)
    * ``direction``: the steady-window misfits (relative to the model force) of the two directions of motion differ
@@ -56,6 +59,8 @@ __all__ = ["DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thru
 DEFAULT_THRUST_UNCERTAINTY_REL = (0.05, 0.10)
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
 WHITENESS_MAX = 0.9
+#: Relative difference of the steady-state and transient quadratic damping flagged (with |z| > 3).
+METHODS_MAX = 0.05
 #: Difference of the mean relative steady-window misfit between the two directions of motion flagged (with z > 4).
 DIRECTION_MAX = 0.05
 #: Relative 95 % half-width above which a parameter is too uncertain for controller design.
@@ -119,7 +124,7 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
     cov = np.asarray(cov_fit, dtype=float) + thrust_covariance(r.dof, names, theta, rel)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     nseg = segment_count(r.dof, r.pool_time_s)
-    t_dof = max(1, nseg - len(names))
+    t_dof = max(1, nseg - 1)
     tq = float(stats.t.ppf(0.975, t_dof))
     out: dict = {}
     for n, v, s, sf in zip(names, theta, std, np.sqrt(np.clip(np.diag(cov_fit), 0.0, None))):
@@ -150,7 +155,7 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
                 vs, ss = r.steady[n]
                 zz = (vs - out[n]["value"]) / math.hypot(ss, out[n]["std_fit"]) if (ss or out[n]["std_fit"]) else 0.0
                 checks[f"steady_z_{n}"] = zz
-                if abs(zz) > 3.0:
+                if abs(zz) > 3.0 and abs(vs - out[n]["value"]) > METHODS_MAX * abs(out[n]["value"]):
                     dof_reasons.append(f"steady-state {n} {vs:.4g} disagrees with the transient fit "
                                        f"{out[n]['value']:.4g} (z = {zz:+.1f})")
     # --- direction consistency of the steady windows
