@@ -142,3 +142,26 @@ def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp
                     assert params["thrusters.time_constant_s"] == 0.1, name
         finally:
             graph.shutdown()
+
+
+def test_five_percent_weaker_thrust_is_covered_or_suspect(vehicle):
+    """Issue 16, done when: a truth whose thrust curves are 5 % weaker than the vehicle file's gives surge and heave
+    inertia intervals that cover the truth (or a suspect verdict). The truth's hydrodynamics are the vehicle's."""
+    from hindrax_ident.identification.campaign import Campaign
+    from hindrax_ident.identification.estimators import identify_all_with_errors, truth_parameters
+    from hindrax_ident.identification.verdicts import apply_verdicts
+
+    truth = load_truth(vehicle, truth_dir() / "thrust_0.95.yaml")
+    assert truth.disturbances.get("thrust.scale") == 0.95
+    sim = Simulator(vehicle, seed=1, truth=truth)
+    record = Campaign(vehicle, dofs=("surge", "heave"), levels=3, seed=1, sim=sim).run()
+    assert not record.aborted, record.abort_reason
+    idents, errors = identify_all_with_errors(record, vehicle)
+    assert not errors
+    verdicts = apply_verdicts(idents, vehicle)
+    for dof in ("surge", "heave"):
+        r = idents[dof]
+        true = truth_parameters(truth.config, dof)["inertia"]
+        assert r.values["inertia"] > true  # less thrust than believed: the inertia reads high
+        lo, hi = r.ci95["inertia"]
+        assert lo <= true <= hi or verdicts[dof]["parameters"]["inertia"]["verdict"] == "suspect", (dof, lo, hi, true)
