@@ -116,7 +116,7 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             handle = f.result()
             assert handle.accepted
             running = lambda: any(s.phase == ManeuverStatus.PHASE_RUNNING for s in got["status"])  # noqa: E731
-            wait_until(running, 120, spin, "surge run under way")
+            wait_until(running, 300, spin, "surge run under way")  # wall time: slow under load
             t_run = sim.t_s
             wait_until(lambda: sim.t_s > t_run + 2.0, 30, spin, "two seconds of the run")
             fb = [x for x in got["fb"] if x.level_command != 0.0]
@@ -143,3 +143,24 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
         finally:
             graph.shutdown()
             probe.destroy_node()
+
+
+def test_node_parameters_are_described_read_only_and_checked():
+    from rclpy.parameter import Parameter
+
+    from hindrax_drivers.config import ConfigError
+    from hindrax_ident.identification.node import IdentificationNode
+
+    cfg = load_config(default_config_path())
+    with ros_context() as ctx:
+        node = IdentificationNode(config=cfg, context=ctx)
+        try:
+            d = node.describe_parameters(["stop_timeout_s"])[0]
+            assert d.read_only and "neutral" in d.description
+            assert not node.set_parameters([Parameter("stop_timeout_s", value=5.0)])[0].successful
+            assert node.stop_timeout_s == 2.0
+        finally:
+            node.destroy_node()
+        with pytest.raises(ConfigError, match="sensor_timeout_s = -1"):
+            IdentificationNode(config=cfg, context=ctx, node_name="bad",
+                               parameter_overrides=[Parameter("sensor_timeout_s", value=-1.0)])

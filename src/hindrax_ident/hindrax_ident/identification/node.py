@@ -63,7 +63,7 @@ from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Imu, Range
 
 from hindrax_drivers import frames
-from hindrax_drivers.config import DOFS, ConfigError, VehicleConfig, node_config
+from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig, node_config
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
@@ -135,9 +135,12 @@ class IdentificationNode(Node):
         f = self.config.flat
         self.tick_s = 1.0 / float(f["identification.estimate_rate_hz"])
         self.publish_period_s = 1.0 / max(1.0, float(f["identification.publish_rate_hz"]))
-        self.dvl_lock_timeout_s = float(self._param("dvl_lock_timeout_s", 3.0))
-        self.sensor_timeout_s = float(self._param("sensor_timeout_s", 30.0))
-        self.stop_timeout_s = float(self._param("stop_timeout_s", 2.0))
+        self.dvl_lock_timeout_s = self._param("dvl_lock_timeout_s", 3.0, "longest time without a valid DVL velocity "
+                                              "during a surge or sway run before the goal aborts, s")
+        self.sensor_timeout_s = self._param("sensor_timeout_s", 30.0, "longest wait for every sensor to publish "
+                                            "after a goal is accepted, s")
+        self.stop_timeout_s = self._param("stop_timeout_s", 2.0, "longest zero-wrench hold at the end of a goal "
+                                          "while waiting for the ESC to report neutral widths, s")
         self._mount_t = mounting_rotation(f["sensors.icm20948.mounting_rpy_rad"]).T
         self._n_thrusters = len(self.config.thrusters.thrusters)
         self._neutral_us = float(self.config.thrusters.pulse_width_neutral_us)
@@ -167,10 +170,19 @@ class IdentificationNode(Node):
         log.info(f"identification executive ready: action run_identification, ticks at "
                  f"{1.0 / self.tick_s:g} Hz, estimates at {1.0 / self.publish_period_s:g} Hz")
 
-    def _param(self, name: str, default: Any) -> Any:
+    def _param(self, name: str, default: float, description: str) -> float:
+        """A read-only node parameter (> 0, s). Raises :class:`ConfigError` (one line) for another value."""
+        from rcl_interfaces.msg import ParameterDescriptor
+
         if not self.has_parameter(name):
-            self.declare_parameter(name, default)
-        return self.get_parameter(name).value
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description=description, read_only=True, additional_constraints="allowed a number > 0"))
+        value = self.get_parameter(name).value
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and value > 0):
+            issue = ConfigIssue(name, value, "a number > 0")
+            self.get_logger().fatal(f"invalid configuration: {issue.line()}")
+            raise ConfigError([issue], f"parameters of {self.get_name()}")
+        return float(value)
 
     # ------------------------------------------------------------------ inputs
     def _on_dvl(self, msg: Dvl) -> None:
