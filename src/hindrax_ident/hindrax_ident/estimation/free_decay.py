@@ -85,6 +85,10 @@ __all__ = [
     "keulegan_carpenter",
     "prototype_added_mass",
     "free_decay_table_row",
+    "DECAY_OUTPUTS",
+    "QuadraticDecayFit",
+    "fit_quadratic_free_decay",
+    "quadratic_free_decay_keys",
 ]
 
 
@@ -560,3 +564,253 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
         fluid_density_kg_m3=rho, release_index=int(i_rel), peaks=peaks_arr,
         peak_times_s=t[peaks_arr], peak_amplitudes_m=amp, t_s=t, acceleration_m_s2=a,
         displacement_m=x, velocity_m_s=v, envelope_m=envelope)
+
+
+# --------------------------------------------------------------------------------------
+# Quadratic damping: output-error fit of the nonlinear free-decay ODE ([SmallROV] (seed 004) eqs. 12-16)
+# --------------------------------------------------------------------------------------
+#: Signals the ODE fit can compare with the record (``output``): what the sensor measured.
+DECAY_OUTPUTS = ("acceleration", "velocity", "displacement")
+
+
+@dataclass(frozen=True, eq=False)
+class QuadraticDecayFit:
+    """Result of :func:`fit_quadratic_free_decay`.
+
+    The model is the 1-DOF free decay with linear and quadratic damping of [SmallROV] (seed 004)
+    eq. 12 with the restoring term of [Hindrax-AM] (seed 000) eq. 1 (a spring of stiffness k, or a
+    hydrostatic restoring moment C for roll/pitch):
+
+        M x'' + b1 x' + b2 |x'| x' + k x = 0,   M = m_b + m_ad   (rigid + added inertia)
+
+    Attributes (SI; for a rotational DOF read kg as kg m^2, m as rad, N as N m):
+    ``total_inertia`` (M, kg) and ``total_inertia_std``; ``added_inertia`` (M - m_b, kg; NaN when
+    no rigid inertia was given) and ``added_inertia_std`` (= ``total_inertia_std``: m_b is taken as
+    exact); ``linear_damping`` (b1, N s/m) and ``linear_damping_std``; ``quadratic_damping`` (b2,
+    N s^2/m^2) and ``quadratic_damping_std``; ``initial_displacement`` and ``initial_velocity`` (state
+    at the first analysed sample, m and m/s); ``bias`` (constant sensor offset in the unit of the
+    output); ``rms_residual`` (unit of the output); ``n_samples``; ``stiffness`` (k, N/m, given);
+    ``output`` (one of :data:`DECAY_OUTPUTS`); ``t0_s`` (time of the first analysed sample);
+    ``covariance`` ((6, 6), order M, b1, b2, x0, v0, bias: s^2 (J^T J)^-1 with the residual variance
+    s^2, i.e. white residuals assumed - the std are optimistic when the residuals are coloured);
+    ``fitted`` ((n,) the model output at the record's times).
+    """
+
+    total_inertia: float
+    total_inertia_std: float
+    added_inertia: float
+    added_inertia_std: float
+    linear_damping: float
+    linear_damping_std: float
+    quadratic_damping: float
+    quadratic_damping_std: float
+    initial_displacement: float
+    initial_velocity: float
+    bias: float
+    rms_residual: float
+    n_samples: int
+    stiffness: float
+    output: str
+    t0_s: float
+    covariance: np.ndarray = field(repr=False)
+    fitted: np.ndarray = field(repr=False)
+
+
+def _decay_rhs(M: float, b1: float, b2: float, k: float):
+    """Right-hand side of the state + sensitivity system (see :func:`_simulate_decay`).
+
+    Plain Python floats on purpose: the system is tiny and numpy's per-call overhead would
+    dominate the integration time.
+    """
+    inv_m = 1.0 / M
+
+    def rhs(_t, z):
+        x, v = z[0], z[1]
+        av = abs(v)
+        f = -(k * x + b1 * v + b2 * av * v) * inv_m
+        dfdx = -k * inv_m
+        dfdv = -(b1 + 2.0 * b2 * av) * inv_m
+        # d f / d(M, b1, b2) directly; x0 and v0 enter through the initial sensitivities only
+        d0, d1, d2 = -f * inv_m, -v * inv_m, -av * v * inv_m
+        return [v, f,
+                z[3], dfdx * z[2] + dfdv * z[3] + d0,
+                z[5], dfdx * z[4] + dfdv * z[5] + d1,
+                z[7], dfdx * z[6] + dfdv * z[7] + d2,
+                z[9], dfdx * z[8] + dfdv * z[9],
+                z[11], dfdx * z[10] + dfdv * z[11]]
+    return rhs
+
+
+def _simulate_decay(tt: np.ndarray, theta: np.ndarray, k: float, output: str):
+    """Integrate the ODE and its forward sensitivities (scipy ``solve_ivp``, DOP853, rtol 1e-7: model error
+    about 1e-7 of the amplitude, far below any sensor noise).
+
+    theta = (M, b1, b2, x0, v0, bias); tt: (n,) times from 0. Returns (y, J): the model output
+    (n,) and its Jacobian (n, 6) with respect to theta.
+    """
+    M, b1, b2, x0, v0, bias = (float(p) for p in theta)
+    z0 = np.zeros(12)
+    z0[0], z0[1] = x0, v0
+    z0[2 + 2 * 3] = 1.0       # d x / d x0 at t = 0
+    z0[2 + 2 * 4 + 1] = 1.0   # d v / d v0 at t = 0
+    sol = integrate.solve_ivp(_decay_rhs(M, b1, b2, k), (0.0, float(tt[-1])), z0, method="DOP853",
+                              t_eval=tt, rtol=1e-7, atol=1e-10 * max(abs(x0), abs(v0), 1e-6))
+    if not sol.success or sol.y.shape[1] != tt.size:
+        raise EstimationError(f"free-decay ODE integration failed: {sol.message}")
+    x, v = sol.y[0], sol.y[1]
+    s = sol.y[2:].reshape(5, 2, -1)            # (param, x|v, time)
+    n = tt.size
+    J = np.zeros((n, 6))
+    if output == "displacement":
+        y = x + bias
+        J[:, :5] = s[:, 0, :].T
+    elif output == "velocity":
+        y = v + bias
+        J[:, :5] = s[:, 1, :].T
+    else:
+        f = -(k * x + b1 * v + b2 * np.abs(v) * v) / M
+        y = f + bias
+        dfdx = -k / M
+        dfdv = -(b1 + 2.0 * b2 * np.abs(v)) / M
+        direct = np.stack([-f / M, -v / M, -np.abs(v) * v / M, np.zeros(n), np.zeros(n)])
+        J[:, :5] = (dfdx * s[:, 0, :] + dfdv * s[:, 1, :] + direct).T
+    J[:, 5] = 1.0
+    return y, J
+
+
+def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[float] = None,
+                             output: str = "acceleration",
+                             initial_total_inertia: Optional[float] = None,
+                             initial_linear_damping: Optional[float] = None) -> QuadraticDecayFit:
+    """Fit M x'' + b1 x' + b2 |x'| x' + k x = 0 to a whole free-decay record (output error).
+
+    The amplitude-dependent decrement of quadratic damping ([SmallROV] (seed 004) eqs. 12-16: the
+    pendulum's K_L x' + K_Q |x'| x') is what separates b1 from b2: a log decrement
+    ([Hindrax-AM] (seed 000) eq. 3) assumes a constant decrement and reports one equivalent linear
+    damping that depends on the amplitude. [SmallROV] (seed 004) eq. 17 estimates the coefficients by
+    linear least squares on differentiated angles; here the ODE is integrated instead
+    (``scipy.integrate.solve_ivp`` with forward sensitivities) and the simulated output is fitted to
+    the measured one with ``scipy.optimize.least_squares`` (trust-region reflective, b1, b2 >= 0,
+    M > 0), so no signal is differentiated or integrated. The stiffness k is known (spring:
+    [Hindrax-AM] (seed 000) k_eq; roll/pitch: the inclining test's restoring moment per radian), so
+    M follows from the period and the result is independent of any thrust curve.
+
+    Args:
+        t_s: (n,) strictly increasing times in s, starting at (or just after) the release.
+        y: (n,) measured output: acceleration (m/s^2; any constant bias is fitted), velocity (m/s)
+            or displacement (m) per ``output``; for a rotational DOF rad/s^2, rad/s or rad.
+        stiffness: k in N/m (or C in N m/rad), > 0.
+        rigid_inertia: m_b in kg (or kg m^2) to report ``added_inertia`` = M - m_b (optional).
+        output: one of :data:`DECAY_OUTPUTS`.
+        initial_total_inertia: starting M (default: k / omega^2 from the record's spectrum peak).
+        initial_linear_damping: starting equivalent linear damping in N s/m (default: 0.1 of
+            critical); split half linear, half quadratic at the record's mean speed.
+
+    Returns:
+        :class:`QuadraticDecayFit`.
+
+    Raises:
+        EstimationError: bad input (shapes, NaN, time, k <= 0, unknown output), fewer than 32
+            samples, no oscillation, or a failed integration/fit.
+    """
+    if output not in DECAY_OUTPUTS:
+        raise EstimationError(f"output must be one of {', '.join(DECAY_OUTPUTS)}, got {output!r}")
+    t = check_time_vector(t_s, "t_s", min_samples=32)
+    yy = as_float_array(y, "y", 1)
+    check_same_length(t_s=t, y=yy)
+    k = _pos(stiffness, "stiffness")
+    tt = t - t[0]
+
+    f_hz = _dominant_frequency_hz(t, yy)
+    if not f_hz > 0:
+        raise EstimationError("no oscillation found in the record")
+    w = 2.0 * np.pi * f_hz
+    M0 = float(initial_total_inertia) if initial_total_inertia else k / w**2
+    c0 = float(initial_linear_damping) if initial_linear_damping else 0.1 * 2.0 * np.sqrt(k * M0)
+    # starting state and amplitude from the first sample(s), per output
+    yc = yy - np.mean(yy[int(0.8 * yy.size):])
+    if output == "acceleration":
+        x0, v0 = -yc[0] / w**2, 0.0
+    elif output == "velocity":
+        x0, v0 = float(np.max(np.abs(yc[: max(2, int(t.size * 0.5 / (f_hz * tt[-1])))])) / w), float(yc[0])
+        x0 = x0 if yc[min(yc.size - 1, 3)] < 0 else -x0
+    else:
+        x0, v0 = float(yc[0]), 0.0
+    amp = max(abs(x0), 1e-12)
+    u_mean = 0.5 * w * amp
+    theta0 = np.array([M0, 0.5 * c0, 0.5 * c0 / max(u_mean, 1e-12), x0, v0,
+                       float(np.mean(yy[int(0.8 * yy.size):]))])
+
+    cache: dict = {}
+
+    def model(theta):
+        key = theta.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = _simulate_decay(tt, theta, k, output)
+        return cache[key]
+
+    lower = np.array([1e-9 * M0, 0.0, 0.0, -np.inf, -np.inf, -np.inf])
+    best, last_exc = None, None
+    for scale_b2 in (1.0, 0.05):   # a second starting split only if the first fit fails
+        if best is not None and best.success:
+            break
+        th0 = theta0.copy()
+        th0[2] *= scale_b2
+        try:
+            res = optimize.least_squares(lambda th: model(th)[0] - yy, th0, jac=lambda th: model(th)[1],
+                                         bounds=(lower, np.full(6, np.inf)), x_scale="jac",
+                                         method="trf", max_nfev=100)
+        except (ValueError, EstimationError) as exc:
+            last_exc = exc
+            continue
+        if best is None or res.cost < best.cost:
+            best = res
+    if best is None:
+        raise EstimationError(f"free-decay ODE fit failed: {last_exc}")
+    theta = best.x
+    yfit, J = model(theta)
+    r = yfit - yy
+    dof = max(1, yy.size - 6)
+    s2 = float(r @ r) / dof
+    try:
+        cov = s2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov = np.full((6, 6), np.nan)
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    M = float(theta[0])
+    mb = None if rigid_inertia is None else _pos(rigid_inertia, "rigid_inertia")
+    return QuadraticDecayFit(
+        total_inertia=M, total_inertia_std=float(std[0]),
+        added_inertia=float("nan") if mb is None else M - mb, added_inertia_std=float(std[0]),
+        linear_damping=float(theta[1]), linear_damping_std=float(std[1]),
+        quadratic_damping=float(theta[2]), quadratic_damping_std=float(std[2]),
+        initial_displacement=float(theta[3]), initial_velocity=float(theta[4]), bias=float(theta[5]),
+        rms_residual=float(np.sqrt(np.mean(r * r))), n_samples=int(yy.size), stiffness=k,
+        output=output, t0_s=float(t[0]), covariance=cov, fitted=yfit)
+
+
+def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) -> dict:
+    """The keys ``hindrax ident free-decay --model quadratic`` adds to the linear analysis' JSON.
+
+    Fits :func:`fit_quadratic_free_decay` to the acceleration from the release found by the linear
+    analysis ``res`` (its ``release_index``), started from its added mass (eq. 5) and damping (eq. 6).
+    Returns ``linear_damping_n_s_per_m``, ``quadratic_damping_n_s2_per_m2``, the ODE fit's
+    ``added_mass_ode_kg`` (rigid mass ``res.mass_kg`` subtracted), each with its ``_std``, and
+    ``ode_rms_residual_m_s2``.
+    """
+    t = np.asarray(t_s, dtype=float)[res.release_index:]
+    a = np.asarray(acceleration_m_s2, dtype=float)[res.release_index:]
+    fit = fit_quadratic_free_decay(t, a, res.stiffness_n_per_m, rigid_inertia=res.mass_kg,
+                                   output="acceleration",
+                                   initial_total_inertia=res.mass_kg + res.added_mass_kg,
+                                   initial_linear_damping=res.damping_n_s_per_m)
+    return {
+        "linear_damping_n_s_per_m": fit.linear_damping,
+        "linear_damping_n_s_per_m_std": fit.linear_damping_std,
+        "quadratic_damping_n_s2_per_m2": fit.quadratic_damping,
+        "quadratic_damping_n_s2_per_m2_std": fit.quadratic_damping_std,
+        "added_mass_ode_kg": fit.added_inertia,
+        "added_mass_ode_kg_std": fit.added_inertia_std,
+        "ode_rms_residual_m_s2": fit.rms_residual,
+    }
