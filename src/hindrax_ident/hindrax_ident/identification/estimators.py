@@ -207,6 +207,7 @@ class OnlineDofEstimator:
 
     def __init__(self, cfg: VehicleConfig, dof: str, history_every: int = 5) -> None:
         self.dof = dof
+        self.cfg = cfg
         self.settings = measurement_settings(cfg, dof)
         s = self.settings
         if s["accel"]:
@@ -284,6 +285,13 @@ class OnlineDofEstimator:
         return True
 
     def published_std(self) -> np.ndarray:
+        """The std to publish (:func:`~.verdicts.rls_published_std` of :meth:`converged_std`): damping parameters
+        of the DOFs the scenario suite measured, widened by the thrust uncertainty; NaN = not converged / not
+        trusted."""
+        from .verdicts import rls_published_std
+        return rls_published_std(self.dof, self.names, self.rls.theta, self.converged_std(), self.cfg)
+
+    def converged_std(self) -> np.ndarray:
         """The RLS std where converged (inertia, damping, restoring: std <= converged_relative_std |value|; bias:
         std <= 0.1 N / 0.02 N m; linear damping: std <= 0.5 |value| + its bias tolerance), NaN = not converged."""
         tol_abs = [(0.02 if self.dof in ("roll", "pitch", "yaw") else 0.1) if n in ("bias",) or n.startswith("linear")
@@ -297,7 +305,7 @@ class OnlineDofEstimator:
 
     def result(self) -> dict:
         """Final {name: (value, std)} plus n_samples, excitation, converged_at_s."""
-        th, sd = self.rls.theta, self.published_std()
+        th, sd = self.rls.theta, self.converged_std()
         return {"parameters": {n: (float(v), float(s)) for n, v, s in zip(self.names, th, sd)},
                 "n_samples": self.rls.n_samples, "excitation_normalised": self.rls.excitation_normalised,
                 "converged_at_s": self.converged_at_s}
