@@ -87,7 +87,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     from ..identification.campaign import Campaign
     from ..identification.estimators import identify_all_with_errors, truth_parameters
-    from ..identification.verdicts import apply_verdicts
+    from ..identification.verdicts import apply_verdicts, rls_published_std
     from ..sim.simulator import Simulator
     from ..sim.truth import load_truth
 
@@ -117,13 +117,18 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     for dof, r in idents.items():
         true = truth_parameters(truth.config, dof)
         a = verdicts[dof]["parameters"]
+        # the online RLS std as the executive publishes it (NaN = not converged / not trusted)
+        online = [r.online.get(n, (math.nan, math.nan)) for n in r.names]
+        published = rls_published_std(dof, r.names, [v for v, _ in online],
+                                      [math.nan if s_ is None else s_ for _, s_ in online], cfg)
+        rls_std = {n: float(x) for n, x in zip(r.names, published)}
         for name in REPORTED:
             if name not in r.values:
                 continue
             v, s, tr = float(r.values[name]), float(r.std[name]), float(true[name])
             lo, hi = r.ci95[name]
             rv, rs = r.online.get(name, (math.nan, math.nan))
-            rs = math.nan if rs is None else float(rs)
+            rs = rls_std.get(name, math.nan)
             rls = {"rls_value": float(rv), "rls_std": rs if math.isfinite(rs) else None,
                    "rls_covers": bool(math.isfinite(rs) and abs(float(rv) - tr) <= 1.96 * rs)}
             # before issue 16: the fit's own std and the t quantile of (samples - parameters), no verdict

@@ -102,6 +102,18 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
     return out
 
 
+def _rls_entry(dof: str, r: Any, cfg: VehicleConfig) -> dict:
+    """{name: [value, std or None]} of the online RLS, the std as published (:func:`~.verdicts.rls_published_std`:
+    None = not converged / not trusted)."""
+    from .verdicts import rls_published_std
+
+    names = [n for n in r.names if n in r.online]
+    vals = [float(r.online[n][0]) for n in names]
+    stds = [math.nan if r.online[n][1] is None else float(r.online[n][1]) for n in names]
+    pub = rls_published_std(dof, names, vals, stds, cfg)
+    return {n: [v, _f(float(s))] for n, v, s in zip(names, vals, pub)}
+
+
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
                   seed: int | None = None, method: str | None = None,
                   include_configured: bool = True) -> dict:
@@ -130,7 +142,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         entry["pool_time_s"] = float(r.pool_time_s)
         entry["comparison"] = {
             "equation_error": {k: [float(v), float(s)] for k, (v, s) in r.equation_error.items()},
-            "rls": {k: [float(v), _f(s)] for k, (v, s) in r.online.items()},
+            "rls": _rls_entry(dof, r, cfg),
             "steady_state": None if r.steady is None else {k: [float(v), _f(s)] for k, (v, s) in r.steady.items()},
             "steady_state_note": r.steady_note,
             "rls_time_s": _f(r.rls_time_s),

@@ -52,7 +52,7 @@ from scipy import stats
 
 from hindrax_drivers.config import VehicleConfig
 
-__all__ = ["DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
+__all__ = ["RLS_STD_DOFS", "rls_published_std", "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "segment_count", "assess_dof", "apply_verdicts", "spread_reasons"]
 
 #: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
@@ -237,6 +237,27 @@ def apply_verdicts(identifications: Mapping[str, Any], cfg: VehicleConfig,
         r.signals["assessment"] = a
         out[dof] = a
     return out
+
+
+#: DOFs whose online RLS damping std the scenario suite measured (issue 16 item 5). Elsewhere it is not published.
+RLS_STD_DOFS = ("surge", "sway", "heave", "yaw")
+
+
+def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg: VehicleConfig) -> np.ndarray:
+    """The online RLS standard deviations worth publishing (p,), NaN = "not converged / not trusted".
+
+    ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping
+    parameters of :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty
+    (:func:`thrust_covariance`): in the scenario suite (no disturbance, seed 1) the RLS inertia read 2-5 % low
+    (z = -4 to -7) and the bias was off by up to 1.6 N (z = -32), the lag of the causal filter behind the
+    acceleration, so their std would not cover the truth; roll and pitch are not in the suite.
+    """
+    std = np.asarray(converged_std, dtype=float).copy()
+    theta = np.asarray(theta, dtype=float)
+    keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names])
+    thrust = np.diag(thrust_covariance(dof, names, theta, _declared_rel(cfg, None)))
+    out = np.sqrt(std ** 2 + thrust)
+    return np.where(keep & np.isfinite(std), out, np.nan)
 
 
 def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float = 2.0) -> list[str]:
