@@ -2,7 +2,7 @@
 MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust
-allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as
+allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the static TF (/tf_static), the identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as
 in the virtual pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the
 recorder. On the vehicle they open the configured serial ports and
 ``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
@@ -251,6 +251,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     from hindrax_drivers.supervisor.node import SupervisorNode
 
     nodes["supervisor"] = SupervisorNode(**common)  # disarms the ESC on a breach (supervisor.*)
+    from hindrax_drivers.tf.node import StaticTfNode
+
+    nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static
     if identification:
         from .identification.node import IdentificationNode
 
