@@ -143,3 +143,19 @@ def test_without_overrides_the_node_takes_the_shipped_vehicle_file_and_still_onl
         names = listed(call, "static_tf")
         assert vehicle_keys(names) == expected(TF_KEYS)
         assert len(nodes[0].message.transforms) == 12
+
+
+def test_node_specific_parameters_are_described_too():
+    from hindrax_drivers.recording.recorder_node import RecorderNode
+    from hindrax_ident.sim.node import SimulatorNode
+
+    rclpy_own = {"use_sim_time", "start_type_description_service"}  # declared by rclpy itself
+    with running(lambda c: SimulatorNode(context=c, parameter_overrides=ALL),
+                 lambda c: RecorderNode(context=c, parameter_overrides=ALL)) as (nodes, call):
+        for name in ("hindrax_simulator", "recorder"):
+            names = listed(call, name) - rclpy_own
+            assert len(names) > (100 if name == "hindrax_simulator" else 8)
+            undocumented = sorted(k for k, d in describe(call, name, names).items() if not d.description)
+            assert not undocumented, (name, undocumented)
+        # its own section only (recording.topics is optional: declared, without a value unless given)
+        assert vehicle_keys(listed(call, "recorder")) - {"recording.topics"} == expected(("recording",))

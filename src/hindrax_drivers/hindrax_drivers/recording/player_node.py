@@ -50,6 +50,20 @@ class PlayerError(ValueError):
     """The bag cannot be played as requested (message is one line)."""
 
 
+#: Descriptions of the player's parameters (``ros2 param describe``); all read at start-up (read-only).
+_PARAMETER_DOCS = {
+    "bag": "bag directory (or .mcap file) to play",
+    "rate": "playback rate factor (1 = recorded timing)",
+    "start_offset_s": "start this many seconds into the bag, s",
+    "topics": "topics to play (empty: all)",
+    "loop": "play the bag again when it ends",
+    "clock": "publish /clock from the bag's time",
+    "clock_rate_hz": "rate /clock is published at, Hz",
+    "wait_for_subscribers_timeout_s": "how long to wait for a subscriber on every topic before playing, s",
+    "qos_depth": "publisher queue depth",
+}
+
+
 class BagPlayerNode(Node):
     """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction."""
 
@@ -120,10 +134,13 @@ class BagPlayerNode(Node):
         """Declare (once) and read a parameter. A list is declared as a string array without a value: rclpy
         types an empty list as a byte array and would then refuse a ``topics`` override of strings."""
         if not self.has_parameter(name):
+            from rcl_interfaces.msg import ParameterDescriptor
+
+            desc = ParameterDescriptor(description=_PARAMETER_DOCS.get(name, name), read_only=True)
             if isinstance(default, list):
-                self.declare_parameter(name, Parameter.Type.STRING_ARRAY)
+                self.declare_parameter(name, Parameter.Type.STRING_ARRAY, desc)
             else:
-                self.declare_parameter(name, default)
+                self.declare_parameter(name, default, desc)
         return self.get_parameter_or(name, Parameter(name, value=default)).value
 
     def wait_for_subscribers(self, timeout_s: float | None = None) -> list[str]:
