@@ -46,6 +46,14 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("ident", "thruster-fit"), "hindrax_ident.commands.ident",
      "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] (seed 003) eq. 1 "
      "(JSON; --write CONFIG)"),
+    (("ident", "priors"), "hindrax_ident.commands.ident_references",
+     "empirical added mass and damping priors from geometry, [NTNU-Thesis] (seed 002) App. A.1/A.2 (JSON; --config "
+     "FILE or --length-m ... --top-area-m2)"),
+    (("ident", "inclining"), "hindrax_ident.commands.ident_references",
+     "roll/pitch restoring stiffness from an inclining test CSV (arm m, IMU tilt rad) with a known mass (JSON)"),
+    (("ident", "tilt-decay"), "hindrax_ident.commands.ident_references",
+     "rigid + added roll/pitch inertia from a free-decay CSV (time s, gyro rate or angle) and the inclining "
+     "stiffness, nonlinear ODE fit (JSON)"),
     (("ident", "campaign"), "hindrax_ident.commands.ident",
      "identification campaign in-process on the simulator (same as `hindrax run`)"),
     (("ident", "scenarios"), "hindrax_ident.commands.scenarios",

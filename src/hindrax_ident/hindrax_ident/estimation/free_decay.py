@@ -89,6 +89,8 @@ __all__ = [
     "QuadraticDecayFit",
     "fit_quadratic_free_decay",
     "quadratic_free_decay_keys",
+    "IncliningResult",
+    "restoring_from_inclining",
 ]
 
 
@@ -814,3 +816,88 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
         "added_mass_ode_kg_std": fit.added_inertia_std,
         "ode_rms_residual_m_s2": fit.rms_residual,
     }
+
+
+# --------------------------------------------------------------------------------------
+# Inclining test: hydrostatic restoring stiffness in roll/pitch from a known moment
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class IncliningResult:
+    """Result of :func:`restoring_from_inclining`.
+
+    ``restoring_n_m_per_rad`` (C, N m/rad) and its ``_std`` (NaN with only two points); ``offset_n_m``
+    (the moment that holds the vehicle's own static list, from the intercept); ``bg_m`` (C / (m g), when
+    the vehicle mass was given, else NaN) and ``bg_m_std``; ``weight_in_water_n`` (of the test mass);
+    ``n_points``; ``residual_rms_n_m``.
+    """
+
+    restoring_n_m_per_rad: float
+    restoring_n_m_per_rad_std: float
+    offset_n_m: float
+    bg_m: float
+    bg_m_std: float
+    weight_in_water_n: float
+    n_points: int
+    residual_rms_n_m: float
+
+    def to_dict(self) -> dict:
+        return {k: (int(v) if k == "n_points" else float(v)) for k, v in self.__dict__.items()}
+
+
+def restoring_from_inclining(arm_m, tilt_rad, test_mass_kg: float, test_volume_m3: float = 0.0,
+                             fluid_density_kg_m3: float = 1000.0, gravity_m_s2: float = 9.81,
+                             vehicle_mass_kg: Optional[float] = None) -> IncliningResult:
+    """Restoring stiffness C from an inclining test: a known mass moved across the vehicle, tilt measured.
+
+    With the test mass's weight in water w = (m - rho V) g at horizontal arm d (body frame, from the CG, in the
+    plane of the tilt) the static equilibrium is w d cos(phi) = C sin(phi) + M0, i.e. w d = C tan(phi) + M0 / cos(phi)
+    ~= C tan(phi) + M0 for small tilts (M0: the moment of the vehicle's own list). C (and M0) by linear least
+    squares over the points, std from the residual variance. C = W BG for a vehicle whose weight equals its
+    buoyancy ([NTNU-Thesis] (seed 002) Sec. 3.1.2), so BG = C / (m g) when the vehicle mass is given. This is
+    the classical inclining experiment; the stiffness it gives is what turns a roll/pitch free-decay period into
+    rigid + added inertia (:func:`fit_quadratic_free_decay` with ``stiffness`` = C), free of any thrust curve.
+    Assumes the test mass hangs at the CG's height (a mass above/below it shifts the CG too).
+
+    Args:
+        arm_m: (n,) signed horizontal arms, m (n >= 2, at least two different arms; include 0 and both signs).
+        tilt_rad: (n,) measured tilt (IMU roll or pitch, averaged over each hold), rad, same sign convention
+            as the moment w d.
+        test_mass_kg, test_volume_m3: the known mass and its displaced volume.
+        vehicle_mass_kg: optional, for BG.
+
+    Raises:
+        EstimationError: bad shapes, fewer than 2 points, all arms equal, non-positive weight in water.
+    """
+    d = as_float_array(arm_m, "arm_m", 1)
+    phi = as_float_array(tilt_rad, "tilt_rad", 1)
+    check_same_length(arm_m=d, tilt_rad=phi)
+    if d.size < 2 or np.ptp(d) <= 0:
+        raise EstimationError("need at least two different arms")
+    if np.any(np.abs(phi) >= 0.5 * np.pi):
+        raise EstimationError("tilts must be within +-90 deg (radians expected)")
+    w = (_pos(test_mass_kg, "test_mass_kg") - float(test_volume_m3) * _pos(fluid_density_kg_m3,
+                                                                          "fluid_density_kg_m3")) * gravity_m_s2
+    if not w > 0:
+        raise EstimationError(f"test mass must be heavier than the water it displaces, weight in water {w} N")
+    y = w * d
+    X = np.column_stack([np.tan(phi), np.ones_like(phi)])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    n = y.size
+    if n > 2:
+        s2 = float(r @ r) / (n - 2)
+        cov = s2 * np.linalg.inv(X.T @ X)
+        c_std = float(np.sqrt(cov[0, 0]))
+    else:
+        c_std = float("nan")
+    c = float(coef[0])
+    if not c > 0:
+        raise EstimationError(f"restoring stiffness came out {c:.4g} N m/rad (<= 0): check the signs of arm and tilt")
+    if vehicle_mass_kg is not None:
+        wv = _pos(vehicle_mass_kg, "vehicle_mass_kg") * gravity_m_s2
+        bg, bg_std = c / wv, c_std / wv
+    else:
+        bg, bg_std = float("nan"), float("nan")
+    return IncliningResult(restoring_n_m_per_rad=c, restoring_n_m_per_rad_std=c_std, offset_n_m=float(coef[1]),
+                           bg_m=bg, bg_m_std=bg_std, weight_in_water_n=float(w), n_points=int(n),
+                           residual_rms_n_m=float(np.sqrt(np.mean(r * r))))

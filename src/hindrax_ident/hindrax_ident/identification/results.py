@@ -16,6 +16,7 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
         comparison: {equation_error: {<parameter>: [value, std]}, rls: {...}, steady_state: {...} | null,
                      steady_state_note: <text>, rls_time_s: <float|null>, steady_state_time_s: <float|null>}
         configured: {<parameter>: <float>}     # optional: the configuration's values (simulation runs)
+        prior: {added_mass, linear_damping, quadratic_damping: <float|null>, source: <text>}  # [NTNU-Thesis] App. A
         drag_coefficient: {c_d: [value, std] (heave: c_d_positive, c_d_negative), projected_area_m2,
                            characteristic_length_m, reynolds_range: [low, high], definition}  # surge/sway/heave
 
@@ -39,7 +40,7 @@ import yaml
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry", "write_identification",
-           "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS"]
+           "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "prior_entries"]
 
 SCHEMA_VERSION = 1
 
@@ -114,6 +115,24 @@ def _rls_entry(dof: str, r: Any, cfg: VehicleConfig) -> dict:
     return {n: [v, _f(float(s))] for n, v, s in zip(names, vals, pub)}
 
 
+def prior_entries(cfg: VehicleConfig) -> dict[str, dict]:
+    """Per DOF ``{added_mass, linear_damping, quadratic_damping, source}``: the empirical priors from the
+    configured geometry ([NTNU-Thesis] (seed 002) App. A.1/A.2, :func:`~..estimation.priors.priors_from_config`;
+    no projected areas in the vehicle file, so a solid prism: an upper bound). A value that cannot be computed is
+    None; ``{}`` if the configuration lacks the geometry."""
+    from ..estimation.least_squares import EstimationError
+    from ..estimation.priors import priors_from_config
+
+    try:
+        p = priors_from_config(cfg)
+    except (KeyError, TypeError, EstimationError):
+        return {}
+    src = "[NTNU-Thesis] (seed 002) App. A.1/A.2 empirical estimate, solid prism of the configured box"
+    return {dof: {"added_mass": _f(p["added_mass"][i]), "linear_damping": _f(p["linear_damping"][i]),
+                  "quadratic_damping": _f(p["quadratic_damping"][i]), "source": src}
+            for i, dof in enumerate(DOFS)}
+
+
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
                   seed: int | None = None, method: str | None = None,
                   include_configured: bool = True) -> dict:
@@ -126,6 +145,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
     from .verdicts import apply_verdicts
 
     assessments = apply_verdicts(identifications, cfg)
+    priors = prior_entries(cfg)
     dofs: dict = {}
     for dof, r in identifications.items():
         entry: dict = {}
@@ -150,6 +170,8 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         }
         if include_configured:
             entry["configured"] = {k: float(v) for k, v in r.truth.items()}
+        if dof in priors:
+            entry["prior"] = priors[dof]
         drag = drag_coefficient_entry(r, cfg)
         if drag is not None:
             entry["drag_coefficient"] = drag
