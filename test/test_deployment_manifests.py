@@ -20,10 +20,14 @@ DOCKER = REPO / "docker"
 #: imported top-level module -> rosdep key (ROS packages and our own map to their own name)
 ROSDEP_KEY = {
     "numpy": "python3-numpy", "scipy": "python3-scipy", "serial": "python3-serial", "yaml": "python3-yaml",
-    "matplotlib": "python3-matplotlib", "smbus2": "python3-smbus2-pip", "mcap": "python3-mcap-pip",
-    "mcap_ros2": "python3-mcap-ros2-support-pip", "filterpy": "python3-filterpy-pip",
+    "matplotlib": "python3-matplotlib", "smbus2": "python3-smbus2", "mcap": "python3-mcap-pip",
+    "mcap_ros2": "mcap-ros2-support", "filterpy": "python3-filterpy-pip",
     "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest", "hypothesis": "python3-hypothesis",
 }
+#: keys of rosdistro's rosdep/python.yaml used here (checked against ros/rosdistro, 2026-11): apt or pip there
+ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-serial", "python3-yaml", "python3-matplotlib",
+                  "python3-smbus2", "python3-filterpy-pip", "python3-rosbags-pip", "mcap-ros2-support",
+                  "python3-pytest", "python3-hypothesis"}
 ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "std_msgs", "std_srvs",
                 "geometry_msgs", "sensor_msgs", "nav_msgs", "diagnostic_msgs", "rosgraph_msgs", "tf2_msgs",
                 "domain_coordinator", "hindrax_msgs", "hindrax_drivers", "hindrax_ident"}
@@ -73,16 +77,18 @@ def test_each_package_xml_lists_what_its_package_imports():
         assert "hindrax_ident" not in run_keys or pkg == "hindrax_ident"
 
 
-def test_the_workspaces_pip_keys_are_defined_in_rosdep_yaml_with_the_requirements_packages():
+def test_every_key_is_a_ros_package_a_rosdistro_key_or_defined_in_rosdep_yaml():
     rosdep = yaml.safe_load((REPO / "rosdep.yaml").read_text())
     requirements = {re.split(r"[<>=\[ ]", line.strip())[0].lower() for line in
                     (REPO / "requirements.txt").read_text().splitlines() if line.strip() and not line.startswith("#")}
     used = set()
     for pkg in ("hindrax_drivers", "hindrax_ident"):
         for keys in depends(pkg).values():
-            used |= {k for k in keys if k.endswith("-pip")}
-    assert used and used <= set(rosdep), sorted(used - set(rosdep))
-    for key in used:
+            used |= keys
+    ours = used - ROS_PACKAGES - ROSDISTRO_KEYS - {"foxglove_bridge"}
+    assert ours and ours <= set(rosdep), sorted(ours - set(rosdep))
+    assert not set(rosdep) & ROSDISTRO_KEYS  # no shadowing of rosdistro's definitions
+    for key in ours:
         for os_name in ("ubuntu", "debian"):
             packages = rosdep[key][os_name]["pip"]["packages"]
             assert packages and {p.lower() for p in packages} <= requirements, (key, packages)
