@@ -297,3 +297,16 @@ def test_pulse_round_trip_within_one_count(pulse_us, prescale, oscillator_hz):
     dev.write_byte_data(0x00, pca.MODE1_AI)
     dev.write_block(pca.led_register(7), pca.channel_bytes_for_pulse(pulse_us, prescale, oscillator_hz))
     assert abs(emu.pulse_width_us(7) - pulse_us) <= pca.count_duration_us(prescale, oscillator_hz) / 2 + 1e-9
+
+
+def test_channel_block_matches_per_channel_bytes_and_decodes_the_counts():
+    """The ESC node's block conversion gives exactly the per-channel bytes and the widths of their counts."""
+    widths = [1100.0, 1474.4, 1500.0, 1525.6, 1900.0, 0.0, 1700.04, 3.0]
+    block, decoded = pca.channel_block_for_pulses(widths, 30, 25e6)
+    assert block == b"".join(pca.channel_bytes_for_pulse(w, 30, 25e6) for w in widths)
+    # counts by hand: round(w / 1.24 us), e.g. 1500 / 1.24 = 1209.68 -> 1210 counts = 1500.40 us; 0 us is full OFF
+    assert decoded[2] == pytest.approx(1210 * 1.24) and decoded[5] == 0.0 and block[20:24] == bytes([0, 0, 0, 0x10])
+    with pytest.raises(pca.Pca9685Error):
+        pca.channel_block_for_pulses([1500.0, float("nan")], 30, 25e6)
+    with pytest.raises(pca.Pca9685Error):
+        pca.channel_block_for_pulses([5100.0], 30, 25e6)

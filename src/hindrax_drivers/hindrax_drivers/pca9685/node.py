@@ -256,20 +256,19 @@ class EscNode(Node):
         per_channel = {int(ch): float(w) for ch, w in zip(self.output.channels, widths_us)}
         per_channel[self.lights_channel] = float(lights_us)
         self.raw.begin_batch()  # raw/pca9685: the block writes of one update in one message
+        decoded: dict[int, float] = {}
         for run in self._channel_runs(sorted(per_channel)):
-            blocks = [p.channel_bytes_for_pulse(per_channel[c], self.prescale, self.oscillator_hz) for c in run]
+            block, widths = p.channel_block_for_pulses([per_channel[c] for c in run], self.prescale,
+                                                       self.oscillator_hz)
             self._written_key = None  # unknown until the whole write succeeded
-            self.device.write_block(p.led_register(run[0]), b"".join(blocks))
-            self._expected.update(zip(run, blocks))
+            self.device.write_block(p.led_register(run[0]), block)
+            self._expected.update((c, block[4 * i:4 * i + 4]) for i, c in enumerate(run))
+            decoded.update(zip(run, widths))
         self.raw.flush()  # (after a failed write the records are published with the next update's)
-        self.written = np.array([self._decoded(w) for w in widths_us])
+        self.written = np.array([decoded[int(ch)] for ch in self.output.channels])
         self.lights_us = lights_us
         self._written_key = key
         return True
-
-    def _decoded(self, width_us: float) -> float:
-        counts = p.pulse_width_to_counts(width_us, self.prescale, self.oscillator_hz)
-        return p.counts_to_pulse_width_us(counts, self.prescale, self.oscillator_hz)
 
     # -- inputs
     def on_command(self, msg: ThrusterPwm) -> None:
