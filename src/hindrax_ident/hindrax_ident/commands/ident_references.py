@@ -12,12 +12,13 @@
   restoring stiffness from an inclining test (CSV with a header; column 1 the signed arm of the test mass in m,
   column 2 the IMU-measured tilt, rad or with ``--degrees`` deg). Prints
   :meth:`~hindrax_ident.estimation.free_decay.IncliningResult.to_dict` (restoring_n_m_per_rad, its std, bg_m...).
-* ``hindrax ident tilt-decay FILE --stiffness C [--rigid-inertia I] [--signal rate|angle]
+* ``hindrax ident tilt-decay FILE --stiffness C [--stiffness-std S] [--rigid-inertia I] [--signal rate|angle]
   [--identification YAML --dof roll|pitch]``: roll or pitch free decay (CSV with a header; column 1 time s,
   column 2 the gyro rate in rad/s or the attitude angle in rad), fitted from its largest excursion on with the
   nonlinear ODE I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_ident.estimation.free_decay.
   fit_quadratic_free_decay`): rigid + added inertia independent of the thrust curve ([Hindrax-AM] (seed 000)
-  eq. 4 applied to the vehicle, [SmallROV] (seed 004) eq. 12). With ``--identification`` the self-propelled
+  eq. 4 applied to the vehicle, [SmallROV] (seed 004) eq. 12); ``total_inertia_kg_m2_std`` combines the fit's
+  std (``_std_fit``, white residuals assumed) with C's (``--stiffness-std``). With ``--identification`` the self-propelled
   inertia of that DOF is compared: ``verdict`` suspect when the two differ by more than 1.96 combined std.
 
 Exit status 0 on success, 1 on bad input (one-line message on stderr).
@@ -65,6 +66,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("file", help="CSV with a header: time (s), gyro rate (rad/s) or angle (rad)")
         parser.add_argument("--stiffness", type=float, required=True,
                             help="restoring stiffness C, N m/rad (from `hindrax ident inclining`)")
+        parser.add_argument("--stiffness-std", type=float, default=0.0,
+                            help="1-sigma of C (the inclining result's std), propagated: std(I)/I = std(C)/C")
         parser.add_argument("--rigid-inertia", type=float, default=None, help="rigid-body inertia, kg m^2")
         parser.add_argument("--signal", choices=("rate", "angle"), default="rate", help="what column 2 holds")
         parser.add_argument("--identification", default=None, help="identification.yaml to compare with")
@@ -141,11 +144,17 @@ def _tilt_decay(args) -> int:
         i0 = find_release_index(y, 0.999) if y.size > 16 else 0   # start at the largest excursion
         fit = fit_quadratic_free_decay(t[i0:], y[i0:], args.stiffness, rigid_inertia=args.rigid_inertia,
                                        output="velocity" if args.signal == "rate" else "displacement")
+        if not (math.isfinite(args.stiffness_std) and args.stiffness_std >= 0):
+            raise ValueError(f"--stiffness-std must be >= 0, got {args.stiffness_std}")
+        # I = C / omega_n^2: a relative error of C is the same relative error of I (and of the added inertia)
+        std_c = fit.total_inertia * args.stiffness_std / args.stiffness
+        std = math.hypot(fit.total_inertia_std, std_c)
         out = {
             "dof": args.dof,
-            "total_inertia_kg_m2": fit.total_inertia, "total_inertia_kg_m2_std": fit.total_inertia_std,
+            "total_inertia_kg_m2": fit.total_inertia, "total_inertia_kg_m2_std": std,
+            "total_inertia_kg_m2_std_fit": fit.total_inertia_std,
             "added_inertia_kg_m2": None if math.isnan(fit.added_inertia) else fit.added_inertia,
-            "added_inertia_kg_m2_std": fit.added_inertia_std,
+            "added_inertia_kg_m2_std": std,
             "linear_damping_kg_m2_s": fit.linear_damping, "linear_damping_kg_m2_s_std": fit.linear_damping_std,
             "quadratic_damping_kg_m2": fit.quadratic_damping,
             "quadratic_damping_kg_m2_std": fit.quadratic_damping_std,
@@ -155,7 +164,7 @@ def _tilt_decay(args) -> int:
         }
         if args.identification:
             v, s = _self_propelled_inertia(args.identification, args.dof)
-            comb = math.hypot(s, fit.total_inertia_std)
+            comb = math.hypot(s, std)
             z = abs(fit.total_inertia - v) / comb if comb > 0 else math.inf
             out["self_propelled"] = {"inertia_kg_m2": v, "inertia_kg_m2_std": s, "z": z,
                                      "verdict": "suspect" if z > 1.96 else "agrees",
