@@ -15,6 +15,7 @@ import json
 import os
 import platform
 import sys
+import time
 from pathlib import Path
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -47,12 +48,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unknown benchmark(s): {', '.join(unknown)}; available: {', '.join(BENCHMARKS)}", file=sys.stderr)
         return 2
     rows: list[dict] = []
+    wall_s: dict[str, float] = {}
+    start = time.monotonic()
     for name in names:
         mod = importlib.import_module(BENCHMARKS[name])
         print(f"== {name}", flush=True)
+        t0 = time.monotonic()
         for row in mod.run(quick=args.quick):
             row = {"benchmark": name, **row}
             rows.append(row)
+        wall_s[name] = round(time.monotonic() - t0, 1)
+        print(f"== {name}: {wall_s[name]:.0f} s", flush=True)
+    wall_s["total"] = round(time.monotonic() - start, 1)
     width = max((len(r["name"]) for r in rows), default=10)
     print(f"\n{'benchmark':<14} {'measure':<{width}} {'value':>12} unit         target")
     for r in rows:
@@ -62,9 +69,10 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     doc = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(), "machine": platform.platform(),
-           "cpus": os.cpu_count(), "rows": rows}
+           "cpus": os.cpu_count(), "wall_s": wall_s, "rows": rows}
     (out / "results.json").write_text(json.dumps(doc, indent=2))
-    print(f"\nwritten {out / 'results.json'}")
+    print("\nwall time per section: " + ", ".join(f"{k} {v:.0f} s" for k, v in wall_s.items()))
+    print(f"written {out / 'results.json'}")
     return 0
 
 

@@ -13,7 +13,8 @@ Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node .
 ``node MODULE --ros-args ...``
     Runs ``MODULE.main()`` (e.g. ``hindrax_drivers.ms5837.node``) exactly as ``python -m MODULE --ros-args ...``
     would, except that ``open_smbus`` returns a :class:`SocketI2CBus` connected to the pool when the
-    environment variable ``HINDRAX_BENCH_I2C_SOCKET`` is set. A transaction is then one request/answer on a Unix
+    environment variable ``HINDRAX_BENCH_I2C_SOCKET`` is set. With ``HINDRAX_BENCH_PROFILE=DIR`` the node runs under
+    cProfile and writes ``DIR/<module>.prof`` on exit (``python -m pstats``). A transaction is then one request/answer on a Unix
     socket in the driver process (two system calls and a pickle each way), which stands in for the ``ioctl`` of
     a real ``smbus2.SMBus`` on the Pi; the emulator's own work happens in the pool process.
 """
@@ -32,6 +33,8 @@ from typing import Any
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 SOCKET_ENV = "HINDRAX_BENCH_I2C_SOCKET"
+#: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits
+PROFILE_ENV = "HINDRAX_BENCH_PROFILE"
 
 
 class SocketI2CBus:
@@ -182,7 +185,16 @@ def _node(argv: list[str]) -> int:
         if hasattr(module, "open_smbus"):
             module.open_smbus = opener
     sys.argv = [module_name] + rest
-    return int(module.main() or 0)
+    profile_dir = os.environ.get(PROFILE_ENV)
+    if not profile_dir:
+        return int(module.main() or 0)
+    import cProfile
+
+    profiler = cProfile.Profile()
+    try:
+        return int(profiler.runcall(module.main) or 0)
+    finally:
+        profiler.dump_stats(str(Path(profile_dir) / f"{module_name}.prof"))
 
 
 def main(argv: list[str] | None = None) -> int:

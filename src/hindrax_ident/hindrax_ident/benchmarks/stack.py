@@ -311,19 +311,19 @@ def _launch(duration_s: float, tmp: Path) -> dict:
                           if "esc.oscillator_calibrated" in load_config(params).flat else [])
             wrap = ["-m", "hindrax_ident.benchmarks.launch_layout", "node"]
             cmds = {
-                "dvl75": ["-m", "hindrax_drivers.dvl75.node", *base, "-p", f"sensors.dvl75.port:={ports['dvl75']}"],
-                "ping1d": ["-m", "hindrax_drivers.ping1d.node", *base, "-p", f"sensors.ping1d.port:={ports['ping1d']}"],
+                "dvl75": [*wrap, "hindrax_drivers.dvl75.node", *base, "-p", f"sensors.dvl75.port:={ports['dvl75']}"],
+                "ping1d": [*wrap, "hindrax_drivers.ping1d.node", *base, "-p", f"sensors.ping1d.port:={ports['ping1d']}"],
                 "ms5837": [*wrap, "hindrax_drivers.ms5837.node", *base],
                 "icm20948": [*wrap, "hindrax_drivers.icm20948.node", *base],
                 "esc": [*wrap, "hindrax_drivers.pca9685.node", *base, "-p", "esc.arming_time_s:=1.0", *calibrated],
-                "thrust_allocation": ["-m", "hindrax_drivers.allocation.node", *base],
-                "identification": ["-m", "hindrax_ident.identification.node", *base],
-                "recorder": ["-m", "hindrax_drivers.recording.recorder_node", *base, "-p", "autostart:=true",
+                "thrust_allocation": [*wrap, "hindrax_drivers.allocation.node", *base],
+                "identification": [*wrap, "hindrax_ident.identification.node", *base],
+                "recorder": [*wrap, "hindrax_drivers.recording.recorder_node", *base, "-p", "autostart:=true",
                              "-p", f"output_dir:={tmp / 'launch-bag'}", "-p", "all_topics:=true",
                              "-p", "status_period_s:=0.5"],
             }
             if _supervisor_available():
-                cmds["supervisor"] = ["-m", "hindrax_drivers.supervisor.node", *base]
+                cmds["supervisor"] = [*wrap, "hindrax_drivers.supervisor.node", *base]
             for name, args in cmds.items():
                 logs[name] = open(tmp / f"{name}.log", "w")
                 e = dict(env, **{SOCKET_ENV: sock}) if name in ("ms5837", "icm20948", "esc") else env
