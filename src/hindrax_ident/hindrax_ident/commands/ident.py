@@ -6,7 +6,7 @@
   JSON object (:meth:`hindrax_ident.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
   added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8), kc (eq. 9)...
   ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear + quadratic damping, [SmallROV]
-  (seed 004) eq. 12; :func:`hindrax_ident.estimation.free_decay.quadratic_free_decay_keys`):
+  ([SmallROV] (seed 004)) eq. 12; :func:`hindrax_ident.estimation.free_decay.quadratic_free_decay_keys`):
   linear_damping_n_s_per_m, quadratic_damping_n_s2_per_m2, added_mass_ode_kg (each with ``_std``) and
   ode_rms_residual_m_s2; the linear keys are unchanged.
 * ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] (seed 003) eq. 1 cubic per rotation direction from
