@@ -416,3 +416,29 @@ def test_event_driven_output_writes_the_command_on_arrival(esc):
     msg = ThrusterPwm(pulse_width_us=[1720.0] * 8, armed=True)
     node.on_command(msg)  # as the subscription does, outside any tick
     assert wire(emu)[0] == pytest.approx(1720.0, abs=TICK_US)
+
+
+def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):
+    """A stalled process (one 2 s gap between two checks, e.g. a long callback) does not trip the steady-clock
+    watchdog by itself (a gap counts at most two output periods); regular checks without a command do."""
+    import hindrax_drivers.pca9685.node as esc_node
+
+    fake = {"t": 100.0}
+    monkeypatch.setattr(esc_node.time, "monotonic", lambda: fake["t"])
+    with ros_context() as ctx:
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2}, ctx=ctx)
+        assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
+        node.on_command(ThrusterPwm(pulse_width_us=[1650.0] * 8))
+        fake["t"] += 2.0  # stall
+        node.steady_check()
+        assert node.steady_watchdog_trips == 0 and node.command is not None
+        # the stall counted 2 periods (0.04 s); 7 regular checks of 20 ms: 0.18 s in all, below 0.2 s
+        for _ in range(7):
+            fake["t"] += PERIOD_S
+            node.steady_check()
+        assert node.steady_watchdog_trips == 0
+        for _ in range(2):  # 0.22 s
+            fake["t"] += PERIOD_S
+            node.steady_check()
+        assert node.steady_watchdog_trips == 1 and node.command is None
+        node.destroy_node()
