@@ -595,6 +595,17 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     if "pool.depth_m" in c and "limits.max_depth_m" in c and c["limits.max_depth_m"] > c["pool.depth_m"]:
         issues.append(ConfigIssue("limits.max_depth_m", c["limits.max_depth_m"],
                                   f"at most pool.depth_m ({c['pool.depth_m']:g})"))
+    # the supervisor is the last line: its limits at least as wide as the identification's (which abort first)
+    for key, other, wider in (("supervisor.max_depth_m", "limits.max_depth_m", "at least"),
+                              ("supervisor.min_altitude_m", "limits.min_altitude_m", "at most"),
+                              ("supervisor.max_roll_rad", "limits.max_roll_rad", "at least"),
+                              ("supervisor.max_pitch_rad", "limits.max_pitch_rad", "at least")):
+        if key in c and other in c and (c[key] < c[other] if wider == "at least" else c[key] > c[other]):
+            issues.append(ConfigIssue(key, c[key], f"{wider} {other} ({c[other]:g}): the identification aborts first"))
+    if "supervisor.cage_margin_m" in c and "pool.width_m" in c and \
+            2.0 * c["supervisor.cage_margin_m"] >= min(c["pool.length_m"], c["pool.width_m"]):
+        issues.append(ConfigIssue("supervisor.cage_margin_m", c["supervisor.cage_margin_m"],
+                                  f"below half the pool's smaller side ({min(c['pool.length_m'], c['pool.width_m']) / 2:g})"))
     return issues
 
 

@@ -49,6 +49,19 @@ def test_limits_from_the_shipped_configuration():
     assert lim.start_position_ne == (2.0, 3.0) and lim.max_depth_m == 1.65
 
 
+def test_supervisor_limits_must_be_wider_than_the_identification_limits():
+    from hindrax_drivers.config import ConfigError
+
+    for key, value, words in (("supervisor.max_depth_m", 1.4, "at least limits.max_depth_m (1.5)"),
+                              ("supervisor.min_altitude_m", 0.4, "at most limits.min_altitude_m (0.3)"),
+                              ("supervisor.max_pitch_rad", 0.8, "at least limits.max_pitch_rad (0.9)"),
+                              ("supervisor.cage_margin_m", 3.0, "below half the pool's smaller side (3)")):
+        with pytest.raises(ConfigError) as err:
+            load_config(default_config_path(), {key: value})
+        assert err.value.lines() == [f"{key} = {value}: allowed {words}" + (
+            ": the identification aborts first" if "limits." in words else "")]
+
+
 def test_nothing_trips_while_disarmed_and_each_limit_trips_once_armed():
     c = SupervisorCore(limits())
     assert c.on_depth(0.0, 5.0) == "" and c.on_altitude(0.0, 0.0) == "" and c.on_attitude(2.0, 0.0, 0.0) == ""
