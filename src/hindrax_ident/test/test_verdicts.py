@@ -20,7 +20,7 @@ def cfg():
     return load_config(default_config_path())
 
 
-def _ident(cfg, dof, rel_std=0.01, bias=None, pool_time_s=90.0, rho=0.3, velocity=None):
+def _ident(cfg, dof, rel_std=0.01, bias=None, pool_time_s=90.0, rho=0.05, velocity=None):
     truth = truth_parameters(cfg, dof)
     names = parameter_names(dof)
     values = {n: truth[n] for n in names}
@@ -78,8 +78,19 @@ def test_bias_where_none_is_expected_makes_the_dof_suspect(cfg):
     assert not any("bias" in x for x in h["reasons"])
 
 
+def test_heave_bias_off_the_net_buoyancy_makes_every_dof_suspect(cfg):
+    """The net buoyancy is known from mass and volume: a heave bias far from it says the thrust curves are wrong."""
+    good = {"surge": _ident(cfg, "surge"), "heave": _ident(cfg, "heave")}
+    assert apply_verdicts(good, cfg)["surge"]["verdict"] == "trusted"
+    bad = {"surge": _ident(cfg, "surge"), "heave": _ident(cfg, "heave", bias=-0.7)}
+    out = apply_verdicts(bad, cfg)
+    assert out["heave"]["verdict"] == "suspect"
+    assert out["surge"]["verdict"] == "suspect"
+    assert any("thrust curves" in x for x in out["surge"]["parameters"]["inertia"]["reasons"])
+
+
 def test_coloured_residuals_and_wide_intervals_are_suspect(cfg):
-    a = assess_dof(_ident(cfg, "sway", rho=0.95), cfg)
+    a = assess_dof(_ident(cfg, "sway", rho=0.3), cfg)
     assert any("not white" in x for x in a["reasons"])
     wide = assess_dof(_ident(cfg, "yaw", rel_std=0.3), cfg)
     assert wide["parameters"]["inertia"]["verdict"] == "suspect"

@@ -33,7 +33,12 @@ and
      by more than :data:`DIRECTION_MAX` and beyond their scatter (z > 4) (heave: up/down; others: forward/backward),
      a level-to-level inconsistency. DOF-wide.
    * ``whiteness``: the lag-1 autocorrelation of the output-error residuals between consecutive samples is above
-     :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit). DOF-wide.
+     :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit: a thrust lag or latency the vehicle file
+     does not have, a late DVL). In the scenario suite's no-disturbance runs it stayed at or below 0.06. DOF-wide.
+   * ``thrust`` (across DOFs, :func:`apply_verdicts`): heave's bias is the force that holds the vehicle at depth,
+     the net buoyancy (rho V - m) g known from the vehicle's mass and volume. When the identified heave bias
+     differs from it significantly, the thrust curves are wrong, and every DOF identified with them is suspect
+     (a thrust error in one direction cannot be seen in surge, sway or yaw, which use both directions at once).
    * ``width``: the 95 % half-width is too wide to design a controller from: above :data:`WIDTH_MAX` of the value
      (inertia, quadratic damping), or for linear damping and bias of the total damping force at the typical
      speed of the test (the 75th percentile of |velocity|).
@@ -58,7 +63,7 @@ __all__ = ["RLS_STD_DOFS", "rls_published_std", "DEFAULT_THRUST_UNCERTAINTY_REL"
 #: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
 DEFAULT_THRUST_UNCERTAINTY_REL = (0.05, 0.10)
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
-WHITENESS_MAX = 0.9
+WHITENESS_MAX = 0.2
 #: Relative difference of the steady-state and transient quadratic damping flagged (with |z| > 3).
 METHODS_MAX = 0.05
 #: Difference of the mean relative steady-window misfit between the two directions of motion flagged (with z > 4).
@@ -225,6 +230,7 @@ def apply_verdicts(identifications: Mapping[str, Any], cfg: VehicleConfig,
     become the honest ones, the fit-only std moves to ``signals["std_fit"]``, ``signals["assessment"]`` holds
     the verdicts. Returns {dof: assessment}."""
     out = {}
+    fresh = []
     for dof, r in identifications.items():
         if "assessment" in r.signals:
             out[dof] = r.signals["assessment"]
@@ -236,6 +242,22 @@ def apply_verdicts(identifications: Mapping[str, Any], cfg: VehicleConfig,
             r.ci95[n] = tuple(e["ci95"])
         r.signals["assessment"] = a
         out[dof] = a
+        fresh.append(dof)
+    heave = out.get("heave")
+    if heave is not None and fresh:
+        z, tq = heave["checks"].get("bias_z", 0.0), heave["checks"].get("t_quantile", math.inf)
+        if abs(z) > tq:
+            reason = (f"heave bias differs from the configured net buoyancy (z = {z:+.1f}): the thrust curves do not "
+                      "match the vehicle, every thrust-derived parameter is suspect")
+            for dof in fresh:
+                if dof == "heave":
+                    continue
+                a = out[dof]
+                a["reasons"].append(reason)
+                for e in a["parameters"].values():
+                    e["reasons"].append(reason)
+                    e["verdict"] = "suspect"
+                a["verdict"] = "suspect"
     return out
 
 
