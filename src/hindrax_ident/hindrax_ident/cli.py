@@ -66,6 +66,9 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("ident", "bag"), "hindrax_ident.commands.ident_bag",
      "offline identification (batch LS + output error, [Hindrax-Drag] (seed 003) eqs. 6-8) of a recorded campaign bag: "
      "identification.yaml + report"),
+    (("ident", "fit"), "hindrax_ident.commands.ident_fit",
+     "identify from any bag (WrenchStamped or ThrusterPwm force; Odometry, Twist or Dvl velocity): prediction-error "
+     "fit with delay, K-fold and holdout validation (nrmse): identification.yaml + report"),
     (("run",), "hindrax_ident.commands.run",
      "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
      "identification.yaml, report"),

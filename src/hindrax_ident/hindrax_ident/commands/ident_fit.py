@@ -1,0 +1,100 @@
+"""``hindrax ident fit BAG [BAG ...]``: identify from any bag (piloted, closed-loop, another vehicle's) and validate.
+
+The pipeline is :mod:`hindrax_ident.identification.fit_any` (force and velocity by message type, preprocessing,
+segment-wise output error with an input delay, K-fold and holdout validation). Writes ``identification.yaml``
+(``dofs``, ``validation``, ``preprocessing``) and ``report/index.html`` (measured against predicted velocity on the
+validation data) in ``--out`` (default: the first bag's parent directory) and prints a table. Exit 0, or 1 with one
+line on stderr for an unusable bag, topic, frame or too little data.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from .common import CommandError
+
+__all__ = ["add_arguments", "run", "format_table"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``hindrax ident fit``."""
+    parser.add_argument("bags", nargs="+", metavar="BAG", help="bag directories (or .mcap files), fitted jointly")
+    parser.add_argument("--wrench-topic", default=None,
+                        help="force: geometry_msgs/WrenchStamped (base_link, FLU) or hindrax_msgs/ThrusterPwm "
+                             "(needs --config); default: the one topic of such a type")
+    parser.add_argument("--velocity-topic", default=None,
+                        help="velocity: nav_msgs/Odometry, TwistWithCovarianceStamped, TwistStamped or hindrax_msgs/Dvl")
+    parser.add_argument("--imu-topic", default=None, help="angular rate from sensor_msgs/Imu (default: the velocity "
+                        "topic's, else an IMU found with a Dvl, else the differentiated attitude)")
+    parser.add_argument("--depth-topic", default=None, help="heave velocity from the derivative of a depth: "
+                        "sensor_msgs/FluidPressure, Odometry or PoseStamped pose")
+    parser.add_argument("--dofs", default=None, help="comma-separated DOFs (default: all six)")
+    parser.add_argument("--holdout", nargs="+", default=[], metavar="BAG", help="bags used for validation only")
+    parser.add_argument("--folds", type=int, default=3, help="K of the cross-validation (default 3)")
+    parser.add_argument("--config", default=None,
+                        help="vehicle file (optional: without it nothing about the vehicle is assumed; needed for "
+                             "ThrusterPwm forces and for added_mass = inertia - rigid-body inertia)")
+    parser.add_argument("--out", default=None, help="output directory (default: the first bag's parent directory)")
+
+
+def format_table(res) -> str:
+    """Parameters (value +- std, 95 % interval, fold spread) and validation, one row each."""
+    lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'95 % interval':>23} {'fold spread':>11}"]
+    for dof, r in res.dofs.items():
+        if r.status != "fitted":
+            lines.append(f"{dof:6} {r.status}: {r.reason}")
+            continue
+        import numpy as np
+
+        folds = np.array(r.folds) if len(r.folds) >= 2 else None
+        for i, n in enumerate(r.names):
+            sp = f"{np.std(folds[:, i], ddof=1):11.4g}" if folds is not None else f"{'-':>11}"
+            lines.append(f"{dof:6} {n:28} {r.theta[i]:10.4g} {r.std[i]:9.3g} "
+                         f"[{r.ci95[i, 0]:10.4g}, {r.ci95[i, 1]:10.4g}] {sp}")
+    lines.append("")
+    lines.append(f"validation ({res.design})")
+    lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8}")
+    for dof, r in res.dofs.items():
+        for key, v in r.validation.items():
+            lines.append(f"{dof:6} {key:17} {v['nrmse']:7.3f} {v['nrmse_hold']:10.3f} {v['nrmse_zero']:10.3f} "
+                         f"{v['samples']:8d}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fit, write the outputs, print the table. Raises :class:`CommandError` on bad input."""
+    from hindrax_drivers.recording.reader import BagError
+
+    from ..identification.fit_any import FitInputError, FitOptions, TopicChoice, build_document, fit_bags
+    from ..identification.fit_report import write_fit_outputs
+
+    cfg = None
+    if args.config is not None:
+        from .common import load_vehicle
+
+        cfg = load_vehicle(args.config)
+    for b in list(args.bags) + list(args.holdout):
+        if not Path(b).exists():
+            raise CommandError(f"ident fit: {b}: no such file or directory")
+    if args.folds < 2:
+        raise CommandError(f"ident fit: --folds {args.folds}: must be >= 2")
+    dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
+    choice = TopicChoice(args.wrench_topic, args.velocity_topic, args.imu_topic, args.depth_topic)
+    try:
+        res = fit_bags(args.bags, choice, cfg, dofs, args.holdout, FitOptions(folds=args.folds))
+    except (FitInputError, BagError, OSError) as exc:
+        raise CommandError(f"ident fit: {exc}") from exc
+    if not any(r.status == "fitted" for r in res.dofs.values()):
+        print(format_table(res))
+        raise CommandError("ident fit: no DOF could be identified (see the table: not excited or failed)")
+    out = Path(args.out) if args.out else Path(args.bags[0]).resolve().parent
+    doc = build_document(res, cfg, args.bags, args.holdout)
+    path, index = write_fit_outputs(out, res, doc)
+    print(format_table(res))
+    d = res.preprocessing
+    print(f"preprocessing: {d['resampling']}; delay {d['delay_s']:g} s; "
+          + "; ".join(f"{Path(b['bag']).name}: {b['gaps']['dropped_s']:g} s in gaps dropped, "
+                      f"{b['velocity_repeated_values_dropped']} repeated velocities dropped" for b in d["bags"]))
+    print(f"output: {path} and {index}")
+    return 0 if all(math.isfinite(v["nrmse"]) for r in res.dofs.values() for v in r.validation.values()) else 0

@@ -1,0 +1,88 @@
+"""Outputs of ``hindrax ident fit``: identification.yaml and report/index.html (measured vs predicted velocity).
+
+The plots use matplotlib's Agg backend as :mod:`.report`: per fitted DOF, the validation segments laid end to end
+(the holdout bags when given, else the cross-validation folds), measured velocity, the model's open-loop prediction
+from each segment's measured initial velocity, and the held initial value (what ``nrmse_hold`` measures).
+"""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+
+__all__ = ["write_fit_outputs"]
+
+
+def _plot(r, path: Path, h: float) -> None:
+    p = r.plot
+    meas, pred, valid = p["measured"], p["predicted"], p["valid"]
+    m, L = meas.shape
+    fig, ax = plt.subplots(figsize=(11, 3.2))
+    for i in range(min(m, 12)):  # at most 12 segments: 2 minutes
+        t = (i * L + np.arange(L)) * h
+        ok = valid[i]
+        ax.plot(t[ok], meas[i, ok], "k.", ms=2, label="measured" if i == 0 else None)
+        ax.plot(t[ok], pred[i, ok], "C1-", lw=1.2, label="predicted (open loop from the segment start)" if i == 0 else None)
+        ax.plot(t[ok], np.full(ok.sum(), meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
+        ax.axvline(t[0], color="0.85", lw=0.8)
+    unit = "rad/s" if r.dof in ("roll", "pitch", "yaw") else "m/s"
+    ax.set_xlabel("validation time, s (segments end to end)")
+    ax.set_ylabel(f"{r.dof} velocity, {unit} (FRD)")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(f"{r.dof}: {p['data']} data")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
+    """Write ``out/identification.yaml`` (``doc``, :func:`.fit_any.build_document`) and ``out/report/index.html``;
+    returns both paths."""
+    out = Path(out)
+    rep = out / "report"
+    rep.mkdir(parents=True, exist_ok=True)
+    path = out / "identification.yaml"
+    path.write_text("# Hindrax identified hydrodynamics (hindrax ident fit; hindrax_ident.identification.fit_any)\n"
+                    + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
+    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>hindrax ident fit</title><style>body{"
+             "font-family:sans-serif;max-width:1150px;margin:auto} table{border-collapse:collapse} td,th{border:1px "
+             "solid #ccc;padding:2px 6px;font-size:13px;text-align:right}</style></head><body>",
+             "<h1>Identification from bags (hindrax ident fit)</h1>",
+             f"<p>{html.escape(res.design)}</p><h2>Parameters</h2><table><tr><th>DOF</th><th>parameter</th>"
+             "<th>value</th><th>std</th><th>unit</th><th>95 % interval</th><th>fold spread (std)</th></tr>"]
+    for dof, e in doc["dofs"].items():
+        for name, p in e.items():
+            if isinstance(p, dict) and "value" in p:
+                sp = p.get("fold_spread", {}).get("std")
+                parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
+                    dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}", p["unit"],
+                    f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]", "-" if sp is None else f"{sp:.3g}")) + "</tr>")
+    parts.append("</table>")
+    for dof, e in doc.get("not_identified", {}).items():
+        parts.append(f"<p><b>{html.escape(dof)}</b>: {html.escape(e['status'])} ({html.escape(e['reason'])})</p>")
+    parts.append("<h2>Validation</h2><table><tr><th>DOF</th><th>data</th><th>nrmse</th><th>nrmse_hold</th>"
+                 "<th>nrmse_zero</th><th>samples</th></tr>")
+    for dof, r in res.dofs.items():
+        for key, v in r.validation.items():
+            parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in (
+                dof, key, f"{v['nrmse']:.3f}", f"{v['nrmse_hold']:.3f}", f"{v['nrmse_zero']:.3f}", v["samples"]))
+                + "</tr>")
+    parts.append("</table><p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred "
+                 "simulated open loop from the recorded force and re-initialised from the measured velocity at the "
+                 "start of each segment; nrmse_hold: velocity held at the segment's initial value; nrmse_zero: 0.</p>")
+    for dof, r in res.dofs.items():
+        if r.status == "fitted" and r.plot:
+            png = rep / f"{dof}_validation.png"
+            _plot(r, png, res.preprocessing["grid_s"])
+            parts.append(f"<h3>{html.escape(dof)}</h3><img src='{png.name}' alt='{dof} measured vs predicted'>")
+    parts.append("<h2>Preprocessing</h2><pre>" + html.escape(yaml.safe_dump(doc["preprocessing"], sort_keys=False))
+                 + "</pre></body></html>")
+    index = rep / "index.html"
+    index.write_text("\n".join(parts))
+    return path, index
