@@ -6,7 +6,7 @@ STAMP := $(VENV)/.hindrax-setup-done
 # Every process started from here keeps ROS 2 discovery on loopback (docs/architecture.md §11.4).
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-SETUP_INPUTS := requirements.txt scripts/setup_venv.sh \
+SETUP_INPUTS := requirements.txt requirements-colcon.txt scripts/setup_venv.sh \
 	src/hindrax_msgs/CMakeLists.txt src/hindrax_msgs/package.xml \
 	$(wildcard src/hindrax_msgs/msg/*.msg src/hindrax_msgs/srv/*.srv src/hindrax_msgs/action/*.action) \
 	src/hindrax_drivers/setup.py src/hindrax_drivers/package.xml \
@@ -32,11 +32,11 @@ test: setup
 bench: setup
 	$(PY) -m hindrax_ident.bench $(BENCH_ARGS)
 
-# The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels
-# (the Pi builds the same packages against /opt/ros/jazzy). Then: source .venv/bin/activate &&
-# source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/) and share/ are there.
+# The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels (the
+# Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
+# .venv/bin/activate && source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/)
+# and share/ are there.
 ros-install: setup
-	$(PY) -m pip install -q -r requirements-colcon.txt 2>&1 | { grep -v '^WARNING: Location .* is ignored' || true; }
 	cd ros_ws && source $(abspath $(VENV))/bin/activate && \
 	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV colcon build --merge-install \
 	    --event-handlers console_cohesion- --cmake-args -DPython3_EXECUTABLE=$$VIRTUAL_ENV/bin/python3 -DBUILD_TESTING=OFF

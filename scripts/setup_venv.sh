@@ -35,7 +35,9 @@ pipq() {
   return "${PIPESTATUS[0]}"
 }
 pipq install -q --upgrade pip
-pipq install -q -r requirements.txt
+# colcon too (requirements-colcon.txt): `make ros-install` builds ros_ws with it, and the test suite runs that
+# build, which must not install packages into the venv while other tests run.
+pipq install -q -r requirements.txt -r requirements-colcon.txt
 if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then pipq install -q 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
 export PATH="$PWD/$VENV/bin:$PATH"
 

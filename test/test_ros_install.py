@@ -55,8 +55,7 @@ def install(tmp_path_factory):
     shutil.copytree(REPO / "src", root / "src", symlinks=True, ignore=ignore)
     shutil.copytree(REPO / "ros_ws" / "config", root / "ros_ws" / "config")
     (root / "ros_ws" / "src").symlink_to("../src")
-    for f in ("Makefile", "requirements-colcon.txt"):
-        shutil.copy2(REPO / f, root / f)
+    shutil.copy2(REPO / "Makefile", root / "Makefile")
     env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT_", "COLCON_", "PYTHONPATH"))}
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     # `-o setup`: the shared venv is set up already; only the ros-install recipe runs.
