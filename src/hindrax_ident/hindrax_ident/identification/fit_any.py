@@ -138,6 +138,23 @@ def _select(path: Path, topics: dict[str, str], role: str, given: str | None, re
     raise FitInputError(f"{path}: several {role} topics ({', '.join(sorted(cands))}): choose one with --{role}-topic")
 
 
+def _static_rotation(reader, parent: str, child: str) -> np.ndarray | None:
+    """Rotation (3, 3) taking vectors of ``child`` to ``parent`` from a direct transform in the bag's /tf_static
+    (tf2_msgs/msg/TFMessage), or None."""
+    topics = [t for t, ty in reader.topics.items() if ty == "tf2_msgs/msg/TFMessage" and t.endswith("tf_static")]
+    if not topics:
+        return None
+    try:
+        for _raw, msg in reader.decoded(topics):
+            for tr in msg.transforms:
+                if tr.header.frame_id == parent and tr.child_frame_id == child:
+                    q = tr.transform.rotation
+                    return Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    except Exception:  # noqa: BLE001 - an unreadable /tf_static is the same as none
+        return None
+    return None
+
+
 def _hdr_ns(msg) -> int:
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
@@ -248,14 +265,31 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
     for role in ("wrench", "velocity"):
         if not streams[role].val:
             raise FitInputError(f"{path}: {role} topic {streams[role].topic} [{streams[role].type}] has no messages")
-    body = {f for role in ("wrench", "velocity", "imu") if role in streams for f in streams[role].frames if f}
+    body = {f for role in ("wrench", "velocity") if role in streams for f in streams[role].frames if f}
+    imu_note = None
+    if "imu" in streams and streams["imu"].val:
+        imu_frames = {f for f in streams["imu"].frames if f}
+        ref = next(iter(body)) if len(body) == 1 else "base_link"
+        if len(imu_frames) == 1 and imu_frames != {ref}:
+            # an angular rate only needs the IMU frame's orientation: from /tf_static when the bag has it
+            rot = _static_rotation(reader, ref, next(iter(imu_frames)))
+            if rot is not None:
+                r_frd = frames.R_FLU_FRD @ rot @ frames.R_FLU_FRD.T  # FRD-of-body <- FRD-of-imu
+                streams["imu"].val = [r_frd @ np.asarray(v) for v in streams["imu"].val]
+                imu_note = f"IMU frame {next(iter(imu_frames))} rotated into {ref} with /tf_static"
+            else:
+                body |= imu_frames
+        else:
+            body |= imu_frames
     if len(body) > 1:
         where = "; ".join(f"{role} {streams[role].topic}: {', '.join(sorted(f for f in streams[role].frames if f))}"
                           for role in ("wrench", "velocity", "imu") if role in streams and streams[role].frames - {""})
         raise FitInputError(f"{path}: frames disagree ({where}): force and velocity must be in the same body frame "
-                            "(base_link, REP-103 FLU)")
+                            "(base_link, REP-103 FLU); an IMU in another frame needs that frame in /tf_static")
     info = {"topics": {role: f"{s.topic} [{s.type}]" for role, s in streams.items() if role != "attitude" and s.val},
             "body_frame": (next(iter(body)) if body else "(unset: assumed base_link)")}
+    if imu_note:
+        info["imu_frame"] = imu_note
     if not streams["attitude"].val:
         del streams["attitude"]
     if "imu" in streams and not streams["imu"].val:
@@ -327,6 +361,7 @@ class Preprocessed:
     vel_values: np.ndarray
     attitude: tuple[np.ndarray, np.ndarray] | None
     spans: list
+    lag_s: float = 0.0
 
 
 def _derivative(t: np.ndarray, x: np.ndarray, window_s: float = 0.5) -> np.ndarray:
@@ -349,6 +384,13 @@ def _grid_chunks(pre: Preprocessed, delay_s: float, grid_s: float) -> list[Chunk
         t = lo2 + grid_s * np.arange(n)
         i = np.clip(np.searchsorted(ft, t + 1e-9, side="right") - 1, 0, len(ft) - 1)
         force = fv[i]
+        if pre.lag_s > 0:  # the thrust follows the commanded force through a first-order lag
+            k = math.exp(-grid_s / pre.lag_s)
+            lagged = np.empty_like(force)
+            lagged[0] = force[0]
+            for j in range(1, n):
+                lagged[j] = force[j - 1] + (lagged[j - 1] - force[j - 1]) * k
+            force = lagged
         vel = np.column_stack([np.interp(t, pre.vel_times, pre.vel_values[:, k], left=np.nan, right=np.nan)
                                if np.isfinite(pre.vel_values[:, k]).any() else np.full(n, np.nan) for k in range(6)])
         att = np.full((n, 3), np.nan)
@@ -376,6 +418,9 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     vt, vv = _sorted(vt, np.asarray(streams["velocity"].val, dtype=float))
     n_pub = len(vt)
     lin_t, lin_v, n_rep = _dedupe(vt, vv[:, :3])
+    ok = np.all(np.isfinite(lin_v), axis=1)  # an invalid DVL report (no lock) measures nothing
+    notes["velocity_invalid_dropped"] = int((~ok).sum())
+    lin_t, lin_v = lin_t[ok], lin_v[ok]
     notes["velocity_repeated_values_dropped"] = n_rep
     notes["velocity_published_hz"] = round(float((n_pub - 1) / (vt[-1] - vt[0])), 3) if n_pub > 1 else None
     notes["velocity_updated_hz"] = round(float((len(lin_t) - 1) / (vt[-1] - vt[0])), 3) if n_pub > 1 else None
@@ -430,6 +475,11 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
                      "continuous_spans": len(spans), "dropped_s": round(total - used, 3)}
     pre = Preprocessed(path, [], notes, ft, fv, lin_t, vel, None if attitude is None else (attitude[0] - t0,
                                                                                             attitude[1]), spans)
+    if streams["wrench"].type == PWM:
+        pre.lag_s = float(cfg.thrusters.time_constant_s)
+        notes["thrust"] = (f"thrust curves and allocation matrix of {cfg.source} (ThrusterPwm: reversal and trim "
+                           f"undone), widths acting esc.output_latency_s = {cfg.flat['esc.output_latency_s']:g} s "
+                           f"late, first-order lag thrusters.time_constant_s = {pre.lag_s:g} s")
     pre.chunks = _grid_chunks(pre, 0.0, opts.grid_s)
     return pre
 
