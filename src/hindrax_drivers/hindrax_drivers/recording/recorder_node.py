@@ -45,6 +45,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -61,6 +62,9 @@ from .writer import WriterOptions
 from .writer_thread import ThreadedBagWriter
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+#: The recorder's subscriptions carry no QoS event handlers: each would be visited in Python on every executor spin
+#: (rclpy's SingleThreadedExecutor), and the recorder matches every publisher's QoS itself (recording.qos).
+_NO_EVENT_HANDLERS = SubscriptionEventCallbacks(use_default_callbacks=False)
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
 
 
@@ -271,7 +275,8 @@ class RecorderNode(Node):
                              reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
             self._writer.add_topic(topic, type_name, profiles)
             self._subs[topic] = self.create_subscription(
-                cls, topic, functools.partial(self._on_message, topic), qos, raw=True)
+                cls, topic, functools.partial(self._on_message, topic), qos, raw=True,
+                event_callbacks=_NO_EVENT_HANDLERS)
             self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
 
     def _on_message(self, topic: str, data: bytes, info: Any) -> None:
