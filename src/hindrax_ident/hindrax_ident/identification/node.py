@@ -36,7 +36,9 @@ Publishes
     goal runs; ``identification/estimates`` (HydroEstimate, method ``rls``, one per DOF with data) at
     ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) at every tick
     while a goal runs (phase, DOF, level, progress, message = current step), once at its end (DONE or ABORTED
-    with the reason) and at 1 Hz when idle.
+    with the reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a
+    goal aborts on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety
+    supervisor (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset.
 Parameters
     The vehicle configuration; node-specific ``dvl_lock_timeout_s`` (default 3.0): a surge or sway run
     aborts when the DVL had no valid velocity for this long (docs/architecture.md §8); ``sensor_timeout_s``
@@ -45,6 +47,7 @@ Parameters
 Safety (docs/architecture.md §8)
     Limits of the executive (depth, altitude, roll, pitch, pool box) plus DVL lock and ESC disarm abort the
     goal; the vehicle is brought to neutral thrust at the end, on abort and on cancel, before the action ends.
+    Aborts other than a cancel or a disarm also trip the safety supervisor (``supervisor/abort``, above).
 """
 from __future__ import annotations
 
@@ -61,6 +64,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Imu, Range
+from std_msgs.msg import String
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig, node_config
@@ -76,6 +80,10 @@ __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 
 #: sensors that must have published before a goal starts moving the vehicle
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
+
+#: abort reasons not sent to the safety supervisor (the executive's words): an operator's cancel, and a disarmed
+#: ESC output (the thrusters are already stopped, possibly by the supervisor itself)
+NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
 
 _PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverStatus.PHASE_RUNNING,
            "returning": ManeuverStatus.PHASE_RETURNING, "done": ManeuverStatus.PHASE_DONE,
@@ -164,6 +172,7 @@ class IdentificationNode(Node):
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
         self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10)
         self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50)
+        self.pub_abort = self.create_publisher(String, "supervisor/abort", 10)
         self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self._timer = self.create_timer(self.tick_s, self._on_tick)
@@ -315,13 +324,18 @@ class IdentificationNode(Node):
         run.error = error
         run.stop_since_s = t
         run.pwm_count_at_stop = self._pwm_count
+        reason = error
         if run.executive.started:
             run.record = run.executive.record()
             st = run.executive.status()
             phase = ManeuverStatus.PHASE_ABORTED if (error or st.phase == "aborted") else ManeuverStatus.PHASE_DONE
             self._publish_status(phase, st, error or st.message)
+            reason = error or (run.record.abort_reason if run.record.aborted else "")
         else:
             self._publish_status(ManeuverStatus.PHASE_ABORTED, None, error)
+        if reason and reason not in NOT_SUPERVISOR_ABORTS:
+            self.get_logger().error(f"run_identification aborted: {reason}; tripping the safety supervisor")
+            self.pub_abort.publish(String(data=reason))
         self._publish_wrench(np.zeros(6), now)
         self._hold_neutral(run, t, now)
 
