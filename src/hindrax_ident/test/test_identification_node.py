@@ -164,3 +164,34 @@ def test_node_parameters_are_described_read_only_and_checked():
         with pytest.raises(ConfigError, match="sensor_timeout_s = -1"):
             IdentificationNode(config=cfg, context=ctx, node_name="bad",
                                parameter_overrides=[Parameter("sensor_timeout_s", value=-1.0)])
+
+
+def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
+    """``python -m hindrax_ident.identification.node`` (run_node): ready, SIGINT -> status 0; an invalid node
+    parameter -> status 1 with one line naming key, value and allowed range."""
+    import signal
+    import subprocess
+
+    from hindrax_drivers.testing import child_env, python_executable
+
+    cmd = [python_executable(), "-m", "hindrax_ident.identification.node", "--ros-args", "--params-file",
+           str(default_config_path())]
+    bad = subprocess.run(cmd + ["-p", "sensor_timeout_s:=-1.0"], env=child_env(), capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 1, bad.stderr
+    assert bad.stderr.splitlines()[-1] == ("invalid configuration: parameters of identification: "
+                                           "sensor_timeout_s = -1.0: allowed a number > 0")
+    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        for line in proc.stdout:  # the node logs once when ready
+            lines.append(line)
+            if "identification executive ready" in line:
+                break
+        assert lines and "ready" in lines[-1], "".join(lines)
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0, proc.stdout.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -57,10 +57,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Imu, Range
@@ -69,6 +67,7 @@ from std_msgs.msg import String
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig, node_config
 from hindrax_drivers.icm20948.mounting import mounting_rotation
+from hindrax_drivers.node_common import run_node
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
@@ -415,27 +414,9 @@ class IdentificationNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node alone (SingleThreadedExecutor) until SIGINT/SIGTERM. Returns the exit status."""
-    rclpy.init(args=args if args is not None else sys.argv)
-    node = None
-    status = 0
-    try:
-        node = IdentificationNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except ConfigError as exc:
-        print(f"invalid configuration: {exc}", file=sys.stderr)
-        status = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return status
+    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_drivers.node_common.run_node`: a running goal is
+    ended by :meth:`IdentificationNode.close`). Returns the exit status (1 on an invalid configuration)."""
+    return run_node(IdentificationNode, args)
 
 
 if __name__ == "__main__":  # pragma: no cover
