@@ -755,7 +755,8 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
              ) -> FitResult:
     """The whole pipeline (module docstring) over ``bags`` (fitted jointly), validated by K-fold and on ``holdout``.
 
-    dofs: the DOFs to identify (default all six; a DOF without excitation is reported "not excited").
+    dofs: the DOFs to identify (default all six; a DOF without excitation is reported "not excited"); the other
+    excited DOFs are fitted too, for their inertias in the coupling terms, but not reported.
     Raises :class:`FitInputError` (bad topics, frames, too little data) or ``BagError``.
     """
     dofs = list(dofs or DOFS)
@@ -764,7 +765,7 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
             raise FitInputError(f"--dofs: {d!r} is not a DOF (one of {', '.join(DOFS)})")
     pres = [preprocess_bag(b, choice, cfg, opts) for b in bags]
     hold = [preprocess_bag(b, choice, cfg, opts) for b in holdout]
-    ex = {d: excitation(pres, d) for d in dofs}
+    ex = {d: excitation(pres, d) for d in DOFS}  # all six: the coupling needs every moving DOF's inertia
     excited = [d for d in dofs if ex[d]["excited"]]
     pre_notes: dict[str, Any] = {"grid_s": opts.grid_s, "resampling": f"uniform grid of {opts.grid_s:g} s "
                                  f"({1 / opts.grid_s:g} Hz): force held (zero-order), velocity interpolated linearly",
@@ -796,8 +797,12 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
         design += f"; holdout: {', '.join(str(b) for b in holdout)}"
     out: dict[str, DofFit] = {}
     plan: dict[str, tuple[str, list]] = {}
-    for dof in dofs:
+    for dof in DOFS:
         e = ex[dof]
+        if dof not in dofs:  # not asked for: fitted only for the coupling terms, when it can be
+            if e["excited"] and (dof not in ("roll", "pitch") or np.isfinite(seg.attitude[..., :2]).all()):
+                plan[dof] = (_model_dof(dof, False), _names(dof, False))
+            continue
         if not e["excited"]:
             why = ("no velocity measured" if not e["velocity_measured"] else
                    f"force std {e['force_std']:.3g} (min {e['force_std_min']:g}), velocity std "
@@ -840,6 +845,8 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
     seg_c = seg.with_coupling(inertia)
     hold_c = seg_hold.with_coupling(inertia) if seg_hold is not None and len(seg_hold) else None
     for dof, (model, names) in plan.items():
+        if dof not in dofs:
+            continue
         e = ex[dof]
         k = DOFS.index(dof)
         try:

@@ -41,7 +41,10 @@ class PilotSettings:
     late_s: max receive latency; gap: (start, length) s of lost messages or None; max_force_n, max_moment_n_m:
     saturation (surge/sway, heave; yaw); jitter: relative random force added to the PD output; axes: the moves the
     pilot makes (0 forward/back, 1 right/left, 2 down/up, 3 turn), drawn uniformly from this tuple (repeat one to make it
-    more frequent)."""
+    more frequent); header_stamps: False leaves every header stamp unset (readers must use receive times);
+    imu: also ``/imu`` sensor_msgs/msg/Imu (angular rate, at ``control_hz``, noise ``noise_angular_rad_s``) in the
+    frame ``imu_link`` mounted upside down (180 deg about x) with that rotation in ``/tf_static``
+    (tf2_msgs/msg/TFMessage), and the odometry's angular twist left at zero."""
 
     duration_s: float = 120.0
     control_hz: float = 20.0
@@ -55,6 +58,8 @@ class PilotSettings:
     max_moment_n_m: float = 6.0
     jitter: float = 0.25
     axes: tuple[int, ...] = (0, 1, 2, 2, 2, 3)
+    header_stamps: bool = True
+    imu: bool = False
 
 
 def _serialize(msg) -> bytes:
@@ -110,6 +115,19 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
         w.add_topic("/wrench", "geometry_msgs/msg/WrenchStamped")
         w.add_topic("/odometry", "nav_msgs/msg/Odometry")
         out: list[tuple[int, str, bytes]] = []
+        r_imu = np.diag([1.0, -1.0, -1.0])  # imu_link axes in base_link: 180 deg about x
+        if s.imu:
+            from geometry_msgs.msg import TransformStamped
+            from sensor_msgs.msg import Imu
+            from tf2_msgs.msg import TFMessage
+
+            w.add_topic("/imu", "sensor_msgs/msg/Imu")
+            w.add_topic("/tf_static", "tf2_msgs/msg/TFMessage")
+            tr = TransformStamped()
+            _stamp(tr.header, EPOCH_NS)
+            tr.header.frame_id, tr.child_frame_id = "base_link", "imu_link"
+            tr.transform.rotation.x, tr.transform.rotation.w = 1.0, 0.0
+            w.write("/tf_static", EPOCH_NS, _serialize(TFMessage(transforms=[tr])))
         for k in range(n_ticks):
             t = k * tick_s
             if t >= next_move:  # the pilot's next move: one DOF at a time, in body axes, inside the pool
@@ -172,7 +190,20 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
             om.twist.twist.linear.x, om.twist.twist.linear.y, om.twist.twist.linear.z = (float(x) for x in twist_held[:3])
             om.twist.twist.angular.x, om.twist.twist.angular.y, om.twist.twist.angular.z = (
                 float(x) for x in twist_held[3:])
+            if s.imu:
+                om.twist.twist.angular.x = om.twist.twist.angular.y = om.twist.twist.angular.z = 0.0
+                im = Imu()
+                _stamp(im.header, t_ns)
+                im.header.frame_id = "imu_link"
+                w_imu = r_imu.T @ frames.frd_to_flu(np.asarray(nu[3:], dtype=float)) + rng.normal(
+                    0, s.noise_angular_rad_s, 3)
+                im.angular_velocity.x, im.angular_velocity.y, im.angular_velocity.z = (float(x) for x in w_imu)
+            if not s.header_stamps:
+                for m in (wm, om) + ((im,) if s.imu else ()):
+                    m.header.stamp.sec = m.header.stamp.nanosec = 0
             if not in_gap:
+                if s.imu:
+                    out.append((t_ns + int(rng.uniform(0.0, 0.004) * 1e9), "/imu", _serialize(im)))
                 burst = rng.random() < 0.05
                 late = int(rng.uniform(0.0, s.late_s) * 1e9) + (int(0.2e9) if burst else 0)
                 out.append((t_ns + int(rng.uniform(0.0, 0.005) * 1e9), "/wrench", _serialize(wm)))
