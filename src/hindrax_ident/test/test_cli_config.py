@@ -46,3 +46,24 @@ def test_without_a_file_the_shipped_vehicle_file_is_checked():
 
     r = run("config", "check")
     assert r.returncode == 0 and r.stdout.startswith(f"{default_config_path()}: OK")
+
+
+def test_every_command_reading_the_vehicle_file_reports_an_invalid_one_in_one_line(tmp_path, capsys):
+    """One mechanism (commands/common.py load_vehicle): one line on stderr naming key, value, allowed range,
+    exit 1, nothing on stdout, for each command that loads the vehicle file."""
+    from hindrax_ident import cli
+
+    doc = yaml.safe_load(default_config_path().read_text())
+    doc["/**"]["ros__parameters"]["thrusters"]["t3"]["esc_channel"] = 17
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(yaml.safe_dump(doc))
+    before = bad.read_text()
+    for argv in (["allocate", "--config", str(bad), "0", "0", "0", "0", "0", "0"],
+                 ["esc", "calibrate", "--measured-us", "1500", "--config", str(bad), "--write"],
+                 ["ident", "priors", "--config", str(bad)],
+                 ["ident", "scenarios", "--config", str(bad), "--out", str(tmp_path / "suite")]):
+        assert cli.main(argv) == 1, argv
+        out, err = capsys.readouterr()
+        assert out == "" and err.splitlines() == [
+            f"invalid configuration: {bad}: thrusters.t3.esc_channel = 17: allowed integer in [0, 15]"], (argv, err)
+    assert bad.read_text() == before and not (tmp_path / "suite").exists()

@@ -20,7 +20,7 @@ import json
 import re
 from pathlib import Path
 
-from .common import CommandError, add_config_argument
+from .common import CommandError, add_config_argument, load_vehicle
 
 __all__ = ["add_arguments", "run", "write_oscillator"]
 
@@ -60,14 +60,11 @@ def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hindrax_drivers.config import ConfigError, default_config_path, load_config
+    from hindrax_drivers.config import ConfigError, default_config_path
     from hindrax_drivers.pca9685 import protocol as p
 
     path = args.config or str(default_config_path())
-    try:
-        cfg = load_config(path)
-    except ConfigError as exc:
-        raise CommandError(f"esc calibrate: {path}: {exc}") from None
+    cfg = load_vehicle(path)
     assumed = float(cfg.get("esc.oscillator_hz"))
     commanded = float(args.commanded_us if args.commanded_us is not None
                       else cfg.get("thrusters.pulse_width_neutral_us"))

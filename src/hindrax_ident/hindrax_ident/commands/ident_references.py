@@ -85,12 +85,10 @@ def _priors(args) -> int:
 
     try:
         if args.config:
-            from hindrax_drivers.config import ConfigError, load_config
-            try:
-                cfg = load_config(args.config)
-            except ConfigError as exc:
-                return _fail("priors", f"{args.config}: {'; '.join(exc.lines())}")
-            out = priors_from_config(cfg, args.frontal_area_m2, args.side_area_m2, args.top_area_m2)
+            from .common import load_vehicle
+
+            out = priors_from_config(load_vehicle(args.config), args.frontal_area_m2, args.side_area_m2,
+                                     args.top_area_m2)
         else:
             missing = ["--" + n.replace("_", "-") for n, _ in _GEOMETRY if getattr(args, n) is None]
             if missing:

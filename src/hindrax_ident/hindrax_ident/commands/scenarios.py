@@ -25,6 +25,8 @@ import time
 from pathlib import Path
 from typing import Sequence
 
+from .common import add_config_argument, load_vehicle
+
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED"]
 
 #: DOFs of the full suite (issue 16: surge, sway, heave, yaw).
@@ -57,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "heave,yaw)")
     parser.add_argument("--levels", type=int, default=None, help="levels per DOF (default identification.levels_per_dof)")
     parser.add_argument("--out", default="scenario-results", help="output directory (default scenario-results/)")
-    parser.add_argument("--config", default=None, help="vehicle configuration (default ros_ws/config/hindrax.yaml)")
+    add_config_argument(parser)
     parser.add_argument("--jobs", type=int, default=1, help="campaigns run in parallel processes (default 1)")
     parser.add_argument("--cache", default=None,
                         help="directory keeping each campaign's identification (pickle): a case found there is not "
@@ -81,10 +83,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
     "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
-    covered, verdict, reasons, t_dof.
+    covered, verdict, reasons, t_dof. Raises :class:`~.common.CommandError` for an invalid vehicle file.
     """
-    from hindrax_drivers.config import default_config_path, load_config
-
     from ..identification.campaign import Campaign
     from ..identification.estimators import identify_all_with_errors, truth_parameters
     from ..identification.verdicts import apply_verdicts, rls_published_std
@@ -95,7 +95,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     from scipy import stats
 
-    cfg = load_config(config_path or default_config_path())
+    cfg = load_vehicle(config_path)
     truth = load_truth(cfg, _truth_path(scenario))
     label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
     wall0 = time.monotonic()
@@ -256,6 +256,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the suite (module docstring)."""
     from hindrax_drivers.config import DOFS
 
+    load_vehicle(args.config)  # an invalid vehicle file: one line and exit 1 here, not an error per case
     names = [s.strip() for s in (args.scenarios.split(",") if args.scenarios else scenario_names()) if s.strip()]
     missing = [n for n in names if not _truth_path(n).is_file()]
     if missing:
