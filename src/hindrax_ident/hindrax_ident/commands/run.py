@@ -57,6 +57,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "simulator and emulators only (default ros_ws/config/truth/default.yaml)")
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
+    parser.add_argument("--calibrate", default="",
+                        help="known-force calibration steps before the ladders, comma-separated: ballast (in-process "
+                             "only for now; the thrust scale is applied to the identification, identification.yaml "
+                             "gains a calibration section)")
+    parser.add_argument("--ballast-mass-kg", type=float, default=1.0, help="ballast mass, kg (default 1.0)")
+    parser.add_argument("--ballast-volume-m3", type=float, default=1.0 / 7850.0,
+                        help="ballast displaced volume, m^3 (default 1 kg of steel: 1.27e-4)")
     if not parser.prog.endswith("campaign"):
         parser.add_argument("--in-process", action="store_true",
                             help="step the simulator in-process instead (no drivers, no ROS graph, no bag; about 4x "
@@ -117,7 +124,27 @@ def _check_args(args) -> tuple[object, list[str]]:
         raise CommandError("--levels must be >= 1")
     if args.rtf < 0:
         raise CommandError("--rtf must be >= 0")
+    from ..identification.executive import CALIBRATION_STEPS
+
+    cal = _calibration_steps(args)
+    bad = [c for c in cal if c not in CALIBRATION_STEPS]
+    if bad:
+        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)} "
+                           "(line_pull is not implemented yet)")
+    if cal and _ballast_weight_n(args, cfg) <= 0:
+        raise CommandError(f"--ballast-mass-kg {args.ballast_mass_kg} with --ballast-volume-m3 "
+                           f"{args.ballast_volume_m3}: the ballast must be heavier than the water it displaces")
     return cfg, dofs
+
+
+def _calibration_steps(args) -> list[str]:
+    return [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
+
+
+def _ballast_weight_n(args, cfg) -> float:
+    """(m - rho V) g of the ballast, N."""
+    return (float(args.ballast_mass_kg) - float(args.ballast_volume_m3) * float(cfg.water_density_kg_m3)) \
+        * float(cfg.gravity_m_s2)
 
 
 def run_graph(args: argparse.Namespace) -> int:
@@ -127,6 +154,9 @@ def run_graph(args: argparse.Namespace) -> int:
     from ..identification.graph_campaign import run_graph_campaign
 
     cfg, dofs = _check_args(args)
+    if _calibration_steps(args):
+        raise CommandError("--calibrate: only in-process for now (hindrax ident campaign, hindrax run --in-process): "
+                           "the identification node has no continue service yet")
 
     wall0 = time.monotonic()
 
@@ -170,18 +200,27 @@ def run_in_process(args: argparse.Namespace) -> int:
         sim = Simulator(cfg, seed=args.seed, truth=getattr(args, "truth", None))
     except TruthError as exc:
         raise CommandError(f"--truth: {exc}") from exc
+    cal = _calibration_steps(args)
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
-                        sim=sim)
+                        sim=sim, calibrate=cal, ballast_weight_in_water_n=_ballast_weight_n(args, cfg) if cal else 0.0)
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
-    idents, errors = identify_all_with_errors(record, cfg)
+    from ..identification.calibration import (apply_thrust_calibration, calibration_relative_std,
+                                              calibration_section)
+    from ..identification.verdicts import apply_verdicts
+
+    idents, errors = identify_all_with_errors(apply_thrust_calibration(record), cfg)
+    if record.calibration:  # the calibration's uncertainty replaces the declared thrust-curve uncertainty
+        apply_verdicts(idents, cfg, thruster_fit_rel=calibration_relative_std(record.calibration))
     for dof, msg in errors.items():
         progress(f"{dof}: no estimate ({msg})")
     out = _output_dir(cfg, args.out)
     if idents:
         doc = build_results(idents, cfg, source="simulation", seed=record.seed)
+        if record.calibration:
+            doc["calibration"] = calibration_section(record.calibration)
         write_identification(out / "identification.yaml", doc)
         note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
                 + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))

@@ -8,6 +8,11 @@ thrusters, the thrust curve of those widths ([Hindrax-Drag] (seed 003) eq. 1) is
 the sensor samples the simulator produced during the tick go to the executive. At the end or on abort every
 thruster is commanded neutral. The simulator's truth (position, attitude) goes into the record for tests and
 plots only; the executive never sees it.
+
+Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): the virtual pool plays the operator. When
+the executive waits for the ballast to be attached, the simulator gets the ballast's weight in water (vertical,
+NED down, expressed in the body frame every tick) as an external force until the executive asks for its removal;
+each time ``continue`` is given at once.
 """
 from __future__ import annotations
 
@@ -43,7 +48,8 @@ class Campaign:
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
                  seed: int | None = None, max_level_duration_s: float | None = None,
                  progress: Callable[[str], None] | None = None, real_time_factor: float = 0.0,
-                 sim: Simulator | None = None, heave_repeats: int = 3) -> None:
+                 sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
+                 ballast_weight_in_water_n: float = 0.0) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -54,7 +60,9 @@ class Campaign:
         self.steps_per_tick = max(1, int(round(1.0 / (rate * self.sim.step_s))))
         self.tick_s = self.steps_per_tick * self.sim.step_s
         self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, max_level_duration_s=max_level_duration_s,
-                                   heave_repeats=heave_repeats, progress=progress)
+                                   heave_repeats=heave_repeats, progress=progress, calibrate=calibrate,
+                                   ballast_weight_in_water_n=ballast_weight_in_water_n)
+        self._ballast_on = False
         self.core = self.executive.core
         self.reversed = np.array([t.reversed for t in cfg.thrusters.thrusters], dtype=bool)
         self.neutral_us = float(cfg.thrusters.pulse_width_neutral_us)
@@ -80,7 +88,16 @@ class Campaign:
         self._truth["pos"].append(self.sim.position_ned_m)
         self._truth["eul"].append(self.sim.euler_rad)
         wire = np.where(self.reversed, 2.0 * self.neutral_us - pw, pw)
-        self.sim.advance(self.tick_s, wire)
+        if ex.awaiting:  # the virtual pool's operator: do what the step asks, then continue
+            self._ballast_on = ex.awaiting == "attach_ballast"
+            ex.operator_continue()
+        if ex.calibrate:
+            ext = np.zeros(6)
+            if self._ballast_on:
+                ext[:3] = self.sim.rotation.T @ np.array([0.0, 0.0, ex.ballast_weight_in_water_n])
+            self.sim.advance(self.tick_s, wire, external_wrench_frd=ext)
+        else:
+            self.sim.advance(self.tick_s, wire)
         pending, self._pending = self._pending, []
         w = ex.step(TickInput(t_s=self.sim.t_s, elapsed_s=self.tick_s, samples=pending))
         if w is not None and self.rtf > 0.0:

@@ -58,7 +58,16 @@ from .maneuvers import (DOF_INDEX, DepthEstimator, HoldController, PoolBox, Sens
                         level_ladder, prior_inertia, wrap_angle)
 from .signals import STILL_MESSAGE
 
-__all__ = ["CampaignAbort", "CampaignRecord", "Executive", "ExecutiveStatus", "TickInput", "ordered_samples"]
+__all__ = ["CampaignAbort", "CampaignRecord", "Executive", "ExecutiveStatus", "TickInput", "ordered_samples",
+           "CALIBRATION_STEPS"]
+
+#: Known-force calibration steps the executive can run before the ladders (issue 17 item 1; line_pull not yet).
+CALIBRATION_STEPS = ("ballast",)
+#: Settling time before, and averaging window of, each calibration hold (s).
+CALIBRATION_SETTLE_S = 15.0
+CALIBRATION_WINDOW_S = 30.0
+#: Block length of the batch means giving the std of the mean holding force (s; several depth-hold time constants).
+CALIBRATION_BLOCK_S = 3.0
 
 Wrenches = Generator[np.ndarray, None, None]
 
@@ -101,6 +110,9 @@ class CampaignRecord:
     time_constant_s: float
     seed: int
     final_pulse_width_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: known-force calibration results (:meth:`Executive._ballast`): {"vertical": {value, std, known_force_n,
+    #: holding_force_n, holding_force_std_n, method}}; empty without a calibration step
+    calibration: dict = field(default_factory=dict)
 
     def dof_slice(self, dof: str) -> slice:
         """Tick index range of one DOF's manoeuvres (empty slice when it was not run)."""
@@ -167,14 +179,19 @@ class Executive:
     of the DOF's smaller authority (each in (0, 1]), instead of the configured ladder. max_level_duration_s: cap
     of one run (default ``identification.max_level_duration_s``). heave_repeats: down/up pairs per heave level.
     dvl_lock_timeout_s: longest time without a valid DVL velocity during surge or sway. progress: optional
-    callable receiving one-line messages as the campaign moves on.
-    Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0.
+    callable receiving one-line messages as the campaign moves on. calibrate: known-force steps to run after the
+    dive, before the ladders (:data:`CALIBRATION_STEPS`); ``ballast`` needs ``ballast_weight_in_water_n`` (> 0,
+    N: (m - rho V) g of the ballast). While a step waits for the operator, :attr:`awaiting` names what to do and
+    :meth:`operator_continue` resumes it.
+    Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0, an unknown
+    calibration step or a missing ballast weight.
     """
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None, *,
                  tick_s: float, fractions: Sequence[float] | None = None, max_level_duration_s: float | None = None,
                  heave_repeats: int = 3, dvl_lock_timeout_s: float = 3.0,
-                 progress: Callable[[str], None] | None = None) -> None:
+                 progress: Callable[[str], None] | None = None, calibrate: Sequence[str] = (),
+                 ballast_weight_in_water_n: float = 0.0) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -182,6 +199,17 @@ class Executive:
             raise ValueError(f"level fractions must be in (0, 1], got {list(fractions)}")
         if not (math.isfinite(tick_s) and tick_s > 0.0):
             raise ValueError(f"tick_s must be > 0, got {tick_s}")
+        bad = [c for c in calibrate if c not in CALIBRATION_STEPS]
+        if bad:
+            raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+        if "ballast" in calibrate and not (math.isfinite(ballast_weight_in_water_n) and ballast_weight_in_water_n > 0):
+            raise ValueError(f"ballast_weight_in_water_n must be > 0 N for the ballast step, got {ballast_weight_in_water_n}")
+        self.calibrate = list(calibrate)
+        self.ballast_weight_in_water_n = float(ballast_weight_in_water_n)
+        #: what a calibration step waits for the operator to do ("" when not waiting): attach_ballast, remove_ballast
+        self.awaiting = ""
+        self._continue = False
+        self.calibration: dict = {}
         self.cfg = cfg
         f = cfg.flat
         self.dofs = list(dofs)
@@ -338,7 +366,8 @@ class Executive:
             sensors=self.state.log, windows=dict(self.windows), online=self.online, levels=self.levels,
             authority=self.authority, aborted=self.aborted, abort_reason=self.abort_reason, wall_time_s=wall_time_s,
             tick_s=self.tick_s, time_constant_s=self.time_constant_s, seed=int(seed),
-            final_pulse_width_us=np.zeros(0) if final_pulse_width_us is None else np.asarray(final_pulse_width_us))
+            final_pulse_width_us=np.zeros(0) if final_pulse_width_us is None else np.asarray(final_pulse_width_us),
+            calibration={k: dict(v) for k, v in self.calibration.items()})
 
     # ------------------------------------------------------------------ status
     def level_position(self) -> tuple[str, int, int, float]:
@@ -561,8 +590,71 @@ class Executive:
                 yield from self._wait_still(k, 0.05, 8.0)
                 yield from self._hold(0.5)
 
+    def operator_continue(self) -> bool:
+        """The operator's ``continue``: resumes a calibration step waiting in :attr:`awaiting`; False (nothing
+        done) when no step waits."""
+        if not self.awaiting:
+            return False
+        self._continue = True
+        return True
+
+    def _wait_operator(self, what: str, prompt: str, max_s: float = 900.0) -> Wrenches:
+        """Hold (all DOFs) until :meth:`operator_continue`; aborts after ``max_s``."""
+        self.awaiting, self._continue = what, False
+        self._say(f"{prompt}, then call continue")
+        t0 = self.t_s
+        while not self._continue:
+            if self.t_s - t0 > max_s:
+                raise CampaignAbort(f"no continue within {max_s:g} s ({what})")
+            yield self.ctrl.wrench(self.state, (), self.tick_s)
+        self.awaiting, self._continue = "", False
+
+    def _mean_holding_force(self, k: int, t_from: float) -> tuple[float, float]:
+        """Mean of the recorded (lagged) thrust-model force on axis k since ``t_from`` and the std of that mean by
+        batch means (blocks of :data:`CALIBRATION_BLOCK_S`: the holding force is correlated over the depth hold's
+        time scale, so the per-tick std would be wrong either way)."""
+        t = np.asarray(self._rec["t"])
+        x = np.asarray(self._rec["w"]).reshape(-1, 6)[t >= t_from, k]
+        per = max(1, int(round(CALIBRATION_BLOCK_S / self.tick_s)))
+        nb = x.size // per
+        if nb < 3:
+            raise CampaignAbort("calibration: averaging window shorter than three blocks")
+        blocks = x[: nb * per].reshape(nb, per).mean(axis=1)
+        return float(np.mean(x)), float(np.std(blocks, ddof=1) / math.sqrt(nb))
+
+    def _ballast(self) -> Wrenches:
+        """Vertical thrust scale from a known ballast (issue 17 item 1): hold depth, average the holding force Z1;
+        the operator attaches the ballast (weight in water w); hold again, Z2. The thrust-model force changes by
+        Z1 - Z2 = w / s for a true thrust s times the curve's, so s = w / (Z1 - Z2) (FRD: z down), std from the
+        two means' std. Then the ballast is removed before the ladders."""
+        w = self.ballast_weight_in_water_n
+        yield from self._move_to_centre()
+        self.ctrl.depth_setpoint_m = self.depth_hold_m
+        self._say("calibration (ballast): hold depth without the ballast")
+        yield from self._hold(CALIBRATION_SETTLE_S)
+        t1 = self.t_s
+        yield from self._hold(CALIBRATION_WINDOW_S)
+        z1, s1 = self._mean_holding_force(2, t1)
+        yield from self._wait_operator("attach_ballast", f"calibration: attach the ballast ({w:.3g} N in water)")
+        yield from self._hold(CALIBRATION_SETTLE_S)
+        t2 = self.t_s
+        yield from self._hold(CALIBRATION_WINDOW_S)
+        z2, s2 = self._mean_holding_force(2, t2)
+        yield from self._wait_operator("remove_ballast", "calibration: remove the ballast")
+        yield from self._hold(CALIBRATION_SETTLE_S)
+        dz = z1 - z2
+        if not dz > 0.0:
+            raise CampaignAbort(f"calibration (ballast): the holding force did not rise ({z1:.3g} -> {z2:.3g} N)")
+        scale = w / dz
+        self.calibration["vertical"] = {
+            "value": scale, "std": scale * math.hypot(s1, s2) / dz, "known_force_n": w,
+            "holding_force_n": [z1, z2], "holding_force_std_n": [s1, s2], "method": "ballast"}
+        self._say(f"calibration (ballast): vertical thrust scale {scale:.4f}")
+
     def _campaign(self) -> Wrenches:
         yield from self._dive()
+        if "ballast" in self.calibrate:
+            yield from self._ballast()
         for dof in self.dofs:
             yield from self._move_to_centre()
             ladder = self.ladder(dof)

@@ -1,0 +1,85 @@
+"""Issue 17 items 1-2 (ballast part): a known-force calibration step in the campaign and its thrust scale applied to
+the identification, so that a pool whose thrusters give 10 % less than their curves ("thrust x0.90" truth) still
+yields surge and heave inertia and quadratic damping within 5 % with intervals that cover the truth.
+
+The in-process campaign plays the operator: when the executive asks for the ballast (1 kg of steel, 8.56 N in
+water) the simulator gets that weight as an external force until the executive asks for its removal.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident import cli
+from hindrax_ident.identification.calibration import (apply_thrust_calibration, calibration_relative_std,
+                                                      calibration_section)
+from hindrax_ident.identification.executive import Executive
+from hindrax_ident.sim.truth import truth_dir
+
+THRUST_090 = truth_dir() / "scenarios" / "thrust_0.90.yaml"
+W_BALLAST = (1.0 - 1000.0 / 7850.0) * 9.81
+
+
+@dataclasses.dataclass
+class _Rec:
+    wrench_frd: np.ndarray
+    wrench_cmd_frd: np.ndarray
+    calibration: dict
+
+
+def test_calibration_scales_the_force_and_gives_its_relative_std():
+    w = np.arange(12.0).reshape(2, 6)
+    cal = {"vertical": {"value": 0.9, "std": 0.009, "known_force_n": 8.56, "holding_force_n": [0.8, -8.7],
+                        "method": "ballast"}}
+    r = apply_thrust_calibration(_Rec(w, 2 * w, cal))
+    np.testing.assert_allclose(r.wrench_frd, 0.9 * w)
+    np.testing.assert_allclose(r.wrench_cmd_frd, 1.8 * w)
+    assert calibration_relative_std(cal) == pytest.approx([0.01, 0.01])
+    sec = calibration_section(cal)
+    assert sec["vertical_thrust_scale"]["value"] == 0.9 and sec["vertical_thrust_scale"]["known_force_n"] == 8.56
+    plain = _Rec(w, w, {})
+    assert apply_thrust_calibration(plain) is plain and calibration_relative_std({}) is None
+    with pytest.raises(ValueError, match="scale must be > 0"):
+        apply_thrust_calibration(_Rec(w, w, {"vertical": {"value": -1.0, "std": 0.1}}))
+
+
+def test_executive_validates_calibration_options():
+    cfg = load_config(default_config_path())
+    with pytest.raises(ValueError, match="unknown calibration step"):
+        Executive(cfg, ["heave"], tick_s=0.02, calibrate=["line_pull"])
+    with pytest.raises(ValueError, match="ballast_weight_in_water_n"):
+        Executive(cfg, ["heave"], tick_s=0.02, calibrate=["ballast"])
+    ex = Executive(cfg, ["heave"], tick_s=0.02, calibrate=["ballast"], ballast_weight_in_water_n=W_BALLAST)
+    assert ex.operator_continue() is False   # nothing waits
+
+
+def test_calibrate_is_refused_on_the_graph_and_for_unknown_steps(capsys):
+    assert cli.main(["run", "--calibrate", "ballast", "--dofs", "heave"]) == 1
+    assert "only in-process" in capsys.readouterr().err
+    assert cli.main(["ident", "campaign", "--calibrate", "line_pull", "--dofs", "heave"]) == 1
+    assert "unknown step" in capsys.readouterr().err
+
+
+def test_ballast_calibration_recovers_surge_and_heave_under_thrust_0_90(tmp_path, capsys):
+    out = tmp_path / "run"
+    rc = cli.main(["ident", "campaign", "--dofs", "surge,heave", "--levels", "3", "--seed", "1",
+                   "--truth", str(THRUST_090), "--calibrate", "ballast", "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    doc = yaml.safe_load((out / "identification.yaml").read_text())
+    scale = doc["calibration"]["vertical_thrust_scale"]
+    assert scale["value"] == pytest.approx(0.90, rel=0.02)
+    assert 0.0 < scale["std"] < 0.03 and abs(scale["value"] - 0.90) < 3.0 * scale["std"]
+    assert scale["known_force_n"] == pytest.approx(W_BALLAST)
+    for dof, names in (("surge", ("inertia", "quadratic_damping")),
+                       ("heave", ("inertia", "quadratic_damping_positive", "quadratic_damping_negative"))):
+        e = doc["dofs"][dof]
+        for n in names:
+            truth = e["configured"][n]
+            assert e[n]["value"] == pytest.approx(truth, rel=0.05), (dof, n, e[n]["value"], truth)
+            lo, hi = e[n]["ci95"]
+            assert lo <= truth <= hi, (dof, n, e[n], truth)
