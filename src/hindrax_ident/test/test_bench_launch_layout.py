@@ -15,7 +15,7 @@ from hindrax_ident.benchmarks.launch_layout import I2CSocketServer, SocketI2CBus
 
 def test_socket_bus_serves_the_emulated_bus(tmp_path):
     emulator = Pca9685Emulator()
-    I2CSocketServer(EmulatedI2CBus({0x40: emulator}), str(tmp_path / "i2c.sock"), threading.Lock())
+    server = I2CSocketServer(EmulatedI2CBus({0x40: emulator}), str(tmp_path / "i2c.sock"), threading.Lock())
     bus = SocketI2CBus(str(tmp_path / "i2c.sock"))
     device = I2CDevice(bus, 0x40, "pca9685", retries=0)
     prescale = p.esc_prescale(50.0, p.INTERNAL_OSCILLATOR_HZ)
@@ -30,3 +30,5 @@ def test_socket_bus_serves_the_emulated_bus(tmp_path):
         bus.read_byte_data(0x41, 0x00)  # nobody at 0x41: a NACK, as smbus2 reports it
     assert exc.value.errno == errno.EREMOTEIO
     bus.close()
+    server.close()
+    assert not (tmp_path / "i2c.sock").exists()

@@ -93,6 +93,10 @@ class I2CSocketServer:
         self._listener = Listener(path, family="AF_UNIX")
         threading.Thread(target=self._accept, name="i2c-socket-accept", daemon=True).start()
 
+    def close(self) -> None:
+        """Stop accepting connections and remove the socket file."""
+        self._listener.close()
+
     def _accept(self) -> None:
         while True:
             try:
@@ -156,7 +160,7 @@ def _pool(argv: list[str]) -> int:
             original_step()
 
     node._step_once = locked_step
-    I2CSocketServer(hardware.i2c_bus, args.socket, lock)
+    server = I2CSocketServer(hardware.i2c_bus, args.socket, lock)
     Path(args.ports_file).write_text(json.dumps({"dvl75": hardware.dvl_port, "ping1d": hardware.ping_port}))
     ex = SingleThreadedExecutor()
     ex.add_node(node)
@@ -165,6 +169,7 @@ def _pool(argv: list[str]) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        server.close()
         hardware.close()
         ex.shutdown()
         node.destroy_node()
