@@ -13,6 +13,8 @@ Rules checked:
 - a node module (``*/node.py`` or ``*_node.py``: it defines an rclpy node) is imported only by other node
   modules and by the entry points that start nodes (:data:`ENTRY_POINTS`); pure functions that offline tools
   need live in pure modules that the nodes import too.
+- production code does not import the test helpers (:data:`TESTING`): only the benchmarks
+  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``.
 
 Run alone: ``.venv/bin/python -m pytest -n0 -p no:randomly test/test_import_structure.py -q``.
 """
@@ -187,6 +189,22 @@ def test_no_import_cycles(graph):
 
 def test_node_modules_imported_only_by_nodes_and_entry_points(graph):
     assert node_imports(graph) == []
+
+
+#: The helpers for tests and benchmarks (waits, contexts, child environments, configuration parameters).
+TESTING = "hindrax_drivers.testing"
+
+
+def testing_imports(graph: dict[str, set[str]]) -> list[str]:
+    """``"importer -> hindrax_drivers.testing"`` for every production module importing the test helpers."""
+    return sorted(f"{src} -> {TESTING}" for src, deps in graph.items()
+                  if TESTING in deps and src != TESTING and not any(
+                      src == p or src.startswith(p + ".") for p in ENTRY_POINT_PACKAGES))
+
+
+def test_production_code_does_not_import_the_test_helpers(graph):
+    assert TESTING in graph and "hindrax_drivers.conditions" in graph[TESTING]  # the rule is not vacuous
+    assert testing_imports(graph) == []
 
 
 def test_entry_points_exist(graph):

@@ -1,4 +1,5 @@
-"""Helpers for tests and benchmarks: waiting on conditions, isolated rclpy contexts, child processes.
+"""Helpers for tests and benchmarks: waiting on conditions, isolated rclpy contexts (both from
+:mod:`hindrax_drivers.conditions`, which production code uses), child processes, configuration parameters.
 
 Tests wait on conditions with a deadline, never on fixed sleeps (README, "Tests"). Every helper here
 keeps ROS 2 traffic on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and in the ROS_DOMAIN_ID the
@@ -6,57 +7,13 @@ test session reserved (conftest.py).
 """
 from __future__ import annotations
 
-import contextlib
 import os
 import sys
-import time
-from typing import Any, Callable, Iterator
+from typing import Any
 
+from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
 
-class ConditionTimeout(AssertionError):
-    """A waited-for condition did not become true before its deadline."""
-
-
-def wait_until(predicate: Callable[[], Any], timeout_s: float = 10.0, poll: Callable[[], None] | None = None,
-               message: str = "condition") -> Any:
-    """Call ``poll`` (e.g. one executor spin) until ``predicate()`` is truthy; return its value.
-
-    poll: called between checks; default waits 5 ms on a threading.Event (a bounded poll interval, not a
-    fixed delay the test relies on). Raises :class:`ConditionTimeout` after ``timeout_s`` seconds.
-    """
-    import threading
-
-    ev = threading.Event()
-    deadline = time.monotonic() + timeout_s
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise ConditionTimeout(f"{message} not met within {timeout_s:g} s")
-        if poll is not None:
-            poll()
-        else:
-            ev.wait(0.005)
-
-
-@contextlib.contextmanager
-def ros_context(domain_id: int | None = None) -> Iterator[Any]:
-    """An initialised, isolated rclpy Context (shut down on exit). Domain from ROS_DOMAIN_ID by default."""
-    import rclpy
-    from rclpy.context import Context
-
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    ctx = Context()
-    kwargs = {}
-    if domain_id is not None:
-        kwargs["domain_id"] = domain_id
-    rclpy.init(context=ctx, **kwargs)
-    try:
-        yield ctx
-    finally:
-        with contextlib.suppress(Exception):
-            rclpy.shutdown(context=ctx)
+__all__ = ["ConditionTimeout", "child_env", "config_parameters", "python_executable", "ros_context", "wait_until"]
 
 
 def child_env(**extra: str) -> dict[str, str]:

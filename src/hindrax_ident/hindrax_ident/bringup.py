@@ -119,9 +119,9 @@ class Graph:
         with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready and
         ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); answer the arm
         request with time frozen again. Returns the SetArmed response. Raises
-        :class:`~hindrax_drivers.testing.ConditionTimeout` when a step takes longer than ``timeout_s`` of wall time.
+        :class:`~hindrax_drivers.conditions.ConditionTimeout` when a step takes longer than ``timeout_s`` of wall time.
         """
-        from hindrax_drivers.testing import wait_until
+        from hindrax_drivers.conditions import wait_until
         from hindrax_msgs.srv import SetArmed
 
         spin = lambda: self.spin_once(spin_timeout_s)  # noqa: E731

@@ -386,7 +386,7 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
 
 def write_sim_bag(bag_dir: Path, duration_s: float, overrides: dict[str, Any], context: Any = None) -> int:
     """Record one bag (see :func:`record_simulated_run`); returns its message count."""
-    from hindrax_drivers.testing import ros_context
+    from hindrax_drivers.conditions import ros_context
 
     from .reader import BagReader
 

@@ -66,7 +66,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     import rclpy
     from rclpy.action import ActionClient
 
-    from hindrax_drivers.testing import ros_context, wait_until
+    from hindrax_drivers.conditions import ros_context, wait_until
     from hindrax_msgs.action import RunIdentification
     from hindrax_msgs.msg import ThrusterPwm
     from hindrax_msgs.srv import SetArmed
