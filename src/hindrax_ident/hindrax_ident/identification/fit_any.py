@@ -145,7 +145,7 @@ def _static_rotation(reader, parent: str, child: str) -> np.ndarray | None:
     if not topics:
         return None
     try:
-        for _raw, msg in reader.decoded(topics):
+        for _raw, msg in _decoded(reader, topics):
             for tr in msg.transforms:
                 if tr.header.frame_id == parent and tr.child_frame_id == child:
                     q = tr.transform.rotation
@@ -153,6 +153,28 @@ def _static_rotation(reader, parent: str, child: str) -> np.ndarray | None:
     except Exception:  # noqa: BLE001 - an unreadable /tf_static is the same as none
         return None
     return None
+
+
+def _decoded(reader, topics: Sequence[str]):
+    """(raw, message) pairs of ``topics`` in log-time order: rclpy's C deserializer for types whose Python package
+    is installed (standard messages: several times faster), else the reader's mcap_ros2 decoding from the stored
+    definitions (:meth:`hindrax_drivers.recording.reader.BagReader.decoded`)."""
+    import importlib
+
+    classes: dict[str, Any] = {}
+    for t in topics:
+        pkg, _sub, name = reader.topics[t].partition("/msg/")
+        try:
+            classes[t] = getattr(importlib.import_module(f"{pkg}.msg"), name)
+        except (ImportError, AttributeError, ValueError):
+            classes[t] = None
+    if any(c is None for c in classes.values()):
+        yield from reader.decoded(list(topics))
+        return
+    from rclpy.serialization import deserialize_message
+
+    for raw in reader.messages(list(topics)):
+        yield raw, deserialize_message(raw.data, classes[raw.topic])
 
 
 def _hdr_ns(msg) -> int:
@@ -206,7 +228,7 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
         pwm = (core.allocator.curves[0], np.asarray(core.matrix_frd, dtype=float),
                np.full(len(cfg.thrusters.thrusters), float(cfg.thrusters.pulse_width_neutral_us)),
                int(round(float(cfg.flat["esc.output_latency_s"]) * 1e9)))
-    for raw, msg in reader.decoded(list(by_topic)):
+    for raw, msg in _decoded(reader, list(by_topic)):
         for role in by_topic[raw.topic]:
             st = streams[role]
             ty = st.type
@@ -863,7 +885,7 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
         for idx in folds:
             train = np.setdiff1d(np.arange(len(seg)), idx)
             try:
-                th_f, _ = _fit(seg_c.subset(train), dof, model)
+                th_f, _ = _fit(seg_c.subset(train), dof, model, theta)  # from the full fit: fewer iterations
             except (EstimationError, np.linalg.LinAlgError, ValueError):
                 continue
             r.folds.append(th_f)
