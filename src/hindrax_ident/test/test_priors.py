@@ -168,3 +168,14 @@ def test_identification_yaml_shows_the_priors_beside_the_identified_values():
     assert prior["added_mass"] == pytest.approx(expected["added_mass"][DOFS.index("surge")])
     assert prior["quadratic_damping"] == pytest.approx(expected["quadratic_damping"][0])
     assert "NTNU-Thesis" in prior["source"]
+    # the report's references section shows the prior beside the identified value, and the calibration
+    from hindrax_ident.identification.calibration import calibration_section
+    from hindrax_ident.identification.report import references_html
+
+    doc["calibration"] = calibration_section({"vertical": {"value": 0.9012, "std": 0.0044, "known_force_n": 8.56,
+                                                           "holding_force_n": [0.85, -8.65], "method": "ballast"}})
+    page = references_html(doc)
+    assert "References" in page and "0.9012" in page and "ballast" in page
+    ratio = expected["added_mass"][0] / truth["added_mass"]
+    assert f"{ratio:.3g}" in page and "outside" in page      # the solid-prism prior is far above Table 6's 12.08 kg
+    assert references_html({"dofs": {}}) == ""

@@ -147,6 +147,51 @@ def _fmt(x, digits: int = 4) -> str:
     return f"{x:.{digits}g}"
 
 
+def references_html(document: Mapping) -> str:
+    """The "References" section (issue 17 item 6): the known-force calibration (``document["calibration"]``) and,
+    per DOF, the empirical priors ([NTNU-Thesis] (seed 002) App. A, ``dofs.<dof>.prior``) beside the identified
+    values, with the ratio and whether the prior lies inside the identified 95 % interval. Empty string when the
+    document has neither."""
+    rows = []
+    cal = document.get("calibration") or {}
+    for name, c in cal.items():
+        if isinstance(c, Mapping) and "value" in c:
+            rows.append(f"<tr><td>{html.escape(name)}</td><td>{_fmt(c.get('value'))}</td><td>{_fmt(c.get('std'), 2)}"
+                        f"</td><td>{_fmt(c.get('known_force_n'))}</td><td>{html.escape(str(c.get('method', '')))}"
+                        f"</td><td>{html.escape(str(c.get('holding_force_n', '')))}</td></tr>")
+    parts = []
+    if rows:
+        parts.append("<h3>Known-force calibration</h3><table><tr><th>scale</th><th>value</th><th>std</th>"
+                     "<th>known force (N)</th><th>method</th><th>holding force (N)</th></tr>" + "".join(rows)
+                     + "</table>" + (f"<p>{html.escape(str(cal.get('applied_to', '')))}</p>" if cal.get("applied_to")
+                                     else ""))
+    prow = []
+    for dof, e in (document.get("dofs") or {}).items():
+        prior = e.get("prior") if isinstance(e, Mapping) else None
+        if not prior:
+            continue
+        for kind in ("added_mass", "linear_damping", "quadratic_damping"):
+            names = [n for n in e if isinstance(e.get(n), Mapping) and "value" in e[n]
+                     and (n == kind or n.startswith(kind + "_"))]
+            for n in names:
+                p, par = prior.get(kind), e[n]
+                lo, hi = (par.get("ci95") or [math.nan, math.nan])[:2]
+                ratio = p / par["value"] if (p is not None and par["value"]) else math.nan
+                inside = "-" if p is None else ("inside" if lo <= p <= hi else "outside")
+                prow.append(f"<tr><td>{html.escape(dof)}</td><td>{html.escape(n)}</td><td>{_fmt(par['value'])}</td>"
+                            f"<td>[{_fmt(lo)}, {_fmt(hi)}]</td><td>{_fmt(p)}</td><td>{_fmt(ratio, 3)}</td>"
+                            f"<td>{inside}</td></tr>")
+    if prow:
+        parts.append("<h3>Empirical priors from geometry ([NTNU-Thesis] (seed 002) App. A.1/A.2)</h3><p>rough "
+                     "estimates (the thesis reports differences of tens of percent against panel codes and CFD); "
+                     "a prior outside the identified interval is expected and is not a verdict</p><table><tr><th>DOF"
+                     "</th><th>parameter</th><th>identified</th><th>95 % interval</th><th>prior</th>"
+                     "<th>prior / identified</th><th>prior in interval</th></tr>" + "".join(prow) + "</table>")
+    if not parts:
+        return ""
+    return "<h2>References (independent of the thrust curve)</h2>" + "".join(parts)
+
+
 def write_report(out_dir: str | Path, identifications: Mapping[str, Any], document: Mapping,
                  free_decay: Optional[Any] = None, campaign_note: str = "") -> Path:
     """Write ``out_dir/index.html`` and the PNGs; returns the index path."""
@@ -190,6 +235,7 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
         rl = out / f"{dof}_rls.png"
         if _rls_plot(r, rl):
             parts.append(f"<img src='{rl.name}' alt='{dof} RLS convergence'>")
+    parts.append(references_html(document))
     if free_decay is not None:
         fd = out / "free_decay.png"
         _free_decay_plot(free_decay, fd)
