@@ -217,3 +217,36 @@ def test_imu_in_a_rotated_frame_and_unset_header_stamps(tmp_path):
     # orientation is differentiated instead
     pre = preprocess_bag(bag, TopicChoice(), None, FitOptions())
     assert pre.notes["angular_rate"].startswith("differentiated attitude")
+
+
+def test_thruster_widths_need_the_vehicle_file_and_go_through_its_thrust_model(tmp_path, capsys):
+    """Our own ThrusterPwm (hindrax_msgs) with a Dvl velocity: refused without --config (the thrust curves are
+    the vehicle's); with it, neutral widths give zero force and the thrust lag is reported."""
+    from rclpy.serialization import serialize_message
+
+    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_msgs.msg import Dvl, ThrusterPwm
+
+    cfg = load_config(default_config_path())
+    n = len(cfg.thrusters.thrusters)
+    bag = tmp_path / "pwm"
+    with BagWriter(bag, WriterOptions(fsync=False)) as w:
+        w.add_topic("/thrusters/pulse_width", "hindrax_msgs/msg/ThrusterPwm")
+        w.add_topic("/dvl/data", "hindrax_msgs/msg/Dvl")
+        for k in range(300):
+            t_ns = 1_000_000_000_000 + k * 100_000_000
+            pw = ThrusterPwm(pulse_width_us=[1500.0] * n, armed=True)
+            pw.header.stamp.sec, pw.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+            w.write("/thrusters/pulse_width", t_ns, serialize_message(pw))
+            d = Dvl(velocity_valid=True, delta_time_s=0.1)
+            d.header.stamp.sec, d.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+            d.header.frame_id = "base_link"
+            d.velocity_m_s.x = 0.01 * k
+            w.write("/dvl/data", t_ns, serialize_message(d))
+    err = _fails([str(bag), "--out", str(tmp_path / "o")], capsys)
+    assert "/thrusters/pulse_width" in err and "hindrax_msgs/msg/ThrusterPwm" in err and "--config" in err
+    pre = preprocess_bag(bag, TopicChoice(), cfg, FitOptions())
+    assert "thrusters.time_constant_s" in pre.notes["thrust"]
+    assert pre.notes["topics"]["velocity"] == "/dvl/data [hindrax_msgs/msg/Dvl]"
+    assert np.all(np.concatenate([c.force for c in pre.chunks]) == 0.0)
+    assert pre.notes["angular_rate"] == "none"

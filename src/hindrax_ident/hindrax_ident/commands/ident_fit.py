@@ -9,7 +9,6 @@ line on stderr for an unusable bag, topic, frame or too little data.
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 from .common import CommandError
@@ -97,4 +96,4 @@ def run(args: argparse.Namespace) -> int:
           + "; ".join(f"{Path(b['bag']).name}: {b['gaps']['dropped_s']:g} s in gaps dropped, "
                       f"{b['velocity_repeated_values_dropped']} repeated velocities dropped" for b in d["bags"]))
     print(f"output: {path} and {index}")
-    return 0 if all(math.isfinite(v["nrmse"]) for r in res.dofs.values() for v in r.validation.values()) else 0
+    return 0
