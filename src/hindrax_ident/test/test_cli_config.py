@@ -67,3 +67,26 @@ def test_every_command_reading_the_vehicle_file_reports_an_invalid_one_in_one_li
         assert out == "" and err.splitlines() == [
             f"invalid configuration: {bad}: thrusters.t3.esc_channel = 17: allowed integer in [0, 15]"], (argv, err)
     assert bad.read_text() == before and not (tmp_path / "suite").exists()
+
+
+def test_update_vehicle_file_sets_scalars_and_lists_keeps_comments_and_restores_an_invalid_result(tmp_path):
+    """The one "edit the vehicle file in place" helper (esc calibrate --write, ident thruster-fit --write)."""
+    import pytest
+
+    from hindrax_drivers.config import ConfigError, load_config
+    from hindrax_ident.commands.common import update_vehicle_file
+
+    conf = tmp_path / "hindrax.yaml"
+    conf.write_text(default_config_path().read_text())
+    original = conf.read_text()
+    update_vehicle_file(conf, {"oscillator_hz": "24500000.0", "curve_positive": "[-4.0e-07, 0.002, -3.9, 2191.0]"})
+    cfg = load_config(conf)
+    assert cfg.get("esc.oscillator_hz") == 24.5e6 and list(cfg.thrusters.curve_positive) == [-4e-07, 0.002, -3.9, 2191.0]
+    changed = [(a, b) for a, b in zip(original.splitlines(), conf.read_text().splitlines()) if a != b]
+    assert len(changed) == 2 and any("# nominal; calibrate per board" in b for _, b in changed)  # comment kept
+    edited = conf.read_text()
+    with pytest.raises(ValueError, match="expected exactly one 'no_such_key:' line to update, found 0"):
+        update_vehicle_file(conf, {"no_such_key": "1"})
+    with pytest.raises(ConfigError, match="oscillator_hz"):
+        update_vehicle_file(conf, {"oscillator_hz": "5.0"})
+    assert conf.read_text() == edited  # restored

@@ -8,9 +8,11 @@ Only the standard library is imported here at module level, so defining a comman
 from __future__ import annotations
 
 import argparse
-from typing import Any
+import re
+from pathlib import Path
+from typing import Any, Mapping
 
-__all__ = ["CommandError", "CONFIG_HELP", "add_config_argument", "load_vehicle"]
+__all__ = ["CommandError", "CONFIG_HELP", "add_config_argument", "load_vehicle", "update_vehicle_file"]
 
 CONFIG_HELP = "vehicle configuration (default ros_ws/config/hindrax.yaml)"
 
@@ -37,3 +39,31 @@ def load_vehicle(path: str | None = None) -> Any:
         return load_config(path or default_config_path())
     except ConfigError as exc:
         raise CommandError(f"invalid configuration: {exc}") from exc
+
+
+def update_vehicle_file(path: str | Path, values: Mapping[str, str]) -> None:
+    """Set ``key: value`` in the vehicle file ``path`` in place, keeping every other line and each line's comment;
+    then validate the file and restore the original text if it no longer validates.
+
+    values: {key as written on its line (e.g. ``"oscillator_hz"``): the value's YAML text, a scalar or a one-line
+    flow list such as ``"[1.0, 2.0]"``}; each key must stand on exactly one line of the file.
+    Raises ValueError when a key is missing or stands on several lines (the file is not written),
+    :class:`~hindrax_drivers.config.ConfigError` when the result does not validate (the file is restored).
+    """
+    from hindrax_drivers.config import ConfigError, load_config
+
+    p = Path(path)
+    original = p.read_text()
+    text = original
+    for key, value in values.items():
+        pattern = re.compile(rf"^(\s*{re.escape(key)}:\s*)(\[[^\]\n]*\]|[^\s#]+)(.*)$", re.MULTILINE)
+        found = len(pattern.findall(text))
+        if found != 1:
+            raise ValueError(f"{path}: expected exactly one '{key}:' line to update, found {found}")
+        text = pattern.sub(lambda m, v=value: m.group(1) + v + m.group(3), text, count=1)
+    p.write_text(text)
+    try:
+        load_config(p)
+    except ConfigError:
+        p.write_text(original)
+        raise

@@ -17,10 +17,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
-from .common import CommandError, add_config_argument, load_vehicle
+from .common import CommandError, add_config_argument, load_vehicle, update_vehicle_file
 
 __all__ = ["add_arguments", "run", "write_oscillator"]
 
@@ -41,22 +40,7 @@ def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
 
     Raises ValueError when a line is missing, :class:`ConfigError` when the result is invalid (file restored).
     """
-    from hindrax_drivers.config import ConfigError, load_config
-
-    p = Path(config_path)
-    original = p.read_text()
-    text = original
-    for key, value in (("oscillator_hz", f"{oscillator_hz:.1f}"), ("oscillator_calibrated", "true")):
-        pattern = re.compile(rf"^(\s*{key}:\s*)([^\s#]+)(.*)$", re.MULTILINE)
-        if len(pattern.findall(text)) != 1:
-            raise ValueError(f"{config_path}: expected exactly one '{key}:' line to update")
-        text = pattern.sub(lambda m: m.group(1) + value + m.group(3), text, count=1)
-    p.write_text(text)
-    try:
-        load_config(p)
-    except ConfigError:
-        p.write_text(original)
-        raise
+    update_vehicle_file(config_path, {"oscillator_hz": f"{oscillator_hz:.1f}", "oscillator_calibrated": "true"})
 
 
 def run(args: argparse.Namespace) -> int:

@@ -25,13 +25,11 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import re
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from hindrax_drivers.config import ConfigError, load_config
+from hindrax_drivers.config import ConfigError
 
 __all__ = ["add_arguments", "run", "read_two_columns", "write_thruster_curves"]
 
@@ -94,23 +92,12 @@ def _curve_text(coeffs) -> str:
 def write_thruster_curves(config_path: str, negative, positive) -> None:
     """Replace the ``curve_negative:`` / ``curve_positive:`` values in a configuration file, keeping comments.
 
-    Validates with ``load_config`` afterwards and restores the original text on failure.
+    Validates the result and restores the original text on failure (:func:`~.common.update_vehicle_file`).
     Raises ``ValueError`` (missing lines) or :class:`~hindrax_drivers.config.ConfigError`.
     """
-    p = Path(config_path)
-    original = p.read_text()
-    text = original
-    for key, coeffs in (("curve_negative", negative), ("curve_positive", positive)):
-        pattern = re.compile(rf"^(\s*{key}:\s*)\[[^\]]*\](.*)$", re.MULTILINE)
-        if not pattern.search(text):
-            raise ValueError(f"{config_path}: no single-line '{key}: [...]' entry to update")
-        text = pattern.sub(lambda m: m.group(1) + _curve_text(coeffs) + m.group(2), text, count=1)
-    p.write_text(text)
-    try:
-        load_config(p)
-    except ConfigError:
-        p.write_text(original)
-        raise
+    from .common import update_vehicle_file
+
+    update_vehicle_file(config_path, {"curve_negative": _curve_text(negative), "curve_positive": _curve_text(positive)})
 
 
 def _free_decay(args) -> int:
