@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any
 
 from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
 
