@@ -33,17 +33,25 @@ def graph():
         spin = lambda: ex.spin_once(timeout_sec=0.02)  # noqa: E731
         wait_until(lambda: pub.get_subscription_count() > 0, 10, spin, "allocation node subscribed")
 
-        def send(w, frame="base_link", stamp=None):
+        def post(w, frame="base_link", stamp=None):
             m = WrenchStamped()
             m.header.frame_id = frame
             m.header.stamp = stamp if stamp is not None else probe.get_clock().now().to_msg()
             (m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
              m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z) = w
-            n = len(got["status"])
             pub.publish(m)
-            wait_until(lambda: len(got["status"]) > n, 10, spin, "allocation status")
+            return m.header.stamp
+
+        def send(w, frame="base_link", stamp=None):
+            # widths go out per wrench; forces and status at <= 10 Hz, the latest one always: wait for the ones
+            # that describe this wrench (same header stamp)
+            stamp = post(w, frame, stamp)
+            this = lambda q: q and q[-1].header.stamp == stamp  # noqa: E731
+            wait_until(lambda: this(got["pwm"]) and this(got["forces"]) and this(got["status"]), 10, spin,
+                       "allocation of this wrench")
             return got["pwm"][-1], got["forces"][-1], got["status"][-1]
 
+        send.post = post  # publish without waiting
         yield node, send, got, spin
         ex.shutdown()
         probe.destroy_node()
@@ -113,3 +121,22 @@ def test_allocator_is_rebuilt_on_parameter_change_only(graph):
     res = node.set_parameters([Parameter("thrusters.t1.allocation_weight", value=-1.0)])
     # refused by the descriptor's range (rclpy's reason names key, range and value)
     assert not res[0].successful and "thrusters.t1.allocation_weight" in res[0].reason and "-1.0" in res[0].reason
+
+
+def test_forces_and_status_are_throttled_and_the_latest_is_sent(graph):
+    """30 wrenches back to back: 30 width commands, far fewer forces/status (<= 10 Hz), the last of them
+    describing the last wrench (held and sent by the timer)."""
+    node, send, got, spin = graph
+    send([1.0, 0, 0, 0, 0, 0])
+    n_pwm, n_forces, n_status = len(got["pwm"]), len(got["forces"]), len(got["status"])
+    stamps = []
+    for i in range(30):  # one at a time (the node's wrench queue keeps 10), as fast as the node takes them
+        stamps.append(send.post([2.0 + 0.1 * i, 0, 0, 0, 0, 0]))
+        wait_until(lambda: len(got["pwm"]) > n_pwm + i, 10, spin, "widths of this wrench")
+    wait_until(lambda: len(got["pwm"]) >= n_pwm + 30 and got["status"] and got["forces"]
+               and got["status"][-1].header.stamp == got["forces"][-1].header.stamp == stamps[-1], 10, spin,
+               "forces and status of the last wrench")
+    assert len(got["pwm"]) - n_pwm == 30
+    assert len(got["status"]) - n_status <= 15 and len(got["forces"]) - n_forces <= 15
+    assert got["pwm"][-1].header.stamp == stamps[-1]
+    assert got["status"][-1].requested_wrench.force.x == pytest.approx(2.0 + 0.1 * 29)

@@ -7,6 +7,10 @@ Publishes
     ``thrusters/forces`` (hindrax_msgs/ThrusterForces): thrust each thruster will produce, N.
     ``allocation/status`` (hindrax_msgs/AllocationStatus): requested and achieved wrench (base_link),
     scale, per-thruster saturation, rejection reason.
+    Pulse widths go out for every wrench; forces and status (display and bag) at most every
+    :data:`STATUS_PERIOD_S` (10 Hz) with the latest allocation, and at once when rejected, the saturated
+    thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
+    stale-check timer once the period has passed.
 
 A NaN/inf wrench, a wrench in another frame, or a stale one (stamp older than
 ``thrusters.wrench_timeout_s`` by the node's clock) is rejected: the node commands neutral (1500 us) and
@@ -32,6 +36,8 @@ from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
 BASE_FRAME = "base_link"
+#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of state, s
+STATUS_PERIOD_S = 0.1
 
 
 def _wrench_msg(w: np.ndarray) -> Wrench:
@@ -63,6 +69,9 @@ class ThrustAllocationNode(Node):
         self.stale_reported = True  # nothing to report before the first wrench
         self.rejected = 0
         self.allocations = 0
+        self._held: tuple | None = None  # (forces, status) not yet published
+        self._last_status_key: tuple = ()
+        self._last_status_ns = -(1 << 62)
         self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale)
 
     # -- parameters: rebuild the core when a validated change of the thruster keys arrives
@@ -107,6 +116,10 @@ class ThrustAllocationNode(Node):
                      rejected=True, reason=reason)
 
     def check_stale(self) -> None:
+        if self._held is not None:
+            now_ns = self.get_clock().now().nanoseconds
+            if now_ns - self._last_status_ns >= STATUS_PERIOD_S * 1e9:
+                self._send_status(now_ns)
         if self.last_wrench_time is None or self.stale_reported:
             return
         age_s = (self.get_clock().now() - self.last_wrench_time).nanoseconds * 1e-9
@@ -124,11 +137,23 @@ class ThrustAllocationNode(Node):
         self.pub_pwm.publish(pwm)
         forces = ThrusterForces(force_n=[float(x) for x in force_n])
         forces.header.stamp, forces.header.frame_id = stamp, BASE_FRAME
-        self.pub_forces.publish(forces)
         st = AllocationStatus(requested_wrench=_wrench_msg(requested), achieved_wrench=_wrench_msg(achieved),
                               scale=float(scale), thruster_saturated=[bool(x) for x in saturated],
                               saturated=bool(np.any(saturated)), rejected=rejected, reason=reason)
         st.header.stamp, st.header.frame_id = stamp, BASE_FRAME
+        self._held = (forces, st)
+        key = (rejected, tuple(st.thruster_saturated), reason.split(":", 1)[0])
+        now_ns = self.get_clock().now().nanoseconds
+        if key != self._last_status_key or now_ns - self._last_status_ns >= STATUS_PERIOD_S * 1e9:
+            self._last_status_key = key
+            self._send_status(now_ns)
+
+    def _send_status(self, now_ns: int) -> None:
+        """Publish the held forces and status (ROS time ``now_ns``, ns)."""
+        forces, st = self._held
+        self._held = None
+        self._last_status_ns = now_ns
+        self.pub_forces.publish(forces)
         self.pub_status.publish(st)
 
 
