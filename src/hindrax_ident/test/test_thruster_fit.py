@@ -141,3 +141,15 @@ def test_errors():
         fit_cubic([1100.0, 1200.0, 1300.0], [1.0, 2.0])
     with pytest.raises(EstimationError):
         fit_cubic([1100.0, 1200.0, 1300.0, 1400.0, np.nan], [1.0, 2.0, 3.0, 4.0, 5.0])
+
+
+@pytest.mark.parametrize("value", [-4e-07, 1500.0, -1.25e-05, 3.0e-9, 0.0, -2.0, 123456789012.0])
+def test_written_curve_coefficients_load_back_as_floats(value):
+    """`thruster-fit --write` text: YAML 1.1 reads '-4e-07' as a string and '1500' as an int."""
+    import yaml
+
+    from hindrax_ident.commands.ident import _curve_text
+
+    loaded = yaml.safe_load(_curve_text([value, value]))
+    assert all(isinstance(x, float) for x in loaded)
+    assert loaded[0] == pytest.approx(value, rel=1e-9, abs=0.0)

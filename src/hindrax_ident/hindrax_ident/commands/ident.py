@@ -85,8 +85,21 @@ def read_two_columns(path: str) -> tuple[np.ndarray, np.ndarray]:
     return x, y
 
 
+def _yaml_float(value: float) -> str:
+    """``value`` with 10 significant digits in a form YAML 1.1 (PyYAML) reads back as a float.
+
+    YAML 1.1's float pattern needs a decimal point: ``-4e-07`` or ``1500`` would load as a string or an int,
+    so the mantissa always carries one (``-4.0e-07``, ``1500.0``).
+    """
+    text = f"{float(value):.10g}"
+    mantissa, sep, exponent = text.partition("e")
+    if "." not in mantissa and mantissa.lstrip("-").isdigit():
+        mantissa += ".0"
+    return mantissa + sep + exponent
+
+
 def _curve_text(coeffs) -> str:
-    return "[" + ", ".join(f"{float(c):.10g}" for c in coeffs) + "]"
+    return "[" + ", ".join(_yaml_float(c) for c in coeffs) + "]"
 
 
 def write_thruster_curves(config_path: str, negative, positive) -> None:
