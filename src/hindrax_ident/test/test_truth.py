@@ -144,6 +144,7 @@ def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp
             graph.shutdown()
 
 
+@pytest.mark.timeout(1800)  # one surge + heave campaign (about 100 s of CPU; slower on a loaded machine)
 def test_five_percent_weaker_thrust_is_covered_or_suspect(vehicle):
     """Issue 16, done when: a truth whose thrust curves are 5 % weaker than the vehicle file's gives surge and heave
     inertia intervals that cover the truth (or a suspect verdict). The truth's hydrodynamics are the vehicle's."""
