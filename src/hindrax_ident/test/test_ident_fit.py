@@ -96,6 +96,15 @@ def test_one_bag_is_cross_validated_by_blocks_of_segments(piloted):
     assert res.design.startswith("2-fold cross-validation by blocks")
     assert r.status == "fitted" and len(r.folds) == 2
     assert r.validation["cross_validation"]["nrmse"] < 0.3
+    # --depth-topic: heave velocity from the depth rate (odometry pose here), rotated into the body with the
+    # attitude, close to the odometry's own body heave velocity
+    with_depth = preprocess_bag(hold, TopicChoice(depth="/odometry"), None, FitOptions())
+    plain = preprocess_bag(hold, TopicChoice(), None, FitOptions())
+    assert "rotated into the body" in with_depth.notes["heave_velocity"]
+    a = np.concatenate([c.velocity[:, 2] for c in with_depth.chunks])
+    b = np.concatenate([c.velocity[:, 2] for c in plain.chunks])
+    ok = np.isfinite(a) & np.isfinite(b)
+    assert ok.sum() > 1000 and np.sqrt(np.mean((a[ok] - b[ok]) ** 2)) < 0.25 * np.std(b[ok])
 
 
 def test_validation_measures_follow_the_issue_definitions():

@@ -484,8 +484,17 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
         dt_, dz = _sorted(dt_, np.asarray(streams["depth"].val, dtype=float)[:, 0:1])
         h = float(np.median(np.diff(dt_)))
         wz = _derivative(dt_, dz[:, 0], 1.0) if len(dt_) > 7 else np.gradient(dz[:, 0], h)
-        vel[:, 2] = np.interp(lin_t, dt_, wz, left=np.nan, right=np.nan)
+        zdot = np.interp(lin_t, dt_, wz, left=np.nan, right=np.nan)  # NED down rate of the body origin
         notes["heave_velocity"] = f"derivative of the depth {streams['depth'].topic} (Savitzky-Golay, 1 s window)"
+        if attitude is not None:  # z_dot = R[2, :] nu_lin (Fossen eq. 2.40): body w from the depth rate
+            eul = np.column_stack([np.interp(lin_t, attitude[0], np.unwrap(attitude[1], axis=0)[:, k])
+                                   for k in range(3)])
+            rot = Rotation.from_euler("ZYX", eul[:, ::-1]).as_matrix()
+            vel[:, 2] = (zdot - rot[:, 2, 0] * vel[:, 0] - rot[:, 2, 1] * vel[:, 1]) / rot[:, 2, 2]
+            notes["heave_velocity"] += ", rotated into the body with the attitude and the surge/sway velocity"
+        else:
+            vel[:, 2] = zdot
+            notes["heave_velocity"] += " (no attitude: taken as the body heave velocity, exact only when level)"
     if t0 is None:
         t0 = float(ft[0])
     ft, lin_t = ft - t0, lin_t - t0
