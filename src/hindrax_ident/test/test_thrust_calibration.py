@@ -42,6 +42,15 @@ def test_calibration_scales_the_force_and_gives_its_relative_std():
     assert calibration_relative_std(cal) == pytest.approx([0.01, 0.01])
     sec = calibration_section(cal)
     assert sec["vertical_thrust_scale"]["value"] == 0.9 and sec["vertical_thrust_scale"]["known_force_n"] == 8.56
+    assert sec["horizontal_thrust_scale"]["value"] == 0.9 and "assumed" in sec["horizontal_thrust_scale"]["source"]
+    # two line pulls: horizontal = inverse-variance mean, applied to X, Y, N; the ballast's to Z, K, M
+    cal2 = dict(cal, surge={"value": 0.80, "std": 0.01}, sway={"value": 0.86, "std": 0.02})
+    h = 0.80 + (0.86 - 0.80) * (1 / 0.02 ** 2) / (1 / 0.01 ** 2 + 1 / 0.02 ** 2)
+    r2 = apply_thrust_calibration(_Rec(w, w, cal2))
+    np.testing.assert_allclose(r2.wrench_frd[1], w[1] * np.array([h, h, 0.9, 0.9, 0.9, h]))
+    assert calibration_relative_std(cal2, "sway")[0] == pytest.approx(
+        1 / math.sqrt(1 / 0.01 ** 2 + 1 / 0.02 ** 2) / h)
+    assert calibration_relative_std(cal2, "pitch")[0] == pytest.approx(0.01)
     plain = _Rec(w, w, {})
     assert apply_thrust_calibration(plain) is plain and calibration_relative_std({}) is None
     with pytest.raises(ValueError, match="scale must be > 0"):
@@ -51,6 +60,8 @@ def test_calibration_scales_the_force_and_gives_its_relative_std():
 def test_executive_validates_calibration_options():
     cfg = load_config(default_config_path())
     with pytest.raises(ValueError, match="unknown calibration step"):
+        Executive(cfg, ["heave"], tick_s=0.02, calibrate=["tow"])
+    with pytest.raises(ValueError, match="line_pull_n"):
         Executive(cfg, ["heave"], tick_s=0.02, calibrate=["line_pull"])
     with pytest.raises(ValueError, match="ballast_weight_in_water_n"):
         Executive(cfg, ["heave"], tick_s=0.02, calibrate=["ballast"])
@@ -61,7 +72,7 @@ def test_executive_validates_calibration_options():
 def test_calibrate_is_refused_on_the_graph_and_for_unknown_steps(capsys):
     assert cli.main(["run", "--calibrate", "ballast", "--dofs", "heave"]) == 1
     assert "only in-process" in capsys.readouterr().err
-    assert cli.main(["ident", "campaign", "--calibrate", "line_pull", "--dofs", "heave"]) == 1
+    assert cli.main(["ident", "campaign", "--calibrate", "tow", "--dofs", "heave"]) == 1
     assert "unknown step" in capsys.readouterr().err
 
 
@@ -83,3 +94,22 @@ def test_ballast_calibration_recovers_surge_and_heave_under_thrust_0_90(tmp_path
             assert e[n]["value"] == pytest.approx(truth, rel=0.05), (dof, n, e[n]["value"], truth)
             lo, hi = e[n]["ci95"]
             assert lo <= truth <= hi, (dof, n, e[n], truth)
+
+
+def test_line_pull_measures_the_horizontal_scale_in_surge_and_sway():
+    """Dive and the two line pulls only (no ladders): 4.905 N along body +x, then +y, under the thrust x0.90 truth."""
+    from hindrax_ident.identification.campaign import Campaign
+    from hindrax_ident.sim.simulator import Simulator
+
+    cfg = load_config(default_config_path())
+    sim = Simulator(cfg, seed=2, truth=str(THRUST_090))
+    rec = Campaign(cfg, dofs=[], seed=2, sim=sim, calibrate=["line_pull"], line_pull_n=4.905).run()
+    assert not rec.aborted, rec.abort_reason
+    for axis in ("surge", "sway"):
+        c = rec.calibration[axis]
+        assert c["method"] == "line_pull" and c["known_force_n"] == 4.905
+        assert c["value"] == pytest.approx(0.90, rel=0.02), (axis, c)
+        assert abs(c["value"] - 0.90) < 3.0 * c["std"] + 0.002, (axis, c)
+    sec = calibration_section(rec.calibration)
+    assert sec["horizontal_thrust_scale"]["source"] == "line pull (surge, sway)"
+    assert "assumed" in sec["vertical_thrust_scale"]["source"]

@@ -58,12 +58,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="known-force calibration steps before the ladders, comma-separated: ballast (in-process "
-                             "only for now; the thrust scale is applied to the identification, identification.yaml "
-                             "gains a calibration section)")
+                        help="known-force calibration steps before the ladders, comma-separated: ballast, line_pull "
+                             "(in-process only for now; the thrust scales are applied to the identification, "
+                             "identification.yaml gains a calibration section)")
     parser.add_argument("--ballast-mass-kg", type=float, default=1.0, help="ballast mass, kg (default 1.0)")
     parser.add_argument("--ballast-volume-m3", type=float, default=1.0 / 7850.0,
                         help="ballast displaced volume, m^3 (default 1 kg of steel: 1.27e-4)")
+    parser.add_argument("--line-pull-n", type=float, default=4.905,
+                        help="horizontal line force over the pulley, N (default 4.905: 0.5 kg hanging in air)")
     if not parser.prog.endswith("campaign"):
         parser.add_argument("--in-process", action="store_true",
                             help="step the simulator in-process instead (no drivers, no ROS graph, no bag; about 4x "
@@ -129,9 +131,10 @@ def _check_args(args) -> tuple[object, list[str]]:
     cal = _calibration_steps(args)
     bad = [c for c in cal if c not in CALIBRATION_STEPS]
     if bad:
-        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)} "
-                           "(line_pull is not implemented yet)")
-    if cal and _ballast_weight_n(args, cfg) <= 0:
+        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+    if "line_pull" in cal and not float(args.line_pull_n) > 0:
+        raise CommandError(f"--line-pull-n must be > 0 N, got {args.line_pull_n}")
+    if "ballast" in cal and _ballast_weight_n(args, cfg) <= 0:
         raise CommandError(f"--ballast-mass-kg {args.ballast_mass_kg} with --ballast-volume-m3 "
                            f"{args.ballast_volume_m3}: the ballast must be heavier than the water it displaces")
     return cfg, dofs
@@ -203,7 +206,9 @@ def run_in_process(args: argparse.Namespace) -> int:
     cal = _calibration_steps(args)
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
-                        sim=sim, calibrate=cal, ballast_weight_in_water_n=_ballast_weight_n(args, cfg) if cal else 0.0)
+                        sim=sim, calibrate=cal,
+                        ballast_weight_in_water_n=_ballast_weight_n(args, cfg) if "ballast" in cal else 0.0,
+                        line_pull_n=float(args.line_pull_n) if "line_pull" in cal else 0.0)
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
@@ -213,7 +218,8 @@ def run_in_process(args: argparse.Namespace) -> int:
 
     idents, errors = identify_all_with_errors(apply_thrust_calibration(record), cfg)
     if record.calibration:  # the calibration's uncertainty replaces the declared thrust-curve uncertainty
-        apply_verdicts(idents, cfg, thruster_fit_rel=calibration_relative_std(record.calibration))
+        for dof, r in idents.items():
+            apply_verdicts({dof: r}, cfg, thruster_fit_rel=calibration_relative_std(record.calibration, dof))
     for dof, msg in errors.items():
         progress(f"{dof}: no estimate ({msg})")
     out = _output_dir(cfg, args.out)

@@ -13,9 +13,10 @@ inertia, damping and bias all come out s times too (docs/identification.md). The
   :func:`~.verdicts.apply_verdicts` (``thruster_fit_rel``), which then adds it to every interval in place of the
   declared thrust-curve uncertainty: the intervals carry the calibration's own uncertainty.
 
-ASSUMPTION (until the line-pull step exists): the horizontal thrusters get the vertical scale (a common cause such
-as the battery voltage, docs/devices.md §5.3); a loss specific to some thrusters is not calibrated. The RLS
-comparison values in ``record.online`` stay in curve units.
+Scales: ``vertical`` (ballast: heave, roll, pitch columns Z, K, M, the vertical thrusters) and ``horizontal``
+(line pull in surge and sway, their inverse-variance mean: X, Y, N, the horizontal thrusters). ASSUMPTION when only
+one of the two was measured: the other thrusters get the same scale (a common cause such as the battery voltage,
+docs/devices.md §5.3); the section says so. The RLS comparison values in ``record.online`` stay in curve units.
 """
 from __future__ import annotations
 
@@ -25,48 +26,90 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["apply_thrust_calibration", "calibration_relative_std", "calibration_section"]
+__all__ = ["apply_thrust_calibration", "calibration_relative_std", "calibration_section", "thrust_scales",
+           "DOF_GROUP"]
+
+#: Which thrusters (scale) act in each DOF, and the wrench columns of each group.
+DOF_GROUP = {"surge": "horizontal", "sway": "horizontal", "yaw": "horizontal",
+             "heave": "vertical", "roll": "vertical", "pitch": "vertical"}
+_COLUMNS = {"horizontal": [0, 1, 5], "vertical": [2, 3, 4]}
 
 
-def _scale(calibration: Mapping[str, Any]) -> tuple[float, float] | None:
-    v = calibration.get("vertical") if calibration else None
-    if not v:
+def _entry(calibration: Mapping[str, Any], key: str) -> tuple[float, float] | None:
+    v = calibration.get(key) if calibration else None
+    if not isinstance(v, Mapping) or "value" not in v:
         return None
     s, sd = float(v["value"]), float(v["std"])
     if not (math.isfinite(s) and s > 0 and math.isfinite(sd) and sd >= 0):
-        raise ValueError(f"calibration.vertical: scale must be > 0 with std >= 0, got {s} +- {sd}")
+        raise ValueError(f"calibration.{key}: scale must be > 0 with std >= 0, got {s} +- {sd}")
     return s, sd
 
 
+def thrust_scales(calibration: Mapping[str, Any] | None) -> dict[str, dict]:
+    """{"vertical"|"horizontal": {value, std, source}} from the raw step results (``vertical`` from the ballast;
+    ``surge``/``sway`` line pulls -> ``horizontal``, inverse-variance mean); a group without its own measurement
+    takes the other's (source says "assumed"). {} without any calibration. Raises ``ValueError`` on a bad scale."""
+    cal = calibration or {}
+    out: dict[str, dict] = {}
+    v = _entry(cal, "vertical")
+    if v is not None:
+        out["vertical"] = {"value": v[0], "std": v[1], "source": "ballast"}
+    hs = [(k, e) for k in ("surge", "sway") if (e := _entry(cal, k)) is not None]
+    if hs:
+        w = np.array([1.0 / max(e[1], 1e-12) ** 2 for _, e in hs])
+        val = float(np.sum(w * [e[0] for _, e in hs]) / np.sum(w))
+        out["horizontal"] = {"value": val, "std": float(1.0 / math.sqrt(np.sum(w))),
+                             "source": "line pull (" + ", ".join(k for k, _ in hs) + ")"}
+    if len(out) == 1:
+        have, other = next(iter(out)), ("horizontal" if "vertical" in out else "vertical")
+        out[other] = dict(out[have], source=f"assumed equal to the {have} scale (not measured)")
+    return out
+
+
 def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None = None) -> Any:
-    """A copy of ``record`` (:class:`~.executive.CampaignRecord`) with both wrench arrays (n, 6) times the
-    calibrated thrust scale (``calibration`` default: ``record.calibration``); the record itself when there
-    is no calibration. Raises ``ValueError`` on a non-positive scale."""
+    """A copy of ``record`` (:class:`~.executive.CampaignRecord`) with both wrench arrays (n, 6) scaled per
+    thruster group (:func:`thrust_scales`; ``calibration`` default ``record.calibration``); the record itself
+    without a calibration. Raises ``ValueError`` on a non-positive scale."""
     cal = record.calibration if calibration is None else calibration
-    sc = _scale(cal)
-    if sc is None:
+    sc = thrust_scales(cal)
+    if not sc:
         return record
-    s = sc[0]
-    return dataclasses.replace(record, wrench_frd=np.asarray(record.wrench_frd) * s,
-                               wrench_cmd_frd=np.asarray(record.wrench_cmd_frd) * s)
+    factor = np.ones(6)
+    for group, cols in _COLUMNS.items():
+        factor[cols] = sc[group]["value"]
+    return dataclasses.replace(record, wrench_frd=np.asarray(record.wrench_frd) * factor,
+                               wrench_cmd_frd=np.asarray(record.wrench_cmd_frd) * factor)
 
 
-def calibration_relative_std(calibration: Mapping[str, Any] | None) -> list[float] | None:
-    """[negative, positive] relative 1-sigma thrust uncertainty after calibration (std / value), or None."""
-    sc = _scale(calibration or {})
-    if sc is None:
+def calibration_relative_std(calibration: Mapping[str, Any] | None, dof: str = "heave") -> list[float] | None:
+    """[negative, positive] relative 1-sigma thrust uncertainty of ``dof``'s thrusters after calibration, or None."""
+    sc = thrust_scales(calibration)
+    if not sc:
         return None
-    rel = sc[1] / sc[0]
+    g = sc[DOF_GROUP[dof]]
+    rel = g["std"] / g["value"]
     return [rel, rel]
 
 
 def calibration_section(calibration: Mapping[str, Any] | None) -> dict:
-    """The ``calibration`` section of identification.yaml: per scale {value, std, known_force_n, holding_force_n,
-    method}, plus ``applied_to`` and the assumption above."""
-    sc = _scale(calibration or {})
-    if sc is None:
+    """The ``calibration`` section of identification.yaml: ``vertical_thrust_scale`` / ``horizontal_thrust_scale``
+    ({value, std, source} plus, for a measured one, the step's known force and holding forces) and each raw step
+    (``surge``/``sway`` line pulls)."""
+    sc = thrust_scales(calibration)
+    if not sc:
         return {}
-    v = dict(calibration["vertical"])
-    return {"vertical_thrust_scale": {k: (list(map(float, x)) if isinstance(x, (list, tuple)) else
-                                          (float(x) if isinstance(x, (int, float)) else x)) for k, x in v.items()},
-            "applied_to": "all thrusters (no line-pull step yet: horizontal scale assumed equal to the vertical)"}
+
+    def plain(d):
+        return {k: ([float(x) for x in v] if isinstance(v, (list, tuple)) else
+                    (float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)) for k, v in d.items()}
+
+    out = {}
+    for group in ("vertical", "horizontal"):
+        e = dict(sc[group])
+        if group == "vertical" and "vertical" in calibration:
+            e = {**dict(calibration["vertical"]), **e}
+        out[f"{group}_thrust_scale"] = plain(e)
+    for axis in ("surge", "sway"):
+        if axis in calibration:
+            out[f"line_pull_{axis}"] = plain(dict(calibration[axis]))
+    return out

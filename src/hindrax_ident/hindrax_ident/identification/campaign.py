@@ -12,7 +12,8 @@ plots only; the executive never sees it.
 Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): the virtual pool plays the operator. When
 the executive waits for the ballast to be attached, the simulator gets the ballast's weight in water (vertical,
 NED down, expressed in the body frame every tick) as an external force until the executive asks for its removal;
-each time ``continue`` is given at once.
+a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis the step names
+(as a line over a pulley at the pool edge). Each time ``continue`` is given at once.
 """
 from __future__ import annotations
 
@@ -49,7 +50,7 @@ class Campaign:
                  seed: int | None = None, max_level_duration_s: float | None = None,
                  progress: Callable[[str], None] | None = None, real_time_factor: float = 0.0,
                  sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
-                 ballast_weight_in_water_n: float = 0.0) -> None:
+                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -61,8 +62,9 @@ class Campaign:
         self.tick_s = self.steps_per_tick * self.sim.step_s
         self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, max_level_duration_s=max_level_duration_s,
                                    heave_repeats=heave_repeats, progress=progress, calibrate=calibrate,
-                                   ballast_weight_in_water_n=ballast_weight_in_water_n)
+                                   ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n)
         self._ballast_on = False
+        self._line_ned: np.ndarray | None = None
         self.core = self.executive.core
         self.reversed = np.array([t.reversed for t in cfg.thrusters.thrusters], dtype=bool)
         self.neutral_us = float(cfg.thrusters.pulse_width_neutral_us)
@@ -89,12 +91,21 @@ class Campaign:
         self._truth["eul"].append(self.sim.euler_rad)
         wire = np.where(self.reversed, 2.0 * self.neutral_us - pw, pw)
         if ex.awaiting:  # the virtual pool's operator: do what the step asks, then continue
-            self._ballast_on = ex.awaiting == "attach_ballast"
+            if ex.awaiting in ("attach_ballast", "remove_ballast"):
+                self._ballast_on = ex.awaiting == "attach_ballast"
+            elif ex.awaiting.startswith("apply_line_pull_"):
+                axis = np.eye(3)[0 if ex.awaiting.endswith("surge") else 1]
+                d = self.sim.rotation @ axis
+                self._line_ned = ex.line_pull_n * np.array([d[0], d[1], 0.0]) / math.hypot(d[0], d[1])
+            elif ex.awaiting.startswith("release_line_"):
+                self._line_ned = None
             ex.operator_continue()
         if ex.calibrate:
             ext = np.zeros(6)
             if self._ballast_on:
                 ext[:3] = self.sim.rotation.T @ np.array([0.0, 0.0, ex.ballast_weight_in_water_n])
+            if self._line_ned is not None:
+                ext[:3] += self.sim.rotation.T @ self._line_ned
             self.sim.advance(self.tick_s, wire, external_wrench_frd=ext)
         else:
             self.sim.advance(self.tick_s, wire)

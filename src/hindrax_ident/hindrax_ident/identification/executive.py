@@ -61,8 +61,8 @@ from .signals import STILL_MESSAGE
 __all__ = ["CampaignAbort", "CampaignRecord", "Executive", "ExecutiveStatus", "TickInput", "ordered_samples",
            "CALIBRATION_STEPS"]
 
-#: Known-force calibration steps the executive can run before the ladders (issue 17 item 1; line_pull not yet).
-CALIBRATION_STEPS = ("ballast",)
+#: Known-force calibration steps the executive can run before the ladders (issue 17 item 1).
+CALIBRATION_STEPS = ("ballast", "line_pull")
 #: Settling time before, and averaging window of, each calibration hold (s).
 CALIBRATION_SETTLE_S = 15.0
 CALIBRATION_WINDOW_S = 30.0
@@ -181,8 +181,9 @@ class Executive:
     dvl_lock_timeout_s: longest time without a valid DVL velocity during surge or sway. progress: optional
     callable receiving one-line messages as the campaign moves on. calibrate: known-force steps to run after the
     dive, before the ladders (:data:`CALIBRATION_STEPS`); ``ballast`` needs ``ballast_weight_in_water_n`` (> 0,
-    N: (m - rho V) g of the ballast). While a step waits for the operator, :attr:`awaiting` names what to do and
-    :meth:`operator_continue` resumes it.
+    N: (m - rho V) g of the ballast), ``line_pull`` needs ``line_pull_n`` (> 0, N: the horizontal force of the line
+    over the pulley, e.g. the weight of a hanging mass). While a step waits for the operator, :attr:`awaiting`
+    names what to do and :meth:`operator_continue` resumes it.
     Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0, an unknown
     calibration step or a missing ballast weight.
     """
@@ -191,7 +192,7 @@ class Executive:
                  tick_s: float, fractions: Sequence[float] | None = None, max_level_duration_s: float | None = None,
                  heave_repeats: int = 3, dvl_lock_timeout_s: float = 3.0,
                  progress: Callable[[str], None] | None = None, calibrate: Sequence[str] = (),
-                 ballast_weight_in_water_n: float = 0.0) -> None:
+                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -204,9 +205,13 @@ class Executive:
             raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
         if "ballast" in calibrate and not (math.isfinite(ballast_weight_in_water_n) and ballast_weight_in_water_n > 0):
             raise ValueError(f"ballast_weight_in_water_n must be > 0 N for the ballast step, got {ballast_weight_in_water_n}")
+        if "line_pull" in calibrate and not (math.isfinite(line_pull_n) and line_pull_n > 0):
+            raise ValueError(f"line_pull_n must be > 0 N for the line_pull step, got {line_pull_n}")
         self.calibrate = list(calibrate)
         self.ballast_weight_in_water_n = float(ballast_weight_in_water_n)
-        #: what a calibration step waits for the operator to do ("" when not waiting): attach_ballast, remove_ballast
+        self.line_pull_n = float(line_pull_n)
+        #: what a calibration step waits for the operator to do ("" when not waiting): attach_ballast,
+        #: remove_ballast, apply_line_pull_surge / _sway (line along the body's +x / +y), release_line_surge / _sway
         self.awaiting = ""
         self._continue = False
         self.calibration: dict = {}
@@ -651,10 +656,57 @@ class Executive:
             "holding_force_n": [z1, z2], "holding_force_std_n": [s1, s2], "method": "ballast"}
         self._say(f"calibration (ballast): vertical thrust scale {scale:.4f}")
 
+    def _station(self, duration_s: float, centre) -> Wrenches:
+        """Hold station at ``centre`` (NED x, y) for ``duration_s``: dead-reckoned position -> velocity setpoint (as
+        :meth:`_move_to_centre`), depth and heading held. Under a constant external force the vehicle settles at a
+        constant offset, with zero velocity, so the thrust then balances the force alone (no damping term)."""
+        for _ in range(int(round(duration_s / self.tick_s))):
+            p = self.state.position_ned_m
+            err_ned = np.array([centre[0] - p[0], centre[1] - p[1]])
+            psi = float(np.nan_to_num(self.state.rpy_rad[2]))
+            rot = np.array([[math.cos(psi), math.sin(psi)], [-math.sin(psi), math.cos(psi)]])  # NED -> body
+            self.ctrl.velocity_setpoint_m_s = np.clip(0.6 * (rot @ np.nan_to_num(err_ned)), -0.25, 0.25)
+            yield self.ctrl.wrench(self.state, (), self.tick_s)
+        self.ctrl.velocity_setpoint_m_s = np.zeros(2)
+
+    def _line_pull(self, axis: str) -> Wrenches:
+        """Horizontal thrust scale from a known line pull along the body's +x (surge) or +y (sway) axis (issue 17
+        item 1): hold station, average the holding force X1; the operator applies the line; hold station again, X2;
+        s = F / (X1 - X2), std from the two means' std (as :meth:`_ballast`)."""
+        k = 0 if axis == "surge" else 1
+        f = self.line_pull_n
+        yield from self._move_to_centre()
+        c = (float(self.state.position_ned_m[0]), float(self.state.position_ned_m[1]))
+        self._say(f"calibration (line pull, {axis}): hold station without the line")
+        yield from self._station(CALIBRATION_SETTLE_S, c)
+        t1 = self.t_s
+        yield from self._station(CALIBRATION_WINDOW_S, c)
+        x1, s1 = self._mean_holding_force(k, t1)
+        yield from self._wait_operator(f"apply_line_pull_{axis}",
+                                       f"calibration: pull the line along +{'xy'[k]} ({f:.3g} N over the pulley)")
+        yield from self._station(CALIBRATION_SETTLE_S, c)
+        t2 = self.t_s
+        yield from self._station(CALIBRATION_WINDOW_S, c)
+        x2, s2 = self._mean_holding_force(k, t2)
+        yield from self._wait_operator(f"release_line_{axis}", "calibration: release the line")
+        yield from self._station(CALIBRATION_SETTLE_S, c)
+        dx = x1 - x2
+        if not dx > 0.0:
+            raise CampaignAbort(f"calibration (line pull, {axis}): the holding force did not change against the "
+                                f"line ({x1:.3g} -> {x2:.3g} N)")
+        scale = f / dx
+        self.calibration[axis] = {
+            "value": scale, "std": scale * math.hypot(s1, s2) / dx, "known_force_n": f,
+            "holding_force_n": [x1, x2], "holding_force_std_n": [s1, s2], "method": "line_pull"}
+        self._say(f"calibration (line pull, {axis}): thrust scale {scale:.4f}")
+
     def _campaign(self) -> Wrenches:
         yield from self._dive()
         if "ballast" in self.calibrate:
             yield from self._ballast()
+        if "line_pull" in self.calibrate:
+            for axis in ("surge", "sway"):
+                yield from self._line_pull(axis)
         for dof in self.dofs:
             yield from self._move_to_centre()
             ladder = self.ladder(dof)
