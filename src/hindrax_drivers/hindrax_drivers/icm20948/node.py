@@ -40,9 +40,12 @@ Publishes (reliable, depth 10), all with frame ``imu_link``:
   times the noise bandwidth of the configured DLPF plus the quantisation (:func:`imu_noise_variances`).
 - ``imu/mag`` sensor_msgs/MagneticField, tesla, rotated into the accel/gyro axes (m_x = hx, m_y = -hy,
   m_z = -hz, docs/devices.md §4.7), only for new data (ST1.DRDY) without overflow (ST2.HOFL); covariance all 0
-  = unknown (the datasheet gives no magnetometer noise figure, DS-000189 Table 3).
+  = unknown (the datasheet gives no magnetometer noise figure, DS-000189 Table 3). At most
+  :data:`MAG_PUBLISH_HZ` (a heading display's rate): every k-th such sample, k = round(AK09916 sample rate /
+  20 Hz), counted from each start-up (a replay of the same raw data publishes the same samples).
 - ``imu/temperature`` sensor_msgs/Temperature, degC (raw / 333.87 + 21, room offset 0, docs/devices.md §4.4),
-  variance = one LSB squared.
+  variance = one LSB squared; at :data:`TEMPERATURE_PUBLISH_HZ`: every round(rate / 1 Hz)-th published IMU
+  sample, the first one after each start-up included (a slow diagnostic value).
 - ``raw/icm20948`` hindrax_msgs/RawDeviceData: every I2C transaction (ICM and, in bypass mode, AK09916);
   those of one poll in one message (:class:`~hindrax_drivers.node_common.RawDataPublisher` batch).
 - ``/diagnostics``: state, rate, last message age, I2C transactions/errors/retries/failures, identity,
@@ -114,6 +117,11 @@ from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPubl
 from ..transport.i2c import I2CDevice, I2CError, close_quietly, open_smbus
 from . import protocol as p
 from .mounting import mounting_rotation
+
+#: rate of ``imu/temperature``, Hz (diagnostics and bag: the die temperature drifts over minutes)
+TEMPERATURE_PUBLISH_HZ = 1.0
+#: highest rate of ``imu/mag``, Hz (heading on the topside; AK09916 continuous mode 2 is 20 Hz, docs/devices.md §4.5)
+MAG_PUBLISH_HZ = 20.0
 
 __all__ = ["Icm20948Node", "GyroBiasEstimator", "GyroBiasResult", "imu_config_from_settings",
            "imu_noise_variances", "mounting_rotation", "mag_mode_for_rate", "main"]
@@ -330,6 +338,11 @@ class Icm20948Node(Node):
         self._steps: collections.deque[Callable[[], float | None]] = collections.deque()
         self.samples = 0
         self.mag_samples = 0
+        self.temperature_every = max(1, round(self.odr_hz / TEMPERATURE_PUBLISH_HZ))
+        self.mag_every = max(1, round(min(p.AK_CONTINUOUS_MODE_RATE_HZ[self.mag_mode], self.odr_hz)
+                                      / MAG_PUBLISH_HZ))
+        self._temperature_count = 0  # IMU samples published since the start-up
+        self._mag_count = 0  # valid magnetometer samples since the start-up
 
         qos = DEFAULT_QOS_DEPTH
         self.pub_imu = self.create_publisher(Imu, "imu/data_raw", qos)
@@ -402,6 +415,7 @@ class Icm20948Node(Node):
         self.mag_available = False
         self.mag_failed = False
         self._mag_attempt = 0
+        self._temperature_count = self._mag_count = 0
         self.diag.set_state("starting", DiagnosticStatus.WARN, "identity check, reset and configuration")
         steps: list[Callable[[], float | None]] = [self._check_who_am_i]
         steps += [self._write_step(w) for w in p.reset_wake_sequence() + p.configure_sequence(self.config)]
@@ -629,11 +643,13 @@ class Icm20948Node(Node):
         imu.angular_velocity_covariance = self.gyro_cov.ravel()
         self.pub_imu.publish(imu)
 
-        tm = Temperature()
-        tm.header.stamp, tm.header.frame_id = stamp_msg, FRAME_ID
-        tm.temperature = float(sample.temperature_c)
-        tm.variance = self.temperature_var
-        self.pub_temperature.publish(tm)
+        if self._temperature_count % self.temperature_every == 0:
+            tm = Temperature()
+            tm.header.stamp, tm.header.frame_id = stamp_msg, FRAME_ID
+            tm.temperature = float(sample.temperature_c)
+            tm.variance = self.temperature_var
+            self.pub_temperature.publish(tm)
+        self._temperature_count += 1
 
         if mag_block is not None:
             self._publish_mag(p.parse_ak09916_block(mag_block), stamp_msg)
@@ -664,6 +680,10 @@ class Icm20948Node(Node):
         self._mag_fresh_s = self._now_s()
         if mag.overflow:
             self.diag.count("mag_overflow")
+            return
+        due = self._mag_count % self.mag_every == 0
+        self._mag_count += 1
+        if not due:
             return
         field_t = self.rotation @ mag.magnetic_field_t
         msg = MagneticField()
