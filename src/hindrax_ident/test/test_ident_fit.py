@@ -67,6 +67,7 @@ def test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag(piloted, capsy
                                                     - truth_parameters(cfg, dof)["added_mass"]))
     assert not problems, "; ".join(problems)
     assert doc["dofs"]["heave"]["model"] == "heave by direction"
+    assert all(doc["dofs"][d]["verdict"] == "trusted" for d in ("surge", "sway", "heave", "yaw")), doc["dofs"]
     # roll and pitch are moved only by coupling (no commanded moment): reported, not fitted
     for dof in ("roll", "pitch"):
         n = doc["not_identified"][dof]

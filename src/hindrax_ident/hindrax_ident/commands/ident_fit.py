@@ -91,6 +91,9 @@ def run(args: argparse.Namespace) -> int:
     doc = build_document(res, cfg, args.bags, args.holdout)
     path, index = write_fit_outputs(out, res, doc)
     print(format_table(res))
+    for dof, e in doc["dofs"].items():
+        if e.get("verdict") == "suspect":
+            print(f"{dof}: suspect ({'; '.join(e['reasons'])})")
     d = res.preprocessing
     print(f"preprocessing: {d['resampling']}; delay {d['delay_s']:g} s; "
           + "; ".join(f"{Path(b['bag']).name}: {b['gaps']['dropped_s']:g} s in gaps dropped, "

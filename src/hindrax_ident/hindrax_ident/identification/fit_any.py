@@ -967,7 +967,9 @@ def _plain(x):
 def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str | Path],
                    holdout: Sequence[str | Path] = ()) -> dict:
     """identification.yaml: ``dofs.<dof>.<param>.{value,std,unit,ci95,fold_spread}`` of the fitted DOFs (the
-    schema of :mod:`.results`; ``added_mass`` only with a configuration, which gives the rigid-body inertia),
+    schema of :mod:`.results`; ``added_mass`` only with a configuration, which gives the rigid-body inertia; per DOF
+    ``verdict`` suspect with ``reasons`` for a negative damping, a fold spread above 3 std or a validation nrmse of
+    0.5 or more),
     ``not_excited``/``failed`` with their numbers, ``validation.<dof>.{nrmse,nrmse_hold,nrmse_zero,samples}`` (the
     holdout when given, else the cross-validation; both under their own keys too) and ``preprocessing``."""
     import datetime as _dt
@@ -985,6 +987,15 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         e["model"] = "heave by direction" if r.model == "heave" else ("one pair for both directions"
                                                                       if r.dof == "heave" else "one DOF")
         e["segments"] = r.segments
+        reasons = [f"{n} {v['value']:.4g} < 0 (unphysical)" for n, v in e.items()
+                   if isinstance(v, dict) and "damping" in n and v.get("value", 0.0) < 0]
+        reasons += [f"{n}: fold spread {v['fold_spread']['std']:.3g} > 3 x std {v['std']:.3g}" for n, v in e.items()
+                    if isinstance(v, dict) and "fold_spread" in v and v["fold_spread"]["std"] > 3 * v["std"]]
+        main = r.validation.get("holdout") or r.validation.get("cross_validation")
+        if main and not main["nrmse"] < 0.5:
+            reasons.append(f"validation nrmse {main['nrmse']:.3f} >= 0.5")
+        e["verdict"] = "suspect" if reasons else "trusted"
+        e["reasons"] = reasons
         e["excitation"] = {k: v for k, v in r.excitation.items() if v is not None}
         dofs[dof] = e
         main = r.validation.get("holdout") or r.validation.get("cross_validation")
