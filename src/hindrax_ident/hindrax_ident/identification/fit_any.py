@@ -12,7 +12,8 @@ REP-103 FLU in ``base_link``):
 * velocity: ``nav_msgs/msg/Odometry`` (twist in ``child_frame_id``), ``TwistWithCovarianceStamped``,
   ``TwistStamped`` or our ``hindrax_msgs/msg/Dvl`` (:func:`.signals.samples_from_dvl`);
 * angular rate: the velocity message's angular part, else ``sensor_msgs/msg/Imu`` (``--imu-topic``, which then
-  takes precedence), else the attitude differentiated (odometry pose or DVL attitude);
+  takes precedence; found by type with a Dvl velocity; an IMU frame other than the body frame is rotated with the
+  bag's ``/tf_static``, else refused), else the attitude differentiated (odometry pose or DVL attitude);
 * depth (optional, ``--depth-topic``): ``sensor_msgs/msg/FluidPressure`` or the pose of an Odometry/PoseStamped;
   when given, the heave velocity is its derivative (Savitzky-Golay) instead of the velocity topic's.
 
