@@ -109,6 +109,7 @@ from typing import Any, Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
@@ -345,9 +346,12 @@ class Icm20948Node(Node):
         self._mag_count = 0  # valid magnetometer samples since the start-up
 
         qos = DEFAULT_QOS_DEPTH
-        self.pub_imu = self.create_publisher(Imu, "imu/data_raw", qos)
-        self.pub_mag = self.create_publisher(MagneticField, "imu/mag", qos)
-        self.pub_temperature = self.create_publisher(Temperature, "imu/temperature", qos)
+        # no QoS event handlers (rclpy's default incompatible-QoS warning handler of each publisher is visited in
+        # Python on every executor spin, at the 100 Hz poll)
+        ev = PublisherEventCallbacks(use_default_callbacks=False)
+        self.pub_imu = self.create_publisher(Imu, "imu/data_raw", qos, event_callbacks=ev)
+        self.pub_mag = self.create_publisher(MagneticField, "imu/mag", qos, event_callbacks=ev)
+        self.pub_temperature = self.create_publisher(Temperature, "imu/temperature", qos, event_callbacks=ev)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
 
         self._step_timer = self.create_timer(1.0, self._on_step_timer, autostart=False)

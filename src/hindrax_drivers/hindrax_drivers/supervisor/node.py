@@ -9,9 +9,10 @@ armed while the breach is latched.
 Subscribes (ROS time of arrival is used for rates and run time; ``use_sim_time`` supported)
     ``dvl/data`` (hindrax_msgs/Dvl: attitude, velocity for the dead reckoning), ``ping/altitude``
     (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
-    ``imu/data_raw`` (sensor_msgs/Imu, rate only), ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the
-    ESC's armed flag), ``supervisor/abort`` (std_msgs/String: any node trips the supervisor with a reason,
-    e.g. the identification node when it aborts a manoeuvre on a limit).
+    ``imu/data_raw`` (sensor_msgs/Imu, rate only: taken as serialised bytes, never deserialised),
+    ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag), ``supervisor/abort``
+    (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
+    a manoeuvre on a limit).
 Services
     ``supervisor/estop`` (std_srvs/Trigger): operator emergency stop: trip and disarm now.
     ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again; a disarm
@@ -19,6 +20,10 @@ Services
 Publishes
     ``supervisor/status`` (diagnostic_msgs/DiagnosticStatus: level OK or ERROR, message = the breach reason, values
     = the supervised quantities) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
+CPU (README "Performance on the Pi")
+    Publishers and subscriptions carry no QoS event handlers (rclpy's default is one incompatible-QoS warning
+    handler each, visited in Python on every executor spin): a sensor that stops reaching the supervisor, for a
+    QoS mismatch or any other reason, trips it through the ``supervisor.min_rate.*`` checks (where not 0).
 Configuration
     ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``).
 
@@ -32,6 +37,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
@@ -48,6 +54,9 @@ __all__ = ["SupervisorNode", "main"]
 
 #: A disarm request is repeated this often while the ESC still reports armed after a breach, s.
 DISARM_RETRY_S = 0.2
+#: no QoS event handlers (module docstring, "CPU")
+_NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
+_NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 
 
 class SupervisorNode(Node):
@@ -65,13 +74,15 @@ class SupervisorNode(Node):
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
-        self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10)
-        self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10)
-        self.create_subscription(Range, "ping/altitude", self.on_altitude, 10)
-        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10)
-        self.create_subscription(Imu, "imu/data_raw", self.on_imu, 10)
-        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10)
-        self.create_subscription(String, "supervisor/abort", self.on_abort, 10)
+        self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10,
+                                                event_callbacks=_NO_PUB_EVENTS)
+        ev = {"event_callbacks": _NO_SUB_EVENTS}
+        self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10, **ev)
+        self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
+        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
+        self.create_subscription(Imu, "imu/data_raw", self.on_imu, 10, raw=True, **ev)
+        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10, **ev)
+        self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")
@@ -99,7 +110,7 @@ class SupervisorNode(Node):
     def on_depth(self, msg: PoseWithCovarianceStamped) -> None:
         self._handle(self.core.on_depth(self._now_s(), -float(msg.pose.pose.position.z)))
 
-    def on_imu(self, _msg: Imu) -> None:
+    def on_imu(self, _msg: bytes) -> None:
         self.core.on_message("imu", self._now_s())
 
     def on_esc(self, msg: ThrusterPwm) -> None:
