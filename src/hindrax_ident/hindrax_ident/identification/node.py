@@ -34,8 +34,9 @@ Subscribes
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.estimate_rate_hz`` while a
     goal runs; ``identification/estimates`` (HydroEstimate, method ``rls``, one per DOF with data) at
-    ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) at every tick
-    while a goal runs (phase, DOF, level, progress, message = current step), once at its end (DONE or ABORTED
+    ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) while a goal
+    runs at once when the phase, DOF, level or message (current step) changes and otherwise at
+    :data:`STATUS_PERIOD_S` (10 Hz: the progress of a level), once at its end (DONE or ABORTED
     with the reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a
     goal aborts on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety
     supervisor (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset.
@@ -59,13 +60,15 @@ from typing import Any
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
 
 from hindrax_drivers import frames
-from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig, node_config
+from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
+from hindrax_drivers.node_parameters import node_config
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
 from hindrax_msgs.action import RunIdentification
@@ -83,6 +86,8 @@ NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro"
 #: abort reasons not sent to the safety supervisor (the executive's words): an operator's cancel, and a disarmed
 #: ESC output (the thrusters are already stopped, possibly by the supervisor itself)
 NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
+#: period of ``identification/status`` while a goal runs and nothing changes (10 Hz: topside display, bag), s
+STATUS_PERIOD_S = 0.1
 
 _PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverStatus.PHASE_RUNNING,
            "returning": ManeuverStatus.PHASE_RETURNING, "done": ManeuverStatus.PHASE_DONE,
@@ -160,18 +165,23 @@ class IdentificationNode(Node):
         self._last_tick_s: float | None = None  # ROS time of the last control tick of a goal (step gate)
         self._last_publish_t = -math.inf
         self._last_idle_status_t = -math.inf
+        self._last_status: tuple[float, tuple] = (-math.inf, ())  # (ROS time, key) of the last running status
         self.last_record: CampaignRecord | None = None
         self.last_result: str = ""
 
-        self.create_subscription(Dvl, "dvl/data", self._on_dvl, 20)
-        self.create_subscription(FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20)
-        self.create_subscription(Imu, "imu/data_raw", self._on_imu, 50)
-        self.create_subscription(Range, "ping/altitude", self._on_range, 20)
-        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20)
-        self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
-        self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10)
-        self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50)
-        self.pub_abort = self.create_publisher(String, "supervisor/abort", 10)
+        # no QoS event handlers (rclpy's default incompatible-QoS warning handler of each is visited in Python on
+        # every executor spin); a sensor that does not arrive fails the goal (sensor_timeout_s, DVL lock)
+        sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
+        pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
+        self.create_subscription(Dvl, "dvl/data", self._on_dvl, 20, **sub_ev)
+        self.create_subscription(FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20, **sub_ev)
+        self.create_subscription(Imu, "imu/data_raw", self._on_imu, 50, **sub_ev)
+        self.create_subscription(Range, "ping/altitude", self._on_range, 20, **sub_ev)
+        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20, **sub_ev)
+        self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
+        self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10, **pub_ev)
+        self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50, **pub_ev)
+        self.pub_abort = self.create_publisher(String, "supervisor/abort", 10, **pub_ev)
         self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self._timer = self.create_timer(self.tick_s, self._on_tick)
@@ -300,7 +310,7 @@ class IdentificationNode(Node):
                            else f"sensors not publishing: {sorted(NEEDED_SENSORS - self._seen)}")
                 return
             if not NEEDED_SENSORS <= self._seen:
-                self._publish_status(ManeuverStatus.PHASE_POSITIONING, None, "waiting for the sensors")
+                self._publish_status_throttled(t, ManeuverStatus.PHASE_POSITIONING, None, "waiting for the sensors")
                 return
             self._samples = []
             w = ex.start(t)
@@ -378,7 +388,7 @@ class IdentificationNode(Node):
     def _publish_progress(self, run: _GoalRun, t: float) -> None:
         ex = run.executive
         st = ex.status()
-        self._publish_status(_PHASES[st.phase], st, st.message)
+        self._publish_status_throttled(t, _PHASES[st.phase], st, st.message)
         key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0)
         if key != run.last_feedback or t - run.last_feedback_s >= 1.0:
             run.last_feedback, run.last_feedback_s = key, t
@@ -391,6 +401,17 @@ class IdentificationNode(Node):
             for d, est in ex.online.items():
                 if est.rls.n_samples > 0:
                     self.pub_estimate.publish(hydro_estimate(d, est, stamp))
+
+    def _publish_status_throttled(self, t: float, phase: int, st: ExecutiveStatus | None, message: str) -> None:
+        """The running status at ROS time ``t`` (s): at once when phase, DOF, level or message changed, else at
+        most every :data:`STATUS_PERIOD_S` (the status is a step signal: a bag's zero-order hold of it,
+        :mod:`.from_bag`, sees every change at its time)."""
+        key = (phase, message) if st is None else (phase, message, st.dof, st.level_index, st.level_command)
+        last_t, last_key = self._last_status
+        if key == last_key and t - last_t < STATUS_PERIOD_S - 1e-9:
+            return
+        self._last_status = (t, key)
+        self._publish_status(phase, st, message)
 
     def _publish_status(self, phase: int, st: ExecutiveStatus | None, message: str) -> None:
         m = ManeuverStatus(phase=phase, message=message)
