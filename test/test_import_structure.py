@@ -195,7 +195,7 @@ def test_node_modules_imported_only_by_nodes_and_entry_points(graph):
 TESTING = "hindrax_drivers.testing"
 
 
-def testing_imports(graph: dict[str, set[str]]) -> list[str]:
+def production_imports_of_testing(graph: dict[str, set[str]]) -> list[str]:
     """``"importer -> hindrax_drivers.testing"`` for every production module importing the test helpers."""
     return sorted(f"{src} -> {TESTING}" for src, deps in graph.items()
                   if TESTING in deps and src != TESTING and not any(
@@ -204,7 +204,7 @@ def testing_imports(graph: dict[str, set[str]]) -> list[str]:
 
 def test_production_code_does_not_import_the_test_helpers(graph):
     assert TESTING in graph and "hindrax_drivers.conditions" in graph[TESTING]  # the rule is not vacuous
-    assert testing_imports(graph) == []
+    assert production_imports_of_testing(graph) == []
 
 
 def test_entry_points_exist(graph):

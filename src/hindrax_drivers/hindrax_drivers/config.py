@@ -926,25 +926,3 @@ def default_config_path() -> Path:
         if c.is_file():
             return c
     raise FileNotFoundError("hindrax.yaml not found; searched: " + ", ".join(str(c) for c in candidates[:4]))
-
-
-def node_config(node: Any, on_error: Callable[[str], None] | None = None, keys: Sequence[str] | None = None,
-                dynamic: Sequence[str] = (), on_change: Callable[["VehicleConfig"], None] | None = None
-                ) -> VehicleConfig:
-    """Declare the node's vehicle keys as described ROS parameters and return them validated.
-
-    See :func:`hindrax_drivers.node_parameters.declare_vehicle_parameters`: the node must be created
-    without ``automatically_declare_parameters_from_overrides``; ``keys`` are the SCHEMA prefixes it reads
-    (None: all sections), ``dynamic`` those it applies while running (the others are read-only) and
-    ``on_change`` applies a validated change. Values: overrides (``--params-file``, ``-p``,
-    ``parameter_overrides``), else the ``config_file`` parameter's file, else :func:`default_config_path`.
-    Raises :class:`ConfigError`; ``on_error`` (if given) receives the one-line message first.
-    """
-    from .node_parameters import declare_vehicle_parameters
-
-    try:
-        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change)
-    except ConfigError as exc:
-        if on_error:
-            on_error(str(exc))
-        raise

@@ -17,7 +17,8 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
 from hindrax_msgs.msg import RawDeviceData
 
-from .config import ConfigError, VehicleConfig, node_config
+from .config import ConfigError, VehicleConfig
+from .node_parameters import node_config
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
@@ -310,7 +311,7 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
 
     keys: SCHEMA prefixes the node reads (None: all sections); dynamic: prefixes it applies while running
     (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason.
-    See :func:`hindrax_drivers.config.node_config`. Logs the one-line reason and re-raises
+    See :func:`hindrax_drivers.node_parameters.node_config`. Logs the one-line reason and re-raises
     :class:`ConfigError` so :func:`run_node` exits with status 1.
     """
     return node_config(node, on_error=lambda line: node.get_logger().fatal(f"invalid configuration: {line}"),

@@ -51,7 +51,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from hindrax_msgs.srv import StartRecording, StopRecording
 
-from ..config import ConfigError, node_config
+from ..config import ConfigError
+from ..node_parameters import node_config
 from ..ros_process import RosProcess
 from .metadata import BagMetadata
 from .msgdefs import normalize_type_name

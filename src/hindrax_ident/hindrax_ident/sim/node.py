@@ -64,7 +64,8 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hindrax_drivers import frames
-from hindrax_drivers.config import VehicleConfig, node_config
+from hindrax_drivers.config import VehicleConfig
+from hindrax_drivers.node_parameters import node_config
 from hindrax_msgs.msg import ThrusterPwm
 
 from .pool import FACES
