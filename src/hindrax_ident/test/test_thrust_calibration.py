@@ -113,3 +113,26 @@ def test_line_pull_measures_the_horizontal_scale_in_surge_and_sway():
     sec = calibration_section(rec.calibration)
     assert sec["horizontal_thrust_scale"]["source"] == "line pull (surge, sway)"
     assert "assumed" in sec["vertical_thrust_scale"]["source"]
+
+
+def test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90(tmp_path, capsys):
+    """Dive, then roll and pitch free decays tilted by the (10 % weak) thrusters; C given as an inclining test would
+    give it (the simulator's B BG). Issue 17: within 10 % of the truth's rigid + added inertia."""
+    out = tmp_path / "run"
+    cfg = load_config(default_config_path())
+    c = float(cfg.get("vehicle.displaced_volume_m3")) * 1000.0 * 9.81 * 0.03
+    rc = cli.main(["ident", "campaign", "--dofs", "roll", "--levels", "2", "--seed", "2", "--truth", str(THRUST_090),
+                   "--calibrate", "tilt_decay", "--restoring-n-m-per-rad", str(c), "--restoring-std", "0.02",
+                   "--out", str(out)])
+    assert rc == 0, capsys.readouterr().err
+    doc = yaml.safe_load((out / "identification.yaml").read_text())
+    fd = doc["free_decay"]
+    truth = {"roll": 0.4831 + 0.48, "pitch": 0.6444 + 0.65}     # ros_ws/config/hindrax.yaml (= truth file)
+    for dof in ("roll", "pitch"):
+        assert fd[dof]["total_inertia_kg_m2"] == pytest.approx(truth[dof], rel=0.10), fd[dof]
+        assert fd[dof]["total_inertia_kg_m2_std"] > fd[dof]["total_inertia_kg_m2_std_fit"]
+        assert "inclining" in fd[dof]["stiffness_source"]
+    # roll was also identified self-propelled, with the curve 10 % optimistic: about 11 % high
+    sp = fd["roll"]["self_propelled"]
+    assert sp["inertia_kg_m2"] > 1.05 * truth["roll"]
+    assert sp["verdict"] in ("suspect", "agrees") and sp["z"] >= 0.0

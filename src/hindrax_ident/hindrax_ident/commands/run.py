@@ -58,12 +58,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="known-force calibration steps before the ladders, comma-separated: ballast, line_pull "
-                             "(in-process only for now; the thrust scales are applied to the identification, "
-                             "identification.yaml gains a calibration section)")
+                        help="reference steps before the ladders, comma-separated: ballast, line_pull (known forces: "
+                             "the thrust scales are applied to the identification, identification.yaml gains a "
+                             "calibration section), tilt_decay (roll and pitch free decay: rigid + added inertia with "
+                             "--restoring-n-m-per-rad, section free_decay); in-process only for now")
     parser.add_argument("--ballast-mass-kg", type=float, default=1.0, help="ballast mass, kg (default 1.0)")
     parser.add_argument("--ballast-volume-m3", type=float, default=1.0 / 7850.0,
                         help="ballast displaced volume, m^3 (default 1 kg of steel: 1.27e-4)")
+    parser.add_argument("--restoring-n-m-per-rad", type=float, default=None,
+                        help="roll/pitch restoring stiffness C for tilt_decay (from `hindrax ident inclining`; default "
+                             "m g BG of the vehicle file, marked not measured)")
+    parser.add_argument("--restoring-std", type=float, default=0.0, help="1-sigma of C, N m/rad")
     parser.add_argument("--line-pull-n", type=float, default=4.905,
                         help="horizontal line force over the pulley, N (default 4.905: 0.5 kg hanging in air)")
     if not parser.prog.endswith("campaign"):
@@ -183,6 +188,38 @@ def run_graph(args: argparse.Namespace) -> int:
     return 0 if (outcome.success and outcome.identifications) else 1
 
 
+def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
+    """identification.yaml ``free_decay``: per roll/pitch the inertia from the campaign's free decay
+    (:func:`~hindrax_ident.identification.calibration.decay_inertia`) and, when that DOF was identified
+    self-propelled, the comparison: verdict suspect when they differ by more than 1.96 combined std."""
+    from ..estimation.least_squares import EstimationError
+    from ..identification.calibration import decay_inertia
+
+    f = cfg.flat
+    measured = args.restoring_n_m_per_rad is not None
+    c = float(args.restoring_n_m_per_rad) if measured else float(cfg.weight_n) * (
+        float(f["vehicle.centre_of_gravity_frd_m"][2]) - float(f["vehicle.centre_of_buoyancy_frd_m"][2]))
+    out: dict = {}
+    for dof in record.decays:
+        i = {"roll": 0, "pitch": 1}[dof]
+        try:
+            e = decay_inertia(record, dof, c, args.restoring_std, float(f["vehicle.inertia_kg_m2"][i]))
+        except (EstimationError, KeyError, ValueError) as exc:
+            progress(f"{dof} free decay: no estimate ({exc})")
+            continue
+        e["stiffness_source"] = ("--restoring-n-m-per-rad (inclining test)" if measured else
+                                 "vehicle file m g BG (not measured: run hindrax ident inclining)")
+        r = idents.get(dof)
+        if r is not None:
+            v, sd = float(r.values["inertia"]), float(r.std["inertia"])
+            comb = math.hypot(sd, e["total_inertia_kg_m2_std"])
+            z = abs(e["total_inertia_kg_m2"] - v) / comb if comb > 0 else math.inf
+            e["self_propelled"] = {"inertia_kg_m2": v, "inertia_kg_m2_std": sd, "z": z,
+                                   "verdict": "suspect" if z > 1.96 else "agrees"}
+        out[dof] = e
+    return out
+
+
 def run_in_process(args: argparse.Namespace) -> int:
     """Run the campaign in-process on the simulator, identify, write the outputs, print the summary."""
     from ..identification.campaign import Campaign
@@ -227,6 +264,8 @@ def run_in_process(args: argparse.Namespace) -> int:
         doc = build_results(idents, cfg, source="simulation", seed=record.seed)
         if record.calibration:
             doc["calibration"] = calibration_section(record.calibration)
+        if record.decays:
+            doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
         write_identification(out / "identification.yaml", doc)
         note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
                 + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))

@@ -27,7 +27,7 @@ from typing import Any, Mapping
 import numpy as np
 
 __all__ = ["apply_thrust_calibration", "calibration_relative_std", "calibration_section", "thrust_scales",
-           "DOF_GROUP"]
+           "DOF_GROUP", "decay_inertia"]
 
 #: Which thrusters (scale) act in each DOF, and the wrench columns of each group.
 DOF_GROUP = {"surge": "horizontal", "sway": "horizontal", "yaw": "horizontal",
@@ -113,3 +113,37 @@ def calibration_section(calibration: Mapping[str, Any] | None) -> dict:
         if axis in calibration:
             out[f"line_pull_{axis}"] = plain(dict(calibration[axis]))
     return out
+
+
+def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness_std: float = 0.0,
+                  rigid_inertia_kg_m2: float | None = None) -> dict:
+    """Rigid + added inertia of ``dof`` (roll | pitch) from the campaign's free decay (issue 17 item 3).
+
+    The de-biased gyro rate of the recorded window ``record.decays[dof]`` (from its largest excursion on) is
+    fitted with I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_ident.estimation.free_decay.
+    fit_quadratic_free_decay`, output = velocity), C the restoring stiffness of an inclining test (``hindrax ident
+    inclining``). The thrusters only tilted the vehicle, so the result does not depend on the thrust curve.
+    Returns {total_inertia_kg_m2, total_inertia_kg_m2_std (fit and C's std combined), total_inertia_kg_m2_std_fit,
+    added_inertia_kg_m2 (None without the rigid inertia), linear_damping_kg_m2_s, quadratic_damping_kg_m2 (with
+    _std), stiffness_n_m_per_rad, window_s}. Raises ``KeyError`` when the DOF has no recorded decay and
+    :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the fit fails.
+    """
+    from ..estimation.free_decay import fit_quadratic_free_decay
+
+    t0, t1 = record.decays[dof]
+    k = {"roll": 0, "pitch": 1}[dof]
+    rows = [(s, r[k]) for s, r in record.sensors["gyro"] if t0 <= s <= t1 and math.isfinite(r[k])]
+    t = np.array([a for a, _ in rows])
+    y = np.array([b for _, b in rows])
+    i0 = int(np.argmax(np.abs(y - np.median(y)))) if y.size else 0
+    fit = fit_quadratic_free_decay(t[i0:], y[i0:], stiffness_n_m_per_rad, rigid_inertia=rigid_inertia_kg_m2,
+                                   output="velocity")
+    std = math.hypot(fit.total_inertia_std, fit.total_inertia * float(stiffness_std) / float(stiffness_n_m_per_rad))
+    return {"total_inertia_kg_m2": fit.total_inertia, "total_inertia_kg_m2_std": std,
+            "total_inertia_kg_m2_std_fit": fit.total_inertia_std,
+            "added_inertia_kg_m2": None if math.isnan(fit.added_inertia) else fit.added_inertia,
+            "linear_damping_kg_m2_s": fit.linear_damping, "linear_damping_kg_m2_s_std": fit.linear_damping_std,
+            "quadratic_damping_kg_m2": fit.quadratic_damping,
+            "quadratic_damping_kg_m2_std": fit.quadratic_damping_std,
+            "stiffness_n_m_per_rad": float(stiffness_n_m_per_rad), "stiffness_std": float(stiffness_std),
+            "window_s": [float(t0), float(t1)]}

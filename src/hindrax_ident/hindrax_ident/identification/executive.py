@@ -62,7 +62,12 @@ __all__ = ["CampaignAbort", "CampaignRecord", "Executive", "ExecutiveStatus", "T
            "CALIBRATION_STEPS"]
 
 #: Known-force calibration steps the executive can run before the ladders (issue 17 item 1).
-CALIBRATION_STEPS = ("ballast", "line_pull")
+CALIBRATION_STEPS = ("ballast", "line_pull", "tilt_decay")
+#: tilt_decay: tilt angle aimed at (rad), ramp and hold before the release, and the recorded decay (s).
+TILT_DECAY_ANGLE_RAD = 0.25
+TILT_DECAY_RAMP_S = 6.0
+TILT_DECAY_HOLD_S = 4.0
+TILT_DECAY_RECORD_S = 25.0
 #: Settling time before, and averaging window of, each calibration hold (s).
 CALIBRATION_SETTLE_S = 15.0
 CALIBRATION_WINDOW_S = 30.0
@@ -113,6 +118,8 @@ class CampaignRecord:
     #: known-force calibration results (:meth:`Executive._ballast`): {"vertical": {value, std, known_force_n,
     #: holding_force_n, holding_force_std_n, method}}; empty without a calibration step
     calibration: dict = field(default_factory=dict)
+    #: roll/pitch free decays (:meth:`Executive._tilt_decay`): DOF -> (t_release, t_end), s
+    decays: dict = field(default_factory=dict)
 
     def dof_slice(self, dof: str) -> slice:
         """Tick index range of one DOF's manoeuvres (empty slice when it was not run)."""
@@ -215,6 +222,7 @@ class Executive:
         self.awaiting = ""
         self._continue = False
         self.calibration: dict = {}
+        self.decays: dict[str, tuple[float, float]] = {}
         self.cfg = cfg
         f = cfg.flat
         self.dofs = list(dofs)
@@ -372,7 +380,7 @@ class Executive:
             authority=self.authority, aborted=self.aborted, abort_reason=self.abort_reason, wall_time_s=wall_time_s,
             tick_s=self.tick_s, time_constant_s=self.time_constant_s, seed=int(seed),
             final_pulse_width_us=np.zeros(0) if final_pulse_width_us is None else np.asarray(final_pulse_width_us),
-            calibration={k: dict(v) for k, v in self.calibration.items()})
+            calibration={k: dict(v) for k, v in self.calibration.items()}, decays=dict(self.decays))
 
     # ------------------------------------------------------------------ status
     def level_position(self) -> tuple[str, int, int, float]:
@@ -700,8 +708,37 @@ class Executive:
             "holding_force_n": [x1, x2], "holding_force_std_n": [s1, s2], "method": "line_pull"}
         self._say(f"calibration (line pull, {axis}): thrust scale {scale:.4f}")
 
+    def _tilt_decay(self, dof: str) -> Wrenches:
+        """Roll or pitch free decay, self-propelled (issue 17 item 3): the vertical thrusters ramp a moment of
+        C0 :data:`TILT_DECAY_ANGLE_RAD` (C0 = m g BG of the vehicle file, so the angle reached is only roughly the
+        target: the thrust curve need not be right), hold it, then release (zero moment on that DOF, the others
+        held) and record :data:`TILT_DECAY_RECORD_S` s; the window goes to :attr:`decays`. Rigid + added inertia
+        follow offline from the gyro rate and the inclining stiffness (:func:`~.calibration.decay_inertia`)."""
+        k = DOF_INDEX[dof]
+        f = self.cfg.flat
+        bg = float(f["vehicle.centre_of_gravity_frd_m"][2]) - float(f["vehicle.centre_of_buoyancy_frd_m"][2])
+        c0 = float(self.cfg.weight_n) * bg
+        moment = min(c0 * TILT_DECAY_ANGLE_RAD, 0.8 * min(self.authority[dof]))
+        yield from self._move_to_centre()
+        self._say(f"free decay ({dof}): tilt with the vertical thrusters, then release")
+        n_ramp = int(round(TILT_DECAY_RAMP_S / self.tick_s))
+        for i in range(n_ramp + int(round(TILT_DECAY_HOLD_S / self.tick_s))):
+            w = np.asarray(self.ctrl.wrench(self.state, (dof,), self.tick_s), dtype=float)
+            w[k] = moment * min(1.0, i / max(n_ramp, 1))
+            yield w
+        t0 = self.t_s
+        for _ in range(int(round(TILT_DECAY_RECORD_S / self.tick_s))):
+            w = np.asarray(self.ctrl.wrench(self.state, (dof,), self.tick_s), dtype=float)
+            w[k] = 0.0
+            yield w
+        self.decays[dof] = (t0, self.t_s)
+        yield from self._wait_still(k, 0.05, 8.0)
+
     def _campaign(self) -> Wrenches:
         yield from self._dive()
+        if "tilt_decay" in self.calibrate:
+            for dof in ("roll", "pitch"):
+                yield from self._tilt_decay(dof)
         if "ballast" in self.calibrate:
             yield from self._ballast()
         if "line_pull" in self.calibrate:
