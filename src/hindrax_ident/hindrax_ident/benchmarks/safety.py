@@ -18,7 +18,8 @@ I2C transaction after which the emulator decodes every thruster channel at neutr
 * ``clock_loss``: ``use_sim_time`` and ``/clock`` stops while commanding (the commands stop with it): the
   steady-clock watchdog; measured from the last command the node took (so it includes the 0.5 s timeout).
 
-Each path is repeated (3 times with ``--quick``, 10 otherwise); rows give the median and the maximum in ms.
+Each path is repeated (3 times with ``--quick``, 6 otherwise, to keep ``make bench`` under 6 minutes); rows give the
+median and the maximum in ms.
 """
 from __future__ import annotations
 
@@ -143,7 +144,7 @@ def run(quick: bool = False) -> list[dict]:
 
     from hindrax_drivers.testing import ros_context
 
-    repeats = 3 if quick else 10
+    repeats = 3 if quick else 6
     times: dict[str, list[float]] = {k: [] for k in (
         "watchdog", "watchdog_beyond_timeout", "disarm_service", "supervisor_breach", "estop", "exception",
         "shutdown", "chip_reset_detect", "chip_reset_recover", "clock_loss")}

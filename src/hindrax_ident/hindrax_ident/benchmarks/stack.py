@@ -524,10 +524,10 @@ PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (publ
 
 
 def run(quick: bool = False) -> list[dict]:
-    # windows: 12 s per phase and layout, 10 s per baseline (were 15/12 s; shortened to keep make bench under
+    # windows: 10 s per phase and layout, 8 s per baseline (were 15/12 s; shortened to keep make bench under
     # 6 minutes; the shared machine's load moves the figures by about +-20 % anyway)
-    duration_s = 8.0 if quick else 12.0
-    base_s = 6.0 if quick else 10.0
+    duration_s = 8.0 if quick else 10.0
+    base_s = 6.0 if quick else 8.0
     with tempfile.TemporaryDirectory(prefix="hindrax-bench-stack-") as tmpdir:
         tmp = Path(tmpdir)
         inproc = _in_process(duration_s, tmp)
