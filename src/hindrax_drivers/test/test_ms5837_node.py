@@ -206,7 +206,9 @@ def test_saturated_adc_is_rejected_not_published_as_82_bar(rig):
 
 def test_pressure_outside_the_configured_range_is_not_published_and_raises_error(rig):
     truth = {"pa": 110000.0}
-    r = rig(lambda t: (truth["pa"], 20.0), "30BA")  # gates of the vehicle file: 50 kPa .. 400 kPa
+    # +-60 Pa of motion: a constant truth would also trip the stuck detector (2 s of identical D1/D2), whose
+    # ERROR can outlast the implausible-pressure hold under load and hide the clearing this test waits for.
+    r = rig(lambda t: (truth["pa"] + 60.0 * math.sin(9.0 * t), 20.0), "30BA")  # gates: 50 kPa .. 400 kPa
     r.wait_messages(2)
     truth["pa"] = 600000.0
     r.wait(lambda: r.node.diag.counts().get("implausible_pressure", 0) >= 3, 10, "implausible readings counted")
