@@ -95,7 +95,13 @@ _PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverS
 
 
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
-    """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation)."""
+    """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation).
+
+    ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`: a number only where the scenario suite
+    showed the online value's interval can cover the truth (converged damping of surge, sway, heave and yaw,
+    widened by the declared thrust uncertainty, :func:`~.verdicts.rls_published_std`); -1 means "not converged
+    or not trusted" (the message's float64 std has no NaN convention). ``covariance`` stays the raw RLS one.
+    """
     rls = estimator.rls
     units = parameter_units(dof)
     msg = HydroEstimate(dof=dof, method=method)
@@ -104,7 +110,7 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
     msg.parameter_names = list(estimator.names)
     msg.parameter_units = [units[n] for n in estimator.names]
     msg.values = [float(v) for v in rls.theta]
-    msg.std = [float(s) if math.isfinite(s) else -1.0 for s in rls.std]
+    msg.std = [float(s) if math.isfinite(s) else -1.0 for s in estimator.published_std()]
     cov = np.asarray(rls.covariance, dtype=float)
     msg.covariance = [float(c) if math.isfinite(c) else 0.0 for c in cov.ravel()]
     msg.sample_count = int(rls.n_samples)
