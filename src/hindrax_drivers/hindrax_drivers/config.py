@@ -229,6 +229,9 @@ SCHEMA.update({
                                          0.0, 2e5),
     "sensors.ms5837.max_pressure_pa": _f("plausibility gate: a higher compensated pressure is not published, Pa "
                                          "(30BA full scale 30 bar)", 1e4, 3.1e6),
+    "sensors.ms5837.prom_reject_blank_words": _b("PROM sanity gate: reject a PROM whose coefficient C1..C6 reads "
+                                                 "0x0000 or 0xFFFF (blank or unread PROM; an all-zero PROM passes "
+                                                 "CRC-4, docs/devices.md §3.2-3.3)"),
     "sensors.icm20948.i2c_bus": _i("Linux I2C bus number", 0, 31),
     "sensors.icm20948.i2c_address": _i("ICM-20948 7-bit address (AD0 low 0x68, high 0x69)", choices=(0x68, 0x69)),
     "sensors.icm20948.accel_full_scale_g": _i("accelerometer full scale, g", choices=(2, 4, 8, 16)),
@@ -245,6 +248,12 @@ SCHEMA.update({
                                           3, -5.0, 5.0),
     "sensors.icm20948.frozen_check_samples": _i("data-ready gate: after this many bit-identical samples in a row "
                                                 "the chip's PWR_MGMT_1/USER_CTRL are read back (reset check)", 1, 100),
+    "sensors.icm20948.require_data_ready": _b("data-ready gate: read INT_STATUS_1.RAW_DATA_0_RDY (bank 0, 0x1A) "
+                                              "before each poll and publish no sample without it"),
+    "sensors.icm20948.not_ready_error_polls": _i("data-ready gate: this many consecutive polls without "
+                                                 "RAW_DATA_0_RDY raise the ERROR data_ready", 1, 10000),
+    "sensors.icm20948.mag_retry_interval_s": _f("lost AK09916: period of the magnetometer re-initialisation "
+                                                "attempts until it answers again, s", 0.1, 600.0),
     "sensors.icm20948.mag_stale_timeout_s": _f("data-ready gate: no new magnetometer sample (ST1.DRDY, SLV0 "
                                                "answered) for this long -> ERROR and re-initialisation, s", 0.05, 10.0),
     # --- pool ([Hindrax-Drag] (seed 003) §4) ---

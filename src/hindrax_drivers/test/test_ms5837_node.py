@@ -233,6 +233,19 @@ def test_all_zero_prom_passes_crc4_but_is_rejected(rig):
     assert r.pressure[-1].fluid_pressure == pytest.approx(110000.0, abs=10.0)
 
 
+def test_prom_blank_word_rule_is_configurable(rig):
+    """sensors.ms5837.prom_reject_blank_words = false: the all-zero PROM (valid CRC-4) is accepted as it stands;
+    the pressure it gives (0 Pa: every coefficient 0) is then caught by the range gate instead."""
+    r = rig(lambda t: (110000.0, 20.0), "30BA",
+            {"sensors.ms5837.variant": "30BA", "sensors.ms5837.prom_reject_blank_words": False})
+    r.emu.blank_prom = True  # before the PROM read (a timer 10 ms after the reset command)
+    r.wait(lambda: r.node.calibration is not None, 10, "PROM accepted")
+    assert tuple(r.node.calibration.words) == (0,) * 8
+    r.wait(lambda: r.node.diag.counts().get("implausible_pressure", 0) >= 2, 10, "0 Pa rejected by the range gate")
+    assert r.node.diag.counts().get("prom_error", 0) == 0 and r.node.startup_attempts == 1
+    assert r.pressure == []
+
+
 def test_reset_and_prom_read_are_sent_again_after_an_i2c_outage(rig):
     """The part loses power during an I2C outage; without a new reset command its conversions read 0
     (datasheet "Reset sequence": the PROM is loaded by the reset). The node re-runs its start-up."""

@@ -3,7 +3,8 @@
 Start-up (docs/devices.md §3.1-3.3, §3.9):
 
 1. Reset command 0x1E, then wait :data:`~hindrax_drivers.ms5837.protocol.RESET_TIME_S` (10 ms).
-2. Read the 8 PROM words (0xA0 + 2k, 2 bytes MSB first) and check the CRC-4 and the PROM sanity
+2. Read the 8 PROM words (0xA0 + 2k, 2 bytes MSB first) and check the CRC-4 and, when
+   ``sensors.ms5837.prom_reject_blank_words`` is true, the PROM sanity
    (:func:`~hindrax_drivers.ms5837.protocol.prom_sanity_issue`: no coefficient 0x0000/0xFFFF; an all-zero
    PROM passes CRC-4). A bad CRC or PROM (or an I2C
    failure, or a C1 outside the heuristic's range with ``variant: auto``) stops start-up: the device
@@ -158,6 +159,7 @@ class Ms5837Node(Node):
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
         self.min_pressure_pa = float(s["min_pressure_pa"])
         self.max_pressure_pa = float(s["max_pressure_pa"])
+        self.prom_reject_blank_words = bool(s["prom_reject_blank_words"])
         self._last_implausible_s: float | None = None
         self.d1_command = p.convert_d1_command(self.osr)
         self.d2_command = p.convert_d2_command(self.osr)
@@ -245,7 +247,7 @@ class Ms5837Node(Node):
         try:
             words = [p.parse_prom_word(self.device.read_block(p.prom_read_command(k), 2)) for k in range(8)]
             calibration = p.Calibration.from_words(words, check_crc=True)
-            issue = p.prom_sanity_issue(calibration)
+            issue = p.prom_sanity_issue(calibration) if self.prom_reject_blank_words else ""
             if issue:
                 raise p.Ms5837Error(issue)
             variant = p.detect_variant(calibration, self.configured_variant)
