@@ -321,6 +321,54 @@ def test_magnetometer_nack_stops_imu_mag_and_raises_error(rig):
     assert len([m for m in r.mag if stamp_ns(m) > nack_ns]) <= 1
 
 
+def test_lost_magnetometer_is_retried_periodically_until_it_answers_again(rig):
+    """After the NACK re-initialisation finds no AK09916, the start-up (with the magnetometer sequence) is retried
+    every sensors.icm20948.mag_retry_interval_s until the AK09916 answers; then imu/mag comes back."""
+    r = rig(truth=live_truth, overrides={"sensors.icm20948.mag_retry_interval_s": 0.4})
+    r.wait(lambda: len(r.mag) >= 5 and len(r.imu) >= 10, 5, "IMU and magnetometer data")
+    r.emu.aux_connected = False
+    r.wait(lambda: r.node.diag.counts().get("mag_lost", 0) == 1, 5, "magnetometer lost")
+    r.wait(lambda: r.node.diag.counts().get("mag_retries", 0) >= 2, 10, "two periodic retries")
+    assert not r.node.mag_available and r.node.diag.status().level == DiagnosticStatus.ERROR
+    r.wait_imu(10)  # the IMU keeps publishing between the retries
+    n_mag = len(r.mag)
+    reconnected_ns = r.node.get_clock().now().nanoseconds
+    r.emu.aux_connected = True
+    r.wait(lambda: len(r.mag) >= n_mag + 5, 10, "imu/mag published again")
+    assert r.node.mag_available and r.node.diag.counts().get("mag_lost") == 1
+    assert all(stamp_ns(m) > reconnected_ns for m in r.mag[n_mag:])
+    assert all(np.allclose(vec(m.magnetic_field), MAG, atol=5e-6 + 2e-6) for m in r.mag[n_mag:])
+    r.wait(lambda: r.node.diag.status().level == DiagnosticStatus.OK, 5, "magnetometer ERROR cleared")
+
+
+def test_sample_without_data_ready_is_not_published(rig):
+    """INT_STATUS_1.RAW_DATA_0_RDY stuck low: the data registers still update, but no sample is published,
+    every poll counts not_ready and after not_ready_error_polls the ERROR data_ready is raised; it clears with
+    the flag. The flag is one 1-byte read of INT_STATUS_1 (0x1A) per poll."""
+    r = rig(truth=live_truth, overrides={"sensors.icm20948.not_ready_error_polls": 10})
+    r.wait_imu(10)
+    reads = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST
+             and x.i2c_register == p.INT_STATUS_1.address]
+    assert reads and all(len(x.data) == 1 for x in reads)
+    r.emu.data_ready_stuck_low = True
+    stuck_ns = r.node.get_clock().now().nanoseconds
+    r.wait(lambda: r.node.diag.counts().get("not_ready", 0) >= 15, 5, "not-ready polls counted")
+    status = r.node.diag.status()
+    assert status.level == DiagnosticStatus.ERROR and "data_ready" in status.message
+    assert len([m for m in r.imu if stamp_ns(m) > stuck_ns]) <= 1  # at most a poll already under way
+    r.emu.data_ready_stuck_low = False
+    r.wait_imu(10)
+    r.wait(lambda: r.node.diag.status().level == DiagnosticStatus.OK, 5, "data_ready ERROR cleared")
+
+
+def test_data_ready_gate_can_be_switched_off(rig):
+    r = rig(truth=live_truth, overrides={"sensors.icm20948.require_data_ready": False})
+    r.emu.data_ready_stuck_low = True
+    r.wait_imu(20)
+    assert r.node.diag.counts().get("not_ready", 0) == 0
+    assert not [x for x in r.raw if x.i2c_register == p.INT_STATUS_1.address]  # no extra read
+
+
 def test_gyro_bias_is_estimated_and_subtracted_when_still(rig):
     bias = np.array([0.021, -0.013, 0.0047])  # rad/s; the "true" rate is zero: a still vehicle
     r = rig(truth=lambda t: (ACCEL, bias, MAG, TEMP_C),

@@ -21,7 +21,8 @@
   (magnetometer NACKs: I2C_MST_STATUS.SLVn_NACK bits, EXT_SLV_SENS_DATA keeps the last sample read,
   bypass port errno 121), :meth:`Icm20948Emulator.power_glitch` (both chips back to their power-on
   state: ICM registers at reset values, asleep, data registers 0, I2C master off; AK09916 powered
-  down); errno 121 on the host bus is injected by the bus.
+  down), ``data_ready_stuck_low`` (INT_STATUS_1.RAW_DATA_0_RDY always reads 0 while the data registers keep
+  updating); errno 121 on the host bus is injected by the bus.
 
 Not modelled: FIFO, DMP, interrupts pins, low-power cycling, self-test, the accel/gyro start-up
 delay after wake, filter dynamics (the DLPF only sets the output rate here).
@@ -214,6 +215,8 @@ class Icm20948Emulator(RegisterPointerEmulator):
         magnetometer: the AK09916 emulator.
         aux_port: device to attach at 0x0C on the host bus for the bypass path.
         aux_connected: fault switch for the AK09916 (False = it NACKs).
+        data_ready_stuck_low: fault switch: INT_STATUS_1.RAW_DATA_0_RDY always reads 0 (the data registers
+            still update).
         samples: number of accel/gyro samples generated.
     """
 
@@ -228,6 +231,7 @@ class Icm20948Emulator(RegisterPointerEmulator):
         self.magnetometer = magnetometer or Ak09916Emulator(lambda t: self._truth_at(t)[2], clock)
         self.aux_port = _AuxBusPort(self)
         self.aux_connected = True
+        self.data_ready_stuck_low = False
         self._stuck = False
         self.samples = 0
         self._truth_cache: tuple[float, tuple] | None = None
@@ -436,6 +440,8 @@ class Icm20948Emulator(RegisterPointerEmulator):
         if register == p.REG_BANK_SEL_ADDRESS:
             return p.bank_select_value(self._bank)
         value = self._banks[self._bank][register]
+        if self._bank == 0 and register == p.INT_STATUS_1.address and self.data_ready_stuck_low:
+            value &= ~p.INT_STATUS_1_RAW_DATA_0_RDY  # fault: the data keep updating, the flag never shows it
         if self._bank == 0 and register in (p.I2C_MST_STATUS.address, p.INT_STATUS_1.address):
             self._banks[0][register] = 0  # status registers clear on read
         return value

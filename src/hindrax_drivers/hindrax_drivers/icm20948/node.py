@@ -28,9 +28,11 @@ Start-up (docs/devices.md §4.3), executed step by step from ROS timers so the e
 Polling, at the achieved output data rate: one burst read from ACCEL_XOUT_H of 14 bytes (accel, gyro,
 temperature), 23 bytes in I2C-master mode (plus EXT_SLV_SENS_DATA_00..08 = ST1..ST2 of the AK09916); in
 bypass mode a second 9-byte burst at 0x0C:0x10; in I2C-master mode a 1-byte read of I2C_MST_STATUS (the
-AK09916's NACK bit, see "Data-ready gates" below). The register bank stays 0 between polls. The node does not
-read INT_STATUS_1.RAW_DATA_0_RDY: a poll may see the previous sample again or skip one when the chip and the
-host clocks drift (both run at the same nominal rate); repeated samples are handled by the data-ready gates.
+AK09916's NACK bit, see "Data-ready gates" below). The register bank stays 0 between polls. With
+``sensors.icm20948.require_data_ready`` each poll first reads INT_STATUS_1 (bank 0, 0x1A, one byte: it lies
+19 bytes before ACCEL_XOUT_H, too far to share the burst): a poll whose RAW_DATA_0_RDY is not set (the chip
+and host clocks drift at the same nominal rate, so a poll may come before the next sample) publishes nothing
+(see "Data-ready gates").
 
 Publishes (reliable, depth 10), all with frame ``imu_link``:
 
@@ -72,8 +74,15 @@ Faults: an I2C failure after the transport's retries (immediate, ``backoff_s = 0
 callback) drops that poll only (counted). Failures lasting
 :data:`REINIT_AFTER_S` seconds restart the start-up.
 
-Data-ready gates (``sensors.icm20948.frozen_check_samples``, ``mag_stale_timeout_s``; the poll itself stays
-one burst, so the raw traffic of a healthy chip is unchanged):
+Data-ready gates (``sensors.icm20948.require_data_ready``, ``not_ready_error_polls``, ``frozen_check_samples``,
+``mag_stale_timeout_s``, ``mag_retry_interval_s``):
+
+- INT_STATUS_1.RAW_DATA_0_RDY (clears on read; datasheet DS-000189 register description, bank 0 0x1A bit 0):
+  not set -> the sample is not published (``imu/data_raw``, ``imu/temperature``, ``imu/mag``), counted
+  ``not_ready``; ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``, cleared by the next ready
+  sample. The burst is still read and checked (reset and stuck detection below work on it). A failed status
+  read (counted ``data_ready_read_failure``) leaves the flag unknown and the sample is published as without
+  the gate: a replay of a bag recorded without these reads therefore publishes what it recorded.
 
 - Chip reset (power glitch): the data registers of a chip that reset read their reset value 0 and stop
   updating, PWR_MGMT_1 reads 0x41 (asleep) and USER_CTRL 0 (I2C master off) (docs/devices.md §4.3). An
@@ -90,8 +99,10 @@ one burst, so the raw traffic of a healthy chip is unchanged):
   cycles re-reads the same block, so the NACK of one cycle covers every poll that sees its data). If the
   status read itself fails the sample is published (the NACK bit stays set until read, the next poll sees it). No fresh magnetometer sample (DRDY without
   NACK) for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-runs the start-up once (the
-  AK09916 may have reset to power-down); if it is still missing the IMU publishes without ``imu/mag`` and
-  the ERROR stays until a start-up finds it again.
+  AK09916 may have reset to power-down); if it is still missing the IMU publishes without ``imu/mag``, the
+  ERROR stays, and the start-up (with the magnetometer sequence) is retried every ``mag_retry_interval_s``
+  (counted ``mag_retries``; each retry resets the chip, a gap of about one start-up in ``imu/data_raw``)
+  until the AK09916 answers again.
 
 The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi, an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` with an
@@ -319,6 +330,11 @@ class Icm20948Node(Node):
         self.stuck = StuckDetector(max(3, round(STUCK_AFTER_S * self.odr_hz)))
         self.frozen_check_samples = int(s["frozen_check_samples"])
         self.mag_stale_timeout_s = float(s["mag_stale_timeout_s"])
+        self.require_data_ready = bool(s["require_data_ready"])
+        self.not_ready_error_polls = int(s["not_ready_error_polls"])
+        self.mag_retry_interval_s = float(s["mag_retry_interval_s"])
+        self._not_ready_polls = 0  # consecutive polls without RAW_DATA_0_RDY
+        self._mag_retry_due_s: float | None = None
         self._repeats = 0
         self._last_block: bytes | None = None
         self._mag_fresh_s: float | None = None
@@ -549,6 +565,8 @@ class Icm20948Node(Node):
         self._mag_fresh_s = self._now_s() if self.mag_available else None
         if self.mag_available:
             self._mag_lost = False
+        self._mag_retry_due_s = (self._now_s() + self.mag_retry_interval_s
+                                 if self._mag_lost and not self.mag_available else None)
         if self.estimate_gyro_bias and self.bias_result is None:
             self.bias_estimator = GyroBiasEstimator(self.gyro_bias_duration_s,
                                                     STILL_STD_FACTOR * math.sqrt(self.gyro_var),
@@ -568,6 +586,7 @@ class Icm20948Node(Node):
         master = self.mag_mode_name == "i2c_master" and self.mag_available
         length = p.SENSOR_BLOCK_LENGTH + (p.AK09916_BLOCK_LENGTH if master else 0)
         self.raw.begin_batch()  # raw/icm20948: the poll's transactions in one message
+        ready = self._read_data_ready() if self.require_data_ready else None
         try:
             data = self._read(p.ACCEL_XOUT_H, length)
         except I2CError as exc:
@@ -598,8 +617,38 @@ class Icm20948Node(Node):
                 self.diag.count("mag_i2c_failure")
         if self.diag.state == "i2c error":
             self.diag.set_state("running", DiagnosticStatus.OK, "running")
-        self._process(data[:p.SENSOR_BLOCK_LENGTH], mag_block, stamp)
+        self._process(data[:p.SENSOR_BLOCK_LENGTH], mag_block, stamp, ready)
         self.raw.flush()
+
+    def _read_data_ready(self) -> bool | None:
+        """INT_STATUS_1.RAW_DATA_0_RDY (bank 0, 0x1A; clears on read), read before the data burst: True when a
+        new accel/gyro sample was written since the last read, None when the read failed (unknown: the sample
+        is then published, as without the gate; counted ``data_ready_read_failure``). INT_STATUS_1 is 19 bytes
+        before ACCEL_XOUT_H (0x2D), so it is a separate 1-byte read rather than part of the burst."""
+        try:
+            return bool(self._read(p.INT_STATUS_1)[0] & p.INT_STATUS_1_RAW_DATA_0_RDY)
+        except I2CError:  # a failed read leaves the bank unchanged (no re-select: the replay has no such write)
+            self.diag.count("data_ready_read_failure")
+            return None
+
+    def _data_ready_gate(self, ready: bool | None) -> bool:
+        """Count a poll without RAW_DATA_0_RDY (``not_ready``); ERROR ``data_ready`` after
+        ``not_ready_error_polls`` in a row, cleared by the next ready sample. Returns True when the sample may be
+        published (ready, or unknown)."""
+        if ready is False:
+            self.diag.count("not_ready")
+            self._not_ready_polls += 1
+            if self._not_ready_polls == self.not_ready_error_polls:
+                text = (f"data_ready: INT_STATUS_1.RAW_DATA_0_RDY not set for {self._not_ready_polls} consecutive "
+                        "polls: no new accel/gyro sample, nothing published")
+                self.diag.error("data_ready", text)
+                self.get_logger().error(f"ICM-20948 {text}")
+                self.diagnostics.publish()
+            return False
+        if self._not_ready_polls >= self.not_ready_error_polls:
+            self.diag.clear("data_ready")
+        self._not_ready_polls = 0
+        return True
 
     def _poll_failed(self, exc: Exception) -> None:
         self._bank = None
@@ -615,7 +664,7 @@ class Icm20948Node(Node):
         elif self.diag.state == "running":
             self.diag.set_state("i2c error", DiagnosticStatus.WARN, f"poll failed: {exc}")
 
-    def _process(self, block: bytes, mag_block: bytes | None, stamp) -> None:
+    def _process(self, block: bytes, mag_block: bytes | None, stamp, ready: bool | None = None) -> None:
         block = bytes(block)
         self._repeats = self._repeats + 1 if block == self._last_block else 0
         self._last_block = block
@@ -628,6 +677,8 @@ class Icm20948Node(Node):
         self.samples += 1
         if self._check_stuck(block):
             return  # a stuck sensor is not published (ERROR "stuck")
+        if not self._data_ready_gate(ready):
+            return  # the registers still hold the sample of an earlier poll (RAW_DATA_0_RDY not set)
         if sample.accel_saturated or sample.gyro_saturated:
             self.diag.count("saturated_samples")
         if self.bias_estimator is not None:
@@ -658,8 +709,15 @@ class Icm20948Node(Node):
         if mag_block is not None:
             self._publish_mag(p.parse_ak09916_block(mag_block), stamp_msg)
         self.diag.published()
-        if self.mag_available and self._mag_stale(self._now_s()):
+        now_s = self._now_s()
+        if self.mag_available and self._mag_stale(now_s):
             return
+        if self._mag_retry_due_s is not None and now_s >= self._mag_retry_due_s:
+            self._mag_retry_due_s = None
+            self.diag.count("mag_retries")
+            self.get_logger().warn(f"AK09916 still missing: re-initialising (every {self.mag_retry_interval_s:g} s)",
+                                   throttle_duration_sec=30.0)
+            self._start()
 
     def _mag_stale(self, now_s: float) -> bool:
         """True (and re-initialisation started) when no fresh magnetometer sample came for the timeout."""
