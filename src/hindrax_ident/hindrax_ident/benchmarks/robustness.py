@@ -37,7 +37,9 @@ I2C devices on the emulated bus, each node in its own rclpy context, polled ever
   then on); recover = unfreeze -> next ``imu/data_raw``.
 - chip reset (ICM-20948 power glitch): detect = glitch -> reset detected; recover = glitch -> first
   ``imu/data_raw`` after the re-initialisation.
-- magnetometer NACK (AK09916 behind the ICM's I2C master): detect = NACK onset -> ERROR ``magnetometer``.
+- magnetometer NACK (AK09916 behind the ICM's I2C master): detect = NACK onset -> ERROR ``magnetometer``;
+  recover = the AK09916 answers again (right after the failed re-initialisation) -> first ``imu/mag`` (the
+  node retries every ``sensors.icm20948.mag_retry_interval_s``).
 
 Run alone: ``python -m hindrax_ident.benchmarks.robustness`` (quick). ``make bench`` runs it full.
 """
@@ -446,10 +448,16 @@ def _icm_faults() -> list[dict]:
             lost = node.diag.counts().get("mag_lost", 0)
             emu.aux_connected = False
             detect = _until(lambda: node.diag.counts().get("mag_lost", 0) > lost, spin, 5, "magnetometer lost")
-            _until(lambda: node.running, spin, 5, "running without magnetometer")
-            out.append(_fault_row("magnetometer NACK (AK09916 via I2C master)", detect, None,
+            _until(lambda: node.running and not node.mag_available, spin, 5, "running without magnetometer")
+            mags = node.mag_samples
+            emu.aux_connected = True
+            recover = _until(lambda: node.mag_samples > mags, spin, 3 * node.mag_retry_interval_s + 5,
+                             "imu/mag again")
+            out.append(_fault_row("magnetometer NACK (AK09916 via I2C master)", detect, recover,
                                   "detect: NACK onset -> ERROR magnetometer (mag_stale_timeout_s 0.5 s; no "
-                                  "frozen imu/mag published meanwhile); IMU continues without imu/mag"))
+                                  "frozen imu/mag published meanwhile); IMU continues without imu/mag; recover: "
+                                  "AK09916 answers again (just after the failed re-initialisation) -> first "
+                                  f"imu/mag (retried every mag_retry_interval_s {node.mag_retry_interval_s:g} s)"))
         finally:
             ex.shutdown()
             node.destroy_node()
