@@ -4,7 +4,7 @@ the drivers re-publish the same parsed messages (same values, same count)."""
 import pytest
 
 from hindrax_drivers.config import default_config_path
-from hindrax_drivers.recording.make_test_bags import record_simulated_run
+from hindrax_ident.sim.record_bag import record_simulated_run
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.replay_devices import (PARSED_TOPICS, DriverReplay, compare_parsed,
                                                       recorded_parsed)

@@ -33,7 +33,7 @@ ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interf
                 "domain_coordinator", "hindrax_msgs", "hindrax_drivers", "hindrax_ident"}
 #: a development tool inside hindrax_drivers that drives the hindrax_ident graph to regenerate test bags; a
 #: package dependency on hindrax_ident would be a cycle (dependencies flow msgs <- drivers <- ident)
-DEV_TOOLS = {"hindrax_drivers/hindrax_drivers/recording/make_test_bags.py"}
+DEV_TOOLS: set[str] = set()
 
 
 def imports(files) -> set[str]:
