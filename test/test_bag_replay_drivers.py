@@ -59,7 +59,7 @@ def test_raw_device_data_replayed_through_fresh_drivers_reproduces_the_parsed_to
 
 def test_committed_simulator_bag_replays_through_fresh_drivers():
     """The small bag committed under src/hindrax_drivers/test/data (recorded from the simulator by
-    ``python -m hindrax_drivers.recording.make_test_bags --from-sim``) drives fresh drivers to the same parsed
+    ``python -m hindrax_ident.sim.record_bag``) drives fresh drivers to the same parsed
     messages: the regression guard for any change in a driver's parsing."""
     from pathlib import Path
 
