@@ -260,7 +260,7 @@ def write_bag(bag_dir: Path, duration_s: float, options: WriterOptions) -> int:
 
 
 
-__all__ = ["STREAMS", "synthetic_messages", "messages_per_stream", "write_bag", "BAGS", "default_output_dir",
+__all__ = ["STREAMS", "synthetic_messages", "messages_per_stream", "write_bag", "BAGS", "default_output_dir", "write_bags",
            "main"]
 
 def default_output_dir() -> Path:
@@ -272,13 +272,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="make_test_bags", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(default_output_dir()), help="directory to write the bags into")
     args = parser.parse_args(argv)
-    out = Path(args.out)
+    write_bags(Path(args.out), BAGS, write_bag)
+    return 0
+
+
+def write_bags(out: Path, bags: dict[str, tuple[float, Any]], write: Callable[[Path, float, Any], int]) -> None:
+    """Write every bag of ``bags`` (name -> (duration s, argument of ``write``)) into ``out`` with ``write``
+    (returns the message count) and print one line per bag: its path, messages and size."""
     out.mkdir(parents=True, exist_ok=True)
-    for name, (duration_s, options) in BAGS.items():
-        n = write_bag(out / name, duration_s, options)
+    for name, (duration_s, arg) in bags.items():
+        n = write(out / name, duration_s, arg)
         size = sum(p.stat().st_size for p in (out / name).iterdir())
         print(f"{out / name}: {n} messages, {size / 1024:.1f} KiB")
-    return 0
 
 
 if __name__ == "__main__":

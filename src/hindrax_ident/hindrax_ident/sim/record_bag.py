@@ -33,7 +33,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from hindrax_drivers.recording.make_test_bags import default_output_dir
+from hindrax_drivers.recording.make_test_bags import default_output_dir, write_bags
 
 __all__ = ["SIM_BAGS", "SIM_SEED", "START_POSITION_NED_M", "record_simulated_run", "write_sim_bag", "main"]
 
@@ -155,12 +155,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="record_bag", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(default_output_dir()), help="directory to write the bags into")
     args = parser.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    for name, (duration_s, overrides) in SIM_BAGS.items():
-        n = write_sim_bag(out / name, duration_s, overrides)
-        size = sum(p.stat().st_size for p in (out / name).iterdir())
-        print(f"{out / name}: {n} messages, {size / 1024:.1f} KiB")
+    write_bags(Path(args.out), SIM_BAGS, write_sim_bag)
     return 0
 
 
