@@ -81,17 +81,7 @@ def run(quick: bool = False) -> list[dict]:
                 node = rclpy.create_node("recorder_bench", context=ctx)
                 ex = SingleThreadedExecutor(context=ctx)
                 ex.add_node(node)
-                counts: dict[str, int] = {}
-                lock = threading.Lock()
-
-                def on_diag(msg: DiagnosticArray) -> None:
-                    with lock:
-                        for st in msg.status:
-                            for kv in st.values:
-                                if kv.key.startswith("topic:"):
-                                    counts[kv.key[6:]] = int(kv.value)
-
-                node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+                counts, lock = subscribe_recorder_counts(node, 10)
                 spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
 
                 def publishers(spec):
@@ -188,3 +178,22 @@ def run(quick: bool = False) -> list[dict]:
 if __name__ == "__main__":
     for r in run(quick="--quick" in sys.argv):
         print(r)
+
+
+def subscribe_recorder_counts(node, depth: int) -> tuple[dict[str, int], "threading.Lock"]:
+    """Subscribe ``node`` to ``/diagnostics`` and keep the recorder's per-topic message counts (its
+    ``topic:<name>`` values) in the returned dict, guarded by the returned lock."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    counts: dict[str, int] = {}
+    lock = threading.Lock()
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        with lock:
+            for st in msg.status:
+                for kv in st.values:
+                    if kv.key.startswith("topic:"):
+                        counts[kv.key[6:]] = int(kv.value)
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, depth)
+    return counts, lock

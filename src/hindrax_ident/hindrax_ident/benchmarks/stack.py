@@ -330,17 +330,9 @@ def _launch(duration_s: float, tmp: Path) -> dict:
                 procs[name] = subprocess.Popen([py, *args], env=e, stdout=logs[name], stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
-                counts: dict[str, int] = {}
-                lock = threading.Lock()
+                from .recorder import subscribe_recorder_counts
 
-                def on_diag(msg: DiagnosticArray) -> None:
-                    with lock:
-                        for st in msg.status:
-                            for kv in st.values:
-                                if kv.key.startswith("topic:"):
-                                    counts[kv.key[6:]] = int(kv.value)
-
-                probe.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 50)
+                counts, lock = subscribe_recorder_counts(probe, 50)
                 wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
                 arm = probe.create_client(SetArmed, "esc/set_armed")
                 action = ActionClient(probe, RunIdentification, "run_identification")
