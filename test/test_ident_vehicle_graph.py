@@ -90,8 +90,11 @@ def test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral(
                         return
                     seen.append(line)
 
-            wait_until(lambda: (read() or any(s.startswith("campaign started") for s in seen)), 60, read,
-                       "the goal accepted")
+            try:
+                wait_until(lambda: (read() or any(s.startswith("campaign started") for s in seen)), 60, read,
+                           "the goal accepted")
+            except AssertionError as exc:
+                raise AssertionError(f"{exc}; hindrax ident start printed:\n{''.join(seen)}") from None
             # hindrax ident status: where the campaign is (diving and settling, or already in the surge runs)
             st = subprocess.Popen([hindrax, "ident", "status", "--timeout", "30"], env=child_env(),
                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -97,35 +97,39 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
     from rclpy.action import ActionClient
 
+    from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
     from hindrax_msgs.action import RunIdentification
 
     client = ActionClient(node, RunIdentification, "run_identification")
+    goals = GoalSender(node, client, "run_identification")
+    spin = lambda: executor.spin_once(timeout_sec=0.1)  # noqa: E731
     deadline = time.monotonic() + server_timeout_s
     while not client.server_is_ready():
         if time.monotonic() > deadline:
             raise CommandError(f"no run_identification server within {server_timeout_s:g} s: is the stack running "
                                "(hindrax bringup)?")
-        executor.spin_once(timeout_sec=0.1)
+        spin()
     goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions)
-    sent = client.send_goal_async(goal, feedback_callback=lambda m: print_line(format_feedback(m.feedback)))
-    while not sent.done():
-        executor.spin_once(timeout_sec=0.1)
-    handle = sent.result()
+    try:
+        handle = goals.send(goal, spin, max(server_timeout_s, 5.0),
+                            feedback_callback=lambda m: print_line(format_feedback(m.feedback)))
+    except GoalNotAnswered as exc:
+        raise CommandError(f"run_identification: {exc}; the node's status: hindrax ident status") from None
     if not handle.accepted:
         raise CommandError("goal rejected: a campaign is already running or the goal is invalid "
                            "(see the identification node's log)")
     print_line(f"campaign started: {', '.join(dofs) or 'all DOFs'}; Ctrl-C cancels")
-    result = handle.get_result_async()
     cancelled = False
-    while not result.done():
+    while (result := goals.poll_result(handle)) is None:
         if not cancelled and cancel_requested():
             cancelled = True
             print_line("cancelling: the vehicle is brought to a zero wrench and held ...")
-            handle.cancel_goal_async()
+        if cancelled:
+            goals.cancel(handle)
         if cancelled and give_up():
             return False, "stopped waiting for the end of the cancelled goal"
-        executor.spin_once(timeout_sec=0.1)
-    res = result.result().result
+        spin()
+    res = result.result
     for e in res.estimates:
         values = ", ".join(f"{n} {v:.4g}" for n, v in zip(e.parameter_names, e.values))
         print_line(f"  {e.dof}: {values}")

@@ -66,6 +66,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     import rclpy
     from rclpy.action import ActionClient
 
+    from hindrax_drivers.action_goal import GoalSender
     from hindrax_drivers.conditions import ros_context, wait_until
     from hindrax_msgs.action import RunIdentification
     from hindrax_msgs.msg import ThrusterPwm
@@ -92,6 +93,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                                    lambda m: armed_state.__setitem__(0, bool(m.armed)), 10)
         arm = client.create_client(SetArmed, "esc/set_armed")
         action = ActionClient(client, RunIdentification, "run_identification")
+        goals = GoalSender(client, action, "run_identification")  # survives a lost goal or result response
         spin = lambda: graph.spin_once(0.01)  # noqa: E731
         try:
             say(f"graph up: {', '.join(graph.nodes)}; recording to {bag_dir}")
@@ -121,17 +123,13 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             goal = RunIdentification.Goal(dofs=list(dofs), levels_per_dof=int(levels or 0),
                                           level_fractions=[float(x) for x in level_fractions])
             graph.freeze_time()
-            gf = action.send_goal_async(goal, feedback_callback=on_feedback)
-            wait_until(gf.done, 30, spin, "goal acceptance")
+            handle = goals.send(goal, spin, 30, feedback_callback=on_feedback)
             graph.resume_time()
-            handle = gf.result()
             if not handle.accepted:
                 outcome.message = "goal rejected by the identification node"
                 say(outcome.message)
                 return outcome
-            rf = handle.get_result_async()
-            wait_until(rf.done, deadline_s, spin, "identification campaign")
-            res = rf.result().result
+            res = wait_until(lambda: goals.poll_result(handle), deadline_s, spin, "identification campaign").result
             outcome.success, outcome.message, outcome.estimates = bool(res.success), res.message, list(res.estimates)
             say(f"campaign finished after {sim.t_s:.0f} s simulated: {res.message}")
             graph.freeze_time()

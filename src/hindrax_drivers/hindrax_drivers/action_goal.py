@@ -1,0 +1,145 @@
+"""Sending an action goal and fetching its result when a request or response can be lost.
+
+Why this module exists: rclpy's :class:`rclpy.action.ActionClient` sends a goal request once and waits on its
+response for ever. On Fast DDS (the Jazzy default RMW) a service response is dropped without an error when the
+server has not yet matched the client's reply reader (rmw_fastrtps ``__rmw_send_response``: the client is taken
+as gone, the call returns OK), which happens shortly after discovery on a loaded machine: ``server_is_ready()``
+is true on the client's side, the server accepts the goal and starts the campaign, and the client never learns
+so. No maintained library covers this; the ROS 2 answer is to observe the action's status topic, which the server
+publishes (transient local) on every goal state change (ROS 2 design, "Actions": ``_action/status``).
+
+:class:`GoalSender` does that:
+
+- the goal is sent with a client-chosen UUID; while neither a response nor the UUID on the status topic has
+  arrived, the same request (same UUID) is sent again every ``resend_every_s``. A server that got an earlier copy
+  rejects the duplicate UUID (rclpy ``ActionServer._execute_goal_request``) and the status topic tells that the
+  goal runs, so a goal is never started twice;
+- a goal seen on the status topic without a response is accepted: a :class:`~rclpy.action.client.ClientGoalHandle`
+  is built for it, so its result and cancel calls work as usual;
+- :meth:`GoalSender.cancel` sends the cancel request again until the status topic shows the goal cancelling;
+- :meth:`GoalSender.poll_result` requests the result again when the status topic says the goal ended and no
+  result came within ``resend_every_s`` (``get_result`` is idempotent).
+
+Times are wall-clock seconds (``time.monotonic``); spinning is the caller's (one executor spin per call of
+``spin``), as in :func:`hindrax_drivers.conditions.wait_until`.
+"""
+from __future__ import annotations
+
+import time
+import uuid as uuidlib
+from typing import Any, Callable
+
+__all__ = ["GoalNotAnswered", "GoalSender"]
+
+#: action_msgs/GoalStatus codes: CANCELING, and the ended goals (SUCCEEDED, CANCELED, ABORTED)
+_CANCELING = 3
+_ENDED = (4, 5, 6)
+
+
+class GoalNotAnswered(RuntimeError):
+    """No response and no status for a goal within the caller's timeout."""
+
+
+class GoalSender:
+    """Goals of one :class:`rclpy.action.ActionClient` sent and followed through the action's status topic.
+
+    node: the client's node (a subscription to ``<action_name>/_action/status`` is created on it);
+    client: the ActionClient; action_name: the name the client was created with (resolved the same way);
+    resend_every_s: how long to wait for a response or a status before sending the request again.
+    """
+
+    def __init__(self, node: Any, client: Any, action_name: str, resend_every_s: float = 2.0) -> None:
+        from action_msgs.msg import GoalStatusArray
+        from rclpy.qos import qos_profile_action_status_default
+
+        self._node, self._client = node, client
+        self.resend_every_s = float(resend_every_s)
+        self._status: dict[bytes, int] = {}
+        self._ended_at: dict[bytes, float] = {}
+        self._result_requested_at: dict[bytes, float] = {}
+        self._results: dict[bytes, Any] = {}
+        self._cancel_requested_at: dict[bytes, float] = {}
+        self.resends = 0  # goal requests sent again (for the caller's log)
+        self._sub = node.create_subscription(GoalStatusArray, f"{action_name}/_action/status", self._on_status,
+                                             qos_profile_action_status_default)
+
+    def _on_status(self, msg: Any) -> None:
+        now = time.monotonic()
+        for s in msg.status_list:
+            key = bytes(s.goal_info.goal_id.uuid)
+            self._status[key] = int(s.status)
+            if int(s.status) in _ENDED:
+                self._ended_at.setdefault(key, now)
+
+    def status(self, handle_or_uuid: Any) -> int | None:
+        """Last status code seen on the status topic for a goal (action_msgs/GoalStatus), or None."""
+        key = bytes(getattr(handle_or_uuid, "goal_id", handle_or_uuid).uuid)
+        return self._status.get(key)
+
+    def send(self, goal: Any, spin: Callable[[], None], timeout_s: float,
+             feedback_callback: Callable[[Any], None] | None = None) -> Any:
+        """Send ``goal`` and return its ClientGoalHandle once the server answered or the status topic shows it.
+
+        Returns a handle whose ``accepted`` is False when the server rejected the goal. Raises
+        :class:`GoalNotAnswered` when neither came within ``timeout_s`` seconds (the request is sent
+        ``1 + timeout_s / resend_every_s`` times at most).
+        """
+        from rclpy.action.client import ClientGoalHandle
+        from unique_identifier_msgs.msg import UUID
+
+        goal_id = UUID(uuid=list(uuidlib.uuid4().bytes))
+        key = bytes(goal_id.uuid)
+        futures = [self._client.send_goal_async(goal, feedback_callback=feedback_callback, goal_uuid=goal_id)]
+        t0 = last = time.monotonic()
+        while True:
+            accepted = [f.result() for f in futures if f.done() and f.result().accepted]
+            if accepted:
+                return accepted[0]
+            if key in self._status:  # running (or already ended) on the server: our goal, response lost
+                response = self._client._action_type.Impl.SendGoalService.Response(accepted=True)
+                return ClientGoalHandle(self._client, goal_id, response)
+            now = time.monotonic()
+            rejected = [f.result() for f in futures if f.done()]
+            if rejected and (len(futures) == 1 or now - last > self.resend_every_s):
+                return rejected[0]  # a real rejection: no status for the UUID after a resend either
+            if now - t0 > timeout_s:
+                raise GoalNotAnswered(f"no answer to the goal within {timeout_s:g} s "
+                                      f"({len(futures)} request(s) sent)")
+            if not rejected and now - last > self.resend_every_s:
+                futures.append(self._client.send_goal_async(goal, feedback_callback=feedback_callback,
+                                                            goal_uuid=goal_id))
+                self.resends += 1
+                last = now
+            spin()
+
+    def poll_result(self, handle: Any) -> Any | None:
+        """The goal's result response (``.status``, ``.result``) once it arrived, else None.
+
+        Call once per spin. Requests the result on the first call, and again when the status topic has shown the
+        goal ended for more than ``resend_every_s`` without a result arriving.
+        """
+        key = bytes(handle.goal_id.uuid)
+        if key in self._results and self._results[key].done():
+            return self._results[key].result()
+        now = time.monotonic()
+        asked = self._result_requested_at.get(key)
+        ended = self._ended_at.get(key)
+        if asked is None or (ended is not None and now - max(asked, ended) > self.resend_every_s):
+            self._results[key] = handle.get_result_async()
+            self._result_requested_at[key] = now
+        return None
+
+    def cancel(self, handle: Any) -> None:
+        """Request the goal's cancellation; call once per spin while waiting for its end. The request is sent
+        again every ``resend_every_s`` until the status topic shows the goal cancelling or ended."""
+        key = bytes(handle.goal_id.uuid)
+        if self._status.get(key) in (_CANCELING, *_ENDED):
+            return
+        now = time.monotonic()
+        if now - self._cancel_requested_at.get(key, -float("inf")) > self.resend_every_s:
+            handle.cancel_goal_async()
+            self._cancel_requested_at[key] = now
+
+    def destroy(self) -> None:
+        """Remove the status subscription from the node."""
+        self._node.destroy_subscription(self._sub)
