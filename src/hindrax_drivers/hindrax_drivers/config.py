@@ -46,7 +46,7 @@ ROTATIONAL_DOFS = DOFS[3:]
 #: Sections a configuration file may contain (top level under ``ros__parameters``).
 SECTIONS: tuple[str, ...] = (
     "vehicle", "environment", "hydrodynamics", "thrusters", "esc", "lights", "sensors", "pool", "limits",
-    "identification", "simulation", "recording", "supervisor",
+    "identification", "simulation", "recording", "supervisor", "calibration",
 )
 
 _FLOAT = "float"
@@ -300,6 +300,12 @@ SCHEMA.update({
                                               0.01, 1.5),
     "identification.max_level_duration_s": _f("longest time one level is held, s", 1.0, 600.0),
     "identification.converged_relative_std": _f("converged when every std/|value| is below this", 0.001, 1.0),
+    # --- calibration: known forces of the campaign's reference steps (docs/identification.md §6) ---
+    "calibration.ballast_mass_kg": _f("mass of the ballast hung on the vehicle in the ballast step, kg", 0.01, 50.0),
+    "calibration.ballast_volume_m3": _f("displaced volume of that ballast, m^3 (weight in water (m - rho V) g must be "
+                                        "> 0)", 0.0, 0.05),
+    "calibration.line_pull_force_n": _f("horizontal force of the line over the pool-edge pulley in the line_pull "
+                                        "step (e.g. a hanging mass times g), N", 0.1, 200.0),
     # --- simulation (docs/architecture.md §6) ---
     "simulation.step_s": _f("fixed integration step, s", 1e-4, 0.05),
     "simulation.real_time_factor": _f("simulated seconds per wall second (0 = as fast as possible)", 0.0, 1000.0),
@@ -601,6 +607,13 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
                  ("simulation.sensors.dvl75.min_altitude_m", "simulation.sensors.dvl75.max_altitude_m")):
         if a in c and b in c and c[a] > c[b]:
             issues.append(ConfigIssue(a, c[a], f"at most {b} ({c[b]:g})"))
+    if "calibration.ballast_mass_kg" in c and "calibration.ballast_volume_m3" in c:
+        rho = float(c.get("environment.water_density_kg_m3", 1000.0))
+        v_max = c["calibration.ballast_mass_kg"] / rho
+        if c["calibration.ballast_volume_m3"] >= v_max:
+            issues.append(ConfigIssue("calibration.ballast_volume_m3", c["calibration.ballast_volume_m3"],
+                                      f"below calibration.ballast_mass_kg / water density = {v_max:.4g} (the ballast "
+                                      "must sink)"))
     if "pool.depth_m" in c and "limits.max_depth_m" in c and c["limits.max_depth_m"] > c["pool.depth_m"]:
         issues.append(ConfigIssue("limits.max_depth_m", c["limits.max_depth_m"],
                                   f"at most pool.depth_m ({c['pool.depth_m']:g})"))

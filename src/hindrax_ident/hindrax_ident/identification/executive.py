@@ -59,10 +59,21 @@ from .maneuvers import (DOF_INDEX, DepthEstimator, HoldController, PoolBox, Sens
 from .signals import STILL_MESSAGE
 
 __all__ = ["CampaignAbort", "CampaignRecord", "Executive", "ExecutiveStatus", "TickInput", "ordered_samples",
-           "CALIBRATION_STEPS"]
+           "CALIBRATION_STEPS", "calibration_forces"]
 
 #: Known-force calibration steps the executive can run before the ladders (issue 17 item 1).
 CALIBRATION_STEPS = ("ballast", "line_pull", "tilt_decay")
+
+
+def calibration_forces(cfg: VehicleConfig) -> tuple[float, float]:
+    """(ballast weight in water (m - rho V) g, line pull force), N, from the vehicle file's ``calibration.*`` keys
+    (``ballast_mass_kg``, ``ballast_volume_m3``, ``line_pull_force_n``; validated there: the ballast sinks)."""
+    f = cfg.flat
+    w = (float(f["calibration.ballast_mass_kg"]) - float(f["calibration.ballast_volume_m3"])
+         * float(cfg.water_density_kg_m3)) * float(cfg.gravity_m_s2)
+    return w, float(f["calibration.line_pull_force_n"])
+
+
 #: tilt_decay: tilt angle aimed at (rad), ramp and hold before the release, and the recorded decay (s).
 TILT_DECAY_ANGLE_RAD = 0.25
 TILT_DECAY_RAMP_S = 6.0
@@ -220,6 +231,9 @@ class Executive:
         #: what a calibration step waits for the operator to do ("" when not waiting): attach_ballast,
         #: remove_ballast, apply_line_pull_surge / _sway (line along the body's +x / +y), release_line_surge / _sway
         self.awaiting = ""
+        #: the operator's instruction while :attr:`awaiting` ("" otherwise), e.g. "calibration: attach the ballast
+        #: (8.56 N in water), then call continue"
+        self.prompt = ""
         self._continue = False
         self.calibration: dict = {}
         self.decays: dict[str, tuple[float, float]] = {}
@@ -355,6 +369,7 @@ class Executive:
 
     def _finish(self) -> None:
         self.finished = True
+        self.awaiting, self.prompt = "", ""  # nothing waits for the operator any more
         self._active = -1
         self._end_run()
         self.f_lag = np.zeros_like(self.f_lag)  # the caller commands neutral thrust
@@ -614,13 +629,14 @@ class Executive:
     def _wait_operator(self, what: str, prompt: str, max_s: float = 900.0) -> Wrenches:
         """Hold (all DOFs) until :meth:`operator_continue`; aborts after ``max_s``."""
         self.awaiting, self._continue = what, False
-        self._say(f"{prompt}, then call continue")
+        self.prompt = f"{prompt}, then call continue"
+        self._say(self.prompt)
         t0 = self.t_s
         while not self._continue:
             if self.t_s - t0 > max_s:
                 raise CampaignAbort(f"no continue within {max_s:g} s ({what})")
             yield self.ctrl.wrench(self.state, (), self.tick_s)
-        self.awaiting, self._continue = "", False
+        self.awaiting, self._continue, self.prompt = "", False, ""
 
     def _mean_holding_force(self, k: int, t_from: float) -> tuple[float, float]:
         """Mean of the recorded (lagged) thrust-model force on axis k since ``t_from`` and the std of that mean by
