@@ -34,6 +34,11 @@ goal's explicit fractions of the DOF's authority) with the other DOFs held by :c
   ``pitch_test_angle_rad``, then return to level ([Hindrax-Drag] (seed 003) §4.2), both directions.
 * yaw: one turn (2 pi) per run ([Hindrax-Drag] (seed 003) §4.2: 360 deg rotations), both directions.
 
+With ``identification.excitation`` (or the ``excitation`` argument) ``multisine``, ``prbs`` or ``chirp`` instead of
+the default ``ladder``, each DOF gets one broadband run of ``identification.excitation_duration_s`` instead of its
+ladder (:meth:`Executive._excite`, signals and pool-box shaping in :mod:`.excitation`), identified by the same
+output-error fit.
+
 Stops (:class:`CampaignAbort`, the record says why): a limit (``limits.*``: depth, altitude, roll, pitch; the
 pool box grown by half ``pool.margin_m``), no valid DVL velocity for ``dvl_lock_timeout_s`` during surge or sway,
 the ESC output disarmed, a cancel request. The caller then commands neutral thrust.
@@ -53,7 +58,8 @@ import numpy as np
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 
-from .estimators import OnlineDofEstimator, measurement_settings
+from .estimators import OnlineDofEstimator, measurement_settings, truth_parameters
+from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS, BoxShaping, design_band, design_signal
 from .maneuvers import (DOF_INDEX, DepthEstimator, HoldController, PoolBox, SensorState, dof_authority,
                         level_ladder, prior_inertia, wrap_angle)
 from .signals import STILL_MESSAGE
@@ -202,15 +208,21 @@ class Executive:
     N: (m - rho V) g of the ballast), ``line_pull`` needs ``line_pull_n`` (> 0, N: the horizontal force of the line
     over the pulley, e.g. the weight of a hanging mass). While a step waits for the operator, :attr:`awaiting`
     names what to do and :meth:`operator_continue` resumes it.
+    excitation: ``ladder`` (default: ``identification.excitation``, else ladder) or a broadband signal of
+    :data:`~.excitation.BROADBAND`; excitation_duration_s: length of that run per DOF (default
+    ``identification.excitation_duration_s``, else 60 s); excitation_amplitude_fraction: its peak as a fraction of
+    the DOF's smaller authority.
     Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0, an unknown
-    calibration step or a missing ballast weight.
+    calibration step or a missing ballast weight, an unknown excitation or a non-positive duration.
     """
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None, *,
                  tick_s: float, fractions: Sequence[float] | None = None, max_level_duration_s: float | None = None,
                  heave_repeats: int = 3, dvl_lock_timeout_s: float = 3.0,
                  progress: Callable[[str], None] | None = None, calibrate: Sequence[str] = (),
-                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0) -> None:
+                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
+                 excitation_duration_s: float | None = None,
+                 excitation_amplitude_fraction: float = DEFAULT_AMPLITUDE_FRACTION) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -228,6 +240,18 @@ class Executive:
         self.calibrate = list(calibrate)
         self.ballast_weight_in_water_n = float(ballast_weight_in_water_n)
         self.line_pull_n = float(line_pull_n)
+        # broadband excitation instead of the ladder (issue 18 item 5; :meth:`_excite`, :mod:`.excitation`)
+        fl = cfg.flat
+        self.excitation = str(fl.get("identification.excitation", "ladder") if excitation is None else excitation)
+        if self.excitation not in EXCITATIONS:
+            raise ValueError(f"excitation {self.excitation!r}: choose from {', '.join(EXCITATIONS)}")
+        self.excitation_duration_s = float(fl.get("identification.excitation_duration_s", 60.0)
+                                           if excitation_duration_s is None else excitation_duration_s)
+        if not (math.isfinite(self.excitation_duration_s) and self.excitation_duration_s > 0):
+            raise ValueError(f"excitation_duration_s must be > 0 s, got {self.excitation_duration_s}")
+        if not (0.0 < excitation_amplitude_fraction <= 1.0):
+            raise ValueError(f"excitation_amplitude_fraction must be in (0, 1], got {excitation_amplitude_fraction}")
+        self.excitation_amplitude_fraction = float(excitation_amplitude_fraction)
         #: what a calibration step waits for the operator to do ("" when not waiting): attach_ballast,
         #: remove_ballast, apply_line_pull_surge / _sway (line along the body's +x / +y), release_line_surge / _sway
         self.awaiting = ""
@@ -766,13 +790,94 @@ class Executive:
             self.levels[dof] = ladder
             t0 = self.t_s
             self._active = DOF_INDEX[dof]
-            if dof in ("surge", "sway", "heave"):
+            if self.excitation in BROADBAND:
+                yield from self._excite(dof)
+            elif dof in ("surge", "sway", "heave"):
                 yield from self._translation(dof, ladder)
             else:
                 yield from self._rotation(dof, ladder)
             self._active = -1
             self.windows[dof] = (t0, self.t_s)
             self._say(f"{dof}: done ({self.t_s - t0:.0f} s of pool time)")
+
+    def excitation_design(self, dof: str):
+        """(signal, band, shaping) of the broadband run of one DOF (:mod:`.excitation`): amplitude
+        ``excitation_amplitude_fraction`` of the DOF's smaller authority, band from the vehicle file's inertia and
+        damping (:func:`~.excitation.design_band`, capped by the thruster lag), room L from the box centre to the
+        box along the axis (surge/sway: along the start heading, less 0.2 m; heave: half the box depth range less
+        0.05 m; roll/pitch: the test angle; yaw: pi/2 from the start heading), PD bandwidth half the lowest line."""
+        k = DOF_INDEX[dof]
+        lim = min(self.authority[dof])
+        amp = self.excitation_amplitude_fraction * lim
+        tp = truth_parameters(self.cfg, dof)  # the vehicle file's values (the belief, not the pool's truth)
+        kq = tp.get("quadratic_damping", 0.5 * (tp.get("quadratic_damping_positive", 0.0)
+                                               + tp.get("quadratic_damping_negative", 0.0)))
+        kl = tp.get("linear_damping", 0.5 * (tp.get("linear_damping_positive", 0.0)
+                                            + tp.get("linear_damping_negative", 0.0)))
+        m = prior_inertia(self.cfg, dof)
+        band = design_band(m, kl, kq, amp, self.time_constant_s)
+        sig = design_signal(self.excitation, amp, band, self.excitation_duration_s)
+        if k < 2:
+            psi0 = self.ctrl.heading_setpoint_rad
+            axis = np.array([math.cos(psi0), math.sin(psi0), 0.0]) if k == 0 else \
+                np.array([-math.sin(psi0), math.cos(psi0), 0.0])
+            half = max(0.1, self.box.room_m(self.box.centre, axis) - 0.2)
+        elif k == 2:
+            half = max(0.05, 0.5 * (self.box.z_max - self.box.z_min) - 0.05)
+        elif k == 5:
+            half = 0.5 * math.pi
+        else:
+            half = float(self.cfg.flat[f"identification.{dof}_test_angle_rad"])
+        shaping = BoxShaping(half, m, lim, math.pi * band.f_min_hz, self.tick_s)
+        return sig, band, shaping
+
+    def _excite(self, dof: str) -> Wrenches:
+        """One broadband run of ``excitation_duration_s`` on ``dof`` (issue 18 item 5) instead of the ladder: the
+        other DOFs held, the DOF under test gets the signal through the :class:`~.excitation.BoxShaping` of its
+        displacement from the box centre (surge/sway: dead-reckoned position along the start-heading axis; heave:
+        depth estimate, plus the net-buoyancy feed-forward; roll/pitch: angle; yaw: heading from the start
+        heading); then the DOF is held still again. The record holds one run (``level`` = the total force
+        commanded on the axis each tick); the DOF is identified by the output-error fit
+        (:func:`~.estimators.identify_dof`) like a ladder."""
+        k = DOF_INDEX[dof]
+        sig, band, shaping = self.excitation_design(dof)
+        self.levels[dof] = [float(sig.amplitude)]
+        psi0 = self.ctrl.heading_setpoint_rad
+        c = self.box.centre
+        axis = {0: np.array([math.cos(psi0), math.sin(psi0)]), 1: np.array([-math.sin(psi0), math.cos(psi0)])}
+        self._say(f"{dof}: {self.excitation} excitation {self.excitation_duration_s:.0f} s, peak "
+                  f"{sig.amplitude:.2f}, band {band.f_min_hz:.3f}-{band.f_max_hz:.2f} Hz")
+        self._start_run(dof, 0.0)
+        t0 = self.t_s
+        while self.t_s - t0 < self.excitation_duration_s - 1e-9:
+            if k < 2:
+                e = float(np.nan_to_num(self.state.position_ned_m[:2] - c[:2]) @ axis[k])
+            elif k == 2:
+                d = self.ctrl.depth_estimate_m if math.isfinite(self.ctrl.depth_estimate_m) else self.state.depth_m
+                e = float(np.nan_to_num(d - c[2]))
+            elif k == 5:
+                e = wrap_angle(float(np.nan_to_num(self.state.rpy_rad[2])) - psi0)
+            else:
+                e = float(np.nan_to_num(self.state.rpy_rad[k - 3]))
+            f = shaping.force(float(sig.value(self.t_s - t0)), e, self._axis_velocity(k))
+            if k == 2:
+                f += self.ctrl.net_buoyancy_n
+            self._level = f
+            w = np.asarray(self.ctrl.wrench(self.state, (dof,), self.tick_s), dtype=float)
+            w[k] = f
+            yield w
+        self._end_run()
+        if k == 2:
+            self.ctrl.depth_setpoint_m = float(np.clip(self.state.depth_m, self.box.z_min, self.box.z_max))
+            self.ctrl.reset_integral()
+        elif k == 5:
+            self.ctrl.heading_setpoint_rad = float(np.nan_to_num(self.state.rpy_rad[2]))
+        yield from self._wait_still(k, 0.05, 8.0)
+        yield from self._hold(0.5)
+        if k == 2:
+            self.ctrl.depth_setpoint_m = self.depth_hold_m
+        elif k == 5:
+            self.ctrl.heading_setpoint_rad = psi0
 
     def ladder(self, dof: str) -> list[float]:
         """Levels of one DOF (N or N m): the explicit fractions times the DOF's smaller authority, else
