@@ -254,6 +254,16 @@ class Simulator:
             self.step(pulse_widths_us if i == 0 else None, external_wrench_frd if i == 0 else None, armed)
         return n
 
+    def set_external_wrench(self, wrench_frd: Sequence[float]) -> None:
+        """Hold ``wrench_frd`` (6,) [X Y Z K M N] about the body origin (FRD, N, N m) from the next step on, as
+        :meth:`step`'s ``external_wrench_frd`` does, for a plant stepped by someone else (the simulator node): e.g.
+        the known force of a calibration step (:mod:`hindrax_ident.identification.graph_campaign`). Raises
+        ``ValueError`` unless 6 finite numbers."""
+        w = [float(x) for x in wrench_frd]
+        if len(w) != 6 or not all(math.isfinite(x) for x in w):
+            raise ValueError(f"external_wrench_frd must be 6 finite numbers, got {wrench_frd!r}")
+        self._external = w
+
     # ------------------------------------------------------------------ truth
     @property
     def t_s(self) -> float:
