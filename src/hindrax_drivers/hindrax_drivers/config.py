@@ -300,6 +300,13 @@ SCHEMA.update({
                                               0.01, 1.5),
     "identification.max_level_duration_s": _f("longest time one level is held, s", 1.0, 600.0),
     "identification.converged_relative_std": _f("converged when every std/|value| is below this", 0.001, 1.0),
+    "identification.prior_std_rel": _f("1-sigma of the empirical priors in the batch fit, as a fraction of the prior "
+                                       "value (0 = no prior; docs/identification.md §6.3)", 0.0, 100.0),
+    "identification.excitation": _s("force input per DOF: the constant-thrust ladder, or one broadband run shaped to "
+                                    "stay in the pool box (hindrax_ident identification/excitation.py)",
+                                    ("ladder", "multisine", "prbs", "chirp")),
+    "identification.excitation_duration_s": _f("length of the broadband run per DOF (excitation not ladder), s",
+                                               5.0, 1800.0),
     # --- calibration: known forces of the campaign's reference steps (docs/identification.md §6) ---
     "calibration.ballast_mass_kg": _f("mass of the ballast hung on the vehicle in the ballast step, kg", 0.01, 50.0),
     "calibration.ballast_volume_m3": _f("displaced volume of that ballast, m^3 (weight in water (m - rho V) g must be "
@@ -328,7 +335,8 @@ SCHEMA.update({
 OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics", "sensors.dvl75.noise_std_m_s",
                                       "sensors.dvl75.scale_error_fraction", "sensors.dvl75.attitude_noise_std_rad",
                                       "sensors.ms5837.noise_std_pa", "sensors.icm20948.accel_noise_std_m_s2",
-                                      "sensors.icm20948.gyro_noise_std_rad_s", "thrusters.thrust_uncertainty_rel")
+                                      "sensors.icm20948.gyro_noise_std_rad_s", "thrusters.thrust_uncertainty_rel",
+                                      "identification.excitation", "identification.prior_std_rel")
 
 # Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
 for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837", "pa", 1e4),
