@@ -69,6 +69,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="roll/pitch restoring stiffness C for tilt_decay (from `hindrax ident inclining`; default "
                              "m g BG of the vehicle file, marked not measured)")
     parser.add_argument("--restoring-std", type=float, default=0.0, help="1-sigma of C, N m/rad")
+    parser.add_argument("--excitation", default=None, choices=("ladder", "multisine", "prbs", "chirp"),
+                        help="force input per DOF: the constant-thrust ladder, or one broadband run (Schroeder "
+                             "multisine, m-sequence PRBS, log chirp) shaped to stay in the pool box "
+                             "(default identification.excitation of the vehicle file)")
+    parser.add_argument("--excitation-duration", type=float, default=None,
+                        help="length of the broadband run per DOF, s (default identification.excitation_duration_s)")
     parser.add_argument("--line-pull-n", type=float, default=4.905,
                         help="horizontal line force over the pulley, N (default 4.905: 0.5 kg hanging in air)")
     if not parser.prog.endswith("campaign"):
@@ -131,6 +137,9 @@ def _check_args(args) -> tuple[object, list[str]]:
         raise CommandError("--levels must be >= 1")
     if args.rtf < 0:
         raise CommandError("--rtf must be >= 0")
+    dur = getattr(args, "excitation_duration", None)
+    if dur is not None and not (5.0 <= dur <= 1800.0):
+        raise CommandError(f"--excitation-duration {dur}: allowed 5-1800 s (identification.excitation_duration_s)")
     from ..identification.executive import CALIBRATION_STEPS
 
     cal = _calibration_steps(args)
@@ -177,6 +186,10 @@ def run_graph(args: argparse.Namespace) -> int:
     overrides = {}
     if args.max_level_duration is not None:
         overrides["identification.max_level_duration_s"] = float(args.max_level_duration)
+    if getattr(args, "excitation", None):  # reaches the identification node through the vehicle file override
+        overrides["identification.excitation"] = args.excitation
+    if getattr(args, "excitation_duration", None) is not None:
+        overrides["identification.excitation_duration_s"] = float(args.excitation_duration)
     outcome = run_graph_campaign(args.config or default_config_path(), out, dofs=dofs, levels=args.levels,
                                  seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
                                  progress=progress, truth=getattr(args, "truth", None))
@@ -243,7 +256,8 @@ def run_in_process(args: argparse.Namespace) -> int:
     cal = _calibration_steps(args)
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
-                        sim=sim, calibrate=cal,
+                        sim=sim, calibrate=cal, excitation=getattr(args, "excitation", None),
+                        excitation_duration_s=getattr(args, "excitation_duration", None),
                         ballast_weight_in_water_n=_ballast_weight_n(args, cfg) if "ballast" in cal else 0.0,
                         line_pull_n=float(args.line_pull_n) if "line_pull" in cal else 0.0)
     record = campaign.run()

@@ -12,6 +12,14 @@ Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenanc
 table) and prints the table. A scenario *meets the target* (issue 16) when every parameter's interval covers the
 truth in at least 90 % of the seeds or the parameter is suspect in every case where it does not; the
 no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
+
+``--excitation ladder,multisine,prbs`` (issue 18 item 5) runs every case once per excitation
+(``identification.excitation``: the constant-thrust ladder or one broadband run per DOF,
+:mod:`hindrax_ident.identification.excitation`; ``--excitation-duration`` its length); the scenario label becomes
+``<scenario> [<excitation>]`` for the other excitations, and a second table compares them
+(:func:`format_excitation_table`): pool seconds per DOF, mean |error| of the inertia and quadratic damping, their
+interval coverage, and the error scaled to 100 s of pool time (|error| x sqrt(pool s / 100), the 1 / sqrt(T) law of
+an unbiased estimate), i.e. the accuracy per second of pool time.
 """
 from __future__ import annotations
 
@@ -27,7 +35,8 @@ from typing import Sequence
 
 from .common import add_config_argument, load_vehicle
 
-__all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED"]
+__all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
+           "format_excitation_table"]
 
 #: DOFs of the full suite (issue 16: surge, sway, heave, yaw).
 DEFAULT_DOFS = ("surge", "sway", "heave", "yaw")
@@ -65,6 +74,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="directory keeping each campaign's identification (pickle): a case found there is not "
                              "run again, so the verdicts can be re-assessed and seeds added without re-running (keyed by "
                              "scenario, seed, DOFs and levels: empty it when the vehicle file or the code changes)")
+    parser.add_argument("--excitation", default=None,
+                        help="comma-separated force inputs to compare: ladder, multisine, prbs, chirp (default "
+                             "identification.excitation of the vehicle file)")
+    parser.add_argument("--excitation-duration", type=float, default=None,
+                        help="broadband run per DOF, s (default identification.excitation_duration_s)")
     parser.add_argument("--cached-only", action="store_true",
                         help="with --cache: use only the cases found there (re-assess them with the current verdicts "
                              "and tables; the others are listed as not run)")
@@ -78,12 +92,16 @@ def _truth_path(name: str) -> Path:
 
 
 def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[str],
-             levels: int | None = None, cache: str | None = None) -> dict:
+             levels: int | None = None, cache: str | None = None, excitation: str | None = None,
+             excitation_duration_s: float | None = None) -> dict:
     """One campaign of ``scenario`` (name or truth file) with ``seed``: the compared parameters.
+
+    excitation / excitation_duration_s: the force input (default the vehicle file's ``identification.excitation``);
+    another than ``ladder`` is appended to the label as `` [<excitation>]`` and to the cache key.
 
     Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
     "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
-    covered, verdict, reasons, t_dof. Raises :class:`~.common.CommandError` for an invalid vehicle file.
+    covered, verdict, reasons, t_dof, pool_time_s. Raises :class:`~.common.CommandError` for an invalid vehicle file.
     """
     from ..identification.campaign import Campaign
     from ..identification.estimators import identify_all_with_errors, truth_parameters
@@ -98,13 +116,19 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     cfg = load_vehicle(config_path)
     truth = load_truth(cfg, _truth_path(scenario))
     label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
+    exc = str(cfg.flat.get("identification.excitation", "ladder") if excitation is None else excitation)
+    dur = excitation_duration_s
+    if exc != "ladder":
+        label = f"{label} [{exc}]"
     wall0 = time.monotonic()
-    cached = _cache_file(cache, label, seed, dofs, levels) if cache else None
+    key = label if exc == "ladder" else f"{label.split(' [')[0]}-{exc}{'' if dur is None else f'-{dur:g}s'}"
+    cached = _cache_file(cache, key, seed, dofs, levels) if cache else None
     if cached is not None and cached.is_file():
         idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
     else:
         sim = Simulator(cfg, seed=seed, truth=truth)
-        record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim).run()
+        record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim, excitation=exc,
+                          excitation_duration_s=dur).run()
         idents, errors = identify_all_with_errors(record, cfg)
         aborted, abort_reason, campaign_wall = bool(record.aborted), record.abort_reason, time.monotonic() - wall0
         if cached is not None:
@@ -138,8 +162,9 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
                          "std_fit": a[name]["std_fit"],
                          "truth": tr, "rel_error": (v - tr) / abs(tr) if tr != 0.0 else None,
                          "z": (v - tr) / s if s > 0 else None, "covered": bool(lo <= tr <= hi),
-                         "verdict": a[name]["verdict"], "reasons": a[name]["reasons"], "t_dof": a[name]["t_dof"]})
-    return {"scenario": label, "seed": int(seed), "wall_s": campaign_wall, "aborted": aborted,
+                         "verdict": a[name]["verdict"], "reasons": a[name]["reasons"], "t_dof": a[name]["t_dof"],
+                         "pool_time_s": float(r.pool_time_s)})
+    return {"scenario": label, "excitation": exc, "seed": int(seed), "wall_s": campaign_wall, "aborted": aborted,
             "abort_reason": abort_reason, "errors": errors, "cases": rows,
             "dofs": {d: {"verdict": v["verdict"], "reasons": v["reasons"], "checks": v["checks"]}
                      for d, v in verdicts.items()}}
@@ -209,6 +234,39 @@ def summarise(results: Sequence[dict]) -> dict:
     return out
 
 
+def format_excitation_table(results: Sequence[dict]) -> str:
+    """Markdown comparison of the force inputs (module docstring): per scenario, excitation and DOF over the seeds:
+    mean pool seconds of the DOF, mean |error| of the inertia and of the quadratic damping (heave: both directions),
+    how many of their 95 % intervals cover the truth, and each error scaled to 100 s of pool time
+    (|error| x sqrt(pool s / 100))."""
+    by: dict = {}
+    for res in results:
+        for row in res["cases"]:
+            if row["rel_error"] is None:
+                continue
+            kind = "inertia" if row["parameter"] == "inertia" else (
+                "kq" if row["parameter"].startswith("quadratic_damping") else None)
+            if kind is None:
+                continue
+            key = (res["scenario"].split(" [")[0], res.get("excitation", "ladder"), row["dof"])
+            d = by.setdefault(key, {"pool": {}, "inertia": [], "kq": [], "covered": 0, "n": 0})
+            d["pool"][res["seed"]] = row.get("pool_time_s", math.nan)
+            d[kind].append(abs(row["rel_error"]))
+            d["covered"] += bool(row["covered"])
+            d["n"] += 1
+    lines = ["| scenario | excitation | DOF | seeds | pool s | inertia mean abs error | quadratic damping mean abs "
+             "error | intervals cover | inertia error at 100 s | quadratic damping error at 100 s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for (sc, exc, dof), d in sorted(by.items(), key=lambda kv: (kv[0][0], kv[0][2], kv[0][1])):
+        pool = sum(d["pool"].values()) / max(1, len(d["pool"]))
+        mi = sum(d["inertia"]) / len(d["inertia"]) if d["inertia"] else math.nan
+        mq = sum(d["kq"]) / len(d["kq"]) if d["kq"] else math.nan
+        k = math.sqrt(pool / 100.0) if pool > 0 else math.nan
+        lines.append(f"| {sc} | {exc} | {dof} | {len(d['pool'])} | {pool:.0f} | {100 * mi:.1f} % | {100 * mq:.1f} % | "
+                     f"{d['covered']}/{d['n']} | {100 * mi * k:.1f} % | {100 * mq * k:.1f} % |")
+    return "\n".join(lines)
+
+
 def _pct(a: int, n: int) -> str:
     return f"{100.0 * a / n:.0f} %" if n else "-"
 
@@ -272,14 +330,23 @@ def run(args: argparse.Namespace) -> int:
     if args.cached_only and not args.cache:
         print("--cached-only needs --cache DIR", file=sys.stderr)
         return 1
+    from ..identification.excitation import EXCITATIONS
+    excitations = [e.strip() for e in str(args.excitation).split(",") if e.strip()] if args.excitation else [None]
+    if not excitations or any(e not in EXCITATIONS for e in excitations if e is not None):
+        print(f"--excitation: {args.excitation!r}: comma-separated from {', '.join(EXCITATIONS)}", file=sys.stderr)
+        return 1
+    if args.excitation_duration is not None and not args.excitation_duration > 0:
+        print(f"--excitation-duration must be > 0 s, got {args.excitation_duration}", file=sys.stderr)
+        return 1
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # seed-major: every scenario's seed 1 first, so that a suite cut short still covers every scenario
-    jobs = [(args.config, n, seed, dofs, args.levels, args.cache) for seed in range(1, args.seeds + 1)
-            for n in names]
+    jobs = [(args.config, n, seed, dofs, args.levels, args.cache, e, args.excitation_duration)
+            for seed in range(1, args.seeds + 1) for n in names for e in excitations]
     not_run = []
     if args.cached_only:
-        keep = [j for j in jobs if _cache_file(args.cache, j[1], j[2], dofs, args.levels).is_file()]
+        keep = [j for j in jobs if j[6] in (None, "ladder")
+                and _cache_file(args.cache, j[1], j[2], dofs, args.levels).is_file()]
         not_run = [f"{j[1]} seed {j[2]}" for j in jobs if j not in keep]
         jobs = keep
     wall0 = time.monotonic()
@@ -305,6 +372,10 @@ def run(args: argparse.Namespace) -> int:
            "wall_time_s": time.monotonic() - wall0, "summary": summary, "runs": results}
     (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
     table = format_table(summary)
+    if args.excitation:
+        doc["excitation_table"] = format_excitation_table(results)
+        table += "\n\n" + doc["excitation_table"]
+        (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
     missing = f"; not run: {', '.join(not_run)}" if not_run else ""
     (out / "scenarios.md").write_text(f"Scenario suite, {date}, commit {doc['commit']}, seeds 1-{args.seeds}, "
                                       f"DOFs {', '.join(dofs)}, levels {args.levels or 'default'}{missing}\n\n"

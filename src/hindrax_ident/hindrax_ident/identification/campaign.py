@@ -42,7 +42,8 @@ class Campaign:
     progress: optional callable receiving one-line progress messages. real_time_factor: > 0 paces the
     simulation against the wall clock (0: as fast as possible). sim: an existing simulator (else built).
     heave_repeats: down/up pairs per heave level (heave runs last 1-3 s in the depth available, so each level
-    is repeated to collect enough transient data).
+    is repeated to collect enough transient data). excitation, excitation_duration_s: ``ladder`` or one broadband
+    run per DOF and its length (default ``identification.excitation*``; :class:`~.executive.Executive`).
     Raises ``ValueError`` for an unknown DOF.
     """
 
@@ -50,7 +51,8 @@ class Campaign:
                  seed: int | None = None, max_level_duration_s: float | None = None,
                  progress: Callable[[str], None] | None = None, real_time_factor: float = 0.0,
                  sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
-                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0) -> None:
+                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
+                 excitation_duration_s: float | None = None) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -62,7 +64,8 @@ class Campaign:
         self.tick_s = self.steps_per_tick * self.sim.step_s
         self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, max_level_duration_s=max_level_duration_s,
                                    heave_repeats=heave_repeats, progress=progress, calibrate=calibrate,
-                                   ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n)
+                                   ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n,
+                                   excitation=excitation, excitation_duration_s=excitation_duration_s)
         self._ballast_on = False
         self._line_ned: np.ndarray | None = None
         self.core = self.executive.core
