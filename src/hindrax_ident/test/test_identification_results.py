@@ -18,7 +18,8 @@ from hindrax_ident.sim.simulator import Simulator
 
 @pytest.fixture(scope="module")
 def cfg():
-    return load_config(default_config_path())
+    # no empirical priors: the file must show the fake fits' values unchanged (the priors: test_joint_estimation.py)
+    return load_config(default_config_path(), {"identification.prior_std_rel": 0.0})
 
 
 def _fake(cfg, dof, scale=1.1):

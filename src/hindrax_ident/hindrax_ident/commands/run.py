@@ -263,21 +263,15 @@ def run_in_process(args: argparse.Namespace) -> int:
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
-    from ..identification.calibration import (apply_thrust_calibration, calibration_relative_std,
-                                              calibration_section)
-    from ..identification.verdicts import apply_verdicts
+    from ..identification.calibration import apply_thrust_calibration
 
     idents, errors = identify_all_with_errors(apply_thrust_calibration(record), cfg)
-    if record.calibration:  # the calibration's uncertainty replaces the declared thrust-curve uncertainty
-        for dof, r in idents.items():
-            apply_verdicts({dof: r}, cfg, thruster_fit_rel=calibration_relative_std(record.calibration, dof))
     for dof, msg in errors.items():
         progress(f"{dof}: no estimate ({msg})")
     out = _output_dir(cfg, args.out)
     if idents:
-        doc = build_results(idents, cfg, source="simulation", seed=record.seed)
-        if record.calibration:
-            doc["calibration"] = calibration_section(record.calibration)
+        # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
+        doc = build_results(idents, cfg, source="simulation", seed=record.seed, calibration=record.calibration)
         if record.decays:
             doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
         write_identification(out / "identification.yaml", doc)

@@ -27,7 +27,8 @@ from typing import Any, Mapping
 import numpy as np
 
 __all__ = ["apply_thrust_calibration", "calibration_relative_std", "calibration_section", "thrust_scales",
-           "DOF_GROUP", "decay_inertia"]
+           "DOF_GROUP", "decay_inertia", "DEFAULT_PRIOR_STD_REL", "scale_prior_std", "scale_measurements",
+           "joint_estimate"]
 
 #: Which thrusters (scale) act in each DOF, and the wrench columns of each group.
 DOF_GROUP = {"surge": "horizontal", "sway": "horizontal", "yaw": "horizontal",
@@ -147,3 +148,207 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
             "quadratic_damping_kg_m2_std": fit.quadratic_damping_std,
             "stiffness_n_m_per_rad": float(stiffness_n_m_per_rad), "stiffness_std": float(stiffness_std),
             "window_s": [float(t0), float(t1)]}
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Joint estimation: thrust scales and empirical priors as parameters (issue 17 items 2 and 5; docs/identification.md
+# §6.2-§6.3)
+# ---------------------------------------------------------------------------------------------------------------
+
+#: Default 1-sigma of an empirical prior as a fraction of the prior's value (``identification.prior_std_rel``).
+DEFAULT_PRIOR_STD_REL = 0.5
+
+
+def scale_prior_std(cfg) -> float:
+    """1-sigma of the prior on a thruster group's scale s (prior mean 1): the RMS of the declared relative thrust
+    uncertainty of the two directions, ``thrusters.thrust_uncertainty_rel`` = [negative, positive] (a group scale
+    weighs both directions alike)."""
+    from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL
+
+    v = cfg.flat.get("thrusters.thrust_uncertainty_rel")
+    neg, pos = (float(x) for x in (v if v is not None else DEFAULT_THRUST_UNCERTAINTY_REL))
+    return math.sqrt(0.5 * (neg * neg + pos * pos))
+
+
+def scale_measurements(calibration: Mapping[str, Any] | None) -> dict[str, list[tuple[str, float, float]]]:
+    """The calibration steps as measurements of the scale parameters: {parameter: [(step, value, std), ...]}.
+
+    Parameters: ``vertical`` (ballast) and ``horizontal`` (each line pull, surge and sway, is one measurement of
+    it) when both groups were measured; when only one group was, a single ``common`` scale for all thrusters
+    (the ASSUMPTION of :func:`thrust_scales`). {} without a calibration. Raises ``ValueError`` on a bad scale."""
+    cal = calibration or {}
+    groups: dict[str, list] = {}
+    v = _entry(cal, "vertical")
+    if v is not None:
+        groups["vertical"] = [("ballast", v[0], v[1])]
+    hs = [("line pull " + k, *e) for k in ("surge", "sway") if (e := _entry(cal, k)) is not None]
+    if hs:
+        groups["horizontal"] = hs
+    if len(groups) == 1:
+        return {"common": next(iter(groups.values()))}
+    return groups
+
+
+def _scale_parameter(groups: Mapping[str, Any], dof: str) -> str | None:
+    if not groups:
+        return None
+    return "common" if "common" in groups else DOF_GROUP[dof]
+
+
+def _theta_priors(dof: str, names: list, cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:
+    """{parameter: (mean, std)} of the empirical priors ([NTNU-Thesis] (seed 002) App. A.1/A.2 via
+    :func:`~.results.prior_entries`) on the physical parameters: inertia = rigid + prior added mass with std
+    ``prior_std_rel`` x the added mass (the rigid part is known), quadratic and linear damping (heave: the same
+    prior for both directions) with std ``prior_std_rel`` x the value. Bias and restoring have none."""
+    from .estimators import rigid_inertia
+    from .results import prior_entries
+
+    if not prior_std_rel > 0:
+        return {}
+    p = prior_entries(cfg).get(dof)
+    if not p:
+        return {}
+    out = {}
+    for n in names:
+        key = ("added_mass" if n == "inertia" else "quadratic_damping" if n.startswith("quadratic")
+               else "linear_damping" if n.startswith("linear") else None)
+        val = p.get(key) if key else None
+        if val is None or not (math.isfinite(val) and val > 0):
+            continue
+        mean = val + (rigid_inertia(cfg, dof) if n == "inertia" else 0.0)
+        out[n] = (float(mean), float(prior_std_rel) * float(val))
+    return out
+
+
+def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping[str, Any] | None = None,
+                   prior_std_rel: float | None = None) -> dict:
+    """Bayesian (regularised) least squares of the thrust scales, the empirical priors and the ladders' fits
+    together (docs/identification.md §6.2-§6.3; [Tarantola2005] Ch. 3), written into the identifications.
+
+    ``identifications``: {dof: :class:`~.estimators.DofIdentification`} fitted on the record whose thrust-model
+    force was multiplied by the calibration's point scale (:func:`apply_thrust_calibration` with ``calibration``;
+    none without one). The model tau = M nu_dot + D(nu) nu + b (+ k_r s(eta)) with the true force s x the curve's
+    depends on the parameters only through phi = theta / s, so each DOF's fit is, to first order, a Gaussian
+    measurement of phi (value and the fit covariance ``signals["covariance"]``, without the thrust-curve
+    uncertainty). The joint problem over x = [phi of every DOF, s of every scale parameter] minimises
+
+        sum_dof ||L^-1 (phi - phi_fit)||^2 + sum_i ((s phi_i - mu_i) / sigma_i)^2
+        + sum_g ((s_g - 1) / sigma_s)^2 + sum_steps ((s_g - s_step) / sd_step)^2
+
+    (L L^T the fit covariance; mu_i, sigma_i the empirical priors of :func:`_theta_priors`; sigma_s
+    :func:`scale_prior_std`; the steps of :func:`scale_measurements`) and its covariance is (J^T J)^-1 at the
+    optimum (Gauss-Newton, the Laplace approximation). The reported theta = s phi with the covariance carried by the
+    Jacobian [s I, phi]: the intervals contain the calibration's own uncertainty and the prior's pull. Without a
+    calibration s is fixed at 1 (only the priors act) and the thrust-curve uncertainty is added later by
+    :func:`~.verdicts.assess_dof`, per direction, as before.
+
+    ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`DEFAULT_PRIOR_STD_REL`); 0 leaves the
+    priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of
+    identification.yaml: {scales: {parameter: {value, std, prior: [1, sigma_s], measurements: [...], dofs}},
+    prior_std_rel, method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
+    """
+    from scipy import optimize
+
+    from .estimators import rigid_inertia
+
+    if prior_std_rel is None:
+        prior_std_rel = float(cfg.flat.get("identification.prior_std_rel", DEFAULT_PRIOR_STD_REL))
+    if not (math.isfinite(prior_std_rel) and prior_std_rel >= 0):
+        raise ValueError(f"prior_std_rel must be >= 0, got {prior_std_rel}")
+    groups = scale_measurements(calibration)
+    applied = thrust_scales(calibration)
+    todo = [d for d, r in identifications.items() if "joint" not in r.signals and "assessment" not in r.signals]
+    g_names = [g for g in groups if any(_scale_parameter(groups, d) == g for d in todo)]
+    blocks = []  # (dof, names, phi_fit, Linv, priors, slice, scale index or None)
+    k = 0
+    for dof in todo:
+        r = identifications[dof]
+        names = list(r.names)
+        s_app = applied[DOF_GROUP[dof]]["value"] if applied else 1.0
+        y = np.array([r.values[n] for n in names], dtype=float)
+        cov = r.signals.get("covariance")
+        if cov is None or np.shape(cov) != (len(names), len(names)):
+            cov = np.diag([r.std[n] ** 2 for n in names])
+        cov = np.asarray(cov, dtype=float) / s_app ** 2
+        cov = 0.5 * (cov + cov.T) + np.eye(len(names)) * 1e-18 * max(1.0, float(np.max(np.abs(np.diag(cov)))))
+        linv = np.linalg.inv(np.linalg.cholesky(cov))
+        gp = _scale_parameter(groups, dof)
+        blocks.append((dof, names, y / s_app, linv, _theta_priors(dof, names, cfg, prior_std_rel),
+                       slice(k, k + len(names)), None if gp is None else g_names.index(gp)))
+        k += len(names)
+    n_phi = k
+    sig_s = scale_prior_std(cfg)
+    meas = [(g_names.index(g), v, sd) for g in g_names for _, v, sd in groups[g]]
+    for _, v, sd in meas:
+        if not sd > 0:
+            raise ValueError(f"calibration: a scale std must be > 0 for the joint estimate, got {sd}")
+
+    def scales(x):
+        return x[n_phi:]
+
+    def residuals(x):
+        s = scales(x)
+        out = []
+        for _, names, phi_fit, linv, pri, sl, gi in blocks:
+            phi = x[sl]
+            out.append(linv @ (phi - phi_fit))
+            sg = 1.0 if gi is None else s[gi]
+            for i, n in enumerate(names):
+                if n in pri:
+                    out.append(np.array([(sg * phi[i] - pri[n][0]) / pri[n][1]]))
+        out.append((s - 1.0) / sig_s)
+        out.append(np.array([(s[gi] - v) / sd for gi, v, sd in meas]))
+        return np.concatenate(out)
+
+    if not blocks:
+        return {}
+    s0 = []  # start: each scale at the inverse-variance mean of its measurements
+    for gi in range(len(g_names)):
+        w = np.array([1.0 / sd ** 2 for g2, _, sd in meas if g2 == gi])
+        s0.append(float(np.sum(w * [v for g2, v, _ in meas if g2 == gi]) / np.sum(w)))
+    x0 = np.concatenate([b[2] for b in blocks] + [np.array(s0)])
+    sol = optimize.least_squares(residuals, x0, method="lm", xtol=1e-14, ftol=1e-14)
+    J = sol.jac
+    cx = np.linalg.inv(J.T @ J)
+    x = sol.x
+    s = scales(x)
+    for dof, names, phi_fit, _, pri, sl, gi in blocks:
+        r = identifications[dof]
+        phi = x[sl]
+        sg = 1.0 if gi is None else float(s[gi])
+        idx = list(range(sl.start, sl.stop)) + ([] if gi is None else [n_phi + gi])
+        T = np.zeros((len(names), len(idx)))
+        T[:, :len(names)] = sg * np.eye(len(names))
+        if gi is not None:
+            T[:, -1] = phi
+        cov = T @ cx[np.ix_(idx, idx)] @ T.T
+        theta = sg * phi
+        s_app = applied[DOF_GROUP[dof]]["value"] if applied else 1.0
+        cov_y = r.signals.get("covariance")
+        fit_sd = (np.sqrt(np.clip(np.diag(cov_y), 0.0, None)) if cov_y is not None and np.shape(cov_y) ==
+                  (len(names), len(names)) else np.array([r.std[n] for n in names]))
+        r.signals["joint"] = {
+            "fit_values": {n: float(v * s_app) for n, v in zip(names, phi_fit)},
+            "fit_std": {n: float(v) for n, v in zip(names, fit_sd)},
+            "priors": {n: [m, sd] for n, (m, sd) in pri.items()},
+            "scale_parameter": None if gi is None else g_names[gi],
+            "thrust_in_covariance": gi is not None}
+        r.signals["covariance"] = cov
+        for n, v, sd in zip(names, theta, np.sqrt(np.clip(np.diag(cov), 0.0, None))):
+            r.values[n] = float(v)
+            r.std[n] = float(sd)
+        r.values["added_mass"] = r.values["inertia"] - rigid_inertia(cfg, dof)
+        r.std["added_mass"] = r.std["inertia"]
+    sec = {"prior_std_rel": float(prior_std_rel),
+           "method": ("Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2): each DOF's "
+                      "output-error fit in curve units phi = theta / s as a Gaussian measurement, the thrust scales s "
+                      "with prior N(1, sigma_s^2) and the calibration steps as measurements, the empirical priors "
+                      "on theta = s phi; covariance (J^T J)^-1 at the optimum"),
+           "scales": {}}
+    for gi, g in enumerate(g_names):
+        sec["scales"][g] = {"value": float(s[gi]), "std": float(math.sqrt(cx[n_phi + gi, n_phi + gi])),
+                            "prior": [1.0, float(sig_s)],
+                            "measurements": [{"step": st, "value": float(v), "std": float(sd)}
+                                             for st, v, sd in groups[g]],
+                            "dofs": [b[0] for b in blocks if b[6] == gi]}
+    return sec

@@ -17,6 +17,10 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
                      steady_state_note: <text>, rls_time_s: <float|null>, steady_state_time_s: <float|null>}
         configured: {<parameter>: <float>}     # optional: the configuration's values (simulation runs)
         prior: {added_mass, linear_damping, quadratic_damping: <float|null>, source: <text>}  # [NTNU-Thesis] App. A
+        # a parameter weighted by an empirical prior also carries prior: [mean, std] (identification.prior_std_rel)
+    joint: {prior_std_rel, method, scales: {<vertical|horizontal|common>: {value, std, prior: [1, std],
+            measurements: [{step, value, std}], dofs}}}      # calibration.joint_estimate, docs/identification.md §6
+    calibration: {...}                                      # with calibration steps: calibration.calibration_section
         drag_coefficient: {c_d: [value, std] (heave: c_d_positive, c_d_negative), projected_area_m2,
                            characteristic_length_m, reynolds_range: [low, high], definition}  # surge/sway/heave
 
@@ -135,15 +139,24 @@ def prior_entries(cfg: VehicleConfig) -> dict[str, dict]:
 
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
                   seed: int | None = None, method: str | None = None,
-                  include_configured: bool = True) -> dict:
+                  include_configured: bool = True, calibration: Mapping[str, Any] | None = None) -> dict:
     """The identification.yaml document from :class:`~.estimators.DofIdentification` objects (per DOF).
 
     The intervals are the honest ones of :func:`~.verdicts.apply_verdicts` (fit covariance + thrust-curve
     uncertainty, Student t on the independent segments; applied here if not yet), each parameter with ``std_fit``
     (the fit alone), ``verdict`` (trusted | suspect) and ``reasons``; each DOF with ``verdict`` and ``reasons``.
+
+    Before the verdicts the empirical priors (``identification.prior_std_rel``) and, with ``calibration`` (the
+    record's calibration steps; the identifications then come from the record scaled by
+    :func:`~.calibration.apply_thrust_calibration`), the thrust scales are estimated jointly with the fits
+    (:func:`~.calibration.joint_estimate`, in place, skipped for DOFs already assessed); each parameter that had a
+    prior shows it as ``prior: [mean, std]`` beside its value, the document gains ``joint`` (the scales' posterior)
+    and, with a calibration, ``calibration`` (:func:`~.calibration.calibration_section`).
     """
+    from .calibration import calibration_section, joint_estimate
     from .verdicts import apply_verdicts
 
+    joint = joint_estimate(identifications, cfg, calibration)
     assessments = apply_verdicts(identifications, cfg)
     priors = prior_entries(cfg)
     dofs: dict = {}
@@ -156,6 +169,9 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             entry[name] = {"value": float(r.values[name]), "std": float(r.std[name]), "unit": r.units[name],
                            "ci95": [float(lo), float(hi)], "std_fit": float(pa.get("std_fit", r.std[name])),
                            "verdict": pa.get("verdict", "trusted"), "reasons": list(pa.get("reasons", []))}
+            pri = (r.signals.get("joint") or {}).get("priors", {}).get(name)
+            if pri is not None:
+                entry[name]["prior"] = [float(pri[0]), float(pri[1])]
         entry["verdict"] = a["verdict"]
         entry["reasons"] = list(a["reasons"])
         entry["method"] = r.method
@@ -176,7 +192,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         if drag is not None:
             entry["drag_coefficient"] = drag
         dofs[dof] = entry
-    return {
+    doc = {
         "schema_version": SCHEMA_VERSION,
         "provenance": {
             "source": source,
@@ -190,6 +206,11 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         },
         "dofs": dofs,
     }
+    if joint:
+        doc["joint"] = joint
+    if calibration:
+        doc["calibration"] = calibration_section(calibration)
+    return doc
 
 
 def write_identification(path: str | Path, document: Mapping) -> Path:

@@ -125,8 +125,16 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
     cov_fit = r.signals.get("covariance")
     if cov_fit is None or np.shape(cov_fit) != (len(names), len(names)):
         cov_fit = np.diag([r.std[n] ** 2 for n in names])
-    rel = _declared_rel(cfg, thruster_fit_rel)
-    cov = np.asarray(cov_fit, dtype=float) + thrust_covariance(r.dof, names, theta, rel)
+    joint = r.signals.get("joint") or {}
+    if joint.get("thrust_in_covariance"):
+        # the joint estimate (calibration.joint_estimate) already carries the calibrated scale's uncertainty
+        rel = (0.0, 0.0)
+        cov = np.asarray(cov_fit, dtype=float)
+        fit_std = joint.get("fit_std", {})
+        cov_fit = np.diag([fit_std.get(n, math.sqrt(max(cov[i, i], 0.0))) ** 2 for i, n in enumerate(names)])
+    else:
+        rel = _declared_rel(cfg, thruster_fit_rel)
+        cov = np.asarray(cov_fit, dtype=float) + thrust_covariance(r.dof, names, theta, rel)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     nseg = segment_count(r.dof, r.pool_time_s)
     t_dof = max(1, nseg - 1)
@@ -276,7 +284,8 @@ def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg:
     """
     std = np.asarray(converged_std, dtype=float).copy()
     theta = np.asarray(theta, dtype=float)
-    keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names])
+    keep = np.array([dof in RLS_STD_DOFS and (n.startswith("quadratic") or n.startswith("linear")) for n in names],
+                    dtype=bool)
     thrust = np.diag(thrust_covariance(dof, names, theta, _declared_rel(cfg, None)))
     out = np.sqrt(std ** 2 + thrust)
     return np.where(keep & np.isfinite(std), out, np.nan)
