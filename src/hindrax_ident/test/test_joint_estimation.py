@@ -117,3 +117,31 @@ def test_identification_yaml_shows_the_prior_beside_the_value_and_the_joint_sect
     assert doc["calibration"]["vertical_thrust_scale"]["known_force_n"] == 8.56
     with pytest.raises(ValueError, match="prior_std_rel"):
         joint_estimate({"surge": _ident("surge", [1, 1, 1, 0], [1, 1, 1, 1])}, cfg, None, prior_std_rel=-1.0)
+
+
+def test_free_decay_disagreement_makes_the_inertia_suspect():
+    from hindrax_ident.identification.verdicts import apply_reference_verdicts, free_decay_reason
+
+    # 1.07 +- 0.02 against 0.97 +- 0.03: |0.10| / 0.0361 = 2.77 > 1.96 -> suspect
+    assert "z = +2.8" in free_decay_reason("roll", (1.07, 0.02), (0.97, 0.03))
+    assert free_decay_reason("roll", (1.02, 0.02), (0.97, 0.03)) is None     # 1.39 combined std: agrees
+    doc = {"dofs": {
+        "roll": {"inertia": {"value": 1.07, "std": 0.02, "verdict": "trusted", "reasons": []},
+                 "added_mass": {"value": 0.59, "std": 0.02, "verdict": "trusted", "reasons": []},
+                 "quadratic_damping": {"value": 1.3, "std": 0.1, "verdict": "trusted", "reasons": []},
+                 "verdict": "trusted", "reasons": []},
+        "pitch": {"inertia": {"value": 1.30, "std": 0.03, "verdict": "trusted", "reasons": []},
+                  "verdict": "trusted", "reasons": []}},
+        "free_decay": {"roll": {"total_inertia_kg_m2": 0.97, "total_inertia_kg_m2_std": 0.03},
+                       "pitch": {"total_inertia_kg_m2": 1.26, "total_inertia_kg_m2_std": 0.04}}}
+    apply_reference_verdicts(doc)
+    apply_reference_verdicts(doc)                                              # idempotent
+    roll = doc["dofs"]["roll"]
+    assert roll["inertia"]["verdict"] == "suspect" and roll["added_mass"]["verdict"] == "suspect"
+    assert len(roll["inertia"]["reasons"]) == 1 and "free decay" in roll["inertia"]["reasons"][0]
+    assert roll["quadratic_damping"]["verdict"] == "trusted" and roll["verdict"] == "suspect"
+    assert doc["free_decay"]["roll"]["self_propelled"]["verdict"] == "suspect"
+    assert doc["free_decay"]["roll"]["self_propelled"]["z"] == pytest.approx(0.10 / math.hypot(0.02, 0.03))
+    # pitch: 0.04 / 0.05 = 0.8 combined std
+    assert doc["dofs"]["pitch"]["inertia"]["verdict"] == "trusted" and doc["dofs"]["pitch"]["verdict"] == "trusted"
+    assert doc["free_decay"]["pitch"]["self_propelled"]["verdict"] == "agrees"

@@ -274,6 +274,8 @@ def run_in_process(args: argparse.Namespace) -> int:
         doc = build_results(idents, cfg, source="simulation", seed=record.seed, calibration=record.calibration)
         if record.decays:
             doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
+            from ..identification.verdicts import apply_reference_verdicts
+            apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std
         write_identification(out / "identification.yaml", doc)
         note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
                 + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))

@@ -44,6 +44,10 @@ and
      speed of the test (the 75th percentile of |velocity|).
    * ``spread`` (scenario suite only, :func:`spread_reasons`): over repeated campaigns the estimates scatter more
      than their own intervals say.
+   * ``free decay`` (roll and pitch inertia, :func:`apply_reference_verdicts`): the rigid + added inertia from a free
+     decay (campaign ``tilt_decay`` step or ``hindrax ident free-decay``; restoring stiffness from an inclining
+     test, independent of the thrust curve) differs from the self-propelled inertia by more than
+     :data:`REFERENCE_Z_MAX` combined standard deviations (issue 17 item 3; docs/identification.md §6.4).
 
 All quantities SI, the parameters and units of :func:`~.estimators.parameter_names`.
 """
@@ -57,7 +61,7 @@ from scipy import stats
 
 from hindrax_drivers.config import VehicleConfig
 
-__all__ = ["RLS_STD_DOFS", "rls_published_std", "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
+__all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std", "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "segment_count", "assess_dof", "apply_verdicts", "spread_reasons"]
 
 #: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
@@ -303,3 +307,55 @@ def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float
     if med > 0 and spread > factor * med:
         return [f"run-to-run spread {spread:.3g} is {spread / med:.1f} x the reported std"]
     return []
+
+
+#: |difference| / combined std beyond which an independent reference contradicts the self-propelled value (the
+#: two-sided 95 % normal quantile: the two intervals do not overlap at that level).
+REFERENCE_Z_MAX = 1.96
+
+
+def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay: tuple[float, float],
+                      z_max: float = REFERENCE_Z_MAX) -> str | None:
+    """The reason text when the free-decay inertia (value, std; kg m^2) contradicts the self-propelled one
+    (value, std): |I_sp - I_fd| > ``z_max`` sqrt(std_sp^2 + std_fd^2); None when they agree. Raises ``ValueError``
+    for a negative std."""
+    (v, sd), (vf, sf) = self_propelled, free_decay
+    if sd < 0 or sf < 0:
+        raise ValueError(f"{dof}: std must be >= 0, got {sd} and {sf}")
+    comb = math.hypot(sd, sf)
+    z = (v - vf) / comb if comb > 0 else (0.0 if v == vf else math.copysign(math.inf, v - vf))
+    if abs(z) <= z_max:
+        return None
+    return (f"{dof} inertia {v:.4g} kg m^2 (self-propelled) differs from the free decay's {vf:.4g} +- {sf:.2g} kg m^2 "
+            f"(z = {z:+.1f}, beyond {z_max:g} combined std): the thrust curve (or the model) is off in {dof}")
+
+
+def apply_reference_verdicts(document: dict, z_max: float = REFERENCE_Z_MAX) -> dict:
+    """Independent references against the self-propelled result in an identification.yaml ``document`` (changed
+    in place; returned): for every roll/pitch of ``document["free_decay"]`` (``total_inertia_kg_m2`` and
+    ``total_inertia_kg_m2_std``) also identified self-propelled (``dofs.<dof>.inertia`` value and honest std), a
+    disagreement (:func:`free_decay_reason`) makes ``inertia`` and ``added_mass`` ``verdict: suspect`` with the
+    reason, and the DOF suspect; the free-decay entry gets ``self_propelled: {inertia_kg_m2, inertia_kg_m2_std, z,
+    verdict: suspect | agrees}``. Idempotent."""
+    for dof, fd in (document.get("free_decay") or {}).items():
+        entry = (document.get("dofs") or {}).get(dof)
+        if entry is None or "inertia" not in entry or "total_inertia_kg_m2" not in fd:
+            continue
+        v, sd = float(entry["inertia"]["value"]), float(entry["inertia"]["std"])
+        vf, sf = float(fd["total_inertia_kg_m2"]), float(fd["total_inertia_kg_m2_std"])
+        comb = math.hypot(sd, sf)
+        reason = free_decay_reason(dof, (v, sd), (vf, sf), z_max)
+        fd["self_propelled"] = {"inertia_kg_m2": v, "inertia_kg_m2_std": sd,
+                                "z": abs(v - vf) / comb if comb > 0 else 0.0,
+                                "verdict": "agrees" if reason is None else "suspect"}
+        if reason is None:
+            continue
+        for name in ("inertia", "added_mass"):
+            par = entry.get(name)
+            if isinstance(par, dict):
+                par.setdefault("reasons", [])
+                if reason not in par["reasons"]:
+                    par["reasons"].append(reason)
+                par["verdict"] = "suspect"
+        entry["verdict"] = "suspect"
+    return document
