@@ -238,7 +238,8 @@ def format_excitation_table(results: Sequence[dict]) -> str:
     """Markdown comparison of the force inputs (module docstring): per scenario, excitation and DOF over the seeds:
     mean pool seconds of the DOF, mean |error| of the inertia and of the quadratic damping (heave: both directions),
     how many of their 95 % intervals cover the truth, and each error scaled to 100 s of pool time
-    (|error| x sqrt(pool s / 100))."""
+    (|error| x sqrt(pool s / 100)); the last column scales the fits' own relative 1-sigma the same way (less noisy
+    than the error over a few seeds)."""
     by: dict = {}
     for res in results:
         for row in res["cases"]:
@@ -249,21 +250,27 @@ def format_excitation_table(results: Sequence[dict]) -> str:
             if kind is None:
                 continue
             key = (res["scenario"].split(" [")[0], res.get("excitation", "ladder"), row["dof"])
-            d = by.setdefault(key, {"pool": {}, "inertia": [], "kq": [], "covered": 0, "n": 0})
+            d = by.setdefault(key, {"pool": {}, "inertia": [], "kq": [], "covered": 0, "n": 0, "inertia_std": [],
+                                    "kq_std": []})
             d["pool"][res["seed"]] = row.get("pool_time_s", math.nan)
             d[kind].append(abs(row["rel_error"]))
+            d[kind + "_std"].append(abs(row["std"] / row["truth"]))
             d["covered"] += bool(row["covered"])
             d["n"] += 1
     lines = ["| scenario | excitation | DOF | seeds | pool s | inertia mean abs error | quadratic damping mean abs "
-             "error | intervals cover | inertia error at 100 s | quadratic damping error at 100 s |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "error | intervals cover | inertia error at 100 s | quadratic damping error at 100 s | 1-sigma at 100 s "
+             "(inertia / quadratic damping) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for (sc, exc, dof), d in sorted(by.items(), key=lambda kv: (kv[0][0], kv[0][2], kv[0][1])):
         pool = sum(d["pool"].values()) / max(1, len(d["pool"]))
         mi = sum(d["inertia"]) / len(d["inertia"]) if d["inertia"] else math.nan
         mq = sum(d["kq"]) / len(d["kq"]) if d["kq"] else math.nan
         k = math.sqrt(pool / 100.0) if pool > 0 else math.nan
+        si = sum(d["inertia_std"]) / len(d["inertia_std"]) if d["inertia_std"] else math.nan
+        sq = sum(d["kq_std"]) / len(d["kq_std"]) if d["kq_std"] else math.nan
         lines.append(f"| {sc} | {exc} | {dof} | {len(d['pool'])} | {pool:.0f} | {100 * mi:.1f} % | {100 * mq:.1f} % | "
-                     f"{d['covered']}/{d['n']} | {100 * mi * k:.1f} % | {100 * mq * k:.1f} % |")
+                     f"{d['covered']}/{d['n']} | {100 * mi * k:.1f} % | {100 * mq * k:.1f} % | "
+                     f"{100 * si * k:.1f} % / {100 * sq * k:.1f} % |")
     return "\n".join(lines)
 
 

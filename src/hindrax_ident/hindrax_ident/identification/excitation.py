@@ -31,7 +31,9 @@ Pool-box shaping (:meth:`BoxShaping.force`), with e the displacement from the bo
 1. a slow PD on the displacement, f_pd = -M w_b^2 e - 2 zeta M w_b v with w_b = 2 pi f_min / 2 (half the lowest
    designed line, so it removes drift without cancelling the band), zeta = 0.7;
 2. the excitation is scaled down near a wall when it pushes outwards: g = clip((L - |e|) / (0.3 L), 0, 1) when
-   u e > 0, else 1 (a linear taper over the outer 30 % of the room);
+   u e > 0, else 1 (a linear taper over the outer 30 % of the room), and a wall spring pushes back in that outer
+   band, -sign(e) ``brake_fraction`` x authority x ((|e| - 0.7 L) / (0.3 L))^2, which reaches the braking force at
+   the boundary, so an unmodelled steady push (tether, current, buoyancy error) smaller than that is held inside;
 3. a braking guard: when moving outwards and the stopping distance at the braking authority, v^2 / (2 a_b)
    with a_b = ``brake_fraction`` x authority / M (the drag, which helps, is left out), plus one tick of travel
    reaches the room left, the whole command is a full brake -sign(v) ``brake_fraction`` x authority.
@@ -250,8 +252,11 @@ class BoxShaping:
             a_b = self.brake_fraction * lim / m
             if v * v / (2.0 * a_b) + abs(v) * self.tick_s >= room:
                 return -math.copysign(self.brake_fraction * lim, v)
+        band = self.taper_fraction * self.half_range
         g = 1.0
         if u * e > 0.0:
-            g = min(1.0, max(0.0, room / (self.taper_fraction * self.half_range)))
-        f = g * u - m * wb * wb * e - 2.0 * self.zeta * m * wb * v
+            g = min(1.0, max(0.0, room / band))
+        depth = min(1.0, max(0.0, 1.0 - room / band))  # 0 inside the taper's start, 1 at the boundary
+        f_wall = -math.copysign(self.brake_fraction * lim * depth * depth, e)
+        f = g * u + f_wall - m * wb * wb * e - 2.0 * self.zeta * m * wb * v
         return float(min(lim, max(-lim, f)))
