@@ -145,3 +145,31 @@ def test_free_decay_disagreement_makes_the_inertia_suspect():
     # pitch: 0.04 / 0.05 = 0.8 combined std
     assert doc["dofs"]["pitch"]["inertia"]["verdict"] == "trusted" and doc["dofs"]["pitch"]["verdict"] == "trusted"
     assert doc["free_decay"]["pitch"]["self_propelled"]["verdict"] == "agrees"
+
+
+def test_report_references_section_shows_scales_free_decay_priors_and_disagreements(cfg):
+    from hindrax_ident.identification.report import references_html
+    from hindrax_ident.identification.verdicts import apply_reference_verdicts
+
+    rs = {"surge": _ident("surge", [27.3, 66.5, 1.25, 0.02], [0.3, 2.0, 3.0, 0.05])}
+    rs["surge"].signals.update(velocity=np.linspace(-0.5, 0.5, 50))
+    cal = {"vertical": {"value": 0.9012, "std": 0.0044, "known_force_n": 8.56, "method": "ballast"},
+           "surge": {"value": 0.8998, "std": 0.003, "known_force_n": 4.905, "method": "line_pull"}}
+    doc = build_results(rs, cfg, calibration=cal)
+    doc["dofs"]["roll"] = {"inertia": {"value": 1.07, "std": 0.02, "verdict": "trusted", "reasons": []},
+                           "verdict": "trusted", "reasons": []}
+    doc["free_decay"] = {"roll": {"total_inertia_kg_m2": 0.9712, "total_inertia_kg_m2_std": 0.0301,
+                                  "added_inertia_kg_m2": 0.4881, "stiffness_n_m_per_rad": 4.503,
+                                  "stiffness_source": "--restoring-n-m-per-rad (inclining test)"}}
+    apply_reference_verdicts(doc)
+    page = references_html(doc)
+    # joint scales: the two groups with their steps, and the uncalibrated error 1/s - 1 (about +11 %)
+    assert "Thrust scales estimated jointly" in page and "line pull surge 0.8998" in page and "ballast 0.9012" in page
+    h = doc["joint"]["scales"]["horizontal"]["value"]
+    assert f"{100 * (1 / h - 1):+.1f} %" in page and "curve off" in page
+    # free decay beside the self-propelled value, z = 0.0988 / hypot(0.02, 0.0301) = 2.73: suspect
+    assert "<td>0.9712</td>" in page and "<td>1.07</td>" in page and "<td>2.73</td>" in page
+    assert "<td>suspect</td>" in page
+    # the priors with the stated weight
+    assert "Empirical priors" in page and "1-sigma 0.5 x its value" in page
+    assert page.startswith("<h2>References (independent of the thrust curve)</h2>")

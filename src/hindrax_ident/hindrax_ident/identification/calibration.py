@@ -258,7 +258,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     groups = scale_measurements(calibration)
     applied = thrust_scales(calibration)
     todo = [d for d, r in identifications.items() if "joint" not in r.signals and "assessment" not in r.signals]
-    g_names = [g for g in groups if any(_scale_parameter(groups, d) == g for d in todo)]
+    g_names = list(groups)  # every measured scale (one no DOF uses still shows its posterior)
     blocks = []  # (dof, names, phi_fit, Linv, priors, slice, scale index or None)
     k = 0
     for dof in todo:

@@ -148,10 +148,12 @@ def _fmt(x, digits: int = 4) -> str:
 
 
 def references_html(document: Mapping) -> str:
-    """The "References" section (issue 17 item 6): the known-force calibration (``document["calibration"]``) and,
-    per DOF, the empirical priors ([NTNU-Thesis] (seed 002) App. A, ``dofs.<dof>.prior``) beside the identified
-    values, with the ratio and whether the prior lies inside the identified 95 % interval. Empty string when the
-    document has neither."""
+    """The "References" section (issue 17 item 6): the known-force calibration (``document["calibration"]``), the
+    jointly estimated thrust scales (``document["joint"]["scales"]``: posterior, prior, steps, the error the
+    uncalibrated self-propelled values would have and z against the curve), the free-decay inertias
+    (``document["free_decay"]``) beside the self-propelled ones with z and verdict, and per DOF the empirical priors
+    ([NTNU-Thesis] (seed 002) App. A, ``dofs.<dof>.prior``) beside the identified values, with the ratio and
+    whether the prior lies inside the identified 95 % interval. Empty string when the document has none of them."""
     rows = []
     cal = document.get("calibration") or {}
     for name, c in cal.items():
@@ -165,6 +167,41 @@ def references_html(document: Mapping) -> str:
                      "<th>known force (N)</th><th>method</th><th>holding force (N)</th></tr>" + "".join(rows)
                      + "</table>" + (f"<p>{html.escape(str(cal.get('applied_to', '')))}</p>" if cal.get("applied_to")
                                      else ""))
+    scales = (document.get("joint") or {}).get("scales") or {}
+    srow = []
+    for name, j in scales.items():
+        v, sd = float(j["value"]), float(j["std"])
+        z = (v - 1.0) / sd if sd > 0 else math.nan
+        off = 1.0 / v - 1.0 if v > 0 else math.nan
+        steps = "; ".join(f"{m['step']} {_fmt(m['value'])} +- {_fmt(m['std'], 2)}" for m in j.get("measurements", []))
+        verdict = "curve off" if abs(z) > 1.96 else "curve agrees"
+        srow.append(f"<tr><td>{html.escape(name)}</td><td>{_fmt(v)}</td><td>{_fmt(sd, 2)}</td>"
+                    f"<td>{_fmt(j['prior'][0], 3)} +- {_fmt(j['prior'][1], 2)}</td><td>{html.escape(steps)}</td>"
+                    f"<td>{html.escape(', '.join(j.get('dofs', [])))}</td><td>{100 * off:+.1f} %</td>"
+                    f"<td>{_fmt(z, 3)}</td><td>{verdict}</td></tr>")
+    if srow:
+        parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each "
+                     "scale s (true thrust / curve thrust) from its prior and the calibration steps; the "
+                     "self-propelled values without the calibration would be off by 1/s - 1; z = (s - 1) / std "
+                     "(|z| > 1.96: the thrust curve disagrees with the known forces)</p><table><tr><th>scale</th>"
+                     "<th>value</th><th>std</th><th>prior</th><th>steps</th><th>DOFs</th><th>uncalibrated error"
+                     "</th><th>z</th><th>verdict</th></tr>" + "".join(srow) + "</table>")
+    frow = []
+    for dof, fd in (document.get("free_decay") or {}).items():
+        sp = fd.get("self_propelled") or {}
+        frow.append(f"<tr><td>{html.escape(dof)}</td><td>{_fmt(fd.get('total_inertia_kg_m2'))}</td>"
+                    f"<td>{_fmt(fd.get('total_inertia_kg_m2_std'), 2)}</td><td>{_fmt(fd.get('added_inertia_kg_m2'))}"
+                    f"</td><td>{_fmt(fd.get('stiffness_n_m_per_rad'))}</td>"
+                    f"<td>{html.escape(str(fd.get('stiffness_source', '')))}</td>"
+                    f"<td>{_fmt(sp.get('inertia_kg_m2'))}</td><td>{_fmt(sp.get('inertia_kg_m2_std'), 2)}</td>"
+                    f"<td>{_fmt(sp.get('z'), 3)}</td><td>{html.escape(str(sp.get('verdict', '-')))}</td></tr>")
+    if frow:
+        parts.append("<h3>Free decay: rigid + added inertia without the thrust curve ([Hindrax-AM] (seed 000), "
+                     "[SmallROV] (seed 004))</h3><p>suspect: |free decay - self-propelled| beyond 1.96 combined std "
+                     "(the self-propelled inertia then carries verdict suspect)</p><table><tr><th>DOF</th>"
+                     "<th>free-decay inertia (kg m^2)</th><th>std</th><th>added</th><th>stiffness (N m/rad)</th>"
+                     "<th>stiffness from</th><th>self-propelled</th><th>std</th><th>z</th><th>verdict</th></tr>"
+                     + "".join(frow) + "</table>")
     prow = []
     for dof, e in (document.get("dofs") or {}).items():
         prior = e.get("prior") if isinstance(e, Mapping) else None
@@ -184,7 +221,9 @@ def references_html(document: Mapping) -> str:
     if prow:
         parts.append("<h3>Empirical priors from geometry ([NTNU-Thesis] (seed 002) App. A.1/A.2)</h3><p>rough "
                      "estimates (the thesis reports differences of tens of percent against panel codes and CFD); "
-                     "a prior outside the identified interval is expected and is not a verdict</p><table><tr><th>DOF"
+                     "a prior outside the identified interval is expected and is not a verdict; in the batch fit each "
+                     f"weighs with 1-sigma {_fmt((document.get('joint') or {}).get('prior_std_rel'), 3)} x its value "
+                     "(identification.prior_std_rel)</p><table><tr><th>DOF"
                      "</th><th>parameter</th><th>identified</th><th>95 % interval</th><th>prior</th>"
                      "<th>prior / identified</th><th>prior in interval</th></tr>" + "".join(prow) + "</table>")
     if not parts:
@@ -223,9 +262,13 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
         if a:
             parts.append(f"<h2>{html.escape(dof)}: {a['verdict']}</h2>" + (
                 "<ul>" + "".join(f"<li>{html.escape(x)}</li>" for x in a["reasons"]) + "</ul>" if a["reasons"] else
-                "<p>no DOF-wide check failed</p>") + "<p>intervals: fit covariance + thrust-curve uncertainty "
-                f"{a['checks'].get('thrust_uncertainty_rel')} (1-sigma, [negative, positive]), Student t with "
-                f"{a['checks'].get('segments')} segments</p>")
+                "<p>no DOF-wide check failed</p>") + (
+                "<p>intervals: joint covariance of the fit, the calibrated thrust scale "
+                f"{html.escape(str((r.signals.get('joint') or {}).get('scale_parameter')))} and the priors "
+                "(docs/identification.md §6.2)" if (r.signals.get("joint") or {}).get("thrust_in_covariance") else
+                "<p>intervals: fit covariance + thrust-curve uncertainty "
+                f"{a['checks'].get('thrust_uncertainty_rel')} (1-sigma, [negative, positive])")
+                + f", Student t with {a['checks'].get('segments')} segments</p>")
         parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time "
                      f"{r.pool_time_s:.0f} s; RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: "
                      f"{html.escape(r.steady_note)}</p>")
