@@ -63,6 +63,9 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "Ctrl-C cancels to a zero wrench"),
     (("ident", "status"), "hindrax_ident.commands.ident_live",
      "print where a running identification campaign is (identification/status)"),
+    (("ident", "continue"), "hindrax_ident.commands.ident_live",
+     "tell a running campaign's calibration step that the operator did what its prompt asked "
+     "(service identification/continue)"),
     (("ident", "bag"), "hindrax_ident.commands.ident_bag",
      "offline identification (batch LS + output error, [Hindrax-Drag] (seed 003) eqs. 6-8) of a recorded campaign bag: "
      "identification.yaml + report"),

@@ -1,14 +1,19 @@
-"""``hindrax ident start | status``: the identification campaign on a running stack (vehicle or virtual pool).
+"""``hindrax ident start | status | continue``: the identification campaign on a running stack (vehicle or virtual pool).
 
-* ``hindrax ident start [--dofs surge,heave,...] [--levels N] [--fractions F1,F2,...] [--server-timeout S]``
+* ``hindrax ident start [--dofs surge,heave,...] [--levels N] [--fractions F1,F2,...] [--calibrate ballast,line_pull
+  [--calibration-only]] [--server-timeout S]``
   sends one ``run_identification`` goal (hindrax_msgs/action/RunIdentification) to the identification node of a
   running graph (``hindrax bringup``, with or without ``--sim``) and prints its feedback, one line per level change
-  and once a second: DOF, level, command, progress. Ctrl-C cancels the goal: the node brings the vehicle to a
+  and once a second: DOF, level, command, progress; a calibration step's operator prompt (``>>> [attach_ballast]
+  calibration: attach the ballast (8.56 N in water), then call continue``) is printed once when it appears. Ctrl-C cancels the goal: the node brings the vehicle to a
   zero wrench and holds it until the ESC reports neutral widths, then the action ends; the command waits for that
   end (a second Ctrl-C stops waiting). The result line carries the node's message and the final online estimates.
   Exit 0 when the campaign completed, 1 when it was rejected, aborted or cancelled, or no server answered.
 * ``hindrax ident status [--timeout S]`` prints the next ``identification/status`` message (ManeuverStatus):
   phase, DOF, level, command, progress and the current step. Exit 1 when none arrives within the timeout.
+* ``hindrax ident continue [--timeout S]`` calls ``identification/continue`` (std_srvs/Trigger) once the operator
+  did what the prompt asked (ballast attached, line pulled, ...): prints the node's answer; exit 1 when nothing
+  was awaited (the reason is printed) or no service answered.
 
 The ESC output must be armed first (``esc/set_armed``, e.g. ``hindrax thruster-test``'s arming or a service call);
 the node refuses a goal otherwise.
@@ -23,7 +28,7 @@ from typing import Any, Callable
 
 from .common import CommandError
 
-__all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign"]
+__all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign", "call_continue"]
 
 _PHASE_NAMES = {0: "idle", 1: "positioning", 2: "running", 3: "returning", 4: "done", 5: "aborted"}
 _ROTATIONS = ("roll", "pitch", "yaw")
@@ -39,8 +44,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help="levels per DOF (default 0: identification.levels_per_dof of the running node)")
         parser.add_argument("--fractions", default="",
                             help="explicit level fractions of each DOF's authority, comma-separated, each in (0, 1]")
+        parser.add_argument("--calibrate", default="",
+                            help="known-force calibration steps before the ladders, comma-separated: ballast, "
+                                 "line_pull, tilt_decay (the node prompts; answer with `hindrax ident continue`)")
+        parser.add_argument("--calibration-only", action="store_true",
+                            help="run only the --calibrate steps (no ladders)")
         parser.add_argument("--server-timeout", type=float, default=10.0,
                             help="wall time to wait for the run_identification server, s (default 10)")
+    elif which == "continue":
+        parser.add_argument("--timeout", type=float, default=10.0,
+                            help="wall time to wait for the identification/continue service and its answer, s "
+                                 "(default 10)")
     else:
         parser.add_argument("--timeout", type=float, default=5.0,
                             help="wall time to wait for a status message, s (default 5)")
@@ -70,6 +84,20 @@ def format_status(msg: Any) -> str:
     return "  ".join(parts)
 
 
+def _parse_calibrate(args: argparse.Namespace) -> list[str]:
+    """The ``--calibrate`` steps. Raises :class:`CommandError` for an unknown step or ``--calibration-only``
+    without one."""
+    from ..identification.executive import CALIBRATION_STEPS
+
+    steps = [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
+    bad = [c for c in steps if c not in CALIBRATION_STEPS]
+    if bad:
+        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+    if getattr(args, "calibration_only", False) and not steps:
+        raise CommandError("--calibration-only needs --calibrate STEP[,STEP]")
+    return steps
+
+
 def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float]]:
     from hindrax_drivers.config import DOFS
 
@@ -91,9 +119,11 @@ def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float]]:
 def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fractions: list[float],
                    server_timeout_s: float, print_line: Callable[[str], None] = print,
                    cancel_requested: Callable[[], bool] = lambda: False,
-                   give_up: Callable[[], bool] = lambda: False) -> tuple[bool, str]:
-    """Send one goal from ``node`` (spun by ``executor``), print its feedback, cancel it once
-    ``cancel_requested()`` turns True, and wait for its end (``give_up()`` True stops waiting after a cancel).
+                   give_up: Callable[[], bool] = lambda: False, calibrate: list[str] | None = None,
+                   calibration_only: bool = False) -> tuple[bool, str]:
+    """Send one goal from ``node`` (spun by ``executor``), print its feedback (an operator prompt once, when it
+    appears, prefixed ``>>>``), cancel it once ``cancel_requested()`` turns True, and wait for its end
+    (``give_up()`` True stops waiting after a cancel). ``calibrate`` / ``calibration_only``: the goal's fields.
     Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
     from rclpy.action import ActionClient
 
@@ -109,16 +139,29 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
             raise CommandError(f"no run_identification server within {server_timeout_s:g} s: is the stack running "
                                "(hindrax bringup)?")
         spin()
-    goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions)
+    goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions,
+                                  calibrate=list(calibrate or []), calibration_only=bool(calibration_only))
+    last_prompt = [""]
+
+    def on_feedback(m) -> None:
+        fb = m.feedback
+        if fb.prompt:
+            if fb.prompt != last_prompt[0]:
+                print_line(f">>> {fb.prompt} (hindrax ident continue)")
+        else:
+            print_line(format_feedback(fb))
+        last_prompt[0] = fb.prompt
+
     try:
-        handle = goals.send(goal, spin, max(server_timeout_s, 5.0),
-                            feedback_callback=lambda m: print_line(format_feedback(m.feedback)))
+        handle = goals.send(goal, spin, max(server_timeout_s, 5.0), feedback_callback=on_feedback)
     except GoalNotAnswered as exc:
         raise CommandError(f"run_identification: {exc}; the node's status: hindrax ident status") from None
     if not handle.accepted:
         raise CommandError("goal rejected: a campaign is already running or the goal is invalid "
                            "(see the identification node's log)")
-    print_line(f"campaign started: {', '.join(dofs) or 'all DOFs'}; Ctrl-C cancels")
+    what = "calibration only" if calibration_only else (', '.join(dofs) or 'all DOFs')
+    cal = f" after calibration {', '.join(calibrate)}" if (calibrate and not calibration_only) else ""
+    print_line(f"campaign started: {what}{cal}; Ctrl-C cancels")
     cancelled = False
     while (result := goals.poll_result(handle)) is None:
         if not cancelled and cancel_requested():
@@ -156,12 +199,14 @@ def _with_ros(body: Callable[[Any, Any], int]) -> int:
 
 def _start(args: argparse.Namespace) -> int:
     dofs, levels, fractions = _parse(args)
+    calibrate = _parse_calibrate(args)
     interrupts = []
     previous = signal.signal(signal.SIGINT, lambda *_: interrupts.append(time.monotonic()))
     try:
         ok, message = _with_ros(lambda node, ex: start_campaign(
             node, ex, dofs, levels, fractions, args.server_timeout, lambda s: print(s, flush=True),
-            cancel_requested=lambda: len(interrupts) >= 1, give_up=lambda: len(interrupts) >= 2))
+            cancel_requested=lambda: len(interrupts) >= 1, give_up=lambda: len(interrupts) >= 2,
+            calibrate=calibrate, calibration_only=bool(args.calibration_only)))
     finally:
         signal.signal(signal.SIGINT, previous)
     print(f"result: {'complete' if ok else 'not complete'}: {message}", flush=True)
@@ -186,6 +231,36 @@ def _status(args: argparse.Namespace) -> int:
     return _with_ros(body)
 
 
+def call_continue(node: Any, executor: Any, timeout_s: float) -> tuple[bool, str]:
+    """Call ``identification/continue`` (std_srvs/Trigger) from ``node`` (spun by ``executor``) once; returns the
+    node's (success, message). Raises :class:`CommandError` when the service is not there or does not answer within
+    ``timeout_s`` (wall). Not repeated on a lost answer: a second continue could skip the next prompt."""
+    from std_srvs.srv import Trigger
+
+    client = node.create_client(Trigger, "identification/continue")
+    deadline = time.monotonic() + timeout_s
+    while not client.service_is_ready():
+        if time.monotonic() > deadline:
+            raise CommandError(f"no identification/continue service within {timeout_s:g} s: is the stack running "
+                               "(hindrax bringup)?")
+        executor.spin_once(timeout_sec=0.1)
+    fut = client.call_async(Trigger.Request())
+    while not fut.done():
+        if time.monotonic() > deadline:
+            raise CommandError(f"identification/continue did not answer within {timeout_s:g} s; check with "
+                               "hindrax ident status before calling it again")
+        executor.spin_once(timeout_sec=0.1)
+    res = fut.result()
+    return bool(res.success), str(res.message)
+
+
+def _continue(args: argparse.Namespace) -> int:
+    ok, message = _with_ros(lambda node, ex: call_continue(node, ex, args.timeout))
+    print(f"{'continued' if ok else 'not continued'}: {message}", flush=True)
+    return 0 if ok else 1
+
+
 def run(args: argparse.Namespace) -> int:
     """Dispatch on the subcommand."""
-    return _start(args) if getattr(args, "_live", "") == "start" else _status(args)
+    which = getattr(args, "_live", "")
+    return _start(args) if which == "start" else (_continue(args) if which == "continue" else _status(args))

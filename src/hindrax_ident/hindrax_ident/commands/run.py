@@ -61,10 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="reference steps before the ladders, comma-separated: ballast, line_pull (known forces: "
                              "the thrust scales are applied to the identification, identification.yaml gains a "
                              "calibration section), tilt_decay (roll and pitch free decay: rigid + added inertia with "
-                             "--restoring-n-m-per-rad, section free_decay); in-process only for now")
-    parser.add_argument("--ballast-mass-kg", type=float, default=1.0, help="ballast mass, kg (default 1.0)")
-    parser.add_argument("--ballast-volume-m3", type=float, default=1.0 / 7850.0,
-                        help="ballast displaced volume, m^3 (default 1 kg of steel: 1.27e-4)")
+                             "--restoring-n-m-per-rad, section free_decay); through the graph the virtual pool plays "
+                             "the operator (applies the known force, calls identification/continue)")
+    parser.add_argument("--ballast-mass-kg", type=float, default=None,
+                        help="ballast mass, kg (default calibration.ballast_mass_kg of the vehicle file)")
+    parser.add_argument("--ballast-volume-m3", type=float, default=None,
+                        help="ballast displaced volume, m^3 (default calibration.ballast_volume_m3)")
     parser.add_argument("--restoring-n-m-per-rad", type=float, default=None,
                         help="roll/pitch restoring stiffness C for tilt_decay (from `hindrax ident inclining`; default "
                              "m g BG of the vehicle file, marked not measured)")
@@ -75,8 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default identification.excitation of the vehicle file)")
     parser.add_argument("--excitation-duration", type=float, default=None,
                         help="length of the broadband run per DOF, s (default identification.excitation_duration_s)")
-    parser.add_argument("--line-pull-n", type=float, default=4.905,
-                        help="horizontal line force over the pulley, N (default 4.905: 0.5 kg hanging in air)")
+    parser.add_argument("--line-pull-n", type=float, default=None,
+                        help="horizontal line force over the pulley, N (default calibration.line_pull_force_n)")
     if not parser.prog.endswith("campaign"):
         parser.add_argument("--in-process", action="store_true",
                             help="step the simulator in-process instead (no drivers, no ROS graph, no bag; about 4x "
@@ -129,6 +131,13 @@ def _check_args(args) -> tuple[object, list[str]]:
     from hindrax_drivers.config import DOFS
 
     cfg = load_vehicle(args.config)
+    overrides = _calibration_overrides(args)
+    if overrides:  # the options replace the vehicle file's calibration.* keys, validated like the file
+        from hindrax_drivers.config import ConfigError, load_config
+        try:
+            cfg = load_config(cfg.source, overrides)
+        except ConfigError as exc:
+            raise CommandError(f"--ballast-mass-kg/--ballast-volume-m3/--line-pull-n: {exc}") from exc
     dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
     bad = [d for d in dofs if d not in DOFS]
     if bad or not dofs:
@@ -146,11 +155,6 @@ def _check_args(args) -> tuple[object, list[str]]:
     bad = [c for c in cal if c not in CALIBRATION_STEPS]
     if bad:
         raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
-    if "line_pull" in cal and not float(args.line_pull_n) > 0:
-        raise CommandError(f"--line-pull-n must be > 0 N, got {args.line_pull_n}")
-    if "ballast" in cal and _ballast_weight_n(args, cfg) <= 0:
-        raise CommandError(f"--ballast-mass-kg {args.ballast_mass_kg} with --ballast-volume-m3 "
-                           f"{args.ballast_volume_m3}: the ballast must be heavier than the water it displaces")
     return cfg, dofs
 
 
@@ -158,10 +162,17 @@ def _calibration_steps(args) -> list[str]:
     return [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
 
 
-def _ballast_weight_n(args, cfg) -> float:
-    """(m - rho V) g of the ballast, N."""
-    return (float(args.ballast_mass_kg) - float(args.ballast_volume_m3) * float(cfg.water_density_kg_m3)) \
-        * float(cfg.gravity_m_s2)
+def _calibration_overrides(args) -> dict:
+    """``calibration.*`` keys given on the command line (``--ballast-mass-kg``, ``--ballast-volume-m3``,
+    ``--line-pull-n``): {key: value} of those given."""
+    out = {}
+    for opt, key in (("ballast_mass_kg", "calibration.ballast_mass_kg"),
+                     ("ballast_volume_m3", "calibration.ballast_volume_m3"),
+                     ("line_pull_n", "calibration.line_pull_force_n")):
+        v = getattr(args, opt, None)
+        if v is not None:
+            out[key] = float(v)
+    return out
 
 
 def run_graph(args: argparse.Namespace) -> int:
@@ -171,9 +182,6 @@ def run_graph(args: argparse.Namespace) -> int:
     from ..identification.graph_campaign import run_graph_campaign
 
     cfg, dofs = _check_args(args)
-    if _calibration_steps(args):
-        raise CommandError("--calibrate: only in-process for now (hindrax ident campaign, hindrax run --in-process): "
-                           "the identification node has no continue service yet")
 
     wall0 = time.monotonic()
 
@@ -183,7 +191,7 @@ def run_graph(args: argparse.Namespace) -> int:
     out = _output_dir(cfg, args.out)
     if (out / "bag").exists():
         raise CommandError(f"--out: {out} already holds a run (bag/); choose a new output directory")
-    overrides = {}
+    overrides = _calibration_overrides(args)
     if args.max_level_duration is not None:
         overrides["identification.max_level_duration_s"] = float(args.max_level_duration)
     if getattr(args, "excitation", None):  # reaches the identification node through the vehicle file override
@@ -192,7 +200,8 @@ def run_graph(args: argparse.Namespace) -> int:
         overrides["identification.excitation_duration_s"] = float(args.excitation_duration)
     outcome = run_graph_campaign(args.config or default_config_path(), out, dofs=dofs, levels=args.levels,
                                  seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
-                                 progress=progress, truth=getattr(args, "truth", None))
+                                 progress=progress, truth=getattr(args, "truth", None),
+                                 calibrate=_calibration_steps(args))
     for dof, msg in outcome.errors.items():
         progress(f"{dof}: no estimate ({msg})")
     if outcome.identifications:
@@ -254,12 +263,14 @@ def run_in_process(args: argparse.Namespace) -> int:
     except TruthError as exc:
         raise CommandError(f"--truth: {exc}") from exc
     cal = _calibration_steps(args)
+    from ..identification.executive import calibration_forces
+    w_ballast, f_line = calibration_forces(cfg)
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
                         sim=sim, calibrate=cal, excitation=getattr(args, "excitation", None),
                         excitation_duration_s=getattr(args, "excitation_duration", None),
-                        ballast_weight_in_water_n=_ballast_weight_n(args, cfg) if "ballast" in cal else 0.0,
-                        line_pull_n=float(args.line_pull_n) if "line_pull" in cal else 0.0)
+                        ballast_weight_in_water_n=w_ballast if "ballast" in cal else 0.0,
+                        line_pull_n=f_line if "line_pull" in cal else 0.0)
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))

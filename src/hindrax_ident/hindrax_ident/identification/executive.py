@@ -661,6 +661,7 @@ class Executive:
                 raise CampaignAbort(f"no continue within {max_s:g} s ({what})")
             yield self.ctrl.wrench(self.state, (), self.tick_s)
         self.awaiting, self._continue, self.prompt = "", False, ""
+        self._say(f"operator continued ({what}): holding")
 
     def _mean_holding_force(self, k: int, t_from: float) -> tuple[float, float]:
         """Mean of the recorded (lagged) thrust-model force on axis k since ``t_from`` and the std of that mean by

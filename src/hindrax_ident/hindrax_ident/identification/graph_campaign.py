@@ -7,6 +7,15 @@ operator's service); send one ``run_identification`` goal and report its feedbac
 run the offline identification on the bag (:mod:`.from_bag`) and write ``identification.yaml`` and the report.
 All waits are on simulated-time conditions with wall-clock deadlines.
 
+Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): sent in the goal; :class:`VirtualOperator`
+plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for the ballast or a line pull
+(``[attach_ballast] ...``, ``[apply_line_pull_surge] ...``), it applies the known force in the simulator (as the
+in-process campaign does, :mod:`.campaign`: the ballast's weight in water, NED down; the line pull, fixed in the pool
+frame along the body axis named, both expressed in the body frame at every integration step) or removes it, and
+calls ``identification/continue``. The thrust scales the node measured (its record) are applied to the bag's record
+before the offline identification, their std added to the intervals, and written to the ``calibration`` section of
+``identification.yaml`` (as ``hindrax ident campaign --calibrate`` does).
+
 Reproducibility: with the serial devices in lock-step (:class:`~hindrax_ident.sim.hardware.SerialLockStep`),
 simulated time frozen until every driver has finished its start-up exchange and the recorder is subscribed to
 every topic, and frozen again while each operator call (arm, goal, disarm) is answered, what happens at each
@@ -20,7 +29,115 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-__all__ = ["GraphCampaignOutcome", "run_graph_campaign"]
+__all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
+
+
+def parse_prompt(prompt: str) -> str:
+    """The step code of an operator prompt ``"[<code>] <instruction>"`` (e.g. ``attach_ballast``), "" for none."""
+    p = (prompt or "").strip()
+    if not p.startswith("[") or "]" not in p:
+        return ""
+    return p[1:p.index("]")].strip()
+
+
+class VirtualOperator:
+    """The virtual pool's operator for the calibration steps on the ROS graph (module docstring).
+
+    simulator: the :class:`~hindrax_ident.sim.simulator.Simulator` (``set_external_wrench``, ``rotation``);
+    ballast_weight_n / line_pull_n: the known forces, N (:func:`~.executive.calibration_forces`);
+    request_continue: callable that sends one ``identification/continue`` request and returns its future (or None);
+    say: progress lines; freeze / resume: stop and restart simulated time (:meth:`~hindrax_ident.bringup.Graph.
+    freeze_time`) from acting on a prompt until the continue answer, so the step goes on at the simulated instant
+    the operator acted, whatever the wall time the call took. Feed it every feedback prompt (:meth:`on_prompt`), call :meth:`on_step` after every
+    integration step (a step listener of the simulator node) and :meth:`poll` from the wait loop (a request with no
+    answer within ``resend_after_s`` of wall time is sent again: after a continue every step holds at least
+    :data:`~.executive.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing awaited and is
+    answered False).
+    """
+
+    def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
+                 request_continue: Callable[[], object], say: Callable[[str], None] = lambda _m: None,
+                 resend_after_s: float = 5.0, freeze: Callable[[], None] = lambda: None,
+                 resume: Callable[[], None] = lambda: None) -> None:
+        self.sim = simulator
+        self.ballast_weight_n = float(ballast_weight_n)
+        self.line_pull_n = float(line_pull_n)
+        self._request = request_continue
+        self._say = say
+        self.resend_after_s = float(resend_after_s)
+        self.ballast_on = False
+        self.line_ned: object = None  # np.ndarray (3,) N in NED while a line pulls
+        self.handled = ""             # step code last acted on ("" once its prompt went away)
+        self.answers: list[tuple[bool, str]] = []
+        self._pending = None
+        self._sent_at = -math.inf
+        self._external_set = False
+        self._freeze, self._resume = freeze, resume
+
+    def on_prompt(self, prompt: str) -> None:
+        """Act on one feedback prompt: apply or remove the force the step code asks for, then request continue."""
+        import numpy as np
+
+        code = parse_prompt(prompt)
+        if not code:
+            self.handled = ""
+            return
+        if code == self.handled:
+            return
+        self.handled = code
+        self._freeze()
+        if code in ("attach_ballast", "remove_ballast"):
+            self.ballast_on = code == "attach_ballast"
+        elif code.startswith("apply_line_pull_"):
+            d = np.asarray(self.sim.rotation) @ np.eye(3)[0 if code.endswith("surge") else 1]
+            self.line_ned = self.line_pull_n * np.array([d[0], d[1], 0.0]) / math.hypot(d[0], d[1])
+        elif code.startswith("release_line_"):
+            self.line_ned = None
+        else:
+            self._say(f"virtual operator: unknown request {code!r}; continuing")
+        self._say(f"virtual operator: {code} done (t_sim {self.sim.t_s:.1f} s), calling identification/continue")
+        self._send()
+
+    def _send(self) -> None:
+        self._pending = self._request()
+        self._sent_at = time.monotonic()
+
+    def poll(self) -> None:
+        """Collect the continue answer; send again when none came within ``resend_after_s`` and a prompt waits."""
+        fut = self._pending
+        if fut is None:
+            return
+        if fut.done():
+            res = fut.result()
+            self.answers.append((bool(res.success), str(res.message)))
+            if not res.success:
+                self._say(f"virtual operator: continue refused: {res.message}")
+            self._pending = None
+            self._resume()
+        elif self.handled and time.monotonic() - self._sent_at > self.resend_after_s:
+            self._send()
+
+    def external_wrench_frd(self):
+        """The wrench (6,) FRD the applied forces exert now (zeros when none)."""
+        import numpy as np
+
+        ext = np.zeros(6)
+        if self.ballast_on or self.line_ned is not None:
+            rt = np.asarray(self.sim.rotation).T  # NED -> body
+            if self.ballast_on:
+                ext[:3] += rt @ np.array([0.0, 0.0, self.ballast_weight_n])
+            if self.line_ned is not None:
+                ext[:3] += rt @ np.asarray(self.line_ned)
+        return ext
+
+    def on_step(self, _sim=None) -> None:
+        """Step listener: hold the current external wrench for the next integration step."""
+        if self.ballast_on or self.line_ned is not None:
+            self.sim.set_external_wrench(self.external_wrench_frd())
+            self._external_set = True
+        elif self._external_set:
+            self.sim.set_external_wrench([0.0] * 6)
+            self._external_set = False
 
 
 @dataclass
@@ -30,7 +147,9 @@ class GraphCampaignOutcome:
     success / message: the action result; estimates: the action's online (RLS) HydroEstimates;
     identifications / errors: offline results per DOF (:func:`~.estimators.identify_all_with_errors`) from the
     bag; bag_dir; record: the CampaignRecord rebuilt from the bag; disarmed: the ESC reported disarmed after
-    the run; sim_time_s / wall_time_s of the whole run; final_pulse_width_us: the PCA9685 outputs after shutdown.
+    the run; sim_time_s / wall_time_s of the whole run; final_pulse_width_us: the PCA9685 outputs after shutdown;
+    calibration: the identification node's calibration step results (:attr:`~.executive.CampaignRecord.calibration`,
+    {} without a step).
     """
 
     success: bool = False
@@ -44,13 +163,18 @@ class GraphCampaignOutcome:
     sim_time_s: float = 0.0
     wall_time_s: float = 0.0
     final_pulse_width_us: list = field(default_factory=list)
+    calibration: dict = field(default_factory=dict)
 
 
 def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int | None = None,
                        seed: int | None = None, real_time_factor: float = 0.0, overrides: dict | None = None,
                        progress: Callable[[str], None] | None = None, deadline_s: float = 3600.0,
-                       level_fractions: Sequence[float] = (), truth=None) -> GraphCampaignOutcome:
+                       level_fractions: Sequence[float] = (), truth=None,
+                       calibrate: Sequence[str] = ()) -> GraphCampaignOutcome:
     """Run the campaign (module docstring); outputs in ``out`` (bag/, identification.yaml, report/).
+
+    calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers the prompts);
+    with ``dofs`` empty only the calibration steps run (goal ``calibration_only``).
 
     Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration and ``TimeoutError`` when a
     step does not finish within its wall-clock deadline (the graph is shut down, thrusters neutral).
@@ -58,11 +182,11 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
     say = progress or (lambda _m: None)
     wall0 = time.monotonic()
     return _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s,
-                level_fractions, wall0, truth)
+                level_fractions, wall0, truth, list(calibrate))
 
 
 def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s, level_fractions,
-         wall0, truth=None) -> GraphCampaignOutcome:
+         wall0, truth=None, calibrate=()) -> GraphCampaignOutcome:
     import rclpy
     from rclpy.action import ActionClient
 
@@ -71,9 +195,11 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     from hindrax_msgs.action import RunIdentification
     from hindrax_msgs.msg import ThrusterPwm
     from hindrax_msgs.srv import SetArmed
+    from std_srvs.srv import Trigger
 
     from ..bringup import build_graph
-    from .from_bag import BagContentError, identify_bag, write_outputs
+    from .executive import calibration_forces
+    from .from_bag import BagContentError, record_from_bag
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -94,7 +220,19 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         arm = client.create_client(SetArmed, "esc/set_armed")
         action = ActionClient(client, RunIdentification, "run_identification")
         goals = GoalSender(client, action, "run_identification")  # survives a lost goal or result response
-        spin = lambda: graph.spin_once(0.01)  # noqa: E731
+        operator = None
+        if calibrate:
+            cont = client.create_client(Trigger, "identification/continue")
+            operator = VirtualOperator(sim, *calibration_forces(cfg), lambda: cont.call_async(Trigger.Request()),
+                                       say, freeze=graph.freeze_time, resume=graph.resume_time)
+            graph.nodes["simulator"].add_step_listener(operator.on_step)
+
+        def spin() -> None:
+            graph.spin_once(0.01)
+            if operator is not None:
+                operator.poll()
+
+        calibration: dict = {}
         try:
             say(f"graph up: {', '.join(graph.nodes)}; recording to {bag_dir}")
             # Simulated time starts only when discovery, port opening and the devices' start-up exchanges are
@@ -112,6 +250,8 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
 
             def on_feedback(fb) -> None:
                 f = fb.feedback
+                if operator is not None:
+                    operator.on_prompt(f.prompt)
                 key = (f.dof, f.level_index, math.copysign(1.0, f.level_command) if f.level_command else 0.0)
                 if key != last[0] and f.dof:
                     last[0] = key
@@ -121,7 +261,8 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                     say(f"{100 * f.progress:5.1f} %  {f.dof}: {lvl}  (t_sim {sim.t_s:.0f} s)")
 
             goal = RunIdentification.Goal(dofs=list(dofs), levels_per_dof=int(levels or 0),
-                                          level_fractions=[float(x) for x in level_fractions])
+                                          level_fractions=[float(x) for x in level_fractions],
+                                          calibrate=list(calibrate), calibration_only=bool(calibrate and not dofs))
             graph.freeze_time()
             handle = goals.send(goal, spin, 30, feedback_callback=on_feedback)
             graph.resume_time()
@@ -143,21 +284,42 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             t_disarmed = sim.t_s
             wait_until(lambda: sim.t_s >= t_disarmed + 0.2, 30, spin, "disarmed outputs recorded")
             graph.nodes["recorder"].stop_recording()
+            node_record = graph.nodes["identification"].last_record
+            calibration = dict(node_record.calibration) if node_record is not None else {}
         finally:
             outcome.sim_time_s = sim.t_s
             graph.shutdown()
             client.destroy_node()
             outcome.final_pulse_width_us = [float(x) for x in graph.hardware.pulse_widths_us()]
+    outcome.calibration = calibration
+    if not dofs:
+        outcome.wall_time_s = time.monotonic() - wall0
+        return outcome
     say("offline identification from the bag")
+    from .calibration import apply_thrust_calibration, calibration_relative_std, calibration_section
+    from .estimators import identify_all_with_errors
+    from .verdicts import apply_verdicts
     try:
-        record, idents, errors = identify_bag(bag_dir, cfg)
+        record = record_from_bag(bag_dir, cfg)
+        idents, errors = identify_all_with_errors(apply_thrust_calibration(record, calibration), cfg)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
+    if calibration:  # the calibration's uncertainty replaces the declared thrust-curve uncertainty
+        for dof, r in idents.items():
+            apply_verdicts({dof: r}, cfg, thruster_fit_rel=calibration_relative_std(calibration, dof))
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
     outcome.wall_time_s = time.monotonic() - wall0
     if idents:
+        from .report import write_report
+        from .results import build_results, write_identification
+
         note = (f"ROS graph campaign on the virtual pool (seed {cfg.flat['simulation.seed']}), "
                 f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
                 f"action result: {outcome.message}")
-        write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.flat["simulation.seed"]))
+        doc = build_results(idents, cfg, source="simulation", seed=int(cfg.flat["simulation.seed"]))
+        doc["provenance"]["bag"] = str(bag_dir)
+        if calibration:
+            doc["calibration"] = calibration_section(calibration)
+        write_identification(out / "identification.yaml", doc)
+        write_report(out / "report", idents, doc, campaign_note=note)
     return outcome

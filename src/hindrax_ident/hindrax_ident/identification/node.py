@@ -19,14 +19,23 @@ Interfaces
 ----------
 Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     Goal: ``dofs`` (empty = all six, in SNAME order), ``levels_per_dof`` (0 = ``identification.levels_per_dof``),
-    ``level_fractions`` (optional explicit fractions of the DOF's authority, each in (0, 1]). Rejected when
-    a goal is running or the goal is invalid (unknown DOF, fraction out of range). The goal fails at once
-    when the ESC output is not armed. Feedback at every level change and once per second: DOF, level index
-    and count, level command (N or N m, FRD), progress 0-1. End (done, abort or cancel): the node publishes a
+    ``level_fractions`` (optional explicit fractions of the DOF's authority, each in (0, 1]), ``calibrate``
+    (known-force steps after the dive, before the ladders: ballast, line_pull, tilt_decay; the known forces
+    are the ``calibration.*`` parameters, :func:`~.executive.calibration_forces`), ``calibration_only`` (no
+    ladders). Rejected when a goal is running or the goal is invalid (unknown DOF or step, fraction out of
+    range, calibration_only without a step). The goal fails at once when the ESC output is not armed. Feedback
+    at every level change, at every operator prompt and once per second: DOF, level index and count, level
+    command (N or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel): the node publishes a
     zero wrench every tick until the ESC node reports neutral widths (zero thrust on every thruster, or
     disarmed) or ``stop_timeout_s`` has passed, and only then ends the action; afterwards it publishes no
     wrench (the allocation's wrench timeout keeps the thrusters neutral). Result: success, message (abort
-    reason, ``cancelled``), the final online estimate of every DOF.
+    reason, ``cancelled``; after calibration steps also the thrust scales measured), the final online estimate of
+    every DOF.
+Service ``identification/continue`` (std_srvs/Trigger)
+    The operator's "done": while a calibration step waits (the feedback ``prompt`` and the status ``message``
+    read ``[<what>] <instruction>, then call continue``, e.g. ``[attach_ballast] calibration: attach the ballast
+    (8.56 N in water), then call continue``), the step goes on (success True, message ``continuing: <what>``);
+    otherwise success False with the reason (no goal, or nothing awaited). Nothing waits in the callback.
 Subscribes
     ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure``
     (FluidPressure, Pa), ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range),
@@ -65,6 +74,7 @@ from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
+from std_srvs.srv import Trigger
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
@@ -75,7 +85,8 @@ from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
 from .estimators import parameter_units
-from .executive import CampaignRecord, Executive, ExecutiveStatus, TickInput, ordered_samples
+from .executive import (CALIBRATION_STEPS, CampaignRecord, Executive, ExecutiveStatus, TickInput,
+                        calibration_forces, ordered_samples)
 from .signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu, thrust_of_written_widths
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
@@ -190,6 +201,7 @@ class IdentificationNode(Node):
         self.pub_abort = self.create_publisher(String, "supervisor/abort", 10, **pub_ev)
         self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+        self.create_service(Trigger, "identification/continue", self._on_continue)
         self._timer = self.create_timer(self.tick_s, self._on_tick)
         log.info(f"identification executive ready: action run_identification, ticks at "
                  f"{1.0 / self.tick_s:g} Hz, estimates at {1.0 / self.publish_period_s:g} Hz")
@@ -250,6 +262,11 @@ class IdentificationNode(Node):
         bad = [d for d in goal.dofs if d not in DOFS]
         if bad:
             return f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}"
+        bad = [c for c in goal.calibrate if c not in CALIBRATION_STEPS]
+        if bad:
+            return f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}"
+        if goal.calibration_only and not goal.calibrate:
+            return "calibration_only without a calibration step"
         fr = list(goal.level_fractions)
         if any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in fr):
             return f"level_fractions must be in (0, 1], got {fr}"
@@ -258,23 +275,30 @@ class IdentificationNode(Node):
     async def _execute(self, goal_handle):
         """Execute callback: set up the goal and await its end, which the control timer signals (no wait here)."""
         goal = goal_handle.request
-        dofs = list(goal.dofs) or list(DOFS)
+        dofs = [] if goal.calibration_only else (list(goal.dofs) or list(DOFS))
         if not self._armed:
             goal_handle.abort()
             return RunIdentification.Result(success=False, message="ESC output not armed: call esc/set_armed first")
+        calibrate = list(goal.calibrate)
+        w_ballast, f_line = calibration_forces(self.config) if calibrate else (0.0, 0.0)
         executive = Executive(self.config, dofs, int(goal.levels_per_dof) or None, tick_s=self.tick_s,
                               fractions=list(goal.level_fractions) or None,
-                              dvl_lock_timeout_s=self.dvl_lock_timeout_s)
+                              dvl_lock_timeout_s=self.dvl_lock_timeout_s, calibrate=calibrate,
+                              ballast_weight_in_water_n=w_ballast, line_pull_n=f_line)
         run = _GoalRun(goal_handle, executive, Future(), self._now_s(), np.full(self._n_thrusters, self._neutral_us))
         self._samples = []
         self._run = run
-        self.get_logger().info(f"run_identification: {', '.join(dofs)}")
+        self.get_logger().info(f"run_identification: {', '.join(dofs) or 'no ladders'}"
+                               + (f"; calibration {', '.join(calibrate)}" if calibrate else ""))
         await run.done
         self._run = None
         self._last_tick_s = None
         self.last_record = run.record
         ok = run.record is not None and not run.record.aborted and not run.error
         message = run.error or ("" if run.record is None else run.record.abort_reason) or "campaign complete"
+        if run.record is not None and run.record.calibration:  # the thrust scales measured, for the operator
+            message += "; thrust scale " + ", ".join(f"{k} {v['value']:.4f} +- {v['std']:.4f}"
+                                                     for k, v in run.record.calibration.items())
         self.last_result = message
         result = RunIdentification.Result(success=ok, message=message)
         if executive.started:
@@ -289,6 +313,27 @@ class IdentificationNode(Node):
             goal_handle.abort()
         self.get_logger().info(f"run_identification finished: {message}")
         return result
+
+    def _on_continue(self, _request, response):
+        """``identification/continue``: resume the calibration step waiting for the operator (module docstring)."""
+        run = self._run
+        ex = None if run is None else run.executive
+        if ex is None or run.done.done() or run.stop_since_s is not None:
+            response.success, response.message = False, "no identification goal is running"
+        elif not ex.awaiting:
+            response.success, response.message = False, "nothing awaits the operator (no calibration step waits)"
+        else:
+            what = ex.awaiting
+            response.success = ex.operator_continue()
+            response.message = f"continuing: {what}"
+            self.get_logger().info(f"identification/continue: {what}")
+        return response
+
+    @staticmethod
+    def operator_prompt(ex: Executive) -> str:
+        """The operator prompt of ``ex`` as sent in feedback and status: ``[<awaiting>] <prompt>``, "" when nothing
+        waits."""
+        return f"[{ex.awaiting}] {ex.prompt}" if ex.awaiting else ""
 
     # ------------------------------------------------------------------ control tick
     def _now_s(self) -> float:
@@ -394,13 +439,16 @@ class IdentificationNode(Node):
     def _publish_progress(self, run: _GoalRun, t: float) -> None:
         ex = run.executive
         st = ex.status()
-        self._publish_status_throttled(t, _PHASES[st.phase], st, st.message)
-        key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0)
+        prompt = self.operator_prompt(ex)
+        self._publish_status_throttled(t, _PHASES[st.phase], st, prompt or st.message)
+        key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0, prompt)
         if key != run.last_feedback or t - run.last_feedback_s >= 1.0:
+            if prompt and prompt != run.last_feedback[-1]:
+                self.get_logger().info(f"operator: {prompt}")
             run.last_feedback, run.last_feedback_s = key, t
             run.handle.publish_feedback(RunIdentification.Feedback(
                 dof=st.dof, level_index=st.level_index, level_count=st.level_count, level_command=st.level_command,
-                progress=st.progress))
+                progress=st.progress, prompt=prompt))
         if t - self._last_publish_t >= self.publish_period_s - 1e-9:
             self._last_publish_t = t
             stamp = self.get_clock().now().to_msg()

@@ -1,0 +1,174 @@
+"""Calibration steps on the ROS graph (issue 17 item 1): the run_identification goal's ``calibrate`` field, the
+operator prompt in the action feedback and in ``identification/status``, the ``identification/continue`` service
+(std_srvs/Trigger), the virtual operator of ``hindrax run`` (:class:`~hindrax_ident.identification.graph_campaign.
+VirtualOperator`) and the ``calibration.*`` keys of the vehicle file.
+
+The graph tests shorten the ballast step's settling and averaging times (executive module constants, read at run
+time) so that a calibration-only goal takes about a minute of simulated time.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from rclpy.action import ActionClient
+from std_srvs.srv import Trigger
+
+from hindrax_drivers.config import ConfigError, default_config_path, load_config, ros_parameters_from_yaml
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_ident import cli
+from hindrax_ident.identification import executive
+from hindrax_ident.identification.graph_campaign import VirtualOperator, parse_prompt
+from hindrax_msgs.action import RunIdentification
+from hindrax_msgs.msg import ManeuverStatus
+from hindrax_msgs.srv import SetArmed
+
+# the shipped keys: 1 kg of steel displacing 1.274e-4 m^3, in water of 1000 kg/m^3 with g = 9.81 m/s^2
+W_BALLAST = (1.0 - 1000.0 * 0.0001274) * 9.81
+
+
+def _write(tmp_path, mutate):
+    doc = yaml.safe_load(default_config_path().read_text())
+    params = ros_parameters_from_yaml(doc)
+    mutate(params)
+    p = tmp_path / "v.yaml"
+    p.write_text(yaml.safe_dump({"/**": {"ros__parameters": params}}))
+    return p
+
+
+@pytest.mark.parametrize("key, value, allowed", [
+    ("ballast_mass_kg", -1.0, "calibration.ballast_mass_kg = -1.0: allowed number in [0.01, 50]"),
+    ("line_pull_force_n", 0.0, "calibration.line_pull_force_n = 0.0: allowed number in [0.1, 200]"),
+    ("ballast_volume_m3", 0.002, "calibration.ballast_volume_m3 = 0.002: allowed below calibration.ballast_mass_kg"),
+])
+def test_calibration_keys_are_validated_with_one_line_naming_key_value_and_range(tmp_path, key, value, allowed):
+    p = _write(tmp_path, lambda prm: prm["calibration"].update({key: value}))
+    with pytest.raises(ConfigError) as exc:
+        load_config(p)
+    lines = exc.value.lines()
+    assert len(lines) == 1 and allowed in lines[0], lines
+
+
+def test_shipped_calibration_keys_and_cli_defaults(tmp_path, capsys):
+    cfg = load_config(default_config_path())
+    w, f = executive.calibration_forces(cfg)
+    assert w == pytest.approx(W_BALLAST, rel=1e-6) and f == 4.905
+    # a command-line value replaces the key and is validated like the file (one line naming the key)
+    assert cli.main(["ident", "campaign", "--calibrate", "ballast", "--dofs", "heave", "--ballast-volume-m3", "0.01",
+                     "--out", str(tmp_path / "x")]) == 1
+    err = capsys.readouterr().err
+    assert "calibration.ballast_volume_m3 = 0.01: allowed below" in err and len(err.strip().splitlines()) == 1
+
+
+def test_prompt_codes_and_virtual_operator_forces():
+    assert parse_prompt("[attach_ballast] calibration: attach the ballast") == "attach_ballast"
+    assert parse_prompt("") == "" and parse_prompt("dive to the altitude setpoint") == ""
+
+    class Sim:  # yawed 90 deg: body +x points east; pitched by 0.1 rad does not tilt the line
+        t_s = 0.0
+        rotation = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+        wrenches: list = []
+
+        def set_external_wrench(self, w):
+            self.wrenches.append(list(w))
+
+    sim = Sim()
+    sent = []
+    op = VirtualOperator(sim, 8.0, 5.0, lambda: sent.append(1))
+    op.on_prompt("[attach_ballast] calibration: attach the ballast, then call continue")
+    op.on_prompt("[attach_ballast] calibration: attach the ballast, then call continue")  # repeated feedback
+    assert len(sent) == 1 and op.ballast_on
+    op.on_step()
+    assert sim.wrenches[-1] == pytest.approx([0, 0, 8.0, 0, 0, 0])  # weight: NED down = body down here
+    op.on_prompt("")
+    op.on_prompt("[remove_ballast] calibration: remove the ballast")
+    op.on_prompt("[apply_line_pull_surge] pull the line")
+    assert not op.ballast_on and op.line_ned == pytest.approx([0.0, 5.0, 0.0])  # east, along body +x
+    op.on_step()
+    assert sim.wrenches[-1] == pytest.approx([5.0, 0, 0, 0, 0, 0])
+    op.on_prompt("[release_line_surge] release the line")
+    op.on_step()
+    assert sim.wrenches[-1] == pytest.approx([0.0] * 6) and len(sent) == 4
+    n = len(sim.wrenches)
+    op.on_step()
+    assert len(sim.wrenches) == n  # nothing held: no further writes
+
+
+@pytest.mark.ros
+def test_goal_with_ballast_prompts_continue_proceeds_and_nothing_awaited_is_refused(monkeypatch):
+    monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 3.0)
+    monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 9.0)
+    with ros_context() as ctx:
+        from hindrax_ident.bringup import build_graph
+
+        graph = build_graph(default_config_path(), sim=True, context=ctx, seed=4,
+                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0})
+        probe = rclpy.create_node("operator", context=ctx)
+        graph.executor.add_node(probe)
+        sim = graph.nodes["simulator"].simulator
+        status, feedback = [], []
+        probe.create_subscription(ManeuverStatus, "identification/status", status.append, 100)
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        cont = probe.create_client(Trigger, "identification/continue")
+        action = ActionClient(probe, RunIdentification, "run_identification")
+        spin = lambda: graph.spin_once(0.005)  # noqa: E731
+
+        def call_continue():
+            f = cont.call_async(Trigger.Request())
+            wait_until(f.done, 10, spin, "continue answer")
+            return f.result()
+
+        try:
+            wait_until(lambda: action.server_is_ready() and cont.service_is_ready(), 30, spin, "servers")
+            r = call_continue()
+            assert not r.success and "no identification goal" in r.message
+            # an unknown step and calibration_only without a step are rejected
+            for goal in (RunIdentification.Goal(calibrate=["tow"]), RunIdentification.Goal(calibration_only=True)):
+                f = action.send_goal_async(goal)
+                wait_until(f.done, 10, spin, "goal answer")
+                assert not f.result().accepted
+            assert graph.start_and_arm(arm, 60).success
+            wait_until(lambda: graph.nodes["identification"]._armed, 30, spin, "ESC reporting armed")
+            f = action.send_goal_async(RunIdentification.Goal(calibrate=["ballast"], calibration_only=True),
+                                       feedback_callback=lambda m: feedback.append(m.feedback))
+            wait_until(f.done, 10, spin, "goal answer")
+            handle = f.result()
+            assert handle.accepted
+            prompts = lambda: [x.prompt for x in feedback if x.prompt]  # noqa: E731
+            wait_until(lambda: prompts(), 120, spin, "first operator prompt")
+            assert prompts()[0].startswith("[attach_ballast] calibration: attach the ballast (8.56 N in water)")
+            wait_until(lambda: any(s.message == prompts()[0] for s in status), 10, spin, "prompt in the status")
+            t_prompt = sim.t_s
+            wait_until(lambda: sim.t_s > t_prompt + 2.0, 30, spin, "two seconds of waiting")
+            assert graph.nodes["identification"]._run.executive.awaiting == "attach_ballast"  # still waits
+            # the test plays the operator: the ballast's weight in water on the simulator, then continue
+            op = VirtualOperator(sim, W_BALLAST, 4.905, lambda: None)
+            graph.nodes["simulator"].add_step_listener(op.on_step)
+            op.on_prompt(prompts()[-1])
+            r = call_continue()
+            assert r.success and r.message == "continuing: attach_ballast"
+            r = call_continue()  # the step holds now: nothing awaited
+            assert not r.success and "nothing awaits" in r.message
+            n = len(prompts())
+            wait_until(lambda: any(p.startswith("[remove_ballast]") for p in prompts()[n:]), 120, spin,
+                       "the step proceeds to the removal prompt")
+            op.on_prompt("[remove_ballast]")
+            assert call_continue().success
+            res = handle.get_result_async()
+            wait_until(res.done, 120, spin, "result")
+            result = res.result().result
+            assert result.success, result.message
+            cal = graph.nodes["identification"].last_record.calibration["vertical"]
+            # default truth: the thrusters give their curves, so the known weight is held by scale 1
+            assert cal["value"] == pytest.approx(1.0, abs=0.1) and 0.0 < cal["std"] < 0.1, cal
+            assert cal["known_force_n"] == pytest.approx(W_BALLAST)
+            assert "thrust scale vertical" in result.message
+            assert not math.isnan(cal["holding_force_n"][0])
+            r = call_continue()
+            assert not r.success and "no identification goal" in r.message
+        finally:
+            graph.shutdown()
+            probe.destroy_node()
