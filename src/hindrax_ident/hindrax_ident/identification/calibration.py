@@ -1,17 +1,18 @@
-"""Known-force thrust calibration applied to a campaign (issue 17 items 1-2; [Hindrax-Drag] (seed 003) §6).
+"""Known-force thrust calibration and joint estimation (issue 17 items 1-3, 5; [Hindrax-Drag] (seed 003) §6).
 
 A self-propelled test only sees force / inertia and force / damping: if every thruster gives s times its curve,
 inertia, damping and bias all come out s times too (docs/identification.md). The ballast step of the executive
 (:meth:`~.executive.Executive._ballast`) measures s against a known weight; here it enters the identification:
 
 * :func:`apply_thrust_calibration` returns the record with its thrust-model wrenches (``wrench_frd``,
-  ``wrench_cmd_frd``) multiplied by the calibrated scale. For parameters that scale linearly with the force
-  (inertia, damping, bias: tau = M nu_dot + D(nu) nu + b) this is the joint estimate: the ladders carry no
-  information on s, so the joint maximum-likelihood estimate of (s, theta) is the calibration's s and theta of
-  the scaled force.
-* :func:`calibration_relative_std` gives s's relative std as the thrust uncertainty [negative, positive] for
-  :func:`~.verdicts.apply_verdicts` (``thruster_fit_rel``), which then adds it to every interval in place of the
-  declared thrust-curve uncertainty: the intervals carry the calibration's own uncertainty.
+  ``wrench_cmd_frd``) multiplied by the calibrated point scale, so that the fits come out near physical units.
+* :func:`joint_estimate` then estimates the scales as parameters together with every DOF's parameters: prior
+  N(1, sigma_s^2) from ``thrusters.thrust_uncertainty_rel``, each calibration step a measurement, the empirical
+  priors ([NTNU-Thesis] (seed 002) App. A, weight ``identification.prior_std_rel``) on the physical parameters, and
+  each DOF's fit in curve units phi = theta / s (the model is linear in 1/s: an exact reparametrisation) as a
+  Gaussian measurement; Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2-§6.3). The
+  reported intervals carry the calibration's own uncertainty; :func:`~.verdicts.assess_dof` then adds no second
+  thrust term. (:func:`calibration_relative_std` is the former, first-order shortcut: the scale's relative std.)
 
 Scales: ``vertical`` (ballast: heave, roll, pitch columns Z, K, M, the vertical thrusters) and ``horizontal``
 (line pull in surge and sway, their inverse-variance mean: X, Y, N, the horizontal thrusters). ASSUMPTION when only
@@ -195,17 +196,43 @@ def _scale_parameter(groups: Mapping[str, Any], dof: str) -> str | None:
     return "common" if "common" in groups else DOF_GROUP[dof]
 
 
+def _rigid_inertia(cfg, dof: str) -> float:
+    """Rigid-body mass or moment of inertia of ``dof`` about the body origin, diag of M_RB (as
+    :func:`~.estimators.rigid_inertia`; not imported from there: estimators -> results -> calibration)."""
+    from hindrax_drivers.config import DOFS
+
+    from ..sim.model import rigid_body_mass_matrix
+
+    m = rigid_body_mass_matrix(cfg.mass_kg, cfg.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
+    return float(m[DOFS.index(dof), DOFS.index(dof)])
+
+
+def _prior_entry(cfg, dof: str) -> dict:
+    """{added_mass, linear_damping, quadratic_damping} of ``dof`` from the configured geometry
+    (:func:`~hindrax_ident.estimation.priors.priors_from_config`, as :func:`~.results.prior_entries`); {} when the
+    configuration lacks the geometry."""
+    from hindrax_drivers.config import DOFS
+
+    from ..estimation.least_squares import EstimationError
+    from ..estimation.priors import priors_from_config
+
+    try:
+        p = priors_from_config(cfg)
+    except (KeyError, TypeError, EstimationError):
+        return {}
+    i = DOFS.index(dof)
+    return {k: (None if p[k][i] is None else float(p[k][i])) for k in ("added_mass", "linear_damping",
+                                                                        "quadratic_damping")}
+
+
 def _theta_priors(dof: str, names: list, cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:
     """{parameter: (mean, std)} of the empirical priors ([NTNU-Thesis] (seed 002) App. A.1/A.2 via
-    :func:`~.results.prior_entries`) on the physical parameters: inertia = rigid + prior added mass with std
+    :func:`_prior_entry`) on the physical parameters: inertia = rigid + prior added mass with std
     ``prior_std_rel`` x the added mass (the rigid part is known), quadratic and linear damping (heave: the same
     prior for both directions) with std ``prior_std_rel`` x the value. Bias and restoring have none."""
-    from .estimators import rigid_inertia
-    from .results import prior_entries
-
     if not prior_std_rel > 0:
         return {}
-    p = prior_entries(cfg).get(dof)
+    p = _prior_entry(cfg, dof)
     if not p:
         return {}
     out = {}
@@ -215,7 +242,7 @@ def _theta_priors(dof: str, names: list, cfg, prior_std_rel: float) -> dict[str,
         val = p.get(key) if key else None
         if val is None or not (math.isfinite(val) and val > 0):
             continue
-        mean = val + (rigid_inertia(cfg, dof) if n == "inertia" else 0.0)
+        mean = val + (_rigid_inertia(cfg, dof) if n == "inertia" else 0.0)
         out[n] = (float(mean), float(prior_std_rel) * float(val))
     return out
 
@@ -248,8 +275,6 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     prior_std_rel, method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
     """
     from scipy import optimize
-
-    from .estimators import rigid_inertia
 
     if prior_std_rel is None:
         prior_std_rel = float(cfg.flat.get("identification.prior_std_rel", DEFAULT_PRIOR_STD_REL))
@@ -337,7 +362,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         for n, v, sd in zip(names, theta, np.sqrt(np.clip(np.diag(cov), 0.0, None))):
             r.values[n] = float(v)
             r.std[n] = float(sd)
-        r.values["added_mass"] = r.values["inertia"] - rigid_inertia(cfg, dof)
+        r.values["added_mass"] = r.values["inertia"] - _rigid_inertia(cfg, dof)
         r.std["added_mass"] = r.std["inertia"]
     sec = {"prior_std_rel": float(prior_std_rel),
            "method": ("Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2): each DOF's "
