@@ -302,6 +302,17 @@ SCHEMA.update({
     "identification.converged_relative_std": _f("converged when every std/|value| is below this", 0.001, 1.0),
     "identification.prior_std_rel": _f("1-sigma of the empirical priors in the batch fit, as a fraction of the prior "
                                        "value (0 = no prior; docs/identification.md §6.3)", 0.0, 100.0),
+    "identification.rls_directional_forgetting": _b("online RLS: forget only along the regressor (Bittanti et al. "
+                                                    "1990), default true (docs/identification.md §1.D)"),
+    "identification.rls_min_excitation": _f("online RLS: hold the estimate while the normalised excitation is below "
+                                            "this once reached (0 = no gate), default 0.001", 0.0, 1.0),
+    "identification.rls_change_threshold": _f("online RLS: reset the covariance when the mean normalised a-priori error "
+                                              "over rls_change_window_s exceeds this (0 = no detector), default 6",
+                                              0.0, 1e6),
+    "identification.rls_change_window_s": _f("online RLS: window of the change detector, s, default 10", 0.1, 600.0),
+    "identification.rls_prior_std_rel": _f("online RLS: 1-sigma of its starting values (empirical priors) as a "
+                                           "fraction of the prior value (0 = diffuse start at zero), default 1",
+                                           0.0, 100.0),
     "identification.excitation": _s("force input per DOF: the constant-thrust ladder, or one broadband run shaped to "
                                     "stay in the pool box (hindrax_ident identification/excitation.py)",
                                     ("ladder", "multisine", "prbs", "chirp")),
@@ -336,7 +347,8 @@ OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics",
                                       "sensors.dvl75.scale_error_fraction", "sensors.dvl75.attitude_noise_std_rad",
                                       "sensors.ms5837.noise_std_pa", "sensors.icm20948.accel_noise_std_m_s2",
                                       "sensors.icm20948.gyro_noise_std_rad_s", "thrusters.thrust_uncertainty_rel",
-                                      "identification.excitation", "identification.prior_std_rel")
+                                      "identification.excitation", "identification.prior_std_rel",
+                                      "identification.rls_", "thrusters.thrust_fit_uncertainty_rel")
 
 # Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
 for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837", "pa", 1e4),
@@ -366,6 +378,9 @@ SCHEMA["sensors.icm20948.gyro_noise_std_rad_s"] = _f("declared gyro white noise 
 SCHEMA["thrusters.thrust_uncertainty_rel"] = _v(
     "declared 1-sigma relative uncertainty of the thrust curves [negative, positive direction] (battery state, "
     "curve fit), added to the identification intervals", 2, 0.0, 1.0)
+SCHEMA["thrusters.thrust_fit_uncertainty_rel"] = _v(
+    "1-sigma relative uncertainty of the thrust curves [negative, positive direction] from the bollard-pull fit "
+    "(written by hindrax ident thruster-fit --write); replaces thrust_uncertainty_rel in the intervals", 2, 0.0, 1.0)
 SCHEMA["recording.topics"] = Spec(_STRS, "topics recorded by default (empty list not allowed by ROS: omit the key "
                                          "to record all topics)")
 

@@ -91,7 +91,7 @@ def test_thruster_fit_prints_cubics_and_writes_config(tmp_path, capsys):
     rc = cli.main(["ident", "thruster-fit", str(csv), "--write", str(conf)])
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
-    assert set(out) == {"negative", "positive"}
+    assert set(out) == {"negative", "positive", "thrust_fit_uncertainty_rel"}
     for side, truth, pws in (("negative", neg, [1100, 1250, 1400]), ("positive", pos, [1600, 1750, 1900])):
         c = out[side]
         for k in ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std"):
@@ -105,9 +105,14 @@ def test_thruster_fit_prints_cubics_and_writes_config(tmp_path, capsys):
                        rtol=1e-8)
     assert np.allclose(cfg2.thrusters.curve_positive, [out["positive"][k] for k in ("c4", "c3", "c2", "c1")],
                        rtol=1e-8)
-    # everything else unchanged
-    changed = [a for a, b in zip(text.splitlines(), open(default_config_path()).read().splitlines()) if a != b]
+    # everything else unchanged: the two curve lines replaced, one thrust_fit_uncertainty_rel line added
+    lines = text.splitlines()
+    added = [i for i, ln in enumerate(lines) if ln.strip().startswith("thrust_fit_uncertainty_rel:")]
+    assert len(added) == 1 and lines[added[0] - 1].strip().startswith("curve_positive:")
+    del lines[added[0]]
+    changed = [a for a, b in zip(lines, open(default_config_path()).read().splitlines()) if a != b]
     assert len(changed) == 2
+    assert cfg2.flat["thrusters.thrust_fit_uncertainty_rel"] == pytest.approx(out["thrust_fit_uncertainty_rel"])
 
 
 def test_thruster_fit_bad_csv(tmp_path, capsys):

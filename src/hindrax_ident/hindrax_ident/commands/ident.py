@@ -11,9 +11,14 @@
   ode_rms_residual_m_s2; the linear keys are unchanged.
 * ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] (seed 003) eq. 1 cubic per rotation direction from
   bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints
-  ``{"negative": {c4..c1, c4_std..c1_std, ...}, "positive": {...}}``. ``--write`` replaces the
-  ``curve_negative:`` and ``curve_positive:`` lines of a configuration file in place (text edit, comments
-  kept) and validates the result with ``load_config`` (the file is restored if it no longer validates).
+  ``{"negative": {c4..c1, c4_std..c1_std, thrust_relative_std, ...}, "positive": {...},
+  "thrust_fit_uncertainty_rel": [negative, positive]}``. ``--write`` replaces the ``curve_negative:`` and
+  ``curve_positive:`` lines of a configuration file in place (text edit, comments kept), sets
+  ``thrust_fit_uncertainty_rel:`` (the fit's relative thrust std per direction,
+  :meth:`~hindrax_ident.estimation.thruster_fit.CubicFit.relative_std`; inserted after ``curve_positive:`` when
+  the file has no such line), which the identification intervals then use instead of the declared
+  ``thrust_uncertainty_rel``, and validates the result with ``load_config`` (the file is restored if it no
+  longer validates).
 * ``hindrax ident campaign``: the identification campaign on the simulator, same as ``hindrax run``
   (:mod:`hindrax_ident.commands.run`).
 
@@ -52,7 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     elif which == "thruster-fit":
         parser.add_argument("file", help="CSV with a header: pulse width (us), thrust (N)")
         parser.add_argument("--write", metavar="CONFIG", default=None,
-                            help="update thrusters.curve_negative/curve_positive in this configuration file")
+                            help="update thrusters.curve_negative/curve_positive and thrust_fit_uncertainty_rel "
+                                 "(the fit's relative thrust std per direction, used by the identification "
+                                 "intervals) in this configuration file")
         parser.add_argument("--neutral", type=float, default=1500.0, help="neutral pulse width, us")
     else:
         from . import run as run_cmd
@@ -102,15 +109,36 @@ def _curve_text(coeffs) -> str:
     return "[" + ", ".join(_yaml_float(c) for c in coeffs) + "]"
 
 
-def write_thruster_curves(config_path: str, negative, positive) -> None:
-    """Replace the ``curve_negative:`` / ``curve_positive:`` values in a configuration file, keeping comments.
+def write_thruster_curves(config_path: str, negative, positive, relative_std=None) -> None:
+    """Replace the ``curve_negative:`` / ``curve_positive:`` values in a configuration file, keeping comments, and
+    with ``relative_std`` = (negative, positive) set ``thrust_fit_uncertainty_rel:`` (inserted after the
+    ``curve_positive:`` line, same indentation, when absent).
 
     Validates the result and restores the original text on failure (:func:`~.common.update_vehicle_file`).
     Raises ``ValueError`` (missing lines) or :class:`~hindrax_drivers.config.ConfigError`.
     """
+    import re
+    from pathlib import Path
+
     from .common import update_vehicle_file
 
-    update_vehicle_file(config_path, {"curve_negative": _curve_text(negative), "curve_positive": _curve_text(positive)})
+    values = {"curve_negative": _curve_text(negative), "curve_positive": _curve_text(positive)}
+    path = Path(config_path)
+    original = path.read_text()
+    if relative_std is not None:
+        values["thrust_fit_uncertainty_rel"] = _curve_text(relative_std)
+        if not re.search(r"^\s*thrust_fit_uncertainty_rel:", original, re.MULTILINE):
+            m = re.search(r"^(\s*)curve_positive:.*$", original, re.MULTILINE)
+            if m is None:
+                raise ValueError(f"{config_path}: no 'curve_positive:' line to add thrust_fit_uncertainty_rel after")
+            line = (f"\n{m.group(1)}thrust_fit_uncertainty_rel: [0.0, 0.0]  # 1-sigma relative thrust std "
+                    "[negative, positive] of the bollard-pull fit (hindrax ident thruster-fit)")
+            path.write_text(original[:m.end()] + line + original[m.end():])
+    try:
+        update_vehicle_file(config_path, values)
+    except Exception:
+        path.write_text(original)
+        raise
 
 
 def _free_decay(args) -> int:
@@ -139,10 +167,12 @@ def _thruster_fit(args) -> int:
         print(f"thruster-fit: {exc}", file=sys.stderr)
         return 1
     out = fit.to_dict()
-    print(json.dumps({"negative": out["negative"], "positive": out["positive"]}))
+    rel = fit.relative_std()
+    print(json.dumps({"negative": out["negative"], "positive": out["positive"],
+                      "thrust_fit_uncertainty_rel": list(rel)}))
     if args.write:
         try:
-            write_thruster_curves(args.write, fit.negative.coefficients, fit.positive.coefficients)
+            write_thruster_curves(args.write, fit.negative.coefficients, fit.positive.coefficients, rel)
         except ConfigError as exc:
             print(f"thruster-fit: {args.write} would be invalid, left unchanged: {'; '.join(exc.lines())}",
                   file=sys.stderr)

@@ -23,6 +23,17 @@ Cov(c) = T Cov(a) T^T. The raw standard deviations are large and strongly correl
 [Hindrax-Drag] (seed 003) Table 2, e.g. c1 = 927.18 +- 137.82): use :meth:`CubicFit.predict_std` for the
 uncertainty of the thrust itself.
 
+Relative thrust uncertainty for the identification intervals (issue 16 item 4; our definition, the seed gives
+none): a self-propelled identification sees the thrust only through a scale (every identified parameter scales
+with it, docs/identification.md), so the curve's covariance is summarised per direction as the thrust-weighted RMS
+relative standard deviation of the fitted mean thrust over the fitted pulse-width range,
+``rel = sqrt(sum_P sd(P)^2 / sum_P f(P)^2)`` on a uniform grid of 101 widths (:meth:`CubicFit.relative_std`;
+weighting by f^2 keeps the widths near neutral, where f -> 0, from dominating). ``hindrax ident thruster-fit
+--write`` stores it as ``thrusters.thrust_fit_uncertainty_rel`` = [negative, positive], which then replaces the
+declared ``thrusters.thrust_uncertainty_rel`` in the intervals (:mod:`hindrax_ident.identification.verdicts`). It
+is the fit's statistical uncertainty at the bollard-pull test's battery voltage only; a voltage that sags during a
+session (thrust ~ V^1.2, docs/devices.md §5.3) is not in it.
+
 :func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses
 it because [Hindrax-Drag] (seed 003) Table 2's printed positive-direction row evaluates to about -1070 N at
 1500 us (docs/architecture.md §4), while the negative row is consistent (-15.6 N at 1100 us,
@@ -120,12 +131,27 @@ class CubicFit:
         out = np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
         return float(out[0]) if np.ndim(pulse_width_us) == 0 else out
 
+    def relative_std(self, points: int = 101) -> float:
+        """Thrust-weighted RMS relative std of the fitted mean thrust over [pulse_width_min_us, pulse_width_max_us]
+        (dimensionless, module docstring): sqrt(sum sd^2 / sum f^2) on ``points`` uniformly spaced widths.
+
+        Raises:
+            EstimationError: the fitted thrust is zero over the whole range.
+        """
+        P = np.linspace(self.pulse_width_min_us, self.pulse_width_max_us, int(points))
+        f2 = float(np.sum(np.asarray(self.predict(P)) ** 2))
+        if not f2 > 0.0:
+            raise EstimationError("the fitted thrust is zero over the data's range: no relative uncertainty")
+        return float(np.sqrt(np.sum(np.asarray(self.predict_std(P)) ** 2) / f2))
+
     def to_dict(self) -> dict:
-        """{c4..c1, c4_std..c1_std, n, residual_std_n, pulse_width_min_us, pulse_width_max_us}."""
+        """{c4..c1, c4_std..c1_std, n, residual_std_n, thrust_relative_std, pulse_width_min_us,
+        pulse_width_max_us}."""
         keys = ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std")
         out = {k: float(getattr(self, k)) for k in keys}
         out["n"] = int(self.n)
         out["residual_std_n"] = float(self.residual_std_n)
+        out["thrust_relative_std"] = self.relative_std()
         out["pulse_width_min_us"] = float(self.pulse_width_min_us)
         out["pulse_width_max_us"] = float(self.pulse_width_max_us)
         return out
@@ -150,6 +176,10 @@ class ThrusterCurveFit:
         if np.any(hi):
             out[hi] = self.positive.predict(flat[hi])
         return float(out[0]) if P.ndim == 0 else out.reshape(P.shape)
+
+    def relative_std(self) -> Tuple[float, float]:
+        """(negative, positive) :meth:`CubicFit.relative_std`: the value for ``thrusters.thrust_fit_uncertainty_rel``."""
+        return (self.negative.relative_std(), self.positive.relative_std())
 
     def to_dict(self) -> dict:
         """``{"negative": {...}, "positive": {...}, "neutral_us": ...}`` (see CubicFit.to_dict)."""

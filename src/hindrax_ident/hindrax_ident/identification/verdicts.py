@@ -12,9 +12,11 @@ and
    surge, sway, yaw, roll and pitch use two thrusters in each direction of rotation for either sign of the
    command (55-degree layout, [Hindrax-Drag] (seed 003) Fig. 5), so a = b = 1/2; heave moves down on positive and up on negative
    thrust: ``*_positive`` (and the bias holding the net buoyancy, a downward force) a = 1, ``*_negative`` b = 1,
-   inertia a = b = 1/2. When a thrust-curve fit covariance is known (``thruster_fit_rel``: from
-   ``hindrax ident thruster-fit``, the relative std of the fitted thrust over the pulse widths used) it replaces the
-   declared value;
+   inertia a = b = 1/2. When a thrust-curve fit covariance is known it replaces the declared value: the vehicle
+   file's ``thrusters.thrust_fit_uncertainty_rel`` (written by ``hindrax ident thruster-fit --write``: the
+   thrust-weighted relative std of the fitted curve over the pulse widths of the bollard-pull data,
+   :meth:`~hindrax_ident.estimation.thruster_fit.CubicFit.relative_std`), or a calibration's scale std
+   (``thruster_fit_rel``), which takes precedence;
 2. **uses degrees of freedom that match the independent information**: the output-error residuals are correlated
    inside a segment (3 s for a velocity-measured DOF, 10 s for heave) and the fit's covariance is at least the
    cluster-robust one with one cluster per segment, so the 95 % interval uses the Student t quantile with
@@ -110,6 +112,10 @@ def segment_count(dof: str, pool_time_s: float) -> int:
 def _declared_rel(cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None) -> tuple[float, float]:
     if thruster_fit_rel is not None:
         return float(thruster_fit_rel[0]), float(thruster_fit_rel[1])
+    # the bollard-pull fit's own uncertainty (hindrax ident thruster-fit --write) replaces the declared one
+    v = cfg.flat.get("thrusters.thrust_fit_uncertainty_rel")
+    if v is not None:
+        return float(v[0]), float(v[1])
     v = cfg.flat.get("thrusters.thrust_uncertainty_rel")
     return tuple(float(x) for x in v) if v is not None else DEFAULT_THRUST_UNCERTAINTY_REL  # type: ignore
 
