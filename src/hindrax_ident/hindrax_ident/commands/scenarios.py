@@ -238,8 +238,8 @@ def format_excitation_table(results: Sequence[dict]) -> str:
     """Markdown comparison of the force inputs (module docstring): per scenario, excitation and DOF over the seeds:
     mean pool seconds of the DOF, mean |error| of the inertia and of the quadratic damping (heave: both directions),
     how many of their 95 % intervals cover the truth, and each error scaled to 100 s of pool time
-    (|error| x sqrt(pool s / 100)); the last column scales the fits' own relative 1-sigma the same way (less noisy
-    than the error over a few seeds)."""
+    (|error| x sqrt(pool s / 100)); the last column scales the fits' own relative 1-sigma (``std_fit``, before the
+    thrust-model widening) the same way (less noisy than the error over a few seeds)."""
     by: dict = {}
     for res in results:
         for row in res["cases"]:
@@ -254,7 +254,7 @@ def format_excitation_table(results: Sequence[dict]) -> str:
                                     "kq_std": []})
             d["pool"][res["seed"]] = row.get("pool_time_s", math.nan)
             d[kind].append(abs(row["rel_error"]))
-            d[kind + "_std"].append(abs(row["std"] / row["truth"]))
+            d[kind + "_std"].append(abs(row["std_fit"] / row["truth"]))
             d["covered"] += bool(row["covered"])
             d["n"] += 1
     lines = ["| scenario | excitation | DOF | seeds | pool s | inertia mean abs error | quadratic damping mean abs "
