@@ -172,3 +172,24 @@ def test_goal_with_ballast_prompts_continue_proceeds_and_nothing_awaited_is_refu
         finally:
             graph.shutdown()
             probe.destroy_node()
+
+
+@pytest.mark.ros
+def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(monkeypatch, tmp_path, capsys):
+    """`hindrax run --calibrate ballast` through the whole graph (recorder, bag): the virtual operator answers both
+    prompts from the feedback (known weight in the simulator, identification/continue); the measured scale reaches
+    identification.yaml. Without the weight applied the step would abort (holding force did not rise)."""
+    monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 3.0)
+    monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 9.0)
+    out = tmp_path / "run"
+    rc = cli.main(["run", "--calibrate", "ballast", "--dofs", "heave", "--levels", "1", "--seed", "2",
+                   "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text[-3000:]
+    assert "virtual operator: attach_ballast done" in text and "virtual operator: remove_ballast done" in text
+    assert "continue refused" not in text
+    doc = yaml.safe_load((out / "identification.yaml").read_text())
+    v = doc["calibration"]["vertical_thrust_scale"]
+    assert v["method"] == "ballast" and v["known_force_n"] == pytest.approx(W_BALLAST)
+    assert v["value"] == pytest.approx(1.0, abs=0.1) and 0.0 < v["std"] < 0.05, v  # default truth: curves exact
+    assert doc["dofs"]["heave"]["inertia"]["value"] > 0

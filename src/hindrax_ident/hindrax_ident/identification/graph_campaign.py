@@ -13,8 +13,8 @@ plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for 
 in-process campaign does, :mod:`.campaign`: the ballast's weight in water, NED down; the line pull, fixed in the pool
 frame along the body axis named, both expressed in the body frame at every integration step) or removes it, and
 calls ``identification/continue``. The thrust scales the node measured (its record) are applied to the bag's record
-before the offline identification, their std added to the intervals, and written to the ``calibration`` section of
-``identification.yaml`` (as ``hindrax ident campaign --calibrate`` does).
+before the offline identification and estimated jointly with the fits (:func:`~.results.build_results`), with the
+``calibration`` section of ``identification.yaml``, as ``hindrax ident campaign --calibrate`` does.
 
 Reproducibility: with the serial devices in lock-step (:class:`~hindrax_ident.sim.hardware.SerialLockStep`),
 simulated time frozen until every driver has finished its start-up exchange and the recorder is subscribed to
@@ -296,17 +296,13 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
-    from .calibration import apply_thrust_calibration, calibration_relative_std, calibration_section
+    from .calibration import apply_thrust_calibration
     from .estimators import identify_all_with_errors
-    from .verdicts import apply_verdicts
     try:
         record = record_from_bag(bag_dir, cfg)
         idents, errors = identify_all_with_errors(apply_thrust_calibration(record, calibration), cfg)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
-    if calibration:  # the calibration's uncertainty replaces the declared thrust-curve uncertainty
-        for dof, r in idents.items():
-            apply_verdicts({dof: r}, cfg, thruster_fit_rel=calibration_relative_std(calibration, dof))
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
     outcome.wall_time_s = time.monotonic() - wall0
     if idents:
@@ -316,10 +312,10 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         note = (f"ROS graph campaign on the virtual pool (seed {cfg.flat['simulation.seed']}), "
                 f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
                 f"action result: {outcome.message}")
-        doc = build_results(idents, cfg, source="simulation", seed=int(cfg.flat["simulation.seed"]))
+        # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
+        doc = build_results(idents, cfg, source="simulation", seed=int(cfg.flat["simulation.seed"]),
+                            calibration=calibration or None)
         doc["provenance"]["bag"] = str(bag_dir)
-        if calibration:
-            doc["calibration"] = calibration_section(calibration)
         write_identification(out / "identification.yaml", doc)
         write_report(out / "report", idents, doc, campaign_note=note)
     return outcome
