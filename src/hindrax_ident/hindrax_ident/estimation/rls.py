@@ -43,7 +43,8 @@ P are clipped to it after each update (the eigen-decomposition is only computed 
 exceeds the bound, which is cheap to test). :meth:`RecursiveLeastSquares.reset_covariance`
 restarts P explicitly.
 
-Honesty options (issue 16; all off by default, so the plain algorithm above is unchanged):
+Honesty options (issue 16; all off by default in this class, so the plain algorithm above is unchanged; the
+identification executive switches all of them on, :func:`hindrax_ident.identification.estimators.online_rls`):
 
 * ``directional=True``: directional forgetting (Bittanti, Bolzern and Campi 1990, "Recursive least squares
   identification algorithms with incomplete excitation", IEEE TAC 35(12); Kulhavy 1987): information is forgotten
@@ -51,14 +52,29 @@ Honesty options (issue 16; all off by default, so the plain algorithm above is u
   (mu = the forgetting factor), i.e. ``P <- P - P phi phi^T P / (1 / eps + phi^T P phi)``: directions the
   manoeuvre does not excite keep their information instead of winding up. Its covariance is sigma2_hat * P
   (P^-1 is the retained information).
-* ``min_excitation``: the estimate and P are updated only while :attr:`excitation_normalised` (which always
-  accumulates) is at least this value: samples that cannot separate the parameters do not move them.
-* ``lower_bounds`` (p,): after each update the estimate is projected onto theta >= lower bound (physical signs:
-  positive inertia, non-negative damping; NaN = unbounded).
+* ``min_excitation``: once :attr:`excitation_normalised` (which always accumulates) has reached this value, the
+  estimate and P are updated only while it stays at or above it: samples that cannot separate the parameters (a
+  long hold at one speed fills the forgetting window with collinear rows) do not move them. Before the gate has
+  opened for the first time every sample updates (nothing is published then, :meth:`converged_mask`): gating the
+  start would throw away the first levels, whose rows are what later lifts the excitation above the threshold
+  (with the gate closed from the first sample, a surge campaign whose final excitation is 0.006 passed only the
+  330 samples when it was briefly above 0.01 and ended with the inertia at 0 and the bias at 19 N).
+* ``lower_bounds`` (p,): :attr:`theta` is the estimate constrained to theta >= lower bound (physical signs:
+  positive inertia, non-negative damping; NaN = unbounded): the projection of the unconstrained estimate in the
+  metric of the information matrix P^-1, min (t - theta_u)^T P^-1 (t - theta_u) subject to t >= lb, which is the
+  exact constrained minimiser of the (forgetting-weighted) least-squares cost, because that cost is this quadratic
+  form plus a constant (the projection used for least-squares estimates in adaptive control, e.g. Goodwin and Sin
+  1984, "Adaptive Filtering Prediction and Control", ch. 3: it must use the P^-1 metric). It is solved by an
+  active set (p <= 6: at most p small solves). The recursion keeps the unconstrained estimate: feeding a
+  Euclidean clip back into it (as first written) made every DOF of a campaign diverge to 1e14-1e27, because each
+  clip leaves an error the next gain K e pushes along the correlated directions. :meth:`at_bound` says which parameters sit on their bound.
 * ``change_threshold``: a change detector on the normalised a-priori error ``e^2 / (sigma2_hat (1 + phi^T P phi))``
   (chi-square with 1 degree of freedom for a correct model): when its mean over ``change_samples`` consecutive
   samples exceeds the threshold, the covariance is reset (:meth:`reset_covariance`) and the residual statistics
-  restart, so the estimate re-adapts to the changed parameters (:attr:`changes_detected` counts them).
+  restart, so the estimate re-adapts to the changed parameters (:attr:`changes_detected` counts them). The model
+  errors of a real DOF (the causal filter's lag at every level step) make that mean exceed 1 for a few seconds:
+  over 1 s windows it reached 28 in a no-disturbance surge campaign, over 10 s at most 3.6, so the window must
+  span several level steps.
 * :meth:`published_std`: the standard deviation where the estimate has converged (std <= rel_tol |theta| + abs_tol,
   enough samples, excitation above ``min_excitation``), NaN elsewhere: "not converged" rather than a number that
   does not cover the truth.
@@ -179,6 +195,8 @@ class RecursiveLeastSquares:
         self._changes = 0
         self._nis: list[float] = []
         self._gated = 0
+        self._gate_open = False
+        self._theta_c: Optional[np.ndarray] = None   # cached constrained estimate (None = recompute)
 
     def reset_covariance(self, covariance=None) -> None:
         """Restart P (to P0 or to ``covariance`` * I / matrix) keeping theta and statistics.
@@ -201,6 +219,7 @@ class RecursiveLeastSquares:
         self._P = P
         self._Q = np.linalg.inv(P)
         self._covariance_resets += 1
+        self._theta_c = None
 
     # ------------------------------------------------------------------ update
     def update(self, phi, y: float) -> float:
@@ -228,9 +247,13 @@ class RecursiveLeastSquares:
         self._R = lam * self._R + outer
         self._wr = lam * self._wr + 1.0
         self._n += 1
-        if self.min_excitation > 0.0 and self.excitation_normalised < self.min_excitation:
-            self._gated += 1  # not informative enough: theta and P stay (the excitation keeps accumulating)
-            return float(err)
+        if self.min_excitation > 0.0:
+            informative = self.excitation_normalised >= self.min_excitation
+            self._gate_open = self._gate_open or informative
+            if self._gate_open and not informative:
+                self._gated += 1  # not informative enough: theta and P stay (the excitation keeps accumulating)
+                return float(err)
+        self._theta_c = None
         self._w = lam * self._w + 1.0
         if self.directional:
             denom = 1.0 + r
@@ -254,8 +277,6 @@ class RecursiveLeastSquares:
                 P = (V * np.clip(ev, 0.0, self._max_cov)) @ V.T
         self._P = P
         self._Q = (lam * lam) * self._Q + outer
-        if self._lb is not None:
-            self._theta = np.maximum(self._theta, self._lb)
         if self.change_threshold is not None:
             s2 = self.sigma2
             if np.isfinite(s2) and s2 > 0.0:
@@ -281,8 +302,47 @@ class RecursiveLeastSquares:
         return np.array([self.update(Phi[i], Y[i]) for i in range(Y.shape[0])])
 
     def predict(self, phi) -> float:
-        """Model output phi^T theta for a (p,) regressor."""
-        return float(np.asarray(phi, dtype=float) @ self._theta)
+        """Model output phi^T theta for a (p,) regressor (the constrained :attr:`theta`)."""
+        return float(np.asarray(phi, dtype=float) @ self.theta)
+
+    def _constrained(self) -> np.ndarray:
+        """theta_u projected onto theta >= lb in the P^-1 metric (module docstring), by an active set: fix the
+        violated parameters at their bounds, move the free ones by the conditional mean
+        t_F = theta_F + P_FA P_AA^-1 (lb_A - theta_A), repeat until no free parameter violates its bound, then
+        release a fixed parameter whose Lagrange multiplier has the wrong sign."""
+        th = self._theta
+        if self._lb is None or np.all(th >= self._lb):
+            return th.copy()
+        P = self._P
+        active = th < self._lb
+        t = th.copy()
+        for _ in range(4 * self._p):
+            A = np.flatnonzero(active)
+            F = np.flatnonzero(~active)
+            t = th.copy()
+            t[A] = self._lb[A]
+            if A.size:
+                d = np.linalg.solve(P[np.ix_(A, A)], self._lb[A] - th[A])
+                if F.size:
+                    t[F] = th[F] + P[np.ix_(F, A)] @ d
+                # multiplier of each active bound: the cost decreases when released if d < 0 (it pulls down)
+                release = A[d < -1e-15]
+            else:
+                release = np.array([], dtype=int)
+            viol = F[t[F] < self._lb[F] - 1e-12] if F.size else np.array([], dtype=int)
+            if viol.size:
+                active[viol] = True
+            elif release.size:
+                active[release[0]] = False
+            else:
+                break
+        return np.maximum(t, self._lb)
+
+    def at_bound(self) -> np.ndarray:
+        """(p,) bool: parameters held on their lower bound by the constraint (False without bounds)."""
+        if self._lb is None:
+            return np.zeros(self._p, dtype=bool)
+        return np.isfinite(self._lb) & (self.theta <= self._lb)
 
     # ------------------------------------------------------------------ estimates
     @property
@@ -297,8 +357,22 @@ class RecursiveLeastSquares:
 
     @property
     def theta(self) -> np.ndarray:
-        """(p,) current estimate (copy)."""
+        """(p,) current estimate (copy), constrained to the lower bounds when given (module docstring)."""
+        if self._lb is None:
+            return self._theta.copy()
+        if self._theta_c is None:
+            self._theta_c = self._constrained()
+        return self._theta_c.copy()
+
+    @property
+    def theta_unconstrained(self) -> np.ndarray:
+        """(p,) the recursion's unconstrained estimate (equal to :attr:`theta` without bounds)."""
         return self._theta.copy()
+
+    @property
+    def gate_open(self) -> bool:
+        """True once the excitation has reached ``min_excitation`` (always True without a gate)."""
+        return self.min_excitation <= 0.0 or self._gate_open
 
     @property
     def P(self) -> np.ndarray:
@@ -390,8 +464,8 @@ class RecursiveLeastSquares:
         std = self.std
         if self._n < min_samples or self.excitation_normalised < self.min_excitation:
             return np.zeros(self._p, dtype=bool)
-        ok = np.isfinite(std) & (std <= rel_tol * np.abs(self._theta) + np.asarray(abs_tol, dtype=float))
-        return ok
+        ok = np.isfinite(std) & (std <= rel_tol * np.abs(self.theta) + np.asarray(abs_tol, dtype=float))
+        return ok & ~self.at_bound()  # a parameter held on its bound has no interval of its own
 
     def published_std(self, rel_tol: float = 0.05, abs_tol=0.0, min_samples: Optional[int] = None) -> np.ndarray:
         """(p,) the std where :meth:`converged_mask` holds, NaN ("not converged") elsewhere."""
@@ -418,7 +492,7 @@ class RecursiveLeastSquares:
         std = self.std
         if not np.all(np.isfinite(std)):
             return False
-        return bool(np.all(std <= rel_tol * np.abs(self._theta) + abs_tol))
+        return bool(np.all(std <= rel_tol * np.abs(self.theta) + abs_tol))
 
     def to_dict(self) -> dict:
         """Plain-float snapshot: parameters (value/std), n_samples, sigma2, excitation."""
@@ -426,7 +500,7 @@ class RecursiveLeastSquares:
         std = self.std
         return {
             "parameters": {nm: {"value": float(v), "std": float(s)}
-                           for nm, v, s in zip(names, self._theta, std)},
+                           for nm, v, s in zip(names, self.theta, std)},
             "n_samples": self._n,
             "forgetting": self._lambda,
             "sigma2": self.sigma2,

@@ -192,6 +192,85 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
 
 
 # ============================================================================ online
+#: Online RLS defaults when the vehicle file omits ``identification.rls_*`` (docs/identification.md §1.D).
+RLS_DEFAULTS = {"directional_forgetting": True, "min_excitation": 0.001, "change_threshold": 6.0,
+                "change_window_s": 10.0, "prior_std_rel": 1.0}
+#: Reference force noise (N; N m for roll, pitch, yaw) that scales the prior std into the RLS's P0 = diag(std^2) /
+#: sigma_ref^2 (P is the inverse information without sigma^2). The online residual std measured in a no-disturbance
+#: campaign (seed 1, 3 levels) was 1.9-2.7 N and 0.15-0.29 N m; taking about half of it makes the prior weaker than
+#: its stated std, never stronger.
+RLS_PRIOR_NOISE_STD = {"surge": 1.0, "sway": 1.0, "heave": 1.0, "roll": 0.1, "pitch": 0.1, "yaw": 0.1}
+#: Prior 1-sigma of the bias (N; N m), centred on the expected bias (0; heave: the net buoyancy).
+RLS_PRIOR_BIAS_STD = {"surge": 1.0, "sway": 1.0, "heave": 1.0, "roll": 0.1, "pitch": 0.1, "yaw": 0.1}
+
+
+def rls_setting(cfg: VehicleConfig, name: str):
+    """``identification.rls_<name>`` from the vehicle file, else :data:`RLS_DEFAULTS`."""
+    v = cfg.flat.get(f"identification.rls_{name}")
+    return RLS_DEFAULTS[name] if v is None else v
+
+
+def rls_prior(cfg: VehicleConfig, dof: str, prior_std_rel: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Start value and 1-sigma (p,) of the online RLS of ``dof`` from the empirical priors, or None.
+
+    inertia = rigid + prior added mass, std ``prior_std_rel`` x the added mass (the rigid part is known);
+    quadratic and linear damping (heave: the same prior for both directions) std ``prior_std_rel`` x the value
+    ([NTNU-Thesis] (seed 002) App. A.1/A.2 via :func:`~.results.prior_entries`; a solid prism of the configured
+    box); bias: the expected one (0; heave (rho V - m) g) with :data:`RLS_PRIOR_BIAS_STD`; restoring: the
+    configured z_g W - z_b B with ``prior_std_rel`` x its value. None when ``prior_std_rel`` is 0 or the geometry
+    gives no prior."""
+    from .results import prior_entries
+
+    if not prior_std_rel > 0:
+        return None
+    p = prior_entries(cfg).get(dof)
+    if not p:
+        return None
+    truth = truth_parameters(cfg, dof)  # configured bias and restoring only (what the vehicle file states)
+    mean, std = [], []
+    for n in parameter_names(dof):
+        key = "added_mass" if n == "inertia" else "quadratic_damping" if n.startswith("quadratic") \
+            else "linear_damping" if n.startswith("linear") else None
+        if key is not None:
+            v = p.get(key)
+            if v is None or not (math.isfinite(v) and v > 0):
+                return None
+            mean.append(v + (rigid_inertia(cfg, dof) if n == "inertia" else 0.0))
+            std.append(prior_std_rel * v)
+        elif n == "bias":
+            mean.append(truth["bias"])
+            std.append(RLS_PRIOR_BIAS_STD[dof])
+        else:  # restoring
+            mean.append(truth["restoring"])
+            std.append(max(prior_std_rel * abs(truth["restoring"]), RLS_PRIOR_BIAS_STD[dof]))
+    return np.array(mean, dtype=float), np.array(std, dtype=float)
+
+
+def online_rls(cfg: VehicleConfig, dof: str) -> RecursiveLeastSquares:
+    """The online RLS of one DOF with the vehicle file's settings (docs/identification.md §1.D).
+
+    Forgetting ``identification.forgetting_factor``, directional (``rls_directional_forgetting``), the excitation
+    gate (``rls_min_excitation``), lower bounds 0 on inertia, damping and restoring (physical signs; the bias is
+    free), the change detector (``rls_change_threshold`` over ``rls_change_window_s`` at
+    ``identification.estimate_rate_hz``) and the start at the empirical priors (:func:`rls_prior`) with
+    P0 = diag(std^2) / :data:`RLS_PRIOR_NOISE_STD`^2; without priors a diffuse start (theta = 0, P0 = 1e4 I)."""
+    names = parameter_names(dof)
+    rate = float(cfg.flat["identification.estimate_rate_hz"])
+    thr = float(rls_setting(cfg, "change_threshold"))
+    prior = rls_prior(cfg, dof, float(rls_setting(cfg, "prior_std_rel")))
+    if prior is None:
+        theta0, p0 = None, 1e4
+    else:
+        theta0, p0 = prior[0], np.diag((prior[1] / RLS_PRIOR_NOISE_STD[dof]) ** 2)
+    return RecursiveLeastSquares(
+        len(names), forgetting=float(cfg.flat["identification.forgetting_factor"]), initial_covariance=p0,
+        initial_theta=theta0, names=names, directional=bool(rls_setting(cfg, "directional_forgetting")),
+        min_excitation=float(rls_setting(cfg, "min_excitation")),
+        lower_bounds=[math.nan if n == "bias" else 0.0 for n in names],
+        change_threshold=thr if thr > 1.0 else None,
+        change_samples=max(1, int(round(float(rls_setting(cfg, "change_window_s")) * rate))))
+
+
 class OnlineDofEstimator:
     """Online estimator of one DOF: KinematicKalmanFilter on its sensor + RLS with forgetting.
 
@@ -215,9 +294,7 @@ class OnlineDofEstimator:
         else:
             self.kf = KinematicKalmanFilter(s["measured"], jerk_psd=s["jerk_psd"], measurement_std=s["std"])
         self.names = parameter_names(dof)
-        self.rls = RecursiveLeastSquares(len(self.names),
-                                         forgetting=float(cfg.flat["identification.forgetting_factor"]),
-                                         initial_covariance=1e4, names=self.names)
+        self.rls = online_rls(cfg, dof)
         self.rel_tol = float(cfg.flat["identification.converged_relative_std"])
         self.history_every = int(history_every)
         self.history: dict[str, list] = {"t": [], "theta": [], "std": [], "excitation": []}
@@ -299,6 +376,7 @@ class OnlineDofEstimator:
         rel = np.array([0.5 if n.startswith("linear") else 0.0 if n == "bias" else self.rel_tol for n in self.names])
         std = self.rls.std
         ok = np.isfinite(std) & (std <= rel * np.abs(self.rls.theta) + np.asarray(tol_abs))
+        ok &= ~self.rls.at_bound()  # held on a physical-sign bound: its std is not an interval around the truth
         if self.rls.n_samples < 500 or self.rls.excitation_normalised < self.rls.min_excitation:
             ok[:] = False
         return np.where(ok, std, np.nan)
