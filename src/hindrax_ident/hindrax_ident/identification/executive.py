@@ -806,7 +806,8 @@ class Executive:
         ``excitation_amplitude_fraction`` of the DOF's smaller authority, band from the vehicle file's inertia and
         damping (:func:`~.excitation.design_band`, capped by the thruster lag), room L from the box centre to the
         box along the axis (surge/sway: along the start heading, less 0.2 m; heave: half the box depth range less
-        0.05 m; roll/pitch: the test angle; yaw: pi/2 from the start heading), PD bandwidth half the lowest line."""
+        0.05 m; roll/pitch: half the test angle; yaw: pi/2 from the start heading), PD bandwidth half the lowest
+        line."""
         k = DOF_INDEX[dof]
         lim = min(self.authority[dof])
         amp = self.excitation_amplitude_fraction * lim
@@ -828,7 +829,10 @@ class Executive:
         elif k == 5:
             half = 0.5 * math.pi
         else:
-            half = float(self.cfg.flat[f"identification.{dof}_test_angle_rad"])
+            # half the test angle: near the roll/pitch natural frequency (inside the band) the restoring moment
+            # resonates and the 10 Hz attitude lags, so the braking guard needs the room (full angle overshot the
+            # pitch limit in a first in-process trial)
+            half = 0.5 * float(self.cfg.flat[f"identification.{dof}_test_angle_rad"])
         shaping = BoxShaping(half, m, lim, math.pi * band.f_min_hz, self.tick_s)
         return sig, band, shaping
 
@@ -859,7 +863,8 @@ class Executive:
             elif k == 5:
                 e = wrap_angle(float(np.nan_to_num(self.state.rpy_rad[2])) - psi0)
             else:
-                e = float(np.nan_to_num(self.state.rpy_rad[k - 3]))
+                # the 10 Hz attitude extrapolated to now with the gyro rate (as in :meth:`_rotation`)
+                e = float(np.nan_to_num(self.state.rpy_rad[k - 3])) + self._axis_velocity(k) * self._attitude_age_s()
             f = shaping.force(float(sig.value(self.t_s - t0)), e, self._axis_velocity(k))
             if k == 2:
                 f += self.ctrl.net_buoyancy_n
