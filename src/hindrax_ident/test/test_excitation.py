@@ -142,3 +142,21 @@ def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
     box = Campaign(cfg, dofs=["surge"]).executive.box
     pos = rec.truth_position_ned_m
     assert np.all((pos[:, 0] > box.x_min) & (pos[:, 0] < box.x_max))
+
+
+def test_run_options_reach_the_campaign_and_the_graph_override():
+    import argparse
+
+    from hindrax_ident.commands import run as run_cmd
+    from hindrax_ident.commands.common import CommandError
+
+    parser = argparse.ArgumentParser(prog="hindrax run")
+    run_cmd.add_arguments(parser)
+    args = parser.parse_args(["--dofs", "surge", "--excitation", "prbs", "--excitation-duration", "30"])
+    assert (args.excitation, args.excitation_duration) == ("prbs", 30.0)
+    assert parser.parse_args([]).excitation is None  # default: the vehicle file's identification.excitation
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--excitation", "sweep"])
+    bad = parser.parse_args(["--dofs", "surge", "--excitation-duration", "2"])
+    with pytest.raises(CommandError, match="excitation-duration"):
+        run_cmd._check_args(bad)
