@@ -324,6 +324,10 @@ SCHEMA.update({
                                         "> 0)", 0.0, 0.05),
     "calibration.line_pull_force_n": _f("horizontal force of the line over the pool-edge pulley in the line_pull "
                                         "step (e.g. a hanging mass times g), N", 0.1, 200.0),
+    "calibration.inclining_mass_kg": _f("test mass of the inclining step, kg", 0.01, 20.0),
+    "calibration.inclining_volume_m3": _f("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
+    "calibration.inclining_arm_m": _f("horizontal arm of the test mass from the centre line (roll: to starboard, "
+                                      "pitch: forward), m", 0.01, 2.0),
     # --- simulation (docs/architecture.md §6) ---
     "simulation.step_s": _f("fixed integration step, s", 1e-4, 0.05),
     "simulation.real_time_factor": _f("simulated seconds per wall second (0 = as fast as possible)", 0.0, 1000.0),
@@ -637,6 +641,12 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             issues.append(ConfigIssue("calibration.ballast_volume_m3", c["calibration.ballast_volume_m3"],
                                       f"below calibration.ballast_mass_kg / water density = {v_max:.4g} (the ballast "
                                       "must sink)"))
+    if "calibration.inclining_mass_kg" in c and "calibration.inclining_volume_m3" in c:
+        v_max = c["calibration.inclining_mass_kg"] / float(c.get("environment.water_density_kg_m3", 1000.0))
+        if c["calibration.inclining_volume_m3"] >= v_max:
+            issues.append(ConfigIssue("calibration.inclining_volume_m3", c["calibration.inclining_volume_m3"],
+                                      f"below calibration.inclining_mass_kg / water density = {v_max:.4g} (the test "
+                                      "mass must sink)"))
     if "pool.depth_m" in c and "limits.max_depth_m" in c and c["limits.max_depth_m"] > c["pool.depth_m"]:
         issues.append(ConfigIssue("limits.max_depth_m", c["limits.max_depth_m"],
                                   f"at most pool.depth_m ({c['pool.depth_m']:g})"))

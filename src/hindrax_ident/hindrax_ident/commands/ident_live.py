@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help="explicit level fractions of each DOF's authority, comma-separated, each in (0, 1]")
         parser.add_argument("--calibrate", default="",
                             help="known-force calibration steps before the ladders, comma-separated: ballast, "
-                                 "line_pull, tilt_decay (the node prompts; answer with `hindrax ident continue`)")
+                                 "line_pull, tilt_decay, inclining (the node prompts; answer with `hindrax ident continue`)")
         parser.add_argument("--calibration-only", action="store_true",
                             help="run only the --calibrate steps (no ladders)")
         parser.add_argument("--server-timeout", type=float, default=10.0,

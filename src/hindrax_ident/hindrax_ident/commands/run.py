@@ -61,7 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="reference steps before the ladders, comma-separated: ballast, line_pull (known forces: "
                              "the thrust scales are applied to the identification, identification.yaml gains a "
                              "calibration section), tilt_decay (roll and pitch free decay: rigid + added inertia with "
-                             "--restoring-n-m-per-rad, section free_decay); through the graph the virtual pool plays "
+                             "--restoring-n-m-per-rad or the inclining step, section free_decay), inclining (restoring "
+                             "stiffness C of roll and pitch from a known mass at a known arm, calibration.inclining_*; "
+                             "section inclining); through the graph the virtual pool plays "
                              "the operator (applies the known force, calls identification/continue)")
     parser.add_argument("--ballast-mass-kg", type=float, default=None,
                         help="ballast mass, kg (default calibration.ballast_mass_kg of the vehicle file)")
@@ -219,18 +221,22 @@ def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
 
     f = cfg.flat
     measured = args.restoring_n_m_per_rad is not None
-    c = float(args.restoring_n_m_per_rad) if measured else float(cfg.weight_n) * (
+    c0 = float(args.restoring_n_m_per_rad) if measured else float(cfg.weight_n) * (
         float(f["vehicle.centre_of_gravity_frd_m"][2]) - float(f["vehicle.centre_of_buoyancy_frd_m"][2]))
     out: dict = {}
     for dof in record.decays:
         i = {"roll": 0, "pitch": 1}[dof]
+        incl = getattr(record, "inclining", {}).get(dof)
+        c, c_std = (float(incl["value"]), float(incl["std"])) if incl else (c0, float(args.restoring_std))
         try:
-            e = decay_inertia(record, dof, c, args.restoring_std, float(f["vehicle.inertia_kg_m2"][i]))
+            e = decay_inertia(record, dof, c, c_std, float(f["vehicle.inertia_kg_m2"][i]))
         except (EstimationError, KeyError, ValueError) as exc:
             progress(f"{dof} free decay: no estimate ({exc})")
             continue
-        e["stiffness_source"] = ("--restoring-n-m-per-rad (inclining test)" if measured else
-                                 "vehicle file m g BG (not measured: run hindrax ident inclining)")
+        e["stiffness_source"] = ("inclining campaign step (--calibrate inclining)" if incl else
+                                 "--restoring-n-m-per-rad (inclining test)" if measured else
+                                 "vehicle file m g BG (not measured: run hindrax ident inclining or --calibrate "
+                                 "inclining)")
         r = idents.get(dof)
         if r is not None:
             v, sd = float(r.values["inertia"]), float(r.std["inertia"])
@@ -263,14 +269,15 @@ def run_in_process(args: argparse.Namespace) -> int:
     except TruthError as exc:
         raise CommandError(f"--truth: {exc}") from exc
     cal = _calibration_steps(args)
-    from ..identification.executive import calibration_forces
+    from ..identification.executive import calibration_forces, inclining_load
     w_ballast, f_line = calibration_forces(cfg)
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
                         sim=sim, calibrate=cal, excitation=getattr(args, "excitation", None),
                         excitation_duration_s=getattr(args, "excitation_duration", None),
                         ballast_weight_in_water_n=w_ballast if "ballast" in cal else 0.0,
-                        line_pull_n=f_line if "line_pull" in cal else 0.0)
+                        line_pull_n=f_line if "line_pull" in cal else 0.0,
+                        inclining_load_n_m=inclining_load(cfg) if "inclining" in cal else (0.0, 0.0))
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
@@ -283,6 +290,9 @@ def run_in_process(args: argparse.Namespace) -> int:
     if idents:
         # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
         doc = build_results(idents, cfg, source="simulation", seed=record.seed, calibration=record.calibration)
+        if record.inclining:  # restoring stiffness C per DOF from the inclining step
+            doc["inclining"] = {k: {kk: ([float(x) for x in vv] if isinstance(vv, list) else vv)
+                                    for kk, vv in v.items()} for k, v in record.inclining.items()}
         if record.decays:
             doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
             from ..identification.verdicts import apply_reference_verdicts

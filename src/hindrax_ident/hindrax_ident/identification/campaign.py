@@ -13,7 +13,8 @@ Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): the vi
 the executive waits for the ballast to be attached, the simulator gets the ballast's weight in water (vertical,
 NED down, expressed in the body frame every tick) as an external force until the executive asks for its removal;
 a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis the step names
-(as a line over a pulley at the pool edge). Each time ``continue`` is given at once.
+(as a line over a pulley at the pool edge); an inclining test mass is its weight in water at the step's arm
+(:func:`inclining_wrench_frd`). Each time ``continue`` is given at once.
 """
 from __future__ import annotations
 
@@ -29,7 +30,16 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from ..sim.simulator import Simulator
 from .executive import CampaignAbort, CampaignRecord, Executive, TickInput
 
-__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign"]
+__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign", "inclining_wrench_frd"]
+
+
+def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, dof: str) -> np.ndarray:
+    """Wrench (6,) FRD about the body origin (the CG) of an inclining test mass: its weight in water ``weight_n``
+    (NED down) hung at ``arm_m`` along body +y (``dof`` roll) or +x (pitch) at the CG's height; ``rotation`` (3, 3)
+    body -> NED. Force R^T [0, 0, w], moment r x force."""
+    f = np.asarray(rotation, dtype=float).T @ np.array([0.0, 0.0, float(weight_n)])
+    r = np.array([0.0, float(arm_m), 0.0]) if dof == "roll" else np.array([float(arm_m), 0.0, 0.0])
+    return np.concatenate([f, np.cross(r, f)])
 
 
 class Campaign:
@@ -52,7 +62,7 @@ class Campaign:
                  progress: Callable[[str], None] | None = None, real_time_factor: float = 0.0,
                  sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
                  ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
-                 excitation_duration_s: float | None = None) -> None:
+                 excitation_duration_s: float | None = None, inclining_load_n_m=(0.0, 0.0)) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -65,8 +75,10 @@ class Campaign:
         self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, max_level_duration_s=max_level_duration_s,
                                    heave_repeats=heave_repeats, progress=progress, calibrate=calibrate,
                                    ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n,
-                                   excitation=excitation, excitation_duration_s=excitation_duration_s)
+                                   excitation=excitation, excitation_duration_s=excitation_duration_s,
+                                   inclining_load_n_m=inclining_load_n_m)
         self._ballast_on = False
+        self._inclining: str | None = None  # DOF whose inclining test mass hangs on the vehicle
         self._line_ned: np.ndarray | None = None
         self.core = self.executive.core
         self.reversed = np.array([t.reversed for t in cfg.thrusters.thrusters], dtype=bool)
@@ -102,9 +114,13 @@ class Campaign:
                 self._line_ned = ex.line_pull_n * np.array([d[0], d[1], 0.0]) / math.hypot(d[0], d[1])
             elif ex.awaiting.startswith("release_line_"):
                 self._line_ned = None
+            elif ex.awaiting.startswith(("attach_inclining_mass_", "remove_inclining_mass_")):
+                self._inclining = ex.awaiting.rsplit("_", 1)[1] if ex.awaiting.startswith("attach") else None
             ex.operator_continue()
         if ex.calibrate:
             ext = np.zeros(6)
+            if self._inclining is not None:
+                ext += inclining_wrench_frd(self.sim.rotation, *ex.inclining_load_n_m, self._inclining)
             if self._ballast_on:
                 ext[:3] = self.sim.rotation.T @ np.array([0.0, 0.0, ex.ballast_weight_in_water_n])
             if self._line_ned is not None:

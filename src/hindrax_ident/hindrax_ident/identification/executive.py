@@ -68,7 +68,7 @@ __all__ = ["CampaignAbort", "CampaignRecord", "Executive", "ExecutiveStatus", "T
            "CALIBRATION_STEPS", "calibration_forces"]
 
 #: Known-force calibration steps the executive can run before the ladders (issue 17 item 1).
-CALIBRATION_STEPS = ("ballast", "line_pull", "tilt_decay")
+CALIBRATION_STEPS = ("ballast", "line_pull", "tilt_decay", "inclining")
 
 
 def calibration_forces(cfg: VehicleConfig) -> tuple[float, float]:
@@ -78,6 +78,15 @@ def calibration_forces(cfg: VehicleConfig) -> tuple[float, float]:
     w = (float(f["calibration.ballast_mass_kg"]) - float(f["calibration.ballast_volume_m3"])
          * float(cfg.water_density_kg_m3)) * float(cfg.gravity_m_s2)
     return w, float(f["calibration.line_pull_force_n"])
+
+
+def inclining_load(cfg: VehicleConfig) -> tuple[float, float]:
+    """(test mass weight in water (m - rho V) g, N; its arm from the centre line, m) of the inclining step, from
+    ``calibration.inclining_mass_kg``, ``calibration.inclining_volume_m3`` and ``calibration.inclining_arm_m``."""
+    f = cfg.flat
+    w = (float(f["calibration.inclining_mass_kg"]) - float(f["calibration.inclining_volume_m3"])
+         * float(cfg.water_density_kg_m3)) * float(cfg.gravity_m_s2)
+    return w, float(f["calibration.inclining_arm_m"])
 
 
 #: tilt_decay: tilt angle aimed at (rad), ramp and hold before the release, and the recorded decay (s).
@@ -137,6 +146,9 @@ class CampaignRecord:
     calibration: dict = field(default_factory=dict)
     #: roll/pitch free decays (:meth:`Executive._tilt_decay`): DOF -> (t_release, t_end), s
     decays: dict = field(default_factory=dict)
+    #: inclining steps (:meth:`Executive._inclining`): DOF -> {value (C, N m/rad), std, known_moment_n_m,
+    #: tilt_rad [without, with the mass], tilt_std_rad, method}; empty without the step
+    inclining: dict = field(default_factory=dict)
 
     def dof_slice(self, dof: str) -> slice:
         """Tick index range of one DOF's manoeuvres (empty slice when it was not run)."""
@@ -206,7 +218,8 @@ class Executive:
     callable receiving one-line messages as the campaign moves on. calibrate: known-force steps to run after the
     dive, before the ladders (:data:`CALIBRATION_STEPS`); ``ballast`` needs ``ballast_weight_in_water_n`` (> 0,
     N: (m - rho V) g of the ballast), ``line_pull`` needs ``line_pull_n`` (> 0, N: the horizontal force of the line
-    over the pulley, e.g. the weight of a hanging mass). While a step waits for the operator, :attr:`awaiting`
+    over the pulley, e.g. the weight of a hanging mass); ``inclining`` needs ``inclining_load_n_m`` (weight in water
+    of the test mass > 0 N, its arm > 0 m: :func:`inclining_load`). While a step waits for the operator, :attr:`awaiting`
     names what to do and :meth:`operator_continue` resumes it.
     excitation: ``ladder`` (default: ``identification.excitation``, else ladder) or a broadband signal of
     :data:`~.excitation.BROADBAND`; excitation_duration_s: length of that run per DOF (default
@@ -220,7 +233,8 @@ class Executive:
                  tick_s: float, fractions: Sequence[float] | None = None, max_level_duration_s: float | None = None,
                  heave_repeats: int = 3, dvl_lock_timeout_s: float = 3.0,
                  progress: Callable[[str], None] | None = None, calibrate: Sequence[str] = (),
-                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
+                 ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0,
+                 inclining_load_n_m: Sequence[float] = (0.0, 0.0), excitation: str | None = None,
                  excitation_duration_s: float | None = None,
                  excitation_amplitude_fraction: float = DEFAULT_AMPLITUDE_FRACTION) -> None:
         bad = [d for d in dofs if d not in DOFS]
@@ -237,6 +251,12 @@ class Executive:
             raise ValueError(f"ballast_weight_in_water_n must be > 0 N for the ballast step, got {ballast_weight_in_water_n}")
         if "line_pull" in calibrate and not (math.isfinite(line_pull_n) and line_pull_n > 0):
             raise ValueError(f"line_pull_n must be > 0 N for the line_pull step, got {line_pull_n}")
+        if "inclining" in calibrate and not (len(inclining_load_n_m) == 2 and all(
+                math.isfinite(x) and x > 0 for x in inclining_load_n_m)):
+            raise ValueError(f"inclining_load_n_m must be (weight in water > 0 N, arm > 0 m) for the inclining step, "
+                             f"got {inclining_load_n_m}")
+        self.inclining_load_n_m = tuple(float(x) for x in inclining_load_n_m)
+        self.inclining: dict = {}
         self.calibrate = list(calibrate)
         self.ballast_weight_in_water_n = float(ballast_weight_in_water_n)
         self.line_pull_n = float(line_pull_n)
@@ -419,7 +439,8 @@ class Executive:
             authority=self.authority, aborted=self.aborted, abort_reason=self.abort_reason, wall_time_s=wall_time_s,
             tick_s=self.tick_s, time_constant_s=self.time_constant_s, seed=int(seed),
             final_pulse_width_us=np.zeros(0) if final_pulse_width_us is None else np.asarray(final_pulse_width_us),
-            calibration={k: dict(v) for k, v in self.calibration.items()}, decays=dict(self.decays))
+            calibration={k: dict(v) for k, v in self.calibration.items()}, decays=dict(self.decays),
+            inclining={k: dict(v) for k, v in self.inclining.items()})
 
     # ------------------------------------------------------------------ status
     def level_position(self) -> tuple[str, int, int, float]:
@@ -775,8 +796,67 @@ class Executive:
         self.decays[dof] = (t0, self.t_s)
         yield from self._wait_still(k, 0.05, 8.0)
 
+    def _hold_tilt_free(self, dof: str, duration_s: float) -> Wrenches:
+        """Hold depth, position and the other attitude for ``duration_s`` with no moment on ``dof`` (roll | pitch):
+        the vehicle settles at the angle where its restoring moment balances the external one."""
+        k = DOF_INDEX[dof]
+        for _ in range(int(round(duration_s / self.tick_s))):
+            w = np.asarray(self.ctrl.wrench(self.state, (dof,), self.tick_s), dtype=float)
+            w[k] = 0.0
+            yield w
+
+    def _mean_tilt(self, i: int, t_from: float) -> tuple[float, float]:
+        """Mean of the attitude log's angle i (0 roll, 1 pitch; the DVL-75's own IMU) since ``t_from`` and the std of
+        that mean by batch means over :data:`CALIBRATION_BLOCK_S` blocks (as :meth:`_mean_holding_force`)."""
+        rows = [(t, a[i]) for t, a in self.state.log["attitude"] if t >= t_from and math.isfinite(a[i])]
+        t = np.array([r[0] for r in rows])
+        x = np.array([r[1] for r in rows])
+        if t.size < 3 or t[-1] - t[0] < 3.0 * CALIBRATION_BLOCK_S:
+            raise CampaignAbort("inclining: averaging window shorter than three blocks")
+        blocks = [x[(t >= b) & (t < b + CALIBRATION_BLOCK_S)] for b in
+                  np.arange(t[0], t[-1] - CALIBRATION_BLOCK_S + 1e-9, CALIBRATION_BLOCK_S)]
+        means = np.array([b.mean() for b in blocks if b.size])
+        return float(np.mean(x)), float(np.std(means, ddof=1) / math.sqrt(means.size))
+
+    def _inclining(self, dof: str) -> Wrenches:
+        """Restoring stiffness C of roll or pitch by an inclining test (issue 17 item 3): with that DOF free (no
+        moment from the thrusters; depth, position and the other angles held) average the angle a1; the operator
+        hangs the test mass (weight in water w) at arm d to starboard (roll: body +y) or forward (pitch: body +x),
+        a moment K = w d (roll) or -w d (pitch); average a2; the mass is removed. Equilibrium w d cos(a) = C sin(a)
+        + M0 gives C = K / (tan a2 - tan a1) (:func:`~hindrax_ident.estimation.free_decay.restoring_from_inclining`,
+        two points), std from the two means' std. No thrust curve enters: the thrusters only hold the other DOFs."""
+        i = DOF_INDEX[dof] - 3
+        w, d = self.inclining_load_n_m
+        moment = w * d if dof == "roll" else -w * d
+        where = "to starboard (body +y)" if dof == "roll" else "forward (body +x)"
+        yield from self._move_to_centre()
+        self._say(f"inclining ({dof}): {dof} free, without the test mass")
+        yield from self._hold_tilt_free(dof, CALIBRATION_SETTLE_S)
+        t1 = self.t_s
+        yield from self._hold_tilt_free(dof, CALIBRATION_WINDOW_S)
+        a1, s1 = self._mean_tilt(i, t1)
+        yield from self._wait_operator(f"attach_inclining_mass_{dof}",
+                                       f"inclining: hang the test mass ({w:.3g} N in water) {d:.3g} m {where}")
+        yield from self._hold_tilt_free(dof, CALIBRATION_SETTLE_S)
+        t2 = self.t_s
+        yield from self._hold_tilt_free(dof, CALIBRATION_WINDOW_S)
+        a2, s2 = self._mean_tilt(i, t2)
+        yield from self._wait_operator(f"remove_inclining_mass_{dof}", "inclining: remove the test mass")
+        yield from self._hold(CALIBRATION_SETTLE_S)
+        dt = math.tan(a2) - math.tan(a1)
+        if dt == 0.0 or moment / dt <= 0.0:
+            raise CampaignAbort(f"inclining ({dof}): the tilt did not follow the test mass ({a1:.4f} -> {a2:.4f} rad)")
+        c = moment / dt
+        ds = math.hypot(s1 / math.cos(a1) ** 2, s2 / math.cos(a2) ** 2)
+        self.inclining[dof] = {"value": c, "std": abs(c) * ds / abs(dt), "known_moment_n_m": moment,
+                               "tilt_rad": [a1, a2], "tilt_std_rad": [s1, s2], "method": "inclining"}
+        self._say(f"inclining ({dof}): restoring stiffness {c:.3f} N m/rad")
+
     def _campaign(self) -> Wrenches:
         yield from self._dive()
+        if "inclining" in self.calibrate:
+            for dof in ("roll", "pitch"):
+                yield from self._inclining(dof)
         if "tilt_decay" in self.calibrate:
             for dof in ("roll", "pitch"):
                 yield from self._tilt_decay(dof)

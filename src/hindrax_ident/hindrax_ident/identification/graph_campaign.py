@@ -46,6 +46,7 @@ class VirtualOperator:
     simulator: the :class:`~hindrax_ident.sim.simulator.Simulator` (``set_external_wrench``, ``rotation``);
     ballast_weight_n / line_pull_n: the known forces, N (:func:`~.executive.calibration_forces`);
     request_continue: callable that sends one ``identification/continue`` request and returns its future (or None);
+    inclining_load_n_m: (weight in water N, arm m) of the inclining test mass (:func:`~.executive.inclining_load`);
     say: progress lines; freeze / resume: stop and restart simulated time (:meth:`~hindrax_ident.bringup.Graph.
     freeze_time`) from acting on a prompt until the continue answer, so the step goes on at the simulated instant
     the operator acted, whatever the wall time the call took. Feed it every feedback prompt (:meth:`on_prompt`), call :meth:`on_step` after every
@@ -58,7 +59,7 @@ class VirtualOperator:
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
                  request_continue: Callable[[], object], say: Callable[[str], None] = lambda _m: None,
                  resend_after_s: float = 5.0, freeze: Callable[[], None] = lambda: None,
-                 resume: Callable[[], None] = lambda: None) -> None:
+                 resume: Callable[[], None] = lambda: None, inclining_load_n_m=(0.0, 0.0)) -> None:
         self.sim = simulator
         self.ballast_weight_n = float(ballast_weight_n)
         self.line_pull_n = float(line_pull_n)
@@ -73,6 +74,8 @@ class VirtualOperator:
         self._sent_at = -math.inf
         self._external_set = False
         self._freeze, self._resume = freeze, resume
+        self.inclining_load_n_m = tuple(float(x) for x in inclining_load_n_m)
+        self.inclining: str | None = None  # DOF whose inclining test mass hangs on the vehicle
 
     def on_prompt(self, prompt: str) -> None:
         """Act on one feedback prompt: apply or remove the force the step code asks for, then request continue."""
@@ -93,6 +96,8 @@ class VirtualOperator:
             self.line_ned = self.line_pull_n * np.array([d[0], d[1], 0.0]) / math.hypot(d[0], d[1])
         elif code.startswith("release_line_"):
             self.line_ned = None
+        elif code.startswith(("attach_inclining_mass_", "remove_inclining_mass_")):
+            self.inclining = code.rsplit("_", 1)[1] if code.startswith("attach") else None
         else:
             self._say(f"virtual operator: unknown request {code!r}; continuing")
         self._say(f"virtual operator: {code} done (t_sim {self.sim.t_s:.1f} s), calling identification/continue")
@@ -122,6 +127,9 @@ class VirtualOperator:
         import numpy as np
 
         ext = np.zeros(6)
+        if self.inclining is not None:
+            from .campaign import inclining_wrench_frd
+            ext += inclining_wrench_frd(self.sim.rotation, *self.inclining_load_n_m, self.inclining)
         if self.ballast_on or self.line_ned is not None:
             rt = np.asarray(self.sim.rotation).T  # NED -> body
             if self.ballast_on:
@@ -132,7 +140,7 @@ class VirtualOperator:
 
     def on_step(self, _sim=None) -> None:
         """Step listener: hold the current external wrench for the next integration step."""
-        if self.ballast_on or self.line_ned is not None:
+        if self.ballast_on or self.line_ned is not None or self.inclining is not None:
             self.sim.set_external_wrench(self.external_wrench_frd())
             self._external_set = True
         elif self._external_set:
@@ -198,7 +206,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     from std_srvs.srv import Trigger
 
     from ..bringup import build_graph
-    from .executive import calibration_forces
+    from .executive import calibration_forces, inclining_load
     from .from_bag import BagContentError, record_from_bag
 
     out = Path(out)
@@ -224,7 +232,8 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         if calibrate:
             cont = client.create_client(Trigger, "identification/continue")
             operator = VirtualOperator(sim, *calibration_forces(cfg), lambda: cont.call_async(Trigger.Request()),
-                                       say, freeze=graph.freeze_time, resume=graph.resume_time)
+                                       say, freeze=graph.freeze_time, resume=graph.resume_time,
+                                       inclining_load_n_m=inclining_load(cfg))
             graph.nodes["simulator"].add_step_listener(operator.on_step)
 
         def spin() -> None:

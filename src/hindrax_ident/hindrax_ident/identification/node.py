@@ -20,8 +20,9 @@ Interfaces
 Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     Goal: ``dofs`` (empty = all six, in SNAME order), ``levels_per_dof`` (0 = ``identification.levels_per_dof``),
     ``level_fractions`` (optional explicit fractions of the DOF's authority, each in (0, 1]), ``calibrate``
-    (known-force steps after the dive, before the ladders: ballast, line_pull, tilt_decay; the known forces
-    are the ``calibration.*`` parameters, :func:`~.executive.calibration_forces`), ``calibration_only`` (no
+    (known-force steps after the dive, before the ladders: ballast, line_pull, tilt_decay, inclining; the known
+    forces are the ``calibration.*`` parameters, :func:`~.executive.calibration_forces`,
+    :func:`~.executive.inclining_load`), ``calibration_only`` (no
     ladders). Rejected when a goal is running or the goal is invalid (unknown DOF or step, fraction out of
     range, calibration_only without a step). The goal fails at once when the ESC output is not armed. Feedback
     at every level change, at every operator prompt and once per second: DOF, level index and count, level
@@ -86,7 +87,7 @@ from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
 from .estimators import parameter_units
 from .executive import (CALIBRATION_STEPS, CampaignRecord, Executive, ExecutiveStatus, TickInput,
-                        calibration_forces, ordered_samples)
+                        calibration_forces, inclining_load, ordered_samples)
 from .signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu, thrust_of_written_widths
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
@@ -281,10 +282,11 @@ class IdentificationNode(Node):
             return RunIdentification.Result(success=False, message="ESC output not armed: call esc/set_armed first")
         calibrate = list(goal.calibrate)
         w_ballast, f_line = calibration_forces(self.config) if calibrate else (0.0, 0.0)
+        incl = inclining_load(self.config) if "inclining" in calibrate else (0.0, 0.0)
         executive = Executive(self.config, dofs, int(goal.levels_per_dof) or None, tick_s=self.tick_s,
                               fractions=list(goal.level_fractions) or None,
                               dvl_lock_timeout_s=self.dvl_lock_timeout_s, calibrate=calibrate,
-                              ballast_weight_in_water_n=w_ballast, line_pull_n=f_line)
+                              ballast_weight_in_water_n=w_ballast, line_pull_n=f_line, inclining_load_n_m=incl)
         run = _GoalRun(goal_handle, executive, Future(), self._now_s(), np.full(self._n_thrusters, self._neutral_us))
         self._samples = []
         self._run = run
