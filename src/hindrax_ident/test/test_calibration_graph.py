@@ -200,12 +200,11 @@ def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(monk
 
 def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypatch):
     """In-process (the campaign hangs the test mass on the simulator): 0.5 kg of steel 0.15 m to starboard, then
-    forward, with that DOF free and the rest held. Truth: z_g W - z_b B of the vehicle file (= the default truth).
-    Measured with the default 15 s / 30 s holds (seed 2): roll 4.563 +- 0.108, pitch 4.783 +- 0.100 N m/rad against
-    4.503: roll 1.3 % high, pitch 6 % high (2.8 std). The thrusters' realised moment on the free DOF is not exactly
-    the zero commanded (in the simulator's truth about +0.026 N m in pitch, -0.022 N m in roll, against the 0.64 N m
-    of the mass, while the horizontal thrusters hold the position against the tilted heave thrust), so the step's
-    own interval does not cover pitch; the tolerance below says so."""
+    forward, with that DOF free and the rest held. Truth: z_g W - z_b B of the vehicle file (= the default truth,
+    4.503 N m/rad). Measured with the default 15 s / 30 s holds: seed 2 roll 4.489 +- 0.132, pitch 4.606 +- 0.129;
+    seed 3 roll 4.464 +- 0.136, pitch 4.554 +- 0.139 (within 2.3 %, |z| < 0.8). Without the thrusters' realised
+    moment on the free DOF (thruster_moment_n_m, about 0.02 N m against the mass's 0.64 N m) pitch read 6 % high
+    (2.8 std)."""
     from hindrax_ident.identification.campaign import Campaign
     from hindrax_ident.identification.executive import inclining_load
 
@@ -220,11 +219,11 @@ def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypa
     assert w == pytest.approx((0.5 - 1000.0 * 0.0000637) * 9.81) and d == 0.15
     rec = Campaign(cfg, dofs=[], seed=2, calibrate=["inclining"], inclining_load_n_m=(w, d)).run()
     assert not rec.aborted, rec.abort_reason
-    for dof, sign, tol in (("roll", 1.0, 0.04), ("pitch", -1.0, 0.09)):
+    for dof, sign in (("roll", 1.0), ("pitch", -1.0)):
         e = rec.inclining[dof]
         assert e["method"] == "inclining" and e["known_moment_n_m"] == pytest.approx(sign * w * d)
         assert sign * (e["tilt_rad"][1] - e["tilt_rad"][0]) > 0.1  # the mass tilted the vehicle its way
-        assert e["value"] == pytest.approx(c_true, rel=tol), (dof, e, c_true)
-        assert 0.0 < e["std"] < 0.05 * e["value"]
+        assert e["value"] == pytest.approx(c_true, rel=0.04), (dof, e, c_true)
+        assert 0.0 < e["std"] < 0.05 * e["value"] and abs(e["value"] - c_true) < 2.5 * e["std"], (dof, e)
     with pytest.raises(ValueError, match="inclining_load_n_m"):
         executive.Executive(cfg, [], tick_s=0.02, calibrate=["inclining"])

@@ -824,7 +824,10 @@ class Executive:
         hangs the test mass (weight in water w) at arm d to starboard (roll: body +y) or forward (pitch: body +x),
         a moment K = w d (roll) or -w d (pitch); average a2; the mass is removed. Equilibrium w d cos(a) = C sin(a)
         + M0 gives C = K / (tan a2 - tan a1) (:func:`~hindrax_ident.estimation.free_decay.restoring_from_inclining`,
-        two points), std from the two means' std. No thrust curve enters: the thrusters only hold the other DOFs."""
+        two points), std from the two means' std. The thrusters only hold the other DOFs, but the moment they realise
+        on the free DOF is not exactly the zero commanded (pulse widths near neutral); its change between the two
+        holds, M2 - M1 (thrust model, recorded), is added: C = (K + M2 - M1) / (tan a2 - tan a1). It is a few % of
+        K, so a thrust-curve error s - 1 moves C by only (s - 1) (M2 - M1) / K."""
         i = DOF_INDEX[dof] - 3
         w, d = self.inclining_load_n_m
         moment = w * d if dof == "roll" else -w * d
@@ -835,20 +838,24 @@ class Executive:
         t1 = self.t_s
         yield from self._hold_tilt_free(dof, CALIBRATION_WINDOW_S)
         a1, s1 = self._mean_tilt(i, t1)
+        m1, ms1 = self._mean_holding_force(i + 3, t1)
         yield from self._wait_operator(f"attach_inclining_mass_{dof}",
                                        f"inclining: hang the test mass ({w:.3g} N in water) {d:.3g} m {where}")
         yield from self._hold_tilt_free(dof, CALIBRATION_SETTLE_S)
         t2 = self.t_s
         yield from self._hold_tilt_free(dof, CALIBRATION_WINDOW_S)
         a2, s2 = self._mean_tilt(i, t2)
+        m2, ms2 = self._mean_holding_force(i + 3, t2)
         yield from self._wait_operator(f"remove_inclining_mass_{dof}", "inclining: remove the test mass")
         yield from self._hold(CALIBRATION_SETTLE_S)
         dt = math.tan(a2) - math.tan(a1)
-        if dt == 0.0 or moment / dt <= 0.0:
+        total = moment + m2 - m1
+        if dt == 0.0 or total / dt <= 0.0:
             raise CampaignAbort(f"inclining ({dof}): the tilt did not follow the test mass ({a1:.4f} -> {a2:.4f} rad)")
-        c = moment / dt
+        c = total / dt
         ds = math.hypot(s1 / math.cos(a1) ** 2, s2 / math.cos(a2) ** 2)
-        self.inclining[dof] = {"value": c, "std": abs(c) * ds / abs(dt), "known_moment_n_m": moment,
+        self.inclining[dof] = {"value": c, "std": abs(c) * math.hypot(ds / dt, math.hypot(ms1, ms2) / total),
+                               "known_moment_n_m": moment, "thruster_moment_n_m": [m1, m2],
                                "tilt_rad": [a1, a2], "tilt_std_rad": [s1, s2], "method": "inclining"}
         self._say(f"inclining ({dof}): restoring stiffness {c:.3f} N m/rad")
 
