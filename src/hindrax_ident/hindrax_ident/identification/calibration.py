@@ -161,13 +161,13 @@ DEFAULT_PRIOR_STD_REL = 0.5
 
 
 def scale_prior_std(cfg) -> float:
-    """1-sigma of the prior on a thruster group's scale s (prior mean 1): the RMS of the declared relative thrust
-    uncertainty of the two directions, ``thrusters.thrust_uncertainty_rel`` = [negative, positive] (a group scale
-    weighs both directions alike)."""
-    from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL
+    """1-sigma of the prior on a thruster group's scale s (prior mean 1): the RMS of the relative thrust
+    uncertainty of the two directions, [negative, positive] (a group scale weighs both directions alike): the
+    bollard-pull fit's ``thrusters.thrust_fit_uncertainty_rel`` when the vehicle file has it, else the declared
+    ``thrusters.thrust_uncertainty_rel`` (the same choice as the intervals, :func:`~.verdicts._declared_rel`)."""
+    from .verdicts import _declared_rel
 
-    v = cfg.flat.get("thrusters.thrust_uncertainty_rel")
-    neg, pos = (float(x) for x in (v if v is not None else DEFAULT_THRUST_UNCERTAINTY_REL))
+    neg, pos = _declared_rel(cfg, None)
     return math.sqrt(0.5 * (neg * neg + pos * pos))
 
 
