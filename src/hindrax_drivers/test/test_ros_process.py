@@ -6,7 +6,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from hindrax_drivers.config import ConfigError
-from hindrax_drivers.ros_process import RosProcess
+from hindrax_drivers.ros_process import RosProcess, executor_kind
 
 pytestmark = pytest.mark.ros
 
@@ -79,3 +79,37 @@ def test_a_failing_cleanup_does_not_skip_the_others():
             proc.own(FakeNode("a", log))
             proc.own(FakeNode("b", log, close_error=OSError("bus gone")))
     assert log == ["close b", "close a", "destroy a"] and not rclpy.ok()
+
+
+def test_executor_is_the_events_executor_unless_hindrax_executor_says_single(monkeypatch):
+    from rclpy.executors import SingleThreadedExecutor
+
+    monkeypatch.delenv("HINDRAX_EXECUTOR", raising=False)
+    with RosProcess([]) as proc:
+        assert type(proc.executor._ex).__name__ == "EventsExecutor"  # rclpy's C++ events executor
+    monkeypatch.setenv("HINDRAX_EXECUTOR", "single")
+    with RosProcess([]) as proc:
+        assert isinstance(proc.executor, SingleThreadedExecutor)
+    monkeypatch.delenv("HINDRAX_EXECUTOR")
+    with RosProcess([], executor="single") as proc:  # the recorder's choice, whatever the environment says
+        assert isinstance(proc.executor, SingleThreadedExecutor)
+
+
+def test_unknown_executor_names_the_variable_value_and_allowed_values(monkeypatch):
+    monkeypatch.setenv("HINDRAX_EXECUTOR", "multi")
+    with pytest.raises(ValueError, match=r"HINDRAX_EXECUTOR='multi': allowed values are events, single"):
+        executor_kind()
+    with pytest.raises(ValueError, match=r"executor='fast'"):
+        RosProcess([], executor="fast")
+
+
+def test_events_loop_spins_callbacks_and_ends_on_context_shutdown():
+    """spin() of the events loop runs timers and returns via ExternalShutdownException once the context is shut
+    down (what SIGINT/SIGTERM do), which RosProcess treats as a normal end."""
+    ticks: list = []
+    with RosProcess([], executor="events") as proc:
+        node = proc.own(rclpy.create_node("events_loop_test"))
+        node.create_timer(0.01, lambda: ticks.append(1) if len(ticks) < 5 else rclpy.shutdown())
+        proc.executor.add_node(node)
+        proc.executor.spin()
+    assert len(ticks) == 5 and proc.status == 0 and not rclpy.ok()

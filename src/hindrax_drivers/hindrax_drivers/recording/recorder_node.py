@@ -368,7 +368,7 @@ def main(args: list[str] | None = None) -> int:
 
     Exit 0 (also after SIGINT/SIGTERM, the bag finished), 1 with one line on stderr when the node cannot start.
     """
-    with RosProcess(args) as proc:
+    with RosProcess(args, executor="single") as proc:  # EventsExecutor: see ros_process
         try:
             node = RecorderNode()
         except (ConfigError, ValueError) as exc:
