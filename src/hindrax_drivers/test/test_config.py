@@ -201,7 +201,7 @@ def test_schema_docs_and_units_in_names():
                 "allocation_weight", "added_mass_coupling", "dropout_probability", "level_fraction_min",
                 "level_fraction_max", "real_time_factor", "converged_relative_std", "scale_error_fraction",
                 "thrust_uncertainty_rel", "thrust_fit_uncertainty_rel", "rls_directional_forgetting",
-                "rls_min_excitation", "rls_change_threshold", "rls_prior_std_rel",
+                "rls_min_excitation", "rls_change_threshold", "rls_prior_std_rel", "prior_std_rel",
                 "oscillator_calibrated", "frozen_check_samples", "prom_reject_blank_words", "require_data_ready",
                 "not_ready_error_polls", "excitation"}
     units = ("_kg", "_m", "_m3", "_n", "_kg_m2", "_s", "_hz", "_us", "_pa", "_rad", "_m_s", "_m_s2", "_g", "_dps",
