@@ -111,6 +111,7 @@ def test_identification_yaml_shows_the_prior_beside_the_value_and_the_joint_sect
     p = prior_entries(cfg)["surge"]
     assert e["quadratic_damping"]["prior"] == pytest.approx([p["quadratic_damping"], 0.5 * p["quadratic_damping"]])
     assert e["inertia"]["prior"][0] == pytest.approx(rigid_inertia(cfg, "surge") + p["added_mass"])
+    assert e["added_mass"]["prior"] == pytest.approx([p["added_mass"], 0.5 * p["added_mass"]])
     assert "prior" not in e["bias"]
     assert doc["joint"]["prior_std_rel"] == 0.5 and doc["joint"]["scales"]["common"]["measurements"][0]["step"] == \
         "ballast"

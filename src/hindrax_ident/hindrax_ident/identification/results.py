@@ -169,9 +169,12 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             entry[name] = {"value": float(r.values[name]), "std": float(r.std[name]), "unit": r.units[name],
                            "ci95": [float(lo), float(hi)], "std_fit": float(pa.get("std_fit", r.std[name])),
                            "verdict": pa.get("verdict", "trusted"), "reasons": list(pa.get("reasons", []))}
-            pri = (r.signals.get("joint") or {}).get("priors", {}).get(name)
-            if pri is not None:
-                entry[name]["prior"] = [float(pri[0]), float(pri[1])]
+            pri = (r.signals.get("joint") or {}).get("priors", {})
+            if name == "added_mass" and "inertia" in pri:  # the inertia's prior less the (known) rigid part
+                rigid = float(r.values["inertia"]) - float(r.values["added_mass"])
+                entry[name]["prior"] = [float(pri["inertia"][0]) - rigid, float(pri["inertia"][1])]
+            elif name in pri:
+                entry[name]["prior"] = [float(pri[name][0]), float(pri[name][1])]
         entry["verdict"] = a["verdict"]
         entry["reasons"] = list(a["reasons"])
         entry["method"] = r.method
