@@ -318,16 +318,18 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
                        keys=keys, dynamic=dynamic, on_change=on_change)
 
 
-def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None) -> int:
-    """Process entry point of a node: init, build the node, spin a SingleThreadedExecutor, shut down cleanly.
+def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None) -> int:
+    """Process entry point of a node: init, build the node, spin the process's executor, shut down cleanly.
 
-    factory: creates the node after ``rclpy.init``. Returns the exit status: 0 on SIGINT/SIGTERM,
+    factory: creates the node after ``rclpy.init``. executor: ``events``, ``single`` or None for the default
+    (:mod:`hindrax_drivers.ros_process`: the EventsExecutor unless ``HINDRAX_EXECUTOR=single``). Returns the exit
+    status: 0 on SIGINT/SIGTERM,
     1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
     (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
     """
     from .ros_process import RosProcess
 
-    with RosProcess(args, errors={ConfigError: "invalid configuration"}) as proc:
+    with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor) as proc:
         node = proc.own(factory())
         proc.executor.add_node(node)
         proc.executor.spin()
