@@ -227,3 +227,13 @@ def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypa
         assert 0.0 < e["std"] < 0.05 * e["value"] and abs(e["value"] - c_true) < 2.5 * e["std"], (dof, e)
     with pytest.raises(ValueError, match="inclining_load_n_m"):
         executive.Executive(cfg, [], tick_s=0.02, calibrate=["inclining"])
+
+
+@pytest.mark.ros
+def test_ident_continue_without_a_stack_and_start_refuses_bad_calibrate(capsys):
+    assert cli.main(["ident", "continue", "--timeout", "1"]) == 1
+    assert "no identification/continue service within 1 s" in capsys.readouterr().err
+    assert cli.main(["ident", "start", "--calibrate", "tow"]) == 1
+    assert "unknown step(s) ['tow']" in capsys.readouterr().err
+    assert cli.main(["ident", "start", "--calibration-only"]) == 1
+    assert "--calibration-only needs --calibrate" in capsys.readouterr().err

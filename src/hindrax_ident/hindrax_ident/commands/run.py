@@ -203,7 +203,9 @@ def run_graph(args: argparse.Namespace) -> int:
     outcome = run_graph_campaign(args.config or default_config_path(), out, dofs=dofs, levels=args.levels,
                                  seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
                                  progress=progress, truth=getattr(args, "truth", None),
-                                 calibrate=_calibration_steps(args))
+                                 calibrate=_calibration_steps(args),
+                                 sections=lambda doc, rec, idents: _add_reference_sections(doc, rec, cfg, idents, args,
+                                                                                           progress))
     for dof, msg in outcome.errors.items():
         progress(f"{dof}: no estimate ({msg})")
     if outcome.identifications:
@@ -219,7 +221,17 @@ def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
     from ..estimation.least_squares import EstimationError
     from ..identification.calibration import decay_inertia
 
+    import dataclasses
+
     f = cfg.flat
+    # strictly increasing gyro stamps (the identification node moves samples that arrive after their tick to the tick
+    # time, executive.ordered_samples, so its log can repeat a stamp); the in-process log is unchanged by this
+    gyro, last = [], -math.inf
+    for t, r in sorted(record.sensors.get("gyro", []), key=lambda x: x[0]):
+        if t > last:
+            gyro.append((t, r))
+            last = t
+    record = dataclasses.replace(record, sensors={**record.sensors, "gyro": gyro})
     measured = args.restoring_n_m_per_rad is not None
     c0 = float(args.restoring_n_m_per_rad) if measured else float(cfg.weight_n) * (
         float(f["vehicle.centre_of_gravity_frd_m"][2]) - float(f["vehicle.centre_of_buoyancy_frd_m"][2]))
@@ -246,6 +258,18 @@ def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
                                    "verdict": "suspect" if z > 1.96 else "agrees"}
         out[dof] = e
     return out
+
+
+def _add_reference_sections(doc: dict, record, cfg, idents: dict, args, progress) -> None:
+    """identification.yaml ``inclining`` (restoring stiffness per DOF from the inclining step) and ``free_decay``
+    (:func:`_free_decay_section`, with the reference verdicts) of a campaign record that has them; in place."""
+    if getattr(record, "inclining", None):
+        doc["inclining"] = {k: {kk: ([float(x) for x in vv] if isinstance(vv, list) else vv)
+                                for kk, vv in v.items()} for k, v in record.inclining.items()}
+    if getattr(record, "decays", None):
+        doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
+        from ..identification.verdicts import apply_reference_verdicts
+        apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std
 
 
 def run_in_process(args: argparse.Namespace) -> int:
@@ -290,13 +314,7 @@ def run_in_process(args: argparse.Namespace) -> int:
     if idents:
         # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
         doc = build_results(idents, cfg, source="simulation", seed=record.seed, calibration=record.calibration)
-        if record.inclining:  # restoring stiffness C per DOF from the inclining step
-            doc["inclining"] = {k: {kk: ([float(x) for x in vv] if isinstance(vv, list) else vv)
-                                    for kk, vv in v.items()} for k, v in record.inclining.items()}
-        if record.decays:
-            doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
-            from ..identification.verdicts import apply_reference_verdicts
-            apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std
+        _add_reference_sections(doc, record, cfg, idents, args, progress)
         write_identification(out / "identification.yaml", doc)
         note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
                 + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))

@@ -157,7 +157,8 @@ class GraphCampaignOutcome:
     bag; bag_dir; record: the CampaignRecord rebuilt from the bag; disarmed: the ESC reported disarmed after
     the run; sim_time_s / wall_time_s of the whole run; final_pulse_width_us: the PCA9685 outputs after shutdown;
     calibration: the identification node's calibration step results (:attr:`~.executive.CampaignRecord.calibration`,
-    {} without a step).
+    {} without a step); node_record: the identification node's own CampaignRecord (its sensor log, calibration,
+    inclining and free-decay windows).
     """
 
     success: bool = False
@@ -172,17 +173,20 @@ class GraphCampaignOutcome:
     wall_time_s: float = 0.0
     final_pulse_width_us: list = field(default_factory=list)
     calibration: dict = field(default_factory=dict)
+    node_record: object = None
 
 
 def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int | None = None,
                        seed: int | None = None, real_time_factor: float = 0.0, overrides: dict | None = None,
                        progress: Callable[[str], None] | None = None, deadline_s: float = 3600.0,
                        level_fractions: Sequence[float] = (), truth=None,
-                       calibrate: Sequence[str] = ()) -> GraphCampaignOutcome:
+                       calibrate: Sequence[str] = (), sections: Callable | None = None) -> GraphCampaignOutcome:
     """Run the campaign (module docstring); outputs in ``out`` (bag/, identification.yaml, report/).
 
     calibrate: calibration steps before the ladders (goal field; :class:`VirtualOperator` answers the prompts);
-    with ``dofs`` empty only the calibration steps run (goal ``calibration_only``).
+    with ``dofs`` empty only the calibration steps run (goal ``calibration_only``). sections(doc, record,
+    identifications): optional, adds sections to identification.yaml from the identification node's own record
+    (e.g. ``free_decay`` and ``inclining`` of the tilt_decay and inclining steps, which need its sensor log).
 
     Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration and ``TimeoutError`` when a
     step does not finish within its wall-clock deadline (the graph is shut down, thrusters neutral).
@@ -190,11 +194,11 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
     say = progress or (lambda _m: None)
     wall0 = time.monotonic()
     return _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s,
-                level_fractions, wall0, truth, list(calibrate))
+                level_fractions, wall0, truth, list(calibrate), sections)
 
 
 def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s, level_fractions,
-         wall0, truth=None, calibrate=()) -> GraphCampaignOutcome:
+         wall0, truth=None, calibrate=(), sections=None) -> GraphCampaignOutcome:
     import rclpy
     from rclpy.action import ActionClient
 
@@ -295,6 +299,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             graph.nodes["recorder"].stop_recording()
             node_record = graph.nodes["identification"].last_record
             calibration = dict(node_record.calibration) if node_record is not None else {}
+            outcome.node_record = node_record
         finally:
             outcome.sim_time_s = sim.t_s
             graph.shutdown()
@@ -325,6 +330,8 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         doc = build_results(idents, cfg, source="simulation", seed=int(cfg.flat["simulation.seed"]),
                             calibration=calibration or None)
         doc["provenance"]["bag"] = str(bag_dir)
+        if sections is not None and outcome.node_record is not None:
+            sections(doc, outcome.node_record, idents)
         write_identification(out / "identification.yaml", doc)
         write_report(out / "report", idents, doc, campaign_note=note)
     return outcome
