@@ -160,3 +160,19 @@ def test_run_options_reach_the_campaign_and_the_graph_override():
     bad = parser.parse_args(["--dofs", "surge", "--excitation-duration", "2"])
     with pytest.raises(CommandError, match="excitation-duration"):
         run_cmd._check_args(bad)
+
+
+def test_excitation_table_scales_errors_to_100_s_of_pool_time():
+    from hindrax_ident.commands.scenarios import format_excitation_table
+
+    def row(param, err, std_fit, truth, covered):
+        return {"dof": "surge", "parameter": param, "rel_error": err, "std": 99.0, "std_fit": std_fit,
+                "truth": truth, "covered": covered, "pool_time_s": 400.0}
+
+    results = [{"scenario": "none [prbs]", "excitation": "prbs", "seed": 1,
+                "cases": [row("inertia", 0.02, 0.5, 25.0, True), row("quadratic_damping", -0.04, 2.0, 50.0, False),
+                          row("linear_damping", 0.5, 1.0, 1.0, True)]}]
+    lines = format_excitation_table(results).splitlines()
+    assert len(lines) == 3  # header, rule, one row (linear damping is not compared)
+    # 400 s of pool time: x sqrt(4) = 2 at 100 s; 1-sigma 0.5 / 25 = 2 %, 2 / 50 = 4 %
+    assert lines[2] == ("| none | prbs | surge | 1 | 400 | 2.0 % | 4.0 % | 1/2 | 4.0 % | 8.0 % | 4.0 % / 8.0 % |")
