@@ -121,7 +121,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     if exc != "ladder":
         label = f"{label} [{exc}]"
     wall0 = time.monotonic()
-    key = label if exc == "ladder" else f"{label.split(' [')[0]}-{exc}{'' if dur is None else f'-{dur:g}s'}"
+    key = _cache_key(label.split(" [")[0], exc, dur)
     cached = _cache_file(cache, key, seed, dofs, levels) if cache else None
     if cached is not None and cached.is_file():
         idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
@@ -168,6 +168,15 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
             "abort_reason": abort_reason, "errors": errors, "cases": rows,
             "dofs": {d: {"verdict": v["verdict"], "reasons": v["reasons"], "checks": v["checks"]}
                      for d, v in verdicts.items()}}
+
+
+def _cache_key(scenario: str, excitation: str | None, duration_s: float | None) -> str:
+    """Cache name of a case: the scenario for the ladder (None: taken as the ladder, the shipped default), else
+    ``<scenario>-<excitation>[-<duration>s]``."""
+    label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
+    if excitation in (None, "ladder"):
+        return label
+    return f"{label}-{excitation}{'' if duration_s is None else f'-{duration_s:g}s'}"
 
 
 def _cache_file(cache: str, scenario: str, seed: int, dofs: Sequence[str], levels: int | None) -> Path:
@@ -352,8 +361,8 @@ def run(args: argparse.Namespace) -> int:
             for seed in range(1, args.seeds + 1) for n in names for e in excitations]
     not_run = []
     if args.cached_only:
-        keep = [j for j in jobs if j[6] in (None, "ladder")
-                and _cache_file(args.cache, j[1], j[2], dofs, args.levels).is_file()]
+        keep = [j for j in jobs if _cache_file(args.cache, _cache_key(j[1], j[6], j[7]), j[2], dofs,
+                                               args.levels).is_file()]
         not_run = [f"{j[1]} seed {j[2]}" for j in jobs if j not in keep]
         jobs = keep
     wall0 = time.monotonic()
