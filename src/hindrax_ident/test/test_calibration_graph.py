@@ -26,8 +26,8 @@ from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import ManeuverStatus
 from hindrax_msgs.srv import SetArmed
 
-# the shipped keys: 1 kg of steel displacing 1.274e-4 m^3, in water of 1000 kg/m^3 with g = 9.81 m/s^2
-W_BALLAST = (1.0 - 1000.0 * 0.0001274) * 9.81
+# the shipped keys: 1 kg of steel (7850 kg/m^3), in water of 1000 kg/m^3 with g = 9.81 m/s^2
+W_BALLAST = (1.0 - 1000.0 / 7850.0) * 9.81
 
 
 def _write(tmp_path, mutate):
@@ -216,7 +216,7 @@ def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypa
     c_true = float(f["vehicle.centre_of_gravity_frd_m"][2]) * cfg.weight_n \
         - float(f["vehicle.centre_of_buoyancy_frd_m"][2]) * w_b
     w, d = inclining_load(cfg)
-    assert w == pytest.approx((0.5 - 1000.0 * 0.0000637) * 9.81) and d == 0.15
+    assert w == pytest.approx((0.5 - 500.0 / 7850.0) * 9.81) and d == 0.15
     rec = Campaign(cfg, dofs=[], seed=2, calibrate=["inclining"], inclining_load_n_m=(w, d)).run()
     assert not rec.aborted, rec.abort_reason
     for dof, sign in (("roll", 1.0), ("pitch", -1.0)):
