@@ -261,13 +261,18 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                 f"({', '.join(dofs)}, {levels or cfg.flat['identification.levels_per_dof']} levels)")
             last = [None]
 
+            last_said = [-float("inf")]
+
             def on_feedback(fb) -> None:
                 f = fb.feedback
                 if operator is not None:
                     operator.on_prompt(f.prompt)
                 key = (f.dof, f.level_index, math.copysign(1.0, f.level_command) if f.level_command else 0.0)
-                if key != last[0] and f.dof:
-                    last[0] = key
+                # a new DOF or level always prints; a sign change within one (a ladder's reverse run, or the
+                # many of a broadband excitation's force) at most every 5 s of simulated time
+                new_level = last[0] is None or key[:2] != last[0][:2]
+                if f.dof and (new_level or (key != last[0] and sim.t_s - last_said[0] >= 5.0)):
+                    last[0], last_said[0] = key, sim.t_s
                     unit = "N" if f.dof in ("surge", "sway", "heave") else "N m"
                     lvl = f"level {f.level_index + 1}/{f.level_count} {f.level_command:+.2f} {unit}" \
                         if f.level_command else "between levels"
