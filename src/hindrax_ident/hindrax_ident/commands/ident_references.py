@@ -19,7 +19,9 @@
   fit_quadratic_free_decay`): rigid + added inertia independent of the thrust curve ([Hindrax-AM] (seed 000)
   eq. 4 applied to the vehicle, [SmallROV] (seed 004) eq. 12); ``total_inertia_kg_m2_std`` combines the fit's
   std (``_std_fit``, white residuals assumed) with C's (``--stiffness-std``). With ``--identification`` the self-propelled
-  inertia of that DOF is compared: ``verdict`` suspect when the two differ by more than 1.96 combined std.
+  inertia of that DOF is compared by the campaign's rule (:func:`~hindrax_ident.identification.verdicts.
+  apply_reference_verdicts`): ``verdict`` suspect, with the ``reason``, when the two differ by more than 1.96
+  combined std.
 
 Exit status 0 on success, 1 on bad input (one-line message on stderr).
 """
@@ -132,6 +134,23 @@ def _self_propelled_inertia(path: str, dof: str):
     return float(entry["inertia"]["value"]), float(entry["inertia"]["std"])
 
 
+def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
+    """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the free-decay
+    result ``out`` (in place): the campaign's verdict rule itself (:func:`~hindrax_ident.identification.verdicts.
+    apply_reference_verdicts` on a one-DOF document, i.e. :func:`~hindrax_ident.identification.verdicts.
+    free_decay_reason`: suspect beyond :data:`~hindrax_ident.identification.verdicts.REFERENCE_Z_MAX` combined
+    std). Raises ``ValueError`` when ``path`` has no ``dofs.<dof>``."""
+    from ..identification.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
+
+    v, s = _self_propelled_inertia(path, dof)
+    doc = apply_reference_verdicts({"dofs": {dof: {"inertia": {"value": v, "std": s}}}, "free_decay": {dof: out}})
+    sp = doc["free_decay"][dof]["self_propelled"]
+    sp["rule"] = f"suspect when |free decay - self-propelled| > {REFERENCE_Z_MAX:g} combined std"
+    reasons = doc["dofs"][dof]["inertia"].get("reasons")
+    if reasons:
+        sp["reason"] = reasons[0]
+
+
 def _tilt_decay(args) -> int:
     from ..estimation.free_decay import find_release_index, fit_quadratic_free_decay
     from ..estimation.least_squares import EstimationError
@@ -161,12 +180,7 @@ def _tilt_decay(args) -> int:
             "n_samples": fit.n_samples, "start_time_s": fit.t0_s,
         }
         if args.identification:
-            v, s = _self_propelled_inertia(args.identification, args.dof)
-            comb = math.hypot(s, std)
-            z = abs(fit.total_inertia - v) / comb if comb > 0 else math.inf
-            out["self_propelled"] = {"inertia_kg_m2": v, "inertia_kg_m2_std": s, "z": z,
-                                     "verdict": "suspect" if z > 1.96 else "agrees",
-                                     "rule": "suspect when |free decay - self-propelled| > 1.96 combined std"}
+            _compare_with_self_propelled(out, args.identification, args.dof)
     except (ValueError, EstimationError) as exc:
         return _fail("tilt-decay", str(exc))
     print(json.dumps(out))
