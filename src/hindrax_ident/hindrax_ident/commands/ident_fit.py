@@ -3,7 +3,9 @@
 The pipeline is :mod:`hindrax_ident.identification.fit_any` (force and velocity by message type, preprocessing,
 segment-wise output error with an input delay, K-fold and holdout validation). Writes ``identification.yaml``
 (``dofs``, ``validation``, ``preprocessing``) and ``report/index.html`` (measured against predicted velocity on the
-validation data) in ``--out`` (default: the first bag's parent directory) and prints a table. Exit 0, or 1 with one
+validation data) in ``--out`` (default: the first bag's parent directory) and prints a table. Without ``--config``
+the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready: false`` with the reason, also
+printed (:func:`hindrax_ident.identification.results.to_config_overrides` refuses it). Exit 0, or 1 with one
 line on stderr for an unusable bag, topic, frame or too little data.
 """
 from __future__ import annotations
@@ -38,8 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def format_table(res) -> str:
-    """Parameters (value +- std, 95 % interval, fold spread) and validation, one row each."""
-    lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'95 % interval':>23} {'fold spread':>11}"]
+    """Parameters (value +- std, which estimate set the std: output_error or jackknife, 95 % interval, fold
+    spread) and validation, one row each."""
+    lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>12} {'95 % interval':>23} "
+             f"{'fold spread':>11}"]
     for dof, r in res.dofs.items():
         if r.status != "fitted":
             lines.append(f"{dof:6} {r.status}: {r.reason}")
@@ -49,7 +53,8 @@ def format_table(res) -> str:
         folds = np.array(r.folds) if len(r.folds) >= 2 else None
         for i, n in enumerate(r.names):
             sp = f"{np.std(folds[:, i], ddof=1):11.4g}" if folds is not None else f"{'-':>11}"
-            lines.append(f"{dof:6} {n:28} {r.theta[i]:10.4g} {r.std[i]:9.3g} "
+            src = r.std_source[i] if r.std_source else "output_error"
+            lines.append(f"{dof:6} {n:28} {r.theta[i]:10.4g} {r.std[i]:9.3g} {src:>12} "
                          f"[{r.ci95[i, 0]:10.4g}, {r.ci95[i, 1]:10.4g}] {sp}")
     lines.append("")
     lines.append(f"validation ({res.design})")
@@ -98,5 +103,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"preprocessing: {d['resampling']}; delay {d['delay_s']:g} s; "
           + "; ".join(f"{Path(b['bag']).name}: {b['gaps']['dropped_s']:g} s in gaps dropped, "
                       f"{b['velocity_repeated_values_dropped']} repeated velocities dropped" for b in d["bags"]))
+    if not doc["config_ready"]:
+        print(f"config_ready: false: {doc['config_ready_reason']}")
     print(f"output: {path} and {index}")
     return 0

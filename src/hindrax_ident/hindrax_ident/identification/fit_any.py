@@ -43,6 +43,10 @@ recorded force (less the coupling terms of the measured velocities) re-initialis
 each segment's start; ``nrmse_hold``: v_pred held at
 the segment's initial value; ``nrmse_zero``: v_pred = 0. Fold parameters give the spread beside each interval.
 
+Intervals (:func:`honest_interval`, docs/identification.md §7): per parameter the larger of the output-error std and
+the delete-a-group jackknife std of the K fold estimates (Efron and Stein 1981; Shao and Tu 1995 §2.3), with
+``std_source`` saying which; ci95 from it (Student t, n_segments - 1 or K - 1 degrees of freedom).
+
 Errors: :class:`FitInputError` (one line: the topic, the type found, the types accepted; disagreeing frame ids;
 how much data is needed).
 """
@@ -66,7 +70,8 @@ from .output_error import DofModel, OutputErrorFit, rk4_step
 from .signals import samples_from_dvl, thrust_of_written_widths
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed", "BagSegments",
-           "preprocess_bag", "fit_bags", "DofFit", "FitResult"]
+           "preprocess_bag", "fit_bags", "fit_dof", "jackknife_std", "honest_interval", "DofFit", "FitResult",
+           "CONFIG_READY_REASON"]
 
 WRENCH, PWM = "geometry_msgs/msg/WrenchStamped", "hindrax_msgs/msg/ThrusterPwm"
 ODOM, TWIST_COV, TWIST, DVL = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistWithCovarianceStamped",
@@ -761,6 +766,9 @@ class DofFit:
     validation: dict = field(default_factory=dict)
     plot: dict = field(default_factory=dict)
     reason: str = ""
+    std_source: list = field(default_factory=list)
+    oe_std: np.ndarray | None = None
+    jackknife_std: np.ndarray | None = None
 
 
 @dataclass
@@ -770,6 +778,79 @@ class FitResult:
     dofs: dict
     preprocessing: dict
     design: str
+
+
+def jackknife_std(fold_thetas) -> np.ndarray:
+    """Delete-a-group jackknife standard deviation (p,) of the full-data estimate from ``fold_thetas`` (K, p), the
+    estimates each fitted without one of K disjoint groups (the K cross-validation folds):
+    ``sqrt((K - 1) / K * sum_k (theta_k - mean_k theta_k)^2)`` (Efron and Stein 1981; Shao and Tu 1995 §2.3, the
+    delete-d jackknife with the groups as the deleted sets; docs/references.md [Efron-Stein1981], [Shao-Tu1995]).
+    Raises ValueError with fewer than 2 fold estimates."""
+    th = np.asarray(fold_thetas, dtype=float)
+    if th.ndim != 2 or th.shape[0] < 2:
+        raise ValueError(f"jackknife: {th.shape[0] if th.ndim == 2 else 0} fold estimates; at least 2 are needed")
+    k = th.shape[0]
+    return np.sqrt((k - 1) / k * np.sum((th - th.mean(axis=0)) ** 2, axis=0))
+
+
+def honest_interval(theta: np.ndarray, oe_std: np.ndarray, fold_thetas, n_segments: int
+                    ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray | None]:
+    """Per parameter, std = max(output-error std, jackknife std) and its 95 % interval (docs/identification.md §7).
+
+    theta, oe_std (p,): the full fit and its own std (:class:`.output_error.OutputErrorFit`: residual variance,
+    AR(1) and cluster-robust widening); fold_thetas (K, p): the cross-validation folds' estimates (fewer than 2:
+    the output-error std alone). The output-error std assumes the model's residuals independent across segments;
+    a misfit that drifts over minutes (a slowly varying disturbance, a model error that depends on the manoeuvre)
+    moves the estimate from one part of the record to another, which the jackknife of the folds sees. The larger
+    of the two is taken (both estimate the same variance: summing them would double it when both are right).
+    ci95 = theta +- t std, t the Student quantile with n_segments - 1 degrees of freedom for the output-error std,
+    K - 1 for the jackknife's (a variance estimated from K group estimates).
+    Returns (std (p,), ci95 (p, 2), std_source per parameter ``"output_error"`` | ``"jackknife"``, jackknife std
+    (p,) or None)."""
+    theta = np.asarray(theta, dtype=float)
+    oe_std = np.asarray(oe_std, dtype=float)
+    t_oe = float(stats.t.ppf(0.975, max(n_segments - 1, 1)))
+    folds = np.asarray(fold_thetas, dtype=float) if len(fold_thetas) else np.zeros((0, theta.size))
+    if folds.shape[0] < 2:
+        return oe_std.copy(), np.column_stack([theta - t_oe * oe_std, theta + t_oe * oe_std]), \
+            ["output_error"] * theta.size, None
+    jk = jackknife_std(folds)
+    t_jk = float(stats.t.ppf(0.975, folds.shape[0] - 1))
+    use_jk = jk > oe_std
+    std = np.where(use_jk, jk, oe_std)
+    half = np.where(use_jk, t_jk, t_oe) * std
+    return std, np.column_stack([theta - half, theta + half]), \
+        ["jackknife" if u else "output_error" for u in use_jk], jk
+
+
+def fit_dof(seg: BagSegments, dof: str, model: str, names: list, folds: Sequence[np.ndarray], excitation_: dict,
+            theta0: np.ndarray | None = None) -> DofFit:
+    """Output-error fit of ``dof`` on all of ``seg``, refitted without each index set of ``folds`` (the fold
+    estimates, each validated on its left-out segments), and the interval of :func:`honest_interval`.
+    Raises EstimationError, LinAlgError or ValueError when the full fit fails."""
+    k = DOFS.index(dof)
+    theta, cov = _fit(seg, dof, model, theta0)
+    oe_std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    r = DofFit(dof, "fitted", excitation_, model, names, theta, oe_std, None, len(seg))
+    preds = []
+    for idx in folds:
+        train = np.setdiff1d(np.arange(len(seg)), idx)
+        try:
+            th_f, _ = _fit(seg.subset(train), dof, model, theta)  # from the full fit: fewer iterations
+        except (EstimationError, np.linalg.LinAlgError, ValueError):
+            continue
+        r.folds.append(th_f)
+        vs = seg.subset(idx)
+        preds.append((vs, predict(vs, dof, model, th_f)))
+    r.std, r.ci95, r.std_source, r.jackknife_std = honest_interval(theta, oe_std, r.folds, len(seg))
+    r.oe_std = oe_std
+    if preds:
+        cat = BagSegments(*(np.concatenate([getattr(p[0], a) for p in preds]) for a in
+                            ("force", "velocity", "attitude", "bag", "valid")), seg.h)
+        vp = np.concatenate([p[1] for p in preds])
+        r.validation["cross_validation"] = {**validation_measures(cat, dof, vp), "folds": len(r.folds)}
+        r.plot = {"data": "cross-validation", "measured": cat.velocity[..., k], "predicted": vp, "valid": cat.valid}
+    return r
 
 
 def _folds(seg: BagSegments, n_bags: int, k: int) -> list[np.ndarray]:
@@ -882,32 +963,12 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
         e = ex[dof]
         k = DOFS.index(dof)
         try:
-            theta, cov = _fit(seg_c, dof, model, first[dof][0] if dof in first else None)
+            r = fit_dof(seg_c, dof, model, names, folds, e, first[dof][0] if dof in first else None)
         except (EstimationError, np.linalg.LinAlgError, ValueError) as exc:
             out[dof] = DofFit(dof, "failed", e, reason=str(exc))
             continue
-        std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        tq = float(stats.t.ppf(0.975, max(len(seg) - 1, 1)))
-        r = DofFit(dof, "fitted", e, model, names, theta, std, np.column_stack([theta - tq * std, theta + tq * std]),
-                   len(seg))
+        theta = r.theta
         r.excitation["by_direction"] = model == "heave" if dof == "heave" else None
-        preds = []
-        for idx in folds:
-            train = np.setdiff1d(np.arange(len(seg)), idx)
-            try:
-                th_f, _ = _fit(seg_c.subset(train), dof, model, theta)  # from the full fit: fewer iterations
-            except (EstimationError, np.linalg.LinAlgError, ValueError):
-                continue
-            r.folds.append(th_f)
-            vs = seg_c.subset(idx)
-            preds.append((vs, predict(vs, dof, model, th_f)))
-        if preds:
-            cat = BagSegments(*(np.concatenate([getattr(p[0], a) for p in preds]) for a in
-                                ("force", "velocity", "attitude", "bag", "valid")), seg.h)
-            vp = np.concatenate([p[1] for p in preds])
-            r.validation["cross_validation"] = {**validation_measures(cat, dof, vp), "folds": len(r.folds)}
-            r.plot = {"data": "cross-validation", "measured": cat.velocity[..., k], "predicted": vp,
-                      "valid": cat.valid}
         if hold_c is not None:
             vp = predict(hold_c, dof, model, theta)
             r.validation["holdout"] = validation_measures(hold_c, dof, vp)
@@ -927,6 +988,11 @@ def _param_entries(r: DofFit, cfg: VehicleConfig | None) -> dict:
     def put(name, i, unit):
         e = {"value": float(r.theta[i]), "std": float(r.std[i]), "unit": unit,
              "ci95": [float(r.ci95[i, 0]), float(r.ci95[i, 1])]}
+        if r.std_source:  # which estimate set std (docs/identification.md §7), and both
+            e["std_source"] = r.std_source[i]
+            e["std_output_error"] = float(r.oe_std[i])
+            if r.jackknife_std is not None:
+                e["std_jackknife"] = float(r.jackknife_std[i])
         if folds is not None and len(folds) >= 2:
             e["fold_spread"] = {"std": float(np.std(folds[:, i], ddof=1)), "min": float(folds[:, i].min()),
                                 "max": float(folds[:, i].max()), "folds": int(len(folds))}
@@ -950,6 +1016,11 @@ def _param_entries(r: DofFit, cfg: VehicleConfig | None) -> dict:
     return entries
 
 
+#: Why ``hindrax ident fit`` without ``--config`` writes ``config_ready: false`` (and no ``added_mass``).
+CONFIG_READY_REASON = ("no vehicle file (--config): only the rigid + added inertia is identified, not the added mass; "
+                       "applying it to a vehicle file (results.to_config_overrides) needs --config")
+
+
 def _plain(x):
     """numpy scalars and arrays, tuples and nested mappings as plain YAML-safe Python values."""
     if isinstance(x, dict):
@@ -967,8 +1038,10 @@ def _plain(x):
 
 def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str | Path],
                    holdout: Sequence[str | Path] = ()) -> dict:
-    """identification.yaml: ``dofs.<dof>.<param>.{value,std,unit,ci95,fold_spread}`` of the fitted DOFs (the
-    schema of :mod:`.results`; ``added_mass`` only with a configuration, which gives the rigid-body inertia; per DOF
+    """identification.yaml: ``dofs.<dof>.<param>.{value,std,unit,ci95,fold_spread,std_source,std_output_error,
+    std_jackknife}`` of the fitted DOFs (the schema of :mod:`.results`; std the larger of the output-error and the
+    jackknife std, ``std_source`` naming it, :func:`honest_interval`; ``added_mass`` only with a configuration, which
+    gives the rigid-body inertia: without one ``config_ready: false`` and ``config_ready_reason``; per DOF
     ``verdict`` suspect with ``reasons`` for a negative damping, a fold spread above 3 std or a validation nrmse of
     0.5 or more),
     ``not_excited``/``failed`` with their numbers, ``validation.<dof>.{nrmse,nrmse_hold,nrmse_zero,samples}`` (the
@@ -990,8 +1063,11 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         e["segments"] = r.segments
         reasons = [f"{n} {v['value']:.4g} < 0 (unphysical)" for n, v in e.items()
                    if isinstance(v, dict) and "damping" in n and v.get("value", 0.0) < 0]
-        reasons += [f"{n}: fold spread {v['fold_spread']['std']:.3g} > 3 x std {v['std']:.3g}" for n, v in e.items()
-                    if isinstance(v, dict) and "fold_spread" in v and v["fold_spread"]["std"] > 3 * v["std"]]
+        # the fold spread against the fit's own std (the reported std already covers the spread, §7)
+        reasons += [f"{n}: fold spread {v['fold_spread']['std']:.3g} > 3 x output-error std "
+                    f"{v.get('std_output_error', v['std']):.3g}" for n, v in e.items()
+                    if isinstance(v, dict) and "fold_spread" in v
+                    and v["fold_spread"]["std"] > 3 * v.get("std_output_error", v["std"])]
         main = r.validation.get("holdout") or r.validation.get("cross_validation")
         if main and not main["nrmse"] < 0.5:
             reasons.append(f"validation nrmse {main['nrmse']:.3f} >= 0.5")
@@ -1015,6 +1091,9 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
                                  "inertia and bias",
                        "seed": None, "bags": [str(b) for b in bags], "holdout": [str(b) for b in holdout],
                        "validation_design": res.design},
+        "config_ready": cfg is not None,
+        "config_ready_reason": (CONFIG_READY_REASON if cfg is None else
+                                "added_mass = inertia - the vehicle file's rigid-body inertia"),
         "dofs": dofs,
         "not_identified": other,
         "validation": val,

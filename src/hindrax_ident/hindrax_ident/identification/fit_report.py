@@ -55,15 +55,19 @@ def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
              "solid #ccc;padding:2px 6px;font-size:13px;text-align:right}</style></head><body>",
              "<h1>Identification from bags (hindrax ident fit)</h1>",
              f"<p>{html.escape(res.design)}</p><h2>Parameters</h2><table><tr><th>DOF</th><th>parameter</th>"
-             "<th>value</th><th>std</th><th>unit</th><th>95 % interval</th><th>fold spread (std)</th></tr>"]
+             "<th>value</th><th>std</th><th>std from</th><th>unit</th><th>95 % interval</th><th>fold spread (std)</th>"
+             "</tr>"]
     for dof, e in doc["dofs"].items():
         for name, p in e.items():
             if isinstance(p, dict) and "value" in p:
                 sp = p.get("fold_spread", {}).get("std")
                 parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-                    dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}", p["unit"],
+                    dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}", p.get("std_source", "-"), p["unit"],
                     f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]", "-" if sp is None else f"{sp:.3g}")) + "</tr>")
-    parts.append("</table>")
+    parts.append("</table><p>std: the larger of the output-error std and the jackknife std of the fold estimates "
+                 "(docs/identification.md §7).</p>")
+    if not doc.get("config_ready", True):
+        parts.append(f"<p><b>config_ready: false</b>: {html.escape(doc['config_ready_reason'])}</p>")
     for dof, e in doc.get("not_identified", {}).items():
         parts.append(f"<p><b>{html.escape(dof)}</b>: {html.escape(e['status'])} ({html.escape(e['reason'])})</p>")
     parts.append("<h2>Validation</h2><table><tr><th>DOF</th><th>data</th><th>nrmse</th><th>nrmse_hold</th>"

@@ -279,7 +279,18 @@ def to_config_overrides(document: Mapping) -> dict[str, float]:
 
     Added mass and damping only (the configuration's inertia and buoyancy come from mass, volume and
     geometry). Negative damping estimates (unphysical; the schema requires >= 0) are clipped to 0.
+    Raises :class:`IdentificationFileError` (a ValueError, one line) for a file that is not config-ready: one of
+    ``hindrax ident fit`` without ``--config`` (``config_ready: false``, or an ``inertia`` without ``added_mass``:
+    without the vehicle file only the rigid + added inertia is known), or one that fails :func:`validate`.
     """
+    if isinstance(document, Mapping) and isinstance(document.get("dofs"), Mapping):
+        bare = [d for d, e in document["dofs"].items() if isinstance(e, Mapping) and "inertia" in e
+                and "added_mass" not in e]
+        if document.get("config_ready") is False or bare:
+            raise IdentificationFileError(
+                f"identification file not config-ready: no added_mass ({', '.join(bare) or 'any DOF'}): written by "
+                "`hindrax ident fit` without --config, which knows only the rigid + added inertia; rerun it with "
+                "--config FILE (the vehicle file giving the rigid-body inertia) to apply it to a vehicle file")
     validate(document)
     out: dict[str, float] = {}
     for dof, e in document["dofs"].items():
