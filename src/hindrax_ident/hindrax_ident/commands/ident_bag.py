@@ -1,9 +1,15 @@
-"""``hindrax ident bag BAG [--out DIR] [--config FILE]``: offline identification of a recorded campaign bag.
+"""``hindrax ident bag BAG [--out DIR] [--config FILE] [--restoring-n-m-per-rad C --restoring-std S]``: offline
+identification of a recorded campaign bag.
 
 Writes ``identification.yaml`` and ``report/index.html`` (default: beside the bag) and prints the summary
 table; the analysis is :mod:`hindrax_ident.identification.from_bag` (batch least squares with output-error
-refinement, [Hindrax-Drag] (seed 003) eqs. 6-8). Exit 0, or 1 with one line on stderr when the configuration,
-the bag or its content is unusable, or when no DOF could be identified.
+refinement, [Hindrax-Drag] (seed 003) eqs. 6-8). When the bag holds the calibration steps' results
+(``identification/calibration``, published by the identification node when each step ends: ``hindrax ident start
+--calibrate ...`` with the recorder on), they are applied as ``hindrax run`` applies them: the thrust scales are
+estimated jointly with the fits (sections ``calibration`` and ``joint``), the inclining steps give the section
+``inclining`` and the tilt_decay steps the section ``free_decay`` with the reference verdicts
+(docs/identification.md §6). Exit 0, or 1 with one line on stderr when the configuration, the bag or its content
+is unusable, or when no DOF could be identified.
 """
 from __future__ import annotations
 
@@ -19,6 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``hindrax ident bag``."""
     parser.add_argument("bag", help="bag directory (or .mcap file) recorded during an identification campaign")
     parser.add_argument("--out", default=None, help="output directory (default: the bag's parent directory)")
+    parser.add_argument("--restoring-n-m-per-rad", type=float, default=None,
+                        help="roll/pitch restoring stiffness C for the bag's tilt_decay steps when it has no inclining "
+                             "step (from `hindrax ident inclining`; default the vehicle file's m g BG)")
+    parser.add_argument("--restoring-std", type=float, default=0.0, help="1-sigma of C, N m/rad")
     add_config_argument(parser)
 
 
@@ -27,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.recording.reader import BagError
 
     from ..identification.from_bag import BagContentError, identify_bag, write_outputs
-    from .run import format_summary
+    from .run import _add_reference_sections, format_summary
 
     cfg = load_vehicle(args.config)
     bag = Path(args.bag)
@@ -35,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"ident bag: {bag}: no such file or directory")
     try:
         record, idents, errors = identify_bag(bag, cfg)
-    except (BagError, BagContentError, OSError) as exc:
+    except (BagError, BagContentError, OSError, ValueError) as exc:
         raise CommandError(f"ident bag: {exc}") from exc
     for dof, msg in errors.items():
         print(f"{dof}: no estimate ({msg})")
@@ -43,9 +53,13 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("ident bag: no DOF could be identified")
     out = Path(args.out) if args.out else bag.resolve().parent
     out.mkdir(parents=True, exist_ok=True)
+    if record.calibration:
+        print("calibration from the bag (identification/calibration): " + ", ".join(
+            f"{k} {v['value']:.4f} +- {v['std']:.4f}" for k, v in record.calibration.items()))
     note = (f"Offline identification of bag {bag}, {record.t_s[-1] - record.t_s[0]:.0f} s of campaign"
             + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
-    path = write_outputs(out, idents, cfg, bag, note)
+    path = write_outputs(out, idents, cfg, bag, note, calibration=record.calibration,
+                         sections=lambda doc: _add_reference_sections(doc, record, cfg, idents, args, print))
     print(format_summary(idents))
     print(f"output: {path} and {out / 'report' / 'index.html'}")
     return 0

@@ -11,7 +11,11 @@ Topics read (the identification node's inputs and outputs, README "Topics"): ``d
 node, :mod:`.signals`, into :class:`~.maneuvers.SensorState`), ``thrusters/pulse_width`` (the widths the ESC node
 wrote: thrust model of [Hindrax-Drag] (seed 003) eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
-accelerometer biases) and ``identification/estimates`` (the online RLS history, for the report).
+accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
+``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:
+the record's ``calibration``, ``inclining`` and ``decays``; :func:`identify_bag` scales the thrust-model force by the
+measured scales, :func:`~.calibration.apply_thrust_calibration`, and :func:`write_outputs` estimates them jointly
+with the fits and writes the ``calibration`` and ``joint`` sections, as ``hindrax run`` does from the node's record).
 
 Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10 ms,
 the simulator's /clock period): the status is held from its stamps and the ESC widths from their stamps plus
@@ -34,6 +38,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 
+from . import calibration_topic
 from .campaign import CampaignRecord
 from .maneuvers import SensorState
 from .signals import (STILL_MESSAGE, sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu,
@@ -43,7 +48,8 @@ __all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_f
            "write_outputs"]
 
 SENSOR_TOPICS = ("dvl/data", "pressure/fluid_pressure", "imu/data_raw", "ping/altitude")
-TOPICS = SENSOR_TOPICS + ("thrusters/pulse_width", "identification/status", "identification/estimates")
+TOPICS = SENSOR_TOPICS + ("thrusters/pulse_width", "identification/status", "identification/estimates",
+                          calibration_topic.TOPIC)
 _RUNNING = 2  # ManeuverStatus.PHASE_RUNNING
 
 
@@ -93,7 +99,8 @@ def _stamp(msg) -> float:
 def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> CampaignRecord:
     """CampaignRecord from (topic, message) pairs (any order; rclpy or bag-decoded messages).
 
-    Raises :class:`BagContentError` without ESC widths, status or an identification run.
+    Raises :class:`BagContentError` without ESC widths, status or an identification run, or with an
+    ``identification/calibration`` status missing a value.
     """
     mount_t = mounting_rotation(cfg.flat["sensors.icm20948.mounting_rpy_rad"]).T
     samples: list = []
@@ -101,6 +108,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     status: list = []
     online: dict[str, OnlineHistory] = {}
     estimates: list = []
+    calibrations: list = []
     for topic, msg in messages:
         if topic == "dvl/data":
             samples.extend(samples_from_dvl(msg))
@@ -116,6 +124,8 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
             status.append((_stamp(msg), msg))
         elif topic == "identification/estimates":
             estimates.append((_stamp(msg), msg))
+        elif topic == calibration_topic.TOPIC:
+            calibrations.append((_stamp(msg), msg))
     if not pwm:
         raise BagContentError("no thrusters/pulse_width messages (the widths the ESC wrote)")
     if not status:
@@ -186,6 +196,11 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     for ts, m in estimates:
         if m.dof in DOFS and m.method == "rls":
             online.setdefault(m.dof, OnlineHistory(m.dof)).add(ts, m)
+    calibrations.sort(key=lambda x: x[0])
+    try:
+        calibration, inclining, decays = calibration_topic.merge_results(m for _, m in calibrations)
+    except ValueError as exc:
+        raise BagContentError(str(exc)) from exc
     last = [m for _, m in status if m.phase != 0][-1] if busy else status[-1][1]
     aborted = last.phase == 5  # PHASE_ABORTED
     return CampaignRecord(
@@ -193,7 +208,8 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
         level=level[ist], run_id=run_id.astype(int), truth_position_ned_m=np.full((n, 3), np.nan),
         truth_euler_rad=np.full((n, 3), np.nan), sensors=state.log, windows=windows, online=online,
         levels={}, authority={}, aborted=aborted, abort_reason=last.message if aborted else "", wall_time_s=0.0,
-        tick_s=grid_s, time_constant_s=tau, seed=-1, final_pulse_width_us=pwm[-1][1])
+        tick_s=grid_s, time_constant_s=tau, seed=-1, final_pulse_width_us=pwm[-1][1], calibration=calibration,
+        decays=decays, inclining=inclining)
 
 
 def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01) -> CampaignRecord:
@@ -215,22 +231,34 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
 
 
 def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01):
-    """(record, {dof: DofIdentification}, {dof: error}) of a bag."""
+    """(record, {dof: DofIdentification}, {dof: error}) of a bag. With calibration results in the bag
+    (``record.calibration``) the fits see the thrust-model force times the measured scales
+    (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays unscaled.
+    Raises ``ValueError`` for a non-positive scale in the bag."""
+    from .calibration import apply_thrust_calibration
     from .estimators import identify_all_with_errors
 
     record = record_from_bag(bag_path, cfg, grid_s)
-    idents, errors = identify_all_with_errors(record, cfg)
+    idents, errors = identify_all_with_errors(apply_thrust_calibration(record), cfg)
     return record, idents, errors
 
 
 def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | Path, note: str,
-                  source: str = "bag", seed: int | None = None) -> Path:
-    """identification.yaml (provenance names the bag) and report/index.html in ``out``; returns the yaml path."""
+                  source: str = "bag", seed: int | None = None, calibration: dict | None = None,
+                  sections=None) -> Path:
+    """identification.yaml (provenance names the bag) and report/index.html in ``out``; returns the yaml path.
+
+    calibration: the record's calibration steps (``record.calibration`` of :func:`identify_bag`): the thrust scales
+    are estimated jointly with the fits and identification.yaml gets the ``calibration`` and ``joint`` sections
+    (:func:`~.results.build_results`). sections(doc): optional, adds further sections (e.g. ``inclining`` and
+    ``free_decay``) before the file and the report are written."""
     from .report import write_report
     from .results import build_results, write_identification
 
-    doc = build_results(idents, cfg, source=source, seed=seed)
+    doc = build_results(idents, cfg, source=source, seed=seed, calibration=calibration or None)
     doc["provenance"]["bag"] = str(bag_path)
+    if sections is not None:
+        sections(doc)
     path = write_identification(out / "identification.yaml", doc)
     write_report(out / "report", idents, doc, campaign_note=note)
     return path

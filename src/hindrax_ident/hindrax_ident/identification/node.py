@@ -49,7 +49,11 @@ Publishes
     :data:`STATUS_PERIOD_S` (10 Hz: the progress of a level), once at its end (DONE or ABORTED
     with the reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a
     goal aborts on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety
-    supervisor (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset.
+    supervisor (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset;
+    ``identification/calibration`` (diagnostic_msgs/DiagnosticArray, reliable, transient local, depth 1) when a
+    calibration step ends (ballast, line pull surge / sway, inclining roll / pitch, tilt_decay roll / pitch): every
+    step result since the node started, one DiagnosticStatus each, KeyValue pairs named with their units
+    (:mod:`.calibration_topic`); the recorder stores it with the campaign and ``hindrax ident bag`` applies it.
 Parameters
     The vehicle configuration; node-specific ``dvl_lock_timeout_s`` (default 3.0): a surge or sway run
     aborts when the DVL had no valid velocity for this long (docs/architecture.md §8); ``sensor_timeout_s``
@@ -68,10 +72,12 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
@@ -85,6 +91,7 @@ from hindrax_drivers.node_common import run_node
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
+from . import calibration_topic
 from .estimators import parameter_units
 from .executive import (CALIBRATION_STEPS, CampaignRecord, Executive, ExecutiveStatus, TickInput,
                         calibration_forces, inclining_load, ordered_samples)
@@ -148,6 +155,7 @@ class _GoalRun:
     status: ExecutiveStatus | None = None
     last_feedback: tuple = field(default_factory=lambda: (None, -1))
     last_feedback_s: float = -math.inf
+    calibration_results: int = 0  # step results of this goal already published on identification/calibration
 
 
 class IdentificationNode(Node):
@@ -186,6 +194,8 @@ class IdentificationNode(Node):
         self._last_status: tuple[float, tuple] = (-math.inf, ())  # (ROS time, key) of the last running status
         self.last_record: CampaignRecord | None = None
         self.last_result: str = ""
+        #: step results published on identification/calibration: name -> (name, message, [(key, value)])
+        self.calibration_results: dict[str, tuple] = {}
 
         # no QoS event handlers (rclpy's default incompatible-QoS warning handler of each is visited in Python on
         # every executor spin); a sensor that does not arrive fails the goal (sensor_timeout_s, DVL lock)
@@ -200,6 +210,10 @@ class IdentificationNode(Node):
         self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10, **pub_ev)
         self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50, **pub_ev)
         self.pub_abort = self.create_publisher(String, "supervisor/abort", 10, **pub_ev)
+        # transient local: a recorder or tool that subscribes after the step still gets every result
+        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC, latched, **pub_ev)
         self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._execute,
                                     goal_callback=self._on_goal, cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self.create_service(Trigger, "identification/continue", self._on_continue)
@@ -374,12 +388,29 @@ class IdentificationNode(Node):
             if self._written is not None:
                 run.written_us = self._written
         self._last_tick_s = t
+        self._publish_calibration(run)
         if w is None:
             self._stop(run, t, now, "")
             return
         ex.command(thrust_of_written_widths(self.config, ex.curve, run.written_us))
         self._publish_wrench(w, now)
         self._publish_progress(run, t)
+
+    def _publish_calibration(self, run: _GoalRun) -> None:
+        """``identification/calibration`` when the executive has a step result it had not at the last call (a
+        calibration step ended): all results since the node started, the new ones replacing older ones of the same
+        name (module docstring)."""
+        ex = run.executive
+        n = len(ex.calibration) + len(ex.inclining) + len(ex.decays)
+        if n == run.calibration_results:
+            return
+        run.calibration_results = n
+        for item in calibration_topic.statuses(ex.calibration, ex.inclining, ex.decays):
+            self.calibration_results[item[0]] = item
+        self.pub_calibration.publish(calibration_topic.calibration_array(
+            list(self.calibration_results.values()), self.get_clock().now().to_msg()))
+        self.get_logger().info("identification/calibration: " + "; ".join(
+            m for _n, m, _kv in self.calibration_results.values()))
 
     def _stop(self, run: _GoalRun, t: float, now, error: str) -> None:
         """End of the goal: record, final status, zero wrench; the action ends once the thrusters are neutral."""

@@ -1,0 +1,148 @@
+"""The calibration steps' results as a standard message: topic ``identification/calibration``.
+
+The identification node (:mod:`.node`) publishes, when a calibration step of a goal ends (``ballast``,
+``line_pull`` surge and sway, ``inclining`` roll and pitch, ``tilt_decay`` roll and pitch; docs/identification.md
+§6), one ``diagnostic_msgs/msg/DiagnosticArray`` holding every step result measured since the node started, one
+``DiagnosticStatus`` per result (a later result of the same name replaces the earlier one), with transient-local
+durability (depth 1), so a recorder or a tool that subscribes later still receives all of them. The recorder
+stores the topic with the campaign, and ``hindrax ident bag`` (:mod:`.from_bag`) reads it back into the
+:class:`~.campaign.CampaignRecord`'s ``calibration``, ``inclining`` and ``decays``, so identification.yaml gets the
+``calibration`` and ``joint`` sections (and ``inclining`` / ``free_decay``) as ``hindrax run`` writes them from the
+node's record in-process.
+
+Each status: ``level`` OK, ``hardware_id`` :data:`HARDWARE_ID`, ``name`` ``<kind>/<key>``, ``message`` a
+one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the float: exact round trip):
+
+``thrust_scale/vertical`` (ballast), ``thrust_scale/surge`` and ``thrust_scale/sway`` (line pull)
+    ``step`` (ballast | line_pull), ``axis`` (vertical | surge | sway), ``group`` (vertical | horizontal: the
+    thrusters the scale applies to, docs/identification.md §6.2), ``direction`` (body FRD axis of the known force:
+    ``+z`` the ballast's weight, ``+x`` / ``+y`` the line), ``scale`` and ``scale_std`` (true thrust / curve's,
+    dimensionless), ``known_force_n`` (N), ``holding_force_without_n``, ``holding_force_with_n`` and their
+    ``..._std_n`` (mean thrust-model force on the axis without and with the known force, N, FRD).
+``inclining/roll``, ``inclining/pitch``
+    ``step`` inclining, ``dof``, ``stiffness_n_m_per_rad`` and ``stiffness_n_m_per_rad_std`` (restoring C),
+    ``known_moment_n_m``, ``thruster_moment_without_n_m``, ``thruster_moment_with_n_m`` (N m), ``tilt_without_rad``,
+    ``tilt_with_rad`` and their ``..._std_rad`` (rad).
+``tilt_decay/roll``, ``tilt_decay/pitch``
+    ``step`` tilt_decay, ``dof``, ``release_time_s`` and ``end_time_s``: the recorded decay's window in ROS time (s,
+    the header stamps' time base); the inertia follows offline from the gyro (:func:`~.calibration.decay_inertia`).
+
+Pure apart from the message import in :func:`calibration_array`; :func:`results_from_array` duck-types the
+message (rclpy or bag-decoded objects).
+"""
+from __future__ import annotations
+
+from typing import Any, Iterable, Mapping
+
+__all__ = ["TOPIC", "HARDWARE_ID", "statuses", "calibration_array", "results_from_array", "merge_results"]
+
+#: topic name (relative: the node's namespace)
+TOPIC = "identification/calibration"
+#: ``DiagnosticStatus.hardware_id`` of the statuses
+HARDWARE_ID = "hindrax identification"
+
+_GROUP = {"vertical": "vertical", "surge": "horizontal", "sway": "horizontal"}
+_DIRECTION = {"vertical": "+z", "surge": "+x", "sway": "+y"}
+
+
+def _num(x: Any) -> str:
+    return repr(float(x))
+
+
+def _pairs(stem: str, unit: str, values: Any = (0.0, 0.0)) -> list[tuple[str, str]]:
+    """KeyValue pairs ``<stem>_without_<unit>``, ``<stem>_with_<unit>`` of a [without, with] pair (the record's key
+    is ``<stem>_<unit>``, e.g. holding_force + std_n)."""
+    return [(f"{stem}_without_{unit}", _num(values[0])), (f"{stem}_with_{unit}", _num(values[1]))]
+
+
+def statuses(calibration: Mapping[str, Mapping] | None, inclining: Mapping[str, Mapping] | None = None,
+             decays: Mapping[str, Any] | None = None) -> list[tuple[str, str, list[tuple[str, str]]]]:
+    """(name, message, [(key, value)]) of every result (module docstring) of an executive's or record's
+    ``calibration`` ({axis: {value, std, known_force_n, holding_force_n, holding_force_std_n, method}}),
+    ``inclining`` ({dof: {value, std, known_moment_n_m, thruster_moment_n_m, tilt_rad, tilt_std_rad, method}}) and
+    ``decays`` ({dof: (t_release, t_end) s})."""
+    out = []
+    for axis, e in (calibration or {}).items():
+        kv = [("step", str(e.get("method", ""))), ("axis", axis), ("group", _GROUP.get(axis, axis)),
+              ("direction", _DIRECTION.get(axis, "")), ("scale", _num(e["value"])), ("scale_std", _num(e["std"])),
+              ("known_force_n", _num(e["known_force_n"]))]
+        kv += _pairs("holding_force", "n", e["holding_force_n"]) + _pairs("holding_force", "std_n",
+                                                                         e["holding_force_std_n"])
+        out.append((f"thrust_scale/{axis}", f"{axis} thrust scale {float(e['value']):.4f} +- {float(e['std']):.4f} "
+                    f"({e.get('method', '')}, known force {float(e['known_force_n']):.4g} N)", kv))
+    for dof, e in (inclining or {}).items():
+        kv = [("step", str(e.get("method", "inclining"))), ("dof", dof),
+              ("stiffness_n_m_per_rad", _num(e["value"])), ("stiffness_n_m_per_rad_std", _num(e["std"])),
+              ("known_moment_n_m", _num(e["known_moment_n_m"]))]
+        kv += _pairs("thruster_moment", "n_m", e["thruster_moment_n_m"]) + _pairs("tilt", "rad", e["tilt_rad"])
+        kv += _pairs("tilt", "std_rad", e["tilt_std_rad"])
+        out.append((f"inclining/{dof}", f"{dof} restoring stiffness {float(e['value']):.4g} +- {float(e['std']):.2g} "
+                    "N m/rad (inclining)", kv))
+    for dof, (t0, t1) in (decays or {}).items():
+        out.append((f"tilt_decay/{dof}", f"{dof} free decay recorded from {float(t0):.2f} s to {float(t1):.2f} s",
+                    [("step", "tilt_decay"), ("dof", dof), ("release_time_s", _num(t0)), ("end_time_s", _num(t1))]))
+    return out
+
+
+def calibration_array(results: Iterable[tuple[str, str, list[tuple[str, str]]]], stamp) -> Any:
+    """``diagnostic_msgs/msg/DiagnosticArray`` of :func:`statuses` output, header ``stamp``
+    (builtin_interfaces/Time)."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    arr = DiagnosticArray()
+    arr.header.stamp = stamp
+    arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=name, message=message, hardware_id=HARDWARE_ID,
+                                   values=[KeyValue(key=k, value=v) for k, v in kv])
+                  for name, message, kv in results]
+    return arr
+
+
+def results_from_array(msg: Any) -> tuple[dict, dict, dict]:
+    """(calibration, inclining, decays) of one DiagnosticArray (the inverse of :func:`statuses`, the same dict
+    layout as :class:`~.campaign.CampaignRecord`); statuses of another ``hardware_id`` or name are ignored.
+    Raises ``ValueError`` naming the status when a needed key is missing or not a number."""
+    cal: dict = {}
+    incl: dict = {}
+    decays: dict = {}
+    for st in msg.status:
+        if st.hardware_id != HARDWARE_ID or "/" not in st.name:
+            continue
+        kind, key = st.name.split("/", 1)
+        kv = {v.key: v.value for v in st.values}
+
+        def num(k: str) -> float:
+            try:
+                return float(kv[k])
+            except (KeyError, ValueError) as exc:
+                raise ValueError(f"{TOPIC}: status {st.name!r}: key {k!r} missing or not a number "
+                                 f"({kv.get(k)!r})") from exc
+
+        def pair(stem: str, unit: str) -> list[float]:
+            return [num(a) for a, _ in _pairs(stem, unit)]
+
+        if kind == "thrust_scale":
+            cal[key] = {"value": num("scale"), "std": num("scale_std"), "known_force_n": num("known_force_n"),
+                        "holding_force_n": pair("holding_force", "n"),
+                        "holding_force_std_n": pair("holding_force", "std_n"), "method": kv.get("step", "")}
+        elif kind == "inclining":
+            incl[key] = {"value": num("stiffness_n_m_per_rad"), "std": num("stiffness_n_m_per_rad_std"),
+                         "known_moment_n_m": num("known_moment_n_m"),
+                         "thruster_moment_n_m": pair("thruster_moment", "n_m"), "tilt_rad": pair("tilt", "rad"),
+                         "tilt_std_rad": pair("tilt", "std_rad"), "method": kv.get("step", "inclining")}
+        elif kind == "tilt_decay":
+            decays[key] = (num("release_time_s"), num("end_time_s"))
+    return cal, incl, decays
+
+
+def merge_results(messages: Iterable[Any]) -> tuple[dict, dict, dict]:
+    """(calibration, inclining, decays) of several DiagnosticArrays in time order: a later result of the same name
+    replaces an earlier one (the node's messages are cumulative, so the last one normally holds everything)."""
+    cal: dict = {}
+    incl: dict = {}
+    decays: dict = {}
+    for m in messages:
+        c, i, d = results_from_array(m)
+        cal.update(c)
+        incl.update(i)
+        decays.update(d)
+    return cal, incl, decays

@@ -1,0 +1,286 @@
+"""The calibration steps' results on ``identification/calibration`` (issue 17, "Absolute references" on the vehicle):
+the identification node publishes them when a step ends (diagnostic_msgs/DiagnosticArray, transient local), the
+recorder stores them, and ``hindrax ident bag`` applies them (sections ``calibration`` and ``joint``, and
+``inclining`` / ``free_decay``) as ``hindrax run`` does from the node's record (docs/identification.md §6).
+"""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import yaml
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident import cli
+from hindrax_ident.identification import calibration_topic, executive
+from hindrax_ident.identification.estimators import parameter_names
+
+# step results in the executive's layout (executive.Executive._ballast, _line_pull, _inclining, _tilt_decay)
+CAL = {"vertical": {"value": 0.9, "std": 0.01, "known_force_n": 8.5603, "holding_force_n": [0.81, -8.70],
+                    "holding_force_std_n": [0.05, 0.06], "method": "ballast"},
+       "surge": {"value": 0.88, "std": 0.02, "known_force_n": 4.905, "holding_force_n": [0.1, -5.47],
+                 "holding_force_std_n": [0.04, 0.05], "method": "line_pull"},
+       "sway": {"value": 0.92, "std": 0.04, "known_force_n": 4.905, "holding_force_n": [0.0, -5.33],
+                "holding_force_std_n": [0.03, 0.07], "method": "line_pull"}}
+INCL = {"roll": {"value": 4.489, "std": 0.132, "known_moment_n_m": 0.642, "thruster_moment_n_m": [0.01, 0.03],
+                 "tilt_rad": [0.001, 0.144], "tilt_std_rad": [0.002, 0.003], "method": "inclining"}}
+DECAYS = {"pitch": (1012.34, 1032.34)}
+T0 = 1000.0  # ROS time of the synthetic campaign's start, s
+
+
+def _stamped(msg, t):
+    msg.header.stamp.sec = int(t)
+    msg.header.stamp.nanosec = int(round((t - int(t)) * 1e9))
+    return msg
+
+
+def test_results_survive_the_message_exactly_with_named_keys():
+    from builtin_interfaces.msg import Time
+
+    arr = calibration_topic.calibration_array(calibration_topic.statuses(CAL, INCL, DECAYS), Time(sec=5))
+    names = [s.name for s in arr.status]
+    assert names == ["thrust_scale/vertical", "thrust_scale/surge", "thrust_scale/sway", "inclining/roll",
+                     "tilt_decay/pitch"]
+    kv = {v.key: v.value for v in arr.status[0].values}
+    assert kv["scale"] == "0.9" and kv["scale_std"] == "0.01" and kv["known_force_n"] == "8.5603"
+    assert kv["group"] == "vertical" and kv["direction"] == "+z" and kv["step"] == "ballast"
+    assert kv["holding_force_with_n"] == "-8.7" and kv["holding_force_without_std_n"] == "0.05"
+    kv = {v.key: v.value for v in arr.status[2].values}
+    assert kv["group"] == "horizontal" and kv["direction"] == "+y" and kv["axis"] == "sway"
+    kv = {v.key: v.value for v in arr.status[3].values}
+    assert kv["stiffness_n_m_per_rad"] == "4.489" and kv["thruster_moment_with_n_m"] == "0.03"
+    assert kv["tilt_with_rad"] == "0.144" and kv["tilt_without_std_rad"] == "0.002"
+    cal, incl, decays = calibration_topic.results_from_array(arr)
+    assert cal == CAL and incl == INCL and decays == DECAYS
+    # a later message's result of the same name replaces the earlier one; other statuses are ignored
+    newer = calibration_topic.calibration_array(
+        calibration_topic.statuses({"vertical": dict(CAL["vertical"], value=0.95)}), Time(sec=6))
+    newer.status.append(type(newer.status[0])(name="recorder", hardware_id="hindrax recorder"))
+    cal, _, _ = calibration_topic.merge_results([arr, newer])
+    assert cal["vertical"]["value"] == 0.95 and cal["surge"] == CAL["surge"]
+    bad = calibration_topic.calibration_array(calibration_topic.statuses({"vertical": CAL["vertical"]}), Time())
+    bad.status[0].values = [v for v in bad.status[0].values if v.key != "scale_std"]
+    with pytest.raises(ValueError, match="thrust_scale/vertical.*scale_std"):
+        calibration_topic.results_from_array(bad)
+
+
+def _write_campaign_bag(path, cfg, calibration_msg):
+    """A bag with what ``hindrax ident bag`` needs: 10 s of a heave run at fixed widths (status, ESC widths,
+    pressure, DVL, IMU) and, optionally, the node's calibration message (type from its own class)."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import FluidPressure, Imu
+
+    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
+
+    n = len(cfg.thrusters.thrusters)
+    with BagWriter(path, WriterOptions(fsync=False)) as w:
+        for topic, type_name in (("/identification/status", "hindrax_msgs/msg/ManeuverStatus"),
+                                 ("/thrusters/pulse_width", "hindrax_msgs/msg/ThrusterPwm"),
+                                 ("/pressure/fluid_pressure", "sensor_msgs/msg/FluidPressure"),
+                                 ("/dvl/data", "hindrax_msgs/msg/Dvl"), ("/imu/data_raw", "sensor_msgs/msg/Imu"),
+                                 ("/identification/calibration", "diagnostic_msgs/msg/DiagnosticArray")):
+            w.add_topic(topic, type_name)
+        if calibration_msg is not None:  # transient local: the recorder gets it when it subscribes, first
+            assert isinstance(calibration_msg, DiagnosticArray)
+            w.write("/identification/calibration", int(T0 * 1e9), serialize_message(calibration_msg))
+        for k in range(501):
+            t = T0 + 0.02 * k
+            t_ns = int(round(t * 1e9))
+            running = T0 + 2.0 <= t < T0 + 6.0
+            st = ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING if running else ManeuverStatus.PHASE_POSITIONING,
+                                dof="heave" if running else "", level_command=10.0 if running else 0.0,
+                                level_count=1)
+            w.write("/identification/status", t_ns, serialize_message(_stamped(st, t)))
+            pw = ThrusterPwm(pulse_width_us=[1600.0 if running else 1500.0] * n, armed=True)
+            w.write("/thrusters/pulse_width", t_ns, serialize_message(_stamped(pw, t)))
+            if k % 5 == 0:
+                w.write("/pressure/fluid_pressure", t_ns,
+                        serialize_message(_stamped(FluidPressure(fluid_pressure=101325.0 + 9810.0), t)))
+                d = Dvl(velocity_valid=True, delta_time_s=0.1)
+                d.header.frame_id = "base_link"
+                w.write("/dvl/data", t_ns, serialize_message(_stamped(d, t)))
+                w.write("/imu/data_raw", t_ns, serialize_message(_stamped(Imu(), t)))
+
+
+def _ident(dof, values, stds, cfg):
+    """A DofIdentification stand-in (what identify_all_with_errors returns; test_joint_estimation's layout)."""
+    from hindrax_ident.identification.estimators import rigid_inertia
+
+    names = parameter_names(dof)
+    vals = dict(zip(names, values))
+    vals["added_mass"] = vals["inertia"] - rigid_inertia(cfg, dof)
+    std = dict(zip(names, stds))
+    std["added_mass"] = std["inertia"]
+    return SimpleNamespace(dof=dof, names=names, values=vals, std=std, ci95={k: (0.0, 0.0) for k in vals},
+                           signals={"covariance": np.diag(np.square(stds))}, steady=None, pool_time_s=60.0,
+                           units={k: "" for k in vals}, method="output-error", equation_error={}, online={},
+                           steady_note="", truth={}, rls_time_s=None, steady_time_s=None)
+
+
+@pytest.mark.parametrize("with_calibration", [True, False])
+def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, capsys, with_calibration):
+    """The fit (replaced here: the dynamics are not the subject) sees the thrust-model force times the bag's scales;
+    identification.yaml gets ``calibration`` (the scales and known forces used) and ``joint`` (the scales' posterior
+    from their prior N(1, sigma_s^2) and the steps, docs/identification.md §6.2); ``inclining`` from the inclining
+    step. Without the message: no such sections and the force unscaled."""
+    from builtin_interfaces.msg import Time
+
+    from hindrax_ident.identification import estimators, report
+    from hindrax_ident.identification.calibration import scale_prior_std
+
+    cfg = load_config(default_config_path())
+    msg = calibration_topic.calibration_array(calibration_topic.statuses(CAL, INCL), Time(sec=int(T0)))
+    bag = tmp_path / "bag"
+    _write_campaign_bag(bag, cfg, msg if with_calibration else None)
+    seen = []
+
+    def fake_identify(record, cfg_):
+        seen.append(record)
+        return {"heave": _ident("heave", [37.7, 93.5, 56.6, 5.3, 11.8, 0.78], [0.5, 3, 3, 3, 3, 0.05], cfg_)}, {}
+
+    monkeypatch.setattr(estimators, "identify_all_with_errors", fake_identify)
+    monkeypatch.setattr(report, "write_report", lambda out, *a, **k: out.mkdir(parents=True, exist_ok=True))
+    assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "out")]) == 0, capsys.readouterr().err
+    doc = yaml.safe_load((tmp_path / "out" / "identification.yaml").read_text())
+    (rec,) = seen
+    z = rec.wrench_cmd_frd[:, 2]
+    assert np.max(np.abs(z)) > 1.0  # the heave run's thrust
+    from hindrax_ident.identification.from_bag import record_from_bag
+    raw = record_from_bag(bag, cfg).wrench_cmd_frd[:, 2]
+    if not with_calibration:
+        assert np.array_equal(z, raw)
+        assert "calibration" not in doc and "inclining" not in doc
+        assert doc.get("joint", {}).get("scales", {}) == {}
+        return
+    assert "calibration from the bag" in capsys.readouterr().out
+    assert np.allclose(z, 0.9 * raw, rtol=1e-12)  # vertical scale of the ballast step
+    v, h = doc["calibration"]["vertical_thrust_scale"], doc["calibration"]["horizontal_thrust_scale"]
+    assert v["value"] == 0.9 and v["std"] == 0.01 and v["known_force_n"] == 8.5603 and v["method"] == "ballast"
+    assert v["holding_force_n"] == [0.81, -8.70]
+    w_s, w_y = 1 / 0.02 ** 2, 1 / 0.04 ** 2  # line pulls' inverse-variance mean
+    assert h["value"] == pytest.approx((0.88 * w_s + 0.92 * w_y) / (w_s + w_y), rel=1e-12)
+    assert doc["calibration"]["line_pull_sway"]["known_force_n"] == 4.905
+    sp = scale_prior_std(cfg)
+    s_v = (1 / sp ** 2 + 0.9 / 0.01 ** 2) / (1 / sp ** 2 + 1 / 0.01 ** 2)  # precision-weighted mean
+    joint = doc["joint"]["scales"]["vertical"]
+    assert [(m["value"], m["std"]) for m in joint["measurements"]] == [(0.9, 0.01)] and joint["dofs"] == ["heave"]
+    # without the empirical priors' pull (identification.prior_std_rel) exactly s_v; with them within 0.1 step std
+    assert abs(joint["value"] - s_v) < 0.001 and joint["std"] < 0.01
+    assert doc["inclining"]["roll"]["value"] == 4.489 and doc["inclining"]["roll"]["tilt_rad"] == [0.001, 0.144]
+
+
+@pytest.mark.ros
+def test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it(monkeypatch, tmp_path):
+    """Ballast step on the graph (virtual pool; steps shortened) with the recorder on: no calibration message while
+    the step runs; when it ends the node publishes the scale it measured (its record's numbers, exactly); a
+    subscriber that arrives afterwards still gets it (transient local), and the bag holds it."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.action import ActionClient
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_srvs.srv import Trigger
+
+    from hindrax_drivers.recording.reader import BagReader
+    from hindrax_drivers.testing import ros_context, wait_until
+    from hindrax_ident.bringup import build_graph
+    from hindrax_ident.identification.graph_campaign import VirtualOperator
+    from hindrax_msgs.action import RunIdentification
+    from hindrax_msgs.srv import SetArmed
+
+    monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 3.0)
+    monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 9.0)
+    bag_dir = tmp_path / "bag"
+    with ros_context() as ctx:
+        graph = build_graph(default_config_path(), sim=True, context=ctx, seed=4, record=True,
+                            record_dir=str(bag_dir),
+                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0})
+        probe = rclpy.create_node("operator", context=ctx)
+        graph.executor.add_node(probe)
+        sim = graph.nodes["simulator"].simulator
+        early: list = []
+        probe.create_subscription(DiagnosticArray, "identification/calibration", early.append,
+                                  QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        cont = probe.create_client(Trigger, "identification/continue")
+        action = ActionClient(probe, RunIdentification, "run_identification")
+        op = VirtualOperator(sim, *executive.calibration_forces(graph.config),
+                             lambda: cont.call_async(Trigger.Request()))
+        graph.nodes["simulator"].add_step_listener(op.on_step)
+
+        def spin():
+            graph.spin_once(0.005)
+            op.poll()
+
+        try:
+            assert graph.start_and_arm(arm, 60, lambda: action.server_is_ready() and cont.service_is_ready()).success
+            wait_until(lambda: graph.nodes["identification"]._armed, 30, spin, "ESC reporting armed")
+            f = action.send_goal_async(RunIdentification.Goal(calibrate=["ballast"], calibration_only=True),
+                                       feedback_callback=lambda m: op.on_prompt(m.feedback.prompt))
+            wait_until(f.done, 10, spin, "goal answer")
+            assert f.result().accepted
+            wait_until(lambda: op.handled == "remove_ballast", 120, spin, "the ballast step's last prompt")
+            assert early == []  # nothing before the step's result exists
+            res = f.result().get_result_async()
+            wait_until(lambda: res.done() and early, 120, spin, "result and calibration message")
+            assert res.result().result.success, res.result().result.message
+            cal = graph.nodes["identification"].last_record.calibration
+            assert set(cal) == {"vertical"} and cal["vertical"]["value"] == pytest.approx(1.0, abs=0.1)
+            assert len(early) == 1 and calibration_topic.results_from_array(early[0]) == (cal, {}, {})
+            # a late subscriber (a recorder started now) still receives it
+            late: list = []
+            probe.create_subscription(DiagnosticArray, "identification/calibration", late.append,
+                                      QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            wait_until(lambda: late, 10, spin, "late subscriber")
+            kv = {v.key: v.value for v in late[0].status[0].values}
+            assert late[0].status[0].name == "thrust_scale/vertical" and kv["group"] == "vertical"
+            assert float(kv["scale"]) == cal["vertical"]["value"] and float(kv["known_force_n"]) > 8.0
+            graph.nodes["recorder"].stop_recording()
+        finally:
+            graph.shutdown()
+            probe.destroy_node()
+    reader = BagReader(bag_dir)
+    topic = next(tp for tp in reader.topics if tp.lstrip("/") == "identification/calibration")
+    msgs = [obj for _m, obj in reader.decoded([topic])]
+    assert msgs and calibration_topic.merge_results(msgs) == (cal, {}, {})
+    assert not math.isnan(cal["vertical"]["std"])
+
+
+def test_tilt_decay_command_uses_the_campaigns_verdict_rule(tmp_path, capsys, monkeypatch):
+    """``hindrax ident tilt-decay --identification`` decides through verdicts.free_decay_reason (via
+    apply_reference_verdicts), not a copy of it: replacing the rule changes the command's verdict both ways."""
+    import json
+
+    from scipy.integrate import solve_ivp
+
+    from hindrax_ident.identification import results, verdicts
+
+    c, inertia, b1, b2 = 4.5, 0.96, 0.05, 1.3
+    sol = solve_ivp(lambda _t, x: [x[1], -(b1 * x[1] + b2 * abs(x[1]) * x[1] + c * x[0]) / inertia], (0.0, 25.0),
+                    [0.3, 0.0], t_eval=np.arange(0.0, 25.0, 0.01), rtol=1e-9, atol=1e-12)
+    f = tmp_path / "roll.csv"
+    f.write_text("time_s,rate\n" + "".join(f"{t:.4f},{p:.8f}\n" for t, p in zip(sol.t, sol.y[1])))
+    doc_path = tmp_path / "identification.yaml"
+    monkeypatch.setattr(results, "read_identification", lambda path: yaml.safe_load(open(path).read()))
+    args = ["ident", "tilt-decay", str(f), "--stiffness", str(c), "--identification", str(doc_path), "--dof", "roll"]
+
+    def verdict(value, std):
+        doc_path.write_text(yaml.safe_dump({"dofs": {"roll": {"inertia": {"value": value, "std": std}}}}))
+        assert cli.main(args) == 0
+        return json.loads(capsys.readouterr().out)["self_propelled"]
+
+    sp = verdict(1.2 * inertia, 0.01)  # 20 % high with a tight interval
+    assert sp["verdict"] == "suspect" and "beyond 1.96 combined std" in sp["reason"], sp
+    assert sp["rule"] == "suspect when |free decay - self-propelled| > 1.96 combined std"
+    assert sp["z"] > 1.96 and sp["inertia_kg_m2"] == 1.2 * inertia
+    assert verdict(inertia, 0.02)["verdict"] == "agrees"
+    monkeypatch.setattr(verdicts, "free_decay_reason", lambda *a, **k: None)
+    assert verdict(1.2 * inertia, 0.01)["verdict"] == "agrees"
+    monkeypatch.setattr(verdicts, "free_decay_reason", lambda *a, **k: "stand-in rule")
+    sp = verdict(inertia, 0.02)
+    assert sp["verdict"] == "suspect" and sp["reason"] == "stand-in rule"
