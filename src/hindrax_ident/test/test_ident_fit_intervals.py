@@ -17,7 +17,7 @@ import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
-from hindrax_ident.identification.fit_any import BagSegments, fit_dof, honest_interval, jackknife_std
+from hindrax_ident.identification.fit_any import BagSegments, _folds, fit_dof, honest_interval, jackknife_std
 from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
 from hindrax_ident.identification.results import IdentificationFileError, to_config_overrides
 
@@ -161,3 +161,19 @@ def test_with_config_the_file_is_config_ready(short_bag, capsys):
     over = to_config_overrides(doc)
     assert over["hydrodynamics.surge.added_mass_kg"] == pytest.approx(max(0.0, doc["dofs"]["surge"]["added_mass"]
                                                                              ["value"]))
+
+
+def test_one_bag_folds_share_out_the_segments_that_move_the_dof():
+    # a campaign moves one DOF after the other: sway only in segments 20..28 of 30; contiguous thirds would leave
+    # two folds without sway motion (their estimates, and the jackknife of them, meaningless)
+    m, L = 30, 50
+    vel = np.zeros((m, L, 6))
+    vel[20:29, :, 1] = 0.3
+    seg = BagSegments(np.zeros((m, L, 6)), vel, np.zeros((m, L, 3)), np.zeros(m, int), np.ones((m, L), bool), 0.2)
+    folds = _folds(seg, 1, 3, "sway")
+    assert sorted(np.concatenate(folds).tolist()) == list(range(m))  # a partition
+    assert [sorted(set(f.tolist()) & set(range(20, 29))) for f in folds] == [[20, 21, 22], [23, 24, 25], [26, 27, 28]]
+    # the segments that do not move sway stay in contiguous blocks (a slow drift still moves the fold estimates)
+    assert [sorted(set(f.tolist()) - set(range(20, 29))) for f in folds] == [
+        list(range(0, 7)), list(range(7, 14)), list(range(14, 20)) + [29]]
+    assert [f.tolist() for f in _folds(seg, 1, 3)] == [list(range(0, 10)), list(range(10, 20)), list(range(20, 30))]

@@ -728,10 +728,11 @@ def predict(seg: BagSegments, dof: str, model: str, theta: np.ndarray) -> np.nda
 
 
 def validation_measures(seg: BagSegments, dof: str, v_pred: np.ndarray) -> dict:
-    """nrmse, nrmse_hold, nrmse_zero and samples over the measured ticks after each segment's first (issue 18)."""
+    """nrmse, nrmse_hold, nrmse_zero and samples over the measured ticks after each segment's first (issue 18);
+    segments whose first tick has no measured velocity (no initial value) are left out, as in the fit."""
     k = DOFS.index(dof)
     z = seg.velocity[..., k]
-    mask = seg.valid & np.isfinite(z)
+    mask = seg.valid & np.isfinite(z) & np.isfinite(z[:, :1])  # a segment without an initial value is not simulated
     mask[:, 0] = False
     zm = z[mask]
     if zm.size < 2:
@@ -853,14 +854,29 @@ def fit_dof(seg: BagSegments, dof: str, model: str, names: list, folds: Sequence
     return r
 
 
-def _folds(seg: BagSegments, n_bags: int, k: int) -> list[np.ndarray]:
-    """Validation index sets: by bag when there are several bags, else contiguous blocks of segments."""
+def _folds(seg: BagSegments, n_bags: int, k: int, dof: str | None = None) -> list[np.ndarray]:
+    """Validation index sets: by bag when there are several bags, else contiguous blocks of segments. With ``dof``
+    (one bag), the segments that move it (RMS velocity within the segment at least the velocity threshold of
+    :data:`EXCITATION_MIN`) and the others are each cut into k contiguous blocks, block j of both forming fold j: a
+    campaign that moves one DOF after the other would otherwise leave a fold with none of that DOF's motion
+    (its estimate then is the starting value or diverges, and the jackknife of the folds means nothing)."""
     if n_bags >= 2:
         k = max(2, min(k, n_bags))
         return [np.flatnonzero(seg.bag % k == j) for j in range(k)]
     m = len(seg)
     k = max(2, min(k, m))
-    return [a for a in np.array_split(np.arange(m), k) if a.size]
+    if dof is None:
+        return [a for a in np.array_split(np.arange(m), k) if a.size]
+    i = DOFS.index(dof)
+    v_min = EXCITATION_MIN[_kind(dof)][1]
+    v = np.where(seg.valid & np.isfinite(seg.velocity[..., i]), seg.velocity[..., i], 0.0)
+    n = np.maximum((seg.valid & np.isfinite(seg.velocity[..., i])).sum(axis=1), 1)
+    moving = np.sqrt((v ** 2).sum(axis=1) / n) >= v_min  # RMS velocity: a steady level counts, a held DOF not
+    if moving.sum() < k:
+        return [a for a in np.array_split(np.arange(m), k) if a.size]
+    blocks = [np.sort(np.concatenate([a, b])) for a, b in zip(np.array_split(np.flatnonzero(moving), k),
+                                                               np.array_split(np.flatnonzero(~moving), k))]
+    return [b for b in blocks if b.size]
 
 
 def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig | None = None,
@@ -905,7 +921,8 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
                             f"cross-validation")
     folds = _folds(seg, len(pres), opts.folds)
     design = (f"{len(folds)}-fold cross-validation by bag" if len(pres) >= 2 else
-              f"{len(folds)}-fold cross-validation by blocks of {opts.segment_s:g} s segments (one bag)")
+              f"{len(folds)}-fold cross-validation by blocks of {opts.segment_s:g} s segments (one bag; per DOF "
+              "the segments exciting it and the others each cut into contiguous blocks)")
     if hold:
         design += f"; holdout: {', '.join(str(b) for b in holdout)}"
     out: dict[str, DofFit] = {}
@@ -928,7 +945,10 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
         k = DOFS.index(dof)
         zk = seg.velocity[..., k][seg.valid]
         zk = zk[np.isfinite(zk)]
-        by_dir = dof == "heave" and min((zk > 0.05).sum(), (zk < -0.05).sum()) >= 0.1 * zk.size
+        # both directions excited: each holds at least 10 % of the moving samples (|w| > 0.05 m/s; a campaign
+        # bag also holds the other DOFs' runs, with heave near 0)
+        up, down = (zk > 0.05).sum(), (zk < -0.05).sum()
+        by_dir = dof == "heave" and min(up, down) >= 0.1 * max(up + down, 1) and min(up, down) >= 100
         plan[dof] = (_model_dof(dof, by_dir), _names(dof, by_dir))
     # coupling: inertias of the fitted DOFs by equation error, twice (without, then with the coupling terms)
     inertia = np.full(6, np.nan)
@@ -963,7 +983,8 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
         e = ex[dof]
         k = DOFS.index(dof)
         try:
-            r = fit_dof(seg_c, dof, model, names, folds, e, first[dof][0] if dof in first else None)
+            r = fit_dof(seg_c, dof, model, names, _folds(seg, len(pres), opts.folds, dof), e,
+                        first[dof][0] if dof in first else None)
         except (EstimationError, np.linalg.LinAlgError, ValueError) as exc:
             out[dof] = DofFit(dof, "failed", e, reason=str(exc))
             continue
