@@ -201,6 +201,10 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
         calibration, inclining, decays = calibration_topic.merge_results(m for _, m in calibrations)
     except ValueError as exc:
         raise BagContentError(str(exc)) from exc
+    # the node's message holds every result since it started: a free decay recorded before this bag has no data here
+    if samples:
+        lo, hi = samples[0][1].stamp_s - grid_s, samples[-1][1].stamp_s + grid_s
+        decays = {d: w for d, w in decays.items() if lo <= w[0] and w[1] <= hi}
     last = [m for _, m in status if m.phase != 0][-1] if busy else status[-1][1]
     aborted = last.phase == 5  # PHASE_ABORTED
     return CampaignRecord(
