@@ -17,7 +17,7 @@ from rcl_interfaces.srv import DescribeParameters, ListParameters, SetParameters
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.allocation.node import ThrustAllocationNode
-from hindrax_drivers.config import SCHEMA
+from hindrax_drivers.config import OPTIONAL_PREFIXES, SCHEMA
 from hindrax_drivers.ms5837.node import Ms5837Node
 from hindrax_drivers.node_parameters import select_schema_keys
 from hindrax_drivers.testing import config_parameters, ros_context, wait_until
@@ -95,7 +95,8 @@ def test_each_node_declares_only_its_own_keys_with_descriptions_and_ranges():
                 assert d.description, f"{node_name}: {key} has no description"
                 if key in vehicle_keys(names):
                     assert d.additional_constraints.startswith("allowed "), (key, d.additional_constraints)
-                    assert d.type != ParameterType.PARAMETER_NOT_SET
+                    # typed once it has a value; an optional key absent from the file has none
+                    assert d.type != ParameterType.PARAMETER_NOT_SET or key.startswith(OPTIONAL_PREFIXES), key
         d = describe(call, "ms5837", ["sensors.ms5837.rate_hz", "environment.surface_pressure_pa",
                                       "sensors.ms5837.oversampling"])
         spec = SCHEMA["sensors.ms5837.rate_hz"]

@@ -197,7 +197,9 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     values: dict[str, Any] = {}
 
     def declare(key: str) -> Any:
-        desc = ParameterDescriptor(description=SCHEMA[_generic(key)].doc, dynamic_typing=True)
+        spec = SCHEMA[_generic(key)]  # the range is described from the start: an absent optional key keeps this
+        desc = ParameterDescriptor(description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
+                                   dynamic_typing=True)
         try:
             p = node.declare_parameter(key, defaults.get(key), desc)
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:  # pragma: no cover
