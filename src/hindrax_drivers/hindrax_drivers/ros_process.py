@@ -28,9 +28,10 @@ its wait set in Python on every spin, one spin per message, and that was the lar
 process's profile (README, "Pi budget"); the EventsExecutor dispatches from a C++ event queue instead. Measured
 on this machine with one process taking three 100 Hz ``sensor_msgs/Imu`` topics and publishing one 50 Hz topic:
 8.4-10.5 % of a core with the SingleThreadedExecutor, 3.6-4.4 % with the EventsExecutor. The recorder (its node
-run alone, and ``hindrax bag record``) keeps the SingleThreadedExecutor: with the EventsExecutor its
-subscriptions stop the process with "SystemError: null argument to internal routine" (rclpy 7.3 from the pip
-wheels) as soon as a message arrives.
+run alone, and ``hindrax bag record``) keeps the SingleThreadedExecutor: its callbacks take the message info (the
+source timestamp it writes as each record's publish time), and the EventsExecutor of rclpy 7.3 (pip wheels) stops
+the process with "SystemError: null argument to internal routine" on the first message to such a callback
+(reproduced with a bare raw subscription whose callback takes ``(msg, info)``; ``(msg)`` alone works).
 
 rclpy is imported when the block is entered, not when this module is.
 """
