@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import time
 import uuid as uuidlib
+from types import SimpleNamespace
 from typing import Any, Callable
 
 __all__ = ["GoalNotAnswered", "GoalSender"]
@@ -84,6 +85,7 @@ class GoalSender:
         :class:`GoalNotAnswered` when neither came within ``timeout_s`` seconds (the request is sent
         ``1 + timeout_s / resend_every_s`` times at most).
         """
+        from builtin_interfaces.msg import Time
         from rclpy.action.client import ClientGoalHandle
         from unique_identifier_msgs.msg import UUID
 
@@ -96,8 +98,8 @@ class GoalSender:
             if accepted:
                 return accepted[0]
             if key in self._status:  # running (or already ended) on the server: our goal, response lost
-                response = self._client._action_type.Impl.SendGoalService.Response(accepted=True)
-                return ClientGoalHandle(self._client, goal_id, response)
+                # the handle reads only ``accepted`` and ``stamp`` of the (lost) SendGoal response
+                return ClientGoalHandle(self._client, goal_id, SimpleNamespace(accepted=True, stamp=Time()))
             now = time.monotonic()
             rejected = [f.result() for f in futures if f.done()]
             if rejected and (len(futures) == 1 or now - last > self.resend_every_s):
@@ -129,16 +131,18 @@ class GoalSender:
             self._result_requested_at[key] = now
         return None
 
-    def cancel(self, handle: Any) -> None:
+    def cancel(self, handle: Any) -> bool:
         """Request the goal's cancellation; call once per spin while waiting for its end. The request is sent
-        again every ``resend_every_s`` until the status topic shows the goal cancelling or ended."""
+        again every ``resend_every_s`` until the status topic shows the goal cancelling or ended; returns True
+        from then on."""
         key = bytes(handle.goal_id.uuid)
         if self._status.get(key) in (_CANCELING, *_ENDED):
-            return
+            return True
         now = time.monotonic()
         if now - self._cancel_requested_at.get(key, -float("inf")) > self.resend_every_s:
             handle.cancel_goal_async()
             self._cancel_requested_at[key] = now
+        return False
 
     def destroy(self) -> None:
         """Remove the status subscription from the node."""

@@ -102,6 +102,33 @@ def _goal() -> Any:
     return RunIdentification.Goal(dofs=["surge"], levels_per_dof=3)
 
 
+def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin: Any, spin_idle: Any,
+                       warm_timeout_s: float, what: str) -> None:
+    """The measured sequence of both layouts: the surge goal (sent through
+    :class:`~hindrax_drivers.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s of
+    warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
+
+    stream: {"on": bool} switches the wrench stream; window(label) measures one window; spin / spin_idle: one
+    executor spin while running / while idle. Raises RuntimeError when the goal is rejected."""
+    from hindrax_drivers.action_goal import GoalSender
+    from hindrax_drivers.testing import wait_until
+
+    goals = GoalSender(probe, action, "run_identification")
+    stream["on"] = False
+    handle = goals.send(_goal(), spin, 30)
+    if not handle.accepted:
+        raise RuntimeError(f"{what}: the surge goal was rejected")
+    warm = time.monotonic() + 3.0
+    wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin, "running warm-up")
+    window("running")
+    wait_until(lambda: goals.cancel(handle), 30, spin, "goal cancel")
+    stream["on"] = True
+    warm = time.monotonic() + 2.0
+    wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin_idle, "idle warm-up")
+    window("idle")
+    goals.destroy()
+
+
 # ---------------------------------------------------------------------------------------------- one process
 def _in_process(duration_s: float, tmp: Path) -> dict:
     import rclpy
@@ -246,21 +273,8 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
                 "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall,
             }
 
-        stream["on"] = False
-        send = action.send_goal_async(_goal())
-        wait_until(send.done, 30, spin, "goal answer")
-        handle = send.result()
-        if not handle.accepted:
-            raise RuntimeError("in-process stack benchmark: the surge goal was rejected")
-        warm = time.monotonic() + 3.0
-        wait_until(lambda: time.monotonic() > warm, 60, spin, "running warm-up")
-        window("running")
-        cancel = handle.cancel_goal_async()
-        wait_until(cancel.done, 30, spin, "goal cancel")
-        stream["on"] = True
-        warm = time.monotonic() + 2.0
-        wait_until(lambda: time.monotonic() > warm, 60, spin_with_wrench, "idle warm-up")
-        window("idle")
+        _running_then_idle(probe, action, stream, window, spin, spin_with_wrench, 60,
+                           "in-process stack benchmark")
         out["types"] = {pub.topic_name: _type_name(pub.msg_type) for n in graph.nodes.values() for pub in n.publishers}
         out["dropped"] = recorder._writer.dropped
         graph.shutdown()
@@ -383,21 +397,7 @@ def _launch(duration_s: float, tmp: Path) -> dict:
                         "rates": {t: (c1.get(t, 0) - c0.get(t, 0)) / wall for t in c1},
                     }
 
-                stream["on"] = False
-                send = action.send_goal_async(_goal())
-                wait_until(send.done, 30, spin, "goal answer")
-                handle = send.result()
-                if not handle.accepted:
-                    raise RuntimeError("launch-layout benchmark: the surge goal was rejected")
-                warm = time.monotonic() + 3.0
-                wait_until(lambda: time.monotonic() > warm, 30, spin, "running warm-up")
-                window("running")
-                cancel = handle.cancel_goal_async()
-                wait_until(cancel.done, 30, spin, "goal cancel")
-                stream["on"] = True
-                warm = time.monotonic() + 2.0
-                wait_until(lambda: time.monotonic() > warm, 30, spin, "idle warm-up")
-                window("idle")
+                _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark")
                 ex.shutdown()
                 probe.destroy_node()
         finally:

@@ -85,6 +85,7 @@ Everything is a few small dense numpy operations per sample (p = 4..6), fast eno
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Optional, Sequence
 
 import numpy as np
@@ -193,7 +194,7 @@ class RecursiveLeastSquares:
         self._n = 0
         self._covariance_resets = 0
         self._changes = 0
-        self._nis: list[float] = []
+        self._nis: deque[float] = deque(maxlen=self.change_samples)
         self._gated = 0
         self._gate_open = False
         self._theta_c: Optional[np.ndarray] = None   # cached constrained estimate (None = recompute)
@@ -280,9 +281,7 @@ class RecursiveLeastSquares:
         if self.change_threshold is not None:
             s2 = self.sigma2
             if np.isfinite(s2) and s2 > 0.0:
-                self._nis.append(err * err / (s2 * (1.0 + r)))
-                if len(self._nis) > self.change_samples:
-                    self._nis.pop(0)
+                self._nis.append(err * err / (s2 * (1.0 + r)))  # the oldest falls out (maxlen)
                 if len(self._nis) == self.change_samples and \
                         sum(self._nis) / self.change_samples > self.change_threshold:
                     self._changes += 1
