@@ -114,13 +114,13 @@ def _v(doc: str, length: int, lo: float | None = None, hi: float | None = None, 
 _T = "<thruster>"
 
 SCHEMA: dict[str, Spec] = {
-    # --- vehicle ([Hindrax-AM] (seed 000) §2, [Hindrax-Drag] (seed 003) §2.1) ---
+    # --- vehicle ([Hindrax-AM] §2, [Hindrax-Drag] §2.1) ---
     "vehicle.name": _s("vehicle name"),
-    "vehicle.mass_kg": _f("total mass in air, kg ([Hindrax-Drag] (seed 003) §2.1)", 0.1, 1000.0),
-    "vehicle.displaced_volume_m3": _f("displaced volume, m^3 ([Hindrax-Drag] (seed 003) §2.1)", 1e-5, 10.0),
-    "vehicle.length_m": _f("overall length (x), m ([Hindrax-Drag] (seed 003) §2.1)", 0.01, 10.0),
-    "vehicle.width_m": _f("overall width (y), m ([Hindrax-Drag] (seed 003) §2.1)", 0.01, 10.0),
-    "vehicle.height_m": _f("overall height (z), m ([Hindrax-Drag] (seed 003) §2.1)", 0.01, 10.0),
+    "vehicle.mass_kg": _f("total mass in air, kg ([Hindrax-Drag] §2.1)", 0.1, 1000.0),
+    "vehicle.displaced_volume_m3": _f("displaced volume, m^3 ([Hindrax-Drag] §2.1)", 1e-5, 10.0),
+    "vehicle.length_m": _f("overall length (x), m ([Hindrax-Drag] §2.1)", 0.01, 10.0),
+    "vehicle.width_m": _f("overall width (y), m ([Hindrax-Drag] §2.1)", 0.01, 10.0),
+    "vehicle.height_m": _f("overall height (z), m ([Hindrax-Drag] §2.1)", 0.01, 10.0),
     "vehicle.net_buoyancy_n": _f("stated net buoyancy (buoyancy - weight), N; checked against (rho V - m) g",
                                  -100.0, 100.0),
     "vehicle.inertia_kg_m2": _v("principal moments of inertia [Ixx, Iyy, Izz] about the CG, kg m^2", 3, 1e-6, 1e4),
@@ -130,9 +130,9 @@ SCHEMA: dict[str, Spec] = {
     # --- environment ---
     "environment.water_density_kg_m3": _f("water density, kg/m^3 (seeds use 1000)", 900.0, 1100.0),
     "environment.gravity_m_s2": _f("gravitational acceleration, m/s^2", 9.7, 9.9),
-    "environment.kinematic_viscosity_m2_s": _f("kinematic viscosity of water, m^2/s ([Hindrax-AM] (seed 000) §4)", 1e-7, 1e-5),
+    "environment.kinematic_viscosity_m2_s": _f("kinematic viscosity of water, m^2/s ([Hindrax-AM] §4)", 1e-7, 1e-5),
     "environment.surface_pressure_pa": _f("atmospheric pressure at the surface, Pa", 50000.0, 120000.0),
-    # --- hydrodynamics (positive numbers; [Hindrax-AM] (seed 000) Table 6, [Hindrax-Drag] (seed 003) Table 3) ---
+    # --- hydrodynamics (positive numbers; [Hindrax-AM] Table 6, [Hindrax-Drag] Table 3) ---
     "hydrodynamics.added_mass_coupling": _v(
         "off-diagonal added-mass terms added to diag(added_mass), row-major 6x6 (kg, kg m, kg m^2); "
         "diagonal entries must be 0", 36, -1e4, 1e4),
@@ -156,14 +156,14 @@ for _dof in ROTATIONAL_DOFS:
         f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
 
 SCHEMA.update({
-    # --- thrusters ([Hindrax-Drag] (seed 003) §2.2, eq. 1, Table 2, §4 eq. 9) ---
+    # --- thrusters ([Hindrax-Drag] §2.2, eq. 1, Table 2, §4 eq. 9) ---
     "thrusters.names": Spec(_STRS, "thruster names in allocation order"),
-    "thrusters.pulse_width_min_us": _f("lowest pulse width (full reverse), us ([Hindrax-Drag] (seed 003) §2.2.1)", 500.0, 2500.0),
-    "thrusters.pulse_width_neutral_us": _f("neutral pulse width (stop), us ([Hindrax-Drag] (seed 003) §2.2.1)", 500.0, 2500.0),
-    "thrusters.pulse_width_max_us": _f("highest pulse width (full forward), us ([Hindrax-Drag] (seed 003) §2.2.1)", 500.0, 2500.0),
+    "thrusters.pulse_width_min_us": _f("lowest pulse width (full reverse), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
+    "thrusters.pulse_width_neutral_us": _f("neutral pulse width (stop), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
+    "thrusters.pulse_width_max_us": _f("highest pulse width (full forward), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
     "thrusters.deadband_us": _f("half-width of the ESC deadband around neutral, us (docs/devices.md §5.2)", 0.0, 200.0),
-    "thrusters.curve_negative": _v("cubic [c4, c3, c2, c1] for P below neutral, N ([Hindrax-Drag] (seed 003) eq. 1)", 4),
-    "thrusters.curve_positive": _v("cubic [c4, c3, c2, c1] for P above neutral, N ([Hindrax-Drag] (seed 003) eq. 1)", 4),
+    "thrusters.curve_negative": _v("cubic [c4, c3, c2, c1] for P below neutral, N ([Hindrax-Drag] eq. 1)", 4),
+    "thrusters.curve_positive": _v("cubic [c4, c3, c2, c1] for P above neutral, N ([Hindrax-Drag] eq. 1)", 4),
     "thrusters.time_constant_s": _f("first-order thruster lag time constant, s", 0.0, 5.0),
     "thrusters.allocation_mode": _s("saturation handling", ("uniform", "priority")),
     "thrusters.priority_dofs": Spec(_STRS, "DOFs kept exact in priority mode", choices=DOFS),
@@ -190,11 +190,11 @@ SCHEMA.update({
                                     "arming is refused while false"),
     "esc.readback_interval_s": _f("MODE1, PRE_SCALE and the channel registers are read back this often; a "
                                   "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
-    # --- lights ([Hindrax-Drag] (seed 003) §2.1: PWM also drives the lights) ---
+    # --- lights ([Hindrax-Drag] §2.1: PWM also drives the lights) ---
     "lights.esc_channel": _i("PCA9685 channel of the lights", 0, 15),
     "lights.pulse_width_off_us": _f("pulse width for lights off, us", 500.0, 2500.0),
     "lights.pulse_width_full_us": _f("pulse width for full brightness, us", 500.0, 2500.0),
-    # --- sensors ([Hindrax-Drag] (seed 003) Table 1; docs/devices.md) ---
+    # --- sensors ([Hindrax-Drag] Table 1; docs/devices.md) ---
     "sensors.dvl75.port": _s("serial device path or pyserial URL of the DVL-75"),
     "sensors.dvl75.baud_rate": _i("baud rate (docs/devices.md §1.1)", choices=(9600, 19200, 38400, 57600, 115200,
                                                                            230400, 460800, 921600)),
@@ -256,7 +256,7 @@ SCHEMA.update({
                                                 "attempts until it answers again, s", 0.1, 600.0),
     "sensors.icm20948.mag_stale_timeout_s": _f("data-ready gate: no new magnetometer sample (ST1.DRDY, SLV0 "
                                                "answered) for this long -> ERROR and re-initialisation, s", 0.05, 10.0),
-    # --- pool ([Hindrax-Drag] (seed 003) §4) ---
+    # --- pool ([Hindrax-Drag] §4) ---
     "pool.length_m": _f("pool length (north, x), m", 1.0, 200.0),
     "pool.width_m": _f("pool width (east, y), m", 1.0, 200.0),
     "pool.depth_m": _f("water depth, m", 0.3, 100.0),
@@ -285,18 +285,18 @@ SCHEMA.update({
     "supervisor.cage_margin_m": _f("disarm when the DVL dead-reckoned position comes closer than this to a pool "
                                    "wall (pool.* box), m", 0.0, 10.0),
     "supervisor.max_run_time_s": _f("disarm after this long armed, s", 1.0, 86400.0),
-    # --- identification (docs/architecture.md §5; [Hindrax-Drag] (seed 003) §4) ---
+    # --- identification (docs/architecture.md §5; [Hindrax-Drag] §4) ---
     "identification.levels_per_dof": _i("thrust levels in each DOF's ladder", 1, 50),
     "identification.level_fraction_min": _f("smallest level as a fraction of the DOF's authority", 0.01, 1.0),
     "identification.level_fraction_max": _f("largest level as a fraction of the DOF's authority", 0.01, 1.0),
     "identification.forgetting_factor": _f("RLS forgetting factor lambda", 0.9, 1.0),
     "identification.estimate_rate_hz": _f("RLS update rate, Hz", 1.0, 400.0),
     "identification.publish_rate_hz": _f("HydroEstimate publication rate, Hz", 0.1, 50.0),
-    "identification.altitude_setpoint_m": _f("altitude held during manoeuvres, m ([Hindrax-Drag] (seed 003) §4: 0.8-1.0 m)",
+    "identification.altitude_setpoint_m": _f("altitude held during manoeuvres, m ([Hindrax-Drag] §4: 0.8-1.0 m)",
                                              0.1, 50.0),
-    "identification.roll_test_angle_rad": _f("roll test turns back at this angle, rad ([Hindrax-Drag] (seed 003) §4.2: 30 deg)",
+    "identification.roll_test_angle_rad": _f("roll test turns back at this angle, rad ([Hindrax-Drag] §4.2: 30 deg)",
                                              0.01, 1.5),
-    "identification.pitch_test_angle_rad": _f("pitch test turns back at this angle, rad ([Hindrax-Drag] (seed 003) §4.2: 40 deg)",
+    "identification.pitch_test_angle_rad": _f("pitch test turns back at this angle, rad ([Hindrax-Drag] §4.2: 40 deg)",
                                               0.01, 1.5),
     "identification.max_level_duration_s": _f("longest time one level is held, s", 1.0, 600.0),
     "identification.converged_relative_std": _f("converged when every std/|value| is below this", 0.001, 1.0),
@@ -363,7 +363,7 @@ for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837",
     SCHEMA[f"simulation.sensors.{_dev}.rate_hz"] = _f(f"{_dev} output rate, Hz", 0.1, 2000.0)
     SCHEMA[f"simulation.sensors.{_dev}.dropout_probability"] = _f(f"{_dev} probability a sample is lost", 0.0, 1.0)
 SCHEMA["simulation.sensors.dvl75.scale_error_fraction"] = _f(
-    "1-sigma multiplicative velocity error per report ([Hindrax-Drag] (seed 003) Table 1: mean error about 5 %)", 0.0, 0.5)
+    "1-sigma multiplicative velocity error per report ([Hindrax-Drag] Table 1: mean error about 5 %)", 0.0, 0.5)
 SCHEMA["simulation.sensors.dvl75.min_altitude_m"] = _f("DVL loses lock below this altitude, m", 0.0, 10.0)
 SCHEMA["simulation.sensors.dvl75.max_altitude_m"] = _f("DVL loses lock above this altitude, m", 0.1, 200.0)
 SCHEMA["simulation.sensors.dvl75.wall_lock_loss_distance_m"] = _f(
@@ -680,7 +680,7 @@ class DofHydrodynamics:
     """Hydrodynamic coefficients of one DOF (positive numbers, SI).
 
     added_mass: kg (translation) or kg m^2 (rotation). linear_damping: kg/s or kg m^2/s.
-    quadratic_damping: kg/m or kg m^2. Heave has direction-dependent damping ([Hindrax-Drag] (seed 003) Table 3:
+    quadratic_damping: kg/m or kg m^2. Heave has direction-dependent damping ([Hindrax-Drag] Table 3:
     positive heave = moving down, w > 0 in FRD); for the other DOFs the positive and negative values are equal.
     Damping force/moment opposing motion: D(v) = linear v + quadratic |v| v, with the coefficient
     chosen by the sign of v.
@@ -716,7 +716,7 @@ class ThrusterConfig:
 
 @dataclass(frozen=True)
 class ThrustersConfig:
-    """Thruster set: per-thruster geometry and the shared cubic thrust curves ([Hindrax-Drag] (seed 003) eq. 1, Table 2).
+    """Thruster set: per-thruster geometry and the shared cubic thrust curves ([Hindrax-Drag] eq. 1, Table 2).
 
     curve_negative/curve_positive: [c4, c3, c2, c1] with thrust_N = c4 P^3 + c3 P^2 + c2 P + c1, P in us.
     """

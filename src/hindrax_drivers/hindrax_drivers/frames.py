@@ -145,7 +145,7 @@ def wrench_about_point(force, torque, application_point, reference_point=(0.0, 0
     """Move a wrench to a new reference point: tau_ref = [F; T + (p_app - p_ref) x F].
 
     force (N), torque (N m) and points (m) are 3-vectors in one and the same frame (any of FLU/FRD).
-    Returns the 6-vector [F; T_ref]. [Hindrax-Drag] (Seed 003) eq. 9 is the special case torque = 0, reference = CG.
+    Returns the 6-vector [F; T_ref]. [Hindrax-Drag] eq. 9 is the special case torque = 0, reference = CG.
     """
     f = _vec3(force)
     t = _vec3(torque)

@@ -1,4 +1,4 @@
-"""Tests of hindrax_drivers.allocation.matrix and .allocator ([Hindrax-Drag] (seed 003) eqs. 1 and 9, section 4).
+"""Tests of hindrax_drivers.allocation.matrix and .allocator ([Hindrax-Drag] eqs. 1 and 9, section 4).
 
 Independent references used here: eq. 9 written out component by component, numpy.linalg.pinv for
 the minimum-norm solution, hand-derived geometry of the 55-degree layout, and an axis authority
@@ -24,12 +24,12 @@ from hindrax_drivers.allocation.thrust_curve import ThrustCurve, hindrax_default
 
 COS55 = math.cos(math.radians(55.0))
 SIN55 = math.sin(math.radians(55.0))
-F_MAX = 15.5283  # [Hindrax-Drag] (seed 003) Table 2 negative row at 1100 us (and the reflected positive row at 1900 us)
+F_MAX = 15.5283  # [Hindrax-Drag] Table 2 negative row at 1100 us (and the reflected positive row at 1900 us)
 X, Y, Z, K, M, N = range(6)
 
 
 def eq9_column(force_vec, lever):
-    """[Hindrax-Drag] (Seed 003) eq. 9, component by component: [Fx, Fy, Fz, Fz ly - Fy lz, Fx lz - Fz lx, Fy lx - Fx ly]."""
+    """[Hindrax-Drag] eq. 9, component by component: [Fx, Fy, Fz, Fz ly - Fy lz, Fx lz - Fz lx, Fy lx - Fx ly]."""
     fx, fy, fz = force_vec
     lx, ly, lz = lever
     return np.array([fx, fy, fz, fz * ly - fy * lz, fx * lz - fz * lx, fy * lx - fx * ly])
@@ -105,7 +105,7 @@ def test_default_layout_geometry(layout):
     assert p[2, 0] < 0 and p[2, 1] > 0 and p[3, 0] < 0 and p[3, 1] < 0
     # horizontals in the lower layer (+z is down), verticals in the upper layer
     assert np.all(p[:4, 2] > 0) and np.all(p[4:, 2] < 0)
-    # inside the 0.59 x 0.47 x 0.40 m envelope ([Hindrax-Drag] (seed 003) section 2.1)
+    # inside the 0.59 x 0.47 x 0.40 m envelope ([Hindrax-Drag] section 2.1)
     assert np.all(np.abs(p[:, 0]) <= 0.59 / 2) and np.all(np.abs(p[:, 1]) <= 0.47 / 2)
     assert np.ptp(p[:, 2]) <= 0.40
     assert np.linalg.matrix_rank(layout.matrix()) == 6
@@ -155,7 +155,7 @@ def test_pure_sway_request_holds_roll_at_zero_with_vertical_thrusters(allocator,
 
 
 def test_weights_reproduce_the_seed_sway_pairing(layout, curve):
-    # Heavily weighting T2 and T4 leaves T1 + T3 to push sway, as in [Hindrax-Drag] (seed 003) section 4.1.
+    # Heavily weighting T2 and T4 leaves T1 + T3 to push sway, as in [Hindrax-Drag] section 4.1.
     weights = np.array([1, 1e6, 1, 1e6, 1, 1, 1, 1], dtype=float)
     alloc = ThrustAllocator(layout.matrix(), curve, weights=weights)
     sway = 12.0

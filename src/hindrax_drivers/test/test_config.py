@@ -34,14 +34,14 @@ def test_real_file_loads_cleanly(cfg):
 
 
 def test_seed_numbers(cfg):
-    # [Hindrax-AM] (seed 000) §2 / [Hindrax-Drag] (seed 003) §2.1
+    # [Hindrax-AM] §2 / [Hindrax-Drag] §2.1
     assert cfg.mass_kg == 15.22 and cfg.displaced_volume_m3 == 0.0153
     assert (cfg.get("vehicle.length_m"), cfg.get("vehicle.width_m"), cfg.get("vehicle.height_m")) == (0.59, 0.47, 0.40)
-    # net buoyancy: [Hindrax-Drag] (seed 003) §5 computes f_b = 0.7845 N with rho = 1000 kg/m^3
+    # net buoyancy: [Hindrax-Drag] §5 computes f_b = 0.7845 N with rho = 1000 kg/m^3
     assert cfg.buoyancy_n - cfg.weight_n == pytest.approx(0.7845, abs=2e-3)
-    # [Hindrax-AM] (seed 000) Table 6
+    # [Hindrax-AM] Table 6
     assert np.diag(cfg.added_mass_matrix)[:3].tolist() == [12.08, 19.43, 22.48]
-    # [Hindrax-Drag] (seed 003) Table 3, including the direction-dependent heave rows
+    # [Hindrax-Drag] Table 3, including the direction-dependent heave rows
     assert cfg.hydrodynamics("surge").quadratic_damping_positive == 66.48
     assert cfg.hydrodynamics("sway").linear_damping_positive == 14.54
     heave = cfg.hydrodynamics("heave")
@@ -50,7 +50,7 @@ def test_seed_numbers(cfg):
     assert cfg.hydrodynamics("yaw").quadratic_damping_positive == 0.55
     # substituted negative linear damping (roll -0.12, pitch -0.13 in Table 3) is non-negative
     assert all(cfg.hydrodynamics(d).linear_damping_positive >= 0 for d in DOFS)
-    # PWM range, [Hindrax-Drag] (seed 003) §2.2.1
+    # PWM range, [Hindrax-Drag] §2.2.1
     t = cfg.thrusters
     assert (t.pulse_width_min_us, t.pulse_width_neutral_us, t.pulse_width_max_us) == (1100.0, 1500.0, 1900.0)
     assert t.curve_negative == (-4.61e-7, 0.001794, -2.2726, 927.1827)

@@ -1,4 +1,4 @@
-"""Tests of hindrax_drivers.allocation.thrust_curve ([Hindrax-Drag] (seed 003) eq. 1 / Table 2, docs/devices.md 5.2-5.3).
+"""Tests of hindrax_drivers.allocation.thrust_curve ([Hindrax-Drag] eq. 1 / Table 2, docs/devices.md 5.2-5.3).
 
 Expected values are computed here directly from the printed coefficients (plain Horner evaluation),
 from numpy.roots as an independent inverse, or taken from the reference tables.
@@ -21,13 +21,13 @@ from hindrax_drivers.allocation.thrust_curve import (
     voltage_thrust_scale,
 )
 
-# [Hindrax-Drag] (Seed 003) Table 2, typed in again here (not imported) so that a typo in the module is caught.
+# [Hindrax-Drag] Table 2, typed in again here (not imported) so that a typo in the module is caught.
 C4, C3, C2, C1 = -4.61e-7, 0.001794, -2.2726, 927.1827
 P4, P3, P2, P1 = -3.52e-7, 1.82e-4, -0.3106, 174.3542
 
 
 def f_neg(p):
-    """[Hindrax-Drag] (Seed 003) eq. 1 with the Table 2 negative row."""
+    """[Hindrax-Drag] eq. 1 with the Table 2 negative row."""
     p = np.asarray(p, dtype=float)
     return ((C4 * p + C3) * p + C2) * p + C1
 
@@ -209,7 +209,7 @@ def test_voltage_thrust_scale_matches_t200_table():
     # docs/devices.md §5.3: full-throttle forward thrust 2.93 kgf at 10 V, 6.72 at 20 V, 3.71 at 12 V, 5.25 at 16 V
     assert voltage_thrust_scale(20.0, nominal_voltage_v=10.0) == pytest.approx(6.72 / 2.93, rel=0.01)
     assert voltage_thrust_scale(16.0, nominal_voltage_v=12.0) == pytest.approx(5.245 / 3.714, rel=0.01)
-    assert voltage_thrust_scale(14.8) == 1.0  # nominal Hindrax battery, [Hindrax-Drag] (seed 003) section 2.1
+    assert voltage_thrust_scale(14.8) == 1.0  # nominal Hindrax battery, [Hindrax-Drag] section 2.1
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ThrustCurveError):
             voltage_thrust_scale(bad)

@@ -42,12 +42,12 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("bag", "recover"), "hindrax_ident.commands.bag.recover",
      "rebuild the summary and metadata.yaml of a bag whose recorder was killed"),
     (("ident", "free-decay"), "hindrax_ident.commands.ident",
-     "added mass from a free-decay CSV (time s, acceleration m/s^2), [Hindrax-AM] (seed 000) eqs. 2-9 (JSON)"),
+     "added mass from a free-decay CSV (time s, acceleration m/s^2), [Hindrax-AM] eqs. 2-9 (JSON)"),
     (("ident", "thruster-fit"), "hindrax_ident.commands.ident",
-     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] (seed 003) eq. 1 "
+     "thrust-curve cubics from bollard-pull CSV (pulse width us, thrust N), [Hindrax-Drag] eq. 1 "
      "(JSON; --write CONFIG)"),
     (("ident", "priors"), "hindrax_ident.commands.ident_references",
-     "empirical added mass and damping priors from geometry, [NTNU-Thesis] (seed 002) App. A.1/A.2 (JSON; --config "
+     "empirical added mass and damping priors from geometry, [NTNU-Thesis] App. A.1/A.2 (JSON; --config "
      "FILE or --length-m ... --top-area-m2)"),
     (("ident", "inclining"), "hindrax_ident.commands.ident_references",
      "roll/pitch restoring stiffness from an inclining test CSV (arm m, IMU tilt rad) with a known mass (JSON)"),
@@ -67,7 +67,7 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "tell a running campaign's calibration step that the operator did what its prompt asked "
      "(service identification/continue)"),
     (("ident", "bag"), "hindrax_ident.commands.ident_bag",
-     "offline identification (batch LS + output error, [Hindrax-Drag] (seed 003) eqs. 6-8) of a recorded campaign bag: "
+     "offline identification (batch LS + output error, [Hindrax-Drag] eqs. 6-8) of a recorded campaign bag: "
      "identification.yaml + report"),
     (("ident", "fit"), "hindrax_ident.commands.ident_fit",
      "identify from any bag (WrenchStamped or ThrusterPwm force; Odometry, Twist or Dvl velocity): prediction-error "

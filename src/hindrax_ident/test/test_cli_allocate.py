@@ -17,7 +17,7 @@ def run(*args):
 
 
 def independent_model():
-    """Matrix (FLU) and forward curve rebuilt here from the YAML numbers with plain numpy ([Hindrax-Drag] (seed 003) eqs. 1, 9)."""
+    """Matrix (FLU) and forward curve rebuilt here from the YAML numbers with plain numpy ([Hindrax-Drag] eqs. 1, 9)."""
     cfg = load_config(default_config_path())
     t = cfg.thrusters
     flu = np.diag([1.0, -1.0, -1.0])

@@ -1,8 +1,8 @@
 """`hindrax ident free-decay`, `hindrax ident thruster-fit` and `hindrax run` with synthetic inputs.
 
-Free decay: an analytic damped oscillator released from rest ([Hindrax-AM] (seed 000) eq. 1) with the [Hindrax-AM] (seed 000) Table 5
+Free decay: an analytic damped oscillator released from rest ([Hindrax-AM] eq. 1) with the [Hindrax-AM] Table 5
 conditions (k_eq 659.9 N/m, m_b 0.39 kg, added mass 0.82 kg, zeta 0.15, A 20 mm, V 0.00056 m^3, 330 Hz, 10 s);
-expected values from [Hindrax-AM] (seed 000) eqs. 5-9. Thruster fit: the configured cubic ([Hindrax-Drag] (seed 003) Table 2 negative row)
+expected values from [Hindrax-AM] eqs. 5-9. Thruster fit: the configured cubic ([Hindrax-Drag] Table 2 negative row)
 and its point reflection, plus 0.05 N noise.
 """
 from __future__ import annotations
@@ -71,7 +71,7 @@ def _thrust_csv(path, cfg):
     neg = cfg.thrusters.curve_negative
     pos = point_reflection(*neg)
     rng = np.random.default_rng(4)
-    # outside the ESC dead band only (the cubic branches end at +-1.09 N, not at 0 N, [Hindrax-Drag] (seed 003) Table 2)
+    # outside the ESC dead band only (the cubic branches end at +-1.09 N, not at 0 N, [Hindrax-Drag] Table 2)
     pw = np.concatenate([np.arange(1100, 1480, 10.0), np.arange(1530, 1901, 10.0)])
     thrust = np.where(pw < 1500, evaluate_cubic(*neg, pw), evaluate_cubic(*pos, pw))
     thrust = thrust + rng.normal(0, 0.05, pw.size)
@@ -99,7 +99,7 @@ def test_thruster_fit_prints_cubics_and_writes_config(tmp_path, capsys):
         fitted = evaluate_cubic(c["c4"], c["c3"], c["c2"], c["c1"], np.array(pws, dtype=float))
         assert np.allclose(fitted, evaluate_cubic(*truth, np.array(pws, dtype=float)), atol=0.1)
     text = conf.read_text()
-    assert "# [Hindrax-Drag] (Seed 003) Table 2 prints for the positive direction" in text  # comments kept
+    assert "# [Hindrax-Drag] Table 2 prints for the positive direction" in text  # comments kept
     cfg2 = load_config(conf)
     assert np.allclose(cfg2.thrusters.curve_negative, [out["negative"][k] for k in ("c4", "c3", "c2", "c1")],
                        rtol=1e-8)

@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.drag_coefficient ([Hindrax-Drag] (seed 003) Table 4, docs/identification.md)."""
+"""Tests of hindrax_ident.estimation.drag_coefficient ([Hindrax-Drag] Table 4, docs/identification.md)."""
 
 import numpy as np
 import pytest
@@ -16,7 +16,7 @@ from hindrax_ident.estimation.least_squares import EstimationError
 
 
 def test_characteristic_lengths_of_seed000():
-    """[Hindrax-AM] (Seed 000) section 4: V^(1/3) = 0.0824 m (model, 0.00056 m^3), 0.2483 m (0.0153 m^3)."""
+    """[Hindrax-AM] section 4: V^(1/3) = 0.0824 m (model, 0.00056 m^3), 0.2483 m (0.0153 m^3)."""
     assert characteristic_length_from_volume(0.00056) == pytest.approx(0.0824, abs=5e-5)
     assert characteristic_length_from_volume(0.0153) == pytest.approx(0.2483, abs=5e-5)
 

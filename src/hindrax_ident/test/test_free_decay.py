@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.free_decay against [Hindrax-AM] (seed 000) (Tables 3-6) and physics.
+"""Tests of hindrax_ident.estimation.free_decay against [Hindrax-AM] (Tables 3-6) and physics.
 
 Table checks: every printed number is compared with the value computed from the printed
 inputs of its own equation: m_ad eq. 7 and eq. 5 from (omega_d, zeta, k_eq, m_b = 0.39 kg);
@@ -38,11 +38,11 @@ from hindrax_ident.estimation.free_decay import (
 )
 from hindrax_ident.estimation.least_squares import EstimationError
 
-MODEL_MASS_KG = 0.39          # [Hindrax-AM] (seed 000) section 2
-MODEL_VOLUME_M3 = 0.00056     # [Hindrax-AM] (seed 000) section 2
-MODEL_LENGTH_M = MODEL_VOLUME_M3 ** (1 / 3)   # 0.0824 m, [Hindrax-AM] (seed 000) section 4
-PROTOTYPE_VOLUME_M3 = 0.0153  # [Hindrax-AM] (seed 000) section 2
-RHO = 1000.0                  # [Hindrax-AM] (seed 000) eq. 12 text
+MODEL_MASS_KG = 0.39          # [Hindrax-AM] section 2
+MODEL_VOLUME_M3 = 0.00056     # [Hindrax-AM] section 2
+MODEL_LENGTH_M = MODEL_VOLUME_M3 ** (1 / 3)   # 0.0824 m, [Hindrax-AM] section 4
+PROTOTYPE_VOLUME_M3 = 0.0153  # [Hindrax-AM] section 2
+RHO = 1000.0                  # [Hindrax-AM] eq. 12 text
 
 # (table, direction, A mm, k_eq, omega_d, zeta, c, m_ad eq7, m_ad eq5, error %, KC) as printed
 SEED000_ROWS = [
@@ -173,7 +173,7 @@ def test_table_row_function_matches_the_equations():
 
 
 def test_seed000_table6_from_printed_added_masses():
-    """[Hindrax-AM] (Seed 000) Table 6 from the seventh column of Tables 3-5 (eqs. 8 and 12)."""
+    """[Hindrax-AM] Table 6 from the seventh column of Tables 3-5 (eqs. 8 and 12)."""
     surge = inertia_coefficient(0.4401, MODEL_VOLUME_M3, RHO)
     sway = inertia_coefficient(0.7132, MODEL_VOLUME_M3, RHO)
     heave_m = np.array([float(r[8]) for r in SEED000_ROWS if r[1] == "heave"])
@@ -264,7 +264,7 @@ def test_closed_form_errors(bad):
 # --------------------------------------------------------------------------------------
 # Synthetic free-decay records
 # --------------------------------------------------------------------------------------
-FS_HZ = 330.0   # [Hindrax-AM] (seed 000) section 4
+FS_HZ = 330.0   # [Hindrax-AM] section 4
 DURATION_S = 10.0
 
 

@@ -1,10 +1,10 @@
 """Free decay with quadratic damping: ``hindrax ident free-decay --model quadratic`` and the ODE fit.
 
 Records are generated here by an independent integrator (classical fixed-step Runge-Kutta 4 with 20 sub-steps per
-sample, written in this file) of M x'' + b1 x' + b2 |x'| x' + k x = 0 ([SmallROV] (seed 004) eq. 12 with the spring
-of [Hindrax-AM] (seed 000) eq. 1), released from rest; the fit under test uses scipy's solve_ivp. Conditions: the
-[Hindrax-AM] (seed 000) Table 5 rig (k_eq 659.9 N/m, m_b 0.39 kg, added mass 0.82 kg, A 20 mm, 330 Hz, 10 s) with
-a quadratic damping of the [SmallROV] (seed 004) Table 10 order (b2 a few N s^2/m^2 for a body of this size) and a
+sample, written in this file) of M x'' + b1 x' + b2 |x'| x' + k x = 0 ([SmallROV] eq. 12 with the spring
+of [Hindrax-AM] eq. 1), released from rest; the fit under test uses scipy's solve_ivp. Conditions: the
+[Hindrax-AM] Table 5 rig (k_eq 659.9 N/m, m_b 0.39 kg, added mass 0.82 kg, A 20 mm, 330 Hz, 10 s) with
+a quadratic damping of the [SmallROV] Table 10 order (b2 a few N s^2/m^2 for a body of this size) and a
 small linear term, plus accelerometer noise and bias. With this damping the decrement depends on the amplitude,
 so the log-decrement analysis (linear model) reports one equivalent linear damping several times b1: biased.
 """

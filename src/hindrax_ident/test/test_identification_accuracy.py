@@ -1,9 +1,9 @@
-"""Acceptance test of the identification (docs/architecture.md §5, [Hindrax-Drag] (seed 003)): a shortened simulated campaign with the
+"""Acceptance test of the identification (docs/architecture.md §5, [Hindrax-Drag]): a shortened simulated campaign with the
 simulator's sensor noise on recovers the configured hydrodynamics of surge and heave.
 
 Targets (issue): inertia (rigid + added) and quadratic damping within 5 %, bias within 0.2 N, and the
 reported 95 % intervals contain the configured values. The configured values are the truth of the
-simulator: [Hindrax-AM] (seed 000) Table 6 added masses, [Hindrax-Drag] (seed 003) Table 3 damping, and the heave bias (rho V - m) g.
+simulator: [Hindrax-AM] Table 6 added masses, [Hindrax-Drag] Table 3 damping, and the heave bias (rho V - m) g.
 One test function (one campaign, also under pytest-xdist); every check is collected and reported together.
 """
 from __future__ import annotations
@@ -56,7 +56,7 @@ def test_surge_and_heave_recover_the_configured_hydrodynamics():
     assert surge.steady is not None  # the seed's steady-state LS found windows in surge (10 m pool) ...
     assert abs(surge.relative_error("quadratic_damping", "steady")) < 0.10
     assert surge.steady_time_s is not None and 0 < surge.steady_time_s <= surge.pool_time_s
-    assert heave.steady is None  # ... but not in heave (no steady state in the depth available, [Hindrax-Drag] (seed 003) §5)
+    assert heave.steady is None  # ... but not in heave (no steady state in the depth available, [Hindrax-Drag] §5)
     for r in idents.values():
         assert r.pool_time_s > 0
         assert math.isfinite(r.relative_error("inertia", "equation_error"))

@@ -1,4 +1,4 @@
-"""Manoeuvres and campaign safety ([Hindrax-Drag] (seed 003) §4; docs/architecture.md §5): authority from the allocator, ladders,
+"""Manoeuvres and campaign safety ([Hindrax-Drag] §4; docs/architecture.md §5): authority from the allocator, ladders,
 the pool box, abort on limits with neutral thrust."""
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def cfg():
 
 def test_surge_authority_is_four_horizontal_thrusters_at_full_thrust(cfg):
     # T1/T2 push forward and T3/T4 pull in reverse, each along a direction 55 deg off the x axis
-    # ([Hindrax-Drag] (seed 003) §4, Fig. 5): X_max = sum |F_i| cos(55 deg), F_i the curve's largest forward/reverse thrust.
+    # ([Hindrax-Drag] §4, Fig. 5): X_max = sum |F_i| cos(55 deg), F_i the curve's largest forward/reverse thrust.
     core = AllocationCore(cfg)
     curve = core.allocator.curves[0]
     expected = 2 * (curve.max_forward_n + abs(curve.max_reverse_n)) * math.cos(math.radians(55.0))
@@ -77,7 +77,7 @@ def test_translation_and_yaw_runs_stay_inside_the_pool_box(cfg):
     assert np.ptp(np.unwrap(rec.truth_euler_rad[sl, 2])) > 1.5 * math.pi
     # neutral at the end
     assert np.all(rec.final_pulse_width_us == cfg.thrusters.pulse_width_neutral_us)
-    # yaw identification target (issue: 10 %): inertia Iz + added (0.7217 + 0.55) and [Hindrax-Drag] (seed 003) Table 3 k_q
+    # yaw identification target (issue: 10 %): inertia Iz + added (0.7217 + 0.55) and [Hindrax-Drag] Table 3 k_q
     yaw = identify_dof(rec, "yaw", cfg)
     assert yaw.values["inertia"] == pytest.approx(cfg.inertia_matrix_kg_m2[2, 2] + 0.55, rel=0.10)
     assert yaw.values["quadratic_damping"] == pytest.approx(0.55, rel=0.10)
@@ -110,7 +110,7 @@ def test_roll_and_pitch_rotate_to_the_test_angle_return_and_are_identified(cfg):
         assert ang.max() > 0.7 * target  # it did rotate towards the configured angle ...
         assert ang.max() < target + 0.1  # ... and returned without overshooting much
         assert ang[-1] < 0.05  # back to level at the end
-        # identification target (issue: 10 %): inertia I + added inertia, [Hindrax-Drag] (seed 003) Table 3 k_q, and the
+        # identification target (issue: 10 %): inertia I + added inertia, [Hindrax-Drag] Table 3 k_q, and the
         # restoring moment z_g W - z_b B (CB 3 cm above the CG)
         r = identify_dof(rec, dof, cfg)
         i = {"roll": 0, "pitch": 1}[dof]

@@ -61,7 +61,7 @@ def test_record_wrench_windows_and_runs_from_status_and_esc_widths():
     assert t0 == pytest.approx(2.0) and t1 == pytest.approx(8.99, abs=0.011)
     assert set(rec.run_id[(rec.t_s > 2.0) & (rec.t_s < 6.0)]) == {0}
     assert set(rec.run_id[rec.t_s > 6.05]) == {-1} and np.all(np.isnan(rec.level[rec.t_s > 6.05]))
-    # commanded wrench: the same thrust on every thruster through the thrust allocation matrix ([Hindrax-Drag] (seed 003) eq. 9)
+    # commanded wrench: the same thrust on every thruster through the thrust allocation matrix ([Hindrax-Drag] eq. 9)
     expected = matrix @ np.full(matrix.shape[1], float(curve.thrust_n(1700.0)))
     mid = np.argmin(np.abs(rec.t_s - 4.0))
     assert rec.wrench_cmd_frd[mid] == pytest.approx(expected, abs=1e-9)

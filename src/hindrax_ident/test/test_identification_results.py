@@ -1,5 +1,5 @@
 """identification.yaml (docs/architecture.md §5): schema, round trip, provenance, and the configuration overrides the
-simulator reads; plus the configured truth used by the acceptance test ([Hindrax-Drag] (seed 003) §5)."""
+simulator reads; plus the configured truth used by the acceptance test ([Hindrax-Drag] §5)."""
 from __future__ import annotations
 
 
@@ -39,10 +39,10 @@ def _fake(cfg, dof, scale=1.1):
 
 def test_truth_values_follow_the_seeds(cfg):
     heave = truth_parameters(cfg, "heave")
-    # [Hindrax-Drag] (seed 003) §5: f_b = (rho V - m) g = (1000 * 0.0153 - 15.22) * 9.81 = 0.785 N, FRD force holding depth
+    # [Hindrax-Drag] §5: f_b = (rho V - m) g = (1000 * 0.0153 - 15.22) * 9.81 = 0.785 N, FRD force holding depth
     assert heave["bias"] == pytest.approx((1000 * 0.0153 - 15.22) * 9.81)
-    assert heave["inertia"] == pytest.approx(15.22 + 22.48)  # rigid + [Hindrax-AM] (seed 000) Table 6
-    assert heave["quadratic_damping_positive"] == pytest.approx(93.52)  # [Hindrax-Drag] (seed 003) Table 3
+    assert heave["inertia"] == pytest.approx(15.22 + 22.48)  # rigid + [Hindrax-AM] Table 6
+    assert heave["quadratic_damping_positive"] == pytest.approx(93.52)  # [Hindrax-Drag] Table 3
     roll = truth_parameters(cfg, "roll")
     # restoring: z_g W - z_b B with the CB 3 cm above the CG -> 0.03 rho g V
     assert roll["restoring"] == pytest.approx(0.03 * 1000 * 9.81 * 0.0153)
@@ -74,17 +74,17 @@ def test_round_trip_and_schema(cfg, tmp_path):
 
 
 def test_drag_coefficient_and_reynolds_range_of_table_4(cfg):
-    """[Hindrax-Drag] (Seed 003) Table 4 columns: C_D = 2 k_q / (rho A_p) with A_p the box face normal to the motion, and the
+    """[Hindrax-Drag] Table 4 columns: C_D = 2 k_q / (rho A_p) with A_p the box face normal to the motion, and the
     Reynolds range |v| V^(1/3) / nu of the speeds above 0.05 m/s; none for rotations."""
     surge = _fake(cfg, "surge", scale=1.0)
     surge.signals = {"velocity": np.array([0.0, 0.02, 0.2, -0.45, 0.3])}
     doc = build_results({"surge": surge, "heave": _fake(cfg, "heave", scale=1.0), "yaw": _fake(cfg, "yaw")}, cfg)
     d = doc["dofs"]["surge"]["drag_coefficient"]
-    area = 0.47 * 0.40  # width x height, [Hindrax-Drag] (seed 003) §2.1
+    area = 0.47 * 0.40  # width x height, [Hindrax-Drag] §2.1
     assert d["projected_area_m2"] == pytest.approx(area)
-    assert d["c_d"][0] == pytest.approx(2 * 66.48 / (1000.0 * area))  # k_q of [Hindrax-Drag] (seed 003) Table 3 -> 0.707
+    assert d["c_d"][0] == pytest.approx(2 * 66.48 / (1000.0 * area))  # k_q of [Hindrax-Drag] Table 3 -> 0.707
     assert d["c_d"][1] == pytest.approx(2 * surge.std["quadratic_damping"] / (1000.0 * area))
-    length = 0.0153 ** (1 / 3)  # [Hindrax-AM] (seed 000) eq. 10: V^(1/3) = 0.2483 m
+    length = 0.0153 ** (1 / 3)  # [Hindrax-AM] eq. 10: V^(1/3) = 0.2483 m
     assert d["reynolds_range"] == pytest.approx([0.2 * length / 1.01e-6, 0.45 * length / 1.01e-6])
     h = doc["dofs"]["heave"]["drag_coefficient"]
     assert h["c_d_positive"][0] == pytest.approx(2 * 93.52 / (1000.0 * 0.59 * 0.47))

@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.least_squares ([Hindrax-Drag] (seed 003) eqs. 2-8)."""
+"""Tests of hindrax_ident.estimation.least_squares ([Hindrax-Drag] eqs. 2-8)."""
 
 import numpy as np
 import pytest
@@ -14,7 +14,7 @@ from hindrax_ident.estimation.least_squares import (
     fit_linear_model,
 )
 
-# [Hindrax-Drag] (Seed 003) Table 3 surge: k_q = 66.48, k_l = 1.25, b = -0.02 (N, m/s)
+# [Hindrax-Drag] Table 3 surge: k_q = 66.48, k_l = 1.25, b = -0.02 (N, m/s)
 SURGE = (66.48, 1.25, -0.02)
 
 
@@ -57,7 +57,7 @@ def test_noise_free_fit_is_exact():
 
 
 def test_abs_v_times_v_keeps_the_sign():
-    """[Hindrax-Drag] (Seed 003) eq. 2: with |v|v a symmetric drag law is one model for both signs; an x^2
+    """[Hindrax-Drag] eq. 2: with |v|v a symmetric drag law is one model for both signs; an x^2
     regressor (eq. 3 as printed) cannot represent it."""
     v = np.linspace(-0.5, 0.5, 41)
     f = 70.0 * np.abs(v) * v + 3.0 * v
@@ -165,7 +165,7 @@ def test_fit_dynamic_recovers_inertia_and_damping():
 
 
 def test_fit_dynamic_separate_quadratic_and_restoring():
-    """Heave: different quadratic damping up/down ([Hindrax-Drag] (seed 003) Table 3 positive 93.52, negative
+    """Heave: different quadratic damping up/down ([Hindrax-Drag] Table 3 positive 93.52, negative
     56.57 N/(m/s)^2) and a restoring column sin(angle) whose coefficient is W*BG."""
     rng = np.random.default_rng(5)
     a, v, f, r = _one_dof_record(rng, separate=True, restoring=True)
@@ -180,7 +180,7 @@ def test_fit_dynamic_separate_quadratic_and_restoring():
 
 
 def test_buoyancy_bias_in_heave():
-    """[Hindrax-Drag] (Seed 003) section 5: in heave b equals the net buoyancy f_b = (W - rho V) g,
+    """[Hindrax-Drag] section 5: in heave b equals the net buoyancy f_b = (W - rho V) g,
     15.22 kg vs 1000 * 0.0153 = 15.30 kg -> |f_b| = 0.0800 * 9.80665 = 0.7845 N."""
     f_b = (15.30 - 15.22) * 9.80665
     assert f_b == pytest.approx(0.7845, abs=1e-4)

@@ -1,4 +1,4 @@
-"""Empirical priors ([NTNU-Thesis] (seed 002) Sec. 3.1, App. A.1/A.2) against the thesis's printed "Empirical" columns.
+"""Empirical priors ([NTNU-Thesis] Sec. 3.1, App. A.1/A.2) against the thesis's printed "Empirical" columns.
 
 Expected numbers are copied by hand from the thesis's tables (cited at each case); a printed value counts as
 reproduced when our value rounds to it (half a unit of its last printed digit, plus 1e-4 relative for the

@@ -19,7 +19,7 @@ def regressors(n, dt=0.02, phase=0.0):
 
 
 def test_lambda_one_equals_batch_least_squares():
-    """With lambda = 1 and a diffuse prior RLS is the batch LS of [Hindrax-Drag] (seed 003) eqs. 6-8."""
+    """With lambda = 1 and a diffuse prior RLS is the batch LS of [Hindrax-Drag] eqs. 6-8."""
     rng = np.random.default_rng(0)
     Phi = regressors(1500)
     y = Phi @ THETA + rng.normal(0, 0.4, Phi.shape[0])

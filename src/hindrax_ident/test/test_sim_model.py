@@ -8,7 +8,7 @@ Where a test needs a single DOF to move alone, the configuration is made *neutra
 the CG* (mass = rho V, net buoyancy 0, r_b = 0): then g(eta) = 0 identically, and a pure force (moment)
 at the CG along (about) a principal axis of a vehicle with diagonal M_A excites no other DOF (C_RB nu and
 C_A nu vanish for motion along a single axis), so the motion is exactly 1-DOF. Heave instead keeps the real
-buoyancy, which appears as the bias b = B - W of [Hindrax-Drag] (seed 003) eq. 2 ([Hindrax-Drag] (seed 003) §5).
+buoyancy, which appears as the bias b = B - W of [Hindrax-Drag] eq. 2 ([Hindrax-Drag] §5).
 """
 import math
 
@@ -123,7 +123,7 @@ def test_restoring_physics(cfg):
     w, b = cfg.weight_n, cfg.buoyancy_n
     r_b = cfg.centre_of_buoyancy_frd_m
     g = mdl.restoring_vector(np.eye(3), w, b, np.zeros(3), r_b)
-    assert g[2] == pytest.approx(-(w - b)) and b - w == pytest.approx(0.785, abs=0.001)  # [Hindrax-Drag] (seed 003) §5
+    assert g[2] == pytest.approx(-(w - b)) and b - w == pytest.approx(0.785, abs=0.001)  # [Hindrax-Drag] §5
     rot = Rotation.from_euler("x", 0.2).as_matrix()
     g = mdl.restoring_vector(rot, w, b, np.zeros(3), r_b)
     # righting moment K = -g_4 = -B * BG * sin(phi) (BG = 0.03 m: CB above CG)
@@ -160,7 +160,7 @@ def test_energy_conserved_without_damping_and_restoring(neutral_cfg):
     assert energy() == pytest.approx(e0, rel=1e-6)
 
 
-# ----------------------------------------------------------------------------------- steady speeds ([Hindrax-Drag] (seed 003) eq. 2)
+# ----------------------------------------------------------------------------------- steady speeds ([Hindrax-Drag] eq. 2)
 @pytest.mark.parametrize("dof,load", [("surge", 10.0), ("surge", -6.0), ("sway", 8.0), ("roll", 0.5),
                                       ("pitch", -0.4), ("yaw", 0.6)])
 def test_steady_speed_pure_load(neutral_cfg, dof, load):
@@ -183,7 +183,7 @@ def test_steady_speed_pure_load(neutral_cfg, dof, load):
 
 @pytest.mark.parametrize("force", [20.0, 5.0, -12.0, -3.0])
 def test_steady_heave_with_net_buoyancy(cfg, force):
-    """Heave keeps the real buoyancy: k_q|w|w + k_l w + b = Z with b = B - W (0.785 N, [Hindrax-Drag] (seed 003) §5), the
+    """Heave keeps the real buoyancy: k_q|w|w + k_l w + b = Z with b = B - W (0.785 N, [Hindrax-Drag] §5), the
     positive-heave (down, w > 0) coefficients for w > 0 and the negative-heave ones for w < 0."""
     h = cfg.hydrodynamics("heave")
     b = cfg.buoyancy_n - cfg.weight_n
@@ -216,7 +216,7 @@ def test_initial_acceleration_is_force_over_total_mass(neutral_cfg, dof):
 
 
 def test_thruster_step_acceleration_and_lag(neutral_cfg):
-    """T1+T2 at equal pulse widths: surge force 2 F(P) cos 55 deg ([Hindrax-Drag] (seed 003) eq. 1 and §4), accelerating
+    """T1+T2 at equal pulse widths: surge force 2 F(P) cos 55 deg ([Hindrax-Drag] eq. 1 and §4), accelerating
     m + m_a; with the first-order lag the thrust reaches 1 - 1/e of its command after one time constant."""
     p_us = 1750.0
     c4, c3, c2, c1 = neutral_cfg.get("thrusters.curve_positive")
@@ -240,7 +240,7 @@ def test_thruster_step_acceleration_and_lag(neutral_cfg):
 
 
 def test_surge_and_sway_pairs_make_no_yaw(cfg):
-    """[Hindrax-Drag] (Seed 003) §4.1: T1+T2 push surge, T1+T3 push sway; with the symmetric layout neither makes a yaw moment."""
+    """[Hindrax-Drag] §4.1: T1+T2 push surge, T1+T3 push sway; with the symmetric layout neither makes a yaw moment."""
     thr = Thrusters(cfg)
     thr.command([1700, 1700, 1500, 1500, 1500, 1500, 1500, 1500])
     thr.advance(10.0)  # many time constants: the thrust equals its command

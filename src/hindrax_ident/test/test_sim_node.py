@@ -104,7 +104,7 @@ def test_clock_and_ground_truth_follow_the_model(cfg):
             start = cfg.get("pool.start_position_ned_m")
             assert last.pose.pose.position.y - start[0] > 0.5
             assert last.twist.twist.linear.x > 0.2
-            # true wrench in base_link FLU: surge 2 F cos 55 deg, no sway force, no yaw moment ([Hindrax-Drag] (seed 003) §4.1)
+            # true wrench in base_link FLU: surge 2 F cos 55 deg, no sway force, no yaw moment ([Hindrax-Drag] §4.1)
             w = probe.wrench[-1]
             c4, c3, c2, c1 = cfg.get("thrusters.curve_positive")
             f_one = c4 * 1700.0 ** 3 + c3 * 1700.0 ** 2 + c2 * 1700.0 + c1

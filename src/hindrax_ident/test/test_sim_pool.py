@@ -39,7 +39,7 @@ def test_free_surface_fraction_geometry():
 
 def test_unpowered_vehicle_rises_and_floats_at_the_archimedes_waterline(cfg):
     """Released at 1 m depth with the thrusters stopped, the positively buoyant vehicle (B - W = 0.785 N,
-    [Hindrax-Drag] (seed 003) §5) rises, breaks the surface and stays there with the submerged fraction W / B (Archimedes);
+    [Hindrax-Drag] §5) rises, breaks the surface and stays there with the submerged fraction W / B (Archimedes);
     with the hull centred on the CB that puts the CB at depth h (2 W / B - 1), h = height / 2."""
     sim = Simulator(cfg, sensors=False)
     start = [5.0, 3.0, 1.0]

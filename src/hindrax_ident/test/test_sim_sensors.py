@@ -144,7 +144,7 @@ def test_dvl_velocity_at_its_position_and_lock_rules(quiet_cfg):
 
 
 def test_dvl_noise_statistics(cfg):
-    """Multiplicative 5 % (1-sigma per report, [Hindrax-Drag] (seed 003) Table 1) and additive noise: at a steady 0.5 m/s surge
+    """Multiplicative 5 % (1-sigma per report, [Hindrax-Drag] Table 1) and additive noise: at a steady 0.5 m/s surge
     the reports have mean 0.5 + bias and std sqrt((0.05 * 0.5)^2 + sigma_n^2)."""
     pool = Pool.from_config(cfg)
     model = sn.DvlVelocityModel(cfg, pool, 3)

@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.steady_windows on a simulated thrust ladder ([Hindrax-Drag] (seed 003) §4)."""
+"""Tests of hindrax_ident.estimation.steady_windows on a simulated thrust ladder ([Hindrax-Drag] §4)."""
 
 import numpy as np
 import pytest
@@ -12,8 +12,8 @@ from hindrax_ident.estimation.steady_windows import (
     steady_state_data,
 )
 
-# Surge, [Hindrax-Drag] (seed 003) Table 3: k_q = 66.48 N/(m/s)^2, k_l = 1.25 N/(m/s); inertia 15.22 + 12.08 kg
-# (mass + [Hindrax-AM] (seed 000) Table 6 added mass).
+# Surge, [Hindrax-Drag] Table 3: k_q = 66.48 N/(m/s)^2, k_l = 1.25 N/(m/s); inertia 15.22 + 12.08 kg
+# (mass + [Hindrax-AM] Table 6 added mass).
 KQ, KL, INERTIA = 66.48, 1.25, 27.3
 LEVELS_N = [0.0, 3.0, 6.0, 10.0, 15.0, 20.0]
 HOLD_S = 15.0

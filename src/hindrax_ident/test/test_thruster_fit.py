@@ -1,4 +1,4 @@
-"""Tests of hindrax_ident.estimation.thruster_fit ([Hindrax-Drag] (seed 003) eq. 1, section 2.2.1, Table 2)."""
+"""Tests of hindrax_ident.estimation.thruster_fit ([Hindrax-Drag] eq. 1, section 2.2.1, Table 2)."""
 
 import numpy as np
 import pytest
@@ -13,7 +13,7 @@ from hindrax_ident.estimation.thruster_fit import (
     point_reflection,
 )
 
-# [Hindrax-Drag] (Seed 003) Table 2 as printed: (c4, c3, c2, c1) of tau = c4 P^3 + c3 P^2 + c2 P + c1
+# [Hindrax-Drag] Table 2 as printed: (c4, c3, c2, c1) of tau = c4 P^3 + c3 P^2 + c2 P + c1
 TABLE2_NEGATIVE = (-4.61e-7, 0.001794, -2.2726, 927.1827)
 TABLE2_POSITIVE = (-3.52e-7, 1.82e-4, -0.3106, 174.3542)
 # half a unit of the last printed digit of each coefficient

@@ -1,7 +1,7 @@
 """Thrust allocation: body wrench (FRD) -> thruster forces -> ESC pulse widths, pure numpy.
 
-Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] (seed 003) eq. 9 (``tau = B F``, tau = [X Y Z K M N]
-in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hindrax-Drag] (seed 003) eq. 1),
+Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] eq. 9 (``tau = B F``, tau = [X Y Z K M N]
+in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hindrax-Drag] eq. 1),
 :class:`ThrustAllocator` turns a requested wrench into forces and pulse widths:
 
 1. **Weighted minimum-norm solution.** ``F = B_W^+ tau`` with ``B_W^+ = W^-1/2 pinv(B W^-1/2)``,
@@ -56,9 +56,9 @@ __all__ = [
     "weighted_pseudo_inverse",
 ]
 
-#: Wrench axes in order ([Hindrax-Drag] (seed 003) section 3 notation, SNAME): tau = [X Y Z K M N].
+#: Wrench axes in order ([Hindrax-Drag] section 3 notation, SNAME): tau = [X Y Z K M N].
 AXIS_NAMES: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
-#: Default priority: heave and yaw first (depth and heading holding during the [Hindrax-Drag] (seed 003) tests).
+#: Default priority: heave and yaw first (depth and heading holding during the [Hindrax-Drag] tests).
 DEFAULT_PRIORITY_GROUPS: tuple[tuple[str, ...], ...] = (("heave", "yaw"),)
 _MODES = ("uniform", "priority")
 _ZERO_ROW_TOLERANCE = 1e-12
@@ -127,7 +127,7 @@ class ThrustAllocator:
     Parameters
     ----------
     matrix:
-        Thrust allocation matrix (6, n), FRD, [Hindrax-Drag] (seed 003) eq. 9 (see :mod:`.matrix`).
+        Thrust allocation matrix (6, n), FRD, [Hindrax-Drag] eq. 9 (see :mod:`.matrix`).
     curves:
         One :class:`ThrustCurve` shared by all thrusters, or a sequence of n of them.
     weights:
@@ -333,7 +333,7 @@ class ThrustAllocator:
         ``voltage_scale`` multiplies every curve's thrust (battery voltage hook, see
         :func:`.thrust_curve.voltage_thrust_scale`). Returns an :class:`AllocationResult`. Raises
         :class:`InvalidWrenchError` if the wrench is not 6 finite numbers, ``ValueError`` for a bad
-        ``voltage_scale``. Source: [Hindrax-Drag] (seed 003) eqs. 1 and 9; module docstring for the method.
+        ``voltage_scale``. Source: [Hindrax-Drag] eqs. 1 and 9; module docstring for the method.
         """
         try:
             tau = np.array(wrench, dtype=float)

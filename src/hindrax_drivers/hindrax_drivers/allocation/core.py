@@ -2,7 +2,7 @@
 
 Input: a wrench in base_link (FLU, N and N m, about the CG). The core converts it to body FRD
 (:mod:`hindrax_drivers.frames`), allocates with the configuration's :class:`ThrustAllocator`
-(weighted pseudo-inverse, saturation handling, cubic-curve inversion: [Hindrax-Drag] (seed 003) eqs. 1 and 9), and returns
+(weighted pseudo-inverse, saturation handling, cubic-curve inversion: [Hindrax-Drag] eqs. 1 and 9), and returns
 per-thruster forces, pulse widths and the achieved wrench back in base_link.
 
 Thruster reversal and trim (``thrusters.<t>.reversed``/``trim_us``) are applied by the ESC output, not here:

@@ -15,7 +15,7 @@ from .thrust_curve import ThrustCurve
 
 
 def thrust_curve_from_config(cfg: VehicleConfig) -> ThrustCurve:
-    """The shared two-branch cubic thrust curve ([Hindrax-Drag] (seed 003) eq. 1) with the configured PWM range and deadband."""
+    """The shared two-branch cubic thrust curve ([Hindrax-Drag] eq. 1) with the configured PWM range and deadband."""
     t = cfg.thrusters
     return ThrustCurve(negative=t.curve_negative, positive=t.curve_positive,
                        pulse_width_min_us=t.pulse_width_min_us, pulse_width_neutral_us=t.pulse_width_neutral_us,
@@ -23,7 +23,7 @@ def thrust_curve_from_config(cfg: VehicleConfig) -> ThrustCurve:
 
 
 def allocation_matrix_from_config(cfg: VehicleConfig) -> np.ndarray:
-    """Thrust allocation matrix B (6, n), body FRD about the CG ([Hindrax-Drag] (seed 003) eq. 9): column i = [d_i; r_i x d_i]."""
+    """Thrust allocation matrix B (6, n), body FRD about the CG ([Hindrax-Drag] eq. 9): column i = [d_i; r_i x d_i]."""
     t = cfg.thrusters
     return thrust_allocation_matrix(t.positions_frd_m - cfg.centre_of_gravity_frd_m, t.directions_frd)
 

@@ -1,9 +1,9 @@
-"""Thrust allocation matrix ([Hindrax-Drag] (seed 003) eq. 9) and the default Hindrax thruster layout, pure numpy.
+"""Thrust allocation matrix ([Hindrax-Drag] eq. 9) and the default Hindrax thruster layout, pure numpy.
 
 Frame: marine body frame FRD (x forward, y starboard, z down), origin at the centre of gravity
-(docs/architecture.md §3; [Hindrax-Drag] (seed 003) Figure 2). A thruster ``i`` at position ``r_i`` (m) pushing along the
+(docs/architecture.md §3; [Hindrax-Drag] Figure 2). A thruster ``i`` at position ``r_i`` (m) pushing along the
 unit vector ``d_i`` with thrust ``F_i`` (N) applies the wrench ``tau_i = [d_i; r_i x d_i] F_i``
-([Hindrax-Drag] (seed 003) eq. 9, after Fossen 1994), ``tau = [X Y Z K M N]`` in N and N m. Stacking the columns
+([Hindrax-Drag] eq. 9, after Fossen 1994), ``tau = [X Y Z K M N]`` in N and N m. Stacking the columns
 ``[d_i; r_i x d_i]`` gives the 6 x n thrust allocation matrix ``B`` with ``tau = B F``.
 
 Conversions between ROS ``base_link`` (FLU) and FRD are done by the project's frames module, not here.
@@ -24,7 +24,7 @@ __all__ = [
     "hindrax_default_layout",
 ]
 
-#: Rotation of the horizontal thrusters T1-T4 from the x axis, [Hindrax-Drag] (seed 003) section 4 (55 degrees).
+#: Rotation of the horizontal thrusters T1-T4 from the x axis, [Hindrax-Drag] section 4 (55 degrees).
 HINDRAX_HORIZONTAL_ANGLE_RAD = math.radians(55.0)
 
 _UNIT_TOLERANCE = 1e-6
@@ -43,7 +43,7 @@ def _as_n_by_3(values, name: str) -> np.ndarray:
 
 
 def thrust_allocation_matrix(positions_m, directions) -> np.ndarray:
-    """Thrust allocation matrix ``B`` (6, n) with columns ``[d_i; r_i x d_i]`` ([Hindrax-Drag] (seed 003) eq. 9).
+    """Thrust allocation matrix ``B`` (6, n) with columns ``[d_i; r_i x d_i]`` ([Hindrax-Drag] eq. 9).
 
     ``positions_m`` (n, 3): thruster positions in FRD relative to the centre of gravity (m).
     ``directions`` (n, 3): unit vectors (FRD) of the force a positive thrust applies to the vehicle.
@@ -65,7 +65,7 @@ def thrust_allocation_matrix(positions_m, directions) -> np.ndarray:
 def horizontal_direction(angle_rad) -> np.ndarray:
     """Unit thrust direction(s) in the horizontal FRD plane: ``(cos a, sin a, 0)``.
 
-    ``angle_rad`` is measured from +x (forward) towards +y (starboard), the decomposition of [Hindrax-Drag] (seed 003)
+    ``angle_rad`` is measured from +x (forward) towards +y (starboard), the decomposition of [Hindrax-Drag]
     section 4 (``F_x = cos(a) F``, ``F_y = sin(a) F``). Scalar in: shape (3,); array of shape (n,) in:
     shape (n, 3). Raises ``ValueError`` for non-finite angles.
     """
@@ -81,7 +81,7 @@ def horizontal_direction(angle_rad) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class ThrusterLayout:
     """Thruster geometry: ``names`` (n,), ``positions_m`` (n, 3) and unit ``directions`` (n, 3), FRD,
-    origin at the centre of gravity. ``matrix()`` gives the (6, n) thrust allocation matrix ([Hindrax-Drag] (seed 003)
+    origin at the centre of gravity. ``matrix()`` gives the (6, n) thrust allocation matrix ([Hindrax-Drag]
     eq. 9) via :func:`thrust_allocation_matrix`."""
 
     names: tuple[str, ...]
@@ -102,7 +102,7 @@ class ThrusterLayout:
         object.__setattr__(self, "directions", directions)
 
     def matrix(self) -> np.ndarray:
-        """Thrust allocation matrix (6, n), [Hindrax-Drag] (seed 003) eq. 9."""
+        """Thrust allocation matrix (6, n), [Hindrax-Drag] eq. 9."""
         return thrust_allocation_matrix(self.positions_m, self.directions)
 
 
@@ -111,7 +111,7 @@ def hindrax_default_layout(horizontal_x_m: float = 0.20, horizontal_y_m: float =
                            horizontal_angle_rad: float = HINDRAX_HORIZONTAL_ANGLE_RAD) -> ThrusterLayout:
     """Default Hindrax geometry, eight thrusters T1-T8 (FRD, origin at the centre of gravity).
 
-    What the seed fixes ([Hindrax-Drag] (seed 003) sections 2.2 and 4, Figures 2 and 5): two layers; the lower layer
+    What the seed fixes ([Hindrax-Drag] sections 2.2 and 4, Figures 2 and 5): two layers; the lower layer
     holds the horizontal thrusters T1-T4 (surge, sway, yaw), the upper layer the vertical thrusters
     T5-T8 (heave, roll, pitch); T1-T4 are rotated 55 degrees, T1 decomposing as ``F_x = cos(a) F``,
     ``F_y = sin(a) F``, ``F_z = 0``; the vehicle is symmetric about the xz and yz planes; in the
@@ -126,7 +126,7 @@ def hindrax_default_layout(horizontal_x_m: float = 0.20, horizontal_y_m: float =
 
     ASSUMPTIONS: the seed prints no thruster coordinates. The defaults (horizontals at x = +-0.20,
     y = +-0.15, z = +0.10 m, i.e. below the centre of gravity; verticals at x = +-0.20, y = +-0.17,
-    z = -0.12 m, above it) are chosen inside the 0.59 x 0.47 x 0.40 m envelope ([Hindrax-Drag] (seed 003) section 2.1)
+    z = -0.12 m, above it) are chosen inside the 0.59 x 0.47 x 0.40 m envelope ([Hindrax-Drag] section 2.1)
     and must be replaced by measured values. Because the horizontals sit below the centre of gravity,
     their thrust also makes roll and pitch moments (eq. 9: ``K = -l_z F_y``, ``M = l_z F_x`` for a
     horizontal thruster), which the vertical thrusters can cancel.

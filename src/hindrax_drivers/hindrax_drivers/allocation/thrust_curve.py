@@ -1,6 +1,6 @@
 """Thruster thrust curve: pulse width (us) <-> bollard-pull thrust (N), pure numpy.
 
-Model ([Hindrax-Drag] (seed 003), section 2.2.1, eq. 1 and Table 2): the thrust of one thruster is a cubic in the ESC
+Model ([Hindrax-Drag], section 2.2.1, eq. 1 and Table 2): the thrust of one thruster is a cubic in the ESC
 pulse width P (us), ``tau = c4 P^3 + c3 P^2 + c2 P + c1``, with one cubic for negative rotation
 (1100-1500 us) and one for positive rotation (1500-1900 us); 1500 us stops the motor. Coefficient
 tuples are always ordered ``(c4, c3, c2, c1)``, i.e. highest power first (``numpy.polyval`` order).
@@ -66,12 +66,12 @@ __all__ = [
     "forward_thrust",
 ]
 
-#: [Hindrax-Drag] (Seed 003) Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).
+#: [Hindrax-Drag] Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).
 SEED_003_NEGATIVE_COEFFS: tuple[float, float, float, float] = (-4.61e-7, 0.001794, -2.2726, 927.1827)
-#: [Hindrax-Drag] (Seed 003) Table 2, positive direction exactly as printed. Inconsistent (about -1070 N at 1500 us);
+#: [Hindrax-Drag] Table 2, positive direction exactly as printed. Inconsistent (about -1070 N at 1500 us);
 #: kept only to document and test that it is rejected.
 SEED_003_POSITIVE_COEFFS_AS_PRINTED: tuple[float, float, float, float] = (-3.52e-7, 1.82e-4, -0.3106, 174.3542)
-#: Hindrax battery nominal voltage, [Hindrax-Drag] (seed 003) section 2.1 (14.8 V, 19.2 Ah).
+#: Hindrax battery nominal voltage, [Hindrax-Drag] section 2.1 (14.8 V, 19.2 Ah).
 HINDRAX_NOMINAL_VOLTAGE_V = 14.8
 #: Blue Robotics Basic ESC deadband half-width, docs/devices.md §5.2 (1500 +- 25 us; UNVERIFIED there).
 BASIC_ESC_DEADBAND_US = 25.0
@@ -98,7 +98,7 @@ def point_reflection(coeffs: Sequence[float], neutral_us: float = 1500.0) -> tup
     """Coefficients of the cubic point-reflected about (``neutral_us``, 0 N).
 
     Returns ``g`` with ``g(P) = -f(2 * neutral_us - P)`` for the cubic ``f`` given by ``coeffs``
-    ``(c4, c3, c2, c1)`` (N as a function of P in us), in the same order. With the [Hindrax-Drag] (seed 003) Table 2
+    ``(c4, c3, c2, c1)`` (N as a function of P in us), in the same order. With the [Hindrax-Drag] Table 2
     negative row this is the project's default positive-rotation curve (docs/architecture.md §4): it gives
     +15.53 N at 1900 us. Applying it twice returns the original coefficients.
 
@@ -119,7 +119,7 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
 
     Source: docs/devices.md §5.3 (Blue Robotics T200 data, DERIVED there): full-throttle thrust
     scales roughly with V^1.2 (10 V -> 20 V gives x2.29, 12 V -> 16 V gives x1.41). The nominal
-    voltage is the Hindrax battery, 14.8 V ([Hindrax-Drag] (seed 003) section 2.1), at which the curves are taken to be
+    voltage is the Hindrax battery, 14.8 V ([Hindrax-Drag] section 2.1), at which the curves are taken to be
     valid. Raises :class:`ThrustCurveError` unless both voltages are finite and positive and the
     exponent is finite.
     """
@@ -152,7 +152,7 @@ def _finite_array(values, name: str) -> np.ndarray:
 
 
 def _cubic(coeffs: np.ndarray, p):
-    """[Hindrax-Drag] (Seed 003) eq. 1 by Horner's rule: c4 P^3 + c3 P^2 + c2 P + c1 (N), coeffs ordered (c4, c3, c2, c1)."""
+    """[Hindrax-Drag] eq. 1 by Horner's rule: c4 P^3 + c3 P^2 + c2 P + c1 (N), coeffs ordered (c4, c3, c2, c1)."""
     return ((coeffs[0] * p + coeffs[1]) * p + coeffs[2]) * p + coeffs[3]
 
 
@@ -161,7 +161,7 @@ def forward_thrust(pulse_width_us, negative, positive, pulse_width_min_us, pulse
     """Forward thrust model (N) of :meth:`ThrustCurve.thrust_n` at ``voltage_scale = 1``, vectorised.
 
     Every parameter broadcasts against ``pulse_width_us``: ``negative`` and ``positive`` are
-    ``(c4, c3, c2, c1)`` of [Hindrax-Drag] (seed 003) eq. 1 with shape (4,) or (4, n) (one column per thruster), the others
+    ``(c4, c3, c2, c1)`` of [Hindrax-Drag] eq. 1 with shape (4,) or (4, n) (one column per thruster), the others
     scalars or (n,). Pulse widths are clamped to ``[pulse_width_min_us, pulse_width_max_us]``; the negative
     cubic (clipped to <= 0) applies at ``P <= negative_edge_us``, the positive one (clipped to >= 0) at
     ``P >= positive_edge_us``, 0 N between (deadband, docs/devices.md §5.2); the result is clipped to
@@ -180,7 +180,7 @@ def _out(arr: np.ndarray):
 
 
 class ThrustCurve:
-    """Two-branch cubic thrust curve of one thruster ([Hindrax-Drag] (seed 003) eq. 1), with its inverse.
+    """Two-branch cubic thrust curve of one thruster ([Hindrax-Drag] eq. 1), with its inverse.
 
     Parameters
     ----------
@@ -188,7 +188,7 @@ class ThrustCurve:
         ``(c4, c3, c2, c1)`` of eq. 1 for negative rotation (``pulse_width_min_us`` to neutral) and
         positive rotation (neutral to ``pulse_width_max_us``); thrust in N, pulse width in us.
     pulse_width_min_us, pulse_width_neutral_us, pulse_width_max_us:
-        ESC range and stop value ([Hindrax-Drag] (seed 003) section 2.2.1; docs/devices.md §5.2): 1100, 1500, 1900 us.
+        ESC range and stop value ([Hindrax-Drag] section 2.2.1; docs/devices.md §5.2): 1100, 1500, 1900 us.
     deadband_us:
         Half-width of the ESC deadband around neutral; thrust is 0 N for
         ``|P - neutral| < deadband_us`` and at neutral itself. Default 25 us (docs/devices.md §5.2).
@@ -363,7 +363,7 @@ class ThrustCurve:
         deadband_us``; otherwise the negative cubic (below neutral) or positive cubic (above), clipped to
         the side's sign (a thruster in reverse rotation does not push forward) and to
         ``[max_reverse_n, max_forward_n]``, times ``voltage_scale``.
-        Source: [Hindrax-Drag] (seed 003) eq. 1, docs/devices.md §5.2. Raises :class:`ThrustCurveError` for non-finite
+        Source: [Hindrax-Drag] eq. 1, docs/devices.md §5.2. Raises :class:`ThrustCurveError` for non-finite
         input or a bad ``voltage_scale``.
         """
         s = _check_voltage_scale(voltage_scale)
@@ -378,7 +378,7 @@ class ThrustCurve:
         sign (exact to 0.005 us). 0 N gives neutral. Forces beyond ``max_forward_n`` / ``max_reverse_n``
         saturate at ``pulse_width_max_us`` / ``pulse_width_min_us``. Forces smaller in magnitude than the
         branch's smallest thrust go to neutral or to the branch's inner end according to
-        ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] (seed 003) eq. 1. Raises
+        ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] eq. 1. Raises
         :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``.
         """
         s = _check_voltage_scale(voltage_scale)
@@ -421,7 +421,7 @@ class ThrustCurve:
 
 
 def hindrax_default_curve(deadband_us: float = BASIC_ESC_DEADBAND_US, small_force: str = "nearest") -> ThrustCurve:
-    """The project's default thruster curve: [Hindrax-Drag] (seed 003) Table 2 negative row, and its point reflection
+    """The project's default thruster curve: [Hindrax-Drag] Table 2 negative row, and its point reflection
     about (1500 us, 0 N) as positive row (docs/architecture.md §4), ESC range 1100/1500/1900 us.
 
     Raises :class:`ThrustCurveError` for a bad ``deadband_us`` or ``small_force``.

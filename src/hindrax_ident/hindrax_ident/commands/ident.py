@@ -1,15 +1,15 @@
 """``hindrax ident free-decay | thruster-fit | campaign``: offline identification tools.
 
 * ``hindrax ident free-decay FILE --stiffness K --mass M --volume V [--density RHO] [--model linear|quadratic]``:
-  [Hindrax-AM] (seed 000) analysis of a
+  [Hindrax-AM] analysis of a
   free-decay record (CSV with a header row; column 1 time in s, column 2 acceleration in m/s^2). Prints one
   JSON object (:meth:`hindrax_ident.estimation.free_decay.FreeDecayResult.to_dict`): omega_d_rad_s, zeta,
   added_mass_kg (eq. 5), added_mass_simplified_kg (eq. 7), damping_n_s_per_m (eq. 6), c_m (eq. 8), kc (eq. 9)...
   ``--model quadratic`` adds the output-error fit of the nonlinear ODE (linear + quadratic damping, [SmallROV]
-  ([SmallROV] (seed 004)) eq. 12; :func:`hindrax_ident.estimation.free_decay.quadratic_free_decay_keys`):
+  ([SmallROV]) eq. 12; :func:`hindrax_ident.estimation.free_decay.quadratic_free_decay_keys`):
   linear_damping_n_s_per_m, quadratic_damping_n_s2_per_m2, added_mass_ode_kg (each with ``_std``) and
   ode_rms_residual_m_s2; the linear keys are unchanged.
-* ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] (seed 003) eq. 1 cubic per rotation direction from
+* ``hindrax ident thruster-fit FILE [--write CONFIG]``: [Hindrax-Drag] eq. 1 cubic per rotation direction from
   bollard-pull data (CSV with a header; column 1 pulse width in us, column 2 thrust in N). Prints
   ``{"negative": {c4..c1, c4_std..c1_std, thrust_relative_std, ...}, "positive": {...},
   "thrust_fit_uncertainty_rel": [negative, positive]}``. ``--write`` replaces the ``curve_negative:`` and
@@ -52,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--model", choices=("linear", "quadratic"), default="linear",
                             help="linear: log decrement and period only (default); quadratic: also fit the "
                                  "nonlinear ODE with linear + quadratic damping to the whole record "
-                                 "([SmallROV] (seed 004) eq. 12), adding linear_damping_n_s_per_m, "
+                                 "([SmallROV] eq. 12), adding linear_damping_n_s_per_m, "
                                  "quadratic_damping_n_s2_per_m2 and their _std")
     elif which == "thruster-fit":
         parser.add_argument("file", help="CSV with a header: pulse width (us), thrust (N)")

@@ -3,7 +3,7 @@ identification of a recorded campaign bag.
 
 Writes ``identification.yaml`` and ``report/index.html`` (default: beside the bag) and prints the summary
 table; the analysis is :mod:`hindrax_ident.identification.from_bag` (batch least squares with output-error
-refinement, [Hindrax-Drag] (seed 003) eqs. 6-8). When the bag holds the calibration steps' results
+refinement, [Hindrax-Drag] eqs. 6-8). When the bag holds the calibration steps' results
 (``identification/calibration``, published by the identification node when each step ends: ``hindrax ident start
 --calibrate ...`` with the recorder on), they are applied as ``hindrax run`` applies them: the thrust scales are
 estimated jointly with the fits (sections ``calibration`` and ``joint``), the inclining steps give the section

@@ -3,7 +3,7 @@
 * ``hindrax ident priors (--config FILE | --length-m L --width-m W --height-m H --density-kg-m3 RHO
   --frontal-area-m2 AF --side-area-m2 AS --top-area-m2 AT) [--mass-kg M --bg-m BG | --restoring-n-m-per-rad C]
   [--roll-inertia-kg-m2 I44 --pitch-inertia-kg-m2 I55]``: empirical added mass and damping from geometry
-  ([NTNU-Thesis] (seed 002) Sec. 3.1, App. A.1/A.2; :mod:`hindrax_ident.estimation.priors`). Prints one JSON object
+  ([NTNU-Thesis] Sec. 3.1, App. A.1/A.2; :mod:`hindrax_ident.estimation.priors`). Prints one JSON object
   with 6-element lists ``added_mass``, ``linear_damping``, ``quadratic_damping`` (SI, surge..yaw; null where an
   input is missing), ``units``, ``inputs`` and ``notes``. Frontal area: normal to x; side: normal to y; top: normal
   to z. With ``--config`` the box, density, mass, inertias and BG come from the vehicle file, the areas from the
@@ -16,8 +16,8 @@
   [--identification YAML --dof roll|pitch]``: roll or pitch free decay (CSV with a header; column 1 time s,
   column 2 the gyro rate in rad/s or the attitude angle in rad), fitted from its largest excursion on with the
   nonlinear ODE I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_ident.estimation.free_decay.
-  fit_quadratic_free_decay`): rigid + added inertia independent of the thrust curve ([Hindrax-AM] (seed 000)
-  eq. 4 applied to the vehicle, [SmallROV] (seed 004) eq. 12); ``total_inertia_kg_m2_std`` combines the fit's
+  fit_quadratic_free_decay`): rigid + added inertia independent of the thrust curve ([Hindrax-AM]
+  eq. 4 applied to the vehicle, [SmallROV] eq. 12); ``total_inertia_kg_m2_std`` combines the fit's
   std (``_std_fit``, white residuals assumed) with C's (``--stiffness-std``). With ``--identification`` the self-propelled
   inertia of that DOF is compared by the campaign's rule (:func:`~hindrax_ident.identification.verdicts.
   apply_reference_verdicts`): ``verdict`` suspect, with the ``reason``, when the two differ by more than 1.96

@@ -3,7 +3,7 @@ channel before a pool test.
 
 Each thruster is stepped alone at a small thrust (default 3 N along its configured direction). For each
 step the command prints the pulse width, the ESC channel and the wrench the model expects (base_link FLU,
-N and N m: column i of the thrust allocation matrix times the force, [Hindrax-Drag] (seed 003) eq. 9), so the
+N and N m: column i of the thrust allocation matrix times the force, [Hindrax-Drag] eq. 9), so the
 engineer can watch the vehicle (or a hand on the frame) and compare. Without ``--dry-run`` it drives the ESCs through
 the running stack: it arms through ``esc/set_armed`` (hindrax_msgs/SetArmed), publishes
 ``thrusters/command_pulse_width`` for ``--step-s`` seconds per thruster with neutral in between, then

@@ -1,6 +1,6 @@
-"""Drag coefficients and Reynolds numbers of the identified DOFs ([Hindrax-Drag] (seed 003) Table 4).
+"""Drag coefficients and Reynolds numbers of the identified DOFs ([Hindrax-Drag] Table 4).
 
-[Hindrax-Drag] (Seed 003) Table 4 reports, per DOF, a mean drag coefficient C_D with its standard deviation and
+[Hindrax-Drag] Table 4 reports, per DOF, a mean drag coefficient C_D with its standard deviation and
 the Reynolds-number range of the self-propelled tests, but it prints neither the projected
 areas, nor the characteristic length, nor the definition used for the rotational DOFs. What we
 implement (and what we cannot verify against the paper):
@@ -20,9 +20,9 @@ implement (and what we cannot verify against the paper):
   speed), so C_D = 2 k_q / (rho A_p R^3) with k_q in N m/(rad/s)^2 = kg m^2.
   :func:`rotational_drag_coefficient`. Table 4's rotational values (0.022-0.049) cannot be
   reproduced without the paper's A_p and R.
-* Reynolds number Re = U L / nu ([T] eq. 2.60; [Hindrax-AM] (seed 000) section 4 uses U_m V^(1/3) / nu with
-  nu = 1.01e-6 m^2/s). Default characteristic length: L = V^(1/3) ([Hindrax-AM] (seed 000) eq. 10 choice;
-  0.2483 m for the Hindrax prototype). For rotations U = |w| R. [Hindrax-Drag] (Seed 003) does not state its L;
+* Reynolds number Re = U L / nu ([T] eq. 2.60; [Hindrax-AM] section 4 uses U_m V^(1/3) / nu with
+  nu = 1.01e-6 m^2/s). Default characteristic length: L = V^(1/3) ([Hindrax-AM] eq. 10 choice;
+  0.2483 m for the Hindrax prototype). For rotations U = |w| R. [Hindrax-Drag] does not state its L;
   with L = 0.2483 m its surge range 0.5e5-1.1e5 corresponds to 0.20-0.45 m/s, plausible for
   the tests ("0.5 m/s needs about 25 N") but not verifiable.
 """
@@ -45,7 +45,7 @@ __all__ = [
     "drag_coefficient_samples",
 ]
 
-#: Kinematic viscosity of water used by [Hindrax-AM] (seed 000) (section 4): 1.01e-6 m^2/s.
+#: Kinematic viscosity of water used by [Hindrax-AM] (section 4): 1.01e-6 m^2/s.
 KINEMATIC_VISCOSITY_WATER_M2_S = 1.01e-6
 
 
@@ -57,7 +57,7 @@ def _positive(value: float, name: str) -> float:
 
 
 def characteristic_length_from_volume(volume_m3: float) -> float:
-    """L = V^(1/3) in m ([Hindrax-AM] (seed 000) eq. 10: 0.0824 m for the 1:3 model, 0.2483 m prototype).
+    """L = V^(1/3) in m ([Hindrax-AM] eq. 10: 0.0824 m for the 1:3 model, 0.2483 m prototype).
 
     Raises:
         EstimationError: volume not > 0.
@@ -67,12 +67,12 @@ def characteristic_length_from_volume(volume_m3: float) -> float:
 
 def reynolds_number(speed, characteristic_length_m: float,
                     kinematic_viscosity_m2_s: float = KINEMATIC_VISCOSITY_WATER_M2_S):
-    """Re = |U| L / nu ([T] eq. 2.60; [Hindrax-AM] (seed 000) section 4). Scalar or element-wise on arrays.
+    """Re = |U| L / nu ([T] eq. 2.60; [Hindrax-AM] section 4). Scalar or element-wise on arrays.
 
     Args:
         speed: U in m/s (for rotations pass |w| R).
         characteristic_length_m: L in m (> 0).
-        kinematic_viscosity_m2_s: nu in m^2/s (> 0), default 1.01e-6 ([Hindrax-AM] (seed 000)).
+        kinematic_viscosity_m2_s: nu in m^2/s (> 0), default 1.01e-6 ([Hindrax-AM]).
 
     Raises:
         EstimationError: non-positive L or nu.
@@ -108,12 +108,12 @@ def reynolds_range(speed, characteristic_length_m: float,
 def drag_coefficient(quadratic_damping: float, projected_area_m2: float,
                      fluid_density_kg_m3: float = 1000.0,
                      quadratic_damping_std: float = 0.0) -> Tuple[float, float]:
-    """C_D = 2 k_q / (rho A_p) and its std (docs/identification.md §1.A (h); [Hindrax-Drag] (seed 003) Table 4).
+    """C_D = 2 k_q / (rho A_p) and its std (docs/identification.md §1.A (h); [Hindrax-Drag] Table 4).
 
     Args:
-        quadratic_damping: k_q in N/(m/s)^2 = kg/m ([Hindrax-Drag] (seed 003) Table 3).
+        quadratic_damping: k_q in N/(m/s)^2 = kg/m ([Hindrax-Drag] Table 3).
         projected_area_m2: A_p normal to the motion in m^2 (> 0).
-        fluid_density_kg_m3: rho (> 0), default 1000 ([Hindrax-Drag] (seed 003) section 5).
+        fluid_density_kg_m3: rho (> 0), default 1000 ([Hindrax-Drag] section 5).
         quadratic_damping_std: std of k_q (>= 0), propagated linearly.
 
     Returns:

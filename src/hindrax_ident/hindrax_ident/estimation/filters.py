@@ -1,7 +1,7 @@
 """Kinematic Kalman filter and RTS smoother: velocity and acceleration from noisy sensors.
 
 Identification needs v and v_dot per DOF (docs/architecture.md §5: "velocities and accelerations
-come from sensors through filters, not from raw finite differences"). [Hindrax-Drag] (Seed 003) derived heave
+come from sensors through filters, not from raw finite differences"). [Hindrax-Drag] derived heave
 velocity "by deriving the altitude signal" and reported the resulting oscillations as the main
 perturbation of negative heave (section 5); a model-based filter avoids that.
 

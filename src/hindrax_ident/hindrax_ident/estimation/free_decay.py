@@ -1,6 +1,6 @@
-"""Added mass from free-decay (spring-supported free vibration) tests: [Hindrax-AM] (seed 000) eqs. 1-12.
+"""Added mass from free-decay (spring-supported free vibration) tests: [Hindrax-AM] eqs. 1-12.
 
-[Hindrax-AM] (Seed 000) supports a 1:3 model of Hindrax on springs (equivalent stiffness k_eq), releases it
+[Hindrax-AM] supports a 1:3 model of Hindrax on springs (equivalent stiffness k_eq), releases it
 from an initial displacement A and records its acceleration at 330 Hz for 10 s. The model is
 the 1-DOF damped oscillator m x'' + c x' + k_eq x = 0 with m = m_b + m_ad (eq. 1). From the
 displacement (double integral of the acceleration) it measures the damped frequency omega_d and
@@ -14,7 +14,7 @@ the log decrement delta, and computes:
     eq. 6   c = 2 zeta sqrt(k_eq (m_b + m_ad))                    (N s/m; the seed prints N.m.s)
     eq. 7   m_ad = k_eq / omega_n^2 - m_b with damping omitted, i.e. the measured frequency taken
             as omega_n: m_ad = k_eq / omega_d^2 - m_b ("simplified"; this is how the sixth
-            column of [Hindrax-AM] (seed 000) Tables 3-5 is computed, e.g. surge 1127.7 / 36.7824^2 - 0.39
+            column of [Hindrax-AM] Tables 3-5 is computed, e.g. surge 1127.7 / 36.7824^2 - 0.39
             = 0.4435 kg)
     eq. 8   C_M = m_ad / (rho V)
     eq. 9   KC = 2 pi A / D with D = V^(1/3) (section 3) and A = the initial displacement
@@ -95,7 +95,7 @@ __all__ = [
 
 
 # --------------------------------------------------------------------------------------
-# Closed-form relations ([Hindrax-AM] (seed 000) eqs. 2-12)
+# Closed-form relations ([Hindrax-AM] eqs. 2-12)
 # --------------------------------------------------------------------------------------
 def _pos(x: float, name: str) -> float:
     x = float(x)
@@ -112,7 +112,7 @@ def _zeta(z: float) -> float:
 
 
 def log_decrement(peak_amplitudes) -> float:
-    """delta = (1/n) ln(x_0 / x_n) over n periods ([Hindrax-AM] (seed 000) eq. 3, averaged over n peaks).
+    """delta = (1/n) ln(x_0 / x_n) over n periods ([Hindrax-AM] eq. 3, averaged over n peaks).
 
     Args:
         peak_amplitudes: (n + 1,) successive same-sign peak amplitudes (> 0), one period apart.
@@ -129,7 +129,7 @@ def log_decrement(peak_amplitudes) -> float:
 
 
 def damping_ratio_from_log_decrement(delta: float) -> float:
-    """zeta = delta / sqrt(4 pi^2 + delta^2) ([Hindrax-AM] (seed 000) eq. 3 inverted)."""
+    """zeta = delta / sqrt(4 pi^2 + delta^2) ([Hindrax-AM] eq. 3 inverted)."""
     delta = float(delta)
     if not (np.isfinite(delta) and delta >= 0):
         raise EstimationError(f"log decrement must be >= 0, got {delta}")
@@ -137,29 +137,29 @@ def damping_ratio_from_log_decrement(delta: float) -> float:
 
 
 def log_decrement_from_damping_ratio(zeta: float) -> float:
-    """delta = 2 pi zeta / sqrt(1 - zeta^2) ([Hindrax-AM] (seed 000) eq. 3)."""
+    """delta = 2 pi zeta / sqrt(1 - zeta^2) ([Hindrax-AM] eq. 3)."""
     z = _zeta(zeta)
     return 2.0 * np.pi * z / np.sqrt(1.0 - z * z)
 
 
 def natural_frequency(omega_d_rad_s: float, zeta: float) -> float:
-    """omega_n = omega_d / sqrt(1 - zeta^2) in rad/s ([Hindrax-AM] (seed 000) eq. 2)."""
+    """omega_n = omega_d / sqrt(1 - zeta^2) in rad/s ([Hindrax-AM] eq. 2)."""
     return _pos(omega_d_rad_s, "omega_d_rad_s") / np.sqrt(1.0 - _zeta(zeta) ** 2)
 
 
 def added_mass_exact(stiffness_n_per_m: float, omega_d_rad_s: float, zeta: float,
                      mass_kg: float) -> float:
-    """m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b in kg ([Hindrax-AM] (seed 000) eq. 5, based on omega_d)."""
+    """m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b in kg ([Hindrax-AM] eq. 5, based on omega_d)."""
     k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
     wd = _pos(omega_d_rad_s, "omega_d_rad_s")
     return k * (1.0 - _zeta(zeta) ** 2) / wd**2 - _pos(mass_kg, "mass_kg")
 
 
 def added_mass_simplified(stiffness_n_per_m: float, omega_rad_s: float, mass_kg: float) -> float:
-    """m_ad = k_eq / omega^2 - m_b in kg ([Hindrax-AM] (seed 000) eq. 7, damping omitted).
+    """m_ad = k_eq / omega^2 - m_b in kg ([Hindrax-AM] eq. 7, damping omitted).
 
     ``omega_rad_s`` is the measured oscillation frequency taken as omega_n (damping neglected);
-    [Hindrax-AM] (seed 000) Tables 3-5 (sixth column) evaluate it with the measured omega_d.
+    [Hindrax-AM] Tables 3-5 (sixth column) evaluate it with the measured omega_d.
     """
     k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
     w = _pos(omega_rad_s, "omega_rad_s")
@@ -167,7 +167,7 @@ def added_mass_simplified(stiffness_n_per_m: float, omega_rad_s: float, mass_kg:
 
 
 def added_mass_error_percent(added_mass_simplified_kg: float, added_mass_exact_kg: float) -> float:
-    """(m_ad,eq7 - m_ad,eq5) / m_ad,eq5 * 100 ([Hindrax-AM] (seed 000) eq. 11)."""
+    """(m_ad,eq7 - m_ad,eq5) / m_ad,eq5 * 100 ([Hindrax-AM] eq. 11)."""
     exact = float(added_mass_exact_kg)
     if exact == 0.0 or not np.isfinite(exact):
         raise EstimationError("exact added mass must be finite and non-zero")
@@ -175,27 +175,27 @@ def added_mass_error_percent(added_mass_simplified_kg: float, added_mass_exact_k
 
 
 def damping_coefficient(zeta: float, stiffness_n_per_m: float, total_mass_kg: float) -> float:
-    """c = 2 zeta sqrt(k_eq m) in N s/m, m = m_b + m_ad ([Hindrax-AM] (seed 000) eq. 6)."""
+    """c = 2 zeta sqrt(k_eq m) in N s/m, m = m_b + m_ad ([Hindrax-AM] eq. 6)."""
     return 2.0 * _zeta(zeta) * np.sqrt(_pos(stiffness_n_per_m, "stiffness_n_per_m")
                                        * _pos(total_mass_kg, "total_mass_kg"))
 
 
 def inertia_coefficient(added_mass_kg: float, volume_m3: float,
                         fluid_density_kg_m3: float = 1000.0) -> float:
-    """C_M = m_ad / (rho V), dimensionless ([Hindrax-AM] (seed 000) eq. 8)."""
+    """C_M = m_ad / (rho V), dimensionless ([Hindrax-AM] eq. 8)."""
     return float(added_mass_kg) / (_pos(fluid_density_kg_m3, "fluid_density_kg_m3")
                                    * _pos(volume_m3, "volume_m3"))
 
 
 def keulegan_carpenter(amplitude_m: float, characteristic_length_m: float) -> float:
-    """KC = 2 pi A / D ([Hindrax-AM] (seed 000) eq. 9; D = V^(1/3) for the ROV model)."""
+    """KC = 2 pi A / D ([Hindrax-AM] eq. 9; D = V^(1/3) for the ROV model)."""
     return 2.0 * np.pi * abs(float(amplitude_m)) / _pos(characteristic_length_m,
                                                          "characteristic_length_m")
 
 
 def prototype_added_mass(c_m: float, prototype_volume_m3: float,
                          fluid_density_kg_m3: float = 1000.0) -> float:
-    """m_ad,prototype = C_M rho V_prototype in kg ([Hindrax-AM] (seed 000) eq. 12; V = 0.0153 m^3 for Hindrax)."""
+    """m_ad,prototype = C_M rho V_prototype in kg ([Hindrax-AM] eq. 12; V = 0.0153 m^3 for Hindrax)."""
     return float(c_m) * _pos(fluid_density_kg_m3, "fluid_density_kg_m3") * _pos(
         prototype_volume_m3, "prototype_volume_m3")
 
@@ -203,7 +203,7 @@ def prototype_added_mass(c_m: float, prototype_volume_m3: float,
 def free_decay_table_row(omega_d_rad_s: float, zeta: float, stiffness_n_per_m: float,
                          mass_kg: float, initial_displacement_m: Optional[float] = None,
                          characteristic_length_m: Optional[float] = None) -> dict:
-    """One row of [Hindrax-AM] (seed 000) Tables 3-5 from (omega_d, zeta, k_eq, m_b) (and A, D for KC).
+    """One row of [Hindrax-AM] Tables 3-5 from (omega_d, zeta, k_eq, m_b) (and A, D for KC).
 
     Returns a dict with ``omega_n_rad_s`` (eq. 2), ``damping_n_s_per_m`` (eq. 6 with the eq. 5
     added mass, as the seed's text prescribes), ``added_mass_simplified_kg`` (eq. 7),
@@ -345,7 +345,7 @@ def _alternating_extrema(sx: np.ndarray, distance: int):
 
 @dataclass(frozen=True, eq=False)
 class FreeDecayResult:
-    """Result of :func:`analyse_free_decay` ([Hindrax-AM] (seed 000) eqs. 1-12).
+    """Result of :func:`analyse_free_decay` ([Hindrax-AM] eqs. 1-12).
 
     Scalar attributes (units in the names): ``omega_d_rad_s`` (extremum spacing),
     ``zeta`` (eq. 3 from ``log_decrement``), ``log_decrement``, ``omega_n_rad_s`` (eq. 2),
@@ -453,17 +453,17 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
                        highpass_fraction: Optional[float] = 0.1,
                        release_threshold: float = 0.5, min_peak_fraction: float = 0.05,
                        max_periods: Optional[int] = None) -> FreeDecayResult:
-    """Full [Hindrax-AM] (seed 000) analysis of one free-decay record (module docstring for the method).
+    """Full [Hindrax-AM] analysis of one free-decay record (module docstring for the method).
 
     Args:
         t_s: (n,) strictly increasing sample times in s (seed: 330 Hz for 10 s).
         acceleration_m_s2: (n,) acceleration along the tested axis in m/s^2 (any constant
             bias, e.g. gravity on a tilted sensor, is removed).
-        stiffness_n_per_m: equivalent spring stiffness k_eq ([Hindrax-AM] (seed 000): 1127.7 or 659.9 N/m).
-        mass_kg: body (model) mass m_b ([Hindrax-AM] (seed 000): 0.39 kg).
-        volume_m3: displaced volume V of the body ([Hindrax-AM] (seed 000) model: 0.00056 m^3).
+        stiffness_n_per_m: equivalent spring stiffness k_eq ([Hindrax-AM]: 1127.7 or 659.9 N/m).
+        mass_kg: body (model) mass m_b ([Hindrax-AM]: 0.39 kg).
+        volume_m3: displaced volume V of the body ([Hindrax-AM] model: 0.00056 m^3).
         fluid_density_kg_m3: rho (default 1000).
-        kinematic_viscosity_m2_s: nu for Re (default 1.01e-6, [Hindrax-AM] (seed 000) section 4).
+        kinematic_viscosity_m2_s: nu for Re (default 1.01e-6, [Hindrax-AM] section 4).
         highpass_fraction: high-pass cut-off as a fraction of the damped frequency for the
             displacement (None: no high-pass, only bias removal).
         release_threshold: see :func:`find_release_index`.
@@ -569,7 +569,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
 
 
 # --------------------------------------------------------------------------------------
-# Quadratic damping: output-error fit of the nonlinear free-decay ODE ([SmallROV] (seed 004) eqs. 12-16)
+# Quadratic damping: output-error fit of the nonlinear free-decay ODE ([SmallROV] eqs. 12-16)
 # --------------------------------------------------------------------------------------
 #: Signals the ODE fit can compare with the record (``output``): what the sensor measured.
 DECAY_OUTPUTS = ("acceleration", "velocity", "displacement")
@@ -579,8 +579,8 @@ DECAY_OUTPUTS = ("acceleration", "velocity", "displacement")
 class QuadraticDecayFit:
     """Result of :func:`fit_quadratic_free_decay`.
 
-    The model is the 1-DOF free decay with linear and quadratic damping of [SmallROV] (seed 004)
-    eq. 12 with the restoring term of [Hindrax-AM] (seed 000) eq. 1 (a spring of stiffness k, or a
+    The model is the 1-DOF free decay with linear and quadratic damping of [SmallROV]
+    eq. 12 with the restoring term of [Hindrax-AM] eq. 1 (a spring of stiffness k, or a
     hydrostatic restoring moment C for roll/pitch):
 
         M x'' + b1 x' + b2 |x'| x' + k x = 0,   M = m_b + m_ad   (rigid + added inertia)
@@ -686,15 +686,15 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
                              initial_linear_damping: Optional[float] = None) -> QuadraticDecayFit:
     """Fit M x'' + b1 x' + b2 |x'| x' + k x = 0 to a whole free-decay record (output error).
 
-    The amplitude-dependent decrement of quadratic damping ([SmallROV] (seed 004) eqs. 12-16: the
+    The amplitude-dependent decrement of quadratic damping ([SmallROV] eqs. 12-16: the
     pendulum's K_L x' + K_Q |x'| x') is what separates b1 from b2: a log decrement
-    ([Hindrax-AM] (seed 000) eq. 3) assumes a constant decrement and reports one equivalent linear
-    damping that depends on the amplitude. [SmallROV] (seed 004) eq. 17 estimates the coefficients by
+    ([Hindrax-AM] eq. 3) assumes a constant decrement and reports one equivalent linear
+    damping that depends on the amplitude. [SmallROV] eq. 17 estimates the coefficients by
     linear least squares on differentiated angles; here the ODE is integrated instead
     (``scipy.integrate.solve_ivp`` with forward sensitivities) and the simulated output is fitted to
     the measured one with ``scipy.optimize.least_squares`` (trust-region reflective, b1, b2 >= 0,
     M > 0), so no signal is differentiated or integrated. The stiffness k is known (spring:
-    [Hindrax-AM] (seed 000) k_eq; roll/pitch: the inclining test's restoring moment per radian), so
+    [Hindrax-AM] k_eq; roll/pitch: the inclining test's restoring moment per radian), so
     M follows from the period and the result is independent of any thrust curve.
 
     Args:
@@ -853,7 +853,7 @@ def restoring_from_inclining(arm_m, tilt_rad, test_mass_kg: float, test_volume_m
     plane of the tilt) the static equilibrium is w d cos(phi) = C sin(phi) + M0, i.e. w d = C tan(phi) + M0 / cos(phi)
     ~= C tan(phi) + M0 for small tilts (M0: the moment of the vehicle's own list). C (and M0) by linear least
     squares over the points, std from the residual variance. C = W BG for a vehicle whose weight equals its
-    buoyancy ([NTNU-Thesis] (seed 002) Sec. 3.1.2), so BG = C / (m g) when the vehicle mass is given. This is
+    buoyancy ([NTNU-Thesis] Sec. 3.1.2), so BG = C / (m g) when the vehicle mass is given. This is
     the classical inclining experiment; the stiffness it gives is what turns a roll/pitch free-decay period into
     rigid + added inertia (:func:`fit_quadratic_free_decay` with ``stiffness`` = C), free of any thrust curve.
     Assumes the test mass hangs at the CG's height (a mass above/below it shifts the CG too).

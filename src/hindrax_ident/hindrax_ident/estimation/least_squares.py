@@ -1,19 +1,19 @@
-"""Batch least squares with parameter standard deviations ([Hindrax-Drag] (seed 003), eqs. 2-8).
+"""Batch least squares with parameter standard deviations ([Hindrax-Drag], eqs. 2-8).
 
 This module is the offline estimation core of the identification package:
 
-* :func:`fit_linear_model` is the ordinary least-squares estimator of [Hindrax-Drag] (seed 003) eq. 6,
+* :func:`fit_linear_model` is the ordinary least-squares estimator of [Hindrax-Drag] eq. 6,
   theta = (X^T X)^-1 X^T Y, with the parameter covariance sigma^2 (X^T X)^-1 (eq. 7) and the
   unbiased residual variance sigma^2 = S / (n - p) of eq. 8 (Beck and Arnold 1977; also
   docs/identification.md §1.D "Ordinary LS covariance").
-* :func:`fit_drag` fits [Hindrax-Drag] (seed 003) eq. 2, F = k_q |v| v + k_l v + b, to steady-state samples.
-  [Hindrax-Drag] (Seed 003) eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state
+* :func:`fit_drag` fits [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, to steady-state samples.
+  [Hindrax-Drag] eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state
   ("the absolute value symbol is to conserve the velocity sign"), so that one model covers
   both signs of the velocity.
 * :func:`fit_dynamic` fits the 1-DOF transient model
   tau = m v_dot + k_q |v| v + k_l v + b (+ W*BG sin(angle)) (docs/architecture.md §5; Fossen/SNAME,
   positive added mass and damping), optionally with separate quadratic damping for v > 0 and
-  v < 0 (heave: [Hindrax-Drag] (seed 003) Table 3 reports positive and negative heave separately).
+  v < 0 (heave: [Hindrax-Drag] Table 3 reports positive and negative heave separately).
 * :func:`confidence_interval` gives Student-t intervals for any estimate with n - p degrees of
   freedom.
 
@@ -113,7 +113,7 @@ def check_time_vector(t, name: str = "t_s", min_samples: int = 2) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class LsResult:
-    """Result of an ordinary least-squares fit ([Hindrax-Drag] (seed 003) eqs. 6-8).
+    """Result of an ordinary least-squares fit ([Hindrax-Drag] eqs. 6-8).
 
     Attributes:
         theta: (p,) estimated parameters, eq. 6.
@@ -188,17 +188,17 @@ class _NamedFit:
 
     @property
     def quadratic_damping(self) -> Optional[float]:
-        """Quadratic damping k_q of [Hindrax-Drag] (seed 003) eq. 2 (None when not fitted, e.g. fitted per direction)."""
+        """Quadratic damping k_q of [Hindrax-Drag] eq. 2 (None when not fitted, e.g. fitted per direction)."""
         return self._value("quadratic_damping")
 
     @property
     def quadratic_damping_std(self) -> Optional[float]:
-        """Standard deviation of k_q ([Hindrax-Drag] (seed 003) eq. 7)."""
+        """Standard deviation of k_q ([Hindrax-Drag] eq. 7)."""
         return self._std("quadratic_damping")
 
     @property
     def linear_damping(self) -> Optional[float]:
-        """Linear damping k_l of [Hindrax-Drag] (seed 003) eq. 2 (Table 3 second column)."""
+        """Linear damping k_l of [Hindrax-Drag] eq. 2 (Table 3 second column)."""
         return self._value("linear_damping")
 
     @property
@@ -208,7 +208,7 @@ class _NamedFit:
 
     @property
     def bias(self) -> Optional[float]:
-        """Constant force/moment b of [Hindrax-Drag] (seed 003) eq. 2 (Table 3 third column; net buoyancy in heave)."""
+        """Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net buoyancy in heave)."""
         return self._value("bias")
 
     @property
@@ -229,7 +229,7 @@ class _NamedFit:
 
 @dataclass(frozen=True, eq=False)
 class DragFit(_NamedFit):
-    """Steady-state drag fit of [Hindrax-Drag] (seed 003) eq. 2: F = k_q |v| v + k_l v + b.
+    """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
 
     Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
     ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m); the last two only when
@@ -278,7 +278,7 @@ class DynamicFit(_NamedFit):
 
     @property
     def quadratic_damping_positive(self) -> Optional[float]:
-        """k_q for v > 0 (heave: positive = down, [Hindrax-Drag] (seed 003) section 4.1)."""
+        """k_q for v > 0 (heave: positive = down, [Hindrax-Drag] section 4.1)."""
         return self._value("quadratic_damping_positive")
 
     @property
@@ -312,7 +312,7 @@ class DynamicFit(_NamedFit):
 # --------------------------------------------------------------------------------------
 def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
                      rcond: Optional[float] = None) -> LsResult:
-    """Ordinary least squares with parameter covariance ([Hindrax-Drag] (seed 003) eqs. 4-8).
+    """Ordinary least squares with parameter covariance ([Hindrax-Drag] eqs. 4-8).
 
     theta = (X^T X)^-1 X^T y (eq. 6), sigma2 = |y - X theta|^2 / (n - p) (eq. 8),
     covariance = sigma2 (X^T X)^-1 and std = sqrt(diag(covariance)) (eq. 7).
@@ -381,7 +381,7 @@ def confidence_interval(value, std, dof: int, level: float = 0.95):
     Args:
         value: estimate(s) (scalar or array).
         std: standard deviation(s) of the estimate(s), same shape as ``value``.
-        dof: degrees of freedom (n - p for an LS fit, [Hindrax-Drag] (seed 003) eq. 8), integer >= 1.
+        dof: degrees of freedom (n - p for an LS fit, [Hindrax-Drag] eq. 8), integer >= 1.
         level: confidence level in (0, 1), default 0.95.
 
     Returns:
@@ -420,7 +420,7 @@ def _drag_regressors(v: np.ndarray, quadratic: bool, linear: bool, bias: bool) -
 
 
 def fit_drag(velocity, force, include_linear: bool = True, include_bias: bool = True) -> DragFit:
-    """Fit [Hindrax-Drag] (seed 003) eq. 2, F = k_q |v| v + k_l v + b, by least squares (eqs. 3-8).
+    """Fit [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, by least squares (eqs. 3-8).
 
     The regressor row is [|v| v, v, 1]: eq. 3 prints x^2, but eq. 2 and its text use |v| v to
     keep the sign, which is what we fit (see module docstring).
@@ -455,7 +455,7 @@ def fit_dynamic(acceleration, velocity, force, separate_quadratic: bool = False,
     """Fit the 1-DOF transient model tau = m v_dot + k_q |v| v + k_l v + b (+ k_r r).
 
     Regressor row: [v_dot, |v| v, v, 1] (docs/architecture.md §5), or with
-    ``separate_quadratic`` [v_dot, |v| v [v > 0], |v| v [v < 0], v, 1] ([Hindrax-Drag] (seed 003) Table 3
+    ``separate_quadratic`` [v_dot, |v| v [v > 0], |v| v [v < 0], v, 1] ([Hindrax-Drag] Table 3
     positive/negative heave), plus the optional restoring column r (e.g. sin(roll) so that the
     coefficient is W*BG in N m, Fossen's g(eta) for roll/pitch, docs/identification.md §3 C4).
 

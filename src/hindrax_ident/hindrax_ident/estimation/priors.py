@@ -1,4 +1,4 @@
-"""Empirical priors from geometry: added mass, linear and quadratic damping ([NTNU-Thesis] (seed 002) Sec. 3.1, App. A).
+"""Empirical priors from geometry: added mass, linear and quadratic damping ([NTNU-Thesis] Sec. 3.1, App. A).
 
 This is a transcription of the thesis's two MATLAB scripts, the ones that produced its Chapter 4 "Empirical"
 columns: App. A.1 ("Empirical Added Mass estimator for ROV") and App. A.2 ("Empirical Damping estimator for

@@ -19,11 +19,11 @@ Noise variance and calibrated covariance (our estimator; the seeds contain no re
 * Its expectation is sigma^2 (sum_j w_j - tr(P Q)) with Q_k = lambda^2 Q_{k-1} + phi phi^T
   (the information matrix with squared weights), so
   sigma2_hat = S_k / (N_eff - tr(P Q)), N_eff = sum_j lambda^(k-j).
-  With lambda = 1 this is [Hindrax-Drag] (seed 003) eq. 8, S / (n - p).
+  With lambda = 1 this is [Hindrax-Drag] eq. 8, S / (n - p).
 * The covariance of a weighted LS estimate is sigma^2 P Q P (sandwich form). The prior is
   treated as a pseudo-measurement, Q_0 = P0^-1, so that the covariance starts at
   sigma^2 P0 and, for lambda = 1, P Q P = P exactly: the covariance is sigma2_hat * P, the
-  batch covariance of [Hindrax-Drag] (seed 003) eq. 7 (plus the negligible diffuse prior).
+  batch covariance of [Hindrax-Drag] eq. 7 (plus the negligible diffuse prior).
   :meth:`RecursiveLeastSquares.reset_covariance` restarts Q = P^-1 in the same way.
   For lambda < 1 the plain sigma2_hat * P (i.e. std = sqrt(diag(P) sigma2_hat)) overstates
   the variance (by the factor 1 + lambda, about 2, for a constant regressor in steady state);

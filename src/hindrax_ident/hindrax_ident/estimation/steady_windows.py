@@ -1,6 +1,6 @@
 """Automatic detection of steady-velocity windows in a self-propelled test record.
 
-[Hindrax-Drag] (Seed 003) (sections 4-5) fits F = k_q |v| v + k_l v + b to "the data collected in all tests with
+[Hindrax-Drag] (sections 4-5) fits F = k_q |v| v + k_l v + b to "the data collected in all tests with
 constant velocity" of each DOF: a ladder of constant thrust levels, each held until the velocity
 is steady. This module finds those windows in a record of (time, velocity, applied force) so the
 steady-state LS of :func:`hindrax_ident.estimation.least_squares.fit_drag` can be run on them
@@ -26,7 +26,7 @@ Algorithm (all thresholds are arguments; defaults in brackets):
 
 Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise
 (DVL ~ 0.01 m/s, filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient
-accelerations (force / inertia). [Hindrax-Drag] (Seed 003)'s heave runs never became steady for lack of depth
+accelerations (force / inertia). [Hindrax-Drag]'s heave runs never became steady for lack of depth
 (section 5); expect no windows there and use the transient fit (least_squares.fit_dynamic).
 """
 
@@ -205,13 +205,13 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
 
 def steady_state_data(windows: Sequence[SteadyWindow], velocity=None, force=None,
                       use_means: bool = True) -> Tuple[np.ndarray, np.ndarray]:
-    """Data for the steady-state LS of [Hindrax-Drag] (seed 003) eqs. 3-8 from detected windows.
+    """Data for the steady-state LS of [Hindrax-Drag] eqs. 3-8 from detected windows.
 
     Args:
         windows: output of :func:`detect_steady_windows`.
         velocity, force: the full (n,) records; required when ``use_means`` is False.
         use_means: True -> one (velocity_mean, force_mean) point per window; False -> all
-            samples inside the windows concatenated (what [Hindrax-Drag] (seed 003) section 5 describes).
+            samples inside the windows concatenated (what [Hindrax-Drag] section 5 describes).
 
     Returns:
         (velocity, force) 1-D arrays ready for ``fit_drag``.

@@ -1,6 +1,6 @@
-"""Thruster curve fit from bollard-pull data ([Hindrax-Drag] (seed 003) eq. 1, section 2.2.1, Table 2).
+"""Thruster curve fit from bollard-pull data ([Hindrax-Drag] eq. 1, section 2.2.1, Table 2).
 
-[Hindrax-Drag] (Seed 003) models the bollard-pull thrust of one thruster as a cubic in the ESC pulse width P (us),
+[Hindrax-Drag] models the bollard-pull thrust of one thruster as a cubic in the ESC pulse width P (us),
 one cubic per rotation direction:
 
     tau = c4 P^3 + c3 P^2 + c2 P + c1          (eq. 1, coefficients by LS)
@@ -20,7 +20,7 @@ cubic in the centred and scaled variable s = (P - neutral_us) / scale_us (scale 
 seed's raw form exactly: tau = sum_k a_k s^k = sum_j c_j P^j with c = T a, where
 T[j, k] = binom(k, j) (-neutral)^(k-j) / scale^k, and the covariance is propagated exactly,
 Cov(c) = T Cov(a) T^T. The raw standard deviations are large and strongly correlated (as in
-[Hindrax-Drag] (seed 003) Table 2, e.g. c1 = 927.18 +- 137.82): use :meth:`CubicFit.predict_std` for the
+[Hindrax-Drag] Table 2, e.g. c1 = 927.18 +- 137.82): use :meth:`CubicFit.predict_std` for the
 uncertainty of the thrust itself.
 
 Relative thrust uncertainty for the identification intervals (issue 16 item 4; our definition, the seed gives
@@ -35,7 +35,7 @@ is the fit's statistical uncertainty at the bollard-pull test's battery voltage 
 session (thrust ~ V^1.2, docs/devices.md §5.3) is not in it.
 
 :func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses
-it because [Hindrax-Drag] (seed 003) Table 2's printed positive-direction row evaluates to about -1070 N at
+it because [Hindrax-Drag] Table 2's printed positive-direction row evaluates to about -1070 N at
 1500 us (docs/architecture.md §4), while the negative row is consistent (-15.6 N at 1100 us,
 about -1.1 N at 1500 us).
 """
@@ -55,13 +55,13 @@ from .least_squares import (EstimationError, LsResult, as_float_array, check_sam
 __all__ = ["CubicFit", "ThrusterCurveFit", "fit_cubic", "fit_thruster_curve",
            "point_reflection", "evaluate_cubic", "NEUTRAL_US"]
 
-#: ESC stop pulse width ([Hindrax-Drag] (seed 003) section 2.2.1).
+#: ESC stop pulse width ([Hindrax-Drag] section 2.2.1).
 NEUTRAL_US = 1500.0
 _SCALE_US = 400.0
 
 
 def evaluate_cubic(c4: float, c3: float, c2: float, c1: float, pulse_width_us) -> np.ndarray:
-    """tau = c4 P^3 + c3 P^2 + c2 P + c1 in N at pulse widths P in us ([Hindrax-Drag] (seed 003) eq. 1).
+    """tau = c4 P^3 + c3 P^2 + c2 P + c1 in N at pulse widths P in us ([Hindrax-Drag] eq. 1).
 
     Returns a float for scalar input, an array otherwise.
     """
@@ -84,8 +84,8 @@ class CubicFit:
     """One cubic tau(P) = c4 P^3 + c3 P^2 + c2 P + c1 with exact raw covariance.
 
     Attributes:
-        c4, c3, c2, c1: raw coefficients (N/us^3, N/us^2, N/us, N), [Hindrax-Drag] (seed 003) naming.
-        c4_std, c3_std, c2_std, c1_std: their standard deviations ([Hindrax-Drag] (seed 003) eq. 7, propagated).
+        c4, c3, c2, c1: raw coefficients (N/us^3, N/us^2, N/us, N), [Hindrax-Drag] naming.
+        c4_std, c3_std, c2_std, c1_std: their standard deviations ([Hindrax-Drag] eq. 7, propagated).
         covariance: (4, 4) covariance of (c4, c3, c2, c1).
         n: number of samples used; residual_std_n: sqrt(sigma^2) of eq. 8 in N.
         centre_us, scale_us: the centring used internally; ls: the centred LS result
@@ -189,7 +189,7 @@ class ThrusterCurveFit:
 
 def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US,
               scale_us: float = _SCALE_US) -> CubicFit:
-    """LS fit of tau = c4 P^3 + c3 P^2 + c2 P + c1 ([Hindrax-Drag] (seed 003) eq. 1) with exact raw covariance.
+    """LS fit of tau = c4 P^3 + c3 P^2 + c2 P + c1 ([Hindrax-Drag] eq. 1) with exact raw covariance.
 
     Args:
         pulse_width_us: (n,) pulse widths in us.
@@ -230,7 +230,7 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US,
 def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
                        include_neutral: bool = True, neutral_tolerance_us: float = 0.5,
                        deadband_us: float = 0.0) -> ThrusterCurveFit:
-    """Fit one cubic per rotation direction from bollard-pull data ([Hindrax-Drag] (seed 003) section 2.2.1).
+    """Fit one cubic per rotation direction from bollard-pull data ([Hindrax-Drag] section 2.2.1).
 
     Args:
         pulse_width_us: (n,) pulse widths in us (seed: 1100-1900 us).
@@ -272,7 +272,7 @@ def point_reflection(c4: float, c3: float, c2: float, c1: float,
     """Coefficients of f_pos(P) = -f_neg(2 neutral - P) (point reflection about (neutral, 0)).
 
     Args:
-        c4, c3, c2, c1: the negative-direction cubic ([Hindrax-Drag] (seed 003) Table 2 naming).
+        c4, c3, c2, c1: the negative-direction cubic ([Hindrax-Drag] Table 2 naming).
         neutral_us: centre of the reflection (1500 us).
 
     Returns:

@@ -1,4 +1,4 @@
-"""Known-force thrust calibration and joint estimation (issue 17 items 1-3, 5; [Hindrax-Drag] (seed 003) §6).
+"""Known-force thrust calibration and joint estimation (issue 17 items 1-3, 5; [Hindrax-Drag] §6).
 
 A self-propelled test only sees force / inertia and force / damping: if every thruster gives s times its curve,
 inertia, damping and bias all come out s times too (docs/identification.md). The ballast step of the executive
@@ -8,7 +8,7 @@ inertia, damping and bias all come out s times too (docs/identification.md). The
   ``wrench_cmd_frd``) multiplied by the calibrated point scale, so that the fits come out near physical units.
 * :func:`joint_estimate` then estimates the scales as parameters together with every DOF's parameters: prior
   N(1, sigma_s^2) from ``thrusters.thrust_uncertainty_rel``, each calibration step a measurement, the empirical
-  priors ([NTNU-Thesis] (seed 002) App. A, weight ``identification.prior_std_rel``) on the physical parameters, and
+  priors ([NTNU-Thesis] App. A, weight ``identification.prior_std_rel``) on the physical parameters, and
   each DOF's fit in curve units phi = theta / s (the model is linear in 1/s: an exact reparametrisation) as a
   Gaussian measurement; Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2-§6.3). The
   reported intervals carry the calibration's own uncertainty; :func:`~.verdicts.assess_dof` then adds no second
@@ -226,7 +226,7 @@ def _prior_entry(cfg, dof: str) -> dict:
 
 
 def _theta_priors(dof: str, names: list, cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:
-    """{parameter: (mean, std)} of the empirical priors ([NTNU-Thesis] (seed 002) App. A.1/A.2 via
+    """{parameter: (mean, std)} of the empirical priors ([NTNU-Thesis] App. A.1/A.2 via
     :func:`_prior_entry`) on the physical parameters: inertia = rigid + prior added mass with std
     ``prior_std_rel`` x the added mass (the rigid part is known), quadratic and linear damping (heave: the same
     prior for both directions) with std ``prior_std_rel`` x the value. Bias and restoring have none."""

@@ -4,7 +4,7 @@ The campaign logic is the :class:`~.executive.Executive` (the same object the id
 ROS graph, :mod:`.node`); here its plant is a :class:`~hindrax_ident.sim.simulator.Simulator` stepped in this
 process: each control tick (``identification.estimate_rate_hz``; the simulator steps in between) the wrench is
 allocated (:class:`~hindrax_drivers.allocation.core.AllocationCore`), its pulse widths drive the simulator's
-thrusters, the thrust curve of those widths ([Hindrax-Drag] (seed 003) eq. 1) is what the executive records, and
+thrusters, the thrust curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and
 the sensor samples the simulator produced during the tick go to the executive. At the end or on abort every
 thruster is commanded neutral. The simulator's truth (position, attitude) goes into the record for tests and
 plots only; the executive never sees it.

@@ -1,15 +1,15 @@
 """Per-DOF estimators: online (Kalman filter + RLS), offline batch LS + output-error, steady-state LS.
 
-Model per DOF (docs/architecture.md §5; [Hindrax-Drag] (seed 003) eq. 2 extended with the inertia term; Fossen/SNAME positive
+Model per DOF (docs/architecture.md §5; [Hindrax-Drag] eq. 2 extended with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
 
     tau = M nu_dot + k_q |nu| nu + k_l nu + b (+ k_r s(eta))
 
 * M: inertia, rigid + added (kg or kg m^2); added mass = M - rigid (rigid from the configuration).
-* heave: separate quadratic AND linear damping for w > 0 (down, "positive heave", [Hindrax-Drag] (seed 003) §4.1) and w < 0
-  (the simulator and configuration carry both pairs; [Hindrax-Drag] (seed 003) Table 3 reports both). The configured
+* heave: separate quadratic AND linear damping for w > 0 (down, "positive heave", [Hindrax-Drag] §4.1) and w < 0
+  (the simulator and configuration carry both pairs; [Hindrax-Drag] Table 3 reports both). The configured
   truth has different linear terms per direction (5.26 / 11.84 kg/s), so a single linear column would bias
-  the quadratic terms. b is the force holding depth, (rho V - m) g = +0.785 N FRD ([Hindrax-Drag] (seed 003) §5).
+  the quadratic terms. b is the force holding depth, (rho V - m) g = +0.785 N FRD ([Hindrax-Drag] §5).
 * roll: s = cos(theta) sin(phi); pitch: s = sin(theta); k_r = z_g W - z_b B (Fossen g(eta),
   docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23; "W*BG" when W = B), 4.50 N m for Hindrax.
 
@@ -33,7 +33,7 @@ Methods:
    and the forgetting window (1 / (1 - lambda) = 20 s at 50 Hz) is short, so the online values are a live
    indicator (a few per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly
    conditioned online), not the reported estimate.
-2. Offline equation-error batch LS on the smoothed signals ([Hindrax-Drag] (seed 003) eqs. 6-8,
+2. Offline equation-error batch LS on the smoothed signals ([Hindrax-Drag] eqs. 6-8,
    :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`).
 3. Offline output-error refinement (the reported result, :class:`.output_error.OutputErrorFit`): starting from (2), ``scipy.optimize.least_squares``
    integrates the 1-DOF ODE over segments (3 s; initial velocity from the smoother; RK4 at the tick rate;
@@ -46,13 +46,13 @@ Methods:
    more than the curvature of the depth, and 3 s segments left the upward quadratic damping with a 3 % standard
    deviation (measured on one graph campaign: 3.0 % at 3 s, 1.6 % at 5 s, 0.65 % at 10 s, errors within
    about one of them). Covariance: sigma^2 (J^T J)^-1 with sigma^2 = SSR / (n - p)
-   ([Hindrax-Drag] (seed 003) eq. 8 analogue), inflated by (1 + rho) / (1 - rho) for the lag-1 autocorrelation rho of
+   ([Hindrax-Drag] eq. 8 analogue), inflated by (1 + rho) / (1 - rho) for the lag-1 autocorrelation rho of
    consecutive residual samples within segments (effective sample size of AR(1) residuals). 95 % intervals are Student-t.
 4. The seed's own method (:func:`steady_state_fit`): steady windows detected automatically
    (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity per run,
-   then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag] (seed 003) eqs. 2-8).
+   then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag] eqs. 2-8).
    Roll/pitch windows are corrected by the output-error restoring term; heave fits each direction
-   separately and usually has too few windows (no steady state in the depth available, [Hindrax-Drag] (seed 003) §5).
+   separately and usually has too few windows (no steady state in the depth available, [Hindrax-Drag] §5).
 """
 from __future__ import annotations
 
@@ -217,7 +217,7 @@ def rls_prior(cfg: VehicleConfig, dof: str, prior_std_rel: float) -> tuple[np.nd
 
     inertia = rigid + prior added mass, std ``prior_std_rel`` x the added mass (the rigid part is known);
     quadratic and linear damping (heave: the same prior for both directions) std ``prior_std_rel`` x the value
-    ([NTNU-Thesis] (seed 002) App. A.1/A.2 via :func:`~.results.prior_entries`; a solid prism of the configured
+    ([NTNU-Thesis] App. A.1/A.2 via :func:`~.results.prior_entries`; a solid prism of the configured
     box); bias: the expected one (0; heave (rho V - m) g) with :data:`RLS_PRIOR_BIAS_STD`; restoring: the
     configured z_g W - z_b B with ``prior_std_rel`` x its value. None when ``prior_std_rel`` is 0 or the geometry
     gives no prior."""
@@ -350,7 +350,7 @@ class OnlineDofEstimator:
 
     def _converged(self, std: np.ndarray) -> bool:
         """Inertia, quadratic damping and restoring: std <= rel_tol |value|; bias: std <= 0.1 N (0.02 N m).
-        Linear damping is left out (small and weakly excited at the seed's speeds, [Hindrax-Drag] (seed 003) Table 3)."""
+        Linear damping is left out (small and weakly excited at the seed's speeds, [Hindrax-Drag] Table 3)."""
         if self.rls.n_samples < 500 or not np.all(np.isfinite(std)):
             return False
         th = self.rls.theta
@@ -576,7 +576,7 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
 
 def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, restoring_coefficient: float = 0.0,
                      min_duration_s: float = 2.0, max_std: float = 0.02, max_slope: float = 0.02):
-    """The seed's method: steady windows per run, fit_drag on window means ([Hindrax-Drag] (seed 003) eqs. 2-8).
+    """The seed's method: steady windows per run, fit_drag on window means ([Hindrax-Drag] eqs. 2-8).
 
     t, velocity (smoothed), force (thrust model), run_id (-1 outside runs) (n,); restoring (n,) and its
     coefficient are subtracted from the force for roll/pitch. Returns (params {name: (value, std)},

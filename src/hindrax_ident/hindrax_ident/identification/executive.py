@@ -1,4 +1,4 @@
-"""The identification executive: [Hindrax-Drag] (seed 003) §4 manoeuvres, one control tick at a time (pure, no rclpy).
+"""The identification executive: [Hindrax-Drag] §4 manoeuvres, one control tick at a time (pure, no rclpy).
 
 One object runs the whole campaign logic (dive, positioning, level ladders, holds, pool-box planning, limits, the
 online Kalman + RLS) for both plants: the simulator stepped in-process (:class:`~.campaign.Campaign`, ``hindrax
@@ -15,10 +15,10 @@ Driving it (one control tick of ``tick_s``)::
     record = ex.record()
 
 ``thrust_n`` is the thrust model of what goes to the thrusters for this tick: in-process the thrust curve
-([Hindrax-Drag] (seed 003) eq. 1) of the pulse widths the allocation gives for ``w``; on the graph that of
+([Hindrax-Drag] eq. 1) of the pulse widths the allocation gives for ``w``; on the graph that of
 the widths the ESC node last reported writing (:func:`~.signals.thrust_of_written_widths`). The recorded force
 is that thrust through the first-order lag ``thrusters.time_constant_s`` over the elapsed time (exact for a
-command held over the tick), times the thrust allocation matrix ([Hindrax-Drag] (seed 003) eq. 9), body FRD.
+command held over the tick), times the thrust allocation matrix ([Hindrax-Drag] eq. 9), body FRD.
 
 Sequence (docs/identification.md): dive to the altitude setpoint (``identification.altitude_setpoint_m``,
 Ping1D) and settle (the gyro and accelerometer biases are averaged while still), then for each requested DOF:
@@ -31,8 +31,8 @@ goal's explicit fractions of the DOF's authority) with the other DOFs held by :c
 * heave: down then up within the box depth range, ``heave_repeats`` pairs per level (no steady state needed:
   estimated through the transient).
 * roll, pitch: rotate until the predicted stopping angle reaches ``identification.roll_test_angle_rad`` /
-  ``pitch_test_angle_rad``, then return to level ([Hindrax-Drag] (seed 003) §4.2), both directions.
-* yaw: one turn (2 pi) per run ([Hindrax-Drag] (seed 003) §4.2: 360 deg rotations), both directions.
+  ``pitch_test_angle_rad``, then return to level ([Hindrax-Drag] §4.2), both directions.
+* yaw: one turn (2 pi) per run ([Hindrax-Drag] §4.2: 360 deg rotations), both directions.
 
 With ``identification.excitation`` (or the ``excitation`` argument) ``multisine``, ``prbs`` or ``chirp`` instead of
 the default ``ladder``, each DOF gets one broadband run of ``identification.excitation_duration_s`` instead of its

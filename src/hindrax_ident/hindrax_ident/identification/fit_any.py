@@ -1120,7 +1120,7 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
                        "configuration_sha256": cfg.sha256 if cfg is not None else None,
                        "water_density_kg_m3": float(cfg.water_density_kg_m3) if cfg is not None else None,
                        "method": "hindrax ident fit: segment-wise output error (prediction error) over free-form "
-                                 "excitation, equation-error start; model of [Hindrax-Drag] (seed 003) eq. 2 with "
+                                 "excitation, equation-error start; model of [Hindrax-Drag] eq. 2 with "
                                  "inertia and bias",
                        "seed": None, "bags": [str(b) for b in bags], "holdout": [str(b) for b in holdout],
                        "validation_design": res.design},

@@ -3,13 +3,13 @@
 ``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_ident.commands.ident_bag`) writes
 ``identification.yaml`` and ``report/index.html`` through :func:`identify_bag` and :func:`write_outputs`: the
 same analyses as the in-process campaign (:func:`~.estimators.identify_all_with_errors`, i.e. equation-error
-batch LS with standard deviations, [Hindrax-Drag] (seed 003) eqs. 6-8, refined by output error, plus the
+batch LS with standard deviations, [Hindrax-Drag] eqs. 6-8, refined by output error, plus the
 seed's steady-state LS; "Batch least squares from a bag").
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
 node, :mod:`.signals`, into :class:`~.maneuvers.SensorState`), ``thrusters/pulse_width`` (the widths the ESC node
-wrote: thrust model of [Hindrax-Drag] (seed 003) eq. 1, first-order lag, thrust allocation matrix),
+wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
 ``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:

@@ -1,12 +1,12 @@
-"""Manoeuvre planning and holding control for the self-propelled tests ([Hindrax-Drag] (seed 003) §4; docs/architecture.md §5).
+"""Manoeuvre planning and holding control for the self-propelled tests ([Hindrax-Drag] §4; docs/architecture.md §5).
 
 Pure numpy, no ROS. Everything here uses the vehicle configuration and SENSOR samples only (never the
 simulator's truth):
 
 * :func:`dof_authority` - the largest feasible wrench along one body axis, from the thrust allocator
-  (same curves and thrust allocation matrix as the allocation node, [Hindrax-Drag] (seed 003) eqs. 1 and 9).
+  (same curves and thrust allocation matrix as the allocation node, [Hindrax-Drag] eqs. 1 and 9).
 * :func:`level_ladder` - the ladder of constant thrust/moment levels, fractions
-  ``identification.level_fraction_min .. level_fraction_max`` of the authority ([Hindrax-Drag] (seed 003) §4: constant
+  ``identification.level_fraction_min .. level_fraction_max`` of the authority ([Hindrax-Drag] §4: constant
   known forces/torques, one DOF at a time).
 * :class:`PoolBox` - where the body origin may go: the pool (``pool.*``) shrunk by ``pool.margin_m`` plus
   half the vehicle's extent at walls and floor, ``limits.max_depth_m`` / ``limits.min_altitude_m`` below
@@ -74,7 +74,7 @@ def dof_authority(core: AllocationCore, dof: str) -> tuple[float, float]:
 
 
 def level_ladder(cfg: VehicleConfig, authority: float, levels: int | None = None) -> list[float]:
-    """Constant levels (N or N m), evenly spaced fractions of ``authority`` ([Hindrax-Drag] (seed 003) §4).
+    """Constant levels (N or N m), evenly spaced fractions of ``authority`` ([Hindrax-Drag] §4).
 
     Fractions from ``identification.level_fraction_min`` to ``level_fraction_max``;
     ``levels`` defaults to ``identification.levels_per_dof``. Raises ``ValueError`` for levels < 1.

@@ -1,7 +1,7 @@
 """Identification node: the ``run_identification`` action over the identification executive.
 
 A thin rclpy node over :class:`~.executive.Executive` (pure: the dive, positioning, level ladders, holds, pool-box
-planning, limits and online Kalman + RLS of [Hindrax-Drag] (seed 003) §4; the same object the in-process campaign
+planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the in-process campaign
 steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples (:mod:`.signals`), and at
 every tick of its control timer (``identification.estimate_rate_hz``, ROS clock) hands the executive the samples
 that came in since the last tick and publishes the wrench it returns. Nothing in a callback waits: the action's
@@ -10,8 +10,8 @@ the vehicle is simulated: it sees the same topics from the drivers either way.
 
 The force in the regression is the thrust model of the pulse widths the ESC node actually wrote
 (``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed, through the allocation's cubic curves,
-[Hindrax-Drag] (seed 003) eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust allocation
-matrix, [Hindrax-Drag] (seed 003) eq. 9), body FRD.
+[Hindrax-Drag] eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust allocation
+matrix, [Hindrax-Drag] eq. 9), body FRD.
 
 Run alone: ``python -m hindrax_ident.identification.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 

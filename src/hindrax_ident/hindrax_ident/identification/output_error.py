@@ -1,6 +1,6 @@
 """Output-error fit of the one-DOF model: the model, the integrator and the segment bookkeeping, each on its own.
 
-Model (docs/identification.md; [Hindrax-Drag] (seed 003) eq. 2 with the inertia term; Fossen/SNAME positive
+Model (docs/identification.md; [Hindrax-Drag] eq. 2 with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, for the DOF under test with velocity nu (m/s or rad/s) and thrust-model force tau
 (N or N m)::
 
@@ -19,7 +19,7 @@ of w (down positive): ``[M, k_q+, k_q-, k_l+, k_l-, b]``. Roll and pitch add the
 * :class:`Segments` - the record cut into equal segments, each integrated from its own initial state (from
   the smoother; free for a measured position), the measured samples on the tick grid that the residuals use.
 * :class:`OutputErrorFit` - the least-squares fit of theta (``scipy.optimize.least_squares``) and its
-  covariance: sigma^2 (J^T J)^-1 ([Hindrax-Drag] (seed 003) eq. 8 analogue), inflated for the lag-1
+  covariance: sigma^2 (J^T J)^-1 ([Hindrax-Drag] eq. 8 analogue), inflated for the lag-1
   autocorrelation of consecutive residual samples within segments (AR(1) effective sample size), and at
   least the cluster-robust covariance with one cluster per segment (Liang and Zeger 1986).
 """

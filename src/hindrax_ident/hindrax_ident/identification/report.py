@@ -2,14 +2,14 @@
 
 Plots per DOF:
 
-* ``<dof>_force_velocity.png`` - force (moment) vs velocity as [Hindrax-Drag] (seed 003) Figs. 8-10: the drag samples
+* ``<dof>_force_velocity.png`` - force (moment) vs velocity as [Hindrax-Drag] Figs. 8-10: the drag samples
   tau - M nu_dot - k_r s(eta) (thrust model minus the identified inertial and restoring terms) against the
   smoothed velocity, the steady-window means of the seed's method, and the fitted curve
   k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
 * ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band and the
   reported (offline) value.
 * ``free_decay.png`` - when a :class:`~hindrax_ident.estimation.free_decay.FreeDecayResult` is given: the
-  displacement record, its peaks and the fitted envelope ([Hindrax-AM] (seed 000) Figs. 6-7).
+  displacement record, its peaks and the fitted envelope ([Hindrax-AM] Figs. 6-7).
 """
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ def _force_velocity_plot(r, path: Path) -> None:
     ax.plot(v[ok][::3], drag[ok][::3], ".", ms=2, alpha=0.35, color="0.5", label="tau - M nu_dot (samples)")
     if s.get("windows"):
         wv, wf = zip(*s["windows"])
-        ax.plot(wv, wf, "s", color="C3", label="steady-window means ([Hindrax-Drag] (seed 003))")
+        ax.plot(wv, wf, "s", color="C3", label="steady-window means ([Hindrax-Drag])")
     vmax = float(np.nanmax(np.abs(v[ok]))) if np.any(ok) else 1.0
     grid = np.linspace(-vmax, vmax, 201)
     rest = _rest_terms(r.dof, grid, np.zeros_like(grid))
@@ -152,7 +152,7 @@ def references_html(document: Mapping) -> str:
     jointly estimated thrust scales (``document["joint"]["scales"]``: posterior, prior, steps, the error the
     uncalibrated self-propelled values would have and z against the curve), the free-decay inertias
     (``document["free_decay"]``) beside the self-propelled ones with z and verdict, and per DOF the empirical priors
-    ([NTNU-Thesis] (seed 002) App. A, ``dofs.<dof>.prior``) beside the identified values, with the ratio and
+    ([NTNU-Thesis] App. A, ``dofs.<dof>.prior``) beside the identified values, with the ratio and
     whether the prior lies inside the identified 95 % interval. Empty string when the document has none of them."""
     rows = []
     cal = document.get("calibration") or {}
@@ -196,8 +196,8 @@ def references_html(document: Mapping) -> str:
                     f"<td>{_fmt(sp.get('inertia_kg_m2'))}</td><td>{_fmt(sp.get('inertia_kg_m2_std'), 2)}</td>"
                     f"<td>{_fmt(sp.get('z'), 3)}</td><td>{html.escape(str(sp.get('verdict', '-')))}</td></tr>")
     if frow:
-        parts.append("<h3>Free decay: rigid + added inertia without the thrust curve ([Hindrax-AM] (seed 000), "
-                     "[SmallROV] (seed 004))</h3><p>suspect: |free decay - self-propelled| beyond 1.96 combined std "
+        parts.append("<h3>Free decay: rigid + added inertia without the thrust curve ([Hindrax-AM], "
+                     "[SmallROV])</h3><p>suspect: |free decay - self-propelled| beyond 1.96 combined std "
                      "(the self-propelled inertia then carries verdict suspect)</p><table><tr><th>DOF</th>"
                      "<th>free-decay inertia (kg m^2)</th><th>std</th><th>added</th><th>stiffness (N m/rad)</th>"
                      "<th>stiffness from</th><th>self-propelled</th><th>std</th><th>z</th><th>verdict</th></tr>"
@@ -219,7 +219,7 @@ def references_html(document: Mapping) -> str:
                             f"<td>[{_fmt(lo)}, {_fmt(hi)}]</td><td>{_fmt(p)}</td><td>{_fmt(ratio, 3)}</td>"
                             f"<td>{inside}</td></tr>")
     if prow:
-        parts.append("<h3>Empirical priors from geometry ([NTNU-Thesis] (seed 002) App. A.1/A.2)</h3><p>rough "
+        parts.append("<h3>Empirical priors from geometry ([NTNU-Thesis] App. A.1/A.2)</h3><p>rough "
                      "estimates (the thesis reports differences of tens of percent against panel codes and CFD); "
                      "a prior outside the identified interval is expected and is not a verdict; in the batch fit each "
                      f"weighs with 1-sigma {_fmt((document.get('joint') or {}).get('prior_std_rel'), 3)} x its value "
@@ -282,7 +282,7 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
     if free_decay is not None:
         fd = out / "free_decay.png"
         _free_decay_plot(free_decay, fd)
-        parts.append("<h2>Free decay ([Hindrax-AM] (seed 000))</h2><img src='free_decay.png' alt='free decay'>")
+        parts.append("<h2>Free decay ([Hindrax-AM])</h2><img src='free_decay.png' alt='free decay'>")
     parts.append("</body></html>")
     index = out / "index.html"
     index.write_text("\n".join(parts))

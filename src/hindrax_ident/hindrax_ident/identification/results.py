@@ -26,7 +26,7 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
 
 <parameter>: ``inertia`` (rigid + added; kg or kg m^2), ``added_mass`` (inertia - rigid),
 ``quadratic_damping`` and ``linear_damping`` (heave: ``*_positive`` and ``*_negative``, positive heave = down,
-[Hindrax-Drag] (seed 003) §4.1), ``bias`` (N or N m; heave: the FRD force holding depth), roll/pitch also ``restoring`` (N m).
+[Hindrax-Drag] §4.1), ``bias`` (N or N m; heave: the FRD force holding depth), roll/pitch also ``restoring`` (N m).
 Values are positive Fossen/SNAME coefficients in SI (as the configuration, ros_ws/config/hindrax.yaml).
 
 :func:`to_config_overrides` maps the file onto ``hydrodynamics.*`` configuration keys, so
@@ -66,7 +66,7 @@ def _f(x) -> float | None:
 
 
 #: Projected area of each translational DOF from the configured bounding box (vehicle.length_m, width_m,
-#: height_m): the two dimensions normal to the motion. ASSUMPTION: [Hindrax-Drag] (seed 003) Table 4 prints no areas.
+#: height_m): the two dimensions normal to the motion. ASSUMPTION: [Hindrax-Drag] Table 4 prints no areas.
 _AREA_DIMENSIONS = {"surge": ("width_m", "height_m"), "sway": ("length_m", "height_m"),
                     "heave": ("length_m", "width_m")}
 #: Speeds at or below this are left out of the Reynolds range (the vehicle between levels), m/s.
@@ -74,10 +74,10 @@ REYNOLDS_MIN_SPEED_M_S = 0.05
 
 
 def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
-    """[Hindrax-Drag] (Seed 003) Table 4 for a translational DOF: C_D = 2 k_q / (rho A_p) with its std from the std of k_q
+    """[Hindrax-Drag] Table 4 for a translational DOF: C_D = 2 k_q / (rho A_p) with its std from the std of k_q
     (:func:`~hindrax_ident.estimation.drag_coefficient.drag_coefficient`; heave per direction), A_p the
     bounding-box area normal to the motion (:data:`_AREA_DIMENSIONS`), and the Reynolds range Re = |v| L / nu
-    with L = V^(1/3) ([Hindrax-AM] (seed 000) eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
+    with L = V^(1/3) ([Hindrax-AM] eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
     None for rotational DOFs (the seed defines neither their area nor their radius)."""
     from ..estimation.drag_coefficient import (EstimationError, characteristic_length_from_volume,
                                                drag_coefficient, reynolds_range)
@@ -101,7 +101,7 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
         out["reynolds_range"] = [lo, hi]
     except (EstimationError, ValueError):
         out["reynolds_range"] = None
-    out["definition"] = (f"C_D = 2 k_q / (rho A_p), A_p = {a} x {b} of the configuration (assumed: [Hindrax-Drag] (seed 003) prints "
+    out["definition"] = (f"C_D = 2 k_q / (rho A_p), A_p = {a} x {b} of the configuration (assumed: [Hindrax-Drag] prints "
                          "no areas); Re = |v| V^(1/3) / 1.01e-6 m^2/s over speeds above "
                          f"{REYNOLDS_MIN_SPEED_M_S:g} m/s")
     return out
@@ -121,7 +121,7 @@ def _rls_entry(dof: str, r: Any, cfg: VehicleConfig) -> dict:
 
 def prior_entries(cfg: VehicleConfig) -> dict[str, dict]:
     """Per DOF ``{added_mass, linear_damping, quadratic_damping, source}``: the empirical priors from the
-    configured geometry ([NTNU-Thesis] (seed 002) App. A.1/A.2, :func:`~..estimation.priors.priors_from_config`;
+    configured geometry ([NTNU-Thesis] App. A.1/A.2, :func:`~..estimation.priors.priors_from_config`;
     no projected areas in the vehicle file, so a solid prism: an upper bound). A value that cannot be computed is
     None; ``{}`` if the configuration lacks the geometry."""
     from ..estimation.least_squares import EstimationError
@@ -131,7 +131,7 @@ def prior_entries(cfg: VehicleConfig) -> dict[str, dict]:
         p = priors_from_config(cfg)
     except (KeyError, TypeError, EstimationError):
         return {}
-    src = "[NTNU-Thesis] (seed 002) App. A.1/A.2 empirical estimate, solid prism of the configured box"
+    src = "[NTNU-Thesis] App. A.1/A.2 empirical estimate, solid prism of the configured box"
     return {dof: {"added_mass": _f(p["added_mass"][i]), "linear_damping": _f(p["linear_damping"][i]),
                   "quadratic_damping": _f(p["quadratic_damping"][i]), "source": src}
             for i, dof in enumerate(DOFS)}
@@ -202,9 +202,9 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
             "configuration_sha256": cfg.sha256,
             "water_density_kg_m3": float(cfg.water_density_kg_m3),
-            "method": method or ("[Hindrax-Drag] (seed 003) §4 self-propelled ladder; output-error refinement of equation-error "
+            "method": method or ("[Hindrax-Drag] §4 self-propelled ladder; output-error refinement of equation-error "
                                  "batch LS on RTS-smoothed sensor signals; RLS online; steady-state LS "
-                                 "([Hindrax-Drag] (seed 003) eqs. 2-8) for comparison"),
+                                 "([Hindrax-Drag] eqs. 2-8) for comparison"),
             "seed": seed,
         },
         "dofs": dofs,

@@ -101,7 +101,7 @@ def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[flo
 
     The ESC applies reversal (2 neutral - w) and trim after the allocation
     (:class:`hindrax_drivers.pca9685.node.EscOutput`); both are undone here, then the allocation's thrust curve
-    ([Hindrax-Drag] (seed 003) eq. 1) gives the force along each thruster's configured direction. Raises
+    ([Hindrax-Drag] eq. 1) gives the force along each thruster's configured direction. Raises
     ``ValueError`` for a wrong number of widths.
     """
     w = np.asarray(written_us, dtype=float)

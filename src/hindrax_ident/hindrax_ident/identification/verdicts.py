@@ -5,12 +5,12 @@ and
 
 1. **adds the force model's uncertainty** to the fit covariance. Every parameter of the self-propelled model
    ``tau = M nu_dot + D(nu) nu + b`` scales with the thrust: thrust s times the curve's gives parameters s times
-   the identified ones ([Hindrax-Drag] (seed 003) eq. 1 curve and eq. 9 allocation feed tau). With independent
+   the identified ones ([Hindrax-Drag] eq. 1 curve and eq. 9 allocation feed tau). With independent
    relative thrust errors s_neg, s_pos of the two rotation directions (1-sigma ``thrusters.thrust_uncertainty_rel``
    = [negative, positive], default [0.05, 0.10], see ros_ws/config/hindrax.yaml for why), parameter i moves by
    ``theta_i (a_i ds_pos + b_i ds_neg)`` and ``cov += sum_k sigma_k^2 (theta o w_k)(theta o w_k)^T``. The weights:
    surge, sway, yaw, roll and pitch use two thrusters in each direction of rotation for either sign of the
-   command (55-degree layout, [Hindrax-Drag] (seed 003) Fig. 5), so a = b = 1/2; heave moves down on positive and up on negative
+   command (55-degree layout, [Hindrax-Drag] Fig. 5), so a = b = 1/2; heave moves down on positive and up on negative
    thrust: ``*_positive`` (and the bias holding the net buoyancy, a downward force) a = 1, ``*_negative`` b = 1,
    inertia a = b = 1/2. When a thrust-curve fit covariance is known it replaces the declared value: the vehicle
    file's ``thrusters.thrust_fit_uncertainty_rel`` (written by ``hindrax ident thruster-fit --write``: the
@@ -27,7 +27,7 @@ and
 
    * ``bias``: the constant force differs significantly from the one expected (0; heave: the configured net
      buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide.
-   * ``methods``: the seed's steady-state fit ([Hindrax-Drag] (seed 003) eqs. 2-8) disagrees with the reported
+   * ``methods``: the seed's steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported
      quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not explain the transients and the
      steady states with the same numbers (lag, latency, coupling). DOF-wide. (The equation-error fit is not used:
      its inertia is biased low by the noise of the differentiated velocity even when nothing is wrong.)

@@ -13,16 +13,16 @@ body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
   ``I_o = I_cg - m S(r_g)^2``.
 * M_RB = [m I3, -m S(r_g); m S(r_g), I_o]   ([T] eq. 2.7).
 * M_A: the positive 6x6 added-mass matrix of the configuration (``VehicleConfig.added_mass_matrix``,
-  diagonal from [Hindrax-AM] (seed 000) Table 6 and assumptions, optional off-diagonal couplings; not forced symmetric).
+  diagonal from [Hindrax-AM] Table 6 and assumptions, optional off-diagonal couplings; not forced symmetric).
 * C_RB: the coordinate-free form (docs/identification.md, Fossen 2011)
   ``C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)]``,
   whose product with nu equals the Newton-Euler terms of [T] eqs. 2.4-2.5.
 * C_A from M_A (Fossen 2011): with ``a = M_A nu = [a1; a2]``,
   ``C_A = [0, -S(a1); -S(a1), -S(a2)]`` (skew-symmetric for any M_A; equals [T] eq. 2.83 in the diagonal case
   with M_A = -diag(derivatives)).
-* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.hydrodynamics(dof)`` ([Hindrax-Drag] (seed 003) eq. 2 / Table 3), the
+* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.hydrodynamics(dof)`` ([Hindrax-Drag] eq. 2 / Table 3), the
   coefficient pair chosen by the sign of the velocity; heave uses the ``*_positive`` pair for w > 0 (moving
-  down, [Hindrax-Drag] (seed 003) §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
+  down, [Hindrax-Drag] §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
 * g(eta) = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B]
   (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.22-2.23 with the corrected sign of f_b). W = m g and B = rho g V from the
   configuration; B is multiplied by the submerged fraction of a free-surface model when one is given (the
@@ -38,7 +38,7 @@ matrix form; the tests check the fast path against them.
 
 State vector (13,): ``[x_n, y_e, z_d (m, NED), q_x, q_y, q_z, q_w, u, v, w (m/s), p, q, r (rad/s)]``.
 Not modelled: currents (nu is relative to still water), the variation of added mass and damping near the
-surface, floor and walls, thruster-hull interaction ([Hindrax-Drag] (seed 003) §6).
+surface, floor and walls, thruster-hull interaction ([Hindrax-Drag] §6).
 """
 from __future__ import annotations
 
@@ -113,7 +113,7 @@ def coriolis_added_mass(added_mass, nu) -> np.ndarray:
 
 
 def damping_vector(nu, linear_positive, linear_negative, quadratic_positive, quadratic_negative) -> np.ndarray:
-    """D(nu) nu (6,): per DOF k_l v + k_q |v| v, the coefficients chosen by the sign of v ([Hindrax-Drag] (seed 003) eq. 2).
+    """D(nu) nu (6,): per DOF k_l v + k_q |v| v, the coefficients chosen by the sign of v ([Hindrax-Drag] eq. 2).
 
     All coefficient arguments are (6,) positive numbers in SNAME order (kg/s, kg/m; kg m^2/s, kg m^2).
     """

@@ -1,11 +1,11 @@
 """The pool box: floor, walls and free surface, with contact handling and reporting. Pure numpy.
 
-Geometry ([Hindrax-Drag] (seed 003) §4: a 10 x 6 x 1.8 m pool; configuration ``pool.length_m``, ``pool.width_m``,
+Geometry ([Hindrax-Drag] §4: a 10 x 6 x 1.8 m pool; configuration ``pool.length_m``, ``pool.width_m``,
 ``pool.depth_m``): world frame NED with the origin at a pool corner on the water surface, x north along the
 length (0 .. length_m), y east along the width (0 .. width_m), z down (surface 0, floor depth_m).
 
 Hull (ASSUMPTION, the seeds give only the envelope): a box of ``vehicle.length_m x width_m x height_m``
-([Hindrax-Drag] (seed 003) §2.1: 0.59 x 0.47 x 0.40 m) centred on the centre of buoyancy, aligned with the body axes. Its
+([Hindrax-Drag] §2.1: 0.59 x 0.47 x 0.40 m) centred on the centre of buoyancy, aligned with the body axes. Its
 displaced volume is taken as uniformly distributed over its height, so the volume centroid is the CB.
 
 Free surface (:class:`FreeSurface`): the submerged fraction of the hull is the part of its vertical extent

@@ -10,17 +10,17 @@ dropout, the device's configured or default rate):
 ``noise_std_<unit>`` (white noise 1-sigma), ``bias_<unit>`` (constant bias, every axis), ``rate_hz``,
 ``dropout_probability`` (probability a sample is lost: no report at all). Devices and their models:
 
-* ``dvl75`` (:class:`DvlVelocitySample`, [Hindrax-Drag] (seed 003) Table 1, docs/devices.md §1): velocity over the bottom of the
+* ``dvl75`` (:class:`DvlVelocitySample`, [Hindrax-Drag] Table 1, docs/devices.md §1): velocity over the bottom of the
   DVL's position ``sensors.dvl75.position_frd_m``, ``v + w x r``, in the vehicle FRD axes (the DVL applies
   its configured mounting orientation itself and reports in the vehicle frame, docs/devices.md §1.4). Measured
   ``(1 + e) v_true + bias + n`` with one scale error ``e ~ N(0, scale_error_fraction)`` per report
-  ([Hindrax-Drag] (seed 003) Table 1: mean error about 5 %) and ``n ~ N(0, noise_std_m_s)`` per axis. No bottom lock when
+  ([Hindrax-Drag] Table 1: mean error about 5 %) and ``n ~ N(0, noise_std_m_s)`` per axis. No bottom lock when
   the DVL is out of the water, its vertical altitude above the floor is outside
   ``[min_altitude_m, max_altitude_m]``, or it is within ``wall_lock_loss_distance_m`` of a wall; unlocked
   reports carry NaN velocities (the real DVL keeps reporting "searching").
 * ``dvl75_attitude`` (:class:`DvlAttitudeSample`): roll, pitch, yaw (Fossen ZYX, NED; yaw = heading from
   north) of the DVL's own IMU, plus bias and noise (rad), yaw wrapped to (-pi, pi].
-* ``icm20948_accel`` / ``icm20948_gyro`` / ``icm20948_mag`` ([Hindrax-Drag] (seed 003) Table 1, docs/devices.md §4): specific
+* ``icm20948_accel`` / ``icm20948_gyro`` / ``icm20948_mag`` ([Hindrax-Drag] Table 1, docs/devices.md §4): specific
   force ``f = a - g`` at the IMU position (lever arm ``imu_position_frd_m``, default the CG origin):
   ``a = v_dot + w x v + w_dot x r + w x (w x r)``, ``g = R^T [0, 0, g]``, so a vehicle at rest reads
   ``-g`` along body z (up); angular rate ``w``; the earth magnetic field ``R^T B_ned``. All three in the

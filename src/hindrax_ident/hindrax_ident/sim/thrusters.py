@@ -2,11 +2,11 @@
 
 * Geometry: ``config.thrusters`` positions (FRD, m, relative to the CG) and unit directions; the thrust
   allocation matrix ``B_cg = [d_i; r_i x d_i]`` (6, n) is :func:`hindrax_drivers.allocation.matrix.
-  thrust_allocation_matrix` ([Hindrax-Drag] (seed 003) eq. 9), i.e. the wrench about the CG. The model's reference point is
+  thrust_allocation_matrix` ([Hindrax-Drag] eq. 9), i.e. the wrench about the CG. The model's reference point is
   the body origin CO with the CG at r_g, so the wrench about CO is ``[F; T_cg + r_g x F]``
   (``matrix_co``; identical when r_g = 0, as in the Hindrax file).
 * Thrust: one :class:`hindrax_drivers.allocation.thrust_curve.ThrustCurve` from ``thrusters.curve_negative``,
-  ``curve_positive``, the pulse-width range and the deadband ([Hindrax-Drag] (seed 003) eq. 1, Table 2; docs/architecture.md §4). The
+  ``curve_positive``, the pulse-width range and the deadband ([Hindrax-Drag] eq. 1, Table 2; docs/architecture.md §4). The
   pulse widths are those on the wire (``hindrax_msgs/ThrusterPwm``: what the ESC output wrote). A thruster
   configured ``reversed`` has its pulse width mirrored about neutral by the ESC node and a reversed
   propeller, so its physical thrust along ``direction_frd`` is ``curve(2 P_neutral - P)``. The per-thruster
@@ -16,7 +16,7 @@
   For a command held constant over a step the solution is exact:
   ``F(t0 + s) = F_cmd + (F(t0) - F_cmd) exp(-s / T)``, which the integrator evaluates at its stage times.
 * Not modelled: thrust dependence on advance speed and thruster-hull / thruster-thruster interaction
-  ([Hindrax-Drag] (seed 003) §6; docs/identification.md §3 C6).
+  ([Hindrax-Drag] §6; docs/identification.md §3 C6).
 """
 from __future__ import annotations
 
@@ -117,5 +117,5 @@ class Thrusters:
         return self.matrix_co @ (self.force_n if force_n is None else np.asarray(force_n, dtype=float))
 
     def wrench_cg(self, force_n: Sequence[float] | None = None) -> np.ndarray:
-        """Body wrench [X Y Z K M N] (6,) about the CG (FRD, N, N m), [Hindrax-Drag] (seed 003) eq. 9."""
+        """Body wrench [X Y Z K M N] (6,) about the CG (FRD, N, N m), [Hindrax-Drag] eq. 9."""
         return self.matrix_cg @ (self.force_n if force_n is None else np.asarray(force_n, dtype=float))
