@@ -226,3 +226,51 @@ def test_every_readme_pi_command_is_a_tested_one():
     assert TESTED_BY_INSTALL_TEST <= set(commands)
     for c in commands:
         assert c in TESTED_BY_INSTALL_TEST or c.startswith(("ros2 launch ", "ros2 run ")), f"untested README line: {c}"
+
+
+#: argument sets each launch file is read with below (the defaults, and what the vehicle and the pool day pass)
+READER_CASES = [
+    ("hindrax_drivers/launch/vehicle.launch.xml", {}),
+    ("hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/var/lib/hindrax/runs"}),
+    ("hindrax_ident/launch/pool_test.launch.xml", {}),
+    ("hindrax_ident/launch/pool_test.launch.xml", {"output_dir": "/tmp/runs", "foxglove": "true"}),
+]
+
+
+@pytest.mark.parametrize("rel,given", READER_CASES, ids=lambda c: str(c))
+def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packages):
+    """The pool-day test runs the process list of hindrax_drivers.launch_xml through the project's runner; it must
+    be the one the launch file declares, read here by this module's own parser (check_launch)."""
+    from hindrax_drivers.launch_xml import read_launch
+
+    path = REPO / "src" / rel
+    declared = check_launch(path, packages, given)
+    read = read_launch(path, given, find_share=lambda pkg: REPO / "src" / pkg)
+    assert [(p.package, p.executable) for p in read] == declared
+    # each node: its name, the vehicle file, respawn with a delay, exactly as the XML says
+    xml_nodes = {}
+    for f in (path, REPO / "src/hindrax_drivers/launch/vehicle.launch.xml"):
+        for el in ET.parse(f).getroot().iter("node"):
+            xml_nodes[el.get("name")] = el
+    for p in read:
+        el = xml_nodes[p.name]
+        assert (el.get("pkg"), el.get("exec")) == (p.package, p.executable)
+        assert p.respawn and el.get("respawn") == "true" and p.respawn_delay_s == float(el.get("respawn_delay")) > 0
+        if p.package in PACKAGES:
+            assert p.parameters[0].resolve() == (REPO / "ros_ws/config/hindrax.yaml").resolve()
+
+
+def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_its_root(packages):
+    from hindrax_drivers.launch_xml import read_launch
+
+    for path in launch_files():
+        for el in ET.parse(path).getroot().iter("node"):
+            assert el.get("respawn") == "true" and float(el.get("respawn_delay", "0")) > 0, \
+                f"{path.name}: {el.get('name')} does not respawn after a delay"
+    read = read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/x"},
+                       find_share=lambda pkg: REPO / "src" / pkg)
+    recorder = next(p for p in read if p.executable == "recorder_node")
+    values = {k: v for p in recorder.parameters if isinstance(p, dict) for k, v in p.items()}
+    # the root of new timestamped bags (recording/bag_dir.py), not one bag directory that the next launch would find
+    assert values["recording.output_root"] == "/x" and "output_dir" not in values
+    assert values["autostart"] is True
