@@ -3,8 +3,8 @@
 Every ``src/*/launch/*.launch.xml`` is parsed with xml.etree; ``$(var ...)`` and ``$(find-pkg-share ...)`` are
 substituted the way ros2 launch does, with find-pkg-share resolved through the packages' setup.py data_files
 (what colcon installs under share/). Checked: each ``<node pkg exec>`` of our packages is a console script of
-that package's setup.py (an external package only behind a condition that is off by default, and declared in
-package.xml), each ``<param from>`` file and ``<include file>`` resolves to a file that is installed, include
+that package's setup.py (an external package only behind a condition that is off by default, never a hard
+exec_depend, its apt package named in docs/deployment.md), each ``<param from>`` file and ``<include file>`` resolves to a file that is installed, include
 arguments are declared by the included file, and conditions are booleans. The README's ``ros2 launch`` and
 ``ros2 run`` lines name existing launch files, declared arguments and installed executables.
 """
@@ -104,12 +104,15 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
             pkg, exe = el.get("pkg"), el.get("exec")
             if pkg in packages:
                 assert exe in packages[pkg][0], f"{path.name}: {pkg}/{exe} is not an installed executable"
-            else:  # an external package: optional, off by default, declared as a dependency
+            else:  # an external package: optional, off by default, not a hard dependency, documented
                 default = substitute(cond, {k: v or "" for k, v in declared_args(path).items()}, packages) \
                     if cond else "true"
                 assert default == "false", f"{path.name}: external {pkg}/{exe} must be optional and off by default"
                 deps = "".join((REPO / "src" / p / "package.xml").read_text() for p in PACKAGES)
-                assert f"<exec_depend>{pkg}</exec_depend>" in deps, f"{pkg} not declared in a package.xml"
+                assert f"<exec_depend>{pkg}</exec_depend>" not in deps, \
+                    f"{pkg} is optional: rosdep must not install it with every vehicle (package.xml exec_depend)"
+                apt = "ros-jazzy-" + pkg.replace("_", "-")
+                assert apt in (REPO / "docs" / "deployment.md").read_text(), f"docs/deployment.md: how to install {apt}"
             for p in el.findall("param"):
                 if p.get("from"):
                     f = Path(substitute(p.get("from"), args, packages))
@@ -274,3 +277,20 @@ def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_
     # the root of new timestamped bags (recording/bag_dir.py), not one bag directory that the next launch would find
     assert values["recording.output_root"] == "/x" and "output_dir" not in values
     assert values["autostart"] is True
+
+
+def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real_commands(packages):
+    """docs/deployment.md, the "Running on the Pi" steps: each `ros2 launch PKG FILE [name:=value]` names an installed
+    launch file and arguments it declares; each `hindrax <command>` is a registered command."""
+    from hindrax_ident.cli import COMMANDS
+
+    text = (REPO / "docs" / "deployment.md").read_text()
+    launches = re.findall(r"ros2 launch (\w+) ([\w.]+\.launch\.xml)((?: \w+:=[^\s`]*)*)", text)
+    assert len(launches) >= 2
+    for pkg, name, args in launches:
+        path = find_pkg_share(packages, pkg, f"launch/{name}")
+        given = dict(a.split(":=", 1) for a in args.split())
+        check_launch(path, packages, {k: v or "x" for k, v in given.items() if "$" not in v})
+    registered = {" ".join(words) for words, _m, _h in COMMANDS}
+    used = set(re.findall(r"`(?:docker exec -it hindrax )?hindrax ((?:[a-z-]+)(?: [a-z-]+)?)", text))
+    assert used and all(u in registered or u.split()[0] in registered for u in used), used - registered
