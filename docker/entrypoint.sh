@@ -27,6 +27,7 @@ case "$range" in
   *) die "HINDRAX_DISCOVERY_RANGE=$range: allowed LOCALHOST, SUBNET, SYSTEM_DEFAULT, OFF" ;;
 esac
 export ROS_AUTOMATIC_DISCOVERY_RANGE="$range"
+[ -n "${ROS_STATIC_PEERS:-}" ] || unset ROS_STATIC_PEERS  # compose passes an empty one when none is set
 if [ -n "${ROS_DOMAIN_ID:-}" ]; then
   if ! [[ "$ROS_DOMAIN_ID" =~ ^[0-9]+$ ]] || [ "$ROS_DOMAIN_ID" -gt 101 ]; then
     die "ROS_DOMAIN_ID=$ROS_DOMAIN_ID: allowed integer 1-101 (this vehicle's own domain)"

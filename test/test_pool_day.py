@@ -11,8 +11,8 @@ reaches through a socket.
 ``test_pool_day``: the I2C bus is absent at the start (the MS5837 and ICM-20948 drivers keep running and report
 it, then pick the bus up); a driver and the recorder are killed mid-run and respawned (the DVL topic comes back,
 the recorder starts a new bag); both USB-serial adapters are unplugged and plugged in again (picked up without a
-restart); ``hindrax health`` then says READY; a second launch with the same ``output_dir`` records a bag of its
-own. ``test_esc_starts_without_its_bus``: the launch file's ESC process without its bus keeps running, reports
+restart); ``hindrax health`` then says READY; a second launch with the same ``output_dir``, the Ping adapter
+plugged in only after the start, records a bag of its own. ``test_esc_starts_without_its_bus``: the launch file's ESC process without its bus keeps running, reports
 ERROR on /diagnostics, and holds neutral once the bus is there.
 
 Every wait is on a condition (a message, a status, a process state) with a generous deadline.
@@ -176,8 +176,16 @@ def test_pool_day(colcon_install, tmp_path):
         assert not unclean, "\n".join(f"{k} {codes}:\n{day.runner.log(k)[-3000:]}" for k, codes in unclean.items())
         first_launch = bags(runs)
         assert len(first_launch) == 2 and messages_in(first_launch[-1], "/dvl/data") > 0
-        # 6. the next launch, same output_dir: a new bag, nothing stopped by the earlier ones
+        # 6. the next launch, same output_dir: a new bag, nothing stopped by the earlier ones; the Ping adapter
+        #    is not plugged in at the start this time, and is picked up when it is
+        dev.unplug("ping1d")
         with Day(install, dev, "hindrax_ident/pool_test.launch.xml", args) as day2:
+            day2.wait(lambda: any("cannot open" in s[2] for s in day2.seen("hindrax/ping1d", min_level=2)),
+                      "ping1d reports its adapter absent at the start")
+            t_in = time.monotonic()
+            dev.replug("ping1d")
+            day2.wait(lambda: day2.count("/ping/altitude", t_in) >= 3, "ping data once the adapter is plugged in")
+            assert day2.state("ping1d").starts == 1
             day2.wait(lambda: len(bags(runs)) == 3 and any(
                 int(s[3].get("topic:/dvl/data", 0)) > 0 and s[3].get("bag") not in map(str, first_launch)
                 for s in day2.seen("recorder: recording")), "the second launch recording")
