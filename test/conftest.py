@@ -48,7 +48,8 @@ def _inputs_hash(extra: str) -> str:
     files = [REPO / "Makefile", REPO / "requirements.txt", REPO / "requirements-colcon.txt"]
     for top in (REPO / "src", REPO / "ros_ws" / "config"):
         for dirpath, dirnames, filenames in os.walk(top, followlinks=False):
-            dirnames[:] = sorted(d for d in dirnames if d not in ("__pycache__", "test") and not d.endswith(".egg-info"))
+            dirnames[:] = sorted(d for d in dirnames
+                                 if d not in ("__pycache__", "test") and not d.endswith(".egg-info"))
             files += [Path(dirpath) / f for f in sorted(filenames) if not f.endswith(".pyc")]
     for f in files:
         h.update(str(f.relative_to(REPO)).encode())

@@ -1,12 +1,12 @@
 """Launch files (ROS 2 launch XML) checked without the `launch` package, which is not installable here.
 
 Every ``src/*/launch/*.launch.xml`` is parsed with xml.etree; ``$(var ...)`` and ``$(find-pkg-share ...)`` are
-substituted the way ros2 launch does, with find-pkg-share resolved through the packages' setup.py data_files
-(what colcon installs under share/). Checked: each ``<node pkg exec>`` of our packages is a console script of
-that package's setup.py (an external package only behind a condition that is off by default, never a hard
-exec_depend, its apt package named in docs/deployment.md), each ``<param from>`` file and ``<include file>`` resolves to a file that is installed, include
-arguments are declared by the included file, and conditions are booleans. The README's ``ros2 launch`` and
-``ros2 run`` lines name existing launch files, declared arguments and installed executables.
+substituted the way ros2 launch does, with find-pkg-share resolved through the packages' setup.py data_files (what
+colcon installs under share/). Checked: each ``<node pkg exec>`` of our packages is a console script of that
+package's setup.py (an external package only behind a condition that is off by default, never a hard exec_depend,
+its apt package named in docs/deployment.md), each ``<param from>`` file and ``<include file>`` resolves to a file
+that is installed, include arguments are declared by the included file, and conditions are booleans. The README's
+``ros2 launch`` and ``ros2 run`` lines name existing launch files, declared arguments and installed executables.
 """
 from __future__ import annotations
 

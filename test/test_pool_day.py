@@ -4,16 +4,16 @@ The vehicle runs ``ros2 launch hindrax_ident pool_test.launch.xml``; ``launch`` 
 process list is read from the *installed* launch file (hindrax_drivers/launch_xml.py; test/test_launch_files.py
 checks that it is the list the file declares) and started, executable by executable from the colcon install
 (test/conftest.py), by the project's runner (hindrax_drivers/process_runner.py: launch_ros's command line, respawn
-after the file's delay, SIGINT on stop). The devices are emulated (hindrax_drivers/emulated_devices.py): DVL-75
-and Ping1D on pseudo-terminals behind stable paths, the I2C devices on an emulated bus every I2C driver process
-reaches through a socket.
+after the file's delay, SIGINT on stop). The devices are emulated (hindrax_drivers/emulated_devices.py): DVL-75 and
+Ping1D on pseudo-terminals behind stable paths, the I2C devices on an emulated bus every I2C driver process reaches
+through a socket.
 
-``test_pool_day``: the I2C bus is absent at the start (the MS5837 and ICM-20948 drivers keep running and report
-it, then pick the bus up); a driver and the recorder are killed mid-run and respawned (the DVL topic comes back,
-the recorder starts a new bag); both USB-serial adapters are unplugged and plugged in again (picked up without a
-restart); ``hindrax health`` then says READY; a second launch with the same ``output_dir``, the Ping adapter
-plugged in only after the start, records a bag of its own. ``test_esc_starts_without_its_bus``: the launch file's ESC process without its bus keeps running, reports
-ERROR on /diagnostics, and holds neutral once the bus is there.
+``test_pool_day``: the I2C bus is absent at the start (the MS5837 and ICM-20948 drivers keep running and report it,
+then pick the bus up); a driver and the recorder are killed mid-run and respawned (the DVL topic comes back, the
+recorder starts a new bag); both USB-serial adapters are unplugged and plugged in again (picked up without a
+restart); ``hindrax health`` then says READY; a second launch with the same ``output_dir``, the Ping adapter plugged
+in only after the start, records a bag of its own. ``test_esc_starts_without_its_bus``: the launch file's ESC
+process without its bus keeps running, reports ERROR on /diagnostics, and holds neutral once the bus is there.
 
 Every wait is on a condition (a message, a status, a process state) with a generous deadline.
 """
@@ -86,7 +86,8 @@ class Day:
         now = time.monotonic()
         for st in msg.status:
             level = st.level[0] if isinstance(st.level, bytes) else int(st.level)
-            self.statuses.setdefault(st.name, []).append((now, level, st.message, {kv.key: kv.value for kv in st.values}))
+            values = {kv.key: kv.value for kv in st.values}
+            self.statuses.setdefault(st.name, []).append((now, level, st.message, values))
 
     def spin(self) -> None:
         self.executor.spin_once(timeout_sec=0.05)

@@ -101,7 +101,8 @@ class ProcessRunner:
     ``ValueError`` for two processes with the same label.
     """
 
-    def __init__(self, processes: Sequence[NodeProcess], *, command: Callable[[NodeProcess], list[str]] = installed_command,
+    def __init__(self, processes: Sequence[NodeProcess], *,
+                 command: Callable[[NodeProcess], list[str]] = installed_command,
                  env: Mapping[str, str] | None = None, extra_env: Mapping[str, Mapping[str, str]] | None = None,
                  extra_ros_args: Mapping[str, Sequence[str]] | None = None, log_dir: str | os.PathLike | None = None,
                  sigterm_timeout_s: float = 5.0, sigkill_timeout_s: float = 5.0) -> None:
