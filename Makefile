@@ -35,10 +35,11 @@ bench: setup
 # The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels (the
 # Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
 # .venv/bin/activate && source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/)
-# and share/ are there.
+# and share/ are there. Extra colcon options: COLCON_ARGS="--symlink-install" (docs/deployment.md §3).
+COLCON_ARGS ?=
 ros-install: setup
 	cd ros_ws && source $(abspath $(VENV))/bin/activate && \
-	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV colcon build --merge-install \
+	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV colcon build --merge-install $(COLCON_ARGS) \
 	    --event-handlers console_cohesion- --cmake-args -DPython3_EXECUTABLE=$$VIRTUAL_ENV/bin/python3 -DBUILD_TESTING=OFF
 
 clean:

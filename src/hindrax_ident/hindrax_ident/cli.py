@@ -30,7 +30,11 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("thruster-test",), "hindrax_ident.commands.thruster_test",
      "step each thruster alone and print the wrench the model expects (catch reversed/swapped thrusters)"),
     (("bringup",), "hindrax_ident.commands.bringup",
-     "start the node graph: drivers, ESC output, allocation (--sim: virtual pool and emulated devices)"),
+     "the virtual pool's single-process graph (--sim); the vehicle runs the launch file instead "
+     "(ros2 launch hindrax_drivers vehicle.launch.xml)"),
+    (("health",), "hindrax_ident.commands.health",
+     "ready to dive? every node of the vehicle's launch file running, its /diagnostics OK and the supervisor OK; "
+     "exit 0, or 1 listing what is missing"),
     (("decode",), "hindrax_ident.commands.decode",
      "run a serial driver's parser (dvl75: text lines, ping1d: raw bytes) over a capture; one JSON record per line"),
     (("bag", "record"), "hindrax_ident.commands.bag.record",

@@ -70,7 +70,8 @@ raises the ERROR ``stuck`` in the diagnostics and a log error, and its readings 
 they change.
 
 The bus is injected: ``smbus2.SMBus(sensors.ms5837.i2c_bus)`` on the Pi (opened at start-up; if it cannot
-be opened the node reports it and retries), an
+be opened, or a start-up attempt fails, the node reports it, closes the bus and opens it again at the next
+attempt: :class:`~hindrax_drivers.transport.i2c.BusHandle`), an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding an
 :class:`~hindrax_drivers.ms5837.emulator.Ms5837Emulator` in tests and simulation.
 
@@ -91,7 +92,7 @@ from std_srvs.srv import Trigger
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, load_node_config, run_node)
-from ..transport.i2c import I2CDevice, I2CError, close_quietly, open_smbus
+from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
 
 __all__ = ["Ms5837Node", "pressure_variance_pa2", "PRESSURE_RESOLUTION_PA", "main"]
@@ -164,8 +165,7 @@ class Ms5837Node(Node):
         self.d1_command = p.convert_d1_command(self.osr)
         self.d2_command = p.convert_d2_command(self.osr)
 
-        self._bus = bus
-        self._owns_bus = bus is None
+        self._bus = BusHandle(self.i2c_bus_number, bus)  # reopened after a failed start-up when owned
         self.raw = RawDataPublisher(self, "ms5837")
         self.device: I2CDevice | None = None
         self.calibration: p.Calibration | None = None
@@ -224,14 +224,14 @@ class Ms5837Node(Node):
         self.startup_attempts += 1
         self._cycle_timer.cancel()
         self._phase = "idle"
+        try:
+            bus = self._bus.get()  # the same bus, or opened afresh after a failed attempt (BusHandle)
+        except (OSError, ImportError) as exc:
+            self._fail(str(exc))
+            return
         if self.device is None:
-            if self._bus is None:
-                try:
-                    self._bus = open_smbus(self.i2c_bus_number)
-                except (OSError, ImportError) as exc:
-                    self._fail(str(exc))
-                    return
-            self.device = I2CDevice(self._bus, self.address, "ms5837", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
+            self.device = I2CDevice(bus, self.address, "ms5837", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
+        self.device.bus = bus  # the device keeps its counters across reopened buses
         self.diag.set_state("starting", DiagnosticStatus.WARN, "reset and PROM read")
         try:
             self.device.write_byte(p.CMD_RESET)
@@ -270,6 +270,7 @@ class Ms5837Node(Node):
         """Start-up failed: ERROR state with the reason, retry after RETRY_PERIOD_S."""
         self.diag.set_state("error", DiagnosticStatus.ERROR, f"{reason}; retrying every {RETRY_PERIOD_S:g} s")
         self.get_logger().error(f"MS5837 start-up failed: {reason}", throttle_duration_sec=10.0)
+        self._bus.reset()  # the next attempt opens /dev/i2c-N again: a bus that went and came back is picked up
         self._schedule(RETRY_PERIOD_S, self._start)
 
     # ------------------------------------------------------------------ measurement cycle
@@ -454,8 +455,7 @@ class Ms5837Node(Node):
         """Stop the timers and close the bus if this node opened it (run_node calls this on shutdown)."""
         self._cycle_timer.cancel()
         self._step_timer.cancel()
-        if self._owns_bus and self._bus is not None:
-            close_quietly(self._bus)
+        self._bus.close()
 
 
 def main(args=None) -> int:

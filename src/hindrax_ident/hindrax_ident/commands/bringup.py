@@ -1,14 +1,25 @@
 """``hindrax bringup [--config FILE] [--sim] [--record [--record-dir DIR]] [--rtf X] [--seed N]``.
 
-Starts the whole node graph in this process (:mod:`hindrax_ident.bringup`): on the vehicle against the
-configured serial ports and I2C bus; with ``--sim`` against the virtual pool and the device emulators.
-Runs until Ctrl-C / SIGTERM, then commands neutral thrust and closes any bag.
+Starts the whole node graph in this process (:mod:`hindrax_ident.bringup`): with ``--sim`` against the virtual pool
+and the device emulators (the virtual pool's and the tests' graph). Runs until Ctrl-C / SIGTERM, then commands
+neutral thrust and closes any bag.
+
+The vehicle does not run this: it runs the launch layout, one process per node, respawned
+(``ros2 launch hindrax_drivers vehicle.launch.xml``, started by the Docker image and the systemd unit;
+docs/deployment.md). Without ``--sim`` the graph still opens the configured ports and I2C bus (a bench check of
+the hardware on one process), after printing :data:`VEHICLE_NOTICE` on stderr.
 """
 from __future__ import annotations
 
 import argparse
+import sys
 
 from .common import add_config_argument
+
+#: printed on stderr by ``hindrax bringup`` without ``--sim``
+VEHICLE_NOTICE = ("bringup: this is the single-process graph of the virtual pool and the tests; the vehicle runs the "
+                  "launch layout (ros2 launch hindrax_drivers vehicle.launch.xml: one process per node, respawned; "
+                  "docs/deployment.md). Starting it on the hardware for a bench check only.")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -25,5 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
     from hindrax_ident.bringup import run as run_graph
 
+    if not args.sim:
+        print(VEHICLE_NOTICE, file=sys.stderr, flush=True)
     return run_graph(args.config or default_config_path(), sim=args.sim, record=args.record,
                      record_dir=args.record_dir, seed=args.seed, real_time_factor=args.rtf)

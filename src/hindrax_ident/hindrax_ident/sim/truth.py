@@ -70,8 +70,24 @@ class TruthError(ValueError):
 
 
 def truth_dir() -> Path:
-    """``ros_ws/config/truth/`` beside the shipped vehicle file."""
-    return default_config_path().parent / "truth"
+    """The truth files: ``truth/`` beside the vehicle file in use (the repository's ``ros_ws/config/truth``, or
+    ``share/hindrax_drivers/config/truth`` of a colcon install); when the vehicle file is elsewhere
+    (``HINDRAX_CONFIG`` naming a mounted file), the installed ``share/hindrax_drivers/config/truth``. Raises
+    :class:`TruthError` naming the places searched when neither exists."""
+    beside = default_config_path().parent / "truth"
+    if beside.is_dir():
+        return beside
+    searched = [beside]
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        installed = Path(get_package_share_directory("hindrax_drivers")) / "config" / "truth"
+        if installed.is_dir():
+            return installed
+        searched.append(installed)
+    except Exception:  # noqa: BLE001 - no ament index entry: report what was searched
+        pass
+    raise TruthError(f"no truth files: searched {', '.join(str(p) for p in searched)}")
 
 
 def default_truth_path() -> Path:
