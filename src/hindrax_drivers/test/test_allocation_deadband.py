@@ -82,7 +82,8 @@ def allocator(mode: str = "priority", step: float = STEP_200HZ) -> ThrustAllocat
     return alloc
 
 
-ALLOCATORS = {(mode, step): allocator(mode, step) for mode in ("uniform", "priority") for step in (STEP_200HZ, STEP_50HZ)}
+ALLOCATORS = {(mode, step): allocator(mode, step)
+              for mode in ("uniform", "priority") for step in (STEP_200HZ, STEP_50HZ)}
 
 
 def check_widths_and_achieved(res, step: float) -> None:

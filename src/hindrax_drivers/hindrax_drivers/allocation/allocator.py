@@ -89,8 +89,9 @@ class AllocationResult:
 
     ``requested_wrench`` (6,): the request as given. ``allocated_force_n`` (n,): forces after
     saturation and deadband handling, before the curves and the pulse-width grid (``B @ allocated_force_n``
-    is the wrench the allocator aimed for; every force is 0 or outside the deadband). ``pulse_width_us`` (n,): ESC commands. ``force_n`` (n,): thrust the curves give at those pulse
-    widths (deadband, small-force rule and quantisation included). ``achieved_wrench`` (6,):
+    is the wrench the allocator aimed for; with the deadband search every force is 0 or outside the
+    deadband). ``pulse_width_us`` (n,): ESC commands. ``force_n`` (n,): thrust the curves give at those
+    pulse widths (deadband, small-force rule and quantisation included). ``achieved_wrench`` (6,):
     ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``) or the smallest
     group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
     the request. ``saturated`` (n,) bool: the thruster's forward or reverse limit bounded the allocation
@@ -177,7 +178,8 @@ class _PulseGrid:
         p = np.round(pulse / q) * q
         above = pulse > self.neutral + 1e-9
         below = pulse < self.neutral - 1e-9
-        p = np.where(above, np.maximum(p, self.first_forward_us), np.where(below, np.minimum(p, self.last_reverse_us), p))
+        p = np.where(above, np.maximum(p, self.first_forward_us),
+                     np.where(below, np.minimum(p, self.last_reverse_us), p))
         return np.minimum(np.maximum(p, self.min_us), self.max_us)
 
 
@@ -242,7 +244,8 @@ class ThrustAllocator:
 
     def reconfigure(self, matrix=_KEEP, curves=_KEEP, weights=_KEEP, mode=_KEEP, priority_groups=_KEEP,
                     pulse_width_step_us=_KEEP, deadband_search=_KEEP, effort_weight=_KEEP) -> None:
-        """Change any of the constructor's parameters (others are kept) and recompute the pseudo-inverse.
+        """Change any of the constructor's parameters (others are kept) and recompute the pseudo-inverse and the
+        deadband search's tables (about 50 ms for 8 thrusters).
 
         A kept shared curve or default (``None``) weights follow a new number of thrusters; kept
         per-thruster lists must still match it.
@@ -316,9 +319,6 @@ class ThrustAllocator:
         self._curve_groups = [(self._curves[idx[0]], np.array(idx)) for idx in by_curve.values()]
         self._base_lower = np.array([c.max_reverse_n for c in self._curves])
         self._base_upper = np.array([c.max_forward_n for c in self._curves])
-        self._pw_min = np.array([c.pulse_width_min_us for c in self._curves])
-        self._pw_max = np.array([c.pulse_width_max_us for c in self._curves])
-        self._pw_neutral = np.array([c.pulse_width_neutral_us for c in self._curves])
         # forward model of all thrusters in one vectorised call: coefficients as (4, n), the rest (n,)
         params = list(zip(*(c.forward_parameters for c in self._curves)))
         self._forward_params = tuple(np.array(v, dtype=float).T if i < 2 else np.array(v, dtype=float)
