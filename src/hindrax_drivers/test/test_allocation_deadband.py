@@ -86,13 +86,13 @@ ALLOCATORS = {(mode, step): allocator(mode, step)
               for mode in ("uniform", "priority") for step in (STEP_200HZ, STEP_50HZ)}
 
 
-def check_widths_and_achieved(res, step: float) -> None:
+def check_widths_and_achieved(res, step: float, voltage_scale: float = 1.0) -> None:
     p = res.pulse_width_us
     np.testing.assert_allclose(p / step, np.round(p / step), atol=1e-9)  # on the PCA9685 grid
     neutral = np.abs(p - NEUTRAL_US) <= 0.5 * step
     outside = np.abs(p - NEUTRAL_US) >= DEADBAND_US
     assert np.all(neutral | outside), f"width in the deadband: {p}"
-    force = thrust(p)
+    force = voltage_scale * thrust(p)
     np.testing.assert_allclose(res.force_n, force, rtol=0, atol=1e-9)
     np.testing.assert_allclose(res.achieved_wrench, B @ force, rtol=0, atol=1e-9)
 
@@ -119,7 +119,8 @@ def test_property_no_width_in_the_deadband_and_achieved_wrench_from_the_widths(d
 @st.composite
 def producible(draw):
     """A wrench some thrusters outside their deadband produce exactly: each thruster off, or on at a grid width
-    between its deadband edge and 5 N (so the pseudo-inverse of any such wrench stays within the 15.5 N limits)."""
+    between its deadband edge and 5 N (so the pseudo-inverse of any such wrench stays within the 15.5 N limits),
+    at a battery voltage scale of 0.8, 1 or 1.1."""
     step = draw(st.sampled_from([STEP_200HZ, STEP_50HZ]))
     rev, fwd = grid_edges(step)
     force = []
@@ -130,7 +131,8 @@ def producible(draw):
         force.append(0.0 if state == 0 else float(thrust(p)))
     force = np.array(force)
     assert np.all(np.abs(force) < 5.0)  # 95 us beyond the deadband edge: about 4.5 N
-    return step, force, draw(st.sampled_from(["uniform", "priority"]))
+    voltage_scale = draw(st.sampled_from([1.0, 0.8, 1.1]))
+    return step, voltage_scale * force, draw(st.sampled_from(["uniform", "priority"])), voltage_scale
 
 
 @settings(max_examples=300, deadline=None)
@@ -138,11 +140,11 @@ def producible(draw):
 def test_property_producible_request_is_produced_to_the_pwm_step(case):
     """Error <= what the PCA9685 step allows: half a count of thrust on every thruster, plus the effort trade
     sqrt(rho sum F^2) that the allocator may prefer to running thrusters against each other (rho = (delta/m)^2)."""
-    step, truth, mode = case
+    step, truth, mode, voltage_scale = case
     tau = B @ truth
-    res = ALLOCATORS[(mode, step)].allocate(tau)
-    check_widths_and_achieved(res, step)
-    quantisation = np.abs(B) @ np.full(8, 0.5 * largest_count_thrust(step))
+    res = ALLOCATORS[(mode, step)].allocate(tau, voltage_scale=voltage_scale)
+    check_widths_and_achieved(res, step, voltage_scale)
+    quantisation = np.abs(B) @ np.full(8, 0.5 * voltage_scale * largest_count_thrust(step))
     trade = np.sqrt(effort_weight(step) * np.sum(truth ** 2))
     assert np.all(np.abs(res.achieved_wrench - tau) <= quantisation + trade + 1e-9)
     assert res.scale == 1.0

@@ -191,7 +191,7 @@ class DeadbandSearch:
         tau = np.asarray(tau, dtype=float)
         s = float(voltage_scale)
         n, seeds = self.n, self._seed_free.size
-        # seed forces x (n, seeds) and weighted residuals (6, seeds) in one product
+        # seed forces x (n, seeds) and residuals B x - tau (6, seeds) in one product
         y = (self._seed_affine @ np.append(tau, s)).reshape(n + 6, seeds)
         x, residual = y[:n], y[n:]
         bound = np.einsum("js,js->s", residual, residual)  # no repair of a seed lowers its residual
@@ -202,7 +202,7 @@ class DeadbandSearch:
         best = int(np.argmin(cost))
         best_x, best_cost = x[:, best].copy(), float(cost[best])
         # A repaired seed keeps its pins and zeros and puts every bad thruster at >= m: a lower bound of its J.
-        bound = bound + self._rho_w @ np.where(self._seed_nonfree, x * x, 0.0) + self._rho_w_m2 @ bad
+        bound = bound + self._rho_w @ np.where(self._seed_nonfree, x * x, 0.0) + s * s * (self._rho_w_m2 @ bad)
         rows = np.flatnonzero(rows_bad & (bound < best_cost))
         if rows.size:
             best_x, best_cost = self._repair(tau, s, x[:, rows], bad[:, rows], ~self._seed_nonfree[:, rows],
@@ -240,7 +240,7 @@ class DeadbandSearch:
             i = int(np.argmin(cost))
             if cost[i] < best_cost:
                 best_x, best_cost = x[:, i].copy(), float(cost[i])
-            bound += self._rho_w @ np.where(free, 0.0, effort) + self._rho_w_m2 @ bad  # as in solve
+            bound += self._rho_w @ np.where(free, 0.0, effort) + s * s * (self._rho_w_m2 @ bad)  # as in solve
             keep = np.flatnonzero(rows_bad & (bound < best_cost))
             if keep.size == 0:
                 break
