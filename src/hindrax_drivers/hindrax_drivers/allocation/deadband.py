@@ -191,48 +191,49 @@ class DeadbandSearch:
         tau = np.asarray(tau, dtype=float)
         s = float(voltage_scale)
         n, seeds = self.n, self._seed_free.size
+        limits = self._limits(s)
         # seed forces x (n, seeds) and residuals B x - tau (6, seeds) in one product
         y = (self._seed_affine @ np.append(tau, s)).reshape(n + 6, seeds)
         x, residual = y[:n], y[n:]
         bound = np.einsum("js,js->s", residual, residual)  # no repair of a seed lowers its residual
-        bad = self._violations(x, s)
+        bad = _violations(x, *limits)
         rows_bad = np.logical_or.reduce(bad, axis=0)
-        cost = bound + self._rho_w @ (x * x)
+        effort = x * x
+        cost = bound + self._rho_w @ effort
         cost[rows_bad] = np.inf
         best = int(np.argmin(cost))
         best_x, best_cost = x[:, best].copy(), float(cost[best])
         # A repaired seed keeps its pins and zeros and puts every bad thruster at >= m: a lower bound of its J.
-        bound = bound + self._rho_w @ np.where(self._seed_nonfree, x * x, 0.0) + s * s * (self._rho_w_m2 @ bad)
+        bound += self._rho_w @ (effort * self._seed_nonfree) + (s * s) * (self._rho_w_m2 @ bad)
         rows = np.flatnonzero(rows_bad & (bound < best_cost))
         if rows.size:
-            best_x, best_cost = self._repair(tau, s, x[:, rows], bad[:, rows], ~self._seed_nonfree[:, rows],
+            best_x, best_cost = self._repair(tau, s, limits, x[:, rows], bad[:, rows], ~self._seed_nonfree[:, rows],
                                              best_x, best_cost)
         return np.where(np.abs(best_x) > ZERO_FORCE_N, best_x, 0.0)
 
-    def _violations(self, x: np.ndarray, s: float) -> np.ndarray:
-        """Bool (n, k): the forces x (n, k) inside a deadband gap (0 < |x| < m) or beyond a saturation limit."""
+    def _limits(self, s: float) -> tuple[np.ndarray, ...]:
+        """Columns (n, 1) at voltage scale s: m_fwd, m_rev, upper, lower, and the same with the tolerance."""
         tol = _BOUND_TOL_N
-        gap = (np.abs(x) > ZERO_FORCE_N) & (x < s * self._smallest_forward_col - tol) & (
-            x > -s * self._smallest_reverse_col + tol)
-        return gap | (x > s * self._upper_col + tol) | (x < s * self._lower_col - tol)
-
-    def _repair(self, tau, s, x, bad, free, best_x, best_cost):
-        """Repair rounds (module docstring, step 2) on k seeds given thruster-major: x, bad, free (n, k)."""
         m_fwd, m_rev = s * self._smallest_forward_col, s * self._smallest_reverse_col
         upper, lower = s * self._upper_col, s * self._lower_col
+        return m_fwd - tol, -m_rev + tol, upper + tol, lower - tol, m_fwd, m_rev, upper, lower
+
+    def _repair(self, tau, s, limits, x, bad, free, best_x, best_cost):
+        """Repair rounds (module docstring, step 2) on k seeds given thruster-major: x, bad, free (n, k)."""
+        m_fwd, m_rev, upper, lower = limits[4:]
         tau_col = tau[:, None]
         for _ in range(self.n):  # each round pins at least one more thruster of every seed it repairs
             clamp = np.where(x > 0.0, m_fwd, -m_rev)
             if np.any(x > upper) or np.any(x < lower):
                 clamp = np.where(x > upper, upper, np.where(x < lower, lower, clamp))
-            pinned = np.where(bad, clamp, np.where(free, 0.0, x))  # earlier pins and zeros kept
-            free = free & ~bad
+            pinned = np.where(bad, clamp, x * ~free)  # earlier pins and zeros kept
+            free &= ~bad
             subset = (self._bitf @ free).astype(np.intp)
             rhs = tau_col - self.matrix @ pinned
             x = np.einsum("knj,jk->nk", self._subset_pinv[subset], rhs) + pinned
             residual = self.matrix @ x - tau_col
             bound = np.einsum("jk,jk->k", residual, residual)
-            bad = self._violations(x, s)
+            bad = _violations(x, *limits[:4])
             rows_bad = np.logical_or.reduce(bad, axis=0)
             effort = x * x
             cost = bound + self._rho_w @ effort
@@ -240,9 +241,15 @@ class DeadbandSearch:
             i = int(np.argmin(cost))
             if cost[i] < best_cost:
                 best_x, best_cost = x[:, i].copy(), float(cost[i])
-            bound += self._rho_w @ np.where(free, 0.0, effort) + s * s * (self._rho_w_m2 @ bad)  # as in solve
+            bound += self._rho_w @ (effort * ~free) + (s * s) * (self._rho_w_m2 @ bad)  # as in solve
             keep = np.flatnonzero(rows_bad & (bound < best_cost))
             if keep.size == 0:
                 break
             x, bad, free = x[:, keep], bad[:, keep], free[:, keep]
         return best_x, best_cost
+
+
+def _violations(x: np.ndarray, gap_high, gap_low, upper, lower, *_unused) -> np.ndarray:
+    """Bool (n, k): the forces x (n, k) inside a deadband gap (0 < |x|, gap_low < x < gap_high) or beyond a
+    saturation limit (x > upper or x < lower); the bounds are (n, 1) columns, tolerances included."""
+    return ((x < gap_high) & (x > gap_low) & (np.abs(x) > ZERO_FORCE_N)) | (x > upper) | (x < lower)
