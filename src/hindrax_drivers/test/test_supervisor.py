@@ -116,7 +116,7 @@ def test_rates_and_run_time():
         t = k / 100.0
         c.on_message("imu", t)
         if k % 10 == 0:
-            c.on_dvl(t, None)
+            c.on_dvl(t, np.zeros(3))  # a valid velocity (an invalid one no longer counts toward the rate)
             c.on_altitude(t, 1.0)
             if k <= 290:
                 c.on_depth(t, 0.5)

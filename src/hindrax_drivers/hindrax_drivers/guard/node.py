@@ -26,6 +26,7 @@ Run alone: ``python -m hindrax_drivers.guard.node --ros-args --params-file ros_w
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -84,7 +85,7 @@ class OutputGuardNode(Node):
         self.last_assert_monotonic: float | None = None
         self.silence_failures = 0
         self._last_rewrite = -1e9
-        where = (f"/OE {self.gpio[0]}:{self.gpio[1]}" if self.gpio or line is not None
+        where = (f"/OE {self.gpio[0]}:{self.gpio[1]}" if self.gpio else "/OE (injected line)" if line is not None
                  else f"registers i2c-{self._bus_number}@0x{self._address:02x}")
         self.diag = DeviceDiagnostics("hindrax/output_guard", where, lambda: time.monotonic())
         if self.gpio is None and line is None:
@@ -96,7 +97,13 @@ class OutputGuardNode(Node):
         self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._apply(True, force=True)
+        if self.wired:
+            self._apply(True, force=True)  # /OE high from the start; the registers are the ESC's own start-up's job
+
+    @property
+    def wired(self) -> bool:
+        """True when the guard drives an /OE line (else it writes the chip's registers)."""
+        return self.gpio is not None or self.line is not None
 
     # -- outputs
     def _open_line(self) -> None:
@@ -164,7 +171,9 @@ class OutputGuardNode(Node):
             self.get_logger().warn(f"outputs silenced: {self.core.reason}")
         elif changed:
             self.get_logger().info("outputs enabled: the ESC reports disarmed at neutral")
-        self._apply(asserted, force=changed)
+        # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
+        # nothing to silence: the ESC's own start-up writes neutral before anything runs)
+        self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
         st = DiagnosticStatus(level=DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
                               name="hindrax/output_guard", message=self.core.reason if asserted else "outputs enabled",
                               hardware_id="output_guard")

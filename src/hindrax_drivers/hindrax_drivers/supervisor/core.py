@@ -113,7 +113,6 @@ class SupervisorCore:
         """The ESC's armed flag (``thrusters/pulse_width``). Arming starts the run-time and rate grace clocks."""
         if armed and not self.armed:
             self.armed_since_s = t_s
-            self.last_valid_dvl_t = None  # the invalid-DVL time counts from arming at the earliest
         if not armed:
             self.armed_since_s = None
         self.armed = bool(armed)
@@ -234,7 +233,8 @@ class SupervisorCore:
             return self._breach(f"armed for {armed_for:.0f} s, beyond supervisor.max_run_time_s "
                                 f"{self.limits.max_run_time_s:g}")
         if self.limits.min_rate_hz.get("dvl", 0.0) > 0.0:
-            since = self.last_valid_dvl_t if self.last_valid_dvl_t is not None else self.armed_since_s
+            # counted from the last valid velocity, or from arming if that is later
+            since = max(self.last_valid_dvl_t if self.last_valid_dvl_t is not None else -math.inf, self.armed_since_s)
             if t_s - since > self.limits.max_invalid_dvl_s:
                 return self._breach(f"no valid DVL velocity for {t_s - since:.1f} s, beyond "
                                     f"supervisor.max_invalid_dvl_s {self.limits.max_invalid_dvl_s:g} (dead-reckoned "
