@@ -759,6 +759,7 @@ def _safety_cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             if other in c and c["supervisor.max_depth_m"] > c[other]:
                 issues.append(ConfigIssue("supervisor.max_depth_m", c["supervisor.max_depth_m"],
                                           f"at most {other} ({c[other]:g}, {what}): a deeper limit never trips"))
+                break  # one line per key
     return issues
 
 
