@@ -251,6 +251,13 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     from hindrax_drivers.supervisor.node import SupervisorNode
 
     nodes["supervisor"] = SupervisorNode(**common)  # disarms the ESC on a breach (supervisor.*)
+    from hindrax_drivers.guard.node import OutputGuardNode
+
+    # the second stop path (docs/architecture.md §8): the ESC arms only with its heartbeat; without /OE wired it
+    # silences the chip over the same bus
+    nodes["output_guard"] = OutputGuardNode(bus=bus, **common)
+    if sim:  # simulated time may stand still on purpose (step gates): not a stalled /clock
+        nodes["supervisor"].set_clock_stall_timeout(30.0)
     from hindrax_drivers.tf.node import StaticTfNode
 
     nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static

@@ -539,6 +539,7 @@ class EscNode(Node):
             self.diag.warn("clock_step", f"ROS time stepped back {-step:.3f} s (/clock restarted?); protective "
                                          "timing is on the steady clock")
             self.get_logger().warn(f"ROS time stepped back {-step:.3f} s")
+            self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         self.supervisor_age.tick()
         self.guard_age.tick()
         refusal = self.heartbeat_refusal()

@@ -176,6 +176,7 @@ class SupervisorNode(Node):
             self.diag.count("clock_step")
             self.diag.warn("clock_step", f"ROS time stepped back {-step:.3f} s; supervised times shifted by it")
             self.get_logger().warn(f"ROS time stepped back {-step:.3f} s: checks re-based")
+            self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
             self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
                                         "armed: the supervisor's ROS-time checks are blind"))
