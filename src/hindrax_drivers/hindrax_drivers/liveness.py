@@ -19,7 +19,7 @@ from typing import Callable
 __all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_NAMES"]
 
 #: heartbeat topics (diagnostic_msgs/DiagnosticStatus: level OK = healthy, ERROR = tripped/asserted + reason)
-HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbeat"}
+HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbeat", "esc": "esc/heartbeat"}
 
 
 class AliveAge:

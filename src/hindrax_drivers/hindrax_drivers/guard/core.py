@@ -3,7 +3,7 @@
 The guard is the second stop path of docs/architecture.md §8. It asserts (silences the outputs: /OE high, or the
 chip's all-off and sleep registers where /OE is not wired) when any of these holds:
 
-* the ESC's output state (``thrusters/pulse_width``, published at every output tick) has not been heard for
+* the ESC's output state (``esc/heartbeat``, 25 Hz from its steady-clock tick) has not been heard for
   ``timeout_s``: the ESC process died or hangs, and the chip keeps its last widths on the wire;
 * the ESC reports ``OUTPUT_UNKNOWN``: the chip cannot be written or read back (I2C fault);
 * the supervisor's heartbeat (``supervisor/heartbeat``) has not been heard for ``timeout_s``, or says ERROR (a
@@ -36,7 +36,7 @@ class GuardCore:
     supervisor_message: str = ""
 
     def on_esc(self, output_state: int, armed: bool) -> None:
-        """The ESC's ``thrusters/pulse_width`` (output_state constant, armed flag)."""
+        """The ESC's ``esc/heartbeat`` (output_state constant, armed flag)."""
         self.esc_state, self.esc_armed = int(output_state), bool(armed)
 
     def on_supervisor(self, ok: bool, message: str) -> None:
@@ -48,7 +48,7 @@ class GuardCore:
         out = []
         if esc_age_s > self.timeout_s:
             out.append("ESC output state silent" + (f" for {esc_age_s:.2f} s" if esc_age_s < 1e9 else "") +
-                       " (thrusters/pulse_width): ESC process dead or hung")
+                       " (esc/heartbeat): ESC process dead or hung")
         elif self.esc_state == OUTPUT_UNKNOWN:
             out.append("ESC output state unknown: the PCA9685 cannot be written or read back (I2C fault)")
         if supervisor_age_s > self.timeout_s:

@@ -12,7 +12,8 @@ heartbeat silent or tripped -> silence, latched until the ESC reports disarmed a
   §7.3.4), once on assertion and again whenever the ESC reports commanding while asserted. Needs a working bus: an
   I2C outage on an unwired vehicle leaves the last widths on the wire (``hindrax config check`` warns).
 
-Subscribes ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's output state) and
+Subscribes ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus from the ESC's steady-clock tick: its output state
+and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
 ``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus). Publishes ``guard/heartbeat``
 (diagnostic_msgs/DiagnosticStatus at every tick: level OK = outputs enabled, ERROR = silenced with the reason; the
 ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
@@ -34,14 +35,12 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from hindrax_msgs.msg import ThrusterPwm
-
 from ..config import output_enable_gpio
 from ..liveness import HEARTBEAT_NAMES, AliveAge
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..pca9685 import protocol as p
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
-from .core import OUTPUT_COMMANDING, GuardCore
+from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
 
 __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "main"]
 
@@ -93,7 +92,7 @@ class OutputGuardNode(Node):
                                                  "bus (does not work through an I2C outage)")
         self._open_line()
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["guard"], 10)
-        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10)
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10)
         self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -153,9 +152,14 @@ class OutputGuardNode(Node):
             self.get_logger().error(f"cannot silence the outputs: {exc}", throttle_duration_sec=2.0)
 
     # -- inputs
-    def on_esc(self, msg: ThrusterPwm) -> None:
+    def on_esc(self, msg: DiagnosticStatus) -> None:
+        values = {kv.key: kv.value for kv in msg.values}
+        try:
+            state = int(values.get("output_state", OUTPUT_UNKNOWN))
+        except ValueError:
+            state = OUTPUT_UNKNOWN
         self.esc_age.heard()
-        self.core.on_esc(msg.output_state, msg.armed)
+        self.core.on_esc(state, values.get("armed") == "true")
 
     def on_supervisor(self, msg: DiagnosticStatus) -> None:
         self.supervisor_age.heard()

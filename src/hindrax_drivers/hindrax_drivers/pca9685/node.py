@@ -32,6 +32,10 @@ Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
   answers a disarm request with success=false and the reason, and retries the chip with backoff
   (:data:`RETRY_MIN_S` doubling to :data:`RETRY_MAX_S`); when the chip is back it is re-initialised at neutral and
   thrust needs a new arm request (and the arming time again).
+- ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus, every second steady-clock tick, 25 Hz at the default 50 Hz
+  output rate): the output state and the armed flag (values ``output_state``, ``armed``; level ERROR while
+  unknown). It is the output guard's sign of life: driven by the steady clock, unlike ``thrusters/pulse_width``
+  (ROS-time tick), so a simulation slower than real time or with its time held does not look like a dead ESC.
 - No bus at start-up (``/dev/i2c-N`` missing, or opening it fails): the node keeps running, reports ERROR "no I2C
   bus" on ``/diagnostics`` and ``OUTPUT_UNKNOWN``, and retries opening it with the same backoff; a bus that appears
   is picked up without a restart.
@@ -62,7 +66,7 @@ import time
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64
@@ -197,6 +201,8 @@ class EscNode(Node):
         self.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", self.on_command, 10)
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
+        self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
+        self._heartbeat_tick = 0
         self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor_heartbeat, 10)
         self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
@@ -555,11 +561,23 @@ class EscNode(Node):
         elif t - self._last_readback >= self.readback_interval_s:
             self._last_readback = t
             self._check_chip()
+        self._heartbeat_tick += 1
+        if self._heartbeat_tick % 2 == 0:
+            self._publish_heartbeat()
         guard_through = self.guard_ok and self.guard_age.fresh(self.heartbeat_timeout_s)
         if self.neutral_confirmed_time is None or not guard_through:
             self.neutral_on_wire_since = None
         elif self.neutral_on_wire_since is None:
             self.neutral_on_wire_since = t
+
+    def _publish_heartbeat(self) -> None:
+        unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
+        st = DiagnosticStatus(level=DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, name="hindrax/esc",
+                              message={0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state],
+                              hardware_id="esc")
+        st.values = [KeyValue(key="output_state", value=str(int(self.output_state))),
+                     KeyValue(key="armed", value="true" if self.armed and not unknown else "false")]
+        self.pub_heartbeat.publish(st)
 
     def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip

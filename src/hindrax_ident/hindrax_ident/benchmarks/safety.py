@@ -482,12 +482,16 @@ def _process_rows(repeats: int) -> dict[str, list[float]]:
     times: dict[str, list[float]] = {k: [] for k in (
         "supervisor_killed_outputs_stopped", "supervisor_hung_outputs_stopped", "esc_killed_oe_asserted",
         "esc_hung_oe_asserted", "i2c_outage_state_unknown", "clock_step_back_detected")}
+    times["guard_cpu_percent"] = []
     with tempfile.TemporaryDirectory(prefix="hindrax-bench-safety-") as d, domain_id() as did, \
             ros_context(domain_id=did) as ctx:
         tmp = Path(d)
         hw = _Hardware(str(tmp / "emulation.sock"))
         lay = _Layout(ctx, did, tmp, hw)
         try:
+            # the guard's cost while the vehicle is armed and commanded (50 Hz ESC state, 20 Hz heartbeats)
+            lay.armed_at_1700()
+            times["guard_cpu_percent"] = [_cpu_share(lay.procs["guard"].pid, 5.0 if repeats <= 3 else 10.0)]
             for _ in range(repeats):
                 for who, sig in (("supervisor", _signal.SIGKILL), ("supervisor", _signal.SIGSTOP)):
                     lay.armed_at_1700()
@@ -529,6 +533,18 @@ def _process_rows(repeats: int) -> dict[str, list[float]]:
             lay.close()
             hw.close()
     return times
+
+
+def _cpu_share(pid: int, window_s: float) -> float:
+    """CPU time of process ``pid`` (user + system, /proc) over ``window_s`` of wall time, in % of one core."""
+    import os
+
+    def cpu_s() -> float:
+        fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    c0, t0 = cpu_s(), time.monotonic()
+    time.sleep(window_s)  # a measurement window, not a wait for a condition
+    return 100.0 * (cpu_s() - c0) / (time.monotonic() - t0)
 
 
 def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
@@ -585,7 +601,8 @@ def run_processes(quick: bool = False) -> list[dict]:
              "esc_hung_oe_asserted": "SIGSTOP: the same path",
              "i2c_outage_state_unknown": "PCA9685 NACKs: thrusters/pulse_width output_state UNKNOWN",
              "clock_step_back_detected": "/clock -100 s: supervisor /diagnostics errors.clock_step"}
-    rows = []
+    rows = [{"name": "guard_cpu_percent", "value": times.pop("guard_cpu_percent")[0], "unit": "% of a core",
+             "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz timer)"}]
     for name, values in times.items():
         ms = np.array(values) * 1e3
         rows.append({"name": f"{name}_ms", "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)),
