@@ -324,3 +324,46 @@ def test_f7_clock_step_monitor_and_alive_age():
         t["steady"] += 0.02
         age.tick()
     assert age.age_s == pytest.approx(0.24) and not age.fresh(0.2)
+
+
+def test_esc_process_without_its_bus_keeps_running_and_reports():
+    """Issue 24 item 2, as the vehicle starts it: ``python -m hindrax_drivers.pca9685.node`` with no /dev/i2c-N
+    stays up, says why on /diagnostics, reports the output state unknown, refuses to arm, exits 0 on SIGINT."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hindrax_drivers.config import default_config_path
+
+    assert not os.path.exists("/dev/i2c-31")
+    env = child_env()
+    env.pop("HINDRAX_EMULATION_SOCKET", None)
+    proc = subprocess.Popen([sys.executable, "-m", "hindrax_drivers.pca9685.node", "--ros-args", "--params-file",
+                             str(default_config_path()), "-p", "esc.i2c_bus:=31", "-p",
+                             "esc.oscillator_calibrated:=true"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        with ros_context() as ctx:
+            probe = rclpy.create_node("probe", context=ctx)
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(probe)
+            diags, states = [], []
+            probe.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+            probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", states.append, 10)
+            arm = probe.create_client(SetArmed, "esc/set_armed")
+            spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
+            wait_until(lambda: any("no I2C bus" in s.message and "/dev/i2c-31" in s.message
+                                   and s.level == DiagnosticStatus.ERROR for a in diags for s in a.status)
+                       and states, 20, spin, "bus error in diagnostics and the output state")
+            assert states[-1].output_state == ThrusterPwm.OUTPUT_UNKNOWN and not states[-1].armed
+            wait_until(arm.service_is_ready, 10, spin, "esc/set_armed")
+            fut = arm.call_async(SetArmed.Request(arm=True))
+            wait_until(fut.done, 10, spin, "arm answer")
+            assert not fut.result().success and "/dev/i2c-31" in fut.result().message
+            assert proc.poll() is None
+            ex.shutdown()
+            probe.destroy_node()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)
