@@ -59,7 +59,9 @@ def test_drivers_read_the_simulated_vehicle_and_thrust_moves_it():
             def push():
                 m = WrenchStamped()
                 m.header.frame_id = "base_link"
-                m.header.stamp = probe.get_clock().now().to_msg()
+                # stamped on the graph's simulated time (the probe runs on system time): the allocation rejects a
+                # wrench stamped beyond thrusters.wrench_future_margin_s in its future
+                m.header.stamp = graph.nodes["thrust_allocation"].get_clock().now().to_msg()
                 m.wrench.force.x = 12.0  # forward, base_link
                 wrench.publish(m)
                 spin()

@@ -189,6 +189,10 @@ def ordered_executor(**kwargs: Any) -> Any:
     return _OrderedExecutor(**kwargs)
 
 
+#: heartbeat timeout of the ESC and the output guard inside one process (see build_graph), s
+SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S = 2.0
+
+
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
@@ -259,6 +263,10 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     # the second stop path (docs/architecture.md §8): the ESC arms only with its heartbeat; without /OE wired it
     # silences the chip over the same bus
     nodes["output_guard"] = OutputGuardNode(bus=bus, **common)
+    # one process, one executor thread: a slow callback delays the ESC, the supervisor and the guard alike, and none
+    # of them can die or hang alone, so their heartbeats get a wide timeout (the vehicle runs them as processes)
+    nodes["output_guard"].set_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
+    nodes["esc"].set_heartbeat_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
     if sim:  # simulated time may stand still on purpose (step gates): not a stalled /clock
         nodes["supervisor"].set_clock_stall_timeout(30.0)
     from hindrax_drivers.tf.node import StaticTfNode

@@ -99,6 +99,14 @@ class OutputGuardNode(Node):
         if self.wired:
             self._apply(True, force=True)  # /OE high from the start; the registers are the ESC's own start-up's job
 
+    def set_timeout(self, seconds: float) -> None:
+        """Heartbeat timeout, s (default ``esc.heartbeat_timeout_s``). A single-process graph (``hindrax bringup``),
+        where the ESC, the supervisor and this node share one executor thread, widens it: there a busy callback
+        delays every peer alike, and no peer can fail alone."""
+        if not seconds > 0.0:
+            raise ValueError(f"guard timeout must be > 0 s, got {seconds}")
+        self.timeout_s = self.core.timeout_s = float(seconds)
+
     @property
     def wired(self) -> bool:
         """True when the guard drives an /OE line (else it writes the chip's registers)."""
@@ -191,7 +199,11 @@ class OutputGuardNode(Node):
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}")]
 
     def close(self) -> None:
-        """Shutdown: silence, then release the line (with the /OE pull-up it stays off)."""
+        """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:
+        the ESC, which loses this heartbeat, disarms and writes neutral itself (sleeping the chip under a running
+        ESC would only fight its read-back)."""
+        if not self.wired:
+            return
         self._apply(True, force=True)
         if self.line is not None:
             release = getattr(self.line, "release", None)

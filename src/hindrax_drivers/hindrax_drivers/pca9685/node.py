@@ -223,6 +223,14 @@ class EscNode(Node):
             raise ValueError(f"steady watchdog timeout must be > 0 s, got {seconds}")
         self.steady_watchdog_s = float(seconds)
 
+    def set_heartbeat_timeout(self, seconds: float) -> None:
+        """Supervisor and guard heartbeat timeout, s (default ``esc.heartbeat_timeout_s``); widened in a
+        single-process graph, where the peers share this node's executor thread (see
+        :meth:`hindrax_drivers.guard.node.OutputGuardNode.set_timeout`)."""
+        if not seconds > 0.0:
+            raise ValueError(f"heartbeat timeout must be > 0 s, got {seconds}")
+        self.heartbeat_timeout_s = float(seconds)
+
     # -- device
     def _configure_chip(self) -> bool:
         """Put the chip in a known state with neutral on every used channel, then confirm it by reading it back.
