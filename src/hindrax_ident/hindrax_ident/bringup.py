@@ -116,9 +116,9 @@ class Graph:
     def start_and_arm(self, arm_client: Any, timeout_s: float, ready: Callable[[], bool] = lambda: True,
                       spin_timeout_s: float = 0.01) -> Any:
         """The operator's start of a simulated run, each step at a simulated instant independent of wall time:
-        with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready,
-        ``ready()``, the ESC's arming time (``esc.arming_time_s`` at neutral, steady clock) and the safety heartbeats;
-        answer the arm request, still frozen. Returns the SetArmed response. Raises
+        with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready and
+        ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); with time frozen
+        again, wait for the ESC's steady-clock arming time and the safety heartbeats, and answer the arm request. Returns the SetArmed response. Raises
         :class:`~hindrax_drivers.conditions.ConditionTimeout` when a step takes longer than ``timeout_s`` of wall time.
         """
         from hindrax_drivers.conditions import wait_until
@@ -128,12 +128,18 @@ class Graph:
         self.freeze_time()
         wait_until(lambda: self.startup_complete() and arm_client.service_is_ready() and ready(), timeout_s, spin,
                    "drivers' start-up, recorder subscriptions and services")
-        # the ESC's arming time and the supervisor's and guard's heartbeats run on the steady clock
-        # (docs/architecture.md §8): wait for them with simulated time held, so that the arm request lands at the same
-        # simulated instant whatever the machine's speed
+        # the vehicle holds neutral for esc.arming_time_s of simulated time (the drivers finish their start-up
+        # meanwhile); the ESC counts its arming time and the safety heartbeats on the steady clock
+        # (docs/architecture.md §8), so the rest of that wait happens with simulated time held: the arm request
+        # lands at the same simulated instant whatever the machine's speed
         esc = self.nodes["esc"]
+        self.resume_time()
+        t0_ns = esc.get_clock().now().nanoseconds
+        wait_until(lambda: esc.get_clock().now().nanoseconds - t0_ns >= esc.arming_time_s * 1e9, timeout_s, spin,
+                   "ESC arming time (simulated)")
+        self.freeze_time()
         wait_until(lambda: esc.arming_remaining_s() == 0.0 and not esc.heartbeat_refusal(), timeout_s, spin,
-                   "ESC arming time and the supervisor's and guard's heartbeats")
+                   "ESC arming time (steady clock) and the supervisor's and guard's heartbeats")
         fut = arm_client.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, timeout_s, spin, "arm answer")
         self.resume_time()
