@@ -20,6 +20,9 @@ from hindrax_msgs.srv import SetArmed
 pytestmark = pytest.mark.ros
 TICK_US = 1.24  # one PCA9685 count at 200 Hz (prescale 30) and 25 MHz, docs/devices.md §5.1
 PERIOD_S = 1 / 50.0  # esc.output_rate_hz
+#: these tests are not about the safety heartbeats (test_safety_paths.py is): the stand-in's heartbeats, published in
+#: this same busy process, get a wide timeout so that a loaded machine cannot disarm the ESC mid-test
+HEARTBEAT_TIMEOUT_S = 2.0
 #: neutral of the fixture's channels: 1500 us plus each thruster's trim (t3: +10 us)
 NEUTRAL = np.array([1500.0, 1500.0, 1510.0, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0])
 
@@ -36,6 +39,7 @@ def esc():
         params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True,
                                     "thrusters.t2.reversed": True, "thrusters.t3.trim_us": 10.0})
         node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
+        node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
         probe = rclpy.create_node("probe", context=ctx)
         beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
@@ -117,6 +121,10 @@ def test_watchdog_returns_to_neutral_within_one_period():
         params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True})
         node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
                        parameter_overrides=params + [Parameter("use_sim_time", value=True)])
+        node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
+        # the ROS-time watchdog is under test; the wall-clock one (test_fault3_...) must not pre-empt it when this
+        # loop's simulated 5 ms steps take longer than 5 ms of wall time on a loaded machine
+        node.set_steady_watchdog_timeout(5.0)
         probe = rclpy.create_node("probe", context=ctx)
         beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
@@ -264,7 +272,9 @@ def _node(emu_or_bus, overrides, sim_time=False, ctx=None):
     params = config_parameters({"esc.oscillator_calibrated": True, **overrides})
     if sim_time:
         params.append(Parameter("use_sim_time", value=True))
-    return EscNode(bus=bus, context=ctx, parameter_overrides=params)
+    node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
+    node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
+    return node
 
 
 def test_fault1_chip_reset_while_armed_is_detected_reinitialised_and_disarms(esc):
