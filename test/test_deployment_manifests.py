@@ -23,6 +23,7 @@ ROSDEP_KEY = {
     "matplotlib": "python3-matplotlib", "smbus2": "python3-smbus2", "mcap": "python3-mcap-pip",
     "mcap_ros2": "mcap-ros2-support", "filterpy": "python3-filterpy-pip",
     "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest", "hypothesis": "python3-hypothesis",
+    "gpiod": "python3-gpiod-pip",
 }
 #: keys of rosdistro's rosdep/python.yaml used here (checked against ros/rosdistro, 2026-11): apt or pip there
 ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-serial", "python3-yaml", "python3-matplotlib",

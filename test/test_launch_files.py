@@ -157,7 +157,7 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     root = REPO / "src"
     vehicle = dict.fromkeys(check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages))
     for exe in ("dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
-                "static_tf_node", "supervisor_node"):
+                "static_tf_node", "supervisor_node", "output_guard_node"):
         assert ("hindrax_drivers", exe) in vehicle
     assert ("hindrax_drivers", "recorder_node") not in vehicle  # recording is optional there
     recorded = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,

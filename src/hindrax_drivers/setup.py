@@ -30,6 +30,7 @@ NODES = {
     "player_node": "hindrax_drivers.recording.player_node",
     "static_tf_node": "hindrax_drivers.tf.node",
     "supervisor_node": "hindrax_drivers.supervisor.node",
+    "output_guard_node": "hindrax_drivers.guard.node",
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
 NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}

@@ -117,8 +117,8 @@ class Graph:
                       spin_timeout_s: float = 0.01) -> Any:
         """The operator's start of a simulated run, each step at a simulated instant independent of wall time:
         with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready and
-        ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); answer the arm
-        request with time frozen again. Returns the SetArmed response. Raises
+        ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); with time frozen
+        again, wait for the ESC's steady-clock arming time and the safety heartbeats, and answer the arm request. Returns the SetArmed response. Raises
         :class:`~hindrax_drivers.conditions.ConditionTimeout` when a step takes longer than ``timeout_s`` of wall time.
         """
         from hindrax_drivers.conditions import wait_until
@@ -128,9 +128,18 @@ class Graph:
         self.freeze_time()
         wait_until(lambda: self.startup_complete() and arm_client.service_is_ready() and ready(), timeout_s, spin,
                    "drivers' start-up, recorder subscriptions and services")
+        # the vehicle holds neutral for esc.arming_time_s of simulated time (the drivers finish their start-up
+        # meanwhile); the ESC counts its arming time and the safety heartbeats on the steady clock
+        # (docs/architecture.md §8), so the rest of that wait happens with simulated time held: the arm request
+        # lands at the same simulated instant whatever the machine's speed
+        esc = self.nodes["esc"]
         self.resume_time()
-        wait_until(lambda: self.nodes["esc"].arming_remaining_s() == 0.0, timeout_s, spin, "ESC arming time")
+        t0_ns = esc.get_clock().now().nanoseconds
+        wait_until(lambda: esc.get_clock().now().nanoseconds - t0_ns >= esc.arming_time_s * 1e9, timeout_s, spin,
+                   "ESC arming time (simulated)")
         self.freeze_time()
+        wait_until(lambda: esc.arming_remaining_s() == 0.0 and not esc.heartbeat_refusal(), timeout_s, spin,
+                   "ESC arming time (steady clock) and the supervisor's and guard's heartbeats")
         fut = arm_client.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, timeout_s, spin, "arm answer")
         self.resume_time()
@@ -184,6 +193,10 @@ def ordered_executor(**kwargs: Any) -> Any:
             return [n for n in self._order if n in present]
 
     return _OrderedExecutor(**kwargs)
+
+
+#: heartbeat timeout of the ESC and the output guard inside one process (see build_graph), s
+SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S = 2.0
 
 
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
@@ -251,6 +264,17 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     from hindrax_drivers.supervisor.node import SupervisorNode
 
     nodes["supervisor"] = SupervisorNode(**common)  # disarms the ESC on a breach (supervisor.*)
+    from hindrax_drivers.guard.node import OutputGuardNode
+
+    # the second stop path (docs/architecture.md §8): the ESC arms only with its heartbeat; without /OE wired it
+    # silences the chip over the same bus
+    nodes["output_guard"] = OutputGuardNode(bus=bus, **common)
+    # one process, one executor thread: a slow callback delays the ESC, the supervisor and the guard alike, and none
+    # of them can die or hang alone, so their heartbeats get a wide timeout (the vehicle runs them as processes)
+    nodes["output_guard"].set_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
+    nodes["esc"].set_heartbeat_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
+    if sim:  # simulated time may stand still on purpose (step gates): not a stalled /clock
+        nodes["supervisor"].set_clock_stall_timeout(30.0)
     from hindrax_drivers.tf.node import StaticTfNode
 
     nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static

@@ -335,6 +335,8 @@ class Icm20948Node(Node):
         self.mag_retry_interval_s = float(s["mag_retry_interval_s"])
         self._not_ready_polls = 0  # consecutive polls without RAW_DATA_0_RDY
         self._mag_retry_due_s: float | None = None
+        self._mag_retrying = False  # a magnetometer-only re-initialisation runs between polls
+        self._mag_step_due_s = 0.0
         self._repeats = 0
         self._last_block: bytes | None = None
         self._mag_fresh_s: float | None = None
@@ -418,6 +420,7 @@ class Icm20948Node(Node):
     def _start(self) -> None:
         """Open the bus if needed and run the start-up steps (docs/devices.md §4.3)."""
         self.startup_attempts += 1
+        self._mag_retrying = False
         self._poll_timer.cancel()
         self.running = False
         self._fail_since_s = None
@@ -716,9 +719,43 @@ class Icm20948Node(Node):
         if self._mag_retry_due_s is not None and now_s >= self._mag_retry_due_s:
             self._mag_retry_due_s = None
             self.diag.count("mag_retries")
-            self.get_logger().warn(f"AK09916 still missing: re-initialising (every {self.mag_retry_interval_s:g} s)",
+            self.get_logger().warn(f"AK09916 still missing: re-initialising it (every {self.mag_retry_interval_s:g} s)",
                                    throttle_duration_sec=30.0)
-            self._start()
+            self._begin_mag_retry(now_s)
+        self._mag_retry_step(now_s)
+
+    def _begin_mag_retry(self, now_s: float) -> None:
+        """Re-initialise only the magnetometer, one step per poll (the accel/gyro polls go on: at most one missed
+        sample, where the whole start-up with its device reset cost 340-350 ms of samples every retry)."""
+        self._mag_attempt = 0
+        self.mag_failed = False
+        self._steps = collections.deque(self._mag_steps())
+        self._mag_retrying = True
+        self._mag_step_due_s = now_s
+
+    def _mag_retry_step(self, now_s: float) -> None:
+        """One step of the magnetometer re-initialisation when due (called after a published sample)."""
+        if not self._mag_retrying or now_s < self._mag_step_due_s:
+            return
+        if not self._steps:
+            self._mag_retrying = False
+            if self.mag_available:
+                self._mag_lost = False
+                self._mag_frozen_block = None
+                self._mag_fresh_s = now_s
+                self.get_logger().info("AK09916 answers again: publishing imu/mag")
+            else:
+                self._mag_retry_due_s = now_s + self.mag_retry_interval_s
+            return
+        step = self._steps.popleft()
+        try:
+            delay_s = step() or 0.0
+        except (I2CError, p.Icm20948Error) as exc:
+            self._bank = None
+            self._steps.clear()
+            self._mag_unavailable(f"re-initialisation failed: {exc}")
+            delay_s = 0.0
+        self._mag_step_due_s = now_s + delay_s
 
     def _mag_stale(self, now_s: float) -> bool:
         """True (and re-initialisation started) when no fresh magnetometer sample came for the timeout."""
@@ -732,7 +769,8 @@ class Icm20948Node(Node):
         self._mag_lost = True
         self._mag_fresh_s = None
         self.diagnostics.publish()
-        self._start()
+        self.mag_available = False
+        self._begin_mag_retry(now_s)
         return True
 
     def _publish_mag(self, mag: p.MagSample, stamp_msg) -> None:

@@ -63,7 +63,11 @@ identified heave inertia and damping.
 
 Plausibility (ERROR ``implausible`` in the diagnostics, held :data:`IMPLAUSIBLE_HOLD_S` after the last
 rejection; nothing is published for that cycle, counted ``implausible_pressure``): a compensated pressure
-outside [``sensors.ms5837.min_pressure_pa``, ``max_pressure_pa``] of the vehicle file.
+outside [``sensors.ms5837.min_pressure_pa``, ``max_pressure_pa``] of the vehicle file; then, after the conversion
+to depth, :class:`DepthGate`: a depth outside [``sensors.ms5837.min_depth_m``, ``max_depth_m``], or one that moved
+faster than ``max_depth_rate_m_s`` from the last published depth and is not confirmed by the next sample (counted
+``implausible_depth``). Garbage ADC words (a bus returning noise, not errors) pass the pressure window in about
+4.5 % of random pairs; the rate gate needs two consecutive garbage depths to agree, which they almost never do.
 
 A stuck sensor (bit-identical D1 and D2 for :data:`STUCK_AFTER_S` seconds, :class:`StuckDetector`)
 raises the ERROR ``stuck`` in the diagnostics and a log error, and its readings are not published until
@@ -80,6 +84,7 @@ Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_
 from __future__ import annotations
 
 import collections
+import math
 from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -123,6 +128,50 @@ PRESSURE_RESOLUTION_PA = {p.Variant.MS5837_30BA: 25.0, p.Variant.MS5837_02BA: 1.
 TEMPERATURE_RESOLUTION_C = 0.01
 
 
+class DepthGate:
+    """Range and rate-of-change gate on the depth after conversion (pure; see the module docstring).
+
+    ``check(t_s, depth_m)`` returns '' to publish, else the reason; ``invalid()`` tells it that a cycle gave no
+    reading (rejected earlier, or failed). A depth within ``max_rate_m_s * dt + noise_m`` of the last accepted
+    one, accepted at most ``max_age_s`` ago, is accepted; any other in-range depth is held as a candidate and
+    accepted when the very next cycle agrees with it (a real jump, e.g. after an outage, costs one sample). Noise
+    passes only when two consecutive garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well under 1 m/s.
+    """
+
+    def __init__(self, min_depth_m: float, max_depth_m: float, max_rate_m_s: float, noise_m: float = 0.05,
+                 max_age_s: float = 0.5) -> None:
+        self.min_depth_m, self.max_depth_m = float(min_depth_m), float(max_depth_m)
+        self.max_age_s = float(max_age_s)
+        self.max_rate_m_s, self.noise_m = float(max_rate_m_s), float(noise_m)
+        self._last: tuple[float, float] | None = None
+        self._candidate: tuple[float, float] | None = None
+
+    def _agrees(self, ref: tuple[float, float], t_s: float, depth_m: float) -> bool:
+        return abs(depth_m - ref[1]) <= self.max_rate_m_s * max(t_s - ref[0], 0.0) + self.noise_m
+
+    def invalid(self) -> None:
+        """A cycle without a reading: the next depth cannot confirm a candidate across it."""
+        self._candidate = None
+
+    def check(self, t_s: float, depth_m: float) -> str:
+        if not math.isfinite(depth_m) or not self.min_depth_m <= depth_m <= self.max_depth_m:
+            self._candidate = None
+            return (f"depth {depth_m:.2f} m outside sensors.ms5837.min_depth_m..max_depth_m "
+                    f"{self.min_depth_m:g}..{self.max_depth_m:g} m")
+        if self._last is not None and t_s - self._last[0] <= self.max_age_s and self._agrees(self._last, t_s, depth_m):
+            self._last, self._candidate = (t_s, depth_m), None
+            return ""
+        if self._candidate is not None and self._agrees(self._candidate, t_s, depth_m):
+            self._last, self._candidate = (t_s, depth_m), None
+            return ""
+        if self._last is None:  # the first depth (range-checked) is the baseline
+            self._last = (t_s, depth_m)
+            return ""
+        self._candidate = (t_s, depth_m)
+        return (f"depth {depth_m:.2f} m changed faster than sensors.ms5837.max_depth_rate_m_s {self.max_rate_m_s:g} "
+                f"since {self._last[1]:.2f} m (held until the next sample confirms it)")
+
+
 def pressure_variance_pa2(variant: p.Variant) -> float:
     """Variance of one pressure reading, Pa^2: resolution^2 (taken as 1 sigma) + output LSB^2 / 12.
 
@@ -160,6 +209,9 @@ class Ms5837Node(Node):
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
         self.min_pressure_pa = float(s["min_pressure_pa"])
         self.max_pressure_pa = float(s["max_pressure_pa"])
+        # a baseline is "recent" for 5 cycles at sensors.ms5837.rate_hz
+        self.depth_gate = DepthGate(s["min_depth_m"], s["max_depth_m"], s["max_depth_rate_m_s"],
+                                    max_age_s=5.0 / float(s["rate_hz"]))
         self.prom_reject_blank_words = bool(s["prom_reject_blank_words"])
         self._last_implausible_s: float | None = None
         self.d1_command = p.convert_d1_command(self.osr)
@@ -333,6 +385,7 @@ class Ms5837Node(Node):
             return  # a stuck sensor's reading is not published (ERROR "stuck")
         now_s = self._now_s()
         if not self.min_pressure_pa <= reading.pressure_pa <= self.max_pressure_pa:
+            self.depth_gate.invalid()
             self.diag.count("implausible_pressure")
             text = (f"implausible pressure {reading.pressure_pa:.0f} Pa outside {self.min_pressure_pa:g}.."
                     f"{self.max_pressure_pa:g} Pa (D1 = {self._d1}, D2 = {d2}): not published")
@@ -341,6 +394,14 @@ class Ms5837Node(Node):
             if self._last_implausible_s is None:
                 self.diagnostics.publish()
             self._last_implausible_s = now_s
+            return
+        depth_reason = self.depth_gate.check(now_s, self.depth_m(reading.pressure_pa))
+        if depth_reason:
+            self.diag.count("implausible_depth")
+            if not depth_reason.startswith("first"):
+                self.diag.error("implausible", f"{depth_reason} (D1 = {self._d1}, D2 = {d2}): not published")
+                self.get_logger().error(f"MS5837: {depth_reason}", throttle_duration_sec=5.0)
+                self._last_implausible_s = now_s
             return
         if self._last_implausible_s is not None and now_s - self._last_implausible_s > IMPLAUSIBLE_HOLD_S:
             self._last_implausible_s = None
@@ -354,6 +415,7 @@ class Ms5837Node(Node):
         self.raw.flush()
 
     def _cycle_failed(self, kind: str, exc: Exception) -> None:
+        self.depth_gate.invalid()
         self._phase = "idle"
         self.raw.flush()
         self.diag.count(kind)

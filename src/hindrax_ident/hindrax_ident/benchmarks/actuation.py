@@ -28,7 +28,7 @@ from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.srv import SetArmed
 
@@ -102,13 +102,15 @@ def run(quick: bool = False) -> list[dict]:
         alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
         esc = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         driver = rclpy.create_node("bench_driver", context=ctx)
+        SafetyHeartbeats(driver)  # stand-in supervisor and output guard: the ESC arms only with their heartbeats
         ex = SingleThreadedExecutor(context=ctx)
         for n in (alloc, esc, driver):
             ex.add_node(n)
         pub = driver.create_publisher(WrenchStamped, "wrench", 10)
         arm = driver.create_client(SetArmed, "esc/set_armed")
         spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
-        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready(), 10, spin, "graph")
+        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready() and not esc.heartbeat_refusal(),
+                   10, spin, "graph")
         fut = arm.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, 5, spin, "armed")
         state = {"i": 0, "sent": 0}
