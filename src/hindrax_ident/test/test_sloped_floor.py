@@ -4,12 +4,15 @@ DVL beam ranges through the emulator and driver message into the campaign's sens
 Expected values are plain geometry written out here (a ray from a point along a direction to the plane
 z = D + g_n (x - L/2) + g_e (y - W/2)), not the simulator's own ray caster."""
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.dvl75.protocol import BEAM_TILT_RAD
+from hindrax_ident.identification.maneuvers import SensorState
+from hindrax_ident.identification.signals import samples_from_dvl
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import TruthError, load_truth, truth_from_mapping, with_floor_gradient
 
@@ -125,3 +128,19 @@ def test_dvl_emulator_reports_the_simulated_beam_ranges():
         assert port_b == pytest.approx(h / c, rel=0.05)
     finally:
         vh.close()
+
+
+def test_beam_ranges_reach_the_sensor_state_from_a_driver_message():
+    """hindrax_msgs/Dvl beam_range_m / beam_lock -> the dvl75 sample -> SensorState (NaN for an unlocked beam)."""
+    cfg = load_config(default_config_path())
+    msg = SimpleNamespace(
+        header=SimpleNamespace(stamp=SimpleNamespace(sec=10, nanosec=0)), delta_time_s=0.1,
+        orientation=SimpleNamespace(x=0.0, y=0.0, z=0.0, w=1.0), velocity_m_s=SimpleNamespace(x=0.1, y=0.0, z=0.0),
+        velocity_valid=True, beam_range_m=[0.61, 0.60, -1.0, 0.55], beam_lock=[True, True, False, True])
+    st = SensorState(cfg)
+    for dev, s in samples_from_dvl(msg):
+        st.on_sample(dev, s)
+    assert st.dvl_beam_stamp_s == pytest.approx(10.0)
+    assert st.dvl_beam_range_m[0] == pytest.approx(0.61)
+    assert math.isnan(st.dvl_beam_range_m[2])
+    assert st.dvl_beam_range_m[3] == pytest.approx(0.55)
