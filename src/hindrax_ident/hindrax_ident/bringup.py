@@ -189,14 +189,17 @@ def ordered_executor(**kwargs: Any) -> Any:
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
-                drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None) -> Graph:
+                drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None, controller: bool = False,
+                model_file: str = "") -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
     (all topics) writing to ``record_dir`` (empty: timestamped directory under ``recording.output_root``).
     overrides: dotted configuration keys. seed / real_time_factor: simulation settings.
     identification: add the identification node (action ``run_identification``; default True, with or without
-    ``sim``). i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
+    ``sim``). controller: add the controller node (depth/altitude, heading and velocity holds, disabled until
+    ``controller/hold``; docs/control.md) with the model of ``model_file`` ("" = the vehicle file's).
+    i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
     of opening its configured ``/dev/i2c-N`` (e.g. the emulated bus of
     :class:`~hindrax_ident.sim.hardware.VirtualHardware`, to run the vehicle graph against emulated devices).
     drive_clocks (sim only): the simulator sets the nodes' clocks directly and publishes no /clock (about 20 %
@@ -260,6 +263,12 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         nodes["identification"] = IdentificationNode(config=cfg, **common)
         if sim:  # lock-step: simulated time waits for every control tick of a running manoeuvre
             nodes["simulator"].add_step_gate(nodes["identification"].clock_may_advance)
+    if controller:
+        from .control.node import ControllerNode
+
+        nodes["controller"] = ControllerNode(config=cfg, model_file=model_file, **common)
+        if sim:  # lock-step while it holds, as for the identification node
+            nodes["simulator"].add_step_gate(nodes["controller"].clock_may_advance)
     if hardware is not None:
         # emulators on the drivers' ROS clock (the MS5837 driver's): conversion waits line up exactly
         ms5837_clock = nodes["ms5837"].get_clock()
