@@ -1,11 +1,13 @@
 """``hindrax control evaluate | scenarios | model``: the identified model in closed loop (docs/control.md).
 
-* ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...] [--seed N]``:
+* ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...] [--seed N]
+  [--seeds N]``:
   closed-loop runs in the in-process virtual pool on the truth FILE (:mod:`hindrax_ident.control.evaluate`): a 0.3 m
   depth step, an altitude hold at 0.5 m over a sloped floor and a 30 degree heading step, each with the model of
   YAML, the vehicle file's model and the former PD hold. Prints the table (RMSE, overshoot, settling time, RMS thrust)
   and the ratios, writes ``control.json`` and ``report/index.html`` (plots) in DIR (default
-  ``<recording.output_root>/control-<UTC time>``). A model file that cannot be used is reported in one line and the
+  ``<recording.output_root>/control-<UTC time>``); with ``--seeds N`` every case runs with N noise seeds and the
+  table and ``cases`` give the mean (and its std). A model file that cannot be used is reported in one line and the
   vehicle file is used in its place (then the "identified" rows equal the vehicle file's).
 * ``hindrax control scenarios [--scenarios NAMES] [--seed N] [--levels N] [--out DIR]``: for each truth of the scenario
   suite (``ros_ws/config/truth/scenarios/``), an in-process identification campaign (surge, sway, heave, yaw) against
@@ -40,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help="identification.yaml (default: the vehicle file's model)")
         return
     parser.add_argument("--seed", type=int, default=1, help="simulation seed (default 1)")
+    if which == "evaluate":
+        parser.add_argument("--seeds", type=int, default=1,
+                            help="run every case with the noise seeds seed .. seed+N-1 and report the mean (default 1)")
     parser.add_argument("--out", default=None, metavar="DIR", help="output directory")
     if which == "evaluate":
         parser.add_argument("--truth", required=True, metavar="FILE",
@@ -124,17 +129,20 @@ def _evaluate(args, cfg) -> int:
     def progress(msg: str) -> None:
         print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
 
-    cases = ev.evaluate(cfg, truth, model, maneuvers, models, setup, seed=args.seed, progress=progress)
+    if args.seeds < 1:
+        raise CommandError(f"--seeds: {args.seeds}: a number >= 1")
+    cases = ev.evaluate(cfg, truth, model, maneuvers, models, setup, seed=args.seed, progress=progress,
+                        seeds=args.seeds)
     out = _out_dir(cfg, args.out, "control")
     info = {"truth": str(args.truth), "model": model.source, "model_notes": list(model.notes),
-            "vehicle_file": cfg.source, "seed": args.seed, "setup": ev.setup_dict(setup),
+            "vehicle_file": cfg.source, "seed": args.seed, "seeds": args.seeds, "setup": ev.setup_dict(setup),
             "gains_identified": ev.make_hold("identified", cfg, setup, model).core.gain_report(),
             "gains_vehicle_file": ev.make_hold("vehicle_file", cfg, setup).core.gain_report()}
     path = ev.write_outputs(out, cases, info)
     print(ev.format_table(cases))
     for m, row in ev.ratios(cases).items():
         print(f"{m}: identified rmse / vehicle file {row.get('rmse_vs_vehicle_file', math.nan):.2f}, "
-              f"/ PD hold {row.get('rmse_vs_pd_hold', math.nan):.2f}")
+              f"/ PD hold {row.get('rmse_vs_pd_hold', math.nan):.2f} (mean over {args.seeds} seed(s))")
     print(f"output: {path} and {path.parent / 'report' / 'index.html'}  (wall time {time.monotonic() - wall0:.0f} s)")
     return 0
 

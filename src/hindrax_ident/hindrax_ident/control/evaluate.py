@@ -54,8 +54,8 @@ from .legacy import LegacyPDHold
 from .loop import HoldLoop
 from .model import ControlModel, model_from_config
 
-__all__ = ["MANEUVERS", "MODELS", "EvaluationSetup", "CaseResult", "run_case", "evaluate", "metrics",
-           "format_table", "write_outputs", "ratios"]
+__all__ = ["MANEUVERS", "MODELS", "METRICS", "EvaluationSetup", "CaseResult", "run_case", "evaluate", "metrics",
+           "summarise", "format_table", "write_outputs", "ratios", "make_hold", "reference_limits"]
 
 MANEUVERS = ("depth_step", "altitude_hold", "heading_step")
 MODELS = ("identified", "vehicle_file", "pd_hold")
@@ -99,6 +99,7 @@ class CaseResult:
     thrust_n: np.ndarray
     metrics: dict = field(default_factory=dict)
     unit: str = "m"
+    seed: int = 1
 
 
 def _authority(cfg: VehicleConfig) -> np.ndarray:
@@ -229,7 +230,7 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
             series["thrust"].append(sim.thrust_n)
     res = CaseResult(maneuver, model_name, np.asarray(series["t"]), np.asarray(series["v"]),
                      np.asarray(series["spec"]), np.asarray(series["sp"]), np.asarray(series["thrust"]),
-                     unit="rad" if maneuver == "heading_step" else "m")
+                     unit="rad" if maneuver == "heading_step" else "m", seed=int(seed))
     res.metrics = metrics(res, setup, step=final - initial)
     return res
 
@@ -261,25 +262,48 @@ def metrics(res: CaseResult, setup: EvaluationSetup, step: float) -> dict:
 
 def evaluate(cfg: VehicleConfig, truth: Truth, model: ControlModel, maneuvers: Sequence[str] = MANEUVERS,
              models: Sequence[str] = MODELS, setup: EvaluationSetup = EvaluationSetup(), seed: int = 1,
-             progress: Callable[[str], None] | None = None) -> list[CaseResult]:
-    """Every manoeuvre with every hold (module docstring); ``model`` is the identified model."""
+             progress: Callable[[str], None] | None = None, seeds: int = 1) -> list[CaseResult]:
+    """Every manoeuvre with every hold (module docstring) for the noise seeds ``seed`` .. ``seed + seeds - 1``;
+    ``model`` is the identified model."""
     out = []
-    for m in maneuvers:
-        for kind in models:
-            hold = make_hold(kind, cfg, setup, model)
-            r = run_case(cfg, truth, m, hold, setup, seed, kind)
-            out.append(r)
-            if progress:
-                k = r.metrics
-                progress(f"{m} / {kind}: rmse {k['rmse']:.4g} {r.unit}, overshoot {k['overshoot']:.3g} {r.unit}, "
-                         f"settling {k['settling_time_s']:.2f} s, effort {k['effort_n_rms']:.2f} N rms")
+    for sd in range(int(seed), int(seed) + max(1, int(seeds))):
+        for m in maneuvers:
+            for kind in models:
+                hold = make_hold(kind, cfg, setup, model)
+                r = run_case(cfg, truth, m, hold, setup, sd, kind)
+                out.append(r)
+                if progress:
+                    k = r.metrics
+                    progress(f"seed {sd} {m} / {kind}: rmse {k['rmse']:.4g} {r.unit}, overshoot {k['overshoot']:.3g} "
+                             f"{r.unit}, settling {k['settling_time_s']:.2f} s, effort {k['effort_n_rms']:.2f} N rms")
     return out
 
 
-def ratios(cases: Sequence[CaseResult]) -> dict:
-    """Per manoeuvre: rmse of ``identified`` / ``vehicle_file`` and / ``pd_hold``, and the overshoot difference
-    (identified - other, m or rad), where both cases exist."""
-    by = {(c.maneuver, c.model): c.metrics for c in cases}
+METRICS = ("rmse", "rmse_setpoint", "overshoot", "settling_time_s", "effort_n_rms")
+
+
+def summarise(cases: Sequence[CaseResult]) -> list[dict]:
+    """One entry per (manoeuvre, hold), in run order: the mean of each metric over the seeds, its sample std
+    (``<metric>_std``, 0 for one seed), ``seeds``, ``unit``."""
+    groups: dict = {}
+    for c in cases:
+        groups.setdefault((c.maneuver, c.model), []).append(c)
+    out = []
+    for (m, kind), cs in groups.items():
+        e = {"maneuver": m, "model": kind, "unit": cs[0].unit, "seeds": [c.seed for c in cs]}
+        for k in METRICS:
+            v = np.array([c.metrics[k] for c in cs], dtype=float)
+            e[k] = float(np.mean(v))
+            e[k + "_std"] = float(np.std(v, ddof=1)) if v.size > 1 and np.all(np.isfinite(v)) else 0.0
+        out.append(e)
+    return out
+
+
+def ratios(summary: Sequence) -> dict:
+    """Per manoeuvre: mean rmse of ``identified`` / ``vehicle_file`` and / ``pd_hold``, and the mean overshoot
+    difference (identified - other, m or rad), where both exist. Takes :func:`summarise`'s entries (or cases)."""
+    rows = summarise(summary) if summary and isinstance(summary[0], CaseResult) else list(summary)
+    by = {(e["maneuver"], e["model"]): e for e in rows}
     out: dict = {}
     for m in MANEUVERS:
         ident = by.get((m, "identified"))
@@ -295,16 +319,18 @@ def ratios(cases: Sequence[CaseResult]) -> dict:
     return out
 
 
-def format_table(cases: Sequence[CaseResult]) -> str:
-    """The cases as a plain-text table (SI units)."""
-    lines = [f"{'manoeuvre':14s} {'model':13s} {'rmse':>10s} {'rmse_sp':>10s} {'overshoot':>10s} {'settling_s':>10s} "
-             f"{'effort_N':>9s}"]
-    for c in cases:
-        k = c.metrics
-        scale, unit = (180.0 / math.pi, "deg") if c.unit == "rad" else (100.0, "cm")
-        lines.append(f"{c.maneuver:14s} {c.model:13s} {k['rmse'] * scale:7.3f} {unit:>2s} "
-                     f"{k['rmse_setpoint'] * scale:7.3f} {unit:>2s} {k['overshoot'] * scale:7.3f} {unit:>2s} "
-                     f"{k['settling_time_s']:10.2f} {k['effort_n_rms']:9.3f}")
+def format_table(cases: Sequence) -> str:
+    """The cases (or :func:`summarise`'s entries) as a plain-text table, SI with cm and deg; the mean over the seeds
+    with +- its std when there are several."""
+    rows = summarise(cases) if cases and isinstance(cases[0], CaseResult) else list(cases)
+    lines = [f"{'manoeuvre':14s} {'model':13s} {'rmse':>16s} {'rmse_sp':>10s} {'overshoot':>10s} {'settling_s':>10s} "
+             f"{'effort_N':>9s}  seeds"]
+    for e in rows:
+        scale, unit = (180.0 / math.pi, "deg") if e["unit"] == "rad" else (100.0, "cm")
+        sd = f"+-{e['rmse_std'] * scale:5.3f}" if len(e["seeds"]) > 1 else " " * 7
+        lines.append(f"{e['maneuver']:14s} {e['model']:13s} {e['rmse'] * scale:6.3f} {sd} {unit:>3s} "
+                     f"{e['rmse_setpoint'] * scale:6.3f} {unit:>3s} {e['overshoot'] * scale:6.3f} {unit:>3s} "
+                     f"{e['settling_time_s']:10.2f} {e['effort_n_rms']:9.3f}  {len(e['seeds'])}")
     return "\n".join(lines)
 
 
@@ -319,23 +345,28 @@ def _jsonable(x: Any) -> Any:
 
 
 def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mapping[str, Any]) -> Path:
-    """``control.json`` (``cases``: maneuver, model, rmse, rmse_setpoint, overshoot, settling_time_s, effort_n_rms,
-    unit; ``ratios``; ``info``) and ``report/index.html`` with one plot per manoeuvre (response of every hold, the
-    specified response and the setpoint; thrust effort) in ``out_dir``; returns the control.json path. A settling time
-    that never came is null."""
+    """``control.json`` in ``out_dir``: ``cases`` (one per manoeuvre and hold, the mean over the seeds: maneuver,
+    model, rmse, rmse_setpoint, overshoot, settling_time_s, effort_n_rms, each with ``_std``, seeds, unit), ``runs``
+    (the same per seed), ``ratios`` and ``info``; and ``report/index.html`` with one plot per manoeuvre (response of
+    every hold for the first seed, the specified response and the setpoint; thrust effort). Returns the control.json
+    path. A settling time that never came is null."""
     import json
 
     out = Path(out_dir)
     (out / "report").mkdir(parents=True, exist_ok=True)
-    doc = {"cases": [_jsonable({"maneuver": c.maneuver, "model": c.model, **c.metrics, "unit": c.unit}) for c in cases],
-           "ratios": _jsonable(ratios(cases)), "info": _jsonable(dict(info))}
+    summary = summarise(cases)
+    doc = {"cases": _jsonable(summary),
+           "runs": [_jsonable({"maneuver": c.maneuver, "model": c.model, "seed": c.seed, **c.metrics, "unit": c.unit})
+                    for c in cases],
+           "ratios": _jsonable(ratios(summary)), "info": _jsonable(dict(info))}
     path = out / "control.json"
     path.write_text(json.dumps(doc, indent=2) + "\n")
-    _report(out / "report", cases, info)
+    first = min(c.seed for c in cases) if cases else 1
+    _report(out / "report", [c for c in cases if c.seed == first], info, summary)
     return path
 
 
-def _report(folder: Path, cases: Sequence[CaseResult], info: Mapping[str, Any]) -> None:
+def _report(folder: Path, cases: Sequence[CaseResult], info: Mapping[str, Any], summary: Sequence[dict]) -> None:
     import html
 
     import matplotlib
@@ -346,7 +377,7 @@ def _report(folder: Path, cases: Sequence[CaseResult], info: Mapping[str, Any]) 
     colours = {"identified": "tab:green", "vehicle_file": "tab:orange", "pd_hold": "tab:red"}
     parts = ["<html><head><meta charset='utf-8'><title>Hindrax control evaluation</title></head><body>",
              "<h1>Closed-loop evaluation (hindrax control evaluate)</h1>",
-             f"<pre>{html.escape(format_table(cases))}</pre>",
+             f"<pre>{html.escape(format_table(summary))}</pre>",
              "<pre>" + html.escape("\n".join(f"{k}: {v}" for k, v in info.items() if not isinstance(v, (dict, list))))
              + "</pre>"]
     for m in MANEUVERS:

@@ -79,7 +79,7 @@ def run_scenario(cfg: VehicleConfig, name: str, truth_path: Path, out: Path, see
     cases = evaluate(cfg, truth, model, SUITE_MANEUVERS, setup=setup, seed=seed)
     write_outputs(folder, cases, {"truth": str(truth_path), "model": model.source, "model_notes": list(model.notes),
                                   "seed": seed, "setup": setup_dict(setup)})
-    row["cases"] = {f"{c.maneuver}/{c.model}": dict(c.metrics) for c in cases}
+    row["cases"] = {f"{c.maneuver}/{c.model}": dict(c.metrics) for c in cases}  # one seed
     row["ratios"] = ratios(cases)
     say(f"{name}: " + "; ".join(f"{m} identified/file {r.get('rmse_vs_vehicle_file', math.nan):.2f}, "
                                 f"/PD {r.get('rmse_vs_pd_hold', math.nan):.2f}" for m, r in row["ratios"].items()))
