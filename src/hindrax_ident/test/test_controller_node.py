@@ -113,3 +113,45 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
         finally:
             graph.shutdown()
             probe.destroy_node()
+
+
+@pytest.mark.ros
+def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
+    """``python -m hindrax_ident.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
+    the model of a file for another vehicle (one warning, the vehicle file), SIGINT -> 0; a bad ``control.*`` value
+    -> 1 with one line naming key, value and allowed range."""
+    import signal
+    import subprocess
+
+    import yaml
+
+    from hindrax_drivers.testing import child_env, python_executable
+
+    other = tmp_path / "identification.yaml"
+    other.write_text(yaml.safe_dump({"schema_version": 1, "provenance": {"configuration_sha256": "0" * 64},
+                                     "dofs": {"heave": {"inertia": {"value": 50.0, "std": 1.0, "unit": "kg"}}}}))
+    cmd = [python_executable(), "-m", "hindrax_ident.control.node", "--ros-args", "--params-file",
+           str(default_config_path())]
+    bad = subprocess.run(cmd + ["-p", "control.hold_fraction:=1.5"], env=child_env(), capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 1, bad.stderr
+    assert bad.stderr.splitlines()[-1] == ("invalid configuration: parameters of controller (defaults from "
+                                           f"{default_config_path()}): control.hold_fraction = 1.5: allowed number in "
+                                           "[0.05, 1]")
+    proc = subprocess.Popen(cmd + ["-p", f"model_file:={other}"], env=child_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        for line in proc.stdout:  # the node logs once when ready
+            lines.append(line)
+            if "controller ready" in line:
+                break
+        text = "".join(lines)
+        assert "controller ready (disabled): model vehicle file" in text, text
+        assert sum("another vehicle configuration" in x for x in lines) == 1
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0, proc.stdout.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
