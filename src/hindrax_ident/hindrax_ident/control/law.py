@@ -6,9 +6,10 @@ feedback linearisation, whose feedforward part this is; docs/control.md §2). Fo
 
 * a **reference model** (:class:`ReferenceModel`) turns the setpoint r into a smooth desired state: the critically
   damped second-order response x_d'' = w^2 (r - x_d) - 2 zeta w x_d' at the target bandwidth w, with the desired rate
-  limited (``max_depth_rate_m_s``, ``max_yaw_rate_rad_s``); surge and sway velocities pass a first-order filter at
-  their bandwidth. Engaging a hold (at start, or after the DOF was free) starts it at the measured state (bumpless
-  transfer);
+  limited (``max_depth_rate_m_s``, ``max_yaw_rate_rad_s``) and the desired acceleration to
+  :data:`REFERENCE_ACCEL_FRACTION` of the axis' force limit over the model's inertia while speeding up (the whole
+  limit while braking); surge and sway velocities pass a first-order filter at their bandwidth. Engaging a hold (at
+  start, or after the DOF was free) starts it at the measured state (bumpless transfer);
 * **feedforward** of the model at the desired state: tau_ff = M x_d'' + D(x_d') + b + k_r sin(x_d) (heave: b = the net
   buoyancy B - W; roll, pitch: the restoring moment);
 * **feedback** PID on e = x_d - x: tau_fb = M (k_p e + k_d e' + k_i int e) with k_p = w_c^2, k_d = 2 zeta w_c,
@@ -23,14 +24,15 @@ feedback linearisation, whose feedforward part this is; docs/control.md §2). Fo
   authority (from the thrust allocation, per direction); the integrator stops integrating while the output is
   clipped, or the allocation reported the axis short (:meth:`Controller.note_allocation`, from
   ``allocation/status``' achieved wrench), in the direction of the error (conditional integration, [AstromHagglund2006]
-  §3.5), and the integral term alone never exceeds the limit.
+  Ch. 3), and the integral term alone never exceeds the limit.
 
 Depth is NED z of the body origin (down positive); the heave force is projected on the body z axis as
-Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D altitude: the floor depth under the vehicle,
-z_f = depth + (R r_ping)_z + range cos(roll) cos(pitch), is tracked by a constant-rate Kalman filter
-(:class:`FloorEstimator`, filterpy), and the depth hold follows x_d = z_f - (R r_ping)_z - a_d,
-x_d' = z_f' - a_d' with a_d the reference model of the altitude setpoint: the floor's rate under a moving vehicle is
-fed forward.
+Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range: the floor under the vehicle is a local plane
+(:class:`FloorEstimator`, a filterpy Kalman filter on the floor depth under the body origin and its gradient), fed
+with every range as a floor point (the Ping1D along body z and the four DVL-75 beams); the depth hold follows
+x_d = z_f(footprint) - (R r_ping)_z - a_d cos(roll) cos(pitch), x_d' = g . v_ref - a_d', x_d'' = g . a_ref - a_d''
+with g the gradient, v_ref and a_ref the surge/sway references in NED and a_d the reference model of the altitude
+setpoint: the floor's rate and acceleration under a moving vehicle are fed forward before the altimeter sees them.
 
 Why our own code: the reference model, feedforward and anti-windup are a few lines each around the model, and no
 maintained Python library implements marine model-based PID with reference feedforward; filterpy gives the filter.
@@ -472,7 +474,8 @@ class Controller:
         self.heading_rad = math.nan
         self.velocity_frd_m_s = np.zeros(2)
         self.attitude_rad = np.zeros(2)
-        self.mode = "none"  # vertical hold of the last tick: depth | altitude | none
+        self.mode = "none"  # vertical hold of the last tick: depth | altitude | waiting_altitude | none
+        self.floor_state = (math.nan, math.nan, math.nan)  # altitude mode: floor depth under the footprint, gradient
 
     # ------------------------------------------------------------------ reporting
     def gain_report(self) -> list[str]:
