@@ -305,7 +305,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
 
 
 def run(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
-        seed: int | None = None, real_time_factor: float | None = None) -> int:
+        seed: int | None = None, real_time_factor: float | None = None, controller: bool = False,
+        model_file: str = "") -> int:
     """Process entry point of ``hindrax bringup``: build the graph, spin until SIGINT/SIGTERM, shut down
     (:class:`~hindrax_drivers.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
     status: 1 with one line on stderr for an invalid configuration."""
@@ -315,7 +316,7 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
     with RosProcess(errors={ConfigError: "invalid configuration"}) as proc:
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,
-                            real_time_factor=real_time_factor)
+                            real_time_factor=real_time_factor, controller=controller, model_file=model_file)
         proc.at_exit(graph.shutdown)
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)
