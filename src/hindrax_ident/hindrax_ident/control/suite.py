@@ -96,11 +96,14 @@ def run_suite(cfg: VehicleConfig, names: Sequence[str], truth_dir: Path, out: Pa
 def format_suite(rows: Sequence[dict]) -> str:
     """The markdown table: per scenario the RMSE (cm) of each hold in the depth step and the altitude hold, and the
     ratios identified / vehicle file and identified / PD hold."""
-    head = ("| scenario | depth step: identified / vehicle file / PD hold (cm) | ratio to file | ratio to PD | "
-            "altitude hold: identified / vehicle file / PD hold (cm) | ratio to file | ratio to PD |")
-    lines = [head, "|" + "---|" * 7]
+    head = ("| scenario | heave model | depth step: identified / vehicle file / PD hold (cm) | ratio to file | "
+            "ratio to PD | altitude hold: identified / vehicle file / PD hold (cm) | ratio to file | ratio to PD |")
+    lines = [head, "|" + "---|" * 8]
     for r in rows:
-        cells = [r["scenario"] + (" (aborted)" if r.get("aborted") else "")]
+        src = str(r.get("model_sources", {}).get("heave", {}).get("inertia", "?"))
+        heave = "identified" if src.startswith("identified") else ("file: " + src.split(": ", 1)[-1][:40].rstrip(")")
+                                                                   if "suspect" in src else "file")
+        cells = [r["scenario"] + (" (aborted)" if r.get("aborted") else ""), heave]
         for m in SUITE_MANEUVERS:
             v = [r["cases"].get(f"{m}/{k}", {}).get("rmse", math.nan) * 100 for k in ("identified", "vehicle_file",
                                                                                         "pd_hold")]
