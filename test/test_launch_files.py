@@ -168,6 +168,12 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     assert ("foxglove_bridge", "foxglove_bridge") not in pool
     live = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
     assert ("foxglove_bridge", "foxglove_bridge") in live
+    # the controller: launched with the pool test, optional (off by default) in the vehicle
+    assert ("hindrax_ident", "controller_node") in pool
+    assert ("hindrax_ident", "controller_node") not in vehicle
+    held = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
+                        {"controller": "true", "model_file": "/ws/runs/x/identification.yaml"})
+    assert ("hindrax_ident", "controller_node") in held
 
 
 def test_checker_rejects_a_missing_executable_and_a_missing_parameter_file(packages, tmp_path):

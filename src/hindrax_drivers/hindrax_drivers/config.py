@@ -46,7 +46,7 @@ ROTATIONAL_DOFS = DOFS[3:]
 #: Sections a configuration file may contain (top level under ``ros__parameters``).
 SECTIONS: tuple[str, ...] = (
     "vehicle", "environment", "hydrodynamics", "thrusters", "esc", "lights", "sensors", "pool", "limits",
-    "identification", "simulation", "recording", "supervisor", "calibration",
+    "identification", "simulation", "recording", "supervisor", "calibration", "control",
 )
 
 _FLOAT = "float"
@@ -352,6 +352,20 @@ SCHEMA.update({
     "calibration.inclining_volume_m3": _f("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
     "calibration.inclining_arm_m": _f("horizontal arm of the test mass from the centre line (roll: to starboard, "
                                       "pitch: forward), m", 0.01, 2.0),
+    # --- control: the depth/altitude, heading and velocity holds (hindrax_ident control, docs/control.md §2-§3) ---
+    "control.rate_hz": _f("rate of the controller node's wrench, Hz (default 50)", 1.0, 200.0),
+    "control.depth_bandwidth_rad_s": _f("target bandwidth of the depth and altitude hold, rad/s (default 2)", 0.05, 20.0),
+    "control.heading_bandwidth_rad_s": _f("target bandwidth of the heading hold, rad/s (default 2)", 0.05, 20.0),
+    "control.attitude_bandwidth_rad_s": _f("target bandwidth of the roll and pitch holds, rad/s (default 2)",
+                                           0.05, 20.0),
+    "control.velocity_bandwidth_rad_s": _f("target bandwidth of the surge and sway velocity holds, rad/s (default 3)",
+                                           0.05, 20.0),
+    "control.damping_ratio": _f("damping ratio of the reference models and the PID, default 1", 0.3, 2.0),
+    "control.hold_fraction": _f("share of each axis' authority the holds may use, default 0.6", 0.05, 1.0),
+    "control.max_depth_rate_m_s": _f("largest depth rate the reference model asks for, m/s (default 0.3)", 0.01, 2.0),
+    "control.max_yaw_rate_rad_s": _f("largest yaw rate the reference model asks for, rad/s (default 0.6)", 0.01, 5.0),
+    "control.sensor_timeout_s": _f("the controller stops when depth or attitude is older than this, s (default 0.5)",
+                                   0.05, 10.0),
     # --- simulation (docs/architecture.md §6) ---
     "simulation.step_s": _f("fixed integration step, s", 1e-4, 0.05),
     "simulation.real_time_factor": _f("simulated seconds per wall second (0 = as fast as possible)", 0.0, 1000.0),
@@ -377,7 +391,7 @@ OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics",
                                       "sensors.icm20948.gyro_noise_std_rad_s", "thrusters.thrust_uncertainty_rel",
                                       "identification.excitation", "identification.prior_std_rel",
                                       "identification.rls_", "thrusters.thrust_fit_uncertainty_rel",
-                                      "esc.output_enable_gpio.", "supervisor.rate_check_disabled.")
+                                      "esc.output_enable_gpio.", "supervisor.rate_check_disabled.", "control.")
 
 # Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
 for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837", "pa", 1e4),

@@ -202,14 +202,17 @@ SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S = 2.0
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
-                drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None) -> Graph:
+                drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None, controller: bool = False,
+                model_file: str = "") -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
     (all topics) writing to ``record_dir`` (empty: timestamped directory under ``recording.output_root``).
     overrides: dotted configuration keys. seed / real_time_factor: simulation settings.
     identification: add the identification node (action ``run_identification``; default True, with or without
-    ``sim``). i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
+    ``sim``). controller: add the controller node (depth/altitude, heading and velocity holds, disabled until
+    ``controller/hold``; docs/control.md) with the model of ``model_file`` ("" = the vehicle file's).
+    i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
     of opening its configured ``/dev/i2c-N`` (e.g. the emulated bus of
     :class:`~hindrax_ident.sim.hardware.VirtualHardware`, to run the vehicle graph against emulated devices).
     drive_clocks (sim only): the simulator sets the nodes' clocks directly and publishes no /clock (about 20 %
@@ -284,6 +287,12 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         nodes["identification"] = IdentificationNode(config=cfg, **common)
         if sim:  # lock-step: simulated time waits for every control tick of a running manoeuvre
             nodes["simulator"].add_step_gate(nodes["identification"].clock_may_advance)
+    if controller:
+        from .control.node import ControllerNode
+
+        nodes["controller"] = ControllerNode(config=cfg, model_file=model_file, **common)
+        if sim:  # lock-step while it holds, as for the identification node
+            nodes["simulator"].add_step_gate(nodes["controller"].clock_may_advance)
     if hardware is not None:
         # emulators on the drivers' ROS clock (the MS5837 driver's): conversion waits line up exactly
         ms5837_clock = nodes["ms5837"].get_clock()
@@ -320,7 +329,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
 
 
 def run(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
-        seed: int | None = None, real_time_factor: float | None = None) -> int:
+        seed: int | None = None, real_time_factor: float | None = None, controller: bool = False,
+        model_file: str = "") -> int:
     """Process entry point of ``hindrax bringup``: build the graph, spin until SIGINT/SIGTERM, shut down
     (:class:`~hindrax_drivers.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
     status: 1 with one line on stderr for an invalid configuration."""
@@ -330,7 +340,7 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
     with RosProcess(errors={ConfigError: "invalid configuration"}) as proc:
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,
-                            real_time_factor=real_time_factor)
+                            real_time_factor=real_time_factor, controller=controller, model_file=model_file)
         proc.at_exit(graph.shutdown)
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)

@@ -79,6 +79,14 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("run",), "hindrax_ident.commands.run",
      "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
      "identification.yaml, report"),
+    (("control", "evaluate"), "hindrax_ident.commands.control",
+     "closed-loop depth step, altitude hold over a sloped floor and heading step in the virtual pool against a truth: "
+     "identified model vs vehicle file vs the former PD hold (table, control.json, report)"),
+    (("control", "scenarios"), "hindrax_ident.commands.control",
+     "for each scenario truth: identify in-process, then compare the depth and altitude holds of the identified model "
+     "and the vehicle file (control_scenarios.md/.json)"),
+    (("control", "model"), "hindrax_ident.commands.control",
+     "the controller's gains and the source of each model value (--model identification.yaml or the vehicle file)"),
     (("esc", "calibrate"), "hindrax_ident.commands.esc",
      "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
 ]

@@ -1,7 +1,10 @@
-"""``hindrax bringup [--config FILE] [--sim] [--record [--record-dir DIR]] [--rtf X] [--seed N]``.
+"""``hindrax bringup [--config FILE] [--sim] [--record [--record-dir DIR]] [--rtf X] [--seed N] [--controller
+[--model YAML]]``.
 
 Starts the whole node graph in this process (:mod:`hindrax_ident.bringup`): with ``--sim`` against the virtual pool
-and the device emulators (the virtual pool's and the tests' graph). Runs until Ctrl-C / SIGTERM, then commands
+and the device emulators (the virtual pool's and the tests' graph).
+``--controller`` adds the controller node (depth/altitude, heading and velocity holds from ``--model``, disabled until
+``controller/hold``; docs/control.md §3). Runs until Ctrl-C / SIGTERM, then commands
 neutral thrust and closes any bag.
 
 The vehicle does not run this: it runs the launch layout, one process per node, respawned
@@ -29,6 +32,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record-dir", default="", help="bag directory (default: under recording.output_root)")
     parser.add_argument("--rtf", type=float, default=None, help="simulation real-time factor (0 = fastest)")
     parser.add_argument("--seed", type=int, default=None, help="simulation noise seed")
+    parser.add_argument("--controller", action="store_true",
+                        help="add the controller node (disabled until the service controller/hold; docs/control.md)")
+    parser.add_argument("--model", default="", metavar="YAML",
+                        help="identification.yaml for the controller's model (default: the vehicle file's)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,4 +46,5 @@ def run(args: argparse.Namespace) -> int:
     if not args.sim:
         print(VEHICLE_NOTICE, file=sys.stderr, flush=True)
     return run_graph(args.config or default_config_path(), sim=args.sim, record=args.record,
-                     record_dir=args.record_dir, seed=args.seed, real_time_factor=args.rtf)
+                     record_dir=args.record_dir, seed=args.seed, real_time_factor=args.rtf,
+                     controller=args.controller, model_file=args.model)
