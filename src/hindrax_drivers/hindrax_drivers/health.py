@@ -27,6 +27,7 @@ STATUS_OF_NODE = {
     "icm20948": "hindrax/icm20948",
     "esc": "hindrax/esc_pca9685",
     "supervisor": "hindrax/supervisor",
+    "output_guard": "hindrax/output_guard",
     "recorder": "recorder: recording",
 }
 #: the supervisor's own state (diagnostic_msgs/DiagnosticStatus: OK, or ERROR with the latched breach)

@@ -8,9 +8,10 @@ from hindrax_drivers.health import Seen, assess, expectation
 from hindrax_drivers.launch_xml import read_launch
 
 REPO = Path(__file__).resolve().parents[3]
-VEHICLE = ["dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor"]
+VEHICLE = ["dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor",
+           "output_guard"]
 STATUSES = ["hindrax/dvl75", "hindrax/ping1d", "hindrax/ms5837", "hindrax/icm20948", "hindrax/esc_pca9685",
-            "hindrax/supervisor"]
+            "hindrax/supervisor", "hindrax/output_guard"]
 OK = Seen(0, "running")
 
 
