@@ -153,22 +153,31 @@ def make_bags(data: DataSet, root: Path, quick: bool = False) -> Bags:
     return out
 
 
-def _plain_ls(seg, dof: str):
-    """Plain per-DOF least squares (module docstring) on the training segments; theta of the one-DOF model with one
-    damping pair for both directions."""
+def plain_ls_theta(rec, dof: str):
+    """Plain per-DOF least squares (module docstring) on the training record's moving segments: the layout and
+    theta of M nu_dot + k_q |nu| nu + k_l nu + b = tau (one damping pair, no delay, no lag, no coupling), nu_dot the
+    Savitzky-Golay derivative of the record (:func:`..identification.fit_any.dof_records`), unconstrained."""
     import numpy as np
 
-    from hindrax_ident.identification import fit_any
+    from hindrax_ident.identification import fit_core
 
-    model = fit_any._model_dof(dof, False)
-    return fit_any._equation_error(seg, dof, model), model
+    terms = fit_core.Terms("both")
+    timing = fit_core.Timing(0.0, 0.0)
+    sd = fit_core.build_segments(rec, terms, timing, fit_core.VALIDATION_S)
+    layout = fit_core.parameter_layout(dof, terms)
+    v = sd.v_s
+    A = np.stack([sd.a_s, np.abs(v) * v, v, np.ones_like(v)], axis=-1).reshape(-1, 4)
+    y = sd.u[0].reshape(-1)
+    ok = np.all(np.isfinite(A), axis=1) & np.isfinite(y)
+    th, *_ = np.linalg.lstsq(A[ok], y[ok], rcond=None)
+    return layout, th, terms, timing
 
 
 def evaluate(bags: Bags) -> dict:
-    """{dof: {fit, ls, hold, samples}} held-out NRMSE of the three predictors (module docstring)."""
+    """{dof: {fit, ls, hold, samples, cv, model}} held-out NRMSE of the three predictors (module docstring)."""
     import numpy as np
 
-    from hindrax_ident.identification import fit_any
+    from hindrax_ident.identification import fit_any, fit_core
     from hindrax_ident.identification.fit_any import FitOptions, TopicChoice, fit_bags
 
     opts = FitOptions()
@@ -179,8 +188,6 @@ def evaluate(bags: Bags) -> dict:
     runtime_warnings = sum(issubclass(w.category, RuntimeWarning) for w in caught)
     train = [fit_any.preprocess_bag(b, choice, None, opts) for b in bags.train]
     hold = [fit_any.preprocess_bag(b, choice, None, opts) for b in bags.holdout]
-    seg_t = fit_any.BagSegments.build(train, opts)
-    seg_h = fit_any.BagSegments.build(hold, opts)
     out: dict = {"runtime_warnings": runtime_warnings}
     for dof in DOFS_COMPARED:
         r = res.dofs.get(dof)
@@ -189,15 +196,18 @@ def evaluate(bags: Bags) -> dict:
             v = r.validation["holdout"]
             row.update(fit=v["nrmse"], hold=v["nrmse_hold"], samples=v["samples"])
             row["cv"] = r.validation.get("cross_validation", {}).get("nrmse", math.nan)
+            row["model"] = f"{r.core.terms.label}; delay {r.core.timing.delay_s:.2f} lag {r.core.timing.lag_s:.2f}"
         try:
-            th, model = _plain_ls(seg_t, dof)
-            with np.errstate(all="ignore"):
-                vp = fit_any.predict(seg_h, dof, model, th)
-            vp = np.where(np.isfinite(vp), vp, 1e3)
-            row["ls"] = fit_any.validation_measures(seg_h, dof, vp)["nrmse"]
+            rt = fit_any.dof_records(train, [dof], opts)[dof]
+            rh = fit_any.dof_records(hold, [dof], opts)[dof]
+            layout, th, terms, timing = plain_ls_theta(rt, dof)
+            sd = fit_core.build_segments(rh, terms, timing, fit_core.VALIDATION_S, excited_only=False)
+            vp = fit_core.predict_validation(sd, layout, th)
+            m = fit_core.validation_measures(sd, np.where(np.isfinite(vp), vp, 1e3))
+            row["ls"] = m["nrmse"]
             if not math.isfinite(row["hold"]):
-                row["hold"] = fit_any.validation_measures(seg_h, dof, vp)["nrmse_hold"]
-        except (ValueError, np.linalg.LinAlgError):
+                row["hold"] = m["nrmse_hold"]
+        except (ValueError, np.linalg.LinAlgError, fit_core.EstimationError):
             pass
         out[dof] = row
     return out
@@ -226,7 +236,8 @@ def run(quick: bool = False, only: list[str] | None = None, keep: str | None = N
                 rows.append({"name": f"{data.name} {dof} nrmse fit / ls / hold",
                              "value": f"{r['fit']:.3f} / {r['ls']:.3f} / {r['hold']:.3f}", "unit": "",
                              "target": "fit <= 0.9 ls and < hold",
-                             "note": f"cv {r.get('cv', math.nan):.3f}; {r['status']}; {r['samples']} samples"})
+                             "note": f"cv {r.get('cv', math.nan):.3f}; {r['status']}; {r['samples']} samples; "
+                                     f"{r.get('model', '')}"})
                 rows.append({"name": f"{data.name} {dof} fit / ls", "value": round(r["fit"] / r["ls"], 3)
                              if r["ls"] > 0 else math.nan, "unit": "", "target": "<= 0.9"})
     finally:
