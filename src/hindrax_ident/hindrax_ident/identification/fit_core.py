@@ -155,7 +155,8 @@ class CoreOptions:
     """segment_s: training segment, s; validation_s: prediction horizon of the validation, s; folds: K of the
     cross-validation; max_delay_s: largest input delay searched (commanded wrench), s; robust: soft-L1 loss (else
     plain least squares); select: choose the terms by cross-validation (else ``terms``); terms: the model when not
-    selecting; min_clusters: fewest clusters for the interval."""
+    selecting; min_clusters: fewest clusters for the interval; all_segments: fit every segment of the record, moving
+    or not (a designed campaign's DOF window), else only the segments that move the DOF."""
 
     segment_s: float = SEGMENT_S
     validation_s: float = VALIDATION_S
@@ -165,6 +166,7 @@ class CoreOptions:
     select: bool = True
     terms: Terms = Terms()
     min_clusters: int = MIN_CLUSTERS
+    all_segments: bool = False
 
 
 @dataclass(frozen=True)
@@ -882,8 +884,8 @@ def _cv_summary(sd_val: SegmentData, folds: Folds, sse, nn, sst, fold_theta, lay
 
 def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, inertia: np.ndarray | None,
                folds_cache: dict, theta0: np.ndarray | None = None) -> Candidate:
-    sd = build_segments(rec, terms, timing, opts.segment_s, inertia)
-    sv = sd if opts.validation_s == opts.segment_s else build_segments(rec, terms, timing, opts.validation_s, inertia)
+    sd = build_segments(rec, terms, timing, opts.segment_s, inertia, excited_only=not opts.all_segments)
+    sv = build_segments(rec, terms, timing, opts.validation_s, inertia)
     layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names)
     start = _equation_error_start(sd, rec.dof, layout, sd.a_s)
     if theta0 is not None and theta0.size == start.size:

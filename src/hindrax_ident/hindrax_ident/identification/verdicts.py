@@ -148,7 +148,8 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
         cov = np.asarray(cov_fit, dtype=float) + thrust_covariance(r.dof, names, theta, rel)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     nseg = segment_count(r.dof, r.pool_time_s)
-    t_dof = max(1, nseg - 1)
+    # the fit core's interval (docs/identification.md §7): t on clusters - 1 degrees of freedom
+    t_dof = int(r.signals["t_dof"]) if r.signals.get("t_dof") else max(1, nseg - 1)
     tq = float(stats.t.ppf(0.975, t_dof))
     out: dict = {}
     for n, v, s, sf in zip(names, theta, std, np.sqrt(np.clip(np.diag(cov_fit), 0.0, None))):
@@ -225,7 +226,14 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
             if contrib / total > WIDTH_MAX:
                 e["reasons"].append(f"95 % interval +-{contrib:.3g} at {v_typ:.2f} (typical speed) is "
                                     f"{100 * contrib / total:.0f} % of the damping force there")
-    for e in out.values():
+    sig = r.signals
+    have = all(sig.get(k) is not None for k in ("velocity", "acceleration", "force", "t"))
+    h = float(np.median(np.diff(np.asarray(sig["t"], dtype=float)))) if have and len(sig["t"]) > 1 else 0.0
+    for n, e in out.items():
+        if e["reasons"] and have and h > 0:  # what data would fix it (the same advice as hindrax ident fit)
+            half = 0.5 * (e["ci95"][1] - e["ci95"][0])
+            e["advice"] = data_advice(r.dof, n, e["value"], half, sig["velocity"], sig["acceleration"], sig["force"],
+                                      h)
         e["reasons"] = dof_reasons + e["reasons"]
         e["verdict"] = "suspect" if e["reasons"] else "trusted"
     return {"parameters": out, "verdict": "suspect" if any(e["reasons"] for e in out.values()) else "trusted",
