@@ -35,7 +35,8 @@ Methods:
    conditioned online), not the reported estimate.
 2. Offline equation-error batch LS on the smoothed signals ([Hindrax-Drag] eqs. 6-8,
    :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`).
-3. Offline output-error refinement (the reported result, :class:`.output_error.OutputErrorFit`): starting from (2), ``scipy.optimize.least_squares``
+3. Offline output-error refinement (the reported result, the fit core :mod:`.fit_core` shared with ``hindrax ident
+   fit``, docs/identification.md §7): starting from (2), ``scipy.optimize.least_squares``
    integrates the 1-DOF ODE over segments (3 s; initial velocity from the smoother; RK4 at the tick rate;
    the lagged thrust evaluated exactly inside each tick) and fits the simulated velocity (or depth for heave,
    with one free offset per segment eliminated by projection) to the RAW sensor samples. Reason: the
@@ -72,7 +73,7 @@ from ..estimation.steady_windows import detect_steady_windows
 from ..sim.model import rigid_body_mass_matrix
 from .fusion import AccelAidedFilter, smooth_with_acceleration, smooth_with_rate
 from .maneuvers import euler_rates
-from .output_error import OutputErrorFit, model_terms
+from .output_error import model_terms
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
@@ -668,7 +669,8 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
 
         inside = (tm >= t[0]) & (tm <= t[-1]) & np.isfinite(zm)
         chunk = fit_core.Chunk(np.asarray(force_cmd, dtype=float), v_s, x_s if ms["measured"] == "position" else
-                               np.zeros_like(v_s), a_s, (tm[inside] - t[0]) / record.tick_s, zm[inside], rr)
+                               np.zeros_like(v_s), a_s, (tm[inside] - t[0]) / record.tick_s, zm[inside], rr,
+                               force_start=float(force[0]))
         rec = fit_core.DofRecord(dof, record.tick_s, ms["measured"], [chunk], "thrust_model",
                                  float(record.time_constant_s))
         segment_s = POSITION_SEGMENT_S if ms["measured"] == "position" else VELOCITY_SEGMENT_S

@@ -29,7 +29,7 @@ weighted by the model, sub-grid by a parabola through the minimum), then applied
 Model and fit (per DOF, the campaign's model, :mod:`.output_error`): ``M nu_dot + k_q |nu| nu + k_l nu + b
 (+ k_r s(eta)) = tau``, heave by direction (``k_q+, k_q-, k_l+, k_l-``) when both directions are excited, else one
 pair for both. Start: equation-error least squares on Savitzky-Golay derivatives; then segment-wise output error
-(:class:`.output_error.OutputErrorFit`): the record is cut into ``segment_s`` (10 s) segments, each simulated
+(:mod:`.fit_core`): the record is cut into ``segment_s`` (10 s) segments, each simulated
 open-loop from the force and re-initialised from the measured velocity at its start. Several bags are fitted jointly
 (their segments pooled). The other DOFs' motion enters through the Coriolis and centripetal terms of a diagonal
 rigid + added inertia (:func:`coupling_force`, Fossen 2011): the force of each DOF is taken less C(nu) nu computed

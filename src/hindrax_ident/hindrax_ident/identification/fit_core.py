@@ -90,7 +90,8 @@ class Chunk:
     (fractional); sample_z (k,): the measurements (velocity, or position for a measured position);
     restoring (n,) or None: s(eta) (roll, pitch); coupling (n, 6) or None: the Coriolis and centripetal products
     g_k with C(nu) nu of this DOF = g_k . [M1..M6] (:func:`coriolis_products`); cross (n, c) or None: the other
-    moving DOFs' velocities; group: the bag (record) it belongs to."""
+    moving DOFs' velocities; group: the bag (record) it belongs to; force_start: the lagged force at tick 0 (None:
+    settled at the first command)."""
 
     force: np.ndarray
     v: np.ndarray
@@ -103,6 +104,7 @@ class Chunk:
     cross: np.ndarray | None = None
     group: int = 0
     t0: float = 0.0
+    force_start: float | None = None
 
 
 @dataclass
@@ -265,14 +267,15 @@ def _shift(x: np.ndarray, ticks: float) -> np.ndarray:
     return (1.0 - f) * a + f * b
 
 
-def _lagged(fc: np.ndarray, lag_s: float, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _lagged(fc: np.ndarray, lag_s: float, h: float, f0: float | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(start, middle, end) of each tick of the force through a first-order lag from the held command ``fc`` (n,):
-    exact for a command held over the tick, the lag state starting at the first command."""
+    exact for a command held over the tick, the lag state starting at ``f0`` (None: the first command)."""
     if lag_s <= 0:
         return fc, fc, fc
     e_full, e_half = math.exp(-h / lag_s), math.exp(-0.5 * h / lag_s)
     start = np.empty_like(fc)
-    s = fc[0]
+    s = fc[0] if f0 is None else float(f0)
     # the recursion is a first-order IIR filter: start[j+1] = fc[j] + (start[j] - fc[j]) e
     from scipy import signal as _signal
 
@@ -317,7 +320,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     for ci, ch in enumerate(rec.chunks):
         n = ch.force.size
         f = _shift(ch.force, timing.delay_s / h)
-        fs, fm, fe = _lagged(f, timing.lag_s, h)
+        fs, fm, fe = _lagged(f, timing.lag_s, h, ch.force_start if timing.delay_s <= 0 else None)
         inputs = [fs, fm, fe]
         extra = []  # time-dependent regressors (start, middle, end) of the parameters after the restoring
         if rec.dof in ("roll", "pitch"):
@@ -683,6 +686,8 @@ def cluster_covariance(fit: FitOutcome, sd: SegmentData, min_clusters: int = MIN
     corr = G / (G - 1) if G > 1 else 1.0
     sand = corr * binv @ (scores.T @ scores) @ binv
     model_p, sand_p = model[:p, :p], sand[:p, :p]
+    if G < 3:  # two clusters tell nothing about the spread between them: the model-based covariance alone
+        return Covariance(model_p.copy(), model_p, sand_p, G, b, rho, max(G - 1, 1), rho_r)
     var = np.diag(model_p)
     ratio = np.where(var > 0, np.diag(sand_p) / np.where(var > 0, var, 1.0), 1.0)
     d = np.sqrt(np.maximum(1.0, ratio))
