@@ -21,32 +21,23 @@ Preprocessing (:class:`Preprocessed`, reported in the ``preprocessing`` section)
 every stamp is set, else receive (log) times; messages sorted by that time; repeated velocity values (a velocity
 that updates slower than it is published) dropped, keeping the first of each run; gaps longer than
 ``max(gap_min_s, 5 x median spacing)`` in force or velocity cut the record (nothing is interpolated across them);
-force held (zero-order: for the fit its mean over each step, :func:`_grid_chunks`) and velocity linearly
-interpolated on a uniform grid of ``grid_s``; the delay between force
-and velocity chosen by minimising the equation-error residual over delays 0..``max_delay_s`` (a cross-correlation
-weighted by the model, sub-grid by a parabola through the minimum), then applied to the force times.
+force held (zero-order: its mean over each step, :func:`_grid_chunks`) on a uniform grid of ``grid_s``; the
+velocity samples kept at their own times, interpolated onto the grid only for the smoothed initial states
+(Savitzky-Golay, 0.5 s), the Coriolis products and the cross-coupling candidates (:func:`dof_records`).
 
-Model and fit (per DOF, the campaign's model, :mod:`.output_error`): ``M nu_dot + k_q |nu| nu + k_l nu + b
-(+ k_r s(eta)) = tau``, heave by direction (``k_q+, k_q-, k_l+, k_l-``) when both directions are excited, else one
-pair for both. Start: equation-error least squares on Savitzky-Golay derivatives; then segment-wise output error
-(:mod:`.fit_core`): the record is cut into ``segment_s`` (10 s) segments, each simulated
-open-loop from the force and re-initialised from the measured velocity at its start. Several bags are fitted jointly
-(their segments pooled). The other DOFs' motion enters through the Coriolis and centripetal terms of a diagonal
-rigid + added inertia (:func:`coupling_force`, Fossen 2011): the force of each DOF is taken less C(nu) nu computed
-from the measured velocities and the equation-error inertias of the fitted DOFs (two passes), so a piloted run that
-turns while it translates is not read as extra damping (measured on the virtual pool: without it the yaw quadratic
-damping came out 0.03 instead of 0.55 kg m^2 and the surge one 16 % low). A DOF whose force or velocity standard deviation is below :data:`EXCITATION_MIN` is
-"not excited" (reported with both numbers).
+Everything after the reading is the fit core shared with ``hindrax ident bag`` (:mod:`.fit_core`,
+docs/identification.md §7): per DOF the input delay and thrust lag (a commanded wrench; a ThrusterPwm force keeps
+the vehicle file's latency and lag), the segment-wise output-error fit with physical bounds and a robust loss, the
+model terms chosen by cross-validation (damping law, heave per direction, Coriolis and centripetal force of the
+other DOFs' inertias, cross-DOF coupling, reverse thrust gain), the cluster-robust intervals, and the verdicts
+with what data would fix them (:func:`.verdicts.fit_parameter_verdicts`). Several bags are fitted jointly (their
+segments pooled; clusters never span two bags). A DOF whose force or velocity standard deviation is below
+:data:`EXCITATION_MIN` is "not excited" (reported with both numbers).
 
-Validation (issue 18): K-fold by bag (by contiguous blocks of segments with one bag) and ``holdout`` bags. Per DOF
-``nrmse`` = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred the model's simulation from the
-recorded force (less the coupling terms of the measured velocities) re-initialised from the measured velocity at
-each segment's start; ``nrmse_hold``: v_pred held at
-the segment's initial value; ``nrmse_zero``: v_pred = 0. Fold parameters give the spread beside each interval.
-
-Intervals (:func:`honest_interval`, docs/identification.md §7): per parameter the larger of the output-error std and
-the delete-a-group jackknife std of the K fold estimates (Efron and Stein 1981; Shao and Tu 1995 §2.3), with
-``std_source`` saying which; ci95 from it (Student t, n_segments - 1 or K - 1 degrees of freedom).
+Validation (issues 18, 27): K-fold cross-validation on contiguous blocks of the moving validation segments and
+``holdout`` bags. Per DOF ``nrmse`` = RMS(v_pred - v_meas) / std(v_meas) over the measurements of the 10 s
+validation segments, v_pred simulated open loop from the recorded force and the smoothed initial velocity;
+``nrmse_hold``: the initial velocity held; ``nrmse_zero``: 0.
 
 Errors: :class:`FitInputError` (one line: the topic, the type found, the types accepted; disagreeing frame ids;
 how much data is needed).
@@ -59,7 +50,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-from scipy import signal, stats
+from scipy import signal
 from scipy.spatial.transform import Rotation
 
 from hindrax_drivers import frames

@@ -45,7 +45,7 @@ All quantities SI; forces N (N m for rotations), velocities m/s (rad/s); body FR
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
