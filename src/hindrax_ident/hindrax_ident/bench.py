@@ -28,6 +28,7 @@ BENCHMARKS: dict[str, str] = {
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
     "identification": "hindrax_ident.benchmarks.identification",
+    "ident_fit": "hindrax_ident.benchmarks.ident_fit",
     "scenarios": "hindrax_ident.benchmarks.scenarios",
     "recorder": "hindrax_ident.benchmarks.recorder",
     "serial_drivers": "hindrax_ident.benchmarks.serial_drivers",
