@@ -6,20 +6,24 @@ from __future__ import annotations
 import subprocess
 
 import pytest
+from domain_coordinator import domain_id
 
 from hindrax_drivers.testing import child_env, python_executable
 
 pytestmark = pytest.mark.ros
 
 
-def hindrax(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run([python_executable(), "-m", "hindrax_ident.cli", *args], env=child_env(),
+def hindrax(*args: str, timeout: float = 60, **env: str) -> subprocess.CompletedProcess:
+    return subprocess.run([python_executable(), "-m", "hindrax_ident.cli", *args], env=child_env(**env),
                           capture_output=True, text=True, timeout=timeout)
 
 
 def test_health_without_a_vehicle_lists_every_missing_node_and_status():
-    # this worker's ROS domain has no vehicle in it
-    r = hindrax("health", "--launch", "hindrax_ident/pool_test.launch.xml", "output_dir:=/tmp/x", "--timeout", "1.5")
+    # A ROS domain of its own, reserved like the workers' (conftest.py): nothing else this worker ran (an
+    # in-process node of another test, a process a failed test left behind) can be mistaken for the vehicle.
+    with domain_id() as domain:
+        r = hindrax("health", "--launch", "hindrax_ident/pool_test.launch.xml", "output_dir:=/tmp/x", "--timeout",
+                    "1.5", ROS_DOMAIN_ID=str(domain))
     assert r.returncode == 1, r.stdout + r.stderr
     lines = r.stdout.splitlines()
     for node in ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor",
