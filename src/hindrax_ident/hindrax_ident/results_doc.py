@@ -22,6 +22,7 @@ import datetime as _dt
 import os
 import re
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -111,3 +112,29 @@ def markdown_table(header: list[str], rows: list[list[object]]) -> str:
     lines = ["| " + " | ".join(cell(h) for h in header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(cell(c) for c in row) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def add_argument(parser) -> None:
+    """The ``--results-doc PATH`` option of a command that produces measurements (argparse parser)."""
+    parser.add_argument("--results-doc", default=None, metavar="PATH",
+                        help="also write this run's table into section of the measurements document PATH "
+                             "(the Makefile passes docs/results.md); default: write nothing")
+
+
+def command_line() -> str:
+    """This process's command line as a user typed it: ``hindrax run --dofs surge`` (program name without path)."""
+    main = sys.modules.get("__main__")
+    spec = getattr(main, "__spec__", None)
+    program = f"python -m {spec.name}" if spec is not None and spec.name != "__main__" else Path(sys.argv[0]).name
+    return " ".join([program or "python", *sys.argv[1:]])
+
+
+def write_if_asked(args, name: str, title: str, body: str) -> Path | None:
+    """:func:`write_section` into ``args.results_doc`` when the option was given (else nothing; returns None),
+    with :func:`command_line` as the provenance. Prints where it wrote."""
+    path = getattr(args, "results_doc", None)
+    if not path:
+        return None
+    written = write_section(path, name, title, body, command_line())
+    print(f"results: section {name!r} of {written}", flush=True)
+    return written

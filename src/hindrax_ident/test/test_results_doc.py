@@ -1,8 +1,12 @@
 """docs/results.md sections are replaced one at a time, atomically, and never by a test run by accident."""
 from __future__ import annotations
 
+import json
+import subprocess
+
 import pytest
 
+from hindrax_drivers.testing import child_env, python_executable
 from hindrax_ident.results_doc import ResultsDocError, markdown_table, write_section
 
 
@@ -50,3 +54,22 @@ def test_bad_name_and_missing_folder(tmp_path):
 
 def test_markdown_table_escapes_pipes():
     assert markdown_table(["a", "b"], [[1, "x|y"]]).splitlines() == ["| a | b |", "|---|---|", "| 1 | x\\|y |"]
+
+
+def test_bench_writes_its_section_only_when_asked(tmp_path):
+    """``python -m hindrax_ident.bench --results-doc PATH`` writes the rows of its results.json into PATH's section,
+    names the command, and leaves the other sections alone; without the option it writes no document."""
+    doc = tmp_path / "results.md"
+    write_section(doc, "scenarios", "Scenario suite", "| a |\n|---|\n| kept |", "hindrax ident scenarios")
+    cmd = [python_executable(), "-m", "hindrax_ident.bench", "--only", "cli", "--quick", "--out", str(tmp_path / "b")]
+    r = subprocess.run(cmd + ["--results-doc", str(doc)], env=child_env(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    text = doc.read_text()
+    assert "| kept |" in text  # the other section survives
+    section = text[text.index("<!-- results:bench-cli:begin -->"):text.index("<!-- results:bench-cli:end -->")]
+    assert "`python -m hindrax_ident.bench --only cli --quick" in section
+    rows = json.loads((tmp_path / "b" / "results.json").read_text())["rows"]
+    assert rows and all(f"| cli | {row['name']} | " in section for row in rows)
+    other = tmp_path / "untouched.md"
+    r = subprocess.run(cmd, env=child_env(), capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert r.returncode == 0 and not other.exists() and "results: section" not in r.stdout

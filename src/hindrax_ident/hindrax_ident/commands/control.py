@@ -27,6 +27,7 @@ import math
 import time
 from pathlib import Path
 
+from .. import results_doc
 from .common import CommandError, add_config_argument, load_vehicle
 
 __all__ = ["add_arguments", "run"]
@@ -46,6 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--seeds", type=int, default=1,
                             help="run every case with the noise seeds seed .. seed+N-1 and report the mean (default 1)")
     parser.add_argument("--out", default=None, metavar="DIR", help="output directory")
+    results_doc.add_argument(parser)
     if which == "evaluate":
         parser.add_argument("--truth", required=True, metavar="FILE",
                             help="truth file of the virtual pool (overlay of the vehicle file + disturbances)")
@@ -140,9 +142,14 @@ def _evaluate(args, cfg) -> int:
             "gains_vehicle_file": ev.make_hold("vehicle_file", cfg, setup).core.gain_report()}
     path = ev.write_outputs(out, cases, info)
     print(ev.format_table(cases))
-    for m, row in ev.ratios(cases).items():
-        print(f"{m}: identified rmse / vehicle file {row.get('rmse_vs_vehicle_file', math.nan):.2f}, "
-              f"/ PD hold {row.get('rmse_vs_pd_hold', math.nan):.2f} (mean over {args.seeds} seed(s))")
+    ratio_lines = [f"{m}: identified rmse / vehicle file {row.get('rmse_vs_vehicle_file', math.nan):.2f}, "
+                   f"/ PD hold {row.get('rmse_vs_pd_hold', math.nan):.2f} (mean over {args.seeds} seed(s))"
+                   for m, row in ev.ratios(cases).items()]
+    print("\n".join(ratio_lines))
+    results_doc.write_if_asked(args, "control-evaluate", "Closed loop: identified model against the vehicle file",
+                               f"Truth `{args.truth}`, model `{model.source}`, seeds {args.seed}.."
+                               f"{args.seed + args.seeds - 1}.\n\n```\n{ev.format_table(cases)}\n"
+                               + "\n".join(ratio_lines) + "\n```")
     print(f"output: {path} and {path.parent / 'report' / 'index.html'}  (wall time {time.monotonic() - wall0:.0f} s)")
     return 0
 
@@ -163,5 +170,6 @@ def _scenarios(args, cfg) -> int:
     rows = suite.run_suite(cfg, names, truth_dir, out, seed=args.seed, levels=args.levels, progress=progress)
     md = suite.write_suite(out, rows, cfg)
     print(md.read_text())
+    results_doc.write_if_asked(args, "control-scenarios", "Closed loop over the scenario suite", md.read_text())
     print(f"output: {out / 'control_scenarios.json'} and {md}  (wall time {time.monotonic() - wall0:.0f} s)")
     return 0
