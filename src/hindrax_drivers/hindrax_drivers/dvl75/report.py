@@ -10,7 +10,7 @@ Conventions and sources
   §1.5), after SET-SENSOR-ORIENTATION. Velocity = position delta / ``dtu`` (the mean over the interval,
   docs/devices.md §1.3.1 "common use"), so its time of validity is the middle of the interval.
 - Lever arm: the DVL measures the velocity of its transducer, at ``position_frd_m`` from the centre of
-  gravity (the base_link origin, README "Vehicle configuration"). Rigid-body kinematics
+  gravity (the base_link origin, README "Configuration and frames"). Rigid-body kinematics
   v_CG = v_DVL - omega x r gives the base_link velocity; omega is taken from the ``$DVPDL`` angle
   deltas over ``dtu`` (small-angle: Euler-angle increments ~ body rotation increments). The position
   delta is corrected the same way (delta_p_CG = delta_p_DVL - delta_theta x r), so velocity equals
