@@ -35,6 +35,10 @@ __all__ = ["apply_thrust_calibration", "calibration_relative_std", "calibration_
 DOF_GROUP = {"surge": "horizontal", "sway": "horizontal", "yaw": "horizontal",
              "heave": "vertical", "roll": "vertical", "pitch": "vertical"}
 _COLUMNS = {"horizontal": [0, 1, 5], "vertical": [2, 3, 4]}
+#: Calibration keys of the known-force steps -> (thruster group, FRD axis index, sense of the known force).
+KNOWN_FORCE_AXES = {"vertical": ("vertical", 2, 1), "vertical_negative": ("vertical", 2, -1),
+                    "surge": ("horizontal", 0, 1), "surge_negative": ("horizontal", 0, -1),
+                    "sway": ("horizontal", 1, 1), "sway_negative": ("horizontal", 1, -1)}
 
 
 def _entry(calibration: Mapping[str, Any], key: str) -> tuple[float, float] | None:
