@@ -65,6 +65,24 @@ class PoolOperator:
         self.line_ned: np.ndarray | None = None  # (3,) N in NED while a line pulls
         self.inclining: str | None = None  # DOF whose inclining test mass hangs on the vehicle
 
+    @classmethod
+    def for_steps(cls, steps) -> "PoolOperator":
+        """The operator of a campaign's steps (:mod:`.steps`): the known force each reference step prompts for
+        (ballast, float, line pull, inclining test mass) is the one it applies."""
+        from .steps import Ballast, Float, Inclining, LinePull
+
+        kw: dict = {}
+        for st in steps:
+            if isinstance(st, Ballast):
+                kw["ballast_weight_n"] = st.force_n
+            elif isinstance(st, Float):
+                kw["float_buoyancy_n"] = st.force_n
+            elif isinstance(st, LinePull):
+                kw["line_pull_n"] = st.force_n
+            elif isinstance(st, Inclining):
+                kw["inclining_load_n_m"] = (st.weight_n, st.arm_m)
+        return cls(**kw)
+
     @property
     def active(self) -> bool:
         """Some known force is applied."""
@@ -144,10 +162,9 @@ class Campaign:
                                    excitation=excitation, excitation_duration_s=excitation_duration_s,
                                    inclining_load_n_m=inclining_load_n_m, float_buoyancy_n=float_buoyancy_n,
                                    steps=steps)
-        ex = self.executive
-        #: the virtual pool's operator of the calibration steps
-        self.operator = PoolOperator(ex.ballast_weight_in_water_n, ex.line_pull_n, ex.inclining_load_n_m,
-                                     ex.float_buoyancy_n)
+        #: the virtual pool's operator of the calibration steps: the known forces the steps prompt for
+        self.operator = PoolOperator.for_steps(self.executive.steps)
+        self._external_used = False
         self.core = self.executive.core
         self.reversed = np.array([t.reversed for t in cfg.thrusters.thrusters], dtype=bool)
         self.neutral_us = float(cfg.thrusters.pulse_width_neutral_us)
@@ -176,7 +193,8 @@ class Campaign:
         if ex.awaiting:  # the virtual pool's operator: do what the step asks, then continue
             self.operator.act(ex.awaiting, self.sim.rotation)
             ex.operator_continue()
-        if ex.calibrate:
+        if ex.calibrate or self.operator.active or self._external_used:
+            self._external_used = True  # the simulator holds the last external wrench: keep setting it
             self.sim.advance(self.tick_s, wire, external_wrench_frd=self.operator.external_wrench_frd(self.sim.rotation))
         else:
             self.sim.advance(self.tick_s, wire)

@@ -299,11 +299,12 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
-    from .calibration import apply_thrust_calibration
-    from .estimators import identify_all_with_errors
+    import dataclasses
+
+    from .calibration import identify_calibrated
     try:
         record = record_from_bag(bag_dir, cfg)
-        idents, errors = identify_all_with_errors(apply_thrust_calibration(record, calibration), cfg)
+        idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
