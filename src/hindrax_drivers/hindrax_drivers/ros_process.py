@@ -25,7 +25,7 @@ Exceptions leaving the block:
 The executor is rclpy's ``EventsExecutor`` (``rclpy.experimental``, Jazzy) unless the environment variable
 ``HINDRAX_EXECUTOR`` says ``single`` (rclpy's ``SingleThreadedExecutor``). The SingleThreadedExecutor rebuilds
 its wait set in Python on every spin, one spin per message, and that was the largest item of every node
-process's profile (README, "Pi budget"); the EventsExecutor dispatches from a C++ event queue instead. Measured
+process's profile (docs/architecture.md §10); the EventsExecutor dispatches from a C++ event queue instead. Measured
 on this machine with one process taking three 100 Hz ``sensor_msgs/Imu`` topics and publishing one 50 Hz topic:
 8.4-10.5 % of a core with the SingleThreadedExecutor, 3.6-4.4 % with the EventsExecutor. The recorder (its node
 run alone, and ``hindrax bag record``) keeps the SingleThreadedExecutor: its callbacks take the message info (the

@@ -338,9 +338,11 @@ def _launch(duration_s: float, tmp: Path) -> dict:
             }
             if _supervisor_available():
                 cmds["supervisor"] = [*wrap, "hindrax_drivers.supervisor.node", *base]
+            # the second stop path (the ESC arms only with its heartbeat); without /OE it uses the emulated bus
+            cmds["output_guard"] = [*wrap, "hindrax_drivers.guard.node", *base]
             for name, args in cmds.items():
                 logs[name] = open(tmp / f"{name}.log", "w")
-                e = dict(env, **{SOCKET_ENV: sock}) if name in ("ms5837", "icm20948", "esc") else env
+                e = dict(env, **{SOCKET_ENV: sock}) if name in ("ms5837", "icm20948", "esc", "output_guard") else env
                 procs[name] = subprocess.Popen([py, *args], env=e, stdout=logs[name], stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
