@@ -352,6 +352,13 @@ SCHEMA.update({
     "calibration.inclining_volume_m3": _f("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
     "calibration.inclining_arm_m": _f("horizontal arm of the test mass from the centre line (roll: to starboard, "
                                       "pitch: forward), m", 0.01, 2.0),
+    "calibration.float_mass_kg": _f("mass of the sealed float tied to the vehicle in the float step (optional), kg",
+                                    0.0, 50.0),
+    "calibration.float_volume_m3": _f("displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)",
+                                      1e-6, 0.1),
+    "calibration.net_buoyancy_std_n": _f("1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the "
+                                         "hover holds of the thrust calibration measure the forward thrust against "
+                                         "it; optional)", 1e-4, 10.0),
     # --- control: the depth/altitude, heading and velocity holds (hindrax_ident control, docs/control.md §2-§3) ---
     "control.rate_hz": _f("rate of the controller node's wrench, Hz (default 50)", 1.0, 200.0),
     "control.depth_bandwidth_rad_s": _f("target bandwidth of the depth and altitude hold, rad/s (default 2)", 0.05, 20.0),
@@ -391,6 +398,7 @@ OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics",
                                       "sensors.icm20948.gyro_noise_std_rad_s", "thrusters.thrust_uncertainty_rel",
                                       "identification.excitation", "identification.prior_std_rel",
                                       "identification.rls_", "thrusters.thrust_fit_uncertainty_rel",
+                                      "calibration.float_", "calibration.net_buoyancy_std_n",
                                       "esc.output_enable_gpio.", "supervisor.rate_check_disabled.", "control.")
 
 # Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
@@ -695,6 +703,12 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             issues.append(ConfigIssue("calibration.ballast_volume_m3", c["calibration.ballast_volume_m3"],
                                       f"below calibration.ballast_mass_kg / water density = {v_max:.4g} (the ballast "
                                       "must sink)"))
+    if "calibration.float_mass_kg" in c and "calibration.float_volume_m3" in c:
+        v_min = c["calibration.float_mass_kg"] / float(c.get("environment.water_density_kg_m3", 1000.0))
+        if c["calibration.float_volume_m3"] <= v_min:
+            issues.append(ConfigIssue("calibration.float_volume_m3", c["calibration.float_volume_m3"],
+                                      f"above calibration.float_mass_kg / water density = {v_min:.4g} (the float "
+                                      "must float)"))
     if "calibration.inclining_mass_kg" in c and "calibration.inclining_volume_m3" in c:
         v_max = c["calibration.inclining_mass_kg"] / float(c.get("environment.water_density_kg_m3", 1000.0))
         if c["calibration.inclining_volume_m3"] >= v_max:
@@ -864,6 +878,23 @@ class ThrustersConfig:
 
 
 @dataclass(frozen=True)
+class CalibrationConfig:
+    """The known forces of the campaign's reference steps (``calibration.*``; docs/identification.md §6.1).
+
+    Weights in water and buoyancies are (m - rho V) g and (rho V - m) g with the configured water density and g.
+    ``float_net_buoyancy_n`` is None without the optional ``calibration.float_*`` keys; ``net_buoyancy_std_n``
+    defaults to 0.05 N (the vehicle weighed in water with a spring scale; ASSUMPTION when not configured).
+    """
+
+    ballast_weight_in_water_n: float
+    line_pull_force_n: float
+    inclining_weight_in_water_n: float
+    inclining_arm_m: float
+    float_net_buoyancy_n: float | None
+    net_buoyancy_std_n: float
+
+
+@dataclass(frozen=True)
 class VehicleConfig:
     """The validated vehicle configuration.
 
@@ -930,6 +961,23 @@ class VehicleConfig:
     def added_mass_matrix(self) -> np.ndarray:
         """6x6 positive-definite added-mass matrix M_A, FRD, SNAME order (kg, kg m, kg m^2)."""
         return added_mass_matrix_from_flat(self.flat)
+
+    @functools.cached_property
+    def calibration(self) -> CalibrationConfig:
+        """Typed ``calibration.*`` section (:class:`CalibrationConfig`)."""
+        f = self.flat
+        rho, g = self.water_density_kg_m3, self.gravity_m_s2
+        float_b = None
+        if "calibration.float_mass_kg" in f and "calibration.float_volume_m3" in f:
+            float_b = (rho * f["calibration.float_volume_m3"] - f["calibration.float_mass_kg"]) * g
+        return CalibrationConfig(
+            ballast_weight_in_water_n=(f["calibration.ballast_mass_kg"] - f["calibration.ballast_volume_m3"] * rho) * g,
+            line_pull_force_n=float(f["calibration.line_pull_force_n"]),
+            inclining_weight_in_water_n=(f["calibration.inclining_mass_kg"] - f["calibration.inclining_volume_m3"]
+                                         * rho) * g,
+            inclining_arm_m=float(f["calibration.inclining_arm_m"]),
+            float_net_buoyancy_n=float_b,
+            net_buoyancy_std_n=float(f.get("calibration.net_buoyancy_std_n", 0.05)))
 
     def hydrodynamics(self, dof: str) -> DofHydrodynamics:
         """Typed hydrodynamic coefficients of one DOF (see :class:`DofHydrodynamics`)."""

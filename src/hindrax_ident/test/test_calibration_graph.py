@@ -98,6 +98,16 @@ def test_prompt_codes_and_virtual_operator_forces():
     n = len(sim.wrenches)
     op.on_step()
     assert len(sim.wrenches) == n  # nothing held: no further writes
+    # the float (net buoyancy up) and a line along the negative body axis (issue 26: --calibrate thrust)
+    op2 = VirtualOperator(sim, 8.0, 5.0, lambda: sent.append(1), float_buoyancy_n=9.3)
+    op2.on_prompt("[attach_float] calibration: tie the float")
+    op2.on_step()
+    assert op2.float_on and sim.wrenches[-1] == pytest.approx([0, 0, -9.3, 0, 0, 0])
+    op2.on_prompt("[remove_float] calibration: remove the float")
+    op2.on_prompt("[apply_line_pull_sway_negative] pull the line along -y")
+    assert not op2.float_on and op2.line_ned == pytest.approx([5.0, 0.0, 0.0])  # body -y is north here
+    op2.on_step()
+    assert sim.wrenches[-1] == pytest.approx([0, -5.0, 0, 0, 0, 0])
 
 
 @pytest.mark.ros
@@ -192,9 +202,13 @@ def test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator(monk
     assert "virtual operator: attach_ballast done" in text and "virtual operator: remove_ballast done" in text
     assert "continue refused" not in text
     doc = yaml.safe_load((out / "identification.yaml").read_text())
-    v = doc["calibration"]["vertical_thrust_scale"]
+    v = doc["calibration"]["steps"]["vertical"]
     assert v["method"] == "ballast" and v["known_force_n"] == pytest.approx(W_BALLAST)
     assert v["value"] == pytest.approx(1.0, abs=0.1) and 0.0 < v["std"] < 0.05, v  # default truth: curves exact
+    # the sinker is held by reverse thrust: the node recorded which direction held it
+    assert abs(v["reverse_force_n"][1]) > 5.0 and abs(v["forward_force_n"][1]) < 0.5, v
+    s = doc["calibration"]["thrust_scales"]["common_reverse"]
+    assert abs(s["value"] - 1.0) < 3.0 * s["std"] + 0.01, s
     assert doc["dofs"]["heave"]["inertia"]["value"] > 0
 
 

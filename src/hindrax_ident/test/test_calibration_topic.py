@@ -17,13 +17,20 @@ from hindrax_ident import cli
 from hindrax_ident.identification import calibration_topic, executive
 from hindrax_ident.identification.estimators import parameter_names
 
-# step results in the executive's layout (executive.Executive._ballast, _line_pull, _inclining, _tilt_decay)
+# step results in the steps' layout (identification/steps: Ballast, LinePull, Inclining, TiltDecay): the holding
+# forces and their parts from forward and reverse thrust
 CAL = {"vertical": {"value": 0.9, "std": 0.01, "known_force_n": 8.5603, "holding_force_n": [0.81, -8.70],
-                    "holding_force_std_n": [0.05, 0.06], "method": "ballast"},
+                    "holding_force_std_n": [0.05, 0.06], "method": "ballast", "direction": "+z", "group": "vertical",
+                    "forward_force_n": [0.84, 0.0], "reverse_force_n": [-0.03, -8.70]},
        "surge": {"value": 0.88, "std": 0.02, "known_force_n": 4.905, "holding_force_n": [0.1, -5.47],
-                 "holding_force_std_n": [0.04, 0.05], "method": "line_pull"},
+                 "holding_force_std_n": [0.04, 0.05], "method": "line_pull", "direction": "+x", "group": "horizontal",
+                 "forward_force_n": [0.05, -2.73], "reverse_force_n": [0.05, -2.74]},
        "sway": {"value": 0.92, "std": 0.04, "known_force_n": 4.905, "holding_force_n": [0.0, -5.33],
-                "holding_force_std_n": [0.03, 0.07], "method": "line_pull"}}
+                "holding_force_std_n": [0.03, 0.07], "method": "line_pull", "direction": "+y", "group": "horizontal",
+                "forward_force_n": [0.0, -2.66], "reverse_force_n": [0.0, -2.67]}}
+#: the same results as a node before issue 26 published them: single scales, no forward/reverse parts
+OLD_CAL = {k: {kk: vv for kk, vv in v.items() if kk not in ("direction", "group", "forward_force_n",
+                                                                "reverse_force_n")} for k, v in CAL.items()}
 INCL = {"roll": {"value": 4.489, "std": 0.132, "known_moment_n_m": 0.642, "thruster_moment_n_m": [0.01, 0.03],
                  "tilt_rad": [0.001, 0.144], "tilt_std_rad": [0.002, 0.003], "method": "inclining"}}
 DECAYS = {"pitch": (1012.34, 1032.34)}
@@ -47,6 +54,7 @@ def test_results_survive_the_message_exactly_with_named_keys():
     assert kv["scale"] == "0.9" and kv["scale_std"] == "0.01" and kv["known_force_n"] == "8.5603"
     assert kv["group"] == "vertical" and kv["direction"] == "+z" and kv["step"] == "ballast"
     assert kv["holding_force_with_n"] == "-8.7" and kv["holding_force_without_std_n"] == "0.05"
+    assert kv["forward_force_without_n"] == "0.84" and kv["reverse_force_with_n"] == "-8.7"
     kv = {v.key: v.value for v in arr.status[2].values}
     assert kv["group"] == "horizontal" and kv["direction"] == "+y" and kv["axis"] == "sway"
     kv = {v.key: v.value for v in arr.status[3].values}
@@ -64,6 +72,13 @@ def test_results_survive_the_message_exactly_with_named_keys():
     bad.status[0].values = [v for v in bad.status[0].values if v.key != "scale_std"]
     with pytest.raises(ValueError, match="thrust_scale/vertical.*scale_std"):
         calibration_topic.results_from_array(bad)
+    # an older node's message (no forward/reverse parts) still reads: its scales measure each group's mean
+    old = calibration_topic.calibration_array(calibration_topic.statuses(OLD_CAL), Time(sec=5))
+    for st in old.status:
+        st.values = [v for v in st.values if not v.key.startswith(("forward_", "reverse_"))]
+    cal, _, _ = calibration_topic.results_from_array(old)
+    assert all("forward_force_n" not in e for e in cal.values())
+    assert {k: e["value"] for k, e in cal.items()} == {k: e["value"] for k, e in CAL.items()}
 
 
 def _write_campaign_bag(path, cfg, calibration_msg):
@@ -130,7 +145,7 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     from builtin_interfaces.msg import Time
 
     from hindrax_ident.identification import estimators, report
-    from hindrax_ident.identification.calibration import scale_prior_std
+    from hindrax_ident.identification.calibration import thrust_scales
 
     cfg = load_config(default_config_path())
     # a free decay of an earlier goal (the node's message is cumulative) has no data in this bag: left out
@@ -159,19 +174,21 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
         assert doc.get("joint", {}).get("scales", {}) == {}
         return
     assert "calibration from the bag" in capsys.readouterr().out
-    assert np.allclose(z, 0.9 * raw, rtol=1e-12)  # vertical scale of the ballast step
-    v, h = doc["calibration"]["vertical_thrust_scale"], doc["calibration"]["horizontal_thrust_scale"]
-    assert v["value"] == 0.9 and v["std"] == 0.01 and v["known_force_n"] == 8.5603 and v["method"] == "ballast"
-    assert v["holding_force_n"] == [0.81, -8.70]
-    w_s, w_y = 1 / 0.02 ** 2, 1 / 0.04 ** 2  # line pulls' inverse-variance mean
-    assert h["value"] == pytest.approx((0.88 * w_s + 0.92 * w_y) / (w_s + w_y), rel=1e-12)
-    assert doc["calibration"]["line_pull_sway"]["known_force_n"] == 4.905
-    sp = scale_prior_std(cfg)
-    s_v = (1 / sp ** 2 + 0.9 / 0.01 ** 2) / (1 / sp ** 2 + 1 / 0.01 ** 2)  # precision-weighted mean
-    joint = doc["joint"]["scales"]["vertical"]
-    assert [(m["value"], m["std"]) for m in joint["measurements"]] == [(0.9, 0.01)] and joint["dofs"] == ["heave"]
-    # without the empirical priors' pull (identification.prior_std_rel) exactly s_v; with them within 0.1 step std
-    assert abs(joint["value"] - s_v) < 0.001 and joint["std"] < 0.01
+    # the heave run pushes down with every vertical thruster (1600 us): forward thrust, the vertical forward scale
+    # of the bag's calibration (the sinker's and the hovers' holds, thrust_scales: test_thrust_calibration.py)
+    sc = thrust_scales(CAL, cfg)
+    assert abs(sc["vertical_forward"]["value"] - sc["vertical_reverse"]["value"]) > 0.01
+    assert np.allclose(z, sc["vertical_forward"]["value"] * raw, rtol=1e-9)
+    steps = doc["calibration"]["steps"]
+    assert steps["vertical"]["value"] == 0.9 and steps["vertical"]["known_force_n"] == 8.5603
+    assert steps["vertical"]["holding_force_n"] == [0.81, -8.70] and steps["vertical"]["method"] == "ballast"
+    assert steps["sway"]["known_force_n"] == 4.905 and steps["surge"]["forward_force_n"] == [0.05, -2.73]
+    assert doc["calibration"]["thrust_scales"]["vertical_forward"]["value"] == pytest.approx(
+        sc["vertical_forward"]["value"], rel=1e-12)
+    joint = doc["joint"]["scales"]["vertical_forward"]
+    assert [m["step"] for m in joint["measurements"]] == ["ballast vertical"] and joint["dofs"] == ["heave"]
+    # the empirical priors (identification.prior_std_rel) pull the joint posterior only a little
+    assert abs(joint["value"] - sc["vertical_forward"]["value"]) < 0.5 * sc["vertical_forward"]["std"]
     assert rec.decays == {} and "free_decay" not in doc
     assert doc["inclining"]["roll"]["value"] == 4.489 and doc["inclining"]["roll"]["tilt_rad"] == [0.001, 0.144]
 

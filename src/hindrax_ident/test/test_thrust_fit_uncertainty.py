@@ -105,10 +105,11 @@ def test_thruster_fit_write_sets_the_interval_width(tmp_path, capsys, noise_n, n
 
 
 def test_the_joint_estimate_scale_prior_follows_the_fit_too():
-    from hindrax_ident.identification.calibration import scale_prior_std
+    """Each rotation direction's scale has the prior of its own curve (issue 26 item 1)."""
+    from hindrax_ident.identification.calibration import scale_prior_stds
 
     declared = load_config(default_config_path())
     fitted = load_config(default_config_path(), {"thrusters.thrust_fit_uncertainty_rel": [0.006, 0.008]})
     neg, pos = declared.flat["thrusters.thrust_uncertainty_rel"]
-    assert scale_prior_std(declared) == pytest.approx(np.sqrt((neg ** 2 + pos ** 2) / 2.0))
-    assert scale_prior_std(fitted) == pytest.approx(np.sqrt((0.006 ** 2 + 0.008 ** 2) / 2.0))
+    assert scale_prior_stds(declared) == {"forward": pos, "reverse": neg}
+    assert scale_prior_stds(fitted) == {"forward": 0.008, "reverse": 0.006}

@@ -45,8 +45,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--fractions", default="",
                             help="explicit level fractions of each DOF's authority, comma-separated, each in (0, 1]")
         parser.add_argument("--calibrate", default="",
-                            help="known-force calibration steps before the ladders, comma-separated: ballast, "
-                                 "line_pull, tilt_decay, inclining (the node prompts; answer with `hindrax ident continue`)")
+                            help="reference steps before the ladders, comma-separated: thrust (= ballast, float, "
+                                 "line_pull, line_pull_negative), or some of ballast, float, line_pull, "
+                                 "line_pull_negative; tilt_decay, inclining (the node prompts; answer with `hindrax "
+                                 "ident continue`; docs/identification.md §6.1)")
         parser.add_argument("--calibration-only", action="store_true",
                             help="run only the --calibrate steps (no ladders)")
         parser.add_argument("--server-timeout", type=float, default=10.0,

@@ -60,9 +60,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-level-duration", type=float, default=None,
                         help="longest run of one level, s (default identification.max_level_duration_s)")
     parser.add_argument("--calibrate", default="",
-                        help="reference steps before the ladders, comma-separated: ballast, line_pull (known forces: "
-                             "the thrust scales are applied to the identification, identification.yaml gains a "
-                             "calibration section), tilt_decay (roll and pitch free decay: rigid + added inertia with "
+                        help="reference steps before the ladders, comma-separated: thrust (= ballast, float, "
+                             "line_pull, line_pull_negative: every step the thrust scales per thruster group and "
+                             "rotation direction need, docs/identification.md §6.1), or some of them: ballast (a known "
+                             "sinker), float (a known float, calibration.float_*), line_pull (+x, +y), "
+                             "line_pull_negative (-x, -y) (known forces: the thrust scales are applied to the "
+                             "identification, identification.yaml gains calibration and joint sections), tilt_decay "
+                             "(roll and pitch free decay: rigid + added inertia with "
                              "--restoring-n-m-per-rad or the inclining step, section free_decay), inclining (restoring "
                              "stiffness C of roll and pitch from a known mass at a known arm, calibration.inclining_*; "
                              "section inclining); through the graph the virtual pool plays "
@@ -181,6 +185,11 @@ def _check_args(args) -> tuple[object, list[str]]:
     bad = [c for c in cal if c not in CALIBRATION_STEPS]
     if bad:
         raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+    from ..identification.executive import expand_calibration
+
+    if "float" in expand_calibration(cal) and cfg.calibration.float_net_buoyancy_n is None:
+        raise CommandError("--calibrate: the float step needs calibration.float_mass_kg and calibration.float_volume_m3 "
+                           "in the vehicle file")
     return cfg, dofs
 
 
@@ -324,15 +333,15 @@ def run_in_process(args: argparse.Namespace) -> int:
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
                         sim=sim, calibrate=cal, excitation=getattr(args, "excitation", None),
                         excitation_duration_s=getattr(args, "excitation_duration", None),
-                        ballast_weight_in_water_n=w_ballast if "ballast" in cal else 0.0,
-                        line_pull_n=f_line if "line_pull" in cal else 0.0,
+                        ballast_weight_in_water_n=w_ballast, line_pull_n=f_line,
                         inclining_load_n_m=inclining_load(cfg) if "inclining" in cal else (0.0, 0.0))
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
-    from ..identification.calibration import apply_thrust_calibration
+    from ..identification.calibration import identify_calibrated
 
-    idents, errors = identify_all_with_errors(apply_thrust_calibration(record), cfg)
+    # the calibration's per-direction scales applied, the thrust shares attached for the joint estimate
+    idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
     for dof, msg in errors.items():
         progress(f"{dof}: no estimate ({msg})")
     out = _output_dir(cfg, args.out)

@@ -20,6 +20,11 @@ no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 
 (:func:`format_excitation_table`): pool seconds per DOF, mean |error| of the inertia and quadratic damping, their
 interval coverage, and the error scaled to 100 s of pool time (|error| x sqrt(pool s / 100), the 1 / sqrt(T) law of
 an unbiased estimate), i.e. the accuracy per second of pool time.
+
+``--calibrate thrust`` (or other reference steps, issue 26) runs them before the manoeuvres of every case (the
+virtual pool plays the operator) and identifies as ``hindrax ident campaign --calibrate`` does: the per-direction
+thrust scales applied and estimated jointly with the fits and the empirical priors; the label gains
+``[calibrate <steps>]``. Without it the cases are identified on the curve's force, as before.
 """
 from __future__ import annotations
 
@@ -82,6 +87,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "identification.excitation of the vehicle file)")
     parser.add_argument("--excitation-duration", type=float, default=None,
                         help="broadband run per DOF, s (default identification.excitation_duration_s)")
+    parser.add_argument("--calibrate", default="",
+                        help="reference steps before the manoeuvres in every case, comma-separated (as hindrax ident "
+                             "campaign --calibrate, e.g. thrust): the scales are applied and estimated jointly with "
+                             "the fits and the empirical priors (docs/identification.md §6.2); the label gains "
+                             "[calibrate <steps>]")
     parser.add_argument("--cached-only", action="store_true",
                         help="with --cache: use only the cases found there (re-assess them with the current verdicts "
                              "and tables; the others are listed as not run)")
@@ -96,11 +106,15 @@ def _truth_path(name: str) -> Path:
 
 def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[str],
              levels: int | None = None, cache: str | None = None, excitation: str | None = None,
-             excitation_duration_s: float | None = None) -> dict:
+             excitation_duration_s: float | None = None, calibrate: Sequence[str] = ()) -> dict:
     """One campaign of ``scenario`` (name or truth file) with ``seed``: the compared parameters.
 
     excitation / excitation_duration_s: the force input (default the vehicle file's ``identification.excitation``);
-    another than ``ladder`` is appended to the label as `` [<excitation>]`` and to the cache key.
+    another than ``ladder`` is appended to the label as `` [<excitation>]`` and to the cache key. calibrate: reference
+    steps run first (:data:`~hindrax_ident.identification.executive.CALIBRATION_STEPS`; the virtual pool plays the
+    operator): the record is identified with its thrust scales applied and estimated jointly with the fits
+    (:func:`~hindrax_ident.identification.calibration.identify_calibrated`, :func:`~hindrax_ident.identification.
+    calibration.joint_estimate`, as ``hindrax ident campaign``); the label gains `` [calibrate <steps>]``.
 
     Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
     "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
@@ -123,16 +137,31 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     dur = excitation_duration_s
     if exc != "ladder":
         label = f"{label} [{exc}]"
+    cal = [str(c) for c in calibrate]
+    if cal:
+        label = f"{label} [calibrate {','.join(cal)}]"
     wall0 = time.monotonic()
-    key = _cache_key(label.split(" [")[0], exc, dur)
+    key = _cache_key(label.split(" [")[0], exc, dur) + (f"-calibrate-{'_'.join(cal)}" if cal else "")
     cached = _cache_file(cache, key, seed, dofs, levels) if cache else None
     if cached is not None and cached.is_file():
         idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
     else:
         sim = Simulator(cfg, seed=seed, truth=truth)
-        record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim, excitation=exc,
-                          excitation_duration_s=dur).run()
-        idents, errors = identify_all_with_errors(record, cfg)
+        if cal:
+            from ..identification.calibration import identify_calibrated, joint_estimate
+            from ..identification.executive import calibration_forces, inclining_load
+
+            w_ballast, f_line = calibration_forces(cfg)
+            record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim, excitation=exc,
+                              excitation_duration_s=dur, calibrate=cal, ballast_weight_in_water_n=w_ballast,
+                              line_pull_n=f_line, inclining_load_n_m=inclining_load(cfg)).run()
+            idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
+            if idents:
+                joint_estimate(idents, cfg, record.calibration)
+        else:
+            record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim, excitation=exc,
+                              excitation_duration_s=dur).run()
+            idents, errors = identify_all_with_errors(record, cfg)
         aborted, abort_reason, campaign_wall = bool(record.aborted), record.abort_reason, time.monotonic() - wall0
         if cached is not None:
             for r in idents.values():
@@ -167,7 +196,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
                          "z": (v - tr) / s if s > 0 else None, "covered": bool(lo <= tr <= hi),
                          "verdict": a[name]["verdict"], "reasons": a[name]["reasons"], "t_dof": a[name]["t_dof"],
                          "pool_time_s": float(r.pool_time_s)})
-    return {"scenario": label, "excitation": exc, "seed": int(seed), "wall_s": campaign_wall, "aborted": aborted,
+    return {"scenario": label, "excitation": exc, "calibrate": cal, "seed": int(seed), "wall_s": campaign_wall,
+            "aborted": aborted,
             "abort_reason": abort_reason, "errors": errors, "cases": rows,
             "dofs": {d: {"verdict": v["verdict"], "reasons": v["reasons"], "checks": v["checks"]}
                      for d, v in verdicts.items()}}
@@ -360,11 +390,17 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # seed-major: every scenario's seed 1 first, so that a suite cut short still covers every scenario
-    jobs = [(args.config, n, seed, dofs, args.levels, args.cache, e, args.excitation_duration)
+    from ..identification.executive import CALIBRATION_STEPS
+    cal = [c.strip() for c in str(args.calibrate or "").split(",") if c.strip()]
+    if any(c not in CALIBRATION_STEPS for c in cal):
+        print(f"--calibrate: {args.calibrate!r}: comma-separated from {', '.join(CALIBRATION_STEPS)}", file=sys.stderr)
+        return 1
+    jobs = [(args.config, n, seed, dofs, args.levels, args.cache, e, args.excitation_duration, cal)
             for seed in range(1, args.seeds + 1) for n in names for e in excitations]
     not_run = []
     if args.cached_only:
-        keep = [j for j in jobs if _cache_file(args.cache, _cache_key(j[1], j[6], j[7]), j[2], dofs,
+        ckey = f"-calibrate-{'_'.join(cal)}" if cal else ""
+        keep = [j for j in jobs if _cache_file(args.cache, _cache_key(j[1], j[6], j[7]) + ckey, j[2], dofs,
                                                args.levels).is_file()]
         not_run = [f"{j[1]} seed {j[2]}" for j in jobs if j not in keep]
         jobs = keep
@@ -386,7 +422,7 @@ def run(args: argparse.Namespace) -> int:
             _say(res, wall0)
     summary = summarise(results)
     date = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
-    doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names,
+    doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names, "calibrate": cal,
            "levels": args.levels, "not_run": not_run,
            "wall_time_s": time.monotonic() - wall0, "summary": summary, "runs": results}
     (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
@@ -396,8 +432,9 @@ def run(args: argparse.Namespace) -> int:
         table += "\n\n" + doc["excitation_table"]
         (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
     missing = f"; not run: {', '.join(not_run)}" if not_run else ""
+    calib = f", calibrate {','.join(cal)}" if cal else ""
     (out / "scenarios.md").write_text(f"Scenario suite, {date}, commit {doc['commit']}, seeds 1-{args.seeds}, "
-                                      f"DOFs {', '.join(dofs)}, levels {args.levels or 'default'}{missing}\n\n"
+                                      f"DOFs {', '.join(dofs)}, levels {args.levels or 'default'}{calib}{missing}\n\n"
                                       f"{table}\n")
     print(table)
     results_doc.write_if_asked(args, "scenarios", "Scenario suite: identification against truths that differ",

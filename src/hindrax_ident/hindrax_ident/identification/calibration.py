@@ -1,23 +1,39 @@
-"""Known-force thrust calibration and joint estimation (issue 17 items 1-3, 5; [Hindrax-Drag] §6).
+"""Known-force thrust calibration per thruster group and rotation direction, and the joint estimation (issue 17
+items 1-3, 5; issue 26 items 1-2; [Hindrax-Drag] §6; docs/identification.md §6).
 
-A self-propelled test only sees force / inertia and force / damping: if every thruster gives s times its curve,
-inertia, damping and bias all come out s times too (docs/identification.md). The ballast step of the executive
-(:meth:`~.executive.Executive._ballast`) measures s against a known weight; here it enters the identification:
+A self-propelled test only sees force / inertia and force / damping: if the thrusters give s times their curve,
+inertia, damping and bias all come out s times too (docs/identification.md §6). A T200's forward and reverse
+thrust are two curves ([Hindrax-Drag] eq. 1, Table 2) that go wrong differently (a propeller mounted the other way,
+thruster-frame interaction, a curve measured on another unit), so the thrust model here has one scale per thruster
+group and rotation direction: ``vertical_forward``, ``vertical_reverse``, ``horizontal_forward``,
+``horizontal_reverse`` (forward = positive thrust along the thruster's configured direction, the curve_positive
+branch). The true force of thruster j is s_{g(j), d} F_j with d the sign of its commanded force F_j.
 
-* :func:`apply_thrust_calibration` returns the record with its thrust-model wrenches (``wrench_frd``,
-  ``wrench_cmd_frd``) multiplied by the calibrated point scale, so that the fits come out near physical units.
-* :func:`joint_estimate` then estimates the scales as parameters together with every DOF's parameters: prior
-  N(1, sigma_s^2) from ``thrusters.thrust_uncertainty_rel``, each calibration step a measurement, the empirical
-  priors ([NTNU-Thesis] App. A, weight ``identification.prior_std_rel``) on the physical parameters, and
-  each DOF's fit in curve units phi = theta / s (the model is linear in 1/s: an exact reparametrisation) as a
-  Gaussian measurement; Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2-§6.3). The
-  reported intervals carry the calibration's own uncertainty; :func:`~.verdicts.assess_dof` then adds no second
-  thrust term. (:func:`calibration_relative_std` is the former, first-order shortcut: the scale's relative std.)
+* The calibration steps (:mod:`.steps.calibration_steps`) give, per hold, the parts P and N of the holding force
+  on the step's axis made by forward and reverse thrust; at rest ``s_forward P + s_reverse N + E = R`` with E the
+  known force (0 without it) and R the constant force the thrusters balance: for the vertical group the vehicle's
+  net buoyancy (rho V - m) g, whose weighed value (``calibration.net_buoyancy_std_n``) makes every hover hold a
+  measurement of the forward scale; for a line pull a free constant per step (current, tether).
+  :func:`scale_model` collects these linear Gaussian measurements; :func:`thrust_scales` is the scales' posterior
+  from them and the priors N(1, u_d^2) (u_d of the thruster fit per direction, :func:`scale_prior_stds`).
+* :func:`apply_thrust_calibration` rebuilds the record's thrust-model wrenches from the commanded thruster forces
+  with those point scales, per thruster and direction (first-order lag as the executive's), so that the fits come
+  out near physical units.
+* :func:`attach_thrust_sensitivities` measures, per DOF and parameter, how the fit moves with each scale (refits
+  with one scale raised); :func:`joint_estimate` then estimates the scales together with every DOF's parameters
+  (Bayesian least squares, [Tarantola2005] Ch. 3).
 
-Scales: ``vertical`` (ballast: heave, roll, pitch columns Z, K, M, the vertical thrusters) and ``horizontal``
-(line pull in surge and sway, their inverse-variance mean: X, Y, N, the horizontal thrusters). ASSUMPTION when only
-one of the two was measured: the other thrusters get the same scale (a common cause such as the battery voltage,
-docs/devices.md §5.3); the section says so. The RLS comparison values in ``record.online`` stay in curve units.
+Which direction turns in each manoeuvre (the allocation of ros_ws/config/hindrax.yaml, [Hindrax-Drag] Fig. 5, 55-degree
+horizontal layout): a pure surge, sway or yaw wrench is made by two horizontal thrusters turning forward and two in
+reverse with equal thrust (T1/T4 and T2/T3 are point-symmetric pairs with opposite directions), in either sense, so
+those DOFs and every line pull see the mean of the two horizontal scales only; surge and sway pulls share the
+horizontal group's two scales, and their difference stays at its prior, which none of these manoeuvres depends on.
+Heave down is forward thrust of all four vertical thrusters, heave up reverse; the hover (0.79 N down) is forward
+thrust; roll and pitch use two vertical thrusters each way.
+
+ASSUMPTION when only one group was measured: the other group's thrusters get the same two scales (``common_*``; a
+common cause such as the battery voltage, docs/devices.md §5.3). The RLS comparison values in ``record.online``
+stay in curve units.
 """
 from __future__ import annotations
 
@@ -27,77 +43,362 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["apply_thrust_calibration", "calibration_relative_std", "calibration_section", "thrust_scales",
-           "DOF_GROUP", "decay_inertia", "DEFAULT_PRIOR_STD_REL", "scale_prior_std", "scale_measurements",
-           "joint_estimate"]
+__all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
+           "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
+           "KNOWN_FORCE_AXES", "GROUPS", "DIRECTIONS", "thruster_groups", "attach_thrust_sensitivities",
+           "identify_calibrated", "lagged_parts"]
 
-#: Which thrusters (scale) act in each DOF, and the wrench columns of each group.
-DOF_GROUP = {"surge": "horizontal", "sway": "horizontal", "yaw": "horizontal",
-             "heave": "vertical", "roll": "vertical", "pitch": "vertical"}
+GROUPS = ("vertical", "horizontal")
+DIRECTIONS = ("forward", "reverse")
+#: Calibration keys of the known-force steps -> (thruster group, FRD axis index, sense of the known force).
+KNOWN_FORCE_AXES = {"vertical": ("vertical", 2, 1), "vertical_negative": ("vertical", 2, -1),
+                    "surge": ("horizontal", 0, 1), "surge_negative": ("horizontal", 0, -1),
+                    "sway": ("horizontal", 1, 1), "sway_negative": ("horizontal", 1, -1)}
+#: The step that produces each calibration key (an older result may not name it).
+_METHOD = {"vertical": "ballast", "vertical_negative": "float", "surge": "line_pull", "surge_negative": "line_pull",
+           "sway": "line_pull", "sway_negative": "line_pull"}
+#: The thruster group that moves each DOF in a pure single-DOF manoeuvre (:func:`_fallback_weights`).
+_DOF_GROUP = {"surge": "horizontal", "sway": "horizontal", "yaw": "horizontal",
+              "heave": "vertical", "roll": "vertical", "pitch": "vertical"}
 _COLUMNS = {"horizontal": [0, 1, 5], "vertical": [2, 3, 4]}
+#: Name of the vertical group's hover constant (the net buoyancy the vertical thrusters hold) in the scale model.
+NET_BUOYANCY = "net_buoyancy_n"
 
 
-def _entry(calibration: Mapping[str, Any], key: str) -> tuple[float, float] | None:
+def thruster_groups(cfg) -> list[str]:
+    """Group of each thruster (allocation order): ``vertical`` when its configured direction is mostly along
+    body z (|d_z| >= 0.5), else ``horizontal``."""
+    return ["vertical" if abs(float(t.direction_frd[2])) >= 0.5 else "horizontal" for t in cfg.thrusters.thrusters]
+
+
+def scale_prior_stds(cfg) -> dict[str, float]:
+    """1-sigma of the prior N(1, u^2) of each direction's scale: {"forward": u_positive, "reverse": u_negative}
+    from the bollard-pull fit's ``thrusters.thrust_fit_uncertainty_rel`` [negative, positive] when the vehicle file
+    has it, else the declared ``thrusters.thrust_uncertainty_rel`` (the same choice as the intervals,
+    :func:`~.verdicts._declared_rel`)."""
+    from .verdicts import _declared_rel
+
+    neg, pos = _declared_rel(cfg, None)
+    return {"forward": float(pos), "reverse": float(neg)}
+
+
+@dataclasses.dataclass
+class ScaleModel:
+    """The calibration steps as linear Gaussian measurements of the thrust scales (module docstring).
+
+    names: scale parameters (``<group>_<direction>`` or ``common_<direction>``); nuisance: the constants R (the
+    vertical group's ``net_buoyancy_n``, a free one per horizontal step); rows: (coefficients (n_names,), nuisance
+    index or -1, right-hand side, std, step key) of ``sum_k c_k s_k - R = rhs``; prior: (n_names, 2) mean and std of
+    each scale; nuisance_prior: {nuisance index: (mean, std)} (the weighed net buoyancy).
+    """
+
+    names: list
+    nuisance: list
+    rows: list
+    prior: np.ndarray
+    nuisance_prior: dict
+
+    def parameter(self, group: str, direction: str) -> str:
+        """The scale parameter of ``group`` turning in ``direction``."""
+        name = f"{group}_{direction}"
+        return name if name in self.names else f"common_{direction}"
+
+    def steps_of(self, name: str) -> list[str]:
+        """Calibration keys whose measurements involve scale ``name``."""
+        k = self.names.index(name)
+        return list(dict.fromkeys(key for c, _, _, _, key in self.rows if c[k] != 0.0))
+
+    def solve(self) -> tuple[np.ndarray, np.ndarray]:
+        """Posterior mean and covariance of [scales, nuisances] (linear Gaussian: weighted least squares with the
+        priors as rows)."""
+        ns, nr = len(self.names), len(self.nuisance)
+        a, b = [], []
+        for c, ri, rhs, sd, _ in self.rows:
+            row = np.zeros(ns + nr)
+            row[:ns] = c
+            if ri >= 0:
+                row[ns + ri] = -1.0
+            a.append(row / sd)
+            b.append(rhs / sd)
+        for k in range(ns):
+            row = np.zeros(ns + nr)
+            row[k] = 1.0 / self.prior[k, 1]
+            a.append(row)
+            b.append(self.prior[k, 0] / self.prior[k, 1])
+        for ri, (m, sd) in self.nuisance_prior.items():
+            row = np.zeros(ns + nr)
+            row[ns + ri] = 1.0 / sd
+            a.append(row)
+            b.append(m / sd)
+        a, b = np.array(a), np.array(b)
+        cov = np.linalg.inv(a.T @ a)
+        return cov @ a.T @ b, cov
+
+
+def _entry(calibration: Mapping[str, Any], key: str) -> Mapping | None:
     v = calibration.get(key) if calibration else None
     if not isinstance(v, Mapping) or "value" not in v:
         return None
     s, sd = float(v["value"]), float(v["std"])
     if not (math.isfinite(s) and s > 0 and math.isfinite(sd) and sd >= 0):
         raise ValueError(f"calibration.{key}: scale must be > 0 with std >= 0, got {s} +- {sd}")
-    return s, sd
+    return v
 
 
-def thrust_scales(calibration: Mapping[str, Any] | None) -> dict[str, dict]:
-    """{"vertical"|"horizontal": {value, std, source}} from the raw step results (``vertical`` from the ballast;
-    ``surge``/``sway`` line pulls -> ``horizontal``, inverse-variance mean); a group without its own measurement
-    takes the other's (source says "assumed"). {} without any calibration. Raises ``ValueError`` on a bad scale."""
+def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel | None:
+    """The :class:`ScaleModel` of the calibration steps' results (``record.calibration``: keys of
+    :data:`KNOWN_FORCE_AXES`), None without any. A result with its holds' forward and reverse parts
+    (``forward_force_n``, ``reverse_force_n``) gives one row per hold (module docstring); an older result with only
+    its single scale (``value``, ``std``) measures the mean of the group's two directions. Priors from ``cfg``
+    (:func:`scale_prior_stds`; the weighed net buoyancy (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without
+    ``cfg`` the default thrust uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or
+    a zero std."""
+    from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL
+
     cal = calibration or {}
-    out: dict[str, dict] = {}
-    v = _entry(cal, "vertical")
-    if v is not None:
-        out["vertical"] = {"value": v[0], "std": v[1], "source": "ballast"}
-    hs = [(k, e) for k in ("surge", "sway") if (e := _entry(cal, k)) is not None]
-    if hs:
-        w = np.array([1.0 / max(e[1], 1e-12) ** 2 for _, e in hs])
-        val = float(np.sum(w * [e[0] for _, e in hs]) / np.sum(w))
-        out["horizontal"] = {"value": val, "std": float(1.0 / math.sqrt(np.sum(w))),
-                             "source": "line pull (" + ", ".join(k for k, _ in hs) + ")"}
-    if len(out) == 1:
-        have, other = next(iter(out)), ("horizontal" if "vertical" in out else "vertical")
-        out[other] = dict(out[have], source=f"assumed equal to the {have} scale (not measured)")
+    entries = {k: e for k in KNOWN_FORCE_AXES if (e := _entry(cal, k)) is not None}
+    if not entries:
+        return None
+    measured = [g for g in GROUPS if any(KNOWN_FORCE_AXES[k][0] == g for k in entries)]
+    names = ([f"{g}_{d}" for g in GROUPS for d in DIRECTIONS] if len(measured) == 2
+             else [f"common_{d}" for d in DIRECTIONS])
+    u = scale_prior_stds(cfg) if cfg is not None else {"forward": DEFAULT_THRUST_UNCERTAINTY_REL[1],
+                                                       "reverse": DEFAULT_THRUST_UNCERTAINTY_REL[0]}
+    prior = np.array([[1.0, u[n.rsplit("_", 1)[1]]] for n in names])
+    model = ScaleModel(names, [], [], prior, {})
+    for key, e in entries.items():
+        group, _axis, sense = KNOWN_FORCE_AXES[key]
+        kf, kr = names.index(model.parameter(group, "forward")), names.index(model.parameter(group, "reverse"))
+        if "forward_force_n" in e and "reverse_force_n" in e:
+            known = sense * float(e["known_force_n"])
+            nuis = NET_BUOYANCY if group == "vertical" else f"{key}_bias_n"
+            if nuis not in model.nuisance:
+                model.nuisance.append(nuis)
+                if nuis == NET_BUOYANCY and cfg is not None:
+                    model.nuisance_prior[len(model.nuisance) - 1] = (
+                        float(cfg.buoyancy_n - cfg.weight_n), float(cfg.calibration.net_buoyancy_std_n))
+            ri = model.nuisance.index(nuis)
+            for h, ext in enumerate((0.0, known)):
+                sd = float(e["holding_force_std_n"][h])
+                if not (math.isfinite(sd) and sd > 0):
+                    raise ValueError(f"calibration.{key}: a holding force std must be > 0, got {sd}")
+                c = np.zeros(len(names))
+                c[kf], c[kr] = float(e["forward_force_n"][h]), float(e["reverse_force_n"][h])
+                model.rows.append((c, ri, -ext, sd, key))
+        else:
+            sd = float(e["std"])
+            if not sd > 0:
+                raise ValueError(f"calibration.{key}: a scale std must be > 0 for the joint estimate, got {sd}")
+            c = np.zeros(len(names))
+            c[kf] = c[kr] = 0.5
+            model.rows.append((c, -1, float(e["value"]), sd, key))
+    return model
+
+
+def thrust_scales(calibration: Mapping[str, Any] | None, cfg=None) -> dict[str, dict]:
+    """{scale: {value, std, source}} of the calibration alone (:func:`scale_model`, its posterior), plus
+    ``<group>_mean`` entries (the mean of the group's two directions, what a symmetric manoeuvre uses) and
+    ``net_buoyancy_n`` when the vertical group was measured per hold; {} without a calibration. Raises
+    ``ValueError`` on a bad scale."""
+    model = scale_model(calibration, cfg)
+    if model is None:
+        return {}
+    x, cov = model.solve()
+    ns = len(model.names)
+    out: dict = {}
+    for k, n in enumerate(model.names):
+        steps = model.steps_of(n)
+        src = ("steps " + ", ".join(steps) if steps else "prior only (not measured)")
+        if n.startswith("common_"):
+            src += "; ASSUMPTION: the same for both thruster groups (only one measured)"
+        out[n] = {"value": float(x[k]), "std": float(math.sqrt(cov[k, k])), "source": src}
+    for g in dict.fromkeys(n.rsplit("_", 1)[0] for n in model.names):
+        a = np.zeros(ns + len(model.nuisance))
+        a[model.names.index(f"{g}_forward")] = a[model.names.index(f"{g}_reverse")] = 0.5
+        out[f"{g}_mean"] = {"value": float(a @ x), "std": float(math.sqrt(a @ cov @ a)),
+                            "source": "mean of the two directions"}
+    if NET_BUOYANCY in model.nuisance:
+        i = ns + model.nuisance.index(NET_BUOYANCY)
+        out[NET_BUOYANCY] = {"value": float(x[i]), "std": float(math.sqrt(cov[i, i])),
+                             "source": "hover holds (weighed net buoyancy as prior)"
+                             if model.nuisance_prior else "hover holds"}
     return out
 
 
-def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None = None) -> Any:
-    """A copy of ``record`` (:class:`~.executive.CampaignRecord`) with both wrench arrays (n, 6) scaled per
-    thruster group (:func:`thrust_scales`; ``calibration`` default ``record.calibration``); the record itself
-    without a calibration. Raises ``ValueError`` on a non-positive scale."""
+def _thruster_scales(model: ScaleModel, x: np.ndarray, cfg) -> tuple[np.ndarray, np.ndarray]:
+    """(forward, reverse) scale of each thruster (m,) from the scale vector ``x``."""
+    groups = thruster_groups(cfg)
+    fwd = np.array([x[model.names.index(model.parameter(g, "forward"))] for g in groups])
+    rev = np.array([x[model.names.index(model.parameter(g, "reverse"))] for g in groups])
+    return fwd, rev
+
+
+def lagged_parts(record: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The commanded thruster forces of ``record`` (``thrust_cmd_n``, (n, m) N) split into their positive and
+    negative parts, each through the first-order thrust lag ``record.time_constant_s`` over the tick intervals
+    (zero before the first tick, as the executive and :mod:`.from_bag` lag them): (forward, reverse), (n, m) each,
+    the value at each tick."""
+    f = np.asarray(record.thrust_cmd_n, dtype=float)
+    t = np.asarray(record.t_s, dtype=float)
+    tau = float(record.time_constant_s)
+    pos, neg = np.maximum(f, 0.0), np.minimum(f, 0.0)
+    lp, ln = np.zeros_like(f), np.zeros_like(f)
+    if f.shape[0] == 0:
+        return lp, ln
+    k = np.exp(-np.diff(t) / tau) if tau > 0 else np.zeros(t.size - 1)
+    ap, an = np.zeros(f.shape[1]), np.zeros(f.shape[1])
+    for i in range(1, t.size):
+        ap = pos[i - 1] + (ap - pos[i - 1]) * k[i - 1]
+        an = neg[i - 1] + (an - neg[i - 1]) * k[i - 1]
+        lp[i], ln[i] = ap, an
+    return lp, ln
+
+
+def _has_thrust(record: Any) -> bool:
+    f = getattr(record, "thrust_cmd_n", None)
+    return f is not None and np.ndim(f) == 2 and np.shape(f)[0] == np.size(record.t_s) and np.shape(f)[1] > 0
+
+
+def _matrix(cfg) -> np.ndarray:
+    from hindrax_drivers.allocation.core import AllocationCore
+
+    return np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
+
+
+def _rebuild(record: Any, cfg, fwd: np.ndarray, rev: np.ndarray) -> Any:
+    """``record`` with its wrenches rebuilt from ``thrust_cmd_n`` with per-thruster forward / reverse scales (m,)."""
+    b = _matrix(cfg)
+    f = np.asarray(record.thrust_cmd_n, dtype=float)
+    lp, ln = lagged_parts(record)
+    wc = (np.where(f >= 0.0, fwd, rev) * f) @ b.T
+    w = (fwd * lp + rev * ln) @ b.T
+    return dataclasses.replace(record, wrench_frd=w, wrench_cmd_frd=wc)
+
+
+def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None = None, cfg=None) -> Any:
+    """A copy of ``record`` (:class:`~.executive.CampaignRecord`) whose wrenches (n, 6) are rebuilt with the
+    calibration's point scales (:func:`thrust_scales`; ``calibration`` default ``record.calibration``): from the
+    commanded thruster forces ``thrust_cmd_n`` times the scale of each thruster's group and direction, lagged as the
+    executive does (:func:`lagged_parts`), times the thrust allocation matrix of ``cfg``. A record without
+    ``thrust_cmd_n`` (or without ``cfg``) gets each group's wrench columns (vertical: Z, K, M; horizontal: X, Y, N)
+    times the mean of its two directions. The record itself without a calibration. Raises ``ValueError`` on a
+    non-positive scale."""
     cal = record.calibration if calibration is None else calibration
-    sc = thrust_scales(cal)
-    if not sc:
+    model = scale_model(cal, cfg)
+    if model is None:
         return record
+    x, _ = model.solve()
+    if cfg is not None and _has_thrust(record):
+        return _rebuild(record, cfg, *_thruster_scales(model, x, cfg))
     factor = np.ones(6)
     for group, cols in _COLUMNS.items():
-        factor[cols] = sc[group]["value"]
+        p = (model.parameter(group, "forward"), model.parameter(group, "reverse"))
+        factor[cols] = 0.5 * (x[model.names.index(p[0])] + x[model.names.index(p[1])])
     return dataclasses.replace(record, wrench_frd=np.asarray(record.wrench_frd) * factor,
                                wrench_cmd_frd=np.asarray(record.wrench_cmd_frd) * factor)
 
 
-def calibration_relative_std(calibration: Mapping[str, Any] | None, dof: str = "heave") -> list[float] | None:
-    """[negative, positive] relative 1-sigma thrust uncertainty of ``dof``'s thrusters after calibration, or None."""
-    sc = thrust_scales(calibration)
-    if not sc:
-        return None
-    g = sc[DOF_GROUP[dof]]
-    rel = g["std"] / g["value"]
-    return [rel, rel]
+def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
+    """First-order guess of each parameter's weights on its group's two directions when the fit's sensitivity was
+    not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust uncertainty's weights
+    (:func:`~.verdicts.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse, the rest
+    half each; other DOFs half each)."""
+    from .verdicts import thrust_weights
+
+    w = thrust_weights(dof, names)  # (p, 2): [positive, negative]
+    g = _DOF_GROUP[dof]
+    return {f"{g}_forward": w[:, 0].copy(), f"{g}_reverse": w[:, 1].copy()}
 
 
-def calibration_section(calibration: Mapping[str, Any] | None) -> dict:
-    """The ``calibration`` section of identification.yaml: ``vertical_thrust_scale`` / ``horizontal_thrust_scale``
-    ({value, std, source} plus, for a measured one, the step's known force and holding forces) and each raw step
-    (``surge``/``sway`` line pulls)."""
-    sc = thrust_scales(calibration)
+def _affecting(record: Any, cfg, model: ScaleModel, dofs) -> dict[str, list[str]]:
+    """Per DOF, the scale parameters whose thrusters put force on the DOF's axis during its window (model order)."""
+    from hindrax_drivers.config import DOFS
+
+    f = np.asarray(record.thrust_cmd_n, dtype=float)
+    b = _matrix(cfg)
+    groups = thruster_groups(cfg)
+    out = {}
+    for dof in dofs:
+        sl = record.dof_slice(dof)
+        k = DOFS.index(dof)
+        used = set()
+        for j, g in enumerate(groups):
+            col = f[sl, j] * b[k, j]
+            if np.any((f[sl, j] > 0) & (col != 0)):
+                used.add(model.parameter(g, "forward"))
+            if np.any((f[sl, j] < 0) & (col != 0)):
+                used.add(model.parameter(g, "reverse"))
+        out[dof] = [n for n in model.names if n in used]
+    return out
+
+
+def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any], cfg, identify,
+                                calibration: Mapping[str, Any] | None = None, step: float = 0.02) -> None:
+    """Measure how each DOF's fit moves with each thrust scale: ``signals["thrust_sensitivity"]`` =
+    {scale: (p,) d theta / d s} (the interface to :func:`joint_estimate`), in place.
+
+    ``identifications`` were fitted by ``identify(record', cfg)`` on ``record'`` = ``record`` rebuilt with the
+    calibration's point scales s_c (:func:`apply_thrust_calibration`). For each DOF, the scales whose thrusters push
+    on its axis during its manoeuvres are found from ``thrust_cmd_n`` (surge: the two horizontal directions; heave:
+    the two vertical ones; roll and pitch: all four); the fit is repeated with one of them raised by ``step``
+    (relative) and d theta / d s_n = (theta' - theta) / (step s_n) (forward difference; only the DOFs it affects are
+    refitted). The last one follows without a fit from the exact homogeneity of the model (every force times lambda
+    gives every parameter times lambda, docs/identification.md §6.2): sum_n s_n d theta / d s_n = theta. So a DOF
+    costs one fit per extra scale. The output-error fit's sensitivity is what this measures, not a model of it: on
+    the heave ladders a 5 % stronger forward thrust alone moves the downward quadratic damping by +14 %, the bias by
+    +37 % (reverse: -9 % and -31 %): the braking phases of each run use the other direction. Nothing is done
+    without a calibration or without ``thrust_cmd_n``."""
+    cal = record.calibration if calibration is None else calibration
+    model = scale_model(cal, cfg)
+    if model is None or not _has_thrust(record) or not identifications:
+        return
+    x, _ = model.solve()
+    s_c = x[:len(model.names)]
+    affecting = _affecting(record, cfg, model, list(identifications))
+    sens = {d: {} for d in identifications}
+    for j, name in enumerate(model.names):
+        dofs = [d for d, a in affecting.items() if name in a[:-1]]
+        if not dofs:
+            continue
+        xp = x.copy()
+        xp[j] *= 1.0 + step
+        rec = _rebuild(record, cfg, *_thruster_scales(model, xp, cfg))
+        rec = dataclasses.replace(rec, windows={d: w for d, w in record.windows.items() if d in dofs})
+        refit, _errors = identify(rec, cfg)
+        for d in dofs:
+            r, r2 = identifications[d], refit.get(d)
+            if r2 is None:
+                continue
+            sens[d][name] = np.array([(r2.values[n] - r.values[n]) / (step * s_c[j]) for n in r.names])
+    for d, r in identifications.items():
+        a = affecting.get(d, [])
+        if not a or any(n not in sens[d] for n in a[:-1]):
+            continue  # a refit failed: no measured sensitivity (joint_estimate falls back)
+        theta = np.array([r.values[n] for n in r.names])
+        last = a[-1]
+        rest = sum(s_c[model.names.index(n)] * sens[d][n] for n in a[:-1]) if len(a) > 1 else 0.0
+        sens[d][last] = (theta - rest) / s_c[model.names.index(last)]
+        r.signals["thrust_sensitivity"] = {n: [float(v) for v in sens[d][n]] for n in a}
+
+
+def identify_calibrated(record: Any, cfg, identify=None) -> tuple[dict, dict]:
+    """({dof: DofIdentification}, {dof: error}) of ``record`` with its calibration applied
+    (:func:`apply_thrust_calibration` with ``cfg``) and each DOF's sensitivity to the thrust scales measured
+    (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate` (through :func:`~.results.build_results`).
+    identify: the fit of every DOF with a window in the record (default
+    :func:`~.estimators.identify_all_with_errors`), called as identify(record, cfg)."""
+    if identify is None:
+        from .estimators import identify_all_with_errors as identify
+    idents, errors = identify(apply_thrust_calibration(record, cfg=cfg), cfg)
+    attach_thrust_sensitivities(record, idents, cfg, identify)
+    return idents, errors
+
+
+def calibration_section(calibration: Mapping[str, Any] | None, cfg=None) -> dict:
+    """The ``calibration`` section of identification.yaml: ``thrust_scales`` (the calibration's own posterior per
+    group and direction, the group means and the hover's net buoyancy, :func:`thrust_scales`) and ``steps`` (each
+    raw step result: scale, known force, holding forces and their forward/reverse parts)."""
+    sc = thrust_scales(calibration, cfg)
     if not sc:
         return {}
 
@@ -105,16 +406,8 @@ def calibration_section(calibration: Mapping[str, Any] | None) -> dict:
         return {k: ([float(x) for x in v] if isinstance(v, (list, tuple)) else
                     (float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v)) for k, v in d.items()}
 
-    out = {}
-    for group in ("vertical", "horizontal"):
-        e = dict(sc[group])
-        if group == "vertical" and "vertical" in calibration:
-            e = {**dict(calibration["vertical"]), **e}
-        out[f"{group}_thrust_scale"] = plain(e)
-    for axis in ("surge", "sway"):
-        if axis in calibration:
-            out[f"line_pull_{axis}"] = plain(dict(calibration[axis]))
-    return out
+    return {"thrust_scales": {k: plain(v) for k, v in sc.items()},
+            "steps": {k: plain(dict(calibration[k])) for k in KNOWN_FORCE_AXES if k in calibration}}
 
 
 def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness_std: float = 0.0,
@@ -152,48 +445,12 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Joint estimation: thrust scales and empirical priors as parameters (issue 17 items 2 and 5; docs/identification.md
-# §6.2-§6.3)
+# Joint estimation: thrust scales and empirical priors as parameters (issue 17 items 2 and 5, issue 26 item 1;
+# docs/identification.md §6.2-§6.3)
 # ---------------------------------------------------------------------------------------------------------------
 
 #: Default 1-sigma of an empirical prior as a fraction of the prior's value (``identification.prior_std_rel``).
 DEFAULT_PRIOR_STD_REL = 0.5
-
-
-def scale_prior_std(cfg) -> float:
-    """1-sigma of the prior on a thruster group's scale s (prior mean 1): the RMS of the relative thrust
-    uncertainty of the two directions, [negative, positive] (a group scale weighs both directions alike): the
-    bollard-pull fit's ``thrusters.thrust_fit_uncertainty_rel`` when the vehicle file has it, else the declared
-    ``thrusters.thrust_uncertainty_rel`` (the same choice as the intervals, :func:`~.verdicts._declared_rel`)."""
-    from .verdicts import _declared_rel
-
-    neg, pos = _declared_rel(cfg, None)
-    return math.sqrt(0.5 * (neg * neg + pos * pos))
-
-
-def scale_measurements(calibration: Mapping[str, Any] | None) -> dict[str, list[tuple[str, float, float]]]:
-    """The calibration steps as measurements of the scale parameters: {parameter: [(step, value, std), ...]}.
-
-    Parameters: ``vertical`` (ballast) and ``horizontal`` (each line pull, surge and sway, is one measurement of
-    it) when both groups were measured; when only one group was, a single ``common`` scale for all thrusters
-    (the ASSUMPTION of :func:`thrust_scales`). {} without a calibration. Raises ``ValueError`` on a bad scale."""
-    cal = calibration or {}
-    groups: dict[str, list] = {}
-    v = _entry(cal, "vertical")
-    if v is not None:
-        groups["vertical"] = [("ballast", v[0], v[1])]
-    hs = [("line pull " + k, *e) for k in ("surge", "sway") if (e := _entry(cal, k)) is not None]
-    if hs:
-        groups["horizontal"] = hs
-    if len(groups) == 1:
-        return {"common": next(iter(groups.values()))}
-    return groups
-
-
-def _scale_parameter(groups: Mapping[str, Any], dof: str) -> str | None:
-    if not groups:
-        return None
-    return "common" if "common" in groups else DOF_GROUP[dof]
 
 
 def _rigid_inertia(cfg, dof: str) -> float:
@@ -247,32 +504,56 @@ def _theta_priors(dof: str, names: list, cfg, prior_std_rel: float) -> dict[str,
     return out
 
 
+def _sensitivity_matrix(r, model: ScaleModel, s_c: np.ndarray) -> np.ndarray:
+    """(p, n_scales) d theta / d s of a DOF's parameters at the point scales s_c: the measured
+    ``signals["thrust_sensitivity"]`` (:func:`attach_thrust_sensitivities`), else theta w / sigma(s_c) from the
+    first-order weights w of :func:`_fallback_weights` (merged onto ``common_*`` when one scale serves both groups)."""
+    names = list(r.names)
+    theta = np.array([r.values[n] for n in names], dtype=float)
+    g = np.zeros((len(names), len(model.names)))
+    meas = r.signals.get("thrust_sensitivity")
+    if meas:
+        for nm, v in meas.items():
+            g[:, model.names.index(nm)] += np.asarray(v, dtype=float)
+        return g
+    w = np.zeros_like(g)
+    for nm, v in _fallback_weights(r.dof, names).items():
+        gr, d = nm.rsplit("_", 1)
+        w[:, model.names.index(model.parameter(gr, d))] += np.asarray(v, dtype=float)
+    return theta[:, None] * w / (w @ s_c)[:, None]
+
+
 def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping[str, Any] | None = None,
                    prior_std_rel: float | None = None) -> dict:
-    """Bayesian (regularised) least squares of the thrust scales, the empirical priors and the ladders' fits
+    """Bayesian (regularised) least squares of the thrust scales, the empirical priors and the manoeuvres' fits
     together (docs/identification.md §6.2-§6.3; [Tarantola2005] Ch. 3), written into the identifications.
 
     ``identifications``: {dof: :class:`~.estimators.DofIdentification`} fitted on the record whose thrust-model
-    force was multiplied by the calibration's point scale (:func:`apply_thrust_calibration` with ``calibration``;
-    none without one). The model tau = M nu_dot + D(nu) nu + b (+ k_r s(eta)) with the true force s x the curve's
-    depends on the parameters only through phi = theta / s, so each DOF's fit is, to first order, a Gaussian
-    measurement of phi (value and the fit covariance ``signals["covariance"]``, without the thrust-curve
-    uncertainty). The joint problem over x = [phi of every DOF, s of every scale parameter] minimises
+    force was rebuilt with the calibration's point scales s_c (:func:`apply_thrust_calibration` with
+    ``calibration`` and ``cfg``; the record as recorded without one), each with its measured sensitivity
+    ``signals["thrust_sensitivity"]`` = G = d theta / d s (:func:`attach_thrust_sensitivities`; else the first-order
+    guess of :func:`_sensitivity_matrix`). To first order theta(s) = theta_0 + G (s - s_c), theta_0 the parameters
+    at s_c, and the fit is a Gaussian measurement of theta_0 (value and the fit covariance
+    ``signals["covariance"]``, no thrust term). The joint problem over x = [theta_0 of every DOF, the scales s, the
+    nuisance constants R of the calibration holds] minimises
 
-        sum_dof ||L^-1 (phi - phi_fit)||^2 + sum_i ((s phi_i - mu_i) / sigma_i)^2
-        + sum_g ((s_g - 1) / sigma_s)^2 + sum_steps ((s_g - s_step) / sd_step)^2
+        sum_dof ||L^-1 (theta_0 - theta_fit)||^2 + sum_i ((theta_i(s) - mu_i) / sd_i)^2
+        + sum_k ((s_k - 1) / u_k)^2 + sum_holds ((sum_k c_k s_k - R - rhs) / sd)^2 + ((R_v - B_w) / sd_B)^2
 
-    (L L^T the fit covariance; mu_i, sigma_i the empirical priors of :func:`_theta_priors`; sigma_s
-    :func:`scale_prior_std`; the steps of :func:`scale_measurements`) and its covariance is (J^T J)^-1 at the
-    optimum (Gauss-Newton, the Laplace approximation). The reported theta = s phi with the covariance carried by the
-    Jacobian [s I, phi]: the intervals contain the calibration's own uncertainty and the prior's pull. Without a
-    calibration s is fixed at 1 (only the priors act) and the thrust-curve uncertainty is added later by
+    (L L^T the fit covariance; mu_i, sd_i the empirical priors of :func:`_theta_priors`; u_k per direction,
+    :func:`scale_prior_stds`; the holds of :func:`scale_model`; B_w the weighed net buoyancy) and its covariance is
+    (J^T J)^-1 at the optimum (Gauss-Newton, the Laplace approximation). The reported theta = theta_0 + G (s - s_c)
+    has the covariance carried by the Jacobian [I, G] (the delta method): each interval contains the calibration's own
+    uncertainty in the directions the parameter depends on, and the priors' pull. For one scale per DOF this is the
+    reparametrisation theta = s phi of the single-scale model to first order (G = theta / s by homogeneity). Without
+    a calibration the scales stay 1 (only the empirical priors act) and the thrust-curve uncertainty is added later by
     :func:`~.verdicts.assess_dof`, per direction, as before.
 
     ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`DEFAULT_PRIOR_STD_REL`); 0 leaves the
     priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of
-    identification.yaml: {scales: {parameter: {value, std, prior: [1, sigma_s], measurements: [...], dofs}},
-    prior_std_rel, method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
+    identification.yaml: {scales: {name: {value, std, prior: [1, u], measurements: [{step, value, std}], dofs}},
+    group_means: {group: {value, std}}, net_buoyancy_n (with a per-hold vertical calibration), prior_std_rel,
+    method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
     """
     from scipy import optimize
 
@@ -280,84 +561,81 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         prior_std_rel = float(cfg.flat.get("identification.prior_std_rel", DEFAULT_PRIOR_STD_REL))
     if not (math.isfinite(prior_std_rel) and prior_std_rel >= 0):
         raise ValueError(f"prior_std_rel must be >= 0, got {prior_std_rel}")
-    groups = scale_measurements(calibration)
-    applied = thrust_scales(calibration)
+    model = scale_model(calibration, cfg)
+    ns = len(model.names) if model else 0
+    z_c = model.solve()[0] if model else np.zeros(0)   # the point scales (and constants) the record was rebuilt with
+    s_c = z_c[:ns]
     todo = [d for d, r in identifications.items() if "joint" not in r.signals and "assessment" not in r.signals]
-    g_names = list(groups)  # every measured scale (one no DOF uses still shows its posterior)
-    blocks = []  # (dof, names, phi_fit, Linv, priors, slice, scale index or None)
+    blocks = []  # (dof, names, theta_fit, Linv, priors, slice, G (p, ns) or None)
     k = 0
     for dof in todo:
         r = identifications[dof]
         names = list(r.names)
-        s_app = applied[DOF_GROUP[dof]]["value"] if applied else 1.0
         y = np.array([r.values[n] for n in names], dtype=float)
         cov = r.signals.get("covariance")
         if cov is None or np.shape(cov) != (len(names), len(names)):
             cov = np.diag([r.std[n] ** 2 for n in names])
-        cov = np.asarray(cov, dtype=float) / s_app ** 2
+        cov = np.asarray(cov, dtype=float)
         cov = 0.5 * (cov + cov.T) + np.eye(len(names)) * 1e-18 * max(1.0, float(np.max(np.abs(np.diag(cov)))))
         linv = np.linalg.inv(np.linalg.cholesky(cov))
-        gp = _scale_parameter(groups, dof)
-        blocks.append((dof, names, y / s_app, linv, _theta_priors(dof, names, cfg, prior_std_rel),
-                       slice(k, k + len(names)), None if gp is None else g_names.index(gp)))
+        g = _sensitivity_matrix(r, model, s_c) if model else None
+        blocks.append((dof, names, y, linv, _theta_priors(dof, names, cfg, prior_std_rel), slice(k, k + len(names)),
+                       g))
         k += len(names)
-    n_phi = k
-    sig_s = scale_prior_std(cfg)
-    meas = [(g_names.index(g), v, sd) for g in g_names for _, v, sd in groups[g]]
-    for _, v, sd in meas:
-        if not sd > 0:
-            raise ValueError(f"calibration: a scale std must be > 0 for the joint estimate, got {sd}")
-
-    def scales(x):
-        return x[n_phi:]
-
-    def residuals(x):
-        s = scales(x)
-        out = []
-        for _, names, phi_fit, linv, pri, sl, gi in blocks:
-            phi = x[sl]
-            out.append(linv @ (phi - phi_fit))
-            sg = 1.0 if gi is None else s[gi]
-            for i, n in enumerate(names):
-                if n in pri:
-                    out.append(np.array([(sg * phi[i] - pri[n][0]) / pri[n][1]]))
-        out.append((s - 1.0) / sig_s)
-        out.append(np.array([(s[gi] - v) / sd for gi, v, sd in meas]))
-        return np.concatenate(out)
-
     if not blocks:
         return {}
-    s0 = []  # start: each scale at the inverse-variance mean of its measurements
-    for gi in range(len(g_names)):
-        w = np.array([1.0 / sd ** 2 for g2, _, sd in meas if g2 == gi])
-        s0.append(float(np.sum(w * [v for g2, v, _ in meas if g2 == gi]) / np.sum(w)))
-    x0 = np.concatenate([b[2] for b in blocks] + [np.array(s0)])
+    n_th = k
+    rows = model.rows if model else []
+    nuis_prior = model.nuisance_prior if model else {}
+    prior = model.prior if model else np.zeros((0, 2))
+
+    def theta_of(x, sl, g):
+        return x[sl] if g is None else x[sl] + g @ (x[n_th:n_th + ns] - s_c)
+
+    def residuals(x):
+        s, rr = x[n_th:n_th + ns], x[n_th + ns:]
+        out = []
+        for _, names, y, linv, pri, sl, g in blocks:
+            out.append(linv @ (x[sl] - y))
+            th = theta_of(x, sl, g)
+            for i, n in enumerate(names):
+                if n in pri:
+                    out.append(np.array([(th[i] - pri[n][0]) / pri[n][1]]))
+        out.append((s - prior[:, 0]) / prior[:, 1])
+        out.append(np.array([(c @ s - (rr[ri] if ri >= 0 else 0.0) - rhs) / sd for c, ri, rhs, sd, _ in rows]))
+        out.append(np.array([(rr[ri] - m) / sd for ri, (m, sd) in nuis_prior.items()]))
+        return np.concatenate(out)
+
+    x0 = np.concatenate([b[2] for b in blocks] + [z_c])
     sol = optimize.least_squares(residuals, x0, method="lm", xtol=1e-14, ftol=1e-14)
     J = sol.jac
     cx = np.linalg.inv(J.T @ J)
     x = sol.x
-    s = scales(x)
-    for dof, names, phi_fit, _, pri, sl, gi in blocks:
+    s = x[n_th:n_th + ns]
+    for dof, names, y, _, pri, sl, g in blocks:
         r = identifications[dof]
-        phi = x[sl]
-        sg = 1.0 if gi is None else float(s[gi])
-        idx = list(range(sl.start, sl.stop)) + ([] if gi is None else [n_phi + gi])
-        T = np.zeros((len(names), len(idx)))
-        T[:, :len(names)] = sg * np.eye(len(names))
-        if gi is not None:
-            T[:, -1] = phi
+        p = len(names)
+        idx = list(range(sl.start, sl.stop)) + list(range(n_th, n_th + ns))
+        T = np.zeros((p, p + ns))
+        T[:, :p] = np.eye(p)
+        if g is not None:
+            T[:, p:] = g
         cov = T @ cx[np.ix_(idx, idx)] @ T.T
-        theta = sg * phi
-        s_app = applied[DOF_GROUP[dof]]["value"] if applied else 1.0
+        theta = theta_of(x, sl, g)
         cov_y = r.signals.get("covariance")
-        fit_sd = (np.sqrt(np.clip(np.diag(cov_y), 0.0, None)) if cov_y is not None and np.shape(cov_y) ==
-                  (len(names), len(names)) else np.array([r.std[n] for n in names]))
+        fit_sd = (np.sqrt(np.clip(np.diag(cov_y), 0.0, None)) if cov_y is not None and np.shape(cov_y) == (p, p)
+                  else np.array([r.std[n] for n in names]))
+        used = [] if g is None else [model.names[j] for j in range(ns) if np.any(g[:, j] != 0.0)]
         r.signals["joint"] = {
-            "fit_values": {n: float(v * s_app) for n, v in zip(names, phi_fit)},
+            "fit_values": {n: float(v) for n, v in zip(names, y)},
             "fit_std": {n: float(v) for n, v in zip(names, fit_sd)},
             "priors": {n: [m, sd] for n, (m, sd) in pri.items()},
-            "scale_parameter": None if gi is None else g_names[gi],
-            "thrust_in_covariance": gi is not None}
+            "scale_parameter": ", ".join(used) if used else None,
+            "thrust_sensitivity": None if g is None else {model.names[j]: [float(v) for v in g[:, j]]
+                                                          for j in range(ns) if model.names[j] in used},
+            "sensitivity_source": None if g is None else ("measured (refits)" if r.signals.get("thrust_sensitivity")
+                                                          else "first-order weights (not measured)"),
+            "thrust_in_covariance": g is not None}
         r.signals["covariance"] = cov
         for n, v, sd in zip(names, theta, np.sqrt(np.clip(np.diag(cov), 0.0, None))):
             r.values[n] = float(v)
@@ -366,14 +644,30 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         r.std["added_mass"] = r.std["inertia"]
     sec = {"prior_std_rel": float(prior_std_rel),
            "method": ("Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2): each DOF's "
-                      "output-error fit in curve units phi = theta / s as a Gaussian measurement, the thrust scales s "
-                      "with prior N(1, sigma_s^2) and the calibration steps as measurements, the empirical priors "
-                      "on theta = s phi; covariance (J^T J)^-1 at the optimum"),
+                      "output-error fit as a Gaussian measurement of its parameters at the calibration's point "
+                      "scales, theta(s) = theta_0 + G (s - s_c) with G the fit's measured sensitivity to each scale; "
+                      "one scale per thruster group and rotation direction with prior N(1, u^2) and the calibration "
+                      "holds as measurements; the empirical priors on theta; covariance (J^T J)^-1 at the optimum"),
            "scales": {}}
-    for gi, g in enumerate(g_names):
-        sec["scales"][g] = {"value": float(s[gi]), "std": float(math.sqrt(cx[n_phi + gi, n_phi + gi])),
-                            "prior": [1.0, float(sig_s)],
-                            "measurements": [{"step": st, "value": float(v), "std": float(sd)}
-                                             for st, v, sd in groups[g]],
-                            "dofs": [b[0] for b in blocks if b[6] == gi]}
+    if model is None:
+        return sec
+    cal = calibration or {}
+    cs = cx[n_th:n_th + ns, n_th:n_th + ns]
+    for j, name in enumerate(model.names):
+        meas = [{"step": f"{cal[key].get('method', _METHOD[key])} {key}", "value": float(cal[key]["value"]),
+                 "std": float(cal[key]["std"])} for key in model.steps_of(name)]
+        sec["scales"][name] = {"value": float(s[j]), "std": float(math.sqrt(cs[j, j])),
+                               "prior": [float(model.prior[j, 0]), float(model.prior[j, 1])],
+                               "measurements": meas,
+                               "dofs": [b[0] for b in blocks if b[6] is not None and np.any(b[6][:, j] != 0.0)]}
+    sec["group_means"] = {}
+    for grp in dict.fromkeys(n.rsplit("_", 1)[0] for n in model.names):
+        a = np.zeros(ns)
+        a[model.names.index(f"{grp}_forward")] = a[model.names.index(f"{grp}_reverse")] = 0.5
+        sec["group_means"][grp] = {"value": float(a @ s), "std": float(math.sqrt(a @ cs @ a))}
+    if NET_BUOYANCY in model.nuisance:
+        i = n_th + ns + model.nuisance.index(NET_BUOYANCY)
+        pr = model.nuisance_prior.get(model.nuisance.index(NET_BUOYANCY))
+        sec[NET_BUOYANCY] = {"value": float(x[i]), "std": float(math.sqrt(cx[i, i])),
+                             "prior": None if pr is None else [float(pr[0]), float(pr[1])]}
     return sec

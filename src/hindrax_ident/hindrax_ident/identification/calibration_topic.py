@@ -1,8 +1,8 @@
 """The calibration steps' results as a standard message: topic ``identification/calibration``.
 
-The identification node (:mod:`.node`) publishes, when a calibration step of a goal ends (``ballast``,
-``line_pull`` surge and sway, ``inclining`` roll and pitch, ``tilt_decay`` roll and pitch; docs/identification.md
-§6), one ``diagnostic_msgs/msg/DiagnosticArray`` holding every step result measured since the node started, one
+The identification node (:mod:`.node`) publishes, when a calibration step of a goal ends (``ballast``, ``float``,
+``line_pull`` and ``line_pull_negative`` surge and sway, ``inclining`` roll and pitch, ``tilt_decay`` roll and pitch;
+docs/identification.md §6), one ``diagnostic_msgs/msg/DiagnosticArray`` holding every step result measured since the node started, one
 ``DiagnosticStatus`` per result (a later result of the same name replaces the earlier one), with transient-local
 durability (depth 1), so a recorder or a tool that subscribes later still receives all of them. The recorder
 stores the topic with the campaign, and ``hindrax ident bag`` (:mod:`.from_bag`) reads it back into the
@@ -13,12 +13,18 @@ node's record in-process.
 Each status: ``level`` OK, ``hardware_id`` :data:`HARDWARE_ID`, ``name`` ``<kind>/<key>``, ``message`` a
 one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the float: exact round trip):
 
-``thrust_scale/vertical`` (ballast), ``thrust_scale/surge`` and ``thrust_scale/sway`` (line pull)
-    ``step`` (ballast | line_pull), ``axis`` (vertical | surge | sway), ``group`` (vertical | horizontal: the
-    thrusters the scale applies to, docs/identification.md §6.2), ``direction`` (body FRD axis of the known force:
-    ``+z`` the ballast's weight, ``+x`` / ``+y`` the line), ``scale`` and ``scale_std`` (true thrust / curve's,
-    dimensionless), ``known_force_n`` (N), ``holding_force_without_n``, ``holding_force_with_n`` and their
-    ``..._std_n`` (mean thrust-model force on the axis without and with the known force, N, FRD).
+``thrust_scale/vertical`` (ballast), ``thrust_scale/vertical_negative`` (float), ``thrust_scale/surge``,
+``thrust_scale/sway`` (line pull along +x, +y), ``thrust_scale/surge_negative``, ``thrust_scale/sway_negative`` (-x, -y)
+    ``step`` (ballast | float | line_pull), ``axis`` (the key), ``group`` (vertical | horizontal: the
+    thrusters that held the force, docs/identification.md §6.2), ``direction`` (body FRD axis and sense of the known
+    force: ``+z`` the ballast's weight, ``-z`` the float's buoyancy, ``+x`` / ``-x`` / ``+y`` / ``-y`` the line),
+    ``scale`` and ``scale_std`` (true thrust / curve's assuming one scale for both rotation directions,
+    dimensionless), ``known_force_n`` (N, magnitude), ``holding_force_without_n``, ``holding_force_with_n`` and their
+    ``..._std_n`` (mean thrust-model force on the axis without and with the known force, N, FRD), and
+    ``forward_force_without_n``, ``forward_force_with_n``, ``reverse_force_without_n``, ``reverse_force_with_n``: the
+    parts of those holding forces made by thrusters turning forward and in reverse (N, FRD; their sum is the holding
+    force), from which the per-direction scales are estimated (:func:`~.calibration.scale_model`). A message of an
+    older node without the four parts still reads: its scale then measures the mean of the two directions.
 ``inclining/roll``, ``inclining/pitch``
     ``step`` inclining, ``dof``, ``stiffness_n_m_per_rad`` and ``stiffness_n_m_per_rad_std`` (restoring C),
     ``known_moment_n_m``, ``thruster_moment_without_n_m``, ``thruster_moment_with_n_m`` (N m), ``tilt_without_rad``,
@@ -41,8 +47,10 @@ TOPIC = "identification/calibration"
 #: ``DiagnosticStatus.hardware_id`` of the statuses
 HARDWARE_ID = "hindrax identification"
 
-_GROUP = {"vertical": "vertical", "surge": "horizontal", "sway": "horizontal"}
-_DIRECTION = {"vertical": "+z", "surge": "+x", "sway": "+y"}
+_GROUP = {"vertical": "vertical", "vertical_negative": "vertical", "surge": "horizontal", "sway": "horizontal",
+          "surge_negative": "horizontal", "sway_negative": "horizontal"}
+_DIRECTION = {"vertical": "+z", "vertical_negative": "-z", "surge": "+x", "sway": "+y", "surge_negative": "-x",
+              "sway_negative": "-y"}
 
 
 def _num(x: Any) -> str:
@@ -68,6 +76,9 @@ def statuses(calibration: Mapping[str, Mapping] | None, inclining: Mapping[str, 
               ("known_force_n", _num(e["known_force_n"]))]
         kv += _pairs("holding_force", "n", e["holding_force_n"]) + _pairs("holding_force", "std_n",
                                                                          e["holding_force_std_n"])
+        if "forward_force_n" in e and "reverse_force_n" in e:
+            kv += _pairs("forward_force", "n", e["forward_force_n"]) + _pairs("reverse_force", "n",
+                                                                             e["reverse_force_n"])
         out.append((f"thrust_scale/{axis}", f"{axis} thrust scale {float(e['value']):.4f} +- {float(e['std']):.4f} "
                     f"({e.get('method', '')}, known force {float(e['known_force_n']):.4g} N)", kv))
     for dof, e in (inclining or {}).items():
@@ -124,6 +135,13 @@ def results_from_array(msg: Any) -> tuple[dict, dict, dict]:
             cal[key] = {"value": num("scale"), "std": num("scale_std"), "known_force_n": num("known_force_n"),
                         "holding_force_n": pair("holding_force", "n"),
                         "holding_force_std_n": pair("holding_force", "std_n"), "method": kv.get("step", "")}
+            if "direction" in kv and kv["direction"]:
+                cal[key]["direction"] = kv["direction"]
+            if "group" in kv:
+                cal[key]["group"] = kv["group"]
+            if "forward_force_without_n" in kv:  # a node of issue 26 on: the per-direction parts
+                cal[key]["forward_force_n"] = pair("forward_force", "n")
+                cal[key]["reverse_force_n"] = pair("reverse_force", "n")
         elif kind == "inclining":
             incl[key] = {"value": num("stiffness_n_m_per_rad"), "std": num("stiffness_n_m_per_rad_std"),
                          "known_moment_n_m": num("known_moment_n_m"),

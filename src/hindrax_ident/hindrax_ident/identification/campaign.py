@@ -9,12 +9,13 @@ the sensor samples the simulator produced during the tick go to the executive. A
 thruster is commanded neutral. The simulator's truth (position, attitude) goes into the record for tests and
 plots only; the executive never sees it.
 
-Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): the virtual pool plays the operator. When
-the executive waits for the ballast to be attached, the simulator gets the ballast's weight in water (vertical,
-NED down, expressed in the body frame every tick) as an external force until the executive asks for its removal;
-a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis the step names
-(as a line over a pulley at the pool edge); an inclining test mass is its weight in water at the step's arm
-(:func:`inclining_wrench_frd`). Each time ``continue`` is given at once.
+Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): the virtual pool plays the operator
+(:class:`PoolOperator`, shared with the graph's :class:`~.graph_campaign.VirtualOperator`). When the executive waits
+for the ballast to be attached, the simulator gets the ballast's weight in water (vertical, NED down, expressed in
+the body frame every tick) as an external force until the executive asks for its removal; the float is its net
+buoyancy, NED up; a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis
+and sense the step names (as a line over a pulley at the pool edge); an inclining test mass is its weight in water
+at the step's arm (:func:`inclining_wrench_frd`). Each time ``continue`` is given at once.
 """
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from ..sim.simulator import Simulator
 from .executive import CampaignAbort, CampaignRecord, Executive, TickInput
 
-__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign", "inclining_wrench_frd"]
+__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign", "inclining_wrench_frd", "PoolOperator"]
 
 
 def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, dof: str) -> np.ndarray:
@@ -40,6 +41,86 @@ def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, do
     f = np.asarray(rotation, dtype=float).T @ np.array([0.0, 0.0, float(weight_n)])
     r = np.array([0.0, float(arm_m), 0.0]) if dof == "roll" else np.array([float(arm_m), 0.0, 0.0])
     return np.concatenate([f, np.cross(r, f)])
+
+
+class PoolOperator:
+    """The virtual pool's operator of the calibration steps: which known force hangs on the vehicle.
+
+    ballast_weight_n / float_buoyancy_n / line_pull_n: the known forces, N (:func:`~.executive.calibration_forces`,
+    :func:`~.executive.float_buoyancy`); inclining_load_n_m: (weight in water N, arm m) of the inclining test mass.
+    :meth:`act` does what a step's operator code asks (``attach_ballast``, ``remove_ballast``, ``attach_float``,
+    ``remove_float``, ``apply_line_pull_<surge|sway>[_negative]``, ``release_line_<...>``,
+    ``attach_inclining_mass_<dof>``, ``remove_inclining_mass_<dof>``); :meth:`external_wrench_frd` is the wrench the
+    applied forces exert on the vehicle at its current attitude.
+    """
+
+    def __init__(self, ballast_weight_n: float = 0.0, line_pull_n: float = 0.0, inclining_load_n_m=(0.0, 0.0),
+                 float_buoyancy_n: float = 0.0) -> None:
+        self.ballast_weight_n = float(ballast_weight_n)
+        self.line_pull_n = float(line_pull_n)
+        self.float_buoyancy_n = float(float_buoyancy_n)
+        self.inclining_load_n_m = tuple(float(x) for x in inclining_load_n_m)
+        self.ballast_on = False
+        self.float_on = False
+        self.line_ned: np.ndarray | None = None  # (3,) N in NED while a line pulls
+        self.inclining: str | None = None  # DOF whose inclining test mass hangs on the vehicle
+
+    @classmethod
+    def for_steps(cls, steps) -> "PoolOperator":
+        """The operator of a campaign's steps (:mod:`.steps`): the known force each reference step prompts for
+        (ballast, float, line pull, inclining test mass) is the one it applies."""
+        from .steps import Ballast, Float, Inclining, LinePull
+
+        kw: dict = {}
+        for st in steps:
+            if isinstance(st, Ballast):
+                kw["ballast_weight_n"] = st.force_n
+            elif isinstance(st, Float):
+                kw["float_buoyancy_n"] = st.force_n
+            elif isinstance(st, LinePull):
+                kw["line_pull_n"] = st.force_n
+            elif isinstance(st, Inclining):
+                kw["inclining_load_n_m"] = (st.weight_n, st.arm_m)
+        return cls(**kw)
+
+    @property
+    def active(self) -> bool:
+        """Some known force is applied."""
+        return self.ballast_on or self.float_on or self.line_ned is not None or self.inclining is not None
+
+    def act(self, code: str, rotation: np.ndarray) -> bool:
+        """Do what ``code`` asks with the vehicle at ``rotation`` (3, 3) body -> NED (a line is laid along the body
+        axis of that moment, horizontal); False for a code this operator does not know."""
+        if code in ("attach_ballast", "remove_ballast"):
+            self.ballast_on = code == "attach_ballast"
+        elif code in ("attach_float", "remove_float"):
+            self.float_on = code == "attach_float"
+        elif code.startswith("apply_line_pull_"):
+            what = code[len("apply_line_pull_"):]
+            axis = np.eye(3)[0 if what.startswith("surge") else 1] * (-1.0 if what.endswith("_negative") else 1.0)
+            d = np.asarray(rotation) @ axis
+            self.line_ned = self.line_pull_n * np.array([d[0], d[1], 0.0]) / math.hypot(d[0], d[1])
+        elif code.startswith("release_line_"):
+            self.line_ned = None
+        elif code.startswith(("attach_inclining_mass_", "remove_inclining_mass_")):
+            self.inclining = code.rsplit("_", 1)[1] if code.startswith("attach") else None
+        else:
+            return False
+        return True
+
+    def external_wrench_frd(self, rotation: np.ndarray) -> np.ndarray:
+        """The wrench (6,) FRD about the body origin of the applied forces, vehicle at ``rotation`` body -> NED."""
+        ext = np.zeros(6)
+        rt = np.asarray(rotation).T  # NED -> body
+        if self.inclining is not None:
+            ext += inclining_wrench_frd(rotation, *self.inclining_load_n_m, self.inclining)
+        if self.ballast_on:
+            ext[:3] += rt @ np.array([0.0, 0.0, self.ballast_weight_n])
+        if self.float_on:
+            ext[:3] += rt @ np.array([0.0, 0.0, -self.float_buoyancy_n])
+        if self.line_ned is not None:
+            ext[:3] += rt @ self.line_ned
+        return ext
 
 
 class Campaign:
@@ -54,7 +135,9 @@ class Campaign:
     heave_repeats: down/up pairs per heave level (heave runs last 1-3 s in the depth available, so each level
     is repeated to collect enough transient data). excitation, excitation_duration_s: ``ladder`` or one broadband
     run per DOF and its length (default ``identification.excitation*``; :class:`~.executive.Executive`).
-    Raises ``ValueError`` for an unknown DOF.
+    calibrate, ballast_weight_in_water_n, line_pull_n, float_buoyancy_n, inclining_load_n_m: the reference steps
+    and their known forces (:class:`~.executive.Executive`); steps: run these step objects instead of the plan (a
+    test of one step). Raises ``ValueError`` for an unknown DOF.
     """
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
@@ -62,7 +145,8 @@ class Campaign:
                  progress: Callable[[str], None] | None = None, real_time_factor: float = 0.0,
                  sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
                  ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
-                 excitation_duration_s: float | None = None, inclining_load_n_m=(0.0, 0.0)) -> None:
+                 excitation_duration_s: float | None = None, inclining_load_n_m=(0.0, 0.0),
+                 float_buoyancy_n: float | None = None, steps=None) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -76,10 +160,11 @@ class Campaign:
                                    heave_repeats=heave_repeats, progress=progress, calibrate=calibrate,
                                    ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n,
                                    excitation=excitation, excitation_duration_s=excitation_duration_s,
-                                   inclining_load_n_m=inclining_load_n_m)
-        self._ballast_on = False
-        self._inclining: str | None = None  # DOF whose inclining test mass hangs on the vehicle
-        self._line_ned: np.ndarray | None = None
+                                   inclining_load_n_m=inclining_load_n_m, float_buoyancy_n=float_buoyancy_n,
+                                   steps=steps)
+        #: the virtual pool's operator of the calibration steps: the known forces the steps prompt for
+        self.operator = PoolOperator.for_steps(self.executive.steps)
+        self._external_used = False
         self.core = self.executive.core
         self.reversed = np.array([t.reversed for t in cfg.thrusters.thrusters], dtype=bool)
         self.neutral_us = float(cfg.thrusters.pulse_width_neutral_us)
@@ -106,26 +191,11 @@ class Campaign:
         self._truth["eul"].append(self.sim.euler_rad)
         wire = np.where(self.reversed, 2.0 * self.neutral_us - pw, pw)
         if ex.awaiting:  # the virtual pool's operator: do what the step asks, then continue
-            if ex.awaiting in ("attach_ballast", "remove_ballast"):
-                self._ballast_on = ex.awaiting == "attach_ballast"
-            elif ex.awaiting.startswith("apply_line_pull_"):
-                axis = np.eye(3)[0 if ex.awaiting.endswith("surge") else 1]
-                d = self.sim.rotation @ axis
-                self._line_ned = ex.line_pull_n * np.array([d[0], d[1], 0.0]) / math.hypot(d[0], d[1])
-            elif ex.awaiting.startswith("release_line_"):
-                self._line_ned = None
-            elif ex.awaiting.startswith(("attach_inclining_mass_", "remove_inclining_mass_")):
-                self._inclining = ex.awaiting.rsplit("_", 1)[1] if ex.awaiting.startswith("attach") else None
+            self.operator.act(ex.awaiting, self.sim.rotation)
             ex.operator_continue()
-        if ex.calibrate:
-            ext = np.zeros(6)
-            if self._inclining is not None:
-                ext += inclining_wrench_frd(self.sim.rotation, *ex.inclining_load_n_m, self._inclining)
-            if self._ballast_on:
-                ext[:3] = self.sim.rotation.T @ np.array([0.0, 0.0, ex.ballast_weight_in_water_n])
-            if self._line_ned is not None:
-                ext[:3] += self.sim.rotation.T @ self._line_ned
-            self.sim.advance(self.tick_s, wire, external_wrench_frd=ext)
+        if ex.calibrate or self.operator.active or self._external_used:
+            self._external_used = True  # the simulator holds the last external wrench: keep setting it
+            self.sim.advance(self.tick_s, wire, external_wrench_frd=self.operator.external_wrench_frd(self.sim.rotation))
         else:
             self.sim.advance(self.tick_s, wire)
         pending, self._pending = self._pending, []

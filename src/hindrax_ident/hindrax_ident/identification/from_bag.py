@@ -213,7 +213,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
         truth_euler_rad=np.full((n, 3), np.nan), sensors=state.log, windows=windows, online=online,
         levels={}, authority={}, aborted=aborted, abort_reason=last.message if aborted else "", wall_time_s=0.0,
         tick_s=grid_s, time_constant_s=tau, seed=-1, final_pulse_width_us=pwm[-1][1], calibration=calibration,
-        decays=decays, inclining=inclining)
+        decays=decays, inclining=inclining, thrust_cmd_n=f_cmd)
 
 
 def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01) -> CampaignRecord:
@@ -239,11 +239,11 @@ def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01)
     (``record.calibration``) the fits see the thrust-model force times the measured scales
     (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays unscaled.
     Raises ``ValueError`` for a non-positive scale in the bag."""
-    from .calibration import apply_thrust_calibration
+    from .calibration import identify_calibrated
     from .estimators import identify_all_with_errors
 
     record = record_from_bag(bag_path, cfg, grid_s)
-    idents, errors = identify_all_with_errors(apply_thrust_calibration(record), cfg)
+    idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
     return record, idents, errors
 
 

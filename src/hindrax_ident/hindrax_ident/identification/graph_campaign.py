@@ -8,11 +8,12 @@ run the offline identification on the bag (:mod:`.from_bag`) and write ``identif
 All waits are on simulated-time conditions with wall-clock deadlines.
 
 Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): sent in the goal; :class:`VirtualOperator`
-plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for the ballast or a line pull
-(``[attach_ballast] ...``, ``[apply_line_pull_surge] ...``), it applies the known force in the simulator (as the
-in-process campaign does, :mod:`.campaign`: the ballast's weight in water, NED down; the line pull, fixed in the pool
-frame along the body axis named, both expressed in the body frame at every integration step) or removes it, and
-calls ``identification/continue``. The thrust scales the node measured (its record) are applied to the bag's record
+plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for the ballast, the float or a line
+pull (``[attach_ballast] ...``, ``[attach_float] ...``, ``[apply_line_pull_surge] ...``), it applies the known force
+in the simulator (as the in-process campaign does, :class:`~.campaign.PoolOperator`: the ballast's weight in water,
+NED down; the float's net buoyancy, NED up; the line pull, fixed in the pool frame along the body axis and sense
+named, all expressed in the body frame at every integration step) or removes it, and calls
+``identification/continue``. The thrust scales the node measured (its record) are applied to the bag's record
 before the offline identification and estimated jointly with the fits (:func:`~.results.build_results`), with the
 ``calibration`` section of ``identification.yaml``, as ``hindrax ident campaign --calibrate`` does.
 
@@ -47,40 +48,44 @@ class VirtualOperator:
     ballast_weight_n / line_pull_n: the known forces, N (:func:`~.executive.calibration_forces`);
     request_continue: callable that sends one ``identification/continue`` request and returns its future (or None);
     inclining_load_n_m: (weight in water N, arm m) of the inclining test mass (:func:`~.executive.inclining_load`);
+    float_buoyancy_n: net buoyancy of the float, N (:func:`~.executive.float_buoyancy`);
     say: progress lines; freeze / resume: stop and restart simulated time (:meth:`~hindrax_ident.bringup.Graph.
     freeze_time`) from acting on a prompt until the continue answer, so the step goes on at the simulated instant
-    the operator acted, whatever the wall time the call took. Feed it every feedback prompt (:meth:`on_prompt`), call :meth:`on_step` after every
-    integration step (a step listener of the simulator node) and :meth:`poll` from the wait loop (a request with no
-    answer within ``resend_after_s`` of wall time is sent again: after a continue every step holds at least
-    :data:`~.executive.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing awaited and is
-    answered False).
+    the operator acted, whatever the wall time the call took. Feed it every feedback prompt (:meth:`on_prompt`),
+    call :meth:`on_step` after every integration step (a step listener of the simulator node) and :meth:`poll` from
+    the wait loop (a request with no answer within ``resend_after_s`` of wall time is sent again: after a continue
+    every step holds at least :data:`~.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds
+    nothing awaited and is answered False). What each code does is :class:`~.campaign.PoolOperator`'s, as
+    in-process.
     """
 
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
                  request_continue: Callable[[], object], say: Callable[[str], None] = lambda _m: None,
                  resend_after_s: float = 5.0, freeze: Callable[[], None] = lambda: None,
-                 resume: Callable[[], None] = lambda: None, inclining_load_n_m=(0.0, 0.0)) -> None:
+                 resume: Callable[[], None] = lambda: None, inclining_load_n_m=(0.0, 0.0),
+                 float_buoyancy_n: float = 0.0) -> None:
+        from .campaign import PoolOperator
+
         self.sim = simulator
-        self.ballast_weight_n = float(ballast_weight_n)
-        self.line_pull_n = float(line_pull_n)
+        #: which known forces hang on the vehicle (:class:`~.campaign.PoolOperator`)
+        self.pool = PoolOperator(ballast_weight_n, line_pull_n, inclining_load_n_m, float_buoyancy_n)
         self._request = request_continue
         self._say = say
         self.resend_after_s = float(resend_after_s)
-        self.ballast_on = False
-        self.line_ned: object = None  # np.ndarray (3,) N in NED while a line pulls
         self.handled = ""             # step code last acted on ("" once its prompt went away)
         self.answers: list[tuple[bool, str]] = []
         self._pending = None
         self._sent_at = -math.inf
         self._external_set = False
         self._freeze, self._resume = freeze, resume
-        self.inclining_load_n_m = tuple(float(x) for x in inclining_load_n_m)
-        self.inclining: str | None = None  # DOF whose inclining test mass hangs on the vehicle
+
+    ballast_on = property(lambda self: self.pool.ballast_on, doc="the ballast hangs on the vehicle")
+    float_on = property(lambda self: self.pool.float_on, doc="the float is tied to the vehicle")
+    line_ned = property(lambda self: self.pool.line_ned, doc="the line's force (3,) N in NED, None without")
+    inclining = property(lambda self: self.pool.inclining, doc="DOF whose inclining test mass hangs, or None")
 
     def on_prompt(self, prompt: str) -> None:
         """Act on one feedback prompt: apply or remove the force the step code asks for, then request continue."""
-        import numpy as np
-
         code = parse_prompt(prompt)
         if not code:
             self.handled = ""
@@ -89,16 +94,7 @@ class VirtualOperator:
             return
         self.handled = code
         self._freeze()
-        if code in ("attach_ballast", "remove_ballast"):
-            self.ballast_on = code == "attach_ballast"
-        elif code.startswith("apply_line_pull_"):
-            d = np.asarray(self.sim.rotation) @ np.eye(3)[0 if code.endswith("surge") else 1]
-            self.line_ned = self.line_pull_n * np.array([d[0], d[1], 0.0]) / math.hypot(d[0], d[1])
-        elif code.startswith("release_line_"):
-            self.line_ned = None
-        elif code.startswith(("attach_inclining_mass_", "remove_inclining_mass_")):
-            self.inclining = code.rsplit("_", 1)[1] if code.startswith("attach") else None
-        else:
+        if not self.pool.act(code, self.sim.rotation):
             self._say(f"virtual operator: unknown request {code!r}; continuing")
         self._say(f"virtual operator: {code} done (t_sim {self.sim.t_s:.1f} s), calling identification/continue")
         self._send()
@@ -124,23 +120,11 @@ class VirtualOperator:
 
     def external_wrench_frd(self):
         """The wrench (6,) FRD the applied forces exert now (zeros when none)."""
-        import numpy as np
-
-        ext = np.zeros(6)
-        if self.inclining is not None:
-            from .campaign import inclining_wrench_frd
-            ext += inclining_wrench_frd(self.sim.rotation, *self.inclining_load_n_m, self.inclining)
-        if self.ballast_on or self.line_ned is not None:
-            rt = np.asarray(self.sim.rotation).T  # NED -> body
-            if self.ballast_on:
-                ext[:3] += rt @ np.array([0.0, 0.0, self.ballast_weight_n])
-            if self.line_ned is not None:
-                ext[:3] += rt @ np.asarray(self.line_ned)
-        return ext
+        return self.pool.external_wrench_frd(self.sim.rotation)
 
     def on_step(self, _sim=None) -> None:
         """Step listener: hold the current external wrench for the next integration step."""
-        if self.ballast_on or self.line_ned is not None or self.inclining is not None:
+        if self.pool.active:
             self.sim.set_external_wrench(self.external_wrench_frd())
             self._external_set = True
         elif self._external_set:
@@ -210,7 +194,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     from std_srvs.srv import Trigger
 
     from ..bringup import build_graph
-    from .executive import calibration_forces, inclining_load
+    from .executive import calibration_forces, float_buoyancy, inclining_load
     from .from_bag import BagContentError, record_from_bag
 
     out = Path(out)
@@ -237,7 +221,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             cont = client.create_client(Trigger, "identification/continue")
             operator = VirtualOperator(sim, *calibration_forces(cfg), lambda: cont.call_async(Trigger.Request()),
                                        say, freeze=graph.freeze_time, resume=graph.resume_time,
-                                       inclining_load_n_m=inclining_load(cfg))
+                                       inclining_load_n_m=inclining_load(cfg), float_buoyancy_n=float_buoyancy(cfg))
             graph.nodes["simulator"].add_step_listener(operator.on_step)
 
         def spin() -> None:
@@ -315,11 +299,12 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
-    from .calibration import apply_thrust_calibration
-    from .estimators import identify_all_with_errors
+    import dataclasses
+
+    from .calibration import identify_calibrated
     try:
         record = record_from_bag(bag_dir, cfg)
-        idents, errors = identify_all_with_errors(apply_thrust_calibration(record, calibration), cfg)
+        idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors

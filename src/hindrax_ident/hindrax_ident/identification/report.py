@@ -147,6 +147,11 @@ def _fmt(x, digits: int = 4) -> str:
     return f"{x:.{digits}g}"
 
 
+#: The manoeuvres that use a thruster group's two rotation directions equally (docs/identification.md §6.1).
+_USES_MEAN = {"horizontal": "surge, sway, yaw use this", "vertical": "roll, pitch use this",
+              "common": "surge, sway, yaw, roll, pitch use this"}
+
+
 def references_html(document: Mapping) -> str:
     """The "References" section (issue 17 item 6): the known-force calibration (``document["calibration"]``), the
     jointly estimated thrust scales (``document["joint"]["scales"]``: posterior, prior, steps, the error the
@@ -156,8 +161,8 @@ def references_html(document: Mapping) -> str:
     whether the prior lies inside the identified 95 % interval. Empty string when the document has none of them."""
     rows = []
     cal = document.get("calibration") or {}
-    for name, c in cal.items():
-        if isinstance(c, Mapping) and "value" in c:
+    for name, c in (cal.get("steps") or cal).items():
+        if isinstance(c, Mapping) and "value" in c and "known_force_n" in c:
             rows.append(f"<tr><td>{html.escape(name)}</td><td>{_fmt(c.get('value'))}</td><td>{_fmt(c.get('std'), 2)}"
                         f"</td><td>{_fmt(c.get('known_force_n'))}</td><td>{html.escape(str(c.get('method', '')))}"
                         f"</td><td>{html.escape(str(c.get('holding_force_n', '')))}</td></tr>")
@@ -179,9 +184,17 @@ def references_html(document: Mapping) -> str:
                     f"<td>{_fmt(j['prior'][0], 3)} +- {_fmt(j['prior'][1], 2)}</td><td>{html.escape(steps)}</td>"
                     f"<td>{html.escape(', '.join(j.get('dofs', [])))}</td><td>{100 * off:+.1f} %</td>"
                     f"<td>{_fmt(z, 3)}</td><td>{verdict}</td></tr>")
+    for g, j in ((document.get("joint") or {}).get("group_means") or {}).items():
+        v, sd = float(j["value"]), float(j["std"])
+        z = (v - 1.0) / sd if sd > 0 else math.nan
+        srow.append(f"<tr><td>{html.escape(g)} mean of both directions</td><td>{_fmt(v)}</td><td>{_fmt(sd, 2)}</td>"
+                    f"<td>-</td><td>-</td><td>{_USES_MEAN.get(g, '')}</td>"
+                    f"<td>{100 * (1.0 / v - 1.0):+.1f} %</td><td>{_fmt(z, 3)}</td>"
+                    f"<td>{'curve off' if abs(z) > 1.96 else 'curve agrees'}</td></tr>")
     if srow:
         parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each "
-                     "scale s (true thrust / curve thrust) from its prior and the calibration steps; the "
+                     "scale s (true thrust / curve thrust, per thruster group and rotation direction) from its prior "
+                     "and the calibration steps; the "
                      "self-propelled values without the calibration would be off by 1/s - 1; z = (s - 1) / std "
                      "(|z| > 1.96: the thrust curve disagrees with the known forces)</p><table><tr><th>scale</th>"
                      "<th>value</th><th>std</th><th>prior</th><th>steps</th><th>DOFs</th><th>uncalibrated error"

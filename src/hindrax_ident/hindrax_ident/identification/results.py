@@ -216,7 +216,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
     if joint:
         doc["joint"] = joint
     if calibration:
-        doc["calibration"] = calibration_section(calibration)
+        doc["calibration"] = calibration_section(calibration, cfg)
     return doc
 
 
