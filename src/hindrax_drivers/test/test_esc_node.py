@@ -41,7 +41,7 @@ def esc():
         node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
         probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
+        _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -126,7 +126,7 @@ def test_watchdog_returns_to_neutral_within_one_period():
         # loop's simulated 5 ms steps take longer than 5 ms of wall time on a loaded machine
         node.set_steady_watchdog_timeout(5.0)
         probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
+        _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -338,7 +338,7 @@ def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
         emu = Pca9685Emulator()
         node = _node(emu, {"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2}, sim_time=True, ctx=ctx)
         probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
+        _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)

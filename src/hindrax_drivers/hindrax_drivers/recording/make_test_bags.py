@@ -269,6 +269,7 @@ def default_output_dir() -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     parser = argparse.ArgumentParser(prog="make_test_bags", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(default_output_dir()), help="directory to write the bags into")
     args = parser.parse_args(argv)

@@ -247,6 +247,7 @@ def run(quick: bool = False, only: list[str] | None = None, keep: str | None = N
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     p = argparse.ArgumentParser(prog="python -m hindrax_ident.benchmarks.ident_fit", description=__doc__.splitlines()[0])
     p.add_argument("--only", default="", help="comma-separated data sets: " + ", ".join(d.name for d in DATASETS))
     p.add_argument("--quick", action="store_true", help="shorter bags")

@@ -13,7 +13,8 @@ import time
 
 
 def run(quick: bool = False) -> list[dict]:
-    from hindrax_drivers.config import DOFS, default_config_path, load_config
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
+    from hindrax_drivers.config import default_config_path, load_config
     from hindrax_ident.identification.campaign import Campaign
     from hindrax_ident.identification.estimators import identify_all_with_errors
 

@@ -118,6 +118,7 @@ def _node(argv: list[str]) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] not in ("pool", "node"):
         print("usage: python -m hindrax_ident.benchmarks.launch_layout pool|node ...", file=sys.stderr)

@@ -156,6 +156,7 @@ def _close(r) -> None:
 
 
 def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     from domain_coordinator import domain_id
 
     from hindrax_drivers.testing import ros_context

@@ -289,7 +289,6 @@ def _type_name(cls: Any) -> str:
 # ---------------------------------------------------------------------------------------------- launch layout
 def _launch(duration_s: float, tmp: Path) -> dict:
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
     from domain_coordinator import domain_id
     from geometry_msgs.msg import WrenchStamped
     from rclpy.action import ActionClient
@@ -518,6 +517,7 @@ PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (publ
 
 
 def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     # windows: 10 s per phase and layout, 8 s per baseline (were 15/12 s; shortened to keep make bench under
     # 6 minutes; the shared machine's load moves the figures by about +-20 % anyway)
     duration_s = 8.0 if quick else 10.0

@@ -152,6 +152,7 @@ def write_sim_bag(bag_dir: Path, duration_s: float, overrides: dict[str, Any], c
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     parser = argparse.ArgumentParser(prog="record_bag", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(default_output_dir()), help="directory to write the bags into")
     args = parser.parse_args(argv)
