@@ -11,7 +11,9 @@ Both matrices are proper rotations (det = +1) and their own inverses, so the sam
 *and* pseudo-vectors (angular velocity, torque) in both directions. Orientations are quaternions in ROS
 order (x, y, z, w), handled with :class:`scipy.spatial.transform.Rotation`.
 
-Nothing else in the stack converts frames: drivers and nodes call these functions at their ROS boundary.
+Nothing else in the stack converts frames: drivers, emulators and tools call these functions and matrices at
+their ROS boundary (test/test_docs_truth.py checks that no other module spells the matrices out). A device's
+own sign conventions (the DVL-75's pitch, docs/devices.md §1.5) stay in its protocol.
 """
 from __future__ import annotations
 

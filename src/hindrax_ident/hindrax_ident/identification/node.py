@@ -526,7 +526,7 @@ def main(args: list[str] | None = None) -> int:
     ended by :meth:`IdentificationNode.close`). Returns the exit status (1 on an invalid configuration).
 
     The node spins rclpy's SingleThreadedExecutor, not the EventsExecutor of the other node processes: the action's
-    execute coroutine awaits a future, and the EventsExecutor (rclpy 7.3) polls such a task in a busy loop
+    execute coroutine awaits a future, and the EventsExecutor (rclpy 7.1) polls such a task in a busy loop
     (measured in the launch layout: 72 % of a core while a goal runs, 20 % with the SingleThreadedExecutor)."""
     return run_node(IdentificationNode, args, executor="single")
 
