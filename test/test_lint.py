@@ -4,8 +4,8 @@
   with the pep257 convention) passes on every Python file of the repository;
 * mypy (pyproject.toml ``[tool.mypy]``) passes on the pure cores: the device protocols, the configuration, the
   thrust allocation and the estimation package;
-* each tool is really configured to catch what it claims: a planted unused import, missing docstring and type
-  error are reported (a configuration that silently selects nothing would pass the first two tests).
+* each tool is really configured to catch what it claims: a planted unused import, function-local import,
+  missing docstring and type error are reported (a configuration that silently selects nothing would pass the first two tests).
 """
 from __future__ import annotations
 
@@ -31,13 +31,13 @@ def test_mypy_passes_on_the_pure_cores():
     assert "Success" in res.stdout
 
 
-def test_ruff_configuration_reports_unused_imports_and_missing_docstrings(tmp_path):
+def test_ruff_configuration_reports_unused_and_local_imports_and_missing_docstrings(tmp_path):
     bad = tmp_path / "hindrax_bad.py"
-    bad.write_text('"""A module."""\nimport os\n\n\ndef public():\n    return "' + "x" * 120 + '"\n')
+    bad.write_text('"""A module."""\nimport os\n\n\ndef public():\n    import json\n\n    return json.dumps(1)\n')
     res = _run("ruff", "check", "--no-cache", "--output-format", "concise", "--config", str(ROOT / "pyproject.toml"),
                str(bad))
     assert res.returncode == 1
-    for code in ("F401", "D103"):
+    for code in ("F401", "D103", "PLC0415"):
         assert code in res.stdout, (code, res.stdout)
 
 
