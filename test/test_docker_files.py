@@ -108,7 +108,8 @@ def dockerfile() -> str:
 
 def instructions() -> list[tuple[str, str]]:
     """(INSTRUCTION, rest) of the Dockerfile, continuation lines joined, comments left out."""
-    text = re.sub(r"\\\n", " ", "\n".join(line for line in dockerfile().splitlines() if not line.lstrip().startswith("#")))
+    lines = [line for line in dockerfile().splitlines() if not line.lstrip().startswith("#")]
+    text = re.sub(r"\\\n", " ", "\n".join(lines))
     return [(m.group(1).upper(), m.group(2)) for m in re.finditer(r"^\s*([A-Za-z]+)\s+(.*)$", text, re.M)]
 
 

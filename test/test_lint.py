@@ -1,11 +1,12 @@
 """Lint and type checks as tests, so that `make test` (and CI's .ci/run) runs them (docs/architecture.md §12).
 
-* ruff with the repository's rules (pyproject.toml ``[tool.ruff]``: pyflakes F, pycodestyle E/W, docstrings D
-  with the pep257 convention) passes on every Python file of the repository;
+* ruff with the repository's rules (pyproject.toml ``[tool.ruff]``: pyflakes F, pycodestyle E/W at 120 columns,
+  docstrings D with the pep257 convention, imports at the top) passes on every Python file of the repository;
 * mypy (pyproject.toml ``[tool.mypy]``) passes on the pure cores: the device protocols, the configuration, the
   thrust allocation and the estimation package;
 * each tool is really configured to catch what it claims: a planted unused import, function-local import,
-  missing docstring and type error are reported (a configuration that silently selects nothing would pass the first two tests).
+  over-long line, missing docstring and type error are reported (a configuration that silently selects nothing
+  would pass the first two tests).
 """
 from __future__ import annotations
 
@@ -31,13 +32,14 @@ def test_mypy_passes_on_the_pure_cores():
     assert "Success" in res.stdout
 
 
-def test_ruff_configuration_reports_unused_and_local_imports_and_missing_docstrings(tmp_path):
+def test_ruff_configuration_reports_unused_and_local_imports_long_lines_and_missing_docstrings(tmp_path):
     bad = tmp_path / "hindrax_bad.py"
-    bad.write_text('"""A module."""\nimport os\n\n\ndef public():\n    import json\n\n    return json.dumps(1)\n')
+    bad.write_text('"""A module."""\nimport os\n\n\ndef public():\n    import json\n\n    return json.dumps("'
+                   + "x" * 120 + '")\n')
     res = _run("ruff", "check", "--no-cache", "--output-format", "concise", "--config", str(ROOT / "pyproject.toml"),
                str(bad))
     assert res.returncode == 1
-    for code in ("F401", "D103", "PLC0415"):
+    for code in ("F401", "E501", "D103", "PLC0415"):
         assert code in res.stdout, (code, res.stdout)
 
 

@@ -132,7 +132,8 @@ def quaternion_marine_to_ros(q_xyzw) -> np.ndarray:
 def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:
     """Fossen ZYX Euler angles [phi theta psi] (rad) of a body-FRD-in-NED quaternion (x, y, z, w).
 
-    Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; docs/identification.md §1.A, [NTNU-Thesis] eq. 2.2).
+    Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; docs/identification.md §1.A,
+    [NTNU-Thesis] eq. 2.2).
     """
     return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_euler("ZYX")[..., ::-1]
 

@@ -36,7 +36,8 @@ def esc():
     with ros_context() as ctx:
         emu = Pca9685Emulator()
         bus = EmulatedI2CBus({0x40: emu})
-        params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True,
+        params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2,
+                                    "esc.oscillator_calibrated": True,
                                     "thrusters.t2.reversed": True, "thrusters.t3.trim_us": 10.0})
         node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
@@ -118,7 +119,8 @@ def test_watchdog_returns_to_neutral_within_one_period():
 
     with ros_context() as ctx:
         emu = Pca9685Emulator()
-        params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True})
+        params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2,
+                                    "esc.oscillator_calibrated": True})
         node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
                        parameter_overrides=params + [Parameter("use_sim_time", value=True)])
         node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
@@ -210,7 +212,8 @@ def test_sigterm_path_writes_neutral():
     holder = {}
 
     def factory():
-        node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True}))
+        node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0,
+                                                                       "esc.oscillator_calibrated": True}))
         node.armed = True
         node.command = np.full(8, 1700.0)
         node.command_time = node.get_clock().now()

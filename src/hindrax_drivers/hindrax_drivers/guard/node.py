@@ -144,7 +144,8 @@ class OutputGuardNode(Node):
                 self.line.set_high(asserted)
             elif asserted:
                 now = time.monotonic()
-                if force or (self.core.esc_state == OUTPUT_COMMANDING and now - self._last_rewrite > REWRITE_INTERVAL_S):
+                rewrite_due = now - self._last_rewrite > REWRITE_INTERVAL_S
+                if force or (self.core.esc_state == OUTPUT_COMMANDING and rewrite_due):
                     self._last_rewrite = now
                     self._silence_registers()
             if self.diag.state in ("silence failed", "gpio error"):

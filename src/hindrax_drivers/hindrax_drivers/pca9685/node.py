@@ -396,7 +396,8 @@ class EscNode(Node):
         if not self.supervisor_age.fresh(t):
             age = self.supervisor_age.age_s
             return ("no supervisor heartbeat" + (f" for {age:.2f} s" if math.isfinite(age) else "") +
-                    f" ({HEARTBEAT_NAMES['supervisor']}, esc.heartbeat_timeout_s {t:g}): supervisor not running or hung")
+                    f" ({HEARTBEAT_NAMES['supervisor']}, esc.heartbeat_timeout_s {t:g}): "
+                    "supervisor not running or hung")
         if not self.supervisor_ok:
             return f"supervisor tripped: {self.supervisor_message} (clear it with supervisor/reset)"
         if not self.guard_age.fresh(t):

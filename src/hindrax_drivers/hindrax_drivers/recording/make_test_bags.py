@@ -243,8 +243,8 @@ def write_bag(bag_dir: Path, duration_s: float, options: WriterOptions) -> int:
 
 
 
-__all__ = ["STREAMS", "synthetic_messages", "messages_per_stream", "write_bag", "BAGS", "default_output_dir", "write_bags",
-           "main"]
+__all__ = ["STREAMS", "synthetic_messages", "messages_per_stream", "write_bag", "BAGS", "default_output_dir",
+           "write_bags", "main"]
 
 def default_output_dir() -> Path:
     """``src/hindrax_drivers/test/data`` of the source checkout this module lives in."""

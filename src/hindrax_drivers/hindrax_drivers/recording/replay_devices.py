@@ -464,7 +464,8 @@ class DriverReplay:
                 "/dvl/altitude": "sensor_msgs/msg/Range", "/ping/altitude": "sensor_msgs/msg/Range",
                 "/ping/confidence": "std_msgs/msg/Float32", "/pressure/fluid_pressure": "sensor_msgs/msg/FluidPressure",
                 "/pressure/temperature": "sensor_msgs/msg/Temperature",
-                "/pressure/depth": "geometry_msgs/msg/PoseWithCovarianceStamped", "/imu/data_raw": "sensor_msgs/msg/Imu",
+                "/pressure/depth": "geometry_msgs/msg/PoseWithCovarianceStamped",
+                "/imu/data_raw": "sensor_msgs/msg/Imu",
                 "/imu/mag": "sensor_msgs/msg/MagneticField", "/imu/temperature": "sensor_msgs/msg/Temperature",
                 "/thrusters/pulse_width": "hindrax_msgs/msg/ThrusterPwm"}[topic]
 
@@ -515,7 +516,8 @@ class DriverReplay:
         """True when every recorded device->host byte was read and handled (parsed, published) by its driver and
         every I2C read served."""
         hw = self.hardware
-        serial = all(hw.serial_done(n, self.nodes[n].transport.status().bytes_handled) for n in hw.serial if n in self.nodes)
+        serial = all(hw.serial_done(n, self.nodes[n].transport.status().bytes_handled)
+                     for n in hw.serial if n in self.nodes)
         return serial and hw.i2c_done()
 
     def run(self, timeout_s: float = 60.0, extra_s: float = 5.0) -> None:

@@ -325,7 +325,8 @@ def _launch(duration_s: float, tmp: Path) -> dict:
             wrap = ["-m", "hindrax_ident.benchmarks.launch_layout", "node"]
             cmds = {
                 "dvl75": [*wrap, "hindrax_drivers.dvl75.node", *base, "-p", f"sensors.dvl75.port:={ports['dvl75']}"],
-                "ping1d": [*wrap, "hindrax_drivers.ping1d.node", *base, "-p", f"sensors.ping1d.port:={ports['ping1d']}"],
+                "ping1d": [*wrap, "hindrax_drivers.ping1d.node", *base, "-p",
+                           f"sensors.ping1d.port:={ports['ping1d']}"],
                 "ms5837": [*wrap, "hindrax_drivers.ms5837.node", *base],
                 "icm20948": [*wrap, "hindrax_drivers.icm20948.node", *base],
                 "esc": [*wrap, "hindrax_drivers.pca9685.node", *base, "-p", "esc.arming_time_s:=1.0", *calibrated],

@@ -178,7 +178,10 @@ class ThrusterCurveFit:
         return float(out[0]) if P.ndim == 0 else out.reshape(P.shape)
 
     def relative_std(self) -> Tuple[float, float]:
-        """(negative, positive) :meth:`CubicFit.relative_std`: the value for ``thrusters.thrust_fit_uncertainty_rel``."""
+        """(negative, positive) :meth:`CubicFit.relative_std`.
+
+        The value for ``thrusters.thrust_fit_uncertainty_rel``.
+        """
         return (self.negative.relative_std(), self.positive.relative_std())
 
     def to_dict(self) -> dict:

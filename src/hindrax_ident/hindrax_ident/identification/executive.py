@@ -219,8 +219,8 @@ class Executive:
     dive, before the ladders (:data:`CALIBRATION_STEPS`); ``ballast`` needs ``ballast_weight_in_water_n`` (> 0,
     N: (m - rho V) g of the ballast), ``line_pull`` needs ``line_pull_n`` (> 0, N: the horizontal force of the line
     over the pulley, e.g. the weight of a hanging mass); ``inclining`` needs ``inclining_load_n_m`` (weight in water
-    of the test mass > 0 N, its arm > 0 m: :func:`inclining_load`). While a step waits for the operator, :attr:`awaiting`
-    names what to do and :meth:`operator_continue` resumes it.
+    of the test mass > 0 N, its arm > 0 m: :func:`inclining_load`). While a step waits for the operator,
+    :attr:`awaiting` names what to do and :meth:`operator_continue` resumes it.
     excitation: ``ladder`` (default: ``identification.excitation``, else ladder) or a broadband signal of
     :data:`~.excitation.BROADBAND`; excitation_duration_s: length of that run per DOF (default
     ``identification.excitation_duration_s``, else 60 s); excitation_amplitude_fraction: its peak as a fraction of
@@ -248,7 +248,8 @@ class Executive:
         if bad:
             raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
         if "ballast" in calibrate and not (math.isfinite(ballast_weight_in_water_n) and ballast_weight_in_water_n > 0):
-            raise ValueError(f"ballast_weight_in_water_n must be > 0 N for the ballast step, got {ballast_weight_in_water_n}")
+            raise ValueError("ballast_weight_in_water_n must be > 0 N for the ballast step, "
+                             f"got {ballast_weight_in_water_n}")
         if "line_pull" in calibrate and not (math.isfinite(line_pull_n) and line_pull_n > 0):
             raise ValueError(f"line_pull_n must be > 0 N for the line_pull step, got {line_pull_n}")
         if "inclining" in calibrate and not (len(inclining_load_n_m) == 2 and all(
@@ -433,7 +434,8 @@ class Executive:
             t_s=np.asarray(r["t"]), wrench_frd=np.asarray(r["w"]).reshape(-1, 6),
             wrench_cmd_frd=np.asarray(r["wc"]).reshape(-1, 6), active=np.asarray(r["active"], dtype=int),
             level=np.asarray(r["level"], dtype=float), run_id=np.asarray(r["run"], dtype=int),
-            truth_position_ned_m=nan3 if truth_position_ned_m is None else np.asarray(truth_position_ned_m).reshape(-1, 3),
+            truth_position_ned_m=(nan3 if truth_position_ned_m is None
+                                  else np.asarray(truth_position_ned_m).reshape(-1, 3)),
             truth_euler_rad=nan3.copy() if truth_euler_rad is None else np.asarray(truth_euler_rad).reshape(-1, 3),
             sensors=self.state.log, windows=dict(self.windows), online=self.online, levels=self.levels,
             authority=self.authority, aborted=self.aborted, abort_reason=self.abort_reason, wall_time_s=wall_time_s,

@@ -49,11 +49,11 @@ class VirtualOperator:
     inclining_load_n_m: (weight in water N, arm m) of the inclining test mass (:func:`~.executive.inclining_load`);
     say: progress lines; freeze / resume: stop and restart simulated time (:meth:`~hindrax_ident.bringup.Graph.
     freeze_time`) from acting on a prompt until the continue answer, so the step goes on at the simulated instant
-    the operator acted, whatever the wall time the call took. Feed it every feedback prompt (:meth:`on_prompt`), call :meth:`on_step` after every
-    integration step (a step listener of the simulator node) and :meth:`poll` from the wait loop (a request with no
-    answer within ``resend_after_s`` of wall time is sent again: after a continue every step holds at least
-    :data:`~.executive.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing awaited and is
-    answered False).
+    the operator acted, whatever the wall time the call took. Feed it every feedback prompt (:meth:`on_prompt`), call
+    :meth:`on_step` after every integration step (a step listener of the simulator node) and :meth:`poll` from the wait
+    loop (a request with no answer within ``resend_after_s`` of wall time is sent again: after a continue every step
+    holds at least :data:`~.executive.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing awaited
+    and is answered False).
     """
 
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,

@@ -127,7 +127,8 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
             _spin_until(graph, flushed, timeout_s, "the recorder wrote every published message")
         except TimeoutError:
             got = recorder._writer.topic_counts()
-            raise TimeoutError("lagging: " + str({t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}))
+            lagging = {t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}
+            raise TimeoutError(f"lagging: {lagging}")
         counting[0] = False
         recorder.stop_recording()
     finally:
