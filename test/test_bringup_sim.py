@@ -1,6 +1,5 @@
 """The whole stack on the virtual pool, in one process: simulator -> emulators -> real drivers, and
 wrench -> allocation -> ESC node -> PCA9685 registers -> thrust -> vehicle motion."""
-import math
 
 import numpy as np
 import pytest

@@ -31,7 +31,8 @@ ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-serial", "python3-y
                   "python3-pytest", "python3-hypothesis"}
 ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "std_msgs", "std_srvs",
                 "geometry_msgs", "sensor_msgs", "nav_msgs", "diagnostic_msgs", "rosgraph_msgs", "tf2_msgs",
-                "domain_coordinator", "action_msgs", "unique_identifier_msgs", "hindrax_msgs", "hindrax_drivers", "hindrax_ident"}
+                "domain_coordinator", "action_msgs", "unique_identifier_msgs", "hindrax_msgs", "hindrax_drivers",
+                "hindrax_ident"}
 #: a development tool inside hindrax_drivers that drives the hindrax_ident graph to regenerate test bags; a
 #: package dependency on hindrax_ident would be a cycle (dependencies flow msgs <- drivers <- ident)
 DEV_TOOLS: set[str] = set()

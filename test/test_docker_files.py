@@ -108,7 +108,8 @@ def dockerfile() -> str:
 
 def instructions() -> list[tuple[str, str]]:
     """(INSTRUCTION, rest) of the Dockerfile, continuation lines joined, comments left out."""
-    text = re.sub(r"\\\n", " ", "\n".join(l for l in dockerfile().splitlines() if not l.lstrip().startswith("#")))
+    lines = [line for line in dockerfile().splitlines() if not line.lstrip().startswith("#")]
+    text = re.sub(r"\\\n", " ", "\n".join(lines))
     return [(m.group(1).upper(), m.group(2)) for m in re.finditer(r"^\s*([A-Za-z]+)\s+(.*)$", text, re.M)]
 
 
@@ -163,8 +164,8 @@ def _ignored(path: str, patterns: list[str]) -> bool:
 
 
 def test_dockerignore_keeps_the_context_small_and_the_copied_files_in():
-    patterns = [l.strip() for l in (REPO / ".dockerignore").read_text().splitlines()
-                if l.strip() and not l.startswith("#")]
+    patterns = [line.strip() for line in (REPO / ".dockerignore").read_text().splitlines()
+                if line.strip() and not line.startswith("#")]
     for heavy in (".git", ".venv", "build", "runs", "ros_ws/install", "ros_ws/build", "src/hindrax_drivers/test"):
         assert _ignored(heavy, patterns), heavy
     for kind, rest in instructions():
@@ -201,8 +202,8 @@ def test_compose_rotates_logs_and_takes_the_vehicle_settings_from_its_env_file()
     env = svc["environment"]
     assert ":?" in env["ROS_DOMAIN_ID"]  # compose refuses to start without this vehicle's domain
     assert any(v.endswith(":/var/lib/hindrax/runs") and v.startswith("${HINDRAX_RUNS_HOST") for v in svc["volumes"])
-    example = dict(l.split("=", 1) for l in (DOCKER / "hindrax.env.example").read_text().splitlines()
-                   if l and not l.startswith("#"))
+    example = dict(line.split("=", 1) for line in (DOCKER / "hindrax.env.example").read_text().splitlines()
+                   if line and not line.startswith("#"))
     assert 1 <= int(example["ROS_DOMAIN_ID"]) <= 101
     assert {"HINDRAX_RUNS_HOST", "HINDRAX_LAUNCH", "HINDRAX_RECORD", "I2C_GID", "GPIO_GID"} <= set(example)
 

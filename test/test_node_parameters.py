@@ -100,7 +100,8 @@ def test_each_node_declares_only_its_own_keys_with_descriptions_and_ranges():
         d = describe(call, "ms5837", ["sensors.ms5837.rate_hz", "environment.surface_pressure_pa",
                                       "sensors.ms5837.oversampling"])
         spec = SCHEMA["sensors.ms5837.rate_hz"]
-        assert d["sensors.ms5837.rate_hz"].read_only and d["sensors.ms5837.rate_hz"].type == ParameterType.PARAMETER_DOUBLE
+        rate = d["sensors.ms5837.rate_hz"]
+        assert rate.read_only and rate.type == ParameterType.PARAMETER_DOUBLE
         assert (d["sensors.ms5837.rate_hz"].floating_point_range[0].from_value,
                 d["sensors.ms5837.rate_hz"].floating_point_range[0].to_value) == (spec.lo, spec.hi)
         assert "4096" in d["sensors.ms5837.oversampling"].additional_constraints  # choices spelled out

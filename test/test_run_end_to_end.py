@@ -31,7 +31,8 @@ pytestmark = pytest.mark.ros
 def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     cfg = load_config(default_config_path())
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "hindrax_ident.cli", "run", "--dofs", "surge,heave", "--levels", "3", "--seed", "1",
+    proc = subprocess.run([sys.executable, "-m", "hindrax_ident.cli", "run", "--dofs", "surge,heave", "--levels", "3",
+                           "--seed", "1",
                            "--out", str(out)], env=child_env(), capture_output=True, text=True,
                           timeout=1500)
     log = proc.stdout[-3000:] + proc.stderr[-3000:]

@@ -3,8 +3,8 @@
 Python dependencies are declared once, in the repository's requirements.txt (dev venv) and package.xml
 (rosdep on the Pi); they are deliberately not repeated here.
 
-Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node`` and the ``hindrax`` command as console
-scripts in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source
+Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node`` and the ``hindrax`` command as
+console scripts in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source
 install/setup.bash``), the launch files in ``share/hindrax_ident/launch`` and the Foxglove layout in
 ``share/hindrax_ident/foxglove``.
 """

@@ -13,6 +13,9 @@ import threading
 import time
 from typing import Any, Callable, Iterator
 
+import rclpy
+from rclpy.context import Context
+
 __all__ = ["ConditionTimeout", "ros_context", "wait_until"]
 
 
@@ -46,9 +49,6 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 10.0, poll: Call
 def ros_context(domain_id: int | None = None) -> Iterator[Any]:
     """An initialised, isolated rclpy Context (shut down on exit). Domain from ROS_DOMAIN_ID by default; discovery
     kept on loopback (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) unless the environment already says otherwise."""
-    import rclpy
-    from rclpy.context import Context
-
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     ctx = Context()
     kwargs = {}

@@ -30,9 +30,9 @@ import functools
 import hashlib
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 import yaml
@@ -568,8 +568,9 @@ def _check_value(key: str, spec: Spec, value: Any) -> tuple[Any, ConfigIssue | N
     if spec.kind == _FLOATS:
         if not isinstance(value, (list, tuple, np.ndarray)):
             return value, bad
-        xs = [number(v) for v in value]
-        if any(x is None for x in xs):
+        maybe = [number(v) for v in value]
+        xs = [x for x in maybe if x is not None]
+        if len(xs) < len(maybe):
             return value, bad
         if spec.length is not None and len(xs) != spec.length:
             return value, bad
@@ -658,7 +659,7 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             db = c["thrusters.deadband_us"]
             if db >= min(mid - lo, hi - mid):
                 issues.append(ConfigIssue("thrusters.deadband_us", db, f"below {min(mid - lo, hi - mid):g}"))
-        channels = {}
+        channels: dict[Any, str] = {}
         for n in names:
             ch = c.get(f"thrusters.{n}.esc_channel")
             if ch in channels:
@@ -1133,7 +1134,7 @@ def default_config_path() -> Path:
     installed: list[Path] = []
     in_install_space = False
     try:  # colcon install (the vehicle) or the ament index of the dev venv
-        from ament_index_python.packages import get_package_prefix, get_package_share_directory  # type: ignore
+        from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
         installed.append(Path(get_package_share_directory("hindrax_drivers")) / "config" / "hindrax.yaml")
         in_install_space = Path(get_package_prefix("hindrax_drivers")).resolve() in here.parents

@@ -11,7 +11,9 @@ Both matrices are proper rotations (det = +1) and their own inverses, so the sam
 *and* pseudo-vectors (angular velocity, torque) in both directions. Orientations are quaternions in ROS
 order (x, y, z, w), handled with :class:`scipy.spatial.transform.Rotation`.
 
-Nothing else in the stack converts frames: drivers and nodes call these functions at their ROS boundary.
+Nothing else in the stack converts frames: drivers, emulators and tools call these functions and matrices at
+their ROS boundary (test/test_docs_truth.py checks that no other module spells the matrices out). A device's
+own sign conventions (the DVL-75's pitch, docs/devices.md §1.5) stay in its protocol.
 """
 from __future__ import annotations
 
@@ -130,7 +132,8 @@ def quaternion_marine_to_ros(q_xyzw) -> np.ndarray:
 def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:
     """Fossen ZYX Euler angles [phi theta psi] (rad) of a body-FRD-in-NED quaternion (x, y, z, w).
 
-    Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; docs/identification.md §1.A, [NTNU-Thesis] eq. 2.2).
+    Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; docs/identification.md §1.A,
+    [NTNU-Thesis] eq. 2.2).
     """
     return Rotation.from_quat(np.asarray(q_xyzw, dtype=float)).as_euler("ZYX")[..., ::-1]
 

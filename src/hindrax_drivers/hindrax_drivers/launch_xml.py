@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Callable, Mapping
 
 import yaml
+from ament_index_python.packages import get_package_share_directory
 
 __all__ = ["LaunchFileError", "NodeProcess", "ament_share", "read_launch"]
 
@@ -96,8 +97,6 @@ def ament_share(package: str) -> Path:
     the package's source directory ``src/<package>``, which holds the same ``launch/`` and ``config/``. Raises
     :class:`LaunchFileError` when neither has the package."""
     try:
-        from ament_index_python.packages import get_package_share_directory
-
         return Path(get_package_share_directory(package))
     except Exception:  # noqa: BLE001 - not in the index (or no index at all): try the checkout
         pass

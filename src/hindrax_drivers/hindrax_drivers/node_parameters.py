@@ -30,6 +30,10 @@ import hashlib
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.parameter import Parameter
+
 from . import config as _c
 from .config import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
 
@@ -116,8 +120,6 @@ def parameter_descriptor(key: str, read_only: bool = True):
     description: the schema's one-line meaning; additional_constraints: "allowed <range>"; ranges for
     scalar numbers with both bounds; read_only as given. The type is left to the caller.
     """
-    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-
     spec: Spec = SCHEMA[_generic(key)]
     d = ParameterDescriptor(name=key, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                             read_only=read_only)
@@ -162,10 +164,6 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     Returns a :class:`VehicleConfig` holding the node's keys only (``flat``). Raises :class:`ConfigError`
     (one line per issue) on a missing, mistyped or out-of-range value.
     """
-    from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-    from rclpy.parameter import Parameter
-
     generic = select_schema_keys(keys)
     dynamic = tuple(dynamic)
     if dynamic and on_change is None:

@@ -27,10 +27,12 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
 import yaml
+from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
 from .launch_xml import NodeProcess
 
@@ -43,8 +45,6 @@ def installed_command(process: NodeProcess) -> list[str]:
     Raises ``LookupError`` naming the places searched."""
     searched = []
     try:
-        from ament_index_python.packages import PackageNotFoundError, get_package_prefix
-
         try:
             exe = Path(get_package_prefix(process.package)) / "lib" / process.package / process.executable
             if os.access(exe, os.X_OK):
@@ -62,8 +62,6 @@ def installed_command(process: NodeProcess) -> list[str]:
 
 
 def _console_script_of(package: str, name: str) -> bool:
-    from importlib.metadata import entry_points
-
     return any(ep.name == name and ep.dist is not None and ep.dist.name.replace("-", "_") == package
                for ep in entry_points(group="console_scripts"))
 

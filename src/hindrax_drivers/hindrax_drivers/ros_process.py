@@ -29,7 +29,7 @@ process's profile (docs/architecture.md §10); the EventsExecutor dispatches fro
 on this machine with one process taking three 100 Hz ``sensor_msgs/Imu`` topics and publishing one 50 Hz topic:
 8.4-10.5 % of a core with the SingleThreadedExecutor, 3.6-4.4 % with the EventsExecutor. The recorder (its node
 run alone, and ``hindrax bag record``) keeps the SingleThreadedExecutor: its callbacks take the message info (the
-source timestamp it writes as each record's publish time), and the EventsExecutor of rclpy 7.3 (pip wheels) stops
+source timestamp it writes as each record's publish time), and the EventsExecutor of rclpy 7.1 (pip wheels) stops
 the process with "SystemError: null argument to internal routine" on the first message to such a callback
 (reproduced with a bare raw subscription whose callback takes ``(msg, info)``; ``(msg)`` alone works).
 

@@ -33,6 +33,7 @@ import threading
 from typing import Any, Iterable, List, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from .config import ConfigError, ConfigIssue
@@ -167,8 +168,6 @@ class SerialDeviceNode(Node):
 
     # -- helpers for subclasses
     def _int_parameter(self, name: str, default: int, minimum: int) -> int:
-        from rcl_interfaces.msg import ParameterDescriptor
-
         docs = {"stuck_limit_samples": "identical consecutive readings after which a sensor is reported stuck"}
         value = (self.get_parameter(name).value if self.has_parameter(name)
                  else self.declare_parameter(name, default, ParameterDescriptor(

@@ -10,7 +10,13 @@ from __future__ import annotations
 import os
 import sys
 
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.clock import Clock, ClockType
+from rclpy.parameter import Parameter
+
 from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
+from .config import default_config_path, load_config
+from .liveness import HEARTBEAT_NAMES
 
 __all__ = ["ConditionTimeout", "SafetyHeartbeats", "child_env", "config_parameters", "python_executable", "ros_context",
            "wait_until"]
@@ -33,10 +39,6 @@ def python_executable() -> str:
 def config_parameters(overrides: dict | None = None, path: str | None = None) -> list:
     """The vehicle configuration (default file, with dotted-key ``overrides``) as rclpy Parameters, for
     ``Node(..., parameter_overrides=config_parameters({...}))``; validated like a params file."""
-    from rclpy.parameter import Parameter
-
-    from .config import default_config_path, load_config
-
     cfg = load_config(path or default_config_path(), overrides)
     return [Parameter(k, value=v) for k, v in cfg.to_ros_parameters().items()]
 
@@ -51,11 +53,6 @@ class SafetyHeartbeats:
     """
 
     def __init__(self, node, supervisor: str | None = "", guard: str | None = "", rate_hz: float = 20.0) -> None:
-        from diagnostic_msgs.msg import DiagnosticStatus
-        from rclpy.clock import Clock, ClockType
-
-        from .liveness import HEARTBEAT_NAMES
-
         self._status = DiagnosticStatus
         self.supervisor, self.guard = supervisor, guard
         self._pubs = {k: node.create_publisher(DiagnosticStatus, topic, 10) for k, topic in HEARTBEAT_NAMES.items()}

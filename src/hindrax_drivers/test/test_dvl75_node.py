@@ -361,11 +361,11 @@ def test_implausible_but_checksum_valid_dvpdl_is_published_not_valid_with_an_err
         r.wait(lambda: r.node.diag.counts().get("implausible_velocity", 0) >= 2, message="both rejected")
         r.wait(lambda: any(st.level == DiagnosticStatus.ERROR and "implausible" in st.message for st in r.diag),
                5.0, "ERROR in diagnostics")
-        def rejected():
+        def rejected_reports():
             return [m for m, _ in r.data if m.confidence_percent == 100.0
                     and any(abs(m.delta_time_s - dt) < 1e-6 * dt for dt in (0.1, 1e-6))]
 
-        rejected = r.wait(lambda: len(rejected()) == 2 and rejected(), 5.0, "both reports received")
+        rejected = r.wait(lambda: len(rejected_reports()) == 2 and rejected_reports(), 5.0, "both reports received")
         assert all(not m.velocity_valid and math.isnan(m.velocity_m_s.x) and m.velocity_covariance[0] == -1.0
                    for m in rejected)
         assert all(abs(tw.twist.twist.linear.x) < 1.0 for tw, _ in r.twist)  # no twist from them

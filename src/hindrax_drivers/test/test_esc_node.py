@@ -36,12 +36,13 @@ def esc():
     with ros_context() as ctx:
         emu = Pca9685Emulator()
         bus = EmulatedI2CBus({0x40: emu})
-        params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True,
+        params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2,
+                                    "esc.oscillator_calibrated": True,
                                     "thrusters.t2.reversed": True, "thrusters.t3.trim_us": 10.0})
         node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
         probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
+        _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -118,7 +119,8 @@ def test_watchdog_returns_to_neutral_within_one_period():
 
     with ros_context() as ctx:
         emu = Pca9685Emulator()
-        params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True})
+        params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2,
+                                    "esc.oscillator_calibrated": True})
         node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
                        parameter_overrides=params + [Parameter("use_sim_time", value=True)])
         node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
@@ -126,7 +128,7 @@ def test_watchdog_returns_to_neutral_within_one_period():
         # loop's simulated 5 ms steps take longer than 5 ms of wall time on a loaded machine
         node.set_steady_watchdog_timeout(5.0)
         probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
+        _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -210,7 +212,8 @@ def test_sigterm_path_writes_neutral():
     holder = {}
 
     def factory():
-        node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True}))
+        node = EscNode(bus=bus, parameter_overrides=config_parameters({"esc.arming_time_s": 0.0,
+                                                                       "esc.oscillator_calibrated": True}))
         node.armed = True
         node.command = np.full(8, 1700.0)
         node.command_time = node.get_clock().now()
@@ -338,7 +341,7 @@ def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
         emu = Pca9685Emulator()
         node = _node(emu, {"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2}, sim_time=True, ctx=ctx)
         probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
+        _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)

@@ -68,7 +68,8 @@ def test_node_latches_on_tf_static_with_the_static_broadcaster_qos_and_frame_ids
             info, = listener.get_publishers_info_by_topic("/tf_static")
             assert info.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
             assert info.qos_profile.reliability == ReliabilityPolicy.RELIABLE
-            assert node.publisher.qos_profile.depth == 1 and node.publisher.qos_profile.history == HistoryPolicy.KEEP_LAST
+            qos = node.publisher.qos_profile
+            assert qos.depth == 1 and qos.history == HistoryPolicy.KEEP_LAST
             assert node.describe_parameter("base_frame").read_only
         finally:
             ex.shutdown()

@@ -1,0 +1,1 @@
+"""Hindrax identification, simulation, control and the ``hindrax`` command line (docs/architecture.md §2)."""

@@ -40,6 +40,7 @@ BENCHMARKS: dict[str, str] = {
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     parser = argparse.ArgumentParser(prog="hindrax-bench", description=__doc__.splitlines()[0])
     parser.add_argument("--only", default="", help="comma-separated benchmark names")
     parser.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the scripts)")

@@ -2,9 +2,10 @@
 MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust
-allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the static TF (/tf_static), the identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as
-in the virtual pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the
-recorder. On the vehicle they open the configured serial ports and
+allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the static TF (/tf_static), the
+identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as in the virtual pool, it
+cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the recorder. On the vehicle they
+open the configured serial ports and
 ``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
 ``/clock`` and :class:`~hindrax_ident.sim.hardware.VirtualHardware` (the five device emulators fed by the
 simulator: serial devices on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an
@@ -118,8 +119,9 @@ class Graph:
         """The operator's start of a simulated run, each step at a simulated instant independent of wall time:
         with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready and
         ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); with time frozen
-        again, wait for the ESC's steady-clock arming time and the safety heartbeats, and answer the arm request. Returns the SetArmed response. Raises
-        :class:`~hindrax_drivers.conditions.ConditionTimeout` when a step takes longer than ``timeout_s`` of wall time.
+        again, wait for the ESC's steady-clock arming time and the safety heartbeats, and answer the arm request.
+        Returns the SetArmed response. Raises :class:`~hindrax_drivers.conditions.ConditionTimeout` when a step takes
+        longer than ``timeout_s`` of wall time.
         """
         from hindrax_drivers.conditions import wait_until
         from hindrax_msgs.srv import SetArmed

@@ -78,7 +78,8 @@ def test_suspect_parameter_falls_back_unless_the_reason_is_only_the_thrust_curve
     whiteness = "residuals not white (lag-1 autocorrelation 0.44 > 0.2)"
     thrust = ("heave bias differs from the configured net buoyancy (z = +4.1): the thrust curves do not match the "
               "vehicle, every thrust-derived parameter is suspect")
-    bias = "bias +0.952 N differs from the expected +0.785 N (z = +3.3): an unmodelled force (current, tether, thrust offset)"
+    bias = ("bias +0.952 N differs from the expected +0.785 N (z = +3.3): an unmodelled force "
+            "(current, tether, thrust offset)")
     doc = _doc(cfg)
     doc["dofs"]["heave"]["inertia"] = _par(50.0, 2.0, "suspect", [bias])
     doc["dofs"]["heave"]["quadratic_damping_positive"] = _par(120.0, 10.0, "suspect", [bias, whiteness])

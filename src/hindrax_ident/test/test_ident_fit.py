@@ -1,7 +1,7 @@
-"""``hindrax ident fit`` (issues 18 and 27): identification from bags of standard messages only (WrenchStamped on /wrench and
-Odometry on /odometry, REP-103 FLU) written by a piloted virtual-pool run (:mod:`hindrax_ident.identification.
-piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz, late and bursty receive times, a
-1.5 s gap, a 50 ms actuation delay).
+"""``hindrax ident fit`` (issues 18 and 27): identification from bags of standard messages only (WrenchStamped on
+/wrench and Odometry on /odometry, REP-103 FLU) written by a piloted virtual-pool run
+(:mod:`hindrax_ident.identification. piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz,
+late and bursty receive times, a 1.5 s gap, a 50 ms actuation delay).
 
 Acceptance (issue): the truth of the simulator (:func:`~hindrax_ident.identification.estimators.truth_parameters` on
 the truth configuration) recovered within 10 % for surge, sway, heave and yaw inertia and quadratic damping; nrmse on

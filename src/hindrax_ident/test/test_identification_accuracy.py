@@ -1,5 +1,5 @@
-"""Acceptance test of the identification (docs/architecture.md §5, [Hindrax-Drag]): a shortened simulated campaign with the
-simulator's sensor noise on recovers the configured hydrodynamics of surge and heave.
+"""Acceptance test of the identification (docs/architecture.md §5, [Hindrax-Drag]): a shortened simulated campaign with
+the simulator's sensor noise on recovers the configured hydrodynamics of surge and heave.
 
 Targets (issue): inertia (rigid + added) and quadratic damping within 5 %, bias within 0.2 N, and the
 reported 95 % intervals contain the configured values. The configured values are the truth of the

@@ -1,6 +1,5 @@
 """Identification node: ROS message adapters (frames, reversal) and the run_identification action on the
 virtual pool (goal validation, refusal while disarmed, feedback, HydroEstimate >= 1 Hz, cancel -> neutral)."""
-import math
 
 import numpy as np
 import pytest

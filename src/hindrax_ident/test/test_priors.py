@@ -49,7 +49,8 @@ def _printed(value: float, printed: str) -> bool:
 
 
 def _check(values, printed_row):
-    bad = [(i, float(v), p) for i, (v, p) in enumerate(zip(values, printed_row)) if p is not None and not _printed(v, p)]
+    bad = [(i, float(v), p) for i, (v, p) in enumerate(zip(values, printed_row))
+           if p is not None and not _printed(v, p)]
     assert not bad, bad
 
 

@@ -160,7 +160,7 @@ def test_energy_conserved_without_damping_and_restoring(neutral_cfg):
     assert energy() == pytest.approx(e0, rel=1e-6)
 
 
-# ----------------------------------------------------------------------------------- steady speeds ([Hindrax-Drag] eq. 2)
+# --------------------------------------------------------------------------------- steady speeds ([Hindrax-Drag] eq. 2)
 @pytest.mark.parametrize("dof,load", [("surge", 10.0), ("surge", -6.0), ("sway", 8.0), ("roll", 0.5),
                                       ("pitch", -0.4), ("yaw", 0.6)])
 def test_steady_speed_pure_load(neutral_cfg, dof, load):

@@ -43,9 +43,9 @@ def test_floor_gradient_moves_the_floor_and_the_dvl_altitude(cfg):
 def test_ping_and_dvl_beams_see_the_slope(cfg):
     """A level vehicle: the Ping1D range along body z, and each beam tilted 22.5 deg, hit the sloped plane where the
     hand-solved ray meets it."""
-    truth = truth_from_mapping(cfg, {"simulation": {"sensors": {"ping1d": {"noise_std_m": 0.0, "dropout_probability": 0.0},
-                                                               "dvl75": {"noise_std_m_s": 0.0, "scale_error_fraction": 0.0,
-                                                                         "dropout_probability": 0.0}}}})
+    quiet = {"ping1d": {"noise_std_m": 0.0, "dropout_probability": 0.0},
+             "dvl75": {"noise_std_m_s": 0.0, "scale_error_fraction": 0.0, "dropout_probability": 0.0}}
+    truth = truth_from_mapping(cfg, {"simulation": {"sensors": quiet}})
     sim = Simulator(cfg, truth=with_floor_gradient(truth, GRAD))
     x0, y0, z0 = 3.0, 2.5, 1.0
     sim.reset(position_ned_m=[x0, y0, z0], rpy_rad=[0.0, 0.0, 0.0])

@@ -1,0 +1,1 @@
+"""Thrust allocation: wrench to thruster forces and ESC pulse widths (docs/architecture.md §2)."""

@@ -232,6 +232,16 @@ class ThrustAllocator:
     bool, ``n_thrusters``.
     """
 
+    # Set by reconfigure() (which __init__ calls); declared here for the type checker.
+    _matrix: np.ndarray
+    _curves_arg: ThrustCurve | Sequence[ThrustCurve]
+    _weights_arg: Sequence[float] | np.ndarray | None
+    _mode: str
+    _priority_groups_arg: Sequence[Sequence[int]]
+    _step_us: float | None
+    _search_on: bool
+    _effort_weight_arg: float | None
+
     def __init__(self, matrix, curves: ThrustCurve | Sequence[ThrustCurve], weights=None, mode: str = "uniform",
                  priority_groups=DEFAULT_PRIORITY_GROUPS, pulse_width_step_us: float | None = None,
                  deadband_search: bool = True, effort_weight: float | None = None) -> None:

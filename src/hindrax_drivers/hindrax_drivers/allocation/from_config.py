@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import VehicleConfig
+from ..pca9685 import protocol as pca
 from .allocator import ThrustAllocator
 from .matrix import thrust_allocation_matrix
 from .thrust_curve import ThrustCurve
@@ -33,8 +34,6 @@ def pca9685_pulse_step_us(cfg: VehicleConfig) -> float:
 
     PRE_SCALE = round(f_osc / (4096 f)) - 1; one count = (PRE_SCALE + 1) / f_osc (docs/devices.md §5.1).
     """
-    from ..pca9685 import protocol as pca  # the ESC node's own prescale arithmetic (half-up rounding)
-
     f_osc = cfg.get("esc.oscillator_hz")
     return pca.count_duration_us(pca.prescale_for_frequency(cfg.get("esc.pwm_frequency_hz"), f_osc), f_osc)
 

@@ -14,9 +14,9 @@ Publishes
 
 A NaN/inf wrench, a wrench with an empty frame_id or in another frame than ``base_link``, one without a
 stamp (0: its age cannot be checked), a stale one (stamp older than ``thrusters.wrench_timeout_s`` by the node's
-clock) or one stamped more than ``thrusters.wrench_future_margin_s`` in the future is rejected: the node commands neutral (1500 us) and
-the status says why. If no wrench arrives for ``wrench_timeout_s`` the node commands neutral once and
-reports ``stale``; the ESC node's watchdog is the second line of defence (docs/architecture.md §8).
+clock) or one stamped more than ``thrusters.wrench_future_margin_s`` in the future is rejected: the node commands
+neutral (1500 us) and the status says why. If no wrench arrives for ``wrench_timeout_s`` the node commands neutral once
+and reports ``stale``; the ESC node's watchdog is the second line of defence (docs/architecture.md §8).
 
 The core (:class:`~hindrax_drivers.allocation.core.AllocationCore`) is built at start-up and rebuilt only
 when a parameter changes, never per message. Configuration: the vehicle file as ROS parameters

@@ -400,7 +400,7 @@ class ThrustCurve:
         if self._small_force == "nearest":
             replacement = np.where(magnitude >= 0.5 * inner_n, inner_p, self._pneu)
         else:
-            replacement = self._pneu
+            replacement = np.asarray(self._pneu)
         return np.where(small, replacement, p)
 
     def _key(self) -> tuple:

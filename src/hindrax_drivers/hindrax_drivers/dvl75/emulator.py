@@ -52,6 +52,7 @@ from typing import Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from .. import frames
 from ..transport.pty_device import PeriodicSchedule, StreamFaults
 from .protocol import (
     DvlExtended,
@@ -72,9 +73,6 @@ __all__ = ["DvlTruth", "DvlFlash", "Dvl75Emulator", "EARTH_RADIUS_M"]
 #: Mean Earth radius used for dead-reckoned latitude/longitude [EMULATOR].
 EARTH_RADIUS_M = 6371000.0
 _GPS_FRESH_S = 1.5  # SET-POSITION counts as a fix, fresh for 1.5 s (docs/devices.md §1.3.2, §1.4)
-# NED <-> ENU axis swap and FRD <-> FLU axis flip (docs/devices.md §1.5, REP-103).
-_T_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-_T_FRD_FLU = np.diag([1.0, -1.0, -1.0])
 
 
 @dataclass(frozen=True)
@@ -408,8 +406,8 @@ class Dvl75Emulator:
                               else alt / down * range_scale)
         gains = (tuple(float(g) for g in truth.beam_gain_db) if truth.beam_gain_db is not None
                  else (self.default_gain_db,) * 4)
-        r_enu_flu = _T_ENU_NED @ r_nb @ _T_FRD_FLU
-        qx, qy, qz, qw = Rotation.from_matrix(r_enu_flu).as_quat()
+        # the DVL reports base_link (FLU) in ENU (docs/devices.md §1.5, REP-103)
+        qx, qy, qz, qw = frames.quaternion_marine_to_ros(Rotation.from_matrix(r_nb).as_quat())
         cal = self.imu_calibration
         return DvlExtended(
             locked=locked,

@@ -314,11 +314,11 @@ def nmea_checksum(body: Union[bytes, str]) -> int:
 
 
 def format_sentence(body: str, *, with_checksum: bool = True) -> bytes:
-    """Build one complete sentence ``$<body>*HH\\r\\n`` (uppercase hex, docs/devices.md §1.2).
+    r"""Build one complete sentence ``$<body>*HH\r\n`` (uppercase hex, docs/devices.md §1.2).
 
     Args:
         body: printable ASCII without ``$``, ``*``, CR or LF, e.g. ``"DVPDL,1,2,..."``.
-        with_checksum: False gives ``$<body>\\r\\n`` (how ``$DVTXT`` is documented [D10]).
+        with_checksum: False gives ``$<body>\r\n`` (how ``$DVTXT`` is documented [D10]).
     Raises:
         ValueError: if ``body`` is not printable ASCII or contains ``$`` or ``*``.
     """
@@ -501,11 +501,11 @@ def parse_dvext(fields: Sequence[str]) -> DvlExtended:
         latitude_deg=_float(f[11], "latitude"),
         longitude_deg=_float(f[12], "longitude"),
         ekf_elapsed_time_s=_float(f[13], "elapsed_time"),
-        orientation_wxyz=four(14, _float, "q"),  # type: ignore[arg-type]
-        beam_gain_db=four(18, _float, "gain"),  # type: ignore[arg-type]
-        beam_locked=four(22, _flag, "lock"),  # type: ignore[arg-type]
-        beam_velocity_m_s=four(26, _float, "velocity"),  # type: ignore[arg-type]
-        beam_range_m=four(30, _float, "range"),  # type: ignore[arg-type]
+        orientation_wxyz=four(14, _float, "q"),
+        beam_gain_db=four(18, _float, "gain"),
+        beam_locked=four(22, _flag, "lock"),
+        beam_velocity_m_s=four(26, _float, "velocity"),
+        beam_range_m=four(30, _float, "range"),
     )
 
 
@@ -825,7 +825,7 @@ def parse_command(line: Union[bytes, bytearray, str]) -> DvlCommand:
 
 
 def build_command(keyword: str, argument: Optional[str] = None) -> bytes:
-    """Build one command line ``KEYWORD[ argument]\\r\\n`` (docs/devices.md §1.4; CR LF as the BlueOS
+    r"""Build one command line ``KEYWORD[ argument]\r\n`` (docs/devices.md §1.4; CR LF as the BlueOS
     driver sends [D17]).  Commands carry no checksum.
 
     Raises:

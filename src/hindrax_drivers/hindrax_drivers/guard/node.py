@@ -39,7 +39,9 @@ from ..config import output_enable_gpio
 from ..liveness import HEARTBEAT_NAMES, AliveAge
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..pca9685 import protocol as p
+from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
+from ..transport.shared_emulation import open_shared_bus, open_shared_line
 from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
 
 __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "main"]
@@ -53,13 +55,9 @@ REWRITE_INTERVAL_S = 0.2
 def open_output_enable(chip: str, line: int) -> Any:
     """The /OE line, requested HIGH (outputs off): the emulation server's line when
     ``HINDRAX_EMULATION_SOCKET`` is set (tests, benchmarks), else libgpiod. Raises OSError/ImportError."""
-    from ..transport.shared_emulation import open_shared_line
-
     shared = open_shared_line("oe", True)
     if shared is not None:
         return shared
-    from ..transport.gpio import open_output_line
-
     return open_output_line(chip, line, initial_high=True)
 
 
@@ -125,8 +123,6 @@ class OutputGuardNode(Node):
     def _device(self) -> I2CDevice:
         if self.device is None:
             if self._bus is None:
-                from ..transport.shared_emulation import open_shared_bus
-
                 self._bus = open_shared_bus() or open_smbus(self._bus_number)
             self.device = I2CDevice(self._bus, self._address, "pca9685-guard", retries=1)
         return self.device
@@ -148,7 +144,8 @@ class OutputGuardNode(Node):
                 self.line.set_high(asserted)
             elif asserted:
                 now = time.monotonic()
-                if force or (self.core.esc_state == OUTPUT_COMMANDING and now - self._last_rewrite > REWRITE_INTERVAL_S):
+                rewrite_due = now - self._last_rewrite > REWRITE_INTERVAL_S
+                if force or (self.core.esc_state == OUTPUT_COMMANDING and rewrite_due):
                     self._last_rewrite = now
                     self._silence_registers()
             if self.diag.state in ("silence failed", "gpio error"):

@@ -97,12 +97,12 @@ Data-ready gates (``sensors.icm20948.require_data_ready``, ``not_ready_error_pol
   SLV0_NACK set means the AK09916 did not answer and EXT_SLV_SENS_DATA holds an old sample: ``imu/mag`` is
   not published (counted ``mag_nack``) until that block changes (a new sample; a poll between two master
   cycles re-reads the same block, so the NACK of one cycle covers every poll that sees its data). If the
-  status read itself fails the sample is published (the NACK bit stays set until read, the next poll sees it). No fresh magnetometer sample (DRDY without
-  NACK) for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-runs the start-up once (the
-  AK09916 may have reset to power-down); if it is still missing the IMU publishes without ``imu/mag``, the
-  ERROR stays, and the start-up (with the magnetometer sequence) is retried every ``mag_retry_interval_s``
-  (counted ``mag_retries``; each retry resets the chip, a gap of about one start-up in ``imu/data_raw``)
-  until the AK09916 answers again.
+  status read itself fails the sample is published (the NACK bit stays set until read, the next poll sees it). No fresh
+  magnetometer sample (DRDY without NACK) for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-runs the
+  start-up once (the AK09916 may have reset to power-down); if it is still missing the IMU publishes without
+  ``imu/mag``, the ERROR stays, and the start-up (with the magnetometer sequence) is retried every
+  ``mag_retry_interval_s`` (counted ``mag_retries``; each retry resets the chip, a gap of about one start-up in
+  ``imu/data_raw``) until the AK09916 answers again.
 
 The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi (closed after a failed start-up
 attempt and opened again at the next: :class:`~hindrax_drivers.transport.i2c.BusHandle`), an

@@ -286,9 +286,9 @@ class ImuConfig:
                                 ("gyro_smplrt_div", self.gyro_smplrt_div, 255)):
             if not isinstance(value, int) or not 0 <= value <= hi:
                 raise Icm20948Error(f"{name} must be an int 0..{hi}, got {value!r}")
-        for name, value in (("accel_dlpfcfg", self.accel_dlpfcfg), ("gyro_dlpfcfg", self.gyro_dlpfcfg)):
-            if value is not None and (not isinstance(value, int) or not 0 <= value <= 7):
-                raise Icm20948Error(f"{name} must be None or an int 0..7, got {value!r}")
+        for name, dlpfcfg in (("accel_dlpfcfg", self.accel_dlpfcfg), ("gyro_dlpfcfg", self.gyro_dlpfcfg)):
+            if dlpfcfg is not None and (not isinstance(dlpfcfg, int) or not 0 <= dlpfcfg <= 7):
+                raise Icm20948Error(f"{name} must be None or an int 0..7, got {dlpfcfg!r}")
 
     @property
     def gyro_config_1_value(self) -> int:
@@ -585,8 +585,8 @@ def parse_sensor_block(data: bytes | Sequence[int], config: ImuConfig) -> ImuSam
         Icm20948Error: not 14 bytes.
     """
     raw = np.frombuffer(_as_bytes(data, SENSOR_BLOCK_LENGTH, "ICM-20948 sensor block"), dtype=">i2")
-    accel_raw = tuple(int(v) for v in raw[0:3])
-    gyro_raw = tuple(int(v) for v in raw[3:6])
+    accel_raw = (int(raw[0]), int(raw[1]), int(raw[2]))
+    gyro_raw = (int(raw[3]), int(raw[4]), int(raw[5]))
     temp_raw = int(raw[6])
     return ImuSample(
         accel_m_s2=raw[0:3].astype(float) / config.accel_lsb_per_g * GRAVITY_M_S2,
@@ -635,7 +635,7 @@ def parse_ak09916_block(data: bytes | Sequence[int]) -> MagSample:
     st1, st2 = raw_bytes[0], raw_bytes[8]
     h = np.frombuffer(raw_bytes[1:7], dtype="<i2").astype(float)
     field_t = np.array([h[0], -h[1], -h[2]]) * AK09916_TESLA_PER_LSB
-    return MagSample(magnetic_field_t=field_t, raw=tuple(int(v) for v in h),
+    return MagSample(magnetic_field_t=field_t, raw=(int(h[0]), int(h[1]), int(h[2])),
                      data_ready=bool(st1 & AK_ST1_DRDY), data_overrun=bool(st1 & AK_ST1_DOR),
                      overflow=bool(st2 & AK_ST2_HOFL))
 

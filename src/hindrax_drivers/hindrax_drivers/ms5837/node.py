@@ -17,12 +17,13 @@ Measurement cycle, every 1 / ``sensors.ms5837.rate_hz`` seconds, as a state mach
 so that the executor is never blocked (no sleep in any callback):
 ``convert D1 (OSR)`` -> one-shot timer (conversion time of the OSR + :data:`CONVERSION_MARGIN_S`) ->
 ``ADC read (D1)`` -> ``convert D2 (OSR)`` -> one-shot timer -> ``ADC read (D2)`` -> compensate -> publish.
-Conversion times are TE's library waits (docs/devices.md §3.1, :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S`;
-the datasheet table is UNVERIFIED). Compensation is the datasheet's first- and second-order integer
-arithmetic with floor semantics (:func:`hindrax_drivers.ms5837.protocol.compensate`, docs/devices.md §3.4-3.7).
-An ADC read of 0 (no completed conversion, docs/devices.md §3.1), a saturated ADC read (0xFFFFFF: a bus
-held high or a broken bridge; no reading in the sensor's range comes near it) or an I2C failure after the
-transport's retries abandons that cycle only (counted in the diagnostics: ``adc_zero``, ``adc_saturated``,
+Conversion times are TE's library waits (docs/devices.md §3.1,
+:data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S`; the datasheet table is UNVERIFIED). Compensation is the
+datasheet's first- and second-order integer arithmetic with floor semantics
+(:func:`hindrax_drivers.ms5837.protocol.compensate`, docs/devices.md §3.4-3.7). An ADC read of 0 (no completed
+conversion, docs/devices.md §3.1), a saturated ADC read (0xFFFFFF: a bus held high or a broken bridge; no reading in the
+sensor's range comes near it) or an I2C failure after the transport's retries abandons that cycle only (counted in the
+diagnostics: ``adc_zero``, ``adc_saturated``,
 ``i2c_failure``); the next cycle starts afresh. After :data:`FAILED_CYCLES_FOR_ERROR` consecutive failed
 cycles the state turns to ERROR and the whole start-up (reset command, PROM read) runs again: a part
 that lost power during an I2C outage needs the reset to reload its PROM (datasheet "Reset sequence"). The
@@ -135,7 +136,8 @@ class DepthGate:
     reading (rejected earlier, or failed). A depth within ``max_rate_m_s * dt + noise_m`` of the last accepted
     one, accepted at most ``max_age_s`` ago, is accepted; any other in-range depth is held as a candidate and
     accepted when the very next cycle agrees with it (a real jump, e.g. after an outage, costs one sample). Noise
-    passes only when two consecutive garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well under 1 m/s.
+    passes only when two consecutive garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well
+    under 1 m/s.
     """
 
     def __init__(self, min_depth_m: float, max_depth_m: float, max_rate_m_s: float, noise_m: float = 0.05,

@@ -77,6 +77,7 @@ from hindrax_msgs.srv import SetArmed
 from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
+from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
 
 #: first retry of an unreachable bus or chip, s (doubled after every failure up to :data:`RETRY_MAX_S`)
@@ -272,8 +273,6 @@ class EscNode(Node):
     def _open_bus(self) -> bool:
         """Open ``/dev/i2c-<esc.i2c_bus>`` (or the shared emulated bus); False with an ERROR when it fails."""
         try:
-            from ..transport.shared_emulation import open_shared_bus
-
             bus = open_shared_bus() or open_smbus(self.i2c_bus_number)
         except (OSError, ImportError) as exc:
             self.bus_error = str(exc)
@@ -397,7 +396,8 @@ class EscNode(Node):
         if not self.supervisor_age.fresh(t):
             age = self.supervisor_age.age_s
             return ("no supervisor heartbeat" + (f" for {age:.2f} s" if math.isfinite(age) else "") +
-                    f" ({HEARTBEAT_NAMES['supervisor']}, esc.heartbeat_timeout_s {t:g}): supervisor not running or hung")
+                    f" ({HEARTBEAT_NAMES['supervisor']}, esc.heartbeat_timeout_s {t:g}): "
+                    "supervisor not running or hung")
         if not self.supervisor_ok:
             return f"supervisor tripped: {self.supervisor_message} (clear it with supervisor/reset)"
         if not self.guard_age.fresh(t):

@@ -23,7 +23,8 @@ __all__ = [
     "Pca9685Error", "ChannelRegisters", "led_register", "prescale_for_frequency",
     "frequency_for_prescale", "period_s", "count_duration_us", "pulse_width_to_counts",
     "counts_to_pulse_width_us", "high_time_counts", "channel_bytes_for_pulse", "channel_block_for_pulses",
-    "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "oscillator_from_measurement", "clamp_esc_pulse_us", "esc_prescale",
+    "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "oscillator_from_measurement",
+    "clamp_esc_pulse_us", "esc_prescale",
 ]
 
 

@@ -1,0 +1,1 @@
+"""Blue Robotics Ping1D echosounder driver: protocol, emulator and node (docs/devices.md §2)."""

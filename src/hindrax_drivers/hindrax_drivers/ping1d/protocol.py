@@ -138,7 +138,7 @@ class Ping1dId(IntEnum):
 # ---------------------------------------------------------------------------------------------
 
 
-def checksum(data: bytes) -> int:
+def checksum(data: bytes | bytearray) -> int:
     """Ping protocol checksum: sum of all bytes, modulo 2**16 (docs/devices.md §2.2)."""
     return sum(data) & 0xFFFF
 

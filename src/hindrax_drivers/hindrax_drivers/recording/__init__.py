@@ -1,4 +1,5 @@
-"""Recording and replay of rosbag2-compatible MCAP bags without rosbag2 (docs/architecture.md §7, docs/architecture.md §11.6).
+"""Recording and replay of rosbag2-compatible MCAP bags without rosbag2 (docs/architecture.md §7, docs/architecture.md
+§11.6).
 
 Pure cores (no ROS runtime):
 - :mod:`.msgdefs`: full ``ros2msg`` definitions and RIHS01 type hashes from ``share/<pkg>/msg``;

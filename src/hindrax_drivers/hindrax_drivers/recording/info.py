@@ -14,6 +14,8 @@ import datetime as _dt
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from mcap.reader import make_reader
+
 from .reader import BagReader
 
 
@@ -86,8 +88,6 @@ def bag_info(path: str | Path) -> BagInfo:
 
 def _exact_times(reader: BagReader, first: dict[str, int], last: dict[str, int]) -> None:
     """First/last log time per topic of the summarised files (reads the first and last chunk of each)."""
-    from mcap.reader import make_reader
-
     exact_first: dict[str, int] = {}
     exact_last: dict[str, int] = {}
     for f in reader.files:

@@ -20,6 +20,11 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import FluidPressure, Imu, MagneticField, Range
+
+from hindrax_msgs.msg import Dvl, RawDeviceData, ThrusterPwm
 
 from .qos import default_profile
 from .writer import BagWriter, WriterOptions
@@ -68,8 +73,6 @@ def surge_acceleration_m_s2(t_s: float) -> float:
 
 
 def _imu(t: float, rng: np.random.Generator) -> Any:
-    from sensor_msgs.msg import Imu
-
     m = _stamp(Imu(), t, "imu_link")
     m.orientation.w = 1.0
     m.orientation_covariance[0] = -1.0
@@ -83,8 +86,6 @@ def _imu(t: float, rng: np.random.Generator) -> Any:
 
 
 def _mag(t: float, rng: np.random.Generator) -> Any:
-    from sensor_msgs.msg import MagneticField
-
     m = _stamp(MagneticField(), t, "imu_link")
     m.magnetic_field.x = 2.0e-5 + float(rng.normal(0.0, 1e-6))
     m.magnetic_field.z = -4.0e-5 + float(rng.normal(0.0, 1e-6))
@@ -92,8 +93,6 @@ def _mag(t: float, rng: np.random.Generator) -> Any:
 
 
 def _dvl(t: float, rng: np.random.Generator) -> Any:
-    from hindrax_msgs.msg import Dvl
-
     m = _stamp(Dvl(), t, "base_link")
     m.velocity_m_s.x = surge_velocity_m_s(t) + float(rng.normal(0.0, 0.01))
     m.velocity_covariance[0] = m.velocity_covariance[4] = m.velocity_covariance[8] = 1e-4
@@ -113,8 +112,6 @@ def _dvl(t: float, rng: np.random.Generator) -> Any:
 
 def _range(frame: str, altitude_m: float) -> Callable[[float, np.random.Generator], Any]:
     def make(t: float, rng: np.random.Generator) -> Any:
-        from sensor_msgs.msg import Range
-
         m = _stamp(Range(), t, frame)
         m.radiation_type = Range.ULTRASOUND
         m.field_of_view = math.radians(30.0)
@@ -127,8 +124,6 @@ def _range(frame: str, altitude_m: float) -> Callable[[float, np.random.Generato
 
 
 def _pressure(t: float, rng: np.random.Generator) -> Any:
-    from sensor_msgs.msg import FluidPressure
-
     m = _stamp(FluidPressure(), t, "pressure_link")
     m.fluid_pressure = SURFACE_PRESSURE_PA + WATER_DENSITY_KG_M3 * GRAVITY_M_S2 * DEPTH_M + float(rng.normal(0, 20))
     m.variance = 400.0
@@ -136,8 +131,6 @@ def _pressure(t: float, rng: np.random.Generator) -> Any:
 
 
 def _pwm(t: float, rng: np.random.Generator) -> Any:
-    from hindrax_msgs.msg import ThrusterPwm
-
     m = _stamp(ThrusterPwm(), t, "base_link")
     surge = 60.0 * math.sin(2 * math.pi * SURGE_FREQUENCY_HZ * t)
     m.pulse_width_us = [1500.0 + surge, 1500.0 + surge, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0]
@@ -146,8 +139,6 @@ def _pwm(t: float, rng: np.random.Generator) -> Any:
 
 
 def _wrench(t: float, rng: np.random.Generator) -> Any:
-    from geometry_msgs.msg import WrenchStamped
-
     m = _stamp(WrenchStamped(), t, "base_link")
     m.wrench.force.x = 10.0 * math.sin(2 * math.pi * SURGE_FREQUENCY_HZ * t)
     return m
@@ -162,8 +153,6 @@ def nmea_checksum(body: str) -> int:
 
 
 def _raw_dvl(t: float, rng: np.random.Generator) -> Any:
-    from hindrax_msgs.msg import RawDeviceData
-
     m = _stamp(RawDeviceData(), t, "")
     body = (f"DVEXT,{int(round(t * 1000))},{surge_velocity_m_s(t):.3f},0.000,0.000,0.800,95,1,"
             "0.866,0.866,0.866,0.866,0.0,0.0,0.0")
@@ -176,8 +165,6 @@ def _raw_dvl(t: float, rng: np.random.Generator) -> Any:
 
 
 def _raw_ms5837(t: float, rng: np.random.Generator) -> Any:
-    from hindrax_msgs.msg import RawDeviceData
-
     m = _stamp(RawDeviceData(), t, "")
     m.device_name = "ms5837"
     m.transport = RawDeviceData.TRANSPORT_I2C
@@ -189,8 +176,6 @@ def _raw_ms5837(t: float, rng: np.random.Generator) -> Any:
 
 
 def _raw_icm(t: float, rng: np.random.Generator) -> Any:
-    from hindrax_msgs.msg import RawDeviceData
-
     m = _stamp(RawDeviceData(), t, "")
     m.device_name = "icm20948"
     m.transport = RawDeviceData.TRANSPORT_I2C
@@ -245,8 +230,6 @@ def synthetic_messages(duration_s: float, streams: tuple[StreamSpec, ...] = STRE
 
 def write_bag(bag_dir: Path, duration_s: float, options: WriterOptions) -> int:
     """Write one bag of :data:`STREAMS`; returns its message count. Replaces an existing directory."""
-    from rclpy.serialization import serialize_message
-
     if bag_dir.exists():
         shutil.rmtree(bag_dir)
     n = 0
@@ -260,8 +243,8 @@ def write_bag(bag_dir: Path, duration_s: float, options: WriterOptions) -> int:
 
 
 
-__all__ = ["STREAMS", "synthetic_messages", "messages_per_stream", "write_bag", "BAGS", "default_output_dir", "write_bags",
-           "main"]
+__all__ = ["STREAMS", "synthetic_messages", "messages_per_stream", "write_bag", "BAGS", "default_output_dir",
+           "write_bags", "main"]
 
 def default_output_dir() -> Path:
     """``src/hindrax_drivers/test/data`` of the source checkout this module lives in."""
@@ -269,6 +252,7 @@ def default_output_dir() -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     parser = argparse.ArgumentParser(prog="make_test_bags", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(default_output_dir()), help="directory to write the bags into")
     args = parser.parse_args(argv)

@@ -1,4 +1,4 @@
-"""Message definitions for MCAP schemas, exactly as rosbag2 (Jazzy) writes them.
+r"""Message definitions for MCAP schemas, exactly as rosbag2 (Jazzy) writes them.
 
 An MCAP channel of the ``ros2`` profile points at a schema named ``pkg/msg/Type`` with encoding
 ``ros2msg`` whose data is the *full* definition (docs/architecture.md §11.6; rosbag2
@@ -6,7 +6,7 @@ An MCAP channel of the ``ros2`` profile points at a schema named ``pkg/msg/Type`
 
 - the type's own ``.msg`` text, verbatim (comments included);
 - then, for every dependency in sorted order (``std::set``), depth first, each dependency only once
-  for the whole definition: ``"\\n"``, a line of 80 ``=``, a line ``MSG: pkg/Type``, then that
+  for the whole definition: ``"\n"``, a line of 80 ``=``, a line ``MSG: pkg/Type``, then that
   dependency's text (and its own dependencies, recursively).
 
 Dependencies are the first word of each line (``[a-zA-Z0-9_/]+``, optional ``[...]`` array suffix,

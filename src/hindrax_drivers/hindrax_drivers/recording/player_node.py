@@ -31,6 +31,8 @@ import threading
 import time
 from typing import Any
 
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -134,8 +136,6 @@ class BagPlayerNode(Node):
         """Declare (once) and read a parameter. A list is declared as a string array without a value: rclpy
         types an empty list as a byte array and would then refuse a ``topics`` override of strings."""
         if not self.has_parameter(name):
-            from rcl_interfaces.msg import ParameterDescriptor
-
             desc = ParameterDescriptor(description=_PARAMETER_DOCS.get(name, name), read_only=True)
             if isinstance(default, list):
                 self.declare_parameter(name, Parameter.Type.STRING_ARRAY, desc)
@@ -194,8 +194,6 @@ class BagPlayerNode(Node):
 
     def wait_for_acknowledgements(self, timeout_s: float = 2.0) -> bool:
         """Wait (bounded) until reliable subscribers acknowledged everything, so exiting loses nothing."""
-        from rclpy.duration import Duration
-
         ok = True
         deadline = time.monotonic() + timeout_s
         for pub in self.pubs.values():

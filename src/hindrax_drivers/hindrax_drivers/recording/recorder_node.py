@@ -29,7 +29,8 @@ Behaviour
 Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.yaml):
 ``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty = a new
 timestamped directory under ``recording.output_root`` at every start, never an existing one: :mod:`.bag_dir`),
-``autostart`` (bool, false), ``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000), ``disk_check_period_s`` (1.0).
+``autostart`` (bool, false), ``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000),
+``disk_check_period_s`` (1.0).
 
 Run alone: ``python -m hindrax_drivers.recording.recorder_node --ros-args --params-file
 ros_ws/config/hindrax.yaml -p autostart:=true``.

@@ -35,13 +35,36 @@ topic are equal. See :func:`compare_parsed` for the precise rule, including the 
 from __future__ import annotations
 
 import collections
+import copy
 import errno
 import math
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
+import rclpy
+from builtin_interfaces.msg import Time
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
+
+from hindrax_msgs.msg import RawDeviceData
+
+from ..config import load_config
+from ..dvl75.node import Dvl75Node
+from ..icm20948.node import Icm20948Node
+from ..ms5837.node import Ms5837Node
+from ..node_common import raw_transactions
+from ..pca9685.emulator import Pca9685Emulator
+from ..pca9685.node import EscNode
+from ..ping1d.node import Ping1dNode
+from ..transport.emulated_i2c import EmulatedI2CBus
+from ..transport.pty_device import PtyDevice
+from .msgtypes import message_class
 from .reader import BagReader, iter_raw_device_data
 
 __all__ = ["ReplayClock", "SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay",
@@ -94,8 +117,6 @@ class ReplayClock:
 def serial_chunks(items: Iterable[tuple[int, Any]]) -> tuple[list[tuple[int, bytes]], list[tuple[int, bytes]]]:
     """Split ``iter_raw_device_data`` output of a serial device into (device->host, host->device) lists of
     ``(t_ns, bytes)`` in recorded order. I2C messages are ignored."""
-    from hindrax_msgs.msg import RawDeviceData
-
     rx: list[tuple[int, bytes]] = []
     tx: list[tuple[int, bytes]] = []
     for t, m in items:
@@ -125,10 +146,6 @@ def i2c_transactions(items: Iterable[tuple[int, Any]]) -> dict[int, I2CTransacti
     The driver tap records a write as (register, payload) and ``write_byte(value)`` as (value, b"")
     (:class:`~hindrax_drivers.transport.i2c.I2CDevice`), so the wire bytes are ``[register] + payload``.
     """
-    from hindrax_msgs.msg import RawDeviceData
-
-    from ..node_common import raw_transactions
-
     out: dict[int, I2CTransactions] = {}
     for _t, m in items:
         if m.transport != RawDeviceData.TRANSPORT_I2C:
@@ -279,9 +296,6 @@ class ReplayHardware:
     I2C = ("ms5837", "icm20948", "pca9685")
 
     def __init__(self, bag_path: str | Path, devices: Iterable[str] | None = None, paced: bool = True) -> None:
-        from ..transport.emulated_i2c import EmulatedI2CBus
-        from ..transport.pty_device import PtyDevice
-
         self.clock = ReplayClock()
         self.serial: dict[str, SerialReplayDevice] = {}
         self.ptys: dict[str, Any] = {}
@@ -306,8 +320,6 @@ class ReplayHardware:
                 # an output device: its reads only echo the driver's writes, and the ESC node's read-back runs on the
                 # steady clock (docs/architecture.md §8), so their number depends on wall time, not on the bag: the
                 # register-exact emulator answers them (its outputs are not compared)
-                from ..pca9685.emulator import Pca9685Emulator
-
                 for address in i2c_transactions(items):
                     self.outputs[address] = Pca9685Emulator()
                     self.i2c_device_of[address] = name
@@ -337,8 +349,6 @@ class ReplayHardware:
 
 def strip_stamp(msg: Any) -> Any:
     """A copy of ``msg`` with ``header.stamp`` zeroed (messages without a header are returned unchanged)."""
-    import copy
-
     if not hasattr(msg, "header"):
         return msg
     out = copy.deepcopy(msg)
@@ -405,19 +415,6 @@ class DriverReplay:
 
     def __init__(self, bag_path: str | Path, config_path: str | Path, context: Any, overrides: dict | None = None,
                  clock_period_s: float = 0.01) -> None:
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.parameter import Parameter
-        from rclpy.qos import QoSProfile
-        from rosgraph_msgs.msg import Clock
-
-        from ..config import load_config
-        from ..dvl75.node import Dvl75Node
-        from ..icm20948.node import Icm20948Node
-        from ..ms5837.node import Ms5837Node
-        from ..pca9685.node import EscNode
-        from ..ping1d.node import Ping1dNode
-        from .msgtypes import message_class
-
         self.bag_path = Path(bag_path)
         self.context = context
         reader = BagReader(self.bag_path)
@@ -449,8 +446,6 @@ class DriverReplay:
         for node in self.nodes.values():
             for pub in node.publishers:
                 self._count(pub)
-        import rclpy
-
         self.probe = rclpy.create_node("replay_probe", context=context)
         self._clock_pub = self.probe.create_publisher(Clock, "/clock", QoSProfile(depth=1))
         self._clock_msg = Clock
@@ -469,7 +464,8 @@ class DriverReplay:
                 "/dvl/altitude": "sensor_msgs/msg/Range", "/ping/altitude": "sensor_msgs/msg/Range",
                 "/ping/confidence": "std_msgs/msg/Float32", "/pressure/fluid_pressure": "sensor_msgs/msg/FluidPressure",
                 "/pressure/temperature": "sensor_msgs/msg/Temperature",
-                "/pressure/depth": "geometry_msgs/msg/PoseWithCovarianceStamped", "/imu/data_raw": "sensor_msgs/msg/Imu",
+                "/pressure/depth": "geometry_msgs/msg/PoseWithCovarianceStamped",
+                "/imu/data_raw": "sensor_msgs/msg/Imu",
                 "/imu/mag": "sensor_msgs/msg/MagneticField", "/imu/temperature": "sensor_msgs/msg/Temperature",
                 "/thrusters/pulse_width": "hindrax_msgs/msg/ThrusterPwm"}[topic]
 
@@ -486,9 +482,6 @@ class DriverReplay:
     @staticmethod
     def _timeline(reader: BagReader, period_s: float) -> list[int]:
         """The recorded /clock values (ns, increasing); without /clock a grid over the raw data's span."""
-        from rclpy.serialization import deserialize_message
-        from rosgraph_msgs.msg import Clock
-
         if "/clock" in reader.topics:
             ts = sorted({deserialize_message(m.data, Clock).clock.sec * 1_000_000_000
                          + deserialize_message(m.data, Clock).clock.nanosec for m in reader.messages(["/clock"])})
@@ -502,8 +495,6 @@ class DriverReplay:
     # -- running
     def _set_clock(self, t_ns: int, wait_s: float) -> None:
         """Publish /clock t_ns and spin until every node's clock shows it."""
-        from builtin_interfaces.msg import Time
-
         self.hardware.clock.set(t_ns)
         self._clock_pub.publish(self._clock_msg(clock=Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)))
         nodes = list(self.nodes.values())
@@ -525,7 +516,8 @@ class DriverReplay:
         """True when every recorded device->host byte was read and handled (parsed, published) by its driver and
         every I2C read served."""
         hw = self.hardware
-        serial = all(hw.serial_done(n, self.nodes[n].transport.status().bytes_handled) for n in hw.serial if n in self.nodes)
+        serial = all(hw.serial_done(n, self.nodes[n].transport.status().bytes_handled)
+                     for n in hw.serial if n in self.nodes)
         return serial and hw.i2c_done()
 
     def run(self, timeout_s: float = 60.0, extra_s: float = 5.0) -> None:
@@ -570,8 +562,6 @@ class DriverReplay:
 
 def _spin_until(executor: Any, predicate: Callable[[], bool], timeout_s: float, what: str) -> None:
     """Spin ``executor`` (0.005 s per call) until ``predicate()``; TimeoutError naming ``what`` after ``timeout_s``."""
-    import time
-
     deadline = time.monotonic() + timeout_s
     while not predicate():
         if time.monotonic() > deadline:
@@ -582,10 +572,6 @@ def _spin_until(executor: Any, predicate: Callable[[], bool], timeout_s: float, 
 def recorded_parsed(bag_path: str | Path) -> dict[str, list[Any]]:
     """The parsed messages of :data:`PARSED_TOPICS` (and ``/thrusters/pulse_width``) in a bag, decoded into
     rclpy classes, in log-time order per topic."""
-    from rclpy.serialization import deserialize_message
-
-    from .msgtypes import message_class
-
     reader = BagReader(bag_path)
     wanted = [t for t in list(PARSED_TOPICS) + ["/thrusters/pulse_width"] if t in reader.topics]
     out: dict[str, list[Any]] = {t: [] for t in wanted}

@@ -1,0 +1,1 @@
+"""The safety supervisor: core rules and node (docs/architecture.md §8)."""

@@ -1,0 +1,1 @@
+"""Byte and register transports (serial, I2C, emulated buses) shared by the device drivers."""

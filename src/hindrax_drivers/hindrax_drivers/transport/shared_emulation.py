@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import os
 import threading
+from multiprocessing.connection import Client, Listener
 from typing import Any, Mapping
 
 __all__ = ["SOCKET_ENV", "EmulationServer", "SharedI2CBus", "SharedGpioLine", "open_shared_bus", "open_shared_line"]
@@ -46,8 +47,6 @@ class EmulationServer:
 
     def __init__(self, path: str, bus: Any = None, lines: Mapping[str, Any] | None = None,
                  lock: threading.Lock | None = None) -> None:
-        from multiprocessing.connection import Listener
-
         self.bus = bus
         self.lines = dict(lines or {})
         self.lock = lock or threading.Lock()
@@ -112,8 +111,6 @@ class EmulationServer:
 
 class _Client:
     def __init__(self, path: str) -> None:
-        from multiprocessing.connection import Client
-
         try:
             self._conn = Client(path, family="AF_UNIX")
         except (OSError, EOFError) as exc:

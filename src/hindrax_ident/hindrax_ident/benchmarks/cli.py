@@ -39,6 +39,7 @@ def wall_times_s(argv: list[str], runs: int, check: bool = True) -> list[float]:
 
 
 def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     runs = 3 if quick else 11
     base = hindrax_command()
     help_s = wall_times_s(base + ["--help"], runs)

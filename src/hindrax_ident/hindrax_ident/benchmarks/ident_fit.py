@@ -46,8 +46,10 @@ SMALL = {
     "hydrodynamics.sway.added_mass_kg": 12.7, "hydrodynamics.sway.linear_damping_kg_s": 6.2,
     "hydrodynamics.sway.quadratic_damping_kg_m": 21.7,
     "hydrodynamics.heave.added_mass_kg": 14.6,
-    "hydrodynamics.heave.linear_damping_positive_kg_s": 5.2, "hydrodynamics.heave.quadratic_damping_positive_kg_m": 37.0,
-    "hydrodynamics.heave.linear_damping_negative_kg_s": 7.0, "hydrodynamics.heave.quadratic_damping_negative_kg_m": 30.0,
+    "hydrodynamics.heave.linear_damping_positive_kg_s": 5.2,
+    "hydrodynamics.heave.quadratic_damping_positive_kg_m": 37.0,
+    "hydrodynamics.heave.linear_damping_negative_kg_s": 7.0,
+    "hydrodynamics.heave.quadratic_damping_negative_kg_m": 30.0,
     "hydrodynamics.yaw.added_mass_kg_m2": 0.12, "hydrodynamics.yaw.linear_damping_kg_m2_s": 0.07,
     "hydrodynamics.yaw.quadratic_damping_kg_m2": 1.55,
 }
@@ -61,8 +63,10 @@ LARGE = {
     "hydrodynamics.sway.added_mass_kg": 55.0, "hydrodynamics.sway.linear_damping_kg_s": 25.0,
     "hydrodynamics.sway.quadratic_damping_kg_m": 210.0,
     "hydrodynamics.heave.added_mass_kg": 70.0,
-    "hydrodynamics.heave.linear_damping_positive_kg_s": 20.0, "hydrodynamics.heave.quadratic_damping_positive_kg_m": 260.0,
-    "hydrodynamics.heave.linear_damping_negative_kg_s": 30.0, "hydrodynamics.heave.quadratic_damping_negative_kg_m": 200.0,
+    "hydrodynamics.heave.linear_damping_positive_kg_s": 20.0,
+    "hydrodynamics.heave.quadratic_damping_positive_kg_m": 260.0,
+    "hydrodynamics.heave.linear_damping_negative_kg_s": 30.0,
+    "hydrodynamics.heave.quadratic_damping_negative_kg_m": 200.0,
     "hydrodynamics.yaw.added_mass_kg_m2": 2.5, "hydrodynamics.yaw.linear_damping_kg_m2_s": 4.0,
     "hydrodynamics.yaw.quadratic_damping_kg_m2": 6.0,
     "thrusters.curve_negative": [-1.383e-6, 0.005382, -6.8178, 2781.5481],
@@ -247,7 +251,9 @@ def run(quick: bool = False, only: list[str] | None = None, keep: str | None = N
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m hindrax_ident.benchmarks.ident_fit", description=__doc__.splitlines()[0])
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
+    p = argparse.ArgumentParser(prog="python -m hindrax_ident.benchmarks.ident_fit",
+                                description=__doc__.splitlines()[0])
     p.add_argument("--only", default="", help="comma-separated data sets: " + ", ".join(d.name for d in DATASETS))
     p.add_argument("--quick", action="store_true", help="shorter bags")
     p.add_argument("--keep", default=None, help="directory for the bags (reused on the next run)")

@@ -1,8 +1,9 @@
 """Identification benchmark: wall time of the simulated campaign and the accuracy of each method.
 
 Surge + heave, 3 levels (the acceptance test's campaign), in both modes: ``make bench`` has to stay short; the
-all-DOF campaign's wall time and accuracy are ``make run``'s, in docs/results.md (section ``run``). Rows: wall time (target < 600 s for the full campaign), pool time
-per DOF, and per DOF the relative error of the inertia and quadratic damping for the reported
+all-DOF campaign's wall time and accuracy are ``make run``'s, in docs/results.md (section ``run``). Rows: wall
+time (target < 600 s for the full campaign), pool time per DOF, and per DOF the relative error of the inertia and
+quadratic damping for the reported
 (output-error) estimate, the equation-error batch LS, the online RLS and the seed's steady-state LS, with
 the pool time each needed (RLS: until converged; steady-state: until the end of the last window used).
 """
@@ -13,7 +14,8 @@ import time
 
 
 def run(quick: bool = False) -> list[dict]:
-    from hindrax_drivers.config import DOFS, default_config_path, load_config
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
+    from hindrax_drivers.config import default_config_path, load_config
     from hindrax_ident.identification.campaign import Campaign
     from hindrax_ident.identification.estimators import identify_all_with_errors
 

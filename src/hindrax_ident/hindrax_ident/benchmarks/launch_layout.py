@@ -4,8 +4,8 @@ Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node .
 
 ``pool --socket PATH --ports-file FILE [--set KEY=VALUE ...]``
     The virtual pool in its own process (excluded from the stack's CPU): the simulator at real-time factor 1
-    (no ``/clock`` and no ground-truth topics: every node runs on system time, as on the vehicle), the DVL-75 and Ping1D emulators on
-    pseudo-terminals served by their own threads, and the MS5837, ICM-20948 and PCA9685 emulators on an
+    (no ``/clock`` and no ground-truth topics: every node runs on system time, as on the vehicle), the DVL-75 and Ping1D
+    emulators on pseudo-terminals served by their own threads, and the MS5837, ICM-20948 and PCA9685 emulators on an
     :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
     (:class:`I2CSocketServer`). The emulators run on ``time.monotonic`` (the drivers' clock here). The pty paths
     are written to ``--ports-file`` (JSON) once everything is up.
@@ -14,9 +14,9 @@ Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node .
     Runs ``MODULE.main()`` (e.g. ``hindrax_drivers.ms5837.node``) exactly as ``python -m MODULE --ros-args ...``
     would, except that ``open_smbus`` returns a :class:`SocketI2CBus` connected to the pool when the
     environment variable ``HINDRAX_BENCH_I2C_SOCKET`` is set. With ``HINDRAX_BENCH_PROFILE=DIR`` the node runs under
-    cProfile and writes ``DIR/<module>.prof`` on exit (``python -m pstats``). A transaction is then one request/answer on a Unix
-    socket in the driver process (two system calls and a pickle each way), which stands in for the ``ioctl`` of
-    a real ``smbus2.SMBus`` on the Pi; the emulator's own work happens in the pool process.
+    cProfile and writes ``DIR/<module>.prof`` on exit (``python -m pstats``). A transaction is then one request/answer
+    on a Unix socket in the driver process (two system calls and a pickle each way), which stands in for the ``ioctl``
+    of a real ``smbus2.SMBus`` on the Pi; the emulator's own work happens in the pool process.
 """
 from __future__ import annotations
 
@@ -118,6 +118,7 @@ def _node(argv: list[str]) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] not in ("pool", "node"):
         print("usage: python -m hindrax_ident.benchmarks.launch_layout pool|node ...", file=sys.stderr)

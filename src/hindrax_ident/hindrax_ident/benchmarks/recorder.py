@@ -50,8 +50,8 @@ def _cpu_s(pid: int) -> float:
 
 
 def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
     from domain_coordinator import domain_id
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data

@@ -31,8 +31,8 @@ an emulated PCA9685 and its /OE line that this process serves over a Unix socket
 * ``clock_step_back_detected``: a supervisor on ``use_sim_time``, ``/clock`` (100 Hz from here) steps back 100 s,
   until its ``/diagnostics`` carries ``errors.clock_step``.
 
-Each path is repeated (3 times with ``--quick``, 6 otherwise, 5 for the process failures); rows give the median and
-the maximum in ms.
+Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :data:`REPEATS` in-process and
+:data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms.
 """
 from __future__ import annotations
 
@@ -41,6 +41,11 @@ import time
 import numpy as np
 
 NEUTRAL_US = 1500.0
+#: Repeats per path: in-process paths, process failures (kill/stop/outage/brown-out), and both with ``--quick``
+#: (docs/architecture.md §8.1 quotes them; test/test_docs_truth.py compares).
+REPEATS = 6
+PROCESS_REPEATS = 5
+QUICK_REPEATS = 3
 #: no sensors run in this bench: every supervisor rate check off, with the reason the configuration requires
 NO_SENSORS = {**{f"supervisor.min_rate.{s}_hz": 0.0 for s in ("dvl", "altimeter", "pressure", "imu")},
               **{f"supervisor.rate_check_disabled.{s}": "safety bench: no sensors simulated"
@@ -156,11 +161,12 @@ def _close(r) -> None:
 
 
 def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     from domain_coordinator import domain_id
 
     from hindrax_drivers.testing import ros_context
 
-    repeats = 3 if quick else 6
+    repeats = QUICK_REPEATS if quick else REPEATS
     times: dict[str, list[float]] = {k: [] for k in (
         "watchdog", "watchdog_beyond_timeout", "disarm_service", "supervisor_breach", "estop", "exception",
         "shutdown", "chip_reset_detect", "chip_reset_recover", "clock_loss")}
@@ -594,7 +600,7 @@ def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
 
 def run_processes(quick: bool = False) -> list[dict]:
     """Rows of the process, bus and clock failures (issue 23: each <= 0.5 s), median and max in ms."""
-    times = _process_rows(3 if quick else 5)
+    times = _process_rows(QUICK_REPEATS if quick else PROCESS_REPEATS)
     notes = {"supervisor_killed_outputs_stopped": "SIGKILL: ESC heartbeat timeout 0.2 s and guard /OE",
              "supervisor_hung_outputs_stopped": "SIGSTOP: the same paths",
              "esc_killed_oe_asserted": "SIGKILL: guard sees thrusters/pulse_width silent for 0.2 s",

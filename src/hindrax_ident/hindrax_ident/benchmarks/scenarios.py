@@ -3,8 +3,9 @@
 quick: scenario ``thrust_0.90`` only, surge, 2 levels, seed 1; full: ``none``, ``thrust_0.90`` and
 ``reverse_weak``, surge, 2 levels, seed 1 (about 15 s each here; surge and heave at 3 levels took about 80 s
 each, too long for ``make bench``'s 6 minutes; the full table, 13 scenarios x seeds x 4 DOFs, is written
-by the command into docs/results.md, section ``scenarios``). Rows: wall time per campaign, and per scenario the fraction of parameters whose
-95 % interval covers the truth, the fraction marked suspect and the fraction covered-or-suspect (target 100 %:
+by the command into docs/results.md, section ``scenarios``). Rows: wall time per campaign, and per scenario the
+fraction of parameters whose 95 % interval covers the truth, the fraction marked suspect and the fraction
+covered-or-suspect (target 100 %:
 a parameter that misses the truth must be suspect), plus the no-disturbance scenario's suspect fraction (target
 <= 10 %).
 """
@@ -14,6 +15,7 @@ import time
 
 
 def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     from hindrax_ident.commands.scenarios import run_case, summarise
 
     scenarios = ("thrust_0.90",) if quick else ("none", "thrust_0.90", "reverse_weak")

@@ -289,7 +289,6 @@ def _type_name(cls: Any) -> str:
 # ---------------------------------------------------------------------------------------------- launch layout
 def _launch(duration_s: float, tmp: Path) -> dict:
     import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
     from domain_coordinator import domain_id
     from geometry_msgs.msg import WrenchStamped
     from rclpy.action import ActionClient
@@ -326,7 +325,8 @@ def _launch(duration_s: float, tmp: Path) -> dict:
             wrap = ["-m", "hindrax_ident.benchmarks.launch_layout", "node"]
             cmds = {
                 "dvl75": [*wrap, "hindrax_drivers.dvl75.node", *base, "-p", f"sensors.dvl75.port:={ports['dvl75']}"],
-                "ping1d": [*wrap, "hindrax_drivers.ping1d.node", *base, "-p", f"sensors.ping1d.port:={ports['ping1d']}"],
+                "ping1d": [*wrap, "hindrax_drivers.ping1d.node", *base, "-p",
+                           f"sensors.ping1d.port:={ports['ping1d']}"],
                 "ms5837": [*wrap, "hindrax_drivers.ms5837.node", *base],
                 "icm20948": [*wrap, "hindrax_drivers.icm20948.node", *base],
                 "esc": [*wrap, "hindrax_drivers.pca9685.node", *base, "-p", "esc.arming_time_s:=1.0", *calibrated],
@@ -518,6 +518,7 @@ PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (publ
 
 
 def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     # windows: 10 s per phase and layout, 8 s per baseline (were 15/12 s; shortened to keep make bench under
     # 6 minutes; the shared machine's load moves the figures by about +-20 % anyway)
     duration_s = 8.0 if quick else 10.0

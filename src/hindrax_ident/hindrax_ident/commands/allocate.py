@@ -19,6 +19,7 @@ from .common import CommandError, add_config_argument, load_vehicle
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     for name, unit in zip("XYZKMN", ["N"] * 3 + ["N m"] * 3):
         parser.add_argument(name, type=float, help=f"{name} in base_link (FLU), {unit}")
     add_config_argument(parser)
@@ -28,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.allocation.allocator import InvalidWrenchError
     from hindrax_drivers.allocation.core import AllocationCore
 

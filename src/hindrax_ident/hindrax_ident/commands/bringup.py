@@ -26,6 +26,7 @@ VEHICLE_NOTICE = ("bringup: this is the single-process graph of the virtual pool
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     add_config_argument(parser)
     parser.add_argument("--sim", action="store_true", help="virtual pool and emulated devices instead of hardware")
     parser.add_argument("--record", action="store_true", help="record every topic to an MCAP bag")
@@ -39,6 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.config import default_config_path
 
     from hindrax_ident.bringup import run as run_graph

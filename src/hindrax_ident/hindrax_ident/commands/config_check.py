@@ -9,6 +9,7 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("file", nargs="?", default=None,
                         help="vehicle configuration YAML (ros-args params-file layout); default: the "
                              "installed share/hindrax_drivers/config/hindrax.yaml, or the repository's "
@@ -16,6 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.config import ConfigError, default_config_path, load_config, output_enable_gpio
 
     if args.file is None:

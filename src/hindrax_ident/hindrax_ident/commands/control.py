@@ -59,7 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help="comma-separated holds (default identified,vehicle_file,pd_hold)")
     else:
         parser.add_argument("--scenarios", default=None,
-                            help="comma-separated scenario names (default: every truth in ros_ws/config/truth/scenarios)")
+                            help="comma-separated scenario names "
+                                 "(default: every truth in ros_ws/config/truth/scenarios)")
         parser.add_argument("--levels", type=int, default=3, help="levels per DOF of each identification (default 3)")
         parser.add_argument("--truth-dir", default=None, metavar="DIR",
                             help="folder of the scenario truth files (default ros_ws/config/truth/scenarios)")

@@ -25,6 +25,7 @@ __all__ = ["add_arguments", "run", "write_oscillator"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("--measured-us", type=float, required=True,
                         help="high time of the pulse measured on the scope, us")
     parser.add_argument("--commanded-us", type=float, default=None,
@@ -44,6 +45,7 @@ def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.config import ConfigError, default_config_path
     from hindrax_drivers.pca9685 import protocol as p
 

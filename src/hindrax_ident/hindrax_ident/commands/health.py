@@ -22,6 +22,7 @@ DEFAULT_LAUNCH = "hindrax_drivers/vehicle.launch.xml"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("--launch", default=DEFAULT_LAUNCH, metavar="PKG/FILE",
                         help=f"the launch file the vehicle runs, as PACKAGE/FILE (default {DEFAULT_LAUNCH}) or a path")
     parser.add_argument("launch_arguments", nargs="*", metavar="NAME:=VALUE",
@@ -84,6 +85,7 @@ def collect(expect, timeout_s: float, done=None):
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.health import assess, expectation
     from hindrax_drivers.launch_xml import LaunchFileError, read_launch
 

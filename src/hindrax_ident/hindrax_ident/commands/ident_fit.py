@@ -25,7 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="force: geometry_msgs/WrenchStamped (base_link, FLU) or hindrax_msgs/ThrusterPwm "
                              "(needs --config); default: the one topic of such a type")
     parser.add_argument("--velocity-topic", default=None,
-                        help="velocity: nav_msgs/Odometry, TwistWithCovarianceStamped, TwistStamped or hindrax_msgs/Dvl")
+                        help="velocity: nav_msgs/Odometry, TwistWithCovarianceStamped, TwistStamped or "
+                             "hindrax_msgs/Dvl")
     parser.add_argument("--imu-topic", default=None, help="angular rate from sensor_msgs/Imu (default: the velocity "
                         "topic's, else an IMU found with a Dvl, else the differentiated attitude)")
     parser.add_argument("--depth-topic", default=None, help="heave velocity from the derivative of a depth: "

@@ -1,14 +1,16 @@
-"""``hindrax ident start | status | continue``: the identification campaign on a running stack (vehicle or virtual pool).
+"""``hindrax ident start | status | continue``: the identification campaign on a running stack (vehicle or virtual
+pool).
 
 * ``hindrax ident start [--dofs surge,heave,...] [--levels N] [--fractions F1,F2,...] [--calibrate ballast,line_pull
   [--calibration-only]] [--server-timeout S]``
   sends one ``run_identification`` goal (hindrax_msgs/action/RunIdentification) to the identification node of a
   running graph (``hindrax bringup``, with or without ``--sim``) and prints its feedback, one line per level change
   and once a second: DOF, level, command, progress; a calibration step's operator prompt (``>>> [attach_ballast]
-  calibration: attach the ballast (8.56 N in water), then call continue``) is printed once when it appears. Ctrl-C cancels the goal: the node brings the vehicle to a
-  zero wrench and holds it until the ESC reports neutral widths, then the action ends; the command waits for that
-  end (a second Ctrl-C stops waiting). The result line carries the node's message and the final online estimates.
-  Exit 0 when the campaign completed, 1 when it was rejected, aborted or cancelled, or no server answered.
+  calibration: attach the ballast (8.56 N in water), then call continue``) is printed once when it appears. Ctrl-C
+  cancels the goal: the node brings the vehicle to a zero wrench and holds it until the ESC reports neutral widths, then
+  the action ends; the command waits for that end (a second Ctrl-C stops waiting). The result line carries the node's
+  message and the final online estimates. Exit 0 when the campaign completed, 1 when it was rejected, aborted or
+  cancelled, or no server answered.
 * ``hindrax ident status [--timeout S]`` prints the next ``identification/status`` message (ManeuverStatus):
   phase, DOF, level, command, progress and the current step. Exit 1 when none arrives within the timeout.
 * ``hindrax ident continue [--timeout S]`` calls ``identification/continue`` (std_srvs/Trigger) once the operator

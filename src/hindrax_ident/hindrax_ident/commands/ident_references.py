@@ -18,8 +18,8 @@
   nonlinear ODE I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_ident.estimation.free_decay.
   fit_quadratic_free_decay`): rigid + added inertia independent of the thrust curve ([Hindrax-AM]
   eq. 4 applied to the vehicle, [SmallROV] eq. 12); ``total_inertia_kg_m2_std`` combines the fit's
-  std (``_std_fit``, white residuals assumed) with C's (``--stiffness-std``). With ``--identification`` the self-propelled
-  inertia of that DOF is compared by the campaign's rule (:func:`~hindrax_ident.identification.verdicts.
+  std (``_std_fit``, white residuals assumed) with C's (``--stiffness-std``). With ``--identification`` the
+  self-propelled inertia of that DOF is compared by the campaign's rule (:func:`~hindrax_ident.identification.verdicts.
   apply_reference_verdicts`): ``verdict`` suspect, with the ``reason``, when the two differ by more than 1.96
   combined std.
 

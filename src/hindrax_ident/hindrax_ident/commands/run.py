@@ -188,8 +188,8 @@ def _check_args(args) -> tuple[object, list[str]]:
     from ..identification.executive import expand_calibration
 
     if "float" in expand_calibration(cal) and cfg.calibration.float_net_buoyancy_n is None:
-        raise CommandError("--calibrate: the float step needs calibration.float_mass_kg and calibration.float_volume_m3 "
-                           "in the vehicle file")
+        raise CommandError("--calibrate: the float step needs calibration.float_mass_kg and "
+                           "calibration.float_volume_m3 in the vehicle file")
     return cfg, dofs
 
 

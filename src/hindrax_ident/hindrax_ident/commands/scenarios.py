@@ -73,15 +73,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, default=5, help="seeds 1..N per scenario (default 5)")
     parser.add_argument("--dofs", default=",".join(DEFAULT_DOFS), help="comma-separated DOFs (default surge,sway,"
                         "heave,yaw)")
-    parser.add_argument("--levels", type=int, default=None, help="levels per DOF (default identification.levels_per_dof)")
+    parser.add_argument("--levels", type=int, default=None,
+                        help="levels per DOF (default identification.levels_per_dof)")
     parser.add_argument("--out", default="scenario-results", help="output directory (default scenario-results/)")
     results_doc.add_argument(parser)
     add_config_argument(parser)
     parser.add_argument("--jobs", type=int, default=1, help="campaigns run in parallel processes (default 1)")
     parser.add_argument("--cache", default=None,
                         help="directory keeping each campaign's identification (pickle): a case found there is not "
-                             "run again, so the verdicts can be re-assessed and seeds added without re-running (keyed by "
-                             "scenario, seed, DOFs and levels: empty it when the vehicle file or the code changes)")
+                             "run again, so the verdicts can be re-assessed and seeds added without re-running "
+                             "(keyed by scenario, seed, DOFs and levels: empty it when the vehicle file or the code "
+                             "changes)")
     parser.add_argument("--excitation", default=None,
                         help="comma-separated force inputs to compare: ladder, multisine, prbs, chirp (default "
                              "identification.excitation of the vehicle file)")

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("--force-n", type=float, default=3.0, help="thrust per step, N (sign = direction)")
     parser.add_argument("--step-s", type=float, default=2.0, help="duration of each step on hardware, s")
     parser.add_argument("--dry-run", action="store_true", help="only print; do not drive the ESCs")
@@ -45,6 +46,7 @@ def plan(core: AllocationCore, force_n: float) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.allocation.core import AllocationCore
 
     core = AllocationCore(load_vehicle(args.config))

@@ -176,7 +176,8 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
     limits = reference_limits(cfg, setup)
     settings = ControlSettings()
     spec_ref = ReferenceModel(setup.bandwidth_rad_s, 1.0,
-                              settings.max_yaw_rate_rad_s if maneuver == "heading_step" else settings.max_depth_rate_m_s,
+                              (settings.max_yaw_rate_rad_s if maneuver == "heading_step"
+                               else settings.max_depth_rate_m_s),
                               angle=maneuver == "heading_step",
                               max_accel=limits["yaw" if maneuver == "heading_step" else "heave"])
     initial = {"depth_step": z0, "heading_step": 0.0, "altitude_hold": setup.altitude_m}[maneuver]

@@ -425,8 +425,8 @@ class Controller:
     beams are not used).
 
     Setpoints (attributes; NaN = not held): ``depth_m``; ``altitude_m`` (finite: altitude mode, when ranges arrive);
-    ``heading_rad``; ``velocity_frd_m_s`` (2,) surge, sway; ``attitude_rad`` (2,) roll, pitch. :meth:`wrench` returns the
-    body FRD wrench (6,) for one tick. Raises ``ValueError`` for an authority of the wrong shape or not > 0.
+    ``heading_rad``; ``velocity_frd_m_s`` (2,) surge, sway; ``attitude_rad`` (2,) roll, pitch. :meth:`wrench` returns
+    the body FRD wrench (6,) for one tick. Raises ``ValueError`` for an authority of the wrong shape or not > 0.
     """
 
     def __init__(self, model: ControlModel, authority, settings: ControlSettings | None = None,

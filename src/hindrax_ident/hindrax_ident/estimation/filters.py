@@ -165,6 +165,7 @@ class KinematicKalmanFilter:
             self._t = t
             self._initialised = True
             return self.state_tuple()
+        assert self._t is not None  # set with _initialised
         dt = t - self._t
         if dt < 0.0:
             raise EstimationError(f"time went backwards: {t} < {self._t}")

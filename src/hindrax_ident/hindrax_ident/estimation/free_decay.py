@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Optional, Tuple
+from typing import Any, Optional, Tuple
 
 import numpy as np
 from scipy import integrate, optimize, signal
@@ -407,7 +407,7 @@ class FreeDecayResult:
         """JSON-friendly dict: every scalar attribute (same keys), ``peaks`` (list of indices),
         ``peak_times_s`` and ``peak_amplitudes_m`` (lists); with ``include_signals`` also the
         plot arrays as lists."""
-        out = {}
+        out: dict[str, Any] = {}
         for k in self._SCALARS:
             v = getattr(self, k)
             out[k] = int(v) if k in ("n_periods", "release_index") else float(v)
@@ -506,7 +506,8 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     seq = _alternating_extrema(sx, distance)
     tail = sx[int(0.8 * sx.size):]
     noise_floor = 6.0 * float(np.std(signal.detrend(tail))) if tail.size > 2 else 0.0
-    peaks_idx, heights = [], []
+    peaks_idx: list[int] = []
+    heights: list[float] = []
     for j in range(0, len(seq) - 1, 2):
         ip, it = seq[j][0], seq[j + 1][0]
         h = sx[ip] - sx[it]

@@ -219,7 +219,7 @@ class _NamedFit:
     def to_dict(self) -> dict:
         """``{name: value, name_std: std, ..., "n": n, "residual_std": s}`` (plain floats)."""
         out: dict = {}
-        for nm, v, s in zip(self.ls.names, self.ls.theta, self.ls.std):
+        for nm, v, s in zip(self.ls.names or (), self.ls.theta, self.ls.std):
             out[nm] = float(v)
             out[f"{nm}_std"] = float(s)
         out["n"] = int(self.ls.n)
@@ -240,16 +240,14 @@ class DragFit(_NamedFit):
 
     def predict(self, velocity) -> np.ndarray:
         """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""
-        v = np.asarray(velocity, dtype=float)
-        return _drag_regressors(v, "quadratic_damping" in self.ls.names,
-                                "linear_damping" in self.ls.names,
-                                "bias" in self.ls.names) @ self.ls.theta
+        v, names = np.asarray(velocity, dtype=float), self.ls.names or ()
+        return _drag_regressors(v, "quadratic_damping" in names, "linear_damping" in names,
+                                "bias" in names) @ self.ls.theta
 
     def predict_std(self, velocity) -> np.ndarray:
         """Standard deviation of the fitted mean force at ``velocity`` (for plot bands)."""
-        v = np.asarray(velocity, dtype=float)
-        X = _drag_regressors(v, "quadratic_damping" in self.ls.names,
-                             "linear_damping" in self.ls.names, "bias" in self.ls.names)
+        v, names = np.asarray(velocity, dtype=float), self.ls.names or ()
+        X = _drag_regressors(v, "quadratic_damping" in names, "linear_damping" in names, "bias" in names)
         return np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
 
 

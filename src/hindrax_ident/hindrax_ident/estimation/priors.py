@@ -83,6 +83,11 @@ UNITS = {
 }
 
 
+def _columns(rows: Sequence[Sequence[float]]) -> tuple[list[float], list[float]]:
+    """The two columns (x, y) of a table given as rows."""
+    return [float(r[0]) for r in rows], [float(r[1]) for r in rows]
+
+
 class _Table:
     """MATLAB ``spline``/``ppval`` on one table column; records out-of-range lookups in ``notes``."""
 
@@ -131,7 +136,7 @@ class Geometry:
 def added_mass_priors(g: Geometry, notes: Optional[list] = None) -> np.ndarray:
     """(6,) diagonal added mass, kg and kg m^2 ([NTNU-Thesis] App. A.1, Sec. 3.1.3 eqs. 3.2-3.4)."""
     notes = [] if notes is None else notes
-    ca3d = _Table("added-mass 3D table", *zip(*ADDED_MASS_3D), notes)
+    ca3d = _Table("added-mass 3D table", *_columns(ADDED_MASS_3D), notes)
     col = list(zip(*ADDED_MASS_2D))
     ca2dt = _Table("added-mass 2D table (translation)", col[0], col[1], notes)
     ca2dr = _Table("added-mass 2D table (rotation)", col[0], col[2], notes)
@@ -164,8 +169,8 @@ def added_mass_priors(g: Geometry, notes: Optional[list] = None) -> np.ndarray:
 def quadratic_damping_priors(g: Geometry, notes: Optional[list] = None) -> np.ndarray:
     """(6,) diagonal quadratic damping, kg/m and kg m^2 ([NTNU-Thesis] App. A.2, eqs. 3.6-3.10)."""
     notes = [] if notes is None else notes
-    d2 = _Table("drag 2D table", *zip(*DRAG_2D), notes)
-    d3 = _Table("drag 3D table", *zip(*DRAG_3D), notes)
+    d2 = _Table("drag 2D table", *_columns(DRAG_2D), notes)
+    d3 = _Table("drag 3D table", *_columns(DRAG_3D), notes)
     L, W, H, rho = g.length_m, g.width_m, g.height_m, g.fluid_density_kg_m3
     cxy, cyz, czx = g.cp
     a = 0.5 * (H + W)
@@ -190,7 +195,7 @@ def quadratic_damping_priors(g: Geometry, notes: Optional[list] = None) -> np.nd
     return BQ
 
 
-def linear_damping_priors(quadratic: Sequence[float], restoring_n_m_per_rad: Optional[float],
+def linear_damping_priors(quadratic: Sequence[float] | np.ndarray, restoring_n_m_per_rad: Optional[float],
                           roll_inertia_kg_m2: Optional[float], pitch_inertia_kg_m2: Optional[float],
                           roll_added_kg_m2: float, pitch_added_kg_m2: float,
                           zeta: float = ZETA_ROLL_PITCH,

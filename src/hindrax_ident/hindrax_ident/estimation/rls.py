@@ -67,7 +67,8 @@ identification executive switches all of them on, :func:`hindrax_ident.identific
   1984, "Adaptive Filtering Prediction and Control", ch. 3: it must use the P^-1 metric). It is solved by an
   active set (p <= 6: at most p small solves). The recursion keeps the unconstrained estimate: feeding a
   Euclidean clip back into it (as first written) made every DOF of a campaign diverge to 1e14-1e27, because each
-  clip leaves an error the next gain K e pushes along the correlated directions. :meth:`at_bound` says which parameters sit on their bound.
+  clip leaves an error the next gain K e pushes along the correlated directions. :meth:`at_bound` says which parameters
+  sit on their bound.
 * ``change_threshold``: a change detector on the normalised a-priori error ``e^2 / (sigma2_hat (1 + phi^T P phi))``
   (chi-square with 1 degree of freedom for a correct model): when its mean over ``change_samples`` consecutive
   samples exceeds the threshold, the covariance is reset (:meth:`reset_covariance`) and the residual statistics

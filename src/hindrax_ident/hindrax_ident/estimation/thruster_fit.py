@@ -60,7 +60,7 @@ NEUTRAL_US = 1500.0
 _SCALE_US = 400.0
 
 
-def evaluate_cubic(c4: float, c3: float, c2: float, c1: float, pulse_width_us) -> np.ndarray:
+def evaluate_cubic(c4: float, c3: float, c2: float, c1: float, pulse_width_us) -> float | np.ndarray:
     """tau = c4 P^3 + c3 P^2 + c2 P + c1 in N at pulse widths P in us ([Hindrax-Drag] eq. 1).
 
     Returns a float for scalar input, an array otherwise.
@@ -120,12 +120,12 @@ class CubicFit:
         s = (P - self.centre_us) / self.scale_us
         return np.column_stack([s**3, s**2, s, np.ones_like(s)])
 
-    def predict(self, pulse_width_us) -> np.ndarray:
+    def predict(self, pulse_width_us) -> float | np.ndarray:
         """Thrust in N at pulse widths in us (evaluated in the centred form)."""
         out = self._centred_rows(pulse_width_us) @ self.ls.theta
         return float(out[0]) if np.ndim(pulse_width_us) == 0 else out
 
-    def predict_std(self, pulse_width_us) -> np.ndarray:
+    def predict_std(self, pulse_width_us) -> float | np.ndarray:
         """Standard deviation in N of the fitted mean thrust at pulse widths in us."""
         X = self._centred_rows(pulse_width_us)
         out = np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
@@ -165,7 +165,7 @@ class ThrusterCurveFit:
     positive: CubicFit
     neutral_us: float
 
-    def predict(self, pulse_width_us) -> np.ndarray:
+    def predict(self, pulse_width_us) -> float | np.ndarray:
         """Thrust in N: negative cubic below neutral, positive above, 0 at neutral exactly."""
         P = np.asarray(pulse_width_us, dtype=float)
         flat = np.atleast_1d(P).ravel()
@@ -178,7 +178,10 @@ class ThrusterCurveFit:
         return float(out[0]) if P.ndim == 0 else out.reshape(P.shape)
 
     def relative_std(self) -> Tuple[float, float]:
-        """(negative, positive) :meth:`CubicFit.relative_std`: the value for ``thrusters.thrust_fit_uncertainty_rel``."""
+        """(negative, positive) :meth:`CubicFit.relative_std`.
+
+        The value for ``thrusters.thrust_fit_uncertainty_rel``.
+        """
         return (self.negative.relative_std(), self.positive.relative_std())
 
     def to_dict(self) -> dict:

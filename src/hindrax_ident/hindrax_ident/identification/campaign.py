@@ -195,7 +195,8 @@ class Campaign:
             ex.operator_continue()
         if ex.calibrate or self.operator.active or self._external_used:
             self._external_used = True  # the simulator holds the last external wrench: keep setting it
-            self.sim.advance(self.tick_s, wire, external_wrench_frd=self.operator.external_wrench_frd(self.sim.rotation))
+            self.sim.advance(self.tick_s, wire,
+                             external_wrench_frd=self.operator.external_wrench_frd(self.sim.rotation))
         else:
             self.sim.advance(self.tick_s, wire)
         pending, self._pending = self._pending, []

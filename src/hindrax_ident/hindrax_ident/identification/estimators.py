@@ -48,7 +48,8 @@ Methods:
    deviation (measured on one graph campaign: 3.0 % at 3 s, 1.6 % at 5 s, 0.65 % at 10 s, errors within
    about one of them). Covariance: sigma^2 (J^T J)^-1 with sigma^2 = SSR / (n - p)
    ([Hindrax-Drag] eq. 8 analogue), inflated by (1 + rho) / (1 - rho) for the lag-1 autocorrelation rho of
-   consecutive residual samples within segments (effective sample size of AR(1) residuals). 95 % intervals are Student-t.
+   consecutive residual samples within segments (effective sample size of AR(1) residuals). 95 % intervals are
+   Student-t.
 4. The seed's own method (:func:`steady_state_fit`): steady windows detected automatically
    (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity per run,
    then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag] eqs. 2-8).
@@ -114,7 +115,10 @@ def parameter_units(dof: str) -> dict[str, str]:
 
 
 def restoring_regressor(dof: str, roll_rad, pitch_rad) -> np.ndarray:
-    """Restoring column s(eta): roll cos(theta) sin(phi), pitch sin(theta) (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23)."""
+    """Restoring column s(eta): roll cos(theta) sin(phi), pitch sin(theta).
+
+    Source: docs/identification.md §1.A, [NTNU-Thesis] eq. 2.23.
+    """
     if dof == "roll":
         return np.cos(pitch_rad) * np.sin(roll_rad)
     return np.sin(pitch_rad)
@@ -169,8 +173,8 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
     heave; then also "accel_std" and "accel_jerk_psd", :mod:`.fusion`)}. The noise std comes from
     the noise the vehicle file declares (``sensors.dvl75.noise_std_m_s``, ``scale_error_fraction``,
     ``attitude_noise_std_rad``, ``sensors.ms5837.noise_std_pa``, ``sensors.icm20948.*_noise_std_*``; else
-    ``sensors.dvl75.velocity_std_m_s`` / typical values), never the simulator's truth; q = std^2 w^k puts the filter bandwidth near
-    w = 12 rad/s (translation) or 20 rad/s (rotation) (filters.py: bandwidth ~ (q / std^2)^(1/4) for
+    ``sensors.dvl75.velocity_std_m_s`` / typical values), never the simulator's truth; q = std^2 w^k puts the filter
+    bandwidth near w = 12 rad/s (translation) or 20 rad/s (rotation) (filters.py: bandwidth ~ (q / std^2)^(1/4) for
     velocity and ^(1/6) for position measurements).
     """
     f = cfg.flat

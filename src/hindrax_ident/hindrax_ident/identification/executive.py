@@ -52,7 +52,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from .estimators import OnlineDofEstimator, measurement_settings
 from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
-from .maneuvers import DOF_INDEX, DepthEstimator, level_ladder
+from .maneuvers import DepthEstimator, level_ladder
 from .signals import STILL_MESSAGE
 from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Dive,
                     Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder)
@@ -261,7 +261,8 @@ class Executive:
         if float_buoyancy_n is None:
             float_buoyancy_n = float_buoyancy(cfg) if "float" in calibrate else 0.0
         if "ballast" in calibrate and not _positive(ballast_weight_in_water_n):
-            raise ValueError(f"ballast_weight_in_water_n must be > 0 N for the ballast step, got {ballast_weight_in_water_n}")
+            raise ValueError("ballast_weight_in_water_n must be > 0 N for the ballast step, "
+                             f"got {ballast_weight_in_water_n}")
         for name in ("line_pull", "line_pull_negative"):
             if name in calibrate and not _positive(line_pull_n):
                 raise ValueError(f"line_pull_n must be > 0 N for the {name} step, got {line_pull_n}")
@@ -507,7 +508,8 @@ class Executive:
             t_s=np.asarray(r["t"]), wrench_frd=np.asarray(r["w"]).reshape(-1, 6),
             wrench_cmd_frd=np.asarray(r["wc"]).reshape(-1, 6), active=np.asarray(r["active"], dtype=int),
             level=np.asarray(r["level"], dtype=float), run_id=np.asarray(r["run"], dtype=int),
-            truth_position_ned_m=nan3 if truth_position_ned_m is None else np.asarray(truth_position_ned_m).reshape(-1, 3),
+            truth_position_ned_m=(nan3 if truth_position_ned_m is None
+                                  else np.asarray(truth_position_ned_m).reshape(-1, 3)),
             truth_euler_rad=nan3.copy() if truth_euler_rad is None else np.asarray(truth_euler_rad).reshape(-1, 3),
             sensors=ctx.state.log, windows=dict(ctx.windows), online=self.online, levels=ctx.levels,
             authority=ctx.authority, aborted=self.aborted, abort_reason=self.abort_reason, wall_time_s=wall_time_s,

@@ -711,7 +711,8 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
     inertia = fit_core.inertia_vector(results)
     pre_notes["timing"] = {d: {"delay_s": round(r.timing.delay_s, 4), "lag_s": round(r.timing.lag_s, 4),
                                "source": r.timing.source} for d, r in results.items()}
-    pre_notes["delay_method"] = ("per DOF: a commanded wrench's delay is the force shift (0.." f"{opts.max_delay_s:g} s) "
+    pre_notes["delay_method"] = ("per DOF: a commanded wrench's delay is the force shift "
+                                 f"(0..{opts.max_delay_s:g} s) "
                                  "minimising the equation-error residual (parabola refinement), then the first-order "
                                  "lag tau among 0, d/2, d with the smallest training output error (delay d - tau); a "
                                  "thrust-model force keeps thrusters.time_constant_s and esc.output_latency_s")

@@ -28,7 +28,8 @@ def _plot(r, path: Path, h: float) -> None:
         t = (i * L + np.arange(L)) * h
         ok = valid[i]
         ax.plot(t[ok], meas[i, ok], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
-        ax.plot(t[ok], pred[i, ok], "C1-", lw=1.2, label="predicted (open loop from the segment start)" if i == 0 else None)
+        ax.plot(t[ok], pred[i, ok], "C1-", lw=1.2,
+                label="predicted (open loop from the segment start)" if i == 0 else None)
         ax.plot(t[ok], np.full(ok.sum(), meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
         ax.axvline(t[0], color="0.85", lw=0.8)
     unit = "rad/s" if r.dof in ("roll", "pitch", "yaw") else "m/s"
@@ -98,7 +99,8 @@ def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
             if not isinstance(v, dict) or "nrmse" not in v:
                 continue
             parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in (
-                dof, key, f"{v['nrmse']:.3f}", f"{v.get('nrmse_hold', float('nan')):.3f}", f"{v.get('nrmse_zero', float('nan')):.3f}", v["samples"]))
+                dof, key, f"{v['nrmse']:.3f}", f"{v.get('nrmse_hold', float('nan')):.3f}",
+                f"{v.get('nrmse_zero', float('nan')):.3f}", v["samples"]))
                 + "</tr>")
     parts.append("</table><p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred "
                  "simulated open loop from the recorded force and re-initialised from the measured velocity at the "

@@ -459,7 +459,10 @@ class HoldController:
         self.core.axes["heave"].reset_integral()
 
     def note_allocation(self, requested_frd, achieved_frd) -> None:
-        """Anti-windup from the thrust allocation's result (:meth:`~hindrax_ident.control.law.Controller.note_allocation`)."""
+        """Anti-windup from the thrust allocation's result.
+
+        As :meth:`~hindrax_ident.control.law.Controller.note_allocation`.
+        """
         self.core.note_allocation(requested_frd, achieved_frd)
 
     def control_input(self, st: SensorState, t_s: float | None = None) -> ControlInput:

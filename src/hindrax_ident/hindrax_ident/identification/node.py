@@ -26,9 +26,9 @@ Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     ladders). Rejected when a goal is running or the goal is invalid (unknown DOF or step, fraction out of
     range, calibration_only without a step). The goal fails at once when the ESC output is not armed. Feedback
     at every level change, at every operator prompt and once per second: DOF, level index and count, level
-    command (N or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel): the node publishes a
-    zero wrench every tick until the ESC node reports neutral widths (zero thrust on every thruster, or
-    disarmed) or ``stop_timeout_s`` has passed, and only then ends the action; afterwards it publishes no
+    command (N or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel):
+    the node publishes a zero wrench every tick until the ESC node reports neutral widths (zero thrust on every
+    thruster, or disarmed) or ``stop_timeout_s`` has passed, and only then ends the action; afterwards it publishes no
     wrench (the allocation's wrench timeout keeps the thrusters neutral). Result: success, message (abort
     reason, ``cancelled``; after calibration steps also the thrust scales measured), the final online estimate of
     every DOF.
@@ -95,7 +95,8 @@ from . import calibration_topic
 from .estimators import parameter_units
 from .executive import (CALIBRATION_STEPS, CampaignRecord, Executive, ExecutiveStatus, TickInput,
                         calibration_forces, inclining_load, ordered_samples)
-from .signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu, thrust_of_written_widths
+from .signals import (sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu,
+                      thrust_of_written_widths)
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 
@@ -526,7 +527,7 @@ def main(args: list[str] | None = None) -> int:
     ended by :meth:`IdentificationNode.close`). Returns the exit status (1 on an invalid configuration).
 
     The node spins rclpy's SingleThreadedExecutor, not the EventsExecutor of the other node processes: the action's
-    execute coroutine awaits a future, and the EventsExecutor (rclpy 7.3) polls such a task in a busy loop
+    execute coroutine awaits a future, and the EventsExecutor (rclpy 7.1) polls such a task in a busy loop
     (measured in the launch layout: 72 % of a core while a goal runs, 20 % with the SingleThreadedExecutor)."""
     return run_node(IdentificationNode, args, executor="single")
 

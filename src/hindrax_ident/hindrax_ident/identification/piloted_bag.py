@@ -263,7 +263,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
         else:
             w.add_topic("/odometry", "nav_msgs/msg/Odometry")
         out: list[tuple[int, str, bytes]] = []
-        r_imu = np.diag([1.0, -1.0, -1.0])  # imu_link axes in base_link: 180 deg about x
+        r_imu = frames.R_FLU_FRD  # imu_link axes in base_link: pi about x, the FLU <-> FRD rotation
         if s.imu and not dvl:
             from geometry_msgs.msg import TransformStamped
             from tf2_msgs.msg import TFMessage

@@ -43,8 +43,8 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-__all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry", "write_identification",
-           "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "prior_entries"]
+__all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry",
+           "write_identification", "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "prior_entries"]
 
 SCHEMA_VERSION = 1
 
@@ -101,9 +101,9 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
         out["reynolds_range"] = [lo, hi]
     except (EstimationError, ValueError):
         out["reynolds_range"] = None
-    out["definition"] = (f"C_D = 2 k_q / (rho A_p), A_p = {a} x {b} of the configuration (assumed: [Hindrax-Drag] prints "
-                         "no areas); Re = |v| V^(1/3) / 1.01e-6 m^2/s over speeds above "
-                         f"{REYNOLDS_MIN_SPEED_M_S:g} m/s")
+    out["definition"] = (f"C_D = 2 k_q / (rho A_p), A_p = {a} x {b} of the configuration "
+                         "(assumed: [Hindrax-Drag] prints no areas); Re = |v| V^(1/3) / 1.01e-6 m^2/s "
+                         f"over speeds above {REYNOLDS_MIN_SPEED_M_S:g} m/s")
     return out
 
 

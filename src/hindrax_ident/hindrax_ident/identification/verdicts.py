@@ -28,9 +28,10 @@ and
    * ``bias``: the constant force differs significantly from the one expected (0; heave: the configured net
      buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide.
    * ``methods``: the seed's steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported
-     quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not explain the transients and the
-     steady states with the same numbers (lag, latency, coupling). DOF-wide. (The equation-error fit is not used:
-     its inertia is biased low by the noise of the differentiated velocity even when nothing is wrong.)
+     quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not
+     explain the transients and the steady states with the same numbers (lag, latency, coupling). DOF-wide. (The
+     equation-error fit is not used: its inertia is biased low by the noise of the differentiated velocity even when
+     nothing is wrong.)
    * ``direction``: the steady-window misfits (relative to the model force) of the two directions of motion differ
      by more than :data:`DIRECTION_MAX` and beyond their scatter (z > 4) (heave: up/down; others: forward/backward),
      a level-to-level inconsistency. DOF-wide.
@@ -63,7 +64,8 @@ from scipy import stats
 
 from hindrax_drivers.config import VehicleConfig
 
-__all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std", "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
+__all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
+           "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "segment_count", "assess_dof", "apply_verdicts", "spread_reasons", "data_advice", "fit_parameter_verdicts",
            "ADVICE_TARGET"]
 
@@ -421,7 +423,8 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     elif name.startswith("quadratic"):
         used = np.abs(vv) >= 0.5 * vmax if vmax > 0 else np.zeros(v.size, bool)
         hi = max(vmax, 1e-3)
-        man = f"{dof}{direction}: steady runs of 5 s or more in the top half of the speeds (and faster if the pool allows)"
+        man = (f"{dof}{direction}: steady runs of 5 s or more in the top half of the speeds "
+               "(and faster if the pool allows)")
         lo = 0.5 * hi
     elif name.startswith("linear"):
         used = (np.abs(vv) > 0.05 * vmax) & (np.abs(vv) <= vmax / 3.0) if vmax > 0 else np.zeros(v.size, bool)
@@ -452,7 +455,8 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
         ratio = half_width / (ADVICE_TARGET * abs(value))
         more = max(ADVICE_MIN_S, max(t_in, ADVICE_MIN_S) * (ratio ** 2 - 1.0)) if ratio > 1 else 0.0
         why = (f"95 % half-width {100 * half_width / abs(value):.0f} % of the value; {t_in:.0f} s of that manoeuvre "
-               f"in the data, the variance falls as 1 / seconds: about {more:.0f} s more for +-{100 * ADVICE_TARGET:.0f} %")
+               f"in the data, the variance falls as 1 / seconds: about {more:.0f} s more for "
+               f"+-{100 * ADVICE_TARGET:.0f} %")
     return {"dof": dof, "manoeuvre": man, "speed_range": [round(lo, 3), round(hi, 3), unit],
             "seconds_in_data": round(t_in, 1), "seconds_more": round(float(more), 0), "why": why}
 

@@ -1,7 +1,7 @@
 """6-DOF Fossen model of Hindrax: rigid body + added mass + Coriolis + damping + restoring, pure numpy.
 
-Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eqs. 2.1, 2.6-2.7, 2.22-2.23, 2.80-2.83, 2.90),
-body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
+Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eqs. 2.1, 2.6-2.7, 2.22-2.23, 2.80-2.83,
+2.90), body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
 
     eta_dot = J(eta) nu                      (position in NED, attitude as a unit quaternion)
     (M_RB + M_A) nu_dot + C_RB(nu) nu + C_A(nu) nu + D(nu) nu + g(eta) = tau
@@ -24,8 +24,8 @@ body frame FRD, world frame NED, nu = [u v w p q r], tau = [X Y Z K M N]:
   coefficient pair chosen by the sign of the velocity; heave uses the ``*_positive`` pair for w > 0 (moving
   down, [Hindrax-Drag] §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
 * g(eta) = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B]
-  (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.22-2.23 with the corrected sign of f_b). W = m g and B = rho g V from the
-  configuration; B is multiplied by the submerged fraction of a free-surface model when one is given (the
+  (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.22-2.23 with the corrected sign of f_b). W = m g and B = rho g V
+  from the configuration; B is multiplied by the submerged fraction of a free-surface model when one is given (the
   hull emerging at the surface, :mod:`.pool`), otherwise the vehicle is fully submerged.
 * Kinematics with a unit quaternion q = (x, y, z, w) of the body FRD in NED (no Euler singularity):
   ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an output only.
@@ -105,7 +105,8 @@ def coriolis_rigid_body(mass_kg: float, r_g_m, inertia_o_kg_m2, nu) -> np.ndarra
 def coriolis_added_mass(added_mass, nu) -> np.ndarray:
     """C_A(nu) (6x6) from the positive added-mass matrix M_A (6x6): [0, -S(a1); -S(a1), -S(a2)], a = M_A nu.
 
-    Fossen 2011; equals docs/identification.md §1.A, [NTNU-Thesis] eq. 2.83 for a diagonal M_A = -diag(X_udot ... N_rdot).
+    Fossen 2011; equals docs/identification.md §1.A, [NTNU-Thesis] eq. 2.83 for a diagonal M_A = -diag(X_udot ...
+    N_rdot).
     """
     a = np.asarray(added_mass, dtype=float) @ np.asarray(nu, dtype=float)
     s1, s2 = skew(a[:3]), skew(a[3:])
@@ -125,7 +126,8 @@ def damping_vector(nu, linear_positive, linear_negative, quadratic_positive, qua
 
 
 def restoring_vector(rotation_ned_from_body, weight_n: float, buoyancy_n: float, r_g_m, r_b_m) -> np.ndarray:
-    """g(eta) (6,) on the left-hand side of the equations of motion (docs/identification.md §1.A, [NTNU-Thesis] eq. 2.22).
+    """g(eta) (6,) on the left-hand side of the equations of motion (docs/identification.md §1.A, [NTNU-Thesis] eq.
+    2.22).
 
     g = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B] (NED).
     rotation_ned_from_body (3, 3): R, body FRD to NED. W, B in N; r_g, r_b (3,) from CO, FRD, m.

@@ -127,7 +127,8 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
             _spin_until(graph, flushed, timeout_s, "the recorder wrote every published message")
         except TimeoutError:
             got = recorder._writer.topic_counts()
-            raise TimeoutError("lagging: " + str({t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}))
+            lagging = {t: (n, got.get(t)) for t, n in published.items() if got.get(t, 0) < n}
+            raise TimeoutError(f"lagging: {lagging}")
         counting[0] = False
         recorder.stop_recording()
     finally:
@@ -152,6 +153,7 @@ def write_sim_bag(bag_dir: Path, duration_s: float, overrides: dict[str, Any], c
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name); returns the exit code."""
     parser = argparse.ArgumentParser(prog="record_bag", description=__doc__.splitlines()[0])
     parser.add_argument("--out", default=str(default_output_dir()), help="directory to write the bags into")
     args = parser.parse_args(argv)

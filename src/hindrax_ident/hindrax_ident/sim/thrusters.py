@@ -6,8 +6,8 @@
   the body origin CO with the CG at r_g, so the wrench about CO is ``[F; T_cg + r_g x F]``
   (``matrix_co``; identical when r_g = 0, as in the Hindrax file).
 * Thrust: one :class:`hindrax_drivers.allocation.thrust_curve.ThrustCurve` from ``thrusters.curve_negative``,
-  ``curve_positive``, the pulse-width range and the deadband ([Hindrax-Drag] eq. 1, Table 2; docs/architecture.md §4). The
-  pulse widths are those on the wire (``hindrax_msgs/ThrusterPwm``: what the ESC output wrote). A thruster
+  ``curve_positive``, the pulse-width range and the deadband ([Hindrax-Drag] eq. 1, Table 2; docs/architecture.md §4).
+  The pulse widths are those on the wire (``hindrax_msgs/ThrusterPwm``: what the ESC output wrote). A thruster
   configured ``reversed`` has its pulse width mirrored about neutral by the ESC node and a reversed
   propeller, so its physical thrust along ``direction_frd`` is ``curve(2 P_neutral - P)``. The per-thruster
   ``trim_us`` compensates a real ESC's offset; the simulated ESCs have none, so the trim is not undone.

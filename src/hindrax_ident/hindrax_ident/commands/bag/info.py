@@ -10,10 +10,12 @@ import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("bag", help="bag directory or .mcap file")
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.recording.info import bag_info, format_bag_info
     from hindrax_drivers.recording.reader import BagError
 

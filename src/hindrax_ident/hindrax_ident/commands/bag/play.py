@@ -13,6 +13,7 @@ import argparse
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("bag", help="bag directory or .mcap file")
     parser.add_argument("--rate", type=float, default=1.0, help="playback rate factor (default 1)")
     parser.add_argument("--start-offset", type=float, default=0.0, metavar="S",
@@ -26,6 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from rclpy.parameter import Parameter
 
     from hindrax_drivers.recording.player_node import BagPlayerNode, PlayerError

@@ -17,6 +17,7 @@ from ..common import CommandError, add_config_argument
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="topics to record")
     parser.add_argument("--regex", default="", help="record topics matching this regular expression")
     parser.add_argument("--all", action="store_true", dest="all_topics", help="record every (non-hidden) topic")
@@ -28,6 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     import rclpy
     from rclpy.parameter import Parameter
 

@@ -12,12 +12,14 @@ import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the command's options and arguments to ``parser``."""
     parser.add_argument("bag", help="bag directory or .mcap file")
     parser.add_argument("--keep-original", action="store_true",
                         help="keep each damaged file beside the repaired one as <name>.truncated")
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.recording.recover import RecoverError, recover_bag
 
     try:
