@@ -14,6 +14,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 
 from hindrax_msgs.msg import RawDeviceData
 
@@ -334,3 +335,30 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
         proc.executor.add_node(node)
         proc.executor.spin()
     return proc.status
+
+
+def declare_frame_ids(node: Any, defaults: dict[str, str]) -> dict[str, str]:
+    """Declare a node's frame ids as read-only string parameters and return their values.
+
+    ``defaults`` maps a parameter name (``frame_id``, ``base_frame_id``, ...) to its REP-103/REP-105 default
+    (``imu_link``, ``base_link``, ``odom``), the frames the static TF node publishes (docs/architecture.md §3). As
+    the ROS drivers do (nmea_navsat_driver, phidgets), a vehicle with other frame names sets them with
+    ``-p frame_id:=...`` instead of editing code. A value that is already declared (a composed process) is reused.
+
+    Raises:
+        ValueError: an empty frame id or one starting with ``/`` (tf2 frame ids have no leading slash), naming the
+            parameter and the value in one line.
+    """
+    out: dict[str, str] = {}
+    for name, default in defaults.items():
+        if node.has_parameter(name):
+            value = node.get_parameter(name).value
+        else:
+            value = node.declare_parameter(name, default, ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING, read_only=True,
+                description=f"frame id of the published messages' headers (REP-103/105 default {default!r})")).value
+        value = str(value)
+        if not value or value.startswith("/"):
+            raise ValueError(f"parameter {name}: {value!r} is not a tf2 frame id (non-empty, no leading '/')")
+        out[name] = value
+    return out

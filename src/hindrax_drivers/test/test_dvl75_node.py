@@ -554,3 +554,13 @@ def test_stream_decoder_counts_are_exact_and_independent_of_chunking():
         assert d.counts["garbage_bytes"] == 3 + 20 and d.counts["malformed"] == 0
         assert [type(x).__name__ for x in recs].count("DvlPositionDelta") == 3
         assert [type(x).__name__ for x in recs].count("DvlExtended") == 1
+
+
+def test_frame_ids_are_parameters_with_rep103_defaults():
+    """``frame_id`` (the beam's Range) and ``base_frame_id`` (velocity) set by parameter reach every header."""
+    frames = [Parameter("frame_id", value="dvl_down"), Parameter("base_frame_id", value="hull")]
+    with rig(STEADY, extra_params=frames) as r:
+        r.wait(lambda: len(r.valid()) >= 2 and len(r.twist) >= 2 and len(r.altitude) >= 2, message="DVL data")
+        assert {m.header.frame_id for m in r.valid()} == {"hull"}
+        assert {m.header.frame_id for m, _ in r.twist} == {"hull"}
+        assert {m.header.frame_id for m, _ in r.altitude} == {"dvl_down"}

@@ -289,3 +289,10 @@ def test_stream_decoder_tells_truncated_from_corrupted_frames_for_any_chunking()
         assert [o.payload.ping_number for o in out] == [3, 0]
         assert d.counts == {"garbage_bytes": 2 + 3, "truncated": 3, "bad_checksum": 2, "unknown_message": 0,
                             "malformed": 0}
+
+
+def test_frame_id_is_a_parameter():
+    """``frame_id`` (default ``ping_link``, the frame the static TF node publishes) reaches the Range header."""
+    with rig(Ping1dTruth(altitude_m=2.0, confidence_pct=90), extra_params=[Parameter("frame_id", value="sonar")]) as r:
+        r.wait(lambda: len(r.ranges) >= 2, message="ranges")
+        assert {m.header.frame_id for m in r.ranges} == {"sonar"}

@@ -61,7 +61,7 @@ from sensor_msgs.msg import Range
 from hindrax_msgs.msg import Dvl
 
 from ..device_clock import DeviceClockSync
-from ..node_common import DEFAULT_QOS_DEPTH, run_node, time_from_ns
+from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
 from .protocol import DvlExtended, DvlGprmc, DvlPositionDelta, DvlText, startup_commands
 from .report import DvlReport, DvlReportBuilder, altitude_range_m
@@ -97,6 +97,7 @@ class Dvl75Node(SerialDeviceNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("dvl75", device_name="dvl75", config_section="sensors.dvl75",
                          command_gap_s=COMMAND_GAP_S, **kwargs)
+        self.frames = declare_frame_ids(self, {"frame_id": "dvl_link", "base_frame_id": "base_link"})
         s = self.settings
         self.sensor_orientation_rpy_rad = tuple(float(a) for a in s["sensor_orientation_rpy_rad"])
         self.speed_of_sound_m_s = float(s["speed_of_sound_m_s"])
@@ -201,7 +202,7 @@ class Dvl75Node(SerialDeviceNode):
             return  # a stuck DVL's altitude is not published (ERROR "stuck" in /diagnostics)
         rng = Range()
         rng.header.stamp = time_from_ns(receive_ns)
-        rng.header.frame_id = "dvl_link"
+        rng.header.frame_id = self.frames["frame_id"]
         rng.radiation_type = Range.ULTRASOUND
         rng.field_of_view = float(ALTITUDE_FIELD_OF_VIEW_RAD)
         rng.min_range = float(ALTITUDE_MIN_RANGE_M)
@@ -215,7 +216,7 @@ class Dvl75Node(SerialDeviceNode):
     def _publish(self, r: DvlReport, stamp_ns: int, receive_ns: int) -> None:
         msg = Dvl()
         msg.header.stamp = time_from_ns(stamp_ns)
-        msg.header.frame_id = "base_link"
+        msg.header.frame_id = self.frames["base_frame_id"]
         msg.velocity_m_s = Vector3(x=r.velocity_flu_m_s[0], y=r.velocity_flu_m_s[1], z=r.velocity_flu_m_s[2])
         msg.velocity_covariance = list(r.velocity_covariance)
         msg.velocity_valid = r.velocity_valid

@@ -126,7 +126,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
-                           StuckDetector, load_node_config, run_node)
+                           StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
 from .mounting import mounting_rotation
@@ -295,6 +295,7 @@ class Icm20948Node(Node):
 
     def __init__(self, bus: Any = None, **kwargs: Any):
         super().__init__("icm20948", **kwargs)
+        self.frames = declare_frame_ids(self, {"frame_id": FRAME_ID})
         cfg = load_node_config(self, ("sensors.icm20948",))
         s = cfg.section("sensors.icm20948")
         self.i2c_bus_number = int(s["i2c_bus"])
@@ -692,7 +693,7 @@ class Icm20948Node(Node):
         stamp_msg = stamp.to_msg()
 
         imu = Imu()
-        imu.header.stamp, imu.header.frame_id = stamp_msg, FRAME_ID
+        imu.header.stamp, imu.header.frame_id = stamp_msg, self.frames["frame_id"]
         imu.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
         acc = self.rotation @ sample.accel_m_s2
         gyr = self.rotation @ (sample.gyro_rad_s - self.gyro_bias_rad_s)
@@ -704,7 +705,7 @@ class Icm20948Node(Node):
 
         if self._temperature_count % self.temperature_every == 0:
             tm = Temperature()
-            tm.header.stamp, tm.header.frame_id = stamp_msg, FRAME_ID
+            tm.header.stamp, tm.header.frame_id = stamp_msg, self.frames["frame_id"]
             tm.temperature = float(sample.temperature_c)
             tm.variance = self.temperature_var
             self.pub_temperature.publish(tm)
@@ -788,7 +789,7 @@ class Icm20948Node(Node):
             return
         field_t = self.rotation @ mag.magnetic_field_t
         msg = MagneticField()
-        msg.header.stamp, msg.header.frame_id = stamp_msg, FRAME_ID
+        msg.header.stamp, msg.header.frame_id = stamp_msg, self.frames["frame_id"]
         msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = (float(v) for v in field_t)
         # magnetic_field_covariance stays all 0: unknown (sensor_msgs/MagneticField definition)
         self.pub_mag.publish(msg)

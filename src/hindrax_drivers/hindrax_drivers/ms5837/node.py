@@ -97,7 +97,7 @@ from sensor_msgs.msg import FluidPressure, Temperature
 from std_srvs.srv import Trigger
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
-                           StuckDetector, load_node_config, run_node)
+                           StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
 
@@ -196,6 +196,7 @@ class Ms5837Node(Node):
 
     def __init__(self, bus: Any = None, **kwargs: Any):
         super().__init__("ms5837", **kwargs)
+        self.frames = declare_frame_ids(self, {"frame_id": SENSOR_FRAME_ID, "depth_frame_id": DEPTH_FRAME_ID})
         # The surface pressure is the one key applied while running (hindrax zero_depth and ros2 param set).
         cfg = load_node_config(self, ("sensors.ms5837", "environment"), dynamic=("environment.surface_pressure_pa",),
                                on_change=self._on_vehicle_parameters)
@@ -459,19 +460,19 @@ class Ms5837Node(Node):
             self._recent.popleft()
 
         fp = FluidPressure()
-        fp.header.stamp, fp.header.frame_id = stamp_msg, SENSOR_FRAME_ID
+        fp.header.stamp, fp.header.frame_id = stamp_msg, self.frames["frame_id"]
         fp.fluid_pressure = reading.pressure_pa
         fp.variance = self.pressure_variance_pa2
         self.pub_pressure.publish(fp)
 
         tm = Temperature()
-        tm.header.stamp, tm.header.frame_id = stamp_msg, SENSOR_FRAME_ID
+        tm.header.stamp, tm.header.frame_id = stamp_msg, self.frames["frame_id"]
         tm.temperature = reading.temperature_c
         tm.variance = TEMPERATURE_RESOLUTION_C ** 2
         self.pub_temperature.publish(tm)
 
         depth = PoseWithCovarianceStamped()
-        depth.header.stamp, depth.header.frame_id = stamp_msg, DEPTH_FRAME_ID
+        depth.header.stamp, depth.header.frame_id = stamp_msg, self.frames["depth_frame_id"]
         depth.pose.pose.position.z = -self.depth_m(reading.pressure_pa)
         cov = [0.0] * 36
         for i in (0, 7, 21, 28, 35):

@@ -47,7 +47,7 @@ from typing import Any, Iterable, List, Optional, Tuple
 from sensor_msgs.msg import Range
 from std_msgs.msg import Float32
 
-from ..node_common import DEFAULT_QOS_DEPTH, run_node, time_from_ns
+from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
 from .protocol import (
     SYNC_BYTE,
@@ -107,6 +107,7 @@ class Ping1dNode(SerialDeviceNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("ping1d", device_name="ping1d", config_section="sensors.ping1d",
                          command_gap_s=COMMAND_GAP_S, **kwargs)
+        self.frames = declare_frame_ids(self, {"frame_id": "ping_link"})
         s = self.settings
         self.speed_of_sound_m_s = float(s["speed_of_sound_m_s"])
         self.ping_interval_s = float(s["ping_interval_s"])
@@ -204,7 +205,7 @@ class Ping1dNode(SerialDeviceNode):
         stamp = time_from_ns(receive_ns)
         rng = Range()
         rng.header.stamp = stamp
-        rng.header.frame_id = "ping_link"
+        rng.header.frame_id = self.frames["frame_id"]
         rng.radiation_type = Range.ULTRASOUND
         rng.field_of_view = self.field_of_view_rad
         rng.min_range = self.min_range_m
