@@ -381,14 +381,13 @@ def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any],
         r.signals["thrust_sensitivity"] = {n: [float(v) for v in sens[d][n]] for n in a}
 
 
-def identify_calibrated(record: Any, cfg, identify=None) -> tuple[dict, dict]:
+def identify_calibrated(record: Any, cfg, identify) -> tuple[dict, dict]:
     """({dof: DofIdentification}, {dof: error}) of ``record`` with its calibration applied
     (:func:`apply_thrust_calibration` with ``cfg``) and each DOF's sensitivity to the thrust scales measured
     (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate` (through :func:`~.results.build_results`).
-    identify: the fit of every DOF with a window in the record (default
-    :func:`~.estimators.identify_all_with_errors`), called as identify(record, cfg)."""
-    if identify is None:
-        from .estimators import identify_all_with_errors as identify
+    identify: the fit of every DOF with a window in the record, called as identify(record, cfg)
+    (:func:`~.estimators.identify_all_with_errors`; passed in, as estimators depends on this module through
+    results)."""
     idents, errors = identify(apply_thrust_calibration(record, cfg=cfg), cfg)
     attach_thrust_sensitivities(record, idents, cfg, identify)
     return idents, errors

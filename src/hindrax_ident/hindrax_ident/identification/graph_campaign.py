@@ -302,9 +302,11 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     import dataclasses
 
     from .calibration import identify_calibrated
+    from .estimators import identify_all_with_errors
     try:
         record = record_from_bag(bag_dir, cfg)
-        idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg)
+        idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg,
+                                             identify_all_with_errors)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
