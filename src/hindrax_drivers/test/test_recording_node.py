@@ -6,6 +6,7 @@ recorder/start and recorder/stop, publishes from its own process and checks the 
 from __future__ import annotations
 
 import subprocess
+import time
 
 import pytest
 import rclpy
@@ -94,6 +95,7 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
     latched.publish(String(data="published before the recording started"))
 
     bag1 = tmp_path / "bag1"
+    t_start_ns = time.time_ns()
     res = call(r["start"], StartRecording.Request(output_dir=str(bag1),
                                                   topics=["/n/imu", "/n/latched", "/n/raw", "/n/late"]))
     assert res.success and res.bag_path == str(bag1), res.message
@@ -116,6 +118,7 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
     wait_until(lambda: all(counts.get(t) == n for t, n in expected.items()), 15, spin,
                f"recorder counts {expected}")
     res = call(r["stop"], StopRecording.Request())
+    t_stop_ns = time.time_ns()
     assert res.success and res.message_count == 111 and res.bag_path == str(bag1)
 
     meta = read_metadata(bag1)
@@ -131,6 +134,13 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
     assert [m.linear_acceleration.x for m in by_topic["/n/imu"]] == [float(i) for i in range(50)]
     assert [bytes(m.data) for m in by_topic["/n/raw"]] == [bytes([i, 255 - i]) for i in range(50)]
     assert by_topic["/n/latched"][0].data == "published before the recording started"
+    # publish time = log time = the recorder's clock at reception (recorder_node docstring), here system time
+    from mcap.reader import make_reader
+
+    with open(next(bag1.glob("*.mcap")), "rb") as f:
+        times = [(m.log_time, m.publish_time) for _, _, m in make_reader(f).iter_messages()]
+    assert len(times) == 111 and all(log == pub for log, pub in times)
+    assert t_start_ns <= min(times)[0] and max(times)[0] <= t_stop_ns
 
     # a second recording selected by regular expression; stopping twice is reported, not fatal
     bag2 = tmp_path / "bag2"

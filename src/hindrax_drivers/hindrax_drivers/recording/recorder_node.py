@@ -13,8 +13,13 @@ Behaviour
   best-effort, transient-local only if all are), keep-last depth ``queue_depth``; the publishers'
   profiles are stored in the bag (``offered_qos_profiles``).
 - Data: ``create_subscription(..., raw=True)``: CDR bytes are written unchanged. Log time = the node's
-  clock at reception (ROS time, so sim time with ``use_sim_time``); publish time = the DDS source
-  timestamp. Writing happens in one writer thread (the mcap writer is not thread-safe).
+  clock at reception (ROS time, so sim time with ``use_sim_time``). Publish time = the log time: the callbacks
+  take the message alone, not its ``MessageInfo`` (the DDS source timestamp), because rclpy 7.1's EventsExecutor,
+  which this process spins, fails on a callback that takes ``(msg, info)`` (docs/architecture.md §11.5). The MCAP
+  specification allows it ("publish_time: time at which the message was published; if not available, must be
+  set to the log time"); rosbag2 writes the source timestamp there, and no reader of this project uses it (the
+  message's own ``header.stamp`` is the time of the data). Writing happens in one writer thread (the mcap
+  writer is not thread-safe).
 - Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
   (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
   the bag (summary, metadata.yaml). A SIGKILL or power loss loses at most the open chunk
@@ -280,13 +285,14 @@ class RecorderNode(Node):
                 event_callbacks=_NO_EVENT_HANDLERS)
             self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
 
-    def _on_message(self, topic: str, data: bytes, info: Any) -> None:
+    def _on_message(self, topic: str, data: bytes) -> None:
+        """One received message (CDR bytes) of ``topic``: queued for the writer thread, log time = publish time =
+        the node's clock now (module docstring)."""
         writer = self._writer
         if writer is None:
             return
         now_ns = self.get_clock().now().nanoseconds
-        source_ns = info.get("source_timestamp") if isinstance(info, dict) else None
-        writer.write(topic, now_ns, data, source_ns or now_ns)
+        writer.write(topic, now_ns, data, now_ns)
 
     # -- services and status ----------------------------------------------------------------------
     def _on_start(self, request: StartRecording.Request, response: StartRecording.Response):
@@ -367,8 +373,9 @@ def main(args: list[str] | None = None) -> int:
     """Entry point: ``python -m hindrax_drivers.recording.recorder_node --ros-args ...``.
 
     Exit 0 (also after SIGINT/SIGTERM, the bag finished), 1 with one line on stderr when the node cannot start.
+    The process spins the EventsExecutor (:mod:`hindrax_drivers.ros_process`).
     """
-    with RosProcess(args, executor="single") as proc:  # EventsExecutor: see ros_process
+    with RosProcess(args) as proc:
         try:
             node = RecorderNode()
         except (ConfigError, ValueError) as exc:
