@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 import rclpy
+from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionClient
 from sensor_msgs.msg import Imu, Range
@@ -119,6 +120,8 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             wait_until(running, 300, spin, "surge run under way")  # wall time: slow under load
             t_run = sim.t_s
             wait_until(lambda: sim.t_s > t_run + 2.0, 30, spin, "two seconds of the run")
+            # the running campaign's goal reads ACCEPTED: the node executes it only at its end (node docstring)
+            assert handle.status == GoalStatus.STATUS_ACCEPTED
             fb = [x for x in got["fb"] if x.level_command != 0.0]
             assert fb and fb[-1].dof == "surge" and fb[-1].level_count == 1 and 0.0 < fb[-1].progress < 1.0
             # the level is 0.6 of the surge authority, pushed forward or backward along the body x axis
@@ -133,6 +136,7 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             res = handle.get_result_async()
             wait_until(res.done, 30, spin, "result after cancel")
             assert not res.result().result.success and "cancel" in res.result().result.message
+            assert res.result().status == GoalStatus.STATUS_CANCELED
             assert got["wrench"][-1].wrench.force.x == 0.0 and got["wrench"][-1].wrench.force.z == 0.0
             n_wrench = len(got["wrench"])
             t_end = sim.t_s
