@@ -151,11 +151,16 @@ def test_launch_file_executables_and_parameter_files_resolve(path, packages):
 
 
 def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
+    from hindrax_drivers.composition import GROUPS
+
     root = REPO / "src"
     vehicle = dict.fromkeys(check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages))
-    for exe in ("dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
-                "static_tf_node", "supervisor_node"):
-        assert ("hindrax_drivers", exe) in vehicle
+    # every node runs once, alone (its own executable) or in a composed process (hindrax_drivers.composition)
+    alone = {"allocation_node": "thrust_allocation"}  # executables named otherwise than their node
+    nodes = [n for pkg, exe in vehicle if pkg == "hindrax_drivers"
+             for n in GROUPS.get(exe, (alone.get(exe, exe.removesuffix("_node")),))]
+    for node in ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor"):
+        assert nodes.count(node) == 1, node
     assert ("hindrax_drivers", "recorder_node") not in vehicle  # recording is optional there
     recorded = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
                             {"record": "true", "output_dir": "/ws/runs"})

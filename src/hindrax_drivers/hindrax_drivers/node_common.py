@@ -327,10 +327,20 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
     1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
     (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
     """
+    return run_nodes([factory], args, executor)
+
+
+def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
+              executor: str | None = None) -> int:
+    """Process entry point of several nodes composed in one process (:mod:`hindrax_drivers.composition`): the nodes
+    are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
+    reverse order (the last built first). Same arguments, exit status and shutdown as :func:`run_node`; an
+    exception out of any node's callback ends the whole process (every node's ``close()`` still runs)."""
     from .ros_process import RosProcess
 
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor) as proc:
-        node = proc.own(factory())
-        proc.executor.add_node(node)
+        for factory in factories:
+            node = proc.own(factory())
+            proc.executor.add_node(node)
         proc.executor.spin()
     return proc.status

@@ -403,6 +403,10 @@ class RecorderNode(Node):
         arr.status = [self.status()]
         self._diag_pub.publish(arr)
 
+    def close(self) -> None:
+        """Finish any bag in progress: the clean-up of a composed process (:func:`~hindrax_drivers.node_common.run_nodes`)."""
+        self.shutdown()
+
     def destroy_node(self) -> None:
         """Destroy the intake node too (polled intake), then this node."""
         if self._intake is not None:
