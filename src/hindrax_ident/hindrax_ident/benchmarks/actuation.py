@@ -1,6 +1,7 @@
 """Actuation benchmark: wrench-in to PCA9685-registers-written latency and CPU per command at 50 Hz.
 
-One process, one SingleThreadedExecutor: a publisher of geometry_msgs/WrenchStamped at 50 Hz, the thrust
+One process, one EventsExecutor (as the vehicle's ``actuation_node``, which composes the two nodes:
+``hindrax_drivers.composition``): a publisher of geometry_msgs/WrenchStamped at 50 Hz, the thrust
 allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated I2C bus.
 Wrenches alternate between two surge levels so T1's pulse width changes with every command; latency is
 the time from ``publish()`` to the I2C write after which the emulator decodes the new pulse width on
@@ -19,7 +20,7 @@ import numpy as np
 def run(quick: bool = False) -> list[dict]:
     import rclpy
     from geometry_msgs.msg import WrenchStamped
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental.events_executor import EventsExecutor
 
     from hindrax_drivers.allocation.core import AllocationCore
     from hindrax_drivers.allocation.node import ThrustAllocationNode
@@ -58,7 +59,7 @@ def run(quick: bool = False) -> list[dict]:
         alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
         esc = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         driver = rclpy.create_node("bench_driver", context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EventsExecutor(context=ctx)
         for n in (alloc, esc, driver):
             ex.add_node(n)
         pub = driver.create_publisher(WrenchStamped, "wrench", 10)
