@@ -68,8 +68,8 @@ Action execution
     for any goal. Why: an execute callback that is a coroutine awaiting the end stays a pending task for the whole
     campaign, and rclpy 7.1's EventsExecutor, which every node process spins, re-queues a pending task at once, a
     busy loop (72 % of a core in the launch layout while a goal ran; docs/architecture.md §11.5). With the
-    SingleThreadedExecutor the same coroutine cost about 20 % of a core; the node now costs 5-6 % idle and
-    11-15 % running a goal (docs/architecture.md §10).
+    SingleThreadedExecutor the same coroutine cost about 20 % of a core; the node now costs about 5 % idle and
+    10-13 % running a goal (docs/architecture.md §10.1).
 Safety (docs/architecture.md §8)
     Limits of the executive (depth, altitude, roll, pitch, pool box) plus DVL lock and ESC disarm abort the
     goal; the vehicle is brought to neutral thrust at the end, on abort and on cancel, before the action ends.
