@@ -1,9 +1,10 @@
 """Composed processes (hindrax_drivers.composition): each group's nodes exist and keep their own names in one
-process, a group ends cleanly on SIGINT, and a bad node list is refused."""
+process (the installed group executable), a group ends cleanly on SIGINT, and a bad node list is refused."""
 from __future__ import annotations
 
 import signal
 import subprocess
+from pathlib import Path
 
 import pytest
 import rclpy
@@ -28,18 +29,19 @@ def test_every_group_names_known_nodes_once_and_unknown_nodes_are_refused(capsys
 
 
 @pytest.mark.ros
-def test_actuation_group_runs_both_nodes_under_their_own_names_and_exits_0_on_sigint():
-    # no /dev/i2c-1 here: the ESC node keeps running and reports the bus on /diagnostics (as alone)
-    proc = subprocess.Popen([python_executable(), "-m", "hindrax_drivers.composition", "thrust_allocation,esc",
-                             "--ros-args", "--params-file", str(default_config_path())],
+def test_i2c_sensors_group_runs_both_nodes_under_their_own_names_and_exits_0_on_sigint():
+    # the installed console script; no /dev/i2c-1 here: both drivers keep running and report it (as alone)
+    script = Path(python_executable()).with_name("i2c_sensors_node")
+    proc = subprocess.Popen([str(script), "--ros-args", "--params-file", str(default_config_path())],
                             env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         with ros_context() as ctx:
             probe = rclpy.create_node("composition_probe", context=ctx)
-            wait_until(lambda: proc.poll() is None and {"thrust_allocation", "esc"} <= set(probe.get_node_names()),
+            wait_until(lambda: proc.poll() is None and {"ms5837", "icm20948"} <= set(probe.get_node_names()),
                        30, None, "both nodes in the graph")
-            assert probe.get_publisher_names_and_types_by_node("esc", "/") and \
-                probe.get_publisher_names_and_types_by_node("thrust_allocation", "/")
+            topics = {n: {t for t, _ in probe.get_publisher_names_and_types_by_node(n, "/")}
+                      for n in ("ms5837", "icm20948")}
+            assert "/pressure/fluid_pressure" in topics["ms5837"] and "/imu/data_raw" in topics["icm20948"]
             probe.destroy_node()
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0, proc.stdout.read()
