@@ -24,7 +24,9 @@ Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     forces are the ``calibration.*`` parameters, :func:`~.executive.calibration_forces`,
     :func:`~.executive.inclining_load`), ``calibration_only`` (no
     ladders). Rejected when a goal is running or the goal is invalid (unknown DOF or step, fraction out of
-    range, calibration_only without a step). The goal fails at once when the ESC output is not armed. Feedback
+    range, calibration_only without a step). The goal fails, commanding nothing, when the ESC output has not
+    reported armed within :data:`ARMED_GRACE_S` of its acceptance (an operator who arms and starts at once is
+    not refused while the armed flag is on its way). Feedback
     at every level change, at every operator prompt and once per second: DOF, level index and count, level
     command (N or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel): the node publishes a
     zero wrench every tick until the ESC node reports neutral widths (zero thrust on every thruster, or
@@ -117,6 +119,11 @@ NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro"
 NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
 #: period of ``identification/status`` while a goal runs and nothing changes (10 Hz: topside display, bag), s
 STATUS_PERIOD_S = 0.1
+#: how long an accepted goal waits for the ESC to report armed on ``thrusters/pulse_width`` (published on every
+#: write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``) before it fails, s (ROS time)
+ARMED_GRACE_S = 0.5
+#: the result message of a goal whose ESC output did not report armed
+NOT_ARMED = "ESC output not armed: call esc/set_armed first"
 
 _PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverStatus.PHASE_RUNNING,
            "returning": ManeuverStatus.PHASE_RETURNING, "done": ManeuverStatus.PHASE_DONE,
@@ -154,7 +161,7 @@ class _GoalRun:
     """One accepted goal: its handle, executive and end state."""
 
     handle: Any
-    executive: Executive | None  # None: refused before it started (run.error says why)
+    executive: Executive
     accepted_s: float
     written_us: np.ndarray
     stop_since_s: float | None = None
@@ -300,33 +307,29 @@ class IdentificationNode(Node):
         return ""
 
     def _on_accepted(self, goal_handle) -> None:
-        """Accepted goal: set it up and return; the control timer runs it and ends it (:meth:`_end_goal`).
+        """Accepted goal: set it up and return; the control timer runs it (once the ESC reports armed, within
+        :data:`ARMED_GRACE_S`) and ends it (:meth:`_end_goal`).
 
         The goal is not executed here: its action state stays ACCEPTED while the campaign runs and becomes
         EXECUTING, then SUCCEEDED, ABORTED or CANCELED when it ends (module docstring, "Action execution")."""
         goal = goal_handle.request
         dofs = [] if goal.calibration_only else (list(goal.dofs) or list(DOFS))
         calibrate = list(goal.calibrate)
-        run = _GoalRun(goal_handle, None, self._now_s(), np.full(self._n_thrusters, self._neutral_us))
-        if not self._armed:
-            run.error = "ESC output not armed: call esc/set_armed first"
-            self._end_goal(run)
-            return
         w_ballast, f_line = calibration_forces(self.config) if calibrate else (0.0, 0.0)
         incl = inclining_load(self.config) if "inclining" in calibrate else (0.0, 0.0)
-        run.executive = Executive(self.config, dofs, int(goal.levels_per_dof) or None, tick_s=self.tick_s,
-                                  fractions=list(goal.level_fractions) or None,
-                                  dvl_lock_timeout_s=self.dvl_lock_timeout_s, calibrate=calibrate,
-                                  ballast_weight_in_water_n=w_ballast, line_pull_n=f_line, inclining_load_n_m=incl)
+        executive = Executive(self.config, dofs, int(goal.levels_per_dof) or None, tick_s=self.tick_s,
+                              fractions=list(goal.level_fractions) or None,
+                              dvl_lock_timeout_s=self.dvl_lock_timeout_s, calibrate=calibrate,
+                              ballast_weight_in_water_n=w_ballast, line_pull_n=f_line, inclining_load_n_m=incl)
+        run = _GoalRun(goal_handle, executive, self._now_s(), np.full(self._n_thrusters, self._neutral_us))
         self._samples = []
         self._run = run
         self.get_logger().info(f"run_identification: {', '.join(dofs) or 'no ladders'}"
                                + (f"; calibration {', '.join(calibrate)}" if calibrate else ""))
 
     def _end_goal(self, run: _GoalRun) -> None:
-        """The goal's end, from the control timer (or at once for a goal that cannot start): the result is
-        computed and the goal reaches its terminal state through ``execute`` with :meth:`_goal_result`, a plain
-        function that returns at once."""
+        """The goal's end, from the control timer: the result is computed and the goal reaches its terminal state
+        through ``execute`` with :meth:`_goal_result`, a plain function that returns at once."""
         run.ended = True
         if self._run is run:
             self._run = None
@@ -338,10 +341,6 @@ class IdentificationNode(Node):
         """Execute callback (plain, returns at once): the ended goal's result and terminal state."""
         run = self._ended.pop(bytes(goal_handle.goal_id.uuid))
         executive = run.executive
-        if executive is None:  # refused before it started
-            goal_handle.abort()
-            self.last_result = run.error
-            return RunIdentification.Result(success=False, message=run.error)
         self.last_record = run.record
         ok = run.record is not None and not run.record.aborted and not run.error
         message = run.error or ("" if run.record is None else run.record.abort_reason) or "campaign complete"
@@ -405,6 +404,15 @@ class IdentificationNode(Node):
         ex = run.executive
         cancel = run.handle.is_cancel_requested
         if not ex.started:
+            if not self._armed and not cancel:  # nothing commanded yet: the goal ends without a neutral hold
+                if t - run.accepted_s > ARMED_GRACE_S:
+                    run.error = NOT_ARMED
+                    self._publish_status(ManeuverStatus.PHASE_ABORTED, None, NOT_ARMED)
+                    self._end_goal(run)
+                else:
+                    self._publish_status_throttled(t, ManeuverStatus.PHASE_POSITIONING, None,
+                                                   "waiting for the ESC output to report armed")
+                return
             if cancel or t - run.accepted_s > self.sensor_timeout_s:
                 self._stop(run, t, now, "cancelled" if cancel
                            else f"sensors not publishing: {sorted(NEEDED_SENSORS - self._seen)}")
