@@ -417,6 +417,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                         if py_spy_dir is not None and phase == "running" and k == 0:
                             spies.extend(_start_py_spy(procs, py_spy_dir, duration_s))
                         cpu0 = {n: _proc_cpu_s(p.pid) for n, p in procs.items()}
+                        bench0, load0 = _proc_cpu_s(), os.getloadavg()[0]
                         wall0, t0_ns = time.monotonic(), time.time_ns()
                         end = wall0 + duration_s
                         wait_until(lambda: time.monotonic() > end, duration_s + 30, spin, f"{phase} window")
@@ -425,6 +426,9 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                         alive()
                         results.append({"wall_s": wall, "t0_ns": t0_ns, "t1_ns": t1_ns,
                                         "per_process": {n: (cpu1[n] - cpu0[n]) / wall for n in procs if n != "pool"},
+                                        "pool": (cpu1["pool"] - cpu0["pool"]) / wall,
+                                        "bench": (_proc_cpu_s() - bench0) / wall,
+                                        "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
                                         "goal_status": goal_status[0](),
                                         "rss_mb": {n: _proc_rss_mb(p.pid) for n, p in procs.items() if n != "pool"}})
                     out["phases"][phase] = {"windows": results}
@@ -623,6 +627,16 @@ def launch_rows(launch: dict) -> list[dict]:
              "note": "recorded topics, from the bag"},
         ]
         if phase == "running":
+            rows += [
+                {"name": "launch_running_cpu_excluded", "value": 100 * _median([w["pool"] + w["bench"] for w in wins]),
+                 "unit": "% of a core",
+                 "note": f"not in the total: the virtual pool (simulator, emulators) "
+                         f"{100 * _median([w['pool'] for w in wins]):.1f} % and this benchmark's own process "
+                         f"{100 * _median([w['bench'] for w in wins]):.1f} %"},
+                {"name": "launch_running_loadavg", "value": _median([w["loadavg"] for w in wins]), "unit": "",
+                 "note": f"1-minute load average of the machine ({os.cpu_count()} CPUs) during the windows: "
+                         f"above the CPU count, every figure here is inflated (cache misses, waits)"},
+            ]
             rss = wins[-1]["rss_mb"]
             rows.append({"name": "launch_rss_total_mb", "value": sum(rss.values()), "unit": "MB",
                          "note": "resident memory of the launch layout's processes at the end of the running phase: "
