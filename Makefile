@@ -21,24 +21,26 @@ $(STAMP): $(SETUP_INPUTS)
 	VENV=$(VENV) bash scripts/setup_venv.sh
 	touch $@
 
-# Main job: a complete virtual pool identification campaign (options: make run RUN_ARGS="--dofs surge").
+# Main job: a complete virtual pool identification campaign (options: make run RUN_ARGS="--dofs surge"); its table
+# goes to docs/results.md (section run), as make bench's does (section bench).
 run: setup
-	$(VENV)/bin/hindrax run $(RUN_ARGS)
+	$(VENV)/bin/hindrax run --results-doc docs/results.md $(RUN_ARGS)
 
 # All tests (unit, emulator-to-driver, multi-process ROS, end to end). Extra pytest options: PYTEST_ARGS=...
 test: setup
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 bench: setup
-	$(PY) -m hindrax_ident.bench $(BENCH_ARGS)
+	$(PY) -m hindrax_ident.bench --results-doc docs/results.md $(BENCH_ARGS)
 
 # The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels (the
 # Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
 # .venv/bin/activate && source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/)
-# and share/ are there.
+# and share/ are there. Extra colcon options: COLCON_ARGS="--symlink-install" (docs/deployment.md §3).
+COLCON_ARGS ?=
 ros-install: setup
 	cd ros_ws && source $(abspath $(VENV))/bin/activate && \
-	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV colcon build --merge-install \
+	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV colcon build --merge-install $(COLCON_ARGS) \
 	    --event-handlers console_cohesion- --cmake-args -DPython3_EXECUTABLE=$$VIRTUAL_ENV/bin/python3 -DBUILD_TESTING=OFF
 
 clean:

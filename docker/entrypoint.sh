@@ -1,48 +1,76 @@
 #!/usr/bin/env bash
-# Container entry point: source ROS 2 and the workspace, set DDS discovery for the tether, run the command.
+# The vehicle's start: source ROS 2 and the workspace, set DDS discovery and the domain for the tether, then run
+# the launch layout (one process per node, respawned; docs/deployment.md §1) or the command given.
+# The Docker image's ENTRYPOINT, and the bare-metal systemd unit's ExecStart (docker/hindrax-bare-metal.service):
+# one vehicle path, whichever way the Pi runs it.
 #
-# Environment (all optional):
-#   HINDRAX_DISCOVERY_RANGE  LOCALHOST | SUBNET | SYSTEM_DEFAULT | OFF   (default SUBNET: the topside PC is on
-#                            the tether's Ethernet subnet; use LOCALHOST for simulation and tests)
-#   ROS_DOMAIN_ID            0-101 (default 0)
-#   HINDRAX_CONFIG           vehicle configuration (default /ws/config/hindrax.yaml)
+# Environment (all optional except ROS_DOMAIN_ID for the vehicle launch):
+#   ROS_DOMAIN_ID            this vehicle's DDS domain, 1-101: every vehicle and topside pair on the pool network
+#                            picks its own (0, the ROS default that every other machine uses, is refused)
+#   HINDRAX_DISCOVERY_RANGE  LOCALHOST | SUBNET | SYSTEM_DEFAULT | OFF  (default SUBNET: the topside PC is on the
+#                            tether's Ethernet subnet; ROS_STATIC_PEERS=<topside IP> is passed through as well)
+#   HINDRAX_LAUNCH           "<package> <launch file>" (default "hindrax_drivers vehicle.launch.xml"; a pool campaign:
+#                            "hindrax_ident pool_test.launch.xml")
+#   HINDRAX_RECORD           1 (default): record every topic; 0: no recording
+#   HINDRAX_RUNS_DIR         root folder of the bags, a new timestamped bag per start (default /var/lib/hindrax/runs)
+#   HINDRAX_CONFIG           a vehicle file to use instead of the installed one (a mounted file); must exist
 #   ROS_SETUP, WS_SETUP      setup scripts to source (defaults: /opt/ros/jazzy/setup.bash, /ws/install/setup.bash)
-#   HINDRAX_RECORD           1 (default): the default bringup records every topic to recording.output_root
-#                            (/ws/runs, a mounted folder); 0: no recording
-# With no arguments it runs `hindrax bringup --config "$HINDRAX_CONFIG" --record`.
+# With no arguments: ros2 launch $HINDRAX_LAUNCH [config:=$HINDRAX_CONFIG] record:=true|false output_dir:=$HINDRAX_RUNS_DIR
+# `hindrax health` without --launch checks that same launch, with those arguments (the container's HEALTHCHECK).
 set -eo pipefail
+
+die() { echo "entrypoint: $*" >&2; exit 2; }
 
 range=${HINDRAX_DISCOVERY_RANGE:-SUBNET}
 case "$range" in
   LOCALHOST|SUBNET|SYSTEM_DEFAULT|OFF) ;;
-  *) echo "entrypoint: HINDRAX_DISCOVERY_RANGE=$range: allowed LOCALHOST, SUBNET, SYSTEM_DEFAULT, OFF" >&2; exit 2 ;;
+  *) die "HINDRAX_DISCOVERY_RANGE=$range: allowed LOCALHOST, SUBNET, SYSTEM_DEFAULT, OFF" ;;
 esac
-domain=${ROS_DOMAIN_ID:-0}
-if ! [[ "$domain" =~ ^[0-9]+$ ]] || [ "$domain" -gt 101 ]; then
-  echo "entrypoint: ROS_DOMAIN_ID=$domain: allowed integer 0-101" >&2
-  exit 2
-fi
 export ROS_AUTOMATIC_DISCOVERY_RANGE="$range"
-export ROS_DOMAIN_ID="$domain"
-config=${HINDRAX_CONFIG:-/ws/config/hindrax.yaml}
-export HINDRAX_CONFIG="$config"
+[ -n "${ROS_STATIC_PEERS:-}" ] || unset ROS_STATIC_PEERS  # compose passes an empty one when none is set
+if [ -n "${ROS_DOMAIN_ID:-}" ]; then
+  if ! [[ "$ROS_DOMAIN_ID" =~ ^[0-9]+$ ]] || [ "$ROS_DOMAIN_ID" -gt 101 ]; then
+    die "ROS_DOMAIN_ID=$ROS_DOMAIN_ID: allowed integer 1-101 (this vehicle's own domain)"
+  fi
+  export ROS_DOMAIN_ID
+fi
+if [ -n "${HINDRAX_CONFIG:-}" ]; then
+  [ -f "$HINDRAX_CONFIG" ] || die "HINDRAX_CONFIG=$HINDRAX_CONFIG: no such file (mount it, or unset it for the installed vehicle file)"
+  export HINDRAX_CONFIG
+else
+  unset HINDRAX_CONFIG  # commands and the launch file use the installed vehicle file
+fi
+case "${HINDRAX_RECORD:-1}" in
+  1) record=true ;;
+  0) record=false ;;
+  *) die "HINDRAX_RECORD=$HINDRAX_RECORD: allowed 1 or 0" ;;
+esac
+runs=${HINDRAX_RUNS_DIR:-/var/lib/hindrax/runs}
+read -r launch_pkg launch_file <<< "${HINDRAX_LAUNCH:-hindrax_drivers vehicle.launch.xml}"
+[ -n "$launch_file" ] || die "HINDRAX_LAUNCH=$HINDRAX_LAUNCH: expected \"<package> <file>.launch.xml\""
+launch_args=()
+[ -n "${HINDRAX_CONFIG:-}" ] && launch_args+=("config:=$HINDRAX_CONFIG")
+launch_args+=("record:=$record" "output_dir:=$runs")
 
 set +u
 # shellcheck disable=SC1090
 source "${ROS_SETUP:-/opt/ros/jazzy/setup.bash}"
 # shellcheck disable=SC1090
 source "${WS_SETUP:-/ws/install/setup.bash}"
-# colcon installs ament_python console scripts in lib/<package> (the `ros2 run` location), not on PATH.
-export PATH="${HINDRAX_BIN_DIR:-/ws/install/lib/hindrax_ident}:$PATH"
+set -u
 
 if [ "$#" -eq 0 ]; then
-  set -- hindrax bringup
+  if [ -z "${ROS_DOMAIN_ID:-}" ] || [ "$ROS_DOMAIN_ID" -eq 0 ]; then
+    die "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-unset}: set this vehicle's own domain (1-101) in /etc/hindrax/hindrax.env; 0 is every other ROS machine's on the pool network"
+  fi
+  if [ "$record" = true ]; then
+    mkdir -p "$runs" 2>/dev/null || true
+    [ -w "$runs" ] || die "HINDRAX_RUNS_DIR=$runs is not writable by $(id -un) (uid $(id -u)): chown it on the host"
+  fi
+  echo "entrypoint: ros2 launch $launch_pkg $launch_file ${launch_args[*]} (domain $ROS_DOMAIN_ID, discovery $range)" >&2
+  exec ros2 launch "$launch_pkg" "$launch_file" "${launch_args[@]}"
 fi
-if [ "$1" = "hindrax" ] && [ "${2:-}" = "bringup" ] && [[ " $* " != *" --config "* ]]; then
-  set -- "$@" --config "$config"
-fi
-if [ "$1" = "hindrax" ] && [ "${2:-}" = "bringup" ] && [ "${HINDRAX_RECORD:-1}" = "1" ] \
-   && [[ " $* " != *" --record "* ]] && [[ " $* " != *" --sim "* ]]; then
-  set -- "$@" --record
+if [ "$(basename "$1")" = "hindrax" ] && [ "${2:-}" = "health" ] && [[ " $* " != *" --launch "* ]]; then
+  set -- "$@" --launch "$launch_pkg/$launch_file" "${launch_args[@]}"
 fi
 exec "$@"

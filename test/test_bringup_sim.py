@@ -59,7 +59,9 @@ def test_drivers_read_the_simulated_vehicle_and_thrust_moves_it():
             def push():
                 m = WrenchStamped()
                 m.header.frame_id = "base_link"
-                m.header.stamp = probe.get_clock().now().to_msg()
+                # stamped on the graph's simulated time (the probe runs on system time): the allocation rejects a
+                # wrench stamped beyond thrusters.wrench_future_margin_s in its future
+                m.header.stamp = graph.nodes["thrust_allocation"].get_clock().now().to_msg()
                 m.wrench.force.x = 12.0  # forward, base_link
                 wrench.publish(m)
                 spin()
@@ -103,8 +105,9 @@ def test_hindrax_bringup_sim_command_starts_and_stops_cleanly():
             line = proc.stdout.readline()
             assert line, "bringup exited early: " + "".join(lines)
             lines.append(line)
-        assert lines[-1].startswith("bringup: 10 nodes (simulator, dvl75, ping1d, ms5837, icm20948, esc, "
-                                    "thrust_allocation, supervisor, static_tf, identification), virtual pool"), lines[-1]
+        assert lines[-1].startswith("bringup: 11 nodes (simulator, dvl75, ping1d, ms5837, icm20948, esc, "
+                                    "thrust_allocation, supervisor, output_guard, static_tf, identification), "
+                                    "virtual pool"), lines[-1]
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0
     finally:

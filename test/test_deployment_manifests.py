@@ -1,7 +1,7 @@
 """What rosdep and Docker on the vehicle rely on, checked here: each package.xml lists what its package imports
 (with rosdep keys), the workspace's own pip keys are defined in rosdep.yaml, the image registers them and puts
 `hindrax` with the ROS environment in every process (`docker exec` included), and the container records by
-default."""
+default (into its runs folder, a host folder)."""
 from __future__ import annotations
 
 import ast
@@ -23,6 +23,7 @@ ROSDEP_KEY = {
     "matplotlib": "python3-matplotlib", "smbus2": "python3-smbus2", "mcap": "python3-mcap-pip",
     "mcap_ros2": "mcap-ros2-support", "filterpy": "python3-filterpy-pip",
     "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest", "hypothesis": "python3-hypothesis",
+    "gpiod": "python3-gpiod-pip",
 }
 #: keys of rosdistro's rosdep/python.yaml used here (checked against ros/rosdistro, 2026-11): apt or pip there
 ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-serial", "python3-yaml", "python3-matplotlib",
@@ -85,7 +86,7 @@ def test_every_key_is_a_ros_package_a_rosdistro_key_or_defined_in_rosdep_yaml():
     for pkg in ("hindrax_drivers", "hindrax_ident"):
         for keys in depends(pkg).values():
             used |= keys
-    ours = used - ROS_PACKAGES - ROSDISTRO_KEYS - {"foxglove_bridge"}
+    ours = used - ROS_PACKAGES - ROSDISTRO_KEYS
     assert ours and ours <= set(rosdep), sorted(ours - set(rosdep))
     assert not set(rosdep) & ROSDISTRO_KEYS  # no shadowing of rosdistro's definitions
     for key in ours:
@@ -103,9 +104,11 @@ def test_dockerfile_uses_rosdep_yaml_and_puts_hindrax_with_ros_in_every_process(
     link = os.readlink(REPO / "src" / "hindrax_drivers" / "config")
     assert link == "../../ros_ws/config" and "COPY ros_ws/config /ws/ros_ws/config" in text
     assert "COPY docker/hindrax-exec.sh /usr/local/bin/hindrax" in text
-    assert "/etc/profile.d/hindrax.sh" in text and "HINDRAX_CONFIG=/ws/config/hindrax.yaml" in text
+    assert "/etc/profile.d/hindrax.sh" in text
     compose = yaml.safe_load((DOCKER / "compose.yaml").read_text())["services"]["hindrax"]
-    assert any(v.endswith(":/ws/runs") for v in compose["volumes"])  # the default bag folder is mounted
+    # the recordings' root inside the container (HINDRAX_RUNS_DIR) is a host folder
+    assert "HINDRAX_RUNS_DIR=/var/lib/hindrax/runs" in text
+    assert any(v.endswith(":/var/lib/hindrax/runs") for v in compose["volumes"])
 
 
 def _fakes(tmp_path):
@@ -117,33 +120,39 @@ def _fakes(tmp_path):
     cmd.write_text("#!/usr/bin/env bash\necho \"ARGS=$*\"\necho \"RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE\"\n"
                    "echo \"SOURCED=$FAKE_ROS_SOURCED$FAKE_WS_SOURCED\"\necho \"CONFIG=$HINDRAX_CONFIG\"\n")
     cmd.chmod(0o755)
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_AUTOMATIC", "HINDRAX"))}
-    env.update(ROS_SETUP=str(ros), WS_SETUP=str(ws), PATH=f"{tmp_path}:{os.environ['PATH']}")
+    ros2 = tmp_path / "ros2"
+    ros2.write_text("#!/usr/bin/env bash\necho \"ROS2=$*\"\n")
+    ros2.chmod(0o755)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_AUTOMATIC", "ROS_DOMAIN", "HINDRAX"))}
+    env.update(ROS_SETUP=str(ros), WS_SETUP=str(ws), PATH=f"{tmp_path}:{os.environ['PATH']}",
+               HINDRAX_RUNS_DIR=str(tmp_path / "runs"))
     return cmd, env
 
 
 def test_docker_exec_hindrax_runs_with_the_containers_ros_environment(tmp_path):
     cmd, env = _fakes(tmp_path)
+    mounted = tmp_path / "hindrax.yaml"
+    mounted.write_text("a mounted vehicle file\n")
     env.update(HINDRAX_ENTRYPOINT=str(DOCKER / "entrypoint.sh"), HINDRAX_COMMAND=str(cmd),
-               HINDRAX_CONFIG="/ws/config/hindrax.yaml")
+               HINDRAX_CONFIG=str(mounted))
     r = subprocess.run([str(DOCKER / "hindrax-exec.sh"), "thruster-test", "--help"], env=env, capture_output=True,
                        text=True, timeout=30)
     assert r.returncode == 0, r.stderr
     assert "ARGS=thruster-test --help" in r.stdout and "RANGE=SUBNET" in r.stdout and "SOURCED=11" in r.stdout
-    assert "CONFIG=/ws/config/hindrax.yaml" in r.stdout
+    assert f"CONFIG={mounted}" in r.stdout
 
 
 def test_the_container_records_by_default(tmp_path):
     cmd, env = _fakes(tmp_path)
 
-    def entry(*args, **extra):
-        r = subprocess.run([str(DOCKER / "entrypoint.sh"), *args], env=dict(env, **extra), capture_output=True,
-                           text=True, timeout=30)
+    def entry(**extra):
+        r = subprocess.run([str(DOCKER / "entrypoint.sh")], env=dict(env, ROS_DOMAIN_ID="42", **extra),
+                           capture_output=True, text=True, timeout=30)
         assert r.returncode == 0, r.stderr
         return r.stdout
-    assert "ARGS=bringup --config /ws/config/hindrax.yaml --record" in entry()
-    assert "--record" not in entry(HINDRAX_RECORD="0")
-    assert "--record" not in entry("hindrax", "bringup", "--sim")
+    runs = tmp_path / "runs"
+    assert f"ROS2=launch hindrax_drivers vehicle.launch.xml record:=true output_dir:={runs}" in entry()
+    assert "record:=false" in entry(HINDRAX_RECORD="0")
 
 
 def test_default_config_path_follows_hindrax_config(tmp_path, monkeypatch):

@@ -1,12 +1,12 @@
 """Launch files (ROS 2 launch XML) checked without the `launch` package, which is not installable here.
 
 Every ``src/*/launch/*.launch.xml`` is parsed with xml.etree; ``$(var ...)`` and ``$(find-pkg-share ...)`` are
-substituted the way ros2 launch does, with find-pkg-share resolved through the packages' setup.py data_files
-(what colcon installs under share/). Checked: each ``<node pkg exec>`` of our packages is a console script of
-that package's setup.py (an external package only behind a condition that is off by default, and declared in
-package.xml), each ``<param from>`` file and ``<include file>`` resolves to a file that is installed, include
-arguments are declared by the included file, and conditions are booleans. The README's ``ros2 launch`` and
-``ros2 run`` lines name existing launch files, declared arguments and installed executables.
+substituted the way ros2 launch does, with find-pkg-share resolved through the packages' setup.py data_files (what
+colcon installs under share/). Checked: each ``<node pkg exec>`` of our packages is a console script of that
+package's setup.py (an external package only behind a condition that is off by default, never a hard exec_depend,
+its apt package named in docs/deployment.md), each ``<param from>`` file and ``<include file>`` resolves to a file
+that is installed, include arguments are declared by the included file, and conditions are booleans. The README's
+``ros2 launch`` and ``ros2 run`` lines name existing launch files, declared arguments and installed executables.
 """
 from __future__ import annotations
 
@@ -104,12 +104,15 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
             pkg, exe = el.get("pkg"), el.get("exec")
             if pkg in packages:
                 assert exe in packages[pkg][0], f"{path.name}: {pkg}/{exe} is not an installed executable"
-            else:  # an external package: optional, off by default, declared as a dependency
+            else:  # an external package: optional, off by default, not a hard dependency, documented
                 default = substitute(cond, {k: v or "" for k, v in declared_args(path).items()}, packages) \
                     if cond else "true"
                 assert default == "false", f"{path.name}: external {pkg}/{exe} must be optional and off by default"
                 deps = "".join((REPO / "src" / p / "package.xml").read_text() for p in PACKAGES)
-                assert f"<exec_depend>{pkg}</exec_depend>" in deps, f"{pkg} not declared in a package.xml"
+                assert f"<exec_depend>{pkg}</exec_depend>" not in deps, \
+                    f"{pkg} is optional: rosdep must not install it with every vehicle (package.xml exec_depend)"
+                apt = "ros-jazzy-" + pkg.replace("_", "-")
+                assert apt in (REPO / "docs" / "deployment.md").read_text(), f"docs/deployment.md: how to install {apt}"
             for p in el.findall("param"):
                 if p.get("from"):
                     f = Path(substitute(p.get("from"), args, packages))
@@ -159,8 +162,14 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     alone = {"allocation_node": "thrust_allocation"}  # executables named otherwise than their node
     nodes = [n for pkg, exe in vehicle if pkg == "hindrax_drivers"
              for n in GROUPS.get(exe, (alone.get(exe, exe.removesuffix("_node")),))]
-    for node in ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor"):
+    for node in ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor",
+                 "output_guard"):
         assert nodes.count(node) == 1, node
+    # the ESC shares its process with its one commander only; the supervisor and the output guard run alone
+    # (docs/architecture.md §8, §10.1)
+    assert GROUPS["actuation_node"] == ("thrust_allocation", "esc")
+    for exe in ("supervisor_node", "output_guard_node"):
+        assert ("hindrax_drivers", exe) in vehicle and exe not in GROUPS
     assert ("hindrax_drivers", "recorder_node") not in vehicle  # recording is optional there
     recorded = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
                             {"record": "true", "output_dir": "/ws/runs"})
@@ -170,6 +179,12 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
     assert ("foxglove_bridge", "foxglove_bridge") not in pool
     live = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
     assert ("foxglove_bridge", "foxglove_bridge") in live
+    # the controller: launched with the pool test, optional (off by default) in the vehicle
+    assert ("hindrax_ident", "controller_node") in pool
+    assert ("hindrax_ident", "controller_node") not in vehicle
+    held = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
+                        {"controller": "true", "model_file": "/ws/runs/x/identification.yaml"})
+    assert ("hindrax_ident", "controller_node") in held
 
 
 def test_checker_rejects_a_missing_executable_and_a_missing_parameter_file(packages, tmp_path):
@@ -226,8 +241,79 @@ TESTED_BY_INSTALL_TEST = {
 }
 
 
+#: README lines run by other tests: the installed `hindrax health` against the launch layout (test/test_pool_day.py;
+#: its verdicts in src/hindrax_ident/test/test_cli_health.py) and the symlink build (test/test_ros_install.py)
+TESTED_ELSEWHERE = ("hindrax health", "make ros-install COLCON_ARGS=--symlink-install")
+
+
 def test_every_readme_pi_command_is_a_tested_one():
     commands = readme_commands()
     assert TESTED_BY_INSTALL_TEST <= set(commands)
     for c in commands:
-        assert c in TESTED_BY_INSTALL_TEST or c.startswith(("ros2 launch ", "ros2 run ")), f"untested README line: {c}"
+        assert c in TESTED_BY_INSTALL_TEST or c.startswith(("ros2 launch ", "ros2 run ") + TESTED_ELSEWHERE), \
+            f"untested README line: {c}"
+
+
+#: argument sets each launch file is read with below (the defaults, and what the vehicle and the pool day pass)
+READER_CASES = [
+    ("hindrax_drivers/launch/vehicle.launch.xml", {}),
+    ("hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/var/lib/hindrax/runs"}),
+    ("hindrax_ident/launch/pool_test.launch.xml", {}),
+    ("hindrax_ident/launch/pool_test.launch.xml", {"output_dir": "/tmp/runs", "foxglove": "true"}),
+]
+
+
+@pytest.mark.parametrize("rel,given", READER_CASES, ids=lambda c: str(c))
+def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packages):
+    """The pool-day test runs the process list of hindrax_drivers.launch_xml through the project's runner; it must
+    be the one the launch file declares, read here by this module's own parser (check_launch)."""
+    from hindrax_drivers.launch_xml import read_launch
+
+    path = REPO / "src" / rel
+    declared = check_launch(path, packages, given)
+    read = read_launch(path, given, find_share=lambda pkg: REPO / "src" / pkg)
+    assert [(p.package, p.executable) for p in read] == declared
+    # each node: its name, the vehicle file, respawn with a delay, exactly as the XML says
+    xml_nodes = {}
+    for f in (path, REPO / "src/hindrax_drivers/launch/vehicle.launch.xml"):
+        for el in ET.parse(f).getroot().iter("node"):
+            xml_nodes[el.get("name") or el.get("exec")] = el  # a composed process has no name (its nodes keep theirs)
+    for p in read:
+        el = xml_nodes[p.label]
+        assert (el.get("pkg"), el.get("exec")) == (p.package, p.executable)
+        assert p.respawn and el.get("respawn") == "true" and p.respawn_delay_s == float(el.get("respawn_delay")) > 0
+        if p.package in PACKAGES:
+            assert p.parameters[0].resolve() == (REPO / "ros_ws/config/hindrax.yaml").resolve()
+
+
+def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_its_root(packages):
+    from hindrax_drivers.launch_xml import read_launch
+
+    for path in launch_files():
+        for el in ET.parse(path).getroot().iter("node"):
+            assert el.get("respawn") == "true" and float(el.get("respawn_delay", "0")) > 0, \
+                f"{path.name}: {el.get('name')} does not respawn after a delay"
+    read = read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/x"},
+                       find_share=lambda pkg: REPO / "src" / pkg)
+    recorder = next(p for p in read if p.executable == "recorder_node")
+    values = {k: v for p in recorder.parameters if isinstance(p, dict) for k, v in p.items()}
+    # the root of new timestamped bags (recording/bag_dir.py), not one bag directory that the next launch would find
+    assert values["recording.output_root"] == "/x" and "output_dir" not in values
+    assert values["autostart"] is True
+
+
+def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real_commands(packages):
+    """docs/deployment.md, the "Running on the Pi" steps: each `ros2 launch PKG FILE [name:=value]` names an installed
+    launch file and arguments it declares; each `hindrax <command>` is a registered command."""
+    from hindrax_ident.cli import COMMANDS
+
+    text = (REPO / "docs" / "deployment.md").read_text()
+    launches = re.findall(r"ros2 launch (\w+) ([\w.]+\.launch\.xml)((?: \w+:=[^\s`]*)*)", text)
+    assert len(launches) >= 2
+    for pkg, name, args in launches:
+        path = find_pkg_share(packages, pkg, f"launch/{name}")
+        given = dict(a.split(":=", 1) for a in args.split())
+        check_launch(path, packages, {k: v or "x" for k, v in given.items() if "$" not in v})
+    registered = {" ".join(words) for words, _m, _h in COMMANDS}
+    used = set(re.findall(r"`(?:docker exec -it hindrax )?hindrax ((?:[a-z-]+)(?: [a-z-]+)?)", text))
+    assert used and all(u in registered or u.split()[0] in registered for u in used), used - registered

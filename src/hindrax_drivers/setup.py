@@ -5,8 +5,10 @@ Python dependencies are declared once, in the repository's requirements.txt (dev
 
 Installed (colcon): every node as a console script in ``lib/hindrax_drivers`` (``ros2 run hindrax_drivers
 <node>``; setup.cfg puts scripts there), the vehicle file in ``share/hindrax_drivers/config/hindrax.yaml``
-(``config`` is a symlink to the repository's ``ros_ws/config``, the one vehicle file) and the launch files
-in ``share/hindrax_drivers/launch``.
+(``config`` is a symlink to the repository's ``ros_ws/config``, the one vehicle file), the virtual pool's truth
+files beside it in ``share/hindrax_drivers/config/truth`` (``truth/scenarios``: the scenario suite; read by the
+simulator of ``hindrax run``, ``hindrax bringup --sim`` and ``simulator_node``, never by a vehicle node) and the
+launch files in ``share/hindrax_drivers/launch``.
 """
 from glob import glob
 from pathlib import Path
@@ -28,6 +30,7 @@ NODES = {
     "player_node": "hindrax_drivers.recording.player_node",
     "static_tf_node": "hindrax_drivers.tf.node",
     "supervisor_node": "hindrax_drivers.supervisor.node",
+    "output_guard_node": "hindrax_drivers.guard.node",
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
 NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
@@ -51,6 +54,8 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", _files("config/*.yaml")),
+        (f"share/{PACKAGE}/config/truth", _files("config/truth/*.yaml")),
+        (f"share/{PACKAGE}/config/truth/scenarios", _files("config/truth/scenarios/*.yaml")),
         (f"share/{PACKAGE}/launch", _files("launch/*.launch.xml")),
     ],
     zip_safe=True,

@@ -3,7 +3,7 @@
 Python dependencies are declared once, in the repository's requirements.txt (dev venv) and package.xml
 (rosdep on the Pi); they are deliberately not repeated here.
 
-Installed (colcon): ``identification_node`` and ``simulator_node`` and the ``hindrax`` command as console
+Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node`` and the ``hindrax`` command as console
 scripts in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source
 install/setup.bash``), the launch files in ``share/hindrax_ident/launch`` and the Foxglove layout in
 ``share/hindrax_ident/foxglove``.
@@ -17,9 +17,12 @@ from setuptools import find_packages, setup
 PACKAGE = "hindrax_ident"
 
 
-#: bin/hindrax only for `setup.py install` (what colcon runs): a pip install (editable or wheel) already puts
-#: the console script itself in the environment's bin/, which the wrapper must not replace.
-BIN = [("bin", ["bin/hindrax"])] if "install" in sys.argv[1:] else []
+#: bin/hindrax only for what colcon runs: `setup.py install` (a plain build), `setup.py develop ... symlink_data`
+#: (colcon build --symlink-install; symlink_data is colcon's own command, which links the data files colcon read
+#: from `setup.py --dry-run` beforehand, so that run must list it too). A pip install (editable or wheel) already
+#: puts the console script itself in the environment's bin/, which the wrapper must not replace.
+COLCON_COMMANDS = {"install", "symlink_data", "--dry-run"}
+BIN = [("bin", ["bin/hindrax"])] if COLCON_COMMANDS & set(sys.argv[1:]) else []
 
 
 def _files(pattern: str) -> list[str]:
@@ -46,6 +49,7 @@ setup(
             "hindrax = hindrax_ident.cli:main",
             "identification_node = hindrax_ident.identification.node:main",
             "simulator_node = hindrax_ident.sim.node:main",
+            "controller_node = hindrax_ident.control.node:main",
         ],
     },
 )

@@ -14,8 +14,10 @@ publishes (transient local) on every goal state change (ROS 2 design, "Actions":
   arrived, the same request (same UUID) is sent again every ``resend_every_s``. A server that got an earlier copy
   rejects the duplicate UUID (rclpy ``ActionServer._execute_goal_request``) and the status topic tells that the
   goal runs, so a goal is never started twice;
-- a goal seen on the status topic without a response is accepted: a :class:`~rclpy.action.client.ClientGoalHandle`
-  is built for it, so its result and cancel calls work as usual;
+- a goal seen on the status topic without a response is accepted: rclpy's
+  :class:`~rclpy.action.client.ClientGoalHandle` is made for it from the action's own ``SendGoal`` response
+  type, accepted, stamped with the acceptance time the server published (``GoalInfo.stamp``), exactly what the
+  ActionClient makes when the response arrives, so its result and cancel calls work as usual;
 - :meth:`GoalSender.cancel` sends the cancel request again until the status topic shows the goal cancelling;
 - :meth:`GoalSender.poll_result` requests the result again when the status topic says the goal ended and no
   result came within ``resend_every_s`` (``get_result`` is idempotent).
@@ -25,16 +27,38 @@ Times are wall-clock seconds (``time.monotonic``); spinning is the caller's (one
 """
 from __future__ import annotations
 
+import sys
 import time
 import uuid as uuidlib
-from types import SimpleNamespace
 from typing import Any, Callable
 
-__all__ = ["GoalNotAnswered", "GoalSender"]
+from action_msgs.msg import GoalStatus, GoalStatusArray
+from rclpy.action.client import ClientGoalHandle
+from rclpy.qos import qos_profile_action_status_default
+from unique_identifier_msgs.msg import UUID
 
-#: action_msgs/GoalStatus codes: CANCELING, and the ended goals (SUCCEEDED, CANCELED, ABORTED)
-_CANCELING = 3
-_ENDED = (4, 5, 6)
+__all__ = ["GoalNotAnswered", "GoalSender", "send_goal_response_type"]
+
+#: Goal states after which the server publishes no more (action_msgs/GoalStatus, ROS 2 design "Actions").
+_ENDED = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED, GoalStatus.STATUS_ABORTED})
+#: States in which a cancel request needs no resend: the server took it, or the goal is over.
+_CANCEL_TAKEN = _ENDED | {GoalStatus.STATUS_CANCELING}
+
+
+def send_goal_response_type(goal: Any) -> type:
+    """The ``SendGoal`` response message class of the action whose ``Goal`` message ``goal`` is.
+
+    rosidl generates the action ``pkg/action/Name`` as the class ``Name`` next to ``Name_Goal`` in one module;
+    the response class is ``Name.Impl.SendGoalService.Response`` (what rclpy's ActionClient and ActionServer
+    use). Raises ``TypeError`` if ``goal`` is not a generated action goal message.
+    """
+    goal_type = type(goal)
+    action_name = goal_type.__name__.removesuffix("_Goal")
+    action = getattr(sys.modules.get(goal_type.__module__), action_name, None)
+    impl = getattr(action, "Impl", None)
+    if action_name == goal_type.__name__ or impl is None or getattr(action, "Goal", None) is not goal_type:
+        raise TypeError(f"{goal_type.__qualname__} is not the Goal message of a generated ROS 2 action")
+    return impl.SendGoalService.Response
 
 
 class GoalNotAnswered(RuntimeError):
@@ -50,12 +74,10 @@ class GoalSender:
     """
 
     def __init__(self, node: Any, client: Any, action_name: str, resend_every_s: float = 2.0) -> None:
-        from action_msgs.msg import GoalStatusArray
-        from rclpy.qos import qos_profile_action_status_default
-
         self._node, self._client = node, client
         self.resend_every_s = float(resend_every_s)
         self._status: dict[bytes, int] = {}
+        self._accepted_stamp: dict[bytes, Any] = {}  # GoalInfo.stamp: when the server accepted the goal
         self._ended_at: dict[bytes, float] = {}
         self._result_requested_at: dict[bytes, float] = {}
         self._results: dict[bytes, Any] = {}
@@ -69,11 +91,12 @@ class GoalSender:
         for s in msg.status_list:
             key = bytes(s.goal_info.goal_id.uuid)
             self._status[key] = int(s.status)
+            self._accepted_stamp.setdefault(key, s.goal_info.stamp)
             if int(s.status) in _ENDED:
                 self._ended_at.setdefault(key, now)
 
     def status(self, handle_or_uuid: Any) -> int | None:
-        """Last status code seen on the status topic for a goal (action_msgs/GoalStatus), or None."""
+        """Last status code seen on the status topic for a goal (``action_msgs.msg.GoalStatus.STATUS_*``), or None."""
         key = bytes(getattr(handle_or_uuid, "goal_id", handle_or_uuid).uuid)
         return self._status.get(key)
 
@@ -85,10 +108,7 @@ class GoalSender:
         :class:`GoalNotAnswered` when neither came within ``timeout_s`` seconds (the request is sent
         ``1 + timeout_s / resend_every_s`` times at most).
         """
-        from builtin_interfaces.msg import Time
-        from rclpy.action.client import ClientGoalHandle
-        from unique_identifier_msgs.msg import UUID
-
+        response_type = send_goal_response_type(goal)
         goal_id = UUID(uuid=list(uuidlib.uuid4().bytes))
         key = bytes(goal_id.uuid)
         futures = [self._client.send_goal_async(goal, feedback_callback=feedback_callback, goal_uuid=goal_id)]
@@ -98,8 +118,9 @@ class GoalSender:
             if accepted:
                 return accepted[0]
             if key in self._status:  # running (or already ended) on the server: our goal, response lost
-                # the handle reads only ``accepted`` and ``stamp`` of the (lost) SendGoal response
-                return ClientGoalHandle(self._client, goal_id, SimpleNamespace(accepted=True, stamp=Time()))
+                # the SendGoal response the server sent and we lost: accepted, at the stamp it published
+                response = response_type(accepted=True, stamp=self._accepted_stamp[key])
+                return ClientGoalHandle(self._client, goal_id, response)
             now = time.monotonic()
             rejected = [f.result() for f in futures if f.done()]
             if rejected and (len(futures) == 1 or now - last > self.resend_every_s):
@@ -136,7 +157,7 @@ class GoalSender:
         again every ``resend_every_s`` until the status topic shows the goal cancelling or ended; returns True
         from then on."""
         key = bytes(handle.goal_id.uuid)
-        if self._status.get(key) in (_CANCELING, *_ENDED):
+        if self._status.get(key) in _CANCEL_TAKEN:
             return True
         now = time.monotonic()
         if now - self._cancel_requested_at.get(key, -float("inf")) > self.resend_every_s:

@@ -36,9 +36,7 @@ import importlib
 import sys
 from typing import Any, Callable, Sequence
 
-from .node_common import run_nodes
-
-__all__ = ["GROUPS", "NODE_CLASSES", "node_factories", "run_group"]
+__all__ = ["GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
 
 #: node -> "module:class" of every node class that composes (the class is imported only when used)
 NODE_CLASSES: dict[str, str] = {
@@ -61,6 +59,15 @@ GROUPS: dict[str, tuple[str, ...]] = {
 }
 
 
+def node_names(package: str, executable: str, name: str | None = None) -> tuple[str, ...]:
+    """The ROS node names a launch file's ``<node pkg exec name>`` process runs: a group's nodes (their own names),
+    else ``name``, else the executable. Used where a process list from a launch file is compared with the nodes
+    in the graph (``hindrax health``, the pool-day test)."""
+    if package == "hindrax_drivers" and executable in GROUPS:
+        return GROUPS[executable]
+    return (name or executable,)
+
+
 def node_factories(names: Sequence[str]) -> list[Callable[[], Any]]:
     """The node classes of ``names`` (keys of :data:`NODE_CLASSES`), imported. Raises ValueError naming an unknown
     node and the known ones."""
@@ -76,7 +83,14 @@ def node_factories(names: Sequence[str]) -> list[Callable[[], Any]]:
 def run_group(names: Sequence[str], args: Sequence[str] | None = None) -> int:
     """Run the nodes ``names`` in this process until SIGINT/SIGTERM (:func:`~hindrax_drivers.node_common.run_nodes`).
     Returns the exit status (1 on an invalid configuration, one line on stderr)."""
-    return run_nodes(node_factories(names), args)
+    return _run(node_factories(names), args)
+
+
+def _run(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None) -> int:
+    # imported here: node_names (launch_xml, ``hindrax health``) reads GROUPS without loading the ROS messages
+    from .node_common import run_nodes
+
+    return run_nodes(factories, args)
 
 
 def i2c_sensors_main(args: Sequence[str] | None = None) -> int:
@@ -107,7 +121,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as exc:
         print(f"composition: {exc}", file=sys.stderr)
         return 2
-    return run_nodes(factories, [argv[0]] + argv[2:])
+    return _run(factories, [argv[0]] + argv[2:])
 
 
 if __name__ == "__main__":

@@ -46,7 +46,7 @@ ROTATIONAL_DOFS = DOFS[3:]
 #: Sections a configuration file may contain (top level under ``ros__parameters``).
 SECTIONS: tuple[str, ...] = (
     "vehicle", "environment", "hydrodynamics", "thrusters", "esc", "lights", "sensors", "pool", "limits",
-    "identification", "simulation", "recording", "supervisor", "calibration",
+    "identification", "simulation", "recording", "supervisor", "calibration", "control",
 )
 
 _FLOAT = "float"
@@ -168,6 +168,8 @@ SCHEMA.update({
     "thrusters.allocation_mode": _s("saturation handling", ("uniform", "priority")),
     "thrusters.priority_dofs": Spec(_STRS, "DOFs kept exact in priority mode", choices=DOFS),
     "thrusters.wrench_timeout_s": _f("wrench older than this is rejected as stale, s", 0.01, 10.0),
+    "thrusters.wrench_future_margin_s": _f("wrench stamped further than this in the future is rejected (clock "
+                                           "offset allowed between the controller and this node), s", 0.0, 5.0),
     f"thrusters.{_T}.position_frd_m": _v("thruster position relative to the CG, FRD, m", 3, -5.0, 5.0),
     f"thrusters.{_T}.direction_frd": _v("unit thrust direction for positive thrust, FRD", 3, -1.0, 1.0, unit=True),
     f"thrusters.{_T}.esc_channel": _i("PCA9685 output channel", 0, 15),
@@ -190,6 +192,13 @@ SCHEMA.update({
                                     "arming is refused while false"),
     "esc.readback_interval_s": _f("MODE1, PRE_SCALE and the channel registers are read back this often; a "
                                   "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
+    "esc.heartbeat_timeout_s": _f("the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
+                                  "is older than this (steady clock); the guard asserts /OE when thrusters/pulse_width "
+                                  "or supervisor/heartbeat is (docs/architecture.md §8), s", 0.05, 1.0),
+    "esc.output_enable_gpio.chip": _s("gpiochip of the PCA9685 /OE line, e.g. /dev/gpiochip0 (absent or null: /OE "
+                                      "not wired, the guard writes the chip's all-off and sleep registers instead)"),
+    "esc.output_enable_gpio.line": _i("line offset of the PCA9685 /OE on esc.output_enable_gpio.chip (BCM GPIO number "
+                                      "on a Pi 4)", 0, 1023),
     # --- lights ([Hindrax-Drag] §2.1: PWM also drives the lights) ---
     "lights.esc_channel": _i("PCA9685 channel of the lights", 0, 15),
     "lights.pulse_width_off_us": _f("pulse width for lights off, us", 500.0, 2500.0),
@@ -206,6 +215,9 @@ SCHEMA.update({
     "sensors.dvl75.velocity_std_m_s": _f("1-sigma velocity error used for the covariance, m/s", 0.0, 1.0),
     "sensors.dvl75.max_speed_m_s": _f("plausibility gate: a faster $DVPDL velocity is published invalid, m/s "
                                       "(DVL-75 envelope <= 8 kn = 4.1 m/s, docs/devices.md §1.1)", 0.1, 10.0),
+    "sensors.dvl75.max_angular_rate_rad_s": _f("plausibility gate: a $DVPDL whose attitude change over dtu gives a "
+                                               "faster angular rate is published invalid (it feeds the lever-arm "
+                                               "correction), rad/s", 0.1, 50.0),
     "sensors.dvl75.min_interval_s": _f("plausibility gate: a shorter $DVPDL dtu is published invalid, s "
                                        "(ping rate 5-20 Hz, docs/devices.md §1.1)", 0.001, 1.0),
     "sensors.dvl75.max_interval_s": _f("plausibility gate: a longer $DVPDL dtu is published invalid, s", 0.05, 10.0),
@@ -229,6 +241,12 @@ SCHEMA.update({
                                          0.0, 2e5),
     "sensors.ms5837.max_pressure_pa": _f("plausibility gate: a higher compensated pressure is not published, Pa "
                                          "(30BA full scale 30 bar)", 1e4, 3.1e6),
+    "sensors.ms5837.min_depth_m": _f("plausibility gate: a shallower depth (negative = above the surface, e.g. on "
+                                     "deck) is not published, m", -20.0, 0.0),
+    "sensors.ms5837.max_depth_m": _f("plausibility gate: a deeper depth is not published, m", 0.5, 300.0),
+    "sensors.ms5837.max_depth_rate_m_s": _f("plausibility gate: a depth changing faster than this since the last "
+                                            "published one is held back until the next sample confirms it, m/s",
+                                            0.1, 20.0),
     "sensors.ms5837.prom_reject_blank_words": _b("PROM sanity gate: reject a PROM whose coefficient C1..C6 reads "
                                                  "0x0000 or 0xFFFF (blank or unread PROM; an all-zero PROM passes "
                                                  "CRC-4, docs/devices.md §3.2-3.3)"),
@@ -278,6 +296,12 @@ SCHEMA.update({
     "supervisor.min_rate.pressure_hz": _f("minimum pressure/depth rate while armed, Hz (0 = not watched)",
                                           0.0, 1000.0),
     "supervisor.min_rate.imu_hz": _f("minimum imu/data_raw rate while armed, Hz (0 = not watched)", 0.0, 2000.0),
+    "supervisor.max_invalid_dvl_s": _f("armed with no valid DVL velocity for this long -> trip (the cage's dead "
+                                       "reckoning is frozen meanwhile), s", 0.1, 60.0),
+    "supervisor.rate_check_disabled.dvl": _s("why supervisor.min_rate.dvl_hz is 0 (required with 0, refused otherwise)"),
+    "supervisor.rate_check_disabled.altimeter": _s("why supervisor.min_rate.altimeter_hz is 0 (required with 0)"),
+    "supervisor.rate_check_disabled.pressure": _s("why supervisor.min_rate.pressure_hz is 0 (required with 0)"),
+    "supervisor.rate_check_disabled.imu": _s("why supervisor.min_rate.imu_hz is 0 (required with 0)"),
     "supervisor.max_depth_m": _f("disarm below this depth (pressure port), m", 0.0, 100.0),
     "supervisor.min_altitude_m": _f("disarm closer than this to the floor (altimeter), m", 0.0, 10.0),
     "supervisor.max_roll_rad": _f("disarm beyond this roll (DVL attitude), rad", 0.0, math.pi),
@@ -328,6 +352,20 @@ SCHEMA.update({
     "calibration.inclining_volume_m3": _f("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
     "calibration.inclining_arm_m": _f("horizontal arm of the test mass from the centre line (roll: to starboard, "
                                       "pitch: forward), m", 0.01, 2.0),
+    # --- control: the depth/altitude, heading and velocity holds (hindrax_ident control, docs/control.md §2-§3) ---
+    "control.rate_hz": _f("rate of the controller node's wrench, Hz (default 50)", 1.0, 200.0),
+    "control.depth_bandwidth_rad_s": _f("target bandwidth of the depth and altitude hold, rad/s (default 2)", 0.05, 20.0),
+    "control.heading_bandwidth_rad_s": _f("target bandwidth of the heading hold, rad/s (default 2)", 0.05, 20.0),
+    "control.attitude_bandwidth_rad_s": _f("target bandwidth of the roll and pitch holds, rad/s (default 2)",
+                                           0.05, 20.0),
+    "control.velocity_bandwidth_rad_s": _f("target bandwidth of the surge and sway velocity holds, rad/s (default 3)",
+                                           0.05, 20.0),
+    "control.damping_ratio": _f("damping ratio of the reference models and the PID, default 1", 0.3, 2.0),
+    "control.hold_fraction": _f("share of each axis' authority the holds may use, default 0.6", 0.05, 1.0),
+    "control.max_depth_rate_m_s": _f("largest depth rate the reference model asks for, m/s (default 0.3)", 0.01, 2.0),
+    "control.max_yaw_rate_rad_s": _f("largest yaw rate the reference model asks for, rad/s (default 0.6)", 0.01, 5.0),
+    "control.sensor_timeout_s": _f("the controller stops when depth or attitude is older than this, s (default 0.5)",
+                                   0.05, 10.0),
     # --- simulation (docs/architecture.md §6) ---
     "simulation.step_s": _f("fixed integration step, s", 1e-4, 0.05),
     "simulation.real_time_factor": _f("simulated seconds per wall second (0 = as fast as possible)", 0.0, 1000.0),
@@ -352,7 +390,8 @@ OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics",
                                       "sensors.ms5837.noise_std_pa", "sensors.icm20948.accel_noise_std_m_s2",
                                       "sensors.icm20948.gyro_noise_std_rad_s", "thrusters.thrust_uncertainty_rel",
                                       "identification.excitation", "identification.prior_std_rel",
-                                      "identification.rls_", "thrusters.thrust_fit_uncertainty_rel")
+                                      "identification.rls_", "thrusters.thrust_fit_uncertainty_rel",
+                                      "esc.output_enable_gpio.", "supervisor.rate_check_disabled.", "control.")
 
 # Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
 for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837", "pa", 1e4),
@@ -465,6 +504,19 @@ def _schema_key(key: str, thruster_names: Iterable[str]) -> str | None:
     return None
 
 
+#: keys whose YAML value may be null, meaning "absent" (their sub-keys are optional)
+NULLABLE_KEYS: tuple[str, ...] = ("esc.output_enable_gpio",)
+
+
+def output_enable_gpio(cfg: Any) -> tuple[str, int] | None:
+    """``(chip, line)`` of the PCA9685 /OE line from ``esc.output_enable_gpio``, or None when it is not wired."""
+    flat = cfg.flat if hasattr(cfg, "flat") else cfg
+    chip = flat.get("esc.output_enable_gpio.chip")
+    if not chip:
+        return None
+    return str(chip), int(flat["esc.output_enable_gpio.line"])
+
+
 def _is_optional(key: str) -> bool:
     return any(key.startswith(p) for p in OPTIONAL_PREFIXES)
 
@@ -541,6 +593,8 @@ def validate_flat(flat: Mapping[str, Any], sections: Iterable[str] = SECTIONS,
     names = [n for n in names_raw if isinstance(n, str)] if isinstance(names_raw, (list, tuple)) else []
     out: dict[str, Any] = {}
     for key, value in flat.items():
+        if value is None and key in NULLABLE_KEYS:
+            continue  # e.g. esc.output_enable_gpio: null (not wired)
         if key.split(".")[0] not in sections:
             issues.append(ConfigIssue(key, value, "no such key (sections: " + ", ".join(sections) + ")"))
             continue
@@ -661,6 +715,65 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             2.0 * c["supervisor.cage_margin_m"] >= min(c["pool.length_m"], c["pool.width_m"]):
         issues.append(ConfigIssue("supervisor.cage_margin_m", c["supervisor.cage_margin_m"],
                                   f"below half the pool's smaller side ({min(c['pool.length_m'], c['pool.width_m']) / 2:g})"))
+    issues.extend(_safety_cross_checks(c))
+    return issues
+
+
+def _safety_cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
+    """Cross-checks of the safety settings (docs/architecture.md §8), one issue (one line) each."""
+    from .pca9685.protocol import Pca9685Error, esc_prescale
+
+    issues: list[ConfigIssue] = []
+    # the disarmed hold (neutral + trim) must sit inside the ESC deadband, or a disarmed vehicle thrusts
+    if "thrusters.names" in c and "thrusters.deadband_us" in c:
+        db, mid = c["thrusters.deadband_us"], c["thrusters.pulse_width_neutral_us"]
+        for n in c["thrusters.names"]:
+            trim = c.get(f"thrusters.{n}.trim_us")
+            if trim is not None and abs(trim) >= db:
+                issues.append(ConfigIssue(f"thrusters.{n}.trim_us", trim,
+                                          f"inside +-thrusters.deadband_us ({db:g}): the disarmed hold {mid + trim:g} us "
+                                          f"must stay in the ESC deadband {mid - db:g}-{mid + db:g} us"))
+    # the PWM frequency the ESC node accepts: the ACTUAL rate after prescale rounding within the ESC's 50-400 Hz
+    if "esc.pwm_frequency_hz" in c and "esc.oscillator_hz" in c:
+        try:
+            esc_prescale(c["esc.pwm_frequency_hz"], c["esc.oscillator_hz"])
+        except Pca9685Error as exc:
+            issues.append(ConfigIssue("esc.pwm_frequency_hz", c["esc.pwm_frequency_hz"],
+                                      f"an actual rate within the ESC's 50-400 Hz ({exc})"))
+    if "esc.output_enable_gpio.chip" in c and "esc.output_enable_gpio.line" not in c:
+        issues.append(ConfigIssue("esc.output_enable_gpio.line", "<missing>", "a line offset with "
+                                  "esc.output_enable_gpio.chip"))
+    # the ESC must hear several supervisor heartbeats (one per supervisor check) within its timeout
+    if "esc.heartbeat_timeout_s" in c and "supervisor.check_rate_hz" in c:
+        period = 1.0 / c["supervisor.check_rate_hz"]
+        if c["esc.heartbeat_timeout_s"] < 2.0 * period:
+            issues.append(ConfigIssue("esc.heartbeat_timeout_s", c["esc.heartbeat_timeout_s"],
+                                      f"at least two supervisor heartbeats (2 / supervisor.check_rate_hz = "
+                                      f"{2.0 * period:g} s)"))
+    # a rate check is off only with a reason
+    for sensor in ("dvl", "altimeter", "pressure", "imu"):
+        key, why = f"supervisor.min_rate.{sensor}_hz", f"supervisor.rate_check_disabled.{sensor}"
+        if key not in c:
+            continue
+        reason = str(c.get(why, "")).strip()
+        if c[key] == 0.0 and not reason:
+            issues.append(ConfigIssue(key, 0.0, f"above 0, or 0 with {why}: '<reason>' (a disabled check needs a "
+                                      "reason)"))
+        elif c[key] > 0.0 and why in c:
+            issues.append(ConfigIssue(why, c[why], f"absent while {key} = {c[key]:g} (the check is on)"))
+    # supervisor limits inside what the sensors can report
+    if "supervisor.min_altitude_m" in c and "sensors.ping1d.min_range_m" in c and \
+            c["supervisor.min_altitude_m"] < c["sensors.ping1d.min_range_m"]:
+        issues.append(ConfigIssue("supervisor.min_altitude_m", c["supervisor.min_altitude_m"],
+                                  f"at least sensors.ping1d.min_range_m ({c['sensors.ping1d.min_range_m']:g}): closer "
+                                  "is the Ping's blind zone"))
+    if "supervisor.max_depth_m" in c:
+        for other, what in (("pool.depth_m", "the pool's depth"),
+                            ("sensors.ms5837.max_depth_m", "the depth sensor's plausibility gate")):
+            if other in c and c["supervisor.max_depth_m"] > c[other]:
+                issues.append(ConfigIssue("supervisor.max_depth_m", c["supervisor.max_depth_m"],
+                                          f"at most {other} ({c[other]:g}, {what}): a deeper limit never trips"))
+                break  # one line per key
     return issues
 
 
@@ -732,6 +845,7 @@ class ThrustersConfig:
     allocation_mode: str
     priority_dofs: tuple[str, ...]
     wrench_timeout_s: float
+    wrench_future_margin_s: float = 0.1
 
     @property
     def names(self) -> list[str]:
@@ -863,6 +977,7 @@ class VehicleConfig:
             allocation_mode=f["thrusters.allocation_mode"],
             priority_dofs=tuple(f["thrusters.priority_dofs"]),
             wrench_timeout_s=f["thrusters.wrench_timeout_s"],
+            wrench_future_margin_s=f["thrusters.wrench_future_margin_s"],
         )
 
     def summary(self) -> str:

@@ -12,8 +12,9 @@ from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalRespons
 from rclpy.action.client import ClientGoalHandle
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.task import Future
+from rclpy.time import Time
 
-from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
+from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender, send_goal_response_type
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.action import RunIdentification
 
@@ -85,8 +86,12 @@ def test_lost_goal_response_is_recovered_from_the_status_topic_and_the_goal_runs
     node, client, server, spin = graph
     calls = _lose_first(client, "send_goal_async", send=True)
     sender = GoalSender(node, client, "run_identification", resend_every_s=0.5)
+    before = node.get_clock().now()
     handle, result = _run(sender, spin)
     assert handle.accepted
+    # the recovered handle is rclpy's own, stamped with the acceptance time the server published
+    assert isinstance(handle, ClientGoalHandle)
+    assert Time.from_msg(handle.stamp) >= before
     assert result.result.success and result.result.message == "done surge"
     assert server.accepted == 1  # a resend (if any) carried the same UUID and was refused as a duplicate
     assert len(calls) >= 1
@@ -184,3 +189,11 @@ def test_lost_cancel_request_is_sent_again_until_the_goal_is_cancelling():
             ex.shutdown()
             server_node.destroy_node()
             client_node.destroy_node()
+
+
+def test_send_goal_response_type_is_the_actions_own_and_other_messages_are_refused():
+    assert send_goal_response_type(RunIdentification.Goal()) is RunIdentification.Impl.SendGoalService.Response
+    with pytest.raises(TypeError, match="not the Goal message"):
+        send_goal_response_type(RunIdentification.Result())
+    with pytest.raises(TypeError, match="not the Goal message"):
+        send_goal_response_type(GoalStatus())

@@ -261,10 +261,20 @@ def test_property_uniform_saturation_direction(allocator, layout, curve, directi
     wrench = direction * auth * overload
     res = allocator.allocate(wrench)
     allocated_wrench = layout.matrix() @ res.allocated_force_n
-    assert cosine(allocated_wrench, wrench) >= 1.0 - 1e-12
     assert np.all(res.allocated_force_n <= upper) and np.all(res.allocated_force_n >= lower)
     if res.scale < 1.0:
         assert res.saturated.any()
+    # the saturation step alone (the same allocator without the deadband search) keeps the direction exactly
+    continuous = ThrustAllocator(layout.matrix(), curve, deadband_search=False).allocate(wrench)
+    assert cosine(layout.matrix() @ continuous.allocated_force_n, wrench) >= 1.0 - 1e-12
+    assert continuous.scale == res.scale
+    moving = continuous.allocated_force_n != 0.0
+    if np.all(np.abs(continuous.allocated_force_n[moving]) >= curve.smallest_forward_n):
+        np.testing.assert_array_equal(res.allocated_force_n, continuous.allocated_force_n)  # nothing to search
+    else:
+        # the deadband moves the allocated wrench by at most what one thruster's smallest thrust makes
+        worst = np.max(np.linalg.norm(layout.matrix(), axis=0)) * curve.smallest_forward_n
+        assert np.linalg.norm(allocated_wrench - res.scale * wrench) <= worst
     if np.all((np.abs(res.allocated_force_n) > 1.01 * curve.smallest_forward_n)):
         assert cosine(res.achieved_wrench, wrench) >= 0.9999
 
@@ -481,25 +491,26 @@ TICK_US = 31 * 1e6 / 25e6  # PCA9685 PRE_SCALE 30 at 25 MHz: one count = 1.24 us
 
 
 def test_fault10_quantisation_never_rounds_into_the_deadband(layout, curve):
-    """1475.00 us (the reverse deadband edge, -1.20 N) used to become 1475.60 us (0 N); now every width outside the
-    1475-1525 us deadband stays outside it after quantisation, and moves less than one count, away from 1500."""
-    exact = ThrustAllocator(layout.matrix(), curve)
+    """1475.00 us (the reverse deadband edge, -1.20 N) used to become 1475.60 us (0 N); now every width is on the
+    PCA9685 grid, the nearest grid width to the exact inverse of its allocated force, and outside the 1475-1525 us
+    deadband unless it is the grid's neutral (1500.40 us, 0 N)."""
     grid = ThrustAllocator(layout.matrix(), curve, pulse_width_step_us=TICK_US)
     rng = np.random.default_rng(19)
     wrenches = rng.uniform(-1.0, 1.0, (5000, 6)) * np.array([4.0, 4.0, 4.0, 0.4, 0.4, 0.4])
-    inside_before = inside_after = moved_towards = 0
+    near_edges = inside = 0
     for w in wrenches:
-        p0 = exact.allocate(w).pulse_width_us
-        p1 = grid.allocate(w).pulse_width_us
+        res = grid.allocate(w)
+        p1 = res.pulse_width_us
         counts = p1 / TICK_US
         np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)  # on the PCA9685 grid
-        assert np.all(np.abs(p1 - p0) < TICK_US + 1e-9)
-        outside0 = (p0 <= 1475.0) | (p0 >= 1525.0)
-        inside_before += int(np.sum(outside0))
-        inside_after += int(np.sum(outside0 & (p1 > 1475.0) & (p1 < 1525.0)))
-        moved_towards += int(np.sum(outside0 & (np.abs(p1 - 1500.0) < np.abs(p0 - 1500.0) - 1e-9)))
-    assert inside_before > 10_000  # the sample exercises the small forces near the deadband edges
-    assert (inside_after, moved_towards) == (0, 0)
+        exact = np.array([curve.pulse_width_us(f) for f in res.allocated_force_n])
+        assert np.all(np.abs(p1 - exact) <= 0.5 * TICK_US + 1e-9)  # nearest grid width
+        neutral = np.abs(p1 - 1500.0) <= 0.5 * TICK_US
+        assert np.array_equal(neutral, res.allocated_force_n == 0.0)
+        inside += int(np.sum(~neutral & (p1 > 1475.0) & (p1 < 1525.0)))
+        near_edges += int(np.sum((np.abs(p1 - 1475.0) < 2.0) | (np.abs(p1 - 1525.0) < 2.0)))
+    assert near_edges > 2_000  # the sample exercises the smallest forces, next to the deadband edges
+    assert inside == 0
     # the edge itself, by hand: 1475 / 1.24 = 1189.52 counts -> 1189 counts = 1474.36 us (not 1190 = 1475.60 us)
     one = ThrustAllocator(np.array([[1.0], [0], [0], [0], [0], [0]]), curve, pulse_width_step_us=TICK_US)
     edge_force = curve.thrust_n(1475.0)

@@ -12,7 +12,7 @@ from std_msgs.msg import Float64
 
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode, EscOutput
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -20,6 +20,9 @@ from hindrax_msgs.srv import SetArmed
 pytestmark = pytest.mark.ros
 TICK_US = 1.24  # one PCA9685 count at 200 Hz (prescale 30) and 25 MHz, docs/devices.md §5.1
 PERIOD_S = 1 / 50.0  # esc.output_rate_hz
+#: these tests are not about the safety heartbeats (test_safety_paths.py is): the stand-in's heartbeats, published in
+#: this same busy process, get a wide timeout so that a loaded machine cannot disarm the ESC mid-test
+HEARTBEAT_TIMEOUT_S = 2.0
 #: neutral of the fixture's channels: 1500 us plus each thruster's trim (t3: +10 us)
 NEUTRAL = np.array([1500.0, 1500.0, 1510.0, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0])
 
@@ -36,7 +39,9 @@ def esc():
         params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True,
                                     "thrusters.t2.reversed": True, "thrusters.t3.trim_us": 10.0})
         node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
+        node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
         probe = rclpy.create_node("probe", context=ctx)
+        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -57,7 +62,8 @@ def esc():
             m.header.stamp = probe.get_clock().now().to_msg()
             pub.publish(m)
 
-        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready(), 10, spin, "ESC node ready")
+        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready() and not node.heartbeat_refusal(),
+                   10, spin, "ESC node ready")
         yield dict(node=node, emu=emu, bus=bus, spin=spin, set_armed=set_armed, command=command, written=written,
                    lights=lights)
         ex.shutdown()
@@ -115,7 +121,12 @@ def test_watchdog_returns_to_neutral_within_one_period():
         params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2, "esc.oscillator_calibrated": True})
         node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
                        parameter_overrides=params + [Parameter("use_sim_time", value=True)])
+        node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
+        # the ROS-time watchdog is under test; the wall-clock one (test_fault3_...) must not pre-empt it when this
+        # loop's simulated 5 ms steps take longer than 5 ms of wall time on a loaded machine
+        node.set_steady_watchdog_timeout(5.0)
         probe = rclpy.create_node("probe", context=ctx)
+        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -133,7 +144,7 @@ def test_watchdog_returns_to_neutral_within_one_period():
             ex.spin_once(timeout_sec=0.0)
 
         wait_until(lambda: clock_pub.get_subscription_count() > 0 and pub.get_subscription_count() > 0
-                   and arm.service_is_ready(), 10, advance, "ESC node ready")
+                   and arm.service_is_ready() and not node.heartbeat_refusal(), 10, advance, "ESC node ready")
         fut = arm.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, 5, advance, "armed")
         assert fut.result().success
@@ -204,6 +215,7 @@ def test_sigterm_path_writes_neutral():
         node.command = np.full(8, 1700.0)
         node.command_time = node.get_clock().now()
         node.watchdog_s = 1e9
+        node.heartbeat_refusal = lambda: ""  # this test is about the shutdown path only
         holder["node"] = node
         return node
 
@@ -246,6 +258,13 @@ class _SampledBus:
         return call
 
 
+def _healthy(node):
+    """Feed the node one OK supervisor and guard heartbeat (tests that call the node's methods directly)."""
+    for feed in (node.on_supervisor_heartbeat, node.on_guard_heartbeat):
+        feed(DiagnosticStatus(level=DiagnosticStatus.OK, message="ok"))
+    node.steady_check()
+
+
 def _node(emu_or_bus, overrides, sim_time=False, ctx=None):
     from rclpy.parameter import Parameter
 
@@ -253,7 +272,9 @@ def _node(emu_or_bus, overrides, sim_time=False, ctx=None):
     params = config_parameters({"esc.oscillator_calibrated": True, **overrides})
     if sim_time:
         params.append(Parameter("use_sim_time", value=True))
-    return EscNode(bus=bus, context=ctx, parameter_overrides=params)
+    node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
+    node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
+    return node
 
 
 def test_fault1_chip_reset_while_armed_is_detected_reinitialised_and_disarms(esc):
@@ -287,6 +308,9 @@ def test_fault2_arming_time_counts_from_neutral_confirmed_on_the_chip():
         node = _node(bus, {"esc.arming_time_s": 0.3, "esc.readback_interval_s": 0.1}, ctx=ctx)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
+        probe = rclpy.create_node("probe", context=ctx)
+        SafetyHeartbeats(probe)
+        ex.add_node(probe)
         spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
         created = node.get_clock().now()
         wait_until(lambda: (node.get_clock().now() - created).nanoseconds > 0.6e9, 5, spin, "0.6 s with the bus down")
@@ -314,6 +338,7 @@ def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
         emu = Pca9685Emulator()
         node = _node(emu, {"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2}, sim_time=True, ctx=ctx)
         probe = rclpy.create_node("probe", context=ctx)
+        beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
@@ -329,7 +354,8 @@ def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
             ex.spin_once(timeout_sec=0.01)
 
         wait_until(lambda: clock_pub.get_subscription_count() > 0 and pub.get_subscription_count() > 0, 10, advance)
-        wait_until(lambda: node.arming_remaining_s() == 0.0 and node.get_clock().now().nanoseconds > 0, 10, advance)
+        wait_until(lambda: node.arming_remaining_s() == 0.0 and node.get_clock().now().nanoseconds > 0
+                   and not node.heartbeat_refusal(), 10, advance)
         assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
 
         def command_and_advance():
@@ -427,6 +453,7 @@ def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):
     monkeypatch.setattr(esc_node.time, "monotonic", lambda: fake["t"])
     with ros_context() as ctx:
         node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2}, ctx=ctx)
+        _healthy(node)
         assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
         node.on_command(ThrusterPwm(pulse_width_us=[1650.0] * 8))
         fake["t"] += 2.0  # stall

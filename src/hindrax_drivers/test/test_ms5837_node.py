@@ -376,7 +376,9 @@ def test_stamp_is_the_time_of_validity_of_the_pressure(rig):
         return node.get_clock().now().nanoseconds * 1e-9 if node is not None else sim["t"]
 
     r = rig(lambda t: (101000.0 + ramp_pa_s * (t - 1000.0), 14.0), "30BA", clock=node_clock, sim_time=True,
-            overrides={"sensors.ms5837.min_pressure_pa": 0.0, "sensors.ms5837.max_pressure_pa": 3.1e6})
+            overrides={"sensors.ms5837.min_pressure_pa": 0.0, "sensors.ms5837.max_pressure_pa": 3.1e6,
+                       # the synthetic ramp is 10 m/s of depth: beyond the vehicle's physics the gate holds to
+                       "sensors.ms5837.max_depth_rate_m_s": 20.0, "sensors.ms5837.max_depth_m": 300.0})
     holder["node"] = r.node
     clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
 

@@ -24,7 +24,7 @@ from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.supervisor.core import SupervisorCore, SupervisorLimits
 from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -116,7 +116,7 @@ def test_rates_and_run_time():
         t = k / 100.0
         c.on_message("imu", t)
         if k % 10 == 0:
-            c.on_dvl(t, None)
+            c.on_dvl(t, np.zeros(3))  # a valid velocity (an invalid one no longer counts toward the rate)
             c.on_altitude(t, 1.0)
             if k <= 290:
                 c.on_depth(t, 0.5)
@@ -143,6 +143,7 @@ def graph():
         esc = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx, parameter_overrides=config_parameters(over) + sim)
         sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(over) + sim)
         probe = rclpy.create_node("probe", context=ctx)
+        SafetyHeartbeats(probe, supervisor=None)  # the output guard healthy (the supervisor is real)
         ex = SingleThreadedExecutor(context=ctx)
         for n in (esc, sup, probe):
             ex.add_node(n)

@@ -18,6 +18,8 @@ import sys
 import time
 from pathlib import Path
 
+from hindrax_ident import results_doc
+
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 #: benchmark name -> module
@@ -28,6 +30,7 @@ BENCHMARKS: dict[str, str] = {
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
     "identification": "hindrax_ident.benchmarks.identification",
+    "ident_fit": "hindrax_ident.benchmarks.ident_fit",
     "scenarios": "hindrax_ident.benchmarks.scenarios",
     "recorder": "hindrax_ident.benchmarks.recorder",
     "serial_drivers": "hindrax_ident.benchmarks.serial_drivers",
@@ -41,6 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", default="", help="comma-separated benchmark names")
     parser.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the scripts)")
     parser.add_argument("--out", default="bench-results", help="directory for results.json")
+    results_doc.add_argument(parser)
     args = parser.parse_args(argv)
     names = [n for n in args.only.split(",") if n] or list(BENCHMARKS)
     unknown = [n for n in names if n not in BENCHMARKS]
@@ -73,6 +77,15 @@ def main(argv: list[str] | None = None) -> int:
     (out / "results.json").write_text(json.dumps(doc, indent=2))
     print("\nwall time per section: " + ", ".join(f"{k} {v:.0f} s" for k, v in wall_s.items()))
     print(f"written {out / 'results.json'}")
+    table = results_doc.markdown_table(
+        ["benchmark", "measure", "value", "unit", "target", "note"],
+        [[r["benchmark"], r["name"], f"{r['value']:.4g}" if isinstance(r["value"], (int, float)) else r["value"],
+          r.get("unit", ""), r.get("target", ""), r.get("note", "")] for r in rows])
+    results_doc.write_if_asked(
+        args, "bench" if not args.only else "bench-" + "-".join(names),
+        "Benchmarks (`make bench`)" if not args.only else f"Benchmarks: {', '.join(names)}",
+        f"{platform.platform()}, {os.cpu_count()} cores; wall time {wall_s['total']:.0f} s"
+        f"{' (--quick)' if args.quick else ''}. Targets are the Pi budget of docs/architecture.md §10.\n\n{table}")
     return 0
 
 

@@ -117,8 +117,8 @@ class Graph:
                       spin_timeout_s: float = 0.01) -> Any:
         """The operator's start of a simulated run, each step at a simulated instant independent of wall time:
         with time frozen, wait for :meth:`startup_complete`, ``arm_client`` (an ``esc/set_armed`` client) ready and
-        ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); answer the arm
-        request with time frozen again. Returns the SetArmed response. Raises
+        ``ready()``; let time run through the ESC's arming time (``esc.arming_time_s`` at neutral); with time frozen
+        again, wait for the ESC's steady-clock arming time and the safety heartbeats, and answer the arm request. Returns the SetArmed response. Raises
         :class:`~hindrax_drivers.conditions.ConditionTimeout` when a step takes longer than ``timeout_s`` of wall time.
         """
         from hindrax_drivers.conditions import wait_until
@@ -128,9 +128,18 @@ class Graph:
         self.freeze_time()
         wait_until(lambda: self.startup_complete() and arm_client.service_is_ready() and ready(), timeout_s, spin,
                    "drivers' start-up, recorder subscriptions and services")
+        # the vehicle holds neutral for esc.arming_time_s of simulated time (the drivers finish their start-up
+        # meanwhile); the ESC counts its arming time and the safety heartbeats on the steady clock
+        # (docs/architecture.md §8), so the rest of that wait happens with simulated time held: the arm request
+        # lands at the same simulated instant whatever the machine's speed
+        esc = self.nodes["esc"]
         self.resume_time()
-        wait_until(lambda: self.nodes["esc"].arming_remaining_s() == 0.0, timeout_s, spin, "ESC arming time")
+        t0_ns = esc.get_clock().now().nanoseconds
+        wait_until(lambda: esc.get_clock().now().nanoseconds - t0_ns >= esc.arming_time_s * 1e9, timeout_s, spin,
+                   "ESC arming time (simulated)")
         self.freeze_time()
+        wait_until(lambda: esc.arming_remaining_s() == 0.0 and not esc.heartbeat_refusal(), timeout_s, spin,
+                   "ESC arming time (steady clock) and the supervisor's and guard's heartbeats")
         fut = arm_client.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, timeout_s, spin, "arm answer")
         self.resume_time()
@@ -186,17 +195,24 @@ def ordered_executor(**kwargs: Any) -> Any:
     return _OrderedExecutor(**kwargs)
 
 
+#: heartbeat timeout of the ESC and the output guard inside one process (see build_graph), s
+SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S = 2.0
+
+
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
-                drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None) -> Graph:
+                drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None, controller: bool = False,
+                model_file: str = "") -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
     (all topics) writing to ``record_dir`` (empty: timestamped directory under ``recording.output_root``).
     overrides: dotted configuration keys. seed / real_time_factor: simulation settings.
     identification: add the identification node (action ``run_identification``; default True, with or without
-    ``sim``). i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
+    ``sim``). controller: add the controller node (depth/altitude, heading and velocity holds, disabled until
+    ``controller/hold``; docs/control.md) with the model of ``model_file`` ("" = the vehicle file's).
+    i2c_bus (not with ``sim``): an object with the ``smbus2.SMBus`` interface every I2C node uses instead
     of opening its configured ``/dev/i2c-N`` (e.g. the emulated bus of
     :class:`~hindrax_ident.sim.hardware.VirtualHardware`, to run the vehicle graph against emulated devices).
     drive_clocks (sim only): the simulator sets the nodes' clocks directly and publishes no /clock (about 20 %
@@ -251,6 +267,17 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     from hindrax_drivers.supervisor.node import SupervisorNode
 
     nodes["supervisor"] = SupervisorNode(**common)  # disarms the ESC on a breach (supervisor.*)
+    from hindrax_drivers.guard.node import OutputGuardNode
+
+    # the second stop path (docs/architecture.md §8): the ESC arms only with its heartbeat; without /OE wired it
+    # silences the chip over the same bus
+    nodes["output_guard"] = OutputGuardNode(bus=bus, **common)
+    # one process, one executor thread: a slow callback delays the ESC, the supervisor and the guard alike, and none
+    # of them can die or hang alone, so their heartbeats get a wide timeout (the vehicle runs them as processes)
+    nodes["output_guard"].set_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
+    nodes["esc"].set_heartbeat_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
+    if sim:  # simulated time may stand still on purpose (step gates): not a stalled /clock
+        nodes["supervisor"].set_clock_stall_timeout(30.0)
     from hindrax_drivers.tf.node import StaticTfNode
 
     nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static
@@ -260,6 +287,12 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         nodes["identification"] = IdentificationNode(config=cfg, **common)
         if sim:  # lock-step: simulated time waits for every control tick of a running manoeuvre
             nodes["simulator"].add_step_gate(nodes["identification"].clock_may_advance)
+    if controller:
+        from .control.node import ControllerNode
+
+        nodes["controller"] = ControllerNode(config=cfg, model_file=model_file, **common)
+        if sim:  # lock-step while it holds, as for the identification node
+            nodes["simulator"].add_step_gate(nodes["controller"].clock_may_advance)
     if hardware is not None:
         # emulators on the drivers' ROS clock (the MS5837 driver's): conversion waits line up exactly
         ms5837_clock = nodes["ms5837"].get_clock()
@@ -296,7 +329,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
 
 
 def run(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
-        seed: int | None = None, real_time_factor: float | None = None) -> int:
+        seed: int | None = None, real_time_factor: float | None = None, controller: bool = False,
+        model_file: str = "") -> int:
     """Process entry point of ``hindrax bringup``: build the graph, spin until SIGINT/SIGTERM, shut down
     (:class:`~hindrax_drivers.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
     status: 1 with one line on stderr for an invalid configuration."""
@@ -306,7 +340,7 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
     with RosProcess(errors={ConfigError: "invalid configuration"}) as proc:
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,
-                            real_time_factor=real_time_factor)
+                            real_time_factor=real_time_factor, controller=controller, model_file=model_file)
         proc.at_exit(graph.shutdown)
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)

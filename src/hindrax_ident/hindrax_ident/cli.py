@@ -30,7 +30,11 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("thruster-test",), "hindrax_ident.commands.thruster_test",
      "step each thruster alone and print the wrench the model expects (catch reversed/swapped thrusters)"),
     (("bringup",), "hindrax_ident.commands.bringup",
-     "start the node graph: drivers, ESC output, allocation (--sim: virtual pool and emulated devices)"),
+     "the virtual pool's single-process graph (--sim); the vehicle runs the launch file instead "
+     "(ros2 launch hindrax_drivers vehicle.launch.xml)"),
+    (("health",), "hindrax_ident.commands.health",
+     "ready to dive? every node of the vehicle's launch file running, its /diagnostics OK and the supervisor OK; "
+     "exit 0, or 1 listing what is missing"),
     (("decode",), "hindrax_ident.commands.decode",
      "run a serial driver's parser (dvl75: text lines, ping1d: raw bytes) over a capture; one JSON record per line"),
     (("bag", "record"), "hindrax_ident.commands.bag.record",
@@ -75,6 +79,14 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("run",), "hindrax_ident.commands.run",
      "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
      "identification.yaml, report"),
+    (("control", "evaluate"), "hindrax_ident.commands.control",
+     "closed-loop depth step, altitude hold over a sloped floor and heading step in the virtual pool against a truth: "
+     "identified model vs vehicle file vs the former PD hold (table, control.json, report)"),
+    (("control", "scenarios"), "hindrax_ident.commands.control",
+     "for each scenario truth: identify in-process, then compare the depth and altitude holds of the identified model "
+     "and the vehicle file (control_scenarios.md/.json)"),
+    (("control", "model"), "hindrax_ident.commands.control",
+     "the controller's gains and the source of each model value (--model identification.yaml or the vehicle file)"),
     (("esc", "calibrate"), "hindrax_ident.commands.esc",
      "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
 ]

@@ -72,5 +72,7 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on():
     procs = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1], {"output_dir": "/tmp/b"})
     entries = [p.module for p in procs]
     assert "hindrax_ident.identification.node:main" in entries
-    recorder = [p for p in procs if ("output_dir", "/tmp/b") in p.params]
+    assert "hindrax_ident.control.node:main" in entries  # the controller, launched with the pool test
+    # output_dir is the root of the recorder's timestamped bags (recording/bag_dir.py)
+    recorder = [p for p in procs if ("recording.output_root", "/tmp/b") in p.params]
     assert len(recorder) == 1 and ("autostart", "true") in recorder[0].params

@@ -48,6 +48,33 @@ def test_allocate_prints_the_documented_json():
     assert np.all(np.abs(b @ forces - [10, -4, 5, 0.2, 0, -0.3]) < 0.05 * authority)
 
 
+def test_allocate_small_surge_runs_a_pair_instead_of_rounding_every_thruster_up():
+    """Issue 26: with each horizontal thruster rounded up to its smallest thrust (1.2 N) this gave -2.77 N of surge
+    and 0.28 N m of pitch; the deadband search runs one symmetric pair at about 1.74 N."""
+    r = run("allocate", "-2", "0", "0", "0", "0", "0")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    b, thrust = independent_model()
+    forces = thrust(np.array(out["pulse_width_us"]))
+    achieved = b @ forces
+    assert np.allclose(achieved, out["achieved_wrench"], atol=1e-3)
+    assert abs(achieved[0] - -2.0) <= 0.15
+    assert np.all(np.abs(achieved[[1, 5]]) < 1e-3)  # no sway, no yaw
+    assert np.all(np.abs(achieved[2:5]) < 0.05)  # heave, roll and pitch: what the pulse-width step leaves
+    p = np.array(out["pulse_width_us"])
+    assert np.all((np.abs(p - 1500.0) <= 0.62) | (np.abs(p - 1500.0) >= 25.0))  # neutral or outside the deadband
+    assert np.count_nonzero(forces[:4]) == 2
+
+
+def test_allocate_keeps_heave_when_surge_saturates():
+    """The shipped priority mode: [60 0 -40 0 0 3] keeps the -40 N heave and the 3 N m yaw, surge gets the rest."""
+    out = json.loads(run("allocate", "60", "0", "-40", "0", "0", "3").stdout)
+    b, thrust = independent_model()
+    achieved = b @ thrust(np.array(out["pulse_width_us"]))
+    assert abs(achieved[2] - -40.0) <= 0.15 and abs(achieved[5] - 3.0) <= 0.05
+    assert 0.0 < achieved[0] < 60.0 and any(out["saturated"])
+
+
 def test_allocate_saturates_with_scale():
     out = json.loads(run("allocate", "200", "0", "0", "0", "0", "0").stdout)
     assert 0 < out["scale"] < 1 and any(out["saturated"])

@@ -90,3 +90,19 @@ def test_update_vehicle_file_sets_scalars_and_lists_keeps_comments_and_restores_
     with pytest.raises(ConfigError, match="oscillator_hz"):
         update_vehicle_file(conf, {"oscillator_hz": "5.0"})
     assert conf.read_text() == edited  # restored
+
+
+def test_config_check_warns_when_the_vehicle_has_no_hardware_cut_off(tmp_path):
+    """Issue 23: esc.output_enable_gpio null (the shipped file) -> a warning; wired -> none."""
+    import yaml
+
+    from hindrax_drivers.config import default_config_path
+
+    res = run("config", "check", str(default_config_path()))
+    assert res.returncode == 0 and "no hardware cut-off" in res.stdout
+    doc = yaml.safe_load(default_config_path().read_text())
+    doc["/**"]["ros__parameters"]["esc"]["output_enable_gpio"] = {"chip": "/dev/gpiochip0", "line": 17}
+    wired = tmp_path / "wired.yaml"
+    wired.write_text(yaml.safe_dump(doc))
+    res = run("config", "check", str(wired))
+    assert res.returncode == 0 and "no hardware cut-off" not in res.stdout, res.stdout

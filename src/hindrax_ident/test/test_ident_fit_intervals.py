@@ -1,11 +1,12 @@
-"""``hindrax ident fit`` (issue 18): honest intervals and the config-ready flag.
+"""``hindrax ident fit`` and ``hindrax ident bag`` (issue 27): honest intervals and the config-ready flag.
 
-* The reported std is the larger of the output-error std and the delete-a-group jackknife std of the K fold
-  estimates, var_J = (K - 1) / K sum_k (theta_k - mean)^2 (Efron and Stein 1981; Shao and Tu 1995 §2.3;
-  docs/identification.md §7), with ``std_source`` naming it. On a synthetic surge record whose dynamics carry an
-  unrecorded, slowly varying force (Ornstein-Uhlenbeck, 60 s correlation time: residuals correlated across the 10 s
-  segments, which the output-error covariance treats as independent) the bias std follows the fold spread; with
-  white measurement noise only, the reported std stays the output-error std within a factor 1.5.
+* The reported covariance is the cluster-robust (sandwich) covariance with contiguous blocks of segments as
+  clusters, blocks lengthened while their scores are correlated (lag-1 autocorrelation above 0.2) down to 6 clusters,
+  at least the model-based one, with Student t on clusters - 1 degrees of freedom (docs/identification.md §7,
+  [Liang-Zeger1986], [Bester-Conley-Hansen2011]). On a synthetic surge record whose dynamics carry an unrecorded,
+  slowly varying force (Ornstein-Uhlenbeck, 60 s correlation time: residuals correlated across the 10 s segments)
+  the blocks grow and the bias std follows the correlation; with white measurement noise only, the reported std stays
+  the model-based one within a factor 1.5.
 * Without ``--config`` the file holds ``inertia`` but no ``added_mass``: ``config_ready: false`` with the reason,
   printed too, and :func:`~hindrax_ident.identification.results.to_config_overrides` refuses it in one line.
 """
@@ -14,19 +15,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import yaml
+from scipy import signal, stats
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
-from hindrax_ident.identification.fit_any import BagSegments, _folds, fit_dof, honest_interval, jackknife_std
+from hindrax_ident.identification import fit_core
 from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
 from hindrax_ident.identification.results import IdentificationFileError, to_config_overrides
+
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 #: surge truth of the synthetic record: inertia kg, quadratic damping kg/m, linear damping kg/s, bias N
 TRUTH = np.array([30.0, 20.0, 5.0, 0.0])
 NAMES = ["inertia", "quadratic_damping", "linear_damping", "bias"]
 
 
-def _record(seed: int, disturbance_std_n: float, segments: int = 36, h: float = 0.05) -> BagSegments:
+def _record(seed: int, disturbance_std_n: float, segments: int = 36, h: float = 0.05) -> fit_core.DofRecord:
     """Surge record in 10 s segments on a grid of h: piecewise-constant recorded force (holds of 2-6 s, +-25 N);
     the vehicle (M u' + k_q |u| u + k_l u + b = force + d) also feels d, an unrecorded Ornstein-Uhlenbeck force
     (60 s correlation time, ``disturbance_std_n``); velocity measured with 0.01 m/s white noise. Integrated with
@@ -61,62 +65,69 @@ def _record(seed: int, disturbance_std_n: float, segments: int = 36, h: float = 
             u += dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         v[j + 1] = u
     z = v + 0.01 * rng.standard_normal(n)
-    force6 = np.zeros((segments, L, 6))
-    vel6 = np.full((segments, L, 6), np.nan)
-    force6[..., 0] = f.reshape(segments, L)
-    vel6[..., 0] = z.reshape(segments, L)
-    return BagSegments(force6, vel6, np.zeros((segments, L, 3)), np.zeros(segments, int),
-                       np.ones((segments, L), bool), h)
+    win = 11
+    ch = fit_core.Chunk(f, signal.savgol_filter(z, win, 2), np.zeros(n), signal.savgol_filter(z, win, 2, deriv=1,
+                                                                                            delta=h),
+                        np.arange(n, dtype=float), z, group=0)
+    return fit_core.DofRecord("surge", h, "velocity", [ch], "thrust_model", 0.0)
 
 
-def test_jackknife_and_interval_by_hand():
-    # fold estimates 1, 2, 3 (K = 3): mean 2, sum of squares 2, var_J = 2/3 * 2 = 4/3
-    assert jackknife_std([[1.0], [2.0], [3.0]])[0] == pytest.approx(np.sqrt(4.0 / 3.0), rel=1e-12)
-    std, ci, src, jk = honest_interval(np.array([2.0, 10.0]), np.array([0.5, 2.0]),
-                                       [[1.0, 10.0], [2.0, 10.5], [3.0, 9.5]], n_segments=31)
-    assert src == ["jackknife", "output_error"]
-    assert std == pytest.approx([np.sqrt(4.0 / 3.0), 2.0])
-    # Student t: 2 degrees of freedom (K - 1) for the jackknife, 30 (segments - 1) for the output error
-    assert ci[0] == pytest.approx([2.0 - 4.302652729749 * np.sqrt(4.0 / 3.0), 2.0 + 4.302652729749 * np.sqrt(4.0 / 3.0)])
-    assert ci[1] == pytest.approx([10.0 - 2.042272456301 * 2.0, 10.0 + 2.042272456301 * 2.0])
-    # fewer than two folds: the output-error std alone
-    std, _ci, src, jk = honest_interval(np.array([1.0]), np.array([0.1]), [[1.2]], n_segments=10)
-    assert src == ["output_error"] and jk is None and std[0] == 0.1
-    with pytest.raises(ValueError, match="at least 2"):
-        jackknife_std([[1.0]])
+def test_cluster_covariance_by_hand():
+    """One parameter, residuals and Jacobian chosen by hand: model-based sigma^2 / sum J^2 (with the lag-1
+    inflation), and the sandwich G / (G - 1) sum_g (J_g . r_g)^2 / (J . J)^2 with one cluster per segment."""
+    J = np.array([[1.0], [2.0], [1.0], [1.0], [2.0], [2.0], [1.0], [3.0]])
+    r = np.array([0.5, -0.5, 1.0, 0.25, -0.25, 0.5, 0.5, -1.0])
+    seg = np.array([0, 0, 1, 1, 2, 2, 3, 3])
+    m = 4
+    sd = fit_core.SegmentData(0.1, 4, np.zeros((3, m, 4)), np.zeros((3, m, 4, 0)), np.zeros(m), np.zeros(m), seg,
+                              np.ones(8, int), np.zeros(8), np.zeros(8), np.zeros(m, int), np.zeros((m, 2)),
+                              np.ones(m, bool), np.zeros((m, 4)), np.zeros((m, 4)), np.zeros((m, 4)))
+    fit = fit_core.FitOutcome([("a", "inertia", 0.0, np.inf)], np.array([1.0]), None, r, np.ones(8), J, 1.0, True, "")
+    cov = fit_core.cluster_covariance(fit, sd, min_clusters=2)
+    jj = float(J[:, 0] @ J[:, 0])
+    scores = np.array([J[seg == g, 0] @ r[seg == g] for g in range(m)])
+    sand = m / (m - 1) * float(scores @ scores) / jj ** 2
+    num = sum(r[i] * r[i - 1] for i in range(1, 8) if seg[i] == seg[i - 1])
+    rho = max(0.0, num / float(r @ r))
+    model = float(r @ r) / (8 - 1) / jj * (1 + rho) / (1 - rho)
+    assert cov.sandwich[0, 0] == pytest.approx(sand, rel=1e-12)
+    assert cov.model[0, 0] == pytest.approx(model, rel=1e-12)
+    assert cov.cov[0, 0] == pytest.approx(max(sand, model), rel=1e-12)
+    assert cov.clusters == 4 and cov.t_dof == 3
 
 
-def _fit(seg):
-    m = len(seg)
-    folds = np.array_split(np.arange(m), 6)  # contiguous blocks of 6 segments (60 s)
-    r = fit_dof(seg, "surge", "surge", NAMES, folds, {})
-    assert r.status == "fitted" and len(r.folds) == 6 and r.names == NAMES
+def _fit(rec):
+    opts = fit_core.CoreOptions(select=False, terms=fit_core.Terms("both"), folds=6)
+    r = fit_core.identify_dof(rec, opts)
+    assert r.names == NAMES and r.terms == fit_core.Terms("both")
     return r
 
 
-def test_coloured_disturbance_the_std_follows_the_fold_spread():
+def test_coloured_disturbance_the_blocks_grow_and_the_std_follows():
     r = _fit(_record(seed=0, disturbance_std_n=3.0))
     i = NAMES.index("bias")
-    folds = np.array(r.folds)[:, i]
-    jk = np.sqrt(5.0 / 6.0 * np.sum((folds - folds.mean()) ** 2))
-    # the residuals are correlated across segments: the fit's own std is too small for the bias ...
-    assert jk > 1.5 * r.oe_std[i], (jk, r.oe_std[i])
-    # ... and the reported one is the jackknife's, its interval from t with K - 1 = 5 degrees of freedom
-    assert r.std_source[i] == "jackknife" and r.std[i] == pytest.approx(jk, rel=1e-9)
-    assert r.ci95[i, 1] - r.theta[i] == pytest.approx(2.570581835636 * jk, rel=1e-9)
+    cov = r.covariance
+    sd_model = np.sqrt(cov.model[i, i])
+    # the residuals are correlated across segments: blocks of several segments, the model-based std too small ...
+    assert cov.block >= 2 and cov.clusters >= 6, (cov.block, cov.clusters, cov.rho)
+    assert np.sqrt(cov.sandwich[i, i]) > 1.5 * sd_model
+    # ... the reported one is the sandwich's, with t on clusters - 1 degrees of freedom
+    assert r.std[i] == pytest.approx(np.sqrt(cov.sandwich[i, i]), rel=1e-9)
+    tq = stats.t.ppf(0.975, cov.clusters - 1)
+    assert r.ci95[i, 1] - r.theta[i] == pytest.approx(tq * r.std[i], rel=1e-9)
     assert r.ci95[i, 0] < TRUTH[i] < r.ci95[i, 1]
     for j in range(4):  # never narrower than either estimate
-        assert r.std[j] >= max(r.oe_std[j], r.jackknife_std[j]) * (1 - 1e-12)
+        assert r.std[j] >= np.sqrt(max(cov.model[j, j], cov.sandwich[j, j])) * (1 - 1e-12)
 
 
-def test_white_noise_the_std_stays_the_output_error_std():
+def test_white_noise_the_std_stays_the_model_based_std():
     r = _fit(_record(seed=0, disturbance_std_n=0.0))
+    cov = r.covariance
+    assert cov.t_dof >= 5  # never the 2 degrees of freedom of three folds
     for j, name in enumerate(NAMES):
-        assert r.std[j] <= 1.5 * r.oe_std[j], (name, r.std[j], r.oe_std[j], r.std_source[j])
+        sm = np.sqrt(cov.model[j, j])
+        assert r.std[j] <= 1.5 * sm, (name, r.std[j], sm)
         assert r.ci95[j, 0] < TRUTH[j] < r.ci95[j, 1], (name, r.theta[j], r.ci95[j])
-    # with white noise either estimate may be the larger by chance; the two agree within the factor above
-    assert all(0.5 * r.oe_std[j] < r.jackknife_std[j] < 1.5 * r.oe_std[j] for j in range(4)), (r.oe_std,
-                                                                                             r.jackknife_std)
 
 
 @pytest.fixture(scope="module")
@@ -137,8 +148,8 @@ def test_without_config_the_file_is_not_config_ready(short_bag, capsys):
     assert doc["config_ready"] is False and "--config" in doc["config_ready_reason"]
     e = doc["dofs"]["surge"]
     assert "inertia" in e and "added_mass" not in e
-    assert e["inertia"]["std_source"] in ("output_error", "jackknife")
-    assert e["inertia"]["std"] == max(e["inertia"]["std_output_error"], e["inertia"]["std_jackknife"])
+    assert e["inertia"]["std_source"] in ("model", "cluster_robust")
+    assert e["inertia"]["std"] == pytest.approx(max(e["inertia"]["std_model"], e["inertia"]["std_cluster_robust"]))
     with pytest.raises(ValueError) as exc:
         to_config_overrides(doc)
     msg = str(exc.value)
@@ -163,17 +174,21 @@ def test_with_config_the_file_is_config_ready(short_bag, capsys):
                                                                              ["value"]))
 
 
-def test_one_bag_folds_share_out_the_segments_that_move_the_dof():
-    # a campaign moves one DOF after the other: sway only in segments 20..28 of 30; contiguous thirds would leave
-    # two folds without sway motion (their estimates, and the jackknife of them, meaningless)
-    m, L = 30, 50
-    vel = np.zeros((m, L, 6))
-    vel[20:29, :, 1] = 0.3
-    seg = BagSegments(np.zeros((m, L, 6)), vel, np.zeros((m, L, 3)), np.zeros(m, int), np.ones((m, L), bool), 0.2)
-    folds = _folds(seg, 1, 3, "sway")
-    assert sorted(np.concatenate(folds).tolist()) == list(range(m))  # a partition
-    assert [sorted(set(f.tolist()) & set(range(20, 29))) for f in folds] == [[20, 21, 22], [23, 24, 25], [26, 27, 28]]
-    # the segments that do not move sway stay in contiguous blocks (a slow drift still moves the fold estimates)
-    assert [sorted(set(f.tolist()) - set(range(20, 29))) for f in folds] == [
-        list(range(0, 7)), list(range(7, 14)), list(range(14, 20)) + [29]]
-    assert [f.tolist() for f in _folds(seg, 1, 3)] == [list(range(0, 10)), list(range(10, 20)), list(range(20, 30))]
+def test_folds_hold_out_blocks_of_moving_segments_only():
+    """A campaign moves one DOF after the other: sway only in segments 20..28 of 30. The folds are contiguous blocks
+    of the moving validation segments (so every fold holds sway motion), and a fold's training leaves out the
+    training segments that overlap its held-out ones."""
+    m, L, h = 30, 50, 0.2
+    n = m * L
+    v = np.zeros(n)
+    v[20 * L:29 * L] = 0.3
+    ch = fit_core.Chunk(np.zeros(n), v, np.zeros(n), np.zeros(n), np.arange(n, dtype=float), v, group=0)
+    rec = fit_core.DofRecord("sway", h, "velocity", [ch], "thrust_model")
+    timing = fit_core.Timing()
+    sv = fit_core.build_segments(rec, fit_core.Terms(), timing, L * h, excited_only=False)
+    st = fit_core.build_segments(rec, fit_core.Terms(), timing, L * h / 2, excited_only=False)
+    folds = fit_core.make_folds(st, sv, 3)
+    assert [f.tolist() for f in folds.held] == [[20, 21, 22], [23, 24, 25], [26, 27, 28]]
+    for held, train in zip(folds.held, folds.train):  # the half-length training segments of the held-out span
+        out = sorted(set(range(st.m)) - set(train.tolist()))
+        assert out == list(range(2 * held[0], 2 * held[-1] + 2))

@@ -10,10 +10,14 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.campaign import Campaign
 from hindrax_ident.identification.estimators import identify_all_with_errors
 from hindrax_ident.sim.truth import load_truth
+
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 
 def test_surge_and_heave_recover_the_configured_hydrodynamics():

@@ -23,7 +23,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_ident.identification.node import IdentificationNode
 from hindrax_msgs.action import RunIdentification
@@ -51,6 +51,7 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
         sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(OVERRIDES) + sim)
         ident = IdentificationNode(config=cfg, context=ctx, parameter_overrides=sim)
         probe = rclpy.create_node("probe", context=ctx)
+        SafetyHeartbeats(probe, supervisor=None)  # the output guard healthy (the supervisor is real)
         ex = SingleThreadedExecutor(context=ctx)
         for n in (esc, sup, ident, probe):
             ex.add_node(n)

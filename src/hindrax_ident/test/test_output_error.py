@@ -1,6 +1,7 @@
-"""The output-error pieces (identification/output_error.py) against hand-computed values and analytic solutions:
-the one-DOF model, the lagged thrust inside a tick, the Runge-Kutta step, the segment bookkeeping, and the whole
-fit on records integrated by an independent solver (scipy's solve_ivp)."""
+"""The output-error pieces (identification/output_error.py, identification/fit_core.py) against hand-computed values
+and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the Runge-Kutta step, the segment
+bookkeeping of the fit core, and the core's whole fit on records integrated by an independent solver (scipy's
+solve_ivp), with RuntimeWarnings turned into errors."""
 import math
 
 import numpy as np
@@ -8,8 +9,10 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from hindrax_ident.estimation.least_squares import EstimationError
-from hindrax_ident.identification.output_error import (DofModel, LaggedThrust, OutputErrorFit, Segments, model_terms,
-                                                       rk4_step)
+from hindrax_ident.identification import fit_core
+from hindrax_ident.identification.output_error import DofModel, LaggedThrust, model_terms, rk4_step
+
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 
 # ---------------------------------------------------------------------------------------------------- the model
@@ -78,28 +81,28 @@ def test_rk4_step_with_the_lagged_thrust_integrates_the_impulse():
 
 
 # ---------------------------------------------------------------------------------------------------- segments
-def test_segments_split_keeps_whole_segments_with_an_initial_state_and_three_samples():
-    z = np.full(25, np.nan)
-    z[[0, 3, 5, 7, 12, 14, 16, 22]] = 1.0  # tick 0 is an initial state, 20-24 is no whole segment
-    v = np.arange(25.0)
-    x = -np.arange(25.0)
-    sg = Segments.split(10, z, v, x)
-    assert sg.index.tolist() == [list(range(10)), list(range(10, 20))]
-    assert np.flatnonzero(sg.mask[0]).tolist() == [3, 5, 7] and np.flatnonzero(sg.mask[1]).tolist() == [2, 4, 6]
-    assert sg.v0.tolist() == [0.0, 10.0] and sg.x0.tolist() == [0.0, -10.0]
-    assert sg.sample_segment.tolist() == [0, 0, 0, 1, 1, 1]
-    assert sg.take(v)[1, 3] == 13.0 and sg.take(None) is None
-    # a segment without an initial velocity, or with only two samples, is dropped: one left is too few
+def test_segments_keep_whole_parts_with_an_initial_state_and_three_measurements():
+    n = 25
+    pos = np.array([0.0, 3.0, 5.0, 7.5, 12.0, 14.0, 16.0, 22.0])  # tick 0 is an initial state only
+    z = np.arange(pos.size, dtype=float)
+    v = np.arange(float(n))
+    ch = fit_core.Chunk(np.ones(n), v, -v, np.zeros(n), pos, z)
+    rec = fit_core.DofRecord("surge", 1.0, "velocity", [ch], "thrust_model")
+    sd = fit_core.build_segments(rec, fit_core.Terms(), fit_core.Timing(), 10.0, excited_only=False)
+    # 0-9 and 10-19; 20-24 is half a segment (kept: at least half) but has one measurement (dropped)
+    assert sd.m == 2 and sd.v0.tolist() == [0.0, 10.0] and sd.x0.tolist() == [0.0, -10.0]
+    assert sd.s_seg.tolist() == [0, 0, 0, 1, 1, 1] and sd.s_z.tolist() == [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    assert (sd.s_j + sd.s_a).tolist() == [3.0, 5.0, 7.5, 2.0, 4.0, 6.0]
+    # a segment without an initial velocity is dropped
     v_bad = v.copy()
     v_bad[10] = np.nan
-    with pytest.raises(EstimationError, match="too few usable segments"):
-        Segments.split(10, z, v_bad, x)
-    z_two = z.copy()
-    z_two[16] = np.nan
-    with pytest.raises(EstimationError, match="too few usable segments"):
-        Segments.split(10, z_two, v, x)
-    with pytest.raises(EstimationError, match="too short"):
-        Segments.split(10, z[:15], v[:15], x[:15])
+    ch2 = fit_core.Chunk(np.ones(n), v_bad, -v, np.zeros(n), pos, z)
+    sd2 = fit_core.build_segments(fit_core.DofRecord("surge", 1.0, "velocity", [ch2]), fit_core.Terms(),
+                                  fit_core.Timing(), 10.0, excited_only=False)
+    assert sd2.m == 1
+    with pytest.raises(EstimationError, match="no segment"):
+        fit_core.build_segments(fit_core.DofRecord("surge", 1.0, "velocity", [fit_core.Chunk(
+            np.ones(15), v[:15], -v[:15], np.zeros(15), pos[:2], z[:2])]), fit_core.Terms(), fit_core.Timing(), 10.0)
 
 
 # ---------------------------------------------------------------------------------------------------- the fit
@@ -122,26 +125,37 @@ def _record(dof, theta, tau, levels, hold_s=2.0, h=0.02, v0=0.0):
     return t, f, fc, sol.y[1], sol.y[0]
 
 
+def _core_fit(dof, t, fc, v, x, z_pos, z, measured, segment_s, theta0, v_start=None):
+    h = float(t[1] - t[0])
+    ch = fit_core.Chunk(fc, v if v_start is None else v_start, x, np.zeros_like(v), z_pos, z, force_start=0.0)
+    rec = fit_core.DofRecord(dof, h, measured, [ch], "thrust_model", 0.1)
+    terms = fit_core.Terms("both", dof == "heave")
+    sd = fit_core.build_segments(rec, terms, fit_core.Timing(0.0, 0.1), segment_s, excited_only=False)
+    layout = fit_core.parameter_layout(dof, terms)
+    return sd, layout, fit_core.fit_terms(sd, dof, layout, np.asarray(theta0, dtype=float), robust=False)
+
+
 def test_output_error_fit_recovers_surge_from_measured_velocity():
     theta = [27.3, 66.5, 1.25, 0.4]
     t, f, fc, v, x = _record("surge", theta, 0.1, [20.0, -20.0, 35.0, -35.0, 10.0, -10.0] * 2)
-    z = np.full(t.size, np.nan)
-    z[::5] = v[::5]  # a 10 Hz velocity sensor on the 50 Hz tick grid
-    fit = OutputErrorFit("surge", t, f, fc, 0.1, None, z, "velocity", x, v, 3.0)
-    res = fit.fit(np.array(theta) * np.array([1.3, 0.7, 2.0, -1.0]))
+    idx = np.arange(0, t.size, 5)  # a 10 Hz velocity sensor on the 50 Hz tick grid
+    sd, layout, res = _core_fit("surge", t, fc, v, np.zeros_like(v), idx.astype(float), v[idx], "velocity", 3.0,
+                                np.array(theta) * np.array([1.3, 0.7, 2.0, -1.0]))
     assert res.theta == pytest.approx(theta, rel=1e-4, abs=1e-4)
-    assert np.all(np.isfinite(res.covariance)) and np.all(np.diag(res.covariance) >= 0.0)
-    used = np.isfinite(res.velocity_fit)
-    assert used.sum() > 0.9 * t.size and np.max(np.abs(res.velocity_fit[used] - v[used])) < 1e-5
+    cov = fit_core.cluster_covariance(res, sd)
+    assert np.all(np.isfinite(cov.cov)) and np.all(np.diag(cov.cov) >= 0.0)
+    V = fit_core.predict_validation(sd, layout, res.theta)
+    starts = np.rint(sd.span[:, 0] / 0.02).astype(int)
+    err = max(float(np.max(np.abs(V[i] - v[s0:s0 + sd.L]))) for i, s0 in enumerate(starts) if s0 + sd.L <= v.size)
+    assert err < 1e-5
 
 
 def test_output_error_fit_recovers_heave_from_measured_depth_with_free_offsets_and_initial_velocities():
     theta = [30.0, 60.0, 40.0, 5.0, 10.0, 0.8]
     t, f, fc, v, x = _record("heave", theta, 0.1, [25.0, -25.0, 40.0, -40.0, 15.0, -15.0] * 2, hold_s=3.0)
-    z = np.full(t.size, np.nan)
-    z[::5] = x[::5] + 0.3  # depth with an unknown offset
-    v_start = v + 0.02  # a biased initial velocity: free in the fit
-    fit = OutputErrorFit("heave", t, f, fc, 0.1, None, z, "position", x - 1.0, v_start, 6.0)
-    res = fit.fit(np.array(theta) * 1.2)
+    idx = np.arange(0, t.size, 5)
+    # depth with an unknown offset, a biased initial velocity: both free in the fit
+    sd, _layout, res = _core_fit("heave", t, fc, v, x - 1.0, idx.astype(float), x[idx] + 0.3, "position", 6.0,
+                                 np.array(theta) * 1.2, v_start=v + 0.02)
     assert res.theta == pytest.approx(theta, rel=1e-3, abs=1e-3)
-    assert res.residual_dof == int(fit.segments.mask.sum()) - len(theta) - 2 * fit.segments.mask.shape[0]
+    assert res.v0 is not None and res.v0.size == sd.m

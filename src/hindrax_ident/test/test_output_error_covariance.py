@@ -1,11 +1,24 @@
-"""The output-error covariance is widened to the cluster-robust (sandwich) covariance, one cluster per
-segment (output_error.at_least_cluster_robust): with residuals correlated inside segments, as a 1-DOF model
-leaves them when the other DOFs move, the residual-variance covariance is too narrow and its 95 % intervals
+"""The fit core's covariance is at least the cluster-robust (sandwich) covariance with segments as clusters
+(fit_core.cluster_covariance, docs/identification.md §7): with residuals correlated inside segments, as a 1-DOF
+model leaves them when the other DOFs move, the residual-variance covariance is too narrow and its 95 % intervals
 miss the truth far more often than 5 %; the widened one keeps close to 95 %."""
 import numpy as np
 from scipy import stats
 
-from hindrax_ident.identification.output_error import at_least_cluster_robust as _at_least_cluster_robust
+from hindrax_ident.identification import fit_core
+
+
+def _at_least_cluster_robust(naive, J, r, cluster, _p):
+    """fit_core.cluster_covariance on a linear fit, one segment per cluster (independent groups: no merging).
+    ``naive`` is recomputed there (sigma^2 (J^T J)^-1 with the residuals' lag-1 inflation)."""
+    m = int(cluster.max()) + 1
+    sd = fit_core.SegmentData(1.0, 2, np.zeros((3, m, 2)), np.zeros((3, m, 2, 0)), np.zeros(m), np.zeros(m), cluster,
+                              np.zeros(r.size, int), np.zeros(r.size), np.zeros(r.size), np.arange(m),
+                              np.zeros((m, 2)), np.ones(m, bool), np.zeros((m, 2)), np.zeros((m, 2)),
+                              np.zeros((m, 2)))
+    fit = fit_core.FitOutcome([("a", "bias", -np.inf, np.inf)] * J.shape[1], np.zeros(J.shape[1]), None, r,
+                              np.ones(r.size), J, 1.0, True, "")
+    return fit_core.cluster_covariance(fit, sd, min_clusters=3).cov
 
 
 def _fit(rng, n_groups=40, per_group=50, group_std=0.5, noise_std=0.2):
@@ -47,8 +60,12 @@ def test_independent_residuals_keep_their_covariance():
     assert np.mean(ratios) < 1.1
 
 
-def test_too_few_clusters_leave_the_covariance_unchanged():
+def test_too_few_clusters_leave_the_model_based_covariance():
     J = np.column_stack([np.ones(6), np.arange(6.0)])
     r = np.array([1.0, -1.0, 2.0, -2.0, 0.5, -0.5])
-    cov = np.eye(2) * 1e-6
-    assert np.array_equal(_at_least_cluster_robust(cov, J, r, np.array([0, 0, 0, 1, 1, 1]), 2), cov)
+    sd = fit_core.SegmentData(1.0, 2, np.zeros((3, 2, 2)), np.zeros((3, 2, 2, 0)), np.zeros(2), np.zeros(2),
+                              np.array([0, 0, 0, 1, 1, 1]), np.zeros(6, int), np.zeros(6), np.zeros(6), np.arange(2),
+                              np.zeros((2, 2)), np.ones(2, bool), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)))
+    fit = fit_core.FitOutcome([("a", "bias", -np.inf, np.inf)] * 2, np.zeros(2), None, r, np.ones(6), J, 1.0, True, "")
+    cov = fit_core.cluster_covariance(fit, sd, min_clusters=3)
+    assert cov.clusters == 2 and np.array_equal(cov.cov, cov.model)

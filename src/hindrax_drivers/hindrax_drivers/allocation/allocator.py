@@ -26,13 +26,22 @@ in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thr
      predictable for a controller than a bounded least squares (``scipy.optimize.lsq_linear``), which
      could change the direction of the reduced axes and has no exact equality on the prioritised ones.
      The null space of B is not used to enlarge the feasible set (neither mode does that).
-3. **Pulse widths and achieved wrench.** Each force is inverted on its curve (monotone branch, with
-   saturation and the small-force rule of :mod:`.thrust_curve`), optionally quantised to the PWM
-   generator's step (``pulse_width_step_us``, e.g. the PCA9685 tick of docs/devices.md §5.1; rounded away
-   from neutral, never into the deadband), and the
+3. **Deadband.** An ESC gives 0 N inside its deadband, so a thruster runs at 0 N or at least at its
+   smallest thrust outside it (about 1.2 N, docs/devices.md §5.2). When a force of step 2 falls in that gap,
+   the wrench ``B F`` of step 2 is allocated again by :class:`.deadband.DeadbandSearch`, which chooses which
+   thrusters run as well as how hard (a search over active sets of the semi-continuous least-squares problem,
+   after [JohansenFossen2013]): e.g. ``X = -2 N`` runs one symmetric pair of horizontal thrusters at 1.73 N
+   instead of four at 0.87 N. A request that thrusters outside their deadbands can produce is produced (to
+   the pulse-width step and the effort weight, :class:`ThrustAllocator`); other components are kept as small
+   as the deadband allows. When every force of step 2 is 0 or outside
+   the gap, step 2's forces are kept unchanged (and the search costs nothing).
+4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (monotone branch, with
+   saturation and the small-force rule of :mod:`.thrust_curve`), optionally put on the PWM generator's grid
+   (``pulse_width_step_us``, e.g. the PCA9685 count of docs/devices.md §5.1) at the nearest grid width that
+   is not in the deadband (issue 19, fault 10: a width outside the deadband never moves into it), and the
    *actual* thrust at that pulse width is evaluated with the forward curve (deadband included). The
    achieved wrench ``B @ force_n`` is what the thrusters will really apply according to the model, so
-   a controller can use it for anti-windup.
+   a controller can use it for anti-windup, and it reports every component nobody asked for.
 
 Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8).
 """
@@ -45,6 +54,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .deadband import MAX_THRUSTERS, ZERO_FORCE_N, DeadbandSearch
 from .thrust_curve import ThrustCurve, forward_thrust
 
 __all__ = [
@@ -52,6 +62,7 @@ __all__ = [
     "DEFAULT_PRIORITY_GROUPS",
     "InvalidWrenchError",
     "AllocationResult",
+    "DEFAULT_EFFORT_WEIGHT",
     "ThrustAllocator",
     "weighted_pseudo_inverse",
 ]
@@ -62,6 +73,10 @@ AXIS_NAMES: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
 DEFAULT_PRIORITY_GROUPS: tuple[tuple[str, ...], ...] = (("heave", "yaw"),)
 _MODES = ("uniform", "priority")
 _ZERO_ROW_TOLERANCE = 1e-12
+#: Effort weight rho of the deadband search without a pulse-width step: about (0.0139 N / 1.204 N)^2, the
+#: [Hindrax-Drag] eq. 1 curve's thrust resolution at the deadband edge with the PCA9685's 1.24 us step,
+#: relative to the thrust there (what :meth:`ThrustAllocator.reconfigure` derives when the step is known).
+DEFAULT_EFFORT_WEIGHT = 1e-4
 
 
 class InvalidWrenchError(ValueError):
@@ -73,13 +88,14 @@ class AllocationResult:
     """Outcome of one :meth:`ThrustAllocator.allocate` call (FRD, N and N m, us).
 
     ``requested_wrench`` (6,): the request as given. ``allocated_force_n`` (n,): forces after
-    saturation handling, before the curves (``B @ allocated_force_n`` is the wrench the allocator aimed
-    for). ``pulse_width_us`` (n,): ESC commands. ``force_n`` (n,): thrust the curves give at those pulse
-    widths (deadband, small-force rule and quantisation included). ``achieved_wrench`` (6,):
+    saturation and deadband handling, before the curves and the pulse-width grid (``B @ allocated_force_n``
+    is the wrench the allocator aimed for; with the deadband search every force is 0 or outside the
+    deadband). ``pulse_width_us`` (n,): ESC commands. ``force_n`` (n,): thrust the curves give at those
+    pulse widths (deadband, small-force rule and quantisation included). ``achieved_wrench`` (6,):
     ``B @ force_n``. ``scale``: the uniform factor s in (0, 1] (``mode="uniform"``) or the smallest
     group factor in [0, 1] (``mode="priority"``). ``axis_scale`` (6,): factor applied to each axis of
-    the request. ``saturated`` (n,) bool: the allocated force is at the thruster's forward or reverse
-    limit.
+    the request. ``saturated`` (n,) bool: the thruster's forward or reverse limit bounded the allocation
+    (its force of the saturation step, or its allocated force, is at the limit).
     """
 
     requested_wrench: np.ndarray
@@ -109,6 +125,62 @@ def weighted_pseudo_inverse(matrix, weights=None, rcond: float = 1e-10) -> np.nd
         raise ValueError(f"weights must be {n} finite positive numbers, got {weights!r}")
     root_inv = 1.0 / np.sqrt(w)
     return root_inv[:, None] * np.linalg.pinv(b * root_inv[None, :], rcond=rcond)
+
+
+class _PulseGrid:
+    """The pulse widths the generator can put out, per thruster: the grid of ``step`` us (or every width when
+    ``step`` is None), and on it the widths and thrusts nearest the deadband (docs/devices.md §5.1, §5.2).
+
+    ``smallest_forward_n`` / ``smallest_reverse_n`` (n,), magnitudes in N at ``voltage_scale = 1``: the thrust
+    at the first width outside the deadband that the generator can produce (1525.20 us: 1.2038 N and
+    1474.36 us: 1.2087 N for the [Hindrax-Drag] eq. 1 curve at the PCA9685's 1.24 us).
+    """
+
+    def __init__(self, curves: Sequence[ThrustCurve], step: float | None) -> None:
+        fwd_inner = np.array([c.forward_branch_us[0] for c in curves])
+        rev_inner = np.array([c.reverse_branch_us[1] for c in curves])
+        self.neutral = np.array([c.pulse_width_neutral_us for c in curves])
+        self.step = step
+        if step is None:
+            self.first_forward_us, self.last_reverse_us = fwd_inner, rev_inner
+            self.min_us = np.array([c.pulse_width_min_us for c in curves])
+            self.max_us = np.array([c.pulse_width_max_us for c in curves])
+        else:
+            self.first_forward_us = np.ceil(fwd_inner / step - 1e-9) * step
+            self.last_reverse_us = np.floor(rev_inner / step + 1e-9) * step
+            self.min_us = np.array([math.ceil(c.pulse_width_min_us / step - 1e-9) * step for c in curves])
+            self.max_us = np.array([math.floor(c.pulse_width_max_us / step + 1e-9) * step for c in curves])
+        self.curves = tuple(curves)
+        self.smallest_forward_n = np.array([c.thrust_n(p) for c, p in zip(curves, self.first_forward_us)])
+        self.smallest_reverse_n = -np.array([c.thrust_n(p) for c, p in zip(curves, self.last_reverse_us)])
+
+    def effort_weight(self) -> float:
+        """``min (delta / m)^2`` over thrusters and directions with m > 0: delta the thrust of one step beyond
+        the smallest thrust m (N per step at the deadband edge); :data:`DEFAULT_EFFORT_WEIGHT` if every m is 0.
+        Only with a step."""
+        step = float(self.step)  # type: ignore[arg-type]
+        ratios = []
+        for c, p_f, p_r, m_f, m_r in zip(self.curves, self.first_forward_us, self.last_reverse_us,
+                                         self.smallest_forward_n, self.smallest_reverse_n):
+            if m_f > 0.0:
+                ratios.append((c.thrust_n(p_f + step) - m_f) / m_f)
+            if m_r > 0.0:
+                ratios.append((-c.thrust_n(p_r - step) - m_r) / m_r)
+        return float(min(ratios) ** 2) if ratios else DEFAULT_EFFORT_WEIGHT
+
+    def quantise(self, pulse: np.ndarray) -> np.ndarray:
+        """Pulse widths (n,) to the nearest grid width, never into the deadband: a width above neutral stays at
+        or above the first forward grid width, one below neutral at or below the last reverse one; within
+        the grid's [min, max]. Without a step the widths are returned unchanged."""
+        if self.step is None:
+            return pulse
+        q = self.step
+        p = np.round(pulse / q) * q
+        above = pulse > self.neutral + 1e-9
+        below = pulse < self.neutral - 1e-9
+        p = np.where(above, np.maximum(p, self.first_forward_us),
+                     np.where(below, np.minimum(p, self.last_reverse_us), p))
+        return np.minimum(np.maximum(p, self.min_us), self.max_us)
 
 
 def _axis_index(axis) -> int:
@@ -142,6 +214,17 @@ class ThrustAllocator:
         Optional quantisation step of the pulse-width generator (us), e.g. the PCA9685 tick
         ``(PRE_SCALE + 1) * 1e6 / f_osc`` (docs/devices.md §5.1: 1.24 us at PRE_SCALE 30). ``None``: no
         quantisation.
+    deadband_search:
+        ``True`` (default): forces the thrusters cannot give (inside the ESC deadband) are avoided by choosing
+        which thrusters run (:mod:`.deadband`); ``False``: each force is inverted on its own (small-force rule
+        of :mod:`.thrust_curve`). Ignored (always ``False``) for more than :data:`.deadband.MAX_THRUSTERS`
+        thrusters.
+    effort_weight:
+        rho of the deadband search (>= 0): the thrust spent, ``rho sum w_i F_i^2``, weighed against the
+        squared wrench error. ``None`` (default): ``(delta / m)^2`` with m the smallest thrust outside the
+        deadband and delta the thrust of one pulse-width step there (smallest over thrusters and directions),
+        so a pair of thrusters is run against each other only to remove more than about one step's worth of
+        wrench error; :data:`DEFAULT_EFFORT_WEIGHT` without a step.
 
     Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n),
     ``pseudo_inverse`` (n, 6), ``curves`` (n ThrustCurve), ``weights`` (n,), ``mode``,
@@ -150,16 +233,19 @@ class ThrustAllocator:
     """
 
     def __init__(self, matrix, curves: ThrustCurve | Sequence[ThrustCurve], weights=None, mode: str = "uniform",
-                 priority_groups=DEFAULT_PRIORITY_GROUPS, pulse_width_step_us: float | None = None) -> None:
+                 priority_groups=DEFAULT_PRIORITY_GROUPS, pulse_width_step_us: float | None = None,
+                 deadband_search: bool = True, effort_weight: float | None = None) -> None:
         self.reconfigure(matrix=matrix, curves=curves, weights=weights, mode=mode, priority_groups=priority_groups,
-                         pulse_width_step_us=pulse_width_step_us)
+                         pulse_width_step_us=pulse_width_step_us, deadband_search=deadband_search,
+                         effort_weight=effort_weight)
 
     # ----------------------------------------------------------------- configuration
     _KEEP = object()
 
     def reconfigure(self, matrix=_KEEP, curves=_KEEP, weights=_KEEP, mode=_KEEP, priority_groups=_KEEP,
-                    pulse_width_step_us=_KEEP) -> None:
-        """Change any of the constructor's parameters (others are kept) and recompute the pseudo-inverse.
+                    pulse_width_step_us=_KEEP, deadband_search=_KEEP, effort_weight=_KEEP) -> None:
+        """Change any of the constructor's parameters (others are kept) and recompute the pseudo-inverse and the
+        deadband search's tables (about 50 ms for 8 thrusters).
 
         A kept shared curve or default (``None``) weights follow a new number of thrusters; kept
         per-thruster lists must still match it.
@@ -198,6 +284,24 @@ class ThrustAllocator:
                 raise ValueError(f"pulse_width_step_us must be None or a positive number, got {step!r}") from exc
             if not (math.isfinite(step) and step > 0.0):
                 raise ValueError(f"pulse_width_step_us must be None or a finite positive number, got {step!r}")
+        search_on = self._search_on if deadband_search is keep else deadband_search
+        if not isinstance(search_on, (bool, np.bool_)):
+            raise ValueError(f"deadband_search must be True or False, got {search_on!r}")
+        rho_arg = self._effort_weight_arg if effort_weight is keep else effort_weight
+        if rho_arg is not None:
+            try:
+                rho_arg = float(rho_arg)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"effort_weight must be None or a number >= 0, got {rho_arg!r}") from exc
+            if not (math.isfinite(rho_arg) and rho_arg >= 0.0):
+                raise ValueError(f"effort_weight must be None or a finite number >= 0, got {rho_arg!r}")
+        grid = _PulseGrid(curve_list, step)
+        rho = rho_arg if rho_arg is not None else (grid.effort_weight() if step is not None else DEFAULT_EFFORT_WEIGHT)
+        search = None
+        if search_on and n <= MAX_THRUSTERS:
+            search = DeadbandSearch(b, w, rho, [c.max_reverse_n for c in curve_list],
+                                    [c.max_forward_n for c in curve_list], grid.smallest_forward_n,
+                                    grid.smallest_reverse_n)
 
         # All valid: commit.
         self._matrix, self._pinv, self._weights = b, pinv, w
@@ -215,14 +319,12 @@ class ThrustAllocator:
         self._curve_groups = [(self._curves[idx[0]], np.array(idx)) for idx in by_curve.values()]
         self._base_lower = np.array([c.max_reverse_n for c in self._curves])
         self._base_upper = np.array([c.max_forward_n for c in self._curves])
-        self._pw_min = np.array([c.pulse_width_min_us for c in self._curves])
-        self._pw_max = np.array([c.pulse_width_max_us for c in self._curves])
-        self._pw_neutral = np.array([c.pulse_width_neutral_us for c in self._curves])
         # forward model of all thrusters in one vectorised call: coefficients as (4, n), the rest (n,)
         params = list(zip(*(c.forward_parameters for c in self._curves)))
         self._forward_params = tuple(np.array(v, dtype=float).T if i < 2 else np.array(v, dtype=float)
                                      for i, v in enumerate(params))
         self._group_masks = [np.isin(np.arange(6), g).astype(float) for g in groups]
+        self._search_on, self._effort_weight_arg, self._search, self._grid = bool(search_on), rho_arg, search, grid
 
     @staticmethod
     def _parse_groups(groups_arg) -> tuple[tuple[int, ...], ...]:
@@ -275,6 +377,11 @@ class ThrustAllocator:
         return self._step_us
 
     @property
+    def search(self) -> DeadbandSearch | None:
+        """The deadband search (step 3 of the module docstring), or ``None`` when it is off."""
+        return self._search
+
+    @property
     def zero_authority_axes(self) -> np.ndarray:
         """(6,) bool: axes whose row of the matrix is zero (no thruster acts on them)."""
         return self._zero_rows
@@ -308,24 +415,6 @@ class ThrustAllocator:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             ratio = np.where(step != 0.0, room / step, np.inf)
         return max(float(np.min(ratio)), 0.0)
-
-    def _quantise_away_from_neutral(self, pulse: np.ndarray) -> np.ndarray:
-        """Pulse widths (n,) on the generator's grid (multiples of ``pulse_width_step_us``), rounded AWAY from
-        neutral: above neutral up, below it down, neutral itself to the nearest step.
-
-        Rounding to the nearest step moved e.g. 1475.00 us (the reverse deadband edge, about -1.2 N) to 1475.60
-        us, inside the ESC deadband (0 N): every reverse request between -1.20 and -0.60 N became 0 N while the
-        mirror forward requests were honoured (issue 19, fault 10). Away from neutral a width outside the
-        deadband stays outside it (the thrust is at most one step's worth larger in magnitude). Widths stay
-        within [pulse_width_min_us, pulse_width_max_us] (the grid points inside them)."""
-        q = self._step_us
-        k = pulse / q
-        # a width already on the grid (within float round-off) stays where it is
-        k_near = np.round(k)
-        on_grid = np.abs(k - k_near) < 1e-9
-        k = np.where(on_grid, k_near, np.where(pulse > self._pw_neutral, np.ceil(k),
-                                               np.where(pulse < self._pw_neutral, np.floor(k), k_near)))
-        return np.clip(k * q, np.ceil(self._pw_min / q - 1e-9) * q, np.floor(self._pw_max / q + 1e-9) * q)
 
     def allocate(self, wrench, voltage_scale: float = 1.0) -> AllocationResult:
         """Allocate the wrench ``[X Y Z K M N]`` (6,) (FRD, N and N m) to the thrusters.
@@ -368,6 +457,13 @@ class ThrustAllocator:
                     axis_scale[list(group)] = t / peak
             force = np.clip(force, lower, upper)  # only removes rounding at the limits
         scale = min(scales) if scales else 1.0
+        force = np.where(np.abs(force) < ZERO_FORCE_N, 0.0, force)
+        limited = (force >= upper - 1e-9 * upper) | (force <= lower - 1e-9 * lower)  # before the deadband search
+        if self._search is not None:
+            m_fwd = s_v * self._grid.smallest_forward_n
+            m_rev = s_v * self._grid.smallest_reverse_n
+            if np.any((force != 0.0) & (force < m_fwd) & (force > -m_rev)):  # a force inside a deadband gap
+                force = np.clip(self._search.solve(self._matrix @ force, s_v), lower, upper)  # clip: round-off only
 
         if len(self._curve_groups) == 1:
             pulse = self._curves[0]._pulse_width_unchecked(force, s_v)
@@ -375,12 +471,11 @@ class ThrustAllocator:
             pulse = np.empty(n)
             for curve, idx in self._curve_groups:
                 pulse[idx] = curve._pulse_width_unchecked(force[idx], s_v)
-        if self._step_us is not None:
-            pulse = self._quantise_away_from_neutral(pulse)
+        pulse = self._grid.quantise(pulse)
         actual = s_v * forward_thrust(pulse, *self._forward_params)
 
         tol = 1e-9 * np.maximum(np.abs(lower), np.abs(upper))
-        saturated = (force >= upper - tol) | (force <= lower + tol)
+        saturated = (force >= upper - tol) | (force <= lower + tol) | limited
         return AllocationResult(requested_wrench=tau, allocated_force_n=force, force_n=actual, pulse_width_us=pulse,
                                 achieved_wrench=self._matrix @ actual, scale=float(scale), axis_scale=axis_scale,
                                 saturated=saturated)

@@ -12,8 +12,9 @@ Publishes
     thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
     stale-check timer once the period has passed.
 
-A NaN/inf wrench, a wrench in another frame, or a stale one (stamp older than
-``thrusters.wrench_timeout_s`` by the node's clock) is rejected: the node commands neutral (1500 us) and
+A NaN/inf wrench, a wrench with an empty frame_id or in another frame than ``base_link``, one without a
+stamp (0: its age cannot be checked), a stale one (stamp older than ``thrusters.wrench_timeout_s`` by the node's
+clock) or one stamped more than ``thrusters.wrench_future_margin_s`` in the future is rejected: the node commands neutral (1500 us) and
 the status says why. If no wrench arrives for ``wrench_timeout_s`` the node commands neutral once and
 reports ``stale``; the ESC node's watchdog is the second line of defence (docs/architecture.md §8).
 
@@ -40,6 +41,24 @@ BASE_FRAME = "base_link"
 STATUS_PERIOD_S = 0.1
 
 
+def wrench_header_problem(frame_id: str, stamp_ns: int, now_ns: int, timeout_s: float, future_margin_s: float) -> str:
+    """Why a wrench's header is refused ('' when it is fine): frame_id must be ``base_link`` (an empty one is not
+    taken as base_link), the stamp non-zero, not older than ``timeout_s`` and not more than ``future_margin_s``
+    ahead of ``now_ns`` (all ROS time)."""
+    if frame_id != BASE_FRAME:
+        return (f"wrench frame_id {frame_id!r} is not {BASE_FRAME!r}" if frame_id else
+                f"wrench frame_id is empty (expected {BASE_FRAME!r})")
+    if stamp_ns <= 0:
+        return "wrench stamp is 0: its age cannot be checked"
+    age_s = (now_ns - stamp_ns) * 1e-9
+    if age_s > timeout_s:
+        return f"stale wrench: {age_s:.3f} s old (limit {timeout_s:g} s)"
+    if -age_s > future_margin_s:
+        return (f"wrench stamped {-age_s:.3f} s in the future (limit thrusters.wrench_future_margin_s "
+                f"{future_margin_s:g} s)")
+    return ""
+
+
 def _wrench_msg(w: np.ndarray) -> Wrench:
     m = Wrench()
     m.force.x, m.force.y, m.force.z, m.torque.x, m.torque.y, m.torque.z = (float(x) for x in w)
@@ -61,6 +80,7 @@ class ThrustAllocationNode(Node):
         cfg = load_node_config(self, ALLOCATION_KEYS, dynamic=("thrusters",), on_change=self.on_configuration)
         self.core = AllocationCore(cfg)
         self.timeout_s = cfg.thrusters.wrench_timeout_s
+        self.future_margin_s = cfg.thrusters.wrench_future_margin_s
         self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
@@ -79,6 +99,7 @@ class ThrustAllocationNode(Node):
         """Apply a validated configuration change (called by the parameter callback; raise to refuse)."""
         self.core.reconfigure(cfg)
         self.timeout_s = cfg.thrusters.wrench_timeout_s
+        self.future_margin_s = cfg.thrusters.wrench_future_margin_s
 
     # -- wrench path
     def on_wrench(self, msg: WrenchStamped) -> None:
@@ -87,15 +108,12 @@ class ThrustAllocationNode(Node):
         w = np.array([f.x, f.y, f.z, t.x, t.y, t.z])
         self.last_wrench_time = now
         self.stale_reported = False
-        if msg.header.frame_id not in ("", BASE_FRAME):
-            self.reject(msg, w, f"wrench frame_id {msg.header.frame_id!r} is not {BASE_FRAME!r}")
+        reason = wrench_header_problem(msg.header.frame_id, msg.header.stamp.sec * 1_000_000_000
+                                       + msg.header.stamp.nanosec, now.nanoseconds, self.timeout_s,
+                                       self.future_margin_s)
+        if reason:
+            self.reject(msg, w, reason)
             return
-        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        if stamp_ns > 0:
-            age_s = (now.nanoseconds - stamp_ns) * 1e-9
-            if age_s > self.timeout_s:
-                self.reject(msg, w, f"stale wrench: {age_s:.3f} s old (limit {self.timeout_s:g} s)")
-                return
         try:
             result = self.core.allocate(w)
         except InvalidWrenchError as exc:

@@ -104,7 +104,8 @@ class Dvl75Node(SerialDeviceNode):
                                         velocity_std_m_s=float(s["velocity_std_m_s"]),
                                         max_speed_m_s=float(s["max_speed_m_s"]),
                                         min_interval_s=float(s["min_interval_s"]),
-                                        max_interval_s=float(s["max_interval_s"]))
+                                        max_interval_s=float(s["max_interval_s"]),
+                                        max_angular_rate_rad_s=float(s["max_angular_rate_rad_s"]))
         self.decoder = DvlStreamDecoder()
         self.clock_sync = DeviceClockSync()
         self._reported_counts = dict(self.decoder.counts)

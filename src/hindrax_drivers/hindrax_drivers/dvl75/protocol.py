@@ -61,6 +61,8 @@ __all__ = [
     "DvlCommand",
     "DvlLineFramer",
     "BEAM_NAMES",
+    "BEAM_TILT_RAD",
+    "beam_directions_frd",
     "LINE_TERMINATOR",
     "KNOT_M_S",
     "nmea_checksum",
@@ -97,6 +99,18 @@ __all__ = [
 LINE_TERMINATOR = b"\r\n"
 #: Beam order of the per-beam ``$DVEXT`` fields: A = port, B = stern, C = starboard, D = bow (§1.3.2).
 BEAM_NAMES = ("port", "stern", "starboard", "bow")
+#: Tilt of each beam from the transducer axis, rad. ASSUMPTION: docs/devices.md gives no beam angle; a four-beam
+#: Janus head at 22.5 deg, as the emulator models (:class:`~hindrax_drivers.dvl75.emulator.Dvl75Emulator`).
+BEAM_TILT_RAD = math.radians(22.5)
+
+
+def beam_directions_frd(tilt_rad: float = BEAM_TILT_RAD) -> tuple[tuple[float, float, float], ...]:
+    """Unit direction of each beam (A port, B stern, C starboard, D bow, :data:`BEAM_NAMES`) in the sensor's FRD
+    axes (a downward DVL: z along the transducer axis), tilted ``tilt_rad`` from the axis towards its side."""
+    s, c = math.sin(tilt_rad), math.cos(tilt_rad)
+    return ((0.0, -s, c), (-s, 0.0, c), (0.0, s, c), (s, 0.0, c))
+
+
 #: One knot in m/s (1852 m per hour), for the ``$GPRMC`` speed field (§1.3.3).
 KNOT_M_S = 1852.0 / 3600.0
 

@@ -10,7 +10,7 @@ Conventions and sources
   §1.5), after SET-SENSOR-ORIENTATION. Velocity = position delta / ``dtu`` (the mean over the interval,
   docs/devices.md §1.3.1 "common use"), so its time of validity is the middle of the interval.
 - Lever arm: the DVL measures the velocity of its transducer, at ``position_frd_m`` from the centre of
-  gravity (the base_link origin, README "Vehicle configuration"). Rigid-body kinematics
+  gravity (the base_link origin, README "Configuration and frames"). Rigid-body kinematics
   v_CG = v_DVL - omega x r gives the base_link velocity; omega is taken from the ``$DVPDL`` angle
   deltas over ``dtu`` (small-angle: Euler-angle increments ~ body rotation increments). The position
   delta is corrected the same way (delta_p_CG = delta_p_DVL - delta_theta x r), so velocity equals
@@ -118,25 +118,30 @@ class DvlReportBuilder:
         max_extended_age_s: a ``$DVEXT`` older than this (receive time) is not used, s.
         max_speed_m_s: speed gate, m/s (``sensors.dvl75.max_speed_m_s``); None: only finiteness.
         min_interval_s, max_interval_s: ``dtu`` gate, s (``sensors.dvl75.min/max_interval_s``); None: off.
+        max_angular_rate_rad_s: gate on |delta_theta| / dtu, rad/s (``sensors.dvl75.max_angular_rate_rad_s``);
+            None: only finiteness. The speed gate applies to the lever-arm-corrected velocity (the one published):
+            a wild attitude delta over a small displacement would otherwise pass as a huge CG velocity.
     Raises:
         ValueError: position not 3 finite numbers, negative std or age, non-positive gate.
     """
 
     def __init__(self, position_frd_m: Sequence[float] = (0.0, 0.0, 0.0), velocity_std_m_s: float = 0.02,
                  max_extended_age_s: float = 1.0, max_speed_m_s: Optional[float] = None,
-                 min_interval_s: Optional[float] = None, max_interval_s: Optional[float] = None) -> None:
+                 min_interval_s: Optional[float] = None, max_interval_s: Optional[float] = None,
+                 max_angular_rate_rad_s: Optional[float] = None) -> None:
         r = np.asarray(position_frd_m, dtype=float)
         if r.shape != (3,) or not np.all(np.isfinite(r)):
             raise ValueError(f"position_frd_m must be 3 finite numbers, got {position_frd_m!r}")
         if not velocity_std_m_s >= 0 or not max_extended_age_s >= 0:
             raise ValueError("velocity_std_m_s and max_extended_age_s must be >= 0")
         for name, gate in (("max_speed_m_s", max_speed_m_s), ("min_interval_s", min_interval_s),
-                           ("max_interval_s", max_interval_s)):
+                           ("max_interval_s", max_interval_s), ("max_angular_rate_rad_s", max_angular_rate_rad_s)):
             if gate is not None and not gate > 0:
                 raise ValueError(f"{name} must be > 0, got {gate!r}")
         self.max_speed_m_s = None if max_speed_m_s is None else float(max_speed_m_s)
         self.min_interval_s = None if min_interval_s is None else float(min_interval_s)
         self.max_interval_s = None if max_interval_s is None else float(max_interval_s)
+        self.max_angular_rate_rad_s = None if max_angular_rate_rad_s is None else float(max_angular_rate_rad_s)
         self.position_frd_m = r
         self._r = tuple(float(x) for x in r)
         self.velocity_std_m_s = float(velocity_std_m_s)
@@ -171,12 +176,26 @@ class DvlReportBuilder:
             return f"dtu {dt * 1e3:.3f} ms below {self.min_interval_s * 1e3:g} ms"
         if self.max_interval_s is not None and dt > self.max_interval_s:
             return f"dtu {dt:.3f} s above {self.max_interval_s:g} s"
-        speed = math.hypot(pdl.delta_x_m, pdl.delta_y_m, pdl.delta_z_m) / dt  # hypot: no OverflowError at 1e300
-        if not math.isfinite(speed):
-            return "velocity not finite"
-        if self.max_speed_m_s is not None and speed > self.max_speed_m_s:
-            return f"speed {speed:.3g} m/s above {self.max_speed_m_s:g} m/s"
+        rate = math.hypot(pdl.delta_roll_rad, pdl.delta_pitch_rad, pdl.delta_yaw_rad) / dt
+        if not math.isfinite(rate):
+            return "angular rate not finite"
+        if self.max_angular_rate_rad_s is not None and rate > self.max_angular_rate_rad_s:
+            return f"angular rate {rate:.3g} rad/s above {self.max_angular_rate_rad_s:g} rad/s"
+        for label, dp in (("", (pdl.delta_x_m, pdl.delta_y_m, pdl.delta_z_m)),
+                          (" (lever-arm corrected)", self.lever_arm_corrected(pdl))):
+            speed = math.hypot(*dp) / dt  # hypot: no OverflowError at 1e300
+            if not math.isfinite(speed):
+                return f"velocity{label} not finite"
+            if self.max_speed_m_s is not None and speed > self.max_speed_m_s:
+                return f"speed{label} {speed:.3g} m/s above {self.max_speed_m_s:g} m/s"
         return ""
+
+    def lever_arm_corrected(self, pdl: DvlPositionDelta) -> Tuple[float, float, float]:
+        """delta_p_CG = delta_p_DVL - delta_theta x r, FRD, m (``r`` = ``position_frd_m``)."""
+        a, b, c = pdl.delta_roll_rad, pdl.delta_pitch_rad, pdl.delta_yaw_rad
+        rx, ry, rz = self._r
+        # np.cross costs ~50 us on 3-vectors; written out
+        return (pdl.delta_x_m - (b * rz - c * ry), pdl.delta_y_m - (c * rx - a * rz), pdl.delta_z_m - (a * ry - b * rx))
 
     def from_position_delta(self, pdl: DvlPositionDelta, receive_ns: int) -> DvlReport:
         """Report for one ``$DVPDL`` (received at ``receive_ns``), with the fresh ``$DVEXT`` fields."""
@@ -186,11 +205,7 @@ class DvlReportBuilder:
         rejection = self.plausibility(pdl) if pdl.confidence_pct > 0 and dt > 0.0 else ""
         valid = valid and not rejection
         if valid:
-            a, b, c = pdl.delta_roll_rad, pdl.delta_pitch_rad, pdl.delta_yaw_rad
-            rx, ry, rz = self._r
-            # delta_p_CG = delta_p_DVL - delta_theta x r  (np.cross costs ~50 us on 3-vectors; written out)
-            dp_cg = (pdl.delta_x_m - (b * rz - c * ry), pdl.delta_y_m - (c * rx - a * rz),
-                     pdl.delta_z_m - (a * ry - b * rx))
+            dp_cg = self.lever_arm_corrected(pdl)
             dp_flu = frd_to_flu(dp_cg)
             delta = tuple(float(x) for x in dp_flu)
             velocity = tuple(float(x) / dt for x in dp_flu)

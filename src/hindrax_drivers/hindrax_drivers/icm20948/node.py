@@ -104,7 +104,8 @@ Data-ready gates (``sensors.icm20948.require_data_ready``, ``not_ready_error_pol
   (counted ``mag_retries``; each retry resets the chip, a gap of about one start-up in ``imu/data_raw``)
   until the AK09916 answers again.
 
-The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi, an
+The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi (closed after a failed start-up
+attempt and opened again at the next: :class:`~hindrax_drivers.transport.i2c.BusHandle`), an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` with an
 :class:`~hindrax_drivers.icm20948.emulator.Icm20948Emulator` (and its ``aux_port`` at 0x0C for bypass)
 in tests and simulation.
@@ -126,7 +127,7 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, load_node_config, run_node)
-from ..transport.i2c import I2CDevice, I2CError, close_quietly, open_smbus
+from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
 from .mounting import mounting_rotation
 
@@ -319,8 +320,7 @@ class Icm20948Node(Node):
                                    "divider (docs/devices.md §4.4) and runs at 1125 Hz; polled at "
                                    f"{self.odr_hz:.2f} Hz")
 
-        self._bus = bus
-        self._owns_bus = bus is None
+        self._bus = BusHandle(self.i2c_bus_number, bus)  # reopened after a failed start-up when owned
         self.raw = RawDataPublisher(self, "icm20948")
         self.device: I2CDevice | None = None
         self.mag_device: I2CDevice | None = None
@@ -335,6 +335,8 @@ class Icm20948Node(Node):
         self.mag_retry_interval_s = float(s["mag_retry_interval_s"])
         self._not_ready_polls = 0  # consecutive polls without RAW_DATA_0_RDY
         self._mag_retry_due_s: float | None = None
+        self._mag_retrying = False  # a magnetometer-only re-initialisation runs between polls
+        self._mag_step_due_s = 0.0
         self._repeats = 0
         self._last_block: bytes | None = None
         self._mag_fresh_s: float | None = None
@@ -418,19 +420,20 @@ class Icm20948Node(Node):
     def _start(self) -> None:
         """Open the bus if needed and run the start-up steps (docs/devices.md §4.3)."""
         self.startup_attempts += 1
+        self._mag_retrying = False
         self._poll_timer.cancel()
         self.running = False
         self._fail_since_s = None
+        try:
+            bus = self._bus.get()  # the same bus, or opened afresh after a failed attempt (BusHandle)
+        except (OSError, ImportError) as exc:
+            self._fail(str(exc))
+            return
         if self.device is None:
-            if self._bus is None:
-                try:
-                    self._bus = open_smbus(self.i2c_bus_number)
-                except (OSError, ImportError) as exc:
-                    self._fail(str(exc))
-                    return
-            self.device = I2CDevice(self._bus, self.address, "icm20948", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
-            self.mag_device = I2CDevice(self._bus, p.AK09916_ADDRESS, "ak09916", backoff_s=0.0,
+            self.device = I2CDevice(bus, self.address, "icm20948", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
+            self.mag_device = I2CDevice(bus, p.AK09916_ADDRESS, "ak09916", backoff_s=0.0,
                                         raw_tap=self.raw.i2c_tap)
+        self.device.bus = self.mag_device.bus = bus  # the devices keep their counters across reopened buses
         self._bank = None
         self.mag_available = False
         self.mag_failed = False
@@ -474,6 +477,7 @@ class Icm20948Node(Node):
         self._steps.clear()
         self.diag.set_state("error", DiagnosticStatus.ERROR, f"{reason}; retrying every {RETRY_PERIOD_S:g} s")
         self.get_logger().error(f"ICM-20948 start-up failed: {reason}", throttle_duration_sec=10.0)
+        self._bus.reset()  # the next attempt opens /dev/i2c-N again: a bus that went and came back is picked up
         self._schedule(RETRY_PERIOD_S, self._start)
 
     # -- magnetometer
@@ -715,9 +719,43 @@ class Icm20948Node(Node):
         if self._mag_retry_due_s is not None and now_s >= self._mag_retry_due_s:
             self._mag_retry_due_s = None
             self.diag.count("mag_retries")
-            self.get_logger().warn(f"AK09916 still missing: re-initialising (every {self.mag_retry_interval_s:g} s)",
+            self.get_logger().warn(f"AK09916 still missing: re-initialising it (every {self.mag_retry_interval_s:g} s)",
                                    throttle_duration_sec=30.0)
-            self._start()
+            self._begin_mag_retry(now_s)
+        self._mag_retry_step(now_s)
+
+    def _begin_mag_retry(self, now_s: float) -> None:
+        """Re-initialise only the magnetometer, one step per poll (the accel/gyro polls go on: at most one missed
+        sample, where the whole start-up with its device reset cost 340-350 ms of samples every retry)."""
+        self._mag_attempt = 0
+        self.mag_failed = False
+        self._steps = collections.deque(self._mag_steps())
+        self._mag_retrying = True
+        self._mag_step_due_s = now_s
+
+    def _mag_retry_step(self, now_s: float) -> None:
+        """One step of the magnetometer re-initialisation when due (called after a published sample)."""
+        if not self._mag_retrying or now_s < self._mag_step_due_s:
+            return
+        if not self._steps:
+            self._mag_retrying = False
+            if self.mag_available:
+                self._mag_lost = False
+                self._mag_frozen_block = None
+                self._mag_fresh_s = now_s
+                self.get_logger().info("AK09916 answers again: publishing imu/mag")
+            else:
+                self._mag_retry_due_s = now_s + self.mag_retry_interval_s
+            return
+        step = self._steps.popleft()
+        try:
+            delay_s = step() or 0.0
+        except (I2CError, p.Icm20948Error) as exc:
+            self._bank = None
+            self._steps.clear()
+            self._mag_unavailable(f"re-initialisation failed: {exc}")
+            delay_s = 0.0
+        self._mag_step_due_s = now_s + delay_s
 
     def _mag_stale(self, now_s: float) -> bool:
         """True (and re-initialisation started) when no fresh magnetometer sample came for the timeout."""
@@ -731,7 +769,8 @@ class Icm20948Node(Node):
         self._mag_lost = True
         self._mag_fresh_s = None
         self.diagnostics.publish()
-        self._start()
+        self.mag_available = False
+        self._begin_mag_retry(now_s)
         return True
 
     def _publish_mag(self, mag: p.MagSample, stamp_msg) -> None:
@@ -849,8 +888,7 @@ class Icm20948Node(Node):
         """Stop the timers and close the bus if this node opened it (run_node calls this on shutdown)."""
         self._poll_timer.cancel()
         self._step_timer.cancel()
-        if self._owns_bus and self._bus is not None:
-            close_quietly(self._bus)
+        self._bus.close()
 
 
 def main(args=None) -> int:

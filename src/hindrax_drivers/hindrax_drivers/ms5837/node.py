@@ -63,14 +63,19 @@ identified heave inertia and damping.
 
 Plausibility (ERROR ``implausible`` in the diagnostics, held :data:`IMPLAUSIBLE_HOLD_S` after the last
 rejection; nothing is published for that cycle, counted ``implausible_pressure``): a compensated pressure
-outside [``sensors.ms5837.min_pressure_pa``, ``max_pressure_pa``] of the vehicle file.
+outside [``sensors.ms5837.min_pressure_pa``, ``max_pressure_pa``] of the vehicle file; then, after the conversion
+to depth, :class:`DepthGate`: a depth outside [``sensors.ms5837.min_depth_m``, ``max_depth_m``], or one that moved
+faster than ``max_depth_rate_m_s`` from the last published depth and is not confirmed by the next sample (counted
+``implausible_depth``). Garbage ADC words (a bus returning noise, not errors) pass the pressure window in about
+4.5 % of random pairs; the rate gate needs two consecutive garbage depths to agree, which they almost never do.
 
 A stuck sensor (bit-identical D1 and D2 for :data:`STUCK_AFTER_S` seconds, :class:`StuckDetector`)
 raises the ERROR ``stuck`` in the diagnostics and a log error, and its readings are not published until
 they change.
 
 The bus is injected: ``smbus2.SMBus(sensors.ms5837.i2c_bus)`` on the Pi (opened at start-up; if it cannot
-be opened the node reports it and retries), an
+be opened, or a start-up attempt fails, the node reports it, closes the bus and opens it again at the next
+attempt: :class:`~hindrax_drivers.transport.i2c.BusHandle`), an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding an
 :class:`~hindrax_drivers.ms5837.emulator.Ms5837Emulator` in tests and simulation.
 
@@ -79,6 +84,7 @@ Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_
 from __future__ import annotations
 
 import collections
+import math
 from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -91,7 +97,7 @@ from std_srvs.srv import Trigger
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, load_node_config, run_node)
-from ..transport.i2c import I2CDevice, I2CError, close_quietly, open_smbus
+from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
 
 __all__ = ["Ms5837Node", "pressure_variance_pa2", "PRESSURE_RESOLUTION_PA", "main"]
@@ -120,6 +126,50 @@ DEPTH_FRAME_ID = "odom"
 PRESSURE_RESOLUTION_PA = {p.Variant.MS5837_30BA: 25.0, p.Variant.MS5837_02BA: 1.0}
 #: Temperature output resolution, degC (TEMP in 0.01 degC, docs/devices.md §3.4).
 TEMPERATURE_RESOLUTION_C = 0.01
+
+
+class DepthGate:
+    """Range and rate-of-change gate on the depth after conversion (pure; see the module docstring).
+
+    ``check(t_s, depth_m)`` returns '' to publish, else the reason; ``invalid()`` tells it that a cycle gave no
+    reading (rejected earlier, or failed). A depth within ``max_rate_m_s * dt + noise_m`` of the last accepted
+    one, accepted at most ``max_age_s`` ago, is accepted; any other in-range depth is held as a candidate and
+    accepted when the very next cycle agrees with it (a real jump, e.g. after an outage, costs one sample). Noise
+    passes only when two consecutive garbage readings agree. Defaults from the vehicle's physics: Hindrax heaves well under 1 m/s.
+    """
+
+    def __init__(self, min_depth_m: float, max_depth_m: float, max_rate_m_s: float, noise_m: float = 0.05,
+                 max_age_s: float = 0.5) -> None:
+        self.min_depth_m, self.max_depth_m = float(min_depth_m), float(max_depth_m)
+        self.max_age_s = float(max_age_s)
+        self.max_rate_m_s, self.noise_m = float(max_rate_m_s), float(noise_m)
+        self._last: tuple[float, float] | None = None
+        self._candidate: tuple[float, float] | None = None
+
+    def _agrees(self, ref: tuple[float, float], t_s: float, depth_m: float) -> bool:
+        return abs(depth_m - ref[1]) <= self.max_rate_m_s * max(t_s - ref[0], 0.0) + self.noise_m
+
+    def invalid(self) -> None:
+        """A cycle without a reading: the next depth cannot confirm a candidate across it."""
+        self._candidate = None
+
+    def check(self, t_s: float, depth_m: float) -> str:
+        if not math.isfinite(depth_m) or not self.min_depth_m <= depth_m <= self.max_depth_m:
+            self._candidate = None
+            return (f"depth {depth_m:.2f} m outside sensors.ms5837.min_depth_m..max_depth_m "
+                    f"{self.min_depth_m:g}..{self.max_depth_m:g} m")
+        if self._last is not None and t_s - self._last[0] <= self.max_age_s and self._agrees(self._last, t_s, depth_m):
+            self._last, self._candidate = (t_s, depth_m), None
+            return ""
+        if self._candidate is not None and self._agrees(self._candidate, t_s, depth_m):
+            self._last, self._candidate = (t_s, depth_m), None
+            return ""
+        if self._last is None:  # the first depth (range-checked) is the baseline
+            self._last = (t_s, depth_m)
+            return ""
+        self._candidate = (t_s, depth_m)
+        return (f"depth {depth_m:.2f} m changed faster than sensors.ms5837.max_depth_rate_m_s {self.max_rate_m_s:g} "
+                f"since {self._last[1]:.2f} m (held until the next sample confirms it)")
 
 
 def pressure_variance_pa2(variant: p.Variant) -> float:
@@ -159,13 +209,15 @@ class Ms5837Node(Node):
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
         self.min_pressure_pa = float(s["min_pressure_pa"])
         self.max_pressure_pa = float(s["max_pressure_pa"])
+        # a baseline is "recent" for 5 cycles at sensors.ms5837.rate_hz
+        self.depth_gate = DepthGate(s["min_depth_m"], s["max_depth_m"], s["max_depth_rate_m_s"],
+                                    max_age_s=5.0 / float(s["rate_hz"]))
         self.prom_reject_blank_words = bool(s["prom_reject_blank_words"])
         self._last_implausible_s: float | None = None
         self.d1_command = p.convert_d1_command(self.osr)
         self.d2_command = p.convert_d2_command(self.osr)
 
-        self._bus = bus
-        self._owns_bus = bus is None
+        self._bus = BusHandle(self.i2c_bus_number, bus)  # reopened after a failed start-up when owned
         self.raw = RawDataPublisher(self, "ms5837")
         self.device: I2CDevice | None = None
         self.calibration: p.Calibration | None = None
@@ -224,14 +276,14 @@ class Ms5837Node(Node):
         self.startup_attempts += 1
         self._cycle_timer.cancel()
         self._phase = "idle"
+        try:
+            bus = self._bus.get()  # the same bus, or opened afresh after a failed attempt (BusHandle)
+        except (OSError, ImportError) as exc:
+            self._fail(str(exc))
+            return
         if self.device is None:
-            if self._bus is None:
-                try:
-                    self._bus = open_smbus(self.i2c_bus_number)
-                except (OSError, ImportError) as exc:
-                    self._fail(str(exc))
-                    return
-            self.device = I2CDevice(self._bus, self.address, "ms5837", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
+            self.device = I2CDevice(bus, self.address, "ms5837", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
+        self.device.bus = bus  # the device keeps its counters across reopened buses
         self.diag.set_state("starting", DiagnosticStatus.WARN, "reset and PROM read")
         try:
             self.device.write_byte(p.CMD_RESET)
@@ -270,6 +322,7 @@ class Ms5837Node(Node):
         """Start-up failed: ERROR state with the reason, retry after RETRY_PERIOD_S."""
         self.diag.set_state("error", DiagnosticStatus.ERROR, f"{reason}; retrying every {RETRY_PERIOD_S:g} s")
         self.get_logger().error(f"MS5837 start-up failed: {reason}", throttle_duration_sec=10.0)
+        self._bus.reset()  # the next attempt opens /dev/i2c-N again: a bus that went and came back is picked up
         self._schedule(RETRY_PERIOD_S, self._start)
 
     # ------------------------------------------------------------------ measurement cycle
@@ -332,6 +385,7 @@ class Ms5837Node(Node):
             return  # a stuck sensor's reading is not published (ERROR "stuck")
         now_s = self._now_s()
         if not self.min_pressure_pa <= reading.pressure_pa <= self.max_pressure_pa:
+            self.depth_gate.invalid()
             self.diag.count("implausible_pressure")
             text = (f"implausible pressure {reading.pressure_pa:.0f} Pa outside {self.min_pressure_pa:g}.."
                     f"{self.max_pressure_pa:g} Pa (D1 = {self._d1}, D2 = {d2}): not published")
@@ -340,6 +394,14 @@ class Ms5837Node(Node):
             if self._last_implausible_s is None:
                 self.diagnostics.publish()
             self._last_implausible_s = now_s
+            return
+        depth_reason = self.depth_gate.check(now_s, self.depth_m(reading.pressure_pa))
+        if depth_reason:
+            self.diag.count("implausible_depth")
+            if not depth_reason.startswith("first"):
+                self.diag.error("implausible", f"{depth_reason} (D1 = {self._d1}, D2 = {d2}): not published")
+                self.get_logger().error(f"MS5837: {depth_reason}", throttle_duration_sec=5.0)
+                self._last_implausible_s = now_s
             return
         if self._last_implausible_s is not None and now_s - self._last_implausible_s > IMPLAUSIBLE_HOLD_S:
             self._last_implausible_s = None
@@ -353,6 +415,7 @@ class Ms5837Node(Node):
         self.raw.flush()
 
     def _cycle_failed(self, kind: str, exc: Exception) -> None:
+        self.depth_gate.invalid()
         self._phase = "idle"
         self.raw.flush()
         self.diag.count(kind)
@@ -454,8 +517,7 @@ class Ms5837Node(Node):
         """Stop the timers and close the bus if this node opened it (run_node calls this on shutdown)."""
         self._cycle_timer.cancel()
         self._step_timer.cancel()
-        if self._owns_bus and self._bus is not None:
-            close_quietly(self._bus)
+        self._bus.close()
 
 
 def main(args=None) -> int:

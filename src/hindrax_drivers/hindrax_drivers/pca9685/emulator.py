@@ -19,7 +19,12 @@ Models docs/devices.md §5.1:
   when full ON, inverted with MODE2.INVRT);
 * a write log ``(t_s, register, value)`` per data byte, for latency tests.
 
-Not modelled: sub-addresses and All-Call address decoding, /OE and OUTNE, OCH (updates apply at
+* /OE (active low, datasheet §7.4): ``output_enable_line`` is an object with ``is_high()`` (an
+  :class:`~hindrax_drivers.transport.gpio.EmulatedGpioLine`, or a line served by
+  :mod:`~hindrax_drivers.transport.shared_emulation`); while it reads high every output carries no pulse
+  (:meth:`Pca9685Emulator.pulse_width_us` gives 0, "no signal", whatever the registers hold); None = /OE tied low.
+
+Not modelled: sub-addresses and All-Call address decoding, OUTNE (outputs low while /OE is high), OCH (updates apply at
 the end of the transaction, i.e. at STOP, matching the default OCH = 0), the 500 us oscillator
 start-up, the update-at-end-of-cycle timing.
 """
@@ -55,12 +60,14 @@ class Pca9685Emulator(RegisterPointerEmulator):
         clock: clock for the write log timestamps, s.
         external_clock_hz: frequency used once EXTCLK is latched (None: keep ``oscillator_hz``).
         write_log_max: maximum entries kept in the write log (oldest dropped).
+        output_enable_line: the /OE line (``is_high()``: outputs off), or None (tied low: always enabled).
     """
 
     def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ,
                  clock: Callable[[], float] = time.monotonic, external_clock_hz: float | None = None,
-                 write_log_max: int = 100_000) -> None:
+                 write_log_max: int = 100_000, output_enable_line=None) -> None:
         super().__init__()
+        self.output_enable_line = output_enable_line
         if not oscillator_hz > 0.0:
             raise ValueError(f"oscillator_hz must be > 0, got {oscillator_hz}")
         self.oscillator_hz = float(oscillator_hz)
@@ -136,9 +143,11 @@ class Pca9685Emulator(RegisterPointerEmulator):
     def pulse_width_us(self, channel: int) -> float:
         """High time per period that ``channel`` actually outputs, in us (docs/devices.md §5.1).
 
-        0 while sleeping, while stopped awaiting RESTART, or when full OFF; the full period when
-        full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement.
+        0 while /OE is high (no signal), while sleeping, while stopped awaiting RESTART, or when full OFF; the
+        full period when full ON; (OFF - ON) mod 4096 counts otherwise; with MODE2.INVRT the complement.
         """
+        if self.outputs_disabled():
+            return 0.0
         with self._lock:
             period_us = self.period_s() * 1e6
             if self._regs[p.MODE1] & p.MODE1_SLEEP or self._restart_pending:
@@ -148,6 +157,11 @@ class Pca9685Emulator(RegisterPointerEmulator):
             if self._regs[p.MODE2] & p.MODE2_INVRT:
                 return period_us - high
             return high
+
+    def outputs_disabled(self) -> bool:
+        """True while the /OE line reads high (every output off, OUTNE = 00: low), datasheet §7.4."""
+        line = self.output_enable_line
+        return line is not None and bool(line.is_high())
 
     # ------------------------------------------------------------------ register file
     def _next_pointer(self, register: int) -> int:

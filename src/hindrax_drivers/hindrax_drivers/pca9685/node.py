@@ -22,6 +22,26 @@ Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
   a mismatch (a brown-out reset leaves the chip asleep with every output off) re-initialises the chip at neutral,
   disarms (the ESCs must see neutral for the arming time again) and raises a ``/diagnostics`` warning
   (``errors.chip_reinit``, message "read-back mismatch ...").
+- Independent stop paths (docs/architecture.md §8): arming needs a fresh OK ``supervisor/heartbeat`` and a fresh OK
+  ``guard/heartbeat`` (the output guard has released /OE); either one older than ``esc.heartbeat_timeout_s``
+  (steady clock, executor-alive time: :class:`~hindrax_drivers.liveness.AliveAge`) or not OK disarms at once and
+  refuses arm requests with the reason. The arming time counts from the moment neutral is confirmed on the chip
+  AND the guard lets it through (/OE low): before that the ESCs saw no signal.
+- The output state is reported as it is on the wire (``thrusters/pulse_width`` ``output_state``): while the chip
+  cannot be written or read back it is ``OUTPUT_UNKNOWN`` (widths NaN, never "neutral"), the node disarms itself,
+  answers a disarm request with success=false and the reason, and retries the chip with backoff
+  (:data:`RETRY_MIN_S` doubling to :data:`RETRY_MAX_S`); when the chip is back it is re-initialised at neutral and
+  thrust needs a new arm request (and the arming time again).
+- ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus, every second steady-clock tick, 25 Hz at the default 50 Hz
+  output rate): the output state and the armed flag (values ``output_state``, ``armed``; level ERROR while
+  unknown). It is the output guard's sign of life: driven by the steady clock, unlike ``thrusters/pulse_width``
+  (ROS-time tick), so a simulation slower than real time or with its time held does not look like a dead ESC.
+- No bus at start-up (``/dev/i2c-N`` missing, or opening it fails): the node keeps running, reports ERROR "no I2C
+  bus" on ``/diagnostics`` and ``OUTPUT_UNKNOWN``, and retries opening it with the same backoff; a bus that appears
+  is picked up without a restart.
+- Protective timing is on the steady clock: the read-back, the arming time, the heartbeats, the re-configuration
+  retries and the second watchdog; a backward step of ROS time is detected (:class:`~hindrax_drivers.liveness.
+  ClockStepMonitor`) and reported (``/diagnostics`` warning ``clock_step``).
 - Commands are clamped to [``pulse_width_min_us``, ``pulse_width_max_us``]; per-channel reversal (mirror
   about neutral) and trim are applied after the clamp, and the result is clamped again; an optional slew
   limit ``esc.slew_rate_us_per_s`` bounds the change per step.
@@ -36,8 +56,8 @@ was written since the previous one), ``raw/pca9685``
 The bus is injected: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding a
 :class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation.
-Time: ROS time (``use_sim_time`` supported) for the output tick, watchdog, read-back and arming timer;
-the steady clock only for the second watchdog.
+Time: ROS time (``use_sim_time`` supported) for the stamps, the output tick and the first watchdog; the steady
+clock for everything protective (see above).
 """
 from __future__ import annotations
 
@@ -46,7 +66,7 @@ import time
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64
@@ -54,9 +74,14 @@ from std_msgs.msg import Float64
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
+from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from . import protocol as p
+
+#: first retry of an unreachable bus or chip, s (doubled after every failure up to :data:`RETRY_MAX_S`)
+RETRY_MIN_S = 0.25
+RETRY_MAX_S = 4.0
 
 
 class EscOutput:
@@ -129,13 +154,28 @@ class EscNode(Node):
         self.oscillator_hz = esc["oscillator_hz"]
         self.prescale = p.esc_prescale(esc["pwm_frequency_hz"], self.oscillator_hz)
 
-        if bus is None:
-            bus = open_smbus(esc["i2c_bus"])
+        self.i2c_bus_number, self.i2c_address = int(esc["i2c_bus"]), int(esc["i2c_address"])
         self.raw = RawDataPublisher(self, "pca9685")
-        self.device = I2CDevice(bus, esc["i2c_address"], "pca9685", raw_tap=self.raw.i2c_tap)
+        self.device: I2CDevice | None = None
+        self.bus_error = ""
+        if bus is not None:
+            self.device = I2CDevice(bus, self.i2c_address, "pca9685", raw_tap=self.raw.i2c_tap)
         now_s = lambda: self.get_clock().now().nanoseconds * 1e-9  # noqa: E731
         self.diag = DeviceDiagnostics("hindrax/esc_pca9685", f"i2c-{esc['i2c_bus']}@0x{esc['i2c_address']:02x}",
                                       now_s)
+        self.heartbeat_timeout_s = float(esc["heartbeat_timeout_s"])
+        self.supervisor_age = AliveAge(2.0 * self.period_s)
+        self.guard_age = AliveAge(2.0 * self.period_s)
+        self.supervisor_ok, self.supervisor_message = False, ""
+        self.guard_ok, self.guard_message = False, ""
+        #: time.monotonic() since which neutral is confirmed on the chip AND the guard lets it through, or None
+        self.neutral_on_wire_since: float | None = None
+        self.output_state = ThrusterPwm.OUTPUT_UNKNOWN
+        self.heartbeat_disarms = 0
+        self.unknown_entries = 0
+        self.last_unknown_monotonic: float | None = None
+        self._retry_s = RETRY_MIN_S
+        self.clock_monitor = ClockStepMonitor(now_s)
         self.watchdog_trips = 0
         self.steady_watchdog_trips = 0
         self.chip_reinits = 0
@@ -147,10 +187,10 @@ class EscNode(Node):
         self._expected: dict[int, bytes] = {}  # channel -> the 4 LEDn bytes last written
         self._written_key: tuple | None = None  # (widths, lights) last written, to skip identical writes
         self._last_target_time = None
-        #: ROS time at which neutral was read back from the chip (the arming timer starts here), or None
+        #: time.monotonic() at which neutral was read back from the chip (None: not confirmed)
         self.neutral_confirmed_time = None
         self._last_readback = None
-        self._last_configure_attempt = None
+        self._last_configure_attempt: float | None = None
         self._published_since_tick = False
         self._steady_last = time.monotonic()
         self._steady_command = self._steady_last
@@ -161,6 +201,10 @@ class EscNode(Node):
         self.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", self.on_command, 10)
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
+        self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
+        self._heartbeat_tick = 0
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor_heartbeat, 10)
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._configure_chip()
         self.timer = self.create_timer(self.period_s, self.tick)
@@ -179,6 +223,14 @@ class EscNode(Node):
             raise ValueError(f"steady watchdog timeout must be > 0 s, got {seconds}")
         self.steady_watchdog_s = float(seconds)
 
+    def set_heartbeat_timeout(self, seconds: float) -> None:
+        """Supervisor and guard heartbeat timeout, s (default ``esc.heartbeat_timeout_s``); widened in a
+        single-process graph, where the peers share this node's executor thread (see
+        :meth:`hindrax_drivers.guard.node.OutputGuardNode.set_timeout`)."""
+        if not seconds > 0.0:
+            raise ValueError(f"heartbeat timeout must be > 0 s, got {seconds}")
+        self.heartbeat_timeout_s = float(seconds)
+
     # -- device
     def _configure_chip(self) -> bool:
         """Put the chip in a known state with neutral on every used channel, then confirm it by reading it back.
@@ -189,8 +241,11 @@ class EscNode(Node):
         §7.3.1.1: RESTART resumes the channel registers, which now hold neutral). The arming timer starts when
         the read-back matches (:meth:`arming_remaining_s`). Returns True on success.
         """
-        self._last_configure_attempt = self.get_clock().now()
+        self._last_configure_attempt = time.monotonic()
         self.neutral_confirmed_time = None
+        self.neutral_on_wire_since = None
+        if self.device is None and not self._open_bus():
+            return False
         before, after = p.safe_startup_sequence(self.prescale)
         try:
             self.device.write_sequence(before)
@@ -200,23 +255,58 @@ class EscNode(Node):
             mismatch = self._readback_mismatch()
         except I2CError as exc:
             self.diag.count("i2c_error")
-            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"PCA9685 start-up failed: {exc}")
-            self.get_logger().error(f"PCA9685 start-up failed: {exc}", throttle_duration_sec=5.0)
+            self._set_unknown(f"PCA9685 start-up failed: {exc}")
             return False
         if mismatch:
             self.diag.count("readback_mismatch")
-            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"PCA9685 start-up not confirmed: {mismatch}")
+            self._set_unknown(f"PCA9685 start-up not confirmed: {mismatch}")
             return False
-        now = self.get_clock().now()
+        now = time.monotonic()
         self.neutral_confirmed_time = now
         self._last_readback = now
+        self._retry_s = RETRY_MIN_S
+        self.output_state = ThrusterPwm.OUTPUT_NEUTRAL
         self.diag.set_state("holding neutral", DiagnosticStatus.OK, "holding neutral, disarmed")
         return True
+
+    def _open_bus(self) -> bool:
+        """Open ``/dev/i2c-<esc.i2c_bus>`` (or the shared emulated bus); False with an ERROR when it fails."""
+        try:
+            from ..transport.shared_emulation import open_shared_bus
+
+            bus = open_shared_bus() or open_smbus(self.i2c_bus_number)
+        except (OSError, ImportError) as exc:
+            self.bus_error = str(exc)
+            self.diag.count("no_bus")
+            self._set_unknown(f"no I2C bus: {exc}; retrying")
+            return False
+        self.bus_error = ""
+        self.device = I2CDevice(bus, self.i2c_address, "pca9685", raw_tap=self.raw.i2c_tap)
+        return True
+
+    def _set_unknown(self, reason: str) -> None:
+        """The chip cannot be written or read back: the output state is unknown. Disarm (thrust needs a new arm
+        request once the chip is back), forget what we believe is on the chip, report ERROR, retry with backoff."""
+        if self.output_state != ThrusterPwm.OUTPUT_UNKNOWN or self.armed:
+            self.unknown_entries += 1
+            self.last_unknown_monotonic = time.monotonic()
+            self.get_logger().error(f"output state unknown: {reason}")
+        self.output_state = ThrusterPwm.OUTPUT_UNKNOWN
+        self.armed = False
+        self.command = None
+        self.neutral_confirmed_time = None
+        self.neutral_on_wire_since = None
+        self._written_key = None
+        self._retry_s = min(RETRY_MAX_S, self._retry_s * 2.0) if self._last_configure_attempt else RETRY_MIN_S
+        self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"{reason} (output state unknown)")
 
     def _readback_mismatch(self) -> str:
         """Read MODE1, PRE_SCALE and every written channel back; '' when they match what was written, else why.
 
         Raises :class:`I2CError` when the chip does not answer."""
+        if self.device is None:
+            raise I2CError(None, "no I2C bus", device_name="pca9685", address=self.i2c_address, operation="read",
+                           attempts=0)
         mode1 = self.device.read_byte_data(p.MODE1)
         if mode1 != self.EXPECTED_MODE1:
             return f"MODE1 0x{mode1:02x}, expected 0x{self.EXPECTED_MODE1:02x} (chip reset or asleep)"
@@ -253,6 +343,9 @@ class EscNode(Node):
         key = (tuple(float(w) for w in widths_us), float(lights_us))
         if key == self._written_key:
             return False
+        if self.device is None:
+            raise I2CError(None, "no I2C bus", device_name="pca9685", address=self.i2c_address, operation="write",
+                           attempts=0)
         per_channel = {int(ch): float(w) for ch, w in zip(self.output.channels, widths_us)}
         per_channel[self.lights_channel] = float(lights_us)
         self.raw.begin_batch()  # raw/pca9685: the block writes of one update in one message
@@ -292,12 +385,28 @@ class EscNode(Node):
     def arming_remaining_s(self) -> float:
         """Seconds still needed at neutral before arming is accepted (0 when ready).
 
-        The time counts from the moment neutral was read back from the chip (not from node creation): while the
-        chip has not been configured and confirmed, the whole ``esc.arming_time_s`` remains."""
-        if self.neutral_confirmed_time is None:
+        The time (steady clock) counts from the moment neutral was read back from the chip and the output guard
+        let it through (not from node creation): until then the whole ``esc.arming_time_s`` remains."""
+        if self.neutral_on_wire_since is None:
             return self.arming_time_s
-        held = (self.get_clock().now() - self.neutral_confirmed_time).nanoseconds * 1e-9
-        return max(0.0, self.arming_time_s - held)
+        return max(0.0, self.arming_time_s - (time.monotonic() - self.neutral_on_wire_since))
+
+    def heartbeat_refusal(self) -> str:
+        """Why the supervisor or the output guard forbid thrust now ('' when both are fresh and OK)."""
+        t = self.heartbeat_timeout_s
+        if not self.supervisor_age.fresh(t):
+            age = self.supervisor_age.age_s
+            return ("no supervisor heartbeat" + (f" for {age:.2f} s" if math.isfinite(age) else "") +
+                    f" ({HEARTBEAT_NAMES['supervisor']}, esc.heartbeat_timeout_s {t:g}): supervisor not running or hung")
+        if not self.supervisor_ok:
+            return f"supervisor tripped: {self.supervisor_message} (clear it with supervisor/reset)"
+        if not self.guard_age.fresh(t):
+            age = self.guard_age.age_s
+            return ("no output-guard heartbeat" + (f" for {age:.2f} s" if math.isfinite(age) else "") +
+                    f" ({HEARTBEAT_NAMES['guard']}): output_guard not running or hung")
+        if not self.guard_ok:
+            return f"output guard holds the outputs off: {self.guard_message}"
+        return ""
 
     def arm_refusal(self) -> str:
         """Why an arm request would be refused now ('' when it would be accepted)."""
@@ -306,7 +415,11 @@ class EscNode(Node):
                     "(nominal 25 MHz, parts measure 23-27 MHz). Measure the neutral pulse with a scope and run "
                     "`hindrax esc calibrate --measured-us X --write`")
         if self.neutral_confirmed_time is None:
-            return "PCA9685 not confirmed at neutral (not reachable or its registers did not read back)"
+            return ("PCA9685 not confirmed at neutral (not reachable or its registers did not read back)" +
+                    (f": {self.bus_error}" if self.bus_error else ""))
+        refusal = self.heartbeat_refusal()
+        if refusal:
+            return refusal
         remaining = self.arming_remaining_s()
         if remaining > 0.0:
             return f"ESC arming: {remaining:.1f} s more at neutral needed (esc.arming_time_s)"
@@ -315,13 +428,19 @@ class EscNode(Node):
     def on_set_armed(self, request: SetArmed.Request, response: SetArmed.Response) -> SetArmed.Response:
         if not request.arm:
             self.disarm("disarmed")
-            response.success, response.armed, response.message = True, False, "disarmed"
+            if self.output_state == ThrusterPwm.OUTPUT_UNKNOWN:
+                response.success, response.armed = False, False
+                response.message = ("disarmed (no thrust accepted), but neutral is NOT confirmed on the chip: "
+                                    f"{self.diag_message()}; the output guard must silence the outputs")
+            else:
+                response.success, response.armed, response.message = True, False, "disarmed"
             return response
         refusal = self.arm_refusal()
         if refusal:
             response.success, response.armed, response.message = False, self.armed, refusal
             return response
         self.armed = True
+        self.output_state = ThrusterPwm.OUTPUT_NEUTRAL
         self.command = None  # thrust only from commands that arrive after arming
         self.diag.clear("chip_reset")
         self.diag.set_state("armed, neutral", DiagnosticStatus.OK)
@@ -351,11 +470,14 @@ class EscNode(Node):
                 widths = self.output.target(self.command, dt_s)
                 self._last_target_time = now
                 state = "armed, commanding"
+                wire_state = ThrusterPwm.OUTPUT_COMMANDING
             else:
                 widths = self.output.neutral()
                 self._last_target_time = None
                 state = "armed, neutral" if self.armed else "disarmed, neutral"
+                wire_state = ThrusterPwm.OUTPUT_NEUTRAL
             wrote = self._write(widths, self.lights_us)
+            self.output_state = wire_state
             if self.diag.state not in ("i2c error",) or wrote:
                 self.diag.set_state(state, DiagnosticStatus.OK)
             if wrote:
@@ -368,16 +490,9 @@ class EscNode(Node):
             self._publish_written(now)
 
     def tick(self) -> None:
-        """Output tick (ROS time, ``esc.output_rate_hz``): the ROS-time watchdog, (re)configuration of a chip
-        that was not reachable, the register read-back every ``esc.readback_interval_s``, and the output."""
+        """Output tick (ROS time, ``esc.output_rate_hz``): the ROS-time watchdog and the output (the chip's
+        (re)configuration and read-back run on the steady clock, :meth:`steady_check`)."""
         now = self.get_clock().now()
-        if self.neutral_confirmed_time is None:
-            since = (now - self._last_configure_attempt).nanoseconds * 1e-9 if self._last_configure_attempt else 1e9
-            if since >= self.readback_interval_s:
-                self._configure_chip()
-        elif (now - self._last_readback).nanoseconds * 1e-9 >= self.readback_interval_s:
-            self._last_readback = now
-            self._check_chip()
         if self.neutral_confirmed_time is not None:
             self._output(now)
         if not self._published_since_tick:
@@ -391,7 +506,8 @@ class EscNode(Node):
             mismatch = self._readback_mismatch()
         except I2CError as exc:
             self.diag.count("i2c_error")
-            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"PCA9685 read-back failed: {exc}")
+            self._set_unknown(f"PCA9685 read-back failed: {exc}")
+            self._publish_written(self.get_clock().now())
             return
         if not mismatch:
             return
@@ -413,6 +529,7 @@ class EscNode(Node):
         :meth:`set_steady_watchdog_timeout`). Only executor-alive time counts (a gap between two checks counts at
         most two output periods), so a stalled process does not trip it when it resumes."""
         t = time.monotonic()
+        self._safety_tick(t)
         gap, self._steady_last = t - self._steady_last, t
         if not (self.armed and self.command is not None):
             self._steady_age_s = 0.0
@@ -427,19 +544,87 @@ class EscNode(Node):
             self._safe_neutral("steady-clock watchdog")
             self._publish_written(self.get_clock().now())
 
+    def _safety_tick(self, t: float) -> None:
+        """Steady-clock part of every output period: heartbeats (disarm on loss), the chip's (re)configuration with
+        backoff, the read-back every ``esc.readback_interval_s``, the arming clock, ROS-time steps."""
+        step = self.clock_monitor.check()
+        if step:
+            self.diag.count("clock_step")
+            self.diag.warn("clock_step", f"ROS time stepped back {-step:.3f} s (/clock restarted?); protective "
+                                         "timing is on the steady clock")
+            self.get_logger().warn(f"ROS time stepped back {-step:.3f} s")
+            self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
+        self.supervisor_age.tick()
+        self.guard_age.tick()
+        refusal = self.heartbeat_refusal()
+        if refusal and self.armed:
+            self.heartbeat_disarms += 1
+            self.get_logger().error(f"disarming: {refusal}")
+            self.disarm(refusal)
+        if self.neutral_confirmed_time is None:
+            last = self._last_configure_attempt
+            if last is None or t - last >= self._retry_s:
+                if self._configure_chip():
+                    self._publish_written(self.get_clock().now())
+        elif t - self._last_readback >= self.readback_interval_s:
+            self._last_readback = t
+            self._check_chip()
+        self._heartbeat_tick += 1
+        if self._heartbeat_tick % 2 == 0:
+            self._publish_heartbeat()
+        guard_through = self.guard_ok and self.guard_age.fresh(self.heartbeat_timeout_s)
+        if self.neutral_confirmed_time is None or not guard_through:
+            self.neutral_on_wire_since = None
+        elif self.neutral_on_wire_since is None:
+            self.neutral_on_wire_since = t
+
+    def _publish_heartbeat(self) -> None:
+        unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
+        st = DiagnosticStatus(level=DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, name="hindrax/esc",
+                              message={0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state],
+                              hardware_id="esc")
+        st.values = [KeyValue(key="output_state", value=str(int(self.output_state))),
+                     KeyValue(key="armed", value="true" if self.armed and not unknown else "false")]
+        self.pub_heartbeat.publish(st)
+
+    def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
+        """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip
+        disarms at once (not at the next tick)."""
+        self.supervisor_age.heard()
+        self.supervisor_ok, self.supervisor_message = msg.level == DiagnosticStatus.OK, msg.message
+        if not self.supervisor_ok and self.armed:
+            self.heartbeat_disarms += 1
+            self.disarm(f"supervisor tripped: {msg.message}")
+
+    def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
+        """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low)."""
+        self.guard_age.heard()
+        self.guard_ok, self.guard_message = msg.level == DiagnosticStatus.OK, msg.message
+        if not self.guard_ok and self.armed:
+            self.heartbeat_disarms += 1
+            self.disarm(f"output guard asserted: {msg.message}")
+
+    def diag_message(self) -> str:
+        """The current /diagnostics message (why the state is what it is)."""
+        return getattr(self.diag, "_message", "") or self.diag.state
+
     def _safe_neutral(self, reason: str) -> None:
         try:
             self._written_key = None  # always write: neutral must reach the chip even if we believe it is there
             self._last_target_time = None
             self._write(self.output.neutral(), self.lights_us)
+            if self.neutral_confirmed_time is not None:
+                self.output_state = ThrusterPwm.OUTPUT_NEUTRAL
             self.diag.set_state("neutral", DiagnosticStatus.WARN if reason.startswith("fault") else DiagnosticStatus.OK,
                                 reason)
-        except Exception as exc:  # noqa: BLE001 - bus down: report, keep running, retry next tick
+        except Exception as exc:  # noqa: BLE001 - bus down: report, keep running, retry with backoff
             self.diag.count("i2c_error")
-            self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"cannot write neutral: {exc}")
+            self._set_unknown(f"cannot write neutral: {exc}")
 
     def _publish_written(self, now) -> None:
-        msg = ThrusterPwm(pulse_width_us=[float(x) for x in self.written], armed=self.armed)
+        unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
+        widths = [math.nan] * len(self.written) if unknown else [float(x) for x in self.written]
+        msg = ThrusterPwm(pulse_width_us=widths, armed=self.armed and not unknown, output_state=self.output_state)
         msg.header.stamp = now.to_msg()
         msg.header.frame_id = "base_link"
         self.pub_written.publish(msg)
@@ -452,7 +637,11 @@ class EscNode(Node):
                 ("neutral_confirmed", self.neutral_confirmed_time is not None),
                 ("oscillator_calibrated", self.oscillator_calibrated),
                 ("arming_remaining_s", f"{self.arming_remaining_s():.1f}"), ("prescale", self.prescale),
-                *self.device.stats.diagnostics()]
+                ("output_state", {0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state]),
+                ("supervisor_heartbeat_age_s", f"{self.supervisor_age.age_s:.2f}"),
+                ("guard_heartbeat_age_s", f"{self.guard_age.age_s:.2f}"), ("heartbeat_disarms", self.heartbeat_disarms),
+                ("clock_steps_back", self.clock_monitor.steps_back),
+                *(self.device.stats.diagnostics() if self.device is not None else [("i2c_bus", "not open")])]
 
     def close(self) -> None:
         """Shutdown path: disarm and write neutral (SIGINT/SIGTERM via run_node, or destroy by the owner)."""

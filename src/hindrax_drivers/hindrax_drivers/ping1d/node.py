@@ -24,8 +24,9 @@ Publishes (QoS reliable, depth 10), for every ``profile`` (1300), ``distance`` (
 
 - ``ping/altitude`` (sensor_msgs/Range, frame ``ping_link``, ULTRASOUND, ``field_of_view``,
   ``min_range``, ``max_range`` from the configuration): the distance along the sonar axis, m; ``+inf``
-  when the confidence is 0 (REP-117 "no detection"). Values outside the limits are published as
-  measured (Range.msg: consumers discard them); variance 0 (unknown, as Range.msg defines).
+  when the confidence is 0 (REP-117 "no detection"). Out of range per REP-117: a distance below
+  ``min_range_m`` (the transducer's blind zone) is published as ``-inf`` and one beyond ``max_range_m`` as
+  ``+inf``, never as measured (counted as ``errors.out_of_range``); variance 0 (unknown, as Range.msg defines).
 - ``ping/confidence`` (std_msgs/Float32): the device's confidence, percent 0-100 (docs/devices.md §2.4).
 - ``raw/ping1d`` (hindrax_msgs/RawDeviceData): every byte in both directions.
 - ``/diagnostics``: state (disconnected / connected / reconnecting), rate, last message age,
@@ -208,7 +209,9 @@ class Ping1dNode(SerialDeviceNode):
         rng.field_of_view = self.field_of_view_rad
         rng.min_range = self.min_range_m
         rng.max_range = self.max_range_m
-        rng.range = float(p.distance_m) if p.confidence_pct > 0 else math.inf
+        rng.range = rep117_range(float(p.distance_m), p.confidence_pct, self.min_range_m, self.max_range_m)
+        if p.confidence_pct > 0 and math.isinf(rng.range):
+            self.diag.count("out_of_range")
         rng.variance = 0.0  # Range.msg: 0 = variance unknown (no accuracy is documented)
         self.pub_range.publish(rng)
         self.pub_confidence.publish(Float32(data=float(p.confidence_pct)))
@@ -234,6 +237,16 @@ class Ping1dNode(SerialDeviceNode):
             ("messages", ",".join(f"{k}={v}" for k, v in sorted(self.decoder.messages.items()))),
             ("last_parse_error", "" if last is None else f"{last.kind}: {last.reason}"),
         ]
+
+
+def rep117_range(distance_m: float, confidence_pct: float, min_range_m: float, max_range_m: float) -> float:
+    """``sensor_msgs/Range.range`` per REP-117: ``+inf`` for no detection (confidence 0) or a distance beyond
+    ``max_range_m``, ``-inf`` for one closer than ``min_range_m`` (inside the blind zone), else the distance, m."""
+    if confidence_pct <= 0 or not math.isfinite(distance_m) or distance_m > max_range_m:
+        return math.inf
+    if distance_m < min_range_m:
+        return -math.inf
+    return distance_m
 
 
 def main(args=None) -> int:

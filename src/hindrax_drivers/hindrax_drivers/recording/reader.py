@@ -123,14 +123,20 @@ class BagReader:
             counts: dict[int, int] = {}
             schemas: dict[int, Schema] = {}
             chans: dict[int, Channel] = {}
-            for rec in _recover.iter_file_records(f):
-                if isinstance(rec, Schema):
-                    schemas[rec.id] = rec
-                elif isinstance(rec, Channel):
-                    chans[rec.id] = rec
-                elif isinstance(rec, Message):
-                    counts[rec.channel_id] = counts.get(rec.channel_id, 0) + 1
-                    self._span(rec.log_time, rec.log_time)
+            try:
+                for rec in _recover.iter_file_records(f):
+                    if isinstance(rec, Schema):
+                        schemas[rec.id] = rec
+                    elif isinstance(rec, Channel):
+                        chans[rec.id] = rec
+                    elif isinstance(rec, Message):
+                        counts[rec.channel_id] = counts.get(rec.channel_id, 0) + 1
+                        self._span(rec.log_time, rec.log_time)
+            except _recover.RecoverError as exc:  # not MCAP at all (empty file, wrong magic)
+                raise BagError(str(exc)) from exc
+            if not counts:
+                raise BagError(f"{f}: truncated MCAP without a summary and without one complete message "
+                               "(nothing to read)")
             self._summaries[f] = None
             for cid, ch in chans.items():
                 self._add_channel(ch, schemas.get(ch.schema_id), counts.get(cid, 0))

@@ -40,17 +40,17 @@ Behaviour
   ``/diagnostics`` until space is freed. 0 turns the check off.
 
 Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.yaml):
-``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty =
-timestamped directory under ``recording.output_root``), ``autostart`` (bool, false),
-``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000), ``disk_check_period_s`` (1.0),
-``intake_period_s`` (0.05; polled intake only; ``queue_depth`` must hold what a topic sends in this time).
+``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty = a new
+timestamped directory under ``recording.output_root`` at every start, never an existing one: :mod:`.bag_dir`),
+``autostart`` (bool, false), ``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000),
+``disk_check_period_s`` (1.0), ``intake_period_s`` (0.05; polled intake only; ``queue_depth`` must hold what a topic
+sends in this time).
 
 Run alone: ``python -m hindrax_drivers.recording.recorder_node --ros-args --params-file
 ros_ws/config/hindrax.yaml -p autostart:=true``.
 """
 from __future__ import annotations
 
-import datetime as _dt
 import functools
 import os
 import sys
@@ -69,6 +69,7 @@ from ..config import ConfigError
 from ..node_parameters import node_config
 from ..polled_input import PolledSubscriptions
 from ..ros_process import RosProcess
+from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
 from .msgdefs import normalize_type_name
 from .msgtypes import TypeNotInstalledError, message_class
@@ -82,12 +83,6 @@ _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": Reliabili
 #: (rclpy's SingleThreadedExecutor), and the recorder matches every publisher's QoS itself (recording.qos).
 _NO_EVENT_HANDLERS = SubscriptionEventCallbacks(use_default_callbacks=False)
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
-
-
-def default_bag_dir(output_root: str | Path, now: _dt.datetime | None = None) -> Path:
-    """``<output_root>/hindrax_YYYY_MM_DD-HH_MM_SS`` (rosbag2's naming, local time)."""
-    now = now or _dt.datetime.now()
-    return Path(output_root) / now.strftime("hindrax_%Y_%m_%d-%H_%M_%S")
 
 
 class RecorderNode(Node):
@@ -142,7 +137,7 @@ class RecorderNode(Node):
         "topics": "topics to record (names); with topic_regex and all_topics empty: recording.topics, else all",
         "topic_regex": "record topics matching this regular expression (re.search)",
         "all_topics": "record every topic",
-        "output_dir": "bag directory (empty: a timestamped directory under recording.output_root)",
+        "output_dir": "bag directory (empty: a new timestamped directory under recording.output_root per start)",
         "discovery_period_s": "period of the graph poll that subscribes to new topics, s",
         "status_period_s": "period of the /diagnostics status, s",
         "queue_depth": "subscription queue depth (keep last)",
@@ -207,16 +202,17 @@ class RecorderNode(Node):
     def start_recording(self, output_dir: str = "", selection: TopicSelection | None = None) -> Path:
         """Open a new bag and subscribe to the selected topics. Returns the bag directory.
 
-        Raises RuntimeError when already recording, FileExistsError when the directory holds a bag,
+        Raises RuntimeError when already recording, FileExistsError when a named directory holds a bag,
         OSError when it cannot be created.
         """
         if self._writer is not None:
             raise RuntimeError(f"already recording to {self._writer.bag_dir}")
-        out = Path(output_dir or self._output_dir_param or default_bag_dir(self._output_root))
-        reason = self._below_floor(out)
+        named = output_dir or self._output_dir_param  # else a new directory under the root (bag_dir)
+        reason = self._below_floor(Path(named) if named else self._output_root)
         if reason:
             self._disk_full = reason
             raise OSError(f"not recording: {reason}")
+        out = Path(named) if named else new_bag_dir(self._output_root)
         self._selection = selection or self.default_selection()
         self._writer = ThreadedBagWriter(out, self._options)
         self._skipped.clear()

@@ -287,6 +287,7 @@ class ReplayHardware:
         self.ptys: dict[str, Any] = {}
         self.ports: dict[str, str] = {}
         self.i2c: dict[int, I2CReplayDevice] = {}
+        self.outputs: dict[int, Any] = {}  # PCA9685: emulated, not replayed (see below)
         self.i2c_device_of: dict[int, str] = {}
         self.recorded_host_bytes: dict[str, bytes] = {}
         wanted = tuple(devices) if devices is not None else self.SERIAL + self.I2C
@@ -301,11 +302,20 @@ class ReplayHardware:
                 self.recorded_host_bytes[name] = b"".join(d for _, d in tx)
                 self.ptys[name] = PtyDevice(dev, clock=self.clock.seconds, link_name=name)
                 self.ports[name] = str(self.ptys[name].path)
+            elif name == "pca9685":
+                # an output device: its reads only echo the driver's writes, and the ESC node's read-back runs on the
+                # steady clock (docs/architecture.md §8), so their number depends on wall time, not on the bag: the
+                # register-exact emulator answers them (its outputs are not compared)
+                from ..pca9685.emulator import Pca9685Emulator
+
+                for address in i2c_transactions(items):
+                    self.outputs[address] = Pca9685Emulator()
+                    self.i2c_device_of[address] = name
             else:
                 for address, tr in i2c_transactions(items).items():
                     self.i2c[address] = I2CReplayDevice(tr)
                     self.i2c_device_of[address] = name
-        self.i2c_bus = EmulatedI2CBus(self.i2c)
+        self.i2c_bus = EmulatedI2CBus({**self.i2c, **self.outputs})
 
     def serial_done(self, name: str, bytes_read: int) -> bool:
         """True when every recorded chunk of ``name`` is emitted and the driver has read ``bytes_read`` >= all."""
@@ -581,7 +591,13 @@ def recorded_parsed(bag_path: str | Path) -> dict[str, list[Any]]:
     out: dict[str, list[Any]] = {t: [] for t in wanted}
     classes = {t: message_class(reader.topics[t]) for t in wanted}
     for m in reader.messages(wanted):
-        out[m.topic].append(deserialize_message(m.data, classes[m.topic]))
+        try:
+            msg = deserialize_message(m.data, classes[m.topic])
+        except Exception:  # noqa: BLE001 - a bag recorded before a trailing field was added
+            # hindrax_msgs/ThrusterPwm gained a trailing uint8 output_state (issue 23): an older record decodes with
+            # it at its default, OUTPUT_UNKNOWN (those bags did not record the state on the wire)
+            msg = deserialize_message(bytes(m.data) + b"\x00" * 4, classes[m.topic])
+        out[m.topic].append(msg)
     return out
 
 

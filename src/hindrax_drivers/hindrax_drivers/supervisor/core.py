@@ -4,8 +4,14 @@ The supervisor is the last line of defence after the identification's own limits
 manoeuvre): it watches the sensors and, on a breach, the node disarms the ESC output (docs/architecture.md §8).
 Checks, all only while the ESC is armed (a vehicle on the bench or at the surface, disarmed, trips nothing):
 
-* **sensor rates**: messages per second of each watched sensor over the last ``supervisor.rate_window_s``
-  at least ``supervisor.min_rate.<sensor>_hz`` (0 = not watched), checked once armed for one window;
+* **sensor rates**: VALID messages per second of each watched sensor over the last ``supervisor.rate_window_s``
+  at least ``supervisor.min_rate.<sensor>_hz`` (0 = not watched, with a reason in
+  ``supervisor.rate_check_disabled.<sensor>``), checked once armed for one window. A sensor is alive only while it
+  delivers valid, finite data: a DVL report without a valid velocity, a NaN or infinite depth, a NaN or ``+inf``
+  altitude (REP-117 "no detection") do not count;
+* **data quality**: a NaN or infinite depth trips at once; an altitude of ``-inf`` (REP-117: closer than the
+  sonar's minimum range) trips at once; no valid DVL velocity for ``supervisor.max_invalid_dvl_s`` while armed
+  trips (where the DVL rate is watched) and the cage's dead reckoning stops meanwhile;
 * **depth** (pressure port, m, positive down) at most ``supervisor.max_depth_m``;
 * **altitude** (altimeter, m) at least ``supervisor.min_altitude_m``;
 * **attitude**: |roll| <= ``supervisor.max_roll_rad``, |pitch| <= ``supervisor.max_pitch_rad`` (DVL attitude,
@@ -55,6 +61,7 @@ class SupervisorLimits:
     cage_min_ne: tuple[float, float]
     cage_max_ne: tuple[float, float]
     max_run_time_s: float
+    max_invalid_dvl_s: float = 2.0
     start_position_ne: tuple[float, float] = (0.0, 0.0)
     start_heading_rad: float = 0.0
 
@@ -71,6 +78,7 @@ class SupervisorLimits:
                    cage_min_ne=(margin, margin),
                    cage_max_ne=(float(g("pool.length_m")) - margin, float(g("pool.width_m")) - margin),
                    max_run_time_s=float(g("supervisor.max_run_time_s")),
+                   max_invalid_dvl_s=float(g("supervisor.max_invalid_dvl_s")),
                    start_position_ne=(float(start[0]), float(start[1])),
                    start_heading_rad=float(g("pool.start_heading_rad")))
 
@@ -93,6 +101,7 @@ class SupervisorCore:
     position_ne: np.ndarray = field(default_factory=lambda: np.zeros(2))
     _stamps: dict = field(default_factory=dict)
     _last_velocity_t: float | None = None
+    last_valid_dvl_t: float | None = None
 
     def __post_init__(self) -> None:
         self.position_ne = np.array(self.limits.start_position_ne, dtype=float)
@@ -133,7 +142,20 @@ class SupervisorCore:
         while dq and dq[0] < t_s - self.limits.rate_window_s:
             dq.popleft()
 
+    def shift_time(self, step_s: float) -> None:
+        """The node's time base stepped by ``step_s`` (e.g. -100 s: /clock restarted): move every stored time by
+        it, so that rate windows, run time and the invalid-DVL time continue without a blind interval."""
+        for dq in self._stamps.values():
+            for i in range(len(dq)):
+                dq[i] += step_s
+        for name in ("armed_since_s", "_last_velocity_t", "last_valid_dvl_t"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, value + step_s)
+
     def on_depth(self, t_s: float, depth_m: float) -> str:
+        if not math.isfinite(depth_m):
+            return self._breach(f"depth {depth_m} is not finite (pressure/depth): the depth limit is blind")
         self.on_message("pressure", t_s)
         if math.isfinite(depth_m):
             self.depth_m = float(depth_m)
@@ -142,6 +164,11 @@ class SupervisorCore:
         return ""
 
     def on_altitude(self, t_s: float, altitude_m: float) -> str:
+        if altitude_m == -math.inf:
+            return self._breach(f"altitude -inf (REP-117: closer than the altimeter's minimum range), below "
+                                f"supervisor.min_altitude_m {self.limits.min_altitude_m:g}")
+        if not math.isfinite(altitude_m):
+            return ""  # NaN / +inf (no detection): not a valid reading, not counted toward the altimeter's rate
         self.on_message("altimeter", t_s)
         if math.isfinite(altitude_m):
             self.altitude_m = float(altitude_m)
@@ -169,10 +196,11 @@ class SupervisorCore:
     def on_dvl(self, t_s: float, velocity_frd_m_s: np.ndarray | None) -> str:
         """One DVL report: counts it, dead-reckons with a valid body velocity (3,) FRD m/s (None: invalid), and
         checks the cage."""
-        self.on_message("dvl", t_s)
         if velocity_frd_m_s is None or not np.all(np.isfinite(velocity_frd_m_s)):
-            self._last_velocity_t = None
+            self._last_velocity_t = None  # dead reckoning stops: the position is frozen, not trusted
             return ""
+        self.on_message("dvl", t_s)
+        self.last_valid_dvl_t = t_s
         if self._last_velocity_t is not None:
             dt = t_s - self._last_velocity_t
             if 0.0 < dt <= MAX_DEAD_RECKONING_GAP_S:
@@ -204,6 +232,13 @@ class SupervisorCore:
         if armed_for > self.limits.max_run_time_s:
             return self._breach(f"armed for {armed_for:.0f} s, beyond supervisor.max_run_time_s "
                                 f"{self.limits.max_run_time_s:g}")
+        if self.limits.min_rate_hz.get("dvl", 0.0) > 0.0:
+            # counted from the last valid velocity, or from arming if that is later
+            since = max(self.last_valid_dvl_t if self.last_valid_dvl_t is not None else -math.inf, self.armed_since_s)
+            if t_s - since > self.limits.max_invalid_dvl_s:
+                return self._breach(f"no valid DVL velocity for {t_s - since:.1f} s, beyond "
+                                    f"supervisor.max_invalid_dvl_s {self.limits.max_invalid_dvl_s:g} (dead-reckoned "
+                                    "cage position frozen)")
         if armed_for >= self.limits.rate_window_s:
             for sensor, minimum in self.limits.min_rate_hz.items():
                 if minimum > 0.0:

@@ -18,12 +18,22 @@ Services
     ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again; a disarm
     request still in flight, :attr:`SupervisorNode.disarm_future`, may land after a very quick re-arm).
 Publishes
+    ``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus, no values) at every check
+    (``supervisor.check_rate_hz``, steady clock): level OK within the envelope, ERROR with the latched reason. The
+    ESC refuses to arm and disarms without a fresh OK one; the output guard silences the outputs without one
+    (docs/architecture.md §8). It is the supervisor's independent stop path: a dead or hung supervisor stops
+    heartbeating, which both act on within ``esc.heartbeat_timeout_s``.
     ``supervisor/status`` (diagnostic_msgs/DiagnosticStatus: level OK or ERROR, message = the breach reason, values
     = the supervised quantities) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
 CPU (README "Performance on the Pi")
     Publishers and subscriptions carry no QoS event handlers (rclpy's default is one incompatible-QoS warning
     handler each, visited in Python on every executor spin): a sensor that stops reaching the supervisor, for a
     QoS mismatch or any other reason, trips it through the ``supervisor.min_rate.*`` checks (where not 0).
+Time
+    The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
+    of ROS time is detected at the next check, reported (``/diagnostics`` warning ``clock_step``) and the stored
+    times are shifted by the step, so no check goes blind; ROS time standing still for ``rate_window_s`` of steady
+    time while armed trips ("ROS time stalled": every ROS-time check would be blind).
 Configuration
     ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``).
 
@@ -37,6 +47,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, Range
@@ -47,6 +58,7 @@ from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .. import frames
+from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from .core import SupervisorCore, SupervisorLimits
 
@@ -74,6 +86,11 @@ class SupervisorNode(Node):
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
+        self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], 10,
+                                                   event_callbacks=_NO_PUB_EVENTS)
+        self.clock_monitor = ClockStepMonitor(self._now_s)
+        #: ROS time standing still this long (steady s) while armed trips (see set_clock_stall_timeout)
+        self.clock_stall_timeout_s = float(cfg.get("supervisor.rate_window_s"))
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10,
                                                 event_callbacks=_NO_PUB_EVENTS)
         ev = {"event_callbacks": _NO_SUB_EVENTS}
@@ -87,7 +104,8 @@ class SupervisorNode(Node):
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=lambda: self.core.values(self._now_s()))
-        self.create_timer(1.0 / cfg.get("supervisor.check_rate_hz"), self.on_check)
+        self.create_timer(1.0 / cfg.get("supervisor.check_rate_hz"), self.on_check,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_status)
 
     def _now_s(self) -> float:
@@ -113,8 +131,16 @@ class SupervisorNode(Node):
     def on_imu(self, _msg: bytes) -> None:
         self.core.on_message("imu", self._now_s())
 
+    def set_clock_stall_timeout(self, seconds: float) -> None:
+        """ROS time may stand still this long (steady s) while armed before it trips (default
+        ``supervisor.rate_window_s``). An in-process simulator that holds simulated time on purpose widens it."""
+        if not seconds > 0.0:
+            raise ValueError(f"clock stall timeout must be > 0 s, got {seconds}")
+        self.clock_stall_timeout_s = float(seconds)
+
     def on_esc(self, msg: ThrusterPwm) -> None:
-        armed = bool(msg.armed)
+        # an output state that became unknown while armed may still be thrusting: keep checking
+        armed = bool(msg.armed) or (msg.output_state == ThrusterPwm.OUTPUT_UNKNOWN and self.core.armed)
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed
@@ -144,11 +170,28 @@ class SupervisorNode(Node):
         return response
 
     def on_check(self) -> None:
+        step = self.clock_monitor.check()
+        if step:
+            self.core.shift_time(step)
+            self.diag.count("clock_step")
+            self.diag.warn("clock_step", f"ROS time stepped back {-step:.3f} s; supervised times shifted by it")
+            self.get_logger().warn(f"ROS time stepped back {-step:.3f} s: checks re-based")
+            self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
+        if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
+            self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
+                                        "armed: the supervisor's ROS-time checks are blind"))
         self._handle(self.core.check(self._now_s()))
         if self.core.tripped and self.esc_armed:
             self._disarm()
         if self._status_dirty:
             self._publish_status()
+        self._publish_heartbeat()
+
+    def _publish_heartbeat(self) -> None:
+        tripped = self.core.tripped
+        self.pub_heartbeat.publish(DiagnosticStatus(
+            level=DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK, name="hindrax/supervisor",
+            message=tripped or "within the envelope", hardware_id="supervisor"))
 
     # ------------------------------------------------------------------ breach
     def _handle(self, reason: str, force: bool = False) -> None:
@@ -162,6 +205,7 @@ class SupervisorNode(Node):
         self.diag.set_state("tripped", DiagnosticStatus.ERROR, reason)
         self.get_logger().error(f"supervisor breach: {reason}; disarming the ESC")
         self._status_dirty = True
+        self._publish_heartbeat()  # the ESC and the guard act on it at once
         self._disarm(force=True)
         self._publish_status()
 

@@ -19,12 +19,15 @@ The sleep function and the clock are injected, so tests run without real waiting
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Optional, Sequence
 
-__all__ = ["I2CDevice", "I2CError", "I2CStats", "RawTap", "RegisterWrite"]
+from .socket_i2c import SOCKET_ENV, SocketI2CBus
+
+__all__ = ["BusHandle", "I2CDevice", "I2CError", "I2CStats", "RawTap", "RegisterWrite", "open_smbus"]
 
 #: Raw tap signature: ``(kind, address, register, data, t_monotonic_s)``; ``kind`` is ``"write"``
 #: or ``"read"``; ``register`` is the register/command byte that started the transaction, or
@@ -105,14 +108,56 @@ class I2CStats:
 def open_smbus(bus_number: int) -> Any:
     """Open ``/dev/i2c-<bus_number>`` with smbus2 (what the nodes use on the Pi when no bus is injected).
 
+    When the environment variable ``HINDRAX_I2C_SOCKET`` is set (tests and benchmarks only, never on the vehicle),
+    the emulated bus served at that Unix socket instead (:mod:`.socket_i2c`), whatever the number.
     Raises OSError (or ImportError without smbus2) with a message naming the device file.
     """
+    if os.environ.get(SOCKET_ENV):
+        return SocketI2CBus(os.environ[SOCKET_ENV])
     import smbus2
 
     try:
         return smbus2.SMBus(bus_number)
     except OSError as exc:
         raise OSError(exc.errno, f"cannot open I2C bus {bus_number} (/dev/i2c-{bus_number}): {exc}") from exc
+
+
+class BusHandle:
+    """The bus of one I2C driver node: injected (tests, simulation: used as given, never closed here), or opened
+    by the node with :func:`open_smbus` on first use and opened afresh after :meth:`reset`.
+
+    A driver calls :meth:`reset` when a start-up attempt fails, so that its next attempt opens ``/dev/i2c-N``
+    again: a bus that was absent at start, or went away and came back (the kernel driver reloaded, the emulated
+    bus of a test restarted), is picked up without restarting the process.
+    """
+
+    def __init__(self, bus_number: int, bus: Any = None) -> None:
+        self.bus_number = int(bus_number)
+        self.owned = bus is None
+        """True when the node opens (and closes) the bus itself."""
+        self._bus = bus
+        self.opens = 0
+        """How many times the bus was opened (owned buses)."""
+
+    def get(self) -> Any:
+        """The bus, opened now if needed. Raises OSError (or ImportError) when it cannot be opened."""
+        if self._bus is None:
+            self._bus = open_smbus(self.bus_number)
+            self.opens += 1
+        return self._bus
+
+    def reset(self) -> bool:
+        """Close an owned open bus so that :meth:`get` opens it again; returns True if it did (False for an
+        injected bus or one that is not open)."""
+        if not self.owned or self._bus is None:
+            return False
+        close_quietly(self._bus)
+        self._bus = None
+        return True
+
+    def close(self) -> None:
+        """Close an owned bus (shutdown)."""
+        self.reset()
 
 
 def close_quietly(bus: Any) -> None:

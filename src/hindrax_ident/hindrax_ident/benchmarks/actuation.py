@@ -9,28 +9,73 @@ T1's channel. The ESC node writes a command when it arrives (event-driven output
 watchdog), so this is DDS delivery twice, the allocation and one I2C block write; before that it waited for
 the next 50 Hz output tick (16.6 ms p99). CPU per command is the process CPU time (all three nodes and DDS)
 divided by the commands sent.
+
+The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
+wrenches from 0.1 N to 30 N, with and without the deadband search (docs/architecture.md §9,
+``allocation/deadband.py``), so the search's own cost is the difference of two figures measured in the same process.
 """
 from __future__ import annotations
 
 import time
 
 import numpy as np
+import rclpy
+from domain_coordinator import domain_id
+from geometry_msgs.msg import WrenchStamped
+from rclpy.experimental.events_executor import EventsExecutor
+
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.allocation.node import ThrustAllocationNode
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+from hindrax_drivers.pca9685.node import EscNode
+from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_msgs.srv import SetArmed
+
+
+def allocator_cost(quick: bool = False) -> list[dict]:
+    """CPU time per ``AllocationCore.allocate`` call (the allocation node's whole core, FLU in, widths out), in us.
+
+    Wrenches: normal in each axis (N: 1, N m: 0.15) times a size drawn from 0.1, 0.3, 1, 3, 10 and 30, seed 26, so
+    most fall where some thruster is asked for less than its smallest thrust (the deadband search runs). Each call is
+    timed with ``time.thread_time_ns`` (CPU of this thread: waiting for a core on a shared machine is not counted),
+    the least of 3 repeats per wrench (a cache miss or interrupt is not the allocator's cost).
+    """
+    n = 300 if quick else 3000
+    rng = np.random.default_rng(26)
+    sizes = rng.choice([0.1, 0.3, 1.0, 3.0, 10.0, 30.0], size=(n, 1))
+    wrenches = rng.normal(size=(n, 6)) * np.array([1.0, 1.0, 1.0, 0.15, 0.15, 0.15]) * sizes
+    cfg = load_config(default_config_path())
+    cores = {True: AllocationCore(cfg), False: AllocationCore(cfg)}
+    cores[False].allocator.reconfigure(deadband_search=False)
+    rows = []
+    for search, label in ((True, ""), (False, "_without_search")):
+        core = cores[search]
+        per_call = np.empty(n)
+        for i, w in enumerate(wrenches):
+            best = None
+            for _ in range(3):
+                t0 = time.thread_time_ns()
+                core.allocate(w)
+                dt = time.thread_time_ns() - t0
+                best = dt if best is None else min(best, dt)
+            per_call[i] = best / 1e3
+        rows += [
+            {"name": f"allocate_cpu_p50{label}", "value": float(np.percentile(per_call, 50)), "unit": "us"},
+            {"name": f"allocate_cpu_p99{label}", "value": float(np.percentile(per_call, 99)), "unit": "us",
+             **({"target": "the search adds well under 1 ms (issue 26)"} if search else {})},
+        ]
+    # calls where the search chose other forces than the saturation step (a force fell in a deadband gap)
+    changed = sum(not np.array_equal(cores[True].allocate(w).force_n, cores[False].allocate(w).force_n)
+                  for w in wrenches)
+    rows.append({"name": "allocate_calls_changed_by_search", "value": 100.0 * changed / n, "unit": "%",
+                 "note": f"of {n} wrenches"})
+    return rows
 
 
 def run(quick: bool = False) -> list[dict]:
-    import rclpy
-    from geometry_msgs.msg import WrenchStamped
-    from rclpy.experimental.events_executor import EventsExecutor
-
-    from hindrax_drivers.allocation.core import AllocationCore
-    from hindrax_drivers.allocation.node import ThrustAllocationNode
-    from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-    from hindrax_drivers.pca9685.node import EscNode
-    from hindrax_drivers.testing import config_parameters, ros_context, wait_until
-    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-    from hindrax_msgs.srv import SetArmed
-
+    """The benchmark's rows: wrench-to-registers latency and CPU at 50 Hz, then :func:`allocator_cost`."""
     n_commands = 150 if quick else 1500
     cfg = load_config(default_config_path())
     core = AllocationCore(cfg)
@@ -50,7 +95,6 @@ def run(quick: bool = False) -> list[dict]:
 
     emu = TimedEmulator()
     bus = EmulatedI2CBus({cfg.get("esc.i2c_address"): emu})
-    from domain_coordinator import domain_id
 
     # a reserved ROS domain: the bench publishes wrenches and arms, which must never reach another graph
     with domain_id() as did, ros_context(domain_id=did) as ctx:
@@ -59,13 +103,15 @@ def run(quick: bool = False) -> list[dict]:
         alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
         esc = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         driver = rclpy.create_node("bench_driver", context=ctx)
+        SafetyHeartbeats(driver)  # stand-in supervisor and output guard: the ESC arms only with their heartbeats
         ex = EventsExecutor(context=ctx)
         for n in (alloc, esc, driver):
             ex.add_node(n)
         pub = driver.create_publisher(WrenchStamped, "wrench", 10)
         arm = driver.create_client(SetArmed, "esc/set_armed")
         spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
-        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready(), 10, spin, "graph")
+        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready() and not esc.heartbeat_refusal(),
+                   10, spin, "graph")
         fut = arm.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, 5, spin, "armed")
         state = {"i": 0, "sent": 0}
@@ -103,4 +149,4 @@ def run(quick: bool = False) -> list[dict]:
         {"name": "cpu_per_command", "value": cpu / state["sent"] * 1e3, "unit": "ms",
          "note": "whole process: publisher + allocation + ESC node"},
         {"name": "cpu_load_at_50hz", "value": cpu / wall * 100.0, "unit": "% of a core"},
-    ]
+    ] + allocator_cost(quick)

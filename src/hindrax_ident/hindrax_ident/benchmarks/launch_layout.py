@@ -41,6 +41,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
+from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
+
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 SOCKET_ENV = "HINDRAX_BENCH_I2C_SOCKET"
@@ -174,92 +176,6 @@ def _elements(parent: ET.Element, args: dict[str, str], where: str) -> list[Laun
             raise ValueError(f"{where}: unsupported element <{el.tag}> (the bench reads arg, let, group, include "
                              f"and node)")
     return out
-
-
-class SocketI2CBus:
-    """Client side of :class:`I2CSocketServer`: the ``smbus2.SMBus`` methods the drivers use, forwarded.
-
-    Raises ``OSError`` with the emulator's errno for a NACK, as ``smbus2`` does.
-    """
-
-    def __init__(self, path: str) -> None:
-        from multiprocessing.connection import Client
-
-        self._conn = Client(path, family="AF_UNIX")
-        self._lock = threading.Lock()
-
-    def _call(self, name: str, *args: Any) -> Any:
-        with self._lock:
-            self._conn.send((name, args))
-            ok, value = self._conn.recv()
-        if ok:
-            return value
-        raise OSError(*value)
-
-    def write_byte(self, addr, value, force=None):
-        return self._call("write_byte", addr, value)
-
-    def read_byte(self, addr, force=None):
-        return self._call("read_byte", addr)
-
-    def write_byte_data(self, addr, register, value, force=None):
-        return self._call("write_byte_data", addr, register, value)
-
-    def read_byte_data(self, addr, register, force=None):
-        return self._call("read_byte_data", addr, register)
-
-    def write_i2c_block_data(self, addr, register, data, force=None):
-        return self._call("write_i2c_block_data", addr, register, list(data))
-
-    def read_i2c_block_data(self, addr, register, length, force=None):
-        return self._call("read_i2c_block_data", addr, register, length)
-
-    def close(self) -> None:
-        try:
-            self._conn.close()
-        except OSError:
-            pass
-
-
-class I2CSocketServer:
-    """Serves ``bus`` (an EmulatedI2CBus) to :class:`SocketI2CBus` clients, one thread per connection; every call
-    holds ``lock`` (shared with the simulator's stepping)."""
-
-    def __init__(self, bus: Any, path: str, lock: threading.Lock) -> None:
-        from multiprocessing.connection import Listener
-
-        self.bus, self.lock = bus, lock
-        self._listener = Listener(path, family="AF_UNIX")
-        threading.Thread(target=self._accept, name="i2c-socket-accept", daemon=True).start()
-
-    def close(self) -> None:
-        """Stop accepting connections and remove the socket file."""
-        self._listener.close()
-
-    def _accept(self) -> None:
-        while True:
-            try:
-                conn = self._listener.accept()
-            except OSError:
-                return
-            threading.Thread(target=self._serve, args=(conn,), name="i2c-socket", daemon=True).start()
-
-    def _serve(self, conn: Any) -> None:
-        while True:
-            try:
-                name, args = conn.recv()
-            except (EOFError, OSError):
-                return
-            try:
-                with self.lock:
-                    result = getattr(self.bus, name)(*args)
-                reply = (True, result)
-            except OSError as exc:
-                reply = (False, (exc.errno, str(exc)))
-            try:
-                conn.send(reply)
-            except OSError:
-                return
 
 
 def _pool(argv: list[str]) -> int:

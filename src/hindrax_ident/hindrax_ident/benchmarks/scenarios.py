@@ -2,8 +2,8 @@
 
 quick: scenario ``thrust_0.90`` only, surge, 2 levels, seed 1; full: ``none``, ``thrust_0.90`` and
 ``reverse_weak``, surge, 2 levels, seed 1 (about 15 s each here; surge and heave at 3 levels took about 80 s
-each, too long for ``make bench``'s 6 minutes; the full table, 13 scenarios x seeds x 4 DOFs, is the
-README's, produced by the command). Rows: wall time per campaign, and per scenario the fraction of parameters whose
+each, too long for ``make bench``'s 6 minutes; the full table, 13 scenarios x seeds x 4 DOFs, is written
+by the command into docs/results.md, section ``scenarios``). Rows: wall time per campaign, and per scenario the fraction of parameters whose
 95 % interval covers the truth, the fraction marked suspect and the fraction covered-or-suspect (target 100 %:
 a parameter that misses the truth must be suspect), plus the no-disturbance scenario's suspect fraction (target
 <= 10 %).

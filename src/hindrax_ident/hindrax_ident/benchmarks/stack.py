@@ -337,12 +337,12 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
     py = python_executable()
     sock = str(tmp / "i2c.sock")
     ports_file = tmp / "ports.json"
-    bag = tmp / "launch-bag"
+    bag_root = tmp / "launch-bags"  # the launch files' output_dir: the root the recorder makes its bag beneath
     launch_file = launch_file or package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1]
-    layout = launch_processes(launch_file, {"output_dir": str(bag)})
+    layout = launch_processes(launch_file, {"output_dir": str(bag_root)})
     procs: dict[str, subprocess.Popen] = {}
     logs: dict[str, Any] = {}
-    out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": str(bag),
+    out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": None,
                  "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}", "module": lp.module}
                                for lp in layout}}
     with domain_id() as did:
@@ -452,6 +452,10 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                     p.wait(5)
             for f in logs.values():
                 f.close()
+    bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
+    if len(bags) != 1:  # one recorder start (nothing respawns here)
+        raise RuntimeError(f"expected one bag under {bag_root}, found {[b.name for b in bags]}")
+    out["bag"] = str(bags[0])
     _bag_rates(out)
     return out
 

@@ -5,6 +5,10 @@ object: ``force_n`` (per thruster, N), ``pulse_width_us`` (per thruster, us), ``
 (base_link, N and N m), ``scale`` and ``saturated`` (per-thruster flags). Computed by
 :class:`hindrax_drivers.allocation.core.AllocationCore`, exactly what the node runs. Exit 1 on an
 invalid wrench or configuration.
+
+``achieved_wrench`` is what the thrusters give at the printed widths, so it shows every component nobody asked
+for: a thruster runs at 0 N or at least its smallest thrust outside the ESC deadband, and the allocator chooses
+which thrusters run (docs/architecture.md §9).
 """
 from __future__ import annotations
 
@@ -18,6 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     for name, unit in zip("XYZKMN", ["N"] * 3 + ["N m"] * 3):
         parser.add_argument(name, type=float, help=f"{name} in base_link (FLU), {unit}")
     add_config_argument(parser)
+    parser.epilog = ("achieved_wrench is what the thrusters give at the printed pulse widths (thrust curves, ESC "
+                     "deadband, PCA9685 step): a thruster runs at 0 N or at least its smallest thrust outside the "
+                     "deadband, and the allocator chooses which thrusters run (docs/architecture.md §9).")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -16,7 +16,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hindrax_drivers.config import ConfigError, default_config_path, load_config
+    from hindrax_drivers.config import ConfigError, default_config_path, load_config, output_enable_gpio
 
     if args.file is None:
         try:
@@ -36,4 +36,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: esc.oscillator_calibrated is false: the ESC node will refuse to arm. Hold neutral (hindrax "
               f"bringup), measure one thruster channel's pulse with a scope, then run `hindrax esc calibrate "
               f"--measured-us X --config {args.file} --write` (sets esc.oscillator_hz and the flag).")
+    if output_enable_gpio(cfg) is None:
+        print("warning: esc.output_enable_gpio is not wired: the vehicle has no hardware cut-off. The output guard "
+              "silences the PCA9685 over the I2C bus (all-off + sleep), which an I2C outage defeats "
+              "(docs/architecture.md §8).")
     return 0

@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "sensor_msgs/FluidPressure, Odometry or PoseStamped pose")
     parser.add_argument("--dofs", default=None, help="comma-separated DOFs (default: all six)")
     parser.add_argument("--holdout", nargs="+", default=[], metavar="BAG", help="bags used for validation only")
-    parser.add_argument("--folds", type=int, default=3, help="K of the cross-validation (default 3)")
+    parser.add_argument("--folds", type=int, default=4, help="K of the cross-validation (default 4)")
     parser.add_argument("--config", default=None,
                         help="vehicle file (optional: without it nothing about the vehicle is assumed; needed for "
                              "ThrusterPwm forces and for added_mass = inertia - rigid-body inertia)")
@@ -40,29 +40,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def format_table(res) -> str:
-    """Parameters (value +- std, which estimate set the std: output_error or jackknife, 95 % interval, fold
-    spread) and validation, one row each."""
-    lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>12} {'95 % interval':>23} "
+    """Parameters (value +- std, which covariance set the std, 95 % interval, fold spread), the chosen model and
+    timing per DOF, and the validation, one row each."""
+    import numpy as np
+
+    lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
              f"{'fold spread':>11}"]
     for dof, r in res.dofs.items():
         if r.status != "fitted":
             lines.append(f"{dof:6} {r.status}: {r.reason}")
             continue
-        import numpy as np
-
+        c = r.core
         folds = np.array(r.folds) if len(r.folds) >= 2 else None
-        for i, n in enumerate(r.names):
+        sm = np.sqrt(np.maximum(np.diag(c.covariance.model), 0.0))
+        ss = np.sqrt(np.maximum(np.diag(c.covariance.sandwich), 0.0))
+        for i, n in enumerate(c.names):
             sp = f"{np.std(folds[:, i], ddof=1):11.4g}" if folds is not None else f"{'-':>11}"
-            src = r.std_source[i] if r.std_source else "output_error"
-            lines.append(f"{dof:6} {n:28} {r.theta[i]:10.4g} {r.std[i]:9.3g} {src:>12} "
-                         f"[{r.ci95[i, 0]:10.4g}, {r.ci95[i, 1]:10.4g}] {sp}")
+            src = "cluster_robust" if ss[i] >= sm[i] else "model"
+            lines.append(f"{dof:6} {n:28} {c.theta[i]:10.4g} {c.std[i]:9.3g} {src:>14} "
+                         f"[{c.ci95[i, 0]:10.4g}, {c.ci95[i, 1]:10.4g}] {sp}")
+        lines.append(f"{dof:6} model: {c.terms.label}; delay {c.timing.delay_s:.3f} s, lag {c.timing.lag_s:.3f} s "
+                     f"({c.timing.source}); t with {c.covariance.t_dof} degrees of freedom "
+                     f"({c.covariance.clusters} clusters)")
     lines.append("")
     lines.append(f"validation ({res.design})")
     lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8}")
     for dof, r in res.dofs.items():
         for key, v in r.validation.items():
-            lines.append(f"{dof:6} {key:17} {v['nrmse']:7.3f} {v['nrmse_hold']:10.3f} {v['nrmse_zero']:10.3f} "
-                         f"{v['samples']:8d}")
+            if not isinstance(v, dict) or "nrmse" not in v:
+                continue
+            lines.append(f"{dof:6} {key:17} {v['nrmse']:7.3f} {v.get('nrmse_hold', float('nan')):10.3f} "
+                         f"{v.get('nrmse_zero', float('nan')):10.3f} {v['samples']:8d}")
     return "\n".join(lines)
 
 
@@ -99,8 +107,11 @@ def run(args: argparse.Namespace) -> int:
     for dof, e in doc["dofs"].items():
         if e.get("verdict") == "suspect":
             print(f"{dof}: suspect ({'; '.join(e['reasons'])})")
+            for a in e.get("advice", []):
+                print(f"  to fix {a['parameter']}: {a['manoeuvre']}, speeds {a['speed_range'][0]:g}-"
+                      f"{a['speed_range'][1]:g} {a['speed_range'][2]}, about {a['seconds_more']:.0f} s more")
     d = res.preprocessing
-    print(f"preprocessing: {d['resampling']}; delay {d['delay_s']:g} s; "
+    print(f"preprocessing: {d['resampling']}; "
           + "; ".join(f"{Path(b['bag']).name}: {b['gaps']['dropped_s']:g} s in gaps dropped, "
                       f"{b['velocity_repeated_values_dropped']} repeated velocities dropped" for b in d["bags"]))
     if not doc["config_ready"]:

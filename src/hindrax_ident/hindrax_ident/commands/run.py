@@ -29,6 +29,7 @@ import os
 import time
 from pathlib import Path
 
+from .. import results_doc
 from .common import CommandError, add_config_argument, load_vehicle
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
@@ -51,6 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rtf", type=float, default=0.0, help="real-time factor, 0 = as fast as possible (default)")
     parser.add_argument("--seed", type=int, default=None, help="simulation seed (default simulation.seed)")
     parser.add_argument("--out", default=None, help="output directory (default runs/<UTC timestamp>/)")
+    results_doc.add_argument(parser)
     add_config_argument(parser)
     parser.add_argument("--truth", default=None,
                         help="truth file of the virtual pool: overlay of the vehicle file + disturbances, read by the "
@@ -99,6 +101,28 @@ def format_summary(identifications: dict) -> str:
         lines.append(f"{r['dof']:6s} {r['parameter']:28s} {r['value']:12.5g} {r['std']:9.3g} {r['unit']:9s} "
                      f"{tr:>11s} {err:>8s}  {r.get('verdict', '-')}{why}")
     return "\n".join(lines)
+
+
+def summary_markdown(identifications: dict) -> str:
+    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth, error, verdict)."""
+    from ..identification.report import summary_rows
+    rows = []
+    for r in summary_rows(identifications):
+        err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f} %"
+        tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
+        why = f" ({r['reasons'][0]})" if r.get("reasons") else ""
+        rows.append([r["dof"], r["parameter"], f"{r['value']:.5g}", f"{r['std']:.3g}", r["unit"], tr, err,
+                     f"{r.get('verdict', '-')}{why}"])
+    return results_doc.markdown_table(["DOF", "parameter", "identified", "std", "unit", "configured (truth)",
+                                       "rel. error", "verdict"], rows)
+
+
+def _write_results(args: argparse.Namespace, identifications: dict, path: str, wall_s: float) -> None:
+    """Section ``run`` of ``--results-doc`` (docs/results.md): the end-of-run table of this campaign."""
+    body = (f"Campaign {path}, DOFs {args.dofs}, levels {args.levels or 'default'}, seed "
+            f"{'default' if args.seed is None else args.seed}, truth {getattr(args, 'truth', None) or 'default'}; "
+            f"wall time {wall_s:.0f} s on {os.cpu_count()} cores.\n\n" + summary_markdown(identifications))
+    results_doc.write_if_asked(args, "run", "The main job: identified against the simulator's truth", body)
 
 
 def _output_dir(cfg, out: str | None) -> Path:
@@ -210,6 +234,7 @@ def run_graph(args: argparse.Namespace) -> int:
         progress(f"{dof}: no estimate ({msg})")
     if outcome.identifications:
         print(format_summary(outcome.identifications))
+        _write_results(args, outcome.identifications, "through the node graph", time.monotonic() - wall0)
     print(f"output: {out}  (bag {outcome.bag_dir}; wall time {time.monotonic() - wall0:.0f} s)")
     return 0 if (outcome.success and outcome.identifications) else 1
 
@@ -320,5 +345,6 @@ def run_in_process(args: argparse.Namespace) -> int:
                 + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
         write_report(out / "report", idents, doc, campaign_note=note)
         print(format_summary(idents))
+        _write_results(args, idents, "in-process (no ROS graph)", time.monotonic() - wall0)
     print(f"output: {out}  (wall time {time.monotonic() - wall0:.0f} s)")
     return 1 if (record.aborted or not idents) else 0

@@ -27,12 +27,14 @@ import argparse
 import datetime as _dt
 import json
 import math
+import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import Sequence
 
+from .. import results_doc
 from .common import add_config_argument, load_vehicle
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
@@ -68,6 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "heave,yaw)")
     parser.add_argument("--levels", type=int, default=None, help="levels per DOF (default identification.levels_per_dof)")
     parser.add_argument("--out", default="scenario-results", help="output directory (default scenario-results/)")
+    results_doc.add_argument(parser)
     add_config_argument(parser)
     parser.add_argument("--jobs", type=int, default=1, help="campaigns run in parallel processes (default 1)")
     parser.add_argument("--cache", default=None,
@@ -397,6 +400,10 @@ def run(args: argparse.Namespace) -> int:
                                       f"DOFs {', '.join(dofs)}, levels {args.levels or 'default'}{missing}\n\n"
                                       f"{table}\n")
     print(table)
+    results_doc.write_if_asked(args, "scenarios", "Scenario suite: identification against truths that differ",
+                               f"Seeds 1-{args.seeds}, DOFs {', '.join(dofs)}, levels {args.levels or 'default'}"
+                               f"{missing}; wall time {doc['wall_time_s']:.0f} s on {os.cpu_count()} cores.\n\n"
+                               f"{table}")
     print(f"output: {out / 'scenarios.json'}, {out / 'scenarios.md'} (wall time {doc['wall_time_s']:.0f} s)")
     return 0
 

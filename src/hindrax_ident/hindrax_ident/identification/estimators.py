@@ -35,7 +35,8 @@ Methods:
    conditioned online), not the reported estimate.
 2. Offline equation-error batch LS on the smoothed signals ([Hindrax-Drag] eqs. 6-8,
    :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`).
-3. Offline output-error refinement (the reported result, :class:`.output_error.OutputErrorFit`): starting from (2), ``scipy.optimize.least_squares``
+3. Offline output-error refinement (the reported result, the fit core :mod:`.fit_core` shared with ``hindrax ident
+   fit``, docs/identification.md §7): starting from (2), ``scipy.optimize.least_squares``
    integrates the 1-DOF ODE over segments (3 s; initial velocity from the smoother; RK4 at the tick rate;
    the lagged thrust evaluated exactly inside each tick) and fits the simulated velocity (or depth for heave,
    with one free offset per segment eliminated by projection) to the RAW sensor samples. Reason: the
@@ -72,7 +73,7 @@ from ..estimation.steady_windows import detect_steady_windows
 from ..sim.model import rigid_body_mass_matrix
 from .fusion import AccelAidedFilter, smooth_with_acceleration, smooth_with_rate
 from .maneuvers import euler_rates
-from .output_error import OutputErrorFit, model_terms
+from .output_error import model_terms
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
@@ -660,24 +661,37 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
     cov = ee.covariance
     v_fit = np.full(t.size, np.nan)
     rho = math.nan
+    t_dof = max(int(dof_res), 1)
     if output_error:
-        # measured samples on the tick grid (samples exactly at a tick; others are skipped)
-        z_tick = np.full(t.size, np.nan)
-        pos = np.rint((tm - t[0]) / record.tick_s).astype(int)
-        good = (pos >= 0) & (pos < t.size)
-        good &= np.abs(tm - t[np.clip(pos, 0, t.size - 1)]) < 1e-6
-        z_tick[pos[good]] = zm[good]
+        # the fit core shared with hindrax ident fit (docs/identification.md §7): the DOF's window as one stretch,
+        # the campaign's full model (a designed experiment: no term selection), every segment of the window
+        from . import fit_core
+
+        inside = (tm >= t[0]) & (tm <= t[-1]) & np.isfinite(zm)
+        chunk = fit_core.Chunk(np.asarray(force_cmd, dtype=float), v_s, x_s if ms["measured"] == "position" else
+                               np.zeros_like(v_s), a_s, (tm[inside] - t[0]) / record.tick_s, zm[inside], rr,
+                               force_start=float(force[0]))
+        rec = fit_core.DofRecord(dof, record.tick_s, ms["measured"], [chunk], "thrust_model",
+                                 float(record.time_constant_s))
+        segment_s = POSITION_SEGMENT_S if ms["measured"] == "position" else VELOCITY_SEGMENT_S
+        opts = fit_core.CoreOptions(segment_s=segment_s, validation_s=segment_s, select=False, all_segments=True,
+                                    terms=fit_core.Terms("both", dof == "heave"), folds=4)
         try:
-            segment_s = POSITION_SEGMENT_S if ms["measured"] == "position" else VELOCITY_SEGMENT_S
-            oe = OutputErrorFit(dof, t, force, force_cmd, record.time_constant_s, rr, z_tick, ms["measured"], x_s,
-                                v_s, segment_s).fit(ee.theta)
-            th, cv, dres, v_fit, rho = oe.theta, oe.covariance, oe.residual_dof, oe.velocity_fit, oe.rho
-            if np.all(np.isfinite(th)) and np.all(np.isfinite(np.diag(cv))):
-                theta, cov, dof_res, method = th, cv, dres, "output-error"
-                std = np.sqrt(np.clip(np.diag(cv), 0.0, None))
+            core = fit_core.identify_dof(rec, opts)
+            if list(core.names) == names and np.all(np.isfinite(core.theta)) and np.all(np.isfinite(core.std)):
+                theta, cov, method = core.theta, core.covariance.cov, "output-error"
+                std = core.std
+                t_dof = core.covariance.t_dof
+                dof_res = core.train.s_z.size - len(names)
+                rho = core.covariance.residual_rho
+                V = fit_core.predict_validation(core.train, core.chosen.layout, core.theta)
+                starts = np.rint((core.train.span[:, 0] - t[0]) / record.tick_s).astype(int)
+                for i, j0 in enumerate(starts):
+                    j1 = min(j0 + core.train.L, t.size)
+                    v_fit[j0:j1] = V[i, :j1 - j0]
         except (EstimationError, ValueError, np.linalg.LinAlgError):
-            pass
-    tcrit = float(stats.t.ppf(0.975, max(int(dof_res), 1)))
+            core = None
+    tcrit = float(stats.t.ppf(0.975, t_dof))
     values = {n: float(v) for n, v in zip(names, theta)}
     stds = {n: float(s) for n, s in zip(names, std)}
     rigid = rigid_inertia(cfg, dof)
@@ -697,7 +711,7 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
         steady_time_s=None if (steady is None or t_end is None) else float(t_end - t0),
         signals={"t": t, "velocity": v_s, "acceleration": a_s, "force": force, "velocity_fit": v_fit,
                  "restoring": rr, "windows": [(w.velocity_mean, float(np.mean(force[w.start:w.stop])))
-                                              for w in wins], "residual_autocorrelation": rho,
+                                              for w in wins], "residual_autocorrelation": rho, "t_dof": t_dof,
                  "covariance": cov, "online_history": record.online[dof].history if dof in record.online else {}})
 
 

@@ -21,32 +21,23 @@ Preprocessing (:class:`Preprocessed`, reported in the ``preprocessing`` section)
 every stamp is set, else receive (log) times; messages sorted by that time; repeated velocity values (a velocity
 that updates slower than it is published) dropped, keeping the first of each run; gaps longer than
 ``max(gap_min_s, 5 x median spacing)`` in force or velocity cut the record (nothing is interpolated across them);
-force held (zero-order: for the fit its mean over each step, :func:`_grid_chunks`) and velocity linearly
-interpolated on a uniform grid of ``grid_s``; the delay between force
-and velocity chosen by minimising the equation-error residual over delays 0..``max_delay_s`` (a cross-correlation
-weighted by the model, sub-grid by a parabola through the minimum), then applied to the force times.
+force held (zero-order: its mean over each step, :func:`_grid_chunks`) on a uniform grid of ``grid_s``; the
+velocity samples kept at their own times, interpolated onto the grid only for the smoothed initial states
+(Savitzky-Golay, 0.5 s), the Coriolis products and the cross-coupling candidates (:func:`dof_records`).
 
-Model and fit (per DOF, the campaign's model, :mod:`.output_error`): ``M nu_dot + k_q |nu| nu + k_l nu + b
-(+ k_r s(eta)) = tau``, heave by direction (``k_q+, k_q-, k_l+, k_l-``) when both directions are excited, else one
-pair for both. Start: equation-error least squares on Savitzky-Golay derivatives; then segment-wise output error
-(:class:`.output_error.OutputErrorFit`): the record is cut into ``segment_s`` (10 s) segments, each simulated
-open-loop from the force and re-initialised from the measured velocity at its start. Several bags are fitted jointly
-(their segments pooled). The other DOFs' motion enters through the Coriolis and centripetal terms of a diagonal
-rigid + added inertia (:func:`coupling_force`, Fossen 2011): the force of each DOF is taken less C(nu) nu computed
-from the measured velocities and the equation-error inertias of the fitted DOFs (two passes), so a piloted run that
-turns while it translates is not read as extra damping (measured on the virtual pool: without it the yaw quadratic
-damping came out 0.03 instead of 0.55 kg m^2 and the surge one 16 % low). A DOF whose force or velocity standard deviation is below :data:`EXCITATION_MIN` is
-"not excited" (reported with both numbers).
+Everything after the reading is the fit core shared with ``hindrax ident bag`` (:mod:`.fit_core`,
+docs/identification.md §7): per DOF the input delay and thrust lag (a commanded wrench; a ThrusterPwm force keeps
+the vehicle file's latency and lag), the segment-wise output-error fit with physical bounds and a robust loss, the
+model terms chosen by cross-validation (damping law, heave per direction, Coriolis and centripetal force of the
+other DOFs' inertias, cross-DOF coupling, reverse thrust gain), the cluster-robust intervals, and the verdicts
+with what data would fix them (:func:`.verdicts.fit_parameter_verdicts`). Several bags are fitted jointly (their
+segments pooled; clusters never span two bags). A DOF whose force or velocity standard deviation is below
+:data:`EXCITATION_MIN` is "not excited" (reported with both numbers).
 
-Validation (issue 18): K-fold by bag (by contiguous blocks of segments with one bag) and ``holdout`` bags. Per DOF
-``nrmse`` = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred the model's simulation from the
-recorded force (less the coupling terms of the measured velocities) re-initialised from the measured velocity at
-each segment's start; ``nrmse_hold``: v_pred held at
-the segment's initial value; ``nrmse_zero``: v_pred = 0. Fold parameters give the spread beside each interval.
-
-Intervals (:func:`honest_interval`, docs/identification.md §7): per parameter the larger of the output-error std and
-the delete-a-group jackknife std of the K fold estimates (Efron and Stein 1981; Shao and Tu 1995 §2.3), with
-``std_source`` saying which; ci95 from it (Student t, n_segments - 1 or K - 1 degrees of freedom).
+Validation (issues 18, 27): K-fold cross-validation on contiguous blocks of the moving validation segments and
+``holdout`` bags. Per DOF ``nrmse`` = RMS(v_pred - v_meas) / std(v_meas) over the measurements of the 10 s
+validation segments, v_pred simulated open loop from the recorded force and the smoothed initial velocity;
+``nrmse_hold``: the initial velocity held; ``nrmse_zero``: 0.
 
 Errors: :class:`FitInputError` (one line: the topic, the type found, the types accepted; disagreeing frame ids;
 how much data is needed).
@@ -59,20 +50,20 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-from scipy import signal, stats
+from scipy import signal
 from scipy.spatial.transform import Rotation
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..estimation.least_squares import EstimationError
-from .estimators import parameter_names, parameter_units, regressor_matrix, restoring_regressor, rigid_inertia
-from .output_error import DofModel, OutputErrorFit, rk4_step
+from . import fit_core
+from .estimators import parameter_units, restoring_regressor, rigid_inertia
+from .fit_core import EXCITATION_MIN
 from .signals import samples_from_dvl, thrust_of_written_widths
 
-__all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed", "BagSegments",
-           "preprocess_bag", "fit_bags", "fit_dof", "jackknife_std", "honest_interval", "DofFit", "FitResult",
-           "CONFIG_READY_REASON"]
+__all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed",
+           "preprocess_bag", "dof_records", "fit_bags", "DofFit", "FitResult", "CONFIG_READY_REASON"]
 
 WRENCH, PWM = "geometry_msgs/msg/WrenchStamped", "hindrax_msgs/msg/ThrusterPwm"
 ODOM, TWIST_COV, TWIST, DVL = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistWithCovarianceStamped",
@@ -87,8 +78,6 @@ ACCEPTED: dict[str, tuple[str, ...]] = {
     "depth": (PRESSURE, ODOM, POSE),
 }
 
-#: (force std, velocity std) below which a DOF is "not excited": translational (N, m/s), rotational (N m, rad/s)
-EXCITATION_MIN = {"translational": (0.5, 0.03), "rotational": (0.05, 0.05)}
 
 
 class FitInputError(ValueError):
@@ -107,14 +96,16 @@ class TopicChoice:
 
 @dataclass(frozen=True)
 class FitOptions:
-    """grid_s: resampling step, s; segment_s: output-error segment, s; max_delay_s: largest delay searched, s;
-    gap_min_s: shortest spacing treated as a gap, s; folds: K of the cross-validation."""
+    """grid_s: resampling step, s; segment_s: output-error training segment, s; validation_s: horizon of the
+    validation predictions, s; max_delay_s: largest input delay searched (commanded wrench), s; gap_min_s: shortest
+    spacing treated as a gap, s; folds: K of the cross-validation."""
 
     grid_s: float = 0.05
-    segment_s: float = 10.0
-    max_delay_s: float = 0.5
+    segment_s: float = fit_core.SEGMENT_S
+    validation_s: float = fit_core.VALIDATION_S
+    max_delay_s: float = 1.0
     gap_min_s: float = 0.5
-    folds: int = 3
+    folds: int = 4
 
 
 def _norm(name: str) -> str:
@@ -218,7 +209,8 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
            "depth": _select(path, topics, "depth", choice.depth, False) if choice.depth is not None else None}
     if sel["wrench"][1] == PWM and cfg is None:
         raise FitInputError(f"{path}: force from {sel['wrench'][0]} [{PWM}] needs the thrust curves: give --config")
-    if sel["velocity"][1] == DVL and sel["imu"] is None:
+    if sel["velocity"][1] in (DVL, TWIST_COV, TWIST) and sel["imu"] is None:
+        # a DVL's velocity carries no angular rate: an IMU found by type gives it (an odometry has its own)
         imu = _select(path, topics, "imu", None, False)
         sel["imu"] = imu
     by_topic: dict[str, list[str]] = {}
@@ -549,238 +541,103 @@ def excitation(pres: Sequence[Preprocessed], dof: str) -> dict:
             "velocity_measured": bool(v.size), "excited": bool(v.size) and fs >= fmin and vs >= vmin}
 
 
-# ------------------------------------------------------------------------------------------------ delay
-def _ee_residual(pres: Sequence[Preprocessed], dofs: Sequence[str], shift: int, kmax: int) -> float:
-    total = 0.0
+# ------------------------------------------------------------------------------------------------ to the core
+def _step_mean_chunks(pre: Preprocessed, opts: FitOptions) -> list[Chunk]:
+    """The bag's chunks with the force's mean over each grid step (the value the output-error simulation holds over
+    it, :func:`_grid_chunks`), no delay and no lag: the fit core applies both (docs/identification.md §7)."""
+    lag = pre.lag_s
+    pre.lag_s = 0.0
+    try:
+        return _grid_chunks(pre, 0.0, opts.grid_s, step_mean=True)
+    finally:
+        pre.lag_s = lag
+
+
+def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOptions, moving: Sequence[str] = ()
+                ) -> dict[str, fit_core.DofRecord]:
+    """One :class:`.fit_core.DofRecord` per DOF of ``dofs`` from the preprocessed bags: per continuous chunk the
+    commanded force held over each grid step, the velocity samples at their own (delay-free) times, the velocity
+    smoothed by a Savitzky-Golay filter (0.5 s window; initial states, equation-error start) and its derivative,
+    the restoring regressor (roll, pitch), the Coriolis products of the six interpolated velocities, and the other
+    ``moving`` DOFs' velocities (cross-coupling candidates). A ThrusterPwm force keeps its known lag
+    (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
+    out: dict[str, fit_core.DofRecord] = {}
+    h = opts.grid_s
+    chunks_of = [_step_mean_chunks(p, opts) for p in pres]
     for dof in dofs:
         k = DOFS.index(dof)
-        rows, rhs = [], []
-        for p in pres:
-            for c in p.chunks:
-                n = len(c.t)
-                if n < kmax + 20:
-                    continue
+        cross_names = tuple(d for d in moving if d != dof and d not in ("roll", "pitch"))
+        chunks = []
+        for b, (pre, chs) in enumerate(zip(pres, chunks_of)):
+            vt = pre.vel_times
+            vz = pre.vel_values[:, k]
+            okz = np.isfinite(vz)
+            for c in chs:
                 v = c.velocity[:, k]
-                if not np.isfinite(v).all():
+                if not np.isfinite(v).all() or len(c.t) < 20:
                     continue
-                a = _derivative(c.t, v)
-                sl = slice(kmax, n)
-                f = c.force[kmax - shift:n - shift, k]
-                rows.append(regressor_matrix(_model_dof(dof, True), a[sl], v[sl], None))
-                rhs.append(f)
-        if not rows:
-            continue
-        X, y = np.concatenate(rows), np.concatenate(rhs)
-        th, *_ = np.linalg.lstsq(X, y, rcond=None)
-        total += float(np.mean((y - X @ th) ** 2) / max(np.var(y), 1e-12))
-    return total
-
-
-def estimate_delay(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOptions) -> tuple[float, list]:
-    """Delay (s) of the velocity after the force: the shift of the force minimising the summed normalised
-    equation-error residual of ``dofs`` over 0..max_delay_s (grid steps), refined by a parabola. Returns
-    (delay, [(delay, residual)])."""
-    kmax = int(round(opts.max_delay_s / opts.grid_s))
-    res = [_ee_residual(pres, dofs, s, kmax) for s in range(kmax + 1)]
-    j = int(np.argmin(res))
-    d = float(j)
-    if 0 < j < kmax:
-        a, b, c = res[j - 1], res[j], res[j + 1]
-        den = a - 2 * b + c
-        if den > 0:
-            d = j + 0.5 * (a - c) / den
-    return d * opts.grid_s, [(round(s * opts.grid_s, 4), round(r, 6)) for s, r in enumerate(res)]
-
-
-def apply_delay(pre: Preprocessed, delay_s: float, opts: FitOptions) -> None:
-    """Rebuild the chunks with the force times moved by ``delay_s``, the force the mean over each grid step (the
-    value the output-error fit holds over it, :func:`_grid_chunks`)."""
-    pre.chunks = _grid_chunks(pre, delay_s, opts.grid_s, step_mean=True)
-    pre.notes["delay_s"] = round(delay_s, 4)
-
-
-# ------------------------------------------------------------------------------------------------ segments
-@dataclass
-class BagSegments:
-    """Equal segments of ``L`` grid ticks over all bags: force, velocity (m, L, 6), attitude (m, L, 3), bag (m,)
-    index of the bag, valid (m, L) True on ticks inside the record (False in the padding of a last segment)."""
-
-    force: np.ndarray
-    velocity: np.ndarray
-    attitude: np.ndarray
-    bag: np.ndarray
-    valid: np.ndarray
-    h: float
-
-    @classmethod
-    def build(cls, pres: Sequence[Preprocessed], opts: FitOptions, min_fraction: float = 0.5) -> "BagSegments":
-        """Cut every chunk into segments of ``segment_s``; a last part of at least ``min_fraction`` of a segment is
-        kept (padded with the last force and no measurement)."""
-        L = int(round(opts.segment_s / opts.grid_s))
-        F, V, A, B, M = [], [], [], [], []
-        for b, p in enumerate(pres):
-            for c in p.chunks:
-                n = len(c.t)
-                for s0 in range(0, n, L):
-                    m = min(L, n - s0)
-                    if m < max(10, min_fraction * L):
-                        continue
-                    if not np.isfinite(c.velocity[s0]).any():
-                        continue
-                    pad = L - m
-                    f = np.concatenate([c.force[s0:s0 + m], np.repeat(c.force[s0 + m - 1:s0 + m], pad, axis=0)])
-                    v = np.concatenate([c.velocity[s0:s0 + m], np.full((pad, 6), np.nan)])
-                    a = np.concatenate([c.attitude[s0:s0 + m], np.repeat(c.attitude[s0 + m - 1:s0 + m], pad, axis=0)])
-                    F.append(f), V.append(v), A.append(a), B.append(b), M.append(np.arange(L) < m)
-        if not F:
-            return cls(np.zeros((0, L, 6)), np.zeros((0, L, 6)), np.zeros((0, L, 3)), np.zeros(0, int),
-                       np.zeros((0, L), bool), opts.grid_s)
-        return cls(np.array(F), np.array(V), np.array(A), np.array(B), np.array(M), opts.grid_s)
-
-    def __len__(self) -> int:
-        return self.force.shape[0]
-
-    def with_coupling(self, inertia: np.ndarray) -> "BagSegments":
-        """The same segments with the force less :func:`coupling_force` of the measured velocities."""
-        return BagSegments(self.force - coupling_force(self.velocity, inertia), self.velocity, self.attitude,
-                           self.bag, self.valid, self.h)
-
-    def subset(self, idx) -> "BagSegments":
-        return BagSegments(self.force[idx], self.velocity[idx], self.attitude[idx], self.bag[idx], self.valid[idx],
-                           self.h)
-
-
-def coupling_force(velocity: np.ndarray, inertia: np.ndarray) -> np.ndarray:
-    """Coriolis and centripetal terms C(nu) nu (..., 6) of a diagonal rigid + added inertia ``inertia`` (6,) with the
-    body origin at the CG (Fossen 2011 eqs. 6.43 and 6.45 with M = diag(M1..M6); docs/identification.md §1.A):
-    ``[q M3 w - r M2 v, r M1 u - p M3 w, p M2 v - q M1 u, (M3 - M2) v w + (M6 - M5) q r,
-    (M1 - M3) u w + (M4 - M6) p r, (M2 - M1) u v + (M5 - M4) p q]`` for nu = [u v w p q r] (..., 6), FRD.
-    A term whose inertia is unknown (NaN: the DOF was not fitted) is left out; NaN velocities count as 0."""
-    u, v, w, p, q, r = np.moveaxis(np.nan_to_num(np.asarray(velocity, dtype=float)), -1, 0)
-    M1, M2, M3, M4, M5, M6 = (float(x) for x in inertia)
-
-    def t(coef, a, b):
-        return 0.0 if not math.isfinite(coef) else coef * a * b
-
-    out = [t(M3, q, w) - t(M2, r, v), t(M1, r, u) - t(M3, p, w), t(M2, p, v) - t(M1, q, u),
-           t(M3 - M2, v, w) + t(M6 - M5, q, r), t(M1 - M3, u, w) + t(M4 - M6, p, r),
-           t(M2 - M1, u, v) + t(M5 - M4, p, q)]
-    return np.stack([np.broadcast_to(np.asarray(o, dtype=float), u.shape) for o in out], axis=-1)
-
-
-def _model_dof(dof: str, by_direction: bool) -> str:
-    """The :func:`.output_error.model_terms` name: heave with one pair for both directions is the symmetric model."""
-    return dof if dof != "heave" or by_direction else "heave_one_direction"
-
-
-def _restoring(seg: BagSegments, dof: str) -> np.ndarray | None:
-    if dof not in ("roll", "pitch"):
-        return None
-    return restoring_regressor(dof, seg.attitude[..., 0], seg.attitude[..., 1])
-
-
-def _names(dof: str, by_direction: bool) -> list[str]:
-    return parameter_names(dof) if dof != "heave" or by_direction else ["inertia", "quadratic_damping",
-                                                                        "linear_damping", "bias"]
-
-
-def _equation_error(seg: BagSegments, dof: str, model: str) -> np.ndarray:
-    k = DOFS.index(dof)
-    rows, rhs = [], []
-    rest = _restoring(seg, dof)
-    for i in range(len(seg)):
-        ok = seg.valid[i] & np.isfinite(seg.velocity[i, :, k])
-        if ok.sum() < 10:
-            continue
-        t = np.arange(ok.sum()) * seg.h
-        v = seg.velocity[i, ok, k]
-        a = _derivative(t, v)
-        rows.append(regressor_matrix(model, a, v, None if rest is None else rest[i, ok]))
-        rhs.append(seg.force[i, ok, k])
-    X, y = np.concatenate(rows), np.concatenate(rhs)
-    th, *_ = np.linalg.lstsq(X, y, rcond=None)
-    return th
-
-
-def _fit(seg: BagSegments, dof: str, model: str, theta0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Segment-wise output error on ``seg`` (theta, covariance) from ``theta0`` (default: the equation-error
-    estimate). Raises EstimationError."""
-    k = DOFS.index(dof)
-    m, L = seg.valid.shape
-    z = np.where(seg.valid, seg.velocity[..., k], np.nan).reshape(-1)
-    f = seg.force[..., k].reshape(-1)
-    rest = _restoring(seg, dof)
-    rest = None if rest is None else np.nan_to_num(rest).reshape(-1)
-    v_start = z.copy()
-    t = np.arange(m * L) * seg.h
-    fit = OutputErrorFit(model, t, f, f, 0.0, rest, z, "velocity", np.zeros(m * L), v_start, L * seg.h)
-    th0 = _equation_error(seg, dof, model) if theta0 is None else np.asarray(theta0, dtype=float)
-    res = fit.fit(th0)
-    return res.theta, res.covariance
-
-
-def predict(seg: BagSegments, dof: str, model: str, theta: np.ndarray) -> np.ndarray:
-    """Open-loop velocity (m, L) of every segment from its measured initial velocity under the force (held over each
-    grid step; :func:`.output_error.rk4_step`, as :meth:`.output_error.OutputErrorFit.simulate` without a lag)."""
-    k = DOFS.index(dof)
-    mdl = DofModel(model, np.asarray(theta, dtype=float))
-    m, L = seg.valid.shape
-    rest = _restoring(seg, dof)
-    v = seg.velocity[:, 0, k].copy()
-    x = np.zeros(m)
-    out = np.empty((m, L))
-    out[:, 0] = v
-    for i in range(L - 1):
-        f = seg.force[:, i, k]
-        r = (None, None, None) if rest is None else (rest[:, i], 0.5 * (rest[:, i] + rest[:, i + 1]), rest[:, i + 1])
-        v, x = rk4_step(mdl.acceleration, v, x, seg.h, (f, f, f), r)
-        out[:, i + 1] = v
+                lo, hi = np.searchsorted(vt, [c.t[0], c.t[-1]])
+                sel = slice(lo, hi)
+                pos = (vt[sel] - c.t[0]) / h
+                z = vz[sel]
+                good = okz[sel]
+                rest = None
+                if dof in ("roll", "pitch"):
+                    rest = np.nan_to_num(restoring_regressor(dof, c.attitude[:, 0], c.attitude[:, 1]))
+                cross = np.column_stack([np.nan_to_num(c.velocity[:, DOFS.index(d)]) for d in cross_names]) \
+                    if cross_names else None
+                win = max(5, int(round(0.5 / h)) | 1)
+                if len(v) >= win:
+                    vs = signal.savgol_filter(v, win, 2)
+                    acc = signal.savgol_filter(v, win, 2, deriv=1, delta=h)
+                else:
+                    vs, acc = v, np.gradient(v, h)
+                chunks.append(fit_core.Chunk(c.force[:, k].copy(), vs, np.zeros_like(vs), acc, pos[good], z[good],
+                                             rest, fit_core.coriolis_products(c.velocity)[:, k, :], cross, b,
+                                             float(c.t[0])))
+        src = "thrust_model" if any(p.lag_s > 0 or "thrust" in p.notes for p in pres) else "wrench"
+        lag = max((p.lag_s for p in pres), default=0.0)
+        out[dof] = fit_core.DofRecord(dof, h, "velocity", chunks, src, lag, cross_names)
     return out
-
-
-def validation_measures(seg: BagSegments, dof: str, v_pred: np.ndarray) -> dict:
-    """nrmse, nrmse_hold, nrmse_zero and samples over the measured ticks after each segment's first (issue 18);
-    segments whose first tick has no measured velocity (no initial value) are left out, as in the fit."""
-    k = DOFS.index(dof)
-    z = seg.velocity[..., k]
-    mask = seg.valid & np.isfinite(z) & np.isfinite(z[:, :1])  # a segment without an initial value is not simulated
-    mask[:, 0] = False
-    zm = z[mask]
-    if zm.size < 2:
-        return {"nrmse": math.nan, "nrmse_hold": math.nan, "nrmse_zero": math.nan, "samples": int(zm.size)}
-    sd = float(np.std(zm))
-    hold = np.broadcast_to(z[:, :1], z.shape)[mask]
-
-    def rms(e):
-        return float(np.sqrt(np.mean(e ** 2)))
-
-    return {"nrmse": rms(v_pred[mask] - zm) / sd, "nrmse_hold": rms(hold - zm) / sd, "nrmse_zero": rms(zm) / sd,
-            "samples": int(zm.size)}
 
 
 # ------------------------------------------------------------------------------------------------ results
 @dataclass
 class DofFit:
-    """One DOF: status "fitted" | "not excited" | "failed"; excitation numbers; model name; parameter names,
-    theta, std, ci95, fold thetas; validation {cv, holdout}; v_meas/v_pred (m, L) of the validation data for the
-    report; reason when not fitted."""
+    """One DOF: status "fitted" | "not excited" | "failed"; excitation numbers; the core's result
+    (:class:`.fit_core.DofResult`: names, theta, std, ci95, chosen terms, candidates, timing, intervals);
+    validation {cross_validation, holdout}; plot arrays of the validation data for the report; reason when not
+    fitted."""
 
     dof: str
     status: str
     excitation: dict
-    model: str = ""
-    names: list = field(default_factory=list)
-    theta: np.ndarray | None = None
-    std: np.ndarray | None = None
-    ci95: np.ndarray | None = None
-    segments: int = 0
-    folds: list = field(default_factory=list)
+    core: fit_core.DofResult | None = None
     validation: dict = field(default_factory=dict)
     plot: dict = field(default_factory=dict)
     reason: str = ""
-    std_source: list = field(default_factory=list)
-    oe_std: np.ndarray | None = None
-    jackknife_std: np.ndarray | None = None
+
+    @property
+    def names(self) -> list:
+        return list(self.core.names) if self.core is not None else []
+
+    @property
+    def theta(self) -> np.ndarray | None:
+        return None if self.core is None else self.core.theta
+
+    @property
+    def std(self) -> np.ndarray | None:
+        return None if self.core is None else self.core.std
+
+    @property
+    def ci95(self) -> np.ndarray | None:
+        return None if self.core is None else self.core.ci95
+
+    @property
+    def folds(self) -> list:
+        if self.core is None:
+            return []
+        return [t for t in self.core.fold_theta if np.all(np.isfinite(t))]
 
 
 @dataclass
@@ -792,102 +649,13 @@ class FitResult:
     design: str
 
 
-def jackknife_std(fold_thetas) -> np.ndarray:
-    """Delete-a-group jackknife standard deviation (p,) of the full-data estimate from ``fold_thetas`` (K, p), the
-    estimates each fitted without one of K disjoint groups (the K cross-validation folds):
-    ``sqrt((K - 1) / K * sum_k (theta_k - mean_k theta_k)^2)`` (Efron and Stein 1981; Shao and Tu 1995 §2.3, the
-    delete-d jackknife with the groups as the deleted sets; docs/references.md [Efron-Stein1981], [Shao-Tu1995]).
-    Raises ValueError with fewer than 2 fold estimates."""
-    th = np.asarray(fold_thetas, dtype=float)
-    if th.ndim != 2 or th.shape[0] < 2:
-        raise ValueError(f"jackknife: {th.shape[0] if th.ndim == 2 else 0} fold estimates; at least 2 are needed")
-    k = th.shape[0]
-    return np.sqrt((k - 1) / k * np.sum((th - th.mean(axis=0)) ** 2, axis=0))
-
-
-def honest_interval(theta: np.ndarray, oe_std: np.ndarray, fold_thetas, n_segments: int
-                    ) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray | None]:
-    """Per parameter, std = max(output-error std, jackknife std) and its 95 % interval (docs/identification.md §7).
-
-    theta, oe_std (p,): the full fit and its own std (:class:`.output_error.OutputErrorFit`: residual variance,
-    AR(1) and cluster-robust widening); fold_thetas (K, p): the cross-validation folds' estimates (fewer than 2:
-    the output-error std alone). The output-error std assumes the model's residuals independent across segments;
-    a misfit that drifts over minutes (a slowly varying disturbance, a model error that depends on the manoeuvre)
-    moves the estimate from one part of the record to another, which the jackknife of the folds sees. The larger
-    of the two is taken (both estimate the same variance: summing them would double it when both are right).
-    ci95 = theta +- t std, t the Student quantile with n_segments - 1 degrees of freedom for the output-error std,
-    K - 1 for the jackknife's (a variance estimated from K group estimates).
-    Returns (std (p,), ci95 (p, 2), std_source per parameter ``"output_error"`` | ``"jackknife"``, jackknife std
-    (p,) or None)."""
-    theta = np.asarray(theta, dtype=float)
-    oe_std = np.asarray(oe_std, dtype=float)
-    t_oe = float(stats.t.ppf(0.975, max(n_segments - 1, 1)))
-    folds = np.asarray(fold_thetas, dtype=float) if len(fold_thetas) else np.zeros((0, theta.size))
-    if folds.shape[0] < 2:
-        return oe_std.copy(), np.column_stack([theta - t_oe * oe_std, theta + t_oe * oe_std]), \
-            ["output_error"] * theta.size, None
-    jk = jackknife_std(folds)
-    t_jk = float(stats.t.ppf(0.975, folds.shape[0] - 1))
-    use_jk = jk > oe_std
-    std = np.where(use_jk, jk, oe_std)
-    half = np.where(use_jk, t_jk, t_oe) * std
-    return std, np.column_stack([theta - half, theta + half]), \
-        ["jackknife" if u else "output_error" for u in use_jk], jk
-
-
-def fit_dof(seg: BagSegments, dof: str, model: str, names: list, folds: Sequence[np.ndarray], excitation_: dict,
-            theta0: np.ndarray | None = None) -> DofFit:
-    """Output-error fit of ``dof`` on all of ``seg``, refitted without each index set of ``folds`` (the fold
-    estimates, each validated on its left-out segments), and the interval of :func:`honest_interval`.
-    Raises EstimationError, LinAlgError or ValueError when the full fit fails."""
-    k = DOFS.index(dof)
-    theta, cov = _fit(seg, dof, model, theta0)
-    oe_std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    r = DofFit(dof, "fitted", excitation_, model, names, theta, oe_std, None, len(seg))
-    preds = []
-    for idx in folds:
-        train = np.setdiff1d(np.arange(len(seg)), idx)
-        try:
-            th_f, _ = _fit(seg.subset(train), dof, model, theta)  # from the full fit: fewer iterations
-        except (EstimationError, np.linalg.LinAlgError, ValueError):
-            continue
-        r.folds.append(th_f)
-        vs = seg.subset(idx)
-        preds.append((vs, predict(vs, dof, model, th_f)))
-    r.std, r.ci95, r.std_source, r.jackknife_std = honest_interval(theta, oe_std, r.folds, len(seg))
-    r.oe_std = oe_std
-    if preds:
-        cat = BagSegments(*(np.concatenate([getattr(p[0], a) for p in preds]) for a in
-                            ("force", "velocity", "attitude", "bag", "valid")), seg.h)
-        vp = np.concatenate([p[1] for p in preds])
-        r.validation["cross_validation"] = {**validation_measures(cat, dof, vp), "folds": len(r.folds)}
-        r.plot = {"data": "cross-validation", "measured": cat.velocity[..., k], "predicted": vp, "valid": cat.valid}
-    return r
-
-
-def _folds(seg: BagSegments, n_bags: int, k: int, dof: str | None = None) -> list[np.ndarray]:
-    """Validation index sets: by bag when there are several bags, else contiguous blocks of segments. With ``dof``
-    (one bag), the segments that move it (RMS velocity within the segment at least the velocity threshold of
-    :data:`EXCITATION_MIN`) and the others are each cut into k contiguous blocks, block j of both forming fold j: a
-    campaign that moves one DOF after the other would otherwise leave a fold with none of that DOF's motion
-    (its estimate then is the starting value or diverges, and the jackknife of the folds means nothing)."""
-    if n_bags >= 2:
-        k = max(2, min(k, n_bags))
-        return [np.flatnonzero(seg.bag % k == j) for j in range(k)]
-    m = len(seg)
-    k = max(2, min(k, m))
-    if dof is None:
-        return [a for a in np.array_split(np.arange(m), k) if a.size]
-    i = DOFS.index(dof)
-    v_min = EXCITATION_MIN[_kind(dof)][1]
-    v = np.where(seg.valid & np.isfinite(seg.velocity[..., i]), seg.velocity[..., i], 0.0)
-    n = np.maximum((seg.valid & np.isfinite(seg.velocity[..., i])).sum(axis=1), 1)
-    moving = np.sqrt((v ** 2).sum(axis=1) / n) >= v_min  # RMS velocity: a steady level counts, a held DOF not
-    if moving.sum() < k:
-        return [a for a in np.array_split(np.arange(m), k) if a.size]
-    blocks = [np.sort(np.concatenate([a, b])) for a, b in zip(np.array_split(np.flatnonzero(moving), k),
-                                                               np.array_split(np.flatnonzero(~moving), k))]
-    return [b for b in blocks if b.size]
+def _holdout(rec: fit_core.DofRecord, res: fit_core.DofResult, opts: fit_core.CoreOptions,
+             inertia: np.ndarray | None) -> tuple[dict, fit_core.SegmentData, np.ndarray]:
+    """Validation measures of the chosen model on a holdout record (every segment of ``validation_s`` with
+    measurements, moving or not), its segments and predictions."""
+    sd = fit_core.build_segments(rec, res.terms, res.timing, opts.validation_s, inertia, excited_only=False)
+    vp = fit_core.predict_validation(sd, res.chosen.layout, res.theta)
+    return fit_core.validation_measures(sd, vp), sd, vp
 
 
 def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig | None = None,
@@ -895,9 +663,9 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
              ) -> FitResult:
     """The whole pipeline (module docstring) over ``bags`` (fitted jointly), validated by K-fold and on ``holdout``.
 
-    dofs: the DOFs to identify (default all six; a DOF without excitation is reported "not excited"); the other
-    excited DOFs are fitted too, for their inertias in the coupling terms, but not reported.
-    Raises :class:`FitInputError` (bad topics, frames, too little data) or ``BagError``.
+    dofs: the DOFs to identify (default all six; a DOF without excitation is reported "not excited"). The other
+    excited DOFs' velocities enter as coupling candidates. Raises :class:`FitInputError` (bad topics, frames, too
+    little data) or ``BagError``.
     """
     dofs = list(dofs or DOFS)
     for d in dofs:
@@ -905,148 +673,151 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
             raise FitInputError(f"--dofs: {d!r} is not a DOF (one of {', '.join(DOFS)})")
     pres = [preprocess_bag(b, choice, cfg, opts) for b in bags]
     hold = [preprocess_bag(b, choice, cfg, opts) for b in holdout]
-    ex = {d: excitation(pres, d) for d in DOFS}  # all six: the coupling needs every moving DOF's inertia
-    excited = [d for d in dofs if ex[d]["excited"]]
+    ex = {d: excitation(pres, d) for d in DOFS}
+    moving = [d for d in DOFS if ex[d]["excited"]]
     pre_notes: dict[str, Any] = {"grid_s": opts.grid_s, "resampling": f"uniform grid of {opts.grid_s:g} s "
-                                 f"({1 / opts.grid_s:g} Hz): force held (zero-order; its mean over each step for the fit, its value at "
-                                 "the step's start for the delay estimate), velocity interpolated linearly",
-                                 "segment_s": opts.segment_s}
-    if excited:
-        delay, curve = estimate_delay(pres, excited, opts)
-    else:
-        delay, curve = 0.0, []
-    pre_notes["delay_s"] = round(delay, 4)
-    pre_notes["delay_method"] = (f"force shifted by 0..{opts.max_delay_s:g} s; the shift minimising the normalised "
-                                 f"equation-error residual of {', '.join(excited) or 'no DOF'} (parabola refinement)")
-    for p in pres + hold:
-        apply_delay(p, delay, opts)
+                                 f"({1 / opts.grid_s:g} Hz): force held (its mean over each step), velocity samples "
+                                 "kept at their own times (interpolated only for the coupling terms and the "
+                                 "smoothed initial states)", "segment_s": opts.segment_s}
     pre_notes["bags"] = [p.notes for p in pres]
     if hold:
         pre_notes["holdout_bags"] = [p.notes for p in hold]
-    seg = BagSegments.build(pres, opts)
-    seg_hold = BagSegments.build(hold, opts) if hold else None
-    need = 2 * opts.segment_s
-    have = float(seg.valid.sum() * opts.grid_s)
-    if len(seg) < 2:
-        raise FitInputError(f"too little data: {have:.1f} s of continuous force and velocity in segments; "
-                            f"at least 2 segments of {opts.segment_s:g} s ({need:g} s) are needed, 2 per fold for "
-                            f"cross-validation")
-    folds = _folds(seg, len(pres), opts.folds)
-    design = (f"{len(folds)}-fold cross-validation by bag" if len(pres) >= 2 else
-              f"{len(folds)}-fold cross-validation by blocks of {opts.segment_s:g} s segments (one bag; per DOF "
-              "the segments exciting it and the others each cut into contiguous blocks)")
+    have = sum(float(c.t[-1] - c.t[0]) for p in pres for c in p.chunks)
+    if have < 2 * opts.segment_s:
+        raise FitInputError(f"too little data: {have:.1f} s of continuous force and velocity; at least 2 segments "
+                            f"of {opts.segment_s:g} s ({2 * opts.segment_s:g} s) are needed, more for "
+                            "cross-validation")
+    core_opts = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s)
+    design = (f"{opts.folds}-fold cross-validation by contiguous blocks of the {opts.validation_s:g} s validation "
+              "segments that move each DOF (training segments overlapping a held-out one left out)")
     if hold:
         design += f"; holdout: {', '.join(str(b) for b in holdout)}"
     out: dict[str, DofFit] = {}
-    plan: dict[str, tuple[str, list]] = {}
-    for dof in DOFS:
+    todo = []
+    for dof in dofs:
         e = ex[dof]
-        if dof not in dofs:  # not asked for: fitted only for the coupling terms, when it can be
-            if e["excited"] and (dof not in ("roll", "pitch") or np.isfinite(seg.attitude[..., :2]).all()):
-                plan[dof] = (_model_dof(dof, False), _names(dof, False))
-            continue
         if not e["excited"]:
             why = ("no velocity measured" if not e["velocity_measured"] else
                    f"force std {e['force_std']:.3g} (min {e['force_std_min']:g}), velocity std "
                    f"{e['velocity_std']:.3g} (min {e['velocity_std_min']:g})")
             out[dof] = DofFit(dof, "not excited", e, reason=why)
             continue
-        if dof in ("roll", "pitch") and not np.isfinite(seg.attitude[..., :2]).all():
+        if dof in ("roll", "pitch") and not any(np.isfinite(c.attitude[:, :2]).all() for p in pres for c in p.chunks):
             out[dof] = DofFit(dof, "failed", e, reason="no attitude for the restoring moment (odometry pose or DVL)")
             continue
-        k = DOFS.index(dof)
-        zk = seg.velocity[..., k][seg.valid]
-        zk = zk[np.isfinite(zk)]
-        # both directions excited: each holds at least 10 % of the moving samples (|w| > 0.05 m/s; a campaign
-        # bag also holds the other DOFs' runs, with heave near 0)
-        up, down = (zk > 0.05).sum(), (zk < -0.05).sum()
-        by_dir = dof == "heave" and min(up, down) >= 0.1 * max(up + down, 1) and min(up, down) >= 100
-        plan[dof] = (_model_dof(dof, by_dir), _names(dof, by_dir))
-    # coupling: inertias of the fitted DOFs by equation error, twice (without, then with the coupling terms)
-    inertia = np.full(6, np.nan)
-    for _ in range(2):
-        new = np.full(6, np.nan)
-        seg_c = seg.with_coupling(inertia)
-        for dof, (model, _n) in plan.items():
-            try:
-                new[DOFS.index(dof)] = max(float(_equation_error(seg_c, dof, model)[0]), 0.0)
-            except (ValueError, np.linalg.LinAlgError):
-                pass
-        inertia = new
-    # then once with the output-error inertias (the equation-error ones are ~10 % high on noisy derivatives, and the
-    # Munk moment (M2 - M1) u v of a piloted run is of the order of the yaw damping)
-    seg_c = seg.with_coupling(inertia)
-    first: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for dof, (model, _n) in plan.items():
-        try:
-            first[dof] = _fit(seg_c, dof, model)
-            inertia[DOFS.index(dof)] = float(first[dof][0][0])
-        except (EstimationError, np.linalg.LinAlgError, ValueError):
-            pass
-    pre_notes["coupling"] = ("force less the Coriolis and centripetal terms C(nu) nu of the diagonal inertia "
-                             "(Fossen 2011) from the measured velocities, with the fitted inertias ("
-                             + ", ".join(f"{d} {inertia[DOFS.index(d)]:.4g}" for d in plan)
-                             + "; equation error twice, then output error); terms of DOFs not fitted left out")
-    seg_c = seg.with_coupling(inertia)
-    hold_c = seg_hold.with_coupling(inertia) if seg_hold is not None and len(seg_hold) else None
-    for dof, (model, names) in plan.items():
-        if dof not in dofs:
-            continue
+        todo.append(dof)
+    recs = dof_records(pres, todo, opts, moving)
+    results, errors = fit_core.identify_dofs(recs, core_opts)
+    inertia = fit_core.inertia_vector(results)
+    pre_notes["timing"] = {d: {"delay_s": round(r.timing.delay_s, 4), "lag_s": round(r.timing.lag_s, 4),
+                               "source": r.timing.source} for d, r in results.items()}
+    pre_notes["delay_method"] = ("per DOF: a commanded wrench's delay is the force shift (0.." f"{opts.max_delay_s:g} s) "
+                                 "minimising the equation-error residual (parabola refinement), then the first-order "
+                                 "lag tau among 0, d/2, d with the smallest training output error (delay d - tau); a "
+                                 "thrust-model force keeps thrusters.time_constant_s and esc.output_latency_s")
+    pre_notes["coupling"] = ("Coriolis and centripetal force of the diagonal inertias (Fossen 2011) from the "
+                             "interpolated velocities, with the fitted inertias (" + ", ".join(
+                                 f"{d} {inertia[DOFS.index(d)]:.4g}" for d in results) + "): a candidate term, "
+                             "chosen by cross-validation")
+    hrecs = dof_records(hold, list(results), opts, moving) if hold else {}
+    for dof in todo:
         e = ex[dof]
-        k = DOFS.index(dof)
-        try:
-            r = fit_dof(seg_c, dof, model, names, _folds(seg, len(pres), opts.folds, dof), e,
-                        first[dof][0] if dof in first else None)
-        except (EstimationError, np.linalg.LinAlgError, ValueError) as exc:
-            out[dof] = DofFit(dof, "failed", e, reason=str(exc))
+        if dof in errors:
+            out[dof] = DofFit(dof, "failed", e, reason=errors[dof])
             continue
-        theta = r.theta
-        r.excitation["by_direction"] = model == "heave" if dof == "heave" else None
-        if hold_c is not None:
-            vp = predict(hold_c, dof, model, theta)
-            r.validation["holdout"] = validation_measures(hold_c, dof, vp)
-            r.plot = {"data": "holdout", "measured": hold_c.velocity[..., k], "predicted": vp,
-                      "valid": hold_c.valid}
-        out[dof] = r
+        r = results[dof]
+        fit = DofFit(dof, "fitted", e, r)
+        fit.validation["cross_validation"] = dict(r.cv)
+        cand = r.chosen
+        if cand.cv.get("samples", 0):
+            fit.plot = {"data": "cross-validation", "measured": cand.val.v_s, "predicted": fit_core.predict_validation(
+                cand.val, cand.layout, r.theta), "valid": np.ones_like(cand.val.v_s, dtype=bool)}
+        if dof in hrecs and hrecs[dof].chunks:
+            try:
+                m, sd, vp = _holdout(hrecs[dof], r, core_opts, inertia)
+                fit.validation["holdout"] = m
+                fit.plot = {"data": "holdout", "measured": sd.v_s, "predicted": vp,
+                            "valid": np.ones_like(sd.v_s, dtype=bool)}
+            except EstimationError as exc:
+                fit.validation["holdout_note"] = str(exc)
+        out[dof] = fit
     out = {d: out[d] for d in dofs}
     return FitResult(out, pre_notes, design)
 
 
 # ------------------------------------------------------------------------------------------------ document
-def _param_entries(r: DofFit, cfg: VehicleConfig | None) -> dict:
-    units = parameter_units(r.dof)
+def _units(dof: str, names: Sequence[str]) -> dict:
+    """Units of the core's parameters: the campaign's (:func:`.estimators.parameter_units`), cross terms in this
+    DOF's force per unit of the other DOF's velocity, the reverse gain dimensionless."""
+    u = dict(parameter_units(dof))
+    u.setdefault("quadratic_damping", u.get("quadratic_damping_positive", ""))
+    u.setdefault("linear_damping", u.get("linear_damping_positive", ""))
+    force = "N m" if dof in ("roll", "pitch", "yaw") else "N"
+    for n in names:
+        if n.startswith("cross_"):
+            other = n[len("cross_"):]
+            u[n] = f"{force}/({'rad/s' if other in ('roll', 'pitch', 'yaw') else 'm/s'})"
+    u["reverse_thrust_gain"] = "1"
+    return u
+
+
+def _fit_signals(r: DofFit) -> dict:
+    sd = r.core.train
+    return {"velocity": sd.v_s.ravel(), "acceleration": sd.a_s.ravel(), "force": sd.force.ravel()}
+
+
+def _param_entries(r: DofFit, cfg: VehicleConfig | None, h: float) -> tuple[dict, dict]:
+    """(parameter entries, verdicts) of one fitted DOF (:func:`build_document`)."""
+    from .verdicts import fit_parameter_verdicts
+
+    c = r.core
+    units = _units(r.dof, c.names)
     folds = np.array(r.folds) if r.folds else None
+    cov = c.covariance
+    sd_model = np.sqrt(np.maximum(np.diag(cov.model), 0.0))
+    sd_sand = np.sqrt(np.maximum(np.diag(cov.sandwich), 0.0))
+    lower = [lo for _n, _k, lo, _hi in c.chosen.layout]
+    verdicts = fit_parameter_verdicts(r.dof, c.names, c.theta, c.ci95, lower, c.fold_theta, c.std, c.cv,
+                                      _fit_signals(r), h)
     entries: dict = {}
 
     def put(name, i, unit):
-        e = {"value": float(r.theta[i]), "std": float(r.std[i]), "unit": unit,
-             "ci95": [float(r.ci95[i, 0]), float(r.ci95[i, 1])]}
-        if r.std_source:  # which estimate set std (docs/identification.md §7), and both
-            e["std_source"] = r.std_source[i]
-            e["std_output_error"] = float(r.oe_std[i])
-            if r.jackknife_std is not None:
-                e["std_jackknife"] = float(r.jackknife_std[i])
+        e = {"value": float(c.theta[i]), "std": float(c.std[i]), "unit": unit,
+             "ci95": [float(c.ci95[i, 0]), float(c.ci95[i, 1])], "t_dof": int(cov.t_dof),
+             "std_source": "cluster_robust" if sd_sand[i] >= sd_model[i] else "model",
+             "std_model": float(sd_model[i]), "std_cluster_robust": float(sd_sand[i])}
         if folds is not None and len(folds) >= 2:
             e["fold_spread"] = {"std": float(np.std(folds[:, i], ddof=1)), "min": float(folds[:, i].min()),
                                 "max": float(folds[:, i].max()), "folds": int(len(folds))}
+        v = verdicts["parameters"][c.names[i]]
+        e["verdict"], e["reasons"] = v["verdict"], list(v["reasons"])
+        if "advice" in v:
+            e["advice"] = v["advice"]
         return e
 
-    for i, name in enumerate(r.names):
+    for i, name in enumerate(c.names):
         if r.dof == "heave" and name in ("quadratic_damping", "linear_damping"):
             for d in ("positive", "negative"):  # one coefficient for both directions
                 entries[f"{name}_{d}"] = put(name, i, units[f"{name}_{d}"])
-                entries[f"{name}_{d}"]["note"] = "one coefficient for both directions (only one was excited)"
+                entries[f"{name}_{d}"]["note"] = "one coefficient for both directions (chosen by cross-validation)"
         else:
             entries[name] = put(name, i, units.get(name, ""))
+    # damping terms the chosen model leaves out: 0 exactly in that model
+    wanted = (["quadratic_damping_positive", "quadratic_damping_negative", "linear_damping_positive",
+               "linear_damping_negative"] if r.dof == "heave" else ["quadratic_damping", "linear_damping"])
+    for n in wanted:
+        if n not in entries:
+            entries[n] = {"value": 0.0, "std": 0.0, "unit": units.get(n, ""), "ci95": [0.0, 0.0],
+                          "model_term": "excluded", "verdict": "trusted",
+                          "reasons": [], "note": f"not in the model chosen by cross-validation ({c.terms.label})"}
     if cfg is not None:
         rigid = rigid_inertia(cfg, r.dof)
-        am = dict(entries["inertia"])
+        am = {k: v for k, v in entries["inertia"].items() if k != "fold_spread"}
         am["value"] = entries["inertia"]["value"] - rigid
         am["ci95"] = [entries["inertia"]["ci95"][0] - rigid, entries["inertia"]["ci95"][1] - rigid]
-        am.pop("fold_spread", None)
         am["unit"] = units["added_mass"]
         entries["added_mass"] = am
-    return entries
+    return entries, verdicts
 
 
 #: Why ``hindrax ident fit`` without ``--config`` writes ``config_ready: false`` (and no ``added_mass``).
@@ -1071,14 +842,15 @@ def _plain(x):
 
 def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str | Path],
                    holdout: Sequence[str | Path] = ()) -> dict:
-    """identification.yaml: ``dofs.<dof>.<param>.{value,std,unit,ci95,fold_spread,std_source,std_output_error,
-    std_jackknife}`` of the fitted DOFs (the schema of :mod:`.results`; std the larger of the output-error and the
-    jackknife std, ``std_source`` naming it, :func:`honest_interval`; ``added_mass`` only with a configuration, which
-    gives the rigid-body inertia: without one ``config_ready: false`` and ``config_ready_reason``; per DOF
-    ``verdict`` suspect with ``reasons`` for a negative damping, a fold spread above 3 std or a validation nrmse of
-    0.5 or more),
-    ``not_excited``/``failed`` with their numbers, ``validation.<dof>.{nrmse,nrmse_hold,nrmse_zero,samples}`` (the
-    holdout when given, else the cross-validation; both under their own keys too) and ``preprocessing``."""
+    """identification.yaml (docs/identification.md §7): ``dofs.<dof>.<param>.{value, std, unit, ci95, t_dof,
+    std_source, std_model, std_cluster_robust, fold_spread, verdict, reasons, advice}`` of the fitted DOFs (the schema
+    of :mod:`.results`; ``added_mass`` only with a configuration, which gives the rigid-body inertia: without one
+    ``config_ready: false`` and ``config_ready_reason``; a damping term the chosen model leaves out is 0 with
+    ``model_term: excluded``), per DOF ``model`` (the chosen terms), ``model_selection`` (every candidate's CV
+    nrmse), ``timing`` (delay, lag), ``interval`` (clusters, t degrees of freedom), ``verdict``, ``reasons`` and
+    ``advice`` (:func:`.verdicts.fit_parameter_verdicts`: what data would fix each suspect parameter);
+    ``not_identified`` with their numbers, ``validation.<dof>.{nrmse,nrmse_hold,nrmse_zero,samples}`` (the holdout
+    when given, else the cross-validation; both under their own keys too) and ``preprocessing``."""
     import datetime as _dt
 
     from .results import SCHEMA_VERSION
@@ -1089,30 +861,33 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
             other[dof] = {"status": r.status, "reason": r.reason,
                           **{k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.excitation.items()}}
             continue
-        e = _param_entries(r, cfg)
-        e["method"] = "output-error (segment-wise, prediction error)"
-        e["model"] = "heave by direction" if r.model == "heave" else ("one pair for both directions"
-                                                                      if r.dof == "heave" else "one DOF")
-        e["segments"] = r.segments
-        reasons = [f"{n} {v['value']:.4g} < 0 (unphysical)" for n, v in e.items()
-                   if isinstance(v, dict) and "damping" in n and v.get("value", 0.0) < 0]
-        # the fold spread against the fit's own std (the reported std already covers the spread, §7)
-        reasons += [f"{n}: fold spread {v['fold_spread']['std']:.3g} > 3 x output-error std "
-                    f"{v.get('std_output_error', v['std']):.3g}" for n, v in e.items()
-                    if isinstance(v, dict) and "fold_spread" in v
-                    and v["fold_spread"]["std"] > 3 * v.get("std_output_error", v["std"])]
-        main = r.validation.get("holdout") or r.validation.get("cross_validation")
-        if main and not main["nrmse"] < 0.5:
-            reasons.append(f"validation nrmse {main['nrmse']:.3f} >= 0.5")
-        e["verdict"] = "suspect" if reasons else "trusted"
-        e["reasons"] = reasons
+        e, verdicts = _param_entries(r, cfg, float(res.preprocessing.get("grid_s", 0.05)))
+        c = r.core
+        e["method"] = "output-error (segment-wise, prediction error; docs/identification.md §7)"
+        e["model"] = c.terms.label
+        e["model_selection"] = [{"terms": k.terms.label, "parameters": k.n_params,
+                                 "cv_nrmse": k.cv.get("nrmse"), "chosen": k is c.chosen} for k in c.candidates]
+        e["timing"] = {"delay_s": c.timing.delay_s, "lag_s": c.timing.lag_s, "source": c.timing.source}
+        e["interval"] = {"method": "cluster-robust (sandwich) covariance, contiguous blocks of segments as "
+                                   "clusters, at least the model-based covariance; Student t with clusters - 1 "
+                                   "degrees of freedom",
+                         "clusters": c.covariance.clusters, "segments_per_cluster": c.covariance.block,
+                         "cluster_score_lag1": round(c.covariance.rho, 4), "t_dof": c.covariance.t_dof,
+                         "residual_lag1": round(c.covariance.residual_rho, 4)}
+        e["segments"] = int(c.train.m)
+        e["verdict"] = verdicts["verdict"]
+        e["reasons"] = sorted({x for v in verdicts["parameters"].values() for x in v["reasons"]})
+        e["advice"] = [dict(v["advice"], parameter=n) for n, v in verdicts["parameters"].items() if "advice" in v]
+        if c.fold_notes:
+            e["cross_validation_notes"] = list(c.fold_notes)
         e["excitation"] = {k: v for k, v in r.excitation.items() if v is not None}
         dofs[dof] = e
         main = r.validation.get("holdout") or r.validation.get("cross_validation")
         if main:
             val[dof] = {**{k: main[k] for k in ("nrmse", "nrmse_hold", "nrmse_zero", "samples")},
                         "data": "holdout" if "holdout" in r.validation else "cross-validation",
-                        **{k: v for k, v in r.validation.items()}}
+                        **{k: ({kk: vv for kk, vv in v.items() if kk not in ("sse", "sst")} if isinstance(v, dict)
+                               else v) for k, v in r.validation.items()}}
     return _plain({
         "schema_version": SCHEMA_VERSION,
         "provenance": {"source": ", ".join(str(b) for b in bags),

@@ -27,7 +27,7 @@ def _plot(r, path: Path, h: float) -> None:
     for i in range(min(m, 12)):  # at most 12 segments: 2 minutes
         t = (i * L + np.arange(L)) * h
         ok = valid[i]
-        ax.plot(t[ok], meas[i, ok], "k.", ms=2, label="measured" if i == 0 else None)
+        ax.plot(t[ok], meas[i, ok], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
         ax.plot(t[ok], pred[i, ok], "C1-", lw=1.2, label="predicted (open loop from the segment start)" if i == 0 else None)
         ax.plot(t[ok], np.full(ok.sum(), meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
         ax.axvline(t[0], color="0.85", lw=0.8)
@@ -56,16 +56,37 @@ def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
              "<h1>Identification from bags (hindrax ident fit)</h1>",
              f"<p>{html.escape(res.design)}</p><h2>Parameters</h2><table><tr><th>DOF</th><th>parameter</th>"
              "<th>value</th><th>std</th><th>std from</th><th>unit</th><th>95 % interval</th><th>fold spread (std)</th>"
-             "</tr>"]
+             "<th>verdict</th></tr>"]
     for dof, e in doc["dofs"].items():
         for name, p in e.items():
             if isinstance(p, dict) and "value" in p:
                 sp = p.get("fold_spread", {}).get("std")
                 parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-                    dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}", p.get("std_source", "-"), p["unit"],
-                    f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]", "-" if sp is None else f"{sp:.3g}")) + "</tr>")
-    parts.append("</table><p>std: the larger of the output-error std and the jackknife std of the fold estimates "
-                 "(docs/identification.md §7).</p>")
+                    dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}", p.get("std_source", p.get("model_term", "-")),
+                    p["unit"], f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]", "-" if sp is None else f"{sp:.3g}",
+                    p.get("verdict", "-"))) + "</tr>")
+    parts.append("</table><p>std: the cluster-robust (sandwich) covariance with contiguous blocks of segments as "
+                 "clusters, at least the model-based one; 95 % intervals Student t with clusters - 1 degrees of "
+                 "freedom (docs/identification.md §7).</p><h2>Model and timing</h2><table><tr><th>DOF</th>"
+                 "<th>model (chosen by cross-validation)</th><th>candidates: CV nrmse</th><th>delay, s</th>"
+                 "<th>lag, s</th><th>clusters</th></tr>")
+    for dof, e in doc["dofs"].items():
+        cands = "; ".join(f"{c['terms']}: {c['cv_nrmse']:.3f}" if c.get("cv_nrmse") is not None else c["terms"]
+                          for c in e.get("model_selection", []))
+        parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
+            dof, e.get("model", "-"), cands, f"{e['timing']['delay_s']:.3f}", f"{e['timing']['lag_s']:.3f}",
+            e["interval"]["clusters"])) + "</tr>")
+    parts.append("</table>")
+    advice = [(dof, a) for dof, e in doc["dofs"].items() for a in e.get("advice", [])]
+    if advice:
+        parts.append("<h2>What data would fix the suspect parameters</h2><table><tr><th>parameter</th>"
+                     "<th>manoeuvre</th><th>speeds</th><th>in the data, s</th><th>more, s</th><th>why</th></tr>")
+        for dof, a in advice:
+            parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
+                f"{dof} {a['parameter']}", a["manoeuvre"],
+                f"{a['speed_range'][0]:g}-{a['speed_range'][1]:g} {a['speed_range'][2]}", a["seconds_in_data"],
+                a["seconds_more"], a["why"])) + "</tr>")
+        parts.append("</table>")
     if not doc.get("config_ready", True):
         parts.append(f"<p><b>config_ready: false</b>: {html.escape(doc['config_ready_reason'])}</p>")
     for dof, e in doc.get("not_identified", {}).items():
@@ -74,8 +95,10 @@ def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
                  "<th>nrmse_zero</th><th>samples</th></tr>")
     for dof, r in res.dofs.items():
         for key, v in r.validation.items():
+            if not isinstance(v, dict) or "nrmse" not in v:
+                continue
             parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in (
-                dof, key, f"{v['nrmse']:.3f}", f"{v['nrmse_hold']:.3f}", f"{v['nrmse_zero']:.3f}", v["samples"]))
+                dof, key, f"{v['nrmse']:.3f}", f"{v.get('nrmse_hold', float('nan')):.3f}", f"{v.get('nrmse_zero', float('nan')):.3f}", v["samples"]))
                 + "</tr>")
     parts.append("</table><p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred "
                  "simulated open loop from the recorded force and re-initialised from the measured velocity at the "

@@ -18,8 +18,9 @@ simulator's truth):
   velocity from the DVL (lever arm ``w x r`` removed with the gyro rate at the sample's time, unless the
   sample is already at the body origin, as the DVL driver's ``dvl/data`` is), altitude from the Ping1D, and a
   dead-reckoned horizontal position (DVL velocity rotated by the DVL heading, from the known start).
-* :class:`HoldController` - PD/PI holds for depth, roll, pitch, heading and surge/sway velocity, gains from
-  the a-priori (configured) rigid + added inertia: ``k_p = I w_n^2``, ``k_d = 2 zeta w_n I``.
+* :class:`HoldController` - holds for depth (or altitude), roll, pitch, heading and surge/sway velocity: the
+  model-based law of :mod:`hindrax_ident.control.law` with the vehicle file's model (or an identified one); the
+  former PD/PI law is :class:`hindrax_ident.control.legacy.LegacyPDHold`.
 
 Frames: body FRD, world NED (docs/architecture.md §3); conversions through :mod:`hindrax_drivers.frames`.
 """
@@ -35,7 +36,10 @@ from scipy.spatial.transform import Rotation
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
+from ..control.law import ControlInput, ControlSettings, Controller
+from ..control.model import ControlModel, inertia_vector, model_from_config
 from .fusion import AccelAidedFilter
 
 __all__ = [
@@ -222,7 +226,8 @@ class SensorState:
     Attributes (NaN until a first sample): ``depth_m`` (body origin, m, NED z), ``rpy_rad`` (3,),
     ``rates_frd_rad_s`` (3,), ``velocity_frd_m_s`` (3,) (DVL, lever arm removed; NaN without lock; a ``dvl75``
     sample with ``at_body_origin`` true is taken as it is, as the DVL driver has removed the lever arm),
-    ``altitude_m`` (Ping1D, NaN when invalid), ``position_ned_m`` (3,) dead-reckoned x, y and depth,
+    ``altitude_m`` (Ping1D, NaN when invalid), ``dvl_beam_range_m`` (4,) the latest DVL beam ranges A-D (NaN
+    without lock) at ``dvl_beam_stamp_s``, ``position_ned_m`` (3,) dead-reckoned x, y and depth,
     ``acceleration_frd_m_s2`` (3,) nu_dot of the body origin and ``acceleration_ned_m_s2`` (3,) its acceleration in
     NED (accelerometer: specific force + gravity, bias removed; NaN before the first sample).
     ``log``: device -> list of (stamp_s, value tuple) with the conditioned values (what the estimators use).
@@ -259,6 +264,8 @@ class SensorState:
         self._g = float(self.cfg.gravity_m_s2)
         self.collecting_gyro_bias = False
         self.log = {k: [] for k in ("depth", "attitude", "gyro", "dvl", "altitude", "accel")}
+        self.dvl_beam_range_m = np.full(4, np.nan)
+        self.dvl_beam_stamp_s = math.nan
 
     def _rotation(self, rpy=None) -> np.ndarray:
         """Body -> NED at ``rpy`` (default the latest attitude); a NaN angle counts as 0."""
@@ -316,6 +323,10 @@ class SensorState:
             self.rates_frd_rad_s = raw - self.gyro_bias_frd_rad_s
             self.log["gyro"].append((s.stamp_s, tuple(self.rates_frd_rad_s)))
         elif device == "dvl75":
+            beams = getattr(s, "beam_range_m", None)
+            if beams is not None:
+                self.dvl_beam_range_m = np.asarray(beams, dtype=float)
+                self.dvl_beam_stamp_s = float(s.stamp_s)
             v = np.asarray(s.velocity_frd_m_s, dtype=float)
             if s.locked and np.all(np.isfinite(v)):
                 if not getattr(s, "at_body_origin", False):
@@ -410,64 +421,94 @@ class DepthEstimator:
 
 
 class HoldController:
-    """Holds for depth, roll, pitch, heading and body velocities from sensor values (module docstring).
+    """Holds for depth (or altitude), roll, pitch, heading and body velocities from sensor values: the model-based law
+    of :mod:`hindrax_ident.control.law` (reference model, feedforward of the model's inertia, damping, net buoyancy and
+    restoring, PID at a bandwidth lowered by the model's uncertainty, anti-windup; docs/control.md).
+
+    cfg: the vehicle file. authority (6,) or (6, 2): largest wrench per axis (N, N m) from the thrust allocation
+    (:func:`dof_authority`). natural_frequency_rad_s: target bandwidth w of the position holds; the velocity holds use
+    ``velocity_gain`` w. hold_fraction: share of each axis' authority the holds may use. model: the
+    :class:`~hindrax_ident.control.model.ControlModel` (default: the vehicle file's, the campaign's model before any
+    identification exists). reference_accel: DOF -> acceleration limit of the reference models (default: from the
+    model, :class:`~hindrax_ident.control.law.Controller`). settings: a
+    :class:`~hindrax_ident.control.law.ControlSettings` replacing the bandwidths and hold fraction above (the
+    controller node's ``control.*``).
 
     ``wrench(state, free)`` returns the FRD wrench (6,) holding every DOF not in ``free``: depth (Z) to
-    ``depth_setpoint_m`` (PI + D, net-buoyancy feed-forward; on ``depth_estimate_m`` and ``depth_rate_m_s``,
-    which the caller sets from a :class:`DepthEstimator`, or on the latest ``state.depth_m`` while
-    ``depth_estimate_m`` is NaN), roll/pitch to 0,
-    heading to ``heading_setpoint_rad``, surge/sway body velocity to ``velocity_setpoint_m_s``. Each hold
-    is limited to ``hold_fraction`` of the axis authority.
+    ``depth_setpoint_m`` on ``depth_estimate_m`` and ``depth_rate_m_s`` (which the caller sets from a
+    :class:`DepthEstimator`; the latest ``state.depth_m`` while ``depth_estimate_m`` is NaN), or, when
+    ``altitude_setpoint_m`` is finite, the Ping1D altitude; roll/pitch to ``attitude_setpoint_rad``; heading to
+    ``heading_setpoint_rad``; surge/sway body velocity to ``velocity_setpoint_m_s``. A DOF in ``free`` gets 0 and, held
+    again, starts from its measured state. ``net_buoyancy_n`` and ``inertia`` are the model's.
+    ``note_allocation(requested_frd, achieved_frd)`` passes the allocation's result for the anti-windup.
     """
 
-    def __init__(self, cfg: VehicleConfig, authority: Sequence[float], natural_frequency_rad_s: float = 2.0,
-                 hold_fraction: float = 0.6) -> None:
+    def __init__(self, cfg: VehicleConfig, authority, natural_frequency_rad_s: float = 2.0,
+                 hold_fraction: float = 0.6, model: ControlModel | None = None, velocity_gain: float = 1.5,
+                 reference_accel=None, settings: ControlSettings | None = None) -> None:
         self.cfg = cfg
         self.authority = np.asarray(authority, dtype=float)
-        self.inertia = np.array([prior_inertia(cfg, d) for d in DOFS])
+        self.model = model if model is not None else model_from_config(cfg)
+        self.inertia = inertia_vector(self.model)
         self.wn = float(natural_frequency_rad_s)
         self.hold_fraction = float(hold_fraction)
-        self.net_buoyancy_n = float(cfg.buoyancy_n - cfg.weight_n)  # FRD force holding depth (down)
+        self.velocity_gain = float(velocity_gain)
+        self.net_buoyancy_n = float(self.model.axis("heave").bias)  # FRD force holding depth (down)
         self.depth_setpoint_m = math.nan
+        self.altitude_setpoint_m = math.nan
         self.heading_setpoint_rad = 0.0
         self.velocity_setpoint_m_s = np.zeros(2)
         self.attitude_setpoint_rad = np.zeros(2)
-        self._depth_integral = 0.0
         self.depth_rate_m_s = 0.0
         self.depth_estimate_m = math.nan
+        self.reference_accel = reference_accel
+        self.settings = settings
+        self.core = self._build(self.velocity_gain)
+
+    def _build(self, velocity_gain: float) -> Controller:
+        wn = self.wn
+        settings = self.settings or ControlSettings(
+            depth_bandwidth_rad_s=wn, heading_bandwidth_rad_s=wn, attitude_bandwidth_rad_s=wn,
+            velocity_bandwidth_rad_s=velocity_gain * wn, hold_fraction=self.hold_fraction)
+        dvl = self.cfg.section("sensors.dvl75")
+        roll, pitch, yaw = dvl["sensor_orientation_rpy_rad"]
+        beams = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix() @ np.asarray(beam_directions_frd()).T
+        return Controller(self.model, self.authority, settings,
+                          ping_position_frd_m=self.cfg.section("sensors.ping1d")["position_frd_m"],
+                          dvl_position_frd_m=dvl["position_frd_m"], dvl_beams_frd=beams.T,
+                          reference_accel=self.reference_accel)
 
     def reset_integral(self) -> None:
         """Clear the depth integrator."""
-        self._depth_integral = 0.0
+        self.core.axes["heave"].reset_integral()
+
+    def note_allocation(self, requested_frd, achieved_frd) -> None:
+        """Anti-windup from the thrust allocation's result (:meth:`~hindrax_ident.control.law.Controller.note_allocation`)."""
+        self.core.note_allocation(requested_frd, achieved_frd)
+
+    def control_input(self, st: SensorState, t_s: float | None = None) -> ControlInput:
+        """The :class:`~hindrax_ident.control.law.ControlInput` of a :class:`SensorState` and the depth estimate."""
+        depth = self.depth_estimate_m if math.isfinite(self.depth_estimate_m) else st.depth_m
+        alt = st.log["altitude"][-1] if st.log.get("altitude") else (math.nan, (math.nan,))
+        t = t_s if t_s is not None else max((log[-1][0] for log in st.log.values() if log), default=0.0)
+        return ControlInput(t_s=float(t), depth_m=float(depth), depth_rate_m_s=float(self.depth_rate_m_s),
+                            rpy_rad=st.rpy_now(), rates_frd_rad_s=np.asarray(st.rates_frd_rad_s, dtype=float),
+                            velocity_frd_m_s=np.asarray(st.velocity_frd_m_s, dtype=float),
+                            altitude_m=float(alt[1][0]), altitude_stamp_s=float(alt[0]),
+                            dvl_beam_range_m=st.dvl_beam_range_m, dvl_beam_stamp_s=st.dvl_beam_stamp_s)
 
     def wrench(self, st: SensorState, free: Sequence[str] = (), dt_s: float = 0.02,
-               velocity_gain: float = 1.5) -> np.ndarray:
-        """FRD wrench (6,) of the holds (N, N m) for the DOFs not in ``free``."""
-        w = np.zeros(6)
-        wn, zeta = self.wn, 1.0
-        lim = self.hold_fraction * self.authority
-        rates = np.nan_to_num(st.rates_frd_rad_s)
-        rpy = np.nan_to_num(st.rpy_now())
-        for k, dof in enumerate(("surge", "sway")):
-            if dof not in free:
-                v = st.velocity_frd_m_s[k]
-                if np.isfinite(v):
-                    w[k] = -velocity_gain * wn * self.inertia[k] * (v - self.velocity_setpoint_m_s[k])
-        depth = self.depth_estimate_m if math.isfinite(self.depth_estimate_m) else st.depth_m
-        if "heave" not in free and math.isfinite(self.depth_setpoint_m) and math.isfinite(depth):
-            m = self.inertia[2]
-            err = self.depth_setpoint_m - depth
-            self._depth_integral = float(np.clip(self._depth_integral + err * dt_s, -0.5, 0.5))
-            w[2] = (self.net_buoyancy_n + m * wn * wn * err - 2.0 * zeta * wn * m * self.depth_rate_m_s
-                    + 0.5 * m * wn ** 3 * self._depth_integral)
-        for k, dof in ((3, "roll"), (4, "pitch")):
-            if dof not in free:
-                i = self.inertia[k]
-                w[k] = (i * wn ** 2 * (self.attitude_setpoint_rad[k - 3] - rpy[k - 3])
-                        - 2.0 * zeta * wn * i * rates[k - 3])
-        if "yaw" not in free:
-            i = self.inertia[5]
-            w[5] = i * wn * wn * wrap_angle(self.heading_setpoint_rad - rpy[2]) - 2.0 * zeta * wn * i * rates[2]
-        for k in range(6):
-            w[k] = float(np.clip(w[k], -lim[k], lim[k]))
-        return w
+               velocity_gain: float | None = None, t_s: float | None = None) -> np.ndarray:
+        """FRD wrench (6,) of the holds (N, N m) for the DOFs not in ``free``, one tick of ``dt_s`` ending at ``t_s``
+        (default: the newest sample's time). ``velocity_gain`` (given): the velocity holds' bandwidth over the
+        position holds' from now on."""
+        if velocity_gain is not None and velocity_gain != self.velocity_gain and self.settings is None:
+            self.velocity_gain = float(velocity_gain)
+            self.core = self._build(self.velocity_gain)
+        c = self.core
+        c.depth_m = float(self.depth_setpoint_m)
+        c.altitude_m = float(self.altitude_setpoint_m)
+        c.heading_rad = float(self.heading_setpoint_rad)
+        c.velocity_frd_m_s = np.asarray(self.velocity_setpoint_m_s, dtype=float)
+        c.attitude_rad = np.asarray(self.attitude_setpoint_rad, dtype=float)
+        return c.wrench(self.control_input(st, t_s), float(dt_s), free)

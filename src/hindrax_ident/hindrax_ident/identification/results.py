@@ -169,6 +169,10 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             entry[name] = {"value": float(r.values[name]), "std": float(r.std[name]), "unit": r.units[name],
                            "ci95": [float(lo), float(hi)], "std_fit": float(pa.get("std_fit", r.std[name])),
                            "verdict": pa.get("verdict", "trusted"), "reasons": list(pa.get("reasons", []))}
+            if pa.get("advice"):  # what data would fix a suspect parameter (verdicts.data_advice)
+                entry[name]["advice"] = pa["advice"]
+            if "t_dof" in pa:
+                entry[name]["t_dof"] = int(pa["t_dof"])
             pri = (r.signals.get("joint") or {}).get("priors", {})
             if name == "added_mass" and "inertia" in pri:  # the inertia's prior less the (known) rigid part
                 rigid = float(r.values["inertia"]) - float(r.values["added_mass"])

@@ -35,8 +35,9 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 
     Returns ``[("dvl75_attitude", ns(stamp_s, roll_rad, pitch_rad, yaw_rad))]`` (NED Euler angles of body FRD,
     via :func:`hindrax_drivers.frames.quaternion_ros_to_marine`; left out when the quaternion is all zero)
-    followed by ``("dvl75", ns(stamp_s, velocity_frd_m_s (3,), locked, at_body_origin=True))`` (velocity FLU ->
-    FRD; NaN and ``locked`` False without a valid velocity). Works on rclpy and bag-decoded messages alike.
+    followed by ``("dvl75", ns(stamp_s, velocity_frd_m_s (3,), locked, at_body_origin=True, beam_range_m (4,)))``
+    (velocity FLU -> FRD; NaN and ``locked`` False without a valid velocity; the range along beams A-D, NaN for a beam
+    without lock). Works on rclpy and bag-decoded messages alike.
 
     ``at_body_origin``: the driver publishes the velocity of base_link (it removes the lever arm with the
     ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
@@ -62,8 +63,12 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
                                                       yaw_rad=float(rpy[2]))))
     v = np.array([msg.velocity_m_s.x, msg.velocity_m_s.y, msg.velocity_m_s.z], dtype=float)
     locked = bool(msg.velocity_valid) and bool(np.all(np.isfinite(v)))
+    beams = np.asarray(list(msg.beam_range_m), dtype=float) if len(msg.beam_range_m) == 4 else np.full(4, np.nan)
+    lock = list(msg.beam_lock) if len(msg.beam_lock) == 4 else [False] * 4
+    beams = np.where(np.asarray(lock, dtype=bool) & np.isfinite(beams) & (beams > 0.0), beams, np.nan)
     out.append(("dvl75", SimpleNamespace(stamp_s=t, velocity_frd_m_s=frames.flu_to_frd(v) if locked
-                                         else np.full(3, np.nan), locked=locked, at_body_origin=True)))
+                                         else np.full(3, np.nan), locked=locked, at_body_origin=True,
+                                         beam_range_m=beams)))
     return out
 
 

@@ -64,7 +64,8 @@ from scipy import stats
 from hindrax_drivers.config import VehicleConfig
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std", "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
-           "segment_count", "assess_dof", "apply_verdicts", "spread_reasons"]
+           "segment_count", "assess_dof", "apply_verdicts", "spread_reasons", "data_advice", "fit_parameter_verdicts",
+           "ADVICE_TARGET"]
 
 #: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
 DEFAULT_THRUST_UNCERTAINTY_REL = (0.05, 0.10)
@@ -147,7 +148,8 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
         cov = np.asarray(cov_fit, dtype=float) + thrust_covariance(r.dof, names, theta, rel)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     nseg = segment_count(r.dof, r.pool_time_s)
-    t_dof = max(1, nseg - 1)
+    # the fit core's interval (docs/identification.md §7): t on clusters - 1 degrees of freedom
+    t_dof = int(r.signals["t_dof"]) if r.signals.get("t_dof") else max(1, nseg - 1)
     tq = float(stats.t.ppf(0.975, t_dof))
     out: dict = {}
     for n, v, s, sf in zip(names, theta, std, np.sqrt(np.clip(np.diag(cov_fit), 0.0, None))):
@@ -224,7 +226,14 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
             if contrib / total > WIDTH_MAX:
                 e["reasons"].append(f"95 % interval +-{contrib:.3g} at {v_typ:.2f} (typical speed) is "
                                     f"{100 * contrib / total:.0f} % of the damping force there")
-    for e in out.values():
+    sig = r.signals
+    have = all(sig.get(k) is not None for k in ("velocity", "acceleration", "force", "t"))
+    h = float(np.median(np.diff(np.asarray(sig["t"], dtype=float)))) if have and len(sig["t"]) > 1 else 0.0
+    for n, e in out.items():
+        if e["reasons"] and have and h > 0:  # what data would fix it (the same advice as hindrax ident fit)
+            half = 0.5 * (e["ci95"][1] - e["ci95"][0])
+            e["advice"] = data_advice(r.dof, n, e["value"], half, sig["velocity"], sig["acceleration"], sig["force"],
+                                      h)
         e["reasons"] = dof_reasons + e["reasons"]
         e["verdict"] = "suspect" if e["reasons"] else "trusted"
     return {"parameters": out, "verdict": "suspect" if any(e["reasons"] for e in out.values()) else "trusted",
@@ -365,3 +374,127 @@ def apply_reference_verdicts(document: dict, z_max: float = REFERENCE_Z_MAX) -> 
                 par["verdict"] = "suspect"
         entry["verdict"] = "suspect"
     return document
+
+
+# ------------------------------------------------------------------------------------------------ data advice
+#: Relative 95 % half-width the advice aims at (below :data:`WIDTH_MAX`, with a margin).
+ADVICE_TARGET = 0.25
+#: Shortest extra recording the advice asks for, s (a few runs).
+ADVICE_MIN_S = 30.0
+
+
+def _speed_unit(dof: str) -> str:
+    return "rad/s" if dof in ("roll", "pitch", "yaw") else "m/s"
+
+
+def data_advice(dof: str, name: str, value: float, half_width: float, velocity, acceleration, force,
+                h: float, at_bound: bool = False) -> dict:
+    """What data would make the 95 % half-width of one parameter ``ADVICE_TARGET`` of its value.
+
+    velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the ticks (``h`` s) of
+    the segments that were fitted. The variance of an estimate falls as 1 / (seconds of the manoeuvre that informs
+    it) (least-squares information adds over independent data), so ``seconds_more = T (w / w_target)^2 - T`` with
+    T the seconds of that manoeuvre already in the data (at least :data:`ADVICE_MIN_S`); the manoeuvre per
+    parameter (docs/identification.md §4, R1, R2, R15): inertia from accelerating and braking (the 30 % of the
+    ticks with the largest |acceleration|), quadratic damping from steady runs in the top half of the speeds
+    reached, linear damping from slow runs (below a third of the top speed), the bias from slow runs in both
+    directions, restoring from tilts, a reverse thrust gain from reverse commands; heave ``_positive`` is down
+    (w > 0), ``_negative`` up. Returns {dof, manoeuvre, speed_range (low, high, unit), seconds_in_data,
+    seconds_more, why}."""
+    v = np.asarray(velocity, dtype=float)
+    a = np.asarray(acceleration, dtype=float)
+    f = np.asarray(force, dtype=float)
+    ok = np.isfinite(v) & np.isfinite(a) & np.isfinite(f)
+    v, a, f = v[ok], a[ok], f[ok]
+    unit = _speed_unit(dof)
+    sign = 1.0 if name.endswith("_positive") else -1.0 if name.endswith("_negative") else 0.0
+    vv = v if sign == 0.0 else np.where(sign * v > 0, np.abs(v), 0.0)
+    vmax = float(np.percentile(np.abs(vv), 98)) if vv.size else 0.0
+    direction = "" if sign == 0.0 else (" down (w > 0)" if sign > 0 else " up (w < 0)")
+    if dof in ("roll", "pitch", "yaw") and sign == 0.0:
+        direction = ""
+    if name in ("inertia", "added_mass"):
+        thr = float(np.percentile(np.abs(a), 70)) if a.size else 0.0
+        used = np.abs(a) >= thr if a.size else np.zeros(0, bool)
+        man = f"{dof}: start-and-stop runs (accelerate from rest to the top speed, hold, brake), both directions"
+        lo, hi = 0.0, vmax
+    elif name.startswith("quadratic"):
+        used = np.abs(vv) >= 0.5 * vmax if vmax > 0 else np.zeros(v.size, bool)
+        hi = max(vmax, 1e-3)
+        man = f"{dof}{direction}: steady runs of 5 s or more in the top half of the speeds (and faster if the pool allows)"
+        lo = 0.5 * hi
+    elif name.startswith("linear"):
+        used = (np.abs(vv) > 0.05 * vmax) & (np.abs(vv) <= vmax / 3.0) if vmax > 0 else np.zeros(v.size, bool)
+        lo, hi = 0.05 * vmax, vmax / 3.0
+        man = f"{dof}{direction}: slow steady runs (low speeds, where linear damping dominates)"
+    elif name == "bias":
+        used = np.abs(v) <= 0.3 * vmax if vmax > 0 else np.ones(v.size, bool)
+        lo, hi = 0.0, 0.3 * vmax
+        man = f"{dof}: slow runs in both directions and holds (the same speed both ways tells bias from damping)"
+    elif name == "restoring":
+        used = np.abs(a) > 0
+        lo, hi = 0.0, vmax
+        man = f"{dof}: tilts of 10-30 degrees and releases (roll/pitch excursions)"
+    elif name == "reverse_thrust_gain":
+        used = f < 0
+        lo, hi = 0.0, vmax
+        man = f"{dof}: runs with reverse (negative) commands as long as the forward ones"
+    else:
+        used = np.abs(v) > 0.05 * vmax if vmax > 0 else np.ones(v.size, bool)
+        lo, hi = 0.0, vmax
+        man = f"{dof}: runs that move {dof} together with the coupled DOF"
+    t_in = float(np.count_nonzero(used)) * h
+    if at_bound or not (value != 0.0 and math.isfinite(half_width)):
+        more = max(ADVICE_MIN_S, t_in)
+        why = (f"held at its physical bound 0: the data cannot tell it from zero; {t_in:.0f} s of that manoeuvre "
+               "in the data")
+    else:
+        ratio = half_width / (ADVICE_TARGET * abs(value))
+        more = max(ADVICE_MIN_S, max(t_in, ADVICE_MIN_S) * (ratio ** 2 - 1.0)) if ratio > 1 else 0.0
+        why = (f"95 % half-width {100 * half_width / abs(value):.0f} % of the value; {t_in:.0f} s of that manoeuvre "
+               f"in the data, the variance falls as 1 / seconds: about {more:.0f} s more for +-{100 * ADVICE_TARGET:.0f} %")
+    return {"dof": dof, "manoeuvre": man, "speed_range": [round(lo, 3), round(hi, 3), unit],
+            "seconds_in_data": round(t_in, 1), "seconds_more": round(float(more), 0), "why": why}
+
+
+def fit_parameter_verdicts(dof: str, names: Sequence[str], theta, ci95, lower_bounds, fold_theta, std, cv: dict,
+                           signals: Mapping[str, Any], h: float, nrmse_max: float = 0.5) -> dict:
+    """Verdicts of an output-error fit from the fit core (:mod:`.fit_core`) with the data each suspect parameter
+    needs (:func:`data_advice`). Per parameter: suspect when its 95 % interval is wider than :data:`WIDTH_MAX` of the
+    value (inertia, quadratic damping, restoring, reverse gain), when it sits on its physical bound (damping 0: not
+    shown by the data), or when the fold estimates spread by more than 3 std. DOF-wide: the cross-validated
+    prediction nrmse at or above ``nrmse_max``. Returns {"parameters": {name: {verdict, reasons, advice}},
+    "reasons": [...], "verdict"}."""
+    theta = np.asarray(theta, dtype=float)
+    out: dict = {}
+    dof_reasons: list[str] = []
+    cvn = cv.get("nrmse") if cv else None
+    if cvn is not None and math.isfinite(cvn) and cvn >= nrmse_max:
+        dof_reasons.append(f"cross-validated prediction nrmse {cvn:.3f} >= {nrmse_max}: the model misses a force "
+                           "(current, tether, thrust not as commanded) or the data are mostly noise")
+    folds = np.asarray(fold_theta, dtype=float) if fold_theta is not None and len(fold_theta) else None
+    for i, n in enumerate(names):
+        reasons = []
+        lo, hi = ci95[i]
+        half = 0.5 * (hi - lo)
+        at_bound = np.isfinite(lower_bounds[i]) and lower_bounds[i] == 0.0 and theta[i] <= 1e-9 * max(
+            1.0, float(np.max(np.abs(theta))))
+        if at_bound:
+            reasons.append(f"{n} at its physical bound 0 (the data do not show it)")
+        elif n in ("inertia",) or n.startswith("quadratic") or n in ("restoring", "reverse_thrust_gain"):
+            if theta[i] != 0 and half / abs(theta[i]) > WIDTH_MAX:
+                reasons.append(f"95 % interval +-{100 * half / abs(theta[i]):.0f} % of the value, too wide for "
+                               "controller design")
+        if folds is not None and folds.shape[0] >= 3:
+            good = np.all(np.isfinite(folds), axis=1)
+            if good.sum() >= 3:
+                spread = float(np.std(folds[good, i], ddof=1))
+                if std[i] > 0 and spread > 3 * std[i]:
+                    reasons.append(f"fold estimates spread {spread:.3g} > 3 x std {std[i]:.3g}")
+        e = {"verdict": "suspect" if (reasons or dof_reasons) else "trusted", "reasons": dof_reasons + reasons}
+        if reasons:
+            e["advice"] = data_advice(dof, n, float(theta[i]), half, signals["velocity"], signals["acceleration"],
+                                      signals["force"], h, at_bound)
+        out[n] = e
+    verdict = "suspect" if dof_reasons or any(e["verdict"] == "suspect" for e in out.values()) else "trusted"
+    return {"parameters": out, "reasons": dof_reasons, "verdict": verdict}

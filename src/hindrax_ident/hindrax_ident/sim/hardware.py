@@ -212,9 +212,10 @@ class VirtualHardware:
         locked = bool(v is not None and v.locked and all(math.isfinite(x) for x in v.velocity_frd_m_s))
         altitude = v.altitude_m if v is not None and math.isfinite(v.altitude_m) else None
         roll, pitch, yaw = (a.roll_rad, a.pitch_rad, a.yaw_rad) if a is not None else (0.0, 0.0, 0.0)
+        beams = tuple(v.beam_range_m) if (locked and all(math.isfinite(r) for r in v.beam_range_m)) else None
         return DvlTruth(velocity_frd_m_s=tuple(v.velocity_frd_m_s) if locked else (0.0, 0.0, 0.0),
                         altitude_m=altitude, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, bottom_lock=locked,
-                        confidence_pct=100.0 if locked else 0.0)
+                        confidence_pct=100.0 if locked else 0.0, beam_range_m=beams)
 
     def _ping_truth(self, _t: float) -> Ping1dTruth:
         s = self.sim.measure("ping1d", dropout=True)  # at the ping, as the DVL

@@ -8,6 +8,12 @@ Hull (ASSUMPTION, the seeds give only the envelope): a box of ``vehicle.length_m
 ([Hindrax-Drag] §2.1: 0.59 x 0.47 x 0.40 m) centred on the centre of buoyancy, aligned with the body axes. Its
 displaced volume is taken as uniformly distributed over its height, so the volume centroid is the CB.
 
+Floor: flat at ``depth_m`` by default; a sloped floor (truth ``disturbances.floor.gradient``, :mod:`.truth`: the
+floor's depth change per metre north and east) is the plane z_f(x, y) = depth_m + g_n (x - length_m / 2) +
+g_e (y - width_m / 2) (depth_m at the pool centre). Altitudes (DVL: vertical; Ping1D: along the body z axis) and the
+floor contact use that plane; the contact takes the floor depth under the hull centre (the tilt of the floor across
+the hull, a few mm at the slopes of a pool, is neglected).
+
 Free surface (:class:`FreeSurface`): the submerged fraction of the hull is the part of its vertical extent
 below z = 0, ``f = clip((z_c + h) / (2 h), 0, 1)`` with z_c the depth of the hull centre (CB) and
 ``h = a |R20| + b |R21| + c |R22|`` the vertical half-extent of the (possibly tilted) box (a, b, c its half
@@ -110,6 +116,7 @@ class Pool:
                              f"diagonal {diag:.3f} m in every direction")
         self._since: dict[str, float] = {}
         self._t = 0.0
+        self.floor_gradient = (0.0, 0.0)
 
     @classmethod
     def from_config(cls, config: VehicleConfig) -> "Pool":
@@ -120,9 +127,22 @@ class Pool:
         return cls(f["pool.length_m"], f["pool.width_m"], f["pool.depth_m"], surface)
 
     # ------------------------------------------------------------------ geometry queries
+    def set_floor_gradient(self, gradient_ne: Sequence[float]) -> None:
+        """Slope the floor (module docstring): (north, east) depth change per metre (each |g| <= 0.5). Raises
+        ``ValueError`` for a gradient that is not two finite numbers within that bound."""
+        g = tuple(float(x) for x in gradient_ne)
+        if len(g) != 2 or not all(math.isfinite(x) and abs(x) <= 0.5 for x in g):
+            raise ValueError(f"floor gradient must be two numbers in [-0.5, 0.5], got {list(gradient_ne)}")
+        self.floor_gradient = g
+
+    def floor_depth_m(self, x_m: float, y_m: float) -> float:
+        """Depth (m, NED z) of the floor at the horizontal position (x, y) (module docstring)."""
+        gn, ge = self.floor_gradient
+        return self.depth_m + gn * (float(x_m) - 0.5 * self.length_m) + ge * (float(y_m) - 0.5 * self.width_m)
+
     def altitude_m(self, point_ned_m: Sequence[float]) -> float:
         """Vertical distance (m) from a point to the floor (negative below the floor)."""
-        return self.depth_m - float(point_ned_m[2])
+        return self.floor_depth_m(point_ned_m[0], point_ned_m[1]) - float(point_ned_m[2])
 
     def wall_distance_m(self, point_ned_m: Sequence[float]) -> float:
         """Horizontal distance (m) from a point to the nearest wall (negative outside the box)."""
@@ -138,12 +158,15 @@ class Pool:
         ox, oy, oz = (float(v) for v in origin_ned_m)
         dx, dy, dz = (float(v) for v in direction_ned)
         best = math.inf
-        for o, d, hi, has_low_face in ((ox, dx, self.length_m, True), (oy, dy, self.width_m, True),
-                                       (oz, dz, self.depth_m, False)):
+        for o, d, hi in ((ox, dx, self.length_m), (oy, dy, self.width_m)):
             if d > 1e-12:
                 best = min(best, (hi - o) / d)
-            elif d < -1e-12 and has_low_face:
+            elif d < -1e-12:
                 best = min(best, (0.0 - o) / d)
+        gn, ge = self.floor_gradient  # the floor plane z = z_f(x, y): oz + t dz = z_f(o + t d)
+        den = dz - gn * dx - ge * dy
+        if den > 1e-12:
+            best = min(best, (self.floor_depth_m(ox, oy) - oz) / den)
         return best if best >= 0.0 else math.inf
 
     # ------------------------------------------------------------------ contact
@@ -173,9 +196,13 @@ class Pool:
         cx, cy, cz = self.free_surface.hull_centre_frd_m
         touched: list[str] = []
         v_ned = None
+        floor = self.depth_m
+        if self.floor_gradient != (0.0, 0.0):
+            floor = self.floor_depth_m(state[0] + r[0][0] * cx + r[0][1] * cy + r[0][2] * cz,
+                                       state[1] + r[1][0] * cx + r[1][1] * cy + r[1][2] * cz)
         for axis, (lo_face, hi_face, hi) in enumerate((("south_wall", "north_wall", self.length_m),
                                                        ("west_wall", "east_wall", self.width_m),
-                                                       (None, "floor", self.depth_m))):
+                                                       (None, "floor", floor))):
             row = r[axis]
             centre = state[axis] + row[0] * cx + row[1] * cy + row[2] * cz
             ext = a * abs(row[0]) + b * abs(row[1]) + c * abs(row[2])

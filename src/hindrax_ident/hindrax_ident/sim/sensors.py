@@ -17,7 +17,10 @@ dropout, the device's configured or default rate):
   ([Hindrax-Drag] Table 1: mean error about 5 %) and ``n ~ N(0, noise_std_m_s)`` per axis. No bottom lock when
   the DVL is out of the water, its vertical altitude above the floor is outside
   ``[min_altitude_m, max_altitude_m]``, or it is within ``wall_lock_loss_distance_m`` of a wall; unlocked
-  reports carry NaN velocities (the real DVL keeps reporting "searching").
+  reports carry NaN velocities (the real DVL keeps reporting "searching"). Each locked report also carries the
+  range along each of the four beams (:func:`hindrax_drivers.dvl75.protocol.beam_directions_frd`, turned by
+  ``sensors.dvl75.sensor_orientation_rpy_rad``) to the first wall or floor it hits (:meth:`.pool.Pool.ray_distance_m`:
+  a sloped floor shows in them), with :data:`DVL_BEAM_RANGE_NOISE_FRACTION` relative noise.
 * ``dvl75_attitude`` (:class:`DvlAttitudeSample`): roll, pitch, yaw (Fossen ZYX, NED; yaw = heading from
   north) of the DVL's own IMU, plus bias and noise (rad), yaw wrapped to (-pi, pi].
 * ``icm20948_accel`` / ``icm20948_gyro`` / ``icm20948_mag`` ([Hindrax-Drag] Table 1, docs/devices.md §4): specific
@@ -51,6 +54,7 @@ from scipy.spatial.transform import Rotation
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import VehicleConfig
+from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
 from .pool import Pool
 
@@ -83,6 +87,9 @@ DEFAULT_EARTH_FIELD_NED_T: tuple[float, float, float] = (24.0e-6, -1.3e-6, -2.0e
 #: Water (and sensor) temperature, deg C. ASSUMPTION consistent with the configured fresh-water speed of sound
 #: of 1481 m/s (about 20 deg C).
 DEFAULT_WATER_TEMPERATURE_C = 20.0
+#: ASSUMPTION: 1-sigma relative noise of a DVL beam range (no datasheet figure in docs/devices.md; about the Ping1D's
+#: 5 mm at 0.5 m).
+DVL_BEAM_RANGE_NOISE_FRACTION = 0.01
 #: Fixed index of each device in the seed sequence (so streams do not depend on which devices are enabled).
 DEVICE_INDEX: dict[str, int] = {"dvl75": 1, "dvl75_attitude": 2, "ping1d": 3, "ms5837": 4, "icm20948_accel": 5,
                                 "icm20948_gyro": 6, "icm20948_mag": 7}
@@ -113,13 +120,16 @@ class VehicleTruth:
 @dataclass(frozen=True)
 class DvlVelocitySample:
     """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock;
-    altitude_m: true vertical distance DVL -> floor (NaN out of the water); true_velocity_frd_m_s: v + w x r."""
+    altitude_m: true vertical distance DVL -> floor (NaN out of the water); true_velocity_frd_m_s: v + w x r;
+    beam_range_m: range along each beam A-D (port, stern, starboard, bow) to the floor with the DVL's range noise
+    (NaN for a beam without lock)."""
 
     stamp_s: float
     velocity_frd_m_s: tuple[float, float, float]
     locked: bool
     altitude_m: float
     true_velocity_frd_m_s: tuple[float, float, float]
+    beam_range_m: tuple[float, float, float, float] = (math.nan, math.nan, math.nan, math.nan)
 
 
 @dataclass(frozen=True)
@@ -324,6 +334,25 @@ class DvlVelocityModel(SensorModel):
         self.multipath_probability = 0.0
         self.floor_noise_gain = 0.0
         self.floor_reference_m = 0.5
+        # beams: directions in the body frame (sensor orientation), range noise from a stream of its own (the velocity
+        # noise is the same with and without the beams)
+        roll, pitch, yaw = config.flat["sensors.dvl75.sensor_orientation_rpy_rad"]
+        r_sensor = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+        self.beam_dirs_frd = (r_sensor @ np.asarray(beam_directions_frd(), dtype=float).T).T
+        self.beam_rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX["dvl75"], 2000]))
+
+    def beam_ranges(self, point_ned_m, rotation) -> tuple[float, float, float, float]:
+        """Range (m) along each beam from ``point_ned_m`` to the first wall or floor it hits, with
+        :data:`DVL_BEAM_RANGE_NOISE_FRACTION` of noise; NaN beyond the altitude envelope or without a pool."""
+        if self.pool is None:
+            return (math.nan,) * 4  # type: ignore[return-value]
+        out = []
+        for d in self.beam_dirs_frd:
+            r = self.pool.ray_distance_m(point_ned_m, rotation @ d)
+            ok = math.isfinite(r) and self.min_altitude_m <= r
+            out.append(float(r * (1.0 + DVL_BEAM_RANGE_NOISE_FRACTION * self.beam_rng.standard_normal()))
+                       if ok else math.nan)
+        return tuple(out)  # type: ignore[return-value]
 
     def locked(self, point_ned_m) -> tuple[bool, float]:
         """(bottom lock, vertical altitude m) for the DVL at ``point_ned_m`` (NED); altitude NaN out of the
@@ -346,6 +375,7 @@ class DvlVelocityModel(SensorModel):
         true3 = (float(v_true[0]), float(v_true[1]), float(v_true[2]))
         if not locked:
             return DvlVelocitySample(truth.t_s, (math.nan, math.nan, math.nan), False, altitude, true3)
+        beams = self.beam_ranges(point, truth.rotation)
         if self.multipath_probability > 0.0 and self.pool is not None:
             d = self.pool.wall_distance_m(point)
             if d < self.multipath_distance_m and \
@@ -363,7 +393,7 @@ class DvlVelocityModel(SensorModel):
             g = 1.0 + self.floor_noise_gain * (self.floor_reference_m / max(altitude, 0.05)) ** 2
             extra = self.walk_rng.normal(0.0, self.spec.noise_std * math.sqrt(g * g - 1.0), 3)
             out = (out[0] + float(extra[0]), out[1] + float(extra[1]), out[2] + float(extra[2]))
-        return DvlVelocitySample(truth.t_s, out, True, altitude, true3)
+        return DvlVelocitySample(truth.t_s, out, True, altitude, true3, beams)
 
 
 class DvlAttitudeModel(SensorModel):

@@ -88,6 +88,8 @@ class Simulator:
             devices = list(sensors)
         self.sensors = SensorSuite(config, self.pool, self.seed, devices=devices,
                                    imu_position_frd_m=imu_position_frd_m)
+        if self.pool is not None:
+            self.pool.set_floor_gradient(truth.disturbances.get("floor.gradient"))
         self.disturbances = DisturbanceModel(config, truth.disturbances, self.model, self.pool)
         self.sensors.apply_disturbances(truth.disturbances, self._delayed_state)
         self._history: deque = deque()

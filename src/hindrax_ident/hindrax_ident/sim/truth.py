@@ -42,7 +42,9 @@ Disturbances (``disturbances:`` section; the physical source of each; all defaul
 ``floor``: heave added mass grows near the floor (image method: about (reference/h)^3):
     ``heave_added_mass_fraction`` x M_A33 x (``reference_altitude_m`` / h)^3 at altitude h of the hull bottom,
     applied as -dM w_dot with the previous step's heave acceleration; ``dvl_noise_gain``: the DVL noise
-    multiplied by 1 + gain (reference / h)^2 (beam footprint and side lobes near the floor).
+    multiplied by 1 + gain (reference / h)^2 (beam footprint and side lobes near the floor); ``gradient``: a sloped
+    floor, the depth change per metre (north, east) about the pool centre (a pool's shallow end, a beach; the DVL and
+    Ping1D altitudes and the floor contact follow it, :mod:`.pool`).
 ``dvl``: ``scale_factor`` (speed-of-sound or transducer error), ``misalignment_rpy_rad`` (mounting),
     ``latency_s`` (reports the velocity that was), ``multipath_distance_m`` / ``multipath_dropout_probability``
     (side-lobe returns from walls: a report is lost with probability p (1 - d / distance) within that distance).
@@ -62,7 +64,7 @@ import yaml
 from hindrax_drivers.config import ConfigError, VehicleConfig, default_config_path, flatten, validate_flat
 
 __all__ = ["Disturbances", "Truth", "TruthError", "default_truth_path", "truth_dir", "load_truth",
-           "truth_from_mapping", "DISTURBANCE_SCHEMA"]
+           "truth_from_mapping", "with_floor_gradient", "DISTURBANCE_SCHEMA"]
 
 
 class TruthError(ValueError):
@@ -70,8 +72,24 @@ class TruthError(ValueError):
 
 
 def truth_dir() -> Path:
-    """``ros_ws/config/truth/`` beside the shipped vehicle file."""
-    return default_config_path().parent / "truth"
+    """The truth files: ``truth/`` beside the vehicle file in use (the repository's ``ros_ws/config/truth``, or
+    ``share/hindrax_drivers/config/truth`` of a colcon install); when the vehicle file is elsewhere
+    (``HINDRAX_CONFIG`` naming a mounted file), the installed ``share/hindrax_drivers/config/truth``. Raises
+    :class:`TruthError` naming the places searched when neither exists."""
+    beside = default_config_path().parent / "truth"
+    if beside.is_dir():
+        return beside
+    searched = [beside]
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        installed = Path(get_package_share_directory("hindrax_drivers")) / "config" / "truth"
+        if installed.is_dir():
+            return installed
+        searched.append(installed)
+    except Exception:  # noqa: BLE001 - no ament index entry: report what was searched
+        pass
+    raise TruthError(f"no truth files: searched {', '.join(str(p) for p in searched)}")
 
 
 def default_truth_path() -> Path:
@@ -103,6 +121,7 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
     "floor.heave_added_mass_fraction": (0.0, 0.0, 5.0, None),
     "floor.reference_altitude_m": (0.5, 0.01, 10.0, None),
     "floor.dvl_noise_gain": (0.0, 0.0, 100.0, None),
+    "floor.gradient": ((0.0, 0.0), -0.5, 0.5, 2),
     "dvl.scale_factor": (1.0, 0.5, 1.5, None),
     "dvl.misalignment_rpy_rad": ((0.0, 0.0, 0.0), -0.5, 0.5, 3),
     "dvl.latency_s": (0.0, 0.0, 2.0, None),
@@ -254,3 +273,13 @@ def _read(p: Path) -> Any:
         raise TruthError(f"{p}: cannot read ({exc.strerror})") from exc
     except yaml.YAMLError as exc:
         raise TruthError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from exc
+
+
+def with_floor_gradient(truth: Truth, gradient_ne) -> Truth:
+    """The same truth with the floor sloped by ``gradient_ne`` (north, east depth change per metre; the
+    ``floor.gradient`` disturbance, module docstring). Raises :class:`TruthError` for a value out of range."""
+    values = dict(truth.disturbances.values)
+    values["floor.gradient"] = tuple(float(x) for x in gradient_ne)
+    flat = {k: v for k, v in values.items()}
+    dist = _validate_disturbances(flat, len(truth.config.thrusters.names), truth.source)
+    return Truth(truth.config, dist, truth.vehicle, truth.overlay, truth.source)

@@ -25,6 +25,9 @@ def run(args: argparse.Namespace) -> int:
     except (FileNotFoundError, RecoverError, OSError) as exc:
         print(f"hindrax bag recover: {exc}", file=sys.stderr)
         return 1
+    if meta.message_count == 0:
+        print(f"hindrax bag recover: {args.bag}: no complete message to recover", file=sys.stderr)
+        return 1
     for r in results:
         print(r.summary_line())
     print(f"{args.bag}: {meta.message_count} messages on {len(meta.topics)} topics in {len(meta.files)} file(s)")

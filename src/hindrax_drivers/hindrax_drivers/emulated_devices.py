@@ -1,0 +1,159 @@
+"""The vehicle's five devices, emulated, for a launch layout of driver processes on a machine without the hardware
+(the pool-day test, docs/deployment.md §9).
+
+Each driver process of the launch layout opens its device as on the vehicle: the DVL-75 and Ping1D drivers a serial
+port (here a pseudo-terminal behind a stable symlink, :class:`~hindrax_drivers.transport.pty_device.PtyDevice`, so
+the real pyserial path runs), the MS5837, ICM-20948 and PCA9685 drivers ``/dev/i2c-N`` (here one
+:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding the register-exact emulators, served over a
+Unix socket by :class:`~hindrax_drivers.transport.socket_i2c.I2CSocketServer`; a driver process reaches it through
+the environment variable in :meth:`EmulatedDevices.env`). What a pool day does to the devices is a method here:
+:meth:`unplug` / :meth:`replug` a USB-serial adapter (the port's symlink disappears and comes back on a new pty, as
+udev's ``/dev/hindrax-dvl``), :meth:`stop_i2c` / :meth:`start_i2c` the bus (absent at start, or gone mid-run).
+
+The truth is a vehicle holding station in the pool, moving a little so that no driver's stuck-value detection
+trips on bit-identical readings: depth 1.0 m +/- 2 cm, altitude 1.5 m +/- 2 cm (DVL and Ping agree), surge
+velocity +/- 1 cm/s, level attitude, gravity and the Earth's field on the IMU, with periods of a few seconds.
+It is not a simulation (no thrust, no dynamics): the virtual pool is ``hindrax bringup --sim``.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from .config import VehicleConfig
+from .dvl75.emulator import Dvl75Emulator, DvlTruth
+from .icm20948.emulator import Icm20948Emulator
+from .ms5837.emulator import Ms5837Emulator
+from .pca9685.emulator import Pca9685Emulator
+from .ping1d.emulator import Ping1dEmulator, Ping1dTruth
+from .transport.emulated_i2c import EmulatedI2CBus
+from .transport.pty_device import PtyDevice
+from .transport.socket_i2c import SOCKET_ENV, I2CSocketServer
+
+__all__ = ["EmulatedDevices", "SERIAL_DEVICES", "I2C_DEVICES"]
+
+#: launch-file node name -> configuration section of its serial port
+SERIAL_DEVICES = {"dvl75": "sensors.dvl75", "ping1d": "sensors.ping1d"}
+#: launch-file node names of the drivers on the I2C bus
+I2C_DEVICES = ("ms5837", "icm20948", "esc")
+
+_DEPTH_M, _ALTITUDE_M, _WOBBLE_M = 1.0, 1.5, 0.02
+_SURFACE_PA, _RHO_KG_M3, _G_M_S2 = 101325.0, 1000.0, 9.80665
+_EARTH_FIELD_T = (2.0e-5, 0.0, 4.0e-5)
+
+
+def _wobble(t_s: float, period_s: float, amplitude: float) -> float:
+    return amplitude * math.sin(2.0 * math.pi * t_s / period_s)
+
+
+class EmulatedDevices:
+    """The five emulated devices (module docstring), serving as soon as constructed unless ``serve_i2c`` is False.
+
+    config: the vehicle configuration (I2C addresses, PCA9685 oscillator). directory: where the I2C socket goes
+    (default: a new temporary directory). Use as a context manager or call :meth:`close`.
+    """
+
+    def __init__(self, config: VehicleConfig, directory: str | os.PathLike | None = None,
+                 serve_i2c: bool = True, poll_period_s: float = 0.01) -> None:
+        self._t0 = time.monotonic()
+        self.directory = Path(directory or tempfile.mkdtemp(prefix="hindrax-devices-"))
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.socket_path = str(self.directory / "i2c.sock")
+        self.dvl = PtyDevice(Dvl75Emulator(self._dvl_truth, rate_hz=10.0), poll_period_s=poll_period_s,
+                             link_name="hindrax-dvl")
+        self.ping = PtyDevice(Ping1dEmulator(self._ping_truth), poll_period_s=poll_period_s,
+                              link_name="hindrax-ping")
+        self._serial = {"dvl75": self.dvl, "ping1d": self.ping}
+        esc = config.section("esc")
+        self.pca9685 = Pca9685Emulator(oscillator_hz=float(esc["oscillator_hz"]))
+        self.bus = EmulatedI2CBus({
+            int(config.section("sensors.ms5837")["i2c_address"]): Ms5837Emulator(self._pressure_truth),
+            int(config.section("sensors.icm20948")["i2c_address"]): Icm20948Emulator(self._imu_truth),
+            int(esc["i2c_address"]): self.pca9685,
+        })
+        self._server: I2CSocketServer | None = None
+        self._lock = threading.Lock()
+        if serve_i2c:
+            self.start_i2c()
+
+    # -- what the driver processes need -------------------------------------------------------------
+    @property
+    def ports(self) -> dict[str, str]:
+        """Node name -> serial port path (stable across :meth:`unplug` / :meth:`replug`)."""
+        return {name: dev.path for name, dev in self._serial.items()}
+
+    def ros_arguments(self, name: str) -> list[str]:
+        """Extra ``--ros-args`` for the driver process of node ``name`` (its emulated serial port), else []."""
+        if name in SERIAL_DEVICES:
+            return ["-p", f"{SERIAL_DEVICES[name]}.port:={self._serial[name].path}"]
+        return []
+
+    def env(self, name: str) -> dict[str, str]:
+        """Extra environment for the driver process of node ``name`` (the emulated I2C bus), else {}."""
+        return {SOCKET_ENV: self.socket_path} if name in I2C_DEVICES else {}
+
+    # -- a pool day ---------------------------------------------------------------------------------
+    def unplug(self, name: str) -> None:
+        """The USB-serial adapter of ``name`` (``dvl75`` or ``ping1d``) is pulled out."""
+        self._serial[name].disconnect()
+
+    def replug(self, name: str) -> None:
+        """... and plugged in again (a new tty behind the same path)."""
+        self._serial[name].reconnect()
+
+    def start_i2c(self) -> None:
+        """The I2C bus is there (idempotent)."""
+        with self._lock:
+            if self._server is None:
+                if os.path.exists(self.socket_path):
+                    os.unlink(self.socket_path)
+                self._server = I2CSocketServer(self.bus, self.socket_path)
+
+    def stop_i2c(self) -> None:
+        """The I2C bus is gone: opening fails, open connections fail with ENODEV (idempotent)."""
+        with self._lock:
+            server, self._server = self._server, None
+        if server is not None:
+            server.close()
+
+    @property
+    def i2c_served(self) -> bool:
+        return self._server is not None
+
+    def close(self) -> None:
+        """Stop serving everything and remove the pseudo-terminals."""
+        self.stop_i2c()
+        for dev in self._serial.values():
+            dev.close()
+
+    def __enter__(self) -> EmulatedDevices:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- truth: a vehicle holding station -------------------------------------------------------------
+    def _t(self) -> float:
+        return time.monotonic() - self._t0
+
+    def _altitude_m(self) -> float:
+        return _ALTITUDE_M + _wobble(self._t(), 5.0, _WOBBLE_M)
+
+    def _dvl_truth(self, _t: float) -> DvlTruth:
+        return DvlTruth(velocity_frd_m_s=(_wobble(self._t(), 7.0, 0.01), 0.0, 0.0), altitude_m=self._altitude_m())
+
+    def _ping_truth(self, _t: float) -> Ping1dTruth:
+        return Ping1dTruth(altitude_m=self._altitude_m())
+
+    def _pressure_truth(self, _t: float) -> tuple[float, float]:
+        depth_m = _DEPTH_M + _wobble(self._t(), 4.0, _WOBBLE_M)
+        return (_SURFACE_PA + _RHO_KG_M3 * _G_M_S2 * depth_m, 20.0)
+
+    def _imu_truth(self, _t: float):
+        w = _wobble(self._t(), 3.0, 0.05)
+        return ((w, 0.0, _G_M_S2), (0.0, 0.0, 0.01 * w), _EARTH_FIELD_T, 20.0)

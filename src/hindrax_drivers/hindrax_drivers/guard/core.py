@@ -1,0 +1,72 @@
+"""Output guard, pure logic (no ROS, no clocks): when must the PCA9685 outputs be silenced from outside the ESC?
+
+The guard is the second stop path of docs/architecture.md §8. It asserts (silences the outputs: /OE high, or the
+chip's all-off and sleep registers where /OE is not wired) when any of these holds:
+
+* the ESC's output state (``esc/heartbeat``, 25 Hz from its steady-clock tick) has not been heard for
+  ``timeout_s``: the ESC process died or hangs, and the chip keeps its last widths on the wire;
+* the ESC reports ``OUTPUT_UNKNOWN``: the chip cannot be written or read back (I2C fault);
+* the supervisor's heartbeat (``supervisor/heartbeat``) has not been heard for ``timeout_s``, or says ERROR (a
+  breach is latched).
+
+Once asserted it stays asserted (latched) until every cause is gone AND the ESC reports that it is disarmed with
+neutral confirmed on the chip (``OUTPUT_NEUTRAL``, ``armed`` false): thrust can then only come back through a new
+arm request. It starts asserted: nothing is released until a live ESC has confirmed neutral.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["GuardCore", "OUTPUT_UNKNOWN", "OUTPUT_NEUTRAL", "OUTPUT_COMMANDING"]
+
+# hindrax_msgs/ThrusterPwm output_state constants (kept here so the core needs no ROS import)
+OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING = 0, 1, 2
+
+
+@dataclass
+class GuardCore:
+    """The guard's decision (module docstring). Ages are supplied by the node (executor-alive steady time, s)."""
+
+    timeout_s: float
+    asserted: bool = True
+    reason: str = "start-up: no ESC output state confirmed yet"
+    esc_state: int | None = None
+    esc_armed: bool = False
+    supervisor_ok: bool = False
+    supervisor_message: str = ""
+
+    def on_esc(self, output_state: int, armed: bool) -> None:
+        """The ESC's ``esc/heartbeat`` (output_state constant, armed flag)."""
+        self.esc_state, self.esc_armed = int(output_state), bool(armed)
+
+    def on_supervisor(self, ok: bool, message: str) -> None:
+        """The supervisor's heartbeat: ok (level OK) or the breach reason."""
+        self.supervisor_ok, self.supervisor_message = bool(ok), message
+
+    def causes(self, esc_age_s: float, supervisor_age_s: float) -> list[str]:
+        """Every reason to silence the outputs now (empty: none)."""
+        out = []
+        if esc_age_s > self.timeout_s:
+            out.append("ESC output state silent" + (f" for {esc_age_s:.2f} s" if esc_age_s < 1e9 else "") +
+                       " (esc/heartbeat): ESC process dead or hung")
+        elif self.esc_state == OUTPUT_UNKNOWN:
+            out.append("ESC output state unknown: the PCA9685 cannot be written or read back (I2C fault)")
+        if supervisor_age_s > self.timeout_s:
+            out.append("no supervisor heartbeat" + (f" for {supervisor_age_s:.2f} s" if supervisor_age_s < 1e9 else "")
+                       + " (supervisor/heartbeat): supervisor dead or hung")
+        elif not self.supervisor_ok:
+            out.append(f"supervisor tripped: {self.supervisor_message}")
+        return out
+
+    def decide(self, esc_age_s: float, supervisor_age_s: float) -> tuple[bool, bool]:
+        """Update :attr:`asserted`/:attr:`reason`. Returns ``(asserted, changed)``."""
+        was = self.asserted
+        causes = self.causes(esc_age_s, supervisor_age_s)
+        if causes:
+            self.asserted, self.reason = True, causes[0]
+        elif self.asserted:
+            if self.esc_state == OUTPUT_NEUTRAL and not self.esc_armed:
+                self.asserted, self.reason = False, ""
+            else:
+                self.reason = "cause cleared; waiting for the ESC to report disarmed at neutral"
+        return self.asserted, self.asserted != was

@@ -1,0 +1,220 @@
+"""Output guard node: silences the PCA9685 outputs from outside the ESC process (docs/architecture.md §8).
+
+The decision is :class:`~hindrax_drivers.guard.core.GuardCore` (ESC output state silent or unknown, supervisor
+heartbeat silent or tripped -> silence, latched until the ESC reports disarmed at neutral). How it silences:
+
+* ``esc.output_enable_gpio`` set (chip and line): the PCA9685 /OE line through libgpiod
+  (:class:`~hindrax_drivers.transport.gpio.GpiodLine`), driven HIGH (outputs off, no pulses: the Basic ESC
+  stops) when asserted and LOW when released. The line is requested high at start-up. The wiring has a pull-up on
+  /OE, so when this process dies and the kernel frees the line (the Pi's pinctrl returns it to an input) the
+  outputs go off by themselves.
+* not wired: over the shared I2C bus, the chip's ALL_LED_OFF_H full-OFF bit then MODE1 SLEEP (datasheet §7.3.1,
+  §7.3.4), once on assertion and again whenever the ESC reports commanding while asserted. Needs a working bus: an
+  I2C outage on an unwired vehicle leaves the last widths on the wire (``hindrax config check`` warns).
+
+Subscribes ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus from the ESC's steady-clock tick: its output state
+and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
+``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus). Publishes ``guard/heartbeat``
+(diagnostic_msgs/DiagnosticStatus at every tick: level OK = outputs enabled, ERROR = silenced with the reason; the
+ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
+
+Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
+(:class:`~hindrax_drivers.liveness.AliveAge`), timeout ``esc.heartbeat_timeout_s``. A small process of its own
+(EventsExecutor, two subscriptions, one 20 Hz timer) so that a fault in the supervisor's sensor code cannot
+take the second stop path with it.
+
+Run alone: ``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+
+from ..config import output_enable_gpio
+from ..liveness import HEARTBEAT_NAMES, AliveAge
+from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from ..pca9685 import protocol as p
+from ..transport.i2c import I2CDevice, I2CError, open_smbus
+from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
+
+__all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "main"]
+
+#: the guard's tick (decision, /OE, heartbeat), Hz
+GUARD_RATE_HZ = 20.0
+#: while asserted without /OE, the sleep registers are written again at most this often when the ESC commands, s
+REWRITE_INTERVAL_S = 0.2
+
+
+def open_output_enable(chip: str, line: int) -> Any:
+    """The /OE line, requested HIGH (outputs off): the emulation server's line when
+    ``HINDRAX_EMULATION_SOCKET`` is set (tests, benchmarks), else libgpiod. Raises OSError/ImportError."""
+    from ..transport.shared_emulation import open_shared_line
+
+    shared = open_shared_line("oe", True)
+    if shared is not None:
+        return shared
+    from ..transport.gpio import open_output_line
+
+    return open_output_line(chip, line, initial_high=True)
+
+
+class OutputGuardNode(Node):
+    """The output guard (module docstring). ``line``: an injected /OE line (``set_high``/``release``); ``bus``: an
+    injected SMBus-like bus for the register fallback. Without them, they are opened from the configuration."""
+
+    def __init__(self, line: Any = None, bus: Any = None, **kwargs: Any):
+        super().__init__("output_guard", **kwargs)
+        cfg = load_node_config(self, ("esc",))
+        esc = cfg.section("esc")
+        self.timeout_s = float(esc["heartbeat_timeout_s"])
+        self.core = GuardCore(self.timeout_s)
+        period = 1.0 / GUARD_RATE_HZ
+        self.esc_age = AliveAge(2.0 * period)
+        self.supervisor_age = AliveAge(2.0 * period)
+        self.gpio = output_enable_gpio(cfg)
+        self.line = line
+        self._bus, self._bus_number, self._address = bus, int(esc["i2c_bus"]), int(esc["i2c_address"])
+        self.device: I2CDevice | None = None
+        self.assertions = 0
+        self.last_assert_monotonic: float | None = None
+        self.silence_failures = 0
+        self._last_rewrite = -1e9
+        where = (f"/OE {self.gpio[0]}:{self.gpio[1]}" if self.gpio else "/OE (injected line)" if line is not None
+                 else f"registers i2c-{self._bus_number}@0x{self._address:02x}")
+        self.diag = DeviceDiagnostics("hindrax/output_guard", where, lambda: time.monotonic())
+        if self.gpio is None and line is None:
+            self.diag.warn("no_hardware_cutoff", "esc.output_enable_gpio not wired: outputs silenced over the I2C "
+                                                 "bus (does not work through an I2C outage)")
+        self._open_line()
+        self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["guard"], 10)
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10)
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10)
+        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
+        self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if self.wired:
+            self._apply(True, force=True)  # /OE high from the start; the registers are the ESC's own start-up's job
+
+    def set_timeout(self, seconds: float) -> None:
+        """Heartbeat timeout, s (default ``esc.heartbeat_timeout_s``). A single-process graph (``hindrax bringup``),
+        where the ESC, the supervisor and this node share one executor thread, widens it: there a busy callback
+        delays every peer alike, and no peer can fail alone."""
+        if not seconds > 0.0:
+            raise ValueError(f"guard timeout must be > 0 s, got {seconds}")
+        self.timeout_s = self.core.timeout_s = float(seconds)
+
+    @property
+    def wired(self) -> bool:
+        """True when the guard drives an /OE line (else it writes the chip's registers)."""
+        return self.gpio is not None or self.line is not None
+
+    # -- outputs
+    def _open_line(self) -> None:
+        if self.line is not None or self.gpio is None:
+            return
+        try:
+            self.line = open_output_enable(*self.gpio)
+        except (OSError, ImportError) as exc:
+            self.diag.set_state("gpio error", DiagnosticStatus.ERROR, f"cannot request /OE {self.gpio}: {exc}")
+            self.get_logger().error(f"cannot request /OE {self.gpio}: {exc}", throttle_duration_sec=5.0)
+
+    def _device(self) -> I2CDevice:
+        if self.device is None:
+            if self._bus is None:
+                from ..transport.shared_emulation import open_shared_bus
+
+                self._bus = open_shared_bus() or open_smbus(self._bus_number)
+            self.device = I2CDevice(self._bus, self._address, "pca9685-guard", retries=1)
+        return self.device
+
+    def _silence_registers(self) -> None:
+        """Every output full OFF, then SLEEP (datasheet §7.3.4, §7.3.1): no pulses whatever the channels held."""
+        dev = self._device()
+        dev.write_byte_data(p.ALL_LED_OFF_H, p.FULL_BIT)
+        dev.write_byte_data(p.MODE1, p.MODE1_SLEEP | p.MODE1_AI | p.MODE1_ALLCALL)
+
+    def _apply(self, asserted: bool, force: bool = False) -> None:
+        """Drive /OE (or write the registers) for ``asserted``; failures are counted and reported, never raised."""
+        try:
+            if self.gpio is not None or self.line is not None:
+                if self.line is None:
+                    self._open_line()
+                if self.line is None:
+                    raise OSError("/OE line not available")
+                self.line.set_high(asserted)
+            elif asserted:
+                now = time.monotonic()
+                if force or (self.core.esc_state == OUTPUT_COMMANDING and now - self._last_rewrite > REWRITE_INTERVAL_S):
+                    self._last_rewrite = now
+                    self._silence_registers()
+            if self.diag.state in ("silence failed", "gpio error"):
+                self.diag.set_state("ok", DiagnosticStatus.OK)
+        except (OSError, I2CError, ImportError) as exc:
+            self.silence_failures += 1
+            self.diag.count("silence_failed")
+            self.diag.set_state("silence failed", DiagnosticStatus.ERROR, f"cannot silence the outputs: {exc}")
+            self.get_logger().error(f"cannot silence the outputs: {exc}", throttle_duration_sec=2.0)
+
+    # -- inputs
+    def on_esc(self, msg: DiagnosticStatus) -> None:
+        values = {kv.key: kv.value for kv in msg.values}
+        try:
+            state = int(values.get("output_state", OUTPUT_UNKNOWN))
+        except ValueError:
+            state = OUTPUT_UNKNOWN
+        self.esc_age.heard()
+        self.core.on_esc(state, values.get("armed") == "true")
+
+    def on_supervisor(self, msg: DiagnosticStatus) -> None:
+        self.supervisor_age.heard()
+        self.core.on_supervisor(msg.level == DiagnosticStatus.OK, msg.message)
+
+    # -- tick
+    def tick(self) -> None:
+        asserted, changed = self.core.decide(self.esc_age.tick(), self.supervisor_age.tick())
+        if changed and asserted:
+            self.assertions += 1
+            self.last_assert_monotonic = time.monotonic()
+            self.diag.count("asserted")
+            self.get_logger().warn(f"outputs silenced: {self.core.reason}")
+        elif changed:
+            self.get_logger().info("outputs enabled: the ESC reports disarmed at neutral")
+        # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
+        # nothing to silence: the ESC's own start-up writes neutral before anything runs)
+        self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
+        st = DiagnosticStatus(level=DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
+                              name="hindrax/output_guard", message=self.core.reason if asserted else "outputs enabled",
+                              hardware_id="output_guard")
+        self.pub_heartbeat.publish(st)
+        self.diag.published()
+
+    def _diag_extra(self):
+        return [("asserted", self.core.asserted), ("reason", self.core.reason), ("assertions", self.assertions),
+                ("silence_failures", self.silence_failures),
+                ("output_enable_gpio", f"{self.gpio[0]}:{self.gpio[1]}" if self.gpio else "not wired"),
+                ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}")]
+
+    def close(self) -> None:
+        """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:
+        the ESC, which loses this heartbeat, disarms and writes neutral itself (sleeping the chip under a running
+        ESC would only fight its read-back)."""
+        if not self.wired:
+            return
+        self._apply(True, force=True)
+        if self.line is not None:
+            release = getattr(self.line, "release", None)
+            if release is not None:
+                release()
+
+
+def main(args=None) -> int:
+    """``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
+    return run_node(OutputGuardNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,89 @@
+"""Heartbeat ages and ROS-time step detection on the steady clock (docs/architecture.md §8, "Time").
+
+Two small pieces every safety node (ESC, output guard, supervisor) shares:
+
+* :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` but only over time this
+  process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``).
+  A peer that dies or hangs in another process ages at wall-clock speed; this process's own stall (a busy
+  single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes.
+* :class:`ClockStepMonitor`: compares ROS time with the steady clock at each tick and reports a backward step of
+  ROS time (``/clock`` restarted or a bag looped) and a stall (ROS time frozen while the steady clock runs), so a
+  node can re-base its ROS-time checks and say so on ``/diagnostics``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable
+
+__all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_NAMES"]
+
+#: heartbeat topics (diagnostic_msgs/DiagnosticStatus: level OK = healthy, ERROR = tripped/asserted + reason)
+HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbeat", "esc": "esc/heartbeat"}
+
+
+class AliveAge:
+    """Age of the last message from a peer, s, in executor-alive steady time (module docstring).
+
+    ``max_step_s``: the most one tick-to-tick gap may add (two tick periods is the usual choice).
+    ``age_s`` is ``math.inf`` until the peer is first heard.
+    """
+
+    def __init__(self, max_step_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+        self.max_step_s = float(max_step_s)
+        self._clock = clock
+        self._last_tick = clock()
+        self.age_s = math.inf
+
+    def heard(self) -> None:
+        """The peer spoke now."""
+        self.age_s = 0.0
+
+    def tick(self) -> float:
+        """Advance by the (capped) time since the previous tick; returns the age, s."""
+        t = self._clock()
+        gap, self._last_tick = t - self._last_tick, t
+        if math.isfinite(self.age_s):
+            self.age_s += min(max(gap, 0.0), self.max_step_s)
+        return self.age_s
+
+    def fresh(self, timeout_s: float) -> bool:
+        """Heard within ``timeout_s``."""
+        return self.age_s <= timeout_s
+
+
+class ClockStepMonitor:
+    """Detects a backward step of ROS time against the steady clock (and a stalled ROS clock).
+
+    ``ros_now_s``: the node's ROS time in seconds; ``tolerance_s``: a backward move smaller than this is jitter.
+    :meth:`check` returns the step in seconds (negative) when ROS time went back, else 0.0; :attr:`steps_back`
+    counts them, :attr:`last_step_s` keeps the last. :meth:`stalled_for_s` is how long ROS time has not moved
+    while the steady clock ran.
+    """
+
+    def __init__(self, ros_now_s: Callable[[], float], tolerance_s: float = 0.05,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._ros = ros_now_s
+        self._clock = clock
+        self.tolerance_s = float(tolerance_s)
+        self._last_ros = ros_now_s()
+        self._moved_at = clock()
+        self.steps_back = 0
+        self.last_step_s = 0.0
+
+    def check(self) -> float:
+        """Call at every steady tick. Returns the backward step (s, < 0) or 0.0."""
+        ros = self._ros()
+        delta = ros - self._last_ros
+        self._last_ros = ros
+        if delta != 0.0:
+            self._moved_at = self._clock()
+        if delta < -self.tolerance_s:
+            self.steps_back += 1
+            self.last_step_s = delta
+            return delta
+        return 0.0
+
+    def stalled_for_s(self) -> float:
+        """Steady time since ROS time last moved, s."""
+        return self._clock() - self._moved_at

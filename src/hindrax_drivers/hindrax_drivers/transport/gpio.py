@@ -1,0 +1,111 @@
+"""Output lines through libgpiod (the ``gpiod`` Python bindings, v2 API), and their emulated stand-in.
+
+Used by the output guard (:mod:`hindrax_drivers.guard`) to drive the PCA9685 /OE pin (docs/architecture.md §8,
+docs/devices.md §5.1: /OE is active low; high = every output off, i.e. no pulses, which the Basic ESC treats as
+stop).
+
+Two objects with the same three methods, ``set_high(bool)``, ``is_high()`` and ``release()``:
+
+* :class:`GpiodLine`: one line requested as an output through ``gpiod.request_lines`` (libgpiod v2). On
+  ``release()`` or when the process dies the kernel frees the request; the Raspberry Pi's pinctrl driver then
+  returns the pin to an input (pinctrl-bcm2835 ``gpio_disable_free`` sets the function to GPIO_IN), so the
+  level is whatever the board's pull resistor gives. The vehicle wiring therefore puts a pull-up on /OE
+  (docs/architecture.md §8): a dead guard process leaves the outputs OFF.
+* :class:`EmulatedGpioLine`: the same line in memory, with that pull: ``release()`` returns it to the pull level.
+  The emulated PCA9685 (:class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator`) reads it to decide whether
+  its outputs carry pulses. :mod:`hindrax_drivers.transport.shared_emulation` serves it to other processes (a
+  dropped connection releases it, as the kernel does for a dead process).
+
+Why a thin wrapper of our own: the guard needs "drive high / drive low / release" and nothing else, and tests
+need the same three calls on an emulated line that a register-exact chip emulator honours.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+__all__ = ["GpiodLine", "EmulatedGpioLine", "open_output_line"]
+
+
+class GpiodLine:
+    """One GPIO line requested as an output with libgpiod v2 (``gpiod.request_lines``).
+
+    Args:
+        chip: gpiochip device path, e.g. ``/dev/gpiochip0`` (Raspberry Pi 4 header GPIOs; ``gpiochip4`` on a Pi 5).
+        line: line offset on that chip (the BCM GPIO number on a Pi 4).
+        initial_high: level driven as soon as the line is requested.
+        consumer: label shown by ``gpioinfo``.
+
+    Raises:
+        ImportError: the ``gpiod`` bindings are not installed.
+        OSError: the chip cannot be opened or the line is busy (another consumer holds it).
+    """
+
+    def __init__(self, chip: str, line: int, initial_high: bool = True, consumer: str = "hindrax-output-guard"):
+        import gpiod
+        from gpiod.line import Direction, Value
+
+        self._value = Value
+        self.chip, self.line = str(chip), int(line)
+        settings = gpiod.LineSettings(direction=Direction.OUTPUT,
+                                      output_value=Value.ACTIVE if initial_high else Value.INACTIVE)
+        self._request = gpiod.request_lines(self.chip, consumer=consumer, config={self.line: settings})
+        self._high = bool(initial_high)
+
+    def set_high(self, high: bool) -> None:
+        """Drive the line high (True) or low (False). Raises OSError when the request is gone."""
+        self._request.set_value(self.line, self._value.ACTIVE if high else self._value.INACTIVE)
+        self._high = bool(high)
+
+    def is_high(self) -> bool:
+        """The level last driven."""
+        return self._high
+
+    def release(self) -> None:
+        """Free the request (the pin returns to an input: the pull resistor decides the level)."""
+        try:
+            self._request.release()
+        except Exception:  # noqa: BLE001 - releasing on shutdown must not raise
+            pass
+
+
+class EmulatedGpioLine:
+    """An emulated output line with a pull resistor (for tests and simulation).
+
+    ``pull_high``: the level of the released line (the vehicle's /OE pull-up: True). Starts released. Thread-safe.
+    ``driven``: True while someone drives it (after :meth:`set_high`, until :meth:`release`).
+    """
+
+    def __init__(self, pull_high: bool = True) -> None:
+        self._lock = threading.Lock()
+        self.pull_high = bool(pull_high)
+        self._driven: bool | None = None  # None: released
+        self.changes = 0
+
+    def set_high(self, high: bool) -> None:
+        """Drive the line high (True) or low (False)."""
+        with self._lock:
+            self._driven = bool(high)
+            self.changes += 1
+
+    def is_high(self) -> bool:
+        """The level on the wire: the driven level, or the pull when released."""
+        with self._lock:
+            return self.pull_high if self._driven is None else self._driven
+
+    @property
+    def driven(self) -> bool:
+        """True while the line is driven (not released)."""
+        with self._lock:
+            return self._driven is not None
+
+    def release(self) -> None:
+        """Stop driving: the pull decides the level (what the kernel does when the requesting process dies)."""
+        with self._lock:
+            self._driven = None
+            self.changes += 1
+
+
+def open_output_line(chip: str, line: int, initial_high: bool = True) -> Any:
+    """A :class:`GpiodLine` on ``chip``/``line``, driven ``initial_high`` at once (see the class for errors)."""
+    return GpiodLine(chip, line, initial_high=initial_high)

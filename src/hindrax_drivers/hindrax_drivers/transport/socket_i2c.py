@@ -1,0 +1,151 @@
+"""An emulated I2C bus served to other processes over a Unix socket: ``/dev/i2c-N`` for a launch layout on a
+machine without the hardware (docs/deployment.md §9).
+
+A driver started as its own process (the vehicle's launch layout: ``ros2 launch``, or the project's
+:class:`~hindrax_drivers.process_runner.ProcessRunner` in the pool-day test and ``make bench``) opens its bus with
+:func:`~hindrax_drivers.transport.i2c.open_smbus`. When the environment variable :data:`SOCKET_ENV` names a socket,
+that function returns a :class:`SocketI2CBus` connected to it instead of ``smbus2.SMBus(n)``; an
+:class:`I2CSocketServer` in another process serves an
+:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` (the register-exact MS5837, ICM-20948 and PCA9685
+emulators) there. A transaction is then one request and one answer on the socket (two system calls and a pickle
+each way), standing in for the ``ioctl`` of a real ``smbus2.SMBus``.
+
+The failures a driver sees are a real bus's: a socket that does not exist (or refuses) is ``OSError`` from the open,
+as a missing ``/dev/i2c-N`` (the bus is "absent"); an address nobody acknowledges is ``OSError`` 121 from the
+emulator; a server that goes away mid-run makes every later call fail with ``OSError`` ENODEV, as an i2c-dev
+adapter that was removed, until the driver opens the bus again. Never set :data:`SOCKET_ENV` on the vehicle.
+
+Why our own code: the processes must share one emulated bus (the simulator reads the PCA9685's registers the ESC
+process writes), and there is no I2C-over-socket adapter in smbus2 or the kernel; ``multiprocessing.connection``
+does the framing.
+"""
+from __future__ import annotations
+
+import errno
+import socket
+import threading
+from multiprocessing.connection import Client, Listener
+from typing import Any
+
+__all__ = ["SOCKET_ENV", "I2CSocketServer", "SocketI2CBus"]
+
+#: environment variable: path of an :class:`I2CSocketServer` socket that ``open_smbus`` connects to instead of
+#: opening ``/dev/i2c-N`` (tests and benchmarks only)
+SOCKET_ENV = "HINDRAX_I2C_SOCKET"
+
+
+class SocketI2CBus:
+    """Client side of :class:`I2CSocketServer`: the ``smbus2.SMBus`` methods the drivers use, forwarded.
+
+    Raises ``OSError`` from the constructor when nobody serves ``path`` (ENOENT, ECONNREFUSED), ``OSError`` with the
+    emulator's errno for a NACK (as ``smbus2`` does), and ``OSError`` ENODEV once the connection is lost.
+    """
+
+    def __init__(self, path: str) -> None:
+        try:
+            self._conn = Client(path, family="AF_UNIX")
+        except OSError as exc:
+            raise OSError(exc.errno, f"emulated I2C bus {path}: {exc.strerror or exc}") from exc
+        self.path = path
+        self._lock = threading.Lock()
+        self._lost = False
+
+    def _call(self, name: str, *args: Any) -> Any:
+        with self._lock:
+            if self._lost:
+                raise OSError(errno.ENODEV, f"emulated I2C bus {self.path}: connection lost")
+            try:
+                self._conn.send((name, args))
+                ok, value = self._conn.recv()
+            except (EOFError, OSError) as exc:
+                self._lost = True
+                raise OSError(errno.ENODEV, f"emulated I2C bus {self.path}: connection lost ({exc!r})") from exc
+        if ok:
+            return value
+        raise OSError(*value)
+
+    def write_byte(self, addr, value, force=None):
+        return self._call("write_byte", addr, value)
+
+    def read_byte(self, addr, force=None):
+        return self._call("read_byte", addr)
+
+    def write_byte_data(self, addr, register, value, force=None):
+        return self._call("write_byte_data", addr, register, value)
+
+    def read_byte_data(self, addr, register, force=None):
+        return self._call("read_byte_data", addr, register)
+
+    def write_i2c_block_data(self, addr, register, data, force=None):
+        return self._call("write_i2c_block_data", addr, register, list(data))
+
+    def read_i2c_block_data(self, addr, register, length, force=None):
+        return self._call("read_i2c_block_data", addr, register, length)
+
+    def close(self) -> None:
+        try:
+            self._conn.close()
+        except OSError:
+            pass
+
+
+class I2CSocketServer:
+    """Serves ``bus`` (an EmulatedI2CBus, or any object with its methods) to :class:`SocketI2CBus` clients at
+    ``path``, one thread per connection; every call holds ``lock`` (share it with whatever else drives the
+    emulators, e.g. a simulator's stepping). :meth:`close` stops serving: the socket file goes and every client's
+    next call fails (a removed adapter)."""
+
+    def __init__(self, bus: Any, path: str, lock: threading.Lock | None = None) -> None:
+        self.bus, self.lock, self.path = bus, lock or threading.Lock(), path
+        self._listener = Listener(path, family="AF_UNIX")
+        self._conns: list[Any] = []
+        self._conns_lock = threading.Lock()
+        self._closed = False
+        threading.Thread(target=self._accept, name="i2c-socket-accept", daemon=True).start()
+
+    def close(self) -> None:
+        """Stop accepting connections, drop the connected clients and remove the socket file."""
+        self._closed = True
+        self._listener.close()
+        with self._conns_lock:
+            conns, self._conns = self._conns, []
+        for conn in conns:
+            try:  # wake the serving thread and the client: shut the socket down, then close it
+                with socket.fromfd(conn.fileno(), socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+                    sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            try:
+                conn.close()
+            except OSError:
+                pass
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                conn = self._listener.accept()
+            except OSError:
+                return
+            with self._conns_lock:
+                if self._closed:
+                    conn.close()
+                    return
+                self._conns.append(conn)
+            threading.Thread(target=self._serve, args=(conn,), name="i2c-socket", daemon=True).start()
+
+    def _serve(self, conn: Any) -> None:
+        while True:
+            try:
+                name, args = conn.recv()
+            except (EOFError, OSError):
+                return
+            try:
+                with self.lock:
+                    result = getattr(self.bus, name)(*args)
+                reply = (True, result)
+            except OSError as exc:
+                reply = (False, (exc.errno, str(exc)))
+            try:
+                conn.send(reply)
+            except OSError:
+                return

@@ -1,0 +1,369 @@
+"""Issue 23: no single failure leaves a thruster running (docs/architecture.md §8).
+
+Each test reproduces one finding against the register-exact PCA9685 emulator (what is on the wire), with the
+supervisor's and the guard's heartbeats from a stand-in or the real nodes. Every one of them failed on the code
+before the independent stop paths (no heartbeat, no guard, no output state, ROS-time read-back).
+"""
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+
+from hindrax_drivers.guard.core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
+from hindrax_drivers.guard.node import OutputGuardNode
+from hindrax_drivers.liveness import AliveAge, ClockStepMonitor
+from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+from hindrax_drivers.pca9685.node import EscNode
+from hindrax_drivers.testing import SafetyHeartbeats, child_env, config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_drivers.transport.gpio import EmulatedGpioLine
+from hindrax_drivers.transport.shared_emulation import EmulationServer, SharedGpioLine
+from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.srv import SetArmed
+
+TICK_US = 1.3  # one PCA9685 count at 200 Hz (docs/devices.md §5.1)
+OVER = {"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True, "esc.watchdog_timeout_s": 2.0}
+
+
+def wire(emu):
+    return np.array([emu.pulse_width_us(c) for c in range(8)])
+
+
+class Rig:
+    """ESC node on an emulated PCA9685 (with an emulated /OE line), a probe with heartbeat stand-ins, and
+    optionally the real output guard on the same bus and line."""
+
+    def __init__(self, ctx, guard=False, wired=True, sim_time=False, overrides=None):
+        self.line = EmulatedGpioLine(pull_high=True) if wired else None
+        self.emu = Pca9685Emulator(output_enable_line=self.line)
+        self.bus = EmulatedI2CBus({0x40: self.emu})
+        params = config_parameters({**OVER, **(overrides or {})})
+        if sim_time:
+            params = params + [Parameter("use_sim_time", value=True)]
+        self.esc = EscNode(bus=self.bus, context=ctx, parameter_overrides=params)
+        self.probe = rclpy.create_node("probe", context=ctx)
+        self.beats = SafetyHeartbeats(self.probe, supervisor="", guard=None if guard else "")
+        self.guard = OutputGuardNode(line=self.line, bus=None if wired else self.bus, context=ctx,
+                                     parameter_overrides=config_parameters(OVER)) if guard else None
+        self.ex = SingleThreadedExecutor(context=ctx)
+        for n in (self.esc, self.probe, self.guard):
+            if n is not None:
+                self.ex.add_node(n)
+        self.states: list[ThrusterPwm] = []
+        self.probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.states.append, 50)
+        self.cmd = self.probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        self.clock = self.probe.create_publisher(Clock, "/clock", 10)
+        self.arm_client = self.probe.create_client(SetArmed, "esc/set_armed")
+        self.ns = 200_000_000_000
+        self.sim_time = sim_time
+        if self.line is not None and not guard:
+            self.line.set_high(False)  # /OE held low (no guard in this rig)
+        self.wait(lambda: self.arm_client.service_is_ready() and self.cmd.get_subscription_count() > 0,
+                  "ESC ready")
+
+    def spin(self):
+        if self.sim_time:
+            self.ns += 2_000_000
+            c = Clock()
+            c.clock.sec, c.clock.nanosec = divmod(self.ns, 1_000_000_000)
+            self.clock.publish(c)
+        self.ex.spin_once(timeout_sec=0.005)
+
+    def wait(self, predicate, message, timeout=10.0, poll=None):
+        return wait_until(predicate, timeout, poll or self.spin, message)
+
+    def set_armed(self, value):
+        fut = self.arm_client.call_async(SetArmed.Request(arm=value))
+        self.wait(fut.done, "SetArmed answer")
+        return fut.result()
+
+    def command(self, width=1700.0):
+        self.cmd.publish(ThrusterPwm(pulse_width_us=[width] * 8))
+
+    def commanding(self):
+        self.command()
+        self.spin()
+
+    def arm_at_1700(self):
+        self.wait(lambda: not self.esc.heartbeat_refusal() and self.esc.arming_remaining_s() == 0.0, "ready to arm")
+        res = self.set_armed(True)
+        assert res.success, res.message
+        self.wait(lambda: wire(self.emu)[0] > 1690, "1700 us on the wire", poll=self.commanding)
+
+    def close(self):
+        self.ex.shutdown()
+        for n in (self.guard, self.probe, self.esc):
+            if n is not None:
+                n.destroy_node()
+
+
+@pytest.fixture
+def rig():
+    rigs = []
+    with ros_context() as ctx:
+        def make(**kwargs):
+            r = Rig(ctx, **kwargs)
+            rigs.append(r)
+            return r
+        yield make
+        for r in rigs:
+            r.close()
+
+
+# ------------------------------------------------------------------ finding 1: the supervisor's heartbeat
+def test_f1_arming_is_refused_without_a_supervisor_or_while_it_is_tripped(rig):
+    r = rig()
+    r.beats.supervisor = None  # no supervisor running
+    r.wait(lambda: not r.esc.supervisor_age.fresh(r.esc.heartbeat_timeout_s), "heartbeat stale")
+    res = r.set_armed(True)
+    assert not res.success and "no supervisor heartbeat" in res.message
+    r.beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"  # running, tripped
+    r.wait(lambda: r.esc.supervisor_age.fresh(0.1) and not r.esc.supervisor_ok, "tripped heartbeat")
+    res = r.set_armed(True)
+    assert not res.success and "supervisor tripped: depth 3.00 m" in res.message
+    r.beats.supervisor = ""
+    r.wait(lambda: r.esc.supervisor_ok, "OK heartbeat")
+    assert r.set_armed(True).success
+
+
+@pytest.mark.parametrize("failure", ["killed_or_hung", "tripped"])
+def test_f1_losing_the_supervisor_while_armed_disarms_to_neutral(rig, failure):
+    """Killed (SIGKILL) and hung (SIGSTOP) look the same from the ESC: the heartbeats stop."""
+    r = rig()
+    r.arm_at_1700()
+    r.beats.supervisor = None if failure == "killed_or_hung" else "imu/data_raw at 0.0 Hz"
+    r.wait(lambda: np.allclose(wire(r.emu), 1500.0, atol=TICK_US), "neutral on the wire", poll=r.commanding)
+    assert not r.esc.armed and r.esc.heartbeat_disarms >= 1
+    # still commanding 1700 us: nothing reaches the wire until a new arm request
+    for _ in range(20):
+        r.commanding()
+    assert np.allclose(wire(r.emu), 1500.0, atol=TICK_US)
+
+
+# ------------------------------------------------------------------ finding 2: a stop path outside the ESC
+def test_f2_esc_process_gone_while_armed_the_guard_drives_oe_high(rig):
+    r = rig(guard=True)
+    r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(), "guard released /OE at neutral")
+    r.arm_at_1700()
+    r.ex.remove_node(r.esc)  # the ESC process dies or hangs: its registers keep 1700 us
+    assert r.emu.channel_registers(0).off_count > 0
+    r.wait(lambda: r.line.is_high(), "/OE asserted")
+    assert np.all(wire(r.emu) == 0.0)  # no pulses at all: the Basic ESC stops
+    assert "ESC output state silent" in r.guard.core.reason
+    # the ESC comes back (SIGCONT): it sees the guard's ERROR heartbeat, disarms, and only then /OE is released
+    r.ex.add_node(r.esc)
+    r.wait(lambda: not r.line.is_high(), "released after the ESC disarmed", poll=r.commanding)
+    assert not r.esc.armed and np.allclose(wire(r.emu), 1500.0, atol=TICK_US)
+
+
+def test_f2_supervisor_breach_asserts_oe_too(rig):
+    r = rig(guard=True)
+    r.wait(lambda: not r.guard.core.asserted, "guard released")
+    r.arm_at_1700()
+    r.beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"
+    r.wait(lambda: r.line.is_high(), "/OE asserted on the breach", poll=r.commanding)
+    assert r.guard.core.reason.startswith("supervisor tripped")
+
+
+def test_f2_without_oe_the_guard_puts_the_chip_to_sleep_over_the_bus(rig):
+    r = rig(guard=True, wired=False)
+    r.wait(lambda: not r.guard.core.asserted, "guard released")
+    r.arm_at_1700()
+    r.ex.remove_node(r.esc)
+    r.wait(lambda: r.emu.sleeping, "chip asleep")
+    assert np.all(wire(r.emu) == 0.0)
+
+
+def test_f2_guard_start_holds_oe_until_a_live_esc_confirms_neutral():
+    core = GuardCore(timeout_s=0.2)
+    assert core.decide(math.inf, 0.0)[0]  # no ESC heard yet
+    core.on_supervisor(True, "")
+    core.on_esc(OUTPUT_COMMANDING, True)
+    assert core.decide(0.0, 0.0)[0]  # latched: an armed ESC never releases it
+    core.on_esc(OUTPUT_UNKNOWN, False)
+    assert core.decide(0.0, 0.0)[0] and "unknown" in core.reason
+    core.on_esc(OUTPUT_NEUTRAL, False)
+    assert core.decide(0.0, 0.0) == (False, True)
+    assert core.decide(0.0, 0.25)[0] and "no supervisor heartbeat" in core.reason
+
+
+_HOLDER = """
+import sys, time
+from hindrax_drivers.transport.shared_emulation import SharedGpioLine
+line = SharedGpioLine(sys.argv[1], "oe", initial_high=False)  # outputs enabled
+print("driving", flush=True)
+time.sleep(60)
+"""
+
+
+def test_f2_a_dead_guard_process_leaves_oe_high_through_the_pull_up(tmp_path):
+    """The kernel frees a dead process's line request; with the /OE pull-up the outputs go off."""
+    line = EmulatedGpioLine(pull_high=True)
+    server = EmulationServer(str(tmp_path / "emu.sock"), lines={"oe": line})
+    proc = subprocess.Popen([sys.executable, "-c", _HOLDER, server.path], env=child_env(), stdout=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout.readline().strip() == "driving"
+        assert not line.is_high() and line.driven
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        wait_until(lambda: line.is_high() and not line.driven, 5, message="line released to its pull-up")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        server.close()
+    # a client that releases explicitly (clean shutdown) does the same
+    server = EmulationServer(str(tmp_path / "emu2.sock"), lines={"oe": line})
+    client = SharedGpioLine(server.path, "oe", initial_high=False)
+    assert not line.is_high()
+    client.release()
+    wait_until(lambda: line.is_high(), 5, message="released")
+    server.close()
+
+
+# ------------------------------------------------------------------ finding 3: I2C outage while armed
+def test_f3_i2c_outage_reports_unknown_and_thrust_needs_a_new_arm_request(rig):
+    r = rig(overrides={"esc.readback_interval_s": 0.1})
+    r.arm_at_1700()
+    r.bus.disconnected = True  # the PCA9685 stops acknowledging; 1700 us stays on the wire
+    r.wait(lambda: r.states and r.states[-1].output_state == ThrusterPwm.OUTPUT_UNKNOWN, "state unknown",
+           poll=r.commanding)
+    last = r.states[-1]
+    assert not last.armed and all(math.isnan(w) for w in last.pulse_width_us)  # never "neutral", never 1700
+    assert wire(r.emu)[0] > 1690  # what is really on the wire (no /OE in this rig is held by a guard)
+    res = r.set_armed(False)
+    assert not res.success and "NOT confirmed" in res.message
+    assert not r.set_armed(True).success
+    r.bus.disconnected = False  # after 2 s in the finding; here as soon as the node has retried
+    r.wait(lambda: r.states[-1].output_state == ThrusterPwm.OUTPUT_NEUTRAL, "chip re-initialised",
+           poll=r.commanding)
+    assert np.allclose(wire(r.emu), 1500.0, atol=TICK_US)
+    for _ in range(30):  # the controller keeps commanding 1600 us: nothing without a new arm request
+        r.command(1600.0)
+        r.spin()
+    assert np.allclose(wire(r.emu), 1500.0, atol=TICK_US) and not r.esc.armed
+    assert r.esc.unknown_entries >= 1
+
+
+def test_esc_starts_without_its_bus_and_picks_it_up(monkeypatch):
+    """Issue 24 item 2: no /dev/i2c-N at start-up; the node runs, reports, retries, and uses the bus once it
+    appears, never armed by itself."""
+    import hindrax_drivers.pca9685.node as esc_module
+
+    emu = Pca9685Emulator()
+    state = {"present": False, "opens": 0}
+
+    def fake_open(bus_number):
+        state["opens"] += 1
+        if not state["present"]:
+            raise OSError(2, f"cannot open I2C bus {bus_number} (/dev/i2c-{bus_number}): No such file or directory")
+        return EmulatedI2CBus({0x40: emu})
+
+    monkeypatch.setattr(esc_module, "open_smbus", fake_open)
+    monkeypatch.delenv("HINDRAX_EMULATION_SOCKET", raising=False)
+    with ros_context() as ctx:
+        node = EscNode(context=ctx, parameter_overrides=config_parameters(OVER))
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+        wait_until(lambda: state["opens"] >= 3, 10, spin, "retries with backoff")
+        assert node.output_state == ThrusterPwm.OUTPUT_UNKNOWN
+        status = node.diag.status()
+        assert status.level == DiagnosticStatus.ERROR and "no I2C bus" in status.message
+        assert "/dev/i2c-1" in node.arm_refusal()
+        state["present"] = True
+        wait_until(lambda: node.output_state == ThrusterPwm.OUTPUT_NEUTRAL, 10, spin, "bus picked up")
+        assert np.allclose(wire(emu), 1500.0, atol=TICK_US) and not node.armed
+        ex.shutdown()
+        node.destroy_node()
+
+
+# ------------------------------------------------------------------ finding 7: /clock steps back
+def test_f7_clock_step_back_brown_out_detected_on_the_steady_clock(rig):
+    r = rig(sim_time=True, overrides={"esc.readback_interval_s": 0.5})
+    r.arm_at_1700()
+    reinits = r.esc.chip_reinits
+    r.ns -= 100_000_000_000  # /clock steps back 100 s
+    r.commanding()
+    r.emu.reset()  # brown-out: asleep, every output off
+    # before: the read-back waited for ROS time to catch up (4 s in the finding, 100 s here)
+    r.wait(lambda: r.esc.chip_reinits > reinits, "brown-out detected", timeout=3.0, poll=r.commanding)
+    assert not r.esc.armed and r.esc.clock_monitor.steps_back >= 1
+    assert r.esc.diag.counts().get("clock_step", 0) >= 1
+    r.wait(lambda: r.states[-1].output_state == ThrusterPwm.OUTPUT_NEUTRAL and not r.states[-1].armed,
+           "reported neutral, disarmed", poll=r.commanding)
+
+
+def test_f7_clock_step_monitor_and_alive_age():
+    t = {"ros": 1000.0, "steady": 0.0}
+    mon = ClockStepMonitor(lambda: t["ros"], clock=lambda: t["steady"])
+    t["ros"] += 0.02
+    t["steady"] += 0.02
+    assert mon.check() == 0.0
+    t["ros"] -= 100.0
+    assert mon.check() == pytest.approx(-100.0) and mon.steps_back == 1
+    t["steady"] += 5.0
+    mon.check()
+    assert mon.stalled_for_s() == pytest.approx(5.0)
+    age = AliveAge(0.04, clock=lambda: t["steady"])
+    age.heard()
+    t["steady"] += 3.0  # this process stalled: counts two periods at most
+    assert age.tick() == pytest.approx(0.04)
+    for _ in range(10):
+        t["steady"] += 0.02
+        age.tick()
+    assert age.age_s == pytest.approx(0.24) and not age.fresh(0.2)
+
+
+def test_esc_process_without_its_bus_keeps_running_and_reports():
+    """Issue 24 item 2, as the vehicle starts it: ``python -m hindrax_drivers.pca9685.node`` with no /dev/i2c-N
+    stays up, says why on /diagnostics, reports the output state unknown, refuses to arm, exits 0 on SIGINT."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from hindrax_drivers.config import default_config_path
+
+    assert not os.path.exists("/dev/i2c-31")
+    env = child_env()
+    env.pop("HINDRAX_EMULATION_SOCKET", None)
+    proc = subprocess.Popen([sys.executable, "-m", "hindrax_drivers.pca9685.node", "--ros-args", "--params-file",
+                             str(default_config_path()), "-p", "esc.i2c_bus:=31", "-p",
+                             "esc.oscillator_calibrated:=true"], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        with ros_context() as ctx:
+            probe = rclpy.create_node("probe", context=ctx)
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(probe)
+            diags, states = [], []
+            probe.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10)
+            probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", states.append, 10)
+            arm = probe.create_client(SetArmed, "esc/set_armed")
+            spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
+            wait_until(lambda: any("no I2C bus" in s.message and "/dev/i2c-31" in s.message
+                                   and s.level == DiagnosticStatus.ERROR for a in diags for s in a.status)
+                       and states, 20, spin, "bus error in diagnostics and the output state")
+            assert states[-1].output_state == ThrusterPwm.OUTPUT_UNKNOWN and not states[-1].armed
+            wait_until(arm.service_is_ready, 10, spin, "esc/set_armed")
+            fut = arm.call_async(SetArmed.Request(arm=True))
+            wait_until(fut.done, 10, spin, "arm answer")
+            assert not fut.result().success and "/dev/i2c-31" in fut.result().message
+            assert proc.poll() is None
+            ex.shutdown()
+            probe.destroy_node()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(10) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(5)

@@ -1,0 +1,109 @@
+"""``hindrax health [--launch PKG/FILE] [NAME:=VALUE ...] [--timeout S] [--strict] [--quiet]``: ready to dive?
+
+Listens to the running vehicle for up to ``--timeout`` seconds (default 6: two periods of the 1 Hz statuses plus
+discovery) and exits 0 when it is ready, 1 with what is missing or failing otherwise (one line each,
+:mod:`hindrax_drivers.health`). What must be there comes from the launch file the vehicle runs, read as ``ros2
+launch`` reads it (:mod:`hindrax_drivers.launch_xml`; default ``hindrax_drivers/vehicle.launch.xml``, with the
+launch arguments given as ``NAME:=VALUE``, e.g. ``record:=true`` to require the recorder): every node in the graph,
+each node's ``/diagnostics`` status OK, and ``supervisor/status`` OK. It returns as soon as everything is seen OK.
+
+The operator's check before a dive, and the Docker image's HEALTHCHECK (``--quiet``: the verdict line only).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+from .common import CommandError
+
+__all__ = ["add_arguments", "run", "collect"]
+
+DEFAULT_LAUNCH = "hindrax_drivers/vehicle.launch.xml"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--launch", default=DEFAULT_LAUNCH, metavar="PKG/FILE",
+                        help=f"the launch file the vehicle runs, as PACKAGE/FILE (default {DEFAULT_LAUNCH}) or a path")
+    parser.add_argument("launch_arguments", nargs="*", metavar="NAME:=VALUE",
+                        help="its launch arguments, as given to ros2 launch (e.g. record:=true)")
+    parser.add_argument("--timeout", type=float, default=6.0,
+                        help="wall time to listen before the verdict, s (default 6; returns earlier when ready)")
+    parser.add_argument("--strict", action="store_true", help="a WARN status is a problem too")
+    parser.add_argument("--quiet", action="store_true", help="print the verdict line only")
+
+
+def _launch_path(spec: str):
+    from pathlib import Path
+
+    from hindrax_drivers.launch_xml import ament_share
+
+    if Path(spec).is_file():
+        return Path(spec)
+    package, _, name = spec.partition("/")
+    if not name:
+        raise CommandError(f"--launch {spec}: expected PACKAGE/FILE.launch.xml or the path of a launch file")
+    return ament_share(package) / "launch" / name
+
+
+def collect(expect, timeout_s: float, done=None):
+    """Listen to the graph for up to ``timeout_s`` s (returning early once ``done(nodes, statuses, supervisor)``):
+    returns (node names, {status name: Seen}, Seen of supervisor/status or None)."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hindrax_drivers.conditions import ros_context
+    from hindrax_drivers.health import SUPERVISOR_STATUS_TOPIC, Seen
+
+    def seen(st: DiagnosticStatus) -> Seen:
+        level = st.level[0] if isinstance(st.level, (bytes, bytearray)) else int(st.level)
+        return Seen(int(level), st.message)
+
+    statuses: dict = {}
+    supervisor: list = []
+    with ros_context() as ctx:
+        node = rclpy.create_node("hindrax_health", context=ctx)
+        node.create_subscription(DiagnosticArray, "/diagnostics",
+                                 lambda msg: statuses.update({s.name: seen(s) for s in msg.status}), 50)
+        node.create_subscription(DiagnosticStatus, SUPERVISOR_STATUS_TOPIC,
+                                 lambda msg: supervisor.append(seen(msg)), 10)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        deadline = time.monotonic() + timeout_s
+        names: set = set()
+        try:
+            while time.monotonic() < deadline:
+                ex.spin_once(timeout_sec=0.1)
+                names = {n for n, _ns in node.get_node_names_and_namespaces()} - {node.get_name()}
+                if done is not None and done(names, statuses, supervisor[-1] if supervisor else None):
+                    break
+        finally:
+            ex.shutdown()
+            node.destroy_node()
+    return names, statuses, (supervisor[-1] if supervisor else None)
+
+
+def run(args: argparse.Namespace) -> int:
+    from hindrax_drivers.health import assess, expectation
+    from hindrax_drivers.launch_xml import LaunchFileError, read_launch
+
+    given = {}
+    for item in args.launch_arguments:
+        name, sep, value = item.partition(":=")
+        if not sep or not name:
+            raise CommandError(f"launch argument {item!r}: expected NAME:=VALUE")
+        given[name] = value
+    try:
+        processes = read_launch(_launch_path(args.launch), given)
+    except LaunchFileError as exc:
+        raise CommandError(f"hindrax health: {exc}") from exc
+    expect = expectation(n for p in processes for n in p.node_names)
+
+    def ready(nodes, statuses, supervisor) -> bool:
+        return assess(expect, nodes, statuses, supervisor, args.strict).ready
+
+    nodes, statuses, supervisor = collect(expect, args.timeout, ready)
+    report = assess(expect, nodes, statuses, supervisor, args.strict)
+    for line in ([report.summary()] if args.quiet else report.lines()):
+        print(line)
+    return 0 if report.ready else 1

@@ -1,0 +1,55 @@
+"""Sensor samples in, wrench out: the campaign's conditioning around a hold (docs/control.md §5).
+
+:class:`HoldLoop` owns a :class:`~hindrax_ident.identification.maneuvers.SensorState` (depth of the body origin from
+the MS5837 with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
+:class:`~hindrax_ident.identification.maneuvers.DepthEstimator` (depth and depth rate from the pressure fused with
+the vertical acceleration), exactly as the identification executive does, and hands them to a hold
+(:class:`~hindrax_ident.identification.maneuvers.HoldController` or
+:class:`~hindrax_ident.control.legacy.LegacyPDHold`). The controller node (:mod:`.node`) feeds it the samples of the
+driver topics (:mod:`hindrax_ident.identification.signals`), the evaluation (:mod:`.evaluate`) those of the
+in-process simulator. Pure, no ROS.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from hindrax_drivers.config import VehicleConfig
+
+from ..identification.estimators import measurement_settings
+from ..identification.maneuvers import DepthEstimator, SensorState
+
+__all__ = ["HoldLoop"]
+
+
+class HoldLoop:
+    """Conditioning + hold (module docstring). cfg: the vehicle file; hold: an object with the HoldController
+    interface; tick_s: the control period (s)."""
+
+    def __init__(self, cfg: VehicleConfig, hold: Any, tick_s: float) -> None:
+        self.cfg = cfg
+        self.hold = hold
+        self.tick_s = float(tick_s)
+        self.state = SensorState(cfg)
+        hv = measurement_settings(cfg, "heave")
+        self.depth = DepthEstimator(hv["std"], hv["accel_std"], hv["accel_jerk_psd"])
+
+    def add(self, samples: Iterable[tuple[str, Any]]) -> None:
+        """Condition samples ``(device, sample)`` in stamp order (the simulator's or :mod:`.signals`' form)."""
+        for dev, s in sorted(samples, key=lambda x: x[1].stamp_s):
+            self.state.on_sample(dev, s)
+            self.depth.on_sample(dev, s.stamp_s, self.state)
+
+    def depth_now(self, t_s: float) -> tuple[float, float]:
+        """(depth m, depth rate m/s) of the body origin predicted to ``t_s`` (NaN before the first depth)."""
+        return self.depth.predict_to(t_s)
+
+    def wrench(self, t_s: float, free: Sequence[str] = ()) -> np.ndarray:
+        """FRD wrench (6,) of the hold for the tick at ``t_s`` (s)."""
+        depth, rate = self.depth.predict_to(t_s)
+        if math.isfinite(rate):
+            self.hold.depth_rate_m_s = rate
+            self.hold.depth_estimate_m = depth
+        return np.asarray(self.hold.wrench(self.state, free, self.tick_s, t_s=t_s), dtype=float)

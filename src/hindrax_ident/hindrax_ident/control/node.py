@@ -1,0 +1,357 @@
+"""Controller node: depth or altitude, heading and surge/sway velocity holds as one more ``wrench`` source.
+
+A thin rclpy node over :class:`~.loop.HoldLoop` (the campaign's sensor conditioning) and
+:class:`~hindrax_ident.identification.maneuvers.HoldController` (the model-based law of :mod:`.law`, the model of
+:mod:`.model`). The ESC, the thrust allocation and the supervisor are unchanged: the controller publishes a
+``wrench`` like the identification node or a pilot, and the allocation turns it into pulse widths. Run alone:
+``ros2 run hindrax_ident controller_node --ros-args --params-file hindrax.yaml -p model_file:=identification.yaml``.
+
+Who owns ``wrench`` (docs/control.md §3): at most one source publishes at a time. The identification node publishes
+only while its ``run_identification`` goal runs; a pilot (topside joystick) only while driving. The controller
+publishes only while **enabled**, which it never is at start-up, and it **yields**: it disables itself (and says why
+in ``controller/status`` and the log) when ``identification/status`` reports a running goal, when a ``wrench``
+message it did not send arrives (a pilot took over), when the ESC output is disarmed (``thrusters/pulse_width``),
+or when its depth or attitude is older than ``control.sensor_timeout_s`` (then it publishes one zero wrench). It
+refuses to enable while a goal runs, while the ESC is disarmed or before its sensors have published. Enabling again
+is always an explicit request.
+
+Interfaces
+----------
+Services
+    ``controller/hold`` (std_srvs/Trigger): hold the current state (the measured depth, or the measured altitude when
+    an altitude setpoint was given before, the current heading, zero velocity) and enable. ``controller/enable``
+    (std_srvs/SetBool): enable with the current setpoints (none given yet: as ``hold``) or disable (one zero wrench).
+Subscribes
+    ``controller/setpoint`` (hindrax_msgs/ControlSetpoint); the sensor topics of the identification node
+    (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``); ``thrusters/pulse_width`` (armed
+    flag); ``allocation/status`` (achieved wrench: the anti-windup); ``identification/status``; ``wrench`` (other
+    writers).
+Publishes
+    ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
+    ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change.
+Parameters
+    The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
+    ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
+    ("" = the vehicle file); a file that cannot be used gives one warning line and the vehicle file's model.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from collections import deque
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.node import Node
+from sensor_msgs.msg import FluidPressure, Imu, Range
+from std_srvs.srv import SetBool, Trigger
+
+from hindrax_drivers import frames
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
+from hindrax_drivers.icm20948.mounting import mounting_rotation
+from hindrax_drivers.node_common import run_node
+from hindrax_drivers.node_parameters import node_config
+from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus, ThrusterPwm
+
+from ..identification.maneuvers import HoldController, dof_authority
+from ..identification.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
+from .law import ControlSettings
+from .loop import HoldLoop
+from .model import load_model, model_from_config
+
+__all__ = ["ControllerNode", "main", "RUNNING_PHASES"]
+
+#: identification/status phases during which the identification node owns ``wrench``.
+RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHASE_RUNNING,
+                            ManeuverStatus.PHASE_RETURNING})
+#: Period of controller/status when nothing changes, s.
+STATUS_PERIOD_S = 0.5
+
+
+class ControllerNode(Node):
+    """The controller as a ROS node (module docstring). config: a VehicleConfig (default: the node's parameters);
+    model_file: overrides the ``model_file`` parameter. Raises :class:`ConfigError` for an invalid configuration."""
+
+    def __init__(self, *, config: VehicleConfig | None = None, node_name: str = "controller",
+                 model_file: str | None = None, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        log = self.get_logger()
+        self.config = config if config is not None else node_config(self, on_error=log.error)
+        self.settings = ControlSettings.from_config(self.config)
+        if not self.has_parameter("model_file"):
+            self.declare_parameter("model_file", "" if model_file is None else model_file, ParameterDescriptor(
+                description="identification.yaml to take the control model from ('' = the vehicle file)",
+                read_only=True, additional_constraints="a readable identification.yaml, or ''"))
+        path = self.get_parameter("model_file").value if model_file is None else model_file
+        if not isinstance(path, str):
+            issue = ConfigIssue("model_file", path, "a path string or ''")
+            log.fatal(f"invalid configuration: {issue.line()}")
+            raise ConfigError([issue], f"parameters of {self.get_name()}")
+        self.model = load_model(path, self.config) if path else model_from_config(self.config)
+        for note in self.model.notes:
+            log.warn(note)
+        core = AllocationCore(self.config)
+        authority = [dof_authority(core, d) for d in DOFS]
+        s = self.settings
+        self.hold = HoldController(self.config, authority, s.depth_bandwidth_rad_s, s.hold_fraction, self.model,
+                                   s.velocity_bandwidth_rad_s / s.depth_bandwidth_rad_s, settings=s)
+        self.tick_s = 1.0 / s.rate_hz
+        self.loop = HoldLoop(self.config, self.hold, self.tick_s)
+        self._mount_t = mounting_rotation(self.config.section("sensors.icm20948")["mounting_rpy_rad"]).T
+        self._pending: list = []
+        self._last_sample_s: dict[str, float] = {}
+        self.enabled = False
+        self.message = "disabled (start-up)"
+        self._armed = False
+        self._armed_seen = False
+        self._ident_running = False
+        self._own = deque(maxlen=200)
+        self._setpoint: ControlSetpoint | None = None
+        self._last_wrench = np.zeros(6)
+        self._last_status_s = -math.inf
+        self._last_tick_s: float | None = None
+        self._report = self.hold.core.gain_report()
+        sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
+        pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
+        self.create_subscription(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20, **sub_ev)
+        self.create_subscription(FluidPressure, "pressure/fluid_pressure",
+                                 lambda m: self._add([sample_from_pressure(m)]), 20, **sub_ev)
+        self.create_subscription(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)), 50,
+                                 **sub_ev)
+        self.create_subscription(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20, **sub_ev)
+        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20, **sub_ev)
+        self.create_subscription(AllocationStatus, "allocation/status", self._on_allocation, 20, **sub_ev)
+        self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20, **sub_ev)
+        self.create_subscription(WrenchStamped, "wrench", self._on_wrench, 50, **sub_ev)
+        self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10, **sub_ev)
+        self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
+        self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10, **pub_ev)
+        self.create_service(Trigger, "controller/hold", self._on_hold)
+        self.create_service(SetBool, "controller/enable", self._on_enable)
+        self.create_timer(self.tick_s, self._on_tick)
+        log.info(f"controller ready (disabled): model {self.model.source}, {s.rate_hz:g} Hz")
+        for line in self._report:
+            log.info(line)
+
+    # ------------------------------------------------------------------ inputs
+    def _now_s(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _add(self, samples: list) -> None:
+        now = self._now_s()
+        for dev, _s in samples:
+            self._last_sample_s[dev] = now
+        self._pending.extend(samples)
+
+    def _on_pwm(self, msg: ThrusterPwm) -> None:
+        self._armed = bool(msg.armed)
+        self._armed_seen = True
+        if self.enabled and not self._armed:
+            self._disable("yielded: the ESC output is disarmed", zero=False)
+
+    def _on_allocation(self, msg: AllocationStatus) -> None:
+        if not self.enabled or msg.rejected:
+            return
+        req = frames.wrench_flu_to_frd(_wrench6(msg.requested_wrench))
+        ach = frames.wrench_flu_to_frd(_wrench6(msg.achieved_wrench))
+        self.hold.note_allocation(req, ach)
+
+    def _on_ident_status(self, msg: ManeuverStatus) -> None:
+        self._ident_running = msg.phase in RUNNING_PHASES
+        if self._ident_running and self.enabled:
+            self._disable("yielded: an identification goal is running", zero=False)
+
+    def _on_wrench(self, msg: WrenchStamped) -> None:
+        key = _key(msg)
+        if key in self._own:
+            return
+        if self.enabled:
+            self._disable("yielded: another source publishes wrench (pilot)", zero=False)
+
+    def _on_setpoint(self, msg: ControlSetpoint) -> None:
+        bad = [n for n in ("depth_m", "altitude_m", "heading_rad", "surge_m_s", "sway_m_s")
+               if not math.isfinite(getattr(msg, n))]
+        needed = {ControlSetpoint.VERTICAL_DEPTH: "depth_m", ControlSetpoint.VERTICAL_ALTITUDE: "altitude_m"}
+        if msg.vertical_mode not in (0, 1, 2) or (msg.vertical_mode in needed and needed[msg.vertical_mode] in bad) \
+                or (msg.hold_heading and "heading_rad" in bad) or (msg.hold_velocity and
+                                                                  ({"surge_m_s", "sway_m_s"} & set(bad))):
+            self.get_logger().error(f"controller/setpoint rejected: vertical_mode {msg.vertical_mode}, "
+                                    f"non-finite {', '.join(bad) or 'none'}")
+            return
+        self._setpoint = msg
+        self._apply_setpoint(msg)
+        self._publish_status(force=True)
+
+    def _apply_setpoint(self, msg: ControlSetpoint) -> None:
+        h = self.hold
+        h.depth_setpoint_m = float(msg.depth_m) if msg.vertical_mode == ControlSetpoint.VERTICAL_DEPTH else math.nan
+        h.altitude_setpoint_m = (float(msg.altitude_m) if msg.vertical_mode == ControlSetpoint.VERTICAL_ALTITUDE
+                                 else math.nan)
+        h.heading_setpoint_rad = float(msg.heading_rad) if msg.hold_heading else math.nan
+        # base_link (FLU) velocity -> body FRD: sway is to port (left) in FLU
+        h.velocity_setpoint_m_s = (np.array([float(msg.surge_m_s), -float(msg.sway_m_s)]) if msg.hold_velocity
+                                   else np.full(2, np.nan))
+
+    # ------------------------------------------------------------------ services
+    def _refusal(self) -> str:
+        if self._ident_running:
+            return "an identification goal is running (it owns wrench)"
+        if not (self._armed_seen and self._armed):
+            return "the ESC output is not armed (esc/set_armed)"
+        missing = [d for d in ("ms5837", "dvl75_attitude", "icm20948_gyro") if d not in self._last_sample_s]
+        if missing:
+            return f"no data yet from {', '.join(missing)}"
+        return ""
+
+    def _hold_current(self) -> None:
+        st = self.loop.state
+        depth, _rate = self.loop.depth_now(self._now_s())
+        msg = ControlSetpoint()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = "base_link"
+        altitude_mode = self._setpoint is not None and self._setpoint.vertical_mode == ControlSetpoint.VERTICAL_ALTITUDE
+        if altitude_mode and math.isfinite(st.altitude_m):
+            msg.vertical_mode, msg.altitude_m = ControlSetpoint.VERTICAL_ALTITUDE, float(st.altitude_m)
+        else:
+            msg.vertical_mode = ControlSetpoint.VERTICAL_DEPTH
+            msg.depth_m = float(depth if math.isfinite(depth) else st.depth_m)
+        msg.hold_heading, msg.heading_rad = True, float(np.nan_to_num(st.rpy_now()[2]))
+        msg.hold_velocity, msg.surge_m_s, msg.sway_m_s = True, 0.0, 0.0
+        self._setpoint = msg
+        self._apply_setpoint(msg)
+
+    def _on_hold(self, _request, response):
+        why = self._refusal()
+        if why:
+            response.success, response.message = False, f"not holding: {why}"
+            return response
+        self._hold_current()
+        self._enable("holding the current state")
+        response.success, response.message = True, self.message
+        return response
+
+    def _on_enable(self, request, response):
+        if not request.data:
+            if self.enabled:
+                self._disable("disabled on request", zero=True)
+            response.success, response.message = True, self.message
+            return response
+        why = self._refusal()
+        if why:
+            response.success, response.message = False, f"not enabled: {why}"
+            return response
+        if self._setpoint is None:
+            self._hold_current()
+        self._enable("enabled")
+        response.success, response.message = True, self.message
+        return response
+
+    def _enable(self, why: str) -> None:
+        self.hold.core.reset()  # references start from the measured state, integrators empty
+        self.enabled = True
+        self.message = why
+        self.get_logger().info(f"controller: {why}")
+        self._publish_status(force=True)
+
+    def _disable(self, why: str, zero: bool) -> None:
+        self.enabled = False
+        self.message = why
+        if why.startswith(("yielded", "stopped")):
+            self.get_logger().warn(f"controller: {why}")
+        else:
+            self.get_logger().info(f"controller: {why}")
+        if zero:
+            self._publish_wrench(np.zeros(6))
+        self._publish_status(force=True)
+
+    # ------------------------------------------------------------------ control tick
+    def _on_tick(self) -> None:
+        t = self._now_s()
+        self.loop.add(self._pending)
+        self._pending = []
+        self._last_tick_s = t
+        if self.enabled:
+            stale = [d for d in ("ms5837", "dvl75_attitude") if t - self._last_sample_s.get(d, -math.inf)
+                     > self.settings.sensor_timeout_s]
+            if stale:
+                self._disable(f"stopped: no {', '.join(stale)} for {self.settings.sensor_timeout_s:g} s", zero=True)
+            else:
+                w = self.loop.wrench(t)
+                if np.all(np.isfinite(w)):
+                    self._publish_wrench(w)
+                else:
+                    self._disable("stopped: the law gave a non-finite wrench", zero=True)
+        self._publish_status()
+
+    def clock_may_advance(self, t_s: float) -> bool:
+        """Step gate for a simulator in the same process: False while enabled and the tick due at ``t_s`` has not
+        run yet (the simulation never runs ahead of the control loop)."""
+        if not self.enabled or self._last_tick_s is None:
+            return True
+        return t_s + 1e-6 < self._last_tick_s + self.tick_s
+
+    def _publish_wrench(self, w_frd: np.ndarray) -> None:
+        w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
+        m = WrenchStamped()
+        m.header.stamp = self.get_clock().now().to_msg()
+        m.header.frame_id = "base_link"
+        m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(x) for x in w[:3])
+        m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(x) for x in w[3:])
+        self._own.append(_key(m))
+        self._last_wrench = w
+        self.pub_wrench.publish(m)
+
+    def _publish_status(self, force: bool = False) -> None:
+        t = self._now_s()
+        if not force and t - self._last_status_s < STATUS_PERIOD_S - 1e-9:
+            return
+        self._last_status_s = t
+        h, st = self.hold, self.loop.state
+        m = ControllerStatus(enabled=self.enabled, message=self.message)
+        m.header.stamp = self.get_clock().now().to_msg()
+        m.header.frame_id = "base_link"
+        sp = self._setpoint
+        m.vertical_mode = 0 if sp is None else int(sp.vertical_mode)
+        m.depth_setpoint_m = float(h.depth_setpoint_m)
+        m.altitude_setpoint_m = float(h.altitude_setpoint_m)
+        m.heading_setpoint_rad = float(h.heading_setpoint_rad)
+        v = np.asarray(h.velocity_setpoint_m_s, dtype=float)
+        m.surge_setpoint_m_s, m.sway_setpoint_m_s = float(v[0]), float(-v[1])
+        depth, _ = self.loop.depth_now(t)
+        m.depth_m = float(depth)
+        m.altitude_m = float(st.altitude_m)
+        m.heading_rad = float(st.rpy_now()[2])
+        w = self._last_wrench
+        m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(x) for x in w[:3])
+        m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(x) for x in w[3:])
+        m.model_source = self.model.source
+        m.gain_report = list(self._report)
+        self.pub_status.publish(m)
+
+    def close(self) -> None:
+        """Shutdown path: while enabled, one zero wrench (the allocation's timeout would also stop the thrusters)."""
+        if self.enabled:
+            self._disable("stopped: node shutting down", zero=True)
+
+
+def _wrench6(w) -> np.ndarray:
+    return np.array([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z], dtype=float)
+
+
+def _key(msg: WrenchStamped) -> tuple:
+    """Identity of a wrench message: its stamp and values (a foreign writer would have to match all of them)."""
+    return (msg.header.stamp.sec, msg.header.stamp.nanosec) + tuple(round(float(x), 9) for x in _wrench6(msg.wrench))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_drivers.node_common.run_node`). Returns the exit status
+    (1 on an invalid configuration)."""
+    return run_node(ControllerNode, args)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

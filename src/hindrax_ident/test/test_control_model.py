@@ -1,0 +1,130 @@
+"""The control model: the vehicle file's, identification.yaml with its verdicts, and bad input (docs/control.md §4).
+
+Expected values are the vehicle file's printed numbers ([Hindrax-AM] Table 6, [Hindrax-Drag] Table 3) and the values
+written into the test's own identification files, not recomputed by the loader."""
+import math
+
+import pytest
+import yaml
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident.control.model import VEHICLE_FILE, load_model, model_from_config
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_config(default_config_path())
+
+
+def test_vehicle_file_model(cfg):
+    m = model_from_config(cfg)
+    heave = m.axis("heave")
+    assert heave.inertia == pytest.approx(15.22 + 22.48)  # mass + [Hindrax-AM] Table 6 heave added mass
+    assert heave.quadratic_damping_positive == pytest.approx(93.52)  # [Hindrax-Drag] Table 3, down
+    assert heave.linear_damping_negative == pytest.approx(11.84)
+    assert heave.bias == pytest.approx(1000.0 * 9.81 * 0.0153 - 15.22 * 9.81)  # (rho V - m) g
+    assert m.axis("roll").restoring == pytest.approx(0.03 * 1000.0 * 9.81 * 0.0153)  # CB 3 cm above the CG
+    assert m.axis("yaw").inertia == pytest.approx(0.7217 + 0.55)
+    # no stated uncertainty of the file's added mass: the declared thrust uncertainty, RMS of [0.05, 0.10]
+    assert heave.inertia_rel_std == pytest.approx(math.sqrt((0.05 ** 2 + 0.10 ** 2) / 2))
+    assert heave.damping(0.2) == pytest.approx(5.26 * 0.2 + 93.52 * 0.04)
+    assert heave.damping(-0.2) == pytest.approx(-(11.84 * 0.2 + 56.57 * 0.04))
+    assert m.notes == ()
+    assert set(heave.sources.values()) == {VEHICLE_FILE}
+
+
+def _par(value, std, verdict="trusted", reasons=()):
+    return {"value": value, "std": std, "unit": "x", "verdict": verdict, "reasons": list(reasons)}
+
+
+def _doc(cfg, heave=None, sha=None, joint=None):
+    heave = heave or {
+        "inertia": _par(50.0, 2.0), "added_mass": _par(34.78, 2.0),
+        "quadratic_damping_positive": _par(120.0, 10.0), "quadratic_damping_negative": _par(80.0, 5.0),
+        "linear_damping_positive": _par(8.0, 1.0), "linear_damping_negative": _par(15.0, 1.0),
+        "bias": _par(0.95, 0.1)}
+    doc = {"schema_version": 1, "provenance": {"source": "simulation", "date": "2026-11-22T00:00:00+00:00",
+                                               "configuration_sha256": cfg.sha256 if sha is None else sha,
+                                               "water_density_kg_m3": 1000.0, "method": "test", "seed": 1},
+           "dofs": {"heave": heave, "yaw": {"inertia": _par(1.8, 0.1), "added_mass": _par(1.08, 0.1),
+                                            "quadratic_damping": _par(0.9, 0.05), "linear_damping": _par(2.5, 0.2),
+                                            "bias": _par(0.0, 0.001)}},
+           "a_future_key": {"anything": [1, 2, 3]}}
+    if joint:
+        doc["joint"] = joint
+    return doc
+
+
+def _write(tmp_path, doc, name="identification.yaml"):
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(doc))
+    return p
+
+
+def test_identified_values_and_their_sources(cfg, tmp_path):
+    m = load_model(_write(tmp_path, _doc(cfg)), cfg)
+    h = m.axis("heave")
+    assert h.inertia == 50.0 and h.quadratic_damping_positive == 120.0 and h.linear_damping_negative == 15.0
+    assert h.bias == 0.95
+    assert h.inertia_rel_std == pytest.approx(2.0 / 50.0)
+    assert h.sources["inertia"] == "identified" and h.sources["damping"] == "identified"
+    assert m.axis("yaw").inertia == 1.8 and m.axis("yaw").quadratic_damping_negative == 0.9  # both directions
+    # DOFs the file does not hold keep the vehicle file's values, and the notes say so
+    assert m.axis("surge").inertia == pytest.approx(15.22 + 12.08)
+    assert any("surge" in n and "vehicle file" in n for n in m.notes)
+
+
+def test_suspect_parameter_falls_back_unless_the_reason_is_only_the_thrust_curve(cfg, tmp_path):
+    whiteness = "residuals not white (lag-1 autocorrelation 0.44 > 0.2)"
+    thrust = ("heave bias differs from the configured net buoyancy (z = +4.1): the thrust curves do not match the "
+              "vehicle, every thrust-derived parameter is suspect")
+    bias = "bias +0.952 N differs from the expected +0.785 N (z = +3.3): an unmodelled force (current, tether, thrust offset)"
+    doc = _doc(cfg)
+    doc["dofs"]["heave"]["inertia"] = _par(50.0, 2.0, "suspect", [bias])
+    doc["dofs"]["heave"]["quadratic_damping_positive"] = _par(120.0, 10.0, "suspect", [bias, whiteness])
+    doc["dofs"]["yaw"]["inertia"] = _par(1.8, 0.1, "suspect", [thrust])
+    doc["dofs"]["yaw"]["linear_damping"] = _par(-0.3, 0.2)
+    m = load_model(_write(tmp_path, doc), cfg)
+    h = m.axis("heave")
+    assert h.inertia == 50.0  # suspect only because the holding force differs: used (commanded-thrust units)
+    assert h.quadratic_damping_positive == pytest.approx(93.52)  # not white: the vehicle file's value
+    assert "residuals not white" in h.sources["damping"]
+    assert m.axis("yaw").inertia == 1.8  # suspect only because the thrust curve is off: used
+    assert m.axis("yaw").linear_damping_positive == pytest.approx(1.47)  # negative: the vehicle file's
+    assert "< 0" in m.axis("yaw").sources["damping"]
+
+
+def test_calibrated_identification_is_divided_by_its_thrust_scale(cfg, tmp_path):
+    joint = {"scales": {"vertical": {"value": 0.8, "std": 0.01, "dofs": ["heave"]}}}
+    m = load_model(_write(tmp_path, _doc(cfg, joint=joint)), cfg)
+    assert m.axis("heave").inertia == pytest.approx(50.0 / 0.8)
+    assert m.axis("heave").bias == pytest.approx(0.95 / 0.8)
+    assert m.axis("yaw").inertia == 1.8  # not in the vertical group
+    assert any("thrust scale" in n for n in m.notes)
+
+
+@pytest.mark.parametrize("content, words", [
+    (None, "cannot read"),
+    ("dofs: [unclosed", "not valid YAML"),
+    ("just a string\n", "no 'dofs' mapping"),
+])
+def test_bad_files_fall_back_with_one_line(cfg, tmp_path, content, words):
+    p = tmp_path / "identification.yaml"
+    if content is not None:
+        p.write_text(content)
+    m = load_model(p, cfg)
+    assert m.source == VEHICLE_FILE
+    assert len(m.notes) == 1 and "\n" not in m.notes[0]
+    assert words in m.notes[0] and "using the vehicle file" in m.notes[0]
+    assert m.axis("heave").inertia == pytest.approx(15.22 + 22.48)
+
+
+def test_another_vehicle_falls_back(cfg, tmp_path):
+    m = load_model(_write(tmp_path, _doc(cfg, sha="ab" * 32)), cfg)
+    assert m.source == VEHICLE_FILE
+    assert len(m.notes) == 1 and "another vehicle configuration" in m.notes[0]
+    assert m.axis("heave").inertia == pytest.approx(15.22 + 22.48)
+    doc = _doc(cfg)
+    doc["provenance"]["configuration_sha256"] = None  # hindrax ident fit without --config
+    m = load_model(_write(tmp_path, doc), cfg)
+    assert m.source == VEHICLE_FILE and "configuration_sha256" in m.notes[0]

@@ -1,0 +1,157 @@
+"""The controller node in the virtual pool graph (docs/control.md §3): refuses before arming, holds the current state,
+follows depth and altitude setpoints (checked on the simulator's truth), and yields ``wrench`` to a pilot and to a
+running identification goal; a bad model file gives one warning line and the vehicle file's model."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from std_srvs.srv import SetBool, Trigger
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_msgs.msg import ControllerStatus, ControlSetpoint, ManeuverStatus
+from hindrax_msgs.srv import SetArmed
+
+
+def _call(client, request, spin):
+    f = client.call_async(request)
+    wait_until(f.done, 20, spin, f"{client.srv_name} answer")
+    return f.result()
+
+
+@pytest.mark.ros
+def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
+    bad = tmp_path / "identification.yaml"
+    bad.write_text("dofs: [unclosed")
+    with ros_context() as ctx:
+        from hindrax_ident.bringup import build_graph
+
+        graph = build_graph(default_config_path(), sim=True, context=ctx, seed=5, controller=True, drive_clocks=True,
+                            model_file=str(bad), overrides={"esc.arming_time_s": 1.0,
+                                                           "simulation.real_time_factor": 0.0})
+        probe = rclpy.create_node("pool_operator", context=ctx)
+        graph.executor.add_node(probe)
+        sim = graph.nodes["simulator"].simulator
+        ctrl = graph.nodes["controller"]
+        status: list[ControllerStatus] = []
+        wrenches: list[WrenchStamped] = []
+        probe.create_subscription(ControllerStatus, "controller/status", status.append, 100)
+        probe.create_subscription(WrenchStamped, "wrench", wrenches.append, 100)
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        hold = probe.create_client(Trigger, "controller/hold")
+        enable = probe.create_client(SetBool, "controller/enable")
+        setpoint = probe.create_publisher(ControlSetpoint, "controller/setpoint", 10)
+        pilot = probe.create_publisher(WrenchStamped, "wrench", 10)
+        ident = probe.create_publisher(ManeuverStatus, "identification/status", 10)
+        spin = lambda: graph.spin_once(0.005)  # noqa: E731
+        try:
+            # the bad model file: the vehicle file's model, said in one line
+            assert ctrl.model.source == "vehicle file" and len(ctrl.model.notes) == 1
+            assert "not valid YAML" in ctrl.model.notes[0]
+            wait_until(lambda: hold.service_is_ready() and enable.service_is_ready(), 30, spin, "controller services")
+            r = _call(hold, Trigger.Request(), spin)
+            assert not r.success and "not armed" in r.message
+            assert graph.start_and_arm(arm, 60).success
+            wait_until(lambda: ctrl._armed, 30, spin, "ESC reporting armed")
+            r = _call(hold, Trigger.Request(), spin)
+            assert r.success, r.message
+            wait_until(lambda: any(s.enabled for s in status), 10, spin, "enabled status")
+            # depth 0.6 m, heading north
+            sp = ControlSetpoint(vertical_mode=ControlSetpoint.VERTICAL_DEPTH, depth_m=0.6, hold_heading=True,
+                                 heading_rad=0.0, hold_velocity=True)
+            setpoint.publish(sp)
+            t0 = sim.t_s
+            wait_until(lambda: sim.t_s > t0 + 10.0, 120, spin, "10 s of holding")
+            assert sim.position_ned_m[2] == pytest.approx(0.6, abs=0.03)
+            assert abs(math.remainder(sim.euler_rad[2], 2 * math.pi)) < math.radians(3.0)
+            # altitude 1.0 m (Ping1D range): the pool is 1.8 m deep, the altimeter 0.18 m below base_link
+            sp = ControlSetpoint(vertical_mode=ControlSetpoint.VERTICAL_ALTITUDE, altitude_m=1.0, hold_heading=True,
+                                 heading_rad=0.0, hold_velocity=True)
+            setpoint.publish(sp)
+            t0 = sim.t_s
+            wait_until(lambda: sim.t_s > t0 + 10.0, 120, spin, "10 s of altitude hold")
+            ping_z = float(load_config(default_config_path()).flat["sensors.ping1d.position_frd_m"][2])
+            assert 1.8 - (sim.position_ned_m[2] + ping_z) == pytest.approx(1.0, abs=0.03)
+            assert status[-1].enabled and status[-1].vertical_mode == ControlSetpoint.VERTICAL_ALTITUDE
+            # a pilot publishes: the controller yields and stops publishing
+            w = WrenchStamped()
+            w.header.frame_id = "base_link"
+            w.header.stamp = probe.get_clock().now().to_msg()
+            pilot.publish(w)
+            wait_until(lambda: not ctrl.enabled, 10, spin, "yield to the pilot")
+            assert "another source" in ctrl.message
+            ours = lambda: [m for m in wrenches if m.header.stamp != w.header.stamp]  # noqa: E731
+            t0 = sim.t_s
+            wait_until(lambda: sim.t_s > t0 + 0.2, 30, spin, "messages in flight")
+            n = len(ours())
+            t0 = sim.t_s
+            wait_until(lambda: sim.t_s > t0 + 1.0, 30, spin, "a second without the controller")
+            assert len(ours()) == n  # nothing from the controller
+            # enabled again on request; then an identification goal runs: it yields, and refuses to enable
+            assert _call(enable, SetBool.Request(data=True), spin).success
+            wait_until(lambda: len(ours()) > n + 5, 10, spin, "wrench again")
+            ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING, dof="surge"))
+            wait_until(lambda: not ctrl.enabled, 10, spin, "yield to the identification")
+            assert "identification" in ctrl.message
+            r = _call(enable, SetBool.Request(data=True), spin)
+            assert not r.success and "identification goal is running" in r.message
+            ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_DONE))
+            wait_until(lambda: not ctrl._ident_running, 10, spin, "identification done")
+            assert _call(enable, SetBool.Request(data=True), spin).success
+            assert _call(enable, SetBool.Request(data=False), spin).success
+            assert not ctrl.enabled
+            def last_is_zero():
+                x = wrenches[-1].wrench
+                return np.allclose([x.force.x, x.force.y, x.force.z, x.torque.x, x.torque.y, x.torque.z], 0.0)
+
+            wait_until(last_is_zero, 10, spin, "a zero wrench after the disable on request")
+            assert any("Kp" in line for line in status[-1].gain_report)
+        finally:
+            graph.shutdown()
+            probe.destroy_node()
+
+
+@pytest.mark.ros
+def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
+    """``python -m hindrax_ident.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
+    the model of a file for another vehicle (one warning, the vehicle file), SIGINT -> 0; a bad ``control.*`` value
+    -> 1 with one line naming key, value and allowed range."""
+    import signal
+    import subprocess
+
+    import yaml
+
+    from hindrax_drivers.testing import child_env, python_executable
+
+    other = tmp_path / "identification.yaml"
+    other.write_text(yaml.safe_dump({"schema_version": 1, "provenance": {"configuration_sha256": "0" * 64},
+                                     "dofs": {"heave": {"inertia": {"value": 50.0, "std": 1.0, "unit": "kg"}}}}))
+    cmd = [python_executable(), "-m", "hindrax_ident.control.node", "--ros-args", "--params-file",
+           str(default_config_path())]
+    bad = subprocess.run(cmd + ["-p", "control.hold_fraction:=1.5"], env=child_env(), capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 1, bad.stderr
+    assert bad.stderr.splitlines()[-1] == ("invalid configuration: parameters of controller (defaults from "
+                                           f"{default_config_path()}): control.hold_fraction = 1.5: allowed number in "
+                                           "[0.05, 1]")
+    proc = subprocess.Popen(cmd + ["-p", f"model_file:={other}"], env=child_env(), stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    try:
+        lines = []
+        for line in proc.stdout:  # the node logs once when ready
+            lines.append(line)
+            if "controller ready" in line:
+                break
+        text = "".join(lines)
+        assert "controller ready (disabled): model vehicle file" in text, text
+        assert sum("another vehicle configuration" in x for x in lines) == 1
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=30) == 0, proc.stdout.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -1,0 +1,75 @@
+"""docs/results.md sections are replaced one at a time, atomically, and never by a test run by accident."""
+from __future__ import annotations
+
+import json
+import subprocess
+
+import pytest
+
+from hindrax_drivers.testing import child_env, python_executable
+from hindrax_ident.results_doc import ResultsDocError, markdown_table, write_section
+
+
+def test_sections_are_created_replaced_and_kept_apart(tmp_path):
+    doc = tmp_path / "results.md"
+    write_section(doc, "bench", "Benchmarks", "old bench", "make bench")
+    write_section(doc, "scenarios", "Scenario suite", "table A", "hindrax ident scenarios")
+    write_section(doc, "bench", "Benchmarks", "new bench", "make bench")
+    text = doc.read_text()
+    assert text.startswith("# Measured results")
+    assert "new bench" in text and "old bench" not in text
+    assert "table A" in text
+    assert text.count("<!-- results:bench:begin -->") == 1
+    # order kept: bench was written first, so it stays before the scenarios section
+    assert text.index("new bench") < text.index("table A")
+    assert "Written by `make bench`" in text
+
+
+def test_text_outside_the_sections_is_kept(tmp_path):
+    doc = tmp_path / "results.md"
+    doc.write_text("# Measured results\n\nHand-written intro.\n")
+    write_section(doc, "control", "Control", "x", "hindrax control evaluate")
+    write_section(doc, "control", "Control", "y", "hindrax control evaluate")
+    text = doc.read_text()
+    assert "Hand-written intro." in text and text.rstrip().endswith("<!-- results:control:end -->")
+    assert "\ny\n" in text and "\nx\n" not in text
+
+
+def test_broken_markers_write_nothing(tmp_path):
+    doc = tmp_path / "results.md"
+    original = "# R\n<!-- results:bench:end -->\nkeep me\n<!-- results:bench:begin -->\n"
+    doc.write_text(original)
+    with pytest.raises(ResultsDocError, match="broken pair of markers"):
+        write_section(doc, "bench", "Benchmarks", "z", "make bench")
+    assert doc.read_text() == original
+    assert [p.name for p in tmp_path.iterdir()] == ["results.md"]  # no temporary file left
+
+
+def test_bad_name_and_missing_folder(tmp_path):
+    with pytest.raises(ResultsDocError, match="allowed"):
+        write_section(tmp_path / "r.md", "Bad Name", "t", "b", "c")
+    with pytest.raises(FileNotFoundError):
+        write_section(tmp_path / "nope" / "r.md", "bench", "t", "b", "c")
+
+
+def test_markdown_table_escapes_pipes():
+    assert markdown_table(["a", "b"], [[1, "x|y"]]).splitlines() == ["| a | b |", "|---|---|", "| 1 | x\\|y |"]
+
+
+def test_bench_writes_its_section_only_when_asked(tmp_path):
+    """``python -m hindrax_ident.bench --results-doc PATH`` writes the rows of its results.json into PATH's section,
+    names the command, and leaves the other sections alone; without the option it writes no document."""
+    doc = tmp_path / "results.md"
+    write_section(doc, "scenarios", "Scenario suite", "| a |\n|---|\n| kept |", "hindrax ident scenarios")
+    cmd = [python_executable(), "-m", "hindrax_ident.bench", "--only", "cli", "--quick", "--out", str(tmp_path / "b")]
+    r = subprocess.run(cmd + ["--results-doc", str(doc)], env=child_env(), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    text = doc.read_text()
+    assert "| kept |" in text  # the other section survives
+    section = text[text.index("<!-- results:bench-cli:begin -->"):text.index("<!-- results:bench-cli:end -->")]
+    assert "`python -m hindrax_ident.bench --only cli --quick" in section
+    rows = json.loads((tmp_path / "b" / "results.json").read_text())["rows"]
+    assert rows and all(f"| cli | {row['name']} | " in section for row in rows)
+    other = tmp_path / "untouched.md"
+    r = subprocess.run(cmd, env=child_env(), capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert r.returncode == 0 and not other.exists() and "results: section" not in r.stdout

@@ -1,0 +1,146 @@
+"""A sloped pool floor (truth ``disturbances.floor.gradient``): altitudes, Ping1D and DVL beam ranges, contact, and the
+DVL beam ranges through the emulator and driver message into the campaign's sensor samples.
+
+Expected values are plain geometry written out here (a ray from a point along a direction to the plane
+z = D + g_n (x - L/2) + g_e (y - W/2)), not the simulator's own ray caster."""
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.dvl75.protocol import BEAM_TILT_RAD
+from hindrax_ident.identification.maneuvers import SensorState
+from hindrax_ident.identification.signals import samples_from_dvl
+from hindrax_ident.sim.simulator import Simulator
+from hindrax_ident.sim.truth import TruthError, load_truth, truth_from_mapping, with_floor_gradient
+
+GRAD = (-0.08, 0.03)
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    return load_config(default_config_path())
+
+
+def plane_depth(cfg, x, y, g=GRAD):
+    f = cfg.flat
+    return f["pool.depth_m"] + g[0] * (x - 0.5 * f["pool.length_m"]) + g[1] * (y - 0.5 * f["pool.width_m"])
+
+
+def test_floor_gradient_moves_the_floor_and_the_dvl_altitude(cfg):
+    sim = Simulator(cfg, truth=with_floor_gradient(load_truth(cfg), GRAD))
+    pool = sim.pool
+    # 2 m north of the centre the floor is 0.16 m shallower, 1 m east 0.03 m deeper
+    assert pool.floor_depth_m(7.0, 4.0) == pytest.approx(1.8 - 0.16 + 0.03)
+    assert pool.altitude_m([7.0, 4.0, 1.0]) == pytest.approx(1.8 - 0.16 + 0.03 - 1.0)
+    # default truth: flat
+    flat = Simulator(cfg).pool
+    assert flat.floor_depth_m(7.0, 4.0) == pytest.approx(1.8)
+
+
+def test_ping_and_dvl_beams_see_the_slope(cfg):
+    """A level vehicle: the Ping1D range along body z, and each beam tilted 22.5 deg, hit the sloped plane where the
+    hand-solved ray meets it."""
+    truth = truth_from_mapping(cfg, {"simulation": {"sensors": {"ping1d": {"noise_std_m": 0.0, "dropout_probability": 0.0},
+                                                               "dvl75": {"noise_std_m_s": 0.0, "scale_error_fraction": 0.0,
+                                                                         "dropout_probability": 0.0}}}})
+    sim = Simulator(cfg, truth=with_floor_gradient(truth, GRAD))
+    x0, y0, z0 = 3.0, 2.5, 1.0
+    sim.reset(position_ned_m=[x0, y0, z0], rpy_rad=[0.0, 0.0, 0.0])
+    samples = {}
+    sim.add_sensor_listener(lambda dev, s: samples.setdefault(dev, s))
+    sim.advance(0.2, [1500.0] * 8)
+    ping = np.asarray(cfg.flat["sensors.ping1d.position_frd_m"])
+    px, py, pz = x0 + ping[0], y0 + ping[1], z0 + ping[2]
+    assert samples["ping1d"].distance_m == pytest.approx(plane_depth(cfg, px, py) - pz, abs=2e-3)  # body moved < 2 mm
+    dvl = np.asarray(cfg.flat["sensors.dvl75.position_frd_m"])
+    s, c = math.sin(BEAM_TILT_RAD), math.cos(BEAM_TILT_RAD)
+    p = sim.position_ned_m + dvl
+    h = plane_depth(cfg, p[0], p[1]) - p[2]
+    expected = []
+    for d in ((0.0, -s, c), (-s, 0.0, c), (0.0, s, c), (s, 0.0, c)):  # port, stern, starboard, bow
+        expected.append(h / (d[2] - GRAD[0] * d[0] - GRAD[1] * d[1]))
+    got = samples["dvl75"].beam_range_m
+    for g, e in zip(got, expected):
+        assert g == pytest.approx(e, rel=0.05)  # 1 % range noise in the default truth
+    # the bow beam looks up-slope (north, shallower): shorter than the stern beam
+    assert got[3] < got[1]
+
+
+def test_vehicle_rests_on_the_sloped_floor(cfg):
+    """A sinking vehicle (net buoyancy negative) comes to rest on the floor under its hull centre."""
+    truth = truth_from_mapping(cfg, {"vehicle": {"mass_kg": 15.4, "net_buoyancy_n": -0.98}})
+    sim = Simulator(cfg, truth=with_floor_gradient(truth, GRAD), sensors=False)
+    sim.reset(position_ned_m=[7.0, 3.0, 1.0])
+    sim.advance(20.0, [1500.0] * 8)
+    f = cfg.flat
+    cb = cfg.centre_of_buoyancy_frd_m
+    bottom = sim.position_ned_m[2] + cb[2] + 0.5 * f["vehicle.height_m"]
+    floor = plane_depth(cfg, sim.position_ned_m[0] + cb[0], sim.position_ned_m[1] + cb[1])
+    assert bottom == pytest.approx(floor, abs=0.01)
+    assert "floor" in sim.contact.faces
+
+
+def test_floor_gradient_out_of_range_is_one_line(cfg):
+    with pytest.raises(TruthError, match="floor.gradient"):
+        truth_from_mapping(cfg, {"disturbances": {"floor": {"gradient": [0.9, 0.0]}}})
+
+
+def test_dvl_emulator_reports_the_simulated_beam_ranges():
+    """Through the emulator on a pty and the driver's parser: $DVEXT carries the sloped floor's beam ranges."""
+    import serial
+
+    from hindrax_drivers.dvl75 import protocol as dvl
+    from hindrax_drivers.testing import wait_until
+    from hindrax_ident.sim.hardware import VirtualHardware
+
+    vehicle = load_config(default_config_path())
+    sim = Simulator(vehicle, seed=3, truth=with_floor_gradient(load_truth(vehicle), (-0.15, 0.0)))
+    vh = VirtualHardware(sim, sim.config)
+    try:
+        sim.reset(position_ned_m=[5.0, 3.0, 1.0])
+        port = serial.serial_for_url(vh.dvl_port, baudrate=115200, timeout=0.05)
+        framer = dvl.DvlLineFramer()
+        records = []
+
+        def poll():
+            sim.advance(0.02)
+            for line in framer.feed(port.read(4096)):
+                try:
+                    records.append(dvl.parse_line(line))
+                except dvl.DvlParseError:
+                    pass
+
+        try:
+            wait_until(lambda: any(isinstance(r, dvl.DvlExtended) and r.locked for r in records), 20, poll,
+                       "$DVEXT report with lock")
+        finally:
+            port.close()
+        ext = [r for r in records if isinstance(r, dvl.DvlExtended) and r.locked][-1]
+        port_b, stern, starboard, bow = ext.beam_range_m
+        p = sim.position_ned_m + np.asarray(vehicle.flat["sensors.dvl75.position_frd_m"])
+        h = plane_depth(vehicle, p[0], p[1], (-0.15, 0.0)) - p[2]
+        s, c = math.sin(BEAM_TILT_RAD), math.cos(BEAM_TILT_RAD)
+        assert bow == pytest.approx(h / (c + 0.15 * s), rel=0.05)  # up-slope
+        assert stern == pytest.approx(h / (c - 0.15 * s), rel=0.05)  # down-slope
+        assert port_b == pytest.approx(h / c, rel=0.05)
+    finally:
+        vh.close()
+
+
+def test_beam_ranges_reach_the_sensor_state_from_a_driver_message():
+    """hindrax_msgs/Dvl beam_range_m / beam_lock -> the dvl75 sample -> SensorState (NaN for an unlocked beam)."""
+    cfg = load_config(default_config_path())
+    msg = SimpleNamespace(
+        header=SimpleNamespace(stamp=SimpleNamespace(sec=10, nanosec=0)), delta_time_s=0.1,
+        orientation=SimpleNamespace(x=0.0, y=0.0, z=0.0, w=1.0), velocity_m_s=SimpleNamespace(x=0.1, y=0.0, z=0.0),
+        velocity_valid=True, beam_range_m=[0.61, 0.60, -1.0, 0.55], beam_lock=[True, True, False, True])
+    st = SensorState(cfg)
+    for dev, s in samples_from_dvl(msg):
+        st.on_sample(dev, s)
+    assert st.dvl_beam_stamp_s == pytest.approx(10.0)
+    assert st.dvl_beam_range_m[0] == pytest.approx(0.61)
+    assert math.isnan(st.dvl_beam_range_m[2])
+    assert st.dvl_beam_range_m[3] == pytest.approx(0.55)

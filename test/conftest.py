@@ -1,0 +1,126 @@
+"""Fixtures of the system tests: the colcon install of the workspace, built once and shared.
+
+``colcon_install`` builds a copy of the repository's workspace with ``make ros-install`` (colcon against the venv's
+ROS wheels, as the vehicle builds it against /opt/ros/jazzy; about 50 s on two idle cores, 100-200 s on a shared
+machine) and returns the install space with the environment of a shell that sourced it. The build goes to
+``build/colcon-test/<hash of its inputs>/`` under a file lock: the pytest-xdist workers (and later runs with the
+same sources) use the same build instead of repeating it; any change to the inputs (src/ without tests,
+ros_ws/config, the Makefile, the requirements, the venv) makes a new one.
+"""
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+VENV = Path(sys.prefix)
+CACHE = REPO / "build" / "colcon-test"
+_IGNORE = ("__pycache__", "*.egg-info", "*.pyc", "test")
+
+
+@dataclass(frozen=True)
+class ColconInstall:
+    """A colcon install: ``root`` (the copied repository), ``prefix`` (``<root>/ros_ws/install``) and ``env`` (the
+    environment after ``source .venv/bin/activate && source <prefix>/setup.bash``, discovery on loopback, this
+    worker's ROS domain)."""
+
+    root: Path
+    prefix: Path
+    env: dict
+
+    def share(self, package: str) -> Path:
+        return self.prefix / "share" / package
+
+    def executable(self, package: str, name: str) -> Path:
+        return self.prefix / "lib" / package / name
+
+
+def _inputs_hash(extra: str) -> str:
+    h = hashlib.sha256(f"{VENV}\n{extra}\n".encode())
+    files = [REPO / "Makefile", REPO / "requirements.txt", REPO / "requirements-colcon.txt"]
+    for top in (REPO / "src", REPO / "ros_ws" / "config"):
+        for dirpath, dirnames, filenames in os.walk(top, followlinks=False):
+            dirnames[:] = sorted(d for d in dirnames
+                                 if d not in ("__pycache__", "test") and not d.endswith(".egg-info"))
+            files += [Path(dirpath) / f for f in sorted(filenames) if not f.endswith(".pyc")]
+    for f in files:
+        h.update(str(f.relative_to(REPO)).encode())
+        h.update(os.readlink(f).encode() if f.is_symlink() else f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def copy_workspace(root: Path) -> None:
+    """The repository's src/ (tests left out) and ros_ws/config, with ros_ws/src -> ../src, and the Makefile."""
+    shutil.copytree(REPO / "src", root / "src", symlinks=True, ignore=shutil.ignore_patterns(*_IGNORE))
+    shutil.copytree(REPO / "ros_ws" / "config", root / "ros_ws" / "config")
+    (root / "ros_ws" / "src").symlink_to("../src")
+    shutil.copy2(REPO / "Makefile", root / "Makefile")
+
+
+def build_env() -> dict:
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("AMENT_", "COLCON_", "PYTHONPATH"))}
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return env
+
+
+def sourced_env(prefix: Path) -> dict:
+    """The environment of a shell that activated the venv and sourced ``prefix/setup.bash``."""
+    out = subprocess.run(["bash", "-c", f"source {VENV}/bin/activate && source {prefix}/setup.bash && env -0"],
+                         env=build_env(), capture_output=True, timeout=60, check=True).stdout
+    env = dict(kv.split("=", 1) for kv in out.decode().split("\0") if "=" in kv)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env["ROS_DOMAIN_ID"] = os.environ.get("ROS_DOMAIN_ID", "0")
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def make_ros_install(root: Path, colcon_args: str = "") -> subprocess.CompletedProcess:
+    """``make ros-install`` in ``root`` (``-o setup``: the venv is set up already), optionally with COLCON_ARGS."""
+    cmd = ["make", "-o", "setup", "ros-install", f"VENV={VENV}"] + ([f"COLCON_ARGS={colcon_args}"] if colcon_args
+                                                                      else [])
+    return subprocess.run(cmd, cwd=root, env=build_env(), capture_output=True, text=True, timeout=1200)
+
+
+@pytest.fixture(scope="session")
+def colcon_tools():
+    """The helpers behind ``colcon_install`` (copy_workspace, make_ros_install, sourced_env), for a test that builds
+    its own variant (e.g. ``--symlink-install``)."""
+    import types
+
+    return types.SimpleNamespace(copy_workspace=copy_workspace, make_ros_install=make_ros_install,
+                                 sourced_env=sourced_env)
+
+
+@pytest.fixture(scope="session")
+def colcon_install() -> ColconInstall:
+    """The shared colcon install of the workspace (module docstring)."""
+    CACHE.mkdir(parents=True, exist_ok=True)
+    (CACHE / "COLCON_IGNORE").write_text("copies of the workspace built by the tests (test/conftest.py)\n")
+    key = _inputs_hash("ros-install")
+    root = CACHE / key
+    with open(CACHE / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # another worker may be building the same inputs: wait for it
+        try:
+            if not (root / "done").exists():
+                shutil.rmtree(root, ignore_errors=True)
+                root.mkdir()
+                copy_workspace(root)
+                r = make_ros_install(root)
+                assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+                print("colcon:", r.stdout.strip().splitlines()[-1] if r.stdout.strip() else "")
+                (root / "done").write_text(r.stdout)
+                for old in CACHE.iterdir():  # keep this build only
+                    if old.is_dir() and old != root:
+                        shutil.rmtree(old, ignore_errors=True)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+    prefix = root / "ros_ws" / "install"
+    return ColconInstall(root, prefix, sourced_env(prefix))

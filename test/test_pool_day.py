@@ -1,0 +1,230 @@
+"""A pool day of the installed launch layout on emulated devices (docs/deployment.md §9).
+
+The vehicle runs ``ros2 launch hindrax_ident pool_test.launch.xml``; ``launch`` is not installable here, so the
+process list is read from the *installed* launch file (hindrax_drivers/launch_xml.py; test/test_launch_files.py
+checks that it is the list the file declares) and started, executable by executable from the colcon install
+(test/conftest.py), by the project's runner (hindrax_drivers/process_runner.py: launch_ros's command line, respawn
+after the file's delay, SIGINT on stop). The devices are emulated (hindrax_drivers/emulated_devices.py): DVL-75 and
+Ping1D on pseudo-terminals behind stable paths, the I2C devices on an emulated bus every I2C driver process reaches
+through a socket.
+
+``test_pool_day``: the I2C bus is absent at the start (the MS5837 and ICM-20948 drivers keep running and report it,
+then pick the bus up); a driver and the recorder are killed mid-run and respawned (the DVL topic comes back, the
+recorder starts a new bag); both USB-serial adapters are unplugged and plugged in again (picked up without a
+restart); ``hindrax health`` then says READY; a second launch with the same ``output_dir``, the Ping adapter plugged
+in only after the start, records a bag of its own. ``test_esc_starts_without_its_bus``: the launch file's ESC
+process without its bus keeps running, reports ERROR on /diagnostics, and holds neutral once the bus is there.
+
+Every wait is on a condition (a message, a status, a process state) with a generous deadline.
+"""
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import FluidPressure, Imu, Range
+
+from hindrax_drivers.config import load_config
+from hindrax_drivers.emulated_devices import EmulatedDevices
+from hindrax_drivers.launch_xml import read_launch
+from hindrax_drivers.process_runner import ProcessRunner
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_msgs.msg import Dvl
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(1200)]
+
+TOPICS = {"/dvl/data": Dvl, "/ping/altitude": Range, "/pressure/fluid_pressure": FluidPressure,
+          "/imu/data_raw": Imu}
+WAIT_S = 60.0  # deadline of every condition (a loaded two-core machine starts ten Python processes)
+
+
+class Day:
+    """The runner of one launch, the emulated devices and a probe node counting what arrives (arrival times)."""
+
+    def __init__(self, install, devices: EmulatedDevices, launch_file: str, arguments: dict, only=None) -> None:
+        procs = read_launch(install.share(launch_file.split("/")[0]) / "launch" / launch_file.split("/")[1],
+                            arguments, find_share=install.share)
+        self.processes = [p for p in procs if only is None or set(p.node_names) & set(only)]
+        # node -> the label of the process that runs it (a composed process runs several: hindrax_drivers.composition)
+        self.process_of = {n: p.label for p in self.processes for n in p.node_names}
+        self.runner = ProcessRunner(
+            self.processes, command=lambda p: [str(install.executable(p.package, p.executable))], env=install.env,
+            extra_env={p.label: {k: v for n in p.node_names for k, v in devices.env(n).items()}
+                       for p in self.processes},
+            extra_ros_args={p.label: [a for n in p.node_names for a in devices.ros_arguments(n)]
+                            for p in self.processes},
+            log_dir=devices.directory / f"logs-{time.monotonic_ns()}")
+        self.arrivals: dict[str, list[float]] = {t: [] for t in TOPICS}
+        self.statuses: dict[str, list[tuple[float, int, str, dict]]] = {}
+
+    def __enter__(self) -> Day:
+        self._ctx_manager = ros_context()
+        ctx = self._ctx_manager.__enter__()
+        self.node = rclpy.create_node("pool_day_probe", context=ctx)
+        for topic, cls in TOPICS.items():
+            self.node.create_subscription(cls, topic, lambda _m, t=topic: self.arrivals[t].append(time.monotonic()),
+                                          qos_profile_sensor_data)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 100)
+        self.executor = SingleThreadedExecutor(context=ctx)
+        self.executor.add_node(self.node)
+        self.runner.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self.final = self.runner.stop()
+        finally:
+            self.executor.shutdown()
+            self.node.destroy_node()
+            self._ctx_manager.__exit__(None, None, None)
+
+    def _on_diag(self, msg: DiagnosticArray) -> None:
+        now = time.monotonic()
+        for st in msg.status:
+            level = st.level[0] if isinstance(st.level, bytes) else int(st.level)
+            values = {kv.key: kv.value for kv in st.values}
+            self.statuses.setdefault(st.name, []).append((now, level, st.message, values))
+
+    def spin(self) -> None:
+        self.executor.spin_once(timeout_sec=0.05)
+
+    def wait(self, condition, what: str) -> None:
+        def check() -> bool:
+            return bool(condition())
+        try:
+            wait_until(check, WAIT_S, self.spin, what)
+        except Exception as exc:  # the logs say why: attach their ends
+            tails = "\n".join(f"--- {p.label}:\n{self.runner.log(p.label)[-1500:]}" for p in self.processes)
+            raise AssertionError(f"{exc}\nprocesses: {self.runner.states()}\n{tails}") from exc
+
+    def count(self, topic: str, since: float = 0.0) -> int:
+        return sum(1 for t in self.arrivals[topic] if t >= since)
+
+    def seen(self, status: str, since: float = 0.0, level: int | None = None, min_level: int | None = None) -> list:
+        return [s for s in self.statuses.get(status, []) if s[0] >= since and (level is None or s[1] == level)
+                and (min_level is None or s[1] >= min_level)]
+
+    def state(self, node: str):
+        """The runner's state of the process that runs ``node``."""
+        return self.runner.states()[self.process_of[node]]
+
+    def kill(self, node: str) -> None:
+        """SIGKILL the process that runs ``node``."""
+        self.runner.kill(self.process_of[node])
+
+    def log(self, node: str) -> str:
+        return self.runner.log(self.process_of[node])
+
+
+def bags(root: Path) -> list[Path]:
+    return sorted(p for p in root.iterdir() if p.is_dir()) if root.exists() else []
+
+
+def messages_in(bag: Path, topic: str) -> int:
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return sum(t["message_count"] for t in meta["topics_with_message_count"] if t["topic_metadata"]["name"] == topic)
+
+
+def test_pool_day(colcon_install, tmp_path):
+    install = colcon_install
+    cfg = load_config(install.share("hindrax_drivers") / "config" / "hindrax.yaml")
+    runs = tmp_path / "runs"
+    args = {"output_dir": str(runs)}
+    with EmulatedDevices(cfg, tmp_path / "devices", serve_i2c=False) as dev:
+        with Day(install, dev, "hindrax_ident/pool_test.launch.xml", args) as day:
+            assert set(day.process_of) >= {"dvl75", "ping1d", "ms5837", "icm20948", "esc", "recorder",
+                                                       "supervisor", "identification"}
+            # 1. the I2C bus is absent: the serial drivers publish, the I2C sensor drivers run and say so
+            day.wait(lambda: day.count("/dvl/data") >= 3 and day.count("/ping/altitude") >= 3, "serial data")
+            day.wait(lambda: all(len(day.seen(f"hindrax/{d}", min_level=2)) >= 2 for d in ("ms5837", "icm20948")),
+                     "ms5837 and icm20948 report ERROR without their bus")
+            assert day.count("/pressure/fluid_pressure") == 0 and day.count("/imu/data_raw") == 0
+            assert all(day.state(d).starts == 1 and day.state(d).running for d in ("ms5837", "icm20948"))
+            # 2. the bus appears: picked up by the running processes
+            t_bus = time.monotonic()
+            dev.start_i2c()
+            day.wait(lambda: day.count("/pressure/fluid_pressure", t_bus) >= 3 and day.count("/imu/data_raw", t_bus)
+                     >= 10, "pressure and IMU data once the bus is there")
+            assert all(day.state(d).starts == 1 for d in ("ms5837", "icm20948"))
+            day.wait(lambda: len(bags(runs)) == 1 and any(
+                int(s[3].get("topic:/dvl/data", 0)) > 0 for s in day.seen("recorder: recording")), "recording")
+            # 3. a driver and the recorder die mid-run (SIGKILL): respawned after their delay, the topic comes back,
+            #    the recorder starts a new bag beside the one it lost the last chunk of
+            t_kill = time.monotonic()
+            day.kill("dvl75")  # with the Ping1D driver: they share a process (serial_sensors_node)
+            day.kill("recorder")
+            day.wait(lambda: day.state("dvl75").starts == 2 and day.count("/dvl/data", t_kill + 0.5) >= 3,
+                     "dvl75 respawned and /dvl/data back")
+            day.wait(lambda: day.state("recorder").starts == 2 and len(bags(runs)) == 2 and any(
+                int(s[3].get("topic:/dvl/data", 0)) > 0 and s[3].get("bag") == str(bags(runs)[-1])
+                for s in day.seen("recorder: recording", t_kill)), "recorder respawned into a new bag")
+            assert day.state("dvl75").exit_codes == (-signal.SIGKILL,)
+            # 4. both USB-serial adapters are pulled out, then plugged in again
+            starts = {d: day.state(d).starts for d in ("dvl75", "ping1d")}
+            t_out = time.monotonic()
+            dev.unplug("dvl75")
+            dev.unplug("ping1d")
+            day.wait(lambda: all(any("lost" in s[2] for s in day.seen(f"hindrax/{d}", t_out, min_level=2))
+                                 for d in ("dvl75", "ping1d")), "dvl75 and ping1d report the adapter lost")
+            t_in = time.monotonic()
+            dev.replug("dvl75")
+            dev.replug("ping1d")
+            day.wait(lambda: day.count("/dvl/data", t_in) >= 3 and day.count("/ping/altitude", t_in) >= 3,
+                     "serial data after the adapters came back")
+            assert {d: day.state(d).starts for d in ("dvl75", "ping1d")} == starts  # no restart for a replug
+            # 5. the operator's check: ready to dive
+            health = subprocess.run(
+                ["hindrax", "health", "--launch", "hindrax_ident/pool_test.launch.xml", f"output_dir:={runs}",
+                 "--timeout", "30"], env=install.env, capture_output=True, text=True, timeout=120)
+            assert health.returncode == 0 and "READY to dive" in health.stdout, health.stdout + health.stderr
+        # SIGINT ends every node cleanly and the recorder finishes its bag
+        unclean = {k: s.exit_codes for k, s in day.final.items() if s.exit_codes[-1] != 0}
+        assert not unclean, "\n".join(f"{k} {codes}:\n{day.runner.log(k)[-3000:]}" for k, codes in unclean.items())
+        first_launch = bags(runs)
+        assert len(first_launch) == 2 and messages_in(first_launch[-1], "/dvl/data") > 0
+        # 6. the next launch, same output_dir: a new bag, nothing stopped by the earlier ones; the Ping adapter
+        #    is not plugged in at the start this time, and is picked up when it is
+        dev.unplug("ping1d")
+        with Day(install, dev, "hindrax_ident/pool_test.launch.xml", args) as day2:
+            day2.wait(lambda: any("cannot open" in s[2] for s in day2.seen("hindrax/ping1d", min_level=2)),
+                      "ping1d reports its adapter absent at the start")
+            t_in = time.monotonic()
+            dev.replug("ping1d")
+            day2.wait(lambda: day2.count("/ping/altitude", t_in) >= 3, "ping data once the adapter is plugged in")
+            assert day2.state("ping1d").starts == 1
+            day2.wait(lambda: len(bags(runs)) == 3 and any(
+                int(s[3].get("topic:/dvl/data", 0)) > 0 and s[3].get("bag") not in map(str, first_launch)
+                for s in day2.seen("recorder: recording")), "the second launch recording")
+            assert day2.state("recorder").starts == 1
+        second = [b for b in bags(runs) if b not in first_launch]
+        assert len(second) == 1 and messages_in(second[0], "/dvl/data") > 0
+        assert messages_in(second[0], "/pressure/fluid_pressure") > 0  # the I2C devices were there from the start
+
+
+def test_esc_starts_without_its_bus(colcon_install, tmp_path):
+    install = colcon_install
+    cfg = load_config(install.share("hindrax_drivers") / "config" / "hindrax.yaml")
+    channels = [t.esc_channel for t in cfg.thrusters.thrusters]
+    neutral_us = cfg.thrusters.pulse_width_neutral_us
+    with EmulatedDevices(cfg, tmp_path / "devices", serve_i2c=False) as dev:
+        with Day(install, dev, "hindrax_drivers/vehicle.launch.xml", {}, only={"esc"}) as day:
+            # no /dev/i2c-1: the ESC process keeps running and says so on /diagnostics, again and again
+            day.wait(lambda: len(day.seen("hindrax/esc_pca9685", min_level=2)) >= 2 or day.state("esc").exit_codes,
+                     "ESC reporting its missing bus")
+            assert day.state("esc").starts == 1 and not day.state("esc").exit_codes, \
+                f"the ESC's process exited without its bus:\n{day.log('esc')[-2000:]}"
+            t_bus = time.monotonic()
+            dev.start_i2c()
+            day.wait(lambda: day.seen("hindrax/esc_pca9685", t_bus, level=0), "ESC OK once the bus is there")
+            assert day.state("esc").starts == 1
+            widths = [dev.pca9685.pulse_width_us(ch) for ch in channels]
+            # neutral on every thruster, to one PCA9685 count (1.24 us at 200 Hz, docs/devices.md §5.1)
+            assert len(widths) == 8 and all(abs(w - neutral_us) < 1.3 for w in widths), widths
