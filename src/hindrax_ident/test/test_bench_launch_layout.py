@@ -73,6 +73,8 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on():
     entries = [p.module for p in procs]
     assert "hindrax_ident.identification.node:main" in entries
     assert "hindrax_ident.control.node:main" in entries  # the controller, launched with the pool test
+    controller = next(p for p in procs if p.module == "hindrax_ident.control.node:main")
+    assert "model_file:=''" in controller.ros_args()  # the empty default, as rcl parses it (not "model_file:=")
     # output_dir is the root of the recorder's timestamped bags (recording/bag_dir.py)
     recorder = [p for p in procs if ("recording.output_root", "/tmp/b") in p.params]
     assert len(recorder) == 1 and ("autostart", "true") in recorder[0].params

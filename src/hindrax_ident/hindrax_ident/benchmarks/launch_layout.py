@@ -75,14 +75,15 @@ class LaunchProcess:
         return self.name or re.sub(r"_node$", "", self.executable)
 
     def ros_args(self) -> list[str]:
-        """``--ros-args`` as ``ros2 launch`` passes them: ``-r __node:=name``, ``--params-file``, ``-p``."""
+        """``--ros-args`` as ``ros2 launch`` passes them: ``-r __node:=name``, ``--params-file``, ``-p`` (an
+        empty value as ``''``: rcl refuses ``-p name:=``)."""
         out = ["--ros-args"]
         if self.name:
             out += ["-r", f"__node:={self.name}"]
         for f in self.params_files:
             out += ["--params-file", f]
         for k, v in self.params:
-            out += ["-p", f"{k}:={v}"]
+            out += ["-p", f"{k}:={v if v else repr('')}"]  # rcl reads -p values as YAML: '' is the empty string
         return out
 
 
