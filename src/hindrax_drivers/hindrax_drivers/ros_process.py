@@ -10,8 +10,8 @@ Every process entry point (a node run alone, :func:`~hindrax_drivers.node_common
     return proc.status
 
 On leaving the block, whatever the reason, the registered clean-ups run, last registered first (for a node
-from :meth:`RosProcess.own`: its ``close()`` if it has one, which is where the ESC node writes neutral, then
-``destroy_node()``), then the executor shuts down and the rclpy context is shut down if still up.
+from :meth:`RosProcess.own`: its ``close()`` if it has one, which is where the ESC node writes neutral, then the
+raw device data its ``raw`` publisher still holds (``RawDataPublisher.flush_pending``), then ``destroy_node()``), then the executor shuts down and the rclpy context is shut down if still up.
 
 Exceptions leaving the block:
 
@@ -138,12 +138,18 @@ class RosProcess:
         self._cleanups.append(cleanup)
 
     def own(self, node: Any) -> Any:
-        """Register ``node`` for clean-up on exit: ``node.close()`` when it has one, then ``node.destroy_node()``
-        (after removing it from :attr:`executor`). Returns ``node``."""
+        """Register ``node`` for clean-up on exit: ``node.close()`` when it has one, ``node.raw.flush_pending()`` when
+        it has that (a driver's RawDataPublisher), then ``node.destroy_node()`` (after removing it from
+        :attr:`executor`). Returns ``node``."""
         def cleanup() -> None:
             close = getattr(node, "close", None)
             if callable(close):
                 close()
+            # raw device data a driver's RawDataPublisher still holds (I2C records wait up to 0.1 s), the ESC's
+            # neutral write in close() included: published before the node goes
+            flush_pending = getattr(getattr(node, "raw", None), "flush_pending", None)
+            if callable(flush_pending):
+                flush_pending()
             if self._executor is not None:
                 self._executor.remove_node(node)
             node.destroy_node()
