@@ -147,7 +147,14 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
     wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin, "running warm-up")
     window("running")
     if goals.status(handle) in (4, 5, 6):  # SUCCEEDED, CANCELED, ABORTED: the campaign did not run throughout
-        raise RuntimeError(f"{what}: the surge goal ended (status {goals.status(handle)}) during the running window")
+        got: list = []
+        try:  # the node's reason, for the error
+            wait_until(lambda: got.append(goals.poll_result(handle)) or got[-1] is not None, 10, spin, "goal result")
+            why = getattr(got[-1].result, "message", "")
+        except Exception:  # noqa: BLE001 - the reason is a courtesy; the error below is what matters
+            why = "(no result received)"
+        raise RuntimeError(f"{what}: the surge goal ended (status {goals.status(handle)}) during the running "
+                           f"window: {why}")
     wait_until(lambda: goals.cancel(handle), 30, spin, "goal cancel")
     stream["on"] = True
     warm = time.monotonic() + 2.0
