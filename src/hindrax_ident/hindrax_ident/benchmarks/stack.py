@@ -441,8 +441,11 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                     out["phases"][phase] = {"windows": results}
 
                 goal_status = [lambda: None]
-                _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark",
-                                   goal_status=goal_status)
+                try:
+                    _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark",
+                                       goal_status=goal_status)
+                except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
+                    raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
                 for spy in spies:
                     spy.wait(duration_s + 30)
                 ex.shutdown()
@@ -496,6 +499,21 @@ def _bag_rates(out: dict) -> None:
                 w["rates"][m.topic] += 1
     for t0, t1, w in spans:
         w["rates"] = {t: n / ((t1 - t0) * 1e-9) for t, n in w["rates"].items()}
+
+
+def _safety_log_lines(tmp: Path, names: list[str], keep: int = 12) -> str:
+    """The last ``keep`` lines of each process log that speak of arming, heartbeats, trips or the watchdog."""
+    import re
+
+    out = []
+    for name in names:
+        try:
+            lines = (tmp / f"{name}.log").read_text(errors="replace").splitlines()
+        except OSError:
+            continue
+        hits = [ln for ln in lines if re.search(r"arm|heartbeat|trip|watchdog|stale|guard", ln, re.I)]
+        out += [f"{name}: {ln[:300]}" for ln in hits[-keep:]]
+    return "\n".join(out) or "(no process logged a disarm, trip or heartbeat)"
 
 
 def _check_alive(procs: dict, tmp: Path) -> bool:
