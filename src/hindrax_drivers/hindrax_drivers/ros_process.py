@@ -11,7 +11,8 @@ Every process entry point (a node run alone, :func:`~hindrax_drivers.node_common
 
 On leaving the block, whatever the reason, the registered clean-ups run, last registered first (for a node
 from :meth:`RosProcess.own`: its ``close()`` if it has one, which is where the ESC node writes neutral, then the
-raw device data its ``raw`` publisher still holds (``RawDataPublisher.flush_pending``), then ``destroy_node()``), then the executor shuts down and the rclpy context is shut down if still up.
+raw device data its ``raw`` publisher still holds (``RawDataPublisher.flush_pending``), then ``destroy_node()``),
+then the executor shuts down and the rclpy context is shut down if still up.
 
 Exceptions leaving the block:
 

@@ -39,9 +39,14 @@ def test_i2c_sensors_group_runs_both_nodes_under_their_own_names_and_exits_0_on_
             probe = rclpy.create_node("composition_probe", context=ctx)
             wait_until(lambda: proc.poll() is None and {"ms5837", "icm20948"} <= set(probe.get_node_names()),
                        30, None, "both nodes in the graph")
-            topics = {n: {t for t, _ in probe.get_publisher_names_and_types_by_node(n, "/")}
-                      for n in ("ms5837", "icm20948")}
-            assert "/pressure/fluid_pressure" in topics["ms5837"] and "/imu/data_raw" in topics["icm20948"]
+
+            def topics(node: str) -> set[str]:
+                return {t for t, _ in probe.get_publisher_names_and_types_by_node(node, "/")}
+
+            # a node is discovered before its publishers: wait for each node's own topic under its own name
+            wait_until(lambda: "/pressure/fluid_pressure" in topics("ms5837") and "/imu/data_raw" in topics("icm20948"),
+                       30, None, "each node's publishers under its own name")
+            assert "/imu/data_raw" not in topics("ms5837") and "/pressure/fluid_pressure" not in topics("icm20948")
             probe.destroy_node()
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0, proc.stdout.read()
