@@ -154,11 +154,22 @@ def test_launch_file_executables_and_parameter_files_resolve(path, packages):
 
 
 def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
+    from hindrax_drivers.composition import GROUPS
+
     root = REPO / "src"
     vehicle = dict.fromkeys(check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages))
-    for exe in ("dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
-                "static_tf_node", "supervisor_node", "output_guard_node"):
-        assert ("hindrax_drivers", exe) in vehicle
+    # every node runs once, alone (its own executable) or in a composed process (hindrax_drivers.composition)
+    alone = {"allocation_node": "thrust_allocation"}  # executables named otherwise than their node
+    nodes = [n for pkg, exe in vehicle if pkg == "hindrax_drivers"
+             for n in GROUPS.get(exe, (alone.get(exe, exe.removesuffix("_node")),))]
+    for node in ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor",
+                 "output_guard"):
+        assert nodes.count(node) == 1, node
+    # the ESC shares its process with its one commander only; the supervisor and the output guard run alone
+    # (docs/architecture.md §8, §10.1)
+    assert GROUPS["actuation_node"] == ("thrust_allocation", "esc")
+    for exe in ("supervisor_node", "output_guard_node"):
+        assert ("hindrax_drivers", exe) in vehicle and exe not in GROUPS
     assert ("hindrax_drivers", "recorder_node") not in vehicle  # recording is optional there
     recorded = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
                             {"record": "true", "output_dir": "/ws/runs"})
@@ -266,9 +277,9 @@ def test_process_runner_list_is_what_the_launch_file_declares(rel, given, packag
     xml_nodes = {}
     for f in (path, REPO / "src/hindrax_drivers/launch/vehicle.launch.xml"):
         for el in ET.parse(f).getroot().iter("node"):
-            xml_nodes[el.get("name")] = el
+            xml_nodes[el.get("name") or el.get("exec")] = el  # a composed process has no name (its nodes keep theirs)
     for p in read:
-        el = xml_nodes[p.name]
+        el = xml_nodes[p.label]
         assert (el.get("pkg"), el.get("exec")) == (p.package, p.executable)
         assert p.respawn and el.get("respawn") == "true" and p.respawn_delay_s == float(el.get("respawn_delay")) > 0
         if p.package in PACKAGES:

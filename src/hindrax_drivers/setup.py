@@ -34,6 +34,12 @@ NODES = {
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
 NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
+#: composed processes (hindrax_drivers.composition: several nodes, one process): console script -> module:function
+GROUPS = {
+    "i2c_sensors_node": "hindrax_drivers.composition:i2c_sensors_main",
+    "serial_sensors_node": "hindrax_drivers.composition:serial_sensors_main",
+    "actuation_node": "hindrax_drivers.composition:actuation_main",
+}
 
 
 def _files(pattern: str) -> list[str]:
@@ -58,6 +64,7 @@ setup(
     description="Hindrax ROV device drivers, emulators, thrust allocation, configuration and recording",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": [f"{name} = {mod}:main" for name, mod in NODES.items()],
+        "console_scripts": [f"{name} = {mod}:main" for name, mod in NODES.items()]
+        + [f"{name} = {target}" for name, target in GROUPS.items()],
     },
 )

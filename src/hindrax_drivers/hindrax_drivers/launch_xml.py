@@ -35,6 +35,8 @@ from typing import Callable, Mapping
 import yaml
 from ament_index_python.packages import get_package_share_directory
 
+from . import composition
+
 __all__ = ["LaunchFileError", "NodeProcess", "ament_share", "read_launch"]
 
 #: resolves ``$(find-pkg-share PKG)``: package name -> its share directory
@@ -75,6 +77,12 @@ class NodeProcess:
     def label(self) -> str:
         """The name a runner and its logs use: the node name, else the executable."""
         return self.name or self.executable
+
+    @property
+    def node_names(self) -> tuple[str, ...]:
+        """The ROS node names this process runs: a composed process's nodes
+        (:func:`hindrax_drivers.composition.node_names`), else :attr:`label`."""
+        return composition.node_names(self.package, self.executable, self.name)
 
     def ros_arguments(self, write_values: Callable[[Mapping], Path]) -> list[str]:
         """Everything after the executable (module docstring, "Command of a node"). ``write_values`` writes one

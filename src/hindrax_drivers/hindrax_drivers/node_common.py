@@ -165,6 +165,10 @@ class DiagnosticsPublisher:
 #: ``i2c_register`` of a RawDeviceData message that carries several I2C transactions (see RawDataPublisher)
 RAW_BATCH_REGISTER = -2
 _RAW_RECORD = struct.Struct("<BBhH")  # direction, 7-bit address, register (-1 none), data length
+#: I2C transactions of read cycles are published together at most this often (ROS time), s (RawDataPublisher)
+RAW_I2C_PERIOD_S = 0.1
+#: ... or as soon as this many bytes of records are pending
+RAW_I2C_MAX_BYTES = 16384
 
 
 class RawDataPublisher:
@@ -174,23 +178,33 @@ class RawDataPublisher:
     :meth:`i2c_tap` as an I2C helper's raw tap ``(kind 'read'|'write', address, register, data, t)``.
     Stamps are the node's ROS time at publication. Safe to call from transport threads.
 
-    Batching (one message per device read cycle instead of one per transaction or chunk): between
-    :meth:`begin_batch` and :meth:`flush` the taps are collected and :meth:`flush` publishes them as one
-    message. Serial: the received chunks are concatenated into one chunk (a host->device write flushes first,
-    so each message has one direction). I2C: one transaction is published as before; several are packed into
-    ``data`` as records ``<direction u8, address u8, register i16, length u16 (little-endian), data>`` with
-    ``i2c_register = RAW_BATCH_REGISTER`` (-2); :func:`raw_transactions` unpacks both forms. Outside a batch
-    every tap is published at once.
+    Batching: between :meth:`begin_batch` and :meth:`flush` the taps are collected. Serial: :meth:`flush`
+    publishes the received chunks concatenated into one chunk (one message per parsed report; a host->device write
+    flushes first, so each message has one direction). I2C: the transactions of read cycles are kept until
+    ``i2c_period_s`` (default :data:`RAW_I2C_PERIOD_S`, ROS time) has passed since the oldest one, or
+    :data:`RAW_I2C_MAX_BYTES` are pending, and then published as one message: records
+    ``<direction u8, address u8, register i16, length u16 (little-endian), data>`` packed into ``data`` with
+    ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a plain message when there is only one transaction;
+    :func:`raw_transactions` unpacks both forms, in wire order. Why 0.1 s and not one message per read cycle: a
+    publish costs far more than its bytes (docs/architecture.md §10.1), and the ICM-20948 polls at 102 Hz and
+    the PCA9685 is written at up to 50 Hz; the I2C replay answers reads in their recorded order and does not use
+    the stamps (:mod:`~hindrax_drivers.recording.replay_devices`). What stays pending is published by
+    ``flush(force=True)``; a tap outside a batch publishes what is pending with it at once (start-up sequences,
+    error paths), so the order on the wire is kept.
     """
 
-    def __init__(self, node: Any, device_name: str, topic: str | None = None):
+    def __init__(self, node: Any, device_name: str, topic: str | None = None,
+                 i2c_period_s: float = RAW_I2C_PERIOD_S):
         self._node = node
         self.device_name = device_name
         self.publisher = node.create_publisher(RawDeviceData, topic or f"raw/{device_name}", 100)
+        self.i2c_period_s = float(i2c_period_s)
         self._lock = threading.Lock()
         self._batching = False
         self._serial: bytearray = bytearray()
         self._i2c: list[tuple[int, int, int, bytes]] = []
+        self._i2c_bytes = 0
+        self._i2c_since_ns: int | None = None
 
     def _msg(self, transport: int, direction: int, data: bytes, address: int = 0, register: int = -1):
         m = RawDeviceData()
@@ -212,13 +226,21 @@ class RawDataPublisher:
     def pending_bytes(self) -> int:
         """Bytes collected and not yet published."""
         with self._lock:
-            return len(self._serial) + sum(len(r[3]) + _RAW_RECORD.size for r in self._i2c)
+            return len(self._serial) + self._i2c_bytes
 
-    def flush(self, end_batch: bool = True) -> None:
-        """Publish what was collected (nothing when nothing was); ``end_batch``: publish taps at once again."""
+    def _i2c_due(self) -> bool:
+        if self._i2c_bytes >= RAW_I2C_MAX_BYTES or self.i2c_period_s <= 0.0 or self._i2c_since_ns is None:
+            return True
+        return self._node.get_clock().now().nanoseconds - self._i2c_since_ns >= self.i2c_period_s * 1e9
+
+    def flush(self, end_batch: bool = True, force: bool = False) -> None:
+        """Publish what was collected: the serial chunks; the I2C transactions when their period is over or
+        ``force`` (nothing when nothing was); ``end_batch``: publish taps at once again."""
         with self._lock:
             serial, self._serial = self._serial, bytearray()
-            i2c, self._i2c = self._i2c, []
+            i2c: list = []
+            if self._i2c and (force or self._i2c_due()):
+                i2c, self._i2c, self._i2c_bytes, self._i2c_since_ns = self._i2c, [], 0, None
             if end_batch:
                 self._batching = False
         if serial:
@@ -244,13 +266,31 @@ class RawDataPublisher:
         self.flush(end_batch=False)  # received bytes first: one direction per message, in wire order
         self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_HOST_TO_DEVICE, data))
 
+    def flush_pending(self) -> None:
+        """Publish everything still held (at shutdown, and before a recording is closed); nothing when the ROS
+        context is already shut down (the records are then lost with the process, at most ``i2c_period_s``)."""
+        try:
+            self.flush(end_batch=False, force=True)
+        except Exception:  # noqa: BLE001 - rclpy raises its own types for a publisher whose context is gone
+            if self._node.context.ok():
+                raise
+
     def i2c_tap(self, kind: str, address: int, register: int | None, data: bytes, _t: float | None = None) -> None:
         d = RawDeviceData.DIRECTION_DEVICE_TO_HOST if kind == "read" else RawDeviceData.DIRECTION_HOST_TO_DEVICE
         reg = -1 if register is None else int(register)
+        record = (d, int(address), reg, bytes(data))
         with self._lock:
-            if self._batching:
-                self._i2c.append((d, int(address), reg, bytes(data)))
-                return
+            pending = self._batching or bool(self._i2c)  # decided under the lock: the wire order is kept
+            if pending:  # in a batch, or after pending records (published together below)
+                if self._i2c_since_ns is None:
+                    self._i2c_since_ns = self._node.get_clock().now().nanoseconds
+                self._i2c.append(record)
+                self._i2c_bytes += len(record[3]) + _RAW_RECORD.size
+                if self._batching:
+                    return
+        if pending:
+            self.flush(end_batch=False, force=True)  # outside a batch: what was pending, with this one, at once
+            return
         self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
 
 
@@ -328,11 +368,21 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
     1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
     (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
     """
+    return run_nodes([factory], args, executor)
+
+
+def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
+              executor: str | None = None) -> int:
+    """Process entry point of several nodes composed in one process (:mod:`hindrax_drivers.composition`): the nodes
+    are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
+    reverse order (the last built first). Same arguments, exit status and shutdown as :func:`run_node`; an
+    exception out of any node's callback ends the whole process (every node's ``close()`` still runs)."""
     from .ros_process import RosProcess
 
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor) as proc:
-        node = proc.own(factory())
-        proc.executor.add_node(node)
+        for factory in factories:
+            node = proc.own(factory())
+            proc.executor.add_node(node)
         proc.executor.spin()
     return proc.status
 

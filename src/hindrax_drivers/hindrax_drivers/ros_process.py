@@ -10,8 +10,9 @@ Every process entry point (a node run alone, :func:`~hindrax_drivers.node_common
     return proc.status
 
 On leaving the block, whatever the reason, the registered clean-ups run, last registered first (for a node
-from :meth:`RosProcess.own`: its ``close()`` if it has one, which is where the ESC node writes neutral, then
-``destroy_node()``), then the executor shuts down and the rclpy context is shut down if still up.
+from :meth:`RosProcess.own`: its ``close()`` if it has one, which is where the ESC node writes neutral, then the
+raw device data its ``raw`` publisher still holds (``RawDataPublisher.flush_pending``), then ``destroy_node()``),
+then the executor shuts down and the rclpy context is shut down if still up.
 
 Exceptions leaving the block:
 
@@ -25,13 +26,13 @@ Exceptions leaving the block:
 The executor is rclpy's ``EventsExecutor`` (``rclpy.experimental``, Jazzy) unless the environment variable
 ``HINDRAX_EXECUTOR`` says ``single`` (rclpy's ``SingleThreadedExecutor``). The SingleThreadedExecutor rebuilds
 its wait set in Python on every spin, one spin per message, and that was the largest item of every node
-process's profile (docs/architecture.md §10); the EventsExecutor dispatches from a C++ event queue instead. Measured
-on this machine with one process taking three 100 Hz ``sensor_msgs/Imu`` topics and publishing one 50 Hz topic:
-8.4-10.5 % of a core with the SingleThreadedExecutor, 3.6-4.4 % with the EventsExecutor. The recorder (its node
-run alone, and ``hindrax bag record``) keeps the SingleThreadedExecutor: its callbacks take the message info (the
-source timestamp it writes as each record's publish time), and the EventsExecutor of rclpy 7.1 (pip wheels) stops
-the process with "SystemError: null argument to internal routine" on the first message to such a callback
-(reproduced with a bare raw subscription whose callback takes ``(msg, info)``; ``(msg)`` alone works).
+process's profile (docs/architecture.md §10); the EventsExecutor dispatches from a C++ event queue instead.
+Measured on this machine with one process taking three 100 Hz ``sensor_msgs/Imu`` topics and publishing one 50 Hz
+topic: 8.4-10.5 % of a core with the SingleThreadedExecutor, 3.6-4.4 % with the EventsExecutor. Every node
+process spins it, the recorder and the identification node included, within the EventsExecutor's limits of
+rclpy 7.1 (docs/architecture.md §11.5): no subscription callback takes the message info (the recorder writes
+the reception time as each record's publish time), and no coroutine waits for long (the identification action
+has none).
 
 rclpy is imported when the block is entered, not when this module is.
 """
@@ -48,9 +49,9 @@ EXECUTORS = ("events", "single")
 
 
 def executor_kind(environ: Mapping[str, str] | None = None) -> str:
-    """The executor a process spins: ``HINDRAX_EXECUTOR`` (``events`` when unset). Raises ``ValueError`` naming
+    """The executor a process spins: ``HINDRAX_EXECUTOR`` (``events`` when unset or empty). Raises ``ValueError`` naming
     the variable, its value and the allowed values when it is set to anything else."""
-    value = (os.environ if environ is None else environ).get("HINDRAX_EXECUTOR", "events").strip().lower()
+    value = (os.environ if environ is None else environ).get("HINDRAX_EXECUTOR", "").strip().lower() or "events"
     if value not in EXECUTORS:
         raise ValueError(f"HINDRAX_EXECUTOR={value!r}: allowed values are {', '.join(EXECUTORS)}")
     return value
@@ -96,8 +97,8 @@ class RosProcess:
 
     args: command-line arguments for ``rclpy.init`` (``None``: ``sys.argv``, so ``--ros-args`` are honoured;
     ``[]`` for a process whose arguments are not ROS arguments). errors: {exception type: message prefix}.
-    executor: ``events`` or ``single`` to fix the executor (the recorder: ``single``, module docstring), None to
-    follow ``HINDRAX_EXECUTOR``. Raises ``ValueError`` for another value.
+    executor: ``events`` or ``single`` to fix the executor, None to follow ``HINDRAX_EXECUTOR``. Raises
+    ``ValueError`` for another value.
     """
 
     def __init__(self, args: Sequence[str] | None = None, errors: Mapping[type, str] | None = None,
@@ -138,12 +139,18 @@ class RosProcess:
         self._cleanups.append(cleanup)
 
     def own(self, node: Any) -> Any:
-        """Register ``node`` for clean-up on exit: ``node.close()`` when it has one, then ``node.destroy_node()``
-        (after removing it from :attr:`executor`). Returns ``node``."""
+        """Register ``node`` for clean-up on exit: ``node.close()`` when it has one, ``node.raw.flush_pending()`` when
+        it has that (a driver's RawDataPublisher), then ``node.destroy_node()`` (after removing it from
+        :attr:`executor`). Returns ``node``."""
         def cleanup() -> None:
             close = getattr(node, "close", None)
             if callable(close):
                 close()
+            # raw device data a driver's RawDataPublisher still holds (I2C records wait up to 0.1 s), the ESC's
+            # neutral write in close() included: published before the node goes
+            flush_pending = getattr(getattr(node, "raw", None), "flush_pending", None)
+            if callable(flush_pending):
+                flush_pending()
             if self._executor is not None:
                 self._executor.remove_node(node)
             node.destroy_node()

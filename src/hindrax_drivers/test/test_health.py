@@ -8,7 +8,8 @@ from hindrax_drivers.health import Seen, assess, expectation
 from hindrax_drivers.launch_xml import read_launch
 
 REPO = Path(__file__).resolve().parents[3]
-VEHICLE = ["dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor",
+#: the vehicle's nodes in launch order (the allocation and the ESC share a process, allocation first)
+VEHICLE = ["dvl75", "ping1d", "ms5837", "icm20948", "thrust_allocation", "esc", "static_tf", "supervisor",
            "output_guard"]
 STATUSES = ["hindrax/dvl75", "hindrax/ping1d", "hindrax/ms5837", "hindrax/icm20948", "hindrax/esc_pca9685",
             "hindrax/supervisor", "hindrax/output_guard"]
@@ -18,9 +19,9 @@ OK = Seen(0, "running")
 def test_expectation_follows_the_launch_file_and_its_arguments():
     path = REPO / "src/hindrax_drivers/launch/vehicle.launch.xml"
     share = lambda pkg: REPO / "src" / pkg  # noqa: E731
-    plain = expectation(p.label for p in read_launch(path, {}, share))
+    plain = expectation(n for p in read_launch(path, {}, share) for n in p.node_names)
     assert plain.nodes == tuple(VEHICLE) and plain.statuses == tuple(STATUSES) and plain.supervisor
-    recorded = expectation(p.label for p in read_launch(path, {"record": "true"}, share))
+    recorded = expectation(n for p in read_launch(path, {"record": "true"}, share) for n in p.node_names)
     assert recorded.nodes[-1] == "recorder" and recorded.statuses[-1] == "recorder: recording"
 
 

@@ -347,8 +347,10 @@ def test_sample_without_data_ready_is_not_published(rig):
     the flag. The flag is one 1-byte read of INT_STATUS_1 (0x1A) per poll."""
     r = rig(truth=live_truth, overrides={"sensors.icm20948.not_ready_error_polls": 10})
     r.wait_imu(10)
-    reads = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST
-             and x.i2c_register == p.INT_STATUS_1.address]
+    is_flag = lambda x: (x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST  # noqa: E731
+                         and x.i2c_register == p.INT_STATUS_1.address)
+    r.wait(lambda: any(is_flag(x) for x in r.raw), 5, "raw INT_STATUS_1 reads (published every 0.1 s)")
+    reads = [x for x in r.raw if is_flag(x)]
     assert reads and all(len(x.data) == 1 for x in reads)
     r.emu.data_ready_stuck_low = True
     stuck_ns = r.node.get_clock().now().nanoseconds

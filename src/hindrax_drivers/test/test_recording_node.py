@@ -6,6 +6,7 @@ recorder/start and recorder/stop, publishes from its own process and checks the 
 from __future__ import annotations
 
 import subprocess
+import time
 
 import pytest
 import rclpy
@@ -94,6 +95,7 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
     latched.publish(String(data="published before the recording started"))
 
     bag1 = tmp_path / "bag1"
+    t_start_ns = time.time_ns()
     res = call(r["start"], StartRecording.Request(output_dir=str(bag1),
                                                   topics=["/n/imu", "/n/latched", "/n/raw", "/n/late"]))
     assert res.success and res.bag_path == str(bag1), res.message
@@ -116,6 +118,7 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
     wait_until(lambda: all(counts.get(t) == n for t, n in expected.items()), 15, spin,
                f"recorder counts {expected}")
     res = call(r["stop"], StopRecording.Request())
+    t_stop_ns = time.time_ns()
     assert res.success and res.message_count == 111 and res.bag_path == str(bag1)
 
     meta = read_metadata(bag1)
@@ -131,6 +134,16 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
     assert [m.linear_acceleration.x for m in by_topic["/n/imu"]] == [float(i) for i in range(50)]
     assert [bytes(m.data) for m in by_topic["/n/raw"]] == [bytes([i, 255 - i]) for i in range(50)]
     assert by_topic["/n/latched"][0].data == "published before the recording started"
+    # on the system clock the recorder takes its messages in batches (polled intake, recorder_node docstring): log
+    # time = DDS reception time, publish time = DDS source timestamp, both within the recording's span; the
+    # latched message was published before the start
+    from mcap.reader import make_reader
+
+    with open(next(bag1.glob("*.mcap")), "rb") as f:
+        times = {(c.topic, m.log_time, m.publish_time) for _, c, m in make_reader(f).iter_messages()}
+    assert len(times) == 111 and all(pub <= log for _, log, pub in times)
+    assert all(t_start_ns <= log <= t_stop_ns for _, log, _ in times)
+    assert all(t_start_ns <= pub for topic, _, pub in times if topic != "/n/latched")
 
     # a second recording selected by regular expression; stopping twice is reported, not fatal
     bag2 = tmp_path / "bag2"

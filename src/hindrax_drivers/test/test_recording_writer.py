@@ -21,6 +21,7 @@ from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.recover import iter_file_records
 from hindrax_drivers.recording.writer import BagWriter, WriterOptions
 from hindrax_drivers.recording.writer_thread import ThreadedBagWriter
+from hindrax_drivers.testing import wait_until
 from hindrax_msgs.msg import Dvl, RawDeviceData
 
 T0 = 1_700_000_000_000_000_000
@@ -300,3 +301,29 @@ def test_threaded_writer_accepts_writes_from_several_threads(tmp_path):
     assert tw.dropped == 0 and tw.error is None
     assert {t.name: t.message_count for t in meta.topics} == {"/imu": 500, "/raw": 500}
     assert sum(1 for _ in BagReader(bag).messages()) == 1000
+
+
+def test_threaded_writer_drops_beyond_its_queue_and_close_drains_at_once(tmp_path):
+    # the writer thread drains the queue every drain_period_s; with a period far longer than the test, nothing is
+    # taken before close(): the queue bound counts the drops, and close() wakes the thread and writes the rest
+    bag = tmp_path / "q"
+    tw = ThreadedBagWriter(bag, WriterOptions(chunk_size_bytes=4096), max_queue=20, drain_period_s=3600.0)
+    tw.add_topic("/imu", "sensor_msgs/msg/Imu")  # one queue slot
+    data = serialize_message(make("/imu", 3))
+    accepted = [tw.write("/imu", T0 + i, data) for i in range(30)]
+    assert accepted == [True] * 19 + [False] * 11 and tw.dropped == 11 and tw.pending == 20
+    meta = tw.close(timeout_s=20.0)  # TimeoutError if close waited for the hour-long drain period
+    assert {t.name: t.message_count for t in meta.topics} == {"/imu": 19}
+    assert [m.log_time_ns for m in BagReader(bag).messages()] == [T0 + i for i in range(19)]
+
+
+def test_threaded_writer_writes_without_close_within_its_drain_period(tmp_path):
+    bag = tmp_path / "d"
+    tw = ThreadedBagWriter(bag, WriterOptions(chunk_size_bytes=4096), drain_period_s=0.05)
+    tw.add_topic("/imu", "sensor_msgs/msg/Imu")
+    data = serialize_message(make("/imu", 3))
+    for i in range(10):
+        tw.write("/imu", T0 + i, data)
+    wait_until(lambda: tw.topic_counts().get("/imu") == 10, 10, None, "10 messages written by the writer thread")
+    assert tw.pending == 0
+    tw.close()

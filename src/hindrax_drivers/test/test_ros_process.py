@@ -90,8 +90,11 @@ def test_executor_is_the_events_executor_unless_hindrax_executor_says_single(mon
     monkeypatch.setenv("HINDRAX_EXECUTOR", "single")
     with RosProcess([]) as proc:
         assert isinstance(proc.executor, SingleThreadedExecutor)
+    monkeypatch.setenv("HINDRAX_EXECUTOR", "")  # empty: as unset
+    with RosProcess([]) as proc:
+        assert type(proc.executor._ex).__name__ == "EventsExecutor"
     monkeypatch.delenv("HINDRAX_EXECUTOR")
-    with RosProcess([], executor="single") as proc:  # the recorder's choice, whatever the environment says
+    with RosProcess([], executor="single") as proc:  # a process that fixes its executor, whatever the environment
         assert isinstance(proc.executor, SingleThreadedExecutor)
 
 

@@ -32,3 +32,50 @@ def test_socket_bus_serves_the_emulated_bus(tmp_path):
     bus.close()
     server.close()
     assert not (tmp_path / "i2c.sock").exists()
+
+
+def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
+    from hindrax_ident.benchmarks.launch_layout import launch_processes, package_share
+
+    inc = tmp_path / "inner.launch.xml"
+    inc.write_text('<launch><arg name="rec" default="false" description="d"/><arg name="dir" default="runs" '
+                   'description="d"/>'
+                   '<node pkg="hindrax_drivers" exec="esc_node" name="esc">'
+                   '<param from="$(find-pkg-share hindrax_drivers)/config/hindrax.yaml"/></node>'
+                   '<node pkg="hindrax_drivers" exec="recorder_node" name="recorder" if="$(var rec)">'
+                   '<param name="output_dir" value="$(var dir)"/></node></launch>')
+    outer = tmp_path / "outer.launch.xml"
+    outer.write_text(f'<launch><arg name="out" default="x" description="d"/>'
+                     f'<include file="{inc}"><arg name="rec" value="true"/><arg name="dir" value="$(var out)/bags"/>'
+                     f'</include><group><let name="g" value="i2c"/>'
+                     f'<node pkg="hindrax_drivers" exec="$(var g)_sensors_node" respawn="true"/></group>'
+                     f'<node pkg="hindrax_drivers" exec="static_tf_node" unless="true"/>'
+                     f'<node pkg="foxglove_bridge" exec="foxglove_bridge" if="false"/></launch>')
+    esc, rec, group = launch_processes(outer, {"out": "/data"})
+    assert (esc.label, esc.module) == ("esc", "hindrax_drivers.pca9685.node:main")
+    assert esc.ros_args() == ["--ros-args", "-r", "__node:=esc", "--params-file",
+                              str(package_share("hindrax_drivers") / "config/hindrax.yaml")]
+    assert rec.ros_args() == ["--ros-args", "-r", "__node:=recorder", "-p", "output_dir:=/data/bags"]
+    # a composed process has no name: its nodes keep theirs; its row is the executable without _node
+    assert (group.name, group.label, group.module) == (None, "i2c_sensors",
+                                                       "hindrax_drivers.composition:i2c_sensors_main")
+    with pytest.raises(ValueError, match="no argument"):
+        launch_processes(outer, {"outt": "/data"})
+    outer.write_text('<launch><node pkg="hindrax_drivers" exec="no_such_node"/></launch>')
+    with pytest.raises(ValueError, match="no_such_node"):
+        launch_processes(outer)
+
+
+def test_the_bench_measures_the_pool_test_launch_file_with_recording_on():
+    from hindrax_ident.benchmarks.launch_layout import launch_processes, package_share
+    from hindrax_ident.benchmarks.stack import LAUNCH_FILE
+
+    procs = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1], {"output_dir": "/tmp/b"})
+    entries = [p.module for p in procs]
+    assert "hindrax_ident.identification.node:main" in entries
+    assert "hindrax_ident.control.node:main" in entries  # the controller, launched with the pool test
+    controller = next(p for p in procs if p.module == "hindrax_ident.control.node:main")
+    assert "model_file:=''" in controller.ros_args()  # the empty default, as rcl parses it (not "model_file:=")
+    # output_dir is the root of the recorder's timestamped bags (recording/bag_dir.py)
+    recorder = [p for p in procs if ("recording.output_root", "/tmp/b") in p.params]
+    assert len(recorder) == 1 and ("autostart", "true") in recorder[0].params

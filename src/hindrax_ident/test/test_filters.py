@@ -46,6 +46,12 @@ def test_transition_and_process_noise_matrices():
                                [dt**3 / 6, dt**2 / 2, dt]])
     np.testing.assert_allclose(Q, expected, rtol=1e-12)
     np.testing.assert_array_equal(process_noise(0.0, 2.0), np.zeros((3, 3)))
+    # the same matrix as filterpy's own construction (block_diag of the white-noise model), over sample intervals
+    # from an IMU's to a long DVL gap
+    from filterpy.common import Q_continuous_white_noise
+
+    for dt, psd in ((0.0098, 2.0), (0.1, 0.05), (1.7, 30.0)):
+        np.testing.assert_allclose(process_noise(dt, psd), Q_continuous_white_noise(3, dt, psd), rtol=1e-12, atol=0)
 
 
 def test_smoother_velocity_and_acceleration_from_noisy_position():

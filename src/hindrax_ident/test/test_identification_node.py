@@ -4,6 +4,7 @@ virtual pool (goal validation, refusal while disarmed, feedback, HydroEstimate >
 import numpy as np
 import pytest
 import rclpy
+from action_msgs.msg import GoalStatus
 from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionClient
 from sensor_msgs.msg import Imu, Range
@@ -118,6 +119,8 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             wait_until(running, 300, spin, "surge run under way")  # wall time: slow under load
             t_run = sim.t_s
             wait_until(lambda: sim.t_s > t_run + 2.0, 30, spin, "two seconds of the run")
+            # the running campaign's goal reads ACCEPTED: the node executes it only at its end (node docstring)
+            assert handle.status == GoalStatus.STATUS_ACCEPTED
             fb = [x for x in got["fb"] if x.level_command != 0.0]
             assert fb and fb[-1].dof == "surge" and fb[-1].level_count == 1 and 0.0 < fb[-1].progress < 1.0
             # the level is 0.6 of the surge authority, pushed forward or backward along the body x axis
@@ -132,6 +135,7 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             res = handle.get_result_async()
             wait_until(res.done, 30, spin, "result after cancel")
             assert not res.result().result.success and "cancel" in res.result().result.message
+            assert res.result().status == GoalStatus.STATUS_CANCELED
             assert got["wrench"][-1].wrench.force.x == 0.0 and got["wrench"][-1].wrench.force.z == 0.0
             n_wrench = len(got["wrench"])
             t_end = sim.t_s
@@ -142,6 +146,56 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
         finally:
             graph.shutdown()
             probe.destroy_node()
+
+
+def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_commanding_after_it():
+    """An operator who arms and starts at once: the goal is accepted while the ESC's armed flag is on its way and
+    goes on once it arrives; without it the goal ends after ARMED_GRACE_S with the "not armed" result, having
+    commanded nothing. The node's own callbacks are driven directly (no graph), with a stand-in goal handle."""
+    from types import SimpleNamespace
+
+    from unique_identifier_msgs.msg import UUID
+
+    from hindrax_ident.identification.node import ARMED_GRACE_S, NOT_ARMED, IdentificationNode
+
+    cfg = load_config(default_config_path())
+    with ros_context() as ctx:
+        node = IdentificationNode(config=cfg, context=ctx)
+        wrenches, status = [], []
+        node._publish_wrench = lambda w, now: wrenches.append(w)
+        node._publish_status = lambda phase, st, message: status.append((phase, message))
+        try:
+            def handle(k: int):
+                h = SimpleNamespace(request=RunIdentification.Goal(dofs=["surge"]), is_cancel_requested=False,
+                                    goal_id=UUID(uuid=[k] * 16), states=[], results=[],
+                                    publish_feedback=lambda _fb: None)
+                h.abort, h.succeed = (lambda: h.states.append("aborted")), (lambda: h.states.append("succeeded"))
+                h.canceled = lambda: h.states.append("canceled")
+                h.execute = lambda cb: h.results.append(cb(h))
+                return h
+
+            armed = ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True)
+            late = handle(1)
+            node._on_accepted(late)
+            node._on_tick()
+            assert node._run is not None and status[-1][1] == "waiting for the ESC output to report armed"
+            node._on_pwm(armed)  # the flag arrives within the grace: the goal goes on (to the sensors' wait)
+            node._on_tick()
+            assert node._run is not None and not late.results and status[-1][1] == "waiting for the sensors"
+            node._run.ended = True  # leave this goal
+            node._run = None
+
+            node._on_pwm(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=False))
+            never = handle(2)
+            node._on_accepted(never)
+            t0 = node._now_s()
+            wait_until(lambda: node._on_tick() or never.results, 10 * ARMED_GRACE_S, None, "the goal's end")
+            assert node._now_s() - t0 >= ARMED_GRACE_S
+            assert never.states == ["aborted"] and never.results[0].message == NOT_ARMED
+            assert not never.results[0].success and not wrenches and node._run is None
+            assert status[-1] == (ManeuverStatus.PHASE_ABORTED, NOT_ARMED)
+        finally:
+            node.destroy_node()
 
 
 def test_node_parameters_are_described_read_only_and_checked():

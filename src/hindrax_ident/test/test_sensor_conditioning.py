@@ -14,7 +14,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.campaign import Campaign
 from hindrax_ident.identification.estimators import rate_bias_against_angle
 from hindrax_ident.identification.fusion import smooth_with_rate
-from hindrax_ident.identification.maneuvers import DepthEstimator, SensorState, euler_rates
+from hindrax_ident.identification.maneuvers import DepthEstimator, SensorState, euler_rates, rotation_ned_from_body
 
 
 @pytest.fixture(scope="module")
@@ -25,6 +25,18 @@ def cfg():
 def _gyro(state: SensorState, t: float, rates_frd) -> None:
     """A gyro sample whose FRD rate is ``rates_frd`` (default mounting: sensor axes = base_link FLU)."""
     state.on_sample("icm20948_gyro", SimpleNamespace(stamp_s=t, angular_rate_rad_s=frames.frd_to_flu(rates_frd)))
+
+
+def test_rotation_ned_from_body_is_the_zyx_euler_rotation():
+    # scipy's intrinsic ZYX rotation is the independent reference; angles over the whole range, pitch near +-90 deg
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(7)
+    angles = np.vstack([rng.uniform([-math.pi, -1.5, -math.pi], [math.pi, 1.5, math.pi], (50, 3)),
+                        [[0.3, math.pi / 2 - 1e-6, -2.0], [0.0, 0.0, 0.0]]])
+    for roll, pitch, yaw in angles:
+        np.testing.assert_allclose(rotation_ned_from_body(roll, pitch, yaw),
+                                   Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix(), atol=1e-14)
 
 
 def test_default_mounting_is_identity(cfg):

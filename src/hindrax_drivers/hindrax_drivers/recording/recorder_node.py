@@ -12,9 +12,22 @@ Behaviour
   (:func:`~hindrax_drivers.recording.qos.subscription_policies`: best-effort if any publisher is
   best-effort, transient-local only if all are), keep-last depth ``queue_depth``; the publishers'
   profiles are stored in the bag (``offered_qos_profiles``).
-- Data: ``create_subscription(..., raw=True)``: CDR bytes are written unchanged. Log time = the node's
-  clock at reception (ROS time, so sim time with ``use_sim_time``); publish time = the DDS source
-  timestamp. Writing happens in one writer thread (the mcap writer is not thread-safe).
+- Data: raw subscriptions (CDR bytes, written unchanged), taken in one of two ways:
+
+  * on the system clock (the vehicle; ``use_sim_time`` false): *polled*. The subscriptions live on the intake
+    node ``<name>_intake`` that no executor dispatches (:class:`~hindrax_drivers.polled_input.PolledSubscriptions`),
+    and a timer takes every queued message every ``intake_period_s``: one executor wake-up per period instead of
+    one per message, about half of the recorder's receive cost (docs/architecture.md §10). Log time = the DDS
+    reception time (``received_timestamp``, system clock = the node's ROS time), publish time = the DDS source
+    timestamp (``source_timestamp``), as rosbag2 records them; each batch is written in log-time order;
+  * with ``use_sim_time``: one callback per message, log time = the node's clock (sim time) in the callback, so a
+    stepped simulation's bag depends on its seed only; publish time = the log time (the callback takes the
+    message alone: rclpy 7.1's EventsExecutor, which this process spins, fails on a callback that takes
+    ``(msg, info)``, docs/architecture.md §11.5; the MCAP specification asks for the log time where the publish
+    time is not available).
+
+  No reader of this project uses the publish time (a message's ``header.stamp`` is the time of its data). Writing
+  happens in one writer thread (the mcap writer is not thread-safe).
 - Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
   (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
   the bag (summary, metadata.yaml). A SIGKILL or power loss loses at most the open chunk
@@ -30,7 +43,8 @@ Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.y
 ``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty = a new
 timestamped directory under ``recording.output_root`` at every start, never an existing one: :mod:`.bag_dir`),
 ``autostart`` (bool, false), ``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000),
-``disk_check_period_s`` (1.0).
+``disk_check_period_s`` (1.0), ``intake_period_s`` (0.05; polled intake only; ``queue_depth`` must hold what a topic
+sends in this time).
 
 Run alone: ``python -m hindrax_drivers.recording.recorder_node --ros-args --params-file
 ros_ws/config/hindrax.yaml -p autostart:=true``.
@@ -53,6 +67,7 @@ from hindrax_msgs.srv import StartRecording, StopRecording
 
 from ..config import ConfigError
 from ..node_parameters import node_config
+from ..polled_input import PolledSubscriptions
 from ..ros_process import RosProcess
 from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
@@ -95,6 +110,9 @@ class RecorderNode(Node):
         self._output_root = Path(self._cfg.flat.get("recording.output_root", "runs"))
         self._min_free_bytes = float(self._cfg.flat.get("recording.min_free_disk_mb", 0.0)) * 1e6
         self._disk_check_period_s = float(self._param("disk_check_period_s", 1.0))
+        self._intake_period_s = float(self._param("intake_period_s", 0.05))
+        #: polled intake on the system clock, one callback per message with sim time (module docstring)
+        self._intake = None if self.get_parameter("use_sim_time").value else PolledSubscriptions(self)
 
         self._writer: ThreadedBagWriter | None = None
         self._selection: TopicSelection | None = None
@@ -110,6 +128,8 @@ class RecorderNode(Node):
         self.create_timer(self._status_period_s, self._publish_status)
         if self._min_free_bytes > 0.0:
             self.create_timer(self._disk_check_period_s, self.check_disk)
+        if self._intake is not None:
+            self.create_timer(self._intake_period_s, self.take_queued)
         if autostart:
             self.start_recording()
 
@@ -123,6 +143,7 @@ class RecorderNode(Node):
         "queue_depth": "subscription queue depth (keep last)",
         "autostart": "start recording at start-up",
         "disk_check_period_s": "period of the free-disk check against recording.min_free_disk_mb, s",
+        "intake_period_s": "period at which the queued messages are taken (on the system clock), s",
     }
 
     def _param(self, name: str, default: Any) -> Any:
@@ -204,9 +225,14 @@ class RecorderNode(Node):
         writer = self._writer
         if writer is None:
             return None
+        if self.context.ok():  # polled intake: what is queued belongs to this bag (after SIGINT it is gone)
+            self._take_into(writer)
         self._writer = None
         for sub in self._subs.values():
-            self.destroy_subscription(sub)
+            if self._intake is not None:
+                self._intake.destroy(sub)
+            else:
+                self.destroy_subscription(sub)
         self._subs.clear()
         meta = writer.close()
         for w in writer.warnings:
@@ -271,18 +297,41 @@ class RecorderNode(Node):
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._queue_depth,
                              reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
             self._writer.add_topic(topic, type_name, profiles)
-            self._subs[topic] = self.create_subscription(
-                cls, topic, functools.partial(self._on_message, topic), qos, raw=True,
-                event_callbacks=_NO_EVENT_HANDLERS)
+            if self._intake is not None:
+                self._subs[topic] = self._intake.subscribe(cls, topic, qos, raw=True,
+                                                           event_callbacks=_NO_EVENT_HANDLERS)
+            else:
+                self._subs[topic] = self.create_subscription(
+                    cls, topic, functools.partial(self._on_message, topic), qos, raw=True,
+                    event_callbacks=_NO_EVENT_HANDLERS)
             self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
 
-    def _on_message(self, topic: str, data: bytes, info: Any) -> None:
+    def take_queued(self) -> int:
+        """Polled intake (module docstring): take every message queued on the subscriptions and hand them to the
+        writer thread in log-time order; returns how many. The timer calls it every ``intake_period_s``."""
+        return self._take_into(self._writer)
+
+    def _take_into(self, writer: ThreadedBagWriter | None) -> int:
+        if self._intake is None or writer is None:
+            return 0
+        batch = []
+        for topic, sub in self._subs.items():
+            for data, info in self._intake.take(sub):
+                log_ns = info.get("received_timestamp") or self.get_clock().now().nanoseconds
+                batch.append((log_ns, topic, data, info.get("source_timestamp") or log_ns))
+        batch.sort(key=lambda item: item[0])
+        for log_ns, topic, data, pub_ns in batch:
+            writer.write(topic, log_ns, data, pub_ns)
+        return len(batch)
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        """One received message (CDR bytes) of ``topic`` (sim time: one callback per message): queued for the writer
+        thread, log time = publish time = the node's clock now (module docstring)."""
         writer = self._writer
         if writer is None:
             return
         now_ns = self.get_clock().now().nanoseconds
-        source_ns = info.get("source_timestamp") if isinstance(info, dict) else None
-        writer.write(topic, now_ns, data, source_ns or now_ns)
+        writer.write(topic, now_ns, data, now_ns)
 
     # -- services and status ----------------------------------------------------------------------
     def _on_start(self, request: StartRecording.Request, response: StartRecording.Response):
@@ -350,6 +399,18 @@ class RecorderNode(Node):
         arr.status = [self.status()]
         self._diag_pub.publish(arr)
 
+    def close(self) -> None:
+        """Finish any bag in progress: the clean-up of a composed process
+        (:func:`~hindrax_drivers.node_common.run_nodes`)."""
+        self.shutdown()
+
+    def destroy_node(self) -> None:
+        """Destroy the intake node too (polled intake), then this node."""
+        if self._intake is not None:
+            self._intake.close()
+            self._intake = None
+        super().destroy_node()
+
     def shutdown(self) -> None:
         """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM)."""
         try:
@@ -363,8 +424,9 @@ def main(args: list[str] | None = None) -> int:
     """Entry point: ``python -m hindrax_drivers.recording.recorder_node --ros-args ...``.
 
     Exit 0 (also after SIGINT/SIGTERM, the bag finished), 1 with one line on stderr when the node cannot start.
+    The process spins the EventsExecutor (:mod:`hindrax_drivers.ros_process`).
     """
-    with RosProcess(args, executor="single") as proc:  # EventsExecutor: see ros_process
+    with RosProcess(args) as proc:
         try:
             node = RecorderNode()
         except (ConfigError, ValueError) as exc:

@@ -1,6 +1,7 @@
 """Actuation benchmark: wrench-in to PCA9685-registers-written latency and CPU per command at 50 Hz.
 
-One process, one SingleThreadedExecutor: a publisher of geometry_msgs/WrenchStamped at 50 Hz, the thrust
+One process, one EventsExecutor (as the vehicle's ``actuation_node``, which composes the two nodes:
+``hindrax_drivers.composition``): a publisher of geometry_msgs/WrenchStamped at 50 Hz, the thrust
 allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated I2C bus.
 Wrenches alternate between two surge levels so T1's pulse width changes with every command; latency is
 the time from ``publish()`` to the I2C write after which the emulator decodes the new pulse width on
@@ -21,7 +22,7 @@ import numpy as np
 import rclpy
 from domain_coordinator import domain_id
 from geometry_msgs.msg import WrenchStamped
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.experimental.events_executor import EventsExecutor
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.allocation.node import ThrustAllocationNode
@@ -103,7 +104,7 @@ def run(quick: bool = False) -> list[dict]:
         esc = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         driver = rclpy.create_node("bench_driver", context=ctx)
         SafetyHeartbeats(driver)  # stand-in supervisor and output guard: the ESC arms only with their heartbeats
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EventsExecutor(context=ctx)
         for n in (alloc, esc, driver):
             ex.add_node(n)
         pub = driver.create_publisher(WrenchStamped, "wrench", 10)

@@ -2,7 +2,8 @@
 
 For each driver (MS5837 pressure node, ICM-20948 IMU node) one process runs the node over its
 device emulator on an :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`, plus a probe node
-subscribing to the main topic, all in one SingleThreadedExecutor, with the shipped configuration
+subscribing to the main topic, all in one EventsExecutor (the executor of every node process,
+``hindrax_drivers.ros_process``), with the shipped configuration
 (MS5837: 10 Hz, OSR 4096; ICM-20948: 100 Hz configured = 102.27 Hz, I2C-master magnetometer).
 
 * Latency: from the emulator's ``i2c_read`` of the data (ICM-20948: the 23-byte burst; MS5837: the ADC read
@@ -32,7 +33,7 @@ def _percentiles(values_s: list[float]) -> tuple[float, float]:
 def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s: float, extra_devices=None):
     """Spin node + probe for ``duration_s``; return (cpu_s, wall_s, published, receipts [(t_ns, stamp_ns)])."""
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental.events_executor import EventsExecutor
 
     from hindrax_drivers.testing import ros_context, wait_until
     from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
@@ -46,7 +47,7 @@ def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s:
             msg_type, topic,
             lambda m: receipts.append((time.time_ns(), m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)),
             50)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EventsExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
         spin = lambda: ex.spin_once(timeout_sec=0.1)  # noqa: E731 - blocks until work, like spin()
@@ -67,13 +68,13 @@ def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s:
 def _idle_load(duration_s: float) -> float:
     """CPU load (fraction of a core) of this process with an idle context and probe node: the DDS background."""
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental.events_executor import EventsExecutor
 
     from hindrax_drivers.testing import ros_context, wait_until
 
     with ros_context() as ctx:
         probe = rclpy.create_node("bench_idle", context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EventsExecutor(context=ctx)
         ex.add_node(probe)
         cpu0, wall0 = time.process_time(), time.monotonic()
         end = wall0 + duration_s

@@ -1,4 +1,12 @@
-"""The vehicle's launch layout for the stack benchmark: one process per node, devices emulated.
+"""The vehicle's launch layout for the stack benchmark: the processes of the launch file, devices emulated.
+
+:func:`launch_processes` reads a ROS 2 launch XML file (``pool_test.launch.xml``, which includes
+``vehicle.launch.xml``) the way ``ros2 launch`` would start it: ``<arg>``, ``<let>``, ``$(var)``,
+``$(find-pkg-share)``, ``if``/``unless`` conditions, ``<group>``, ``<include>``; each ``<node>`` is one process,
+its console script mapped to the function it runs (the installed entry points), with ``name`` (``-r __node:=``),
+parameter files and ``<param name value>`` (other attributes, e.g. ``respawn``, do not change what runs). The
+stack benchmark starts exactly those processes, so it measures what the vehicle runs. The ``launch`` package
+itself is not installable here (docs/architecture.md §11.3).
 
 Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node ...``):
 
@@ -10,13 +18,15 @@ Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node .
     (:class:`I2CSocketServer`). The emulators run on ``time.monotonic`` (the drivers' clock here). The pty paths
     are written to ``--ports-file`` (JSON) once everything is up.
 
-``node MODULE --ros-args ...``
-    Runs ``MODULE.main()`` (e.g. ``hindrax_drivers.ms5837.node``) exactly as ``python -m MODULE --ros-args ...``
-    would, except that ``open_smbus`` returns a :class:`SocketI2CBus` connected to the pool when the
-    environment variable ``HINDRAX_BENCH_I2C_SOCKET`` is set. With ``HINDRAX_BENCH_PROFILE=DIR`` the node runs under
-    cProfile and writes ``DIR/<module>.prof`` on exit (``python -m pstats``). A transaction is then one request/answer
-    on a Unix socket in the driver process (two system calls and a pickle each way), which stands in for the ``ioctl``
-    of a real ``smbus2.SMBus`` on the Pi; the emulator's own work happens in the pool process.
+``node MODULE[:FUNCTION] --ros-args ...``
+    Runs ``MODULE.FUNCTION()`` (default ``main``; a console script's target) (e.g.
+    ``hindrax_drivers.ms5837.node``) exactly as ``python -m MODULE --ros-args ...`` would, except that
+    ``open_smbus`` (in every node module, those a composed process builds included) returns a
+    :class:`SocketI2CBus` connected to the pool when the environment variable ``HINDRAX_BENCH_I2C_SOCKET`` is set.
+    With ``HINDRAX_BENCH_PROFILE=DIR`` the node runs under cProfile and writes ``DIR/<module>.prof`` on exit
+    (``python -m pstats``). A transaction is then one request/answer on a Unix socket in the driver process (two
+    system calls and a pickle each way), which stands in for the ``ioctl`` of a real ``smbus2.SMBus`` on the Pi;
+    the emulator's own work happens in the pool process.
 """
 from __future__ import annotations
 
@@ -24,10 +34,14 @@ import argparse
 import importlib
 import json
 import os
+import re
 import sys
 import threading
 import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping
 
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 
@@ -36,6 +50,135 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 SOCKET_ENV = "HINDRAX_BENCH_I2C_SOCKET"
 #: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits
 PROFILE_ENV = "HINDRAX_BENCH_PROFILE"
+
+
+#: the workspace's own packages: their share directory is the source package directory in a checkout
+OWN_PACKAGES = ("hindrax_drivers", "hindrax_ident")
+
+
+@dataclass(frozen=True)
+class LaunchProcess:
+    """One ``<node>`` of a launch file: a process.
+
+    name: the ``name`` attribute (None: the nodes keep their own names; a process composing several nodes has
+    none); package, executable: ``pkg``/``exec``; module: the console script's target, ``module:function``;
+    params_files: ``<param from>`` files; params: ``<param name value>`` pairs, in file order."""
+
+    name: str | None
+    package: str
+    executable: str
+    module: str
+    params_files: tuple[str, ...]
+    params: tuple[tuple[str, str], ...]
+
+    @property
+    def label(self) -> str:
+        """The process's name in the benchmark's rows: the node name, else the executable without ``_node``."""
+        return self.name or re.sub(r"_node$", "", self.executable)
+
+    def ros_args(self) -> list[str]:
+        """``--ros-args`` as ``ros2 launch`` passes them: ``-r __node:=name``, ``--params-file``, ``-p`` (an
+        empty value as ``''``: rcl refuses ``-p name:=``)."""
+        out = ["--ros-args"]
+        if self.name:
+            out += ["-r", f"__node:={self.name}"]
+        for f in self.params_files:
+            out += ["--params-file", f]
+        for k, v in self.params:
+            out += ["-p", f"{k}:={v if v else repr('')}"]  # rcl reads -p values as YAML: '' is the empty string
+        return out
+
+
+def package_share(package: str) -> Path:
+    """``$(find-pkg-share package)`` for this workspace's packages: the source package directory (it holds
+    ``launch/`` and ``config/`` as colcon installs them under ``share/``). Raises ValueError for another package."""
+    if package not in OWN_PACKAGES:
+        raise ValueError(f"$(find-pkg-share {package}): not a package of this workspace")
+    return Path(importlib.import_module(package).__file__).resolve().parents[1]
+
+
+def console_scripts(package: str) -> dict[str, str]:
+    """Console script name -> ``module:function`` of ``package`` (installed entry points). Raises ValueError when
+    the package has none (not installed: ``make setup``)."""
+    from importlib.metadata import entry_points
+
+    out = {ep.name: ep.value.replace(" ", "") for ep in entry_points(group="console_scripts")
+           if ep.dist is not None and ep.dist.name.replace("-", "_") == package}
+    if not out:
+        raise ValueError(f"{package}: no console scripts installed (run make setup)")
+    return out
+
+
+def _substitute(text: str, args: Mapping[str, str]) -> str:
+    def var(m: re.Match) -> str:
+        if m.group(1) not in args:
+            raise ValueError(f"$(var {m.group(1)}): not a declared argument")
+        return args[m.group(1)]
+
+    text = re.sub(r"\$\(var (\w+)\)", var, text)
+    text = re.sub(r"\$\(find-pkg-share (\w+)\)", lambda m: str(package_share(m.group(1))), text)
+    if "$(" in text:
+        raise ValueError(f"unsupported substitution in {text!r}")
+    return text
+
+
+def launch_processes(path: str | Path, arguments: Mapping[str, str] | None = None) -> list[LaunchProcess]:
+    """The processes ``ros2 launch`` would start for the launch XML file ``path`` with ``arguments`` (name ->
+    value; the others take their defaults), in launch order, includes and groups expanded.
+
+    Raises ValueError for an undeclared argument, an unsupported substitution or element, a condition that is
+    not a boolean, an enabled node of another package, or an executable the package does not install."""
+    root = ET.parse(path).getroot()
+    given = dict(arguments or {})
+    args: dict[str, str] = {}
+    for a in root.findall("arg"):
+        value = given.pop(a.get("name"), a.get("default"))
+        if value is None:
+            raise ValueError(f"{Path(path).name}: argument {a.get('name')} has no value")
+        args[a.get("name")] = _substitute(value, args)
+    if given:
+        raise ValueError(f"{Path(path).name}: no argument(s) {sorted(given)}")
+    return _elements(root, args, Path(path).name)
+
+
+def _enabled(el: ET.Element, args: Mapping[str, str], where: str) -> bool:
+    for attr, wanted in (("if", "true"), ("unless", "false")):
+        cond = el.get(attr)
+        if cond is not None:
+            value = _substitute(cond, args)
+            if value not in ("true", "false"):
+                raise ValueError(f"{where}: condition {attr}={cond!r} is {value!r}, not true/false")
+            if value != wanted:
+                return False
+    return True
+
+
+def _elements(parent: ET.Element, args: dict[str, str], where: str) -> list[LaunchProcess]:
+    out: list[LaunchProcess] = []
+    for el in parent:
+        if el.tag == "arg" or not _enabled(el, args, where):
+            continue
+        if el.tag == "let":
+            args[el.get("name")] = _substitute(el.get("value"), args)
+        elif el.tag == "group":
+            out += _elements(el, dict(args), where)  # a group scopes its <let>s
+        elif el.tag == "include":
+            passed = {a.get("name"): _substitute(a.get("value"), args) for a in el.findall("arg")}
+            out += launch_processes(_substitute(el.get("file"), args), passed)
+        elif el.tag == "node":
+            pkg, exe = _substitute(el.get("pkg"), args), _substitute(el.get("exec"), args)
+            name = _substitute(el.get("name"), args) if el.get("name") else None
+            scripts = console_scripts(pkg) if pkg in OWN_PACKAGES else {}
+            if exe not in scripts:
+                raise ValueError(f"{where}: {pkg}/{exe} is not an executable of this workspace")
+            files = tuple(_substitute(p.get("from"), args) for p in el.findall("param") if p.get("from"))
+            params = tuple((p.get("name"), _substitute(p.get("value"), args)) for p in el.findall("param")
+                           if not p.get("from"))
+            out.append(LaunchProcess(name, pkg, exe, scripts[exe], files, params))
+        else:
+            raise ValueError(f"{where}: unsupported element <{el.tag}> (the bench reads arg, let, group, include "
+                             f"and node)")
+    return out
 
 
 def _pool(argv: list[str]) -> int:
@@ -94,27 +237,33 @@ def _pool(argv: list[str]) -> int:
 
 
 def _node(argv: list[str]) -> int:
-    module_name, rest = argv[0], argv[1:]
-    path = os.environ.get(SOCKET_ENV)
+    entry, rest = argv[0], argv[1:]
+    module_name, _, function = entry.partition(":")
     module = importlib.import_module(module_name)
+    run = getattr(module, function or "main")
+    path = os.environ.get(SOCKET_ENV)
     if path:
         import hindrax_drivers.transport.i2c as i2c
 
+        if module_name == "hindrax_drivers.composition":  # it imports its node modules only when it starts
+            for target in module.NODE_CLASSES.values():
+                importlib.import_module(target.partition(":")[0])
+        original = i2c.open_smbus
         opener = lambda _bus_number: SocketI2CBus(path)  # noqa: E731
-        i2c.open_smbus = opener
-        if hasattr(module, "open_smbus"):
-            module.open_smbus = opener
+        for mod in [sys.modules[n] for n in list(sys.modules) if n.startswith("hindrax_")]:
+            if getattr(mod, "open_smbus", None) is original:  # every module that imported it by name
+                mod.open_smbus = opener
     sys.argv = [module_name] + rest
     profile_dir = os.environ.get(PROFILE_ENV)
     if not profile_dir:
-        return int(module.main() or 0)
+        return int(run() or 0)
     import cProfile
 
     profiler = cProfile.Profile()
     try:
-        return int(profiler.runcall(module.main) or 0)
+        return int(profiler.runcall(run) or 0)
     finally:
-        profiler.dump_stats(str(Path(profile_dir) / f"{module_name}.prof"))
+        profiler.dump_stats(str(Path(profile_dir) / f"{entry.replace(':', '.')}.prof"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,6 +1,11 @@
 """Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process and in the
-launch layout (one process per node), messages per second per topic, and the cost of a bare rclpy process
-sending the same topics at the same rates.
+launch layout (the processes of the vehicle's launch file), messages per second per topic, and the cost of a bare
+rclpy process sending the same topics at the same rates.
+
+CPU is always process (or thread) CPU time over wall time: it does not count the time a process waited for a core,
+so it moves less with the load of a shared machine than latency does; it still grows with that load (other
+processes evict the caches a wake-up needs), by 20-40 % between a quiet and a loaded run of this two-core
+machine, so compare layouts in runs close in time, and repeat.
 
 The graph: the four sensor drivers, the ESC node (PCA9685), the thrust allocation, the identification node
 (idle, then running a surge goal), the safety supervisor when the package has one
@@ -21,16 +26,22 @@ and Ping1D drivers, the recorder's bag writer thread) from ``/proc/self/task/<ti
 the rest of the process (rclpy's wait-set handling and the DDS threads). Whole stack = process CPU minus the
 simulator's steps, the emulators and the benchmark's own probe.
 
-Launch layout (``launch``): every node in its own process (``python -m <module> --ros-args --params-file
-hindrax.yaml``, the layout of the vehicle), the virtual pool in another
+Launch layout (``launch``): the processes ``ros2 launch hindrax_ident pool_test.launch.xml`` starts (the vehicle
+launch file with recording on, plus the identification node; read from the launch file by
+:func:`~hindrax_ident.benchmarks.launch_layout.launch_processes`, so a process added to or merged in the launch
+file is measured as it will run), each its console script's function with the launch file's arguments
+(``-r __node:=``, ``--params-file``, ``-p``) plus the bench's device ports; the virtual pool in another process
 (:mod:`hindrax_ident.benchmarks.launch_layout`: simulator at real time, serial emulators on pseudo-terminals,
 I2C emulators behind a Unix socket standing in for ``/dev/i2c-1``); every node on system time. CPU per process:
-user + system time from ``/proc/<pid>/stat`` (all threads).
+user + system time from ``/proc/<pid>/stat`` (all threads). The running phase is measured in
+:data:`RUNNING_WINDOWS` consecutive windows (the goal must still run at the end of the last); each row is the
+median over the windows, the note lists every window's value.
 
-Messages per second per topic: the recorder's per-topic counts over the window.
+Messages per second per topic: counted in the launch layout's bag by log time within each window (the one-process
+graph: the recorder's counts).
 
-Baselines (each a child process, plain rclpy, SingleThreadedExecutor, one timer per topic publishing a
-default-constructed message of the topic's type at its measured rate):
+Baselines (each a child process, plain rclpy, the EventsExecutor like every node process, one timer per topic
+publishing a default-constructed message of the topic's type at its measured rate):
 ``cpu_bare_rclpy_same_topics``: publishers only, nobody subscribed (the historical baseline), for the topics of
 the one-process idle phase; ``cpu_bare_rclpy_pub_sub``: the same publisher process plus a bare subscriber process
 (raw CDR subscriptions to every topic, like the recorder without writing), for the topics of the launch layout's
@@ -42,6 +53,7 @@ import collections
 import json
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -63,6 +75,14 @@ WRENCH_RATE_HZ = 50.0
 def _proc_cpu_s(pid: int | str = "self") -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / _CLK
+
+
+def _proc_rss_mb(pid: int) -> float:
+    """Resident set size of a process (``VmRSS``), MB (10^6 bytes)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024 / 1e6
+    return float("nan")
 
 
 def _thread_cpu_s() -> dict[str, float]:
@@ -103,13 +123,16 @@ def _goal() -> Any:
 
 
 def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin: Any, spin_idle: Any,
-                       warm_timeout_s: float, what: str) -> None:
+                       warm_timeout_s: float, what: str, goal_status: list | None = None) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
     :class:`~hindrax_drivers.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s of
     warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
 
     stream: {"on": bool} switches the wrench stream; window(label) measures one window; spin / spin_idle: one
-    executor spin while running / while idle. Raises RuntimeError when the goal is rejected."""
+    executor spin while running / while idle. goal_status: a one-item list whose item is set to a function
+    returning the goal's last action status code (action_msgs/GoalStatus) seen on the status topic. Raises
+    RuntimeError when the goal is rejected, or when it ended before the running window did (the window would not
+    have measured a running campaign)."""
     from hindrax_drivers.action_goal import GoalSender
     from hindrax_drivers.testing import wait_until
 
@@ -118,9 +141,20 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
     handle = goals.send(_goal(), spin, 30)
     if not handle.accepted:
         raise RuntimeError(f"{what}: the surge goal was rejected")
+    if goal_status is not None:
+        goal_status[0] = lambda: goals.status(handle)
     warm = time.monotonic() + 3.0
     wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin, "running warm-up")
     window("running")
+    if goals.status(handle) in (4, 5, 6):  # SUCCEEDED, CANCELED, ABORTED: the campaign did not run throughout
+        got: list = []
+        try:  # the node's reason, for the error
+            wait_until(lambda: got.append(goals.poll_result(handle)) or got[-1] is not None, 10, spin, "goal result")
+            why = getattr(got[-1].result, "message", "")
+        except Exception:  # noqa: BLE001 - the reason is a courtesy; the error below is what matters
+            why = "(no result received)"
+        raise RuntimeError(f"{what}: the surge goal ended (status {goals.status(handle)}) during the running "
+                           f"window: {why}")
     wait_until(lambda: goals.cancel(handle), 30, spin, "goal cancel")
     stream["on"] = True
     warm = time.monotonic() + 2.0
@@ -287,7 +321,13 @@ def _type_name(cls: Any) -> str:
 
 
 # ---------------------------------------------------------------------------------------------- launch layout
-def _launch(duration_s: float, tmp: Path) -> dict:
+def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | None = None,
+            launch_file: Path | None = None) -> dict:
+    """The launch layout: every process of ``launch_file`` (default :data:`LAUNCH_FILE`, recording on), the
+    virtual pool in another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the
+    idle phase); per window the CPU of every process and its wall-clock span (the rates come from the bag).
+    py_spy_dir: record every node process with ``py-spy`` during the first running window (raw collapsed stacks,
+    ``<label>.txt``)."""
     import rclpy
     from domain_coordinator import domain_id
     from geometry_msgs.msg import WrenchStamped
@@ -299,15 +339,19 @@ def _launch(duration_s: float, tmp: Path) -> dict:
     from hindrax_msgs.action import RunIdentification
     from hindrax_msgs.srv import SetArmed
 
-    from .launch_layout import SOCKET_ENV
+    from .launch_layout import SOCKET_ENV, launch_processes, package_share
 
     py = python_executable()
-    params = str(default_config_path())
     sock = str(tmp / "i2c.sock")
     ports_file = tmp / "ports.json"
+    bag_root = tmp / "launch-bags"  # the launch files' output_dir: the root the recorder makes its bag beneath
+    launch_file = launch_file or package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1]
+    layout = launch_processes(launch_file, {"output_dir": str(bag_root)})
     procs: dict[str, subprocess.Popen] = {}
     logs: dict[str, Any] = {}
-    out: dict = {"phases": {}}
+    out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": None,
+                 "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}", "module": lp.module}
+                               for lp in layout}}
     with domain_id() as did:
         env = child_env(ROS_DOMAIN_ID=str(did))
         try:
@@ -318,32 +362,22 @@ def _launch(duration_s: float, tmp: Path) -> dict:
             wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and ports_file.exists(), 60, None,
                        "pool process ready")
             ports = json.loads(ports_file.read_text())
-            base = ["--ros-args", "--params-file", params]
-            # the emulated PCA9685's oscillator is exactly nominal: calibrated (the ESC refuses to arm otherwise)
-            calibrated = (["-p", "esc.oscillator_calibrated:=true"]
-                          if "esc.oscillator_calibrated" in load_config(params).flat else [])
+            params = str(default_config_path())
+            # the bench's devices: the serial emulators' pseudo-terminals, a short arming time, and the emulated
+            # PCA9685's oscillator, exactly nominal: calibrated (the ESC refuses to arm otherwise). Vehicle keys,
+            # so every process may get them: a node ignores the keys it does not declare.
+            bench = ["-p", f"sensors.dvl75.port:={ports['dvl75']}", "-p", f"sensors.ping1d.port:={ports['ping1d']}",
+                     "-p", "esc.arming_time_s:=1.0"]
+            if "esc.oscillator_calibrated" in load_config(params).flat:
+                bench += ["-p", "esc.oscillator_calibrated:=true"]
             wrap = ["-m", "hindrax_ident.benchmarks.launch_layout", "node"]
-            cmds = {
-                "dvl75": [*wrap, "hindrax_drivers.dvl75.node", *base, "-p", f"sensors.dvl75.port:={ports['dvl75']}"],
-                "ping1d": [*wrap, "hindrax_drivers.ping1d.node", *base, "-p",
-                           f"sensors.ping1d.port:={ports['ping1d']}"],
-                "ms5837": [*wrap, "hindrax_drivers.ms5837.node", *base],
-                "icm20948": [*wrap, "hindrax_drivers.icm20948.node", *base],
-                "esc": [*wrap, "hindrax_drivers.pca9685.node", *base, "-p", "esc.arming_time_s:=1.0", *calibrated],
-                "thrust_allocation": [*wrap, "hindrax_drivers.allocation.node", *base],
-                "identification": [*wrap, "hindrax_ident.identification.node", *base],
-                "recorder": [*wrap, "hindrax_drivers.recording.recorder_node", *base, "-p", "autostart:=true",
-                             "-p", f"output_dir:={tmp / 'launch-bag'}", "-p", "all_topics:=true",
-                             "-p", "status_period_s:=0.5"],
-            }
-            if _supervisor_available():
-                cmds["supervisor"] = [*wrap, "hindrax_drivers.supervisor.node", *base]
-            # the second stop path (the ESC arms only with its heartbeat); without /OE it uses the emulated bus
-            cmds["output_guard"] = [*wrap, "hindrax_drivers.guard.node", *base]
-            for name, args in cmds.items():
-                logs[name] = open(tmp / f"{name}.log", "w")
-                e = dict(env, **{SOCKET_ENV: sock}) if name in ("ms5837", "icm20948", "esc", "output_guard") else env
-                procs[name] = subprocess.Popen([py, *args], env=e, stdout=logs[name], stderr=subprocess.STDOUT)
+            for lp in layout:
+                if lp.label in procs:
+                    raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
+                logs[lp.label] = open(tmp / f"{lp.label}.log", "w")
+                procs[lp.label] = subprocess.Popen([py, *wrap, lp.module, *lp.ros_args(), *bench],
+                                                   env=dict(env, **{SOCKET_ENV: sock}), stdout=logs[lp.label],
+                                                   stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
                 from .recorder import subscribe_recorder_counts
@@ -377,29 +411,43 @@ def _launch(duration_s: float, tmp: Path) -> dict:
                     return fut.result().armed
 
                 wait_until(try_arm, 30, spin, "armed (last answer: see the log)")
-                print(f"stack benchmark, launch layout: {answer[0]}", flush=True)
+                print(f"stack benchmark, launch layout ({len(layout)} processes of {launch_file.name}): "
+                      f"{answer[0]}", flush=True)
                 warm = time.monotonic() + 3.0
                 wait_until(lambda: time.monotonic() > warm, 30, spin, "warm-up")
+                spies: list[subprocess.Popen] = []
 
                 def window(phase: str) -> None:
                     alive()
-                    with lock:
-                        c0 = dict(counts)
-                    cpu0 = {n: _proc_cpu_s(p.pid) for n, p in procs.items()}
-                    wall0 = time.monotonic()
-                    end = wall0 + duration_s
-                    wait_until(lambda: time.monotonic() > end, duration_s + 30, spin, f"{phase} window")
-                    cpu1 = {n: _proc_cpu_s(p.pid) for n, p in procs.items()}
-                    wall = time.monotonic() - wall0
-                    with lock:
-                        c1 = dict(counts)
-                    out["phases"][phase] = {
-                        "wall_s": wall,
-                        "per_process": {n: (cpu1[n] - cpu0[n]) / wall for n in procs},
-                        "rates": {t: (c1.get(t, 0) - c0.get(t, 0)) / wall for t in c1},
-                    }
+                    results = []
+                    for k in range(windows if phase == "running" else 1):
+                        if py_spy_dir is not None and phase == "running" and k == 0:
+                            spies.extend(_start_py_spy(procs, py_spy_dir, duration_s))
+                        cpu0 = {n: _proc_cpu_s(p.pid) for n, p in procs.items()}
+                        bench0, load0 = _proc_cpu_s(), os.getloadavg()[0]
+                        wall0, t0_ns = time.monotonic(), time.time_ns()
+                        end = wall0 + duration_s
+                        wait_until(lambda: time.monotonic() > end, duration_s + 30, spin, f"{phase} window")
+                        cpu1 = {n: _proc_cpu_s(p.pid) for n, p in procs.items()}
+                        wall, t1_ns = time.monotonic() - wall0, time.time_ns()
+                        alive()
+                        results.append({"wall_s": wall, "t0_ns": t0_ns, "t1_ns": t1_ns,
+                                        "per_process": {n: (cpu1[n] - cpu0[n]) / wall for n in procs if n != "pool"},
+                                        "pool": (cpu1["pool"] - cpu0["pool"]) / wall,
+                                        "bench": (_proc_cpu_s() - bench0) / wall,
+                                        "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
+                                        "goal_status": goal_status[0](),
+                                        "rss_mb": {n: _proc_rss_mb(p.pid) for n, p in procs.items() if n != "pool"}})
+                    out["phases"][phase] = {"windows": results}
 
-                _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark")
+                goal_status = [lambda: None]
+                try:
+                    _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark",
+                                       goal_status=goal_status)
+                except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
+                    raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
+                for spy in spies:
+                    spy.wait(duration_s + 30)
                 ex.shutdown()
                 probe.destroy_node()
         finally:
@@ -414,7 +462,58 @@ def _launch(duration_s: float, tmp: Path) -> dict:
                     p.wait(5)
             for f in logs.values():
                 f.close()
+    bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
+    if len(bags) != 1:  # one recorder start (nothing respawns here)
+        raise RuntimeError(f"expected one bag under {bag_root}, found {[b.name for b in bags]}")
+    out["bag"] = str(bags[0])
+    _bag_rates(out)
     return out
+
+
+def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
+    """``py-spy record`` (raw collapsed stacks, non-blocking, 100 Hz) of every node process for ``duration_s``."""
+    import shutil
+
+    exe = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return [subprocess.Popen([exe, "record", "--nonblocking", "-r", "100", "-d", str(int(round(duration_s))), "-f",
+                              "raw", "-o", str(out_dir / f"{name}.txt"), "-p", str(p.pid)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for name, p in procs.items() if name != "pool"]
+
+
+def _bag_rates(out: dict) -> None:
+    """Messages per second per topic of every window, from the launch layout's bag (log time = the recorder's
+    reception time on the system clock, the windows' clock)."""
+    from hindrax_drivers.recording.reader import BagReader
+
+    reader = BagReader(out["bag"])
+    spans = [(w["t0_ns"], w["t1_ns"], w) for ph in out["phases"].values() for w in ph["windows"]]
+    for *_, w in spans:
+        w["rates"] = collections.Counter()
+    first = min(t0 for t0, _, _ in spans)
+    last = max(t1 for _, t1, _ in spans)
+    for m in reader.messages(start_ns=first, end_ns=last):
+        for t0, t1, w in spans:
+            if t0 <= m.log_time_ns < t1:
+                w["rates"][m.topic] += 1
+    for t0, t1, w in spans:
+        w["rates"] = {t: n / ((t1 - t0) * 1e-9) for t, n in w["rates"].items()}
+
+
+def _safety_log_lines(tmp: Path, names: list[str], keep: int = 12) -> str:
+    """The last ``keep`` lines of each process log that speak of arming, heartbeats, trips or the watchdog."""
+    import re
+
+    out = []
+    for name in names:
+        try:
+            lines = (tmp / f"{name}.log").read_text(errors="replace").splitlines()
+        except OSError:
+            continue
+        hits = [ln for ln in lines if re.search(r"arm|heartbeat|trip|watchdog|stale|guard", ln, re.I)]
+        out += [f"{name}: {ln[:300]}" for ln in hits[-keep:]]
+    return "\n".join(out) or "(no process logged a disarm, trip or heartbeat)"
 
 
 def _check_alive(procs: dict, tmp: Path) -> bool:
@@ -433,7 +532,7 @@ def _check_alive(procs: dict, tmp: Path) -> bool:
 _BARE_PUB = textwrap.dedent('''
     import importlib, json, sys, time
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental.events_executor import EventsExecutor
     spec = json.loads(sys.argv[1]); duration = float(sys.argv[2])
     rclpy.init(); node = rclpy.create_node("bare_publisher")
     for topic, type_name, rate in spec:
@@ -441,7 +540,7 @@ _BARE_PUB = textwrap.dedent('''
         cls = getattr(importlib.import_module(pkg + ".msg"), name)
         pub = node.create_publisher(cls, "/baseline" + topic, 10)
         node.create_timer(1.0 / rate, (lambda p, m: (lambda: p.publish(m)))(pub, cls()))
-    ex = SingleThreadedExecutor(); ex.add_node(node)
+    ex = EventsExecutor(); ex.add_node(node)
     if len(sys.argv) > 3:  # wait for the subscriber process
         t_end = time.monotonic() + 30
         while time.monotonic() < t_end and node.count_subscribers("/baseline" + spec[0][0]) == 0:
@@ -456,7 +555,7 @@ _BARE_PUB = textwrap.dedent('''
 _BARE_SUB = textwrap.dedent('''
     import importlib, json, sys, time
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.experimental.events_executor import EventsExecutor
     spec = json.loads(sys.argv[1]); duration = float(sys.argv[2])
     rclpy.init(); node = rclpy.create_node("bare_subscriber")
     got = [0]
@@ -465,7 +564,7 @@ _BARE_SUB = textwrap.dedent('''
         pkg, _, name = type_name.split("/")
         cls = getattr(importlib.import_module(pkg + ".msg"), name)
         node.create_subscription(cls, "/baseline" + topic, cb, 10, raw=True)
-    ex = SingleThreadedExecutor(); ex.add_node(node)
+    ex = EventsExecutor(); ex.add_node(node)
     while got[0] == 0:
         ex.spin_once(timeout_sec=0.05)
     t_end = time.monotonic() + duration
@@ -517,82 +616,191 @@ PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (publ
             "not measured on a Pi")
 
 
-def run(quick: bool = False) -> list[dict]:
-    """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
-    # windows: 10 s per phase and layout, 8 s per baseline (were 15/12 s; shortened to keep make bench under
-    # 6 minutes; the shared machine's load moves the figures by about +-20 % anyway)
-    duration_s = 8.0 if quick else 10.0
-    base_s = 6.0 if quick else 8.0
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-stack-") as tmpdir:
-        tmp = Path(tmpdir)
-        inproc = _in_process(duration_s, tmp)
-        launch = _launch(duration_s, tmp)
-    types = inproc["types"]
-    types.setdefault("/rosout", "rcl_interfaces/msg/Log")
-    types.setdefault("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
-    idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
-    launch_spec = _spec(launch["phases"]["running"]["rates"], types)
-    bare_pub, _ = _bare(idle_spec, base_s, with_subscriber=False)
-    pubsub_pub, pubsub_sub = _bare(launch_spec, base_s, with_subscriber=True)
-    pubsub = pubsub_pub + pubsub_sub
+#: the launch file the launch layout starts (package, path in its share directory), with recording on
+LAUNCH_FILE = ("hindrax_ident", "launch/pool_test.launch.xml")
+#: running-phase windows of the launch layout in ``make bench`` (their medians are the rows)
+RUNNING_WINDOWS = 3
 
-    rows: list[dict] = [{"name": "pi4_factor_assumed", "value": PI4_FACTOR, "unit": "x", "note": PI4_NOTE}]
+
+def _median(values: list[float]) -> float:
+    return float(statistics.median(values)) if values else float("nan")
+
+
+def launch_rows(launch: dict) -> list[dict]:
+    """Rows of the launch layout: per process, total, largest process and messages per second of each phase, each
+    the median over the phase's windows (the notes list every window's value)."""
+    rows: list[dict] = []
     for phase in ("idle", "running"):
-        ph = inproc["phases"][phase]
-        for name, v in ph["per_node"].items():
-            rows.append({"name": f"inproc_{phase}_cpu_{name}", "value": 100 * v, "unit": "% of a core"})
-        rows.append({"name": f"inproc_{phase}_msgs_per_s", "value": sum(ph["rates"].values()), "unit": "msg/s",
-                     "note": "recorded topics"})
-        if phase == "idle":
-            rows.append({"name": "cpu_stack_excluding_simulator", "value": 100 * ph["stack"], "unit": "% of a core",
-                         "note": "one process, identification idle, 50 Hz wrench stream, recorder on; "
-                                 "emulators and simulator excluded"})
-        else:
-            rows.append({"name": "inproc_running_cpu_stack", "value": 100 * ph["stack"], "unit": "% of a core",
-                         "note": "one process, identification running surge, recorder on"})
-    idle_msgs = sum(r for *_, r in idle_spec)
-    rows += [
-        {"name": "cpu_bare_rclpy_same_topics", "value": 100 * bare_pub, "unit": "% of a core",
-         "note": f"publishers only, {len(idle_spec)} topics, {idle_msgs:.0f} msg/s (one-process idle phase)"},
-        {"name": "stack_vs_bare_ratio", "value": inproc["phases"]["idle"]["stack"] / bare_pub if bare_pub else -1,
-         "unit": "x", "note": "cpu_stack_excluding_simulator / cpu_bare_rclpy_same_topics (stack includes "
-                              "the recorder and every subscriber; the baseline has none)"},
-    ]
-    for phase in ("idle", "running"):
-        ph = launch["phases"][phase]
-        per = {n: v for n, v in ph["per_process"].items() if n != "pool"}
-        for name, v in per.items():
-            rows.append({"name": f"launch_{phase}_cpu_{name}", "value": 100 * v, "unit": "% of a core",
-                         "target": "<= 15" if phase == "running" else ""})
+        wins = launch["phases"][phase]["windows"]
+        names = list(wins[0]["per_process"])
+        per = {n: _median([w["per_process"][n] for w in wins]) for n in names}
+
+        def span(vals):
+            return "" if len(vals) < 2 else "windows: " + " / ".join(f"{100 * v:.1f}" for v in vals)
+
+        for name in names:
+            rows.append({"name": f"launch_{phase}_cpu_{name}", "value": 100 * per[name], "unit": "% of a core",
+                         "target": "<= 15" if phase == "running" else "",
+                         "note": span([w["per_process"][name] for w in wins])})
+        totals = [sum(w["per_process"].values()) for w in wins]
+        total = _median(totals)
         worst = max(per, key=per.get)
+        rates = [sum(w["rates"].values()) for w in wins]
         rows += [
-            {"name": f"launch_{phase}_cpu_total", "value": 100 * sum(per.values()), "unit": "% of a core",
-             "target": "<= 40", "note": f"{len(per)} processes, recorder on; x{PI4_FACTOR:g} on a Pi 4 = "
-                                        f"{PI4_FACTOR * 100 * sum(per.values()):.0f} % of one Pi core (of 4)"},
+            {"name": f"launch_{phase}_cpu_total", "value": 100 * total, "unit": "% of a core",
+             "target": "<= 40", "note": f"{len(names)} processes of {Path(launch['launch_file']).name}, recorder on; "
+                                        f"{len(wins)} window(s) of {wins[0]['wall_s']:.0f} s"
+                                        + (f" ({span(totals)})" if len(wins) > 1 else "")
+                                        + f"; x{PI4_FACTOR:g} on a Pi 4 = {PI4_FACTOR * 100 * total:.0f} % of one "
+                                          f"Pi core (of 4)"},
             {"name": f"launch_{phase}_cpu_max_process", "value": 100 * per[worst], "unit": "% of a core",
              "target": "<= 15", "note": worst},
-            {"name": f"launch_{phase}_msgs_per_s", "value": sum(ph["rates"].values()), "unit": "msg/s"},
+            {"name": f"launch_{phase}_msgs_per_s", "value": _median(rates), "unit": "msg/s",
+             "note": "recorded topics, from the bag"},
         ]
-    launch_total = sum(v for n, v in launch["phases"]["running"]["per_process"].items() if n != "pool")
-    rows += [
-        {"name": "cpu_bare_rclpy_pub_sub", "value": 100 * pubsub, "unit": "% of a core",
-         "note": f"bare publisher {100 * pubsub_pub:.1f} % + bare raw subscriber {100 * pubsub_sub:.1f} %, "
-                 f"{len(launch_spec)} topics of the launch layout's running phase"},
-        {"name": "launch_vs_bare_pubsub_ratio", "value": launch_total / pubsub if pubsub else -1, "unit": "x",
-         "target": "<= 1.2", "note": "launch_running_cpu_total / cpu_bare_rclpy_pub_sub"},
-    ]
-    for topic, rate in sorted(launch["phases"]["running"]["rates"].items()):
-        idle_rate = launch["phases"]["idle"]["rates"].get(topic, 0.0)
-        rows.append({"name": f"rate {topic}", "value": round(rate, 2), "unit": "msg/s",
-                     "note": f"launch layout, running; idle {idle_rate:.2f}"})
-    rows += [
-        {"name": "simulator_real_time_factor", "value": inproc["phases"]["idle"]["sim_rtf"], "unit": "x",
-         "note": "achieved in the one-process graph (configured 1.0)"},
-        {"name": "recorder_drops", "value": inproc["dropped"], "unit": "messages", "target": "0"},
-    ]
+        if phase == "running":
+            rows += [
+                {"name": "launch_running_cpu_excluded", "value": 100 * _median([w["pool"] + w["bench"] for w in wins]),
+                 "unit": "% of a core",
+                 "note": f"not in the total: the virtual pool (simulator, emulators) "
+                         f"{100 * _median([w['pool'] for w in wins]):.1f} % and this benchmark's own process "
+                         f"{100 * _median([w['bench'] for w in wins]):.1f} %"},
+                {"name": "launch_running_loadavg", "value": _median([w["loadavg"] for w in wins]), "unit": "",
+                 "note": f"1-minute load average of the machine ({os.cpu_count()} CPUs) during the windows: "
+                         f"above the CPU count, every figure here is inflated (cache misses, waits)"},
+            ]
+            rss = wins[-1]["rss_mb"]
+            rows.append({"name": "launch_rss_total_mb", "value": sum(rss.values()), "unit": "MB",
+                         "note": "resident memory of the launch layout's processes at the end of the running phase: "
+                                 + ", ".join(f"{n} {v:.0f}" for n, v in rss.items())})
     return rows
 
 
+def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
+    wins = launch["phases"][phase]["windows"]
+    topics = sorted({t for w in wins for t in w["rates"]})
+    return {t: _median([w["rates"].get(t, 0.0) for w in wins]) for t in topics}
+
+
+def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
+        duration_s: float | None = None, baselines: bool = True, py_spy_dir: Path | None = None,
+        launch_file: Path | None = None) -> list[dict]:
+    """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
+    windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
+    s; baselines: the bare rclpy baselines (they need the layouts' rates); launch_file: another launch file for the
+    launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument)."""
+    # windows: 10 s per phase and layout (the launch layout's running phase: 3 of them, medians), 8 s per baseline
+    duration_s = duration_s or (8.0 if quick else 10.0)
+    windows = windows or (1 if quick else RUNNING_WINDOWS)
+    base_s = 6.0 if quick else 8.0
+    inproc = launch = None
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-stack-") as tmpdir:
+        tmp = Path(tmpdir)
+        if "inproc" in layouts:
+            inproc = _in_process(duration_s, tmp)
+        if "launch" in layouts:
+            launch = _launch(duration_s, tmp, windows=windows, py_spy_dir=py_spy_dir, launch_file=launch_file)
+            from hindrax_drivers.recording.reader import BagReader
+
+            launch["types"] = BagReader(launch["bag"]).topics
+    types = dict(launch["types"]) if launch else {}
+    if inproc:
+        types.update(inproc["types"])
+    types.setdefault("/rosout", "rcl_interfaces/msg/Log")
+    types.setdefault("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+
+    rows: list[dict] = [{"name": "pi4_factor_assumed", "value": PI4_FACTOR, "unit": "x", "note": PI4_NOTE}]
+    if inproc:
+        for phase in ("idle", "running"):
+            ph = inproc["phases"][phase]
+            for name, v in ph["per_node"].items():
+                rows.append({"name": f"inproc_{phase}_cpu_{name}", "value": 100 * v, "unit": "% of a core"})
+            rows.append({"name": f"inproc_{phase}_msgs_per_s", "value": sum(ph["rates"].values()),
+                         "unit": "msg/s", "note": "recorded topics"})
+            if phase == "idle":
+                rows.append({"name": "cpu_stack_excluding_simulator", "value": 100 * ph["stack"],
+                             "unit": "% of a core", "note": "one process, identification idle, 50 Hz wrench stream, "
+                                                           "recorder on; emulators and simulator excluded"})
+            else:
+                rows.append({"name": "inproc_running_cpu_stack", "value": 100 * ph["stack"], "unit": "% of a core",
+                             "note": "one process, identification running surge, recorder on"})
+        if baselines:
+            idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
+            bare_pub, _ = _bare(idle_spec, base_s, with_subscriber=False)
+            idle_msgs = sum(r for *_, r in idle_spec)
+            rows += [
+                {"name": "cpu_bare_rclpy_same_topics", "value": 100 * bare_pub, "unit": "% of a core",
+                 "note": f"publishers only, {len(idle_spec)} topics, {idle_msgs:.0f} msg/s (one-process idle phase)"},
+                {"name": "stack_vs_bare_ratio",
+                 "value": inproc["phases"]["idle"]["stack"] / bare_pub if bare_pub else -1,
+                 "unit": "x", "note": "cpu_stack_excluding_simulator / cpu_bare_rclpy_same_topics (stack includes "
+                                      "the recorder and every subscriber; the baseline has none)"},
+            ]
+    if launch:
+        rows += launch_rows(launch)
+        running = _phase_rates(launch, "running")
+        idle = _phase_rates(launch, "idle")
+        if baselines:
+            launch_spec = _spec(running, types)
+            pubsub_pub, pubsub_sub = _bare(launch_spec, base_s, with_subscriber=True)
+            pubsub = pubsub_pub + pubsub_sub
+            launch_total = next(r["value"] for r in rows if r["name"] == "launch_running_cpu_total") / 100
+            rows += [
+                {"name": "cpu_bare_rclpy_pub_sub", "value": 100 * pubsub, "unit": "% of a core",
+                 "note": f"bare publisher {100 * pubsub_pub:.1f} % + bare raw subscriber {100 * pubsub_sub:.1f} %, "
+                         f"{len(launch_spec)} topics of the launch layout's running phase"},
+                {"name": "launch_vs_bare_pubsub_ratio", "value": launch_total / pubsub if pubsub else -1, "unit": "x",
+                 "target": "<= 1.2", "note": "launch_running_cpu_total / cpu_bare_rclpy_pub_sub"},
+            ]
+        for topic, rate in running.items():
+            rows.append({"name": f"rate {topic}", "value": round(rate, 2), "unit": "msg/s",
+                         "note": f"launch layout, running; idle {idle.get(topic, 0.0):.2f}"})
+    if inproc:
+        rows += [
+            {"name": "simulator_real_time_factor", "value": inproc["phases"]["idle"]["sim_rtf"], "unit": "x",
+             "note": "achieved in the one-process graph (configured 1.0)"},
+            {"name": "recorder_drops", "value": inproc["dropped"], "unit": "messages", "target": "0"},
+        ]
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m hindrax_ident.benchmarks.stack``: the stack benchmark alone, with the options ``make bench``
+    does not take (see ``--help``); prints the rows and writes them as JSON with ``--json``."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.benchmarks.stack",
+                                     description="The Pi budget: CPU of the vehicle graph in the launch layout "
+                                                 "(one process per <node> of pool_test.launch.xml) and in one "
+                                                 "process. CPU = process CPU time / wall time.")
+    parser.add_argument("--layouts", default="inproc,launch", help="inproc, launch or both (default both)")
+    parser.add_argument("--windows", type=int, default=None,
+                        help=f"running windows of the launch layout (default {RUNNING_WINDOWS}); rows are medians")
+    parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")
+    parser.add_argument("--no-baselines", action="store_true", help="skip the bare rclpy baselines")
+    parser.add_argument("--py-spy", type=Path, default=None, metavar="DIR",
+                        help="record every launch-layout process with py-spy during the first running window "
+                             "(DIR/<process>.txt, raw collapsed stacks)")
+    parser.add_argument("--launch-file", type=Path, default=None,
+                        help="launch file of the launch layout (default: hindrax_ident's pool_test.launch.xml with "
+                             "output_dir set; another file must declare output_dir too)")
+    parser.add_argument("--quick", action="store_true", help="one 8 s window")
+    parser.add_argument("--json", type=Path, default=None, help="also write the rows to this file")
+    args = parser.parse_args(argv)
+    layouts = tuple(x for x in args.layouts.split(",") if x)
+    bad = [x for x in layouts if x not in ("inproc", "launch")]
+    if bad or not layouts:
+        parser.error(f"--layouts {args.layouts!r}: choose from inproc, launch")
+    rows = run(quick=args.quick, layouts=layouts, windows=args.windows, duration_s=args.window_s,
+               baselines=not args.no_baselines, py_spy_dir=args.py_spy, launch_file=args.launch_file)
+    width = max(len(r["name"]) for r in rows)
+    for r in rows:
+        print(f"{r['name']:<{width}} {r['value']:10.4g} {r.get('unit', ''):<12} {r.get('target', ''):<6} "
+              f"{r.get('note', '')}")
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=2))
+    return 0
+
+
 if __name__ == "__main__":
-    for r in run(quick="--quick" in sys.argv):
-        print(r)
+    sys.exit(main())

@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         processes = read_launch(_launch_path(args.launch), given)
     except LaunchFileError as exc:
         raise CommandError(f"hindrax health: {exc}") from exc
-    expect = expectation(p.label for p in processes)
+    expect = expectation(n for p in processes for n in p.node_names)
 
     def ready(nodes, statuses, supervisor) -> bool:
         return assess(expect, nodes, statuses, supervisor, args.strict).ready

@@ -4,9 +4,9 @@ A thin rclpy node over :class:`~.executive.Executive` (pure: the dive, positioni
 planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the in-process campaign
 steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples (:mod:`.signals`), and at
 every tick of its control timer (``identification.estimate_rate_hz``, ROS clock) hands the executive the samples
-that came in since the last tick and publishes the wrench it returns. Nothing in a callback waits: the action's
-execute callback is a coroutine that awaits a future the control timer completes. The node does not know whether
-the vehicle is simulated: it sees the same topics from the drivers either way.
+that came in since the last tick and publishes the wrench it returns. Nothing in a callback waits, and no coroutine
+runs while a goal does (see "Action execution" below). The node does not know whether the vehicle is simulated: it
+sees the same topics from the drivers either way.
 
 The force in the regression is the thrust model of the pulse widths the ESC node actually wrote
 (``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed, through the allocation's cubic curves,
@@ -24,7 +24,9 @@ Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     forces are the ``calibration.*`` parameters, :func:`~.executive.calibration_forces`,
     :func:`~.executive.inclining_load`), ``calibration_only`` (no
     ladders). Rejected when a goal is running or the goal is invalid (unknown DOF or step, fraction out of
-    range, calibration_only without a step). The goal fails at once when the ESC output is not armed. Feedback
+    range, calibration_only without a step). The goal fails, commanding nothing, when the ESC output has not
+    reported armed within :data:`ARMED_GRACE_S` of its acceptance (an operator who arms and starts at once is
+    not refused while the armed flag is on its way). Feedback
     at every level change, at every operator prompt and once per second: DOF, level index and count, level
     command (N or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel):
     the node publishes a zero wrench every tick until the ESC node reports neutral widths (zero thrust on every
@@ -59,6 +61,17 @@ Parameters
     aborts when the DVL had no valid velocity for this long (docs/architecture.md §8); ``sensor_timeout_s``
     (default 30): a goal fails when a sensor has not published this long after it was accepted;
     ``stop_timeout_s`` (default 2.0): longest zero-wrench hold at the end while waiting for neutral widths.
+Action execution
+    An accepted goal is not executed when it is accepted: ``handle_accepted_callback`` sets up the campaign and
+    returns, the control timer runs it, and when it ends (done, abort, cancel, after the neutral hold) the timer
+    calls the goal handle's ``execute`` with a plain execute callback that returns the result at once. So the
+    goal's action status (action_msgs/GoalStatus) reads ACCEPTED while the campaign runs (CANCELING after a
+    cancel request), then EXECUTING and its end state together; the feedback, the result and cancelling work as
+    for any goal. Why: an execute callback that is a coroutine awaiting the end stays a pending task for the whole
+    campaign, and rclpy 7.1's EventsExecutor, which every node process spins, re-queues a pending task at once, a
+    busy loop (72 % of a core in the launch layout while a goal ran; docs/architecture.md §11.5). With the
+    SingleThreadedExecutor the same coroutine cost about 20 % of a core; the node now costs about 5 % idle and
+    10-13 % running a goal (docs/architecture.md §10.1).
 Safety (docs/architecture.md §8)
     Limits of the executive (depth, altitude, roll, pitch, pool box) plus DVL lock and ESC disarm abort the
     goal; the vehicle is brought to neutral thrust at the end, on abort and on cancel, before the action ends.
@@ -78,7 +91,6 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.task import Future
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -108,6 +120,11 @@ NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro"
 NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
 #: period of ``identification/status`` while a goal runs and nothing changes (10 Hz: topside display, bag), s
 STATUS_PERIOD_S = 0.1
+#: how long an accepted goal waits for the ESC to report armed on ``thrusters/pulse_width`` (published on every
+#: write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``) before it fails, s (ROS time)
+ARMED_GRACE_S = 0.5
+#: the result message of a goal whose ESC output did not report armed
+NOT_ARMED = "ESC output not armed: call esc/set_armed first"
 
 _PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverStatus.PHASE_RUNNING,
            "returning": ManeuverStatus.PHASE_RETURNING, "done": ManeuverStatus.PHASE_DONE,
@@ -142,14 +159,14 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
 
 @dataclass
 class _GoalRun:
-    """One accepted goal: its handle, executive, the future the execute coroutine awaits, and the end state."""
+    """One accepted goal: its handle, executive and end state."""
 
     handle: Any
     executive: Executive
-    done: Future
     accepted_s: float
     written_us: np.ndarray
     stop_since_s: float | None = None
+    ended: bool = False
     pwm_count_at_stop: int = 0
     error: str = ""
     record: CampaignRecord | None = None
@@ -189,6 +206,7 @@ class IdentificationNode(Node):
         self._pwm_count = 0
         self._armed = False
         self._run: _GoalRun | None = None
+        self._ended: dict[bytes, _GoalRun] = {}  # goal UUID -> ended run whose result is being delivered
         self._last_tick_s: float | None = None  # ROS time of the last control tick of a goal (step gate)
         self._last_publish_t = -math.inf
         self._last_idle_status_t = -math.inf
@@ -215,8 +233,9 @@ class IdentificationNode(Node):
         latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC, latched, **pub_ev)
-        self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._execute,
-                                    goal_callback=self._on_goal, cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+        self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._goal_result,
+                                    goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
+                                    cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self.create_service(Trigger, "identification/continue", self._on_continue)
         self._timer = self.create_timer(self.tick_s, self._on_tick)
         log.info(f"identification executive ready: action run_identification, ticks at "
@@ -288,13 +307,14 @@ class IdentificationNode(Node):
             return f"level_fractions must be in (0, 1], got {fr}"
         return ""
 
-    async def _execute(self, goal_handle):
-        """Execute callback: set up the goal and await its end, which the control timer signals (no wait here)."""
+    def _on_accepted(self, goal_handle) -> None:
+        """Accepted goal: set it up and return; the control timer runs it (once the ESC reports armed, within
+        :data:`ARMED_GRACE_S`) and ends it (:meth:`_end_goal`).
+
+        The goal is not executed here: its action state stays ACCEPTED while the campaign runs and becomes
+        EXECUTING, then SUCCEEDED, ABORTED or CANCELED when it ends (module docstring, "Action execution")."""
         goal = goal_handle.request
         dofs = [] if goal.calibration_only else (list(goal.dofs) or list(DOFS))
-        if not self._armed:
-            goal_handle.abort()
-            return RunIdentification.Result(success=False, message="ESC output not armed: call esc/set_armed first")
         calibrate = list(goal.calibrate)
         w_ballast, f_line = calibration_forces(self.config) if calibrate else (0.0, 0.0)
         incl = inclining_load(self.config) if "inclining" in calibrate else (0.0, 0.0)
@@ -302,14 +322,26 @@ class IdentificationNode(Node):
                               fractions=list(goal.level_fractions) or None,
                               dvl_lock_timeout_s=self.dvl_lock_timeout_s, calibrate=calibrate,
                               ballast_weight_in_water_n=w_ballast, line_pull_n=f_line, inclining_load_n_m=incl)
-        run = _GoalRun(goal_handle, executive, Future(), self._now_s(), np.full(self._n_thrusters, self._neutral_us))
+        run = _GoalRun(goal_handle, executive, self._now_s(), np.full(self._n_thrusters, self._neutral_us))
         self._samples = []
         self._run = run
         self.get_logger().info(f"run_identification: {', '.join(dofs) or 'no ladders'}"
                                + (f"; calibration {', '.join(calibrate)}" if calibrate else ""))
-        await run.done
-        self._run = None
-        self._last_tick_s = None
+
+    def _end_goal(self, run: _GoalRun) -> None:
+        """The goal's end, from the control timer: the result is computed and the goal reaches its terminal state
+        through ``execute`` with :meth:`_goal_result`, a plain function that returns at once."""
+        run.ended = True
+        if self._run is run:
+            self._run = None
+            self._last_tick_s = None
+        self._ended[bytes(run.handle.goal_id.uuid)] = run
+        run.handle.execute(self._goal_result)
+
+    def _goal_result(self, goal_handle) -> RunIdentification.Result:
+        """Execute callback (plain, returns at once): the ended goal's result and terminal state."""
+        run = self._ended.pop(bytes(goal_handle.goal_id.uuid))
+        executive = run.executive
         self.last_record = run.record
         ok = run.record is not None and not run.record.aborted and not run.error
         message = run.error or ("" if run.record is None else run.record.abort_reason) or "campaign complete"
@@ -335,7 +367,7 @@ class IdentificationNode(Node):
         """``identification/continue``: resume the calibration step waiting for the operator (module docstring)."""
         run = self._run
         ex = None if run is None else run.executive
-        if ex is None or run.done.done() or run.stop_since_s is not None:
+        if ex is None or run.ended or run.stop_since_s is not None:
             response.success, response.message = False, "no identification goal is running"
         elif not ex.awaiting:
             response.success, response.message = False, "nothing awaits the operator (no calibration step waits)"
@@ -365,7 +397,7 @@ class IdentificationNode(Node):
                 self._last_idle_status_t = t
                 self._publish_status(ManeuverStatus.PHASE_IDLE, None, "idle")
             return
-        if run.done.done():
+        if run.ended:
             return
         if run.stop_since_s is not None:
             self._hold_neutral(run, t, now)
@@ -373,6 +405,15 @@ class IdentificationNode(Node):
         ex = run.executive
         cancel = run.handle.is_cancel_requested
         if not ex.started:
+            if not self._armed and not cancel:  # nothing commanded yet: the goal ends without a neutral hold
+                if t - run.accepted_s > ARMED_GRACE_S:
+                    run.error = NOT_ARMED
+                    self._publish_status(ManeuverStatus.PHASE_ABORTED, None, NOT_ARMED)
+                    self._end_goal(run)
+                else:
+                    self._publish_status_throttled(t, ManeuverStatus.PHASE_POSITIONING, None,
+                                                   "waiting for the ESC output to report armed")
+                return
             if cancel or t - run.accepted_s > self.sensor_timeout_s:
                 self._stop(run, t, now, "cancelled" if cancel
                            else f"sensors not publishing: {sorted(NEEDED_SENSORS - self._seen)}")
@@ -448,7 +489,7 @@ class IdentificationNode(Node):
             if not neutral:
                 self.get_logger().warn(f"run_identification: thrusters not reported neutral within "
                                        f"{self.stop_timeout_s:g} s of the stop")
-            run.done.set_result(True)
+            self._end_goal(run)
             return
         if t > run.stop_since_s:
             self._publish_wrench(np.zeros(6), now)
@@ -514,22 +555,24 @@ class IdentificationNode(Node):
     def close(self) -> None:
         """The graph's shutdown path: a running goal gets a zero wrench and ends ("node shutting down")."""
         run = self._run
-        if run is not None and not run.done.done():
+        if run is not None and not run.ended:
             self._publish_wrench(np.zeros(6), self.get_clock().now())
             run.error = run.error or "node shutting down"
             if run.record is None and run.executive.started:
                 run.record = run.executive.record()
-            run.done.set_result(True)
+            if self.context.ok():
+                self._end_goal(run)
+            else:  # SIGINT/SIGTERM already shut the context down: no result can be delivered any more
+                run.ended = True
 
 
 def main(args: list[str] | None = None) -> int:
     """Run the node alone until SIGINT/SIGTERM (:func:`hindrax_drivers.node_common.run_node`: a running goal is
     ended by :meth:`IdentificationNode.close`). Returns the exit status (1 on an invalid configuration).
 
-    The node spins rclpy's SingleThreadedExecutor, not the EventsExecutor of the other node processes: the action's
-    execute coroutine awaits a future, and the EventsExecutor (rclpy 7.1) polls such a task in a busy loop
-    (measured in the launch layout: 72 % of a core while a goal runs, 20 % with the SingleThreadedExecutor)."""
-    return run_node(IdentificationNode, args, executor="single")
+    The process spins the EventsExecutor like every node process (:mod:`hindrax_drivers.ros_process`): the action
+    runs no coroutine (module docstring, "Action execution")."""
+    return run_node(IdentificationNode, args)
 
 
 if __name__ == "__main__":  # pragma: no cover

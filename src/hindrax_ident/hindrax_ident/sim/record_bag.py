@@ -119,6 +119,10 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
         graph.freeze_time()
 
         def flushed() -> bool:
+            # the I2C drivers' raw records still pending (RawDataPublisher publishes them every 0.1 s), also those
+            # of a poll that was due at the freeze and runs now
+            for name in ("ms5837", "icm20948", "esc"):
+                graph.nodes[name].raw.flush_pending()
             # the serial devices are in lock-step: every byte sent was handled by its driver before time moved on
             got = recorder._writer.topic_counts() if recorder._writer is not None else {}
             return all(link.settled() for link in links) and all(

@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         overrides.append(Parameter("topics", value=list(args.topics)))
     if args.config:
         overrides.append(Parameter("config_file", value=args.config))
-    with RosProcess([], executor="single") as proc:  # EventsExecutor: see ros_process
+    with RosProcess([]) as proc:
         try:
             node = RecorderNode(parameter_overrides=overrides)
         except (ConfigError, ValueError, OSError, RuntimeError) as exc:

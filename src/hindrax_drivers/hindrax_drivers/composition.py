@@ -1,0 +1,128 @@
+"""Composed processes: several node classes of this package in one process, spun by one executor.
+
+ROS 2 C++ composes nodes with ``rclcpp_components`` containers; rclpy has none, and every node class here
+already runs in any process (``bringup.py`` composes them all for the virtual pool). A *group* is a console script
+that builds a fixed list of node classes and spins them with the process's executor
+(:func:`hindrax_drivers.node_common.run_nodes`: the EventsExecutor, orderly shutdown, each node's ``close()``).
+Nodes keep their own names and read the same vehicle file, so a group runs from a launch file exactly like the
+nodes it composes (``<node pkg="hindrax_drivers" exec="i2c_sensors_node">`` without ``name``: a ``name`` would
+rename every node of the process). Every node keeps its own executable too (``ms5837_node`` ...).
+
+Why groups (docs/architecture.md §10, the measured gains): a message costs rclpy, rcl and Fast DDS work in the
+publishing process and in every subscribing process, most of it the wake-up of a thread whose caches are cold;
+nodes in one process share one participant, one set of DDS threads and one executor thread, and a message
+between them is delivered inside the process. What stays apart: the ESC output and the safety supervisor run in
+no process with anything heavy (docs/architecture.md §8), so that neither can be starved or killed by another
+node's work.
+
+Groups (:data:`GROUPS`):
+
+``i2c_sensors_node``
+    MS5837 and ICM-20948: the two sensors on the shared I2C bus (each node opens the bus itself; the kernel
+    serialises the transfers).
+``serial_sensors_node``
+    DVL-75 and Ping1D: the two serial devices (each keeps its port's reader thread).
+``actuation_node``
+    thrust allocation and ESC output: the allocation's command reaches the ESC inside the process (no second
+    DDS hop on the wrench -> registers path). The ESC node is built last and so closed first on exit: it writes
+    neutral before anything else shuts down.
+
+``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
+:data:`NODE_CLASSES` (for measurements; the launch files use the groups).
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+from typing import Any, Callable, Sequence
+
+__all__ = ["GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
+
+#: node -> "module:class" of every node class that composes (the class is imported only when used)
+NODE_CLASSES: dict[str, str] = {
+    "dvl75": "hindrax_drivers.dvl75.node:Dvl75Node",
+    "ping1d": "hindrax_drivers.ping1d.node:Ping1dNode",
+    "ms5837": "hindrax_drivers.ms5837.node:Ms5837Node",
+    "icm20948": "hindrax_drivers.icm20948.node:Icm20948Node",
+    "esc": "hindrax_drivers.pca9685.node:EscNode",
+    "thrust_allocation": "hindrax_drivers.allocation.node:ThrustAllocationNode",
+    "static_tf": "hindrax_drivers.tf.node:StaticTfNode",
+    "supervisor": "hindrax_drivers.supervisor.node:SupervisorNode",
+    "recorder": "hindrax_drivers.recording.recorder_node:RecorderNode",
+}
+
+#: console script -> the nodes it composes, in construction order (module docstring)
+GROUPS: dict[str, tuple[str, ...]] = {
+    "i2c_sensors_node": ("ms5837", "icm20948"),
+    "serial_sensors_node": ("dvl75", "ping1d"),
+    "actuation_node": ("thrust_allocation", "esc"),
+}
+
+
+def node_names(package: str, executable: str, name: str | None = None) -> tuple[str, ...]:
+    """The ROS node names a launch file's ``<node pkg exec name>`` process runs: a group's nodes (their own names),
+    else ``name``, else the executable. Used where a process list from a launch file is compared with the nodes
+    in the graph (``hindrax health``, the pool-day test)."""
+    if package == "hindrax_drivers" and executable in GROUPS:
+        return GROUPS[executable]
+    return (name or executable,)
+
+
+def node_factories(names: Sequence[str]) -> list[Callable[[], Any]]:
+    """The node classes of ``names`` (keys of :data:`NODE_CLASSES`), imported. Raises ValueError naming an unknown
+    node and the known ones."""
+    out = []
+    for name in names:
+        if name not in NODE_CLASSES:
+            raise ValueError(f"unknown node {name!r}: choose from {', '.join(NODE_CLASSES)}")
+        module, _, cls = NODE_CLASSES[name].partition(":")
+        out.append(getattr(importlib.import_module(module), cls))
+    return out
+
+
+def run_group(names: Sequence[str], args: Sequence[str] | None = None) -> int:
+    """Run the nodes ``names`` in this process until SIGINT/SIGTERM (:func:`~hindrax_drivers.node_common.run_nodes`).
+    Returns the exit status (1 on an invalid configuration, one line on stderr)."""
+    return _run(node_factories(names), args)
+
+
+def _run(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None) -> int:
+    # imported here: node_names (launch_xml, ``hindrax health``) reads GROUPS without loading the ROS messages
+    from .node_common import run_nodes
+
+    return run_nodes(factories, args)
+
+
+def i2c_sensors_main(args: Sequence[str] | None = None) -> int:
+    """Console script ``i2c_sensors_node``: MS5837 and ICM-20948 in one process (module docstring)."""
+    return run_group(GROUPS["i2c_sensors_node"], args)
+
+
+def serial_sensors_main(args: Sequence[str] | None = None) -> int:
+    """Console script ``serial_sensors_node``: DVL-75 and Ping1D in one process (module docstring)."""
+    return run_group(GROUPS["serial_sensors_node"], args)
+
+
+def actuation_main(args: Sequence[str] | None = None) -> int:
+    """Console script ``actuation_node``: thrust allocation and ESC output in one process (module docstring)."""
+    return run_group(GROUPS["actuation_node"], args)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]``; exit 2 on a bad node list."""
+    argv = list(sys.argv if argv is None else argv)
+    if len(argv) < 2 or argv[1].startswith("-"):
+        print(f"usage: python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]; nodes: "
+              f"{', '.join(NODE_CLASSES)}", file=sys.stderr)
+        return 2
+    names = [n for n in argv[1].split(",") if n]
+    try:
+        factories = node_factories(names)
+    except ValueError as exc:
+        print(f"composition: {exc}", file=sys.stderr)
+        return 2
+    return _run(factories, [argv[0]] + argv[2:])
+
+
+if __name__ == "__main__":
+    sys.exit(main())
