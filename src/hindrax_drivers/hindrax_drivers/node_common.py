@@ -20,6 +20,7 @@ from hindrax_msgs.msg import RawDeviceData
 
 from .config import ConfigError, VehicleConfig
 from .node_parameters import node_config
+from .ros_process import RosProcess
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
@@ -377,8 +378,6 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
     reverse order (the last built first). Same arguments, exit status and shutdown as :func:`run_node`; an
     exception out of any node's callback ends the whole process (every node's ``close()`` still runs)."""
-    from .ros_process import RosProcess
-
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor) as proc:
         for factory in factories:
             node = proc.own(factory())

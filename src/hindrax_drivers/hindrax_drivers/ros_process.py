@@ -42,6 +42,10 @@ import os
 import sys
 from typing import Any, Callable, Mapping, Sequence
 
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.experimental.events_executor import EventsExecutor
+
 __all__ = ["EXECUTORS", "RosProcess", "executor_kind"]
 
 #: values of ``HINDRAX_EXECUTOR``
@@ -66,7 +70,6 @@ class _EventsLoop:
     ``ExternalShutdownException`` then (handled by :class:`RosProcess`)."""
 
     def __init__(self) -> None:
-        from rclpy.experimental.events_executor import EventsExecutor
 
         self._ex = EventsExecutor()
 
@@ -83,7 +86,6 @@ class _EventsLoop:
         self._ex.spin_once(timeout_sec=timeout_sec)
 
     def spin(self) -> None:
-        import rclpy
 
         while rclpy.ok():
             self._ex.spin_once(timeout_sec=0.1)
@@ -115,7 +117,6 @@ class RosProcess:
         self._executor: Any = None
 
     def __enter__(self) -> RosProcess:
-        import rclpy
 
         rclpy.init(args=self.args)
         return self
@@ -129,8 +130,6 @@ class RosProcess:
             if (self.executor_kind or executor_kind()) == "events":
                 self._executor = _EventsLoop()
             else:
-                from rclpy.executors import SingleThreadedExecutor
-
                 self._executor = SingleThreadedExecutor()
         return self._executor
 
@@ -159,8 +158,6 @@ class RosProcess:
         return node
 
     def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: Any) -> bool:
-        import rclpy
-        from rclpy.executors import ExternalShutdownException
 
         shutting_down = not rclpy.ok()  # before the clean-up: SIGINT/SIGTERM already shut the context down
         failed: list[Exception] = []

@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+from hindrax_drivers.config import default_config_path
+
 TARGET_S = 0.3
 
 
@@ -46,8 +48,6 @@ def run(quick: bool = False) -> list[dict]:
     rows = [{"name": "hindrax_help_wall_s", "value": statistics.median(help_s), "unit": "s",
              "target": f"< {TARGET_S:g}",
              "note": f"median of {runs} fresh processes (min {min(help_s):.3f}, max {max(help_s):.3f})"}]
-    from hindrax_drivers.config import default_config_path
-
     check_s = wall_times_s(base + ["config", "check", str(default_config_path())], max(3, runs // 2), check=False)
     rows.append({"name": "hindrax_config_check_wall_s", "value": statistics.median(check_s), "unit": "s",
                  "note": "median; imports the configuration schema (numpy, yaml), no ROS"})

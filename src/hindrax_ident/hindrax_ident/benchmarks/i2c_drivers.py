@@ -23,6 +23,15 @@ import bisect
 import time
 
 import numpy as np
+import rclpy
+from hindrax_drivers.icm20948.emulator import Icm20948Emulator
+from hindrax_drivers.icm20948.node import Icm20948Node
+from hindrax_drivers.ms5837.emulator import Ms5837Emulator
+from hindrax_drivers.ms5837.node import Ms5837Node
+from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from rclpy.experimental.events_executor import EventsExecutor
+from sensor_msgs.msg import FluidPressure, Imu
 
 
 def _percentiles(values_s: list[float]) -> tuple[float, float]:
@@ -32,12 +41,6 @@ def _percentiles(values_s: list[float]) -> tuple[float, float]:
 
 def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s: float, extra_devices=None):
     """Spin node + probe for ``duration_s``; return (cpu_s, wall_s, published, receipts [(t_ns, stamp_ns)])."""
-    import rclpy
-    from rclpy.experimental.events_executor import EventsExecutor
-
-    from hindrax_drivers.testing import ros_context, wait_until
-    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-
     bus = EmulatedI2CBus({address: emulator, **(extra_devices or {})})
     receipts: list[tuple[int, int]] = []
     with ros_context() as ctx:
@@ -67,11 +70,6 @@ def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s:
 
 def _idle_load(duration_s: float) -> float:
     """CPU load (fraction of a core) of this process with an idle context and probe node: the DDS background."""
-    import rclpy
-    from rclpy.experimental.events_executor import EventsExecutor
-
-    from hindrax_drivers.testing import ros_context, wait_until
-
     with ros_context() as ctx:
         probe = rclpy.create_node("bench_idle", context=ctx)
         ex = EventsExecutor(context=ctx)
@@ -92,11 +90,6 @@ def _marginal_row(prefix: str, cpu: float, emulator_cpu: float, wall: float, pub
 
 
 def _icm20948(duration_s: float, idle: float) -> list[dict]:
-    from sensor_msgs.msg import Imu
-
-    from hindrax_drivers.icm20948.emulator import Icm20948Emulator
-    from hindrax_drivers.icm20948.node import Icm20948Node
-    from hindrax_drivers.testing import config_parameters
 
     reads_ns: list[int] = []
 
@@ -146,11 +139,6 @@ def _icm20948(duration_s: float, idle: float) -> list[dict]:
 
 
 def _ms5837(duration_s: float, idle: float) -> list[dict]:
-    from sensor_msgs.msg import FluidPressure
-
-    from hindrax_drivers.ms5837.emulator import Ms5837Emulator
-    from hindrax_drivers.ms5837.node import Ms5837Node
-    from hindrax_drivers.testing import config_parameters
 
     adc_reads_ns: list[int] = []
 

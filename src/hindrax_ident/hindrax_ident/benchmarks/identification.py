@@ -12,13 +12,13 @@ from __future__ import annotations
 import math
 import time
 
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident.identification.campaign import Campaign
+from hindrax_ident.identification.estimators import identify_all_with_errors
+
 
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
-    from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_ident.identification.campaign import Campaign
-    from hindrax_ident.identification.estimators import identify_all_with_errors
-
     cfg = load_config(default_config_path())
     dofs = ("surge", "heave")
     t0 = time.monotonic()

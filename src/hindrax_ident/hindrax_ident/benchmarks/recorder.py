@@ -27,6 +27,18 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from domain_coordinator import domain_id
+from hindrax_drivers.recording.make_test_bags import STREAMS
+from hindrax_drivers.recording.metadata import read_metadata
+from hindrax_drivers.recording.msgtypes import message_class
+from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.serialization import serialize_message
+
 NOMINAL = (  # topic suffix, stream in make_test_bags.STREAMS (for the message), rate Hz, best effort
     ("imu/data", "/imu/data", 100.0, True),
     ("imu/mag", "/imu/mag", 100.0, True),
@@ -51,19 +63,6 @@ def _cpu_s(pid: int) -> float:
 
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
-    import rclpy
-    from domain_coordinator import domain_id
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-    from rclpy.serialization import serialize_message
-
-    from hindrax_drivers.recording.make_test_bags import STREAMS
-    from hindrax_drivers.recording.metadata import read_metadata
-    from hindrax_drivers.recording.msgtypes import message_class
-    from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
-
-    import numpy as np
-
     nominal_s = 5.0 if quick else 15.0
     stage_s = 2.0 if quick else 3.0
     streams = {s.topic: s for s in STREAMS}
@@ -183,8 +182,6 @@ if __name__ == "__main__":
 def subscribe_recorder_counts(node, depth: int) -> tuple[dict[str, int], "threading.Lock"]:
     """Subscribe ``node`` to ``/diagnostics`` and keep the recorder's per-topic message counts (its
     ``topic:<name>`` values) in the returned dict, guarded by the returned lock."""
-    from diagnostic_msgs.msg import DiagnosticArray
-
     counts: dict[str, int] = {}
     lock = threading.Lock()
 

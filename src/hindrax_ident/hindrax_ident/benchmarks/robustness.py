@@ -49,6 +49,32 @@ import math
 import time
 from typing import Any, Callable
 
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
+from hindrax_drivers.dvl75.node import Dvl75Node
+from hindrax_drivers.dvl75.protocol import DvlParseError, DvlPositionDelta, format_dvpdl, format_sentence, nmea_checksum
+from hindrax_drivers.dvl75.report import DvlReportBuilder
+from hindrax_drivers.dvl75.stream import DvlStreamDecoder
+from hindrax_drivers.icm20948 import protocol as icm_protocol
+from hindrax_drivers.icm20948.emulator import Icm20948Emulator
+from hindrax_drivers.icm20948.node import Icm20948Node
+from hindrax_drivers.icm20948.protocol import Icm20948Error
+from hindrax_drivers.ms5837 import protocol as ms5837_protocol
+from hindrax_drivers.ms5837.emulator import Ms5837Emulator
+from hindrax_drivers.ms5837.node import Ms5837Node
+from hindrax_drivers.ms5837.protocol import Ms5837Error
+from hindrax_drivers.ping1d.protocol import Distance, encode_frame, encode_message
+from hindrax_drivers.ping1d.stream import Ping1dStreamDecoder
+from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_drivers.transport.pty_device import PtyDevice
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.config import default_config_path, load_config
+
 #: Fuzzed inputs per parser (full run); ``quick``: a tenth.
 FUZZ_INPUTS = 100_000
 #: Inputs drawn per hypothesis example.
@@ -59,9 +85,6 @@ BATCH = 100
 def _fuzz(name: str, template: Any, mutate: Callable[[Any, Any], Any], check: Callable[[Any], None],
           allowed: tuple, n_inputs: int) -> dict:
     """Feed ``n_inputs`` inputs (hypothesis templates and their mutants) to ``check``; count crashes."""
-    from hypothesis import HealthCheck, Phase, given, settings
-    from hypothesis import strategies as st
-
     stats = {"inputs": 0, "accepted": 0, "crashes": 0, "first": ""}
 
     @settings(max_examples=max(1, n_inputs // BATCH), database=None, deadline=None, phases=[Phase.generate],
@@ -114,8 +137,6 @@ def _mutate_bytes(data: bytes, rnd, fix: Callable[[bytes], bytes]) -> bytes:
 
 def _dvl_fix(line: bytes) -> bytes:
     """Recompute the XOR checksum of a ``$...*hh`` line (so the mutant reaches the field parser)."""
-    from hindrax_drivers.dvl75.protocol import nmea_checksum
-
     body = line.rstrip(b"\r\n")
     star = body.rfind(b"*")
     if not body.startswith(b"$") or star < 1:
@@ -144,9 +165,6 @@ def _flips(st, frame: bytes):
 
 
 def _dvl_strategy():
-    from hypothesis import strategies as st
-
-    from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvpdl, format_sentence
 
     numbers = st.one_of(st.integers(-10**12, 10**12).map(str),
                         st.floats(allow_nan=False, allow_infinity=False, width=32).map(lambda v: f"{v:.6g}"),
@@ -176,10 +194,6 @@ def _dvl_strategy():
 
 
 def _dvl_check_factory():
-    from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_drivers.dvl75.protocol import DvlPositionDelta
-    from hindrax_drivers.dvl75.report import DvlReportBuilder
-    from hindrax_drivers.dvl75.stream import DvlStreamDecoder
 
     s = load_config(default_config_path()).section("sensors.dvl75")
     builder = DvlReportBuilder(max_speed_m_s=s["max_speed_m_s"], min_interval_s=s["min_interval_s"],
@@ -201,9 +215,6 @@ def _dvl_check_factory():
 
 
 def _ping_strategy():
-    from hypothesis import strategies as st
-
-    from hindrax_drivers.ping1d.protocol import Distance, encode_frame, encode_message
 
     ids = st.sampled_from([1, 2, 3, 4, 5, 6, 1200, 1201, 1202, 1203, 1204, 1205, 1206, 1207, 1208, 1210, 1211,
                            1212, 1213, 1300, 1400, 1401, 2000, 65535])
@@ -214,17 +225,15 @@ def _ping_strategy():
 
 
 def _ping_check(data: bytes) -> bool:
-    from hindrax_drivers.ping1d.stream import Ping1dStreamDecoder
 
     return bool(Ping1dStreamDecoder().feed(data))
 
 
 def _ms5837_strategy():
-    from hypothesis import strategies as st
 
-    from hindrax_drivers.ms5837 import protocol as p
+    datasheet = ms5837_protocol.prom_with_crc(ms5837_protocol.EXAMPLE_WORD0_30BA,
+                                              ms5837_protocol.EXAMPLE_COEFFICIENTS_30BA)
 
-    datasheet = p.prom_with_crc(p.EXAMPLE_WORD0_30BA, p.EXAMPLE_COEFFICIENTS_30BA)
     def edited(edits):
         out = list(datasheet)
         for index, value in edits:
@@ -254,27 +263,25 @@ def _ms5837_mutate(item, rnd):
 
 def _ms5837_check(item) -> bool:
     """True when the PROM passes CRC-4 and the sanity check and both ADC reads are usable."""
-    from hindrax_drivers.ms5837 import protocol as p
-
     words, d1, d2, variant = item
-    parsed = [p.parse_prom_word(p.encode_prom_word(w)) for w in words]
+    parsed = [ms5837_protocol.parse_prom_word(ms5837_protocol.encode_prom_word(w)) for w in words]
     try:
-        p.Calibration.from_words(parsed, check_crc=True)
+        ms5837_protocol.Calibration.from_words(parsed, check_crc=True)
         crc_ok = True
-    except p.Ms5837Error:
+    except ms5837_protocol.Ms5837Error:
         crc_ok = False
-    cal = p.Calibration.from_words(parsed, check_crc=False)  # arbitrary coefficients reach the arithmetic too
-    sane = not p.prom_sanity_issue(cal)
-    a = p.parse_adc(p.encode_adc(d1))
-    b = p.parse_adc(p.encode_adc(d2))
-    reading = p.compensate(a, b, cal, p.parse_variant(variant), apply_second_order=True)
+    # arbitrary coefficients reach the arithmetic too
+    cal = ms5837_protocol.Calibration.from_words(parsed, check_crc=False)
+    sane = not ms5837_protocol.prom_sanity_issue(cal)
+    a = ms5837_protocol.parse_adc(ms5837_protocol.encode_adc(d1))
+    b = ms5837_protocol.parse_adc(ms5837_protocol.encode_adc(d2))
+    reading = ms5837_protocol.compensate(a, b, cal, ms5837_protocol.parse_variant(variant), apply_second_order=True)
     if not (math.isfinite(reading.pressure_pa) and math.isfinite(reading.temperature_c)):
         raise AssertionError(f"non-finite reading {reading}")
     return crc_ok and sane
 
 
 def _icm_strategy():
-    from hypothesis import strategies as st
 
     return st.tuples(st.binary(min_size=14, max_size=14), st.binary(min_size=9, max_size=9),
                      st.lists(st.integers(0, 255), min_size=5, max_size=5))
@@ -294,14 +301,11 @@ def _icm_mutate(item, rnd):
 
 
 def _icm_check(item) -> bool:
-    import numpy as np
-
-    from hindrax_drivers.icm20948 import protocol as p
 
     block, mag_block, regs = item
-    config = p.ImuConfig.from_registers(*regs)
-    sample = p.parse_sensor_block(block, config)
-    mag = p.parse_ak09916_block(mag_block)
+    config = icm_protocol.ImuConfig.from_registers(*regs)
+    sample = icm_protocol.parse_sensor_block(block, config)
+    mag = icm_protocol.parse_ak09916_block(mag_block)
     values = np.concatenate([sample.accel_m_s2, sample.gyro_rad_s, [sample.temperature_c], mag.magnetic_field_t])
     if not np.all(np.isfinite(values)):
         raise AssertionError(f"non-finite decoded values {values}")
@@ -310,10 +314,6 @@ def _icm_check(item) -> bool:
 
 def fuzz_parsers(n_inputs: int = FUZZ_INPUTS) -> list[dict]:
     """One result per parser: inputs, crashes, first crash (text), seconds."""
-    from hindrax_drivers.dvl75.protocol import DvlParseError
-    from hindrax_drivers.icm20948.protocol import Icm20948Error
-    from hindrax_drivers.ms5837.protocol import Ms5837Error
-
     return [
         _fuzz("DVL-75 sentences", _dvl_strategy(), lambda b, r: _mutate_bytes(b, r, _dvl_fix), _dvl_check_factory(),
               (DvlParseError,), n_inputs),
@@ -328,15 +328,12 @@ def fuzz_parsers(n_inputs: int = FUZZ_INPUTS) -> list[dict]:
 # ---------------------------------------------------------------------------------------------- faults
 def _until(predicate: Callable[[], Any], spin: Callable[[], None], timeout_s: float, what: str) -> float:
     """Spin until ``predicate()``; return the wall time it took, s (raises on timeout)."""
-    from hindrax_drivers.testing import wait_until
-
     t0 = time.monotonic()
     wait_until(predicate, timeout_s, spin, what)
     return time.monotonic() - t0
 
 
 def _executor(ctx, *nodes):
-    from rclpy.executors import SingleThreadedExecutor
 
     ex = SingleThreadedExecutor(context=ctx)
     for n in nodes:
@@ -345,10 +342,6 @@ def _executor(ctx, *nodes):
 
 
 def _dvl_faults() -> list[dict]:
-    from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
-    from hindrax_drivers.dvl75.node import Dvl75Node
-    from hindrax_drivers.testing import config_parameters, ros_context
-    from hindrax_drivers.transport.pty_device import PtyDevice
 
     def truth(t):
         return DvlTruth(velocity_frd_m_s=(0.3 + 0.1 * math.sin(2 * t), 0.05 * math.cos(3 * t), 0.0),
@@ -395,10 +388,6 @@ def _fault_row(name: str, detect_s: float, recover_s: float | None, note: str) -
 
 
 def _icm_faults() -> list[dict]:
-    from hindrax_drivers.icm20948.emulator import Icm20948Emulator
-    from hindrax_drivers.icm20948.node import Icm20948Node
-    from hindrax_drivers.testing import config_parameters, ros_context
-    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 
     def truth(t):
         s = math.sin(7.0 * t)
@@ -465,12 +454,6 @@ def _icm_faults() -> list[dict]:
 
 
 def _ms5837_faults() -> list[dict]:
-    from diagnostic_msgs.msg import DiagnosticStatus
-
-    from hindrax_drivers.ms5837.emulator import Ms5837Emulator
-    from hindrax_drivers.ms5837.node import Ms5837Node
-    from hindrax_drivers.testing import config_parameters, ros_context
-    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 
     emu = Ms5837Emulator(lambda t: (110000.0 + 500.0 * math.sin(t), 18.0), variant="30BA")
     bus = EmulatedI2CBus({0x76: emu}, seed=2)

@@ -36,9 +36,42 @@ Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :
 """
 from __future__ import annotations
 
+import os
+import signal as _signal
+import subprocess
+import threading
 import time
+from pathlib import Path
 
 import numpy as np
+import rclpy
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from domain_coordinator import domain_id
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+from hindrax_drivers.pca9685.node import EscNode
+from hindrax_drivers.supervisor.node import SupervisorNode
+from hindrax_drivers.testing import (
+    ConditionTimeout,
+    SafetyHeartbeats,
+    child_env,
+    config_parameters,
+    python_executable,
+    ros_context,
+    wait_until,
+)
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+from hindrax_drivers.transport.gpio import EmulatedGpioLine
+from hindrax_drivers.transport.shared_emulation import SOCKET_ENV, EmulationServer
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.srv import SetArmed
 
 NEUTRAL_US = 1500.0
 #: Repeats per path: in-process paths, process failures (kill/stop/outage/brown-out), and both with ``--quick``
@@ -54,20 +87,6 @@ TICK_US = 1.3  # one PCA9685 count at 200 Hz is 1.24 us (docs/devices.md §5.1)
 
 
 def _rig(ctx, sim_time: bool = False):
-    import rclpy
-    from geometry_msgs.msg import PoseWithCovarianceStamped
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
-    from rosgraph_msgs.msg import Clock
-    from std_srvs.srv import Trigger
-
-    from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-    from hindrax_drivers.pca9685.node import EscNode
-    from hindrax_drivers.supervisor.node import SupervisorNode
-    from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, wait_until
-    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-    from hindrax_msgs.msg import ThrusterPwm
-    from hindrax_msgs.srv import SetArmed
 
     class TimedEmulator(Pca9685Emulator):
         """Records the monotonic time of the first transaction that leaves every thruster channel at neutral."""
@@ -162,10 +181,6 @@ def _close(r) -> None:
 
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
-    from domain_coordinator import domain_id
-
-    from hindrax_drivers.testing import ros_context
-
     repeats = QUICK_REPEATS if quick else REPEATS
     times: dict[str, list[float]] = {k: [] for k in (
         "watchdog", "watchdog_beyond_timeout", "disarm_service", "supervisor_breach", "estop", "exception",
@@ -264,10 +279,6 @@ class _Hardware:
     """The emulated PCA9685 (with /OE) served to the node processes; records when the outputs stop."""
 
     def __init__(self, sock: str) -> None:
-        from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-        from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-        from hindrax_drivers.transport.gpio import EmulatedGpioLine
-        from hindrax_drivers.transport.shared_emulation import EmulationServer
 
         hw = self
 
@@ -316,10 +327,6 @@ class _Hardware:
 
 def _config_file(tmp) -> str:
     """The shipped vehicle file with /OE wired, no sensors watched, no arming hold (the bench's own file)."""
-    import yaml
-
-    from hindrax_drivers.config import default_config_path, load_config
-
     doc = yaml.safe_load(default_config_path().read_text())
     params = doc["/**"]["ros__parameters"]
     for key, value in {"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True,
@@ -340,17 +347,6 @@ class _Layout:
     """The three node processes, restartable, with a probe (commands at 50 Hz, arm/disarm, state) in this one."""
 
     def __init__(self, ctx, did: int, tmp, hw: _Hardware) -> None:
-        import threading
-
-        import rclpy
-        from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.executors import SingleThreadedExecutor
-        from std_srvs.srv import Trigger
-
-        from hindrax_drivers.testing import child_env, python_executable
-        from hindrax_drivers.transport.shared_emulation import SOCKET_ENV
-        from hindrax_msgs.msg import ThrusterPwm
-        from hindrax_msgs.srv import SetArmed
 
         self.tmp, self.hw = tmp, hw
         self.config = _config_file(tmp)
@@ -394,7 +390,6 @@ class _Layout:
 
     # -- processes
     def start(self, name: str, extra: tuple = ()) -> None:
-        import subprocess
 
         log = open(self.tmp / f"{name}.log", "a")
         self.procs[name] = subprocess.Popen([self.py, "-m", PROCESSES[name], "--ros-args", "--params-file",
@@ -411,14 +406,12 @@ class _Layout:
         self.procs[name].send_signal(sig)
 
     def kill(self, name: str) -> None:
-        import signal as _signal
 
         p = self.procs.pop(name)
         p.send_signal(_signal.SIGKILL)
         p.wait(10)
 
     def close(self) -> None:
-        import signal as _signal
 
         self.commanding = False
         for name in list(self.procs):
@@ -435,8 +428,6 @@ class _Layout:
     def call(self, client, request, timeout: float = 3.0, attempts: int = 10):
         """A service call, asked again when no answer comes (a killed server's endpoint is still discovered for a
         while after its restart: the request goes nowhere)."""
-        from hindrax_drivers.testing import ConditionTimeout, wait_until
-
         for _ in range(attempts):
             fut = client.call_async(request)
             try:
@@ -449,8 +440,6 @@ class _Layout:
     def armed_at_1700(self) -> None:
         """(Re)start what is not running, arm (retrying while the ESC still refuses), command 1700 us until it is
         on the wire."""
-        from hindrax_drivers.testing import wait_until
-
         self.hw.watch = False
         self.commanding = False
         self.ensure()
@@ -477,13 +466,7 @@ class _Layout:
 
 
 def _process_rows(repeats: int) -> dict[str, list[float]]:
-    import signal as _signal
     import tempfile  # noqa
-    from pathlib import Path
-
-    from domain_coordinator import domain_id
-
-    from hindrax_drivers.testing import ros_context, wait_until
 
     times: dict[str, list[float]] = {k: [] for k in (
         "supervisor_killed_outputs_stopped", "supervisor_hung_outputs_stopped", "esc_killed_oe_asserted",
@@ -543,7 +526,6 @@ def _process_rows(repeats: int) -> dict[str, list[float]]:
 
 def _cpu_share(pid: int, window_s: float) -> float:
     """CPU time of process ``pid`` (user + system, /proc) over ``window_s`` of wall time, in % of one core."""
-    import os
 
     def cpu_s() -> float:
         fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
@@ -555,13 +537,6 @@ def _cpu_share(pid: int, window_s: float) -> float:
 
 def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
     """A supervisor on use_sim_time; this process publishes /clock at 100 Hz and steps it back 100 s."""
-    import signal as _signal
-    import threading
-
-    from rosgraph_msgs.msg import Clock
-
-    from hindrax_drivers.testing import wait_until
-
     lay.kill("supervisor")
     lay.start("supervisor", ("-p", "use_sim_time:=true"))
     pub = lay.probe.create_publisher(Clock, "/clock", 10)

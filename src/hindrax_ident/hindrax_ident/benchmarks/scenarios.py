@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import time
 
+from hindrax_ident.commands.scenarios import run_case, summarise
+
 
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
-    from hindrax_ident.commands.scenarios import run_case, summarise
-
     scenarios = ("thrust_0.90",) if quick else ("none", "thrust_0.90", "reverse_weak")
     dofs = ("surge",)
     levels = 2

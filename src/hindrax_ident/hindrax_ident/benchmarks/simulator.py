@@ -13,12 +13,19 @@ import os
 import time
 
 import numpy as np
+import rclpy
+from hindrax_drivers.testing import ros_context
+from nav_msgs.msg import Odometry
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident.sim.node import SimulatorNode
+from hindrax_ident.sim.simulator import Simulator
 
 
 def _simulator_rate(duration_s: float) -> tuple[float, float, int]:
-    from hindrax_ident.sim.simulator import Simulator
 
     cfg = load_config(default_config_path())
     sim = Simulator(cfg)
@@ -37,14 +44,6 @@ def _simulator_rate(duration_s: float) -> tuple[float, float, int]:
 
 def _node_rate(wall_s: float) -> float:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    import rclpy
-    from nav_msgs.msg import Odometry
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.parameter import Parameter
-    from rosgraph_msgs.msg import Clock
-
-    from hindrax_drivers.testing import ros_context
-    from hindrax_ident.sim.node import SimulatorNode
 
     cfg = load_config(default_config_path(), overrides={"simulation.real_time_factor": 0.0})
     with ros_context() as ctx:

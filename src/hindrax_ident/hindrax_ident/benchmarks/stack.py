@@ -49,9 +49,12 @@ running phase: the bare cost of moving the same messages between processes.
 """
 from __future__ import annotations
 
+import argparse
 import collections
 import json
 import os
+import re
+import shutil
 import signal
 import statistics
 import subprocess
@@ -62,6 +65,25 @@ import threading
 import time
 from pathlib import Path
 from typing import Any
+
+import rclpy
+from domain_coordinator import domain_id
+from geometry_msgs.msg import WrenchStamped
+from hindrax_drivers.action_goal import GoalSender
+from hindrax_drivers.recording.reader import BagReader
+from hindrax_drivers.recording.selection import TopicSelection
+from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from rclpy.action import ActionClient
+from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
+
+import hindrax_drivers
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident.bringup import build_graph
+from hindrax_msgs.action import RunIdentification
+from hindrax_msgs.srv import SetArmed
+
+from .launch_layout import SOCKET_ENV, launch_processes, package_share
+from .recorder import subscribe_recorder_counts
 
 _CLK = os.sysconf("SC_CLK_TCK")
 #: not recorded in either layout: the simulator's ground truth and /clock (they do not exist on the vehicle)
@@ -100,13 +122,11 @@ def _thread_cpu_s() -> dict[str, float]:
 
 
 def _supervisor_available() -> bool:
-    import hindrax_drivers
 
     return (Path(hindrax_drivers.__file__).parent / "supervisor" / "node.py").is_file()
 
 
 def _wrench_msg(stamp: Any) -> Any:
-    from geometry_msgs.msg import WrenchStamped
 
     m = WrenchStamped()
     m.header.frame_id = "base_link"
@@ -117,7 +137,6 @@ def _wrench_msg(stamp: Any) -> Any:
 
 
 def _goal() -> Any:
-    from hindrax_msgs.action import RunIdentification
 
     return RunIdentification.Goal(dofs=["surge"], levels_per_dof=3)
 
@@ -133,9 +152,6 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
     returning the goal's last action status code (action_msgs/GoalStatus) seen on the status topic. Raises
     RuntimeError when the goal is rejected, or when it ended before the running window did (the window would not
     have measured a running campaign)."""
-    from hindrax_drivers.action_goal import GoalSender
-    from hindrax_drivers.testing import wait_until
-
     goals = GoalSender(probe, action, "run_identification")
     stream["on"] = False
     handle = goals.send(_goal(), spin, 30)
@@ -165,17 +181,6 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
 
 # ---------------------------------------------------------------------------------------------- one process
 def _in_process(duration_s: float, tmp: Path) -> dict:
-    import rclpy
-    from rclpy.action import ActionClient
-    from rclpy.executors import ShutdownException, TimeoutException
-
-    from hindrax_drivers.config import default_config_path
-    from hindrax_drivers.recording.selection import TopicSelection
-    from hindrax_drivers.testing import ros_context, wait_until
-    from hindrax_ident.bringup import build_graph
-    from hindrax_msgs.action import RunIdentification
-    from hindrax_msgs.srv import SetArmed
-    from geometry_msgs.msg import WrenchStamped
 
     cpu: dict[str, float] = collections.defaultdict(float)  # callbacks by node name
     emu: dict[str, float] = collections.defaultdict(float)  # emulator time inside callbacks, by node name
@@ -328,19 +333,6 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
     idle phase); per window the CPU of every process and its wall-clock span (the rates come from the bag).
     py_spy_dir: record every node process with ``py-spy`` during the first running window (raw collapsed stacks,
     ``<label>.txt``)."""
-    import rclpy
-    from domain_coordinator import domain_id
-    from geometry_msgs.msg import WrenchStamped
-    from rclpy.action import ActionClient
-    from rclpy.executors import SingleThreadedExecutor
-
-    from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
-    from hindrax_msgs.action import RunIdentification
-    from hindrax_msgs.srv import SetArmed
-
-    from .launch_layout import SOCKET_ENV, launch_processes, package_share
-
     py = python_executable()
     sock = str(tmp / "i2c.sock")
     ports_file = tmp / "ports.json"
@@ -380,8 +372,6 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                                    stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
-                from .recorder import subscribe_recorder_counts
-
                 counts, lock = subscribe_recorder_counts(probe, 50)
                 wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
                 arm = probe.create_client(SetArmed, "esc/set_armed")
@@ -472,8 +462,6 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
 
 def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
     """``py-spy record`` (raw collapsed stacks, non-blocking, 100 Hz) of every node process for ``duration_s``."""
-    import shutil
-
     exe = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
     out_dir.mkdir(parents=True, exist_ok=True)
     return [subprocess.Popen([exe, "record", "--nonblocking", "-r", "100", "-d", str(int(round(duration_s))), "-f",
@@ -485,8 +473,6 @@ def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
 def _bag_rates(out: dict) -> None:
     """Messages per second per topic of every window, from the launch layout's bag (log time = the recorder's
     reception time on the system clock, the windows' clock)."""
-    from hindrax_drivers.recording.reader import BagReader
-
     reader = BagReader(out["bag"])
     spans = [(w["t0_ns"], w["t1_ns"], w) for ph in out["phases"].values() for w in ph["windows"]]
     for *_, w in spans:
@@ -503,8 +489,6 @@ def _bag_rates(out: dict) -> None:
 
 def _safety_log_lines(tmp: Path, names: list[str], keep: int = 12) -> str:
     """The last ``keep`` lines of each process log that speak of arming, heartbeats, trips or the watchdog."""
-    import re
-
     out = []
     for name in names:
         try:
@@ -577,10 +561,6 @@ _BARE_SUB = textwrap.dedent('''
 
 def _bare(spec: list, duration_s: float, with_subscriber: bool) -> tuple[float, float]:
     """(publisher CPU, subscriber CPU) in fractions of a core, each over ``duration_s``."""
-    from domain_coordinator import domain_id
-
-    from hindrax_drivers.testing import child_env, python_executable
-
     with domain_id() as did:
         env = child_env(ROS_DOMAIN_ID=str(did))
         args = [json.dumps(spec), str(duration_s)]
@@ -700,8 +680,6 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
             inproc = _in_process(duration_s, tmp)
         if "launch" in layouts:
             launch = _launch(duration_s, tmp, windows=windows, py_spy_dir=py_spy_dir, launch_file=launch_file)
-            from hindrax_drivers.recording.reader import BagReader
-
             launch["types"] = BagReader(launch["bag"]).topics
     types = dict(launch["types"]) if launch else {}
     if inproc:
@@ -767,8 +745,6 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
 def main(argv: list[str] | None = None) -> int:
     """``python -m hindrax_ident.benchmarks.stack``: the stack benchmark alone, with the options ``make bench``
     does not take (see ``--help``); prints the rows and writes them as JSON with ``--json``."""
-    import argparse
-
     parser = argparse.ArgumentParser(prog="python -m hindrax_ident.benchmarks.stack",
                                      description="The Pi budget: CPU of the vehicle graph in the launch layout "
                                                  "(one process per <node> of pool_test.launch.xml) and in one "

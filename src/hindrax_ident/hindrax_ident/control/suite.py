@@ -18,6 +18,13 @@ from typing import Callable, Sequence
 
 from hindrax_drivers.config import VehicleConfig
 
+from ..identification.calibration import apply_thrust_calibration
+from ..identification.campaign import Campaign
+from ..identification.estimators import identify_all_with_errors
+from ..identification.results import build_results, write_identification
+from ..sim.simulator import Simulator
+from ..sim.truth import load_truth
+from ..sim.truth import truth_dir as shipped
 from .evaluate import EvaluationSetup, evaluate, ratios, setup_dict, write_outputs
 from .model import load_model
 
@@ -32,8 +39,6 @@ SUITE_MANEUVERS = ("depth_step", "altitude_hold")
 def scenario_names(names: str | None, truth_dir: str | None) -> tuple[list[str], Path]:
     """The scenarios to run (comma-separated ``names``, default every ``*.yaml`` of the folder, ``none`` first) and
     their folder (default ``ros_ws/config/truth/scenarios``). Raises ``ValueError`` naming an unknown scenario."""
-    from ..sim.truth import truth_dir as shipped
-
     folder = Path(truth_dir) if truth_dir else shipped() / "scenarios"
     have = sorted(p.stem for p in folder.glob("*.yaml"))
     if not have:
@@ -51,13 +56,6 @@ def run_scenario(cfg: VehicleConfig, name: str, truth_path: Path, out: Path, see
                  setup: EvaluationSetup = EvaluationSetup(),
                  progress: Callable[[str], None] | None = None) -> dict:
     """Identify against one truth, then evaluate (module docstring). Returns the scenario's summary row."""
-    from ..identification.calibration import apply_thrust_calibration
-    from ..identification.campaign import Campaign
-    from ..identification.estimators import identify_all_with_errors
-    from ..identification.results import build_results, write_identification
-    from ..sim.simulator import Simulator
-    from ..sim.truth import load_truth
-
     say = progress or (lambda _m: None)
     truth = load_truth(cfg, truth_path)
     folder = out / name

@@ -41,6 +41,8 @@ from __future__ import annotations
 
 from typing import Any, Iterable, Mapping
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
 __all__ = ["TOPIC", "HARDWARE_ID", "statuses", "calibration_array", "results_from_array", "merge_results"]
 
 #: topic name (relative: the node's namespace)
@@ -99,8 +101,6 @@ def statuses(calibration: Mapping[str, Mapping] | None, inclining: Mapping[str, 
 def calibration_array(results: Iterable[tuple[str, str, list[tuple[str, str]]]], stamp) -> Any:
     """``diagnostic_msgs/msg/DiagnosticArray`` of :func:`statuses` output, header ``stamp``
     (builtin_interfaces/Time)."""
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-
     arr = DiagnosticArray()
     arr.header.stamp = stamp
     arr.status = [DiagnosticStatus(level=DiagnosticStatus.OK, name=name, message=message, hardware_id=HARDWARE_ID,

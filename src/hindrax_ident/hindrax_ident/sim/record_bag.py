@@ -33,7 +33,13 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from hindrax_drivers.conditions import ros_context
 from hindrax_drivers.recording.make_test_bags import default_output_dir, write_bags
+from hindrax_drivers.recording.reader import BagReader
+
+from hindrax_drivers.config import default_config_path
+
+from ..bringup import build_graph
 
 __all__ = ["SIM_BAGS", "SIM_SEED", "START_POSITION_NED_M", "record_simulated_run", "write_sim_bag", "main"]
 
@@ -75,10 +81,6 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     Raises:
         TimeoutError: naming the condition not reached; ConfigError for bad overrides.
     """
-    from ..bringup import build_graph
-
-    from hindrax_drivers.config import default_config_path
-
     bag_dir = Path(bag_dir)
     if bag_dir.exists():
         shutil.rmtree(bag_dir)
@@ -143,17 +145,12 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
 
 def write_sim_bag(bag_dir: Path, duration_s: float, overrides: dict[str, Any], context: Any = None) -> int:
     """Record one bag (see :func:`record_simulated_run`); returns its message count."""
-    from hindrax_drivers.conditions import ros_context
-
-    from hindrax_drivers.recording.reader import BagReader
-
     if context is None:
         with ros_context() as ctx:
             record_simulated_run(bag_dir, duration_s, context=ctx, overrides=overrides)
     else:
         record_simulated_run(bag_dir, duration_s, context=context, overrides=overrides)
     return sum(c.message_count for c in BagReader(bag_dir).channels.values())
-
 
 
 def main(argv: list[str] | None = None) -> int:
