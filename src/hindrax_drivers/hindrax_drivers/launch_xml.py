@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import re
+import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,7 +38,7 @@ from ament_index_python.packages import get_package_share_directory
 
 from . import composition
 
-__all__ = ["LaunchFileError", "NodeProcess", "ament_share", "read_launch"]
+__all__ = ["LaunchFileError", "NodeProcess", "ament_share", "read_launch", "write_parameter_file"]
 
 #: resolves ``$(find-pkg-share PKG)``: package name -> its share directory
 ShareResolver = Callable[[str], Path]
@@ -125,6 +126,15 @@ def read_launch(path: str | os.PathLike, arguments: Mapping[str, str] | None = N
     argument that is not declared or has no value, or a condition that is not a boolean.
     """
     return _Reader(find_share).read(Path(path), dict(arguments or {}), top=True)
+
+
+def write_parameter_file(values: Mapping, directory: str | os.PathLike) -> Path:
+    """One run of ``<param name value>`` values as a new parameter file in ``directory``, keyed ``/**`` as
+    ``launch_ros`` writes it, for :meth:`NodeProcess.ros_arguments`. Returns the file's path."""
+    fd, name = tempfile.mkstemp(prefix="launch_params_", suffix=".yaml", dir=directory)
+    with os.fdopen(fd, "w") as f:
+        yaml.safe_dump({"/**": {"ros__parameters": dict(values)}}, f, default_flow_style=False)
+    return Path(name)
 
 
 class _Reader:

@@ -31,10 +31,9 @@ from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
-import yaml
 from ament_index_python.packages import PackageNotFoundError, get_package_prefix
 
-from .launch_xml import NodeProcess
+from .launch_xml import NodeProcess, write_parameter_file
 
 __all__ = ["ProcessRunner", "ProcessState", "installed_command"]
 
@@ -204,10 +203,7 @@ class ProcessRunner:
     # -- internals --------------------------------------------------------------------------------
     def _write_values(self, values: Mapping) -> Path:
         """A ``<param name value>`` run as a parameter file keyed ``/**`` (as ``launch_ros`` writes it)."""
-        fd, name = tempfile.mkstemp(prefix="launch_params_", suffix=".yaml", dir=self._params_dir)
-        with os.fdopen(fd, "w") as f:
-            yaml.safe_dump({"/**": {"ros__parameters": dict(values)}}, f, default_flow_style=False)
-        return Path(name)
+        return write_parameter_file(values, self._params_dir)
 
     def _spawn(self, slot: _Slot) -> None:
         env = dict(self._env, **self._extra_env.get(slot.process.label, {}))

@@ -34,6 +34,21 @@ def test_socket_bus_serves_the_emulated_bus(tmp_path):
     assert not (tmp_path / "i2c.sock").exists()
 
 
+def _values(directory):
+    """A parameter-file writer that also keeps what it wrote, to read the values back."""
+    import yaml
+
+    from hindrax_drivers.launch_xml import write_parameter_file
+
+    written = []
+
+    def write(values):
+        path = write_parameter_file(values, directory)
+        written.append(yaml.safe_load(path.read_text())["/**"]["ros__parameters"])
+        return path
+    return write, written
+
+
 def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     from hindrax_ident.benchmarks.launch_layout import launch_processes, package_share
 
@@ -41,7 +56,8 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     inc.write_text('<launch><arg name="rec" default="false" description="d"/><arg name="dir" default="runs" '
                    'description="d"/>'
                    '<node pkg="hindrax_drivers" exec="esc_node" name="esc">'
-                   '<param from="$(find-pkg-share hindrax_drivers)/config/hindrax.yaml"/></node>'
+                   '<param from="$(find-pkg-share hindrax_drivers)/config/hindrax.yaml"/>'
+                   '<remap from="wrench" to="pilot/wrench"/></node>'
                    '<node pkg="hindrax_drivers" exec="recorder_node" name="recorder" if="$(var rec)">'
                    '<param name="output_dir" value="$(var dir)"/></node></launch>')
     outer = tmp_path / "outer.launch.xml"
@@ -52,21 +68,26 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
                      f'<node pkg="hindrax_drivers" exec="static_tf_node" unless="true"/>'
                      f'<node pkg="foxglove_bridge" exec="foxglove_bridge" if="false"/></launch>')
     esc, rec, group = launch_processes(outer, {"out": "/data"})
+    write, written = _values(tmp_path)
     assert (esc.label, esc.module) == ("esc", "hindrax_drivers.pca9685.node:main")
-    assert esc.ros_args() == ["--ros-args", "-r", "__node:=esc", "--params-file",
-                              str(package_share("hindrax_drivers") / "config/hindrax.yaml")]
-    assert rec.ros_args() == ["--ros-args", "-r", "__node:=recorder", "-p", "output_dir:=/data/bags"]
+    # the remap reaches the process (the bench's former reader of its own dropped it)
+    assert esc.ros_args(write) == ["--ros-args", "-r", "__node:=esc", "--params-file",
+                                   str(package_share("hindrax_drivers") / "config/hindrax.yaml"),
+                                   "-r", "wrench:=pilot/wrench"]
+    args = rec.ros_args(write)
+    assert args[:4] == ["--ros-args", "-r", "__node:=recorder", "--params-file"]
+    assert written == [{"output_dir": "/data/bags"}]
     # a composed process has no name: its nodes keep theirs; its row is the executable without _node
     assert (group.name, group.label, group.module) == (None, "i2c_sensors",
                                                        "hindrax_drivers.composition:i2c_sensors_main")
-    with pytest.raises(ValueError, match="no argument"):
+    with pytest.raises(ValueError, match="outt"):
         launch_processes(outer, {"outt": "/data"})
     outer.write_text('<launch><node pkg="hindrax_drivers" exec="no_such_node"/></launch>')
     with pytest.raises(ValueError, match="no_such_node"):
         launch_processes(outer)
 
 
-def test_the_bench_measures_the_pool_test_launch_file_with_recording_on():
+def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path):
     from hindrax_ident.benchmarks.launch_layout import launch_processes, package_share
     from hindrax_ident.benchmarks.stack import LAUNCH_FILE
 
@@ -75,7 +96,12 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on():
     assert "hindrax_ident.identification.node:main" in entries
     assert "hindrax_ident.control.node:main" in entries  # the controller, launched with the pool test
     controller = next(p for p in procs if p.module == "hindrax_ident.control.node:main")
-    assert "model_file:=''" in controller.ros_args()  # the empty default, as rcl parses it (not "model_file:=")
+    write, written = _values(tmp_path)
+    controller.ros_args(write)
+    assert {"model_file": ""} in written  # the empty default stays the empty string (not None, not "''")
     # output_dir is the root of the recorder's timestamped bags (recording/bag_dir.py)
-    recorder = [p for p in procs if ("recording.output_root", "/tmp/b") in p.params]
-    assert len(recorder) == 1 and ("autostart", "true") in recorder[0].params
+    written.clear()
+    recorder = [p for p in procs if p.module.startswith("hindrax_drivers.recording")]
+    assert len(recorder) == 1
+    recorder[0].ros_args(write)
+    assert any(w.get("recording.output_root") == "/tmp/b" and w.get("autostart") is True for w in written)

@@ -1,12 +1,11 @@
 """The vehicle's launch layout for the stack benchmark: the processes of the launch file, devices emulated.
 
-:func:`launch_processes` reads a ROS 2 launch XML file (``pool_test.launch.xml``, which includes
-``vehicle.launch.xml``) the way ``ros2 launch`` would start it: ``<arg>``, ``<let>``, ``$(var)``,
-``$(find-pkg-share)``, ``if``/``unless`` conditions, ``<group>``, ``<include>``; each ``<node>`` is one process,
-its console script mapped to the function it runs (the installed entry points), with ``name`` (``-r __node:=``),
-parameter files and ``<param name value>`` (other attributes, e.g. ``respawn``, do not change what runs). The
-stack benchmark starts exactly those processes, so it measures what the vehicle runs. The ``launch`` package
-itself is not installable here (docs/architecture.md §11.3).
+:func:`launch_processes` lists the processes of a ROS 2 launch XML file (``pool_test.launch.xml``, which
+includes ``vehicle.launch.xml``) through :func:`hindrax_drivers.launch_xml.read_launch`, the one reader of launch
+files in the project (the pool-day test and ``hindrax health`` use it too), each with its console script's
+function (the installed entry points). The stack benchmark starts exactly those processes, with the arguments
+``ros2 launch`` would give them, so it measures what the vehicle runs. The ``launch`` package itself is not
+installable here (docs/architecture.md §11.3).
 
 Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node ...``):
 
@@ -38,11 +37,12 @@ import re
 import sys
 import threading
 import time
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
+from importlib.metadata import entry_points
+from typing import Callable, Mapping
 
+from hindrax_drivers.launch_xml import NodeProcess, read_launch
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -58,35 +58,39 @@ OWN_PACKAGES = ("hindrax_drivers", "hindrax_ident")
 
 @dataclass(frozen=True)
 class LaunchProcess:
-    """One ``<node>`` of a launch file: a process.
+    """One ``<node>`` of a launch file, as :func:`hindrax_drivers.launch_xml.read_launch` reads it (the reader of
+    the pool-day test and ``hindrax health``), with the function its console script runs.
 
-    name: the ``name`` attribute (None: the nodes keep their own names; a process composing several nodes has
-    none); package, executable: ``pkg``/``exec``; module: the console script's target, ``module:function``;
-    params_files: ``<param from>`` files; params: ``<param name value>`` pairs, in file order."""
+    process: the node process (package, executable, name, parameters, remaps, ...); module: the console script's
+    target, ``module:function``."""
 
-    name: str | None
-    package: str
-    executable: str
+    process: NodeProcess
     module: str
-    params_files: tuple[str, ...]
-    params: tuple[tuple[str, str], ...]
+
+    @property
+    def name(self) -> str | None:
+        """The node name (``-r __node:=``), None for a composed process (its nodes keep their own names)."""
+        return self.process.name
+
+    @property
+    def package(self) -> str:
+        """The ``pkg`` of the ``<node>``."""
+        return self.process.package
+
+    @property
+    def executable(self) -> str:
+        """The ``exec`` of the ``<node>``."""
+        return self.process.executable
 
     @property
     def label(self) -> str:
         """The process's name in the benchmark's rows: the node name, else the executable without ``_node``."""
         return self.name or re.sub(r"_node$", "", self.executable)
 
-    def ros_args(self) -> list[str]:
-        """``--ros-args`` as ``ros2 launch`` passes them: ``-r __node:=name``, ``--params-file``, ``-p`` (an
-        empty value as ``''``: rcl refuses ``-p name:=``)."""
-        out = ["--ros-args"]
-        if self.name:
-            out += ["-r", f"__node:={self.name}"]
-        for f in self.params_files:
-            out += ["--params-file", f]
-        for k, v in self.params:
-            out += ["-p", f"{k}:={v if v else repr('')}"]  # rcl reads -p values as YAML: '' is the empty string
-        return out
+    def ros_args(self, write_values: Callable[[Mapping], Path]) -> list[str]:
+        """``--ros-args`` as ``ros2 launch`` passes them (:meth:`NodeProcess.ros_arguments`): ``write_values``
+        writes one mapping of ``<param name value>`` values to a parameter file and returns its path."""
+        return self.process.ros_arguments(write_values)
 
 
 def package_share(package: str) -> Path:
@@ -100,8 +104,6 @@ def package_share(package: str) -> Path:
 def console_scripts(package: str) -> dict[str, str]:
     """Console script name -> ``module:function`` of ``package`` (installed entry points). Raises ValueError when
     the package has none (not installed: ``make setup``)."""
-    from importlib.metadata import entry_points
-
     out = {ep.name: ep.value.replace(" ", "") for ep in entry_points(group="console_scripts")
            if ep.dist is not None and ep.dist.name.replace("-", "_") == package}
     if not out:
@@ -109,75 +111,22 @@ def console_scripts(package: str) -> dict[str, str]:
     return out
 
 
-def _substitute(text: str, args: Mapping[str, str]) -> str:
-    def var(m: re.Match) -> str:
-        if m.group(1) not in args:
-            raise ValueError(f"$(var {m.group(1)}): not a declared argument")
-        return args[m.group(1)]
-
-    text = re.sub(r"\$\(var (\w+)\)", var, text)
-    text = re.sub(r"\$\(find-pkg-share (\w+)\)", lambda m: str(package_share(m.group(1))), text)
-    if "$(" in text:
-        raise ValueError(f"unsupported substitution in {text!r}")
-    return text
-
-
 def launch_processes(path: str | Path, arguments: Mapping[str, str] | None = None) -> list[LaunchProcess]:
     """The processes ``ros2 launch`` would start for the launch XML file ``path`` with ``arguments`` (name ->
-    value; the others take their defaults), in launch order, includes and groups expanded.
+    value; the others take their defaults), in launch order, includes and groups expanded: those of
+    :func:`hindrax_drivers.launch_xml.read_launch` (``$(find-pkg-share)`` resolved to this checkout's packages),
+    each with the function its console script runs.
 
-    Raises ValueError for an undeclared argument, an unsupported substitution or element, a condition that is
-    not a boolean, an enabled node of another package, or an executable the package does not install."""
-    root = ET.parse(path).getroot()
-    given = dict(arguments or {})
-    args: dict[str, str] = {}
-    for a in root.findall("arg"):
-        value = given.pop(a.get("name"), a.get("default"))
-        if value is None:
-            raise ValueError(f"{Path(path).name}: argument {a.get('name')} has no value")
-        args[a.get("name")] = _substitute(value, args)
-    if given:
-        raise ValueError(f"{Path(path).name}: no argument(s) {sorted(given)}")
-    return _elements(root, args, Path(path).name)
-
-
-def _enabled(el: ET.Element, args: Mapping[str, str], where: str) -> bool:
-    for attr, wanted in (("if", "true"), ("unless", "false")):
-        cond = el.get(attr)
-        if cond is not None:
-            value = _substitute(cond, args)
-            if value not in ("true", "false"):
-                raise ValueError(f"{where}: condition {attr}={cond!r} is {value!r}, not true/false")
-            if value != wanted:
-                return False
-    return True
-
-
-def _elements(parent: ET.Element, args: dict[str, str], where: str) -> list[LaunchProcess]:
-    out: list[LaunchProcess] = []
-    for el in parent:
-        if el.tag == "arg" or not _enabled(el, args, where):
-            continue
-        if el.tag == "let":
-            args[el.get("name")] = _substitute(el.get("value"), args)
-        elif el.tag == "group":
-            out += _elements(el, dict(args), where)  # a group scopes its <let>s
-        elif el.tag == "include":
-            passed = {a.get("name"): _substitute(a.get("value"), args) for a in el.findall("arg")}
-            out += launch_processes(_substitute(el.get("file"), args), passed)
-        elif el.tag == "node":
-            pkg, exe = _substitute(el.get("pkg"), args), _substitute(el.get("exec"), args)
-            name = _substitute(el.get("name"), args) if el.get("name") else None
-            scripts = console_scripts(pkg) if pkg in OWN_PACKAGES else {}
-            if exe not in scripts:
-                raise ValueError(f"{where}: {pkg}/{exe} is not an executable of this workspace")
-            files = tuple(_substitute(p.get("from"), args) for p in el.findall("param") if p.get("from"))
-            params = tuple((p.get("name"), _substitute(p.get("value"), args)) for p in el.findall("param")
-                           if not p.get("from"))
-            out.append(LaunchProcess(name, pkg, exe, scripts[exe], files, params))
-        else:
-            raise ValueError(f"{where}: unsupported element <{el.tag}> (the bench reads arg, let, group, include "
-                             f"and node)")
+    Raises :class:`~hindrax_drivers.launch_xml.LaunchFileError` (a ValueError) for what the reader refuses (an
+    undeclared argument, an unsupported element or substitution, a non-boolean condition), and ValueError for an
+    enabled node of another package or an executable the package does not install."""
+    out = []
+    for proc in read_launch(path, arguments, find_share=package_share):
+        scripts = console_scripts(proc.package) if proc.package in OWN_PACKAGES else {}
+        if proc.executable not in scripts:
+            raise ValueError(f"{Path(path).name}: {proc.package}/{proc.executable} is not an executable of this "
+                             f"workspace")
+        out.append(LaunchProcess(proc, scripts[proc.executable]))
     return out
 
 

@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import functools
 import json
 import os
 import re
@@ -69,15 +70,16 @@ from typing import Any
 import rclpy
 from domain_coordinator import domain_id
 from geometry_msgs.msg import WrenchStamped
-from hindrax_drivers.action_goal import GoalSender
-from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.recording.selection import TopicSelection
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
 from rclpy.action import ActionClient
 from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
 
 import hindrax_drivers
+from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.launch_xml import write_parameter_file
+from hindrax_drivers.recording.reader import BagReader
+from hindrax_drivers.recording.selection import TopicSelection
+from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
 from hindrax_ident.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
@@ -363,11 +365,13 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
             if "esc.oscillator_calibrated" in load_config(params).flat:
                 bench += ["-p", "esc.oscillator_calibrated:=true"]
             wrap = ["-m", "hindrax_ident.benchmarks.launch_layout", "node"]
+            (tmp / "params").mkdir(exist_ok=True)
+            values_file = functools.partial(write_parameter_file, directory=tmp / "params")
             for lp in layout:
                 if lp.label in procs:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
                 logs[lp.label] = open(tmp / f"{lp.label}.log", "w")
-                procs[lp.label] = subprocess.Popen([py, *wrap, lp.module, *lp.ros_args(), *bench],
+                procs[lp.label] = subprocess.Popen([py, *wrap, lp.module, *lp.ros_args(values_file), *bench],
                                                    env=dict(env, **{SOCKET_ENV: sock}), stdout=logs[lp.label],
                                                    stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
