@@ -94,13 +94,23 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             # enabled again on request; then an identification goal runs: it yields, and refuses to enable
             assert _call(enable, SetBool.Request(data=True), spin).success
             wait_until(lambda: len(ours()) > n + 5, 10, spin, "wrench again")
+            streams = ("imu/data_raw", "dvl/data", "pressure/fluid_pressure", "ping/altitude", "allocation/status",
+                       "wrench")
+            subscribers = {t: probe.count_subscribers(t) for t in streams}
             ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING, dof="surge"))
             wait_until(lambda: not ctrl.enabled, 10, spin, "yield to the identification")
             assert "identification" in ctrl.message
+            # while the goal runs the controller takes none of the streams (the graph sees one subscriber less each)
+            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] - 1 for t in streams), 10, spin,
+                       "the controller's streams dropped")
             r = _call(enable, SetBool.Request(data=True), spin)
             assert not r.success and "identification goal is running" in r.message
             ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_DONE))
             wait_until(lambda: not ctrl._ident_running, 10, spin, "identification done")
+            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] for t in streams), 10, spin,
+                       "the controller's streams back")
+            wait_until(lambda: {"ms5837", "dvl75_attitude", "icm20948_gyro"} <= set(ctrl._last_sample_s), 10, spin,
+                       "fresh sensor data after the goal")
             assert _call(enable, SetBool.Request(data=True), spin).success
             assert _call(enable, SetBool.Request(data=False), spin).success
             assert not ctrl.enabled

@@ -117,16 +117,11 @@ class ControllerNode(Node):
         self._report = self.hold.core.gain_report()
         sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
-        self.create_subscription(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20, **sub_ev)
-        self.create_subscription(FluidPressure, "pressure/fluid_pressure",
-                                 lambda m: self._add([sample_from_pressure(m)]), 20, **sub_ev)
-        self.create_subscription(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)), 50,
-                                 **sub_ev)
-        self.create_subscription(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20, **sub_ev)
+        self._sub_ev = sub_ev
+        self._streams: list = []
+        self._open_streams()
         self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20, **sub_ev)
-        self.create_subscription(AllocationStatus, "allocation/status", self._on_allocation, 20, **sub_ev)
         self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20, **sub_ev)
-        self.create_subscription(WrenchStamped, "wrench", self._on_wrench, 50, **sub_ev)
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10, **pub_ev)
@@ -138,6 +133,32 @@ class ControllerNode(Node):
             log.info(line)
 
     # ------------------------------------------------------------------ inputs
+    def _open_streams(self) -> None:
+        """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics, ``wrench``
+        (other writers) and ``allocation/status`` (anti-windup). About 250 messages/s in the pool layout."""
+        ev = self._sub_ev
+        self._streams = [
+            self.create_subscription(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20, **ev),
+            self.create_subscription(FluidPressure, "pressure/fluid_pressure",
+                                     lambda m: self._add([sample_from_pressure(m)]), 20, **ev),
+            self.create_subscription(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)),
+                                     50, **ev),
+            self.create_subscription(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20, **ev),
+            self.create_subscription(AllocationStatus, "allocation/status", self._on_allocation, 20, **ev),
+            self.create_subscription(WrenchStamped, "wrench", self._on_wrench, 50, **ev),
+        ]
+
+    def _close_streams(self) -> None:
+        """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
+        conditioned state: after the goal the hold starts from fresh samples, and ``_refusal`` says "no data yet"
+        until they arrive (docs/control.md §3)."""
+        for sub in self._streams:
+            self.destroy_subscription(sub)
+        self._streams = []
+        self._pending = []
+        self._last_sample_s.clear()
+        self.loop = HoldLoop(self.config, self.hold, self.tick_s)
+
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
@@ -161,9 +182,14 @@ class ControllerNode(Node):
         self.hold.note_allocation(req, ach)
 
     def _on_ident_status(self, msg: ManeuverStatus) -> None:
-        self._ident_running = msg.phase in RUNNING_PHASES
-        if self._ident_running and self.enabled:
+        running = msg.phase in RUNNING_PHASES
+        if running and self.enabled:
             self._disable("yielded: an identification goal is running", zero=False)
+        if running and self._streams:
+            self._close_streams()
+        elif not running and not self._streams:
+            self._open_streams()
+        self._ident_running = running
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
         key = _key(msg)
