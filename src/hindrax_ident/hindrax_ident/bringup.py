@@ -21,7 +21,29 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from hindrax_drivers.config import VehicleConfig, load_config
+from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
+from rclpy.parameter import Parameter
+
+from hindrax_drivers.allocation.node import ThrustAllocationNode
+from hindrax_drivers.conditions import wait_until
+from hindrax_drivers.config import ConfigError, VehicleConfig, load_config
+from hindrax_drivers.dvl75.node import Dvl75Node
+from hindrax_drivers.guard.node import OutputGuardNode
+from hindrax_drivers.icm20948.node import Icm20948Node
+from hindrax_drivers.ms5837.node import Ms5837Node
+from hindrax_drivers.pca9685.node import EscNode
+from hindrax_drivers.ping1d.node import Ping1dNode
+from hindrax_drivers.recording.recorder_node import RecorderNode
+from hindrax_drivers.ros_process import RosProcess
+from hindrax_drivers.supervisor.node import SupervisorNode
+from hindrax_drivers.tf.node import StaticTfNode
+from hindrax_msgs.srv import SetArmed
+
+from .control.node import ControllerNode
+from .identification.node import IdentificationNode
+from .sim.hardware import VirtualHardware
+from .sim.node import SimulatorNode
+from .sim.simulator import Simulator
 
 
 @dataclass
@@ -60,8 +82,6 @@ class Graph:
 
     def spin_until_idle(self, max_callbacks: int = 100_000) -> int:
         """Run executor callbacks until a wait with zero timeout finds nothing ready; returns how many ran."""
-        from rclpy.executors import ShutdownException, TimeoutException
-
         for n in range(max_callbacks):
             try:
                 handler, _entity, _node = self.executor.wait_for_ready_callbacks(0.0)
@@ -123,9 +143,6 @@ class Graph:
         Returns the SetArmed response. Raises :class:`~hindrax_drivers.conditions.ConditionTimeout` when a step takes
         longer than ``timeout_s`` of wall time.
         """
-        from hindrax_drivers.conditions import wait_until
-        from hindrax_msgs.srv import SetArmed
-
         spin = lambda: self.spin_once(spin_timeout_s)  # noqa: E731
         self.freeze_time()
         wait_until(lambda: self.startup_complete() and arm_client.service_is_ready() and ready(), timeout_s, spin,
@@ -172,7 +189,6 @@ def ordered_executor(**kwargs: Any) -> Any:
     instant run (e.g. the allocation's wrench subscription and the ESC node's output timer) follows the nodes'
     memory addresses and changes from one run to the next; with a fixed order a stepped simulation is
     reproducible. ``kwargs`` go to the executor (``context``)."""
-    from rclpy.executors import SingleThreadedExecutor
 
     class _OrderedExecutor(SingleThreadedExecutor):
         def __init__(self, **kw: Any) -> None:
@@ -222,15 +238,6 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     graph is ``stepped``: drive it with :meth:`Graph.spin_once`, not ``executor.spin()``.
     Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration.
     """
-    from rclpy.parameter import Parameter
-
-    from hindrax_drivers.allocation.node import ThrustAllocationNode
-    from hindrax_drivers.dvl75.node import Dvl75Node
-    from hindrax_drivers.icm20948.node import Icm20948Node
-    from hindrax_drivers.ms5837.node import Ms5837Node
-    from hindrax_drivers.pca9685.node import EscNode
-    from hindrax_drivers.ping1d.node import Ping1dNode
-
     overrides = dict(overrides or {})
     if seed is not None:
         overrides["simulation.seed"] = int(seed)
@@ -241,10 +248,6 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes: dict[str, Any] = {}
     kw: dict[str, Any] = {"context": context} if context is not None else {}
     if sim:
-        from .sim.hardware import VirtualHardware
-        from .sim.node import SimulatorNode
-        from .sim.simulator import Simulator
-
         simulator = Simulator(cfg, truth=truth)  # the pool's truth (sim/truth.py); the nodes keep cfg
         hardware = VirtualHardware(simulator, simulator.config, seed=cfg.get("simulation.seed"), serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
@@ -266,10 +269,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes["icm20948"] = Icm20948Node(bus=bus, **common)
     nodes["esc"] = EscNode(bus=bus, **common)
     nodes["thrust_allocation"] = ThrustAllocationNode(**common)
-    from hindrax_drivers.supervisor.node import SupervisorNode
 
     nodes["supervisor"] = SupervisorNode(**common)  # disarms the ESC on a breach (supervisor.*)
-    from hindrax_drivers.guard.node import OutputGuardNode
 
     # the second stop path (docs/architecture.md §8): the ESC arms only with its heartbeat; without /OE wired it
     # silences the chip over the same bus
@@ -280,18 +281,13 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes["esc"].set_heartbeat_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
     if sim:  # simulated time may stand still on purpose (step gates): not a stalled /clock
         nodes["supervisor"].set_clock_stall_timeout(30.0)
-    from hindrax_drivers.tf.node import StaticTfNode
 
     nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static
     if identification:
-        from .identification.node import IdentificationNode
-
         nodes["identification"] = IdentificationNode(config=cfg, **common)
         if sim:  # lock-step: simulated time waits for every control tick of a running manoeuvre
             nodes["simulator"].add_step_gate(nodes["identification"].clock_may_advance)
     if controller:
-        from .control.node import ControllerNode
-
         nodes["controller"] = ControllerNode(config=cfg, model_file=model_file, **common)
         if sim:  # lock-step while it holds, as for the identification node
             nodes["simulator"].add_step_gate(nodes["controller"].clock_may_advance)
@@ -304,8 +300,6 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         hardware.lock_step_serial(nodes["simulator"], {n: nodes[n].transport for n in serial},
                                   ready={n: (lambda c=nodes[n].commands: c.sequences_completed >= 1) for n in serial})
     if record:
-        from hindrax_drivers.recording.recorder_node import RecorderNode
-
         rec_params = params + [Parameter("all_topics", value=True), Parameter("autostart", value=True),
                                Parameter("output_dir", value=str(record_dir))]
         nodes["recorder"] = RecorderNode(parameter_overrides=rec_params, **kw)
@@ -336,9 +330,6 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
     """Process entry point of ``hindrax bringup``: build the graph, spin until SIGINT/SIGTERM, shut down
     (:class:`~hindrax_drivers.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
     status: 1 with one line on stderr for an invalid configuration."""
-    from hindrax_drivers.config import ConfigError
-    from hindrax_drivers.ros_process import RosProcess
-
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
     with RosProcess(errors={ConfigError: "invalid configuration"}) as proc:
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,

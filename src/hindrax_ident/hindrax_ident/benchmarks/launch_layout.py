@@ -30,6 +30,7 @@ Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node .
 from __future__ import annotations
 
 import argparse
+import cProfile
 import importlib
 import json
 import os
@@ -38,12 +39,20 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from importlib.metadata import entry_points
+from pathlib import Path
 from typing import Callable, Mapping
 
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+import hindrax_drivers.transport.i2c as i2c
+from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.launch_xml import NodeProcess, read_launch
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
+from hindrax_ident.sim.hardware import VirtualHardware
+from hindrax_ident.sim.node import SimulatorNode
+from hindrax_ident.sim.simulator import Simulator
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
@@ -131,13 +140,7 @@ def launch_processes(path: str | Path, arguments: Mapping[str, str] | None = Non
 
 
 def _pool(argv: list[str]) -> int:
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-    from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_ident.sim.hardware import VirtualHardware
-    from hindrax_ident.sim.node import SimulatorNode
-    from hindrax_ident.sim.simulator import Simulator
 
     parser = argparse.ArgumentParser(prog="launch_layout pool")
     parser.add_argument("--socket", required=True)
@@ -192,8 +195,6 @@ def _node(argv: list[str]) -> int:
     run = getattr(module, function or "main")
     path = os.environ.get(SOCKET_ENV)
     if path:
-        import hindrax_drivers.transport.i2c as i2c
-
         if module_name == "hindrax_drivers.composition":  # it imports its node modules only when it starts
             for target in module.NODE_CLASSES.values():
                 importlib.import_module(target.partition(":")[0])
@@ -206,7 +207,6 @@ def _node(argv: list[str]) -> int:
     profile_dir = os.environ.get(PROFILE_ENV)
     if not profile_dir:
         return int(run() or 0)
-    import cProfile
 
     profiler = cProfile.Profile()
     try:

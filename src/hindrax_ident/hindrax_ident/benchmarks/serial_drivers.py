@@ -26,6 +26,18 @@ import threading
 import time
 
 import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import Range
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
+from hindrax_drivers.dvl75.node import Dvl75Node
+from hindrax_drivers.ping1d.emulator import Ping1dEmulator, Ping1dSettings, Ping1dTruth
+from hindrax_drivers.ping1d.node import Ping1dNode
+from hindrax_drivers.testing import config_parameters, ros_context, wait_until
+from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_msgs.msg import Dvl
 
 DVL_RATE_HZ = 20.0
 PING_INTERVAL_S = 0.025
@@ -66,12 +78,6 @@ def _percentiles_ms(values_ns: list[int]) -> tuple[float, float]:
 def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str):
     """Run node + probe for ``duration_s`` after a warm-up; return (reader_cpu_s, other_cpu_s, wall_s,
     reports, {topic: latencies_ns})."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-
-    from hindrax_drivers.testing import ros_context, wait_until
-    from hindrax_drivers.transport.pty_device import PtyDevice
-
     latencies: dict[str, list[int]] = {topic: [] for topic, _, _ in subscriptions}
     dev = PtyDevice(emulator)
     try:
@@ -133,12 +139,7 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
 
 
 def _bench_dvl(duration_s: float) -> list[dict]:
-    from sensor_msgs.msg import Range
 
-    from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
-    from hindrax_drivers.dvl75.node import Dvl75Node
-    from hindrax_drivers.testing import config_parameters
-    from hindrax_msgs.msg import Dvl
 
     pending: list = []
     written: dict = {}
@@ -170,12 +171,7 @@ def _bench_dvl(duration_s: float) -> list[dict]:
 
 
 def _bench_ping(duration_s: float) -> list[dict]:
-    from sensor_msgs.msg import Range
 
-    from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_drivers.ping1d.emulator import Ping1dEmulator, Ping1dSettings, Ping1dTruth
-    from hindrax_drivers.ping1d.node import Ping1dNode
-    from hindrax_drivers.testing import config_parameters
 
     c = float(load_config(default_config_path()).flat["sensors.ping1d.speed_of_sound_m_s"])
     pending: list = []

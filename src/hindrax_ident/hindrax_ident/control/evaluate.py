@@ -35,11 +35,15 @@ step, or from the start of the surge, to the end):
 """
 from __future__ import annotations
 
+import html
+import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 
 from hindrax_drivers import frames
@@ -351,8 +355,6 @@ def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mappin
     (the same per seed), ``ratios`` and ``info``; and ``report/index.html`` with one plot per manoeuvre (response of
     every hold for the first seed, the specified response and the setpoint; thrust effort). Returns the control.json
     path. A settling time that never came is null."""
-    import json
-
     out = Path(out_dir)
     (out / "report").mkdir(parents=True, exist_ok=True)
     summary = summarise(cases)
@@ -368,12 +370,9 @@ def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mappin
 
 
 def _report(folder: Path, cases: Sequence[CaseResult], info: Mapping[str, Any], summary: Sequence[dict]) -> None:
-    import html
 
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     colours = {"identified": "tab:green", "vehicle_file": "tab:orange", "pd_hold": "tab:red"}
     parts = ["<html><head><meta charset='utf-8'><title>Hindrax control evaluation</title></head><body>",

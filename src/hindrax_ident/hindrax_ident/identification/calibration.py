@@ -42,6 +42,16 @@ import math
 from typing import Any, Mapping
 
 import numpy as np
+from scipy import optimize
+
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.config import DOFS
+
+from ..estimation.free_decay import fit_quadratic_free_decay
+from ..estimation.least_squares import EstimationError
+from ..estimation.priors import priors_from_config
+from ..sim.model import rigid_body_mass_matrix
+from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, _declared_rel, thrust_weights
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -76,8 +86,6 @@ def scale_prior_stds(cfg) -> dict[str, float]:
     from the bollard-pull fit's ``thrusters.thrust_fit_uncertainty_rel`` [negative, positive] when the vehicle file
     has it, else the declared ``thrusters.thrust_uncertainty_rel`` (the same choice as the intervals,
     :func:`~.verdicts._declared_rel`)."""
-    from .verdicts import _declared_rel
-
     neg, pos = _declared_rel(cfg, None)
     return {"forward": float(pos), "reverse": float(neg)}
 
@@ -153,8 +161,6 @@ def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel |
     (:func:`scale_prior_stds`; the weighed net buoyancy (rho V - m) g +- ``calibration.net_buoyancy_std_n``); without
     ``cfg`` the default thrust uncertainty and a free net buoyancy. Raises ``ValueError`` on a non-positive scale or
     a zero std."""
-    from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL
-
     cal = calibration or {}
     entries = {k: e for k in KNOWN_FORCE_AXES if (e := _entry(cal, k)) is not None}
     if not entries:
@@ -260,7 +266,6 @@ def _has_thrust(record: Any) -> bool:
 
 
 def _matrix(cfg) -> np.ndarray:
-    from hindrax_drivers.allocation.core import AllocationCore
 
     return np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
 
@@ -303,8 +308,6 @@ def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
     not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust uncertainty's weights
     (:func:`~.verdicts.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse, the rest
     half each; other DOFs half each)."""
-    from .verdicts import thrust_weights
-
     w = thrust_weights(dof, names)  # (p, 2): [positive, negative]
     g = _DOF_GROUP[dof]
     return {f"{g}_forward": w[:, 0].copy(), f"{g}_reverse": w[:, 1].copy()}
@@ -312,8 +315,6 @@ def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
 
 def _affecting(record: Any, cfg, model: ScaleModel, dofs) -> dict[str, list[str]]:
     """Per DOF, the scale parameters whose thrusters put force on the DOF's axis during its window (model order)."""
-    from hindrax_drivers.config import DOFS
-
     f = np.asarray(record.thrust_cmd_n, dtype=float)
     b = _matrix(cfg)
     groups = thruster_groups(cfg)
@@ -422,8 +423,6 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
     _std), stiffness_n_m_per_rad, window_s}. Raises ``KeyError`` when the DOF has no recorded decay and
     :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the fit fails.
     """
-    from ..estimation.free_decay import fit_quadratic_free_decay
-
     t0, t1 = record.decays[dof]
     k = {"roll": 0, "pitch": 1}[dof]
     rows = [(s, r[k]) for s, r in record.sensors["gyro"] if t0 <= s <= t1 and math.isfinite(r[k])]
@@ -455,10 +454,6 @@ DEFAULT_PRIOR_STD_REL = 0.5
 def _rigid_inertia(cfg, dof: str) -> float:
     """Rigid-body mass or moment of inertia of ``dof`` about the body origin, diag of M_RB (as
     :func:`~.estimators.rigid_inertia`; not imported from there: estimators -> results -> calibration)."""
-    from hindrax_drivers.config import DOFS
-
-    from ..sim.model import rigid_body_mass_matrix
-
     m = rigid_body_mass_matrix(cfg.mass_kg, cfg.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
     return float(m[DOFS.index(dof), DOFS.index(dof)])
 
@@ -467,11 +462,6 @@ def _prior_entry(cfg, dof: str) -> dict:
     """{added_mass, linear_damping, quadratic_damping} of ``dof`` from the configured geometry
     (:func:`~hindrax_ident.estimation.priors.priors_from_config`, as :func:`~.results.prior_entries`); {} when the
     configuration lacks the geometry."""
-    from hindrax_drivers.config import DOFS
-
-    from ..estimation.least_squares import EstimationError
-    from ..estimation.priors import priors_from_config
-
     try:
         p = priors_from_config(cfg)
     except (KeyError, TypeError, EstimationError):
@@ -554,8 +544,6 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     group_means: {group: {value, std}}, net_buoyancy_n (with a per-hold vertical calibration), prior_std_rel,
     method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
     """
-    from scipy import optimize
-
     if prior_std_rel is None:
         prior_std_rel = float(cfg.flat.get("identification.prior_std_rel", DEFAULT_PRIOR_STD_REL))
     if not (math.isfinite(prior_std_rel) and prior_std_rel >= 0):

@@ -30,6 +30,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..sim.simulator import Simulator
 from .executive import CampaignAbort, CampaignRecord, Executive, TickInput
+from .steps import Ballast, Float, Inclining, LinePull
 
 __all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign", "inclining_wrench_frd", "PoolOperator"]
 
@@ -69,8 +70,6 @@ class PoolOperator:
     def for_steps(cls, steps) -> "PoolOperator":
         """The operator of a campaign's steps (:mod:`.steps`): the known force each reference step prompts for
         (ballast, float, line pull, inclining test mass) is the one it applies."""
-        from .steps import Ballast, Float, Inclining, LinePull
-
         kw: dict = {}
         for st in steps:
             if isinstance(st, Ballast):

@@ -24,11 +24,31 @@ simulated instant no longer depends on wall-clock timing, so the same seed gives
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
+
+import rclpy
+from rclpy.action import ActionClient
+from std_srvs.srv import Trigger
+
+from hindrax_drivers.action_goal import GoalSender
+from hindrax_drivers.conditions import ros_context, wait_until
+from hindrax_msgs.action import RunIdentification
+from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.srv import SetArmed
+
+from ..bringup import build_graph
+from .calibration import identify_calibrated
+from .campaign import PoolOperator
+from .estimators import identify_all_with_errors
+from .executive import calibration_forces, float_buoyancy, inclining_load
+from .from_bag import BagContentError, record_from_bag
+from .report import write_report
+from .results import build_results, write_identification
 
 __all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
 
@@ -64,7 +84,6 @@ class VirtualOperator:
                  resend_after_s: float = 5.0, freeze: Callable[[], None] = lambda: None,
                  resume: Callable[[], None] = lambda: None, inclining_load_n_m=(0.0, 0.0),
                  float_buoyancy_n: float = 0.0) -> None:
-        from .campaign import PoolOperator
 
         self.sim = simulator
         #: which known forces hang on the vehicle (:class:`~.campaign.PoolOperator`)
@@ -183,19 +202,8 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
 
 def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s, level_fractions,
          wall0, truth=None, calibrate=(), sections=None) -> GraphCampaignOutcome:
-    import rclpy
-    from rclpy.action import ActionClient
 
-    from hindrax_drivers.action_goal import GoalSender
-    from hindrax_drivers.conditions import ros_context, wait_until
-    from hindrax_msgs.action import RunIdentification
-    from hindrax_msgs.msg import ThrusterPwm
-    from hindrax_msgs.srv import SetArmed
-    from std_srvs.srv import Trigger
 
-    from ..bringup import build_graph
-    from .executive import calibration_forces, float_buoyancy, inclining_load
-    from .from_bag import BagContentError, record_from_bag
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -299,10 +307,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
-    import dataclasses
 
-    from .calibration import identify_calibrated
-    from .estimators import identify_all_with_errors
     try:
         record = record_from_bag(bag_dir, cfg)
         idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg,
@@ -312,9 +317,6 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
     outcome.wall_time_s = time.monotonic() - wall0
     if idents:
-        from .report import write_report
-        from .results import build_results, write_identification
-
         note = (f"ROS graph campaign on the virtual pool (seed {cfg.flat['simulation.seed']}), "
                 f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
                 f"action result: {outcome.message}")

@@ -87,6 +87,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -97,18 +98,31 @@ from std_srvs.srv import Trigger
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
-from hindrax_drivers.node_parameters import node_config
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
+from hindrax_drivers.node_parameters import node_config
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
 from . import calibration_topic
 from .estimators import parameter_units
-from .executive import (CALIBRATION_STEPS, CampaignRecord, Executive, ExecutiveStatus, TickInput,
-                        calibration_forces, inclining_load, ordered_samples)
-from .signals import (sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu,
-                      thrust_of_written_widths)
+from .executive import (
+    CALIBRATION_STEPS,
+    CampaignRecord,
+    Executive,
+    ExecutiveStatus,
+    TickInput,
+    calibration_forces,
+    inclining_load,
+    ordered_samples,
+)
+from .signals import (
+    sample_from_pressure,
+    sample_from_range,
+    samples_from_dvl,
+    samples_from_imu,
+    thrust_of_written_widths,
+)
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 
@@ -243,8 +257,6 @@ class IdentificationNode(Node):
 
     def _param(self, name: str, default: float, description: str) -> float:
         """A read-only node parameter (> 0, s). Raises :class:`ConfigError` (one line) for another value."""
-        from rcl_interfaces.msg import ParameterDescriptor
-
         if not self.has_parameter(name):
             self.declare_parameter(name, default, ParameterDescriptor(
                 description=description, read_only=True, additional_constraints="allowed a number > 0"))

@@ -56,14 +56,16 @@ from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.time import Time
 from rclpy.qos import QoSProfile
+from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import VehicleConfig
+from hindrax_drivers.node_common import run_node
 from hindrax_drivers.node_parameters import node_config
 from hindrax_msgs.msg import ThrusterPwm
 
@@ -105,8 +107,6 @@ class SimulatorNode(Node):
         self.real_time_factor = float(f["simulation.real_time_factor"])
         self.clock_period_s = 1.0 / float(f["simulation.clock_rate_hz"])
         if not self.has_parameter("truth_rate_hz"):
-            from rcl_interfaces.msg import ParameterDescriptor
-
             self.declare_parameter("truth_rate_hz", float(f["simulation.clock_rate_hz"]), ParameterDescriptor(
                 description="rate of the ground-truth topics (sim/odometry, sim/wrench), Hz (default: the clock rate)",
                 read_only=True))
@@ -362,8 +362,6 @@ class SimulatorNode(Node):
 
 def main(args: Sequence[str] | None = None) -> int:
     """Run the simulator node alone (``python -m hindrax_ident.sim.node --ros-args --params-file ...``)."""
-    from hindrax_drivers.node_common import run_node
-
     return run_node(SimulatorNode, args)
 
 

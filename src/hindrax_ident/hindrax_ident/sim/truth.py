@@ -60,6 +60,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import yaml
+from ament_index_python.packages import get_package_share_directory
 
 from hindrax_drivers.config import ConfigError, VehicleConfig, default_config_path, flatten, validate_flat
 
@@ -81,8 +82,6 @@ def truth_dir() -> Path:
         return beside
     searched = [beside]
     try:
-        from ament_index_python.packages import get_package_share_directory
-
         installed = Path(get_package_share_directory("hindrax_drivers")) / "config" / "truth"
         if installed.is_dir():
             return installed
