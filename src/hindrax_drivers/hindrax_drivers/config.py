@@ -22,20 +22,40 @@ Why our own validator rather than a schema library: the errors must name ROS par
 one-line form users see from ``hindrax config check``, and the same checks must run on a YAML file and on
 the parameters of a running rclpy node. No maintained library covers ROS parameter overrides.
 
+Typed access: :class:`VehicleConfig` builds one frozen dataclass per section (``cfg.esc.output_latency_s``,
+``cfg.sensors.dvl75.position_frd_m``, ``cfg.supervisor.min_rate.imu_hz``), so a misspelt name is an AttributeError
+that mypy and the import of a module's tests catch, not a KeyError on the vehicle. The section classes live in
+``config_sections.py``, GENERATED from :data:`SCHEMA` by ``scripts/gen_config_sections.py`` (a test checks the
+file is current and that every key has a field of its kind, and every field a key): writing them by hand next to
+a 250-key schema would let the two drift, and generating them at import time would hide them from mypy. Field
+names are the keys' last segments (ROS parameter names do not change), lists are tuples, optional keys are
+``X | None``. Section objects are built lazily, once per configuration (it is immutable). A node's configuration
+holds only the keys it declared (:mod:`node_parameters`): reading another required key raises KeyError naming it.
+Names taken by older typed views: ``cfg.thrusters`` is :class:`ThrustersConfig` (per-thruster keys),
+``cfg.hydrodynamics(dof)`` and ``cfg.calibration`` (derived forces) keep their meaning, and the raw sections are
+``cfg.hydrodynamics_section`` and ``cfg.calibration_section``. ``cfg.flat`` (dotted key -> value) stays for the
+ROS-parameter conversion, overrides and validation; modules outside this one do not index it by a literal key.
+
 Errors: :class:`ConfigError` (a ``ValueError``) carrying a list of :class:`ConfigIssue`.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Mapping, Sequence, TypeVar
 
 import numpy as np
 import yaml
+
+from .config_sections import (ABSENT, CalibrationSection, ControlSection, EnvironmentSection, EscSection,
+                              HydrodynamicsSection, IdentificationSection, LightsSection, LimitsSection, PoolSection,
+                              RecordingSection, Section, SensorsSection, SimulationSection, SupervisorSection,
+                              VehicleSection)
 
 DOFS: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
 """The six degrees of freedom in SNAME order (nu = [u v w p q r], tau = [X Y Z K M N])."""
@@ -861,6 +881,8 @@ class ThrustersConfig:
     priority_dofs: tuple[str, ...]
     wrench_timeout_s: float
     wrench_future_margin_s: float = 0.1
+    thrust_uncertainty_rel: tuple[float, ...] | None = None
+    thrust_fit_uncertainty_rel: tuple[float, ...] | None = None
 
     @property
     def names(self) -> list[str]:
@@ -895,19 +917,46 @@ class CalibrationConfig:
     net_buoyancy_std_n: float
 
 
+_S = TypeVar("_S", bound=Section)
+
+
+def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
+    """The typed section ``cls`` (a generated :class:`config_sections.Section`) from validated flat keys.
+
+    Lists become tuples; an absent optional key is None; an absent required key (a node's selection of keys) is
+    held as ABSENT and raises KeyError naming the key when read.
+    """
+    kw: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]  # the generated sections are dataclasses
+        if isinstance(f.type, type) and issubclass(f.type, Section):
+            kw[f.name] = build_section(f.type, flat)
+            continue
+        key = f"{cls.PREFIX}.{f.name}"
+        if key in flat:
+            v = flat[key]
+            kw[f.name] = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
+        else:
+            kw[f.name] = None if _is_optional(key) else ABSENT
+    return cls(**kw)
+
+
 @dataclass(frozen=True)
 class VehicleConfig:
     """The validated vehicle configuration.
 
-    ``flat`` holds every validated key (dotted names, SI values) for sections without a dedicated typed
-    view (``section(...)``). Typed views: rigid-body and hydrodynamic parameters, thrusters.
+    Typed sections (built once, on first use): ``vehicle``, ``environment``, ``hydrodynamics_section``,
+    ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``, ``limits``,
+    ``supervisor``, ``identification``, ``calibration_section``, ``control``, ``simulation``, ``recording``
+    (module docstring). Derived views: rigid-body and added-mass matrices, ``hydrodynamics(dof)``,
+    ``calibration``. ``flat`` holds every validated key (dotted names, SI values) for the ROS-parameter
+    conversion and overrides.
     """
 
     flat: Mapping[str, Any]
     source: str = ""
     sha256: str = ""
 
-    # -- convenient typed views --
+    # -- generic access by dotted key (tools that list or convert keys; modules read the typed sections) --
     def get(self, key: str) -> Any:
         """Value of a dotted key (KeyError if absent)."""
         return self.flat[key]
@@ -917,21 +966,97 @@ class VehicleConfig:
         p = prefix.rstrip(".") + "."
         return {k[len(p):]: v for k, v in self.flat.items() if k.startswith(p)}
 
+    # -- typed sections --
+    @functools.cached_property
+    def vehicle(self) -> VehicleSection:
+        """``vehicle.*``: rigid-body data."""
+        return build_section(VehicleSection, self.flat)
+
+    @functools.cached_property
+    def environment(self) -> EnvironmentSection:
+        """``environment.*``: water and gravity."""
+        return build_section(EnvironmentSection, self.flat)
+
+    @functools.cached_property
+    def hydrodynamics_section(self) -> HydrodynamicsSection:
+        """``hydrodynamics.*`` as configured (see also :meth:`hydrodynamics` and :attr:`added_mass_matrix`)."""
+        return build_section(HydrodynamicsSection, self.flat)
+
+    @functools.cached_property
+    def esc(self) -> EscSection:
+        """``esc.*``: the PCA9685 ESC output."""
+        return build_section(EscSection, self.flat)
+
+    @functools.cached_property
+    def lights(self) -> LightsSection:
+        """``lights.*``."""
+        return build_section(LightsSection, self.flat)
+
+    @functools.cached_property
+    def sensors(self) -> SensorsSection:
+        """``sensors.*``: ``dvl75``, ``ping1d``, ``ms5837``, ``icm20948``."""
+        return build_section(SensorsSection, self.flat)
+
+    @functools.cached_property
+    def pool(self) -> PoolSection:
+        """``pool.*``: the pool box and start pose."""
+        return build_section(PoolSection, self.flat)
+
+    @functools.cached_property
+    def limits(self) -> LimitsSection:
+        """``limits.*``: the identification's own abort limits."""
+        return build_section(LimitsSection, self.flat)
+
+    @functools.cached_property
+    def supervisor(self) -> SupervisorSection:
+        """``supervisor.*``: the safety supervisor."""
+        return build_section(SupervisorSection, self.flat)
+
+    @functools.cached_property
+    def identification(self) -> IdentificationSection:
+        """``identification.*``."""
+        return build_section(IdentificationSection, self.flat)
+
+    @functools.cached_property
+    def calibration_section(self) -> CalibrationSection:
+        """``calibration.*`` as configured (masses, volumes; :attr:`calibration` gives the derived forces)."""
+        return build_section(CalibrationSection, self.flat)
+
+    @functools.cached_property
+    def control(self) -> ControlSection:
+        """``control.*``: the holds' settings (all optional: None when absent)."""
+        return build_section(ControlSection, self.flat)
+
+    @functools.cached_property
+    def simulation(self) -> SimulationSection:
+        """``simulation.*``: the virtual pool's integration and sensor models."""
+        return build_section(SimulationSection, self.flat)
+
+    @functools.cached_property
+    def recording(self) -> RecordingSection:
+        """``recording.*``: the MCAP recorder."""
+        return build_section(RecordingSection, self.flat)
+
+    # -- derived views --
     @property
     def mass_kg(self) -> float:
-        return self.flat["vehicle.mass_kg"]
+        """``vehicle.mass_kg``, kg."""
+        return self.vehicle.mass_kg
 
     @property
     def displaced_volume_m3(self) -> float:
-        return self.flat["vehicle.displaced_volume_m3"]
+        """``vehicle.displaced_volume_m3``, m^3."""
+        return self.vehicle.displaced_volume_m3
 
     @property
     def water_density_kg_m3(self) -> float:
-        return self.flat["environment.water_density_kg_m3"]
+        """``environment.water_density_kg_m3``, kg/m^3."""
+        return self.environment.water_density_kg_m3
 
     @property
     def gravity_m_s2(self) -> float:
-        return self.flat["environment.gravity_m_s2"]
+        """``environment.gravity_m_s2``, m/s^2."""
+        return self.environment.gravity_m_s2
 
     @property
     def weight_n(self) -> float:
@@ -946,17 +1071,17 @@ class VehicleConfig:
     @property
     def inertia_matrix_kg_m2(self) -> np.ndarray:
         """3x3 inertia tensor about the CG, kg m^2 (products of inertia with the usual minus sign)."""
-        ixx, iyy, izz = self.flat["vehicle.inertia_kg_m2"]
-        ixy, ixz, iyz = self.flat["vehicle.products_of_inertia_kg_m2"]
+        ixx, iyy, izz = self.vehicle.inertia_kg_m2
+        ixy, ixz, iyz = self.vehicle.products_of_inertia_kg_m2
         return np.array([[ixx, -ixy, -ixz], [-ixy, iyy, -iyz], [-ixz, -iyz, izz]])
 
     @property
     def centre_of_gravity_frd_m(self) -> np.ndarray:
-        return np.asarray(self.flat["vehicle.centre_of_gravity_frd_m"], dtype=float)
+        return np.asarray(self.vehicle.centre_of_gravity_frd_m, dtype=float)
 
     @property
     def centre_of_buoyancy_frd_m(self) -> np.ndarray:
-        return np.asarray(self.flat["vehicle.centre_of_buoyancy_frd_m"], dtype=float)
+        return np.asarray(self.vehicle.centre_of_buoyancy_frd_m, dtype=float)
 
     @property
     def added_mass_matrix(self) -> np.ndarray:
@@ -1027,19 +1152,21 @@ class VehicleConfig:
             priority_dofs=tuple(f["thrusters.priority_dofs"]),
             wrench_timeout_s=f["thrusters.wrench_timeout_s"],
             wrench_future_margin_s=f["thrusters.wrench_future_margin_s"],
+            thrust_uncertainty_rel=_tuple_or_none(f.get("thrusters.thrust_uncertainty_rel")),
+            thrust_fit_uncertainty_rel=_tuple_or_none(f.get("thrusters.thrust_fit_uncertainty_rel")),
         )
 
     def summary(self) -> str:
         """A short multi-line human summary of the vehicle (used by ``hindrax config check``)."""
         t = self.thrusters
         lines = [
-            f"vehicle {self.flat['vehicle.name']}: mass {self.mass_kg:g} kg, volume {self.displaced_volume_m3:g} m^3,"
+            f"vehicle {self.vehicle.name}: mass {self.mass_kg:g} kg, volume {self.displaced_volume_m3:g} m^3,"
             f" net buoyancy {(self.buoyancy_n - self.weight_n):.3f} N (rho {self.water_density_kg_m3:g} kg/m^3)",
             f"thrusters: {len(t.thrusters)} ({', '.join(t.names)}), pulse width "
             f"{t.pulse_width_min_us:g}-{t.pulse_width_max_us:g} us, neutral {t.pulse_width_neutral_us:g} us",
             "added mass (surge sway heave kg; roll pitch yaw kg m^2): "
             + " ".join(f"{v:g}" for v in np.diag(self.added_mass_matrix)),
-            f"pool {self.flat['pool.length_m']:g} x {self.flat['pool.width_m']:g} x {self.flat['pool.depth_m']:g} m",
+            f"pool {self.pool.length_m:g} x {self.pool.width_m:g} x {self.pool.depth_m:g} m",
             f"sha256 {self.sha256[:12]}" if self.sha256 else "",
         ]
         return "\n".join(x for x in lines if x)
@@ -1053,6 +1180,10 @@ class VehicleConfig:
         flat = dict(self.flat)
         flat.update(overrides)
         return VehicleConfig(validate_flat(flat, source=self.source), self.source, self.sha256)
+
+
+def _tuple_or_none(value: Any) -> tuple[float, ...] | None:
+    return None if value is None else tuple(float(v) for v in value)
 
 
 def ros_parameters_from_yaml(doc: Any, source: str = "") -> dict[str, Any]:
