@@ -47,7 +47,7 @@ import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence, TypeVar
+from typing import Any, ClassVar, Iterable, Mapping, Sequence, TypeVar
 
 import numpy as np
 import yaml
@@ -848,8 +848,8 @@ class DofHydrodynamics:
         return self.linear_damping_negative * velocity - self.quadratic_damping_negative * velocity * velocity
 
 
-@dataclass(frozen=True)
-class ThrusterConfig:
+@dataclass(frozen=True, repr=False)
+class ThrusterConfig(Section):
     """One thruster: name, position relative to the CG (FRD, m), unit direction of positive thrust (FRD),
     PCA9685 channel, reversal, trim (us) and allocation weight."""
 
@@ -861,13 +861,20 @@ class ThrusterConfig:
     trim_us: float
     allocation_weight: float
 
+    PREFIX: ClassVar[str] = "thrusters.<thruster>"
 
-@dataclass(frozen=True)
-class ThrustersConfig:
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "PREFIX", f"thrusters.{self.name}")  # KeyError messages name the thruster
+
+
+@dataclass(frozen=True, repr=False)
+class ThrustersConfig(Section):
     """Thruster set: per-thruster geometry and the shared cubic thrust curves ([Hindrax-Drag] eq. 1, Table 2).
 
     curve_negative/curve_positive: [c4, c3, c2, c1] with thrust_N = c4 P^3 + c3 P^2 + c2 P + c1, P in us.
     """
+
+    PREFIX: ClassVar[str] = "thrusters"
 
     thrusters: tuple[ThrusterConfig, ...]
     pulse_width_min_us: float
@@ -1124,36 +1131,48 @@ class VehicleConfig:
     @functools.cached_property
     def thrusters(self) -> ThrustersConfig:
         """Typed thruster set (positions/directions FRD relative to the CG); built once per configuration (the
-        configuration is immutable; the control and identification loops read it at every tick)."""
+        configuration is immutable; the control and identification loops read it at every tick). Needs
+        ``thrusters.names``; other keys a node did not declare raise KeyError naming them when read."""
         f = self.flat
+
+        def get(key: str, convert: Any = None) -> Any:
+            if key not in f:
+                return None if _is_optional(key) else ABSENT
+            return f[key] if convert is None else convert(f[key])
+
+        def unit(v: Any) -> np.ndarray:
+            return np.asarray(v, dtype=float) / np.linalg.norm(v)
+
+        def array(v: Any) -> np.ndarray:
+            return np.asarray(v, dtype=float)
+
         ts = tuple(
             ThrusterConfig(
                 name=n,
-                position_frd_m=np.asarray(f[f"thrusters.{n}.position_frd_m"], dtype=float),
-                direction_frd=np.asarray(f[f"thrusters.{n}.direction_frd"], dtype=float)
-                / np.linalg.norm(f[f"thrusters.{n}.direction_frd"]),
-                esc_channel=f[f"thrusters.{n}.esc_channel"],
-                reversed=f[f"thrusters.{n}.reversed"],
-                trim_us=f[f"thrusters.{n}.trim_us"],
-                allocation_weight=f[f"thrusters.{n}.allocation_weight"],
+                position_frd_m=get(f"thrusters.{n}.position_frd_m", array),
+                direction_frd=get(f"thrusters.{n}.direction_frd", unit),
+                esc_channel=get(f"thrusters.{n}.esc_channel"),
+                reversed=get(f"thrusters.{n}.reversed"),
+                trim_us=get(f"thrusters.{n}.trim_us"),
+                allocation_weight=get(f"thrusters.{n}.allocation_weight"),
             )
             for n in f["thrusters.names"]
         )
         return ThrustersConfig(
             thrusters=ts,
-            pulse_width_min_us=f["thrusters.pulse_width_min_us"],
-            pulse_width_neutral_us=f["thrusters.pulse_width_neutral_us"],
-            pulse_width_max_us=f["thrusters.pulse_width_max_us"],
-            deadband_us=f["thrusters.deadband_us"],
-            curve_negative=tuple(f["thrusters.curve_negative"]),
-            curve_positive=tuple(f["thrusters.curve_positive"]),
-            time_constant_s=f["thrusters.time_constant_s"],
-            allocation_mode=f["thrusters.allocation_mode"],
-            priority_dofs=tuple(f["thrusters.priority_dofs"]),
-            wrench_timeout_s=f["thrusters.wrench_timeout_s"],
-            wrench_future_margin_s=f["thrusters.wrench_future_margin_s"],
-            thrust_uncertainty_rel=_tuple_or_none(f.get("thrusters.thrust_uncertainty_rel")),
-            thrust_fit_uncertainty_rel=_tuple_or_none(f.get("thrusters.thrust_fit_uncertainty_rel")),
+            pulse_width_min_us=get("thrusters.pulse_width_min_us"),
+            pulse_width_neutral_us=get("thrusters.pulse_width_neutral_us"),
+            pulse_width_max_us=get("thrusters.pulse_width_max_us"),
+            deadband_us=get("thrusters.deadband_us"),
+            curve_negative=get("thrusters.curve_negative", tuple),
+            curve_positive=get("thrusters.curve_positive", tuple),
+            time_constant_s=get("thrusters.time_constant_s"),
+            allocation_mode=get("thrusters.allocation_mode"),
+            priority_dofs=get("thrusters.priority_dofs", tuple),
+            wrench_timeout_s=get("thrusters.wrench_timeout_s"),
+            wrench_future_margin_s=get("thrusters.wrench_future_margin_s"),
+            thrust_uncertainty_rel=get("thrusters.thrust_uncertainty_rel", _float_tuple),
+            thrust_fit_uncertainty_rel=get("thrusters.thrust_fit_uncertainty_rel", _float_tuple),
         )
 
     def summary(self) -> str:
@@ -1182,8 +1201,8 @@ class VehicleConfig:
         return VehicleConfig(validate_flat(flat, source=self.source), self.source, self.sha256)
 
 
-def _tuple_or_none(value: Any) -> tuple[float, ...] | None:
-    return None if value is None else tuple(float(v) for v in value)
+def _float_tuple(value: Any) -> tuple[float, ...]:
+    return tuple(float(v) for v in value)
 
 
 def ros_parameters_from_yaml(doc: Any, source: str = "") -> dict[str, Any]:
