@@ -925,6 +925,12 @@ class CalibrationConfig:
 
 
 _S = TypeVar("_S", bound=Section)
+_V = TypeVar("_V")
+
+
+def or_default(value: _V | None, default: _V) -> _V:
+    """``value``, or ``default`` when it is None (an absent optional key of a typed section)."""
+    return default if value is None else value
 
 
 def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:

@@ -1,6 +1,7 @@
 """Typed configuration sections: the generated dataclasses and SCHEMA agree exactly, and the typed objects carry
 the file's values (docs: the config.py module docstring)."""
 import dataclasses
+import re
 import subprocess
 import sys
 import typing
@@ -111,3 +112,50 @@ def test_optional_keys_are_none_when_absent():
     bare = VehicleConfig(flat)
     assert bare.control.rate_hz is None and bare.esc.output_enable_gpio.chip is None
     assert bare.esc.output_latency_s == cfg.flat["esc.output_latency_s"]
+
+
+#: Modules of the fit core, converted by the lead after its rewrite merges (issue 28 item 2): EMPTY THIS LIST.
+NOT_CONVERTED_YET = (
+    "hindrax_ident/identification/fit_any.py", "hindrax_ident/identification/fit_core.py",
+    "hindrax_ident/identification/from_bag.py", "hindrax_ident/identification/estimators.py",
+    "hindrax_ident/identification/output_error.py", "hindrax_ident/identification/fit_report.py",
+    "hindrax_ident/identification/verdicts.py", "hindrax_ident/identification/results.py",
+    "hindrax_ident/identification/piloted_bag.py", "hindrax_ident/identification/report.py",
+    "hindrax_ident/commands/ident_fit.py", "hindrax_ident/commands/ident_bag.py",
+    "hindrax_ident/benchmarks/ident_fit.py",
+)
+#: Where a dotted key by string is the point: the schema and its generated sections, and the validation of a node's
+#: raw parameter mapping (node_parameters.validate_selection, before any VehicleConfig exists).
+DECLARE_KEYS = ("hindrax_drivers/config.py", "hindrax_drivers/config_sections.py",
+                "hindrax_drivers/node_parameters.py")
+LOOKUP = re.compile(r"""flat\[\s*f?["']|flat\.get\(\s*f?["']|\.section\("""
+                    r"""|\.get\(\s*f?["'][a-z0-9_]+\.[a-z0-9_.{}]+["']"""
+                    r"""|\[\s*f?["'](?:""" + "|".join(c.SECTIONS) + r""")\.[a-z0-9_.{}]+["']\s*\](?!\s*=[^=])"""
+                    r"""|["'](?:""" + "|".join(c.SECTIONS) + r""")\.[a-z0-9_.{}]+["']\s+(?:not\s+)?in\s""")
+
+
+def test_no_configuration_lookup_by_string_outside_config():
+    """Modules read the typed sections (cfg.esc.output_latency_s), never cfg.flat["esc.output_latency_s"],
+    cfg.get("esc.output_latency_s") or cfg.section("esc")[...]: a misspelt key must fail at import/type check."""
+    offenders = []
+    for pkg in ("hindrax_drivers", "hindrax_ident"):
+        root = ROOT / "src" / pkg
+        for path in sorted((root / pkg).rglob("*.py")):
+            rel = f"{pkg}/{path.relative_to(root / pkg).as_posix()}"
+            if rel in DECLARE_KEYS or rel in NOT_CONVERTED_YET:
+                continue
+            for i, line in enumerate(path.read_text().splitlines(), 1):
+                if LOOKUP.search(line):
+                    offenders.append(f"{rel}:{i}: {line.strip()}")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_the_lookup_guard_sees_each_form():
+    for line in ('cfg.flat["esc.output_latency_s"]', "cfg.flat.get('recording.topics')", 'cfg.section("esc")',
+                 'cfg.get("simulation.seed")', 'cfg.flat[f"thrusters.{n}.trim_us"]', 'cfg.get(f"vehicle.{k}")',
+                 'c["esc.i2c_address"]', 'if "esc.oscillator_calibrated" in cfg.flat:'):
+        assert LOOKUP.search(line), line
+    for line in ("cfg.esc.output_latency_s", "flat[key]", 'd.get("name")', "self.flat.get(k)",
+                 'overrides["simulation.seed"] = 3'):  # an override by ROS parameter name is fine
+        assert not LOOKUP.search(line), line
+    assert all((ROOT / "src" / p.split("/")[0] / p).is_file() for p in NOT_CONVERTED_YET + DECLARE_KEYS)

@@ -246,7 +246,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         from .sim.simulator import Simulator
 
         simulator = Simulator(cfg, truth=truth)  # the pool's truth (sim/truth.py); the nodes keep cfg
-        hardware = VirtualHardware(simulator, simulator.config, seed=cfg.get("simulation.seed"), serial_threads=False)
+        hardware = VirtualHardware(simulator, simulator.config, seed=cfg.simulation.seed, serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
         # The emulated PCA9685 runs at exactly esc.oscillator_hz (VirtualHardware builds it from the configuration):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,8 @@ import yaml
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.estimators import OnlineDofEstimator, measurement_settings
 from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import TruthError, default_truth_path, load_truth, truth_dir, truth_from_mapping
+from hindrax_ident.sim.truth import (DISTURBANCE_GROUPS, DISTURBANCE_SCHEMA, Disturbances, TruthError,
+                                     default_truth_path, load_truth, truth_dir, truth_from_mapping)
 
 SRC = Path(__file__).resolve().parents[2]  # src/
 
@@ -84,14 +86,15 @@ def _string_constants(path: Path) -> list[str]:
 
 
 def test_no_node_or_estimator_names_a_truth_only_key():
-    """Outside the simulator package (and the config schema that declares them), no module's code names
-    ``simulation.sensors.*`` or ``disturbances.*``: docstrings aside, they are not read."""
+    """Outside the simulator package (and the config schema and typed sections that declare them), no module's code
+    names ``simulation.sensors.*`` or ``disturbances.*``, by string or as ``cfg.simulation.sensors``: docstrings
+    aside, they are not read."""
     offenders = []
     roots = [SRC / "hindrax_drivers" / "hindrax_drivers", SRC / "hindrax_ident" / "hindrax_ident"]
     for root in roots:
         for path in root.rglob("*.py"):
             rel = path.relative_to(root).as_posix()
-            if rel.startswith("sim/") or rel == "config.py":
+            if rel.startswith("sim/") or rel in ("config.py", "config_sections.py"):
                 continue
             tree = ast.parse(path.read_text())
             docstrings = {id(n.body[0].value) for n in ast.walk(tree)
@@ -101,6 +104,9 @@ def test_no_node_or_estimator_names_a_truth_only_key():
                 if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docstrings and \
                         ("simulation.sensors" in n.value or n.value.startswith("disturbances.")):
                     offenders.append(f"{rel}: {n.value!r}")
+                if isinstance(n, ast.Attribute) and n.attr == "sensors" and isinstance(n.value, ast.Attribute) \
+                        and n.value.attr == "simulation":
+                    offenders.append(f"{rel}:{n.lineno}: .simulation.sensors")
     assert not offenders, offenders
 
 
@@ -166,3 +172,14 @@ def test_five_percent_weaker_thrust_is_covered_or_suspect(vehicle):
         assert r.values["inertia"] > true  # less thrust than believed: the inertia reads high
         lo, hi = r.ci95["inertia"]
         assert lo <= true <= hi or verdicts[dof]["parameters"]["inertia"]["verdict"] == "suspect", (dof, lo, hi, true)
+
+
+def test_typed_disturbance_groups_match_the_schema_and_the_file():
+    """Every ``disturbances.<group>.<key>`` has a field of its typed group and every field a key; the typed values
+    are the file's (or the schema default where the file is silent)."""
+    fields = {f"{g}.{f.name}" for g, cls in DISTURBANCE_GROUPS.items() for f in dataclasses.fields(cls)}
+    assert fields == set(DISTURBANCE_SCHEMA)
+    d = Disturbances({"thrust.scale": 0.9, "dvl.misalignment_rpy_rad": (0.01, 0.0, 0.02)})
+    assert d.thrust.scale == 0.9 and d.thrust.negative == 1.0 and d.thrust.per_thruster == ()
+    assert d.dvl.misalignment_rpy_rad == (0.01, 0.0, 0.02) and d.dvl.latency_s == 0.0
+    assert d.battery.nominal_voltage_v == 14.8 and d.floor.gradient == (0.0, 0.0)

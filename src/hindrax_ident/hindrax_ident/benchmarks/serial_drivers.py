@@ -177,7 +177,7 @@ def _bench_ping(duration_s: float) -> list[dict]:
     from hindrax_drivers.ping1d.node import Ping1dNode
     from hindrax_drivers.testing import config_parameters
 
-    c = float(load_config(default_config_path()).flat["sensors.ping1d.speed_of_sound_m_s"])
+    c = float(load_config(default_config_path()).sensors.ping1d.speed_of_sound_m_s)
     pending: list = []
     written: dict = {}
     counter = {"k": 0}
