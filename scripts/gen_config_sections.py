@@ -38,25 +38,41 @@ from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
 ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
-"""Value of a required key this configuration does not hold (a node's selection of keys)."""
+"""Marks a required key this configuration does not hold (a node's selection of keys) in :meth:`Section.build`."""
 
 
 class Section:
-    """Base of the generated sections: ``PREFIX`` is the dotted path; reading an absent key raises KeyError."""
+    """Base of the generated sections: ``PREFIX`` is the dotted path; reading an absent key raises KeyError.
+
+    An absent required key is simply not set on the instance, so reading a present field is a plain attribute
+    read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`.
+    """
 
     PREFIX: ClassVar[str] = ""
 
-    def __getattribute__(self, name: str) -> Any:
-        """The field's value; KeyError naming the dotted key when this configuration does not hold it."""
-        value = object.__getattribute__(self, name)
-        if value is ABSENT:
-            raise KeyError(f"{object.__getattribute__(self, 'PREFIX')}.{name}")
-        return value
+    @classmethod
+    def build(cls, values: dict[str, Any], prefix: str | None = None) -> Any:
+        """An instance holding ``values`` (field name -> value; ABSENT values left unset); ``prefix`` overrides
+        ``PREFIX`` in the KeyError messages (e.g. ``thrusters.t3``). Bypasses ``__init__``: the values are
+        validated already."""
+        obj = object.__new__(cls)
+        for name, value in values.items():
+            if value is not ABSENT:
+                object.__setattr__(obj, name, value)
+        if prefix is not None:
+            object.__setattr__(obj, "PREFIX", prefix)
+        return obj
+
+    def __getattr__(self, name: str) -> Any:
+        """Called only for an attribute the instance lacks: KeyError naming the dotted key of an absent field."""
+        if name in {f.name for f in fields(self)}:  # type: ignore[arg-type]  # every subclass is a dataclass
+            raise KeyError(f"{self.PREFIX}.{name}")
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def __repr__(self) -> str:
         """``ClassName(field=value, ...)`` with absent keys shown as <absent>."""
         names = [f.name for f in fields(self)]  # type: ignore[arg-type]  # every subclass is a dataclass
-        items = ", ".join(f"{k}={object.__getattribute__(self, k)!r}" for k in names)
+        items = ", ".join(f"{k}={self.__dict__.get(k, ABSENT)!r}" for k in names)
         return f"{type(self).__name__}({items})"
 '''
 

@@ -861,10 +861,7 @@ class ThrusterConfig(Section):
     trim_us: float
     allocation_weight: float
 
-    PREFIX: ClassVar[str] = "thrusters.<thruster>"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "PREFIX", f"thrusters.{self.name}")  # KeyError messages name the thruster
+    PREFIX: ClassVar[str] = "thrusters.<thruster>"  # per instance: thrusters.<name> (KeyError messages)
 
 
 @dataclass(frozen=True, repr=False)
@@ -887,9 +884,9 @@ class ThrustersConfig(Section):
     allocation_mode: str
     priority_dofs: tuple[str, ...]
     wrench_timeout_s: float
-    wrench_future_margin_s: float = 0.1
-    thrust_uncertainty_rel: tuple[float, ...] | None = None
-    thrust_fit_uncertainty_rel: tuple[float, ...] | None = None
+    wrench_future_margin_s: float
+    thrust_uncertainty_rel: tuple[float, ...] | None
+    thrust_fit_uncertainty_rel: tuple[float, ...] | None
 
     @property
     def names(self) -> list[str]:
@@ -950,7 +947,8 @@ def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
             kw[f.name] = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
         else:
             kw[f.name] = None if _is_optional(key) else ABSENT
-    return cls(**kw)
+    built: _S = cls.build(kw)
+    return built
 
 
 @dataclass(frozen=True)
@@ -1153,7 +1151,7 @@ class VehicleConfig:
             return np.asarray(v, dtype=float)
 
         ts = tuple(
-            ThrusterConfig(
+            ThrusterConfig.build(dict(
                 name=n,
                 position_frd_m=get(f"thrusters.{n}.position_frd_m", array),
                 direction_frd=get(f"thrusters.{n}.direction_frd", unit),
@@ -1161,10 +1159,10 @@ class VehicleConfig:
                 reversed=get(f"thrusters.{n}.reversed"),
                 trim_us=get(f"thrusters.{n}.trim_us"),
                 allocation_weight=get(f"thrusters.{n}.allocation_weight"),
-            )
+            ), prefix=f"thrusters.{n}")
             for n in f["thrusters.names"]
         )
-        return ThrustersConfig(
+        built: ThrustersConfig = ThrustersConfig.build(dict(
             thrusters=ts,
             pulse_width_min_us=get("thrusters.pulse_width_min_us"),
             pulse_width_neutral_us=get("thrusters.pulse_width_neutral_us"),
@@ -1179,7 +1177,8 @@ class VehicleConfig:
             wrench_future_margin_s=get("thrusters.wrench_future_margin_s"),
             thrust_uncertainty_rel=get("thrusters.thrust_uncertainty_rel", _float_tuple),
             thrust_fit_uncertainty_rel=get("thrusters.thrust_fit_uncertainty_rel", _float_tuple),
-        )
+        ))
+        return built
 
     def summary(self) -> str:
         """A short multi-line human summary of the vehicle (used by ``hindrax config check``)."""

@@ -159,3 +159,18 @@ def test_the_lookup_guard_sees_each_form():
                  'overrides["simulation.seed"] = 3'):  # an override by ROS parameter name is fine
         assert not LOOKUP.search(line), line
     assert all((ROOT / "src" / p.split("/")[0] / p).is_file() for p in NOT_CONVERTED_YET + DECLARE_KEYS)
+
+
+def test_a_partial_thruster_selection_reads_typed_and_names_the_missing_key():
+    """The static TF node declares only names, positions and directions: those read typed, the rest raise KeyError
+    naming the per-thruster key."""
+    partial = VehicleConfig({"thrusters.names": ["t1"], "thrusters.t1.position_frd_m": [0.2, -0.1, 0.0],
+                             "thrusters.t1.direction_frd": [0.0, 3.0, 4.0]})
+    t1 = partial.thrusters.thrusters[0]
+    np.testing.assert_allclose(t1.position_frd_m, [0.2, -0.1, 0.0])
+    np.testing.assert_allclose(t1.direction_frd, [0.0, 0.6, 0.8])  # unit length, as the allocation uses it
+    with pytest.raises(KeyError, match=r"thrusters\.t1\.esc_channel"):
+        _ = t1.esc_channel
+    with pytest.raises(KeyError, match=r"thrusters\.deadband_us"):
+        _ = partial.thrusters.deadband_us
+    assert "esc_channel=<absent>" in repr(t1)
