@@ -1102,35 +1102,36 @@ class VehicleConfig:
     @functools.cached_property
     def calibration(self) -> CalibrationConfig:
         """Typed ``calibration.*`` section (:class:`CalibrationConfig`)."""
-        f = self.flat
+        c = self.calibration_section
         rho, g = self.water_density_kg_m3, self.gravity_m_s2
         float_b = None
-        if "calibration.float_mass_kg" in f and "calibration.float_volume_m3" in f:
-            float_b = (rho * f["calibration.float_volume_m3"] - f["calibration.float_mass_kg"]) * g
+        if c.float_mass_kg is not None and c.float_volume_m3 is not None:
+            float_b = (rho * c.float_volume_m3 - c.float_mass_kg) * g
         return CalibrationConfig(
-            ballast_weight_in_water_n=(f["calibration.ballast_mass_kg"] - f["calibration.ballast_volume_m3"] * rho) * g,
-            line_pull_force_n=float(f["calibration.line_pull_force_n"]),
-            inclining_weight_in_water_n=(f["calibration.inclining_mass_kg"] - f["calibration.inclining_volume_m3"]
-                                         * rho) * g,
-            inclining_arm_m=float(f["calibration.inclining_arm_m"]),
+            ballast_weight_in_water_n=(c.ballast_mass_kg - c.ballast_volume_m3 * rho) * g,
+            line_pull_force_n=float(c.line_pull_force_n),
+            inclining_weight_in_water_n=(c.inclining_mass_kg - c.inclining_volume_m3 * rho) * g,
+            inclining_arm_m=float(c.inclining_arm_m),
             float_net_buoyancy_n=float_b,
-            net_buoyancy_std_n=float(f.get("calibration.net_buoyancy_std_n", 0.05)))
+            net_buoyancy_std_n=float(or_default(c.net_buoyancy_std_n, 0.05)))
 
     def hydrodynamics(self, dof: str) -> DofHydrodynamics:
         """Typed hydrodynamic coefficients of one DOF (see :class:`DofHydrodynamics`)."""
         if dof not in DOFS:
             raise KeyError(f"unknown DOF {dof!r}; one of {', '.join(DOFS)}")
-        h = self.section(f"hydrodynamics.{dof}")
-        if dof in ROTATIONAL_DOFS:
-            return DofHydrodynamics(dof, h["added_mass_kg_m2"], h["linear_damping_kg_m2_s"],
-                                    h["linear_damping_kg_m2_s"], h["quadratic_damping_kg_m2"],
-                                    h["quadratic_damping_kg_m2"])
+        hs = self.hydrodynamics_section
         if dof == "heave":
-            return DofHydrodynamics(dof, h["added_mass_kg"], h["linear_damping_positive_kg_s"],
-                                    h["linear_damping_negative_kg_s"], h["quadratic_damping_positive_kg_m"],
-                                    h["quadratic_damping_negative_kg_m"])
-        return DofHydrodynamics(dof, h["added_mass_kg"], h["linear_damping_kg_s"], h["linear_damping_kg_s"],
-                                h["quadratic_damping_kg_m"], h["quadratic_damping_kg_m"])
+            v = hs.heave
+            return DofHydrodynamics(dof, v.added_mass_kg, v.linear_damping_positive_kg_s,
+                                    v.linear_damping_negative_kg_s, v.quadratic_damping_positive_kg_m,
+                                    v.quadratic_damping_negative_kg_m)
+        if dof in ROTATIONAL_DOFS:
+            r = {"roll": hs.roll, "pitch": hs.pitch, "yaw": hs.yaw}[dof]
+            return DofHydrodynamics(dof, r.added_mass_kg_m2, r.linear_damping_kg_m2_s, r.linear_damping_kg_m2_s,
+                                    r.quadratic_damping_kg_m2, r.quadratic_damping_kg_m2)
+        t = {"surge": hs.surge, "sway": hs.sway}[dof]
+        return DofHydrodynamics(dof, t.added_mass_kg, t.linear_damping_kg_s, t.linear_damping_kg_s,
+                                t.quadratic_damping_kg_m, t.quadratic_damping_kg_m)
 
     @functools.cached_property
     def thrusters(self) -> ThrustersConfig:
