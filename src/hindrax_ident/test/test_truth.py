@@ -30,9 +30,9 @@ def test_vehicle_file_has_no_truth_only_keys(vehicle):
 def test_default_truth_is_the_shipped_noise_and_no_disturbance(vehicle):
     doc = yaml.safe_load(default_truth_path().read_text())
     sim = Simulator(vehicle)
-    assert sim.config.flat["simulation.sensors.dvl75.noise_std_m_s"] == doc["simulation"]["sensors"]["dvl75"][
+    assert sim.config.simulation.sensors.dvl75.noise_std_m_s == doc["simulation"]["sensors"]["dvl75"][
         "noise_std_m_s"] == 0.01
-    assert sim.config.flat["simulation.sensors.ms5837.noise_std_pa"] == 20.0
+    assert sim.config.simulation.sensors.ms5837.noise_std_pa == 20.0
     assert sim.truth_model.disturbances.active == []
     assert sim.vehicle_config is vehicle
     # the vehicle file's own values are untouched
@@ -41,7 +41,7 @@ def test_default_truth_is_the_shipped_noise_and_no_disturbance(vehicle):
 
 def test_default_truth_fills_only_missing_keys(vehicle):
     quiet = vehicle.with_overrides({"simulation.sensors.dvl75.noise_std_m_s": 0.0})
-    assert Simulator(quiet).config.flat["simulation.sensors.dvl75.noise_std_m_s"] == 0.0
+    assert Simulator(quiet).config.simulation.sensors.dvl75.noise_std_m_s == 0.0
 
 
 def test_truth_file_overrides_the_vehicle_file_for_the_simulator_only(vehicle, tmp_path):
@@ -50,8 +50,8 @@ def test_truth_file_overrides_the_vehicle_file_for_the_simulator_only(vehicle, t
                  "disturbances: {thrust: {scale: 0.9}}\n")
     t = load_truth(vehicle, p)
     assert t.config.thrusters.time_constant_s == 0.3 and vehicle.thrusters.time_constant_s == 0.1
-    assert t.config.flat["simulation.sensors.ms5837.noise_std_pa"] == 5.0
-    assert t.config.flat["simulation.sensors.dvl75.noise_std_m_s"] == 0.01  # from the default truth
+    assert t.config.simulation.sensors.ms5837.noise_std_pa == 5.0
+    assert t.config.simulation.sensors.dvl75.noise_std_m_s == 0.01  # from the default truth
     assert t.disturbances.get("thrust.scale") == 0.9 and t.disturbances.active == ["thrust.scale"]
     assert t.differs == {"thrusters.time_constant_s": (0.1, 0.3)}
     sim = Simulator(vehicle, truth=p)
@@ -138,7 +138,7 @@ def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp
             sim = graph.nodes["simulator"].simulator
             assert sim.thrusters.time_constant_s == 0.25
             assert sim.truth_model.disturbances.get("thrust.scale") == 0.9
-            assert graph.hardware.config.flat["thrusters.time_constant_s"] == 0.25
+            assert graph.hardware.config.thrusters.time_constant_s == 0.25
             for name, node in graph.nodes.items():
                 if name == "simulator":
                     continue
