@@ -187,7 +187,7 @@ def test_compose_binds_dev_with_cgroup_rules_so_a_missing_adapter_degrades_only_
     majors = {int(m) for m in re.findall(r"^c (\d+):\* rmw$", "\n".join(svc["device_cgroup_rules"]), re.M)}
     assert {188, 166, 89} <= majors  # ttyUSB, ttyACM, i2c-dev (Linux devices.txt)
     cfg = load_config(default_config_path())
-    for port in (cfg.get("sensors.dvl75.port"), cfg.get("sensors.ping1d.port")):
+    for port in (cfg.sensors.dvl75.port, cfg.sensors.ping1d.port):
         assert port.startswith("/dev/")  # reached through the bind, created by the udev rules
     assert svc["stop_signal"] == "SIGINT" and svc["init"] is True
     grace = int(str(svc["stop_grace_period"]).rstrip("s"))
@@ -231,7 +231,7 @@ def test_udev_names_match_the_configuration():
     rules = (DOCKER / "99-hindrax.rules").read_text()
     links = set(re.findall(r'SYMLINK\+="([^"]+)"', rules))
     cfg = load_config(default_config_path())
-    assert {Path(cfg.get("sensors.dvl75.port")).name, Path(cfg.get("sensors.ping1d.port")).name} <= links
+    assert {Path(cfg.sensors.dvl75.port).name, Path(cfg.sensors.ping1d.port).name} <= links
     for key in ("sensors.ms5837.i2c_bus", "sensors.icm20948.i2c_bus", "esc.i2c_bus"):
         assert f'KERNEL=="i2c-{cfg.get(key)}"' in rules
 

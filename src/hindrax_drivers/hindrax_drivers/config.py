@@ -22,20 +22,40 @@ Why our own validator rather than a schema library: the errors must name ROS par
 one-line form users see from ``hindrax config check``, and the same checks must run on a YAML file and on
 the parameters of a running rclpy node. No maintained library covers ROS parameter overrides.
 
+Typed access: :class:`VehicleConfig` builds one frozen dataclass per section (``cfg.esc.output_latency_s``,
+``cfg.sensors.dvl75.position_frd_m``, ``cfg.supervisor.min_rate.imu_hz``), so a misspelt name is an AttributeError
+that mypy and the import of a module's tests catch, not a KeyError on the vehicle. The section classes live in
+``config_sections.py``, GENERATED from :data:`SCHEMA` by ``scripts/gen_config_sections.py`` (a test checks the
+file is current and that every key has a field of its kind, and every field a key): writing them by hand next to
+a 250-key schema would let the two drift, and generating them at import time would hide them from mypy. Field
+names are the keys' last segments (ROS parameter names do not change), lists are tuples, optional keys are
+``X | None``. Section objects are built lazily, once per configuration (it is immutable). A node's configuration
+holds only the keys it declared (:mod:`node_parameters`): reading another required key raises KeyError naming it.
+Names taken by older typed views: ``cfg.thrusters`` is :class:`ThrustersConfig` (per-thruster keys),
+``cfg.hydrodynamics(dof)`` and ``cfg.calibration`` (derived forces) keep their meaning, and the raw sections are
+``cfg.hydrodynamics_section`` and ``cfg.calibration_section``. ``cfg.flat`` (dotted key -> value) stays for the
+ROS-parameter conversion, overrides and validation; modules outside this one do not index it by a literal key.
+
 Errors: :class:`ConfigError` (a ``ValueError``) carrying a list of :class:`ConfigIssue`.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import math
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, ClassVar, Iterable, Mapping, Sequence, TypeVar
 
 import numpy as np
 import yaml
+
+from .config_sections import (ABSENT, CalibrationSection, ControlSection, EnvironmentSection, EscSection,
+                              HydrodynamicsSection, IdentificationSection, LightsSection, LimitsSection, PoolSection,
+                              RecordingSection, Section, SensorsSection, SimulationSection, SupervisorSection,
+                              VehicleSection)
 
 DOFS: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
 """The six degrees of freedom in SNAME order (nu = [u v w p q r], tau = [X Y Z K M N])."""
@@ -828,8 +848,8 @@ class DofHydrodynamics:
         return self.linear_damping_negative * velocity - self.quadratic_damping_negative * velocity * velocity
 
 
-@dataclass(frozen=True)
-class ThrusterConfig:
+@dataclass(frozen=True, repr=False)
+class ThrusterConfig(Section):
     """One thruster: name, position relative to the CG (FRD, m), unit direction of positive thrust (FRD),
     PCA9685 channel, reversal, trim (us) and allocation weight."""
 
@@ -841,13 +861,17 @@ class ThrusterConfig:
     trim_us: float
     allocation_weight: float
 
+    PREFIX: ClassVar[str] = "thrusters.<thruster>"  # per instance: thrusters.<name> (KeyError messages)
 
-@dataclass(frozen=True)
-class ThrustersConfig:
+
+@dataclass(frozen=True, repr=False)
+class ThrustersConfig(Section):
     """Thruster set: per-thruster geometry and the shared cubic thrust curves ([Hindrax-Drag] eq. 1, Table 2).
 
     curve_negative/curve_positive: [c4, c3, c2, c1] with thrust_N = c4 P^3 + c3 P^2 + c2 P + c1, P in us.
     """
+
+    PREFIX: ClassVar[str] = "thrusters"
 
     thrusters: tuple[ThrusterConfig, ...]
     pulse_width_min_us: float
@@ -860,7 +884,9 @@ class ThrustersConfig:
     allocation_mode: str
     priority_dofs: tuple[str, ...]
     wrench_timeout_s: float
-    wrench_future_margin_s: float = 0.1
+    wrench_future_margin_s: float
+    thrust_uncertainty_rel: tuple[float, ...] | None
+    thrust_fit_uncertainty_rel: tuple[float, ...] | None
 
     @property
     def names(self) -> list[str]:
@@ -895,19 +921,53 @@ class CalibrationConfig:
     net_buoyancy_std_n: float
 
 
+_S = TypeVar("_S", bound=Section)
+_V = TypeVar("_V")
+
+
+def or_default(value: _V | None, default: _V) -> _V:
+    """``value``, or ``default`` when it is None (an absent optional key of a typed section)."""
+    return default if value is None else value
+
+
+def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
+    """The typed section ``cls`` (a generated :class:`config_sections.Section`) from validated flat keys.
+
+    Lists become tuples; an absent optional key is None; an absent required key (a node's selection of keys) is
+    held as ABSENT and raises KeyError naming the key when read.
+    """
+    kw: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]  # the generated sections are dataclasses
+        if isinstance(f.type, type) and issubclass(f.type, Section):
+            kw[f.name] = build_section(f.type, flat)
+            continue
+        key = f"{cls.PREFIX}.{f.name}"
+        if key in flat:
+            v = flat[key]
+            kw[f.name] = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
+        else:
+            kw[f.name] = None if _is_optional(key) else ABSENT
+    built: _S = cls.build(kw)
+    return built
+
+
 @dataclass(frozen=True)
 class VehicleConfig:
     """The validated vehicle configuration.
 
-    ``flat`` holds every validated key (dotted names, SI values) for sections without a dedicated typed
-    view (``section(...)``). Typed views: rigid-body and hydrodynamic parameters, thrusters.
+    Typed sections (built once, on first use): ``vehicle``, ``environment``, ``hydrodynamics_section``,
+    ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``, ``limits``,
+    ``supervisor``, ``identification``, ``calibration_section``, ``control``, ``simulation``, ``recording``
+    (module docstring). Derived views: rigid-body and added-mass matrices, ``hydrodynamics(dof)``,
+    ``calibration``. ``flat`` holds every validated key (dotted names, SI values) for the ROS-parameter
+    conversion and overrides.
     """
 
     flat: Mapping[str, Any]
     source: str = ""
     sha256: str = ""
 
-    # -- convenient typed views --
+    # -- generic access by dotted key (tools that list or convert keys; modules read the typed sections) --
     def get(self, key: str) -> Any:
         """Value of a dotted key (KeyError if absent)."""
         return self.flat[key]
@@ -917,21 +977,97 @@ class VehicleConfig:
         p = prefix.rstrip(".") + "."
         return {k[len(p):]: v for k, v in self.flat.items() if k.startswith(p)}
 
+    # -- typed sections --
+    @functools.cached_property
+    def vehicle(self) -> VehicleSection:
+        """``vehicle.*``: rigid-body data."""
+        return build_section(VehicleSection, self.flat)
+
+    @functools.cached_property
+    def environment(self) -> EnvironmentSection:
+        """``environment.*``: water and gravity."""
+        return build_section(EnvironmentSection, self.flat)
+
+    @functools.cached_property
+    def hydrodynamics_section(self) -> HydrodynamicsSection:
+        """``hydrodynamics.*`` as configured (see also :meth:`hydrodynamics` and :attr:`added_mass_matrix`)."""
+        return build_section(HydrodynamicsSection, self.flat)
+
+    @functools.cached_property
+    def esc(self) -> EscSection:
+        """``esc.*``: the PCA9685 ESC output."""
+        return build_section(EscSection, self.flat)
+
+    @functools.cached_property
+    def lights(self) -> LightsSection:
+        """``lights.*``."""
+        return build_section(LightsSection, self.flat)
+
+    @functools.cached_property
+    def sensors(self) -> SensorsSection:
+        """``sensors.*``: ``dvl75``, ``ping1d``, ``ms5837``, ``icm20948``."""
+        return build_section(SensorsSection, self.flat)
+
+    @functools.cached_property
+    def pool(self) -> PoolSection:
+        """``pool.*``: the pool box and start pose."""
+        return build_section(PoolSection, self.flat)
+
+    @functools.cached_property
+    def limits(self) -> LimitsSection:
+        """``limits.*``: the identification's own abort limits."""
+        return build_section(LimitsSection, self.flat)
+
+    @functools.cached_property
+    def supervisor(self) -> SupervisorSection:
+        """``supervisor.*``: the safety supervisor."""
+        return build_section(SupervisorSection, self.flat)
+
+    @functools.cached_property
+    def identification(self) -> IdentificationSection:
+        """``identification.*``."""
+        return build_section(IdentificationSection, self.flat)
+
+    @functools.cached_property
+    def calibration_section(self) -> CalibrationSection:
+        """``calibration.*`` as configured (masses, volumes; :attr:`calibration` gives the derived forces)."""
+        return build_section(CalibrationSection, self.flat)
+
+    @functools.cached_property
+    def control(self) -> ControlSection:
+        """``control.*``: the holds' settings (all optional: None when absent)."""
+        return build_section(ControlSection, self.flat)
+
+    @functools.cached_property
+    def simulation(self) -> SimulationSection:
+        """``simulation.*``: the virtual pool's integration and sensor models."""
+        return build_section(SimulationSection, self.flat)
+
+    @functools.cached_property
+    def recording(self) -> RecordingSection:
+        """``recording.*``: the MCAP recorder."""
+        return build_section(RecordingSection, self.flat)
+
+    # -- derived views --
     @property
     def mass_kg(self) -> float:
-        return self.flat["vehicle.mass_kg"]
+        """``vehicle.mass_kg``, kg."""
+        return self.vehicle.mass_kg
 
     @property
     def displaced_volume_m3(self) -> float:
-        return self.flat["vehicle.displaced_volume_m3"]
+        """``vehicle.displaced_volume_m3``, m^3."""
+        return self.vehicle.displaced_volume_m3
 
     @property
     def water_density_kg_m3(self) -> float:
-        return self.flat["environment.water_density_kg_m3"]
+        """``environment.water_density_kg_m3``, kg/m^3."""
+        return self.environment.water_density_kg_m3
 
     @property
     def gravity_m_s2(self) -> float:
-        return self.flat["environment.gravity_m_s2"]
+        """``environment.gravity_m_s2``, m/s^2."""
+        return self.environment.gravity_m_s2
 
     @property
     def weight_n(self) -> float:
@@ -946,17 +1082,17 @@ class VehicleConfig:
     @property
     def inertia_matrix_kg_m2(self) -> np.ndarray:
         """3x3 inertia tensor about the CG, kg m^2 (products of inertia with the usual minus sign)."""
-        ixx, iyy, izz = self.flat["vehicle.inertia_kg_m2"]
-        ixy, ixz, iyz = self.flat["vehicle.products_of_inertia_kg_m2"]
+        ixx, iyy, izz = self.vehicle.inertia_kg_m2
+        ixy, ixz, iyz = self.vehicle.products_of_inertia_kg_m2
         return np.array([[ixx, -ixy, -ixz], [-ixy, iyy, -iyz], [-ixz, -iyz, izz]])
 
     @property
     def centre_of_gravity_frd_m(self) -> np.ndarray:
-        return np.asarray(self.flat["vehicle.centre_of_gravity_frd_m"], dtype=float)
+        return np.asarray(self.vehicle.centre_of_gravity_frd_m, dtype=float)
 
     @property
     def centre_of_buoyancy_frd_m(self) -> np.ndarray:
-        return np.asarray(self.flat["vehicle.centre_of_buoyancy_frd_m"], dtype=float)
+        return np.asarray(self.vehicle.centre_of_buoyancy_frd_m, dtype=float)
 
     @property
     def added_mass_matrix(self) -> np.ndarray:
@@ -966,80 +1102,96 @@ class VehicleConfig:
     @functools.cached_property
     def calibration(self) -> CalibrationConfig:
         """Typed ``calibration.*`` section (:class:`CalibrationConfig`)."""
-        f = self.flat
+        c = self.calibration_section
         rho, g = self.water_density_kg_m3, self.gravity_m_s2
         float_b = None
-        if "calibration.float_mass_kg" in f and "calibration.float_volume_m3" in f:
-            float_b = (rho * f["calibration.float_volume_m3"] - f["calibration.float_mass_kg"]) * g
+        if c.float_mass_kg is not None and c.float_volume_m3 is not None:
+            float_b = (rho * c.float_volume_m3 - c.float_mass_kg) * g
         return CalibrationConfig(
-            ballast_weight_in_water_n=(f["calibration.ballast_mass_kg"] - f["calibration.ballast_volume_m3"] * rho) * g,
-            line_pull_force_n=float(f["calibration.line_pull_force_n"]),
-            inclining_weight_in_water_n=(f["calibration.inclining_mass_kg"] - f["calibration.inclining_volume_m3"]
-                                         * rho) * g,
-            inclining_arm_m=float(f["calibration.inclining_arm_m"]),
+            ballast_weight_in_water_n=(c.ballast_mass_kg - c.ballast_volume_m3 * rho) * g,
+            line_pull_force_n=float(c.line_pull_force_n),
+            inclining_weight_in_water_n=(c.inclining_mass_kg - c.inclining_volume_m3 * rho) * g,
+            inclining_arm_m=float(c.inclining_arm_m),
             float_net_buoyancy_n=float_b,
-            net_buoyancy_std_n=float(f.get("calibration.net_buoyancy_std_n", 0.05)))
+            net_buoyancy_std_n=float(or_default(c.net_buoyancy_std_n, 0.05)))
 
     def hydrodynamics(self, dof: str) -> DofHydrodynamics:
         """Typed hydrodynamic coefficients of one DOF (see :class:`DofHydrodynamics`)."""
         if dof not in DOFS:
             raise KeyError(f"unknown DOF {dof!r}; one of {', '.join(DOFS)}")
-        h = self.section(f"hydrodynamics.{dof}")
-        if dof in ROTATIONAL_DOFS:
-            return DofHydrodynamics(dof, h["added_mass_kg_m2"], h["linear_damping_kg_m2_s"],
-                                    h["linear_damping_kg_m2_s"], h["quadratic_damping_kg_m2"],
-                                    h["quadratic_damping_kg_m2"])
+        hs = self.hydrodynamics_section
         if dof == "heave":
-            return DofHydrodynamics(dof, h["added_mass_kg"], h["linear_damping_positive_kg_s"],
-                                    h["linear_damping_negative_kg_s"], h["quadratic_damping_positive_kg_m"],
-                                    h["quadratic_damping_negative_kg_m"])
-        return DofHydrodynamics(dof, h["added_mass_kg"], h["linear_damping_kg_s"], h["linear_damping_kg_s"],
-                                h["quadratic_damping_kg_m"], h["quadratic_damping_kg_m"])
+            v = hs.heave
+            return DofHydrodynamics(dof, v.added_mass_kg, v.linear_damping_positive_kg_s,
+                                    v.linear_damping_negative_kg_s, v.quadratic_damping_positive_kg_m,
+                                    v.quadratic_damping_negative_kg_m)
+        if dof in ROTATIONAL_DOFS:
+            r = {"roll": hs.roll, "pitch": hs.pitch, "yaw": hs.yaw}[dof]
+            return DofHydrodynamics(dof, r.added_mass_kg_m2, r.linear_damping_kg_m2_s, r.linear_damping_kg_m2_s,
+                                    r.quadratic_damping_kg_m2, r.quadratic_damping_kg_m2)
+        t = {"surge": hs.surge, "sway": hs.sway}[dof]
+        return DofHydrodynamics(dof, t.added_mass_kg, t.linear_damping_kg_s, t.linear_damping_kg_s,
+                                t.quadratic_damping_kg_m, t.quadratic_damping_kg_m)
 
     @functools.cached_property
     def thrusters(self) -> ThrustersConfig:
         """Typed thruster set (positions/directions FRD relative to the CG); built once per configuration (the
-        configuration is immutable; the control and identification loops read it at every tick)."""
+        configuration is immutable; the control and identification loops read it at every tick). Needs
+        ``thrusters.names``; other keys a node did not declare raise KeyError naming them when read."""
         f = self.flat
+
+        def get(key: str, convert: Any = None) -> Any:
+            if key not in f:
+                return None if _is_optional(key) else ABSENT
+            return f[key] if convert is None else convert(f[key])
+
+        def unit(v: Any) -> np.ndarray:
+            return np.asarray(v, dtype=float) / np.linalg.norm(v)
+
+        def array(v: Any) -> np.ndarray:
+            return np.asarray(v, dtype=float)
+
         ts = tuple(
-            ThrusterConfig(
+            ThrusterConfig.build(dict(
                 name=n,
-                position_frd_m=np.asarray(f[f"thrusters.{n}.position_frd_m"], dtype=float),
-                direction_frd=np.asarray(f[f"thrusters.{n}.direction_frd"], dtype=float)
-                / np.linalg.norm(f[f"thrusters.{n}.direction_frd"]),
-                esc_channel=f[f"thrusters.{n}.esc_channel"],
-                reversed=f[f"thrusters.{n}.reversed"],
-                trim_us=f[f"thrusters.{n}.trim_us"],
-                allocation_weight=f[f"thrusters.{n}.allocation_weight"],
-            )
+                position_frd_m=get(f"thrusters.{n}.position_frd_m", array),
+                direction_frd=get(f"thrusters.{n}.direction_frd", unit),
+                esc_channel=get(f"thrusters.{n}.esc_channel"),
+                reversed=get(f"thrusters.{n}.reversed"),
+                trim_us=get(f"thrusters.{n}.trim_us"),
+                allocation_weight=get(f"thrusters.{n}.allocation_weight"),
+            ), prefix=f"thrusters.{n}")
             for n in f["thrusters.names"]
         )
-        return ThrustersConfig(
+        built: ThrustersConfig = ThrustersConfig.build(dict(
             thrusters=ts,
-            pulse_width_min_us=f["thrusters.pulse_width_min_us"],
-            pulse_width_neutral_us=f["thrusters.pulse_width_neutral_us"],
-            pulse_width_max_us=f["thrusters.pulse_width_max_us"],
-            deadband_us=f["thrusters.deadband_us"],
-            curve_negative=tuple(f["thrusters.curve_negative"]),
-            curve_positive=tuple(f["thrusters.curve_positive"]),
-            time_constant_s=f["thrusters.time_constant_s"],
-            allocation_mode=f["thrusters.allocation_mode"],
-            priority_dofs=tuple(f["thrusters.priority_dofs"]),
-            wrench_timeout_s=f["thrusters.wrench_timeout_s"],
-            wrench_future_margin_s=f["thrusters.wrench_future_margin_s"],
-        )
+            pulse_width_min_us=get("thrusters.pulse_width_min_us"),
+            pulse_width_neutral_us=get("thrusters.pulse_width_neutral_us"),
+            pulse_width_max_us=get("thrusters.pulse_width_max_us"),
+            deadband_us=get("thrusters.deadband_us"),
+            curve_negative=get("thrusters.curve_negative", tuple),
+            curve_positive=get("thrusters.curve_positive", tuple),
+            time_constant_s=get("thrusters.time_constant_s"),
+            allocation_mode=get("thrusters.allocation_mode"),
+            priority_dofs=get("thrusters.priority_dofs", tuple),
+            wrench_timeout_s=get("thrusters.wrench_timeout_s"),
+            wrench_future_margin_s=get("thrusters.wrench_future_margin_s"),
+            thrust_uncertainty_rel=get("thrusters.thrust_uncertainty_rel", _float_tuple),
+            thrust_fit_uncertainty_rel=get("thrusters.thrust_fit_uncertainty_rel", _float_tuple),
+        ))
+        return built
 
     def summary(self) -> str:
         """A short multi-line human summary of the vehicle (used by ``hindrax config check``)."""
         t = self.thrusters
         lines = [
-            f"vehicle {self.flat['vehicle.name']}: mass {self.mass_kg:g} kg, volume {self.displaced_volume_m3:g} m^3,"
+            f"vehicle {self.vehicle.name}: mass {self.mass_kg:g} kg, volume {self.displaced_volume_m3:g} m^3,"
             f" net buoyancy {(self.buoyancy_n - self.weight_n):.3f} N (rho {self.water_density_kg_m3:g} kg/m^3)",
             f"thrusters: {len(t.thrusters)} ({', '.join(t.names)}), pulse width "
             f"{t.pulse_width_min_us:g}-{t.pulse_width_max_us:g} us, neutral {t.pulse_width_neutral_us:g} us",
             "added mass (surge sway heave kg; roll pitch yaw kg m^2): "
             + " ".join(f"{v:g}" for v in np.diag(self.added_mass_matrix)),
-            f"pool {self.flat['pool.length_m']:g} x {self.flat['pool.width_m']:g} x {self.flat['pool.depth_m']:g} m",
+            f"pool {self.pool.length_m:g} x {self.pool.width_m:g} x {self.pool.depth_m:g} m",
             f"sha256 {self.sha256[:12]}" if self.sha256 else "",
         ]
         return "\n".join(x for x in lines if x)
@@ -1053,6 +1205,10 @@ class VehicleConfig:
         flat = dict(self.flat)
         flat.update(overrides)
         return VehicleConfig(validate_flat(flat, source=self.source), self.source, self.sha256)
+
+
+def _float_tuple(value: Any) -> tuple[float, ...]:
+    return tuple(float(v) for v in value)
 
 
 def ros_parameters_from_yaml(doc: Any, source: str = "") -> dict[str, Any]:

@@ -69,12 +69,12 @@ class EmulatedDevices:
         self.ping = PtyDevice(Ping1dEmulator(self._ping_truth), poll_period_s=poll_period_s,
                               link_name="hindrax-ping")
         self._serial = {"dvl75": self.dvl, "ping1d": self.ping}
-        esc = config.section("esc")
-        self.pca9685 = Pca9685Emulator(oscillator_hz=float(esc["oscillator_hz"]))
+        esc = config.esc
+        self.pca9685 = Pca9685Emulator(oscillator_hz=float(esc.oscillator_hz))
         self.bus = EmulatedI2CBus({
-            int(config.section("sensors.ms5837")["i2c_address"]): Ms5837Emulator(self._pressure_truth),
-            int(config.section("sensors.icm20948")["i2c_address"]): Icm20948Emulator(self._imu_truth),
-            int(esc["i2c_address"]): self.pca9685,
+            int(config.sensors.ms5837.i2c_address): Ms5837Emulator(self._pressure_truth),
+            int(config.sensors.icm20948.i2c_address): Icm20948Emulator(self._imu_truth),
+            int(esc.i2c_address): self.pca9685,
         })
         self._server: I2CSocketServer | None = None
         self._lock = threading.Lock()

@@ -36,7 +36,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
-from .config import ConfigError, ConfigIssue
+from .config import ConfigError, ConfigIssue, build_section
+from .config_sections import SensorsDvl75Section, SensorsPing1dSection
 from .node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector, load_node_config
 from .transport.serial_transport import SerialTransport, SerialTransportError
 
@@ -132,21 +133,23 @@ class SerialDeviceNode(Node):
     Args:
         node_name: ROS node name.
         device_name: short device name (``raw/<device_name>``, diagnostics ``hindrax/<device_name>``).
-        config_section: configuration prefix holding ``port`` and ``baud_rate`` (e.g. ``sensors.dvl75``).
+        config_section: typed configuration section holding ``port`` and ``baud_rate`` (e.g.
+            :class:`~hindrax_drivers.config_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys declared.
         command_gap_s: pause between start-up commands, s.
         **kwargs: passed to ``rclpy.node.Node`` (context, parameter_overrides, namespace...).
     Raises:
         ConfigError: invalid vehicle configuration or ``stuck_limit_samples`` (after logging one line).
     """
 
-    def __init__(self, node_name: str, *, device_name: str, config_section: str, command_gap_s: float,
+    def __init__(self, node_name: str, *, device_name: str,
+                 config_section: type[SensorsDvl75Section] | type[SensorsPing1dSection], command_gap_s: float,
                  **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.cfg = load_node_config(self, (config_section,))
-        self.settings = self.cfg.section(config_section)
+        self.cfg = load_node_config(self, (config_section.PREFIX,))
+        self.settings = build_section(config_section, self.cfg.flat)
         self.device_name = device_name
-        self.port = str(self.settings["port"])
-        self.baud_rate = int(self.settings["baud_rate"])
+        self.port = str(self.settings.port)
+        self.baud_rate = int(self.settings.baud_rate)
         self.stuck_limit_samples = self._int_parameter("stuck_limit_samples", 50, minimum=2)
         self._closed = False
         self._ever_connected = False

@@ -36,7 +36,7 @@ def test_real_file_loads_cleanly(cfg):
 def test_seed_numbers(cfg):
     # [Hindrax-AM] §2 / [Hindrax-Drag] §2.1
     assert cfg.mass_kg == 15.22 and cfg.displaced_volume_m3 == 0.0153
-    assert (cfg.get("vehicle.length_m"), cfg.get("vehicle.width_m"), cfg.get("vehicle.height_m")) == (0.59, 0.47, 0.40)
+    assert (cfg.vehicle.length_m, cfg.vehicle.width_m, cfg.vehicle.height_m) == (0.59, 0.47, 0.40)
     # net buoyancy: [Hindrax-Drag] §5 computes f_b = 0.7845 N with rho = 1000 kg/m^3
     assert cfg.buoyancy_n - cfg.weight_n == pytest.approx(0.7845, abs=2e-3)
     # [Hindrax-AM] Table 6
@@ -186,7 +186,7 @@ def test_ros_parameter_round_trip_and_node_mode(cfg):
 
 
 def test_overrides_revalidate(cfg):
-    assert cfg.with_overrides({"pool.margin_m": 0.6}).get("pool.margin_m") == 0.6
+    assert cfg.with_overrides({"pool.margin_m": 0.6}).pool.margin_m == 0.6
     with pytest.raises(ConfigError, match="net_buoyancy_n"):  # a heavier vehicle must restate its buoyancy
         cfg.with_overrides({"vehicle.mass_kg": 15.3})
     with pytest.raises(ConfigError):

@@ -108,16 +108,16 @@ def test_f5_wild_attitude_delta_is_rejected_not_a_180_m_s_velocity():
 
 # ------------------------------------------------------------------ finding 6: MS5837 garbage
 def test_f6_garbage_adc_words_almost_never_pass_the_depth_gates():
-    s = SHIPPED.section("sensors.ms5837")
+    s = SHIPPED.sensors.ms5837
     cal = ms.Calibration.from_coefficients(ms.EXAMPLE_COEFFICIENTS_30BA, ms.EXAMPLE_WORD0_30BA)
     rng = np.random.default_rng(23)
-    gate = DepthGate(s["min_depth_m"], s["max_depth_m"], s["max_depth_rate_m_s"], max_age_s=5.0 / s["rate_hz"])
+    gate = DepthGate(s.min_depth_m, s.max_depth_m, s.max_depth_rate_m_s, max_age_s=5.0 / s.rate_hz)
     assert gate.check(0.0, 1.0) == ""  # a real depth before the bus starts returning noise
     n, in_window, published = 20000, 0, []
     for k in range(n):
         d1, d2 = (int(x) for x in rng.integers(0, 1 << 24, 2))
         pa = ms.compensate(d1, d2, cal, ms.Variant.MS5837_30BA).pressure_pa
-        if not s["min_pressure_pa"] <= pa <= s["max_pressure_pa"]:
+        if not s.min_pressure_pa <= pa <= s.max_pressure_pa:
             gate.invalid()  # as the node does for a reading outside the pressure window
             continue
         in_window += 1
@@ -159,7 +159,7 @@ def test_f8_unsafe_configuration_is_refused_in_one_line(overrides, key):
 def test_f8_a_disabled_rate_check_needs_a_reason():
     cfg = load_config(default_config_path(), {"supervisor.min_rate.dvl_hz": 0.0,
                                               "supervisor.rate_check_disabled.dvl": "no DVL fitted for this dive"})
-    assert cfg.get("supervisor.min_rate.dvl_hz") == 0.0
+    assert cfg.supervisor.min_rate.dvl_hz == 0.0
     with pytest.raises(ConfigError, match="rate_check_disabled.dvl"):
         load_config(default_config_path(), {"supervisor.rate_check_disabled.dvl": "on, yet disabled?"})
 

@@ -249,7 +249,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     kw: dict[str, Any] = {"context": context} if context is not None else {}
     if sim:
         simulator = Simulator(cfg, truth=truth)  # the pool's truth (sim/truth.py); the nodes keep cfg
-        hardware = VirtualHardware(simulator, simulator.config, seed=cfg.get("simulation.seed"), serial_threads=False)
+        hardware = VirtualHardware(simulator, simulator.config, seed=cfg.simulation.seed, serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
         # The emulated PCA9685 runs at exactly esc.oscillator_hz (VirtualHardware builds it from the configuration):

@@ -101,10 +101,10 @@ def test_dive_reaches_the_altitude_setpoint_and_averages_the_gyro_bias(cfg):
     camp, rec = _run(cfg, [Dive()], seed=3)
     assert not rec.aborted, rec.abort_reason
     ex = camp.executive
-    alt_sp = cfg.flat["identification.altitude_setpoint_m"]
+    alt_sp = cfg.identification.altitude_setpoint_m
     box = PoolBox.from_config(cfg)
     # pool floor (FRD depth) minus the setpoint, inside the box: the depth held and where the vehicle is
-    expected = min(max(cfg.flat["pool.depth_m"] - 0.5 * cfg.flat["vehicle.height_m"] - alt_sp, box.z_min), box.z_max)
+    expected = min(max(cfg.pool.depth_m - 0.5 * cfg.vehicle.height_m - alt_sp, box.z_min), box.z_max)
     assert ex.depth_hold_m == pytest.approx(expected, abs=0.05)
     assert rec.truth_position_ned_m[-1, 2] == pytest.approx(ex.depth_hold_m, abs=0.05)
     # truth/default.yaml: 0.002 rad/s on each gyro axis; roll and pitch are still during the 2 s window (the heading

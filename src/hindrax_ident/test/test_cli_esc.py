@@ -27,7 +27,7 @@ def test_calibrate_from_one_scope_reading_and_write(tmp_path):
     assert abs(out["oscillator_hz"] - 24.06e6) < 50.0 and out["prescale_used"] == 30 and out["written"]
     assert abs(out["calibrated_pulse_us"] - 1500.0) < 1.3  # within one count at the calibrated prescale
     c = load_config(cfg)
-    assert c.get("esc.oscillator_calibrated") is True and abs(c.get("esc.oscillator_hz") - 24.06e6) < 50.0
+    assert c.esc.oscillator_calibrated is True and abs(c.esc.oscillator_hz - 24.06e6) < 50.0
     assert "# nominal; calibrate per board" in cfg.read_text()  # the file's comments survive
     # config check no longer prints the calibration note
     assert "oscillator_calibrated is false" not in run("config", "check", str(cfg)).stdout

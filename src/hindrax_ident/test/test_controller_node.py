@@ -74,7 +74,7 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             setpoint.publish(sp)
             t0 = sim.t_s
             wait_until(lambda: sim.t_s > t0 + 10.0, 120, spin, "10 s of altitude hold")
-            ping_z = float(load_config(default_config_path()).flat["sensors.ping1d.position_frd_m"][2])
+            ping_z = float(load_config(default_config_path()).sensors.ping1d.position_frd_m[2])
             assert 1.8 - (sim.position_ned_m[2] + ping_z) == pytest.approx(1.0, abs=0.03)
             assert status[-1].enabled and status[-1].vertical_mode == ControlSetpoint.VERTICAL_ALTITUDE
             # a pilot publishes: the controller yields and stops publishing

@@ -112,7 +112,7 @@ def test_ladder_is_the_default_and_the_excitation_comes_from_the_config():
     from hindrax_ident.identification.executive import Executive
 
     cfg = load_config(default_config_path())
-    assert cfg.flat["identification.excitation"] == "ladder"
+    assert cfg.identification.excitation == "ladder"
     assert Executive(cfg, ["surge"], tick_s=0.02).excitation == "ladder"
     cfg2 = load_config(default_config_path(), {"identification.excitation": "prbs",
                                                "identification.excitation_duration_s": 30.0})

@@ -36,8 +36,8 @@ def test_surge_authority_is_four_horizontal_thrusters_at_full_thrust(cfg):
 
 def test_level_ladder_spans_configured_fractions(cfg):
     ladder = level_ladder(cfg, 40.0, 5)
-    assert ladder[0] == pytest.approx(40.0 * cfg.flat["identification.level_fraction_min"])
-    assert ladder[-1] == pytest.approx(40.0 * cfg.flat["identification.level_fraction_max"])
+    assert ladder[0] == pytest.approx(40.0 * cfg.identification.level_fraction_min)
+    assert ladder[-1] == pytest.approx(40.0 * cfg.identification.level_fraction_max)
     assert np.all(np.diff(ladder) > 0)
     with pytest.raises(ValueError):
         level_ladder(cfg, 40.0, 0)
@@ -45,10 +45,10 @@ def test_level_ladder_spans_configured_fractions(cfg):
 
 def test_pool_box_has_margins(cfg):
     box = PoolBox.from_config(cfg)
-    m = cfg.flat["pool.margin_m"]
-    assert box.x_min == pytest.approx(m + 0.5 * cfg.flat["vehicle.length_m"])
-    assert box.x_max == pytest.approx(cfg.flat["pool.length_m"] - m - 0.5 * cfg.flat["vehicle.length_m"])
-    assert box.z_max <= cfg.flat["limits.max_depth_m"]
+    m = cfg.pool.margin_m
+    assert box.x_min == pytest.approx(m + 0.5 * cfg.vehicle.length_m)
+    assert box.x_max == pytest.approx(cfg.pool.length_m - m - 0.5 * cfg.vehicle.length_m)
+    assert box.z_max <= cfg.limits.max_depth_m
     assert box.room_m(box.centre, [1.0, 0.0, 0.0]) == pytest.approx(box.x_max - box.centre[0])
     assert box.room_m([box.x_max + 1.0, box.centre[1], box.centre[2]], [1.0, 0.0, 0.0]) == 0.0
 
@@ -58,11 +58,11 @@ def test_translation_and_yaw_runs_stay_inside_the_pool_box(cfg):
     assert not rec.aborted, rec.abort_reason
     box = PoolBox.from_config(cfg)
     p = rec.truth_position_ned_m
-    m = cfg.flat["pool.margin_m"]
-    half = 0.5 * max(cfg.flat["vehicle.length_m"], cfg.flat["vehicle.width_m"])
+    m = cfg.pool.margin_m
+    half = 0.5 * max(cfg.vehicle.length_m, cfg.vehicle.width_m)
     # the true body origin never entered the margin (dead reckoning error allowance 0.15 m)
-    assert p[:, 0].min() >= m + half - 0.15 and p[:, 0].max() <= cfg.flat["pool.length_m"] - m - half + 0.15
-    assert p[:, 1].min() >= m + half - 0.15 and p[:, 1].max() <= cfg.flat["pool.width_m"] - m - half + 0.15
+    assert p[:, 0].min() >= m + half - 0.15 and p[:, 0].max() <= cfg.pool.length_m - m - half + 0.15
+    assert p[:, 1].min() >= m + half - 0.15 and p[:, 1].max() <= cfg.pool.width_m - m - half + 0.15
     dive = rec.t_s > rec.windows["sway"][0]
     assert p[dive, 2].max() <= box.z_max + 0.05 and p[dive, 2].min() >= box.z_min - 0.05
     # both directions were run in surge and sway, and the runs used a good part of the box

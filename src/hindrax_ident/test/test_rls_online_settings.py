@@ -37,7 +37,7 @@ def test_settings_come_from_the_vehicle_file(cfg):
 
 def test_the_start_is_the_empirical_prior_with_the_stated_weight(cfg):
     pri = priors_from_config(cfg)  # [NTNU-Thesis] App. A.1/A.2 from the geometry
-    rel = cfg.flat["identification.rls_prior_std_rel"]
+    rel = cfg.identification.rls_prior_std_rel
     for k, dof in enumerate(("surge", "sway", "heave", "roll", "pitch", "yaw")):
         r = online_rls(cfg, dof)
         am, lin, quad = pri["added_mass"][k], pri["linear_damping"][k], pri["quadratic_damping"][k]

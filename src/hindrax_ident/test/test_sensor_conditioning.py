@@ -41,12 +41,12 @@ def test_rotation_ned_from_body_is_the_zyx_euler_rotation():
 
 def test_default_mounting_is_identity(cfg):
     # _gyro relies on it
-    assert np.allclose(cfg.flat["sensors.icm20948.mounting_rpy_rad"], 0.0)
+    assert np.allclose(cfg.sensors.icm20948.mounting_rpy_rad, 0.0)
 
 
 def test_dvl_lever_arm_uses_the_rate_at_the_samples_time_not_the_latest(cfg):
     st = SensorState(cfg)
-    r_dvl = np.asarray(cfg.flat["sensors.dvl75.position_frd_m"], dtype=float)
+    r_dvl = np.asarray(cfg.sensors.dvl75.position_frd_m, dtype=float)
     assert np.linalg.norm(r_dvl) > 0.05
     for i in range(11):  # pitch rate ramps 0 -> 1 rad/s over 0.1 s
         _gyro(st, 0.01 * i, [0.0, 0.1 * i, 0.0])
@@ -104,12 +104,12 @@ def test_attitude_is_interpolated_or_carried_forward_with_the_gyro(cfg):
 
 def test_depth_from_pressure_uses_the_attitude_at_the_pressure_time(cfg):
     st = SensorState(cfg)
-    r_p = np.asarray(cfg.flat["sensors.ms5837.position_frd_m"], dtype=float)
+    r_p = np.asarray(cfg.sensors.ms5837.position_frd_m, dtype=float)
     assert abs(r_p[0]) > 0.05
     for t, pitch in ((0.0, 0.0), (0.1, 0.4)):
         st.on_sample("dvl75_attitude", SimpleNamespace(stamp_s=t, roll_rad=0.0, pitch_rad=pitch, yaw_rad=0.0))
     rho_g = cfg.water_density_kg_m3 * cfg.gravity_m_s2
-    p0 = cfg.flat["environment.surface_pressure_pa"]
+    p0 = cfg.environment.surface_pressure_pa
     st.on_sample("ms5837", SimpleNamespace(stamp_s=0.05, pressure_pa=p0 + rho_g * 1.0))
     theta = 0.2  # pitch at 0.05 s; port depth = origin depth + (R r_p)_z = d - sin(theta) x_p + cos(theta) z_p
     expected = 1.0 - (-math.sin(theta) * r_p[0] + math.cos(theta) * r_p[2])

@@ -24,12 +24,12 @@ def hw():
 def test_pca9685_registers_drive_the_simulated_thrusters(hw):
     sim, vh, cfg = hw
     assert np.all(vh.pulse_widths_us() == 0.0)  # power-up: full OFF, no pulses, no thrust
-    dev = I2CDevice(vh.i2c_bus, cfg.get("esc.i2c_address"), "pca9685")
-    prescale = pca.esc_prescale(cfg.get("esc.pwm_frequency_hz"), cfg.get("esc.oscillator_hz"))
+    dev = I2CDevice(vh.i2c_bus, cfg.esc.i2c_address, "pca9685")
+    prescale = pca.esc_prescale(cfg.esc.pwm_frequency_hz, cfg.esc.oscillator_hz)
     dev.write_sequence(pca.startup_sequence(prescale))
     widths = [1700.0, 1700.0, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0]  # T1+T2: pure surge
     for ch, w in enumerate(widths):
-        dev.write_block(pca.led_register(ch), pca.channel_bytes_for_pulse(w, prescale, cfg.get("esc.oscillator_hz")))
+        dev.write_block(pca.led_register(ch), pca.channel_bytes_for_pulse(w, prescale, cfg.esc.oscillator_hz))
     wire = vh.pulse_widths_us()
     assert np.allclose(wire, widths, atol=1.3)
     sim.reset(position_ned_m=[5.0, 3.0, 0.9])
@@ -70,16 +70,16 @@ def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample
     sim, vh, cfg = hw
     sim.reset(position_ned_m=[5.0, 3.0, 0.5], nu=[0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
     rho_g = cfg.water_density_kg_m3 * cfg.gravity_m_s2
-    port_z = cfg.flat["sensors.ms5837.position_frd_m"][2]
+    port_z = cfg.sensors.ms5837.position_frd_m[2]
     errors, stale = [], []
     for _ in range(12):
         sim.advance(0.035)  # off the 10 Hz grid of the pressure model
         pressure_pa = float(np.mean([vh.ms5837.truth(0.0)[0] for _ in range(20)]))  # what a conversion samples
-        port_depth = (pressure_pa - cfg.flat["environment.surface_pressure_pa"]) / rho_g
+        port_depth = (pressure_pa - cfg.environment.surface_pressure_pa) / rho_g
         errors.append(port_depth - port_z - sim.position_ned_m[2])
         stale.append(sim.t_s - sim.latest_sample("ms5837").stamp_s)
     assert max(stale) > 0.05  # the grid sample was old at several of these reads
-    noise_m = cfg.flat["simulation.sensors.ms5837.noise_std_pa"] / rho_g / np.sqrt(20)
+    noise_m = cfg.simulation.sensors.ms5837.noise_std_pa / rho_g / np.sqrt(20)
     assert np.max(np.abs(errors)) < 0.002 + 4 * noise_m  # the depth now (a 50 ms old sample is 15 mm off)
     spec_gyro = vh.icm20948.truth(0.0)[1]
     assert np.allclose(spec_gyro, sim.measure("icm20948_gyro").angular_rate_rad_s, atol=0.05)

@@ -205,7 +205,7 @@ def test_initial_acceleration_is_force_over_total_mass(neutral_cfg, dof):
     """Right after a load step from rest: dv/dt = F / (m + m_a) (or K / (I + I_a))."""
     i = DOFS.index(dof)
     load = 10.0 if i < 3 else 0.5
-    inertia = neutral_cfg.mass_kg if i < 3 else neutral_cfg.get("vehicle.inertia_kg_m2")[i - 3]
+    inertia = neutral_cfg.mass_kg if i < 3 else neutral_cfg.vehicle.inertia_kg_m2[i - 3]
     total = inertia + neutral_cfg.hydrodynamics(dof).added_mass
     sim = Simulator(neutral_cfg, pool=False, sensors=False)
     sim.reset(position_ned_m=[0, 0, 10], rpy_rad=[0, 0, 0])
@@ -219,7 +219,7 @@ def test_thruster_step_acceleration_and_lag(neutral_cfg):
     """T1+T2 at equal pulse widths: surge force 2 F(P) cos 55 deg ([Hindrax-Drag] eq. 1 and §4), accelerating
     m + m_a; with the first-order lag the thrust reaches 1 - 1/e of its command after one time constant."""
     p_us = 1750.0
-    c4, c3, c2, c1 = neutral_cfg.get("thrusters.curve_positive")
+    c4, c3, c2, c1 = neutral_cfg.thrusters.curve_positive
     f_one = c4 * p_us ** 3 + c3 * p_us ** 2 + c2 * p_us + c1
     x_force = 2.0 * f_one * math.cos(math.radians(55.0))
     total = neutral_cfg.mass_kg + neutral_cfg.hydrodynamics("surge").added_mass
@@ -231,7 +231,7 @@ def test_thruster_step_acceleration_and_lag(neutral_cfg):
     sim.advance(0.01, pw)
     assert sim.nu[0] / sim.t_s == pytest.approx(x_force / total, rel=0.02)
 
-    tc = neutral_cfg.get("thrusters.time_constant_s")
+    tc = neutral_cfg.thrusters.time_constant_s
     sim = Simulator(neutral_cfg, pool=False, sensors=False)
     sim.reset(position_ned_m=[0, 0, 10], rpy_rad=[0, 0, 0])
     sim.advance(tc, pw)
@@ -280,7 +280,7 @@ def test_step_halving_changes_10s_trajectory_by_less_than_1um(cfg):
     position differs by < 1e-6 m and the attitude by < 1e-6 rad (stated tolerance)."""
     pw = [1650, 1580, 1500, 1440, 1530, 1526, 1520, 1500]
     finals = []
-    for dt in (cfg.get("simulation.step_s"), cfg.get("simulation.step_s") / 2):
+    for dt in (cfg.simulation.step_s, cfg.simulation.step_s / 2):
         sim = Simulator(cfg, step_s=dt, sensors=False)
         sim.reset(position_ned_m=[4.0, 3.0, 0.8])
         faces = set()

@@ -85,7 +85,7 @@ def test_clock_and_ground_truth_follow_the_model(cfg):
             # /clock advances monotonically in steps of the clock period, and the probe's ROS time follows it
             clk = np.array(probe.clock)
             assert np.all(np.diff(clk) > 0)
-            assert np.allclose(np.diff(clk), 1.0 / cfg.get("simulation.clock_rate_hz"), atol=1e-6)
+            assert np.allclose(np.diff(clk), 1.0 / cfg.simulation.clock_rate_hz, atol=1e-6)
             assert probe.node.get_clock().now().nanoseconds * 1e-9 == pytest.approx(clk[-1], abs=0.02)
             # odometry: pose in odom ENU, twist in base_link FLU, both converted with the frames module
             assert len(probe.odom) > 100
@@ -101,12 +101,12 @@ def test_clock_and_ground_truth_follow_the_model(cfg):
                 assert np.allclose([lin.x, lin.y, lin.z, ang.x, ang.y, ang.z], frames.twist_frd_to_flu(nu), atol=1e-9)
             # the commanded surge moved the vehicle forward = north = ENU +y (start heading 0)
             last = probe.odom[-1]
-            start = cfg.get("pool.start_position_ned_m")
+            start = cfg.pool.start_position_ned_m
             assert last.pose.pose.position.y - start[0] > 0.5
             assert last.twist.twist.linear.x > 0.2
             # true wrench in base_link FLU: surge 2 F cos 55 deg, no sway force, no yaw moment ([Hindrax-Drag] §4.1)
             w = probe.wrench[-1]
-            c4, c3, c2, c1 = cfg.get("thrusters.curve_positive")
+            c4, c3, c2, c1 = cfg.thrusters.curve_positive
             f_one = c4 * 1700.0 ** 3 + c3 * 1700.0 ** 2 + c2 * 1700.0 + c1
             assert w.header.frame_id == "base_link"
             assert w.wrench.force.x == pytest.approx(2 * f_one * math.cos(math.radians(55)), rel=1e-4)
@@ -158,7 +158,7 @@ def test_injected_pulse_width_source(cfg):
             assert sim_node.count_subscribers("thrusters/pulse_width") == 0  # the topic is not used
             spin_until(ex, lambda: probe.odom and stamp_s(probe.odom[-1].header.stamp) >= 3.0)
             assert probe.odom[-1].twist.twist.linear.x > 0.2
-            assert len(calls) >= int(3.0 / cfg.get("simulation.step_s"))  # polled before every step
+            assert len(calls) >= int(3.0 / cfg.simulation.step_s)  # polled before every step
         finally:
             close(ex, sim_node, probe.node)
 

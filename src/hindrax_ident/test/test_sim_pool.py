@@ -45,7 +45,7 @@ def test_unpowered_vehicle_rises_and_floats_at_the_archimedes_waterline(cfg):
     start = [5.0, 3.0, 1.0]
     sim.reset(position_ned_m=start)
     w, b = cfg.weight_n, cfg.buoyancy_n
-    h = 0.5 * cfg.get("vehicle.height_m")
+    h = 0.5 * cfg.vehicle.height_m
     z_eq = h * (2.0 * w / b - 1.0) - cfg.centre_of_buoyancy_frd_m[2]
     depths = []
     for _ in range(int(round(60.0 / sim.step_s))):
@@ -64,7 +64,7 @@ def test_unpowered_vehicle_rises_and_floats_at_the_archimedes_waterline(cfg):
 
 def test_wall_contact_clamps_reports_and_clears(cfg):
     sim = Simulator(cfg, sensors=False)
-    length = cfg.get("pool.length_m")
+    length = cfg.pool.length_m
     sim.reset(position_ned_m=[length - 1.5, 3.0, 1.0], rpy_rad=[0, 0, 0])
     sim.advance(12.0, external_wrench_frd=[15.0, 0, 0.785, 0, 0, 0])  # push north; Z cancels B - W
     contact = sim.contact
@@ -83,7 +83,7 @@ def test_wall_contact_clamps_reports_and_clears(cfg):
 
 def test_floor_contact(cfg):
     sim = Simulator(cfg, sensors=False)
-    depth = cfg.get("pool.depth_m")
+    depth = cfg.pool.depth_m
     sim.reset(position_ned_m=[5.0, 3.0, 1.2])
     sim.advance(8.0, external_wrench_frd=[0, 0, 20.0, 0, 0, 0])
     assert sim.contact.faces == ("floor",)

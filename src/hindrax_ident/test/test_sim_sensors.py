@@ -72,7 +72,7 @@ def test_gyro_and_magnetometer_frames(quiet_cfg):
     gyro, mag = sn.GyroModel(quiet_cfg, 1), sn.MagModel(quiet_cfg, 1)
     s = gyro.measure(truth(nu=[0, 0, 0, 0.1, 0.2, 0.3]))
     assert np.allclose(s.angular_rate_rad_s, [0.1, -0.2, -0.3])  # FRD -> FLU sensor axes
-    b_n, b_e, b_d = quiet_cfg.get("simulation.sensors.icm20948_mag.earth_field_ned_t")
+    b_n, b_e, b_d = quiet_cfg.simulation.sensors.icm20948_mag.earth_field_ned_t
     s = mag.measure(truth(rpy=(0, 0, 0)))
     assert np.allclose(s.magnetic_field_t, [b_n, -b_e, -b_d])
     # heading east (yaw +90 deg): forward sees the east component, starboard (south) sees -north
@@ -96,7 +96,7 @@ def test_imu_mounting_rotation(quiet_cfg):
 # ----------------------------------------------------------------------------------- pressure & altitude
 def test_pressure_at_port_depth(quiet_cfg):
     model = sn.PressureModel(quiet_cfg, 1)
-    port = quiet_cfg.get("sensors.ms5837.position_frd_m")
+    port = quiet_cfg.sensors.ms5837.position_frd_m
     s = model.measure(truth(position=(5, 3, 1.0)))
     depth = 1.0 + port[2]
     assert s.true_depth_m == pytest.approx(depth)
@@ -112,8 +112,8 @@ def test_pressure_at_port_depth(quiet_cfg):
 def test_sonar_slant_range(quiet_cfg):
     pool = Pool.from_config(quiet_cfg)
     model = sn.AltitudeModel(quiet_cfg, pool, 1)
-    son = np.array(quiet_cfg.get("sensors.ping1d.position_frd_m"))
-    depth = quiet_cfg.get("pool.depth_m")
+    son = np.array(quiet_cfg.sensors.ping1d.position_frd_m)
+    depth = quiet_cfg.pool.depth_m
     s = model.measure(truth(position=(5, 3, 1.0)))
     assert s.valid and s.distance_m == pytest.approx(depth - 1.0 - son[2])
     phi = math.radians(20)
@@ -129,12 +129,12 @@ def test_sonar_slant_range(quiet_cfg):
 def test_dvl_velocity_at_its_position_and_lock_rules(quiet_cfg):
     pool = Pool.from_config(quiet_cfg)
     model = sn.DvlVelocityModel(quiet_cfg, pool, 1)
-    r = np.array(quiet_cfg.get("sensors.dvl75.position_frd_m"))
+    r = np.array(quiet_cfg.sensors.dvl75.position_frd_m)
     nu = [0.3, -0.1, 0.05, 0.2, -0.1, 0.5]
     s = model.measure(truth(nu=nu))
     assert s.locked
     assert np.allclose(s.velocity_frd_m_s, np.array(nu[:3]) + np.cross(nu[3:], r))
-    assert s.altitude_m == pytest.approx(quiet_cfg.get("pool.depth_m") - 1.0 - r[2])
+    assert s.altitude_m == pytest.approx(quiet_cfg.pool.depth_m - 1.0 - r[2])
     s = model.measure(truth(position=(5, 3, 1.5)))  # 0.12 m above the floor: below min_altitude_m
     assert not s.locked and math.isnan(s.velocity_frd_m_s[0])
     s = model.measure(truth(position=(0.1, 3, 1.0)))  # 0.1 m from the south wall
@@ -171,7 +171,7 @@ def test_rates_and_dropout(cfg):
         rate = c.get(f"simulation.sensors.{dev}.rate_hz")
         expected = rate * 20.0 * (1 - c.get(f"simulation.sensors.{dev}.dropout_probability"))
         assert counts[dev] == pytest.approx(expected, rel=0.05, abs=2), dev
-    n_ping = 20.0 * c.get("simulation.sensors.ping1d.rate_hz")
+    n_ping = 20.0 * c.simulation.sensors.ping1d.rate_hz
     assert counts["ping1d"] == pytest.approx(0.7 * n_ping, abs=4 * math.sqrt(n_ping * 0.21))
     assert sim.latest_sample("ms5837").stamp_s == pytest.approx(20.0, abs=0.11)
 

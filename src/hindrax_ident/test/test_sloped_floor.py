@@ -52,10 +52,10 @@ def test_ping_and_dvl_beams_see_the_slope(cfg):
     samples = {}
     sim.add_sensor_listener(lambda dev, s: samples.setdefault(dev, s))
     sim.advance(0.2, [1500.0] * 8)
-    ping = np.asarray(cfg.flat["sensors.ping1d.position_frd_m"])
+    ping = np.asarray(cfg.sensors.ping1d.position_frd_m)
     px, py, pz = x0 + ping[0], y0 + ping[1], z0 + ping[2]
     assert samples["ping1d"].distance_m == pytest.approx(plane_depth(cfg, px, py) - pz, abs=2e-3)  # body moved < 2 mm
-    dvl = np.asarray(cfg.flat["sensors.dvl75.position_frd_m"])
+    dvl = np.asarray(cfg.sensors.dvl75.position_frd_m)
     s, c = math.sin(BEAM_TILT_RAD), math.cos(BEAM_TILT_RAD)
     p = sim.position_ned_m + dvl
     h = plane_depth(cfg, p[0], p[1]) - p[2]
@@ -120,7 +120,7 @@ def test_dvl_emulator_reports_the_simulated_beam_ranges():
             port.close()
         ext = [r for r in records if isinstance(r, dvl.DvlExtended) and r.locked][-1]
         port_b, stern, starboard, bow = ext.beam_range_m
-        p = sim.position_ned_m + np.asarray(vehicle.flat["sensors.dvl75.position_frd_m"])
+        p = sim.position_ned_m + np.asarray(vehicle.sensors.dvl75.position_frd_m)
         h = plane_depth(vehicle, p[0], p[1], (-0.15, 0.0)) - p[2]
         s, c = math.sin(BEAM_TILT_RAD), math.cos(BEAM_TILT_RAD)
         assert bow == pytest.approx(h / (c + 0.15 * s), rel=0.05)  # up-slope

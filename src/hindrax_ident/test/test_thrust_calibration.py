@@ -191,7 +191,7 @@ def test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90(tmp_path
     give it (the simulator's B BG). Issue 17: within 10 % of the truth's rigid + added inertia."""
     out = tmp_path / "run"
     cfg = load_config(default_config_path())
-    c = float(cfg.get("vehicle.displaced_volume_m3")) * 1000.0 * 9.81 * 0.03
+    c = float(cfg.vehicle.displaced_volume_m3) * 1000.0 * 9.81 * 0.03
     rc = cli.main(["ident", "campaign", "--dofs", "roll", "--levels", "2", "--seed", "2", "--truth", str(THRUST_090),
                    "--calibrate", "tilt_decay", "--restoring-n-m-per-rad", str(c), "--restoring-std", "0.02",
                    "--out", str(out)])

@@ -53,7 +53,7 @@ class _Recorder:
 
 def _hold_force(sim):
     """Body-frame force cancelling the net buoyancy (FRD, N)."""
-    net_up = float(sim.config.get("vehicle.net_buoyancy_n"))
+    net_up = float(sim.config.vehicle.net_buoyancy_n)
     return sim.rotation.T @ np.array([0.0, 0.0, net_up])
 
 
@@ -113,7 +113,7 @@ def _decay_record(dof, seed):
 
 
 def _truth(sim, dof):
-    i = float(sim.config.get("vehicle.inertia_kg_m2")[AXIS[dof]])
+    i = float(sim.config.vehicle.inertia_kg_m2[AXIS[dof]])
     return i, i + float(sim.config.get(f"hydrodynamics.{dof}.added_mass_kg_m2"))
 
 

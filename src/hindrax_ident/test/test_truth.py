@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,8 @@ import yaml
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.estimators import OnlineDofEstimator, measurement_settings
 from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import TruthError, default_truth_path, load_truth, truth_dir, truth_from_mapping
+from hindrax_ident.sim.truth import (DISTURBANCE_GROUPS, DISTURBANCE_SCHEMA, Disturbances, TruthError,
+                                     default_truth_path, load_truth, truth_dir, truth_from_mapping)
 
 SRC = Path(__file__).resolve().parents[2]  # src/
 
@@ -28,9 +30,9 @@ def test_vehicle_file_has_no_truth_only_keys(vehicle):
 def test_default_truth_is_the_shipped_noise_and_no_disturbance(vehicle):
     doc = yaml.safe_load(default_truth_path().read_text())
     sim = Simulator(vehicle)
-    assert sim.config.flat["simulation.sensors.dvl75.noise_std_m_s"] == doc["simulation"]["sensors"]["dvl75"][
+    assert sim.config.simulation.sensors.dvl75.noise_std_m_s == doc["simulation"]["sensors"]["dvl75"][
         "noise_std_m_s"] == 0.01
-    assert sim.config.flat["simulation.sensors.ms5837.noise_std_pa"] == 20.0
+    assert sim.config.simulation.sensors.ms5837.noise_std_pa == 20.0
     assert sim.truth_model.disturbances.active == []
     assert sim.vehicle_config is vehicle
     # the vehicle file's own values are untouched
@@ -39,7 +41,7 @@ def test_default_truth_is_the_shipped_noise_and_no_disturbance(vehicle):
 
 def test_default_truth_fills_only_missing_keys(vehicle):
     quiet = vehicle.with_overrides({"simulation.sensors.dvl75.noise_std_m_s": 0.0})
-    assert Simulator(quiet).config.flat["simulation.sensors.dvl75.noise_std_m_s"] == 0.0
+    assert Simulator(quiet).config.simulation.sensors.dvl75.noise_std_m_s == 0.0
 
 
 def test_truth_file_overrides_the_vehicle_file_for_the_simulator_only(vehicle, tmp_path):
@@ -48,8 +50,8 @@ def test_truth_file_overrides_the_vehicle_file_for_the_simulator_only(vehicle, t
                  "disturbances: {thrust: {scale: 0.9}}\n")
     t = load_truth(vehicle, p)
     assert t.config.thrusters.time_constant_s == 0.3 and vehicle.thrusters.time_constant_s == 0.1
-    assert t.config.flat["simulation.sensors.ms5837.noise_std_pa"] == 5.0
-    assert t.config.flat["simulation.sensors.dvl75.noise_std_m_s"] == 0.01  # from the default truth
+    assert t.config.simulation.sensors.ms5837.noise_std_pa == 5.0
+    assert t.config.simulation.sensors.dvl75.noise_std_m_s == 0.01  # from the default truth
     assert t.disturbances.get("thrust.scale") == 0.9 and t.disturbances.active == ["thrust.scale"]
     assert t.differs == {"thrusters.time_constant_s": (0.1, 0.3)}
     sim = Simulator(vehicle, truth=p)
@@ -84,14 +86,15 @@ def _string_constants(path: Path) -> list[str]:
 
 
 def test_no_node_or_estimator_names_a_truth_only_key():
-    """Outside the simulator package (and the config schema that declares them), no module's code names
-    ``simulation.sensors.*`` or ``disturbances.*``: docstrings aside, they are not read."""
+    """Outside the simulator package (and the config schema and typed sections that declare them), no module's code
+    names ``simulation.sensors.*`` or ``disturbances.*``, by string or as ``cfg.simulation.sensors``: docstrings
+    aside, they are not read."""
     offenders = []
     roots = [SRC / "hindrax_drivers" / "hindrax_drivers", SRC / "hindrax_ident" / "hindrax_ident"]
     for root in roots:
         for path in root.rglob("*.py"):
             rel = path.relative_to(root).as_posix()
-            if rel.startswith("sim/") or rel == "config.py":
+            if rel.startswith("sim/") or rel in ("config.py", "config_sections.py"):
                 continue
             tree = ast.parse(path.read_text())
             docstrings = {id(n.body[0].value) for n in ast.walk(tree)
@@ -101,6 +104,9 @@ def test_no_node_or_estimator_names_a_truth_only_key():
                 if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in docstrings and \
                         ("simulation.sensors" in n.value or n.value.startswith("disturbances.")):
                     offenders.append(f"{rel}: {n.value!r}")
+                if isinstance(n, ast.Attribute) and n.attr == "sensors" and isinstance(n.value, ast.Attribute) \
+                        and n.value.attr == "simulation":
+                    offenders.append(f"{rel}:{n.lineno}: .simulation.sensors")
     assert not offenders, offenders
 
 
@@ -132,7 +138,7 @@ def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp
             sim = graph.nodes["simulator"].simulator
             assert sim.thrusters.time_constant_s == 0.25
             assert sim.truth_model.disturbances.get("thrust.scale") == 0.9
-            assert graph.hardware.config.flat["thrusters.time_constant_s"] == 0.25
+            assert graph.hardware.config.thrusters.time_constant_s == 0.25
             for name, node in graph.nodes.items():
                 if name == "simulator":
                     continue
@@ -166,3 +172,14 @@ def test_five_percent_weaker_thrust_is_covered_or_suspect(vehicle):
         assert r.values["inertia"] > true  # less thrust than believed: the inertia reads high
         lo, hi = r.ci95["inertia"]
         assert lo <= true <= hi or verdicts[dof]["parameters"]["inertia"]["verdict"] == "suspect", (dof, lo, hi, true)
+
+
+def test_typed_disturbance_groups_match_the_schema_and_the_file():
+    """Every ``disturbances.<group>.<key>`` has a field of its typed group and every field a key; the typed values
+    are the file's (or the schema default where the file is silent)."""
+    fields = {f"{g}.{f.name}" for g, cls in DISTURBANCE_GROUPS.items() for f in dataclasses.fields(cls)}
+    assert fields == set(DISTURBANCE_SCHEMA)
+    d = Disturbances({"thrust.scale": 0.9, "dvl.misalignment_rpy_rad": (0.01, 0.0, 0.02)})
+    assert d.thrust.scale == 0.9 and d.thrust.negative == 1.0 and d.thrust.per_thruster == ()
+    assert d.dvl.misalignment_rpy_rad == (0.01, 0.0, 0.02) and d.dvl.latency_s == 0.0
+    assert d.battery.nominal_voltage_v == 14.8 and d.floor.gradient == (0.0, 0.0)

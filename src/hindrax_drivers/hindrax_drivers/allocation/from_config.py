@@ -34,8 +34,8 @@ def pca9685_pulse_step_us(cfg: VehicleConfig) -> float:
 
     PRE_SCALE = round(f_osc / (4096 f)) - 1; one count = (PRE_SCALE + 1) / f_osc (docs/devices.md §5.1).
     """
-    f_osc = cfg.get("esc.oscillator_hz")
-    return pca.count_duration_us(pca.prescale_for_frequency(cfg.get("esc.pwm_frequency_hz"), f_osc), f_osc)
+    f_osc = cfg.esc.oscillator_hz
+    return pca.count_duration_us(pca.prescale_for_frequency(cfg.esc.pwm_frequency_hz, f_osc), f_osc)
 
 
 def allocator_from_config(cfg: VehicleConfig, quantise: bool = True) -> ThrustAllocator:

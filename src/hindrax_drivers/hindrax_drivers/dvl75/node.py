@@ -60,6 +60,7 @@ from sensor_msgs.msg import Range
 
 from hindrax_msgs.msg import Dvl
 
+from ..config_sections import SensorsDvl75Section
 from ..device_clock import DeviceClockSync
 from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
@@ -95,18 +96,18 @@ class Dvl75Node(SerialDeviceNode):
     """
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__("dvl75", device_name="dvl75", config_section="sensors.dvl75",
+        super().__init__("dvl75", device_name="dvl75", config_section=SensorsDvl75Section,
                          command_gap_s=COMMAND_GAP_S, **kwargs)
         self.frames = declare_frame_ids(self, {"frame_id": "dvl_link", "base_frame_id": "base_link"})
-        s = self.settings
-        self.sensor_orientation_rpy_rad = tuple(float(a) for a in s["sensor_orientation_rpy_rad"])
-        self.speed_of_sound_m_s = float(s["speed_of_sound_m_s"])
-        self.builder = DvlReportBuilder(position_frd_m=s["position_frd_m"],
-                                        velocity_std_m_s=float(s["velocity_std_m_s"]),
-                                        max_speed_m_s=float(s["max_speed_m_s"]),
-                                        min_interval_s=float(s["min_interval_s"]),
-                                        max_interval_s=float(s["max_interval_s"]),
-                                        max_angular_rate_rad_s=float(s["max_angular_rate_rad_s"]))
+        s = self.cfg.sensors.dvl75
+        self.sensor_orientation_rpy_rad = tuple(float(a) for a in s.sensor_orientation_rpy_rad)
+        self.speed_of_sound_m_s = float(s.speed_of_sound_m_s)
+        self.builder = DvlReportBuilder(position_frd_m=s.position_frd_m,
+                                        velocity_std_m_s=float(s.velocity_std_m_s),
+                                        max_speed_m_s=float(s.max_speed_m_s),
+                                        min_interval_s=float(s.min_interval_s),
+                                        max_interval_s=float(s.max_interval_s),
+                                        max_angular_rate_rad_s=float(s.max_angular_rate_rad_s))
         self.decoder = DvlStreamDecoder()
         self.clock_sync = DeviceClockSync()
         self._reported_counts = dict(self.decoder.counts)

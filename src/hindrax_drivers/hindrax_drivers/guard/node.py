@@ -68,15 +68,15 @@ class OutputGuardNode(Node):
     def __init__(self, line: Any = None, bus: Any = None, **kwargs: Any):
         super().__init__("output_guard", **kwargs)
         cfg = load_node_config(self, ("esc",))
-        esc = cfg.section("esc")
-        self.timeout_s = float(esc["heartbeat_timeout_s"])
+        esc = cfg.esc
+        self.timeout_s = float(esc.heartbeat_timeout_s)
         self.core = GuardCore(self.timeout_s)
         period = 1.0 / GUARD_RATE_HZ
         self.esc_age = AliveAge(2.0 * period)
         self.supervisor_age = AliveAge(2.0 * period)
         self.gpio = output_enable_gpio(cfg)
         self.line = line
-        self._bus, self._bus_number, self._address = bus, int(esc["i2c_bus"]), int(esc["i2c_address"])
+        self._bus, self._bus_number, self._address = bus, int(esc.i2c_bus), int(esc.i2c_address)
         self.device: I2CDevice | None = None
         self.assertions = 0
         self.last_assert_monotonic: float | None = None

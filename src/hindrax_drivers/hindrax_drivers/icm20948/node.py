@@ -297,18 +297,18 @@ class Icm20948Node(Node):
         super().__init__("icm20948", **kwargs)
         self.frames = declare_frame_ids(self, {"frame_id": FRAME_ID})
         cfg = load_node_config(self, ("sensors.icm20948",))
-        s = cfg.section("sensors.icm20948")
-        self.i2c_bus_number = int(s["i2c_bus"])
-        self.address = int(s["i2c_address"])
-        self.sample_rate_hz = float(s["sample_rate_hz"])
-        self.config = imu_config_from_settings(s["accel_full_scale_g"], s["gyro_full_scale_dps"],
-                                               s["dlpf_config"], self.sample_rate_hz)
+        s = cfg.sensors.icm20948
+        self.i2c_bus_number = int(s.i2c_bus)
+        self.address = int(s.i2c_address)
+        self.sample_rate_hz = float(s.sample_rate_hz)
+        self.config = imu_config_from_settings(s.accel_full_scale_g, s.gyro_full_scale_dps,
+                                               s.dlpf_config, self.sample_rate_hz)
         self.odr_hz = self.config.accel_odr_hz
-        self.mag_mode_name = str(s["magnetometer_mode"])
+        self.mag_mode_name = str(s.magnetometer_mode)
         self.mag_mode = mag_mode_for_rate(self.odr_hz)
-        self.estimate_gyro_bias = bool(s["estimate_gyro_bias"])
-        self.gyro_bias_duration_s = float(s["gyro_bias_duration_s"])
-        self.rotation = mounting_rotation(s["mounting_rpy_rad"])
+        self.estimate_gyro_bias = bool(s.estimate_gyro_bias)
+        self.gyro_bias_duration_s = float(s.gyro_bias_duration_s)
+        self.rotation = mounting_rotation(s.mounting_rpy_rad)
         self.accel_var, self.gyro_var = imu_noise_variances(self.config)
         self.accel_cov = (self.rotation * self.accel_var) @ self.rotation.T
         self.gyro_cov = (self.rotation * self.gyro_var) @ self.rotation.T
@@ -329,11 +329,11 @@ class Icm20948Node(Node):
         self.diag = DeviceDiagnostics("hindrax/icm20948", f"i2c-{self.i2c_bus_number}@0x{self.address:02x}",
                                       self._now_s)
         self.stuck = StuckDetector(max(3, round(STUCK_AFTER_S * self.odr_hz)))
-        self.frozen_check_samples = int(s["frozen_check_samples"])
-        self.mag_stale_timeout_s = float(s["mag_stale_timeout_s"])
-        self.require_data_ready = bool(s["require_data_ready"])
-        self.not_ready_error_polls = int(s["not_ready_error_polls"])
-        self.mag_retry_interval_s = float(s["mag_retry_interval_s"])
+        self.frozen_check_samples = int(s.frozen_check_samples)
+        self.mag_stale_timeout_s = float(s.mag_stale_timeout_s)
+        self.require_data_ready = bool(s.require_data_ready)
+        self.not_ready_error_polls = int(s.not_ready_error_polls)
+        self.mag_retry_interval_s = float(s.mag_retry_interval_s)
         self._not_ready_polls = 0  # consecutive polls without RAW_DATA_0_RDY
         self._mag_retry_due_s: float | None = None
         self._mag_retrying = False  # a magnetometer-only re-initialisation runs between polls

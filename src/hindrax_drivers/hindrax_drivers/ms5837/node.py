@@ -200,22 +200,22 @@ class Ms5837Node(Node):
         # The surface pressure is the one key applied while running (hindrax zero_depth and ros2 param set).
         cfg = load_node_config(self, ("sensors.ms5837", "environment"), dynamic=("environment.surface_pressure_pa",),
                                on_change=self._on_vehicle_parameters)
-        s = cfg.section("sensors.ms5837")
-        self.i2c_bus_number = int(s["i2c_bus"])
-        self.address = int(s["i2c_address"])
-        self.osr = int(s["oversampling"])
-        self.rate_hz = float(s["rate_hz"])
-        self.configured_variant = p.parse_variant(s["variant"])
+        s = cfg.sensors.ms5837
+        self.i2c_bus_number = int(s.i2c_bus)
+        self.address = int(s.i2c_address)
+        self.osr = int(s.oversampling)
+        self.rate_hz = float(s.rate_hz)
+        self.configured_variant = p.parse_variant(s.variant)
         self.water_density_kg_m3 = float(cfg.water_density_kg_m3)
         self.gravity_m_s2 = float(cfg.gravity_m_s2)
-        self.surface_pressure_pa = float(cfg.get("environment.surface_pressure_pa"))
+        self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
-        self.min_pressure_pa = float(s["min_pressure_pa"])
-        self.max_pressure_pa = float(s["max_pressure_pa"])
+        self.min_pressure_pa = float(s.min_pressure_pa)
+        self.max_pressure_pa = float(s.max_pressure_pa)
         # a baseline is "recent" for 5 cycles at sensors.ms5837.rate_hz
-        self.depth_gate = DepthGate(s["min_depth_m"], s["max_depth_m"], s["max_depth_rate_m_s"],
-                                    max_age_s=5.0 / float(s["rate_hz"]))
-        self.prom_reject_blank_words = bool(s["prom_reject_blank_words"])
+        self.depth_gate = DepthGate(s.min_depth_m, s.max_depth_m, s.max_depth_rate_m_s,
+                                    max_age_s=5.0 / float(s.rate_hz))
+        self.prom_reject_blank_words = bool(s.prom_reject_blank_words)
         self._last_implausible_s: float | None = None
         self.d1_command = p.convert_d1_command(self.osr)
         self.d2_command = p.convert_d2_command(self.osr)
@@ -484,7 +484,7 @@ class Ms5837Node(Node):
 
     def _on_vehicle_parameters(self, cfg) -> None:
         """Apply a validated change of ``environment.surface_pressure_pa`` (this node's one writable key)."""
-        self.surface_pressure_pa = float(cfg.get("environment.surface_pressure_pa"))
+        self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
 
     def on_zero_depth(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Set the surface pressure to the mean pressure of the last ZERO_DEPTH_WINDOW_S seconds."""

@@ -137,34 +137,34 @@ class EscNode(Node):
         cfg = load_node_config(self, ("thrusters", "esc", "lights"))
         self.cfg = cfg
         t = cfg.thrusters
-        esc = cfg.section("esc")
-        self.period_s = 1.0 / esc["output_rate_hz"]
-        self.watchdog_s = esc["watchdog_timeout_s"]
+        esc = cfg.esc
+        self.period_s = 1.0 / esc.output_rate_hz
+        self.watchdog_s = esc.watchdog_timeout_s
         #: steady-clock (time.monotonic) watchdog: see :meth:`set_steady_watchdog_timeout`
-        self.steady_watchdog_s = esc["watchdog_timeout_s"]
-        self.arming_time_s = esc["arming_time_s"]
-        self.readback_interval_s = esc["readback_interval_s"]
-        self.oscillator_calibrated = bool(esc["oscillator_calibrated"])
+        self.steady_watchdog_s = esc.watchdog_timeout_s
+        self.arming_time_s = esc.arming_time_s
+        self.readback_interval_s = esc.readback_interval_s
+        self.oscillator_calibrated = bool(esc.oscillator_calibrated)
         self.output = EscOutput([th.esc_channel for th in t.thrusters], [th.reversed for th in t.thrusters],
                                 [th.trim_us for th in t.thrusters], t.pulse_width_min_us, t.pulse_width_neutral_us,
-                                t.pulse_width_max_us, esc["slew_rate_us_per_s"])
-        lights = cfg.section("lights")
-        self.lights_channel = lights["esc_channel"]
-        self.lights_off_us, self.lights_full_us = lights["pulse_width_off_us"], lights["pulse_width_full_us"]
+                                t.pulse_width_max_us, esc.slew_rate_us_per_s)
+        lights = cfg.lights
+        self.lights_channel = lights.esc_channel
+        self.lights_off_us, self.lights_full_us = lights.pulse_width_off_us, lights.pulse_width_full_us
         self.lights_us = self.lights_off_us
-        self.oscillator_hz = esc["oscillator_hz"]
-        self.prescale = p.esc_prescale(esc["pwm_frequency_hz"], self.oscillator_hz)
+        self.oscillator_hz = esc.oscillator_hz
+        self.prescale = p.esc_prescale(esc.pwm_frequency_hz, self.oscillator_hz)
 
-        self.i2c_bus_number, self.i2c_address = int(esc["i2c_bus"]), int(esc["i2c_address"])
+        self.i2c_bus_number, self.i2c_address = int(esc.i2c_bus), int(esc.i2c_address)
         self.raw = RawDataPublisher(self, "pca9685")
         self.device: I2CDevice | None = None
         self.bus_error = ""
         if bus is not None:
             self.device = I2CDevice(bus, self.i2c_address, "pca9685", raw_tap=self.raw.i2c_tap)
         now_s = lambda: self.get_clock().now().nanoseconds * 1e-9  # noqa: E731
-        self.diag = DeviceDiagnostics("hindrax/esc_pca9685", f"i2c-{esc['i2c_bus']}@0x{esc['i2c_address']:02x}",
+        self.diag = DeviceDiagnostics("hindrax/esc_pca9685", f"i2c-{esc.i2c_bus}@0x{esc.i2c_address:02x}",
                                       now_s)
-        self.heartbeat_timeout_s = float(esc["heartbeat_timeout_s"])
+        self.heartbeat_timeout_s = float(esc.heartbeat_timeout_s)
         self.supervisor_age = AliveAge(2.0 * self.period_s)
         self.guard_age = AliveAge(2.0 * self.period_s)
         self.supervisor_ok, self.supervisor_message = False, ""

@@ -47,6 +47,7 @@ from typing import Any, Iterable, List, Optional, Tuple
 from sensor_msgs.msg import Range
 from std_msgs.msg import Float32
 
+from ..config_sections import SensorsPing1dSection
 from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
 from .protocol import (
@@ -105,16 +106,16 @@ class Ping1dNode(SerialDeviceNode):
     """
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__("ping1d", device_name="ping1d", config_section="sensors.ping1d",
+        super().__init__("ping1d", device_name="ping1d", config_section=SensorsPing1dSection,
                          command_gap_s=COMMAND_GAP_S, **kwargs)
         self.frames = declare_frame_ids(self, {"frame_id": "ping_link"})
-        s = self.settings
-        self.speed_of_sound_m_s = float(s["speed_of_sound_m_s"])
-        self.ping_interval_s = float(s["ping_interval_s"])
-        self.mode_auto = bool(s["mode_auto"])
-        self.field_of_view_rad = float(s["field_of_view_rad"])
-        self.min_range_m = float(s["min_range_m"])
-        self.max_range_m = float(s["max_range_m"])
+        s = self.cfg.sensors.ping1d
+        self.speed_of_sound_m_s = float(s.speed_of_sound_m_s)
+        self.ping_interval_s = float(s.ping_interval_s)
+        self.mode_auto = bool(s.mode_auto)
+        self.field_of_view_rad = float(s.field_of_view_rad)
+        self.min_range_m = float(s.min_range_m)
+        self.max_range_m = float(s.max_range_m)
         self.silence_timeout_s = max(1.0, 5.0 * self.ping_interval_s)
         self.decoder = Ping1dStreamDecoder()
         self._reported_counts = dict(self.decoder.counts)

@@ -106,9 +106,9 @@ class RecorderNode(Node):
         self._status_period_s = float(self._param("status_period_s", 1.0))
         self._queue_depth = int(self._param("queue_depth", 1000))
         autostart = bool(self._param("autostart", False))
-        self._options = WriterOptions.from_flat(self._cfg.flat)
-        self._output_root = Path(self._cfg.flat.get("recording.output_root", "runs"))
-        self._min_free_bytes = float(self._cfg.flat.get("recording.min_free_disk_mb", 0.0)) * 1e6
+        self._options = WriterOptions.from_section(self._cfg.recording)
+        self._output_root = Path(self._cfg.recording.output_root)
+        self._min_free_bytes = float(self._cfg.recording.min_free_disk_mb) * 1e6
         self._disk_check_period_s = float(self._param("disk_check_period_s", 1.0))
         self._intake_period_s = float(self._param("intake_period_s", 0.05))
         #: polled intake on the system clock, one callback per message with sim time (module docstring)
@@ -194,7 +194,7 @@ class RecorderNode(Node):
         """Selection from the node parameters, else ``recording.topics``, else all topics."""
         if self._topics_param or self._regex_param or self._all_param:
             return TopicSelection(tuple(self._topics_param), self._regex_param, self._all_param)
-        configured = self._cfg.flat.get("recording.topics")
+        configured = self._cfg.recording.topics
         if configured:
             return TopicSelection(tuple(configured))
         return TopicSelection(all_topics=True)

@@ -38,6 +38,7 @@ from typing import Any, Callable, Iterable, Mapping
 
 from mcap.writer import CompressionType, Writer
 
+from ..config_sections import RecordingSection
 from . import msgdefs
 from .metadata import BagMetadata, FileInfo, TopicInfo, write_metadata
 from .qos import profiles_to_yaml
@@ -80,12 +81,12 @@ class WriterOptions:
             raise ValueError("split_size_bytes, split_duration_s and flush_interval_s must be >= 0")
 
     @classmethod
-    def from_flat(cls, flat: Mapping[str, Any], **overrides: Any) -> "WriterOptions":
-        """From validated configuration keys (``VehicleConfig.flat``; missing keys keep defaults)."""
-        kw: dict[str, Any] = {}
-        for key in ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s", "flush_interval_s"):
-            if f"recording.{key}" in flat:
-                kw[key] = flat[f"recording.{key}"]
+    def from_section(cls, recording: RecordingSection, **overrides: Any) -> "WriterOptions":
+        """From the validated ``recording.*`` section (``VehicleConfig.recording``); ``overrides`` replace fields."""
+        kw: dict[str, Any] = {"compression": recording.compression, "chunk_size_bytes": recording.chunk_size_bytes,
+                              "split_size_bytes": recording.split_size_bytes,
+                              "split_duration_s": recording.split_duration_s,
+                              "flush_interval_s": recording.flush_interval_s}
         kw.update(overrides)
         return cls(**kw)
 

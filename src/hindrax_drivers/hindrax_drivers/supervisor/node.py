@@ -90,7 +90,7 @@ class SupervisorNode(Node):
                                                    event_callbacks=_NO_PUB_EVENTS)
         self.clock_monitor = ClockStepMonitor(self._now_s)
         #: ROS time standing still this long (steady s) while armed trips (see set_clock_stall_timeout)
-        self.clock_stall_timeout_s = float(cfg.get("supervisor.rate_window_s"))
+        self.clock_stall_timeout_s = float(cfg.supervisor.rate_window_s)
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10,
                                                 event_callbacks=_NO_PUB_EVENTS)
         ev = {"event_callbacks": _NO_SUB_EVENTS}
@@ -104,7 +104,7 @@ class SupervisorNode(Node):
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=lambda: self.core.values(self._now_s()))
-        self.create_timer(1.0 / cfg.get("supervisor.check_rate_hz"), self.on_check,
+        self.create_timer(1.0 / cfg.supervisor.check_rate_hz, self.on_check,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_status)
 

@@ -82,7 +82,7 @@ def vehicle_transforms(cfg: VehicleConfig, frame_ids: Mapping[str, str] | None =
     Returns sensors first (imu, dvl, ping, pressure), then thrusters in allocation order.
     """
     ids = dict(DEFAULT_FRAME_IDS, **(frame_ids or {}))
-    f = cfg.flat
+    sensors = cfg.sensors
     base = ids["base"]
 
     def tf(child: str, position_frd, rotation: Rotation) -> StaticTransform:
@@ -90,14 +90,13 @@ def vehicle_transforms(cfg: VehicleConfig, frame_ids: Mapping[str, str] | None =
                                rotation.as_quat())
 
     out = [
-        tf(ids["imu"], f["sensors.icm20948.position_frd_m"],
-           Rotation.from_euler("xyz", f["sensors.icm20948.mounting_rpy_rad"])),
-        tf(ids["dvl"], f["sensors.dvl75.position_frd_m"], _DOWN),
-        tf(ids["ping"], f["sensors.ping1d.position_frd_m"], _DOWN),
-        tf(ids["pressure"], f["sensors.ms5837.position_frd_m"], Rotation.identity()),
+        tf(ids["imu"], sensors.icm20948.position_frd_m,
+           Rotation.from_euler("xyz", list(sensors.icm20948.mounting_rpy_rad))),
+        tf(ids["dvl"], sensors.dvl75.position_frd_m, _DOWN),
+        tf(ids["ping"], sensors.ping1d.position_frd_m, _DOWN),
+        tf(ids["pressure"], sensors.ms5837.position_frd_m, Rotation.identity()),
     ]
-    for i, name in enumerate(f["thrusters.names"]):
-        direction = frd_to_flu(np.asarray(f[f"thrusters.{name}.direction_frd"], dtype=float))
-        out.append(tf(thruster_frame_id(i, ids["thruster_prefix"]), f[f"thrusters.{name}.position_frd_m"],
-                      _align_x(direction)))
+    for i, thruster in enumerate(cfg.thrusters.thrusters):
+        direction = frd_to_flu(thruster.direction_frd)  # unit already; _align_x normalises again
+        out.append(tf(thruster_frame_id(i, ids["thruster_prefix"]), thruster.position_frd_m, _align_x(direction)))
     return out

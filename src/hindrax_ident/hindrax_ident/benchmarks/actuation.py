@@ -94,7 +94,7 @@ def run(quick: bool = False) -> list[dict]:
                 pending.clear()
 
     emu = TimedEmulator()
-    bus = EmulatedI2CBus({cfg.get("esc.i2c_address"): emu})
+    bus = EmulatedI2CBus({cfg.esc.i2c_address: emu})
 
     # a reserved ROS domain: the bench publishes wrenches and arms, which must never reach another graph
     with domain_id() as did, ros_context(domain_id=did) as ctx:

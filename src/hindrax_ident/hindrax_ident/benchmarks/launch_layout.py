@@ -157,7 +157,7 @@ def _pool(argv: list[str]) -> int:
     lock = threading.Lock()
     simulator = Simulator(cfg)
     truth = getattr(simulator, "config", cfg)  # the simulator's truth (vehicle file + simulation keys), as bringup
-    hardware = VirtualHardware(simulator, truth, seed=cfg.get("simulation.seed"), serial_threads=True)
+    hardware = VirtualHardware(simulator, truth, seed=cfg.simulation.seed, serial_threads=True)
     hardware.use_clock(time.monotonic)
     node = SimulatorNode(config=cfg, simulator=simulator, pulse_width_source=hardware.pulse_widths_us)
     node.publish_clock_topic = False

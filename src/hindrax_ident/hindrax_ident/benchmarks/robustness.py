@@ -195,9 +195,9 @@ def _dvl_strategy():
 
 def _dvl_check_factory():
 
-    s = load_config(default_config_path()).section("sensors.dvl75")
-    builder = DvlReportBuilder(max_speed_m_s=s["max_speed_m_s"], min_interval_s=s["min_interval_s"],
-                               max_interval_s=s["max_interval_s"])
+    s = load_config(default_config_path()).sensors.dvl75
+    builder = DvlReportBuilder(max_speed_m_s=s.max_speed_m_s, min_interval_s=s.min_interval_s,
+                               max_interval_s=s.max_interval_s)
 
     def check(data: bytes) -> bool:
         records = DvlStreamDecoder().feed(data)

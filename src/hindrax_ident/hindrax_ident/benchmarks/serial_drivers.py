@@ -173,7 +173,7 @@ def _bench_dvl(duration_s: float) -> list[dict]:
 def _bench_ping(duration_s: float) -> list[dict]:
 
 
-    c = float(load_config(default_config_path()).flat["sensors.ping1d.speed_of_sound_m_s"])
+    c = float(load_config(default_config_path()).sensors.ping1d.speed_of_sound_m_s)
     pending: list = []
     written: dict = {}
     counter = {"k": 0}

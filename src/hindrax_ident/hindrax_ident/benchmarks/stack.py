@@ -362,7 +362,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
             # so every process may get them: a node ignores the keys it does not declare.
             bench = ["-p", f"sensors.dvl75.port:={ports['dvl75']}", "-p", f"sensors.ping1d.port:={ports['ping1d']}",
                      "-p", "esc.arming_time_s:=1.0"]
-            if "esc.oscillator_calibrated" in load_config(params).flat:
+            if load_config(params).esc.oscillator_calibrated is not None:  # a required key: always (file validated)
                 bench += ["-p", "esc.oscillator_calibrated:=true"]
             wrap = ["-m", "hindrax_ident.benchmarks.launch_layout", "node"]
             (tmp / "params").mkdir(exist_ok=True)

@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     print(f"{args.file}: OK")
     print(cfg.summary())
-    if not cfg.get("esc.oscillator_calibrated"):
+    if not cfg.esc.oscillator_calibrated:
         print(f"note: esc.oscillator_calibrated is false: the ESC node will refuse to arm. Hold neutral (hindrax "
               f"bringup), measure one thruster channel's pulse with a scope, then run `hindrax esc calibrate "
               f"--measured-us X --config {args.file} --write` (sets esc.oscillator_hz and the flag).")

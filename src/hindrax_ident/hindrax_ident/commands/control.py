@@ -70,7 +70,7 @@ def _out_dir(cfg, out: str | None, prefix: str) -> Path:
     if out:
         return Path(out)
     stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-    return Path(str(cfg.section("recording")["output_root"])) / f"{prefix}-{stamp}"
+    return Path(str(cfg.recording.output_root)) / f"{prefix}-{stamp}"
 
 
 def _list(text: str, allowed, what: str) -> list[str]:

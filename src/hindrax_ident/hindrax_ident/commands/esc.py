@@ -51,13 +51,13 @@ def run(args: argparse.Namespace) -> int:
 
     path = args.config or str(default_config_path())
     cfg = load_vehicle(path)
-    assumed = float(cfg.get("esc.oscillator_hz"))
+    assumed = float(cfg.esc.oscillator_hz)
     commanded = float(args.commanded_us if args.commanded_us is not None
-                      else cfg.get("thrusters.pulse_width_neutral_us"))
+                      else cfg.thrusters.pulse_width_neutral_us)
     try:
-        prescale = p.esc_prescale(cfg.get("esc.pwm_frequency_hz"), assumed)
+        prescale = p.esc_prescale(cfg.esc.pwm_frequency_hz, assumed)
         f_true = p.oscillator_from_measurement(args.measured_us, commanded, prescale, assumed)
-        new_prescale = p.esc_prescale(cfg.get("esc.pwm_frequency_hz"), f_true)
+        new_prescale = p.esc_prescale(cfg.esc.pwm_frequency_hz, f_true)
         counts = p.pulse_width_to_counts(commanded, new_prescale, f_true)
     except p.Pca9685Error as exc:
         raise CommandError(f"esc calibrate: {exc}") from None

@@ -134,7 +134,7 @@ def _output_dir(cfg, out: str | None) -> Path:
         p = Path(out)
         p.mkdir(parents=True, exist_ok=True)
         return p
-    root = Path(str(cfg.flat.get("recording.output_root", "runs")))
+    root = Path(str(cfg.recording.output_root))
     stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
     p = root / stamp
     p.mkdir(parents=True, exist_ok=True)
@@ -257,7 +257,6 @@ def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
 
     import dataclasses
 
-    f = cfg.flat
     # strictly increasing gyro stamps (the identification node moves samples that arrive after their tick to the tick
     # time, executive.ordered_samples, so its log can repeat a stamp); the in-process log is unchanged by this
     gyro, last = [], -math.inf
@@ -268,14 +267,14 @@ def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
     record = dataclasses.replace(record, sensors={**record.sensors, "gyro": gyro})
     measured = args.restoring_n_m_per_rad is not None
     c0 = float(args.restoring_n_m_per_rad) if measured else float(cfg.weight_n) * (
-        float(f["vehicle.centre_of_gravity_frd_m"][2]) - float(f["vehicle.centre_of_buoyancy_frd_m"][2]))
+        float(cfg.vehicle.centre_of_gravity_frd_m[2]) - float(cfg.vehicle.centre_of_buoyancy_frd_m[2]))
     out: dict = {}
     for dof in record.decays:
         i = {"roll": 0, "pitch": 1}[dof]
         incl = getattr(record, "inclining", {}).get(dof)
         c, c_std = (float(incl["value"]), float(incl["std"])) if incl else (c0, float(args.restoring_std))
         try:
-            e = decay_inertia(record, dof, c, c_std, float(f["vehicle.inertia_kg_m2"][i]))
+            e = decay_inertia(record, dof, c, c_std, float(cfg.vehicle.inertia_kg_m2[i]))
         except (EstimationError, KeyError, ValueError) as exc:
             progress(f"{dof} free decay: no estimate ({exc})")
             continue

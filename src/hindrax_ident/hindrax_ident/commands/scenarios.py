@@ -122,6 +122,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     "dofs": {dof: {"verdict", "reasons"}}}; a row: dof, parameter, value, std, std_fit, truth, rel_error, z,
     covered, verdict, reasons, t_dof, pool_time_s. Raises :class:`~.common.CommandError` for an invalid vehicle file.
     """
+    from hindrax_drivers.config import or_default
+
     from ..identification.campaign import Campaign
     from ..identification.estimators import identify_all_with_errors, truth_parameters
     from ..identification.verdicts import apply_verdicts, rls_published_std
@@ -135,7 +137,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     cfg = load_vehicle(config_path)
     truth = load_truth(cfg, _truth_path(scenario))
     label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
-    exc = str(cfg.flat.get("identification.excitation", "ladder") if excitation is None else excitation)
+    exc = str(or_default(cfg.identification.excitation, "ladder") if excitation is None else excitation)
     dur = excitation_duration_s
     if exc != "ladder":
         label = f"{label} [{exc}]"

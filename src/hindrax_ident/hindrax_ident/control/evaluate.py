@@ -151,10 +151,10 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
     if maneuver == "altitude_hold":
         truth = with_floor_gradient(truth, setup.floor_gradient)
     sim = Simulator(cfg, seed=seed, truth=truth)
-    rate = float(cfg.flat["identification.estimate_rate_hz"])
+    rate = float(cfg.identification.estimate_rate_hz)
     steps = max(1, int(round(1.0 / (rate * sim.step_s))))
     tick = steps * sim.step_s
-    ping = np.asarray(cfg.section("sensors.ping1d")["position_frd_m"], dtype=float)
+    ping = np.asarray(cfg.sensors.ping1d.position_frd_m, dtype=float)
     if maneuver == "altitude_hold":
         x, y = setup.altitude_start_xy_m
         z0 = sim.pool.floor_depth_m(x, y) - setup.altitude_m - ping[2]

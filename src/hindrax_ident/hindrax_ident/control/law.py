@@ -102,8 +102,14 @@ class ControlSettings:
     @classmethod
     def from_config(cls, cfg: VehicleConfig) -> "ControlSettings":
         """The ``control.*`` keys of the vehicle file (validated by its schema), defaults for the absent ones."""
-        sec = cfg.section("control")
-        return cls(**{k: float(sec[k]) for k in cls.__dataclass_fields__ if sec.get(k) is not None})
+        c = cfg.control
+        given = {"rate_hz": c.rate_hz, "depth_bandwidth_rad_s": c.depth_bandwidth_rad_s,
+                 "heading_bandwidth_rad_s": c.heading_bandwidth_rad_s,
+                 "attitude_bandwidth_rad_s": c.attitude_bandwidth_rad_s,
+                 "velocity_bandwidth_rad_s": c.velocity_bandwidth_rad_s, "damping_ratio": c.damping_ratio,
+                 "hold_fraction": c.hold_fraction, "max_depth_rate_m_s": c.max_depth_rate_m_s,
+                 "max_yaw_rate_rad_s": c.max_yaw_rate_rad_s, "sensor_timeout_s": c.sensor_timeout_s}
+        return cls(**{k: float(v) for k, v in given.items() if v is not None})
 
     def bandwidth(self, dof: str) -> float:
         """Target bandwidth w of one DOF's hold, rad/s."""

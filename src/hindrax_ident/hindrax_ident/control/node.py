@@ -101,7 +101,7 @@ class ControllerNode(Node):
                                    s.velocity_bandwidth_rad_s / s.depth_bandwidth_rad_s, settings=s)
         self.tick_s = 1.0 / s.rate_hz
         self.loop = HoldLoop(self.config, self.hold, self.tick_s)
-        self._mount_t = mounting_rotation(self.config.section("sensors.icm20948")["mounting_rpy_rad"]).T
+        self._mount_t = mounting_rotation(self.config.sensors.icm20948.mounting_rpy_rad).T
         self._pending: list = []
         self._last_sample_s: dict[str, float] = {}
         self.enabled = False

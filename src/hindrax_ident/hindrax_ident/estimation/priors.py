@@ -292,19 +292,20 @@ def priors_from_config(cfg, frontal_area_m2: Optional[float] = None, side_area_m
     vehicle.centre_of_gravity_frd_m / centre_of_buoyancy_frd_m (FRD, z down). The vehicle file has no
     projected areas: a missing area is the full bounding rectangle (solid prism, Cp = 1), noted in ``notes``.
     """
-    L, W, H = (float(cfg.get(f"vehicle.{k}")) for k in ("length_m", "width_m", "height_m"))
+    v = cfg.vehicle
+    L, W, H = float(v.length_m), float(v.width_m), float(v.height_m)
     rect = {"frontal": W * H, "side": L * H, "top": L * W}
     given = {"frontal": frontal_area_m2, "side": side_area_m2, "top": top_area_m2}
     areas = {k: (rect[k] if v is None else float(v)) for k, v in given.items()}
-    g = Geometry(L, W, H, float(cfg.get("environment.water_density_kg_m3")), areas["frontal"], areas["side"],
+    g = Geometry(L, W, H, float(cfg.environment.water_density_kg_m3), areas["frontal"], areas["side"],
                  areas["top"])
-    inertia = list(cfg.get("vehicle.inertia_kg_m2"))
-    zg = float(cfg.get("vehicle.centre_of_gravity_frd_m")[2])
-    zb = float(cfg.get("vehicle.centre_of_buoyancy_frd_m")[2])
-    out = empirical_priors(g, PriorInputs(mass_kg=float(cfg.get("vehicle.mass_kg")), bg_m=zg - zb,
+    inertia = list(v.inertia_kg_m2)
+    zg = float(v.centre_of_gravity_frd_m[2])
+    zb = float(v.centre_of_buoyancy_frd_m[2])
+    out = empirical_priors(g, PriorInputs(mass_kg=float(v.mass_kg), bg_m=zg - zb,
                                           roll_inertia_kg_m2=float(inertia[0]),
                                           pitch_inertia_kg_m2=float(inertia[1]),
-                                          gravity_m_s2=float(cfg.get("environment.gravity_m_s2"))))
+                                          gravity_m_s2=float(cfg.environment.gravity_m_s2)))
     missing = [k for k, v in given.items() if v is None]
     if missing:
         out["notes"].insert(0, f"projected area(s) {', '.join(missing)} not given: bounding rectangle "

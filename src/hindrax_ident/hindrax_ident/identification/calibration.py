@@ -53,6 +53,8 @@ from ..estimation.priors import priors_from_config
 from ..sim.model import rigid_body_mass_matrix
 from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, _declared_rel, thrust_weights
 
+from hindrax_drivers.config import or_default
+
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
            "KNOWN_FORCE_AXES", "GROUPS", "DIRECTIONS", "thruster_groups", "attach_thrust_sensitivities",
@@ -545,7 +547,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
     """
     if prior_std_rel is None:
-        prior_std_rel = float(cfg.flat.get("identification.prior_std_rel", DEFAULT_PRIOR_STD_REL))
+        prior_std_rel = float(or_default(cfg.identification.prior_std_rel, DEFAULT_PRIOR_STD_REL))
     if not (math.isfinite(prior_std_rel) and prior_std_rel >= 0):
         raise ValueError(f"prior_std_rel must be >= 0, got {prior_std_rel}")
     model = scale_model(calibration, cfg)

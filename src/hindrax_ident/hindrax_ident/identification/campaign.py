@@ -150,9 +150,9 @@ class Campaign:
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
         self.cfg = cfg
-        self.seed = int(cfg.flat["simulation.seed"] if seed is None else seed)
+        self.seed = int(cfg.simulation.seed if seed is None else seed)
         self.sim = sim if sim is not None else Simulator(cfg, seed=self.seed)
-        rate = float(cfg.flat["identification.estimate_rate_hz"])
+        rate = float(cfg.identification.estimate_rate_hz)
         self.steps_per_tick = max(1, int(round(1.0 / (rate * self.sim.step_s))))
         self.tick_s = self.steps_per_tick * self.sim.step_s
         self.executive = Executive(cfg, dofs, levels, tick_s=self.tick_s, max_level_duration_s=max_level_duration_s,

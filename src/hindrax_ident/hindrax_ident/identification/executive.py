@@ -48,7 +48,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
 from .estimators import OnlineDofEstimator, measurement_settings
 from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
@@ -278,11 +278,11 @@ class Executive:
         self.ballast_weight_in_water_n = float(ballast_weight_in_water_n)
         self.line_pull_n = float(line_pull_n)
         self.float_buoyancy_n = float(float_buoyancy_n)
-        fl = cfg.flat
-        self.excitation = str(fl.get("identification.excitation", "ladder") if excitation is None else excitation)
+        ident = cfg.identification
+        self.excitation = str(or_default(ident.excitation, "ladder") if excitation is None else excitation)
         if self.excitation not in EXCITATIONS:
             raise ValueError(f"excitation {self.excitation!r}: choose from {', '.join(EXCITATIONS)}")
-        self.excitation_duration_s = float(fl.get("identification.excitation_duration_s", 60.0)
+        self.excitation_duration_s = float(or_default(ident.excitation_duration_s, 60.0)
                                            if excitation_duration_s is None else excitation_duration_s)
         if not (math.isfinite(self.excitation_duration_s) and self.excitation_duration_s > 0):
             raise ValueError(f"excitation_duration_s must be > 0 s, got {self.excitation_duration_s}")
@@ -295,7 +295,7 @@ class Executive:
         self.levels_per_dof = levels
         self.fractions = [float(x) for x in fractions] if fractions else None
         self.heave_repeats = max(1, int(heave_repeats))
-        self.max_level_s = float(fl["identification.max_level_duration_s"] if max_level_duration_s is None
+        self.max_level_s = float(ident.max_level_duration_s if max_level_duration_s is None
                                  else max_level_duration_s)
         self.dvl_lock_timeout_s = float(dvl_lock_timeout_s)
         #: the state every step shares (sensors, holds, pool box, tick log, results, operator hand-shake)
@@ -555,20 +555,20 @@ class Executive:
 
     # ------------------------------------------------------------------ checks
     def _check_limits(self) -> None:
-        f = self.cfg.flat
+        lim = self.cfg.limits
         st = self.state
-        if math.isfinite(st.depth_m) and st.depth_m > f["limits.max_depth_m"]:
-            raise CampaignAbort(f"depth {st.depth_m:.2f} m beyond limits.max_depth_m {f['limits.max_depth_m']:g}")
-        if math.isfinite(st.altitude_m) and st.altitude_m < f["limits.min_altitude_m"]:
+        if math.isfinite(st.depth_m) and st.depth_m > lim.max_depth_m:
+            raise CampaignAbort(f"depth {st.depth_m:.2f} m beyond limits.max_depth_m {lim.max_depth_m:g}")
+        if math.isfinite(st.altitude_m) and st.altitude_m < lim.min_altitude_m:
             raise CampaignAbort(f"altitude {st.altitude_m:.2f} m below limits.min_altitude_m "
-                                f"{f['limits.min_altitude_m']:g}")
+                                f"{lim.min_altitude_m:g}")
         roll, pitch = st.rpy_rad[0], st.rpy_rad[1]
-        if math.isfinite(roll) and abs(roll) > f["limits.max_roll_rad"]:
-            raise CampaignAbort(f"roll {roll:.2f} rad beyond limits.max_roll_rad {f['limits.max_roll_rad']:g}")
-        if math.isfinite(pitch) and abs(pitch) > f["limits.max_pitch_rad"]:
-            raise CampaignAbort(f"pitch {pitch:.2f} rad beyond limits.max_pitch_rad {f['limits.max_pitch_rad']:g}")
+        if math.isfinite(roll) and abs(roll) > lim.max_roll_rad:
+            raise CampaignAbort(f"roll {roll:.2f} rad beyond limits.max_roll_rad {lim.max_roll_rad:g}")
+        if math.isfinite(pitch) and abs(pitch) > lim.max_pitch_rad:
+            raise CampaignAbort(f"pitch {pitch:.2f} rad beyond limits.max_pitch_rad {lim.max_pitch_rad:g}")
         p = st.position_ned_m
-        tol = 0.5 * float(f["pool.margin_m"])
+        tol = 0.5 * float(self.cfg.pool.margin_m)
         b = self.box
         if not (b.x_min - tol <= p[0] <= b.x_max + tol and b.y_min - tol <= p[1] <= b.y_max + tol):
             raise CampaignAbort(f"dead-reckoned position ({p[0]:.2f}, {p[1]:.2f}) m left the pool box")

@@ -250,7 +250,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                 return outcome
             wait_until(lambda: armed_state[0] is True, 30, spin, "ESC reporting armed")
             say("armed through esc/set_armed; sending run_identification goal "
-                f"({', '.join(dofs)}, {levels or cfg.flat['identification.levels_per_dof']} levels)")
+                f"({', '.join(dofs)}, {levels or cfg.identification.levels_per_dof} levels)")
             last = [None]
 
             last_said = [-float("inf")]
@@ -317,11 +317,11 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
     outcome.wall_time_s = time.monotonic() - wall0
     if idents:
-        note = (f"ROS graph campaign on the virtual pool (seed {cfg.flat['simulation.seed']}), "
+        note = (f"ROS graph campaign on the virtual pool (seed {cfg.simulation.seed}), "
                 f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
                 f"action result: {outcome.message}")
         # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
-        doc = build_results(idents, cfg, source="simulation", seed=int(cfg.flat["simulation.seed"]),
+        doc = build_results(idents, cfg, source="simulation", seed=int(cfg.simulation.seed),
                             calibration=calibration or None)
         doc["provenance"]["bag"] = str(bag_dir)
         if sections is not None and outcome.node_record is not None:

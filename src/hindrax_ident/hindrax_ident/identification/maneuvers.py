@@ -83,13 +83,20 @@ def level_ladder(cfg: VehicleConfig, authority: float, levels: int | None = None
     Fractions from ``identification.level_fraction_min`` to ``level_fraction_max``;
     ``levels`` defaults to ``identification.levels_per_dof``. Raises ``ValueError`` for levels < 1.
     """
-    n = int(cfg.flat["identification.levels_per_dof"] if levels is None else levels)
+    n = int(cfg.identification.levels_per_dof if levels is None else levels)
     if n < 1:
         raise ValueError(f"levels must be >= 1, got {levels}")
-    lo = float(cfg.flat["identification.level_fraction_min"])
-    hi = float(cfg.flat["identification.level_fraction_max"])
+    lo = float(cfg.identification.level_fraction_min)
+    hi = float(cfg.identification.level_fraction_max)
     fr = [hi] if n == 1 else list(np.linspace(lo, hi, n))
     return [float(f * authority) for f in fr]
+
+
+def tilt_test_angle_rad(cfg: VehicleConfig, dof: str) -> float:
+    """``identification.roll_test_angle_rad`` or ``pitch_test_angle_rad``: where the roll or pitch test turns back,
+    rad ([Hindrax-Drag] §4.2). Raises KeyError for another DOF."""
+    ident = cfg.identification
+    return {"roll": ident.roll_test_angle_rad, "pitch": ident.pitch_test_angle_rad}[dof]
 
 
 def prior_inertia(cfg: VehicleConfig, dof: str) -> float:
@@ -116,14 +123,14 @@ class PoolBox:
     @classmethod
     def from_config(cls, cfg: VehicleConfig) -> "PoolBox":
         """Box of the configuration. Raises ``ValueError`` when the margins leave no room."""
-        f = cfg.flat
-        m = float(f["pool.margin_m"])
-        hl, hw, hh = 0.5 * f["vehicle.length_m"], 0.5 * f["vehicle.width_m"], 0.5 * f["vehicle.height_m"]
+        pool, v, limits = cfg.pool, cfg.vehicle, cfg.limits
+        m = float(pool.margin_m)
+        hl, hw, hh = 0.5 * v.length_m, 0.5 * v.width_m, 0.5 * v.height_m
         half_xy = max(hl, hw)  # the heading changes in yaw tests: keep the larger half extent everywhere
-        z_floor = f["pool.depth_m"] - m - hh
-        z_floor = min(z_floor, float(f["limits.max_depth_m"]) - 0.05,
-                      f["pool.depth_m"] - float(f["limits.min_altitude_m"]) - hh - 0.05)
-        box = cls(m + half_xy, f["pool.length_m"] - m - half_xy, m + half_xy, f["pool.width_m"] - m - half_xy,
+        z_floor = pool.depth_m - m - hh
+        z_floor = min(z_floor, float(limits.max_depth_m) - 0.05,
+                      pool.depth_m - float(limits.min_altitude_m) - hh - 0.05)
+        box = cls(m + half_xy, pool.length_m - m - half_xy, m + half_xy, pool.width_m - m - half_xy,
                   hh + SURFACE_CLEARANCE_M, z_floor)
         if box.x_min >= box.x_max or box.y_min >= box.y_max or box.z_min >= box.z_max:
             raise ValueError(f"the pool with its margins leaves no room for the vehicle: {box}")
@@ -244,15 +251,15 @@ class SensorState:
     log: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        f = self.cfg.flat
-        roll, pitch, yaw = f["sensors.icm20948.mounting_rpy_rad"]
+        sensors = self.cfg.sensors
+        roll, pitch, yaw = sensors.icm20948.mounting_rpy_rad
         r_mount = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # sensor -> base_link (FLU)
         self._frd_from_sensor = frames.R_FLU_FRD @ r_mount
-        self._p0 = float(f["environment.surface_pressure_pa"])
+        self._p0 = float(self.cfg.environment.surface_pressure_pa)
         self._rho_g = float(self.cfg.water_density_kg_m3 * self.cfg.gravity_m_s2)
-        self._r_pressure = np.asarray(f["sensors.ms5837.position_frd_m"], dtype=float)
-        self._r_dvl = np.asarray(f["sensors.dvl75.position_frd_m"], dtype=float)
-        self.position_ned_m = np.asarray(f["pool.start_position_ned_m"], dtype=float).copy()
+        self._r_pressure = np.asarray(sensors.ms5837.position_frd_m, dtype=float)
+        self._r_dvl = np.asarray(sensors.dvl75.position_frd_m, dtype=float)
+        self.position_ned_m = np.asarray(self.cfg.pool.start_position_ned_m, dtype=float).copy()
         self._last_dr_t: float | None = None
         self._bias_sum = np.zeros(3)
         self._bias_n = 0
@@ -470,12 +477,12 @@ class HoldController:
         settings = self.settings or ControlSettings(
             depth_bandwidth_rad_s=wn, heading_bandwidth_rad_s=wn, attitude_bandwidth_rad_s=wn,
             velocity_bandwidth_rad_s=velocity_gain * wn, hold_fraction=self.hold_fraction)
-        dvl = self.cfg.section("sensors.dvl75")
-        roll, pitch, yaw = dvl["sensor_orientation_rpy_rad"]
+        dvl = self.cfg.sensors.dvl75
+        roll, pitch, yaw = dvl.sensor_orientation_rpy_rad
         beams = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix() @ np.asarray(beam_directions_frd()).T
         return Controller(self.model, self.authority, settings,
-                          ping_position_frd_m=self.cfg.section("sensors.ping1d")["position_frd_m"],
-                          dvl_position_frd_m=dvl["position_frd_m"], dvl_beams_frd=beams.T,
+                          ping_position_frd_m=self.cfg.sensors.ping1d.position_frd_m,
+                          dvl_position_frd_m=dvl.position_frd_m, dvl_beams_frd=beams.T,
                           reference_accel=self.reference_accel)
 
     def reset_integral(self) -> None:

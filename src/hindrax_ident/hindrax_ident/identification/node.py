@@ -202,16 +202,16 @@ class IdentificationNode(Node):
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
         self.config = config if config is not None else node_config(self, on_error=log.error)
-        f = self.config.flat
-        self.tick_s = 1.0 / float(f["identification.estimate_rate_hz"])
-        self.publish_period_s = 1.0 / max(1.0, float(f["identification.publish_rate_hz"]))
+        ident = self.config.identification
+        self.tick_s = 1.0 / float(ident.estimate_rate_hz)
+        self.publish_period_s = 1.0 / max(1.0, float(ident.publish_rate_hz))
         self.dvl_lock_timeout_s = self._param("dvl_lock_timeout_s", 3.0, "longest time without a valid DVL velocity "
                                               "during a surge or sway run before the goal aborts, s")
         self.sensor_timeout_s = self._param("sensor_timeout_s", 30.0, "longest wait for every sensor to publish "
                                             "after a goal is accepted, s")
         self.stop_timeout_s = self._param("stop_timeout_s", 2.0, "longest zero-wrench hold at the end of a goal "
                                           "while waiting for the ESC to report neutral widths, s")
-        self._mount_t = mounting_rotation(f["sensors.icm20948.mounting_rpy_rad"]).T
+        self._mount_t = mounting_rotation(self.config.sensors.icm20948.mounting_rpy_rad).T
         self._n_thrusters = len(self.config.thrusters.thrusters)
         self._neutral_us = float(self.config.thrusters.pulse_width_neutral_us)
         self._samples: list = []

@@ -136,26 +136,26 @@ class VirtualHardware:
         # Emulators live in simulated time, quantised like the /clock the drivers see (simulation.clock_rate_hz):
         # a driver that waits a conversion time on its clock then never reads an emulator that is, on the finer
         # simulator time, a fraction of a clock period short of it (MS5837 ADC read returning 0).
-        period_s = 1.0 / config.get("simulation.clock_rate_hz")
+        period_s = 1.0 / config.simulation.clock_rate_hz
         self._clock_fn = lambda: math.floor(sim.t_s / period_s + 1e-9) * period_s  # noqa: E731
         clock = lambda: self._clock_fn()  # noqa: E731 - indirection so use_clock() can swap it later
         self._ensure_samples()
-        c = config.flat
-        self.dvl = Dvl75Emulator(self._dvl_truth, rate_hz=c["simulation.sensors.dvl75.rate_hz"],
-                                 flash=DvlFlash(), min_altitude_m=c["simulation.sensors.dvl75.min_altitude_m"],
-                                 max_altitude_m=c["simulation.sensors.dvl75.max_altitude_m"], seed=seed)
-        self.ping = Ping1dEmulator(self._ping_truth, true_speed_of_sound_m_s=c["sensors.ping1d.speed_of_sound_m_s"],
+        sim_dvl, sensors = config.simulation.sensors.dvl75, config.sensors
+        self.dvl = Dvl75Emulator(self._dvl_truth, rate_hz=sim_dvl.rate_hz,
+                                 flash=DvlFlash(), min_altitude_m=sim_dvl.min_altitude_m,
+                                 max_altitude_m=sim_dvl.max_altitude_m, seed=seed)
+        self.ping = Ping1dEmulator(self._ping_truth, true_speed_of_sound_m_s=sensors.ping1d.speed_of_sound_m_s,
                                    seed=seed)
-        variant = c["sensors.ms5837.variant"]
+        variant = sensors.ms5837.variant
         self.ms5837 = Ms5837Emulator(self._pressure_truth, clock, variant="30BA" if variant == "auto" else variant)
-        self.icm20948 = Icm20948Emulator(self._imu_truth, clock, address=c["sensors.icm20948.i2c_address"])
-        self.pca9685 = Pca9685Emulator(oscillator_hz=c["esc.oscillator_hz"], clock=clock)
+        self.icm20948 = Icm20948Emulator(self._imu_truth, clock, address=sensors.icm20948.i2c_address)
+        self.pca9685 = Pca9685Emulator(oscillator_hz=config.esc.oscillator_hz, clock=clock)
         devices: dict[int, Any] = {
-            c["sensors.ms5837.i2c_address"]: self.ms5837,
-            c["sensors.icm20948.i2c_address"]: self.icm20948,
-            c["esc.i2c_address"]: self.pca9685,
+            sensors.ms5837.i2c_address: self.ms5837,
+            sensors.icm20948.i2c_address: self.icm20948,
+            config.esc.i2c_address: self.pca9685,
         }
-        if c["sensors.icm20948.magnetometer_mode"] == "bypass":
+        if sensors.icm20948.magnetometer_mode == "bypass":
             devices[0x0C] = self.icm20948.aux_port
         self.i2c_bus = EmulatedI2CBus(devices)
         self._channels = [t.esc_channel for t in config.thrusters.thrusters]

@@ -103,17 +103,17 @@ class SimulatorNode(Node):
         log = self.get_logger()
         self.config = config if config is not None else node_config(self, on_error=log.error)
         self.simulator = simulator if simulator is not None else Simulator(self.config)
-        f = self.config.flat
-        self.real_time_factor = float(f["simulation.real_time_factor"])
-        self.clock_period_s = 1.0 / float(f["simulation.clock_rate_hz"])
+        sim = self.config.simulation
+        self.real_time_factor = float(sim.real_time_factor)
+        self.clock_period_s = 1.0 / float(sim.clock_rate_hz)
         if not self.has_parameter("truth_rate_hz"):
-            self.declare_parameter("truth_rate_hz", float(f["simulation.clock_rate_hz"]), ParameterDescriptor(
+            self.declare_parameter("truth_rate_hz", float(sim.clock_rate_hz), ParameterDescriptor(
                 description="rate of the ground-truth topics (sim/odometry, sim/wrench), Hz (default: the clock rate)",
                 read_only=True))
         truth_rate = float(self.get_parameter("truth_rate_hz").value)
         if not (math.isfinite(truth_rate) and truth_rate > 0.0):
             log.error(f"truth_rate_hz = {truth_rate}: allowed a positive number; using the clock rate")
-            truth_rate = float(f["simulation.clock_rate_hz"])
+            truth_rate = float(sim.clock_rate_hz)
         self.truth_period_s = 1.0 / truth_rate
 
         self._n = self.simulator.thrusters.n

@@ -121,10 +121,9 @@ class Pool:
     @classmethod
     def from_config(cls, config: VehicleConfig) -> "Pool":
         """Pool and hull from ``pool.*`` and ``vehicle.length_m/width_m/height_m``, hull centred on the CB."""
-        f = config.flat
-        surface = FreeSurface((0.5 * f["vehicle.length_m"], 0.5 * f["vehicle.width_m"], 0.5 * f["vehicle.height_m"]),
-                              config.centre_of_buoyancy_frd_m)
-        return cls(f["pool.length_m"], f["pool.width_m"], f["pool.depth_m"], surface)
+        v, pool = config.vehicle, config.pool
+        surface = FreeSurface((0.5 * v.length_m, 0.5 * v.width_m, 0.5 * v.height_m), config.centre_of_buoyancy_frd_m)
+        return cls(pool.length_m, pool.width_m, pool.depth_m, surface)
 
     # ------------------------------------------------------------------ geometry queries
     def set_floor_gradient(self, gradient_ne: Sequence[float]) -> None:

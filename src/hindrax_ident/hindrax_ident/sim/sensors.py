@@ -53,7 +53,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from hindrax_drivers import frames
-from hindrax_drivers.config import VehicleConfig
+from hindrax_drivers.config import VehicleConfig, or_default
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
 from .pool import Pool
@@ -239,11 +239,12 @@ class NoiseSpec:
     dropout_probability: float = 0.0
 
     @classmethod
-    def from_config(cls, config: VehicleConfig, device: str, unit: str, default_rate_hz: float) -> "NoiseSpec":
-        """Read ``simulation.sensors.<device>.{noise_std_<unit>, bias_<unit>, rate_hz, dropout_probability}``."""
-        s = config.section(f"simulation.sensors.{device}")
-        return cls(float(s.get(f"noise_std_{unit}", 0.0)), float(s.get(f"bias_{unit}", 0.0)),
-                   float(s.get("rate_hz", default_rate_hz)), float(s.get("dropout_probability", 0.0)))
+    def from_settings(cls, noise_std: float | None, bias: float | None, rate_hz: float | None,
+                      dropout_probability: float | None, default_rate_hz: float) -> "NoiseSpec":
+        """From the optional ``simulation.sensors.<device>.{noise_std_<unit>, bias_<unit>, rate_hz,
+        dropout_probability}`` values (None: absent -> 0, 0, ``default_rate_hz``, 0)."""
+        return cls(float(or_default(noise_std, 0.0)), float(or_default(bias, 0.0)),
+                   float(or_default(rate_hz, default_rate_hz)), float(or_default(dropout_probability, 0.0)))
 
 
 class SensorModel:
@@ -318,13 +319,14 @@ class DvlVelocityModel(SensorModel):
     """DVL-75 bottom-track velocity with scale error, noise, lock rules (module docstring)."""
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
-        super().__init__("dvl75", NoiseSpec.from_config(config, "dvl75", "m_s", 10.0), seed)
-        s = config.section("simulation.sensors.dvl75")
-        self.scale_error_fraction = float(s.get("scale_error_fraction", 0.0))
-        self.min_altitude_m = float(s.get("min_altitude_m", 0.0))
-        self.max_altitude_m = float(s.get("max_altitude_m", math.inf))
-        self.wall_lock_loss_distance_m = float(s.get("wall_lock_loss_distance_m", 0.0))
-        self.position_frd_m = np.asarray(config.flat["sensors.dvl75.position_frd_m"], dtype=float)
+        s = config.simulation.sensors.dvl75
+        super().__init__("dvl75", NoiseSpec.from_settings(s.noise_std_m_s, s.bias_m_s, s.rate_hz, s.dropout_probability,
+                                                          10.0), seed)
+        self.scale_error_fraction = float(or_default(s.scale_error_fraction, 0.0))
+        self.min_altitude_m = float(or_default(s.min_altitude_m, 0.0))
+        self.max_altitude_m = float(or_default(s.max_altitude_m, math.inf))
+        self.wall_lock_loss_distance_m = float(or_default(s.wall_lock_loss_distance_m, 0.0))
+        self.position_frd_m = np.asarray(config.sensors.dvl75.position_frd_m, dtype=float)
         self.pool = pool
         # truth disturbances (SensorSuite.apply_disturbances; sim/truth.py): off
         self.matrix: np.ndarray | None = None  # scale factor x misalignment applied to the true velocity
@@ -336,7 +338,7 @@ class DvlVelocityModel(SensorModel):
         self.floor_reference_m = 0.5
         # beams: directions in the body frame (sensor orientation), range noise from a stream of its own (the velocity
         # noise is the same with and without the beams)
-        roll, pitch, yaw = config.flat["sensors.dvl75.sensor_orientation_rpy_rad"]
+        roll, pitch, yaw = config.sensors.dvl75.sensor_orientation_rpy_rad
         r_sensor = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
         self.beam_dirs_frd = (r_sensor @ np.asarray(beam_directions_frd(), dtype=float).T).T
         self.beam_rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX["dvl75"], 2000]))
@@ -400,7 +402,9 @@ class DvlAttitudeModel(SensorModel):
     """DVL-75 attitude (roll, pitch, yaw) with bias and noise."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        super().__init__("dvl75_attitude", NoiseSpec.from_config(config, "dvl75_attitude", "rad", 10.0), seed)
+        s = config.simulation.sensors.dvl75_attitude
+        super().__init__("dvl75_attitude", NoiseSpec.from_settings(s.noise_std_rad, s.bias_rad, s.rate_hz,
+                                                                   s.dropout_probability, 10.0), seed)
 
     def measure(self, truth: VehicleTruth) -> DvlAttitudeSample:
         e = truth.euler_rad
@@ -409,10 +413,11 @@ class DvlAttitudeModel(SensorModel):
 
 
 class _ImuBase(SensorModel):
-    def __init__(self, name: str, unit: str, config: VehicleConfig, seed: int) -> None:
-        super().__init__(name, NoiseSpec.from_config(config, name, unit,
-                                                     float(config.flat["sensors.icm20948.sample_rate_hz"])), seed)
-        roll, pitch, yaw = config.flat["sensors.icm20948.mounting_rpy_rad"]
+    def __init__(self, name: str, noise_std: float | None, bias: float | None, rate_hz: float | None,
+                 dropout_probability: float | None, config: VehicleConfig, seed: int) -> None:
+        super().__init__(name, NoiseSpec.from_settings(noise_std, bias, rate_hz, dropout_probability,
+                                                       float(config.sensors.icm20948.sample_rate_hz)), seed)
+        roll, pitch, yaw = config.sensors.icm20948.mounting_rpy_rad
         r_mount = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # sensor -> base_link (FLU)
         self.sensor_from_frd = r_mount.T @ frames.R_FLU_FRD
 
@@ -425,7 +430,9 @@ class AccelModel(_ImuBase):
 
     def __init__(self, config: VehicleConfig, seed: int, imu_position_frd_m=(0.0, 0.0, 0.0),
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
-        super().__init__("icm20948_accel", "m_s2", config, seed)
+        s = config.simulation.sensors.icm20948_accel
+        super().__init__("icm20948_accel", s.noise_std_m_s2, s.bias_m_s2, s.rate_hz, s.dropout_probability, config,
+                         seed)
         self.gravity_m_s2 = float(config.gravity_m_s2)
         self.position_frd_m = np.asarray(imu_position_frd_m, dtype=float)
         self.temperature_c = float(water_temperature_c)
@@ -441,7 +448,9 @@ class GyroModel(_ImuBase):
     """ICM-20948 gyroscope: body angular rate in the sensor frame."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        super().__init__("icm20948_gyro", "rad_s", config, seed)
+        s = config.simulation.sensors.icm20948_gyro
+        super().__init__("icm20948_gyro", s.noise_std_rad_s, s.bias_rad_s, s.rate_hz, s.dropout_probability, config,
+                         seed)
 
     def measure(self, truth: VehicleTruth) -> GyroSample:
         w = self._to_sensor(truth.nu[3:])
@@ -453,9 +462,9 @@ class MagModel(_ImuBase):
     """AK09916 magnetometer: the earth field R^T B_ned in the ICM sensor frame."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        super().__init__("icm20948_mag", "t", config, seed)
-        field = config.section("simulation.sensors.icm20948_mag").get("earth_field_ned_t",
-                                                                     DEFAULT_EARTH_FIELD_NED_T)
+        s = config.simulation.sensors.icm20948_mag
+        super().__init__("icm20948_mag", s.noise_std_t, s.bias_t, s.rate_hz, s.dropout_probability, config, seed)
+        field = or_default(s.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
         self.earth_field_ned_t = np.asarray(field, dtype=float)
 
     def measure(self, truth: VehicleTruth) -> MagSample:
@@ -468,12 +477,13 @@ class PressureModel(SensorModel):
 
     def __init__(self, config: VehicleConfig, seed: int,
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
-        super().__init__("ms5837", NoiseSpec.from_config(config, "ms5837", "pa",
-                                                         float(config.flat["sensors.ms5837.rate_hz"])), seed)
-        self.position_frd_m = np.asarray(config.flat["sensors.ms5837.position_frd_m"], dtype=float)
+        s = config.simulation.sensors.ms5837
+        super().__init__("ms5837", NoiseSpec.from_settings(s.noise_std_pa, s.bias_pa, s.rate_hz, s.dropout_probability,
+                                                           float(config.sensors.ms5837.rate_hz)), seed)
+        self.position_frd_m = np.asarray(config.sensors.ms5837.position_frd_m, dtype=float)
         self.density_kg_m3 = float(config.water_density_kg_m3)
         self.gravity_m_s2 = float(config.gravity_m_s2)
-        self.surface_pressure_pa = float(config.flat["environment.surface_pressure_pa"])
+        self.surface_pressure_pa = float(config.environment.surface_pressure_pa)
         self.temperature_c = float(water_temperature_c)
 
     def measure(self, truth: VehicleTruth) -> PressureSample:
@@ -487,12 +497,12 @@ class AltitudeModel(SensorModel):
     """Ping1D slant range along the vehicle's down axis (module docstring)."""
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
-        super().__init__("ping1d", NoiseSpec.from_config(config, "ping1d", "m",
-                                                         1.0 / float(config.flat["sensors.ping1d.ping_interval_s"])),
-                         seed)
-        self.position_frd_m = np.asarray(config.flat["sensors.ping1d.position_frd_m"], dtype=float)
-        self.min_range_m = float(config.flat["sensors.ping1d.min_range_m"])
-        self.max_range_m = float(config.flat["sensors.ping1d.max_range_m"])
+        s, ping = config.simulation.sensors.ping1d, config.sensors.ping1d
+        super().__init__("ping1d", NoiseSpec.from_settings(s.noise_std_m, s.bias_m, s.rate_hz, s.dropout_probability,
+                                                           1.0 / float(ping.ping_interval_s)), seed)
+        self.position_frd_m = np.asarray(ping.position_frd_m, dtype=float)
+        self.min_range_m = float(ping.min_range_m)
+        self.max_range_m = float(ping.max_range_m)
         self.pool = pool
 
     def measure(self, truth: VehicleTruth) -> AltitudeSample:
@@ -520,7 +530,7 @@ class SensorSuite:
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int | None = None,
                  devices: Sequence[str] | None = None, imu_position_frd_m=(0.0, 0.0, 0.0),
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
-        seed = int(config.flat["simulation.seed"] if seed is None else seed)
+        seed = int(config.simulation.seed if seed is None else seed)
         names = list(DEVICE_INDEX) if devices is None else list(devices)
         unknown = [n for n in names if n not in DEVICE_INDEX]
         if unknown:
@@ -544,24 +554,24 @@ class SensorSuite:
         dropouts and floor noise; IMU bias random walks; pressure drift and random walk."""
         dvl = self.models.get("dvl75")
         if isinstance(dvl, DvlVelocityModel):
-            roll, pitch, yaw = dist.get("dvl.misalignment_rpy_rad")
+            roll, pitch, yaw = dist.dvl.misalignment_rpy_rad
             mis = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
-            scale = float(dist.get("dvl.scale_factor"))
+            scale = float(dist.dvl.scale_factor)
             dvl.matrix = None if (scale == 1.0 and not any((roll, pitch, yaw))) else scale * mis
-            dvl.latency_s = float(dist.get("dvl.latency_s"))
+            dvl.latency_s = float(dist.dvl.latency_s)
             dvl.delayed_state = delayed_state
-            dvl.multipath_distance_m = float(dist.get("dvl.multipath_distance_m"))
-            dvl.multipath_probability = float(dist.get("dvl.multipath_dropout_probability")) \
+            dvl.multipath_distance_m = float(dist.dvl.multipath_distance_m)
+            dvl.multipath_probability = float(dist.dvl.multipath_dropout_probability) \
                 if dvl.multipath_distance_m > 0.0 else 0.0
-            dvl.floor_noise_gain = float(dist.get("floor.dvl_noise_gain"))
-            dvl.floor_reference_m = float(dist.get("floor.reference_altitude_m"))
-        for name, key in (("icm20948_gyro", "imu.gyro_bias_walk_rad_s_sqrt_s"),
-                          ("icm20948_accel", "imu.accel_bias_walk_m_s2_sqrt_s"),
-                          ("ms5837", "pressure.random_walk_pa_sqrt_s")):
+            dvl.floor_noise_gain = float(dist.floor.dvl_noise_gain)
+            dvl.floor_reference_m = float(dist.floor.reference_altitude_m)
+        for name, walk in (("icm20948_gyro", dist.imu.gyro_bias_walk_rad_s_sqrt_s),
+                           ("icm20948_accel", dist.imu.accel_bias_walk_m_s2_sqrt_s),
+                           ("ms5837", dist.pressure.random_walk_pa_sqrt_s)):
             if name in self.models:
-                self.models[name].walk_std = float(dist.get(key))
+                self.models[name].walk_std = float(walk)
         if "ms5837" in self.models:
-            self.models["ms5837"].drift_per_s = float(dist.get("pressure.drift_pa_per_s"))
+            self.models["ms5837"].drift_per_s = float(dist.pressure.drift_pa_per_s)
 
     def reset(self, t_s: float = 0.0) -> None:
         """Restart every device's sampling grid at ``t_s`` and forget the latest samples."""

@@ -73,10 +73,10 @@ class Simulator:
         self.vehicle_config = config
         config = truth.config
         self.config = config
-        self.step_s = float(config.flat["simulation.step_s"] if step_s is None else step_s)
+        self.step_s = float(config.simulation.step_s if step_s is None else step_s)
         if not (math.isfinite(self.step_s) and self.step_s > 0.0):
             raise ValueError(f"step_s must be a positive number of seconds, got {step_s!r}")
-        self.seed = int(config.flat["simulation.seed"] if seed is None else seed)
+        self.seed = int(config.simulation.seed if seed is None else seed)
         self.pool: Pool | None = Pool.from_config(config) if pool else None
         self.model = VehicleModel(config, surface_fraction=self.pool.free_surface if self.pool else None)
         self.thrusters = Thrusters(config)
@@ -89,11 +89,11 @@ class Simulator:
         self.sensors = SensorSuite(config, self.pool, self.seed, devices=devices,
                                    imu_position_frd_m=imu_position_frd_m)
         if self.pool is not None:
-            self.pool.set_floor_gradient(truth.disturbances.get("floor.gradient"))
+            self.pool.set_floor_gradient(truth.disturbances.floor.gradient)
         self.disturbances = DisturbanceModel(config, truth.disturbances, self.model, self.pool)
         self.sensors.apply_disturbances(truth.disturbances, self._delayed_state)
         self._history: deque = deque()
-        self._keep_history_s = float(truth.disturbances.get("dvl.latency_s"))
+        self._keep_history_s = float(truth.disturbances.dvl.latency_s)
         self._listeners: list[SensorListener] = []
         self._external = [0.0] * 6
         self._last_pw: np.ndarray | None = None
@@ -112,12 +112,12 @@ class Simulator:
         ``pool.start_heading_rad``). nu (6,): initial body velocity (default 0). Raises ``ValueError`` for
         wrong shapes or non-finite values.
         """
-        f = self.config.flat
-        pos = np.asarray(f["pool.start_position_ned_m"] if position_ned_m is None else position_ned_m, dtype=float)
+        pool = self.config.pool
+        pos = np.asarray(pool.start_position_ned_m if position_ned_m is None else position_ned_m, dtype=float)
         if quaternion_xyzw is not None:
             quat = np.asarray(quaternion_xyzw, dtype=float)
         else:
-            rpy = [0.0, 0.0, f["pool.start_heading_rad"]] if rpy_rad is None else rpy_rad
+            rpy = [0.0, 0.0, pool.start_heading_rad] if rpy_rad is None else rpy_rad
             quat = np.asarray(frames.quaternion_from_euler_ned(np.asarray(rpy, dtype=float)), dtype=float)
         vel = np.zeros(6) if nu is None else np.asarray(nu, dtype=float)
         if pos.shape != (3,) or quat.shape != (4,) or vel.shape != (6,):

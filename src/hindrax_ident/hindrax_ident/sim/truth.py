@@ -54,6 +54,8 @@ Disturbances (``disturbances:`` section; the physical source of each; all defaul
 """
 from __future__ import annotations
 
+import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -134,10 +136,168 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
 
 
 @dataclass(frozen=True)
+class ThrustDisturbance:
+    """``disturbances.thrust.*``: thrust scale factors (all, per thruster (empty: 1 each), per direction)."""
+
+    scale: float
+    per_thruster: tuple[float, ...]
+    positive: float
+    negative: float
+
+
+@dataclass(frozen=True)
+class BatteryDisturbance:
+    """``disturbances.battery.*``: a falling battery voltage (V, s) and the thrust exponent."""
+
+    voltage_start_v: float
+    voltage_end_v: float
+    nominal_voltage_v: float
+    duration_s: float
+    exponent: float
+
+
+@dataclass(frozen=True)
+class InflowDisturbance:
+    """``disturbances.inflow.*``: thrust loss per m/s of inflow."""
+
+    loss_per_m_s: float
+
+
+@dataclass(frozen=True)
+class HydrodynamicsDisturbance:
+    """``disturbances.hydrodynamics.*``: linear damping couplings (36, row-major) and the drag centre (FRD, m)."""
+
+    damping_coupling_linear: tuple[float, ...]
+    drag_centre_offset_frd_m: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class CurrentDisturbance:
+    """``disturbances.current.*``: mean and oscillating water current (NED, m/s) and its period (s)."""
+
+    velocity_ned_m_s: tuple[float, ...]
+    amplitude_ned_m_s: tuple[float, ...]
+    period_s: float
+
+
+@dataclass(frozen=True)
+class TetherDisturbance:
+    """``disturbances.tether.*``: anchor (NED, m), attachment (FRD, m), lumped drag and tension."""
+
+    anchor_ned_m: tuple[float, ...]
+    attachment_frd_m: tuple[float, ...]
+    drag_n_s2_m3: float
+    tension_n: float
+
+
+@dataclass(frozen=True)
+class FloorDisturbance:
+    """``disturbances.floor.*``: floor effect on heave added mass and DVL noise, and the floor gradient."""
+
+    heave_added_mass_fraction: float
+    reference_altitude_m: float
+    dvl_noise_gain: float
+    gradient: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class DvlDisturbance:
+    """``disturbances.dvl.*``: scale factor, misalignment (rad), latency (s) and wall multipath."""
+
+    scale_factor: float
+    misalignment_rpy_rad: tuple[float, ...]
+    latency_s: float
+    multipath_distance_m: float
+    multipath_dropout_probability: float
+
+
+@dataclass(frozen=True)
+class ImuDisturbance:
+    """``disturbances.imu.*``: bias random walks."""
+
+    gyro_bias_walk_rad_s_sqrt_s: float
+    accel_bias_walk_m_s2_sqrt_s: float
+
+
+@dataclass(frozen=True)
+class PressureDisturbance:
+    """``disturbances.pressure.*``: drift (Pa/s) and random walk."""
+
+    drift_pa_per_s: float
+    random_walk_pa_sqrt_s: float
+
+
+#: group of ``disturbances.<group>.*`` -> its typed dataclass (test_truth checks they match DISTURBANCE_SCHEMA)
+DISTURBANCE_GROUPS: dict[str, type] = {
+    "thrust": ThrustDisturbance, "battery": BatteryDisturbance, "inflow": InflowDisturbance,
+    "hydrodynamics": HydrodynamicsDisturbance, "current": CurrentDisturbance, "tether": TetherDisturbance,
+    "floor": FloorDisturbance, "dvl": DvlDisturbance, "imu": ImuDisturbance, "pressure": PressureDisturbance,
+}
+
+
+@dataclass(frozen=True)
 class Disturbances:
-    """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value."""
+    """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value.
+
+    Typed groups (built once; the default where the file does not set a key): ``thrust``, ``battery``, ``inflow``,
+    ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``, ``pressure``.
+    """
 
     values: Mapping[str, Any] = field(default_factory=dict)
+
+    def _group(self, group: str) -> Any:
+        cls = DISTURBANCE_GROUPS[group]
+        return cls(**{f.name: self.get(f"{group}.{f.name}") for f in dataclasses.fields(cls)})
+
+    @functools.cached_property
+    def thrust(self) -> ThrustDisturbance:
+        """``disturbances.thrust.*``."""
+        return self._group("thrust")
+
+    @functools.cached_property
+    def battery(self) -> BatteryDisturbance:
+        """``disturbances.battery.*``."""
+        return self._group("battery")
+
+    @functools.cached_property
+    def inflow(self) -> InflowDisturbance:
+        """``disturbances.inflow.*``."""
+        return self._group("inflow")
+
+    @functools.cached_property
+    def hydrodynamics(self) -> HydrodynamicsDisturbance:
+        """``disturbances.hydrodynamics.*``."""
+        return self._group("hydrodynamics")
+
+    @functools.cached_property
+    def current(self) -> CurrentDisturbance:
+        """``disturbances.current.*``."""
+        return self._group("current")
+
+    @functools.cached_property
+    def tether(self) -> TetherDisturbance:
+        """``disturbances.tether.*``."""
+        return self._group("tether")
+
+    @functools.cached_property
+    def floor(self) -> FloorDisturbance:
+        """``disturbances.floor.*``."""
+        return self._group("floor")
+
+    @functools.cached_property
+    def dvl(self) -> DvlDisturbance:
+        """``disturbances.dvl.*``."""
+        return self._group("dvl")
+
+    @functools.cached_property
+    def imu(self) -> ImuDisturbance:
+        """``disturbances.imu.*``."""
+        return self._group("imu")
+
+    @functools.cached_property
+    def pressure(self) -> PressureDisturbance:
+        """``disturbances.pressure.*``."""
+        return self._group("pressure")
 
     def get(self, key: str) -> Any:
         """Value of ``disturbances.<key>`` (the default when the file does not set it)."""

@@ -42,8 +42,8 @@ class Dive(Step):
 
     def run(self, ctx: StepContext) -> Wrenches:
         ctx.say("dive to the altitude setpoint and settle")
-        alt_sp = float(ctx.cfg.flat["identification.altitude_setpoint_m"])
-        ctx.ctrl.heading_setpoint_rad = float(ctx.cfg.flat["pool.start_heading_rad"])
+        alt_sp = float(ctx.cfg.identification.altitude_setpoint_m)
+        ctx.ctrl.heading_setpoint_rad = float(ctx.cfg.pool.start_heading_rad)
         yield np.zeros(6)  # first samples
         target = ctx.box.z_min
         t0 = ctx.t_s

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..estimators import truth_parameters
 from ..excitation import BROADBAND, BoxShaping, design_band, design_signal
-from ..maneuvers import DOF_INDEX, prior_inertia, wrap_angle
+from ..maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad, wrap_angle
 from .base import DofStep
 from .context import StepContext, Wrenches
 
@@ -68,7 +68,7 @@ class BroadbandRun(DofStep):
             # half the test angle: near the roll/pitch natural frequency (inside the band) the restoring moment
             # resonates and the 10 Hz attitude lags, so the braking guard needs the room (full angle overshot the
             # pitch limit in a first in-process trial)
-            half = 0.5 * float(ctx.cfg.flat[f"identification.{dof}_test_angle_rad"])
+            half = 0.5 * float(tilt_test_angle_rad(ctx.cfg, dof))
         shaping = BoxShaping(half, m, lim, math.pi * band.f_min_hz, ctx.tick_s)
         return sig, band, shaping
 

@@ -300,8 +300,8 @@ class TiltDecay(Step):
     def run(self, ctx: StepContext) -> Wrenches:
         dof = self.dof
         k = DOF_INDEX[dof]
-        f = ctx.cfg.flat
-        bg = float(f["vehicle.centre_of_gravity_frd_m"][2]) - float(f["vehicle.centre_of_buoyancy_frd_m"][2])
+        v = ctx.cfg.vehicle
+        bg = float(v.centre_of_gravity_frd_m[2]) - float(v.centre_of_buoyancy_frd_m[2])
         c0 = float(ctx.cfg.weight_n) * bg
         moment = min(c0 * self.angle_rad, 0.8 * min(ctx.authority[dof]))
         yield from ctx.move_to_centre()

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from ..maneuvers import DOF_INDEX, prior_inertia, wrap_angle
+from ..maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad, wrap_angle
 from .base import DofStep
 from .context import StepContext, Wrenches
 
@@ -93,7 +93,7 @@ class RotationLadder(DofStep):
         dof, k = self.dof, DOF_INDEX[self.dof]
         inertia = prior_inertia(ctx.cfg, dof)
         alpha = 0.5 * min(ctx.authority[dof]) / inertia
-        limit = 2.0 * math.pi if dof == "yaw" else float(ctx.cfg.flat[f"identification.{dof}_test_angle_rad"])
+        limit = 2.0 * math.pi if dof == "yaw" else float(tilt_test_angle_rad(ctx.cfg, dof))
         for i, lvl in enumerate(self.levels):
             for s in (1.0, -1.0):
                 ctx.say(f"{dof}: level {i + 1}/{len(self.levels)} {s * lvl:+.2f} N m")
