@@ -16,6 +16,8 @@ from hindrax_drivers.testing import child_env
 from hindrax_ident.identification.from_bag import BagContentError, record_from_messages
 from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 def _stamped(msg, t):
     msg.header.stamp.sec = int(t)

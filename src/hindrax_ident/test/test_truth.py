@@ -13,6 +13,8 @@ from hindrax_ident.identification.estimators import OnlineDofEstimator, measurem
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import TruthError, default_truth_path, load_truth, truth_dir, truth_from_mapping
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 SRC = Path(__file__).resolve().parents[2]  # src/
 
 
