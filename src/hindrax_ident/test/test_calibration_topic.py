@@ -194,6 +194,24 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
 
 
 @pytest.mark.ros
+def test_ident_bag_prints_and_writes_the_data_advice_of_suspect_parameters(tmp_path, capsys):
+    """Issue 27 item 3: the campaign bag above (a heave run with no measured motion: every heave parameter
+    suspect) through the real ``ident bag`` fit: each suspect parameter's advice (manoeuvre, speed range,
+    seconds more) is in identification.yaml and printed as a ``to fix <dof> <parameter>:`` line."""
+    cfg = load_config(default_config_path())
+    bag = tmp_path / "bag"
+    _write_campaign_bag(bag, cfg, None)
+    assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "out")]) == 0
+    printed = capsys.readouterr().out
+    doc = yaml.safe_load((tmp_path / "out" / "identification.yaml").read_text())
+    advised = {n: p["advice"] for n, p in doc["dofs"]["heave"].items() if isinstance(p, dict) and p.get("advice")}
+    assert "inertia" in advised and "quadratic_damping_positive" in advised
+    for name, a in advised.items():
+        assert doc["dofs"]["heave"][name]["verdict"] == "suspect"
+        assert a["manoeuvre"].startswith("heave") and a["seconds_more"] >= 0 and len(a["speed_range"]) == 3
+        assert f"  to fix heave {name}: {a['manoeuvre']}, speeds " in printed
+
+
 def test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it(monkeypatch, tmp_path):
     """Ballast step on the graph (virtual pool; steps shortened) with the recorder on: no calibration message while
     the step runs; when it ends the node publishes the scale it measured (its record's numbers, exactly); a

@@ -11,6 +11,8 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.excitation import (BoxShaping, Chirp, Multisine, Prbs, design_band, design_signal,
                                                      steady_speed)
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 def test_multisine_has_power_at_the_designed_lines_only():
     ms = Multisine.design(10.0, 0.05, 1.0, period_s=20.0)

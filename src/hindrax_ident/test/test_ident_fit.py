@@ -280,3 +280,40 @@ def test_thruster_widths_need_the_vehicle_file_and_go_through_its_thrust_model(t
     assert pre.notes["topics"]["velocity"] == "/dvl/data [hindrax_msgs/msg/Dvl]"
     assert np.all(np.concatenate([c.force for c in pre.chunks]) == 0.0)
     assert pre.notes["angular_rate"] == "none"
+
+
+def test_unknown_esc_output_is_missing_force_not_neutral_thrust(tmp_path):
+    """Issue 27 item 4: a span where the ESC output state is OUTPUT_UNKNOWN (ThrusterPwm widths NaN, armed or not)
+    is cut out of the fitted spans: no chunk covers it, no force is held across it, and it is counted."""
+    from rclpy.serialization import serialize_message
+
+    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_msgs.msg import Dvl, ThrusterPwm
+
+    cfg = load_config(default_config_path())
+    n = len(cfg.thrusters.thrusters)
+    bag = tmp_path / "unknown"
+    unknown = range(150, 170)  # 15.0-16.9 s: first half disarmed, second half armed
+    with BagWriter(bag, WriterOptions(fsync=False)) as w:
+        w.add_topic("/thrusters/pulse_width", "hindrax_msgs/msg/ThrusterPwm")
+        w.add_topic("/dvl/data", "hindrax_msgs/msg/Dvl")
+        for k in range(400):
+            t_ns = 1_000_000_000_000 + k * 100_000_000
+            widths = [math.nan] * n if k in unknown else [1500.0 + 100.0 * math.sin(0.3 * k * 0.1)] * n
+            pw = ThrusterPwm(pulse_width_us=widths, armed=not (k in unknown and k < 160))
+            pw.header.stamp.sec, pw.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+            w.write("/thrusters/pulse_width", t_ns, serialize_message(pw))
+            d = Dvl(velocity_valid=True, delta_time_s=0.1)
+            d.header.stamp.sec, d.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+            d.header.frame_id = "base_link"
+            d.velocity_m_s.x = 0.2 * math.sin(0.3 * k * 0.1 - 0.2)
+            w.write("/dvl/data", t_ns, serialize_message(d))
+    pre = preprocess_bag(bag, TopicChoice(), cfg, FitOptions())
+    assert pre.notes["force_unknown_dropped"] == len(unknown)
+    lat = float(cfg.flat["esc.output_latency_s"])
+    lo, hi = 14.9 + lat, 17.0 + lat  # last known sample before, first known after (bag-relative, s)
+    assert len(pre.spans) == 2, pre.spans
+    assert all(b <= lo + 1e-6 or a >= hi - 1e-6 for a, b in pre.spans), pre.spans
+    t_all = np.concatenate([c.t for c in pre.chunks])
+    assert not np.any((t_all > lo + 1e-6) & (t_all < hi - 1e-6))
+    assert np.all(np.isfinite(np.concatenate([c.force for c in pre.chunks])))

@@ -13,6 +13,8 @@ from hindrax_ident.identification.campaign import Campaign
 from hindrax_ident.identification.estimators import identify_dof
 from hindrax_ident.identification.maneuvers import PoolBox, dof_authority, level_ladder
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 @pytest.fixture(scope="module")
 def cfg():

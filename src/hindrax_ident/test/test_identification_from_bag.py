@@ -16,6 +16,8 @@ from hindrax_drivers.testing import child_env
 from hindrax_ident.identification.from_bag import BagContentError, record_from_messages
 from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 def _stamped(msg, t):
     msg.header.stamp.sec = int(t)
@@ -86,6 +88,34 @@ def test_esc_widths_act_after_the_configured_output_latency():
         rec = record_from_messages(_messages(cfg), cfg)
         first = rec.t_s[np.flatnonzero(np.linalg.norm(rec.wrench_cmd_frd, axis=1) > 1e-9)[0]]
         assert first == pytest.approx(2.0 + latency, abs=1e-6)
+
+
+def test_unknown_esc_output_is_missing_force_not_neutral_thrust():
+    """Issue 27 item 4: widths NaN (ESC output state OUTPUT_UNKNOWN) from 3.0 to 3.5 s inside the surge run,
+    disarmed then armed: the wrench is NaN (not the neutral zero) there and for 5 thrust time constants after,
+    those ticks belong to no DOF and no run, and the force before and after is the thrust model's."""
+    cfg = load_config(default_config_path())
+    n = len(cfg.thrusters.thrusters)
+    msgs = []
+    for topic, m in _messages(cfg):
+        t = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+        if topic == "thrusters/pulse_width" and 3.0 <= t < 3.5 - 1e-9:
+            m = _stamped(ThrusterPwm(pulse_width_us=[math.nan] * n, armed=t >= 3.25), t)
+        msgs.append((topic, m))
+    rec = record_from_messages(msgs, cfg)
+    lat, tau = float(cfg.flat["esc.output_latency_s"]), cfg.thrusters.time_constant_s
+    t = rec.t_s
+    gap = (t >= 3.0 + lat + 0.011) & (t < 3.5 + lat - 0.011)
+    after = (t >= 3.5 + lat + 0.011) & (t < 3.5 + lat + 5 * tau - 0.011)
+    assert np.all(np.isnan(rec.wrench_cmd_frd[gap])) and np.all(np.isnan(rec.wrench_frd[gap | after]))
+    assert set(rec.active[gap | after]) == {-1} and set(rec.run_id[gap | after]) == {-1}
+    edge = np.min(np.abs(t[:, None] - (lat + np.array([3.0, 3.5, 3.5 + 5 * tau]))), axis=1) <= 0.011  # +-1 tick
+    known = ~(gap | after | edge)
+    assert np.all(np.isfinite(rec.wrench_frd[known]))
+    run = (t > 2.0) & (t < 6.0) & known
+    assert set(rec.active[run]) == {0} and set(rec.run_id[run]) == {0}
+    late = np.argmin(np.abs(t - 5.5))  # settled again: the lagged force equals the command
+    assert rec.wrench_frd[late] == pytest.approx(rec.wrench_cmd_frd[late], rel=0.01)
 
 
 def test_missing_topics_and_runs_are_reported():

@@ -15,6 +15,8 @@ from hindrax_ident.identification.results import (IdentificationFileError, build
                                                   to_config_overrides, write_identification)
 from hindrax_ident.sim.simulator import Simulator
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 @pytest.fixture(scope="module")
 def cfg():

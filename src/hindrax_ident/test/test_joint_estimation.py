@@ -22,6 +22,8 @@ from hindrax_ident.identification.estimators import parameter_names, rigid_inert
 from hindrax_ident.identification.results import build_results, prior_entries
 from hindrax_ident.identification.verdicts import apply_verdicts
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 def _ident(dof, values, stds):
     names = parameter_names(dof)

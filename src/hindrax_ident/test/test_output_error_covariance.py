@@ -3,9 +3,12 @@
 model leaves them when the other DOFs move, the residual-variance covariance is too narrow and its 95 % intervals
 miss the truth far more often than 5 %; the widened one keeps close to 95 %."""
 import numpy as np
+import pytest
 from scipy import stats
 
 from hindrax_ident.identification import fit_core
+
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 
 def _at_least_cluster_robust(naive, J, r, cluster, _p):

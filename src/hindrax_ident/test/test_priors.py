@@ -38,6 +38,8 @@ from hindrax_ident.estimation.least_squares import EstimationError
 from hindrax_ident.estimation.priors import (Geometry, PriorInputs, added_mass_priors, empirical_priors,
                                              priors_from_config, quadratic_damping_priors)
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 MM, MM2 = 1e-3, 1e-6
 
 

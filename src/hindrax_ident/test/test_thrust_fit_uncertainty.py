@@ -17,6 +17,8 @@ from hindrax_ident.identification.estimators import (DofIdentification, paramete
                                                      truth_parameters)
 from hindrax_ident.identification.verdicts import assess_dof
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 def _bollard(cfg, noise_n, seed=4, repeats=1):
     neg = cfg.thrusters.curve_negative

@@ -15,6 +15,8 @@ from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import (DISTURBANCE_GROUPS, DISTURBANCE_SCHEMA, Disturbances, TruthError,
                                      default_truth_path, load_truth, truth_dir, truth_from_mapping)
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 SRC = Path(__file__).resolve().parents[2]  # src/
 
 

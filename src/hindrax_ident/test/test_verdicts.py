@@ -14,6 +14,8 @@ from hindrax_ident.identification.estimators import (DofIdentification, paramete
 from hindrax_ident.identification.verdicts import (apply_verdicts, assess_dof, segment_count, spread_reasons,
                                                    thrust_covariance)
 
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
 
 @pytest.fixture(scope="module")
 def cfg():

@@ -36,7 +36,10 @@ def run(args: argparse.Namespace) -> int:
     """Identify from a bag, write the outputs, print the summary. Raises :class:`CommandError` on bad input."""
     from hindrax_drivers.recording.reader import BagError
 
+    import yaml
+
     from ..identification.from_bag import BagContentError, identify_bag, write_outputs
+    from ..identification.verdicts import format_advice
     from .run import _add_reference_sections, format_summary
 
     cfg = load_vehicle(args.config)
@@ -61,5 +64,10 @@ def run(args: argparse.Namespace) -> int:
     path = write_outputs(out, idents, cfg, bag, note, calibration=record.calibration,
                          sections=lambda doc: _add_reference_sections(doc, record, cfg, idents, args, print))
     print(format_summary(idents))
+    doc = yaml.safe_load(Path(path).read_text())
+    for dof, e in doc.get("dofs", {}).items():  # what data would fix each suspect parameter (as ident fit prints)
+        for name, p in e.items():
+            if isinstance(p, dict) and p.get("advice"):
+                print(format_advice(f"{dof} {name}", p["advice"]))
     print(f"output: {path} and {out / 'report' / 'index.html'}")
     return 0

@@ -80,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.recording.reader import BagError
 
     from ..identification.fit_any import FitInputError, FitOptions, TopicChoice, build_document, fit_bags
+    from ..identification.verdicts import format_advice
     from ..identification.fit_report import write_fit_outputs
 
     cfg = None
@@ -109,8 +110,7 @@ def run(args: argparse.Namespace) -> int:
         if e.get("verdict") == "suspect":
             print(f"{dof}: suspect ({'; '.join(e['reasons'])})")
             for a in e.get("advice", []):
-                print(f"  to fix {a['parameter']}: {a['manoeuvre']}, speeds {a['speed_range'][0]:g}-"
-                      f"{a['speed_range'][1]:g} {a['speed_range'][2]}, about {a['seconds_more']:.0f} s more")
+                print(format_advice(a["parameter"], a))
     d = res.preprocessing
     print(f"preprocessing: {d['resampling']}; "
           + "; ".join(f"{Path(b['bag']).name}: {b['gaps']['dropped_s']:g} s in gaps dropped, "

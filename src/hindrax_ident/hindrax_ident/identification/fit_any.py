@@ -239,8 +239,13 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
                     st.frames.add(msg.header.frame_id)
                 else:
                     curve, matrix, neutral, lat = pwm
-                    widths = np.asarray(msg.pulse_width_us, dtype=float) if msg.armed else neutral
-                    st.val.append(matrix @ thrust_of_written_widths(cfg, curve, widths))
+                    widths = np.asarray(msg.pulse_width_us, dtype=float)
+                    if not np.all(np.isfinite(widths)):
+                        # output_state OUTPUT_UNKNOWN: NaN widths, what is on the wire is not known (armed or
+                        # not): missing force, cut out of the spans by preprocess_bag, never neutral thrust
+                        st.val.append(np.full(6, np.nan))
+                    else:
+                        st.val.append(matrix @ thrust_of_written_widths(cfg, curve, widths if msg.armed else neutral))
                     st.hdr.append(_hdr_ns(msg) + lat)
                     st.log.append(raw.log_time_ns + lat)
                     continue
@@ -443,6 +448,11 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     ft, tb = streams["wrench"].times()
     notes["time_base"]["force"] = tb
     ft, fv = _sorted(ft, np.asarray(streams["wrench"].val, dtype=float))
+    known = np.all(np.isfinite(fv), axis=1)  # ThrusterPwm OUTPUT_UNKNOWN (NaN widths): the force is not known
+    notes["force_unknown_dropped"] = int((~known).sum())
+    if not known.any():
+        raise FitInputError(f"{path}: every force sample of {streams['wrench'].topic} is unknown (NaN: ESC output "
+                            "state OUTPUT_UNKNOWN)")
     vt, tb = streams["velocity"].times()
     notes["time_base"]["velocity"] = tb
     vt, vv = _sorted(vt, np.asarray(streams["velocity"].val, dtype=float))
@@ -503,11 +513,15 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
         else:
             vel[:, 2] = zdot
             notes["heave_velocity"] += " (no attitude: taken as the body heave velocity, exact only when level)"
+    ft, fv = ft[known], fv[known]
     if t0 is None:
         t0 = float(ft[0])
     ft, lin_t = ft - t0, lin_t - t0
     gf, gv = _gap_threshold(ft, opts), _gap_threshold(lin_t, opts)
-    spans = _intersect(_spans(ft, gf), _spans(lin_t, gv))
+    # an unknown force ends a span at the last known sample whatever its length (no hold across it)
+    run = np.cumsum(np.concatenate([[0], np.diff(known.astype(int)) != 0]))[known]
+    force_spans = [sp for r in np.unique(run) for sp in _spans(ft[run == r], gf)]
+    spans = _intersect(force_spans, _spans(lin_t, gv))
     total = max(min(ft[-1], lin_t[-1]) - max(ft[0], lin_t[0]), 0.0)
     used = sum(b - a for a, b in spans)
     notes["gaps"] = {"force_threshold_s": round(gf, 3), "velocity_threshold_s": round(gv, 3),

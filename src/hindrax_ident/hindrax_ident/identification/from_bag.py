@@ -150,19 +150,32 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     matrix = np.asarray(core.matrix_frd, dtype=float)
     n_thr = matrix.shape[1]
     neutral = np.full(n_thr, float(cfg.thrusters.pulse_width_neutral_us))
-    forces = np.array([thrust_of_written_widths(cfg, curve, p[1] if p[2] else neutral) for p in pwm])
+    # NaN widths: ESC output state OUTPUT_UNKNOWN (armed or not), the force on the wire is not known: missing
+    # (NaN), never neutral thrust; the lagged force stays unknown until 5 time constants after it ends
+    forces = np.array([np.full(n_thr, np.nan) if not np.all(np.isfinite(p[1]))
+                       else thrust_of_written_widths(cfg, curve, p[1] if p[2] else neutral) for p in pwm])
     f_cmd = np.where(ipw[:, None] >= 0, forces[np.clip(ipw, 0, None)], 0.0)
     tau = float(cfg.thrusters.time_constant_s)
     k = math.exp(-grid_s / tau) if tau > 0 else 0.0
+    settle = int(math.ceil(5.0 * tau / grid_s)) if tau > 0 else 0
     f_lag = np.zeros_like(f_cmd)
     lag = np.zeros(n_thr)
+    wait = 0
     for i in range(n):
-        f_lag[i] = lag
+        if not np.all(np.isfinite(f_cmd[i])):
+            f_lag[i], lag, wait = np.nan, f_cmd[i], settle
+            continue
+        if wait:
+            lag = f_cmd[i] if not np.all(np.isfinite(lag)) else lag
+            wait -= 1
+            f_lag[i] = np.nan
+        else:
+            f_lag[i] = lag
         lag = f_cmd[i] + (lag - f_cmd[i]) * k
     dof_of = np.array([DOFS.index(m.dof) if m.dof in DOFS else -1 for _, m in status])
     running = np.array([m.phase == _RUNNING for _, m in status])
     level = np.array([m.level_command if m.phase == _RUNNING else math.nan for _, m in status], dtype=float)
-    active = dof_of[ist]
+    active = np.where(np.all(np.isfinite(f_lag), axis=1), dof_of[ist], -1)  # unknown force: in no DOF's window
     # run counter: a new run at every status that starts RUNNING (or changes the level while running)
     run_of_status = np.full(len(status), -1)
     run = -1
@@ -171,7 +184,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
             if j == 0 or not running[j - 1] or level[j] != level[j - 1]:
                 run += 1
             run_of_status[j] = run
-    run_id = run_of_status[ist]
+    run_id = np.where(active >= 0, run_of_status[ist], -1)
     windows: dict[str, tuple[float, float]] = {}
     for d, name in enumerate(DOFS):
         idx = np.flatnonzero(active == d)

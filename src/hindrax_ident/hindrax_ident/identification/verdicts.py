@@ -66,7 +66,8 @@ from hindrax_drivers.config import VehicleConfig
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
            "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
-           "segment_count", "assess_dof", "apply_verdicts", "spread_reasons", "data_advice", "fit_parameter_verdicts",
+           "segment_count", "assess_dof", "apply_verdicts", "spread_reasons", "data_advice", "format_advice",
+           "fit_parameter_verdicts",
            "ADVICE_TARGET"]
 
 #: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
@@ -387,6 +388,13 @@ ADVICE_MIN_S = 30.0
 
 def _speed_unit(dof: str) -> str:
     return "rad/s" if dof in ("roll", "pitch", "yaw") else "m/s"
+
+
+def format_advice(parameter: str, advice: dict) -> str:
+    """One printed line of :func:`data_advice` for ``parameter`` (``hindrax ident fit`` and ``ident bag`` alike)."""
+    lo, hi, unit = advice["speed_range"]
+    return f"  to fix {parameter}: {advice['manoeuvre']}, speeds {lo:g}-{hi:g} {unit}, about " \
+           f"{advice['seconds_more']:.0f} s more"
 
 
 def data_advice(dof: str, name: str, value: float, half_width: float, velocity, acceleration, force,
