@@ -99,6 +99,21 @@ def test_type_hash_matches_the_hash_the_ros_graph_reports():
         node.destroy_node()
 
 
+def test_a_recorded_type_matches_the_installed_one_only_with_the_same_fields():
+    """Comments do not matter; a missing field does (a bag from before ThrusterPwm gained output_state must be
+    decoded from its own stored definition, not by the installed class)."""
+    name = "hindrax_msgs/msg/ThrusterPwm"
+    now = msgdefs.message_definition(name)
+    assert msgdefs.matches_installed(name, now)
+    commented = "# a comment the recording had\n" + now.replace("bool armed", "bool  armed # x")
+    assert msgdefs.matches_installed(name, commented)
+    before = "\n".join(line for line in now.split("\n") if not line.startswith("uint8 "))  # fields of issue 23 gone
+    assert before != now and not msgdefs.matches_installed(name, before)
+    assert msgdefs.matches_installed(name, before, msgdefs.type_description_hash(name))  # the hash decides
+    assert not msgdefs.matches_installed(name, now, "RIHS01_" + "0" * 64)
+    assert not msgdefs.matches_installed("hindrax_msgs/msg/NoSuchType", now)
+
+
 def test_qos_yaml_layout_and_round_trip():
     p = default_profile("best_effort", "transient_local", depth=5)
     text = profiles_to_yaml([p])

@@ -147,3 +147,32 @@ def type_description_hash(type_name: str, search: list[Path] | None = None) -> s
 def definitions_in(full_text: str) -> list[str]:
     """The ``pkg/Type`` names listed by ``MSG:`` lines of a full definition, in order."""
     return [line[5:].strip() for line in full_text.split("\n") if line.startswith("MSG: ")]
+
+
+def _layout(full_text: str) -> list[str]:
+    """The field and constant lines of a full definition: comments, blank lines and spacing dropped."""
+    out = []
+    for line in full_text.split("\n"):
+        line = line.split("#", 1)[0].strip()
+        if line:
+            out.append(" ".join(line.split()))
+    return out
+
+
+def matches_installed(type_name: str, definition: str, type_hash: str | None = None,
+                      search: list[Path] | None = None) -> bool:
+    """True when a recorded type has the wire layout of the installed one, so the installed Python class
+    (and rclpy's C deserializer) can decode its messages.
+
+    type_name: ``pkg/msg/Type``; definition: the full ``ros2msg`` definition stored in the bag's schema;
+    type_hash: the channel's ``topic_type_hash`` (RIHS01) when the bag has one. The hashes are compared when
+    both exist (they cover the fields, not the comments); otherwise the definitions are compared without their
+    comments. False when the installed type or its definition cannot be found: a bag recorded before a message
+    changed (a field added, as ``ThrusterPwm.output_state``) must be decoded from its own stored definition.
+    """
+    try:
+        if type_hash:
+            return type_hash == type_description_hash(type_name, search)
+        return _layout(definition) == _layout(message_definition(type_name, search))
+    except (DefinitionNotFoundError, ValueError):
+        return False

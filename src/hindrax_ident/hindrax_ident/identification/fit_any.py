@@ -155,17 +155,25 @@ def _static_rotation(reader, parent: str, child: str) -> np.ndarray | None:
 
 def _decoded(reader, topics: Sequence[str]):
     """(raw, message) pairs of ``topics`` in log-time order: rclpy's C deserializer for types whose Python package
-    is installed (standard messages: several times faster), else the reader's mcap_ros2 decoding from the stored
-    definitions (:meth:`hindrax_drivers.recording.reader.BagReader.decoded`)."""
+    is installed with the layout the bag recorded (standard messages: several times faster), else the reader's
+    mcap_ros2 decoding from the stored definitions (:meth:`hindrax_drivers.recording.reader.BagReader.decoded`):
+    a bag recorded before a message gained a field (``ThrusterPwm.output_state``) stays readable."""
     import importlib
+
+    from hindrax_drivers.recording import msgdefs
 
     classes: dict[str, Any] = {}
     for t in topics:
-        pkg, _sub, name = reader.topics[t].partition("/msg/")
+        type_name = reader.topics[t]
+        pkg, _sub, name = type_name.partition("/msg/")
+        info = reader.channels[t]
         try:
-            classes[t] = getattr(importlib.import_module(f"{pkg}.msg"), name)
+            cls = getattr(importlib.import_module(f"{pkg}.msg"), name)
         except (ImportError, AttributeError, ValueError):
-            classes[t] = None
+            cls = None
+        same = cls is not None and msgdefs.matches_installed(type_name, info.definition,
+                                                             info.metadata.get("topic_type_hash"))
+        classes[t] = cls if same else None
     if any(c is None for c in classes.values()):
         yield from reader.decoded(list(topics))
         return
