@@ -41,9 +41,11 @@ Errors: :class:`ConfigError` (a ``ValueError``) carrying a list of :class:`Confi
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import functools
 import hashlib
 import math
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,11 +53,27 @@ from typing import Any, ClassVar, Iterable, Mapping, Sequence, TypeVar
 
 import numpy as np
 import yaml
+from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
-from .config_sections import (ABSENT, CalibrationSection, ControlSection, EnvironmentSection, EscSection,
-                              HydrodynamicsSection, IdentificationSection, LightsSection, LimitsSection, PoolSection,
-                              RecordingSection, Section, SensorsSection, SimulationSection, SupervisorSection,
-                              VehicleSection)
+from .config_sections import (
+    ABSENT,
+    CalibrationSection,
+    ControlSection,
+    EnvironmentSection,
+    EscSection,
+    HydrodynamicsSection,
+    IdentificationSection,
+    LightsSection,
+    LimitsSection,
+    PoolSection,
+    RecordingSection,
+    Section,
+    SensorsSection,
+    SimulationSection,
+    SupervisorSection,
+    VehicleSection,
+)
+from .pca9685.protocol import Pca9685Error, esc_prescale
 
 DOFS: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
 """The six degrees of freedom in SNAME order (nu = [u v w p q r], tau = [X Y Z K M N])."""
@@ -652,8 +670,6 @@ def validate_flat(flat: Mapping[str, Any], sections: Iterable[str] = SECTIONS,
 
 
 def _suggest(key: str, names: Sequence[str]) -> str:
-    import difflib
-
     known = [k.replace(_T, names[0]) if (_T in k and names) else k for k in SCHEMA]
     close = difflib.get_close_matches(key, known, n=1, cutoff=0.8)
     return f" (did you mean {close[0]}?)" if close else ""
@@ -756,8 +772,6 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
 
 def _safety_cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     """Cross-checks of the safety settings (docs/architecture.md §8), one issue (one line) each."""
-    from .pca9685.protocol import Pca9685Error, esc_prescale
-
     issues: list[ConfigIssue] = []
     # the disarmed hold (neutral + trim) must sit inside the ESC deadband, or a disarmed vehicle thrusts
     if "thrusters.names" in c and "thrusters.deadband_us" in c:
@@ -1278,8 +1292,6 @@ def default_config_path() -> Path:
     names the file instead (the Docker image sets it to the mounted vehicle file). Raises FileNotFoundError
     naming the places searched.
     """
-    import os
-
     env = os.environ.get("HINDRAX_CONFIG")
     if env:
         if Path(env).is_file():
@@ -1290,8 +1302,6 @@ def default_config_path() -> Path:
     installed: list[Path] = []
     in_install_space = False
     try:  # colcon install (the vehicle) or the ament index of the dev venv
-        from ament_index_python.packages import get_package_prefix, get_package_share_directory
-
         installed.append(Path(get_package_share_directory("hindrax_drivers")) / "config" / "hindrax.yaml")
         in_install_space = Path(get_package_prefix("hindrax_drivers")).resolve() in here.parents
     except Exception:  # noqa: BLE001 - no ament index entry (plain checkout) is fine

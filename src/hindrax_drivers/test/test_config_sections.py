@@ -114,16 +114,6 @@ def test_optional_keys_are_none_when_absent():
     assert bare.esc.output_latency_s == cfg.flat["esc.output_latency_s"]
 
 
-#: Modules of the fit core, converted by the lead after its rewrite merges (issue 28 item 2): EMPTY THIS LIST.
-NOT_CONVERTED_YET = (
-    "hindrax_ident/identification/fit_any.py", "hindrax_ident/identification/fit_core.py",
-    "hindrax_ident/identification/from_bag.py", "hindrax_ident/identification/estimators.py",
-    "hindrax_ident/identification/output_error.py", "hindrax_ident/identification/fit_report.py",
-    "hindrax_ident/identification/verdicts.py", "hindrax_ident/identification/results.py",
-    "hindrax_ident/identification/piloted_bag.py", "hindrax_ident/identification/report.py",
-    "hindrax_ident/commands/ident_fit.py", "hindrax_ident/commands/ident_bag.py",
-    "hindrax_ident/benchmarks/ident_fit.py",
-)
 #: Where a dotted key by string is the point: the schema and its generated sections, and the validation of a node's
 #: raw parameter mapping (node_parameters.validate_selection, before any VehicleConfig exists).
 DECLARE_KEYS = ("hindrax_drivers/config.py", "hindrax_drivers/config_sections.py",
@@ -142,7 +132,7 @@ def test_no_configuration_lookup_by_string_outside_config():
         root = ROOT / "src" / pkg
         for path in sorted((root / pkg).rglob("*.py")):
             rel = f"{pkg}/{path.relative_to(root / pkg).as_posix()}"
-            if rel in DECLARE_KEYS or rel in NOT_CONVERTED_YET:
+            if rel in DECLARE_KEYS:
                 continue
             for i, line in enumerate(path.read_text().splitlines(), 1):
                 if LOOKUP.search(line):
@@ -158,7 +148,7 @@ def test_the_lookup_guard_sees_each_form():
     for line in ("cfg.esc.output_latency_s", "flat[key]", 'd.get("name")', "self.flat.get(k)",
                  'overrides["simulation.seed"] = 3'):  # an override by ROS parameter name is fine
         assert not LOOKUP.search(line), line
-    assert all((ROOT / "src" / p.split("/")[0] / p).is_file() for p in NOT_CONVERTED_YET + DECLARE_KEYS)
+    assert all((ROOT / "src" / p.split("/")[0] / p).is_file() for p in DECLARE_KEYS)
 
 
 def test_a_partial_thruster_selection_reads_typed_and_names_the_missing_key():

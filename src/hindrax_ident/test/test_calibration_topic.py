@@ -144,7 +144,7 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     step. Without the message: no such sections and the force unscaled."""
     from builtin_interfaces.msg import Time
 
-    from hindrax_ident.identification import estimators, report
+    from hindrax_ident.identification import from_bag
     from hindrax_ident.identification.calibration import thrust_scales
 
     cfg = load_config(default_config_path())
@@ -159,8 +159,9 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
         seen.append(record)
         return {"heave": _ident("heave", [37.7, 93.5, 56.6, 5.3, 11.8, 0.78], [0.5, 3, 3, 3, 3, 0.05], cfg_)}, {}
 
-    monkeypatch.setattr(estimators, "identify_all_with_errors", fake_identify)
-    monkeypatch.setattr(report, "write_report", lambda out, *a, **k: out.mkdir(parents=True, exist_ok=True))
+    # from_bag's own bindings (it imports both at its top): the other tests of this module see the real ones
+    monkeypatch.setattr(from_bag, "identify_all_with_errors", fake_identify)
+    monkeypatch.setattr(from_bag, "write_report", lambda out, *a, **k: out.mkdir(parents=True, exist_ok=True))
     assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "out")]) == 0, capsys.readouterr().err
     doc = yaml.safe_load((tmp_path / "out" / "identification.yaml").read_text())
     (rec,) = seen

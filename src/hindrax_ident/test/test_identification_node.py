@@ -187,8 +187,8 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
 
             node._on_pwm(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=False))
             never = handle(2)
+            t0 = node._now_s()  # before the acceptance, which starts the grace
             node._on_accepted(never)
-            t0 = node._now_s()
             wait_until(lambda: node._on_tick() or never.results, 10 * ARMED_GRACE_S, None, "the goal's end")
             assert node._now_s() - t0 >= ARMED_GRACE_S
             assert never.states == ["aborted"] and never.results[0].message == NOT_ARMED

@@ -30,7 +30,13 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import yaml
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident.identification import fit_any, fit_core
+from hindrax_ident.identification.fit_any import FitOptions, TopicChoice, fit_bags
+from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
 
 #: DOFs compared (roll and pitch are not commanded by the pilots)
 DOFS_COMPARED = ("surge", "sway", "heave", "yaw")
@@ -137,9 +143,6 @@ class Bags:
 
 def make_bags(data: DataSet, root: Path, quick: bool = False) -> Bags:
     """Fly and record the data set's bags under ``root`` (reused when already there)."""
-    from hindrax_drivers.config import default_config_path, load_config
-    from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
-
     cfg = load_config(default_config_path(), overrides=data.vehicle or None)
     truth_path = root / f"{data.name}_truth.yaml"
     truth_path.write_text(yaml.safe_dump(data.truth))
@@ -161,10 +164,6 @@ def plain_ls_theta(rec, dof: str):
     """Plain per-DOF least squares (module docstring) on the training record's moving segments: the layout and
     theta of M nu_dot + k_q |nu| nu + k_l nu + b = tau (one damping pair, no delay, no lag, no coupling), nu_dot the
     Savitzky-Golay derivative of the record (:func:`..identification.fit_any.dof_records`), unconstrained."""
-    import numpy as np
-
-    from hindrax_ident.identification import fit_core
-
     terms = fit_core.Terms("both")
     timing = fit_core.Timing(0.0, 0.0)
     sd = fit_core.build_segments(rec, terms, timing, fit_core.VALIDATION_S)
@@ -179,11 +178,6 @@ def plain_ls_theta(rec, dof: str):
 
 def evaluate(bags: Bags) -> dict:
     """{dof: {fit, ls, hold, samples, cv, model}} held-out NRMSE of the three predictors (module docstring)."""
-    import numpy as np
-
-    from hindrax_ident.identification import fit_any, fit_core
-    from hindrax_ident.identification.fit_any import FitOptions, TopicChoice, fit_bags
-
     opts = FitOptions()
     choice = TopicChoice()
     with warnings.catch_warnings(record=True) as caught:

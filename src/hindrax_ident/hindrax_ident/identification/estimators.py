@@ -65,16 +65,19 @@ from typing import Optional
 import numpy as np
 from scipy import stats
 
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
 from ..estimation.filters import KinematicKalmanFilter, smooth_kinematics
 from ..estimation.least_squares import EstimationError, fit_drag, fit_linear_model
 from ..estimation.rls import RecursiveLeastSquares
 from ..estimation.steady_windows import detect_steady_windows
 from ..sim.model import rigid_body_mass_matrix
+from . import fit_core
 from .fusion import AccelAidedFilter, smooth_with_acceleration, smooth_with_rate
 from .maneuvers import euler_rates
 from .output_error import model_terms
+from .results import prior_entries
+from .verdicts import rls_published_std
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
@@ -177,23 +180,22 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
     bandwidth near w = 12 rad/s (translation) or 20 rad/s (rotation) (filters.py: bandwidth ~ (q / std^2)^(1/4) for
     velocity and ^(1/6) for position measurements).
     """
-    f = cfg.flat
+    dvl, imu = cfg.sensors.dvl75, cfg.sensors.icm20948
     k = DOFS.index(dof)
-    acc = max(float(f.get("sensors.icm20948.accel_noise_std_m_s2", 0.05)), 1e-3)
-    att = float(f.get("sensors.dvl75.attitude_noise_std_rad", 0.005))
+    acc = max(float(or_default(imu.accel_noise_std_m_s2, 0.05)), 1e-3)
+    att = float(or_default(dvl.attitude_noise_std_rad, 0.005))
     accel = {"accel": True, "accel_std": math.hypot(acc, cfg.gravity_m_s2 * att), "accel_jerk_psd": ACCEL_JERK_PSD}
     if dof in ("surge", "sway"):
-        std = max(float(f.get("sensors.dvl75.noise_std_m_s", f["sensors.dvl75.velocity_std_m_s"])),
-                  1e-3)
-        std = math.hypot(std, 0.5 * float(f.get("sensors.dvl75.scale_error_fraction", 0.0)))
+        std = max(float(or_default(dvl.noise_std_m_s, dvl.velocity_std_m_s)), 1e-3)
+        std = math.hypot(std, 0.5 * float(or_default(dvl.scale_error_fraction, 0.0)))
         return {"log": "dvl", "column": k, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 12.0 ** 4,
                 **accel}
     if dof == "heave":
-        pa = float(f.get("sensors.ms5837.noise_std_pa", 20.0))
+        pa = float(or_default(cfg.sensors.ms5837.noise_std_pa, 20.0))
         std = max(pa / (cfg.water_density_kg_m3 * cfg.gravity_m_s2), 5e-4)
         return {"log": "depth", "column": 0, "measured": "position", "std": std, "jerk_psd": std ** 2 * 12.0 ** 6,
                 **accel}
-    std = max(float(f.get("sensors.icm20948.gyro_noise_std_rad_s", 0.003)), 5e-4)
+    std = max(float(or_default(imu.gyro_noise_std_rad_s, 0.003)), 5e-4)
     return {"log": "gyro", "column": k - 3, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 20.0 ** 4,
             "accel": False}
 
@@ -213,7 +215,7 @@ RLS_PRIOR_BIAS_STD = {"surge": 1.0, "sway": 1.0, "heave": 1.0, "roll": 0.1, "pit
 
 def rls_setting(cfg: VehicleConfig, name: str):
     """``identification.rls_<name>`` from the vehicle file, else :data:`RLS_DEFAULTS`."""
-    v = cfg.flat.get(f"identification.rls_{name}")
+    v = getattr(cfg.identification, f"rls_{name}")
     return RLS_DEFAULTS[name] if v is None else v
 
 
@@ -226,8 +228,6 @@ def rls_prior(cfg: VehicleConfig, dof: str, prior_std_rel: float) -> tuple[np.nd
     box); bias: the expected one (0; heave (rho V - m) g) with :data:`RLS_PRIOR_BIAS_STD`; restoring: the
     configured z_g W - z_b B with ``prior_std_rel`` x its value. None when ``prior_std_rel`` is 0 or the geometry
     gives no prior."""
-    from .results import prior_entries
-
     if not prior_std_rel > 0:
         return None
     p = prior_entries(cfg).get(dof)
@@ -262,7 +262,7 @@ def online_rls(cfg: VehicleConfig, dof: str) -> RecursiveLeastSquares:
     ``identification.estimate_rate_hz``) and the start at the empirical priors (:func:`rls_prior`) with
     P0 = diag(std^2) / :data:`RLS_PRIOR_NOISE_STD`^2; without priors a diffuse start (theta = 0, P0 = 1e4 I)."""
     names = parameter_names(dof)
-    rate = float(cfg.flat["identification.estimate_rate_hz"])
+    rate = float(cfg.identification.estimate_rate_hz)
     thr = float(rls_setting(cfg, "change_threshold"))
     prior = rls_prior(cfg, dof, float(rls_setting(cfg, "prior_std_rel")))
     if prior is None:
@@ -270,7 +270,7 @@ def online_rls(cfg: VehicleConfig, dof: str) -> RecursiveLeastSquares:
     else:
         theta0, p0 = prior[0], np.diag((prior[1] / RLS_PRIOR_NOISE_STD[dof]) ** 2)
     return RecursiveLeastSquares(
-        len(names), forgetting=float(cfg.flat["identification.forgetting_factor"]), initial_covariance=p0,
+        len(names), forgetting=float(cfg.identification.forgetting_factor), initial_covariance=p0,
         initial_theta=theta0, names=names, directional=bool(rls_setting(cfg, "directional_forgetting")),
         min_excitation=float(rls_setting(cfg, "min_excitation")),
         lower_bounds=[math.nan if n == "bias" else 0.0 for n in names],
@@ -302,7 +302,7 @@ class OnlineDofEstimator:
             self.kf = KinematicKalmanFilter(s["measured"], jerk_psd=s["jerk_psd"], measurement_std=s["std"])
         self.names = parameter_names(dof)
         self.rls = online_rls(cfg, dof)
-        self.rel_tol = float(cfg.flat["identification.converged_relative_std"])
+        self.rel_tol = float(cfg.identification.converged_relative_std)
         self.history_every = int(history_every)
         self.history: dict[str, list] = {"t": [], "theta": [], "std": [], "excitation": []}
         self.converged_at_s: Optional[float] = None
@@ -372,7 +372,6 @@ class OnlineDofEstimator:
         """The std to publish (:func:`~.verdicts.rls_published_std` of :meth:`converged_std`): damping parameters
         of the DOFs the scenario suite measured, widened by the thrust uncertainty; NaN = not converged / not
         trusted."""
-        from .verdicts import rls_published_std
         return rls_published_std(self.dof, self.names, self.rls.theta, self.converged_std(), self.cfg)
 
     def converged_std(self) -> np.ndarray:
@@ -567,7 +566,7 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
     of the roll filter (:func:`measurement_settings`)."""
     ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
-    std_att = max(float(cfg.flat.get("sensors.dvl75.attitude_noise_std_rad", 0.005)), 1e-4)
+    std_att = max(float(or_default(cfg.sensors.dvl75.attitude_noise_std_rad, 0.005)), 1e-4)
     if tg.size == 0:
         jerk = std_att ** 2 * 15.0 ** 6
         return (_smooth_on_ticks(t, ta, rpy[:, 0], "position", jerk, std_att)[0],
@@ -669,7 +668,6 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True
     if output_error:
         # the fit core shared with hindrax ident fit (docs/identification.md §7): the DOF's window as one stretch,
         # the campaign's full model (a designed experiment: no term selection), every segment of the window
-        from . import fit_core
 
         inside = (tm >= t[0]) & (tm <= t[-1]) & np.isfinite(zm)
         chunk = fit_core.Chunk(np.asarray(force_cmd, dtype=float), v_s, x_s if ms["measured"] == "position" else

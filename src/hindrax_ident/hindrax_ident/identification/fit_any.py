@@ -44,23 +44,31 @@ how much data is needed).
 """
 from __future__ import annotations
 
+import datetime as _dt
+import importlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
+from rclpy.serialization import deserialize_message
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
 from hindrax_drivers import frames
+from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.recording import msgdefs
+from hindrax_drivers.recording.reader import BagReader
 
 from ..estimation.least_squares import EstimationError
 from . import fit_core
 from .estimators import parameter_units, restoring_regressor, rigid_inertia
 from .fit_core import EXCITATION_MIN
+from .results import SCHEMA_VERSION
 from .signals import samples_from_dvl, thrust_of_written_widths
+from .verdicts import fit_parameter_verdicts
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed",
            "preprocess_bag", "dof_records", "fit_bags", "DofFit", "FitResult", "CONFIG_READY_REASON"]
@@ -158,10 +166,6 @@ def _decoded(reader, topics: Sequence[str]):
     is installed with the layout the bag recorded (standard messages: several times faster), else the reader's
     mcap_ros2 decoding from the stored definitions (:meth:`hindrax_drivers.recording.reader.BagReader.decoded`):
     a bag recorded before a message gained a field (``ThrusterPwm.output_state``) stays readable."""
-    import importlib
-
-    from hindrax_drivers.recording import msgdefs
-
     classes: dict[str, Any] = {}
     for t in topics:
         type_name = reader.topics[t]
@@ -177,7 +181,6 @@ def _decoded(reader, topics: Sequence[str]):
     if any(c is None for c in classes.values()):
         yield from reader.decoded(list(topics))
         return
-    from rclpy.serialization import deserialize_message
 
     for raw in reader.messages(list(topics)):
         yield raw, deserialize_message(raw.data, classes[raw.topic])
@@ -207,7 +210,6 @@ class _Stream:
 
 
 def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) -> tuple[dict[str, _Stream], dict]:
-    from hindrax_drivers.recording.reader import BagReader
 
     reader = BagReader(path)
     topics = reader.topics
@@ -229,12 +231,11 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
     streams["attitude"] = _Stream(sel["velocity"][0], sel["velocity"][1])
     pwm = None
     if sel["wrench"][1] == PWM:
-        from hindrax_drivers.allocation.core import AllocationCore
 
         core = AllocationCore(cfg)
         pwm = (core.allocator.curves[0], np.asarray(core.matrix_frd, dtype=float),
                np.full(len(cfg.thrusters.thrusters), float(cfg.thrusters.pulse_width_neutral_us)),
-               int(round(float(cfg.flat["esc.output_latency_s"]) * 1e9)))
+               int(round(float(cfg.esc.output_latency_s) * 1e9)))
     for raw, msg in _decoded(reader, list(by_topic)):
         for role in by_topic[raw.topic]:
             st = streams[role]
@@ -539,7 +540,7 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     if streams["wrench"].type == PWM:
         pre.lag_s = float(cfg.thrusters.time_constant_s)
         notes["thrust"] = (f"thrust curves and allocation matrix of {cfg.source} (ThrusterPwm: reversal and trim "
-                           f"undone), widths acting esc.output_latency_s = {cfg.flat['esc.output_latency_s']:g} s "
+                           f"undone), widths acting esc.output_latency_s = {cfg.esc.output_latency_s:g} s "
                            f"late, first-order lag thrusters.time_constant_s = {pre.lag_s:g} s")
     pre.chunks = _grid_chunks(pre, 0.0, opts.grid_s)
     return pre
@@ -791,8 +792,6 @@ def _fit_signals(r: DofFit) -> dict:
 
 def _param_entries(r: DofFit, cfg: VehicleConfig | None, h: float) -> tuple[dict, dict]:
     """(parameter entries, verdicts) of one fitted DOF (:func:`build_document`)."""
-    from .verdicts import fit_parameter_verdicts
-
     c = r.core
     units = _units(r.dof, c.names)
     folds = np.array(r.folds) if r.folds else None
@@ -874,10 +873,6 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
     ``advice`` (:func:`.verdicts.fit_parameter_verdicts`: what data would fix each suspect parameter);
     ``not_identified`` with their numbers, ``validation.<dof>.{nrmse,nrmse_hold,nrmse_zero,samples}`` (the holdout
     when given, else the cross-validation; both under their own keys too) and ``preprocessing``."""
-    import datetime as _dt
-
-    from .results import SCHEMA_VERSION
-
     dofs, val, other = {}, {}, {}
     for dof, r in res.dofs.items():
         if r.status != "fitted":

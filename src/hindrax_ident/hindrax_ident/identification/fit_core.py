@@ -50,6 +50,7 @@ from typing import Sequence
 
 import numpy as np
 from scipy import optimize, stats
+from scipy import signal as _signal
 
 from ..estimation.least_squares import EstimationError
 
@@ -277,7 +278,6 @@ def _lagged(fc: np.ndarray, lag_s: float, h: float, f0: float | None = None
     start = np.empty_like(fc)
     s = fc[0] if f0 is None else float(f0)
     # the recursion is a first-order IIR filter: start[j+1] = fc[j] + (start[j] - fc[j]) e
-    from scipy import signal as _signal
 
     start[0] = s
     if fc.size > 1:

@@ -35,14 +35,24 @@ import numpy as np
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
-
 from hindrax_drivers.icm20948.mounting import mounting_rotation
+from hindrax_drivers.recording.reader import BagReader
 
 from . import calibration_topic
+from .calibration import identify_calibrated
 from .campaign import CampaignRecord
+from .estimators import identify_all_with_errors
 from .maneuvers import SensorState
-from .signals import (STILL_MESSAGE, sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu,
-                      thrust_of_written_widths)
+from .report import write_report
+from .results import build_results, write_identification
+from .signals import (
+    STILL_MESSAGE,
+    sample_from_pressure,
+    sample_from_range,
+    samples_from_dvl,
+    samples_from_imu,
+    thrust_of_written_widths,
+)
 
 __all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "identify_bag",
            "write_outputs"]
@@ -102,7 +112,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     Raises :class:`BagContentError` without ESC widths, status or an identification run, or with an
     ``identification/calibration`` status missing a value.
     """
-    mount_t = mounting_rotation(cfg.flat["sensors.icm20948.mounting_rpy_rad"]).T
+    mount_t = mounting_rotation(cfg.sensors.icm20948.mounting_rpy_rad).T
     samples: list = []
     pwm: list = []
     status: list = []
@@ -143,7 +153,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     # zero-order hold of status and widths on the grid
     st_t = np.array([s[0] for s in status])
     ist = np.clip(np.searchsorted(st_t, t + 1e-9, side="right") - 1, 0, len(status) - 1)
-    pw_t = np.array([p[0] for p in pwm]) + float(cfg.flat["esc.output_latency_s"])
+    pw_t = np.array([p[0] for p in pwm]) + float(cfg.esc.output_latency_s)
     ipw = np.searchsorted(pw_t, t + 1e-9, side="right") - 1
     core = AllocationCore(cfg)
     curve = core.allocator.curves[0]
@@ -235,8 +245,6 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
     Raises :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag and
     :class:`BagContentError` when a needed topic is missing.
     """
-    from hindrax_drivers.recording.reader import BagReader
-
     reader = BagReader(bag_path)
     present = set(reader.topics)
     missing = [tp for tp in ("thrusters/pulse_width", "identification/status", "dvl/data", "imu/data_raw",
@@ -252,9 +260,6 @@ def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01)
     (``record.calibration``) the fits see the thrust-model force times the measured scales
     (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays unscaled.
     Raises ``ValueError`` for a non-positive scale in the bag."""
-    from .calibration import identify_calibrated
-    from .estimators import identify_all_with_errors
-
     record = record_from_bag(bag_path, cfg, grid_s)
     idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
     return record, idents, errors
@@ -269,9 +274,6 @@ def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | P
     are estimated jointly with the fits and identification.yaml gets the ``calibration`` and ``joint`` sections
     (:func:`~.results.build_results`). sections(doc): optional, adds further sections (e.g. ``inclining`` and
     ``free_decay``) before the file and the report are written."""
-    from .report import write_report
-    from .results import build_results, write_identification
-
     doc = build_results(idents, cfg, source=source, seed=seed, calibration=calibration or None)
     doc["provenance"]["bag"] = str(bag_path)
     if sections is not None:

@@ -45,9 +45,19 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from geometry_msgs.msg import TransformStamped, TwistWithCovarianceStamped, WrenchStamped
+from nav_msgs.msg import Odometry
+from rclpy.serialization import serialize_message
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import FluidPressure, Imu
+from tf2_msgs.msg import TFMessage
 
 from hindrax_drivers import frames
+from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import VehicleConfig
+from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+
+from ..sim.simulator import Simulator
 
 __all__ = ["PilotSettings", "write_piloted_bag"]
 
@@ -99,7 +109,6 @@ class PilotSettings:
 
 
 def _serialize(msg) -> bytes:
-    from rclpy.serialization import serialize_message
 
     return serialize_message(msg)
 
@@ -204,25 +213,18 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     cfg: the vehicle file; truth: the simulator's truth (path, :class:`~hindrax_ident.sim.truth.Truth` or None for
     the shipped default). Raises ``FileExistsError`` when ``bag_dir`` already holds a bag.
     """
-    from geometry_msgs.msg import TwistWithCovarianceStamped, WrenchStamped
-    from nav_msgs.msg import Odometry
-    from sensor_msgs.msg import FluidPressure, Imu
-
-    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
-
-    from ..sim.simulator import Simulator
-
     s = settings
     rng = np.random.default_rng(seed)
     dvl = s.sensors == "dvl"
     sim = Simulator(cfg, seed=seed, sensors=["dvl75", "icm20948_accel", "icm20948_gyro", "ms5837"] if dvl else False,
                     truth=truth)
-    f = sim.config.flat
+    vc = sim.config
+    pool = vc.pool
     # depth: the hull well under the surface even pitched and overshooting (no free-surface buoyancy loss)
-    half = 0.5 * float(f["vehicle.height_m"]) + 0.25
-    lo = np.array([f["pool.margin_m"], f["pool.margin_m"], half + 0.15])
-    hi = np.array([f["pool.length_m"] - f["pool.margin_m"], f["pool.width_m"] - f["pool.margin_m"],
-                   min(f["pool.depth_m"] - half, float(f["limits.max_depth_m"]) - 0.05)])
+    half = 0.5 * float(vc.vehicle.height_m) + 0.25
+    lo = np.array([pool.margin_m, pool.margin_m, half + 0.15])
+    hi = np.array([pool.length_m - pool.margin_m, pool.width_m - pool.margin_m,
+                   min(pool.depth_m - half, float(vc.limits.max_depth_m) - 0.05)])
     start = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])])
     sim.reset(position_ned_m=start, rpy_rad=[0.0, 0.0, float(rng.uniform(-math.pi, math.pi))])
     if s.pilot == "setpoints":
@@ -231,7 +233,6 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
         pilot = _Autopilot(s, rng, lo, hi, start, None)
     core = None
     if s.actuation == "thrusters":
-        from hindrax_drivers.allocation.core import AllocationCore
 
         core = AllocationCore(cfg)
         th = cfg.thrusters.thrusters
@@ -246,9 +247,8 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     pending: list[tuple[float, np.ndarray]] = []
     jitter = np.zeros(4)
     twist_held = np.zeros(6)
-    r_dvl = np.asarray(f["sensors.dvl75.position_frd_m"], dtype=float)
-    roll_m, pitch_m, yaw_m = f["sensors.icm20948.mounting_rpy_rad"]
-    from scipy.spatial.transform import Rotation
+    r_dvl = np.asarray(vc.sensors.dvl75.position_frd_m, dtype=float)
+    roll_m, pitch_m, yaw_m = vc.sensors.icm20948.mounting_rpy_rad
 
     flu_from_sensor = Rotation.from_euler("ZYX", [yaw_m, pitch_m, roll_m]).as_matrix()
     gyro_frd = np.zeros(3)
@@ -265,8 +265,6 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
         out: list[tuple[int, str, bytes]] = []
         r_imu = frames.R_FLU_FRD  # imu_link axes in base_link: pi about x, the FLU <-> FRD rotation
         if s.imu and not dvl:
-            from geometry_msgs.msg import TransformStamped
-            from tf2_msgs.msg import TFMessage
 
             w.add_topic("/imu", "sensor_msgs/msg/Imu")
             w.add_topic("/tf_static", "tf2_msgs/msg/TFMessage")

@@ -43,6 +43,16 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
+from ..estimation.drag_coefficient import (
+    characteristic_length_from_volume,
+    drag_coefficient,
+    reynolds_range,
+)
+from ..estimation.least_squares import EstimationError
+from ..estimation.priors import priors_from_config
+from .calibration import calibration_section, joint_estimate
+from .verdicts import apply_verdicts, rls_published_std
+
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry",
            "write_identification", "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "prior_entries"]
 
@@ -79,13 +89,10 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
     bounding-box area normal to the motion (:data:`_AREA_DIMENSIONS`), and the Reynolds range Re = |v| L / nu
     with L = V^(1/3) ([Hindrax-AM] eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
     None for rotational DOFs (the seed defines neither their area nor their radius)."""
-    from ..estimation.drag_coefficient import (EstimationError, characteristic_length_from_volume,
-                                               drag_coefficient, reynolds_range)
-
     if r.dof not in _AREA_DIMENSIONS:
         return None
     a, b = _AREA_DIMENSIONS[r.dof]
-    area = float(cfg.flat[f"vehicle.{a}"]) * float(cfg.flat[f"vehicle.{b}"])
+    area = float(getattr(cfg.vehicle, a)) * float(getattr(cfg.vehicle, b))
     rho = float(cfg.water_density_kg_m3)
     length = characteristic_length_from_volume(float(cfg.displaced_volume_m3))
     out: dict = {}
@@ -110,8 +117,6 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
 def _rls_entry(dof: str, r: Any, cfg: VehicleConfig) -> dict:
     """{name: [value, std or None]} of the online RLS, the std as published (:func:`~.verdicts.rls_published_std`:
     None = not converged / not trusted)."""
-    from .verdicts import rls_published_std
-
     names = [n for n in r.names if n in r.online]
     vals = [float(r.online[n][0]) for n in names]
     stds = [math.nan if r.online[n][1] is None else float(r.online[n][1]) for n in names]
@@ -124,9 +129,6 @@ def prior_entries(cfg: VehicleConfig) -> dict[str, dict]:
     configured geometry ([NTNU-Thesis] App. A.1/A.2, :func:`~..estimation.priors.priors_from_config`;
     no projected areas in the vehicle file, so a solid prism: an upper bound). A value that cannot be computed is
     None; ``{}`` if the configuration lacks the geometry."""
-    from ..estimation.least_squares import EstimationError
-    from ..estimation.priors import priors_from_config
-
     try:
         p = priors_from_config(cfg)
     except (KeyError, TypeError, EstimationError):
@@ -153,9 +155,6 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
     prior shows it as ``prior: [mean, std]`` beside its value, the document gains ``joint`` (the scales' posterior)
     and, with a calibration, ``calibration`` (:func:`~.calibration.calibration_section`).
     """
-    from .calibration import calibration_section, joint_estimate
-    from .verdicts import apply_verdicts
-
     joint = joint_estimate(identifications, cfg, calibration)
     assessments = apply_verdicts(identifications, cfg)
     priors = prior_entries(cfg)

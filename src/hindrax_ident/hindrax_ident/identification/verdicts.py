@@ -117,10 +117,10 @@ def _declared_rel(cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None) 
     if thruster_fit_rel is not None:
         return float(thruster_fit_rel[0]), float(thruster_fit_rel[1])
     # the bollard-pull fit's own uncertainty (hindrax ident thruster-fit --write) replaces the declared one
-    v = cfg.flat.get("thrusters.thrust_fit_uncertainty_rel")
+    v = cfg.thrusters.thrust_fit_uncertainty_rel
     if v is not None:
         return float(v[0]), float(v[1])
-    v = cfg.flat.get("thrusters.thrust_uncertainty_rel")
+    v = cfg.thrusters.thrust_uncertainty_rel
     return tuple(float(x) for x in v) if v is not None else DEFAULT_THRUST_UNCERTAINTY_REL  # type: ignore
 
 
