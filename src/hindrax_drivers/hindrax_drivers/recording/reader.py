@@ -28,8 +28,10 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 
+from . import msgdefs
 from . import recover as _recover
 from .metadata import MetadataError, read_metadata
+from .msgtypes import TypeNotInstalledError, message_class
 
 RAW_DEVICE_DATA_TYPE = "hindrax_msgs/msg/RawDeviceData"
 
@@ -171,6 +173,19 @@ class BagReader:
     def topics(self) -> dict[str, str]:
         """Topic name -> ``pkg/msg/Type``."""
         return {t: c.type for t, c in self.channels.items()}
+
+    def installed_class(self, topic: str) -> Any | None:
+        """The installed Python class of ``topic``'s type when it has the wire layout the bag recorded
+        (:func:`.msgdefs.matches_installed`), so rclpy's C deserializer can decode the records; None when the type
+        is not installed or has changed since (e.g. a bag from before ``ThrusterPwm.output_state``): decode
+        those with :meth:`decoded`, from the bag's own definition. KeyError for a topic not in the bag."""
+        ch = self.channels[topic]
+        try:
+            cls = message_class(ch.type)
+        except (TypeNotInstalledError, ValueError):
+            return None
+        same = msgdefs.matches_installed(ch.type, ch.definition, ch.metadata.get("topic_type_hash"))
+        return cls if same else None
 
     def messages(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
                  end_ns: int | None = None) -> Iterator[RawMessage]:

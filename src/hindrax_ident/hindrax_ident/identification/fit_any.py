@@ -45,7 +45,6 @@ how much data is needed).
 from __future__ import annotations
 
 import datetime as _dt
-import importlib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,7 +58,6 @@ from scipy.spatial.transform import Rotation
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
-from hindrax_drivers.recording import msgdefs
 from hindrax_drivers.recording.reader import BagReader
 
 from ..estimation.least_squares import EstimationError
@@ -164,20 +162,10 @@ def _static_rotation(reader, parent: str, child: str) -> np.ndarray | None:
 def _decoded(reader, topics: Sequence[str]):
     """(raw, message) pairs of ``topics`` in log-time order: rclpy's C deserializer for types whose Python package
     is installed with the layout the bag recorded (standard messages: several times faster), else the reader's
-    mcap_ros2 decoding from the stored definitions (:meth:`hindrax_drivers.recording.reader.BagReader.decoded`):
-    a bag recorded before a message gained a field (``ThrusterPwm.output_state``) stays readable."""
-    classes: dict[str, Any] = {}
-    for t in topics:
-        type_name = reader.topics[t]
-        pkg, _sub, name = type_name.partition("/msg/")
-        info = reader.channels[t]
-        try:
-            cls = getattr(importlib.import_module(f"{pkg}.msg"), name)
-        except (ImportError, AttributeError, ValueError):
-            cls = None
-        same = cls is not None and msgdefs.matches_installed(type_name, info.definition,
-                                                             info.metadata.get("topic_type_hash"))
-        classes[t] = cls if same else None
+    mcap_ros2 decoding from the stored definitions (:meth:`hindrax_drivers.recording.reader.BagReader.decoded`;
+    ``BagReader.installed_class`` decides): a bag recorded before a message gained a field
+    (``ThrusterPwm.output_state``) stays readable."""
+    classes = {t: reader.installed_class(t) for t in topics}
     if any(c is None for c in classes.values()):
         yield from reader.decoded(list(topics))
         return
