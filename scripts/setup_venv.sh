@@ -37,8 +37,8 @@ pipq() {
 pipq install -q --upgrade pip
 # colcon too (requirements-colcon.txt): `make ros-install` builds ros_ws with it, and the test suite runs that
 # build, which must not install packages into the venv while other tests run.
-pipq install -q -r requirements.txt -r requirements-colcon.txt
-if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then pipq install -q 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
+pipq install -q -r requirements.txt -r requirements-colcon.txt -c constraints.txt
+if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then pipq install -q -c constraints.txt 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
 export PATH="$PWD/$VENV/bin:$PATH"
 
 # The wheels' rosidl_generator_py CMake exports hard-code the wheel build host's include directories;

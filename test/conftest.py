@@ -45,7 +45,7 @@ class ColconInstall:
 
 def _inputs_hash(extra: str) -> str:
     h = hashlib.sha256(f"{VENV}\n{extra}\n".encode())
-    files = [REPO / "Makefile", REPO / "requirements.txt", REPO / "requirements-colcon.txt"]
+    files = [REPO / "Makefile", REPO / "requirements.txt", REPO / "requirements-colcon.txt", REPO / "constraints.txt"]
     for top in (REPO / "src", REPO / "ros_ws" / "config"):
         for dirpath, dirnames, filenames in os.walk(top, followlinks=False):
             dirnames[:] = sorted(d for d in dirnames
