@@ -187,6 +187,34 @@ class BagReader:
         same = msgdefs.matches_installed(ch.type, ch.definition, ch.metadata.get("topic_type_hash"))
         return cls if same else None
 
+    def installed_messages(self, topics: Iterable[str]) -> Iterator[tuple[RawMessage, Any]]:
+        """(raw message, instance of the installed class) pairs of ``topics`` in log-time order.
+
+        Records whose type has the installed layout (:meth:`installed_class`) go through rclpy's C deserializer;
+        records of a type that changed since the bag was written are decoded from the bag's stored definition
+        (:meth:`decoded`) and copied into the installed class field by field (:func:`.msgtypes.from_decoded`:
+        a field the bag lacks keeps the installed default). One rule for every reader of old bags.
+        Raises :class:`.msgtypes.TypeNotInstalledError` for a type that is not installed, KeyError for a topic
+        not in the bag, :class:`BagError` for a stored definition that does not parse.
+        """
+        from rclpy.serialization import deserialize_message
+
+        from .msgtypes import from_decoded
+
+        wanted = list(topics)
+        classes = {t: self.installed_class(t) for t in wanted}
+        changed = {t: message_class(self.channels[t].type) for t, c in classes.items() if c is None}
+        if not changed:
+            for raw in self.messages(wanted):
+                yield raw, deserialize_message(raw.data, classes[raw.topic])
+            return
+        for raw, obj in self.decoded(wanted):
+            cls = classes[raw.topic]
+            if cls is not None:
+                yield raw, deserialize_message(raw.data, cls)
+            else:
+                yield raw, from_decoded(changed[raw.topic], obj)
+
     def messages(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
                  end_ns: int | None = None) -> Iterator[RawMessage]:
         """Raw messages of ``topics`` (all when None) with start_ns <= log time < end_ns, in log-time order."""

@@ -575,14 +575,9 @@ def recorded_parsed(bag_path: str | Path) -> dict[str, list[Any]]:
     reader = BagReader(bag_path)
     wanted = [t for t in list(PARSED_TOPICS) + ["/thrusters/pulse_width"] if t in reader.topics]
     out: dict[str, list[Any]] = {t: [] for t in wanted}
-    classes = {t: message_class(reader.topics[t]) for t in wanted}
-    for m in reader.messages(wanted):
-        try:
-            msg = deserialize_message(m.data, classes[m.topic])
-        except Exception:  # noqa: BLE001 - a bag recorded before a trailing field was added
-            # hindrax_msgs/ThrusterPwm gained a trailing uint8 output_state (issue 23): an older record decodes with
-            # it at its default, OUTPUT_UNKNOWN (those bags did not record the state on the wire)
-            msg = deserialize_message(bytes(m.data) + b"\x00" * 4, classes[m.topic])
+    # a bag recorded before a message changed (ThrusterPwm gained output_state, issue 23) decodes from its stored
+    # definition, the new field at its default (OUTPUT_UNKNOWN: those bags did not record the state on the wire)
+    for m, msg in reader.installed_messages(wanted):
         out[m.topic].append(msg)
     return out
 
