@@ -460,7 +460,9 @@ def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):
     """Issue 23 finding 9: with the AK09916 missing, each retry re-ran the whole start-up (device reset): gaps of
     341-352 ms in imu/data_raw every retry. The retry now re-initialises only the magnetometer, one step per poll."""
     r = rig(truth=live_truth, overrides={"sensors.icm20948.mag_retry_interval_s": 0.3})
-    r.wait(lambda: len(r.mag) >= 5 and len(r.imu) >= 10, 5, "IMU and magnetometer data")
+    r.wait(lambda: len(r.mag) >= 5 and len(r.imu) >= 50, 10, "IMU and magnetometer data")
+    before = np.array([stamp_ns(m) for m in r.imu]) * 1e-9
+    rate_before_hz = (len(before) - 1) / (before[-1] - before[0])  # what this machine's load lets the poll reach
     r.emu.aux_connected = False  # the AK09916 goes missing
     r.wait(lambda: r.node.diag.counts().get("mag_lost", 0) == 1 and r.node.running and not r.node.mag_available,
            5, "running without magnetometer")
@@ -470,11 +472,12 @@ def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):
     r.wait_imu(5)
     assert r.node.startup_attempts == attempts  # no full start-up (no device reset) for a retry
     stamps = np.array([stamp_ns(m) for m in r.imu[n0:]]) * 1e-9
-    period = 1.0 / r.node.odr_hz
-    # at most one missed sample per retry; 0.1 s also leaves room for a loaded machine's timer jitter, far below
-    # the 0.34 s of a full start-up
-    assert np.max(np.diff(stamps)) < 0.1, np.max(np.diff(stamps))
-    assert len(stamps) > 0.8 * (stamps[-1] - stamps[0]) / period
+    # a full start-up (the bug) leaves a gap of 0.34 s at every retry; 0.25 s still catches it and leaves room for
+    # the timer jitter of a saturated 2-core machine (a CI run with two test workers), which reached 0.1 s
+    assert np.max(np.diff(stamps)) < 0.25, np.max(np.diff(stamps))
+    # a full start-up per 0.3 s retry would cost more than half the samples; the rate is compared with the one
+    # reached before on the same machine, not with the nominal ODR, which a saturated machine does not reach
+    assert (len(stamps) - 1) / (stamps[-1] - stamps[0]) > 0.7 * rate_before_hz
     r.emu.aux_connected = True
     n_mag = len(r.mag)
     r.wait(lambda: len(r.mag) >= n_mag + 3, 10, "imu/mag published after a retry found the AK09916")
