@@ -1,6 +1,9 @@
 """Identification node: ROS message adapters (frames, reversal) and the run_identification action on the
 virtual pool (goal validation, refusal while disarmed, feedback, HydroEstimate >= 1 Hz, cancel -> neutral)."""
 
+import time
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import rclpy
@@ -14,6 +17,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_ident.bringup import build_graph
+from hindrax_ident.identification.executive import ordered_samples
 from hindrax_ident.identification.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
                                                   thrust_of_written_widths)
 from hindrax_msgs.action import RunIdentification
@@ -55,6 +59,16 @@ def test_imu_and_range_messages():
     assert sample_from_range(r)[1].valid and sample_from_range(r)[1].distance_m == pytest.approx(0.9)
     assert not sample_from_range(Range(range=float("nan"), min_range=0.3, max_range=50.0))[1].valid
     assert not sample_from_range(Range(range=0.1, min_range=0.3, max_range=50.0))[1].valid
+
+
+def test_samples_are_ordered_late_ones_moved_and_impossible_ones_left_out():
+    s = lambda t: SimpleNamespace(stamp_s=t)  # noqa: E731
+    samples = [("imu", s(10.02)), ("dvl", s(9.95)), ("ping", s(1.8e9)), ("ms5837", s(10.01)), ("imu", s(3.0))]
+    out = ordered_samples(samples, not_before_s=10.0, not_after_s=10.02 + 1.0, drop_before_s=10.0 - 2.0)
+    assert [d for d, _ in out] == ["dvl", "ms5837", "imu"]  # by stamp; 1.8e9 (future) and 3.0 (stale) left out
+    assert [x.stamp_s for _, x in out] == [10.0, 10.01, 10.02]  # the late DVL report moved to the previous tick
+    assert samples[1][1].stamp_s == 9.95  # a copy: the caller's sample keeps its stamp
+    assert [d for d, _ in ordered_samples(samples)] == ["imu", "dvl", "ms5837", "imu", "ping"]  # no bounds: all
 
 
 def test_force_from_written_widths_undoes_the_esc_reversal_and_trim():
@@ -119,6 +133,19 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             wait_until(running, 300, spin, "surge run under way")  # wall time: slow under load
             t_run = sim.t_s
             wait_until(lambda: sim.t_s > t_run + 2.0, 30, spin, "two seconds of the run")
+            # a publisher on another clock (a second graph on the system clock in this domain): its samples are
+            # left out and counted, the campaign goes on (it stopped with "time went backwards" before)
+            foreign = probe.create_publisher(Imu, "imu/data_raw", 10)
+            node = graph.nodes["identification"]
+            for stamp_s in (time.time(), max(0.0, sim.t_s - 100.0)):
+                m = Imu()
+                m.header.frame_id = "imu_link"
+                m.header.stamp.sec, m.header.stamp.nanosec = int(stamp_s), int((stamp_s % 1.0) * 1e9)
+                m.linear_acceleration.z = 9.81
+                foreign.publish(m)
+            wait_until(lambda: node.samples_dropped >= 4, 30, spin, "foreign IMU samples left out")  # gyro + accel
+            t_foreign = sim.t_s
+            wait_until(lambda: sim.t_s > t_foreign + 0.5, 30, spin, "the run going on")
             # the running campaign's goal reads ACCEPTED: the node executes it only at its end (node docstring)
             assert handle.status == GoalStatus.STATUS_ACCEPTED
             fb = [x for x in got["fb"] if x.level_command != 0.0]

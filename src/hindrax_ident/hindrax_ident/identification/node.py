@@ -139,6 +139,12 @@ STATUS_PERIOD_S = 0.1
 ARMED_GRACE_S = 0.5
 #: the result message of a goal whose ESC output did not report armed
 NOT_ARMED = "ESC output not armed: call esc/set_armed first"
+#: a sensor sample stamped further than this after the node's clock is impossible and left out (s): the drivers stamp
+#: with their receive time or a device time converted to the ROS clock, both at or before the tick that takes them
+FUTURE_STAMP_TOLERANCE_S = 1.0
+#: a sample stamped further than this before the previous tick is stale and left out (s): sensor latencies through the
+#: graph (a conversion start, a report's time of validity) are tens to hundreds of milliseconds
+STALE_STAMP_TOLERANCE_S = 2.0
 
 _PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverStatus.PHASE_RUNNING,
            "returning": ManeuverStatus.PHASE_RETURNING, "done": ManeuverStatus.PHASE_DONE,
@@ -218,6 +224,9 @@ class IdentificationNode(Node):
         self._seen: set[str] = set()
         self._written: np.ndarray | None = None
         self._pwm_count = 0
+        #: sensor samples left out since start for a stamp after the node's clock or long before it
+        #: (``FUTURE_STAMP_TOLERANCE_S``, ``STALE_STAMP_TOLERANCE_S``)
+        self.samples_dropped = 0
         self._armed = False
         self._run: _GoalRun | None = None
         self._ended: dict[bytes, _GoalRun] = {}  # goal UUID -> ended run whose result is being delivered
@@ -438,7 +447,15 @@ class IdentificationNode(Node):
         else:
             samples, self._samples = self._samples, []
             previous = ex.t_s
-            w = ex.step(TickInput(t, max(0.0, t - previous), ordered_samples(samples, previous), self._armed, cancel))
+            valid = ordered_samples(samples, previous, t + FUTURE_STAMP_TOLERANCE_S,
+                                    previous - STALE_STAMP_TOLERANCE_S)
+            if len(valid) < len(samples):
+                self.samples_dropped += len(samples) - len(valid)
+                self.get_logger().warn(
+                    f"{self.samples_dropped} sensor samples left out, stamped more than {FUTURE_STAMP_TOLERANCE_S} s "
+                    f"after or {STALE_STAMP_TOLERANCE_S} s before this node's clock ({t:.3f} s): a publisher on "
+                    "another clock?", throttle_duration_sec=5.0)
+            w = ex.step(TickInput(t, max(0.0, t - previous), valid, self._armed, cancel))
             if self._written is not None:
                 run.written_us = self._written
         self._last_tick_s = t
