@@ -21,17 +21,24 @@ Reproducibility: with the serial devices in lock-step (:class:`~hindrax_ident.si
 simulated time frozen until every driver has finished its start-up exchange and the recorder is subscribed to
 every topic, and frozen again while each operator call (arm, goal, disarm) is answered, what happens at each
 simulated instant no longer depends on wall-clock timing, so the same seed gives the same run.
+
+Isolation: without ``ROS_DOMAIN_ID`` in the environment the graph runs on a ROS domain that no other process on
+the machine holds (:func:`run_domain`), and says which; another graph on the same domain (a second ``hindrax
+run``, a launch on the system clock) would feed its messages into the identification and the bag.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
 import rclpy
+from domain_coordinator import domain_id
 from rclpy.action import ActionClient
 from std_srvs.srv import Trigger
 
@@ -200,6 +207,19 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
                 level_fractions, wall0, truth, list(calibrate), sections)
 
 
+@contextlib.contextmanager
+def run_domain(say: Callable[[str], None]):
+    """The ROS domain ID for a graph run: ``ROS_DOMAIN_ID`` when the environment sets it (the user's choice, e.g.
+    to watch the run with a topside tool), else one reserved for the run's duration by ``domain_coordinator``
+    (a free one of 1-100, held by a port lock as the tests' domains are). Yields the ID; ``say`` gets one line."""
+    if os.environ.get("ROS_DOMAIN_ID", "").strip():
+        yield int(os.environ["ROS_DOMAIN_ID"])
+        return
+    with domain_id() as did:
+        say(f"ROS domain {did} (reserved for this run; set ROS_DOMAIN_ID to choose one)")
+        yield did
+
+
 def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say, deadline_s, level_fractions,
          wall0, truth=None, calibrate=(), sections=None) -> GraphCampaignOutcome:
 
@@ -211,7 +231,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     outcome = GraphCampaignOutcome(bag_dir=bag_dir)
     ov = dict(overrides or {})
     ov["simulation.real_time_factor"] = float(real_time_factor)
-    with ros_context() as ctx:
+    with run_domain(say) as did, ros_context(domain_id=did) as ctx:
         graph = build_graph(config_path, sim=True, record=True, record_dir=str(bag_dir), context=ctx, seed=seed,
                             overrides=ov, identification=True, drive_clocks=True, truth=truth)
         cfg = graph.config
