@@ -8,9 +8,9 @@ Publishes
     ``allocation/status`` (hindrax_msgs/AllocationStatus): requested and achieved wrench (base_link),
     scale, per-thruster saturation, rejection reason.
     Pulse widths go out for every wrench (and first to every :attr:`ThrustAllocationNode.command_sinks`: the ESC
-    node of the same process, :func:`hindrax_drivers.composition.connect_in_process`); forces and status (display and bag) at most every
-    :data:`STATUS_PERIOD_S` (10 Hz) with the latest allocation, and at once when rejected, the saturated
-    thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
+    node of the same process, :func:`hindrax_drivers.composition.connect_in_process`); forces and status (display
+    and bag) at most every :data:`STATUS_PERIOD_S` (10 Hz) with the latest allocation, and at once when rejected,
+    the saturated thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
     stale-check timer once the period has passed.
 
 A NaN/inf wrench, a wrench with an empty frame_id or in another frame than ``base_link``, one without a

@@ -242,7 +242,8 @@ class IdentificationNode(Node):
         sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
         # inputs (type, topic, handler, QoS depth): the depths hold what arrives in 0.4-2 s, many ticks
-        inputs = ((Dvl, "dvl/data", self._on_dvl, 20), (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
+        inputs = ((Dvl, "dvl/data", self._on_dvl, 20),
+                  (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
                   (Imu, "imu/data_raw", self._on_imu, 50), (Range, "ping/altitude", self._on_range, 20),
                   (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))
         #: on the system clock the inputs are polled at every tick (module docstring, "CPU"); None with use_sim_time
