@@ -53,3 +53,74 @@ def test_i2c_sensors_group_runs_both_nodes_under_their_own_names_and_exits_0_on_
     finally:
         if proc.poll() is None:
             proc.kill()
+
+
+@pytest.mark.ros
+def test_actuation_hands_the_command_to_the_esc_in_process_and_still_takes_other_publishers():
+    """actuation_node's hand-off (connect_in_process): the allocation's command is on the chip before the
+    allocation publishes it, its DDS copy is skipped by the ESC (not handled twice), the copy is still on the topic
+    for the bag, and a command from another publisher (thruster test) still reaches the ESC."""
+    import numpy as np
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hindrax_drivers.allocation.node import ThrustAllocationNode
+    from hindrax_drivers.composition import connect_in_process
+    from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+    from hindrax_drivers.pca9685.node import EscNode
+    from hindrax_drivers.testing import SafetyHeartbeats, config_parameters
+    from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+    from hindrax_msgs.msg import ThrusterPwm
+    from hindrax_msgs.srv import SetArmed
+
+    with ros_context() as ctx:
+        params = config_parameters({"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True})
+        emu = Pca9685Emulator()
+        alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
+        esc = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx, parameter_overrides=params)
+        connect_in_process([alloc, esc])
+        assert alloc.command_sinks == [esc.take_command]
+        probe = rclpy.create_node("handoff_probe", context=ctx)
+        SafetyHeartbeats(probe)
+        ex = SingleThreadedExecutor(context=ctx)
+        for n in (alloc, esc, probe):
+            ex.add_node(n)
+        wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
+        other = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        copies: list = []
+        probe.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", copies.append, 10)
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+        wait_until(lambda: wrench.get_subscription_count() and other.get_subscription_count() >= 2
+                   and arm.service_is_ready() and not esc.heartbeat_refusal(), 10, spin, "graph")
+        fut = arm.call_async(SetArmed.Request(arm=True))
+        wait_until(fut.done, 5, spin, "armed")
+        assert fut.result().success, fut.result().message
+        try:
+            on_chip_when_published = []
+            publish = alloc.pub_pwm.publish
+
+            def spy(msg):  # the chip already holds the command when the allocation publishes it
+                on_chip_when_published.append(emu.pulse_width_us(0))
+                publish(msg)
+            alloc.pub_pwm.publish = spy
+            handled = []
+            on_command = esc.on_command
+            esc.on_command = lambda msg: (handled.append(list(msg.pulse_width_us)), on_command(msg))
+            m = WrenchStamped()
+            m.header.frame_id = "base_link"
+            m.header.stamp = probe.get_clock().now().to_msg()
+            m.wrench.force.x = 20.0
+            wrench.publish(m)
+            wait_until(lambda: copies and esc.local_copies_skipped == 1, 10, spin, "the copy on the topic, skipped")
+            target = copies[-1].pulse_width_us[0]
+            assert abs(target - 1500.0) > 50.0 and on_chip_when_published == [pytest.approx(target, abs=1.0)]
+            assert len(handled) == 1  # handled once, by the hand-off
+            # another publisher's command is not skipped
+            other.publish(ThrusterPwm(pulse_width_us=[1600.0] * 8, armed=True))
+            wait_until(lambda: len(handled) == 2, 10, spin, "the other publisher's command handled")
+            assert np.allclose(handled[-1], 1600.0) and esc.local_copies_skipped == 1
+        finally:
+            ex.shutdown()
+            for n in (probe, esc, alloc):
+                n.destroy_node()

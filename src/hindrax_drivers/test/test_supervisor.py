@@ -293,3 +293,40 @@ def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, brea
     # latched: re-arming is undone by the supervisor until it is reset
     g["esc"].on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
     wait_until(lambda: not g["esc"].armed, 5, g["step"], "disarmed again while tripped")
+
+
+# ------------------------------------------------------------------ system clock: imu/data_raw polled at the checks
+def test_supervisor_takes_imu_samples_at_its_checks_on_the_system_clock():
+    """On the system clock the supervisor's imu/data_raw is a polled subscription (no executor dispatch): every
+    sample is counted once, at its DDS reception time, by the next check; the rate check then sees the IMU stop."""
+    import time
+
+    with ros_context() as ctx:
+        over = {"supervisor.rate_window_s": 1.0, "supervisor.check_rate_hz": 20.0}
+        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(over))
+        probe = rclpy.create_node("probe", context=ctx)
+        pub = probe.create_publisher(Imu, "imu/data_raw", 10)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(sup)
+        ex.add_node(probe)
+        try:
+            assert sup.imu_intake is not None
+            # no imu/data_raw subscription on the node the executor spins: only the intake node has one
+            assert "/imu/data_raw" not in {s.topic_name for s in sup.subscriptions}
+            assert "/imu/data_raw" in {s.topic_name for s in sup.imu_intake.node.subscriptions}
+            spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+            wait_until(lambda: pub.get_subscription_count() == 1, 10, spin, "intake matched")
+            t0 = time.time_ns() * 1e-9
+            for _ in range(30):
+                pub.publish(Imu())
+            stamps = sup.core._stamps["imu"]
+            wait_until(lambda: len(stamps) == 30, 10, spin, "30 samples counted by the checks")
+            assert all(t0 <= t <= time.time_ns() * 1e-9 for t in stamps)  # reception times, not check times
+            assert sup.core.rate_hz("imu", sup._now_s()) == pytest.approx(30.0 / 1.0)
+            assert sup.take_imu() == 0  # each sample counted once
+            # the IMU stops: once the window has passed the rate is 0 (an armed supervisor trips on it)
+            wait_until(lambda: sup.core.rate_hz("imu", sup._now_s()) == 0.0, 10, spin, "rate back to 0")
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            sup.destroy_node()

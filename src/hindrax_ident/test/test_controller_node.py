@@ -165,3 +165,52 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.ros
+def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_and_streams_drop_while_a_goal_runs():
+    """On the system clock the controller's topic inputs (but controller/setpoint) live on its intake node: the tick
+    hands them over (the armed flag, sensor samples at their reception time), and a running identification goal
+    drops the sensor streams from the intake, an idle one opens them again."""
+    import time
+
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import Imu
+
+    from hindrax_ident.control.node import ControllerNode
+    from hindrax_msgs.msg import ThrusterPwm
+
+    with ros_context() as ctx:
+        node = ControllerNode(config=load_config(default_config_path()), context=ctx, model_file="")
+        probe = rclpy.create_node("probe", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        try:
+            streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
+                       "/allocation/status", "/wrench"}
+            polled = streams | {"/thrusters/pulse_width", "/identification/status"}
+            intake_topics = lambda: {s.topic_name for s in node.intake.node.subscriptions}  # noqa: E731
+            assert intake_topics() == polled and not polled & {s.topic_name for s in node.subscriptions}
+            pwm = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
+            imu = probe.create_publisher(Imu, "imu/data_raw", 10)
+            status = probe.create_publisher(ManeuverStatus, "identification/status", 10)
+            spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+            wait_until(lambda: all(p.get_subscription_count() == 1 for p in (pwm, imu, status)), 10, spin,
+                       "intake matched")
+            t0 = time.time_ns() * 1e-9
+            pwm.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True))
+            m = Imu()
+            m.header.stamp = probe.get_clock().now().to_msg()
+            imu.publish(m)
+            wait_until(lambda: node._armed and "icm20948_gyro" in node._last_sample_s, 10, spin, "taken by the tick")
+            assert t0 <= node._last_sample_s["icm20948_gyro"] <= time.time_ns() * 1e-9
+            status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
+            wait_until(lambda: not streams & intake_topics(), 10, spin, "streams dropped while the goal runs")
+            assert node._ident_running and "/thrusters/pulse_width" in intake_topics()
+            status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
+            wait_until(lambda: intake_topics() == polled, 10, spin, "streams open again")
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            node.destroy_node()

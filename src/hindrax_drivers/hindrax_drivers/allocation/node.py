@@ -7,9 +7,10 @@ Publishes
     ``thrusters/forces`` (hindrax_msgs/ThrusterForces): thrust each thruster will produce, N.
     ``allocation/status`` (hindrax_msgs/AllocationStatus): requested and achieved wrench (base_link),
     scale, per-thruster saturation, rejection reason.
-    Pulse widths go out for every wrench; forces and status (display and bag) at most every
-    :data:`STATUS_PERIOD_S` (10 Hz) with the latest allocation, and at once when rejected, the saturated
-    thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
+    Pulse widths go out for every wrench (and first to every :attr:`ThrustAllocationNode.command_sinks`: the ESC
+    node of the same process, :func:`hindrax_drivers.composition.connect_in_process`); forces and status (display
+    and bag) at most every :data:`STATUS_PERIOD_S` (10 Hz) with the latest allocation, and at once when rejected,
+    the saturated thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
     stale-check timer once the period has passed.
 
 A NaN/inf wrench, a wrench with an empty frame_id or in another frame than ``base_link``, one without a
@@ -24,7 +25,7 @@ when a parameter changes, never per message. Configuration: the vehicle file as 
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from geometry_msgs.msg import Wrench, WrenchStamped
@@ -82,6 +83,8 @@ class ThrustAllocationNode(Node):
         self.timeout_s = cfg.thrusters.wrench_timeout_s
         self.future_margin_s = cfg.thrusters.wrench_future_margin_s
         self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        #: called with every command before it is published: in-process consumers (the composed ESC node)
+        self.command_sinks: list[Callable[[ThrusterPwm], None]] = []
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
         self.create_subscription(WrenchStamped, "wrench", self.on_wrench, 10)
@@ -152,6 +155,8 @@ class ThrustAllocationNode(Node):
             else self.get_clock().now().to_msg()
         pwm = ThrusterPwm(pulse_width_us=[float(x) for x in pulse_width_us], armed=not rejected)
         pwm.header.stamp, pwm.header.frame_id = stamp, BASE_FRAME
+        for sink in self.command_sinks:
+            sink(pwm)
         self.pub_pwm.publish(pwm)
         forces = ThrusterForces(force_n=[float(x) for x in force_n])
         forces.header.stamp, forces.header.frame_id = stamp, BASE_FRAME

@@ -61,6 +61,7 @@ clock for everything protective (see above).
 """
 from __future__ import annotations
 
+import collections
 import math
 import time
 from typing import Any
@@ -80,9 +81,18 @@ from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
 
+#: commands taken in the process (:meth:`EscNode.take_command`) remembered until their DDS copy arrives; a copy
+#: comes within milliseconds, so 16 (0.3 s at 50 Hz) only bounds the memory of copies that never come
+LOCAL_COMMANDS_KEPT = 16
 #: first retry of an unreachable bus or chip, s (doubled after every failure up to :data:`RETRY_MAX_S`)
 RETRY_MIN_S = 0.25
 RETRY_MAX_S = 4.0
+
+
+def _command_key(msg: ThrusterPwm) -> tuple:
+    """What identifies one command: stamp, armed flag and the widths' bytes (bytes, so a NaN width matches)."""
+    return (msg.header.stamp.sec, msg.header.stamp.nanosec, bool(msg.armed),
+            np.asarray(msg.pulse_width_us, dtype=float).tobytes())
 
 
 class EscOutput:
@@ -199,7 +209,10 @@ class EscNode(Node):
         self.start_time = self.get_clock().now()
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
-        self.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", self.on_command, 10)
+        self.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", self._on_command_topic, 10)
+        #: commands handed over in the process (:meth:`take_command`) whose DDS copy has not come back yet
+        self._local_commands: collections.deque = collections.deque(maxlen=LOCAL_COMMANDS_KEPT)
+        self.local_copies_skipped = 0
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
@@ -363,6 +376,22 @@ class EscNode(Node):
         return True
 
     # -- inputs
+    def take_command(self, msg: ThrusterPwm) -> None:
+        """A command handed over by a node of the same process (the composed thrust allocation,
+        :func:`hindrax_drivers.composition.connect_in_process`): handled at once, as :meth:`on_command`, without the
+        DDS hop; its copy on ``thrusters/command_pulse_width``, published for the bag, is then skipped when it
+        reaches this node's subscription (matched by stamp, widths and armed flag)."""
+        self._local_commands.append(_command_key(msg))
+        self.on_command(msg)
+
+    def _on_command_topic(self, msg: ThrusterPwm) -> None:
+        key = _command_key(msg)
+        if key in self._local_commands:  # the copy of a command taken in the process: handled already
+            self._local_commands.remove(key)
+            self.local_copies_skipped += 1
+            return
+        self.on_command(msg)
+
     def on_command(self, msg: ThrusterPwm) -> None:
         """Store the command and, armed, write it at once (event-driven output; the tick is the watchdog)."""
         self.command = np.array(msg.pulse_width_us, dtype=float)

@@ -9,7 +9,8 @@ armed while the breach is latched.
 Subscribes (ROS time of arrival is used for rates and run time; ``use_sim_time`` supported)
     ``dvl/data`` (hindrax_msgs/Dvl: attitude, velocity for the dead reckoning), ``ping/altitude``
     (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
-    ``imu/data_raw`` (sensor_msgs/Imu, rate only: taken as serialised bytes, never deserialised),
+    ``imu/data_raw`` (sensor_msgs/Imu, rate only: taken as serialised bytes, never deserialised; on the system
+    clock taken at each check from a polled subscription, see "CPU"),
     ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag), ``supervisor/abort``
     (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
     a manoeuvre on a limit).
@@ -29,6 +30,14 @@ CPU (README "Performance on the Pi")
     Publishers and subscriptions carry no QoS event handlers (rclpy's default is one incompatible-QoS warning
     handler each, visited in Python on every executor spin): a sensor that stops reaching the supervisor, for a
     QoS mismatch or any other reason, trips it through the ``supervisor.min_rate.*`` checks (where not 0).
+    On the system clock (the vehicle; ``use_sim_time`` false) ``imu/data_raw``, the supervisor's largest stream
+    (51-102 Hz), is a polled subscription (:class:`~hindrax_drivers.polled_input.PolledSubscriptions`): no executor
+    wake-up per sample; every check (``supervisor.check_rate_hz``) takes what arrived and counts each sample at its
+    DDS reception time (``received_timestamp``, system clock = the node's ROS time), so the rate and the age the
+    checks see are those of per-sample callbacks, up to one check period late (50 ms at 20 Hz; the rate window is
+    ``supervisor.rate_window_s``, 3 s). With ``use_sim_time`` the samples come by callback, counted at the ROS time
+    of arrival. The other inputs (attitude, depth, altitude, DVL, the ESC's armed flag, aborts) stay callbacks:
+    each can trip or disarm at once. docs/architecture.md §10.1 has the measured gain.
 Time
     The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
     of ROS time is detected at the next check, reported (``/diagnostics`` warning ``clock_step``) and the stored
@@ -60,6 +69,7 @@ from hindrax_msgs.srv import SetArmed
 from .. import frames
 from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from ..polled_input import PolledSubscriptions
 from .core import SupervisorCore, SupervisorLimits
 
 __all__ = ["SupervisorNode", "main"]
@@ -69,6 +79,9 @@ DISARM_RETRY_S = 0.2
 #: no QoS event handlers (module docstring, "CPU")
 _NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 _NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
+#: QoS depth of the polled ``imu/data_raw`` subscription: what arrives between two checks (about 3 samples at
+#: 51 Hz and a 20 Hz check) with room for checks delayed by a loaded machine (0.5 s at 102 Hz)
+IMU_POLL_DEPTH = 50
 
 
 class SupervisorNode(Node):
@@ -97,7 +110,13 @@ class SupervisorNode(Node):
         self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10, **ev)
         self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
         self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
-        self.create_subscription(Imu, "imu/data_raw", self.on_imu, 10, raw=True, **ev)
+        #: polled imu/data_raw intake on the system clock (module docstring, "CPU"); None with use_sim_time
+        self.imu_intake: PolledSubscriptions | None = None
+        if self.get_parameter("use_sim_time").value:
+            self.create_subscription(Imu, "imu/data_raw", self.on_imu, 10, raw=True, **ev)
+        else:
+            self.imu_intake = PolledSubscriptions(self)
+            self._imu_sub = self.imu_intake.subscribe(Imu, "imu/data_raw", IMU_POLL_DEPTH, raw=True, **ev)
         self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10, **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
@@ -130,6 +149,18 @@ class SupervisorNode(Node):
 
     def on_imu(self, _msg: bytes) -> None:
         self.core.on_message("imu", self._now_s())
+
+    def take_imu(self) -> int:
+        """Count the ``imu/data_raw`` samples queued on the polled subscription, each at its DDS reception time
+        (the time of the take where the middleware gave none). Returns how many; 0 with ``use_sim_time``."""
+        if self.imu_intake is None:
+            return 0
+        n = 0
+        for _data, info in self.imu_intake.take(self._imu_sub):
+            received_ns = info.get("received_timestamp") or self.get_clock().now().nanoseconds
+            self.core.on_message("imu", received_ns * 1e-9)
+            n += 1
+        return n
 
     def set_clock_stall_timeout(self, seconds: float) -> None:
         """ROS time may stand still this long (steady s) while armed before it trips (default
@@ -180,6 +211,7 @@ class SupervisorNode(Node):
         if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
             self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
                                         "armed: the supervisor's ROS-time checks are blind"))
+        self.take_imu()
         self._handle(self.core.check(self._now_s()))
         if self.core.tripped and self.esc_armed:
             self._disarm()
@@ -218,6 +250,13 @@ class SupervisorNode(Node):
             self.get_logger().error("esc/set_armed not available: cannot disarm", throttle_duration_sec=1.0)
             return
         self.disarm_future = self.esc_client.call_async(SetArmed.Request(arm=False))
+
+    def destroy_node(self) -> None:
+        """Destroy the polled intake node too, then this node."""
+        if self.imu_intake is not None:
+            self.imu_intake.close()
+            self.imu_intake = None
+        super().destroy_node()
 
     def _publish_status(self) -> None:
         t = self._now_s()

@@ -29,6 +29,13 @@ Subscribes
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
     ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change.
+CPU
+    On the system clock (the vehicle; ``use_sim_time`` false) the topic inputs but ``controller/setpoint`` are polled
+    subscriptions (:class:`~hindrax_drivers.polled_input.PolledSubscriptions`, as the recorder's): no executor
+    wake-up per message (about 60 messages/s while a goal runs, 250 while the streams are open); every tick first
+    hands what arrived to the same handlers, each sensor sample counted at its DDS reception time, so the tick
+    decides (yield, staleness, the law) on what callbacks would have delivered by then. With ``use_sim_time`` the
+    inputs are callbacks.
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
     ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
@@ -55,6 +62,7 @@ from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
 from hindrax_drivers.node_parameters import node_config
+from hindrax_drivers.polled_input import PolledSubscriptions
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus, ThrusterPwm
 
 from ..identification.maneuvers import HoldController, dof_authority
@@ -118,10 +126,16 @@ class ControllerNode(Node):
         sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
         self._sub_ev = sub_ev
+        #: on the system clock the topic inputs are polled at every tick (module docstring, "CPU"); None with
+        #: use_sim_time (callbacks)
+        self.intake: PolledSubscriptions | None = (None if self.get_parameter("use_sim_time").value
+                                                   else PolledSubscriptions(self))
+        self._polled: dict[Any, Any] = {}  # polled subscription -> its handler
+        self._received_s: float | None = None  # DDS reception time of the polled message being handled, s
         self._streams: list = []
         self._open_streams()
-        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20, **sub_ev)
-        self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20, **sub_ev)
+        self._subscribe(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20)
+        self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10, **pub_ev)
@@ -136,24 +150,61 @@ class ControllerNode(Node):
     def _open_streams(self) -> None:
         """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics, ``wrench``
         (other writers) and ``allocation/status`` (anti-windup). About 250 messages/s in the pool layout."""
-        ev = self._sub_ev
         self._streams = [
-            self.create_subscription(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20, **ev),
-            self.create_subscription(FluidPressure, "pressure/fluid_pressure",
-                                     lambda m: self._add([sample_from_pressure(m)]), 20, **ev),
-            self.create_subscription(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)),
-                                     50, **ev),
-            self.create_subscription(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20, **ev),
-            self.create_subscription(AllocationStatus, "allocation/status", self._on_allocation, 20, **ev),
-            self.create_subscription(WrenchStamped, "wrench", self._on_wrench, 50, **ev),
+            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20),
+            self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
+                            20),
+            self._subscribe(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)), 50),
+            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20),
+            self._subscribe(AllocationStatus, "allocation/status", self._on_allocation, 20),
+            self._subscribe(WrenchStamped, "wrench", self._on_wrench, 50),
         ]
+
+    def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
+        """A topic input: polled on the system clock (taken by :meth:`take_inputs` at every tick), a callback with
+        ``use_sim_time``. The depths hold what arrives in 0.4-2 s, many ticks."""
+        if self.intake is None:
+            return self.create_subscription(msg_type, topic, handler, depth, **self._sub_ev)
+        sub = self.intake.subscribe(msg_type, topic, depth, **self._sub_ev)
+        self._polled[sub] = handler
+        return sub
+
+    def take_inputs(self) -> int:
+        """Hand every message queued on the polled inputs to its handler, each sample counted at its DDS
+        reception time (``received_timestamp``, system clock = the node's ROS time). Returns how many; 0 with
+        ``use_sim_time``."""
+        n = 0
+        for sub, handler in list(self._polled.items()):
+            if sub not in self._polled:  # dropped by a handler of this round (identification/status)
+                continue
+            for msg, info in PolledSubscriptions.take(sub):
+                received_ns = info.get("received_timestamp") or 0
+                self._received_s = received_ns * 1e-9 if received_ns else None
+                handler(msg)
+                n += 1
+                if sub not in self._polled:
+                    break
+        self._received_s = None
+        return n
+
+    def destroy_node(self) -> None:
+        """Destroy the polled intake node too, then this node."""
+        if self.intake is not None:
+            self.intake.close()
+            self.intake = None
+            self._polled.clear()
+        super().destroy_node()
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
         conditioned state: after the goal the hold starts from fresh samples, and ``_refusal`` says "no data yet"
         until they arrive (docs/control.md §3)."""
         for sub in self._streams:
-            self.destroy_subscription(sub)
+            if self.intake is None:
+                self.destroy_subscription(sub)
+            else:
+                self._polled.pop(sub, None)
+                self.intake.destroy(sub)
         self._streams = []
         self._pending = []
         self._last_sample_s.clear()
@@ -163,7 +214,7 @@ class ControllerNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _add(self, samples: list) -> None:
-        now = self._now_s()
+        now = self._received_s if self._received_s is not None else self._now_s()
         for dev, _s in samples:
             self._last_sample_s[dev] = now
         self._pending.extend(samples)
@@ -296,6 +347,7 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ control tick
     def _on_tick(self) -> None:
+        self.take_inputs()
         t = self._now_s()
         self.loop.add(self._pending)
         self._pending = []
