@@ -91,3 +91,46 @@ def test_control_commands_bad_input_is_one_line(tmp_path, capsys):
     assert len(err) == 1 and "barrel_roll" in err[0] and "depth_step" in err[0]
     assert cli.main(["control", "scenarios", "--scenarios", "no_such_pool"]) == 1
     assert "no_such_pool" in capsys.readouterr().err
+
+
+def test_without_sensor_noise_is_the_same_run_for_every_seed(cfg):
+    """--no-sensor-noise: the truth's noise, dropout and scale-error keys are zero (biases kept), and with the DVL
+    beam noise off too the altitude hold over the changing slope is the same for two noise seeds; with the noise
+    on it is not."""
+    truth = load_truth(cfg, CONTROL_TRUTH)
+    quiet = ev.without_sensor_noise(truth)
+    flat = quiet.config.flat
+    noisy = [k for k in flat if k.startswith("simulation.sensors.") and (".noise_std_" in k or "dropout" in k
+                                                                          or "scale_error" in k)]
+    assert noisy and all(flat[k] == 0.0 for k in noisy)
+    assert flat["simulation.sensors.icm20948_gyro.bias_rad_s"] == truth.config.flat[
+        "simulation.sensors.icm20948_gyro.bias_rad_s"] != 0.0
+    assert quiet.disturbances.thrust.scale == truth.disturbances.thrust.scale == 0.85
+    setup = ev.EvaluationSetup(settle_s=6.5, surge_s=1.5, altitude_after_s=0.2, sensor_noise=False)
+    runs = [ev.run_case(cfg, truth, "altitude_hold", ev.make_hold("vehicle_file", cfg, setup), setup, sd, "f")
+            for sd in (1, 2)]
+    assert np.array_equal(runs[0].value, runs[1].value)
+    loud = ev.EvaluationSetup(settle_s=6.5, surge_s=1.5, altitude_after_s=0.2)
+    noisy_run = ev.run_case(cfg, truth, "altitude_hold", ev.make_hold("vehicle_file", cfg, loud), loud, 2, "f")
+    assert not np.array_equal(runs[1].value, noisy_run.value)
+
+
+def test_altitude_manoeuvre_stays_in_the_pool_and_crosses_the_slope_change(cfg):
+    """The default altitude_hold (docs/control.md §6, chosen from the vehicle's job): the run starts on the flat deep
+    end, crosses the 1:3 ramp and the 1:12 part, stops at least a hull length from the north wall, and the vehicle at
+    0.5 m altitude stays under the surface with its hull (surge distance = speed x duration + the first-order
+    velocity reference's coast, speed / bandwidth)."""
+    s = ev.EvaluationSetup()
+    f = cfg.flat
+    x0 = s.altitude_start_xy_m[0]
+    x_end = x0 + s.surge_speed_m_s * s.surge_s + s.surge_speed_m_s / (s.velocity_gain * s.bandwidth_rad_s)
+    (x_ramp, z_deep), (x_top, z_break), (_, z_shallow) = s.floor_profile_m
+    assert x0 < x_ramp - 0.5 * f["vehicle.length_m"] and x_top < x_end
+    assert x_end < f["pool.length_m"] - f["vehicle.length_m"]
+    assert z_deep == f["pool.depth_m"]
+    assert (z_deep - z_break) / (x_top - x_ramp) == pytest.approx(1.0 / 3.0)
+    shallowest_floor = z_break - (x_end - x_top) * (z_break - z_shallow) / (f["pool.length_m"] - x_top)
+    ping_z = cfg.sensors.ping1d.position_frd_m[2]
+    assert shallowest_floor - s.altitude_m - ping_z - 0.5 * f["vehicle.height_m"] > 0.2  # hull top 20 cm under water
+    # the heave rate the ramp asks for is inside the depth reference's rate limit
+    assert s.surge_speed_m_s / 3.0 < cfg.control.max_depth_rate_m_s

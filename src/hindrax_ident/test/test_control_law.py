@@ -218,3 +218,58 @@ def test_floor_estimator_finds_the_slope_from_one_dvl_report():
     assert z2 - z == pytest.approx(-0.08 * 0.15, abs=0.003)
     # without any range for FLOOR_TIMEOUT_S the floor is held
     assert est.floor_at(5.0, (0.3, 0.0))[0] == pytest.approx(z, abs=1e-9)
+
+
+def _ramp_floor(x):
+    """Floor depth (m) under north position x: flat 1.8 m, up at 1:3 from x = 2 to 2.9 m, flat 1.5 m beyond."""
+    return 1.8 - min(max(x - 2.0, 0.0), 0.9) / 3.0
+
+
+def _ray_to_floor(x0, z0, d):
+    """Range along the unit (north, east, down) direction d from (x0, z0) to _ramp_floor, by bisection."""
+    lo, hi = 0.0, 5.0
+    for _ in range(60):
+        t = 0.5 * (lo + hi)
+        lo, hi = (t, hi) if z0 + t * d[2] < _ramp_floor(x0 + t * d[0]) else (lo, t)
+    return 0.5 * (lo + hi)
+
+
+def _altitude_over_the_ramp(gradient_feedforward: bool, monkeypatch) -> np.ndarray:
+    """Altitude hold at 0.5 m over _ramp_floor, surging north at 0.4 m/s (kinematic), heave plant = model; Ping1D and
+    four 22.5-degree beams at 10 Hz from the body origin; returns the altitude error (m) per tick."""
+    from hindrax_drivers.dvl75.protocol import beam_directions_frd
+
+    heave = _axis("heave", 48.0, 0.0, 9.0, 120.0, 0.785)
+    plant = HeavePlant(48.0, 9.0, 120.0, 0.785, z0=1.3)
+    beams = np.array(beam_directions_frd())
+    ctrl = Controller(_model(heave), AUTH, ControlSettings(), dvl_beams_frd=beams)
+    if not gradient_feedforward:
+        monkeypatch.setattr(ctrl, "_floor_gradient_rate", lambda t, g: np.zeros(2))
+    ctrl.altitude_m, ctrl.velocity_frd_m_s = 0.5, np.array([0.4, 0.0])
+    err, alt, ranges, stamp = [], math.nan, np.full(4, np.nan), -1.0
+    for k in range(int(9.0 / TICK)):
+        t, x = k * TICK, 0.4 * k * TICK
+        if k % 5 == 0:  # 10 Hz ranges
+            alt, stamp = _ramp_floor(x) - plant.z, t
+            ranges = np.array([_ray_to_floor(x, plant.z, b) for b in beams])
+        f = ctrl.wrench(ControlInput(t, depth_m=plant.z, depth_rate_m_s=plant.w, rpy_rad=np.zeros(3),
+                                     rates_frd_rad_s=np.zeros(3), velocity_frd_m_s=np.array([0.4, 0.0, 0.0]),
+                                     altitude_m=alt, altitude_stamp_s=stamp, dvl_beam_range_m=ranges,
+                                     dvl_beam_stamp_s=stamp), TICK)[2]
+        plant.run(f, TICK)
+        err.append(_ramp_floor(x + 0.4 * TICK) - plant.z - 0.5)
+    return np.array(err)
+
+
+def test_a_slope_change_is_fed_forward_as_the_floors_acceleration(monkeypatch):
+    """Over a floor whose slope changes (flat, 1:3, flat) at 0.4 m/s the floor's vertical acceleration g' . v is fed
+    forward (x_d'' = g . a_ref + g' . v_ref - a_d''): the altitude error is less than 0.6 of the error with that term
+    removed; and the floor filter's slope walks with the distance travelled (FLOOR_GRADIENT_WALK_PER_SQRT_M), so it
+    learns the new slope within the ramp: RMS error below 1 cm (2.8 cm with the time-only walk of 0.02/sqrt(s)), and
+    the vehicle ends at the setpoint. Ideal plant and ranges: no noise, no lag."""
+    with_ff = _altitude_over_the_ramp(True, monkeypatch)
+    without = _altitude_over_the_ramp(False, monkeypatch)
+    rms = [float(np.sqrt(np.mean(e[100:] ** 2))) for e in (with_ff, without)]
+    assert rms[0] < 0.6 * rms[1], rms
+    assert rms[0] < 0.01, rms
+    assert abs(with_ff[-1]) < 0.005

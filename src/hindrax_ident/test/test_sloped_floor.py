@@ -144,3 +144,45 @@ def test_beam_ranges_reach_the_sensor_state_from_a_driver_message():
     assert st.dvl_beam_range_m[0] == pytest.approx(0.61)
     assert math.isnan(st.dvl_beam_range_m[2])
     assert st.dvl_beam_range_m[3] == pytest.approx(0.55)
+
+
+PROFILE = ((3.5, 1.8), (4.4, 1.5), (10.0, 1.5 - 5.6 / 12.0))  # the deep end, 1:3, then 1:12 (control evaluate)
+
+
+def test_floor_profile_depths_rays_and_contact(cfg):
+    """A floor that changes slope (Pool.set_floor_profile): depth by hand-interpolation, a vertical ray and a ray
+    tilted forward that lands on the 1:3 ramp (solved by hand below), a ray from under the floor, bad profiles, and
+    a sinking vehicle resting on the ramp."""
+    sim = Simulator(cfg, sensors=False)
+    pool = sim.pool
+    pool.set_floor_profile(PROFILE)
+    assert pool.floor_depth_m(1.0, 2.0) == pytest.approx(1.8)  # before the first point: constant
+    assert pool.floor_depth_m(3.95, 2.0) == pytest.approx(1.8 - 0.45 / 3.0)  # middle of the ramp
+    assert pool.floor_depth_m(7.2, 2.0) == pytest.approx(1.5 - 2.8 / 12.0)
+    assert pool.floor_depth_m(11.0, 2.0) == pytest.approx(1.5 - 5.6 / 12.0)
+    assert pool.ray_distance_m([3.0, 3.0, 1.0], [0.0, 0.0, 1.0]) == pytest.approx(0.8)
+    s, c = math.sin(math.radians(22.5)), math.cos(math.radians(22.5))
+    # from (3.4, 1.0) the ray x = 3.4 + t s, z = 1 + t c meets z = 1.8 - (x - 3.5) / 3 at
+    # t = (0.8 + 0.1 / 3) / (c + s / 3), on the ramp (the flat floor's 0.8 / c would land at x = 3.73)
+    t = (0.8 + 0.1 / 3.0) / (c + s / 3.0)
+    assert 3.5 < 3.4 + t * s < 4.4
+    assert pool.ray_distance_m([3.4, 3.0, 1.0], [s, 0.0, c]) == pytest.approx(t, rel=1e-9)
+    # looking back (south) the same ray meets the flat deep end: 0.8 / c
+    assert pool.ray_distance_m([3.0, 3.0, 1.0], [-s, 0.0, c]) == pytest.approx(0.8 / c, rel=1e-9)
+    assert pool.ray_distance_m([4.0, 3.0, 1.7], [0.0, 0.0, 1.0]) == math.inf  # under the ramp
+    for bad in ([(1.0, 1.8)], [(2.0, 1.8), (1.0, 1.5)], [(1.0, 1.8), (2.0, -0.1)], [(1.0, 1.8), (1.5, 0.5)],
+                [(1.0, math.nan), (2.0, 1.5)]):
+        with pytest.raises(ValueError, match="floor profile"):
+            pool.set_floor_profile(bad)
+    pool.set_floor_profile(())
+    assert pool.floor_depth_m(7.2, 2.0) == pytest.approx(1.8)  # flat again
+
+    truth = truth_from_mapping(cfg, {"vehicle": {"mass_kg": 15.4, "net_buoyancy_n": -0.98}})
+    sink = Simulator(cfg, truth=truth, sensors=False)
+    sink.pool.set_floor_profile(PROFILE)
+    sink.reset(position_ned_m=[7.0, 3.0, 0.9])
+    sink.advance(8.0, [1500.0] * 8)
+    cb = cfg.centre_of_buoyancy_frd_m
+    bottom = sink.position_ned_m[2] + cb[2] + 0.5 * cfg.flat["vehicle.height_m"]
+    assert bottom == pytest.approx(sink.pool.floor_depth_m(sink.position_ned_m[0] + cb[0], 3.0), abs=0.01)
+    assert "floor" in sink.contact.faces

@@ -53,8 +53,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                             help="truth file of the virtual pool (overlay of the vehicle file + disturbances)")
         parser.add_argument("--model", required=True, metavar="YAML",
                             help="identification.yaml identified against that truth (hindrax ident campaign --truth)")
-        parser.add_argument("--maneuvers", default="depth_step,altitude_hold,heading_step",
-                            help="comma-separated manoeuvres (default all three)")
+        parser.add_argument("--maneuvers", default="depth_step,altitude_hold,heading_step,altitude_gentle",
+                            help="comma-separated manoeuvres (default all four: depth_step, altitude_hold, "
+                                 "heading_step and the former gentle altitude case altitude_gentle)")
+        parser.add_argument("--no-sensor-noise", action="store_true",
+                            help="diagnostic: the simulated sensors without white noise, dropouts, DVL scale error "
+                                 "and beam-range noise, to separate the model's error from the noise")
         parser.add_argument("--models", default="identified,vehicle_file,pd_hold",
                             help="comma-separated holds (default identified,vehicle_file,pd_hold)")
     else:
@@ -127,7 +131,7 @@ def _evaluate(args, cfg) -> int:
         raise CommandError(f"--truth: {exc}") from exc
     model = _load_model(args.model, cfg)
     wall0 = time.monotonic()
-    setup = ev.EvaluationSetup()
+    setup = ev.EvaluationSetup(sensor_noise=not args.no_sensor_noise)
 
     def progress(msg: str) -> None:
         print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
@@ -147,9 +151,14 @@ def _evaluate(args, cfg) -> int:
                    f"/ PD hold {row.get('rmse_vs_pd_hold', math.nan):.2f} (mean over {args.seeds} seed(s))"
                    for m, row in ev.ratios(cases).items()]
     print("\n".join(ratio_lines))
-    results_doc.write_if_asked(args, "control-evaluate", "Closed loop: identified model against the vehicle file",
+    section, title = (("control-evaluate-quiet", "Closed loop without sensor noise (diagnostic)")
+                      if args.no_sensor_noise else
+                      ("control-evaluate", "Closed loop: identified model against the vehicle file"))
+    results_doc.write_if_asked(args, section, title,
                                f"Truth `{args.truth}`, model `{model.source}`, seeds {args.seed}.."
-                               f"{args.seed + args.seeds - 1}.\n\n```\n{ev.format_table(cases)}\n"
+                               f"{args.seed + args.seeds - 1}"
+                               + (", sensor noise off (diagnostic)" if args.no_sensor_noise else "")
+                               + f".\n\n```\n{ev.format_table(cases)}\n"
                                + "\n".join(ratio_lines) + "\n```")
     print(f"output: {path} and {path.parent / 'report' / 'index.html'}  (wall time {time.monotonic() - wall0:.0f} s)")
     return 0

@@ -7,8 +7,33 @@ thrusters), at the identification tick (``identification.estimate_rate_hz``). Th
 (:data:`MANEUVERS`):
 
 * ``depth_step``: hold depth at ``depth_start_m``, then a ``depth_step_m`` (0.3 m) step down;
-* ``altitude_hold``: hold ``altitude_m`` (0.5 m, Ping1D) over a sloped floor (``floor_gradient``: the floor rises
-  8 cm per metre northwards) while surging north at ``surge_speed_m_s`` for ``surge_s``, then stopping;
+* ``altitude_hold``: hold ``altitude_m`` (0.5 m, Ping1D) while surging north at the survey speed
+  ``surge_speed_m_s`` (0.4 m/s) for ``surge_s`` (12 s), then stopping, over a floor whose slope changes
+  (``floor_profile_m``, :meth:`~hindrax_ident.sim.pool.Pool.set_floor_profile`): flat at the pool's 1.8 m, then rising
+  at 1:3 to 1.5 m over 0.9 m, then at 1:12. Why these numbers (chosen from the vehicle's job before the comparison
+  was run; docs/control.md §6):
+
+  - the speed: Hindrax surveys scallop beds surging over them ([Hindrax-Drag] §2.1); its self-propelled surge tests
+    reached 0.20-0.45 m/s ([Hindrax-Drag] Table 4, surge Re 0.5e5-1.1e5 with L = V^(1/3) = 0.248 m and
+    nu = 1.0e-6 m^2/s, :mod:`hindrax_ident.estimation.drag_coefficient`), so the survey speed is taken in the upper
+    part of the speeds the vehicle is known to reach; 0.4 rather than 0.45 m/s for the authority: the steady surge
+    force on the control truth, (85 kg/m x 0.4^2 + 2.5 kg/s x 0.4) / 0.85 = 17.2 N commanded, stays below the holds'
+    surge limit (0.6 x 35.6 N = 21.4 N), where 0.45 m/s would need 21.5 N, the whole limit;
+  - the floor: the test pool ([Hindrax-Drag] §4: 10 x 6 x 1.8 m) has no published profile; the usual pool codes
+    allow at most 1:3 where the water is deeper than about 1.5 m (5 ft) and 1:10 to 1:15 in the shallow part, with
+    the break between them at about 1.5 m (ASSUMPTION: the profile of a code-built pool with a 1.8 m deep end, not
+    the measured floor of the paper's pool). A floor that changes slope is what a seabed does too: the hold then
+    has transients (the floor estimate of :mod:`.law` must follow a new gradient, the vehicle must accelerate
+    vertically) instead of a steady climb that the integrator absorbs. The run-in over the flat deep end keeps the
+    start of the surge (the velocity reference's acceleration saturates surge for about a second) away from the
+    floor's slopes;
+  - inside the box and the authority: start 2 m from the south wall, about 4.8 m run (the ramp reached after about
+    4 s), floor 1.8 -> 1.28 m under the vehicle; heave rate demand 0.13 m/s on the 1:3 ramp (the depth reference
+    allows ``max_depth_rate_m_s`` 0.3), heave force well inside the holds' limit (0.6 x 62.1 N);
+* ``altitude_gentle``: the former altitude manoeuvre, kept so that nothing is hidden: a plane floor rising 8 cm
+  per metre northwards (``gentle_floor_gradient``) while surging at ``gentle_surge_speed_m_s`` (0.3 m/s) for
+  ``gentle_surge_s`` (18 s): heave rate demand 0.024 m/s, forces near the ESC deadband, both model-based holds at the
+  sensor-noise floor (docs/control.md §6);
 * ``heading_step``: a ``heading_step_rad`` (30 deg) heading step;
 
 each with three holds (:data:`MODELS`): ``identified`` (the model-based law, :mod:`.law`, with the model of
@@ -48,26 +73,30 @@ import numpy as np
 
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.config import DOFS, ConfigError, VehicleConfig
 
 from ..identification.maneuvers import HoldController, dof_authority
 from ..sim.simulator import Simulator
-from ..sim.truth import Truth, with_floor_gradient
+from ..sim.truth import Truth, TruthError, with_floor_gradient
 from .law import ControlSettings, ReferenceModel, wrap
 from .legacy import LegacyPDHold
 from .loop import HoldLoop
 from .model import ControlModel, model_from_config
 
-__all__ = ["MANEUVERS", "MODELS", "METRICS", "EvaluationSetup", "CaseResult", "run_case", "evaluate", "metrics",
-           "summarise", "format_table", "write_outputs", "ratios", "make_hold", "reference_limits"]
+__all__ = ["MANEUVERS", "ALTITUDE_MANEUVERS", "MODELS", "METRICS", "EvaluationSetup", "CaseResult", "run_case",
+           "evaluate", "metrics", "summarise", "format_table", "write_outputs", "ratios", "make_hold",
+           "reference_limits", "without_sensor_noise"]
 
-MANEUVERS = ("depth_step", "altitude_hold", "heading_step")
+MANEUVERS = ("depth_step", "altitude_hold", "heading_step", "altitude_gentle")
+ALTITUDE_MANEUVERS = ("altitude_hold", "altitude_gentle")
 MODELS = ("identified", "vehicle_file", "pd_hold")
 
 
 @dataclass(frozen=True)
 class EvaluationSetup:
-    """The manoeuvres' numbers (module docstring). Positions NED in the pool frame (m), angles rad."""
+    """The manoeuvres' numbers (module docstring). Positions NED in the pool frame (m), angles rad, speeds m/s,
+    times s; ``floor_profile_m``: (x north, floor depth) breakpoints, m; ``sensor_noise`` False: the diagnostic
+    without sensor noise (:func:`without_sensor_noise`)."""
 
     bandwidth_rad_s: float = 2.0
     velocity_gain: float = 1.5
@@ -81,13 +110,18 @@ class EvaluationSetup:
     heading_step_rad: float = math.radians(30.0)
     heading_after_s: float = 20.0
     altitude_m: float = 0.5
-    floor_gradient: tuple[float, float] = (-0.08, 0.0)
-    altitude_start_xy_m: tuple[float, float] = (2.5, 3.0)
-    surge_speed_m_s: float = 0.3
-    surge_s: float = 18.0
+    floor_profile_m: tuple[tuple[float, float], ...] = ((3.5, 1.8), (4.4, 1.5), (10.0, 1.5 - 5.6 / 12.0))
+    altitude_start_xy_m: tuple[float, float] = (2.0, 3.0)
+    surge_speed_m_s: float = 0.4
+    surge_s: float = 12.0
     altitude_after_s: float = 12.0
+    gentle_floor_gradient: tuple[float, float] = (-0.08, 0.0)
+    gentle_start_xy_m: tuple[float, float] = (2.5, 3.0)
+    gentle_surge_speed_m_s: float = 0.3
+    gentle_surge_s: float = 18.0
     settling_fraction: float = 0.05
     altitude_band_m: float = 0.02
+    sensor_noise: bool = True
 
 
 @dataclass
@@ -136,6 +170,22 @@ def make_hold(kind: str, cfg: VehicleConfig, setup: EvaluationSetup, model: Cont
     raise ValueError(f"unknown model {kind!r}; one of {', '.join(MODELS)}")
 
 
+def without_sensor_noise(truth: Truth) -> Truth:
+    """The same truth with the simulated sensors' white noise, dropouts and DVL scale error set to zero
+    (``simulation.sensors.*.noise_std_*``, ``dropout_probability``, ``dvl75.scale_error_fraction``); biases, rates
+    and the truth's disturbances are kept. With :func:`run_case` also turning off the DVL beam-range noise, this is
+    the diagnostic that separates the model's error from the sensor noise (docs/control.md §6). Raises
+    :class:`~..sim.truth.TruthError` if the configuration does not validate (it always should)."""
+    quiet = {k: 0.0 for k in truth.config.flat
+             if k.startswith("simulation.sensors.") and (".noise_std_" in k or k.endswith(".dropout_probability")
+                                                          or k.endswith(".scale_error_fraction"))}
+    try:
+        config = truth.config.with_overrides(quiet)
+    except ConfigError as exc:
+        raise TruthError(f"{truth.source}: {exc}") from exc
+    return Truth(config, truth.disturbances, truth.vehicle, truth.overlay, f"{truth.source} (sensor noise off)")
+
+
 def _true_altitude(sim: Simulator, ping_frd: np.ndarray) -> float:
     """Noise-free Ping1D range: from the altimeter along the body z axis to the floor (m)."""
     rot = sim.rotation
@@ -148,15 +198,26 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
     and metrics. Raises ``ValueError`` for an unknown manoeuvre."""
     if maneuver not in MANEUVERS:
         raise ValueError(f"unknown manoeuvre {maneuver!r}; one of {', '.join(MANEUVERS)}")
-    if maneuver == "altitude_hold":
-        truth = with_floor_gradient(truth, setup.floor_gradient)
+    altitude = maneuver in ALTITUDE_MANEUVERS
+    if maneuver == "altitude_gentle":
+        truth = with_floor_gradient(truth, setup.gentle_floor_gradient)
+    if not setup.sensor_noise:
+        truth = without_sensor_noise(truth)
     sim = Simulator(cfg, seed=seed, truth=truth)
+    dvl = sim.sensors.models.get("dvl75")
+    if not setup.sensor_noise and dvl is not None:
+        dvl.beam_range_noise_fraction = 0.0  # type: ignore[attr-defined]
+    if maneuver == "altitude_hold" and sim.pool is not None:
+        sim.pool.set_floor_profile(setup.floor_profile_m)
+    start_xy, surge_speed, surge_s = ((setup.altitude_start_xy_m, setup.surge_speed_m_s, setup.surge_s)
+                                      if maneuver == "altitude_hold" else
+                                      (setup.gentle_start_xy_m, setup.gentle_surge_speed_m_s, setup.gentle_surge_s))
     rate = float(cfg.identification.estimate_rate_hz)
     steps = max(1, int(round(1.0 / (rate * sim.step_s))))
     tick = steps * sim.step_s
     ping = np.asarray(cfg.sensors.ping1d.position_frd_m, dtype=float)
-    if maneuver == "altitude_hold":
-        x, y = setup.altitude_start_xy_m
+    if altitude:
+        x, y = start_xy
         z0 = sim.pool.floor_depth_m(x, y) - setup.altitude_m - ping[2]
     else:
         (x, y), z0 = setup.start_xy_m, setup.depth_start_m
@@ -169,14 +230,14 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
     neutral = float(cfg.thrusters.pulse_width_neutral_us)
     hold.heading_setpoint_rad = 0.0
     hold.velocity_setpoint_m_s = np.zeros(2)
-    if maneuver == "altitude_hold" and isinstance(hold, HoldController):
+    if altitude and isinstance(hold, HoldController):
         hold.altitude_setpoint_m = setup.altitude_m
         hold.depth_setpoint_m = math.nan
     else:
         hold.depth_setpoint_m = z0
     t_event = setup.settle_s
-    end = t_event + {"depth_step": setup.depth_after_s, "heading_step": setup.heading_after_s,
-                     "altitude_hold": setup.surge_s + setup.altitude_after_s}[maneuver]
+    end = t_event + (surge_s + setup.altitude_after_s if altitude else
+                     {"depth_step": setup.depth_after_s, "heading_step": setup.heading_after_s}[maneuver])
     limits = reference_limits(cfg, setup)
     settings = ControlSettings()
     spec_ref = ReferenceModel(setup.bandwidth_rad_s, 1.0,
@@ -184,9 +245,9 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
                                else settings.max_depth_rate_m_s),
                               angle=maneuver == "heading_step",
                               max_accel=limits["yaw" if maneuver == "heading_step" else "heave"])
-    initial = {"depth_step": z0, "heading_step": 0.0, "altitude_hold": setup.altitude_m}[maneuver]
-    final = initial + {"depth_step": setup.depth_step_m, "heading_step": setup.heading_step_rad,
-                       "altitude_hold": 0.0}[maneuver]
+    initial = setup.altitude_m if altitude else {"depth_step": z0, "heading_step": 0.0}[maneuver]
+    final = initial + (0.0 if altitude else
+                       {"depth_step": setup.depth_step_m, "heading_step": setup.heading_step_rad}[maneuver])
     spec_ref.reset(initial)
     series: dict[str, list] = {k: [] for k in ("t", "v", "spec", "sp", "thrust")}
     dive_step = 0.25 * tick  # the campaign's dive: the PD depth setpoint moves at most 0.25 m/s towards its target
@@ -207,8 +268,8 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
         elif maneuver == "heading_step":
             hold.heading_setpoint_rad = sp
         else:
-            moving = after and t < t_event + setup.surge_s
-            hold.velocity_setpoint_m_s = np.array([setup.surge_speed_m_s if moving else 0.0, 0.0])
+            moving = after and t < t_event + surge_s
+            hold.velocity_setpoint_m_s = np.array([surge_speed if moving else 0.0, 0.0])
             if not isinstance(hold, HoldController):  # today's altitude hold: the campaign's dive rule
                 st = loop.state
                 if math.isfinite(st.altitude_m) and math.isfinite(st.depth_m):
@@ -221,7 +282,7 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
         pw = np.asarray(alloc.pulse_width_us, dtype=float)
         sim.advance(tick, np.where(reversed_, 2.0 * neutral - pw, pw))
         if after:
-            spec_x = spec_ref.step(sp, tick)[0] if maneuver != "altitude_hold" else sp
+            spec_x = sp if altitude else spec_ref.step(sp, tick)[0]
             if maneuver == "depth_step":
                 v = float(sim.position_ned_m[2])
             elif maneuver == "heading_step":
@@ -249,7 +310,7 @@ def metrics(res: CaseResult, setup: EvaluationSetup, step: float) -> dict:
     if angle:
         err_spec = np.array([wrap(e) for e in err_spec])
         err_sp = np.array([wrap(e) for e in err_sp])
-    if res.maneuver == "altitude_hold":
+    if res.maneuver in ALTITUDE_MANEUVERS:
         overshoot = float(np.max(np.abs(err_sp))) if err_sp.size else math.nan
         band = setup.altitude_band_m
     else:
@@ -393,7 +454,7 @@ def _report(folder: Path, cases: Sequence[CaseResult], info: Mapping[str, Any], 
                     label=f"{c.model} (rmse {c.metrics['rmse'] * scale:.3g} {unit})")
             ax2.plot(c.t_s, np.sqrt(np.mean(c.thrust_n ** 2, axis=1)), color=colours.get(c.model), lw=1)
         ylabel = {"depth_step": "depth (m, down)", "altitude_hold": "altitude (m, Ping1D range, truth)",
-                  "heading_step": "heading (deg)"}[m]
+                  "altitude_gentle": "altitude (m, Ping1D range, truth)", "heading_step": "heading (deg)"}[m]
         ax.set_ylabel(ylabel)
         if m == "depth_step":
             ax.invert_yaxis()

@@ -30,9 +30,11 @@ Depth is NED z of the body origin (down positive); the heave force is projected 
 Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range: the floor under the vehicle is a local plane
 (:class:`FloorEstimator`, a filterpy Kalman filter on the floor depth under the body origin and its gradient), fed
 with every range as a floor point (the Ping1D along body z and the four DVL-75 beams); the depth hold follows
-x_d = z_f(footprint) - (R r_ping)_z - a_d cos(roll) cos(pitch), x_d' = g . v_ref - a_d', x_d'' = g . a_ref - a_d''
-with g the gradient, v_ref and a_ref the surge/sway references in NED and a_d the reference model of the altitude
-setpoint: the floor's rate and acceleration under a moving vehicle are fed forward before the altimeter sees them.
+x_d = z_f(footprint) - (R r_ping)_z - a_d cos(roll) cos(pitch), x_d' = g . v_ref - a_d',
+x_d'' = g . a_ref + g' . v_ref - a_d'' with g the gradient, g' its low-passed time derivative (a floor whose slope
+changes under the moving vehicle, :meth:`Controller._floor_gradient_rate`), v_ref and a_ref the surge/sway references
+in NED and a_d the reference model of the altitude setpoint: the floor's rate and acceleration under a moving vehicle
+are fed forward before the altimeter sees them.
 
 Why our own code: the reference model, feedforward and anti-windup are a few lines each around the model, and no
 maintained Python library implements marine model-based PID with reference feedforward; filterpy gives the filter.
@@ -71,6 +73,13 @@ PING_RANGE_STD_M = 0.01
 DVL_BEAM_RANGE_STD_FRACTION = 0.02
 #: Without any floor point (Ping1D or DVL beam) for this long the floor estimate is held where it was, s.
 FLOOR_TIMEOUT_S = 1.0
+#: ASSUMPTION: random walk of the floor's slope per metre travelled, 1/sqrt(m): a slope change of 0.25 (a pool's 1:12
+#: shallow part to its 1:3 deep-end transition, or a bed's edge) within the 0.4 m that the DVL-75 beams' footprints
+#: span at 0.5 m altitude: 0.25 / sqrt(0.4) = 0.4.
+FLOOR_GRADIENT_WALK_PER_SQRT_M = 0.4
+#: Time constant of the low-pass on the time derivative of the floor gradient estimate, s: two reports of the DVL-75
+#: beams at their 10 Hz (docs/devices.md §1), the shortest window that smooths the steps of the 10 Hz updates.
+FLOOR_GRADIENT_RATE_FILTER_S = 0.2
 
 
 def wrap(a: float) -> float:
@@ -343,13 +352,18 @@ class FloorEstimator:
     the body origin, a measurement z_f + g_n dN + g_e dE (:meth:`update_point`); the beams of one DVL report at once
     give the slope. Between points the vehicle moves by v dt, so the state advances as z_f += g . v dt
     (:meth:`predict_to`, with the measured horizontal velocity, NED). Process noise: the floor's depth and slope
-    change as a random walk in time (roughness and slope changes along the track). :meth:`floor_at` returns the
-    depth and gradient now; without any range for :data:`FLOOR_TIMEOUT_S` the floor is held (``stale``)."""
+    change as a random walk in time, and the slope also as a random walk in the distance travelled
+    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`, ``gradient_walk_per_sqrt_m``): a floor's slope changes along the
+    track, not while the vehicle hovers. :meth:`floor_at` returns the depth and gradient now; without any range for
+    :data:`FLOOR_TIMEOUT_S` the floor is held (``stale``)."""
 
     def __init__(self, depth_walk_m_sqrt_s: float = 0.005, gradient_walk_per_sqrt_s: float = 0.02,
-                 gradient_prior_std: float = 0.2) -> None:
+                 gradient_prior_std: float = 0.2,
+                 gradient_walk_per_sqrt_m: float | None = None) -> None:
         self.kf = KalmanFilter(dim_x=3, dim_z=1)
         self.q = np.diag([depth_walk_m_sqrt_s ** 2, gradient_walk_per_sqrt_s ** 2, gradient_walk_per_sqrt_s ** 2])
+        walk_m = FLOOR_GRADIENT_WALK_PER_SQRT_M if gradient_walk_per_sqrt_m is None else gradient_walk_per_sqrt_m
+        self.q_per_m = np.diag([0.0, walk_m ** 2, walk_m ** 2])
         self.prior_std = float(gradient_prior_std)
         self.t_s: float | None = None
         self.last_update_s = -math.inf
@@ -370,7 +384,7 @@ class FloorEstimator:
         dt = t_s - self.t_s
         vn, ve = (float(x) if math.isfinite(x) else 0.0 for x in velocity_ne_m_s)
         self.kf.F = np.array([[1.0, vn * dt, ve * dt], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-        self.kf.Q = self.q * dt
+        self.kf.Q = self.q * dt + self.q_per_m * (math.hypot(vn, ve) * dt)
         self.kf.predict()
         self.t_s = float(t_s)
 
@@ -482,6 +496,8 @@ class Controller:
         self.attitude_rad = np.zeros(2)
         self.mode = "none"  # vertical hold of the last tick: depth | altitude | waiting_altitude | none
         self.floor_state = (math.nan, math.nan, math.nan)  # altitude mode: floor depth under the footprint, gradient
+        self._gradient_prev: tuple[float, np.ndarray] | None = None  # (t_s, gradient) of the last altitude tick
+        self.gradient_rate = np.zeros(2)  # low-passed d/dt of the floor gradient estimate (north, east), 1/s
 
     # ------------------------------------------------------------------ reporting
     def gain_report(self) -> list[str]:
@@ -508,6 +524,24 @@ class Controller:
         self.floor = FloorEstimator()
         self._last_alt_stamp = -math.inf
         self._last_beam_stamp = -math.inf
+        self._gradient_prev = None
+        self.gradient_rate = np.zeros(2)
+
+    def _floor_gradient_rate(self, t_s: float, gradient: np.ndarray) -> np.ndarray:
+        """The time derivative of the floor gradient estimate (north, east; 1/s), differenced between altitude ticks
+        and low-passed with :data:`FLOOR_GRADIENT_RATE_FILTER_S` (first order, backward Euler). Under a vehicle
+        moving at v over a floor whose slope changes, the floor's vertical acceleration is g . a + g' . v: the second
+        term is what a slope change asks of the depth hold, and without it the reference's acceleration is not the
+        derivative of its rate (the feedback alone then has to produce the inertia force, late)."""
+        if self._gradient_prev is not None:
+            t0, g0 = self._gradient_prev
+            dt = t_s - t0
+            if dt > 0.0:
+                raw = (gradient - g0) / dt
+                self.gradient_rate = self.gradient_rate + dt / (FLOOR_GRADIENT_RATE_FILTER_S + dt) * (
+                    raw - self.gradient_rate)
+        self._gradient_prev = (float(t_s), gradient.copy())
+        return self.gradient_rate
 
     def note_allocation(self, requested_frd, achieved_frd) -> None:
         """Anti-windup from the thrust allocation (``allocation/status``): an axis whose achieved wrench falls short of
@@ -610,11 +644,18 @@ class Controller:
             rot = rotation_ned_from_body(rpy)
             foot = rot @ (self.ping_position_frd_m + np.array([0.0, 0.0, float(self.altitude_m)]))
             zfp = zf + gn * foot[0] + ge * foot[1]  # floor depth under the altimeter's footprint
+            engaging = not (self.mode == "altitude" and self.altitude_ref.ready and ax.engaged)
+            if engaging or self.floor.stale(inp.t_s):
+                self._gradient_prev, self.gradient_rate = None, np.zeros(2)
+            g_rate = self._floor_gradient_rate(inp.t_s, np.array([gn, ge]))
             zf_rate = gn * v_ne[0] + ge * v_ne[1]
-            zf_acc = gn * a_ne[0] + ge * a_ne[1]
+            # the floor's vertical acceleration under the footprint: g . a_ref + g' . v_ref (a slope change), the
+            # second term no larger than the reference model's acceleration limit
+            acc_lim = self.reference_accel["heave"]
+            zf_acc = gn * a_ne[0] + ge * a_ne[1] + float(np.clip(g_rate @ v_ne, -acc_lim, acc_lim))
             tilt = math.cos(rpy[0]) * math.cos(rpy[1])
             offset = float((rot @ self.ping_position_frd_m)[2])
-            if not (self.mode == "altitude" and self.altitude_ref.ready and ax.engaged):
+            if engaging:
                 # bumpless: the altitude reference starts at the altitude the depth reference is at now
                 xd0 = ax.ref.x if (ax.engaged and ax.ref.ready) else z
                 vd0 = ax.ref.v if (ax.engaged and ax.ref.ready) else zr

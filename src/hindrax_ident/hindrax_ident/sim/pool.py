@@ -12,7 +12,10 @@ Floor: flat at ``depth_m`` by default; a sloped floor (truth ``disturbances.floo
 floor's depth change per metre north and east) is the plane z_f(x, y) = depth_m + g_n (x - length_m / 2) +
 g_e (y - width_m / 2) (depth_m at the pool centre). Altitudes (DVL: vertical; Ping1D: along the body z axis) and the
 floor contact use that plane; the contact takes the floor depth under the hull centre (the tilt of the floor across
-the hull, a few mm at the slopes of a pool, is neglected).
+the hull, a few mm at the slopes of a pool, is neglected). A floor whose slope changes along the pool
+(:meth:`Pool.set_floor_profile`, e.g. a pool's deep end rising at 1:3 to a shallow part at 1:12) is a piecewise-linear
+profile p(x) in north, breakpoints (x_k, z_k), linear between them and constant beyond the first and the last: then
+z_f(x, y) = p(x) + g_n (x - length_m / 2) + g_e (y - width_m / 2), and the rays, altitudes and contact use it alike.
 
 Free surface (:class:`FreeSurface`): the submerged fraction of the hull is the part of its vertical extent
 below z = 0, ``f = clip((z_c + h) / (2 h), 0, 1)`` with z_c the depth of the hull centre (CB) and
@@ -117,6 +120,7 @@ class Pool:
         self._since: dict[str, float] = {}
         self._t = 0.0
         self.floor_gradient = (0.0, 0.0)
+        self.floor_profile: tuple[tuple[float, float], ...] = ()
 
     @classmethod
     def from_config(cls, config: VehicleConfig) -> "Pool":
@@ -134,10 +138,48 @@ class Pool:
             raise ValueError(f"floor gradient must be two numbers in [-0.5, 0.5], got {list(gradient_ne)}")
         self.floor_gradient = g
 
+    def set_floor_profile(self, points_north_depth_m: Sequence[Sequence[float]]) -> None:
+        """Give the floor a piecewise-linear profile along north (module docstring): ``points_north_depth_m`` is a
+        sequence of (x north, floor depth) pairs, m, x strictly increasing; the depth is interpolated linearly between
+        them and kept constant beyond the ends (``pool.depth_m`` is then not used). An empty sequence restores the
+        flat floor at ``pool.depth_m``. Raises ``ValueError`` for fewer than two points, a non-finite value, an x
+        not increasing, a depth not positive, or a segment steeper than 1:1 (the ray caster assumes the floor is
+        a function of x)."""
+        pts = tuple((float(x), float(z)) for x, z in points_north_depth_m)
+        if not pts:
+            self.floor_profile = ()
+            return
+        ok = len(pts) >= 2 and all(math.isfinite(x) and math.isfinite(z) and z > 0.0 for x, z in pts)
+        ok = ok and all(b[0] > a[0] and abs(b[1] - a[1]) <= b[0] - a[0] for a, b in zip(pts, pts[1:]))
+        if not ok:
+            raise ValueError("floor profile must be at least two (x north, depth) points in m, x increasing, depth "
+                             f"positive, slopes within 1:1; got {list(points_north_depth_m)}")
+        self.floor_profile = pts
+
+    def _profile_segments(self) -> list[tuple[float, float, float, float]]:
+        """(x_lo, x_hi, depth at x_lo, slope) of the profile's pieces, the constant ends from -inf and to +inf."""
+        pts = self.floor_profile
+        segs = [(-math.inf, pts[0][0], pts[0][1], 0.0)]
+        segs += [(a[0], b[0], a[1], (b[1] - a[1]) / (b[0] - a[0])) for a, b in zip(pts, pts[1:])]
+        segs.append((pts[-1][0], math.inf, pts[-1][1], 0.0))
+        return segs
+
+    def _profile_depth_m(self, x: float) -> float:
+        pts = self.floor_profile
+        if not pts:
+            return self.depth_m
+        if x <= pts[0][0]:
+            return pts[0][1]
+        for a, b in zip(pts, pts[1:]):
+            if x <= b[0]:
+                return a[1] + (b[1] - a[1]) * (x - a[0]) / (b[0] - a[0])
+        return pts[-1][1]
+
     def floor_depth_m(self, x_m: float, y_m: float) -> float:
         """Depth (m, NED z) of the floor at the horizontal position (x, y) (module docstring)."""
         gn, ge = self.floor_gradient
-        return self.depth_m + gn * (float(x_m) - 0.5 * self.length_m) + ge * (float(y_m) - 0.5 * self.width_m)
+        return (self._profile_depth_m(float(x_m)) + gn * (float(x_m) - 0.5 * self.length_m)
+                + ge * (float(y_m) - 0.5 * self.width_m))
 
     def altitude_m(self, point_ned_m: Sequence[float]) -> float:
         """Vertical distance (m) from a point to the floor (negative below the floor)."""
@@ -163,10 +205,23 @@ class Pool:
             elif d < -1e-12:
                 best = min(best, (0.0 - o) / d)
         gn, ge = self.floor_gradient  # the floor plane z = z_f(x, y): oz + t dz = z_f(o + t d)
-        den = dz - gn * dx - ge * dy
-        if den > 1e-12:
-            best = min(best, (self.floor_depth_m(ox, oy) - oz) / den)
-        return best if best >= 0.0 else math.inf
+        if not self.floor_profile:
+            den = dz - gn * dx - ge * dy
+            if den > 1e-12:
+                best = min(best, (self.floor_depth_m(ox, oy) - oz) / den)
+            return best if best >= 0.0 else math.inf
+        if best < 0.0 or self.floor_depth_m(ox, oy) - oz < 0.0:
+            return math.inf  # outside the box or under the floor
+        for x_lo, x_hi, z_lo, slope in self._profile_segments():  # each piece's plane, hit inside its x range
+            den = dz - (gn + slope) * dx - ge * dy
+            if den <= 1e-12:
+                continue
+            z_here = (z_lo + slope * (ox - x_lo) if math.isfinite(x_lo) else z_lo) + gn * (ox - 0.5 * self.length_m) \
+                + ge * (oy - 0.5 * self.width_m)
+            t = (z_here - oz) / den
+            if 0.0 <= t < best and x_lo - 1e-9 <= ox + t * dx <= x_hi + 1e-9:
+                best = t
+        return best
 
     # ------------------------------------------------------------------ contact
     @property
@@ -196,7 +251,7 @@ class Pool:
         touched: list[str] = []
         v_ned = None
         floor = self.depth_m
-        if self.floor_gradient != (0.0, 0.0):
+        if self.floor_gradient != (0.0, 0.0) or self.floor_profile:
             floor = self.floor_depth_m(state[0] + r[0][0] * cx + r[0][1] * cy + r[0][2] * cz,
                                        state[1] + r[1][0] * cx + r[1][1] * cy + r[1][2] * cz)
         for axis, (lo_face, hi_face, hi) in enumerate((("south_wall", "north_wall", self.length_m),

@@ -342,17 +342,19 @@ class DvlVelocityModel(SensorModel):
         r_sensor = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
         self.beam_dirs_frd = (r_sensor @ np.asarray(beam_directions_frd(), dtype=float).T).T
         self.beam_rng = np.random.default_rng(np.random.SeedSequence([int(seed), DEVICE_INDEX["dvl75"], 2000]))
+        self.beam_range_noise_fraction = DVL_BEAM_RANGE_NOISE_FRACTION  # 0: noise-free beams (diagnostic)
 
     def beam_ranges(self, point_ned_m, rotation) -> tuple[float, float, float, float]:
         """Range (m) along each beam from ``point_ned_m`` to the first wall or floor it hits, with
-        :data:`DVL_BEAM_RANGE_NOISE_FRACTION` of noise; NaN beyond the altitude envelope or without a pool."""
+        ``beam_range_noise_fraction`` (default :data:`DVL_BEAM_RANGE_NOISE_FRACTION`) of relative noise; NaN
+        beyond the altitude envelope or without a pool."""
         if self.pool is None:
             return (math.nan,) * 4  # type: ignore[return-value]
         out = []
         for d in self.beam_dirs_frd:
             r = self.pool.ray_distance_m(point_ned_m, rotation @ d)
             ok = math.isfinite(r) and self.min_altitude_m <= r
-            out.append(float(r * (1.0 + DVL_BEAM_RANGE_NOISE_FRACTION * self.beam_rng.standard_normal()))
+            out.append(float(r * (1.0 + self.beam_range_noise_fraction * self.beam_rng.standard_normal()))
                        if ok else math.nan)
         return tuple(out)  # type: ignore[return-value]
 
