@@ -313,7 +313,9 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     """Cut ``rec``'s chunks into segments of ``seconds`` with the force delayed, lagged and less the Coriolis force
     (``coupling_inertia`` (6,) of the other DOFs, NaN = unknown, this DOF's own entry unused) as ``terms`` and
     ``timing`` say. A last part of at least ``min_fraction`` of a segment is kept (padded, no measurement in the
-    padding). ``excited_only``: only the segments that move the DOF (:data:`EXCITATION_MIN`). Raises
+    padding); without ``excited_only`` a whole chunk shorter than that is one segment too (a designed window shorter
+    than a segment is still fitted). ``excited_only``: only the segments that move the DOF (:data:`EXCITATION_MIN`).
+    Raises
     :class:`EstimationError` when no segment remains."""
     h = rec.h
     L = max(10, int(round(seconds / h)))
@@ -352,7 +354,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
         pos, zs = pos[order], ch.sample_z[order]
         for s0 in range(0, n, L):
             mlen = min(L, n - s0)
-            if mlen < max(10, min_fraction * L):
+            if mlen < 10 or (mlen < min_fraction * L and (excited_only or s0 > 0)):
                 continue
             sl = slice(s0, s0 + mlen)
             vseg = ch.v[sl]
