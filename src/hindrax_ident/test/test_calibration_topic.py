@@ -155,7 +155,7 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     _write_campaign_bag(bag, cfg, msg if with_calibration else None)
     seen = []
 
-    def fake_identify(record, cfg_):
+    def fake_identify(record, cfg_, *_opts):
         seen.append(record)
         return {"heave": _ident("heave", [37.7, 93.5, 56.6, 5.3, 11.8, 0.78], [0.5, 3, 3, 3, 3, 0.05], cfg_)}, {}
 

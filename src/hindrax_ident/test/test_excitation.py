@@ -126,7 +126,7 @@ def test_ladder_is_the_default_and_the_excitation_comes_from_the_config():
 
 def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
     from hindrax_ident.identification.campaign import Campaign
-    from hindrax_ident.identification.estimators import identify_dof
+    from hindrax_ident.identification.campaign_fit import identify_dof
 
     cfg = load_config(default_config_path())
     rec = Campaign(cfg, dofs=["surge"], seed=3, excitation="multisine", excitation_duration_s=40.0).run()

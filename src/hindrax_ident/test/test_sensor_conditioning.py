@@ -12,7 +12,7 @@ import pytest
 from hindrax_drivers import frames
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.campaign import Campaign
-from hindrax_ident.identification.estimators import rate_bias_against_angle
+from hindrax_ident.identification.campaign_fit import rate_bias_against_angle
 from hindrax_ident.identification.fusion import smooth_with_rate
 from hindrax_ident.identification.maneuvers import DepthEstimator, SensorState, euler_rates, rotation_ned_from_body
 

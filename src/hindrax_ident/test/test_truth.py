@@ -157,7 +157,8 @@ def test_five_percent_weaker_thrust_is_covered_or_suspect(vehicle):
     """Issue 16, done when: a truth whose thrust curves are 5 % weaker than the vehicle file's gives surge and heave
     inertia intervals that cover the truth (or a suspect verdict). The truth's hydrodynamics are the vehicle's."""
     from hindrax_ident.identification.campaign import Campaign
-    from hindrax_ident.identification.estimators import identify_all_with_errors, truth_parameters
+    from hindrax_ident.identification.campaign_fit import identify_all_with_errors
+    from hindrax_ident.identification.estimators import truth_parameters
     from hindrax_ident.identification.verdicts import apply_verdicts
 
     truth = load_truth(vehicle, truth_dir() / "thrust_0.95.yaml")

@@ -57,7 +57,7 @@ def test_interval_uses_thrust_uncertainty_and_segment_dof(cfg):
     r = _ident(cfg, "surge", pool_time_s=90.0)
     a = assess_dof(r, cfg)
     nseg = segment_count("surge", 90.0)
-    assert nseg == 30
+    assert nseg == 9  # 10 s segments of the fit core (fit_core.SEGMENT_S)
     p = a["parameters"]["inertia"]
     assert p["t_dof"] == nseg - 1  # cluster-robust: segments - 1
     rel = cfg.flat["thrusters.thrust_uncertainty_rel"]

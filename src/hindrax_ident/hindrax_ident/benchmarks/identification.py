@@ -4,7 +4,7 @@ Surge + heave, 3 levels (the acceptance test's campaign), in both modes: ``make 
 all-DOF campaign's wall time and accuracy are ``make run``'s, in docs/results.md (section ``run``). Rows: wall
 time (target < 600 s for the full campaign), pool time per DOF, and per DOF the relative error of the inertia and
 quadratic damping for the reported
-(output-error) estimate, the equation-error batch LS, the online RLS and the seed's steady-state LS, with
+(output-error, the fit core) estimate, the equation-error batch LS, the online RLS and the steady-state LS, with
 the pool time each needed (RLS: until converged; steady-state: until the end of the last window used).
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ import time
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.campaign import Campaign
-from hindrax_ident.identification.estimators import identify_all_with_errors
+from hindrax_ident.identification.campaign_fit import identify_all_with_errors
 
 
 def run(quick: bool = False) -> list[dict]:

@@ -2,8 +2,10 @@
 identification of a recorded campaign bag.
 
 Writes ``identification.yaml`` and ``report/index.html`` (default: beside the bag) and prints the summary
-table; the analysis is :mod:`hindrax_ident.identification.from_bag` (batch least squares with output-error
-refinement, [Hindrax-Drag] eqs. 6-8). When the bag holds the calibration steps' results
+table; the reading is :mod:`hindrax_ident.identification.from_bag` (the campaign's topics into the campaign
+record) and :mod:`hindrax_ident.identification.campaign_fit` (the record into the fit core's per-DOF records), the
+fit is the fit core shared with ``hindrax ident fit`` (:mod:`hindrax_ident.identification.fit_core`,
+docs/identification.md §7). When the bag holds the calibration steps' results
 (``identification/calibration``, published by the identification node when each step ends: ``hindrax ident start
 --calibrate ...`` with the recorder on), they are applied as ``hindrax run`` applies them: the thrust scales are
 estimated jointly with the fits (sections ``calibration`` and ``joint``), the inclining steps give the section
@@ -18,7 +20,7 @@ from pathlib import Path
 
 from .common import CommandError, add_config_argument, load_vehicle
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["add_arguments", "run", "identify_campaign_bag"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,37 +34,53 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_config_argument(parser)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Identify from a bag, write the outputs, print the summary. Raises :class:`CommandError` on bad input."""
+def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, command: str, identify=None):
+    """Identify a campaign bag (the campaign reader and the fit core, :func:`~..identification.from_bag.identify_bag`)
+    and write identification.yaml and the report in ``out``; prints the DOFs without an estimate and the bag's
+    calibration. ``args`` gives ``restoring_n_m_per_rad`` and ``restoring_std`` (the free decay's stiffness when the
+    bag has no inclining step; absent: the vehicle file's); ``identify(bag, cfg)``: default
+    :func:`~..identification.from_bag.identify_bag` with the fit core's default options. Returns (record,
+    {dof: DofIdentification}, the yaml's path). Raises :class:`CommandError` (prefixed ``command``) for an unusable
+    bag or when no DOF is identified."""
     from hindrax_drivers.recording.reader import BagError
 
-    import yaml
-
     from ..identification.from_bag import BagContentError, identify_bag, write_outputs
-    from ..identification.verdicts import format_advice
-    from .run import _add_reference_sections, format_summary
+    from .run import _add_reference_sections
 
-    cfg = load_vehicle(args.config)
-    bag = Path(args.bag)
-    if not bag.exists():
-        raise CommandError(f"ident bag: {bag}: no such file or directory")
     try:
-        record, idents, errors = identify_bag(bag, cfg)
+        record, idents, errors = (identify or identify_bag)(bag, cfg)
     except (BagError, BagContentError, OSError, ValueError) as exc:
-        raise CommandError(f"ident bag: {exc}") from exc
+        raise CommandError(f"{command}: {exc}") from exc
     for dof, msg in errors.items():
         print(f"{dof}: no estimate ({msg})")
     if not idents:
-        raise CommandError("ident bag: no DOF could be identified")
-    out = Path(args.out) if args.out else bag.resolve().parent
+        raise CommandError(f"{command}: no DOF could be identified")
     out.mkdir(parents=True, exist_ok=True)
     if record.calibration:
         print("calibration from the bag (identification/calibration): " + ", ".join(
             f"{k} {v['value']:.4f} +- {v['std']:.4f}" for k, v in record.calibration.items()))
     note = (f"Offline identification of bag {bag}, {record.t_s[-1] - record.t_s[0]:.0f} s of campaign"
             + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
+    ref = argparse.Namespace(restoring_n_m_per_rad=getattr(args, "restoring_n_m_per_rad", None),
+                             restoring_std=getattr(args, "restoring_std", 0.0))
     path = write_outputs(out, idents, cfg, bag, note, calibration=record.calibration,
-                         sections=lambda doc: _add_reference_sections(doc, record, cfg, idents, args, print))
+                         sections=lambda doc: _add_reference_sections(doc, record, cfg, idents, ref, print))
+    return record, idents, path
+
+
+def run(args: argparse.Namespace) -> int:
+    """Identify from a bag, write the outputs, print the summary. Raises :class:`CommandError` on bad input."""
+    import yaml
+
+    from ..identification.verdicts import format_advice
+    from .run import format_summary
+
+    cfg = load_vehicle(args.config)
+    bag = Path(args.bag)
+    if not bag.exists():
+        raise CommandError(f"ident bag: {bag}: no such file or directory")
+    out = Path(args.out) if args.out else bag.resolve().parent
+    _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident bag")
     print(format_summary(idents))
     doc = yaml.safe_load(Path(path).read_text())
     for dof, e in doc.get("dofs", {}).items():  # what data would fix each suspect parameter (as ident fit prints)

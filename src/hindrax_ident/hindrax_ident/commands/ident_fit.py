@@ -1,7 +1,11 @@
 """``hindrax ident fit BAG [BAG ...]``: identify from any bag (piloted, closed-loop, another vehicle's) and validate.
 
-The pipeline is :mod:`hindrax_ident.identification.fit_any` (force and velocity by message type, preprocessing,
-segment-wise output error with an input delay, K-fold and holdout validation). Writes ``identification.yaml``
+Two readers feed one fit core (:mod:`hindrax_ident.identification.fit_core`, docs/identification.md §7). A bag with
+the campaign's topics (:func:`hindrax_ident.identification.from_bag.is_campaign_bag`), given alone with ``--config``
+and no topic, DOF or holdout choice, is read as the campaign (the campaign reader of ``hindrax ident bag``,
+:mod:`hindrax_ident.identification.campaign_fit`) and written as ``hindrax ident bag`` writes it: the same values
+and intervals. Any other bag goes through :mod:`hindrax_ident.identification.fit_any` (force and velocity by
+message type, preprocessing, K-fold and holdout validation). Writes ``identification.yaml``
 (``dofs``, ``validation``, ``preprocessing``) and ``report/index.html`` (measured against predicted velocity on the
 validation data) in ``--out`` (default: the first bag's parent directory) and prints a table. Without ``--config``
 the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready: false`` with the reason, also
@@ -75,6 +79,32 @@ def format_table(res) -> str:
     return "\n".join(lines)
 
 
+def _run_campaign(args: argparse.Namespace, cfg) -> int:
+    """A campaign bag: the campaign reader, the fit core with this command's folds, the outputs of ``hindrax ident
+    bag`` (:func:`~.ident_bag.identify_campaign_bag`) and this command's table of the core's results."""
+    from dataclasses import replace
+
+    from ..identification import fit_core
+    from ..identification import from_bag
+    from ..identification.fit_any import DofFit, FitResult
+    from .ident_bag import identify_campaign_bag
+
+    bag = Path(args.bags[0])
+    out = Path(args.out) if args.out else bag.resolve().parent
+    opts = replace(fit_core.CoreOptions(), folds=args.folds)
+    identify = from_bag.identify_bag
+    _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit",
+                                                  identify=lambda b, c: identify(b, c, opts=opts))
+    res = FitResult({d: DofFit(d, "fitted", {}, r.signals["core"], {"cross_validation": dict(r.signals["core"].cv)})
+                     for d, r in idents.items()}, {}, f"{args.folds}-fold cross-validation by contiguous blocks of the "
+                    f"{opts.validation_s:g} s validation segments of each DOF's window")
+    print(f"{bag}: the campaign's topics: read as hindrax ident bag reads them (DOF windows from "
+          "identification/status, thrust model of the ESC widths, the vehicle's sensors)")
+    print(format_table(res))
+    print(f"output: {path} and {out / 'report' / 'index.html'}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Fit, write the outputs, print the table. Raises :class:`CommandError` on bad input."""
     from hindrax_drivers.recording.reader import BagError
@@ -95,6 +125,15 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"ident fit: --folds {args.folds}: must be >= 2")
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
     choice = TopicChoice(args.wrench_topic, args.velocity_topic, args.imu_topic, args.depth_topic)
+    if cfg is not None and len(args.bags) == 1 and not args.holdout and dofs is None and choice == TopicChoice():
+        from ..identification.from_bag import is_campaign_bag
+
+        try:
+            campaign = is_campaign_bag(args.bags[0])
+        except (BagError, OSError) as exc:
+            raise CommandError(f"ident fit: {exc}") from exc
+        if campaign:
+            return _run_campaign(args, cfg)
     try:
         res = fit_bags(args.bags, choice, cfg, dofs, args.holdout, FitOptions(folds=args.folds))
     except (FitInputError, BagError, OSError) as exc:

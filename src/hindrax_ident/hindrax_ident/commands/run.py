@@ -308,7 +308,7 @@ def _add_reference_sections(doc: dict, record, cfg, idents: dict, args, progress
 def run_in_process(args: argparse.Namespace) -> int:
     """Run the campaign in-process on the simulator, identify, write the outputs, print the summary."""
     from ..identification.campaign import Campaign
-    from ..identification.estimators import identify_all_with_errors
+    from ..identification.campaign_fit import identify_all_with_errors
     from ..identification.report import write_report
     from ..identification.results import build_results, write_identification
 

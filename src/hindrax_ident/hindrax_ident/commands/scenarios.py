@@ -125,7 +125,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     from hindrax_drivers.config import or_default
 
     from ..identification.campaign import Campaign
-    from ..identification.estimators import identify_all_with_errors, truth_parameters
+    from ..identification.campaign_fit import identify_all_with_errors
+    from ..identification.estimators import truth_parameters
     from ..identification.verdicts import apply_verdicts, rls_published_std
     from ..sim.simulator import Simulator
     from ..sim.truth import load_truth

@@ -20,7 +20,7 @@ from hindrax_drivers.config import VehicleConfig
 
 from ..identification.calibration import apply_thrust_calibration
 from ..identification.campaign import Campaign
-from ..identification.estimators import identify_all_with_errors
+from ..identification.campaign_fit import identify_all_with_errors
 from ..identification.results import build_results, write_identification
 from ..sim.simulator import Simulator
 from ..sim.truth import load_truth

@@ -389,7 +389,7 @@ def identify_calibrated(record: Any, cfg, identify) -> tuple[dict, dict]:
     (:func:`apply_thrust_calibration` with ``cfg``) and each DOF's sensitivity to the thrust scales measured
     (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate` (through :func:`~.results.build_results`).
     identify: the fit of every DOF with a window in the record, called as identify(record, cfg)
-    (:func:`~.estimators.identify_all_with_errors`; passed in, as estimators depends on this module through
+    (:func:`~.campaign_fit.identify_all_with_errors`; passed in, as campaign_fit depends on this module through
     results)."""
     idents, errors = identify(apply_thrust_calibration(record, cfg=cfg), cfg)
     attach_thrust_sensitivities(record, idents, cfg, identify)

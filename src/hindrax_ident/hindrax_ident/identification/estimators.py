@@ -1,4 +1,4 @@
-"""Per-DOF estimators: online (Kalman filter + RLS), offline batch LS + output-error, steady-state LS.
+"""Per-DOF model and estimators: the online RLS, the regressors and the comparison methods of the campaign.
 
 Model per DOF (docs/architecture.md §5; [Hindrax-Drag] eq. 2 extended with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the axis:
@@ -15,13 +15,9 @@ coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the a
 
 Signals: velocity and acceleration come from filters, never raw differences (docs/architecture.md §5): surge/sway
 from the DVL velocity, heave from the pressure depth, each aided by the 100 Hz accelerometer
-(:mod:`.fusion`: same state model and filterpy Kalman filter / RTS smoother as
-:mod:`hindrax_ident.estimation.filters`, with a second measurement); roll/pitch/yaw from the gyro rate with
-:class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter` online and
-:func:`~hindrax_ident.estimation.filters.smooth_kinematics` (RTS) offline. Offline, the roll/pitch restoring
-regressor comes from the 10 Hz DVL attitude fused with the gyro's Euler-angle rates
-(:func:`~.fusion.smooth_with_rate`), after removing the gyro bias measured against the attitude
-(:func:`rate_bias_against_angle`; also removed from the measured rate, and for yaw against the DVL heading).
+(:mod:`.fusion`); roll/pitch/yaw from the gyro rate (:func:`measurement_settings`). Online:
+:class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter` (or the accelerometer-aided filter); offline the
+campaign reader :mod:`.campaign_fit` (RTS smoothers, gyro bias against the DVL attitude, restoring regressor).
 
 Methods:
 
@@ -33,27 +29,17 @@ Methods:
    and the forgetting window (1 / (1 - lambda) = 20 s at 50 Hz) is short, so the online values are a live
    indicator (a few per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly
    conditioned online), not the reported estimate.
-2. Offline equation-error batch LS on the smoothed signals ([Hindrax-Drag] eqs. 6-8,
-   :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`).
-3. Offline output-error refinement (the reported result, the fit core :mod:`.fit_core` shared with ``hindrax ident
-   fit``, docs/identification.md §7): starting from (2), ``scipy.optimize.least_squares``
-   integrates the 1-DOF ODE over segments (3 s; initial velocity from the smoother; RK4 at the tick rate;
-   the lagged thrust evaluated exactly inside each tick) and fits the simulated velocity (or depth for heave,
-   with one free offset per segment eliminated by projection) to the RAW sensor samples. Reason: the
-   smoother attenuates the fast thrust transients in nu_dot (the thruster lag is 0.1 s), biasing the
-   equation-error inertia by several per cent (by 10-40 % without the accelerometer). For heave the initial
-   velocity of every segment is a free parameter too, and its segments are 10 s long
-   (:data:`POSITION_SEGMENT_S`): with a free offset and a free initial velocity, a short segment keeps little
-   more than the curvature of the depth, and 3 s segments left the upward quadratic damping with a 3 % standard
-   deviation (measured on one graph campaign: 3.0 % at 3 s, 1.6 % at 5 s, 0.65 % at 10 s, errors within
-   about one of them). Covariance: sigma^2 (J^T J)^-1 with sigma^2 = SSR / (n - p)
-   ([Hindrax-Drag] eq. 8 analogue), inflated by (1 + rho) / (1 - rho) for the lag-1 autocorrelation rho of
-   consecutive residual samples within segments (effective sample size of AR(1) residuals). 95 % intervals are
-   Student-t.
-4. The seed's own method (:func:`steady_state_fit`): steady windows detected automatically
-   (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity per run,
-   then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag] eqs. 2-8).
-   Roll/pitch windows are corrected by the output-error restoring term; heave fits each direction
+2. The reported offline estimate is the fit core's (:mod:`.fit_core`, docs/identification.md §7) on the campaign
+   reader's records (:mod:`.campaign_fit`), the same core and options as ``hindrax ident fit``;
+   :class:`DofIdentification` holds it with the comparisons below.
+3. Comparison: equation-error batch LS on the smoothed signals ([Hindrax-Drag] eqs. 6-8,
+   :func:`~hindrax_ident.estimation.least_squares.fit_linear_model` on :func:`regressor_matrix`); its inertia is
+   biased low by the smoothing of the fast thrust transients (the thruster lag is 0.1 s), so it is reported, not
+   used.
+4. Comparison: the steady-state method of [Hindrax-Drag] (:func:`steady_state_fit`): steady windows detected
+   automatically (:func:`~hindrax_ident.estimation.steady_windows.detect_steady_windows`) on the smoothed velocity
+   per run, then :func:`~hindrax_ident.estimation.least_squares.fit_drag` on the window means ([Hindrax-Drag]
+   eqs. 2-8). Roll/pitch windows are corrected by the output-error restoring term; heave fits each direction
    separately and usually has too few windows (no steady state in the depth available, [Hindrax-Drag] §5).
 """
 from __future__ import annotations
@@ -63,34 +49,26 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
-from scipy import stats
 
 from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
-from ..estimation.filters import KinematicKalmanFilter, smooth_kinematics
-from ..estimation.least_squares import EstimationError, fit_drag, fit_linear_model
+from ..estimation.filters import KinematicKalmanFilter
+from ..estimation.least_squares import EstimationError, fit_drag
 from ..estimation.rls import RecursiveLeastSquares
 from ..estimation.steady_windows import detect_steady_windows
 from ..sim.model import rigid_body_mass_matrix
-from . import fit_core
-from .fusion import AccelAidedFilter, smooth_with_acceleration, smooth_with_rate
-from .maneuvers import euler_rates
+from .fusion import AccelAidedFilter
 from .output_error import model_terms
 from .results import prior_entries
 from .verdicts import rls_published_std
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
-    "measurement_settings", "OnlineDofEstimator", "DofIdentification", "identify_dof", "steady_state_fit",
-    "identify_all", "identify_all_with_errors", "rate_bias_against_angle",
+    "measurement_settings", "OnlineDofEstimator", "DofIdentification", "steady_state_fit",
 ]
 
 #: White-jerk PSD (m^2/s^5) of the accelerometer-aided filter (fusion.py) for surge, sway and heave.
 ACCEL_JERK_PSD = 20.0
-#: Output-error segment length when a velocity is measured (initial velocity from the smoother), s.
-VELOCITY_SEGMENT_S = 3.0
-#: Output-error segment length when a position is measured (heave: free initial velocity and offset), s.
-POSITION_SEGMENT_S = 10.0
 
 
 def parameter_names(dof: str) -> list[str]:
@@ -355,7 +333,7 @@ class OnlineDofEstimator:
 
     def _converged(self, std: np.ndarray) -> bool:
         """Inertia, quadratic damping and restoring: std <= rel_tol |value|; bias: std <= 0.1 N (0.02 N m).
-        Linear damping is left out (small and weakly excited at the seed's speeds, [Hindrax-Drag] Table 3)."""
+        Linear damping is left out (small and weakly excited at the speeds of [Hindrax-Drag] Table 3)."""
         if self.rls.n_samples < 500 or not np.all(np.isfinite(std)):
             return False
         th = self.rls.theta
@@ -438,149 +416,9 @@ class DofIdentification:
         return (est - tr) / abs(tr)
 
 
-def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
-    if not log:
-        return np.zeros(0), np.zeros(0)
-    t = np.array([s[0] for s in log])
-    z = np.array([s[1][column] for s in log], dtype=float)
-    m = (t >= t0) & (t <= t1)
-    return t[m], z[m]
-
-
-@dataclass(frozen=True)
-class AccelerometerAid:
-    """An accelerometer record aiding the smoother (:func:`~.fusion.smooth_with_acceleration`): sample times
-    ``t_s`` (m,) s, ``acceleration`` (m,) along the DOF's axis (m/s^2), its noise ``std`` (m/s^2) and the aided
-    model's white-jerk PSD ``jerk_psd`` (m^2/s^5)."""
-
-    t_s: np.ndarray
-    acceleration: np.ndarray
-    std: float
-    jerk_psd: float
-
-
-@dataclass(frozen=True)
-class RateAid:
-    """A rate record aiding an angle smoother (:func:`~.fusion.smooth_with_rate`): sample times ``t_s`` (m,) s,
-    ``rate`` (m,) rad/s (Euler-angle rate of the smoothed angle) and its noise ``std`` (rad/s)."""
-
-    t_s: np.ndarray
-    rate: np.ndarray
-    std: float
-
-
-def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured: str, jerk_psd: float, std: float,
-                     aid: AccelerometerAid | RateAid | None = None):
-    """RTS-smoothed (pos, vel, acc) (each (n,)) at the tick times ``t_ticks`` (n,) from measurements ``z_meas`` at
-    their own times ``t_meas`` (m,): ``measured`` "position" or "velocity", noise ``std``, white-jerk PSD
-    ``jerk_psd``; with an :class:`AccelerometerAid` the accelerometer-aided smoother, with a :class:`RateAid` the
-    rate-aided one (``z_meas`` is then an angle), else :func:`~hindrax_ident.estimation.filters.smooth_kinematics`.
-    All records are merged on one time grid (microsecond keys)."""
-    key_ticks = np.rint(np.asarray(t_ticks) * 1e6).astype(np.int64)
-    key_meas = np.rint(np.asarray(t_meas) * 1e6).astype(np.int64)
-    keys = np.union1d(key_ticks, key_meas)
-    if aid is not None:
-        key_aid = np.rint(np.asarray(aid.t_s) * 1e6).astype(np.int64)
-        keys = np.union1d(keys, key_aid)
-    z = np.full(keys.size, np.nan)
-    z[np.searchsorted(keys, key_meas)] = z_meas
-    if aid is None:
-        pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd,
-                                          measurement_std=std)
-    else:
-        a = np.full(keys.size, np.nan)
-        if isinstance(aid, AccelerometerAid):
-            a[np.searchsorted(keys, key_aid)] = aid.acceleration
-            pos, vel, acc = smooth_with_acceleration(keys * 1e-6, z, a, measured, std, aid.std, aid.jerk_psd)
-        else:
-            a[np.searchsorted(keys, key_aid)] = aid.rate
-            pos, vel, acc = smooth_with_rate(keys * 1e-6, z, a, std, aid.std, jerk_psd)
-    idx = np.searchsorted(keys, key_ticks)
-    return pos[idx], vel[idx], acc[idx]
-
-
-def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
-    """Constant bias (rad/s) of a rate record against an angle record of the same axis: least squares of
-    ``integral(rate) - angle = c + b (t - t0)`` at the angle times (the integral by the trapezoid rule at the rate
-    times, interpolated). ``t_angle``, ``angle`` (m,), ``t_rate``, ``rate`` (n,); NaN samples ignored. Returns 0.0
-    with fewer than 3 usable angle samples or a rate record that does not span them.
-
-    Why: the still window that gives the gyro bias on board is short and the vehicle is rarely quite still
-    (a residual of 2-4 mrad/s in the graph campaign), and once the gyro aids the attitude
-    (:func:`~.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude samples: roll and
-    pitch quadratic damping std rose from about 1 % to 5-10 % (measured through the ROS graph)."""
-    ta, a = np.asarray(t_angle, dtype=float), np.asarray(angle, dtype=float)
-    tr, r = np.asarray(t_rate, dtype=float), np.asarray(rate, dtype=float)
-    okr = np.isfinite(r) & np.isfinite(tr)
-    tr, r = tr[okr], r[okr]
-    if tr.size < 2:
-        return 0.0
-    ok = np.isfinite(a) & np.isfinite(ta) & (ta >= tr[0]) & (ta <= tr[-1])
-    if ok.sum() < 3:
-        return 0.0
-    integral = np.concatenate([[0.0], np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(tr))])
-    y = np.interp(ta[ok], tr, integral) - a[ok]
-    x = np.column_stack([np.ones(ok.sum()), ta[ok] - ta[ok][0]])
-    return float(np.linalg.lstsq(x, y, rcond=None)[0][1])
-
-
-def _attitude_and_euler_rates(record, t: np.ndarray):
-    """(t_att (m,), rpy (m, 3), t_gyro (n,), Euler-angle rates (n, 3)) over ``t`` (n,) plus 2 s before: the
-    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~.maneuvers.euler_rates`) at the
-    attitude interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude
-    samples."""
-    t0, t1 = t[0] - 2.0, t[-1]
-    ta, rpy = _log_matrix(record.sensors["attitude"], t0, t1)
-    tg, w = _log_matrix(record.sensors.get("gyro", []), t0, t1)
-    if tg.size < 10 or ta.size < 2:
-        return ta, rpy, np.zeros(0), np.zeros((0, 3))
-    rpy_g = np.column_stack([np.interp(tg, ta, rpy[:, 0]), np.interp(tg, ta, rpy[:, 1]), np.zeros(tg.size)])
-    return ta, rpy, tg, euler_rates(rpy_g, w)
-
-
-def _log_matrix(log: list, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
-    """(times (m,), values (m, 3)) of a three-component SensorState log within [t0, t1]."""
-    if not log:
-        return np.zeros(0), np.zeros((0, 3))
-    t = np.array([s[0] for s in log])
-    v = np.array([s[1] for s in log], dtype=float).reshape(len(log), -1)
-    m = (t >= t0) & (t <= t1)
-    return t[m], v[m]
-
-
-def _yaw_rate_bias(record, t: np.ndarray) -> float:
-    """Bias (rad/s) of the gyro's yaw Euler rate against the unwrapped DVL heading over ``t`` (n,) plus 2 s before
-    (:func:`rate_bias_against_angle`); 0.0 without enough samples."""
-    ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
-    ok = np.isfinite(rpy[:, 2])
-    if tg.size == 0 or ok.sum() < 3:
-        return 0.0
-    return rate_bias_against_angle(ta[ok], np.unwrap(rpy[ok, 2]), tg, rates[:, 2])
-
-
-def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Roll and pitch (rad) at the tick times ``t`` (n,) and the Euler-rate biases (2,) rad/s removed: the DVL-75
-    attitude fused with the Euler-angle rates of the gyro (Fossen eq. 2.29, attitude interpolated to the gyro
-    times; constant bias removed by :func:`rate_bias_against_angle`) by :func:`~.fusion.smooth_with_rate` (the
-    attitude alone, zero biases, when there is no gyro record). Angle noise from
-    ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
-    of the roll filter (:func:`measurement_settings`)."""
-    ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
-    std_att = max(float(or_default(cfg.sensors.dvl75.attitude_noise_std_rad, 0.005)), 1e-4)
-    if tg.size == 0:
-        jerk = std_att ** 2 * 15.0 ** 6
-        return (_smooth_on_ticks(t, ta, rpy[:, 0], "position", jerk, std_att)[0],
-                _smooth_on_ticks(t, ta, rpy[:, 1], "position", jerk, std_att)[0], np.zeros(2))
-    bias = np.array([rate_bias_against_angle(ta, rpy[:, i], tg, rates[:, i]) for i in (0, 1)])
-    ms = measurement_settings(cfg, "roll")
-    out = [_smooth_on_ticks(t, ta, rpy[:, i], "position", ms["jerk_psd"], std_att,
-                            RateAid(tg, rates[:, i] - bias[i], ms["std"]))[0] for i in (0, 1)]
-    return out[0], out[1], bias
-
-
 def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, restoring_coefficient: float = 0.0,
                      min_duration_s: float = 2.0, max_std: float = 0.02, max_slope: float = 0.02):
-    """The seed's method: steady windows per run, fit_drag on window means ([Hindrax-Drag] eqs. 2-8).
+    """The steady-state method: steady windows per run, fit_drag on window means ([Hindrax-Drag] eqs. 2-8).
 
     t, velocity (smoothed), force (thrust model), run_id (-1 outside runs) (n,); restoring (n,) and its
     coefficient are subtracted from the force for roll/pitch. Returns (params {name: (value, std)},
@@ -621,116 +459,3 @@ def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, resto
     except EstimationError as exc:
         return None, wins, f"steady-state fit failed: {exc}", t_end
     return out, wins, f"{len(wins)} steady windows", t_end
-
-
-def identify_dof(record, dof: str, cfg: VehicleConfig, output_error: bool = True) -> DofIdentification:
-    """Offline identification of one DOF from a :class:`~.campaign.CampaignRecord` (module docstring).
-
-    Raises :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the DOF has no usable data.
-    """
-    k = DOFS.index(dof)
-    sl = record.dof_slice(dof)
-    t = record.t_s[sl]
-    if t.size < 50:
-        raise EstimationError(f"{dof}: no manoeuvre data")
-    force = record.wrench_frd[sl, k]
-    force_cmd = record.wrench_cmd_frd[sl, k]
-    run_id = record.run_id[sl]
-    ms = measurement_settings(cfg, dof)
-    tm, zm = _log_arrays(record.sensors[ms["log"]], ms["column"], t[0] - 2.0, t[-1])
-    if np.sum(np.isfinite(zm)) < 20:
-        raise EstimationError(f"{dof}: too few sensor samples")
-    aid = None
-    if ms["accel"] and record.sensors.get("accel"):
-        ta, aa = _log_arrays(record.sensors["accel"], k, t[0] - 2.0, t[-1])
-        aid = AccelerometerAid(ta, aa, ms["accel_std"], ms["accel_jerk_psd"])
-    rr = None
-    if dof in ("roll", "pitch"):
-        roll_s, pitch_s, rate_bias = _smoothed_roll_pitch(record, cfg, t)
-        rr = restoring_regressor(dof, roll_s, pitch_s)
-        # the gyro bias left after the on-board still window, measured against the attitude: removed from the
-        # measured rate too (roll and pitch angles stay small in each other's runs, so Euler rate ~ body rate)
-        zm = zm - rate_bias[k - 3]
-    elif dof == "yaw":
-        # the same for yaw against the DVL heading (unwrapped): a rate bias b would otherwise appear as a moment
-        # bias of about linear damping x b (1.47 x 0.003 = 0.004 N m; measured over in-process campaigns)
-        zm = zm - _yaw_rate_bias(record, t)
-    x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
-    names = parameter_names(dof)
-    X = regressor_matrix(dof, a_s, v_s, rr)
-    ok = np.all(np.isfinite(X), axis=1) & np.isfinite(force)
-    ee = fit_linear_model(X[ok], force[ok], names)
-    theta, std, dof_res, method = ee.theta, ee.std, ee.n - ee.p, "equation-error"
-    cov = ee.covariance
-    v_fit = np.full(t.size, np.nan)
-    rho = math.nan
-    t_dof = max(int(dof_res), 1)
-    if output_error:
-        # the fit core shared with hindrax ident fit (docs/identification.md §7): the DOF's window as one stretch,
-        # the campaign's full model (a designed experiment: no term selection), every segment of the window
-
-        inside = (tm >= t[0]) & (tm <= t[-1]) & np.isfinite(zm)
-        chunk = fit_core.Chunk(np.asarray(force_cmd, dtype=float), v_s, x_s if ms["measured"] == "position" else
-                               np.zeros_like(v_s), a_s, (tm[inside] - t[0]) / record.tick_s, zm[inside], rr,
-                               force_start=float(force[0]))
-        rec = fit_core.DofRecord(dof, record.tick_s, ms["measured"], [chunk], "thrust_model",
-                                 float(record.time_constant_s))
-        segment_s = POSITION_SEGMENT_S if ms["measured"] == "position" else VELOCITY_SEGMENT_S
-        opts = fit_core.CoreOptions(segment_s=segment_s, validation_s=segment_s, select=False, all_segments=True,
-                                    terms=fit_core.Terms("both", dof == "heave"), folds=4)
-        try:
-            core = fit_core.identify_dof(rec, opts)
-            if list(core.names) == names and np.all(np.isfinite(core.theta)) and np.all(np.isfinite(core.std)):
-                theta, cov, method = core.theta, core.covariance.cov, "output-error"
-                std = core.std
-                t_dof = core.covariance.t_dof
-                dof_res = core.train.s_z.size - len(names)
-                rho = core.covariance.residual_rho
-                V = fit_core.predict_validation(core.train, core.chosen.layout, core.theta)
-                starts = np.rint((core.train.span[:, 0] - t[0]) / record.tick_s).astype(int)
-                for i, j0 in enumerate(starts):
-                    j1 = min(j0 + core.train.L, t.size)
-                    v_fit[j0:j1] = V[i, :j1 - j0]
-        except (EstimationError, ValueError, np.linalg.LinAlgError):
-            core = None
-    tcrit = float(stats.t.ppf(0.975, t_dof))
-    values = {n: float(v) for n, v in zip(names, theta)}
-    stds = {n: float(s) for n, s in zip(names, std)}
-    rigid = rigid_inertia(cfg, dof)
-    values["added_mass"] = values["inertia"] - rigid
-    stds["added_mass"] = stds["inertia"]
-    ci = {n: (values[n] - tcrit * stds[n], values[n] + tcrit * stds[n]) for n in values}
-    steady, wins, note, t_end = steady_state_fit(dof, t, v_s, force, run_id, rr, values.get("restoring", 0.0))
-    online = record.online[dof].result() if dof in record.online else {"parameters": {}, "converged_at_s": None}
-    t0 = float(t[0])
-    conv = online.get("converged_at_s")
-    return DofIdentification(
-        dof=dof, names=names, values=values, std=stds, ci95=ci, method=method, residual_dof=int(dof_res),
-        equation_error={n: (float(v), float(s)) for n, v, s in zip(names, ee.theta, ee.std)},
-        online=online["parameters"], steady=steady, steady_note=note, truth=truth_parameters(cfg, dof),
-        units=parameter_units(dof), pool_time_s=float(t[-1] - t0),
-        rls_time_s=None if conv is None else float(conv - t0),
-        steady_time_s=None if (steady is None or t_end is None) else float(t_end - t0),
-        signals={"t": t, "velocity": v_s, "acceleration": a_s, "force": force, "velocity_fit": v_fit,
-                 "restoring": rr, "windows": [(w.velocity_mean, float(np.mean(force[w.start:w.stop])))
-                                              for w in wins], "residual_autocorrelation": rho, "t_dof": t_dof,
-                 "covariance": cov, "online_history": record.online[dof].history if dof in record.online else {}})
-
-
-def identify_all(record, cfg: VehicleConfig, output_error: bool = True) -> dict:
-    """:func:`identify_dof` for every DOF with a manoeuvre window in ``record`` (DOFs without usable data are
-    left out; :func:`identify_all_with_errors` also returns why)."""
-    return identify_all_with_errors(record, cfg, output_error)[0]
-
-
-def identify_all_with_errors(record, cfg: VehicleConfig, output_error: bool = True) -> tuple[dict, dict]:
-    """({dof: DofIdentification}, {dof: error message}) for every DOF run in ``record``."""
-    out, errors = {}, {}
-    for dof in DOFS:
-        if dof not in record.windows:
-            continue
-        try:
-            out[dof] = identify_dof(record, dof, cfg, output_error)
-        except EstimationError as exc:
-            errors[dof] = str(exc)
-    return out, errors

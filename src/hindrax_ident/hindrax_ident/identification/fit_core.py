@@ -114,7 +114,11 @@ class DofRecord:
     and one free initial velocity per segment); force_source: ``"thrust_model"`` (force of recorded pulse widths
     through the vehicle's thrust curves: ``lag_s`` and the latency are known) or ``"wrench"`` (a commanded wrench:
     delay and lag estimated); lag_s: the known first-order thrust lag (thrust model), s; cross_names: the DOFs of
-    the ``cross`` columns."""
+    the ``cross`` columns; terms: the model a designed experiment was built to identify (the campaign's ladders:
+    linear + quadratic damping, heave per direction), fitted as it is; None: the terms are chosen by
+    cross-validation (``CoreOptions.select``); all_segments: the record is a designed experiment's window (the
+    campaign's), every segment of it is fitted, moving or not (as ``CoreOptions.all_segments``): a DOF that did
+    not move gets parameters with wide intervals and advice, not "no segment"."""
 
     dof: str
     h: float
@@ -123,6 +127,8 @@ class DofRecord:
     force_source: str = "wrench"
     lag_s: float = 0.0
     cross_names: tuple = ()
+    terms: "Terms | None" = None
+    all_segments: bool = False
 
     @property
     def has_coupling(self) -> bool:
@@ -307,7 +313,9 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     """Cut ``rec``'s chunks into segments of ``seconds`` with the force delayed, lagged and less the Coriolis force
     (``coupling_inertia`` (6,) of the other DOFs, NaN = unknown, this DOF's own entry unused) as ``terms`` and
     ``timing`` say. A last part of at least ``min_fraction`` of a segment is kept (padded, no measurement in the
-    padding). ``excited_only``: only the segments that move the DOF (:data:`EXCITATION_MIN`). Raises
+    padding); without ``excited_only`` a whole chunk shorter than that is one segment too (a designed window shorter
+    than a segment is still fitted). ``excited_only``: only the segments that move the DOF (:data:`EXCITATION_MIN`).
+    Raises
     :class:`EstimationError` when no segment remains."""
     h = rec.h
     L = max(10, int(round(seconds / h)))
@@ -346,7 +354,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
         pos, zs = pos[order], ch.sample_z[order]
         for s0 in range(0, n, L):
             mlen = min(L, n - s0)
-            if mlen < max(10, min_fraction * L):
+            if mlen < 10 or (mlen < min_fraction * L and (excited_only or s0 > 0)):
                 continue
             sl = slice(s0, s0 + mlen)
             vseg = ch.v[sl]
@@ -887,10 +895,15 @@ def _cv_summary(sd_val: SegmentData, folds: Folds, sse, nn, sst, fold_theta, lay
                            for s, c, t in zip(sse, nn, sst)]}
 
 
+def _excited_only(rec: DofRecord, opts: CoreOptions) -> bool:
+    """Fit only the segments that move the DOF (not ``opts.all_segments`` nor ``rec.all_segments``)."""
+    return not (opts.all_segments or rec.all_segments)
+
+
 def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, inertia: np.ndarray | None,
                folds_cache: dict, theta0: np.ndarray | None = None) -> Candidate:
-    sd = build_segments(rec, terms, timing, opts.segment_s, inertia, excited_only=not opts.all_segments)
-    sv = build_segments(rec, terms, timing, opts.validation_s, inertia)
+    sd = build_segments(rec, terms, timing, opts.segment_s, inertia, excited_only=_excited_only(rec, opts))
+    sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=not rec.all_segments)
     layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names)
     start = _equation_error_start(sd, rec.dof, layout, sd.a_s)
     if theta0 is not None and theta0.size == start.size:
@@ -1085,10 +1098,10 @@ def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.
     :class:`EstimationError`."""
     timing = estimate_timing(rec, opts.max_delay_s)
     timing = choose_lag(rec, timing, opts)
-    if opts.select:
+    if opts.select and rec.terms is None:
         chosen, tried = select_terms(rec, timing, opts, inertia)
     else:
-        c = _candidate(rec, opts.terms, timing, opts, inertia, {})
+        c = _candidate(rec, rec.terms or opts.terms, timing, opts, inertia, {})
         chosen, tried = c, [c]
     return finish(rec, chosen, tried, timing, opts)
 
@@ -1114,7 +1127,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
             tm = choose_lag(rec, estimate_timing(rec, opts.max_delay_s), opts)
             timings[dof] = tm
             terms = Terms("both", rec.dof == "heave")
-            sd = build_segments(rec, terms, tm, opts.segment_s)
+            sd = build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
             layout = parameter_layout(rec.dof, terms)
             first[dof] = fit_terms(sd, dof, layout, _equation_error_start(sd, dof, layout, sd.a_s), opts.robust,
                                    max_nfev=40)
@@ -1132,7 +1145,8 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
             continue
         try:
             terms = Terms("both", rec.dof == "heave", coriolis=True)
-            sd = build_segments(rec, terms, timings[dof], opts.segment_s, inertia0)
+            sd = build_segments(rec, terms, timings[dof], opts.segment_s, inertia0,
+                                excited_only=_excited_only(rec, opts))
             layout = parameter_layout(rec.dof, terms)
             f1 = fit_terms(sd, dof, layout, f.theta, opts.robust, max_nfev=40)
             inertia1[["surge", "sway", "heave", "roll", "pitch", "yaw"].index(dof)] = float(f1.theta[0])
@@ -1146,10 +1160,10 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
             timings[dof] = refine_delay(rec, tm, opts, inertia0 if rec.has_coupling else None)
         tm = timings[dof]
         try:
-            if opts.select:
+            if opts.select and rec.terms is None:
                 base[dof], tried[dof] = select_terms(rec, tm, opts, inertia0, stage=1)
             else:
-                c = _candidate(rec, opts.terms, tm, opts, inertia0, {})
+                c = _candidate(rec, rec.terms or opts.terms, tm, opts, inertia0, {})
                 base[dof], tried[dof] = c, [c]
         except (EstimationError, ValueError, np.linalg.LinAlgError) as exc:
             errors[dof] = str(exc)
@@ -1157,7 +1171,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     for dof, b in base.items():
         rec = records[dof]
         try:
-            if opts.select:
+            if opts.select and rec.terms is None:
                 chosen, more = select_terms(rec, timings[dof], opts, inertia0, stage=2, base=b)
                 allc = tried[dof] + [c for c in more if c not in tried[dof]]
             else:

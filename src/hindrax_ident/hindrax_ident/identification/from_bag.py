@@ -1,10 +1,11 @@
 """Offline identification from a recorded bag: rebuild the campaign record from the bag's topics.
 
-``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_ident.commands.ident_bag`) writes
-``identification.yaml`` and ``report/index.html`` through :func:`identify_bag` and :func:`write_outputs`: the
-same analyses as the in-process campaign (:func:`~.estimators.identify_all_with_errors`, i.e. equation-error
-batch LS with standard deviations, [Hindrax-Drag] eqs. 6-8, refined by output error, plus the
-seed's steady-state LS; "Batch least squares from a bag").
+``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_ident.commands.ident_bag`), and ``hindrax
+ident fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), write ``identification.yaml`` and
+``report/index.html`` through :func:`identify_bag` and :func:`write_outputs`: the same analysis as the in-process
+campaign and ``hindrax run`` (:func:`~.campaign_fit.identify_all_with_errors`: the campaign reader and the fit core
+shared with ``hindrax ident fit``, docs/identification.md §7; the equation-error LS of [Hindrax-Drag] eqs. 6-8, its
+steady-state LS and the online RLS as comparisons).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
@@ -41,7 +42,8 @@ from hindrax_drivers.recording.reader import BagReader
 from . import calibration_topic
 from .calibration import identify_calibrated
 from .campaign import CampaignRecord
-from .estimators import identify_all_with_errors
+from . import fit_core
+from .campaign_fit import identify_all_with_errors
 from .maneuvers import SensorState
 from .report import write_report
 from .results import build_results, write_identification
@@ -55,12 +57,15 @@ from .signals import (
 )
 
 __all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "identify_bag",
-           "write_outputs"]
+           "write_outputs", "is_campaign_bag", "CAMPAIGN_TOPICS"]
 
 SENSOR_TOPICS = ("dvl/data", "pressure/fluid_pressure", "imu/data_raw", "ping/altitude")
 TOPICS = SENSOR_TOPICS + ("thrusters/pulse_width", "identification/status", "identification/estimates",
                           calibration_topic.TOPIC)
 _RUNNING = 2  # ManeuverStatus.PHASE_RUNNING
+#: The topics without which a bag is not a campaign's (:func:`record_from_bag` refuses it)
+CAMPAIGN_TOPICS = ("thrusters/pulse_width", "identification/status", "dvl/data", "imu/data_raw",
+                   "pressure/fluid_pressure")
 
 
 class BagContentError(ValueError):
@@ -247,21 +252,29 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
     """
     reader = BagReader(bag_path)
     present = set(reader.topics)
-    missing = [tp for tp in ("thrusters/pulse_width", "identification/status", "dvl/data", "imu/data_raw",
-                             "pressure/fluid_pressure") if tp not in present and "/" + tp not in present]
+    missing = [tp for tp in CAMPAIGN_TOPICS if tp not in present and "/" + tp not in present]
     if missing:
         raise BagContentError(f"{bag_path}: missing topic(s) {', '.join(missing)}")
     wanted = [tp for tp in present if tp.lstrip("/") in TOPICS]
     return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.decoded(wanted)), cfg, grid_s)
 
 
-def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01):
-    """(record, {dof: DofIdentification}, {dof: error}) of a bag. With calibration results in the bag
-    (``record.calibration``) the fits see the thrust-model force times the measured scales
+def is_campaign_bag(bag_path: str | Path) -> bool:
+    """True when the bag has every topic of :data:`CAMPAIGN_TOPICS` (with or without the leading slash). Raises
+    :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag."""
+    present = {tp.lstrip("/") for tp in BagReader(bag_path).topics}
+    return all(tp in present for tp in CAMPAIGN_TOPICS)
+
+
+def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
+                 opts: fit_core.CoreOptions = fit_core.CoreOptions()):
+    """(record, {dof: DofIdentification}, {dof: error}) of a bag: :func:`record_from_bag`, then
+    :func:`~.campaign_fit.identify_all_with_errors` with the fit core's options ``opts``. With calibration results in
+    the bag (``record.calibration``) the fits see the thrust-model force times the measured scales
     (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays unscaled.
     Raises ``ValueError`` for a non-positive scale in the bag."""
     record = record_from_bag(bag_path, cfg, grid_s)
-    idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
+    idents, errors = identify_calibrated(record, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
     return record, idents, errors
 
 

@@ -51,7 +51,7 @@ from hindrax_msgs.srv import SetArmed
 from ..bringup import build_graph
 from .calibration import identify_calibrated
 from .campaign import PoolOperator
-from .estimators import identify_all_with_errors
+from .campaign_fit import identify_all_with_errors
 from .executive import calibration_forces, float_buoyancy, inclining_load
 from .from_bag import BagContentError, record_from_bag
 from .report import write_report
@@ -163,7 +163,7 @@ class GraphCampaignOutcome:
     """What a graph campaign produced.
 
     success / message: the action result; estimates: the action's online (RLS) HydroEstimates;
-    identifications / errors: offline results per DOF (:func:`~.estimators.identify_all_with_errors`) from the
+    identifications / errors: offline results per DOF (:func:`~.campaign_fit.identify_all_with_errors`) from the
     bag; bag_dir; record: the CampaignRecord rebuilt from the bag; disarmed: the ESC reported disarmed after
     the run; sim_time_s / wall_time_s of the whole run; final_pulse_width_us: the PCA9685 outputs after shutdown;
     calibration: the identification node's calibration step results (:attr:`~.executive.CampaignRecord.calibration`,

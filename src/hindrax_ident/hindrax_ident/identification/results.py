@@ -205,9 +205,10 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
             "configuration_sha256": cfg.sha256,
             "water_density_kg_m3": float(cfg.water_density_kg_m3),
-            "method": method or ("[Hindrax-Drag] §4 self-propelled ladder; output-error refinement of equation-error "
-                                 "batch LS on RTS-smoothed sensor signals; RLS online; steady-state LS "
-                                 "([Hindrax-Drag] eqs. 2-8) for comparison"),
+            "method": method or ("[Hindrax-Drag] §4 self-propelled ladder; the fit core's segment-wise output error on "
+                                 "the raw sensor samples (docs/identification.md §7); equation-error batch LS "
+                                 "([Hindrax-Drag] eqs. 6-8), RLS online and steady-state LS ([Hindrax-Drag] "
+                                 "eqs. 2-8) for comparison"),
             "seed": seed,
         },
         "dofs": dofs,

@@ -18,16 +18,14 @@ and
    :meth:`~hindrax_ident.estimation.thruster_fit.CubicFit.relative_std`), or a calibration's scale std
    (``thruster_fit_rel``), which takes precedence;
 2. **uses degrees of freedom that match the independent information**: the output-error residuals are correlated
-   inside a segment (3 s for a velocity-measured DOF, 10 s for heave) and the fit's covariance is at least the
-   cluster-robust one with one cluster per segment, so the 95 % interval uses the Student t quantile with
-   (number of segments - 1) degrees of freedom, as for cluster-robust inference with few clusters (Cameron and
-   Miller 2015, "A practitioner's guide to cluster-robust inference", J. Human Resources 50(2), §VI), not
-   (samples - parameters);
+   inside a segment and between neighbouring segments, so the fit core's covariance is cluster-robust
+   (docs/identification.md §7, step 5) and the 95 % interval uses the Student t quantile with its (clusters - 1)
+   degrees of freedom ([Cameron-Miller2015] §VI), not (samples - parameters);
 3. **gives each parameter ``verdict: trusted | suspect`` and the reasons**, from the checks a pool engineer makes:
 
    * ``bias``: the constant force differs significantly from the one expected (0; heave: the configured net
      buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide.
-   * ``methods``: the seed's steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported
+   * ``methods``: the steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported
      quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not
      explain the transients and the steady states with the same numbers (lag, latency, coupling). DOF-wide. (The
      equation-error fit is not used: its inertia is biased low by the noise of the differentiated velocity even when
@@ -64,6 +62,8 @@ from scipy import stats
 
 from hindrax_drivers.config import VehicleConfig
 
+from .fit_core import SEGMENT_S
+
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
            "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "segment_count", "assess_dof", "apply_verdicts", "spread_reasons", "data_advice", "format_advice",
@@ -80,9 +80,6 @@ METHODS_MAX = 0.05
 DIRECTION_MAX = 0.05
 #: Relative 95 % half-width above which a parameter is too uncertain for controller design.
 WIDTH_MAX = 0.3
-#: Segment length of the output-error fit, s (estimators.VELOCITY_SEGMENT_S / POSITION_SEGMENT_S).
-_SEGMENT_S = {"heave": 10.0}
-_SEGMENT_S_DEFAULT = 3.0
 
 
 def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
@@ -109,8 +106,8 @@ def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float
 
 
 def segment_count(dof: str, pool_time_s: float) -> int:
-    """Independent segments of the output-error fit (pool time / segment length)."""
-    return max(1, int(pool_time_s // _SEGMENT_S.get(dof, _SEGMENT_S_DEFAULT)))
+    """Independent segments of the output-error fit (pool time / :data:`~.fit_core.SEGMENT_S`, every DOF)."""
+    return max(1, int(pool_time_s // SEGMENT_S))
 
 
 def _declared_rel(cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None) -> tuple[float, float]:

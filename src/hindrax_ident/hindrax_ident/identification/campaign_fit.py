@@ -1,0 +1,363 @@
+"""The campaign front-end of the fit core: a :class:`~.campaign.CampaignRecord` read into one
+:class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.estimators.DofIdentification`
+(docs/identification.md §7).
+
+``hindrax run``, ``hindrax ident bag`` (:mod:`.from_bag`) and the in-process campaign identify with
+:func:`identify_all_with_errors`; ``hindrax ident fit`` on a bag with the campaign's topics reads it with
+:func:`dof_records` too (:mod:`.fit_any`). Everything after the reading (timing, segments, output-error fit, model
+terms by cross-validation, intervals) is :mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as
+``hindrax ident fit``. What the campaign knows that an arbitrary bag does not, and this reader uses:
+
+* **the DOF windows** (``identification/status``): each DOF's record is its window only, one chunk on the record's
+  tick grid (``record.tick_s``, 10 ms), the force the thrust model of the widths the ESC wrote (``thrust_model``:
+  the ESC latency already in the record, the first-order thrust lag ``thrusters.time_constant_s`` applied by the
+  core, starting from the lagged force at the window's first tick);
+* **the vehicle's sensors**, conditioned as the identification node does (docs/architecture.md §5): surge and sway
+  from the DVL velocity, heave from the pressure depth (a measured position: one free offset and initial velocity
+  per segment in the core), each aided by the 100 Hz accelerometer (:mod:`.fusion`); roll, pitch and yaw from the
+  gyro rate (:func:`~hindrax_ident.estimation.filters.smooth_kinematics`); the measurements go to the core at their
+  own times, the RTS-smoothed states only give the segments' initial states and the equation-error start;
+* **the gyro bias** left after the on-board still window, measured against the DVL attitude (roll, pitch) and
+  heading (yaw) by :func:`rate_bias_against_angle` and removed from the measured rate;
+* **the design**: the ladders were built to identify the full model (linear + quadratic damping, heave per direction,
+  roll/pitch restoring), so the record fixes those terms (``DofRecord.terms``) and its window is fitted whole
+  (``DofRecord.all_segments``) instead of choosing terms by cross-validation among the moving segments, as the core
+  does for an arbitrary bag. Cross-validation could not tell the linear term of surge apart from noise (CV nrmse
+  0.0548 quadratic only, 0.0551 linear + quadratic, in-process campaign, seed 1) and the quadratic-only law put the
+  surge quadratic damping 4.3 % high against 0.9 % for the full model;
+* **the restoring regressor** of roll and pitch, s(eta) = cos(theta) sin(phi) / sin(theta) ([NTNU-Thesis]
+  eq. 2.23), from the DVL attitude fused with the gyro's Euler-angle rates (:func:`_smoothed_roll_pitch`).
+
+All quantities SI, body FRD; times in s of the record's clock.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from hindrax_drivers.config import DOFS, VehicleConfig, or_default
+
+from ..estimation.filters import smooth_kinematics
+from ..estimation.least_squares import EstimationError, fit_linear_model
+from . import fit_core
+from .estimators import (DofIdentification, measurement_settings, parameter_names, parameter_units, regressor_matrix,
+                         restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
+from .fusion import smooth_with_acceleration, smooth_with_rate
+from .maneuvers import euler_rates
+
+__all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
+           "dof_records", "identification_of", "identify_all_with_errors", "identify_all", "identify_dof"]
+
+
+@dataclass
+class CampaignSignals:
+    """The conditioned signals of one DOF's window (the comparisons and the report): t (n,) s; force (n,) the lagged
+    thrust-model force and force_cmd (n,) the commanded one (N or N m); run_id (n,) (-1 outside runs); x, v, a (n,)
+    the RTS-smoothed position (heave depth, m; zeros otherwise), velocity and acceleration; restoring (n,) s(eta) or
+    None."""
+
+    t: np.ndarray
+    force: np.ndarray
+    force_cmd: np.ndarray
+    run_id: np.ndarray
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    restoring: np.ndarray | None
+
+
+def dof_record(record, dof: str, cfg: VehicleConfig) -> tuple[fit_core.DofRecord, CampaignSignals]:
+    """The fit core's record of ``dof`` from a campaign record (module docstring) and its conditioned signals.
+
+    Raises :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the DOF has no window of at least
+    50 ticks or fewer than 20 sensor samples in it.
+    """
+    k = DOFS.index(dof)
+    sl = record.dof_slice(dof)
+    t = record.t_s[sl]
+    if t.size < 50:
+        raise EstimationError(f"{dof}: no manoeuvre data")
+    force = np.asarray(record.wrench_frd[sl, k], dtype=float)
+    force_cmd = np.asarray(record.wrench_cmd_frd[sl, k], dtype=float)
+    ms = measurement_settings(cfg, dof)
+    tm, zm = _log_arrays(record.sensors[ms["log"]], ms["column"], t[0] - 2.0, t[-1])
+    if np.sum(np.isfinite(zm)) < 20:
+        raise EstimationError(f"{dof}: too few sensor samples")
+    aid = None
+    if ms["accel"] and record.sensors.get("accel"):
+        ta, aa = _log_arrays(record.sensors["accel"], k, t[0] - 2.0, t[-1])
+        aid = AccelerometerAid(ta, aa, ms["accel_std"], ms["accel_jerk_psd"])
+    rr = None
+    if dof in ("roll", "pitch"):
+        roll_s, pitch_s, rate_bias = _smoothed_roll_pitch(record, cfg, t)
+        rr = restoring_regressor(dof, roll_s, pitch_s)
+        # the gyro bias left after the on-board still window, measured against the attitude: removed from the
+        # measured rate too (roll and pitch angles stay small in each other's runs, so Euler rate ~ body rate)
+        zm = zm - rate_bias[k - 3]
+    elif dof == "yaw":
+        # the same for yaw against the DVL heading (unwrapped): a rate bias b would otherwise appear as a moment
+        # bias of about linear damping x b (1.47 x 0.003 = 0.004 N m; measured over in-process campaigns)
+        zm = zm - _yaw_rate_bias(record, t)
+    x_s, v_s, a_s = _smooth_on_ticks(t, tm, zm, ms["measured"], ms["jerk_psd"], ms["std"], aid)
+    if ms["measured"] != "position":
+        x_s = np.zeros_like(v_s)
+    inside = (tm >= t[0]) & (tm <= t[-1]) & np.isfinite(zm)
+    chunk = fit_core.Chunk(force_cmd, v_s, x_s, a_s, (tm[inside] - t[0]) / record.tick_s, zm[inside], rr,
+                           t0=float(t[0]), force_start=float(force[0]))
+    rec = fit_core.DofRecord(dof, float(record.tick_s), ms["measured"], [chunk], "thrust_model",
+                             float(record.time_constant_s), terms=fit_core.Terms("both", dof == "heave"),
+                             all_segments=True)
+    return rec, CampaignSignals(t, force, force_cmd, np.asarray(record.run_id[sl]), x_s, v_s, a_s, rr)
+
+
+def dof_records(record, cfg: VehicleConfig) -> tuple[dict, dict, dict]:
+    """({dof: DofRecord}, {dof: CampaignSignals}, {dof: error message}) of every DOF with a window in ``record``
+    (:func:`dof_record`)."""
+    recs, sigs, errors = {}, {}, {}
+    for dof in DOFS:
+        if dof not in record.windows:
+            continue
+        try:
+            recs[dof], sigs[dof] = dof_record(record, dof, cfg)
+        except EstimationError as exc:
+            errors[dof] = str(exc)
+    return recs, sigs, errors
+
+
+def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, sig, online=None
+                      ) -> DofIdentification:
+    """The campaign's :class:`DofIdentification` of one DOF from the fit core's result ``core`` (the reported values,
+    covariance and intervals, unchanged) on the campaign reader's signals ``sig``
+    (:class:`CampaignSignals`), with the comparisons beside it: the equation-error batch LS
+    ([Hindrax-Drag] eqs. 6-8, :func:`~hindrax_ident.estimation.least_squares.fit_linear_model`), the steady-state
+    method of [Hindrax-Drag] (:func:`steady_state_fit`) and the online RLS (``online``: the estimator or its recorded
+    history, or None).
+
+    The values are in :func:`parameter_names` order: a damping term the chosen model leaves out is 0 with std 0,
+    heave's one pair for both directions (chosen by cross-validation) gives both directions the same value; the
+    covariance is mapped the same way (theta_full = A theta_core, cov_full = A cov A^T). ``added_mass`` = inertia -
+    the rigid-body inertia, with the inertia's std."""
+    names = parameter_names(dof)
+    A = np.zeros((len(names), len(core.names)))
+    for i, n in enumerate(names):
+        base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
+        if n in core.names:
+            A[i, core.names.index(n)] = 1.0
+        elif base in core.names:
+            A[i, core.names.index(base)] = 1.0
+    theta = A @ core.theta
+    cov = A @ core.covariance.cov @ A.T
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    tq = core.t_quantile
+    values = {n: float(v) for n, v in zip(names, theta)}
+    stds = {n: float(s) for n, s in zip(names, std)}
+    values["added_mass"] = values["inertia"] - rigid_inertia(cfg, dof)
+    stds["added_mass"] = stds["inertia"]
+    ci = {n: (values[n] - tq * stds[n], values[n] + tq * stds[n]) for n in values}
+    t, force = sig.t, sig.force
+    X = regressor_matrix(dof, sig.a, sig.v, sig.restoring)
+    ok = np.all(np.isfinite(X), axis=1) & np.isfinite(force)
+    try:
+        ee = fit_linear_model(X[ok], force[ok], names)
+        equation_error = {n: (float(v), float(s)) for n, v, s in zip(names, ee.theta, ee.std)}
+    except EstimationError:
+        equation_error = {}
+    tick = float(np.median(np.diff(t)))
+    v_fit = np.full(t.size, np.nan)
+    V = fit_core.predict_validation(core.train, core.chosen.layout, core.theta)
+    starts = np.rint((core.train.span[:, 0] - t[0]) / tick).astype(int)
+    for i, j0 in enumerate(starts):
+        j1 = min(j0 + core.train.L, t.size)
+        if 0 <= j0 < j1:
+            v_fit[j0:j1] = V[i, :j1 - j0]
+    steady, wins, note, t_end = steady_state_fit(dof, t, sig.v, force, sig.run_id, sig.restoring,
+                                                 values.get("restoring", 0.0))
+    res = online.result() if online is not None else {"parameters": {}, "converged_at_s": None}
+    t0 = float(t[0])
+    conv = res.get("converged_at_s")
+    return DofIdentification(
+        dof=dof, names=names, values=values, std=stds, ci95=ci, method="output-error",
+        residual_dof=int(core.train.s_z.size - len(core.names)), equation_error=equation_error,
+        online=res["parameters"], steady=steady, steady_note=note, truth=truth_parameters(cfg, dof),
+        units=parameter_units(dof), pool_time_s=float(t[-1] - t0),
+        rls_time_s=None if conv is None else float(conv - t0),
+        steady_time_s=None if (steady is None or t_end is None) else float(t_end - t0),
+        signals={"t": t, "velocity": sig.v, "acceleration": sig.a, "force": force, "velocity_fit": v_fit,
+                 "restoring": sig.restoring, "windows": [(w.velocity_mean, float(np.mean(force[w.start:w.stop])))
+                                                         for w in wins],
+                 "residual_autocorrelation": core.covariance.residual_rho, "t_dof": core.covariance.t_dof,
+                 "covariance": cov, "model": core.terms.label, "core": core,
+                 "online_history": online.history if online is not None else {}})
+
+
+def identify_all_with_errors(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()
+                             ) -> tuple[dict, dict]:
+    """({dof: DofIdentification}, {dof: error message}) for every DOF run in ``record``: the campaign reader
+    (:func:`dof_records`) and the fit core (:func:`~.fit_core.identify_dofs`; ``opts`` default the defaults of
+    ``hindrax ident fit``), docs/identification.md §7; then :func:`identification_of`."""
+    recs, sigs, errors = dof_records(record, cfg)
+    results, errs = fit_core.identify_dofs(recs, opts)
+    errors.update(errs)
+    out = {dof: identification_of(dof, cfg, results[dof], sigs[dof], record.online.get(dof))
+           for dof in DOFS if dof in results}
+    return out, {d: errors[d] for d in DOFS if d in errors}
+
+
+def identify_all(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()) -> dict:
+    """:func:`identify_all_with_errors` without the errors (DOFs without usable data are left out)."""
+    return identify_all_with_errors(record, cfg, opts)[0]
+
+
+def identify_dof(record, dof: str, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()
+                 ) -> DofIdentification:
+    """One DOF of :func:`identify_all_with_errors`. Raises
+    :class:`~hindrax_ident.estimation.least_squares.EstimationError` when the DOF has no usable data."""
+    rec, sig = dof_record(record, dof, cfg)
+    results, errors = fit_core.identify_dofs({dof: rec}, opts)
+    if dof not in results:
+        raise EstimationError(errors.get(dof, f"{dof}: no fit"))
+    return identification_of(dof, cfg, results[dof], sig, record.online.get(dof))
+
+
+# ------------------------------------------------------------------------------------------------ conditioning
+def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+    if not log:
+        return np.zeros(0), np.zeros(0)
+    t = np.array([s[0] for s in log])
+    z = np.array([s[1][column] for s in log], dtype=float)
+    m = (t >= t0) & (t <= t1)
+    return t[m], z[m]
+
+
+@dataclass(frozen=True)
+class AccelerometerAid:
+    """An accelerometer record aiding the smoother (:func:`~.fusion.smooth_with_acceleration`): sample times
+    ``t_s`` (m,) s, ``acceleration`` (m,) along the DOF's axis (m/s^2), its noise ``std`` (m/s^2) and the aided
+    model's white-jerk PSD ``jerk_psd`` (m^2/s^5)."""
+
+    t_s: np.ndarray
+    acceleration: np.ndarray
+    std: float
+    jerk_psd: float
+
+
+@dataclass(frozen=True)
+class RateAid:
+    """A rate record aiding an angle smoother (:func:`~.fusion.smooth_with_rate`): sample times ``t_s`` (m,) s,
+    ``rate`` (m,) rad/s (Euler-angle rate of the smoothed angle) and its noise ``std`` (rad/s)."""
+
+    t_s: np.ndarray
+    rate: np.ndarray
+    std: float
+
+
+def _smooth_on_ticks(t_ticks, t_meas, z_meas, measured: str, jerk_psd: float, std: float,
+                     aid: AccelerometerAid | RateAid | None = None):
+    """RTS-smoothed (pos, vel, acc) (each (n,)) at the tick times ``t_ticks`` (n,) from measurements ``z_meas`` at
+    their own times ``t_meas`` (m,): ``measured`` "position" or "velocity", noise ``std``, white-jerk PSD
+    ``jerk_psd``; with an :class:`AccelerometerAid` the accelerometer-aided smoother, with a :class:`RateAid` the
+    rate-aided one (``z_meas`` is then an angle), else :func:`~hindrax_ident.estimation.filters.smooth_kinematics`.
+    All records are merged on one time grid (microsecond keys)."""
+    key_ticks = np.rint(np.asarray(t_ticks) * 1e6).astype(np.int64)
+    key_meas = np.rint(np.asarray(t_meas) * 1e6).astype(np.int64)
+    keys = np.union1d(key_ticks, key_meas)
+    if aid is not None:
+        key_aid = np.rint(np.asarray(aid.t_s) * 1e6).astype(np.int64)
+        keys = np.union1d(keys, key_aid)
+    z = np.full(keys.size, np.nan)
+    z[np.searchsorted(keys, key_meas)] = z_meas
+    if aid is None:
+        pos, vel, acc = smooth_kinematics(keys * 1e-6, z, measured=measured, jerk_psd=jerk_psd,
+                                          measurement_std=std)
+    else:
+        a = np.full(keys.size, np.nan)
+        if isinstance(aid, AccelerometerAid):
+            a[np.searchsorted(keys, key_aid)] = aid.acceleration
+            pos, vel, acc = smooth_with_acceleration(keys * 1e-6, z, a, measured, std, aid.std, aid.jerk_psd)
+        else:
+            a[np.searchsorted(keys, key_aid)] = aid.rate
+            pos, vel, acc = smooth_with_rate(keys * 1e-6, z, a, std, aid.std, jerk_psd)
+    idx = np.searchsorted(keys, key_ticks)
+    return pos[idx], vel[idx], acc[idx]
+
+
+def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
+    """Constant bias (rad/s) of a rate record against an angle record of the same axis: least squares of
+    ``integral(rate) - angle = c + b (t - t0)`` at the angle times (the integral by the trapezoid rule at the rate
+    times, interpolated). ``t_angle``, ``angle`` (m,), ``t_rate``, ``rate`` (n,); NaN samples ignored. Returns 0.0
+    with fewer than 3 usable angle samples or a rate record that does not span them.
+
+    Why: the still window that gives the gyro bias on board is short and the vehicle is rarely quite still
+    (a residual of 2-4 mrad/s in the graph campaign), and once the gyro aids the attitude
+    (:func:`~.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude samples: roll and
+    pitch quadratic damping std rose from about 1 % to 5-10 % (measured through the ROS graph)."""
+    ta, a = np.asarray(t_angle, dtype=float), np.asarray(angle, dtype=float)
+    tr, r = np.asarray(t_rate, dtype=float), np.asarray(rate, dtype=float)
+    okr = np.isfinite(r) & np.isfinite(tr)
+    tr, r = tr[okr], r[okr]
+    if tr.size < 2:
+        return 0.0
+    ok = np.isfinite(a) & np.isfinite(ta) & (ta >= tr[0]) & (ta <= tr[-1])
+    if ok.sum() < 3:
+        return 0.0
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (r[1:] + r[:-1]) * np.diff(tr))])
+    y = np.interp(ta[ok], tr, integral) - a[ok]
+    x = np.column_stack([np.ones(ok.sum()), ta[ok] - ta[ok][0]])
+    return float(np.linalg.lstsq(x, y, rcond=None)[0][1])
+
+
+def _attitude_and_euler_rates(record, t: np.ndarray):
+    """(t_att (m,), rpy (m, 3), t_gyro (n,), Euler-angle rates (n, 3)) over ``t`` (n,) plus 2 s before: the
+    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~.maneuvers.euler_rates`) at the
+    attitude interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude
+    samples."""
+    t0, t1 = t[0] - 2.0, t[-1]
+    ta, rpy = _log_matrix(record.sensors["attitude"], t0, t1)
+    tg, w = _log_matrix(record.sensors.get("gyro", []), t0, t1)
+    if tg.size < 10 or ta.size < 2:
+        return ta, rpy, np.zeros(0), np.zeros((0, 3))
+    rpy_g = np.column_stack([np.interp(tg, ta, rpy[:, 0]), np.interp(tg, ta, rpy[:, 1]), np.zeros(tg.size)])
+    return ta, rpy, tg, euler_rates(rpy_g, w)
+
+
+def _log_matrix(log: list, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
+    """(times (m,), values (m, 3)) of a three-component SensorState log within [t0, t1]."""
+    if not log:
+        return np.zeros(0), np.zeros((0, 3))
+    t = np.array([s[0] for s in log])
+    v = np.array([s[1] for s in log], dtype=float).reshape(len(log), -1)
+    m = (t >= t0) & (t <= t1)
+    return t[m], v[m]
+
+
+def _yaw_rate_bias(record, t: np.ndarray) -> float:
+    """Bias (rad/s) of the gyro's yaw Euler rate against the unwrapped DVL heading over ``t`` (n,) plus 2 s before
+    (:func:`rate_bias_against_angle`); 0.0 without enough samples."""
+    ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
+    ok = np.isfinite(rpy[:, 2])
+    if tg.size == 0 or ok.sum() < 3:
+        return 0.0
+    return rate_bias_against_angle(ta[ok], np.unwrap(rpy[ok, 2]), tg, rates[:, 2])
+
+
+def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Roll and pitch (rad) at the tick times ``t`` (n,) and the Euler-rate biases (2,) rad/s removed: the DVL-75
+    attitude fused with the Euler-angle rates of the gyro (Fossen eq. 2.29, attitude interpolated to the gyro
+    times; constant bias removed by :func:`rate_bias_against_angle`) by :func:`~.fusion.smooth_with_rate` (the
+    attitude alone, zero biases, when there is no gyro record). Angle noise from
+    ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
+    of the roll filter (:func:`measurement_settings`)."""
+    ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
+    std_att = max(float(or_default(cfg.sensors.dvl75.attitude_noise_std_rad, 0.005)), 1e-4)
+    if tg.size == 0:
+        jerk = std_att ** 2 * 15.0 ** 6
+        return (_smooth_on_ticks(t, ta, rpy[:, 0], "position", jerk, std_att)[0],
+                _smooth_on_ticks(t, ta, rpy[:, 1], "position", jerk, std_att)[0], np.zeros(2))
+    bias = np.array([rate_bias_against_angle(ta, rpy[:, i], tg, rates[:, i]) for i in (0, 1)])
+    ms = measurement_settings(cfg, "roll")
+    out = [_smooth_on_ticks(t, ta, rpy[:, i], "position", ms["jerk_psd"], std_att,
+                            RateAid(tg, rates[:, i] - bias[i], ms["std"]))[0] for i in (0, 1)]
+    return out[0], out[1], bias
+
+

@@ -1,0 +1,143 @@
+"""Issue 27 item 1, "one fit core": ``hindrax ident bag`` and ``hindrax ident fit`` on the same campaign bag give the
+same values and intervals (docs/identification.md §7).
+
+The bag is written here: a surge ladder (8 runs of 6 s at +-10, +-20, +-30, +-15 N, each followed by 6 s of coasting
+while the status says "returning") with the campaign's topics, stamped as the drivers stamp them:
+``identification/status`` and ``thrusters/pulse_width`` at 50 Hz (the allocation's widths for the level, on the wire
+as the ESC node writes them), ``dvl/data`` at 10 Hz (the body velocity FLU with 1 cm/s white noise, level attitude),
+``pressure/fluid_pressure`` at 10 Hz (a constant depth), ``imu/data_raw`` declared without messages (no
+accelerometer aid). The motion is the 1-DOF surge model of the vehicle file (inertia = mass + added mass, linear
+and quadratic damping) driven by the thrust model of the written widths (allocation matrix, first-order lag
+``thrusters.time_constant_s``, after ``esc.output_latency_s``), integrated at 1 ms.
+
+Both commands must read it as the campaign (its DOF windows from the status) and go through the one fit core: every
+``value`` and ``ci95`` of identification.yaml equal, and the fit near the vehicle file's surge parameters (so the
+equality is not that of two empty fits). RuntimeWarning is an error.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from hindrax_drivers.allocation.core import AllocationCore
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_ident import cli
+from hindrax_ident.identification.estimators import truth_parameters
+from hindrax_ident.identification.signals import thrust_of_written_widths
+
+pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
+
+T0 = 2000.0  # ROS time of the bag's first message, s
+LEVELS_N = (10.0, -10.0, 20.0, -20.0, 30.0, -30.0, 15.0, -15.0)
+RUN_S, COAST_S, IDLE_S = 6.0, 6.0, 1.0
+
+
+def _stamped(msg, t):
+    msg.header.stamp.sec = int(t)
+    msg.header.stamp.nanosec = int(round((t - int(t)) * 1e9))
+    return msg
+
+
+def _schedule(t_rel: float):
+    """(phase, level N or None) at ``t_rel`` s after T0."""
+    if t_rel < IDLE_S:
+        return 0, None  # PHASE_IDLE
+    k, r = divmod(t_rel - IDLE_S, RUN_S + COAST_S)
+    if k >= len(LEVELS_N):
+        return 4, None  # PHASE_DONE
+    return (2, LEVELS_N[int(k)]) if r < RUN_S else (3, None)  # RUNNING / RETURNING
+
+
+def write_surge_campaign_bag(path, cfg, seed: int = 5) -> dict:
+    """The campaign bag of the module docstring at ``path``; returns the surge truth of the vehicle file."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import FluidPressure
+
+    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
+
+    rng = np.random.default_rng(seed)
+    core = AllocationCore(cfg)
+    curve, matrix = core.allocator.curves[0], np.asarray(core.matrix_frd, dtype=float)
+    ths = cfg.thrusters.thrusters
+    neutral = float(cfg.thrusters.pulse_width_neutral_us)
+    rev = np.array([t.reversed for t in ths], dtype=bool)
+    trim = np.array([t.trim_us for t in ths], dtype=float)
+    truth = truth_parameters(cfg, "surge")
+    m, kq, kl = truth["inertia"], truth["quadratic_damping"], truth["linear_damping"]
+    tau, lat = float(cfg.thrusters.time_constant_s), float(cfg.esc.output_latency_s)
+
+    def wire(level):
+        logical = core.allocate([level, 0, 0, 0, 0, 0]).pulse_width_us if level else np.full(len(ths), neutral)
+        return np.where(rev, 2 * neutral - logical, logical) + trim
+
+    total = IDLE_S + len(LEVELS_N) * (RUN_S + COAST_S) + 1.0
+    dt = 0.001
+    n = int(round(total / dt))
+    widths, force = {}, {}
+    v, f_lag = 0.0, 0.0
+    with BagWriter(path, WriterOptions(fsync=False)) as w:
+        for topic, type_name in (("/identification/status", "hindrax_msgs/msg/ManeuverStatus"),
+                                 ("/thrusters/pulse_width", "hindrax_msgs/msg/ThrusterPwm"),
+                                 ("/pressure/fluid_pressure", "sensor_msgs/msg/FluidPressure"),
+                                 ("/dvl/data", "hindrax_msgs/msg/Dvl"), ("/imu/data_raw", "sensor_msgs/msg/Imu")):
+            w.add_topic(topic, type_name)
+        for i in range(n + 1):
+            t_rel = i * dt
+            t = T0 + t_rel
+            t_ns = int(round(t * 1e9))
+            if i % 20 == 0:  # 50 Hz: status and the widths the ESC wrote
+                phase, level = _schedule(t_rel)
+                st = ManeuverStatus(phase=phase, dof="surge" if phase in (2, 3) else "",
+                                    level_command=level or 0.0, level_count=len(LEVELS_N))
+                w.write("/identification/status", t_ns, serialize_message(_stamped(st, t)))
+                pw = wire(level)
+                widths[i] = pw
+                w.write("/thrusters/pulse_width", t_ns,
+                        serialize_message(_stamped(ThrusterPwm(pulse_width_us=list(pw), armed=True), t)))
+            if i % 100 == 0:  # 10 Hz: DVL (velocity FLU) and pressure
+                d = Dvl(velocity_valid=True, delta_time_s=0.1)
+                d.header.frame_id = "base_link"
+                d.velocity_m_s.x = v + 0.01 * float(rng.standard_normal())
+                d.orientation.w = 1.0
+                w.write("/dvl/data", t_ns, serialize_message(_stamped(d, t)))
+                w.write("/pressure/fluid_pressure", t_ns,
+                        serialize_message(_stamped(FluidPressure(fluid_pressure=101325.0 + 9810.0), t)))
+            # the force of the last widths written at least the ESC latency ago, through the thrust lag
+            k = 20 * int(math.floor(max(t_rel - lat, 0.0) / (20 * dt) + 1e-9))
+            if k not in force:
+                force[k] = float(matrix[0] @ thrust_of_written_widths(cfg, curve, widths.get(k, widths[0])))
+            f_cmd = force[k]
+            f_lag = f_cmd + (f_lag - f_cmd) * math.exp(-dt / tau)
+            v += dt * (f_lag - kq * abs(v) * v - kl * v) / m
+    return truth
+
+
+def test_ident_bag_and_ident_fit_give_the_same_values_and_intervals(tmp_path, capsys):
+    cfg = load_config(default_config_path())
+    bag = tmp_path / "campaign"
+    truth = write_surge_campaign_bag(bag, cfg)
+    assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "bag_out")]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    assert cli.main(["ident", "fit", str(bag), "--config", str(default_config_path()),
+                     "--out", str(tmp_path / "fit_out")]) == 0, capsys.readouterr().err
+    printed = capsys.readouterr().out
+    assert "the campaign's topics" in printed and "linear + quadratic damping" in printed
+    a = yaml.safe_load((tmp_path / "bag_out" / "identification.yaml").read_text())
+    b = yaml.safe_load((tmp_path / "fit_out" / "identification.yaml").read_text())
+    assert set(a["dofs"]) == set(b["dofs"]) == {"surge"}
+    for name, e in a["dofs"]["surge"].items():
+        if not (isinstance(e, dict) and "value" in e):
+            continue
+        f = b["dofs"]["surge"][name]
+        assert f["value"] == pytest.approx(e["value"], rel=1e-12, abs=1e-15), name
+        assert f["ci95"] == pytest.approx(e["ci95"], rel=1e-12, abs=1e-15), name
+        assert f["std"] == pytest.approx(e["std"], rel=1e-12, abs=1e-15), name
+    # a real fit: inertia and quadratic damping near the vehicle file's, inside their intervals
+    s = a["dofs"]["surge"]
+    for name in ("inertia", "quadratic_damping"):
+        assert s[name]["value"] == pytest.approx(truth[name], rel=0.05), name
+        assert s[name]["ci95"][0] <= truth[name] <= s[name]["ci95"][1], name
