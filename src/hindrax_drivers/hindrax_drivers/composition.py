@@ -88,15 +88,15 @@ def connect_in_process(nodes: Sequence[Any]) -> None:
     same process by a direct call (module docstring, ``actuation_node``). Nodes of other classes are left alone;
     called by :func:`run_group` once every node is built (and by ``benchmarks/actuation.py``, which composes the
     same two nodes)."""
-    from .allocation.node import ThrustAllocationNode
-    from .pca9685.node import EscNode
-
-    escs = [n for n in nodes if isinstance(n, EscNode)]
+    # by their hand-off interfaces (EscNode.take_command, ThrustAllocationNode.command_sinks), so that this module
+    # imports no node module (the classes are loaded by name, NODE_CLASSES; test/test_import_structure.py)
+    escs = [n for n in nodes if callable(getattr(n, "take_command", None))]
     if len(escs) != 1:
         return
     for node in nodes:
-        if isinstance(node, ThrustAllocationNode):
-            node.command_sinks.append(escs[0].take_command)
+        sinks = getattr(node, "command_sinks", None)
+        if isinstance(sinks, list):
+            sinks.append(escs[0].take_command)
 
 
 def run_group(names: Sequence[str], args: Sequence[str] | None = None) -> int:
