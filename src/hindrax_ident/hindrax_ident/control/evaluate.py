@@ -73,11 +73,11 @@ import numpy as np
 
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
-from hindrax_drivers.config import DOFS, ConfigError, VehicleConfig
+from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..identification.maneuvers import HoldController, dof_authority
 from ..sim.simulator import Simulator
-from ..sim.truth import Truth, TruthError, with_floor_gradient
+from ..sim.truth import Truth, with_floor_gradient, without_sensor_noise
 from .law import ControlSettings, ReferenceModel, wrap
 from .legacy import LegacyPDHold
 from .loop import HoldLoop
@@ -168,22 +168,6 @@ def make_hold(kind: str, cfg: VehicleConfig, setup: EvaluationSetup, model: Cont
         return HoldController(cfg, auth, setup.bandwidth_rad_s, setup.hold_fraction, model, setup.velocity_gain,
                               limits)
     raise ValueError(f"unknown model {kind!r}; one of {', '.join(MODELS)}")
-
-
-def without_sensor_noise(truth: Truth) -> Truth:
-    """The same truth with the simulated sensors' white noise, dropouts and DVL scale error set to zero
-    (``simulation.sensors.*.noise_std_*``, ``dropout_probability``, ``dvl75.scale_error_fraction``); biases, rates
-    and the truth's disturbances are kept. With :func:`run_case` also turning off the DVL beam-range noise, this is
-    the diagnostic that separates the model's error from the sensor noise (docs/control.md §6). Raises
-    :class:`~..sim.truth.TruthError` if the configuration does not validate (it always should)."""
-    quiet = {k: 0.0 for k in truth.config.flat
-             if k.startswith("simulation.sensors.") and (".noise_std_" in k or k.endswith(".dropout_probability")
-                                                          or k.endswith(".scale_error_fraction"))}
-    try:
-        config = truth.config.with_overrides(quiet)
-    except ConfigError as exc:
-        raise TruthError(f"{truth.source}: {exc}") from exc
-    return Truth(config, truth.disturbances, truth.vehicle, truth.overlay, f"{truth.source} (sensor noise off)")
 
 
 def _true_altitude(sim: Simulator, ping_frd: np.ndarray) -> float:

@@ -442,3 +442,20 @@ def with_floor_gradient(truth: Truth, gradient_ne) -> Truth:
     flat = {k: v for k, v in values.items()}
     dist = _validate_disturbances(flat, len(truth.config.thrusters.names), truth.source)
     return Truth(truth.config, dist, truth.vehicle, truth.overlay, truth.source)
+
+
+def without_sensor_noise(truth: Truth) -> Truth:
+    """The same truth with the simulated sensors' white noise, dropouts and DVL scale error set to zero
+    (``simulation.sensors.*.noise_std_*``, ``dropout_probability``, ``dvl75.scale_error_fraction``); biases, rates
+    and the truth's disturbances are kept. With :func:`hindrax_ident.control.evaluate.run_case` also turning off
+    the DVL beam-range noise, this is the diagnostic that separates the model's error from the sensor noise
+    (docs/control.md §6; ``hindrax control evaluate --no-sensor-noise``). Raises :class:`TruthError` if the
+    configuration does not validate (it always should)."""
+    quiet = {k: 0.0 for k in truth.config.flat
+             if k.startswith("simulation.sensors.") and (".noise_std_" in k or k.endswith(".dropout_probability")
+                                                          or k.endswith(".scale_error_fraction"))}
+    try:
+        config = truth.config.with_overrides(quiet)
+    except ConfigError as exc:
+        raise TruthError(f"{truth.source}: {exc}") from exc
+    return Truth(config, truth.disturbances, truth.vehicle, truth.overlay, f"{truth.source} (sensor noise off)")
