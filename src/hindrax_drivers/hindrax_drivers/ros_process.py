@@ -168,7 +168,11 @@ class RosProcess:
                 failed.append(cleanup_exc)
         if self._executor is not None:
             self._executor.shutdown()
-        rclpy.try_shutdown()
+        try:
+            rclpy.try_shutdown()
+        except Exception:  # noqa: BLE001 - rclpy's SIGINT handler shut the context down between its check and ours
+            if rclpy.ok():
+                raise
         if failed and exc_type is None:
             raise failed[0]
         for cleanup_exc in failed:

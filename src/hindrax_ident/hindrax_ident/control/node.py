@@ -142,9 +142,9 @@ class ControllerNode(Node):
         self.create_service(Trigger, "controller/hold", self._on_hold)
         self.create_service(SetBool, "controller/enable", self._on_enable)
         self.create_timer(self.tick_s, self._on_tick)
-        log.info(f"controller ready (disabled): model {self.model.source}, {s.rate_hz:g} Hz")
         for line in self._report:
             log.info(line)
+        log.info(f"controller ready (disabled): model {self.model.source}, {s.rate_hz:g} Hz")  # last: it is ready
 
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
