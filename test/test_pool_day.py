@@ -201,8 +201,9 @@ def test_pool_day(colcon_install, tmp_path):
             day2.wait(lambda: day2.count("/ping/altitude", t_in) >= 3, "ping data once the adapter is plugged in")
             assert day2.state("ping1d").starts == 1
             day2.wait(lambda: len(bags(runs)) == 3 and any(
-                int(s[3].get("topic:/dvl/data", 0)) > 0 and s[3].get("bag") not in map(str, first_launch)
-                for s in day2.seen("recorder: recording")), "the second launch recording")
+                int(s[3].get("topic:/dvl/data", 0)) > 0 and int(s[3].get("topic:/pressure/fluid_pressure", 0)) > 0
+                and s[3].get("bag") not in map(str, first_launch)
+                for s in day2.seen("recorder: recording")), "the second launch recording DVL and pressure")
             assert day2.state("recorder").starts == 1
         second = [b for b in bags(runs) if b not in first_launch]
         assert len(second) == 1 and messages_in(second[0], "/dvl/data") > 0
