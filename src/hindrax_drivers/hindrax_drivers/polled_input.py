@@ -18,11 +18,11 @@ depth of each subscription must hold what arrives between two takes.
 """
 from __future__ import annotations
 
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 from rclpy.node import Node
 
-__all__ = ["PolledSubscriptions"]
+__all__ = ["PolledInputs", "PolledSubscriptions", "polled_inputs", "subscribe_input"]
 
 
 class PolledSubscriptions:
@@ -60,6 +60,72 @@ class PolledSubscriptions:
     def close(self) -> None:
         """Destroy the intake node and every subscription on it."""
         self.node.destroy_node()
+
+
+class PolledInputs(PolledSubscriptions):
+    """Polled subscriptions with a handler each: a node's topic inputs taken at its own tick (the supervisor, the
+    identification node, the controller on the system clock; docs/architecture.md §10.1).
+
+    :meth:`take_all` hands every queued message to its handler, subscription by subscription, and sets
+    :attr:`received_s` to the message's DDS reception time (s, system clock; None where the middleware gave none)
+    while the handler runs, so a handler can count a sample at its arrival as a callback would have.
+    """
+
+    def __init__(self, owner: Node) -> None:
+        super().__init__(owner)
+        self.handlers: dict[Any, Callable[[Any], None]] = {}
+        #: DDS reception time of the message being handled by :meth:`take_all`, s; None outside it
+        self.received_s: float | None = None
+
+    def add(self, msg_type: Any, topic: str, handler: Callable[[Any], None], qos: Any, raw: bool = False,
+            **kwargs: Any) -> Any:
+        """:meth:`subscribe` ``topic`` with ``handler`` for :meth:`take_all`; returns the subscription."""
+        sub = self.subscribe(msg_type, topic, qos, raw=raw, **kwargs)
+        self.handlers[sub] = handler
+        return sub
+
+    def remove(self, subscription: Any) -> None:
+        """Destroy one subscription of :meth:`add`; a :meth:`take_all` under way hands it nothing more."""
+        self.handlers.pop(subscription, None)
+        self.destroy(subscription)
+
+    def take_all(self) -> int:
+        """Hand every queued message to its handler (oldest first per subscription). Returns how many."""
+        n = 0
+        try:
+            for sub, handler in list(self.handlers.items()):
+                if sub not in self.handlers:  # removed by a handler of this round: destroyed, nothing to take
+                    continue
+                for msg, info in self.take(sub):
+                    received_ns = info.get("received_timestamp") or 0
+                    self.received_s = received_ns * 1e-9 if received_ns else None
+                    handler(msg)
+                    n += 1
+                    if sub not in self.handlers:
+                        break
+        finally:
+            self.received_s = None
+        return n
+
+    def close(self) -> None:
+        """Forget the handlers and destroy the intake node."""
+        self.handlers.clear()
+        super().close()
+
+
+def subscribe_input(node: Node, inputs: PolledInputs | None, msg_type: Any, topic: str,
+                    handler: Callable[[Any], None], qos: Any, raw: bool = False, **kwargs: Any) -> Any:
+    """One topic input of ``node``: a callback subscription when ``inputs`` is None (``use_sim_time``: the stepped
+    simulation dispatches every message in order), else polled on ``inputs`` (:meth:`PolledInputs.add`)."""
+    if inputs is None:
+        return node.create_subscription(msg_type, topic, handler, qos, raw=raw, **kwargs)
+    return inputs.add(msg_type, topic, handler, qos, raw=raw, **kwargs)
+
+
+def polled_inputs(node: Node) -> PolledInputs | None:
+    """:class:`PolledInputs` for ``node`` on the system clock; None with ``use_sim_time`` (its inputs are
+    callbacks)."""
+    return None if node.get_parameter("use_sim_time").value else PolledInputs(node)
 
 
 def _never_called(_msg: Any) -> None:  # the intake node is in no executor: nothing dispatches its subscriptions

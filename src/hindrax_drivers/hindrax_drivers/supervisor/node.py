@@ -31,7 +31,7 @@ CPU (README "Performance on the Pi")
     handler each, visited in Python on every executor spin): a sensor that stops reaching the supervisor, for a
     QoS mismatch or any other reason, trips it through the ``supervisor.min_rate.*`` checks (where not 0).
     On the system clock (the vehicle; ``use_sim_time`` false) ``imu/data_raw``, the supervisor's largest stream
-    (51-102 Hz), is a polled subscription (:class:`~hindrax_drivers.polled_input.PolledSubscriptions`): no executor
+    (51-102 Hz), is a polled subscription (:class:`~hindrax_drivers.polled_input.PolledInputs`): no executor
     wake-up per sample; every check (``supervisor.check_rate_hz``) takes what arrived and counts each sample at its
     DDS reception time (``received_timestamp``, system clock = the node's ROS time), so the rate and the age the
     checks see are those of per-sample callbacks, up to one check period late (50 ms at 20 Hz; the rate window is
@@ -69,7 +69,7 @@ from hindrax_msgs.srv import SetArmed
 from .. import frames
 from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
-from ..polled_input import PolledSubscriptions
+from ..polled_input import PolledInputs, polled_inputs, subscribe_input
 from .core import SupervisorCore, SupervisorLimits
 
 __all__ = ["SupervisorNode", "main"]
@@ -111,12 +111,9 @@ class SupervisorNode(Node):
         self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
         self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
         #: polled imu/data_raw intake on the system clock (module docstring, "CPU"); None with use_sim_time
-        self.imu_intake: PolledSubscriptions | None = None
-        if self.get_parameter("use_sim_time").value:
-            self.create_subscription(Imu, "imu/data_raw", self.on_imu, 10, raw=True, **ev)
-        else:
-            self.imu_intake = PolledSubscriptions(self)
-            self._imu_sub = self.imu_intake.subscribe(Imu, "imu/data_raw", IMU_POLL_DEPTH, raw=True, **ev)
+        self.imu_intake: PolledInputs | None = polled_inputs(self)
+        subscribe_input(self, self.imu_intake, Imu, "imu/data_raw", self.on_imu,
+                        10 if self.imu_intake is None else IMU_POLL_DEPTH, raw=True, **ev)
         self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10, **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
@@ -148,19 +145,15 @@ class SupervisorNode(Node):
         self._handle(self.core.on_depth(self._now_s(), -float(msg.pose.pose.position.z)))
 
     def on_imu(self, _msg: bytes) -> None:
-        self.core.on_message("imu", self._now_s())
+        """Count one ``imu/data_raw`` sample: at its DDS reception time when polled, else (a callback, or no
+        reception time from the middleware) at the node's time now."""
+        received_s = self.imu_intake.received_s if self.imu_intake is not None else None
+        self.core.on_message("imu", received_s if received_s is not None else self._now_s())
 
     def take_imu(self) -> int:
-        """Count the ``imu/data_raw`` samples queued on the polled subscription, each at its DDS reception time
-        (the time of the take where the middleware gave none). Returns how many; 0 with ``use_sim_time``."""
-        if self.imu_intake is None:
-            return 0
-        n = 0
-        for _data, info in self.imu_intake.take(self._imu_sub):
-            received_ns = info.get("received_timestamp") or self.get_clock().now().nanoseconds
-            self.core.on_message("imu", received_ns * 1e-9)
-            n += 1
-        return n
+        """Count the ``imu/data_raw`` samples queued on the polled subscription (:meth:`on_imu`). Returns how many;
+        0 with ``use_sim_time``."""
+        return self.imu_intake.take_all() if self.imu_intake is not None else 0
 
     def set_clock_stall_timeout(self, seconds: float) -> None:
         """ROS time may stand still this long (steady s) while armed before it trips (default

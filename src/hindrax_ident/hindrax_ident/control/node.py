@@ -31,7 +31,7 @@ Publishes
     ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change.
 CPU
     On the system clock (the vehicle; ``use_sim_time`` false) the topic inputs but ``controller/setpoint`` are polled
-    subscriptions (:class:`~hindrax_drivers.polled_input.PolledSubscriptions`, as the recorder's): no executor
+    subscriptions (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor
     wake-up per message (about 60 messages/s while a goal runs, 250 while the streams are open); every tick first
     hands what arrived to the same handlers, each sensor sample counted at its DDS reception time, so the tick
     decides (yield, staleness, the law) on what callbacks would have delivered by then. With ``use_sim_time`` the
@@ -62,7 +62,7 @@ from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
 from hindrax_drivers.node_parameters import node_config
-from hindrax_drivers.polled_input import PolledSubscriptions
+from hindrax_drivers.polled_input import PolledInputs, polled_inputs, subscribe_input
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus, ThrusterPwm
 
 from ..identification.maneuvers import HoldController, dof_authority
@@ -128,10 +128,7 @@ class ControllerNode(Node):
         self._sub_ev = sub_ev
         #: on the system clock the topic inputs are polled at every tick (module docstring, "CPU"); None with
         #: use_sim_time (callbacks)
-        self.intake: PolledSubscriptions | None = (None if self.get_parameter("use_sim_time").value
-                                                   else PolledSubscriptions(self))
-        self._polled: dict[Any, Any] = {}  # polled subscription -> its handler
-        self._received_s: float | None = None  # DDS reception time of the polled message being handled, s
+        self.intake: PolledInputs | None = polled_inputs(self)
         self._streams: list = []
         self._open_streams()
         self._subscribe(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20)
@@ -163,36 +160,19 @@ class ControllerNode(Node):
     def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
         """A topic input: polled on the system clock (taken by :meth:`take_inputs` at every tick), a callback with
         ``use_sim_time``. The depths hold what arrives in 0.4-2 s, many ticks."""
-        if self.intake is None:
-            return self.create_subscription(msg_type, topic, handler, depth, **self._sub_ev)
-        sub = self.intake.subscribe(msg_type, topic, depth, **self._sub_ev)
-        self._polled[sub] = handler
-        return sub
+        return subscribe_input(self, self.intake, msg_type, topic, handler, depth, **self._sub_ev)
 
     def take_inputs(self) -> int:
         """Hand every message queued on the polled inputs to its handler, each sample counted at its DDS
         reception time (``received_timestamp``, system clock = the node's ROS time). Returns how many; 0 with
         ``use_sim_time``."""
-        n = 0
-        for sub, handler in list(self._polled.items()):
-            if sub not in self._polled:  # dropped by a handler of this round (identification/status)
-                continue
-            for msg, info in PolledSubscriptions.take(sub):
-                received_ns = info.get("received_timestamp") or 0
-                self._received_s = received_ns * 1e-9 if received_ns else None
-                handler(msg)
-                n += 1
-                if sub not in self._polled:
-                    break
-        self._received_s = None
-        return n
+        return self.intake.take_all() if self.intake is not None else 0
 
     def destroy_node(self) -> None:
         """Destroy the polled intake node too, then this node."""
         if self.intake is not None:
             self.intake.close()
             self.intake = None
-            self._polled.clear()
         super().destroy_node()
 
     def _close_streams(self) -> None:
@@ -203,8 +183,7 @@ class ControllerNode(Node):
             if self.intake is None:
                 self.destroy_subscription(sub)
             else:
-                self._polled.pop(sub, None)
-                self.intake.destroy(sub)
+                self.intake.remove(sub)
         self._streams = []
         self._pending = []
         self._last_sample_s.clear()
@@ -214,7 +193,8 @@ class ControllerNode(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _add(self, samples: list) -> None:
-        now = self._received_s if self._received_s is not None else self._now_s()
+        received_s = self.intake.received_s if self.intake is not None else None
+        now = received_s if received_s is not None else self._now_s()
         for dev, _s in samples:
             self._last_sample_s[dev] = now
         self._pending.extend(samples)

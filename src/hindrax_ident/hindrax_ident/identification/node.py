@@ -74,7 +74,7 @@ Action execution
     10-13 % running a goal (docs/architecture.md §10.1).
 CPU
     On the system clock (the vehicle; ``use_sim_time`` false) the five inputs are polled subscriptions
-    (:class:`~hindrax_drivers.polled_input.PolledSubscriptions`, as the recorder's): no executor wake-up per
+    (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor wake-up per
     message (about 130-180 messages/s); every tick first hands what arrived to the same handlers, so the tick sees
     what the callbacks would have delivered by then (the samples keep their header stamps and are ordered by
     them). With ``use_sim_time`` (the stepped simulation, ``hindrax run``) the inputs are callbacks.
@@ -107,7 +107,7 @@ from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
 from hindrax_drivers.node_parameters import node_config
-from hindrax_drivers.polled_input import PolledSubscriptions
+from hindrax_drivers.polled_input import PolledInputs, polled_inputs, subscribe_input
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
@@ -256,15 +256,9 @@ class IdentificationNode(Node):
                   (Imu, "imu/data_raw", self._on_imu, 50), (Range, "ping/altitude", self._on_range, 20),
                   (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))
         #: on the system clock the inputs are polled at every tick (module docstring, "CPU"); None with use_sim_time
-        self.intake: PolledSubscriptions | None = None
-        self._polled: list[tuple[Any, Any]] = []
-        if self.get_parameter("use_sim_time").value:
-            for msg_type, topic, handler, depth in inputs:
-                self.create_subscription(msg_type, topic, handler, depth, **sub_ev)
-        else:
-            self.intake = PolledSubscriptions(self)
-            self._polled = [(self.intake.subscribe(msg_type, topic, depth, **sub_ev), handler)
-                            for msg_type, topic, handler, depth in inputs]
+        self.intake: PolledInputs | None = polled_inputs(self)
+        for msg_type, topic, handler, depth in inputs:
+            subscribe_input(self, self.intake, msg_type, topic, handler, depth, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10, **pub_ev)
         self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50, **pub_ev)
@@ -429,19 +423,13 @@ class IdentificationNode(Node):
     def take_inputs(self) -> int:
         """Hand every message queued on the polled inputs to its handler, topic by topic (the executive orders the
         samples by stamp, :func:`ordered_samples`). Returns how many; 0 with ``use_sim_time`` (callbacks)."""
-        n = 0
-        for subscription, handler in self._polled:
-            for msg, _info in PolledSubscriptions.take(subscription):
-                handler(msg)
-                n += 1
-        return n
+        return self.intake.take_all() if self.intake is not None else 0
 
     def destroy_node(self) -> None:
         """Destroy the polled intake node too, then this node."""
         if self.intake is not None:
             self.intake.close()
             self.intake = None
-            self._polled = []
         super().destroy_node()
 
     def _on_tick(self) -> None:
