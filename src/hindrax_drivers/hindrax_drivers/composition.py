@@ -26,8 +26,10 @@ Groups (:data:`GROUPS`):
     thrust allocation and ESC output: the allocation hands each command to the ESC by a direct call
     (:func:`connect_in_process`: no DDS on the wrench -> registers path but the wrench itself) and still publishes
     it on ``thrusters/command_pulse_width`` for the bag and any other listener; the ESC skips that copy when it
-    reaches its subscription (:meth:`~hindrax_drivers.pca9685.node.EscNode.take_command`), and keeps taking
-    commands from any other publisher (``hindrax thruster-test``). The ESC node is built last and so closed first
+    reaches its subscription (:meth:`~hindrax_drivers.pca9685.node.EscNode.take_command`), which it then takes at its
+    safety tick instead of by a callback on the system clock (:meth:`~hindrax_drivers.pca9685.node.EscNode.
+    in_process_sink`: the copies wake no executor), and keeps taking commands from any other publisher
+    (``hindrax thruster-test``, within one output period). The ESC node is built last and so closed first
     on exit: it writes neutral before anything else shuts down.
 
 ``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
@@ -88,15 +90,15 @@ def connect_in_process(nodes: Sequence[Any]) -> None:
     same process by a direct call (module docstring, ``actuation_node``). Nodes of other classes are left alone;
     called by :func:`run_group` once every node is built (and by ``benchmarks/actuation.py``, which composes the
     same two nodes)."""
-    # by their hand-off interfaces (EscNode.take_command, ThrustAllocationNode.command_sinks), so that this module
-    # imports no node module (the classes are loaded by name, NODE_CLASSES; test/test_import_structure.py)
-    escs = [n for n in nodes if callable(getattr(n, "take_command", None))]
-    if len(escs) != 1:
+    # by their hand-off interfaces (EscNode.in_process_sink, ThrustAllocationNode.command_sinks), so that this
+    # module imports no node module (the classes are loaded by name, NODE_CLASSES; test/test_import_structure.py)
+    escs = [n for n in nodes if callable(getattr(n, "in_process_sink", None))]
+    commanders = [n for n in nodes if isinstance(getattr(n, "command_sinks", None), list)]
+    if len(escs) != 1 or not commanders:
         return
-    for node in nodes:
-        sinks = getattr(node, "command_sinks", None)
-        if isinstance(sinks, list):
-            sinks.append(escs[0].take_command)
+    sink = escs[0].in_process_sink()
+    for node in commanders:
+        node.command_sinks.append(sink)
 
 
 def run_group(names: Sequence[str], args: Sequence[str] | None = None) -> int:

@@ -35,9 +35,10 @@ class AliveAge:
         self._last_tick = clock()
         self.age_s = math.inf
 
-    def heard(self) -> None:
-        """The peer spoke now."""
-        self.age_s = 0.0
+    def heard(self, ago_s: float = 0.0) -> None:
+        """The peer spoke ``ago_s`` seconds ago (0: now; a message taken from a polled subscription passes the wall
+        time since its DDS reception, so that its age is what a callback at its arrival would have counted)."""
+        self.age_s = max(0.0, float(ago_s))
 
     def tick(self) -> float:
         """Advance by the (capped) time since the previous tick; returns the age, s."""

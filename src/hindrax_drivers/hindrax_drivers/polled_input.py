@@ -18,11 +18,12 @@ depth of each subscription must hold what arrives between two takes.
 """
 from __future__ import annotations
 
+import time
 from typing import Any, Callable, Iterator
 
 from rclpy.node import Node
 
-__all__ = ["PolledInputs", "PolledSubscriptions", "polled_inputs", "subscribe_input"]
+__all__ = ["PolledInputs", "PolledSubscriptions", "polled_inputs", "received_ago_s", "subscribe_input"]
 
 
 class PolledSubscriptions:
@@ -77,6 +78,13 @@ class PolledInputs(PolledSubscriptions):
         #: DDS reception time of the message being handled by :meth:`take_all`, s; None outside it
         self.received_s: float | None = None
 
+    def received_ago_s(self) -> float:
+        """Wall time since the DDS reception of the message being handled by :meth:`take_all`, s (system clock,
+        >= 0); 0.0 outside it or where the middleware gave no reception time (the message counts as heard now)."""
+        if self.received_s is None:
+            return 0.0
+        return max(0.0, time.time() - self.received_s)
+
     def add(self, msg_type: Any, topic: str, handler: Callable[[Any], None], qos: Any, raw: bool = False,
             **kwargs: Any) -> Any:
         """:meth:`subscribe` ``topic`` with ``handler`` for :meth:`take_all`; returns the subscription."""
@@ -126,6 +134,14 @@ def polled_inputs(node: Node) -> PolledInputs | None:
     """:class:`PolledInputs` for ``node`` on the system clock; None with ``use_sim_time`` (its inputs are
     callbacks)."""
     return None if node.get_parameter("use_sim_time").value else PolledInputs(node)
+
+
+def received_ago_s(inputs: PolledInputs | None) -> float:
+    """Wall time since the message being handled was received, s: :meth:`PolledInputs.received_ago_s` for a handler
+    called by ``inputs.take_all``, 0.0 when ``inputs`` is None (a callback runs at the message's arrival). The safety
+    nodes age a heartbeat by it (:meth:`hindrax_drivers.liveness.AliveAge.heard`), so a beat taken at their tick
+    counts from its reception, as a callback would have counted it."""
+    return inputs.received_ago_s() if inputs is not None else 0.0
 
 
 def _never_called(_msg: Any) -> None:  # the intake node is in no executor: nothing dispatches its subscriptions

@@ -80,6 +80,10 @@ def test_actuation_hands_the_command_to_the_esc_in_process_and_still_takes_other
         esc = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx, parameter_overrides=params)
         connect_in_process([alloc, esc])
         assert alloc.command_sinks == [esc.take_command]
+        # on the system clock the command topic is then taken at the ESC's safety tick: no callback (executor
+        # wake-up) for the DDS copies of the commands the ESC took in the process
+        assert "/thrusters/command_pulse_width" not in {s.topic_name for s in esc.subscriptions}
+        assert esc._command_sub in esc.inputs.handlers
         probe = rclpy.create_node("handoff_probe", context=ctx)
         SafetyHeartbeats(probe)
         ex = SingleThreadedExecutor(context=ctx)

@@ -472,3 +472,61 @@ def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):
             node.steady_check()
         assert node.steady_watchdog_trips == 1 and node.command is None
         node.destroy_node()
+
+
+def _steady_timers(node):
+    from rclpy.clock import ClockType
+
+    period_ns = round(PERIOD_S * 1e9)
+    timers = [t for t in node.timers if t.timer_period_ns == period_ns]
+    return [t.clock.clock_type == ClockType.STEADY_TIME for t in timers]
+
+
+def test_system_clock_one_steady_tick_takes_the_heartbeats_aged_from_their_reception():
+    """docs/architecture.md §10.1: on the system clock the ESC wakes once per output period (one steady-clock timer
+    runs the safety tick, then the output tick) and takes the supervisor's and guard's heartbeats there from polled
+    subscriptions; a heartbeat counts from its DDS reception, so esc.heartbeat_timeout_s keeps its meaning. With
+    use_sim_time the output tick stays a ROS-time timer and the heartbeats callbacks."""
+    import time
+
+    beat_topics = {"/supervisor/heartbeat", "/guard/heartbeat"}
+    with ros_context() as ctx:
+        sim = _node(Pca9685Emulator(), {}, sim_time=True, ctx=ctx)
+        assert sorted(_steady_timers(sim)) == [False, True] and sim.inputs is None
+        assert beat_topics <= {s.topic_name for s in sim.subscriptions}
+        sim.destroy_node()
+
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
+        node.set_heartbeat_timeout(0.2)
+        assert _steady_timers(node) == [True]
+        assert not beat_topics & {s.topic_name for s in node.subscriptions}
+        # a beat taken 0.15 s after its reception is 0.15 s old; one taken 0.25 s after is stale
+        ok = DiagnosticStatus(level=DiagnosticStatus.OK, message="ok")
+        node.inputs.received_s = time.time() - 0.15
+        node.on_supervisor_heartbeat(ok)
+        node.on_guard_heartbeat(ok)
+        assert 0.15 <= node.supervisor_age.age_s < 0.2 and 0.15 <= node.guard_age.age_s < 0.2
+        assert node.heartbeat_refusal() == ""
+        node.inputs.received_s = time.time() - 0.25
+        node.on_supervisor_heartbeat(ok)
+        assert node.heartbeat_refusal().startswith("no supervisor heartbeat for 0.2")
+        node.inputs.received_s = None
+
+        # live: beats from another node reach the ESC only through its tick; silenced, the refusal comes no
+        # earlier than 0.2 s after the last beat (beats every 50 ms: >= 0.15 s after silencing)
+        probe = rclpy.create_node("probe", context=ctx)
+        beats = SafetyHeartbeats(probe)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
+        try:
+            wait_until(lambda: node.heartbeat_refusal() == "", 10, spin, "both heartbeats taken at the tick")
+            beats.supervisor = None
+            t0 = time.monotonic()
+            wait_until(lambda: "no supervisor heartbeat" in node.heartbeat_refusal(), 5, spin, "supervisor stale")
+            assert time.monotonic() - t0 >= 0.15
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            node.destroy_node()

@@ -11,11 +11,18 @@ Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
   with ``esc.oscillator_calibrated`` true (neutral on the wire depends on the part's oscillator, 23-27 MHz; see
   ``hindrax esc calibrate``) and ``esc.arming_time_s`` after neutral was confirmed on the chip by read-back (not
   after node creation: a bus that was down at start delays it). Disarm is always accepted.
-- Event-driven output: an armed command is written to the chip in its own subscription callback. The output
+- Event-driven output: an armed command is written to the chip when it arrives (its subscription callback, or the
+  direct call of the thrust allocation composed in the same process, :meth:`EscNode.in_process_sink`). The output
   tick (``esc.output_rate_hz``, ROS time) is the watchdog: if no command arrives on
   ``thrusters/command_pulse_width`` for ``esc.watchdog_timeout_s``, every channel is written neutral at the next
   tick, i.e. within one output period. A second, steady-clock watchdog (``time.monotonic``) does the same when
-  ROS time stops (``use_sim_time`` with a dead ``/clock``, where the ROS timers stand still). Neutral is also
+  ROS time stops (``use_sim_time`` with a dead ``/clock``, where the ROS timers stand still).
+- Ticks and inputs (docs/architecture.md §10.1): on the system clock one steady-clock timer runs the safety tick
+  (:meth:`EscNode.steady_check`) and then the output tick (:meth:`EscNode.tick`, ROS time = wall time there), and
+  the supervisor's and the guard's heartbeats are taken at the safety tick from polled subscriptions
+  (:mod:`hindrax_drivers.polled_input`), each aged from its DDS reception time, so the 0.2 s timeout means what it
+  meant with a callback per beat. With ``use_sim_time`` the output tick is a ROS-time timer of its own, the safety
+  tick a steady-clock timer, and the heartbeats callbacks. Neutral is also
   written on disarm, on any exception in the output path, and on shutdown (:meth:`EscNode.close`, called for
   SIGINT/SIGTERM by :func:`run_node`).
 - Read-back: every ``esc.readback_interval_s`` the tick reads MODE1, PRE_SCALE and the written channel registers;
@@ -64,7 +71,7 @@ from __future__ import annotations
 import collections
 import math
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -77,10 +84,12 @@ from hindrax_msgs.srv import SetArmed
 
 from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
+from ..polled_input import polled_inputs, received_ago_s, subscribe_input
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
 
+COMMAND_TOPIC = "thrusters/command_pulse_width"
 #: commands taken in the process (:meth:`EscNode.take_command`) remembered until their DDS copy arrives; a copy
 #: comes within milliseconds, so 16 (0.3 s at 50 Hz) only bounds the memory of copies that never come
 LOCAL_COMMANDS_KEPT = 16
@@ -209,7 +218,11 @@ class EscNode(Node):
         self.start_time = self.get_clock().now()
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
-        self.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", self._on_command_topic, 10)
+        #: the inputs taken at the safety tick (system clock; None with ``use_sim_time``: callbacks, which the stepped
+        #: simulation dispatches in order): the peers' heartbeats, and the command topic once a commander in this
+        #: process hands its commands over (:meth:`in_process_sink`)
+        self.inputs = polled_inputs(self)
+        self._command_sub = self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10)
         #: commands handed over in the process (:meth:`take_command`) whose DDS copy has not come back yet
         self._local_commands: collections.deque = collections.deque(maxlen=LOCAL_COMMANDS_KEPT)
         self.local_copies_skipped = 0
@@ -217,13 +230,22 @@ class EscNode(Node):
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
         self._heartbeat_tick = 0
-        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor_heartbeat, 10)
-        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
+        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"],
+                        self.on_supervisor_heartbeat, 10)
+        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._configure_chip()
-        self.timer = self.create_timer(self.period_s, self.tick)
-        self.steady_timer = self.create_timer(self.period_s, self.steady_check,
-                                              clock=Clock(clock_type=ClockType.STEADY_TIME))
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        if self.inputs is None:
+            # use_sim_time: the output tick follows simulated time (the stepped graph's order); the safety tick
+            # keeps running on the steady clock when /clock stops
+            self.timer = self.create_timer(self.period_s, self.tick)
+            self.steady_timer = self.create_timer(self.period_s, self.steady_check, clock=steady)
+        else:
+            # system clock: ROS time is wall time, so one steady-clock timer runs the safety tick and then the
+            # output tick (one executor wake-up per period instead of two, docs/architecture.md §10.1)
+            self.timer = self.steady_timer = self.create_timer(self.period_s, self._steady_and_output_tick,
+                                                               clock=steady)
 
     def set_steady_watchdog_timeout(self, seconds: float) -> None:
         """Steady-clock watchdog timeout, s (default ``esc.watchdog_timeout_s``).
@@ -376,6 +398,17 @@ class EscNode(Node):
         return True
 
     # -- inputs
+    def in_process_sink(self) -> Callable[[ThrusterPwm], None]:
+        """The hand-off for a commander in this process (:func:`hindrax_drivers.composition.connect_in_process`):
+        returns :meth:`take_command`. On the system clock the command topic is from then on taken at the safety
+        tick (a polled subscription) instead of by a callback: its traffic is then mostly the DDS copies of the
+        commands already taken, which cost no executor wake-up that way; another publisher's command (``hindrax
+        thruster-test``) is handled at the next tick, within one output period."""
+        if self.inputs is not None and self._command_sub not in self.inputs.handlers:
+            self.destroy_subscription(self._command_sub)
+            self._command_sub = self.inputs.add(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10)
+        return self.take_command
+
     def take_command(self, msg: ThrusterPwm) -> None:
         """A command handed over by a node of the same process (the composed thrust allocation,
         :func:`hindrax_drivers.composition.connect_in_process`): handled at once, as :meth:`on_command`, without the
@@ -528,6 +561,12 @@ class EscNode(Node):
             self._publish_written(now)
         self._published_since_tick = False
 
+    def _steady_and_output_tick(self) -> None:
+        """The one timer of the system clock (steady clock, ``esc.output_rate_hz``): :meth:`steady_check`, then
+        :meth:`tick`, which reads ROS time (= wall time there) for its watchdog and stamps."""
+        self.steady_check()
+        self.tick()
+
     def _check_chip(self) -> None:
         """Read the chip back; on a mismatch (brown-out reset, sleep, lost registers) re-initialise it, disarm,
         and restart the arming timer (the ESCs must see neutral again), reporting it in diagnostics."""
@@ -585,6 +624,8 @@ class EscNode(Node):
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         self.supervisor_age.tick()
         self.guard_age.tick()
+        if self.inputs is not None:  # after the ticks: a heartbeat taken now counts from its reception
+            self.inputs.take_all()
         refusal = self.heartbeat_refusal()
         if refusal and self.armed:
             self.heartbeat_disarms += 1
@@ -618,8 +659,9 @@ class EscNode(Node):
 
     def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip
-        disarms at once (not at the next tick)."""
-        self.supervisor_age.heard()
+        disarms when it is handled (at once as a callback; at the next safety tick on the system clock, where
+        the supervisor's own ``esc/set_armed`` request has disarmed already)."""
+        self.supervisor_age.heard(received_ago_s(self.inputs))
         self.supervisor_ok, self.supervisor_message = msg.level == DiagnosticStatus.OK, msg.message
         if not self.supervisor_ok and self.armed:
             self.heartbeat_disarms += 1
@@ -627,7 +669,7 @@ class EscNode(Node):
 
     def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low)."""
-        self.guard_age.heard()
+        self.guard_age.heard(received_ago_s(self.inputs))
         self.guard_ok, self.guard_message = msg.level == DiagnosticStatus.OK, msg.message
         if not self.guard_ok and self.armed:
             self.heartbeat_disarms += 1
@@ -677,6 +719,12 @@ class EscNode(Node):
         self.armed = False
         self.command = None
         self._safe_neutral("shutdown")
+
+    def destroy_node(self) -> None:
+        if self.inputs is not None:
+            self.inputs.close()
+            self.inputs = None
+        super().destroy_node()
 
 
 def main(args=None) -> int:
