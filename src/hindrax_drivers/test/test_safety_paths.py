@@ -185,6 +185,31 @@ def test_f2_without_oe_the_guard_puts_the_chip_to_sleep_over_the_bus(rig):
     assert np.all(wire(r.emu) == 0.0)
 
 
+def test_f2_guard_takes_the_heartbeats_at_its_tick_aged_from_their_reception(rig):
+    """On the system clock the guard's two heartbeat inputs are polled at its 20 Hz tick (no callback per beat,
+    docs/architecture.md §10.1) and a beat counts from its DDS reception, so the 0.2 s timeout keeps its meaning."""
+    import time
+
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    r = rig(guard=True)
+    beats = {"/esc/heartbeat", "/supervisor/heartbeat"}
+    assert not beats & {s.topic_name for s in r.guard.subscriptions}
+    assert {s.topic_name for s in r.guard.inputs.handlers} == beats
+    r.wait(lambda: not r.guard.core.asserted, "guard released: both heartbeats taken at its tick")
+    esc_beat = DiagnosticStatus(level=DiagnosticStatus.OK, values=[KeyValue(key="output_state", value="1"),
+                                                                   KeyValue(key="armed", value="false")])
+    r.guard.inputs.received_s = time.time() - 0.15
+    r.guard.on_esc(esc_beat)
+    r.guard.on_supervisor(DiagnosticStatus(level=DiagnosticStatus.OK, message="ok"))
+    assert 0.15 <= r.guard.esc_age.age_s < 0.2 and 0.15 <= r.guard.supervisor_age.age_s < 0.2
+    r.guard.inputs.received_s = time.time() - 0.25
+    r.guard.on_esc(esc_beat)
+    r.guard.inputs.received_s = None
+    assert r.guard.core.causes(r.guard.esc_age.age_s, r.guard.supervisor_age.age_s)[0].startswith(
+        "ESC output state silent")
+
+
 def test_f2_guard_start_holds_oe_until_a_live_esc_confirms_neutral():
     core = GuardCore(timeout_s=0.2)
     assert core.decide(math.inf, 0.0)[0]  # no ESC heard yet

@@ -19,8 +19,10 @@ and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation m
 ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
-(:class:`~hindrax_drivers.liveness.AliveAge`), timeout ``esc.heartbeat_timeout_s``. A small process of its own
-(EventsExecutor, two subscriptions, one 20 Hz timer) so that a fault in the supervisor's sensor code cannot
+(:class:`~hindrax_drivers.liveness.AliveAge`), timeout ``esc.heartbeat_timeout_s``. On the system clock the two
+heartbeats are taken at that tick from polled subscriptions (:mod:`hindrax_drivers.polled_input`), each aged from
+its DDS reception time; with ``use_sim_time`` they are callbacks. A small process of its own
+(EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's sensor code cannot
 take the second stop path with it.
 
 Run alone: ``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
@@ -38,6 +40,7 @@ from rclpy.node import Node
 from ..config import output_enable_gpio
 from ..liveness import HEARTBEAT_NAMES, AliveAge
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from ..polled_input import polled_inputs, received_ago_s, subscribe_input
 from ..pca9685 import protocol as p
 from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
@@ -90,8 +93,11 @@ class OutputGuardNode(Node):
                                                  "bus (does not work through an I2C outage)")
         self._open_line()
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["guard"], 10)
-        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10)
-        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10)
+        #: the heartbeats are taken at the tick on the system clock (polled subscriptions: no executor wake-up per
+        #: beat, docs/architecture.md §10.1), each aged from its DDS reception; callbacks with use_sim_time
+        self.inputs = polled_inputs(self)
+        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10)
+        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.wired:
@@ -163,16 +169,20 @@ class OutputGuardNode(Node):
             state = int(values.get("output_state", OUTPUT_UNKNOWN))
         except ValueError:
             state = OUTPUT_UNKNOWN
-        self.esc_age.heard()
+        self.esc_age.heard(received_ago_s(self.inputs))
         self.core.on_esc(state, values.get("armed") == "true")
 
     def on_supervisor(self, msg: DiagnosticStatus) -> None:
-        self.supervisor_age.heard()
+        self.supervisor_age.heard(received_ago_s(self.inputs))
         self.core.on_supervisor(msg.level == DiagnosticStatus.OK, msg.message)
 
     # -- tick
     def tick(self) -> None:
-        asserted, changed = self.core.decide(self.esc_age.tick(), self.supervisor_age.tick())
+        self.esc_age.tick()
+        self.supervisor_age.tick()
+        if self.inputs is not None:  # after the ticks: a beat taken now counts from its reception
+            self.inputs.take_all()
+        asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s)
         if changed and asserted:
             self.assertions += 1
             self.last_assert_monotonic = time.monotonic()
@@ -194,6 +204,12 @@ class OutputGuardNode(Node):
                 ("silence_failures", self.silence_failures),
                 ("output_enable_gpio", f"{self.gpio[0]}:{self.gpio[1]}" if self.gpio else "not wired"),
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}")]
+
+    def destroy_node(self) -> None:
+        if self.inputs is not None:
+            self.inputs.close()
+            self.inputs = None
+        super().destroy_node()
 
     def close(self) -> None:
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:
