@@ -317,3 +317,22 @@ def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real
     registered = {" ".join(words) for words, _m, _h in COMMANDS}
     used = set(re.findall(r"`(?:docker exec -it hindrax )?hindrax ((?:[a-z-]+)(?: [a-z-]+)?)", text))
     assert used and all(u in registered or u.split()[0] in registered for u in used), used - registered
+
+
+def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_it(packages, tmp_path):
+    """docs/deployment.md §1: the ESC (actuation_node), the supervisor and the output guard run at nice -5 through
+    launch-prefix, nothing else does, and the project's runner (pool-day test, bench) puts the prefix first as
+    launch_ros does; the bare-metal unit and the compose file allow that nice value."""
+    from hindrax_drivers.launch_xml import read_launch
+    from hindrax_drivers.process_runner import ProcessRunner
+
+    read = read_launch(REPO / "src/hindrax_ident/launch/pool_test.launch.xml", {},
+                       find_share=lambda pkg: REPO / "src" / pkg)
+    prefixed = {p.executable: p.launch_prefix for p in read if p.launch_prefix}
+    assert prefixed == {e: ("nice", "-n", "-5") for e in ("actuation_node", "supervisor_node", "output_guard_node")}
+    runner = ProcessRunner(read, log_dir=tmp_path, command=lambda p: ["/opt/x/" + p.executable])
+    for p in read:
+        argv = runner.argv(p)
+        assert argv[:len(p.launch_prefix) + 2] == [*p.launch_prefix, "/opt/x/" + p.executable, "--ros-args"]
+    assert "LimitNICE=-5" in (REPO / "docker/hindrax-bare-metal.service").read_text()
+    assert "nice: 25" in (REPO / "docker/compose.yaml").read_text()

@@ -11,7 +11,7 @@ names, substitutions, conditions, the ``--ros-args`` a node gets); anything else
 
 Supported
     ``<launch>`` with ``<arg name default description/>``, ``<let name value/>``, ``<node pkg exec name namespace
-    output respawn respawn_delay args if unless>`` holding ``<param from/>``, ``<param name value/>`` and
+    output respawn respawn_delay args launch-prefix if unless>`` holding ``<param from/>``, ``<param name value/>`` and
     ``<remap from to/>``, ``<include file>`` holding ``<arg name value/>``, and ``<group>`` (with ``if``/``unless``);
     the substitutions ``$(var NAME)``, ``$(find-pkg-share PKG)`` and ``$(env NAME [DEFAULT])``; conditions that
     evaluate to ``true``/``false``/``1``/``0`` (any case), as ``launch.conditions.evaluate_condition_expression``.
@@ -19,6 +19,10 @@ Command of a node (``launch_ros.actions.Node``)
     ``<executable> [args...] --ros-args -r __node:=<name> [-r __ns:=<ns>] --params-file <file> ... -r from:=to``,
     the ``<param name value>`` elements written, as ``launch_ros`` does, to a parameter file keyed ``/**``, with
     each value typed by YAML (``true`` -> bool, ``2.0`` -> float, anything else a string).
+Launch prefix
+    ``launch-prefix="nice -n -5"`` puts that command, split as a shell would (``shlex``), before the executable
+    (``launch_ros.actions.Node(prefix=...)``); the vehicle launch file gives the safety processes their scheduling
+    priority this way (docs/deployment.md §1).
 Respawn
     ``respawn="true"`` restarts the process whenever it ends while the launch runs, after ``respawn_delay`` s
     (``launch.actions.ExecuteLocal``: on any exit, not only a failure).
@@ -27,6 +31,7 @@ from __future__ import annotations
 
 import os
 import re
+import shlex
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
@@ -58,8 +63,9 @@ class NodeProcess:
     package / executable: what ``ros2 run`` would start. name: the node name (``-r __node:=``), or None.
     namespace: ``-r __ns:=`` or None. parameters: in the order given, each a parameter file (``Path``) or a
     mapping of parameter name -> typed value (one ``<param name value>`` run). remaps: (from, to) pairs.
-    arguments: the ``args`` attribute, split on white space. respawn / respawn_delay_s: see the module
-    docstring (s). source: the launch file that declares the node.
+    arguments: the ``args`` attribute, split on white space. launch_prefix: the ``launch-prefix`` command, split
+    (module docstring). respawn / respawn_delay_s: see the module docstring (s). source: the launch file that
+    declares the node.
     """
 
     package: str
@@ -69,6 +75,7 @@ class NodeProcess:
     parameters: tuple = ()
     remaps: tuple[tuple[str, str], ...] = ()
     arguments: tuple[str, ...] = ()
+    launch_prefix: tuple[str, ...] = ()
     respawn: bool = False
     respawn_delay_s: float = 0.0
     output: str = "log"
@@ -209,8 +216,8 @@ class _Reader:
         return enabled
 
     def _node(self, el: ET.Element, path: Path, scope: dict[str, str]) -> NodeProcess:
-        _only(el, {"pkg", "exec", "name", "namespace", "output", "respawn", "respawn_delay", "args", "if", "unless"},
-              path)
+        _only(el, {"pkg", "exec", "name", "namespace", "output", "respawn", "respawn_delay", "args", "launch-prefix",
+                   "if", "unless"}, path)
         sub = lambda text: self.sub(text, scope, path)  # noqa: E731
         params: list = []
         remaps: list[tuple[str, str]] = []
@@ -246,7 +253,8 @@ class _Reader:
             name=sub(el.get("name")) if el.get("name") else None,
             namespace=sub(el.get("namespace")) if el.get("namespace") else None,
             parameters=tuple(p if isinstance(p, Path) else dict(p) for p in params), remaps=tuple(remaps),
-            arguments=tuple(sub(el.get("args", "")).split()), respawn=respawn in _TRUE, respawn_delay_s=delay,
+            arguments=tuple(sub(el.get("args", "")).split()), launch_prefix=tuple(shlex.split(sub(el.get(
+                "launch-prefix", "")))), respawn=respawn in _TRUE, respawn_delay_s=delay,
             output=el.get("output", "log"), source=path)
 
     def sub(self, text: str, scope: Mapping[str, str], path: Path) -> str:

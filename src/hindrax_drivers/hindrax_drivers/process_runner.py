@@ -135,8 +135,7 @@ class ProcessRunner:
         self._params_dir.mkdir(parents=True, exist_ok=True)
         slots = []
         for p in self.processes:
-            argv = self._command(p) + p.ros_arguments(self._write_values) + self._extra_args.get(p.label, [])
-            slots.append(_Slot(p, argv, self.log_dir / f"{p.label}.log"))
+            slots.append(_Slot(p, self.argv(p), self.log_dir / f"{p.label}.log"))
         self._stopping.clear()
         for slot in slots:
             self._slots[slot.process.label] = slot
@@ -178,6 +177,13 @@ class ProcessRunner:
             return {label: ProcessState(label, s.popen.pid if s.popen else None,
                                         s.popen is not None and s.popen.poll() is None, s.starts,
                                         tuple(s.exit_codes)) for label, s in self._slots.items()}
+
+    def argv(self, p: NodeProcess) -> list[str]:
+        """What ``p`` is started with, as ``launch_ros`` builds it: its ``launch-prefix``, the executable, then
+        :meth:`NodeProcess.ros_arguments` and this runner's extra arguments for it (writes its parameter files)."""
+        self._params_dir.mkdir(parents=True, exist_ok=True)
+        return list(p.launch_prefix) + self._command(p) + p.ros_arguments(self._write_values) + \
+            self._extra_args.get(p.label, [])
 
     def command(self, label: str) -> list[str]:
         """The argv the process ``label`` is started with."""

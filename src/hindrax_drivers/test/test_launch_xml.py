@@ -79,7 +79,7 @@ def test_nodes_includes_groups_and_substitutions(tmp_path, share, monkeypatch):
     ('<node pkg="p" exec="e" if="maybe"/>', {}, "expected true, false, 1 or 0"),
     ('<node pkg="p" exec="e" respawn_delay="-1"/>', {}, "non-negative"),
     ('<node pkg="p" exec="e" respawn_delay="$(var d)"/>', {}, "number of seconds"),
-    ('<node pkg="p" exec="e" launch-prefix="gdb"/>', {}, "launch-prefix not supported"),
+    ('<node pkg="p" exec="e" output_prefix="gdb"/>', {}, "output_prefix not supported"),
     ('<node pkg="p" exec="e"><param name="x"/></node>', {}, "without value="),
     ('<node pkg="p" exec="e" name="$(var nope)"/>', {}, "no such argument"),
 ])
@@ -88,6 +88,13 @@ def test_what_it_cannot_read_is_refused_in_one_line(tmp_path, share, body, given
     with pytest.raises(LaunchFileError, match=message) as exc:
         read_launch(f, given, share)
     assert "\n" not in str(exc.value) and "bad.launch.xml" in str(exc.value)
+
+
+def test_launch_prefix_is_split_as_a_shell_would_and_substituted(tmp_path, share):
+    f = write(tmp_path, "p.launch.xml", '<launch><arg name="n" default="-5"/>'
+              '<node pkg="p" exec="e" launch-prefix="nice -n $(var n)"/><node pkg="p" exec="f"/></launch>')
+    first, second = read_launch(f, find_share=share)
+    assert first.launch_prefix == ("nice", "-n", "-5") and second.launch_prefix == ()
 
 
 def test_a_missing_file_and_a_wrong_root_are_refused(tmp_path, share):

@@ -371,7 +371,9 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                 if lp.label in procs:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
                 logs[lp.label] = open(tmp / f"{lp.label}.log", "w")
-                procs[lp.label] = subprocess.Popen([py, *wrap, lp.module, *lp.ros_args(values_file), *bench],
+                # the launch file's launch-prefix too (the safety processes' nice -5, docs/deployment.md §1)
+                procs[lp.label] = subprocess.Popen([*lp.process.launch_prefix, py, *wrap, lp.module,
+                                                    *lp.ros_args(values_file), *bench],
                                                    env=dict(env, **{SOCKET_ENV: sock}), stdout=logs[lp.label],
                                                    stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
