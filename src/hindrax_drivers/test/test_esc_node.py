@@ -530,3 +530,36 @@ def test_system_clock_one_steady_tick_takes_the_heartbeats_aged_from_their_recep
             ex.shutdown()
             probe.destroy_node()
             node.destroy_node()
+
+
+def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
+    """With polled heartbeats an arm request is decided on every beat received before it (as with callbacks): a
+    supervisor ERROR that arrived after the ESC's last tick refuses the request instead of arming and disarming at
+    the next tick (found by the safety bench: a trip and reset between two ticks)."""
+    with ros_context() as ctx:
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
+        probe = rclpy.create_node("probe", context=ctx)
+        beats = SafetyHeartbeats(probe)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
+        try:
+            wait_until(lambda: node.heartbeat_refusal() == "", 10, spin, "healthy heartbeats taken")
+            ex.remove_node(node)  # no ESC tick from here: the beats below wait in its polled subscription
+            beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"
+            errors = []
+            probe.create_subscription(DiagnosticStatus, "supervisor/heartbeat",
+                                      lambda m: m.level != DiagnosticStatus.OK and errors.append(m), 10)
+            probe_only = SingleThreadedExecutor(context=ctx)
+            ex.remove_node(probe)
+            probe_only.add_node(probe)
+            wait_until(lambda: len(errors) >= 3, 5, lambda: probe_only.spin_once(timeout_sec=0.01), "ERROR beats")
+            assert node.supervisor_ok  # not taken yet
+            res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+            assert not res.success and "supervisor tripped: depth 3.00 m" in res.message and not node.armed
+            probe_only.shutdown()
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            node.destroy_node()

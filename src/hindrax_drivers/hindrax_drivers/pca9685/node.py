@@ -487,7 +487,19 @@ class EscNode(Node):
             return f"ESC arming: {remaining:.1f} s more at neutral needed (esc.arming_time_s)"
         return ""
 
+    def _take_inputs(self) -> None:
+        """Advance the heartbeat ages, then hand over what the polled inputs hold (system clock; a heartbeat taken
+        now counts from its reception). Called at every safety tick and before an arm request is decided, so that
+        the request sees every beat received before it, as callbacks would have (a supervisor ERROR that arrived
+        between two ticks refuses it)."""
+        self.supervisor_age.tick()
+        self.guard_age.tick()
+        if self.inputs is not None:
+            self.inputs.take_all()
+
     def on_set_armed(self, request: SetArmed.Request, response: SetArmed.Response) -> SetArmed.Response:
+        if request.arm:
+            self._take_inputs()
         if not request.arm:
             self.disarm("disarmed")
             if self.output_state == ThrusterPwm.OUTPUT_UNKNOWN:
@@ -622,10 +634,7 @@ class EscNode(Node):
                                          "timing is on the steady clock")
             self.get_logger().warn(f"ROS time stepped back {-step:.3f} s")
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
-        self.supervisor_age.tick()
-        self.guard_age.tick()
-        if self.inputs is not None:  # after the ticks: a heartbeat taken now counts from its reception
-            self.inputs.take_all()
+        self._take_inputs()
         refusal = self.heartbeat_refusal()
         if refusal and self.armed:
             self.heartbeat_disarms += 1
