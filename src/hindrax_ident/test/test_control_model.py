@@ -129,3 +129,34 @@ def test_another_vehicle_falls_back(cfg, tmp_path):
     doc["provenance"]["configuration_sha256"] = None  # hindrax ident fit without --config
     m = load_model(_write(tmp_path, doc), cfg)
     assert m.source == VEHICLE_FILE and "configuration_sha256" in m.notes[0]
+
+
+def test_a_holding_force_no_thrust_scale_explains_makes_the_force_terms_fall_back(cfg, tmp_path):
+    """Forward thrust 5 % and reverse 15 % weak (scenario thrust_asymmetric): the heave fit put the net buoyancy into
+    the per-direction linear damping, so its bias is near zero and every heave parameter is suspect for that bias
+    alone. The bias and the damping are then no model to feed forward: they fall back; the inertia stays."""
+    file_heave = model_from_config(cfg).axis("heave")
+    assert file_heave.bias > 0.0  # the rule needs a holding force in the vehicle file
+    why = (f"bias -0.0143 N differs from the expected {file_heave.bias:+.3g} N (z = -15.9): an unmodelled force "
+           "(current, tether, thrust offset)")
+    values = {"inertia": (41.9, 1.0), "added_mass": (26.7, 1.0), "quadratic_damping_positive": (80.9, 8.0),
+              "quadratic_damping_negative": (88.5, 8.0), "linear_damping_positive": (12.3, 1.0),
+              "linear_damping_negative": (5.7, 1.0), "bias": (-0.0143, 0.05)}
+    doc = _doc(cfg, heave={k: _par(v, s, "suspect", [why]) for k, (v, s) in values.items()})
+    h = load_model(_write(tmp_path, doc), cfg).axis("heave")
+    assert h.inertia == 41.9 and h.sources["inertia"] == "identified"
+    assert h.bias == file_heave.bias
+    assert (h.linear_damping_positive, h.linear_damping_negative) == (file_heave.linear_damping_positive,
+                                                                      file_heave.linear_damping_negative)
+    assert (h.quadratic_damping_positive, h.quadratic_damping_negative) == (file_heave.quadratic_damping_positive,
+                                                                            file_heave.quadratic_damping_negative)
+    for key in ("bias", "damping"):
+        assert h.sources[key].startswith(VEHICLE_FILE) and "force error" in h.sources[key]
+    # the same reason with a bias a weak thrust explains (file / 0.85): the identified force terms are used
+    scaled = file_heave.bias / 0.85
+    why = f"bias {scaled:+.3g} N differs from the expected {file_heave.bias:+.3g} N (z = +3.3): an unmodelled force"
+    values["bias"] = (scaled, 0.03)
+    doc = _doc(cfg, heave={k: _par(v, s, "suspect", [why]) for k, (v, s) in values.items()})
+    h = load_model(_write(tmp_path, doc), cfg).axis("heave")
+    assert h.bias == pytest.approx(scaled) and h.linear_damping_positive == 12.3
+    assert h.sources["bias"] == "identified" and h.sources["damping"] == "identified"

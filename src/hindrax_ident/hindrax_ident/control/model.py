@@ -23,7 +23,11 @@ that scale back into commanded-thrust units.
 **Verdicts.** A parameter whose ``verdict`` is ``suspect`` falls back to the vehicle file's value, except when every
 one of its reasons only says that the thrust curve or a constant force differs from the vehicle file
 (:data:`CONTROL_IRRELEVANT_REASONS`: the heave bias differing from the net buoyancy, and the cross-DOF "thrust curves do
-not match" reason): in commanded-thrust units those are exactly what the controller must use. A value that is not a
+not match" reason): in commanded-thrust units those are exactly what the controller must use, as long as a thrust
+scale explains them. A heave bias that no thrust scale explains (:func:`unexplained_bias`: e.g. -0.014 N where the
+file's net buoyancy is +0.785 N, with forward and reverse thrust 5 and 15 % weak) is a force error: the fit put the
+constant force into the per-direction damping, so the bias and the damping fall back to the vehicle file, the
+inertia (from the accelerations) stays identified. A value that is not a
 finite number, or a negative inertia or damping, also falls back. Each value carries its source
 (:attr:`AxisModel.sources`).
 
@@ -49,7 +53,8 @@ from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 from ..identification.verdicts import _declared_rel
 
 __all__ = ["AxisModel", "ControlModel", "model_from_config", "load_model", "rigid_inertia",
-           "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE"]
+           "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE",
+           "BIAS_THRUST_SCALE_SIGMAS", "unexplained_bias"]
 
 #: Source name of a value taken from the vehicle file.
 VEHICLE_FILE = "vehicle file"
@@ -58,6 +63,11 @@ VEHICLE_FILE = "vehicle file"
 #: which the feedforward should use) and the thrust curve differing from the vehicle (a uniform thrust scale cancels).
 #: A reason that matches none of them makes the parameter fall back (if the wording changes, it falls back: safe).
 CONTROL_IRRELEVANT_REASONS = ("differs from the expected", "the thrust curves do not match the vehicle")
+#: A holding force (heave: the net buoyancy) in commanded-thrust units is the vehicle file's over the true thrust scale
+#: s; an identified one outside 1 / (1 +- this many times the larger declared thrust-curve 1-sigma) of the file's is no
+#: thrust scale but a force error (an asymmetric thrust, a tether, a fit that put the constant force into the
+#: per-direction damping): the DOF's force terms (bias and damping) then fall back (:func:`unexplained_bias`).
+BIAS_THRUST_SCALE_SIGMAS = 3.0
 
 _DAMPING = ("linear_damping_positive", "linear_damping_negative", "quadratic_damping_positive",
             "quadratic_damping_negative")
@@ -172,6 +182,34 @@ def _disqualifying(entry: Mapping) -> list[str]:
     return [r for r in reasons if not any(p in r for p in CONTROL_IRRELEVANT_REASONS)]
 
 
+def unexplained_bias(entry: Mapping, file_bias: float, cfg: VehicleConfig, scale: float = 1.0) -> str | None:
+    """Why a DOF's identified constant force disqualifies its force terms, or None (module docstring, "Verdicts").
+
+    ``entry``: the DOF's mapping of identification.yaml; ``file_bias``: the vehicle file's holding force (N; heave
+    B - W, FRD down); ``scale``: the calibrated thrust scale the values are divided by. Only a DOF whose file
+    expects a holding force (heave) and whose bias is ``suspect`` for differing from it is judged: a uniform thrust
+    scale s gives b = file_bias / s, so a ratio b / file_bias within 1 / (1 +- r), r =
+    :data:`BIAS_THRUST_SCALE_SIGMAS` x the larger declared thrust-curve 1-sigma (``thrusters.thrust_uncertainty_rel``,
+    docs/identification.md §6), is a thrust scale and is used; outside it the constant force is wrong (it went into
+    the per-direction damping, or a force the file does not know acts), and the bias and damping identified with it
+    are not a model to feed forward."""
+    par = entry.get("bias")
+    if not isinstance(par, Mapping) or file_bias == 0.0 or par.get("verdict", "trusted") != "suspect":
+        return None
+    if not any("differs from the expected" in str(r) for r in (par.get("reasons") or [])):
+        return None
+    b = _number(par.get("value"))
+    if b is None:
+        return None  # falls back anyway (not a number)
+    r = min(0.9, BIAS_THRUST_SCALE_SIGMAS * max(_declared_rel(cfg, None)))
+    ratio = (b / scale) / file_bias
+    lo, hi = 1.0 / (1.0 + r), 1.0 / (1.0 - r)
+    if lo <= ratio <= hi:
+        return None
+    return (f"bias {b / scale:+.3g} N is {ratio:.2f} x the file's {file_bias:+.3g} N, outside the thrust scales "
+            f"{lo:.2f}-{hi:.2f}: a force error, not a thrust scale")
+
+
 def _scales(doc: Mapping) -> dict[str, float]:
     """DOF -> thrust scale of a calibrated identification (``joint.scales.<group>.value`` for the group's ``dofs``)."""
     out: dict[str, float] = {}
@@ -244,7 +282,10 @@ def _axis_from_entry(dof: str, entry: Mapping, file_axis: AxisModel, cfg: Vehicl
     s = 1.0 if scale is None else scale
     sources: dict[str, str] = {}
 
-    def pick(name: str, file_value: float, allow_negative: bool = False) -> tuple[float, str, float | None]:
+    force_error = unexplained_bias(entry, file_axis.bias, cfg, s)
+
+    def pick(name: str, file_value: float, allow_negative: bool = False,
+             force_term: bool = False) -> tuple[float, str, float | None]:
         par = entry.get(name)
         if not isinstance(par, Mapping):
             return file_value, f"{VEHICLE_FILE} (not identified)", None
@@ -253,7 +294,7 @@ def _axis_from_entry(dof: str, entry: Mapping, file_axis: AxisModel, cfg: Vehicl
             return file_value, f"{VEHICLE_FILE} (identified value not a number)", None
         if v < 0 and not allow_negative:
             return file_value, f"{VEHICLE_FILE} (identified {v:.4g} < 0)", None
-        bad = _disqualifying(par)
+        bad = _disqualifying(par) or ([force_error] if (force_term and force_error) else [])
         if bad:
             return file_value, f"{VEHICLE_FILE} (identified value suspect: {bad[0]})", None
         sd = _number(par.get("std"))
@@ -280,11 +321,11 @@ def _axis_from_entry(dof: str, entry: Mapping, file_axis: AxisModel, cfg: Vehicl
     values = {}
     dsrc = set()
     for n, key in names.items():
-        v, ssrc, _ = pick(key, getattr(file_axis, n))
+        v, ssrc, _ = pick(key, getattr(file_axis, n), force_term=True)
         values[n] = v
         dsrc.add(ssrc)
     sources["damping"] = "; ".join(sorted(dsrc))
-    bias, bsrc, _ = pick("bias", file_axis.bias, allow_negative=True)
+    bias, bsrc, _ = pick("bias", file_axis.bias, allow_negative=True, force_term=True)
     sources["bias"] = bsrc
     restoring = file_axis.restoring
     if dof in ROTATIONAL_DOFS and dof != "yaw":

@@ -91,6 +91,20 @@ def run_suite(cfg: VehicleConfig, names: Sequence[str], truth_dir: Path, out: Pa
     return [run_scenario(cfg, n, truth_dir / f"{n}.yaml", out, seed, levels, progress=progress) for n in names]
 
 
+def _heave_source(sources: dict) -> str:
+    """The table's "heave model" cell from the heave axis' sources (:attr:`~.model.AxisModel.sources`): identified,
+    the vehicle file with the first reason, or the inertia identified while the force terms (damping, bias) fell back
+    (:func:`~.model.unexplained_bias`)."""
+    src = str(sources.get("inertia", "?"))
+    if not src.startswith("identified"):
+        return "file: " + src.split(": ", 1)[-1][:40].rstrip(")") if "suspect" in src else "file"
+    forces = [str(sources.get(k, "identified")) for k in ("damping", "bias")]
+    if all(f.startswith("identified") for f in forces):
+        return "identified"
+    why = next(f for f in forces if not f.startswith("identified"))
+    return "inertia identified; damping, bias file" + (" (force error)" if "force error" in why else "")
+
+
 def format_suite(rows: Sequence[dict]) -> str:
     """The markdown table: per scenario the RMSE (cm) of each hold in the depth step and the altitude hold, and the
     ratios identified / vehicle file and identified / PD hold."""
@@ -98,9 +112,7 @@ def format_suite(rows: Sequence[dict]) -> str:
             "ratio to PD | altitude hold: identified / vehicle file / PD hold (cm) | ratio to file | ratio to PD |")
     lines = [head, "|" + "---|" * 8]
     for r in rows:
-        src = str(r.get("model_sources", {}).get("heave", {}).get("inertia", "?"))
-        heave = "identified" if src.startswith("identified") else ("file: " + src.split(": ", 1)[-1][:40].rstrip(")")
-                                                                   if "suspect" in src else "file")
+        heave = _heave_source(r.get("model_sources", {}).get("heave", {}))
         cells = [r["scenario"] + (" (aborted)" if r.get("aborted") else ""), heave]
         for m in SUITE_MANEUVERS:
             v = [r["cases"].get(f"{m}/{k}", {}).get("rmse", math.nan) * 100 for k in ("identified", "vehicle_file",
