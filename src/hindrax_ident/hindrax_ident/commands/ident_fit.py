@@ -69,13 +69,15 @@ def format_table(res) -> str:
                      f"({c.covariance.clusters} clusters)")
     lines.append("")
     lines.append(f"validation ({res.design})")
-    lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8}")
+    lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8} "
+                 f"{'noise floor':>11}")
     for dof, r in res.dofs.items():
         for key, v in r.validation.items():
             if not isinstance(v, dict) or "nrmse" not in v:
                 continue
             lines.append(f"{dof:6} {key:17} {v['nrmse']:7.3f} {v.get('nrmse_hold', float('nan')):10.3f} "
-                         f"{v.get('nrmse_zero', float('nan')):10.3f} {v['samples']:8d}")
+                         f"{v.get('nrmse_zero', float('nan')):10.3f} {v['samples']:8d} "
+                         f"{v.get('nrmse_floor', float('nan')):11.3f}")
     return "\n".join(lines)
 
 
