@@ -97,7 +97,7 @@ def prior_posterior(names: Sequence[str], theta, cov, priors: dict[str, tuple[fl
         return theta.copy(), cov.copy()
     free = np.flatnonzero(np.diag(cov) > 0)
     c = cov[np.ix_(free, free)]
-    info = np.linalg.inv(c)
+    info = np.linalg.pinv(c, hermitian=True)  # a singular fit covariance (a collinear pair) raises nothing
     d = np.zeros(free.size)
     mu = np.zeros(free.size)
     for j, i in enumerate(free):
