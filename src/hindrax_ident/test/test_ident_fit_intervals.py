@@ -156,6 +156,9 @@ def test_without_config_the_file_is_not_config_ready(short_bag, capsys):
     # the thrust-curve uncertainty on top (the default 5 % reverse / 10 % forward, both directions weigh 1/2 in surge)
     thrust_sd = abs(e["inertia"]["value"]) * math.sqrt(0.25 * 0.05 ** 2 + 0.25 * 0.10 ** 2)
     assert e["inertia"]["std"] == pytest.approx(math.hypot(fit_sd, thrust_sd))
+    # the printed table shows the file's std and interval (one verdict path), not the fit's alone
+    row = next(x for x in printed.splitlines() if x.split()[:2] == ["surge", "inertia"])
+    assert f"{e['inertia']['std']:.3g}" in row and f"{e['inertia']['ci95'][1]:.4g}" in row
     with pytest.raises(ValueError) as exc:
         to_config_overrides(doc)
     msg = str(exc.value)
