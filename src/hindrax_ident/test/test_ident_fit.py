@@ -145,6 +145,26 @@ def test_validation_measures_follow_the_issue_definitions():
     assert m["nrmse_zero"] == pytest.approx(math.sqrt(np.mean(zz ** 2)) / sdev)
 
 
+def test_noise_floor_is_the_white_measurement_noise():
+    """nrmse_floor against the noise the test adds (not a number of the code): a smooth velocity at 10 Hz in three
+    10 s segments plus white noise of 1 cm/s."""
+    rng = np.random.default_rng(3)
+    m, L, h, sigma = 3, 101, 0.1, 0.01
+    t = np.arange(L) * h
+    clean = np.array([0.3 * np.sin(2 * np.pi * t / (8.0 + k)) for k in range(m)])
+    seg = np.repeat(np.arange(m), L - 1)
+    j = np.tile(np.arange(1, L), m)
+    z = clean[seg, j] + sigma * rng.standard_normal(seg.size)
+    sd = SegmentData(h, L, np.zeros((3, m, L)), np.zeros((3, m, L, 0)), clean[:, 0].copy(), np.zeros(m), seg,
+                     np.minimum(j, L - 2), np.where(j == L - 1, 1.0, 0.0), z, np.zeros(m, int), np.zeros((m, 2)),
+                     np.ones(m, bool), clean.copy(), np.zeros((m, L)), np.zeros((m, L)))
+    got = validation_measures(sd, clean)["nrmse_floor"]
+    want = sigma / float(np.std(z))
+    assert got == pytest.approx(want, rel=0.1)
+    # the perfect model (the clean velocity) scores the floor
+    assert validation_measures(sd, clean)["nrmse"] == pytest.approx(want, rel=0.1)
+
+
 def test_coupling_terms_by_hand():
     inertia = np.array([27.0, 35.0, 38.0, 1.0, 1.2, 1.3])
     nu = np.array([0.5, 0.2, 0.1, 0.05, 0.1, 0.4])

@@ -12,6 +12,8 @@
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import yaml
@@ -149,7 +151,14 @@ def test_without_config_the_file_is_not_config_ready(short_bag, capsys):
     e = doc["dofs"]["surge"]
     assert "inertia" in e and "added_mass" not in e
     assert e["inertia"]["std_source"] in ("model", "cluster_robust")
-    assert e["inertia"]["std"] == pytest.approx(max(e["inertia"]["std_model"], e["inertia"]["std_cluster_robust"]))
+    fit_sd = max(e["inertia"]["std_model"], e["inertia"]["std_cluster_robust"])
+    assert e["inertia"]["std_fit"] == pytest.approx(fit_sd)  # no vehicle file: no priors
+    # the thrust-curve uncertainty on top (the default 5 % reverse / 10 % forward, both directions weigh 1/2 in surge)
+    thrust_sd = abs(e["inertia"]["value"]) * math.sqrt(0.25 * 0.05 ** 2 + 0.25 * 0.10 ** 2)
+    assert e["inertia"]["std"] == pytest.approx(math.hypot(fit_sd, thrust_sd))
+    # the printed table shows the file's std and interval (one verdict path), not the fit's alone
+    row = next(x for x in printed.splitlines() if x.split()[:2] == ["surge", "inertia"])
+    assert f"{e['inertia']['std']:.3g}" in row and f"{e['inertia']['ci95'][1]:.4g}" in row
     with pytest.raises(ValueError) as exc:
         to_config_overrides(doc)
     msg = str(exc.value)

@@ -13,7 +13,10 @@ of
 * ``fit``: ``hindrax ident fit`` (no vehicle file, as on another vehicle's data);
 * ``ls``: a plain per-DOF least squares: M nu_dot + k_q |nu| nu + k_l nu + b = tau on the same resampled record,
   nu_dot the Savitzky-Golay derivative (0.5 s window), no delay, no coupling, simulated by the same predictor;
-* ``hold``: the velocity held at its initial value.
+* ``hold``: the velocity held at its initial value;
+
+and the noise floor (``nrmse_floor`` of :func:`..identification.fit_core.validation_measures`: the white measurement
+noise over the measured std, what a perfect model would still score).
 
 Issue 27's acceptance on real held-out data: surge, sway and heave ``fit`` at least 10 % below ``ls`` and below
 ``hold``. Tune on this benchmark, never on the tests. Usage: ``python -m hindrax_ident.benchmarks.ident_fit
@@ -108,6 +111,15 @@ DATASETS: tuple[DataSet, ...] = (
                                     "disturbances": {**_DISTURBED, "thrust": {"negative": 0.85}}},
             {"actuation": "thrusters", "sensors": "dvl", "duration_s": 150.0}, seed=100,
             note="setpoints, thrusters, DVL; current, tether, reverse 0.85, lag 0.2 s, DVL latency 0.1 s"),
+    DataSet("hindrax_deadband", {}, {"thrusters": {"time_constant_s": 0.1, "deadband_us": 45.0},
+                                     "esc": {"output_latency_s": 0.02},
+                                     "disturbances": {**_DISTURBED, "thrust": {"negative": 0.85},
+                                                      "tether": {**_DISTURBED["tether"], "drag_n_s2_m3": 4.0,
+                                                                 "tension_n": 1.0},
+                                                      "dvl": {**_DISTURBED["dvl"], "latency_s": 0.05}}},
+            {"actuation": "thrusters", "sensors": "dvl", "duration_s": 150.0}, seed=900,
+            note="setpoints, thrusters, DVL; ESC deadband 45 us where the vehicle file says 25 us (small commands "
+                 "give no thrust), short lag 0.1 s, DVL latency 0.05 s, heavier tether"),
     DataSet("hindrax_autopilot", {}, {"disturbances": {**_DISTURBED, "thrust": {"negative": 0.8},
                                                        "battery": {"voltage_start_v": 16.0, "voltage_end_v": 14.8,
                                                                    "nominal_voltage_v": 16.0, "duration_s": 600.0}}},
@@ -192,7 +204,7 @@ def evaluate(bags: Bags) -> dict:
         row = {"fit": math.nan, "ls": math.nan, "hold": math.nan, "samples": 0, "status": getattr(r, "status", "-")}
         if r is not None and r.status == "fitted" and "holdout" in r.validation:
             v = r.validation["holdout"]
-            row.update(fit=v["nrmse"], hold=v["nrmse_hold"], samples=v["samples"])
+            row.update(fit=v["nrmse"], hold=v["nrmse_hold"], samples=v["samples"], floor=v["nrmse_floor"])
             row["cv"] = r.validation.get("cross_validation", {}).get("nrmse", math.nan)
             row["model"] = f"{r.core.terms.label}; delay {r.core.timing.delay_s:.2f} lag {r.core.timing.lag_s:.2f}"
         try:
@@ -234,7 +246,8 @@ def run(quick: bool = False, only: list[str] | None = None, keep: str | None = N
                 rows.append({"name": f"{data.name} {dof} nrmse fit / ls / hold",
                              "value": f"{r['fit']:.3f} / {r['ls']:.3f} / {r['hold']:.3f}", "unit": "",
                              "target": "fit <= 0.9 ls and < hold",
-                             "note": f"cv {r.get('cv', math.nan):.3f}; {r['status']}; {r['samples']} samples; "
+                             "note": f"cv {r.get('cv', math.nan):.3f}; noise floor {r.get('floor', math.nan):.3f}; "
+                                     f"{r['status']}; {r['samples']} samples; "
                                      f"{r.get('model', '')}"})
                 rows.append({"name": f"{data.name} {dof} fit / ls", "value": round(r["fit"] / r["ls"], 3)
                              if r["ls"] > 0 else math.nan, "unit": "", "target": "<= 0.9"})

@@ -44,10 +44,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default=None, help="output directory (default: the first bag's parent directory)")
 
 
-def format_table(res) -> str:
-    """Parameters (value +- std, which covariance set the std, 95 % interval, fold spread), the chosen model and
-    timing per DOF, and the validation, one row each."""
+def format_table(res, cfg=None) -> str:
+    """Parameters (value +- std, which covariance set the fit's std, 95 % interval, fold spread), the chosen model and
+    timing per DOF, and the validation, one row each. Value, std and interval are identification.yaml's: the one
+    verdict path (:func:`~..identification.fit_any.assessment`: with ``cfg`` after the priors, with the thrust-curve
+    uncertainty)."""
     import numpy as np
+
+    from ..identification.fit_any import assessment
 
     lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
              f"{'fold spread':>11}"]
@@ -57,25 +61,29 @@ def format_table(res) -> str:
             continue
         c = r.core
         folds = np.array(r.folds) if len(r.folds) >= 2 else None
+        par = assessment(r, cfg)["parameters"]
         sm = np.sqrt(np.maximum(np.diag(c.covariance.model), 0.0))
         ss = np.sqrt(np.maximum(np.diag(c.covariance.sandwich), 0.0))
         for i, n in enumerate(c.names):
             sp = f"{np.std(folds[:, i], ddof=1):11.4g}" if folds is not None else f"{'-':>11}"
             src = "cluster_robust" if ss[i] >= sm[i] else "model"
-            lines.append(f"{dof:6} {n:28} {c.theta[i]:10.4g} {c.std[i]:9.3g} {src:>14} "
-                         f"[{c.ci95[i, 0]:10.4g}, {c.ci95[i, 1]:10.4g}] {sp}")
+            e = par[n]
+            lines.append(f"{dof:6} {n:28} {e['value']:10.4g} {e['std']:9.3g} {src:>14} "
+                         f"[{e['ci95'][0]:10.4g}, {e['ci95'][1]:10.4g}] {sp}")
         lines.append(f"{dof:6} model: {c.terms.label}; delay {c.timing.delay_s:.3f} s, lag {c.timing.lag_s:.3f} s "
                      f"({c.timing.source}); t with {c.covariance.t_dof} degrees of freedom "
                      f"({c.covariance.clusters} clusters)")
     lines.append("")
     lines.append(f"validation ({res.design})")
-    lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8}")
+    lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8} "
+                 f"{'noise floor':>11}")
     for dof, r in res.dofs.items():
         for key, v in r.validation.items():
             if not isinstance(v, dict) or "nrmse" not in v:
                 continue
             lines.append(f"{dof:6} {key:17} {v['nrmse']:7.3f} {v.get('nrmse_hold', float('nan')):10.3f} "
-                         f"{v.get('nrmse_zero', float('nan')):10.3f} {v['samples']:8d}")
+                         f"{v.get('nrmse_zero', float('nan')):10.3f} {v['samples']:8d} "
+                         f"{v.get('nrmse_floor', float('nan')):11.3f}")
     return "\n".join(lines)
 
 
@@ -100,7 +108,7 @@ def _run_campaign(args: argparse.Namespace, cfg) -> int:
                     f"{opts.validation_s:g} s validation segments of each DOF's window")
     print(f"{bag}: the campaign's topics: read as hindrax ident bag reads them (DOF windows from "
           "identification/status, thrust model of the ESC widths, the vehicle's sensors)")
-    print(format_table(res))
+    print(format_table(res, cfg))
     print(f"output: {path} and {out / 'report' / 'index.html'}")
     return 0
 
@@ -139,12 +147,12 @@ def run(args: argparse.Namespace) -> int:
     except (FitInputError, BagError, OSError) as exc:
         raise CommandError(f"ident fit: {exc}") from exc
     if not any(r.status == "fitted" for r in res.dofs.values()):
-        print(format_table(res))
+        print(format_table(res, cfg))
         raise CommandError("ident fit: no DOF could be identified (see the table: not excited or failed)")
     out = Path(args.out) if args.out else Path(args.bags[0]).resolve().parent
     doc = build_document(res, cfg, args.bags, args.holdout)
     path, index = write_fit_outputs(out, res, doc)
-    print(format_table(res))
+    print(format_table(res, cfg))
     for dof, e in doc["dofs"].items():
         if e.get("verdict") == "suspect":
             print(f"{dof}: suspect ({'; '.join(e['reasons'])})")

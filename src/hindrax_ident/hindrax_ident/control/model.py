@@ -50,7 +50,7 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-from ..identification.verdicts import _declared_rel
+from ..identification.verdicts import declared_rel
 
 __all__ = ["AxisModel", "ControlModel", "model_from_config", "load_model", "rigid_inertia",
            "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE",
@@ -144,7 +144,7 @@ def declared_inertia_uncertainty_rel(cfg: VehicleConfig) -> float:
     """Relative 1-sigma uncertainty the vehicle file declares for its force model: the RMS of the two thrust-curve
     directions' relative uncertainty (the rule of the identification intervals,
     :mod:`hindrax_ident.identification.verdicts`)."""
-    neg, pos = _declared_rel(cfg, None)
+    neg, pos = declared_rel(cfg)
     return float(math.sqrt(0.5 * (neg * neg + pos * pos)))
 
 

@@ -48,12 +48,8 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS
 
 from ..estimation.free_decay import fit_quadratic_free_decay
-from ..estimation.least_squares import EstimationError
-from ..estimation.priors import priors_from_config
-from ..sim.model import rigid_body_mass_matrix
-from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, _declared_rel, thrust_weights
-
-from hindrax_drivers.config import or_default
+from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, rigid_inertia_of, theta_priors
+from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel, thrust_weights
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -87,8 +83,8 @@ def scale_prior_stds(cfg) -> dict[str, float]:
     """1-sigma of the prior N(1, u^2) of each direction's scale: {"forward": u_positive, "reverse": u_negative}
     from the bollard-pull fit's ``thrusters.thrust_fit_uncertainty_rel`` [negative, positive] when the vehicle file
     has it, else the declared ``thrusters.thrust_uncertainty_rel`` (the same choice as the intervals,
-    :func:`~.verdicts._declared_rel`)."""
-    neg, pos = _declared_rel(cfg, None)
+    :func:`~.verdicts.declared_rel`)."""
+    neg, pos = declared_rel(cfg)
     return {"forward": float(pos), "reverse": float(neg)}
 
 
@@ -449,52 +445,6 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
 # docs/identification.md §6.2-§6.3)
 # ---------------------------------------------------------------------------------------------------------------
 
-#: Default 1-sigma of an empirical prior as a fraction of the prior's value (``identification.prior_std_rel``).
-DEFAULT_PRIOR_STD_REL = 0.5
-
-
-def _rigid_inertia(cfg, dof: str) -> float:
-    """Rigid-body mass or moment of inertia of ``dof`` about the body origin, diag of M_RB (as
-    :func:`~.estimators.rigid_inertia`; not imported from there: estimators -> results -> calibration)."""
-    m = rigid_body_mass_matrix(cfg.mass_kg, cfg.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
-    return float(m[DOFS.index(dof), DOFS.index(dof)])
-
-
-def _prior_entry(cfg, dof: str) -> dict:
-    """{added_mass, linear_damping, quadratic_damping} of ``dof`` from the configured geometry
-    (:func:`~hindrax_ident.estimation.priors.priors_from_config`, as :func:`~.results.prior_entries`); {} when the
-    configuration lacks the geometry."""
-    try:
-        p = priors_from_config(cfg)
-    except (KeyError, TypeError, EstimationError):
-        return {}
-    i = DOFS.index(dof)
-    return {k: (None if p[k][i] is None else float(p[k][i])) for k in ("added_mass", "linear_damping",
-                                                                        "quadratic_damping")}
-
-
-def _theta_priors(dof: str, names: list, cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:
-    """{parameter: (mean, std)} of the empirical priors ([NTNU-Thesis] App. A.1/A.2 via
-    :func:`_prior_entry`) on the physical parameters: inertia = rigid + prior added mass with std
-    ``prior_std_rel`` x the added mass (the rigid part is known), quadratic and linear damping (heave: the same
-    prior for both directions) with std ``prior_std_rel`` x the value. Bias and restoring have none."""
-    if not prior_std_rel > 0:
-        return {}
-    p = _prior_entry(cfg, dof)
-    if not p:
-        return {}
-    out = {}
-    for n in names:
-        key = ("added_mass" if n == "inertia" else "quadratic_damping" if n.startswith("quadratic")
-               else "linear_damping" if n.startswith("linear") else None)
-        val = p.get(key) if key else None
-        if val is None or not (math.isfinite(val) and val > 0):
-            continue
-        mean = val + (_rigid_inertia(cfg, dof) if n == "inertia" else 0.0)
-        out[n] = (float(mean), float(prior_std_rel) * float(val))
-    return out
-
-
 def _sensitivity_matrix(r, model: ScaleModel, s_c: np.ndarray) -> np.ndarray:
     """(p, n_scales) d theta / d s of a DOF's parameters at the point scales s_c: the measured
     ``signals["thrust_sensitivity"]`` (:func:`attach_thrust_sensitivities`), else theta w / sigma(s_c) from the
@@ -531,25 +481,22 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         sum_dof ||L^-1 (theta_0 - theta_fit)||^2 + sum_i ((theta_i(s) - mu_i) / sd_i)^2
         + sum_k ((s_k - 1) / u_k)^2 + sum_holds ((sum_k c_k s_k - R - rhs) / sd)^2 + ((R_v - B_w) / sd_B)^2
 
-    (L L^T the fit covariance; mu_i, sd_i the empirical priors of :func:`_theta_priors`; u_k per direction,
-    :func:`scale_prior_stds`; the holds of :func:`scale_model`; B_w the weighed net buoyancy) and its covariance is
-    (J^T J)^-1 at the optimum (Gauss-Newton, the Laplace approximation). The reported theta = theta_0 + G (s - s_c)
-    has the covariance carried by the Jacobian [I, G] (the delta method): each interval contains the calibration's own
-    uncertainty in the directions the parameter depends on, and the priors' pull. For one scale per DOF this is the
-    reparametrisation theta = s phi of the single-scale model to first order (G = theta / s by homogeneity). Without
-    a calibration the scales stay 1 (only the empirical priors act) and the thrust-curve uncertainty is added later by
-    :func:`~.verdicts.assess_dof`, per direction, as before.
+    (L L^T the fit covariance; mu_i, sd_i the empirical priors of :func:`~.posterior.theta_priors`; u_k per
+    direction, :func:`scale_prior_stds`; the holds of :func:`scale_model`; B_w the weighed net buoyancy) and its
+    covariance is (J^T J)^-1 at the optimum (Gauss-Newton, the Laplace approximation). The reported theta = theta_0
+    + G (s - s_c) has the covariance carried by the Jacobian [I, G] (the delta method): each interval contains the
+    calibration's own uncertainty in the directions the parameter depends on, and the priors' pull. For one scale
+    per DOF this is the reparametrisation theta = s phi of the single-scale model to first order (G = theta / s by
+    homogeneity). Without a calibration the scales stay 1 (only the empirical priors act) and the thrust-curve
+    uncertainty is added later by :func:`~.verdicts.assess_dof`, per direction, as before.
 
-    ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`DEFAULT_PRIOR_STD_REL`); 0 leaves the
-    priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of
+    ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`~.posterior.DEFAULT_PRIOR_STD_REL`); 0
+    leaves the priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of
     identification.yaml: {scales: {name: {value, std, prior: [1, u], measurements: [{step, value, std}], dofs}},
     group_means: {group: {value, std}}, net_buoyancy_n (with a per-hold vertical calibration), prior_std_rel,
     method}. Raises ``ValueError`` on a bad calibration scale or ``prior_std_rel`` < 0.
     """
-    if prior_std_rel is None:
-        prior_std_rel = float(or_default(cfg.identification.prior_std_rel, DEFAULT_PRIOR_STD_REL))
-    if not (math.isfinite(prior_std_rel) and prior_std_rel >= 0):
-        raise ValueError(f"prior_std_rel must be >= 0, got {prior_std_rel}")
+    prior_std_rel = prior_std_rel_of(cfg, prior_std_rel)
     model = scale_model(calibration, cfg)
     ns = len(model.names) if model else 0
     z_c = model.solve()[0] if model else np.zeros(0)   # the point scales (and constants) the record was rebuilt with
@@ -568,7 +515,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         cov = 0.5 * (cov + cov.T) + np.eye(len(names)) * 1e-18 * max(1.0, float(np.max(np.abs(np.diag(cov)))))
         linv = np.linalg.inv(np.linalg.cholesky(cov))
         g = _sensitivity_matrix(r, model, s_c) if model else None
-        blocks.append((dof, names, y, linv, _theta_priors(dof, names, cfg, prior_std_rel), slice(k, k + len(names)),
+        blocks.append((dof, names, y, linv, theta_priors(dof, names, cfg, prior_std_rel), slice(k, k + len(names)),
                        g))
         k += len(names)
     if not blocks:
@@ -596,10 +543,19 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         return np.concatenate(out)
 
     x0 = np.concatenate([b[2] for b in blocks] + [z_c])
-    sol = optimize.least_squares(residuals, x0, method="lm", xtol=1e-14, ftol=1e-14)
-    J = sol.jac
-    cx = np.linalg.inv(J.T @ J)
-    x = sol.x
+    if model is None:  # no scales: the problem separates into the per-DOF update of posterior.prior_posterior
+        x = x0.copy()
+        cx = np.zeros((n_th, n_th))
+        for dof, names, y, _, pri, sl, _g in blocks:
+            cov_y = identifications[dof].signals.get("covariance")
+            if cov_y is None or np.shape(cov_y) != (len(names), len(names)):
+                cov_y = np.diag([identifications[dof].std[n] ** 2 for n in names])
+            x[sl], cx[sl, sl] = prior_posterior(names, y, cov_y, pri)
+    else:
+        sol = optimize.least_squares(residuals, x0, method="lm", xtol=1e-14, ftol=1e-14)
+        J = sol.jac
+        cx = np.linalg.inv(J.T @ J)
+        x = sol.x
     s = x[n_th:n_th + ns]
     for dof, names, y, _, pri, sl, g in blocks:
         r = identifications[dof]
@@ -629,7 +585,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         for n, v, sd in zip(names, theta, np.sqrt(np.clip(np.diag(cov), 0.0, None))):
             r.values[n] = float(v)
             r.std[n] = float(sd)
-        r.values["added_mass"] = r.values["inertia"] - _rigid_inertia(cfg, dof)
+        r.values["added_mass"] = r.values["inertia"] - rigid_inertia_of(cfg, dof)
         r.std["added_mass"] = r.std["inertia"]
     sec = {"prior_std_rel": float(prior_std_rel),
            "method": ("Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2): each DOF's "

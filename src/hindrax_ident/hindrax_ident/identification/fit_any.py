@@ -30,8 +30,9 @@ docs/identification.md §7): per DOF the input delay and thrust lag (a commanded
 the vehicle file's latency and lag), the segment-wise output-error fit with physical bounds and a robust loss, the
 model terms chosen by cross-validation (damping law, heave per direction, Coriolis and centripetal force of the
 other DOFs' inertias, cross-DOF coupling, reverse thrust gain), the cluster-robust intervals, and the verdicts
-with what data would fix them (:func:`.verdicts.fit_parameter_verdicts`). Several bags are fitted jointly (their
-segments pooled; clusters never span two bags). A DOF whose force or velocity standard deviation is below
+with what data would fix them: the one verdict path of both commands (:func:`assessment`, :func:`.verdicts.assess`:
+the empirical priors with a vehicle file, the thrust-curve covariance, the checks). Several bags are fitted jointly
+(their segments pooled; clusters never span two bags). A DOF whose force or velocity standard deviation is below
 :data:`EXCITATION_MIN` is "not excited" (reported with both numbers).
 
 Validation (issues 18, 27): K-fold cross-validation on contiguous blocks of the moving validation segments and
@@ -66,10 +67,11 @@ from .estimators import parameter_units, restoring_regressor, rigid_inertia
 from .fit_core import EXCITATION_MIN
 from .results import SCHEMA_VERSION
 from .signals import samples_from_dvl, thrust_of_written_widths
-from .verdicts import fit_parameter_verdicts
+from .posterior import prior_posterior, prior_std_rel_of, theta_priors
+from .verdicts import FitEvidence, assess, core_signals, declared_rel, thrust_curve_check, with_added_mass
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed",
-           "preprocess_bag", "dof_records", "fit_bags", "DofFit", "FitResult", "CONFIG_READY_REASON"]
+           "preprocess_bag", "dof_records", "fit_bags", "DofFit", "FitResult", "CONFIG_READY_REASON", "assessment"]
 
 WRENCH, PWM = "geometry_msgs/msg/WrenchStamped", "hindrax_msgs/msg/ThrusterPwm"
 ODOM, TWIST_COV, TWIST, DVL = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistWithCovarianceStamped",
@@ -773,33 +775,61 @@ def _units(dof: str, names: Sequence[str]) -> dict:
     return u
 
 
-def _fit_signals(r: DofFit) -> dict:
-    sd = r.core.train
-    return {"velocity": sd.v_s.ravel(), "acceleration": sd.a_s.ravel(), "force": sd.force.ravel()}
+def assessment(r: DofFit, cfg: VehicleConfig | None) -> dict:
+    """The verdicts of one fitted DOF through the one verdict path (:func:`.verdicts.assess`, as ``hindrax ident bag``):
+    the fit core's estimate and cluster-robust covariance, with a vehicle file after its empirical priors
+    (:func:`.posterior.prior_posterior`, ``identification.prior_std_rel``), the thrust-curve covariance
+    (:func:`.verdicts.declared_rel`: the vehicle file's, else the default), t with the core's clusters - 1
+    degrees of freedom; the expected bias 0 (heave: the vehicle file's net buoyancy, unknown without one); no
+    whiteness check (its threshold is the designed campaign's). ``added_mass`` with a vehicle file. Returns
+    :func:`.verdicts.assess`'s dict with ``fit_values`` (the core's, before the priors) and ``priors`` ({name:
+    [mean, std]})."""
+    c = r.core
+    theta, cov = np.asarray(c.theta, dtype=float), np.asarray(c.covariance.cov, dtype=float)
+    pri: dict = {}
+    if cfg is not None:
+        pri = theta_priors(r.dof, c.names, cfg, prior_std_rel_of(cfg))
+        theta, cov = prior_posterior(c.names, theta, cov, pri)
+    vel, acc, force, h = core_signals(c)
+    expected = (None if cfg is None else float(cfg.buoyancy_n - cfg.weight_n)) if r.dof == "heave" else 0.0
+    ev = FitEvidence(dof=r.dof, names=list(c.names), theta=theta, cov=cov, t_dof=int(c.covariance.t_dof),
+                     units=_units(r.dof, c.names), velocity=vel, acceleration=acc, force=force, h=h,
+                     lower_bounds=[lo for _n, _k, lo, _hi in c.chosen.layout],
+                     fold_theta=c.fold_theta, cv_nrmse=c.cv.get("nrmse") if c.cv else None,
+                     # the whiteness threshold is the designed campaign's (docs/identification.md §7 step 6); here
+                     # the CV nrmse judges the model, and the intervals carry the residual correlation
+                     residual_rho=None, expected_bias=expected)
+    a = assess(ev, declared_rel(cfg))
+    if cfg is not None:
+        with_added_mass(a, a["parameters"]["inertia"]["value"] - rigid_inertia(cfg, r.dof))
+    a["fit_values"] = {n: float(v) for n, v in zip(c.names, c.theta)}
+    a["priors"] = {n: [float(m), float(sd)] for n, (m, sd) in pri.items()}
+    return a
 
 
-def _param_entries(r: DofFit, cfg: VehicleConfig | None, h: float) -> tuple[dict, dict]:
-    """(parameter entries, verdicts) of one fitted DOF (:func:`build_document`)."""
+def _param_entries(r: DofFit, a: dict) -> dict:
+    """The parameter entries of one fitted DOF from its :func:`assessment` ``a`` (:func:`build_document`)."""
     c = r.core
     units = _units(r.dof, c.names)
     folds = np.array(r.folds) if r.folds else None
     cov = c.covariance
     sd_model = np.sqrt(np.maximum(np.diag(cov.model), 0.0))
     sd_sand = np.sqrt(np.maximum(np.diag(cov.sandwich), 0.0))
-    lower = [lo for _n, _k, lo, _hi in c.chosen.layout]
-    verdicts = fit_parameter_verdicts(r.dof, c.names, c.theta, c.ci95, lower, c.fold_theta, c.std, c.cv,
-                                      _fit_signals(r), h)
     entries: dict = {}
 
-    def put(name, i, unit):
-        e = {"value": float(c.theta[i]), "std": float(c.std[i]), "unit": unit,
-             "ci95": [float(c.ci95[i, 0]), float(c.ci95[i, 1])], "t_dof": int(cov.t_dof),
+    def put(name, i, unit, pname=None):
+        v = a["parameters"][pname or c.names[i]]
+        e = {"value": float(v["value"]), "std": float(v["std"]), "unit": unit,
+             "ci95": [float(v["ci95"][0]), float(v["ci95"][1])], "t_dof": int(v["t_dof"]),
+             "std_fit": float(v["std_fit"]),
              "std_source": "cluster_robust" if sd_sand[i] >= sd_model[i] else "model",
              "std_model": float(sd_model[i]), "std_cluster_robust": float(sd_sand[i])}
+        if c.names[i] in a["priors"]:
+            e["prior"] = list(a["priors"][c.names[i]])
+            e["fit_value"] = a["fit_values"][c.names[i]]
         if folds is not None and len(folds) >= 2:
             e["fold_spread"] = {"std": float(np.std(folds[:, i], ddof=1)), "min": float(folds[:, i].min()),
                                 "max": float(folds[:, i].max()), "folds": int(len(folds))}
-        v = verdicts["parameters"][c.names[i]]
         e["verdict"], e["reasons"] = v["verdict"], list(v["reasons"])
         if "advice" in v:
             e["advice"] = v["advice"]
@@ -820,14 +850,13 @@ def _param_entries(r: DofFit, cfg: VehicleConfig | None, h: float) -> tuple[dict
             entries[n] = {"value": 0.0, "std": 0.0, "unit": units.get(n, ""), "ci95": [0.0, 0.0],
                           "model_term": "excluded", "verdict": "trusted",
                           "reasons": [], "note": f"not in the model chosen by cross-validation ({c.terms.label})"}
-    if cfg is not None:
-        rigid = rigid_inertia(cfg, r.dof)
-        am = {k: v for k, v in entries["inertia"].items() if k != "fold_spread"}
-        am["value"] = entries["inertia"]["value"] - rigid
-        am["ci95"] = [entries["inertia"]["ci95"][0] - rigid, entries["inertia"]["ci95"][1] - rigid]
-        am["unit"] = units["added_mass"]
+    if "added_mass" in a["parameters"]:
+        am = put("inertia", c.names.index("inertia"), units["added_mass"], "added_mass")
+        am.pop("fold_spread", None)
+        am.pop("prior", None)
+        am.pop("fit_value", None)
         entries["added_mass"] = am
-    return entries, verdicts
+    return entries
 
 
 #: Why ``hindrax ident fit`` without ``--config`` writes ``config_ready: false`` (and no ``added_mass``).
@@ -858,16 +887,21 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
     ``config_ready: false`` and ``config_ready_reason``; a damping term the chosen model leaves out is 0 with
     ``model_term: excluded``), per DOF ``model`` (the chosen terms), ``model_selection`` (every candidate's CV
     nrmse), ``timing`` (delay, lag), ``interval`` (clusters, t degrees of freedom), ``verdict``, ``reasons`` and
-    ``advice`` (:func:`.verdicts.fit_parameter_verdicts`: what data would fix each suspect parameter);
+    ``advice`` (:func:`assessment`: what data would fix each suspect parameter); ``std`` and ``ci95`` with the
+    thrust-curve uncertainty and, with a vehicle file, after the empirical priors (``prior``, ``fit_value``);
     ``not_identified`` with their numbers, ``validation.<dof>.{nrmse,nrmse_hold,nrmse_zero,samples}`` (the holdout
     when given, else the cross-validation; both under their own keys too) and ``preprocessing``."""
     dofs, val, other = {}, {}, {}
+    assessments = {d: assessment(r, cfg) for d, r in res.dofs.items() if r.status == "fitted"}
+    if cfg is not None:  # the heave bias against the vehicle file's net buoyancy judges every DOF's thrust
+        thrust_curve_check(assessments, list(assessments))
     for dof, r in res.dofs.items():
         if r.status != "fitted":
             other[dof] = {"status": r.status, "reason": r.reason,
                           **{k: (round(v, 6) if isinstance(v, float) else v) for k, v in r.excitation.items()}}
             continue
-        e, verdicts = _param_entries(r, cfg, float(res.preprocessing.get("grid_s", 0.05)))
+        verdicts = assessments[dof]
+        e = _param_entries(r, verdicts)
         c = r.core
         e["method"] = "output-error (segment-wise, prediction error; docs/identification.md §7)"
         e["model"] = c.terms.label
@@ -883,7 +917,8 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         e["segments"] = int(c.train.m)
         e["verdict"] = verdicts["verdict"]
         e["reasons"] = sorted({x for v in verdicts["parameters"].values() for x in v["reasons"]})
-        e["advice"] = [dict(v["advice"], parameter=n) for n, v in verdicts["parameters"].items() if "advice" in v]
+        e["advice"] = [dict(v["advice"], parameter=n) for n, v in verdicts["parameters"].items() if "advice" in v
+                       and n != "added_mass"]
         if c.fold_notes:
             e["cross_validation_notes"] = list(c.fold_notes)
         e["excitation"] = {k: v for k, v in r.excitation.items() if v is not None}

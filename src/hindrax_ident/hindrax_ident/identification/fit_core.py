@@ -758,9 +758,13 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, inertia: np.ndarray | No
 
 # ------------------------------------------------------------------------------------------------ validation
 def validation_measures(sd: SegmentData, V: np.ndarray) -> dict:
-    """nrmse, nrmse_hold, nrmse_zero and samples of predictions ``V`` (m, L) on ``sd``: RMS(prediction - measured)
-    / std(measured) over the measurements after each segment's start; ``hold``: the initial velocity held;
-    ``zero``: 0 (issue 18). A measured position is validated on the smoothed velocity at the ticks."""
+    """nrmse, nrmse_hold, nrmse_zero, nrmse_floor and samples of predictions ``V`` (m, L) on ``sd``:
+    RMS(prediction - measured) / std(measured) over the measurements after each segment's start; ``hold``: the
+    initial velocity held; ``zero``: 0 (issue 18). A measured position is validated on the smoothed velocity at the
+    ticks. ``nrmse_floor``: the white measurement noise over std(measured), the nrmse a perfect model would still
+    have, sigma^2 = mean(d2^2) / 6 with d2 the second differences of consecutive measurements in a segment (white
+    noise of variance sigma^2 gives var(d2) = 6 sigma^2; a smooth velocity adds little at the sensor's rate), NaN
+    for a measured position or fewer than 3 measurements in every segment."""
     if sd.measured == "position":
         z = sd.v_s[:, 1:].ravel()
         pred = V[:, 1:].ravel()
@@ -772,14 +776,25 @@ def validation_measures(sd: SegmentData, V: np.ndarray) -> dict:
     ok = np.isfinite(z) & np.isfinite(pred)
     z, pred, hold = z[ok], pred[ok], hold[ok]
     if z.size < 2:
-        return {"nrmse": math.nan, "nrmse_hold": math.nan, "nrmse_zero": math.nan, "samples": int(z.size)}
+        return {"nrmse": math.nan, "nrmse_hold": math.nan, "nrmse_zero": math.nan, "nrmse_floor": math.nan,
+                "samples": int(z.size)}
     sd_z = float(np.std(z)) or 1.0
 
     def rms(e):
         return float(np.sqrt(np.mean(e ** 2)))
 
+    floor = math.nan
+    if sd.measured != "position":
+        seg = sd.s_seg[ok]
+        order = np.lexsort((sd.s_j[ok] + sd.s_a[ok], seg))
+        zs, gs = z[order], seg[order]
+        d2 = zs[2:] - 2.0 * zs[1:-1] + zs[:-2]
+        same = (gs[2:] == gs[:-2])
+        if np.any(same):
+            floor = math.sqrt(float(np.mean(d2[same] ** 2)) / 6.0) / sd_z
     return {"nrmse": rms(pred - z) / sd_z, "nrmse_hold": rms(hold - z) / sd_z, "nrmse_zero": rms(z) / sd_z,
-            "samples": int(z.size), "sse": float(np.sum((pred - z) ** 2)), "sst": float(np.sum((z - z.mean()) ** 2))}
+            "nrmse_floor": floor, "samples": int(z.size), "sse": float(np.sum((pred - z) ** 2)),
+            "sst": float(np.sum((z - z.mean()) ** 2))}
 
 
 def predict_validation(sd: SegmentData, layout: list, theta: np.ndarray) -> np.ndarray:
