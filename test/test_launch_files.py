@@ -330,6 +330,8 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
                        find_share=lambda pkg: REPO / "src" / pkg)
     prefixed = {p.executable: p.launch_prefix for p in read if p.launch_prefix}
     assert prefixed == {e: ("nice", "-n", "-5") for e in ("actuation_node", "supervisor_node", "output_guard_node")}
+    # Jazzy's launch labels a prefixed process after the prefix ("[nice-3]") unless exec_name says otherwise
+    assert {p.executable: p.exec_name for p in read if p.launch_prefix} == {e: e for e in prefixed}
     runner = ProcessRunner(read, log_dir=tmp_path, command=lambda p: ["/opt/x/" + p.executable])
     for p in read:
         argv = runner.argv(p)

@@ -11,7 +11,8 @@ names, substitutions, conditions, the ``--ros-args`` a node gets); anything else
 
 Supported
     ``<launch>`` with ``<arg name default description/>``, ``<let name value/>``, ``<node pkg exec name namespace
-    output respawn respawn_delay args launch-prefix if unless>`` holding ``<param from/>``, ``<param name value/>`` and
+    output respawn respawn_delay args launch-prefix exec_name if unless>``
+    holding ``<param from/>``, ``<param name value/>`` and
     ``<remap from to/>``, ``<include file>`` holding ``<arg name value/>``, and ``<group>`` (with ``if``/``unless``);
     the substitutions ``$(var NAME)``, ``$(find-pkg-share PKG)`` and ``$(env NAME [DEFAULT])``; conditions that
     evaluate to ``true``/``false``/``1``/``0`` (any case), as ``launch.conditions.evaluate_condition_expression``.
@@ -22,7 +23,9 @@ Command of a node (``launch_ros.actions.Node``)
 Launch prefix
     ``launch-prefix="nice -n -5"`` puts that command, split as a shell would (``shlex``), before the executable
     (``launch_ros.actions.Node(prefix=...)``); the vehicle launch file gives the safety processes their scheduling
-    priority this way (docs/deployment.md §1).
+    priority this way (docs/deployment.md §1). Jazzy's launch then labels the process after the prefix's command
+    (``[nice-3]``), so those nodes also set ``exec_name``, the label ``launch_ros`` prints instead; this reader keeps
+    it (:attr:`NodeProcess.exec_name`) and labels processes by node name or executable as before.
 Respawn
     ``respawn="true"`` restarts the process whenever it ends while the launch runs, after ``respawn_delay`` s
     (``launch.actions.ExecuteLocal``: on any exit, not only a failure).
@@ -64,7 +67,8 @@ class NodeProcess:
     namespace: ``-r __ns:=`` or None. parameters: in the order given, each a parameter file (``Path``) or a
     mapping of parameter name -> typed value (one ``<param name value>`` run). remaps: (from, to) pairs.
     arguments: the ``args`` attribute, split on white space. launch_prefix: the ``launch-prefix`` command, split
-    (module docstring). respawn / respawn_delay_s: see the module docstring (s). source: the launch file that
+    (module docstring). exec_name: the ``exec_name`` attribute (Jazzy's process label) or None.
+    respawn / respawn_delay_s: see the module docstring (s). source: the launch file that
     declares the node.
     """
 
@@ -76,6 +80,7 @@ class NodeProcess:
     remaps: tuple[tuple[str, str], ...] = ()
     arguments: tuple[str, ...] = ()
     launch_prefix: tuple[str, ...] = ()
+    exec_name: str | None = None
     respawn: bool = False
     respawn_delay_s: float = 0.0
     output: str = "log"
@@ -217,7 +222,7 @@ class _Reader:
 
     def _node(self, el: ET.Element, path: Path, scope: dict[str, str]) -> NodeProcess:
         _only(el, {"pkg", "exec", "name", "namespace", "output", "respawn", "respawn_delay", "args", "launch-prefix",
-                   "if", "unless"}, path)
+                   "exec_name", "if", "unless"}, path)
         sub = lambda text: self.sub(text, scope, path)  # noqa: E731
         params: list = []
         remaps: list[tuple[str, str]] = []
@@ -254,7 +259,8 @@ class _Reader:
             namespace=sub(el.get("namespace")) if el.get("namespace") else None,
             parameters=tuple(p if isinstance(p, Path) else dict(p) for p in params), remaps=tuple(remaps),
             arguments=tuple(sub(el.get("args", "")).split()), launch_prefix=tuple(shlex.split(sub(el.get(
-                "launch-prefix", "")))), respawn=respawn in _TRUE, respawn_delay_s=delay,
+                "launch-prefix", "")))), exec_name=sub(el.get("exec_name")) if el.get("exec_name") else None,
+            respawn=respawn in _TRUE, respawn_delay_s=delay,
             output=el.get("output", "log"), source=path)
 
     def sub(self, text: str, scope: Mapping[str, str], path: Path) -> str:
