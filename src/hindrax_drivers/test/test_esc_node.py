@@ -1,4 +1,5 @@
 """ESC node at the register "wire": the PCA9685 emulator decodes what each channel actually outputs."""
+import contextlib
 import itertools
 import math
 import threading
@@ -482,6 +483,23 @@ def _steady_timers(node):
     return [t.clock.clock_type == ClockType.STEADY_TIME for t in timers]
 
 
+@contextlib.contextmanager
+def _esc_beside_heartbeats(ctx, node):
+    """``node`` and a probe publishing healthy supervisor and guard heartbeats on one executor; yields
+    (probe, beats, executor, spin-once); destroys both nodes on the way out."""
+    probe = rclpy.create_node("probe", context=ctx)
+    beats = SafetyHeartbeats(probe)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(probe)
+    try:
+        yield probe, beats, ex, lambda: ex.spin_once(timeout_sec=0.005)
+    finally:
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
 def test_system_clock_one_steady_tick_takes_the_heartbeats_aged_from_their_reception():
     """docs/architecture.md §10.1: on the system clock the ESC wakes once per output period (one steady-clock timer
     runs the safety tick, then the output tick) and takes the supervisor's and guard's heartbeats there from polled
@@ -514,22 +532,12 @@ def test_system_clock_one_steady_tick_takes_the_heartbeats_aged_from_their_recep
 
         # live: beats from another node reach the ESC only through its tick; silenced, the refusal comes no
         # earlier than 0.2 s after the last beat (beats every 50 ms: >= 0.15 s after silencing)
-        probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(probe)
-        spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
-        try:
+        with _esc_beside_heartbeats(ctx, node) as (probe, beats, ex, spin):
             wait_until(lambda: node.heartbeat_refusal() == "", 10, spin, "both heartbeats taken at the tick")
             beats.supervisor = None
             t0 = time.monotonic()
             wait_until(lambda: "no supervisor heartbeat" in node.heartbeat_refusal(), 5, spin, "supervisor stale")
             assert time.monotonic() - t0 >= 0.15
-        finally:
-            ex.shutdown()
-            probe.destroy_node()
-            node.destroy_node()
 
 
 def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
@@ -538,13 +546,7 @@ def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
     the next tick (found by the safety bench: a trip and reset between two ticks)."""
     with ros_context() as ctx:
         node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
-        probe = rclpy.create_node("probe", context=ctx)
-        beats = SafetyHeartbeats(probe)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(probe)
-        spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
-        try:
+        with _esc_beside_heartbeats(ctx, node) as (probe, beats, ex, spin):
             wait_until(lambda: node.heartbeat_refusal() == "", 10, spin, "healthy heartbeats taken")
             ex.remove_node(node)  # no ESC tick from here: the beats below wait in its polled subscription
             beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"
@@ -559,7 +561,3 @@ def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
             res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
             assert not res.success and "supervisor tripped: depth 3.00 m" in res.message and not node.armed
             probe_only.shutdown()
-        finally:
-            ex.shutdown()
-            probe.destroy_node()
-            node.destroy_node()
