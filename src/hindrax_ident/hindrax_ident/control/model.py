@@ -201,7 +201,7 @@ def unexplained_bias(entry: Mapping, file_bias: float, cfg: VehicleConfig, scale
     b = _number(par.get("value"))
     if b is None:
         return None  # falls back anyway (not a number)
-    r = min(0.9, BIAS_THRUST_SCALE_SIGMAS * max(_declared_rel(cfg, None)))
+    r = min(0.9, BIAS_THRUST_SCALE_SIGMAS * max(declared_rel(cfg)))
     ratio = (b / scale) / file_bias
     lo, hi = 1.0 / (1.0 + r), 1.0 / (1.0 - r)
     if lo <= ratio <= hi:
