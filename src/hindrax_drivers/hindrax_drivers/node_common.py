@@ -60,9 +60,9 @@ class DeviceDiagnostics:
         self._last_publish_s: float | None = None
         self.total_published = 0
 
-    def published(self) -> None:
-        """Record one published output message now."""
-        t = self._now_s()
+    def published(self, now_s: float | None = None) -> None:
+        """Record one published output message at ``now_s`` (the clock's time, s; read from the clock when None)."""
+        t = self._now_s() if now_s is None else now_s
         with self._lock:
             self._stamps.append(t)
             self._last_publish_s = t

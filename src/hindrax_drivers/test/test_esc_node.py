@@ -241,6 +241,52 @@ def test_output_logic_slew_and_errors():
         out.target([1500, math.inf], 0.1)
 
 
+
+def test_output_logic_computes_a_command_once_and_never_caches_a_slew_step():
+    """Without slew limit a tick between two commands reuses the command's widths; neutral in between, a new command
+    or a slew limit compute them anew (each assertion fails if the widths came from the wrong cache)."""
+    out = EscOutput(range(2), [False, True], [0.0, 10.0], 1100, 1500, 1900)
+    cmd = np.array([1600.0, 1600.0])
+    assert out.target(cmd, 0.02).tolist() == [1600.0, 1410.0]  # t2 mirrored about 1500, then its +10 us trim
+    assert out.target(cmd, 0.02).tolist() == [1600.0, 1410.0]
+    assert out.neutral().tolist() == [1500.0, 1510.0]
+    assert out.target(cmd, 0.02).tolist() == [1600.0, 1410.0]  # after neutral: computed again, not neutral
+    assert out.target(np.array([1700.0, 1500.0]), 0.02).tolist() == [1700.0, 1510.0]
+    slewed = EscOutput(range(1), [False], [0.0], 1100, 1500, 1900, slew_rate_us_per_s=1000.0)
+    cmd = np.array([1900.0])
+    assert slewed.target(cmd, 0.1).tolist() == [1600.0]
+    assert slewed.target(cmd, 0.1).tolist() == [1700.0]  # the same command keeps approaching its target
+
+
+def test_a_thrust_command_writes_only_the_blocks_that_changed(esc):
+    """The lights channel (8) is a block of its own: a thrust command that leaves it alone is one block write, not
+    two; a change of the lights writes its block; a neutral for safety writes every block whatever is believed to be
+    on the chip."""
+    arm(esc)
+    node, emu, bus = esc["node"], esc["emu"], esc["bus"]
+    registers = []
+    write = bus.write_i2c_block_data
+
+    def counted(address, register, data):
+        registers.append(register)
+        return write(address, register, data)
+
+    bus.write_i2c_block_data = counted
+    node.on_command(ThrusterPwm(pulse_width_us=[1720.0] * 8, armed=True))
+    node.on_command(ThrusterPwm(pulse_width_us=[1580.0] * 8, armed=True))
+    assert registers == [0x06, 0x06]  # LED0_ON_L: the thrusters' block only
+    assert wire(emu)[0] == pytest.approx(1580.0, abs=TICK_US)
+    assert emu.pulse_width_us(8) == pytest.approx(node.lights_off_us, abs=TICK_US)
+    registers.clear()
+    node.on_lights(Float64(data=0.5))
+    node.on_command(ThrusterPwm(pulse_width_us=[1580.0] * 8, armed=True))
+    assert registers == [0x06 + 4 * 8]  # LED8: the lights' block only
+    assert emu.pulse_width_us(8) == pytest.approx(1500.0, abs=TICK_US)
+    registers.clear()
+    node._safe_neutral("test")
+    assert registers == [0x06, 0x06 + 4 * 8]
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
+
 # ------------------------------------------------------------------ issue 19, faults 1-5 (each failed before the fix)
 class _SampledBus:
     """Delegates to an EmulatedI2CBus and records, after every SMBus call, what each channel puts on the wire."""

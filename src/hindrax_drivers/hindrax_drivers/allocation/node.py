@@ -28,7 +28,8 @@ from __future__ import annotations
 from typing import Any, Callable
 
 import numpy as np
-from geometry_msgs.msg import Wrench, WrenchStamped
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
 from rclpy.node import Node
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
@@ -40,6 +41,7 @@ from .core import AllocationCore
 BASE_FRAME = "base_link"
 #: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of state, s
 STATUS_PERIOD_S = 0.1
+STATUS_PERIOD_NS = int(STATUS_PERIOD_S * 1e9)
 
 
 def wrench_header_problem(frame_id: str, stamp_ns: int, now_ns: int, timeout_s: float, future_margin_s: float) -> str:
@@ -61,9 +63,8 @@ def wrench_header_problem(frame_id: str, stamp_ns: int, now_ns: int, timeout_s: 
 
 
 def _wrench_msg(w: np.ndarray) -> Wrench:
-    m = Wrench()
-    m.force.x, m.force.y, m.force.z, m.torque.x, m.torque.y, m.torque.z = (float(x) for x in w)
-    return m
+    fx, fy, fz, tx, ty, tz = np.asarray(w, dtype=float).tolist()
+    return Wrench(force=Vector3(x=fx, y=fy, z=fz), torque=Vector3(x=tx, y=ty, z=tz))
 
 
 #: Vehicle keys the allocation reads: thrusters, the CG the moments are taken about, the PCA9685 timing that
@@ -88,11 +89,12 @@ class ThrustAllocationNode(Node):
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
         self.create_subscription(WrenchStamped, "wrench", self.on_wrench, 10)
-        self.last_wrench_time = None
+        #: ROS time of the last wrench received, ns (None before the first)
+        self.last_wrench_ns: int | None = None
         self.stale_reported = True  # nothing to report before the first wrench
         self.rejected = 0
         self.allocations = 0
-        self._held: tuple | None = None  # (forces, status) not yet published
+        self._held: tuple | None = None  # what the next forces and status carry, not yet published
         self._last_status_key: tuple = ()
         self._last_status_ns = -(1 << 62)
         self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale)
@@ -106,76 +108,85 @@ class ThrustAllocationNode(Node):
 
     # -- wrench path
     def on_wrench(self, msg: WrenchStamped) -> None:
-        now = self.get_clock().now()
+        now_ns = self.get_clock().now().nanoseconds
         f, t = msg.wrench.force, msg.wrench.torque
         w = np.array([f.x, f.y, f.z, t.x, t.y, t.z])
-        self.last_wrench_time = now
+        self.last_wrench_ns = now_ns
         self.stale_reported = False
-        reason = wrench_header_problem(msg.header.frame_id, msg.header.stamp.sec * 1_000_000_000
-                                       + msg.header.stamp.nanosec, now.nanoseconds, self.timeout_s,
-                                       self.future_margin_s)
+        stamp = msg.header.stamp
+        reason = wrench_header_problem(msg.header.frame_id, stamp.sec * 1_000_000_000 + stamp.nanosec, now_ns,
+                                       self.timeout_s, self.future_margin_s)
         if reason:
-            self.reject(msg, w, reason)
+            self.reject(msg, w, reason, now_ns)
             return
         try:
             result = self.core.allocate(w)
         except InvalidWrenchError as exc:
-            self.reject(msg, w, str(exc))
+            self.reject(msg, w, str(exc), now_ns)
             return
         self.allocations += 1
         self.publish(msg, result.pulse_width_us, result.force_n, w, result.achieved_wrench_flu, result.scale,
                      result.saturated, rejected=False,
-                     reason="saturated: scaled" if bool(np.any(result.saturated)) else "")
+                     reason="saturated: scaled" if bool(np.any(result.saturated)) else "", now_ns=now_ns)
 
-    def reject(self, msg: WrenchStamped | None, requested: np.ndarray, reason: str) -> None:
-        """Command neutral and report why."""
+    def reject(self, msg: WrenchStamped | None, requested: np.ndarray, reason: str, now_ns: int | None = None) -> None:
+        """Command neutral and report why (``now_ns``: ROS time of the decision, ns; read when None)."""
         self.rejected += 1
         self.get_logger().warn(f"wrench rejected: {reason}", throttle_duration_sec=1.0)
         n = len(self.core.names)
         req = np.where(np.isfinite(requested), requested, 0.0)
         self.publish(msg, self.core.neutral(), np.zeros(n), req, np.zeros(6), 0.0, np.zeros(n, bool),
-                     rejected=True, reason=reason)
+                     rejected=True, reason=reason, now_ns=now_ns)
 
     def check_stale(self) -> None:
-        if self._held is not None:
-            now_ns = self.get_clock().now().nanoseconds
-            if now_ns - self._last_status_ns >= STATUS_PERIOD_S * 1e9:
-                self._send_status(now_ns)
-        if self.last_wrench_time is None or self.stale_reported:
+        now_ns = self.get_clock().now().nanoseconds
+        if self._held is not None and now_ns - self._last_status_ns >= STATUS_PERIOD_NS:
+            self._send_status(now_ns)
+        if self.last_wrench_ns is None or self.stale_reported:
             return
-        age_s = (self.get_clock().now() - self.last_wrench_time).nanoseconds * 1e-9
+        age_s = (now_ns - self.last_wrench_ns) * 1e-9
         if age_s > self.timeout_s:
             self.stale_reported = True
-            self.reject(None, np.zeros(6), f"stale: no wrench for {age_s:.3f} s (limit {self.timeout_s:g} s)")
+            self.reject(None, np.zeros(6), f"stale: no wrench for {age_s:.3f} s (limit {self.timeout_s:g} s)", now_ns)
 
     def publish(self, msg: WrenchStamped | None, pulse_width_us: np.ndarray, force_n: np.ndarray,
                 requested: np.ndarray, achieved: np.ndarray, scale: float, saturated: np.ndarray,
-                rejected: bool, reason: str) -> None:
-        stamp = msg.header.stamp if msg is not None and (msg.header.stamp.sec or msg.header.stamp.nanosec) \
-            else self.get_clock().now().to_msg()
-        pwm = ThrusterPwm(pulse_width_us=[float(x) for x in pulse_width_us], armed=not rejected)
+                rejected: bool, reason: str, now_ns: int | None = None) -> None:
+        """Send the command (in-process sinks first, then ``thrusters/command_pulse_width``) and hold the forces and
+        status; they are sent now when the state changed or :data:`STATUS_PERIOD_S` has passed, else later by
+        :meth:`check_stale`. The held messages are built only when sent (at most 10 Hz of the 50 Hz commands)."""
+        if now_ns is None:
+            now_ns = self.get_clock().now().nanoseconds
+        if msg is not None and (msg.header.stamp.sec or msg.header.stamp.nanosec):
+            stamp = msg.header.stamp
+        else:
+            stamp = Time(sec=now_ns // 1_000_000_000, nanosec=now_ns % 1_000_000_000)
+        pwm = ThrusterPwm(pulse_width_us=np.asarray(pulse_width_us, dtype=float).tolist(), armed=not rejected)
         pwm.header.stamp, pwm.header.frame_id = stamp, BASE_FRAME
         for sink in self.command_sinks:
             sink(pwm)
         self.pub_pwm.publish(pwm)
-        forces = ThrusterForces(force_n=[float(x) for x in force_n])
-        forces.header.stamp, forces.header.frame_id = stamp, BASE_FRAME
-        st = AllocationStatus(requested_wrench=_wrench_msg(requested), achieved_wrench=_wrench_msg(achieved),
-                              scale=float(scale), thruster_saturated=[bool(x) for x in saturated],
-                              saturated=bool(np.any(saturated)), rejected=rejected, reason=reason)
-        st.header.stamp, st.header.frame_id = stamp, BASE_FRAME
-        self._held = (forces, st)
-        key = (rejected, tuple(st.thruster_saturated), reason.split(":", 1)[0])
-        now_ns = self.get_clock().now().nanoseconds
-        if key != self._last_status_key or now_ns - self._last_status_ns >= STATUS_PERIOD_S * 1e9:
+        saturated = np.asarray(saturated, dtype=bool)
+        self._held = (stamp, np.asarray(force_n, dtype=float), np.asarray(requested, dtype=float),
+                      np.asarray(achieved, dtype=float), float(scale), saturated, rejected, reason)
+        key = (rejected, saturated.tobytes(), reason.split(":", 1)[0])
+        if key != self._last_status_key or now_ns - self._last_status_ns >= STATUS_PERIOD_NS:
             self._last_status_key = key
             self._send_status(now_ns)
 
     def _send_status(self, now_ns: int) -> None:
-        """Publish the held forces and status (ROS time ``now_ns``, ns)."""
-        forces, st = self._held
+        """Build and publish the held forces and status (ROS time ``now_ns``, ns)."""
+        if self._held is None:
+            return
+        stamp, force_n, requested, achieved, scale, saturated, rejected, reason = self._held
         self._held = None
         self._last_status_ns = now_ns
+        forces = ThrusterForces(force_n=force_n.tolist())
+        forces.header.stamp, forces.header.frame_id = stamp, BASE_FRAME
+        st = AllocationStatus(requested_wrench=_wrench_msg(requested), achieved_wrench=_wrench_msg(achieved),
+                              scale=scale, thruster_saturated=saturated.tolist(),
+                              saturated=bool(saturated.any()), rejected=rejected, reason=reason)
+        st.header.stamp, st.header.frame_id = stamp, BASE_FRAME
         self.pub_forces.publish(forces)
         self.pub_status.publish(st)
 

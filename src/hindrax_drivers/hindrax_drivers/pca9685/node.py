@@ -108,9 +108,11 @@ class EscOutput:
     """Pure output logic of the ESC node (no ROS): command -> per-channel pulse widths.
 
     channels (n,): PCA9685 channel of each thruster; reversed (n,) bool; trim_us (n,);
-    limits and neutral in us; slew_rate_us_per_s (0 = off). ``target(command, armed, fresh, dt_s)``
+    limits and neutral in us; slew_rate_us_per_s (0 = off). ``target(command, dt_s)``
     returns the (n,) pulse widths to write now. Raises :class:`ValueError` for a command of the wrong
-    length or with a non-finite value (the node then writes neutral).
+    length or with a non-finite value (the node then writes neutral). Without a slew limit the widths of a command
+    are computed once: the same command object again (the output tick between two commands) returns them as they
+    are; a new command object, or :meth:`neutral` in between, computes them anew.
     """
 
     def __init__(self, channels, reversed_, trim_us, min_us: float, neutral_us: float, max_us: float,
@@ -121,15 +123,19 @@ class EscOutput:
         self.min_us, self.neutral_us, self.max_us = float(min_us), float(neutral_us), float(max_us)
         self.slew = float(slew_rate_us_per_s)
         self.current = np.full(len(self.channels), self.neutral_us)
+        self._computed_for: object = None  # the command object :attr:`current` was computed for (no slew limit)
 
     def neutral(self) -> np.ndarray:
         """(n,) neutral widths: ``neutral_us + trim_us`` per channel, clamped to the limits (the same widths
         :meth:`target` gives for a neutral command). Also resets the slew-limiter state (neutral is immediate)."""
         self.current = np.clip(np.full(len(self.channels), self.neutral_us) + self.trim_us, self.min_us, self.max_us)
+        self._computed_for = None
         return self.current.copy()
 
     def target(self, command, dt_s: float) -> np.ndarray:
         """Pulse widths to write for a fresh, armed ``command`` (thruster order, us)."""
+        if command is self._computed_for:
+            return self.current.copy()
         cmd = np.asarray(command, dtype=float)
         if cmd.shape != self.current.shape:
             raise ValueError(f"command has {cmd.size} pulse widths, expected {self.current.size}")
@@ -142,6 +148,7 @@ class EscOutput:
             step = self.slew * dt_s
             out = np.clip(out, self.current - step, self.current + step)
         self.current = out
+        self._computed_for = command if self.slew <= 0.0 else None
         return out.copy()
 
 
@@ -373,10 +380,14 @@ class EscNode(Node):
         """Write the thruster channels (and the lights channel), grouped in auto-increment block writes.
 
         Skips the bus when the same widths are already on the chip (the read-back confirms them once per
-        ``esc.readback_interval_s``). Returns True when it wrote."""
-        key = (tuple(float(w) for w in widths_us), float(lights_us))
+        ``esc.readback_interval_s``), and, while what was last written is known to be on the chip, skips a block
+        whose register bytes are the ones last written there (the lights channel between two thrust commands: one
+        block write per command instead of two). After a failed write, a neutral for safety (:meth:`_safe_neutral`)
+        or a (re)configuration every block is written. Returns True when it updated the outputs."""
+        key = (tuple(np.asarray(widths_us, dtype=float).tolist()), float(lights_us))
         if key == self._written_key:
             return False
+        known_on_chip = self._written_key is not None
         if self.device is None:
             raise I2CError(None, "no I2C bus", device_name="pca9685", address=self.i2c_address, operation="write",
                            attempts=0)
@@ -387,10 +398,12 @@ class EscNode(Node):
         for run in self._channel_runs(sorted(per_channel)):
             block, widths = p.channel_block_for_pulses([per_channel[c] for c in run], self.prescale,
                                                        self.oscillator_hz)
+            decoded.update(zip(run, widths))
+            if known_on_chip and block == b"".join(self._expected.get(c, b"") for c in run):
+                continue  # these registers already hold exactly these bytes
             self._written_key = None  # unknown until the whole write succeeded
             self.device.write_block(p.led_register(run[0]), block)
             self._expected.update((c, block[4 * i:4 * i + 4]) for i, c in enumerate(run))
-            decoded.update(zip(run, widths))
         self.raw.flush()  # (after a failed write the records are published with the next update's)
         self.written = np.array([decoded[int(ch)] for ch in self.output.channels])
         self.lights_us = lights_us
@@ -703,12 +716,12 @@ class EscNode(Node):
 
     def _publish_written(self, now) -> None:
         unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
-        widths = [math.nan] * len(self.written) if unknown else [float(x) for x in self.written]
+        widths = [math.nan] * len(self.written) if unknown else np.asarray(self.written, dtype=float).tolist()
         msg = ThrusterPwm(pulse_width_us=widths, armed=self.armed and not unknown, output_state=self.output_state)
         msg.header.stamp = now.to_msg()
         msg.header.frame_id = "base_link"
         self.pub_written.publish(msg)
-        self.diag.published()
+        self.diag.published(now.nanoseconds * 1e-9)
         self._published_since_tick = True
 
     def _diag_extra(self):
