@@ -23,6 +23,8 @@ from typing import Any, Callable, Iterator
 
 from rclpy.node import Node
 
+from .cdr_decode import cdr_decoder
+
 __all__ = ["PolledInputs", "PolledSubscriptions", "polled_inputs", "received_ago_s", "subscribe_input"]
 
 
@@ -86,8 +88,16 @@ class PolledInputs(PolledSubscriptions):
         return max(0.0, time.time() - self.received_s)
 
     def add(self, msg_type: Any, topic: str, handler: Callable[[Any], None], qos: Any, raw: bool = False,
-            **kwargs: Any) -> Any:
-        """:meth:`subscribe` ``topic`` with ``handler`` for :meth:`take_all`; returns the subscription."""
+            lean: bool = False, **kwargs: Any) -> Any:
+        """:meth:`subscribe` ``topic`` with ``handler`` for :meth:`take_all`; returns the subscription. ``lean``: the
+        message is taken as CDR bytes and handed over as rosbags' light decoding of them
+        (:func:`hindrax_drivers.cdr_decode.cdr_decoder`: the ROS field names, read-only) instead of an rclpy object,
+        for a handler that only reads fields (about 31 instead of 77 us per ``Imu``, that module's docstring)."""
+        if lean and not raw:
+            decode = cdr_decoder(msg_type)
+            sub = self.subscribe(msg_type, topic, qos, raw=True, **kwargs)
+            self.handlers[sub] = lambda data: handler(decode(data))
+            return sub
         sub = self.subscribe(msg_type, topic, qos, raw=raw, **kwargs)
         self.handlers[sub] = handler
         return sub
@@ -122,12 +132,14 @@ class PolledInputs(PolledSubscriptions):
 
 
 def subscribe_input(node: Node, inputs: PolledInputs | None, msg_type: Any, topic: str,
-                    handler: Callable[[Any], None], qos: Any, raw: bool = False, **kwargs: Any) -> Any:
+                    handler: Callable[[Any], None], qos: Any, raw: bool = False, lean: bool = False,
+                    **kwargs: Any) -> Any:
     """One topic input of ``node``: a callback subscription when ``inputs`` is None (``use_sim_time``: the stepped
-    simulation dispatches every message in order), else polled on ``inputs`` (:meth:`PolledInputs.add`)."""
+    simulation dispatches every message in order; ``lean`` does not apply, the handler gets rclpy objects), else
+    polled on ``inputs`` (:meth:`PolledInputs.add`, ``lean`` included): a ``lean`` handler must read fields only."""
     if inputs is None:
         return node.create_subscription(msg_type, topic, handler, qos, raw=raw, **kwargs)
-    return inputs.add(msg_type, topic, handler, qos, raw=raw, **kwargs)
+    return inputs.add(msg_type, topic, handler, qos, raw=raw, lean=lean, **kwargs)
 
 
 def polled_inputs(node: Node) -> PolledInputs | None:

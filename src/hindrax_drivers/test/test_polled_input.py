@@ -52,3 +52,56 @@ def test_take_returns_queued_messages_in_order_with_their_times_and_nothing_disp
         talker.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_a_lean_input_hands_over_the_fields_of_the_message_decoded_from_its_cdr():
+    """``lean``: the handler gets rosbags' decoding of the CDR bytes, whose fields are those rclpy's own deserialiser
+    reads from the same bytes (the reference), not an rclpy message."""
+    import numpy as np
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Imu
+
+    from hindrax_drivers.polled_input import PolledInputs
+    from hindrax_drivers.testing import ros_context
+    from hindrax_msgs.msg import Dvl, ThrusterPwm
+
+    imu = Imu()
+    imu.header.stamp.sec, imu.header.stamp.nanosec, imu.header.frame_id = 12, 345, "imu_link"
+    imu.orientation.x, imu.angular_velocity.y, imu.linear_acceleration.z = 0.5, -0.25, 9.81
+    imu.linear_acceleration_covariance[4] = 0.02
+    dvl = Dvl(velocity_valid=True, beam_range_m=[1.0, 2.0, 3.0, 4.5], beam_lock=[True, False, True, True])
+    dvl.velocity_m_s.x, dvl.delta_time_s = 0.31, 0.1
+    pwm = ThrusterPwm(pulse_width_us=[1500.0 + i for i in range(8)], armed=True, output_state=2)
+    with ros_context() as ctx:
+        owner = rclpy.create_node("lean_owner", context=ctx)
+        talker = rclpy.create_node("lean_talker", context=ctx)
+        inputs = PolledInputs(owner)
+        got: dict = {}
+        pubs = []
+        for msg in (imu, dvl, pwm):
+            topic = f"/lean/{type(msg).__name__}"
+            inputs.add(type(msg), topic, lambda m, k=type(msg): got.setdefault(k, m), 10, lean=True)
+            pubs.append((talker.create_publisher(type(msg), topic, 10), msg))
+        wait_until(lambda: all(p.get_subscription_count() == 1 for p, _ in pubs), 10, lambda: time.sleep(0.01),
+                   "lean inputs matched")
+        for p, msg in pubs:
+            p.publish(msg)
+        wait_until(lambda: inputs.take_all() >= 0 and len(got) == 3, 10, lambda: time.sleep(0.01), "taken")
+        inputs.close()
+        owner.destroy_node()
+        talker.destroy_node()
+    for msg in (imu, dvl, pwm):
+        lean = got[type(msg)]
+        assert not isinstance(lean, type(msg))
+        ref = deserialize_message(serialize_message(msg), type(msg))
+        for field in msg.get_fields_and_field_types():
+            want, have = getattr(ref, field), getattr(lean, field)
+            if hasattr(want, "get_fields_and_field_types"):
+                for sub in want.get_fields_and_field_types():
+                    w, h = getattr(want, sub), getattr(have, sub)
+                    if hasattr(w, "get_fields_and_field_types"):  # header.stamp
+                        assert (w.sec, w.nanosec) == (h.sec, h.nanosec)
+                    else:
+                        assert w == h, (field, sub)
+            else:
+                assert np.array_equal(np.asarray(want), np.asarray(have)), field

@@ -257,8 +257,10 @@ class IdentificationNode(Node):
                   (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))
         #: on the system clock the inputs are polled at every tick (module docstring, "CPU"); None with use_sim_time
         self.intake: PolledInputs | None = polled_inputs(self)
+        # every handler only reads fields: taken lean when polled (CDR decoded by rosbags, hindrax_drivers.cdr_decode:
+        # 31 instead of 77 us per Imu, docs/architecture.md §10.1)
         for msg_type, topic, handler, depth in inputs:
-            subscribe_input(self, self.intake, msg_type, topic, handler, depth, **sub_ev)
+            subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=True, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10, **pub_ev)
         self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50, **pub_ev)
