@@ -92,3 +92,26 @@ def test_wrench_at_an_offset():
     assert np.allclose(frames.wrench_flu_to_frd(w_flu), w)
     # a pure couple is unchanged by moving the reference point
     assert np.allclose(frames.wrench_about_point([0, 0, 0], [1, 2, 3], [5, 5, 5], [1, 1, 1])[3:], [1, 2, 3])
+
+
+def test_quaternion_map_and_euler_angles_agree_with_scipys_rotations():
+    """The written-out forms (frames module: the constant product map, Fossen's Euler formulas) against scipy's
+    Rotation composition and ``as_euler("ZYX")``, one quaternion at a time (the nodes' path) and in batches; not
+    normalised on input, as a message's quaternion may not be."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(7)
+    q = rng.normal(size=(500, 4)) * rng.uniform(0.5, 2.0, size=(500, 1))
+    r_flu_frd, r_enu_ned = Rotation.from_matrix(frames.R_FLU_FRD), Rotation.from_matrix(frames.R_ENU_NED)
+    want_q = (r_enu_ned * Rotation.from_quat(q) * r_flu_frd).as_quat(canonical=False)
+    want_rpy = Rotation.from_quat(q).as_euler("ZYX")[:, ::-1]
+    assert np.allclose(frames.quaternion_ros_to_marine(q), want_q, atol=1e-12)
+    assert np.allclose(frames.quaternion_marine_to_ros(q), want_q, atol=1e-12)
+    wrapped = lambda a: np.angle(np.exp(1j * a))  # noqa: E731
+    assert np.allclose(wrapped(frames.euler_ned_from_quaternion(q) - want_rpy), 0.0, atol=1e-9)
+    for qi, wq, wr in zip(q[:50], want_q[:50], want_rpy[:50]):
+        assert np.allclose(frames.quaternion_ros_to_marine(qi), wq, atol=1e-12)
+        assert np.allclose(wrapped(frames.euler_ned_from_quaternion(qi) - wr), 0.0, atol=1e-9)
+    for bad in ([0.0, 0.0, 0.0, 0.0], [np.nan, 0.0, 0.0, 1.0]):
+        with pytest.raises(ValueError):
+            frames.quaternion_ros_to_marine(bad)
