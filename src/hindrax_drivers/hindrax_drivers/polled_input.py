@@ -15,17 +15,23 @@ takes the queued messages with the subscription handle's ``take_message``, the c
 for each message. Each message comes with its ``rmw_message_info`` (a dict: ``source_timestamp`` and
 ``received_timestamp``, ns of the system clock, as rclpy's executors pass to ``(msg, info)`` callbacks). The QoS
 depth of each subscription must hold what arrives between two takes.
+
+A node whose topic inputs are polled at its own tick (the ESC, the output guard, the supervisor, the identification
+node, the controller) takes :class:`PolledInputsMixin`: it opens them (:class:`PolledInputs` on the system clock,
+callbacks with ``use_sim_time``), takes them at the tick after what must run first (the heartbeat ages' ticks), and
+closes them with the node.
 """
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 from rclpy.node import Node
 
 from .cdr_decode import cdr_decoder
 
-__all__ = ["PolledInputs", "PolledSubscriptions", "polled_inputs", "received_ago_s", "subscribe_input"]
+__all__ = ["PolledInputs", "PolledInputsMixin", "PolledSubscriptions", "polled_inputs", "received_ago_s",
+           "subscribe_input"]
 
 
 class PolledSubscriptions:
@@ -129,6 +135,49 @@ class PolledInputs(PolledSubscriptions):
         """Forget the handlers and destroy the intake node."""
         self.handlers.clear()
         super().close()
+
+
+class PolledInputsMixin:
+    """For a node whose topic inputs are taken at its own tick on the system clock (module docstring): listed before
+    ``Node`` in its bases (``class EscNode(PolledInputsMixin, Node)``).
+
+    :meth:`open_inputs` creates the inputs (:func:`polled_inputs`: None with ``use_sim_time``) in an attribute of the
+    node's choice, :meth:`take_inputs` takes them at the tick after the ``before_take`` hooks, and
+    :meth:`destroy_node` closes them (their intake node) before the node itself is destroyed.
+    """
+
+    _inputs_attribute: str | None = None
+    _before_take: tuple[Callable[[], Any], ...] = ()
+
+    def open_inputs(self, attribute: str = "inputs",
+                    before_take: Iterable[Callable[[], Any]] = ()) -> PolledInputs | None:
+        """Set ``self.<attribute>`` to :func:`polled_inputs` of this node and return it (None with ``use_sim_time``:
+        its inputs are callbacks, :func:`subscribe_input`). ``before_take``: called, in order, at the start of every
+        :meth:`take_inputs`, polled or not: a heartbeat age's ``AliveAge.tick``, so that a beat taken right after it
+        counts from its reception (:func:`received_ago_s`)."""
+        inputs = polled_inputs(self)  # a Node: the mixin precedes Node in its bases
+        setattr(self, attribute, inputs)
+        self._inputs_attribute, self._before_take = attribute, tuple(before_take)
+        return inputs
+
+    def take_inputs(self) -> int:
+        """Run the ``before_take`` hooks of :meth:`open_inputs`, then hand every message queued on the polled inputs
+        to its handler (:meth:`PolledInputs.take_all`). Returns how many; 0 with ``use_sim_time`` (callbacks)."""
+        for hook in self._before_take:
+            hook()
+        inputs = self._inputs()
+        return inputs.take_all() if inputs is not None else 0
+
+    def destroy_node(self) -> None:
+        """Close the polled inputs (destroys their intake node; the attribute becomes None), then destroy the node."""
+        inputs = self._inputs()
+        if inputs is not None:
+            inputs.close()
+            setattr(self, str(self._inputs_attribute), None)
+        super().destroy_node()  # Node's, next in the bases
+
+    def _inputs(self) -> PolledInputs | None:
+        return getattr(self, self._inputs_attribute) if self._inputs_attribute is not None else None
 
 
 def subscribe_input(node: Node, inputs: PolledInputs | None, msg_type: Any, topic: str,

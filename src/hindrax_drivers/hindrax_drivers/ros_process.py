@@ -34,22 +34,50 @@ rclpy 7.1 (docs/architecture.md §11.5): no subscription callback takes the mess
 the reception time as each record's publish time), and no coroutine waits for long (the identification action
 has none).
 
+Signals: one SIGINT or SIGTERM ends the process with status 0, and so does any number of them at any moment after
+start-up. rclpy's handler (installed by ``rclpy.init``) chains to Python's and shuts the context down from a thread
+of its own; Python's raises ``KeyboardInterrupt`` in the main thread when that thread next checks for signals, which
+for a signal the kernel handed to another thread (a DDS thread) may be after the body has seen the context shut down
+and left the block: the ``KeyboardInterrupt`` then lands in a clean-up and ends the process with status -2 (-SIGINT),
+its remaining clean-ups not run (28 times in 30 in a reproduction, a clean-up that waits on the GIL); a second signal
+during the shutdown does the same. So, in the main thread, :class:`RosProcess` sets Python's SIGINT and SIGTERM
+handlers before ``rclpy.init`` (rclpy's then chain to them):
+
+- while the block runs, SIGINT raises ``KeyboardInterrupt`` in it as Python's default handler does (a command may
+  catch it), SIGTERM only shuts the context down (rclpy's handler);
+- from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end (the ESC node's
+  neutral write among them);
+- at the end rclpy's handlers are uninstalled (``rclpy.try_shutdown`` leaves them) and the handlers found on entry
+  restored, unless a signal arrived: the process is then ending on request, and SIGINT and SIGTERM stay ignored
+  until it has exited (the interpreter's finalization resets a signal that Python handles to its default action,
+  which for SIGINT would end the process with -2).
+
+In another thread (a test running a node process in a thread) the handlers are left as they are: only the main
+thread may set them.
+
 rclpy is imported when the block is entered, not when this module is.
 """
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
+from types import FrameType
 from typing import Any, Callable, Mapping, Sequence
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
+from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options, uninstall_signal_handlers
 
 __all__ = ["EXECUTORS", "RosProcess", "executor_kind"]
 
 #: values of ``HINDRAX_EXECUTOR``
 EXECUTORS = ("events", "single")
+
+#: the signals that end a process (module docstring, "Signals")
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def executor_kind(environ: Mapping[str, str] | None = None) -> str:
@@ -115,11 +143,48 @@ class RosProcess:
         """Exit status: 0, or 1 after an exception listed in ``errors`` (a command may set it too)."""
         self._cleanups: list[Callable[[], Any]] = []
         self._executor: Any = None
+        self.signals: list[int] = []
+        """The SIGINT/SIGTERM received, in order (main thread only)."""
+        self._stopping = False
+        self._previous: dict[int, Any] = {}
 
     def __enter__(self) -> RosProcess:
 
-        rclpy.init(args=self.args)
+        if threading.current_thread() is threading.main_thread():
+            _uninstall_rclpy_handlers()  # an earlier context's (rclpy.try_shutdown leaves them): reinstalled below
+            self._previous = {sig: signal.getsignal(sig) for sig in _STOP_SIGNALS}
+            for sig in _STOP_SIGNALS:  # before rclpy.init: rclpy's handlers chain to these
+                signal.signal(sig, self._on_signal)
+        try:
+            rclpy.init(args=self.args)
+        except BaseException:
+            self._stopping = True
+            self._release_signals(rclpy_handlers=False)
+            raise
+        if self.signals:  # a SIGTERM during rclpy.init, before rclpy's handler was there: end at once
+            rclpy.try_shutdown()
         return self
+
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
+        """Python's handler of SIGINT and SIGTERM (module docstring, "Signals"): records the signal; raises
+        ``KeyboardInterrupt`` for SIGINT while the block runs, absorbs both once it is left."""
+        self.signals.append(signum)
+        if signum == signal.SIGINT and not self._stopping and not _in_exit(frame):
+            raise KeyboardInterrupt
+
+    def _release_signals(self, rclpy_handlers: bool = True) -> None:
+        """rclpy's signal handlers out of the chain (``rclpy_handlers``), then the handlers found on entry back, or
+        SIGINT and SIGTERM ignored if one arrived (module docstring, "Signals")."""
+        if not self._previous:
+            return
+        if rclpy_handlers:
+            _uninstall_rclpy_handlers()  # puts ours back: they were there when rclpy installed its own
+        for sig in _STOP_SIGNALS:  # signal.signal runs the handlers of signals already received (absorbed here)
+            signal.signal(sig, self._on_signal)
+        for sig, previous in self._previous.items():
+            signal.signal(sig, signal.SIG_IGN if self.signals else
+                          previous if previous is not None else signal.SIG_DFL)
+        self._previous = {}
 
     @property
     def executor(self) -> Any:
@@ -159,6 +224,15 @@ class RosProcess:
 
     def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: Any) -> bool:
 
+        self._stopping = True  # first: from here on SIGINT and SIGTERM are absorbed (_on_signal)
+        try:
+            return self._shut_down(exc_type, exc)
+        finally:
+            self._release_signals()
+
+    def _shut_down(self, exc_type: type | None, exc: BaseException | None) -> bool:
+        """The exit (class docstring): clean-ups, executor and context shutdown; returns whether ``exc`` is
+        handled."""
         shutting_down = not rclpy.ok()  # before the clean-up: SIGINT/SIGTERM already shut the context down
         failed: list[Exception] = []
         while self._cleanups:
@@ -188,3 +262,20 @@ class RosProcess:
                 self.status = 1
                 return True
         return isinstance(exc, Exception) and shutting_down
+
+
+def _in_exit(frame: FrameType | None) -> bool:
+    """Whether ``frame`` or a caller is :meth:`RosProcess.__exit__`: a signal whose handler runs at its very
+    start, before it sets ``_stopping``, is part of the shutdown too."""
+    while frame is not None:
+        if frame.f_code is RosProcess.__exit__.__code__:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _uninstall_rclpy_handlers() -> None:
+    """rclpy's SIGINT/SIGTERM handlers out of the chain, if installed (``rclpy.shutdown`` does this for the default
+    context, ``rclpy.try_shutdown`` does not); rclpy restores the handlers it found."""
+    if get_current_signal_handlers_options() != SignalHandlerOptions.NO:
+        uninstall_signal_handlers()

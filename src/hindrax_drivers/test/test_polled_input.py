@@ -105,3 +105,44 @@ def test_a_lean_input_hands_over_the_fields_of_the_message_decoded_from_its_cdr(
                         assert w == h, (field, sub)
             else:
                 assert np.array_equal(np.asarray(want), np.asarray(have)), field
+
+
+def test_the_mixin_opens_takes_after_its_hooks_and_closes_with_the_node():
+    """PolledInputsMixin: on the system clock the inputs are polled (kept in the attribute named), each take runs the
+    before-take hooks first, and destroy_node closes the intake node and sets the attribute to None; with
+    use_sim_time there are no polled inputs, the hooks still run and a take hands over nothing."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from hindrax_drivers.polled_input import PolledInputs, PolledInputsMixin, subscribe_input
+    from hindrax_drivers.testing import ros_context
+
+    class Taker(PolledInputsMixin, Node):
+        def __init__(self, name: str, log: list, **kwargs) -> None:
+            super().__init__(name, **kwargs)
+            self.intake = self.open_inputs("intake", before_take=(lambda: log.append("hook"),))
+            subscribe_input(self, self.intake, String, "/polled/mixin", lambda m: log.append(m.data), 10)
+
+    with ros_context() as ctx:
+        log: list = []
+        node = Taker("taker", log, context=ctx)
+        talker = rclpy.create_node("talker", context=ctx)
+        try:
+            topics = lambda n: {sub.topic_name for sub in n.subscriptions}  # noqa: E731
+            assert isinstance(node.intake, PolledInputs) and "/polled/mixin" not in topics(node)  # on the intake
+            pub = talker.create_publisher(String, "/polled/mixin", 10)
+            wait_until(lambda: pub.get_subscription_count() == 1, 10, message="intake matched")
+            pub.publish(String(data="m0"))
+            wait_until(lambda: node.take_inputs() == 1, 10, message="m0 taken")
+            assert log[-2:] == ["hook", "m0"] and set(log[:-1]) == {"hook"}
+            inputs = node.intake
+            node.destroy_node()
+            assert node.intake is None and inputs.handlers == {}  # closed
+            wait_until(lambda: pub.get_subscription_count() == 0, 10, message="the intake node's subscription gone")
+        finally:
+            talker.destroy_node()
+        sim_log: list = []
+        sim = Taker("sim_taker", sim_log, context=ctx, parameter_overrides=[Parameter("use_sim_time", value=True)])
+        assert sim.intake is None and "/polled/mixin" in topics(sim)  # a callback subscription on the node itself
+        assert sim.take_inputs() == 0 and sim_log == ["hook"]
+        sim.destroy_node()

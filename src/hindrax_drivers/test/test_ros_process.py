@@ -1,12 +1,18 @@
 """RosProcess: the one rclpy process life every entry point uses (init, clean-up in order, shutdown, exit status)."""
 from __future__ import annotations
 
+import signal
+import subprocess
+import threading
+from pathlib import Path
+
 import pytest
 import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from hindrax_drivers.config import ConfigError
 from hindrax_drivers.ros_process import RosProcess, executor_kind
+from hindrax_drivers.testing import child_env, python_executable, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -116,3 +122,138 @@ def test_events_loop_spins_callbacks_and_ends_on_context_shutdown():
         proc.executor.add_node(node)
         proc.executor.spin()
     assert len(ticks) == 5 and proc.status == 0 and not rclpy.ok()
+
+
+# A node process started by the shared runner (run_node -> RosProcess): prints "spinning" at its first tick,
+# "closing" when its close() starts, then waits in close() for the file argv[1] and, once run_node has returned
+# ("returned <status>"), for argv[1] + ".2" before it exits with run_node's status. With argv[2] == "thread", its
+# constructor ends with one SIGINT taken by another thread (what test_controller_node met on a loaded machine).
+SIGNAL_PROBE = r"""
+import ctypes, os, signal, sys
+from pathlib import Path
+
+from rclpy.node import Node
+
+from hindrax_drivers.conditions import wait_until
+from hindrax_drivers.node_common import run_node
+
+go, mode = Path(sys.argv[1]), sys.argv[2]
+
+
+def say(line):
+    print(line, flush=True)
+
+
+class Probe(Node):
+    def __init__(self):
+        super().__init__("signal_probe")
+        self.ticks = 0
+        self.create_timer(0.01, self.tick)
+        if mode == "thread":
+            # the kernel hands a process-directed SIGINT to a thread that does not block it, here not the main one
+            # (a DDS thread): rclpy's handler shuts the context down from its thread, and Python's
+            # KeyboardInterrupt is due in the main thread when that thread next looks, which the constructor does
+            # not do before the context is down (PyDLL: no look on the way back from kill)
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            ctypes.PyDLL(None).kill(os.getpid(), signal.SIGINT)
+            while self.context.ok():
+                pass
+
+    def tick(self):
+        self.ticks += 1
+        if self.ticks == 1:
+            say("spinning")
+
+    def close(self):
+        say("closing")
+        wait_until(go.exists, 60, message="go")
+
+
+rc = run_node(Probe, [])
+say(f"returned {rc}")
+wait_until(Path(f"{go}.2").exists, 60, message="go 2")
+sys.exit(rc)
+"""
+
+
+class SignalProbe:
+    """The probe process, its output lines collected by a thread (the test waits on them, never on a time)."""
+
+    def __init__(self, tmp_path, mode: str = "outside") -> None:
+        script = tmp_path / "signal_probe.py"
+        script.write_text(SIGNAL_PROBE)
+        self.go = tmp_path / "go"
+        self.proc = subprocess.Popen([python_executable(), str(script), str(self.go), mode], env=child_env(),
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.lines: list[str] = []
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line)
+
+    def wait_for(self, text: str) -> None:
+        wait_until(lambda: any(text in line for line in self.lines) or self.proc.poll() is not None, 60,
+                   message=f"{text!r} from the probe")
+        assert any(text in line for line in self.lines), "".join(self.lines)
+
+    def send(self, *signals: int) -> None:
+        """Send ``signals`` and wait until the kernel has delivered them (none pending in /proc/<pid>/status)."""
+        for sig in signals:
+            self.proc.send_signal(sig)
+        mask = sum(1 << (sig - 1) for sig in signals)
+
+        def delivered() -> bool:
+            if self.proc.poll() is not None:
+                return True  # ended (by them: the assertion below)
+            status = Path(f"/proc/{self.proc.pid}/status").read_text().splitlines()
+            pending = [int(line.split()[1], 16) for line in status if line.startswith(("SigPnd:", "ShdPnd:"))]
+            return not any(p & mask for p in pending)
+
+        wait_until(delivered, 10, message="signals delivered")
+        assert self.proc.poll() is None, "".join(self.lines)  # not ended by them
+
+    def finish(self) -> int:
+        """Let the probe leave close() and then exit; its exit status."""
+        self.go.touch()
+        self.wait_for("returned")
+        (self.go.parent / "go.2").touch()
+        return self.proc.wait(timeout=60)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+@pytest.mark.parametrize("first", ["SIGINT", "SIGTERM"])
+def test_signals_during_and_after_the_shutdown_leave_exit_status_0(tmp_path, first):
+    """The first signal ends the node process; SIGINT and SIGTERM sent while its clean-ups run (here: its close())
+    and after run_node has returned change nothing: close() runs to its end and the process exits 0 (before: the
+    second SIGINT raised KeyboardInterrupt in close(), exit -2)."""
+    probe = SignalProbe(tmp_path)
+    try:
+        probe.wait_for("spinning")
+        probe.send(getattr(signal, first))
+        probe.wait_for("closing")
+        probe.send(signal.SIGINT, signal.SIGTERM)
+        probe.send(signal.SIGINT)
+        probe.go.touch()
+        probe.wait_for("returned 0")
+        probe.send(signal.SIGINT, signal.SIGTERM)
+        assert probe.finish() == 0, "".join(probe.lines)
+    finally:
+        probe.kill()
+
+
+def test_one_sigint_taken_by_another_thread_at_start_up_leaves_exit_status_0(tmp_path):
+    """One SIGINT just after the node is built (test_controller_node sends it on "controller ready") that the kernel
+    hands to a thread other than the main one: rclpy shuts the context down, the spin loop ends before the main
+    thread has looked at the signal, and Python's KeyboardInterrupt comes due in the clean-up. Exit 0 (before: the
+    KeyboardInterrupt ended close() and the process, the flaky exit -2 of test_controller_node)."""
+    probe = SignalProbe(tmp_path, mode="thread")
+    try:
+        probe.wait_for("closing")
+        assert probe.finish() == 0, "".join(probe.lines)
+    finally:
+        probe.kill()

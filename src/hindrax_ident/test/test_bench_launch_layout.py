@@ -105,3 +105,41 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path
     assert len(recorder) == 1
     recorder[0].ros_args(write)
     assert any(w.get("recording.output_root") == "/tmp/b" and w.get("autostart") is True for w in written)
+
+
+def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
+    """The pool writes its ports file through a temporary file in the same folder and os.replace: while it writes, the
+    file the stack benchmark waits for does not exist (it once existed empty, and json.loads failed on it); a failed
+    write leaves nothing behind. The reader answers None until the file is there and whole."""
+    import json
+
+    from hindrax_ident.benchmarks import launch_layout as ll
+
+    path = tmp_path / "ports.json"
+    ports = {"dvl75": "/dev/pts/7", "ping1d": "/dev/pts/8"}
+    seen_while_writing = []
+
+    def slow_dump(obj, f):
+        f.write("{")
+        f.flush()
+        seen_while_writing.append((path.exists(), ll.read_ports_file(path)))
+        f.write(json.dumps(obj)[1:])
+
+    monkeypatch.setattr(ll.json, "dump", slow_dump)
+    ll.write_ports_file(path, ports)
+    assert seen_while_writing == [(False, None)]
+    assert ll.read_ports_file(path) == ports and [p.name for p in tmp_path.iterdir()] == ["ports.json"]
+
+    def failing_dump(obj, f):
+        f.write("{")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(ll.json, "dump", failing_dump)
+    with pytest.raises(OSError, match="disk full"):
+        ll.write_ports_file(tmp_path / "other.json", ports)
+    assert [p.name for p in tmp_path.iterdir()] == ["ports.json"]
+
+    for text in ("", '{"dvl75": "/dev/pt', "[]"):  # what a non-atomic writer could leave for a moment; not an object
+        path.write_text(text)
+        assert ll.read_ports_file(path) is None
+    assert ll.read_ports_file(tmp_path / "missing.json") is None

@@ -40,7 +40,7 @@ from rclpy.node import Node
 from ..config import output_enable_gpio
 from ..liveness import HEARTBEAT_NAMES, AliveAge
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
-from ..polled_input import polled_inputs, received_ago_s, subscribe_input
+from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
 from ..pca9685 import protocol as p
 from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
@@ -64,7 +64,7 @@ def open_output_enable(chip: str, line: int) -> Any:
     return open_output_line(chip, line, initial_high=True)
 
 
-class OutputGuardNode(Node):
+class OutputGuardNode(PolledInputsMixin, Node):
     """The output guard (module docstring). ``line``: an injected /OE line (``set_high``/``release``); ``bus``: an
     injected SMBus-like bus for the register fallback. Without them, they are opened from the configuration."""
 
@@ -94,8 +94,9 @@ class OutputGuardNode(Node):
         self._open_line()
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["guard"], 10)
         #: the heartbeats are taken at the tick on the system clock (polled subscriptions: no executor wake-up per
-        #: beat, docs/architecture.md §10.1), each aged from its DDS reception; callbacks with use_sim_time
-        self.inputs = polled_inputs(self)
+        #: beat, docs/architecture.md §10.1), each aged from its DDS reception, after the ages' ticks; callbacks with
+        #: use_sim_time
+        self.inputs = self.open_inputs(before_take=(self.esc_age.tick, self.supervisor_age.tick))
         subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10)
         subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
@@ -178,10 +179,7 @@ class OutputGuardNode(Node):
 
     # -- tick
     def tick(self) -> None:
-        self.esc_age.tick()
-        self.supervisor_age.tick()
-        if self.inputs is not None:  # after the ticks: a beat taken now counts from its reception
-            self.inputs.take_all()
+        self.take_inputs()  # the ages' ticks, then the beats: a beat taken now counts from its reception
         asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s)
         if changed and asserted:
             self.assertions += 1
@@ -204,12 +202,6 @@ class OutputGuardNode(Node):
                 ("silence_failures", self.silence_failures),
                 ("output_enable_gpio", f"{self.gpio[0]}:{self.gpio[1]}" if self.gpio else "not wired"),
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}")]
-
-    def destroy_node(self) -> None:
-        if self.inputs is not None:
-            self.inputs.close()
-            self.inputs = None
-        super().destroy_node()
 
     def close(self) -> None:
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:

@@ -84,7 +84,7 @@ from hindrax_msgs.srv import SetArmed
 
 from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
-from ..polled_input import polled_inputs, received_ago_s, subscribe_input
+from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
@@ -152,7 +152,7 @@ class EscOutput:
         return out.copy()
 
 
-class EscNode(Node):
+class EscNode(PolledInputsMixin, Node):
     """PCA9685 ESC output node (see the module docstring). ``bus``: SMBus-like object (default smbus2)."""
 
     #: MODE1 as read back from a configured chip: awake, auto-increment, All-Call, no RESTART pending.
@@ -227,8 +227,8 @@ class EscNode(Node):
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
         #: the inputs taken at the safety tick (system clock; None with ``use_sim_time``: callbacks, which the stepped
         #: simulation dispatches in order): the peers' heartbeats, and the command topic once a commander in this
-        #: process hands its commands over (:meth:`in_process_sink`)
-        self.inputs = polled_inputs(self)
+        #: process hands its commands over (:meth:`in_process_sink`); the heartbeat ages tick first (_take_inputs)
+        self.inputs = self.open_inputs(before_take=(self.supervisor_age.tick, self.guard_age.tick))
         self._command_sub = self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10)
         #: commands handed over in the process (:meth:`take_command`) whose DDS copy has not come back yet
         self._local_commands: collections.deque = collections.deque(maxlen=LOCAL_COMMANDS_KEPT)
@@ -505,10 +505,7 @@ class EscNode(Node):
         now counts from its reception). Called at every safety tick and before an arm request is decided, so that
         the request sees every beat received before it, as callbacks would have (a supervisor ERROR that arrived
         between two ticks refuses it)."""
-        self.supervisor_age.tick()
-        self.guard_age.tick()
-        if self.inputs is not None:
-            self.inputs.take_all()
+        self.take_inputs()  # the ages' ticks first (open_inputs in __init__)
 
     def on_set_armed(self, request: SetArmed.Request, response: SetArmed.Response) -> SetArmed.Response:
         if request.arm:
@@ -741,12 +738,6 @@ class EscNode(Node):
         self.armed = False
         self.command = None
         self._safe_neutral("shutdown")
-
-    def destroy_node(self) -> None:
-        if self.inputs is not None:
-            self.inputs.close()
-            self.inputs = None
-        super().destroy_node()
 
 
 def main(args=None) -> int:

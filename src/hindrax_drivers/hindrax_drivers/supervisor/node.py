@@ -69,7 +69,7 @@ from hindrax_msgs.srv import SetArmed
 from .. import frames
 from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
-from ..polled_input import PolledInputs, polled_inputs, subscribe_input
+from ..polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from .core import SupervisorCore, SupervisorLimits
 
 __all__ = ["SupervisorNode", "main"]
@@ -84,7 +84,7 @@ _NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 IMU_POLL_DEPTH = 50
 
 
-class SupervisorNode(Node):
+class SupervisorNode(PolledInputsMixin, Node):
     """The safety supervisor (see the module docstring)."""
 
     def __init__(self, **kwargs: Any):
@@ -111,7 +111,7 @@ class SupervisorNode(Node):
         self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
         self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
         #: polled imu/data_raw intake on the system clock (module docstring, "CPU"); None with use_sim_time
-        self.imu_intake: PolledInputs | None = polled_inputs(self)
+        self.imu_intake: PolledInputs | None = self.open_inputs("imu_intake")
         subscribe_input(self, self.imu_intake, Imu, "imu/data_raw", self.on_imu,
                         10 if self.imu_intake is None else IMU_POLL_DEPTH, raw=True, **ev)
         self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10, **ev)
@@ -153,7 +153,7 @@ class SupervisorNode(Node):
     def take_imu(self) -> int:
         """Count the ``imu/data_raw`` samples queued on the polled subscription (:meth:`on_imu`). Returns how many;
         0 with ``use_sim_time``."""
-        return self.imu_intake.take_all() if self.imu_intake is not None else 0
+        return self.take_inputs()
 
     def set_clock_stall_timeout(self, seconds: float) -> None:
         """ROS time may stand still this long (steady s) while armed before it trips (default
@@ -243,13 +243,6 @@ class SupervisorNode(Node):
             self.get_logger().error("esc/set_armed not available: cannot disarm", throttle_duration_sec=1.0)
             return
         self.disarm_future = self.esc_client.call_async(SetArmed.Request(arm=False))
-
-    def destroy_node(self) -> None:
-        """Destroy the polled intake node too, then this node."""
-        if self.imu_intake is not None:
-            self.imu_intake.close()
-            self.imu_intake = None
-        super().destroy_node()
 
     def _publish_status(self) -> None:
         t = self._now_s()

@@ -15,7 +15,7 @@ Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node .
     emulators on pseudo-terminals served by their own threads, and the MS5837, ICM-20948 and PCA9685 emulators on an
     :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
     (:class:`I2CSocketServer`). The emulators run on ``time.monotonic`` (the drivers' clock here). The pty paths
-    are written to ``--ports-file`` (JSON) once everything is up.
+    are written to ``--ports-file`` (JSON, :func:`write_ports_file`: whole or not at all) once everything is up.
 
 ``node MODULE[:FUNCTION] --ros-args ...``
     Runs ``MODULE.FUNCTION()`` (default ``main``; a console script's target) (e.g.
@@ -36,6 +36,7 @@ import json
 import os
 import re
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -139,6 +140,31 @@ def launch_processes(path: str | Path, arguments: Mapping[str, str] | None = Non
     return out
 
 
+def write_ports_file(path: str | Path, ports: Mapping[str, str]) -> None:
+    """Write the pool's pseudo-terminal paths to ``path`` as JSON, atomically: a temporary file in the same folder,
+    then ``os.replace``, so that a reader waiting for ``path`` to exist never reads it empty or half written (the
+    stack benchmark once did, and failed on the empty file)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(dict(ports), f)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def read_ports_file(path: str | Path) -> dict | None:
+    """The ports :func:`write_ports_file` wrote to ``path``, or None while there is no such file or it is not a whole
+    JSON object yet (a writer that is not atomic), for a ``wait_until``."""
+    try:
+        ports = json.loads(Path(path).read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return None
+    return ports if isinstance(ports, dict) else None
+
+
 def _pool(argv: list[str]) -> int:
 
 
@@ -171,7 +197,7 @@ def _pool(argv: list[str]) -> int:
 
     node._step_once = locked_step
     server = I2CSocketServer(hardware.i2c_bus, args.socket, lock)
-    Path(args.ports_file).write_text(json.dumps({"dvl75": hardware.dvl_port, "ping1d": hardware.ping_port}))
+    write_ports_file(args.ports_file, {"dvl75": hardware.dvl_port, "ping1d": hardware.ping_port})
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     try:

@@ -84,7 +84,7 @@ from hindrax_ident.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
-from .launch_layout import SOCKET_ENV, launch_processes, package_share
+from .launch_layout import SOCKET_ENV, launch_processes, package_share, read_ports_file
 from .recorder import subscribe_recorder_counts
 
 _CLK = os.sysconf("SC_CLK_TCK")
@@ -353,9 +353,8 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
             procs["pool"] = subprocess.Popen([py, "-m", "hindrax_ident.benchmarks.launch_layout", "pool", "--socket",
                                               sock, "--ports-file", str(ports_file)], env=env, stdout=logs["pool"],
                                              stderr=subprocess.STDOUT)
-            wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and ports_file.exists(), 60, None,
-                       "pool process ready")
-            ports = json.loads(ports_file.read_text())
+            ports = wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and read_ports_file(ports_file), 60,
+                               None, "pool process ready")
             params = str(default_config_path())
             # the bench's devices: the serial emulators' pseudo-terminals, a short arming time, and the emulated
             # PCA9685's oscillator, exactly nominal: calibrated (the ESC refuses to arm otherwise). Vehicle keys,

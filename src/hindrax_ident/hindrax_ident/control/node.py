@@ -62,7 +62,7 @@ from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
 from hindrax_drivers.node_parameters import node_config
-from hindrax_drivers.polled_input import PolledInputs, polled_inputs, subscribe_input
+from hindrax_drivers.polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus, ThrusterPwm
 
 from ..identification.maneuvers import HoldController, dof_authority
@@ -82,7 +82,7 @@ STATUS_PERIOD_S = 0.5
 LEAN_INPUTS = frozenset({Dvl, FluidPressure, Imu, Range, ThrusterPwm})
 
 
-class ControllerNode(Node):
+class ControllerNode(PolledInputsMixin, Node):
     """The controller as a ROS node (module docstring). config: a VehicleConfig (default: the node's parameters);
     model_file: overrides the ``model_file`` parameter. Raises :class:`ConfigError` for an invalid configuration."""
 
@@ -128,9 +128,10 @@ class ControllerNode(Node):
         sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
         self._sub_ev = sub_ev
-        #: on the system clock the topic inputs are polled at every tick (module docstring, "CPU"); None with
-        #: use_sim_time (callbacks)
-        self.intake: PolledInputs | None = polled_inputs(self)
+        #: on the system clock the topic inputs are polled at every tick (module docstring, "CPU"; :meth:`take_inputs`
+        #: counts each sample at its DDS reception time, ``received_timestamp``, system clock = the node's ROS time);
+        #: None with use_sim_time (callbacks)
+        self.intake: PolledInputs | None = self.open_inputs("intake")
         self._streams: list = []
         self._open_streams()
         self._subscribe(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20)
@@ -166,19 +167,6 @@ class ControllerNode(Node):
         :mod:`hindrax_drivers.cdr_decode`)."""
         return subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=msg_type in LEAN_INPUTS,
                                **self._sub_ev)
-
-    def take_inputs(self) -> int:
-        """Hand every message queued on the polled inputs to its handler, each sample counted at its DDS
-        reception time (``received_timestamp``, system clock = the node's ROS time). Returns how many; 0 with
-        ``use_sim_time``."""
-        return self.intake.take_all() if self.intake is not None else 0
-
-    def destroy_node(self) -> None:
-        """Destroy the polled intake node too, then this node."""
-        if self.intake is not None:
-            self.intake.close()
-            self.intake = None
-        super().destroy_node()
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the

@@ -107,7 +107,7 @@ from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
 from hindrax_drivers.node_parameters import node_config
-from hindrax_drivers.polled_input import PolledInputs, polled_inputs, subscribe_input
+from hindrax_drivers.polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
@@ -203,7 +203,7 @@ class _GoalRun:
     calibration_results: int = 0  # step results of this goal already published on identification/calibration
 
 
-class IdentificationNode(Node):
+class IdentificationNode(PolledInputsMixin, Node):
     """The identification executive as a ROS node (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters, :func:`node_config`). Other keyword
@@ -255,8 +255,10 @@ class IdentificationNode(Node):
                   (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
                   (Imu, "imu/data_raw", self._on_imu, 50), (Range, "ping/altitude", self._on_range, 20),
                   (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))
-        #: on the system clock the inputs are polled at every tick (module docstring, "CPU"); None with use_sim_time
-        self.intake: PolledInputs | None = polled_inputs(self)
+        #: on the system clock the inputs are polled at every tick (module docstring, "CPU"; :meth:`take_inputs` hands
+        #: them over topic by topic, the executive orders the samples by stamp, :func:`ordered_samples`); None with
+        #: use_sim_time
+        self.intake: PolledInputs | None = self.open_inputs("intake")
         # every handler only reads fields: taken lean when polled (CDR decoded by rosbags, hindrax_drivers.cdr_decode:
         # 31 instead of 77 us per Imu, docs/architecture.md §10.1)
         for msg_type, topic, handler, depth in inputs:
@@ -421,18 +423,6 @@ class IdentificationNode(Node):
     # ------------------------------------------------------------------ control tick
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
-
-    def take_inputs(self) -> int:
-        """Hand every message queued on the polled inputs to its handler, topic by topic (the executive orders the
-        samples by stamp, :func:`ordered_samples`). Returns how many; 0 with ``use_sim_time`` (callbacks)."""
-        return self.intake.take_all() if self.intake is not None else 0
-
-    def destroy_node(self) -> None:
-        """Destroy the polled intake node too, then this node."""
-        if self.intake is not None:
-            self.intake.close()
-            self.intake = None
-        super().destroy_node()
 
     def _on_tick(self) -> None:
         self.take_inputs()
