@@ -98,8 +98,6 @@ def test_quaternion_map_and_euler_angles_agree_with_scipys_rotations():
     """The written-out forms (frames module: the constant product map, Fossen's Euler formulas) against scipy's
     Rotation composition and ``as_euler("ZYX")``, one quaternion at a time (the nodes' path) and in batches; not
     normalised on input, as a message's quaternion may not be."""
-    from scipy.spatial.transform import Rotation
-
     rng = np.random.default_rng(7)
     q = rng.normal(size=(500, 4)) * rng.uniform(0.5, 2.0, size=(500, 1))
     r_flu_frd, r_enu_ned = Rotation.from_matrix(frames.R_FLU_FRD), Rotation.from_matrix(frames.R_ENU_NED)
