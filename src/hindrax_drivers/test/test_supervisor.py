@@ -330,3 +330,43 @@ def test_supervisor_takes_imu_samples_at_its_checks_on_the_system_clock():
             ex.shutdown()
             probe.destroy_node()
             sup.destroy_node()
+
+
+def test_supervisor_takes_the_esc_armed_flag_at_its_checks_and_disarms_a_tripped_arming():
+    """On the system clock ``thrusters/pulse_width`` is polled too (no executor dispatch per 50 Hz message): the
+    armed flag reaches the core at the next check, dated at its reception; an ESC that reports armed while the
+    supervisor is tripped gets an ``esc/set_armed(false)`` request from that check."""
+    import time
+
+    with ros_context() as ctx:
+        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters({"supervisor.check_rate_hz": 20.0}))
+        probe = rclpy.create_node("probe", context=ctx)
+        pub = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
+        requests: list = []
+
+        def on_set_armed(req, resp):
+            requests.append(req.arm)
+            resp.success = True
+            return resp
+
+        probe.create_service(SetArmed, "esc/set_armed", on_set_armed)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(sup)
+        ex.add_node(probe)
+        try:
+            assert "/thrusters/pulse_width" not in {s.topic_name for s in sup.subscriptions}
+            assert "/thrusters/pulse_width" in {s.topic_name for s in sup.imu_intake.node.subscriptions}
+            spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+            wait_until(lambda: pub.get_subscription_count() == 1, 10, spin, "intake matched")
+            t0 = time.time_ns() * 1e-9
+            pub.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True, output_state=1))
+            wait_until(lambda: sup.core.armed, 10, spin, "armed flag taken by a check")
+            assert t0 <= sup.core.armed_since_s <= time.time_ns() * 1e-9  # its reception time
+            assert requests == []
+            sup.core.trip("test breach")
+            pub.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True, output_state=1))
+            wait_until(lambda: requests == [False], 10, spin, "disarm requested by the next check")
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            sup.destroy_node()

@@ -11,7 +11,8 @@ Subscribes (ROS time of arrival is used for rates and run time; ``use_sim_time``
     (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
     ``imu/data_raw`` (sensor_msgs/Imu, rate only: taken as serialised bytes, never deserialised; on the system
     clock taken at each check from a polled subscription, see "CPU"),
-    ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag), ``supervisor/abort``
+    ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag; on the system clock taken at each
+    check, see "CPU"), ``supervisor/abort``
     (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
     a manoeuvre on a limit).
 Services
@@ -36,8 +37,12 @@ CPU (README "Performance on the Pi")
     DDS reception time (``received_timestamp``, system clock = the node's ROS time), so the rate and the age the
     checks see are those of per-sample callbacks, up to one check period late (50 ms at 20 Hz; the rate window is
     ``supervisor.rate_window_s``, 3 s). With ``use_sim_time`` the samples come by callback, counted at the ROS time
-    of arrival. The other inputs (attitude, depth, altitude, DVL, the ESC's armed flag, aborts) stay callbacks:
-    each can trip or disarm at once. docs/architecture.md §10.1 has the measured gain.
+    of arrival. ``thrusters/pulse_width`` (50 Hz), of which only the armed flag is read, is taken the same way and
+    decoded lean (:mod:`hindrax_drivers.cdr_decode`); an arming is dated at its reception. A breach found while the
+    ESC is armed still disarms at once; an ESC that arms while the supervisor is tripped is disarmed at the next
+    check (at most 50 ms), and the ESC itself refuses to arm and disarms on the tripped supervisor's ERROR
+    heartbeat. The other inputs (attitude, depth, altitude, DVL, aborts) stay callbacks: each can trip at once.
+    docs/architecture.md §10.1 has the measured gains.
 Time
     The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
     of ROS time is detected at the next check, reported (``/diagnostics`` warning ``clock_step``) and the stored
@@ -82,6 +87,8 @@ _NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 #: QoS depth of the polled ``imu/data_raw`` subscription: what arrives between two checks (about 3 samples at
 #: 51 Hz and a 20 Hz check) with room for checks delayed by a loaded machine (0.5 s at 102 Hz)
 IMU_POLL_DEPTH = 50
+#: QoS depth of the polled ``thrusters/pulse_width`` subscription (50 Hz: about 3 between two checks; room for 0.4 s)
+ESC_POLL_DEPTH = 20
 
 
 class SupervisorNode(PolledInputsMixin, Node):
@@ -114,7 +121,9 @@ class SupervisorNode(PolledInputsMixin, Node):
         self.imu_intake: PolledInputs | None = self.open_inputs("imu_intake")
         subscribe_input(self, self.imu_intake, Imu, "imu/data_raw", self.on_imu,
                         10 if self.imu_intake is None else IMU_POLL_DEPTH, raw=True, **ev)
-        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, 10, **ev)
+        # the ESC's widths (50 Hz), of which only the armed flag is read: polled lean at the check on the system clock
+        subscribe_input(self, self.imu_intake, ThrusterPwm, "thrusters/pulse_width", self.on_esc,
+                        10 if self.imu_intake is None else ESC_POLL_DEPTH, lean=True, **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
@@ -151,8 +160,8 @@ class SupervisorNode(PolledInputsMixin, Node):
         self.core.on_message("imu", received_s if received_s is not None else self._now_s())
 
     def take_imu(self) -> int:
-        """Count the ``imu/data_raw`` samples queued on the polled subscription (:meth:`on_imu`). Returns how many;
-        0 with ``use_sim_time``."""
+        """Take what the polled subscriptions hold: count the ``imu/data_raw`` samples (:meth:`on_imu`) and hand the
+        ESC's widths to :meth:`on_esc`, oldest first. Returns how many; 0 with ``use_sim_time``."""
         return self.take_inputs()
 
     def set_clock_stall_timeout(self, seconds: float) -> None:
@@ -168,7 +177,8 @@ class SupervisorNode(PolledInputsMixin, Node):
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed
-        self.core.set_armed(self._now_s(), armed)
+        received_s = self.imu_intake.received_s if self.imu_intake is not None else None
+        self.core.set_armed(received_s if received_s is not None else self._now_s(), armed)
         if armed and self.core.tripped:
             self._disarm()
 
