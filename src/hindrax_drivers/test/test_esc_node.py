@@ -607,3 +607,52 @@ def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
             res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
             assert not res.success and "supervisor tripped: depth 3.00 m" in res.message and not node.armed
             probe_only.shutdown()
+
+
+def test_the_tick_rides_on_in_process_commands_and_its_timer_resumes_when_they_stop():
+    """System clock (the vehicle): while the composed allocation hands over commands at 50 Hz, the safety and output
+    tick runs in their wake-ups and its timer, restarted by each, does not fire; when they stop the timer ticks at
+    the output rate again (the watchdogs' timing)."""
+    import time
+
+    from rclpy.experimental.events_executor import EventsExecutor
+
+    with ros_context() as ctx:
+        node = _node(Pca9685Emulator(), {}, ctx=ctx)
+        sink = node.in_process_sink()
+        ticks = {"inline": 0}
+        timer_tick = node._steady_and_output_tick
+
+        def inline_tick():
+            ticks["inline"] += 1
+            timer_tick()
+
+        node._steady_and_output_tick = inline_tick  # what _join_tick calls; the timer keeps the original
+        driver = rclpy.create_node("commander", context=ctx)
+        streaming = {"on": True}
+
+        def command():
+            if streaming["on"]:
+                sink(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True))
+
+        driver.create_timer(PERIOD_S, command)
+        ex = EventsExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(driver)
+        try:
+            spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+            wait_until(lambda: ticks["inline"] >= 5, 5, spin, "commands streaming")
+            total0, inline0, t0 = node._heartbeat_tick, ticks["inline"], time.monotonic()
+            wait_until(lambda: time.monotonic() - t0 >= 1.0, 5, spin, "1 s of commands")
+            total, inline = node._heartbeat_tick - total0, ticks["inline"] - inline0
+            assert 40 <= total <= 60  # one tick per output period
+            assert total - inline <= 5  # the timer (almost) never fired while commands came
+            streaming["on"] = False
+            total0, inline0, t0 = node._heartbeat_tick, ticks["inline"], time.monotonic()
+            wait_until(lambda: time.monotonic() - t0 >= 0.5, 5, spin, "0.5 s without commands")
+            assert ticks["inline"] == inline0
+            assert node._heartbeat_tick - total0 >= 20  # the timer ticks at 50 Hz again
+        finally:
+            ex.shutdown()
+            driver.destroy_node()
+            node.destroy_node()
