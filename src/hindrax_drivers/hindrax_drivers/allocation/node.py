@@ -97,7 +97,9 @@ class ThrustAllocationNode(Node):
         self._held: tuple | None = None  # what the next forces and status carry, not yet published
         self._last_status_key: tuple = ()
         self._last_status_ns = -(1 << 62)
-        self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale)
+        #: the stale check, restarted by every wrench: it wakes the process only when wrenches stop (a held status
+        #: then goes out from it), not 10 times a second beside the 50 Hz wrenches (docs/architecture.md §10.1)
+        self.stale_timer = self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale)
 
     # -- parameters: rebuild the core when a validated change of the thruster keys arrives
     def on_configuration(self, cfg) -> None:
@@ -113,6 +115,7 @@ class ThrustAllocationNode(Node):
         w = np.array([f.x, f.y, f.z, t.x, t.y, t.z])
         self.last_wrench_ns = now_ns
         self.stale_reported = False
+        self.stale_timer.reset()
         stamp = msg.header.stamp
         reason = wrench_header_problem(msg.header.frame_id, stamp.sec * 1_000_000_000 + stamp.nanosec, now_ns,
                                        self.timeout_s, self.future_margin_s)
