@@ -310,10 +310,10 @@ def test_supervisor_takes_imu_samples_at_its_checks_on_the_system_clock():
         ex.add_node(sup)
         ex.add_node(probe)
         try:
-            assert sup.imu_intake is not None
+            assert sup.intake is not None
             # no imu/data_raw subscription on the node the executor spins: only the intake node has one
             assert "/imu/data_raw" not in {s.topic_name for s in sup.subscriptions}
-            assert "/imu/data_raw" in {s.topic_name for s in sup.imu_intake.node.subscriptions}
+            assert "/imu/data_raw" in {s.topic_name for s in sup.intake.node.subscriptions}
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
             wait_until(lambda: pub.get_subscription_count() == 1, 10, spin, "intake matched")
             t0 = time.time_ns() * 1e-9
@@ -323,7 +323,7 @@ def test_supervisor_takes_imu_samples_at_its_checks_on_the_system_clock():
             wait_until(lambda: len(stamps) == 30, 10, spin, "30 samples counted by the checks")
             assert all(t0 <= t <= time.time_ns() * 1e-9 for t in stamps)  # reception times, not check times
             assert sup.core.rate_hz("imu", sup._now_s()) == pytest.approx(30.0 / 1.0)
-            assert sup.take_imu() == 0  # each sample counted once
+            assert sup.take_inputs() == 0  # each sample counted once
             # the IMU stops: once the window has passed the rate is 0 (an armed supervisor trips on it)
             wait_until(lambda: sup.core.rate_hz("imu", sup._now_s()) == 0.0, 10, spin, "rate back to 0")
         finally:
@@ -355,7 +355,7 @@ def test_supervisor_takes_the_esc_armed_flag_at_its_checks_and_disarms_a_tripped
         ex.add_node(probe)
         try:
             assert "/thrusters/pulse_width" not in {s.topic_name for s in sup.subscriptions}
-            assert "/thrusters/pulse_width" in {s.topic_name for s in sup.imu_intake.node.subscriptions}
+            assert "/thrusters/pulse_width" in {s.topic_name for s in sup.intake.node.subscriptions}
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
             wait_until(lambda: pub.get_subscription_count() == 1, 10, spin, "intake matched")
             t0 = time.time_ns() * 1e-9

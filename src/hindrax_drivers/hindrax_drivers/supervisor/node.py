@@ -117,13 +117,14 @@ class SupervisorNode(PolledInputsMixin, Node):
         self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10, **ev)
         self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
         self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
-        #: polled imu/data_raw intake on the system clock (module docstring, "CPU"); None with use_sim_time
-        self.imu_intake: PolledInputs | None = self.open_inputs("imu_intake")
-        subscribe_input(self, self.imu_intake, Imu, "imu/data_raw", self.on_imu,
-                        10 if self.imu_intake is None else IMU_POLL_DEPTH, raw=True, **ev)
+        #: polled imu/data_raw and thrusters/pulse_width on the system clock (module docstring, "CPU"); None with
+        #: use_sim_time
+        self.intake: PolledInputs | None = self.open_inputs("intake")
+        subscribe_input(self, self.intake, Imu, "imu/data_raw", self.on_imu,
+                        10 if self.intake is None else IMU_POLL_DEPTH, raw=True, **ev)
         # the ESC's widths (50 Hz), of which only the armed flag is read: polled lean at the check on the system clock
-        subscribe_input(self, self.imu_intake, ThrusterPwm, "thrusters/pulse_width", self.on_esc,
-                        10 if self.imu_intake is None else ESC_POLL_DEPTH, lean=True, **ev)
+        subscribe_input(self, self.intake, ThrusterPwm, "thrusters/pulse_width", self.on_esc,
+                        10 if self.intake is None else ESC_POLL_DEPTH, lean=True, **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
@@ -156,13 +157,8 @@ class SupervisorNode(PolledInputsMixin, Node):
     def on_imu(self, _msg: bytes) -> None:
         """Count one ``imu/data_raw`` sample: at its DDS reception time when polled, else (a callback, or no
         reception time from the middleware) at the node's time now."""
-        received_s = self.imu_intake.received_s if self.imu_intake is not None else None
+        received_s = self.intake.received_s if self.intake is not None else None
         self.core.on_message("imu", received_s if received_s is not None else self._now_s())
-
-    def take_imu(self) -> int:
-        """Take what the polled subscriptions hold: count the ``imu/data_raw`` samples (:meth:`on_imu`) and hand the
-        ESC's widths to :meth:`on_esc`, oldest first. Returns how many; 0 with ``use_sim_time``."""
-        return self.take_inputs()
 
     def set_clock_stall_timeout(self, seconds: float) -> None:
         """ROS time may stand still this long (steady s) while armed before it trips (default
@@ -177,7 +173,7 @@ class SupervisorNode(PolledInputsMixin, Node):
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed
-        received_s = self.imu_intake.received_s if self.imu_intake is not None else None
+        received_s = self.intake.received_s if self.intake is not None else None
         self.core.set_armed(received_s if received_s is not None else self._now_s(), armed)
         if armed and self.core.tripped:
             self._disarm()
@@ -214,7 +210,7 @@ class SupervisorNode(PolledInputsMixin, Node):
         if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
             self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
                                         "armed: the supervisor's ROS-time checks are blind"))
-        self.take_imu()
+        self.take_inputs()  # the IMU samples counted, the ESC's armed flag (PolledInputsMixin)
         self._handle(self.core.check(self._now_s()))
         if self.core.tripped and self.esc_armed:
             self._disarm()
