@@ -379,8 +379,10 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     reverse order (the last built first). ``connect``: called with the built nodes, in order, before the executor
     spins (in-process hand-offs, :func:`hindrax_drivers.composition.connect_in_process`). Same arguments, exit
     status and shutdown as :func:`run_node`; an exception out of any node's callback ends the whole process (every
-    node's ``close()`` still runs)."""
-    with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor) as proc:
+    node's ``close()`` still runs). SIGINT shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a
+    callback (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``)."""
+    with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor,
+                    interrupt=False) as proc:
         nodes = []
         for factory in factories:
             node = proc.own(factory())

@@ -44,7 +44,10 @@ during the shutdown does the same. So, in the main thread, :class:`RosProcess` s
 handlers before ``rclpy.init`` (rclpy's then chain to them):
 
 - while the block runs, SIGINT raises ``KeyboardInterrupt`` in it as Python's default handler does (a command may
-  catch it), SIGTERM only shuts the context down (rclpy's handler);
+  catch it), SIGTERM only shuts the context down (rclpy's handler); with ``interrupt=False`` (node processes,
+  :func:`~hindrax_drivers.node_common.run_nodes`) SIGINT too only shuts the context down, and the spin loop ends
+  within its 0.1 s timeout: a ``KeyboardInterrupt`` raised inside a timer callback would end that callback half
+  way and print rclpy's ``[FATAL] Exception in 'timers' callback`` with a traceback at every Ctrl-C of a launch;
 - from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end (the ESC node's
   neutral write among them);
 - at the end rclpy's handlers are uninstalled (``rclpy.try_shutdown`` leaves them) and the handlers found on entry
@@ -132,12 +135,14 @@ class RosProcess:
     """
 
     def __init__(self, args: Sequence[str] | None = None, errors: Mapping[type, str] | None = None,
-                 executor: str | None = None) -> None:
+                 executor: str | None = None, interrupt: bool = True) -> None:
         if executor is not None and executor not in EXECUTORS:
             raise ValueError(f"executor={executor!r}: allowed values are {', '.join(EXECUTORS)}")
         self.executor_kind = executor
         """``events`` or ``single``; None: from ``HINDRAX_EXECUTOR`` (:func:`executor_kind`)."""
         self.args = list(args) if args is not None else list(sys.argv)
+        self.interrupt = bool(interrupt)
+        """Whether SIGINT raises ``KeyboardInterrupt`` in the block (module docstring, "Signals")."""
         self.errors = dict(errors or {})
         self.status = 0
         """Exit status: 0, or 1 after an exception listed in ``errors`` (a command may set it too)."""
@@ -169,7 +174,7 @@ class RosProcess:
         """Python's handler of SIGINT and SIGTERM (module docstring, "Signals"): records the signal; raises
         ``KeyboardInterrupt`` for SIGINT while the block runs, absorbs both once it is left."""
         self.signals.append(signum)
-        if signum == signal.SIGINT and not self._stopping and not _in_exit(frame):
+        if signum == signal.SIGINT and self.interrupt and not self._stopping and not _in_exit(frame):
             raise KeyboardInterrupt
 
     def _release_signals(self, rclpy_handlers: bool = True) -> None:

@@ -257,3 +257,36 @@ def test_one_sigint_taken_by_another_thread_at_start_up_leaves_exit_status_0(tmp
         assert probe.finish() == 0, "".join(probe.lines)
     finally:
         probe.kill()
+
+
+def test_a_node_process_shuts_down_on_sigint_without_a_keyboard_interrupt_in_a_callback(tmp_path, monkeypatch):
+    """run_nodes builds its RosProcess with ``interrupt=False``: SIGINT is recorded and only shuts the context down
+    (no ``KeyboardInterrupt`` half way through a timer callback, and no rclpy FATAL traceback at a launch's Ctrl-C);
+    the default RosProcess of a command still raises it. Then the signal probe: SIGINT, exit 0."""
+    import hindrax_drivers.node_common as node_common
+
+    quiet, default = RosProcess([], interrupt=False), RosProcess([])
+    quiet._on_signal(signal.SIGINT, None)  # a node process: recorded, nothing raised
+    assert quiet.signals == [signal.SIGINT]
+    with pytest.raises(KeyboardInterrupt):
+        default._on_signal(signal.SIGINT, None)
+    built: list[dict] = []
+
+    class Recording(RosProcess):
+        def __init__(self, *args, **kwargs):
+            built.append(kwargs)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(node_common, "RosProcess", Recording)
+    with pytest.raises(RuntimeError):  # the factory fails at once: only the construction is looked at here
+        node_common.run_nodes([lambda: (_ for _ in ()).throw(RuntimeError("no node"))], [])
+    assert built and built[0].get("interrupt") is False
+    probe = SignalProbe(tmp_path)
+    try:
+        probe.wait_for("spinning")
+        probe.send(signal.SIGINT)
+        probe.wait_for("closing")
+        assert probe.finish() == 0, "".join(probe.lines)
+        assert not any("KeyboardInterrupt" in line or "FATAL" in line for line in probe.lines), "".join(probe.lines)
+    finally:
+        probe.kill()
