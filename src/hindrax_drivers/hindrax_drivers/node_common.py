@@ -390,7 +390,7 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
             proc.executor.add_node(node)
         if connect is not None:
             connect(nodes)
-        proc.executor.spin()
+        proc.spin()
     return proc.status
 
 

@@ -6,7 +6,7 @@ Every process entry point (a node run alone, :func:`~hindrax_drivers.node_common
     with RosProcess(args, errors={ConfigError: "invalid configuration"}) as proc:
         node = proc.own(MyNode())
         proc.executor.add_node(node)
-        proc.executor.spin()
+        proc.spin()
     return proc.status
 
 On leaving the block, whatever the reason, the registered clean-ups run, last registered first (for a node
@@ -58,10 +58,26 @@ handlers before ``rclpy.init`` (rclpy's then chain to them):
 In another thread (a test running a node process in a thread) the handlers are left as they are: only the main
 thread may set them.
 
+Garbage collection: :meth:`RosProcess.spin` collects once and then freezes every object alive at start-up
+(``gc.freeze``, Python's documented way to keep a long-lived heap out of every later collection) before it spins. A
+node process holds 34,000-57,000 objects once rclpy, numpy and its modules are loaded (94,000 with the
+identification node's), nearly all of them alive for the whole run; a full (generation 2) collection traverses all
+of them and holds the GIL meanwhile: 8-35 ms of CPU here for the output guard's, the supervisor's and
+``actuation_node``'s modules (``make bench``, ``gc_full_collection_cpu_ms_*_unfrozen``; 59 ms with the
+identification node's), 50-210 ms on the Pi 4 by the README's 6x planning factor, against the 0.2 s heartbeat
+timeouts of the ESC and the output guard (docs/architecture.md §8); in the stack benchmark's processes the full
+collections observed at start-up and shut-down took 55-140 ms of wall time. Python starts such a collection by
+itself whenever enough objects have survived the young generations, so without the freeze one could stop the ESC's,
+the supervisor's or the guard's tick at any moment of a dive. After it, a full collection traverses only what was
+allocated since start-up (``make bench``: ``gc_full_collection_cpu_ms_*``, ``benchmarks/safety.py``). The price: a
+frozen object that later ends up in a reference cycle is never collected (one freed by its reference count still
+is); what is frozen here is modules, classes, functions and the nodes, which live as long as the process.
+
 rclpy is imported when the block is entered, not when this module is.
 """
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import sys
@@ -74,7 +90,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options, uninstall_signal_handlers
 
-__all__ = ["EXECUTORS", "RosProcess", "executor_kind"]
+__all__ = ["EXECUTORS", "RosProcess", "executor_kind", "freeze_startup_heap"]
 
 #: values of ``HINDRAX_EXECUTOR``
 EXECUTORS = ("events", "single")
@@ -90,6 +106,15 @@ def executor_kind(environ: Mapping[str, str] | None = None) -> str:
     if value not in EXECUTORS:
         raise ValueError(f"HINDRAX_EXECUTOR={value!r}: allowed values are {', '.join(EXECUTORS)}")
     return value
+
+
+def freeze_startup_heap() -> int:
+    """Collect the garbage of start-up once, then move every object still tracked by the garbage collector to its
+    permanent generation (``gc.collect()``, ``gc.freeze()``; module docstring, "Garbage collection"): no later
+    collection traverses them again. Returns the number of frozen objects (``gc.get_freeze_count()``)."""
+    gc.collect()
+    gc.freeze()
+    return gc.get_freeze_count()
 
 
 class _EventsLoop:
@@ -152,6 +177,8 @@ class RosProcess:
         """The SIGINT/SIGTERM received, in order (main thread only)."""
         self._stopping = False
         self._previous: dict[int, Any] = {}
+        self.frozen_objects = 0
+        """Objects frozen for the garbage collector by :meth:`spin` (0 before it)."""
 
     def __enter__(self) -> RosProcess:
 
@@ -202,6 +229,14 @@ class RosProcess:
             else:
                 self._executor = SingleThreadedExecutor()
         return self._executor
+
+    def spin(self, executor: Any = None) -> None:
+        """Spin ``executor`` (default :attr:`executor`) until the context shuts down, after freezing the start-up
+        heap for the garbage collector (:func:`freeze_startup_heap`; module docstring, "Garbage collection"): call it
+        once every node of the process is built. Sets :attr:`frozen_objects`. Raises what the executor's spin raises
+        (``ExternalShutdownException`` on SIGINT/SIGTERM, handled on leaving the block)."""
+        self.frozen_objects = freeze_startup_heap()
+        (self.executor if executor is None else executor).spin()
 
     def at_exit(self, cleanup: Callable[[], Any]) -> None:
         """Run ``cleanup()`` on exit (clean-ups run last registered first)."""

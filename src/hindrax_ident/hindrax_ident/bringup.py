@@ -337,5 +337,5 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
         proc.at_exit(graph.shutdown)
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)
-        graph.executor.spin()
+        proc.spin(graph.executor)
     return proc.status

@@ -440,7 +440,7 @@ def main(args: list[str] | None = None) -> int:
 
         proc.at_exit(finish)
         proc.executor.add_node(node)
-        proc.executor.spin()
+        proc.spin()
     return proc.status
 
 

@@ -36,6 +36,7 @@ Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :
 """
 from __future__ import annotations
 
+import json
 import os
 import signal as _signal
 import subprocess
@@ -262,7 +263,57 @@ def run(quick: bool = False) -> list[dict]:
         if name in notes:
             row["note"] = notes[name]
         rows.append(row)
-    return rows + run_processes(quick)
+    return rows + run_processes(quick) + gc_rows(quick)
+
+
+# ------------------------------------------------------------------------------------ garbage collection pauses
+# A full collection holds the GIL of a node process for as long as it traverses the heap (ros_process.py, "Garbage
+# collection"). Measured in a fresh interpreter per process of the vehicle layout that has a safety tick: the
+# modules it runs imported and rclpy initialised, then gc.collect() timed (CPU of the process) before and after
+# freeze_startup_heap(), which RosProcess.spin() calls once the nodes are built.
+
+GC_PROCESSES = {"actuation": ["hindrax_drivers.composition", "hindrax_drivers.allocation.node",
+                              "hindrax_drivers.pca9685.node"],
+                "supervisor": ["hindrax_drivers.supervisor.node"], "output_guard": ["hindrax_drivers.guard.node"]}
+
+_GC_PROBE = r"""
+import gc, importlib, json, sys, time
+import rclpy
+for name in sys.argv[2:]:
+    importlib.import_module(name)
+rclpy.init(args=[])
+from hindrax_drivers.ros_process import freeze_startup_heap
+
+def full_collection_ms():
+    out = []
+    for _ in range(int(sys.argv[1])):
+        t = time.process_time()
+        gc.collect()
+        out.append((time.process_time() - t) * 1e3)
+    return sorted(out)[len(out) // 2]
+
+before, objects = full_collection_ms(), len(gc.get_objects())
+frozen = freeze_startup_heap()
+print(json.dumps({"unfrozen": before, "frozen": full_collection_ms(), "objects": objects, "frozen_objects": frozen}))
+rclpy.shutdown()
+"""
+
+
+def gc_rows(quick: bool = False) -> list[dict]:
+    """Rows ``gc_full_collection_cpu_ms_<process>`` (frozen: what a full collection costs once the process spins)
+    and ``..._unfrozen`` (the same heap without :func:`~hindrax_drivers.ros_process.freeze_startup_heap`), median
+    CPU ms of 3 (quick) or 7 collections, for each process of :data:`GC_PROCESSES`."""
+    rows = []
+    for label, modules in GC_PROCESSES.items():
+        out = subprocess.run([python_executable(), "-c", _GC_PROBE, "3" if quick else "7", *modules],
+                             env=child_env(), capture_output=True, text=True, timeout=300, check=True)
+        got = json.loads(out.stdout.strip().splitlines()[-1])
+        rows.append({"name": f"gc_full_collection_cpu_ms_{label}_unfrozen", "value": got["unfrozen"], "unit": "ms",
+                     "note": f"{got['objects']} objects tracked after start-up ({', '.join(modules)} imported)"})
+        rows.append({"name": f"gc_full_collection_cpu_ms_{label}", "value": got["frozen"], "unit": "ms",
+                     "target": 20.0, "note": f"after RosProcess.spin froze {got['frozen_objects']} objects; the "
+                     "heartbeat timeouts are 200 ms, and the Pi 4 is about 6x slower (README)"})
+    return rows
 
 
 # ---------------------------------------------------------------------------------------------- process failures
