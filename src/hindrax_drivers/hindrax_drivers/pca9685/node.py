@@ -249,14 +249,14 @@ class EscNode(PolledInputsMixin, Node):
         if self.inputs is None:
             # use_sim_time: the output tick follows simulated time (the stepped graph's order); the safety tick
             # keeps running on the steady clock when /clock stops
-            self.timer = self.create_timer(self.period_s, self.tick)
+            self.output_timer = self.create_timer(self.period_s, self.tick)
             self.steady_timer = self.create_timer(self.period_s, self.steady_check, clock=steady)
         else:
             # system clock: ROS time is wall time, so one steady-clock timer runs the safety tick and then the
             # output tick (one executor wake-up per period instead of two, docs/architecture.md §10.1); while
             # in-process commands stream, the tick rides on their wake-ups (_join_tick)
-            self.timer = self.steady_timer = self.create_timer(self.period_s, self._steady_and_output_tick,
-                                                               clock=steady)
+            self.output_timer = None
+            self.steady_timer = self.create_timer(self.period_s, self._steady_and_output_tick, clock=steady)
 
     def set_steady_watchdog_timeout(self, seconds: float) -> None:
         """Steady-clock watchdog timeout, s (default ``esc.watchdog_timeout_s``).
@@ -447,7 +447,7 @@ class EscNode(PolledInputsMixin, Node):
             return
         if time.monotonic() - self._last_tick_monotonic >= 0.5 * self.period_s:
             self._steady_and_output_tick()
-        self.timer.reset()
+        self.steady_timer.reset()
 
     def _on_command_topic(self, msg: ThrusterPwm) -> None:
         key = _command_key(msg)
