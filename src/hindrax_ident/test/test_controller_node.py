@@ -214,3 +214,27 @@ def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_and_streams_drop_
             ex.shutdown()
             probe.destroy_node()
             node.destroy_node()
+
+
+def test_every_input_handler_reads_a_lean_message_as_an_rclpy_one():
+    """On the system clock every controller input is taken lean (rosbags' decoding of the CDR bytes): the wrench
+    identity that tells the controller's own wrench from a pilot's, and the fields the other handlers read, are the
+    same from the lean message as from rclpy's object of the same bytes."""
+    from hindrax_drivers.cdr_decode import cdr_decoder
+    from hindrax_ident.control.node import RUNNING_PHASES, _key, _wrench6
+    from hindrax_msgs.msg import AllocationStatus
+    from rclpy.serialization import serialize_message
+
+    w = WrenchStamped()
+    w.header.stamp.sec, w.header.stamp.nanosec = 1_795_000_000, 123_456_789
+    w.wrench.force.x, w.wrench.force.z, w.wrench.torque.z = 1.2345678901234, -0.3, 1e-12
+    lean = cdr_decoder(WrenchStamped)(serialize_message(w))
+    assert _key(lean) == _key(w)
+    status = AllocationStatus(rejected=False)
+    status.requested_wrench.force.y, status.achieved_wrench.torque.x = 2.5, -0.75
+    lean_status = cdr_decoder(AllocationStatus)(serialize_message(status))
+    assert bool(lean_status.rejected) is False
+    for field in ("requested_wrench", "achieved_wrench"):
+        assert np.array_equal(_wrench6(getattr(lean_status, field)), _wrench6(getattr(status, field)))
+    phase = ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING)
+    assert cdr_decoder(ManeuverStatus)(serialize_message(phase)).phase in RUNNING_PHASES

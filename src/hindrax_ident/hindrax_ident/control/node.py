@@ -78,8 +78,6 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
                             ManeuverStatus.PHASE_RETURNING})
 #: Period of controller/status when nothing changes, s.
 STATUS_PERIOD_S = 0.5
-#: inputs taken as rosbags' light decoding of their CDR when polled (their handlers only read fields)
-LEAN_INPUTS = frozenset({Dvl, FluidPressure, Imu, Range, ThrusterPwm})
 
 
 class ControllerNode(PolledInputsMixin, Node):
@@ -162,11 +160,10 @@ class ControllerNode(PolledInputsMixin, Node):
 
     def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
         """A topic input: polled on the system clock (taken by :meth:`take_inputs` at every tick), a callback with
-        ``use_sim_time``. The depths hold what arrives in 0.4-2 s, many ticks. The sensor samples and the ESC's
-        widths, whose handlers only read fields, are taken lean when polled (:data:`LEAN_INPUTS`,
-        :mod:`hindrax_drivers.cdr_decode`)."""
-        return subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=msg_type in LEAN_INPUTS,
-                               **self._sub_ev)
+        ``use_sim_time``. The depths hold what arrives in 0.4-2 s, many ticks. Every handler only reads fields, so
+        every input is taken lean when polled (CDR decoded by rosbags, :mod:`hindrax_drivers.cdr_decode`), as in the
+        identification node."""
+        return subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=True, **self._sub_ev)
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
