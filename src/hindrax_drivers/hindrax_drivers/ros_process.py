@@ -44,10 +44,14 @@ during the shutdown does the same. So, in the main thread, :class:`RosProcess` s
 handlers before ``rclpy.init`` (rclpy's then chain to them):
 
 - while the block runs, SIGINT raises ``KeyboardInterrupt`` in it as Python's default handler does (a command may
-  catch it), SIGTERM only shuts the context down (rclpy's handler); with ``interrupt=False`` (node processes,
-  :func:`~hindrax_drivers.node_common.run_nodes`) SIGINT too only shuts the context down, and the spin loop ends
-  within its 0.1 s timeout: a ``KeyboardInterrupt`` raised inside a timer callback would end that callback half
-  way and print rclpy's ``[FATAL] Exception in 'timers' callback`` with a traceback at every Ctrl-C of a launch;
+  catch it), SIGTERM only shuts the context down (rclpy's handler);
+- with ``interrupt=False`` (node processes, :func:`~hindrax_drivers.node_common.run_nodes`) rclpy installs no
+  handler at all (``SignalHandlerOptions.NO``): both signals are only recorded, and :meth:`RosProcess.spin`, a loop
+  of ``spin_once`` with a 0.1 s timeout, returns at the next turn once one is; the context is shut down after the
+  clean-ups, never under a running callback. rclpy's handler shut it down from its own thread while a callback
+  ran: a timer callback that published then failed ("publisher's context is invalid") and rclpy printed ``[FATAL]
+  Exception in 'timers' callback`` with a traceback (the controller's status, 1 launch Ctrl-C in 2, November
+  2026); a ``KeyboardInterrupt`` raised inside a callback did the same before;
 - from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end (the ESC node's
   neutral write among them);
 - at the end rclpy's handlers are uninstalled (``rclpy.try_shutdown`` leaves them) and the handlers found on entry
@@ -187,8 +191,9 @@ class RosProcess:
             self._previous = {sig: signal.getsignal(sig) for sig in _STOP_SIGNALS}
             for sig in _STOP_SIGNALS:  # before rclpy.init: rclpy's handlers chain to these
                 signal.signal(sig, self._on_signal)
-        try:
-            rclpy.init(args=self.args)
+        try:  # node processes: no rclpy handler (module docstring, "Signals"), the signals end spin() instead
+            rclpy.init(args=self.args, signal_handler_options=SignalHandlerOptions.ALL if self.interrupt
+                       else SignalHandlerOptions.NO)
         except BaseException:
             self._stopping = True
             self._release_signals(rclpy_handlers=False)
@@ -233,10 +238,16 @@ class RosProcess:
     def spin(self, executor: Any = None) -> None:
         """Spin ``executor`` (default :attr:`executor`) until the context shuts down, after freezing the start-up
         heap for the garbage collector (:func:`freeze_startup_heap`; module docstring, "Garbage collection"): call it
-        once every node of the process is built. Sets :attr:`frozen_objects`. Raises what the executor's spin raises
-        (``ExternalShutdownException`` on SIGINT/SIGTERM, handled on leaving the block)."""
+        once every node of the process is built. Sets :attr:`frozen_objects`. With ``interrupt=False`` it returns
+        at most 0.1 s after a SIGINT or SIGTERM (module docstring, "Signals"); otherwise it raises what the
+        executor's spin raises (``ExternalShutdownException`` on SIGINT/SIGTERM, handled on leaving the block)."""
         self.frozen_objects = freeze_startup_heap()
-        (self.executor if executor is None else executor).spin()
+        executor = self.executor if executor is None else executor
+        if self.interrupt:
+            executor.spin()
+            return
+        while rclpy.ok() and not self.signals:  # interrupt=False: a recorded SIGINT/SIGTERM ends the loop
+            executor.spin_once(timeout_sec=0.1)
 
     def at_exit(self, cleanup: Callable[[], Any]) -> None:
         """Run ``cleanup()`` on exit (clean-ups run last registered first)."""

@@ -157,7 +157,11 @@ class Probe(Node):
             # not do before the context is down (PyDLL: no look on the way back from kill)
             signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
             ctypes.PyDLL(None).kill(os.getpid(), signal.SIGINT)
-            while self.context.ok():
+            # rclpy installs no handler in a node process (ros_process.py, "Signals"): if no other thread takes the
+            # SIGINT it stays pending until the main thread unblocks it; Python runs the handler in the main thread
+            recorded = getattr(signal.getsignal(signal.SIGINT), "__self__", None)  # the RosProcess, run_node's
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+            while self.context.ok() and not getattr(recorded, "signals", None):
                 pass
 
     def tick(self):
@@ -166,7 +170,7 @@ class Probe(Node):
             say(f"spinning, {gc.get_freeze_count()} objects frozen")
 
     def close(self):
-        say("closing")
+        say(f"closing, context {'up' if self.context.ok() else 'down'}")
         wait_until(go.exists, 60, message="go")
 
 
@@ -249,9 +253,10 @@ def test_signals_during_and_after_the_shutdown_leave_exit_status_0(tmp_path, fir
 
 def test_one_sigint_taken_by_another_thread_at_start_up_leaves_exit_status_0(tmp_path):
     """One SIGINT just after the node is built (test_controller_node sends it on "controller ready") that the kernel
-    hands to a thread other than the main one: rclpy shuts the context down, the spin loop ends before the main
-    thread has looked at the signal, and Python's KeyboardInterrupt comes due in the clean-up. Exit 0 (before: the
-    KeyboardInterrupt ended close() and the process, the flaky exit -2 of test_controller_node)."""
+    hands to a thread other than the main one. Before: rclpy shut the context down, the spin loop ended before the
+    main thread had looked at the signal, and Python's KeyboardInterrupt came due in the clean-up (the flaky exit -2
+    of test_controller_node). Now a node process has no rclpy handler: the signal is recorded, spin() returns, the
+    clean-ups run. Exit 0."""
     probe = SignalProbe(tmp_path, mode="thread")
     try:
         probe.wait_for("closing")
@@ -261,9 +266,10 @@ def test_one_sigint_taken_by_another_thread_at_start_up_leaves_exit_status_0(tmp
 
 
 def test_a_node_process_shuts_down_on_sigint_without_a_keyboard_interrupt_in_a_callback(tmp_path, monkeypatch):
-    """run_nodes builds its RosProcess with ``interrupt=False``: SIGINT is recorded and only shuts the context down
-    (no ``KeyboardInterrupt`` half way through a timer callback, and no rclpy FATAL traceback at a launch's Ctrl-C);
-    the default RosProcess of a command still raises it. Then the signal probe: SIGINT, exit 0."""
+    """run_nodes builds its RosProcess with ``interrupt=False``: SIGINT is recorded and ends the spin loop (no
+    ``KeyboardInterrupt`` half way through a timer callback, no context shut down under one by rclpy's handler, and so
+    no rclpy FATAL traceback at a launch's Ctrl-C); the default RosProcess of a command still raises it. Then the
+    signal probe: SIGINT, the clean-ups run with the context up, exit 0."""
     import hindrax_drivers.node_common as node_common
 
     quiet, default = RosProcess([], interrupt=False), RosProcess([])
@@ -289,6 +295,8 @@ def test_a_node_process_shuts_down_on_sigint_without_a_keyboard_interrupt_in_a_c
         probe.wait_for("closing")
         assert probe.finish() == 0, "".join(probe.lines)
         assert not any("KeyboardInterrupt" in line or "FATAL" in line for line in probe.lines), "".join(probe.lines)
+        # no rclpy handler shut the context down under a running callback: it is still up for the clean-ups
+        assert any("closing, context up" in line for line in probe.lines), "".join(probe.lines)
     finally:
         probe.kill()
 
@@ -306,6 +314,7 @@ def test_a_node_process_spins_with_its_start_up_heap_frozen(tmp_path):
         assert frozen > 20_000, line
         probe.send(signal.SIGTERM)
         probe.wait_for("closing")
+        assert any("closing, context up" in line for line in probe.lines), "".join(probe.lines)  # as for SIGINT
         assert probe.finish() == 0, "".join(probe.lines)
     finally:
         probe.kill()
