@@ -304,7 +304,7 @@ def test_a_node_process_shuts_down_on_sigint_without_a_keyboard_interrupt_in_a_c
 def test_a_node_process_spins_with_its_start_up_heap_frozen(tmp_path):
     """run_node spins through RosProcess.spin, which freezes the start-up heap first: at the first tick of the probe
     node every object of the imports (rclpy, the node) is out of the garbage collector's reach (tens of thousands;
-    a bare interpreter has none frozen), so a full collection during the run cannot stop the process for the 35-59
+    a bare interpreter has none frozen), so a full collection during the run cannot stop the process for the 14-59
     ms one takes here over that heap (ros_process.py, "Garbage collection")."""
     probe = SignalProbe(tmp_path)
     try:
