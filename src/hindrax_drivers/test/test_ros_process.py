@@ -128,9 +128,10 @@ def test_events_loop_spins_callbacks_and_ends_on_context_shutdown():
 # the number of objects frozen for the garbage collector),
 # "closing" when its close() starts, then waits in close() for the file argv[1] and, once run_node has returned
 # ("returned <status>"), for argv[1] + ".2" before it exits with run_node's status. With argv[2] == "thread", its
-# constructor ends with one SIGINT taken by another thread (what test_controller_node met on a loaded machine).
+# constructor ends with one SIGINT taken by another thread (what test_controller_node met on a loaded machine);
+# with "thread-spinning", its first tick does.
 SIGNAL_PROBE = r"""
-import ctypes, gc, os, signal, sys
+import ctypes, gc, os, signal, sys, time
 from pathlib import Path
 
 from rclpy.node import Node
@@ -145,29 +146,38 @@ def say(line):
     print(line, flush=True)
 
 
+# One process-directed SIGINT that the kernel hands to a thread other than the main one (a DDS thread: the main
+# thread blocks SIGINT from here on), then back to the caller as soon as that thread has taken it, without waiting
+# for Python's handler: on Linux, CPython 3.11's C handler run in a thread that cannot handle signals marks the
+# signal pending without setting the main thread's eval breaker (Python/ceval.c, _PyEval_SignalReceived: force = 0
+# except on Windows), so the handler runs at the main thread's next look, which a loop that never releases the GIL
+# may not make (the first version of this probe waited for the handler in such a loop: 60 s without it, 1 run in 30
+# on a loaded machine). RosProcess.spin must make that look by itself (its spin_once waits without the GIL). If no
+# other thread has taken the signal within 10 s, the main thread unblocks it and takes it.
+def sigint_taken_by_another_thread():
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    ctypes.PyDLL(None).kill(os.getpid(), signal.SIGINT)  # PyDLL: the GIL held, no look for signals on the way back
+    deadline = time.monotonic() + 10
+    while signal.SIGINT in signal.sigpending() and time.monotonic() < deadline:
+        pass  # C calls only (no look for signals, the GIL kept): until a thread has dequeued the signal
+    if signal.SIGINT in signal.sigpending():
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 class Probe(Node):
     def __init__(self):
         super().__init__("signal_probe")
         self.ticks = 0
         self.create_timer(0.01, self.tick)
         if mode == "thread":
-            # the kernel hands a process-directed SIGINT to a thread that does not block it, here not the main one
-            # (a DDS thread): rclpy's handler shuts the context down from its thread, and Python's
-            # KeyboardInterrupt is due in the main thread when that thread next looks, which the constructor does
-            # not do before the context is down (PyDLL: no look on the way back from kill)
-            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-            ctypes.PyDLL(None).kill(os.getpid(), signal.SIGINT)
-            # rclpy installs no handler in a node process (ros_process.py, "Signals"): if no other thread takes the
-            # SIGINT it stays pending until the main thread unblocks it; Python runs the handler in the main thread
-            recorded = getattr(signal.getsignal(signal.SIGINT), "__self__", None)  # the RosProcess, run_node's
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-            while self.context.ok() and not getattr(recorded, "signals", None):
-                pass
+            sigint_taken_by_another_thread()
 
     def tick(self):
         self.ticks += 1
         if self.ticks == 1:
             say(f"spinning, {gc.get_freeze_count()} objects frozen")
+            if mode == "thread-spinning":
+                sigint_taken_by_another_thread()
 
     def close(self):
         say(f"closing, context {'up' if self.context.ok() else 'down'}")
@@ -251,16 +261,19 @@ def test_signals_during_and_after_the_shutdown_leave_exit_status_0(tmp_path, fir
         probe.kill()
 
 
-def test_one_sigint_taken_by_another_thread_at_start_up_leaves_exit_status_0(tmp_path):
-    """One SIGINT just after the node is built (test_controller_node sends it on "controller ready") that the kernel
-    hands to a thread other than the main one. Before: rclpy shut the context down, the spin loop ended before the
-    main thread had looked at the signal, and Python's KeyboardInterrupt came due in the clean-up (the flaky exit -2
-    of test_controller_node). Now a node process has no rclpy handler: the signal is recorded, spin() returns, the
-    clean-ups run. Exit 0."""
-    probe = SignalProbe(tmp_path, mode="thread")
+@pytest.mark.parametrize("when", ["thread", "thread-spinning"])
+def test_one_sigint_taken_by_another_thread_leaves_exit_status_0(tmp_path, when):
+    """One SIGINT that the kernel hands to a thread other than the main one: just after the node is built
+    (test_controller_node sends it on "controller ready") or at the first tick. Before: rclpy shut the context down,
+    the spin loop ended before the main thread had looked at the signal, and Python's KeyboardInterrupt came due in
+    the clean-up (the flaky exit -2 of test_controller_node). Now a node process has no rclpy handler: the signal is
+    recorded, spin() returns, the clean-ups run, exit 0. The probe does not wait for Python's handler
+    (``sigint_taken_by_another_thread`` in the probe): spin() has to let it run by itself."""
+    probe = SignalProbe(tmp_path, mode=when)
     try:
         probe.wait_for("closing")
         assert probe.finish() == 0, "".join(probe.lines)
+        assert any("closing, context up" in line for line in probe.lines), "".join(probe.lines)
     finally:
         probe.kill()
 
