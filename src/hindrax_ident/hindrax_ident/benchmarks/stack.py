@@ -40,6 +40,12 @@ median over the windows, the note lists every window's value.
 Messages per second per topic: counted in the launch layout's bag by log time within each window (the one-process
 graph: the recorder's counts).
 
+Machine speed: first of all, the CPU time of 5 million n-body steps here (:mod:`hindrax_ident.benchmarks.machine`,
+``machine_nbody_cpu_s``). The development machines of this project differ by about 2x between sessions; the
+launch totals are also given at the speed of a reference machine (``launch_*_cpu_total_at_reference_speed``,
+``..._max_process_at_reference_speed``: the figures to compare between sessions). The targets stay on the figures
+measured here.
+
 Baselines (each a child process, plain rclpy, the EventsExecutor like every node process, one timer per topic
 publishing a default-constructed message of the topic's type at its measured rate):
 ``cpu_bare_rclpy_same_topics``: publishers only, nobody subscribed (the historical baseline), for the topics of
@@ -85,6 +91,7 @@ from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
 from .launch_layout import SOCKET_ENV, launch_processes, package_share, read_ports_file
+from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s
 from .recorder import subscribe_recorder_counts
 
 _CLK = os.sysconf("SC_CLK_TCK")
@@ -611,9 +618,11 @@ def _median(values: list[float]) -> float:
     return float(statistics.median(values)) if values else float("nan")
 
 
-def launch_rows(launch: dict) -> list[dict]:
+def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
     """Rows of the launch layout: per process, total, largest process and messages per second of each phase, each
-    the median over the phase's windows (the notes list every window's value)."""
+    the median over the phase's windows (the notes list every window's value). ``nbody_s``: this machine's n-body
+    time (:func:`~hindrax_ident.benchmarks.machine.nbody_cpu_s`), for the total and the largest process at the
+    reference machine's speed (``..._at_reference_speed``); None: no such rows."""
     rows: list[dict] = []
     for phase in ("idle", "running"):
         wins = launch["phases"][phase]["windows"]
@@ -643,6 +652,17 @@ def launch_rows(launch: dict) -> list[dict]:
             {"name": f"launch_{phase}_msgs_per_s", "value": _median(rates), "unit": "msg/s",
              "note": "recorded topics, from the bag"},
         ]
+        if nbody_s:
+            scale = REFERENCE_NBODY_CPU_S / nbody_s
+            rows += [
+                {"name": f"launch_{phase}_cpu_total_at_reference_speed", "value": 100 * total * scale,
+                 "unit": "% of a core",
+                 "note": f"launch_{phase}_cpu_total x {scale:.3g} (machine_nbody_cpu_s {nbody_s:.1f} s here, "
+                         f"{REFERENCE_NBODY_CPU_S:g} s on the reference machine): the figure to compare between "
+                         f"sessions' machines"},
+                {"name": f"launch_{phase}_cpu_max_process_at_reference_speed", "value": 100 * per[worst] * scale,
+                 "unit": "% of a core", "note": worst},
+            ]
         if phase == "running":
             rows += [
                 {"name": "launch_running_cpu_excluded", "value": 100 * _median([w["pool"] + w["bench"] for w in wins]),
@@ -679,6 +699,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
     windows = windows or (1 if quick else RUNNING_WINDOWS)
     base_s = 6.0 if quick else 8.0
     inproc = launch = None
+    nbody_before = nbody_cpu_s()  # the machine's speed before and after the layouts (it drifts within minutes)
     with tempfile.TemporaryDirectory(prefix="hindrax-bench-stack-") as tmpdir:
         tmp = Path(tmpdir)
         if "inproc" in layouts:
@@ -692,7 +713,16 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
     types.setdefault("/rosout", "rcl_interfaces/msg/Log")
     types.setdefault("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
 
-    rows: list[dict] = [{"name": "pi4_factor_assumed", "value": PI4_FACTOR, "unit": "x", "note": PI4_NOTE}]
+    nbody_after = nbody_cpu_s()
+    nbody_s = (nbody_before + nbody_after) / 2
+    rows: list[dict] = [
+        {"name": "pi4_factor_assumed", "value": PI4_FACTOR, "unit": "x", "note": PI4_NOTE},
+        {"name": "machine_nbody_cpu_s", "value": nbody_s, "unit": "s",
+         "note": f"this machine's Python speed: CPU time of 5 million n-body steps (benchmarks/machine.py, least of "
+                 f"5 runs of 100,000), mean of {nbody_before:.1f} s before the layouts and {nbody_after:.1f} s "
+                 f"after; {REFERENCE_NBODY_CPU_S:g} s on the reference machine, about 47 s on the one of the "
+                 f"previous session (by its virtual pool's CPU)"},
+    ]
     if inproc:
         for phase in ("idle", "running"):
             ph = inproc["phases"][phase]
@@ -720,7 +750,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                                       "the recorder and every subscriber; the baseline has none)"},
             ]
     if launch:
-        rows += launch_rows(launch)
+        rows += launch_rows(launch, nbody_s)
         running = _phase_rates(launch, "running")
         idle = _phase_rates(launch, "idle")
         if baselines:

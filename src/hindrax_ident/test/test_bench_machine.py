@@ -1,0 +1,47 @@
+"""The machine-speed reference of the stack benchmark (hindrax_ident.benchmarks.machine) and its use in the rows."""
+import pytest
+
+from hindrax_ident.benchmarks import machine, stack
+
+
+def test_the_workload_is_the_published_n_body_computation():
+    """The Benchmarks Game publishes the n-body program's output for 1000 steps: the energy -0.169075164 before and
+    -0.169087605 after. The same numbers here make the timed workload the computation the published timings are
+    of, not some other loop."""
+    bodies = machine._bodies()
+    assert f"{machine.nbody_energy(bodies):.9f}" == "-0.169075164"
+    machine._advance(bodies, 1000)
+    assert f"{machine.nbody_energy(bodies):.9f}" == "-0.169087605"
+
+
+def test_nbody_cpu_s_extrapolates_to_the_published_step_count_and_rejects_nonsense():
+    """A run of 2000 steps is scaled to 5 million: a positive time 2500 x that of the run (a few seconds at most on
+    any machine this runs on, not a few milliseconds); no steps or no repeats are refused."""
+    t = machine.nbody_cpu_s(steps=2000, repeats=1)
+    assert 0.5 < t < 600
+    with pytest.raises(ValueError, match="steps=0"):
+        machine.nbody_cpu_s(steps=0)
+    with pytest.raises(ValueError, match="repeats=0"):
+        machine.nbody_cpu_s(repeats=0)
+
+
+def _launch(total_per_process: dict[str, float]) -> dict:
+    window = {"per_process": total_per_process, "rates": {"/wrench": 50.0}, "wall_s": 10.0, "pool": 0.2,
+              "bench": 0.05, "loadavg": 1.0, "rss_mb": {n: 100.0 for n in total_per_process}}
+    return {"launch_file": "pool_test.launch.xml", "phases": {"idle": {"windows": [window]},
+                                                              "running": {"windows": [window]}}}
+
+
+def test_totals_at_reference_speed_scale_with_this_machines_n_body_time():
+    """A machine twice as slow as the reference (n-body 2 x 27 s) measures twice the CPU for the same work: its 0.6
+    of a core is 30 % at the reference speed, its largest process 0.4 is 20 %. Without an n-body time, no such
+    rows; the Pi projection keeps its fixed factor either way."""
+    rows = {r["name"]: r for r in stack.launch_rows(_launch({"a": 0.4, "b": 0.2}),
+                                                   nbody_s=2 * machine.REFERENCE_NBODY_CPU_S)}
+    assert rows["launch_running_cpu_total"]["value"] == pytest.approx(60.0)
+    assert rows["launch_running_cpu_total_at_reference_speed"]["value"] == pytest.approx(30.0)
+    assert rows["launch_running_cpu_max_process_at_reference_speed"]["value"] == pytest.approx(20.0)
+    assert rows["launch_running_cpu_max_process_at_reference_speed"]["note"] == "a"
+    assert "x6 on a Pi 4 = 360 % of one Pi core" in rows["launch_running_cpu_total"]["note"]
+    plain = {r["name"] for r in stack.launch_rows(_launch({"a": 0.4}))}
+    assert "launch_running_cpu_total_at_reference_speed" not in plain and "launch_running_cpu_total" in plain
