@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
@@ -18,8 +19,8 @@ from .conditions import ConditionTimeout, ros_context, wait_until  # production 
 from .config import default_config_path, load_config
 from .liveness import HEARTBEAT_NAMES
 
-__all__ = ["ConditionTimeout", "SafetyHeartbeats", "child_env", "config_parameters", "python_executable", "ros_context",
-           "wait_until"]
+__all__ = ["ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env", "config_parameters",
+           "python_executable", "ros_context", "wait_until"]
 
 
 def child_env(**extra: str) -> dict[str, str]:
@@ -65,3 +66,29 @@ class SafetyHeartbeats:
                 continue
             level = self._status.OK if state == "" else self._status.ERROR
             self._pubs[name].publish(self._status(level=level, name=name, message=state or "ok"))
+
+
+class GraphSettled:
+    """Predicate for :func:`wait_until`: True once the ROS graph ``node`` sees (its node names) has not changed for
+    ``quiet_s`` seconds (monotonic clock) and holds at least ``min_nodes`` nodes besides ``node``.
+
+    Why: with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps gives every participant Fast DDS's
+    shared-memory transport, and the first message a process sends to a new participant's port runs Fast DDS's port
+    health check, which can sleep 333 ms (a third of the 1 s ``healthy_check_timeout_ms``) while the sending
+    participant's send lock is held: every publish of that process waits (docs/architecture.md §10.1, "The publish
+    stalls"). Measured in the stack benchmark (7 runs, ``perf`` scheduler trace): every main-thread stall over 0.15 s
+    of the nine node processes came 0-3.0 s after the newest participant was created, none later. So anything
+    that arms the ESC in a freshly started layout waits for this first.
+    """
+
+    def __init__(self, node, quiet_s: float = 5.0, min_nodes: int = 1) -> None:
+        self.node, self.quiet_s, self.min_nodes = node, float(quiet_s), int(min_nodes)
+        self._names: frozenset | None = None
+        self._since = 0.0
+
+    def __call__(self) -> bool:
+        names = frozenset(self.node.get_node_names_and_namespaces())
+        now = time.monotonic()
+        if names != self._names:
+            self._names, self._since = names, now
+        return len(names) - 1 >= self.min_nodes and now - self._since >= self.quiet_s

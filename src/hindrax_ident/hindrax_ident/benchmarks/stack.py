@@ -85,7 +85,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.launch_xml import write_parameter_file
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import GraphSettled, child_env, python_executable, ros_context, wait_until
 from hindrax_ident.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
@@ -101,6 +101,9 @@ EXCLUDE_REGEX = r"^/(sim/|clock$)"
 NODES = ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "identification", "supervisor",
          "recorder")
 WRENCH_RATE_HZ = 50.0
+#: the launch layout is armed once its ROS graph has not changed for this long (s): the publish stalls of a new
+#: participant's first messages came 0-3.0 s after it appeared (hindrax_drivers.testing.GraphSettled)
+GRAPH_QUIET_S = 5.0
 
 
 def _proc_cpu_s(pid: int | str = "self") -> float:
@@ -403,6 +406,12 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                            "every sensor topic recorded")
                 wait_until(lambda: alive() and arm.service_is_ready() and action.server_is_ready(), 60, spin,
                            "esc/set_armed and run_identification")
+                # arm only once discovery has settled: a process's first message to a new participant can stall its
+                # publishes 0.33 s (Fast DDS's shared-memory port health check, GraphSettled), which silences a
+                # safety heartbeat past its 0.2 s timeout and disarms the ESC before or during the running window
+                settled = GraphSettled(probe, quiet_s=GRAPH_QUIET_S, min_nodes=len(layout))
+                wait_until(lambda: alive() and settled(), 120, spin, "the ROS graph unchanged for "
+                                                                       f"{GRAPH_QUIET_S:g} s")
 
                 answer = [""]
 
