@@ -40,11 +40,11 @@ median over the windows, the note lists every window's value.
 Messages per second per topic: counted in the launch layout's bag by log time within each window (the one-process
 graph: the recorder's counts).
 
-Machine speed: first of all, the CPU time of 5 million n-body steps here (:mod:`hindrax_ident.benchmarks.machine`,
-``machine_nbody_cpu_s``). The development machines of this project differ by about 2x between sessions; the
-launch totals are also given at the speed of a reference machine (``launch_*_cpu_total_at_reference_speed``,
-``..._max_process_at_reference_speed``: the figures to compare between sessions). The targets stay on the figures
-measured here.
+Machine speed: before and after the layouts, the CPU time of 5 million n-body steps here
+(:mod:`hindrax_ident.benchmarks.machine`, ``machine_nbody_cpu_s``, their mean). The development machines of this
+project differ by about 2x between sessions; the launch totals are also given at the speed of a reference machine
+(``launch_*_cpu_total_at_reference_speed``, ``..._max_process_at_reference_speed``: the figures to compare between
+sessions). The targets stay on the figures measured here.
 
 Baselines (each a child process, plain rclpy, the EventsExecutor like every node process, one timer per topic
 publishing a default-constructed message of the topic's type at its measured rate):
