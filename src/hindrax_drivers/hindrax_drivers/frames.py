@@ -85,6 +85,11 @@ def ned_to_enu(v) -> np.ndarray:
     return _vec3(v) @ R_ENU_NED.T
 
 
+#: R_FLU_FRD is diagonal, so a wrench changes between FLU and FRD by the signs of its diagonal, force and torque
+#: alike: one multiplication instead of two 3x3 products (the allocation converts two wrenches per command)
+_WRENCH_FLU_FRD_SIGNS = np.tile(np.diag(R_FLU_FRD), 2)
+
+
 def _wrench6(w) -> np.ndarray:
     a = np.asarray(w, dtype=float)
     if a.shape[-1] != 6:
@@ -94,14 +99,12 @@ def _wrench6(w) -> np.ndarray:
 
 def wrench_flu_to_frd(w) -> np.ndarray:
     """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) from base_link FLU to body FRD tau = [X Y Z K M N]. w: (..., 6)."""
-    a = _wrench6(w)
-    return np.concatenate([flu_to_frd(a[..., :3]), flu_to_frd(a[..., 3:])], axis=-1)
+    return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
 
 
 def wrench_frd_to_flu(w) -> np.ndarray:
     """Wrench tau = [X Y Z K M N] (N, N m) from body FRD to base_link FLU. w: (..., 6)."""
-    a = _wrench6(w)
-    return np.concatenate([frd_to_flu(a[..., :3]), frd_to_flu(a[..., 3:])], axis=-1)
+    return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
 
 
 def twist_flu_to_frd(t) -> np.ndarray:

@@ -38,6 +38,20 @@ def test_wrench_and_twist():
     assert np.allclose(frames.wrench_frd_to_flu(tau), w_flu)
 
 
+@given(st.lists(st.lists(finite, min_size=6, max_size=6), min_size=1, max_size=4))
+def test_wrench_conversion_is_the_half_turn_about_x_of_force_and_torque(wrenches):
+    # FLU and FRD differ by a half turn about the forward axis (REP-103; Fossen's body frame): scipy's rotation,
+    # applied to the force and the torque separately, is the reference for the sign flip frames.py multiplies by
+    half_turn = Rotation.from_euler("x", 180.0, degrees=True)
+    w = np.array(wrenches)
+    expected = np.hstack([half_turn.apply(w[:, :3]), half_turn.apply(w[:, 3:])])
+    assert np.allclose(frames.wrench_flu_to_frd(w), expected, atol=1e-9)
+    assert np.allclose(frames.wrench_frd_to_flu(w), expected, atol=1e-9)
+    assert frames.wrench_flu_to_frd(w).shape == w.shape
+    with pytest.raises(ValueError):
+        frames.wrench_flu_to_frd(w[:, :5])
+
+
 def test_covariances():
     c = np.diag([1.0, 2.0, 3.0])
     c[0, 1] = c[1, 0] = 0.5

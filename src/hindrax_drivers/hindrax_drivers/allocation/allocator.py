@@ -333,7 +333,11 @@ class ThrustAllocator:
         params = list(zip(*(c.forward_parameters for c in self._curves)))
         self._forward_params = tuple(np.array(v, dtype=float).T if i < 2 else np.array(v, dtype=float)
                                      for i, v in enumerate(params))
-        self._group_masks = [np.isin(np.arange(6), g).astype(float) for g in groups]
+        group_masks = [np.isin(np.arange(6), g).astype(float) for g in groups]
+        # per priority group: its axes and the pseudo-inverse with the other axes' columns zeroed
+        self._group_index = [np.array(g, dtype=np.intp) for g in groups]
+        self._group_pinv = [pinv * mask[None, :] for mask in group_masks]
+        self._scale_cache = None
         self._search_on, self._effort_weight_arg, self._search, self._grid = bool(search_on), rho_arg, search, grid
 
     @staticmethod
@@ -421,10 +425,29 @@ class ThrustAllocator:
     @staticmethod
     def _max_multiplier(base: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
         """Largest t >= 0 with lower <= base + t * step <= upper (inf if step is zero)."""
-        room = np.where(step > 0.0, upper - base, np.where(step < 0.0, lower - base, np.inf))
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            ratio = np.where(step != 0.0, room / step, np.inf)
-        return max(float(np.min(ratio)), 0.0)
+        with np.errstate(over="ignore"):  # a subnormal step: its ratio is inf, as for a zero step
+            ratio = np.divide(np.where(step > 0.0, upper, lower) - base, step, out=np.full(step.shape, math.inf),
+                              where=step != 0.0)
+        return max(float(ratio.min()), 0.0)
+
+    def _at_scale(self, s: float) -> tuple[np.ndarray, ...]:
+        """Per voltage scale ``s``, computed once and kept for the next call at the same scale: the limits
+        ``lower, upper`` (n,), the thresholds of ``limited`` and ``saturated`` (:meth:`allocate`) and the smallest
+        thrusts ``m_fwd, m_rev`` (n,) (``None`` without the search)."""
+        cached = self._scale_cache
+        if cached is not None and cached[0] == s:
+            return cached[1]
+        lower, upper = s * self._base_lower, s * self._base_upper
+        tol = 1e-9 * np.maximum(np.abs(lower), np.abs(upper))
+        grid = self._grid if self._search is not None else None
+        values = (lower, upper, upper - 1e-9 * upper, lower - 1e-9 * lower, upper - tol, lower + tol,
+                  None if grid is None else s * grid.smallest_forward_n,
+                  None if grid is None else s * grid.smallest_reverse_n)
+        for arr in values:
+            if arr is not None:
+                arr.flags.writeable = False
+        self._scale_cache = (s, values)
+        return values
 
     def allocate(self, wrench, voltage_scale: float = 1.0) -> AllocationResult:
         """Allocate the wrench ``[X Y Z K M N]`` (6,) (FRD, N and N m) to the thrusters.
@@ -438,14 +461,15 @@ class ThrustAllocator:
             tau = np.array(wrench, dtype=float)
         except (TypeError, ValueError) as exc:
             raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}") from exc
-        if tau.shape != (6,) or not np.all(np.isfinite(tau)):
+        if tau.shape != (6,) or not np.isfinite(tau).all():
             raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}")
         s_v = self._check_scale(voltage_scale)
-        lower, upper = s_v * self._base_lower, s_v * self._base_upper
+        lower, upper, upper_limited, lower_limited, upper_saturated, lower_saturated, m_fwd, m_rev = \
+            self._at_scale(s_v)
 
         # Work with the request normalised by its largest component, so huge finite requests cannot
         # overflow; a multiplier t of the unit request corresponds to the scale factor t / peak.
-        peak = float(np.max(np.abs(tau)))
+        peak = float(np.abs(tau).max())
         n = self._matrix.shape[1]
         force = np.zeros(n)
         axis_scale = np.ones(6)
@@ -459,21 +483,20 @@ class ThrustAllocator:
                 scales.append(t / peak)
                 axis_scale[:] = t / peak
             else:
-                for group, mask in zip(self._groups, self._group_masks):
-                    step = self._pinv @ (unit * mask)
+                for group, group_pinv in zip(self._group_index, self._group_pinv):
+                    step = group_pinv @ unit  # = pinv @ (unit * mask): the masked columns are zero
                     t = min(peak, self._max_multiplier(force, step, lower, upper))
                     force = force + t * step
                     scales.append(t / peak)
-                    axis_scale[list(group)] = t / peak
-            force = np.clip(force, lower, upper)  # only removes rounding at the limits
+                    axis_scale[group] = t / peak
+            force = np.minimum(np.maximum(force, lower), upper)  # only removes rounding at the limits
         scale = min(scales) if scales else 1.0
         force = np.where(np.abs(force) < ZERO_FORCE_N, 0.0, force)
-        limited = (force >= upper - 1e-9 * upper) | (force <= lower - 1e-9 * lower)  # before the deadband search
+        limited = (force >= upper_limited) | (force <= lower_limited)  # before the deadband search
         if self._search is not None:
-            m_fwd = s_v * self._grid.smallest_forward_n
-            m_rev = s_v * self._grid.smallest_reverse_n
-            if np.any((force != 0.0) & (force < m_fwd) & (force > -m_rev)):  # a force inside a deadband gap
-                force = np.clip(self._search.solve(self._matrix @ force, s_v), lower, upper)  # clip: round-off only
+            if ((force != 0.0) & (force < m_fwd) & (force > -m_rev)).any():  # a force inside a deadband gap
+                force = self._search.solve(self._matrix @ force, s_v)
+                force = np.minimum(np.maximum(force, lower), upper)  # round-off only
 
         if len(self._curve_groups) == 1:
             pulse = self._curves[0]._pulse_width_unchecked(force, s_v)
@@ -484,8 +507,7 @@ class ThrustAllocator:
         pulse = self._grid.quantise(pulse)
         actual = s_v * forward_thrust(pulse, *self._forward_params)
 
-        tol = 1e-9 * np.maximum(np.abs(lower), np.abs(upper))
-        saturated = (force >= upper - tol) | (force <= lower + tol) | limited
+        saturated = (force >= upper_saturated) | (force <= lower_saturated) | limited
         return AllocationResult(requested_wrench=tau, allocated_force_n=force, force_n=actual, pulse_width_us=pulse,
                                 achieved_wrench=self._matrix @ actual, scale=float(scale), axis_scale=axis_scale,
                                 saturated=saturated)

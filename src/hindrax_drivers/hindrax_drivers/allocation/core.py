@@ -78,8 +78,11 @@ class AllocationCore:
 
     def allocate(self, wrench_flu, voltage_scale: float = 1.0) -> FluAllocation:
         """Allocate a base_link wrench [Fx Fy Fz Tx Ty Tz] (N, N m). Raises InvalidWrenchError."""
-        w = np.asarray(wrench_flu, dtype=float) if _is_numeric(wrench_flu) else None
-        if w is None or w.shape != (6,) or not np.all(np.isfinite(w)):
+        try:
+            w = np.asarray(wrench_flu, dtype=float)
+        except (TypeError, ValueError):
+            w = None
+        if w is None or w.shape != (6,) or not np.isfinite(w).all():
             raise InvalidWrenchError(f"wrench must be 6 finite numbers (N, N m), got {wrench_flu!r}")
         result = self.allocator.allocate(frames.wrench_flu_to_frd(w), voltage_scale=voltage_scale)
         return FluAllocation(
@@ -96,10 +99,3 @@ class AllocationCore:
         """Wrench (base_link FLU) thruster ``index`` alone produces at ``force_n``: B[:, i] F, converted."""
         return frames.wrench_frd_to_flu(self.matrix_frd[:, index] * force_n)
 
-
-def _is_numeric(x) -> bool:
-    try:
-        np.asarray(x, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return True

@@ -166,6 +166,7 @@ class DeadbandSearch:
         self._upper_col, self._lower_col = col(self.upper), col(self.lower)
         self._rho_w = self.effort_weight * w
         self._rho_w_m2 = self._rho_w * np.minimum(self.smallest_forward, self.smallest_reverse) ** 2
+        self._limits_cache: tuple[float, tuple[np.ndarray, ...]] | None = None
         for arr in (self.matrix, self.weights, self.lower, self.upper, self.smallest_forward, self.smallest_reverse,
                     self._subset_pinv, self._seed_affine, self._seed_nonfree):
             arr.flags.writeable = False
@@ -213,11 +214,19 @@ class DeadbandSearch:
         return np.where(np.abs(best_x) > ZERO_FORCE_N, best_x, 0.0)
 
     def _limits(self, s: float) -> tuple[np.ndarray, ...]:
-        """Columns (n, 1) at voltage scale s: m_fwd, m_rev, upper, lower, and the same with the tolerance."""
+        """Columns (n, 1) at voltage scale s: m_fwd, m_rev, upper, lower, and the same with the tolerance. Kept for
+        the next call at the same scale (the node allocates every command at one scale)."""
+        cached = self._limits_cache
+        if cached is not None and cached[0] == s:
+            return cached[1]
         tol = _BOUND_TOL_N
         m_fwd, m_rev = s * self._smallest_forward_col, s * self._smallest_reverse_col
         upper, lower = s * self._upper_col, s * self._lower_col
-        return m_fwd - tol, -m_rev + tol, upper + tol, lower - tol, m_fwd, m_rev, upper, lower
+        limits = (m_fwd - tol, -m_rev + tol, upper + tol, lower - tol, m_fwd, m_rev, upper, lower)
+        for arr in limits:
+            arr.flags.writeable = False
+        self._limits_cache = (s, limits)
+        return limits
 
     def _repair(self, tau, s, limits, x, bad, free, best_x, best_cost):
         """Repair rounds (module docstring, step 2) on k seeds given thruster-major: x, bad, free (n, k)."""
@@ -225,7 +234,7 @@ class DeadbandSearch:
         tau_col = tau[:, None]
         for _ in range(self.n):  # each round pins at least one more thruster of every seed it repairs
             clamp = np.where(x > 0.0, m_fwd, -m_rev)
-            if np.any(x > upper) or np.any(x < lower):
+            if (x > upper).any() or (x < lower).any():
                 clamp = np.where(x > upper, upper, np.where(x < lower, lower, clamp))
             pinned = np.where(bad, clamp, x * ~free)  # earlier pins and zeros kept
             free &= ~bad
