@@ -482,11 +482,12 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
 
 
 def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
-    """``py-spy record`` (raw collapsed stacks, non-blocking, 100 Hz) of every node process for ``duration_s``."""
+    """``py-spy record`` (raw collapsed stacks, non-blocking, 100 Hz, only samples that hold the GIL: Python's CPU,
+    not its waits in a socket or the executor) of every node process for ``duration_s``."""
     exe = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
     out_dir.mkdir(parents=True, exist_ok=True)
-    return [subprocess.Popen([exe, "record", "--nonblocking", "-r", "100", "-d", str(int(round(duration_s))), "-f",
-                              "raw", "-o", str(out_dir / f"{name}.txt"), "-p", str(p.pid)],
+    return [subprocess.Popen([exe, "record", "--nonblocking", "--gil", "-r", "100", "-d", str(int(round(duration_s))),
+                              "-f", "raw", "-o", str(out_dir / f"{name}.txt"), "-p", str(p.pid)],
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             for name, p in procs.items() if name != "pool"]
 
