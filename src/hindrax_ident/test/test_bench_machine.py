@@ -45,3 +45,24 @@ def test_totals_at_reference_speed_scale_with_this_machines_n_body_time():
     assert "x6 on a Pi 4 = 360 % of one Pi core" in rows["launch_running_cpu_total"]["note"]
     plain = {r["name"] for r in stack.launch_rows(_launch({"a": 0.4}))}
     assert "launch_running_cpu_total_at_reference_speed" not in plain and "launch_running_cpu_total" in plain
+
+
+def test_totals_per_pool_divide_by_the_pool_of_the_same_window():
+    """Two windows: 0.6 of a core beside a pool of 0.2 (3x), then 0.9 beside 0.45 (2x): the median ratio is 2.5, at
+    the reference pool (20.3 %) 50.75 %; the largest process (a: 0.4/0.2, 0.6/0.45) likewise. A window without a
+    measured pool gives no such rows (no division by zero, no made-up ratio)."""
+    launch = _launch({"a": 0.4, "b": 0.2})
+    second = {**launch["phases"]["running"]["windows"][0], "per_process": {"a": 0.6, "b": 0.3}, "pool": 0.45}
+    launch["phases"]["running"]["windows"].append(second)
+    rows = {r["name"]: r for r in stack.launch_rows(launch)}
+    assert stack.REFERENCE_POOL_CPU == pytest.approx(0.203)
+    assert rows["launch_running_cpu_total_per_pool"]["value"] == pytest.approx(2.5)
+    assert "3.00 / 2.00" in rows["launch_running_cpu_total_per_pool"]["note"]
+    assert rows["launch_running_cpu_total_at_reference_pool"]["value"] == pytest.approx(2.5 * 20.3)
+    assert rows["launch_running_cpu_max_process_at_reference_pool"]["value"] == pytest.approx(
+        (2.0 + 0.6 / 0.45) / 2 * 20.3)
+    assert rows["launch_idle_cpu_total_per_pool"]["value"] == pytest.approx(3.0)
+    no_pool = _launch({"a": 0.4})
+    no_pool["phases"]["running"]["windows"] = [{**no_pool["phases"]["running"]["windows"][0], "pool": 0.0}]
+    names = {r["name"] for r in stack.launch_rows(no_pool)}
+    assert "launch_running_cpu_total_per_pool" not in names and "launch_idle_cpu_total_per_pool" in names
