@@ -443,6 +443,24 @@ def test_voltage_scale_lowers_limits_and_keeps_unsaturated_wrench(allocator, cur
     assert np.max(sat.allocated_force_n) == pytest.approx(0.8 * F_MAX, rel=1e-5)
 
 
+def test_limits_follow_a_reconfigured_curve_at_the_same_voltage_scale(layout, curve):
+    """The allocator keeps its limits per voltage scale between calls; a new curve must replace them. A curve whose
+    ESC range ends at 1700 us saturates at its own thrust there (the curve's value, not the 1900 us F_MAX), and back
+    on the full range the limit is F_MAX again; likewise when the scale alternates between calls."""
+    alloc = ThrustAllocator(layout.matrix(), curve)
+    push = [500.0, 0, 0, 0, 0, 0]
+    assert np.max(alloc.allocate(push).allocated_force_n) == pytest.approx(F_MAX, rel=1e-5)
+    short = ThrustCurve(curve.negative_coeffs, curve.positive_coeffs, pulse_width_min_us=1300.0,
+                        pulse_width_max_us=1700.0)
+    f_1700 = short.thrust_n(1700.0)
+    assert 1.0 < f_1700 < 0.8 * F_MAX
+    alloc.reconfigure(curves=short)
+    assert np.max(alloc.allocate(push).allocated_force_n) == pytest.approx(f_1700, rel=1e-5)
+    assert np.max(alloc.allocate(push, voltage_scale=0.5).allocated_force_n) == pytest.approx(0.5 * f_1700, rel=1e-5)
+    alloc.reconfigure(curves=curve)
+    assert np.max(alloc.allocate(push).allocated_force_n) == pytest.approx(F_MAX, rel=1e-5)
+
+
 def test_pseudo_inverse_computed_once_and_on_reconfigure(layout, curve):
     alloc = ThrustAllocator(layout.matrix(), curve)
     pinv = alloc.pseudo_inverse
