@@ -337,7 +337,7 @@ class ThrustAllocator:
         # per priority group: its axes and the pseudo-inverse with the other axes' columns zeroed
         self._group_index = [np.array(g, dtype=np.intp) for g in groups]
         self._group_pinv = [pinv * mask[None, :] for mask in group_masks]
-        self._scale_cache = None
+        self._scale_cache: tuple[float, tuple[np.ndarray, ...]] | None = None
         self._search_on, self._effort_weight_arg, self._search, self._grid = bool(search_on), rho_arg, search, grid
 
     @staticmethod
@@ -433,19 +433,16 @@ class ThrustAllocator:
     def _at_scale(self, s: float) -> tuple[np.ndarray, ...]:
         """Per voltage scale ``s``, computed once and kept for the next call at the same scale: the limits
         ``lower, upper`` (n,), the thresholds of ``limited`` and ``saturated`` (:meth:`allocate`) and the smallest
-        thrusts ``m_fwd, m_rev`` (n,) (``None`` without the search)."""
+        thrusts ``m_fwd, m_rev`` (n,) outside the deadband on the pulse-width grid."""
         cached = self._scale_cache
         if cached is not None and cached[0] == s:
             return cached[1]
         lower, upper = s * self._base_lower, s * self._base_upper
         tol = 1e-9 * np.maximum(np.abs(lower), np.abs(upper))
-        grid = self._grid if self._search is not None else None
         values = (lower, upper, upper - 1e-9 * upper, lower - 1e-9 * lower, upper - tol, lower + tol,
-                  None if grid is None else s * grid.smallest_forward_n,
-                  None if grid is None else s * grid.smallest_reverse_n)
+                  s * self._grid.smallest_forward_n, s * self._grid.smallest_reverse_n)
         for arr in values:
-            if arr is not None:
-                arr.flags.writeable = False
+            arr.flags.writeable = False
         self._scale_cache = (s, values)
         return values
 
