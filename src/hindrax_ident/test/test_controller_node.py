@@ -216,6 +216,56 @@ def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_and_streams_drop_
             node.destroy_node()
 
 
+@pytest.mark.ros
+def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after():
+    """Under the vehicle's executor (rclpy's EventsExecutor, system clock) the controller ticks at ``control.rate_hz``
+    (50 Hz), at 1 / GOAL_TICK_S (5 Hz) while an identification goal runs, and at 50 Hz again once it ends."""
+    import time
+
+    from rclpy.experimental.events_executor import EventsExecutor
+
+    from hindrax_ident.control.node import GOAL_TICK_S, ControllerNode
+
+    cfg = load_config(default_config_path())
+    with ros_context() as ctx:
+        node = ControllerNode(config=cfg, context=ctx, model_file="")
+        ticks = {"n": 0}
+        take = node.take_inputs
+
+        def counted_take() -> None:
+            ticks["n"] += 1
+            take()
+
+        node.take_inputs = counted_take  # the first thing every tick does
+        probe = rclpy.create_node("probe", context=ctx)
+        status = probe.create_publisher(ManeuverStatus, "identification/status", 10)
+        ex = EventsExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+        spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+
+        def ticks_in(seconds: float) -> int:
+            n0, t0 = ticks["n"], time.monotonic()
+            wait_until(lambda: time.monotonic() - t0 >= seconds, seconds + 5, spin, f"{seconds} s of ticks")
+            return ticks["n"] - n0
+
+        try:
+            wait_until(lambda: status.get_subscription_count() == 1 and ticks["n"] >= 3, 10, spin, "intake matched")
+            rate = cfg.control.rate_hz
+            assert 0.7 * rate <= ticks_in(1.0) <= 1.1 * rate
+            status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
+            wait_until(lambda: node._ident_running, 5, spin, "the goal seen")
+            slow = ticks_in(2.0)
+            assert 0.7 * 2.0 / GOAL_TICK_S <= slow <= 1.1 * 2.0 / GOAL_TICK_S + 1, slow
+            status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
+            wait_until(lambda: not node._ident_running, 5, spin, "the goal's end seen")
+            assert 0.7 * rate <= ticks_in(1.0) <= 1.1 * rate
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            node.destroy_node()
+
+
 def test_every_input_handler_reads_a_lean_message_as_an_rclpy_one():
     """On the system clock every controller input is taken lean (rosbags' decoding of the CDR bytes): the wrench
     identity that tells the controller's own wrench from a pilot's, and the fields the other handlers read, are the

@@ -34,8 +34,10 @@ CPU
     subscriptions (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor
     wake-up per message (about 60 messages/s while a goal runs, 250 while the streams are open); every tick first
     hands what arrived to the same handlers, each sensor sample counted at its DDS reception time, so the tick
-    decides (yield, staleness, the law) on what callbacks would have delivered by then. With ``use_sim_time`` the
-    inputs are callbacks.
+    decides (yield, staleness, the law) on what callbacks would have delivered by then. While an identification goal
+    runs the controller cannot be enabled and its sensor streams are closed, so the tick slows from ``control.rate_hz``
+    to :data:`GOAL_TICK_S` until the goal ends (docs/architecture.md §10.1). With ``use_sim_time`` the inputs are
+    callbacks and the tick keeps its rate.
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
     ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
@@ -78,6 +80,11 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
                             ManeuverStatus.PHASE_RETURNING})
 #: Period of controller/status when nothing changes, s.
 STATUS_PERIOD_S = 0.5
+#: tick period (s) while an identification goal runs, on the system clock: the tick then only takes the armed flag
+#: and the goal's phase and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`). At 5 Hz the polled
+#: ``thrusters/pulse_width`` (50 Hz) stays within its queue of 20, and the goal's end is seen within 0.2 s (the streams
+#: open then; enabling waits for their first samples anyway, :meth:`ControllerNode._refusal`)
+GOAL_TICK_S = 0.2
 
 
 class ControllerNode(PolledInputsMixin, Node):
@@ -139,7 +146,10 @@ class ControllerNode(PolledInputsMixin, Node):
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10, **pub_ev)
         self.create_service(Trigger, "controller/hold", self._on_hold)
         self.create_service(SetBool, "controller/enable", self._on_enable)
-        self.create_timer(self.tick_s, self._on_tick)
+        self._tick_timer = self.create_timer(self.tick_s, self._on_tick)
+        #: the slow tick while a goal runs (system clock only), started and stopped by :meth:`_on_ident_status`
+        self._goal_timer = (None if self.intake is None
+                            else self.create_timer(GOAL_TICK_S, self._on_tick, autostart=False))
         for line in self._report:
             log.info(line)
         log.info(f"controller ready (disabled): model {self.model.source}, {s.rate_hz:g} Hz")  # last: it is ready
@@ -210,6 +220,10 @@ class ControllerNode(PolledInputsMixin, Node):
             self._close_streams()
         elif not running and not self._streams:
             self._open_streams()
+        if self._goal_timer is not None and running != self._ident_running:
+            # one tick timer runs at a time: the slow one while the goal runs, the control-rate one otherwise
+            (self._goal_timer if running else self._tick_timer).reset()
+            (self._tick_timer if running else self._goal_timer).cancel()
         self._ident_running = running
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
