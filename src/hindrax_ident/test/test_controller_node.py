@@ -251,15 +251,15 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
 
         try:
             wait_until(lambda: status.get_subscription_count() == 1 and ticks["n"] >= 3, 10, spin, "intake matched")
-            rate = cfg.control.rate_hz
-            assert 0.7 * rate <= ticks_in(1.0) <= 1.1 * rate
+            rate = cfg.control.rate_hz  # bounds wide enough for a loaded machine, far from the other rate
+            assert 0.5 * rate <= ticks_in(1.0) <= 1.1 * rate
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
             wait_until(lambda: node._ident_running, 5, spin, "the goal seen")
             slow = ticks_in(2.0)
-            assert 0.7 * 2.0 / GOAL_TICK_S <= slow <= 1.1 * 2.0 / GOAL_TICK_S + 1, slow
+            assert 0.5 * 2.0 / GOAL_TICK_S <= slow <= 2.0 * 2.0 / GOAL_TICK_S, slow
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
             wait_until(lambda: not node._ident_running, 5, spin, "the goal's end seen")
-            assert 0.7 * rate <= ticks_in(1.0) <= 1.1 * rate
+            assert 0.5 * rate <= ticks_in(1.0) <= 1.1 * rate
         finally:
             ex.shutdown()
             probe.destroy_node()
