@@ -206,7 +206,7 @@ def _dvl_check_factory():
                 rep = builder.from_position_delta(record, 0)
                 if rep.velocity_valid:
                     speed = math.sqrt(sum(v * v for v in rep.velocity_flu_m_s))
-                    if not (math.isfinite(speed) and speed <= s["max_speed_m_s"] * 1.01 + 0.05):
+                    if not (math.isfinite(speed) and speed <= s.max_speed_m_s * 1.01 + 0.05):
                         # (the gate is on the transducer's speed; the lever-arm term adds |omega x r|)
                         raise AssertionError(f"valid velocity {rep.velocity_flu_m_s} outside the gates")
         return bool(records)
