@@ -86,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         args, "bench" if not args.only else "bench-" + "-".join(names),
         "Benchmarks (`make bench`)" if not args.only else f"Benchmarks: {', '.join(names)}",
         f"{platform.platform()}, {os.cpu_count()} cores; wall time {wall_s['total']:.0f} s"
-        f"{' (--quick)' if args.quick else ''}. Targets are the Pi budget of docs/architecture.md §10.\n\n{table}")
+        f"{' (--quick)' if args.quick else ''}. Targets are the Pi budget of docs/architecture.md §10.\n\n{table}",
+        supersedes_prefix=None if args.only else "bench-")
     return 0
 
 

@@ -35,6 +35,33 @@ def test_text_outside_the_sections_is_kept(tmp_path):
     assert "\ny\n" in text and "\nx\n" not in text
 
 
+def test_a_full_run_removes_the_partial_runs_it_supersedes(tmp_path):
+    """``make bench`` (section ``bench``, prefix ``bench-``) removes the sections of earlier ``--only`` runs and
+    nothing else: the scenario table, the text between sections and a section named ``benchmarks`` stay."""
+    doc = tmp_path / "results.md"
+    write_section(doc, "bench-stack-actuation", "Benchmarks: stack, actuation", "stale 72 %", "bench --only")
+    write_section(doc, "scenarios", "Scenario suite", "table A", "hindrax ident scenarios")
+    write_section(doc, "bench-safety", "Benchmarks: safety", "stale safety", "bench --only safety")
+    write_section(doc, "benchmarks", "Other", "unrelated", "x")
+    write_section(doc, "bench", "Benchmarks", "full 39 %", "make bench", supersedes_prefix="bench-")
+    text = doc.read_text()
+    assert "stale" not in text and "bench-safety" not in text and "bench-stack-actuation" not in text
+    assert "full 39 %" in text and "table A" in text and "unrelated" in text
+    assert "\n\n\n" not in text and text.endswith("\n")
+    write_section(doc, "bench-safety", "Benchmarks: safety", "new partial", "bench --only safety")
+    write_section(doc, "bench", "Benchmarks", "full again", "make bench")  # no prefix: partials kept
+    assert "new partial" in doc.read_text()
+
+
+def test_a_broken_superseded_section_writes_nothing(tmp_path):
+    doc = tmp_path / "results.md"
+    original = "# R\n<!-- results:bench-old:begin -->\nhalf a section\n"
+    doc.write_text(original)
+    with pytest.raises(ResultsDocError, match="bench-old"):
+        write_section(doc, "bench", "Benchmarks", "z", "make bench", supersedes_prefix="bench-")
+    assert doc.read_text() == original
+
+
 def test_broken_markers_write_nothing(tmp_path):
     doc = tmp_path / "results.md"
     original = "# R\n<!-- results:bench:end -->\nkeep me\n<!-- results:bench:begin -->\n"
