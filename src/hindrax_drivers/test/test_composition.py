@@ -96,7 +96,8 @@ def test_actuation_hands_the_command_to_the_esc_in_process_and_still_takes_other
         arm = probe.create_client(SetArmed, "esc/set_armed")
         spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
         wait_until(lambda: wrench.get_subscription_count() and other.get_subscription_count() >= 2
-                   and arm.service_is_ready() and not esc.heartbeat_refusal(), 10, spin, "graph")
+                   and arm.service_is_ready() and not esc.heartbeat_refusal() and esc.arming_remaining_s() == 0.0,
+                   10, spin, "graph")
         fut = arm.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, 5, spin, "armed")
         assert fut.result().success, fut.result().message

@@ -147,7 +147,8 @@ def test_watchdog_returns_to_neutral_within_one_period():
             ex.spin_once(timeout_sec=0.0)
 
         wait_until(lambda: clock_pub.get_subscription_count() > 0 and pub.get_subscription_count() > 0
-                   and arm.service_is_ready() and not node.heartbeat_refusal(), 10, advance, "ESC node ready")
+                   and arm.service_is_ready() and not node.heartbeat_refusal()
+                   and node.arming_remaining_s() == 0.0, 10, advance, "ESC node ready")
         fut = arm.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, 5, advance, "armed")
         assert fut.result().success
@@ -504,6 +505,8 @@ def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):
     with ros_context() as ctx:
         node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2}, ctx=ctx)
         _healthy(node)
+        fake["t"] += esc_node.GUARD_CONFIRM_S  # at neutral with the guard's OK for the shortest arming time
+        _healthy(node)
         assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
         node.on_command(ThrusterPwm(pulse_width_us=[1650.0] * 8))
         fake["t"] += 2.0  # stall
@@ -607,6 +610,44 @@ def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
             res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
             assert not res.success and "supervisor tripped: depth 3.00 m" in res.message and not node.armed
             probe_only.shutdown()
+
+
+def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
+    """With ``esc.arming_time_s`` 0 an arm is still refused until neutral has been on the wire with the guard's OK
+    for GUARD_CONFIRM_S (0.15 s), and a guard ERROR taken in the same round as a later OK restarts that time. Found
+    by the safety bench: after an I2C outage the ESC reconfigured the chip within 15 ms of reporting UNKNOWN, was
+    armed on the guard's last OK, then took the guard's ERROR for that UNKNOWN and disarmed itself."""
+    import time
+
+    from hindrax_drivers.pca9685.node import GUARD_CONFIRM_S
+
+    assert GUARD_CONFIRM_S == pytest.approx(0.15)
+    with ros_context() as ctx:
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
+        node.set_heartbeat_timeout(2.0)
+        ok = DiagnosticStatus(level=DiagnosticStatus.OK, message="ok")
+        err = DiagnosticStatus(level=DiagnosticStatus.ERROR, message="ESC output state unknown")
+        node.on_supervisor_heartbeat(ok)
+        node.on_guard_heartbeat(ok)
+        assert node.neutral_confirmed_time is not None
+        node._safety_tick(time.monotonic())  # neutral on the wire with the guard's OK from now
+        assert node.neutral_on_wire_since is not None
+        assert GUARD_CONFIRM_S - 0.05 < node.arming_remaining_s() <= GUARD_CONFIRM_S
+        res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+        assert not res.success and "at neutral" in res.message and not node.armed
+        # the guard's ERROR and its next OK taken in one round: the time at neutral starts again
+        node.on_guard_heartbeat(err)
+        node.on_guard_heartbeat(ok)
+        assert node.neutral_on_wire_since is None
+        node._safety_tick(time.monotonic())
+        t0 = time.monotonic()
+        wait_until(lambda: node.arming_remaining_s() == 0.0, 2, None, "guard confirmation time")
+        assert time.monotonic() - t0 >= GUARD_CONFIRM_S - 0.02
+        node.on_supervisor_heartbeat(ok)
+        node.on_guard_heartbeat(ok)
+        res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+        assert res.success and node.armed
+        node.destroy_node()
 
 
 def test_the_tick_rides_on_in_process_commands_and_its_timer_resumes_when_they_stop():

@@ -133,7 +133,7 @@ def test_f1_arming_is_refused_without_a_supervisor_or_while_it_is_tripped(rig):
     res = r.set_armed(True)
     assert not res.success and "supervisor tripped: depth 3.00 m" in res.message
     r.beats.supervisor = ""
-    r.wait(lambda: r.esc.supervisor_ok, "OK heartbeat")
+    r.wait(lambda: r.esc.supervisor_ok and r.esc.arming_remaining_s() == 0.0, "OK heartbeat, time at neutral")
     assert r.set_armed(True).success
 
 

@@ -229,6 +229,9 @@ def arm_and_thrust(g):
     g["sup"].core.position_ne = np.array(g["sup"].core.limits.start_position_ne)
     for _ in range(120):  # 1.2 s of sensors: a whole rate window before arming
         g["step"]()
+    # the ESC's shortest time at neutral with the guard's OK (GUARD_CONFIRM_S, steady clock; simulated time held)
+    wait_until(lambda: g["esc"].arming_remaining_s() == 0.0, 5, lambda: g["ex"].spin_once(timeout_sec=0.01),
+               "ESC time at neutral")
     assert g["call"](g["arm"], SetArmed.Request(arm=True)).success
 
     def go():

@@ -125,6 +125,9 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
                        and action.server_is_ready(), 30, step, "graph ready")
             for _ in range(120):  # a whole supervisor rate window of sensors before arming
                 step()
+            # the ESC's shortest time at neutral with the guard's OK (GUARD_CONFIRM_S, steady clock; time held)
+            wait_until(lambda: esc.arming_remaining_s() == 0.0, 5, lambda: ex.spin_once(timeout_sec=0.01),
+                       "ESC time at neutral")
             assert call(arm, SetArmed.Request(arm=True)).success
             wait_until(lambda: ident._armed and sup.core.armed and emu.pulse_width_us(0) > 1690, 10, thrust,
                        "armed, thrust on the wire")

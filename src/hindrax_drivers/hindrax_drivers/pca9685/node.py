@@ -35,7 +35,9 @@ Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
   ``guard/heartbeat`` (the output guard has released /OE); either one older than ``esc.heartbeat_timeout_s``
   (steady clock, executor-alive time: :class:`~hindrax_drivers.liveness.AliveAge`) or not OK disarms at once and
   refuses arm requests with the reason. The arming time counts from the moment neutral is confirmed on the chip
-  AND the guard lets it through (/OE low): before that the ESCs saw no signal.
+  AND the guard lets it through (/OE low): before that the ESCs saw no signal. Any guard ERROR taken restarts it,
+  and it is never shorter than :data:`GUARD_CONFIRM_S` (0.15 s), so an arm is not accepted on a guard OK that
+  predates the guard's reaction to the ESC's own last state.
 - The output state is reported as it is on the wire (``thrusters/pulse_width`` ``output_state``): while the chip
   cannot be written or read back it is ``OUTPUT_UNKNOWN`` (widths NaN, never "neutral"), the node disarms itself,
   answers a disarm request with success=false and the reason, and retries the chip with backoff
@@ -97,6 +99,12 @@ COMMAND_TOPIC = "thrusters/command_pulse_width"
 LOCAL_COMMANDS_KEPT = 16
 #: first retry of an unreachable bus or chip, s (doubled after every failure up to :data:`RETRY_MAX_S`)
 RETRY_MIN_S = 0.25
+#: the shortest time at neutral, with the output guard letting it through, before an arm is accepted, whatever
+#: ``esc.arming_time_s`` says, s: two guard ticks (20 Hz) and their delivery. A guard ERROR published just before
+#: the ESC's own recovery (an I2C outage: the ESC reconfigures the chip within 15 ms of reporting UNKNOWN) arrives
+#: within it, so an arm is never accepted on the guard's stale OK and undone at once (measured in the safety bench
+#: with arming_time_s 0: 1 arm in about 100 after an outage)
+GUARD_CONFIRM_S = 0.15
 RETRY_MAX_S = 4.0
 
 
@@ -479,10 +487,12 @@ class EscNode(PolledInputsMixin, Node):
         """Seconds still needed at neutral before arming is accepted (0 when ready).
 
         The time (steady clock) counts from the moment neutral was read back from the chip and the output guard
-        let it through (not from node creation): until then the whole ``esc.arming_time_s`` remains."""
+        let it through (not from node creation): until then the whole ``esc.arming_time_s`` remains. A guard ERROR
+        taken restarts it. It is never shorter than :data:`GUARD_CONFIRM_S`."""
+        needed_s = max(self.arming_time_s, GUARD_CONFIRM_S)
         if self.neutral_on_wire_since is None:
-            return self.arming_time_s
-        return max(0.0, self.arming_time_s - (time.monotonic() - self.neutral_on_wire_since))
+            return needed_s
+        return max(0.0, needed_s - (time.monotonic() - self.neutral_on_wire_since))
 
     def heartbeat_refusal(self) -> str:
         """Why the supervisor or the output guard forbid thrust now ('' when both are fresh and OK)."""
@@ -516,7 +526,9 @@ class EscNode(PolledInputsMixin, Node):
             return refusal
         remaining = self.arming_remaining_s()
         if remaining > 0.0:
-            return f"ESC arming: {remaining:.1f} s more at neutral needed (esc.arming_time_s)"
+            why = "esc.arming_time_s" if self.arming_time_s >= GUARD_CONFIRM_S else \
+                f"the output guard's OK confirmed for {GUARD_CONFIRM_S:g} s"
+            return f"ESC arming: {remaining:.1f} s more at neutral needed ({why})"
         return ""
 
     def _take_inputs(self) -> None:
@@ -704,14 +716,18 @@ class EscNode(PolledInputsMixin, Node):
         self.supervisor_ok, self.supervisor_message = msg.level == DiagnosticStatus.OK, msg.message
         if not self.supervisor_ok and self.armed:
             self.heartbeat_disarms += 1
+            self.get_logger().error(f"disarming: supervisor tripped: {msg.message}")
             self.disarm(f"supervisor tripped: {msg.message}")
 
     def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low)."""
         self.guard_age.heard(received_ago_s(self.inputs))
         self.guard_ok, self.guard_message = msg.level == DiagnosticStatus.OK, msg.message
+        if not self.guard_ok:
+            self.neutral_on_wire_since = None  # even if a later beat of the same take says OK again
         if not self.guard_ok and self.armed:
             self.heartbeat_disarms += 1
+            self.get_logger().error(f"disarming: output guard asserted: {msg.message}")
             self.disarm(f"output guard asserted: {msg.message}")
 
     def diag_message(self) -> str:
