@@ -114,10 +114,12 @@ def run(quick: bool = False) -> list[dict]:
         pub = driver.create_publisher(WrenchStamped, "wrench", 10)
         arm = driver.create_client(SetArmed, "esc/set_armed")
         spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
-        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready() and not esc.heartbeat_refusal(),
-                   10, spin, "graph")
+        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready() and not esc.heartbeat_refusal()
+                   and esc.arming_remaining_s() == 0.0, 10, spin, "graph and the ESC's time at neutral")
         fut = arm.call_async(SetArmed.Request(arm=True))
         wait_until(fut.done, 5, spin, "armed")
+        if not fut.result().success:
+            raise RuntimeError(f"the ESC refused to arm: {fut.result().message}")
         state = {"i": 0, "sent": 0}
 
         def send() -> None:

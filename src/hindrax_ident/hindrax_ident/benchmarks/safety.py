@@ -79,6 +79,8 @@ NEUTRAL_US = 1500.0
 #: (docs/architecture.md §8.1 quotes them; test/test_docs_truth.py compares).
 REPEATS = 6
 PROCESS_REPEATS = 5
+#: arm requests per :meth:`_Layout.armed_at_1700` when the ESC disarms itself before thrust reaches the wire
+ARM_ATTEMPTS = 3
 QUICK_REPEATS = 3
 #: no sensors run in this bench: every supervisor rate check off, with the reason the configuration requires
 NO_SENSORS = {**{f"supervisor.min_rate.{s}_hz": 0.0 for s in ("dvl", "altimeter", "pressure", "imu")},
@@ -183,7 +185,7 @@ def _close(r) -> None:
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     repeats = QUICK_REPEATS if quick else REPEATS
-    times: dict[str, list[float]] = {k: [] for k in (
+    times: dict[str, list] = {k: [] for k in (
         "watchdog", "watchdog_beyond_timeout", "disarm_service", "supervisor_breach", "estop", "exception",
         "shutdown", "chip_reset_detect", "chip_reset_recover", "clock_loss")}
     # a reserved ROS domain: this bench trips supervisors and calls e-stops, which must never reach another graph
@@ -401,7 +403,9 @@ class _Layout:
 
         self.tmp, self.hw = tmp, hw
         self.config = _config_file(tmp)
-        self.env = child_env(ROS_DOMAIN_ID=str(did), **{SOCKET_ENV: hw.server.path})
+        # unbuffered logs: a failure prints the processes' last lines while they still run
+        self.env = child_env(ROS_DOMAIN_ID=str(did), RCUTILS_LOGGING_BUFFERED_STREAM="0", PYTHONUNBUFFERED="1",
+                             **{SOCKET_ENV: hw.server.path})
         self.py = python_executable()
         self.procs: dict = {}
         self.SetArmed, self.Trigger, self.ThrusterPwm = SetArmed, Trigger, ThrusterPwm
@@ -411,6 +415,11 @@ class _Layout:
         self.cmd = self.probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
         self.commanding = False
         self.last_state: tuple[float, int] | None = None  # (monotonic receive time, output_state)
+        self.last_msg = None  # the last thrusters/pulse_width (for the failure message)
+        self.seen_armed = False  # thrusters/pulse_width said armed since the last arm
+        self.disarmed_after_arm = False  # ... and then disarmed, before 1700 us reached the wire
+        self.rearms: list[str] = []  # why the ESC disarmed itself right after an arm (its log line)
+        self.last_esc_diag: str = ""
         self.unknown_at: float | None = None
         self.diag: list[tuple[float, object]] = []
         self.probe.create_timer(0.02, lambda: self.commanding and self.cmd.publish(
@@ -430,12 +439,20 @@ class _Layout:
     def _on_state(self, msg) -> None:
         t = time.monotonic()
         self.last_state = (t, msg.output_state)
+        self.last_msg = msg
+        if self.commanding:
+            if msg.armed:
+                self.seen_armed = True
+            elif self.seen_armed:
+                self.disarmed_after_arm = True
         if msg.output_state == self.ThrusterPwm.OUTPUT_UNKNOWN and self.unknown_at is None:
             self.unknown_at = t
 
     def _on_diag(self, msg) -> None:
         t = time.monotonic()
         for st in msg.status:
+            if st.hardware_id == "esc" or "esc" in st.name or "pca9685" in st.name:
+                self.last_esc_diag = f"{st.name}: {st.message} " + ", ".join(f"{kv.key}={kv.value}" for kv in st.values)
             if st.name == "hindrax/supervisor" and any(kv.key == "errors.clock_step" for kv in st.values):
                 self.diag.append((t, st))
 
@@ -475,6 +492,12 @@ class _Layout:
         self.ex.shutdown()
         self.probe.destroy_node()
 
+    def _last_log_line(self, name: str, containing: str) -> str:
+        """The last line of process ``name``'s log that contains ``containing`` ('' when none)."""
+        path = self.tmp / f"{name}.log"
+        lines = [ln for ln in path.read_text().splitlines() if containing in ln] if path.exists() else []
+        return lines[-1] if lines else ""
+
     # -- vehicle
     def call(self, client, request, timeout: float = 3.0, attempts: int = 10):
         """A service call, asked again when no answer comes (a killed server's endpoint is still discovered for a
@@ -505,21 +528,39 @@ class _Layout:
             if not res.success:
                 time.sleep(0.05)  # the ESC refuses until the guard has released /OE: ask again
             return res.success
-        try:
-            wait_until(arm, 30, None, "armed")
-        except Exception as exc:
-            raise RuntimeError(f"{exc}: last answer {answer[0]!r}") from exc
-        self.commanding = True
-        wait_until(lambda: self.hw.thrust() and self.hw.emu.pulse_width_us(0) > 1690.0, 10, None,
-                   "1700 us on the wire")
+        for attempt in range(ARM_ATTEMPTS):
+            try:
+                wait_until(arm, 30, None, "armed")
+            except Exception as exc:
+                raise RuntimeError(f"{exc}: last answer {answer[0]!r}") from exc
+            self.seen_armed = self.disarmed_after_arm = False
+            self.commanding = True
+            try:
+                wait_until(lambda: self.disarmed_after_arm or (
+                    self.hw.thrust() and self.hw.emu.pulse_width_us(0) > 1690.0), 10, None, "1700 us on the wire")
+            except ConditionTimeout as exc:
+                m = self.last_msg
+                state = "none" if m is None else (
+                    f"armed={m.armed} output_state={m.output_state} widths={list(m.pulse_width_us)[:2]} "
+                    f"{time.monotonic() - self.last_state[0]:.2f} s ago")
+                raise RuntimeError(f"{exc}: arm answered {answer[0]!r}; last thrusters/pulse_width {state}; chip "
+                                   f"channel 0 {self.hw.emu.pulse_width_us(0):.1f} us, /OE high "
+                                   f"{self.hw.line.is_high()}; last ESC diagnostics: {self.last_esc_diag}") from exc
+            if not self.disarmed_after_arm:
+                break
+            # the ESC disarmed itself between the arm and the first thrust: say why, and arm again
+            self.commanding = False
+            self.rearms.append(self._last_log_line("esc", "disarming"))
+        else:
+            raise RuntimeError(f"the ESC disarmed itself after each of {ARM_ATTEMPTS} arms: {self.rearms[-3:]}")
         self.unknown_at = None
         self.hw.arm_watch()
 
 
-def _process_rows(repeats: int) -> dict[str, list[float]]:
+def _process_rows(repeats: int) -> dict[str, list]:
     import tempfile  # noqa
 
-    times: dict[str, list[float]] = {k: [] for k in (
+    times: dict[str, list] = {k: [] for k in (
         "supervisor_killed_outputs_stopped", "supervisor_hung_outputs_stopped", "esc_killed_oe_asserted",
         "esc_hung_oe_asserted", "i2c_outage_state_unknown", "clock_step_back_detected")}
     times["guard_cpu_percent"] = []
@@ -565,6 +606,7 @@ def _process_rows(repeats: int) -> dict[str, list[float]]:
                 hw.bus.disconnected = False
             lay.commanding = False
             times["clock_step_back_detected"] = _clock_rows(lay, ctx, repeats)
+            times["rearms"] = lay.rearms
         except Exception:
             for f in sorted(tmp.glob("*.log")):  # what the node processes said
                 print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
@@ -635,6 +677,11 @@ def run_processes(quick: bool = False) -> list[dict]:
              "clock_step_back_detected": "/clock -100 s: supervisor /diagnostics errors.clock_step"}
     rows = [{"name": "guard_cpu_percent", "value": times.pop("guard_cpu_percent")[0], "unit": "% of a core",
              "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz timer)"}]
+    rearms = times.pop("rearms")
+    rows.append({"name": "esc_disarmed_right_after_arm", "value": len(rearms), "unit": "arms",
+                 "note": f"of {5 * (QUICK_REPEATS if quick else PROCESS_REPEATS) + 1} arm requests, the ESC "
+                         "disarmed itself before 1700 us reached the wire (the bench armed again)"
+                         + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")})
     for name, values in times.items():
         ms = np.array(values) * 1e3
         rows.append({"name": f"{name}_ms", "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)),
