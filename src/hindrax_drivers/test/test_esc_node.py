@@ -612,6 +612,36 @@ def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
             probe_only.shutdown()
 
 
+def test_the_read_back_goes_to_raw_pca9685_in_the_batches_of_the_writes():
+    """The read-back (MODE1, PRE_SCALE, the thruster block and the lights channel every esc.readback_interval_s,
+    0.25 s) is recorded on raw/pca9685 in the 0.1 s batches, not one message per read: 4 reads x 4 read-backs a
+    second were 16 messages a second on their own, and each is a publish and a delivery to the recorder
+    (docs/architecture.md §10.1). Every read is still recorded, in wire order."""
+    import time
+
+    from hindrax_msgs.msg import RawDeviceData
+
+    from hindrax_drivers.node_common import raw_transactions
+
+    with ros_context() as ctx:
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0, "esc.readback_interval_s": 0.25}, ctx=ctx)
+        with _esc_beside_heartbeats(ctx, node) as (probe, beats, ex, spin):
+            got = []
+            probe.create_subscription(RawDeviceData, "raw/pca9685", got.append, 100)
+            wait_until(lambda: node.neutral_confirmed_time is not None and len(got) > 0, 10, spin, "ESC up")
+            t_end = time.monotonic() + 2.0
+            got.clear()
+            n0 = node.device.stats.transactions
+            wait_until(lambda: time.monotonic() > t_end, 3, spin, "2 s idle")  # a window, counted below
+            reads = node.device.stats.transactions - n0
+            node.raw.flush_pending()
+            wait_until(lambda: sum(len(raw_transactions(m)) for m in got) >= reads, 5, spin, "every read recorded")
+            records = [t for m in got for t in raw_transactions(m)]
+            assert reads >= 24  # 2 s of read-backs: 8 x (MODE1, PRE_SCALE, channels 0-7, channel 8)
+            assert {reg for _d, _a, reg, _data in records} >= {0x00, 0xFE}
+            assert len(got) <= 11, f"{len(got)} messages for {reads} reads in 2 s"
+
+
 def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
     """With ``esc.arming_time_s`` 0 an arm is still refused until neutral has been on the wire with the guard's OK
     for GUARD_CONFIRM_S (0.15 s), and a guard ERROR taken in the same round as a later OK restarts that time. Found

@@ -624,6 +624,7 @@ class EscNode(PolledInputsMixin, Node):
     def _check_chip(self) -> None:
         """Read the chip back; on a mismatch (brown-out reset, sleep, lost registers) re-initialise it, disarm,
         and restart the arming timer (the ESCs must see neutral again), reporting it in diagnostics."""
+        self.raw.begin_batch()  # raw/pca9685: the reads join the 0.1 s batches of the writes
         try:
             mismatch = self._readback_mismatch()
         except I2CError as exc:
@@ -631,6 +632,8 @@ class EscNode(PolledInputsMixin, Node):
             self._set_unknown(f"PCA9685 read-back failed: {exc}")
             self._publish_written(self.get_clock().now())
             return
+        finally:
+            self.raw.flush()
         if not mismatch:
             return
         self.chip_reinits += 1
