@@ -99,13 +99,13 @@ COMMAND_TOPIC = "thrusters/command_pulse_width"
 LOCAL_COMMANDS_KEPT = 16
 #: first retry of an unreachable bus or chip, s (doubled after every failure up to :data:`RETRY_MAX_S`)
 RETRY_MIN_S = 0.25
+RETRY_MAX_S = 4.0
 #: the shortest time at neutral, with the output guard letting it through, before an arm is accepted, whatever
 #: ``esc.arming_time_s`` says, s: two guard ticks (20 Hz) and their delivery. A guard ERROR published just before
 #: the ESC's own recovery (an I2C outage: the ESC reconfigures the chip within 15 ms of reporting UNKNOWN) arrives
 #: within it, so an arm is never accepted on the guard's stale OK and undone at once (measured in the safety bench
-#: with arming_time_s 0: 1 arm in about 100 after an outage)
+#: with arming_time_s 0: 1 in about 115 cycles of ESC hung, arm, I2C outage, arm)
 GUARD_CONFIRM_S = 0.15
-RETRY_MAX_S = 4.0
 
 
 def _command_key(msg: ThrusterPwm) -> tuple:

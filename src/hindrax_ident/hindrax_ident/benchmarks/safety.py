@@ -185,7 +185,7 @@ def _close(r) -> None:
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: the reduced CI variant); returns its result rows."""
     repeats = QUICK_REPEATS if quick else REPEATS
-    times: dict[str, list] = {k: [] for k in (
+    times: dict[str, list[float]] = {k: [] for k in (
         "watchdog", "watchdog_beyond_timeout", "disarm_service", "supervisor_breach", "estop", "exception",
         "shutdown", "chip_reset_detect", "chip_reset_recover", "clock_loss")}
     # a reserved ROS domain: this bench trips supervisors and calls e-stops, which must never reach another graph
@@ -528,7 +528,7 @@ class _Layout:
             if not res.success:
                 time.sleep(0.05)  # the ESC refuses until the guard has released /OE: ask again
             return res.success
-        for attempt in range(ARM_ATTEMPTS):
+        for _ in range(ARM_ATTEMPTS):
             try:
                 wait_until(arm, 30, None, "armed")
             except Exception as exc:
