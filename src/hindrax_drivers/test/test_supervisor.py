@@ -373,3 +373,66 @@ def test_supervisor_takes_the_esc_armed_flag_at_its_checks_and_disarms_a_tripped
             ex.shutdown()
             probe.destroy_node()
             sup.destroy_node()
+
+
+def test_supervisor_takes_the_10_hz_sensors_at_its_checks_and_trips_on_a_depth_breach():
+    """On the system clock ``dvl/data``, ``ping/altitude`` and ``pressure/depth`` are polled too (30 executor wake-ups
+    a second fewer): each report reaches the core at the next check, dated at its reception (not the check's time),
+    decoded lean; a depth beyond ``supervisor.max_depth_m`` while armed trips at that check, with the ERROR
+    heartbeat and an ``esc/set_armed(false)`` request."""
+    import time
+
+    with ros_context() as ctx:
+        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters({"supervisor.check_rate_hz": 20.0}))
+        probe = rclpy.create_node("probe", context=ctx)
+        pubs = {"dvl": probe.create_publisher(Dvl, "dvl/data", 10),
+                "ping": probe.create_publisher(Range, "ping/altitude", 10),
+                "depth": probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10)}
+        requests: list = []
+        beats: list = []
+
+        def on_set_armed(req, resp):
+            requests.append(req.arm)
+            resp.success = True
+            return resp
+
+        probe.create_service(SetArmed, "esc/set_armed", on_set_armed)
+        probe.create_subscription(DiagnosticStatus, "supervisor/heartbeat", beats.append, 10)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(sup)
+        ex.add_node(probe)
+        try:
+            topics = {"/dvl/data", "/ping/altitude", "/pressure/depth"}
+            assert not topics & {s.topic_name for s in sup.subscriptions}  # nothing the executor dispatches
+            assert topics <= {s.topic_name for s in sup.intake.node.subscriptions}
+            spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
+            wait_until(lambda: all(p.get_subscription_count() == 1 for p in pubs.values()), 10, spin,
+                       "intake matched")
+            t0 = time.time_ns() * 1e-9
+            dvl = Dvl(velocity_valid=True)
+            dvl.orientation.w = 1.0
+            dvl.velocity_m_s.x = 0.1
+            pubs["dvl"].publish(dvl)
+            pubs["ping"].publish(Range(range=1.0))
+            depth = PoseWithCovarianceStamped()
+            depth.pose.pose.position.z = -0.5
+            pubs["depth"].publish(depth)
+            stamps = sup.core._stamps
+            wait_until(lambda: all(len(stamps[s]) == 1 for s in ("dvl", "altimeter", "pressure")), 10, spin,
+                       "one report of each counted by a check")
+            t1 = time.time_ns() * 1e-9
+            assert all(t0 <= stamps[s][0] <= t1 for s in ("dvl", "altimeter", "pressure"))
+            assert sup.core.last_valid_dvl_t == stamps["dvl"][0]  # the velocity was valid, dated at reception
+            assert not sup.core.tripped
+            # armed (as the core sees it), then a depth beyond the limit: the next check trips and disarms
+            sup.core.set_armed(sup._now_s(), True)
+            sup.esc_armed = True
+            depth.pose.pose.position.z = -(sup.core.limits.max_depth_m + 0.1)
+            pubs["depth"].publish(depth)
+            wait_until(lambda: sup.core.tripped and False in requests, 10, spin, "tripped by the next check")
+            assert "depth" in sup.core.tripped
+            wait_until(lambda: beats and beats[-1].level == DiagnosticStatus.ERROR, 10, spin, "ERROR heartbeat")
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            sup.destroy_node()
