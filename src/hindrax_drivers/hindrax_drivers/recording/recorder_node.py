@@ -43,8 +43,8 @@ Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.y
 ``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty = a new
 timestamped directory under ``recording.output_root`` at every start, never an existing one: :mod:`.bag_dir`),
 ``autostart`` (bool, false), ``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000),
-``disk_check_period_s`` (1.0), ``intake_period_s`` (0.05; polled intake only; ``queue_depth`` must hold what a topic
-sends in this time).
+``disk_check_period_s`` (1.0), ``intake_period_s`` (:data:`INTAKE_PERIOD_S`, 0.1; the polled intake's period and
+the writer thread's drain period; ``queue_depth`` must hold what a topic sends in this time).
 
 Run alone: ``python -m hindrax_drivers.recording.recorder_node --ros-args --params-file
 ros_ws/config/hindrax.yaml -p autostart:=true``.
@@ -82,6 +82,9 @@ _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": Reliabili
 #: The recorder's subscriptions carry no QoS event handlers: each would be visited in Python on every executor spin
 #: (rclpy's SingleThreadedExecutor), and the recorder matches every publisher's QoS itself (recording.qos).
 _NO_EVENT_HANDLERS = SubscriptionEventCallbacks(use_default_callbacks=False)
+#: default ``intake_period_s``, s: the polled intake takes every queued message, and the writer thread drains what it
+#: was handed, 10 times a second (docs/architecture.md §10.1: 20 -> 10 Hz, the measured gain)
+INTAKE_PERIOD_S = 0.1
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
 
 
@@ -110,7 +113,7 @@ class RecorderNode(Node):
         self._output_root = Path(self._cfg.recording.output_root)
         self._min_free_bytes = float(self._cfg.recording.min_free_disk_mb) * 1e6
         self._disk_check_period_s = float(self._param("disk_check_period_s", 1.0))
-        self._intake_period_s = float(self._param("intake_period_s", 0.05))
+        self._intake_period_s = float(self._param("intake_period_s", INTAKE_PERIOD_S))
         #: polled intake on the system clock, one callback per message with sim time (module docstring)
         self._intake = None if self.get_parameter("use_sim_time").value else PolledSubscriptions(self)
 
@@ -214,7 +217,8 @@ class RecorderNode(Node):
             raise OSError(f"not recording: {reason}")
         out = Path(named) if named else new_bag_dir(self._output_root)
         self._selection = selection or self.default_selection()
-        self._writer = ThreadedBagWriter(out, self._options)
+        # the writer thread drains at the intake's period: one writer wake-up per batch taken, not two
+        self._writer = ThreadedBagWriter(out, self._options, drain_period_s=self._intake_period_s)
         self._skipped.clear()
         self.get_logger().info(f"recording {self._selection.describe()} to {out}")
         self._discover()
