@@ -95,7 +95,7 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             assert _call(enable, SetBool.Request(data=True), spin).success
             wait_until(lambda: len(ours()) > n + 5, 10, spin, "wrench again")
             streams = ("imu/data_raw", "dvl/data", "pressure/fluid_pressure", "ping/altitude", "allocation/status",
-                       "wrench")
+                       "wrench", "thrusters/pulse_width")
             subscribers = {t: probe.count_subscribers(t) for t in streams}
             ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING, dof="surge"))
             wait_until(lambda: not ctrl.enabled, 10, spin, "yield to the identification")
@@ -188,8 +188,8 @@ def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_and_streams_drop_
         ex.add_node(probe)
         try:
             streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
-                       "/allocation/status", "/wrench"}
-            polled = streams | {"/thrusters/pulse_width", "/identification/status"}
+                       "/allocation/status", "/wrench", "/thrusters/pulse_width"}
+            polled = streams | {"/identification/status"}
             intake_topics = lambda: {s.topic_name for s in node.intake.node.subscriptions}  # noqa: E731
             assert intake_topics() == polled and not polled & {s.topic_name for s in node.subscriptions}
             pwm = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
@@ -207,9 +207,11 @@ def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_and_streams_drop_
             assert t0 <= node._last_sample_s["icm20948_gyro"] <= time.time_ns() * 1e-9
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
             wait_until(lambda: not streams & intake_topics(), 10, spin, "streams dropped while the goal runs")
-            assert node._ident_running and "/thrusters/pulse_width" in intake_topics()
+            # the armed flag went with the streams: enabling waits for a fresh one after the goal
+            assert node._ident_running and intake_topics() == {"/identification/status"} and not node._armed_seen
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
             wait_until(lambda: intake_topics() == polled, 10, spin, "streams open again")
+            assert "not armed" in str(node._refusal())
         finally:
             ex.shutdown()
             probe.destroy_node()

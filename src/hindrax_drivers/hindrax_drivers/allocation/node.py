@@ -9,7 +9,7 @@ Publishes
     scale, per-thruster saturation, rejection reason.
     Pulse widths go out for every wrench (and first to every :attr:`ThrustAllocationNode.command_sinks`: the ESC
     node of the same process, :func:`hindrax_drivers.composition.connect_in_process`); forces and status (display
-    and bag) at most every :data:`STATUS_PERIOD_S` (10 Hz) with the latest allocation, and at once when rejected,
+    and bag) at most every :data:`STATUS_PERIOD_S` (5 Hz) with the latest allocation, and at once when rejected,
     the saturated thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
     stale-check timer once the period has passed.
 
@@ -39,8 +39,10 @@ from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
 BASE_FRAME = "base_link"
-#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of state, s
-STATUS_PERIOD_S = 0.1
+#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of state, s (5 Hz: a
+#: topside display, the controller's anti-windup; a change of saturation or rejection goes out at once; 10 Hz before,
+#: docs/architecture.md §10.1)
+STATUS_PERIOD_S = 0.2
 STATUS_PERIOD_NS = int(STATUS_PERIOD_S * 1e9)
 
 

@@ -32,7 +32,7 @@ Publishes
 CPU
     On the system clock (the vehicle; ``use_sim_time`` false) the topic inputs but ``controller/setpoint`` are polled
     subscriptions (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor
-    wake-up per message (about 60 messages/s while a goal runs, 250 while the streams are open); every tick first
+    wake-up per message (about 10 messages/s while a goal runs, 250 while the streams are open); every tick first
     hands what arrived to the same handlers, each sensor sample counted at its DDS reception time, so the tick
     decides (yield, staleness, the law) on what callbacks would have delivered by then. While an identification goal
     runs the controller cannot be enabled and its sensor streams are closed, so the tick slows from ``control.rate_hz``
@@ -80,10 +80,10 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
                             ManeuverStatus.PHASE_RETURNING})
 #: Period of controller/status when nothing changes, s.
 STATUS_PERIOD_S = 0.5
-#: tick period (s) while an identification goal runs, on the system clock: the tick then only takes the armed flag
-#: and the goal's phase and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`). At 5 Hz the polled
-#: ``thrusters/pulse_width`` (50 Hz) stays within its queue of 20, and the goal's end is seen within 0.2 s (the streams
-#: open then; enabling waits for their first samples anyway, :meth:`ControllerNode._refusal`)
+#: tick period (s) while an identification goal runs, on the system clock: the tick then only takes the goal's phase
+#: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams,
+#: ``thrusters/pulse_width`` among them, are closed. The goal's end is seen within 0.2 s (the streams open then;
+#: enabling waits for their first samples and a fresh armed flag anyway, :meth:`ControllerNode._refusal`)
 GOAL_TICK_S = 0.2
 
 
@@ -139,7 +139,6 @@ class ControllerNode(PolledInputsMixin, Node):
         self.intake: PolledInputs | None = self.open_inputs("intake")
         self._streams: list = []
         self._open_streams()
-        self._subscribe(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20)
         self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
@@ -157,8 +156,10 @@ class ControllerNode(PolledInputsMixin, Node):
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
         """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics, ``wrench``
-        (other writers) and ``allocation/status`` (anti-windup). About 250 messages/s in the pool layout."""
+        (other writers), ``allocation/status`` (anti-windup) and ``thrusters/pulse_width`` (the armed flag: enabling
+        waits for a fresh one). About 250 messages/s in the pool layout."""
         self._streams = [
+            self._subscribe(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20),
             self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20),
             self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
                             20),
@@ -187,6 +188,7 @@ class ControllerNode(PolledInputsMixin, Node):
         self._streams = []
         self._pending = []
         self._last_sample_s.clear()
+        self._armed_seen = False  # the armed flag comes again with the streams
         self.loop = HoldLoop(self.config, self.hold, self.tick_s)
 
     def _now_s(self) -> float:

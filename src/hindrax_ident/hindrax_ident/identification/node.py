@@ -48,7 +48,7 @@ Publishes
     goal runs; ``identification/estimates`` (HydroEstimate, method ``rls``, one per DOF with data) at
     ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) while a goal
     runs at once when the phase, DOF, level or message (current step) changes and otherwise at
-    :data:`STATUS_PERIOD_S` (10 Hz: the progress of a level), once at its end (DONE or ABORTED
+    :data:`STATUS_PERIOD_S` (2 Hz: the progress of a level), once at its end (DONE or ABORTED
     with the reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a
     goal aborts on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety
     supervisor (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset;
@@ -139,8 +139,10 @@ NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro"
 #: abort reasons not sent to the safety supervisor (the executive's words): an operator's cancel, and a disarmed
 #: ESC output (the thrusters are already stopped, possibly by the supervisor itself)
 NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
-#: period of ``identification/status`` while a goal runs and nothing changes (10 Hz: topside display, bag), s
-STATUS_PERIOD_S = 0.1
+#: period of ``identification/status`` while a goal runs and nothing changes, s (2 Hz: the progress on a topside
+#: display; every change of phase, DOF, level or message goes out at once, so a bag's zero-order hold of the status
+#: loses nothing; 10 Hz before, docs/architecture.md §10.1)
+STATUS_PERIOD_S = 0.5
 #: how long an accepted goal waits for the ESC to report armed on ``thrusters/pulse_width`` (published on every
 #: write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``) before it fails, s (ROS time)
 ARMED_GRACE_S = 0.5
