@@ -89,6 +89,22 @@ def test_nan_or_inf_wrench_commands_neutral(graph, bad):
     assert list(forces.force_n) == [0.0] * 8
 
 
+def test_bytes_that_are_no_wrench_are_counted_and_command_neutral(graph):
+    """``wrench`` is taken as CDR bytes and decoded by rosbags: bytes that do not decode (a raw publisher's bug) never
+    crash the node; they are counted, and neutral goes out with the reason."""
+    node, send, got, spin = graph
+    send([5.0, 0, 0, 0, 0, 0])
+    pub = node.create_publisher(WrenchStamped, "wrench", 10)  # a second, raw publisher on the node's own graph
+    wait_until(lambda: pub.get_subscription_count() > 0, 10, spin, "raw publisher matched")
+    n = len(got["status"])
+    pub.publish(b"\x00\x01\x00\x00\x05\x00")
+    wait_until(lambda: len(got["status"]) > n and got["status"][-1].rejected, 10, spin, "neutral for the bad bytes")
+    assert "undecodable wrench" in got["status"][-1].reason and node.undecodable == 1
+    assert set(got["pwm"][-1].pulse_width_us) == {1500.0} and not got["pwm"][-1].armed
+    pwm, _, status = send([5.0, 0, 0, 0, 0, 0])  # and the next good wrench is allocated
+    assert not status.rejected and pwm.armed
+
+
 def test_stale_and_wrong_frame_wrenches_are_rejected(graph):
     node, send, _, _ = graph
     old = node.get_clock().now().nanoseconds - int(2e9)

@@ -34,6 +34,7 @@ from rclpy.node import Node
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
+from ..cdr_decode import cdr_decoder
 from ..node_common import load_node_config, run_node
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
@@ -90,7 +91,11 @@ class ThrustAllocationNode(Node):
         self.command_sinks: list[Callable[[ThrusterPwm], None]] = []
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
-        self.create_subscription(WrenchStamped, "wrench", self.on_wrench, 10)
+        #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.cdr_decode`: a lighter 50 Hz
+        #: path than rclpy's message objects); :meth:`on_wrench` reads fields only, so it takes either form
+        self._decode_wrench = cdr_decoder(WrenchStamped)
+        self.undecodable = 0
+        self.create_subscription(WrenchStamped, "wrench", self.on_wrench_cdr, 10, raw=True)
         #: ROS time of the last wrench received, ns (None before the first)
         self.last_wrench_ns: int | None = None
         self.stale_reported = True  # nothing to report before the first wrench
@@ -111,7 +116,19 @@ class ThrustAllocationNode(Node):
         self.future_margin_s = cfg.thrusters.wrench_future_margin_s
 
     # -- wrench path
+    def on_wrench_cdr(self, data: bytes) -> None:
+        """A ``wrench`` as received (CDR bytes): decoded, then :meth:`on_wrench`. Bytes that do not decode as a
+        ``WrenchStamped`` (a raw publisher's bug) are counted in :attr:`undecodable` and rejected: neutral."""
+        try:
+            msg = self._decode_wrench(data)
+        except Exception as exc:  # noqa: BLE001 - rosbags raises several types for malformed CDR
+            self.undecodable += 1
+            self.reject(None, np.zeros(6), f"undecodable wrench ({len(data)} bytes: {type(exc).__name__})")
+            return
+        self.on_wrench(msg)
+
     def on_wrench(self, msg: WrenchStamped) -> None:
+        """One wrench: an rclpy ``WrenchStamped`` or rosbags' decoding of one (fields are only read)."""
         now_ns = self.get_clock().now().nanoseconds
         f, t = msg.wrench.force, msg.wrench.torque
         w = np.array([f.x, f.y, f.z, t.x, t.y, t.z])
@@ -163,7 +180,7 @@ class ThrustAllocationNode(Node):
         if now_ns is None:
             now_ns = self.get_clock().now().nanoseconds
         if msg is not None and (msg.header.stamp.sec or msg.header.stamp.nanosec):
-            stamp = msg.header.stamp
+            stamp = Time(sec=int(msg.header.stamp.sec), nanosec=int(msg.header.stamp.nanosec))  # rclpy's, by value
         else:
             stamp = Time(sec=now_ns // 1_000_000_000, nanosec=now_ns % 1_000_000_000)
         pwm = ThrusterPwm(pulse_width_us=np.asarray(pulse_width_us, dtype=float).tolist(), armed=not rejected)

@@ -86,6 +86,7 @@ from std_msgs.msg import Float64
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
+from ..cdr_decode import thruster_pwm_cdr
 from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
@@ -752,11 +753,10 @@ class EscNode(PolledInputsMixin, Node):
 
     def _publish_written(self, now) -> None:
         unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
-        widths = [math.nan] * len(self.written) if unknown else np.asarray(self.written, dtype=float).tolist()
-        msg = ThrusterPwm(pulse_width_us=widths, armed=self.armed and not unknown, output_state=self.output_state)
-        msg.header.stamp = now.to_msg()
-        msg.header.frame_id = "base_link"
-        self.pub_written.publish(msg)
+        widths = [math.nan] * len(self.written) if unknown else self.written
+        # serialised by rosbags and published as bytes: 50 Hz without rclpy's object conversion (cdr_decode.py)
+        self.pub_written.publish(thruster_pwm_cdr(now.nanoseconds, "base_link", widths,
+                                                  self.armed and not unknown, self.output_state))
         self.diag.published(now.nanoseconds * 1e-9)
         self._published_since_tick = True
 

@@ -103,6 +103,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from hindrax_drivers import frames
+from hindrax_drivers.cdr_decode import wrench_stamped_cdr
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
@@ -550,13 +551,10 @@ class IdentificationNode(PolledInputsMixin, Node):
         return t_s + 1e-6 < self._last_tick_s + self.tick_s
 
     def _publish_wrench(self, w_frd: np.ndarray, now) -> None:
+        # serialised by rosbags and published as bytes: the 50 Hz publish without rclpy's object conversion
+        # (hindrax_drivers.cdr_decode, the measured gain)
         w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
-        m = WrenchStamped()
-        m.header.stamp = now.to_msg()
-        m.header.frame_id = "base_link"
-        m.wrench.force.x, m.wrench.force.y, m.wrench.force.z = (float(x) for x in w[:3])
-        m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z = (float(x) for x in w[3:])
-        self.pub_wrench.publish(m)
+        self.pub_wrench.publish(wrench_stamped_cdr(now.nanoseconds, "base_link", w))
 
     def _publish_progress(self, run: _GoalRun, t: float) -> None:
         ex = run.executive

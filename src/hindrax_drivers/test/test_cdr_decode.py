@@ -1,0 +1,50 @@
+"""Lean CDR (hindrax_drivers.cdr_decode): what rosbags encodes, rclpy's own typesupport decodes to the same message,
+and what rclpy serialises, rosbags decodes to the same fields. rclpy's deserialiser is the reference here, not code
+of this project."""
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import WrenchStamped
+from rclpy.serialization import deserialize_message, serialize_message
+
+from hindrax_drivers.cdr_decode import cdr_decoder, cdr_encoder, lean_class, thruster_pwm_cdr, wrench_stamped_cdr
+from hindrax_msgs.msg import ThrusterPwm
+
+
+def test_a_wrench_encoded_by_rosbags_is_the_message_rclpy_would_publish():
+    w = [1.5, -2.25, 3e-3, -4.0, 5.5, -6.125]
+    data = wrench_stamped_cdr(1_732_500_000_123_456_789, "base_link", np.array(w))
+    ref = WrenchStamped()
+    ref.header.stamp.sec, ref.header.stamp.nanosec, ref.header.frame_id = 1_732_500_000, 123_456_789, "base_link"
+    ref.wrench.force.x, ref.wrench.force.y, ref.wrench.force.z = w[:3]
+    ref.wrench.torque.x, ref.wrench.torque.y, ref.wrench.torque.z = w[3:]
+    assert deserialize_message(data, WrenchStamped) == ref
+    # the same length and bytes but for the string's padding (rosbags zeroes it; Fast CDR leaves what was there)
+    assert len(data) == len(serialize_message(ref))
+
+
+def test_thruster_widths_encoded_by_rosbags_decode_in_rclpy_nan_included():
+    widths = [1500.0, 1525.2, math.nan, 1899.96, 1100.0, 1500.0, 1474.8, 1650.0]
+    data = thruster_pwm_cdr(2_000_000_001, "base_link", widths, True, ThrusterPwm.OUTPUT_COMMANDING)
+    got = deserialize_message(data, ThrusterPwm)
+    assert (got.header.stamp.sec, got.header.stamp.nanosec, got.header.frame_id) == (2, 1, "base_link")
+    assert got.armed is True and got.output_state == ThrusterPwm.OUTPUT_COMMANDING
+    assert len(got.pulse_width_us) == 8 and math.isnan(got.pulse_width_us[2])
+    assert [x for i, x in enumerate(got.pulse_width_us) if i != 2] == [x for i, x in enumerate(widths) if i != 2]
+
+
+def test_rclpy_bytes_decode_in_rosbags_to_the_same_fields_and_back():
+    ref = ThrusterPwm(pulse_width_us=[1510.0, 1490.0], armed=False, output_state=ThrusterPwm.OUTPUT_NEUTRAL)
+    ref.header.frame_id = "base_link"
+    lean = cdr_decoder(ThrusterPwm)(serialize_message(ref))
+    assert list(lean.pulse_width_us) == [1510.0, 1490.0] and lean.armed is False and lean.output_state == 1
+    assert deserialize_message(cdr_encoder(ThrusterPwm)(lean), ThrusterPwm) == ref
+    assert lean_class(ThrusterPwm) is type(lean)
+
+
+def test_bytes_that_are_not_the_type_raise_and_a_non_message_is_refused():
+    with pytest.raises(Exception):  # noqa: B017 - rosbags raises several types; the node catches them all
+        cdr_decoder(WrenchStamped)(b"\x00\x01\x00\x00\x05")
+    with pytest.raises(ValueError, match="not a ROS message class"):
+        cdr_encoder(int)
