@@ -34,7 +34,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .recording.msgdefs import DELIMITER, message_definition
 
-__all__ = ["cdr_decoder", "cdr_encoder", "lean_class", "thruster_pwm_cdr", "type_name_of", "wrench_stamped_cdr"]
+__all__ = ["cdr_decoder", "cdr_encoder", "imu_cdr", "lean_class", "thruster_pwm_cdr", "type_name_of",
+           "wrench_stamped_cdr"]
 
 _lock = threading.Lock()
 
@@ -149,3 +150,29 @@ def thruster_pwm_cdr(stamp_ns: int, frame_id: str, pulse_width_us: Any, armed: b
     return encode(cls(header=header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id),
                       pulse_width_us=np.asarray(pulse_width_us, dtype=np.float64), armed=bool(armed),
                       output_state=int(output_state)))
+
+
+@functools.lru_cache(maxsize=1)
+def _imu_parts() -> tuple[Any, ...]:
+    header, time_ = _stamp_classes()
+    no_orientation = np.zeros(9)
+    no_orientation[0] = -1.0  # REP-145: no orientation estimate
+    return (lean_class("sensor_msgs/msg/Imu"), header, time_, lean_class("geometry_msgs/msg/Vector3"),
+            lean_class("geometry_msgs/msg/Quaternion"), no_orientation, cdr_encoder("sensor_msgs/msg/Imu"))
+
+
+def imu_cdr(stamp_ns: int, frame_id: str, accel_m_s2: Any, gyro_rad_s: Any, accel_cov: Any, gyro_cov: Any) -> bytes:
+    """CDR of a ``sensor_msgs/Imu`` without orientation (:func:`cdr_encoder`; REP-145: ``orientation_covariance[0]
+    = -1``, the orientation left at rclpy's default, the identity): header stamp ``stamp_ns`` (ns of ROS time, >= 0),
+    ``frame_id``, linear acceleration (3,) m/s^2 and angular velocity (3,) rad/s in ``frame_id``, their covariances
+    (9,) or (3, 3)."""
+    cls, header, time_, vector, quaternion, no_orientation, encode = _imu_parts()
+    a = [float(x) for x in accel_m_s2]
+    g = [float(x) for x in gyro_rad_s]
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return encode(cls(header=header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id),
+                      orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=no_orientation,
+                      angular_velocity=vector(x=g[0], y=g[1], z=g[2]),
+                      angular_velocity_covariance=np.asarray(gyro_cov, dtype=np.float64).ravel(),
+                      linear_acceleration=vector(x=a[0], y=a[1], z=a[2]),
+                      linear_acceleration_covariance=np.asarray(accel_cov, dtype=np.float64).ravel()))

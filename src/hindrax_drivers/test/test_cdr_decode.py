@@ -48,3 +48,19 @@ def test_bytes_that_are_not_the_type_raise_and_a_non_message_is_refused():
         cdr_decoder(WrenchStamped)(b"\x00\x01\x00\x00\x05")
     with pytest.raises(ValueError, match="not a ROS message class"):
         cdr_encoder(int)
+
+
+def test_an_imu_sample_encoded_by_rosbags_is_the_message_rclpy_would_publish():
+    from sensor_msgs.msg import Imu
+
+    from hindrax_drivers.cdr_decode import imu_cdr
+
+    acc, gyr = np.array([0.1, -0.2, 9.81]), np.array([1e-3, -2e-3, 0.5])
+    acc_cov, gyr_cov = np.diag([1e-4, 2e-4, 3e-4]), np.diag([4e-6, 5e-6, 6e-6])
+    ref = Imu()
+    ref.header.stamp.sec, ref.header.stamp.nanosec, ref.header.frame_id = 7, 500, "imu_link"
+    ref.orientation_covariance[0] = -1.0
+    ref.linear_acceleration.x, ref.linear_acceleration.y, ref.linear_acceleration.z = acc
+    ref.angular_velocity.x, ref.angular_velocity.y, ref.angular_velocity.z = gyr
+    ref.linear_acceleration_covariance, ref.angular_velocity_covariance = acc_cov.ravel(), gyr_cov.ravel()
+    assert deserialize_message(imu_cdr(7_000_000_500, "imu_link", acc, gyr, acc_cov, gyr_cov), Imu) == ref

@@ -125,6 +125,7 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
+from ..cdr_decode import imu_cdr
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
@@ -692,16 +693,12 @@ class Icm20948Node(Node):
                 self._bias_done(result)
         stamp_msg = stamp.to_msg()
 
-        imu = Imu()
-        imu.header.stamp, imu.header.frame_id = stamp_msg, self.frames["frame_id"]
-        imu.orientation_covariance[0] = -1.0  # REP-145: no orientation estimate
+        # REP-145, no orientation estimate; serialised by rosbags and published as bytes (51 Hz without rclpy's
+        # object conversion: 0.30-0.31 -> 0.23-0.25 ms per publish here, hindrax_drivers.cdr_decode)
         acc = self.rotation @ sample.accel_m_s2
         gyr = self.rotation @ (sample.gyro_rad_s - self.gyro_bias_rad_s)
-        imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = (float(v) for v in acc)
-        imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z = (float(v) for v in gyr)
-        imu.linear_acceleration_covariance = self.accel_cov.ravel()
-        imu.angular_velocity_covariance = self.gyro_cov.ravel()
-        self.pub_imu.publish(imu)
+        self.pub_imu.publish(imu_cdr(stamp.nanoseconds, self.frames["frame_id"], acc, gyr, self.accel_cov,
+                                     self.gyro_cov))
 
         if self._temperature_count % self.temperature_every == 0:
             tm = Temperature()
