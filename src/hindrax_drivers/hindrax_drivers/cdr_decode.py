@@ -27,15 +27,15 @@ from __future__ import annotations
 
 import functools
 import threading
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .recording.msgdefs import DELIMITER, message_definition
 
-__all__ = ["cdr_decoder", "cdr_encoder", "imu_cdr", "lean_class", "thruster_pwm_cdr", "type_name_of",
-           "wrench_stamped_cdr"]
+__all__ = ["cdr_decoder", "cdr_encoder", "diagnostic_status_cdr", "imu_cdr", "lean_class", "thruster_pwm_cdr",
+           "type_name_of", "wrench_stamped_cdr"]
 
 _lock = threading.Lock()
 
@@ -176,3 +176,21 @@ def imu_cdr(stamp_ns: int, frame_id: str, accel_m_s2: Any, gyro_rad_s: Any, acce
                       angular_velocity_covariance=np.asarray(gyro_cov, dtype=np.float64).ravel(),
                       linear_acceleration=vector(x=a[0], y=a[1], z=a[2]),
                       linear_acceleration_covariance=np.asarray(accel_cov, dtype=np.float64).ravel()))
+
+
+@functools.lru_cache(maxsize=1)
+def _status_parts() -> tuple[Any, ...]:
+    return (lean_class("diagnostic_msgs/msg/DiagnosticStatus"), lean_class("diagnostic_msgs/msg/KeyValue"),
+            cdr_encoder("diagnostic_msgs/msg/DiagnosticStatus"))
+
+
+def diagnostic_status_cdr(level: int, name: str, message: str, hardware_id: str,
+                          values: Sequence[tuple[str, str]] = ()) -> bytes:
+    """CDR of a ``diagnostic_msgs/DiagnosticStatus`` (:func:`cdr_encoder`): the safety heartbeats (20-25 Hz each,
+    docs/architecture.md §8). ``level``: the message's constants (OK 0 ... STALE 3, an int or rclpy's one-byte
+    bytes); ``values``: (key, value) pairs."""
+    cls, key_value, encode = _status_parts()
+    if isinstance(level, (bytes, bytearray)):  # rclpy's constants are one-byte bytes (``byte`` fields)
+        level = level[0]
+    return encode(cls(level=int(level), name=name, message=message, hardware_id=hardware_id,
+                      values=[key_value(key=k, value=v) for k, v in values]))

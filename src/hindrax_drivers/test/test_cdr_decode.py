@@ -64,3 +64,19 @@ def test_an_imu_sample_encoded_by_rosbags_is_the_message_rclpy_would_publish():
     ref.angular_velocity.x, ref.angular_velocity.y, ref.angular_velocity.z = gyr
     ref.linear_acceleration_covariance, ref.angular_velocity_covariance = acc_cov.ravel(), gyr_cov.ravel()
     assert deserialize_message(imu_cdr(7_000_000_500, "imu_link", acc, gyr, acc_cov, gyr_cov), Imu) == ref
+
+
+def test_a_heartbeat_encoded_by_rosbags_is_the_status_rclpy_would_publish():
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    from hindrax_drivers.cdr_decode import diagnostic_status_cdr
+
+    ref = DiagnosticStatus(level=DiagnosticStatus.ERROR, name="hindrax/esc", message="unknown", hardware_id="esc",
+                           values=[KeyValue(key="output_state", value="0"), KeyValue(key="armed", value="false")])
+    data = diagnostic_status_cdr(DiagnosticStatus.ERROR, "hindrax/esc", "unknown", "esc",
+                                 [("output_state", "0"), ("armed", "false")])
+    assert deserialize_message(data, DiagnosticStatus) == ref
+    empty = DiagnosticStatus(level=DiagnosticStatus.OK, name="hindrax/supervisor", message="", hardware_id="")
+    assert deserialize_message(diagnostic_status_cdr(0, "hindrax/supervisor", "", ""), DiagnosticStatus) == empty
+    assert deserialize_message(diagnostic_status_cdr(DiagnosticStatus.OK, "hindrax/supervisor", "", ""),
+                               DiagnosticStatus) == empty  # rclpy's constant (b"\x00") as well as an int

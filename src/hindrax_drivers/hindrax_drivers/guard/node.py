@@ -37,6 +37,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
+from ..cdr_decode import diagnostic_status_cdr
 from ..config import output_enable_gpio
 from ..liveness import HEARTBEAT_NAMES, AliveAge
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
@@ -191,10 +192,9 @@ class OutputGuardNode(PolledInputsMixin, Node):
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
-        st = DiagnosticStatus(level=DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
-                              name="hindrax/output_guard", message=self.core.reason if asserted else "outputs enabled",
-                              hardware_id="output_guard")
-        self.pub_heartbeat.publish(st)
+        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (cdr_decode.py)
+            DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK, "hindrax/output_guard",
+            self.core.reason if asserted else "outputs enabled", "output_guard"))
         self.diag.published()
 
     def _diag_extra(self):

@@ -78,7 +78,7 @@ import time
 from typing import Any, Callable
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from std_msgs.msg import Float64
@@ -86,7 +86,7 @@ from std_msgs.msg import Float64
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from ..cdr_decode import thruster_pwm_cdr
+from ..cdr_decode import diagnostic_status_cdr, thruster_pwm_cdr
 from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
@@ -432,7 +432,9 @@ class EscNode(PolledInputsMixin, Node):
         thruster-test``) is handled at the next tick, within one output period."""
         if self.inputs is not None and self._command_sub not in self.inputs.handlers:
             self.destroy_subscription(self._command_sub)
-            self._command_sub = self.inputs.add(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10)
+            # lean: the copies are only compared and skipped (and another commander's widths read), so rosbags
+            # decodes them (cdr_decode.py: about a third of an rclpy object's cost per message)
+            self._command_sub = self.inputs.add(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10, lean=True)
         return self.take_command
 
     def take_command(self, msg: ThrusterPwm) -> None:
@@ -705,12 +707,11 @@ class EscNode(PolledInputsMixin, Node):
 
     def _publish_heartbeat(self) -> None:
         unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
-        st = DiagnosticStatus(level=DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, name="hindrax/esc",
-                              message={0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state],
-                              hardware_id="esc")
-        st.values = [KeyValue(key="output_state", value=str(int(self.output_state))),
-                     KeyValue(key="armed", value="true" if self.armed and not unknown else "false")]
-        self.pub_heartbeat.publish(st)
+        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (cdr_decode.py)
+            DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, "hindrax/esc",
+            {0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state], "esc",
+            [("output_state", str(int(self.output_state))),
+             ("armed", "true" if self.armed and not unknown else "false")]))
 
     def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip

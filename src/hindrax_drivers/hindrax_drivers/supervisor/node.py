@@ -77,6 +77,7 @@ from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .. import frames
+from ..cdr_decode import diagnostic_status_cdr
 from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..polled_input import PolledInputs, PolledInputsMixin, subscribe_input
@@ -236,9 +237,9 @@ class SupervisorNode(PolledInputsMixin, Node):
 
     def _publish_heartbeat(self) -> None:
         tripped = self.core.tripped
-        self.pub_heartbeat.publish(DiagnosticStatus(
-            level=DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK, name="hindrax/supervisor",
-            message=tripped or "within the envelope", hardware_id="supervisor"))
+        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (cdr_decode.py)
+            DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK, "hindrax/supervisor",
+            tripped or "within the envelope", "supervisor"))
 
     # ------------------------------------------------------------------ breach
     def _handle(self, reason: str, force: bool = False) -> None:
