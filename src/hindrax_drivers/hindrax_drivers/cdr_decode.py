@@ -35,7 +35,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from .recording.msgdefs import DELIMITER, message_definition
 
 __all__ = ["cdr_decoder", "cdr_encoder", "diagnostic_status_cdr", "imu_cdr", "lean_class", "thruster_pwm_cdr",
-           "type_name_of", "wrench_stamped_cdr"]
+           "thruster_pwm_encode", "thruster_pwm_lean", "type_name_of", "wrench_stamped_cdr"]
 
 _lock = threading.Lock()
 
@@ -142,14 +142,25 @@ def _pwm_parts() -> tuple[Any, ...]:
     return lean_class("hindrax_msgs/msg/ThrusterPwm"), header, time_, cdr_encoder("hindrax_msgs/msg/ThrusterPwm")
 
 
-def thruster_pwm_cdr(stamp_ns: int, frame_id: str, pulse_width_us: Any, armed: bool, output_state: int) -> bytes:
-    """CDR of a ``hindrax_msgs/ThrusterPwm`` (:func:`cdr_encoder`): header stamp ``stamp_ns`` (ns of ROS time, >= 0),
-    ``frame_id``, ``pulse_width_us`` (n,) us, ``armed``, ``output_state`` (0-2, the message's constants)."""
-    cls, header, time_, encode = _pwm_parts()
+def thruster_pwm_lean(stamp_ns: int, frame_id: str, pulse_width_us: Any, armed: bool, output_state: int = 0) -> Any:
+    """A rosbags ``hindrax_msgs/ThrusterPwm`` (:func:`lean_class`): header stamp ``stamp_ns`` (ns of ROS time, >= 0),
+    ``frame_id``, ``pulse_width_us`` (n,) us (a float64 array), ``armed``, ``output_state`` (0-2, the message's
+    constants; 0 for a command). Its fields read as an rclpy message's; :func:`thruster_pwm_encode` gives its CDR."""
+    cls, header, time_, _encode = _pwm_parts()
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return encode(cls(header=header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id),
-                      pulse_width_us=np.asarray(pulse_width_us, dtype=np.float64), armed=bool(armed),
-                      output_state=int(output_state)))
+    return cls(header=header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id),
+               pulse_width_us=np.asarray(pulse_width_us, dtype=np.float64), armed=bool(armed),
+               output_state=int(output_state))
+
+
+def thruster_pwm_encode(msg: Any) -> bytes:
+    """CDR of a rosbags ``ThrusterPwm`` (:func:`thruster_pwm_lean`), for ``Publisher.publish(bytes)``."""
+    return _pwm_parts()[3](msg)
+
+
+def thruster_pwm_cdr(stamp_ns: int, frame_id: str, pulse_width_us: Any, armed: bool, output_state: int) -> bytes:
+    """CDR of a ``hindrax_msgs/ThrusterPwm`` (:func:`cdr_encoder`): the fields of :func:`thruster_pwm_lean`."""
+    return thruster_pwm_encode(thruster_pwm_lean(stamp_ns, frame_id, pulse_width_us, armed, output_state))
 
 
 @functools.lru_cache(maxsize=1)

@@ -34,7 +34,7 @@ from rclpy.node import Node
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
-from ..cdr_decode import cdr_decoder
+from ..cdr_decode import cdr_decoder, thruster_pwm_encode, thruster_pwm_lean
 from ..node_common import load_node_config, run_node
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
@@ -87,8 +87,9 @@ class ThrustAllocationNode(Node):
         self.timeout_s = cfg.thrusters.wrench_timeout_s
         self.future_margin_s = cfg.thrusters.wrench_future_margin_s
         self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
-        #: called with every command before it is published: in-process consumers (the composed ESC node)
-        self.command_sinks: list[Callable[[ThrusterPwm], None]] = []
+        #: called with every command before it is published: in-process consumers (the composed ESC node); the
+        #: command is rosbags' ThrusterPwm (:func:`~hindrax_drivers.cdr_decode.thruster_pwm_lean`), fields read only
+        self.command_sinks: list[Callable[[Any], None]] = []
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
         #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.cdr_decode`: a lighter 50 Hz
@@ -183,11 +184,13 @@ class ThrustAllocationNode(Node):
             stamp = Time(sec=int(msg.header.stamp.sec), nanosec=int(msg.header.stamp.nanosec))  # rclpy's, by value
         else:
             stamp = Time(sec=now_ns // 1_000_000_000, nanosec=now_ns % 1_000_000_000)
-        pwm = ThrusterPwm(pulse_width_us=np.asarray(pulse_width_us, dtype=float).tolist(), armed=not rejected)
-        pwm.header.stamp, pwm.header.frame_id = stamp, BASE_FRAME
+        # the command as rosbags' ThrusterPwm: the sinks read its fields, and its CDR is published as bytes (50 Hz
+        # without an rclpy object, hindrax_drivers.cdr_decode)
+        pwm = thruster_pwm_lean(stamp.sec * 1_000_000_000 + stamp.nanosec, BASE_FRAME, pulse_width_us,
+                                not rejected)
         for sink in self.command_sinks:
             sink(pwm)
-        self.pub_pwm.publish(pwm)
+        self.pub_pwm.publish(thruster_pwm_encode(pwm))
         saturated = np.asarray(saturated, dtype=bool)
         self._held = (stamp, np.asarray(force_n, dtype=float), np.asarray(requested, dtype=float),
                       np.asarray(achieved, dtype=float), float(scale), saturated, rejected, reason)
