@@ -16,10 +16,21 @@ import math
 import time
 from typing import Callable
 
-__all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_NAMES"]
+__all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_NAMES", "heartbeat_ok"]
 
 #: heartbeat topics (diagnostic_msgs/DiagnosticStatus: level OK = healthy, ERROR = tripped/asserted + reason)
 HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbeat", "esc": "esc/heartbeat"}
+
+
+def heartbeat_ok(msg) -> bool:
+    """Whether a heartbeat (diagnostic_msgs/DiagnosticStatus) says OK (level 0). ``level`` is a ``byte`` field:
+    rclpy gives one-byte ``bytes`` (``DiagnosticStatus.OK`` is the byte 0), rosbags' lean decoding
+    (:mod:`hindrax_drivers.cdr_decode`) an int; both are read here, so a beat taken either way means the same. Any
+    other type is not OK."""
+    level = msg.level
+    if isinstance(level, (bytes, bytearray)):
+        return len(level) == 1 and level[0] == 0
+    return isinstance(level, int) and not isinstance(level, bool) and level == 0
 
 
 class AliveAge:

@@ -80,3 +80,22 @@ def test_a_heartbeat_encoded_by_rosbags_is_the_status_rclpy_would_publish():
     assert deserialize_message(diagnostic_status_cdr(0, "hindrax/supervisor", "", ""), DiagnosticStatus) == empty
     assert deserialize_message(diagnostic_status_cdr(DiagnosticStatus.OK, "hindrax/supervisor", "", ""),
                                DiagnosticStatus) == empty  # rclpy's constant (b"\x00") as well as an int
+
+
+def test_a_heartbeat_says_ok_the_same_whether_taken_as_an_rclpy_object_or_lean():
+    """The safety nodes take the heartbeats lean (rosbags: ``level`` an int) where rclpy gives one-byte bytes: an OK
+    or ERROR beat must read the same both ways, and a beat that is not a level 0 is never OK."""
+    from types import SimpleNamespace
+
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from hindrax_drivers.cdr_decode import diagnostic_status_cdr
+    from hindrax_drivers.liveness import heartbeat_ok
+
+    for level, ok in ((DiagnosticStatus.OK, True), (DiagnosticStatus.WARN, False), (DiagnosticStatus.ERROR, False),
+                      (DiagnosticStatus.STALE, False)):
+        data = diagnostic_status_cdr(level, "hindrax/supervisor", "x", "supervisor")
+        assert heartbeat_ok(deserialize_message(data, DiagnosticStatus)) is ok  # rclpy: bytes
+        assert heartbeat_ok(cdr_decoder(DiagnosticStatus)(data)) is ok  # rosbags: int
+    for odd in (None, False, "0", b"", b"\x00\x00", 0.0):
+        assert heartbeat_ok(SimpleNamespace(level=odd)) is False

@@ -39,7 +39,7 @@ from rclpy.node import Node
 
 from ..cdr_decode import diagnostic_status_cdr
 from ..config import output_enable_gpio
-from ..liveness import HEARTBEAT_NAMES, AliveAge
+from ..liveness import HEARTBEAT_NAMES, AliveAge, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
 from ..pca9685 import protocol as p
@@ -98,8 +98,10 @@ class OutputGuardNode(PolledInputsMixin, Node):
         #: beat, docs/architecture.md §10.1), each aged from its DDS reception, after the ages' ticks; callbacks with
         #: use_sim_time
         self.inputs = self.open_inputs(before_take=(self.esc_age.tick, self.supervisor_age.tick))
-        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10)
-        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10)
+        # lean when polled: the beats are decoded by rosbags (cdr_decode.py), fields read only (heartbeat_ok)
+        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10, lean=True)
+        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10,
+                        lean=True)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.wired:
@@ -176,7 +178,7 @@ class OutputGuardNode(PolledInputsMixin, Node):
 
     def on_supervisor(self, msg: DiagnosticStatus) -> None:
         self.supervisor_age.heard(received_ago_s(self.inputs))
-        self.core.on_supervisor(msg.level == DiagnosticStatus.OK, msg.message)
+        self.core.on_supervisor(heartbeat_ok(msg), msg.message)
 
     # -- tick
     def tick(self) -> None:

@@ -87,7 +87,7 @@ from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from ..cdr_decode import diagnostic_status_cdr, thruster_pwm_cdr
-from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor
+from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
@@ -249,9 +249,11 @@ class EscNode(PolledInputsMixin, Node):
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
         self._heartbeat_tick = 0
+        # lean when polled: the beats are decoded by rosbags (cdr_decode.py), fields read only (heartbeat_ok)
         subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"],
-                        self.on_supervisor_heartbeat, 10)
-        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
+                        self.on_supervisor_heartbeat, 10, lean=True)
+        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10,
+                        lean=True)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._configure_chip()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -718,7 +720,7 @@ class EscNode(PolledInputsMixin, Node):
         disarms when it is handled (at once as a callback; at the next safety tick on the system clock, where
         the supervisor's own ``esc/set_armed`` request has disarmed already)."""
         self.supervisor_age.heard(received_ago_s(self.inputs))
-        self.supervisor_ok, self.supervisor_message = msg.level == DiagnosticStatus.OK, msg.message
+        self.supervisor_ok, self.supervisor_message = heartbeat_ok(msg), msg.message
         if not self.supervisor_ok and self.armed:
             self.heartbeat_disarms += 1
             self.get_logger().error(f"disarming: supervisor tripped: {msg.message}")
@@ -727,7 +729,7 @@ class EscNode(PolledInputsMixin, Node):
     def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low)."""
         self.guard_age.heard(received_ago_s(self.inputs))
-        self.guard_ok, self.guard_message = msg.level == DiagnosticStatus.OK, msg.message
+        self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:
             self.neutral_on_wire_since = None  # even if a later beat of the same take says OK again
         if not self.guard_ok and self.armed:
