@@ -8,8 +8,7 @@ armed while the breach is latched.
 
 Subscribes (ROS time of arrival is used for rates and run time; ``use_sim_time`` supported)
     ``dvl/data`` (hindrax_msgs/Dvl: attitude, velocity for the dead reckoning), ``ping/altitude``
-    (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``;
-    these three on the system clock taken at each check from polled subscriptions, see "CPU"),
+    (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
     ``imu/data_raw`` (sensor_msgs/Imu, rate only: taken as serialised bytes, never deserialised; on the system
     clock taken at each check from a polled subscription, see "CPU"),
     ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag; on the system clock taken at each
@@ -39,14 +38,10 @@ CPU (README "Performance on the Pi")
     checks see are those of per-sample callbacks, up to one check period late (50 ms at 20 Hz; the rate window is
     ``supervisor.rate_window_s``, 3 s). With ``use_sim_time`` the samples come by callback, counted at the ROS time
     of arrival. ``thrusters/pulse_width`` (50 Hz), of which only the armed flag is read, is taken the same way and
-    decoded lean (:mod:`hindrax_drivers.cdr_decode`); an arming is dated at its reception. The 10 Hz sensors
-    (``dvl/data``: attitude and velocity; ``ping/altitude``; ``pressure/depth``) are polled and decoded lean too,
-    each dated at its reception: 30 executor wake-ups a second fewer, for a trip on an attitude, depth or altitude
-    limit at most one check period (50 ms at 20 Hz) after the sample arrived, against the sensors' own 100 ms
-    between samples. A breach found at a check while the ESC is armed disarms at once (the ERROR heartbeat and the
-    disarm request go out in that check); an ESC that arms while the supervisor is tripped is disarmed at the next
+    decoded lean (:mod:`hindrax_drivers.cdr_decode`); an arming is dated at its reception. A breach found while the
+    ESC is armed still disarms at once; an ESC that arms while the supervisor is tripped is disarmed at the next
     check (at most 50 ms), and the ESC itself refuses to arm and disarms on the tripped supervisor's ERROR
-    heartbeat. ``supervisor/abort`` and the e-stop service stay callbacks: each trips at once.
+    heartbeat. The other inputs (attitude, depth, altitude, DVL, aborts) stay callbacks: each can trip at once.
     docs/architecture.md §10.1 has the measured gains.
 Time
     The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
@@ -95,9 +90,6 @@ _NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 IMU_POLL_DEPTH = 50
 #: QoS depth of the polled ``thrusters/pulse_width`` subscription (50 Hz: about 3 between two checks; room for 0.4 s)
 ESC_POLL_DEPTH = 20
-#: QoS depth of the polled 10 Hz sensor inputs (``dvl/data``, ``ping/altitude``, ``pressure/depth``): about 1
-#: between two checks; room for 1 s of delayed checks
-SENSOR_POLL_DEPTH = 10
 
 
 class SupervisorNode(PolledInputsMixin, Node):
@@ -123,14 +115,12 @@ class SupervisorNode(PolledInputsMixin, Node):
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10,
                                                 event_callbacks=_NO_PUB_EVENTS)
         ev = {"event_callbacks": _NO_SUB_EVENTS}
-        #: every topic input but supervisor/abort is polled at the check on the system clock (module docstring,
-        #: "CPU"); None with use_sim_time (callbacks)
+        self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10, **ev)
+        self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
+        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
+        #: polled imu/data_raw and thrusters/pulse_width on the system clock (module docstring, "CPU"); None with
+        #: use_sim_time
         self.intake: PolledInputs | None = self.open_inputs("intake")
-        depth = 10 if self.intake is None else SENSOR_POLL_DEPTH
-        subscribe_input(self, self.intake, Dvl, "dvl/data", self.on_dvl, depth, lean=True, **ev)
-        subscribe_input(self, self.intake, Range, "ping/altitude", self.on_altitude, depth, lean=True, **ev)
-        subscribe_input(self, self.intake, PoseWithCovarianceStamped, "pressure/depth", self.on_depth, depth,
-                        lean=True, **ev)
         subscribe_input(self, self.intake, Imu, "imu/data_raw", self.on_imu,
                         10 if self.intake is None else IMU_POLL_DEPTH, raw=True, **ev)
         # the ESC's widths (50 Hz), of which only the armed flag is read: polled lean at the check on the system clock
@@ -148,17 +138,9 @@ class SupervisorNode(PolledInputsMixin, Node):
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _arrival_s(self) -> float:
-        """When the input being handled arrived, s of ROS time: its DDS reception time when polled (system clock =
-        ROS time there), else (a callback, or no reception time from the middleware) the node's time now."""
-        received_s = self.intake.received_s if self.intake is not None else None
-        return received_s if received_s is not None else self._now_s()
-
     # ------------------------------------------------------------------ inputs
-    # dvl/data, ping/altitude and pressure/depth come as rclpy objects (callbacks) or as rosbags' lean decoding
-    # (polled): the handlers read fields only
     def on_dvl(self, msg: Dvl) -> None:
-        t = self._arrival_s()
+        t = self._now_s()
         q = np.array([msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w], dtype=float)
         if np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5:
             rpy = frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q))
@@ -168,15 +150,16 @@ class SupervisorNode(PolledInputsMixin, Node):
         self._handle(self.core.on_dvl(t, frames.flu_to_frd(v) if valid else None))
 
     def on_altitude(self, msg: Range) -> None:
-        self._handle(self.core.on_altitude(self._arrival_s(), float(msg.range)))
+        self._handle(self.core.on_altitude(self._now_s(), float(msg.range)))
 
     def on_depth(self, msg: PoseWithCovarianceStamped) -> None:
-        self._handle(self.core.on_depth(self._arrival_s(), -float(msg.pose.pose.position.z)))
+        self._handle(self.core.on_depth(self._now_s(), -float(msg.pose.pose.position.z)))
 
     def on_imu(self, _msg: bytes) -> None:
         """Count one ``imu/data_raw`` sample: at its DDS reception time when polled, else (a callback, or no
         reception time from the middleware) at the node's time now."""
-        self.core.on_message("imu", self._arrival_s())
+        received_s = self.intake.received_s if self.intake is not None else None
+        self.core.on_message("imu", received_s if received_s is not None else self._now_s())
 
     def set_clock_stall_timeout(self, seconds: float) -> None:
         """ROS time may stand still this long (steady s) while armed before it trips (default
@@ -191,7 +174,8 @@ class SupervisorNode(PolledInputsMixin, Node):
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed
-        self.core.set_armed(self._arrival_s(), armed)
+        received_s = self.intake.received_s if self.intake is not None else None
+        self.core.set_armed(received_s if received_s is not None else self._now_s(), armed)
         if armed and self.core.tripped:
             self._disarm()
 
