@@ -114,48 +114,51 @@ def cdr_decoder(msg_type: Any) -> Callable[[bytes], Any]:
     return _decoder(type_name_of(msg_type))
 
 
-# -- the two 50 Hz messages of the wrench -> registers chain, published as bytes (module docstring) -----------------
+# -- the messages published as bytes (module docstring): the 50 Hz wrench -> registers chain and the IMU ----------
+@functools.lru_cache(maxsize=1)
 def _stamp_classes() -> tuple[Any, Any]:
     return lean_class("std_msgs/msg/Header"), lean_class("builtin_interfaces/msg/Time")
 
 
+def _header(stamp_ns: int, frame_id: str) -> Any:
+    """rosbags' ``std_msgs/Header`` of ROS time ``stamp_ns`` (ns, >= 0) and ``frame_id``."""
+    header, time_ = _stamp_classes()
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    return header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id)
+
+
 @functools.lru_cache(maxsize=1)
 def _wrench_parts() -> tuple[Any, ...]:
-    header, time_ = _stamp_classes()
-    return (lean_class("geometry_msgs/msg/WrenchStamped"), header, time_, lean_class("geometry_msgs/msg/Wrench"),
+    return (lean_class("geometry_msgs/msg/WrenchStamped"), lean_class("geometry_msgs/msg/Wrench"),
             lean_class("geometry_msgs/msg/Vector3"), cdr_encoder("geometry_msgs/msg/WrenchStamped"))
 
 
 def wrench_stamped_cdr(stamp_ns: int, frame_id: str, wrench: Any) -> bytes:
     """CDR of a ``geometry_msgs/WrenchStamped`` (:func:`cdr_encoder`): header stamp ``stamp_ns`` (ns of ROS time,
     >= 0), ``frame_id``, ``wrench`` 6 numbers [Fx Fy Fz Mx My Mz] (N, N m, in ``frame_id``)."""
-    cls, header, time_, wrench_cls, vector, encode = _wrench_parts()
+    cls, wrench_cls, vector, encode = _wrench_parts()
     f = [float(x) for x in wrench]
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return encode(cls(header=header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id),
+    return encode(cls(header=_header(stamp_ns, frame_id),
                       wrench=wrench_cls(force=vector(x=f[0], y=f[1], z=f[2]), torque=vector(x=f[3], y=f[4], z=f[5]))))
 
 
 @functools.lru_cache(maxsize=1)
-def _pwm_parts() -> tuple[Any, ...]:
-    header, time_ = _stamp_classes()
-    return lean_class("hindrax_msgs/msg/ThrusterPwm"), header, time_, cdr_encoder("hindrax_msgs/msg/ThrusterPwm")
+def _pwm_parts() -> tuple[Any, Any]:
+    return lean_class("hindrax_msgs/msg/ThrusterPwm"), cdr_encoder("hindrax_msgs/msg/ThrusterPwm")
 
 
 def thruster_pwm_lean(stamp_ns: int, frame_id: str, pulse_width_us: Any, armed: bool, output_state: int = 0) -> Any:
     """A rosbags ``hindrax_msgs/ThrusterPwm`` (:func:`lean_class`): header stamp ``stamp_ns`` (ns of ROS time, >= 0),
     ``frame_id``, ``pulse_width_us`` (n,) us (a float64 array), ``armed``, ``output_state`` (0-2, the message's
     constants; 0 for a command). Its fields read as an rclpy message's; :func:`thruster_pwm_encode` gives its CDR."""
-    cls, header, time_, _encode = _pwm_parts()
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return cls(header=header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id),
-               pulse_width_us=np.asarray(pulse_width_us, dtype=np.float64), armed=bool(armed),
-               output_state=int(output_state))
+    return _pwm_parts()[0](header=_header(stamp_ns, frame_id),
+                           pulse_width_us=np.asarray(pulse_width_us, dtype=np.float64), armed=bool(armed),
+                           output_state=int(output_state))
 
 
 def thruster_pwm_encode(msg: Any) -> bytes:
     """CDR of a rosbags ``ThrusterPwm`` (:func:`thruster_pwm_lean`), for ``Publisher.publish(bytes)``."""
-    return _pwm_parts()[3](msg)
+    return _pwm_parts()[1](msg)
 
 
 def thruster_pwm_cdr(stamp_ns: int, frame_id: str, pulse_width_us: Any, armed: bool, output_state: int) -> bytes:
@@ -165,10 +168,9 @@ def thruster_pwm_cdr(stamp_ns: int, frame_id: str, pulse_width_us: Any, armed: b
 
 @functools.lru_cache(maxsize=1)
 def _imu_parts() -> tuple[Any, ...]:
-    header, time_ = _stamp_classes()
     no_orientation = np.zeros(9)
     no_orientation[0] = -1.0  # REP-145: no orientation estimate
-    return (lean_class("sensor_msgs/msg/Imu"), header, time_, lean_class("geometry_msgs/msg/Vector3"),
+    return (lean_class("sensor_msgs/msg/Imu"), lean_class("geometry_msgs/msg/Vector3"),
             lean_class("geometry_msgs/msg/Quaternion"), no_orientation, cdr_encoder("sensor_msgs/msg/Imu"))
 
 
@@ -177,11 +179,10 @@ def imu_cdr(stamp_ns: int, frame_id: str, accel_m_s2: Any, gyro_rad_s: Any, acce
     = -1``, the orientation left at rclpy's default, the identity): header stamp ``stamp_ns`` (ns of ROS time, >= 0),
     ``frame_id``, linear acceleration (3,) m/s^2 and angular velocity (3,) rad/s in ``frame_id``, their covariances
     (9,) or (3, 3)."""
-    cls, header, time_, vector, quaternion, no_orientation, encode = _imu_parts()
+    cls, vector, quaternion, no_orientation, encode = _imu_parts()
     a = [float(x) for x in accel_m_s2]
     g = [float(x) for x in gyro_rad_s]
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return encode(cls(header=header(stamp=time_(sec=sec, nanosec=nanosec), frame_id=frame_id),
+    return encode(cls(header=_header(stamp_ns, frame_id),
                       orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=no_orientation,
                       angular_velocity=vector(x=g[0], y=g[1], z=g[2]),
                       angular_velocity_covariance=np.asarray(gyro_cov, dtype=np.float64).ravel(),
@@ -189,6 +190,7 @@ def imu_cdr(stamp_ns: int, frame_id: str, accel_m_s2: Any, gyro_rad_s: Any, acce
                       linear_acceleration_covariance=np.asarray(accel_cov, dtype=np.float64).ravel()))
 
 
+# -- the safety heartbeats
 @functools.lru_cache(maxsize=1)
 def _status_parts() -> tuple[Any, ...]:
     return (lean_class("diagnostic_msgs/msg/DiagnosticStatus"), lean_class("diagnostic_msgs/msg/KeyValue"),
