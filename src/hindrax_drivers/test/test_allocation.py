@@ -383,6 +383,28 @@ def test_bad_voltage_scale_rejected(allocator):
             allocator.allocate([1, 0, 0, 0, 0, 0], voltage_scale=bad)
 
 
+def test_repeated_request_returns_the_same_read_only_result(layout, curve):
+    """The one-entry memo of allocate: the same request is answered by the same result, which nobody can alter;
+    a different request, another voltage scale or a reconfiguration computes afresh."""
+    alloc = ThrustAllocator(layout.matrix(), curve)
+    wrench = [-2.0, 0.3, 0.5, 0.0, 0.02, 0.1]  # small: the deadband search runs
+    first = alloc.allocate(wrench)
+    fresh = ThrustAllocator(layout.matrix(), curve).allocate(list(wrench))
+    again = alloc.allocate(np.array(wrench))
+    assert again is first
+    np.testing.assert_array_equal(again.pulse_width_us, fresh.pulse_width_us)
+    for arr in (first.pulse_width_us, first.force_n, first.allocated_force_n, first.achieved_wrench,
+                first.requested_wrench, first.axis_scale, first.saturated):
+        with pytest.raises(ValueError):
+            arr[0] = 0
+    other = alloc.allocate([2.0, 0.3, 0.5, 0.0, 0.02, 0.1])
+    assert other is not first and other.achieved_wrench[X] > 0 > first.achieved_wrench[X]
+    assert alloc.allocate(wrench, voltage_scale=0.9) is not first
+    alloc.allocate(wrench)
+    alloc.reconfigure(weights=[1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0, 2.0])
+    assert alloc.allocate(wrench) is not first
+
+
 # ---------------------------------------------------------------- other layouts
 def test_custom_six_thruster_layout_full_rank():
     positions = [[0.3, 0, 0], [-0.3, 0, 0], [0, 0, 0], [0.25, 0, 0], [-0.2, 0.2, 0], [-0.2, -0.2, 0]]

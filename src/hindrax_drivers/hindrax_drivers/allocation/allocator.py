@@ -338,6 +338,7 @@ class ThrustAllocator:
         self._group_index = [np.array(g, dtype=np.intp) for g in groups]
         self._group_pinv = [pinv * mask[None, :] for mask in group_masks]
         self._scale_cache: tuple[float, tuple[np.ndarray, ...]] | None = None
+        self._last: tuple[bytes, float, AllocationResult] | None = None  # allocate's one-entry memo
         self._search_on, self._effort_weight_arg, self._search, self._grid = bool(search_on), rho_arg, search, grid
 
     @staticmethod
@@ -450,7 +451,9 @@ class ThrustAllocator:
         """Allocate the wrench ``[X Y Z K M N]`` (6,) (FRD, N and N m) to the thrusters.
 
         ``voltage_scale`` multiplies every curve's thrust (battery voltage hook, see
-        :func:`.thrust_curve.voltage_thrust_scale`). Returns an :class:`AllocationResult`. Raises
+        :func:`.thrust_curve.voltage_thrust_scale`). Returns an :class:`AllocationResult` whose arrays are
+        read-only: a request equal bit for bit to the last call's, at the same scale, returns the same result object
+        without allocating again (a hold or a step commands the same wrench for many ticks in a row). Raises
         :class:`InvalidWrenchError` if the wrench is not 6 finite numbers, ``ValueError`` for a bad
         ``voltage_scale``. Source: [Hindrax-Drag] eqs. 1 and 9; module docstring for the method.
         """
@@ -461,6 +464,10 @@ class ThrustAllocator:
         if tau.shape != (6,) or not np.isfinite(tau).all():
             raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}")
         s_v = self._check_scale(voltage_scale)
+        key = tau.tobytes()
+        last = self._last
+        if last is not None and last[0] == key and last[1] == s_v:
+            return last[2]  # the same request as the last call: the same (read-only) result
         lower, upper, upper_limited, lower_limited, upper_saturated, lower_saturated, m_fwd, m_rev = \
             self._at_scale(s_v)
 
@@ -505,6 +512,10 @@ class ThrustAllocator:
         actual = s_v * forward_thrust(pulse, *self._forward_params)
 
         saturated = (force >= upper_saturated) | (force <= lower_saturated) | limited
-        return AllocationResult(requested_wrench=tau, allocated_force_n=force, force_n=actual, pulse_width_us=pulse,
-                                achieved_wrench=self._matrix @ actual, scale=float(scale), axis_scale=axis_scale,
-                                saturated=saturated)
+        result = AllocationResult(requested_wrench=tau, allocated_force_n=force, force_n=actual, pulse_width_us=pulse,
+                                  achieved_wrench=self._matrix @ actual, scale=float(scale), axis_scale=axis_scale,
+                                  saturated=saturated)
+        for arr in (tau, force, actual, pulse, result.achieved_wrench, axis_scale, saturated):
+            arr.flags.writeable = False  # shared with the next call of the same request
+        self._last = (key, s_v, result)
+        return result
