@@ -47,11 +47,11 @@ handlers before ``rclpy.init`` (rclpy's then chain to them):
   catch it), SIGTERM only shuts the context down (rclpy's handler);
 - with ``interrupt=False`` (node processes, :func:`~hindrax_drivers.node_common.run_nodes`) rclpy installs no
   handler at all (``SignalHandlerOptions.NO``): both signals are only recorded, and :meth:`RosProcess.spin`, a loop
-  of ``spin_once`` with a 0.1 s timeout, returns at the next turn once one is; the context is shut down after the
-  clean-ups, never under a running callback. rclpy's handler shut it down from its own thread while a callback
-  ran: a timer callback that published then failed ("publisher's context is invalid") and rclpy printed ``[FATAL]
-  Exception in 'timers' callback`` with a traceback (the controller's status, 1 launch Ctrl-C in 2, November
-  2026); a ``KeyboardInterrupt`` raised inside a callback did the same before;
+  of ``spin_once`` with a 0.08 s timeout (:data:`SPIN_TIMEOUT_S`), returns at the next turn once one is; the
+  context is shut down after the clean-ups, never under a running callback. rclpy's handler shut it down from its
+  own thread while a callback ran: a timer callback that published then failed ("publisher's context is invalid")
+  and rclpy printed ``[FATAL] Exception in 'timers' callback`` with a traceback (the controller's status, 1 launch
+  Ctrl-C in 2, November 2026); a ``KeyboardInterrupt`` raised inside a callback did the same before;
 - from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end (the ESC node's
   neutral write among them);
 - at the end rclpy's handlers are uninstalled (``rclpy.try_shutdown`` leaves them) and the handlers found on entry
@@ -86,6 +86,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from types import FrameType
 from typing import Any, Callable, Mapping, Sequence
 
@@ -121,12 +122,32 @@ def freeze_startup_heap() -> int:
     return gc.get_freeze_count()
 
 
+#: spin loops (:func:`_spin_while`): the longest wait in one ``spin_once`` and the longest time between two looks at
+#: ``rclpy.ok()``; together the 0.1 s within which a loop notices a shut-down context or a recorded signal
+SPIN_TIMEOUT_S = 0.08
+OK_CHECK_PERIOD_S = 0.02
+
+
+def _spin_while(executor: Any, go_on: Callable[[], bool]) -> None:
+    """``executor.spin_once`` until the default context is shut down or ``go_on()`` is false. ``go_on`` (cheap) is
+    asked at every turn; ``rclpy.ok()`` (a lock and a call into rcl, 2-4 us here) at most every
+    :data:`OK_CHECK_PERIOD_S`: a node process handles 50-100 events a second, each one a turn of this loop."""
+    next_check = 0.0
+    while go_on():
+        now = time.monotonic()
+        if now >= next_check:
+            if not rclpy.ok():
+                return
+            next_check = now + OK_CHECK_PERIOD_S
+        executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+
+
 class _EventsLoop:
     """rclpy's ``EventsExecutor`` behind the executor methods this package uses (add_node, remove_node,
     get_nodes, spin, spin_once, shutdown).
 
     Its own ``spin()`` (rclpy 7.x, Jazzy) does not return when SIGINT/SIGTERM shut the context down, so
-    :meth:`spin` is a loop of ``spin_once`` with a 0.1 s timeout, which raises rclpy's
+    :meth:`spin` is a loop of ``spin_once`` (:func:`_spin_while`), which raises rclpy's
     ``ExternalShutdownException`` then (handled by :class:`RosProcess`)."""
 
     def __init__(self) -> None:
@@ -146,9 +167,7 @@ class _EventsLoop:
         self._ex.spin_once(timeout_sec=timeout_sec)
 
     def spin(self) -> None:
-
-        while rclpy.ok():
-            self._ex.spin_once(timeout_sec=0.1)
+        _spin_while(self._ex, lambda: True)
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
         return self._ex.shutdown(timeout_sec) if timeout_sec is not None else self._ex.shutdown()
@@ -246,8 +265,7 @@ class RosProcess:
         if self.interrupt:
             executor.spin()
             return
-        while rclpy.ok() and not self.signals:  # interrupt=False: a recorded SIGINT/SIGTERM ends the loop
-            executor.spin_once(timeout_sec=0.1)
+        _spin_while(executor, lambda: not self.signals)  # interrupt=False: a recorded SIGINT/SIGTERM ends the loop
 
     def at_exit(self, cleanup: Callable[[], Any]) -> None:
         """Run ``cleanup()`` on exit (clean-ups run last registered first)."""

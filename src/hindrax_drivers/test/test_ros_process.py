@@ -11,6 +11,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from hindrax_drivers.config import ConfigError
+from hindrax_drivers import ros_process
 from hindrax_drivers.ros_process import RosProcess, executor_kind, freeze_startup_heap
 from hindrax_drivers.testing import child_env, python_executable, wait_until
 
@@ -122,6 +123,36 @@ def test_events_loop_spins_callbacks_and_ends_on_context_shutdown():
         proc.executor.add_node(node)
         proc.executor.spin()
     assert len(ticks) == 5 and proc.status == 0 and not rclpy.ok()
+
+
+def test_spin_loop_reads_rclpy_ok_at_most_every_check_period(monkeypatch):
+    """The spin loop of every node process: with events streaming (a turn every 1 ms of a fake clock) it asks
+    rclpy.ok() at most once per OK_CHECK_PERIOD_S, not once per event, and still ends within that period of the
+    context going down; a false go_on() ends it at the next turn."""
+    clock = [0.0]
+    monkeypatch.setattr(ros_process.time, "monotonic", lambda: clock[0])
+    asked: list = []
+
+    def ok() -> bool:
+        asked.append(clock[0])
+        return clock[0] < 1.0  # the context shuts down at 1 s
+
+    monkeypatch.setattr(ros_process.rclpy, "ok", ok)
+    timeouts: list = []
+
+    class Streaming:
+        def spin_once(self, timeout_sec=None):
+            timeouts.append(timeout_sec)
+            clock[0] += 0.001
+
+    ros_process._spin_while(Streaming(), lambda: True)
+    assert len(timeouts) >= 1000 and set(timeouts) == {ros_process.SPIN_TIMEOUT_S}
+    assert len(asked) <= 1.0 / ros_process.OK_CHECK_PERIOD_S + 2
+    assert 1.0 <= clock[0] <= 1.0 + ros_process.OK_CHECK_PERIOD_S + 0.0011
+    assert ros_process.SPIN_TIMEOUT_S + ros_process.OK_CHECK_PERIOD_S <= 0.1 + 1e-12  # the documented 0.1 s
+    turns, clock[0] = len(timeouts), 0.0
+    ros_process._spin_while(Streaming(), lambda: len(timeouts) < turns + 3)
+    assert len(timeouts) == turns + 3
 
 
 # A node process started by the shared runner (run_node -> RosProcess): prints "spinning" at its first tick (with
