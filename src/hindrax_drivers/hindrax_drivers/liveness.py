@@ -25,7 +25,7 @@ HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbe
 def heartbeat_ok(msg) -> bool:
     """Whether a heartbeat (diagnostic_msgs/DiagnosticStatus) says OK (level 0). ``level`` is a ``byte`` field:
     rclpy gives one-byte ``bytes`` (``DiagnosticStatus.OK`` is the byte 0), rosbags' lean decoding
-    (:mod:`hindrax_drivers.cdr_decode`) an int; both are read here, so a beat taken either way means the same. Any
+    (:mod:`hindrax_drivers.lean_cdr`) an int; both are read here, so a beat taken either way means the same. Any
     other type is not OK."""
     level = msg.level
     if isinstance(level, (bytes, bytearray)):

@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 from rclpy.node import Node
 
-from .cdr_decode import cdr_decoder
+from .lean_cdr import cdr_decoder
 
 __all__ = ["PolledInputs", "PolledInputsMixin", "PolledSubscriptions", "polled_inputs", "received_ago_s",
            "subscribe_input"]
@@ -97,7 +97,7 @@ class PolledInputs(PolledSubscriptions):
             lean: bool = False, **kwargs: Any) -> Any:
         """:meth:`subscribe` ``topic`` with ``handler`` for :meth:`take_all`; returns the subscription. ``lean``: the
         message is taken as CDR bytes and handed over as rosbags' light decoding of them
-        (:func:`hindrax_drivers.cdr_decode.cdr_decoder`: the ROS field names, read-only) instead of an rclpy object,
+        (:func:`hindrax_drivers.lean_cdr.cdr_decoder`: the ROS field names, read-only) instead of an rclpy object,
         for a handler that only reads fields (about 31 instead of 77 us per ``Imu``, that module's docstring)."""
         if lean and not raw:
             decode = cdr_decoder(msg_type)

@@ -272,7 +272,7 @@ def test_every_input_handler_reads_a_lean_message_as_an_rclpy_one():
     """On the system clock every controller input is taken lean (rosbags' decoding of the CDR bytes): the wrench
     identity that tells the controller's own wrench from a pilot's, and the fields the other handlers read, are the
     same from the lean message as from rclpy's object of the same bytes."""
-    from hindrax_drivers.cdr_decode import cdr_decoder
+    from hindrax_drivers.lean_cdr import cdr_decoder
     from hindrax_ident.control.node import RUNNING_PHASES, _key, _wrench6
     from hindrax_msgs.msg import AllocationStatus
     from rclpy.serialization import serialize_message

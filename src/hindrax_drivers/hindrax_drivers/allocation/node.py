@@ -34,7 +34,7 @@ from rclpy.node import Node
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
-from ..cdr_decode import cdr_decoder, thruster_pwm_encode, thruster_pwm_lean
+from ..lean_cdr import cdr_decoder, thruster_pwm_encode, thruster_pwm_lean
 from ..node_common import load_node_config, run_node
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
@@ -88,11 +88,11 @@ class ThrustAllocationNode(Node):
         self.future_margin_s = cfg.thrusters.wrench_future_margin_s
         self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
         #: called with every command before it is published: in-process consumers (the composed ESC node); the
-        #: command is rosbags' ThrusterPwm (:func:`~hindrax_drivers.cdr_decode.thruster_pwm_lean`), fields read only
+        #: command is rosbags' ThrusterPwm (:func:`~hindrax_drivers.lean_cdr.thruster_pwm_lean`), fields read only
         self.command_sinks: list[Callable[[Any], None]] = []
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
-        #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.cdr_decode`: a lighter 50 Hz
+        #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.lean_cdr`: a lighter 50 Hz
         #: path than rclpy's message objects); :meth:`on_wrench` reads fields only, so it takes either form
         self._decode_wrench = cdr_decoder(WrenchStamped)
         self.undecodable = 0
@@ -185,7 +185,7 @@ class ThrustAllocationNode(Node):
         else:
             stamp = Time(sec=now_ns // 1_000_000_000, nanosec=now_ns % 1_000_000_000)
         # the command as rosbags' ThrusterPwm: the sinks read its fields, and its CDR is published as bytes (50 Hz
-        # without an rclpy object, hindrax_drivers.cdr_decode)
+        # without an rclpy object, hindrax_drivers.lean_cdr)
         pwm = thruster_pwm_lean(stamp.sec * 1_000_000_000 + stamp.nanosec, BASE_FRAME, pulse_width_us,
                                 not rejected)
         for sink in self.command_sinks:

@@ -37,7 +37,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from ..cdr_decode import diagnostic_status_cdr
+from ..lean_cdr import diagnostic_status_cdr
 from ..config import output_enable_gpio
 from ..liveness import HEARTBEAT_NAMES, AliveAge, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
@@ -98,7 +98,7 @@ class OutputGuardNode(PolledInputsMixin, Node):
         #: beat, docs/architecture.md §10.1), each aged from its DDS reception, after the ages' ticks; callbacks with
         #: use_sim_time
         self.inputs = self.open_inputs(before_take=(self.esc_age.tick, self.supervisor_age.tick))
-        # lean when polled: the beats are decoded by rosbags (cdr_decode.py), fields read only (heartbeat_ok)
+        # lean when polled: the beats are decoded by rosbags (lean_cdr.py), fields read only (heartbeat_ok)
         subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10, lean=True)
         subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10,
                         lean=True)
@@ -194,7 +194,7 @@ class OutputGuardNode(PolledInputsMixin, Node):
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
-        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (cdr_decode.py)
+        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (lean_cdr.py)
             DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK, "hindrax/output_guard",
             self.core.reason if asserted else "outputs enabled", "output_guard"))
         self.diag.published()

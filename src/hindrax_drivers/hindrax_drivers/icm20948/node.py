@@ -125,7 +125,7 @@ from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
-from ..cdr_decode import imu_cdr
+from ..lean_cdr import imu_cdr
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
@@ -694,7 +694,7 @@ class Icm20948Node(Node):
         stamp_msg = stamp.to_msg()
 
         # REP-145, no orientation estimate; serialised by rosbags and published as bytes (51 Hz without rclpy's
-        # object conversion: 0.30-0.31 -> 0.23-0.25 ms per publish here, hindrax_drivers.cdr_decode)
+        # object conversion: 0.30-0.31 -> 0.23-0.25 ms per publish here, hindrax_drivers.lean_cdr)
         acc = self.rotation @ sample.accel_m_s2
         gyr = self.rotation @ (sample.gyro_rad_s - self.gyro_bias_rad_s)
         self.pub_imu.publish(imu_cdr(stamp.nanoseconds, self.frames["frame_id"], acc, gyr, self.accel_cov,

@@ -86,7 +86,7 @@ from std_msgs.msg import Float64
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from ..cdr_decode import diagnostic_status_cdr, thruster_pwm_cdr
+from ..lean_cdr import diagnostic_status_cdr, thruster_pwm_cdr
 from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
@@ -249,7 +249,7 @@ class EscNode(PolledInputsMixin, Node):
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
         self._heartbeat_tick = 0
-        # lean when polled: the beats are decoded by rosbags (cdr_decode.py), fields read only (heartbeat_ok)
+        # lean when polled: the beats are decoded by rosbags (lean_cdr.py), fields read only (heartbeat_ok)
         subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"],
                         self.on_supervisor_heartbeat, 10, lean=True)
         subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10,
@@ -435,7 +435,7 @@ class EscNode(PolledInputsMixin, Node):
         if self.inputs is not None and self._command_sub not in self.inputs.handlers:
             self.destroy_subscription(self._command_sub)
             # lean: the copies are only compared and skipped (and another commander's widths read), so rosbags
-            # decodes them (cdr_decode.py: about a third of an rclpy object's cost per message)
+            # decodes them (lean_cdr.py: about a third of an rclpy object's cost per message)
             self._command_sub = self.inputs.add(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10, lean=True)
         return self.take_command
 
@@ -709,7 +709,7 @@ class EscNode(PolledInputsMixin, Node):
 
     def _publish_heartbeat(self) -> None:
         unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
-        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (cdr_decode.py)
+        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (lean_cdr.py)
             DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, "hindrax/esc",
             {0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state], "esc",
             [("output_state", str(int(self.output_state))),
@@ -757,7 +757,7 @@ class EscNode(PolledInputsMixin, Node):
     def _publish_written(self, now) -> None:
         unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
         widths = [math.nan] * len(self.written) if unknown else self.written
-        # serialised by rosbags and published as bytes: 50 Hz without rclpy's object conversion (cdr_decode.py)
+        # serialised by rosbags and published as bytes: 50 Hz without rclpy's object conversion (lean_cdr.py)
         self.pub_written.publish(thruster_pwm_cdr(now.nanoseconds, "base_link", widths,
                                                   self.armed and not unknown, self.output_state))
         self.diag.published(now.nanoseconds * 1e-9)

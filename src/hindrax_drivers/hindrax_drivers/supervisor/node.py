@@ -38,7 +38,7 @@ CPU (README "Performance on the Pi")
     checks see are those of per-sample callbacks, up to one check period late (50 ms at 20 Hz; the rate window is
     ``supervisor.rate_window_s``, 3 s). With ``use_sim_time`` the samples come by callback, counted at the ROS time
     of arrival. ``thrusters/pulse_width`` (50 Hz), of which only the armed flag is read, is taken the same way and
-    decoded lean (:mod:`hindrax_drivers.cdr_decode`); an arming is dated at its reception. A breach found while the
+    decoded lean (:mod:`hindrax_drivers.lean_cdr`); an arming is dated at its reception. A breach found while the
     ESC is armed still disarms at once; an ESC that arms while the supervisor is tripped is disarmed at the next
     check (at most 50 ms), and the ESC itself refuses to arm and disarms on the tripped supervisor's ERROR
     heartbeat. The other inputs (attitude, depth, altitude, DVL, aborts) stay callbacks: each can trip at once.
@@ -72,7 +72,7 @@ from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .. import frames
-from ..cdr_decode import diagnostic_status_cdr
+from ..lean_cdr import diagnostic_status_cdr
 from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..polled_input import PolledInputs, PolledInputsMixin, subscribe_input
@@ -221,7 +221,7 @@ class SupervisorNode(PolledInputsMixin, Node):
 
     def _publish_heartbeat(self) -> None:
         tripped = self.core.tripped
-        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (cdr_decode.py)
+        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (lean_cdr.py)
             DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK, "hindrax/supervisor",
             tripped or "within the envelope", "supervisor"))
 

@@ -172,7 +172,7 @@ class ControllerNode(PolledInputsMixin, Node):
     def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
         """A topic input: polled on the system clock (taken by :meth:`take_inputs` at every tick), a callback with
         ``use_sim_time``. The depths hold what arrives in 0.4-2 s, many ticks. Every handler only reads fields, so
-        every input is taken lean when polled (CDR decoded by rosbags, :mod:`hindrax_drivers.cdr_decode`), as in the
+        every input is taken lean when polled (CDR decoded by rosbags, :mod:`hindrax_drivers.lean_cdr`), as in the
         identification node."""
         return subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=True, **self._sub_ev)
 

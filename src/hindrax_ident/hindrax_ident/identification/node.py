@@ -103,7 +103,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from hindrax_drivers import frames
-from hindrax_drivers.cdr_decode import wrench_stamped_cdr
+from hindrax_drivers.lean_cdr import wrench_stamped_cdr
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
@@ -262,7 +262,7 @@ class IdentificationNode(PolledInputsMixin, Node):
         #: them over topic by topic, the executive orders the samples by stamp, :func:`ordered_samples`); None with
         #: use_sim_time
         self.intake: PolledInputs | None = self.open_inputs("intake")
-        # every handler only reads fields: taken lean when polled (CDR decoded by rosbags, hindrax_drivers.cdr_decode:
+        # every handler only reads fields: taken lean when polled (CDR decoded by rosbags, hindrax_drivers.lean_cdr:
         # 31 instead of 77 us per Imu, docs/architecture.md §10.1)
         for msg_type, topic, handler, depth in inputs:
             subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=True, **sub_ev)
@@ -552,7 +552,7 @@ class IdentificationNode(PolledInputsMixin, Node):
 
     def _publish_wrench(self, w_frd: np.ndarray, now) -> None:
         # serialised by rosbags and published as bytes: the 50 Hz publish without rclpy's object conversion
-        # (hindrax_drivers.cdr_decode, the measured gain)
+        # (hindrax_drivers.lean_cdr, the measured gain)
         w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
         self.pub_wrench.publish(wrench_stamped_cdr(now.nanoseconds, "base_link", w))
 

@@ -1,4 +1,4 @@
-"""Lean CDR (hindrax_drivers.cdr_decode): what rosbags encodes, rclpy's own typesupport decodes to the same message,
+"""Lean CDR (hindrax_drivers.lean_cdr): what rosbags encodes, rclpy's own typesupport decodes to the same message,
 and what rclpy serialises, rosbags decodes to the same fields. rclpy's deserialiser is the reference here, not code
 of this project."""
 import math
@@ -8,7 +8,7 @@ import pytest
 from geometry_msgs.msg import WrenchStamped
 from rclpy.serialization import deserialize_message, serialize_message
 
-from hindrax_drivers.cdr_decode import cdr_decoder, cdr_encoder, lean_class, thruster_pwm_cdr, wrench_stamped_cdr
+from hindrax_drivers.lean_cdr import cdr_decoder, cdr_encoder, lean_class, thruster_pwm_cdr, wrench_stamped_cdr
 from hindrax_msgs.msg import ThrusterPwm
 
 
@@ -53,7 +53,7 @@ def test_bytes_that_are_not_the_type_raise_and_a_non_message_is_refused():
 def test_an_imu_sample_encoded_by_rosbags_is_the_message_rclpy_would_publish():
     from sensor_msgs.msg import Imu
 
-    from hindrax_drivers.cdr_decode import imu_cdr
+    from hindrax_drivers.lean_cdr import imu_cdr
 
     acc, gyr = np.array([0.1, -0.2, 9.81]), np.array([1e-3, -2e-3, 0.5])
     acc_cov, gyr_cov = np.diag([1e-4, 2e-4, 3e-4]), np.diag([4e-6, 5e-6, 6e-6])
@@ -69,7 +69,7 @@ def test_an_imu_sample_encoded_by_rosbags_is_the_message_rclpy_would_publish():
 def test_a_heartbeat_encoded_by_rosbags_is_the_status_rclpy_would_publish():
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-    from hindrax_drivers.cdr_decode import diagnostic_status_cdr
+    from hindrax_drivers.lean_cdr import diagnostic_status_cdr
 
     ref = DiagnosticStatus(level=DiagnosticStatus.ERROR, name="hindrax/esc", message="unknown", hardware_id="esc",
                            values=[KeyValue(key="output_state", value="0"), KeyValue(key="armed", value="false")])
@@ -89,7 +89,7 @@ def test_a_heartbeat_says_ok_the_same_whether_taken_as_an_rclpy_object_or_lean()
 
     from diagnostic_msgs.msg import DiagnosticStatus
 
-    from hindrax_drivers.cdr_decode import diagnostic_status_cdr
+    from hindrax_drivers.lean_cdr import diagnostic_status_cdr
     from hindrax_drivers.liveness import heartbeat_ok
 
     for level, ok in ((DiagnosticStatus.OK, True), (DiagnosticStatus.WARN, False), (DiagnosticStatus.ERROR, False),

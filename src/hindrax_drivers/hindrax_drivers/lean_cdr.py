@@ -21,7 +21,7 @@ created with ``raw=True`` hands the callback bytes for :func:`cdr_decoder`. Meas
 ``WrenchStamped`` stream between two processes, November 2026): publisher 0.216-0.233 ms per message object,
 0.169-0.178 ms building a rosbags object, serialising and publishing the bytes; the subscribing process 2.0 % of a core
 taking message objects, 1.7 % taking bytes and decoding them with rosbags. The bytes differ from rclpy's only in
-padding (rosbags zeroes it), and every reader decodes them to the same message (test_cdr_decode.py).
+padding (rosbags zeroes it), and every reader decodes them to the same message (test_lean_cdr.py).
 """
 from __future__ import annotations
 
