@@ -181,18 +181,17 @@ class ThrustAllocationNode(Node):
         if now_ns is None:
             now_ns = self.get_clock().now().nanoseconds
         if msg is not None and (msg.header.stamp.sec or msg.header.stamp.nanosec):
-            stamp = Time(sec=int(msg.header.stamp.sec), nanosec=int(msg.header.stamp.nanosec))  # rclpy's, by value
+            stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         else:
-            stamp = Time(sec=now_ns // 1_000_000_000, nanosec=now_ns % 1_000_000_000)
+            stamp_ns = now_ns
         # the command as rosbags' ThrusterPwm: the sinks read its fields, and its CDR is published as bytes (50 Hz
         # without an rclpy object, hindrax_drivers.lean_cdr)
-        pwm = thruster_pwm_lean(stamp.sec * 1_000_000_000 + stamp.nanosec, BASE_FRAME, pulse_width_us,
-                                not rejected)
+        pwm = thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us, not rejected)
         for sink in self.command_sinks:
             sink(pwm)
         self.pub_pwm.publish(thruster_pwm_encode(pwm))
         saturated = np.asarray(saturated, dtype=bool)
-        self._held = (stamp, np.asarray(force_n, dtype=float), np.asarray(requested, dtype=float),
+        self._held = (stamp_ns, np.asarray(force_n, dtype=float), np.asarray(requested, dtype=float),
                       np.asarray(achieved, dtype=float), float(scale), saturated, rejected, reason)
         key = (rejected, saturated.tobytes(), reason.split(":", 1)[0])
         if key != self._last_status_key or now_ns - self._last_status_ns >= STATUS_PERIOD_NS:
@@ -203,8 +202,9 @@ class ThrustAllocationNode(Node):
         """Build and publish the held forces and status (ROS time ``now_ns``, ns)."""
         if self._held is None:
             return
-        stamp, force_n, requested, achieved, scale, saturated, rejected, reason = self._held
+        stamp_ns, force_n, requested, achieved, scale, saturated, rejected, reason = self._held
         self._held = None
+        stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)  # the command's stamp
         self._last_status_ns = now_ns
         forces = ThrusterForces(force_n=force_n.tolist())
         forces.header.stamp, forces.header.frame_id = stamp, BASE_FRAME
