@@ -28,14 +28,13 @@ from __future__ import annotations
 from typing import Any, Callable
 
 import numpy as np
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
 from rclpy.node import Node
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
 from ..lean_cdr import cdr_decoder, thruster_pwm_encode, thruster_pwm_lean
-from ..node_common import load_node_config, run_node
+from ..node_common import load_node_config, run_node, time_from_ns
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
@@ -204,7 +203,7 @@ class ThrustAllocationNode(Node):
             return
         stamp_ns, force_n, requested, achieved, scale, saturated, rejected, reason = self._held
         self._held = None
-        stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)  # the command's stamp
+        stamp = time_from_ns(stamp_ns)  # the command's stamp
         self._last_status_ns = now_ns
         forces = ThrusterForces(force_n=force_n.tolist())
         forces.header.stamp, forces.header.frame_id = stamp, BASE_FRAME
