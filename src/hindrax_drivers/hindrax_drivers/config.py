@@ -73,7 +73,8 @@ from .config_sections import (
     SupervisorSection,
     VehicleSection,
 )
-from .pca9685.protocol import Pca9685Error, esc_prescale
+from .allocation.thrust_curve import ThrustCurve, ThrustCurveError
+from .pca9685.protocol import ESC_DEADBAND_US, ESC_NEUTRAL_US, Pca9685Error, esc_prescale
 
 DOFS: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
 """The six degrees of freedom in SNAME order (nu = [u v w p q r], tau = [X Y Z K M N])."""
@@ -86,6 +87,14 @@ SECTIONS: tuple[str, ...] = (
     "vehicle", "environment", "hydrodynamics", "thrusters", "esc", "lights", "sensors", "pool", "limits",
     "identification", "simulation", "recording", "supervisor", "calibration", "control",
 )
+
+#: Range of the PCA9685's internal oscillator, Hz: 25 MHz nominal (NXP PCA9685 product data sheet Rev. 4, §7.3.5
+#: PWM frequency PRE_SCALE: ``prescale = round(osc_clock / (4096 f)) - 1`` with osc_clock 25 MHz); individual parts
+#: measure 23-27 MHz (docs/devices.md §5.1, [PCA9685] in docs/references.md). A calibration outside it is a wrong
+#: reading (channel, trigger, unit), not a part: with 28.85 MHz assumed, a commanded 1500 us neutral puts
+#: 1732 us on a 25 MHz part's wire.
+PCA9685_OSCILLATOR_MIN_HZ = 23e6
+PCA9685_OSCILLATOR_MAX_HZ = 27e6
 
 _FLOAT = "float"
 _INT = "int"
@@ -218,7 +227,9 @@ SCHEMA.update({
     "esc.i2c_bus": _i("Linux I2C bus number (/dev/i2c-N)", 0, 31),
     "esc.i2c_address": _i("PCA9685 7-bit address", 0x40, 0x7F),
     "esc.pwm_frequency_hz": _f("PWM frequency, Hz (Basic ESC max 400 Hz)", 24.0, 400.0),
-    "esc.oscillator_hz": _f("calibrated PCA9685 oscillator frequency, Hz (23-27 MHz measured)", 20e6, 30e6),
+    "esc.oscillator_hz": _f("calibrated PCA9685 internal oscillator frequency, Hz (25 MHz nominal, NXP PCA9685 "
+                            "data sheet §7.3.5; parts measure 23-27 MHz, docs/devices.md §5.1)",
+                            PCA9685_OSCILLATOR_MIN_HZ, PCA9685_OSCILLATOR_MAX_HZ),
     "esc.arming_time_s": _f("time at neutral before arming is accepted, s (docs/devices.md §5.2: BR holds 7 s)",
                             0.0, 60.0),
     "esc.watchdog_timeout_s": _f("no command for this long -> all neutral, s", 0.02, 10.0),
@@ -327,7 +338,11 @@ SCHEMA.update({
     "limits.max_pitch_rad": _f("abort beyond this pitch, rad", 0.0, math.pi / 2),
     # --- safety supervisor (hindrax_drivers.supervisor): the last line after the identification's own limits ---
     "supervisor.check_rate_hz": _f("rate of the supervisor's rate and run-time checks, Hz", 1.0, 200.0),
-    "supervisor.rate_window_s": _f("window the sensor rates are measured over, s", 0.2, 60.0),
+    "supervisor.rate_window_s": _f("window the sensor rates are measured over (at most "
+                                   "supervisor.reaction_time_s), s", 0.2, 60.0),
+    "supervisor.reaction_time_s": _f("longest time a failed sensor (silent, stale or frozen) may go unnoticed while "
+                                     "armed; bounds supervisor.rate_window_s and supervisor.max_invalid_dvl_s, s",
+                                     0.1, 10.0),
     "supervisor.min_rate.dvl_hz": _f("minimum dvl/data rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
     "supervisor.min_rate.altimeter_hz": _f("minimum ping/altitude rate while armed, Hz (0 = not watched)",
                                            0.0, 1000.0),
@@ -772,16 +787,7 @@ def _cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
 
 def _safety_cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     """Cross-checks of the safety settings (docs/architecture.md §8), one issue (one line) each."""
-    issues: list[ConfigIssue] = []
-    # the disarmed hold (neutral + trim) must sit inside the ESC deadband, or a disarmed vehicle thrusts
-    if "thrusters.names" in c and "thrusters.deadband_us" in c:
-        db, mid = c["thrusters.deadband_us"], c["thrusters.pulse_width_neutral_us"]
-        for n in c["thrusters.names"]:
-            trim = c.get(f"thrusters.{n}.trim_us")
-            if trim is not None and abs(trim) >= db:
-                issues.append(ConfigIssue(f"thrusters.{n}.trim_us", trim,
-                                          f"inside +-thrusters.deadband_us ({db:g}): the disarmed hold {mid + trim:g} us "
-                                          f"must stay in the ESC deadband {mid - db:g}-{mid + db:g} us"))
+    issues: list[ConfigIssue] = _hardware_checks(c)
     # the PWM frequency the ESC node accepts: the ACTUAL rate after prescale rounding within the ESC's 50-400 Hz
     if "esc.pwm_frequency_hz" in c and "esc.oscillator_hz" in c:
         try:
@@ -823,6 +829,56 @@ def _safety_cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
                 issues.append(ConfigIssue("supervisor.max_depth_m", c["supervisor.max_depth_m"],
                                           f"at most {other} ({c[other]:g}, {what}): a deeper limit never trips"))
                 break  # one line per key
+    return issues
+
+
+def _hardware_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
+    """Values checked against the hardware they drive, one issue (one line) each.
+
+    * ``thrusters.pulse_width_neutral_us`` and every neutral + ``trim_us`` (what a disarmed ESC node holds on the
+      wire) strictly inside the Basic ESC's own deadband, 1500 +- 25 us (docs/devices.md §5.2; ESC_NEUTRAL_US and
+      ESC_DEADBAND_US of :mod:`hindrax_drivers.pca9685.protocol`): outside it a vehicle that was never armed
+      thrusts (1560 us; deadband 120 with trim 100 gives 1600 us).
+    * ``thrusters.curve_negative`` / ``curve_positive``: each side increasing with the right sign at its range end
+      (negative thrust at ``pulse_width_min_us``, positive at ``pulse_width_max_us``) with a usable monotone branch
+      toward the deadband, the condition :class:`~hindrax_drivers.allocation.thrust_curve.ThrustCurve` needs to
+      start ([Hindrax-Drag] eq. 1); a negated curve is refused here rather than by the allocation at start-up.
+    * ``supervisor.rate_window_s`` and ``supervisor.max_invalid_dvl_s`` at most ``supervisor.reaction_time_s``: a
+      dead sensor is found at the latest one rate window after it stops (60 s found a dead depth sensor after 48 s).
+
+    The oscillator's range (23-27 MHz, :data:`PCA9685_OSCILLATOR_MIN_HZ`) is the key's own range in :data:`SCHEMA`.
+    """
+    issues: list[ConfigIssue] = []
+    lo_us, hi_us = ESC_NEUTRAL_US - ESC_DEADBAND_US, ESC_NEUTRAL_US + ESC_DEADBAND_US
+    esc_band = f"the ESC's deadband ({lo_us:g}, {hi_us:g}) us (Basic ESC, docs/devices.md §5.2)"
+    mid = c.get("thrusters.pulse_width_neutral_us")
+    if mid is not None:
+        if not lo_us < mid < hi_us:
+            issues.append(ConfigIssue("thrusters.pulse_width_neutral_us", mid,
+                                      f"inside {esc_band}: a disarmed ESC output would thrust"))
+        else:
+            for n in c.get("thrusters.names", ()):
+                trim = c.get(f"thrusters.{n}.trim_us")
+                if trim is not None and not lo_us < mid + trim < hi_us:
+                    issues.append(ConfigIssue(f"thrusters.{n}.trim_us", trim,
+                                              f"neutral + trim ({mid + trim:g} us) inside {esc_band}: the "
+                                              "disarmed hold would thrust"))
+    curve_keys = ("thrusters.curve_negative", "thrusters.curve_positive", "thrusters.pulse_width_min_us",
+                  "thrusters.pulse_width_neutral_us", "thrusters.pulse_width_max_us", "thrusters.deadband_us")
+    if all(k in c for k in curve_keys):
+        try:
+            ThrustCurve(*(c[k] for k in curve_keys))
+        except ThrustCurveError as exc:
+            side = "positive" if str(exc).startswith("positive") else "negative"
+            key = f"thrusters.curve_{side}"
+            issues.append(ConfigIssue(key, c[key], f"a cubic increasing with the right sign toward its range end "
+                                                   f"([Hindrax-Drag] eq. 1): {exc}"))
+    reaction = c.get("supervisor.reaction_time_s")
+    if reaction is not None:
+        for key in ("supervisor.rate_window_s", "supervisor.max_invalid_dvl_s"):
+            if key in c and c[key] > reaction:
+                issues.append(ConfigIssue(key, c[key], f"at most supervisor.reaction_time_s ({reaction:g} s): a "
+                                                       "failed sensor would go unnoticed longer"))
     return issues
 
 

@@ -226,7 +226,8 @@ class EscSection(Section):
     pwm_frequency_hz: float
     """PWM frequency, Hz (Basic ESC max 400 Hz)"""
     oscillator_hz: float
-    """calibrated PCA9685 oscillator frequency, Hz (23-27 MHz measured)"""
+    """calibrated PCA9685 internal oscillator frequency, Hz (25 MHz nominal, NXP PCA9685 data sheet §7.3.5; parts
+    measure 23-27 MHz, docs/devices.md §5.1)"""
     arming_time_s: float
     """time at neutral before arming is accepted, s (docs/devices.md §5.2: BR holds 7 s)"""
     watchdog_timeout_s: float
@@ -498,7 +499,10 @@ class SupervisorSection(Section):
     check_rate_hz: float
     """rate of the supervisor's rate and run-time checks, Hz"""
     rate_window_s: float
-    """window the sensor rates are measured over, s"""
+    """window the sensor rates are measured over (at most supervisor.reaction_time_s), s"""
+    reaction_time_s: float
+    """longest time a failed sensor (silent, stale or frozen) may go unnoticed while armed; bounds
+    supervisor.rate_window_s and supervisor.max_invalid_dvl_s, s"""
     min_rate: SupervisorMinRateSection
     max_invalid_dvl_s: float
     """armed with no valid DVL velocity for this long -> trip (the cage's dead reckoning is frozen meanwhile), s"""

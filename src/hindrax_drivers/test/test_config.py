@@ -215,3 +215,37 @@ def test_schema_docs_and_units_in_names():
 
 def test_flatten():
     assert flatten({"a": {"b": 1, "c": {"d": [1, 2]}}}) == {"a.b": 1, "a.c.d": [1, 2]}
+
+
+@pytest.mark.parametrize("overrides, line", [
+    # a never-armed vehicle holding 1560 us on all eight channels
+    ({"thrusters.pulse_width_neutral_us": 1560.0},
+     "thrusters.pulse_width_neutral_us = 1560.0: allowed inside the ESC's deadband (1475, 1525) us"),
+    # deadband 120 with trim 100: 1600 us disarmed
+    ({"thrusters.deadband_us": 120.0, "thrusters.t4.trim_us": 100.0},
+     "thrusters.t4.trim_us = 100.0: allowed neutral + trim (1600 us) inside the ESC's deadband (1475, 1525) us"),
+    ({"thrusters.t2.trim_us": -30.0}, "thrusters.t2.trim_us = -30.0: allowed neutral + trim (1470 us)"),
+    # outside the PCA9685's 23-27 MHz: 1732 us on the wire for a commanded neutral
+    ({"esc.oscillator_hz": 28.85e6}, "esc.oscillator_hz = 28850000.0: allowed number in [2.3e+07, 2.7e+07]"),
+    ({"esc.oscillator_hz": 22.9e6}, "esc.oscillator_hz = 22900000.0: allowed number in [2.3e+07, 2.7e+07]"),
+    # a negated thrust curve (positive thrust below neutral)
+    ({"thrusters.curve_negative": [4.61e-7, -0.001794, 2.2726, -927.1827]},
+     "thrusters.curve_negative = [4.61e-07, -0.001794, 2.2726, -927.1827]: allowed a cubic increasing with the right "
+     "sign"),
+    ({"thrusters.curve_positive": [4.61e-7, -0.002355, 3.9556, -2191.6173]}, "thrusters.curve_positive = "),
+    # a 60 s rate window found a dead depth sensor after 48 s
+    ({"supervisor.rate_window_s": 60.0},
+     "supervisor.rate_window_s = 60.0: allowed at most supervisor.reaction_time_s (3 s)"),
+    ({"supervisor.max_invalid_dvl_s": 5.0}, "supervisor.max_invalid_dvl_s = 5.0: allowed at most "
+                                            "supervisor.reaction_time_s (3 s)"),
+])
+def test_values_checked_against_the_hardware_one_line_each(overrides, line):
+    with pytest.raises(ConfigError) as err:
+        load_config(CONFIG, overrides)
+    assert err.value.lines() == [err.value.lines()[0]] and err.value.lines()[0].startswith(line), err.value.lines()
+
+
+def test_hardware_limits_accept_the_edges_inside():
+    cfg = load_config(CONFIG, {"thrusters.t1.trim_us": 24.0, "thrusters.t2.trim_us": -24.0,
+                               "esc.oscillator_hz": 23e6, "supervisor.rate_window_s": 3.0})
+    assert cfg.flat["thrusters.t1.trim_us"] == 24.0 and cfg.esc.oscillator_hz == 23e6

@@ -79,10 +79,10 @@ def test_update_vehicle_file_sets_scalars_and_lists_keeps_comments_and_restores_
     conf = tmp_path / "hindrax.yaml"
     conf.write_text(default_config_path().read_text())
     original = conf.read_text()
-    update_vehicle_file(conf, {"oscillator_hz": "24500000.0", "curve_positive": "[-4.0e-07, 0.002, -3.9, 2191.0]"})
+    update_vehicle_file(conf, {"oscillator_hz": "24500000.0", "curve_positive": "[0.0, 0.0001, -0.3, 225.0]"})
     cfg = load_config(conf)
     assert cfg.esc.oscillator_hz == 24.5e6
-    assert list(cfg.thrusters.curve_positive) == [-4e-07, 0.002, -3.9, 2191.0]
+    assert list(cfg.thrusters.curve_positive) == [0.0, 0.0001, -0.3, 225.0]
     changed = [(a, b) for a, b in zip(original.splitlines(), conf.read_text().splitlines()) if a != b]
     assert len(changed) == 2 and any("# nominal; calibrate per board" in b for _, b in changed)  # comment kept
     edited = conf.read_text()

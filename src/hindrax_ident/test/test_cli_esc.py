@@ -41,3 +41,15 @@ def test_calibrate_rejects_an_impossible_reading_and_leaves_the_file(tmp_path):
     r = run("esc", "calibrate", "--measured-us", "15.6", "--config", str(cfg), "--write")
     assert r.returncode == 1 and "outside 20-30 MHz" in r.stderr
     assert cfg.read_text() == before
+
+
+def test_calibrate_refuses_a_reading_outside_the_parts_range_and_keeps_the_flag_false(tmp_path):
+    """1300 us read for the 1500 us neutral (1210 counts, prescale 30): 1210 * 31 / 1300e-6 = 28.85 MHz (hand
+    arithmetic), outside the PCA9685's 23-27 MHz; it must not be written nor set oscillator_calibrated."""
+    cfg = tmp_path / "vehicle.yaml"
+    shutil.copy(default_config_path(), cfg)
+    before = cfg.read_text()
+    r = run("esc", "calibrate", "--measured-us", "1300", "--config", str(cfg), "--write")
+    assert r.returncode == 1 and "esc.oscillator_hz = 28853846.2: allowed 23-27 MHz" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert cfg.read_text() == before and load_config(cfg).esc.oscillator_calibrated is False

@@ -10,7 +10,8 @@ Procedure: start the stack (``hindrax bringup``; the ESC node holds every thrust
 channel's pulse with a scope (trim 0 on that channel), and run this command with the reading. It prints one JSON
 object (assumed and calibrated oscillator, prescale, counts, the pulse width the calibrated value gives);
 ``--write`` sets ``esc.oscillator_hz`` and ``esc.oscillator_calibrated: true`` in the configuration file (comments
-kept, validated, the original restored if the result is invalid). Arithmetic:
+kept, validated, the original restored if the result is invalid). A reading that gives an oscillator outside the
+part's 23-27 MHz (``esc.oscillator_hz``'s range) is refused, written or not: it is a wrong reading. Arithmetic:
 :func:`hindrax_drivers.pca9685.protocol.oscillator_from_measurement`.
 """
 from __future__ import annotations
@@ -46,7 +47,8 @@ def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.config import ConfigError, default_config_path
+    from hindrax_drivers.config import (PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, ConfigError,
+                                        default_config_path)
     from hindrax_drivers.pca9685 import protocol as p
 
     path = args.config or str(default_config_path())
@@ -61,6 +63,12 @@ def run(args: argparse.Namespace) -> int:
         counts = p.pulse_width_to_counts(commanded, new_prescale, f_true)
     except p.Pca9685Error as exc:
         raise CommandError(f"esc calibrate: {exc}") from None
+    if not PCA9685_OSCILLATOR_MIN_HZ <= f_true <= PCA9685_OSCILLATOR_MAX_HZ:
+        # not a part (23-27 MHz, esc.oscillator_hz's range): a wrong reading; nothing written, the flag stays false
+        raise CommandError(f"esc calibrate: {args.measured_us:g} us measured for {commanded:g} us commanded gives "
+                           f"esc.oscillator_hz = {f_true:.1f}: allowed {PCA9685_OSCILLATOR_MIN_HZ / 1e6:g}-"
+                           f"{PCA9685_OSCILLATOR_MAX_HZ / 1e6:g} MHz (the PCA9685's range); check channel, trigger and "
+                           f"units; {path} left unchanged")
     result = {
         "assumed_oscillator_hz": assumed,
         "commanded_us": commanded,
