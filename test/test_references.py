@@ -5,6 +5,8 @@
 * Every ``docs/<name>.md §N`` cited anywhere resolves to a numbered heading of that file, and every
   ``docs/<name>.md`` cited exists.
 * A paper is cited by its key from docs/references.md only, never by a project-internal number.
+* docs/architecture.md describes today's design in at most 500 lines (the history of a decision belongs in the
+  body of its commit).
 
 The forbidden names are assembled from parts so that this file does not match a plain grep for them.
 """
@@ -137,6 +139,21 @@ def test_every_cited_docs_section_exists(texts: dict[Path, str]) -> None:
                     bad.append(f"{_where(path, text, pos)}  <- docs/{name} has no section {section}")
     assert not bad, "citations of docs/ that do not resolve:\n" + "\n".join(bad)
     assert n_cited > 100, f"only {n_cited} section citations of docs/ found: is the scan broken?"
+
+
+#: The most lines docs/architecture.md may have (issue 47 item 5).
+ARCHITECTURE_MAX_LINES = 500
+
+
+def test_architecture_stays_a_description_of_today() -> None:
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    n_lines = len(text.splitlines())
+    assert n_lines <= ARCHITECTURE_MAX_LINES, (
+        f"docs/architecture.md has {n_lines} lines (at most {ARCHITECTURE_MAX_LINES}): describe today's design, "
+        "move history to commit bodies")
+    # the sections that code cites keep existing (test_every_cited_docs_section_exists checks each citation)
+    assert {"1", "2", "3", "4", "5", "6", "7", "8", "8.1", "9", "10", "10.1", "11", "12"} <= headings(
+        ROOT / "docs" / "architecture.md")
 
 
 def test_papers_are_cited_by_key_only(texts: dict[Path, str]) -> None:
