@@ -38,10 +38,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dofs", default=None, help="comma-separated DOFs (default: all six)")
     parser.add_argument("--holdout", nargs="+", default=[], metavar="BAG", help="bags used for validation only")
     parser.add_argument("--folds", type=int, default=4, help="K of the cross-validation (default 4)")
+    parser.add_argument("--persistence-margin", type=float, default=None, metavar="FRACTION",
+                        help="relative margin by which a DOF's model must beat holding the velocity in "
+                             "cross-validation, else its verdict is 'no model beats holding the velocity' (default "
+                             "0.05: about what one physical term such as a per-run bias is worth, and the "
+                             "fold-to-fold scatter of the score)")
+    parser.add_argument("--max-delay-s", type=float, default=1.0,
+                        help="largest input delay + lag searched for a commanded wrench, s (default 1.0; also "
+                             "bounded by a tenth of the segment and a quarter period of the excitation bandwidth)")
     parser.add_argument("--config", default=None,
                         help="vehicle file (optional: without it nothing about the vehicle is assumed; needed for "
                              "ThrusterPwm forces and for added_mass = inertia - rigid-body inertia)")
     parser.add_argument("--out", default=None, help="output directory (default: the first bag's parent directory)")
+
+
+def _num(x, width: int, fmt: str = ".3f") -> str:
+    """``x`` right-aligned in ``width``; a missing or non-finite number is ``-`` (never ``nan`` in a table)."""
+    import math
+
+    return f"{'-':>{width}}" if x is None or not math.isfinite(float(x)) else f"{float(x):{width}{fmt}}"
 
 
 def format_table(res, cfg=None) -> str:
@@ -52,6 +67,7 @@ def format_table(res, cfg=None) -> str:
     import numpy as np
 
     from ..identification.fit_any import assessment
+    from ..identification.fit_core import NO_MODEL_VERDICT
 
     lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
              f"{'fold spread':>11}"]
@@ -73,6 +89,13 @@ def format_table(res, cfg=None) -> str:
         lines.append(f"{dof:6} model: {c.terms.label}; delay {c.timing.delay_s:.3f} s, lag {c.timing.lag_s:.3f} s "
                      f"({c.timing.source}); t with {c.covariance.t_dof} degrees of freedom "
                      f"({c.covariance.clusters} clusters)")
+        if c.timing.at_edge:
+            lines.append(f"{dof:6} timing: {c.timing.edge_note}")
+        if not c.beats_persistence:
+            p = c.persistence
+            lines.append(f"{dof:6} verdict: {NO_MODEL_VERDICT} (cross-validated nrmse {p['nrmse']:.3f}, holding the "
+                         f"velocity {p['nrmse_hold']:.3f}, needs {100 * p['margin']:.0f} % less): no parameter "
+                         "trusted")
     lines.append("")
     lines.append(f"validation ({res.design})")
     lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8} "
@@ -81,9 +104,9 @@ def format_table(res, cfg=None) -> str:
         for key, v in r.validation.items():
             if not isinstance(v, dict) or "nrmse" not in v:
                 continue
-            lines.append(f"{dof:6} {key:17} {v['nrmse']:7.3f} {v.get('nrmse_hold', float('nan')):10.3f} "
-                         f"{v.get('nrmse_zero', float('nan')):10.3f} {v['samples']:8d} "
-                         f"{v.get('nrmse_floor', float('nan')):11.3f}")
+            lines.append(f"{dof:6} {key:17} {_num(v['nrmse'], 7)} {_num(v.get('nrmse_hold'), 10)} "
+                         f"{_num(v.get('nrmse_zero'), 10)} {v['samples']:8d} {_num(v.get('nrmse_floor'), 11)}")
+    lines.append("(-: not computable from these samples, e.g. the noise floor of a measured position)")
     return "\n".join(lines)
 
 
@@ -131,6 +154,13 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"ident fit: {b}: no such file or directory")
     if args.folds < 2:
         raise CommandError(f"ident fit: --folds {args.folds}: must be >= 2")
+    from ..identification.fit_core import PERSISTENCE_MARGIN
+
+    margin = PERSISTENCE_MARGIN if args.persistence_margin is None else float(args.persistence_margin)
+    if not 0.0 <= margin < 1.0:
+        raise CommandError(f"ident fit: --persistence-margin {margin:g}: must be in [0, 1)")
+    if not 0.0 < args.max_delay_s <= 5.0:
+        raise CommandError(f"ident fit: --max-delay-s {args.max_delay_s:g}: must be in (0, 5]")
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
     choice = TopicChoice(args.wrench_topic, args.velocity_topic, args.imu_topic, args.depth_topic)
     if cfg is not None and len(args.bags) == 1 and not args.holdout and dofs is None and choice == TopicChoice():
@@ -143,7 +173,8 @@ def run(args: argparse.Namespace) -> int:
         if campaign:
             return _run_campaign(args, cfg)
     try:
-        res = fit_bags(args.bags, choice, cfg, dofs, args.holdout, FitOptions(folds=args.folds))
+        res = fit_bags(args.bags, choice, cfg, dofs, args.holdout,
+                       FitOptions(folds=args.folds, persistence_margin=margin, max_delay_s=args.max_delay_s))
     except (FitInputError, BagError, OSError) as exc:
         raise CommandError(f"ident fit: {exc}") from exc
     if not any(r.status == "fitted" for r in res.dofs.values()):
@@ -154,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
     path, index = write_fit_outputs(out, res, doc)
     print(format_table(res, cfg))
     for dof, e in doc["dofs"].items():
-        if e.get("verdict") == "suspect":
+        if e.get("verdict") != "trusted":
             print(f"{dof}: suspect ({'; '.join(e['reasons'])})")
             for a in e.get("advice", []):
                 print(format_advice(a["parameter"], a))

@@ -106,7 +106,8 @@ class TopicChoice:
 class FitOptions:
     """grid_s: resampling step, s; segment_s: output-error training segment, s; validation_s: horizon of the
     validation predictions, s; max_delay_s: largest input delay searched (commanded wrench), s; gap_min_s: shortest
-    spacing treated as a gap, s; folds: K of the cross-validation."""
+    spacing treated as a gap, s; folds: K of the cross-validation; persistence_margin: the relative margin by which
+    a DOF's model must beat holding the velocity in cross-validation (:func:`.fit_core.persistence`)."""
 
     grid_s: float = 0.05
     segment_s: float = fit_core.SEGMENT_S
@@ -114,6 +115,7 @@ class FitOptions:
     max_delay_s: float = 1.0
     gap_min_s: float = 0.5
     folds: int = 4
+    persistence_margin: float = fit_core.PERSISTENCE_MARGIN
 
 
 def _norm(name: str) -> str:
@@ -700,7 +702,8 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
         raise FitInputError(f"too little data: {have:.1f} s of continuous force and velocity; at least 2 segments "
                             f"of {opts.segment_s:g} s ({2 * opts.segment_s:g} s) are needed, more for "
                             "cross-validation")
-    core_opts = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s)
+    core_opts = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s,
+                                     persistence_margin=opts.persistence_margin)
     design = (f"{opts.folds}-fold cross-validation by contiguous blocks of the {opts.validation_s:g} s validation "
               "segments that move each DOF (training segments overlapping a held-out one left out)")
     if hold:
@@ -723,9 +726,13 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
     results, errors = fit_core.identify_dofs(recs, core_opts)
     inertia = fit_core.inertia_vector(results)
     pre_notes["timing"] = {d: {"delay_s": round(r.timing.delay_s, 4), "lag_s": round(r.timing.lag_s, 4),
-                               "source": r.timing.source} for d, r in results.items()}
+                               "source": r.timing.source,
+                               **({"searched_up_to_s": round(r.timing.bound_s, 4), "bound": r.timing.bound_why,
+                                   "at_edge": r.timing.at_edge} if r.timing.bound_s is not None else {})}
+                           for d, r in results.items()}
     pre_notes["delay_method"] = ("per DOF: a commanded wrench's delay is the force shift "
-                                 f"(0..{opts.max_delay_s:g} s) "
+                                 f"(0 up to the smallest of {opts.max_delay_s:g} s, a tenth of the segment and a "
+                                 "quarter period of the excitation bandwidth: fit_core.resolvable_delay) "
                                  "minimising the equation-error residual (parabola refinement), then the first-order "
                                  "lag tau among 0, d/2, d with the smallest training output error (delay d - tau); a "
                                  "thrust-model force keeps thrusters.time_constant_s and esc.output_latency_s")
@@ -798,7 +805,9 @@ def assessment(r: DofFit, cfg: VehicleConfig | None) -> dict:
                      fold_theta=c.fold_theta, cv_nrmse=c.cv.get("nrmse") if c.cv else None,
                      # the whiteness threshold is the designed campaign's (docs/identification.md §7 step 6); here
                      # the CV nrmse judges the model, and the intervals carry the residual correlation
-                     residual_rho=None, expected_bias=expected)
+                     residual_rho=None, expected_bias=expected,
+                     cv_nrmse_hold=(c.persistence or {}).get("nrmse_hold"),
+                     persistence_margin=(c.persistence or {}).get("margin", fit_core.PERSISTENCE_MARGIN))
     a = assess(ev, declared_rel(cfg))
     if cfg is not None:
         with_added_mass(a, a["parameters"]["inertia"]["value"] - rigid_inertia(cfg, r.dof))
@@ -847,9 +856,11 @@ def _param_entries(r: DofFit, a: dict) -> dict:
                "linear_damping_negative"] if r.dof == "heave" else ["quadratic_damping", "linear_damping"])
     for n in wanted:
         if n not in entries:
+            no_model = a["verdict"] == fit_core.NO_MODEL_VERDICT
             entries[n] = {"value": 0.0, "std": 0.0, "unit": units.get(n, ""), "ci95": [0.0, 0.0],
-                          "model_term": "excluded", "verdict": "trusted",
-                          "reasons": [], "note": f"not in the model chosen by cross-validation ({c.terms.label})"}
+                          "model_term": "excluded", "verdict": "suspect" if no_model else "trusted",
+                          "reasons": list(a["reasons"]) if no_model else [],
+                          "note": f"not in the model chosen by cross-validation ({c.terms.label})"}
     if "added_mass" in a["parameters"]:
         am = put("inertia", c.names.index("inertia"), units["added_mass"], "added_mass")
         am.pop("fold_spread", None)
@@ -906,8 +917,20 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         e["method"] = "output-error (segment-wise, prediction error; docs/identification.md §7)"
         e["model"] = c.terms.label
         e["model_selection"] = [{"terms": k.terms.label, "parameters": k.n_params,
-                                 "cv_nrmse": k.cv.get("nrmse"), "chosen": k is c.chosen} for k in c.candidates]
+                                 "cv_nrmse": k.cv.get("nrmse"), "cv_nrmse_hold": k.cv.get("nrmse_hold"),
+                                 "chosen": k is c.chosen} for k in c.candidates]
+        if c.persistence is not None:  # the trivial predictors, scored on the chosen model's held-out samples
+            e["model_selection"] += [{"terms": "hold the velocity (persistence)", "parameters": 0,
+                                      "cv_nrmse": c.persistence["nrmse_hold"], "chosen": False},
+                                     {"terms": "zero", "parameters": 0, "cv_nrmse": c.persistence["nrmse_zero"],
+                                      "chosen": False}]
+            e["persistence"] = dict(c.persistence)
         e["timing"] = {"delay_s": c.timing.delay_s, "lag_s": c.timing.lag_s, "source": c.timing.source}
+        if c.timing.bound_s is not None:
+            e["timing"].update(searched_up_to_s=c.timing.bound_s, bound=c.timing.bound_why,
+                               at_edge=c.timing.at_edge)
+            if c.timing.at_edge:
+                e["timing"]["note"] = c.timing.edge_note
         e["interval"] = {"method": "cluster-robust (sandwich) covariance, contiguous blocks of segments as "
                                    "clusters, at least the model-based covariance; Student t with clusters - 1 "
                                    "degrees of freedom",

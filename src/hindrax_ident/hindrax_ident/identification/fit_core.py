@@ -7,7 +7,9 @@ raw measurements at their own times) and hand it here. Everything after the read
 1. **Timing** (:func:`estimate_timing`): a force from a thrust model of the recorded pulse widths carries its own
    latency and lag (``known``); a commanded wrench gets its input delay estimated per DOF (the shift of the force
    minimising the equation-error residual, parabola through the minimum) and a first-order thrust lag chosen by
-   the training output error among tau = 0, d/2, d (with the delay d - tau).
+   the training output error among tau = 0, d/2, d (with the delay d - tau). The search stops at what the data
+   can resolve (:func:`resolvable_delay`: the option, a tenth of the segment, a quarter period of the excitation
+   bandwidth); an estimate at that bound is reported as such (``Timing.at_edge``).
 2. **Segments** (:func:`build_segments`): the chunks cut into equal segments of ``segment_s``; a segment is used
    when the DOF moves in it (RMS velocity or force standard deviation above :data:`EXCITATION_MIN`). Each segment
    is simulated open loop from its own smoothed initial state.
@@ -30,7 +32,9 @@ raw measurements at their own times) and hand it here. Everything after the read
    one-standard-error rule biased the yaw damping moment by 29 % on the piloted test bags); an addition of stage 2
    is kept only when it lowers the CV error by more than one standard error of the fold-wise differences (the
    one-standard-error rule of [Hastie-ESL2009] §7.10, against spurious coupling terms). Every candidate's CV score
-   is reported.
+   is reported, with holding the velocity and 0 scored on the same held-out samples (:func:`persistence`): a
+   chosen model that does not beat holding the velocity by :data:`PERSISTENCE_MARGIN` makes the DOF's verdict
+   :data:`NO_MODEL_VERDICT` (:func:`.verdicts.assess`).
 5. **Intervals** (:func:`cluster_covariance`): the cluster-robust (sandwich) covariance of the M-estimator with
    contiguous blocks of segments as clusters, blocks lengthened (doubled) while the lag-1 autocorrelation of the
    block scores exceeds :data:`CLUSTER_RHO_MAX` and at least :data:`MIN_CLUSTERS` blocks remain, small-sample factor
@@ -58,7 +62,8 @@ __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUST
            "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments", "simulate", "fit_terms", "FitOutcome",
            "cluster_covariance", "estimate_timing", "validation_measures", "DofResult", "select_terms",
            "identify_dof", "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
-           "excited_kind", "coriolis_products"]
+           "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN", "NO_MODEL_VERDICT",
+           "resolvable_delay", "with_edge"]
 
 #: (force std, velocity std) within a segment below which it does not move the DOF: translational (N, m/s),
 #: rotational (N m, rad/s)
@@ -73,6 +78,14 @@ MIN_CLUSTERS = 6
 CLUSTER_RHO_MAX = 0.2
 #: Reverse thrust gain bounds (ratio of the reverse to the forward force per unit of command)
 REVERSE_GAIN_BOUNDS = (0.2, 2.0)
+#: Relative margin by which a model's cross-validated nrmse must be below holding the velocity
+#: (:func:`persistence`). 0.05: the smallest gain the issue-46 real data show a physical term to be worth (a
+#: per-run bias, 0.02-0.06 nrmse, on hold scores of 0.5-0.9) and about the fold-to-fold scatter of a CV nrmse
+#: over 4 folds of a few minutes each; a model within it of holding the velocity predicts nothing the last
+#: measurement does not.
+PERSISTENCE_MARGIN = 0.05
+#: The verdict of a DOF whose best model does not beat holding the velocity (:func:`persistence`)
+NO_MODEL_VERDICT = "no model beats holding the velocity"
 
 
 def excited_kind(dof: str) -> str:
@@ -165,7 +178,8 @@ class CoreOptions:
     cross-validation; max_delay_s: largest input delay searched (commanded wrench), s; robust: soft-L1 loss (else
     plain least squares); select: choose the terms by cross-validation (else ``terms``); terms: the model when not
     selecting; min_clusters: fewest clusters for the interval; all_segments: fit every segment of the record, moving
-    or not (a designed campaign's DOF window), else only the segments that move the DOF."""
+    or not (a designed campaign's DOF window), else only the segments that move the DOF; persistence_margin: the
+    relative margin by which the chosen model must beat holding the velocity (:func:`persistence`)."""
 
     segment_s: float = SEGMENT_S
     validation_s: float = VALIDATION_S
@@ -176,17 +190,32 @@ class CoreOptions:
     terms: Terms = Terms()
     min_clusters: int = MIN_CLUSTERS
     all_segments: bool = False
+    persistence_margin: float = PERSISTENCE_MARGIN
 
 
 @dataclass(frozen=True)
 class Timing:
     """delay_s: the force acts this late; lag_s: then through a first-order lag of this time constant; source:
-    ``"known"`` (thrust model) or ``"estimated"``; curve: [(delay, normalised residual)] of the search."""
+    ``"known"`` (thrust model) or ``"estimated"``; curve: [(delay, normalised residual)] of the search; bound_s:
+    the largest delay + lag searched (:func:`resolvable_delay`; None for a known timing) and bound_why what set it;
+    at_edge: the estimate within one grid step of that bound."""
 
     delay_s: float = 0.0
     lag_s: float = 0.0
     source: str = "known"
     curve: tuple = ()
+    bound_s: float | None = None
+    bound_why: str = ""
+    at_edge: bool = False
+
+    @property
+    def edge_note(self) -> str:
+        """One line when delay + lag sit at the upper end of the searched range (the true value may be larger:
+        the data cannot resolve it), else ``""``."""
+        if not self.at_edge or self.bound_s is None:
+            return ""
+        return (f"delay + lag {self.delay_s + self.lag_s:.3f} s at the edge of its range 0-{self.bound_s:.3f} s "
+                f"({self.bound_why}): the data cannot tell a longer one")
 
 
 def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequence[str] = ()) -> list[tuple]:
@@ -723,7 +752,54 @@ def _ee_rows(rec: DofRecord, force: list, terms: Terms) -> tuple[np.ndarray, np.
     return np.concatenate(rows), np.concatenate(rhs)
 
 
-def estimate_timing(rec: DofRecord, max_delay_s: float, inertia: np.ndarray | None = None) -> Timing:
+#: Fraction of a training segment a delay may take (each segment starts from its measured state: a delay of a
+#: tenth of it already leaves a tenth of every segment driven by force from before its start)
+DELAY_SEGMENT_FRACTION = 0.1
+#: Fraction of the velocity's power below the excitation bandwidth (:func:`resolvable_delay`)
+BANDWIDTH_POWER = 0.9
+
+
+def resolvable_delay(rec: DofRecord, max_delay_s: float, segment_s: float = SEGMENT_S) -> tuple[float, str]:
+    """The largest input delay + lag (s) the record can resolve, and what set it: the smallest of ``max_delay_s``
+    (the option), :data:`DELAY_SEGMENT_FRACTION` of the training segment (record length), and a quarter period of
+    the excitation bandwidth f_b, the frequency below which :data:`BANDWIDTH_POWER` of the detrended velocity's
+    power lies (Welch periodogram of each chunk, pooled): a pure delay d shifts the phase by 2 pi f d, and at a
+    quarter period of the highest frequency the response carries, d trades against the inertia-to-damping phase lag
+    of the dynamics (at most 90 degrees), so the data no longer tell them apart. Never below two grid steps (the
+    sample rate's resolution; sub-step values come from the parabola refinement)."""
+    h = rec.h
+    limits = [(float(max_delay_s), f"option max_delay_s {max_delay_s:g} s"),
+              (DELAY_SEGMENT_FRACTION * segment_s,
+               f"{DELAY_SEGMENT_FRACTION:g} x the {segment_s:g} s segment (record length)")]
+    freqs = np.linspace(0.0, 0.5 / h, 401)
+    power = np.zeros_like(freqs)
+    for ch in rec.chunks:
+        v = np.asarray(ch.v, dtype=float)
+        if v.size < 32 or not np.all(np.isfinite(v)):
+            continue
+        f, p = _signal.welch(_signal.detrend(v), fs=1.0 / h, nperseg=min(v.size, int(round(40.0 / h))))
+        power += np.interp(freqs, f, p) * v.size  # a density, weighted by the chunk's length
+    if float(np.sum(power)) > 0:
+        cum = np.cumsum(power) / float(np.sum(power))
+        fb = float(freqs[min(int(np.searchsorted(cum, BANDWIDTH_POWER)), freqs.size - 1)])
+        if fb > 0:
+            limits.append((0.25 / fb, f"a quarter period of the {fb:.2g} Hz excitation bandwidth "
+                                      f"({100 * BANDWIDTH_POWER:.0f} % of the velocity's power)"))
+    bound, why = min(limits, key=lambda x: x[0])
+    if bound < 2 * h:
+        return 2 * h, f"two grid steps of {h:g} s (the sample rate's resolution; {why}: {bound:.3g} s)"
+    return bound, why
+
+
+def with_edge(timing: Timing, h: float) -> Timing:
+    """``timing`` with ``at_edge`` set: an estimated delay + lag within one grid step ``h`` of its bound."""
+    if timing.bound_s is None or timing.source == "known":
+        return timing
+    return replace(timing, at_edge=bool(timing.delay_s + timing.lag_s >= timing.bound_s - h))
+
+
+def estimate_timing(rec: DofRecord, max_delay_s: float, inertia: np.ndarray | None = None,
+                    segment_s: float = SEGMENT_S) -> Timing:
     """The input delay of a commanded wrench (module docstring, step 1; lag chosen later by
     :func:`choose_lag`): shift s = 0..max of the force minimising the equation-error residual normalised by the
     force variance, refined by a parabola. With ``inertia`` (6,) the Coriolis force of the other DOFs is subtracted
@@ -731,7 +807,8 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, inertia: np.ndarray | No
     delay)."""
     if rec.force_source != "wrench":
         return Timing(0.0, rec.lag_s, "known")
-    kmax = max(1, int(round(max_delay_s / rec.h)))
+    bound, why = resolvable_delay(rec, max_delay_s, segment_s)
+    kmax = max(1, int(round(bound / rec.h)))
     mi = None
     if inertia is not None and rec.has_coupling:
         mi = np.where(np.isfinite(inertia), inertia, 0.0).copy()
@@ -742,7 +819,7 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, inertia: np.ndarray | No
                   for ch in rec.chunks]
         X, y = _ee_rows(rec, forces, Terms())
         if y.size < 20:
-            return Timing(0.0, 0.0, "estimated (too little data: 0)")
+            return Timing(0.0, 0.0, "estimated (too little data: 0)", (), bound, why)
         th, *_ = np.linalg.lstsq(X, y, rcond=None)
         res.append(float(np.mean((y - X @ th) ** 2) / max(float(np.var(y)), 1e-12)))
     j = int(np.argmin(res))
@@ -753,7 +830,7 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, inertia: np.ndarray | No
         if den > 0:
             d = j + 0.5 * (a - c) / den
     curve = tuple((round(s * rec.h, 4), round(r, 6)) for s, r in enumerate(res))
-    return Timing(d * rec.h, 0.0, "estimated", curve)
+    return with_edge(Timing(d * rec.h, 0.0, "estimated", curve, bound, why), rec.h)
 
 
 # ------------------------------------------------------------------------------------------------ validation
@@ -905,7 +982,8 @@ def _cv_summary(sd_val: SegmentData, folds: Folds, sse, nn, sst, fold_theta, lay
     pooled = validation_measures(va, np.broadcast_to(va.v0[:, None], (va.m, va.L)))
     sd_z = math.sqrt(pooled["sst"] / pooled["samples"]) if pooled["samples"] else 1.0
     return {"nrmse": math.sqrt(float(np.sum(sse)) / n) / sd_z, "nrmse_hold": pooled["nrmse_hold"],
-            "nrmse_zero": pooled["nrmse_zero"], "samples": int(n), "folds": int(np.sum(nn > 0)),
+            "nrmse_zero": pooled["nrmse_zero"], "nrmse_floor": pooled["nrmse_floor"], "samples": int(n),
+            "folds": int(np.sum(nn > 0)),
             "fold_nrmse": [float(math.sqrt(s / c) / math.sqrt(t / c)) if c > 0 and t > 0 else None
                            for s, c, t in zip(sse, nn, sst)]}
 
@@ -933,6 +1011,16 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     cv = _cv_summary(sv, folds, sse, nn, sst, th, layout) if folds.held else {"nrmse": math.nan, "samples": 0,
                                                                               "folds": 0}
     return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, notes)
+
+
+def persistence(cv: dict, margin: float = PERSISTENCE_MARGIN) -> dict:
+    """The model's cross-validated nrmse against the two trivial predictors scored on the SAME held-out samples
+    (:func:`_cv_summary`): holding the segment's initial velocity (persistence) and 0. ``beats``: nrmse <=
+    (1 - ``margin``) nrmse_hold (NaN scores: False). Returns {nrmse, nrmse_hold, nrmse_zero, margin, beats}."""
+    n, hold, zero = (float(cv.get(k, math.nan)) if cv.get(k) is not None else math.nan
+                     for k in ("nrmse", "nrmse_hold", "nrmse_zero"))
+    beats = bool(math.isfinite(n) and math.isfinite(hold) and n <= (1.0 - margin) * hold)
+    return {"nrmse": n, "nrmse_hold": hold, "nrmse_zero": zero, "margin": float(margin), "beats": beats}
 
 
 def _best_cv(cands: list[Candidate]) -> Candidate:
@@ -1005,6 +1093,11 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         singles = [t for t in tried if t.terms in [replace(base.terms, **{n: v}) for n, v in keep]]
         best_single = min(singles, key=lambda t: t.mse)
         chosen = c if c is not None and _improves(best_single, c) else best_single
+    if not persistence(chosen.cv, opts.persistence_margin)["beats"]:
+        # the one-standard-error rule kept a simpler model that holding the velocity beats: the best one that does
+        better = [t for t in tried if persistence(t.cv, opts.persistence_margin)["beats"]]
+        if better:
+            chosen = min(better, key=lambda t: t.mse)
     return chosen, tried
 
 
@@ -1031,6 +1124,14 @@ class DofResult:
     train: SegmentData
     chosen: Candidate
     measured: str
+    persistence: dict | None = None
+
+    @property
+    def beats_persistence(self) -> bool:
+        """The chosen model beats holding the velocity in cross-validation (:func:`persistence`); True without a
+        cross-validation (nothing to compare)."""
+        return self.persistence is None or bool(self.persistence["beats"]) or not math.isfinite(
+            self.persistence["nrmse_hold"])
 
     @property
     def t_quantile(self) -> float:
@@ -1085,13 +1186,14 @@ def refine_delay(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         return float(np.mean(f.residuals ** 2))
 
     lo = max(0.0, timing.delay_s - 2 * rec.h)
-    hi = min(opts.max_delay_s, timing.delay_s + 2 * rec.h)
+    top = timing.bound_s if timing.bound_s is not None else opts.max_delay_s
+    hi = min(top - timing.lag_s, timing.delay_s + 2 * rec.h)
     if hi - lo < 1e-3:
         return timing
     sol = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 0.005})
     if not math.isfinite(sol.fun):
         return timing
-    return replace(timing, delay_s=float(sol.x), source="estimated (output-error refined)")
+    return with_edge(replace(timing, delay_s=float(sol.x), source="estimated (output-error refined)"), rec.h)
 
 
 def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts: CoreOptions) -> DofResult:
@@ -1103,7 +1205,8 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
     names = [n for n, _k, _lo, _hi in chosen.layout]
     return DofResult(rec.dof, names, th, cov, std, np.column_stack([th - tq * std, th + tq * std]), chosen.terms,
                      timing, tried, chosen.cv, chosen.fold_theta, chosen.fold_notes, chosen.train, chosen,
-                     rec.measured)
+                     rec.measured, persistence(chosen.cv, opts.persistence_margin) if chosen.cv.get("samples")
+                     else None)
 
 
 def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None
@@ -1111,8 +1214,8 @@ def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.
     """Timing, terms by cross-validation (or ``opts.terms``), fit and intervals of one DOF (module docstring).
     ``inertia`` (6,): the other DOFs' inertias for the Coriolis candidate (NaN: unknown). Raises
     :class:`EstimationError`."""
-    timing = estimate_timing(rec, opts.max_delay_s)
-    timing = choose_lag(rec, timing, opts)
+    timing = estimate_timing(rec, opts.max_delay_s, segment_s=opts.segment_s)
+    timing = with_edge(choose_lag(rec, timing, opts), rec.h)
     if opts.select and rec.terms is None:
         chosen, tried = select_terms(rec, timing, opts, inertia)
     else:
@@ -1139,7 +1242,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     timings, base, tried, errors, first = {}, {}, {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
         try:
-            tm = choose_lag(rec, estimate_timing(rec, opts.max_delay_s), opts)
+            tm = choose_lag(rec, estimate_timing(rec, opts.max_delay_s, segment_s=opts.segment_s), opts)
             timings[dof] = tm
             terms = Terms("both", rec.dof == "heave")
             sd = build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
@@ -1171,8 +1274,10 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     for dof in first:
         rec = records[dof]
         if rec.force_source == "wrench":  # again, without the Coriolis force, then refined by the output error
-            tm = choose_lag(rec, estimate_timing(rec, opts.max_delay_s, inertia0 if rec.has_coupling else None), opts)
+            tm = choose_lag(rec, estimate_timing(rec, opts.max_delay_s, inertia0 if rec.has_coupling else None,
+                                                 opts.segment_s), opts)
             timings[dof] = refine_delay(rec, tm, opts, inertia0 if rec.has_coupling else None)
+        timings[dof] = with_edge(timings[dof], rec.h)
         tm = timings[dof]
         try:
             if opts.select and rec.terms is None:

@@ -63,7 +63,7 @@ from scipy import stats
 
 from hindrax_drivers.config import VehicleConfig
 
-from .fit_core import SEGMENT_S
+from .fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
            "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
@@ -155,7 +155,10 @@ class FitEvidence:
     residual_rho: lag-1 autocorrelation of consecutive output-error residuals or None; steady {name: (value, std)}
     of the steady-state method ([Hindrax-Drag] eqs. 2-8) or None; windows [(mean velocity, mean force)] of the
     steady windows; expected_bias: the constant force expected (0; heave the configured net buoyancy, N) or None
-    when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when ``thrust_in_covariance``.
+    when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when ``thrust_in_covariance``;
+    cv_nrmse_hold: holding the velocity's nrmse on the same cross-validation samples as ``cv_nrmse`` or None (no
+    comparison); persistence_margin: the relative margin the model must beat it by
+    (:func:`~.fit_core.persistence`).
     """
 
     dof: str
@@ -177,6 +180,8 @@ class FitEvidence:
     expected_bias: float | None = 0.0
     thrust_in_covariance: bool = False
     fit_std: Mapping[str, float] | None = None
+    cv_nrmse_hold: float | None = None
+    persistence_margin: float = PERSISTENCE_MARGIN
 
 
 #: Smallest bias difference flagged, as a fraction of the damping force at the typical speed: a force the data
@@ -200,14 +205,16 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     * DOF-wide: ``bias`` (off the expected force beyond the t quantile and by more than :data:`BIAS_MIN_REL` of the
       damping force at the typical speed), ``methods`` (steady-state against transient quadratic damping),
       ``direction`` (steady windows of the two directions), ``whiteness`` (residual lag-1 above
-      :data:`WHITENESS_MAX`), cross-validated nrmse at or above :data:`NRMSE_MAX`;
+      :data:`WHITENESS_MAX`), cross-validated nrmse at or above :data:`NRMSE_MAX`; with ``cv_nrmse_hold`` the model
+      must beat holding the velocity (:func:`~.fit_core.persistence`), else the DOF's verdict is
+      :data:`~.fit_core.NO_MODEL_VERDICT` and every parameter is suspect;
     * per parameter: ``width`` (95 % half-width above :data:`WIDTH_MAX` of the value for inertia, quadratic
       damping, restoring and the reverse gain; for linear damping and bias of the damping force at the typical
       speed), on its physical bound 0, fold estimates spread by more than 3 fit std; each parameter with a reason
       of its own gets ``advice`` (:func:`data_advice`).
 
-    Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict",
-    "reasons" (DOF-wide), "checks": {name: number}}.
+    Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
+    (trusted | suspect | :data:`~.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
     """
     names = list(ev.names)
     theta = np.asarray(ev.theta, dtype=float)
@@ -284,6 +291,17 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
         if ev.cv_nrmse >= NRMSE_MAX:
             dof_reasons.append(f"cross-validated prediction nrmse {ev.cv_nrmse:.3f} >= {NRMSE_MAX}: the model misses "
                                "a force (current, tether, thrust not as commanded) or the data are mostly noise")
+    # --- never worse than persistence: a model that does not beat holding the velocity is not trusted at all
+    no_model = False
+    if ev.cv_nrmse is not None and ev.cv_nrmse_hold is not None:
+        per = persistence({"nrmse": ev.cv_nrmse, "nrmse_hold": ev.cv_nrmse_hold}, ev.persistence_margin)
+        checks["cv_nrmse_hold"] = per["nrmse_hold"]
+        if math.isfinite(per["nrmse_hold"]) and not per["beats"]:
+            no_model = True
+            dof_reasons.append(f"{NO_MODEL_VERDICT}: cross-validated nrmse {per['nrmse']:.3f} against "
+                               f"{per['nrmse_hold']:.3f} for holding the velocity on the same samples (needs "
+                               f"{100 * per['margin']:.0f} % less): the parameters explain nothing the last "
+                               "measurement does not")
     # --- width, physical bound, fold spread
     folds = np.asarray(ev.fold_theta, dtype=float) if ev.fold_theta is not None and len(ev.fold_theta) else None
     scale = max(1.0, float(np.max(np.abs(theta)))) if theta.size else 1.0
@@ -317,8 +335,8 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
                                       at_bound[n])
         e["reasons"] = dof_reasons + e["reasons"]
         e["verdict"] = "suspect" if e["reasons"] else "trusted"
-    return {"parameters": out, "verdict": "suspect" if any(e["reasons"] for e in out.values()) else "trusted",
-            "reasons": dof_reasons, "checks": checks}
+    verdict = NO_MODEL_VERDICT if no_model else "suspect" if any(e["reasons"] for e in out.values()) else "trusted"
+    return {"parameters": out, "verdict": verdict, "reasons": dof_reasons, "checks": checks}
 
 
 def with_added_mass(a: dict, added_mass: float) -> dict:
@@ -453,7 +471,8 @@ def thrust_curve_check(assessments: Mapping[str, dict], dofs: Sequence[str]) -> 
         for e in a["parameters"].values():
             e["reasons"].append(reason)
             e["verdict"] = "suspect"
-        a["verdict"] = "suspect"
+        if a["verdict"] != NO_MODEL_VERDICT:
+            a["verdict"] = "suspect"
 
 
 #: DOFs whose online RLS damping std the scenario suite measured (issue 16 item 5). Elsewhere it is not published.
