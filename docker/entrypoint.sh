@@ -5,10 +5,12 @@
 # one vehicle path, whichever way the Pi runs it.
 #
 # Environment (all optional except ROS_DOMAIN_ID for the vehicle launch):
-#   ROS_DOMAIN_ID            this vehicle's DDS domain, 1-101: every vehicle and topside pair on the pool network
-#                            picks its own (0, the ROS default that every other machine uses, is refused)
-#   HINDRAX_DISCOVERY_RANGE  LOCALHOST | SUBNET | SYSTEM_DEFAULT | OFF  (default SUBNET: the topside PC is on the
-#                            tether's Ethernet subnet; ROS_STATIC_PEERS=<topside IP> is passed through as well)
+#   ROS_DOMAIN_ID            the topside domain, 1-101: the one the vehicle's gateway joins and the topside PC uses
+#                            (0, the ROS default that every other machine uses, is refused); docs/architecture.md §8.2
+#   HINDRAX_DISCOVERY_RANGE  the gateway's topside range: LOCALHOST | SUBNET | SYSTEM_DEFAULT | OFF  (default SUBNET:
+#                            the topside PC is on the tether's Ethernet subnet; ROS_STATIC_PEERS=<topside IP> as well)
+#   HINDRAX_INTERNAL_DOMAIN_ID  the vehicle's internal domain, 0-101 (default 0): its own processes, and every
+#                            command run here, on loopback only (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)
 #   HINDRAX_LAUNCH           "<package> <launch file>" (default "hindrax_drivers vehicle.launch.xml"; a pool campaign:
 #                            "hindrax_ident pool_test.launch.xml")
 #   HINDRAX_RECORD           1 (default): record every topic; 0: no recording
@@ -26,14 +28,20 @@ case "$range" in
   LOCALHOST|SUBNET|SYSTEM_DEFAULT|OFF) ;;
   *) die "HINDRAX_DISCOVERY_RANGE=$range: allowed LOCALHOST, SUBNET, SYSTEM_DEFAULT, OFF" ;;
 esac
-export ROS_AUTOMATIC_DISCOVERY_RANGE="$range"
 [ -n "${ROS_STATIC_PEERS:-}" ] || unset ROS_STATIC_PEERS  # compose passes an empty one when none is set
 if [ -n "${ROS_DOMAIN_ID:-}" ]; then
   if ! [[ "$ROS_DOMAIN_ID" =~ ^[0-9]+$ ]] || [ "$ROS_DOMAIN_ID" -gt 101 ]; then
-    die "ROS_DOMAIN_ID=$ROS_DOMAIN_ID: allowed integer 1-101 (this vehicle's own domain)"
+    die "ROS_DOMAIN_ID=$ROS_DOMAIN_ID: allowed integer 1-101 (this vehicle's topside domain)"
   fi
-  export ROS_DOMAIN_ID
 fi
+topside_domain=${ROS_DOMAIN_ID:-}
+internal_domain=${HINDRAX_INTERNAL_DOMAIN_ID:-0}
+if ! [[ "$internal_domain" =~ ^[0-9]+$ ]] || [ "$internal_domain" -gt 101 ] \
+   || { [ "${topside_domain:-0}" != 0 ] && [ "$internal_domain" -eq "$topside_domain" ]; }; then
+  die "HINDRAX_INTERNAL_DOMAIN_ID=$internal_domain: allowed integer 0-101, not the topside domain ROS_DOMAIN_ID"
+fi
+# The vehicle's processes and every command run here: the internal graph, loopback only (docs/architecture.md §8.2).
+export ROS_DOMAIN_ID="$internal_domain" ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 if [ -n "${HINDRAX_CONFIG:-}" ]; then
   [ -f "$HINDRAX_CONFIG" ] || die "HINDRAX_CONFIG=$HINDRAX_CONFIG: no such file (mount it, or unset it for the installed vehicle file)"
   export HINDRAX_CONFIG
@@ -51,6 +59,7 @@ read -r launch_pkg launch_file <<< "${HINDRAX_LAUNCH:-hindrax_drivers vehicle.la
 launch_args=()
 [ -n "${HINDRAX_CONFIG:-}" ] && launch_args+=("config:=$HINDRAX_CONFIG")
 launch_args+=("record:=$record" "output_dir:=$runs")
+[ -n "$topside_domain" ] && launch_args+=("topside_domain_id:=$topside_domain" "topside_discovery_range:=$range")
 
 set +u
 # shellcheck disable=SC1090
@@ -60,14 +69,14 @@ source "${WS_SETUP:-/ws/install/setup.bash}"
 set -u
 
 if [ "$#" -eq 0 ]; then
-  if [ -z "${ROS_DOMAIN_ID:-}" ] || [ "$ROS_DOMAIN_ID" -eq 0 ]; then
-    die "ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-unset}: set this vehicle's own domain (1-101) in /etc/hindrax/hindrax.env; 0 is every other ROS machine's on the pool network"
+  if [ -z "$topside_domain" ] || [ "$topside_domain" -eq 0 ]; then
+    die "ROS_DOMAIN_ID=${topside_domain:-unset}: set this vehicle's own domain (1-101) in /etc/hindrax/hindrax.env; 0 is every other ROS machine's on the pool network"
   fi
   if [ "$record" = true ]; then
     mkdir -p "$runs" 2>/dev/null || true
     [ -w "$runs" ] || die "HINDRAX_RUNS_DIR=$runs is not writable by $(id -un) (uid $(id -u)): chown it on the host"
   fi
-  echo "entrypoint: ros2 launch $launch_pkg $launch_file ${launch_args[*]} (domain $ROS_DOMAIN_ID, discovery $range)" >&2
+  echo "entrypoint: ros2 launch $launch_pkg $launch_file ${launch_args[*]} (internal domain $internal_domain on loopback; gateway: topside domain $topside_domain, discovery $range)" >&2
   exec ros2 launch "$launch_pkg" "$launch_file" "${launch_args[@]}"
 fi
 if [ "$(basename "$1")" = "hindrax" ] && [ "${2:-}" = "health" ] && [[ " $* " != *" --launch "* ]]; then

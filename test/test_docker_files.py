@@ -52,8 +52,10 @@ def test_entrypoint_runs_the_launch_layout_on_the_tether(tmp_path):
     r = run_entrypoint(tmp_path, [], ROS_DOMAIN_ID="42")
     assert r.returncode == 0, r.stderr
     runs = tmp_path / "runs"
-    assert f"RUN=ros2 launch hindrax_drivers vehicle.launch.xml record:=true output_dir:={runs}" in r.stdout
-    assert "RANGE=SUBNET" in r.stdout and "DOMAIN=42" in r.stdout and "SOURCED=11" in r.stdout
+    assert (f"RUN=ros2 launch hindrax_drivers vehicle.launch.xml record:=true output_dir:={runs} "
+            "topside_domain_id:=42 topside_discovery_range:=SUBNET") in r.stdout
+    # the vehicle's own processes: the internal domain, loopback only; only the gateway joins domain 42 (SUBNET)
+    assert "RANGE=LOCALHOST" in r.stdout and "DOMAIN=0" in r.stdout and "SOURCED=11" in r.stdout
     assert "CONFIG=unset" in r.stdout  # the installed vehicle file, unless one is named
     assert runs.is_dir()  # created for the recorder
 
@@ -76,6 +78,8 @@ def test_entrypoint_refuses_domain_0_and_bad_settings_in_one_line(tmp_path):
     for env, message in (({}, "ROS_DOMAIN_ID=unset: set this vehicle's own domain (1-101)"),
                          ({"ROS_DOMAIN_ID": "0"}, "ROS_DOMAIN_ID=0: set this vehicle's own domain (1-101)"),
                          ({"ROS_DOMAIN_ID": "300"}, "ROS_DOMAIN_ID=300: allowed integer 1-101"),
+                         ({"ROS_DOMAIN_ID": "7", "HINDRAX_INTERNAL_DOMAIN_ID": "7"},
+                          "HINDRAX_INTERNAL_DOMAIN_ID=7: allowed integer 0-101, not the topside domain"),
                          ({"ROS_DOMAIN_ID": "7", "HINDRAX_DISCOVERY_RANGE": "EVERYWHERE"},
                           "HINDRAX_DISCOVERY_RANGE=EVERYWHERE"),
                          ({"ROS_DOMAIN_ID": "7", "HINDRAX_CONFIG": "/nonexistent/v.yaml"},
@@ -90,7 +94,7 @@ def test_entrypoint_refuses_domain_0_and_bad_settings_in_one_line(tmp_path):
 def test_entrypoint_runs_a_given_command_and_health_checks_the_same_launch(tmp_path):
     r = run_entrypoint(tmp_path, ["hindrax", "bringup", "--sim"], HINDRAX_DISCOVERY_RANGE="LOCALHOST")
     assert r.returncode == 0, r.stderr  # an explicit command needs no vehicle domain
-    assert "RUN=hindrax bringup --sim" in r.stdout and "RANGE=LOCALHOST" in r.stdout
+    assert "RUN=hindrax bringup --sim" in r.stdout and "RANGE=LOCALHOST" in r.stdout and "DOMAIN=0" in r.stdout
     runs = tmp_path / "runs"
     # the HEALTHCHECK runs /usr/local/bin/hindrax, which passes the installed command's full path
     r = run_entrypoint(tmp_path, [str(tmp_path / "bin" / "hindrax"), "health", "--quiet"], ROS_DOMAIN_ID="42",
@@ -204,7 +208,7 @@ def test_compose_rotates_logs_and_takes_the_vehicle_settings_from_its_env_file()
     assert any(v.endswith(":/var/lib/hindrax/runs") and v.startswith("${HINDRAX_RUNS_HOST") for v in svc["volumes"])
     example = dict(line.split("=", 1) for line in (DOCKER / "hindrax.env.example").read_text().splitlines()
                    if line and not line.startswith("#"))
-    assert 1 <= int(example["ROS_DOMAIN_ID"]) <= 101
+    assert example["ROS_DOMAIN_ID"] == ""  # no shared example domain: every vehicle's file must name its own
     assert {"HINDRAX_RUNS_HOST", "HINDRAX_LAUNCH", "HINDRAX_RECORD", "I2C_GID", "GPIO_GID"} <= set(example)
 
 

@@ -120,11 +120,15 @@ class Spec:
     length: int | None = None
     choices: tuple | None = None
     unit_vector: bool = False
+    #: for "str": a regular expression the whole value must match, and its meaning as printed in error lines
+    pattern: tuple[str, str] | None = None
 
     def allowed(self) -> str:
         """Human-readable allowed range, as printed in error lines."""
         if self.choices is not None:
             return "one of " + ", ".join(str(c) for c in self.choices)
+        if self.pattern is not None:
+            return self.pattern[1]
         base = {_FLOAT: "number", _INT: "integer", _STR: "string", _BOOL: "true/false",
                 _FLOATS: "list of numbers", _STRS: "list of strings"}[self.kind]
         if self.length is not None:
@@ -150,6 +154,11 @@ def _s(doc: str, choices: tuple | None = None) -> Spec:
     return Spec(_STR, doc, choices=choices)
 
 
+#: A ROS 2 name token (rcl's namespace rules: a letter, then letters, digits and single underscores), 1-63 chars.
+ROS_NAME_TOKEN = (r"[A-Za-z](?!.*__)[A-Za-z0-9_]{0,62}",
+                  "a ROS name token: a letter, then letters, digits or single underscores, at most 63 characters")
+
+
 def _b(doc: str) -> Spec:
     return Spec(_BOOL, doc)
 
@@ -162,7 +171,8 @@ _T = "<thruster>"
 
 SCHEMA: dict[str, Spec] = {
     # --- vehicle ([Hindrax-AM] §2, [Hindrax-Drag] §2.1) ---
-    "vehicle.name": _s("vehicle name"),
+    "vehicle.name": Spec(_STR, "the vehicle's name: its namespace on the topside graph (docs/architecture.md "
+                               "§8.2), unique among the vehicles on one topside domain", pattern=ROS_NAME_TOKEN),
     "vehicle.mass_kg": _f("total mass in air, kg ([Hindrax-Drag] §2.1)", 0.1, 1000.0),
     "vehicle.displaced_volume_m3": _f("displaced volume, m^3 ([Hindrax-Drag] §2.1)", 1e-5, 10.0),
     "vehicle.length_m": _f("overall length (x), m ([Hindrax-Drag] §2.1)", 0.01, 10.0),
@@ -612,6 +622,8 @@ def _check_value(key: str, spec: Spec, value: Any) -> tuple[Any, ConfigIssue | N
         if not isinstance(value, str):
             return value, bad
         if spec.choices is not None and value not in spec.choices:
+            return value, bad
+        if spec.pattern is not None and re.fullmatch(spec.pattern[0], value) is None:
             return value, bad
         return value, None
     if spec.kind == _BOOL:

@@ -56,7 +56,8 @@ class VehicleSection(Section):
     PREFIX: ClassVar[str] = "vehicle"
 
     name: str
-    """vehicle name"""
+    """the vehicle's name: its namespace on the topside graph (docs/architecture.md §8.2), unique among the vehicles
+    on one topside domain"""
     mass_kg: float
     """total mass in air, kg ([Hindrax-Drag] §2.1)"""
     displaced_volume_m3: float

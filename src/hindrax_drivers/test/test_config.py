@@ -115,6 +115,19 @@ def test_bad_choice(tmp_path):
     assert "sensors.ms5837.oversampling = 300: allowed one of 256, 512, 1024, 2048, 4096, 8192" in msg
 
 
+@pytest.mark.parametrize("name", ["2rov", "rov-a", "a__b", "", "rov/a", "x" * 64])
+def test_vehicle_name_must_be_a_ros_name_token(tmp_path, name):
+    """vehicle.name is the vehicle's namespace on the topside graph: rcl would refuse any of these there."""
+    msg = one_line_error(tmp_path, lambda p: p["vehicle"].update(name=name))
+    assert f"vehicle.name = {name!r}: allowed a ROS name token" in msg
+
+
+def test_vehicle_name_tokens_accepted(tmp_path):
+    params = base_params()
+    params["vehicle"]["name"] = "rov_2B"
+    assert load_config(write(tmp_path, params)).vehicle.name == "rov_2B"
+
+
 def test_nan_and_bool_are_not_numbers(tmp_path):
     assert "environment.gravity_m_s2 = nan" in one_line_error(
         tmp_path, lambda p: p["environment"].update(gravity_m_s2=float("nan")))
