@@ -98,8 +98,8 @@ def test_arming_needs_time_at_neutral_then_commands_reach_the_wire(esc):
         assert not res.success and "at neutral" in res.message
     wait_until(lambda: node.arming_remaining_s() == 0.0, 5, esc["spin"], "arming time")
     assert esc["set_armed"](True).success
-    cmd = np.array([1700.0, 1700.0, 1300.0, 2500.0, 900.0, 1500.0, 1600.0, 1400.0])
-    # expected: clamp to 1100-1900, t2 reversed about 1500, t3 trimmed +10 us
+    cmd = np.array([1700.0, 1700.0, 1300.0, 1900.0, 1100.0, 1500.0, 1600.0, 1400.0])
+    # expected: t2 reversed about 1500, t3 trimmed +10 us
     expected = np.array([1700.0, 1300.0, 1310.0, 1900.0, 1100.0, 1500.0, 1600.0, 1400.0])
     stream(esc, cmd, lambda: np.allclose(wire(emu), expected, atol=TICK_US))
     # the node reports what it wrote, decoded from the register counts
@@ -174,11 +174,35 @@ def test_disarm_and_fault_and_shutdown_go_neutral(esc):
     assert esc["set_armed"](False).success
     assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)  # at once, in the service call
     arm(esc)
-    stream(esc, [math.nan] * 8, lambda: node.diag.counts().get("output_exception", 0) > 0)
+    stream(esc, [math.nan] * 8, lambda: node.diag.counts().get("command_rejected", 0) > 0)
     assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)  # a NaN command is a fault: neutral
     stream(esc, [1650.0] * 8, lambda: wire(emu)[0] > 1600)
     node.close()
     assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
+
+
+@pytest.mark.parametrize("widths, armed, why", [
+    ([0.0] * 8, True, "outside the ESC's range"),  # a default-constructed ThrusterPwm: not full reverse
+    ([3000.0] * 8, True, "outside the ESC's range"),  # not full forward
+    ([1700.0] * 7 + [math.inf], True, "non-finite"),
+    ([1700.0] * 8, False, "armed=false"),  # its sender does not mean thrust
+])
+def test_a_faulty_command_gives_neutral_and_a_reason_never_a_clamp(esc, widths, armed, why):
+    """Issue 44 finding 3: 0.0 us gave 1100 us (full reverse) on every channel, 3000 us gave 1900 us, a command with
+    armed false gave 1700 us. Each is a fault: neutral on every channel, the reason on /diagnostics and the
+    heartbeat, counted; the next valid command drives again."""
+    arm(esc)
+    node, emu = esc["node"], esc["emu"]
+    stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
+    msg = ThrusterPwm(pulse_width_us=[float(w) for w in widths], armed=armed)
+    node.on_command(msg)
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
+    assert node.armed and node.diag.counts()["command_rejected"] == 1
+    assert why in node.core.reason and why in node.diag.status().message
+    assert node.diag.status().level == (DiagnosticStatus.OK if not armed else DiagnosticStatus.WARN)
+    node.tick()  # the output tick keeps neutral: the faulty command is not held
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
+    stream(esc, [1650.0] * 8, lambda: wire(emu)[0] > 1640)
 
 
 def test_lights_channel(esc):
@@ -220,7 +244,7 @@ def test_sigterm_path_writes_neutral():
         node.command = np.full(8, 1700.0)
         node.command_time = node.get_clock().now()
         node.watchdog_s = 1e9
-        node.heartbeat_refusal = lambda: ""  # this test is about the shutdown path only
+        node._peer_verdicts = lambda: ("", "")  # this test is about the shutdown path only
         holder["node"] = node
         return node
 
@@ -508,7 +532,7 @@ def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):
         fake["t"] += esc_node.GUARD_CONFIRM_S  # at neutral with the guard's OK for the shortest arming time
         _healthy(node)
         assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
-        node.on_command(ThrusterPwm(pulse_width_us=[1650.0] * 8))
+        node.on_command(ThrusterPwm(pulse_width_us=[1650.0] * 8, armed=True))
         fake["t"] += 2.0  # stall
         node.steady_check()
         assert node.steady_watchdog_trips == 0 and node.command is not None

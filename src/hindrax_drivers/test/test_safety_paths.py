@@ -89,7 +89,7 @@ class Rig:
         return fut.result()
 
     def command(self, width=1700.0):
-        self.cmd.publish(ThrusterPwm(pulse_width_us=[width] * 8))
+        self.cmd.publish(ThrusterPwm(pulse_width_us=[width] * 8, armed=True))
 
     def commanding(self):
         self.command()

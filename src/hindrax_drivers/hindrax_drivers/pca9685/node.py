@@ -53,9 +53,14 @@ Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
 - Protective timing is on the steady clock: the read-back, the arming time, the heartbeats, the re-configuration
   retries and the second watchdog; a backward step of ROS time is detected (:class:`~hindrax_drivers.liveness.
   ClockStepMonitor`) and reported (``/diagnostics`` warning ``clock_step``).
-- Commands are clamped to [``pulse_width_min_us``, ``pulse_width_max_us``]; per-channel reversal (mirror
-  about neutral) and trim are applied after the clamp, and the result is clamped again; an optional slew
-  limit ``esc.slew_rate_us_per_s`` bounds the change per step.
+- Commands: a command with a width outside [``pulse_width_min_us``, ``pulse_width_max_us``] (the ESC's range), a
+  non-finite width or ``armed`` false is a fault: neutral and the reason (:func:`.core.command_fault`), never a
+  clamp. Per-channel reversal (mirror about neutral) and trim follow, the result is clamped to the range, an
+  optional slew limit ``esc.slew_rate_us_per_s`` bounds the change per step, and the widths are put on the chip's
+  count grid rounded away from neutral outside the deadband (:meth:`.core.EscOutput.on_grid`).
+
+The decisions (arm, refuse, disarm, neutral, output state, reason) are :class:`.core.EscCore`'s; this node feeds it
+the heartbeats, the commands and the chip's state and does the I/O.
 
 Subscribes ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm, thruster order) and
 ``lights/brightness`` (std_msgs/Float64, 0-1, mapped linearly from ``pulse_width_off_us`` to
@@ -81,6 +86,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.time import Time
 from std_msgs.msg import Float64
 
 from hindrax_msgs.msg import ThrusterPwm
@@ -93,74 +99,20 @@ from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
+from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, EscCore, EscOutput, heartbeat_verdict
+
+__all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "main"]
 
 COMMAND_TOPIC = "thrusters/command_pulse_width"
 #: commands taken in the process (:meth:`EscNode.take_command`) remembered until their DDS copy arrives; a copy
 #: comes within milliseconds, so 16 (0.3 s at 50 Hz) only bounds the memory of copies that never come
 LOCAL_COMMANDS_KEPT = 16
-#: first retry of an unreachable bus or chip, s (doubled after every failure up to :data:`RETRY_MAX_S`)
-RETRY_MIN_S = 0.25
-RETRY_MAX_S = 4.0
-#: the shortest time at neutral, with the output guard letting it through, before an arm is accepted, whatever
-#: ``esc.arming_time_s`` says, s: two guard ticks (20 Hz) and their delivery. A guard ERROR published just before
-#: the ESC's own recovery (an I2C outage: the ESC reconfigures the chip within 15 ms of reporting UNKNOWN) arrives
-#: within it, so an arm is never accepted on the guard's stale OK and undone at once (measured in the safety bench
-#: with arming_time_s 0: 1 in about 115 cycles of ESC hung, arm, I2C outage, arm)
-GUARD_CONFIRM_S = 0.15
 
 
 def _command_key(msg: ThrusterPwm) -> tuple:
     """What identifies one command: stamp, armed flag and the widths' bytes (bytes, so a NaN width matches)."""
     return (msg.header.stamp.sec, msg.header.stamp.nanosec, bool(msg.armed),
             np.asarray(msg.pulse_width_us, dtype=float).tobytes())
-
-
-class EscOutput:
-    """Pure output logic of the ESC node (no ROS): command -> per-channel pulse widths.
-
-    channels (n,): PCA9685 channel of each thruster; reversed (n,) bool; trim_us (n,);
-    limits and neutral in us; slew_rate_us_per_s (0 = off). ``target(command, dt_s)``
-    returns the (n,) pulse widths to write now. Raises :class:`ValueError` for a command of the wrong
-    length or with a non-finite value (the node then writes neutral). Without a slew limit the widths of a command
-    are computed once: the same command object again (the output tick between two commands) returns them as they
-    are; a new command object, or :meth:`neutral` in between, computes them anew.
-    """
-
-    def __init__(self, channels, reversed_, trim_us, min_us: float, neutral_us: float, max_us: float,
-                 slew_rate_us_per_s: float = 0.0):
-        self.channels = np.asarray(channels, dtype=int)
-        self.reversed = np.asarray(reversed_, dtype=bool)
-        self.trim_us = np.asarray(trim_us, dtype=float)
-        self.min_us, self.neutral_us, self.max_us = float(min_us), float(neutral_us), float(max_us)
-        self.slew = float(slew_rate_us_per_s)
-        self.current = np.full(len(self.channels), self.neutral_us)
-        self._computed_for: object = None  # the command object :attr:`current` was computed for (no slew limit)
-
-    def neutral(self) -> np.ndarray:
-        """(n,) neutral widths: ``neutral_us + trim_us`` per channel, clamped to the limits (the same widths
-        :meth:`target` gives for a neutral command). Also resets the slew-limiter state (neutral is immediate)."""
-        self.current = np.clip(np.full(len(self.channels), self.neutral_us) + self.trim_us, self.min_us, self.max_us)
-        self._computed_for = None
-        return self.current.copy()
-
-    def target(self, command, dt_s: float) -> np.ndarray:
-        """Pulse widths to write for a fresh, armed ``command`` (thruster order, us)."""
-        if command is self._computed_for:
-            return self.current.copy()
-        cmd = np.asarray(command, dtype=float)
-        if cmd.shape != self.current.shape:
-            raise ValueError(f"command has {cmd.size} pulse widths, expected {self.current.size}")
-        if not np.all(np.isfinite(cmd)):
-            raise ValueError(f"command contains a non-finite pulse width: {cmd.tolist()}")
-        out = np.clip(cmd, self.min_us, self.max_us)
-        out = np.where(self.reversed, 2.0 * self.neutral_us - out, out) + self.trim_us
-        out = np.clip(out, self.min_us, self.max_us)
-        if self.slew > 0.0 and dt_s > 0.0:
-            step = self.slew * dt_s
-            out = np.clip(out, self.current - step, self.current + step)
-        self.current = out
-        self._computed_for = command if self.slew <= 0.0 else None
-        return out.copy()
 
 
 class EscNode(PolledInputsMixin, Node):
@@ -176,21 +128,23 @@ class EscNode(PolledInputsMixin, Node):
         t = cfg.thrusters
         esc = cfg.esc
         self.period_s = 1.0 / esc.output_rate_hz
-        self.watchdog_s = esc.watchdog_timeout_s
         #: steady-clock (time.monotonic) watchdog: see :meth:`set_steady_watchdog_timeout`
         self.steady_watchdog_s = esc.watchdog_timeout_s
-        self.arming_time_s = esc.arming_time_s
         self.readback_interval_s = esc.readback_interval_s
-        self.oscillator_calibrated = bool(esc.oscillator_calibrated)
-        self.output = EscOutput([th.esc_channel for th in t.thrusters], [th.reversed for th in t.thrusters],
-                                [th.trim_us for th in t.thrusters], t.pulse_width_min_us, t.pulse_width_neutral_us,
-                                t.pulse_width_max_us, esc.slew_rate_us_per_s)
         lights = cfg.lights
         self.lights_channel = lights.esc_channel
         self.lights_off_us, self.lights_full_us = lights.pulse_width_off_us, lights.pulse_width_full_us
         self.lights_us = self.lights_off_us
         self.oscillator_hz = esc.oscillator_hz
         self.prescale = p.esc_prescale(esc.pwm_frequency_hz, self.oscillator_hz)
+        self.output = EscOutput([th.esc_channel for th in t.thrusters], [th.reversed for th in t.thrusters],
+                                [th.trim_us for th in t.thrusters], t.pulse_width_min_us, t.pulse_width_neutral_us,
+                                t.pulse_width_max_us, esc.slew_rate_us_per_s,
+                                count_us=p.count_duration_us(self.prescale, self.oscillator_hz),
+                                deadband_us=t.deadband_us)
+        #: the decisions (arm, refuse, disarm, neutral, output state, reason): :mod:`.core`
+        self.core = EscCore(self.output, arming_time_s=esc.arming_time_s, watchdog_timeout_s=esc.watchdog_timeout_s,
+                            oscillator_calibrated=esc.oscillator_calibrated, clock=lambda: time.monotonic())
 
         self.i2c_bus_number, self.i2c_address = int(esc.i2c_bus), int(esc.i2c_address)
         self.raw = RawDataPublisher(self, "pca9685")
@@ -206,29 +160,17 @@ class EscNode(PolledInputsMixin, Node):
         self.guard_age = AliveAge(2.0 * self.period_s)
         self.supervisor_ok, self.supervisor_message = False, ""
         self.guard_ok, self.guard_message = False, ""
-        #: time.monotonic() since which neutral is confirmed on the chip AND the guard lets it through, or None
-        self.neutral_on_wire_since: float | None = None
-        self.output_state = ThrusterPwm.OUTPUT_UNKNOWN
-        self.heartbeat_disarms = 0
         self.unknown_entries = 0
         self.last_unknown_monotonic: float | None = None
-        self._retry_s = RETRY_MIN_S
         self.clock_monitor = ClockStepMonitor(now_s)
-        self.watchdog_trips = 0
         self.steady_watchdog_trips = 0
         self.chip_reinits = 0
         self.last_chip_reinit_monotonic: float | None = None  # time.monotonic() of the last detection
-        self.armed = False
-        self.command: np.ndarray | None = None
-        self.command_time = None
         self.written = self.output.neutral()
         self._expected: dict[int, bytes] = {}  # channel -> the 4 LEDn bytes last written
         self._written_key: tuple | None = None  # (widths, lights) last written, to skip identical writes
         self._last_target_time = None
-        #: time.monotonic() at which neutral was read back from the chip (None: not confirmed)
-        self.neutral_confirmed_time = None
         self._last_readback = None
-        self._last_configure_attempt: float | None = None
         self._published_since_tick = False
         self._steady_last = time.monotonic()
         self._last_tick_monotonic = -math.inf  # time.monotonic() of the last _steady_and_output_tick
@@ -269,6 +211,31 @@ class EscNode(PolledInputsMixin, Node):
             self.output_timer = None
             self.steady_timer = self.create_timer(self.period_s, self._steady_and_output_tick, clock=steady)
 
+    # -- the core's state, as the node's (read by the tests, the benches and the diagnostics)
+    armed = property(lambda self: self.core.armed, lambda self, v: setattr(self.core, "armed", bool(v)))
+    output_state = property(lambda self: self.core.output_state,
+                            lambda self, v: setattr(self.core, "output_state", int(v)))
+    command = property(lambda self: self.core.command, lambda self, v: setattr(self.core, "command", v))
+    arming_time_s = property(lambda self: self.core.arming_time_s)
+    watchdog_s = property(lambda self: self.core.watchdog_s, lambda self, v: setattr(self.core, "watchdog_s", v))
+    oscillator_calibrated = property(lambda self: self.core.oscillator_calibrated)
+    watchdog_trips = property(lambda self: self.core.watchdog_trips)
+    heartbeat_disarms = property(lambda self: self.core.heartbeat_disarms)
+    #: time.monotonic() at which neutral was read back from the chip (None: not confirmed)
+    neutral_confirmed_time = property(lambda self: self.core.neutral_confirmed_at)
+    #: time.monotonic() since which neutral is confirmed on the chip AND the guard lets it through, or None
+    neutral_on_wire_since = property(lambda self: self.core.neutral_on_wire_since)
+
+    @property
+    def command_time(self) -> Time | None:
+        """ROS time of the last command's arrival (None before the first)."""
+        t = self.core.command_t_s
+        return None if t is None else Time(nanoseconds=round(t * 1e9), clock_type=self.get_clock().clock_type)
+
+    @command_time.setter
+    def command_time(self, value: Time) -> None:
+        self.core.command_t_s = value.nanoseconds * 1e-9
+
     def set_steady_watchdog_timeout(self, seconds: float) -> None:
         """Steady-clock watchdog timeout, s (default ``esc.watchdog_timeout_s``).
 
@@ -299,13 +266,15 @@ class EscNode(PolledInputsMixin, Node):
         §7.3.1.1: RESTART resumes the channel registers, which now hold neutral). The arming timer starts when
         the read-back matches (:meth:`arming_remaining_s`). Returns True on success.
         """
-        self._last_configure_attempt = time.monotonic()
-        self.neutral_confirmed_time = None
-        self.neutral_on_wire_since = None
+        self.core.chip_attempt()
         if self.device is None and not self._open_bus():
             return False
         before, after = p.safe_startup_sequence(self.prescale)
         try:
+            # first neutral into the channel registers: a chip that kept running through an outage (the bus
+            # failed, not the chip) still outputs the last widths written; this ends them before anything else
+            self._written_key = None
+            self._write(self.output.neutral(), self.lights_off_us)
             self.device.write_sequence(before)
             self._written_key = None
             self._write(self.output.neutral(), self.lights_off_us)
@@ -319,11 +288,8 @@ class EscNode(PolledInputsMixin, Node):
             self.diag.count("readback_mismatch")
             self._set_unknown(f"PCA9685 start-up not confirmed: {mismatch}")
             return False
-        now = time.monotonic()
-        self.neutral_confirmed_time = now
-        self._last_readback = now
-        self._retry_s = RETRY_MIN_S
-        self.output_state = ThrusterPwm.OUTPUT_NEUTRAL
+        self.core.chip_confirmed()
+        self._last_readback = self.core.neutral_confirmed_at
         self.diag.set_state("holding neutral", DiagnosticStatus.OK, "holding neutral, disarmed")
         return True
 
@@ -343,18 +309,12 @@ class EscNode(PolledInputsMixin, Node):
     def _set_unknown(self, reason: str) -> None:
         """The chip cannot be written or read back: the output state is unknown. Disarm (thrust needs a new arm
         request once the chip is back), forget what we believe is on the chip, report ERROR, retry with backoff."""
-        if self.output_state != ThrusterPwm.OUTPUT_UNKNOWN or self.armed:
+        if self.core.chip_lost(reason):
             self.unknown_entries += 1
             self.last_unknown_monotonic = time.monotonic()
-            self.get_logger().error(f"output state unknown: {reason}")
-        self.output_state = ThrusterPwm.OUTPUT_UNKNOWN
-        self.armed = False
-        self.command = None
-        self.neutral_confirmed_time = None
-        self.neutral_on_wire_since = None
+            self.get_logger().error(f"output state unknown: {self.core.reason}")
         self._written_key = None
-        self._retry_s = min(RETRY_MAX_S, self._retry_s * 2.0) if self._last_configure_attempt else RETRY_MIN_S
-        self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"{reason} (output state unknown)")
+        self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"{self.core.reason} (output state unknown)")
 
     def _readback_mismatch(self) -> str:
         """Read MODE1, PRE_SCALE and every written channel back; '' when they match what was written, else why.
@@ -421,6 +381,7 @@ class EscNode(PolledInputsMixin, Node):
             self._expected.update((c, block[4 * i:4 * i + 4]) for i, c in enumerate(run))
         self.raw.flush()  # (after a failed write the records are published with the next update's)
         self.written = np.array([decoded[int(ch)] for ch in self.output.channels])
+        self.core.wrote(self.written)
         self.lights_us = lights_us
         self._written_key = key
         return True
@@ -471,12 +432,15 @@ class EscNode(PolledInputsMixin, Node):
         self.on_command(msg)
 
     def on_command(self, msg: ThrusterPwm) -> None:
-        """Store the command and, armed, write it at once (event-driven output; the tick is the watchdog)."""
-        self.command = np.array(msg.pulse_width_us, dtype=float)
+        """Hand the command to the core and, armed, write it at once (event-driven output; the tick is the
+        watchdog). A faulty command (:func:`~.core.command_fault`) gives neutral at once, with its reason."""
         now = self.get_clock().now()
-        self.command_time = now
+        fault = self.core.on_command(now.nanoseconds * 1e-9, msg.pulse_width_us, bool(msg.armed))
         self._steady_age_s = 0.0
         self._steady_command = time.monotonic()
+        if fault:
+            self.diag.count("command_rejected")
+            self.get_logger().error(f"command rejected, neutral: {fault}", throttle_duration_sec=1.0)
         if self.armed and self.neutral_confirmed_time is not None:
             self._output(now)
 
@@ -489,52 +453,40 @@ class EscNode(PolledInputsMixin, Node):
         self.lights_us = self.lights_off_us + b * (self.lights_full_us - self.lights_off_us)
 
     def arming_remaining_s(self) -> float:
-        """Seconds still needed at neutral before arming is accepted (0 when ready).
+        """Seconds still needed at neutral before arming is accepted (0 when ready; :meth:`.core.EscCore.
+        arming_remaining_s`)."""
+        return self.core.arming_remaining_s()
 
-        The time (steady clock) counts from the moment neutral was read back from the chip and the output guard
-        let it through (not from node creation): until then the whole ``esc.arming_time_s`` remains. A guard ERROR
-        taken restarts it. It is never shorter than :data:`GUARD_CONFIRM_S`."""
-        needed_s = max(self.arming_time_s, GUARD_CONFIRM_S)
-        if self.neutral_on_wire_since is None:
-            return needed_s
-        return max(0.0, needed_s - (time.monotonic() - self.neutral_on_wire_since))
+    def _peer_verdicts(self) -> tuple[str, str]:
+        """The supervisor's and the guard's heartbeat verdicts ('' = trusted, else why not)."""
+        t = self.heartbeat_timeout_s
+        sup = heartbeat_verdict("supervisor", HEARTBEAT_NAMES["supervisor"], self.supervisor_age.age_s, t,
+                                self.supervisor_ok, self.supervisor_message)
+        if sup and self.supervisor_age.fresh(t):
+            sup = f"supervisor tripped: {self.supervisor_message} (clear it with supervisor/reset)"
+        guard = heartbeat_verdict("output guard", HEARTBEAT_NAMES["guard"], self.guard_age.age_s, t,
+                                  self.guard_ok, self.guard_message)
+        if guard and self.guard_age.fresh(t):
+            guard = f"output guard holds the outputs off: {self.guard_message}"
+        return sup, guard
 
     def heartbeat_refusal(self) -> str:
         """Why the supervisor or the output guard forbid thrust now ('' when both are fresh and OK)."""
-        t = self.heartbeat_timeout_s
-        if not self.supervisor_age.fresh(t):
-            age = self.supervisor_age.age_s
-            return ("no supervisor heartbeat" + (f" for {age:.2f} s" if math.isfinite(age) else "") +
-                    f" ({HEARTBEAT_NAMES['supervisor']}, esc.heartbeat_timeout_s {t:g}): "
-                    "supervisor not running or hung")
-        if not self.supervisor_ok:
-            return f"supervisor tripped: {self.supervisor_message} (clear it with supervisor/reset)"
-        if not self.guard_age.fresh(t):
-            age = self.guard_age.age_s
-            return ("no output-guard heartbeat" + (f" for {age:.2f} s" if math.isfinite(age) else "") +
-                    f" ({HEARTBEAT_NAMES['guard']}): output_guard not running or hung")
-        if not self.guard_ok:
-            return f"output guard holds the outputs off: {self.guard_message}"
-        return ""
+        sup, guard = self._peer_verdicts()
+        return sup or guard
+
+    def _feed_peers(self) -> str:
+        """Hand the heartbeat verdicts to the core; log and publish a disarm they cause. Returns its reason."""
+        refusal = self.core.set_peers(*self._peer_verdicts())
+        if refusal:
+            self.get_logger().error(f"disarming: {refusal}")
+            self._after_disarm(refusal)
+        return refusal
 
     def arm_refusal(self) -> str:
         """Why an arm request would be refused now ('' when it would be accepted)."""
-        if not self.oscillator_calibrated:
-            return ("esc.oscillator_calibrated is false: neutral on the wire depends on this PCA9685's oscillator "
-                    "(nominal 25 MHz, parts measure 23-27 MHz). Measure the neutral pulse with a scope and run "
-                    "`hindrax esc calibrate --measured-us X --write`")
-        if self.neutral_confirmed_time is None:
-            return ("PCA9685 not confirmed at neutral (not reachable or its registers did not read back)" +
-                    (f": {self.bus_error}" if self.bus_error else ""))
-        refusal = self.heartbeat_refusal()
-        if refusal:
-            return refusal
-        remaining = self.arming_remaining_s()
-        if remaining > 0.0:
-            why = "esc.arming_time_s" if self.arming_time_s >= GUARD_CONFIRM_S else \
-                f"the output guard's OK confirmed for {GUARD_CONFIRM_S:g} s"
-            return f"ESC arming: {remaining:.1f} s more at neutral needed ({why})"
-        return ""
+        self.core.set_peers(*self._peer_verdicts())
+        return self.core.arm_refusal(self.bus_error)
 
     def _take_inputs(self) -> None:
         """Advance the heartbeat ages, then hand over what the polled inputs hold (system clock; a heartbeat taken
@@ -544,8 +496,6 @@ class EscNode(PolledInputsMixin, Node):
         self.take_inputs()  # the ages' ticks first (open_inputs in __init__)
 
     def on_set_armed(self, request: SetArmed.Request, response: SetArmed.Response) -> SetArmed.Response:
-        if request.arm:
-            self._take_inputs()
         if not request.arm:
             self.disarm("disarmed")
             if self.output_state == ThrusterPwm.OUTPUT_UNKNOWN:
@@ -555,13 +505,12 @@ class EscNode(PolledInputsMixin, Node):
             else:
                 response.success, response.armed, response.message = True, False, "disarmed"
             return response
-        refusal = self.arm_refusal()
+        self._take_inputs()
+        self.core.set_peers(*self._peer_verdicts())
+        refusal = self.core.request_arm(self.bus_error)
         if refusal:
             response.success, response.armed, response.message = False, self.armed, refusal
             return response
-        self.armed = True
-        self.output_state = ThrusterPwm.OUTPUT_NEUTRAL
-        self.command = None  # thrust only from commands that arrive after arming
         self.diag.clear("chip_reset")
         self.diag.set_state("armed, neutral", DiagnosticStatus.OK)
         response.success, response.armed, response.message = True, True, "armed"
@@ -569,37 +518,31 @@ class EscNode(PolledInputsMixin, Node):
 
     def disarm(self, reason: str) -> None:
         """Disarm and write neutral now (the disarm service, the supervisor, shutdown)."""
-        self.armed = False
-        self.command = None
+        self.core.disarm(reason)
+        self._after_disarm(reason)
+
+    def _after_disarm(self, reason: str) -> None:
         self._safe_neutral(reason)
         self._publish_written(self.get_clock().now())
 
     # -- output
     def _output(self, now) -> None:
-        """Compute and write the widths for the current state (neutral unless armed with a fresh command)."""
+        """Write what the core decides for now (neutral unless armed with a fresh, valid command)."""
         try:
-            fresh = (self.command is not None and self.command_time is not None
-                     and (now - self.command_time).nanoseconds * 1e-9 <= self.watchdog_s)
-            if self.armed and self.command is not None and not fresh:
-                self.watchdog_trips += 1
-                self.command = None
+            trips = self.core.watchdog_trips
+            dt_s = self.period_s if self._last_target_time is None else \
+                min(self.period_s, max(0.0, (now - self._last_target_time).nanoseconds * 1e-9))
+            decision = self.core.decide(now.nanoseconds * 1e-9, dt_s)
+            if self.core.watchdog_trips != trips:
                 self.get_logger().warn(f"watchdog: no command for {self.watchdog_s:g} s, outputs neutral")
-            if self.armed and fresh:
-                dt_s = self.period_s if self._last_target_time is None else \
-                    min(self.period_s, max(0.0, (now - self._last_target_time).nanoseconds * 1e-9))
-                widths = self.output.target(self.command, dt_s)
-                self._last_target_time = now
-                state = "armed, commanding"
-                wire_state = ThrusterPwm.OUTPUT_COMMANDING
-            else:
-                widths = self.output.neutral()
-                self._last_target_time = None
-                state = "armed, neutral" if self.armed else "disarmed, neutral"
-                wire_state = ThrusterPwm.OUTPUT_NEUTRAL
-            wrote = self._write(widths, self.lights_us)
-            self.output_state = wire_state
+            self._last_target_time = now if decision.output_state == ThrusterPwm.OUTPUT_COMMANDING else None
+            wrote = self._write(decision.widths_us, self.lights_us)
+            self.output_state = decision.output_state
             if self.diag.state not in ("i2c error",) or wrote:
-                self.diag.set_state(state, DiagnosticStatus.OK)
+                # a malformed command is a WARN; one that says armed=false (a rejected wrench) is only neutral
+                level = DiagnosticStatus.WARN if decision.reason.startswith("command rejected") and \
+                    "armed=false" not in decision.reason else DiagnosticStatus.OK
+                self.diag.set_state(decision.state, level, decision.reason)
             if wrote:
                 self._publish_written(now)
         except Exception as exc:  # noqa: BLE001 - any fault in the output path must end at neutral
@@ -645,10 +588,9 @@ class EscNode(PolledInputsMixin, Node):
         self.last_chip_reinit_monotonic = time.monotonic()
         self.diag.count("chip_reinit")
         was_armed = self.armed
-        self.armed = False
-        self.command = None
         message = f"PCA9685 read-back mismatch: {mismatch}; re-initialised at neutral" + \
             (", disarmed (re-arm after esc.arming_time_s)" if was_armed else "")
+        self.core.chip_mismatch(message)
         self.diag.warn("chip_reset", message)
         self.get_logger().error(message)
         self._configure_chip()
@@ -667,8 +609,7 @@ class EscNode(PolledInputsMixin, Node):
         self._steady_age_s += min(max(gap, 0.0), t - self._steady_command, 2.0 * self.period_s)
         if self._steady_age_s > self.steady_watchdog_s:
             self.steady_watchdog_trips += 1
-            self.watchdog_trips += 1
-            self.command = None
+            self.core.watchdog_trip(f"steady-clock watchdog: no command for {self.steady_watchdog_s:g} s")
             self.get_logger().warn(f"steady-clock watchdog: no command for {self.steady_watchdog_s:g} s of wall "
                                    f"time (ROS time stalled?), outputs neutral")
             self._safe_neutral("steady-clock watchdog")
@@ -685,35 +626,25 @@ class EscNode(PolledInputsMixin, Node):
             self.get_logger().warn(f"ROS time stepped back {-step:.3f} s")
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         self._take_inputs()
-        refusal = self.heartbeat_refusal()
-        if refusal and self.armed:
-            self.heartbeat_disarms += 1
-            self.get_logger().error(f"disarming: {refusal}")
-            self.disarm(refusal)
-        if self.neutral_confirmed_time is None:
-            last = self._last_configure_attempt
-            if last is None or t - last >= self._retry_s:
-                if self._configure_chip():
-                    self._publish_written(self.get_clock().now())
-        elif t - self._last_readback >= self.readback_interval_s:
+        self._feed_peers()
+        if self.core.retry_due():
+            if self._configure_chip():
+                self._publish_written(self.get_clock().now())
+        elif self.neutral_confirmed_time is not None and t - self._last_readback >= self.readback_interval_s:
             self._last_readback = t
             self._check_chip()
         self._heartbeat_tick += 1
         if self._heartbeat_tick % 2 == 0:
             self._publish_heartbeat()
-        guard_through = self.guard_ok and self.guard_age.fresh(self.heartbeat_timeout_s)
-        if self.neutral_confirmed_time is None or not guard_through:
-            self.neutral_on_wire_since = None
-        elif self.neutral_on_wire_since is None:
-            self.neutral_on_wire_since = t
+        self.core.set_peers(*self._peer_verdicts())  # the arming time starts in the tick that confirmed neutral
 
     def _publish_heartbeat(self) -> None:
         unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
         self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (lean_cdr.py)
             DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, "hindrax/esc",
-            {0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state], "esc",
+            STATE_NAMES[self.output_state], "esc",
             [("output_state", str(int(self.output_state))),
-             ("armed", "true" if self.armed and not unknown else "false")]))
+             ("armed", "true" if self.armed and not unknown else "false"), ("reason", self.core.reason)]))
 
     def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip
@@ -722,20 +653,14 @@ class EscNode(PolledInputsMixin, Node):
         self.supervisor_age.heard(received_ago_s(self.inputs))
         self.supervisor_ok, self.supervisor_message = heartbeat_ok(msg), msg.message
         if not self.supervisor_ok and self.armed:
-            self.heartbeat_disarms += 1
-            self.get_logger().error(f"disarming: supervisor tripped: {msg.message}")
-            self.disarm(f"supervisor tripped: {msg.message}")
+            self._feed_peers()
 
     def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low)."""
         self.guard_age.heard(received_ago_s(self.inputs))
         self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:
-            self.neutral_on_wire_since = None  # even if a later beat of the same take says OK again
-        if not self.guard_ok and self.armed:
-            self.heartbeat_disarms += 1
-            self.get_logger().error(f"disarming: output guard asserted: {msg.message}")
-            self.disarm(f"output guard asserted: {msg.message}")
+            self._feed_peers()  # restarts the time at neutral even if a later beat of the same take says OK
 
     def diag_message(self) -> str:
         """The current /diagnostics message (why the state is what it is)."""
@@ -769,16 +694,16 @@ class EscNode(PolledInputsMixin, Node):
                 ("neutral_confirmed", self.neutral_confirmed_time is not None),
                 ("oscillator_calibrated", self.oscillator_calibrated),
                 ("arming_remaining_s", f"{self.arming_remaining_s():.1f}"), ("prescale", self.prescale),
-                ("output_state", {0: "unknown", 1: "neutral", 2: "commanding"}[self.output_state]),
+                ("output_state", STATE_NAMES[self.output_state]),
                 ("supervisor_heartbeat_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("guard_heartbeat_age_s", f"{self.guard_age.age_s:.2f}"), ("heartbeat_disarms", self.heartbeat_disarms),
+                ("rejected_commands", self.core.rejected_commands), ("reason", self.core.reason),
                 ("clock_steps_back", self.clock_monitor.steps_back),
                 *(self.device.stats.diagnostics() if self.device is not None else [("i2c_bus", "not open")])]
 
     def close(self) -> None:
         """Shutdown path: disarm and write neutral (SIGINT/SIGTERM via run_node, or destroy by the owner)."""
-        self.armed = False
-        self.command = None
+        self.core.disarm("shutdown")
         self._safe_neutral("shutdown")
 
 

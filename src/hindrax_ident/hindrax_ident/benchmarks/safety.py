@@ -423,7 +423,7 @@ class _Layout:
         self.unknown_at: float | None = None
         self.diag: list[tuple[float, object]] = []
         self.probe.create_timer(0.02, lambda: self.commanding and self.cmd.publish(
-            ThrusterPwm(pulse_width_us=[1700.0] * 8)))
+            ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True)))
         self.probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_state, 50)
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
         self.ex = SingleThreadedExecutor(context=ctx)

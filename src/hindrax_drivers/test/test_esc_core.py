@@ -1,0 +1,271 @@
+"""The ESC's decisions without ROS or a bus (pca9685/core.py): one row per rule of the core's docstring.
+
+Expected values are written from the rules and the hardware facts (Basic ESC 1100-1900 us, neutral 1500 us,
+deadband +-25 us; PCA9685 at prescale 30 and 25 MHz: one count = 31 / 25 MHz = 1.24 us), not computed by the core.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hindrax_drivers.pca9685.core import (GUARD_CONFIRM_S, OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN,
+                                          RETRY_MAX_S, RETRY_MIN_S, EscCore, EscOutput, command_fault,
+                                          heartbeat_verdict)
+from hindrax_msgs.msg import ThrusterPwm
+
+COUNT_US = 1.24
+
+
+class Clock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+def make(arming_time_s=1.0, calibrated=True, n=2):
+    clock = Clock()
+    out = EscOutput(range(n), [False] * n, [0.0] * n, 1100, 1500, 1900)
+    core = EscCore(out, arming_time_s=arming_time_s, watchdog_timeout_s=0.2, oscillator_calibrated=calibrated,
+                   clock=clock)
+    return core, clock
+
+
+def ready(core, clock, wait_s=1.0):
+    """Chip confirmed, both peers trusted, the arming time passed."""
+    core.chip_confirmed()
+    core.set_peers("", "")
+    clock.t += wait_s
+
+
+def test_output_states_are_the_message_constants():
+    assert (OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING) == (
+        ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT_NEUTRAL, ThrusterPwm.OUTPUT_COMMANDING)
+
+
+# rule -> (command widths, its armed flag, expected fault substring or "" for accepted)
+COMMAND_ROWS = [
+    ("in range", [1700.0, 1300.0], True, ""),
+    ("range ends are the ESC's full reverse / forward", [1100.0, 1900.0], True, ""),
+    ("default-constructed message: 0.0 us", [0.0, 0.0], True, "outside the ESC's range 1100-1900"),
+    ("3000 us", [3000.0, 1500.0], True, "3000 us (thruster 0) outside"),
+    ("just below full reverse", [1500.0, 1099.9], True, "(thruster 1) outside"),
+    ("NaN", [math.nan, 1500.0], True, "non-finite"),
+    ("infinity", [1500.0, math.inf], True, "non-finite"),
+    ("wrong count", [1500.0], True, "1 pulse widths, expected 2"),
+    ("armed=false", [1700.0, 1700.0], False, "armed=false"),
+]
+
+
+@pytest.mark.parametrize("rule, widths, armed, fault", COMMAND_ROWS, ids=[r[0] for r in COMMAND_ROWS])
+def test_command_fault(rule, widths, armed, fault):
+    got = command_fault(widths, armed, 2, 1100.0, 1900.0)
+    assert (fault in got and got) if fault else got == ""
+
+
+def test_heartbeat_verdict_rows():
+    assert heartbeat_verdict("supervisor", "supervisor/heartbeat", 0.1, 0.2, True, "ok") == ""
+    assert heartbeat_verdict("supervisor", "s", 0.1, 0.2, False, "depth 3 m").endswith("not OK: depth 3 m")
+    assert heartbeat_verdict("supervisor", "s", 0.3, 0.2, True, "ok").startswith("no supervisor heartbeat for 0.30")
+    assert heartbeat_verdict("guard", "g", math.inf, 0.2, True, "ok").startswith("no guard heartbeat (g")
+
+
+# arming: rule -> (setup, expected refusal substring, "" = accepted)
+def _uncalibrated(core, clock):
+    core.oscillator_calibrated = False
+    ready(core, clock)
+
+
+def _not_confirmed(core, clock):
+    core.set_peers("", "")
+    clock.t += 5.0
+
+
+def _supervisor_untrusted(core, clock):
+    ready(core, clock)
+    core.set_peers("no supervisor heartbeat for 0.30 s", "")
+
+
+def _guard_untrusted(core, clock):
+    ready(core, clock)
+    core.set_peers("", "output guard holds the outputs off: /OE high")
+
+
+def _too_soon(core, clock):
+    ready(core, clock, wait_s=0.4)  # arming time 1.0 s
+
+
+def _guard_error_restarts_time(core, clock):
+    ready(core, clock, wait_s=0.9)
+    core.set_peers("", "output guard holds the outputs off")
+    core.set_peers("", "")
+    clock.t += 0.5  # 0.5 s since the guard's OK again, not 1.4 s
+
+
+def _ready(core, clock):
+    ready(core, clock)
+
+
+def _chip_lost_after_ready(core, clock):
+    ready(core, clock)
+    core.chip_lost("PCA9685 read-back failed")
+
+
+ARM_ROWS = [
+    ("oscillator not calibrated", _uncalibrated, "oscillator_calibrated is false"),
+    ("neutral not confirmed on the chip", _not_confirmed, "not confirmed at neutral"),
+    ("supervisor not trusted", _supervisor_untrusted, "no supervisor heartbeat"),
+    ("guard not trusted", _guard_untrusted, "output guard holds the outputs off"),
+    ("arming time not over", _too_soon, "0.6 s more at neutral"),
+    ("a guard ERROR restarts the arming time", _guard_error_restarts_time, "0.5 s more at neutral"),
+    ("chip lost", _chip_lost_after_ready, "not confirmed at neutral"),
+    ("everything ready", _ready, ""),
+]
+
+
+@pytest.mark.parametrize("rule, setup, refusal", ARM_ROWS, ids=[r[0] for r in ARM_ROWS])
+def test_arming(rule, setup, refusal):
+    core, clock = make()
+    setup(core, clock)
+    got = core.request_arm()
+    if refusal:
+        assert refusal in got and not core.armed
+    else:
+        assert got == "" and core.armed and core.output_state == OUTPUT_NEUTRAL
+
+
+def test_arm_waits_for_the_guard_confirmation_even_with_no_arming_time():
+    core, clock = make(arming_time_s=0.0)
+    ready(core, clock, wait_s=0.0)
+    assert "the output guard's OK confirmed for 0.15 s" in core.request_arm()
+    clock.t += GUARD_CONFIRM_S
+    assert core.request_arm() == ""
+
+
+def armed_commanding(n=2):
+    core, clock = make(n=n)
+    ready(core, clock)
+    assert core.request_arm() == ""
+    assert core.on_command(10.0, [1700.0] * n, True) == ""
+    d = core.decide(10.0, 0.02)
+    assert d.output_state == OUTPUT_COMMANDING and d.widths_us.tolist() == [1700.0] * n
+    return core, clock
+
+
+def test_commands_before_arming_give_neutral():
+    core, clock = make()
+    ready(core, clock)
+    core.on_command(10.0, [1700.0, 1700.0], True)
+    d = core.decide(10.0, 0.02)
+    assert d.output_state == OUTPUT_NEUTRAL and d.widths_us.tolist() == [1500.0, 1500.0]
+
+
+def test_arming_drops_a_command_from_before_it():
+    core, clock = make()
+    ready(core, clock)
+    core.on_command(10.0, [1700.0, 1700.0], True)
+    core.request_arm()
+    assert core.decide(10.0, 0.02).widths_us.tolist() == [1500.0, 1500.0]
+
+
+@pytest.mark.parametrize("rule, widths, armed", [(r[0], r[1], r[2]) for r in COMMAND_ROWS if r[3]],
+                         ids=[r[0] for r in COMMAND_ROWS if r[3]])
+def test_a_faulty_command_while_commanding_gives_neutral_and_the_reason(rule, widths, armed):
+    core, _clock = armed_commanding()
+    fault = core.on_command(10.01, widths, armed)
+    d = core.decide(10.01, 0.02)
+    assert fault and d.output_state == OUTPUT_NEUTRAL and d.widths_us.tolist() == [1500.0, 1500.0]
+    assert d.reason == f"command rejected: {fault}" and core.armed and core.rejected_commands == 1
+    core.on_command(10.02, [1600.0, 1600.0], True)  # the next valid command drives again
+    assert core.decide(10.02, 0.02).widths_us.tolist() == [1600.0, 1600.0] and core.reason == ""
+
+
+def test_peer_loss_while_armed_disarms_with_the_reason():
+    core, _clock = armed_commanding()
+    assert core.set_peers("supervisor tripped: depth", "") == "supervisor tripped: depth"
+    d = core.decide(10.0, 0.02)
+    assert not core.armed and d.widths_us.tolist() == [1500.0, 1500.0] and core.heartbeat_disarms == 1
+    assert d.reason == "supervisor tripped: depth"
+
+
+def test_watchdog_on_ros_time():
+    core, _clock = armed_commanding()
+    assert core.decide(10.2, 0.02).output_state == OUTPUT_COMMANDING  # 0.2 s: not older than the timeout
+    d = core.decide(10.21, 0.02)
+    assert d.output_state == OUTPUT_NEUTRAL and core.watchdog_trips == 1 and core.armed
+    assert d.reason.startswith("watchdog")
+
+
+def test_steady_watchdog_trip_drops_the_command():
+    core, _clock = armed_commanding()
+    core.watchdog_trip("steady-clock watchdog")
+    assert core.decide(10.0, 0.02).output_state == OUTPUT_NEUTRAL and core.watchdog_trips == 1
+
+
+def test_chip_lost_is_unknown_and_disarmed():
+    core, _clock = armed_commanding()
+    assert core.chip_lost("write failed")
+    assert core.output_state == OUTPUT_UNKNOWN and not core.armed and core.command is None
+    assert not core.chip_lost("write failed")  # the same outage: not new
+
+
+def test_chip_mismatch_disarms():
+    core, _clock = armed_commanding()
+    core.chip_mismatch("MODE1 0x11")
+    assert not core.armed and core.decide(10.0, 0.02).widths_us.tolist() == [1500.0, 1500.0]
+
+
+def test_retry_backs_off_when_nothing_but_neutral_was_written():
+    core, clock = make()
+    core.chip_attempt()
+    core.chip_lost("no I2C bus")
+    assert not core.stale_width_possible
+    delays = []
+    for _ in range(6):
+        clock.t += 0.01
+        assert not core.retry_due()
+        clock.t += core.retry_s
+        assert core.retry_due()
+        delays.append(core.retry_s)
+        core.chip_attempt()
+        core.chip_lost("no I2C bus")
+    assert delays == [2 * RETRY_MIN_S, 4 * RETRY_MIN_S, 8 * RETRY_MIN_S, RETRY_MAX_S, RETRY_MAX_S, RETRY_MAX_S]
+
+
+def test_retry_at_every_tick_while_an_old_width_may_be_on_the_wire():
+    """Issue 44 finding 8: with /OE not wired, a bus that fails after a 1700 us write leaves 1700 us running; the
+    back-off (up to 4 s) kept it there 138-1288 ms after the bus returned. Retried at every tick instead."""
+    core, clock = armed_commanding()
+    core.wrote(np.array([1700.0, 1700.0]))
+    core.chip_attempt()
+    core.chip_lost("write failed")
+    assert core.stale_width_possible and "1700, 1700 us" in core.reason and "may still be on the wire" in core.reason
+    for _ in range(10):
+        clock.t += 0.02  # one tick
+        assert core.retry_due()
+        core.chip_attempt()
+        core.chip_lost("write failed")
+    core.wrote(np.array([1500.0, 1500.0]))  # the returning bus took neutral
+    core.chip_confirmed()
+    assert not core.stale_width_possible and not core.retry_due() and core.output_state == OUTPUT_NEUTRAL
+
+
+# deadband rounding (issue 44 item 9): one count = 1.24 us; deadband 1475-1525 us about each channel's neutral
+GRID_ROWS = [
+    ("forward edge 1525: 1229.8 counts, up to 1230", [1525.0], [False], [0.0], 1230 * COUNT_US),
+    ("reversed 1525 -> 1475: 1189.5 counts, down to 1189 (half-up gave 1190 = 1475.6, inside)",
+     [1525.0], [True], [0.0], 1189 * COUNT_US),
+    ("reversed with +3 us trim: 1478 -> 1191.9 counts, down to 1191", [1525.0], [True], [3.0], 1191 * COUNT_US),
+    ("inside the deadband: nearest count (1510 -> 1217.7 -> 1218)", [1510.0], [False], [0.0], 1218 * COUNT_US),
+    ("full forward 1900: 1532.3 counts, not up to 1533 (1900.9 us, beyond the ESC's maximum)", [1900.0], [False],
+     [0.0], 1532 * COUNT_US),
+]
+
+
+@pytest.mark.parametrize("rule, cmd, rev, trim, expected", GRID_ROWS, ids=[r[0] for r in GRID_ROWS])
+def test_count_grid_rounds_away_from_neutral_outside_the_deadband(rule, cmd, rev, trim, expected):
+    out = EscOutput(range(1), rev, trim, 1100, 1500, 1900, count_us=COUNT_US, deadband_us=25.0)
+    assert out.on_grid(out.target(np.array(cmd), 0.02))[0] == pytest.approx(expected, abs=1e-9)
