@@ -1,8 +1,8 @@
 """Vehicle configuration as the ROS 2 parameters of one node: declared per node, described, validated.
 
 Each node declares only the vehicle keys it reads (``keys``: prefixes of :data:`hindrax_drivers.config.SCHEMA`
-keys, e.g. ``("sensors.dvl75",)`` or ``("thrusters.names", "thrusters.<thruster>.position_frd_m")``); every
-other key of a params file or of ``parameter_overrides`` is ignored, as ROS 2 does for undeclared overrides.
+keys, e.g. ``("sensors.dvl75",)`` or ``("thrusters.names", "thrusters.<thruster>.position_frd_m")``); the other keys of a
+params file or of ``parameter_overrides`` are not declared, but validated with the whole vehicle (below).
 Each declared parameter gets a ``rcl_interfaces/ParameterDescriptor`` built from the schema: description
 (meaning and unit), ``additional_constraints`` (the allowed range as the loader prints it), a
 floating-point or integer range where the schema has both bounds, a static type, and ``read_only`` unless
@@ -17,7 +17,9 @@ vehicle file found by :func:`hindrax_drivers.config.default_config_path` (the re
 ``ros_ws/config/hindrax.yaml`` in a checkout, ``share/hindrax_drivers/config/hindrax.yaml`` when installed).
 So ``ros2 run hindrax_drivers dvl75_node --ros-args -p sensors.dvl75.port:=/dev/ttyUSB0`` works without a
 params file. A file named by ``config_file`` is validated whole by :func:`hindrax_drivers.config.load_config`;
-the node's own keys are validated again after the overrides are applied.
+the node's own keys are validated again after the overrides are applied. Every override in the vehicle's sections,
+declared by the node or not, is validated with the rest of the vehicle as ``hindrax config check`` validates a file
+(:func:`check_whole_vehicle`): a node refuses what ``config check`` refuses, in the same one line.
 
 Only public rclpy API is used (declare_parameter, get_parameter, set_parameters, set_descriptor,
 add_on_set_parameters_callback).
@@ -38,7 +40,8 @@ from . import config as _c
 from .config import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
 
 __all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
-           "declare_vehicle_parameters", "node_config", "CONFIG_FILE_PARAMETER"]
+           "declare_vehicle_parameters", "node_config", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
+           "check_whole_vehicle"]
 
 #: Name of the parameter naming a vehicle file to take defaults from ("" = the shipped file).
 CONFIG_FILE_PARAMETER = "config_file"
@@ -152,6 +155,48 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def vehicle_overrides(node: Any) -> dict[str, Any]:
+    """The overrides (``--params-file``, ``-p``, ``parameter_overrides``) a node was started with that fall in the
+    vehicle file's sections, declared by the node or not: dotted key -> plain value.
+
+    rclpy keeps them in ``Node._parameter_overrides`` and has no public accessor for the undeclared ones (``/**``
+    keys of another node's section are among them); read defensively (an empty mapping if that changes). A null
+    nullable key (:data:`hindrax_drivers.config.NULLABLE_KEYS`) is left out, as the file loader does."""
+    overrides = getattr(node, "_parameter_overrides", None) or {}
+    out = {name: _plain(p.value) for name, p in overrides.items() if name.split(".")[0] in SECTIONS}
+    # a YAML null (``esc.output_enable_gpio: null``, not wired) reaches rclpy as the string "null" from a params file
+    return {k: v for k, v in out.items() if not (k in _c.NULLABLE_KEYS and v in (None, "null", "~", ""))}
+
+
+def check_whole_vehicle(overrides: Mapping[str, Any], defaults: Mapping[str, Any], source: str) -> None:
+    """Validate the vehicle a node is started with as a whole, as ``hindrax config check`` does the file: the
+    ``defaults`` (a validated vehicle file, flat) with every vehicle-section override applied, including keys the
+    node does not read. A misspelt key (``supervisor.max_dpth_m``, ``vehicle.mas_kg``: unknown key), a value out of
+    range (``limits.max_roll_rad: 46``) or a failed cross-key check anywhere in the file stops the node, instead of
+    the key being ignored as ROS 2 ignores an undeclared override. Nothing to do without overrides that change the
+    defaults (validated when loaded), nor without defaults (no vehicle file found).
+
+    Raises :class:`ConfigError` naming key, value and allowed range (``str()`` is the first issue, one line).
+    """
+    changed = {k: v for k, v in overrides.items() if k not in defaults or defaults[k] != v}
+    if not changed or not defaults:
+        return  # no vehicle file to complete a partial set: the node's own keys are still validated
+    merged = dict(defaults)
+    merged.update(overrides)
+    _validate_whole(tuple(sorted((k, _frozen(v)) for k, v in merged.items())), source)
+
+
+def _frozen(value: Any) -> Any:
+    return tuple(value) if isinstance(value, list) else value
+
+
+@functools.lru_cache(maxsize=8)
+def _validate_whole(items: tuple, source: str) -> None:
+    """:func:`hindrax_drivers.config.validate_flat` of a whole vehicle, once per distinct vehicle and source (a
+    composed process starts several nodes with the same parameters)."""
+    _c.validate_flat({k: (list(v) if isinstance(v, tuple) else v) for k, v in items}, source=source)
+
+
 def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
                                on_change: Callable[[VehicleConfig], None] | None = None) -> VehicleConfig:
     """Declare the node's vehicle keys as described ROS parameters and return them validated.
@@ -192,6 +237,8 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
         defaults = file_cfg.to_ros_parameters()
 
     source = config_file or (file_cfg.source if file_cfg else "")
+    check_whole_vehicle(vehicle_overrides(node), defaults,
+                        f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else ""))
     values: dict[str, Any] = {}
 
     def declare(key: str) -> Any:
