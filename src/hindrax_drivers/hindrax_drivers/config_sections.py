@@ -5,7 +5,7 @@ check that this file is current. Field names are the keys' last segments, nested
 of the keys, optional keys are ``X | None`` (None when absent) and lists are tuples. Build them through
 :class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A required key that
 a node did not declare among its parameters is absent from its configuration: reading it raises KeyError naming
-the key (what ``cfg.flat["key"]`` raised before).
+the key.
 """
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar

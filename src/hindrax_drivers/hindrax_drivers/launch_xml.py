@@ -25,7 +25,7 @@ Launch prefix
     (``launch_ros.actions.Node(prefix=...)``); the vehicle launch file gives the safety processes their scheduling
     priority this way (docs/deployment.md §1). Jazzy's launch then labels the process after the prefix's command
     (``[nice-3]``), so those nodes also set ``exec_name``, the label ``launch_ros`` prints instead; this reader keeps
-    it (:attr:`NodeProcess.exec_name`) and labels processes by node name or executable as before.
+    it (:attr:`NodeProcess.exec_name`) and labels processes by node name or executable.
 Respawn
     ``respawn="true"`` restarts the process whenever it ends while the launch runs, after ``respawn_delay`` s
     (``launch.actions.ExecuteLocal``: on any exit, not only a failure).

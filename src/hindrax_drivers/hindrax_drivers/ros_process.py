@@ -48,10 +48,10 @@ handlers before ``rclpy.init`` (rclpy's then chain to them):
 - with ``interrupt=False`` (node processes, :func:`~hindrax_drivers.node_common.run_nodes`) rclpy installs no
   handler at all (``SignalHandlerOptions.NO``): both signals are only recorded, and :meth:`RosProcess.spin`, a loop
   of ``spin_once`` with a 0.08 s timeout (:data:`SPIN_TIMEOUT_S`), returns at the next turn once one is; the
-  context is shut down after the clean-ups, never under a running callback. rclpy's handler shut it down from its
-  own thread while a callback ran: a timer callback that published then failed ("publisher's context is invalid")
-  and rclpy printed ``[FATAL] Exception in 'timers' callback`` with a traceback (the controller's status, 1 launch
-  Ctrl-C in 2, November 2026); a ``KeyboardInterrupt`` raised inside a callback did the same before;
+  context is shut down after the clean-ups, never under a running callback. rclpy's own handler shuts it down from
+  its own thread while a callback may run: a timer callback that publishes then fails ("publisher's context is
+  invalid") and rclpy prints ``[FATAL] Exception in 'timers' callback`` with a traceback (measured: 1 launch Ctrl-C
+  in 2); a ``KeyboardInterrupt`` raised inside a callback does the same;
 - from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end (the ESC node's
   neutral write among them);
 - at the end rclpy's handlers are uninstalled (``rclpy.try_shutdown`` leaves them) and the handlers found on entry

@@ -38,7 +38,7 @@ in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thr
 4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (monotone branch, with
    saturation and the small-force rule of :mod:`.thrust_curve`), optionally put on the PWM generator's grid
    (``pulse_width_step_us``, e.g. the PCA9685 count of docs/devices.md §5.1) at the nearest grid width that
-   is not in the deadband (issue 19, fault 10: a width outside the deadband never moves into it), and the
+   is not in the deadband (a width outside the deadband never moves into it), and the
    *actual* thrust at that pulse width is evaluated with the forward curve (deadband included). The
    achieved wrench ``B @ force_n`` is what the thrusters will really apply according to the model, so
    a controller can use it for anti-windup, and it reports every component nobody asked for.

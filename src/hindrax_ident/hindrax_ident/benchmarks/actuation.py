@@ -8,9 +8,9 @@ the time from ``publish()`` to the I2C write after which the emulator decodes th
 T1's channel. The ESC node writes a command when it arrives (event-driven output; its output tick is the
 watchdog), and the allocation hands it over by a direct call as in ``actuation_node``
 (:func:`hindrax_drivers.composition.connect_in_process`), so this is one DDS delivery (the wrench), the allocation
-and one I2C block write; before the hand-off it was DDS delivery twice, and before event-driven output it waited for
-the next 50 Hz output tick (16.6 ms p99). CPU per command is the process CPU time (all three nodes and DDS)
-divided by the commands sent.
+and one I2C block write (a DDS hop for the command would add a second delivery; waiting for the next 50 Hz
+output tick instead of writing on arrival, 16.6 ms p99). CPU per command is the process CPU time (all three nodes
+and DDS) divided by the commands sent.
 
 The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
 wrenches from 0.1 N to 30 N, with and without the deadband search (docs/architecture.md §9,

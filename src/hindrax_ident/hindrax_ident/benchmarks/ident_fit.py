@@ -18,7 +18,7 @@ of
 and the noise floor (``nrmse_floor`` of :func:`..identification.fit_core.validation_measures`: the white measurement
 noise over the measured std, what a perfect model would still score).
 
-Issue 27's acceptance on real held-out data: surge, sway and heave ``fit`` at least 10 % below ``ls`` and below
+Acceptance on real held-out data: surge, sway and heave ``fit`` at least 10 % below ``ls`` and below
 ``hold``. Tune on this benchmark, never on the tests. Usage: ``python -m hindrax_ident.benchmarks.ident_fit
 [--only NAME,...] [--quick] [--keep DIR]`` (``make bench BENCH_ARGS=--only=ident_fit`` runs it in the suite).
 """

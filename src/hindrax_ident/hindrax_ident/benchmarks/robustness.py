@@ -1,4 +1,4 @@
-"""Robustness benchmark: fuzzed parsers and injected faults, measured (issue 19).
+"""Robustness benchmark: fuzzed parsers and injected faults, measured.
 
 Fuzzing (:mod:`hypothesis`, derandomised so every run draws the same inputs): per parser at least
 :data:`FUZZ_INPUTS` inputs. Each hypothesis example draws one *template* (arbitrary bytes, a frame with a

@@ -18,7 +18,7 @@ I2C transaction after which the emulator decodes every thruster channel at neutr
 * ``clock_loss``: ``use_sim_time`` and ``/clock`` stops while commanding (the commands stop with it): the
   steady-clock watchdog; measured from the last command the node took (so it includes the 0.5 s timeout).
 
-Process, bus and clock failures (:func:`run_processes`, issue 23; target 500 ms each), in the vehicle's layout: the
+Process, bus and clock failures (:func:`run_processes`; target 500 ms each), in the vehicle's layout: the
 ESC node, the supervisor and the output guard each in its own process (``python -m ...``, EventsExecutor), sharing
 an emulated PCA9685 and its /OE line that this process serves over a Unix socket
 (:mod:`hindrax_drivers.transport.shared_emulation`); the bench's own vehicle file wires /OE and watches no sensor:

@@ -1,4 +1,4 @@
-"""Scenario-suite benchmark (issue 16): a short subset of ``hindrax ident scenarios`` in ``make bench``.
+"""Scenario-suite benchmark: a short subset of ``hindrax ident scenarios`` in ``make bench``.
 
 quick: scenario ``thrust_0.90`` only, surge, 2 levels, seed 1; full: ``none``, ``thrust_0.90`` and
 ``reverse_weak``, surge, 2 levels, seed 1 (about 15 s each here; surge and heave at 3 levels took about 80 s

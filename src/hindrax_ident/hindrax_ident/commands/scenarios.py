@@ -9,11 +9,11 @@ error, z = (estimate - truth) / std, whether the 95 % interval covers the truth,
 reasons.
 
 Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenance) and ``<out>/scenarios.md`` (the
-table) and prints the table. A scenario *meets the target* (issue 16) when every parameter's interval covers the
+table) and prints the table. A scenario *meets the target* when every parameter's interval covers the
 truth in at least 90 % of the seeds or the parameter is suspect in every case where it does not; the
 no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 0; 1 on bad arguments.
 
-``--excitation ladder,multisine,prbs`` (issue 18 item 5) runs every case once per excitation
+``--excitation ladder,multisine,prbs`` runs every case once per excitation
 (``identification.excitation``: the constant-thrust ladder or one broadband run per DOF,
 :mod:`hindrax_ident.identification.excitation`; ``--excitation-duration`` its length); the scenario label becomes
 ``<scenario> [<excitation>]`` for the other excitations, and a second table compares them
@@ -21,10 +21,10 @@ no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 
 interval coverage, and the error scaled to 100 s of pool time (|error| x sqrt(pool s / 100), the 1 / sqrt(T) law of
 an unbiased estimate), i.e. the accuracy per second of pool time.
 
-``--calibrate thrust`` (or other reference steps, issue 26) runs them before the manoeuvres of every case (the
+``--calibrate thrust`` (or other reference steps) runs them before the manoeuvres of every case (the
 virtual pool plays the operator) and identifies as ``hindrax ident campaign --calibrate`` does: the per-direction
 thrust scales applied and estimated jointly with the fits and the empirical priors; the label gains
-``[calibrate <steps>]``. Without it the cases are identified on the curve's force, as before.
+``[calibrate <steps>]``. Without it the cases are identified on the curve's force.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""The PD/PI holds the campaign used before the model-based law (kept for ``hindrax control evaluate``).
+"""PD/PI holds without a model: the baseline that ``hindrax control evaluate`` compares the model-based law with.
 
-:class:`LegacyPDHold` is the former ``maneuvers.HoldController`` law, unchanged: gains from the vehicle file's
+:class:`LegacyPDHold`: gains from the vehicle file's
 a-priori rigid + added inertia, k_p = I w_n^2, k_d = 2 zeta w_n I (zeta = 1), the derivative on the measured rate (not
 on the error), a depth integral 0.5 m w_n^3 clipped to +-0.5 m s, the net-buoyancy feed-forward, a proportional
 velocity hold -1.5 w_n m (v - v_sp), no damping feedforward and no reference model. Same interface as

@@ -43,7 +43,7 @@ P are clipped to it after each update (the eigen-decomposition is only computed 
 exceeds the bound, which is cheap to test). :meth:`RecursiveLeastSquares.reset_covariance`
 restarts P explicitly.
 
-Honesty options (issue 16; all off by default in this class, so the plain algorithm above is unchanged; the
+Honesty options (all off by default in this class, so the plain algorithm above is unchanged; the
 identification executive switches all of them on, :func:`hindrax_ident.identification.estimators.online_rls`):
 
 * ``directional=True``: directional forgetting (Bittanti, Bolzern and Campi 1990, "Recursive least squares

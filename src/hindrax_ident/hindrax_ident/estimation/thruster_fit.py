@@ -23,7 +23,7 @@ Cov(c) = T Cov(a) T^T. The raw standard deviations are large and strongly correl
 [Hindrax-Drag] Table 2, e.g. c1 = 927.18 +- 137.82): use :meth:`CubicFit.predict_std` for the
 uncertainty of the thrust itself.
 
-Relative thrust uncertainty for the identification intervals (issue 16 item 4; our definition, the seed gives
+Relative thrust uncertainty for the identification intervals (our definition, the seed gives
 none): a self-propelled identification sees the thrust only through a scale (every identified parameter scales
 with it, docs/identification.md), so the curve's covariance is summarised per direction as the thrust-weighted RMS
 relative standard deviation of the fitted mean thrust over the fitted pulse-width range,

@@ -1,5 +1,5 @@
-"""Known-force thrust calibration per thruster group and rotation direction, and the joint estimation (issue 17
-items 1-3, 5; issue 26 items 1-2; [Hindrax-Drag] §6; docs/identification.md §6).
+"""Known-force thrust calibration per thruster group and rotation direction, and the joint estimation
+([Hindrax-Drag] §6; docs/identification.md §6).
 
 A self-propelled test only sees force / inertia and force / damping: if the thrusters give s times their curve,
 inertia, damping and bias all come out s times too (docs/identification.md §6). A T200's forward and reverse

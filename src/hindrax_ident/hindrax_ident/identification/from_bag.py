@@ -20,8 +20,8 @@ with the fits and writes the ``calibration`` and ``joint`` sections, as ``hindra
 
 Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10 ms,
 the simulator's /clock period): the status is held from its stamps and the ESC widths from their stamps plus
-``esc.output_latency_s`` (zero-order hold, as the ESC output; a force 10 ms ahead of the true thrust, as the
-graph had before its lock-step gate, put the heave bias 2 N and the downward quadratic damping 90 % off), and
+``esc.output_latency_s`` (zero-order hold, as the ESC output; a force 10 ms ahead of the true thrust puts the heave
+bias 2 N and the downward quadratic damping 90 % off), and
 every sensor stamp is rounded to the grid (<= grid_s / 2 moved), because the output-error fit
 compares the model with samples at grid instants. Sensor stamps are the drivers' times of validity (the DVL's
 device time, the MS5837's conversion midpoint), which is what the fit needs.

@@ -70,8 +70,8 @@ Action execution
     for any goal. Why: an execute callback that is a coroutine awaiting the end stays a pending task for the whole
     campaign, and rclpy 7.1's EventsExecutor, which every node process spins, re-queues a pending task at once, a
     busy loop (72 % of a core in the launch layout while a goal ran; docs/architecture.md §11.5). With the
-    SingleThreadedExecutor the same coroutine cost about 20 % of a core; the node now costs about 5 % idle and
-    10-13 % running a goal (docs/architecture.md §10.1).
+    SingleThreadedExecutor the same coroutine costs about 20 % of a core; without it the node costs about 5 % idle
+    and 10-13 % running a goal (docs/architecture.md §10.1).
 CPU
     On the system clock (the vehicle; ``use_sim_time`` false) the five inputs are polled subscriptions
     (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor wake-up per

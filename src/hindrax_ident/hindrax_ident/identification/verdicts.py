@@ -48,7 +48,7 @@ and
    * ``free decay`` (roll and pitch inertia, :func:`apply_reference_verdicts`): the rigid + added inertia from a free
      decay (campaign ``tilt_decay`` step or ``hindrax ident free-decay``; restoring stiffness from an inclining
      test, independent of the thrust curve) differs from the self-propelled inertia by more than
-     :data:`REFERENCE_Z_MAX` combined standard deviations (issue 17 item 3; docs/identification.md §6.4).
+     :data:`REFERENCE_Z_MAX` combined standard deviations (docs/identification.md §6.4).
 
 All quantities SI, the parameters and units of :func:`~.estimators.parameter_names`.
 """

@@ -10,9 +10,9 @@ sections no node reads:
 
 The simulator and the device emulators read the truth (:attr:`Truth.config`); every node and estimator reads the
 vehicle file only (``test_truth.py`` checks that no module outside ``sim/`` names a truth-only key). The shipped
-``default.yaml`` holds the sensor noise levels the vehicle file carried before and no disturbance, so a run
-without ``--truth`` is what it was. The simulator always fills the keys the vehicle configuration lacks from
-``default.yaml``; a truth file given with ``--truth`` then overrides any key (it states only what differs).
+``default.yaml`` holds the default sensor noise levels and no disturbance. The simulator always fills the keys the
+vehicle configuration lacks from ``default.yaml``; a truth file given with ``--truth`` then overrides any key (it
+states only what differs).
 
 Disturbances (``disturbances:`` section; the physical source of each; all default off):
 

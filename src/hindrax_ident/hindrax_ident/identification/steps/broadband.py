@@ -1,4 +1,4 @@
-"""One broadband run per DOF instead of its ladder (issue 18 item 5): :class:`BroadbandRun`.
+"""One broadband run per DOF instead of its ladder: :class:`BroadbandRun`.
 
 The signal (Schroeder multisine, m-sequence PRBS or log chirp, :mod:`..excitation`) drives the DOF under test
 through the :class:`~..excitation.BoxShaping` of its displacement from the pool-box centre, the other DOFs held;
