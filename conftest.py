@@ -1,6 +1,7 @@
 """Test-session set-up shared by every test directory.
 
-- Discovery stays on loopback: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (docs/architecture.md §11.4).
+- Discovery and data stay on loopback, over the vehicle's transport: UDPv4 bound to 127.0.0.1, no shared memory
+  (:mod:`hindrax_drivers.dds_transport`; docs/architecture.md §11.4).
 - Each pytest-xdist worker (and a plain run) reserves its own ROS domain ID through
   ``domain_coordinator`` (a port lock, so concurrent test runs on one machine never share a domain) and
   exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it.
@@ -12,6 +13,9 @@ import os
 import pytest
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+from hindrax_drivers.dds_transport import loopback_transport  # noqa: E402 - after the range is set
+
+loopback_transport()
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 _domain_ctx = None

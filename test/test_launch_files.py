@@ -130,6 +130,10 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
             passed = {a.get("name"): substitute(a.get("value"), args, packages) for a in el.findall("arg")}
             if enabled:
                 nodes += check_launch(inc, packages, passed)
+        elif el.tag == "set_env":  # the DDS transport (hindrax_drivers.dds_transport): its files must exist
+            value = substitute(el.get("value"), args, packages)
+            if el.get("name") == "FASTRTPS_DEFAULT_PROFILES_FILE":
+                assert Path(value).is_file(), f"{path.name}: DDS profile {value} does not exist"
         else:
             assert el.tag == "arg", f"{path.name}: unexpected element <{el.tag}>"
     return nodes

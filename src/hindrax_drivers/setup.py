@@ -53,7 +53,7 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
-        (f"share/{PACKAGE}/config", _files("config/*.yaml")),
+        (f"share/{PACKAGE}/config", _files("config/*.yaml") + _files("config/*.xml")),
         (f"share/{PACKAGE}/config/truth", _files("config/truth/*.yaml")),
         (f"share/{PACKAGE}/config/truth/scenarios", _files("config/truth/scenarios/*.yaml")),
         (f"share/{PACKAGE}/launch", _files("launch/*.launch.xml")),

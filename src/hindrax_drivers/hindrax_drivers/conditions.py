@@ -8,13 +8,14 @@ rclpy is imported when a context is created, not when this module is.
 from __future__ import annotations
 
 import contextlib
-import os
 import threading
 import time
 from typing import Any, Callable, Iterator
 
 import rclpy
 from rclpy.context import Context
+
+from .dds_transport import loopback_transport
 
 __all__ = ["ConditionTimeout", "ros_context", "wait_until"]
 
@@ -48,8 +49,9 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 10.0, poll: Call
 @contextlib.contextmanager
 def ros_context(domain_id: int | None = None) -> Iterator[Any]:
     """An initialised, isolated rclpy Context (shut down on exit). Domain from ROS_DOMAIN_ID by default; discovery
-    kept on loopback (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``) unless the environment already says otherwise."""
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    kept on loopback over the vehicle's loopback UDP transport (:func:`~hindrax_drivers.dds_transport.
+    loopback_transport`) unless the environment already asks for another discovery range."""
+    loopback_transport()
     ctx = Context()
     kwargs = {}
     if domain_id is not None:

@@ -13,13 +13,20 @@ Supported
     ``<launch>`` with ``<arg name default description/>``, ``<let name value/>``, ``<node pkg exec name namespace
     output respawn respawn_delay args launch-prefix exec_name if unless>``
     holding ``<param from/>``, ``<param name value/>`` and
-    ``<remap from to/>``, ``<include file>`` holding ``<arg name value/>``, and ``<group>`` (with ``if``/``unless``);
+    ``<remap from to/>`` and ``<env name value/>``, ``<include file>`` holding ``<arg name value/>``, ``<group>``
+    (with ``if``/``unless``), and ``<set_env name value/>`` (for the nodes after it in its ``<launch>`` or
+    scoped ``<group>``, as ``launch`` does: included files see it, and one set in an included file stays set
+    after the ``<include>``; a node's own ``<env>`` wins);
     the substitutions ``$(var NAME)``, ``$(find-pkg-share PKG)`` and ``$(env NAME [DEFAULT])``; conditions that
     evaluate to ``true``/``false``/``1``/``0`` (any case), as ``launch.conditions.evaluate_condition_expression``.
 Command of a node (``launch_ros.actions.Node``)
     ``<executable> [args...] --ros-args -r __node:=<name> [-r __ns:=<ns>] --params-file <file> ... -r from:=to``,
     the ``<param name value>`` elements written, as ``launch_ros`` does, to a parameter file keyed ``/**``, with
     each value typed by YAML (``true`` -> bool, ``2.0`` -> float, anything else a string).
+Environment
+    ``<set_env>`` and a node's ``<env>`` add to the environment the node's process inherits
+    (:attr:`NodeProcess.env`); the vehicle launch file gives every vehicle process its DDS transport this way
+    (:mod:`hindrax_drivers.dds_transport`).
 Launch prefix
     ``launch-prefix="nice -n -5"`` puts that command, split as a shell would (``shlex``), before the executable
     (``launch_ros.actions.Node(prefix=...)``); the vehicle launch file gives the safety processes their scheduling
@@ -68,8 +75,8 @@ class NodeProcess:
     mapping of parameter name -> typed value (one ``<param name value>`` run). remaps: (from, to) pairs.
     arguments: the ``args`` attribute, split on white space. launch_prefix: the ``launch-prefix`` command, split
     (module docstring). exec_name: the ``exec_name`` attribute (Jazzy's process label) or None.
-    respawn / respawn_delay_s: see the module docstring (s). source: the launch file that
-    declares the node.
+    respawn / respawn_delay_s: see the module docstring (s). env: (name, value) pairs added to the inherited
+    environment (``<set_env>``, then the node's ``<env>``). source: the launch file that declares the node.
     """
 
     package: str
@@ -84,6 +91,7 @@ class NodeProcess:
     respawn: bool = False
     respawn_delay_s: float = 0.0
     output: str = "log"
+    env: tuple[tuple[str, str], ...] = ()
     source: Path = field(default=Path(), compare=False)
 
     @property
@@ -153,7 +161,8 @@ class _Reader:
     def __init__(self, find_share: ShareResolver) -> None:
         self.find_share = find_share
 
-    def read(self, path: Path, given: dict[str, str], top: bool) -> list[NodeProcess]:
+    def read(self, path: Path, given: dict[str, str], top: bool,
+             env: dict[str, str] | None = None) -> list[NodeProcess]:
         try:
             root = ET.parse(path).getroot()
         except (OSError, ET.ParseError) as exc:
@@ -167,9 +176,10 @@ class _Reader:
             raise LaunchFileError(f"{path.name}: {kind}(s) {', '.join(unknown)} not declared "
                                   f"(declared: {', '.join(declared) or 'none'})")
         scope: dict[str, str] = {}
-        return self._children(root, path, scope, given)
+        return self._children(root, path, scope, given, {} if env is None else env)  # an include shares it
 
-    def _children(self, parent: ET.Element, path: Path, scope: dict[str, str], given: dict[str, str]) -> list:
+    def _children(self, parent: ET.Element, path: Path, scope: dict[str, str], given: dict[str, str],
+                  env: dict[str, str]) -> list:
         out: list[NodeProcess] = []
         for el in parent:
             if not isinstance(el.tag, str):  # comments
@@ -186,10 +196,15 @@ class _Reader:
             if el.tag == "let":
                 scope[_required(el, "name", path)] = self.sub(_required(el, "value", path), scope, path)
                 continue
+            if el.tag == "set_env":
+                _only(el, {"name", "value"}, path)
+                env[self.sub(_required(el, "name", path), scope, path)] = self.sub(_required(el, "value", path),
+                                                                                    scope, path)
+                continue
             if not self._enabled(el, scope, path):
                 continue
             if el.tag == "node":
-                out.append(self._node(el, path, scope))
+                out.append(self._node(el, path, scope, env))
             elif el.tag == "include":
                 file = Path(self.sub(_required(el, "file", path), scope, path))
                 passed = {}
@@ -199,11 +214,11 @@ class _Reader:
                     if a.tag != "arg":
                         raise LaunchFileError(f"{path.name}: <{a.tag}> inside <include> is not supported")
                     passed[_required(a, "name", path)] = self.sub(_required(a, "value", path), scope, path)
-                out += self.read(file, passed, top=False)
+                out += self.read(file, passed, top=False, env=env)
             elif el.tag == "group":
                 _only(el, {"if", "unless", "scoped"}, path)
                 scoped = self.sub(el.get("scoped", "true"), scope, path).lower() in _TRUE
-                out += self._children(el, path, dict(scope) if scoped else scope, {})
+                out += self._children(el, path, dict(scope) if scoped else scope, {}, dict(env) if scoped else env)
             else:
                 raise LaunchFileError(f"{path.name}: element <{el.tag}> is not supported by this reader")
         return out
@@ -220,12 +235,13 @@ class _Reader:
             enabled = enabled and ((value in _TRUE) == want)
         return enabled
 
-    def _node(self, el: ET.Element, path: Path, scope: dict[str, str]) -> NodeProcess:
+    def _node(self, el: ET.Element, path: Path, scope: dict[str, str], env: Mapping[str, str]) -> NodeProcess:
         _only(el, {"pkg", "exec", "name", "namespace", "output", "respawn", "respawn_delay", "args", "launch-prefix",
                    "exec_name", "if", "unless"}, path)
         sub = lambda text: self.sub(text, scope, path)  # noqa: E731
         params: list = []
         remaps: list[tuple[str, str]] = []
+        node_env = dict(env)
         for child in el:
             if not isinstance(child.tag, str):
                 continue
@@ -241,6 +257,9 @@ class _Reader:
             elif child.tag == "remap":
                 _only(child, {"from", "to"}, path)
                 remaps.append((sub(_required(child, "from", path)), sub(_required(child, "to", path))))
+            elif child.tag == "env":
+                _only(child, {"name", "value"}, path)
+                node_env[sub(_required(child, "name", path))] = sub(_required(child, "value", path))
             else:
                 raise LaunchFileError(f"{path.name}: <{child.tag}> inside <node> is not supported by this reader")
         respawn = sub(el.get("respawn", "false")).strip().lower()
@@ -261,7 +280,7 @@ class _Reader:
             arguments=tuple(sub(el.get("args", "")).split()), launch_prefix=tuple(shlex.split(sub(el.get(
                 "launch-prefix", "")))), exec_name=sub(el.get("exec_name")) if el.get("exec_name") else None,
             respawn=respawn in _TRUE, respawn_delay_s=delay,
-            output=el.get("output", "log"), source=path)
+            output=el.get("output", "log"), env=tuple(node_env.items()), source=path)
 
     def sub(self, text: str, scope: Mapping[str, str], path: Path) -> str:
         """``text`` with its substitutions done (module docstring)."""

@@ -90,8 +90,9 @@ class ProcessRunner:
     """Starts, respawns and stops the processes of a launch file (module docstring).
 
     processes: from :func:`~hindrax_drivers.launch_xml.read_launch`. command: process -> executable argv (default
-    :func:`installed_command`). env: environment of every process (default: this one's), ``extra_env``: per-label
-    additions (e.g. an emulated device for one driver). log_dir: output files (default: a temporary directory,
+    :func:`installed_command`). env: environment of every process (default: this one's), updated by the launch
+    file's (``<set_env>``, ``<env>``: :attr:`NodeProcess.env`), then by ``extra_env``: per-label additions (e.g.
+    an emulated device for one driver). log_dir: output files (default: a temporary directory,
     :attr:`log_dir`). extra_ros_args: per-label arguments appended after the launch file's (``-p key:=value``
     overrides, e.g. an emulated port). Use as a context manager or call :meth:`start` / :meth:`stop`.
     Raises ``LookupError`` from :meth:`start` when an executable cannot be found (nothing is started then), and
@@ -212,7 +213,7 @@ class ProcessRunner:
         return write_parameter_file(values, self._params_dir)
 
     def _spawn(self, slot: _Slot) -> None:
-        env = dict(self._env, **self._extra_env.get(slot.process.label, {}))
+        env = dict(self._env, **dict(slot.process.env), **self._extra_env.get(slot.process.label, {}))
         with open(slot.log_path, "a") as log:
             log.write(f"--- start {slot.starts + 1}: {' '.join(slot.command)}\n")
             log.flush()

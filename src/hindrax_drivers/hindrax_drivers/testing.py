@@ -15,6 +15,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.parameter import Parameter
 
+from .dds_transport import loopback_transport
 from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
 from .config import default_config_path, load_config
 from .liveness import HEARTBEAT_NAMES
@@ -24,9 +25,11 @@ __all__ = ["ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env", 
 
 
 def child_env(**extra: str) -> dict[str, str]:
-    """Environment for a child Python process of this venv: loopback discovery, same domain, extras."""
+    """Environment for a child Python process of this venv: loopback discovery over the vehicle's loopback UDP
+    transport (:func:`~hindrax_drivers.dds_transport.loopback_transport`), same domain, extras."""
     env = dict(os.environ)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    loopback_transport(env)
     env.setdefault("PYTHONUNBUFFERED", "1")
     env.update(extra)
     return env

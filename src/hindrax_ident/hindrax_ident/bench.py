@@ -19,8 +19,10 @@ import time
 from pathlib import Path
 
 from hindrax_ident import results_doc
+from hindrax_drivers.dds_transport import loopback_transport
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 
 #: benchmark name -> module
 BENCHMARKS: dict[str, str] = {

@@ -36,6 +36,7 @@ from hindrax_drivers.ping1d.node import Ping1dNode
 from hindrax_drivers.recording.recorder_node import RecorderNode
 from hindrax_drivers.ros_process import RosProcess
 from hindrax_drivers.supervisor.node import SupervisorNode
+from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.tf.node import StaticTfNode
 from hindrax_msgs.srv import SetArmed
 
@@ -331,6 +332,7 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
     (:class:`~hindrax_drivers.ros_process.RosProcess`; :meth:`Graph.shutdown` on the way out). Returns the exit
     status: 1 with one line on stderr for an invalid configuration."""
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
+    loopback_transport()  # loopback discovery: over the vehicle's loopback UDP transport
     with RosProcess(errors={ConfigError: "invalid configuration"}) as proc:
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,
                             real_time_factor=real_time_factor, controller=controller, model_file=model_file)

@@ -18,7 +18,8 @@ import os
 import sys
 from typing import Sequence
 
-# Every process the project starts keeps DDS discovery on loopback unless told otherwise (docs/architecture.md §11.4).
+# Every process the project starts keeps DDS discovery on loopback unless told otherwise (SUBNET on the topside),
+# over the vehicle's loopback UDP transport (docs/architecture.md §11.4).
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 #: (command words, module implementing add_arguments/run, one-line help)
@@ -153,8 +154,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "_import_error", None):
         print(f"hindrax: this command is unavailable ({args._import_error})", file=sys.stderr)
         return 1
+    from hindrax_drivers.dds_transport import loopback_transport  # stdlib only; --help never gets here
+
     from .commands.common import CommandError
 
+    try:
+        loopback_transport()  # before any command creates a participant
+    except FileNotFoundError as exc:
+        print(f"hindrax: {exc}", file=sys.stderr)
+        return 1
     mod = importlib.import_module(args._module)
     try:
         return int(mod.run(args) or 0)

@@ -49,6 +49,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
 import hindrax_drivers.transport.i2c as i2c
 from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.launch_xml import NodeProcess, read_launch
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 from hindrax_ident.sim.hardware import VirtualHardware
@@ -56,6 +57,7 @@ from hindrax_ident.sim.node import SimulatorNode
 from hindrax_ident.sim.simulator import Simulator
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 
 SOCKET_ENV = "HINDRAX_BENCH_I2C_SOCKET"
 #: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits

@@ -74,6 +74,7 @@ from hypothesis import strategies as st
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.dds_transport import loopback_transport
 
 #: Fuzzed inputs per parser (full run); ``quick``: a tenth.
 FUZZ_INPUTS = 100_000
@@ -504,5 +505,6 @@ if __name__ == "__main__":  # pragma: no cover
     import os
 
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    loopback_transport()
     for row in run(quick=True):
         print(row)

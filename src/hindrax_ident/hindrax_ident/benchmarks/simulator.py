@@ -21,6 +21,7 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_ident.sim.node import SimulatorNode
 from hindrax_ident.sim.simulator import Simulator
 
@@ -44,6 +45,7 @@ def _simulator_rate(duration_s: float) -> tuple[float, float, int]:
 
 def _node_rate(wall_s: float) -> float:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    loopback_transport()
 
     cfg = load_config(default_config_path(), overrides={"simulation.real_time_factor": 0.0})
     with ros_context() as ctx:

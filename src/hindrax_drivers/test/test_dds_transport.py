@@ -1,0 +1,160 @@
+"""The vehicle's DDS transport (hindrax_drivers.dds_transport): UDPv4 on 127.0.0.1 only, no shared memory.
+
+Why the vehicle processes run with ROS_AUTOMATIC_DISCOVERY_RANGE=SYSTEM_DEFAULT, not LOCALHOST: under LOCALHOST
+rmw_fastrtps puts its own shared-memory + UDP transports on every participant (Fast-DDS issue 6535's stall). The
+live test shows that the replacement keeps everything on loopback: every UDP socket of every process of the
+vehicle launch file is bound to 127.0.0.1 (or is a multicast group, joined on loopback by the white list), and no
+process maps Fast DDS shared memory, while a LOCALHOST process (the control) does.
+"""
+from __future__ import annotations
+
+import os
+import socket
+import struct
+import subprocess
+import sys
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV, loopback_transport, profile_path
+from hindrax_drivers.emulated_devices import EmulatedDevices
+from hindrax_drivers.launch_xml import read_launch
+from hindrax_drivers.process_runner import ProcessRunner
+from hindrax_drivers.testing import child_env, ros_context, wait_until
+
+REPO = Path(__file__).resolve().parents[3]
+PKG = REPO / "src" / "hindrax_drivers"
+NS = "{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}"
+WAIT_S = 90.0
+
+
+def share(package: str) -> Path:
+    return REPO / "src" / package
+
+
+@pytest.mark.parametrize("given", [None, "", "LOCALHOST", "localhost"])
+def test_loopback_discovery_becomes_the_udp_loopback_profile(given):
+    env = {} if given is None else {RANGE_ENV: given}
+    loopback_transport(env)
+    assert env[RANGE_ENV] == "SYSTEM_DEFAULT"
+    assert Path(env[PROFILE_ENV]).resolve() == (REPO / "ros_ws/config/fastdds_loopback.xml").resolve()
+
+
+@pytest.mark.parametrize("given", ["SUBNET", "OFF", "SYSTEM_DEFAULT"])
+def test_other_discovery_ranges_keep_their_transports(given):
+    env = {RANGE_ENV: given}
+    loopback_transport(env)
+    assert env == {RANGE_ENV: given}  # the topside's SUBNET reaches the network with Fast DDS's defaults
+
+
+def test_the_profile_is_udpv4_on_loopback_only_without_builtin_transports():
+    root = ET.parse(profile_path()).getroot()
+    descriptors = root.findall(f"{NS}transport_descriptors/{NS}transport_descriptor")
+    assert [d.findtext(f"{NS}type") for d in descriptors] == ["UDPv4"]
+    assert [a.text for a in descriptors[0].iter(f"{NS}address")] == ["127.0.0.1"]
+    participant = root.find(f"{NS}participant")
+    assert participant.get("is_default_profile") == "true"  # rmw_fastrtps applies the default profile only
+    assert participant.findtext(f"{NS}rtps/{NS}useBuiltinTransports") == "false"  # no shared memory
+    assert [t.text for t in participant.iter(f"{NS}transport_id")] == [descriptors[0].findtext(f"{NS}transport_id")]
+
+
+@pytest.mark.parametrize("launch", ["hindrax_drivers/vehicle.launch.xml", "hindrax_ident/pool_test.launch.xml"])
+def test_every_launched_process_gets_the_profile(launch):
+    package, name = launch.split("/")
+    procs = read_launch(share(package) / "launch" / name, {}, find_share=share)
+    assert procs
+    for p in procs:
+        env = dict(p.env)
+        assert env[RANGE_ENV] == "SYSTEM_DEFAULT", p.label
+        assert Path(env[PROFILE_ENV]).resolve() == profile_path().resolve(), p.label
+
+
+def _udp_sockets(pid: int) -> list[tuple[str, int]]:
+    """(local IPv4 address, port) of every UDP socket process ``pid`` holds (IPv6 ones as ('ipv6', port))."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    out = []
+    for table, family in (("udp", "ipv4"), ("udp6", "ipv6")):
+        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[9] not in inodes:
+                continue
+            address, port = fields[1].split(":")
+            if family == "ipv4":
+                out.append((socket.inet_ntoa(struct.pack("<I", int(address, 16))), int(port, 16)))
+            else:
+                out.append(("ipv6", int(port, 16)))
+    return out
+
+
+def _maps_shared_memory(pid: int) -> bool:
+    """True when process ``pid`` maps a Fast DDS shared-memory segment (/dev/shm/fastrtps_*)."""
+    return "/dev/shm/fastrtps" in Path(f"/proc/{pid}/maps").read_text()
+
+
+def _loopback_or_multicast(address: str) -> bool:
+    return address == "127.0.0.1" or (address != "ipv6" and 224 <= int(address.split(".")[0]) <= 239)
+
+
+@pytest.mark.ros
+@pytest.mark.timeout(600)
+def test_every_vehicle_udp_socket_binds_loopback_and_no_process_uses_shared_memory(tmp_path):
+    cfg = load_config(default_config_path())
+    procs = read_launch(PKG / "launch" / "vehicle.launch.xml", {"record": "true", "output_dir": str(tmp_path / "runs")},
+                        find_share=share)
+    expected = {n for p in procs for n in p.node_names}
+    control = None
+    # a shell that asks for loopback discovery only, as the Makefile's: the launch file's <set_env> does the rest
+    plain = dict(child_env(), **{RANGE_ENV: "LOCALHOST"})
+    plain.pop(PROFILE_ENV)
+    with EmulatedDevices(cfg, tmp_path / "dev") as devices, ros_context() as ctx:
+        runner = ProcessRunner(
+            procs, env=plain,
+            extra_env={p.label: {k: v for n in p.node_names for k, v in devices.env(n).items()} for p in procs},
+            extra_ros_args={p.label: [a for n in p.node_names for a in devices.ros_arguments(n)] for p in procs},
+            log_dir=tmp_path / "logs")
+        probe = rclpy.create_node("transport_probe", context=ctx)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(probe)
+        try:
+            runner.start()
+            # the control: a plain LOCALHOST participant, as rmw_fastrtps sets it up (shared memory + UDP)
+            control = subprocess.Popen([sys.executable, "-c", "import rclpy, time; rclpy.init(); "
+                                        "n = rclpy.create_node('localhost_control'); time.sleep(600)"],
+                                       env=plain)
+            names = lambda: {n for n, _ in probe.get_node_names_and_namespaces()}  # noqa: E731
+            try:
+                wait_until(lambda: expected | {"localhost_control"} <= names(), WAIT_S,
+                           lambda: executor.spin_once(timeout_sec=0.1), "every vehicle node discovered")
+            except Exception as exc:
+                tails = "\n".join(f"--- {p.label}:\n{runner.log(p.label)[-800:]}" for p in procs)
+                raise AssertionError(f"{exc}; seen {sorted(names())}\n{tails}") from exc
+            wait_until(lambda: _maps_shared_memory(control.pid), WAIT_S, lambda: time.sleep(0.05),
+                       "the LOCALHOST control maps shared memory")
+            states = runner.states()
+            assert all(s.running for s in states.values()), states
+            for label, state in states.items():
+                sockets = _udp_sockets(state.pid)
+                assert sockets, label  # a DDS participant holds UDP sockets: this looked at the right process
+                assert all(_loopback_or_multicast(a) for a, _ in sockets), (label, sockets)
+                assert not _maps_shared_memory(state.pid), label
+            assert not any(a == "0.0.0.0" for a, _ in _udp_sockets(os.getpid()))  # the tests' own process too
+        finally:
+            if control is not None:
+                control.kill()
+                control.wait()
+            runner.stop()
+            executor.shutdown()
+            probe.destroy_node()
