@@ -2,7 +2,9 @@
 
 Pure part: due times follow wall = wall_0 + (t - origin) / rate exactly; /clock carries the bag time.
 Process part: the committed test bag is played into subscriptions of this process; the bytes received must be
-the recorded CDR bytes, per topic in order, with /clock, a start offset, a topic subset and looping.
+the recorded CDR bytes, per topic in order, with /clock, a start offset, a topic subset and looping. A bag of the
+vehicle's safety graph (heartbeats, thruster commands, wrench) plays its sensor data only, unless asked with
+``--safety-topics``, and even then never while an ESC is on the graph (issue 43.3).
 """
 from __future__ import annotations
 
@@ -150,8 +152,9 @@ def test_player_publishes_the_recorded_bytes_with_timing_and_clock(ros):
     ros.node.create_subscription(Clock, "/clock", lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec),
                                  QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT))
     rate = 4.0
+    # /thrusters/pwm is an actuation topic: published on request only, onto a graph without an ESC or supervisor
     proc = start_player([str(SENSORS), "--rate", str(rate), "--topics", *topics, "--clock", "50",
-                         "--wait-subscribers", "20"])
+                         "--wait-subscribers", "20", "--safety-topics"])
     try:
         expected = {t: [m.data for m in BagReader(SENSORS).messages([t])] for t in topics}
         complete = lambda: all(len(got[t]) == len(expected[t]) for t in topics)  # noqa: E731
@@ -259,3 +262,93 @@ def test_player_says_clearly_when_a_type_is_not_installed(ros, custom_bag):
     assert proc.wait(30) == 1 and "no such bag" in proc.stderr.read().decode()
     proc = start_player([str(custom_bag), "--start-offset", "5"])  # the bag is 0.04 s long
     assert proc.wait(30) == 1 and "beyond the end" in proc.stderr.read().decode()
+
+
+@pytest.fixture
+def vehicle_bag(tmp_path):
+    """A bag as the vehicle records it, 1 s at 20 Hz: both safety heartbeats, the ESC's command, the wrench, and
+    the altimeter's range."""
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import Range
+
+    from hindrax_msgs.msg import ThrusterPwm
+
+    bag = tmp_path / "vehicle"
+    with BagWriter(bag) as w:
+        w.add_topic("/supervisor/heartbeat", "diagnostic_msgs/msg/DiagnosticStatus")
+        w.add_topic("/esc/heartbeat", "diagnostic_msgs/msg/DiagnosticStatus")
+        w.add_topic("/thrusters/command_pulse_width", "hindrax_msgs/msg/ThrusterPwm")
+        w.add_topic("/wrench", "geometry_msgs/msg/WrenchStamped")
+        w.add_topic("/ping/altitude", "sensor_msgs/msg/Range")
+        for i in range(20):
+            t = START_NS + i * 50_000_000
+            for topic in ("/supervisor/heartbeat", "/esc/heartbeat"):
+                w.write(topic, t, serialize_message(DiagnosticStatus(
+                    level=DiagnosticStatus.OK, name=topic, values=[KeyValue(key="seq", value=str(i))])))
+            w.write("/thrusters/command_pulse_width", t + 1, serialize_message(
+                ThrusterPwm(pulse_width_us=[1700] * 8, armed=True)))
+            w.write("/wrench", t + 2, serialize_message(WrenchStamped()))
+            w.write("/ping/altitude", t + 3, serialize_message(Range(range=1.0 + i / 100)))
+    return bag
+
+
+VEHICLE_TOPICS = {"/supervisor/heartbeat": "diagnostic_msgs/msg/DiagnosticStatus",
+                  "/esc/heartbeat": "diagnostic_msgs/msg/DiagnosticStatus",
+                  "/thrusters/command_pulse_width": "hindrax_msgs/msg/ThrusterPwm",
+                  "/wrench": "geometry_msgs/msg/WrenchStamped"}
+
+
+def subscribe_all(node, topics):
+    got: dict[str, list] = {t: [] for t in topics}
+    for t, typ in topics.items():
+        node.create_subscription(message_class(typ), t, lambda m, t=t: got[t].append(m), 100)
+    return got
+
+
+@pytest.mark.ros
+def test_player_withholds_the_safety_and_actuation_topics_unless_asked(ros, vehicle_bag):
+    got = subscribe_all(ros.node, {**VEHICLE_TOPICS, "/ping/altitude": "sensor_msgs/msg/Range"})
+    proc = start_player([str(vehicle_bag), "--rate", "2", "--wait-subscribers", "20"])
+    try:
+        wait_until(lambda: len(got["/ping/altitude"]) == 20 or proc.poll() is not None, 30, ros.spin, "player done")
+        assert proc.wait(15) == 0, proc.stderr.read().decode()
+        err = proc.stderr.read().decode()
+        # every altimeter message, spread through the bag between the withheld ones, arrived: they would have too
+        wait_until(lambda: len(got["/ping/altitude"]) == 20, 10, ros.spin, "altimeter messages")
+    finally:
+        stop_process(proc)
+    assert {t: len(got[t]) for t in VEHICLE_TOPICS} == {t: 0 for t in VEHICLE_TOPICS}
+    assert "not publishing 4 safety and actuation topic(s)" in err and "--safety-topics" in err
+    # naming one explicitly is not enough: one line, exit 1, nothing published
+    proc = start_player([str(vehicle_bag), "--topics", "/supervisor/heartbeat"])
+    assert proc.wait(30) == 1
+    lines = proc.stderr.read().decode().strip().splitlines()
+    assert lines[-1].startswith("hindrax bag play: /supervisor/heartbeat: a heartbeat")
+    assert "--safety-topics" in lines[-1]
+
+
+@pytest.mark.ros
+def test_player_refuses_the_safety_topics_while_an_esc_is_on_the_graph(ros, vehicle_bag):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    got = subscribe_all(ros.node, VEHICLE_TOPICS)
+    esc = rclpy.create_node("esc", context=ros.node.context)  # a live ESC, as the graph shows it
+    esc.create_publisher(DiagnosticStatus, "esc/heartbeat", 10)
+    try:
+        proc = start_player([str(vehicle_bag), "--safety-topics", "--loop", "--wait-subscribers", "20"])
+        try:
+            wait_until(lambda: proc.poll() is not None, 60, ros.spin, "player refusing")
+            err = proc.stderr.read().decode().strip().splitlines()
+        finally:
+            stop_process(proc)
+        for _ in range(20):  # anything in flight would arrive now
+            ros.spin()
+    finally:
+        esc.destroy_node()
+    assert proc.returncode == 1
+    domain = ros.node.context.get_domain_id()
+    assert err[-1] == (f"hindrax bag play: refused: ROS domain {domain} already has ESC /esc; a bag's safety and "
+                       "actuation topics are never published onto a live vehicle's graph"), err
+    assert {t: len(got[t]) for t in VEHICLE_TOPICS} == {t: 0 for t in VEHICLE_TOPICS}

@@ -38,6 +38,7 @@ from hindrax_drivers.ros_process import RosProcess
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.tf.node import StaticTfNode
+from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, own_view
 from hindrax_msgs.srv import SetArmed
 
 from .control.node import ControllerNode
@@ -325,6 +326,16 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     return Graph(cfg, nodes, executor, hardware, context, stepped=stepped)
 
 
+def refuse_foreign_vehicle(graph: Graph, consequence: str, spin_timeout_s: float = 0.05) -> None:
+    """Spin ``graph`` through the discovery window (:data:`~hindrax_drivers.vehicle_graph.DISCOVERY_WINDOW_S`) and
+    raise :class:`~hindrax_drivers.vehicle_graph.ForeignVehicleError` (one line naming the domain and the process,
+    then ``consequence``) as soon as an ESC or supervisor other than the graph's own is visible on its domain."""
+    any_node = next(iter(graph.nodes.values()))
+    watch = ForeignVehicleWatch(any_node, "refused", consequence, own=lambda: own_view(graph.nodes.values()))
+    wait_until(watch.settled, 10 * watch.window_s, lambda: graph.executor.spin_once(timeout_sec=spin_timeout_s),
+               "discovery window")
+
+
 def run(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
         seed: int | None = None, real_time_factor: float | None = None, controller: bool = False,
         model_file: str = "") -> int:
@@ -333,10 +344,12 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
     status: 1 with one line on stderr for an invalid configuration."""
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
     loopback_transport()  # loopback discovery: over the vehicle's loopback UDP transport
-    with RosProcess(errors={ConfigError: "invalid configuration"}) as proc:
+    with RosProcess(errors={ConfigError: "invalid configuration", ForeignVehicleError: "hindrax bringup"}) as proc:
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,
                             real_time_factor=real_time_factor, controller=controller, model_file=model_file)
         proc.at_exit(graph.shutdown)
+        refuse_foreign_vehicle(graph, "refusing to start a second vehicle graph on it (set ROS_DOMAIN_ID to a free "
+                                      "domain)")
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)
         proc.spin(graph.executor)

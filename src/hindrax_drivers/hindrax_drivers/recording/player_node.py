@@ -16,13 +16,20 @@ Thin rclpy node over :mod:`~hindrax_drivers.recording.reader` (raw CDR messages 
   the bag's own schema (``hindrax bag info``, :meth:`BagReader.decoded`).
 - ``clock:=true`` publishes rosgraph_msgs/Clock on /clock at ``clock_rate_hz`` (wall) with the bag time;
   nodes under test then run with ``use_sim_time:=true``.
+- The safety and actuation topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``wrench``,
+  setpoints, action and service topics: :func:`~hindrax_drivers.vehicle_graph.vehicle_topic_reason`) are withheld
+  unless ``safety_topics:=true``: a bag must never answer for the vehicle's supervisor or drive its thrusters. Naming
+  one in ``topics`` without it is an error. With it, the player watches the graph
+  (:class:`~hindrax_drivers.vehicle_graph.ForeignVehicleWatch`) for at least the discovery window before the first
+  message and all through the play, and stops with a :class:`PlayerError` naming the ESC or supervisor it sees.
 
 Parameters: ``bag`` (string, required), ``rate`` (1.0), ``start_offset_s`` (0.0), ``topics`` (string[],
 empty = all), ``loop`` (false), ``clock`` (false), ``clock_rate_hz`` (100.0),
-``wait_for_subscribers_timeout_s`` (5.0), ``qos_depth`` (100).
+``wait_for_subscribers_timeout_s`` (5.0), ``qos_depth`` (100), ``safety_topics`` (false).
 
 Run alone: ``python -m hindrax_drivers.recording.player_node --ros-args -p bag:=runs/BAG -p rate:=2.0``.
-Errors: :class:`PlayerError` (one line) for a missing bag, unknown topics or nothing publishable.
+Errors: :class:`PlayerError` (one line) for a missing bag, unknown topics, nothing publishable, a withheld topic
+requested without ``safety_topics``, or (with it) an ESC or supervisor on the graph.
 """
 from __future__ import annotations
 
@@ -39,6 +46,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 
 from ..ros_process import RosProcess
+from ..vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, GraphView, split_vehicle_topics
 from .msgtypes import TypeNotInstalledError, message_class
 from .playback import PlayStats, play
 from .qos import playback_profile, profiles_from_yaml
@@ -63,7 +71,12 @@ _PARAMETER_DOCS = {
     "clock_rate_hz": "rate /clock is published at, Hz",
     "wait_for_subscribers_timeout_s": "how long to wait for a subscriber on every topic before playing, s",
     "qos_depth": "publisher queue depth",
+    "safety_topics": "also publish the safety and actuation topics (heartbeats, thrusters, esc, supervisor, guard, "
+                     "wrench, setpoints); refused while an ESC or supervisor is on the graph",
 }
+
+#: how often the player looks at the graph for an ESC or supervisor while it publishes safety topics, s
+GRAPH_CHECK_PERIOD_S = 0.2
 
 
 class BagPlayerNode(Node):
@@ -80,6 +93,7 @@ class BagPlayerNode(Node):
         self.clock_rate_hz = float(self._param("clock_rate_hz", 100.0))
         self.wait_timeout_s = float(self._param("wait_for_subscribers_timeout_s", 5.0))
         depth = int(self._param("qos_depth", 100))
+        self.safety_topics = bool(self._param("safety_topics", False))
         if not bag:
             raise PlayerError("no bag given (parameter bag:=PATH)")
         if not self.rate > 0:
@@ -102,6 +116,16 @@ class BagPlayerNode(Node):
                               + " ".join(sorted(self.reader.channels)))
         selected = requested or sorted(self.reader.channels)
         self.skipped: dict[str, str] = {}
+        self.withheld: dict[str, str] = {}
+        if not self.safety_topics:
+            selected, self.withheld = split_vehicle_topics(selected)
+            asked = [t for t in requested if t in self.withheld]
+            if asked:
+                raise PlayerError(f"{' '.join(asked)}: {self.withheld[asked[0]]}; a bag does not speak for the "
+                                  "vehicle unless asked with --safety-topics (safety_topics:=true)")
+            if self.withheld:
+                self.get_logger().info(f"not publishing {len(self.withheld)} safety and actuation topic(s) "
+                                       f"({' '.join(self.withheld)}); --safety-topics to publish them")
         self.pubs: dict[str, Any] = {}
         for topic in selected:
             ch = self.reader.channels[topic]
@@ -121,7 +145,9 @@ class BagPlayerNode(Node):
                              durability=_DURABILITY.get(prof["durability"], DurabilityPolicy.VOLATILE))
             self.pubs[topic] = self.create_publisher(cls, topic, qos)
         if not self.pubs:
-            raise PlayerError("nothing to publish: " + "; ".join(self.skipped.values()))
+            raise PlayerError("nothing to publish: " + "; ".join(
+                list(self.skipped.values()) + ([f"the bag's {len(self.withheld)} safety and actuation topic(s) are "
+                                                "withheld (--safety-topics)"] if self.withheld else [])))
         self.clock_pub = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
         if self.reader.start_ns is None:
             raise PlayerError(f"{bag}: the bag holds no messages")
@@ -131,6 +157,33 @@ class BagPlayerNode(Node):
             raise PlayerError(f"start offset {self.start_offset_s:g} s is beyond the end of {bag} "
                               f"({(self.reader.end_ns - self.bag_start_ns) / 1e9:.3f} s long)")
         self._stop = threading.Event()
+        self.watch: ForeignVehicleWatch | None = None
+        if self.safety_topics:
+            me = self.get_fully_qualified_name()
+            own = GraphView((me,), {t: (me,) for t in self.pubs})
+            self.watch = ForeignVehicleWatch(self, "refused", "a bag's safety and actuation topics are never "
+                                             "published onto a live vehicle's graph", own=lambda: own)
+        self._next_check = 0.0
+
+    def _check_graph(self, force: bool = False) -> None:
+        """With ``safety_topics``: raise :class:`PlayerError` when an ESC or supervisor is on the graph (looked at
+        every :data:`GRAPH_CHECK_PERIOD_S` at most, unless ``force``)."""
+        if self.watch is None:
+            return
+        now = time.monotonic()
+        if force or now >= self._next_check:
+            self._next_check = now + GRAPH_CHECK_PERIOD_S
+            try:
+                self.watch.check()
+            except ForeignVehicleError as exc:
+                self._stop.set()
+                raise PlayerError(str(exc)) from exc
+
+    def _graph_settled(self) -> bool:
+        """True once the discovery window has passed with no ESC or supervisor seen (raises :class:`PlayerError`
+        when one is); True at once without ``safety_topics``."""
+        self._check_graph(force=True)
+        return self.watch is None or self.watch.settled()
 
     def _param(self, name: str, default: Any) -> Any:
         """Declare (once) and read a parameter. A list is declared as a string array without a value: rclpy
@@ -152,6 +205,9 @@ class BagPlayerNode(Node):
         while missing and time.monotonic() < deadline and not self._stop.is_set():
             self._wait(0.02)
             missing = waiting()
+        # safety topics: no message before the graph had the discovery window to show an ESC or supervisor
+        while not self._stop.is_set() and not self._graph_settled():
+            self._wait(0.05)
         if missing:
             self.get_logger().warning(f"no subscriber after {timeout_s:g} s on: {' '.join(missing)}; playing anyway")
         return missing
@@ -161,6 +217,7 @@ class BagPlayerNode(Node):
         self._stop.wait(min(seconds, 0.1))
         if not self.context.ok():
             self._stop.set()
+        self._check_graph()
 
     def stop(self) -> None:
         """Ask :meth:`play` to return (thread-safe)."""
@@ -174,6 +231,7 @@ class BagPlayerNode(Node):
             return self.reader.messages(topics, start_ns=self.origin_ns)
 
         def publish(m) -> None:
+            self._check_graph()
             self.pubs[m.topic].publish(m.data)
 
         def publish_clock(t_ns: int) -> None:

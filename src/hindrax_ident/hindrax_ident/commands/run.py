@@ -214,6 +214,8 @@ def run_graph(args: argparse.Namespace) -> int:
     """The campaign through the ROS graph (module docstring). Returns the exit status."""
     from hindrax_drivers.config import default_config_path
 
+    from hindrax_drivers.vehicle_graph import ForeignVehicleError
+
     from ..identification.graph_campaign import run_graph_campaign
 
     cfg, dofs = _check_args(args)
@@ -233,12 +235,15 @@ def run_graph(args: argparse.Namespace) -> int:
         overrides["identification.excitation"] = args.excitation
     if getattr(args, "excitation_duration", None) is not None:
         overrides["identification.excitation_duration_s"] = float(args.excitation_duration)
-    outcome = run_graph_campaign(args.config or default_config_path(), out, dofs=dofs, levels=args.levels,
-                                 seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
-                                 progress=progress, truth=getattr(args, "truth", None),
-                                 calibrate=_calibration_steps(args),
-                                 sections=lambda doc, rec, idents: _add_reference_sections(doc, rec, cfg, idents, args,
-                                                                                           progress))
+    try:
+        outcome = run_graph_campaign(args.config or default_config_path(), out, dofs=dofs, levels=args.levels,
+                                     seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
+                                     progress=progress, truth=getattr(args, "truth", None),
+                                     calibrate=_calibration_steps(args),
+                                     sections=lambda doc, rec, idents: _add_reference_sections(doc, rec, cfg, idents,
+                                                                                               args, progress))
+    except ForeignVehicleError as exc:
+        raise CommandError(f"hindrax run: {exc}") from exc
     for dof, msg in outcome.errors.items():
         progress(f"{dof}: no estimate ({msg})")
     if outcome.identifications:

@@ -44,6 +44,7 @@ from std_srvs.srv import Trigger
 
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.conditions import ros_context, wait_until
+from hindrax_drivers.vehicle_graph import ForeignVehicleWatch, own_view
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -198,8 +199,9 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
     identifications): optional, adds sections to identification.yaml from the identification node's own record
     (e.g. ``free_decay`` and ``inclining`` of the tilt_decay and inclining steps, which need its sensor log).
 
-    Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration and ``TimeoutError`` when a
-    step does not finish within its wall-clock deadline (the graph is shut down, thrusters neutral).
+    Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration, ``TimeoutError`` when a
+    step does not finish within its wall-clock deadline (the graph is shut down, thrusters neutral) and
+    :class:`~hindrax_drivers.vehicle_graph.ForeignVehicleError` when another ESC or supervisor is on the domain.
     """
     say = progress or (lambda _m: None)
     wall0 = time.monotonic()
@@ -263,7 +265,12 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             # Simulated time starts only when discovery, port opening and the devices' start-up exchanges are
             # over, and stands still while the operator's calls are answered: the run then depends on the seed
             # alone, not on how long those took in wall time (graph_campaign module docstring).
-            armed = graph.start_and_arm(arm, 120, action.server_is_ready)
+            # a second graph on a domain with another ESC or supervisor would mix the two safety graphs (issue 43.3):
+            # refused before arming, as soon as one is seen, after a discovery window without one
+            watch = ForeignVehicleWatch(client, "refused", "refusing to run a campaign beside another vehicle graph "
+                                        "(set ROS_DOMAIN_ID to a free domain, or unset it to get one reserved)",
+                                        own=lambda: own_view([*graph.nodes.values(), client]))
+            armed = graph.start_and_arm(arm, 120, lambda: action.server_is_ready() and watch.settled())
             if not armed.success:
                 outcome.message = f"arming refused: {armed.message}"
                 say(outcome.message)

@@ -3,8 +3,11 @@
 Options: ``--rate X`` (2 = twice as fast), ``--start-offset S`` (skip the first S seconds),
 ``--topics T ...`` (subset), ``--loop``, ``--clock [HZ]`` (publish /clock, default 100 Hz, for nodes run
 with use_sim_time), ``--wait-subscribers S`` (wait up to S s for every topic to have a subscriber before
-starting). Give BAG first (``--topics`` takes every following word). Exit 0 when played, 1 with one line
-on stderr when the bag cannot be played.
+starting), ``--safety-topics`` (also publish the safety and actuation topics: heartbeats, ``thrusters/*``,
+``esc/*``, ``supervisor/*``, ``guard/*``, ``wrench``, setpoints, action topics; withheld by default so that a bag
+never answers for a vehicle's supervisor or drives its thrusters, and refused while an ESC or supervisor is on the
+graph). Give BAG first (``--topics`` takes every following word). Exit 0 when played, 1 with one line on stderr when
+the bag cannot be played or is refused.
 Implementation: :class:`hindrax_drivers.recording.player_node.BagPlayerNode`.
 """
 from __future__ import annotations
@@ -24,6 +27,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="publish /clock at HZ (default 100 Hz when given without a value)")
     parser.add_argument("--wait-subscribers", type=float, default=5.0, metavar="S",
                         help="wait up to S s for subscribers before starting (default 5)")
+    parser.add_argument("--safety-topics", action="store_true",
+                        help="also publish the bag's safety and actuation topics (heartbeats, thrusters, esc, "
+                             "supervisor, guard, wrench, setpoints); refused while an ESC or supervisor is on the "
+                             "graph. For a bench graph without a vehicle only")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
                  Parameter("start_offset_s", value=float(args.start_offset)), Parameter("loop", value=bool(args.loop)),
                  Parameter("clock", value=bool(args.clock > 0)),
                  Parameter("clock_rate_hz", value=float(args.clock) if args.clock > 0 else 100.0),
-                 Parameter("wait_for_subscribers_timeout_s", value=float(args.wait_subscribers))]
+                 Parameter("wait_for_subscribers_timeout_s", value=float(args.wait_subscribers)),
+                 Parameter("safety_topics", value=bool(args.safety_topics))]
     if args.topics:
         overrides.append(Parameter("topics", value=list(args.topics)))
     with RosProcess([], errors={PlayerError: "hindrax bag play"}) as proc:

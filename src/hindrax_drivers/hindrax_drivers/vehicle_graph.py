@@ -1,0 +1,192 @@
+"""What on a ROS graph speaks for a vehicle: the topics that command or vouch for it, and the processes that are it.
+
+The project's own tools must never speak for a vehicle they were not started as (docs/architecture.md,
+"Authority"): a replayed ``supervisor/heartbeat`` would answer for a dead supervisor, a replayed ``wrench`` or
+``thrusters/command_pulse_width`` would drive the thrusters, a second ``bringup --sim`` on the vehicle's domain would
+mix its ESC and supervisor into the vehicle's safety graph.
+
+Pure core:
+
+- :func:`vehicle_topic_reason` / :func:`split_vehicle_topics`: the safety and actuation topics (heartbeats,
+  ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*`` and ``output_guard/*``, the allocation's ``wrench`` and the
+  controller's ``setpoint``, action and service topics), in any namespace. ``hindrax bag play`` withholds them
+  unless asked with ``--safety-topics``.
+- :func:`foreign_vehicle_processes`: the ESCs and supervisors a graph shows beyond the caller's own (node names
+  ``esc`` / ``supervisor`` in any namespace, and any other node publishing their heartbeat topics), each as one
+  phrase naming the node.
+
+Graph side (rclpy, no executor needed): :func:`graph_view` reads a node's view of the graph, :func:`own_view` the
+caller's own nodes;
+:class:`ForeignVehicleWatch` applies :func:`foreign_vehicle_processes` to it over a discovery window and raises
+:class:`ForeignVehicleError` (one line naming the domain and the process) when something is seen.
+"""
+from __future__ import annotations
+
+import re
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping
+
+__all__ = ["DISCOVERY_WINDOW_S", "HEARTBEAT_TOPICS", "ROLE_NODES", "ForeignVehicleError", "ForeignVehicleWatch",
+           "GraphView", "foreign_vehicle_processes", "graph_view", "own_view", "split_vehicle_topics",
+           "vehicle_topic_reason"]
+
+#: (pattern matched with ``re.search`` against the full topic name, why the topic speaks for the vehicle); the first
+#: match gives the reason
+_VEHICLE_TOPIC_RULES: tuple[tuple[re.Pattern, str], ...] = tuple((re.compile(p), why) for p, why in (
+    (r"(^|/)heartbeat$", "a heartbeat: a replayed one answers for a process that may be dead"),
+    (r"(^|/)(thrusters|esc)(/|$)", "the thruster output"),
+    (r"(^|/)(supervisor|guard|output_guard)(/|$)", "the safety supervisor's or the output guard's"),
+    (r"(^|/)controller/setpoint$", "a controller setpoint"),
+    (r"(?<!/sim)/wrench$|^wrench$", "the wrench the thrust allocation drives the thrusters from"),
+    (r"/_action/", "an action's goals, feedback or status"),
+    (r"^/?r[qr]/", "a service request or reply"),
+))
+
+#: node name (any namespace) -> the role it plays in the vehicle's safety graph
+ROLE_NODES = {"esc": "ESC", "supervisor": "supervisor"}
+#: heartbeat topic (relative name, any namespace) -> role of its one legitimate publisher
+HEARTBEAT_TOPICS = {"esc/heartbeat": "ESC", "supervisor/heartbeat": "supervisor"}
+#: rmw's node name for an endpoint whose participant's node list has not been received yet
+_UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+#: how long a new participant watches the graph before it trusts that no other ESC or supervisor is there, s.
+#: Cross-process discovery on loopback takes about 2 s (docs/architecture.md §11.5).
+DISCOVERY_WINDOW_S = 2.5
+
+
+def vehicle_topic_reason(topic: str) -> str | None:
+    """Why ``topic`` (full or relative name) speaks for the vehicle, or None for a topic a bag may replay freely
+    (sensor data, status, /tf_static, /clock, /diagnostics, the simulator's ``sim/*``)."""
+    name = topic if topic.startswith("/") else "/" + topic
+    for pattern, why in _VEHICLE_TOPIC_RULES:
+        if pattern.search(name):
+            return why
+    return None
+
+
+def split_vehicle_topics(topics: Iterable[str]) -> tuple[list[str], dict[str, str]]:
+    """(topics that may be replayed, {withheld topic: reason}) in the order given."""
+    free: list[str] = []
+    withheld: dict[str, str] = {}
+    for t in topics:
+        why = vehicle_topic_reason(t)
+        if why is None:
+            free.append(t)
+        else:
+            withheld[t] = why
+    return free, withheld
+
+
+@dataclass(frozen=True)
+class GraphView:
+    """What a participant sees: ``nodes`` (fully qualified names, duplicates kept: two processes may carry the same
+    name) and ``heartbeat_publishers`` ({full heartbeat topic: fully qualified names of its publishers' nodes})."""
+
+    nodes: tuple[str, ...] = ()
+    heartbeat_publishers: Mapping[str, tuple[str, ...]] = field(default_factory=dict)
+
+
+def _fq(name: str, namespace: str) -> str:
+    return f"{namespace.rstrip('/')}/{name}" if namespace not in ("", "/") else f"/{name}"
+
+
+def _role_of_node(fq_name: str) -> str | None:
+    return ROLE_NODES.get(fq_name.rsplit("/", 1)[-1])
+
+
+def _role_of_topic(topic: str) -> str | None:
+    for rel, role in HEARTBEAT_TOPICS.items():
+        if topic == "/" + rel or topic.endswith("/" + rel):
+            return role
+    return None
+
+
+def foreign_vehicle_processes(seen: GraphView, own: GraphView = GraphView()) -> list[str]:
+    """The ESCs and supervisors ``seen`` shows beyond ``own`` (the caller's own nodes and heartbeat publishers), one
+    phrase each, e.g. ``"supervisor /supervisor"`` or ``"ESC heartbeat publisher /forger on /esc/heartbeat"``.
+
+    A node counts by its name (``esc``, ``supervisor``, in any namespace); a node of another name counts when it
+    publishes an ESC or supervisor heartbeat topic. Names are counted as a multiset, so a second process with the
+    caller's own node name is found. Empty: nothing foreign."""
+    extra_nodes = Counter(n for n in seen.nodes if _role_of_node(n)) - Counter(n for n in own.nodes if _role_of_node(n))
+    found = [f"{_role_of_node(n)} {n}" for n in sorted(extra_nodes.elements())]
+    named = set(extra_nodes)
+    for topic in sorted(seen.heartbeat_publishers):
+        role = _role_of_topic(topic)
+        if role is None:
+            continue
+        extra = Counter(seen.heartbeat_publishers[topic]) - Counter(own.heartbeat_publishers.get(topic, ()))
+        for n in sorted(extra.elements()):
+            if n not in named:
+                found.append(f"{role} heartbeat publisher {n} on {topic}")
+                named.add(n)
+    return found
+
+
+def own_view(nodes: Iterable[Any]) -> GraphView:
+    """The :class:`GraphView` of the caller's own rclpy ``nodes``: their names and the heartbeat topics they
+    publish, to subtract from what the graph shows."""
+    nodes = list(nodes)
+    names = tuple(n.get_fully_qualified_name() for n in nodes)
+    pubs: dict[str, list[str]] = {}
+    for n in nodes:
+        for p in n.publishers:
+            if _role_of_topic(p.topic_name) is not None:
+                pubs.setdefault(p.topic_name, []).append(n.get_fully_qualified_name())
+    return GraphView(names, {t: tuple(v) for t, v in pubs.items()})
+
+
+def graph_view(node: Any) -> GraphView:
+    """The graph as ``node`` (an rclpy node) sees it now: node names and the publishers of every ESC or supervisor
+    heartbeat topic in any namespace."""
+    nodes = tuple(_fq(n, ns) for n, ns in node.get_node_names_and_namespaces())
+    pubs: dict[str, tuple[str, ...]] = {}
+    for topic, _types in node.get_topic_names_and_types():
+        if _role_of_topic(topic) is not None:
+            # an endpoint seen before its participant's node names arrives as _NODE_NAME_UNKNOWN_: left out until
+            # it can be named (one discovery round later)
+            pubs[topic] = tuple(_fq(i.node_name, i.node_namespace) for i in node.get_publishers_info_by_topic(topic)
+                                if i.node_name != _UNKNOWN_NODE)
+    return GraphView(nodes, pubs)
+
+
+class ForeignVehicleError(RuntimeError):
+    """Another vehicle's ESC or supervisor is on the domain (message is one line naming it)."""
+
+
+class ForeignVehicleWatch:
+    """Watches ``node``'s graph for ESCs and supervisors that are not the caller's.
+
+    node: an rclpy node on the domain to check. own: callable returning the caller's own :class:`GraphView` (its
+    nodes and heartbeat publishers; default nothing). what: the refusing tool, for the message (``hindrax run``).
+    consequence: what the tool refuses to do. window_s: :data:`DISCOVERY_WINDOW_S`. clock: monotonic seconds.
+    """
+
+    def __init__(self, node: Any, what: str, consequence: str, own: Callable[[], GraphView] = GraphView,
+                 window_s: float = DISCOVERY_WINDOW_S, clock: Callable[[], float] = time.monotonic) -> None:
+        self.node = node
+        self.what = what
+        self.consequence = consequence
+        self.own = own
+        self.window_s = float(window_s)
+        self.clock = clock
+        self.t0 = clock()
+
+    def found(self) -> list[str]:
+        """The foreign ESCs and supervisors seen now (:func:`foreign_vehicle_processes`)."""
+        return foreign_vehicle_processes(graph_view(self.node), self.own())
+
+    def check(self) -> None:
+        """Raise :class:`ForeignVehicleError` when a foreign ESC or supervisor is visible now."""
+        found = self.found()
+        if found:
+            domain = self.node.context.get_domain_id()
+            raise ForeignVehicleError(f"{self.what}: ROS domain {domain} already has {', '.join(found)}; "
+                                      f"{self.consequence}")
+
+    def settled(self) -> bool:
+        """:meth:`check`, then True once the discovery window has passed since construction (nothing foreign seen
+        through it). Poll it, e.g. as a ``wait_until`` predicate."""
+        self.check()
+        return self.clock() - self.t0 >= self.window_s

@@ -1,0 +1,90 @@
+"""What speaks for a vehicle on a ROS graph (:mod:`hindrax_drivers.vehicle_graph`), pure: the topics a bag must not
+replay by default, and the ESCs and supervisors a graph shows beyond the caller's own (issue 43.3)."""
+from __future__ import annotations
+
+import pytest
+
+from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, GraphView, \
+    foreign_vehicle_processes, split_vehicle_topics, vehicle_topic_reason
+
+#: topics of the vehicle's launch layout that command the thrusters or vouch for a safety process
+SPEAKS = ["/supervisor/heartbeat", "guard/heartbeat", "/esc/heartbeat", "/thrusters/command_pulse_width",
+          "/thrusters/pulse_width", "/thrusters/forces", "/supervisor/status", "/supervisor/abort", "/wrench",
+          "/controller/setpoint", "/run_identification/_action/status", "/run_identification/_action/feedback",
+          "/rov1/esc/heartbeat", "/rov1/wrench", "/output_guard/state", "rq/esc/set_armedRequest"]
+#: sensor data and status a bag may replay onto any graph
+FREE = ["/dvl/data", "/imu/data_raw", "/pressure/fluid_pressure", "/ping/altitude", "/tf_static", "/clock",
+        "/diagnostics", "/sim/wrench", "/sim/odometry", "/identification/status", "/allocation/status",
+        "/controller/status", "/raw/dvl75", "/escape/data", "/heartbeats_seen"]
+
+
+@pytest.mark.parametrize("topic", SPEAKS)
+def test_safety_and_actuation_topics_are_named_with_a_reason(topic):
+    assert vehicle_topic_reason(topic)
+
+
+@pytest.mark.parametrize("topic", FREE)
+def test_sensor_and_status_topics_replay_freely(topic):
+    assert vehicle_topic_reason(topic) is None
+
+
+def test_split_keeps_order_and_reasons():
+    free, withheld = split_vehicle_topics(["/dvl/data", "/esc/heartbeat", "/imu/data_raw", "/wrench"])
+    assert free == ["/dvl/data", "/imu/data_raw"]
+    assert list(withheld) == ["/esc/heartbeat", "/wrench"]
+    assert "heartbeat" in withheld["/esc/heartbeat"] and "allocation" in withheld["/wrench"]
+
+
+def test_a_graph_with_only_its_own_safety_nodes_has_nothing_foreign():
+    own = GraphView(("/esc", "/supervisor", "/dvl75"), {"/esc/heartbeat": ("/esc",),
+                                                       "/supervisor/heartbeat": ("/supervisor",)})
+    seen = GraphView(("/esc", "/supervisor", "/dvl75", "/hindrax_health"), own.heartbeat_publishers)
+    assert foreign_vehicle_processes(seen, own) == []
+    # sensors of another graph are not a vehicle's safety graph
+    assert foreign_vehicle_processes(GraphView(("/dvl75", "/recorder")), GraphView()) == []
+
+
+def test_a_second_node_of_the_same_name_is_foreign():
+    own = GraphView(("/esc", "/supervisor"), {"/supervisor/heartbeat": ("/supervisor",)})
+    seen = GraphView(("/esc", "/supervisor", "/supervisor"), {"/supervisor/heartbeat": ("/supervisor", "/supervisor")})
+    assert foreign_vehicle_processes(seen, own) == ["supervisor /supervisor"]
+
+
+def test_namespaced_and_forged_publishers_are_named():
+    seen = GraphView(("/rov2/esc", "/forger"), {"/esc/heartbeat": ("/forger",), "/rov2/esc/heartbeat": ("/rov2/esc",),
+                                                "/dvl/heartbeat": ("/x",)})
+    assert foreign_vehicle_processes(seen) == ["ESC /rov2/esc", "ESC heartbeat publisher /forger on /esc/heartbeat"]
+
+
+class _Graph:
+    """Stands in for an rclpy node's graph API."""
+
+    def __init__(self, nodes, pubs=None, domain=7):
+        self.nodes, self.pubs = nodes, dict(pubs or {})
+        self.context = type("Ctx", (), {"get_domain_id": lambda _self: domain})()
+
+    def get_node_names_and_namespaces(self):
+        return [(n.rsplit("/", 1)[1], n.rsplit("/", 1)[0] or "/") for n in self.nodes]
+
+    def get_topic_names_and_types(self):
+        return [(t, ["diagnostic_msgs/msg/DiagnosticStatus"]) for t in self.pubs]
+
+    def get_publishers_info_by_topic(self, topic):
+        return [type("Info", (), {"node_name": n.rsplit("/", 1)[1], "node_namespace": n.rsplit("/", 1)[0] or "/"})()
+                for n in self.pubs[topic]]
+
+
+def test_watch_settles_after_the_window_and_refuses_with_one_line_naming_domain_and_node():
+    t = [0.0]
+    graph = _Graph(["/run", "/dvl75"])
+    watch = ForeignVehicleWatch(graph, "refused", "no second graph", window_s=2.5, clock=lambda: t[0])
+    assert not watch.settled()
+    t[0] = 2.5
+    assert watch.settled()
+    graph.nodes.append("/supervisor")
+    graph.pubs["/supervisor/heartbeat"] = ["/supervisor"]
+    with pytest.raises(ForeignVehicleError) as err:
+        watch.settled()
+    msg = str(err.value)
+    assert "\n" not in msg
+    assert msg == "refused: ROS domain 7 already has supervisor /supervisor; no second graph"

@@ -1,0 +1,61 @@
+"""A second vehicle graph is refused (issue 43.3): ``hindrax bringup --sim`` and ``hindrax run`` started on a domain
+where another ESC or supervisor is visible exit 1 with one line naming the domain and the process, before arming.
+
+The other vehicle is a node of this test process carrying the name the launch layout gives the supervisor or the
+ESC, publishing its heartbeat topic: what the graph shows of a live one.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.testing import child_env, ros_context, wait_until
+
+pytestmark = pytest.mark.ros
+
+
+def _refusal(args: list[str], role_node: str, tmp_path: Path) -> tuple[int, list[str], int]:
+    """Run ``hindrax ARGS`` while a node named ``role_node`` publishes its heartbeat on this test's domain; returns
+    (exit status, stderr lines, domain)."""
+    with ros_context() as ctx:
+        other = rclpy.create_node(role_node, context=ctx)
+        beat = other.create_publisher(DiagnosticStatus, f"{role_node}/heartbeat", 10)
+        other.create_timer(0.05, lambda: beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK)))
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(other)
+        hindrax = str(Path(sys.executable).with_name("hindrax"))
+        with open(tmp_path / "stdout", "w") as out, open(tmp_path / "stderr", "w") as errf:
+            proc = subprocess.Popen([hindrax, *args], env=child_env(), cwd=tmp_path, stdout=out, stderr=errf)
+        try:
+            wait_until(lambda: proc.poll() is not None, 180, lambda: ex.spin_once(timeout_sec=0.05),
+                       f"hindrax {args[0]} refusing")
+            err = (tmp_path / "stderr").read_text().strip().splitlines()
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            ex.shutdown()
+            other.destroy_node()
+        return proc.returncode, err, ctx.get_domain_id()
+
+
+def test_bringup_sim_refuses_a_domain_with_another_supervisor(tmp_path):
+    status, err, domain = _refusal(["bringup", "--sim"], "supervisor", tmp_path)
+    assert status == 1, err
+    assert err[-1] == (f"hindrax bringup: refused: ROS domain {domain} already has supervisor /supervisor; refusing "
+                       "to start a second vehicle graph on it (set ROS_DOMAIN_ID to a free domain)"), err
+
+
+def test_run_refuses_a_domain_with_another_esc_before_arming(tmp_path):
+    status, err, domain = _refusal(["run", "--dofs", "surge", "--levels", "1", "--out", str(tmp_path / "run")],
+                                   "esc", tmp_path)
+    assert status == 1, err
+    assert err[-1].startswith(f"hindrax run: refused: ROS domain {domain} already has ESC /esc; refusing to run a "
+                              "campaign beside another vehicle graph"), err
+    assert not (tmp_path / "run" / "identification.yaml").exists()
