@@ -1,29 +1,13 @@
 """ICM-20948 IMU node (TDK InvenSense ICM-20948 + AK09916 magnetometer on I2C; docs/devices.md §4).
 
-Start-up (docs/devices.md §4.3), executed step by step from ROS timers so the executor is never blocked
-(the datasheet waits are one-shot timers, not sleeps):
-
-1. Select bank 0, read WHO_AM_I and check 0xEA. A wrong identity or an I2C failure stops start-up with the
-   reason in ``/diagnostics`` (ERROR) and the log; the whole start-up is retried every
-   :data:`RETRY_PERIOD_S` seconds. Nothing crashes.
-2. DEVICE_RESET, wait 10 ms; wake (SLEEP = 0, CLKSEL = auto), wait 20 ms; all axes on
-   (:func:`~hindrax_drivers.icm20948.protocol.reset_wake_sequence`).
-3. Bank 2: sample-rate dividers, DLPF and full scale from the configuration
-   (``sensors.icm20948.accel_full_scale_g``, ``gyro_full_scale_dps``, ``dlpf_config`` for both sensors,
-   ``sample_rate_hz`` -> divider ``round(1125 / rate) - 1``; docs/devices.md §4.4). The chip can only run at
-   1125 / (1 + div) Hz (100 Hz configured -> 102.27 Hz): the node polls at that achieved rate and reports
-   both in the diagnostics.
-4. Magnetometer (``sensors.icm20948.magnetometer_mode``, docs/devices.md §4.6):
-   ``i2c_master``: BYPASS_EN = 0, I2C_MST_CTRL = 0x17, I2C_MST_EN, AK09916 soft reset and continuous mode
-   through SLV0 writes, then SLV0 reads the 9 bytes ST1..ST2 every master cycle into EXT_SLV_SENS_DATA
-   (:func:`~hindrax_drivers.icm20948.protocol.mag_master_sequence`); the AK09916 identity (WIA2 = 0x09) is
-   checked with one SLV4 read, retried up to :data:`MAG_ATTEMPTS` times with I2C_MST_RST in between
-   (docs/devices.md §4.3 step 7). ``bypass``: I2C_MST_EN = 0, BYPASS_EN = 1, then the AK09916 is talked to at
-   0x0C directly (WIA1/WIA2 check, soft reset, continuous mode). The continuous mode is the slowest of
-   10/20/50/100 Hz not below the IMU rate (100 Hz at most). A magnetometer that does not answer is a WARN:
-   the IMU keeps publishing without ``imu/mag``.
-   Every magnetometer read is the 9-byte burst ST1..ST2, so ST2 is always read last and the data
-   registers unlock (docs/devices.md §0 point 7, §4.5).
+Start-up (docs/devices.md §4.3): the steps of :class:`~hindrax_drivers.icm20948.core.StartupSequence` (identity
+check, reset and wake, bank-2 configuration, magnetometer), run from ROS timers so the executor is never blocked
+(the datasheet waits are one-shot timers, not sleeps). A wrong identity or an I2C failure stops the attempt with the
+reason in ``/diagnostics`` (ERROR) and the log, and the whole start-up is retried every :data:`RETRY_PERIOD_S`
+seconds; a magnetometer that does not answer is a WARN and the IMU keeps publishing without ``imu/mag``. The chip can
+only run at 1125 / (1 + div) Hz (100 Hz configured -> 102.27 Hz): the node polls at that achieved rate and reports
+both in the diagnostics. Every magnetometer read is the 9-byte burst ST1..ST2, so ST2 is always read last and the
+data registers unlock (docs/devices.md §0 point 7, §4.5).
 
 Polling, at the achieved output data rate: one burst read from ACCEL_XOUT_H of 14 bytes (accel, gyro,
 temperature), 23 bytes in I2C-master mode (plus EXT_SLV_SENS_DATA_00..08 = ST1..ST2 of the AK09916); in
@@ -114,9 +98,7 @@ Run alone: ``python -m hindrax_drivers.icm20948.node --ros-args --params-file ro
 """
 from __future__ import annotations
 
-import collections
 import math
-from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -130,6 +112,8 @@ from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPubl
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
+from .core import (STILL_STD_FACTOR, BankedRegisters, GyroBiasEstimator, GyroBiasResult, StartupSequence,
+                   imu_config_from_settings, imu_noise_variances, mag_mode_for_rate)
 from .mounting import mounting_rotation
 
 #: rate of ``imu/temperature``, Hz (diagnostics and bag: the die temperature drifts over minutes)
@@ -148,138 +132,8 @@ REINIT_AFTER_S = 1.0
 STUCK_AFTER_S = 2.0
 #: Bytes read back by the chip-state check: USER_CTRL (0x03), reserved 0x04, LP_CONFIG 0x05, PWR_MGMT_1 0x06.
 CHIP_STATE_LENGTH = 4
-#: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, docs/devices.md §4.3 step 7).
-MAG_ATTEMPTS = 3
 #: Frame of every message (see the module docstring: base_link orientation, at the sensor).
 FRAME_ID = "imu_link"
-#: Accelerometer noise spectral density, g/sqrt(Hz): DS-000189 rev 1.3 Table 2 (p. 12), 230 ug/sqrt(Hz).
-ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ = 230e-6
-#: Gyroscope rate noise spectral density, deg/s/sqrt(Hz): DS-000189 rev 1.3 Table 1 (p. 11), 0.015.
-#: Not in docs/devices.md and that page was not re-read for this project: UNVERIFIED here.
-GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ = 0.015
-#: DLPF noise bandwidths in Hz per DLPFCFG 0..7 (FCHOICE = 1), docs/devices.md §4.4 table (from [I2]).
-GYRO_NOISE_BANDWIDTH_HZ = (229.8, 187.6, 154.3, 73.3, 35.9, 17.8, 8.9, 376.5)
-ACCEL_NOISE_BANDWIDTH_HZ = (265.0, 265.0, 136.0, 68.8, 34.4, 17.0, 8.3, 499.0)
-#: The vehicle is "still" when every axis's std is below this many times the expected noise std.
-STILL_STD_FACTOR = 5.0
-
-
-# ---------------------------------------------------------------------------------------- pure helpers
-def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,
-                             sample_rate_hz: float) -> p.ImuConfig:
-    """Register fields from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4).
-
-    Full scale: the FS_SEL whose range equals the setting (2/4/8/16 g, 250/500/1000/2000 dps). DLPF: the
-    same DLPFCFG for accel and gyro (FCHOICE = 1). Divider for both: ``round(1125 / rate) - 1`` in 0..255.
-
-    Raises:
-        Icm20948Error: a full scale that is not a device range, DLPFCFG outside 0..7, or a non-positive rate.
-    """
-    try:
-        accel_fs = p.ACCEL_RANGE_G.index(float(accel_full_scale_g))
-        gyro_fs = p.GYRO_RANGE_DPS.index(float(gyro_full_scale_dps))
-    except ValueError:
-        raise p.Icm20948Error(f"full scale {accel_full_scale_g} g / {gyro_full_scale_dps} dps is not a device "
-                              f"range ({p.ACCEL_RANGE_G} g, {p.GYRO_RANGE_DPS} dps)") from None
-    if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0.0):
-        raise p.Icm20948Error(f"sample_rate_hz must be > 0, got {sample_rate_hz}")
-    div = min(255, max(0, round(p.BASE_ODR_HZ / sample_rate_hz) - 1))
-    return p.ImuConfig(accel_fs_sel=accel_fs, gyro_fs_sel=gyro_fs, accel_dlpfcfg=int(dlpf_config),
-                       gyro_dlpfcfg=int(dlpf_config), accel_smplrt_div=div, gyro_smplrt_div=div)
-
-
-def imu_noise_variances(config: p.ImuConfig) -> tuple[float, float]:
-    """Per-axis white-noise variances (accel m^2/s^4, gyro rad^2/s^2) for ``config``.
-
-    variance = density^2 * noise_bandwidth(DLPFCFG) + LSB^2 / 12, with the datasheet densities
-    (:data:`ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ`, :data:`GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ`), the noise
-    bandwidths of docs/devices.md §4.4 and the LSB of the full scale. With the DLPF bypassed the widest
-    bandwidth (DLPFCFG 7) is used.
-    """
-    a_cfg = 7 if config.accel_dlpfcfg is None else config.accel_dlpfcfg
-    g_cfg = 7 if config.gyro_dlpfcfg is None else config.gyro_dlpfcfg
-    a_density = ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ * p.GRAVITY_M_S2
-    g_density = math.radians(GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ)
-    a_lsb = p.GRAVITY_M_S2 / config.accel_lsb_per_g
-    g_lsb = math.radians(1.0 / config.gyro_lsb_per_dps)
-    accel_var = a_density ** 2 * ACCEL_NOISE_BANDWIDTH_HZ[a_cfg] + a_lsb ** 2 / 12.0
-    gyro_var = g_density ** 2 * GYRO_NOISE_BANDWIDTH_HZ[g_cfg] + g_lsb ** 2 / 12.0
-    return accel_var, gyro_var
-
-
-def mag_mode_for_rate(rate_hz: float) -> int:
-    """AK09916 continuous mode: the slowest of 10/20/50/100 Hz not below ``rate_hz`` (100 Hz at most)."""
-    for mode, mode_rate in sorted(p.AK_CONTINUOUS_MODE_RATE_HZ.items(), key=lambda kv: kv[1]):
-        if mode_rate >= rate_hz - 1e-9:
-            return mode
-    return p.AK_MODE_CONTINUOUS_100HZ
-
-
-@dataclass(frozen=True)
-class GyroBiasResult:
-    """Outcome of a start-up gyro-bias estimate.
-
-    Attributes:
-        bias_rad_s: (3,) mean gyro rate in sensor axes, rad/s (applied only when ``still``).
-        gyro_std_rad_s, accel_std_m_s2: (3,) per-axis standard deviations during the window.
-        samples: number of samples averaged.
-        still: every std below its threshold.
-        message: one line for the diagnostics.
-    """
-
-    bias_rad_s: np.ndarray
-    gyro_std_rad_s: np.ndarray
-    accel_std_m_s2: np.ndarray
-    samples: int
-    still: bool
-    message: str
-
-
-class GyroBiasEstimator:
-    """Averages gyro samples over ``duration_s`` and decides whether the vehicle was still.
-
-    Args:
-        duration_s: averaging window (from the first sample), s.
-        gyro_std_threshold_rad_s, accel_std_threshold_m_s2: stillness thresholds on each axis's std.
-
-    ``add(t_s, gyro_rad_s (3,), accel_m_s2 (3,))`` returns None until the window is complete (at least
-    two samples and ``duration_s`` elapsed), then a :class:`GyroBiasResult` (once).
-    """
-
-    def __init__(self, duration_s: float, gyro_std_threshold_rad_s: float, accel_std_threshold_m_s2: float):
-        if not duration_s > 0.0:
-            raise ValueError(f"duration_s must be > 0, got {duration_s}")
-        self.duration_s = float(duration_s)
-        self.gyro_threshold = float(gyro_std_threshold_rad_s)
-        self.accel_threshold = float(accel_std_threshold_m_s2)
-        self._t0: float | None = None
-        self._gyro: list[np.ndarray] = []
-        self._accel: list[np.ndarray] = []
-        self.result: GyroBiasResult | None = None
-
-    def add(self, t_s: float, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> GyroBiasResult | None:
-        if self.result is not None:
-            return None
-        if self._t0 is None:
-            self._t0 = t_s
-        self._gyro.append(np.asarray(gyro_rad_s, dtype=float))
-        self._accel.append(np.asarray(accel_m_s2, dtype=float))
-        if t_s - self._t0 < self.duration_s or len(self._gyro) < 2:
-            return None
-        g = np.array(self._gyro)
-        a = np.array(self._accel)
-        g_std, a_std = g.std(axis=0, ddof=1), a.std(axis=0, ddof=1)
-        still = bool(np.all(g_std <= self.gyro_threshold) and np.all(a_std <= self.accel_threshold))
-        bias = g.mean(axis=0)
-        if still:
-            message = (f"gyro bias {np.array2string(bias, precision=5)} rad/s from {len(g)} samples "
-                       f"(std max {g_std.max():.2e} rad/s)")
-        else:
-            message = (f"vehicle not still during the gyro-bias estimate (gyro std max {g_std.max():.2e} rad/s, "
-                       f"limit {self.gyro_threshold:.2e}; accel std max {a_std.max():.2e} m/s^2, limit "
-                       f"{self.accel_threshold:.2e}): no bias applied")
-        self.result = GyroBiasResult(bias, g_std, a_std, len(g), still, message)
-        return self.result
 
 
 # ---------------------------------------------------------------------------------------- node
@@ -326,7 +180,8 @@ class Icm20948Node(Node):
         self.raw = RawDataPublisher(self, "icm20948")
         self.device: I2CDevice | None = None
         self.mag_device: I2CDevice | None = None
-        self._bank: int | None = None
+        self.regs: BankedRegisters | None = None
+        self.startup: StartupSequence | None = None  # the start-up, or the magnetometer's re-initialisation
         self.diag = DeviceDiagnostics("hindrax/icm20948", f"i2c-{self.i2c_bus_number}@0x{self.address:02x}",
                                       self._now_s)
         self.stuck = StuckDetector(max(3, round(STUCK_AFTER_S * self.odr_hz)))
@@ -348,15 +203,12 @@ class Icm20948Node(Node):
         self.is_stuck = False
         self.who_am_i: int | None = None
         self.mag_available = False
-        self.mag_failed = False
-        self._mag_attempt = 0
         self.startup_attempts = 0
         self.running = False
         self.gyro_bias_rad_s = np.zeros(3)
         self.bias_estimator: GyroBiasEstimator | None = None
         self.bias_result: GyroBiasResult | None = None
         self._fail_since_s: float | None = None
-        self._steps: collections.deque[Callable[[], float | None]] = collections.deque()
         self.samples = 0
         self.mag_samples = 0
         self.temperature_every = max(1, round(self.odr_hz / TEMPERATURE_PUBLISH_HZ))
@@ -396,27 +248,12 @@ class Icm20948Node(Node):
             fn()
 
     # ------------------------------------------------------------------ banked register access
-    def _select_bank(self, bank: int) -> None:
-        if self._bank != bank:
-            self._bank = None  # unknown until the write succeeds
-            self.device.write_byte_data(p.REG_BANK_SEL_ADDRESS, p.bank_select_value(bank))
-            self._bank = bank
-
-    def _write(self, register: p.Register, value: int) -> None:
-        self._select_bank(register.bank)
-        self.device.write_byte_data(register.address, value)
-        if register == p.PWR_MGMT_1 and value & p.PWR_MGMT_1_DEVICE_RESET:
-            self._bank = None  # reset-to-bank-0 is only assumed (docs/devices.md §4.1): re-select
-
     def _read(self, register: p.Register, length: int = 1) -> bytes:
-        self._select_bank(register.bank)
-        return self.device.read_block(register.address, length)
+        return self.regs.read(register, length)
 
-    def _write_step(self, write: p.BankedWrite) -> Callable[[], float]:
-        def step() -> float:
-            self._write(write.register, write.value)
-            return write.delay_after_s
-        return step
+    def _invalidate_bank(self) -> None:
+        if self.regs is not None:
+            self.regs.invalidate()
 
     # ------------------------------------------------------------------ start-up
     def _start(self) -> None:
@@ -435,134 +272,50 @@ class Icm20948Node(Node):
             self.device = I2CDevice(bus, self.address, "icm20948", backoff_s=0.0, raw_tap=self.raw.i2c_tap)
             self.mag_device = I2CDevice(bus, p.AK09916_ADDRESS, "ak09916", backoff_s=0.0,
                                         raw_tap=self.raw.i2c_tap)
+            self.regs = BankedRegisters(self.device)
         self.device.bus = self.mag_device.bus = bus  # the devices keep their counters across reopened buses
-        self._bank = None
+        self.regs.invalidate()
         self.mag_available = False
-        self.mag_failed = False
-        self._mag_attempt = 0
         self._temperature_count = self._mag_count = 0
         self.diag.set_state("starting", DiagnosticStatus.WARN, "identity check, reset and configuration")
-        steps: list[Callable[[], float | None]] = [self._check_who_am_i]
-        steps += [self._write_step(w) for w in p.reset_wake_sequence() + p.configure_sequence(self.config)]
-        steps += self._mag_steps()
-        self._steps = collections.deque(steps)
+        self.startup = StartupSequence(self.regs, self.mag_device, self.config, self.mag_mode_name, self.mag_mode,
+                                       self._on_magnetometer)
         self._run_steps()
-
-    def _check_who_am_i(self) -> None:
-        self._bank = None
-        value = self._read(p.WHO_AM_I)[0]
-        self.who_am_i = value
-        if value != p.WHO_AM_I_VALUE:
-            raise p.Icm20948Error(f"WHO_AM_I = 0x{value:02x}, expected 0x{p.WHO_AM_I_VALUE:02x}: not an ICM-20948 "
-                                  f"at 0x{self.address:02x}")
 
     def _run_steps(self) -> None:
         """Execute start-up steps until one asks for a wait (then continue from a one-shot timer)."""
-        while self._steps:
-            step = self._steps.popleft()
-            try:
-                delay_s = step() or 0.0
-            except I2CError as exc:
-                self._bank = None
+        result = self.startup.advance()
+        self.who_am_i = self.startup.who_am_i if self.startup.who_am_i is not None else self.who_am_i
+        if result.failure is not None:
+            if result.i2c_failure:
                 self.diag.count("i2c_failure")
-                self._fail(f"start-up I2C failure: {exc}")
-                return
-            except p.Icm20948Error as exc:
-                self._fail(str(exc))
-                return
-            if delay_s > 0.0:
-                self._schedule(delay_s, self._run_steps)
-                return
-        self._started()
+            self._fail(result.failure)
+        elif result.wait_s > 0.0:
+            self._schedule(result.wait_s, self._run_steps)
+        else:
+            self._started()
 
     def _fail(self, reason: str) -> None:
-        self._steps.clear()
+        self.startup = None
         self.diag.set_state("error", DiagnosticStatus.ERROR, f"{reason}; retrying every {RETRY_PERIOD_S:g} s")
         self.get_logger().error(f"ICM-20948 start-up failed: {reason}", throttle_duration_sec=10.0)
         self._bus.reset()  # the next attempt opens /dev/i2c-N again: a bus that went and came back is picked up
         self._schedule(RETRY_PERIOD_S, self._start)
 
-    # -- magnetometer
-    def _mag_steps(self) -> list[Callable[[], float | None]]:
-        if self.mag_mode_name == "bypass":
-            steps = [self._write_step(w) for w in p.mag_bypass_sequence()]
-            return steps + [self._bypass_mag_init]
-        steps = [self._write_step(w) for w in p.mag_master_sequence(self.config, self.mag_mode)]
-        return steps + [self._slv4_who_am_i_request, self._slv4_who_am_i_check]
-
-    def _mag_unavailable(self, reason: str) -> None:
-        self.mag_available = False
-        self.diag.warn("magnetometer", f"magnetometer unavailable: {reason}")
-        self.get_logger().warn(f"AK09916 unavailable, publishing without imu/mag: {reason}")
-
-    def _bypass_mag_init(self) -> float:
-        """Bypass: check WIA1/WIA2 at 0x0C, then queue soft reset and continuous mode (docs/devices.md §4.5-4.6a)."""
-        try:
-            wia = self.mag_device.read_block(p.AK_WIA1.address, 2)
-        except I2CError as exc:
-            self._mag_unavailable(f"no answer at 0x0c: {exc}")
-            return 0.0
-        if tuple(wia) != (p.AK09916_WIA1_VALUE, p.AK09916_WIA2_VALUE):
-            self._mag_unavailable(f"WIA1/WIA2 = {wia.hex()}, expected 4809")
-            return 0.0
-        steps = [self._mag_write_step(w) for w in p.ak09916_direct_init_writes(self.mag_mode)]
-        self._steps.extendleft(reversed(steps + [self._mag_ready]))
-        return 0.0
-
-    def _mag_write_step(self, write) -> Callable[[], float]:
-        """A direct AK09916 write (bypass); a failure marks the magnetometer unavailable, not the IMU."""
-        def step() -> float:
-            if self.mag_failed:
-                return 0.0
-            try:
-                self.mag_device.write_byte_data(write.register, write.value)
-            except I2CError as exc:
-                self.mag_failed = True
-                self._mag_unavailable(f"write of 0x{write.register:02x} failed: {exc}")
-                return 0.0
-            return write.delay_after_s
-        return step
-
-    def _mag_ready(self) -> float:
-        if not self.mag_failed:
-            self.mag_available = True
+    def _on_magnetometer(self, available: bool, reason: str) -> None:
+        self.mag_available = available
+        if available:
             self.diag.clear("magnetometer")
-        return 0.0
-
-    def _slv4_who_am_i_request(self) -> float:
-        """I2C master: one SLV4 read of AK09916 WIA2; the answer comes after a master cycle."""
-        self._mag_attempt += 1
-        self._write(p.I2C_SLV4_ADDR, p.I2C_SLV_ADDR_RNW | p.AK09916_ADDRESS)
-        self._write(p.I2C_SLV4_REG, p.AK_WIA2.address)
-        self._write(p.I2C_SLV4_CTRL, p.I2C_SLV_CTRL_EN)
-        return max(3.0 / self.config.gyro_odr_hz, p.AK_RESET_WAIT_S)
-
-    def _slv4_who_am_i_check(self) -> float:
-        status = self._read(p.I2C_MST_STATUS)[0]
-        value = self._read(p.I2C_SLV4_DI)[0]
-        ok = bool(status & p.I2C_MST_STATUS_SLV4_DONE) and not status & p.I2C_MST_STATUS_SLV4_NACK \
-            and value == p.AK09916_WIA2_VALUE
-        if ok:
-            self.mag_available = True
-            self.diag.clear("magnetometer")
-        elif self._mag_attempt < MAG_ATTEMPTS:
-            # I2C_MST_RST, then the whole magnetometer sequence again (SparkFun, docs/devices.md §4.3 step 7)
-            retry = [self._write_step(p.BankedWrite(p.USER_CTRL, p.USER_CTRL_I2C_MST_EN | p.USER_CTRL_I2C_MST_RST,
-                                                    0.01, "I2C_MST_RST"))]
-            retry += [self._write_step(w) for w in p.mag_master_sequence(self.config, self.mag_mode)]
-            retry += [self._slv4_who_am_i_request, self._slv4_who_am_i_check]
-            self._steps.extendleft(reversed(retry))
         else:
-            self._mag_unavailable(f"SLV4 read of WIA2: status 0x{status:02x}, value 0x{value:02x} after "
-                                  f"{self._mag_attempt} attempts")
-        return 0.0
+            self.diag.warn("magnetometer", f"magnetometer unavailable: {reason}")
+            self.get_logger().warn(f"AK09916 unavailable, publishing without imu/mag: {reason}")
 
     def _started(self) -> None:
         """Configuration done: select bank 0 for the polls and start the poll timer."""
         try:
-            self._select_bank(0)
+            self.regs.select_bank(0)
         except I2CError as exc:
-            self._bank = None
+            self.regs.invalidate()
             self._fail(f"start-up I2C failure: {exc}")
             return
         self.running = True
@@ -657,7 +410,7 @@ class Icm20948Node(Node):
         return True
 
     def _poll_failed(self, exc: Exception) -> None:
-        self._bank = None
+        self._invalidate_bank()
         self.diag.count("i2c_failure")
         now = self._now_s()
         if self._fail_since_s is None:
@@ -725,9 +478,8 @@ class Icm20948Node(Node):
     def _begin_mag_retry(self, now_s: float) -> None:
         """Re-initialise only the magnetometer, one step per poll (the accel/gyro polls go on: at most one missed
         sample, where the whole start-up with its device reset cost 340-350 ms of samples every retry)."""
-        self._mag_attempt = 0
-        self.mag_failed = False
-        self._steps = collections.deque(self._mag_steps())
+        self.startup = StartupSequence(self.regs, self.mag_device, self.config, self.mag_mode_name, self.mag_mode,
+                                       self._on_magnetometer, magnetometer_only=True)
         self._mag_retrying = True
         self._mag_step_due_s = now_s
 
@@ -735,7 +487,7 @@ class Icm20948Node(Node):
         """One step of the magnetometer re-initialisation when due (called after a published sample)."""
         if not self._mag_retrying or now_s < self._mag_step_due_s:
             return
-        if not self._steps:
+        if self.startup.finished:
             self._mag_retrying = False
             if self.mag_available:
                 self._mag_lost = False
@@ -745,15 +497,7 @@ class Icm20948Node(Node):
             else:
                 self._mag_retry_due_s = now_s + self.mag_retry_interval_s
             return
-        step = self._steps.popleft()
-        try:
-            delay_s = step() or 0.0
-        except (I2CError, p.Icm20948Error) as exc:
-            self._bank = None
-            self._steps.clear()
-            self._mag_unavailable(f"re-initialisation failed: {exc}")
-            delay_s = 0.0
-        self._mag_step_due_s = now_s + delay_s
+        self._mag_step_due_s = now_s + self.startup.step().wait_s
 
     def _mag_stale(self, now_s: float) -> bool:
         """True (and re-initialisation started) when no fresh magnetometer sample came for the timeout."""
@@ -854,7 +598,7 @@ class Icm20948Node(Node):
         try:
             pwr = self._read(p.PWR_MGMT_1)[0]
         except I2CError:
-            self._bank = None
+            self._invalidate_bank()
             return
         if pwr & p.PWR_MGMT_1_SLEEP:
             self.get_logger().error("ICM-20948 found asleep (reset by a power glitch?): restarting the start-up")

@@ -1,0 +1,418 @@
+"""ICM-20948 start-up and calibration core: pure, no rclpy, no clock, no sleep (docs/devices.md §4).
+
+What the node (:mod:`.node`) runs from its timers, written so that it can be tested step by step against the
+register-exact emulator:
+
+- :func:`imu_config_from_settings`, :func:`imu_noise_variances`, :func:`mag_mode_for_rate`: the register fields,
+  noise variances and AK09916 mode from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4, §4.6);
+- :class:`BankedRegisters`: register access through REG_BANK_SEL with the selected bank cached (docs/devices.md
+  §4.1); a failed transfer or a DEVICE_RESET makes the bank unknown, so the next access selects it again;
+- :class:`StartupSequence`: the start-up of docs/devices.md §4.3 as a list of steps, each returning the wait the
+  datasheet asks for after it:
+
+  1. select bank 0, read WHO_AM_I and check 0xEA (a wrong identity or an I2C failure ends the attempt with the
+     reason; the node retries);
+  2. DEVICE_RESET, 10 ms; wake (SLEEP = 0, CLKSEL = auto), 20 ms; all axes on (:func:`.protocol.reset_wake_sequence`);
+  3. bank 2: sample-rate dividers, DLPF and full scale (:func:`.protocol.configure_sequence`);
+  4. magnetometer (``i2c_master``: the I2C master set up by :func:`.protocol.mag_master_sequence`, then the AK09916
+     identity WIA2 = 0x09 read once through SLV4, retried up to :data:`MAG_ATTEMPTS` times with I2C_MST_RST in
+     between, docs/devices.md §4.3 step 7; ``bypass``: BYPASS_EN, then WIA1/WIA2 at 0x0C, soft reset and continuous
+     mode written directly). A magnetometer that does not answer is reported through ``on_magnetometer``, never a
+     failure of the start-up: the IMU runs without it.
+
+  ``StartupSequence(..., magnetometer_only=True)`` is step 4 alone, which the node runs one step per poll to bring
+  back a lost AK09916 without resetting the chip;
+- :class:`GyroBiasEstimator`: the start-up gyro-bias calibration (mean over a window, applied only when every axis's
+  gyro and accelerometer standard deviation shows a still vehicle).
+"""
+from __future__ import annotations
+
+import collections
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+from ..transport.i2c import I2CError, RegisterWrite
+from . import protocol as p
+
+__all__ = ["ACCEL_NOISE_BANDWIDTH_HZ", "ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ", "BankedRegisters",
+           "GYRO_NOISE_BANDWIDTH_HZ", "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBiasEstimator", "GyroBiasResult",
+           "MAG_ATTEMPTS", "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings",
+           "imu_noise_variances", "mag_mode_for_rate"]
+
+#: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, docs/devices.md §4.3 step 7).
+MAG_ATTEMPTS = 3
+#: Accelerometer noise spectral density, g/sqrt(Hz): DS-000189 rev 1.3 Table 2 (p. 12), 230 ug/sqrt(Hz).
+ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ = 230e-6
+#: Gyroscope rate noise spectral density, deg/s/sqrt(Hz): DS-000189 rev 1.3 Table 1 (p. 11), 0.015.
+#: Not in docs/devices.md and that page was not re-read for this project: UNVERIFIED here.
+GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ = 0.015
+#: DLPF noise bandwidths in Hz per DLPFCFG 0..7 (FCHOICE = 1), docs/devices.md §4.4 table (from [I2]).
+GYRO_NOISE_BANDWIDTH_HZ = (229.8, 187.6, 154.3, 73.3, 35.9, 17.8, 8.9, 376.5)
+ACCEL_NOISE_BANDWIDTH_HZ = (265.0, 265.0, 136.0, 68.8, 34.4, 17.0, 8.3, 499.0)
+#: The vehicle is "still" when every axis's std is below this many times the expected noise std.
+STILL_STD_FACTOR = 5.0
+
+
+class I2CPort(Protocol):
+    """What the core needs of one device on the bus (:class:`~hindrax_drivers.transport.i2c.I2CDevice`)."""
+
+    address: int
+
+    def write_byte_data(self, register: int, value: int) -> None: ...  # noqa: D102
+
+    def read_block(self, register: int, length: int) -> bytes: ...  # noqa: D102
+
+
+# ---------------------------------------------------------------------------------------- settings
+def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,
+                             sample_rate_hz: float) -> p.ImuConfig:
+    """Register fields from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4).
+
+    Full scale: the FS_SEL whose range equals the setting (2/4/8/16 g, 250/500/1000/2000 dps). DLPF: the
+    same DLPFCFG for accel and gyro (FCHOICE = 1). Divider for both: ``round(1125 / rate) - 1`` in 0..255.
+
+    Raises:
+        Icm20948Error: a full scale that is not a device range, DLPFCFG outside 0..7, or a non-positive rate.
+    """
+    try:
+        accel_fs = p.ACCEL_RANGE_G.index(float(accel_full_scale_g))
+        gyro_fs = p.GYRO_RANGE_DPS.index(float(gyro_full_scale_dps))
+    except ValueError:
+        raise p.Icm20948Error(f"full scale {accel_full_scale_g} g / {gyro_full_scale_dps} dps is not a device "
+                              f"range ({p.ACCEL_RANGE_G} g, {p.GYRO_RANGE_DPS} dps)") from None
+    if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0.0):
+        raise p.Icm20948Error(f"sample_rate_hz must be > 0, got {sample_rate_hz}")
+    div = min(255, max(0, round(p.BASE_ODR_HZ / sample_rate_hz) - 1))
+    return p.ImuConfig(accel_fs_sel=accel_fs, gyro_fs_sel=gyro_fs, accel_dlpfcfg=int(dlpf_config),
+                       gyro_dlpfcfg=int(dlpf_config), accel_smplrt_div=div, gyro_smplrt_div=div)
+
+
+def imu_noise_variances(config: p.ImuConfig) -> tuple[float, float]:
+    """Per-axis white-noise variances (accel m^2/s^4, gyro rad^2/s^2) for ``config``.
+
+    variance = density^2 * noise_bandwidth(DLPFCFG) + LSB^2 / 12, with the datasheet densities
+    (:data:`ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ`, :data:`GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ`), the noise
+    bandwidths of docs/devices.md §4.4 and the LSB of the full scale. With the DLPF bypassed the widest
+    bandwidth (DLPFCFG 7) is used.
+    """
+    a_cfg = 7 if config.accel_dlpfcfg is None else config.accel_dlpfcfg
+    g_cfg = 7 if config.gyro_dlpfcfg is None else config.gyro_dlpfcfg
+    a_density = ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ * p.GRAVITY_M_S2
+    g_density = math.radians(GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ)
+    a_lsb = p.GRAVITY_M_S2 / config.accel_lsb_per_g
+    g_lsb = math.radians(1.0 / config.gyro_lsb_per_dps)
+    accel_var = a_density ** 2 * ACCEL_NOISE_BANDWIDTH_HZ[a_cfg] + a_lsb ** 2 / 12.0
+    gyro_var = g_density ** 2 * GYRO_NOISE_BANDWIDTH_HZ[g_cfg] + g_lsb ** 2 / 12.0
+    return accel_var, gyro_var
+
+
+def mag_mode_for_rate(rate_hz: float) -> int:
+    """AK09916 continuous mode: the slowest of 10/20/50/100 Hz not below ``rate_hz`` (100 Hz at most)."""
+    for mode, mode_rate in sorted(p.AK_CONTINUOUS_MODE_RATE_HZ.items(), key=lambda kv: kv[1]):
+        if mode_rate >= rate_hz - 1e-9:
+            return mode
+    return p.AK_MODE_CONTINUOUS_100HZ
+
+
+# ---------------------------------------------------------------------------------------- register access
+class BankedRegisters:
+    """Register access to one ICM-20948 through REG_BANK_SEL, the selected bank cached (docs/devices.md §4.1).
+
+    Args:
+        device: the chip on the bus (``write_byte_data``, ``read_block``; raises ``I2CError``).
+
+    :attr:`bank` is None while unknown: before the first selection, after a failed selection, after
+    :meth:`invalidate` (a failed transfer elsewhere) and after a DEVICE_RESET (reset-to-bank-0 is only assumed).
+    """
+
+    def __init__(self, device: I2CPort):
+        self.device = device
+        self.bank: int | None = None
+
+    def invalidate(self) -> None:
+        """Forget the selected bank: the next access selects it again."""
+        self.bank = None
+
+    def select_bank(self, bank: int) -> None:
+        """Write REG_BANK_SEL unless ``bank`` is the one known to be selected."""
+        if self.bank != bank:
+            self.bank = None  # unknown until the write succeeds
+            self.device.write_byte_data(p.REG_BANK_SEL_ADDRESS, p.bank_select_value(bank))
+            self.bank = bank
+
+    @staticmethod
+    def _bank_of(register: p.Register) -> int:
+        if register.bank is None:
+            raise ValueError(f"{register.name} is not an ICM-20948 register (no user bank)")
+        return register.bank
+
+    def write(self, register: p.Register, value: int) -> None:
+        """Write one byte to ``register`` in its bank (ValueError for a register without a bank)."""
+        self.select_bank(self._bank_of(register))
+        self.device.write_byte_data(register.address, value)
+        if register == p.PWR_MGMT_1 and value & p.PWR_MGMT_1_DEVICE_RESET:
+            self.bank = None
+
+    def read(self, register: p.Register, length: int = 1) -> bytes:
+        """Read ``length`` bytes from ``register`` in its bank (burst, auto-increment)."""
+        self.select_bank(self._bank_of(register))
+        return self.device.read_block(register.address, length)
+
+
+# ---------------------------------------------------------------------------------------- start-up
+@dataclass(frozen=True)
+class StepResult:
+    """What the sequence asks of its caller after :meth:`StartupSequence.advance` or :meth:`~StartupSequence.step`.
+
+    Attributes:
+        wait_s: wait before the next call, s (the datasheet wait after the last step run; 0 = at once).
+        done: every step has run (the magnetometer state is :attr:`StartupSequence.mag_available`).
+        failure: the start-up attempt failed (one line: the reason); the caller retries it from the beginning.
+        i2c_failure: the failure was a failed I2C transfer (the caller counts it).
+    """
+
+    wait_s: float = 0.0
+    done: bool = False
+    failure: str | None = None
+    i2c_failure: bool = False
+
+
+class StartupSequence:
+    """The start-up of the ICM-20948 and its AK09916 as steps (docs/devices.md §4.3; see the module docstring).
+
+    Args:
+        regs: the chip's registers (:class:`BankedRegisters`).
+        mag_device: the AK09916 at 0x0C on the host bus (used in ``bypass`` mode only).
+        config: register fields (:func:`imu_config_from_settings`).
+        mag_mode_name: ``i2c_master`` or ``bypass`` (``sensors.icm20948.magnetometer_mode``).
+        mag_mode: AK09916 continuous mode (:func:`mag_mode_for_rate`).
+        on_magnetometer: called ``(available, reason)`` when the magnetometer is found (True, "") or given up (False,
+            one line why).
+        magnetometer_only: run the magnetometer steps alone (no identity check, no reset).
+    """
+
+    def __init__(self, regs: BankedRegisters, mag_device: I2CPort, config: p.ImuConfig, mag_mode_name: str,
+                 mag_mode: int, on_magnetometer: Callable[[bool, str], Any], *, magnetometer_only: bool = False):
+        self.regs = regs
+        self.mag_device = mag_device
+        self.config = config
+        self.mag_mode_name = mag_mode_name
+        self.mag_mode = mag_mode
+        self.on_magnetometer = on_magnetometer
+        self.who_am_i: int | None = None
+        self.mag_available = False
+        self.mag_failed = False
+        self.mag_attempt = 0
+        steps: list[Callable[[], float]] = []
+        if not magnetometer_only:
+            steps.append(self._check_who_am_i)
+            steps += [self._write_step(w) for w in p.reset_wake_sequence() + p.configure_sequence(config)]
+        steps += self._mag_steps()
+        self._steps: collections.deque[Callable[[], float]] = collections.deque(steps)
+
+    @property
+    def finished(self) -> bool:
+        """No step left."""
+        return not self._steps
+
+    def advance(self) -> StepResult:
+        """Run steps until one asks for a wait, a step fails, or none is left.
+
+        An I2C failure or a wrong identity ends the attempt (``failure``); a magnetometer that does not answer does
+        not (``on_magnetometer(False, reason)``).
+        """
+        while self._steps:
+            step = self._steps.popleft()
+            try:
+                wait_s = step()
+            except I2CError as exc:
+                self.regs.invalidate()
+                self._steps.clear()
+                return StepResult(failure=f"start-up I2C failure: {exc}", i2c_failure=True)
+            except p.Icm20948Error as exc:
+                self._steps.clear()
+                return StepResult(failure=str(exc))
+            if wait_s > 0.0:
+                return StepResult(wait_s=wait_s)
+        return StepResult(done=True)
+
+    def step(self) -> StepResult:
+        """Run one step (the magnetometer re-initialisation between two polls). A failure gives the magnetometer
+        up for this attempt (``on_magnetometer(False, reason)``) and ends the sequence."""
+        if not self._steps:
+            return StepResult(done=True)
+        step = self._steps.popleft()
+        try:
+            wait_s = step()
+        except (I2CError, p.Icm20948Error) as exc:
+            self.regs.invalidate()
+            self._steps.clear()
+            self._mag_unavailable(f"re-initialisation failed: {exc}")
+            return StepResult(done=True)
+        return StepResult(wait_s=wait_s, done=not self._steps)
+
+    # -- chip
+    def _check_who_am_i(self) -> float:
+        self.regs.invalidate()
+        value = self.regs.read(p.WHO_AM_I)[0]
+        self.who_am_i = value
+        if value != p.WHO_AM_I_VALUE:
+            raise p.Icm20948Error(f"WHO_AM_I = 0x{value:02x}, expected 0x{p.WHO_AM_I_VALUE:02x}: not an ICM-20948 "
+                                  f"at 0x{self.regs.device.address:02x}")
+        return 0.0
+
+    def _write_step(self, write: p.BankedWrite) -> Callable[[], float]:
+        def step() -> float:
+            self.regs.write(write.register, write.value)
+            return write.delay_after_s
+        return step
+
+    # -- magnetometer
+    def _mag_steps(self) -> list[Callable[[], float]]:
+        if self.mag_mode_name == "bypass":
+            return [self._write_step(w) for w in p.mag_bypass_sequence()] + [self._bypass_mag_init]
+        steps = [self._write_step(w) for w in p.mag_master_sequence(self.config, self.mag_mode)]
+        return steps + [self._slv4_who_am_i_request, self._slv4_who_am_i_check]
+
+    def _mag_unavailable(self, reason: str) -> None:
+        self.mag_available = False
+        self.on_magnetometer(False, reason)
+
+    def _mag_found(self) -> None:
+        self.mag_available = True
+        self.on_magnetometer(True, "")
+
+    def _bypass_mag_init(self) -> float:
+        """Bypass: check WIA1/WIA2 at 0x0C, then queue soft reset and continuous mode (docs/devices.md §4.5-4.6a)."""
+        try:
+            wia = self.mag_device.read_block(p.AK_WIA1.address, 2)
+        except I2CError as exc:
+            self._mag_unavailable(f"no answer at 0x0c: {exc}")
+            return 0.0
+        if tuple(wia) != (p.AK09916_WIA1_VALUE, p.AK09916_WIA2_VALUE):
+            self._mag_unavailable(f"WIA1/WIA2 = {wia.hex()}, expected 4809")
+            return 0.0
+        steps = [self._mag_write_step(w) for w in p.ak09916_direct_init_writes(self.mag_mode)]
+        self._steps.extendleft(reversed(steps + [self._mag_ready]))
+        return 0.0
+
+    def _mag_write_step(self, write: RegisterWrite) -> Callable[[], float]:
+        """A direct AK09916 write (bypass); a failure marks the magnetometer unavailable, not the IMU."""
+        def step() -> float:
+            if self.mag_failed:
+                return 0.0
+            try:
+                self.mag_device.write_byte_data(write.register, write.value)
+            except I2CError as exc:
+                self.mag_failed = True
+                self._mag_unavailable(f"write of 0x{write.register:02x} failed: {exc}")
+                return 0.0
+            return write.delay_after_s
+        return step
+
+    def _mag_ready(self) -> float:
+        if not self.mag_failed:
+            self._mag_found()
+        return 0.0
+
+    def _slv4_who_am_i_request(self) -> float:
+        """I2C master: one SLV4 read of AK09916 WIA2; the answer comes after a master cycle."""
+        self.mag_attempt += 1
+        self.regs.write(p.I2C_SLV4_ADDR, p.I2C_SLV_ADDR_RNW | p.AK09916_ADDRESS)
+        self.regs.write(p.I2C_SLV4_REG, p.AK_WIA2.address)
+        self.regs.write(p.I2C_SLV4_CTRL, p.I2C_SLV_CTRL_EN)
+        return max(3.0 / self.config.gyro_odr_hz, p.AK_RESET_WAIT_S)
+
+    def _slv4_who_am_i_check(self) -> float:
+        status = self.regs.read(p.I2C_MST_STATUS)[0]
+        value = self.regs.read(p.I2C_SLV4_DI)[0]
+        ok = bool(status & p.I2C_MST_STATUS_SLV4_DONE) and not status & p.I2C_MST_STATUS_SLV4_NACK \
+            and value == p.AK09916_WIA2_VALUE
+        if ok:
+            self._mag_found()
+        elif self.mag_attempt < MAG_ATTEMPTS:
+            # I2C_MST_RST, then the whole magnetometer sequence again (SparkFun, docs/devices.md §4.3 step 7)
+            retry = [self._write_step(p.BankedWrite(p.USER_CTRL, p.USER_CTRL_I2C_MST_EN | p.USER_CTRL_I2C_MST_RST,
+                                                    0.01, "I2C_MST_RST"))]
+            retry += [self._write_step(w) for w in p.mag_master_sequence(self.config, self.mag_mode)]
+            retry += [self._slv4_who_am_i_request, self._slv4_who_am_i_check]
+            self._steps.extendleft(reversed(retry))
+        else:
+            self._mag_unavailable(f"SLV4 read of WIA2: status 0x{status:02x}, value 0x{value:02x} after "
+                                  f"{self.mag_attempt} attempts")
+        return 0.0
+
+
+# ---------------------------------------------------------------------------------------- calibration
+@dataclass(frozen=True)
+class GyroBiasResult:
+    """Outcome of a start-up gyro-bias estimate.
+
+    Attributes:
+        bias_rad_s: (3,) mean gyro rate in sensor axes, rad/s (applied only when ``still``).
+        gyro_std_rad_s, accel_std_m_s2: (3,) per-axis standard deviations during the window.
+        samples: number of samples averaged.
+        still: every std below its threshold.
+        message: one line for the diagnostics.
+    """
+
+    bias_rad_s: np.ndarray
+    gyro_std_rad_s: np.ndarray
+    accel_std_m_s2: np.ndarray
+    samples: int
+    still: bool
+    message: str
+
+
+class GyroBiasEstimator:
+    """Averages gyro samples over ``duration_s`` and decides whether the vehicle was still.
+
+    Args:
+        duration_s: averaging window (from the first sample), s.
+        gyro_std_threshold_rad_s, accel_std_threshold_m_s2: stillness thresholds on each axis's std.
+
+    ``add(t_s, gyro_rad_s (3,), accel_m_s2 (3,))`` returns None until the window is complete (at least
+    two samples and ``duration_s`` elapsed), then a :class:`GyroBiasResult` (once).
+
+    Raises:
+        ValueError: ``duration_s`` not > 0.
+    """
+
+    def __init__(self, duration_s: float, gyro_std_threshold_rad_s: float, accel_std_threshold_m_s2: float):
+        if not duration_s > 0.0:
+            raise ValueError(f"duration_s must be > 0, got {duration_s}")
+        self.duration_s = float(duration_s)
+        self.gyro_threshold = float(gyro_std_threshold_rad_s)
+        self.accel_threshold = float(accel_std_threshold_m_s2)
+        self._t0: float | None = None
+        self._gyro: list[np.ndarray] = []
+        self._accel: list[np.ndarray] = []
+        self.result: GyroBiasResult | None = None
+
+    def add(self, t_s: float, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> GyroBiasResult | None:
+        """Add one sample (time s, gyro rad/s (3,), accel m/s^2 (3,)); the result once the window is complete."""
+        if self.result is not None:
+            return None
+        if self._t0 is None:
+            self._t0 = t_s
+        self._gyro.append(np.asarray(gyro_rad_s, dtype=float))
+        self._accel.append(np.asarray(accel_m_s2, dtype=float))
+        if t_s - self._t0 < self.duration_s or len(self._gyro) < 2:
+            return None
+        g = np.array(self._gyro)
+        a = np.array(self._accel)
+        g_std, a_std = g.std(axis=0, ddof=1), a.std(axis=0, ddof=1)
+        still = bool(np.all(g_std <= self.gyro_threshold) and np.all(a_std <= self.accel_threshold))
+        bias = g.mean(axis=0)
+        if still:
+            message = (f"gyro bias {np.array2string(bias, precision=5)} rad/s from {len(g)} samples "
+                       f"(std max {g_std.max():.2e} rad/s)")
+        else:
+            message = (f"vehicle not still during the gyro-bias estimate (gyro std max {g_std.max():.2e} rad/s, "
+                       f"limit {self.gyro_threshold:.2e}; accel std max {a_std.max():.2e} m/s^2, limit "
+                       f"{self.accel_threshold:.2e}): no bias applied")
+        self.result = GyroBiasResult(bias, g_std, a_std, len(g), still, message)
+        return self.result
