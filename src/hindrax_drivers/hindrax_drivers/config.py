@@ -224,6 +224,8 @@ SCHEMA.update({
     "thrusters.time_constant_s": _f("first-order thruster lag time constant, s", 0.0, 5.0),
     "thrusters.allocation_mode": _s("saturation handling", ("uniform", "priority")),
     "thrusters.priority_dofs": Spec(_STRS, "DOFs kept exact in priority mode", choices=DOFS),
+    "thrusters.max_wrench_excess_ratio": _f("a wrench beyond this many times what the thrusters can produce on an "
+                                            "axis is rejected (neutral), not scaled into full thrust", 1.0, 100.0),
     "thrusters.wrench_timeout_s": _f("wrench older than this is rejected as stale, s", 0.01, 10.0),
     "thrusters.wrench_future_margin_s": _f("wrench stamped further than this in the future is rejected (clock "
                                            "offset allowed between the controller and this node), s", 0.0, 5.0),
@@ -965,6 +967,7 @@ class ThrustersConfig(Section):
     time_constant_s: float
     allocation_mode: str
     priority_dofs: tuple[str, ...]
+    max_wrench_excess_ratio: float
     wrench_timeout_s: float
     wrench_future_margin_s: float
     thrust_uncertainty_rel: tuple[float, ...] | None
@@ -1256,6 +1259,7 @@ class VehicleConfig:
             time_constant_s=get("thrusters.time_constant_s"),
             allocation_mode=get("thrusters.allocation_mode"),
             priority_dofs=get("thrusters.priority_dofs", tuple),
+            max_wrench_excess_ratio=get("thrusters.max_wrench_excess_ratio"),
             wrench_timeout_s=get("thrusters.wrench_timeout_s"),
             wrench_future_margin_s=get("thrusters.wrench_future_margin_s"),
             thrust_uncertainty_rel=get("thrusters.thrust_uncertainty_rel", _float_tuple),

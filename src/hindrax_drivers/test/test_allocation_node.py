@@ -73,7 +73,7 @@ def test_wrench_is_allocated_by_the_shared_core(graph):
 
 def test_saturation_is_reported(graph):
     _, send, _, _ = graph
-    pwm, _, status = send([500.0, 0, 0, 0, 0, 0])
+    pwm, _, status = send([150.0, 0, 0, 0, 0, 0])
     assert status.saturated and 0 < status.scale < 1
     assert any(status.thruster_saturated)
     assert max(pwm.pulse_width_us) <= 1900.0 and min(pwm.pulse_width_us) >= 1100.0
@@ -156,3 +156,30 @@ def test_forces_and_status_are_throttled_and_the_latest_is_sent(graph):
     assert len(got["status"]) - n_status <= 15 and len(got["forces"]) - n_forces <= 15
     assert got["pwm"][-1].header.stamp == stamps[-1]
     assert got["status"][-1].requested_wrench.force.x == pytest.approx(2.0 + 0.1 * 29)
+
+
+#: surge the thrusters can produce: T1-T4 at 55 deg from the x axis (the shipped layout), each at most 15.53 N (the
+#: shipped curve at 1100 us and, mirrored, at 1900 us): 4 cos(55 deg) 15.53 N = 35.63 N; the shipped
+#: thrusters.max_wrench_excess_ratio is 10, so 356 N is the most accepted
+SURGE_CAPACITY_N = 4 * math.cos(math.radians(55.0)) * 15.53
+
+
+@pytest.mark.parametrize("wrench, rejected", [
+    ([300.0, 0, 0, 0, 0, 0], False),  # 8.4 times: saturated, scaled
+    ([400.0, 0, 0, 0, 0, 0], True),  # 11.2 times
+    ([1e30, 0, 0, 0, 0, 0], True),
+    ([0, 0, 0, 0, 0, 1e308], True),
+])
+def test_a_wrench_far_beyond_the_thrusters_is_rejected_not_scaled_into_full_thrust(graph, wrench, rejected):
+    """Issue 44 finding 3: 1e30 N and 1e308 N m were accepted and saturated to full thrust ("saturated: scaled"). A
+    wrench beyond thrusters.max_wrench_excess_ratio times what the thrusters can produce is a fault: neutral, not
+    armed, and the reason."""
+    assert 8.0 < 300.0 / SURGE_CAPACITY_N < 10.0 < 400.0 / SURGE_CAPACITY_N
+    _, send, _, _ = graph
+    pwm, forces, status = send(wrench)
+    if rejected:
+        assert status.rejected and "beyond what the thrusters can produce" in status.reason
+        assert "thrusters.max_wrench_excess_ratio 10" in status.reason
+        assert list(pwm.pulse_width_us) == [1500.0] * 8 and not pwm.armed and list(forces.force_n) == [0.0] * 8
+    else:
+        assert not status.rejected and status.saturated and status.reason == "saturated: scaled" and pwm.armed

@@ -5,6 +5,10 @@ Input: a wrench in base_link (FLU, N and N m, about the CG). The core converts i
 (weighted pseudo-inverse, saturation handling, cubic-curve inversion: [Hindrax-Drag] eqs. 1 and 9), and returns
 per-thruster forces, pulse widths and the achieved wrench back in base_link.
 
+A wrench asking more than ``thrusters.max_wrench_excess_ratio`` times what the thrusters can produce on some axis
+(:meth:`AllocationCore.wrench_capacity_frd`) is rejected (:class:`InvalidWrenchError`: the node commands neutral
+with the reason) rather than saturated: 1e30 N is a unit or scaling fault, not a request for full thrust.
+
 Thruster reversal and trim (``thrusters.<t>.reversed``/``trim_us``) are applied by the ESC output, not here:
 the pulse widths below are what the thrust curves need, in the thrusters' configured directions.
 """
@@ -66,6 +70,37 @@ class AllocationCore:
         self.allocator = allocator_from_config(cfg)
         self.names = cfg.thrusters.names
         self.neutral_us = cfg.thrusters.pulse_width_neutral_us
+        self.max_excess_ratio = float(cfg.thrusters.max_wrench_excess_ratio)
+        self._capacity_scale: float | None = None
+        self._capacity = (np.zeros(6), np.zeros(6))
+
+    def wrench_capacity_frd(self, voltage_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """``(lowest, highest)`` (6,) each axis of the body FRD wrench can reach, N and N m: for axis k the extremes
+        of ``sum_i B[k, i] F_i`` over the force box ``lower_i <= F_i <= upper_i`` (each thruster at the limit
+        that pushes that axis most; the other axes left free), so no allocation reaches beyond them."""
+        if voltage_scale != self._capacity_scale:
+            lower, upper = self.allocator.force_limits_n(voltage_scale)
+            b = self.allocator.matrix
+            self._capacity = (np.minimum(b * lower, b * upper).sum(axis=1),
+                              np.maximum(b * lower, b * upper).sum(axis=1))
+            self._capacity_scale = voltage_scale
+        return self._capacity
+
+    def excess_problem(self, wrench_frd: np.ndarray, voltage_scale: float = 1.0) -> str:
+        """Why the FRD wrench (6,) is beyond ``max_wrench_excess_ratio`` times the capacity ('' when it is not).
+        An axis no thruster moves (capacity 0 both ways) is not checked: nothing can be produced there."""
+        low, high = self.wrench_capacity_frd(voltage_scale)
+        reach = np.where(wrench_frd >= 0.0, high, -low)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(reach > 0.0, np.abs(wrench_frd) / np.where(reach > 0.0, reach, 1.0), 0.0)
+        k = int(np.argmax(ratio))
+        if ratio[k] > self.max_excess_ratio:
+            axis = ("X", "Y", "Z", "K", "M", "N")[k]
+            unit = "N" if k < 3 else "N m"
+            return (f"wrench beyond what the thrusters can produce: FRD {axis} {wrench_frd[k]:.6g} {unit} is "
+                    f"{ratio[k]:.3g} times the {reach[k]:.4g} {unit} reachable (thrusters.max_wrench_excess_ratio "
+                    f"{self.max_excess_ratio:g})")
+        return ""
 
     @property
     def matrix_frd(self) -> np.ndarray:
@@ -84,7 +119,11 @@ class AllocationCore:
             w = None
         if w is None or w.shape != (6,) or not np.isfinite(w).all():
             raise InvalidWrenchError(f"wrench must be 6 finite numbers (N, N m), got {wrench_flu!r}")
-        result = self.allocator.allocate(frames.wrench_flu_to_frd(w), voltage_scale=voltage_scale)
+        w_frd = frames.wrench_flu_to_frd(w)
+        excess = self.excess_problem(w_frd, voltage_scale)
+        if excess:
+            raise InvalidWrenchError(excess)
+        result = self.allocator.allocate(w_frd, voltage_scale=voltage_scale)
         return FluAllocation(
             requested_wrench_flu=w,
             achieved_wrench_flu=frames.wrench_frd_to_flu(result.achieved_wrench),
