@@ -269,3 +269,36 @@ GRID_ROWS = [
 def test_count_grid_rounds_away_from_neutral_outside_the_deadband(rule, cmd, rev, trim, expected):
     out = EscOutput(range(1), rev, trim, 1100, 1500, 1900, count_us=COUNT_US, deadband_us=25.0)
     assert out.on_grid(out.target(np.array(cmd), 0.02))[0] == pytest.approx(expected, abs=1e-9)
+
+
+def test_no_thrust_command_lands_in_the_deadband_after_the_chips_rounding_exhaustive():
+    """Issue 44 item 9: 320 of 3200 reversed-thruster cases landed 0.1-0.3 us inside the deadband after the PCA9685's
+    12-bit rounding (thrust lost). Exhaustive over: the part's oscillator 23-27 MHz in 0.5 MHz steps (calibrated,
+    datasheet range), at 200 Hz; every command width outside the deadband (1100-1475 us and 1525-1900 us) on the
+    allocation's grid for that oscillator (one count) and on a 0.5 us grid (``hindrax thruster-test`` widths);
+    a normal and a reversed thruster; trims -5, 0 and +5 us. Put on the wire as the chip does (counts = the written
+    width / count duration rounded half-up, datasheet §7.3.5, as the register encoder), each stays at least 25 us
+    from its channel's neutral (1500 us + trim) and inside 1100-1900 us. (Without the rounding away from neutral:
+    388 of these 114240 cases land inside.)"""
+    from hindrax_drivers.pca9685 import protocol as pca
+
+    cases = inside = 0
+    for osc_hz in np.arange(23.0e6, 27.0e6 + 1.0, 0.5e6):
+        prescale = pca.esc_prescale(200.0, osc_hz)
+        count_us = (prescale + 1) / osc_hz * 1e6  # datasheet §7.3.5
+        on_grid = np.arange(math.ceil(1100 / count_us), math.floor(1900 / count_us) + 1) * count_us
+        fine = np.arange(1100.0, 1900.0 + 1e-9, 0.5)
+        w = np.concatenate([on_grid, fine])
+        w = w[((w >= 1100) & (w <= 1475.0 + 1e-9)) | ((w >= 1525.0 - 1e-9) & (w <= 1900))]
+        for rev in (False, True):
+            for trim in (-5.0, 0.0, 5.0):
+                n = w.size  # one channel per width: the whole sweep in one call
+                out = EscOutput(range(n), [rev] * n, [trim] * n, 1100, 1500, 1900, count_us=count_us,
+                                deadband_us=25.0)
+                written = out.on_grid(out.target(w, 0.02))
+                decoded = np.floor(written / count_us + 0.5) * count_us
+                cases += n
+                bad = (np.abs(decoded - (1500.0 + trim)) < 25.0 - 1e-9) | (decoded < 1100 - 1e-9) | \
+                    (decoded > 1900 + 1e-9)
+                inside += int(bad.sum())
+    assert cases == 114240 and inside == 0

@@ -374,6 +374,38 @@ def test_fault1_chip_reset_while_armed_is_detected_reinitialised_and_disarms(esc
     assert 0.0 < node.arming_remaining_s() <= node.arming_time_s
 
 
+def test_i2c_outage_without_oe_the_returning_bus_gets_neutral_first_within_one_tick(esc):
+    """Issue 44 finding 8 (/OE not wired): the bus fails while armed at 1700 us and the chip keeps outputting
+    1700 us. The ESC says so (UNKNOWN, the widths that may still be on the wire); when the bus returns, the first
+    width that reaches the wire is neutral and it comes at the next tick, however long the outage was (before: the
+    retry back-off, up to 4 s, left 1700 us on the wire 138-1288 ms after the bus returned)."""
+    node, emu, bus = esc["node"], esc["emu"], esc["bus"]
+    arm(esc)
+    stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
+    bus.disconnected = True
+    stream(esc, [1700.0] * 8, lambda: node.output_state == ThrusterPwm.OUTPUT_UNKNOWN)
+    t_lost = node.get_clock().now()
+    # 1.5 s of outage: a doubling back-off would be at 1-2 s by now
+    wait_until(lambda: (node.get_clock().now() - t_lost).nanoseconds > 1.5e9, 5, esc["spin"], "1.5 s outage")
+    assert wire(emu)[0] > 1690 and not node.armed  # what the chip really outputs, and the ESC's state
+    assert "1700" in node.core.reason and "may still be on the wire" in node.core.reason
+    assert "may still be on the wire" in node.diag.status().message
+    samples = []
+    write = bus.write_i2c_block_data
+
+    def sampled(address, register, data):
+        write(address, register, data)
+        samples.append(wire(emu))
+
+    bus.write_i2c_block_data = sampled
+    bus.disconnected = False
+    node.steady_check()  # the next tick
+    assert samples and np.allclose(samples[0], NEUTRAL, atol=TICK_US)  # the first write: neutral
+    assert all(np.all((s == 0.0) | (np.abs(s - NEUTRAL) <= TICK_US)) for s in samples)
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US) and node.output_state == ThrusterPwm.OUTPUT_NEUTRAL
+    assert not node.armed and "may still be on the wire" not in node.diag.status().message
+
+
 def test_fault2_arming_time_counts_from_neutral_confirmed_on_the_chip():
     """Bus down at start, back later: the arming time starts when neutral is read back from the chip."""
     with ros_context() as ctx:
