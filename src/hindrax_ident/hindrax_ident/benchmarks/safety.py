@@ -31,6 +31,18 @@ an emulated PCA9685 and its /OE line that this process serves over a Unix socket
 * ``clock_step_back_detected``: a supervisor on ``use_sim_time``, ``/clock`` (100 Hz from here) steps back 100 s,
   until its ``/diagnostics`` carries ``errors.clock_step``.
 
+A bag of the vehicle replayed on its own domain (:func:`replay_rows`, issue 43.1): the same three processes, armed
+at 1700 us, recorded for :data:`REPLAY_RECORD_S` by the project's recorder (every topic, as the vehicle launch
+records); then that bag is replayed in a loop with every topic, heartbeats and commands included (the worst case:
+the player with ``safety_topics`` and its graph check off, as a tool without that check would publish), and the
+supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
+
+* ``supervisor_killed_during_replay_thrust_after_kill``: from the kill until no thruster carries a non-neutral pulse
+  (0 when the outputs had already stopped; :data:`REPLAY_CENSOR_S` when thrust was still on then, counted in the
+  note);
+* ``replay_alone_stopped_outputs``: the repeats in which the replay itself stopped the outputs before the kill (a
+  second heartbeat publisher is a fault), with the time from its first message in the note.
+
 Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :data:`REPEATS` in-process and
 :data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms.
 """
@@ -40,6 +52,7 @@ import json
 import os
 import signal as _signal
 import subprocess
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -52,6 +65,7 @@ from domain_coordinator import domain_id
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
+from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import (
     ConditionTimeout,
@@ -265,7 +279,7 @@ def run(quick: bool = False) -> list[dict]:
         if name in notes:
             row["note"] = notes[name]
         rows.append(row)
-    return rows + run_processes(quick) + gc_rows(quick)
+    return rows + run_processes(quick) + replay_rows(quick) + gc_rows(quick)
 
 
 # ------------------------------------------------------------------------------------ garbage collection pauses
@@ -557,9 +571,131 @@ class _Layout:
         self.hw.arm_watch()
 
 
-def _process_rows(repeats: int) -> dict[str, list]:
-    import tempfile  # noqa
+#: how long the armed layout is recorded for the replay rows, s
+REPLAY_RECORD_S = 12.0
+#: replay time before the supervisor is killed: every vehicle process has discovered the replay (about 2 s) and taken
+#: its heartbeats, s
+REPLAY_LEAD_S = 3.0
+#: how long thrust is watched after the kill before the repeat counts as "still on", s
+REPLAY_CENSOR_S = 3.0
 
+#: the bag player in its own process, with every topic and the graph check off (what a tool without it publishes);
+#: prints the monotonic time (system-wide CLOCK_MONOTONIC) of its first message
+_REPLAY = r"""
+import sys, time
+from rclpy.parameter import Parameter
+from hindrax_drivers.recording.player_node import BagPlayerNode
+from hindrax_drivers.ros_process import RosProcess
+with RosProcess([]) as proc:
+    node = proc.own(BagPlayerNode(parameter_overrides=[
+        Parameter("bag", value=sys.argv[1]), Parameter("start_offset_s", value=float(sys.argv[2])),
+        Parameter("loop", value=True), Parameter("safety_topics", value=True),
+        Parameter("wait_for_subscribers_timeout_s", value=1.0)]))
+    node.watch = None
+    node.wait_for_subscribers()
+    print(time.monotonic(), flush=True)
+    node.play()
+"""
+
+
+def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
+    """Record the armed, commanded layout for :data:`REPLAY_RECORD_S` with the project's recorder (every topic).
+    Returns the bag and the start offset (s) from which it holds all three heartbeats (the recorder subscribes to
+    each topic as it discovers it): replayed from there, every pass carries them without a gap until its end."""
+    bag = tmp / "vehicle_bag"
+    lay.armed_at_1700()
+    with open(tmp / "recorder.log", "w") as log:
+        rec = subprocess.Popen([lay.py, "-m", "hindrax_drivers.recording.recorder_node", "--ros-args", "--params-file",
+                                lay.config, "-p", "all_topics:=true", "-p", "autostart:=true", "-p",
+                                f"output_dir:={bag}"], env=lay.env, stdout=log, stderr=subprocess.STDOUT)
+    try:
+        wait_until(lambda: (bag / "metadata.yaml").exists() or any(bag.glob("*.mcap")), 30, None, "recorder started")
+        t_end = time.monotonic() + REPLAY_RECORD_S
+        wait_until(lambda: time.monotonic() > t_end, REPLAY_RECORD_S + 5, None, "recording window")
+    finally:
+        rec.send_signal(_signal.SIGINT)
+        rec.wait(30)
+    lay.commanding = False
+    reader = BagReader(bag)
+    wanted = ("/supervisor/heartbeat", "/guard/heartbeat", "/esc/heartbeat", "/thrusters/command_pulse_width")
+    missing = [t for t in wanted if t not in reader.channels]
+    if missing:
+        raise RuntimeError(f"the recorded bag lacks {missing}; it has {sorted(reader.channels)}")
+    first = max(next(iter(reader.messages([t]))).log_time_ns for t in wanted)
+    return bag, (first - reader.start_ns) / 1e9
+
+
+def replay_rows(quick: bool = False) -> list[dict]:
+    """Rows of the supervisor killed while a bag of the vehicle replays (module docstring; issue 43 asks
+    <= 500 ms median and max)."""
+    repeats = QUICK_REPEATS if quick else PROCESS_REPEATS
+    after_kill: list[float] = []
+    censored = 0
+    by_replay: list[float] = []
+    spurious = 0  # outputs stopped before the replay's first message: not the replay's doing, the repeat is redone
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-replay-") as d, domain_id() as did, \
+            ros_context(domain_id=did) as ctx:
+        tmp = Path(d)
+        hw = _Hardware(str(tmp / "emulation.sock"))
+        lay = _Layout(ctx, did, tmp, hw)
+        try:
+            bag, offset_s = _record_vehicle_bag(lay, tmp)
+            k = 0
+            while len(after_kill) < repeats:
+                if spurious > repeats:
+                    raise RuntimeError(f"the outputs stopped before the replay began in {spurious} attempts")
+                k += 1
+                lay.armed_at_1700()
+                with open(tmp / f"replay{k}.log", "w") as log:
+                    replay = subprocess.Popen([lay.py, "-c", _REPLAY, str(bag), f"{offset_s:.3f}"], env=lay.env,
+                                              stdout=subprocess.PIPE, stderr=log, text=True)
+                try:
+                    line = replay.stdout.readline()
+                    if not line:
+                        raise RuntimeError(f"the replay exited ({replay.wait(10)}) before its first message")
+                    t_replay = float(line)
+                    if hw.stopped_at is not None and hw.stopped_at < t_replay:
+                        spurious += 1
+                        continue
+                    wait_until(lambda: hw.stopped_at is not None or time.monotonic() > t_replay + REPLAY_LEAD_S,
+                               REPLAY_LEAD_S + 10, None, "replay running")
+                    t0 = time.monotonic()
+                    lay.kill("supervisor")
+                    if hw.stopped_at is not None and hw.stopped_at <= t0:
+                        by_replay.append(hw.stopped_at - t_replay)
+                        after_kill.append(0.0)
+                        continue
+                    try:
+                        wait_until(lambda: hw.stopped_at is not None, REPLAY_CENSOR_S, None, "outputs stopped")
+                        after_kill.append(hw.stopped_at - t0)
+                    except ConditionTimeout:
+                        censored += 1
+                        after_kill.append(REPLAY_CENSOR_S)
+                finally:
+                    replay.kill()
+                    replay.wait(10)
+        except Exception:
+            for f in sorted(tmp.glob("*.log")):
+                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
+            raise
+        finally:
+            lay.close()
+            hw.close()
+    ms = np.array(after_kill) * 1e3
+    note = ("bag of the armed layout replayed in a loop with every topic (heartbeats, commands), supervisor SIGKILLed "
+            f"{REPLAY_LEAD_S:g} s into the replay; {censored} of {repeats} still had thrust "
+            f"{REPLAY_CENSOR_S:g} s after the kill (counted as {REPLAY_CENSOR_S * 1e3:.0f} ms), {len(by_replay)} had "
+            f"stopped before it (counted as 0); {spurious} attempt(s) redone (outputs stopped before the replay began)")
+    stopped_note = ("the replay's second heartbeat publisher stopped the outputs before the kill"
+                    + (f", {1e3 * float(np.median(by_replay)):.0f} ms median after its first message" if by_replay
+                       else ""))
+    return [{"name": "supervisor_killed_during_replay_thrust_after_kill_ms", "value": float(np.median(ms)),
+             "unit": "ms", "max": float(np.max(ms)), "n": int(ms.size), "target": 500.0, "note": note},
+            {"name": "replay_alone_stopped_outputs", "value": len(by_replay), "unit": f"of {repeats} repeats",
+             "note": stopped_note}]
+
+
+def _process_rows(repeats: int) -> dict[str, list]:
     times: dict[str, list] = {k: [] for k in (
         "supervisor_killed_outputs_stopped", "supervisor_hung_outputs_stopped", "esc_killed_oe_asserted",
         "esc_hung_oe_asserted", "i2c_outage_state_unknown", "clock_step_back_detected")}
