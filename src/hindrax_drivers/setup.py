@@ -31,6 +31,7 @@ NODES = {
     "static_tf_node": "hindrax_drivers.tf.node",
     "supervisor_node": "hindrax_drivers.supervisor.node",
     "output_guard_node": "hindrax_drivers.guard.node",
+    "gateway_node": "hindrax_drivers.gateway.node",
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
 NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}

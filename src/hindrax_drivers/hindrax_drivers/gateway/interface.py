@@ -1,0 +1,94 @@
+"""What the vehicle offers on the topside graph, and how a command finds the vehicle it means.
+
+This is the whole topside interface (docs/architecture.md §8.2): the gateway (:mod:`hindrax_drivers.gateway.node`)
+relays these and nothing else between the vehicle's internal graph (loopback) and the topside domain, under the
+namespace ``/<vehicle.name>/``. Heartbeats, ``thrusters/*``, ``esc/*``, ``pressure/zero_depth`` and
+``supervisor/abort`` have no entry: they do not exist on the topside. ``who`` is the access the SROS2 permissions
+policy grants on the Pi: ``anyone`` (every topside participant), ``operator`` (the operator enclave only),
+``read`` (telemetry, subscribe only).
+
+Pure: no rclpy import (the CLI, the policy generator and the tests read it).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterable
+
+__all__ = ["GATEWAY_NODE", "INTERFACE", "Relay", "VehicleChoiceError", "choose_vehicle", "relays", "vehicles_seen"]
+
+#: the node name the gateway has on both graphs, in the namespace ``/<vehicle.name>``; tools find vehicles by it
+GATEWAY_NODE = "gateway"
+
+
+@dataclass(frozen=True)
+class Relay:
+    """One element of the topside interface.
+
+    topside: name relative to ``/<vehicle.name>/``; internal: absolute name on the vehicle's internal graph;
+    kind: ``service``, ``action``, ``topic_in`` (topside -> vehicle) or ``topic_out`` (vehicle -> topside);
+    type: the ROS interface type on the topside (``pkg/srv/Name``, ``pkg/action/Name``, ``pkg/msg/Name``);
+    who: ``anyone``, ``operator`` or ``read`` (module docstring).
+    """
+
+    topside: str
+    internal: str
+    kind: str
+    type: str
+    who: str
+
+
+_TRIGGER = "std_srvs/srv/Trigger"
+
+#: the topside interface, in full (module docstring). ``arm``/``disarm`` call ``esc/set_armed`` (hindrax_msgs/SetArmed)
+INTERFACE: tuple[Relay, ...] = (
+    Relay("estop", "/supervisor/estop", "service", _TRIGGER, "anyone"),
+    Relay("arm", "/esc/set_armed", "service", _TRIGGER, "operator"),
+    Relay("disarm", "/esc/set_armed", "service", _TRIGGER, "operator"),
+    Relay("reset", "/supervisor/reset", "service", _TRIGGER, "operator"),
+    Relay("recorder/start", "/recorder/start", "service", "hindrax_msgs/srv/StartRecording", "operator"),
+    Relay("recorder/stop", "/recorder/stop", "service", "hindrax_msgs/srv/StopRecording", "operator"),
+    Relay("identification/continue", "/identification/continue", "service", _TRIGGER, "operator"),
+    Relay("controller/hold", "/controller/hold", "service", _TRIGGER, "operator"),
+    Relay("controller/enable", "/controller/enable", "service", "std_srvs/srv/SetBool", "operator"),
+    Relay("run_identification", "/run_identification", "action", "hindrax_msgs/action/RunIdentification", "operator"),
+    Relay("controller/setpoint", "/controller/setpoint", "topic_in", "hindrax_msgs/msg/ControlSetpoint", "operator"),
+    Relay("supervisor/status", "/supervisor/status", "topic_out", "diagnostic_msgs/msg/DiagnosticStatus", "read"),
+    Relay("identification/status", "/identification/status", "topic_out", "hindrax_msgs/msg/ManeuverStatus", "read"),
+    Relay("controller/status", "/controller/status", "topic_out", "hindrax_msgs/msg/ControllerStatus", "read"),
+    Relay("odom", "/odom", "topic_out", "nav_msgs/msg/Odometry", "read"),
+)
+
+
+def relays(kind: str) -> tuple[Relay, ...]:
+    """The entries of :data:`INTERFACE` of one ``kind``."""
+    return tuple(r for r in INTERFACE if r.kind == kind)
+
+
+class VehicleChoiceError(ValueError):
+    """No vehicle, several, or not the one named: one line saying what was seen."""
+
+
+def vehicles_seen(nodes: Iterable[tuple[str, str]]) -> list[str]:
+    """Vehicle names from a graph's ``(node name, namespace)`` pairs (rclpy ``get_node_names_and_namespaces``):
+    the namespaces of the nodes named :data:`GATEWAY_NODE`, sorted, without duplicates."""
+    return sorted({ns.strip("/") for name, ns in nodes if name == GATEWAY_NODE and ns.strip("/")})
+
+
+def choose_vehicle(seen: Iterable[str], wanted: str | None, domain: str = "this domain") -> str:
+    """The vehicle a command that moves one talks to: ``wanted`` if it is among ``seen``, else the only one seen.
+
+    Raises :class:`VehicleChoiceError` (one line naming the domain and what was seen) when ``wanted`` is not seen,
+    when nothing is seen, or when several are seen and none is named.
+    """
+    seen = sorted(set(seen))
+    if wanted is not None:
+        if wanted in seen:
+            return wanted
+        others = f" (seen: {', '.join(seen)})" if seen else ""
+        raise VehicleChoiceError(f"vehicle {wanted!r} not seen on {domain}{others}: is its gateway running?")
+    if not seen:
+        raise VehicleChoiceError(f"no vehicle on {domain}: no gateway node seen (check ROS_DOMAIN_ID and "
+                                 "ROS_AUTOMATIC_DISCOVERY_RANGE, docs/deployment.md §6)")
+    if len(seen) > 1:
+        raise VehicleChoiceError(f"several vehicles on {domain} ({', '.join(seen)}): name one with --vehicle")
+    return seen[0]
