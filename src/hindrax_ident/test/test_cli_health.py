@@ -27,11 +27,11 @@ def test_health_without_a_vehicle_lists_every_missing_node_and_status():
     assert r.returncode == 1, r.stdout + r.stderr
     lines = r.stdout.splitlines()
     for node in ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "static_tf", "supervisor",
-                 "recorder", "identification", "output_guard", "controller"):
+                 "recorder", "identification", "output_guard", "controller", "gateway"):
         assert f"  FAIL  node {node} missing" in lines
     assert "  FAIL  recorder: recording: no status received" in lines  # pool_test records
     assert "  FAIL  supervisor/status: no status received" in lines
-    assert lines[-1].startswith("NOT READY: 21 problem(s)")
+    assert lines[-1].startswith("NOT READY: 22 problem(s)")
     quiet = hindrax("health", "--quiet", "--timeout", "0.5")
     assert quiet.returncode == 1 and len(quiet.stdout.splitlines()) == 1
 
