@@ -23,14 +23,10 @@ Groups (:data:`GROUPS`):
 ``serial_sensors_node``
     DVL-75 and Ping1D: the two serial devices (each keeps its port's reader thread).
 ``actuation_node``
-    thrust allocation and ESC output: the allocation hands each command to the ESC by a direct call
-    (:func:`connect_in_process`: no DDS on the wrench -> registers path but the wrench itself) and still publishes
-    it on ``thrusters/command_pulse_width`` for the bag and any other listener; the ESC skips that copy when it
-    reaches its subscription (:meth:`~hindrax_drivers.pca9685.node.EscNode.take_command`), which it then takes at its
-    safety tick instead of by a callback on the system clock (:meth:`~hindrax_drivers.pca9685.node.EscNode.
-    in_process_sink`: the copies wake no executor), and keeps taking commands from any other publisher
-    (``hindrax thruster-test``, within one output period). The ESC node is built last and so closed first
-    on exit: it writes neutral before anything else shuts down.
+    thrust allocation and ESC output: the allocation's commands reach the ESC on ``thrusters/command_pulse_width``
+    inside the process (one participant), taken by the ESC's subscription callback as from any other publisher
+    (the path the vehicle takes is the path the tests take). The ESC node is built last and so closed first on
+    exit: it writes neutral before anything else shuts down.
 
 ``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
 :data:`NODE_CLASSES` (for measurements; the launch files use the groups).
@@ -41,7 +37,7 @@ import importlib
 import sys
 from typing import Any, Callable, Sequence
 
-__all__ = ["GROUPS", "NODE_CLASSES", "connect_in_process", "node_factories", "node_names", "run_group"]
+__all__ = ["GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
 
 #: node -> "module:class" of every node class that composes (the class is imported only when used)
 NODE_CLASSES: dict[str, str] = {
@@ -85,22 +81,6 @@ def node_factories(names: Sequence[str]) -> list[Callable[[], Any]]:
     return out
 
 
-def connect_in_process(nodes: Sequence[Any]) -> None:
-    """In-process hand-offs between composed nodes: a thrust allocation node's commands go to an ESC node of the
-    same process by a direct call (module docstring, ``actuation_node``). Nodes of other classes are left alone;
-    called by :func:`run_group` once every node is built (and by ``benchmarks/actuation.py``, which composes the
-    same two nodes)."""
-    # by their hand-off interfaces (EscNode.in_process_sink, ThrustAllocationNode.command_sinks), so that this
-    # module imports no node module (the classes are loaded by name, NODE_CLASSES; test/test_import_structure.py)
-    escs = [n for n in nodes if callable(getattr(n, "in_process_sink", None))]
-    commanders = [n for n in nodes if isinstance(getattr(n, "command_sinks", None), list)]
-    if len(escs) != 1 or not commanders:
-        return
-    sink = escs[0].in_process_sink()
-    for node in commanders:
-        node.command_sinks.append(sink)
-
-
 def run_group(names: Sequence[str], args: Sequence[str] | None = None) -> int:
     """Run the nodes ``names`` in this process until SIGINT/SIGTERM (:func:`~hindrax_drivers.node_common.run_nodes`).
     Returns the exit status (1 on an invalid configuration, one line on stderr)."""
@@ -111,7 +91,7 @@ def _run(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None) -> 
     # imported here: node_names (launch_xml, ``hindrax health``) reads GROUPS without loading the ROS messages
     from .node_common import run_nodes
 
-    return run_nodes(factories, args, connect=connect_in_process)
+    return run_nodes(factories, args)
 
 
 def i2c_sensors_main(args: Sequence[str] | None = None) -> int:

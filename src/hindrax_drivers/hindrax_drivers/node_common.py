@@ -373,23 +373,17 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
 
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
-              executor: str | None = None, connect: Callable[[list], None] | None = None) -> int:
+              executor: str | None = None) -> int:
     """Process entry point of several nodes composed in one process (:mod:`hindrax_drivers.composition`): the nodes
     are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
-    reverse order (the last built first). ``connect``: called with the built nodes, in order, before the executor
-    spins (in-process hand-offs, :func:`hindrax_drivers.composition.connect_in_process`). Same arguments, exit
+    reverse order (the last built first). Same arguments, exit
     status and shutdown as :func:`run_node`; an exception out of any node's callback ends the whole process (every
     node's ``close()`` still runs). SIGINT shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a
     callback (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``)."""
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor,
                     interrupt=False) as proc:
-        nodes = []
         for factory in factories:
-            node = proc.own(factory())
-            nodes.append(node)
-            proc.executor.add_node(node)
-        if connect is not None:
-            connect(nodes)
+            proc.executor.add_node(proc.own(factory()))
         proc.spin()
     return proc.status
 

@@ -56,16 +56,15 @@ def test_i2c_sensors_group_runs_both_nodes_under_their_own_names_and_exits_0_on_
 
 
 @pytest.mark.ros
-def test_actuation_hands_the_command_to_the_esc_in_process_and_still_takes_other_publishers():
-    """actuation_node's hand-off (connect_in_process): the allocation's command is on the chip before the
-    allocation publishes it, its DDS copy is skipped by the ESC (not handled twice), the copy is still on the topic
-    for the bag, and a command from another publisher (thruster test) still reaches the ESC."""
+def test_actuation_the_esc_takes_the_allocations_commands_by_its_subscription():
+    """actuation_node composes the allocation and the ESC: the allocation's command reaches the chip through the
+    ESC's subscription callback, the same path as a command from any other publisher (``hindrax thruster-test``) and
+    as in separate processes; the ESC has no polled intake node and no in-process hand-off."""
     import numpy as np
     from geometry_msgs.msg import WrenchStamped
     from rclpy.executors import SingleThreadedExecutor
 
     from hindrax_drivers.allocation.node import ThrustAllocationNode
-    from hindrax_drivers.composition import connect_in_process
     from hindrax_drivers.pca9685.emulator import Pca9685Emulator
     from hindrax_drivers.pca9685.node import EscNode
     from hindrax_drivers.testing import SafetyHeartbeats, config_parameters
@@ -78,17 +77,15 @@ def test_actuation_hands_the_command_to_the_esc_in_process_and_still_takes_other
         emu = Pca9685Emulator()
         alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
         esc = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx, parameter_overrides=params)
-        connect_in_process([alloc, esc])
-        assert alloc.command_sinks == [esc.take_command]
-        # on the system clock the command topic is then taken at the ESC's safety tick: no callback (executor
-        # wake-up) for the DDS copies of the commands the ESC took in the process
-        assert "/thrusters/command_pulse_width" not in {s.topic_name for s in esc.subscriptions}
-        assert esc._command_sub in esc.inputs.handlers
+        topics = {s.topic_name for s in esc.subscriptions}
+        assert {"/thrusters/command_pulse_width", "/supervisor/heartbeat", "/guard/heartbeat"} <= topics
+        assert not hasattr(esc, "in_process_sink") and not hasattr(alloc, "command_sinks")
         probe = rclpy.create_node("handoff_probe", context=ctx)
         SafetyHeartbeats(probe)
         ex = SingleThreadedExecutor(context=ctx)
         for n in (alloc, esc, probe):
             ex.add_node(n)
+        assert "esc_intake" not in probe.get_node_names()
         wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
         other = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
         copies: list = []
@@ -102,29 +99,18 @@ def test_actuation_hands_the_command_to_the_esc_in_process_and_still_takes_other
         wait_until(fut.done, 5, spin, "armed")
         assert fut.result().success, fut.result().message
         try:
-            on_chip_when_published = []
-            publish = alloc.pub_pwm.publish
-
-            def spy(msg):  # the chip already holds the command when the allocation publishes it
-                on_chip_when_published.append(emu.pulse_width_us(0))
-                publish(msg)
-            alloc.pub_pwm.publish = spy
-            handled = []
-            on_command = esc.on_command
-            esc.on_command = lambda msg: (handled.append(list(msg.pulse_width_us)), on_command(msg))
             m = WrenchStamped()
             m.header.frame_id = "base_link"
             m.header.stamp = probe.get_clock().now().to_msg()
             m.wrench.force.x = 20.0
             wrench.publish(m)
-            wait_until(lambda: copies and esc.local_copies_skipped == 1, 10, spin, "the copy on the topic, skipped")
+            wait_until(lambda: copies, 10, spin, "the allocation's command on the topic")
             target = copies[-1].pulse_width_us[0]
-            assert abs(target - 1500.0) > 50.0 and on_chip_when_published == [pytest.approx(target, abs=1.0)]
-            assert len(handled) == 1  # handled once, by the hand-off
-            # another publisher's command is not skipped
+            assert abs(target - 1500.0) > 50.0
+            wait_until(lambda: abs(emu.pulse_width_us(0) - target) < 1.3, 10, spin, "the command on the chip")
             other.publish(ThrusterPwm(pulse_width_us=[1600.0] * 8, armed=True))
-            wait_until(lambda: len(handled) == 2, 10, spin, "the other publisher's command handled")
-            assert np.allclose(handled[-1], 1600.0) and esc.local_copies_skipped == 1
+            wait_until(lambda: np.allclose([emu.pulse_width_us(c) for c in (0, 4)], 1600.0, atol=1.3), 10, spin,
+                       "the other publisher's command on the chip")
         finally:
             ex.shutdown()
             for n in (probe, esc, alloc):

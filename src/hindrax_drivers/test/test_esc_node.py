@@ -605,68 +605,31 @@ def _esc_beside_heartbeats(ctx, node):
         node.destroy_node()
 
 
-def test_system_clock_one_steady_tick_takes_the_heartbeats_aged_from_their_reception():
-    """docs/architecture.md §10.1: on the system clock the ESC wakes once per output period (one steady-clock timer
-    runs the safety tick, then the output tick) and takes the supervisor's and guard's heartbeats there from polled
-    subscriptions; a heartbeat counts from its DDS reception, so esc.heartbeat_timeout_s keeps its meaning. With
-    use_sim_time the output tick stays a ROS-time timer and the heartbeats callbacks."""
+def test_heartbeats_are_callbacks_in_both_clock_modes_and_age_from_their_arrival():
+    """Issue 47 item 1: the ESC takes its inputs by callbacks whatever the clock (no polled intake node): on the system
+    clock one steady-clock timer runs the safety and output ticks, with use_sim_time the output tick is a ROS-time
+    timer; a heartbeat counts from its arrival, so a supervisor silenced for more than esc.heartbeat_timeout_s
+    (0.2 s here) is refused no earlier than 0.2 s minus one beat period after its last beat."""
     import time
 
-    beat_topics = {"/supervisor/heartbeat", "/guard/heartbeat"}
+    beat_topics = {"/supervisor/heartbeat", "/guard/heartbeat", "/thrusters/command_pulse_width"}
     with ros_context() as ctx:
         sim = _node(Pca9685Emulator(), {}, sim_time=True, ctx=ctx)
-        assert sorted(_steady_timers(sim)) == [False, True] and sim.inputs is None
+        assert sorted(_steady_timers(sim)) == [False, True]
         assert beat_topics <= {s.topic_name for s in sim.subscriptions}
         sim.destroy_node()
 
         node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
         node.set_heartbeat_timeout(0.2)
         assert _steady_timers(node) == [True]
-        assert not beat_topics & {s.topic_name for s in node.subscriptions}
-        # a beat taken 0.15 s after its reception is 0.15 s old; one taken 0.25 s after is stale
-        ok = DiagnosticStatus(level=DiagnosticStatus.OK, message="ok")
-        node.inputs.received_s = time.time() - 0.15
-        node.on_supervisor_heartbeat(ok)
-        node.on_guard_heartbeat(ok)
-        assert 0.15 <= node.supervisor_age.age_s < 0.2 and 0.15 <= node.guard_age.age_s < 0.2
-        assert node.heartbeat_refusal() == ""
-        node.inputs.received_s = time.time() - 0.25
-        node.on_supervisor_heartbeat(ok)
-        assert node.heartbeat_refusal().startswith("no supervisor heartbeat for 0.2")
-        node.inputs.received_s = None
-
-        # live: beats from another node reach the ESC only through its tick; silenced, the refusal comes no
-        # earlier than 0.2 s after the last beat (beats every 50 ms: >= 0.15 s after silencing)
+        assert beat_topics <= {s.topic_name for s in node.subscriptions}
         with _esc_beside_heartbeats(ctx, node) as (probe, beats, ex, spin):
-            wait_until(lambda: node.heartbeat_refusal() == "", 10, spin, "both heartbeats taken at the tick")
+            assert "esc_intake" not in probe.get_node_names()
+            wait_until(lambda: node.heartbeat_refusal() == "", 10, spin, "both heartbeats by callbacks")
             beats.supervisor = None
             t0 = time.monotonic()
             wait_until(lambda: "no supervisor heartbeat" in node.heartbeat_refusal(), 5, spin, "supervisor stale")
             assert time.monotonic() - t0 >= 0.15
-
-
-def test_an_arm_request_sees_the_heartbeats_received_since_the_last_tick():
-    """With polled heartbeats an arm request is decided on every beat received before it (as with callbacks): a
-    supervisor ERROR that arrived after the ESC's last tick refuses the request instead of arming and disarming at
-    the next tick (found by the safety bench: a trip and reset between two ticks)."""
-    with ros_context() as ctx:
-        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
-        with _esc_beside_heartbeats(ctx, node) as (probe, beats, ex, spin):
-            wait_until(lambda: node.heartbeat_refusal() == "", 10, spin, "healthy heartbeats taken")
-            ex.remove_node(node)  # no ESC tick from here: the beats below wait in its polled subscription
-            beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"
-            errors = []
-            probe.create_subscription(DiagnosticStatus, "supervisor/heartbeat",
-                                      lambda m: m.level != DiagnosticStatus.OK and errors.append(m), 10)
-            probe_only = SingleThreadedExecutor(context=ctx)
-            ex.remove_node(probe)
-            probe_only.add_node(probe)
-            wait_until(lambda: len(errors) >= 3, 5, lambda: probe_only.spin_once(timeout_sec=0.01), "ERROR beats")
-            assert node.supervisor_ok  # not taken yet
-            res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
-            assert not res.success and "supervisor tripped: depth 3.00 m" in res.message and not node.armed
-            probe_only.shutdown()
-
 
 def test_the_read_back_goes_to_raw_pca9685_in_the_batches_of_the_writes():
     """The read-back (MODE1, PRE_SCALE, the thruster block and the lights channel every esc.readback_interval_s,
@@ -736,50 +699,3 @@ def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
         node.destroy_node()
 
 
-def test_the_tick_rides_on_in_process_commands_and_its_timer_resumes_when_they_stop():
-    """System clock (the vehicle): while the composed allocation hands over commands at 50 Hz, the safety and output
-    tick runs in their wake-ups and its timer, restarted by each, does not fire; when they stop the timer ticks at
-    the output rate again (the watchdogs' timing)."""
-    import time
-
-    from rclpy.experimental.events_executor import EventsExecutor
-
-    with ros_context() as ctx:
-        node = _node(Pca9685Emulator(), {}, ctx=ctx)
-        sink = node.in_process_sink()
-        ticks = {"inline": 0}
-        timer_tick = node._steady_and_output_tick
-
-        def inline_tick():
-            ticks["inline"] += 1
-            timer_tick()
-
-        node._steady_and_output_tick = inline_tick  # what _join_tick calls; the timer keeps the original
-        driver = rclpy.create_node("commander", context=ctx)
-        streaming = {"on": True}
-
-        def command():
-            if streaming["on"]:
-                sink(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True))
-
-        driver.create_timer(PERIOD_S, command)
-        ex = EventsExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(driver)
-        try:
-            spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
-            wait_until(lambda: ticks["inline"] >= 5, 5, spin, "commands streaming")
-            total0, inline0, t0 = node._heartbeat_tick, ticks["inline"], time.monotonic()
-            wait_until(lambda: time.monotonic() - t0 >= 1.0, 5, spin, "1 s of commands")
-            total, inline = node._heartbeat_tick - total0, ticks["inline"] - inline0
-            assert 40 <= total <= 60  # one tick per output period
-            assert total - inline <= 5  # the timer (almost) never fired while commands came
-            streaming["on"] = False
-            total0, inline0, t0 = node._heartbeat_tick, ticks["inline"], time.monotonic()
-            wait_until(lambda: time.monotonic() - t0 >= 0.5, 5, spin, "0.5 s without commands")
-            assert ticks["inline"] == inline0
-            assert node._heartbeat_tick - total0 >= 20  # the timer ticks at 50 Hz again
-        finally:
-            ex.shutdown()
-            driver.destroy_node()
-            node.destroy_node()

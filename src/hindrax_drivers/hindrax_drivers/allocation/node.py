@@ -7,8 +7,7 @@ Publishes
     ``thrusters/forces`` (hindrax_msgs/ThrusterForces): thrust each thruster will produce, N.
     ``allocation/status`` (hindrax_msgs/AllocationStatus): requested and achieved wrench (base_link),
     scale, per-thruster saturation, rejection reason.
-    Pulse widths go out for every wrench (and first to every :attr:`ThrustAllocationNode.command_sinks`: the ESC
-    node of the same process, :func:`hindrax_drivers.composition.connect_in_process`); forces and status (display
+    Pulse widths go out for every wrench; forces and status (display
     and bag) at most every :data:`STATUS_PERIOD_S` (5 Hz) with the latest allocation, and at once when rejected,
     the saturated thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
     stale-check timer once the period has passed.
@@ -25,7 +24,7 @@ when a parameter changes, never per message. Configuration: the vehicle file as 
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
@@ -86,9 +85,6 @@ class ThrustAllocationNode(Node):
         self.timeout_s = cfg.thrusters.wrench_timeout_s
         self.future_margin_s = cfg.thrusters.wrench_future_margin_s
         self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
-        #: called with every command before it is published: in-process consumers (the composed ESC node); the
-        #: command is rosbags' ThrusterPwm (:func:`~hindrax_drivers.lean_cdr.thruster_pwm_lean`), fields read only
-        self.command_sinks: list[Callable[[Any], None]] = []
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
         #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.lean_cdr`: a lighter 50 Hz
@@ -174,7 +170,7 @@ class ThrustAllocationNode(Node):
     def publish(self, msg: WrenchStamped | None, pulse_width_us: np.ndarray, force_n: np.ndarray,
                 requested: np.ndarray, achieved: np.ndarray, scale: float, saturated: np.ndarray,
                 rejected: bool, reason: str, now_ns: int | None = None) -> None:
-        """Send the command (in-process sinks first, then ``thrusters/command_pulse_width``) and hold the forces and
+        """Send the command on ``thrusters/command_pulse_width`` and hold the forces and
         status; they are sent now when the state changed or :data:`STATUS_PERIOD_S` has passed, else later by
         :meth:`check_stale`. The held messages are built only when sent (at most 10 Hz of the 50 Hz commands)."""
         if now_ns is None:
@@ -183,12 +179,9 @@ class ThrustAllocationNode(Node):
             stamp_ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
         else:
             stamp_ns = now_ns
-        # the command as rosbags' ThrusterPwm: the sinks read its fields, and its CDR is published as bytes (50 Hz
-        # without an rclpy object, hindrax_drivers.lean_cdr)
-        pwm = thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us, not rejected)
-        for sink in self.command_sinks:
-            sink(pwm)
-        self.pub_pwm.publish(thruster_pwm_encode(pwm))
+        # the command's CDR is published as bytes (50 Hz without an rclpy object, hindrax_drivers.lean_cdr)
+        self.pub_pwm.publish(thruster_pwm_encode(thruster_pwm_lean(stamp_ns, BASE_FRAME, pulse_width_us,
+                                                                   not rejected)))
         saturated = np.asarray(saturated, dtype=bool)
         self._held = (stamp_ns, np.asarray(force_n, dtype=float), np.asarray(requested, dtype=float),
                       np.asarray(achieved, dtype=float), float(scale), saturated, rejected, reason)

@@ -1,86 +1,40 @@
-"""ESC output node: thruster pulse widths and the lights channel through a PCA9685 on I2C.
+"""ESC output node: thruster pulse widths and the lights channel through a PCA9685 on I2C (thin, over
+:class:`.core.EscCore`).
 
-Safety behaviour (docs/architecture.md §8, docs/devices.md §5.2):
+The decisions (arm, refuse to arm, disarm, neutral, output state, the reason; the rules and their sources) are the
+core's (:mod:`.core`, docs/architecture.md §8). This node does the I/O and feeds the core:
 
-- From start-up every thruster channel is held at neutral (``thrusters.pulse_width_neutral_us`` plus the
-  channel's ``trim_us``) and the lights at ``lights.pulse_width_off_us``: the ESC arms only after seeing neutral
-  for a few seconds. Start-up never lets old channel values run: every output is switched full OFF, the chip is
-  put to sleep, PRE_SCALE and neutral are written, and only then is it woken and restarted
-  (:func:`~.protocol.safe_startup_sequence`); the result is read back before anything else happens.
-- Thrust is accepted only after an explicit arm request on the ``esc/set_armed`` service (hindrax_msgs/SetArmed),
-  with ``esc.oscillator_calibrated`` true (neutral on the wire depends on the part's oscillator, 23-27 MHz; see
-  ``hindrax esc calibrate``) and ``esc.arming_time_s`` after neutral was confirmed on the chip by read-back (not
-  after node creation: a bus that was down at start delays it). Disarm is always accepted.
-- Event-driven output: an armed command is written to the chip when it arrives (its subscription callback, or the
-  direct call of the thrust allocation composed in the same process, :meth:`EscNode.in_process_sink`). The output
-  tick (``esc.output_rate_hz``, ROS time) is the watchdog: if no command arrives on
-  ``thrusters/command_pulse_width`` for ``esc.watchdog_timeout_s``, every channel is written neutral at the next
-  tick, i.e. within one output period. A second, steady-clock watchdog (``time.monotonic``) does the same when
-  ROS time stops (``use_sim_time`` with a dead ``/clock``, where the ROS timers stand still).
-- Ticks and inputs (docs/architecture.md §10.1): on the system clock one steady-clock timer runs the safety tick
-  (:meth:`EscNode.steady_check`) and then the output tick (:meth:`EscNode.tick`, ROS time = wall time there), and
-  the supervisor's and the guard's heartbeats are taken at the safety tick from polled subscriptions
-  (:mod:`hindrax_drivers.polled_input`), each aged from its DDS reception time, so the 0.2 s timeout means what it
-  meant with a callback per beat. While the composed allocation hands commands over, the tick runs in their
-  wake-ups and the timer, restarted by each, fires only a period after the last one (:meth:`EscNode._join_tick`).
-  With ``use_sim_time`` the output tick is a ROS-time timer of its own, the safety tick a steady-clock timer, and
-  the heartbeats callbacks. Neutral is also
-  written on disarm, on any exception in the output path, and on shutdown (:meth:`EscNode.close`, called for
-  SIGINT/SIGTERM by :func:`run_node`).
-- Read-back: every ``esc.readback_interval_s`` the tick reads MODE1, PRE_SCALE and the written channel registers;
-  a mismatch (a brown-out reset leaves the chip asleep with every output off) re-initialises the chip at neutral,
-  disarms (the ESCs must see neutral for the arming time again) and raises a ``/diagnostics`` warning
-  (``errors.chip_reinit``, message "read-back mismatch ...").
-- Independent stop paths (docs/architecture.md §8): arming needs a fresh OK ``supervisor/heartbeat`` and a fresh OK
-  ``guard/heartbeat`` (the output guard has released /OE); either one older than ``esc.heartbeat_timeout_s``
-  (steady clock, executor-alive time: :class:`~hindrax_drivers.liveness.AliveAge`) or not OK disarms at once and
-  refuses arm requests with the reason. The arming time counts from the moment neutral is confirmed on the chip
-  AND the guard lets it through (/OE low): before that the ESCs saw no signal. Any guard ERROR taken restarts it,
-  and it is never shorter than :data:`GUARD_CONFIRM_S` (0.15 s), so an arm is not accepted on a guard OK that
-  predates the guard's reaction to the ESC's own last state.
-- The output state is reported as it is on the wire (``thrusters/pulse_width`` ``output_state``): while the chip
-  cannot be written or read back it is ``OUTPUT_UNKNOWN`` (widths NaN, never "neutral"), the node disarms itself,
-  answers a disarm request with success=false and the reason, and retries the chip with backoff
-  (:data:`RETRY_MIN_S` doubling to :data:`RETRY_MAX_S`); when the chip is back it is re-initialised at neutral and
-  thrust needs a new arm request (and the arming time again).
-- ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus, every second steady-clock tick, 25 Hz at the default 50 Hz
-  output rate): the output state and the armed flag (values ``output_state``, ``armed``; level ERROR while
-  unknown). It is the output guard's sign of life: driven by the steady clock, unlike ``thrusters/pulse_width``
-  (ROS-time tick), so a simulation slower than real time or with its time held does not look like a dead ESC.
-- No bus at start-up (``/dev/i2c-N`` missing, or opening it fails): the node keeps running, reports ERROR "no I2C
-  bus" on ``/diagnostics`` and ``OUTPUT_UNKNOWN``, and retries opening it with the same backoff; a bus that appears
-  is picked up without a restart.
-- Protective timing is on the steady clock: the read-back, the arming time, the heartbeats, the re-configuration
-  retries and the second watchdog; a backward step of ROS time is detected (:class:`~hindrax_drivers.liveness.
-  ClockStepMonitor`) and reported (``/diagnostics`` warning ``clock_step``).
-- Commands: a command with a width outside [``pulse_width_min_us``, ``pulse_width_max_us``] (the ESC's range), a
-  non-finite width or ``armed`` false is a fault: neutral and the reason (:func:`.core.command_fault`), never a
-  clamp. Per-channel reversal (mirror about neutral) and trim follow, the result is clamped to the range, an
-  optional slew limit ``esc.slew_rate_us_per_s`` bounds the change per step, and the widths are put on the chip's
-  count grid rounded away from neutral outside the deadband (:meth:`.core.EscOutput.on_grid`).
-
-The decisions (arm, refuse, disarm, neutral, output state, reason) are :class:`.core.EscCore`'s; this node feeds it
-the heartbeats, the commands and the chip's state and does the I/O.
-
-Subscribes ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm, thruster order) and
-``lights/brightness`` (std_msgs/Float64, 0-1, mapped linearly from ``pulse_width_off_us`` to
-``pulse_width_full_us``). Publishes ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the widths actually
-written, decoded back from the register counts, and the armed state; on every write, and at a tick when nothing
-was written since the previous one), ``raw/pca9685``
-(hindrax_msgs/RawDeviceData of every I2C transaction) and ``/diagnostics``.
+- Chip (docs/devices.md §5.1): start-up and every recovery write neutral into the channel registers first, then
+  every output full OFF, sleep, PRE_SCALE, neutral, wake, RESTART (:func:`~.protocol.safe_startup_sequence`), and
+  read the result back (:meth:`.core.EscCore.chip_confirmed`); a failed write or read-back is
+  :meth:`.core.EscCore.chip_lost` (``OUTPUT_UNKNOWN``, widths NaN on ``thrusters/pulse_width``, never "neutral"); a
+  read-back mismatch every ``esc.readback_interval_s`` (brown-out) re-initialises the chip and disarms. No bus at
+  start-up: the node keeps running, reports ERROR "no I2C bus" and picks the bus up when it appears.
+- Inputs, all by callbacks in both clock modes: ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm,
+  thruster order; an armed command is written when it arrives), ``supervisor/heartbeat`` and ``guard/heartbeat``
+  (aged on the steady clock in executor-alive time, :class:`~hindrax_drivers.liveness.AliveAge`; their verdicts go
+  to :meth:`.core.EscCore.set_peers`), ``lights/brightness`` (std_msgs/Float64, 0-1 mapped linearly from
+  ``lights.pulse_width_off_us`` to ``pulse_width_full_us``), the ``esc/set_armed`` service (hindrax_msgs/SetArmed).
+- Ticks: on the system clock one steady-clock timer (``esc.output_rate_hz``) runs the safety tick
+  (:meth:`EscNode.steady_check`: heartbeats, chip retries and read-back, the steady-clock watchdog for a stopped ROS
+  clock, ROS-time steps) and then the output tick (:meth:`EscNode.tick`: the ROS-time command watchdog); with
+  ``use_sim_time`` the output tick is a ROS-time timer of its own.
+- Outputs: ``thrusters/pulse_width`` (the widths on the chip, decoded from the register counts, armed flag, output
+  state; on every write and at a tick without one), ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus every
+  second steady tick, 25 Hz at 50 Hz: values ``output_state``, ``armed``, ``reason``; ERROR while unknown; the
+  output guard's sign of life), ``raw/pca9685`` (every I2C transaction) and ``/diagnostics``. Neutral is written
+  on disarm, on any exception in the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via
+  :func:`run_node`).
 
 The bus is injected: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding a
 :class:`~hindrax_drivers.pca9685.emulator.Pca9685Emulator` in tests and simulation.
-Time: ROS time (``use_sim_time`` supported) for the stamps, the output tick and the first watchdog; the steady
-clock for everything protective (see above).
 """
 from __future__ import annotations
 
-import collections
 import math
 import time
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -95,7 +49,6 @@ from hindrax_msgs.srv import SetArmed
 from ..lean_cdr import diagnostic_status_cdr, thruster_pwm_cdr
 from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
-from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
@@ -104,18 +57,8 @@ from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, EscCor
 __all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "main"]
 
 COMMAND_TOPIC = "thrusters/command_pulse_width"
-#: commands taken in the process (:meth:`EscNode.take_command`) remembered until their DDS copy arrives; a copy
-#: comes within milliseconds, so 16 (0.3 s at 50 Hz) only bounds the memory of copies that never come
-LOCAL_COMMANDS_KEPT = 16
 
-
-def _command_key(msg: ThrusterPwm) -> tuple:
-    """What identifies one command: stamp, armed flag and the widths' bytes (bytes, so a NaN width matches)."""
-    return (msg.header.stamp.sec, msg.header.stamp.nanosec, bool(msg.armed),
-            np.asarray(msg.pulse_width_us, dtype=float).tobytes())
-
-
-class EscNode(PolledInputsMixin, Node):
+class EscNode(Node):
     """PCA9685 ESC output node (see the module docstring). ``bus``: SMBus-like object (default smbus2)."""
 
     #: MODE1 as read back from a configured chip: awake, auto-increment, All-Call, no RESTART pending.
@@ -179,35 +122,25 @@ class EscNode(PolledInputsMixin, Node):
         self.start_time = self.get_clock().now()
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
-        #: the inputs taken at the safety tick (system clock; None with ``use_sim_time``: callbacks, which the stepped
-        #: simulation dispatches in order): the peers' heartbeats, and the command topic once a commander in this
-        #: process hands its commands over (:meth:`in_process_sink`); the heartbeat ages tick first (_take_inputs)
-        self.inputs = self.open_inputs(before_take=(self.supervisor_age.tick, self.guard_age.tick))
-        self._command_sub = self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10)
-        #: commands handed over in the process (:meth:`take_command`) whose DDS copy has not come back yet
-        self._local_commands: collections.deque = collections.deque(maxlen=LOCAL_COMMANDS_KEPT)
-        self.local_copies_skipped = 0
+        # every input is a callback, in both clock modes (the path the vehicle takes is the path the tests take)
+        self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self.on_command, 10)
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
         self._heartbeat_tick = 0
-        # lean when polled: the beats are decoded by rosbags (lean_cdr.py), fields read only (heartbeat_ok)
-        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"],
-                        self.on_supervisor_heartbeat, 10, lean=True)
-        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10,
-                        lean=True)
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor_heartbeat, 10)
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._configure_chip()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        if self.inputs is None:
+        if self.get_parameter("use_sim_time").value:
             # use_sim_time: the output tick follows simulated time (the stepped graph's order); the safety tick
             # keeps running on the steady clock when /clock stops
             self.output_timer = self.create_timer(self.period_s, self.tick)
             self.steady_timer = self.create_timer(self.period_s, self.steady_check, clock=steady)
         else:
             # system clock: ROS time is wall time, so one steady-clock timer runs the safety tick and then the
-            # output tick (one executor wake-up per period instead of two, docs/architecture.md §10.1); while
-            # in-process commands stream, the tick rides on their wake-ups (_join_tick)
+            # output tick (one executor wake-up per period instead of two, docs/architecture.md §10.1)
             self.output_timer = None
             self.steady_timer = self.create_timer(self.period_s, self._steady_and_output_tick, clock=steady)
 
@@ -387,50 +320,6 @@ class EscNode(PolledInputsMixin, Node):
         return True
 
     # -- inputs
-    def in_process_sink(self) -> Callable[[ThrusterPwm], None]:
-        """The hand-off for a commander in this process (:func:`hindrax_drivers.composition.connect_in_process`):
-        returns :meth:`take_command`. On the system clock the command topic is from then on taken at the safety
-        tick (a polled subscription) instead of by a callback: its traffic is then mostly the DDS copies of the
-        commands already taken, which cost no executor wake-up that way; another publisher's command (``hindrax
-        thruster-test``) is handled at the next tick, within one output period."""
-        if self.inputs is not None and self._command_sub not in self.inputs.handlers:
-            self.destroy_subscription(self._command_sub)
-            # lean: the copies are only compared and skipped (and another commander's widths read), so rosbags
-            # decodes them (lean_cdr.py: about a third of an rclpy object's cost per message)
-            self._command_sub = self.inputs.add(ThrusterPwm, COMMAND_TOPIC, self._on_command_topic, 10, lean=True)
-        return self.take_command
-
-    def take_command(self, msg: ThrusterPwm) -> None:
-        """A command handed over by a node of the same process (the composed thrust allocation,
-        :func:`hindrax_drivers.composition.connect_in_process`): handled at once, as :meth:`on_command`, without the
-        DDS hop; its copy on ``thrusters/command_pulse_width``, published for the bag, is then skipped when it
-        reaches this node's subscription (matched by stamp, widths and armed flag)."""
-        self._local_commands.append(_command_key(msg))
-        self.on_command(msg)
-        self._join_tick()
-
-    def _join_tick(self) -> None:
-        """On the system clock, run the period's safety and output tick in the wake-up of an in-process command and
-        restart the tick timer: while commands stream, the tick rides on their wake-ups instead of waking the
-        process once more per period (docs/architecture.md §10.1: a wake-up's first publish or take costs 230-285 us
-        of CPU here after 5-20 ms idle, 19-26 us back to back). The tick runs here when at least half a period has
-        passed since the last one, and the timer, restarted at every command, fires a full period after the last
-        command: so ticks stay at most one period (plus one command's handling) apart whatever the command rate, and
-        the watchdogs keep their timing when commands stop. With ``use_sim_time`` nothing changes (two timers)."""
-        if self.inputs is None:
-            return
-        if time.monotonic() - self._last_tick_monotonic >= 0.5 * self.period_s:
-            self._steady_and_output_tick()
-        self.steady_timer.reset()
-
-    def _on_command_topic(self, msg: ThrusterPwm) -> None:
-        key = _command_key(msg)
-        if key in self._local_commands:  # the copy of a command taken in the process: handled already
-            self._local_commands.remove(key)
-            self.local_copies_skipped += 1
-            return
-        self.on_command(msg)
-
     def on_command(self, msg: ThrusterPwm) -> None:
         """Hand the command to the core and, armed, write it at once (event-driven output; the tick is the
         watchdog). A faulty command (:func:`~.core.command_fault`) gives neutral at once, with its reason."""
@@ -489,11 +378,9 @@ class EscNode(PolledInputsMixin, Node):
         return self.core.arm_refusal(self.bus_error)
 
     def _take_inputs(self) -> None:
-        """Advance the heartbeat ages, then hand over what the polled inputs hold (system clock; a heartbeat taken
-        now counts from its reception). Called at every safety tick and before an arm request is decided, so that
-        the request sees every beat received before it, as callbacks would have (a supervisor ERROR that arrived
-        between two ticks refuses it)."""
-        self.take_inputs()  # the ages' ticks first (open_inputs in __init__)
+        """Advance the heartbeat ages to now (the safety tick and an arm request; the beats arrive by callbacks)."""
+        self.supervisor_age.tick()
+        self.guard_age.tick()
 
     def on_set_armed(self, request: SetArmed.Request, response: SetArmed.Response) -> SetArmed.Response:
         if not request.arm:
@@ -650,14 +537,14 @@ class EscNode(PolledInputsMixin, Node):
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip
         disarms when it is handled (at once as a callback; at the next safety tick on the system clock, where
         the supervisor's own ``esc/set_armed`` request has disarmed already)."""
-        self.supervisor_age.heard(received_ago_s(self.inputs))
+        self.supervisor_age.heard()
         self.supervisor_ok, self.supervisor_message = heartbeat_ok(msg), msg.message
         if not self.supervisor_ok and self.armed:
             self._feed_peers()
 
     def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low)."""
-        self.guard_age.heard(received_ago_s(self.inputs))
+        self.guard_age.heard()
         self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:
             self._feed_peers()  # restarts the time at neutral even if a later beat of the same take says OK

@@ -6,10 +6,9 @@ allocation node and the ESC node writing to a register-exact PCA9685 emulator on
 Wrenches alternate between two surge levels so T1's pulse width changes with every command; latency is
 the time from ``publish()`` to the I2C write after which the emulator decodes the new pulse width on
 T1's channel. The ESC node writes a command when it arrives (event-driven output; its output tick is the
-watchdog), and the allocation hands it over by a direct call as in ``actuation_node``
-(:func:`hindrax_drivers.composition.connect_in_process`), so this is one DDS delivery (the wrench), the allocation
-and one I2C block write (a DDS hop for the command would add a second delivery; waiting for the next 50 Hz
-output tick instead of writing on arrival, 16.6 ms p99). CPU per command is the process CPU time (all three nodes
+watchdog), taken by its subscription callback as in ``actuation_node``, so this is two deliveries inside the process
+(the wrench, the command), the allocation and one I2C block write (waiting for the next 50 Hz output tick instead of
+writing on arrival: 16.6 ms p99). CPU per command is the process CPU time (all three nodes
 and DDS) divided by the commands sent.
 
 The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
@@ -28,7 +27,6 @@ from rclpy.experimental.events_executor import EventsExecutor
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.allocation.node import ThrustAllocationNode
-from hindrax_drivers.composition import connect_in_process
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
@@ -112,7 +110,6 @@ def run(quick: bool = False) -> list[dict]:
         params = config_parameters({"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True})
         alloc = ThrustAllocationNode(context=ctx, parameter_overrides=params)
         esc = EscNode(bus=bus, context=ctx, parameter_overrides=params)
-        connect_in_process([alloc, esc])  # as actuation_node
         driver = rclpy.create_node("bench_driver", context=ctx)
         SafetyHeartbeats(driver)  # stand-in supervisor and output guard: the ESC arms only with their heartbeats
         ex = EventsExecutor(context=ctx)
