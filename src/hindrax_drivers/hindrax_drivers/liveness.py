@@ -1,6 +1,21 @@
-"""Heartbeat ages and ROS-time step detection on the steady clock (docs/architecture.md §8, "Time").
+"""Heartbeats of the safety nodes: their identity, their ages, and ROS-time step detection (docs/architecture.md §8).
 
-Two small pieces every safety node (ESC, output guard, supervisor) shares:
+The pieces every safety node (ESC, output guard, supervisor) shares:
+
+* :class:`HeartbeatPublisher`: publishes a node's heartbeat with the two KeyValues that make it hard to take for
+  another process's: ``boot_id`` (random hex, new at every node start) and ``seq`` (1, 2, 3 ... per beat).
+* :class:`HeartbeatIdentity`: the pure check a receiver runs on a peer's heartbeat: exactly one live publisher on
+  the topic, every publisher with the expected node name (``Node.get_publishers_info_by_topic``); ``seq`` strictly
+  increasing within one ``boot_id``; no ``boot_id`` change while armed. A forged publisher or a replayed bag of the
+  vehicle's own beats is a second publisher, a wrong node name, a sequence that goes back or a new boot while armed:
+  a fault, and a beat it rejects does not count as the peer being alive.
+* :class:`HeartbeatWatch`: the receiver's subscription that feeds it. Heartbeats use :func:`heartbeat_qos`: DDS
+  AUTOMATIC liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the subscription's liveliness event counts the
+  *live* publishers. Why not the graph's count alone: a SIGKILLed process's endpoints stay in the ROS graph until
+  its DDS participant lease runs out (20 s with Fast DDS's default, measured here), so a supervisor restarted after
+  a crash would be refused for 20 s; its writer is no longer alive after one lease (0.95-1.0 s measured, also for
+  a SIGSTOPped one). A writer offering a longer lease (rclpy's default QoS: infinite) does not match at all: its
+  beats never arrive, while the graph still shows its node name.
 
 * :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` but only over time this
   process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``).
@@ -13,13 +28,147 @@ Two small pieces every safety node (ESC, output guard, supervisor) shares:
 from __future__ import annotations
 
 import math
+import secrets
 import time
-from typing import Callable
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
-__all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_NAMES", "heartbeat_ok"]
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.duration import Duration
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.qos import LivelinessPolicy, QoSProfile
+
+from .lean_cdr import diagnostic_status_cdr
+
+__all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_LEASE_S", "HEARTBEAT_NAMES", "HEARTBEAT_NODES",
+           "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "beat_values", "heartbeat_ok",
+           "heartbeat_qos", "new_boot_id"]
 
 #: heartbeat topics (diagnostic_msgs/DiagnosticStatus: level OK = healthy, ERROR = tripped/asserted + reason)
 HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbeat", "esc": "esc/heartbeat"}
+#: the one node allowed to publish each heartbeat (internal graph names, docs/architecture.md §8)
+HEARTBEAT_NODES = {"supervisor": "supervisor", "guard": "output_guard", "esc": "esc"}
+#: DDS liveliness lease of the heartbeat writers and readers, s (module docstring): how long a dead publisher still
+#: counts as live; the heartbeat ages (``esc.heartbeat_timeout_s``, 0.2 s) stop the outputs long before
+HEARTBEAT_LEASE_S = 1.0
+
+
+def heartbeat_qos() -> Any:
+    """The heartbeats' QoS (publishers and subscriptions): reliable, keep last 10, volatile, AUTOMATIC liveliness
+    with a :data:`HEARTBEAT_LEASE_S` lease (module docstring)."""
+    return QoSProfile(depth=10, liveliness=LivelinessPolicy.AUTOMATIC,
+                      liveliness_lease_duration=Duration(seconds=HEARTBEAT_LEASE_S))
+
+
+def new_boot_id() -> str:
+    """A heartbeat's per-start value: 16 random hex digits (64 bits from :mod:`secrets`)."""
+    return secrets.token_hex(8)
+
+
+def beat_values(msg: Any) -> dict[str, str]:
+    """A heartbeat's KeyValues as a dict (an rclpy DiagnosticStatus or rosbags' lean decoding of one)."""
+    return {kv.key: kv.value for kv in msg.values}
+
+
+class HeartbeatPublisher:
+    """One node's heartbeat (diagnostic_msgs/DiagnosticStatus on ``HEARTBEAT_NAMES[kind]``) carrying ``boot_id`` and
+    ``seq`` (module docstring), published as CDR bytes (:func:`hindrax_drivers.lean_cdr.diagnostic_status_cdr`: no
+    rclpy object per beat).
+
+    ``node``: the publishing rclpy node (it must be named ``HEARTBEAT_NODES[kind]`` for receivers to accept it); the
+    QoS is :func:`heartbeat_qos`;
+    ``name``/``hardware_id``: the status fields; further keyword arguments go to ``create_publisher``.
+    :attr:`boot_id` is new for every instance (a node re-created in the same process is a new start).
+    """
+
+    def __init__(self, node: Any, kind: str, name: str, hardware_id: str, **publisher_kwargs: Any) -> None:
+        self.topic = HEARTBEAT_NAMES[kind]
+        self.name, self.hardware_id = name, hardware_id
+        self.boot_id = new_boot_id()
+        self.seq = 0
+        self.publisher = node.create_publisher(DiagnosticStatus, self.topic, heartbeat_qos(), **publisher_kwargs)
+
+    def publish(self, level: Any, message: str, values: Iterable[tuple[str, str]] = ()) -> None:
+        """Publish one beat: ``level`` (DiagnosticStatus constant), ``message``, extra (key, value) pairs."""
+        self.seq += 1
+        self.publisher.publish(diagnostic_status_cdr(
+            level, self.name, message, self.hardware_id,
+            [("boot_id", self.boot_id), ("seq", str(self.seq)), *values]))
+
+
+@dataclass
+class HeartbeatIdentity:
+    """Is a peer's heartbeat really the peer's? Pure (no ROS, no clock): the receiver feeds it the publishers it sees
+    on the topic (:meth:`on_publishers`, node names from ``get_publishers_info_by_topic``) and every beat
+    (:meth:`on_beat`, with its own armed state). :attr:`fault` is '' or the reason, naming the topic.
+
+    Faults: a number of live publishers other than one (a forger or a bag player beside the peer; none), a
+    publisher with another node name, a beat without a valid ``boot_id``/``seq``, a ``seq`` not
+    greater than the last accepted one of the same ``boot_id`` (a replay or a repeat), a ``boot_id`` change while
+    armed (a forger or a replay of another boot taking over a dead peer's topic). The publisher faults hold while
+    the graph shows them; a beat fault holds until a beat is accepted while not armed (while armed, it stays until
+    the receiver has disarmed). A new ``boot_id`` while not armed is a restart of the peer: its sequence starts
+    again.
+    """
+
+    topic: str
+    node_name: str
+    boot_id: str | None = None
+    seq: int | None = None
+    publisher_fault: str = ""
+    beat_fault: str = ""
+    rejected: int = 0
+
+    @property
+    def fault(self) -> str:
+        """'' when the peer's heartbeat can be trusted, else why not (publisher faults first)."""
+        return self.publisher_fault or self.beat_fault
+
+    def on_publishers(self, node_names: Sequence[str], alive: int | None = None) -> str:
+        """The node names of every publisher the graph shows on :attr:`topic`, and how many of them are live (the
+        subscription's liveliness ``alive_count``; None: count the names). Returns :attr:`fault`."""
+        names = sorted(node_names)
+        count = len(names) if alive is None else int(alive)
+        strangers = sorted({n for n in names if n != self.node_name})
+        if strangers:
+            self.publisher_fault = (f"{self.topic} published by node {', '.join(map(repr, strangers))}, only "
+                                    f"{self.node_name!r} may publish it: a forged or replayed heartbeat")
+        elif count > 1:
+            self.publisher_fault = (f"{count} live publishers on {self.topic}, only one {self.node_name!r} may "
+                                    "publish it: a forged or replayed heartbeat")
+        elif count < 1:
+            self.publisher_fault = f"no live publisher on {self.topic}"
+        else:
+            self.publisher_fault = ""
+        return self.fault
+
+    def on_beat(self, values: Mapping[str, str], armed: bool) -> bool:
+        """One beat's KeyValues (:func:`beat_values`); ``armed``: the receiver's (or the vehicle's) armed state. True
+        when the beat is accepted (the peer counts as heard), False when it is rejected (:attr:`beat_fault` says
+        why, :attr:`rejected` counts it)."""
+        boot_id = values.get("boot_id", "")
+        try:
+            seq = int(values.get("seq", ""))
+        except ValueError:
+            seq = None
+        fault = ""
+        if not boot_id or seq is None:
+            fault = f"{self.topic} beat without boot_id/seq: not from a {self.node_name} of this stack"
+        elif self.boot_id is not None and boot_id != self.boot_id:
+            if armed:
+                fault = (f"{self.topic} boot_id changed from {self.boot_id} to {boot_id} while armed: "
+                         f"{self.node_name} restarted or another process publishes it")
+        elif self.seq is not None and seq <= self.seq:
+            fault = (f"{self.topic} seq {seq} after {self.seq}: " +
+                     ("repeated" if seq == self.seq else "went back") + " (a replayed or duplicated heartbeat)")
+        if fault:
+            self.beat_fault = fault
+            self.rejected += 1
+            return False
+        self.boot_id, self.seq = boot_id, seq
+        if not armed:
+            self.beat_fault = ""
+        return True
 
 
 def heartbeat_ok(msg) -> bool:
@@ -31,6 +180,37 @@ def heartbeat_ok(msg) -> bool:
     if isinstance(level, (bytes, bytearray)):
         return len(level) == 1 and level[0] == 0
     return isinstance(level, int) and not isinstance(level, bool) and level == 0
+
+
+class HeartbeatWatch:
+    """A receiver's subscription to a peer's heartbeat through its :class:`HeartbeatIdentity` (module docstring).
+
+    ``node``: the receiving rclpy node; ``kind``: a key of :data:`HEARTBEAT_NAMES`; ``handler(msg)``: called with
+    every accepted beat (an rclpy DiagnosticStatus) only; ``armed()``: the receiver's armed state for the check.
+    Call :meth:`check` at the receiver's tick (one ``get_publishers_info_by_topic``, about 30 us): it returns
+    :attr:`identity`'s fault ('' when trusted). Rejected beats are counted in :attr:`identity`.
+    """
+
+    def __init__(self, node: Any, kind: str, handler: Callable[[Any], None], armed: Callable[[], bool]) -> None:
+        self.node, self.handler, self.armed = node, handler, armed
+        self.identity = HeartbeatIdentity(HEARTBEAT_NAMES[kind], HEARTBEAT_NODES[kind])
+        #: live publishers (the subscription's liveliness ``alive_count``; 0 until the first event)
+        self.alive = 0
+        self.subscription = node.create_subscription(
+            DiagnosticStatus, self.identity.topic, self._on_beat, heartbeat_qos(),
+            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_liveliness))
+
+    def _on_liveliness(self, info: Any) -> None:
+        self.alive = int(info.alive_count)
+
+    def _on_beat(self, msg: Any) -> None:
+        if self.identity.on_beat(beat_values(msg), bool(self.armed())):
+            self.handler(msg)
+
+    def check(self) -> str:
+        """Feed the publishers the graph shows and the live count to the identity check; returns its fault."""
+        names = [i.node_name for i in self.node.get_publishers_info_by_topic(self.identity.topic)]
+        return self.identity.on_publishers(names, self.alive)
 
 
 class AliveAge:

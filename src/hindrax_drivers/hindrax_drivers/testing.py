@@ -11,6 +11,7 @@ import os
 import sys
 import time
 
+import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.parameter import Parameter
@@ -18,7 +19,7 @@ from rclpy.parameter import Parameter
 from .dds_transport import loopback_transport
 from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
 from .config import default_config_path, load_config
-from .liveness import HEARTBEAT_NAMES
+from .liveness import HEARTBEAT_NODES, HeartbeatPublisher
 
 __all__ = ["ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env", "config_parameters",
            "python_executable", "ros_context", "wait_until"]
@@ -51,16 +52,29 @@ class SafetyHeartbeats:
     """Stand-in for the supervisor's and the output guard's heartbeats (docs/architecture.md §8), for tests and
     benchmarks that arm an ESC node without running those two nodes.
 
-    Publishes OK ``supervisor/heartbeat`` and ``guard/heartbeat`` at 20 Hz from a timer on ``node`` (steady clock).
-    Set :attr:`supervisor` / :attr:`guard` to ``None`` (silent), ``""`` (OK) or a reason (ERROR) to emulate a dead,
-    healthy or tripped peer.
+    Publishes OK ``supervisor/heartbeat`` and ``guard/heartbeat`` at 20 Hz from a timer on ``node`` (steady clock),
+    each from a node of its own with the real publisher's name (``supervisor``, ``output_guard``:
+    :data:`~hindrax_drivers.liveness.HEARTBEAT_NODES`, created in ``node``'s context the first time that heartbeat is
+    published) and with ``boot_id``/``seq`` (:class:`~hindrax_drivers.liveness.HeartbeatPublisher`), as the
+    receivers' identity check requires. Set :attr:`supervisor` / :attr:`guard` to ``None`` (silent), ``""`` (OK) or
+    a reason (ERROR) to emulate a dead, healthy or tripped peer.
     """
 
     def __init__(self, node, supervisor: str | None = "", guard: str | None = "", rate_hz: float = 20.0) -> None:
         self._status = DiagnosticStatus
+        self._node = node
         self.supervisor, self.guard = supervisor, guard
-        self._pubs = {k: node.create_publisher(DiagnosticStatus, topic, 10) for k, topic in HEARTBEAT_NAMES.items()}
+        self.publishers: dict[str, HeartbeatPublisher] = {}
+        self.nodes: list = []
         node.create_timer(1.0 / rate_hz, self.publish, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def _publisher(self, kind: str) -> HeartbeatPublisher:
+        if kind not in self.publishers:
+            peer = rclpy.create_node(HEARTBEAT_NODES[kind], namespace=self._node.get_namespace(),
+                                     context=self._node.context, start_parameter_services=False)
+            self.nodes.append(peer)
+            self.publishers[kind] = HeartbeatPublisher(peer, kind, f"hindrax/{HEARTBEAT_NODES[kind]}", kind)
+        return self.publishers[kind]
 
     def publish(self) -> None:
         """Publish both heartbeats now (as configured)."""
@@ -68,7 +82,7 @@ class SafetyHeartbeats:
             if state is None:
                 continue
             level = self._status.OK if state == "" else self._status.ERROR
-            self._pubs[name].publish(self._status(level=level, name=name, message=state or "ok"))
+            self._publisher(name).publish(level, state or "ok")
 
 
 class GraphSettled:

@@ -185,29 +185,27 @@ def test_f2_without_oe_the_guard_puts_the_chip_to_sleep_over_the_bus(rig):
     assert np.all(wire(r.emu) == 0.0)
 
 
-def test_f2_guard_takes_the_heartbeats_at_its_tick_aged_from_their_reception(rig):
-    """On the system clock the guard's two heartbeat inputs are polled at its 20 Hz tick (no callback per beat,
-    docs/architecture.md §10.1) and a beat counts from its DDS reception, so the 0.2 s timeout keeps its meaning."""
-    import time
-
-    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+@pytest.mark.parametrize("forger_name", ["forger", "supervisor"])
+def test_f2_a_second_supervisor_heartbeat_publisher_asserts_oe(rig, forger_name):
+    """Issue 43 item 2: a second live publisher on supervisor/heartbeat (another name, or the supervisor's own) is a
+    forged or replayed heartbeat: /OE is asserted, and released only after the forger is gone and the ESC disarmed."""
+    from hindrax_drivers.liveness import HeartbeatPublisher
 
     r = rig(guard=True)
-    beats = {"/esc/heartbeat", "/supervisor/heartbeat"}
-    assert not beats & {s.topic_name for s in r.guard.subscriptions}
-    assert {s.topic_name for s in r.guard.inputs.handlers} == beats
-    r.wait(lambda: not r.guard.core.asserted, "guard released: both heartbeats taken at its tick")
-    esc_beat = DiagnosticStatus(level=DiagnosticStatus.OK, values=[KeyValue(key="output_state", value="1"),
-                                                                   KeyValue(key="armed", value="false")])
-    r.guard.inputs.received_s = time.time() - 0.15
-    r.guard.on_esc(esc_beat)
-    r.guard.on_supervisor(DiagnosticStatus(level=DiagnosticStatus.OK, message="ok"))
-    assert 0.15 <= r.guard.esc_age.age_s < 0.2 and 0.15 <= r.guard.supervisor_age.age_s < 0.2
-    r.guard.inputs.received_s = time.time() - 0.25
-    r.guard.on_esc(esc_beat)
-    r.guard.inputs.received_s = None
-    assert r.guard.core.causes(r.guard.esc_age.age_s, r.guard.supervisor_age.age_s)[0].startswith(
-        "ESC output state silent")
+    r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(), "guard released /OE at neutral")
+    r.arm_at_1700()
+    with ros_context() as other:  # a participant of its own, as another process's would be
+        forger = rclpy.create_node(forger_name, context=other)
+        beats = HeartbeatPublisher(forger, "supervisor", "hindrax/supervisor", "supervisor")
+        r.wait(lambda: r.line.is_high(), "/OE asserted", poll=lambda: (beats.publish(DiagnosticStatus.OK, "ok"),
+                                                                       r.commanding()))
+        reason = r.guard.core.reason
+        assert reason.startswith("heartbeat not trusted: ") and "supervisor/heartbeat" in reason
+        assert np.all(wire(r.emu) == 0.0)
+        forger.destroy_node()
+    r.wait(lambda: not r.line.is_high(), "released once the forger is gone and the ESC disarmed",
+           poll=r.commanding, timeout=20.0)
+    assert not r.esc.armed and np.allclose(wire(r.emu), 1500.0, atol=TICK_US)
 
 
 def test_f2_guard_start_holds_oe_until_a_live_esc_confirms_neutral():

@@ -7,7 +7,10 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
   ``timeout_s``: the ESC process died or hangs, and the chip keeps its last widths on the wire;
 * the ESC reports ``OUTPUT_UNKNOWN``: the chip cannot be written or read back (I2C fault);
 * the supervisor's heartbeat (``supervisor/heartbeat``) has not been heard for ``timeout_s``, or says ERROR (a
-  breach is latched).
+  breach is latched);
+* either heartbeat cannot be trusted to be its sender's (:class:`~hindrax_drivers.liveness.HeartbeatIdentity`: a
+  second publisher, a wrong node name, a sequence that goes back, a new boot while armed): a forged or replayed
+  heartbeat must not keep the outputs on.
 
 Once asserted it stays asserted (latched) until every cause is gone AND the ESC reports that it is disarmed with
 neutral confirmed on the chip (``OUTPUT_NEUTRAL``, ``armed`` false): thrust can then only come back through a new
@@ -34,6 +37,7 @@ class GuardCore:
     esc_armed: bool = False
     supervisor_ok: bool = False
     supervisor_message: str = ""
+    identity_fault: str = ""
 
     def on_esc(self, output_state: int, armed: bool) -> None:
         """The ESC's ``esc/heartbeat`` (output_state constant, armed flag)."""
@@ -43,9 +47,16 @@ class GuardCore:
         """The supervisor's heartbeat: ok (level OK) or the breach reason."""
         self.supervisor_ok, self.supervisor_message = bool(ok), message
 
+    def on_identity(self, fault: str) -> None:
+        """The heartbeats' identity check: '' (both trusted) or the first fault
+        (:attr:`hindrax_drivers.liveness.HeartbeatIdentity.fault`)."""
+        self.identity_fault = fault
+
     def causes(self, esc_age_s: float, supervisor_age_s: float) -> list[str]:
         """Every reason to silence the outputs now (empty: none)."""
         out = []
+        if self.identity_fault:
+            out.append(f"heartbeat not trusted: {self.identity_fault}")
         if esc_age_s > self.timeout_s:
             out.append("ESC output state silent" + (f" for {esc_age_s:.2f} s" if esc_age_s < 1e9 else "") +
                        " (esc/heartbeat): ESC process dead or hung")

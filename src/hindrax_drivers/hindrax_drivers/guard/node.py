@@ -1,7 +1,10 @@
 """Output guard node: silences the PCA9685 outputs from outside the ESC process (docs/architecture.md §8).
 
 The decision is :class:`~hindrax_drivers.guard.core.GuardCore` (ESC output state silent or unknown, supervisor
-heartbeat silent or tripped -> silence, latched until the ESC reports disarmed at neutral). How it silences:
+heartbeat silent or tripped, either heartbeat not its sender's -> silence, latched until the ESC reports disarmed at
+neutral). Each heartbeat comes through a :class:`~hindrax_drivers.liveness.HeartbeatWatch` (its identity check:
+at every tick the topic's publishers' node names and live count, at every beat its ``boot_id`` and ``seq``; a
+rejected beat does not count as the peer being heard). How it silences:
 
 * ``esc.output_enable_gpio`` set (chip and line): the PCA9685 /OE line through libgpiod
   (:class:`~hindrax_drivers.transport.gpio.GpiodLine`), driven HIGH (outputs off, no pulses: the Basic ESC
@@ -19,9 +22,8 @@ and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation m
 ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
-(:class:`~hindrax_drivers.liveness.AliveAge`), timeout ``esc.heartbeat_timeout_s``. On the system clock the two
-heartbeats are taken at that tick from polled subscriptions (:mod:`hindrax_drivers.polled_input`), each aged from
-its DDS reception time; with ``use_sim_time`` they are callbacks. A small process of its own
+(:class:`~hindrax_drivers.liveness.AliveAge`), timeout ``esc.heartbeat_timeout_s``. The two heartbeats are
+callbacks in both clock modes (the path the vehicle takes is the path the tests take). A small process of its own
 (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's sensor code cannot
 take the second stop path with it.
 
@@ -37,11 +39,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from ..lean_cdr import diagnostic_status_cdr
 from ..config import output_enable_gpio
-from ..liveness import HEARTBEAT_NAMES, AliveAge, heartbeat_ok
+from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
-from ..polled_input import PolledInputsMixin, received_ago_s, subscribe_input
 from ..pca9685 import protocol as p
 from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
@@ -65,7 +65,7 @@ def open_output_enable(chip: str, line: int) -> Any:
     return open_output_line(chip, line, initial_high=True)
 
 
-class OutputGuardNode(PolledInputsMixin, Node):
+class OutputGuardNode(Node):
     """The output guard (module docstring). ``line``: an injected /OE line (``set_high``/``release``); ``bus``: an
     injected SMBus-like bus for the register fallback. Without them, they are opened from the configuration."""
 
@@ -93,15 +93,16 @@ class OutputGuardNode(PolledInputsMixin, Node):
             self.diag.warn("no_hardware_cutoff", "esc.output_enable_gpio not wired: outputs silenced over the I2C "
                                                  "bus (does not work through an I2C outage)")
         self._open_line()
-        self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["guard"], 10)
+        self.heartbeat = HeartbeatPublisher(self, "guard", "hindrax/output_guard", "output_guard")
         #: the heartbeats are taken at the tick on the system clock (polled subscriptions: no executor wake-up per
         #: beat, docs/architecture.md §10.1), each aged from its DDS reception, after the ages' ticks; callbacks with
         #: use_sim_time
-        self.inputs = self.open_inputs(before_take=(self.esc_age.tick, self.supervisor_age.tick))
-        # lean when polled: the beats are decoded by rosbags (lean_cdr.py), fields read only (heartbeat_ok)
-        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["esc"], self.on_esc, 10, lean=True)
-        subscribe_input(self, self.inputs, DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor, 10,
-                        lean=True)
+        #: the peers' heartbeats through their identity checks (module docstring)
+        #: "armed" for their boot_id rule: the ESC reported armed and the outputs are let through; once /OE is
+        #: asserted a peer's new start (a restart after a crash) is accepted, since release still needs the ESC to
+        #: report disarmed at neutral
+        self.watches = {kind: HeartbeatWatch(self, kind, handler, self._armed_through)
+                        for kind, handler in (("esc", self.on_esc), ("supervisor", self.on_supervisor))}
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.wired:
@@ -167,22 +168,36 @@ class OutputGuardNode(PolledInputsMixin, Node):
             self.get_logger().error(f"cannot silence the outputs: {exc}", throttle_duration_sec=2.0)
 
     # -- inputs
+    def _armed_through(self) -> bool:
+        return self.core.esc_armed and not self.core.asserted
+
     def on_esc(self, msg: DiagnosticStatus) -> None:
-        values = {kv.key: kv.value for kv in msg.values}
+        """An accepted ``esc/heartbeat``: the ESC's output state and armed flag."""
+        values = beat_values(msg)
         try:
             state = int(values.get("output_state", OUTPUT_UNKNOWN))
         except ValueError:
             state = OUTPUT_UNKNOWN
-        self.esc_age.heard(received_ago_s(self.inputs))
+        self.esc_age.heard()
         self.core.on_esc(state, values.get("armed") == "true")
 
     def on_supervisor(self, msg: DiagnosticStatus) -> None:
-        self.supervisor_age.heard(received_ago_s(self.inputs))
+        """An accepted ``supervisor/heartbeat``: OK or the breach."""
+        self.supervisor_age.heard()
         self.core.on_supervisor(heartbeat_ok(msg), msg.message)
 
     # -- tick
+    def check_identity(self) -> str:
+        """Feed the heartbeats' publishers to their identity checks and the first fault to the core; returns it."""
+        faults = [w.check() for w in self.watches.values()]
+        fault = next((f for f in faults if f), "")
+        self.core.on_identity(fault)
+        return fault
+
     def tick(self) -> None:
-        self.take_inputs()  # the ages' ticks, then the beats: a beat taken now counts from its reception
+        self.esc_age.tick()
+        self.supervisor_age.tick()
+        self.check_identity()
         asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s)
         if changed and asserted:
             self.assertions += 1
@@ -194,16 +209,17 @@ class OutputGuardNode(PolledInputsMixin, Node):
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
-        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (lean_cdr.py)
-            DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK, "hindrax/output_guard",
-            self.core.reason if asserted else "outputs enabled", "output_guard"))
+        self.heartbeat.publish(DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
+                               self.core.reason if asserted else "outputs enabled")
         self.diag.published()
 
     def _diag_extra(self):
         return [("asserted", self.core.asserted), ("reason", self.core.reason), ("assertions", self.assertions),
                 ("silence_failures", self.silence_failures),
                 ("output_enable_gpio", f"{self.gpio[0]}:{self.gpio[1]}" if self.gpio else "not wired"),
-                ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}")]
+                ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
+                ("heartbeat_identity", self.core.identity_fault or "ok"),
+                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values()))]
 
     def close(self) -> None:
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:

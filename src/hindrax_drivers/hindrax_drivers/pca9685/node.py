@@ -21,9 +21,10 @@ core's (:mod:`.core`, docs/architecture.md §8). This node does the I/O and feed
   ``use_sim_time`` the output tick is a ROS-time timer of its own.
 - Outputs: ``thrusters/pulse_width`` (the widths on the chip, decoded from the register counts, armed flag, output
   state; on every write and at a tick without one), ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus every
-  second steady tick, 25 Hz at 50 Hz: values ``output_state``, ``armed``, ``reason``; ERROR while unknown; the
-  output guard's sign of life), ``raw/pca9685`` (every I2C transaction) and ``/diagnostics``. Neutral is written
-  on disarm, on any exception in the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via
+  second steady tick, 25 Hz at 50 Hz: values ``output_state``, ``armed``, ``reason`` and the ``boot_id``/``seq``
+  of :class:`~hindrax_drivers.liveness.HeartbeatPublisher`; ERROR while unknown; the output guard's sign of life),
+  ``raw/pca9685`` (every I2C transaction) and ``/diagnostics``. Neutral is written on disarm, on any exception in
+  the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via
   :func:`run_node`).
 
 The bus is injected: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, an
@@ -46,8 +47,8 @@ from std_msgs.msg import Float64
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from ..lean_cdr import diagnostic_status_cdr, thruster_pwm_cdr
-from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, heartbeat_ok
+from ..lean_cdr import thruster_pwm_cdr
+from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, HeartbeatPublisher, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
@@ -126,7 +127,7 @@ class EscNode(Node):
         self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self.on_command, 10)
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
-        self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["esc"], 10)
+        self.heartbeat = HeartbeatPublisher(self, "esc", "hindrax/esc", "esc")
         self._heartbeat_tick = 0
         self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor_heartbeat, 10)
         self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
@@ -527,11 +528,10 @@ class EscNode(Node):
 
     def _publish_heartbeat(self) -> None:
         unknown = self.output_state == ThrusterPwm.OUTPUT_UNKNOWN
-        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (lean_cdr.py)
-            DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, "hindrax/esc",
-            STATE_NAMES[self.output_state], "esc",
+        self.heartbeat.publish(
+            DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, STATE_NAMES[self.output_state],
             [("output_state", str(int(self.output_state))),
-             ("armed", "true" if self.armed and not unknown else "false"), ("reason", self.core.reason)]))
+             ("armed", "true" if self.armed and not unknown else "false"), ("reason", self.core.reason)])
 
     def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip

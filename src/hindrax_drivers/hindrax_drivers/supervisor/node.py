@@ -20,7 +20,8 @@ Services
     ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again; a disarm
     request still in flight, :attr:`SupervisorNode.disarm_future`, may land after a very quick re-arm).
 Publishes
-    ``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus, no values) at every check
+    ``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus, values ``boot_id`` and ``seq``:
+    :class:`~hindrax_drivers.liveness.HeartbeatPublisher`) at every check
     (``supervisor.check_rate_hz``, steady clock): level OK within the envelope, ERROR with the latched reason. The
     ESC refuses to arm and disarms without a fresh OK one; the output guard silences the outputs without one
     (docs/architecture.md §8). It is the supervisor's independent stop path: a dead or hung supervisor stops
@@ -72,8 +73,7 @@ from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .. import frames
-from ..lean_cdr import diagnostic_status_cdr
-from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor
+from ..liveness import ClockStepMonitor, HeartbeatPublisher
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from .core import SupervisorCore, SupervisorLimits
@@ -107,8 +107,8 @@ class SupervisorNode(PolledInputsMixin, Node):
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
-        self.pub_heartbeat = self.create_publisher(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], 10,
-                                                   event_callbacks=_NO_PUB_EVENTS)
+        self.heartbeat = HeartbeatPublisher(self, "supervisor", "hindrax/supervisor", "supervisor",
+                                            event_callbacks=_NO_PUB_EVENTS)
         self.clock_monitor = ClockStepMonitor(self._now_s)
         #: ROS time standing still this long (steady s) while armed trips (see set_clock_stall_timeout)
         self.clock_stall_timeout_s = float(cfg.supervisor.rate_window_s)
@@ -221,9 +221,8 @@ class SupervisorNode(PolledInputsMixin, Node):
 
     def _publish_heartbeat(self) -> None:
         tripped = self.core.tripped
-        self.pub_heartbeat.publish(diagnostic_status_cdr(  # bytes: no rclpy object per beat (lean_cdr.py)
-            DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK, "hindrax/supervisor",
-            tripped or "within the envelope", "supervisor"))
+        self.heartbeat.publish(DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK,
+                               tripped or "within the envelope")
 
     # ------------------------------------------------------------------ breach
     def _handle(self, reason: str, force: bool = False) -> None:

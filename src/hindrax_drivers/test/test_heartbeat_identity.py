@@ -1,0 +1,127 @@
+"""Issue 43 item 2: a heartbeat carries its sender's per-start value and a sequence, and a receiver accepts one
+publisher with the expected node name (hindrax_drivers.liveness.HeartbeatIdentity, HeartbeatPublisher)."""
+from __future__ import annotations
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.liveness import HeartbeatIdentity, HeartbeatPublisher, beat_values, heartbeat_ok
+from hindrax_drivers.testing import ros_context, wait_until
+
+A, B = "a1a1a1a1a1a1a1a1", "b2b2b2b2b2b2b2b2"
+
+
+def beat(boot_id, seq):
+    return {"boot_id": boot_id, "seq": str(seq)}
+
+
+# (beats as (boot_id, seq, armed), accepted flags expected, fault substring expected at the end or "")
+BEAT_TABLE = {
+    "increasing": ([(A, 1, False), (A, 2, False), (A, 7, True)], [True, True, True], ""),
+    "repeated": ([(A, 1, True), (A, 2, True), (A, 2, True)], [True, True, False], "repeated"),
+    "went back": ([(A, 5, True), (A, 6, True), (A, 3, True)], [True, True, False], "went back"),
+    "replay of the same boot after the live beats": (
+        [(A, 100, True), (A, 101, True), (A, 1, True), (A, 2, True)], [True, True, False, False], "went back"),
+    "boot change while armed": ([(A, 9, True), (B, 1, True)], [True, False], "boot_id changed"),
+    "boot change while armed, then the old boot goes on": (
+        [(A, 9, True), (B, 10, True), (A, 10, True)], [True, False, True], "boot_id changed"),
+    "restart while disarmed": ([(A, 9, False), (B, 1, False), (B, 2, True)], [True, True, True], ""),
+    "no boot_id": ([("", 1, False)], [False], "without boot_id"),
+    "seq not a number": ([(A, "x", False)], [False], "without boot_id"),
+    "fault cleared by a beat accepted while disarmed": (
+        [(A, 5, True), (A, 5, True), (A, 6, True), (A, 7, False)], [True, False, True, True], ""),
+}
+
+
+@pytest.mark.parametrize("case", list(BEAT_TABLE), ids=list(BEAT_TABLE))
+def test_beat_table(case):
+    beats, accepted, fault = BEAT_TABLE[case]
+    ident = HeartbeatIdentity("supervisor/heartbeat", "supervisor")
+    ident.on_publishers(["supervisor"])
+    got = [ident.on_beat(beat(b, s), armed) for b, s, armed in beats]
+    assert got == accepted
+    if fault:
+        assert fault in ident.fault and "supervisor/heartbeat" in ident.fault
+    else:
+        assert ident.fault == ""
+    assert ident.rejected == accepted.count(False)
+
+
+# (publisher node names in the graph, live publishers (None: count the names), fault substring or "")
+PUBLISHER_TABLE = {
+    "the supervisor alone": (["supervisor"], 1, ""),
+    "the supervisor alone, graph count": (["supervisor"], None, ""),
+    "a restarted supervisor beside its dead self": (["supervisor", "supervisor"], 1, ""),
+    "a second live publisher with the same name": (["supervisor", "supervisor"], 2, "2 live publishers"),
+    "two names, graph count": (["supervisor", "supervisor"], None, "2 live publishers"),
+    "a forger beside the supervisor": (["supervisor", "forger"], 1, "node 'forger'"),
+    "a bag player alone": (["rosbag2_player"], 1, "node 'rosbag2_player'"),
+    "a dead forger still in the graph": (["forger", "supervisor"], 1, "node 'forger'"),
+    "none live": (["supervisor"], 0, "no live publisher"),
+    "none visible": ([], None, "no live publisher"),
+}
+
+
+@pytest.mark.parametrize("case", list(PUBLISHER_TABLE), ids=list(PUBLISHER_TABLE))
+def test_publisher_table(case):
+    names, alive, fault = PUBLISHER_TABLE[case]
+    ident = HeartbeatIdentity("supervisor/heartbeat", "supervisor")
+    assert ident.on_beat(beat(A, 1), False)
+    out = ident.on_publishers(names, alive)
+    assert out == ident.fault
+    assert (fault in out and "supervisor/heartbeat" in out) if fault else out == ""
+    ident.on_publishers(["supervisor"], 1)  # the graph shows the supervisor alone again: the fault is gone
+    assert ident.fault == ""
+
+
+def test_publisher_fault_comes_before_a_beat_fault():
+    ident = HeartbeatIdentity("esc/heartbeat", "esc")
+    ident.on_beat(beat(A, 3), True)
+    ident.on_beat(beat(A, 2), True)
+    ident.on_publishers(["esc", "x"], 1)
+    assert ident.fault.startswith("esc/heartbeat published by node 'x'")
+    ident.on_publishers(["esc"], 1)
+    assert "went back" in ident.fault
+
+
+def test_heartbeat_publisher_stamps_boot_id_and_seq_on_the_wire():
+    with ros_context() as ctx:
+        node = rclpy.create_node("supervisor", context=ctx)
+        probe = rclpy.create_node("probe", context=ctx)
+        got = []
+        probe.create_subscription(DiagnosticStatus, "supervisor/heartbeat", got.append, 10)
+        first = HeartbeatPublisher(node, "supervisor", "hindrax/supervisor", "supervisor")
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(probe)
+        wait_until(lambda: first.publisher.get_subscription_count() > 0, 10, lambda: ex.spin_once(0.01), "matched")
+        for _ in range(3):
+            first.publish(DiagnosticStatus.OK, "within the envelope", [("extra", "1")])
+        wait_until(lambda: len(got) >= 3, 10, lambda: ex.spin_once(0.01), "three beats")
+        values = [beat_values(m) for m in got]
+        assert [v["seq"] for v in values] == ["1", "2", "3"]
+        assert {v["boot_id"] for v in values} == {first.boot_id} and len(first.boot_id) == 16
+        assert values[0]["extra"] == "1" and heartbeat_ok(got[0]) and got[0].message == "within the envelope"
+        # a receiver accepts them, and a restarted node is a new boot
+        ident = HeartbeatIdentity("supervisor/heartbeat", "supervisor")
+        ident.on_publishers([i.node_name for i in probe.get_publishers_info_by_topic("supervisor/heartbeat")], 1)
+        assert all(ident.on_beat(v, True) for v in values) and ident.fault == ""
+        second = HeartbeatPublisher(node, "supervisor", "hindrax/supervisor", "supervisor")
+        assert second.boot_id != first.boot_id
+        ex.shutdown()
+        probe.destroy_node()
+        node.destroy_node()
+
+
+def test_guard_core_silences_on_an_untrusted_heartbeat():
+    from hindrax_drivers.guard.core import OUTPUT_NEUTRAL, GuardCore
+
+    core = GuardCore(timeout_s=0.2)
+    core.on_supervisor(True, "")
+    core.on_esc(OUTPUT_NEUTRAL, False)
+    assert core.decide(0.0, 0.0) == (False, True)
+    core.on_identity("2 live publishers on supervisor/heartbeat")
+    assert core.decide(0.0, 0.0) == (True, True) and core.reason.startswith("heartbeat not trusted: 2 live")
+    core.on_identity("")
+    assert core.decide(0.0, 0.0) == (False, True)
