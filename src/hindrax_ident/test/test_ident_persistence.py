@@ -10,7 +10,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from scipy import signal
+
+from hindrax_ident.commands.ident_fit import format_table
 
 from hindrax_ident.identification import fit_core
 from hindrax_ident.identification.fit_any import DofFit, assessment, build_document, FitResult
@@ -45,9 +48,13 @@ def _noise_record(seed: int = 3) -> fit_core.DofRecord:
     return fit_core.DofRecord("surge", h, "velocity", chunks, "wrench")
 
 
-def test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter():
-    rec = _noise_record()
-    res = fit_core.identify_dof(rec)
+@pytest.fixture(scope="module")
+def noise_fit():
+    return fit_core.identify_dof(_noise_record())
+
+
+def test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter(noise_fit):
+    res = noise_fit
     p = res.persistence
     # the scores come from the same held-out samples: the trivial predictors are finite and the model does not
     # beat holding the velocity by the margin
@@ -70,3 +77,16 @@ def test_persistence_rule_follows_its_definition():
     assert fit_core.persistence({"nrmse": 0.90, "nrmse_hold": 1.0}, 0.05)["beats"]
     assert not fit_core.persistence({"nrmse": 0.96, "nrmse_hold": 1.0}, 0.05)["beats"]
     assert not fit_core.persistence({"nrmse": float("nan"), "nrmse_hold": 1.0}, 0.05)["beats"]
+
+
+def test_printed_table_has_no_nan_and_the_cv_row_its_noise_floor(noise_fit):
+    fit = DofFit("surge", "fitted", {"excited": True}, noise_fit, {"cross_validation": dict(noise_fit.cv)})
+    # the measurements carry 5 mm/s of white noise: the floor is that over the held-out velocity's std
+    floor = noise_fit.cv["nrmse_floor"]
+    assert math.isfinite(floor) and 0.0 < floor < 0.1
+    table = format_table(FitResult({"surge": fit}, {}, "test"))
+    assert "nan" not in table and f"{floor:11.3f}" in table
+    assert "verdict: no model beats holding the velocity" in table
+    # a score that cannot be computed (a measured position has no noise floor) prints as "-", not "nan"
+    fit.validation["holdout"] = {**noise_fit.cv, "nrmse_floor": float("nan")}
+    assert "nan" not in format_table(FitResult({"surge": fit}, {}, "test"))

@@ -84,8 +84,9 @@ def format_table(res, cfg=None) -> str:
             sp = f"{np.std(folds[:, i], ddof=1):11.4g}" if folds is not None else f"{'-':>11}"
             src = "cluster_robust" if ss[i] >= sm[i] else "model"
             e = par[n]
-            lines.append(f"{dof:6} {n:28} {e['value']:10.4g} {e['std']:9.3g} {src:>14} "
-                         f"[{e['ci95'][0]:10.4g}, {e['ci95'][1]:10.4g}] {sp}")
+            ci = (f"[{e['ci95'][0]:10.4g}, {e['ci95'][1]:10.4g}]" if "at_bound" not in e else
+                  f"{'at bound ' + format(e['at_bound'], 'g') + ': none':>24}")
+            lines.append(f"{dof:6} {n:28} {e['value']:10.4g} {e['std']:9.3g} {src:>14} {ci} {sp}")
         lines.append(f"{dof:6} model: {c.terms.label}; delay {c.timing.delay_s:.3f} s, lag {c.timing.lag_s:.3f} s "
                      f"({c.timing.source}); t with {c.covariance.t_dof} degrees of freedom "
                      f"({c.covariance.clusters} clusters)")

@@ -802,6 +802,7 @@ def assessment(r: DofFit, cfg: VehicleConfig | None) -> dict:
     ev = FitEvidence(dof=r.dof, names=list(c.names), theta=theta, cov=cov, t_dof=int(c.covariance.t_dof),
                      units=_units(r.dof, c.names), velocity=vel, acceleration=acc, force=force, h=h,
                      lower_bounds=[lo for _n, _k, lo, _hi in c.chosen.layout],
+                     upper_bounds=[hi for _n, _k, _lo, hi in c.chosen.layout],
                      fold_theta=c.fold_theta, cv_nrmse=c.cv.get("nrmse") if c.cv else None,
                      # the whiteness threshold is the designed campaign's (docs/identification.md §7 step 6); here
                      # the CV nrmse judges the model, and the intervals carry the residual correlation
@@ -840,6 +841,8 @@ def _param_entries(r: DofFit, a: dict) -> dict:
             e["fold_spread"] = {"std": float(np.std(folds[:, i], ddof=1)), "min": float(folds[:, i].min()),
                                 "max": float(folds[:, i].max()), "folds": int(len(folds))}
         e["verdict"], e["reasons"] = v["verdict"], list(v["reasons"])
+        if "at_bound" in v:  # the interval means nothing there: say so next to it
+            e["at_bound"] = float(v["at_bound"])
         if "advice" in v:
             e["advice"] = v["advice"]
         return e

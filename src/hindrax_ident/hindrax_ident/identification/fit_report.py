@@ -19,6 +19,11 @@ import yaml  # noqa: E402
 __all__ = ["write_fit_outputs"]
 
 
+def _num(x) -> str:
+    """A score with 3 decimals; ``-`` for a missing or non-finite one (never ``nan`` in a table)."""
+    return "-" if x is None or not np.isfinite(float(x)) else f"{float(x):.3f}"
+
+
 def _plot(r, path: Path, h: float) -> None:
     p = r.plot
     meas, pred, valid = p["measured"], p["predicted"], p["valid"]
@@ -64,7 +69,8 @@ def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
                 sp = p.get("fold_spread", {}).get("std")
                 parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
                     dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}", p.get("std_source", p.get("model_term", "-")),
-                    p["unit"], f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]", "-" if sp is None else f"{sp:.3g}",
+                    p["unit"], f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]" if "at_bound" not in p else
+                    f"none: at its bound {p['at_bound']:g}", "-" if sp is None else f"{sp:.3g}",
                     p.get("verdict", "-"))) + "</tr>")
     parts.append("</table><p>std: the cluster-robust (sandwich) covariance with contiguous blocks of segments as "
                  "clusters, at least the model-based one; 95 % intervals Student t with clusters - 1 degrees of "
@@ -81,12 +87,13 @@ def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
     advice = [(dof, a) for dof, e in doc["dofs"].items() for a in e.get("advice", [])]
     if advice:
         parts.append("<h2>What data would fix the suspect parameters</h2><table><tr><th>parameter</th>"
-                     "<th>manoeuvre</th><th>speeds</th><th>in the data, s</th><th>more, s</th><th>why</th></tr>")
+                     "<th>runs</th><th>manoeuvre</th><th>speeds</th><th>pool time, min</th><th>in the data, s</th>"
+                     "<th>why</th></tr>")
         for dof, a in advice:
             parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-                f"{dof} {a['parameter']}", a["manoeuvre"],
-                f"{a['speed_range'][0]:g}-{a['speed_range'][1]:g} {a['speed_range'][2]}", a["seconds_in_data"],
-                a["seconds_more"], a["why"])) + "</tr>")
+                f"{dof} {a['parameter']}", f"{a.get('runs', '-')} {a.get('run_kind', '')}", a["manoeuvre"],
+                f"{a['speed_range'][0]:g}-{a['speed_range'][1]:g} {a['speed_range'][2]}",
+                a.get("minutes", "-"), a["seconds_in_data"], a["why"])) + "</tr>")
         parts.append("</table>")
     if not doc.get("config_ready", True):
         parts.append(f"<p><b>config_ready: false</b>: {html.escape(doc['config_ready_reason'])}</p>")
@@ -99,8 +106,7 @@ def write_fit_outputs(out: str | Path, res, doc: dict) -> tuple[Path, Path]:
             if not isinstance(v, dict) or "nrmse" not in v:
                 continue
             parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in (
-                dof, key, f"{v['nrmse']:.3f}", f"{v.get('nrmse_hold', float('nan')):.3f}",
-                f"{v.get('nrmse_zero', float('nan')):.3f}", v["samples"]))
+                dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")), v["samples"]))
                 + "</tr>")
     parts.append("</table><p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred "
                  "simulated open loop from the recorded force and re-initialised from the measured velocity at the "

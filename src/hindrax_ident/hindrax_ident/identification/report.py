@@ -285,11 +285,12 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
                 "segments - 1, docs/identification.md §7)</p>")
             adv = [(n, e["advice"]) for n, e in a["parameters"].items() if e.get("advice")]
             if adv:  # what data would fix the suspect parameters (verdicts.data_advice)
-                parts.append("<table><tr><th>parameter</th><th>manoeuvre</th><th>speeds</th><th>in the data, s</th>"
-                             "<th>more, s</th><th>why</th></tr>" + "".join(
+                parts.append("<table><tr><th>parameter</th><th>runs</th><th>manoeuvre</th><th>speeds</th>"
+                             "<th>pool time, min</th><th>in the data, s</th><th>why</th></tr>" + "".join(
                                  "<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-                                     n, v["manoeuvre"], f"{v['speed_range'][0]:g}-{v['speed_range'][1]:g} "
-                                     f"{v['speed_range'][2]}", v["seconds_in_data"], v["seconds_more"], v["why"]))
+                                     n, f"{v.get('runs', '-')} {v.get('run_kind', '')}", v["manoeuvre"],
+                                     f"{v['speed_range'][0]:g}-{v['speed_range'][1]:g} {v['speed_range'][2]}",
+                                     v.get("minutes", "-"), v["seconds_in_data"], v["why"]))
                                  + "</tr>" for n, v in adv) + "</table>")
         parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time "
                      f"{r.pool_time_s:.0f} s; RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: "

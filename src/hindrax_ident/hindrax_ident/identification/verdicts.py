@@ -69,7 +69,8 @@ __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "
            "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
            "segment_count", "declared_rel", "FitEvidence", "core_signals", "NRMSE_MAX", "BIAS_MIN_REL", "assess",
            "with_added_mass", "assess_dof",
-           "apply_verdicts", "thrust_curve_check", "spread_reasons", "data_advice", "format_advice", "ADVICE_TARGET"]
+           "apply_verdicts", "thrust_curve_check", "spread_reasons", "data_advice", "format_advice", "ADVICE_TARGET",
+           "POOL_DAY_S", "RUN_KINDS"]
 
 #: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
 DEFAULT_THRUST_UNCERTAINTY_REL = (0.05, 0.10)
@@ -150,7 +151,7 @@ class FitEvidence:
     calibrated joint estimate's, which already holds the thrust scales); t_dof: the interval's degrees of freedom
     (the fit core's clusters - 1); units {name: unit}; velocity, acceleration, force (n,): the smoothed velocity,
     acceleration and input force at the fitted ticks, ``h`` s apart (typical speed, :func:`data_advice`);
-    lower_bounds (p,) the optimiser's bounds (0: a physical bound) or None; fold_theta (K, p) the cross-validation
+    lower_bounds, upper_bounds (p,) the optimiser's bounds (0: a physical bound; +-inf or None: none) or None; fold_theta (K, p) the cross-validation
     folds' estimates or None; cv_nrmse: the chosen model's cross-validated prediction nrmse or None;
     residual_rho: lag-1 autocorrelation of consecutive output-error residuals or None; steady {name: (value, std)}
     of the steady-state method ([Hindrax-Drag] eqs. 2-8) or None; windows [(mean velocity, mean force)] of the
@@ -172,6 +173,7 @@ class FitEvidence:
     force: np.ndarray
     h: float
     lower_bounds: Sequence[float] | None = None
+    upper_bounds: Sequence[float] | None = None
     fold_theta: np.ndarray | None = None
     cv_nrmse: float | None = None
     residual_rho: float | None = None
@@ -310,9 +312,19 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
         e = out[n]
         half = 0.5 * (e["ci95"][1] - e["ci95"][0])
         lb = None if ev.lower_bounds is None else ev.lower_bounds[i]
-        at_bound[n] = lb is not None and np.isfinite(lb) and lb == 0.0 and theta[i] <= 1e-9 * scale
+        ub = None if ev.upper_bounds is None else ev.upper_bounds[i]
+        where = None
+        if lb is not None and np.isfinite(lb) and (theta[i] <= 1e-9 * scale if lb == 0.0 else
+                                                   theta[i] <= lb + 1e-3 * max(abs(lb), 1e-9)):
+            where = ("lower", float(lb))
+        elif ub is not None and np.isfinite(ub) and theta[i] >= ub - 1e-3 * max(abs(ub), 1e-9):
+            where = ("upper", float(ub))
+        at_bound[n] = where is not None
         if at_bound[n]:
-            e["reasons"].append(f"{n} at its physical bound 0 (the data do not show it)")
+            e["at_bound"] = where[1]
+            e["reasons"].append(f"{n} at its {where[0]} bound {where[1]:g}"
+                                + (" (physical; the data do not show it)" if where[1] == 0.0 else "")
+                                + ": no interval (the data push it to the bound)")
         elif n in _RELATIVE or n.startswith("quadratic"):
             if theta[i] != 0 and half / abs(theta[i]) > WIDTH_MAX:
                 e["reasons"].append(f"95 % interval +-{100 * half / abs(theta[i]):.0f} % of the value, too wide for "
@@ -331,8 +343,9 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     for n, e in out.items():
         if e["reasons"] and ev.h > 0:  # what data would fix it
             half = 0.5 * (e["ci95"][1] - e["ci95"][0])
+            ref = (total / v_typ if n.startswith("linear") and v_typ > 0 else total if n == "bias" else None)
             e["advice"] = data_advice(ev.dof, n, e["value"], half, ev.velocity, ev.acceleration, ev.force, ev.h,
-                                      at_bound[n])
+                                      at_bound[n], ref if ref else None)
         e["reasons"] = dof_reasons + e["reasons"]
         e["verdict"] = "suspect" if e["reasons"] else "trusted"
     verdict = NO_MODEL_VERDICT if no_model else "suspect" if any(e["reasons"] for e in out.values()) else "trusted"
@@ -386,11 +399,13 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
     t = np.asarray(sig.get("t") if sig.get("t") is not None else [], dtype=float)
     have = all(sig.get(k) is not None for k in ("velocity", "acceleration", "force")) and t.size > 1
     core = sig.get("core")
-    lower = fold = cvn = None
+    lower = upper = fold = cvn = None
     if core is not None:
         idx = _index_in(names, list(core.names))
         lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
         lower = [lows[j] if j is not None else None for j in idx]
+        highs = [hi for _n, _k, _lo, hi in core.chosen.layout]
+        upper = [highs[j] if j is not None else None for j in idx]
         ft = np.asarray(core.fold_theta, dtype=float) if core.fold_theta is not None else np.zeros((0, 0))
         if ft.ndim == 2 and ft.shape[0] and all(j is not None for j in idx):
             fold = ft[:, idx]
@@ -401,7 +416,8 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
         velocity=np.asarray(sig.get("velocity") if have else [], dtype=float),
         acceleration=np.asarray(sig.get("acceleration") if have else [], dtype=float),
         force=np.asarray(sig.get("force") if have else [], dtype=float),
-        h=float(np.median(np.diff(t))) if have else 0.0, lower_bounds=lower, fold_theta=fold, cv_nrmse=cvn,
+        h=float(np.median(np.diff(t))) if have else 0.0, lower_bounds=lower, upper_bounds=upper, fold_theta=fold,
+        cv_nrmse=cvn,
         residual_rho=sig.get("residual_autocorrelation"), steady=r.steady, windows=sig.get("windows") or [],
         expected_bias=_expected_bias(cfg, r.dof), thrust_in_covariance=bool(joint.get("thrust_in_covariance")),
         fit_std=joint.get("fit_std"))
@@ -568,6 +584,21 @@ def apply_reference_verdicts(document: dict, z_max: float = REFERENCE_Z_MAX) -> 
 ADVICE_TARGET = 0.25
 #: Shortest extra recording the advice asks for, s (a few runs).
 ADVICE_MIN_S = 30.0
+#: A pool day, s: no advice asks for more (a pool engineer books the pool by the day).
+POOL_DAY_S = 8 * 3600.0
+#: Runs of a kind the advice names when more of the data's own manoeuvre cannot fix a parameter within a pool day
+ALTERNATIVE_RUNS = 10
+#: The named kinds of run: key -> (plural name, seconds of one run including its start and stop)
+RUN_KINDS = {
+    "start-stop": ("start-and-stop runs", 15.0),
+    "steady": ("steady runs", 20.0),
+    "slow": ("slow steady runs", 30.0),
+    "hold": ("holds and slow runs both ways", 30.0),
+    "tilt": ("tilt-and-release runs", 15.0),
+    "reverse": ("reverse-command runs", 20.0),
+    "coupled": ("combined runs", 20.0),
+    "ladder": ("speed-ladder runs", 60.0),
+}
 
 
 def _speed_unit(dof: str) -> str:
@@ -575,15 +606,22 @@ def _speed_unit(dof: str) -> str:
 
 
 def format_advice(parameter: str, advice: dict) -> str:
-    """One printed line of :func:`data_advice` for ``parameter`` (``hindrax ident fit`` and ``ident bag`` alike)."""
+    """One printed line of :func:`data_advice` for ``parameter`` (``hindrax ident fit`` and ``ident bag`` alike):
+    runs of a named kind, their speed range and the pool time in minutes."""
     lo, hi, unit = advice["speed_range"]
-    return f"  to fix {parameter}: {advice['manoeuvre']}, speeds {lo:g}-{hi:g} {unit}, about " \
-           f"{advice['seconds_more']:.0f} s more"
+    head = "" if advice.get("feasible", True) else "more of the same runs cannot fix it within a pool day: "
+    runs, kind = advice.get("runs"), advice.get("run_kind")
+    if runs is None:  # an advice written before the run counts
+        return (f"  to fix {parameter}: {advice['manoeuvre']}, speeds {lo:g}-{hi:g} {unit}, about "
+                f"{max(1, math.ceil(advice['seconds_more'] / 60.0))} min more")
+    return (f"  to fix {parameter}: {head}{runs} {kind} of about {advice['run_s']:.0f} s ({advice['manoeuvre']}), "
+            f"speeds {lo:g}-{hi:g} {unit}: about {advice['minutes']} min of pool time")
 
 
 def data_advice(dof: str, name: str, value: float, half_width: float, velocity, acceleration, force,
-                h: float, at_bound: bool = False) -> dict:
-    """What data would make the 95 % half-width of one parameter ``ADVICE_TARGET`` of its value.
+                h: float, at_bound: bool = False, scale: float | None = None) -> dict:
+    """What data would make the 95 % half-width of one parameter ``ADVICE_TARGET`` of its value, in the units a
+    pool engineer plans in: runs of a named kind (:data:`RUN_KINDS`), a speed range, minutes.
 
     velocity, acceleration, force (n,): the smoothed velocity, acceleration and input force at the ticks (``h`` s) of
     the segments that were fitted. The variance of an estimate falls as 1 / (seconds of the manoeuvre that informs
@@ -593,8 +631,18 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     ticks with the largest |acceleration|), quadratic damping from steady runs in the top half of the speeds
     reached, linear damping from slow runs (below a third of the top speed), the bias from slow runs in both
     directions, restoring from tilts, a reverse thrust gain from reverse commands; heave ``_positive`` is down
-    (w > 0), ``_negative`` up. Returns {dof, manoeuvre, speed_range (low, high, unit), seconds_in_data,
-    seconds_more, why}."""
+    (w > 0), ``_negative`` up. The time is rounded up to whole runs, at least one, never above a pool day
+    (:data:`POOL_DAY_S`): when more of the same would take longer (or the data hold none of it while the interval
+    is already wide), no amount of it fixes the parameter, and the advice names the kind of run that would
+    (``feasible`` False: sharper accelerations for an inertia, a wider speed range for a quadratic damping, a speed
+    ladder for a linear one, holds at zero command for a bias, larger tilts for restoring, reverse commands for the
+    reverse gain, each DOF alone then together for a coupling), :data:`ALTERNATIVE_RUNS` runs of it. A parameter
+    at a bound gets as much again of its manoeuvre (at least :data:`ADVICE_MIN_S`); one whose interval is already
+    narrow (another reason: fold spread, bias, prediction) gets a repetition of its manoeuvre, which tells a real
+    effect from chance. ``scale``: the magnitude the half-width is judged against when not the value itself (a
+    bias, expected near 0, and a linear damping are judged against the damping force at the typical speed,
+    :func:`assess`). Returns {dof, manoeuvre, run_kind, runs, run_s, minutes, speed_range (low, high, unit),
+    seconds_in_data, seconds_more, feasible, why}."""
     v = np.asarray(velocity, dtype=float)
     a = np.asarray(acceleration, dtype=float)
     f = np.asarray(force, dtype=float)
@@ -604,50 +652,85 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     sign = 1.0 if name.endswith("_positive") else -1.0 if name.endswith("_negative") else 0.0
     vv = v if sign == 0.0 else np.where(sign * v > 0, np.abs(v), 0.0)
     vmax = float(np.percentile(np.abs(vv), 98)) if vv.size else 0.0
+    top = vmax if vmax >= 1e-3 else 0.5  # nothing moved: the usual top speed of a small ROV, 0.5 m/s or rad/s
     direction = "" if sign == 0.0 else (" down (w > 0)" if sign > 0 else " up (w < 0)")
     if dof in ("roll", "pitch", "yaw") and sign == 0.0:
         direction = ""
     if name in ("inertia", "added_mass"):
         thr = float(np.percentile(np.abs(a), 70)) if a.size else 0.0
         used = np.abs(a) >= thr if a.size else np.zeros(0, bool)
-        man = f"{dof}: start-and-stop runs (accelerate from rest to the top speed, hold, brake), both directions"
-        lo, hi = 0.0, vmax
+        man = f"{dof}: accelerate from rest to the top speed, hold, brake, both directions"
+        kind, lo, hi = "start-stop", 0.0, top
+        alt = ("start-stop", f"{dof}: full-thrust steps from rest and full-thrust braking (the acceleration, not "
+                             "the time, informs the inertia)", 0.0, top)
     elif name.startswith("quadratic"):
         used = np.abs(vv) >= 0.5 * vmax if vmax > 0 else np.zeros(v.size, bool)
-        hi = max(vmax, 1e-3)
-        man = (f"{dof}{direction}: steady runs of 5 s or more in the top half of the speeds "
-               "(and faster if the pool allows)")
-        lo = 0.5 * hi
+        man = f"{dof}{direction}: steady runs of 5 s or more in the top half of the speeds"
+        kind, lo, hi = "steady", 0.5 * top, top
+        alt = ("steady", f"{dof}{direction}: steady runs faster than the data's top speed (the curvature over a "
+                         "wider speed range tells quadratic from linear damping)", top, 1.5 * top)
     elif name.startswith("linear"):
         used = (np.abs(vv) > 0.05 * vmax) & (np.abs(vv) <= vmax / 3.0) if vmax > 0 else np.zeros(v.size, bool)
-        lo, hi = 0.05 * vmax, vmax / 3.0
         man = f"{dof}{direction}: slow steady runs (low speeds, where linear damping dominates)"
+        kind, lo, hi = "slow", 0.05 * top, top / 3.0
+        alt = ("ladder", f"{dof}{direction}: a ladder of 5-7 steady speeds from slow to the top, both directions "
+                         "(linear and quadratic damping from one curve)", 0.05 * top, top)
     elif name == "bias":
         used = np.abs(v) <= 0.3 * vmax if vmax > 0 else np.ones(v.size, bool)
-        lo, hi = 0.0, 0.3 * vmax
         man = f"{dof}: slow runs in both directions and holds (the same speed both ways tells bias from damping)"
+        kind, lo, hi = "hold", 0.0, 0.3 * top
+        alt = ("hold", f"{dof}: holds at zero command, 30 s each, at the start and end of every set of runs (the "
+                       "force that moves a vehicle at rest)", 0.0, 0.1 * top)
     elif name == "restoring":
         used = np.abs(a) > 0
-        lo, hi = 0.0, vmax
         man = f"{dof}: tilts of 10-30 degrees and releases (roll/pitch excursions)"
+        kind, lo, hi = "tilt", 0.0, top
+        alt = ("tilt", f"{dof}: larger tilts (20-30 degrees) held, then released (free decay)", 0.0, top)
     elif name == "reverse_thrust_gain":
         used = f < 0
-        lo, hi = 0.0, vmax
         man = f"{dof}: runs with reverse (negative) commands as long as the forward ones"
+        kind, lo, hi = "reverse", 0.0, top
+        alt = ("reverse", f"{dof}: reverse-command steps of the same sizes as the forward ones", 0.0, top)
     else:
         used = np.abs(v) > 0.05 * vmax if vmax > 0 else np.ones(v.size, bool)
-        lo, hi = 0.0, vmax
         man = f"{dof}: runs that move {dof} together with the coupled DOF"
+        kind, lo, hi = "coupled", 0.0, top
+        alt = ("coupled", f"{dof} alone, the coupled DOF alone, then both together (tells the coupling from "
+                          f"{dof}'s own dynamics)", 0.0, top)
     t_in = float(np.count_nonzero(used)) * h
-    if at_bound or not (value != 0.0 and math.isfinite(half_width)):
+    feasible = True
+    ref = abs(value) if scale is None or not (math.isfinite(scale) and scale > 0) else float(scale)
+    if at_bound:
         more = max(ADVICE_MIN_S, t_in)
-        why = (f"held at its physical bound 0: the data cannot tell it from zero; {t_in:.0f} s of that manoeuvre "
-               "in the data")
+        why = (f"at its bound: the data cannot tell it from the bound, so it has no interval; {t_in:.0f} s of that "
+               "manoeuvre in the data, as much again to see it move off the bound")
+    elif ref > 0.0 and math.isfinite(half_width) and half_width > ADVICE_TARGET * ref:
+        ratio = half_width / (ADVICE_TARGET * ref)
+        need = max(t_in, ADVICE_MIN_S) * (ratio ** 2 - 1.0)
+        what = "the value" if scale is None else "its reference force"
+        why = (f"95 % half-width {100 * half_width / ref:.0f} % of {what}; {t_in:.0f} s of that manoeuvre "
+               f"in the data, the variance falls as 1 / seconds")
+        if t_in <= 0.0 or need > POOL_DAY_S:
+            feasible = False
+            why += (f": more of it would take {need / 3600.0:.0f} h, beyond a pool day" if t_in > 0 else
+                    ": the data hold none of it")
+        more = max(ADVICE_MIN_S, need)
+    elif ref == 0.0 or not math.isfinite(half_width):
+        feasible = t_in > 0.0
+        more = max(ADVICE_MIN_S, t_in)
+        why = f"no usable interval; {t_in:.0f} s of that manoeuvre in the data"
     else:
-        ratio = half_width / (ADVICE_TARGET * abs(value))
-        more = max(ADVICE_MIN_S, max(t_in, ADVICE_MIN_S) * (ratio ** 2 - 1.0)) if ratio > 1 else 0.0
-        why = (f"95 % half-width {100 * half_width / abs(value):.0f} % of the value; {t_in:.0f} s of that manoeuvre "
-               f"in the data, the variance falls as 1 / seconds: about {more:.0f} s more for "
-               f"+-{100 * ADVICE_TARGET:.0f} %")
-    return {"dof": dof, "manoeuvre": man, "speed_range": [round(lo, 3), round(hi, 3), unit],
-            "seconds_in_data": round(t_in, 1), "seconds_more": round(float(more), 0), "why": why}
+        more = max(ADVICE_MIN_S, t_in)
+        why = (f"95 % half-width {100 * half_width / ref:.0f} % of the reference (narrow enough); the reason is "
+               f"another check: repeating the manoeuvre ({t_in:.0f} s in the data) tells a real effect from chance")
+    if not feasible:
+        kind, man, lo, hi = alt
+        more = ALTERNATIVE_RUNS * RUN_KINDS[kind][1]
+        why += f"; it needs a different kind of run: {RUN_KINDS[kind][0]}"
+    run_name, run_s = RUN_KINDS[kind]
+    runs = int(min(max(1, math.ceil(more / run_s)), POOL_DAY_S // run_s))
+    more = runs * run_s
+    return {"dof": dof, "manoeuvre": man, "run_kind": run_name, "runs": runs, "run_s": run_s,
+            "minutes": int(max(1, math.ceil(more / 60.0))), "speed_range": [round(lo, 3), round(hi, 3), unit],
+            "seconds_in_data": round(t_in, 1), "seconds_more": round(float(more), 0), "feasible": feasible,
+            "why": why}
