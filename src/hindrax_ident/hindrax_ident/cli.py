@@ -77,6 +77,9 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("ident", "fit"), "hindrax_ident.commands.ident_fit",
      "identify from any bag (WrenchStamped or ThrusterPwm force; Odometry, Twist or Dvl velocity): prediction-error "
      "fit with delay, K-fold and holdout validation (nrmse): identification.yaml + report"),
+    (("ident", "predict"), "hindrax_ident.commands.ident_predict",
+     "open-loop predictions of an identification.yaml on bags, re-initialised per segment (--segment-s): one CSV "
+     "t_s,segment,measured,predicted per bag and DOF, and their nrmse"),
     (("run",), "hindrax_ident.commands.run",
      "identification campaign on the virtual pool through the ROS graph (action, recorder): bag/, "
      "identification.yaml, report"),

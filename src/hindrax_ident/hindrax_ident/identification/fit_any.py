@@ -919,6 +919,8 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         c = r.core
         e["method"] = "output-error (segment-wise, prediction error; docs/identification.md §7)"
         e["model"] = c.terms.label
+        e["terms"] = {"damping": c.terms.damping, "by_direction": c.terms.by_direction,
+                      "coriolis": c.terms.coriolis, "cross": c.terms.cross, "reverse_gain": c.terms.reverse_gain}
         e["model_selection"] = [{"terms": k.terms.label, "parameters": k.n_params,
                                  "cv_nrmse": k.cv.get("nrmse"), "cv_nrmse_hold": k.cv.get("nrmse_hold"),
                                  "chosen": k is c.chosen} for k in c.candidates]

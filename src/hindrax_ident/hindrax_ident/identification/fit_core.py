@@ -338,12 +338,15 @@ def coriolis_products(velocity: np.ndarray) -> np.ndarray:
 
 def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
                    coupling_inertia: np.ndarray | None = None, excited_only: bool = True,
-                   min_fraction: float = 0.5) -> SegmentData:
+                   min_fraction: float = 0.5, anchor_s: float | None = None) -> SegmentData:
     """Cut ``rec``'s chunks into segments of ``seconds`` with the force delayed, lagged and less the Coriolis force
     (``coupling_inertia`` (6,) of the other DOFs, NaN = unknown, this DOF's own entry unused) as ``terms`` and
     ``timing`` say. A last part of at least ``min_fraction`` of a segment is kept (padded, no measurement in the
     padding); without ``excited_only`` a whole chunk shorter than that is one segment too (a designed window shorter
     than a segment is still fitted). ``excited_only``: only the segments that move the DOF (:data:`EXCITATION_MIN`).
+    ``anchor_s``: segment boundaries every ``seconds`` from this record time instead of from each chunk's start (a
+    chunk starting between two boundaries begins with the part up to the next one; ``hindrax ident predict
+    --segment-s``).
     Raises
     :class:`EstimationError` when no segment remains."""
     h = rec.h
@@ -381,8 +384,13 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
         pos = ch.sample_pos
         order = np.argsort(pos)
         pos, zs = pos[order], ch.sample_z[order]
-        for s0 in range(0, n, L):
-            mlen = min(L, n - s0)
+        if anchor_s is None:
+            cuts = list(range(0, n, L))
+        else:  # boundaries on the record's grid anchor_s + k L h
+            first = int(math.ceil(round((anchor_s - ch.t0) / h, 6))) % L
+            cuts = ([0] if first > 0 else []) + list(range(first, n, L))
+        for ci_, s0 in enumerate(cuts):
+            mlen = min(L, n - s0, (cuts[ci_ + 1] - s0) if ci_ + 1 < len(cuts) else n - s0)
             if mlen < 10 or (mlen < min_fraction * L and (excited_only or s0 > 0)):
                 continue
             sl = slice(s0, s0 + mlen)
