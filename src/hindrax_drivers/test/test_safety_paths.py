@@ -44,7 +44,8 @@ class Rig:
     """ESC node on an emulated PCA9685 (with an emulated /OE line), a probe with heartbeat stand-ins, and
     optionally the real output guard on the same bus and line."""
 
-    def __init__(self, ctx, guard=False, wired=True, sim_time=False, overrides=None):
+    def __init__(self, ctx, guard=False, wired=True, sim_time=False, overrides=None, guard_bus=lambda bus: bus,
+                 guard_opens_line=False):
         self.line = EmulatedGpioLine(pull_high=True) if wired else None
         self.emu = Pca9685Emulator(output_enable_line=self.line)
         self.bus = EmulatedI2CBus({0x40: self.emu})
@@ -54,8 +55,11 @@ class Rig:
         self.esc = EscNode(bus=self.bus, context=ctx, parameter_overrides=params)
         self.probe = rclpy.create_node("probe", context=ctx)
         self.beats = SafetyHeartbeats(self.probe, supervisor="", guard=None if guard else "")
-        self.guard = OutputGuardNode(line=self.line, bus=None if wired else self.bus, context=ctx,
-                                     parameter_overrides=config_parameters(OVER)) if guard else None
+        # guard_opens_line: the guard requests its configured /OE line itself (open_output_enable, patched by the test)
+        gpio = {"esc.output_enable_gpio.chip": "/dev/gpiochip0", "esc.output_enable_gpio.line": 17}
+        self.guard = OutputGuardNode(
+            line=None if guard_opens_line else self.line, bus=None if wired else guard_bus(self.bus), context=ctx,
+            parameter_overrides=config_parameters({**OVER, **(gpio if guard_opens_line else {})})) if guard else None
         self.ex = SingleThreadedExecutor(context=ctx)
         for n in (self.esc, self.probe, self.guard):
             if n is not None:
@@ -219,6 +223,75 @@ def test_f2_guard_start_holds_oe_until_a_live_esc_confirms_neutral():
     core.on_esc(OUTPUT_NEUTRAL, False)
     assert core.decide(0.0, 0.0) == (False, True)
     assert core.decide(0.0, 0.25)[0] and "no supervisor heartbeat" in core.reason
+
+
+def test_44_7_guard_without_its_line_says_error_retries_and_the_esc_refuses_to_arm(rig, monkeypatch):
+    """Issue 44 item 7: the GPIO request fails at start-up (line busy): the guard's heartbeat is ERROR (it said OK
+    before, and the ESC armed), the ESC refuses to arm on it; the guard retries and, once the line is granted, lets
+    the ESC arm."""
+    import hindrax_drivers.guard.node as guard_module
+
+    granted = {"ok": False, "attempts": 0}
+
+    def open_line(chip, line):
+        granted["attempts"] += 1
+        if not granted["ok"]:
+            raise OSError(16, "Device or resource busy")
+        r.line.set_high(True)
+        return r.line
+
+    monkeypatch.setattr(guard_module, "open_output_enable", open_line)
+    r = rig(guard=True, guard_opens_line=True)
+    r.wait(lambda: granted["attempts"] >= 3 and r.esc.heartbeat_refusal(), "retried, ESC sees the guard's ERROR")
+    assert r.guard.core.asserted and "cannot request /OE /dev/gpiochip0:17" in r.guard.core.reason
+    assert r.guard.diag.status().level == DiagnosticStatus.ERROR
+    res = r.set_armed(True)
+    assert not res.success and "output guard" in res.message and "Device or resource busy" in res.message
+    granted["ok"] = True
+    r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(), "line granted, guard released")
+    assert r.guard.core.drive_fault == ""
+    r.arm_at_1700()
+
+
+class _FlakyBus:
+    """The guard's view of the I2C bus, failing on demand (the ESC keeps its own, working)."""
+
+    def __init__(self, bus):
+        self.bus, self.fail = bus, False
+
+    def __getattr__(self, name):
+        attr = getattr(self.bus, name)
+        if not callable(attr):
+            return attr
+
+        def call(*args, **kwargs):
+            if self.fail:
+                raise OSError(121, "Remote I/O error")
+            return attr(*args, **kwargs)
+        return call
+
+
+def test_44_7_a_failed_silencing_stays_error_until_a_retry_reaches_the_chip(rig):
+    """Issue 44 item 7, without /OE: the guard's sleep-register write fails; its heartbeat stays ERROR after the
+    cause (a supervisor trip) is gone, so the ESC cannot arm, until a retry reaches the chip (it returned to OK at
+    once before, and never retried)."""
+    r = rig(guard=True, wired=False, guard_bus=_FlakyBus)
+    flaky = r.guard._bus
+    r.wait(lambda: not r.guard.core.asserted, "guard released")
+    r.arm_at_1700()
+    flaky.fail = True
+    r.beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"
+    r.wait(lambda: r.guard.core.drive_fault and not r.esc.armed, "silencing failed, ESC disarmed",
+           poll=r.commanding)
+    failures = r.guard.silence_failures
+    r.beats.supervisor = ""
+    r.wait(lambda: r.guard.silence_failures >= failures + 2, "retried", poll=r.commanding)
+    assert r.guard.core.asserted and r.guard.core.reason.startswith("guard cannot act: cannot silence the outputs")
+    res = r.set_armed(True)
+    assert not res.success and "guard cannot act" in res.message
+    flaky.fail = False
+    r.wait(lambda: not r.guard.core.asserted, "a retry reached the chip, guard released", timeout=20.0)
+    assert r.guard.core.drive_fault == ""
 
 
 _HOLDER = """

@@ -8,6 +8,9 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
 * the ESC reports ``OUTPUT_UNKNOWN``: the chip cannot be written or read back (I2C fault);
 * the supervisor's heartbeat (``supervisor/heartbeat``) has not been heard for ``timeout_s``, or says ERROR (a
   breach is latched);
+* the guard itself cannot silence the outputs (its /OE line could not be requested or driven, or its last write of
+  the chip's sleep registers failed): it must not say OK when it could not act, so the ESC refuses to arm and
+  disarms on its ERROR heartbeat (issue 44 item 7); the node retries and clears it on success;
 * either heartbeat cannot be trusted to be its sender's (:class:`~hindrax_drivers.liveness.HeartbeatIdentity`: a
   second publisher, a wrong node name, a sequence that goes back, a new boot while armed): a forged or replayed
   heartbeat must not keep the outputs on.
@@ -38,6 +41,7 @@ class GuardCore:
     supervisor_ok: bool = False
     supervisor_message: str = ""
     identity_fault: str = ""
+    drive_fault: str = ""
 
     def on_esc(self, output_state: int, armed: bool) -> None:
         """The ESC's ``esc/heartbeat`` (output_state constant, armed flag)."""
@@ -52,9 +56,15 @@ class GuardCore:
         (:attr:`hindrax_drivers.liveness.HeartbeatIdentity.fault`)."""
         self.identity_fault = fault
 
+    def on_drive(self, fault: str) -> None:
+        """The node's last attempt to drive /OE or write the chip: '' (it worked) or why it failed."""
+        self.drive_fault = fault
+
     def causes(self, esc_age_s: float, supervisor_age_s: float) -> list[str]:
         """Every reason to silence the outputs now (empty: none)."""
         out = []
+        if self.drive_fault:
+            out.append(f"guard cannot act: {self.drive_fault}")
         if self.identity_fault:
             out.append(f"heartbeat not trusted: {self.identity_fault}")
         if esc_age_s > self.timeout_s:

@@ -54,6 +54,8 @@ __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "main"]
 GUARD_RATE_HZ = 20.0
 #: while asserted without /OE, the sleep registers are written again at most this often when the ESC commands, s
 REWRITE_INTERVAL_S = 0.2
+#: after a failure to drive /OE or to reach the chip, the line request or the chip is tried again this often, s
+DRIVE_RETRY_S = 0.5
 
 
 def open_output_enable(chip: str, line: int) -> Any:
@@ -86,6 +88,7 @@ class OutputGuardNode(Node):
         self.last_assert_monotonic: float | None = None
         self.silence_failures = 0
         self._last_rewrite = -1e9
+        self._last_drive_attempt = -1e9
         where = (f"/OE {self.gpio[0]}:{self.gpio[1]}" if self.gpio else "/OE (injected line)" if line is not None
                  else f"registers i2c-{self._bus_number}@0x{self._address:02x}")
         self.diag = DeviceDiagnostics("hindrax/output_guard", where, lambda: time.monotonic())
@@ -94,9 +97,6 @@ class OutputGuardNode(Node):
                                                  "bus (does not work through an I2C outage)")
         self._open_line()
         self.heartbeat = HeartbeatPublisher(self, "guard", "hindrax/output_guard", "output_guard")
-        #: the heartbeats are taken at the tick on the system clock (polled subscriptions: no executor wake-up per
-        #: beat, docs/architecture.md §10.1), each aged from its DDS reception, after the ages' ticks; callbacks with
-        #: use_sim_time
         #: the peers' heartbeats through their identity checks (module docstring)
         #: "armed" for their boot_id rule: the ESC reported armed and the outputs are let through; once /OE is
         #: asserted a peer's new start (a restart after a crash) is accepted, since release still needs the ESC to
@@ -123,13 +123,14 @@ class OutputGuardNode(Node):
 
     # -- outputs
     def _open_line(self) -> None:
+        """Request the /OE line (configured and not injected); a failure is a drive fault (:meth:`_drive_failed`)."""
         if self.line is not None or self.gpio is None:
             return
+        self._last_drive_attempt = time.monotonic()
         try:
             self.line = open_output_enable(*self.gpio)
         except (OSError, ImportError) as exc:
-            self.diag.set_state("gpio error", DiagnosticStatus.ERROR, f"cannot request /OE {self.gpio}: {exc}")
-            self.get_logger().error(f"cannot request /OE {self.gpio}: {exc}", throttle_duration_sec=5.0)
+            self._drive_failed(f"cannot request /OE {self.gpio[0]}:{self.gpio[1]}: {exc}")
 
     def _device(self) -> I2CDevice:
         if self.device is None:
@@ -144,28 +145,49 @@ class OutputGuardNode(Node):
         dev.write_byte_data(p.ALL_LED_OFF_H, p.FULL_BIT)
         dev.write_byte_data(p.MODE1, p.MODE1_SLEEP | p.MODE1_AI | p.MODE1_ALLCALL)
 
+    def _drive_failed(self, reason: str) -> None:
+        """The guard could not drive /OE or silence the chip: a cause of its own (ERROR heartbeat: the ESC refuses
+        to arm and disarms) until a later attempt succeeds."""
+        self.silence_failures += 1
+        self.diag.count("silence_failed")
+        self.diag.set_state("cannot silence", DiagnosticStatus.ERROR, reason)
+        self.get_logger().error(reason, throttle_duration_sec=2.0)
+        self.core.on_drive(reason)
+
+    def _drive_ok(self) -> None:
+        if self.core.drive_fault:
+            self.get_logger().info("the outputs can be silenced again")
+            self.diag.set_state("ok", DiagnosticStatus.OK)
+        self.core.on_drive("")
+
     def _apply(self, asserted: bool, force: bool = False) -> None:
-        """Drive /OE (or write the registers) for ``asserted``; failures are counted and reported, never raised."""
+        """Drive /OE (or write the registers) for ``asserted``; failures become a drive fault of the core, never
+        raised. After a failure the line request (wired) or the chip (a read of MODE1, unwired) is tried again every
+        :data:`DRIVE_RETRY_S`, and only a success clears it."""
+        now = time.monotonic()
+        retry_due = now - self._last_drive_attempt >= DRIVE_RETRY_S
         try:
-            if self.gpio is not None or self.line is not None:
+            if self.wired:
                 if self.line is None:
+                    if not retry_due:
+                        return
                     self._open_line()
-                if self.line is None:
-                    raise OSError("/OE line not available")
+                    if self.line is None:
+                        return
                 self.line.set_high(asserted)
-            elif asserted:
-                now = time.monotonic()
-                rewrite_due = now - self._last_rewrite > REWRITE_INTERVAL_S
-                if force or (self.core.esc_state == OUTPUT_COMMANDING and rewrite_due):
-                    self._last_rewrite = now
+                self._drive_ok()
+            elif asserted and (force or self.core.drive_fault or self.core.esc_state == OUTPUT_COMMANDING):
+                if force or now - self._last_rewrite > REWRITE_INTERVAL_S:
+                    self._last_rewrite = self._last_drive_attempt = now
                     self._silence_registers()
-            if self.diag.state in ("silence failed", "gpio error"):
-                self.diag.set_state("ok", DiagnosticStatus.OK)
+                    self._drive_ok()
+            elif self.core.drive_fault and retry_due:
+                self._last_drive_attempt = now
+                self._device().read_byte_data(p.MODE1)  # the chip answers: the next silencing can reach it
+                self._drive_ok()
         except (OSError, I2CError, ImportError) as exc:
-            self.silence_failures += 1
-            self.diag.count("silence_failed")
-            self.diag.set_state("silence failed", DiagnosticStatus.ERROR, f"cannot silence the outputs: {exc}")
-            self.get_logger().error(f"cannot silence the outputs: {exc}", throttle_duration_sec=2.0)
+            self._last_drive_attempt = now
+            self._drive_failed(f"cannot silence the outputs: {exc}")
 
     # -- inputs
     def _armed_through(self) -> bool:
@@ -209,13 +231,15 @@ class OutputGuardNode(Node):
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
+        if self.core.drive_fault and not asserted:  # the fault is a cause: decided at the next tick at the latest
+            asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s)
         self.heartbeat.publish(DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
                                self.core.reason if asserted else "outputs enabled")
         self.diag.published()
 
     def _diag_extra(self):
         return [("asserted", self.core.asserted), ("reason", self.core.reason), ("assertions", self.assertions),
-                ("silence_failures", self.silence_failures),
+                ("silence_failures", self.silence_failures), ("drive_fault", self.core.drive_fault or "none"),
                 ("output_enable_gpio", f"{self.gpio[0]}:{self.gpio[1]}" if self.gpio else "not wired"),
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
