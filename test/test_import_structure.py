@@ -14,7 +14,12 @@ Rules checked:
   modules and by the entry points that start nodes (:data:`ENTRY_POINTS`); pure functions that offline tools
   need live in pure modules that the nodes import too.
 - production code does not import the test helpers (:data:`TESTING`): only the benchmarks
-  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``.
+  (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``;
+- layers (:data:`LAYERS`): drivers < vehicle physics < identification and control < simulator < commands,
+  benchmarks and the graph builders; no module imports a module of a higher layer, except the imports listed with
+  their reason in :data:`KNOWN_LAYER_EXCEPTIONS`;
+- the vehicle's shared physics is defined once (:data:`DEFINED_ONCE`): the angle wrap, the thrust lag, the thrust
+  curve and the rigid-body mass matrix, each in its one module, and no other module writes their formulas out.
 
 Run alone: ``.venv/bin/python -m pytest -n0 -p no:randomly test/test_import_structure.py -q``.
 """
@@ -211,3 +216,137 @@ def test_entry_points_exist(graph):
     """Every allowed entry point is a real module (a renamed module must not leave a stale allowance)."""
     assert sorted(ENTRY_POINTS - set(graph)) == []
     assert all(p in graph for p in ENTRY_POINT_PACKAGES)
+
+
+# ------------------------------------------------------------------------------------------------ layers
+#: (module prefix, layer), the longest matching prefix wins; a module matching none is in the top layer
+#: (commands, benchmarks, the graph builders, the command line). docs/architecture.md §2.
+LAYERS = (
+    ("hindrax_drivers", 0),
+    ("hindrax_ident.vehicle", 1),
+    ("hindrax_ident.estimation", 1),
+    ("hindrax_ident.identification", 2),
+    ("hindrax_ident.control", 2),
+    ("hindrax_ident.sim", 3),
+)
+TOP_LAYER = 4
+
+#: Imports from a lower layer to a higher one that exist today, each with its reason. A new one fails the test; an
+#: entry whose import is gone fails it too (so the list only shrinks).
+KNOWN_LAYER_EXCEPTIONS = {
+    ("hindrax_ident.identification.campaign", "hindrax_ident.sim.simulator"):
+        "the in-process campaign steps the simulator directly (issue 47.2: belongs in the simulator's room)",
+    ("hindrax_ident.identification.piloted_bag", "hindrax_ident.sim.simulator"):
+        "a simulator bag writer that lives in identification (issue 47.2: moves to sim/)",
+    ("hindrax_ident.identification.graph_campaign", "hindrax_ident.bringup"):
+        "the campaign over the composed graph builds that graph (an entry point in identification's room)",
+    ("hindrax_ident.control.evaluate", "hindrax_ident.sim.simulator"):
+        "the closed-loop evaluation runs its holds against the simulator",
+    ("hindrax_ident.control.evaluate", "hindrax_ident.sim.truth"):
+        "the closed-loop evaluation sets the simulator's truth (floor gradient, noise-free sensors)",
+    ("hindrax_ident.control.suite", "hindrax_ident.sim.simulator"):
+        "the control suite runs the evaluation's scenarios in the simulator",
+    ("hindrax_ident.control.suite", "hindrax_ident.sim.truth"):
+        "the control suite loads the shipped truths",
+    ("hindrax_ident.sim.record_bag", "hindrax_ident.bringup"):
+        "the simulated bag recorder runs the whole composed graph (an entry point in the simulator's room)",
+}
+
+
+def layer_of(module: str) -> int:
+    """Layer of ``module`` (:data:`LAYERS`; the package ``hindrax_ident`` itself is below everything)."""
+    if module == "hindrax_ident":
+        return 0
+    best = [(len(p), lay) for p, lay in LAYERS if module == p or module.startswith(p + ".")]
+    return max(best)[1] if best else TOP_LAYER
+
+
+def upward_imports(graph: dict[str, set[str]]) -> set[tuple[str, str]]:
+    """(importer, imported) for every import of a higher layer's module (packages' ``__init__`` edges dropped when
+    the module itself is also imported)."""
+    out = set()
+    for src, deps in graph.items():
+        for dst in deps:
+            if layer_of(dst) > layer_of(src) and not any(d.startswith(dst + ".") for d in deps):
+                out.add((src, dst))
+    return out
+
+
+def test_the_layer_checker_sees_an_upward_import():
+    graph = {"hindrax_ident.vehicle.x": {"hindrax_ident.sim", "hindrax_ident.sim.model"},
+             "hindrax_ident.sim.model": {"hindrax_ident.vehicle.x", "hindrax_drivers.frames"},
+             "hindrax_drivers.frames": set()}
+    assert upward_imports(graph) == {("hindrax_ident.vehicle.x", "hindrax_ident.sim.model")}
+    assert layer_of("hindrax_ident.commands.run") == TOP_LAYER and layer_of("hindrax_drivers.frames") == 0
+
+
+def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
+    found = upward_imports(graph)
+    new = sorted(f"{a} -> {b}" for a, b in found - set(KNOWN_LAYER_EXCEPTIONS))
+    gone = sorted(f"{a} -> {b}" for a, b in set(KNOWN_LAYER_EXCEPTIONS) - found)
+    assert not new, "imports from a lower layer to a higher one (drivers < vehicle < identification, control < sim " \
+                    "< commands):\n" + "\n".join(new)
+    assert not gone, "known exceptions that no longer exist (remove them):\n" + "\n".join(gone)
+    assert all(layer_of(m) <= 1 for m in graph.get("hindrax_ident.vehicle.rigid_body", set()) if m in graph)
+
+
+# ------------------------------------------------------------------------------------------------ defined once
+#: name -> the one module (path under src/) that defines it.
+DEFINED_ONCE = {
+    "wrap_angle": "hindrax_drivers/hindrax_drivers/frames.py",
+    "ThrustLag": "hindrax_ident/hindrax_ident/vehicle/thrust_lag.py",
+    "ThrustCurve": "hindrax_drivers/hindrax_drivers/allocation/thrust_curve.py",
+    "rigid_body_mass_matrix": "hindrax_ident/hindrax_ident/vehicle/rigid_body.py",
+    "skew": "hindrax_ident/hindrax_ident/vehicle/rigid_body.py",
+}
+#: Other names the same things had; none may be defined anywhere.
+FORMER_NAMES = ("wrap", "_wrap", "_wrap_angle", "angle_wrap", "LaggedThrust", "_lagged", "lag_factor", "_skew")
+#: The formulas written out: the wrap ``(a + pi) % (2 pi) - pi`` or ``atan2(sin a, cos a)`` (a heading in
+#: [0, 2 pi) is another convention), a lag factor ``exp(-t / time_constant | lag | tau)``, and a ThrustCurve built
+#: outside the allocation's modules.
+FORMULAS = {
+    "the angle wrap": (r"pi\s*\)\s*%\s*\(\s*2(\.0)?\s*\*\s*(math|np)\.pi|atan2\(\s*(math|np)\.sin\(", ("frames.py",)),
+    "the thrust lag": (r"exp\(\s*-[^\n]*?/\s*(self\.)?(time_constant|lag|tau)", ("vehicle/thrust_lag.py",)),
+    # config.py builds one only to validate the configured coefficients (its one-line refusal)
+    "a thrust curve": (r"\bThrustCurve\(", ("allocation/thrust_curve.py", "allocation/from_config.py",
+                                            "hindrax_drivers/config.py")),
+}
+
+
+def _sources() -> dict[Path, str]:
+    src = ROOT / "src"
+    return {p: p.read_text(encoding="utf-8") for p in sorted(src.rglob("*.py"))
+            if "test" not in p.relative_to(src).parts}
+
+
+def test_the_vehicle_physics_is_defined_once():
+    import re
+
+    defined: dict[str, list[str]] = {}
+    for path, text in _sources().items():
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                defined.setdefault(node.name, []).append(path.relative_to(ROOT / "src").as_posix())
+    for name, where in DEFINED_ONCE.items():
+        assert defined.get(name) == [where], f"{name} must be defined once, in {where}: found {defined.get(name)}"
+    assert not {n: defined[n] for n in FORMER_NAMES if n in defined}, "a second angle wrap, lag or skew"
+    offenders = []
+    for what, (pattern, allowed) in FORMULAS.items():
+        for path, text in _sources().items():
+            rel = path.relative_to(ROOT / "src").as_posix()
+            if re.search(pattern, text) and not rel.endswith(allowed):
+                offenders.append(f"{rel}: {what}")
+    assert not offenders, "formulas written out again instead of imported:\n" + "\n".join(offenders)
+
+
+def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
+    import re
+
+    pattern = FORMULAS["the angle wrap"][0]
+    assert re.search(pattern, "return (a + math.pi) % (2.0 * math.pi) - math.pi")
+    assert re.search(pattern, "math.atan2(math.sin(angle), math.cos(angle))")
+    assert not re.search(pattern, "heading_rad=truth.yaw_rad % (2.0 * math.pi),")
+    assert re.search(FORMULAS["the thrust lag"][0], "k = math.exp(-grid_s / tau) if tau > 0 else 0.0")
+    assert re.search(FORMULAS["the thrust lag"][0], "k = math.exp(-float(dt) / self.time_constant_s)")
+    assert re.search(FORMULAS["the thrust lag"][0], "e = math.exp(-0.5 * h / lag_s)")
+    assert re.search(FORMULAS["a thrust curve"][0], "self.curve = ThrustCurve(t.curve_negative, ...)")

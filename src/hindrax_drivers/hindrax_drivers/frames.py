@@ -14,6 +14,9 @@ order (x, y, z, w), handled with :class:`scipy.spatial.transform.Rotation`.
 Nothing else in the stack converts frames: drivers, emulators and tools call these functions and matrices at
 their ROS boundary (test/test_docs_truth.py checks that no other module spells the matrices out). A device's
 own sign conventions (the DVL-75's pitch, docs/devices.md §1.5) stay in its protocol.
+
+Angles: :func:`wrap_angle` is the one angle wrap of the repository (headings, attitude errors, the DVL-75
+emulator's attitude rates).
 """
 from __future__ import annotations
 
@@ -83,6 +86,11 @@ def enu_to_ned(v) -> np.ndarray:
 def ned_to_enu(v) -> np.ndarray:
     """Vector(s) from world NED to odom ENU. v: (..., 3)."""
     return _vec3(v) @ R_ENU_NED.T
+
+
+def wrap_angle(angle_rad: float) -> float:
+    """``angle_rad`` wrapped to [-pi, pi), rad."""
+    return (float(angle_rad) + math.pi) % (2.0 * math.pi) - math.pi
 
 
 #: R_FLU_FRD is diagonal, so a wrench changes between FLU and FRD by the signs of its diagonal, force and torque

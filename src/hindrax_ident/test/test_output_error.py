@@ -10,7 +10,8 @@ from scipy.integrate import solve_ivp
 
 from hindrax_ident.estimation.least_squares import EstimationError
 from hindrax_ident.identification import fit_core
-from hindrax_ident.identification.output_error import DofModel, LaggedThrust, model_terms, rk4_step
+from hindrax_ident.identification.output_error import DofModel, model_terms, rk4_step
+from hindrax_ident.vehicle.thrust_lag import ThrustLag
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -33,11 +34,11 @@ def test_model_acceleration_by_hand():
 
 
 def test_lagged_thrust_inside_a_tick():
-    lag = LaggedThrust(time_constant_s=0.1, tick_s=0.02)
-    f = lag.start_middle_end(2.0, 10.0)  # from 2 N towards a 10 N command
+    lag = ThrustLag(time_constant_s=0.1)
+    f = lag.within_tick(2.0, 10.0, 0.02)  # from 2 N towards a 10 N command
     assert f == pytest.approx((2.0, 10.0 - 8.0 * math.exp(-0.1), 10.0 - 8.0 * math.exp(-0.2)), abs=1e-12)
     # no lag: the command acts over the whole tick
-    assert LaggedThrust(0.0, 0.02).start_middle_end(2.0, 10.0) == pytest.approx((10.0, 10.0, 10.0))
+    assert ThrustLag(0.0).within_tick(2.0, 10.0, 0.02) == pytest.approx((10.0, 10.0, 10.0))
 
 
 # ---------------------------------------------------------------------------------------------------- the integrator
@@ -73,9 +74,9 @@ def test_rk4_step_against_quadratic_damping():
 
 
 def test_rk4_step_with_the_lagged_thrust_integrates_the_impulse():
-    lag = LaggedThrust(0.1, 0.02)
+    lag = ThrustLag(0.1)
     free = DofModel("surge", np.array([1.0, 0.0, 0.0, 0.0]))  # M = 1, no damping: v(h) = v0 + integral of f
-    v, x = rk4_step(free.acceleration, np.array([0.3]), np.array([0.0]), 0.02, lag.start_middle_end(2.0, 10.0))
+    v, x = rk4_step(free.acceleration, np.array([0.3]), np.array([0.0]), 0.02, lag.within_tick(2.0, 10.0, 0.02))
     impulse = 10.0 * 0.02 + (2.0 - 10.0) * 0.1 * (1.0 - math.exp(-0.2))
     assert float(v[0]) == pytest.approx(0.3 + impulse, abs=1e-7)
 

@@ -53,6 +53,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .. import frames
+from ..frames import wrap_angle
 from ..transport.pty_device import PeriodicSchedule, StreamFaults
 from .protocol import (
     DvlExtended,
@@ -143,10 +144,6 @@ _COORD_RE = re.compile(
     r"|(?P<d>[0-9]+)\s+(?P<m>[0-9]+(?:\.[0-9]+)?)\s*(?P<h1>[NSEW])"
     r"|(?P<ddmm>[0-9]+(?:\.[0-9]+)?)\s*(?P<h2>[NSEW]))\s*"
 )
-
-
-def _wrap(angle_rad: float) -> float:
-    return (angle_rad + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _parse_coordinate(text: str) -> float:
@@ -361,8 +358,8 @@ class Dvl75Emulator:
                 prev_v = self._prev_velocity if self._prev_velocity is not None else velocity
                 delta = 0.5 * (prev_v + velocity) * dt
                 prev = self._prev_truth if self._prev_truth is not None else truth
-                d_att = (_wrap(truth.roll_rad - prev.roll_rad), _wrap(truth.pitch_rad - prev.pitch_rad),
-                         _wrap(truth.yaw_rad - prev.yaw_rad))
+                d_att = (wrap_angle(truth.roll_rad - prev.roll_rad), wrap_angle(truth.pitch_rad - prev.pitch_rad),
+                         wrap_angle(truth.yaw_rad - prev.yaw_rad))
             else:
                 delta, d_att = np.zeros(3), (0.0, 0.0, 0.0)
             record = DvlPositionDelta(tu / 1e6, dt, *d_att, *(float(x) for x in delta), confidence)

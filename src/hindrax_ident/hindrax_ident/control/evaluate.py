@@ -74,11 +74,12 @@ import numpy as np
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.frames import wrap_angle
 
 from ..identification.maneuvers import HoldController, dof_authority
 from ..sim.simulator import Simulator
 from ..sim.truth import Truth, with_floor_gradient, without_sensor_noise
-from .law import ControlSettings, ReferenceModel, wrap
+from .law import ControlSettings, ReferenceModel
 from .legacy import LegacyPDHold
 from .loop import HoldLoop
 from .model import ControlModel, model_from_config
@@ -292,8 +293,8 @@ def metrics(res: CaseResult, setup: EvaluationSetup, step: float) -> dict:
     err_spec = res.value - res.spec
     err_sp = res.value - res.setpoint
     if angle:
-        err_spec = np.array([wrap(e) for e in err_spec])
-        err_sp = np.array([wrap(e) for e in err_sp])
+        err_spec = np.array([wrap_angle(e) for e in err_spec])
+        err_sp = np.array([wrap_angle(e) for e in err_sp])
     if res.maneuver in ALTITUDE_MANEUVERS:
         overshoot = float(np.max(np.abs(err_sp))) if err_sp.size else math.nan
         band = setup.altitude_band_m

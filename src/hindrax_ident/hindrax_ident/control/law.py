@@ -53,11 +53,12 @@ import numpy as np
 from filterpy.kalman import KalmanFilter
 
 from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.frames import wrap_angle
 
 from .model import AxisModel, ControlModel
 
 __all__ = ["ControlSettings", "AxisGains", "design_gains", "ReferenceModel", "PositionAxis", "VelocityAxis",
-           "FloorEstimator", "ControlInput", "Controller", "UNCERTAINTY_Z", "MIN_BANDWIDTH_FACTOR", "wrap"]
+           "FloorEstimator", "ControlInput", "Controller", "UNCERTAINTY_Z", "MIN_BANDWIDTH_FACTOR"]
 
 #: Quantile of the inertia's uncertainty the bandwidth is designed for (95 %, two-sided).
 UNCERTAINTY_Z = 1.96
@@ -89,11 +90,6 @@ FLOOR_SLOPE_CHANGE_STD = 0.1
 #: Time constant of the low-pass on the time derivative of the floor gradient estimate, s: two reports of the DVL-75
 #: beams at their 10 Hz (docs/devices.md §1), the shortest window that smooths the steps of the 10 Hz updates.
 FLOOR_GRADIENT_RATE_FILTER_S = 0.2
-
-
-def wrap(a: float) -> float:
-    """Angle wrapped to [-pi, pi), rad."""
-    return (float(a) + math.pi) % (2.0 * math.pi) - math.pi
 
 
 @dataclass(frozen=True)
@@ -214,7 +210,7 @@ class ReferenceModel:
 
     def reset(self, x: float, v: float = 0.0) -> None:
         """Start at the state (x, v); NaN rate counts as 0."""
-        self.x = wrap(x) if self.angle else float(x)
+        self.x = wrap_angle(x) if self.angle else float(x)
         self.v = float(v) if math.isfinite(v) else 0.0
         self.v = max(-self.max_rate, min(self.max_rate, self.v))
         self.a = 0.0
@@ -227,7 +223,7 @@ class ReferenceModel:
         h = dt / n
         w2, c, am = self.w * self.w, 2.0 * self.zeta * self.w, self.max_accel
         for _ in range(n):
-            e = wrap(r - self.x) if self.angle else r - self.x
+            e = wrap_angle(r - self.x) if self.angle else r - self.x
             v0 = self.v
             a = w2 * e - c * v0
             lim = am if a * v0 >= 0.0 else am * self.brake_factor  # speeding up / braking
@@ -236,7 +232,7 @@ class ReferenceModel:
             self.a = (self.v - v0) / h
             self.x = self.x + h * self.v
             if self.angle:
-                self.x = wrap(self.x)
+                self.x = wrap_angle(self.x)
         return self.x, self.v, self.a
 
 
@@ -302,7 +298,7 @@ class PositionAxis(_Axis):
         """Body force or moment tracking the desired state (x_d, x_d', x_d'') (module docstring)."""
         self.engaged = True
         m = self.model
-        e = wrap(xd - x) if self.angle else xd - x
+        e = wrap_angle(xd - x) if self.angle else xd - x
         de = vd - (v if math.isfinite(v) else 0.0)
         ff = m.inertia * ad + m.damping(vd) + m.bias + m.restoring * math.sin(xd)
         fb = m.inertia * (self.gains.kp * e + self.gains.kd * de)

@@ -14,14 +14,11 @@ from typing import Sequence
 import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig
+from hindrax_drivers.frames import wrap_angle
 
 from .model import rigid_inertia
 
 __all__ = ["LegacyPDHold"]
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class LegacyPDHold:
@@ -82,7 +79,7 @@ class LegacyPDHold:
                         - 2.0 * zeta * wn * i * rates[k - 3])
         if "yaw" not in free:
             i = self.inertia[5]
-            w[5] = i * wn * wn * _wrap(self.heading_setpoint_rad - rpy[2]) - 2.0 * zeta * wn * i * rates[2]
+            w[5] = i * wn * wn * wrap_angle(self.heading_setpoint_rad - rpy[2]) - 2.0 * zeta * wn * i * rates[2]
         for k in range(6):
             w[k] = float(np.clip(w[k], -lim[k], lim[k]))
         return w

@@ -48,6 +48,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS
 
 from ..estimation.free_decay import fit_quadratic_free_decay
+from ..vehicle.thrust_lag import ThrustLag
 from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, rigid_inertia_of, theta_priors
 from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel, thrust_weights
 
@@ -249,11 +250,12 @@ def lagged_parts(record: Any) -> tuple[np.ndarray, np.ndarray]:
     lp, ln = np.zeros_like(f), np.zeros_like(f)
     if f.shape[0] == 0:
         return lp, ln
-    k = np.exp(-np.diff(t) / tau) if tau > 0 else np.zeros(t.size - 1)
+    lag = ThrustLag(tau)
     ap, an = np.zeros(f.shape[1]), np.zeros(f.shape[1])
     for i in range(1, t.size):
-        ap = pos[i - 1] + (ap - pos[i - 1]) * k[i - 1]
-        an = neg[i - 1] + (an - neg[i - 1]) * k[i - 1]
+        dt = float(t[i] - t[i - 1])
+        ap = lag.advance(ap, pos[i - 1], dt)
+        an = lag.advance(an, neg[i - 1], dt)
         lp[i], ln[i] = ap, an
     return lp, ln
 

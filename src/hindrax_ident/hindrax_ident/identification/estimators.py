@@ -56,7 +56,7 @@ from ..estimation.filters import KinematicKalmanFilter
 from ..estimation.least_squares import EstimationError, fit_drag
 from ..estimation.rls import RecursiveLeastSquares
 from ..estimation.steady_windows import detect_steady_windows
-from ..sim.model import rigid_body_mass_matrix
+from ..vehicle.rigid_body import rigid_body_mass_matrix
 from .fusion import AccelAidedFilter
 from .output_error import model_terms
 from .results import prior_entries

@@ -50,6 +50,8 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
+from ..vehicle.thrust_lag import ThrustLag
+
 from .estimators import OnlineDofEstimator, measurement_settings
 from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
 from .maneuvers import DepthEstimator, level_ladder
@@ -437,13 +439,10 @@ class Executive:
         ctx.t_s = float(inp.t_s)
         fc = self._f_cmd
         fp, fn = np.maximum(fc, 0.0), np.minimum(fc, 0.0)
-        if self.time_constant_s > 0.0:
-            k = math.exp(-float(inp.elapsed_s) / self.time_constant_s)
-            self.f_lag = fc + (self.f_lag - fc) * k
-            self._f_pos = fp + (self._f_pos - fp) * k
-            self._f_neg = fn + (self._f_neg - fn) * k
-        else:
-            self.f_lag, self._f_pos, self._f_neg = fc, fp, fn
+        lag, dt = ThrustLag(self.time_constant_s), float(inp.elapsed_s)
+        self.f_lag = lag.advance(self.f_lag, fc, dt)
+        self._f_pos = lag.advance(self._f_pos, fp, dt)
+        self._f_neg = lag.advance(self._f_neg, fn, dt)
         st = ctx.state
         for dev, s in inp.samples:
             st.on_sample(dev, s)

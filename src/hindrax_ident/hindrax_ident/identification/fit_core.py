@@ -57,6 +57,7 @@ from scipy import optimize, stats
 from scipy import signal as _signal
 
 from ..estimation.least_squares import EstimationError
+from ..vehicle.thrust_lag import ThrustLag
 
 __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUSTER_RHO_MAX", "Chunk", "DofRecord",
            "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments", "simulate", "fit_terms", "FitOutcome",
@@ -303,23 +304,6 @@ def _shift(x: np.ndarray, ticks: float) -> np.ndarray:
     return (1.0 - f) * a + f * b
 
 
-def _lagged(fc: np.ndarray, lag_s: float, h: float, f0: float | None = None
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(start, middle, end) of each tick of the force through a first-order lag from the held command ``fc`` (n,):
-    exact for a command held over the tick, the lag state starting at ``f0`` (None: the first command)."""
-    if lag_s <= 0:
-        return fc, fc, fc
-    e_full, e_half = math.exp(-h / lag_s), math.exp(-0.5 * h / lag_s)
-    start = np.empty_like(fc)
-    s = fc[0] if f0 is None else float(f0)
-    # the recursion is a first-order IIR filter: start[j+1] = fc[j] + (start[j] - fc[j]) e
-
-    start[0] = s
-    if fc.size > 1:
-        start[1:] = _signal.lfilter([1.0 - e_full], [1.0, -e_full], fc[:-1], zi=[e_full * s])[0]
-    return start, fc + (start - fc) * e_half, fc + (start - fc) * e_full
-
-
 def coriolis_products(velocity: np.ndarray) -> np.ndarray:
     """The products g (..., 6, 6) with the Coriolis and centripetal force of a diagonal inertia M = diag(M1..M6)
     (body origin at the CG; Fossen 2011 eqs. 6.43 and 6.45) C(nu) nu = g @ [M1..M6] for nu (..., 6) = [u v w p q r]
@@ -360,7 +344,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     for ci, ch in enumerate(rec.chunks):
         n = ch.force.size
         f = _shift(ch.force, timing.delay_s / h)
-        fs, fm, fe = _lagged(f, timing.lag_s, h, ch.force_start if timing.delay_s <= 0 else None)
+        fs, fm, fe = ThrustLag(timing.lag_s).over_ticks(f, h, ch.force_start if timing.delay_s <= 0 else None)
         inputs = [fs, fm, fe]
         extra = []  # time-dependent regressors (start, middle, end) of the parameters after the restoring
         if rec.dof in ("roll", "pitch"):

@@ -39,6 +39,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.recording.reader import BagReader
 
+from ..vehicle.thrust_lag import ThrustLag
 from . import calibration_topic
 from .calibration import identify_calibrated
 from .campaign import CampaignRecord
@@ -171,7 +172,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
                        else thrust_of_written_widths(cfg, curve, p[1] if p[2] else neutral) for p in pwm])
     f_cmd = np.where(ipw[:, None] >= 0, forces[np.clip(ipw, 0, None)], 0.0)
     tau = float(cfg.thrusters.time_constant_s)
-    k = math.exp(-grid_s / tau) if tau > 0 else 0.0
+    thrust_lag = ThrustLag(tau)
     settle = int(math.ceil(5.0 * tau / grid_s)) if tau > 0 else 0
     f_lag = np.zeros_like(f_cmd)
     lag = np.zeros(n_thr)
@@ -186,7 +187,7 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
             f_lag[i] = np.nan
         else:
             f_lag[i] = lag
-        lag = f_cmd[i] + (lag - f_cmd[i]) * k
+        lag = thrust_lag.advance(lag, f_cmd[i], grid_s)
     dof_of = np.array([DOFS.index(m.dof) if m.dof in DOFS else -1 for _, m in status])
     running = np.array([m.phase == _RUNNING for _, m in status])
     level = np.array([m.level_command if m.phase == _RUNNING else math.nan for _, m in status], dtype=float)

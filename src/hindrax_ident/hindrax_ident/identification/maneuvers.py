@@ -37,6 +37,7 @@ from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
+from hindrax_drivers.frames import wrap_angle
 
 from ..control.law import ControlInput, ControlSettings, Controller
 from ..control.model import ControlModel, inertia_vector, model_from_config
@@ -44,7 +45,7 @@ from .fusion import AccelAidedFilter
 
 __all__ = [
     "DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority", "level_ladder",
-    "prior_inertia", "PoolBox", "SensorState", "DepthEstimator", "HoldController", "wrap_angle", "euler_rates",
+    "prior_inertia", "PoolBox", "SensorState", "DepthEstimator", "HoldController", "euler_rates",
 ]
 
 #: DOF name -> index in nu / tau (SNAME order).
@@ -53,11 +54,6 @@ TRANSLATIONAL = ("surge", "sway", "heave")
 ROTATIONAL = ("roll", "pitch", "yaw")
 #: Clearance between the hull top and the free surface, m (the hull must not emerge: buoyancy would change).
 SURFACE_CLEARANCE_M = 0.1
-
-
-def wrap_angle(a: float) -> float:
-    """Angle wrapped to (-pi, pi], rad."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def dof_authority(core: AllocationCore, dof: str) -> tuple[float, float]:

@@ -11,8 +11,8 @@ of w (down positive): ``[M, k_q+, k_q-, k_l+, k_l-, b]``. Roll and pitch add the
 ``s`` = cos(theta) sin(phi) (roll) or sin(theta) (pitch) ([NTNU-Thesis] eq. 2.23).
 
 * :class:`DofModel` - the acceleration nu_dot of that model for given parameters.
-* :class:`LaggedThrust` - the force inside one control tick: the thrust reaches the commanded value through the
-  first-order lag ``thrusters.time_constant_s`` (exact for a command held over the tick).
+* the force inside one control tick (the thrust reaching the commanded value through the first-order lag
+  ``thrusters.time_constant_s``) is :meth:`hindrax_ident.vehicle.thrust_lag.ThrustLag.within_tick`.
 * :func:`rk4_step` - one classical Runge-Kutta step of the velocity, and the matching Runge-Kutta-Nystrom
   step of the position (x' = v, v' = a(v, t)), force and restoring regressor given at the start, middle and
   end of the step.
@@ -23,13 +23,12 @@ that the online estimators and the tests use.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-__all__ = ["model_terms", "DofModel", "LaggedThrust", "rk4_step"]
+__all__ = ["model_terms", "DofModel", "rk4_step"]
 
 
 def model_terms(dof: str, velocity, restoring=None) -> np.ndarray:
@@ -60,23 +59,6 @@ class DofModel:
         """nu_dot = (tau - [k_q |nu| nu + k_l nu + b (+ k_r s)]) / M, elementwise over ``velocity`` (...) with
         ``force`` and ``restoring`` broadcast against it."""
         return (force - model_terms(self.dof, velocity, restoring) @ self.theta[1:]) / self.theta[0]
-
-
-@dataclass(frozen=True)
-class LaggedThrust:
-    """Force inside one tick of ``tick_s`` when the thrust follows a first-order lag of ``time_constant_s`` (0: no
-    lag) towards the commanded value: f(s) = f_cmd + (f_start - f_cmd) exp(-s / tau), 0 <= s <= tick_s."""
-
-    time_constant_s: float
-    tick_s: float
-
-    def decay(self, s: float) -> float:
-        """exp(-s / tau) (0.0 without a lag)."""
-        return math.exp(-s / self.time_constant_s) if self.time_constant_s > 0 else 0.0
-
-    def start_middle_end(self, f_start, f_cmd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The force at s = 0, tick_s / 2 and tick_s (arrays broadcast as ``f_start``, ``f_cmd``)."""
-        return tuple(f_cmd + (f_start - f_cmd) * self.decay(s) for s in (0.0, 0.5 * self.tick_s, self.tick_s))
 
 
 def rk4_step(acceleration: Callable, v, x, h: float, forces: tuple, restorings: tuple = (None, None, None)):

@@ -23,7 +23,7 @@ from hindrax_drivers.config import DOFS, or_default
 
 from ..estimation.least_squares import EstimationError
 from ..estimation.priors import priors_from_config
-from ..sim.model import rigid_body_mass_matrix
+from ..vehicle.rigid_body import rigid_body_mass_matrix
 
 __all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "rigid_inertia_of", "prior_entry", "theta_priors",
            "prior_posterior"]

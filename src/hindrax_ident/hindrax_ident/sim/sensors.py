@@ -55,6 +55,7 @@ from scipy.spatial.transform import Rotation
 from hindrax_drivers import frames
 from hindrax_drivers.config import VehicleConfig, or_default
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
+from hindrax_drivers.frames import wrap_angle
 
 from .pool import Pool
 
@@ -222,10 +223,6 @@ def pressure_at_depth_pa(depth_m: float, density_kg_m3: float, gravity_m_s2: flo
                          surface_pressure_pa: float) -> float:
     """Hydrostatic absolute pressure p0 + rho g max(depth, 0) (Pa)."""
     return surface_pressure_pa + density_kg_m3 * gravity_m_s2 * max(float(depth_m), 0.0)
-
-
-def _wrap(angle: float) -> float:
-    return math.atan2(math.sin(angle), math.cos(angle))
 
 
 # --------------------------------------------------------------------------------------------- models
@@ -411,7 +408,7 @@ class DvlAttitudeModel(SensorModel):
     def measure(self, truth: VehicleTruth) -> DvlAttitudeSample:
         e = truth.euler_rad
         m = self._noisy3(e)
-        return DvlAttitudeSample(truth.t_s, m[0], m[1], _wrap(m[2]), (float(e[0]), float(e[1]), float(e[2])))
+        return DvlAttitudeSample(truth.t_s, m[0], m[1], wrap_angle(m[2]), (float(e[0]), float(e[1]), float(e[2])))
 
 
 class _ImuBase(SensorModel):

@@ -98,8 +98,8 @@ class Simulator:
         self._external = [0.0] * 6
         self._last_pw: np.ndarray | None = None
         self._neutral = np.full(self.thrusters.n, self.thrusters.neutral_us)
-        self._lag_half = self.thrusters.lag_factor(0.5 * self.step_s)
-        self._lag_full = self.thrusters.lag_factor(self.step_s)
+        self._lag_half = self.thrusters.lag.decay(0.5 * self.step_s)
+        self._lag_full = self.thrusters.lag.decay(self.step_s)
         self.reset()
 
     # ------------------------------------------------------------------ set-up

@@ -5,29 +5,30 @@
   thrust_allocation_matrix` ([Hindrax-Drag] eq. 9), i.e. the wrench about the CG. The model's reference point is
   the body origin CO with the CG at r_g, so the wrench about CO is ``[F; T_cg + r_g x F]``
   (``matrix_co``; identical when r_g = 0, as in the Hindrax file).
-* Thrust: one :class:`hindrax_drivers.allocation.thrust_curve.ThrustCurve` from ``thrusters.curve_negative``,
-  ``curve_positive``, the pulse-width range and the deadband ([Hindrax-Drag] eq. 1, Table 2; docs/architecture.md §4).
+* Thrust: the allocation's :class:`hindrax_drivers.allocation.thrust_curve.ThrustCurve`
+  (:func:`hindrax_drivers.allocation.from_config.thrust_curve_from_config`: ``thrusters.curve_negative``,
+  ``curve_positive``, the pulse-width range and the deadband) ([Hindrax-Drag] eq. 1, Table 2; docs/architecture.md §4).
   The pulse widths are those on the wire (``hindrax_msgs/ThrusterPwm``: what the ESC output wrote). A thruster
   configured ``reversed`` has its pulse width mirrored about neutral by the ESC node and a reversed
   propeller, so its physical thrust along ``direction_frd`` is ``curve(2 P_neutral - P)``. The per-thruster
   ``trim_us`` compensates a real ESC's offset; the simulated ESCs have none, so the trim is not undone.
   Battery sag is not modelled (``voltage_scale`` 1).
-* Lag: first order, ``T dF/dt = F_cmd - F`` with ``T = thrusters.time_constant_s`` (0 = instantaneous).
-  For a command held constant over a step the solution is exact:
-  ``F(t0 + s) = F_cmd + (F(t0) - F_cmd) exp(-s / T)``, which the integrator evaluates at its stage times.
+* Lag: :class:`hindrax_ident.vehicle.thrust_lag.ThrustLag` of ``thrusters.time_constant_s``, exact for a command
+  held over a step, which the integrator evaluates at its stage times.
 * Not modelled: thrust dependence on advance speed and thruster-hull / thruster-thruster interaction
   ([Hindrax-Drag] §6; docs/identification.md §3 C6).
 """
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 import numpy as np
 
+from hindrax_drivers.allocation.from_config import thrust_curve_from_config
 from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
-from hindrax_drivers.allocation.thrust_curve import ThrustCurve
 from hindrax_drivers.config import VehicleConfig
+
+from ..vehicle.thrust_lag import ThrustLag
 
 __all__ = ["PulseWidthError", "Thrusters"]
 
@@ -54,12 +55,11 @@ class Thrusters:
         shift = np.eye(6)
         shift[3:, :3] = np.array([[0.0, -r_g[2], r_g[1]], [r_g[2], 0.0, -r_g[0]], [-r_g[1], r_g[0], 0.0]])
         self.matrix_co = shift @ self.matrix_cg
-        self.curve = ThrustCurve(t.curve_negative, t.curve_positive, pulse_width_min_us=t.pulse_width_min_us,
-                                 pulse_width_neutral_us=t.pulse_width_neutral_us,
-                                 pulse_width_max_us=t.pulse_width_max_us, deadband_us=t.deadband_us)
+        self.curve = thrust_curve_from_config(config)  # the allocation's curve, the same object type and values
         self.neutral_us = float(t.pulse_width_neutral_us)
         self._reversed = np.array([th.reversed for th in t.thrusters], dtype=bool)
         self.time_constant_s = float(t.time_constant_s)
+        self.lag = ThrustLag(self.time_constant_s)
         for arr in (self.matrix_cg, self.matrix_co):
             arr.flags.writeable = False
         self.pulse_width_us = np.full(self.n, self.neutral_us)
@@ -101,16 +101,9 @@ class Thrusters:
         self.commanded_force_n = force
         self.pulse_width_us = np.array(pulse_width_us, dtype=float).reshape(-1)
 
-    def lag_factor(self, dt_s: float) -> float:
-        """exp(-dt / T): the fraction of a thrust error left after ``dt_s`` (0 when T = 0)."""
-        if self.time_constant_s <= 0.0:
-            return 0.0
-        return math.exp(-dt_s / self.time_constant_s)
-
     def advance(self, dt_s: float) -> None:
         """Advance the lagged thrust by ``dt_s`` (exact for the held command)."""
-        k = self.lag_factor(dt_s)
-        self.force_n = self.commanded_force_n + (self.force_n - self.commanded_force_n) * k
+        self.force_n = self.lag.advance(self.force_n, self.commanded_force_n, dt_s)
 
     def wrench_co(self, force_n: Sequence[float] | None = None) -> np.ndarray:
         """Body wrench [X Y Z K M N] (6,) about the body origin (FRD, N, N m) of ``force_n`` (default: current)."""

@@ -12,7 +12,9 @@ import numpy as np
 
 from ..estimators import truth_parameters
 from ..excitation import BROADBAND, BoxShaping, design_band, design_signal
-from ..maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad, wrap_angle
+from hindrax_drivers.frames import wrap_angle
+
+from ..maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
 from .base import DofStep
 from .context import StepContext, Wrenches
 

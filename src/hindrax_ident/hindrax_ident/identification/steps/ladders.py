@@ -15,7 +15,9 @@ import math
 
 import numpy as np
 
-from ..maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad, wrap_angle
+from hindrax_drivers.frames import wrap_angle
+
+from ..maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
 from .base import DofStep
 from .context import StepContext, Wrenches
 
