@@ -28,6 +28,11 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "validate a vehicle configuration file; print each error as one line, or a summary"),
     (("allocate",), "hindrax_ident.commands.allocate",
      "allocate a base_link wrench X Y Z K M N (N, N m) to thruster forces and pulse widths (JSON)"),
+    (("arm",), "hindrax_ident.commands.arm",
+     "arm a vehicle's thruster outputs (--vehicle NAME, or the only vehicle on the domain; through its gateway "
+     "from the topside)"),
+    (("disarm",), "hindrax_ident.commands.arm",
+     "disarm a vehicle's thruster outputs (--vehicle NAME, or the only vehicle on the domain)"),
     (("thruster-test",), "hindrax_ident.commands.thruster_test",
      "step each thruster alone and print the wrench the model expects (catch reversed/swapped thrusters)"),
     (("bringup",), "hindrax_ident.commands.bringup",

@@ -1,0 +1,95 @@
+"""Which vehicle a command that moves one talks to: ``--vehicle NAME``, or the only one on the domain.
+
+A vehicle shows itself by its gateway's node, ``/<vehicle.name>/gateway`` (docs/architecture.md §8.2), on the
+topside domain and on the vehicle's internal graph alike. On the topside the vehicle's interface is the gateway's
+relays under ``/<name>/`` (:data:`hindrax_drivers.gateway.interface.INTERFACE`); on the internal graph (a command
+run on the vehicle itself) the nodes' own names, without a namespace. :func:`find_vehicle` tells the two apart by
+the gateway's topside-only node ``/<name>/gateway_operator``.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from .common import CommandError
+
+__all__ = ["DISCOVERY_SETTLE_S", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros"]
+
+#: after the first gateway appears, how long to keep listening for others before choosing, s (cross-process
+#: discovery of peers already running arrives within about 1 s of the first, docs/architecture.md §11.5)
+DISCOVERY_SETTLE_S = 3.0
+
+
+@dataclass(frozen=True)
+class Target:
+    """The vehicle a command talks to: its ``name`` and whether the command is on the ``topside`` domain (through
+    the gateway) or on the vehicle's internal graph."""
+
+    name: str
+    topside: bool
+
+    def resolve(self, topside_name: str, internal_name: str) -> str:
+        """The absolute name to use: ``/<name>/<topside_name>`` on the topside, ``internal_name`` on the vehicle."""
+        return f"/{self.name}/{topside_name}" if self.topside else internal_name
+
+
+def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--vehicle NAME`` and ``--discovery-timeout S`` (how long to look for the vehicle)."""
+    parser.add_argument("--vehicle", default=None, metavar="NAME",
+                        help="the vehicle's name (vehicle.name of its vehicle file); default: the only vehicle "
+                             "on this ROS domain (refused when there are none or several)")
+    parser.add_argument("--discovery-timeout", type=float, default=10.0, metavar="S",
+                        help="how long to look for the vehicle's gateway, s (default 10)")
+
+
+def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float) -> Target:
+    """Spin ``executor`` until ``wanted``'s gateway is seen, or (no name given) until a gateway is seen and
+    :data:`DISCOVERY_SETTLE_S` more have passed, at most ``timeout_s``; then choose
+    (:func:`hindrax_drivers.gateway.interface.choose_vehicle`). Raises :class:`CommandError` (one line) for no
+    vehicle, several, or not the one named."""
+    from hindrax_drivers.gateway.interface import GATEWAY_NODE, VehicleChoiceError, choose_vehicle, vehicles_seen
+
+    start = time.monotonic()
+    first_seen: float | None = None
+    while True:
+        nodes = node.get_node_names_and_namespaces()
+        seen = vehicles_seen(nodes)
+        now = time.monotonic()
+        if seen and first_seen is None:
+            first_seen = now
+        if wanted is not None and wanted in seen:
+            break
+        if wanted is None and first_seen is not None and now - first_seen >= DISCOVERY_SETTLE_S:
+            break
+        if now - start >= timeout_s:
+            break
+        executor.spin_once(timeout_sec=0.1)
+    domain = f"ROS domain {os.environ.get('ROS_DOMAIN_ID', '0')}"
+    try:
+        name = choose_vehicle(seen, wanted, domain)
+    except VehicleChoiceError as exc:
+        raise CommandError(str(exc)) from None
+    return Target(name, (GATEWAY_NODE + "_operator", "/" + name) in nodes)
+
+
+def with_ros(body: Callable[[Any, Any], Any], node_name: str) -> Any:
+    """Run ``body(node, executor)`` with a node ``node_name`` in a context of its own (SIGINT left to the caller);
+    shut everything down after it. Returns what ``body`` returns."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(node_name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        return body(node, executor)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        context.try_shutdown()

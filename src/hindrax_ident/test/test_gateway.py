@@ -1,0 +1,221 @@
+"""Who may command a vehicle (docs/architecture.md §8.2): the gateway is the vehicle's only door to the topside.
+
+Two vehicles, ``alpha`` and ``bravo``, each with its own internal domain, share one topside domain. Each vehicle's
+internal graph holds stand-ins of its safety services and topics (the ESC's ``esc/set_armed``, the supervisor's
+``supervisor/estop`` and ``supervisor/reset``, the MS5837's ``pressure/zero_depth``, the recorder's ``recorder/stop``,
+subscribers of ``thrusters/command_pulse_width`` and ``supervisor/heartbeat``), recording every call and message
+that reaches them, and its gateway is started from ``vehicle.launch.xml`` as ``ros2 launch`` would. Then:
+
+* a plain rclpy script on the topside domain (no credentials, not using the interface) tries what a process on the
+  vehicle's domain could do before: arm, drive, forge a heartbeat, reset, re-zero, stop the recorder. Nothing
+  reaches the vehicle; its e-stop through ``/alpha/estop`` does, and the telemetry reaches the script;
+* ``hindrax arm --vehicle alpha`` arms alpha and never bravo; ``hindrax arm`` with two vehicles on the domain
+  refuses with one line and arms neither; ``hindrax disarm --vehicle bravo`` reaches bravo only.
+
+Who *on the topside* may call ``arm`` is SROS2's on the Pi (the operator enclave); the development wheels have no
+DDS Security, so that part is checked on the policy files, not here.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+from domain_coordinator import domain_id
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.config import default_config_path
+from hindrax_drivers.gateway.interface import relays
+from hindrax_drivers.launch_xml import read_launch
+from hindrax_drivers.process_runner import ProcessRunner
+from hindrax_drivers.testing import child_env, ros_context, wait_until
+
+REPO = Path(__file__).resolve().parents[3]
+WAIT_S = 60.0
+VEHICLES = ("alpha", "bravo")
+
+#: the plain script: waits for alpha's gateway, then tries the safety graph directly; prints one JSON line
+INTRUDER = r'''
+import json, sys, time
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from hindrax_msgs.msg import ThrusterPwm
+from std_srvs.srv import Trigger
+rclpy.init()
+node = rclpy.create_node("intruder")
+status = []
+node.create_subscription(DiagnosticStatus, "/alpha/supervisor/status", status.append, 10)
+deadline = time.monotonic() + float(sys.argv[1])
+def names():
+    return {n for n, _ in node.get_service_names_and_types()}
+while not {"/alpha/estop", "/bravo/estop"} <= names() and time.monotonic() < deadline:
+    rclpy.spin_once(node, timeout_sec=0.1)
+rclpy.spin_once(node, timeout_sec=0.5)
+# the graph before this script adds clients and publishers of its own (a client's name is listed too)
+graph = {"services": sorted(names()), "topics": sorted(n for n, _ in node.get_topic_names_and_types())}
+pwm = {t: node.create_publisher(ThrusterPwm, t, 10) for t in ("thrusters/command_pulse_width",
+                                                              "/alpha/thrusters/command_pulse_width")}
+beat = node.create_publisher(DiagnosticStatus, "supervisor/heartbeat", 10)
+calls = {}
+for name in ("/supervisor/reset", "/pressure/zero_depth", "/alpha/pressure/zero_depth", "/recorder/stop"):
+    client = node.create_client(Trigger, name)
+    calls[name] = client.wait_for_service(timeout_sec=1.0)
+end = time.monotonic() + 1.5
+while time.monotonic() < end:
+    for p in pwm.values():
+        p.publish(ThrusterPwm(pulse_width_us=[1900.0] * 8, armed=True))
+    beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK, name="supervisor"))
+    rclpy.spin_once(node, timeout_sec=0.05)
+estop = node.create_client(Trigger, "/alpha/estop")
+answer = None
+if estop.wait_for_service(timeout_sec=10.0):
+    future = estop.call_async(Trigger.Request())
+    rclpy.spin_until_future_complete(node, future, timeout_sec=10.0)
+    answer = future.result() and future.result().success
+while not status and time.monotonic() < deadline:
+    rclpy.spin_once(node, timeout_sec=0.1)
+print(json.dumps(dict(graph, reachable=calls, estop=answer, telemetry=len(status))))
+'''
+
+
+class StandIns:
+    """One vehicle's internal graph as the gateway sees it: the safety services and topics, each recording what
+    reaches it, and ``supervisor/status`` published at 5 Hz."""
+
+    def __init__(self, ctx) -> None:
+        from diagnostic_msgs.msg import DiagnosticStatus
+        from hindrax_msgs.msg import ThrusterPwm
+        from hindrax_msgs.srv import SetArmed, StopRecording
+        from std_srvs.srv import Trigger
+
+        self.calls: list[object] = []
+        self.messages: list[str] = []
+        import rclpy
+
+        self.node = rclpy.create_node("vehicle_stand_ins", context=ctx)
+
+        def service(kind, name, answer):
+            def callback(request, response):
+                self.calls.append(answer(request))
+                response.success = True
+                if hasattr(response, "armed"):
+                    response.armed = bool(request.arm)
+                return response
+            self.node.create_service(kind, name, callback)
+
+        service(SetArmed, "esc/set_armed", lambda r: ("set_armed", bool(r.arm)))
+        for name in ("supervisor/estop", "supervisor/reset", "pressure/zero_depth"):
+            service(Trigger, name, lambda _r, n=name: n)
+        service(StopRecording, "recorder/stop", lambda _r: "recorder/stop")
+        self.node.create_subscription(ThrusterPwm, "thrusters/command_pulse_width",
+                                      lambda _m: self.messages.append("command_pulse_width"), 10)
+        self.node.create_subscription(DiagnosticStatus, "supervisor/heartbeat",
+                                      lambda _m: self.messages.append("heartbeat"), 10)
+        status = self.node.create_publisher(DiagnosticStatus, "supervisor/status", 10)
+        self.node.create_timer(0.2, lambda: status.publish(DiagnosticStatus(level=DiagnosticStatus.OK,
+                                                                           name="supervisor", message="ok")))
+        self.executor = SingleThreadedExecutor(context=ctx)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except Exception:  # noqa: BLE001 - the context shut down at the end of the test module
+            pass
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=2.0)
+        self.thread.join(timeout=5.0)
+        self.node.destroy_node()
+
+
+def gateway_process(config: Path, topside: int):
+    """The gateway's process as vehicle.launch.xml declares it."""
+    procs = read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml",
+                        {"config": str(config), "topside_domain_id": str(topside)},
+                        find_share=lambda pkg: REPO / "src" / pkg)
+    (gateway,) = [p for p in procs if p.label == "gateway"]
+    return gateway
+
+
+@pytest.fixture(scope="module")
+def pool(tmp_path_factory):
+    """Two vehicles (stand-ins + gateway each) on internal domains of their own, one topside domain."""
+    tmp = tmp_path_factory.mktemp("pool")
+    with domain_id() as topside, domain_id() as internal_a, domain_id() as internal_b:
+        vehicles = {}
+        runners = []
+        try:
+            with ros_context(internal_a) as ctx_a, ros_context(internal_b) as ctx_b:
+                for name, internal, ctx in (("alpha", internal_a, ctx_a), ("bravo", internal_b, ctx_b)):
+                    params = yaml.safe_load(default_config_path().read_text())
+                    params["/**"]["ros__parameters"]["vehicle"]["name"] = name
+                    config = tmp / f"{name}.yaml"
+                    config.write_text(yaml.safe_dump(params))
+                    vehicles[name] = StandIns(ctx)
+                    runner = ProcessRunner([gateway_process(config, topside)],
+                                           env=child_env(ROS_DOMAIN_ID=str(internal)), log_dir=tmp / name)
+                    runner.start()
+                    runners.append(runner)
+                yield {"topside": topside, "vehicles": vehicles, "runners": runners}
+                for v in vehicles.values():
+                    v.close()
+        finally:
+            for runner in runners:
+                runner.stop()
+
+
+def hindrax(pool, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "hindrax_ident.cli", *args], capture_output=True, text=True,
+                          env=child_env(ROS_DOMAIN_ID=str(pool["topside"])), timeout=120)
+
+
+def test_a_process_on_the_topside_reaches_only_the_interface(pool):
+    alpha = pool["vehicles"]["alpha"]
+    r = subprocess.run([sys.executable, "-c", INTRUDER, str(WAIT_S)], capture_output=True, text=True,
+                       env=child_env(ROS_DOMAIN_ID=str(pool["topside"])), timeout=180)
+    assert r.returncode == 0, r.stderr[-2000:]
+    seen = json.loads(r.stdout.strip().splitlines()[-1])
+    assert "/alpha/estop" in seen["services"] and "/bravo/estop" in seen["services"]  # it did see both vehicles
+    assert not any(seen["reachable"].values()), seen["reachable"]  # reset, zero_depth, recorder/stop: absent
+    graph = seen["services"] + seen["topics"]
+    for forbidden in ("set_armed", "heartbeat", "pulse_width", "zero_depth", "supervisor/reset", "supervisor/abort"):
+        assert not [n for n in graph if forbidden in n], forbidden  # no vehicle offers them on the topside
+    # exactly the interface, nothing more (the operator's relays exist: SROS2 decides who calls them, on the Pi)
+    action = [f"/alpha/run_identification/_action/{x}" for x in ("send_goal", "cancel_goal", "get_result")]
+    assert {n for n in seen["services"] if n.startswith("/alpha/") and not n.endswith("/get_type_description")} == \
+        {f"/alpha/{r.topside}" for r in relays("service")} | set(action)
+    assert {n for n in seen["topics"] if n.startswith("/alpha/")} == \
+        {f"/alpha/{r.topside}" for r in relays("topic_in") + relays("topic_out")} | \
+        {"/alpha/run_identification/_action/feedback", "/alpha/run_identification/_action/status"}
+    assert seen["estop"] is True and seen["telemetry"] > 0
+    # on the vehicle: the e-stop arrived, nothing else did; no command or forged heartbeat reached its subscribers
+    wait_until(lambda: "supervisor/estop" in alpha.calls, 10.0, message="alpha's supervisor got the e-stop")
+    assert alpha.calls == ["supervisor/estop"], alpha.calls
+    assert alpha.messages == [], alpha.messages[:5]
+    assert pool["vehicles"]["bravo"].calls == []
+
+
+def test_a_command_aimed_at_one_vehicle_never_moves_the_other(pool):
+    alpha, bravo = pool["vehicles"]["alpha"], pool["vehicles"]["bravo"]
+    before_a, before_b = len(alpha.calls), len(bravo.calls)
+    r = hindrax(pool, "arm")  # two vehicles on the domain and none named: refused, nobody armed
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "several vehicles" in r.stderr and "alpha, bravo" in r.stderr and "--vehicle" in r.stderr
+    r = hindrax(pool, "arm", "--vehicle", "charlie", "--discovery-timeout", "3")
+    assert r.returncode == 1 and "vehicle 'charlie' not seen" in r.stderr, r.stderr
+    assert len(alpha.calls) == before_a and len(bravo.calls) == before_b
+    r = hindrax(pool, "arm", "--vehicle", "alpha")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "alpha: armed"
+    assert alpha.calls[before_a:] == [("set_armed", True)] and len(bravo.calls) == before_b
+    r = hindrax(pool, "disarm", "--vehicle", "bravo")
+    assert r.returncode == 0, r.stderr
+    assert bravo.calls[before_b:] == [("set_armed", False)] and alpha.calls[before_a:] == [("set_armed", True)]
