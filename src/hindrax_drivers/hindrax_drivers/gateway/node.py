@@ -39,6 +39,19 @@ import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
+import rclpy
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient, ActionServer, CancelResponse
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from ..config import ConfigError, ConfigIssue
+from ..node_common import load_node_config
+from ..ros_process import RosProcess
+from .interface import GATEWAY_NODE, relays
+
 __all__ = ["DISCOVERY_RANGES", "GatewaySettings", "Gateway", "main", "read_settings"]
 
 #: allowed values of ``topside_discovery_range`` (Jazzy's ``ROS_AUTOMATIC_DISCOVERY_RANGE``)
@@ -65,9 +78,6 @@ class GatewaySettings:
 def read_settings(node: Any) -> GatewaySettings:
     """Declare and read the gateway's parameters on ``node`` (module docstring). Raises
     :class:`~hindrax_drivers.config.ConfigError` naming key, value and allowed range."""
-    from ..config import ConfigError, ConfigIssue
-    from ..node_common import load_node_config
-
     cfg = load_node_config(node, ("vehicle",))
     domain = node.declare_parameter("topside_domain_id", 0).value
     scope = node.declare_parameter("topside_discovery_range", "LOCALHOST").value
@@ -98,9 +108,6 @@ def wait_for(future: Any, timeout_s: float) -> bool:
 def init_topside_context(domain_id: int, discovery_range: str, static_peers: str | None) -> Any:
     """An initialised rclpy Context on the topside domain. rcl reads ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and
     ``ROS_STATIC_PEERS`` at init: they are set for this init only, and the environment restored after."""
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
-
     saved = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS")}
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery_range
     if static_peers:
@@ -123,13 +130,6 @@ class Gateway:
     in threads of its own; :meth:`close` stops and destroys them (the context is left to the caller)."""
 
     def __init__(self, internal: Any, topside_context: Any, settings: GatewaySettings) -> None:
-        from rclpy.action import ActionClient, ActionServer, CancelResponse
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.node import Node
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-        from .interface import GATEWAY_NODE, relays
-
         self.settings = settings
         self.internal = internal
         ns = "/" + settings.vehicle_name
@@ -223,8 +223,6 @@ class Gateway:
     def _run_goal(self, goal_handle: Any) -> Any:
         """The topside ``run_identification`` goal: sent to the identification node, its feedback relayed, a cancel
         passed on; ends as the internal goal ended."""
-        from action_msgs.msg import GoalStatus
-
         result_type = self._action_type.Result
 
         def failed(why: str) -> Any:
@@ -267,8 +265,6 @@ class Gateway:
 
     @staticmethod
     def _spin(executor: Any) -> None:
-        from rclpy.executors import ExternalShutdownException
-
         try:
             executor.spin()
         except ExternalShutdownException:
@@ -292,12 +288,6 @@ def main(args: Sequence[str] | None = None) -> int:
     os.environ.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)  # module docstring: the topside must not be loopback-bound
     static_peers = os.environ.pop("ROS_STATIC_PEERS", None)  # the topside's, not the internal graph's
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the internal context: loopback whatever was set
-    import rclpy
-    from rclpy.node import Node
-
-    from ..config import ConfigError
-    from ..ros_process import RosProcess
-
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor="single",
                     interrupt=False) as proc:
         boot = Node("gateway", automatically_declare_parameters_from_overrides=False)
