@@ -16,13 +16,15 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.parameter import Parameter
 
+from hindrax_msgs.msg import ThrusterPwm
+
 from .dds_transport import loopback_transport
 from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
 from .config import default_config_path, load_config
 from .liveness import HEARTBEAT_NODES, HeartbeatPublisher
 
-__all__ = ["ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env", "config_parameters",
-           "python_executable", "ros_context", "wait_until"]
+__all__ = ["AllocationStandIn", "ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env",
+           "config_parameters", "python_executable", "ros_context", "wait_until"]
 
 
 def child_env(**extra: str) -> dict[str, str]:
@@ -83,6 +85,32 @@ class SafetyHeartbeats:
                 continue
             level = self._status.OK if state == "" else self._status.ERROR
             self._publisher(name).publish(level, state or "ok")
+
+
+class AllocationStandIn:
+    """Stand-in for the thrust allocation as the ESC's commander, for tests and benchmarks that drive an ESC node
+    with pulse widths directly: a node named ``thrust_allocation`` (the only publisher the ESC accepts on
+    ``thrusters/command_pulse_width``, :func:`hindrax_drivers.pca9685.core.command_source_fault`) in ``context``
+    with :attr:`pub` on that topic. :meth:`command` publishes one armed command now; :meth:`destroy` when done.
+    The node needs no executor."""
+
+    def __init__(self, context=None) -> None:
+        self.node = rclpy.create_node("thrust_allocation", context=context)
+        self.pub = self.node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+
+    def command(self, widths, armed: bool = True) -> None:
+        """Publish ``widths`` (thruster order, us), stamped now."""
+        m = ThrusterPwm(pulse_width_us=[float(w) for w in widths], armed=armed)
+        m.header.stamp = self.node.get_clock().now().to_msg()
+        self.pub.publish(m)
+
+    def publish(self, msg) -> None:
+        """Publish a ThrusterPwm as it is."""
+        self.pub.publish(msg)
+
+    def destroy(self) -> None:
+        """Destroy the stand-in's node."""
+        self.node.destroy_node()
 
 
 class GraphSettled:

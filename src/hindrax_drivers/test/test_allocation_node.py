@@ -183,3 +183,27 @@ def test_a_wrench_far_beyond_the_thrusters_is_rejected_not_scaled_into_full_thru
         assert list(pwm.pulse_width_us) == [1500.0] * 8 and not pwm.armed and list(forces.force_n) == [0.0] * 8
     else:
         assert not status.rejected and status.saturated and status.reason == "saturated: scaled" and pwm.armed
+
+
+def test_thruster_test_forces_go_through_the_allocation(graph):
+    """``hindrax thruster-test`` steps one thruster at a time through ``thrusters/test_forces``: the allocation, the
+    one commander the ESC accepts, puts each force through its thruster's curve; a force beyond the thruster's
+    limits (the shipped curve gives at most 15.53 N) is rejected: neutral, not armed."""
+    from hindrax_msgs.msg import ThrusterForces
+
+    node, _send, got, spin = graph
+    pub = node.create_publisher(ThrusterForces, "thrusters/test_forces", 10)
+    wait_until(lambda: pub.get_subscription_count() > 0, 10, spin, "allocation subscribed to test forces")
+    n = len(got["pwm"])
+    pub.publish(ThrusterForces(force_n=[0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    wait_until(lambda: len(got["pwm"]) > n, 10, spin, "the test command")
+    pwm = got["pwm"][-1]
+    widths = list(pwm.pulse_width_us)
+    assert pwm.armed and widths[:2] == [1500.0, 1500.0] and widths[3:] == [1500.0] * 5
+    assert 1525.0 <= widths[2] <= 1600.0  # 3 N forward: outside the deadband, well below full thrust
+    curve = node.core.allocator.curves[2]
+    assert float(curve.thrust_n(widths[2])) == pytest.approx(3.0, abs=0.05)
+    n = len(got["pwm"])
+    pub.publish(ThrusterForces(force_n=[0.0, 0.0, 40.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    wait_until(lambda: len(got["pwm"]) > n, 10, spin, "the rejection")
+    assert not got["pwm"][-1].armed and set(got["pwm"][-1].pulse_width_us) == {1500.0}

@@ -58,8 +58,9 @@ def test_i2c_sensors_group_runs_both_nodes_under_their_own_names_and_exits_0_on_
 @pytest.mark.ros
 def test_actuation_the_esc_takes_the_allocations_commands_by_its_subscription():
     """actuation_node composes the allocation and the ESC: the allocation's command reaches the chip through the
-    ESC's subscription callback, the same path as a command from any other publisher (``hindrax thruster-test``) and
-    as in separate processes; the ESC has no polled intake node and no in-process hand-off."""
+    ESC's subscription callback, as in separate processes; the ESC has no polled intake node and no in-process
+    hand-off. Another publisher on the command topic (not the allocation) disarms the ESC: its 1600 us never reach
+    the wire."""
     import numpy as np
     from geometry_msgs.msg import WrenchStamped
     from rclpy.executors import SingleThreadedExecutor
@@ -87,12 +88,11 @@ def test_actuation_the_esc_takes_the_allocations_commands_by_its_subscription():
             ex.add_node(n)
         assert "esc_intake" not in probe.get_node_names()
         wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
-        other = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
         copies: list = []
         probe.create_subscription(ThrusterPwm, "thrusters/command_pulse_width", copies.append, 10)
         arm = probe.create_client(SetArmed, "esc/set_armed")
         spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
-        wait_until(lambda: wrench.get_subscription_count() and other.get_subscription_count() >= 2
+        wait_until(lambda: wrench.get_subscription_count() and alloc.pub_pwm.get_subscription_count() >= 2
                    and arm.service_is_ready() and not esc.heartbeat_refusal() and esc.arming_remaining_s() == 0.0,
                    10, spin, "graph")
         fut = arm.call_async(SetArmed.Request(arm=True))
@@ -108,9 +108,14 @@ def test_actuation_the_esc_takes_the_allocations_commands_by_its_subscription():
             target = copies[-1].pulse_width_us[0]
             assert abs(target - 1500.0) > 50.0
             wait_until(lambda: abs(emu.pulse_width_us(0) - target) < 1.3, 10, spin, "the command on the chip")
-            other.publish(ThrusterPwm(pulse_width_us=[1600.0] * 8, armed=True))
-            wait_until(lambda: np.allclose([emu.pulse_width_us(c) for c in (0, 4)], 1600.0, atol=1.3), 10, spin,
-                       "the other publisher's command on the chip")
+            other = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+
+            def other_command():
+                other.publish(ThrusterPwm(pulse_width_us=[1600.0] * 8, armed=True))
+                spin()
+            wait_until(lambda: not esc.armed, 10, other_command, "disarmed by the other publisher")
+            other_command()
+            assert np.allclose([emu.pulse_width_us(c) for c in range(8)], 1500.0, atol=1.3)
         finally:
             ex.shutdown()
             for n in (probe, esc, alloc):

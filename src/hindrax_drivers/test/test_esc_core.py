@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.pca9685.core import (GUARD_CONFIRM_S, OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN,
-                                          RETRY_MAX_S, RETRY_MIN_S, EscCore, EscOutput, command_fault,
-                                          heartbeat_verdict)
+from hindrax_drivers.pca9685.core import (COMMAND_NODE, GUARD_CONFIRM_S, OUTPUT_COMMANDING, OUTPUT_NEUTRAL,
+                                          OUTPUT_UNKNOWN, RETRY_MAX_S, RETRY_MIN_S, EscCore, EscOutput,
+                                          command_fault, command_source_fault, heartbeat_verdict)
 from hindrax_msgs.msg import ThrusterPwm
 
 COUNT_US = 1.24
@@ -109,6 +109,11 @@ def _ready(core, clock):
     ready(core, clock)
 
 
+def _foreign_commander(core, clock):
+    ready(core, clock)
+    core.set_command_source(command_source_fault(["thrust_allocation", "rogue_script"]))
+
+
 def _chip_lost_after_ready(core, clock):
     ready(core, clock)
     core.chip_lost("PCA9685 read-back failed")
@@ -122,6 +127,7 @@ ARM_ROWS = [
     ("arming time not over", _too_soon, "0.6 s more at neutral"),
     ("a guard ERROR restarts the arming time", _guard_error_restarts_time, "0.5 s more at neutral"),
     ("chip lost", _chip_lost_after_ready, "not confirmed at neutral"),
+    ("a command publisher other than the allocation", _foreign_commander, "published by 'rogue_script'"),
     ("everything ready", _ready, ""),
 ]
 
@@ -302,3 +308,31 @@ def test_no_thrust_command_lands_in_the_deadband_after_the_chips_rounding_exhaus
                     (decoded > 1900 + 1e-9)
                 inside += int(bad.sum())
     assert cases == 114240 and inside == 0
+
+
+SOURCE_ROWS = [
+    ("the allocation alone", ["thrust_allocation"], ""),
+    ("nobody (no command comes)", [], ""),
+    ("another node beside it", ["thrust_allocation", "thruster_test"], "published by 'thruster_test'"),
+    ("another node alone", ["probe"], "published by 'probe'"),
+    ("two allocations", ["thrust_allocation", "thrust_allocation"], "2 publishers named 'thrust_allocation'"),
+]
+
+
+@pytest.mark.parametrize("rule, names, fault", SOURCE_ROWS, ids=[r[0] for r in SOURCE_ROWS])
+def test_command_source_fault(rule, names, fault):
+    assert COMMAND_NODE == "thrust_allocation"
+    got = command_source_fault(names)
+    assert (fault in got and got) if fault else got == ""
+
+
+def test_a_foreign_commander_while_armed_disarms_and_its_commands_are_refused():
+    """Issue 43 finding 3: a plain rclpy script publishing thrusters/command_pulse_width put 1900 us on the wire."""
+    core, _clock = armed_commanding()
+    fault = command_source_fault(["thrust_allocation", "rogue"])
+    assert core.set_command_source(fault) == fault
+    assert not core.armed and core.decide(10.0, 0.02).widths_us.tolist() == [1500.0, 1500.0]
+    assert core.on_command(10.01, [1900.0, 1900.0], True) == fault
+    assert fault in core.request_arm()
+    core.set_command_source("")  # gone
+    assert core.request_arm() == ""

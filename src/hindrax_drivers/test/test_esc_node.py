@@ -13,7 +13,7 @@ from std_msgs.msg import Float64
 
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode, EscOutput
-from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -47,7 +47,8 @@ def esc():
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
         ex.add_node(probe)
-        pub = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        allocation = AllocationStandIn(ctx)
+        pub = allocation.pub
         lights = probe.create_publisher(Float64, "lights/brightness", 10)
         written = []
         probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", written.append, 10)
@@ -67,8 +68,9 @@ def esc():
         wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready() and not node.heartbeat_refusal(),
                    10, spin, "ESC node ready")
         yield dict(node=node, emu=emu, bus=bus, spin=spin, set_armed=set_armed, command=command, written=written,
-                   lights=lights)
+                   lights=lights, probe=probe)
         ex.shutdown()
+        allocation.destroy()
         probe.destroy_node()
         node.destroy_node()
 
@@ -134,7 +136,8 @@ def test_watchdog_returns_to_neutral_within_one_period():
         ex.add_node(node)
         ex.add_node(probe)
         clock_pub = probe.create_publisher(Clock, "/clock", 10)
-        pub = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        allocation = AllocationStandIn(ctx)
+        pub = allocation.pub
         arm = probe.create_client(SetArmed, "esc/set_armed")
         now = {"ns": 1_000_000_000}
 
@@ -164,6 +167,7 @@ def test_watchdog_returns_to_neutral_within_one_period():
         assert 0.2 <= elapsed_s <= 0.2 + PERIOD_S + 0.005  # timeout + at most one output period (+1 clock step)
         assert node.watchdog_trips == 1
         ex.shutdown()
+        allocation.destroy()
         probe.destroy_node()
         node.destroy_node()
 
@@ -203,6 +207,31 @@ def test_a_faulty_command_gives_neutral_and_a_reason_never_a_clamp(esc, widths, 
     node.tick()  # the output tick keeps neutral: the faulty command is not held
     assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
     stream(esc, [1650.0] * 8, lambda: wire(emu)[0] > 1640)
+
+
+def test_only_the_allocation_may_command_a_second_publisher_disarms_and_is_refused(esc):
+    """Issue 43 finding 3: a plain rclpy script publishing thrusters/command_pulse_width put 1900 us on the wire for
+    3.6 s. The ESC takes commands only while the graph shows one publisher on the topic, the node
+    ``thrust_allocation``: another one (here a node named ``probe``) disarms it at its next tick, its commands never
+    reach the wire, arming is refused naming it, and once it is gone the ESC can be armed again."""
+    node, emu, probe = esc["node"], esc["emu"], esc["probe"]
+    arm(esc)
+    stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
+    rogue = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+
+    def rogue_command():
+        rogue.publish(ThrusterPwm(pulse_width_us=[1900.0] * 8, armed=True))
+        esc["spin"]()
+    wait_until(lambda: not node.armed, 10, rogue_command, "disarmed on the second publisher")
+    for _ in range(20):
+        rogue_command()
+        assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
+    res = esc["set_armed"](True)
+    assert not res.success and "published by 'probe'" in res.message
+    assert node.diag.counts()["command_source_fault"] >= 1
+    probe.destroy_publisher(rogue)
+    wait_until(lambda: not node.core.command_source, 10, esc["spin"], "the second publisher gone")
+    arm(esc)
 
 
 def test_lights_channel(esc):
@@ -450,7 +479,8 @@ def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
         ex.add_node(node)
         ex.add_node(probe)
         clock_pub = probe.create_publisher(ClockMsg, "/clock", 10)
-        pub = probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        allocation = AllocationStandIn(ctx)
+        pub = allocation.pub
         now = {"ns": 1_000_000_000}
 
         def advance():
@@ -478,6 +508,7 @@ def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
         assert node.steady_watchdog_trips == 1
         assert wall_s >= 0.2  # not before the timeout
         ex.shutdown()
+        allocation.destroy()
         probe.destroy_node()
         node.destroy_node()
 

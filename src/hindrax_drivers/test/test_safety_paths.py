@@ -25,7 +25,8 @@ from hindrax_drivers.guard.node import OutputGuardNode
 from hindrax_drivers.liveness import AliveAge, ClockStepMonitor
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.testing import SafetyHeartbeats, child_env, config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import (AllocationStandIn, SafetyHeartbeats, child_env, config_parameters, ros_context,
+                                     wait_until)
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.gpio import EmulatedGpioLine
 from hindrax_drivers.transport.shared_emulation import EmulationServer, SharedGpioLine
@@ -66,7 +67,8 @@ class Rig:
                 self.ex.add_node(n)
         self.states: list[ThrusterPwm] = []
         self.probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.states.append, 50)
-        self.cmd = self.probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        self.allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
+        self.cmd = self.allocation.pub
         self.clock = self.probe.create_publisher(Clock, "/clock", 10)
         self.arm_client = self.probe.create_client(SetArmed, "esc/set_armed")
         self.ns = 200_000_000_000
@@ -107,7 +109,7 @@ class Rig:
 
     def close(self):
         self.ex.shutdown()
-        for n in (self.guard, self.probe, self.esc):
+        for n in (self.guard, self.probe, self.esc, self.allocation.node):
             if n is not None:
                 n.destroy_node()
 

@@ -24,7 +24,7 @@ from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.supervisor.core import SupervisorCore, SupervisorLimits
 from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -147,8 +147,9 @@ def graph():
         ex = SingleThreadedExecutor(context=ctx)
         for n in (esc, sup, probe):
             ex.add_node(n)
+        allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
         pubs = {"clock": probe.create_publisher(Clock, "/clock", 10),
-                "cmd": probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10),
+                "cmd": allocation.pub,
                 "dvl": probe.create_publisher(Dvl, "dvl/data", 10),
                 "alt": probe.create_publisher(Range, "ping/altitude", 10),
                 "depth": probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
@@ -209,7 +210,7 @@ def graph():
                    and estop.service_is_ready() and sup.esc_client.service_is_ready(), 10, step, "graph ready")
         yield g
         ex.shutdown()
-        for n in (probe, sup, esc):
+        for n in (allocation.node, probe, sup, esc):
             n.destroy_node()
 
 

@@ -23,7 +23,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_ident.identification.node import IdentificationNode
 from hindrax_msgs.action import RunIdentification
@@ -55,8 +55,9 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
         ex = SingleThreadedExecutor(context=ctx)
         for n in (esc, sup, ident, probe):
             ex.add_node(n)
+        allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
         pubs = {"clock": probe.create_publisher(Clock, "/clock", 10),
-                "cmd": probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10),
+                "cmd": allocation.pub,
                 "dvl": probe.create_publisher(Dvl, "dvl/data", 10),
                 "alt": probe.create_publisher(Range, "ping/altitude", 10),
                 "depth": probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
@@ -168,5 +169,5 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
             assert sup.core.tripped
         finally:
             ex.shutdown()
-            for n in (probe, ident, sup, esc):
+            for n in (allocation.node, probe, ident, sup, esc):
                 n.destroy_node()

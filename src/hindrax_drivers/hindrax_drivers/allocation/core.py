@@ -134,6 +134,23 @@ class AllocationCore:
             frd=result,
         )
 
+    def test_pulse_widths(self, force_n) -> np.ndarray:
+        """Pulse widths (n,) us for per-thruster forces ``force_n`` (n,) N, each through its own curve, without the
+        allocation (``hindrax thruster-test``: one thruster at a time). Raises :class:`InvalidWrenchError` for the
+        wrong count, a non-finite force or one beyond the thruster's limits (a fault, not a saturation)."""
+        try:
+            f = np.asarray(force_n, dtype=float)
+        except (TypeError, ValueError):
+            f = None
+        n = len(self.names)
+        if f is None or f.shape != (n,) or not np.isfinite(f).all():
+            raise InvalidWrenchError(f"test forces must be {n} finite numbers (N), got {force_n!r}")
+        lower, upper = self.allocator.force_limits_n()
+        if np.any(f < lower) or np.any(f > upper):
+            raise InvalidWrenchError(f"test forces {f.tolist()} N beyond the thrusters' limits "
+                                     f"{lower.tolist()}..{upper.tolist()} N")
+        return np.array([float(c.pulse_width_us(x)) for c, x in zip(self.allocator.curves, f)])
+
     def thruster_wrench_flu(self, index: int, force_n: float) -> np.ndarray:
         """Wrench (base_link FLU) thruster ``index`` alone produces at ``force_n``: B[:, i] F, converted."""
         return frames.wrench_frd_to_flu(self.matrix_frd[:, index] * force_n)

@@ -2,6 +2,10 @@
 
 Subscribes
     ``wrench`` (geometry_msgs/WrenchStamped): requested wrench about the CG, base_link, N and N m.
+    ``thrusters/test_forces`` (hindrax_msgs/ThrusterForces): per-thruster forces, N, put through each thruster's
+    curve without the allocation (``hindrax thruster-test``): the ESC takes commands from this node only
+    (:func:`hindrax_drivers.pca9685.core.command_source_fault`), so the thruster test comes through here. The same
+    staleness rule as for wrenches applies to either stream.
 Publishes
     ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm): pulse widths for the ESC node, us.
     ``thrusters/forces`` (hindrax_msgs/ThrusterForces): thrust each thruster will produce, N.
@@ -92,6 +96,7 @@ class ThrustAllocationNode(Node):
         self._decode_wrench = cdr_decoder(WrenchStamped)
         self.undecodable = 0
         self.create_subscription(WrenchStamped, "wrench", self.on_wrench_cdr, 10, raw=True)
+        self.create_subscription(ThrusterForces, "thrusters/test_forces", self.on_test_forces, 10)
         #: ROS time of the last wrench received, ns (None before the first)
         self.last_wrench_ns: int | None = None
         self.stale_reported = True  # nothing to report before the first wrench
@@ -146,6 +151,22 @@ class ThrustAllocationNode(Node):
         self.publish(msg, result.pulse_width_us, result.force_n, w, result.achieved_wrench_flu, result.scale,
                      result.saturated, rejected=False,
                      reason="saturated: scaled" if bool(np.any(result.saturated)) else "", now_ns=now_ns)
+
+    def on_test_forces(self, msg: ThrusterForces) -> None:
+        """Per-thruster test forces (``hindrax thruster-test``): widths from each curve, or neutral and the reason."""
+        now_ns = self.get_clock().now().nanoseconds
+        self.last_wrench_ns = now_ns
+        self.stale_reported = False
+        self.stale_timer.reset()
+        n = len(self.core.names)
+        try:
+            widths = self.core.test_pulse_widths(msg.force_n)
+        except InvalidWrenchError as exc:
+            self.reject(None, np.zeros(6), f"thruster test: {exc}", now_ns)
+            return
+        force = np.asarray(msg.force_n, dtype=float)
+        self.publish(None, widths, force, np.zeros(6), np.zeros(6), 1.0, np.zeros(n, bool), rejected=False,
+                     reason="thruster test", now_ns=now_ns)
 
     def reject(self, msg: WrenchStamped | None, requested: np.ndarray, reason: str, now_ns: int | None = None) -> None:
         """Command neutral and report why (``now_ns``: ROS time of the decision, ns; read when None)."""

@@ -24,6 +24,9 @@ Rules (one test row each in ``test/test_esc_core.py``):
   outside the ESC's physical range [``min_us``, ``max_us``] (a default-constructed message's 0.0, 3000 us) or
   whose own ``armed`` flag is false is a fault: neutral on every channel and the reason, never a clamp into
   thrust. The fault holds until the next valid command.
+* **Command source** (:func:`command_source_fault`, :meth:`EscCore.set_command_source`): commands come only from the
+  ``thrust_allocation`` node, alone on the topic. Any other publisher (``hindrax thruster-test`` goes through the
+  allocation; a script, a replayed bag) refuses arming, disarms while armed and holds neutral until it is gone.
 * **Watchdog**: armed, a command older than ``watchdog_timeout_s`` (ROS time) gives neutral; so does
   :meth:`EscCore.watchdog_trip` (the node's steady-clock watchdog for a stopped ROS clock).
 * **Output**: armed with a fresh valid command -> the command's widths through :class:`EscOutput` (reversal,
@@ -38,7 +41,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 __all__ = ["OUTPUT_UNKNOWN", "OUTPUT_NEUTRAL", "OUTPUT_COMMANDING", "RETRY_MIN_S", "RETRY_MAX_S", "GUARD_CONFIRM_S",
-           "EscOutput", "EscCore", "EscDecision", "command_fault", "heartbeat_verdict"]
+           "COMMAND_NODE", "EscOutput", "EscCore", "EscDecision", "command_fault", "command_source_fault",
+           "heartbeat_verdict"]
 
 #: output states, the values of hindrax_msgs/ThrusterPwm ``output_state`` (checked equal in the tests)
 OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING = 0, 1, 2
@@ -52,6 +56,21 @@ RETRY_MAX_S = 4.0
 #: within it, so an arm is never accepted on the guard's stale OK and undone at once (measured in the safety bench
 #: with arming_time_s 0: 1 in about 115 cycles of ESC hung, arm, I2C outage, arm)
 GUARD_CONFIRM_S = 0.15
+#: the one node that may publish ``thrusters/command_pulse_width`` (docs/architecture.md §8.2)
+COMMAND_NODE = "thrust_allocation"
+
+
+def command_source_fault(node_names: Sequence[str], topic: str = "thrusters/command_pulse_width") -> str:
+    """Why the command topic cannot be trusted ('' when it can): ``node_names`` of every publisher the graph shows
+    on it (``get_publishers_info_by_topic``). Only one publisher, :data:`COMMAND_NODE`, may be there; none is no
+    fault (no command comes)."""
+    strangers = sorted({n for n in node_names if n != COMMAND_NODE})
+    if strangers:
+        return (f"{topic} published by {', '.join(map(repr, strangers))}: only {COMMAND_NODE!r} may command the "
+                "thrusters")
+    if len(node_names) > 1:
+        return f"{len(node_names)} publishers named {COMMAND_NODE!r} on {topic}: only one may command the thrusters"
+    return ""
 
 
 def command_fault(widths_us: Sequence[float], armed: bool, n: int, min_us: float, max_us: float) -> str:
@@ -199,6 +218,7 @@ class EscCore:
         self.command_t_s: float | None = None  # ROS time of the command's arrival, s
         self.neutral_confirmed_at: float | None = None
         self.neutral_on_wire_since: float | None = None
+        self.command_source = ""  # '' or why the command topic is not trusted (command_source_fault)
         self.supervisor_refusal = "no supervisor heartbeat yet"
         self.guard_refusal = "no output-guard heartbeat yet"
         #: the last widths written may still be on the wire although the chip cannot be reached
@@ -280,6 +300,17 @@ class EscCore:
             return refusal
         return ""
 
+    def set_command_source(self, fault: str) -> str:
+        """The command topic's publishers checked (:func:`command_source_fault`): a fault drops the command and
+        disarms while armed. Returns the reason of a disarm it causes ('' when none)."""
+        self.command_source = fault
+        if fault:
+            self.command = None
+            if self.armed:
+                self.disarm(fault)
+                return fault
+        return ""
+
     def peer_refusal(self) -> str:
         """Why the supervisor or the output guard forbid thrust now ('' when both are trusted)."""
         if self.supervisor_refusal:
@@ -304,7 +335,7 @@ class EscCore:
         if self.neutral_confirmed_at is None:
             return ("PCA9685 not confirmed at neutral (not reachable or its registers did not read back)" +
                     (f": {bus_error}" if bus_error else ""))
-        refusal = self.peer_refusal()
+        refusal = self.peer_refusal() or self.command_source
         if refusal:
             return refusal
         remaining = self.arming_remaining_s()
@@ -335,7 +366,8 @@ class EscCore:
     def on_command(self, ros_t_s: float, widths_us: Sequence[float], armed: bool) -> str:
         """A ThrusterPwm command arrived at ROS time ``ros_t_s``. Returns the fault ('' when it is valid); a fault
         drops the held command, so the next :meth:`decide` gives neutral with the reason."""
-        fault = command_fault(widths_us, armed, len(self.output.channels), self.output.min_us, self.output.max_us)
+        fault = self.command_source or \
+            command_fault(widths_us, armed, len(self.output.channels), self.output.min_us, self.output.max_us)
         if fault:
             self.rejected_commands += 1
             self.command = None

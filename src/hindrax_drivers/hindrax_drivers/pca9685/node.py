@@ -53,7 +53,8 @@ from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublis
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
-from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, EscCore, EscOutput, heartbeat_verdict
+from .core import (GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, EscCore, EscOutput, command_source_fault,
+                   heartbeat_verdict)
 
 __all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "main"]
 
@@ -365,6 +366,17 @@ class EscNode(Node):
         sup, guard = self._peer_verdicts()
         return sup or guard
 
+    def _check_command_source(self) -> None:
+        """Who publishes ``thrusters/command_pulse_width`` (the graph): only the allocation may
+        (:func:`.core.command_source_fault`); a fault disarms and holds neutral while it lasts."""
+        names = [info.node_name for info in self.get_publishers_info_by_topic(COMMAND_TOPIC)]
+        fault = command_source_fault(names, COMMAND_TOPIC)
+        if fault and fault != self.core.command_source:
+            self.diag.count("command_source_fault")
+            self.get_logger().error(f"command topic not trusted: {fault}")
+        if self.core.set_command_source(fault):
+            self._after_disarm(fault)
+
     def _feed_peers(self) -> str:
         """Hand the heartbeat verdicts to the core; log and publish a disarm they cause. Returns its reason."""
         refusal = self.core.set_peers(*self._peer_verdicts())
@@ -394,6 +406,7 @@ class EscNode(Node):
                 response.success, response.armed, response.message = True, False, "disarmed"
             return response
         self._take_inputs()
+        self._check_command_source()
         self.core.set_peers(*self._peer_verdicts())
         refusal = self.core.request_arm(self.bus_error)
         if refusal:
@@ -515,6 +528,7 @@ class EscNode(Node):
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         self._take_inputs()
         self._feed_peers()
+        self._check_command_source()
         if self.core.retry_due():
             if self._configure_chip():
                 self._publish_written(self.get_clock().now())
@@ -585,6 +599,7 @@ class EscNode(Node):
                 ("supervisor_heartbeat_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("guard_heartbeat_age_s", f"{self.guard_age.age_s:.2f}"), ("heartbeat_disarms", self.heartbeat_disarms),
                 ("rejected_commands", self.core.rejected_commands), ("reason", self.core.reason),
+                ("command_source", self.core.command_source or "thrust_allocation"),
                 ("clock_steps_back", self.clock_monitor.steps_back),
                 *(self.device.stats.diagnostics() if self.device is not None else [("i2c_bus", "not open")])]
 

@@ -68,6 +68,7 @@ from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import (
+    AllocationStandIn,
     ConditionTimeout,
     SafetyHeartbeats,
     child_env,
@@ -131,8 +132,9 @@ def _rig(ctx, sim_time: bool = False):
     ex = SingleThreadedExecutor(context=ctx)
     for n in (esc, sup, probe):
         ex.add_node(n)
-    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex,
-             cmd=probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10),
+    allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
+    r = dict(emu=emu, esc=esc, sup=sup, probe=probe, ex=ex, allocation=allocation,
+             cmd=allocation.pub,
              depth=probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10),
              clock=probe.create_publisher(Clock, "/clock", 10),
              arm=probe.create_client(SetArmed, "esc/set_armed"), estop=probe.create_client(Trigger, "supervisor/estop"),
@@ -192,7 +194,7 @@ def _rig(ctx, sim_time: bool = False):
 
 def _close(r) -> None:
     r["ex"].shutdown()
-    for n in (r["probe"], r["sup"], r["esc"]):
+    for n in (r["probe"], r["sup"], r["esc"], r["allocation"].node):
         n.destroy_node()
 
 
@@ -426,7 +428,8 @@ class _Layout:
         self.probe = rclpy.create_node("bench_safety_layout", context=ctx)
         self.arm_client = self.probe.create_client(SetArmed, "esc/set_armed")
         self.reset_client = self.probe.create_client(Trigger, "supervisor/reset")
-        self.cmd = self.probe.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        self.allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
+        self.cmd = self.allocation.pub
         self.commanding = False
         self.last_state: tuple[float, int] | None = None  # (monotonic receive time, output_state)
         self.last_msg = None  # the last thrusters/pulse_width (for the failure message)
@@ -505,6 +508,7 @@ class _Layout:
         self.thread.join(5)
         self.ex.shutdown()
         self.probe.destroy_node()
+        self.allocation.destroy()
 
     def _last_log_line(self, name: str, containing: str) -> str:
         """The last line of process ``name``'s log that contains ``containing`` ('' when none)."""

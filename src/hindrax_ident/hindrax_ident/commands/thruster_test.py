@@ -5,9 +5,10 @@ Each thruster is stepped alone at a small thrust (default 3 N along its configur
 step the command prints the pulse width, the ESC channel and the wrench the model expects (base_link FLU,
 N and N m: column i of the thrust allocation matrix times the force, [Hindrax-Drag] eq. 9), so the
 engineer can watch the vehicle (or a hand on the frame) and compare. Without ``--dry-run`` it drives the ESCs through
-the running stack: it arms through ``esc/set_armed`` (hindrax_msgs/SetArmed), publishes
-``thrusters/command_pulse_width`` for ``--step-s`` seconds per thruster with neutral in between, then
-disarms (also on Ctrl-C or any error).
+the running stack: it arms through ``esc/set_armed`` (hindrax_msgs/SetArmed), publishes the step's per-thruster
+forces on ``thrusters/test_forces`` (hindrax_msgs/ThrusterForces; the allocation node turns them into the command,
+the only one the ESC accepts) for ``--step-s`` seconds per thruster with 0 N in between, then disarms (also on
+Ctrl-C or any error).
 """
 from __future__ import annotations
 
@@ -64,14 +65,14 @@ def _drive(core: AllocationCore, rows: list[dict], step_s: float) -> int:
     import rclpy
 
     from hindrax_drivers.ros_process import RosProcess
-    from hindrax_msgs.msg import ThrusterPwm
+    from hindrax_msgs.msg import ThrusterForces
     from hindrax_msgs.srv import SetArmed
 
     with RosProcess([]) as proc:
         node = proc.own(rclpy.create_node("thruster_test"))
         ex = proc.executor
         ex.add_node(node)
-        pub = node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        pub = node.create_publisher(ThrusterForces, "thrusters/test_forces", 10)
         arm = node.create_client(SetArmed, "esc/set_armed")
 
         def call_arm(value: bool) -> bool:
@@ -84,10 +85,10 @@ def _drive(core: AllocationCore, rows: list[dict], step_s: float) -> int:
                 return False
             return True
 
-        def hold(widths, seconds: float) -> None:
+        def hold(forces, seconds: float) -> None:
             end = node.get_clock().now().nanoseconds + int(seconds * 1e9)
             while node.get_clock().now().nanoseconds < end:
-                msg = ThrusterPwm(pulse_width_us=[float(x) for x in widths], armed=True)
+                msg = ThrusterForces(force_n=[float(x) for x in forces])
                 msg.header.stamp = node.get_clock().now().to_msg()
                 pub.publish(msg)
                 ex.spin_once(timeout_sec=0.05)
@@ -97,15 +98,15 @@ def _drive(core: AllocationCore, rows: list[dict], step_s: float) -> int:
         proc.at_exit(lambda: call_arm(False))
         if not call_arm(True):
             return 1
-        neutral = core.neutral()
+        zero = [0.0] * len(rows)
         try:
             for i, row in enumerate(rows):
-                widths = neutral.copy()
-                widths[i] = row["pulse_width_us"]
+                forces = list(zero)
+                forces[i] = row["force_n"]
                 print(f"stepping {row['thruster']} (channel {row['esc_channel']}) at {row['pulse_width_us']} us",
                       flush=True)
-                hold(widths, step_s)
-                hold(neutral, 1.0)
+                hold(forces, step_s)
+                hold(zero, 1.0)
         except KeyboardInterrupt:
             proc.status = 130
     return proc.status
