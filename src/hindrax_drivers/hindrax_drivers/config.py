@@ -260,6 +260,16 @@ SCHEMA.update({
                                       "not wired, the guard writes the chip's all-off and sleep registers instead)"),
     "esc.output_enable_gpio.line": _i("line offset of the PCA9685 /OE on esc.output_enable_gpio.chip (BCM GPIO number "
                                       "on a Pi 4)", 0, 1023),
+    "esc.output_enable_feed_gpio.chip": _s("gpiochip of the hardware watchdog's feed line (docs/watchdog.md: a "
+                                           "retriggerable monostable that holds /OE high unless it sees rising "
+                                           "edges); absent or null: no hardware watchdog"),
+    "esc.output_enable_feed_gpio.line": _i("line offset of the watchdog feed on esc.output_enable_feed_gpio.chip (BCM "
+                                           "GPIO number on a Pi 4)", 0, 1023),
+    "esc.output_enable_feed_rate_hz": _f("rising edges per second the output guard puts on the watchdog feed while "
+                                         "the ESC heartbeat is fresh and nothing is tripped, Hz", 2.0, 50.0),
+    "esc.output_enable_feed_timeout_s": _f("the hardware watchdog's timeout: its monostable's pulse width "
+                                           "t_W = R_EXT * C_EXT (docs/watchdog.md); the outputs stop this long after "
+                                           "the last rising edge, s", 0.05, 2.0),
     # --- lights ([Hindrax-Drag] §2.1: PWM also drives the lights) ---
     "lights.esc_channel": _i("PCA9685 channel of the lights", 0, 15),
     "lights.pulse_width_off_us": _f("pulse width for lights off, us", 500.0, 2500.0),
@@ -464,7 +474,8 @@ OPTIONAL_PREFIXES: tuple[str, ...] = ("simulation.sensors.", "recording.topics",
                                       "identification.excitation", "identification.prior_std_rel",
                                       "identification.rls_", "thrusters.thrust_fit_uncertainty_rel",
                                       "calibration.float_", "calibration.net_buoyancy_std_n",
-                                      "esc.output_enable_gpio.", "supervisor.rate_check_disabled.", "control.")
+                                      "esc.output_enable_gpio.", "esc.output_enable_feed", "supervisor.rate_check_disabled.",
+                                      "control.")
 
 # Sensor-model keys of the simulator: per device, the same set (noise, bias, rate, dropout).
 for _dev, _unit, _hi in (("dvl75", "m_s", 1.0), ("ping1d", "m", 1.0), ("ms5837", "pa", 1e4),
@@ -578,16 +589,17 @@ def _schema_key(key: str, thruster_names: Iterable[str]) -> str | None:
 
 
 #: keys whose YAML value may be null, meaning "absent" (their sub-keys are optional)
-NULLABLE_KEYS: tuple[str, ...] = ("esc.output_enable_gpio",)
+NULLABLE_KEYS: tuple[str, ...] = ("esc.output_enable_gpio", "esc.output_enable_feed_gpio")
 
 
-def output_enable_gpio(cfg: Any) -> tuple[str, int] | None:
-    """``(chip, line)`` of the PCA9685 /OE line from ``esc.output_enable_gpio``, or None when it is not wired."""
+def output_enable_gpio(cfg: Any, key: str = "esc.output_enable_gpio") -> tuple[str, int] | None:
+    """``(chip, line)`` of the PCA9685 /OE line from ``esc.output_enable_gpio`` (or of another GPIO key, e.g.
+    ``esc.output_enable_feed_gpio``), or None when it is not wired."""
     flat = cfg.flat if hasattr(cfg, "flat") else cfg
-    chip = flat.get("esc.output_enable_gpio.chip")
+    chip = flat.get(f"{key}.chip")
     if not chip:
         return None
-    return str(chip), int(flat["esc.output_enable_gpio.line"])
+    return str(chip), int(flat[f"{key}.line"])
 
 
 def _is_optional(key: str) -> bool:
@@ -812,6 +824,18 @@ def _safety_cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     if "esc.output_enable_gpio.chip" in c and "esc.output_enable_gpio.line" not in c:
         issues.append(ConfigIssue("esc.output_enable_gpio.line", "<missing>", "a line offset with "
                                   "esc.output_enable_gpio.chip"))
+    # the hardware watchdog on /OE (docs/watchdog.md): its feed needs a rate and the circuit's timeout, and at least
+    # three rising edges per timeout, so that one late guard tick does not stop the outputs
+    if c.get("esc.output_enable_feed_gpio.chip"):
+        for key in ("esc.output_enable_feed_gpio.line", "esc.output_enable_feed_rate_hz",
+                    "esc.output_enable_feed_timeout_s"):
+            if key not in c:
+                issues.append(ConfigIssue(key, "<missing>", "a value with esc.output_enable_feed_gpio.chip"))
+        if "esc.output_enable_feed_rate_hz" in c and "esc.output_enable_feed_timeout_s" in c:
+            low = 3.0 / c["esc.output_enable_feed_timeout_s"]
+            if c["esc.output_enable_feed_rate_hz"] < low:
+                issues.append(ConfigIssue("esc.output_enable_feed_rate_hz", c["esc.output_enable_feed_rate_hz"],
+                                          f">= {low:g} Hz: three rising edges per esc.output_enable_feed_timeout_s"))
     # the ESC must hear several supervisor heartbeats (one per supervisor check) within its timeout
     if "esc.heartbeat_timeout_s" in c and "supervisor.check_rate_hz" in c:
         period = 1.0 / c["supervisor.check_rate_hz"]

@@ -215,6 +215,19 @@ class EscOutputEnableGpioSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
+class EscOutputEnableFeedGpioSection(Section):
+    """``esc.output_enable_feed_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
+
+    PREFIX: ClassVar[str] = "esc.output_enable_feed_gpio"
+
+    chip: str | None
+    """gpiochip of the hardware watchdog's feed line (docs/watchdog.md: a retriggerable monostable that holds /OE
+    high unless it sees rising edges); absent or null: no hardware watchdog"""
+    line: int | None
+    """line offset of the watchdog feed on esc.output_enable_feed_gpio.chip (BCM GPIO number on a Pi 4)"""
+
+
+@dataclass(frozen=True, eq=False, repr=False)
 class EscSection(Section):
     """``esc.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -250,6 +263,13 @@ class EscSection(Section):
     clock); the guard asserts /OE when thrusters/pulse_width or supervisor/heartbeat is (docs/architecture.md §8),
     s"""
     output_enable_gpio: EscOutputEnableGpioSection
+    output_enable_feed_gpio: EscOutputEnableFeedGpioSection
+    output_enable_feed_rate_hz: float | None
+    """rising edges per second the output guard puts on the watchdog feed while the ESC heartbeat is fresh and
+    nothing is tripped, Hz"""
+    output_enable_feed_timeout_s: float | None
+    """the hardware watchdog's timeout: its monostable's pulse width t_W = R_EXT * C_EXT (docs/watchdog.md); the
+    outputs stop this long after the last rising edge, s"""
 
 
 @dataclass(frozen=True, eq=False, repr=False)

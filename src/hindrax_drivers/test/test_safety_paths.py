@@ -28,7 +28,7 @@ from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.testing import (AllocationStandIn, SafetyHeartbeats, child_env, config_parameters, ros_context,
                                      wait_until)
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_drivers.transport.gpio import EmulatedGpioLine
+from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
 from hindrax_drivers.transport.shared_emulation import EmulationServer, SharedGpioLine
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -46,9 +46,12 @@ class Rig:
     optionally the real output guard on the same bus and line."""
 
     def __init__(self, ctx, guard=False, wired=True, sim_time=False, overrides=None, guard_bus=lambda bus: bus,
-                 guard_opens_line=False):
+                 guard_opens_line=False, watchdog_s=None):
         self.line = EmulatedGpioLine(pull_high=True) if wired else None
-        self.emu = Pca9685Emulator(output_enable_line=self.line)
+        # watchdog_s: the hardware watchdog on /OE fitted (docs/watchdog.md), with that timeout
+        self.feed = WatchdogFeedLine(watchdog_s) if watchdog_s else None
+        self.emu = Pca9685Emulator(output_enable_line=self.line if self.feed is None else
+                                   WatchedOutputEnable(self.line, self.feed))
         self.bus = EmulatedI2CBus({0x40: self.emu})
         params = config_parameters({**OVER, **(overrides or {})})
         if sim_time:
@@ -58,9 +61,11 @@ class Rig:
         self.beats = SafetyHeartbeats(self.probe, supervisor="", guard=None if guard else "")
         # guard_opens_line: the guard requests its configured /OE line itself (open_output_enable, patched by the test)
         gpio = {"esc.output_enable_gpio.chip": "/dev/gpiochip0", "esc.output_enable_gpio.line": 17}
+        feed = {"esc.output_enable_feed_rate_hz": 10.0, "esc.output_enable_feed_timeout_s": watchdog_s or 0.33}
         self.guard = OutputGuardNode(
-            line=None if guard_opens_line else self.line, bus=None if wired else guard_bus(self.bus), context=ctx,
-            parameter_overrides=config_parameters({**OVER, **(gpio if guard_opens_line else {})})) if guard else None
+            line=None if guard_opens_line else self.line, bus=None if wired else guard_bus(self.bus), feed=self.feed,
+            context=ctx, parameter_overrides=config_parameters({**OVER, **(gpio if guard_opens_line else {}),
+                                                                **(feed if self.feed else {})})) if guard else None
         self.ex = SingleThreadedExecutor(context=ctx)
         for n in (self.esc, self.probe, self.guard):
             if n is not None:
@@ -294,6 +299,42 @@ def test_44_7_a_failed_silencing_stays_error_until_a_retry_reaches_the_chip(rig)
     flaky.fail = False
     r.wait(lambda: not r.guard.core.asserted, "a retry reached the chip, guard released", timeout=20.0)
     assert r.guard.core.drive_fault == ""
+
+
+def test_44_2_frozen_guard_and_esc_the_hardware_watchdog_stops_the_outputs(rig):
+    """Issue 44 item 2: the guard feeds the hardware watchdog only while the outputs are released; with the ESC and
+    the guard frozen (their lines stay as they were, as for a SIGSTOPped process or a frozen Pi) the edges stop and
+    the watchdog disables the outputs although /OE itself stays low. Before, a frozen launch kept thrust on."""
+    import time
+
+    r = rig(guard=True, watchdog_s=0.33)
+    assert r.emu.output_enable_line.is_high()  # never fed yet: outputs off from power-up
+    r.wait(lambda: not r.guard.core.asserted and r.feed.rises >= 2, "guard released and feeding")
+    r.arm_at_1700()
+    rises = r.feed.rises
+    r.wait(lambda: r.feed.rises >= rises + 3, "fed while armed", poll=r.commanding)
+    r.ex.remove_node(r.guard)  # the launch freezes: nothing runs any more
+    r.ex.remove_node(r.esc)
+    frozen_at = time.monotonic()
+    wait_until(lambda: np.all(wire(r.emu) == 0.0), 10, None, "no pulses")
+    assert not r.line.is_high(), "the guard's /OE line is still low: the watchdog stopped the outputs"
+    assert r.feed.expires_at() - frozen_at <= r.feed.timeout_s  # within the circuit's timeout of the freeze
+    # the launch resumes: the ESC disarms on the guard's view, feeding starts again only once released
+    r.ex.add_node(r.esc)
+    r.ex.add_node(r.guard)
+    r.wait(lambda: not r.esc.armed, "disarmed after the freeze", poll=r.commanding, timeout=20.0)
+    assert r.guard.assertions >= 1  # the guard saw that the watchdog had cut the outputs, and latched
+
+
+def test_44_2_the_guard_does_not_feed_while_asserted(rig):
+    r = rig(guard=True, watchdog_s=0.33)
+    r.wait(lambda: not r.guard.core.asserted and r.feed.rises >= 2, "guard released and feeding")
+    r.arm_at_1700()
+    r.beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"
+    r.wait(lambda: r.guard.core.asserted, "guard asserted on the breach", poll=r.commanding)
+    rises = r.feed.rises
+    r.wait(lambda: r.feed.expired(), "watchdog ran out while asserted", poll=r.commanding)
+    assert r.feed.rises <= rises + 1 and not r.guard.feeding()
 
 
 _HOLDER = """

@@ -11,6 +11,8 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
 * the guard itself cannot silence the outputs (its /OE line could not be requested or driven, or its last write of
   the chip's sleep registers failed): it must not say OK when it could not act, so the ESC refuses to arm and
   disarms on its ERROR heartbeat (issue 44 item 7); the node retries and clears it on success;
+* the hardware watchdog on /OE ran out while the guard meant to feed it (docs/watchdog.md: the guard was frozen or
+  starved): thrust must come back only through a new arm request;
 * either heartbeat cannot be trusted to be its sender's (:class:`~hindrax_drivers.liveness.HeartbeatIdentity`: a
   second publisher, a wrong node name, a sequence that goes back, a new boot while armed): a forged or replayed
   heartbeat must not keep the outputs on.
@@ -42,6 +44,7 @@ class GuardCore:
     supervisor_message: str = ""
     identity_fault: str = ""
     drive_fault: str = ""
+    stall: str = ""
 
     def on_esc(self, output_state: int, armed: bool) -> None:
         """The ESC's ``esc/heartbeat`` (output_state constant, armed flag)."""
@@ -60,9 +63,16 @@ class GuardCore:
         """The node's last attempt to drive /OE or write the chip: '' (it worked) or why it failed."""
         self.drive_fault = fault
 
+    def on_stall(self, reason: str) -> None:
+        """'' or why the hardware watchdog cut the outputs behind the guard's back (its feed stopped: the guard was
+        frozen or starved). A cause at the next :meth:`decide`, latched like any other."""
+        self.stall = reason
+
     def causes(self, esc_age_s: float, supervisor_age_s: float) -> list[str]:
         """Every reason to silence the outputs now (empty: none)."""
         out = []
+        if self.stall:
+            out.append(self.stall)
         if self.drive_fault:
             out.append(f"guard cannot act: {self.drive_fault}")
         if self.identity_fault:

@@ -15,6 +15,13 @@ rejected beat does not count as the peer being heard). How it silences:
   §7.3.4), once on assertion and again whenever the ESC reports commanding while asserted. Needs a working bus: an
   I2C outage on an unwired vehicle leaves the last widths on the wire (``hindrax config check`` warns).
 
+The hardware watchdog (``esc.output_enable_feed_gpio``, docs/watchdog.md): a retriggerable monostable ORed into
+/OE holds the outputs off unless it sees rising edges. The guard toggles that line on a steady-clock timer at twice
+``esc.output_enable_feed_rate_hz``, and only while the outputs are released (the ESC heartbeat fresh, nothing
+tripped, the guard able to act) and its own decision tick ran within the last two periods: a frozen launch, a
+frozen Pi or a starved guard stops the edges, and the outputs go off ``esc.output_enable_feed_timeout_s`` later
+without any software alive. A feed line that cannot be requested or driven is a drive fault (ERROR heartbeat).
+
 Subscribes ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus from the ESC's steady-clock tick: its output state
 and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
 ``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus). Publishes ``guard/heartbeat``
@@ -48,7 +55,7 @@ from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
 from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
 
-__all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "main"]
+__all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "open_watchdog_feed", "main"]
 
 #: the guard's tick (decision, /OE, heartbeat), Hz
 GUARD_RATE_HZ = 20.0
@@ -67,19 +74,31 @@ def open_output_enable(chip: str, line: int) -> Any:
     return open_output_line(chip, line, initial_high=True)
 
 
+def open_watchdog_feed(chip: str, line: int) -> Any:
+    """The hardware watchdog's feed line, requested LOW (no edge): the emulation server's ``oe_feed`` line when
+    ``HINDRAX_EMULATION_SOCKET`` is set, else libgpiod. Raises OSError/ImportError."""
+    shared = open_shared_line("oe_feed", False)
+    if shared is not None:
+        return shared
+    return open_output_line(chip, line, initial_high=False, consumer="hindrax-watchdog-feed")
+
+
 class OutputGuardNode(Node):
     """The output guard (module docstring). ``line``: an injected /OE line (``set_high``/``release``); ``bus``: an
-    injected SMBus-like bus for the register fallback. Without them, they are opened from the configuration."""
+    injected SMBus-like bus for the register fallback; ``feed``: an injected watchdog feed line (with
+    ``esc.output_enable_feed_rate_hz`` configured). Without them, they are opened from the configuration."""
 
-    def __init__(self, line: Any = None, bus: Any = None, **kwargs: Any):
+    def __init__(self, line: Any = None, bus: Any = None, feed: Any = None, **kwargs: Any):
         super().__init__("output_guard", **kwargs)
         cfg = load_node_config(self, ("esc",))
         esc = cfg.esc
         self.timeout_s = float(esc.heartbeat_timeout_s)
         self.core = GuardCore(self.timeout_s)
         period = 1.0 / GUARD_RATE_HZ
-        self.esc_age = AliveAge(2.0 * period)
-        self.supervisor_age = AliveAge(2.0 * period)
+        #: a gap between two ticks counts in full up to the timeout, so that a starved guard still ages a dead peer
+        #: at wall speed (a longer gap is this process's own stall; the watchdog feed covers it)
+        self.esc_age = AliveAge(self.timeout_s)
+        self.supervisor_age = AliveAge(self.timeout_s)
         self.gpio = output_enable_gpio(cfg)
         self.line = line
         self._bus, self._bus_number, self._address = bus, int(esc.i2c_bus), int(esc.i2c_address)
@@ -89,6 +108,17 @@ class OutputGuardNode(Node):
         self.silence_failures = 0
         self._last_rewrite = -1e9
         self._last_drive_attempt = -1e9
+        #: the hardware watchdog's feed (module docstring): (chip, line) or None, the line, its level, edges
+        self.feed_gpio = output_enable_gpio(cfg, "esc.output_enable_feed_gpio")
+        self.feed = feed
+        self.feed_rate_hz = esc.output_enable_feed_rate_hz
+        self._feed_high = False
+        self.feed_edges = 0
+        self._last_decision = -1e9
+        self._last_rise: float | None = None  # time.monotonic() of the last rising edge sent
+        self.feed_timeout_s = esc.output_enable_feed_timeout_s
+        if (self.feed_gpio is not None or feed is not None) and not self.feed_rate_hz:
+            raise ValueError("the watchdog feed needs esc.output_enable_feed_rate_hz")
         where = (f"/OE {self.gpio[0]}:{self.gpio[1]}" if self.gpio else "/OE (injected line)" if line is not None
                  else f"registers i2c-{self._bus_number}@0x{self._address:02x}")
         self.diag = DeviceDiagnostics("hindrax/output_guard", where, lambda: time.monotonic())
@@ -105,6 +135,10 @@ class OutputGuardNode(Node):
                         for kind, handler in (("esc", self.on_esc), ("supervisor", self.on_supervisor))}
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if self.feeds:
+            self._open_feed()
+            self.create_timer(0.5 / float(self.feed_rate_hz), self.feed_tick,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.wired:
             self._apply(True, force=True)  # /OE high from the start; the registers are the ESC's own start-up's job
 
@@ -115,11 +149,65 @@ class OutputGuardNode(Node):
         if not seconds > 0.0:
             raise ValueError(f"guard timeout must be > 0 s, got {seconds}")
         self.timeout_s = self.core.timeout_s = float(seconds)
+        self.esc_age.max_step_s = self.supervisor_age.max_step_s = self.timeout_s
 
     @property
     def wired(self) -> bool:
         """True when the guard drives an /OE line (else it writes the chip's registers)."""
         return self.gpio is not None or self.line is not None
+
+    @property
+    def feeds(self) -> bool:
+        """True when a hardware watchdog is fitted (the guard toggles its feed line)."""
+        return self.feed_gpio is not None or self.feed is not None
+
+    # -- the hardware watchdog's feed
+    def _open_feed(self) -> None:
+        if self.feed is not None or self.feed_gpio is None:
+            return
+        try:
+            self.feed = open_watchdog_feed(*self.feed_gpio)
+        except (OSError, ImportError) as exc:
+            self._drive_failed(f"cannot request the watchdog feed {self.feed_gpio[0]}:{self.feed_gpio[1]}: {exc}")
+
+    def feeding(self) -> bool:
+        """Whether the watchdog gets edges now: outputs released by the last decision, which is recent (half the
+        watchdog's timeout: a starved or frozen guard stops feeding, and the outputs stop at most
+        1.5 x ``esc.output_enable_feed_timeout_s`` after its last decision)."""
+        fresh = time.monotonic() - self._last_decision <= 0.5 * float(self.feed_timeout_s or 0.0)
+        return fresh and not self.core.asserted and not self.core.drive_fault
+
+    def watchdog_ran_out(self) -> str:
+        """'' or why the watchdog has (probably) disabled the outputs although this guard released them: no rising
+        edge sent for longer than its timeout (this process was frozen or starved). The outputs then stay off until
+        the ESC has disarmed: thrust comes back only through a new arm request."""
+        if not self.feeds or self.core.asserted or self._last_rise is None:
+            return ""
+        quiet = time.monotonic() - self._last_rise
+        if quiet <= float(self.feed_timeout_s):
+            return ""
+        return (f"no watchdog feed edge for {quiet:.2f} s (esc.output_enable_feed_timeout_s "
+                f"{float(self.feed_timeout_s):g}): the guard stalled, the hardware watchdog cut the outputs")
+
+    def feed_tick(self) -> None:
+        """Toggle the feed line (twice ``esc.output_enable_feed_rate_hz``) while :meth:`feeding`; else hold it."""
+        if not self.feeding():
+            return
+        if self.feed is None:
+            if time.monotonic() - self._last_drive_attempt < DRIVE_RETRY_S:
+                return
+            self._last_drive_attempt = time.monotonic()
+            self._open_feed()
+            if self.feed is None:
+                return
+        try:
+            self.feed.set_high(not self._feed_high)
+            self._feed_high = not self._feed_high
+            if self._feed_high:
+                self.feed_edges += 1
+                self._last_rise = time.monotonic()
+        except OSError as exc:
+            self._drive_failed(f"cannot feed the watchdog: {exc}")
 
     # -- outputs
     def _open_line(self) -> None:
@@ -217,9 +305,11 @@ class OutputGuardNode(Node):
         return fault
 
     def tick(self) -> None:
+        self._last_decision = time.monotonic()
         self.esc_age.tick()
         self.supervisor_age.tick()
         self.check_identity()
+        self.core.on_stall(self.watchdog_ran_out())
         asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s)
         if changed and asserted:
             self.assertions += 1
@@ -241,6 +331,8 @@ class OutputGuardNode(Node):
         return [("asserted", self.core.asserted), ("reason", self.core.reason), ("assertions", self.assertions),
                 ("silence_failures", self.silence_failures), ("drive_fault", self.core.drive_fault or "none"),
                 ("output_enable_gpio", f"{self.gpio[0]}:{self.gpio[1]}" if self.gpio else "not wired"),
+                ("watchdog_feed", ("feeding" if self.feeding() else "held") if self.feeds else "not fitted"),
+                ("watchdog_feed_edges", self.feed_edges),
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
                 ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values()))]
@@ -249,6 +341,11 @@ class OutputGuardNode(Node):
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:
         the ESC, which loses this heartbeat, disarms and writes neutral itself (sleeping the chip under a running
         ESC would only fight its read-back)."""
+        self._last_decision = -1e9  # no more edges on the watchdog feed
+        if self.feed is not None:
+            release = getattr(self.feed, "release", None)
+            if release is not None:
+                release()
         if not self.wired:
             return
         self._apply(True, force=True)

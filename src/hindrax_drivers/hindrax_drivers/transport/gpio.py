@@ -16,15 +16,21 @@ Two objects with the same three methods, ``set_high(bool)``, ``is_high()`` and `
   its outputs carry pulses. :mod:`hindrax_drivers.transport.shared_emulation` serves it to other processes (a
   dropped connection releases it, as the kernel does for a dead process).
 
+The hardware watchdog on /OE (docs/watchdog.md) has its stand-in here too: :class:`WatchdogFeedLine` is the
+feed line the guard toggles (it records its rising edges and runs out ``timeout_s`` after the last one, as the
+retriggerable monostable does), and :class:`WatchedOutputEnable` is /OE as the PCA9685 sees it through the OR gate:
+high when the guard drives (or releases) its line high, or when the watchdog has run out.
+
 Why a thin wrapper of our own: the guard needs "drive high / drive low / release" and nothing else, and tests
 need the same three calls on an emulated line that a register-exact chip emulator honours.
 """
 from __future__ import annotations
 
 import threading
-from typing import Any
+import time
+from typing import Any, Callable
 
-__all__ = ["GpiodLine", "EmulatedGpioLine", "open_output_line"]
+__all__ = ["GpiodLine", "EmulatedGpioLine", "WatchdogFeedLine", "WatchedOutputEnable", "open_output_line"]
 
 
 class GpiodLine:
@@ -106,6 +112,54 @@ class EmulatedGpioLine:
             self.changes += 1
 
 
-def open_output_line(chip: str, line: int, initial_high: bool = True) -> Any:
+class WatchdogFeedLine(EmulatedGpioLine):
+    """The hardware watchdog's feed input (docs/watchdog.md) in memory: an :class:`EmulatedGpioLine` with a pull-down
+    that records the time of its last rising edge (``clock``, s; ``time.monotonic`` by default, the system-wide
+    CLOCK_MONOTONIC, so another process's times compare). The monostable's output is active for ``timeout_s`` after
+    each rising edge (retriggered by the next); :meth:`expired` is its inverted output (/Q): True before the first
+    edge and once ``timeout_s`` has passed since the last one."""
+
+    def __init__(self, timeout_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+        super().__init__(pull_high=False)
+        self.timeout_s = float(timeout_s)
+        self._clock = clock
+        #: clock time of the last rising edge (None: never fed)
+        self.last_rise: float | None = None
+        self.rises = 0
+
+    def set_high(self, high: bool) -> None:
+        """Drive the feed; a low-to-high change retriggers the monostable."""
+        was = self.is_high()
+        super().set_high(high)
+        if high and not was:
+            self.last_rise = self._clock()
+            self.rises += 1
+
+    def expires_at(self) -> float | None:
+        """Clock time at which the monostable runs out without a new edge (None: never fed)."""
+        last = self.last_rise
+        return None if last is None else last + self.timeout_s
+
+    def expired(self) -> bool:
+        """The monostable's /Q: True (outputs to be disabled) unless a rising edge came within ``timeout_s``."""
+        end = self.expires_at()
+        return end is None or self._clock() >= end
+
+
+class WatchedOutputEnable:
+    """/OE as the PCA9685 sees it with the hardware watchdog fitted (docs/watchdog.md): the OR (74LVC1G32) of the
+    guard's /OE line ``oe`` and the watchdog's /Q (``feed.expired()``). Pass it to the emulated chip as its
+    ``output_enable_line``; the guard keeps driving ``oe`` and toggling ``feed``."""
+
+    def __init__(self, oe: EmulatedGpioLine, feed: WatchdogFeedLine) -> None:
+        self.oe, self.feed = oe, feed
+
+    def is_high(self) -> bool:
+        """True: the outputs are disabled (the guard asserts /OE, or the watchdog ran out)."""
+        return self.oe.is_high() or self.feed.expired()
+
+
+def open_output_line(chip: str, line: int, initial_high: bool = True,
+                     consumer: str = "hindrax-output-guard") -> Any:
     """A :class:`GpiodLine` on ``chip``/``line``, driven ``initial_high`` at once (see the class for errors)."""
-    return GpiodLine(chip, line, initial_high=initial_high)
+    return GpiodLine(chip, line, initial_high=initial_high, consumer=consumer)
