@@ -96,6 +96,10 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "and the vehicle file (control_scenarios.md/.json)"),
     (("control", "model"), "hindrax_ident.commands.control",
      "the controller's gains and the source of each model value (--model identification.yaml or the vehicle file)"),
+    (("sros2", "policy"), "hindrax_ident.commands.sros2",
+     "write the vehicle's SROS2 permissions policies (internal and topside domain) for its name and launch files"),
+    (("sros2", "keystore"), "hindrax_ident.commands.sros2",
+     "create the vehicle's SROS2 keystore: enclaves, certificates, signed permissions (needs sros2, on the Pi)"),
     (("esc", "calibrate"), "hindrax_ident.commands.esc",
      "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
 ]

@@ -50,6 +50,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..config import ConfigError, ConfigIssue
 from ..node_common import load_node_config
 from ..ros_process import RosProcess
+from ..sros2_policy import topside_enclaves
 from .interface import GATEWAY_NODE, relays
 
 __all__ = ["DISCOVERY_RANGES", "GatewaySettings", "Gateway", "main", "read_settings"]
@@ -105,16 +106,20 @@ def wait_for(future: Any, timeout_s: float) -> bool:
     return done.wait(timeout_s) or future.done()
 
 
-def init_topside_context(domain_id: int, discovery_range: str, static_peers: str | None) -> Any:
+def init_topside_context(domain_id: int, discovery_range: str, static_peers: str | None,
+                         enclave: str | None = None) -> Any:
     """An initialised rclpy Context on the topside domain. rcl reads ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and
-    ``ROS_STATIC_PEERS`` at init: they are set for this init only, and the environment restored after."""
+    ``ROS_STATIC_PEERS`` at init: they are set for this init only, and the environment restored after. ``enclave``:
+    the SROS2 enclave of this context (``/<vehicle.name>/gateway``, :mod:`hindrax_drivers.sros2_policy`; used when
+    ``ROS_SECURITY_ENABLE`` is true, on the Pi)."""
     saved = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS")}
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery_range
     if static_peers:
         os.environ["ROS_STATIC_PEERS"] = static_peers
     context = rclpy.Context()
     try:
-        rclpy.init(args=[], context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(args=["--ros-args", "--enclave", enclave] if enclave else [], context=context,
+                   domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
     finally:
         for key, value in saved.items():
             if value is None:
@@ -297,7 +302,8 @@ def main(args: Sequence[str] | None = None) -> int:
             boot.destroy_node()
         internal = proc.own(Node("gateway", namespace="/" + settings.vehicle_name, use_global_arguments=False))
         proc.executor.add_node(internal)
-        topside = init_topside_context(settings.topside_domain_id, settings.topside_discovery_range, static_peers)
+        topside = init_topside_context(settings.topside_domain_id, settings.topside_discovery_range, static_peers,
+                                       enclave=topside_enclaves(settings.vehicle_name)["gateway"])
         proc.at_exit(lambda: rclpy.try_shutdown(context=topside))
         gateway = Gateway(internal, topside, settings)
         proc.at_exit(gateway.close)

@@ -1,0 +1,169 @@
+"""The vehicle's SROS2 permissions policy: which enclave may publish, subscribe, call or serve what.
+
+SROS2 (ROS 2's DDS Security tooling) turns a policy file (format 0.2.0, sros2's ``policy.xsd``) into one signed DDS
+permissions document per *enclave*; a process joins the graph with its enclave's certificate and may use only what
+its permissions grant (default deny). This module writes the policy that matches docs/architecture.md §8.2:
+
+- **internal domain** (the vehicle's loopback graph): one enclave per process of the launch layout, named by the
+  ``--enclave`` its ``<node>`` passes (``/vehicle/<process>``, :func:`launch_enclaves`), plus ``/vehicle/gateway``
+  (the gateway's internal context). Each may use every topic, service and action of the internal graph
+  (:data:`INTERNAL_TOPICS`, :data:`INTERNAL_SERVICES`, :data:`INTERNAL_ACTIONS`): the vehicle trusts its own
+  processes; what it keeps from the topside is the domain itself.
+- **topside domain**, under ``/<vehicle.name>/``: ``/<name>/gateway`` serves the gateway's interface
+  (:data:`hindrax_drivers.gateway.interface.INTERFACE`); ``/<name>/operator`` may call all of it (arm, disarm,
+  reset, setpoints, campaign, recorder); ``/<name>/topside`` (every other topside participant) may call ``estop``
+  and read the telemetry, nothing else. No topside enclave is granted an internal topic (heartbeats,
+  ``thrusters/*``, ``esc/*``): they exist on the internal domain only.
+
+DDS permissions name one domain per grant (sros2 writes ``ROS_DOMAIN_ID`` into every grant), so the internal and the
+topside enclaves are two policies, :func:`internal_policy` and :func:`topside_policy`, turned into permissions with
+the internal and the topside domain id respectively (``hindrax sros2 keystore``).
+
+Pure: strings in, XML text out (``xml.etree``); no rclpy, no sros2.
+"""
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from typing import Iterable, Mapping
+
+from .gateway.interface import GATEWAY_NODE, INTERFACE, Relay
+
+__all__ = ["INTERNAL_ACTIONS", "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
+           "NODE_TOPICS", "POLICY_VERSION", "enclave_of", "gateway_internal_enclave", "internal_policy",
+           "launch_enclaves", "topside_enclaves", "topside_policy"]
+
+#: sros2's policy format (``policy.xsd`` fixes the attribute ``version`` to it)
+POLICY_VERSION = "0.2.0"
+#: prefix of the internal enclaves (one vehicle per keystore: the name is not needed on the loopback graph)
+INTERNAL_ENCLAVE_ROOT = "/vehicle"
+
+#: every topic of the vehicle's internal graph (what its nodes publish or subscribe; checked against the nodes by
+#: test_sros2_policy.py)
+INTERNAL_TOPICS = (
+    "/allocation/status", "/controller/setpoint", "/controller/status", "/diagnostics", "/dvl/altitude", "/dvl/data",
+    "/dvl/twist", "/esc/heartbeat", "/guard/heartbeat", "/identification/calibration", "/identification/estimates",
+    "/identification/status", "/imu/data_raw", "/imu/mag", "/imu/temperature", "/lights/brightness", "/odom",
+    "/ping/altitude", "/ping/confidence", "/pressure/depth", "/pressure/fluid_pressure", "/pressure/temperature",
+    "/raw/dvl75", "/raw/icm20948", "/raw/ms5837", "/raw/pca9685", "/raw/ping1d", "/supervisor/abort",
+    "/supervisor/heartbeat", "/supervisor/status", "/tf", "/tf_static", "/thrusters/command_pulse_width",
+    "/thrusters/forces", "/thrusters/pulse_width", "/wrench",
+)
+#: every service of the internal graph besides the nodes' parameter services
+INTERNAL_SERVICES = (
+    "/controller/enable", "/controller/hold", "/esc/set_armed", "/identification/continue", "/pressure/zero_depth",
+    "/recorder/start", "/recorder/stop", "/supervisor/estop", "/supervisor/reset", "/thrusters/test_forces",
+)
+#: the internal graph's actions
+INTERNAL_ACTIONS = ("/run_identification",)
+#: what every rclpy node publishes and subscribes on its own (``/rosout`` logging, parameter events)
+NODE_TOPICS = ("/rosout", "/parameter_events")
+#: the parameter and type-description services every rclpy node serves (private names, ``~/``)
+NODE_SERVICES = ("~/describe_parameters", "~/get_parameter_types", "~/get_parameters", "~/get_type_description",
+                 "~/list_parameters", "~/set_parameters", "~/set_parameters_atomically")
+
+
+def enclave_of(arguments: Iterable[str]) -> str | None:
+    """The ``--enclave`` a process's command-line arguments give (``--ros-args ... --enclave PATH``), or None."""
+    args = list(arguments)
+    for i, a in enumerate(args[:-1]):
+        if a in ("--enclave", "-e"):
+            return args[i + 1]
+    return None
+
+
+def launch_enclaves(processes: Iterable) -> dict[str, tuple[str, ...]]:
+    """{enclave: node names} of the launch layout's processes (:class:`~hindrax_drivers.launch_xml.NodeProcess`,
+    from :func:`~hindrax_drivers.launch_xml.read_launch`). A process of this package without ``--enclave`` is an
+    error (ValueError naming it); the gateway is left out (its two contexts have :func:`gateway_internal_enclave`
+    and the topside enclave)."""
+    out: dict[str, list[str]] = {}
+    for p in processes:
+        if p.executable == "gateway_node":
+            continue
+        enclave = enclave_of(p.arguments)
+        if enclave is None:
+            if p.package.startswith("hindrax"):
+                raise ValueError(f"launch process {p.executable} ({p.source}): no --enclave in its args")
+            continue
+        out.setdefault(enclave, []).extend(p.node_names)
+    return {k: tuple(v) for k, v in sorted(out.items())}
+
+
+def gateway_internal_enclave() -> str:
+    """The enclave of the gateway's internal context."""
+    return f"{INTERNAL_ENCLAVE_ROOT}/gateway"
+
+
+def topside_enclaves(vehicle_name: str) -> dict[str, str]:
+    """{role: enclave} on the topside domain: ``gateway``, ``operator``, ``topside``."""
+    return {role: f"/{vehicle_name}/{role}" for role in ("gateway", "operator", "topside")}
+
+
+def _policy(enclaves: Mapping[str, list[tuple[str, str, list[tuple[str, dict[str, str], list[str]]]]]]) -> str:
+    """XML text of a policy: {enclave path: [(profile ns, profile node, [(element kind, attributes, names)])]}."""
+    root = ET.Element("policy", version=POLICY_VERSION)
+    encl = ET.SubElement(root, "enclaves")
+    for path, profiles in enclaves.items():
+        e = ET.SubElement(ET.SubElement(encl, "enclave", path=path), "profiles")
+        for ns, node, rules in profiles:
+            prof = ET.SubElement(e, "profile", ns=ns, node=node)
+            for kind, attrs, names in rules:
+                if not names:
+                    continue
+                lst = ET.SubElement(prof, kind, attrs)
+                for n in names:
+                    ET.SubElement(lst, kind[:-1]).text = n
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _node_rules() -> list:
+    return [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
+            ("services", {"reply": "ALLOW", "request": "ALLOW"}, list(NODE_SERVICES))]
+
+
+def internal_policy(enclaves: Mapping[str, Iterable[str]]) -> str:
+    """The internal domain's policy: each enclave of ``enclaves`` ({enclave: node names},
+    :func:`launch_enclaves`) and the gateway's internal context may use the whole internal graph."""
+    graph = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(INTERNAL_TOPICS)),
+             ("services", {"reply": "ALLOW", "request": "ALLOW"}, list(INTERNAL_SERVICES)),
+             ("actions", {"call": "ALLOW", "execute": "ALLOW"}, list(INTERNAL_ACTIONS))]
+    doc: dict = {}
+    for enclave, nodes in {**dict(enclaves), gateway_internal_enclave(): ("gateway",)}.items():
+        doc[enclave] = [("/", n, _node_rules() + graph) for n in nodes]
+    return _policy(doc)
+
+
+def _names(vehicle_name: str, relays: Iterable[Relay]) -> list[str]:
+    return [f"/{vehicle_name}/{r.topside}" for r in relays]
+
+
+def topside_policy(vehicle_name: str, interface: Iterable[Relay] = INTERFACE) -> str:
+    """The topside domain's policy for ``vehicle_name`` (module docstring): the gateway serves ``interface``, the
+    operator may use all of it, every other topside participant e-stop (``who == "anyone"``) and telemetry."""
+    relays = list(interface)
+    of = lambda kind, who=None: [r for r in relays if r.kind == kind and (who is None or r.who in who)]  # noqa: E731
+    ns = f"/{vehicle_name}"
+    roles = topside_enclaves(vehicle_name)
+    gateway = _node_rules() + [
+        ("topics", {"publish": "ALLOW"}, _names(vehicle_name, of("topic_out"))),
+        ("topics", {"subscribe": "ALLOW"}, _names(vehicle_name, of("topic_in"))),
+        ("services", {"reply": "ALLOW"}, _names(vehicle_name, of("service"))),
+        ("actions", {"execute": "ALLOW"}, _names(vehicle_name, of("action")))]
+    operator = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
+                ("topics", {"subscribe": "ALLOW"}, _names(vehicle_name, of("topic_out"))),
+                ("topics", {"publish": "ALLOW"}, _names(vehicle_name, of("topic_in"))),
+                ("services", {"request": "ALLOW"}, _names(vehicle_name, of("service"))),
+                ("actions", {"call": "ALLOW"}, _names(vehicle_name, of("action")))]
+    anyone = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
+              ("topics", {"subscribe": "ALLOW"}, _names(vehicle_name, of("topic_out", ("read", "anyone")))),
+              ("services", {"request": "ALLOW"}, _names(vehicle_name, of("service", ("anyone",)))),
+              ("services", {"request": "DENY"}, _names(vehicle_name, of("service", ("operator",)))),
+              ("actions", {"call": "DENY"}, _names(vehicle_name, of("action", ("operator",)))),
+              ("topics", {"publish": "DENY"}, _names(vehicle_name, of("topic_in", ("operator",))))]
+    # the gateway's topside context holds GATEWAY_NODE and its _operator and _campaign siblings (gateway/node.py):
+    # the interface on the first profile, each node's own parameter services on its own
+    siblings = [(ns, f"{GATEWAY_NODE}_{suffix}", _node_rules()) for suffix in ("operator", "campaign")]
+    return _policy({roles["gateway"]: [(ns, GATEWAY_NODE, gateway), *siblings],
+                    roles["operator"]: [("/", "hindrax_operator", operator)],
+                    roles["topside"]: [("/", "hindrax_topside", anyone)]})
