@@ -43,6 +43,9 @@ supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
 * ``replay_alone_stopped_outputs``: the repeats in which the replay itself stopped the outputs before the kill (a
   second heartbeat publisher is a fault), with the time from its first message in the note.
 
+ROS 2 processes started while armed (:mod:`hindrax_ident.benchmarks.participant_churn`, the same layout):
+``participant_churn_disarms`` (target 0) and ``participant_churn_heartbeat_gap_max_ms`` (target 100 ms).
+
 Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :data:`REPEATS` in-process and
 :data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms.
 """
@@ -281,7 +284,9 @@ def run(quick: bool = False) -> list[dict]:
         if name in notes:
             row["note"] = notes[name]
         rows.append(row)
-    return rows + run_processes(quick) + replay_rows(quick) + gc_rows(quick)
+    from .participant_churn import churn_rows  # noqa: PLC0415 - it imports this module (its _Layout)
+
+    return rows + run_processes(quick) + replay_rows(quick) + gc_rows(quick) + churn_rows(quick)
 
 
 # ------------------------------------------------------------------------------------ garbage collection pauses

@@ -1,0 +1,161 @@
+"""Safety benchmark rows ``participant_churn_*``: ROS 2 processes started while the vehicle is armed and commanded.
+
+The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process
+on the shipped transport, :mod:`hindrax_drivers.dds_transport`; the layout of
+:func:`hindrax_ident.benchmarks.safety.run_processes`) are armed and commanded at 1700 us. Then a new ROS 2
+process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s subscriber to
+``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each
+exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) stalled a safety process 333 ms
+on such a start and disarmed the vehicle in 2-3 of 10 trials; the rows say whether that is gone:
+
+* ``participant_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
+* ``participant_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive messages of any of the three
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms).
+
+Run alone: ``python -m hindrax_ident.benchmarks.participant_churn [--quick] [--default-transports]`` (prints the
+rows as JSON); ``--default-transports`` runs every process with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and no
+profile (rmw_fastrtps's shared memory + UDP), for comparison.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from domain_coordinator import domain_id
+from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
+from hindrax_drivers.liveness import HEARTBEAT_NAMES
+from hindrax_drivers.testing import python_executable, ros_context, wait_until
+
+from hindrax_msgs.msg import ThrusterPwm
+
+from .safety import _Hardware, _Layout
+
+#: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
+PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
+GAP_TARGET_MS = 100.0
+
+_SUBSCRIBER = r"""
+import sys, time
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+rclpy.init()
+node = rclpy.create_node("churn_subscriber_" + sys.argv[1])
+node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: None, 10)
+for topic in ("supervisor/heartbeat", "guard/heartbeat", "esc/heartbeat"):
+    node.create_subscription(DiagnosticStatus, topic, lambda m: None, 10)
+end = time.monotonic() + 3.0
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.05)
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+class _Watch:
+    """Arrival times of the three heartbeats and the ESC's armed transitions, from subscriptions on ``node``."""
+
+    def __init__(self, node) -> None:
+        self.arrivals: dict[str, list[float]] = {name: [] for name in HEARTBEAT_NAMES}
+        self.armed: bool | None = None
+        self.disarms = 0
+        self.active = False
+        for name, topic in HEARTBEAT_NAMES.items():
+            node.create_subscription(DiagnosticStatus, topic, lambda _m, n=name: self._beat(n), 50)
+        node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
+
+    def _beat(self, name: str) -> None:
+        if self.active:
+            self.arrivals[name].append(time.monotonic())
+
+    def _state(self, msg) -> None:
+        if self.active and self.armed and not msg.armed:
+            self.disarms += 1
+        self.armed = bool(msg.armed)
+
+    def largest_gap_s(self) -> tuple[float, str]:
+        """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent."""
+        worst, who = 0.0, ""
+        for name, times in self.arrivals.items():
+            if len(times) < 2:
+                return float("inf"), name
+            gap = max(b - a for a, b in zip(times, times[1:]))
+            if gap > worst:
+                worst, who = gap, name
+        return worst, who
+
+
+def churn_rows(quick: bool = False, default_transports: bool = False) -> list[dict]:
+    """The two ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
+    duration_s = QUICK_DURATION_S if quick else DURATION_S
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-churn-") as d, domain_id() as did, \
+            ros_context(domain_id=did) as ctx:
+        tmp = Path(d)
+        hw = _Hardware(str(tmp / "emulation.sock"))
+        lay = _Layout(ctx, did, tmp, hw)
+        if default_transports:
+            lay.env = {k: v for k, v in lay.env.items() if k != PROFILE_ENV}
+            lay.env[RANGE_ENV] = "LOCALHOST"
+        watch = _Watch(lay.probe)
+        started: list[subprocess.Popen] = []
+        try:
+            lay.armed_at_1700()
+            watch.armed, watch.disarms, watch.active = True, 0, True
+            t0 = time.monotonic()
+            k = 0
+            while time.monotonic() - t0 < duration_s:
+                if k % 2 == 0:
+                    argv = [python_executable(), "-c", _SUBSCRIBER, str(k)]
+                else:
+                    argv = [python_executable(), "-m", "hindrax_ident.cli", "health", "--quiet", "--timeout", "3"]
+                started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
+                                                stderr=subprocess.DEVNULL))
+                k += 1
+                next_start = t0 + k * PERIOD_S
+                wait_until(lambda: time.monotonic() >= next_start, PERIOD_S + 5.0, lambda: time.sleep(0.02),
+                           "next participant's start")
+            watch.active = False
+            for p in started:
+                p.wait(60)
+            gap_s, who = watch.largest_gap_s()
+            beats = sum(len(v) for v in watch.arrivals.values())
+        except Exception:
+            for f in sorted(tmp.glob("*.log")):
+                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
+            raise
+        finally:
+            for p in started:
+                if p.poll() is None:
+                    p.kill()
+            lay.close()
+            hw.close()
+    what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
+            f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
+            + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport"))
+    return [
+        {"name": "participant_churn_disarms", "value": watch.disarms, "unit": "disarms", "target": 0,
+         "n": k, "note": what},
+        {"name": "participant_churn_heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms",
+         "target": GAP_TARGET_MS, "n": beats,
+         "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the rows alone and print them as JSON."""
+    parser = argparse.ArgumentParser(prog="participant_churn")
+    parser.add_argument("--quick", action="store_true", help=f"{QUICK_DURATION_S:g} s instead of {DURATION_S:g} s")
+    parser.add_argument("--default-transports", action="store_true",
+                        help="LOCALHOST with rmw_fastrtps's shared memory + UDP instead of the vehicle's profile")
+    args = parser.parse_args(argv)
+    print(json.dumps(churn_rows(args.quick, args.default_transports), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
