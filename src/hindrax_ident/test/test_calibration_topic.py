@@ -325,3 +325,23 @@ def test_tilt_decay_command_uses_the_campaigns_verdict_rule(tmp_path, capsys, mo
     monkeypatch.setattr(verdicts, "free_decay_reason", lambda *a, **k: "stand-in rule")
     sp = verdict(inertia, 0.02)
     assert sp["verdict"] == "suspect" and sp["reason"] == "stand-in rule"
+
+
+@pytest.mark.ros
+def test_ident_bag_writes_each_result_into_a_new_folder_beside_the_bag(tmp_path, capsys):
+    """Issue 45.3: without --out, each ``ident bag`` writes a new ``<bag>_ident_<time>`` folder beside the bag, never
+    into the parent all bags share, and never over an earlier result; --out must be new or empty."""
+    cfg = load_config(default_config_path())
+    runs = tmp_path / "runs"
+    bag = runs / "hindrax_2026_11_25-10_00_00"
+    _write_campaign_bag(bag, cfg, None)
+    assert cli.main(["ident", "bag", str(bag)]) == 0
+    assert cli.main(["ident", "bag", str(bag)]) == 0
+    capsys.readouterr()
+    results = sorted(p for p in runs.iterdir() if p != bag)
+    assert len(results) == 2 and all(p.name.startswith(f"{bag.name}_ident_") for p in results)
+    assert all((p / "identification.yaml").is_file() and (p / "report" / "index.html").is_file() for p in results)
+    assert not (runs / "identification.yaml").exists() and not (runs / "report").exists()
+    assert cli.main(["ident", "bag", str(bag), "--out", str(results[0])]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not empty" in err[0]

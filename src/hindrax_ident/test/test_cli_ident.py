@@ -147,7 +147,39 @@ def test_run_default_directory_and_latest_link(tmp_path, capsys, monkeypatch):
     latest = tmp_path / "runs" / "latest"
     assert latest.is_symlink()
     assert (latest / "identification.yaml").exists()
-    assert os.readlink(latest).endswith("Z")
+    assert os.readlink(latest).startswith("sim-in-process_yaw_")  # named by its input and time
+
+
+def test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion(tmp_path, capsys, monkeypatch):
+    """Issue 45.3: the second run of the same second picks a new name with one line; an aborted run leaves latest."""
+    import datetime as dt
+
+    from hindrax_ident import output_dirs
+
+    monkeypatch.chdir(tmp_path)
+    frozen = dt.datetime(2026, 11, 25, 12, 0, 0)
+    real = output_dirs.new_result_dir
+    monkeypatch.setattr(output_dirs, "new_result_dir", lambda root, name, now=None: real(root, name, frozen))
+    argv = ["run", "--in-process", "--dofs", "yaw", "--levels", "1", "--max-level-duration", "4"]
+    assert cli.main(argv) == 0
+    first = capsys.readouterr().out
+    assert cli.main(argv) == 0
+    second = capsys.readouterr().out
+    runs = tmp_path / "runs"
+    names = sorted(p.name for p in runs.iterdir() if p.name != "latest")
+    assert names == ["sim-in-process_yaw_2026_11_25-12_00_00", "sim-in-process_yaw_2026_11_25-12_00_00_1"]
+    assert "exists" not in first
+    notice = [ln for ln in second.splitlines() if "exists: writing to" in ln]
+    assert len(notice) == 1 and notice[0].endswith("_1")
+    assert os.readlink(runs / "latest") == names[1]
+    assert all((runs / n / "identification.yaml").is_file() for n in names)  # the first result is intact
+    # a run without a result (no DOF identified) does not move latest
+    import hindrax_ident.identification.calibration as calibration
+
+    monkeypatch.setattr(calibration, "identify_calibrated", lambda *a, **k: ({}, {"yaw": "no data"}))
+    assert cli.main(argv) == 1
+    capsys.readouterr()
+    assert os.readlink(runs / "latest") == names[1]
 
 
 def test_run_rejects_unknown_dof(capsys):
@@ -167,5 +199,5 @@ def test_run_refuses_an_output_directory_that_holds_a_run(tmp_path, capsys):
     (tmp_path / "bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
     assert cli.main(["run", "--dofs", "surge", "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err
-    assert "already holds a run" in err and len(err.strip().splitlines()) == 1
+    assert "not empty" in err and len(err.strip().splitlines()) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # nothing started, nothing written

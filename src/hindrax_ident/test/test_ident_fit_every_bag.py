@@ -44,9 +44,9 @@ def test_the_repository_has_committed_bags_with_force_and_velocity():
 @pytest.mark.parametrize("bag", BAGS, ids=lambda p: p.name)
 def test_ident_fit_on_a_committed_bag_is_clean(bag, tmp_path, capsys):
     """Every (wrench, velocity) choice: exit 0, or exit 1 with one ``ident fit:`` line; no traceback, no warning."""
-    for wrench, velocity in _pairs(bag):
+    for k, (wrench, velocity) in enumerate(_pairs(bag)):
         argv = ["ident", "fit", str(bag), "--wrench-topic", wrench, "--velocity-topic", velocity,
-                "--config", str(default_config_path()), "--out", str(tmp_path / "out")]
+                "--config", str(default_config_path()), "--out", str(tmp_path / f"out{k}")]  # results never share
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             warnings.simplefilter("error", RuntimeWarning)

@@ -1,7 +1,8 @@
 """``hindrax ident bag BAG [--out DIR] [--config FILE] [--restoring-n-m-per-rad C --restoring-std S]``: offline
 identification of a recorded campaign bag.
 
-Writes ``identification.yaml`` and ``report/index.html`` (default: beside the bag) and prints the summary
+Writes ``identification.yaml`` and ``report/index.html`` into a new folder beside the bag,
+``<bag>_ident_<time>`` (``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints the summary
 table; the reading is :mod:`hindrax_ident.identification.from_bag` (the campaign's topics into the campaign
 record) and :mod:`hindrax_ident.identification.campaign_fit` (the record into the fit core's per-DOF records), the
 fit is the fit core shared with ``hindrax ident fit`` (:mod:`hindrax_ident.identification.fit_core`,
@@ -20,18 +21,48 @@ from pathlib import Path
 
 from .common import CommandError, add_config_argument, load_vehicle
 
-__all__ = ["add_arguments", "run", "identify_campaign_bag"]
+__all__ = ["add_arguments", "run", "identify_campaign_bag", "result_dir_for_bag"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``hindrax ident bag``."""
     parser.add_argument("bag", help="bag directory (or .mcap file) recorded during an identification campaign")
-    parser.add_argument("--out", default=None, help="output directory (default: the bag's parent directory)")
+    parser.add_argument("--out", default=None,
+                        help="output directory, new or empty (default: a new <bag>_ident_<time> beside the bag)")
     parser.add_argument("--restoring-n-m-per-rad", type=float, default=None,
                         help="roll/pitch restoring stiffness C for the bag's tilt_decay steps when it has no inclining "
                              "step (from `hindrax ident inclining`; default the vehicle file's m g BG)")
     parser.add_argument("--restoring-std", type=float, default=0.0, help="1-sigma of C, N m/rad")
     add_config_argument(parser)
+
+
+def result_dir_for_bag(bag: Path, out: str | None, kind: str = "ident") -> Path:
+    """The folder of one result from ``bag`` (:mod:`hindrax_ident.output_dirs`): ``out`` when given (new or empty,
+    else CommandError), else a new ``<bag name>_<kind>_<time>[_N]`` beside the bag, never the bags' shared parent
+    itself. Prints one line when the plain name was taken."""
+    from ..output_dirs import OutputDirError, explicit_result_dir, new_result_dir
+
+    try:
+        if out:
+            return explicit_result_dir(out)
+        resolved = bag.resolve()
+        name = resolved.stem if resolved.is_file() else resolved.name
+        path, notice = new_result_dir(resolved.parent, f"{name}_{kind}")
+    except OutputDirError as exc:
+        raise CommandError(str(exc)) from exc
+    except OSError as exc:
+        raise CommandError(f"{bag}: cannot create a result folder beside it ({exc.strerror or exc}); "
+                           "give --out") from exc
+    if notice:
+        print(notice)
+    return path
+
+
+def _remove_if_empty(path: Path) -> None:
+    try:
+        path.rmdir()  # only an empty folder: a failed identification leaves no half-named result
+    except OSError:
+        pass
 
 
 def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, command: str, identify=None):
@@ -79,8 +110,12 @@ def run(args: argparse.Namespace) -> int:
     bag = Path(args.bag)
     if not bag.exists():
         raise CommandError(f"ident bag: {bag}: no such file or directory")
-    out = Path(args.out) if args.out else bag.resolve().parent
-    _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident bag")
+    out = result_dir_for_bag(bag, args.out)
+    try:
+        _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident bag")
+    except CommandError:
+        _remove_if_empty(out)
+        raise
     print(format_summary(idents))
     doc = yaml.safe_load(Path(path).read_text())
     for dof, e in doc.get("dofs", {}).items():  # what data would fix each suspect parameter (as ident fit prints)

@@ -7,10 +7,10 @@ and no topic, DOF or holdout choice, is read as the campaign (the campaign reade
 and intervals. Any other bag goes through :mod:`hindrax_ident.identification.fit_any` (force and velocity by
 message type, preprocessing, K-fold and holdout validation). Writes ``identification.yaml``
 (``dofs``, ``validation``, ``preprocessing``) and ``report/index.html`` (measured against predicted velocity on the
-validation data) in ``--out`` (default: the first bag's parent directory) and prints a table. Without ``--config``
-the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready: false`` with the reason, also
-printed (:func:`hindrax_ident.identification.results.to_config_overrides` refuses it). Exit 0, or 1 with one
-line on stderr for an unusable bag, topic, frame or too little data.
+validation data) in ``--out`` (new or empty; default: a new ``<first bag>_fit_<time>`` beside it) and prints a
+table. Without ``--config`` the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready:
+false`` with the reason, also printed (:func:`hindrax_ident.identification.results.to_config_overrides` refuses
+it). Exit 0, or 1 with one line on stderr for an unusable bag, topic, frame or too little data.
 """
 from __future__ import annotations
 
@@ -49,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default=None,
                         help="vehicle file (optional: without it nothing about the vehicle is assumed; needed for "
                              "ThrusterPwm forces and for added_mass = inertia - rigid-body inertia)")
-    parser.add_argument("--out", default=None, help="output directory (default: the first bag's parent directory)")
+    parser.add_argument("--out", default=None,
+                        help="output directory, new or empty (default: a new <first bag>_fit_<time> beside it)")
 
 
 def _num(x, width: int, fmt: str = ".3f") -> str:
@@ -119,14 +120,18 @@ def _run_campaign(args: argparse.Namespace, cfg) -> int:
     from ..identification import fit_core
     from ..identification import from_bag
     from ..identification.fit_any import DofFit, FitResult
-    from .ident_bag import identify_campaign_bag
+    from .ident_bag import _remove_if_empty, identify_campaign_bag, result_dir_for_bag
 
     bag = Path(args.bags[0])
-    out = Path(args.out) if args.out else bag.resolve().parent
+    out = result_dir_for_bag(bag, args.out, "fit")
     opts = replace(fit_core.CoreOptions(), folds=args.folds)
     identify = from_bag.identify_bag
-    _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit",
-                                                  identify=lambda b, c: identify(b, c, opts=opts))
+    try:
+        _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit",
+                                                      identify=lambda b, c: identify(b, c, opts=opts))
+    except CommandError:
+        _remove_if_empty(out)
+        raise
     res = FitResult({d: DofFit(d, "fitted", {}, r.signals["core"], {"cross_validation": dict(r.signals["core"].cv)})
                      for d, r in idents.items()}, {}, f"{args.folds}-fold cross-validation by contiguous blocks of the "
                     f"{opts.validation_s:g} s validation segments of each DOF's window")
@@ -181,7 +186,9 @@ def run(args: argparse.Namespace) -> int:
     if not any(r.status == "fitted" for r in res.dofs.values()):
         print(format_table(res, cfg))
         raise CommandError("ident fit: no DOF could be identified (see the table: not excited or failed)")
-    out = Path(args.out) if args.out else Path(args.bags[0]).resolve().parent
+    from .ident_bag import result_dir_for_bag
+
+    out = result_dir_for_bag(Path(args.bags[0]), args.out, "fit")
     doc = build_document(res, cfg, args.bags, args.holdout)
     path, index = write_fit_outputs(out, res, doc)
     print(format_table(res, cfg))

@@ -14,8 +14,10 @@ but does not change it.
 (:mod:`hindrax_ident.identification.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
 no ROS graph, no bag), about four times faster; for quick studies of the method.
 
-Output directory: ``<recording.output_root>/<UTC timestamp>/`` with a ``latest`` symlink beside it, or
-``--out``. It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.results`),
+Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
+``--in-process``; a second run in the same second gets ``_1`` and one line says so), with a ``latest`` link beside
+it moved once the run has completed (:mod:`hindrax_ident.output_dirs`), or ``--out``, which must be new or empty.
+It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.results`),
 ``report/index.html`` with its plots, and (graph) ``bag/`` (rosbag2 MCAP layout). At the end a table is printed:
 per DOF and parameter the identified value with its std, the configured value ("truth" in simulation) and the
 relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
@@ -23,7 +25,6 @@ relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import math
 import os
 import time
@@ -129,23 +130,38 @@ def _write_results(args: argparse.Namespace, identifications: dict, path: str, w
     results_doc.write_if_asked(args, "run", "The main job: identified against the simulator's truth", body)
 
 
-def _output_dir(cfg, out: str | None) -> Path:
-    if out:
-        p = Path(out)
-        p.mkdir(parents=True, exist_ok=True)
-        return p
-    root = Path(str(cfg.recording.output_root))
-    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
-    p = root / stamp
-    p.mkdir(parents=True, exist_ok=True)
-    latest = root / "latest"
+def _output_dir(cfg, out: str | None, kind: str, dofs: list[str]) -> Path:
+    """``--out`` (new or empty, else CommandError), or a new folder under ``recording.output_root`` named by the
+    campaign (``kind``, the DOFs) and the time (:mod:`hindrax_ident.output_dirs`)."""
+    from hindrax_drivers.config import DOFS
+
+    from ..output_dirs import OutputDirError, explicit_result_dir, new_result_dir
+
     try:
-        if latest.is_symlink() or latest.exists():
-            latest.unlink()
-        os.symlink(stamp, latest)
-    except OSError:
-        pass
-    return p
+        if out:
+            return explicit_result_dir(out)
+        label = "all" if set(dofs) == set(DOFS) else "-".join(dofs)
+        path, notice = new_result_dir(Path(str(cfg.recording.output_root)), f"{kind}_{label}")
+    except OutputDirError as exc:
+        raise CommandError(str(exc)) from exc
+    except OSError as exc:
+        raise CommandError(f"recording.output_root {cfg.recording.output_root}: cannot create a run folder "
+                           f"({exc.strerror or exc})") from exc
+    if notice:
+        print(notice, flush=True)
+    return path
+
+
+def _completed(out: Path, explicit: bool) -> None:
+    """A run folder is complete: ``latest`` beside it points at it now (not for ``--out``)."""
+    if explicit:
+        return
+    from ..output_dirs import point_latest
+
+    try:
+        point_latest(out)
+    except OSError as exc:
+        print(f"{out.parent / 'latest'}: not updated ({exc.strerror or exc})")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -225,9 +241,7 @@ def run_graph(args: argparse.Namespace) -> int:
     def progress(msg: str) -> None:
         print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
 
-    out = _output_dir(cfg, args.out)
-    if (out / "bag").exists():
-        raise CommandError(f"--out: {out} already holds a run (bag/); choose a new output directory")
+    out = _output_dir(cfg, args.out, "sim", dofs)
     overrides = _calibration_overrides(args)
     if args.max_level_duration is not None:
         overrides["identification.max_level_duration_s"] = float(args.max_level_duration)
@@ -250,7 +264,10 @@ def run_graph(args: argparse.Namespace) -> int:
         print(format_summary(outcome.identifications))
         _write_results(args, outcome.identifications, "through the node graph", time.monotonic() - wall0)
     print(f"output: {out}  (bag {outcome.bag_dir}; wall time {time.monotonic() - wall0:.0f} s)")
-    return 0 if (outcome.success and outcome.identifications) else 1
+    if outcome.success and outcome.identifications:
+        _completed(out, bool(args.out))
+        return 0
+    return 1
 
 
 def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
@@ -348,7 +365,7 @@ def run_in_process(args: argparse.Namespace) -> int:
     idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
     for dof, msg in errors.items():
         progress(f"{dof}: no estimate ({msg})")
-    out = _output_dir(cfg, args.out)
+    out = _output_dir(cfg, args.out, "sim-in-process", dofs)
     if idents:
         # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
         doc = build_results(idents, cfg, source="simulation", seed=record.seed, calibration=record.calibration)
@@ -360,4 +377,7 @@ def run_in_process(args: argparse.Namespace) -> int:
         print(format_summary(idents))
         _write_results(args, idents, "in-process (no ROS graph)", time.monotonic() - wall0)
     print(f"output: {out}  (wall time {time.monotonic() - wall0:.0f} s)")
-    return 1 if (record.aborted or not idents) else 0
+    if record.aborted or not idents:
+        return 1
+    _completed(out, bool(args.out))
+    return 0
