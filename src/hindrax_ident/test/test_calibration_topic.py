@@ -81,9 +81,10 @@ def test_results_survive_the_message_exactly_with_named_keys():
     assert {k: e["value"] for k, e in cal.items()} == {k: e["value"] for k, e in CAL.items()}
 
 
-def _write_campaign_bag(path, cfg, calibration_msg):
+def _write_campaign_bag(path, cfg, calibration_msg, cut_s=None):
     """A bag with what ``hindrax ident bag`` needs: 10 s of a heave run at fixed widths (status, ESC widths,
-    pressure, DVL, IMU) and, optionally, the node's calibration message (type from its own class)."""
+    pressure, DVL, IMU) and, optionally, the node's calibration message (type from its own class). The campaign ends
+    with a DONE status, unless the bag is cut ``cut_s`` after its start (heave, the first of 3 levels, running)."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import FluidPressure, Imu
@@ -105,10 +106,14 @@ def _write_campaign_bag(path, cfg, calibration_msg):
         for k in range(501):
             t = T0 + 0.02 * k
             t_ns = int(round(t * 1e9))
+            if cut_s is not None and t > T0 + cut_s:
+                break
             running = T0 + 2.0 <= t < T0 + 6.0
             st = ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING if running else ManeuverStatus.PHASE_POSITIONING,
                                 dof="heave" if running else "", level_command=10.0 if running else 0.0,
-                                level_count=1)
+                                level_count=1 if cut_s is None else 3)
+            if k == 500:
+                st = ManeuverStatus(phase=ManeuverStatus.PHASE_DONE, dof="", level_count=1)
             w.write("/identification/status", t_ns, serialize_message(_stamped(st, t)))
             pw = ThrusterPwm(pulse_width_us=[1600.0 if running else 1500.0] * n, armed=True)
             w.write("/thrusters/pulse_width", t_ns, serialize_message(_stamped(pw, t)))
@@ -345,3 +350,35 @@ def test_ident_bag_writes_each_result_into_a_new_folder_beside_the_bag(tmp_path,
     assert cli.main(["ident", "bag", str(bag), "--out", str(results[0])]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not empty" in err[0]
+
+
+@pytest.mark.ros
+def test_ident_bag_names_a_truncated_bag_with_what_it_lacks(tmp_path, capsys):
+    """Issue 45.4: a bag cut while the campaign ran (heave, level 1 of 3) is identified and named TRUNCATED, with
+    the DOF, the levels missing and the campaign time it holds, in the output and in identification.yaml; a whole
+    campaign is not."""
+    cfg = load_config(default_config_path())
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    _write_campaign_bag(whole, cfg, None)
+    _write_campaign_bag(cut, cfg, None, cut_s=5.0)
+    assert cli.main(["ident", "bag", str(whole), "--out", str(tmp_path / "w")]) == 0
+    assert "TRUNCATED" not in capsys.readouterr().out
+    assert "truncated" not in yaml.safe_load((tmp_path / "w" / "identification.yaml").read_text())["provenance"]
+    assert cli.main(["ident", "bag", str(cut), "--out", str(tmp_path / "c")]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("TRUNCATED"))
+    assert "still running when the bag ends, 5.0 s after it started (heave, level 1 of 3)" in line
+    assert "levels missing: heave 1 of 3 levels" in line
+    recorded = yaml.safe_load((tmp_path / "c" / "identification.yaml").read_text())["provenance"]["truncated"]
+    assert any("heave 1 of 3 levels" in x for x in recorded)
+
+
+@pytest.mark.ros
+def test_ident_fit_on_a_campaign_bag_without_config_says_how_to_read_it_as_one(tmp_path, capsys):
+    """Issue 45.4: ``ident fit`` on a campaign bag that it cannot read as one (no --config) fails naming the fix."""
+    cfg = load_config(default_config_path())
+    bag = tmp_path / "bag"
+    _write_campaign_bag(bag, cfg, None)
+    assert cli.main(["ident", "fit", str(bag), "--out", str(tmp_path / "out")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("ident fit: ")
+    assert f"{bag} is a campaign bag: give --config VEHICLE.yaml to read it as the campaign" in err[0]

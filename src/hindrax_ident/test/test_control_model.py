@@ -8,7 +8,8 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.control.model import VEHICLE_FILE, load_model, model_from_config
+from hindrax_ident.control.model import VEHICLE_FILE, ModelFileError, load_model, model_from_config
+from hindrax_ident.identification.vehicle_match import vehicle_parameters
 
 
 @pytest.fixture(scope="module")
@@ -109,26 +110,41 @@ def test_calibrated_identification_is_divided_by_its_thrust_scale(cfg, tmp_path)
     ("dofs: [unclosed", "not valid YAML"),
     ("just a string\n", "no 'dofs' mapping"),
 ])
-def test_bad_files_fall_back_with_one_line(cfg, tmp_path, content, words):
+def test_bad_files_are_an_error_of_one_line(cfg, tmp_path, content, words):
+    """Issue 45.4: no silent fallback to the vehicle file."""
     p = tmp_path / "identification.yaml"
     if content is not None:
         p.write_text(content)
-    m = load_model(p, cfg)
-    assert m.source == VEHICLE_FILE
-    assert len(m.notes) == 1 and "\n" not in m.notes[0]
-    assert words in m.notes[0] and "using the vehicle file" in m.notes[0]
-    assert m.axis("heave").inertia == pytest.approx(15.22 + 22.48)
+    with pytest.raises(ModelFileError) as exc:
+        load_model(p, cfg)
+    assert words in str(exc.value) and str(p) in str(exc.value) and "\n" not in str(exc.value)
 
 
-def test_another_vehicle_falls_back(cfg, tmp_path):
-    m = load_model(_write(tmp_path, _doc(cfg, sha="ab" * 32)), cfg)
-    assert m.source == VEHICLE_FILE
-    assert len(m.notes) == 1 and "another vehicle configuration" in m.notes[0]
-    assert m.axis("heave").inertia == pytest.approx(15.22 + 22.48)
+def test_another_vehicle_is_an_error(cfg, tmp_path):
+    with pytest.raises(ModelFileError, match="another vehicle file text"):  # a file from before vehicle_parameters
+        load_model(_write(tmp_path, _doc(cfg, sha="ab" * 32)), cfg)
     doc = _doc(cfg)
     doc["provenance"]["configuration_sha256"] = None  # hindrax ident fit without --config
+    with pytest.raises(ModelFileError, match="no provenance.vehicle_parameters"):
+        load_model(_write(tmp_path, doc), cfg)
+
+
+def test_the_vehicle_is_matched_by_the_parameters_the_identification_depends_on(cfg, tmp_path):
+    """Issue 45.4: a comment, the ESC calibration or the disk floor changed in the vehicle file (other text, other
+    SHA-256) keeps the identification; a changed rigid inertia does not, and the error names the key."""
+    doc = _doc(cfg, sha="ab" * 32)  # the text differs ...
+    doc["provenance"]["vehicle_parameters"] = vehicle_parameters(cfg)  # ... the parameters it depends on do not
     m = load_model(_write(tmp_path, doc), cfg)
-    assert m.source == VEHICLE_FILE and "configuration_sha256" in m.notes[0]
+    assert m.source != VEHICLE_FILE and m.axis("heave").inertia == pytest.approx(50.0)
+    text = default_config_path().read_text()
+    edited = tmp_path / "edited.yaml"
+    assert "min_free_disk_mb: 500.0" in text
+    edited.write_text("# a comment\n" + text.replace("min_free_disk_mb: 500.0", "min_free_disk_mb: 200.0"))
+    assert load_model(_write(tmp_path, doc), load_config(edited)).axis("heave").inertia == pytest.approx(50.0)
+    other = load_config(default_config_path(), {"vehicle.inertia_kg_m2": [0.5, 0.6444, 0.7217]})
+    with pytest.raises(ModelFileError) as exc:
+        load_model(_write(tmp_path, doc), other)
+    assert "vehicle.inertia_kg_m2 [0.4831, 0.6444, 0.7217] -> [0.5, 0.6444, 0.7217]" in str(exc.value)
 
 
 def test_a_holding_force_no_thrust_scale_explains_makes_the_force_terms_fall_back(cfg, tmp_path):

@@ -128,8 +128,8 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
 @pytest.mark.ros
 def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
     """``python -m hindrax_ident.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
-    the model of a file for another vehicle (one warning, the vehicle file), SIGINT -> 0; a bad ``control.*`` value
-    -> 1 with one line naming key, value and allowed range."""
+    the vehicle file's model, SIGINT -> 0; a bad ``control.*`` value, or a model file of another vehicle (never a
+    silent fallback, issue 45.4) -> 1 with one line naming key, value and allowed range."""
     import signal
     import subprocess
 
@@ -148,8 +148,13 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
     assert bad.stderr.splitlines()[-1] == ("invalid configuration: parameters of controller (defaults from "
                                            f"{default_config_path()}): control.hold_fraction = 1.5: allowed number in "
                                            "[0.05, 1]")
-    proc = subprocess.Popen(cmd + ["-p", f"model_file:={other}"], env=child_env(), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
+    refused = subprocess.run(cmd + ["-p", f"model_file:={other}"], env=child_env(), capture_output=True, text=True,
+                             timeout=60)
+    assert refused.returncode == 1, refused.stderr
+    last = refused.stderr.splitlines()[-1]
+    assert last.startswith("invalid configuration: ") and "model_file = " in last and str(other) in last
+    assert "another vehicle" in last
+    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         lines = []
         for line in proc.stdout:  # the node logs once when ready
@@ -158,7 +163,6 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
                 break
         text = "".join(lines)
         assert "controller ready (disabled): model vehicle file" in text, text
-        assert sum("another vehicle configuration" in x for x in lines) == 1
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0, proc.stdout.read()
     finally:

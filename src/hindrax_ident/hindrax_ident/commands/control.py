@@ -97,9 +97,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load_model(path, cfg):
-    from ..control.model import load_model, model_from_config
+    from ..control.model import ModelFileError, load_model, model_from_config
 
-    model = model_from_config(cfg) if path is None else load_model(path, cfg)
+    try:
+        model = model_from_config(cfg) if path is None else load_model(path, cfg)
+    except ModelFileError as exc:  # an error, never the vehicle file in its place
+        raise CommandError(f"--model {exc}") from exc
     for note in model.notes:
         print(note, flush=True)
     return model

@@ -75,13 +75,16 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
     bag or when no DOF is identified."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.from_bag import BagContentError, identify_bag, write_outputs
+    from ..identification.from_bag import BagContentError, identify_bag, truncation, write_outputs
     from .run import _add_reference_sections
 
     try:
         record, idents, errors = (identify or identify_bag)(bag, cfg)
+        lacking = truncation(bag)
     except (BagError, BagContentError, OSError, ValueError) as exc:
         raise CommandError(f"{command}: {exc}") from exc
+    if lacking:
+        print(f"TRUNCATED bag {bag}: " + "; ".join(lacking))
     for dof, msg in errors.items():
         print(f"{dof}: no estimate ({msg})")
     if not idents:
@@ -94,8 +97,15 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
             + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
     ref = argparse.Namespace(restoring_n_m_per_rad=getattr(args, "restoring_n_m_per_rad", None),
                              restoring_std=getattr(args, "restoring_std", 0.0))
-    path = write_outputs(out, idents, cfg, bag, note, calibration=record.calibration,
-                         sections=lambda doc: _add_reference_sections(doc, record, cfg, idents, ref, print))
+    if lacking:
+        note += "; TRUNCATED: " + "; ".join(lacking)
+
+    def sections(doc: dict) -> None:
+        _add_reference_sections(doc, record, cfg, idents, ref, print)
+        if lacking:
+            doc["provenance"]["truncated"] = list(lacking)
+
+    path = write_outputs(out, idents, cfg, bag, note, calibration=record.calibration, sections=sections)
     return record, idents, path
 
 

@@ -10,8 +10,9 @@ z_g W - z_b B (moment = restoring sin(angle); feedforward). Two sources:
   (``thrusters.thrust_fit_uncertainty_rel`` or ``thrust_uncertainty_rel``, the RMS of the two directions): the
   file states no uncertainty for its added masses, so this is a lower bound.
 * :func:`load_model` - ``identification.yaml`` (:mod:`hindrax_ident.identification.results`), read by this small
-  tolerant loader (only ``provenance.configuration_sha256``, ``dofs.<dof>.<parameter>.value / std / verdict /
-  reasons`` and ``joint.scales`` are used; unknown keys are ignored, so the schema may grow).
+  tolerant loader (only ``provenance.vehicle_parameters`` (or, in files written before it,
+  ``provenance.configuration_sha256``), ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and
+  ``joint.scales`` are used; unknown keys are ignored, so the schema may grow).
 
 **Units of thrust.** A self-propelled identification measures every parameter divided by the true thrust scale s
 of the curve (docs/identification.md, "Honest intervals": a uniform thrust error is invisible to the fit). The
@@ -31,10 +32,12 @@ inertia (from the accelerations) stays identified. A value that is not a
 finite number, or a negative inertia or damping, also falls back. Each value carries its source
 (:attr:`AxisModel.sources`).
 
-**Bad input** (:func:`load_model` never raises): a missing or unreadable file, invalid YAML, no ``dofs`` mapping, no
-configuration hash, or a hash other than the vehicle file's (``provenance.configuration_sha256``, written by
-:func:`~hindrax_ident.identification.results.build_results` from :attr:`VehicleConfig.sha256`: another vehicle or an
-edited vehicle file) give the vehicle-file model and ONE line in :attr:`ControlModel.notes` saying why.
+**Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no ``dofs``
+mapping, or an identification of another vehicle raise :class:`ModelFileError` (one line). The vehicle is matched
+by the parameters the identification depends on (``provenance.vehicle_parameters``,
+:mod:`hindrax_ident.identification.vehicle_match`: mass properties, thrust model, sensor mounting), so editing a
+comment, the ESC calibration or the disk floor keeps it valid; a file written before that section is matched by
+``provenance.configuration_sha256`` (the vehicle file's text).
 
 Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards.
 """
@@ -50,9 +53,10 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
+from ..identification.vehicle_match import parameter_differences
 from ..identification.verdicts import declared_rel
 
-__all__ = ["AxisModel", "ControlModel", "model_from_config", "load_model", "rigid_inertia",
+__all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "load_model", "rigid_inertia",
            "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE",
            "BIAS_THRUST_SCALE_SIGMAS", "unexplained_bias"]
 
@@ -228,18 +232,23 @@ def _scales(doc: Mapping) -> dict[str, float]:
     return out
 
 
+class ModelFileError(ValueError):
+    """An identification file the controller cannot use (one line naming the file and why)."""
+
+
 def load_model(path: str | Path, cfg: VehicleConfig) -> ControlModel:
     """The control model from ``identification.yaml`` at ``path`` over the vehicle file ``cfg`` (module docstring).
 
-    Never raises: on bad input the vehicle-file model with one note saying why and that the vehicle file is used.
-    DOFs the file does not hold, and parameters that are missing, unusable or suspect (for control), keep the
-    vehicle file's value, each with its reason in :attr:`AxisModel.sources`.
+    Raises :class:`ModelFileError` (one line) for a file that cannot be read, is not an identification or belongs
+    to another vehicle. DOFs the file does not hold, and parameters that are missing, unusable or suspect (for
+    control), keep the vehicle file's value, each with its reason in :attr:`AxisModel.sources` (and the DOFs in
+    :attr:`ControlModel.notes`).
     """
     base = model_from_config(cfg)
     p = Path(path)
 
     def fallback(why: str) -> ControlModel:
-        return ControlModel(base.axes, VEHICLE_FILE, (f"control model: {p}: {why}; using the vehicle file",))
+        raise ModelFileError(f"{p}: {why}")
 
     try:
         doc = yaml.safe_load(p.read_text())
@@ -250,12 +259,21 @@ def load_model(path: str | Path, cfg: VehicleConfig) -> ControlModel:
     if not isinstance(doc, Mapping) or not isinstance(doc.get("dofs"), Mapping) or not doc["dofs"]:
         return fallback("not an identification file (no 'dofs' mapping)")
     prov = doc.get("provenance") if isinstance(doc.get("provenance"), Mapping) else {}
+    recorded = prov.get("vehicle_parameters")
     sha = prov.get("configuration_sha256")
-    if not isinstance(sha, str) or not sha:
-        return fallback("no provenance.configuration_sha256 (identified without the vehicle file?)")
-    if sha != cfg.sha256:
-        return fallback(f"identified for another vehicle configuration (configuration_sha256 {sha[:12]}, this vehicle "
-                        f"file {cfg.sha256[:12] or 'unknown'})")
+    if isinstance(recorded, Mapping):
+        changed = parameter_differences(recorded, cfg)
+        if changed:
+            more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
+            return fallback(f"identified for another vehicle: {'; '.join(changed[:3])}{more} "
+                            f"(provenance.vehicle_parameters -> {cfg.source})")
+    elif not isinstance(sha, str) or not sha:
+        return fallback("no provenance.vehicle_parameters (identified without the vehicle file: give --config to "
+                        "hindrax ident fit)")
+    elif sha != cfg.sha256:
+        return fallback(f"written before provenance.vehicle_parameters, for another vehicle file text "
+                        f"(configuration_sha256 {sha[:12]}, {cfg.source}: {cfg.sha256[:12] or 'unknown'}); "
+                        f"identify the bag again")
     scales = _scales(doc)
     notes: list[str] = []
     axes = dict(base.axes)

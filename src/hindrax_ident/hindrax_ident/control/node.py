@@ -71,7 +71,7 @@ from ..identification.maneuvers import HoldController, dof_authority
 from ..identification.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from .law import ControlSettings
 from .loop import HoldLoop
-from .model import load_model, model_from_config
+from .model import ModelFileError, load_model, model_from_config
 
 __all__ = ["ControllerNode", "main", "RUNNING_PHASES"]
 
@@ -106,7 +106,12 @@ class ControllerNode(PolledInputsMixin, Node):
             issue = ConfigIssue("model_file", path, "a path string or ''")
             log.fatal(f"invalid configuration: {issue.line()}")
             raise ConfigError([issue], f"parameters of {self.get_name()}")
-        self.model = load_model(path, self.config) if path else model_from_config(self.config)
+        try:
+            self.model = load_model(path, self.config) if path else model_from_config(self.config)
+        except ModelFileError as exc:  # never a silent fallback to the vehicle file
+            issue = ConfigIssue("model_file", path, f"a readable identification.yaml of this vehicle ({exc})")
+            log.fatal(f"invalid configuration: {issue.line()}")
+            raise ConfigError([issue], f"parameters of {self.get_name()}") from exc
         for note in self.model.notes:
             log.warn(note)
         core = AllocationCore(self.config)

@@ -26,7 +26,7 @@ from ..sim.simulator import Simulator
 from ..sim.truth import load_truth
 from ..sim.truth import truth_dir as shipped
 from .evaluate import EvaluationSetup, evaluate, ratios, setup_dict, write_outputs
-from .model import load_model
+from .model import ControlModel, load_model, model_from_config
 
 __all__ = ["SUITE_DOFS", "SUITE_MANEUVERS", "scenario_names", "run_scenario", "run_suite", "write_suite",
            "format_suite"]
@@ -70,7 +70,8 @@ def run_scenario(cfg: VehicleConfig, name: str, truth_path: Path, out: Path, see
         path = write_identification(folder / "identification.yaml", doc)
         model = load_model(path, cfg)
     else:
-        model = load_model(folder / "identification.yaml", cfg)  # missing: the vehicle file, said in the notes
+        base = model_from_config(cfg)  # nothing identified: the vehicle file, said in the notes
+        model = ControlModel(base.axes, base.source, ("nothing identified: the vehicle file's model",))
     row["model_notes"] = list(model.notes)
     row["model_sources"] = {d: dict(model.axis(d).sources) for d in ("heave", "surge")}
     say(f"{name}: identified ({'aborted: ' + rec.abort_reason if rec.aborted else 'complete'}); evaluating")

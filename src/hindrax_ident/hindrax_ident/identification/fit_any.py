@@ -68,6 +68,7 @@ from .fit_core import EXCITATION_MIN
 from .results import SCHEMA_VERSION
 from .signals import samples_from_dvl, thrust_of_written_widths
 from .posterior import prior_posterior, prior_std_rel_of, theta_priors
+from .vehicle_match import vehicle_parameters
 from .verdicts import FitEvidence, assess, core_signals, declared_rel, thrust_curve_check, with_added_mass
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed",
@@ -962,6 +963,7 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         "provenance": {"source": ", ".join(str(b) for b in bags),
                        "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
                        "configuration_sha256": cfg.sha256 if cfg is not None else None,
+                       "vehicle_parameters": vehicle_parameters(cfg) if cfg is not None else None,
                        "water_density_kg_m3": float(cfg.water_density_kg_m3) if cfg is not None else None,
                        "method": "hindrax ident fit: segment-wise output error (prediction error) over free-form "
                                  "excitation, equation-error start; model of [Hindrax-Drag] eq. 2 with "

@@ -260,6 +260,40 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
     return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.decoded(wanted)), cfg, grid_s)
 
 
+def truncation(bag_path: str | Path) -> list[str]:
+    """What a campaign bag lacks, one phrase each; empty for a whole campaign. A bag is truncated when a file has no
+    summary (the recorder did not close it: :attr:`BagReader.truncated_files`) or when ``identification/status``
+    ends while the campaign still runs (its last non-idle phase neither DONE nor ABORTED); then the DOF under test
+    and its levels not reached are named, and every DOF whose levels stop short of its level count, with the
+    campaign time the bag holds. Raises :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag."""
+    reader = BagReader(bag_path)
+    out = []
+    if reader.truncated_files:
+        out.append("file(s) without a summary (recorder not closed): "
+                   + ", ".join(f.name for f in reader.truncated_files))
+    topic = next((tp for tp in reader.topics if tp.lstrip("/") == "identification/status"), None)
+    if topic is None:
+        return out
+    busy = [(m.log_time_ns, obj) for m, obj in reader.decoded([topic]) if obj.phase != 0]
+    if not busy:
+        return out
+    reached: dict[str, tuple[int, int]] = {}  # dof -> (levels reached, level count)
+    for _t, s in busy:
+        if s.dof in DOFS and s.level_count > 0:
+            done = max(reached.get(s.dof, (0, 0))[0], int(s.level_index) + 1)
+            reached[s.dof] = (done, int(s.level_count))
+    last = busy[-1][1]
+    if last.phase not in (4, 5):  # PHASE_DONE, PHASE_ABORTED
+        held_s = (busy[-1][0] - busy[0][0]) * 1e-9
+        out.append(f"the campaign was still running when the bag ends, {held_s:.1f} s after it started "
+                   f"({last.dof or 'no DOF'}, level {int(last.level_index) + 1} of {int(last.level_count)}); "
+                   "DOFs of the goal after it are not in the bag")
+    short = [f"{d} {n} of {c} levels" for d, (n, c) in reached.items() if n < c]
+    if short and out:
+        out.append("levels missing: " + ", ".join(short))
+    return out
+
+
 def is_campaign_bag(bag_path: str | Path) -> bool:
     """True when the bag has every topic of :data:`CAMPAIGN_TOPICS` (with or without the leading slash). Raises
     :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag."""

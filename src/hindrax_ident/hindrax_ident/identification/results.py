@@ -51,6 +51,7 @@ from ..estimation.drag_coefficient import (
 from ..estimation.least_squares import EstimationError
 from ..estimation.priors import priors_from_config
 from .calibration import calibration_section, joint_estimate
+from .vehicle_match import vehicle_parameters
 from .verdicts import apply_verdicts, rls_published_std
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry",
@@ -204,6 +205,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             "source": source,
             "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
             "configuration_sha256": cfg.sha256,
+            "vehicle_parameters": vehicle_parameters(cfg),  # what the values depend on (vehicle_match.py)
             "water_density_kg_m3": float(cfg.water_density_kg_m3),
             "method": method or ("[Hindrax-Drag] §4 self-propelled ladder; the fit core's segment-wise output error on "
                                  "the raw sensor samples (docs/identification.md §7); equation-error batch LS "
