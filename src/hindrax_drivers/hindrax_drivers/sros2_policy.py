@@ -46,12 +46,12 @@ INTERNAL_TOPICS = (
     "/ping/altitude", "/ping/confidence", "/pressure/depth", "/pressure/fluid_pressure", "/pressure/temperature",
     "/raw/dvl75", "/raw/icm20948", "/raw/ms5837", "/raw/pca9685", "/raw/ping1d", "/supervisor/abort",
     "/supervisor/heartbeat", "/supervisor/status", "/tf", "/tf_static", "/thrusters/command_pulse_width",
-    "/thrusters/forces", "/thrusters/pulse_width", "/wrench",
+    "/thrusters/forces", "/thrusters/pulse_width", "/thrusters/test_forces", "/wrench",
 )
 #: every service of the internal graph besides the nodes' parameter services
 INTERNAL_SERVICES = (
     "/controller/enable", "/controller/hold", "/esc/set_armed", "/identification/continue", "/pressure/zero_depth",
-    "/recorder/start", "/recorder/stop", "/supervisor/estop", "/supervisor/reset", "/thrusters/test_forces",
+    "/recorder/start", "/recorder/stop", "/supervisor/estop", "/supervisor/reset",
 )
 #: the internal graph's actions
 INTERNAL_ACTIONS = ("/run_identification",)
