@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.icm20948 import protocol as p
-from hindrax_drivers.icm20948.core import (MAG_ATTEMPTS, BankedRegisters, StartupSequence, imu_config_from_settings,
-                                           mag_mode_for_rate)
+from hindrax_drivers.icm20948.core import (MAG_ATTEMPTS, BankedRegisters, DataReadyGate, FrozenBlockWatch,
+                                           MagNackFilter, StartupSequence, chip_reset_problems,
+                                           imu_config_from_settings, mag_mode_for_rate)
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus, ManualClock
 from hindrax_drivers.transport.i2c import I2CDevice
@@ -163,3 +164,55 @@ def test_banked_registers_select_a_bank_only_when_it_changes_or_is_unknown():
     regs.read(p.WHO_AM_I)
     bank_writes = [v for r, v in dev.writes if r == 0x7F]
     assert bank_writes == [0x00, 0x20, 0x20, 0x00, 0x00]  # REG_BANK_SEL bits 5:4 (docs/devices.md §4.1)
+
+
+# ---------------------------------------------------------------------------------------------- per-poll decisions
+A, B = bytes(range(1, 15)), bytes(range(2, 16))  # two different non-zero 14-byte sensor blocks
+ZERO = bytes(14)
+
+
+@pytest.mark.parametrize("blocks,expected", [
+    ([A, B, A, B], [None, None, None, None]),          # a live sensor
+    ([A, A, A, A], [None, None, None, "frozen"]),      # the third repeat with frozen_check_samples 3
+    ([A, A, B, B, B, B], [None, None, None, None, None, "frozen"]),
+    ([A, ZERO, ZERO], [None, "zero", "zero"]),         # the reset value of every data register
+    ([A, A, A, A, A], [None, None, None, "frozen", None]),  # once per run of repeats
+])
+def test_frozen_block_watch(blocks, expected):
+    watch = FrozenBlockWatch(3)
+    assert [watch.update(b) for b in blocks] == expected
+
+
+@pytest.mark.parametrize("state,master,problems", [
+    (bytes([0x20, 0, 0x40, 0x01]), True, []),                                        # I2C master on, awake
+    (bytes([0x00, 0, 0x40, 0x41]), True, ["PWR_MGMT_1 = 0x41 (asleep)", "USER_CTRL = 0x00 (I2C master off)"]),
+    (bytes([0x00, 0, 0x40, 0x41]), False, ["PWR_MGMT_1 = 0x41 (asleep)"]),           # bypass: master off is right
+    (bytes([0x00, 0, 0x40, 0x01]), True, ["USER_CTRL = 0x00 (I2C master off)"]),
+])
+def test_chip_reset_problems_from_the_read_back(state, master, problems):
+    """PWR_MGMT_1 0x41 = the reset value (SLEEP, CLKSEL 1); USER_CTRL bit 5 = I2C_MST_EN (docs/devices.md §4.3)."""
+    assert chip_reset_problems(state, master) == problems
+
+
+@pytest.mark.parametrize("flags,publish,raised_at,cleared_at", [
+    ([True, None, True], [True, True, True], [], []),
+    ([False, False, True], [False, False, True], [], []),                     # below the 3 polls: no ERROR
+    ([False, False, False, False, True], [False] * 4 + [True], [2], [4]),    # ERROR at the 3rd, cleared by a sample
+    ([False, False, False, None], [False] * 3 + [True], [2], [3]),           # an unknown flag publishes and clears
+])
+def test_data_ready_gate(flags, publish, raised_at, cleared_at):
+    gate = DataReadyGate(3)
+    verdicts = [gate.update(f) for f in flags]
+    assert [v.publish for v in verdicts] == publish
+    assert [i for i, v in enumerate(verdicts) if v.raise_error] == raised_at
+    assert [i for i, v in enumerate(verdicts) if v.clear_error] == cleared_at
+
+
+def test_mag_nack_filter_drops_the_block_held_since_the_nack_until_it_changes():
+    old, new = bytes([1] * 9), bytes([2] * 9)
+    f = MagNackFilter()
+    assert f.update(old, nack=False) == old
+    assert f.update(old, nack=True) is None        # NACK: the block is the sample of before
+    assert f.update(old, nack=False) is None       # the same block re-read between two master cycles
+    assert f.update(new, nack=False) == new        # the AK09916 answered again
+    assert f.update(new, nack=False) == new

@@ -23,7 +23,10 @@ register-exact emulator:
   ``StartupSequence(..., magnetometer_only=True)`` is step 4 alone, which the node runs one step per poll to bring
   back a lost AK09916 without resetting the chip;
 - :class:`GyroBiasEstimator`: the start-up gyro-bias calibration (mean over a window, applied only when every axis's
-  gyro and accelerometer standard deviation shows a still vehicle).
+  gyro and accelerometer standard deviation shows a still vehicle);
+- the per-poll decisions on the bytes read: :class:`FrozenBlockWatch` (an all-zero or repeated sensor block: check
+  whether the chip reset), :func:`chip_reset_problems` (the read-back that says it did), :class:`DataReadyGate`
+  (INT_STATUS_1.RAW_DATA_0_RDY) and :class:`MagNackFilter` (the I2C master's SLV0_NACK).
 """
 from __future__ import annotations
 
@@ -37,7 +40,8 @@ import numpy as np
 from ..transport.i2c import I2CError, RegisterWrite
 from . import protocol as p
 
-__all__ = ["ACCEL_NOISE_BANDWIDTH_HZ", "ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ", "BankedRegisters",
+__all__ = ["ACCEL_NOISE_BANDWIDTH_HZ", "ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ", "BankedRegisters", "DataReadyGate",
+           "FrozenBlockWatch", "MagNackFilter", "chip_reset_problems",
            "GYRO_NOISE_BANDWIDTH_HZ", "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBiasEstimator", "GyroBiasResult",
            "MAG_ATTEMPTS", "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings",
            "imu_noise_variances", "mag_mode_for_rate"]
@@ -416,3 +420,101 @@ class GyroBiasEstimator:
                        f"{self.accel_threshold:.2e}): no bias applied")
         self.result = GyroBiasResult(bias, g_std, a_std, len(g), still, message)
         return self.result
+
+
+# ---------------------------------------------------------------------------------------- per-poll decisions
+class FrozenBlockWatch:
+    """Says when a sensor block calls for a chip-state read-back (docs/devices.md §4.3: a reset chip's data registers
+    read 0 and stop updating).
+
+    Args:
+        frozen_check_samples: bit-identical blocks in a row that trigger the check (``sensors.icm20948.
+            frozen_check_samples``; a live sensor's noise changes the low bits of every new sample, and one repeat
+            is a poll that came before the next sample).
+    """
+
+    def __init__(self, frozen_check_samples: int):
+        self.frozen_check_samples = int(frozen_check_samples)
+        self.repeats = 0
+        self._last: bytes | None = None
+
+    def update(self, block: bytes) -> str | None:
+        """Feed one sensor block: ``"zero"`` (all zero), ``"frozen"`` (the ``frozen_check_samples``-th repeat) or
+        None (nothing to check)."""
+        block = bytes(block)
+        self.repeats = self.repeats + 1 if block == self._last else 0
+        self._last = block
+        if not any(block):
+            return "zero"
+        return "frozen" if self.repeats == self.frozen_check_samples else None
+
+    def reset(self) -> None:
+        """Forget the blocks seen (after a re-initialisation)."""
+        self.repeats = 0
+        self._last = None
+
+
+def chip_reset_problems(state: bytes, master_expected: bool) -> list[str]:
+    """What in the read-back USER_CTRL..PWR_MGMT_1 (4 bytes from 0x03, bank 0) shows a chip that reset: asleep
+    (PWR_MGMT_1.SLEEP), or the I2C master off while ``master_expected`` (docs/devices.md §4.3). Empty: no reset."""
+    user_ctrl, pwr = state[0], state[-1]
+    problems = []
+    if pwr & p.PWR_MGMT_1_SLEEP:
+        problems.append(f"PWR_MGMT_1 = 0x{pwr:02x} (asleep)")
+    if master_expected and not user_ctrl & p.USER_CTRL_I2C_MST_EN:
+        problems.append(f"USER_CTRL = 0x{user_ctrl:02x} (I2C master off)")
+    return problems
+
+
+@dataclass(frozen=True)
+class DataReadyVerdict:
+    """publish: the sample may go out; raise_error / clear_error: the ERROR ``data_ready`` starts / ends now;
+    polls: consecutive polls without RAW_DATA_0_RDY."""
+
+    publish: bool
+    raise_error: bool
+    clear_error: bool
+    polls: int
+
+
+class DataReadyGate:
+    """INT_STATUS_1.RAW_DATA_0_RDY per poll (DS-000189, bank 0 0x1A bit 0, clears on read): a poll without it holds
+    the sample of an earlier poll and is not published; ``error_polls`` in a row raise the ERROR, the next ready
+    sample clears it. An unknown flag (its read failed) publishes, as without the gate."""
+
+    def __init__(self, error_polls: int):
+        self.error_polls = int(error_polls)
+        self.polls = 0
+
+    def update(self, ready: bool | None) -> DataReadyVerdict:
+        """Feed the flag of one poll (True, False, or None when unknown)."""
+        if ready is False:
+            self.polls += 1
+            return DataReadyVerdict(False, self.polls == self.error_polls, False, self.polls)
+        cleared = self.polls >= self.error_polls
+        self.polls = 0
+        return DataReadyVerdict(True, False, cleared, 0)
+
+
+class MagNackFilter:
+    """The AK09916 block read through the I2C master, dropped while it is the one EXT_SLV_SENS_DATA held when
+    I2C_MST_STATUS.SLV0_NACK was last set (the magnetometer did not answer; a poll between two master cycles
+    re-reads the same block, so one NACK covers every poll that sees its data) until the block changes."""
+
+    def __init__(self) -> None:
+        self.frozen: bytes | None = None
+
+    def update(self, block: bytes, nack: bool) -> bytes | None:
+        """The block to use, or None (stale after a NACK)."""
+        block = bytes(block)
+        if nack:
+            self.frozen = block
+        if self.frozen is not None:
+            if block == self.frozen:
+                return None
+            self.frozen = None  # the AK09916 answered again: a new sample
+        return block
+
+    def reset(self) -> None:
+        """Forget the NACKed block (after a re-initialisation)."""
+        self.frozen = None

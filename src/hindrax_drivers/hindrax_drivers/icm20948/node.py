@@ -112,8 +112,9 @@ from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPubl
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
-from .core import (STILL_STD_FACTOR, BankedRegisters, GyroBiasEstimator, GyroBiasResult, StartupSequence,
-                   imu_config_from_settings, imu_noise_variances, mag_mode_for_rate)
+from .core import (STILL_STD_FACTOR, BankedRegisters, DataReadyGate, FrozenBlockWatch, GyroBiasEstimator,
+                   GyroBiasResult, MagNackFilter, StartupSequence, chip_reset_problems, imu_config_from_settings,
+                   imu_noise_variances, mag_mode_for_rate)
 from .mounting import mounting_rotation
 
 #: rate of ``imu/temperature``, Hz (diagnostics and bag: the die temperature drifts over minutes)
@@ -190,14 +191,13 @@ class Icm20948Node(Node):
         self.require_data_ready = bool(s.require_data_ready)
         self.not_ready_error_polls = int(s.not_ready_error_polls)
         self.mag_retry_interval_s = float(s.mag_retry_interval_s)
-        self._not_ready_polls = 0  # consecutive polls without RAW_DATA_0_RDY
+        self.data_ready = DataReadyGate(self.not_ready_error_polls)
         self._mag_retry_due_s: float | None = None
         self._mag_retrying = False  # a magnetometer-only re-initialisation runs between polls
         self._mag_step_due_s = 0.0
-        self._repeats = 0
-        self._last_block: bytes | None = None
+        self.frozen = FrozenBlockWatch(self.frozen_check_samples)
         self._mag_fresh_s: float | None = None
-        self._mag_frozen_block: bytes | None = None
+        self.mag_nack = MagNackFilter()
         self._mag_lost = False
         self.chip_state_checks = 0
         self.is_stuck = False
@@ -320,7 +320,7 @@ class Icm20948Node(Node):
             return
         self.running = True
         self.diag.clear("chip_reset")
-        self._mag_frozen_block = None
+        self.mag_nack.reset()
         self._mag_fresh_s = self._now_s() if self.mag_available else None
         if self.mag_available:
             self._mag_lost = False
@@ -363,12 +363,7 @@ class Icm20948Node(Node):
                 self.diag.count("mag_status_failure")
             if nack:
                 self.diag.count("mag_nack")
-                self._mag_frozen_block = bytes(mag_block)
-            if self._mag_frozen_block is not None:
-                if bytes(mag_block) == self._mag_frozen_block:
-                    mag_block = None  # EXT_SLV_SENS_DATA still holds the sample of before the NACK
-                else:
-                    self._mag_frozen_block = None  # the AK09916 answered again: a new sample
+            mag_block = self.mag_nack.update(mag_block, nack)  # None: the sample of before the NACK
         if self.mag_mode_name == "bypass" and self.mag_available:
             try:
                 mag_block = self.mag_device.read_block(p.AK_ST1.address, p.AK09916_BLOCK_LENGTH)
@@ -394,20 +389,18 @@ class Icm20948Node(Node):
         """Count a poll without RAW_DATA_0_RDY (``not_ready``); ERROR ``data_ready`` after
         ``not_ready_error_polls`` in a row, cleared by the next ready sample. Returns True when the sample may be
         published (ready, or unknown)."""
+        verdict = self.data_ready.update(ready)
         if ready is False:
             self.diag.count("not_ready")
-            self._not_ready_polls += 1
-            if self._not_ready_polls == self.not_ready_error_polls:
-                text = (f"data_ready: INT_STATUS_1.RAW_DATA_0_RDY not set for {self._not_ready_polls} consecutive "
-                        "polls: no new accel/gyro sample, nothing published")
-                self.diag.error("data_ready", text)
-                self.get_logger().error(f"ICM-20948 {text}")
-                self.diagnostics.publish()
-            return False
-        if self._not_ready_polls >= self.not_ready_error_polls:
+        if verdict.raise_error:
+            text = (f"data_ready: INT_STATUS_1.RAW_DATA_0_RDY not set for {verdict.polls} consecutive "
+                    "polls: no new accel/gyro sample, nothing published")
+            self.diag.error("data_ready", text)
+            self.get_logger().error(f"ICM-20948 {text}")
+            self.diagnostics.publish()
+        if verdict.clear_error:
             self.diag.clear("data_ready")
-        self._not_ready_polls = 0
-        return True
+        return verdict.publish
 
     def _poll_failed(self, exc: Exception) -> None:
         self._invalidate_bank()
@@ -425,12 +418,10 @@ class Icm20948Node(Node):
 
     def _process(self, block: bytes, mag_block: bytes | None, stamp, ready: bool | None = None) -> None:
         block = bytes(block)
-        self._repeats = self._repeats + 1 if block == self._last_block else 0
-        self._last_block = block
-        if not any(block) or self._repeats == self.frozen_check_samples:
-            if self._reset_detected(zero_block=not any(block)):
-                return
-        if not any(block):
+        suspect = self.frozen.update(block)
+        if suspect is not None and self._reset_detected(zero_block=suspect == "zero"):
+            return
+        if suspect == "zero":
             return  # the reset value of every data register: never a measurement
         sample = p.parse_sensor_block(block, self.config)
         self.samples += 1
@@ -491,7 +482,7 @@ class Icm20948Node(Node):
             self._mag_retrying = False
             if self.mag_available:
                 self._mag_lost = False
-                self._mag_frozen_block = None
+                self.mag_nack.reset()
                 self._mag_fresh_s = now_s
                 self.get_logger().info("AK09916 answers again: publishing imu/mag")
             else:
@@ -571,22 +562,16 @@ class Icm20948Node(Node):
         except I2CError as exc:
             self._poll_failed(exc)
             return True  # unknown: the suspect sample is dropped
-        user_ctrl, pwr = state[0], state[CHIP_STATE_LENGTH - 1]
-        problems = []
-        if pwr & p.PWR_MGMT_1_SLEEP:
-            problems.append(f"PWR_MGMT_1 = 0x{pwr:02x} (asleep)")
-        if self.mag_mode_name == "i2c_master" and self.mag_available and not user_ctrl & p.USER_CTRL_I2C_MST_EN:
-            problems.append(f"USER_CTRL = 0x{user_ctrl:02x} (I2C master off)")
+        problems = chip_reset_problems(state, self.mag_mode_name == "i2c_master" and self.mag_available)
         if not problems:
             return False
-        text = (f"chip reset detected ({', '.join(problems)}; "
-                f"{'all-zero data' if zero_block else f'{self._repeats + 1} identical samples'}): re-initialising")
+        seen = "all-zero data" if zero_block else f"{self.frozen.repeats + 1} identical samples"
+        text = f"chip reset detected ({', '.join(problems)}; {seen}): re-initialising"
         self.get_logger().error(f"ICM-20948 {text}")
         self.diag.count("chip_resets")
         self.diag.error("chip_reset", text)
         self.diagnostics.publish()
-        self._repeats = 0
-        self._last_block = None
+        self.frozen.reset()
         self.stuck = StuckDetector(self.stuck.limit)
         self.is_stuck = False
         self.diag.clear("stuck")
