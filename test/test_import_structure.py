@@ -236,8 +236,6 @@ TOP_LAYER = 4
 KNOWN_LAYER_EXCEPTIONS = {
     ("hindrax_ident.identification.campaign", "hindrax_ident.sim.simulator"):
         "the in-process campaign steps the simulator directly (issue 47.2: belongs in the simulator's room)",
-    ("hindrax_ident.identification.piloted_bag", "hindrax_ident.sim.simulator"):
-        "a simulator bag writer that lives in identification (issue 47.2: moves to sim/)",
     ("hindrax_ident.identification.graph_campaign", "hindrax_ident.bringup"):
         "the campaign over the composed graph builds that graph (an entry point in identification's room)",
     ("hindrax_ident.control.evaluate", "hindrax_ident.sim.simulator"):

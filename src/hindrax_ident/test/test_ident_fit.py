@@ -1,6 +1,6 @@
 """``hindrax ident fit`` (issues 18 and 27): identification from bags of standard messages only (WrenchStamped on
 /wrench and Odometry on /odometry, REP-103 FLU) written by a piloted virtual-pool run
-(:mod:`hindrax_ident.identification. piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz,
+(:mod:`hindrax_ident.sim.piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz,
 late and bursty receive times, a 1.5 s gap, a 50 ms actuation delay).
 
 Acceptance (issue): the truth of the simulator (:func:`~hindrax_ident.identification.estimators.truth_parameters` on
@@ -21,7 +21,7 @@ from hindrax_ident import cli
 from hindrax_ident.identification.estimators import truth_parameters
 from hindrax_ident.identification.fit_any import FitOptions, TopicChoice, fit_bags, preprocess_bag
 from hindrax_ident.identification.fit_core import SegmentData, coriolis_products, validation_measures
-from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 from hindrax_ident.sim.truth import load_truth
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")

@@ -22,7 +22,7 @@ from scipy import signal, stats
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
 from hindrax_ident.identification import fit_core
-from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 from hindrax_ident.identification.results import IdentificationFileError, to_config_overrides
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")

@@ -11,7 +11,7 @@ import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
-from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 
 
 def _read(path):

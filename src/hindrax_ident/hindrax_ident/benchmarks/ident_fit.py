@@ -1,6 +1,6 @@
 """``hindrax ident fit`` on realistic virtual-pool data nobody designed: held-out prediction against two baselines.
 
-Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_ident.identification.piloted_bag`) with a
+Each data set is a handful of bags flown in the virtual pool (:mod:`hindrax_ident.sim.piloted_bag`) with a
 different truth: three vehicles (Hindrax; a smaller BlueROV2-sized frame; a larger 45 kg work-class-like frame with
 stronger thrusters), the setpoint pilot or the closed-loop survey autopilot, the command through the thrusters (so
 the real force differs from the recorded wrench: lag, ESC latency, reverse asymmetry, battery sag, inflow loss), the
@@ -39,7 +39,7 @@ import yaml
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification import fit_any, fit_core
 from hindrax_ident.identification.fit_any import FitOptions, TopicChoice, fit_bags
-from hindrax_ident.identification.piloted_bag import PilotSettings, write_piloted_bag
+from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 
 #: DOFs compared (roll and pitch are not commanded by the pilots)
 DOFS_COMPARED = ("surge", "sway", "heave", "yaw")

@@ -57,7 +57,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import VehicleConfig
 from hindrax_drivers.recording.writer import BagWriter, WriterOptions
 
-from ..sim.simulator import Simulator
+from .simulator import Simulator
 
 __all__ = ["PilotSettings", "write_piloted_bag"]
 
