@@ -1354,10 +1354,16 @@ def load_config(path: str | Path, overrides: Mapping[str, Any] | None = None) ->
         text = path.read_text()
     except OSError as exc:
         raise ConfigError([ConfigIssue("<file>", src, f"a readable file ({exc.strerror})")], src) from exc
+    except UnicodeDecodeError as exc:  # a binary file
+        raise ConfigError([ConfigIssue("<file>", src, f"a UTF-8 text file (byte {exc.start}: {exc.reason})")],
+                          src) from exc
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ConfigError([ConfigIssue("<file>", src, f"valid YAML ({str(exc).splitlines()[0]})")], src) from exc
+    except RecursionError as exc:  # nesting deeper than the parser's recursion limit
+        raise ConfigError([ConfigIssue("<file>", src, "YAML nested less deeply (the parser ran out of recursion)")],
+                          src) from exc
     flat = flatten(ros_parameters_from_yaml(doc, src))
     if overrides:
         flat.update(overrides)

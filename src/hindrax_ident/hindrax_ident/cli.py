@@ -8,7 +8,7 @@ does not import ROS (checked by ``src/hindrax_ident/test/test_cli_help.py``; tim
 
 Exit status: 0 on success, 1 when the command ran and found a problem (e.g. an invalid configuration: the
 command raises :class:`~hindrax_ident.commands.common.CommandError`, whose one-line message goes to stderr),
-2 on a usage error (argparse).
+2 on a usage error (argparse), 141 when the reader of its output closed the pipe (``| head``: no traceback).
 """
 from __future__ import annotations
 
@@ -177,13 +177,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     mod = importlib.import_module(args._module)
     try:
-        return int(mod.run(args) or 0)
+        status = int(mod.run(args) or 0)
+        sys.stdout.flush()  # inside the try: a closed pipe (| head) is said here, not at interpreter exit
+        return status
     except CommandError as exc:
         print(str(exc), file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except (UnicodeDecodeError, RecursionError) as exc:  # an input no reader of the command caught: one line
+        what = "a binary file where text was expected" if isinstance(exc, UnicodeDecodeError) else \
+            "input nested too deeply (recursion limit)"
+        print(f"hindrax {' '.join(w for w in argv[:2] if not w.startswith('-'))}: {what}", file=sys.stderr)
+        return 1
+    except BrokenPipeError:
+        # the reader of our output went away (| head): stop quietly, as the standard tools do
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, the shell's status for a tool stopped by a closed pipe
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -6,6 +6,7 @@ discovery) and exits 0 when it is ready, 1 with what is missing or failing other
 launch`` reads it (:mod:`hindrax_drivers.launch_xml`; default ``hindrax_drivers/vehicle.launch.xml``, with the
 launch arguments given as ``NAME:=VALUE``, e.g. ``record:=true`` to require the recorder): every node in the graph,
 each node's ``/diagnostics`` status OK, and ``supervisor/status`` OK. It returns as soon as everything is seen OK.
+When no node of the vehicle is seen at all, one line says so and names the ROS domain and discovery it looked on.
 
 The operator's check before a dive, and the Docker image's HEALTHCHECK (``--quiet``: the verdict line only).
 """
@@ -84,6 +85,18 @@ def collect(expect, timeout_s: float, done=None):
     return names, statuses, (supervisor[-1] if supervisor else None)
 
 
+def _where() -> str:
+    """The domain and discovery this process looked on, for the one-line verdict of an empty graph."""
+    import os
+
+    from hindrax_drivers.dds_transport import PROFILE_ENV
+
+    scope = os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") or "SYSTEM_DEFAULT"
+    if os.environ.get(PROFILE_ENV):
+        scope = "this machine only, UDP on 127.0.0.1"
+    return f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '') or 0} ({scope})"
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.health import assess, expectation
@@ -105,6 +118,10 @@ def run(args: argparse.Namespace) -> int:
         return assess(expect, nodes, statuses, supervisor, args.strict).ready
 
     nodes, statuses, supervisor = collect(expect, args.timeout, ready)
+    if not ({n.rsplit("/", 1)[-1] for n in nodes} & set(expect.nodes)) and not statuses and supervisor is None:
+        print(f"NOT READY: no node of {args.launch} seen on {_where()} within {args.timeout:g} s: is the vehicle "
+              "running, on this domain? (from the topside: docs/deployment.md §6)")
+        return 1
     report = assess(expect, nodes, statuses, supervisor, args.strict)
     for line in ([report.summary()] if args.quiet else report.lines()):
         print(line)

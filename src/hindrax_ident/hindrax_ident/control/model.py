@@ -256,6 +256,10 @@ def load_model(path: str | Path, cfg: VehicleConfig) -> ControlModel:
         return fallback(f"cannot read ({exc.strerror or exc})")
     except yaml.YAMLError as exc:
         return fallback(f"not valid YAML ({str(exc).splitlines()[0]})")
+    except UnicodeDecodeError as exc:
+        return fallback(f"not a text file (byte {exc.start}: {exc.reason})")
+    except RecursionError:
+        return fallback("YAML nested too deeply for the parser")
     if not isinstance(doc, Mapping) or not isinstance(doc.get("dofs"), Mapping) or not doc["dofs"]:
         return fallback("not an identification file (no 'dofs' mapping)")
     prov = doc.get("provenance") if isinstance(doc.get("provenance"), Mapping) else {}

@@ -1,0 +1,39 @@
+"""Issue 44.9: ``hindrax`` on a binary or 5000-deep YAML file says so in one line, and a closed output pipe
+(``| head``) ends it quietly (exit 141), never with a traceback."""
+import subprocess
+import sys
+
+import pytest
+
+from hindrax_drivers.testing import child_env
+from hindrax_ident import cli
+
+
+@pytest.fixture
+def bad_inputs(tmp_path):
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(bytes(range(256)) * 8)
+    deep = tmp_path / "deep.yaml"
+    deep.write_text("a: " + "[" * 5000 + "]" * 5000 + "\n")
+    return binary, deep
+
+
+@pytest.mark.parametrize("argv", [["config", "check", "{}"], ["control", "model", "--model", "{}"],
+                                  ["allocate", "1", "0", "0", "0", "0", "0", "--config", "{}"]])
+def test_binary_or_deeply_nested_yaml_is_one_line(bad_inputs, argv, capsys):
+    for path, words in zip(bad_inputs, ("UTF-8 text file", "nested")):
+        rc = cli.main([a.format(path) for a in argv])
+        captured = capsys.readouterr()
+        said = [ln for ln in (captured.out + captured.err).splitlines() if path.name in ln]  # config check: stdout
+        assert rc == 1
+        assert len(said) == 1 and "Traceback" not in captured.out + captured.err, captured
+        assert ("text file" if words.startswith("UTF") else "nested") in said[0], said
+
+
+def test_a_closed_output_pipe_ends_quietly():
+    p = subprocess.Popen([sys.executable, "-m", "hindrax_ident.cli", "config", "check"], env=child_env(),
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()  # the reader is gone before the first line: every write meets a closed pipe (| head)
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
