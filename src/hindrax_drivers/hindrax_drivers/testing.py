@@ -59,7 +59,9 @@ class SafetyHeartbeats:
     :data:`~hindrax_drivers.liveness.HEARTBEAT_NODES`, created in ``node``'s context the first time that heartbeat is
     published) and with ``boot_id``/``seq`` (:class:`~hindrax_drivers.liveness.HeartbeatPublisher`), as the
     receivers' identity check requires. Set :attr:`supervisor` / :attr:`guard` to ``None`` (silent), ``""`` (OK) or
-    a reason (ERROR) to emulate a dead, healthy or tripped peer.
+    a reason (ERROR) to emulate a dead, healthy or tripped peer. The peer nodes are destroyed with ``node``
+    (:meth:`destroy`, run by ``node.destroy_node()``): left alive, they would hold their context's participant and
+    count as a second live publisher for the next test in the same process.
     """
 
     def __init__(self, node, supervisor: str | None = "", guard: str | None = "", rate_hz: float = 20.0) -> None:
@@ -69,6 +71,20 @@ class SafetyHeartbeats:
         self.publishers: dict[str, HeartbeatPublisher] = {}
         self.nodes: list = []
         node.create_timer(1.0 / rate_hz, self.publish, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        destroy_owner = node.destroy_node
+
+        def destroy_node() -> None:
+            self.destroy()
+            destroy_owner()
+        node.destroy_node = destroy_node
+
+    def destroy(self) -> None:
+        """Destroy the peer nodes (silent from now on)."""
+        self.supervisor = self.guard = None
+        for peer in self.nodes:
+            peer.destroy_node()
+        self.nodes.clear()
+        self.publishers.clear()
 
     def _publisher(self, kind: str) -> HeartbeatPublisher:
         if kind not in self.publishers:

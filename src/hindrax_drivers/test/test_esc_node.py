@@ -234,6 +234,32 @@ def test_only_the_allocation_may_command_a_second_publisher_disarms_and_is_refus
     arm(esc)
 
 
+def test_a_forged_supervisor_heartbeat_disarms_and_refuses_arming(esc):
+    """Issue 43 finding 2 at the ESC: a 10-line script publishing level-0 supervisor/heartbeat was taken as the
+    supervisor's. The ESC takes the heartbeats through their identity check (one live publisher, node
+    ``supervisor``, boot_id and seq): a forger beside the real one disarms it and arming is refused with the reason;
+    once the forger is gone the ESC arms again."""
+    from hindrax_drivers.liveness import HeartbeatPublisher
+
+    node, emu, probe = esc["node"], esc["emu"], esc["probe"]
+    arm(esc)
+    stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
+    forger = rclpy.create_node("forger", context=probe.context)
+    beat = HeartbeatPublisher(forger, "supervisor", "hindrax/supervisor", "supervisor")
+
+    def forge():
+        beat.publish(DiagnosticStatus.OK, "ok")
+        esc["command"]([1700.0] * 8)
+        esc["spin"]()
+    wait_until(lambda: not node.armed, 10, forge, "disarmed on the forged heartbeat")
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US)
+    res = esc["set_armed"](True)
+    assert not res.success and "supervisor heartbeat not trusted" in res.message and "'forger'" in res.message
+    forger.destroy_node()
+    wait_until(lambda: node.heartbeat_refusal() == "", 10, esc["spin"], "the forger gone")
+    arm(esc)
+
+
 def test_lights_channel(esc):
     msg = Float64(data=0.5)
     esc["lights"].publish(msg)
@@ -362,8 +388,15 @@ class _SampledBus:
         return call
 
 
+def _direct_beats(node):
+    """For tests that feed heartbeats by calling the handlers: no publisher in the graph to check (the identity and
+    command-source checks are test_only_the_allocation_... and test_a_forged_...'s)."""
+    node._check_graph = lambda: None
+
+
 def _healthy(node):
     """Feed the node one OK supervisor and guard heartbeat (tests that call the node's methods directly)."""
+    _direct_beats(node)
     for feed in (node.on_supervisor_heartbeat, node.on_guard_heartbeat):
         feed(DiagnosticStatus(level=DiagnosticStatus.OK, message="ok"))
     node.steady_check()
@@ -705,6 +738,7 @@ def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
     with ros_context() as ctx:
         node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
         node.set_heartbeat_timeout(2.0)
+        _direct_beats(node)
         ok = DiagnosticStatus(level=DiagnosticStatus.OK, message="ok")
         err = DiagnosticStatus(level=DiagnosticStatus.ERROR, message="ESC output state unknown")
         node.on_supervisor_heartbeat(ok)

@@ -12,7 +12,8 @@ core's (:mod:`.core`, docs/architecture.md §8). This node does the I/O and feed
   start-up: the node keeps running, reports ERROR "no I2C bus" and picks the bus up when it appears.
 - Inputs, all by callbacks in both clock modes: ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm,
   thruster order; an armed command is written when it arrives), ``supervisor/heartbeat`` and ``guard/heartbeat``
-  (aged on the steady clock in executor-alive time, :class:`~hindrax_drivers.liveness.AliveAge`; their verdicts go
+  (through :class:`~hindrax_drivers.liveness.HeartbeatWatch`: a forged or replayed beat, a second publisher or one
+  with another node name is a fault, checked every second tick; aged on the steady clock in executor-alive time, :class:`~hindrax_drivers.liveness.AliveAge`; their verdicts go
   to :meth:`.core.EscCore.set_peers`), ``lights/brightness`` (std_msgs/Float64, 0-1 mapped linearly from
   ``lights.pulse_width_off_us`` to ``pulse_width_full_us``), the ``esc/set_armed`` service (hindrax_msgs/SetArmed).
 - Ticks: on the system clock one steady-clock timer (``esc.output_rate_hz``) runs the safety tick
@@ -48,7 +49,7 @@ from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from ..lean_cdr import thruster_pwm_cdr
-from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, HeartbeatPublisher, heartbeat_ok
+from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, HeartbeatPublisher, HeartbeatWatch, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
@@ -130,8 +131,11 @@ class EscNode(Node):
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.heartbeat = HeartbeatPublisher(self, "esc", "hindrax/esc", "esc")
         self._heartbeat_tick = 0
-        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["supervisor"], self.on_supervisor_heartbeat, 10)
-        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard_heartbeat, 10)
+        #: the peers' heartbeats through their identity checks (:class:`~hindrax_drivers.liveness.HeartbeatWatch`:
+        #: one live publisher with the expected node name, boot_id and seq); only accepted beats reach the handlers
+        self.watches = {"supervisor": HeartbeatWatch(self, "supervisor", self.on_supervisor_heartbeat,
+                                                     lambda: self.armed),
+                        "guard": HeartbeatWatch(self, "guard", self.on_guard_heartbeat, lambda: self.armed)}
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self._configure_chip()
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -359,12 +363,25 @@ class EscNode(Node):
                                   self.guard_ok, self.guard_message)
         if guard and self.guard_age.fresh(t):
             guard = f"output guard holds the outputs off: {self.guard_message}"
-        return sup, guard
+        # a silent peer first (its identity fault is then "no live publisher"); then the identity checks, before
+        # the level: a forged or replayed OK must not count as the peer's
+        sup_id, guard_id = (self.watches[k].identity.fault for k in ("supervisor", "guard"))
+        return (sup if not self.supervisor_age.fresh(t) else
+                f"supervisor heartbeat not trusted: {sup_id}" if sup_id else sup,
+                guard if not self.guard_age.fresh(t) else
+                f"output-guard heartbeat not trusted: {guard_id}" if guard_id else guard)
 
     def heartbeat_refusal(self) -> str:
         """Why the supervisor or the output guard forbid thrust now ('' when both are fresh and OK)."""
         sup, guard = self._peer_verdicts()
         return sup or guard
+
+    def _check_graph(self) -> None:
+        """Who publishes the peers' heartbeats and the commands (the graph; every second safety tick and before an
+        arm request): the heartbeats' identity checks, then the command topic's publishers."""
+        for watch in self.watches.values():
+            watch.check()
+        self._check_command_source()
 
     def _check_command_source(self) -> None:
         """Who publishes ``thrusters/command_pulse_width`` (the graph): only the allocation may
@@ -406,7 +423,7 @@ class EscNode(Node):
                 response.success, response.armed, response.message = True, False, "disarmed"
             return response
         self._take_inputs()
-        self._check_command_source()
+        self._check_graph()
         self.core.set_peers(*self._peer_verdicts())
         refusal = self.core.request_arm(self.bus_error)
         if refusal:
@@ -527,8 +544,9 @@ class EscNode(Node):
             self.get_logger().warn(f"ROS time stepped back {-step:.3f} s")
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         self._take_inputs()
+        if self._heartbeat_tick % 2 == 1:  # 25 Hz at 50 Hz: two graph queries and one per heartbeat (~26 us each)
+            self._check_graph()
         self._feed_peers()
-        self._check_command_source()
         if self.core.retry_due():
             if self._configure_chip():
                 self._publish_written(self.get_clock().now())
@@ -598,6 +616,7 @@ class EscNode(Node):
                 ("output_state", STATE_NAMES[self.output_state]),
                 ("supervisor_heartbeat_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("guard_heartbeat_age_s", f"{self.guard_age.age_s:.2f}"), ("heartbeat_disarms", self.heartbeat_disarms),
+                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
                 ("rejected_commands", self.core.rejected_commands), ("reason", self.core.reason),
                 ("command_source", self.core.command_source or "thrust_allocation"),
                 ("clock_steps_back", self.clock_monitor.steps_back),
