@@ -16,8 +16,11 @@ from typing import Any, Callable
 
 from .common import CommandError
 
-__all__ = ["DISCOVERY_SETTLE_S", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros"]
+__all__ = ["DISCOVERY_SETTLE_S", "VEHICLE_ENV", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros"]
 
+#: the environment variable naming the vehicle a topside PC commands (docker/topside.env.example): ``--vehicle``'s
+#: default
+VEHICLE_ENV = "HINDRAX_VEHICLE"
 #: after the first gateway appears, how long to keep listening for others before choosing, s (cross-process
 #: discovery of peers already running arrives within about 1 s of the first, docs/architecture.md §11.5)
 DISCOVERY_SETTLE_S = 3.0
@@ -38,9 +41,10 @@ class Target:
 
 def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
     """``--vehicle NAME`` and ``--discovery-timeout S`` (how long to look for the vehicle)."""
-    parser.add_argument("--vehicle", default=None, metavar="NAME",
-                        help="the vehicle's name (vehicle.name of its vehicle file); default: the only vehicle "
-                             "on this ROS domain (refused when there are none or several)")
+    parser.add_argument("--vehicle", default=os.environ.get(VEHICLE_ENV) or None, metavar="NAME",
+                        help=f"the vehicle's name (vehicle.name of its vehicle file); default: ${VEHICLE_ENV} (the "
+                             "topside's settings file, docker/topside.env.example), else the only vehicle on this ROS "
+                             "domain (refused when there are none or several)")
     parser.add_argument("--discovery-timeout", type=float, default=10.0, metavar="S",
                         help="how long to look for the vehicle's gateway, s (default 10)")
 
