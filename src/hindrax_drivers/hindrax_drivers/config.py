@@ -318,6 +318,9 @@ SCHEMA.update({
     "sensors.ms5837.max_depth_rate_m_s": _f("plausibility gate: a depth changing faster than this since the last "
                                             "published one is held back until the next sample confirms it, m/s",
                                             0.1, 20.0),
+    "sensors.ms5837.zero_depth_margin_pa": _f("pressure/zero_depth is refused when the mean pressure is further than "
+                                              "this from the atmospheric reference environment.surface_pressure_pa "
+                                              "(the vehicle is not at the surface), Pa", 100.0, 50000.0),
     "sensors.ms5837.prom_reject_blank_words": _b("PROM sanity gate: reject a PROM whose coefficient C1..C6 reads "
                                                  "0x0000 or 0xFFFF (blank or unread PROM; an all-zero PROM passes "
                                                  "CRC-4, docs/devices.md §3.2-3.3)"),
@@ -362,8 +365,15 @@ SCHEMA.update({
     "supervisor.check_rate_hz": _f("rate of the supervisor's rate and run-time checks, Hz", 1.0, 200.0),
     "supervisor.rate_window_s": _f("window the sensor rates are measured over (at most "
                                    "supervisor.reaction_time_s), s", 0.2, 60.0),
+    "supervisor.max_sample_age_s": _f("a sensor sample whose header stamp is further than this from the supervisor's "
+                                      "time on arrival (older, or ahead) is not alive: not counted, not used, s",
+                                      0.05, 10.0),
+    "supervisor.max_identical_s": _f("a sensor stream bit-identical (header stamp aside) for longer than this is "
+                                     "frozen: its samples are not alive (sensor noise changes every reading within "
+                                     "a few samples), s", 0.1, 10.0),
     "supervisor.reaction_time_s": _f("longest time a failed sensor (silent, stale or frozen) may go unnoticed while "
-                                     "armed; bounds supervisor.rate_window_s and supervisor.max_invalid_dvl_s, s",
+                                     "armed; bounds supervisor.rate_window_s, max_invalid_dvl_s, max_sample_age_s and "
+                                     "max_identical_s, s",
                                      0.1, 10.0),
     "supervisor.min_rate.dvl_hz": _f("minimum dvl/data rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
     "supervisor.min_rate.altimeter_hz": _f("minimum ping/altitude rate while armed, Hz (0 = not watched)",
@@ -881,8 +891,9 @@ def _hardware_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
       (negative thrust at ``pulse_width_min_us``, positive at ``pulse_width_max_us``) with a usable monotone branch
       toward the deadband, the condition :class:`~hindrax_drivers.allocation.thrust_curve.ThrustCurve` needs to
       start ([Hindrax-Drag] eq. 1); a negated curve is refused here rather than by the allocation at start-up.
-    * ``supervisor.rate_window_s`` and ``supervisor.max_invalid_dvl_s`` at most ``supervisor.reaction_time_s``: a
-      dead sensor is found at the latest one rate window after it stops (60 s found a dead depth sensor after 48 s).
+    * ``supervisor.rate_window_s``, ``max_invalid_dvl_s``, ``max_sample_age_s`` and ``max_identical_s`` at most
+      ``supervisor.reaction_time_s``: a dead sensor is found at the latest one rate window after it stops (60 s
+      found a dead depth sensor after 48 s).
 
     The oscillator's range (23-27 MHz, :data:`PCA9685_OSCILLATOR_MIN_HZ`) is the key's own range in :data:`SCHEMA`.
     """
@@ -913,7 +924,8 @@ def _hardware_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
                                                    f"([Hindrax-Drag] eq. 1): {exc}"))
     reaction = c.get("supervisor.reaction_time_s")
     if reaction is not None:
-        for key in ("supervisor.rate_window_s", "supervisor.max_invalid_dvl_s"):
+        for key in ("supervisor.rate_window_s", "supervisor.max_invalid_dvl_s", "supervisor.max_sample_age_s",
+                    "supervisor.max_identical_s"):
             if key in c and c[key] > reaction:
                 issues.append(ConfigIssue(key, c[key], f"at most supervisor.reaction_time_s ({reaction:g} s): a "
                                                        "failed sensor would go unnoticed longer"))

@@ -377,6 +377,9 @@ class SensorsMs5837Section(Section):
     max_depth_rate_m_s: float
     """plausibility gate: a depth changing faster than this since the last published one is held back until the next
     sample confirms it, m/s"""
+    zero_depth_margin_pa: float
+    """pressure/zero_depth is refused when the mean pressure is further than this from the atmospheric reference
+    environment.surface_pressure_pa (the vehicle is not at the surface), Pa"""
     prom_reject_blank_words: bool
     """PROM sanity gate: reject a PROM whose coefficient C1..C6 reads 0x0000 or 0xFFFF (blank or unread PROM; an
     all-zero PROM passes CRC-4, docs/devices.md §3.2-3.3)"""
@@ -521,9 +524,15 @@ class SupervisorSection(Section):
     """rate of the supervisor's rate and run-time checks, Hz"""
     rate_window_s: float
     """window the sensor rates are measured over (at most supervisor.reaction_time_s), s"""
+    max_sample_age_s: float
+    """a sensor sample whose header stamp is further than this from the supervisor's time on arrival (older, or
+    ahead) is not alive: not counted, not used, s"""
+    max_identical_s: float
+    """a sensor stream bit-identical (header stamp aside) for longer than this is frozen: its samples are not alive
+    (sensor noise changes every reading within a few samples), s"""
     reaction_time_s: float
     """longest time a failed sensor (silent, stale or frozen) may go unnoticed while armed; bounds
-    supervisor.rate_window_s and supervisor.max_invalid_dvl_s, s"""
+    supervisor.rate_window_s, max_invalid_dvl_s, max_sample_age_s and max_identical_s, s"""
     min_rate: SupervisorMinRateSection
     max_invalid_dvl_s: float
     """armed with no valid DVL velocity for this long -> trip (the cage's dead reckoning is frozen meanwhile), s"""

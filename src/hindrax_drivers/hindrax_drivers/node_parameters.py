@@ -1,8 +1,8 @@
 """Vehicle configuration as the ROS 2 parameters of one node: declared per node, described, validated.
 
 Each node declares only the vehicle keys it reads (``keys``: prefixes of :data:`hindrax_drivers.config.SCHEMA`
-keys, e.g. ``("sensors.dvl75",)`` or ``("thrusters.names", "thrusters.<thruster>.position_frd_m")``); the other keys of a
-params file or of ``parameter_overrides`` are not declared, but validated with the whole vehicle (below).
+keys, e.g. ``("sensors.dvl75",)`` or ``("thrusters.names", "thrusters.<thruster>.position_frd_m")``); the other
+keys of a params file or of ``parameter_overrides`` are not declared, but validated with the whole vehicle (below).
 Each declared parameter gets a ``rcl_interfaces/ParameterDescriptor`` built from the schema: description
 (meaning and unit), ``additional_constraints`` (the allowed range as the loader prints it), a
 floating-point or integer range where the schema has both bounds, a static type, and ``read_only`` unless

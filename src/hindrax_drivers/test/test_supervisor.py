@@ -22,7 +22,7 @@ from hindrax_drivers import frames
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.supervisor.core import SupervisorCore, SupervisorLimits
+from hindrax_drivers.supervisor.core import SupervisorCore, SupervisorLimits, tilt_from_specific_force
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
@@ -132,6 +132,75 @@ def test_rates_and_run_time():
     assert c2.check(109.0) == "" and "max_run_time_s 100" in c2.check(110.5)
 
 
+def test_one_hour_old_identical_samples_are_not_alive_and_trip():
+    """At the normal rates (IMU 100 Hz, the others 10 Hz), every sample stamped 3600 s old: none counts, the rate check
+    trips once armed for one window (2 s) and names why; fresh but bit-identical samples trip too, once identical for
+    max_identical_s (1 s) and then below the rate over the 2 s window."""
+    for lag_s, words in ((3600.0, "samples not alive: stamped 3600.0 s old, beyond supervisor.max_sample_age_s 1"),
+                         (0.0, "beyond supervisor.max_identical_s 1 (frozen)")):
+        c = SupervisorCore(limits(max_sample_age_s=1.0, max_identical_s=1.0, reaction_time_s=3.0))
+        c.set_armed(0.0, True)
+        reason = ""
+        for k in range(500):
+            t = k / 100.0
+            c.on_imu(t, t - lag_s, b"same bytes", np.array([0.0, 0.0, -9.81]))
+            if k % 10 == 0:
+                c.on_dvl(t, np.zeros(3), t - lag_s, (0.0, 0.0, 0.0), (0.0,) * 7)
+                c.on_altitude(t, 1.0, t - lag_s)
+                c.on_depth(t, 0.5, t - lag_s)
+            reason = c.check(t)
+            if reason:
+                break
+        assert words in reason, reason
+        assert 2.0 <= t <= 4.0 and c.not_alive["pressure"] > 0
+    # the same streams with a sensor's noise and fresh stamps never trip
+    c = SupervisorCore(limits(max_sample_age_s=1.0, max_identical_s=1.0, reaction_time_s=3.0))
+    c.set_armed(0.0, True)
+    rng = np.random.default_rng(1)
+    for k in range(500):
+        t = k / 100.0
+        c.on_imu(t, t, rng.bytes(8), np.array([0.0, 0.0, -9.81]) + rng.normal(0, 0.01, 3))
+        if k % 10 == 0:
+            v = rng.normal(0.0, 1e-3, 3)
+            assert c.on_dvl(t, v, t, (0.0, 0.0, 0.0), tuple(v)) == ""
+            c.on_altitude(t, 1.0 + rng.normal(0, 1e-3), t)
+            c.on_depth(t, 0.5 + rng.normal(0, 1e-3), t)
+        assert c.check(t) == "", t
+
+
+def test_dvl_without_dvext_uses_the_imu_tilt_or_trips():
+    """$DVPDL without $DVEXT: the report has no attitude (not level). At 60 deg of roll (IMU at rest: specific force
+    FRD (0, -g sin 60, -g cos 60)) the roll limit (1 rad) trips on the IMU's tilt; without the IMU's tilt either,
+    the supervisor trips once reaction_time_s (3 s) has passed armed without attitude."""
+    g, roll = 9.81, math.radians(60.0)
+    assert tilt_from_specific_force(np.array([0.0, -g * math.sin(roll), -g * math.cos(roll)])) == pytest.approx(
+        (roll, 0.0))
+    pitch = math.radians(20.0)
+    assert tilt_from_specific_force(np.array([g * math.sin(pitch), 0.0, -g * math.cos(pitch)])) == pytest.approx(
+        (0.0, pitch))
+    assert tilt_from_specific_force(np.zeros(3)) is None  # a zero (default) message is no tilt
+
+    c = SupervisorCore(limits(max_sample_age_s=1.0, reaction_time_s=3.0))
+    c.set_armed(10.0, True)
+    c.on_dvl(10.0, np.zeros(3), 10.0, (0.0, 0.0, 0.0))  # a last DVL attitude, level
+    f = np.array([0.0, -g * math.sin(roll), -g * math.cos(roll)])
+    assert c.on_imu(10.5, 10.5, b"a", f) == ""  # the DVL's attitude is fresh: it rules
+    assert c.on_dvl(10.6, np.zeros(3), 10.6, None) == ""  # no $DVEXT from here on
+    reason = c.on_imu(11.2, 11.2, b"b", f)  # the DVL's attitude is 1.2 s old: the IMU's tilt is used
+    assert "roll 1.05 rad beyond supervisor.max_roll_rad 1 (IMU accelerometer (no fresh DVL attitude))" in reason
+
+    c = SupervisorCore(limits(max_sample_age_s=1.0, reaction_time_s=3.0, rate_window_s=10.0))  # rates not yet
+    c.set_armed(10.0, True)
+    t_trip, reason = 0.0, ""
+    for k in range(100):
+        t_trip = 10.0 + 0.05 * k
+        assert c.on_dvl(t_trip, np.full(3, 1e-3 * k), t_trip, None) == ""
+        reason = c.check(t_trip)
+        if reason:
+            break
+    assert "no attitude for 3.1 s (no fresh DVL attitude: $DVEXT missing" in reason and t_trip == pytest.approx(13.05)
+
+
 # ------------------------------------------------------------------ graph: every breach -> neutral on the chip
 @pytest.fixture
 def graph():
@@ -174,25 +243,47 @@ def graph():
                     return
                 handler()
 
+        rng = np.random.default_rng(7)
+
+        def noise(std, n=None):
+            """A sensor's noise; none (bit-identical samples) with the state's ``frozen``."""
+            return 0.0 * rng.normal(0.0, std, n) if g["state"].get("frozen") else rng.normal(0.0, std, n)
+
         def step(dt_s=0.01):
-            """Publish the sensors for this instant, then advance /clock by dt_s and let every node run."""
+            """Publish the sensors for this instant (stamped now, with a little noise as real sensors have: the
+            supervisor takes stale or bit-identical streams as dead), then advance /clock by dt_s and let every node
+            run."""
             st = g["state"]
             t_ms = (g["ns"] // 1_000_000)
+            stamp = Clock().clock
+            stamp.sec, stamp.nanosec = divmod(g["ns"] - st.get("stamp_lag_ns", 0), 1_000_000_000)
             if t_ms % 100 == 0:
                 if "dvl" not in st["quiet"]:
                     m = Dvl(velocity_valid=True)
-                    m.velocity_m_s.x, m.velocity_m_s.y = st["v"]
+                    m.header.stamp = stamp
+                    m.velocity_m_s.x, m.velocity_m_s.y = np.asarray(st["v"]) + noise(1e-4, 2)
                     q = frames.quaternion_marine_to_ros(frames.quaternion_from_euler_ned([st["roll"], 0.0, 0.0]))
+                    if "dvext" in st["quiet"]:
+                        q = np.zeros(4)  # what the driver publishes without a $DVEXT: no attitude
                     m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = (float(x) for x in q)
                     pubs["dvl"].publish(m)
                 if "alt" not in st["quiet"]:
-                    pubs["alt"].publish(Range(range=float(st["alt"])))
+                    r = Range(range=float(st["alt"] + noise(1e-3)))
+                    r.header.stamp = stamp
+                    pubs["alt"].publish(r)
                 if "depth" not in st["quiet"]:
                     d = PoseWithCovarianceStamped()
-                    d.pose.pose.position.z = -float(st["depth"])
+                    d.header.stamp = stamp
+                    d.pose.pose.position.z = -float(st["depth"] + noise(1e-3))
                     pubs["depth"].publish(d)
             if "imu" not in st["quiet"]:
-                pubs["imu"].publish(Imu())
+                imu = Imu()
+                imu.header.stamp = stamp
+                # specific force of the vehicle at rest at the state's roll, FLU (FRD (0, -g sin, -g cos) mirrored)
+                f = frames.frd_to_flu([0.0, -9.81 * math.sin(st.get("imu_roll", st["roll"])),
+                                       -9.81 * math.cos(st.get("imu_roll", st["roll"]))]) + noise(0.01, 3)
+                imu.linear_acceleration.x, imu.linear_acceleration.y, imu.linear_acceleration.z = (float(x) for x in f)
+                pubs["imu"].publish(imu)
             g["ns"] += int(dt_s * 1e9)
             c = Clock()
             c.clock.sec, c.clock.nanosec = divmod(g["ns"], 1_000_000_000)
@@ -226,6 +317,7 @@ def arm_and_thrust(g):
     """Reset the supervisor, arm, and command 1700 us until it is on the wire and the supervisor sees armed."""
     g["call"](g["reset"], Trigger.Request())
     st = g["state"]
+    st.clear()
     st.update(depth=0.5, alt=1.0, roll=0.0, v=(0.0, 0.0), quiet=set())
     g["sup"].core.position_ne = np.array(g["sup"].core.limits.start_position_ne)
     for _ in range(120):  # 1.2 s of sensors: a whole rate window before arming
@@ -255,7 +347,7 @@ def until_neutral(g, keep_commanding=True, max_steps=400):
 
 @pytest.mark.ros
 @pytest.mark.parametrize("breach", ["depth", "altitude", "attitude", "cage", "sensor_rate", "run_time", "estop",
-                                    "abort"])
+                                    "abort", "stale_frozen", "no_dvext_roll"])
 def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, breach):
     g = graph
     arm_and_thrust(g)
@@ -272,7 +364,11 @@ def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, brea
         g["sup"].core.armed_since_s -= 29.9  # 0.1 s of simulated time before supervisor.max_run_time_s
     else:
         st.update({"depth": dict(depth=1.7), "altitude": dict(alt=0.1), "attitude": dict(roll=1.2),
-                   "cage": dict(v=(0.0, 0.0)), "sensor_rate": dict(quiet={"depth"})}[breach])
+                   "cage": dict(v=(0.0, 0.0)), "sensor_rate": dict(quiet={"depth"}),
+                   # identical samples stamped one hour old, at the normal rates
+                   "stale_frozen": dict(stamp_lag_ns=3600 * 10**9, frozen=True),
+                   # $DVPDL without $DVEXT (no attitude) while the IMU says 60 deg of roll
+                   "no_dvext_roll": dict(quiet={"dvext"}, imu_roll=math.radians(60.0))}[breach])
         if breach == "cage":
             g["sup"].core.position_ne = np.array([9.95, 3.0])  # beyond the 9.9 m north cage edge
             st["v"] = (0.01, 0.0)
@@ -292,7 +388,9 @@ def test_supervisor_disarms_on_each_breach_neutral_within_one_period(graph, brea
     wait_until(lambda: g["statuses"] and g["statuses"][-1].level == DiagnosticStatus.ERROR, 5, g["step"], "status")
     expected_words = {"depth": "depth 1.70 m", "altitude": "altitude 0.10 m", "attitude": "roll 1.20",
                       "cage": "outside the cage", "sensor_rate": "pressure/depth", "run_time": "max_run_time_s",
-                      "estop": "e-stop", "abort": "limits.max_depth_m"}[breach]
+                      "estop": "e-stop", "abort": "limits.max_depth_m",
+                      "stale_frozen": "samples not alive: stamped 3600", "no_dvext_roll": "roll 1.05 rad beyond "
+                      "supervisor.max_roll_rad 1 (IMU accelerometer (no fresh DVL attitude))"}[breach]
     assert expected_words in g["statuses"][-1].message
     # latched: re-arming is undone by the supervisor until it is reset
     g["esc"].on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
@@ -321,10 +419,16 @@ def test_supervisor_takes_imu_samples_at_its_checks_on_the_system_clock():
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
             wait_until(lambda: pub.get_subscription_count() == 1, 10, spin, "intake matched")
             t0 = time.time_ns() * 1e-9
-            for _ in range(30):
-                pub.publish(Imu())
+            for k in range(30):
+                imu = Imu()
+                imu.header.stamp = sup.get_clock().now().to_msg()
+                imu.linear_acceleration.z = 9.81 + 1e-3 * k  # a sensor's noise: no two samples alike
+                pub.publish(imu)
+            for _ in range(5):
+                pub.publish(Imu())  # stamp 0: never set, not alive
             stamps = sup.core._stamps["imu"]
-            wait_until(lambda: len(stamps) == 30, 10, spin, "30 samples counted by the checks")
+            wait_until(lambda: sup.core.not_alive["imu"] == 5, 10, spin, "35 samples taken by the checks")
+            assert len(stamps) == 30 and "stamp 0" in sup.core.not_alive_reason["imu"]
             assert all(t0 <= t <= time.time_ns() * 1e-9 for t in stamps)  # reception times, not check times
             assert sup.core.rate_hz("imu", sup._now_s()) == pytest.approx(30.0 / 1.0)
             assert sup.take_inputs() == 0  # each sample counted once
@@ -373,4 +477,53 @@ def test_supervisor_takes_the_esc_armed_flag_at_its_checks_and_disarms_a_tripped
         finally:
             ex.shutdown()
             probe.destroy_node()
+            sup.destroy_node()
+
+
+def test_a_backward_clock_step_between_a_sample_and_the_check_gives_no_dvl_trip():
+    """ROS time steps back 100 s while armed, and a valid DVL report arrives before the next check: the report is
+    stored in the new time base, the check re-bases nothing twice, no "no valid DVL velocity for 100 s" trip (was:
+    the report's time shifted by the step once more, 3 runs in 4 tripped)."""
+    from rclpy.time import Time
+
+    with ros_context() as ctx:
+        quiet = ("altimeter", "pressure", "imu")
+        over = {**{f"supervisor.min_rate.{s}_hz": 0.0 for s in quiet},
+                **{f"supervisor.rate_check_disabled.{s}": "clock-step test: DVL only" for s in quiet}}
+        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters(over)
+                             + [Parameter("use_sim_time", value=True)])
+        clock = sup.get_clock()
+        try:
+            def at(t_s: float) -> None:
+                clock.set_ros_time_override(Time(nanoseconds=int(t_s * 1e9), clock_type=clock.clock_type))
+
+            def dvl(t_s: float, k: int) -> Dvl:
+                m = Dvl(velocity_valid=True)
+                m.header.stamp = Time(nanoseconds=int(t_s * 1e9)).to_msg()
+                m.velocity_m_s.x = 1e-3 * (k % 7)  # a sensor's noise
+                m.orientation.w = 1.0
+                return m
+
+            t, k = 1000.0, 0
+            at(t)
+            sup.on_check()
+            sup.core.set_armed(t, True)
+            for _ in range(60):  # 3 s armed (beyond max_invalid_dvl_s, 2 s), DVL at 10 Hz, checks at 20 Hz
+                t, k = t + 0.05, k + 1
+                at(t)
+                if k % 2 == 0:
+                    sup.on_dvl(dvl(t, k))
+                sup.on_check()
+            t -= 100.0  # the step back, then a report before the check
+            at(t)
+            sup.on_dvl(dvl(t, k))
+            for _ in range(20):
+                sup.on_check()
+                t, k = t + 0.05, k + 1
+                at(t)
+                if k % 2 == 0:
+                    sup.on_dvl(dvl(t, k))
+            assert sup.core.tripped == "" and sup.clock_monitor.steps_back == 1
+            assert sup.core.last_valid_dvl_t == pytest.approx(t, abs=0.11)
+        finally:
             sup.destroy_node()

@@ -74,8 +74,11 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
         action = ActionClient(probe, RunIdentification, "run_identification")
         clock = {"ns": 1_000_000_000, "depth": 0.5}
 
+        rng = np.random.default_rng(3)
+
         def step(dt_s: float = 0.01) -> None:
-            """Publish the sensors for this instant (IMU 100 Hz, the others 10 Hz), advance /clock, run callbacks."""
+            """Publish the sensors for this instant (IMU 100 Hz, the others 10 Hz; stamped now, with a little noise as
+            real sensors have: the supervisor takes bit-identical streams as frozen), advance /clock, run callbacks."""
             ns = clock["ns"]
             stamp = Clock().clock
             stamp.sec, stamp.nanosec = divmod(ns, 1_000_000_000)
@@ -83,13 +86,14 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
                 m = Dvl(velocity_valid=True)
                 m.header.stamp = stamp
                 m.orientation.w = 1.0  # level, heading north
+                m.velocity_m_s.x, m.velocity_m_s.y = (float(v) for v in rng.normal(0.0, 1e-4, 2))
                 pubs["dvl"].publish(m)
-                r = Range(range=1.0, min_range=0.3, max_range=50.0)
+                r = Range(range=1.0 + float(rng.normal(0.0, 1e-3)), min_range=0.3, max_range=50.0)
                 r.header.stamp = stamp
                 pubs["alt"].publish(r)
                 d = PoseWithCovarianceStamped()
                 d.header.stamp = stamp
-                d.pose.pose.position.z = -clock["depth"]
+                d.pose.pose.position.z = -clock["depth"] + float(rng.normal(0.0, 1e-3))
                 pubs["depth"].publish(d)
                 p = FluidPressure(fluid_pressure=f["environment.surface_pressure_pa"]
                                   + rho_g * (clock["depth"] + port_z))
@@ -97,7 +101,7 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
                 pubs["pressure"].publish(p)
             imu = Imu()
             imu.header.stamp = stamp
-            imu.linear_acceleration.z = cfg.gravity_m_s2
+            imu.linear_acceleration.z = cfg.gravity_m_s2 + float(rng.normal(0.0, 0.01))
             pubs["imu"].publish(imu)
             clock["ns"] += int(dt_s * 1e9)
             c = Clock()

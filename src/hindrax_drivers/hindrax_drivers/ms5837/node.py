@@ -54,6 +54,11 @@ Publishes (reliable, depth 10):
 Service ``pressure/zero_depth`` (std_srvs/Trigger): sets the surface pressure to the mean of the
 pressures of the last :data:`ZERO_DEPTH_WINDOW_S` seconds (run it with the vehicle at the surface);
 the value is also written to the node's ``environment.surface_pressure_pa`` parameter (not to the file).
+Refused (``success`` false, the reason in ``message``, surface pressure unchanged) while the ESC reports armed
+(``thrusters/pulse_width``: the last one taken says armed; taken only when the service is called, never
+dispatched per message) and when that mean is further than ``sensors.ms5837.zero_depth_margin_pa`` from the
+atmospheric reference, the ``environment.surface_pressure_pa`` the node started with: a zero taken at 1.5 m
+would move every depth, and the depth limits with it, 1.5 m down.
 
 Time stamps: the device has no clock, so every message is stamped with the time of validity of its
 pressure: the ROS time (``use_sim_time`` supported) at which the D1 conversion was commanded plus half the
@@ -96,8 +101,11 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import FluidPressure, Temperature
 from std_srvs.srv import Trigger
 
+from hindrax_msgs.msg import ThrusterPwm
+
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
+from ..polled_input import PolledInputs
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
 
@@ -209,6 +217,10 @@ class Ms5837Node(Node):
         self.water_density_kg_m3 = float(cfg.water_density_kg_m3)
         self.gravity_m_s2 = float(cfg.gravity_m_s2)
         self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
+        #: zero_depth's atmospheric reference (Pa) and margin (Pa): the start-up surface pressure, fixed
+        self.atmospheric_reference_pa = self.surface_pressure_pa
+        self.zero_depth_margin_pa = float(s.zero_depth_margin_pa)
+        self.esc_armed = False  # the last thrusters/pulse_width taken (zero_depth's check)
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
         self.min_pressure_pa = float(s.min_pressure_pa)
         self.max_pressure_pa = float(s.max_pressure_pa)
@@ -243,6 +255,10 @@ class Ms5837Node(Node):
         self.pub_temperature = self.create_publisher(Temperature, "pressure/temperature", qos)
         self.pub_depth = self.create_publisher(PoseWithCovarianceStamped, "pressure/depth", qos)
         self.create_service(Trigger, "pressure/zero_depth", self.on_zero_depth)
+        # the ESC's armed flag, taken only when zero_depth is called (keep last 1; no executor wake-up per message,
+        # in both clock modes: the flag is read nowhere else)
+        self.esc_input: PolledInputs | None = PolledInputs(self)
+        self.esc_input.add(ThrusterPwm, "thrusters/pulse_width", self._on_esc_output, 1, lean=True)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
 
         # One-shot timer (re-armed with the wanted delay) and the periodic cycle timer, both on ROS time.
@@ -486,14 +502,35 @@ class Ms5837Node(Node):
         """Apply a validated change of ``environment.surface_pressure_pa`` (this node's one writable key)."""
         self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
 
+    def _on_esc_output(self, msg: Any) -> None:
+        # an output state that became unknown while armed may still be thrusting: still armed
+        self.esc_armed = bool(msg.armed) or (msg.output_state == ThrusterPwm.OUTPUT_UNKNOWN and self.esc_armed)
+
     def on_zero_depth(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        """Set the surface pressure to the mean pressure of the last ZERO_DEPTH_WINDOW_S seconds."""
+        """Set the surface pressure to the mean pressure of the last ZERO_DEPTH_WINDOW_S seconds; refused while the
+        ESC is armed or with that mean further than ``zero_depth_margin_pa`` from the atmospheric reference."""
+        if self.esc_input is not None:
+            self.esc_input.take_all()
+        response.success = False
         if not self._recent:
-            response.success = False
             response.message = "no pressure reading yet; surface pressure unchanged"
             return response
+        mean_pa = sum(v for _, v in self._recent) / len(self._recent)
+        off_pa = mean_pa - self.atmospheric_reference_pa
+        if self.esc_armed:
+            response.message = "refused while the ESC is armed (thrusters/pulse_width); surface pressure unchanged"
+        elif abs(off_pa) > self.zero_depth_margin_pa:
+            response.message = (f"refused: mean pressure {mean_pa:.1f} Pa is {off_pa:+.1f} Pa "
+                                 f"({off_pa / (self.water_density_kg_m3 * self.gravity_m_s2):+.2f} m of water) from "
+                                 f"the atmospheric reference {self.atmospheric_reference_pa:.1f} Pa, beyond "
+                                 f"sensors.ms5837.zero_depth_margin_pa {self.zero_depth_margin_pa:g}: not at the "
+                                 "surface; surface pressure unchanged")
+        if response.message:
+            self.diag.count("zero_depth_refused")
+            self.get_logger().warn(f"pressure/zero_depth {response.message}")
+            return response
         old = self.surface_pressure_pa
-        self.surface_pressure_pa = sum(v for _, v in self._recent) / len(self._recent)
+        self.surface_pressure_pa = mean_pa
         try:
             self.set_parameters([Parameter("environment.surface_pressure_pa", value=self.surface_pressure_pa)])
         except Exception as exc:  # noqa: BLE001 - the parameter mirror is informative only
@@ -515,6 +552,13 @@ class Ms5837Node(Node):
         if self.device is not None:
             out += self.device.stats.diagnostics()
         return out
+
+    def destroy_node(self) -> None:
+        """Destroy the ESC flag's intake node, then the node."""
+        if self.esc_input is not None:
+            self.esc_input.close()
+            self.esc_input = None
+        super().destroy_node()
 
     def close(self) -> None:
         """Stop the timers and close the bus if this node opened it (run_node calls this on shutdown)."""

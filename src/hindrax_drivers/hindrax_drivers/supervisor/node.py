@@ -6,11 +6,12 @@ every channel in that service callback, i.e. at once, well within one output per
 why on ``supervisor/status`` and in ``/diagnostics`` (level ERROR), and disarms again whenever the ESC reports
 armed while the breach is latched.
 
-Subscribes (ROS time of arrival is used for rates and run time; ``use_sim_time`` supported)
+Subscribes (ROS time of arrival is used for rates and run time, the header stamps for freshness; ``use_sim_time``
+supported)
     ``dvl/data`` (hindrax_msgs/Dvl: attitude, velocity for the dead reckoning), ``ping/altitude``
     (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
-    ``imu/data_raw`` (sensor_msgs/Imu, rate only: taken as serialised bytes, never deserialised; on the system
-    clock taken at each check from a polled subscription, see "CPU"),
+    ``imu/data_raw`` (sensor_msgs/Imu: rate, freshness and the accelerometer's tilt; taken as serialised bytes and
+    decoded with rosbags; on the system clock taken at each check from a polled subscription, see "CPU"),
     ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag; on the system clock taken at each
     check, see "CPU"), ``supervisor/abort``
     (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
@@ -46,8 +47,9 @@ CPU (README "Performance on the Pi")
     docs/architecture.md §10.1 has the measured gains.
 Time
     The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
-    of ROS time is detected at the next check, reported (``/diagnostics`` warning ``clock_step``) and the stored
-    times are shifted by the step, so no check goes blind; ROS time standing still for ``rate_window_s`` of steady
+    of ROS time is detected at the next check or sample, whichever reads the time first, reported (``/diagnostics``
+    warning ``clock_step``) and the stored times are shifted by the step, so no check goes blind and a sample taken
+    after the step is not shifted again; ROS time standing still for ``rate_window_s`` of steady
     time while armed trips ("ROS time stalled": every ROS-time check would be blind).
 Configuration
     ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``).
@@ -73,6 +75,7 @@ from hindrax_msgs.msg import Dvl, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .. import frames
+from ..lean_cdr import cdr_decoder
 from ..liveness import ClockStepMonitor, HeartbeatPublisher
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..polled_input import PolledInputs, PolledInputsMixin, subscribe_input
@@ -99,6 +102,7 @@ class SupervisorNode(PolledInputsMixin, Node):
         super().__init__("supervisor", **kwargs)
         cfg = load_node_config(self, ("supervisor", "pool"))
         self.core = SupervisorCore(SupervisorLimits.from_config(cfg))
+        self._decode_imu = cdr_decoder(Imu)
         self.diag = DeviceDiagnostics("hindrax/supervisor", "supervisor", self._now_s)
         self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
         self.esc_armed = False
@@ -140,26 +144,39 @@ class SupervisorNode(PolledInputsMixin, Node):
 
     # ------------------------------------------------------------------ inputs
     def on_dvl(self, msg: Dvl) -> None:
-        t = self._now_s()
+        t = self._sample_time_s()
         q = np.array([msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w], dtype=float)
+        rpy = None  # the driver's all-zero quaternion: the report has no attitude (no $DVEXT), never "level"
         if np.all(np.isfinite(q)) and np.linalg.norm(q) > 0.5:
-            rpy = frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q))
-            self._handle(self.core.on_attitude(float(rpy[0]), float(rpy[1]), float(rpy[2])))
+            e = frames.euler_ned_from_quaternion(frames.quaternion_ros_to_marine(q))
+            rpy = (float(e[0]), float(e[1]), float(e[2]))
         v = np.array([msg.velocity_m_s.x, msg.velocity_m_s.y, msg.velocity_m_s.z], dtype=float)
         valid = bool(msg.velocity_valid) and bool(np.all(np.isfinite(v)))
-        self._handle(self.core.on_dvl(t, frames.flu_to_frd(v) if valid else None))
+        content = (*v, *q, msg.altitude_m, *msg.beam_range_m, *msg.beam_velocity_m_s)  # all but the header
+        self._handle(self.core.on_dvl(t, frames.flu_to_frd(v) if valid else None, _stamp_s(msg.header.stamp), rpy,
+                                      tuple(float(x) for x in content)))
 
     def on_altitude(self, msg: Range) -> None:
-        self._handle(self.core.on_altitude(self._now_s(), float(msg.range)))
+        self._handle(self.core.on_altitude(self._sample_time_s(), float(msg.range), _stamp_s(msg.header.stamp)))
 
     def on_depth(self, msg: PoseWithCovarianceStamped) -> None:
-        self._handle(self.core.on_depth(self._now_s(), -float(msg.pose.pose.position.z)))
+        self._handle(self.core.on_depth(self._sample_time_s(), -float(msg.pose.pose.position.z),
+                                        _stamp_s(msg.header.stamp)))
 
-    def on_imu(self, _msg: bytes) -> None:
-        """Count one ``imu/data_raw`` sample: at its DDS reception time when polled, else (a callback, or no
-        reception time from the middleware) at the node's time now."""
-        received_s = self.intake.received_s if self.intake is not None else None
-        self.core.on_message("imu", received_s if received_s is not None else self._now_s())
+    def on_imu(self, data: bytes) -> None:
+        """One ``imu/data_raw`` sample (CDR bytes), taken at its DDS reception time when polled, else (a callback,
+        or no reception time from the middleware) at the node's time now: its stamp and bytes (stamp aside: the
+        4-byte encapsulation and the 8-byte stamp lead the message) for freshness, its specific force for the tilt
+        the roll and pitch limits use without a fresh DVL attitude (decoded with rosbags, about 30 us)."""
+        t = self._received_time_s()
+        try:
+            msg = self._decode_imu(data)
+        except Exception:  # noqa: BLE001 - malformed bytes: not a sample (counted, never a crash)
+            self.diag.count("malformed_imu")
+            return
+        a = msg.linear_acceleration
+        self._handle(self.core.on_imu(t, _stamp_s(msg.header.stamp), bytes(data[12:]),
+                                      frames.flu_to_frd(np.array([a.x, a.y, a.z], dtype=float))))
 
     def set_clock_stall_timeout(self, seconds: float) -> None:
         """ROS time may stand still this long (steady s) while armed before it trips (default
@@ -174,8 +191,7 @@ class SupervisorNode(PolledInputsMixin, Node):
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed
-        received_s = self.intake.received_s if self.intake is not None else None
-        self.core.set_armed(received_s if received_s is not None else self._now_s(), armed)
+        self.core.set_armed(self._received_time_s(), armed)
         if armed and self.core.tripped:
             self._disarm()
 
@@ -200,7 +216,10 @@ class SupervisorNode(PolledInputsMixin, Node):
         response.message = f"cleared: {was}" if was else "was not tripped"
         return response
 
-    def on_check(self) -> None:
+    def _sample_time_s(self) -> float:
+        """ROS time now (s), for a sample or a check, after re-basing the supervised times when ROS time stepped
+        back since the last reading: a sample taken between a step and the next check is then stored in the new
+        time base and not shifted a second time (which gave a spurious "no valid DVL velocity for <step> s")."""
         step = self.clock_monitor.check()
         if step:
             self.core.shift_time(step)
@@ -208,6 +227,17 @@ class SupervisorNode(PolledInputsMixin, Node):
             self.diag.warn("clock_step", f"ROS time stepped back {-step:.3f} s; supervised times shifted by it")
             self.get_logger().warn(f"ROS time stepped back {-step:.3f} s: checks re-based")
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
+        return self._now_s()
+
+    def _received_time_s(self) -> float:
+        """The DDS reception time of the polled sample being taken (system clock = ROS time here), or now; never
+        later than now: a sample received before a backward step of the clock is dated now, not in the future."""
+        now = self._sample_time_s()
+        received_s = self.intake.received_s if self.intake is not None else None
+        return now if received_s is None else min(received_s, now)
+
+    def on_check(self) -> None:
+        self._sample_time_s()  # a backward step of ROS time: re-base first
         if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
             self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
                                         "armed: the supervisor's ROS-time checks are blind"))
@@ -260,6 +290,11 @@ class SupervisorNode(PolledInputsMixin, Node):
         self.pub_status.publish(st)
         self.diag.published()
         self._status_dirty = False
+
+
+def _stamp_s(stamp: Any) -> float:
+    """A ``builtin_interfaces/Time`` (rclpy or rosbags object) in seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
 
 
 def main(args=None) -> int:
