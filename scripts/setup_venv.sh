@@ -27,6 +27,20 @@ for tool in cmake ninja; do
   fi
 done
 
+# Progress (2-3 minutes on a fresh machine): one line updated in place on a terminal, a line per step in a log.
+t0=$SECONDS
+step_no=0
+STEPS=5
+show() {
+  if [ -t 1 ]; then printf '\r%s  %ds\033[K' "$STEP" $((SECONDS - t0)); else echo "$STEP"; fi
+}
+step() { step_no=$((step_no + 1)); STEP="setup [$step_no/$STEPS] $*"; show; }
+tick_pid=""
+ticking() { if [ -t 1 ]; then { while sleep 2; do show; done; } & tick_pid=$!; fi; }
+stop_ticking() { if [ -n "$tick_pid" ]; then kill "$tick_pid" 2>/dev/null; wait "$tick_pid" 2>/dev/null; tick_pid=""; fi; }
+trap stop_ticking EXIT
+
+step "Python venv $VENV"
 [ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"
 PY="$VENV/bin/python"
 # pip, quiet, without the noise of index locations a machine's pip.conf may list but not have.
@@ -34,11 +48,14 @@ pipq() {
   "$PY" -m pip "$@" 2>&1 | { grep -v '^WARNING: Location .* is ignored' || true; }
   return "${PIPESTATUS[0]}"
 }
+step "ROS 2 Jazzy wheels and Python packages (pip, about 2 minutes on a fresh venv)"
+ticking
 pipq install -q --upgrade pip
 # colcon too (requirements-colcon.txt): `make ros-install` builds ros_ws with it, and the test suite runs that
 # build, which must not install packages into the venv while other tests run.
 pipq install -q -r requirements.txt -r requirements-colcon.txt -c constraints.txt
 if [ "${NEED_BUILD_TOOLS:-0}" = 1 ]; then pipq install -q -c constraints.txt 'cmake>=3.22,<4' 'ninja>=1.11,<2'; fi
+stop_ticking
 export PATH="$PWD/$VENV/bin:$PATH"
 
 # The wheels' rosidl_generator_py CMake exports hard-code the wheel build host's include directories;
@@ -52,6 +69,8 @@ np_inc=$("$PY" -c 'import numpy; print(numpy.get_include())')
 
 # Build and install hindrax_msgs into the venv prefix (importable with no environment variables), and
 # third_party/tf2_msgs: a stand-in holding tf2_msgs/TFMessage, which the wheels lack (the vehicle's ROS has it).
+step "interfaces hindrax_msgs and tf2_msgs (cmake, about 30 s)"
+ticking
 venv_abs=$(cd "$VENV" && pwd)
 mkdir -p build
 for pkg_dir in src/hindrax_msgs third_party/tf2_msgs; do
@@ -64,10 +83,14 @@ for pkg_dir in src/hindrax_msgs third_party/tf2_msgs; do
   cmake --install "$build" >/dev/null
 done
 
+stop_ticking
 # The two ament_python packages, editable (colcon builds the same setup.py on the Pi).
+step "hindrax_drivers and hindrax_ident (editable)"
 pipq install -q --no-deps --no-build-isolation -e src/hindrax_drivers -e src/hindrax_ident >"build/editable-install.log" \
   || { cat build/editable-install.log >&2; exit 1; }
 
 # Smoke check: the interfaces and rclpy import in the venv.
+step "import check"
 "$PY" -c 'import rclpy, tf2_msgs.msg, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_ident'
-echo "setup: ready in $VENV"
+if [ -t 1 ]; then echo; fi
+echo "setup: ready in $VENV ($((SECONDS - t0)) s)"

@@ -167,21 +167,30 @@ class Graph:
         return fut.result()
 
     def shutdown(self) -> None:
-        """Close every node (the ESC node writes neutral), stop the emulators, destroy the nodes."""
-        for name in reversed(list(self.nodes)):
-            close = getattr(self.nodes[name], "close", None)
-            if callable(close):
-                try:
-                    close()
-                except Exception as exc:  # noqa: BLE001 - keep closing the others
-                    print(f"bringup: closing {name}: {exc}")
-        for closer in self.closers:
-            closer()
-        self.executor.shutdown()
-        for node in self.nodes.values():
-            node.destroy_node()
-        if self.hardware is not None:
-            self.hardware.close()
+        """Close every node (the ESC node writes neutral), stop the emulators, destroy the nodes. The emulators'
+        pseudo-terminals are closed (and their /tmp folders removed) even when a step before fails, e.g. on a
+        context a signal already shut down."""
+        try:
+            for name in reversed(list(self.nodes)):
+                close = getattr(self.nodes[name], "close", None)
+                if callable(close):
+                    try:
+                        close()
+                    except Exception as exc:  # noqa: BLE001 - keep closing the others
+                        print(f"bringup: closing {name}: {exc}")
+            for closer in self.closers:
+                closer()
+            # a task the executor never ran (an action goal's execute coroutine when Ctrl-C or SIGTERM came) is
+            # closed, not left to the garbage collector's "coroutine ... was never awaited" at exit
+            for task, _entity, _node in list(getattr(self.executor, "_tasks", ())):
+                if not task.done():
+                    task.cancel()
+            self.executor.shutdown()
+            for node in self.nodes.values():
+                node.destroy_node()
+        finally:
+            if self.hardware is not None:
+                self.hardware.close()
 
 
 def ordered_executor(**kwargs: Any) -> Any:

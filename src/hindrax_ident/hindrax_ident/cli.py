@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 from typing import Sequence
 
@@ -159,6 +160,12 @@ def _add_module_arguments(parser: argparse.ArgumentParser, module: str) -> None:
     mod.add_arguments(parser)
 
 
+def _terminate(signum: int, _frame) -> None:
+    """SIGTERM handler: raise KeyboardInterrupt in the main thread, so a command cleans up (closes its bag, removes
+    its emulated ports) exactly as on Ctrl-C."""
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``hindrax`` console script."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -176,6 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"hindrax: {exc}", file=sys.stderr)
         return 1
     mod = importlib.import_module(args._module)
+    signal.signal(signal.SIGTERM, _terminate)  # SIGTERM (docker stop, kill) ends a command as Ctrl-C does
     try:
         status = int(mod.run(args) or 0)
         sys.stdout.flush()  # inside the try: a closed pipe (| head) is said here, not at interpreter exit

@@ -4,8 +4,9 @@ pool).
 * ``hindrax ident start [--dofs surge,heave,...] [--levels N] [--fractions F1,F2,...] [--calibrate ballast,line_pull
   [--calibration-only]] [--server-timeout S]``
   sends one ``run_identification`` goal (hindrax_msgs/action/RunIdentification) to the identification node of a
-  running graph (``hindrax bringup``, with or without ``--sim``) and prints its feedback, one line per level change
-  and once a second: DOF, level, command, progress; a calibration step's operator prompt (``>>> [attach_ballast]
+  running graph (``hindrax bringup``, with or without ``--sim``) and prints its feedback as one updating line on a
+  terminal (:mod:`hindrax_ident.progress_line`; in a log, a line only when it changes): DOF, level, command,
+  progress; a calibration step's operator prompt (``>>> [attach_ballast]
   calibration: attach the ballast (8.56 N in water), then call continue``) is printed once when it appears. Ctrl-C
   cancels the goal: the node brings the vehicle to a zero wrench and holds it until the ESC reports neutral widths, then
   the action ends; the command waits for that end (a second Ctrl-C stops waiting). The result line carries the node's
@@ -134,6 +135,8 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
     from hindrax_msgs.action import RunIdentification
 
+    from ..progress_line import ProgressLine
+
     client = ActionClient(node, RunIdentification, "run_identification")
     goals = GoalSender(node, client, "run_identification")
     spin = lambda: executor.spin_once(timeout_sec=0.1)  # noqa: E731
@@ -146,6 +149,9 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions,
                                   calibrate=list(calibrate or []), calibration_only=bool(calibration_only))
     last_prompt = [""]
+    # the feedback comes several times a second: one updating line on a terminal, each new state once elsewhere
+    progress = ProgressLine(print_line, tty=None if print_line is print else False)
+    print_line = progress.line
 
     def on_feedback(m) -> None:
         fb = m.feedback
@@ -153,7 +159,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
             if fb.prompt != last_prompt[0]:
                 print_line(f">>> {fb.prompt} (hindrax ident continue)")
         else:
-            print_line(format_feedback(fb))
+            progress.update(format_feedback(fb))
         last_prompt[0] = fb.prompt
 
     try:
