@@ -517,6 +517,19 @@ def test_dvext_fields_altitude_projection_beams_and_quaternion():
     assert math.isnan(b.from_extended(_ext(locked=False)).altitude_m)
 
 
+def test_dvpdl_without_dvext_has_no_attitude_not_a_level_one():
+    """$DVPDL alone (SEND-DVEXT off, or $DVEXT older than max_extended_age_s): the report carries the all-zero
+    quaternion ("no attitude", hindrax_msgs/Dvl) and unknown covariance, never the identity (level) that the
+    supervisor would take for 0 roll and 0 pitch."""
+    b = DvlReportBuilder(max_extended_age_s=1.0)
+    rep = b.from_position_delta(_pdl(), 0)
+    assert rep.velocity_valid and rep.orientation_xyzw == (0.0, 0.0, 0.0, 0.0)
+    assert rep.orientation_covariance[0] == -1.0
+    b.update_extended(_ext(locked=True), 0)
+    assert np.linalg.norm(b.from_position_delta(_pdl(), 500_000_000).orientation_xyzw) == pytest.approx(1.0)
+    assert b.from_position_delta(_pdl(), 1_500_000_000).orientation_xyzw == (0.0, 0.0, 0.0, 0.0)  # $DVEXT stale
+
+
 def test_device_clock_sync_minimum_latency_reboot_and_time_jump():
     s = DeviceClockSync(window_s=10.0, jump_s=1.0, resync_samples=3)
     offset = 1_000_000_000_000
