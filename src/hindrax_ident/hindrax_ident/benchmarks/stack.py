@@ -124,6 +124,16 @@ def _proc_rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def _proc_pss_mb(pid: int) -> float:
+    """Proportional set size of a process (``Pss`` of /proc/PID/smaps_rollup), MB (10^6 bytes): its private pages
+    plus its share of the pages it shares (the venv's libraries mapped by every node process), so the sum over
+    processes is the memory they hold together, unlike the sum of RSS, which counts shared pages once per process."""
+    for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
+        if line.startswith("Pss:"):
+            return int(line.split()[1]) * 1024 / 1e6
+    return float("nan")
+
+
 def _thread_cpu_s() -> dict[str, float]:
     """CPU seconds per Python thread name of this process (other than the calling thread)."""
     out: dict[str, float] = collections.defaultdict(float)
@@ -474,7 +484,8 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                         "bench": (_proc_cpu_s() - bench0) / wall,
                                         "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
                                         "goal_status": goal_status[0](),
-                                        "rss_mb": {n: _proc_rss_mb(p.pid) for n, p in procs.items() if n != "pool"}})
+                                        "rss_mb": {n: _proc_rss_mb(p.pid) for n, p in procs.items() if n != "pool"},
+                                        "pss_mb": {n: _proc_pss_mb(p.pid) for n, p in procs.items() if n != "pool"}})
                     out["phases"][phase] = {"windows": results}
 
                 goal_status = [lambda: None]
@@ -736,6 +747,12 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
             rows.append({"name": "launch_rss_total_mb", "value": sum(rss.values()), "unit": "MB",
                          "note": "resident memory of the launch layout's processes at the end of the running phase: "
                                  + ", ".join(f"{n} {v:.0f}" for n, v in rss.items())})
+            pss = wins[-1]["pss_mb"]
+            rows.append({"name": "launch_pss_total_mb", "value": sum(pss.values()), "unit": "MB", "target": 400.0,
+                         "note": "proportional set size of the launch layout's processes (shared pages divided among "
+                                 "the processes sharing them; identification and recording on) at the end of the "
+                                 "running phase: " + ", ".join(f"{n} {v:.0f}" for n, v in pss.items())})
+            rows += [{"name": f"launch_pss_mb_{n}", "value": v, "unit": "MB"} for n, v in pss.items()]
     return rows
 
 
