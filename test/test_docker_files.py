@@ -205,11 +205,14 @@ def test_compose_rotates_logs_and_takes_the_vehicle_settings_from_its_env_file()
     assert any(t.startswith("/var/log/hindrax:size=") for t in svc["tmpfs"])  # ROS log files bounded
     env = svc["environment"]
     assert ":?" in env["ROS_DOMAIN_ID"]  # compose refuses to start without this vehicle's domain
-    assert any(v.endswith(":/var/lib/hindrax/runs") and v.startswith("${HINDRAX_RUNS_HOST") for v in svc["volumes"])
+    # one runs-folder variable on every path (issue 45.5): the bare-metal entry point reads HINDRAX_RUNS_DIR too
+    assert any(v.endswith(":/var/lib/hindrax/runs") and v.startswith("${HINDRAX_RUNS_DIR") for v in svc["volumes"])
+    assert "HINDRAX_RUNS_DIR" in (DOCKER / "entrypoint.sh").read_text()
     example = dict(line.split("=", 1) for line in (DOCKER / "hindrax.env.example").read_text().splitlines()
                    if line and not line.startswith("#"))
     assert example["ROS_DOMAIN_ID"] == ""  # no shared example domain: every vehicle's file must name its own
-    assert {"HINDRAX_RUNS_HOST", "HINDRAX_LAUNCH", "HINDRAX_RECORD", "I2C_GID", "GPIO_GID"} <= set(example)
+    assert {"HINDRAX_RUNS_DIR", "HINDRAX_LAUNCH", "HINDRAX_RECORD", "I2C_GID", "GPIO_GID"} <= set(example)
+    assert not any("RUNS_HOST" in p.read_text() for p in DOCKER.iterdir() if p.is_file())
 
 
 def test_systemd_units_start_the_same_entry_point_after_time_sync():

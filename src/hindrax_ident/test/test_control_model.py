@@ -138,8 +138,8 @@ def test_the_vehicle_is_matched_by_the_parameters_the_identification_depends_on(
     assert m.source != VEHICLE_FILE and m.axis("heave").inertia == pytest.approx(50.0)
     text = default_config_path().read_text()
     edited = tmp_path / "edited.yaml"
-    assert "min_free_disk_mb: 500.0" in text
-    edited.write_text("# a comment\n" + text.replace("min_free_disk_mb: 500.0", "min_free_disk_mb: 200.0"))
+    assert "min_free_disk_mb: 2000.0" in text
+    edited.write_text("# a comment\n" + text.replace("min_free_disk_mb: 2000.0", "min_free_disk_mb: 500.0"))
     assert load_model(_write(tmp_path, doc), load_config(edited)).axis("heave").inertia == pytest.approx(50.0)
     other = load_config(default_config_path(), {"vehicle.inertia_kg_m2": [0.5, 0.6444, 0.7217]})
     with pytest.raises(ModelFileError) as exc:
