@@ -106,6 +106,9 @@ def test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag(piloted, capsy
     for dof in ("surge", "sway", "heave", "yaw"):
         assert (out / "report" / f"{dof}_validation.png").stat().st_size > 1000
         assert f"{dof}_validation.png" in html
+        for png in (f"{dof}_time.png", f"{dof}_residual_acf.png"):  # over time, residual autocorrelation
+            assert (out / "report" / png).stat().st_size > 1000 and png in html
+    assert (out / "report" / "parameters_vs_vehicle_file.png").stat().st_size > 1000
     assert "nrmse_hold" in printed and "not excited" in printed and "holdout" in printed
 
 

@@ -92,3 +92,20 @@ def test_predict_csv_scored_independently_matches_the_printed_nrmse(fitted, caps
     assert np.all(np.abs(d - 5.0 * np.round(d / 5.0)) <= 0.1 + 1e-6)
     # 60 s with a gap: about 12 segments, more than the tool's rule would give
     assert 10 <= np.unique(seg[use]).size <= 15
+
+
+def test_residual_autocorrelation_of_the_report_follows_its_definition():
+    from hindrax_ident.identification.fit_report import residual_acf
+
+    rng = np.random.default_rng(4)
+    # an AR(1) residual with coefficient 0.8 in 40 segments of 100 samples: lag-k autocorrelation 0.8^k
+    seg = np.repeat(np.arange(40), 100)
+    e = np.zeros(seg.size)
+    w = rng.normal(size=seg.size)
+    for i in range(1, seg.size):
+        e[i] = (0.8 * e[i - 1] if seg[i] == seg[i - 1] else 0.0) + w[i]
+    acf = residual_acf(seg, e, 3)
+    assert acf[0] == pytest.approx(1.0)
+    assert acf[1:] == pytest.approx([0.8, 0.64, 0.512], abs=0.05)
+    # pairs across segments do not count: shuffled segments of white noise stay near 0
+    assert abs(residual_acf(seg, w, 1)[1]) < 0.05

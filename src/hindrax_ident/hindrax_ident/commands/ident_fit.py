@@ -211,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = result_dir_for_bag(Path(args.bags[0]), args.out, "fit")
     doc = build_document(res, cfg, args.bags, args.holdout)
-    path, index = write_fit_outputs(out, res, doc)
+    path, index = write_fit_outputs(out, res, doc, cfg)
     print(format_table(res, cfg))
     for dof, e in doc["dofs"].items():
         if e.get("verdict") != "trusted":

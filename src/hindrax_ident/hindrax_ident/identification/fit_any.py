@@ -753,13 +753,14 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
         cand = r.chosen
         if cand.cv.get("samples", 0):
             fit.plot = {"data": "cross-validation", "measured": cand.val.v_s, "predicted": fit_core.predict_validation(
-                cand.val, cand.layout, r.theta), "valid": np.ones_like(cand.val.v_s, dtype=bool)}
+                cand.val, cand.layout, r.theta), "valid": np.ones_like(cand.val.v_s, dtype=bool),
+                "segments": cand.val}
         if dof in hrecs and hrecs[dof].chunks:
             try:
                 m, sd, vp = _holdout(hrecs[dof], r, core_opts, inertia)
                 fit.validation["holdout"] = m
                 fit.plot = {"data": "holdout", "measured": sd.v_s, "predicted": vp,
-                            "valid": np.ones_like(sd.v_s, dtype=bool)}
+                            "valid": np.ones_like(sd.v_s, dtype=bool), "segments": sd}
             except EstimationError as exc:
                 fit.validation["holdout_note"] = str(exc)
         out[dof] = fit
