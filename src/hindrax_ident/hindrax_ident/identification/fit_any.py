@@ -569,13 +569,14 @@ def _step_mean_chunks(pre: Preprocessed, opts: FitOptions) -> list[Chunk]:
         pre.lag_s = lag
 
 
-def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOptions, moving: Sequence[str] = ()
-                ) -> dict[str, fit_core.DofRecord]:
+def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOptions, moving: Sequence[str] = (),
+                force_from: Sequence[str] | None = None) -> dict[str, fit_core.DofRecord]:
     """One :class:`.fit_core.DofRecord` per DOF of ``dofs`` from the preprocessed bags: per continuous chunk the
     commanded force held over each grid step, the velocity samples at their own (delay-free) times, the velocity
     smoothed by a Savitzky-Golay filter (0.5 s window; initial states, equation-error start) and its derivative,
     the restoring regressor (roll, pitch), the Coriolis products of the six interpolated velocities, and the other
-    ``moving`` DOFs' velocities (cross-coupling candidates). A ThrusterPwm force keeps its known lag
+    ``moving`` DOFs' velocities (cross-coupling candidates) and commanded forces (``force_from`` when given: the
+    other DOFs' forces as candidates, coupling through the allocation). A ThrusterPwm force keeps its known lag
     (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
     out: dict[str, fit_core.DofRecord] = {}
     h = opts.grid_s
@@ -583,6 +584,7 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
     for dof in dofs:
         k = DOFS.index(dof)
         cross_names = tuple(d for d in moving if d != dof and d not in ("roll", "pitch"))
+        force_names = tuple(d for d in (moving if force_from is None else force_from) if d != dof)
         chunks = []
         for b, (pre, chs) in enumerate(zip(pres, chunks_of)):
             vt = pre.vel_times
@@ -608,12 +610,13 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
                     acc = signal.savgol_filter(v, win, 2, deriv=1, delta=h)
                 else:
                     vs, acc = v, np.gradient(v, h)
+                xf = c.force[:, [DOFS.index(d) for d in force_names]].copy() if force_names else None
                 chunks.append(fit_core.Chunk(c.force[:, k].copy(), vs, np.zeros_like(vs), acc, pos[good], z[good],
                                              rest, fit_core.coriolis_products(c.velocity)[:, k, :], cross, b,
-                                             float(c.t[0])))
+                                             float(c.t[0]), cross_force=xf))
         src = "thrust_model" if any(p.lag_s > 0 or "thrust" in p.notes for p in pres) else "wrench"
         lag = max((p.lag_s for p in pres), default=0.0)
-        out[dof] = fit_core.DofRecord(dof, h, "velocity", chunks, src, lag, cross_names)
+        out[dof] = fit_core.DofRecord(dof, h, "velocity", chunks, src, lag, cross_names, force_names=force_names)
     return out
 
 
@@ -777,6 +780,9 @@ def _units(dof: str, names: Sequence[str]) -> dict:
     u.setdefault("linear_damping", u.get("linear_damping_positive", ""))
     force = "N m" if dof in ("roll", "pitch", "yaw") else "N"
     for n in names:
+        if n.startswith("force_from_"):
+            other = n[len("force_from_"):]
+            u[n] = f"{force}/({'N m' if other in ('roll', 'pitch', 'yaw') else 'N'})"
         if n.startswith("cross_"):
             other = n[len("cross_"):]
             u[n] = f"{force}/({'rad/s' if other in ('roll', 'pitch', 'yaw') else 'm/s'})"
@@ -875,6 +881,18 @@ def _param_entries(r: DofFit, a: dict) -> dict:
     return entries
 
 
+#: The physical meaning of each optional term of the chosen model (identification.yaml ``terms_meaning``)
+TERM_MEANING = {
+    "by_direction": "damping per direction of motion (a frame that is not symmetric top to bottom)",
+    "coriolis": "Coriolis and centripetal force of the other DOFs' inertias (rigid body and added mass, Fossen 2011 "
+                "eq. 6.43): a turning vehicle's surge and sway push each other",
+    "cross": "force per unit of another DOF's velocity (the other DOF's damping acting here: off-diagonal damping "
+             "of an open frame, or a Coriolis term the diagonal inertias leave out)",
+    "cross_force": "part of another DOF's commanded force appearing here (coupling through the allocation: "
+                   "thrusters that do not deliver what the allocation assumes, a thrust centre off the body origin)",
+    "reverse_gain": "propellers weaker in reverse than forward (the force of negative commands times a gain)",
+}
+
 #: Why ``hindrax ident fit`` without ``--config`` writes ``config_ready: false`` (and no ``added_mass``).
 CONFIG_READY_REASON = ("no vehicle file (--config): only the rigid + added inertia is identified, not the added mass; "
                        "applying it to a vehicle file (results.to_config_overrides) needs --config")
@@ -922,7 +940,9 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         e["method"] = "output-error (segment-wise, prediction error; docs/identification.md §7)"
         e["model"] = c.terms.label
         e["terms"] = {"damping": c.terms.damping, "by_direction": c.terms.by_direction,
-                      "coriolis": c.terms.coriolis, "cross": c.terms.cross, "reverse_gain": c.terms.reverse_gain}
+                      "coriolis": c.terms.coriolis, "cross": c.terms.cross, "reverse_gain": c.terms.reverse_gain,
+                      "cross_force": c.terms.cross_force}
+        e["terms_meaning"] = {k: TERM_MEANING[k] for k, on in e["terms"].items() if on is True and k in TERM_MEANING}
         e["model_selection"] = [{"terms": k.terms.label, "parameters": k.n_params,
                                  "cv_nrmse": k.cv.get("nrmse"), "cv_nrmse_hold": k.cv.get("nrmse_hold"),
                                  "chosen": k is c.chosen} for k in c.candidates]

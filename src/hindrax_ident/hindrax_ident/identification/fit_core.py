@@ -27,7 +27,8 @@ raw measurements at their own times) and hand it here. Everything after the read
    validation segments; each candidate is refitted without each fold and predicts it (``validation_s`` open-loop
    predictions). Stage 1 chooses the damping (linear, quadratic, both; heave also one pair or one per direction),
    stage 2 adds, one at a time, the Coriolis and centripetal terms of the other DOFs' inertias, cross-DOF linear
-   coupling (the other moving DOFs' velocities) and, for a commanded wrench, a reverse thrust gain. Stage 1 takes
+   coupling (the other moving DOFs' velocities), the other DOFs' commanded forces (coupling through the
+   allocation) and, for a commanded wrench, a reverse thrust gain. Stage 1 takes
    the smallest CV error (the damping parameters are what a controller needs: a simpler damping law chosen by a
    one-standard-error rule biased the yaw damping moment by 29 % on the piloted test bags); an addition of stage 2
    is kept only when it lowers the CV error by more than one standard error of the fold-wise differences (the
@@ -106,7 +107,8 @@ class Chunk:
     restoring (n,) or None: s(eta) (roll, pitch); coupling (n, 6) or None: the Coriolis and centripetal products
     g_k with C(nu) nu of this DOF = g_k . [M1..M6] (:func:`coriolis_products`); cross (n, c) or None: the other
     moving DOFs' velocities; group: the bag (record) it belongs to; force_start: the lagged force at tick 0 (None:
-    settled at the first command)."""
+    settled at the first command); cross_force (n, f) or None: the other DOFs' commanded forces over each tick, as
+    ``force`` (before the delay and lag)."""
 
     force: np.ndarray
     v: np.ndarray
@@ -120,6 +122,7 @@ class Chunk:
     group: int = 0
     t0: float = 0.0
     force_start: float | None = None
+    cross_force: np.ndarray | None = None
 
 
 @dataclass
@@ -132,7 +135,8 @@ class DofRecord:
     linear + quadratic damping, heave per direction), fitted as it is; None: the terms are chosen by
     cross-validation (``CoreOptions.select``); all_segments: the record is a designed experiment's window (the
     campaign's), every segment of it is fitted, moving or not (as ``CoreOptions.all_segments``): a DOF that did
-    not move gets parameters with wide intervals and advice, not "no segment"."""
+    not move gets parameters with wide intervals and advice, not "no segment"; force_names: the DOFs of the chunks'
+    ``cross_force`` columns."""
 
     dof: str
     h: float
@@ -143,6 +147,7 @@ class DofRecord:
     cross_names: tuple = ()
     terms: "Terms | None" = None
     all_segments: bool = False
+    force_names: tuple = ()
 
     @property
     def has_coupling(self) -> bool:
@@ -154,20 +159,24 @@ class Terms:
     """The model's terms: damping ``"linear"``, ``"quadratic"`` or ``"both"``; by_direction: heave's damping per
     sign of w; coriolis: the Coriolis and centripetal force of the other DOFs' inertias subtracted from the input;
     cross: linear coupling to the other moving DOFs' velocities (free coefficients); reverse_gain: the force of
-    negative commands times a free gain (a propeller weaker in reverse)."""
+    negative commands times a free gain (a propeller weaker in reverse); cross_force: the other DOFs' commanded
+    forces, each times a free coefficient, added to this DOF's force (coupling through the allocation: thrusters that
+    do not deliver the force the allocation assumes put part of one DOF's command into another; they act with this
+    DOF's delay and lag)."""
 
     damping: str = "both"
     by_direction: bool = False
     coriolis: bool = False
     cross: bool = False
     reverse_gain: bool = False
+    cross_force: bool = False
 
     @property
     def label(self) -> str:
         parts = [{"both": "linear + quadratic", "linear": "linear", "quadratic": "quadratic"}[self.damping]
                  + " damping" + (" per direction" if self.by_direction else "")]
         for flag, name in ((self.coriolis, "Coriolis"), (self.cross, "cross-DOF coupling"),
-                           (self.reverse_gain, "reverse thrust gain")):
+                           (self.cross_force, "other DOFs' forces"), (self.reverse_gain, "reverse thrust gain")):
             if flag:
                 parts.append(name)
         return " + ".join(parts)
@@ -219,10 +228,12 @@ class Timing:
                 f"({self.bound_why}): the data cannot tell a longer one")
 
 
-def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequence[str] = ()) -> list[tuple]:
+def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequence[str] = (),
+                     force_names: Sequence[str] = ()) -> list[tuple]:
     """[(name, kind, lower, upper)] of the model's parameters in vector order: inertia; quadratic then linear damping
     (heave per direction: ``_positive`` (w > 0, down) and ``_negative``); bias; restoring (roll, pitch); cross
-    terms ``cross_<dof>``; ``reverse_thrust_gain``. Bounds keep them physical (module docstring)."""
+    terms ``cross_<dof>``; other DOFs' force coefficients ``force_from_<dof>``; ``reverse_thrust_gain``. Bounds keep
+    them physical (module docstring)."""
     out = [("inertia", "inertia", 1e-6, np.inf)]
     split = dof == "heave" and terms.by_direction
     for kind, name in (("kq", "quadratic_damping"), ("kl", "linear_damping")):
@@ -238,6 +249,8 @@ def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequ
     if terms.cross:
         names = list(cross_names) or [str(i) for i in range(n_cross)]
         out += [(f"cross_{names[i]}", f"cross{i}", -np.inf, np.inf) for i in range(n_cross)]
+    if terms.cross_force:
+        out += [(f"force_from_{d}", f"xforce{i}", -np.inf, np.inf) for i, d in enumerate(force_names)]
     if terms.reverse_gain:
         out.append(("reverse_thrust_gain", "reverse", *REVERSE_GAIN_BOUNDS))
     return out
@@ -338,7 +351,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     fmin, vmin = EXCITATION_MIN[excited_kind(rec.dof)]
     k_dof = ["surge", "sway", "heave", "roll", "pitch", "yaw"].index(rec.dof)
     ncol = (1 if rec.dof in ("roll", "pitch") else 0) + (len(rec.cross_names) if terms.cross else 0) + \
-        (1 if terms.reverse_gain else 0)
+        (len(rec.force_names) if terms.cross_force else 0) + (1 if terms.reverse_gain else 0)
     U, C, V0, X0, G, SP, EX, VS, AS, FF = [], [], [], [], [], [], [], [], [], []
     s_seg, s_j, s_a, s_z = [], [], [], []
     for ci, ch in enumerate(rec.chunks):
@@ -356,6 +369,10 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
                 c = ch.cross[:, i] if ch.cross is not None else np.zeros(n)
                 c1 = np.concatenate([c[1:], c[-1:]])
                 extra.append((-c, -0.5 * (c + c1), -c1))
+        if terms.cross_force:  # the other DOFs' forces through this DOF's delay and lag
+            for i in range(len(rec.force_names)):
+                g = ch.cross_force[:, i] if ch.cross_force is not None else np.zeros(n)
+                extra.append(ThrustLag(timing.lag_s).over_ticks(_shift(g, timing.delay_s / h), h, None))
         if terms.reverse_gain:
             extra.append(tuple(np.minimum(x, 0.0) for x in inputs))
             inputs = [np.maximum(x, 0.0) for x in inputs]
@@ -445,7 +462,7 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     b = col("bias")
     split = kqp is not None or klp is not None
     # time-dependent regressors x their parameters, added to the input once for all ticks
-    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith("cross")]
+    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce"))]
     U = np.broadcast_to(sd.u[:, None], (3, B) + sd.u.shape[1:])
     if tk:
         U = U + np.einsum("smlc,bc->sbml", sd.cols, P[:, tk])
@@ -557,7 +574,7 @@ def _equation_error_start(sd: SegmentData, dof: str, layout: list, a: np.ndarray
             rows.append(np.where(pos, 0.0, v))
         elif k == "bias":
             rows.append(np.ones_like(v))
-    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith("cross")]
+    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce"))]
     for c in range(len(tcols)):
         rows.append(-sd.cols[0][..., c])
     A = np.stack(rows, axis=-1)
@@ -989,7 +1006,7 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
                folds_cache: dict, theta0: np.ndarray | None = None) -> Candidate:
     sd = build_segments(rec, terms, timing, opts.segment_s, inertia, excited_only=_excited_only(rec, opts))
     sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=not rec.all_segments)
-    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names)
+    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names)
     start = _equation_error_start(sd, rec.dof, layout, sd.a_s)
     if theta0 is not None and theta0.size == start.size:
         start = theta0
@@ -1071,6 +1088,8 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         changes.append(("coriolis", False))
     if rec.cross_names:
         changes.append(("cross", True))
+    if rec.force_names:
+        changes.append(("cross_force", True))
     if rec.force_source == "wrench":
         changes.append(("reverse_gain", True))
     keep = []

@@ -57,7 +57,7 @@ class ModelError(ValueError):
 @dataclass
 class DofModel:
     """One DOF of an identification.yaml: its terms, parameter layout and values (in layout order), timing, the
-    other DOFs of its cross terms, and its verdict."""
+    other DOFs of its cross terms (velocities), its verdict, and the other DOFs whose forces it takes."""
 
     dof: str
     terms: fit_core.Terms
@@ -66,6 +66,7 @@ class DofModel:
     timing: fit_core.Timing
     cross_names: tuple
     verdict: str
+    force_names: tuple = ()
 
 
 def _value(entry: dict, name: str, dof: str) -> float:
@@ -93,13 +94,14 @@ def load_model(doc: dict) -> tuple[dict, np.ndarray]:
         if not isinstance(t, dict):
             raise ModelError(f"dofs.{dof}.terms: missing (written by an older hindrax ident fit: fit again)")
         terms = fit_core.Terms(str(t["damping"]), bool(t["by_direction"]), bool(t["coriolis"]), bool(t["cross"]),
-                               bool(t["reverse_gain"]))
+                               bool(t["reverse_gain"]), bool(t.get("cross_force", False)))
         cross = tuple(n[len("cross_"):] for n in e if n.startswith("cross_")) if terms.cross else ()
-        layout = fit_core.parameter_layout(dof, terms, len(cross), cross)
+        forces = tuple(n[len("force_from_"):] for n in e if n.startswith("force_from_")) if terms.cross_force else ()
+        layout = fit_core.parameter_layout(dof, terms, len(cross), cross, forces)
         theta = np.array([_value(e, n, dof) for n, _k, _lo, _hi in layout])
         tm = e.get("timing") or {}
         timing = fit_core.Timing(float(tm.get("delay_s", 0.0)), float(tm.get("lag_s", 0.0)), "model file")
-        out[dof] = DofModel(dof, terms, layout, theta, timing, cross, str(e.get("verdict", "")))
+        out[dof] = DofModel(dof, terms, layout, theta, timing, cross, str(e.get("verdict", "")), forces)
         inertia[DOFS.index(dof)] = theta[0]
     return out, inertia
 
@@ -150,7 +152,7 @@ def predict_bag(path: str | Path, models: dict, inertia: np.ndarray, choice: Top
     anchor = float(pre.chunks[0].t[0])
     out = {}
     for dof, m in models.items():
-        recs = dof_records([pre], [dof], opts, [dof, *m.cross_names])
+        recs = dof_records([pre], [dof], opts, [dof, *m.cross_names], m.force_names)
         rec = recs[dof]
         # every measurement of the DOF in the continuous data, in record time
         t_all = np.concatenate([c.t0 + c.sample_pos * rec.h for c in rec.chunks]) if rec.chunks else np.zeros(0)
