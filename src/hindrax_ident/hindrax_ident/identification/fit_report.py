@@ -19,6 +19,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
+from .estimators import truth_parameters  # noqa: E402
+
 __all__ = ["write_fit_outputs", "residual_acf"]
 
 
@@ -128,8 +130,6 @@ def _parameter_plot(doc: dict, cfg, path: Path) -> bool:
     larger magnitude of the two (one axis for every unit); False without a vehicle file."""
     if cfg is None:
         return False
-    from .estimators import truth_parameters
-
     rows = []
     for dof, e in doc["dofs"].items():
         ref = truth_parameters(cfg, dof)

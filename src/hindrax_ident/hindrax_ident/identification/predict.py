@@ -2,7 +2,7 @@
 predict``, issue 46.5).
 
 The model is an identification.yaml of ``hindrax ident fit`` (:func:`.fit_any.build_document`): per DOF its
-chosen ``terms``, the parameter ``value``\\ s, the ``timing`` (input delay and first-order thrust lag) and, for the
+chosen ``terms``, the parameters' ``value``, the ``timing`` (input delay and first-order thrust lag) and, for the
 Coriolis term, the other fitted DOFs' inertias. The bags are read as ``hindrax ident fit`` reads them
 (:func:`.fit_any.preprocess_bag`, :func:`.fit_any.dof_records`: force held on the 0.05 s grid, velocity samples at
 their own times, body FRD) and every DOF of the model is simulated open loop from the recorded force

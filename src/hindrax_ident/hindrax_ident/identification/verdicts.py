@@ -151,8 +151,9 @@ class FitEvidence:
     calibrated joint estimate's, which already holds the thrust scales); t_dof: the interval's degrees of freedom
     (the fit core's clusters - 1); units {name: unit}; velocity, acceleration, force (n,): the smoothed velocity,
     acceleration and input force at the fitted ticks, ``h`` s apart (typical speed, :func:`data_advice`);
-    lower_bounds, upper_bounds (p,) the optimiser's bounds (0: a physical bound; +-inf or None: none) or None; fold_theta (K, p) the cross-validation
-    folds' estimates or None; cv_nrmse: the chosen model's cross-validated prediction nrmse or None;
+    lower_bounds, upper_bounds (p,) the optimiser's bounds (0: a physical bound; +-inf or None: none) or None;
+    fold_theta (K, p) the cross-validation folds' estimates or None; cv_nrmse: the chosen model's cross-validated
+    prediction nrmse or None;
     residual_rho: lag-1 autocorrelation of consecutive output-error residuals or None; steady {name: (value, std)}
     of the steady-state method ([Hindrax-Drag] eqs. 2-8) or None; windows [(mean velocity, mean force)] of the
     steady windows; expected_bias: the constant force expected (0; heave the configured net buoyancy, N) or None
