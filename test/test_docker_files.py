@@ -202,7 +202,11 @@ def test_compose_rotates_logs_and_takes_the_vehicle_settings_from_its_env_file()
     svc = compose_service()
     assert svc["logging"]["driver"] == "json-file"
     assert svc["logging"]["options"]["max-size"] and int(svc["logging"]["options"]["max-file"]) >= 2
-    assert any(t.startswith("/var/log/hindrax:size=") for t in svc["tmpfs"])  # ROS log files bounded
+    # ROS log files survive a restart (host disk) and are rotated there (issue 45.5)
+    assert any(v.endswith(":/var/log/hindrax") for v in svc["volumes"]) and "tmpfs" not in svc
+    rotate = (DOCKER / "logrotate" / "hindrax").read_text()
+    assert "/var/log/hindrax/" in rotate and "maxsize" in rotate and "rotate " in rotate
+    assert svc["restart"] == "no"  # one supervisor: systemd's unit restarts compose up
     env = svc["environment"]
     assert ":?" in env["ROS_DOMAIN_ID"]  # compose refuses to start without this vehicle's domain
     # one runs-folder variable on every path (issue 45.5): the bare-metal entry point reads HINDRAX_RUNS_DIR too
@@ -211,7 +215,7 @@ def test_compose_rotates_logs_and_takes_the_vehicle_settings_from_its_env_file()
     example = dict(line.split("=", 1) for line in (DOCKER / "hindrax.env.example").read_text().splitlines()
                    if line and not line.startswith("#"))
     assert example["ROS_DOMAIN_ID"] == ""  # no shared example domain: every vehicle's file must name its own
-    assert {"HINDRAX_RUNS_DIR", "HINDRAX_LAUNCH", "HINDRAX_RECORD", "I2C_GID", "GPIO_GID"} <= set(example)
+    assert {"HINDRAX_RUNS_DIR", "HINDRAX_LAUNCH", "HINDRAX_RECORD"} <= set(example)
     assert not any("RUNS_HOST" in p.read_text() for p in DOCKER.iterdir() if p.is_file())
 
 
@@ -248,3 +252,26 @@ def test_scripts_are_executable_and_parse(script):
     path = DOCKER / script
     assert os.access(path, os.X_OK)
     assert subprocess.run(["bash", "-n", str(path)], capture_output=True, timeout=30).returncode == 0
+
+
+def test_build_finds_this_hosts_group_ids(tmp_path):
+    """Issue 45.5: the image's device groups take the IDs of this host's groups, found at build (docker/build.sh)."""
+    import subprocess
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    fakes = {"getent": 'case "$2" in dialout) echo dialout:x:20:;; i2c) echo i2c:x:994:;; gpio) echo gpio:x:993:;; '
+                       'esac',
+             "id": "echo 1001",
+             "docker": 'echo "DOCKER $* UID=$HINDRAX_UID DIALOUT=$DIALOUT_GID I2C=$I2C_GID GPIO=$GPIO_GID"'}
+    for name, body in fakes.items():
+        (bin_dir / name).write_text(f"#!/usr/bin/env bash\n{body}\n")
+        (bin_dir / name).chmod(0o755)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "HINDRAX_ENV": str(tmp_path / "hindrax.env")}
+    r = subprocess.run([str(DOCKER / "build.sh"), "--pull"], env=env, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0, r.stderr
+    assert (f"DOCKER compose --env-file {tmp_path / 'hindrax.env'} -f docker/compose.yaml build --pull UID=1001 "
+            "DIALOUT=20 I2C=994 GPIO=993") in r.stdout
+    (bin_dir / "getent").write_text("#!/usr/bin/env bash\nexit 2\n")  # a host without the groups: one line, no build
+    r = subprocess.run([str(DOCKER / "build.sh")], env=env, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 1 and "no group dialout" in r.stderr and "DOCKER" not in r.stdout
