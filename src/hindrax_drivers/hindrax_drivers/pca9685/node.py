@@ -1,20 +1,20 @@
 """ESC output node: thruster pulse widths and the lights channel through a PCA9685 on I2C (thin, over
-:class:`.core.EscCore`).
+:class:`.core.EscCore`, the decisions, and :class:`.chip.EscChip`, the registers).
 
 The decisions (arm, refuse to arm, disarm, neutral, output state, the reason; the rules and their sources) are the
-core's (:mod:`.core`, docs/architecture.md §8). This node does the I/O and feeds the core:
+core's (:mod:`.core`, docs/architecture.md §8). This node does the ROS I/O and feeds the core:
 
-- Chip (docs/devices.md §5.1): start-up and every recovery write neutral into the channel registers first, then
-  every output full OFF, sleep, PRE_SCALE, neutral, wake, RESTART (:func:`~.protocol.safe_startup_sequence`), and
-  read the result back (:meth:`.core.EscCore.chip_confirmed`); a failed write or read-back is
-  :meth:`.core.EscCore.chip_lost` (``OUTPUT_UNKNOWN``, widths NaN on ``thrusters/pulse_width``, never "neutral"); a
-  read-back mismatch every ``esc.readback_interval_s`` (brown-out) re-initialises the chip and disarms. No bus at
-  start-up: the node keeps running, reports ERROR "no I2C bus" and picks the bus up when it appears.
+- Chip: start-up and every recovery through :meth:`.chip.EscChip.configure` (neutral first), confirmed by
+  read-back (:meth:`.core.EscCore.chip_confirmed`); a failed write or read-back is :meth:`.core.EscCore.chip_lost`
+  (``OUTPUT_UNKNOWN``, widths NaN on ``thrusters/pulse_width``, never "neutral"); a read-back mismatch every
+  ``esc.readback_interval_s`` (brown-out) re-initialises the chip and disarms. No bus at start-up: the node keeps
+  running, reports ERROR "no I2C bus" and picks the bus up when it appears.
 - Inputs, all by callbacks in both clock modes: ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm,
-  thruster order; an armed command is written when it arrives), ``supervisor/heartbeat`` and ``guard/heartbeat``
-  (through :class:`~hindrax_drivers.liveness.HeartbeatWatch`: a forged or replayed beat, a second publisher or one
-  with another node name is a fault, checked every second tick; aged on the steady clock in executor-alive time, :class:`~hindrax_drivers.liveness.AliveAge`; their verdicts go
-  to :meth:`.core.EscCore.set_peers`), ``lights/brightness`` (std_msgs/Float64, 0-1 mapped linearly from
+  thruster order; an armed command is written when it arrives; only from ``thrust_allocation``, checked in the
+  graph), ``supervisor/heartbeat`` and ``guard/heartbeat`` (through :class:`~hindrax_drivers.liveness.
+  HeartbeatWatch`: a forged or replayed beat, a second publisher or another node name is a fault; aged on the
+  steady clock in executor-alive time, :class:`~hindrax_drivers.liveness.AliveAge`; verdicts to
+  :meth:`.core.EscCore.set_peers`), ``lights/brightness`` (std_msgs/Float64, 0-1 mapped linearly from
   ``lights.pulse_width_off_us`` to ``pulse_width_full_us``), the ``esc/set_armed`` service (hindrax_msgs/SetArmed).
 - Ticks: on the system clock one steady-clock timer (``esc.output_rate_hz``) runs the safety tick
   (:meth:`EscNode.steady_check`: heartbeats, chip retries and read-back, the steady-clock watchdog for a stopped ROS
@@ -54,6 +54,7 @@ from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublis
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
+from .chip import EscChip
 from .core import (GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, EscCore, EscOutput, command_source_fault,
                    heartbeat_verdict)
 
@@ -61,11 +62,9 @@ __all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_
 
 COMMAND_TOPIC = "thrusters/command_pulse_width"
 
+
 class EscNode(Node):
     """PCA9685 ESC output node (see the module docstring). ``bus``: SMBus-like object (default smbus2)."""
-
-    #: MODE1 as read back from a configured chip: awake, auto-increment, All-Call, no RESTART pending.
-    EXPECTED_MODE1 = p.MODE1_AI | p.MODE1_ALLCALL
 
     def __init__(self, bus: Any = None, **kwargs: Any):
         super().__init__("esc", **kwargs)
@@ -94,7 +93,9 @@ class EscNode(Node):
 
         self.i2c_bus_number, self.i2c_address = int(esc.i2c_bus), int(esc.i2c_address)
         self.raw = RawDataPublisher(self, "pca9685")
-        self.device: I2CDevice | None = None
+        #: the registers (:mod:`.chip`); its device is None until the bus is open
+        self.chip = EscChip(self.i2c_address, self.prescale, self.oscillator_hz, self.output.channels,
+                            self.lights_channel, self.raw)
         self.bus_error = ""
         if bus is not None:
             self.device = I2CDevice(bus, self.i2c_address, "pca9685", raw_tap=self.raw.i2c_tap)
@@ -112,9 +113,6 @@ class EscNode(Node):
         self.steady_watchdog_trips = 0
         self.chip_reinits = 0
         self.last_chip_reinit_monotonic: float | None = None  # time.monotonic() of the last detection
-        self.written = self.output.neutral()
-        self._expected: dict[int, bytes] = {}  # channel -> the 4 LEDn bytes last written
-        self._written_key: tuple | None = None  # (widths, lights) last written, to skip identical writes
         self._last_target_time = None
         self._last_readback = None
         self._published_since_tick = False
@@ -165,6 +163,10 @@ class EscNode(Node):
     #: time.monotonic() since which neutral is confirmed on the chip AND the guard lets it through, or None
     neutral_on_wire_since = property(lambda self: self.core.neutral_on_wire_since)
 
+    device = property(lambda self: self.chip.device, lambda self, v: setattr(self.chip, "device", v))
+    #: (n,) thruster widths on the chip as decoded from the counts written, us
+    written = property(lambda self: self.chip.written)
+
     @property
     def command_time(self) -> Time | None:
         """ROS time of the last command's arrival (None before the first)."""
@@ -197,28 +199,15 @@ class EscNode(Node):
 
     # -- device
     def _configure_chip(self) -> bool:
-        """Put the chip in a known state with neutral on every used channel, then confirm it by reading it back.
-
-        Order (fault-safe): MODE2; every output full OFF (ALL_LED_OFF_H bit 4) so that nothing a previous process
-        left in the channel registers can run again; sleep; PRE_SCALE; neutral (and lights off) written into the
-        channel registers while asleep; wake; RESTART (:func:`~.protocol.safe_startup_sequence`, datasheet
-        §7.3.1.1: RESTART resumes the channel registers, which now hold neutral). The arming timer starts when
-        the read-back matches (:meth:`arming_remaining_s`). Returns True on success.
-        """
+        """Put the chip in a known state with neutral on every used channel and confirm it by reading it back
+        (:meth:`.chip.EscChip.configure`: neutral first); the arming time may start then. Returns True on success."""
         self.core.chip_attempt()
         if self.device is None and not self._open_bus():
             return False
-        before, after = p.safe_startup_sequence(self.prescale)
         try:
-            # first neutral into the channel registers: a chip that kept running through an outage (the bus
-            # failed, not the chip) still outputs the last widths written; this ends them before anything else
-            self._written_key = None
-            self._write(self.output.neutral(), self.lights_off_us)
-            self.device.write_sequence(before)
-            self._written_key = None
-            self._write(self.output.neutral(), self.lights_off_us)
-            self.device.write_sequence(after)
-            mismatch = self._readback_mismatch()
+            mismatch = self.chip.configure(self.output.neutral(), self.lights_off_us)
+            self.core.wrote(self.chip.written)
+            self.lights_us = self.lights_off_us
         except I2CError as exc:
             self.diag.count("i2c_error")
             self._set_unknown(f"PCA9685 start-up failed: {exc}")
@@ -252,78 +241,17 @@ class EscNode(Node):
             self.unknown_entries += 1
             self.last_unknown_monotonic = time.monotonic()
             self.get_logger().error(f"output state unknown: {self.core.reason}")
-        self._written_key = None
+        self.chip.forget()
         self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"{self.core.reason} (output state unknown)")
 
-    def _readback_mismatch(self) -> str:
-        """Read MODE1, PRE_SCALE and every written channel back; '' when they match what was written, else why.
-
-        Raises :class:`I2CError` when the chip does not answer."""
-        if self.device is None:
-            raise I2CError(None, "no I2C bus", device_name="pca9685", address=self.i2c_address, operation="read",
-                           attempts=0)
-        mode1 = self.device.read_byte_data(p.MODE1)
-        if mode1 != self.EXPECTED_MODE1:
-            return f"MODE1 0x{mode1:02x}, expected 0x{self.EXPECTED_MODE1:02x} (chip reset or asleep)"
-        prescale = self.device.read_byte_data(p.PRE_SCALE)
-        if prescale != self.prescale:
-            return f"PRE_SCALE {prescale}, expected {self.prescale}"
-        for run in self._channel_runs(sorted(self._expected)):
-            data = self.device.read_block(p.led_register(run[0]), 4 * len(run))
-            for i, ch in enumerate(run):
-                want = self._expected[ch]
-                got = bytes(data[4 * i:4 * i + 4])
-                # reserved H bits 7:5 read 0 (datasheet §7.3.3); compare what the chip keeps
-                if bytes(b & m for b, m in zip(got, (0xFF, 0x1F, 0xFF, 0x1F))) != \
-                        bytes(b & m for b, m in zip(want, (0xFF, 0x1F, 0xFF, 0x1F))):
-                    return f"channel {ch} registers {got.hex()}, expected {want.hex()}"
-        return ""
-
-    @staticmethod
-    def _channel_runs(channels: list[int]) -> list[list[int]]:
-        """Consecutive channels in runs of at most 8 (32-byte SMBus blocks)."""
-        runs: list[list[int]] = []
-        for ch in channels:
-            if runs and ch == runs[-1][-1] + 1 and len(runs[-1]) < 8:
-                runs[-1].append(ch)
-            else:
-                runs.append([ch])
-        return runs
-
     def _write(self, widths_us: np.ndarray, lights_us: float) -> bool:
-        """Write the thruster channels (and the lights channel), grouped in auto-increment block writes.
-
-        Skips the bus when the same widths are already on the chip (the read-back confirms them once per
-        ``esc.readback_interval_s``), and, while what was last written is known to be on the chip, skips a block
-        whose register bytes are the ones last written there (the lights channel between two thrust commands: one
-        block write per command instead of two). After a failed write, a neutral for safety (:meth:`_safe_neutral`)
-        or a (re)configuration every block is written. Returns True when it updated the outputs."""
-        key = (tuple(np.asarray(widths_us, dtype=float).tolist()), float(lights_us))
-        if key == self._written_key:
-            return False
-        known_on_chip = self._written_key is not None
-        if self.device is None:
-            raise I2CError(None, "no I2C bus", device_name="pca9685", address=self.i2c_address, operation="write",
-                           attempts=0)
-        per_channel = {int(ch): float(w) for ch, w in zip(self.output.channels, widths_us)}
-        per_channel[self.lights_channel] = float(lights_us)
-        self.raw.begin_batch()  # raw/pca9685: the block writes of one update in one message
-        decoded: dict[int, float] = {}
-        for run in self._channel_runs(sorted(per_channel)):
-            block, widths = p.channel_block_for_pulses([per_channel[c] for c in run], self.prescale,
-                                                       self.oscillator_hz)
-            decoded.update(zip(run, widths))
-            if known_on_chip and block == b"".join(self._expected.get(c, b"") for c in run):
-                continue  # these registers already hold exactly these bytes
-            self._written_key = None  # unknown until the whole write succeeded
-            self.device.write_block(p.led_register(run[0]), block)
-            self._expected.update((c, block[4 * i:4 * i + 4]) for i, c in enumerate(run))
-        self.raw.flush()  # (after a failed write the records are published with the next update's)
-        self.written = np.array([decoded[int(ch)] for ch in self.output.channels])
-        self.core.wrote(self.written)
-        self.lights_us = lights_us
-        self._written_key = key
-        return True
+        """Write the widths (:meth:`.chip.EscChip.write`, skipping what is on the chip already) and tell the core.
+        Returns True when it wrote; raises :class:`I2CError`."""
+        wrote = self.chip.write(widths_us, lights_us)
+        if wrote:
+            self.core.wrote(self.chip.written)
+            self.lights_us = lights_us
+        return wrote
 
     # -- inputs
     def on_command(self, msg: ThrusterPwm) -> None:
@@ -492,7 +420,7 @@ class EscNode(Node):
         and restart the arming timer (the ESCs must see neutral again), reporting it in diagnostics."""
         self.raw.begin_batch()  # raw/pca9685: the reads join the 0.1 s batches of the writes
         try:
-            mismatch = self._readback_mismatch()
+            mismatch = self.chip.readback_mismatch()
         except I2CError as exc:
             self.diag.count("i2c_error")
             self._set_unknown(f"PCA9685 read-back failed: {exc}")
@@ -587,7 +515,7 @@ class EscNode(Node):
 
     def _safe_neutral(self, reason: str) -> None:
         try:
-            self._written_key = None  # always write: neutral must reach the chip even if we believe it is there
+            self.chip.forget()  # always write: neutral must reach the chip even if we believe it is there
             self._last_target_time = None
             self._write(self.output.neutral(), self.lights_us)
             if self.neutral_confirmed_time is not None:
