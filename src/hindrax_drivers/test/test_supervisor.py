@@ -527,3 +527,18 @@ def test_a_backward_clock_step_between_a_sample_and_the_check_gives_no_dvl_trip(
             assert sup.core.last_valid_dvl_t == pytest.approx(t, abs=0.11)
         finally:
             sup.destroy_node()
+
+
+def test_identical_samples_far_apart_are_not_a_frozen_stream():
+    """Two identical depths 4 s apart (beyond max_identical_s, 3 s) say nothing about a stream in between: the second
+    is alive and its breach trips (the safety bench publishes one such depth per repeat); 10 Hz repeats of it for
+    3 s are frozen."""
+    c = SupervisorCore(limits(max_sample_age_s=1.0, max_identical_s=3.0, reaction_time_s=3.0))
+    c.set_armed(10.0, True)
+    assert "depth 1.75 m" in c.on_depth(10.0, 1.75, 10.0)
+    c.reset()
+    assert "depth 1.75 m" in c.on_depth(14.0, 1.75, 14.0)
+    c.reset()
+    for k in range(1, 40):  # 14.1 ... 17.9 s: identical beyond 17.0 s, i.e. the last 9 (10 with rounding)
+        c.on_depth(14.0 + 0.1 * k, 1.75, 14.0 + 0.1 * k)
+    assert 9 <= c.not_alive["pressure"] <= 10 and "frozen" in c.not_alive_reason["pressure"]

@@ -194,13 +194,16 @@ class SupervisorCore:
                 reason = (f"stamped {age:.1f} s {'old' if age >= 0 else 'ahead'}, beyond supervisor.max_sample_age_s "
                           f"{self.limits.max_sample_age_s:g}" if stamp_s != 0.0 else "stamp 0 (never set)")
         if fingerprint is not None:
+            # (content, start of its run, last sample): a run is broken by a change, or by a gap longer than
+            # max_identical_s (two samples that far apart say nothing about the stream in between)
             last = self._identical.get(sensor)
-            if last is not None and last[0] == fingerprint:
+            if last is not None and last[0] == fingerprint and t_s - last[2] <= self.limits.max_identical_s:
+                self._identical[sensor] = (fingerprint, last[1], t_s)
                 if t_s - last[1] > self.limits.max_identical_s and not reason:
                     reason = (f"bit-identical for {t_s - last[1]:.1f} s, beyond supervisor.max_identical_s "
                               f"{self.limits.max_identical_s:g} (frozen)")
             else:
-                self._identical[sensor] = (fingerprint, t_s)
+                self._identical[sensor] = (fingerprint, t_s, t_s)
         if reason:
             self.not_alive[sensor] += 1
             self.not_alive_reason[sensor] = reason
@@ -224,7 +227,7 @@ class SupervisorCore:
             value = getattr(self, name)
             if value is not None:
                 setattr(self, name, value + step_s)
-        self._identical = {k: (fp, t + step_s) for k, (fp, t) in self._identical.items()}
+        self._identical = {k: (fp, t0 + step_s, t1 + step_s) for k, (fp, t0, t1) in self._identical.items()}
 
     def on_depth(self, t_s: float, depth_m: float, stamp_s: float | None = None) -> str:
         """One ``pressure/depth`` sample: depth (m, positive down) taken at ``t_s``, header stamp ``stamp_s``."""

@@ -228,6 +228,7 @@ def run(quick: bool = False) -> list[dict]:
             # supervisor breach: too deep
             r["armed_at_1700"]()
             m = r["PoseWithCovarianceStamped"]()
+            m.header.stamp = r["sup"].get_clock().now().to_msg()  # a fresh sample: a stamp-0 one is not alive
             m.pose.pose.position.z = -(r["sup"].core.limits.max_depth_m + 0.1)
             t0 = time.monotonic()
             r["depth"].publish(m)
