@@ -21,7 +21,7 @@ from hindrax_msgs.msg import ThrusterPwm
 from .dds_transport import loopback_transport
 from .conditions import ConditionTimeout, ros_context, wait_until  # production helpers, re-exported for tests
 from .config import default_config_path, load_config
-from .liveness import HEARTBEAT_NODES, HeartbeatPublisher
+from .liveness import HEARTBEAT_NODES, HeartbeatPublisher, heartbeat_qos
 
 __all__ = ["AllocationStandIn", "ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env",
            "config_parameters", "python_executable", "ros_context", "wait_until"]
@@ -112,7 +112,7 @@ class AllocationStandIn:
 
     def __init__(self, context=None) -> None:
         self.node = rclpy.create_node("thrust_allocation", context=context)
-        self.pub = self.node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        self.pub = self.node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", heartbeat_qos())
 
     def command(self, widths, armed: bool = True) -> None:
         """Publish ``widths`` (thruster order, us), stamped now."""

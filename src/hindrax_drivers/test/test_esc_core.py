@@ -315,7 +315,7 @@ SOURCE_ROWS = [
     ("nobody (no command comes)", [], ""),
     ("another node beside it", ["thrust_allocation", "thruster_test"], "published by 'thruster_test'"),
     ("another node alone", ["probe"], "published by 'probe'"),
-    ("two allocations", ["thrust_allocation", "thrust_allocation"], "2 publishers named 'thrust_allocation'"),
+    ("two allocations", ["thrust_allocation", "thrust_allocation"], "2 live publishers named 'thrust_allocation'"),
 ]
 
 
@@ -324,6 +324,13 @@ def test_command_source_fault(rule, names, fault):
     assert COMMAND_NODE == "thrust_allocation"
     got = command_source_fault(names)
     assert (fault in got and got) if fault else got == ""
+
+
+def test_a_dead_allocation_still_in_the_graph_is_not_a_second_one():
+    """A respawned allocation beside its killed predecessor's graph entry (about 20 s): one live publisher."""
+    assert command_source_fault(["thrust_allocation", "thrust_allocation"], alive=1) == ""
+    assert "2 live publishers" in command_source_fault(["thrust_allocation", "thrust_allocation"], alive=2)
+    assert "'rogue'" in command_source_fault(["thrust_allocation", "rogue"], alive=1)  # a stranger by its name
 
 
 def test_a_foreign_commander_while_armed_disarms_and_its_commands_are_refused():

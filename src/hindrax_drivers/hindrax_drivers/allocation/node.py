@@ -37,6 +37,7 @@ from rclpy.node import Node
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
 from ..lean_cdr import cdr_decoder, thruster_pwm_encode, thruster_pwm_lean
+from ..liveness import heartbeat_qos
 from ..node_common import load_node_config, run_node, time_from_ns
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
@@ -88,7 +89,9 @@ class ThrustAllocationNode(Node):
         self.core = AllocationCore(cfg)
         self.timeout_s = cfg.thrusters.wrench_timeout_s
         self.future_margin_s = cfg.thrusters.wrench_future_margin_s
-        self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", 10)
+        #: the heartbeats' liveliness contract (1 s lease), which the ESC's subscription requires: a dead allocation
+        #: stops counting as a live commander after 1 s (:func:`hindrax_drivers.pca9685.core.command_source_fault`)
+        self.pub_pwm = self.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", heartbeat_qos())
         self.pub_forces = self.create_publisher(ThrusterForces, "thrusters/forces", 10)
         self.pub_status = self.create_publisher(AllocationStatus, "allocation/status", 10)
         #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.lean_cdr`: a lighter 50 Hz

@@ -60,16 +60,21 @@ GUARD_CONFIRM_S = 0.15
 COMMAND_NODE = "thrust_allocation"
 
 
-def command_source_fault(node_names: Sequence[str], topic: str = "thrusters/command_pulse_width") -> str:
+def command_source_fault(node_names: Sequence[str], topic: str = "thrusters/command_pulse_width",
+                         alive: int | None = None) -> str:
     """Why the command topic cannot be trusted ('' when it can): ``node_names`` of every publisher the graph shows
-    on it (``get_publishers_info_by_topic``). Only one publisher, :data:`COMMAND_NODE`, may be there; none is no
-    fault (no command comes)."""
+    on it (``get_publishers_info_by_topic``) and ``alive``, how many of them are live (the subscription's DDS
+    liveliness count; None: count the names). Only :data:`COMMAND_NODE` may be there, and only one live; none is
+    no fault (no command comes). The live count, not the names, decides "one": a killed process stays in the graph
+    for about 20 s (Fast DDS participant lease), its writer is not alive after the 1 s liveliness lease, so a
+    respawned allocation is not refused as a second one."""
     strangers = sorted({n for n in node_names if n != COMMAND_NODE})
     if strangers:
         return (f"{topic} published by {', '.join(map(repr, strangers))}: only {COMMAND_NODE!r} may command the "
                 "thrusters")
-    if len(node_names) > 1:
-        return f"{len(node_names)} publishers named {COMMAND_NODE!r} on {topic}: only one may command the thrusters"
+    count = len(node_names) if alive is None else int(alive)
+    if count > 1:
+        return f"{count} live publishers named {COMMAND_NODE!r} on {topic}: only one may command the thrusters"
     return ""
 
 

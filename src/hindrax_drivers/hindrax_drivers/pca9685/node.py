@@ -49,7 +49,10 @@ from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from ..lean_cdr import thruster_pwm_cdr
-from ..liveness import HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, HeartbeatPublisher, HeartbeatWatch, heartbeat_ok
+from rclpy.event_handler import SubscriptionEventCallbacks
+
+from ..liveness import (HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, HeartbeatPublisher, HeartbeatWatch, heartbeat_ok,
+                        heartbeat_qos)
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
@@ -124,7 +127,11 @@ class EscNode(Node):
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
         # every input is a callback, in both clock modes (the path the vehicle takes is the path the tests take)
-        self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self.on_command, 10)
+        #: with the heartbeats' liveliness contract (1 s lease): the allocation publishes with the same QoS; a
+        #: publisher without a finite lease (a script, a bag player) is not matched, and is refused by its name
+        self.command_publishers_alive = 0
+        self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self.on_command, heartbeat_qos(),
+                                 event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_command_liveliness))
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.heartbeat = HeartbeatPublisher(self, "esc", "hindrax/esc", "esc")
@@ -311,11 +318,14 @@ class EscNode(Node):
             watch.check()
         self._check_command_source()
 
+    def _on_command_liveliness(self, info: Any) -> None:
+        self.command_publishers_alive = int(info.alive_count)
+
     def _check_command_source(self) -> None:
-        """Who publishes ``thrusters/command_pulse_width`` (the graph): only the allocation may
+        """Who publishes ``thrusters/command_pulse_width`` (the graph, and the live count): only the allocation may
         (:func:`.core.command_source_fault`); a fault disarms and holds neutral while it lasts."""
         names = [info.node_name for info in self.get_publishers_info_by_topic(COMMAND_TOPIC)]
-        fault = command_source_fault(names, COMMAND_TOPIC)
+        fault = command_source_fault(names, COMMAND_TOPIC, self.command_publishers_alive)
         if fault and fault != self.core.command_source:
             self.diag.count("command_source_fault")
             self.get_logger().error(f"command topic not trusted: {fault}")
