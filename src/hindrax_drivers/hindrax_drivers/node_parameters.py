@@ -183,7 +183,9 @@ def check_whole_vehicle(overrides: Mapping[str, Any], defaults: Mapping[str, Any
         return  # no vehicle file to complete a partial set: the node's own keys are still validated
     merged = dict(defaults)
     merged.update(overrides)
-    _validate_whole(tuple(sorted((k, _frozen(v)) for k, v in merged.items())), source)
+    issues = _whole_vehicle_issues(tuple(sorted((k, _frozen(v)) for k, v in merged.items())))
+    if issues:
+        raise ConfigError(list(issues), source)
 
 
 def _frozen(value: Any) -> Any:
@@ -191,10 +193,14 @@ def _frozen(value: Any) -> Any:
 
 
 @functools.lru_cache(maxsize=8)
-def _validate_whole(items: tuple, source: str) -> None:
-    """:func:`hindrax_drivers.config.validate_flat` of a whole vehicle, once per distinct vehicle and source (a
-    composed process starts several nodes with the same parameters)."""
-    _c.validate_flat({k: (list(v) if isinstance(v, tuple) else v) for k, v in items}, source=source)
+def _whole_vehicle_issues(items: tuple) -> tuple[ConfigIssue, ...]:
+    """The issues :func:`hindrax_drivers.config.validate_flat` finds in a whole vehicle (flat items), computed once
+    per distinct vehicle: a composed process starts several nodes with the same parameters."""
+    try:
+        _c.validate_flat({k: (list(v) if isinstance(v, tuple) else v) for k, v in items})
+    except ConfigError as exc:
+        return tuple(exc.issues)
+    return ()
 
 
 def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
