@@ -1,6 +1,8 @@
 """The controller node in the virtual pool graph (docs/control.md §3): refuses before arming, holds the current state,
 follows depth and altitude setpoints (checked on the simulator's truth), and yields ``wrench`` to a pilot and to a
-running identification goal; a bad model file gives one warning line and the vehicle file's model."""
+running identification goal; its estimate goes out as ``odom`` and ``odom -> base_link`` on ``/tf`` (REP-105); a bad
+model file stops its start-up with one line (never the vehicle file's model in its place, issue 45.4: the process
+test below)."""
 from __future__ import annotations
 
 import math
@@ -9,7 +11,9 @@ import numpy as np
 import pytest
 import rclpy
 from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
 from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import ros_context, wait_until
@@ -25,14 +29,11 @@ def _call(client, request, spin):
 
 @pytest.mark.ros
 def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
-    bad = tmp_path / "identification.yaml"
-    bad.write_text("dofs: [unclosed")
     with ros_context() as ctx:
         from hindrax_ident.bringup import build_graph
 
         graph = build_graph(default_config_path(), sim=True, context=ctx, seed=5, controller=True, drive_clocks=True,
-                            model_file=str(bad), overrides={"esc.arming_time_s": 1.0,
-                                                           "simulation.real_time_factor": 0.0})
+                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0})
         probe = rclpy.create_node("pool_operator", context=ctx)
         graph.executor.add_node(probe)
         sim = graph.nodes["simulator"].simulator
@@ -41,6 +42,10 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
         wrenches: list[WrenchStamped] = []
         probe.create_subscription(ControllerStatus, "controller/status", status.append, 100)
         probe.create_subscription(WrenchStamped, "wrench", wrenches.append, 100)
+        odoms: list[Odometry] = []
+        tfs: list[TFMessage] = []
+        probe.create_subscription(Odometry, "odom", odoms.append, 100)
+        probe.create_subscription(TFMessage, "/tf", tfs.append, 100)
         arm = probe.create_client(SetArmed, "esc/set_armed")
         hold = probe.create_client(Trigger, "controller/hold")
         enable = probe.create_client(SetBool, "controller/enable")
@@ -49,9 +54,7 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
         ident = probe.create_publisher(ManeuverStatus, "identification/status", 10)
         spin = lambda: graph.spin_once(0.005)  # noqa: E731
         try:
-            # the bad model file: the vehicle file's model, said in one line
-            assert ctrl.model.source == "vehicle file" and len(ctrl.model.notes) == 1
-            assert "not valid YAML" in ctrl.model.notes[0]
+            assert ctrl.model.source == "vehicle file"
             wait_until(lambda: hold.service_is_ready() and enable.service_is_ready(), 30, spin, "controller services")
             r = _call(hold, Trigger.Request(), spin)
             assert not r.success and "not armed" in r.message
@@ -68,6 +71,16 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             wait_until(lambda: sim.t_s > t0 + 10.0, 120, spin, "10 s of holding")
             assert sim.position_ned_m[2] == pytest.approx(0.6, abs=0.03)
             assert abs(math.remainder(sim.euler_rad[2], 2 * math.pi)) < math.radians(3.0)
+            # the estimate for ROS tools: odom (ENU, z up) -> base_link, holding 0.6 m deep, heading north (ENU +y)
+            wait_until(lambda: odoms and tfs, 10, spin, "odom and /tf")
+            o = odoms[-1]
+            assert (o.header.frame_id, o.child_frame_id) == ("odom", "base_link")
+            assert o.pose.pose.position.z == pytest.approx(-0.6, abs=0.05)
+            q = o.pose.pose.orientation
+            assert math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y ** 2 + q.z ** 2)) == \
+                pytest.approx(math.pi / 2, abs=math.radians(5.0))
+            t = next(x for m in tfs for x in m.transforms if x.child_frame_id == "base_link")
+            assert t.header.frame_id == "odom"
             # altitude 1.0 m (Ping1D range): the pool is 1.8 m deep, the altimeter 0.18 m below base_link
             sp = ControlSetpoint(vertical_mode=ControlSetpoint.VERTICAL_ALTITUDE, altitude_m=1.0, hold_heading=True,
                                  heading_rad=0.0, hold_velocity=True)

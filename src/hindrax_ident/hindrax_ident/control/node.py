@@ -28,7 +28,9 @@ Subscribes
     writers).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
-    ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change.
+    ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change; ``odom``
+    (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz from its sensor conditioning (REP-105,
+    :mod:`.odometry`), while its sensor streams are open (not while an identification goal runs).
 CPU
     On the system clock (the vehicle; ``use_sim_time`` false) the topic inputs but ``controller/setpoint`` are polled
     subscriptions (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor
@@ -41,7 +43,8 @@ CPU
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
     ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
-    ("" = the vehicle file); a file that cannot be used gives one warning line and the vehicle file's model.
+    ("" = the vehicle file); a file that cannot be used (unreadable, not an identification, another vehicle's)
+    stops the start-up with one line naming ``model_file``, never the vehicle file's model in its place.
 """
 from __future__ import annotations
 
@@ -51,12 +54,14 @@ from collections import deque
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import TransformStamped, WrenchStamped
+from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_srvs.srv import SetBool, Trigger
+from tf2_msgs.msg import TFMessage
 
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
@@ -72,6 +77,7 @@ from ..identification.signals import sample_from_pressure, sample_from_range, sa
 from .law import ControlSettings
 from .loop import HoldLoop
 from .model import ModelFileError, load_model, model_from_config
+from .odometry import odometry_estimate
 
 __all__ = ["ControllerNode", "main", "RUNNING_PHASES"]
 
@@ -80,6 +86,8 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
                             ManeuverStatus.PHASE_RETURNING})
 #: Period of controller/status when nothing changes, s.
 STATUS_PERIOD_S = 0.5
+#: period of ``odom`` and the ``odom -> base_link`` transform on ``/tf`` (s): 10 Hz, enough for a 3D view
+ODOM_PERIOD_S = 0.1
 #: tick period (s) while an identification goal runs, on the system clock: the tick then only takes the goal's phase
 #: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams,
 #: ``thrusters/pulse_width`` among them, are closed. The goal's end is seen within 0.2 s (the streams open then;
@@ -133,6 +141,7 @@ class ControllerNode(PolledInputsMixin, Node):
         self._setpoint: ControlSetpoint | None = None
         self._last_wrench = np.zeros(6)
         self._last_status_s = -math.inf
+        self._last_odom_s = -math.inf
         self._last_tick_s: float | None = None
         self._report = self.hold.core.gain_report()
         sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
@@ -148,6 +157,9 @@ class ControllerNode(PolledInputsMixin, Node):
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10, **pub_ev)
+        # the estimate for ROS tools (REP-105): nav_msgs/Odometry and the odom -> base_link transform
+        self.pub_odom = self.create_publisher(Odometry, "odom", 10, **pub_ev)
+        self.pub_tf = self.create_publisher(TFMessage, "/tf", 10, **pub_ev)
         self.create_service(Trigger, "controller/hold", self._on_hold)
         self.create_service(SetBool, "controller/enable", self._on_enable)
         self._tick_timer = self.create_timer(self.tick_s, self._on_tick)
@@ -355,6 +367,37 @@ class ControllerNode(PolledInputsMixin, Node):
                 else:
                     self._disable("stopped: the law gave a non-finite wrench", zero=True)
         self._publish_status()
+        self._publish_odometry(t)
+
+    def _publish_odometry(self, t: float) -> None:
+        """``odom`` (nav_msgs/Odometry, frame ``odom``, child ``base_link``) and the same pose on ``/tf``, every
+        :data:`ODOM_PERIOD_S`, from the conditioned sensors (:mod:`.odometry`); nothing before the first depth and
+        attitude. A twist without DVL lock is zero with its covariance's first element -1 (unknown)."""
+        if t - self._last_odom_s < ODOM_PERIOD_S - 1e-9:
+            return
+        st = self.loop.state
+        est = odometry_estimate(st.position_ned_m, st.rpy_now(), st.velocity_frd_m_s, st.rates_frd_rad_s)
+        if est is None:
+            return
+        self._last_odom_s = t
+        stamp = self.get_clock().now().to_msg()
+        m = Odometry()
+        m.header.stamp, m.header.frame_id, m.child_frame_id = stamp, "odom", "base_link"
+        p, q = m.pose.pose.position, m.pose.pose.orientation
+        p.x, p.y, p.z = (float(x) for x in est.position_enu_m)
+        q.x, q.y, q.z, q.w = (float(x) for x in est.orientation_xyzw)
+        lin, ang = m.twist.twist.linear, m.twist.twist.angular
+        lin.x, lin.y, lin.z = (float(x) for x in est.linear_flu_m_s)
+        ang.x, ang.y, ang.z = (float(x) for x in est.angular_flu_rad_s)
+        if not est.velocity_known:
+            m.twist.covariance[0] = -1.0
+        self.pub_odom.publish(m)
+        tf = TransformStamped()
+        tf.header.stamp, tf.header.frame_id, tf.child_frame_id = stamp, "odom", "base_link"
+        tr, rot = tf.transform.translation, tf.transform.rotation
+        tr.x, tr.y, tr.z = p.x, p.y, p.z
+        rot.x, rot.y, rot.z, rot.w = q.x, q.y, q.z, q.w
+        self.pub_tf.publish(TFMessage(transforms=[tf]))
 
     def clock_may_advance(self, t_s: float) -> bool:
         """Step gate for a simulator in the same process: False while enabled and the tick due at ``t_s`` has not
