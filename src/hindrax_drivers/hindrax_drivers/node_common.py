@@ -21,6 +21,7 @@ from hindrax_msgs.msg import RawDeviceData
 from .config import ConfigError, VehicleConfig
 from .node_parameters import node_config
 from .ros_process import RosProcess
+from .sd_notify import SystemdNotifier
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
@@ -360,7 +361,8 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
                        keys=keys, dynamic=dynamic, on_change=on_change)
 
 
-def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None) -> int:
+def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,
+             systemd_notify: bool = False) -> int:
     """Process entry point of a node: init, build the node, spin the process's executor, shut down cleanly.
 
     factory: creates the node after ``rclpy.init``. executor: ``events``, ``single`` or None for the default
@@ -368,12 +370,14 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
     status: 0 on SIGINT/SIGTERM,
     1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
     (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
+    systemd_notify: READY=1 and WATCHDOG=1 to systemd from the executor (the safety processes,
+    :class:`~hindrax_drivers.sd_notify.SystemdNotifier`).
     """
-    return run_nodes([factory], args, executor)
+    return run_nodes([factory], args, executor, systemd_notify)
 
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
-              executor: str | None = None) -> int:
+              executor: str | None = None, systemd_notify: bool = False) -> int:
     """Process entry point of several nodes composed in one process (:mod:`hindrax_drivers.composition`): the nodes
     are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
     reverse order (the last built first). Same arguments, exit
@@ -382,8 +386,11 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     callback (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``)."""
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor,
                     interrupt=False) as proc:
-        for factory in factories:
-            proc.executor.add_node(proc.own(factory()))
+        nodes = [proc.own(factory()) for factory in factories]
+        for node in nodes:
+            proc.executor.add_node(node)
+        if systemd_notify and nodes:
+            SystemdNotifier(nodes[0])
         proc.spin()
     return proc.status
 

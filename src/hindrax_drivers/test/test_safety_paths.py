@@ -327,6 +327,8 @@ def test_44_2_frozen_guard_and_esc_the_hardware_watchdog_stops_the_outputs(rig):
 
 
 def test_44_2_the_guard_does_not_feed_while_asserted(rig):
+    import time
+
     r = rig(guard=True, watchdog_s=0.33)
     r.wait(lambda: not r.guard.core.asserted and r.feed.rises >= 2, "guard released and feeding")
     r.arm_at_1700()
@@ -335,6 +337,17 @@ def test_44_2_the_guard_does_not_feed_while_asserted(rig):
     rises = r.feed.rises
     r.wait(lambda: r.feed.expired(), "watchdog ran out while asserted", poll=r.commanding)
     assert r.feed.rises <= rises + 1 and not r.guard.feeding()
+    # cleared and disarmed: released and fed again, and the long pause before is not taken for a stall of its own
+    r.beats.supervisor = ""
+    r.wait(lambda: not r.guard.core.asserted, "released")
+    r.guard._last_rise = time.monotonic() - 1.0  # its last edge went out before the assertion, long ago
+    r.guard.tick()  # a tick before the first feed edge after the release
+    assert not r.guard.core.asserted, r.guard.core.reason
+    r.wait(lambda: r.feed.rises >= rises + 3, "fed again")
+    assertions = r.guard.assertions
+    fed = r.feed.rises
+    r.wait(lambda: r.feed.rises >= fed + 5, "fed for 0.5 s")
+    assert r.guard.assertions == assertions and not r.guard.core.asserted, r.guard.core.reason
 
 
 _HOLDER = """

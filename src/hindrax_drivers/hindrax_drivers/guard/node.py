@@ -116,6 +116,7 @@ class OutputGuardNode(Node):
         self.feed_edges = 0
         self._last_decision = -1e9
         self._last_rise: float | None = None  # time.monotonic() of the last rising edge sent
+        self._released_at = -1e9  # time.monotonic() of the last release of the outputs (feeding starts again)
         self.feed_timeout_s = esc.output_enable_feed_timeout_s
         if (self.feed_gpio is not None or feed is not None) and not self.feed_rate_hz:
             raise ValueError("the watchdog feed needs esc.output_enable_feed_rate_hz")
@@ -178,12 +179,13 @@ class OutputGuardNode(Node):
         return fresh and not self.core.asserted and not self.core.drive_fault
 
     def watchdog_ran_out(self) -> str:
-        """'' or why the watchdog has (probably) disabled the outputs although this guard released them: no rising
-        edge sent for longer than its timeout (this process was frozen or starved). The outputs then stay off until
-        the ESC has disarmed: thrust comes back only through a new arm request."""
-        if not self.feeds or self.core.asserted or self._last_rise is None:
+        """'' or why the watchdog has (probably) disabled the outputs of an armed ESC although this guard released
+        them: no rising edge sent for longer than its timeout (this process was frozen or starved). The outputs then
+        stay off until the ESC has disarmed: thrust comes back only through a new arm request. A disarmed ESC has
+        no thrust to come back: a stall then (a busy start-up) is not latched."""
+        if not self.feeds or self.core.asserted or not self.core.esc_armed or self._last_rise is None:
             return ""
-        quiet = time.monotonic() - self._last_rise
+        quiet = time.monotonic() - max(self._last_rise, self._released_at)
         if quiet <= float(self.feed_timeout_s):
             return ""
         return (f"no watchdog feed edge for {quiet:.2f} s (esc.output_enable_feed_timeout_s "
@@ -201,11 +203,12 @@ class OutputGuardNode(Node):
             if self.feed is None:
                 return
         try:
+            asked = time.monotonic()  # before the call: the edge is no earlier, so quiet times are upper bounds
             self.feed.set_high(not self._feed_high)
             self._feed_high = not self._feed_high
             if self._feed_high:
                 self.feed_edges += 1
-                self._last_rise = time.monotonic()
+                self._last_rise = asked
         except OSError as exc:
             self._drive_failed(f"cannot feed the watchdog: {exc}")
 
@@ -317,6 +320,7 @@ class OutputGuardNode(Node):
             self.diag.count("asserted")
             self.get_logger().warn(f"outputs silenced: {self.core.reason}")
         elif changed:
+            self._released_at = time.monotonic()
             self.get_logger().info("outputs enabled: the ESC reports disarmed at neutral")
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
@@ -357,7 +361,7 @@ class OutputGuardNode(Node):
 
 def main(args=None) -> int:
     """``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
-    return run_node(OutputGuardNode, args)
+    return run_node(OutputGuardNode, args, systemd_notify=True)  # READY=1, WATCHDOG=1 (sd_notify.py)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,174 @@
+"""Issue 44 item 2: the hardware watchdog on /OE (its emulation and configuration) and the systemd watchdog pings
+of the safety processes (hindrax_drivers.transport.gpio, hindrax_drivers.sd_notify, docs/watchdog.md)."""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from hindrax_drivers.config import ConfigError, default_config_path, load_config
+from hindrax_drivers.sd_notify import notify, watchdog_period_s
+from hindrax_drivers.testing import child_env, wait_until
+from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
+
+
+class FakeClock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+# (feed levels driven, each followed by a clock advance in s; expired after each step)
+FEED_TABLE = {
+    "never fed": ([(None, 0.0)], [True]),
+    "one edge holds for the timeout": ([(False, 0.0), (True, 0.0), (None, 0.29), (None, 0.02)], [True, False, False,
+                                                                                                   True]),
+    "edges every 0.1 s hold it": ([(True, 0.05), (False, 0.05)] * 6, [False] * 12),
+    "staying high is no edge": ([(True, 0.1), (True, 0.1), (True, 0.05), (True, 0.1)], [False, False, False, True]),
+    "released (pull-down) after edges runs out": ([(True, 0.05), ("release", 0.2), (None, 0.1)], [False, False,
+                                                                                                  True]),
+}
+
+
+@pytest.mark.parametrize("case", list(FEED_TABLE), ids=list(FEED_TABLE))
+def test_feed_line_table(case):
+    steps, expected = FEED_TABLE[case]
+    clock = FakeClock()
+    feed = WatchdogFeedLine(0.3, clock=clock)
+    got = []
+    for level, advance in steps:
+        if level == "release":
+            feed.release()
+        elif level is not None:
+            feed.set_high(level)
+        clock.t += advance
+        got.append(feed.expired())
+    assert got == expected
+
+
+def test_output_enable_is_the_or_of_the_guard_line_and_the_expired_watchdog():
+    clock = FakeClock()
+    oe, feed = EmulatedGpioLine(pull_high=True), WatchdogFeedLine(0.3, clock=clock)
+    watched = WatchedOutputEnable(oe, feed)
+    assert watched.is_high()  # power-up: guard line released to its pull-up, watchdog never fed
+    oe.set_high(False)
+    assert watched.is_high()  # the guard lets the outputs through, the watchdog does not yet
+    feed.set_high(True)
+    assert not watched.is_high()
+    oe.set_high(True)
+    assert watched.is_high()  # the guard asserts
+    oe.set_high(False)
+    clock.t += 0.31
+    assert watched.is_high()  # no edge for the timeout: off although the guard holds /OE low
+
+
+FEED = {"esc.output_enable_feed_gpio.chip": "/dev/gpiochip0", "esc.output_enable_feed_gpio.line": 27}
+
+
+@pytest.mark.parametrize("overrides,message", [
+    ({**FEED, "esc.output_enable_feed_rate_hz": 10.0, "esc.output_enable_feed_timeout_s": 0.2},
+     "esc.output_enable_feed_rate_hz = 10.0: allowed >= 15 Hz"),
+    ({**FEED, "esc.output_enable_feed_timeout_s": 5.0}, "esc.output_enable_feed_timeout_s = 5.0"),
+])
+def test_feed_configuration_is_checked(overrides, message):
+    with pytest.raises(ConfigError) as exc:
+        load_config(default_config_path(), overrides)
+    assert message in str(exc.value)
+    cfg = load_config(default_config_path(), {**FEED, "esc.output_enable_feed_timeout_s": 0.33})
+    assert cfg.esc.output_enable_feed_rate_hz == 10.0 and cfg.esc.output_enable_feed_gpio.line == 27
+
+
+@pytest.fixture
+def notify_socket(tmp_path):
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(tmp_path / "notify"))
+    sock.settimeout(0.05)
+    yield sock, str(tmp_path / "notify")
+    sock.close()
+
+
+def _received(sock):
+    out = []
+    while True:
+        try:
+            out.append(sock.recv(256).decode())
+        except (TimeoutError, socket.timeout):
+            return out
+
+
+def test_notify_and_watchdog_period(notify_socket):
+    sock, path = notify_socket
+    assert not notify("READY=1", {})
+    assert notify("READY=1", {"NOTIFY_SOCKET": path})
+    assert _received(sock) == ["READY=1"]
+    assert watchdog_period_s({"WATCHDOG_USEC": "2000000"}) == 2.0
+    assert watchdog_period_s({"WATCHDOG_USEC": "x"}) is None and watchdog_period_s({}) is None
+    abstract = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    name = f"hindrax-test-{os.getpid()}"
+    abstract.bind("\0" + name)
+    abstract.settimeout(1.0)
+    try:
+        assert notify("WATCHDOG=1", {"NOTIFY_SOCKET": "@" + name})
+        assert abstract.recv(64) == b"WATCHDOG=1"
+    finally:
+        abstract.close()
+
+
+def test_the_guard_process_pings_systemd_and_a_frozen_one_does_not(notify_socket):
+    """READY=1, then WATCHDOG=1 every half WATCHDOG_USEC; SIGSTOP (a frozen launch) stops the pings, so systemd's
+    WatchdogSec ends the unit."""
+    sock, path = notify_socket
+    env = child_env(NOTIFY_SOCKET=path, WATCHDOG_USEC="200000")
+    env.pop("HINDRAX_EMULATION_SOCKET", None)
+    proc = subprocess.Popen([sys.executable, "-m", "hindrax_drivers.guard.node", "--ros-args", "--params-file",
+                             str(default_config_path())], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    got: list[str] = []
+    try:
+        wait_until(lambda: got.extend(_received(sock)) or got.count("WATCHDOG=1") >= 5, 60, None, "pings")
+        assert got[0] == "READY=1" and got.count("READY=1") == 1
+        proc.send_signal(signal.SIGSTOP)
+        _received(sock)  # what was sent before the stop
+        stopped_at = time.monotonic()
+        wait_until(lambda: time.monotonic() - stopped_at > 0.6, 5, None, "3 ping periods frozen")
+        assert "WATCHDOG=1" not in _received(sock)
+        proc.send_signal(signal.SIGCONT)
+        wait_until(lambda: "WATCHDOG=1" in _received(sock), 20, None, "pings again")
+    finally:
+        proc.send_signal(signal.SIGCONT)
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+
+def test_units_and_the_safety_processes_use_the_systemd_watchdog():
+    """The bare-metal unit waits for READY=1 and aborts a unit that stops pinging; the Pi's drop-in hands the
+    hardware watchdog to systemd; the three safety entry points send the pings."""
+    import inspect
+    import re
+    from pathlib import Path
+
+    from hindrax_drivers.guard import node as guard
+    from hindrax_drivers.pca9685 import node as esc
+    from hindrax_drivers.supervisor import node as supervisor
+
+    docker = Path(__file__).resolve().parents[3] / "docker"
+    bare = (docker / "hindrax-bare-metal.service").read_text()
+    for line in ("Type=notify", "NotifyAccess=all", "WatchdogSec=2", "Restart=on-failure"):
+        assert re.search(rf"^{line}$", bare, re.M), line
+    dropin = (docker / "systemd" / "hindrax-watchdog.conf").read_text()
+    assert re.search(r"^\[Manager\]$", dropin, re.M)
+    seconds = int(re.search(r"^RuntimeWatchdogSec=(\d+)s$", dropin, re.M).group(1))
+    assert 1 <= seconds <= 15  # the BCM2711 watchdog's longest timeout
+    for module in (guard, esc, supervisor):
+        assert "systemd_notify=True" in inspect.getsource(module.main), module.__name__
