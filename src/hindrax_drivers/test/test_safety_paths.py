@@ -330,6 +330,8 @@ def test_44_2_the_guard_does_not_feed_while_asserted(rig):
     import time
 
     r = rig(guard=True, watchdog_s=0.33)
+    # issue 44.9: tick gaps count in full up to the timeout (test_watchdog.py, the starved guard)
+    assert r.guard.esc_age.max_step_s == r.guard.supervisor_age.max_step_s == r.guard.timeout_s
     r.wait(lambda: not r.guard.core.asserted and r.feed.rises >= 2, "guard released and feeding")
     r.arm_at_1700()
     r.beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"

@@ -172,3 +172,25 @@ def test_units_and_the_safety_processes_use_the_systemd_watchdog():
     assert 1 <= seconds <= 15  # the BCM2711 watchdog's longest timeout
     for module in (guard, esc, supervisor):
         assert "systemd_notify=True" in inspect.getsource(module.main), module.__name__
+
+
+def test_44_9_a_starved_guard_ages_a_dead_peer_at_wall_speed():
+    """Issue 44 item 9: a heartbeat's age counted at most two tick periods (0.1 s) per gap between the watcher's
+    ticks, so a watcher starved to a tick every 0.15 s aged a dead peer at 2/3 of wall speed (a stop stretched to
+    1173 ms once). The guard now counts each gap in full up to its timeout: a dead peer is stale after the same wall
+    time whatever the tick rate; only a gap longer than the timeout (its own freeze, which the watchdog feed
+    covers) is capped, so a live peer does not look dead the moment the guard resumes."""
+    from hindrax_drivers.liveness import AliveAge
+
+    clock = FakeClock()
+    age = AliveAge(0.2, clock=clock)  # OutputGuardNode: max_step_s = esc.heartbeat_timeout_s
+    age.heard()
+    ticks = 0
+    while age.fresh(0.2):
+        clock.t += 0.15  # starved: a tick every 0.15 s instead of 0.05 s
+        age.tick()
+        ticks += 1
+    assert ticks == 2 and age.age_s == pytest.approx(0.3)  # stale after 0.3 s of wall time, as at 20 Hz ticks
+    age.heard()
+    clock.t += 5.0  # the guard itself was frozen for 5 s: the peer's beats are queued, not missing
+    assert age.tick() == pytest.approx(0.2) and age.fresh(0.2)
