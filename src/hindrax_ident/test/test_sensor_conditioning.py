@@ -1,4 +1,4 @@
-"""Sensor conditioning of the identification executive (maneuvers.SensorState, DepthEstimator), the gyro-aided
+"""Sensor conditioning of the identification executive (vehicle.state.SensorState, DepthEstimator), the gyro-aided
 attitude smoother and the gyro-bias estimate of the offline analysis (estimators, fusion)."""
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from hindrax_drivers import frames
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.campaign import Campaign
 from hindrax_ident.identification.campaign_fit import rate_bias_against_angle
-from hindrax_ident.identification.fusion import smooth_with_rate
-from hindrax_ident.identification.maneuvers import DepthEstimator, SensorState, euler_rates, rotation_ned_from_body
+from hindrax_ident.vehicle.fusion import smooth_with_rate
+from hindrax_ident.vehicle.state import DepthEstimator, SensorState, euler_rates, rotation_ned_from_body
 
 
 @pytest.fixture(scope="module")

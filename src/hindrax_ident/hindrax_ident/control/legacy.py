@@ -23,7 +23,7 @@ __all__ = ["LegacyPDHold"]
 
 class LegacyPDHold:
     """The previous holds (module docstring): ``wrench(state, free)`` returns the FRD wrench (6,) holding every DOF not
-    in ``free`` from a :class:`~hindrax_ident.identification.maneuvers.SensorState` (depth on ``depth_estimate_m`` and
+    in ``free`` from a :class:`~hindrax_ident.vehicle.state.SensorState` (depth on ``depth_estimate_m`` and
     ``depth_rate_m_s`` when set, else the latest depth), each hold limited to ``hold_fraction`` of the axis
     authority (6,)."""
 

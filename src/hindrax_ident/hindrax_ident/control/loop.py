@@ -1,8 +1,8 @@
 """Sensor samples in, wrench out: the campaign's conditioning around a hold (docs/control.md §5).
 
-:class:`HoldLoop` owns a :class:`~hindrax_ident.identification.maneuvers.SensorState` (depth of the body origin from
+:class:`HoldLoop` owns a :class:`~hindrax_ident.vehicle.state.SensorState` (depth of the body origin from
 the MS5837 with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
-:class:`~hindrax_ident.identification.maneuvers.DepthEstimator` (depth and depth rate from the pressure fused with
+:class:`~hindrax_ident.vehicle.state.DepthEstimator` (depth and depth rate from the pressure fused with
 the vertical acceleration), exactly as the identification executive does, and hands them to a hold
 (:class:`~hindrax_ident.identification.maneuvers.HoldController` or
 :class:`~hindrax_ident.control.legacy.LegacyPDHold`). The controller node (:mod:`.node`) feeds it the samples of the
@@ -19,7 +19,7 @@ import numpy as np
 from hindrax_drivers.config import VehicleConfig
 
 from ..identification.estimators import measurement_settings
-from ..identification.maneuvers import DepthEstimator, SensorState
+from ..vehicle.state import DepthEstimator, SensorState
 
 __all__ = ["HoldLoop"]
 

@@ -56,8 +56,8 @@ from ..estimation.filters import KinematicKalmanFilter
 from ..estimation.least_squares import EstimationError, fit_drag
 from ..estimation.rls import RecursiveLeastSquares
 from ..estimation.steady_windows import detect_steady_windows
+from ..vehicle.fusion import AccelAidedFilter
 from ..vehicle.rigid_body import rigid_body_mass_matrix
-from .fusion import AccelAidedFilter
 from .output_error import model_terms
 from .results import prior_entries
 from .verdicts import rls_published_std
@@ -260,7 +260,7 @@ class OnlineDofEstimator:
     """Online estimator of one DOF: KinematicKalmanFilter on its sensor + RLS with forgetting.
 
     ``on_sample(device, stamp_s, state)`` feeds the filter from the conditioned
-    :class:`~.maneuvers.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
+    :class:`~hindrax_ident.vehicle.state.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
     one regressor row (``force``: thrust-model force/moment on the axis, N or N m). ``history`` holds
     (t, theta, std, excitation_normalised) every ``history_every`` updates; ``converged_at_s`` is the
     first time the inertia, quadratic damping and restoring have std <= ``identification.converged_relative_std``

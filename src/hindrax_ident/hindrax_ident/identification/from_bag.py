@@ -9,7 +9,7 @@ steady-state LS and the online RLS as comparisons).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
-node, :mod:`.signals`, into :class:`~.maneuvers.SensorState`), ``thrusters/pulse_width`` (the widths the ESC node
+node, :mod:`.signals`, into :class:`~hindrax_ident.vehicle.state.SensorState`), ``thrusters/pulse_width`` (the widths the ESC node
 wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
@@ -39,13 +39,13 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.recording.reader import BagReader
 
+from ..vehicle.state import SensorState
 from ..vehicle.thrust_lag import ThrustLag
 from . import calibration_topic
 from .calibration import identify_calibrated
 from .campaign import CampaignRecord
 from . import fit_core
 from .campaign_fit import identify_all_with_errors
-from .maneuvers import SensorState
 from .report import write_report
 from .results import build_results, write_identification
 from .signals import (

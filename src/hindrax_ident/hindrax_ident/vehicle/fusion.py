@@ -8,7 +8,7 @@ one gets a zero row of H, so it carries no information):
 * the primary sensor: DVL velocity (``measured='velocity'``, H = [0 1 0]) or depth from pressure
   (``measured='position'``, H = [1 0 0]);
 * the linear acceleration from the ICM-20948 (H = [0 0 1]): specific force + gravity in body axes - w x v -
-  bias (:class:`~.maneuvers.SensorState`).
+  bias (:class:`~hindrax_ident.vehicle.state.SensorState`).
 
 Why: the DVL and pressure sensor report at 10 Hz, too slowly to resolve the thrust transients (thruster lag
 0.1 s, velocity time constants 0.3-0.6 s); smoothing them alone attenuates nu_dot and biases the
