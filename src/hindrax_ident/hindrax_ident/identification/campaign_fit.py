@@ -232,7 +232,7 @@ def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarra
 
 @dataclass(frozen=True)
 class AccelerometerAid:
-    """An accelerometer record aiding the smoother (:func:`~hindrax_ident.vehicle.fusion.smooth_with_acceleration`): sample times
+    """An accelerometer record aiding the smoother (:func:`~..vehicle.fusion.smooth_with_acceleration`): sample times
     ``t_s`` (m,) s, ``acceleration`` (m,) along the DOF's axis (m/s^2), its noise ``std`` (m/s^2) and the aided
     model's white-jerk PSD ``jerk_psd`` (m^2/s^5)."""
 
@@ -244,7 +244,7 @@ class AccelerometerAid:
 
 @dataclass(frozen=True)
 class RateAid:
-    """A rate record aiding an angle smoother (:func:`~hindrax_ident.vehicle.fusion.smooth_with_rate`): sample times ``t_s`` (m,) s,
+    """A rate record aiding an angle smoother (:func:`~..vehicle.fusion.smooth_with_rate`): sample times ``t_s`` (m,) s,
     ``rate`` (m,) rad/s (Euler-angle rate of the smoothed angle) and its noise ``std`` (rad/s)."""
 
     t_s: np.ndarray
@@ -290,7 +290,7 @@ def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
 
     Why: the still window that gives the gyro bias on board is short and the vehicle is rarely quite still
     (a residual of 2-4 mrad/s in the graph campaign), and once the gyro aids the attitude
-    (:func:`~hindrax_ident.vehicle.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude samples: roll and
+    (:func:`~..vehicle.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude samples: roll and
     pitch quadratic damping std rose from about 1 % to 5-10 % (measured through the ROS graph)."""
     ta, a = np.asarray(t_angle, dtype=float), np.asarray(angle, dtype=float)
     tr, r = np.asarray(t_rate, dtype=float), np.asarray(rate, dtype=float)
@@ -344,7 +344,7 @@ def _yaw_rate_bias(record, t: np.ndarray) -> float:
 def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Roll and pitch (rad) at the tick times ``t`` (n,) and the Euler-rate biases (2,) rad/s removed: the DVL-75
     attitude fused with the Euler-angle rates of the gyro (Fossen eq. 2.29, attitude interpolated to the gyro
-    times; constant bias removed by :func:`rate_bias_against_angle`) by :func:`~hindrax_ident.vehicle.fusion.smooth_with_rate` (the
+    times; constant bias removed by :func:`rate_bias_against_angle`) by :func:`~..vehicle.fusion.smooth_with_rate` (the
     attitude alone, zero biases, when there is no gyro record). Angle noise from
     ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
     of the roll filter (:func:`measurement_settings`)."""

@@ -260,7 +260,7 @@ class OnlineDofEstimator:
     """Online estimator of one DOF: KinematicKalmanFilter on its sensor + RLS with forgetting.
 
     ``on_sample(device, stamp_s, state)`` feeds the filter from the conditioned
-    :class:`~hindrax_ident.vehicle.state.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
+    :class:`~..vehicle.state.SensorState`; ``update(t_s, force, state)`` predicts the filter to ``t_s`` and adds
     one regressor row (``force``: thrust-model force/moment on the axis, N or N m). ``history`` holds
     (t, theta, std, excitation_normalised) every ``history_every`` updates; ``converged_at_s`` is the
     first time the inertia, quadratic damping and restoring have std <= ``identification.converged_relative_std``

@@ -9,7 +9,7 @@ steady-state LS and the online RLS as comparisons).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
-node, :mod:`.signals`, into :class:`~hindrax_ident.vehicle.state.SensorState`), ``thrusters/pulse_width`` (the widths the ESC node
+node, :mod:`.signals`, into :class:`~..vehicle.state.SensorState`), ``thrusters/pulse_width`` (the widths the ESC node
 wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,

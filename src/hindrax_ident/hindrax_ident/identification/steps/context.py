@@ -4,7 +4,7 @@ A step (:class:`~.base.Step`) is a generator over control ticks: each ``yield`` 
 tick, and the step resumes once the sequencer (:class:`~hindrax_ident.identification.executive.Executive`) has
 conditioned that tick's sensor samples. Between yields the step reads the campaign's state through the context:
 
-* the conditioned sensors (:attr:`state`, :class:`~hindrax_ident.vehicle.state.SensorState`), the holds (:attr:`ctrl`,
+* the conditioned sensors (:attr:`state`, :class:`~...vehicle.state.SensorState`), the holds (:attr:`ctrl`,
   :class:`~..maneuvers.HoldController`, used through its public interface only: setpoints and ``wrench``), the
   pool box (:attr:`box`), each DOF's authority and the allocation model (:attr:`core`, :attr:`matrix`);
 * the tick log: the thrust-model wrench of every tick and its parts from the thrusters turning forward (positive
