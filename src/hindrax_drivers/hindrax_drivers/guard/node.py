@@ -18,9 +18,11 @@ rejected beat does not count as the peer being heard). How it silences:
 The hardware watchdog (``esc.output_enable_feed_gpio``, docs/watchdog.md): a retriggerable monostable ORed into
 /OE holds the outputs off unless it sees rising edges. The guard toggles that line on a steady-clock timer at twice
 ``esc.output_enable_feed_rate_hz``, and only while the outputs are released (the ESC heartbeat fresh, nothing
-tripped, the guard able to act) and its own decision tick ran within the last two periods: a frozen launch, a
-frozen Pi or a starved guard stops the edges, and the outputs go off ``esc.output_enable_feed_timeout_s`` later
-without any software alive. A feed line that cannot be requested or driven is a drive fault (ERROR heartbeat).
+tripped, the guard able to act) and its own decision tick ran within the last half watchdog timeout: a frozen
+launch, a frozen Pi or a starved guard stops the edges, and the outputs go off ``esc.output_enable_feed_timeout_s``
+later without any software alive. A feed line that cannot be requested or driven is a drive fault (ERROR
+heartbeat). When no edge went out for longer than the timeout while the ESC was armed (this process was frozen or
+starved), the guard asserts and latches: thrust comes back only through a new arm request.
 
 Subscribes ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus from the ESC's steady-clock tick: its output state
 and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
@@ -29,7 +31,8 @@ and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation m
 ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
-(:class:`~hindrax_drivers.liveness.AliveAge`), timeout ``esc.heartbeat_timeout_s``. The two heartbeats are
+(:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
+starved guard ages a dead peer at wall speed), timeout ``esc.heartbeat_timeout_s``. The two heartbeats are
 callbacks in both clock modes (the path the vehicle takes is the path the tests take). A small process of its own
 (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's sensor code cannot
 take the second stop path with it.
