@@ -104,8 +104,8 @@ def test_hindrax_bringup_sim_command_starts_and_stops_cleanly():
             line = proc.stdout.readline()
             assert line, "bringup exited early: " + "".join(lines)
             lines.append(line)
-        assert lines[-1].startswith("bringup: 11 nodes (simulator, dvl75, ping1d, ms5837, icm20948, esc, "
-                                    "thrust_allocation, supervisor, output_guard, static_tf, identification), "
+        assert lines[-1].startswith("bringup: 12 nodes (simulator, dvl75, ping1d, ms5837, icm20948, esc, "
+                                    "thrust_allocation, supervisor, output_guard, static_tf, gateway, identification), "
                                     "virtual pool"), lines[-1]
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0

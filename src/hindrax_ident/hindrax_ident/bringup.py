@@ -22,12 +22,14 @@ from pathlib import Path
 from typing import Any, Callable
 
 from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.conditions import wait_until
 from hindrax_drivers.config import ConfigError, VehicleConfig, load_config
 from hindrax_drivers.dvl75.node import Dvl75Node
+from hindrax_drivers.gateway.interface import GATEWAY_NODE
 from hindrax_drivers.guard.node import OutputGuardNode
 from hindrax_drivers.icm20948.node import Icm20948Node
 from hindrax_drivers.ms5837.node import Ms5837Node
@@ -294,6 +296,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         nodes["supervisor"].set_clock_stall_timeout(30.0)
 
     nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static
+    # the vehicle's name on its graph, where commands that move a vehicle look for it (the launch layout's gateway
+    # node; this single-process graph has no topside: docs/architecture.md §8.2)
+    nodes["gateway"] = Node(GATEWAY_NODE, namespace="/" + cfg.vehicle.name, start_parameter_services=False, **kw)
     if identification:
         nodes["identification"] = IdentificationNode(config=cfg, **common)
         if sim:  # lock-step: simulated time waits for every control tick of a running manoeuvre

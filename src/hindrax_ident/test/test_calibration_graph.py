@@ -245,8 +245,8 @@ def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypa
 
 @pytest.mark.ros
 def test_ident_continue_without_a_stack_and_start_refuses_bad_calibrate(capsys):
-    assert cli.main(["ident", "continue", "--timeout", "1"]) == 1
-    assert "no identification/continue service within 1 s" in capsys.readouterr().err
+    assert cli.main(["ident", "continue", "--timeout", "1", "--discovery-timeout", "1"]) == 1
+    assert "no vehicle on ROS domain" in capsys.readouterr().err
     assert cli.main(["ident", "start", "--calibrate", "tow"]) == 1
     assert "unknown step(s) ['tow']" in capsys.readouterr().err
     assert cli.main(["ident", "start", "--calibration-only"]) == 1

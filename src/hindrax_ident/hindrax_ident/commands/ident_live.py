@@ -18,8 +18,11 @@ pool).
   did what the prompt asked (ballast attached, line pulled, ...): prints the node's answer; exit 1 when nothing
   was awaited (the reason is printed) or no service answered.
 
-The ESC output must be armed first (``esc/set_armed``, e.g. ``hindrax thruster-test``'s arming or a service call);
-the node refuses a goal otherwise.
+Each subcommand talks to the vehicle named by ``--vehicle NAME``, or to the only one on the domain, and refuses
+with one line when it sees none or several (:mod:`hindrax_ident.commands.vehicle`): on the topside through the
+vehicle's gateway (``/<name>/run_identification``, ``/<name>/identification/...``), on the vehicle itself directly.
+
+The ESC output must be armed first (``hindrax arm``); the node refuses a goal otherwise.
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ import time
 from typing import Any, Callable
 
 from .common import CommandError
+from .vehicle import Target, add_vehicle_arguments, find_vehicle, with_ros
 
 __all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign", "call_continue"]
 
@@ -63,6 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     else:
         parser.add_argument("--timeout", type=float, default=5.0,
                             help="wall time to wait for a status message, s (default 5)")
+    add_vehicle_arguments(parser)
 
 
 def _unit(dof: str) -> str:
@@ -125,10 +130,11 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
                    server_timeout_s: float, print_line: Callable[[str], None] = print,
                    cancel_requested: Callable[[], bool] = lambda: False,
                    give_up: Callable[[], bool] = lambda: False, calibrate: list[str] | None = None,
-                   calibration_only: bool = False) -> tuple[bool, str]:
+                   calibration_only: bool = False, action_name: str = "run_identification") -> tuple[bool, str]:
     """Send one goal from ``node`` (spun by ``executor``), print its feedback (an operator prompt once, when it
     appears, prefixed ``>>>``), cancel it once ``cancel_requested()`` turns True, and wait for its end
     (``give_up()`` True stops waiting after a cancel). ``calibrate`` / ``calibration_only``: the goal's fields.
+    ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside).
     Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
     from rclpy.action import ActionClient
 
@@ -137,8 +143,8 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
 
     from ..progress_line import ProgressLine
 
-    client = ActionClient(node, RunIdentification, "run_identification")
-    goals = GoalSender(node, client, "run_identification")
+    client = ActionClient(node, RunIdentification, action_name)
+    goals = GoalSender(node, client, action_name)
     spin = lambda: executor.spin_once(timeout_sec=0.1)  # noqa: E731
     deadline = time.monotonic() + server_timeout_s
     while not client.server_is_ready():
@@ -190,21 +196,12 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
 
 
 def _with_ros(body: Callable[[Any, Any], int]) -> int:
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
+    return with_ros(body, "hindrax_ident_cli")  # Ctrl-C is ours (cancel)
 
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C is ours (cancel)
-    node = rclpy.create_node("hindrax_ident_cli", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    try:
-        return body(node, executor)
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        context.try_shutdown()
+
+def _on_vehicle(args: argparse.Namespace, body: Callable[[Any, Any, Target], Any]) -> Any:
+    """``body(node, executor, target)`` with the vehicle the arguments name (:func:`find_vehicle`)."""
+    return _with_ros(lambda node, ex: body(node, ex, find_vehicle(node, ex, args.vehicle, args.discovery_timeout)))
 
 
 def _start(args: argparse.Namespace) -> int:
@@ -213,10 +210,11 @@ def _start(args: argparse.Namespace) -> int:
     interrupts = []
     previous = signal.signal(signal.SIGINT, lambda *_: interrupts.append(time.monotonic()))
     try:
-        ok, message = _with_ros(lambda node, ex: start_campaign(
+        ok, message = _on_vehicle(args, lambda node, ex, target: start_campaign(
             node, ex, dofs, levels, fractions, args.server_timeout, lambda s: print(s, flush=True),
             cancel_requested=lambda: len(interrupts) >= 1, give_up=lambda: len(interrupts) >= 2,
-            calibrate=calibrate, calibration_only=bool(args.calibration_only)))
+            calibrate=calibrate, calibration_only=bool(args.calibration_only),
+            action_name=target.resolve("run_identification", "run_identification")))
     finally:
         signal.signal(signal.SIGINT, previous)
     print(f"result: {'complete' if ok else 'not complete'}: {message}", flush=True)
@@ -226,9 +224,10 @@ def _start(args: argparse.Namespace) -> int:
 def _status(args: argparse.Namespace) -> int:
     from hindrax_msgs.msg import ManeuverStatus
 
-    def body(node, executor) -> int:
+    def body(node, executor, target) -> int:
         got: list = []
-        node.create_subscription(ManeuverStatus, "identification/status", got.append, 10)
+        node.create_subscription(ManeuverStatus, target.resolve("identification/status", "identification/status"),
+                                 got.append, 10)
         deadline = time.monotonic() + args.timeout
         while not got and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.1)
@@ -238,16 +237,18 @@ def _status(args: argparse.Namespace) -> int:
         print(format_status(got[-1]), flush=True)
         return 0
 
-    return _with_ros(body)
+    return _on_vehicle(args, body)
 
 
-def call_continue(node: Any, executor: Any, timeout_s: float) -> tuple[bool, str]:
-    """Call ``identification/continue`` (std_srvs/Trigger) from ``node`` (spun by ``executor``) once; returns the
-    node's (success, message). Raises :class:`CommandError` when the service is not there or does not answer within
-    ``timeout_s`` (wall). Not repeated on a lost answer: a second continue could skip the next prompt."""
+def call_continue(node: Any, executor: Any, timeout_s: float,
+                  service: str = "identification/continue") -> tuple[bool, str]:
+    """Call ``service`` (std_srvs/Trigger; ``/<vehicle>/identification/continue`` through the gateway) from ``node``
+    (spun by ``executor``) once; returns the node's (success, message). Raises :class:`CommandError` when the
+    service is not there or does not answer within ``timeout_s`` (wall). Not repeated on a lost answer: a second
+    continue could skip the next prompt."""
     from std_srvs.srv import Trigger
 
-    client = node.create_client(Trigger, "identification/continue")
+    client = node.create_client(Trigger, service)
     deadline = time.monotonic() + timeout_s
     while not client.service_is_ready():
         if time.monotonic() > deadline:
@@ -265,7 +266,8 @@ def call_continue(node: Any, executor: Any, timeout_s: float) -> tuple[bool, str
 
 
 def _continue(args: argparse.Namespace) -> int:
-    ok, message = _with_ros(lambda node, ex: call_continue(node, ex, args.timeout))
+    ok, message = _on_vehicle(args, lambda node, ex, target: call_continue(
+        node, ex, args.timeout, target.resolve("identification/continue", "identification/continue")))
     print(f"{'continued' if ok else 'not continued'}: {message}", flush=True)
     return 0 if ok else 1
 
