@@ -1,7 +1,7 @@
 """Light decoding and encoding of CDR bytes: ``rosbags``' generated (de)serialisers instead of rclpy's classes.
 
 Why (docs/architecture.md §10.1): taking a message as an rclpy object is mostly its conversion into Python objects,
-not DDS. Measured here (one process, 50 queued messages per take, thread CPU per message, November 2026): an
+not DDS. Measured here (one process, 50 queued messages per take, thread CPU per message): an
 ``Imu`` taken as an object 77 us, as CDR bytes 11 us; ``hindrax_msgs/Dvl`` 85 and 12 us; ``ThrusterPwm`` 43 and
 11 us. ``rosbags`` (a maintained bag library the project already uses) decodes the same bytes in 20, 29 and 10 us
 with deserialisers it generates per type, so a node that reads a few fields of every sample takes ``Imu`` for about
@@ -18,7 +18,7 @@ converts it into C structures before Fast DDS serialises it, and rclpy's EventsE
 received message before the callback. :func:`cdr_encoder` serialises a rosbags object (its classes:
 :func:`lean_class`) into bytes that rclpy publishes as they are (``Publisher.publish(bytes)``), and a subscription
 created with ``raw=True`` hands the callback bytes for :func:`cdr_decoder`. Measured here (a 50 Hz
-``WrenchStamped`` stream between two processes, November 2026): publisher 0.216-0.233 ms per message object,
+``WrenchStamped`` stream between two processes): publisher 0.216-0.233 ms per message object,
 0.169-0.178 ms building a rosbags object, serialising and publishing the bytes; the subscribing process 2.0 % of a core
 taking message objects, 1.7 % taking bytes and decoding them with rosbags. The bytes differ from rclpy's only in
 padding (rosbags zeroes it), and every reader decodes them to the same message (test_lean_cdr.py).

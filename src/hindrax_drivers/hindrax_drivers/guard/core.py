@@ -10,7 +10,7 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
   breach is latched);
 * the guard itself cannot silence the outputs (its /OE line could not be requested or driven, or its last write of
   the chip's sleep registers failed): it must not say OK when it could not act, so the ESC refuses to arm and
-  disarms on its ERROR heartbeat (issue 44 item 7); the node retries and clears it on success;
+  disarms on its ERROR heartbeat; the node retries and clears it on success;
 * the hardware watchdog on /OE ran out while the guard meant to feed it (docs/watchdog.md: the guard was frozen or
   starved): thrust must come back only through a new arm request;
 * either heartbeat cannot be trusted to be its sender's (:class:`~hindrax_drivers.liveness.HeartbeatIdentity`: a
