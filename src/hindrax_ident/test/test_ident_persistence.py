@@ -90,3 +90,34 @@ def test_printed_table_has_no_nan_and_the_cv_row_its_noise_floor(noise_fit):
     # a score that cannot be computed (a measured position has no noise floor) prints as "-", not "nan"
     fit.validation["holdout"] = {**noise_fit.cv, "nrmse_floor": float("nan")}
     assert "nan" not in format_table(FitResult({"surge": fit}, {}, "test"))
+
+
+def test_a_delay_beyond_the_searched_range_is_reported_at_its_edge():
+    """A surge record whose force acts 0.6 s late, searched up to 0.3 s: the estimate sits at the bound and says
+    so; searched up to 1 s it is found inside the range."""
+    rng = np.random.default_rng(5)
+    h, n, M, D, lag_ticks = 0.05, 1600, 30.0, 25.0, 12
+    chunks = []
+    for c in range(3):
+        force = np.empty(n)
+        i = 0
+        while i < n:
+            k = int(rng.integers(20, 80))
+            force[i:i + k] = rng.uniform(-20.0, 20.0)
+            i += k
+        late = np.concatenate([np.full(lag_ticks, force[0]), force[:-lag_ticks]])
+        e = math.exp(-D / M * h)
+        v = np.zeros(n)
+        for j in range(1, n):
+            v[j] = v[j - 1] * e + (1.0 - e) * late[j - 1] / D
+        meas = np.arange(0, n, 2)
+        z = v[meas] + rng.normal(0.0, 0.003, meas.size)
+        zi = np.interp(np.arange(n), meas, z)
+        chunks.append(fit_core.Chunk(force, signal.savgol_filter(zi, 11, 2), np.zeros(n),
+                                     signal.savgol_filter(zi, 11, 2, deriv=1, delta=h), meas.astype(float), z,
+                                     group=c))
+    rec = fit_core.DofRecord("surge", h, "velocity", chunks, "wrench")
+    short = fit_core.estimate_timing(rec, 0.3)
+    assert short.bound_s == pytest.approx(0.3) and short.at_edge and "edge of its range" in short.edge_note
+    full = fit_core.estimate_timing(rec, 1.0)
+    assert not full.at_edge and abs(full.delay_s - lag_ticks * h) < 0.1

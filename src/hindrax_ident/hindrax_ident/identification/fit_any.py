@@ -616,7 +616,8 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
                                              float(c.t[0]), cross_force=xf))
         src = "thrust_model" if any(p.lag_s > 0 or "thrust" in p.notes for p in pres) else "wrench"
         lag = max((p.lag_s for p in pres), default=0.0)
-        out[dof] = fit_core.DofRecord(dof, h, "velocity", chunks, src, lag, cross_names, force_names=force_names)
+        out[dof] = fit_core.DofRecord(dof, h, "velocity", chunks, src, lag, cross_names, force_names=force_names,
+                                      run_count=len(pres))
     return out
 
 
@@ -745,6 +746,8 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
                                  f"{d} {inertia[DOFS.index(d)]:.4g}" for d in results) + "): a candidate term, "
                              "chosen by cross-validation")
     hrecs = dof_records(hold, list(results), opts, moving) if hold else {}
+    for hr in hrecs.values():  # a holdout bag is not one of the fitted runs: the mean bias applies
+        hr.run_count, hr.runs_known = len(pres), False
     for dof in todo:
         e = ex[dof]
         if dof in errors:
@@ -780,6 +783,8 @@ def _units(dof: str, names: Sequence[str]) -> dict:
     u.setdefault("linear_damping", u.get("linear_damping_positive", ""))
     force = "N m" if dof in ("roll", "pitch", "yaw") else "N"
     for n in names:
+        if n.startswith("bias_run_"):
+            u[n] = u.get("bias", force)
         if n.startswith("force_from_"):
             other = n[len("force_from_"):]
             u[n] = f"{force}/({'N m' if other in ('roll', 'pitch', 'yaw') else 'N'})"
@@ -881,6 +886,32 @@ def _param_entries(r: DofFit, a: dict) -> dict:
     return entries
 
 
+def _per_run_bias(c, a: dict, bags: Sequence, unit: str) -> list:
+    """[{run, bias, std, unit}] per fitted run: the mean bias plus the run's deviation (effects coding,
+    :class:`.fit_core.Terms`), std from the covariance of :func:`assessment` (a linear combination)."""
+    names = list(c.names)
+    ib = names.index("bias")
+    idx = [i for i, n in enumerate(names) if n.startswith("bias_run_")]
+    R = len(idx) + 1
+    theta = np.array([a["parameters"][n]["value"] for n in names])
+    std = np.array([a["parameters"][n]["std"] for n in names])
+    cov = np.asarray(c.covariance.cov, dtype=float)
+    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    corr = cov / np.outer(d, d)  # the fit's correlations with the reported (thrust, priors) std
+    cov = corr * np.outer(std, std)
+    out = []
+    for k in range(R):
+        g = np.zeros(len(names))
+        g[ib] = 1.0
+        if k < R - 1:
+            g[idx[k]] = 1.0
+        else:
+            g[idx] = -1.0
+        out.append({"run": str(Path(bags[k]).name) if k < len(bags) else f"run {k + 1}",
+                    "bias": float(g @ theta), "std": float(math.sqrt(max(g @ cov @ g, 0.0))), "unit": unit})
+    return out
+
+
 #: The physical meaning of each optional term of the chosen model (identification.yaml ``terms_meaning``)
 TERM_MEANING = {
     "by_direction": "damping per direction of motion (a frame that is not symmetric top to bottom)",
@@ -891,6 +922,8 @@ TERM_MEANING = {
     "cross_force": "part of another DOF's commanded force appearing here (coupling through the allocation: "
                    "thrusters that do not deliver what the allocation assumes, a thrust centre off the body origin)",
     "reverse_gain": "propellers weaker in reverse than forward (the force of negative commands times a gain)",
+    "run_bias": "a constant force of its own in each run (tether lay, trim, buoyancy drift between runs), reported "
+                "per run in bias_per_run; a new run gets the mean",
 }
 
 #: Why ``hindrax ident fit`` without ``--config`` writes ``config_ready: false`` (and no ``added_mass``).
@@ -941,7 +974,7 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         e["model"] = c.terms.label
         e["terms"] = {"damping": c.terms.damping, "by_direction": c.terms.by_direction,
                       "coriolis": c.terms.coriolis, "cross": c.terms.cross, "reverse_gain": c.terms.reverse_gain,
-                      "cross_force": c.terms.cross_force}
+                      "cross_force": c.terms.cross_force, "run_bias": c.terms.run_bias}
         e["terms_meaning"] = {k: TERM_MEANING[k] for k, on in e["terms"].items() if on is True and k in TERM_MEANING}
         e["model_selection"] = [{"terms": k.terms.label, "parameters": k.n_params,
                                  "cv_nrmse": k.cv.get("nrmse"), "cv_nrmse_hold": k.cv.get("nrmse_hold"),
@@ -965,6 +998,8 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
                          "cluster_score_lag1": round(c.covariance.rho, 4), "t_dof": c.covariance.t_dof,
                          "residual_lag1": round(c.covariance.residual_rho, 4)}
         e["segments"] = int(c.train.m)
+        if c.terms.run_bias:
+            e["bias_per_run"] = _per_run_bias(c, verdicts, bags, _units(r.dof, c.names).get("bias", ""))
         e["verdict"] = verdicts["verdict"]
         e["reasons"] = sorted({x for v in verdicts["parameters"].values() for x in v["reasons"]})
         e["advice"] = [dict(v["advice"], parameter=n) for n, v in verdicts["parameters"].items() if "advice" in v

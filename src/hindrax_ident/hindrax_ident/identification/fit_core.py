@@ -136,7 +136,9 @@ class DofRecord:
     cross-validation (``CoreOptions.select``); all_segments: the record is a designed experiment's window (the
     campaign's), every segment of it is fitted, moving or not (as ``CoreOptions.all_segments``): a DOF that did
     not move gets parameters with wide intervals and advice, not "no segment"; force_names: the DOFs of the chunks'
-    ``cross_force`` columns."""
+    ``cross_force`` columns; run_count: the runs (the chunks' ``group`` 0..run_count-1) of a per-run bias, 0 or 1:
+    none; runs_known: False for a record whose runs are not the fitted ones (a holdout bag, ``ident predict``):
+    its per-run bias columns are zero, the mean bias applies."""
 
     dof: str
     h: float
@@ -148,6 +150,8 @@ class DofRecord:
     terms: "Terms | None" = None
     all_segments: bool = False
     force_names: tuple = ()
+    run_count: int = 0
+    runs_known: bool = True
 
     @property
     def has_coupling(self) -> bool:
@@ -162,7 +166,9 @@ class Terms:
     negative commands times a free gain (a propeller weaker in reverse); cross_force: the other DOFs' commanded
     forces, each times a free coefficient, added to this DOF's force (coupling through the allocation: thrusters that
     do not deliver the force the allocation assumes put part of one DOF's command into another; they act with this
-    DOF's delay and lag)."""
+    DOF's delay and lag); run_bias: a constant force per run (bag) around the mean ``bias`` (tether lay, trim,
+    buoyancy drift between runs; effects coding: ``bias_run_<k>`` for runs 1..R-1, run R the negative of their
+    sum, a run not fitted gets the mean)."""
 
     damping: str = "both"
     by_direction: bool = False
@@ -170,13 +176,15 @@ class Terms:
     cross: bool = False
     reverse_gain: bool = False
     cross_force: bool = False
+    run_bias: bool = False
 
     @property
     def label(self) -> str:
         parts = [{"both": "linear + quadratic", "linear": "linear", "quadratic": "quadratic"}[self.damping]
                  + " damping" + (" per direction" if self.by_direction else "")]
         for flag, name in ((self.coriolis, "Coriolis"), (self.cross, "cross-DOF coupling"),
-                           (self.cross_force, "other DOFs' forces"), (self.reverse_gain, "reverse thrust gain")):
+                           (self.cross_force, "other DOFs' forces"), (self.run_bias, "per-run bias"),
+                           (self.reverse_gain, "reverse thrust gain")):
             if flag:
                 parts.append(name)
         return " + ".join(parts)
@@ -229,7 +237,7 @@ class Timing:
 
 
 def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequence[str] = (),
-                     force_names: Sequence[str] = ()) -> list[tuple]:
+                     force_names: Sequence[str] = (), n_runs: int = 0) -> list[tuple]:
     """[(name, kind, lower, upper)] of the model's parameters in vector order: inertia; quadratic then linear damping
     (heave per direction: ``_positive`` (w > 0, down) and ``_negative``); bias; restoring (roll, pitch); cross
     terms ``cross_<dof>``; other DOFs' force coefficients ``force_from_<dof>``; ``reverse_thrust_gain``. Bounds keep
@@ -251,6 +259,8 @@ def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequ
         out += [(f"cross_{names[i]}", f"cross{i}", -np.inf, np.inf) for i in range(n_cross)]
     if terms.cross_force:
         out += [(f"force_from_{d}", f"xforce{i}", -np.inf, np.inf) for i, d in enumerate(force_names)]
+    if terms.run_bias and n_runs >= 2:
+        out += [(f"bias_run_{k + 1}", f"runbias{k}", -np.inf, np.inf) for k in range(n_runs - 1)]
     if terms.reverse_gain:
         out.append(("reverse_thrust_gain", "reverse", *REVERSE_GAIN_BOUNDS))
     return out
@@ -351,7 +361,8 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     fmin, vmin = EXCITATION_MIN[excited_kind(rec.dof)]
     k_dof = ["surge", "sway", "heave", "roll", "pitch", "yaw"].index(rec.dof)
     ncol = (1 if rec.dof in ("roll", "pitch") else 0) + (len(rec.cross_names) if terms.cross else 0) + \
-        (len(rec.force_names) if terms.cross_force else 0) + (1 if terms.reverse_gain else 0)
+        (len(rec.force_names) if terms.cross_force else 0) + (1 if terms.reverse_gain else 0) + \
+        (rec.run_count - 1 if terms.run_bias and rec.run_count >= 2 else 0)
     U, C, V0, X0, G, SP, EX, VS, AS, FF = [], [], [], [], [], [], [], [], [], []
     s_seg, s_j, s_a, s_z = [], [], [], []
     for ci, ch in enumerate(rec.chunks):
@@ -373,6 +384,16 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
             for i in range(len(rec.force_names)):
                 g = ch.cross_force[:, i] if ch.cross_force is not None else np.zeros(n)
                 extra.append(ThrustLag(timing.lag_s).over_ticks(_shift(g, timing.delay_s / h), h, None))
+        if terms.run_bias and rec.run_count >= 2:  # effects coding; the force is less the run's bias
+            R = rec.run_count
+            for k in range(R - 1):
+                val = 0.0
+                if rec.runs_known and ch.group == k:
+                    val = -1.0
+                elif rec.runs_known and ch.group == R - 1:
+                    val = 1.0
+                col = np.full(n, val)
+                extra.append((col, col, col))
         if terms.reverse_gain:
             extra.append(tuple(np.minimum(x, 0.0) for x in inputs))
             inputs = [np.maximum(x, 0.0) for x in inputs]
@@ -462,7 +483,8 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     b = col("bias")
     split = kqp is not None or klp is not None
     # time-dependent regressors x their parameters, added to the input once for all ticks
-    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce"))]
+    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce",
+                                                                                             "runbias"))]
     U = np.broadcast_to(sd.u[:, None], (3, B) + sd.u.shape[1:])
     if tk:
         U = U + np.einsum("smlc,bc->sbml", sd.cols, P[:, tk])
@@ -574,7 +596,8 @@ def _equation_error_start(sd: SegmentData, dof: str, layout: list, a: np.ndarray
             rows.append(np.where(pos, 0.0, v))
         elif k == "bias":
             rows.append(np.ones_like(v))
-    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce"))]
+    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce",
+                                                                                                "runbias"))]
     for c in range(len(tcols)):
         rows.append(-sd.cols[0][..., c])
     A = np.stack(rows, axis=-1)
@@ -963,8 +986,14 @@ def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layo
         if tr.m < 2 or not tr.excited.any():
             notes.append(f"fold {i + 1}: its training part has no segment moving {dof}")
             continue
+        start = full.theta.copy()
+        tk = [j for j, (_n, k, _lo, _hi) in enumerate(layout) if k in ("restoring", "reverse")
+              or k.startswith(("cross", "xforce", "runbias"))]
+        for c, j in enumerate(tk):  # a regressor absent from this fold's training (a held-out run): 0, not the
+            if c < tr.cols.shape[-1] and not np.any(tr.cols[0][..., c]):  # full fit's value (that would leak)
+                start[j] = 0.0
         try:
-            f = fit_terms(tr, dof, layout, full.theta, robust, full.f_scale, max_nfev=25)
+            f = fit_terms(tr, dof, layout, start, robust, full.f_scale, max_nfev=25)
         except (EstimationError, ValueError, np.linalg.LinAlgError) as exc:
             notes.append(f"fold {i + 1}: fit failed ({exc})")
             continue
@@ -1006,7 +1035,8 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
                folds_cache: dict, theta0: np.ndarray | None = None) -> Candidate:
     sd = build_segments(rec, terms, timing, opts.segment_s, inertia, excited_only=_excited_only(rec, opts))
     sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=not rec.all_segments)
-    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names)
+    layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names,
+                              rec.run_count)
     start = _equation_error_start(sd, rec.dof, layout, sd.a_s)
     if theta0 is not None and theta0.size == start.size:
         start = theta0
@@ -1090,6 +1120,8 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         changes.append(("cross", True))
     if rec.force_names:
         changes.append(("cross_force", True))
+    if rec.run_count >= 2 and rec.runs_known:
+        changes.append(("run_bias", True))
     if rec.force_source == "wrench":
         changes.append(("reverse_gain", True))
     keep = []

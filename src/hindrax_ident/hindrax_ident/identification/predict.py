@@ -57,7 +57,8 @@ class ModelError(ValueError):
 @dataclass
 class DofModel:
     """One DOF of an identification.yaml: its terms, parameter layout and values (in layout order), timing, the
-    other DOFs of its cross terms (velocities), its verdict, and the other DOFs whose forces it takes."""
+    other DOFs of its cross terms (velocities), its verdict, the other DOFs whose forces it takes, and the number of
+    fitted runs of a per-run bias (0: none; a predicted bag gets the mean bias)."""
 
     dof: str
     terms: fit_core.Terms
@@ -67,6 +68,7 @@ class DofModel:
     cross_names: tuple
     verdict: str
     force_names: tuple = ()
+    run_count: int = 0
 
 
 def _value(entry: dict, name: str, dof: str) -> float:
@@ -94,14 +96,16 @@ def load_model(doc: dict) -> tuple[dict, np.ndarray]:
         if not isinstance(t, dict):
             raise ModelError(f"dofs.{dof}.terms: missing (written by an older hindrax ident fit: fit again)")
         terms = fit_core.Terms(str(t["damping"]), bool(t["by_direction"]), bool(t["coriolis"]), bool(t["cross"]),
-                               bool(t["reverse_gain"]), bool(t.get("cross_force", False)))
+                               bool(t["reverse_gain"]), bool(t.get("cross_force", False)),
+                               bool(t.get("run_bias", False)))
         cross = tuple(n[len("cross_"):] for n in e if n.startswith("cross_")) if terms.cross else ()
         forces = tuple(n[len("force_from_"):] for n in e if n.startswith("force_from_")) if terms.cross_force else ()
-        layout = fit_core.parameter_layout(dof, terms, len(cross), cross, forces)
+        runs = sum(n.startswith("bias_run_") for n in e) + 1 if terms.run_bias else 0
+        layout = fit_core.parameter_layout(dof, terms, len(cross), cross, forces, runs)
         theta = np.array([_value(e, n, dof) for n, _k, _lo, _hi in layout])
         tm = e.get("timing") or {}
         timing = fit_core.Timing(float(tm.get("delay_s", 0.0)), float(tm.get("lag_s", 0.0)), "model file")
-        out[dof] = DofModel(dof, terms, layout, theta, timing, cross, str(e.get("verdict", "")), forces)
+        out[dof] = DofModel(dof, terms, layout, theta, timing, cross, str(e.get("verdict", "")), forces, runs)
         inertia[DOFS.index(dof)] = theta[0]
     return out, inertia
 
@@ -154,6 +158,7 @@ def predict_bag(path: str | Path, models: dict, inertia: np.ndarray, choice: Top
     for dof, m in models.items():
         recs = dof_records([pre], [dof], opts, [dof, *m.cross_names], m.force_names)
         rec = recs[dof]
+        rec.run_count, rec.runs_known = m.run_count, False  # a bag to predict is not a fitted run: the mean bias
         # every measurement of the DOF in the continuous data, in record time
         t_all = np.concatenate([c.t0 + c.sample_pos * rec.h for c in rec.chunks]) if rec.chunks else np.zeros(0)
         z_all = np.concatenate([c.sample_z for c in rec.chunks]) if rec.chunks else np.zeros(0)
