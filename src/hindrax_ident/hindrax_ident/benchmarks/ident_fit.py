@@ -86,7 +86,9 @@ LARGE = {
 @dataclass(frozen=True)
 class DataSet:
     """One benchmark case: vehicle overrides of the vehicle file, the truth overlay (the simulator only), the pilot
-    settings, the number of training and held-out bags, and the first seed."""
+    settings, the number of training and held-out bags, the first seed, and per-run truth overlays (bag i gets
+    ``runs[i % len(runs)]`` merged into ``truth``: what changes between the runs of a pool day, a tether laid
+    differently, the trim, the current)."""
 
     name: str
     vehicle: dict
@@ -96,6 +98,7 @@ class DataSet:
     holdout: int = 2
     seed: int = 100
     note: str = ""
+    runs: tuple = ()
 
 
 _DISTURBED = {
@@ -153,6 +156,14 @@ class Bags:
     holdout: list = field(default_factory=list)
 
 
+def _merged(base: dict, over: dict) -> dict:
+    """``base`` with ``over`` merged in, nested mappings key by key."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merged(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
 def make_bags(data: DataSet, root: Path, quick: bool = False) -> Bags:
     """Fly and record the data set's bags under ``root`` (reused when already there)."""
     cfg = load_config(default_config_path(), overrides=data.vehicle or None)
@@ -166,8 +177,12 @@ def make_bags(data: DataSet, root: Path, quick: bool = False) -> Bags:
         bag = root / f"{data.name}_{i}"
         if not bag.exists():
             gap = (40.0 + 10.0 * i, 1.5) if i % 2 == 0 else None
+            run_truth = truth_path
+            if data.runs:
+                run_truth = root / f"{data.name}_truth_{i}.yaml"
+                run_truth.write_text(yaml.safe_dump(_merged(data.truth, data.runs[i % len(data.runs)])))
             write_piloted_bag(bag, cfg, seed=data.seed + i, settings=PilotSettings(**{"gap": gap, **settings}),
-                              truth=truth_path)
+                              truth=run_truth)
         (out.train if i < data.train else out.holdout).append(bag)
     return out
 
@@ -188,9 +203,9 @@ def plain_ls_theta(rec, dof: str):
     return layout, th, terms, timing
 
 
-def evaluate(bags: Bags) -> dict:
-    """{dof: {fit, ls, hold, samples, cv, model}} held-out NRMSE of the three predictors (module docstring)."""
-    opts = FitOptions()
+def evaluate(bags: Bags, opts: FitOptions = FitOptions()) -> dict:
+    """{dof: {fit, ls, hold, samples, cv, cv_hold, model, verdict, at_edge}} held-out NRMSE of the three predictors
+    (module docstring), the cross-validated scores, the DOF's verdict and whether its delay sat at its bound."""
     choice = TopicChoice()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -207,6 +222,9 @@ def evaluate(bags: Bags) -> dict:
             row.update(fit=v["nrmse"], hold=v["nrmse_hold"], samples=v["samples"], floor=v["nrmse_floor"])
             row["cv"] = r.validation.get("cross_validation", {}).get("nrmse", math.nan)
             row["model"] = f"{r.core.terms.label}; delay {r.core.timing.delay_s:.2f} lag {r.core.timing.lag_s:.2f}"
+            row["verdict"] = fit_any.assessment(r, None)["verdict"]
+            row["at_edge"] = bool(r.core.timing.at_edge)
+            row["cv_hold"] = (r.core.persistence or {}).get("nrmse_hold", math.nan)
         try:
             rt = fit_any.dof_records(train, [dof], opts)[dof]
             rh = fit_any.dof_records(hold, [dof], opts)[dof]
