@@ -1,9 +1,9 @@
 """Safety benchmark rows ``participant_churn_*``: ROS 2 processes started while the vehicle is armed and commanded.
 
 The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process
-on the shipped transport, :mod:`hindrax_drivers.dds_transport`; the layout of
-:func:`hindrax_ident.benchmarks.safety.run_processes`) are armed and commanded at 1700 us. Then a new ROS 2
-process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s subscriber to
+on the shipped transport, :mod:`hindrax_drivers.dds_transport`, at nice -5 as the vehicle launch file starts them;
+the layout of :func:`hindrax_ident.benchmarks.safety.run_processes`) are armed and commanded at 1700 us. Then a new
+ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s subscriber to
 ``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each
 exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) stalled a safety process 333 ms
 on such a start and disarmed the vehicle in 2-3 of 10 trials; the rows say whether that is gone:
@@ -34,7 +34,7 @@ from hindrax_drivers.testing import python_executable, ros_context, wait_until
 
 from hindrax_msgs.msg import ThrusterPwm
 
-from .safety import _Hardware, _Layout
+from .safety import PROCESSES, _Hardware, _Layout
 
 #: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
 PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
@@ -55,6 +55,17 @@ while time.monotonic() < end:
 node.destroy_node()
 rclpy.shutdown()
 """
+
+
+class _VehicleLayout(_Layout):
+    """The safety layout with the vehicle's scheduling: the three safety processes at nice -5, as
+    ``vehicle.launch.xml``'s ``launch-prefix`` starts them (without the right to, ``nice`` warns and runs them at 0)."""
+
+    def start(self, name: str, extra: tuple = ()) -> None:
+        log = open(self.tmp / f"{name}.log", "a")
+        self.procs[name] = subprocess.Popen(["nice", "-n", "-5", self.py, "-m", PROCESSES[name], "--ros-args",
+                                             "--params-file", self.config, *extra], env=self.env, stdout=log,
+                                            stderr=subprocess.STDOUT)
 
 
 class _Watch:
@@ -97,7 +108,7 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
             ros_context(domain_id=did) as ctx:
         tmp = Path(d)
         hw = _Hardware(str(tmp / "emulation.sock"))
-        lay = _Layout(ctx, did, tmp, hw)
+        lay = _VehicleLayout(ctx, did, tmp, hw)
         if default_transports:
             lay.env = {k: v for k, v in lay.env.items() if k != PROFILE_ENV}
             lay.env[RANGE_ENV] = "LOCALHOST"
