@@ -40,7 +40,7 @@ __all__ = ["EmulatedDevices", "SERIAL_DEVICES", "I2C_DEVICES"]
 #: launch-file node name -> configuration section of its serial port
 SERIAL_DEVICES = {"dvl75": "sensors.dvl75", "ping1d": "sensors.ping1d"}
 #: launch-file node names of the drivers on the I2C bus
-I2C_DEVICES = ("ms5837", "icm20948", "esc")
+I2C_DEVICES = ("ms5837", "icm20948", "esc", "output_guard")
 
 _DEPTH_M, _ALTITUDE_M, _WOBBLE_M = 1.0, 1.5, 0.02
 _SURFACE_PA, _RHO_KG_M3, _G_M_S2 = 101325.0, 1000.0, 9.80665
