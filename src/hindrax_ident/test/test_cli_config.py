@@ -107,3 +107,9 @@ def test_config_check_warns_when_the_vehicle_has_no_hardware_cut_off(tmp_path):
     wired.write_text(yaml.safe_dump(doc))
     res = run("config", "check", str(wired))
     assert res.returncode == 0 and "no hardware cut-off" not in res.stdout, res.stdout
+    # issue 44.2: without the /OE watchdog's feed, a warning too; fitted, none
+    assert "no hardware watchdog" in res.stdout
+    doc["/**"]["ros__parameters"]["esc"]["output_enable_feed_gpio"] = {"chip": "/dev/gpiochip0", "line": 27}
+    wired.write_text(yaml.safe_dump(doc))
+    res = run("config", "check", str(wired))
+    assert res.returncode == 0 and "no hardware watchdog" not in res.stdout, res.stdout

@@ -129,6 +129,9 @@ class OutputGuardNode(Node):
         if self.gpio is None and line is None:
             self.diag.warn("no_hardware_cutoff", "esc.output_enable_gpio not wired: outputs silenced over the I2C "
                                                  "bus (does not work through an I2C outage)")
+        if not self.feeds:
+            self.diag.warn("no_hardware_watchdog", "esc.output_enable_feed_gpio not wired: a frozen launch or Pi "
+                                                   "keeps the last widths until systemd restarts the unit")
         self._open_line()
         self.heartbeat = HeartbeatPublisher(self, "guard", "hindrax/output_guard", "output_guard")
         #: the peers' heartbeats through their identity checks (module docstring)

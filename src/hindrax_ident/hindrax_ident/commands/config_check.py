@@ -42,4 +42,7 @@ def run(args: argparse.Namespace) -> int:
         print("warning: esc.output_enable_gpio is not wired: the vehicle has no hardware cut-off. The output guard "
               "silences the PCA9685 over the I2C bus (all-off + sleep), which an I2C outage defeats "
               "(docs/architecture.md §8).")
+    if output_enable_gpio(cfg, "esc.output_enable_feed_gpio") is None:
+        print("warning: esc.output_enable_feed_gpio is not wired: no hardware watchdog on /OE. A frozen launch or Pi "
+              "keeps the last widths on the wire until systemd's WatchdogSec restarts the unit (docs/watchdog.md).")
     return 0
