@@ -263,7 +263,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     Not run here: the campaign lines (:data:`CAMPAIGN_LINES`: ``ident start``/``continue``, and ``ident bag`` and
     ``control model`` on its bag). The emulated devices report a vehicle at rest, so a campaign's ladders would only
     time out; the campaign with its prompts answered runs through the graph on the virtual pool
-    (test_calibration_graph.py, test_run_end_to_end.py), its bag through ``ident bag`` in test_identification_from_bag.py."""
+    (test_calibration_graph.py, test_run_end_to_end.py), its bag through ``ident bag`` in
+    test_identification_from_bag.py."""
     from domain_coordinator import domain_id
     from std_srvs.srv import Trigger
 
