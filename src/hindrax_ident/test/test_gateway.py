@@ -218,3 +218,12 @@ def test_a_command_aimed_at_one_vehicle_never_moves_the_other(pool):
     r = hindrax(pool, "disarm", "--vehicle", "bravo")
     assert r.returncode == 0, r.stderr
     assert bravo.calls[before_b:] == [("set_armed", False)] and alpha.calls[before_a:] == [("set_armed", True)]
+
+
+def test_thruster_test_names_its_vehicle_and_never_runs_from_the_topside(pool):
+    before = {name: list(v.calls) for name, v in pool["vehicles"].items()}
+    r = hindrax(pool, "thruster-test", "--step-s", "0.1")
+    assert r.returncode == 1 and "several vehicles" in r.stderr and "\n" not in r.stderr.strip(), r.stderr
+    r = hindrax(pool, "thruster-test", "--step-s", "0.1", "--vehicle", "alpha")
+    assert r.returncode == 1 and "exist only on the vehicle" in r.stderr, r.stderr
+    assert {name: v.calls for name, v in pool["vehicles"].items()} == before  # neither vehicle was armed

@@ -8,7 +8,9 @@ engineer can watch the vehicle (or a hand on the frame) and compare. Without ``-
 the running stack: it arms through ``esc/set_armed`` (hindrax_msgs/SetArmed), publishes the step's per-thruster
 forces on ``thrusters/test_forces`` (hindrax_msgs/ThrusterForces; the allocation node turns them into the command,
 the only one the ESC accepts) for ``--step-s`` seconds per thruster with 0 N in between, then disarms (also on
-Ctrl-C or any error).
+Ctrl-C or any error). It runs on the vehicle itself (``thrusters/*`` never cross its gateway,
+docs/architecture.md §8.2), on the vehicle named by ``--vehicle NAME`` or the only one its graph shows; it refuses
+with one line on the topside, or when it sees no vehicle or several.
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from .common import CommandError, add_config_argument, load_vehicle
+from .vehicle import add_vehicle_arguments, find_vehicle
 
 if TYPE_CHECKING:
     from hindrax_drivers.allocation.core import AllocationCore
@@ -29,6 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--step-s", type=float, default=2.0, help="duration of each step on hardware, s")
     parser.add_argument("--dry-run", action="store_true", help="only print; do not drive the ESCs")
     add_config_argument(parser)
+    add_vehicle_arguments(parser)
 
 
 def plan(core: AllocationCore, force_n: float) -> list[dict]:
@@ -56,10 +60,11 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(row))
     if args.dry_run:
         return 0
-    return _drive(core, rows, args.step_s)
+    return _drive(core, rows, args.step_s, args.vehicle, args.discovery_timeout)
 
 
-def _drive(core: AllocationCore, rows: list[dict], step_s: float) -> int:
+def _drive(core: AllocationCore, rows: list[dict], step_s: float, vehicle: str | None = None,
+           discovery_timeout_s: float = 10.0) -> int:
     """Arm, step each thruster for ``step_s`` s with 1 s of neutral after it, disarm (also on Ctrl-C or any
     error: registered before the node's clean-up, :class:`~hindrax_drivers.ros_process.RosProcess`)."""
     import rclpy
@@ -72,6 +77,10 @@ def _drive(core: AllocationCore, rows: list[dict], step_s: float) -> int:
         node = proc.own(rclpy.create_node("thruster_test"))
         ex = proc.executor
         ex.add_node(node)
+        target = find_vehicle(node, ex, vehicle, discovery_timeout_s)
+        if target.topside:
+            raise CommandError(f"{target.name}: thruster-test drives thrusters/*, which exist only on the vehicle: "
+                               "run it there (docker exec hindrax hindrax thruster-test)")
         pub = node.create_publisher(ThrusterForces, "thrusters/test_forces", 10)
         arm = node.create_client(SetArmed, "esc/set_armed")
 
