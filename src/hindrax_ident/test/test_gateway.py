@@ -9,6 +9,7 @@ that reaches them, and its gateway is started from ``vehicle.launch.xml`` as ``r
 * a plain rclpy script on the topside domain (no credentials, not using the interface) tries what a process on the
   vehicle's domain could do before: arm, drive, forge a heartbeat, reset, re-zero, stop the recorder. Nothing
   reaches the vehicle; its e-stop through ``/alpha/estop`` does, and the telemetry reaches the script;
+* ``hindrax ident start --vehicle alpha`` runs the campaign (through the gateway's action relay) on alpha only;
 * ``hindrax arm --vehicle alpha`` arms alpha and never bravo; ``hindrax arm`` with two vehicles on the domain
   refuses with one line and arms neither; ``hindrax disarm --vehicle bravo`` reaches bravo only.
 
@@ -115,6 +116,17 @@ class StandIns:
                                       lambda _m: self.messages.append("command_pulse_width"), 10)
         self.node.create_subscription(DiagnosticStatus, "supervisor/heartbeat",
                                       lambda _m: self.messages.append("heartbeat"), 10)
+        from hindrax_msgs.action import RunIdentification
+        from rclpy.action import ActionServer
+
+        def campaign(goal_handle):
+            self.calls.append(("run_identification", list(goal_handle.request.dofs)))
+            goal_handle.publish_feedback(RunIdentification.Feedback(dof="surge", level_index=0, level_count=1,
+                                                                    level_command=5.0, progress=0.5))
+            goal_handle.succeed()
+            return RunIdentification.Result(success=True, message="stand-in campaign done")
+
+        self.action = ActionServer(self.node, RunIdentification, "run_identification", campaign)
         status = self.node.create_publisher(DiagnosticStatus, "supervisor/status", 10)
         self.node.create_timer(0.2, lambda: status.publish(DiagnosticStatus(level=DiagnosticStatus.OK,
                                                                            name="supervisor", message="ok")))
@@ -227,3 +239,12 @@ def test_thruster_test_names_its_vehicle_and_never_runs_from_the_topside(pool):
     r = hindrax(pool, "thruster-test", "--step-s", "0.1", "--vehicle", "alpha")
     assert r.returncode == 1 and "exist only on the vehicle" in r.stderr, r.stderr
     assert {name: v.calls for name, v in pool["vehicles"].items()} == before  # neither vehicle was armed
+
+
+def test_a_campaign_started_on_the_topside_runs_on_the_named_vehicle_only(pool):
+    alpha, bravo = pool["vehicles"]["alpha"], pool["vehicles"]["bravo"]
+    before_b = list(bravo.calls)
+    r = hindrax(pool, "ident", "start", "--vehicle", "alpha", "--dofs", "surge", "--server-timeout", "30")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "campaign started: surge" in r.stdout and "result: complete: stand-in campaign done" in r.stdout
+    assert ("run_identification", ["surge"]) in alpha.calls and bravo.calls == before_b
