@@ -158,7 +158,10 @@ def main(argv: list[str] | None = None) -> int:
     if a.results_doc:
         doc = Path(a.results_doc)
         png = figure(res, doc.parent / "figures" / "ident_realdata.png")
-        notes = "\n".join(f"- `{n}` ({r['bags_s']:.0f} s of bags, {r['fit_s']:.0f} s to fit and evaluate): {r['note']}"
+        def made(r):
+            return "bags reused from --keep" if r["bags_s"] < 5 else f"{r['bags_s']:.0f} s of bags"
+
+        notes = "\n".join(f"- `{n}` ({made(r)}, {r['fit_s']:.0f} s to fit and evaluate): {r['note']}"
                           for n, r in res.items())
         body = ("Three bags fitted, two predicted, no vehicle file; held-out nrmse = RMS(predicted - measured) / "
                 "std(measured) of 10 s open-loop predictions from the measured velocity "
