@@ -24,11 +24,11 @@ from hindrax_drivers.dds_transport import loopback_transport
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 
-#: benchmark name -> module
-BENCHMARKS: dict[str, str] = {
+#: benchmark name -> module, or modules whose rows form one section (each module has ``run(quick)``)
+BENCHMARKS: dict[str, str | tuple[str, ...]] = {
     "stack": "hindrax_ident.benchmarks.stack",
     "actuation": "hindrax_ident.benchmarks.actuation",
-    "safety": "hindrax_ident.benchmarks.safety",
+    "safety": ("hindrax_ident.benchmarks.safety", "hindrax_ident.benchmarks.participant_churn"),
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
     "identification": "hindrax_ident.benchmarks.identification",
@@ -58,12 +58,12 @@ def main(argv: list[str] | None = None) -> int:
     wall_s: dict[str, float] = {}
     start = time.monotonic()
     for name in names:
-        mod = importlib.import_module(BENCHMARKS[name])
+        modules = BENCHMARKS[name]
         print(f"== {name}", flush=True)
         t0 = time.monotonic()
-        for row in mod.run(quick=args.quick):
-            row = {"benchmark": name, **row}
-            rows.append(row)
+        for module in (modules,) if isinstance(modules, str) else modules:
+            for row in importlib.import_module(module).run(quick=args.quick):
+                rows.append({"benchmark": name, **row})
         wall_s[name] = round(time.monotonic() - t0, 1)
         print(f"== {name}: {wall_s[name]:.0f} s", flush=True)
     wall_s["total"] = round(time.monotonic() - start, 1)

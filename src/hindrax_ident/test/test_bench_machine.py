@@ -27,7 +27,8 @@ def test_nbody_cpu_s_extrapolates_to_the_published_step_count_and_rejects_nonsen
 
 def _launch(total_per_process: dict[str, float]) -> dict:
     window = {"per_process": total_per_process, "rates": {"/wrench": 50.0}, "wall_s": 10.0, "pool": 0.2,
-              "bench": 0.05, "loadavg": 1.0, "rss_mb": {n: 100.0 for n in total_per_process}}
+              "bench": 0.05, "loadavg": 1.0, "rss_mb": {n: 100.0 for n in total_per_process},
+              "pss_mb": {n: 40.0 for n in total_per_process}}
     return {"launch_file": "pool_test.launch.xml", "phases": {"idle": {"windows": [window]},
                                                               "running": {"windows": [window]}}}
 

@@ -157,6 +157,11 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
     ]
 
 
+def run(quick: bool = False) -> list[dict]:
+    """The ``safety`` section's churn rows on the shipped transport (``make bench``; :mod:`hindrax_ident.bench`)."""
+    return churn_rows(quick)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the rows alone and print them as JSON."""
     parser = argparse.ArgumentParser(prog="participant_churn")

@@ -295,9 +295,8 @@ def run(quick: bool = False) -> list[dict]:
         if name in notes:
             row["note"] = notes[name]
         rows.append(row)
-    from .participant_churn import churn_rows  # noqa: PLC0415 - it imports this module (its _Layout)
-
-    return rows + run_processes(quick) + replay_rows(quick) + frozen_rows(quick) + gc_rows(quick) + churn_rows(quick)
+    # The participant-churn rows join this section from their own module (bench.BENCHMARKS): it imports _Layout.
+    return rows + run_processes(quick) + replay_rows(quick) + frozen_rows(quick) + gc_rows(quick)
 
 
 # ------------------------------------------------------------------------------------ garbage collection pauses
