@@ -143,3 +143,50 @@ def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
         path.write_text(text)
         assert ll.read_ports_file(path) is None
     assert ll.read_ports_file(tmp_path / "missing.json") is None
+
+
+#: modules no vehicle process may hold: the virtual pool (simulator, emulated hardware) and the bench's own code
+_POOL_MODULES = ("hindrax_ident.sim", "hindrax_ident.benchmarks.launch_layout", "hindrax_ident.benchmarks.stack")
+#: the processes that run drivers or safety nodes only: they hold no scipy either (frames and mountings are numpy)
+_LEAN_PROCESSES = ("output_guard", "gateway", "recorder")
+_IMPORTS = """
+import importlib, json, sys
+sys.argv = ["x"]
+entry = {entry!r}
+import hindrax_ident.benchmarks.launch_node as launch_node  # the bench's wrapper: must add nothing heavy
+module_name, _, function = entry.partition(":")
+module = importlib.import_module(module_name)
+groups = getattr(module, "GROUPS", {{}})
+for node in groups.get(function.removesuffix("_main") + "_node", ()):  # what a composed process builds at start
+    importlib.import_module(module.NODE_CLASSES[node].partition(":")[0])
+print(json.dumps(sorted(sys.modules)))
+"""
+
+
+def test_node_processes_import_neither_the_pool_nor_scipy():
+    """Every process of the pool-test launch layout, as the stack benchmark starts it (launch_node + the console
+    script's module + a composed group's node modules), imports no simulator and no benchmark module (they once
+    came with the bench's node wrapper, 1,009 MB PSS for the layout), and the driver and safety processes import
+    no scipy (~21 MB private per process). Fails naming the process and the modules."""
+    import json
+    import subprocess
+    import sys
+
+    from hindrax_drivers.testing import child_env
+    from hindrax_ident.benchmarks.launch_layout import launch_processes, package_share
+    from hindrax_ident.benchmarks.stack import LAUNCH_FILE
+
+    layout = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1])
+    assert {lp.label for lp in layout} >= set(_LEAN_PROCESSES)
+    procs = {lp.label: subprocess.Popen([sys.executable, "-c", _IMPORTS.format(entry=lp.module)], env=child_env(),
+                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for lp in layout}
+    bad = {}
+    for label, proc in procs.items():
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, f"{label}: {err[-2000:]}"
+        modules = json.loads(out)
+        forbidden = _POOL_MODULES + (("scipy",) if label in _LEAN_PROCESSES else ())
+        found = sorted({f for m in modules for f in forbidden if m == f or m.startswith(f + ".")})
+        if found:
+            bad[label] = found
+    assert not bad, f"node processes import what they must not: {bad}"

@@ -7,7 +7,7 @@ function (the installed entry points). The stack benchmark starts exactly those 
 ``ros2 launch`` would give them, so it measures what the vehicle runs. The ``launch`` package itself is not
 installable here (docs/architecture.md §11.3).
 
-Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node ...``):
+One entry point, ``python -m hindrax_ident.benchmarks.launch_layout pool ...``:
 
 ``pool --socket PATH --ports-file FILE [--set KEY=VALUE ...]``
     The virtual pool in its own process (excluded from the stack's CPU): the simulator at real-time factor 1
@@ -17,20 +17,12 @@ Two entry points (``python -m hindrax_ident.benchmarks.launch_layout pool|node .
     (:class:`I2CSocketServer`). The emulators run on ``time.monotonic`` (the drivers' clock here). The pty paths
     are written to ``--ports-file`` (JSON, :func:`write_ports_file`: whole or not at all) once everything is up.
 
-``node MODULE[:FUNCTION] --ros-args ...``
-    Runs ``MODULE.FUNCTION()`` (default ``main``; a console script's target) (e.g.
-    ``hindrax_drivers.ms5837.node``) exactly as ``python -m MODULE --ros-args ...`` would, except that
-    ``open_smbus`` (in every node module, those a composed process builds included) returns a
-    :class:`SocketI2CBus` connected to the pool when the environment variable ``HINDRAX_BENCH_I2C_SOCKET`` is set.
-    With ``HINDRAX_BENCH_PROFILE=DIR`` the node runs under cProfile and writes ``DIR/<module>.prof`` on exit
-    (``python -m pstats``). A transaction is then one request/answer on a Unix socket in the driver process (two
-    system calls and a pickle each way), which stands in for the ``ioctl`` of a real ``smbus2.SMBus`` on the Pi;
-    the emulator's own work happens in the pool process.
+The node processes run through :mod:`hindrax_ident.benchmarks.launch_node`, which imports none of this module's
+simulator and emulators.
 """
 from __future__ import annotations
 
 import argparse
-import cProfile
 import importlib
 import json
 import os
@@ -47,21 +39,18 @@ from typing import Callable, Mapping
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
-import hindrax_drivers.transport.i2c as i2c
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.launch_xml import NodeProcess, read_launch
-from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
+from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus  # noqa: F401 (tests' import)
 from hindrax_ident.sim.hardware import VirtualHardware
 from hindrax_ident.sim.node import SimulatorNode
 from hindrax_ident.sim.simulator import Simulator
 
+
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 
-SOCKET_ENV = "HINDRAX_BENCH_I2C_SOCKET"
-#: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits
-PROFILE_ENV = "HINDRAX_BENCH_PROFILE"
 
 
 #: the workspace's own packages: their share directory is the source package directory in a checkout
@@ -216,40 +205,13 @@ def _pool(argv: list[str]) -> int:
     return 0
 
 
-def _node(argv: list[str]) -> int:
-    entry, rest = argv[0], argv[1:]
-    module_name, _, function = entry.partition(":")
-    module = importlib.import_module(module_name)
-    run = getattr(module, function or "main")
-    path = os.environ.get(SOCKET_ENV)
-    if path:
-        if module_name == "hindrax_drivers.composition":  # it imports its node modules only when it starts
-            for target in module.NODE_CLASSES.values():
-                importlib.import_module(target.partition(":")[0])
-        original = i2c.open_smbus
-        opener = lambda _bus_number: SocketI2CBus(path)  # noqa: E731
-        for mod in [sys.modules[n] for n in list(sys.modules) if n.startswith("hindrax_")]:
-            if getattr(mod, "open_smbus", None) is original:  # every module that imported it by name
-                mod.open_smbus = opener
-    sys.argv = [module_name] + rest
-    profile_dir = os.environ.get(PROFILE_ENV)
-    if not profile_dir:
-        return int(run() or 0)
-
-    profiler = cProfile.Profile()
-    try:
-        return int(profiler.runcall(run) or 0)
-    finally:
-        profiler.dump_stats(str(Path(profile_dir) / f"{entry.replace(':', '.')}.prof"))
-
-
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (``argv`` without the program name); returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] not in ("pool", "node"):
-        print("usage: python -m hindrax_ident.benchmarks.launch_layout pool|node ...", file=sys.stderr)
+    if not argv or argv[0] != "pool":
+        print("usage: python -m hindrax_ident.benchmarks.launch_layout pool ...", file=sys.stderr)
         return 2
-    return _pool(argv[1:]) if argv[0] == "pool" else _node(argv[1:])
+    return _pool(argv[1:])
 
 
 if __name__ == "__main__":

@@ -95,7 +95,8 @@ from hindrax_ident.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
-from .launch_layout import SOCKET_ENV, launch_processes, package_share, read_ports_file
+from .launch_layout import launch_processes, package_share, read_ports_file
+from .launch_node import SOCKET_ENV
 from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s
 from .recorder import subscribe_recorder_counts
 
@@ -405,7 +406,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                      "-p", "esc.arming_time_s:=1.0"]
             if load_config(params).esc.oscillator_calibrated is not None:  # a required key: always (file validated)
                 bench += ["-p", "esc.oscillator_calibrated:=true"]
-            wrap = ["-m", "hindrax_ident.benchmarks.launch_layout", "node"]
+            wrap = ["-m", "hindrax_ident.benchmarks.launch_node"]  # no simulator in a node process
             (tmp / "params").mkdir(exist_ok=True)
             values_file = functools.partial(write_parameter_file, directory=tmp / "params")
             for lp in layout:
