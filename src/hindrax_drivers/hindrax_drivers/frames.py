@@ -9,7 +9,9 @@ z down); world frame NED (x north, y east, z down). Both pairs share their origi
 
 Both matrices are proper rotations (det = +1) and their own inverses, so the same matrix maps vectors
 *and* pseudo-vectors (angular velocity, torque) in both directions. Orientations are quaternions in ROS
-order (x, y, z, w), handled with :class:`scipy.spatial.transform.Rotation`.
+order (x, y, z, w), composed by the Hamilton product (:func:`quaternion_multiply`, scipy's ``Rotation``
+convention: ``a * b`` applies b first); the tests compare every function with ``scipy.spatial.transform``, which
+no node process imports (it would add ~21 MB of private memory to each of them).
 
 Nothing else in the stack converts frames: drivers, emulators and tools call these functions and matrices at
 their ROS boundary (test/test_docs_truth.py checks that no other module spells the matrices out). A device's
@@ -23,26 +25,47 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 #: Rotation matrix between base_link (FLU) and the marine body frame (FRD); its own inverse.
 R_FLU_FRD = np.diag([1.0, -1.0, -1.0])
 #: Rotation matrix between odom (ENU) and the marine world frame (NED); its own inverse.
 R_ENU_NED = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
 
-_ROT_FLU_FRD = Rotation.from_matrix(R_FLU_FRD)
-_ROT_ENU_NED = Rotation.from_matrix(R_ENU_NED)
+#: the same two rotations as quaternions (x, y, z, w): pi about x; pi about (x + y) / sqrt(2)
+_Q_FLU_FRD = np.array([1.0, 0.0, 0.0, 0.0])
+_Q_ENU_NED = np.array([math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0])
 
 
-def _product_map(left: Rotation, right: Rotation) -> np.ndarray:
-    """The (4, 4) matrix M with ``(left * Rotation.from_quat(q) * right).as_quat() == M @ q`` for a unit q (x, y, z,
-    w): a quaternion product is bilinear, so fixed factors on both sides make a linear map, whose columns are the
-    products of the basis quaternions (computed here by scipy, which defines the convention)."""
-    return np.stack([(left * Rotation.from_quat(e) * right).as_quat(canonical=False) for e in np.eye(4)], axis=1)
+def quaternion_multiply(a, b) -> np.ndarray:
+    """Hamilton product ``a * b`` of (..., 4) quaternions (x, y, z, w): the rotation b, then a (scipy's
+    ``Rotation.__mul__`` order). Not normalised."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    ax, ay, az, aw = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bx, by, bz, bw = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], axis=-1)
+
+
+def quaternion_from_rotvec(rotvec) -> np.ndarray:
+    """Quaternion (x, y, z, w) of the rotation by |rotvec| rad about rotvec's direction ((3,) rad)."""
+    v = np.asarray(rotvec, dtype=float)
+    angle = float(np.linalg.norm(v))
+    if angle == 0.0:
+        return np.array([0.0, 0.0, 0.0, 1.0])
+    return np.concatenate([v / angle * math.sin(angle / 2.0), [math.cos(angle / 2.0)]])
+
+
+def _product_map(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The (4, 4) matrix M with ``left * q * right == M @ q`` (x, y, z, w): a quaternion product is bilinear, so
+    fixed factors on both sides make a linear map, whose columns are the products of the basis quaternions."""
+    return np.stack([quaternion_multiply(quaternion_multiply(left, e), right) for e in np.eye(4)], axis=1)
 
 
 #: q(body FRD in NED) = M q(base_link FLU in odom ENU), and back (both factors are their own inverses)
-_Q_ROS_MARINE = _product_map(_ROT_ENU_NED, _ROT_FLU_FRD)
+_Q_ROS_MARINE = _product_map(_Q_ENU_NED, _Q_FLU_FRD)
 
 
 def _unit_quaternions(q_xyzw) -> np.ndarray:
@@ -158,7 +181,7 @@ def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
 
     q_xyzw: (..., 4) quaternion(s) in ROS order (x, y, z, w), normalised here. Returns (..., 4) in the same order.
     R_ned_frd = R_ned_enu . R_enu_flu . R_flu_frd, applied as the constant linear map :data:`_Q_ROS_MARINE` that
-    scipy's composition defines (the same result as composing the Rotations: 120 us per call through them here,
+    the Hamilton product defines (the same result as composing scipy Rotations, 120 us per call through them,
     for every DVL message in three nodes). Raises ValueError for a zero or non-finite quaternion.
     """
     return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
@@ -193,9 +216,28 @@ def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:
 
 
 def quaternion_from_euler_ned(rpy) -> np.ndarray:
-    """Quaternion (x, y, z, w) of body FRD in NED from Fossen ZYX Euler angles [phi theta psi] in rad."""
+    """Quaternion (x, y, z, w) of body FRD in NED from Fossen ZYX Euler angles [phi theta psi] in rad, (..., 3) ->
+    (..., 4): q = q_z(psi) q_y(theta) q_x(phi) (Fossen 2011 eq. 2.18 as quaternions; scipy's
+    ``from_euler("ZYX", [psi, theta, phi])``, also ``from_euler("xyz", [phi, theta, psi])``, the same rotation)."""
     a = np.asarray(rpy, dtype=float)
-    return Rotation.from_euler("ZYX", a[..., ::-1]).as_quat()
+    cr, sr = np.cos(a[..., 0] / 2.0), np.sin(a[..., 0] / 2.0)
+    cp, sp = np.cos(a[..., 1] / 2.0), np.sin(a[..., 1] / 2.0)
+    cy, sy = np.cos(a[..., 2] / 2.0), np.sin(a[..., 2] / 2.0)
+    return np.stack([sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy,
+                     cr * cp * sy - sr * sp * cy,
+                     cr * cp * cy + sr * sp * sy], axis=-1)
+
+
+def rotation_matrix_from_quaternion(q_xyzw) -> np.ndarray:
+    """(..., 3, 3) rotation matrix of (..., 4) quaternion(s) (x, y, z, w), normalised here (Fossen 2011 eq. 2.65).
+    Raises ValueError for a zero or non-finite quaternion."""
+    q = _unit_quaternions(q_xyzw)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
+                     np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
+                     np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1)],
+                    axis=-2)
 
 
 def wrench_about_point(force, torque, application_point, reference_point=(0.0, 0.0, 0.0)) -> np.ndarray:

@@ -127,3 +127,24 @@ def test_quaternion_map_and_euler_angles_agree_with_scipys_rotations():
     for bad in ([0.0, 0.0, 0.0, 0.0], [np.nan, 0.0, 0.0, 1.0]):
         with pytest.raises(ValueError):
             frames.quaternion_ros_to_marine(bad)
+
+
+angle = st.floats(-3.2, 3.2, allow_nan=False)
+
+
+@given(st.lists(angle, min_size=3, max_size=3), st.lists(finite, min_size=4, max_size=4),
+       st.lists(finite, min_size=4, max_size=4))
+def test_numpy_rotations_agree_with_scipy(rpy, a, b):
+    """frames' own rotation functions (node processes do not import scipy: ~21 MB each) give scipy's results."""
+    from hindrax_drivers.icm20948.mounting import mounting_rotation
+
+    assert np.allclose(frames.quaternion_from_euler_ned(rpy), Rotation.from_euler("ZYX", rpy[::-1]).as_quat())
+    assert np.allclose(mounting_rotation(rpy), Rotation.from_euler("xyz", rpy).as_matrix())
+    assert np.allclose(frames.rotation_matrix_from_quaternion(frames.quaternion_from_euler_ned(rpy)),
+                       Rotation.from_euler("ZYX", rpy[::-1]).as_matrix())
+    rotvec = np.asarray(rpy) / 2.0  # |v| <= 2.8 < pi: scipy's quaternion has w >= 0, as ours
+    assert np.allclose(frames.quaternion_from_rotvec(rotvec), Rotation.from_rotvec(rotvec).as_quat())
+    if min(np.linalg.norm(a), np.linalg.norm(b)) > 1e-3:
+        expected = (Rotation.from_quat(a) * Rotation.from_quat(b)).as_quat(canonical=False)
+        product = frames.quaternion_multiply(np.asarray(a) / np.linalg.norm(a), np.asarray(b) / np.linalg.norm(b))
+        assert np.allclose(product, expected)

@@ -9,7 +9,8 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from ..frames import quaternion_from_euler_ned, rotation_matrix_from_quaternion
 
 __all__ = ["mounting_rotation"]
 
@@ -23,4 +24,4 @@ def mounting_rotation(rpy_rad: Sequence[float]) -> np.ndarray:
     rpy = np.asarray(rpy_rad, dtype=float)
     if rpy.shape != (3,) or not np.all(np.isfinite(rpy)):
         raise ValueError(f"mounting_rpy_rad must be 3 finite angles, got {rpy_rad!r}")
-    return Rotation.from_euler("xyz", rpy).as_matrix()
+    return rotation_matrix_from_quaternion(quaternion_from_euler_ned(rpy))  # Rz Ry Rx: the ZYX convention

@@ -27,10 +27,9 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..config import VehicleConfig
-from ..frames import frd_to_flu
+from ..frames import frd_to_flu, quaternion_from_euler_ned, quaternion_from_rotvec
 
 __all__ = ["StaticTransform", "DEFAULT_FRAME_IDS", "vehicle_transforms", "thruster_frame_id", "TF_KEYS"]
 
@@ -46,7 +45,9 @@ TF_KEYS = ("thrusters.names", "thrusters.<thruster>.position_frd_m", "thrusters.
            "sensors.ping1d.position_frd_m", "sensors.ms5837.position_frd_m")
 
 #: Downward-looking range sensor: the frame's x axis points along -z of base_link (pitch +90 deg, FLU).
-_DOWN = Rotation.from_euler("y", math.pi / 2)
+_DOWN = quaternion_from_rotvec([0.0, math.pi / 2, 0.0])
+#: no rotation (x, y, z, w)
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -64,15 +65,15 @@ def thruster_frame_id(index: int, prefix: str = DEFAULT_FRAME_IDS["thruster_pref
     return f"{prefix}{index + 1}"
 
 
-def _align_x(direction_flu: np.ndarray) -> Rotation:
-    """Smallest rotation taking base_link's x axis onto the unit vector ``direction_flu``."""
+def _align_x(direction_flu: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking base_link's x axis onto the unit vector ``direction_flu``, quaternion (x, y, z, w)."""
     x = np.array([1.0, 0.0, 0.0])
     d = direction_flu / np.linalg.norm(direction_flu)
     axis = np.cross(x, d)
     s, c = np.linalg.norm(axis), float(np.dot(x, d))
     if s < 1e-12:
-        return Rotation.identity() if c > 0 else Rotation.from_euler("z", math.pi)
-    return Rotation.from_rotvec(axis / s * math.atan2(s, c))
+        return _IDENTITY if c > 0 else quaternion_from_rotvec([0.0, 0.0, math.pi])
+    return quaternion_from_rotvec(axis / s * math.atan2(s, c))
 
 
 def vehicle_transforms(cfg: VehicleConfig, frame_ids: Mapping[str, str] | None = None) -> list[StaticTransform]:
@@ -85,16 +86,16 @@ def vehicle_transforms(cfg: VehicleConfig, frame_ids: Mapping[str, str] | None =
     sensors = cfg.sensors
     base = ids["base"]
 
-    def tf(child: str, position_frd, rotation: Rotation) -> StaticTransform:
+    def tf(child: str, position_frd, rotation: np.ndarray) -> StaticTransform:
         return StaticTransform(base, child, frd_to_flu(np.asarray(position_frd, dtype=float)),
-                               rotation.as_quat())
+                               np.asarray(rotation, dtype=float))
 
     out = [
         tf(ids["imu"], sensors.icm20948.position_frd_m,
-           Rotation.from_euler("xyz", list(sensors.icm20948.mounting_rpy_rad))),
+           quaternion_from_euler_ned(list(sensors.icm20948.mounting_rpy_rad))),  # Rz Ry Rx, as mounting.py
         tf(ids["dvl"], sensors.dvl75.position_frd_m, _DOWN),
         tf(ids["ping"], sensors.ping1d.position_frd_m, _DOWN),
-        tf(ids["pressure"], sensors.ms5837.position_frd_m, Rotation.identity()),
+        tf(ids["pressure"], sensors.ms5837.position_frd_m, _IDENTITY),
     ]
     for i, thruster in enumerate(cfg.thrusters.thrusters):
         direction = frd_to_flu(thruster.direction_frd)  # unit already; _align_x normalises again
