@@ -23,12 +23,12 @@ ROSDEP_KEY = {
     "matplotlib": "python3-matplotlib", "smbus2": "python3-smbus2", "mcap": "python3-mcap-pip",
     "mcap_ros2": "mcap-ros2-support", "filterpy": "python3-filterpy-pip",
     "rosbags": "python3-rosbags-pip", "pytest": "python3-pytest", "hypothesis": "python3-hypothesis",
-    "gpiod": "python3-gpiod-pip", "lxml": "python3-lxml",
+    "gpiod": "python3-gpiod-pip", "lxml": "python3-lxml", "ruamel": "python3-ruamel.yaml",
 }
 #: keys of rosdistro's rosdep/python.yaml used here (checked against ros/rosdistro, 2026-11): apt or pip there
 ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-serial", "python3-yaml", "python3-matplotlib",
                   "python3-smbus2", "python3-filterpy-pip", "python3-rosbags-pip", "mcap-ros2-support",
-                  "python3-pytest", "python3-hypothesis", "python3-lxml"}
+                  "python3-pytest", "python3-hypothesis", "python3-lxml", "python3-ruamel.yaml"}
 ROS_PACKAGES = {"rclpy", "ament_index_python", "builtin_interfaces", "rcl_interfaces", "std_msgs", "std_srvs",
                 "geometry_msgs", "sensor_msgs", "nav_msgs", "diagnostic_msgs", "rosgraph_msgs", "tf2_msgs",
                 "domain_coordinator", "action_msgs", "unique_identifier_msgs", "hindrax_msgs", "hindrax_drivers",

@@ -69,28 +69,71 @@ def test_every_command_reading_the_vehicle_file_reports_an_invalid_one_in_one_li
     assert bad.read_text() == before and not (tmp_path / "suite").exists()
 
 
-def test_update_vehicle_file_sets_scalars_and_lists_keeps_comments_and_restores_an_invalid_result(tmp_path):
-    """The one "edit the vehicle file in place" helper (esc calibrate --write, ident thruster-fit --write)."""
+def _flat(tree, prefix=""):
+    """[(dotted key, value)] of a nested mapping, in file order."""
+    out = []
+    for k, v in tree.items():
+        out += _flat(v, f"{prefix}{k}.") if isinstance(v, dict) else [(prefix + str(k), v)]
+    return out
+
+
+def _comments(text):
+    """Every comment of a YAML text: whole comment lines and the ``# ...`` tail of value lines."""
+    return [line[line.index("#"):].rstrip() for line in text.splitlines() if "#" in line]
+
+
+def test_update_vehicle_file_keeps_every_comment_key_order_and_other_value(tmp_path):
+    """The one "edit the vehicle file in place" helper (esc calibrate --write, ident thruster-fit --write)
+    edits a copy of the shipped file: the edited values change, one key is added where asked, and every
+    comment, the key order and every other value of the original stay as they were."""
     import pytest
 
     from hindrax_drivers.config import ConfigError, load_config
     from hindrax_ident.commands.common import update_vehicle_file
 
     conf = tmp_path / "hindrax.yaml"
-    conf.write_text(default_config_path().read_text())
-    original = conf.read_text()
-    update_vehicle_file(conf, {"oscillator_hz": "24500000.0", "curve_positive": "[0.0, 0.0001, -0.3, 225.0]"})
-    cfg = load_config(conf)
-    assert cfg.esc.oscillator_hz == 24.5e6
-    assert list(cfg.thrusters.curve_positive) == [0.0, 0.0001, -0.3, 225.0]
-    changed = [(a, b) for a, b in zip(original.splitlines(), conf.read_text().splitlines()) if a != b]
-    assert len(changed) == 2 and any("# nominal; calibrate per board" in b for _, b in changed)  # comment kept
+    original = default_config_path().read_text()
+    conf.write_text(original)
+    update_vehicle_file(conf, {"esc.oscillator_hz": 24512345.6, "esc.oscillator_calibrated": True,
+                               "thrusters.curve_positive": [1e-09, 0.0001, -0.3, 225.0],
+                               "thrusters.thrust_fit_uncertainty_rel": [0.01, 0.02]},
+                        new_keys={"thrusters.thrust_fit_uncertainty_rel": ("curve_positive", "fit std")})
     edited = conf.read_text()
-    with pytest.raises(ValueError, match="expected exactly one 'no_such_key:' line to update, found 0"):
-        update_vehicle_file(conf, {"no_such_key": "1"})
+    added = [line for line in edited.splitlines() if "thrust_fit_uncertainty_rel" in line]
+    assert added == ["      thrust_fit_uncertainty_rel: [0.01, 0.02] # fit std"]
+    assert _comments(edited.replace(added[0], "")) == _comments(original)
+    before = _flat(yaml.safe_load(original)["/**"]["ros__parameters"])
+    after = _flat(yaml.safe_load(edited)["/**"]["ros__parameters"])
+    assert after[[k for k, _ in after].index("thrusters.curve_positive") + 1] == (
+        "thrusters.thrust_fit_uncertainty_rel", [0.01, 0.02])
+    assert dict(after)["esc.oscillator_hz"] == 24512345.6 and dict(after)["esc.oscillator_calibrated"] is True
+    assert dict(after)["thrusters.curve_positive"] == [1e-09, 0.0001, -0.3, 225.0]  # 1e-09 read back as a float
+    edited_keys = {"esc.oscillator_hz", "esc.oscillator_calibrated", "thrusters.curve_positive"}
+    assert [k for k, _ in after if k != "thrusters.thrust_fit_uncertainty_rel"] == [k for k, _ in before]
+    assert [kv for kv in after if kv[0] not in edited_keys | {"thrusters.thrust_fit_uncertainty_rel"}] == [
+        kv for kv in before if kv[0] not in edited_keys]
+    changed = [(a, b) for a, b in zip(original.splitlines(), edited.splitlines()) if a != b]
+    assert changed[0] == ("      curve_positive: [-4.61e-7, 0.002355, -3.9556, 2191.6173]",
+                          "      curve_positive: [1.0e-09, 0.0001, -0.3, 225.0]")
+    assert load_config(conf).esc.oscillator_hz == 24512345.6
+    with pytest.raises(ValueError, match="no key 'esc.no_such_key' to update"):
+        update_vehicle_file(conf, {"esc.no_such_key": 1})
+    with pytest.raises(ValueError, match="no section 'no_such_section'"):
+        update_vehicle_file(conf, {"no_such_section.oscillator_hz": 1.0})
     with pytest.raises(ConfigError, match="oscillator_hz"):
-        update_vehicle_file(conf, {"oscillator_hz": "5.0"})
+        update_vehicle_file(conf, {"esc.oscillator_hz": 5.0})
     assert conf.read_text() == edited  # restored
+
+
+def test_the_shipped_vehicle_file_survives_a_round_trip_byte_for_byte(tmp_path):
+    """Setting a value to what it already is rewrites the file unchanged: the shipped file is in the layout the
+    round-trip writer keeps (flow collections on one line), so an edit shows as the edited lines only."""
+    from hindrax_ident.commands.common import update_vehicle_file
+
+    conf = tmp_path / "hindrax.yaml"
+    conf.write_text(default_config_path().read_text())
+    update_vehicle_file(conf, {"vehicle.name": "hindrax"})
+    assert conf.read_text() == default_config_path().read_text()
 
 
 def test_config_check_warns_when_the_vehicle_has_no_hardware_cut_off(tmp_path):

@@ -8,11 +8,10 @@ Only the standard library is imported here at module level, so defining a comman
 from __future__ import annotations
 
 import argparse
-import re
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["CommandError", "CONFIG_HELP", "add_config_argument", "load_vehicle", "update_vehicle_file"]
+__all__ = ["CommandError", "CONFIG_HELP", "add_config_argument", "load_vehicle", "update_vehicle_file", "yaml_float"]
 
 CONFIG_HELP = "vehicle configuration (default ros_ws/config/hindrax.yaml)"
 
@@ -41,27 +40,90 @@ def load_vehicle(path: str | None = None) -> Any:
         raise CommandError(f"invalid configuration: {exc}") from exc
 
 
-def update_vehicle_file(path: str | Path, values: Mapping[str, str]) -> None:
-    """Set ``key: value`` in the vehicle file ``path`` in place, keeping every other line and each line's comment;
-    then validate the file and restore the original text if it no longer validates.
+def _round_trip_yaml() -> Any:
+    """A ruamel.yaml round-trip loader/dumper that reproduces the shipped vehicle file byte for byte.
 
-    values: {key as written on its line (e.g. ``"oscillator_hz"``): the value's YAML text, a scalar or a one-line
-    flow list such as ``"[1.0, 2.0]"``}; each key must stand on exactly one line of the file.
-    Raises ValueError when a key is missing or stands on several lines (the file is not written),
+    Lines are never wrapped (flow collections stay on their line), ``null`` is written as ``null``, and a float
+    set by a command is written with 10 significant digits and a decimal point (``-4.0e-07``, ``1500.0``): the
+    vehicle file is read by PyYAML (YAML 1.1), whose float pattern needs the point. Floats read from the file
+    keep their original text.
+    """
+    from ruamel.yaml import YAML
+    from ruamel.yaml.representer import RoundTripRepresenter
+
+    class _Representer(RoundTripRepresenter):  # own class: ruamel's representer table is class-wide
+        pass
+
+    _Representer.add_representer(type(None), lambda r, _: r.represent_scalar("tag:yaml.org,2002:null", "null"))
+    _Representer.add_representer(float, lambda r, v: r.represent_scalar("tag:yaml.org,2002:float", yaml_float(v)))
+    yaml = YAML(typ="rt")
+    yaml.Representer = _Representer
+    yaml.preserve_quotes = True
+    yaml.width = 1 << 16
+    yaml.indent(mapping=2, sequence=4, offset=2)
+    return yaml
+
+
+def yaml_float(value: float) -> str:
+    """``value`` with 10 significant digits in a form YAML 1.1 (PyYAML) reads back as a float.
+
+    YAML 1.1's float pattern needs a decimal point: ``-4e-07`` or ``1500`` would load as a string or an int,
+    so the mantissa always carries one (``-4.0e-07``, ``1500.0``).
+    """
+    text = f"{float(value):.10g}"
+    mantissa, sep, exponent = text.partition("e")
+    if "." not in mantissa and mantissa.lstrip("-").isdigit():
+        mantissa += ".0"
+    return mantissa + sep + exponent
+
+
+def update_vehicle_file(path: str | Path, values: Mapping[str, Any],
+                        new_keys: Mapping[str, tuple[str, str]] | None = None) -> None:
+    """Set dotted keys of the vehicle file ``path`` in place with a round-trip YAML library (ruamel.yaml),
+    keeping every comment, the key order and every other value; then validate the file and restore the
+    original text if it no longer validates.
+
+    values: {dotted key below ``ros__parameters`` (e.g. ``"esc.oscillator_hz"``): its new value (bool, int,
+    float, str or a list of them; a list is written in flow style, ``[1.0, 2.0]``)}.
+    new_keys: {dotted key of ``values`` that may be absent: (sibling key it is inserted after, end-of-line
+    comment)}; any other key must already be in the file.
+    Raises ValueError when a key (or its section) is missing (the file is not written),
     :class:`~hindrax_drivers.config.ConfigError` when the result does not validate (the file is restored).
     """
+    from ruamel.yaml.comments import CommentedMap, CommentedSeq
+
     from hindrax_drivers.config import ConfigError, load_config
 
     p = Path(path)
     original = p.read_text()
-    text = original
-    for key, value in values.items():
-        pattern = re.compile(rf"^(\s*{re.escape(key)}:\s*)(\[[^\]\n]*\]|[^\s#]+)(.*)$", re.MULTILINE)
-        found = len(pattern.findall(text))
-        if found != 1:
-            raise ValueError(f"{path}: expected exactly one '{key}:' line to update, found {found}")
-        text = pattern.sub(lambda m, v=value: m.group(1) + v + m.group(3), text, count=1)
-    p.write_text(text)
+    yaml = _round_trip_yaml()
+    doc = yaml.load(original)
+    node = next(iter(doc.values()), None) if isinstance(doc, CommentedMap) and len(doc) == 1 else None
+    params = node.get("ros__parameters") if isinstance(node, CommentedMap) else None
+    if not isinstance(params, CommentedMap):
+        raise ValueError(f"{path}: not a params file {{'/**': {{'ros__parameters': {{...}}}}}}")
+    new_keys = new_keys or {}
+    for dotted, value in values.items():
+        *sections, key = dotted.split(".")
+        parent = params
+        for name in sections:
+            parent = parent.get(name) if isinstance(parent, CommentedMap) else None
+        if not isinstance(parent, CommentedMap):
+            raise ValueError(f"{path}: no section '{'.'.join(sections)}' for '{dotted}'")
+        if isinstance(value, (list, tuple)):
+            value = CommentedSeq(value)
+            value.fa.set_flow_style()
+        if key in parent:
+            parent[key] = value
+        elif dotted in new_keys:
+            after, comment = new_keys[dotted]
+            if after not in parent:
+                raise ValueError(f"{path}: no '{after}' to add '{dotted}' after")
+            parent.insert(list(parent).index(after) + 1, key, value, comment=comment)
+        else:
+            raise ValueError(f"{path}: no key '{dotted}' to update")
+    with p.open("w") as stream:
+        yaml.dump(doc, stream)
     try:
         load_config(p)
     except ConfigError:

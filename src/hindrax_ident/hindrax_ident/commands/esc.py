@@ -38,11 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
-    """Set ``oscillator_hz:`` and ``oscillator_calibrated: true`` (the ``esc`` section's lines) in place.
+    """Set ``esc.oscillator_hz`` (Hz, rounded to 0.1) and ``esc.oscillator_calibrated: true`` in place.
 
-    Raises ValueError when a line is missing, :class:`ConfigError` when the result is invalid (file restored).
+    Raises ValueError when a key is missing, :class:`ConfigError` when the result is invalid (file restored).
     """
-    update_vehicle_file(config_path, {"oscillator_hz": f"{oscillator_hz:.1f}", "oscillator_calibrated": "true"})
+    update_vehicle_file(config_path, {"esc.oscillator_hz": round(float(oscillator_hz), 1),
+                                      "esc.oscillator_calibrated": True})
 
 
 def run(args: argparse.Namespace) -> int:

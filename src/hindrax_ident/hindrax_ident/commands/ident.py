@@ -92,53 +92,23 @@ def read_two_columns(path: str) -> tuple[np.ndarray, np.ndarray]:
     return x, y
 
 
-def _yaml_float(value: float) -> str:
-    """``value`` with 10 significant digits in a form YAML 1.1 (PyYAML) reads back as a float.
-
-    YAML 1.1's float pattern needs a decimal point: ``-4e-07`` or ``1500`` would load as a string or an int,
-    so the mantissa always carries one (``-4.0e-07``, ``1500.0``).
-    """
-    text = f"{float(value):.10g}"
-    mantissa, sep, exponent = text.partition("e")
-    if "." not in mantissa and mantissa.lstrip("-").isdigit():
-        mantissa += ".0"
-    return mantissa + sep + exponent
-
-
-def _curve_text(coeffs) -> str:
-    return "[" + ", ".join(_yaml_float(c) for c in coeffs) + "]"
-
-
 def write_thruster_curves(config_path: str, negative, positive, relative_std=None) -> None:
-    """Replace the ``curve_negative:`` / ``curve_positive:`` values in a configuration file, keeping comments, and
-    with ``relative_std`` = (negative, positive) set ``thrust_fit_uncertainty_rel:`` (inserted after the
-    ``curve_positive:`` line, same indentation, when absent).
+    """Set ``thrusters.curve_negative`` / ``thrusters.curve_positive`` (4 coefficients each, N per us^k) in a
+    vehicle file, keeping comments, and with ``relative_std`` = (negative, positive) set
+    ``thrusters.thrust_fit_uncertainty_rel`` (added after ``curve_positive`` when absent).
 
     Validates the result and restores the original text on failure (:func:`~.common.update_vehicle_file`).
-    Raises ``ValueError`` (missing lines) or :class:`~hindrax_drivers.config.ConfigError`.
+    Raises ``ValueError`` (missing keys) or :class:`~hindrax_drivers.config.ConfigError`.
     """
-    import re
-    from pathlib import Path
-
     from .common import update_vehicle_file
 
-    values = {"curve_negative": _curve_text(negative), "curve_positive": _curve_text(positive)}
-    path = Path(config_path)
-    original = path.read_text()
+    values = {"thrusters.curve_negative": [float(c) for c in negative],
+              "thrusters.curve_positive": [float(c) for c in positive]}
     if relative_std is not None:
-        values["thrust_fit_uncertainty_rel"] = _curve_text(relative_std)
-        if not re.search(r"^\s*thrust_fit_uncertainty_rel:", original, re.MULTILINE):
-            m = re.search(r"^(\s*)curve_positive:.*$", original, re.MULTILINE)
-            if m is None:
-                raise ValueError(f"{config_path}: no 'curve_positive:' line to add thrust_fit_uncertainty_rel after")
-            line = (f"\n{m.group(1)}thrust_fit_uncertainty_rel: [0.0, 0.0]  # 1-sigma relative thrust std "
-                    "[negative, positive] of the bollard-pull fit (hindrax ident thruster-fit)")
-            path.write_text(original[:m.end()] + line + original[m.end():])
-    try:
-        update_vehicle_file(config_path, values)
-    except Exception:
-        path.write_text(original)
-        raise
+        values["thrusters.thrust_fit_uncertainty_rel"] = [float(s) for s in relative_std]
+    update_vehicle_file(config_path, values, new_keys={"thrusters.thrust_fit_uncertainty_rel": (
+        "curve_positive", "1-sigma relative thrust std [negative, positive] of the bollard-pull fit "
+                          "(hindrax ident thruster-fit)")})
 
 
 def _free_decay(args) -> int:
