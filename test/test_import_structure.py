@@ -348,3 +348,40 @@ def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
     assert re.search(FORMULAS["the thrust lag"][0], "k = math.exp(-float(dt) / self.time_constant_s)")
     assert re.search(FORMULAS["the thrust lag"][0], "e = math.exp(-0.5 * h / lag_s)")
     assert re.search(FORMULAS["a thrust curve"][0], "self.curve = ThrustCurve(t.curve_negative, ...)")
+
+
+# ------------------------------------------------------------------------------------------------ configuration
+#: The configuration's modules (schema, loading, the nodes' parameter declarations).
+CONFIG_MODULES = ("hindrax_drivers.config", "hindrax_drivers.config_sections", "hindrax_drivers.node_parameters")
+#: Device drivers and safety nodes' packages: the configuration imports none of them, not even through another
+#: module; the hardware limits it checks live in ``hindrax_drivers.hardware_limits``, below the driver too.
+DRIVER_PACKAGES = tuple(f"hindrax_drivers.{p}" for p in (
+    "pca9685", "dvl75", "icm20948", "ms5837", "ping1d", "transport", "guard", "supervisor", "gateway"))
+
+
+def driver_imports_of_config(graph: dict[str, set[str]]) -> list[str]:
+    """``"config module -> driver module"`` for every driver module reachable from a configuration module."""
+    out = []
+    for start in CONFIG_MODULES:
+        seen, todo = set(), [start]
+        while todo:
+            for dep in graph.get(todo.pop(), ()):
+                if dep not in seen:
+                    seen.add(dep)
+                    todo.append(dep)
+        out += [f"{start} -> {m}" for m in sorted(seen)
+                if any(m == p or m.startswith(p + ".") for p in DRIVER_PACKAGES)]
+    return out
+
+
+def test_the_config_rule_sees_a_driver_import():
+    graph = {"hindrax_drivers.config": {"hindrax_drivers.hardware_limits", "hindrax_drivers.frames"},
+             "hindrax_drivers.frames": {"hindrax_drivers.pca9685.protocol"}}
+    assert driver_imports_of_config(graph) == ["hindrax_drivers.config -> hindrax_drivers.pca9685.protocol"]
+
+
+def test_the_configuration_imports_no_driver(graph):
+    assert all(m in graph for m in CONFIG_MODULES)
+    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.config"]
+    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
+    assert driver_imports_of_config(graph) == []

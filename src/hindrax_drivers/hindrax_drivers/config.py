@@ -74,7 +74,8 @@ from .config_sections import (
     VehicleSection,
 )
 from .allocation.thrust_curve import ThrustCurve, ThrustCurveError
-from .pca9685.protocol import ESC_DEADBAND_US, ESC_NEUTRAL_US, Pca9685Error, esc_prescale
+from .hardware_limits import (ESC_DEADBAND_US, ESC_NEUTRAL_US, PCA9685_OSCILLATOR_MAX_HZ,
+                              PCA9685_OSCILLATOR_MIN_HZ, Pca9685Error, esc_prescale)
 
 DOFS: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
 """The six degrees of freedom in SNAME order (nu = [u v w p q r], tau = [X Y Z K M N])."""
@@ -87,14 +88,6 @@ SECTIONS: tuple[str, ...] = (
     "vehicle", "environment", "hydrodynamics", "thrusters", "esc", "lights", "sensors", "pool", "limits",
     "identification", "simulation", "recording", "supervisor", "calibration", "control",
 )
-
-#: Range of the PCA9685's internal oscillator, Hz: 25 MHz nominal (NXP PCA9685 product data sheet Rev. 4, §7.3.5
-#: PWM frequency PRE_SCALE: ``prescale = round(osc_clock / (4096 f)) - 1`` with osc_clock 25 MHz); individual parts
-#: measure 23-27 MHz (docs/devices.md §5.1, [PCA9685] in docs/references.md). A calibration outside it is a wrong
-#: reading (channel, trigger, unit), not a part: with 28.85 MHz assumed, a commanded 1500 us neutral puts
-#: 1732 us on a 25 MHz part's wire.
-PCA9685_OSCILLATOR_MIN_HZ = 23e6
-PCA9685_OSCILLATOR_MAX_HZ = 27e6
 
 _FLOAT = "float"
 _INT = "int"
@@ -885,7 +878,7 @@ def _hardware_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
 
     * ``thrusters.pulse_width_neutral_us`` and every neutral + ``trim_us`` (what a disarmed ESC node holds on the
       wire) strictly inside the Basic ESC's own deadband, 1500 +- 25 us (docs/devices.md §5.2; ESC_NEUTRAL_US and
-      ESC_DEADBAND_US of :mod:`hindrax_drivers.pca9685.protocol`): outside it a vehicle that was never armed
+      ESC_DEADBAND_US of :mod:`hindrax_drivers.hardware_limits`): outside it a vehicle that was never armed
       thrusts (1560 us; deadband 120 with trim 100 gives 1600 us).
     * ``thrusters.curve_negative`` / ``curve_positive``: each side increasing with the right sign at its range end
       (negative thrust at ``pulse_width_min_us``, positive at ``pulse_width_max_us``) with a usable monotone branch

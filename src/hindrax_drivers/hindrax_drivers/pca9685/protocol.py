@@ -2,8 +2,10 @@
 
 Registers and bits (MODE1/MODE2, LEDn_ON/OFF_L/H, ALL_LED, PRE_SCALE), the prescale formula,
 pulse width <-> ON/OFF counts, full-ON/full-OFF bits, the sleep / prescale / restart sequence as
-data, and the ESC conventions (1100-1900 us, 1500 us neutral). Sources: docs/devices.md §5.1 (NXP
-datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2 (Blue Robotics Basic ESC [E1]-[E5]).
+data, and the ESC conventions (1100-1900 us, 1500 us neutral; these limits, shared with the
+configuration check, are defined in :mod:`hindrax_drivers.hardware_limits` and re-exported here).
+Sources: docs/devices.md §5.1 (NXP datasheet [Q1], UM10574 [Q2], Adafruit library [Q3]) and §5.2
+(Blue Robotics Basic ESC [E1]-[E5]).
 
 Why our own code: the Adafruit CircuitPython PCA9685 stack needs Blinka/busio rather than an
 ``smbus2.SMBus`` object, hides the register arithmetic, and computes counts from the *requested*
@@ -17,6 +19,10 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
+from ..hardware_limits import (COUNTS_PER_PERIOD, ESC_ARMING_HOLD_S, ESC_DEADBAND_US, ESC_MAX_FREQUENCY_HZ,
+                               ESC_MAX_US, ESC_MIN_FREQUENCY_HZ, ESC_MIN_US, ESC_NEUTRAL_US, INTERNAL_OSCILLATOR_HZ,
+                               PRESCALE_MAX, PRESCALE_MIN, Pca9685Error, check_oscillator, check_prescale,
+                               esc_prescale, frequency_for_prescale, prescale_for_frequency)
 from ..transport.i2c import RegisterWrite
 
 __all__ = [
@@ -25,11 +31,10 @@ __all__ = [
     "counts_to_pulse_width_us", "high_time_counts", "channel_bytes_for_pulse", "channel_block_for_pulses",
     "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "oscillator_from_measurement",
     "clamp_esc_pulse_us", "esc_prescale",
+    # the limits of hindrax_drivers.hardware_limits, re-exported for the driver's users
+    "COUNTS_PER_PERIOD", "PRESCALE_MIN", "PRESCALE_MAX", "INTERNAL_OSCILLATOR_HZ", "ESC_MIN_US", "ESC_NEUTRAL_US",
+    "ESC_MAX_US", "ESC_DEADBAND_US", "ESC_MIN_FREQUENCY_HZ", "ESC_MAX_FREQUENCY_HZ", "ESC_ARMING_HOLD_S",
 ]
-
-
-class Pca9685Error(ValueError):
-    """Bad PCA9685/ESC input: channel, frequency, prescale, pulse width or register bytes."""
 
 
 # ------------------------------------------------------------------------------ addresses
@@ -79,68 +84,14 @@ SUBADR_RESET = (0xE2, 0xE4, 0xE8)
 ALLCALLADR_RESET = 0xE0
 
 NUM_CHANNELS = 16
-COUNTS_PER_PERIOD = 4096
-PRESCALE_MIN = 3
-PRESCALE_MAX = 255
-#: Nominal internal oscillator; real parts measure 23-27 MHz: calibrate (docs/devices.md §0 item 8, §5.1).
-INTERNAL_OSCILLATOR_HZ = 25_000_000.0
 #: Oscillator start-up wait after clearing SLEEP before RESTART (docs/devices.md §5.1 restart rules).
 RESTART_DELAY_S = 500e-6
-
-# ------------------------------------------------------------------------------ ESC (§5.2)
-ESC_MIN_US = 1100.0
-ESC_NEUTRAL_US = 1500.0
-ESC_MAX_US = 1900.0
-ESC_DEADBAND_US = 25.0  # [UNVERIFIED directly, §5.2]
-ESC_MAX_FREQUENCY_HZ = 400.0
-ESC_MIN_FREQUENCY_HZ = 50.0
-#: Blue Robotics' minimal example holds neutral 7 s before other commands (arming, §5.2 [E1]).
-ESC_ARMING_HOLD_S = 7.0
-
 
 def led_register(channel: int) -> int:
     """LEDn_ON_L address for channel n = 0..15: 0x06 + 4n (docs/devices.md §5.1)."""
     if not isinstance(channel, int) or isinstance(channel, bool) or not 0 <= channel < NUM_CHANNELS:
         raise Pca9685Error(f"channel must be 0..15, got {channel!r}")
     return LED0_ON_L + 4 * channel
-
-
-def _check_oscillator(oscillator_hz: float) -> float:
-    if not (math.isfinite(oscillator_hz) and oscillator_hz > 0.0):
-        raise Pca9685Error(f"oscillator_hz must be finite and > 0, got {oscillator_hz}")
-    return float(oscillator_hz)
-
-
-def _check_prescale(prescale: int) -> int:
-    if not isinstance(prescale, int) or not PRESCALE_MIN <= prescale <= PRESCALE_MAX:
-        raise Pca9685Error(f"prescale must be an int {PRESCALE_MIN}..{PRESCALE_MAX}, got {prescale!r}")
-    return prescale
-
-
-def prescale_for_frequency(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
-    """PRE_SCALE = round(f_osc / (4096 f)) - 1 (docs/devices.md §5.1 [Q1 §7.3.5]).
-
-    Rounding is half-up (``floor(x + 0.5)``, as Adafruit's "+0.5 then truncate" [Q3]), not
-    Python's banker's rounding.
-
-    Raises:
-        Pca9685Error: non-finite/non-positive inputs, or a result outside 3..255
-        (about 24..1526 Hz at 25 MHz).
-    """
-    osc = _check_oscillator(oscillator_hz)
-    if not (math.isfinite(frequency_hz) and frequency_hz > 0.0):
-        raise Pca9685Error(f"frequency_hz must be finite and > 0, got {frequency_hz}")
-    prescale = math.floor(osc / (COUNTS_PER_PERIOD * frequency_hz) + 0.5) - 1
-    if not PRESCALE_MIN <= prescale <= PRESCALE_MAX:
-        raise Pca9685Error(
-            f"{frequency_hz:g} Hz needs prescale {prescale}, outside {PRESCALE_MIN}..{PRESCALE_MAX} "
-            f"({frequency_for_prescale(PRESCALE_MAX, osc):.1f}..{frequency_for_prescale(PRESCALE_MIN, osc):.1f} Hz)")
-    return prescale
-
-
-def frequency_for_prescale(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
-    """Actual PWM frequency f = f_osc / (4096 (PRE_SCALE + 1)) in Hz (docs/devices.md §5.1)."""
-    return _check_oscillator(oscillator_hz) / (COUNTS_PER_PERIOD * (_check_prescale(prescale) + 1))
 
 
 def period_s(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
@@ -150,7 +101,7 @@ def period_s(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> fl
 
 def count_duration_us(prescale: int, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> float:
     """Duration of one of the 4096 counts in us: (PRE_SCALE + 1) / f_osc * 1e6 (docs/devices.md §5.1)."""
-    return (_check_prescale(prescale) + 1) / _check_oscillator(oscillator_hz) * 1e6
+    return (check_prescale(prescale) + 1) / check_oscillator(oscillator_hz) * 1e6
 
 
 def pulse_width_to_counts(pulse_width_us: float, prescale: int,
@@ -292,7 +243,7 @@ def set_frequency_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL)
         :data:`RESTART_DELAY_S`; MODE1 = mode1 | RESTART | AI. PRE_SCALE is only accepted while
         SLEEP = 1, hence the order.
     """
-    _check_prescale(prescale)
+    check_prescale(prescale)
     awake = mode1 & ~(MODE1_RESTART | MODE1_SLEEP) & 0xFF
     return [
         RegisterWrite(MODE1, awake | MODE1_SLEEP, 0.0, "sleep (PRE_SCALE writable only while asleep)"),
@@ -355,7 +306,7 @@ def oscillator_from_measurement(measured_us: float, commanded_us: float, prescal
     counts = pulse_width_to_counts(commanded_us, prescale, oscillator_hz)
     if counts == 0:
         raise Pca9685Error(f"commanded {commanded_us} us is 0 counts: command a pulse, e.g. 1500 us")
-    f_true = counts * (_check_prescale(prescale) + 1) / (measured_us * 1e-6)
+    f_true = counts * (check_prescale(prescale) + 1) / (measured_us * 1e-6)
     if not 20e6 <= f_true <= 30e6:
         raise Pca9685Error(f"{measured_us:g} us measured for {commanded_us:g} us commanded gives "
                            f"{f_true / 1e6:.3f} MHz, outside 20-30 MHz: check channel, trigger and units")
@@ -373,20 +324,3 @@ def clamp_esc_pulse_us(pulse_width_us: float, min_us: float = ESC_MIN_US, max_us
     if not min_us <= max_us:
         raise Pca9685Error(f"min_us ({min_us}) must be <= max_us ({max_us})")
     return min(max(float(pulse_width_us), min_us), max_us)
-
-
-def esc_prescale(frequency_hz: float, oscillator_hz: float = INTERNAL_OSCILLATOR_HZ) -> int:
-    """Prescale for an ESC update rate, checking the ACTUAL rate is within 50..400 Hz (§5.1, §5.2).
-
-    E.g. 400 Hz rounds to prescale 14 = 406.9 Hz at 25 MHz, above the Basic ESC's 400 Hz maximum,
-    and is rejected; use 381.5 Hz (prescale 15) or 200 Hz.
-
-    Raises:
-        Pca9685Error: the actual frequency is outside 50..400 Hz.
-    """
-    prescale = prescale_for_frequency(frequency_hz, oscillator_hz)
-    actual_hz = frequency_for_prescale(prescale, oscillator_hz)
-    if not ESC_MIN_FREQUENCY_HZ <= actual_hz <= ESC_MAX_FREQUENCY_HZ:
-        raise Pca9685Error(f"{frequency_hz:g} Hz gives an actual {actual_hz:.1f} Hz (prescale {prescale}), "
-                           f"outside the ESC range {ESC_MIN_FREQUENCY_HZ:g}..{ESC_MAX_FREQUENCY_HZ:g} Hz")
-    return prescale

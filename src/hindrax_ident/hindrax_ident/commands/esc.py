@@ -48,8 +48,8 @@ def write_oscillator(config_path: str | Path, oscillator_hz: float) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
-    from hindrax_drivers.config import (PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, ConfigError,
-                                        default_config_path)
+    from hindrax_drivers.config import ConfigError, default_config_path
+    from hindrax_drivers.hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ
     from hindrax_drivers.pca9685 import protocol as p
 
     path = args.config or str(default_config_path())
