@@ -247,8 +247,10 @@ SCHEMA.update({
     "esc.readback_interval_s": _f("MODE1, PRE_SCALE and the channel registers are read back this often; a "
                                   "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
     "esc.heartbeat_timeout_s": _f("the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
-                                  "is older than this (steady clock); the guard asserts /OE when thrusters/pulse_width "
-                                  "or supervisor/heartbeat is (docs/architecture.md §8), s", 0.05, 1.0),
+                                  "is older than this (steady clock; docs/architecture.md §8), s", 0.05, 1.0),
+    "esc.guard_heartbeat_timeout_s": _f("the output guard asserts /OE (or silences the chip over I2C) when "
+                                        "esc/heartbeat or supervisor/heartbeat is older than this (steady clock; "
+                                        "docs/architecture.md §8), s", 0.05, 1.0),
     "esc.output_enable_gpio.chip": _s("gpiochip of the PCA9685 /OE line, e.g. /dev/gpiochip0 (absent or null: /OE "
                                       "not wired, the guard writes the chip's all-off and sleep registers instead)"),
     "esc.output_enable_gpio.line": _i("line offset of the PCA9685 /OE on esc.output_enable_gpio.chip (BCM GPIO number "
@@ -839,13 +841,13 @@ def _safety_cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             if c["esc.output_enable_feed_rate_hz"] < low:
                 issues.append(ConfigIssue("esc.output_enable_feed_rate_hz", c["esc.output_enable_feed_rate_hz"],
                                           f">= {low:g} Hz: three rising edges per esc.output_enable_feed_timeout_s"))
-    # the ESC must hear several supervisor heartbeats (one per supervisor check) within its timeout
-    if "esc.heartbeat_timeout_s" in c and "supervisor.check_rate_hz" in c:
-        period = 1.0 / c["supervisor.check_rate_hz"]
-        if c["esc.heartbeat_timeout_s"] < 2.0 * period:
-            issues.append(ConfigIssue("esc.heartbeat_timeout_s", c["esc.heartbeat_timeout_s"],
-                                      f"at least two supervisor heartbeats (2 / supervisor.check_rate_hz = "
-                                      f"{2.0 * period:g} s)"))
+    # the ESC and the guard must hear several supervisor heartbeats (one per supervisor check) within their timeouts
+    for key in ("esc.heartbeat_timeout_s", "esc.guard_heartbeat_timeout_s"):
+        if key in c and "supervisor.check_rate_hz" in c:
+            period = 1.0 / c["supervisor.check_rate_hz"]
+            if c[key] < 2.0 * period:
+                issues.append(ConfigIssue(key, c[key], f"at least two supervisor heartbeats (2 / "
+                                                       f"supervisor.check_rate_hz = {2.0 * period:g} s)"))
     # a rate check is off only with a reason
     for sensor in ("dvl", "altimeter", "pressure", "imu"):
         key, why = f"supervisor.min_rate.{sensor}_hz", f"supervisor.rate_check_disabled.{sensor}"

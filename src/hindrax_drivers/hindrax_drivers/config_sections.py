@@ -260,8 +260,10 @@ class EscSection(Section):
     the chip and disarms, s"""
     heartbeat_timeout_s: float
     """the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat is older than this (steady
-    clock); the guard asserts /OE when thrusters/pulse_width or supervisor/heartbeat is (docs/architecture.md §8),
-    s"""
+    clock; docs/architecture.md §8), s"""
+    guard_heartbeat_timeout_s: float
+    """the output guard asserts /OE (or silences the chip over I2C) when esc/heartbeat or supervisor/heartbeat is
+    older than this (steady clock; docs/architecture.md §8), s"""
     output_enable_gpio: EscOutputEnableGpioSection
     output_enable_feed_gpio: EscOutputEnableFeedGpioSection
     output_enable_feed_rate_hz: float | None

@@ -49,7 +49,8 @@ HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbe
 #: the one node allowed to publish each heartbeat (internal graph names, docs/architecture.md §8)
 HEARTBEAT_NODES = {"supervisor": "supervisor", "guard": "output_guard", "esc": "esc"}
 #: DDS liveliness lease of the heartbeat writers and readers, s (module docstring): how long a dead publisher still
-#: counts as live; the heartbeat ages (``esc.heartbeat_timeout_s``, 0.2 s) stop the outputs long before
+#: counts as live; the heartbeat ages (``esc.heartbeat_timeout_s``, ``esc.guard_heartbeat_timeout_s``: 0.2 s) stop
+#: the outputs long before
 HEARTBEAT_LEASE_S = 1.0
 
 

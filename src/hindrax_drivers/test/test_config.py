@@ -251,6 +251,11 @@ def test_flatten():
      "supervisor.rate_window_s = 60.0: allowed at most supervisor.reaction_time_s (3 s)"),
     ({"supervisor.max_invalid_dvl_s": 5.0}, "supervisor.max_invalid_dvl_s = 5.0: allowed at most "
                                             "supervisor.reaction_time_s (3 s)"),
+    # the output guard's own heartbeat timeout: its range, and two supervisor beats (20 Hz shipped) within it
+    ({"esc.guard_heartbeat_timeout_s": 2.0}, "esc.guard_heartbeat_timeout_s = 2.0: allowed number in [0.05, 1]"),
+    ({"esc.guard_heartbeat_timeout_s": 0.08},
+     "esc.guard_heartbeat_timeout_s = 0.08: allowed at least two supervisor heartbeats (2 / "
+     "supervisor.check_rate_hz = 0.1 s)"),
 ])
 def test_values_checked_against_the_hardware_one_line_each(overrides, line):
     with pytest.raises(ConfigError) as err:

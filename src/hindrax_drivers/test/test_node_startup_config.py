@@ -90,3 +90,23 @@ def test_an_in_process_node_refuses_an_unknown_vehicle_key_it_does_not_read():
             OutputGuardNode(parameter_overrides=[Parameter("vehicle.colour", value="yellow")])
     finally:
         rclpy.shutdown()
+
+
+def test_the_output_guard_reads_its_own_heartbeat_timeout():
+    """The guard ages the ESC's and the supervisor's heartbeats against esc.guard_heartbeat_timeout_s, not the
+    ESC's esc.heartbeat_timeout_s (shipped 0.2 s each)."""
+    import rclpy
+
+    from hindrax_drivers.guard.node import OutputGuardNode
+
+    assert load_config(default_config_path()).flat["esc.heartbeat_timeout_s"] == 0.2
+    rclpy.init()
+    try:
+        guard = OutputGuardNode(parameter_overrides=[Parameter("esc.guard_heartbeat_timeout_s", value=0.35)])
+        try:
+            assert guard.timeout_s == guard.core.timeout_s == 0.35
+            assert guard.esc_age.max_step_s == guard.supervisor_age.max_step_s == 0.35
+        finally:
+            guard.destroy_node()
+    finally:
+        rclpy.shutdown()

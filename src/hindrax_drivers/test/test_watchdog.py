@@ -183,7 +183,7 @@ def test_44_9_a_starved_guard_ages_a_dead_peer_at_wall_speed():
     from hindrax_drivers.liveness import AliveAge
 
     clock = FakeClock()
-    age = AliveAge(0.2, clock=clock)  # OutputGuardNode: max_step_s = esc.heartbeat_timeout_s
+    age = AliveAge(0.2, clock=clock)  # OutputGuardNode: max_step_s = esc.guard_heartbeat_timeout_s
     age.heard()
     ticks = 0
     while age.fresh(0.2):

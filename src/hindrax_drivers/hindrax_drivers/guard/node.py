@@ -32,7 +32,7 @@ ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindr
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
-starved guard ages a dead peer at wall speed), timeout ``esc.heartbeat_timeout_s``. The two heartbeats are
+starved guard ages a dead peer at wall speed), timeout ``esc.guard_heartbeat_timeout_s``. The two heartbeats are
 callbacks in both clock modes (the path the vehicle takes is the path the tests take). A small process of its own
 (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's sensor code cannot
 take the second stop path with it.
@@ -95,7 +95,7 @@ class OutputGuardNode(Node):
         super().__init__("output_guard", **kwargs)
         cfg = load_node_config(self, ("esc",))
         esc = cfg.esc
-        self.timeout_s = float(esc.heartbeat_timeout_s)
+        self.timeout_s = float(esc.guard_heartbeat_timeout_s)
         self.core = GuardCore(self.timeout_s)
         period = 1.0 / GUARD_RATE_HZ
         #: a gap between two ticks counts in full up to the timeout, so that a starved guard still ages a dead peer
@@ -150,9 +150,9 @@ class OutputGuardNode(Node):
             self._apply(True, force=True)  # /OE high from the start; the registers are the ESC's own start-up's job
 
     def set_timeout(self, seconds: float) -> None:
-        """Heartbeat timeout, s (default ``esc.heartbeat_timeout_s``). A single-process graph (``hindrax bringup``),
-        where the ESC, the supervisor and this node share one executor thread, widens it: there a busy callback
-        delays every peer alike, and no peer can fail alone."""
+        """Heartbeat timeout, s (default ``esc.guard_heartbeat_timeout_s``). A single-process graph (``hindrax
+        bringup``), where the ESC, the supervisor and this node share one executor thread, widens it: there a busy
+        callback delays every peer alike, and no peer can fail alone."""
         if not seconds > 0.0:
             raise ValueError(f"guard timeout must be > 0 s, got {seconds}")
         self.timeout_s = self.core.timeout_s = float(seconds)

@@ -26,7 +26,7 @@ Publishes
     (``supervisor.check_rate_hz``, steady clock): level OK within the envelope, ERROR with the latched reason. The
     ESC refuses to arm and disarms without a fresh OK one; the output guard silences the outputs without one
     (docs/architecture.md §8). It is the supervisor's independent stop path: a dead or hung supervisor stops
-    heartbeating, which both act on within ``esc.heartbeat_timeout_s``.
+    heartbeating, which they act on within ``esc.heartbeat_timeout_s`` and ``esc.guard_heartbeat_timeout_s``.
     ``supervisor/status`` (diagnostic_msgs/DiagnosticStatus: level OK or ERROR, message = the breach reason, values
     = the supervised quantities) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
 CPU (README "Performance on the Pi")
