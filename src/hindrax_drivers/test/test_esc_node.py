@@ -3,6 +3,7 @@ import contextlib
 import itertools
 import math
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -613,6 +614,32 @@ def test_event_driven_output_writes_the_command_on_arrival(esc):
     msg = ThrusterPwm(pulse_width_us=[1720.0] * 8, armed=True)
     node.on_command(msg)  # as the subscription does, outside any tick
     assert wire(emu)[0] == pytest.approx(1720.0, abs=TICK_US)
+
+
+def test_commands_behind_a_slow_bus_are_coalesced_into_the_next_tick(esc):
+    """A backlog of commands queued behind a slow chip write (the last write lasted 8 ms, as a socket round trip on
+    a loaded machine, and ended just now) costs no bus time of its own: none is written in its callback, and the
+    next output tick writes the latest one, once. A command once the bus has caught up is written on arrival."""
+    arm(esc)
+    node, emu, bus = esc["node"], esc["emu"], esc["bus"]
+    writes = []
+    write = bus.write_i2c_block_data
+
+    def counted(address, register, data):
+        writes.append(register)
+        return write(address, register, data)
+
+    bus.write_i2c_block_data = counted
+    before = wire(emu)[0]
+    node._last_write_s, node._last_write_end = 0.008, time.monotonic()
+    for width in (1600.0, 1650.0, 1700.0):
+        node.on_command(ThrusterPwm(pulse_width_us=[width] * 8, armed=True))
+    assert writes == [] and wire(emu)[0] == before != pytest.approx(1700.0, abs=TICK_US)
+    node.tick()
+    assert writes == [0x06] and wire(emu)[0] == pytest.approx(1700.0, abs=TICK_US)
+    node._last_write_s, node._last_write_end = 0.008, time.monotonic() - 0.009  # the bus caught up
+    node.on_command(ThrusterPwm(pulse_width_us=[1580.0] * 8, armed=True))
+    assert writes == [0x06, 0x06] and wire(emu)[0] == pytest.approx(1580.0, abs=TICK_US)
 
 
 def test_steady_watchdog_counts_only_executor_alive_time(monkeypatch):

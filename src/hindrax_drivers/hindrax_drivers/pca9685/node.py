@@ -10,7 +10,9 @@ core's (:mod:`.core`, docs/architecture.md §8). This node does the ROS I/O and 
   ``esc.readback_interval_s`` (brown-out) re-initialises the chip and disarms. No bus at start-up: the node keeps
   running, reports ERROR "no I2C bus" and picks the bus up when it appears.
 - Inputs, all by callbacks in both clock modes: ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm,
-  thruster order; an armed command is written when it arrives; only from ``thrust_allocation``, checked in the
+  thruster order; an armed command is written when it arrives, unless it comes sooner after the last chip write than
+  that write lasted: then by the next output tick (coalesced: a backlog of commands behind a slow bus costs one
+  write, not one each, and cannot delay the tick and its heartbeat); only from ``thrust_allocation``, checked in the
   graph), ``supervisor/heartbeat`` and ``guard/heartbeat`` (through :class:`~hindrax_drivers.liveness.
   HeartbeatWatch`: a forged or replayed beat, a second publisher or another node name is a fault; aged on the
   steady clock in executor-alive time, :class:`~hindrax_drivers.liveness.AliveAge`; verdicts to
@@ -119,6 +121,9 @@ class EscNode(Node):
         self._last_target_time = None
         self._last_readback = None
         self._published_since_tick = False
+        #: time.monotonic() at the end of the last chip write and how long that write took, s: a command arriving
+        #: sooner after a write than the write lasted is left to the output tick (:meth:`on_command`)
+        self._last_write_end, self._last_write_s = -math.inf, 0.0
         self._steady_last = time.monotonic()
         self._last_tick_monotonic = -math.inf  # time.monotonic() of the last _steady_and_output_tick
         self._steady_command = self._steady_last
@@ -254,8 +259,11 @@ class EscNode(Node):
     def _write(self, widths_us: np.ndarray, lights_us: float) -> bool:
         """Write the widths (:meth:`.chip.EscChip.write`, skipping what is on the chip already) and tell the core.
         Returns True when it wrote; raises :class:`I2CError`."""
+        start = time.monotonic()
         wrote = self.chip.write(widths_us, lights_us)
         if wrote:
+            self._last_write_end = time.monotonic()
+            self._last_write_s = self._last_write_end - start
             self.core.wrote(self.chip.written)
             self.lights_us = lights_us
         return wrote
@@ -263,7 +271,8 @@ class EscNode(Node):
     # -- inputs
     def on_command(self, msg: ThrusterPwm) -> None:
         """Hand the command to the core and, armed, write it at once (event-driven output; the tick is the
-        watchdog). A faulty command (:func:`~.core.command_fault`) gives neutral at once, with its reason."""
+        watchdog), unless the bus is behind (:meth:`_bus_behind`): the output tick then writes the latest command.
+        A faulty command (:func:`~.core.command_fault`) gives neutral at once, with its reason."""
         now = self.get_clock().now()
         fault = self.core.on_command(now.nanoseconds * 1e-9, msg.pulse_width_us, bool(msg.armed))
         self._steady_age_s = 0.0
@@ -271,8 +280,17 @@ class EscNode(Node):
         if fault:
             self.diag.count("command_rejected")
             self.get_logger().error(f"command rejected, neutral: {fault}", throttle_duration_sec=1.0)
-        if self.armed and self.neutral_confirmed_time is not None:
+        if self.armed and self.neutral_confirmed_time is not None and (fault or not self._bus_behind()):
             self._output(now)
+        # else coalesced: the next output tick writes the latest command, so a backlog costs one write
+
+    def _bus_behind(self) -> bool:
+        """True when a command now would queue behind a slow bus: the last chip write lasted a tenth of an output
+        period or more (2 ms at 50 Hz; a PCA9685 block write takes 0.9 ms at 400 kHz, 3.4 ms at 100 kHz) and ended
+        less than its own duration ago (commands that waited in the executor while it ran). Writing each of them
+        would keep this thread on the bus and delay the tick and its heartbeat past the output guard's timeout."""
+        last = self._last_write_s
+        return last >= 0.1 * self.period_s and time.monotonic() - self._last_write_end < min(last, self.period_s)
 
     def on_lights(self, msg: Float64) -> None:
         b = msg.data
@@ -482,18 +500,18 @@ class EscNode(Node):
             self.get_logger().warn(f"ROS time stepped back {-step:.3f} s")
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         self._take_inputs()
-        if self._heartbeat_tick % 2 == 1:  # 25 Hz at 50 Hz: two graph queries and one per heartbeat (~26 us each)
+        if self._heartbeat_tick % 2 == 0:  # 25 Hz, in the ticks without a beat: three graph queries (~26 us each)
             self._check_graph()
         self._feed_peers()
+        self._heartbeat_tick += 1
+        if self._heartbeat_tick % 2 == 0:  # before the chip's transactions: their bus time does not delay the beat
+            self._publish_heartbeat()
         if self.core.retry_due():
             if self._configure_chip():
                 self._publish_written(self.get_clock().now())
         elif self.neutral_confirmed_time is not None and t - self._last_readback >= self.readback_interval_s:
             self._last_readback = t
             self._check_chip()
-        self._heartbeat_tick += 1
-        if self._heartbeat_tick % 2 == 0:
-            self._publish_heartbeat()
         self.core.set_peers(*self._peer_verdicts())  # the arming time starts in the tick that confirmed neutral
 
     def _publish_heartbeat(self) -> None:

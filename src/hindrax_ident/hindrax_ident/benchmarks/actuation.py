@@ -6,7 +6,8 @@ allocation node and the ESC node writing to a register-exact PCA9685 emulator on
 Wrenches alternate between two surge levels so T1's pulse width changes with every command; latency is
 the time from ``publish()`` to the I2C write after which the emulator decodes the new pulse width on
 T1's channel. The ESC node writes a command when it arrives (event-driven output; its output tick is the
-watchdog), taken by its subscription callback as in ``actuation_node``, so this is two deliveries inside the process
+watchdog, and writes a command that came sooner after the previous write than it lasted), taken by its subscription
+callback as in ``actuation_node``, so this is two deliveries inside the process
 (the wrench, the command), the allocation and one I2C block write (waiting for the next 50 Hz output tick instead of
 writing on arrival: 16.6 ms p99). CPU per command is the process CPU time (all three nodes
 and DDS) divided by the commands sent.
