@@ -12,7 +12,7 @@ P is the inverse of the forgetting-weighted information matrix
 W_k = lambda^k P0^-1 + sum_j lambda^(k-j) phi_j phi_j^T, so theta is the weighted LS estimate
 with weights w_j = lambda^(k-j).
 
-Noise variance and calibrated covariance (our estimator; the seeds contain no recursive LS):
+Noise variance and calibrated covariance (our estimator; the papers contain no recursive LS):
 
 * Weighted residual sum of squares, exact recursion for weighted LS:
   S_k = lambda S_{k-1} + lambda e_k^2 / (lambda + phi_k^T P_{k-1} phi_k).

@@ -4,7 +4,7 @@ Geometry ([Hindrax-Drag] §4: a 10 x 6 x 1.8 m pool; configuration ``pool.length
 ``pool.depth_m``): world frame NED with the origin at a pool corner on the water surface, x north along the
 length (0 .. length_m), y east along the width (0 .. width_m), z down (surface 0, floor depth_m).
 
-Hull (ASSUMPTION, the seeds give only the envelope): a box of ``vehicle.length_m x width_m x height_m``
+Hull (ASSUMPTION, the papers give only the envelope): a box of ``vehicle.length_m x width_m x height_m``
 ([Hindrax-Drag] §2.1: 0.59 x 0.47 x 0.40 m) centred on the centre of buoyancy, aligned with the body axes. Its
 displaced volume is taken as uniformly distributed over its height, so the volume centroid is the CB.
 
