@@ -145,11 +145,12 @@ def test_errors():
 
 @pytest.mark.parametrize("value", [-4e-07, 1500.0, -1.25e-05, 3.0e-9, 0.0, -2.0, 123456789012.0])
 def test_written_curve_coefficients_load_back_as_floats(value):
-    """`thruster-fit --write` text: YAML 1.1 reads '-4e-07' as a string and '1500' as an int."""
+    """`thruster-fit --write` floats (commands.common.yaml_float, used by every vehicle-file edit): YAML 1.1 reads
+    '-4e-07' as a string and '1500' as an int."""
     import yaml
 
-    from hindrax_ident.commands.ident import _curve_text
+    from hindrax_ident.commands.common import yaml_float
 
-    loaded = yaml.safe_load(_curve_text([value, value]))
+    loaded = yaml.safe_load("[" + ", ".join(yaml_float(v) for v in (value, value)) + "]")
     assert all(isinstance(x, float) for x in loaded)
     assert loaded[0] == pytest.approx(value, rel=1e-9, abs=0.0)
