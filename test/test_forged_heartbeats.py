@@ -11,14 +11,12 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import tempfile
 import time
-from pathlib import Path
 
 import pytest
 
-from hindrax_drivers.testing import ConditionTimeout, ros_context, wait_until
-from hindrax_ident.benchmarks.safety import _Hardware, _Layout
+from hindrax_drivers.testing import ConditionTimeout, wait_until
+from hindrax_ident.benchmarks.safety import running_layout
 
 #: the issue's target is 0.3 s (supervisor killed -> outputs stopped, benchmarks/safety.py measures it); a test on a
 #: loaded 2-core machine only asserts that the outputs stop at all within a wide bound (thrust stayed on for 100 %
@@ -81,20 +79,8 @@ VARIANTS = [("plain", "supervisor"), ("copied_qos", "heartbeat_forger"), ("repla
 
 @pytest.fixture(scope="module")
 def layout():
-    with tempfile.TemporaryDirectory(prefix="hindrax-forged-") as d, \
-            ros_context(domain_id=int(os.environ["ROS_DOMAIN_ID"])) as ctx:
-        tmp = Path(d)
-        hw = _Hardware(str(tmp / "emulation.sock"))
-        lay = _Layout(ctx, int(os.environ["ROS_DOMAIN_ID"]), tmp, hw)
-        try:
-            yield lay
-        except Exception:
-            for f in sorted(tmp.glob("*.log")):
-                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
-            raise
-        finally:
-            lay.close()
-            hw.close()
+    with running_layout("hindrax-forged-", int(os.environ["ROS_DOMAIN_ID"])) as lay:
+        yield lay
 
 
 @pytest.mark.parametrize("mode,name", VARIANTS, ids=[v[0] for v in VARIANTS])

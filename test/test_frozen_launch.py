@@ -7,12 +7,10 @@ from __future__ import annotations
 
 import os
 import signal
-import tempfile
 import time
-from pathlib import Path
 
-from hindrax_drivers.testing import ros_context, wait_until
-from hindrax_ident.benchmarks.safety import _Hardware, _Layout
+from hindrax_drivers.testing import wait_until
+from hindrax_ident.benchmarks.safety import running_layout
 
 #: the circuit's timeout is 0.33 s (make bench measures the stop: launch_frozen_outputs_stopped); on a loaded 2-core
 #: machine the test only bounds it widely
@@ -20,33 +18,22 @@ STOP_BOUND_S = 2.0
 
 
 def test_frozen_launch_stops_the_outputs_and_thrust_needs_a_new_arm():
-    did = int(os.environ["ROS_DOMAIN_ID"])
-    with tempfile.TemporaryDirectory(prefix="hindrax-frozen-") as d, ros_context(domain_id=did) as ctx:
-        tmp = Path(d)
-        hw = _Hardware(str(tmp / "emulation.sock"))
-        lay = _Layout(ctx, did, tmp, hw)
+    with running_layout("hindrax-frozen-", int(os.environ["ROS_DOMAIN_ID"])) as lay:
+        hw = lay.hw
+        lay.armed_at_1700()
+        t0 = time.monotonic()
+        for name in ("guard", "esc", "supervisor"):
+            lay.signal(name, signal.SIGSTOP)
         try:
-            lay.armed_at_1700()
-            t0 = time.monotonic()
-            for name in ("guard", "esc", "supervisor"):
-                lay.signal(name, signal.SIGSTOP)
-            try:
-                wait_until(lambda: hw.stop_time() is not None, STOP_BOUND_S, None, "outputs stopped")
-                assert not hw.line.is_high(), "the frozen guard's /OE line is low: the watchdog stopped the outputs"
-                assert hw.feed.expired() and hw.stop_time() - t0 <= STOP_BOUND_S
-                still = time.monotonic() + 1.0  # frozen for another second: nothing comes back
-                wait_until(lambda: hw.thrust() or time.monotonic() > still, 5, None, "1 s frozen")
-                assert not hw.thrust()
-            finally:
-                for name in ("supervisor", "esc", "guard"):
-                    lay.signal(name, signal.SIGCONT)
-            # resumed: the guard saw that the watchdog cut the outputs and holds them until the ESC disarmed
-            wait_until(lambda: lay.last_msg is not None and not lay.last_msg.armed, 20, None, "ESC disarmed")
+            wait_until(lambda: hw.stop_time() is not None, STOP_BOUND_S, None, "outputs stopped")
+            assert not hw.line.is_high(), "the frozen guard's /OE line is low: the watchdog stopped the outputs"
+            assert hw.feed.expired() and hw.stop_time() - t0 <= STOP_BOUND_S
+            still = time.monotonic() + 1.0  # frozen for another second: nothing comes back
+            wait_until(lambda: hw.thrust() or time.monotonic() > still, 5, None, "1 s frozen")
             assert not hw.thrust()
-        except Exception:
-            for f in sorted(tmp.glob("*.log")):
-                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
-            raise
         finally:
-            lay.close()
-            hw.close()
+            for name in ("supervisor", "esc", "guard"):
+                lay.signal(name, signal.SIGCONT)
+        # resumed: the guard saw that the watchdog cut the outputs and holds them until the ESC disarmed
+        wait_until(lambda: lay.last_msg is not None and not lay.last_msg.armed, 20, None, "ESC disarmed")
+        assert not hw.thrust()

@@ -339,13 +339,10 @@ def test_output_logic_computes_a_command_once_and_never_caches_a_slew_step():
     assert slewed.target(cmd, 0.1).tolist() == [1700.0]  # the same command keeps approaching its target
 
 
-def test_a_thrust_command_writes_only_the_blocks_that_changed(esc):
-    """The lights channel (8) is a block of its own: a thrust command that leaves it alone is one block write, not
-    two; a change of the lights writes its block; a neutral for safety writes every block whatever is believed to be
-    on the chip."""
-    arm(esc)
-    node, emu, bus = esc["node"], esc["emu"], esc["bus"]
-    registers = []
+def block_writes(bus) -> list[int]:
+    """The start register of every block write on ``bus`` from now on (the list fills as the node writes; the
+    writes still reach the emulated chip)."""
+    registers: list[int] = []
     write = bus.write_i2c_block_data
 
     def counted(address, register, data):
@@ -353,6 +350,16 @@ def test_a_thrust_command_writes_only_the_blocks_that_changed(esc):
         return write(address, register, data)
 
     bus.write_i2c_block_data = counted
+    return registers
+
+
+def test_a_thrust_command_writes_only_the_blocks_that_changed(esc):
+    """The lights channel (8) is a block of its own: a thrust command that leaves it alone is one block write, not
+    two; a change of the lights writes its block; a neutral for safety writes every block whatever is believed to be
+    on the chip."""
+    arm(esc)
+    node, emu = esc["node"], esc["emu"]
+    registers = block_writes(esc["bus"])
     node.on_command(ThrusterPwm(pulse_width_us=[1720.0] * 8, armed=True))
     node.on_command(ThrusterPwm(pulse_width_us=[1580.0] * 8, armed=True))
     assert registers == [0x06, 0x06]  # LED0_ON_L: the thrusters' block only
@@ -621,15 +628,8 @@ def test_commands_behind_a_slow_bus_are_coalesced_into_the_next_tick(esc):
     a loaded machine, and ended just now) costs no bus time of its own: none is written in its callback, and the
     next output tick writes the latest one, once. A command once the bus has caught up is written on arrival."""
     arm(esc)
-    node, emu, bus = esc["node"], esc["emu"], esc["bus"]
-    writes = []
-    write = bus.write_i2c_block_data
-
-    def counted(address, register, data):
-        writes.append(register)
-        return write(address, register, data)
-
-    bus.write_i2c_block_data = counted
+    node, emu = esc["node"], esc["emu"]
+    writes = block_writes(esc["bus"])
     before = wire(emu)[0]
     node._last_write_s, node._last_write_end = 0.008, time.monotonic()
     for width in (1600.0, 1650.0, 1700.0):

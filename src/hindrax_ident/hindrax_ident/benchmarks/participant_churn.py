@@ -22,19 +22,16 @@ import argparse
 import json
 import subprocess
 import sys
-import tempfile
 import time
-from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from domain_coordinator import domain_id
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
-from hindrax_drivers.testing import python_executable, ros_context, wait_until
+from hindrax_drivers.testing import python_executable, wait_until
 
 from hindrax_msgs.msg import ThrusterPwm
 
-from .safety import PROCESSES, _Hardware, _Layout
+from .safety import PROCESSES, _Layout, running_layout
 
 #: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
 PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
@@ -104,11 +101,7 @@ class _Watch:
 def churn_rows(quick: bool = False, default_transports: bool = False) -> list[dict]:
     """The two ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-churn-") as d, domain_id() as did, \
-            ros_context(domain_id=did) as ctx:
-        tmp = Path(d)
-        hw = _Hardware(str(tmp / "emulation.sock"))
-        lay = _VehicleLayout(ctx, did, tmp, hw)
+    with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
         if default_transports:
             lay.env = {k: v for k, v in lay.env.items() if k != PROFILE_ENV}
             lay.env[RANGE_ENV] = "LOCALHOST"
@@ -135,16 +128,10 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
                 p.wait(60)
             gap_s, who = watch.largest_gap_s()
             beats = sum(len(v) for v in watch.arrivals.values())
-        except Exception:
-            for f in sorted(tmp.glob("*.log")):
-                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
-            raise
         finally:
             for p in started:
                 if p.poll() is None:
                     p.kill()
-            lay.close()
-            hw.close()
     what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
             f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
             + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport"))

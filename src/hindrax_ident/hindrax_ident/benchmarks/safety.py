@@ -66,6 +66,8 @@ import subprocess
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -459,7 +461,7 @@ class _Layout:
 
     def __init__(self, ctx, did: int, tmp, hw: _Hardware) -> None:
 
-        self.tmp, self.hw = tmp, hw
+        self.ctx, self.tmp, self.hw = ctx, tmp, hw
         self.config = _config_file(tmp)
         # unbuffered logs: a failure prints the processes' last lines while they still run
         self.env = child_env(ROS_DOMAIN_ID=str(did), RCUTILS_LOGGING_BUFFERED_STREAM="0", PYTHONUNBUFFERED="1",
@@ -619,6 +621,29 @@ class _Layout:
         self.hw.arm_watch()
 
 
+@contextmanager
+def running_layout(prefix: str, did: int | None = None, layout: type[_Layout] = _Layout) -> Iterator[_Layout]:
+    """A ``layout`` (:class:`_Layout` or a subclass) on a new :class:`_Hardware`, in a new temporary folder named
+    ``prefix...``, on ROS domain ``did`` (a free one reserved when None) with its own rclpy context. The node
+    processes are started by the layout's own calls (``armed_at_1700``, ``ensure``). Yields the layout (``.hw``,
+    ``.ctx``, ``.tmp``, ``.probe``); when the body raises, the last 15 lines of each process's log are printed
+    before the error propagates; the layout and the hardware are closed on the way out."""
+    with tempfile.TemporaryDirectory(prefix=prefix) as d, \
+            (nullcontext(did) if did is not None else domain_id()) as did, ros_context(domain_id=did) as ctx:
+        tmp = Path(d)
+        hw = _Hardware(str(tmp / "emulation.sock"))
+        lay = layout(ctx, did, tmp, hw)
+        try:
+            yield lay
+        except Exception:
+            for f in sorted(tmp.glob("*.log")):  # what the node processes said
+                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
+            raise
+        finally:
+            lay.close()
+            hw.close()
+
+
 #: how long the armed layout is recorded for the replay rows, s
 REPLAY_RECORD_S = 12.0
 #: replay time before the supervisor is killed: every vehicle process has discovered the replay (about 2 s) and taken
@@ -681,55 +706,44 @@ def replay_rows(quick: bool = False) -> list[dict]:
     censored = 0
     by_replay: list[float] = []
     spurious = 0  # outputs stopped before the replay's first message: not the replay's doing, the repeat is redone
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-replay-") as d, domain_id() as did, \
-            ros_context(domain_id=did) as ctx:
-        tmp = Path(d)
-        hw = _Hardware(str(tmp / "emulation.sock"))
-        lay = _Layout(ctx, did, tmp, hw)
-        try:
-            bag, offset_s = _record_vehicle_bag(lay, tmp)
-            k = 0
-            while len(after_kill) < repeats:
-                if spurious > repeats:
-                    raise RuntimeError(f"the outputs stopped before the replay began in {spurious} attempts")
-                k += 1
-                lay.armed_at_1700()
-                t_start = time.monotonic()  # the replay's participant and publishers may stop the outputs already
-                with open(tmp / f"replay{k}.log", "w") as log:
-                    replay = subprocess.Popen([lay.py, "-c", _REPLAY, str(bag), f"{offset_s:.3f}"], env=lay.env,
-                                              stdout=subprocess.PIPE, stderr=log, text=True)
+    with running_layout("hindrax-bench-replay-") as lay:
+        tmp, hw = lay.tmp, lay.hw
+        bag, offset_s = _record_vehicle_bag(lay, tmp)
+        k = 0
+        while len(after_kill) < repeats:
+            if spurious > repeats:
+                raise RuntimeError(f"the outputs stopped before the replay began in {spurious} attempts")
+            k += 1
+            lay.armed_at_1700()
+            t_start = time.monotonic()  # the replay's participant and publishers may stop the outputs already
+            with open(tmp / f"replay{k}.log", "w") as log:
+                replay = subprocess.Popen([lay.py, "-c", _REPLAY, str(bag), f"{offset_s:.3f}"], env=lay.env,
+                                          stdout=subprocess.PIPE, stderr=log, text=True)
+            try:
+                if hw.stopped_at is not None and hw.stopped_at < t_start:
+                    spurious += 1
+                    continue
+                line = replay.stdout.readline()
+                if not line:
+                    raise RuntimeError(f"the replay exited ({replay.wait(10)}) before its first message")
+                t_replay = float(line)
+                wait_until(lambda: hw.stopped_at is not None or time.monotonic() > t_replay + REPLAY_LEAD_S,
+                           REPLAY_LEAD_S + 10, None, "replay running")
+                t0 = time.monotonic()
+                lay.kill("supervisor")
+                if hw.stopped_at is not None and hw.stopped_at <= t0:
+                    by_replay.append(hw.stopped_at - t_start)
+                    after_kill.append(0.0)
+                    continue
                 try:
-                    if hw.stopped_at is not None and hw.stopped_at < t_start:
-                        spurious += 1
-                        continue
-                    line = replay.stdout.readline()
-                    if not line:
-                        raise RuntimeError(f"the replay exited ({replay.wait(10)}) before its first message")
-                    t_replay = float(line)
-                    wait_until(lambda: hw.stopped_at is not None or time.monotonic() > t_replay + REPLAY_LEAD_S,
-                               REPLAY_LEAD_S + 10, None, "replay running")
-                    t0 = time.monotonic()
-                    lay.kill("supervisor")
-                    if hw.stopped_at is not None and hw.stopped_at <= t0:
-                        by_replay.append(hw.stopped_at - t_start)
-                        after_kill.append(0.0)
-                        continue
-                    try:
-                        wait_until(lambda: hw.stopped_at is not None, REPLAY_CENSOR_S, None, "outputs stopped")
-                        after_kill.append(hw.stopped_at - t0)
-                    except ConditionTimeout:
-                        censored += 1
-                        after_kill.append(REPLAY_CENSOR_S)
-                finally:
-                    replay.kill()
-                    replay.wait(10)
-        except Exception:
-            for f in sorted(tmp.glob("*.log")):
-                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
-            raise
-        finally:
-            lay.close()
-            hw.close()
+                    wait_until(lambda: hw.stopped_at is not None, REPLAY_CENSOR_S, None, "outputs stopped")
+                    after_kill.append(hw.stopped_at - t0)
+                except ConditionTimeout:
+                    censored += 1
+                    after_kill.append(REPLAY_CENSOR_S)
+            finally:
+                replay.kill()
+                replay.wait(10)
     ms = np.array(after_kill) * 1e3
     note = ("bag of the armed layout replayed in a loop with every topic (heartbeats, commands), supervisor SIGKILLed "
             f"{REPLAY_LEAD_S:g} s into the replay; {censored} of {repeats} still had thrust "
@@ -751,34 +765,23 @@ def frozen_rows(quick: bool = False) -> list[dict]:
     repeats = QUICK_REPEATS if quick else PROCESS_REPEATS
     stopped: list[float] = []
     oe_low = 0  # repeats in which the guard's own /OE line was still low when the outputs stopped
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-frozen-") as d, domain_id() as did, \
-            ros_context(domain_id=did) as ctx:
-        tmp = Path(d)
-        hw = _Hardware(str(tmp / "emulation.sock"))
-        lay = _Layout(ctx, did, tmp, hw)
-        try:
-            lay.ensure()  # a start-up's stalls (discovery) are not what is measured: the graph settles first
-            wait_until(GraphSettled(lay.probe, quiet_s=3.0, min_nodes=3), 90, None, "graph settled")
-            for _ in range(repeats):
-                lay.armed_at_1700()
-                t0 = time.monotonic()
-                for name in ("guard", "esc", "supervisor"):
-                    lay.signal(name, _signal.SIGSTOP)
-                try:
-                    wait_until(lambda: hw.stop_time() is not None, 10, None, "outputs stopped")
-                    stopped.append(max(0.0, hw.stop_time() - t0))
-                    oe_low += not hw.line.is_high()
-                finally:
-                    for name in ("supervisor", "esc", "guard"):
-                        lay.signal(name, _signal.SIGCONT)
-            refused, attempts, answer, granted_s = _guard_without_line(lay, hw)
-        except Exception:
-            for f in sorted(tmp.glob("*.log")):
-                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
-            raise
-        finally:
-            lay.close()
-            hw.close()
+    with running_layout("hindrax-bench-frozen-") as lay:
+        hw = lay.hw
+        lay.ensure()  # a start-up's stalls (discovery) are not what is measured: the graph settles first
+        wait_until(GraphSettled(lay.probe, quiet_s=3.0, min_nodes=3), 90, None, "graph settled")
+        for _ in range(repeats):
+            lay.armed_at_1700()
+            t0 = time.monotonic()
+            for name in ("guard", "esc", "supervisor"):
+                lay.signal(name, _signal.SIGSTOP)
+            try:
+                wait_until(lambda: hw.stop_time() is not None, 10, None, "outputs stopped")
+                stopped.append(max(0.0, hw.stop_time() - t0))
+                oe_low += not hw.line.is_high()
+            finally:
+                for name in ("supervisor", "esc", "guard"):
+                    lay.signal(name, _signal.SIGCONT)
+        refused, attempts, answer, granted_s = _guard_without_line(lay, hw)
     ms = np.array(stopped) * 1e3
     return [{"name": "launch_frozen_outputs_stopped_ms", "value": float(np.median(ms)), "unit": "ms",
              "max": float(np.max(ms)), "n": int(ms.size), "target": 500.0,
@@ -829,56 +832,45 @@ def _process_rows(repeats: int) -> dict[str, list]:
         "supervisor_killed_outputs_stopped", "supervisor_hung_outputs_stopped", "esc_killed_oe_asserted",
         "esc_hung_oe_asserted", "i2c_outage_state_unknown", "clock_step_back_detected")}
     times["guard_cpu_percent"] = []
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-safety-") as d, domain_id() as did, \
-            ros_context(domain_id=did) as ctx:
-        tmp = Path(d)
-        hw = _Hardware(str(tmp / "emulation.sock"))
-        lay = _Layout(ctx, did, tmp, hw)
-        try:
-            # the guard's cost while the vehicle is armed and commanded (50 Hz ESC state, 20 Hz heartbeats)
-            lay.armed_at_1700()
-            times["guard_cpu_percent"] = [_cpu_share(lay.procs["guard"].pid, 5.0 if repeats <= 3 else 10.0)]
-            for _ in range(repeats):
-                for who, sig in (("supervisor", _signal.SIGKILL), ("supervisor", _signal.SIGSTOP)):
-                    lay.armed_at_1700()
-                    t0 = time.monotonic()
-                    if sig == _signal.SIGKILL:
-                        lay.kill(who)
-                    else:
-                        lay.signal(who, sig)
-                    wait_until(lambda: hw.stopped_at is not None, 10, None, "outputs stopped")
-                    kind = "killed" if sig == _signal.SIGKILL else "hung"
-                    times[f"supervisor_{kind}_outputs_stopped"].append(hw.stopped_at - t0)
-                    if sig == _signal.SIGSTOP:
-                        lay.signal(who, _signal.SIGCONT)
-                for sig in (_signal.SIGKILL, _signal.SIGSTOP):
-                    lay.armed_at_1700()
-                    t0 = time.monotonic()
-                    if sig == _signal.SIGKILL:
-                        lay.kill("esc")
-                    else:
-                        lay.signal("esc", sig)
-                    wait_until(lambda: hw.oe_at is not None, 10, None, "/OE asserted")
-                    kind = "killed" if sig == _signal.SIGKILL else "hung"
-                    times[f"esc_{kind}_oe_asserted"].append(hw.oe_at - t0)
-                    if sig == _signal.SIGSTOP:
-                        lay.signal("esc", _signal.SIGCONT)
+    with running_layout("hindrax-bench-safety-") as lay:
+        hw = lay.hw
+        # the guard's cost while the vehicle is armed and commanded (50 Hz ESC state, 20 Hz heartbeats)
+        lay.armed_at_1700()
+        times["guard_cpu_percent"] = [_cpu_share(lay.procs["guard"].pid, 5.0 if repeats <= 3 else 10.0)]
+        for _ in range(repeats):
+            for who, sig in (("supervisor", _signal.SIGKILL), ("supervisor", _signal.SIGSTOP)):
                 lay.armed_at_1700()
                 t0 = time.monotonic()
-                hw.bus.disconnected = True
-                wait_until(lambda: lay.unknown_at is not None, 10, None, "output state unknown")
-                times["i2c_outage_state_unknown"].append(lay.unknown_at - t0)
-                hw.bus.disconnected = False
-            lay.commanding = False
-            times["clock_step_back_detected"] = _clock_rows(lay, ctx, repeats)
-            times["rearms"] = lay.rearms
-        except Exception:
-            for f in sorted(tmp.glob("*.log")):  # what the node processes said
-                print(f"--- {f.name}\n" + "\n".join(f.read_text().splitlines()[-15:]), flush=True)
-            raise
-        finally:
-            lay.close()
-            hw.close()
+                if sig == _signal.SIGKILL:
+                    lay.kill(who)
+                else:
+                    lay.signal(who, sig)
+                wait_until(lambda: hw.stopped_at is not None, 10, None, "outputs stopped")
+                kind = "killed" if sig == _signal.SIGKILL else "hung"
+                times[f"supervisor_{kind}_outputs_stopped"].append(hw.stopped_at - t0)
+                if sig == _signal.SIGSTOP:
+                    lay.signal(who, _signal.SIGCONT)
+            for sig in (_signal.SIGKILL, _signal.SIGSTOP):
+                lay.armed_at_1700()
+                t0 = time.monotonic()
+                if sig == _signal.SIGKILL:
+                    lay.kill("esc")
+                else:
+                    lay.signal("esc", sig)
+                wait_until(lambda: hw.oe_at is not None, 10, None, "/OE asserted")
+                kind = "killed" if sig == _signal.SIGKILL else "hung"
+                times[f"esc_{kind}_oe_asserted"].append(hw.oe_at - t0)
+                if sig == _signal.SIGSTOP:
+                    lay.signal("esc", _signal.SIGCONT)
+            lay.armed_at_1700()
+            t0 = time.monotonic()
+            hw.bus.disconnected = True
+            wait_until(lambda: lay.unknown_at is not None, 10, None, "output state unknown")
+            times["i2c_outage_state_unknown"].append(lay.unknown_at - t0)
+            hw.bus.disconnected = False
+        lay.commanding = False
+        times["clock_step_back_detected"] = _clock_rows(lay, lay.ctx, repeats)
+        times["rearms"] = lay.rearms
     return times
 
 
