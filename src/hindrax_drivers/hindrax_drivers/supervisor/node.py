@@ -10,10 +10,8 @@ Subscribes (ROS time of arrival is used for rates and run time, the header stamp
 supported)
     ``dvl/data`` (hindrax_msgs/Dvl: attitude, velocity for the dead reckoning), ``ping/altitude``
     (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
-    ``imu/data_raw`` (sensor_msgs/Imu: rate, freshness and the accelerometer's tilt; taken as serialised bytes and
-    decoded with rosbags; on the system clock taken at each check from a polled subscription, see "CPU"),
-    ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag; on the system clock taken at each
-    check, see "CPU"), ``supervisor/abort``
+    ``imu/data_raw`` (sensor_msgs/Imu: rate, freshness and the accelerometer's tilt; taken as serialised bytes, see
+    "CPU"), ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag), ``supervisor/abort``
     (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
     a manoeuvre on a limit).
 Services
@@ -33,18 +31,12 @@ CPU (README "Performance on the Pi")
     Publishers and subscriptions carry no QoS event handlers (rclpy's default is one incompatible-QoS warning
     handler each, visited in Python on every executor spin): a sensor that stops reaching the supervisor, for a
     QoS mismatch or any other reason, trips it through the ``supervisor.min_rate.*`` checks (where not 0).
-    On the system clock (the vehicle; ``use_sim_time`` false) ``imu/data_raw``, the supervisor's largest stream
-    (51-102 Hz), is a polled subscription (:class:`~hindrax_drivers.polled_input.PolledInputs`): no executor
-    wake-up per sample; every check (``supervisor.check_rate_hz``) takes what arrived and counts each sample at its
-    DDS reception time (``received_timestamp``, system clock = the node's ROS time), so the rate and the age the
-    checks see are those of per-sample callbacks, up to one check period late (50 ms at 20 Hz; the rate window is
-    ``supervisor.rate_window_s``, 3 s). With ``use_sim_time`` the samples come by callback, counted at the ROS time
-    of arrival. ``thrusters/pulse_width`` (50 Hz), of which only the armed flag is read, is taken the same way and
-    decoded lean (:mod:`hindrax_drivers.lean_cdr`); an arming is dated at its reception. A breach found while the
-    ESC is armed still disarms at once; an ESC that arms while the supervisor is tripped is disarmed at the next
-    check (at most 50 ms), and the ESC itself refuses to arm and disarms on the tripped supervisor's ERROR
-    heartbeat. The other inputs (attitude, depth, altitude, DVL, aborts) stay callbacks: each can trip at once.
-    docs/architecture.md §10.1 has the measured gains.
+    Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual
+    pool and the tests take the same path): each sample is counted at the ROS time of its arrival and can trip at
+    once; an ESC that reports armed while the supervisor is tripped is disarmed from that callback.
+    ``imu/data_raw`` (51-102 Hz) comes as its CDR bytes: the freshness check compares them (stamp aside) to find a
+    sensor repeating itself, and only the specific force is decoded, with rosbags
+    (:func:`hindrax_drivers.lean_cdr.cdr_decoder`).
 Time
     The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
     of ROS time is detected at the next check or sample, whichever reads the time first, reported (``/diagnostics``
@@ -78,7 +70,6 @@ from .. import frames
 from ..lean_cdr import cdr_decoder
 from ..liveness import ClockStepMonitor, HeartbeatPublisher
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
-from ..polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from .core import SupervisorCore, SupervisorLimits
 
 __all__ = ["SupervisorNode", "main"]
@@ -88,14 +79,14 @@ DISARM_RETRY_S = 0.2
 #: no QoS event handlers (module docstring, "CPU")
 _NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 _NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
-#: QoS depth of the polled ``imu/data_raw`` subscription: what arrives between two checks (about 3 samples at
-#: 51 Hz and a 20 Hz check) with room for checks delayed by a loaded machine (0.5 s at 102 Hz)
-IMU_POLL_DEPTH = 50
-#: QoS depth of the polled ``thrusters/pulse_width`` subscription (50 Hz: about 3 between two checks; room for 0.4 s)
-ESC_POLL_DEPTH = 20
+#: QoS depth of ``imu/data_raw``: 0.5 s at 102 Hz, room for an executor held up on a loaded machine (a sample lost
+#: in the queue lowers the rate the ``supervisor.min_rate.imu_hz`` check sees)
+IMU_QUEUE_DEPTH = 50
+#: QoS depth of ``thrusters/pulse_width`` (50 Hz: 0.4 s)
+ESC_QUEUE_DEPTH = 20
 
 
-class SupervisorNode(PolledInputsMixin, Node):
+class SupervisorNode(Node):
     """The safety supervisor (see the module docstring)."""
 
     def __init__(self, **kwargs: Any):
@@ -122,14 +113,8 @@ class SupervisorNode(PolledInputsMixin, Node):
         self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10, **ev)
         self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
         self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
-        #: polled imu/data_raw and thrusters/pulse_width on the system clock (module docstring, "CPU"); None with
-        #: use_sim_time
-        self.intake: PolledInputs | None = self.open_inputs("intake")
-        subscribe_input(self, self.intake, Imu, "imu/data_raw", self.on_imu,
-                        10 if self.intake is None else IMU_POLL_DEPTH, raw=True, **ev)
-        # the ESC's widths (50 Hz), of which only the armed flag is read: polled lean at the check on the system clock
-        subscribe_input(self, self.intake, ThrusterPwm, "thrusters/pulse_width", self.on_esc,
-                        10 if self.intake is None else ESC_POLL_DEPTH, lean=True, **ev)
+        self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True, **ev)
+        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, ESC_QUEUE_DEPTH, **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
@@ -164,11 +149,10 @@ class SupervisorNode(PolledInputsMixin, Node):
                                         _stamp_s(msg.header.stamp)))
 
     def on_imu(self, data: bytes) -> None:
-        """One ``imu/data_raw`` sample (CDR bytes), taken at its DDS reception time when polled, else (a callback,
-        or no reception time from the middleware) at the node's time now: its stamp and bytes (stamp aside: the
-        4-byte encapsulation and the 8-byte stamp lead the message) for freshness, its specific force for the tilt
-        the roll and pitch limits use without a fresh DVL attitude (decoded with rosbags, about 30 us)."""
-        t = self._received_time_s()
+        """One ``imu/data_raw`` sample (CDR bytes), counted at the node's time now: its stamp and bytes (stamp aside:
+        the 4-byte encapsulation and the 8-byte stamp lead the message) for freshness, its specific force for the tilt
+        the roll and pitch limits use without a fresh DVL attitude (decoded with rosbags)."""
+        t = self._sample_time_s()
         try:
             msg = self._decode_imu(data)
         except Exception:  # noqa: BLE001 - malformed bytes: not a sample (counted, never a crash)
@@ -191,7 +175,7 @@ class SupervisorNode(PolledInputsMixin, Node):
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed
-        self.core.set_armed(self._received_time_s(), armed)
+        self.core.set_armed(self._sample_time_s(), armed)
         if armed and self.core.tripped:
             self._disarm()
 
@@ -229,19 +213,11 @@ class SupervisorNode(PolledInputsMixin, Node):
             self.diagnostics.publish()  # at once: its timer runs on the ROS time that just jumped
         return self._now_s()
 
-    def _received_time_s(self) -> float:
-        """The DDS reception time of the polled sample being taken (system clock = ROS time here), or now; never
-        later than now: a sample received before a backward step of the clock is dated now, not in the future."""
-        now = self._sample_time_s()
-        received_s = self.intake.received_s if self.intake is not None else None
-        return now if received_s is None else min(received_s, now)
-
     def on_check(self) -> None:
         self._sample_time_s()  # a backward step of ROS time: re-base first
         if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
             self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
                                         "armed: the supervisor's ROS-time checks are blind"))
-        self.take_inputs()  # the IMU samples counted, the ESC's armed flag (PolledInputsMixin)
         self._handle(self.core.check(self._now_s()))
         if self.core.tripped and self.esc_armed:
             self._disarm()
