@@ -55,10 +55,10 @@ Service ``pressure/zero_depth`` (std_srvs/Trigger): sets the surface pressure to
 pressures of the last :data:`ZERO_DEPTH_WINDOW_S` seconds (run it with the vehicle at the surface);
 the value is also written to the node's ``environment.surface_pressure_pa`` parameter (not to the file).
 Refused (``success`` false, the reason in ``message``, surface pressure unchanged) while the ESC reports armed
-(``thrusters/pulse_width``: the last one taken says armed; taken only when the service is called, never
-dispatched per message) and when that mean is further than ``sensors.ms5837.zero_depth_margin_pa`` from the
-atmospheric reference, the ``environment.surface_pressure_pa`` the node started with: a zero taken at 1.5 m
-would move every depth, and the depth limits with it, 1.5 m down.
+(``thrusters/pulse_width``, a subscription callback keeping the last flag: the last one received says armed) and
+when that mean is further than ``sensors.ms5837.zero_depth_margin_pa`` from the atmospheric reference, the
+``environment.surface_pressure_pa`` the node started with: a zero taken at 1.5 m would move every depth, and the
+depth limits with it, 1.5 m down.
 
 Time stamps: the device has no clock, so every message is stamped with the time of validity of its
 pressure: the ROS time (``use_sim_time`` supported) at which the D1 conversion was commanded plus half the
@@ -105,7 +105,6 @@ from hindrax_msgs.msg import ThrusterPwm
 
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
-from ..polled_input import PolledInputs
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
 from . import protocol as p
 
@@ -255,10 +254,8 @@ class Ms5837Node(Node):
         self.pub_temperature = self.create_publisher(Temperature, "pressure/temperature", qos)
         self.pub_depth = self.create_publisher(PoseWithCovarianceStamped, "pressure/depth", qos)
         self.create_service(Trigger, "pressure/zero_depth", self.on_zero_depth)
-        # the ESC's armed flag, taken only when zero_depth is called (keep last 1; no executor wake-up per message,
-        # in both clock modes: the flag is read nowhere else)
-        self.esc_input: PolledInputs | None = PolledInputs(self)
-        self.esc_input.add(ThrusterPwm, "thrusters/pulse_width", self._on_esc_output, 1, lean=True)
+        # the ESC's armed flag for zero_depth's check (keep last 1)
+        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_esc_output, 1)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
 
         # One-shot timer (re-armed with the wanted delay) and the periodic cycle timer, both on ROS time.
@@ -509,8 +506,6 @@ class Ms5837Node(Node):
     def on_zero_depth(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Set the surface pressure to the mean pressure of the last ZERO_DEPTH_WINDOW_S seconds; refused while the
         ESC is armed or with that mean further than ``zero_depth_margin_pa`` from the atmospheric reference."""
-        if self.esc_input is not None:
-            self.esc_input.take_all()
         response.success = False
         if not self._recent:
             response.message = "no pressure reading yet; surface pressure unchanged"
@@ -552,13 +547,6 @@ class Ms5837Node(Node):
         if self.device is not None:
             out += self.device.stats.diagnostics()
         return out
-
-    def destroy_node(self) -> None:
-        """Destroy the ESC flag's intake node, then the node."""
-        if self.esc_input is not None:
-            self.esc_input.close()
-            self.esc_input = None
-        super().destroy_node()
 
     def close(self) -> None:
         """Stop the timers and close the bus if this node opened it (run_node calls this on shutdown)."""
