@@ -12,22 +12,17 @@ Behaviour
   (:func:`~hindrax_drivers.recording.qos.subscription_policies`: best-effort if any publisher is
   best-effort, transient-local only if all are), keep-last depth ``queue_depth``; the publishers'
   profiles are stored in the bag (``offered_qos_profiles``).
-- Data: raw subscriptions (CDR bytes, written unchanged), taken in one of two ways:
-
-  * on the system clock (the vehicle; ``use_sim_time`` false): *polled*. The subscriptions live on the intake
-    node ``<name>_intake`` that no executor dispatches (:class:`~hindrax_drivers.polled_input.PolledSubscriptions`),
-    and a timer takes every queued message every ``intake_period_s``: one executor wake-up per period instead of
-    one per message, about half of the recorder's receive cost (docs/architecture.md §10). Log time = the DDS
-    reception time (``received_timestamp``, system clock = the node's ROS time), publish time = the DDS source
-    timestamp (``source_timestamp``), as rosbag2 records them; each batch is written in log-time order;
-  * with ``use_sim_time``: one callback per message, log time = the node's clock (sim time) in the callback, so a
-    stepped simulation's bag depends on its seed only; publish time = the log time (the callback takes the
-    message alone: rclpy 7.1's EventsExecutor, which this process spins, fails on a callback that takes
-    ``(msg, info)``, docs/architecture.md §11.5; the MCAP specification asks for the log time where the publish
-    time is not available).
-
-  No reader of this project uses the publish time (a message's ``header.stamp`` is the time of its data). Writing
-  happens in one writer thread (the mcap writer is not thread-safe).
+- Data: one subscription callback per message on the node's executor, whatever the clock (the vehicle, the
+  virtual pool and the tests take the same path). The subscriptions are raw: the callback gets the CDR bytes and
+  they are written unchanged, never converted into a Python message and back (an ``Imu`` taken as an object costs
+  77 us, as bytes 11 us: :mod:`hindrax_drivers.lean_cdr`; at the stack's 430 msg/s that is about 2 % of a core).
+  Log time = the node's clock in the callback (sim time with ``use_sim_time``, so a stepped simulation's bag depends
+  on its seed only); publish time = the log time (the callback takes the message alone: rclpy 7.1's
+  EventsExecutor, which this process spins, fails on a callback that takes ``(msg, info)``, docs/architecture.md
+  §11.5; the MCAP specification asks for the log time where the publish time is not available). No reader of this
+  project uses the publish time (a message's ``header.stamp`` is the time of its data). Writing happens in one
+  writer thread (the mcap writer is not thread-safe), which drains what the callbacks queued every
+  ``drain_period_s``.
 - Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
   (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
   the bag (summary, metadata.yaml). A SIGKILL or power loss loses at most the open chunk
@@ -43,8 +38,8 @@ Parameters (besides the vehicle configuration, ``recording.*`` keys of hindrax.y
 ``topics`` (string[]), ``topic_regex`` (string), ``all_topics`` (bool), ``output_dir`` (string; empty = a new
 timestamped directory under ``recording.output_root`` at every start, never an existing one: :mod:`.bag_dir`),
 ``autostart`` (bool, false), ``discovery_period_s`` (1.0), ``status_period_s`` (1.0), ``queue_depth`` (1000),
-``disk_check_period_s`` (1.0), ``intake_period_s`` (:data:`INTAKE_PERIOD_S`, 0.1; the polled intake's period and
-the writer thread's drain period; ``queue_depth`` must hold what a topic sends in this time).
+``disk_check_period_s`` (1.0), ``drain_period_s`` (:data:`DRAIN_PERIOD_S`, 0.1; the writer thread's drain period:
+what a crash loses grows by at most this much).
 
 Run alone: ``python -m hindrax_drivers.recording.recorder_node --ros-args --params-file
 ros_ws/config/hindrax.yaml -p autostart:=true``.
@@ -67,7 +62,6 @@ from hindrax_msgs.srv import StartRecording, StopRecording
 
 from ..config import ConfigError
 from ..node_parameters import node_config
-from ..polled_input import PolledSubscriptions
 from ..ros_process import RosProcess
 from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
@@ -82,9 +76,9 @@ _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": Reliabili
 #: The recorder's subscriptions carry no QoS event handlers: each would be visited in Python on every executor spin
 #: (rclpy's SingleThreadedExecutor), and the recorder matches every publisher's QoS itself (recording.qos).
 _NO_EVENT_HANDLERS = SubscriptionEventCallbacks(use_default_callbacks=False)
-#: default ``intake_period_s``, s: the polled intake takes every queued message, and the writer thread drains what it
-#: was handed, 10 times a second (docs/architecture.md §10.1: 20 -> 10 Hz, the measured gain)
-INTAKE_PERIOD_S = 0.1
+#: default ``drain_period_s``, s: the writer thread drains what the callbacks queued 10 times a second
+#: (docs/architecture.md §10.1)
+DRAIN_PERIOD_S = 0.1
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
 
 
@@ -113,9 +107,7 @@ class RecorderNode(Node):
         self._output_root = Path(self._cfg.recording.output_root)
         self._min_free_bytes = float(self._cfg.recording.min_free_disk_mb) * 1e6
         self._disk_check_period_s = float(self._param("disk_check_period_s", 1.0))
-        self._intake_period_s = float(self._param("intake_period_s", INTAKE_PERIOD_S))
-        #: polled intake on the system clock, one callback per message with sim time (module docstring)
-        self._intake = None if self.get_parameter("use_sim_time").value else PolledSubscriptions(self)
+        self._drain_period_s = float(self._param("drain_period_s", DRAIN_PERIOD_S))
 
         self._writer: ThreadedBagWriter | None = None
         self._selection: TopicSelection | None = None
@@ -131,8 +123,6 @@ class RecorderNode(Node):
         self.create_timer(self._status_period_s, self._publish_status)
         if self._min_free_bytes > 0.0:
             self.create_timer(self._disk_check_period_s, self.check_disk)
-        if self._intake is not None:
-            self.create_timer(self._intake_period_s, self.take_queued)
         if autostart:
             self.start_recording()
 
@@ -146,7 +136,7 @@ class RecorderNode(Node):
         "queue_depth": "subscription queue depth (keep last)",
         "autostart": "start recording at start-up",
         "disk_check_period_s": "period of the free-disk check against recording.min_free_disk_mb, s",
-        "intake_period_s": "period at which the queued messages are taken (on the system clock), s",
+        "drain_period_s": "period at which the writer thread writes what the callbacks queued, s",
     }
 
     def _param(self, name: str, default: Any) -> Any:
@@ -217,8 +207,7 @@ class RecorderNode(Node):
             raise OSError(f"not recording: {reason}")
         out = Path(named) if named else new_bag_dir(self._output_root)
         self._selection = selection or self.default_selection()
-        # the writer thread drains at the intake's period: one writer wake-up per batch taken, not two
-        self._writer = ThreadedBagWriter(out, self._options, drain_period_s=self._intake_period_s)
+        self._writer = ThreadedBagWriter(out, self._options, drain_period_s=self._drain_period_s)
         self._skipped.clear()
         self.get_logger().info(f"recording {self._selection.describe()} to {out}")
         self._discover()
@@ -229,14 +218,9 @@ class RecorderNode(Node):
         writer = self._writer
         if writer is None:
             return None
-        if self.context.ok():  # polled intake: what is queued belongs to this bag (after SIGINT it is gone)
-            self._take_into(writer)
         self._writer = None
         for sub in self._subs.values():
-            if self._intake is not None:
-                self._intake.destroy(sub)
-            else:
-                self.destroy_subscription(sub)
+            self.destroy_subscription(sub)
         self._subs.clear()
         meta = writer.close()
         for w in writer.warnings:
@@ -301,36 +285,14 @@ class RecorderNode(Node):
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._queue_depth,
                              reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
             self._writer.add_topic(topic, type_name, profiles)
-            if self._intake is not None:
-                self._subs[topic] = self._intake.subscribe(cls, topic, qos, raw=True,
-                                                           event_callbacks=_NO_EVENT_HANDLERS)
-            else:
-                self._subs[topic] = self.create_subscription(
-                    cls, topic, functools.partial(self._on_message, topic), qos, raw=True,
-                    event_callbacks=_NO_EVENT_HANDLERS)
+            self._subs[topic] = self.create_subscription(
+                cls, topic, functools.partial(self._on_message, topic), qos, raw=True,
+                event_callbacks=_NO_EVENT_HANDLERS)
             self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
 
-    def take_queued(self) -> int:
-        """Polled intake (module docstring): take every message queued on the subscriptions and hand them to the
-        writer thread in log-time order; returns how many. The timer calls it every ``intake_period_s``."""
-        return self._take_into(self._writer)
-
-    def _take_into(self, writer: ThreadedBagWriter | None) -> int:
-        if self._intake is None or writer is None:
-            return 0
-        batch = []
-        for topic, sub in self._subs.items():
-            for data, info in self._intake.take(sub):
-                log_ns = info.get("received_timestamp") or self.get_clock().now().nanoseconds
-                batch.append((log_ns, topic, data, info.get("source_timestamp") or log_ns))
-        batch.sort(key=lambda item: item[0])
-        for log_ns, topic, data, pub_ns in batch:
-            writer.write(topic, log_ns, data, pub_ns)
-        return len(batch)
-
     def _on_message(self, topic: str, data: bytes) -> None:
-        """One received message (CDR bytes) of ``topic`` (sim time: one callback per message): queued for the writer
-        thread, log time = publish time = the node's clock now (module docstring)."""
+        """One received message (CDR bytes) of ``topic``: queued for the writer thread, log time = publish time = the
+        node's clock now (module docstring)."""
         writer = self._writer
         if writer is None:
             return
@@ -407,13 +369,6 @@ class RecorderNode(Node):
         """Finish any bag in progress: the clean-up of a composed process
         (:func:`~hindrax_drivers.node_common.run_nodes`)."""
         self.shutdown()
-
-    def destroy_node(self) -> None:
-        """Destroy the intake node too (polled intake), then this node."""
-        if self._intake is not None:
-            self._intake.close()
-            self._intake = None
-        super().destroy_node()
 
     def shutdown(self) -> None:
         """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM)."""
