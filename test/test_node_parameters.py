@@ -161,3 +161,79 @@ def test_node_specific_parameters_are_described_too():
             assert not undocumented, (name, undocumented)
         # its own section only (recording.topics is optional: declared, without a value unless given)
         assert vehicle_keys(listed(call, "recorder")) - {"recording.topics"} == expected(("recording",))
+
+
+def test_bringup_passes_its_safety_timeouts_as_read_only_parameters_ros2_param_get_sees():
+    """``hindrax bringup`` (one process) widens the safety heartbeats' timeout to 2 s and, with the virtual pool
+    holding simulated time on purpose, the clock-stall checks to 30 s: as parameter overrides of the nodes, so the
+    value each node uses is the one its parameter services report (GetParameters, as ``ros2 param get``), read-only
+    and described with its allowed range; the vehicle file keeps its own 0.2 s."""
+    from rcl_interfaces.srv import GetParameters
+
+    from hindrax_drivers.config import default_config_path, load_config
+    from hindrax_ident.bringup import build_graph
+
+    shipped = load_config(default_config_path()).esc
+    assert shipped.heartbeat_timeout_s == shipped.guard_heartbeat_timeout_s == 0.2
+    with ros_context() as ctx:
+        graph = build_graph(default_config_path(), sim=True, drive_clocks=True, identification=False, context=ctx)
+        client = rclpy.create_node("param_client", context=ctx)
+        graph.executor.add_node(client)
+        graph.freeze_time()
+
+        def call(node_name, srv_type, srv, request):
+            cli = client.create_client(srv_type, f"/{node_name}/{srv}")
+            wait_until(cli.service_is_ready, 10, graph.spin_once, f"{node_name}/{srv} ready")
+            fut = cli.call_async(request)
+            wait_until(fut.done, 10, graph.spin_once, f"{node_name}/{srv} answered")
+            client.destroy_client(cli)
+            return fut.result()
+
+        try:
+            seen = {}
+            for node_name, names in (("esc", ["heartbeat_timeout_s", "steady_watchdog_timeout_s"]),
+                                     ("output_guard", ["heartbeat_timeout_s"]),
+                                     ("supervisor", ["clock_stall_timeout_s"])):
+                values = call(node_name, GetParameters, "get_parameters", GetParameters.Request(names=names)).values
+                seen.update({f"{node_name}.{n}": v.double_value for n, v in zip(names, values)})
+                for n, d in describe(call, node_name, names).items():
+                    assert d.read_only and d.type == ParameterType.PARAMETER_DOUBLE, (node_name, n)
+                    assert d.description and d.additional_constraints.startswith("allowed number in ["), (node_name, n)
+            assert seen == {"esc.heartbeat_timeout_s": 2.0, "esc.steady_watchdog_timeout_s": 30.0,
+                            "output_guard.heartbeat_timeout_s": 2.0, "supervisor.clock_stall_timeout_s": 30.0}
+            # ... and the nodes use those values
+            esc, guard, supervisor = (graph.nodes[n] for n in ("esc", "output_guard", "supervisor"))
+            assert (esc.heartbeat_timeout_s, esc.steady_watchdog_s) == (2.0, 30.0)
+            assert guard.timeout_s == guard.core.timeout_s == guard.esc_age.max_step_s == 2.0
+            assert supervisor.clock_stall_timeout_s == 30.0
+            r = set_param(call, "esc", "heartbeat_timeout_s",
+                          ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=0.2))
+            assert not r.successful and "read-only" in r.reason
+        finally:
+            graph.executor.remove_node(client)
+            client.destroy_node()
+            graph.shutdown()
+
+
+@pytest.mark.parametrize("factory, name, value, line", [
+    ("esc", "heartbeat_timeout_s", 0.0, "heartbeat_timeout_s = 0.0: allowed number in [0.05, 10]"),
+    ("esc", "steady_watchdog_timeout_s", 600.0, "steady_watchdog_timeout_s = 600.0: allowed number in [0.02, 60]"),
+    ("output_guard", "heartbeat_timeout_s", "long", "heartbeat_timeout_s = 'long': allowed number in [0.05, 10]"),
+    ("supervisor", "clock_stall_timeout_s", -1.0, "clock_stall_timeout_s = -1.0: allowed number in [0.2, 120]"),
+])
+def test_a_bad_node_parameter_stops_the_node_with_one_line(factory, name, value, line):
+    from rclpy.parameter import Parameter
+
+    from hindrax_drivers.config import ConfigError
+    from hindrax_drivers.guard.node import OutputGuardNode
+    from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+    from hindrax_drivers.pca9685.node import EscNode
+    from hindrax_drivers.supervisor.node import SupervisorNode
+
+    make = {"esc": lambda **kw: EscNode(bus=EmulatedI2CBus({0x40: Pca9685Emulator()}), **kw),
+            "output_guard": lambda **kw: OutputGuardNode(bus=EmulatedI2CBus({}), **kw),
+            "supervisor": SupervisorNode}[factory]
+    with ros_context() as ctx:
+        with pytest.raises(ConfigError) as err:
+            make(context=ctx, parameter_overrides=ALL + [Parameter(name, value=value)])
+    assert str(err.value) == f"parameters of {factory}: {line}"

@@ -21,6 +21,13 @@ the node's own keys are validated again after the overrides are applied. Every o
 declared by the node or not, is validated with the rest of the vehicle as ``hindrax config check`` validates a file
 (:func:`check_whole_vehicle`): a node refuses what ``config check`` refuses, in the same one line.
 
+Node parameters (:func:`declare_node_parameter`): a value that belongs to how a process runs a node, not to the
+vehicle (a single-process graph widens the safety heartbeats' timeout, a simulator that holds time on purpose the
+clock-stall checks), is a parameter of that node outside the vehicle file's sections. It is declared with a
+:class:`~hindrax_drivers.config.Spec` (type, range, meaning), read-only, defaulting to the vehicle key it
+refines, validated like a vehicle key (one line naming key, value and allowed range) and set by a parameter override
+(``parameter_overrides``, ``-p``), so ``ros2 param get`` shows the value the node uses.
+
 Only public rclpy API is used (declare_parameter, get_parameter, set_parameters, set_descriptor,
 add_on_set_parameters_callback).
 """
@@ -41,7 +48,7 @@ from .config import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleCon
 
 __all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
            "declare_vehicle_parameters", "node_config", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
-           "check_whole_vehicle"]
+           "check_whole_vehicle", "declare_node_parameter"]
 
 #: Name of the parameter naming a vehicle file to take defaults from ("" = the shipped file).
 CONFIG_FILE_PARAMETER = "config_file"
@@ -123,8 +130,11 @@ def parameter_descriptor(key: str, read_only: bool = True):
     description: the schema's one-line meaning; additional_constraints: "allowed <range>"; ranges for
     scalar numbers with both bounds; read_only as given. The type is left to the caller.
     """
-    spec: Spec = SCHEMA[_generic(key)]
-    d = ParameterDescriptor(name=key, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
+    return _descriptor(key, SCHEMA[_generic(key)], read_only)
+
+
+def _descriptor(name: str, spec: Spec, read_only: bool) -> ParameterDescriptor:
+    d = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                             read_only=read_only)
     if spec.kind == "float" and spec.lo is not None and spec.hi is not None:
         d.floating_point_range = [FloatingPointRange(from_value=float(spec.lo), to_value=float(spec.hi), step=0.0)]
@@ -201,6 +211,30 @@ def _whole_vehicle_issues(items: tuple) -> tuple[ConfigIssue, ...]:
     except ConfigError as exc:
         return tuple(exc.issues)
     return ()
+
+
+def declare_node_parameter(node: Any, name: str, spec: Spec, default: Any) -> Any:
+    """Declare ``name``, a read-only parameter of ``node`` outside the vehicle file (module docstring), and return
+    its validated value: the override the node was started with, else ``default`` (the vehicle key it refines).
+
+    spec: type, range and one-line meaning (its ``doc`` becomes the description, its range the
+    ``additional_constraints`` and the descriptor's range). Raises :class:`ConfigError` naming the parameter, the
+    value and the allowed range (one line) for a value of the wrong type or out of range.
+    """
+    desc = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
+                               dynamic_typing=True)
+    value = _plain(node.declare_parameter(name, default, desc).value)
+    coerced, issue = _c._check_value(name, spec, value)  # noqa: SLF001 - one definition of type and range
+    source = f"parameters of {node.get_name()}"
+    if issue is not None:
+        node.undeclare_parameter(name)
+        raise ConfigError([issue], source)
+    if type(coerced) is not type(value):
+        node.set_parameters([Parameter(name, value=coerced)])
+    d = _descriptor(name, spec, read_only=True)
+    d.type = Parameter(name, value=coerced).type_.value
+    node.set_descriptor(name, d)
+    return coerced
 
 
 def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),

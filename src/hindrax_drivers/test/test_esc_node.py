@@ -29,6 +29,13 @@ HEARTBEAT_TIMEOUT_S = 2.0
 NEUTRAL = np.array([1500.0, 1500.0, 1510.0, 1500.0, 1500.0, 1500.0, 1500.0, 1500.0])
 
 
+def wide_heartbeat_timeout(seconds=HEARTBEAT_TIMEOUT_S):
+    """The ESC's node parameter ``heartbeat_timeout_s`` as a parameter override."""
+    from rclpy.parameter import Parameter
+
+    return [Parameter("heartbeat_timeout_s", value=seconds)]
+
+
 def wire(emu, channels=range(8)):
     return np.array([emu.pulse_width_us(c) for c in channels])
 
@@ -41,8 +48,7 @@ def esc():
         params = config_parameters({"esc.arming_time_s": 0.3, "esc.watchdog_timeout_s": 0.2,
                                     "esc.oscillator_calibrated": True,
                                     "thrusters.t2.reversed": True, "thrusters.t3.trim_us": 10.0})
-        node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
-        node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
+        node = EscNode(bus=bus, context=ctx, parameter_overrides=params + wide_heartbeat_timeout())
         probe = rclpy.create_node("probe", context=ctx)
         _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
@@ -125,12 +131,11 @@ def test_watchdog_returns_to_neutral_within_one_period():
         emu = Pca9685Emulator()
         params = config_parameters({"esc.arming_time_s": 0.0, "esc.watchdog_timeout_s": 0.2,
                                     "esc.oscillator_calibrated": True})
-        node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
-                       parameter_overrides=params + [Parameter("use_sim_time", value=True)])
-        node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
         # the ROS-time watchdog is under test; the wall-clock one (test_fault3_...) must not pre-empt it when this
         # loop's simulated 5 ms steps take longer than 5 ms of wall time on a loaded machine
-        node.set_steady_watchdog_timeout(5.0)
+        node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx,
+                       parameter_overrides=params + wide_heartbeat_timeout() + [
+                           Parameter("use_sim_time", value=True), Parameter("steady_watchdog_timeout_s", value=5.0)])
         probe = rclpy.create_node("probe", context=ctx)
         _beats = SafetyHeartbeats(probe)  # supervisor and output guard healthy
         ex = SingleThreadedExecutor(context=ctx)
@@ -410,16 +415,14 @@ def _healthy(node):
     node.steady_check()
 
 
-def _node(emu_or_bus, overrides, sim_time=False, ctx=None):
+def _node(emu_or_bus, overrides, sim_time=False, ctx=None, heartbeat_timeout_s=HEARTBEAT_TIMEOUT_S):
     from rclpy.parameter import Parameter
 
     bus = emu_or_bus if not isinstance(emu_or_bus, Pca9685Emulator) else EmulatedI2CBus({0x40: emu_or_bus})
     params = config_parameters({"esc.oscillator_calibrated": True, **overrides})
     if sim_time:
         params.append(Parameter("use_sim_time", value=True))
-    node = EscNode(bus=bus, context=ctx, parameter_overrides=params)
-    node.set_heartbeat_timeout(HEARTBEAT_TIMEOUT_S)
-    return node
+    return EscNode(bus=bus, context=ctx, parameter_overrides=params + wide_heartbeat_timeout(heartbeat_timeout_s))
 
 
 def test_fault1_chip_reset_while_armed_is_detected_reinitialised_and_disarms(esc):
@@ -710,8 +713,7 @@ def test_heartbeats_are_callbacks_in_both_clock_modes_and_age_from_their_arrival
         assert beat_topics <= {s.topic_name for s in sim.subscriptions}
         sim.destroy_node()
 
-        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
-        node.set_heartbeat_timeout(0.2)
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx, heartbeat_timeout_s=0.2)
         assert _steady_timers(node) == [True]
         assert beat_topics <= {s.topic_name for s in node.subscriptions}
         with _esc_beside_heartbeats(ctx, node) as (probe, beats, ex, spin):
@@ -763,8 +765,7 @@ def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
 
     assert GUARD_CONFIRM_S == pytest.approx(0.15)
     with ros_context() as ctx:
-        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx)
-        node.set_heartbeat_timeout(2.0)
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx, heartbeat_timeout_s=2.0)
         _direct_beats(node)
         ok = DiagnosticStatus(level=DiagnosticStatus.OK, message="ok")
         err = DiagnosticStatus(level=DiagnosticStatus.ERROR, message="ESC output state unknown")

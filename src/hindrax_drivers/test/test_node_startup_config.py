@@ -105,6 +105,7 @@ def test_the_output_guard_reads_its_own_heartbeat_timeout():
         guard = OutputGuardNode(parameter_overrides=[Parameter("esc.guard_heartbeat_timeout_s", value=0.35)])
         try:
             assert guard.timeout_s == guard.core.timeout_s == 0.35
+            assert guard.get_parameter("heartbeat_timeout_s").value == 0.35  # its node parameter's default
             assert guard.esc_age.max_step_s == guard.supervisor_age.max_step_s == 0.35
         finally:
             guard.destroy_node()

@@ -226,8 +226,13 @@ def ordered_executor(**kwargs: Any) -> Any:
     return _OrderedExecutor(**kwargs)
 
 
-#: heartbeat timeout of the ESC and the output guard inside one process (see build_graph), s
+#: heartbeat timeout of the ESC and the output guard inside one process (their parameter ``heartbeat_timeout_s``;
+#: see build_graph), s
 SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S = 2.0
+#: with the virtual pool, simulated time may stand still on purpose (step gates, Graph.freeze_time): the supervisor's
+#: clock-stall check (``clock_stall_timeout_s``) and, with driven clocks, the ESC's steady-clock watchdog
+#: (``steady_watchdog_timeout_s``) wait this long before they take it for a stalled clock, s
+SIMULATED_TIME_HOLD_S = 30.0
 
 
 def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
@@ -280,20 +285,23 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes["ping1d"] = Ping1dNode(**common)
     nodes["ms5837"] = Ms5837Node(bus=bus, **common)
     nodes["icm20948"] = Icm20948Node(bus=bus, **common)
-    nodes["esc"] = EscNode(bus=bus, **common)
+    # one process, one executor thread: a slow callback delays the ESC, the supervisor and the guard alike, and none
+    # of them can die or hang alone, so their heartbeats get a wide timeout (the vehicle runs them as processes)
+    wide_beats = [Parameter("heartbeat_timeout_s", value=SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)]
+    # simulated time may stand still on purpose (step gates, freeze_time): not a stalled /clock; stepped (driven
+    # clocks), the ESC's wall-clock watchdog for a dead /clock must not trip during such a hold either, or the run
+    # would depend on the machine's speed
+    hold = [Parameter("clock_stall_timeout_s", value=SIMULATED_TIME_HOLD_S)] if sim else []
+    steady = [Parameter("steady_watchdog_timeout_s", value=SIMULATED_TIME_HOLD_S)] if sim and drive_clocks else []
+    nodes["esc"] = EscNode(bus=bus, **{**common, "parameter_overrides": params + wide_beats + steady})
     nodes["thrust_allocation"] = ThrustAllocationNode(**common)
 
-    nodes["supervisor"] = SupervisorNode(**common)  # disarms the ESC on a breach (supervisor.*)
+    # disarms the ESC on a breach (supervisor.*)
+    nodes["supervisor"] = SupervisorNode(**{**common, "parameter_overrides": params + hold})
 
     # the second stop path (docs/architecture.md §8): the ESC arms only with its heartbeat; without /OE wired it
     # silences the chip over the same bus
-    nodes["output_guard"] = OutputGuardNode(bus=bus, **common)
-    # one process, one executor thread: a slow callback delays the ESC, the supervisor and the guard alike, and none
-    # of them can die or hang alone, so their heartbeats get a wide timeout (the vehicle runs them as processes)
-    nodes["output_guard"].set_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
-    nodes["esc"].set_heartbeat_timeout(SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)
-    if sim:  # simulated time may stand still on purpose (step gates): not a stalled /clock
-        nodes["supervisor"].set_clock_stall_timeout(30.0)
+    nodes["output_guard"] = OutputGuardNode(bus=bus, **{**common, "parameter_overrides": params + wide_beats})
 
     nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static
     # the vehicle's name on its graph, where commands that move a vehicle look for it (the launch layout's gateway
@@ -329,9 +337,6 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
             if name != "simulator":
                 sim_node.drive_clock(node.get_clock())
         sim_node.publish_clock_topic = False
-        # Simulated time stands still on purpose here (step gates, freeze_time): the ESC's wall-clock watchdog (for a
-        # dead /clock) must not trip during such a hold, or the run would depend on the machine's speed.
-        nodes["esc"].set_steady_watchdog_timeout(30.0)
     executor = ordered_executor(**kw)
     stepped = bool(sim and drive_clocks)
     for name, node in nodes.items():

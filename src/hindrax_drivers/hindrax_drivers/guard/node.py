@@ -32,10 +32,10 @@ ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindr
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
-starved guard ages a dead peer at wall speed), timeout ``esc.guard_heartbeat_timeout_s``. The two heartbeats are
-callbacks in both clock modes (the path the vehicle takes is the path the tests take). A small process of its own
-(EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's sensor code cannot
-take the second stop path with it.
+starved guard ages a dead peer at wall speed), timeout: the read-only node parameter ``heartbeat_timeout_s``
+(default ``esc.guard_heartbeat_timeout_s``). The two heartbeats are callbacks in both clock modes (the path the
+vehicle takes is the path the tests take). A small process of its own (EventsExecutor, two heartbeat inputs, one
+20 Hz timer) so that a fault in the supervisor's sensor code cannot take the second stop path with it.
 
 Run alone: ``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
@@ -49,17 +49,22 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from ..config import output_enable_gpio
+from ..config import Spec, output_enable_gpio
 from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from ..node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
 from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
 from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
 
-__all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "open_output_enable", "open_watchdog_feed", "main"]
+__all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "HEARTBEAT_TIMEOUT", "open_output_enable", "open_watchdog_feed", "main"]
 
+#: node parameter ``heartbeat_timeout_s`` (read-only; :func:`~hindrax_drivers.node_parameters.declare_node_parameter`)
+HEARTBEAT_TIMEOUT = Spec("float", "the ESC's and the supervisor's heartbeats count as silent when older than this "
+                         "(steady clock), s; default esc.guard_heartbeat_timeout_s, widened only where the three "
+                         "safety nodes share one executor thread (hindrax bringup: none can stall alone)", 0.05, 10.0)
 #: the guard's tick (decision, /OE, heartbeat), Hz
 GUARD_RATE_HZ = 20.0
 #: while asserted without /OE, the sleep registers are written again at most this often when the ESC commands, s
@@ -95,7 +100,9 @@ class OutputGuardNode(Node):
         super().__init__("output_guard", **kwargs)
         cfg = load_node_config(self, ("esc",))
         esc = cfg.esc
-        self.timeout_s = float(esc.guard_heartbeat_timeout_s)
+        #: the heartbeats' timeout, s: parameter ``heartbeat_timeout_s`` (:data:`HEARTBEAT_TIMEOUT`)
+        self.timeout_s = float(declare_node_parameter(self, "heartbeat_timeout_s", HEARTBEAT_TIMEOUT,
+                                                      esc.guard_heartbeat_timeout_s))
         self.core = GuardCore(self.timeout_s)
         period = 1.0 / GUARD_RATE_HZ
         #: a gap between two ticks counts in full up to the timeout, so that a starved guard still ages a dead peer
@@ -148,15 +155,6 @@ class OutputGuardNode(Node):
                               clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.wired:
             self._apply(True, force=True)  # /OE high from the start; the registers are the ESC's own start-up's job
-
-    def set_timeout(self, seconds: float) -> None:
-        """Heartbeat timeout, s (default ``esc.guard_heartbeat_timeout_s``). A single-process graph (``hindrax
-        bringup``), where the ESC, the supervisor and this node share one executor thread, widens it: there a busy
-        callback delays every peer alike, and no peer can fail alone."""
-        if not seconds > 0.0:
-            raise ValueError(f"guard timeout must be > 0 s, got {seconds}")
-        self.timeout_s = self.core.timeout_s = float(seconds)
-        self.esc_age.max_step_s = self.supervisor_age.max_step_s = self.timeout_s
 
     @property
     def wired(self) -> bool:

@@ -29,6 +29,9 @@ core's (:mod:`.core`, docs/architecture.md §8). This node does the ROS I/O and 
   ``raw/pca9685`` (every I2C transaction) and ``/diagnostics``. Neutral is written on disarm, on any exception in
   the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via
   :func:`run_node`).
+- Node parameters outside the vehicle file (read-only, :data:`HEARTBEAT_TIMEOUT`, :data:`STEADY_WATCHDOG`):
+  ``heartbeat_timeout_s`` (default ``esc.heartbeat_timeout_s``), ``steady_watchdog_timeout_s`` (default
+  ``esc.watchdog_timeout_s``).
 
 The bus is injected: ``smbus2.SMBus(esc.i2c_bus)`` on the Pi, an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` holding a
@@ -55,7 +58,9 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 
 from ..liveness import (HEARTBEAT_NAMES, AliveAge, ClockStepMonitor, HeartbeatPublisher, HeartbeatWatch, heartbeat_ok,
                         heartbeat_qos)
+from ..config import Spec
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
+from ..node_parameters import declare_node_parameter
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
@@ -66,6 +71,17 @@ from .core import (GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, EscCo
 __all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "main"]
 
 COMMAND_TOPIC = "thrusters/command_pulse_width"
+#: node parameter ``heartbeat_timeout_s`` (read-only; :func:`~hindrax_drivers.node_parameters.declare_node_parameter`)
+HEARTBEAT_TIMEOUT = Spec("float", "the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
+                         "is older than this (steady clock), s; default esc.heartbeat_timeout_s, widened only where "
+                         "the three safety nodes share one executor thread (hindrax bringup: none can stall alone)",
+                         0.05, 10.0)
+#: node parameter ``steady_watchdog_timeout_s``: the steady-clock watchdog counts wall time (time.monotonic) during
+#: which the executor runs but no command arrives; it covers a ROS clock that stops (use_sim_time with a dead
+#: /clock), where the ROS-time watchdog and output tick stand still
+STEADY_WATCHDOG = Spec("float", "no command for this long of steady-clock time (the executor running) -> all neutral, "
+                       "s; default esc.watchdog_timeout_s, widened only by an in-process simulator that holds "
+                       "simulated time on purpose (hindrax bringup's stepped graph)", 0.02, 60.0)
 
 
 class EscNode(Node):
@@ -78,8 +94,9 @@ class EscNode(Node):
         t = cfg.thrusters
         esc = cfg.esc
         self.period_s = 1.0 / esc.output_rate_hz
-        #: steady-clock (time.monotonic) watchdog: see :meth:`set_steady_watchdog_timeout`
-        self.steady_watchdog_s = esc.watchdog_timeout_s
+        #: steady-clock (time.monotonic) watchdog, s: parameter ``steady_watchdog_timeout_s`` (:data:`STEADY_WATCHDOG`)
+        self.steady_watchdog_s = float(declare_node_parameter(self, "steady_watchdog_timeout_s", STEADY_WATCHDOG,
+                                                              esc.watchdog_timeout_s))
         self.readback_interval_s = esc.readback_interval_s
         lights = cfg.lights
         self.lights_channel = lights.esc_channel
@@ -107,7 +124,9 @@ class EscNode(Node):
         now_s = lambda: self.get_clock().now().nanoseconds * 1e-9  # noqa: E731
         self.diag = DeviceDiagnostics("hindrax/esc_pca9685", f"i2c-{esc.i2c_bus}@0x{esc.i2c_address:02x}",
                                       now_s)
-        self.heartbeat_timeout_s = float(esc.heartbeat_timeout_s)
+        #: supervisor and guard heartbeat timeout, s: parameter ``heartbeat_timeout_s`` (:data:`HEARTBEAT_TIMEOUT`)
+        self.heartbeat_timeout_s = float(declare_node_parameter(self, "heartbeat_timeout_s", HEARTBEAT_TIMEOUT,
+                                                                esc.heartbeat_timeout_s))
         self.supervisor_age = AliveAge(2.0 * self.period_s)
         self.guard_age = AliveAge(2.0 * self.period_s)
         self.supervisor_ok, self.supervisor_message = False, ""
@@ -188,26 +207,6 @@ class EscNode(Node):
     @command_time.setter
     def command_time(self, value: Time) -> None:
         self.core.command_t_s = value.nanoseconds * 1e-9
-
-    def set_steady_watchdog_timeout(self, seconds: float) -> None:
-        """Steady-clock watchdog timeout, s (default ``esc.watchdog_timeout_s``).
-
-        The steady watchdog counts wall time (``time.monotonic``) during which the executor runs but no command
-        arrives; it covers a ROS clock that stops (``use_sim_time`` with a dead ``/clock``), where the ROS-time
-        watchdog and output tick stand still. An in-process simulator that holds simulated time on purpose (the
-        stepped graph of :func:`hindrax_ident.bringup.build_graph`) widens it so that a hold never trips it.
-        """
-        if not seconds > 0.0:
-            raise ValueError(f"steady watchdog timeout must be > 0 s, got {seconds}")
-        self.steady_watchdog_s = float(seconds)
-
-    def set_heartbeat_timeout(self, seconds: float) -> None:
-        """Supervisor and guard heartbeat timeout, s (default ``esc.heartbeat_timeout_s``); widened in a
-        single-process graph, where the peers share this node's executor thread (see
-        :meth:`hindrax_drivers.guard.node.OutputGuardNode.set_timeout`)."""
-        if not seconds > 0.0:
-            raise ValueError(f"heartbeat timeout must be > 0 s, got {seconds}")
-        self.heartbeat_timeout_s = float(seconds)
 
     # -- device
     def _configure_chip(self) -> bool:
@@ -472,7 +471,7 @@ class EscNode(Node):
 
     def steady_check(self) -> None:
         """Steady-clock watchdog (``time.monotonic``, independent of ROS time; see
-        :meth:`set_steady_watchdog_timeout`). Only executor-alive time counts (a gap between two checks counts at
+        parameter ``steady_watchdog_timeout_s``). Only executor-alive time counts (a gap between two checks counts at
         most two output periods), so a stalled process does not trip it when it resumes."""
         t = time.monotonic()
         self._safety_tick(t)

@@ -41,10 +41,12 @@ Time
     The checks run on a steady-clock timer; sample times are ROS time (``use_sim_time`` supported). A backward step
     of ROS time is detected at the next check or sample, whichever reads the time first, reported (``/diagnostics``
     warning ``clock_step``) and the stored times are shifted by the step, so no check goes blind and a sample taken
-    after the step is not shifted again; ROS time standing still for ``rate_window_s`` of steady
-    time while armed trips ("ROS time stalled": every ROS-time check would be blind).
+    after the step is not shifted again; ROS time standing still for ``clock_stall_timeout_s`` (default
+    ``supervisor.rate_window_s``) of steady time while armed trips ("ROS time stalled": every ROS-time check would
+    be blind).
 Configuration
-    ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``).
+    ``supervisor.*`` and ``pool.*`` of the vehicle file (``--ros-args --params-file ros_ws/config/hindrax.yaml``);
+    the read-only node parameter ``clock_stall_timeout_s``.
 
 Run alone: ``python -m hindrax_drivers.supervisor.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
@@ -69,11 +71,17 @@ from hindrax_msgs.srv import SetArmed
 from .. import frames
 from ..lean_cdr import cdr_decoder
 from ..liveness import ClockStepMonitor, HeartbeatPublisher
+from ..config import Spec
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from ..node_parameters import declare_node_parameter
 from .core import SupervisorCore, SupervisorLimits
 
 __all__ = ["SupervisorNode", "main"]
 
+#: node parameter ``clock_stall_timeout_s`` (read-only; :func:`~hindrax_drivers.node_parameters.declare_node_parameter`)
+CLOCK_STALL_TIMEOUT = Spec("float", "armed, ROS time standing still this long (steady clock) trips, s; default "
+                           "supervisor.rate_window_s, widened only by an in-process simulator that holds simulated "
+                           "time on purpose (hindrax bringup with the virtual pool)", 0.2, 120.0)
 #: A disarm request is repeated this often while the ESC still reports armed after a breach, s.
 DISARM_RETRY_S = 0.2
 #: no QoS event handlers (module docstring, "CPU")
@@ -105,8 +113,9 @@ class SupervisorNode(Node):
         self.heartbeat = HeartbeatPublisher(self, "supervisor", "hindrax/supervisor", "supervisor",
                                             event_callbacks=_NO_PUB_EVENTS)
         self.clock_monitor = ClockStepMonitor(self._now_s)
-        #: ROS time standing still this long (steady s) while armed trips (see set_clock_stall_timeout)
-        self.clock_stall_timeout_s = float(cfg.supervisor.rate_window_s)
+        #: ROS time standing still this long (steady s) while armed trips: parameter ``clock_stall_timeout_s``
+        self.clock_stall_timeout_s = float(declare_node_parameter(self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT,
+                                                                  cfg.supervisor.rate_window_s))
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10,
                                                 event_callbacks=_NO_PUB_EVENTS)
         ev = {"event_callbacks": _NO_SUB_EVENTS}
@@ -161,13 +170,6 @@ class SupervisorNode(Node):
         a = msg.linear_acceleration
         self._handle(self.core.on_imu(t, _stamp_s(msg.header.stamp), bytes(data[12:]),
                                       frames.flu_to_frd(np.array([a.x, a.y, a.z], dtype=float))))
-
-    def set_clock_stall_timeout(self, seconds: float) -> None:
-        """ROS time may stand still this long (steady s) while armed before it trips (default
-        ``supervisor.rate_window_s``). An in-process simulator that holds simulated time on purpose widens it."""
-        if not seconds > 0.0:
-            raise ValueError(f"clock stall timeout must be > 0 s, got {seconds}")
-        self.clock_stall_timeout_s = float(seconds)
 
     def on_esc(self, msg: ThrusterPwm) -> None:
         # an output state that became unknown while armed may still be thrusting: keep checking
