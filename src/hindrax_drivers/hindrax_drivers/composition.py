@@ -21,7 +21,11 @@ Groups (:data:`GROUPS`):
     MS5837 and ICM-20948: the two sensors on the shared I2C bus (each node opens the bus itself; the kernel
     serialises the transfers).
 ``serial_sensors_node``
-    DVL-75 and Ping1D: the two serial devices (each keeps its port's reader thread).
+    DVL-75 and Ping1D: the two serial devices (each keeps its port's reader thread); and the static transforms
+    (``static_tf``: publishes ``/tf_static`` once, latched, and then only waits), which alone were a whole Python
+    process with its DDS participant: 39 MB of proportional set size for one message (``make bench``,
+    ``launch_pss_mb_static_tf``). A light process of no safety role: a driver's failure takes the transforms with it
+    for the 2 s of the respawn, and late subscribers get them again from the new process.
 ``actuation_node``
     thrust allocation and ESC output: the allocation's commands reach the ESC on ``thrusters/command_pulse_width``
     inside the process (one participant), taken by the ESC's subscription callback as from any other publisher
@@ -55,7 +59,7 @@ NODE_CLASSES: dict[str, str] = {
 #: console script -> the nodes it composes, in construction order (module docstring)
 GROUPS: dict[str, tuple[str, ...]] = {
     "i2c_sensors_node": ("ms5837", "icm20948"),
-    "serial_sensors_node": ("dvl75", "ping1d"),
+    "serial_sensors_node": ("dvl75", "ping1d", "static_tf"),
     "actuation_node": ("thrust_allocation", "esc"),
 }
 
@@ -100,7 +104,8 @@ def i2c_sensors_main(args: Sequence[str] | None = None) -> int:
 
 
 def serial_sensors_main(args: Sequence[str] | None = None) -> int:
-    """Console script ``serial_sensors_node``: DVL-75 and Ping1D in one process (module docstring)."""
+    """Console script ``serial_sensors_node``: DVL-75, Ping1D and the static transforms in one process (module
+    docstring)."""
     return run_group(GROUPS["serial_sensors_node"], args)
 
 

@@ -148,7 +148,7 @@ def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
 #: modules no vehicle process may hold: the virtual pool (simulator, emulated hardware) and the bench's own code
 _POOL_MODULES = ("hindrax_ident.sim", "hindrax_ident.benchmarks.launch_layout", "hindrax_ident.benchmarks.stack")
 #: the processes that run drivers or safety nodes only: they hold no scipy either (frames and mountings are numpy)
-_LEAN_PROCESSES = ("serial_sensors", "i2c_sensors", "actuation", "static_tf", "supervisor", "output_guard", "gateway",
+_LEAN_PROCESSES = ("serial_sensors", "i2c_sensors", "actuation", "supervisor", "output_guard", "gateway",
                    "recorder")
 _IMPORTS = """
 import importlib, json, sys
