@@ -185,10 +185,10 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
 
 
 @pytest.mark.ros
-def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_and_streams_drop_while_a_goal_runs():
-    """On the system clock the controller's topic inputs (but controller/setpoint) live on its intake node: the tick
-    hands them over (the armed flag, sensor samples at their reception time), and a running identification goal
-    drops the sensor streams from the intake, an idle one opens them again."""
+def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_goal_runs():
+    """On the system clock (the vehicle) the controller's topic inputs are subscription callbacks of the node itself,
+    as with use_sim_time (issue 47 item 1: one input path): the armed flag and sensor samples arrive at once (counted at
+    their arrival), and a running identification goal drops the sensor streams, an idle one opens them again."""
     import time
 
     from rclpy.executors import SingleThreadedExecutor
@@ -206,28 +206,28 @@ def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_and_streams_drop_
         try:
             streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
                        "/allocation/status", "/wrench", "/thrusters/pulse_width"}
-            polled = streams | {"/identification/status"}
-            intake_topics = lambda: {s.topic_name for s in node.intake.node.subscriptions}  # noqa: E731
-            assert intake_topics() == polled and not polled & {s.topic_name for s in node.subscriptions}
+            inputs = streams | {"/identification/status"}
+            topics = lambda: {s.topic_name for s in node.subscriptions} - {"/controller/setpoint"}  # noqa: E731
+            assert topics() == inputs and "controller_intake" not in probe.get_node_names()
             pwm = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
             imu = probe.create_publisher(Imu, "imu/data_raw", 10)
             status = probe.create_publisher(ManeuverStatus, "identification/status", 10)
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
             wait_until(lambda: all(p.get_subscription_count() == 1 for p in (pwm, imu, status)), 10, spin,
-                       "intake matched")
+                       "subscriptions matched")
             t0 = time.time_ns() * 1e-9
             pwm.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True))
             m = Imu()
             m.header.stamp = probe.get_clock().now().to_msg()
             imu.publish(m)
-            wait_until(lambda: node._armed and "icm20948_gyro" in node._last_sample_s, 10, spin, "taken by the tick")
+            wait_until(lambda: node._armed and "icm20948_gyro" in node._last_sample_s, 10, spin, "taken")
             assert t0 <= node._last_sample_s["icm20948_gyro"] <= time.time_ns() * 1e-9
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
-            wait_until(lambda: not streams & intake_topics(), 10, spin, "streams dropped while the goal runs")
+            wait_until(lambda: not streams & topics(), 10, spin, "streams dropped while the goal runs")
             # the armed flag went with the streams: enabling waits for a fresh one after the goal
-            assert node._ident_running and intake_topics() == {"/identification/status"} and not node._armed_seen
+            assert node._ident_running and topics() == {"/identification/status"} and not node._armed_seen
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
-            wait_until(lambda: intake_topics() == polled, 10, spin, "streams open again")
+            wait_until(lambda: topics() == inputs, 10, spin, "streams open again")
             assert "not armed" in str(node._refusal())
         finally:
             ex.shutdown()
@@ -249,13 +249,13 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
     with ros_context() as ctx:
         node = ControllerNode(config=cfg, context=ctx, model_file="")
         ticks = {"n": 0}
-        take = node.take_inputs
+        odometry = node._publish_odometry
 
-        def counted_take() -> None:
+        def counted(t: float) -> None:
             ticks["n"] += 1
-            take()
+            odometry(t)
 
-        node.take_inputs = counted_take  # the first thing every tick does
+        node._publish_odometry = counted  # the last thing every tick does
         probe = rclpy.create_node("probe", context=ctx)
         status = probe.create_publisher(ManeuverStatus, "identification/status", 10)
         ex = EventsExecutor(context=ctx)
@@ -269,7 +269,7 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
             return ticks["n"] - n0
 
         try:
-            wait_until(lambda: status.get_subscription_count() == 1 and ticks["n"] >= 3, 10, spin, "intake matched")
+            wait_until(lambda: status.get_subscription_count() == 1 and ticks["n"] >= 3, 10, spin, "matched")
             rate = cfg.control.rate_hz  # bounds wide enough for a loaded machine, far from the other rate
             assert 0.5 * rate <= ticks_in(1.0) <= 1.1 * rate
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
@@ -283,27 +283,3 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
             ex.shutdown()
             probe.destroy_node()
             node.destroy_node()
-
-
-def test_every_input_handler_reads_a_lean_message_as_an_rclpy_one():
-    """On the system clock every controller input is taken lean (rosbags' decoding of the CDR bytes): the wrench
-    identity that tells the controller's own wrench from a pilot's, and the fields the other handlers read, are the
-    same from the lean message as from rclpy's object of the same bytes."""
-    from hindrax_drivers.lean_cdr import cdr_decoder
-    from hindrax_ident.control.node import RUNNING_PHASES, _key, _wrench6
-    from hindrax_msgs.msg import AllocationStatus
-    from rclpy.serialization import serialize_message
-
-    w = WrenchStamped()
-    w.header.stamp.sec, w.header.stamp.nanosec = 1_795_000_000, 123_456_789
-    w.wrench.force.x, w.wrench.force.z, w.wrench.torque.z = 1.2345678901234, -0.3, 1e-12
-    lean = cdr_decoder(WrenchStamped)(serialize_message(w))
-    assert _key(lean) == _key(w)
-    status = AllocationStatus(rejected=False)
-    status.requested_wrench.force.y, status.achieved_wrench.torque.x = 2.5, -0.75
-    lean_status = cdr_decoder(AllocationStatus)(serialize_message(status))
-    assert bool(lean_status.rejected) is False
-    for field in ("requested_wrench", "achieved_wrench"):
-        assert np.array_equal(_wrench6(getattr(lean_status, field)), _wrench6(getattr(status, field)))
-    phase = ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING)
-    assert cdr_decoder(ManeuverStatus)(serialize_message(phase)).phase in RUNNING_PHASES

@@ -32,14 +32,11 @@ Publishes
     (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz from its sensor conditioning (REP-105,
     :mod:`.odometry`), while its sensor streams are open (not while an identification goal runs).
 CPU
-    On the system clock (the vehicle; ``use_sim_time`` false) the topic inputs but ``controller/setpoint`` are polled
-    subscriptions (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor
-    wake-up per message (about 10 messages/s while a goal runs, 250 while the streams are open); every tick first
-    hands what arrived to the same handlers, each sensor sample counted at its DDS reception time, so the tick
-    decides (yield, staleness, the law) on what callbacks would have delivered by then. While an identification goal
-    runs the controller cannot be enabled and its sensor streams are closed, so the tick slows from ``control.rate_hz``
-    to :data:`GOAL_TICK_S` until the goal ends (docs/architecture.md §10.1). With ``use_sim_time`` the inputs are
-    callbacks and the tick keeps its rate.
+    Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual pool
+    and the tests take the same path; about 250 messages/s while the streams are open, 2 while a goal runs), each
+    sensor sample counted at its arrival. While an identification goal runs the controller cannot be enabled and its
+    sensor streams are closed, so the tick slows from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends
+    (docs/architecture.md §10.1).
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
     ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
@@ -69,7 +66,6 @@ from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import run_node
 from hindrax_drivers.node_parameters import node_config
-from hindrax_drivers.polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus, ThrusterPwm
 
 from ..identification.maneuvers import HoldController, dof_authority
@@ -88,14 +84,14 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
 STATUS_PERIOD_S = 0.5
 #: period of ``odom`` and the ``odom -> base_link`` transform on ``/tf`` (s): 10 Hz, enough for a 3D view
 ODOM_PERIOD_S = 0.1
-#: tick period (s) while an identification goal runs, on the system clock: the tick then only takes the goal's phase
+#: tick period (s) while an identification goal runs: the tick then only takes the goal's phase
 #: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams,
 #: ``thrusters/pulse_width`` among them, are closed. The goal's end is seen within 0.2 s (the streams open then;
 #: enabling waits for their first samples and a fresh armed flag anyway, :meth:`ControllerNode._refusal`)
 GOAL_TICK_S = 0.2
 
 
-class ControllerNode(PolledInputsMixin, Node):
+class ControllerNode(Node):
     """The controller as a ROS node (module docstring). config: a VehicleConfig (default: the node's parameters);
     model_file: overrides the ``model_file`` parameter. Raises :class:`ConfigError` for an invalid configuration."""
 
@@ -147,10 +143,6 @@ class ControllerNode(PolledInputsMixin, Node):
         sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
         self._sub_ev = sub_ev
-        #: on the system clock the topic inputs are polled at every tick (module docstring, "CPU"; :meth:`take_inputs`
-        #: counts each sample at its DDS reception time, ``received_timestamp``, system clock = the node's ROS time);
-        #: None with use_sim_time (callbacks)
-        self.intake: PolledInputs | None = self.open_inputs("intake")
         self._streams: list = []
         self._open_streams()
         self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
@@ -163,9 +155,8 @@ class ControllerNode(PolledInputsMixin, Node):
         self.create_service(Trigger, "controller/hold", self._on_hold)
         self.create_service(SetBool, "controller/enable", self._on_enable)
         self._tick_timer = self.create_timer(self.tick_s, self._on_tick)
-        #: the slow tick while a goal runs (system clock only), started and stopped by :meth:`_on_ident_status`
-        self._goal_timer = (None if self.intake is None
-                            else self.create_timer(GOAL_TICK_S, self._on_tick, autostart=False))
+        #: the slow tick while a goal runs, started and stopped by :meth:`_on_ident_status`
+        self._goal_timer = self.create_timer(GOAL_TICK_S, self._on_tick, autostart=False)
         for line in self._report:
             log.info(line)
         log.info(f"controller ready (disabled): model {self.model.source}, {s.rate_hz:g} Hz")  # last: it is ready
@@ -187,21 +178,16 @@ class ControllerNode(PolledInputsMixin, Node):
         ]
 
     def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
-        """A topic input: polled on the system clock (taken by :meth:`take_inputs` at every tick), a callback with
-        ``use_sim_time``. The depths hold what arrives in 0.4-2 s, many ticks. Every handler only reads fields, so
-        every input is taken lean when polled (CDR decoded by rosbags, :mod:`hindrax_drivers.lean_cdr`), as in the
-        identification node."""
-        return subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=True, **self._sub_ev)
+        """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
+        room for an executor held up on a loaded machine."""
+        return self.create_subscription(msg_type, topic, handler, depth, **self._sub_ev)
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
         conditioned state: after the goal the hold starts from fresh samples, and ``_refusal`` says "no data yet"
         until they arrive (docs/control.md §3)."""
         for sub in self._streams:
-            if self.intake is None:
-                self.destroy_subscription(sub)
-            else:
-                self.intake.remove(sub)
+            self.destroy_subscription(sub)
         self._streams = []
         self._pending = []
         self._last_sample_s.clear()
@@ -212,8 +198,7 @@ class ControllerNode(PolledInputsMixin, Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _add(self, samples: list) -> None:
-        received_s = self.intake.received_s if self.intake is not None else None
-        now = received_s if received_s is not None else self._now_s()
+        now = self._now_s()
         for dev, _s in samples:
             self._last_sample_s[dev] = now
         self._pending.extend(samples)
@@ -239,7 +224,7 @@ class ControllerNode(PolledInputsMixin, Node):
             self._close_streams()
         elif not running and not self._streams:
             self._open_streams()
-        if self._goal_timer is not None and running != self._ident_running:
+        if running != self._ident_running:
             # one tick timer runs at a time: the slow one while the goal runs, the control-rate one otherwise
             (self._goal_timer if running else self._tick_timer).reset()
             (self._tick_timer if running else self._goal_timer).cancel()
@@ -350,7 +335,6 @@ class ControllerNode(PolledInputsMixin, Node):
 
     # ------------------------------------------------------------------ control tick
     def _on_tick(self) -> None:
-        self.take_inputs()
         t = self._now_s()
         self.loop.add(self._pending)
         self._pending = []
