@@ -6,6 +6,8 @@ deadband +-25 us; PCA9685 at prescale 30 and 25 MHz: one count = 31 / 25 MHz = 1
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +15,6 @@ import pytest
 from hindrax_drivers.pca9685.core import (COMMAND_NODE, GUARD_CONFIRM_S, OUTPUT_COMMANDING, OUTPUT_NEUTRAL,
                                           OUTPUT_UNKNOWN, RETRY_MAX_S, RETRY_MIN_S, EscCore, EscOutput,
                                           command_fault, command_source_fault, heartbeat_verdict)
-from hindrax_msgs.msg import ThrusterPwm
 
 COUNT_US = 1.24
 
@@ -42,8 +43,12 @@ def ready(core, clock, wait_s=1.0):
 
 
 def test_output_states_are_the_message_constants():
-    assert (OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING) == (
-        ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT_NEUTRAL, ThrusterPwm.OUTPUT_COMMANDING)
+    """The constants as hindrax_msgs/msg/ThrusterPwm.msg defines them (read from the definition, so this core's
+    tests need no ROS: they also run under other Pythons, test/test_pure_cores_other_pythons.py)."""
+    definition = (Path(__file__).resolve().parents[2] / "hindrax_msgs" / "msg" / "ThrusterPwm.msg").read_text()
+    constants = dict(re.findall(r"^uint8 (OUTPUT_\w+)=(\d+)$", definition, re.MULTILINE))
+    assert constants == {"OUTPUT_UNKNOWN": str(OUTPUT_UNKNOWN), "OUTPUT_NEUTRAL": str(OUTPUT_NEUTRAL),
+                         "OUTPUT_COMMANDING": str(OUTPUT_COMMANDING)}
 
 
 # rule -> (command widths, its armed flag, expected fault substring or "" for accepted)
