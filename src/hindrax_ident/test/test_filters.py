@@ -149,3 +149,33 @@ def test_leading_missing_samples_are_nan():
 def test_errors(call):
     with pytest.raises(EstimationError):
         call()
+
+
+def test_linear_kalman_steps_as_filterpy_does():
+    """The online filters' own predict/update (estimation/kalman.py, kept out of filterpy for its scipy.stats import)
+    give filterpy's KalmanFilter state and covariance, step for step: time-varying F and Q, a two-row H with a zero
+    row (a missing measurement, as AccelAidedFilter fuses), and R given per update."""
+    from filterpy.kalman import KalmanFilter
+
+    from hindrax_ident.estimation.kalman import LinearKalman
+
+    rng = np.random.default_rng(7)
+    ref, own = KalmanFilter(dim_x=3, dim_z=2), LinearKalman(3)
+    x0, p0 = rng.normal(size=(3, 1)), np.diag(rng.uniform(0.1, 2.0, 3))
+    ref.x, ref.P = x0.copy(), p0.copy()
+    own.x, own.P = x0.copy(), p0.copy()
+    for k in range(200):
+        dt = float(rng.uniform(0.005, 0.1))
+        F, Q = transition_matrix(dt), process_noise(dt, float(rng.uniform(0.1, 10.0)))
+        ref.predict(F=F, Q=Q)
+        own.predict(F, Q)
+        H = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        if k % 3 == 0:
+            H[1] = 0.0  # the second sensor missing this step: no information from its row
+        R = np.diag(rng.uniform(1e-4, 1e-1, 2))
+        z = rng.normal(size=(2, 1))
+        ref.update(z, R=R, H=H)
+        own.update(z, H=H, R=R)
+        np.testing.assert_allclose(own.x, ref.x, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(own.P, ref.P, rtol=1e-12, atol=1e-12)
+    assert own.P[2, 2] < p0[2, 2]  # the filter did fuse: the acceleration is known better than at the start

@@ -28,7 +28,7 @@ feedback linearisation, whose feedforward part this is; docs/control.md §2). Fo
 
 Depth is NED z of the body origin (down positive); the heave force is projected on the body z axis as
 Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range: the floor under the vehicle is a local plane
-(:class:`FloorEstimator`, a filterpy Kalman filter on the floor depth under the body origin and its gradient), fed
+(:class:`FloorEstimator`, a linear Kalman filter on the floor depth under the body origin and its gradient), fed
 with every range as a floor point (the Ping1D along body z and the four DVL-75 beams, each beam's variance
 including the plane's own error at its distance from the altimeter's footprint, :data:`FLOOR_SLOPE_CHANGE_STD`); the
 depth hold follows
@@ -39,7 +39,10 @@ in NED and a_d the reference model of the altitude setpoint: the floor's rate an
 are fed forward before the altimeter sees them.
 
 Why our own code: the reference model, feedforward and anti-windup are a few lines each around the model, and no
-maintained Python library implements marine model-based PID with reference feedforward; filterpy gives the filter.
+maintained Python library implements marine model-based PID with reference feedforward. The floor filter steps with
+:class:`~hindrax_ident.estimation.kalman.LinearKalman`, filterpy's predict/update equations: ``filterpy.kalman``
+itself would bring scipy.stats into the controller's process (66 MB of proportional set size, that module's
+docstring).
 
 Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north.
 """
@@ -50,11 +53,11 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.frames import wrap_angle
 
+from ..estimation.kalman import LinearKalman
 from .model import AxisModel, ControlModel
 
 __all__ = ["ControlSettings", "AxisGains", "design_gains", "ReferenceModel", "PositionAxis", "VelocityAxis",
@@ -350,7 +353,8 @@ def rotation_ned_from_body(rpy_rad) -> np.ndarray:
 
 class FloorEstimator:
     """The floor under the vehicle as a local plane: depth z_f at the body origin's horizontal position (NED z, m)
-    and its gradient (g_n, g_e) (depth change per metre north and east); a linear Kalman filter (filterpy).
+    and its gradient (g_n, g_e) (depth change per metre north and east); a linear Kalman filter
+    (:class:`~hindrax_ident.estimation.kalman.LinearKalman`).
 
     Each range is a point of the floor: the Ping1D along the body z axis and each DVL-75 beam
     (:func:`hindrax_drivers.dvl75.protocol.beam_directions_frd`) give the point's depth and horizontal offset from
@@ -365,7 +369,7 @@ class FloorEstimator:
     def __init__(self, depth_walk_m_sqrt_s: float = 0.005, gradient_walk_per_sqrt_s: float = 0.02,
                  gradient_prior_std: float = 0.2,
                  gradient_walk_per_sqrt_m: float | None = None) -> None:
-        self.kf = KalmanFilter(dim_x=3, dim_z=1)
+        self.kf = LinearKalman(3)
         self.q = np.diag([depth_walk_m_sqrt_s ** 2, gradient_walk_per_sqrt_s ** 2, gradient_walk_per_sqrt_s ** 2])
         walk_m = FLOOR_GRADIENT_WALK_PER_SQRT_M if gradient_walk_per_sqrt_m is None else gradient_walk_per_sqrt_m
         self.q_per_m = np.diag([0.0, walk_m ** 2, walk_m ** 2])
@@ -388,9 +392,8 @@ class FloorEstimator:
             return
         dt = t_s - self.t_s
         vn, ve = (float(x) if math.isfinite(x) else 0.0 for x in velocity_ne_m_s)
-        self.kf.F = np.array([[1.0, vn * dt, ve * dt], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-        self.kf.Q = self.q * dt + self.q_per_m * (math.hypot(vn, ve) * dt)
-        self.kf.predict()
+        self.kf.predict(F=np.array([[1.0, vn * dt, ve * dt], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]),
+                        Q=self.q * dt + self.q_per_m * (math.hypot(vn, ve) * dt))
         self.t_s = float(t_s)
 
     def update_point(self, t_s: float, offset_ne_m, depth_m: float, std_m: float, velocity_ne_m_s) -> None:

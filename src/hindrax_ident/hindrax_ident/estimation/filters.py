@@ -27,8 +27,9 @@ Tuning: ``jerk_psd`` has units (measured unit)^2/s^5 (e.g. m^2/s^5); the filter 
 grows roughly as (jerk_psd / measurement_std^2)^(1/6) for position and ^(1/4) for velocity
 measurements. ``measurement_std`` is the sensor noise standard deviation in the measured unit.
 
-We use filterpy's ``KalmanFilter`` (predict/update/batch_filter/rts_smoother) rather than our own
-equations; this module only builds F, Q, H, R and handles time stamps and missing data.
+The offline smoother uses filterpy's ``KalmanFilter`` (batch_filter/rts_smoother); the online filter steps with
+:class:`~.kalman.LinearKalman` (filterpy's predict/update equations; why: that module's docstring, 66 MB per process);
+this module only builds F, Q, H, R and handles time stamps and missing data.
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ from __future__ import annotations
 from typing import Optional, Tuple
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
+from .kalman import LinearKalman
 from .least_squares import EstimationError, as_float_array, check_same_length, check_time_vector
 
 __all__ = ["KinematicKalmanFilter", "smooth_kinematics", "transition_matrix", "process_noise"]
@@ -87,11 +88,8 @@ def _initial_state(measured: str, z0: float, measurement_std: float,
     return x0, P0
 
 
-def _make_kf(measured: str, measurement_std: float) -> KalmanFilter:
-    kf = KalmanFilter(dim_x=3, dim_z=1)
-    kf.H = np.array([[1.0, 0.0, 0.0]]) if measured == "position" else np.array([[0.0, 1.0, 0.0]])
-    kf.R = np.array([[measurement_std**2]])
-    return kf
+def _measurement_matrix(measured: str) -> np.ndarray:
+    return np.array([[1.0, 0.0, 0.0]]) if measured == "position" else np.array([[0.0, 1.0, 0.0]])
 
 
 def _is_missing(z) -> bool:
@@ -125,7 +123,7 @@ class KinematicKalmanFilter:
         self.measurement_std = float(measurement_std)
         self.initial_velocity_std = float(initial_velocity_std)
         self.initial_acceleration_std = float(initial_acceleration_std)
-        self._kf = _make_kf(measured, self.measurement_std)
+        self._kf = LinearKalman(3, _measurement_matrix(measured), np.array([[self.measurement_std**2]]))
         self.reset()
 
     def reset(self) -> None:
@@ -260,7 +258,11 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
         raise EstimationError("z has no valid (finite) sample")
     i0 = int(np.argmax(valid))
     tt, zs_arr = t[i0:], zz[i0:]
-    kf = _make_kf(measured, float(measurement_std))
+    from filterpy.kalman import KalmanFilter  # here, not at the top: the node processes step LinearKalman only
+
+    kf = KalmanFilter(dim_x=3, dim_z=1)
+    kf.H = _measurement_matrix(measured)
+    kf.R = np.array([[float(measurement_std)**2]])
     x0, P0 = _initial_state(measured, float(zs_arr[0]), float(measurement_std),
                             float(initial_velocity_std), float(initial_acceleration_std))
     kf.x = x0

@@ -2,8 +2,9 @@
 
 Same state model as :mod:`hindrax_ident.estimation.filters` (x = [position, velocity, acceleration] of one
 DOF, constant acceleration driven by white jerk, F(dt) and Q(dt) from its :func:`transition_matrix` and
-:func:`process_noise`), with TWO scalar measurements fused by filterpy's ``KalmanFilter`` (dim_z = 2; a missing
-one gets a zero row of H, so it carries no information):
+:func:`process_noise`), with TWO scalar measurements (dim_z = 2; a missing one gets a zero row of H, so it carries no
+information), fused online by :class:`~hindrax_ident.estimation.kalman.LinearKalman` (filterpy's equations without
+its import cost, that module's docstring) and offline by filterpy's ``KalmanFilter`` (batch filter, RTS smoother):
 
 * the primary sensor: DVL velocity (``measured='velocity'``, H = [0 1 0]) or depth from pressure
   (``measured='position'``, H = [1 0 0]);
@@ -21,9 +22,9 @@ import math
 from typing import Optional
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
 from ..estimation.filters import process_noise, transition_matrix
+from ..estimation.kalman import LinearKalman
 from ..estimation.least_squares import EstimationError
 
 __all__ = ["AccelAidedFilter", "smooth_with_acceleration", "smooth_with_rate"]
@@ -61,8 +62,7 @@ class AccelAidedFilter:
             if not (math.isfinite(v) and v > 0):
                 raise EstimationError(f"{name} must be > 0, got {v}")
         self.measured, self.std, self.accel_std, self.jerk_psd = measured, float(std), float(accel_std), float(jerk_psd)
-        self.kf = KalmanFilter(dim_x=3, dim_z=2)
-        self.kf.R = np.diag([self.std ** 2, self.accel_std ** 2])
+        self.kf = LinearKalman(3, R=np.diag([self.std ** 2, self.accel_std ** 2]))
         self.t_s: Optional[float] = None
         self.initialised = False
 
@@ -133,6 +133,8 @@ def _smooth_aided(t_s, z, accel, measured: str, std: float, accel_std: float, je
         raise EstimationError("no primary measurement")
     i0 = int(np.argmax(valid))
     tt, zz, aa = t[i0:], z[i0:], a[i0:]
+    from filterpy.kalman import KalmanFilter  # here, not at the top: the node processes step LinearKalman only
+
     kf = KalmanFilter(dim_x=3, dim_z=2)
     kf.R = np.diag([std ** 2, accel_std ** 2])
     x0, p0 = _init(measured, float(zz[0]), float(aa[0]) if (aid_index == 2 and np.isfinite(aa[0])) else None, std)

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import VehicleConfig
@@ -121,7 +120,7 @@ class SensorState:
     def __post_init__(self) -> None:
         sensors = self.cfg.sensors
         roll, pitch, yaw = sensors.icm20948.mounting_rpy_rad
-        r_mount = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # sensor -> base_link (FLU)
+        r_mount = rotation_ned_from_body(roll, pitch, yaw)  # sensor -> base_link (FLU): the same zyx Euler matrix
         self._frd_from_sensor = frames.R_FLU_FRD @ r_mount
         self._p0 = float(self.cfg.environment.surface_pressure_pa)
         self._rho_g = float(self.cfg.water_density_kg_m3 * self.cfg.gravity_m_s2)

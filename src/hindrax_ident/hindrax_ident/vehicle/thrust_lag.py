@@ -11,7 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
 __all__ = ["ThrustLag"]
 
@@ -55,5 +54,7 @@ class ThrustLag:
         s = fc[0] if force_start is None else float(force_start)
         start[0] = s
         if fc.size > 1:
+            from scipy import signal  # here: the offline fits call this; the node processes only advance the lag
+
             start[1:] = signal.lfilter([1.0 - e_full], [1.0, -e_full], fc[:-1], zi=[e_full * s])[0]
         return start, fc + (start - fc) * e_half, fc + (start - fc) * e_full
