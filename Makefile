@@ -6,7 +6,7 @@ STAMP := $(VENV)/.hindrax-setup-done
 # Every process started from here keeps ROS 2 discovery on loopback (docs/architecture.md §11.4).
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 
-SETUP_INPUTS := requirements.txt requirements-colcon.txt constraints.txt scripts/setup_venv.sh \
+SETUP_INPUTS := requirements.txt requirements-colcon.txt constraints.txt scripts/setup_venv.sh scripts/progress.sh \
 	src/hindrax_msgs/CMakeLists.txt src/hindrax_msgs/package.xml \
 	$(wildcard src/hindrax_msgs/msg/*.msg src/hindrax_msgs/srv/*.srv src/hindrax_msgs/action/*.action) \
 	src/hindrax_drivers/setup.py src/hindrax_drivers/package.xml \

@@ -28,17 +28,8 @@ for tool in cmake ninja; do
 done
 
 # Progress (2-3 minutes on a fresh machine): one line updated in place on a terminal, a line per step in a log.
-t0=$SECONDS
-step_no=0
 STEPS=5
-show() {
-  if [ -t 1 ]; then printf '\r%s  %ds\033[K' "$STEP" $((SECONDS - t0)); else echo "$STEP"; fi
-}
-step() { step_no=$((step_no + 1)); STEP="setup [$step_no/$STEPS] $*"; show; }
-tick_pid=""
-ticking() { if [ -t 1 ]; then { while sleep 2; do show; done; } & tick_pid=$!; fi; }
-stop_ticking() { if [ -n "$tick_pid" ]; then kill "$tick_pid" 2>/dev/null; wait "$tick_pid" 2>/dev/null; tick_pid=""; fi; }
-trap stop_ticking EXIT
+source scripts/progress.sh
 
 step "Python venv $VENV"
 [ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"
@@ -92,5 +83,5 @@ pipq install -q --no-deps --no-build-isolation -e src/hindrax_drivers -e src/hin
 # Smoke check: the interfaces and rclpy import in the venv.
 step "import check"
 "$PY" -c 'import rclpy, tf2_msgs.msg, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_ident'
-if [ -t 1 ]; then echo; fi
+progress_done
 echo "setup: ready in $VENV ($((SECONDS - t0)) s)"
