@@ -51,8 +51,10 @@ def _schedule(t_rel: float):
     return (2, LEVELS_N[int(k)]) if r < RUN_S else (3, None)  # RUNNING / RETURNING
 
 
-def write_surge_campaign_bag(path, cfg, seed: int = 5) -> dict:
-    """The campaign bag of the module docstring at ``path``; returns the surge truth of the vehicle file."""
+def write_surge_campaign_bag(path, cfg, seed: int = 5, walk_m_s: float = 0.0) -> dict:
+    """The campaign bag of the module docstring at ``path``; returns the surge truth of the vehicle file.
+    ``walk_m_s``: a random walk (m/s per sqrt(s)) the DVL measures on top of the force's response, the vehicle
+    pushed about by what the force does not explain (drawn from its own generator: 0 keeps the bag as it was)."""
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import FluidPressure
 
@@ -79,6 +81,7 @@ def write_surge_campaign_bag(path, cfg, seed: int = 5) -> dict:
     n = int(round(total / dt))
     widths, force = {}, {}
     v, f_lag = 0.0, 0.0
+    walk = np.cumsum(np.random.default_rng(seed + 1).normal(0.0, walk_m_s * math.sqrt(dt), n + 1))
     with BagWriter(path, WriterOptions(fsync=False)) as w:
         for topic, type_name in (("/identification/status", "hindrax_msgs/msg/ManeuverStatus"),
                                  ("/thrusters/pulse_width", "hindrax_msgs/msg/ThrusterPwm"),
@@ -101,7 +104,7 @@ def write_surge_campaign_bag(path, cfg, seed: int = 5) -> dict:
             if i % 100 == 0:  # 10 Hz: DVL (velocity FLU) and pressure
                 d = Dvl(velocity_valid=True, delta_time_s=0.1)
                 d.header.frame_id = "base_link"
-                d.velocity_m_s.x = v + 0.01 * float(rng.standard_normal())
+                d.velocity_m_s.x = v + walk[i] + 0.01 * float(rng.standard_normal())
                 d.orientation.w = 1.0
                 w.write("/dvl/data", t_ns, serialize_message(_stamped(d, t)))
                 w.write("/pressure/fluid_pressure", t_ns,
@@ -136,8 +139,11 @@ def test_ident_bag_and_ident_fit_give_the_same_values_and_intervals(tmp_path, ca
         assert f["value"] == pytest.approx(e["value"], rel=1e-12, abs=1e-15), name
         assert f["ci95"] == pytest.approx(e["ci95"], rel=1e-12, abs=1e-15), name
         assert f["std"] == pytest.approx(e["std"], rel=1e-12, abs=1e-15), name
-    # a real fit: inertia and quadratic damping near the vehicle file's, inside their intervals
+    # a real fit: inertia and quadratic damping near the vehicle file's, inside their intervals, and a model that
+    # beats holding the velocity on the same held-out samples (issue 46.1)
     s = a["dofs"]["surge"]
+    assert s["persistence"]["beats"] and s["verdict"] != "no model beats holding the velocity"
+    assert s["persistence"]["nrmse"] < 0.5 * s["persistence"]["nrmse_hold"]
     for name in ("inertia", "quadratic_damping"):
         assert s[name]["value"] == pytest.approx(truth[name], rel=0.05), name
         assert s[name]["ci95"][0] <= truth[name] <= s[name]["ci95"][1], name
@@ -188,3 +194,27 @@ def test_one_verdict_path_for_both_document_builders(tmp_path):
     assert compared >= 5  # inertia, added mass, both damping terms, bias
     assert "prior" in b["inertia"] and b["inertia"]["fit_value"] == pytest.approx(float(core.theta[0]))
     assert abs(b["inertia"]["value"] - truth["inertia"]) < 0.05 * truth["inertia"]
+
+
+def test_ident_bag_says_when_no_model_beats_holding_the_velocity(tmp_path, capsys):
+    """Issue 46.1 for ``hindrax ident bag``: the same surge campaign, but the DVL measures a random walk of 1 m/s
+    per sqrt(s) on top of the force's response. For a random walk the best prediction of a later velocity from the
+    initial one IS the initial one, and over a 10 s segment the walk moves ~3 m/s while the ladder's levels move the
+    vehicle ~0.5 m/s: no model of the force beats holding the velocity by the 5 % margin. The command prints the
+    verdict, identification.yaml carries it with both scores, and no parameter is trusted."""
+    cfg = load_config(default_config_path())
+    bag = tmp_path / "campaign"
+    write_surge_campaign_bag(bag, cfg, walk_m_s=1.0)
+    assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "out")]) == 0, capsys.readouterr().err
+    printed = capsys.readouterr().out
+    assert "surge  verdict: no model beats holding the velocity (cross-validated nrmse" in printed
+    s = yaml.safe_load((tmp_path / "out" / "identification.yaml").read_text())["dofs"]["surge"]
+    assert s["verdict"] == "no model beats holding the velocity"
+    p = s["persistence"]
+    assert not p["beats"] and p["nrmse"] > (1 - p["margin"]) * p["nrmse_hold"] and math.isfinite(p["nrmse_zero"])
+    params = {n: e for n, e in s.items() if isinstance(e, dict) and "value" in e}
+    assert params and all(e["verdict"] == "suspect" for e in params.values())
+    assert all(any("no model beats holding the velocity" in r for r in e["reasons"]) for e in params.values())
+    rows = {r["terms"]: r for r in s["model_selection"]}
+    assert rows["hold the velocity (persistence)"]["cv_nrmse"] == pytest.approx(p["nrmse_hold"])
+    assert [r for r in s["model_selection"] if r["chosen"]]

@@ -11,8 +11,10 @@ docs/identification.md §7). When the bag holds the calibration steps' results
 --calibrate ...`` with the recorder on), they are applied as ``hindrax run`` applies them: the thrust scales are
 estimated jointly with the fits (sections ``calibration`` and ``joint``), the inclining steps give the section
 ``inclining`` and the tilt_decay steps the section ``free_decay`` with the reference verdicts
-(docs/identification.md §6). Exit 0, or 1 with one line on stderr when the configuration, the bag or its content
-is unusable, or when no DOF could be identified.
+(docs/identification.md §6). A DOF whose chosen model does not beat holding the velocity in the cross-validation
+gets the verdict "no model beats holding the velocity" (printed and in identification.yaml, with every score under
+``model_selection`` and ``persistence``), as in ``hindrax ident fit``. Exit 0, or 1 with one line on stderr when
+the configuration, the bag or its content is unusable, or when no DOF could be identified.
 """
 from __future__ import annotations
 
@@ -113,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
     """Identify from a bag, write the outputs, print the summary. Raises :class:`CommandError` on bad input."""
     import yaml
 
-    from ..identification.verdicts import format_advice
+    from ..identification.fit_core import NO_MODEL_VERDICT
+    from ..identification.verdicts import format_advice, no_model_line
     from .run import format_summary
 
     cfg = load_vehicle(args.config)
@@ -128,6 +131,9 @@ def run(args: argparse.Namespace) -> int:
         raise
     print(format_summary(idents))
     doc = yaml.safe_load(Path(path).read_text())
+    for dof, e in doc.get("dofs", {}).items():  # never worse than holding the velocity (as ident fit prints it)
+        if e.get("verdict") == NO_MODEL_VERDICT and e.get("persistence"):
+            print(no_model_line(dof, e["persistence"]))
     for dof, e in doc.get("dofs", {}).items():  # what data would fix each suspect parameter (as ident fit prints)
         for name, p in e.items():
             if isinstance(p, dict) and p.get("advice"):

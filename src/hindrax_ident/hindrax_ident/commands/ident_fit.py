@@ -68,7 +68,7 @@ def format_table(res, cfg=None) -> str:
     import numpy as np
 
     from ..identification.fit_any import assessment
-    from ..identification.fit_core import NO_MODEL_VERDICT
+    from ..identification.verdicts import no_model_line
 
     lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
              f"{'fold spread':>11}"]
@@ -94,10 +94,7 @@ def format_table(res, cfg=None) -> str:
         if c.timing.at_edge:
             lines.append(f"{dof:6} timing: {c.timing.edge_note}")
         if not c.beats_persistence:
-            p = c.persistence
-            lines.append(f"{dof:6} verdict: {NO_MODEL_VERDICT} (cross-validated nrmse {p['nrmse']:.3f}, holding the "
-                         f"velocity {p['nrmse_hold']:.3f}, needs {100 * p['margin']:.0f} % less): no parameter "
-                         "trusted")
+            lines.append(no_model_line(dof, c.persistence))
     lines.append("")
     lines.append(f"validation ({res.design})")
     lines.append(f"{'DOF':6} {'data':17} {'nrmse':>7} {'nrmse_hold':>10} {'nrmse_zero':>10} {'samples':>8} "

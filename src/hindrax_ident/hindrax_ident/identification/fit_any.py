@@ -69,7 +69,8 @@ from .results import SCHEMA_VERSION
 from .signals import samples_from_dvl, thrust_of_written_widths
 from .posterior import prior_posterior, prior_std_rel_of, theta_priors
 from .vehicle_match import vehicle_parameters
-from .verdicts import FitEvidence, assess, core_signals, declared_rel, thrust_curve_check, with_added_mass
+from .verdicts import (FitEvidence, assess, core_evidence, declared_rel, model_selection, thrust_curve_check,
+                       with_added_mass)
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed",
            "preprocess_bag", "dof_records", "fit_bags", "DofFit", "FitResult", "CONFIG_READY_REASON", "assessment"]
@@ -810,18 +811,12 @@ def assessment(r: DofFit, cfg: VehicleConfig | None) -> dict:
     if cfg is not None:
         pri = theta_priors(r.dof, c.names, cfg, prior_std_rel_of(cfg))
         theta, cov = prior_posterior(c.names, theta, cov, pri)
-    vel, acc, force, h = core_signals(c)
     expected = (None if cfg is None else float(cfg.buoyancy_n - cfg.weight_n)) if r.dof == "heave" else 0.0
     ev = FitEvidence(dof=r.dof, names=list(c.names), theta=theta, cov=cov, t_dof=int(c.covariance.t_dof),
-                     units=_units(r.dof, c.names), velocity=vel, acceleration=acc, force=force, h=h,
-                     lower_bounds=[lo for _n, _k, lo, _hi in c.chosen.layout],
-                     upper_bounds=[hi for _n, _k, _lo, hi in c.chosen.layout],
-                     fold_theta=c.fold_theta, cv_nrmse=c.cv.get("nrmse") if c.cv else None,
+                     units=_units(r.dof, c.names),
                      # the whiteness threshold is the designed campaign's (docs/identification.md §7 step 6); here
                      # the CV nrmse judges the model, and the intervals carry the residual correlation
-                     residual_rho=None, expected_bias=expected,
-                     cv_nrmse_hold=(c.persistence or {}).get("nrmse_hold"),
-                     persistence_margin=(c.persistence or {}).get("margin", fit_core.PERSISTENCE_MARGIN))
+                     residual_rho=None, expected_bias=expected, **core_evidence(c))
     a = assess(ev, declared_rel(cfg))
     if cfg is not None:
         with_added_mass(a, a["parameters"]["inertia"]["value"] - rigid_inertia(cfg, r.dof))
@@ -976,14 +971,8 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
                       "coriolis": c.terms.coriolis, "cross": c.terms.cross, "reverse_gain": c.terms.reverse_gain,
                       "cross_force": c.terms.cross_force, "run_bias": c.terms.run_bias}
         e["terms_meaning"] = {k: TERM_MEANING[k] for k, on in e["terms"].items() if on is True and k in TERM_MEANING}
-        e["model_selection"] = [{"terms": k.terms.label, "parameters": k.n_params,
-                                 "cv_nrmse": k.cv.get("nrmse"), "cv_nrmse_hold": k.cv.get("nrmse_hold"),
-                                 "chosen": k is c.chosen} for k in c.candidates]
-        if c.persistence is not None:  # the trivial predictors, scored on the chosen model's held-out samples
-            e["model_selection"] += [{"terms": "hold the velocity (persistence)", "parameters": 0,
-                                      "cv_nrmse": c.persistence["nrmse_hold"], "chosen": False},
-                                     {"terms": "zero", "parameters": 0, "cv_nrmse": c.persistence["nrmse_zero"],
-                                      "chosen": False}]
+        e["model_selection"] = model_selection(c)
+        if c.persistence is not None:
             e["persistence"] = dict(c.persistence)
         e["timing"] = {"delay_s": c.timing.delay_s, "lag_s": c.timing.lag_s, "source": c.timing.source}
         if c.timing.bound_s is not None:

@@ -9,8 +9,11 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
       <dof>:                        # surge sway heave roll pitch yaw
         <parameter>: {value: <float>, std: <float>, unit: <text>, ci95: [<low>, <high>], std_fit: <float>,
                       verdict: trusted | suspect, reasons: [<text>, ...]}   # identification/verdicts.py
-        verdict: trusted | suspect          # suspect when any parameter is
+        verdict: trusted | suspect | no model beats holding the velocity   # suspect when any parameter is
         reasons: [<text>, ...]              # the DOF-wide checks that failed
+        model: <text>                       # the fit core's terms chosen by cross-validation
+        model_selection: [{terms, parameters, cv_nrmse, cv_nrmse_hold, chosen}, ...]  # + persistence and zero
+        persistence: {nrmse, nrmse_hold, nrmse_zero, margin, beats}   # fit_core.persistence
         method: "output-error" | "equation-error"
         pool_time_s: <float>
         comparison: {equation_error: {<parameter>: [value, std]}, rls: {...}, steady_state: {...} | null,
@@ -52,7 +55,7 @@ from ..estimation.least_squares import EstimationError
 from ..estimation.priors import priors_from_config
 from .calibration import calibration_section, joint_estimate
 from .vehicle_match import vehicle_parameters
-from .verdicts import apply_verdicts, rls_published_std
+from .verdicts import apply_verdicts, model_selection, rls_published_std
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry",
            "write_identification", "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "prior_entries"]
@@ -181,6 +184,13 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
                 entry[name]["prior"] = [float(pri[name][0]), float(pri[name][1])]
         entry["verdict"] = a["verdict"]
         entry["reasons"] = list(a["reasons"])
+        core = r.signals.get("core")
+        if core is not None:  # the fit core's choice, scored against holding the velocity and 0 (fit_core.persistence)
+            entry["model"] = core.terms.label
+            entry["model_selection"] = _plain_rows(model_selection(core))
+            if core.persistence is not None:
+                entry["persistence"] = {k: (bool(v) if k == "beats" else float(v))
+                                        for k, v in core.persistence.items()}
         entry["method"] = r.method
         entry["pool_time_s"] = float(r.pool_time_s)
         entry["comparison"] = {
@@ -220,6 +230,12 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
     if calibration:
         doc["calibration"] = calibration_section(calibration, cfg)
     return doc
+
+
+def _plain_rows(rows: list) -> list:
+    """:func:`~.verdicts.model_selection` rows with plain ``int``/``float``/``bool`` values (safe_dump)."""
+    return [{k: (v if isinstance(v, (str, bool)) or v is None else int(v) if k == "parameters" else float(v))
+             for k, v in row.items()} for row in rows]
 
 
 def write_identification(path: str | Path, document: Mapping) -> Path:

@@ -67,7 +67,8 @@ from .fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persisten
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
            "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
-           "segment_count", "declared_rel", "FitEvidence", "core_signals", "NRMSE_MAX", "BIAS_MIN_REL", "assess",
+           "segment_count", "declared_rel", "FitEvidence", "core_signals", "core_evidence", "model_selection",
+           "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess",
            "with_added_mass", "assess_dof",
            "apply_verdicts", "thrust_curve_check", "spread_reasons", "data_advice", "format_advice", "ADVICE_TARGET",
            "POOL_DAY_S", "RUN_KINDS"]
@@ -385,10 +386,56 @@ def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
             np.asarray(sd.force, dtype=float).ravel(), float(sd.h))
 
 
+def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
+    """The :class:`FitEvidence` fields a fit core result (:class:`~.fit_core.DofResult`) gives, for both readers
+    (``hindrax ident bag`` through :func:`assess_dof`, ``hindrax ident fit`` through
+    :func:`~.fit_any.assessment`): the optimiser's bounds and the fold estimates of ``names`` (default the core's
+    own; heave's ``*_positive``/``*_negative`` map onto the one pair of both directions, absent ones get no bound and
+    then no fold estimates), the chosen model's cross-validated nrmse, holding the velocity's on the same samples and
+    the margin (:func:`~.fit_core.persistence`), and the fitted segments' signals (:func:`core_signals`).
+    Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse, cv_nrmse_hold, persistence_margin, velocity,
+    acceleration, force, h}."""
+    core_names = list(core.names)
+    idx = _index_in(core_names if names is None else list(names), core_names)
+    lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
+    highs = [hi for _n, _k, _lo, hi in core.chosen.layout]
+    ft = np.asarray(core.fold_theta, dtype=float) if core.fold_theta is not None else np.zeros((0, 0))
+    fold = ft[:, idx] if ft.ndim == 2 and ft.shape[0] and all(j is not None for j in idx) else None
+    per = core.persistence or {}
+    vel, acc, force, h = core_signals(core)
+    return {"lower_bounds": [lows[j] if j is not None else None for j in idx],
+            "upper_bounds": [highs[j] if j is not None else None for j in idx], "fold_theta": fold,
+            "cv_nrmse": core.cv.get("nrmse") if core.cv else None, "cv_nrmse_hold": per.get("nrmse_hold"),
+            "persistence_margin": per.get("margin", PERSISTENCE_MARGIN), "velocity": vel, "acceleration": acc,
+            "force": force, "h": h}
+
+
+def model_selection(core: Any) -> list[dict]:
+    """identification.yaml ``model_selection`` of a fit core result, for both document builders: every candidate's
+    terms, parameter count and cross-validated nrmse (``chosen`` marks the model kept), then holding the velocity
+    (persistence) and the zero model scored on the chosen model's held-out samples (:func:`~.fit_core.persistence`)."""
+    rows = [{"terms": k.terms.label, "parameters": k.n_params, "cv_nrmse": k.cv.get("nrmse"),
+             "cv_nrmse_hold": k.cv.get("nrmse_hold"), "chosen": k is core.chosen} for k in core.candidates]
+    if core.persistence is not None:
+        rows += [{"terms": "hold the velocity (persistence)", "parameters": 0,
+                  "cv_nrmse": core.persistence["nrmse_hold"], "chosen": False},
+                 {"terms": "zero", "parameters": 0, "cv_nrmse": core.persistence["nrmse_zero"], "chosen": False}]
+    return rows
+
+
+def no_model_line(dof: str, per: Mapping[str, float]) -> str:
+    """The printed verdict of a DOF whose model does not beat holding the velocity (``per``: the ``persistence``
+    entry, :func:`~.fit_core.persistence`), the same line for ``hindrax ident fit`` and ``hindrax ident bag``."""
+    return (f"{dof:6} verdict: {NO_MODEL_VERDICT} (cross-validated nrmse {per['nrmse']:.3f}, holding the velocity "
+            f"{per['nrmse_hold']:.3f}, needs {100 * per['margin']:.0f} % less): no parameter trusted")
+
+
 def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None = None) -> dict:
     """:func:`assess` of a :class:`~.estimators.DofIdentification` (the campaign reader's, ``ident bag``); ``r`` is not
-    modified. The fit core's bounds, fold estimates and cross-validated nrmse come from ``r.signals["core"]`` when
-    present (:func:`~.campaign_fit.identification_of`); ``added_mass`` from the inertia (:func:`with_added_mass`)."""
+    modified. The fit core's bounds, fold estimates, cross-validated nrmse and holding the velocity's come from
+    ``r.signals["core"]`` when present (:func:`core_evidence`, as for ``hindrax ident fit``; so a DOF no model beats
+    persistence in gets :data:`~.fit_core.NO_MODEL_VERDICT` here too); ``added_mass`` from the inertia
+    (:func:`with_added_mass`)."""
     names = list(r.names)
     theta = np.array([r.values[n] for n in names])
     cov_fit = r.signals.get("covariance")
@@ -400,30 +447,19 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
     t = np.asarray(sig.get("t") if sig.get("t") is not None else [], dtype=float)
     have = all(sig.get(k) is not None for k in ("velocity", "acceleration", "force")) and t.size > 1
     core = sig.get("core")
-    lower = upper = fold = cvn = None
-    if core is not None:
-        idx = _index_in(names, list(core.names))
-        lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
-        lower = [lows[j] if j is not None else None for j in idx]
-        highs = [hi for _n, _k, _lo, hi in core.chosen.layout]
-        upper = [highs[j] if j is not None else None for j in idx]
-        ft = np.asarray(core.fold_theta, dtype=float) if core.fold_theta is not None else np.zeros((0, 0))
-        if ft.ndim == 2 and ft.shape[0] and all(j is not None for j in idx):
-            fold = ft[:, idx]
-        cvn = core.cv.get("nrmse") if core.cv else None
     ev = FitEvidence(
         dof=r.dof, names=names, theta=theta, cov=np.asarray(cov_fit, dtype=float),
         t_dof=int(sig["t_dof"]) if sig.get("t_dof") else max(1, nseg - 1), units=r.units,
         velocity=np.asarray(sig.get("velocity") if have else [], dtype=float),
         acceleration=np.asarray(sig.get("acceleration") if have else [], dtype=float),
         force=np.asarray(sig.get("force") if have else [], dtype=float),
-        h=float(np.median(np.diff(t))) if have else 0.0, lower_bounds=lower, upper_bounds=upper, fold_theta=fold,
-        cv_nrmse=cvn,
+        h=float(np.median(np.diff(t))) if have else 0.0,
         residual_rho=sig.get("residual_autocorrelation"), steady=r.steady, windows=sig.get("windows") or [],
         expected_bias=_expected_bias(cfg, r.dof), thrust_in_covariance=bool(joint.get("thrust_in_covariance")),
         fit_std=joint.get("fit_std"))
-    if core is not None:  # the fitted segments' signals, as hindrax ident fit takes them
-        ev.velocity, ev.acceleration, ev.force, ev.h = core_signals(core)
+    if core is not None:  # bounds, folds, cross-validation, persistence and signals as hindrax ident fit takes them
+        for key, value in core_evidence(core, names).items():
+            setattr(ev, key, value)
     elif not have and sig.get("velocity") is not None:  # the typical speed without the advice's signals
         ev.velocity = np.asarray(sig["velocity"], dtype=float)
     a = assess(ev, declared_rel(cfg, thruster_fit_rel))
