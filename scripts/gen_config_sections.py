@@ -1,8 +1,8 @@
-"""Write src/hindrax_drivers/hindrax_drivers/config_sections.py: one frozen dataclass per configuration section.
+"""Write src/hindrax_drivers/hindrax_drivers/config/typed_sections.py: one frozen dataclass per configuration section.
 
 The classes mirror ``config.SCHEMA`` exactly (field name = the key's last segment, nested dataclasses where the
 key nests, Python type from ``Spec.kind``, ``X | None`` for optional keys). The ``thrusters`` section is the
-hand-written ``ThrustersConfig``/``ThrusterConfig`` of config.py (its keys are per thruster name).
+hand-written ``ThrustersConfig``/``ThrusterConfig`` of config/sections/thrusters.py (its keys are per thruster name).
 
 Usage: ``python scripts/gen_config_sections.py`` (rewrites the file) or ``--check`` (exit 1 if it is stale);
 test_config_sections.py runs the check, so an edit of SCHEMA without regenerating fails the tests.
@@ -15,12 +15,12 @@ import textwrap
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "src" / "hindrax_drivers" / "hindrax_drivers" / "config_sections.py"
+OUT = ROOT / "src" / "hindrax_drivers" / "hindrax_drivers" / "config" / "typed_sections.py"
 sys.path.insert(0, str(ROOT / "src" / "hindrax_drivers"))
 
 from hindrax_drivers import config as c  # noqa: E402
 
-#: sections whose typed object is hand-written in config.py (not generated)
+#: sections whose typed object is hand-written in their section module (not generated)
 HAND_WRITTEN = ("thrusters",)
 TYPES = {"float": "float", "int": "int", "str": "str", "bool": "bool", "float[]": "tuple[float, ...]",
          "str[]": "tuple[str, ...]"}
@@ -108,7 +108,7 @@ def _classes(path: str, node: dict, out: list[str]) -> None:
             lines.append(f"    {name}: {_camel(f'{path}.{name}')}")
         else:
             key, spec = sub
-            typ = TYPES[spec.kind] + (" | None" if c._is_optional(key) else "")  # noqa: SLF001
+            typ = TYPES[spec.kind] + (" | None" if c.is_optional(key) else "")
             lines.append(f"    {name}: {typ}")
             doc = textwrap.wrap(f'"""{spec.doc.replace(chr(92), "/")}"""', 116, initial_indent="    ",
                                 subsequent_indent="    ")
@@ -117,16 +117,16 @@ def _classes(path: str, node: dict, out: list[str]) -> None:
 
 
 def render() -> str:
-    """The source of config_sections.py for the current SCHEMA."""
+    """The source of typed_sections.py for the current SCHEMA."""
     out: list[str] = [HEADER]
     _classes("", _tree(), out)
     return "".join(out)
 
 
 def main() -> int:
-    """Rewrite config_sections.py, or with --check report whether it is current (exit status 1 if not)."""
+    """Rewrite typed_sections.py, or with --check report whether it is current (exit status 1 if not)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--check", action="store_true", help="exit 1 if config_sections.py is not current")
+    ap.add_argument("--check", action="store_true", help="exit 1 if typed_sections.py is not current")
     args = ap.parse_args()
     text = render()
     if args.check:

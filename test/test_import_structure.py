@@ -103,7 +103,8 @@ def import_graph(packages: dict[str, Path] = PACKAGES) -> dict[str, set[str]]:
                     add(mod, alias.name)
             elif isinstance(node, ast.ImportFrom):
                 base = _resolve(mod, is_pkg, node.level, node.module)
-                add(mod, base)
+                if base != mod:  # ``from . import sub`` in a package's __init__ imports its submodules, not itself
+                    add(mod, base)
                 for alias in node.names:
                     sub = f"{base}.{alias.name}"
                     if sub in modules:
@@ -305,9 +306,9 @@ FORMER_NAMES = ("wrap", "_wrap", "_wrap_angle", "angle_wrap", "LaggedThrust", "_
 FORMULAS = {
     "the angle wrap": (r"pi\s*\)\s*%\s*\(\s*2(\.0)?\s*\*\s*(math|np)\.pi|atan2\(\s*(math|np)\.sin\(", ("frames.py",)),
     "the thrust lag": (r"exp\(\s*-[^\n]*?/\s*(self\.)?(time_constant|lag|tau)", ("vehicle/thrust_lag.py",)),
-    # config.py builds one only to validate the configured coefficients (its one-line refusal)
+    # the thrusters' section builds one only to validate the configured coefficients (its one-line refusal)
     "a thrust curve": (r"\bThrustCurve\(", ("allocation/thrust_curve.py", "allocation/from_config.py",
-                                            "hindrax_drivers/config.py")),
+                                            "config/sections/thrusters.py")),
 }
 
 
@@ -351,8 +352,10 @@ def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------------ configuration
-#: The configuration's modules (schema, loading, the nodes' parameter declarations).
-CONFIG_MODULES = ("hindrax_drivers.config", "hindrax_drivers.config_sections", "hindrax_drivers.node_parameters")
+#: The configuration's modules (the package: schema per section, validation, loading, typed sections; the nodes'
+#: parameter declarations).
+CONFIG_MODULES = ("hindrax_drivers.config", "hindrax_drivers.config.sections", "hindrax_drivers.config.loader",
+                  "hindrax_drivers.config.typed_sections", "hindrax_drivers.node_parameters")
 #: Device drivers and safety nodes' packages: the configuration imports none of them, not even through another
 #: module; the hardware limits it checks live in ``hindrax_drivers.hardware_limits``, below the driver too.
 DRIVER_PACKAGES = tuple(f"hindrax_drivers.{p}" for p in (
@@ -382,6 +385,6 @@ def test_the_config_rule_sees_a_driver_import():
 
 def test_the_configuration_imports_no_driver(graph):
     assert all(m in graph for m in CONFIG_MODULES)
-    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.config"]
+    assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.config.sections.esc"]
     assert "hindrax_drivers.hardware_limits" in graph["hindrax_drivers.pca9685.protocol"]
     assert driver_imports_of_config(graph) == []

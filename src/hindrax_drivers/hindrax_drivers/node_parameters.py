@@ -45,6 +45,7 @@ from rclpy.parameter import Parameter
 
 from . import config as _c
 from .config import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
+from .config.sections import cross_checks
 
 __all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
            "declare_vehicle_parameters", "node_config", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
@@ -107,10 +108,10 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
         spec = SCHEMA[_generic(key)]
         value = flat.get(key)
         if value is None:
-            if not _c._is_optional(key):  # noqa: SLF001 - same module family, one definition of "optional"
+            if not _c.is_optional(key):
                 issues.append(ConfigIssue(key, "<missing>", spec.allowed()))
             continue
-        coerced, issue = _c._check_value(key, spec, value)  # noqa: SLF001
+        coerced, issue = _c.check_value(key, spec, value)
         if issue:
             issues.append(issue)
         else:
@@ -118,7 +119,7 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
     if not issues:
         # cross-key checks among the selected keys only (a check on keys the node does not read is the file
         # loader's, which `hindrax config check` and every node reading those keys run)
-        issues.extend(i for i in _c._cross_checks(out) if i.key in out)  # noqa: SLF001
+        issues.extend(i for i in cross_checks(out) if i.key in out)
     if issues:
         raise ConfigError(issues, source)
     return out
@@ -224,7 +225,7 @@ def declare_node_parameter(node: Any, name: str, spec: Spec, default: Any) -> An
     desc = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                                dynamic_typing=True)
     value = _plain(node.declare_parameter(name, default, desc).value)
-    coerced, issue = _c._check_value(name, spec, value)  # noqa: SLF001 - one definition of type and range
+    coerced, issue = _c.check_value(name, spec, value)
     source = f"parameters of {node.get_name()}"
     if issue is not None:
         node.undeclare_parameter(name)

@@ -37,7 +37,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 from .config import ConfigError, ConfigIssue, build_section
-from .config_sections import SensorsDvl75Section, SensorsPing1dSection
+from .config.typed_sections import SensorsDvl75Section, SensorsPing1dSection
 from .node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector, load_node_config
 from .transport.serial_transport import SerialTransport, SerialTransportError
 
@@ -134,7 +134,8 @@ class SerialDeviceNode(Node):
         node_name: ROS node name.
         device_name: short device name (``raw/<device_name>``, diagnostics ``hindrax/<device_name>``).
         config_section: typed configuration section holding ``port`` and ``baud_rate`` (e.g.
-            :class:`~hindrax_drivers.config_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys declared.
+            :class:`~hindrax_drivers.config.typed_sections.SensorsDvl75Section`); its ``PREFIX`` names the keys
+            declared.
         command_gap_s: pause between start-up commands, s.
         **kwargs: passed to ``rclpy.node.Node`` (context, parameter_overrides, namespace...).
     Raises:

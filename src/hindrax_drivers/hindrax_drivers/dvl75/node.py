@@ -60,7 +60,7 @@ from sensor_msgs.msg import Range
 
 from hindrax_msgs.msg import Dvl
 
-from ..config_sections import SensorsDvl75Section
+from ..config.typed_sections import SensorsDvl75Section
 from ..device_clock import DeviceClockSync
 from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode

@@ -47,7 +47,7 @@ from typing import Any, Iterable, List, Optional, Tuple
 from sensor_msgs.msg import Range
 from std_msgs.msg import Float32
 
-from ..config_sections import SensorsPing1dSection
+from ..config.typed_sections import SensorsPing1dSection
 from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
 from .protocol import (

@@ -485,75 +485,6 @@ class LimitsSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SupervisorMinRateSection(Section):
-    """``supervisor.min_rate.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "supervisor.min_rate"
-
-    dvl_hz: float
-    """minimum dvl/data rate while armed, Hz (0 = not watched)"""
-    altimeter_hz: float
-    """minimum ping/altitude rate while armed, Hz (0 = not watched)"""
-    pressure_hz: float
-    """minimum pressure/depth rate while armed, Hz (0 = not watched)"""
-    imu_hz: float
-    """minimum imu/data_raw rate while armed, Hz (0 = not watched)"""
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class SupervisorRateCheckDisabledSection(Section):
-    """``supervisor.rate_check_disabled.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "supervisor.rate_check_disabled"
-
-    dvl: str | None
-    """why supervisor.min_rate.dvl_hz is 0 (required with 0, refused otherwise)"""
-    altimeter: str | None
-    """why supervisor.min_rate.altimeter_hz is 0 (required with 0)"""
-    pressure: str | None
-    """why supervisor.min_rate.pressure_hz is 0 (required with 0)"""
-    imu: str | None
-    """why supervisor.min_rate.imu_hz is 0 (required with 0)"""
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class SupervisorSection(Section):
-    """``supervisor.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "supervisor"
-
-    check_rate_hz: float
-    """rate of the supervisor's rate and run-time checks, Hz"""
-    rate_window_s: float
-    """window the sensor rates are measured over (at most supervisor.reaction_time_s), s"""
-    max_sample_age_s: float
-    """a sensor sample whose header stamp is further than this from the supervisor's time on arrival (older, or
-    ahead) is not alive: not counted, not used, s"""
-    max_identical_s: float
-    """a sensor stream bit-identical (header stamp aside) for longer than this is frozen: its samples are not alive
-    (sensor noise changes every reading within a few samples), s"""
-    reaction_time_s: float
-    """longest time a failed sensor (silent, stale or frozen) may go unnoticed while armed; bounds
-    supervisor.rate_window_s, max_invalid_dvl_s, max_sample_age_s and max_identical_s, s"""
-    min_rate: SupervisorMinRateSection
-    max_invalid_dvl_s: float
-    """armed with no valid DVL velocity for this long -> trip (the cage's dead reckoning is frozen meanwhile), s"""
-    rate_check_disabled: SupervisorRateCheckDisabledSection
-    max_depth_m: float
-    """disarm below this depth (pressure port), m"""
-    min_altitude_m: float
-    """disarm closer than this to the floor (altimeter), m"""
-    max_roll_rad: float
-    """disarm beyond this roll (DVL attitude), rad"""
-    max_pitch_rad: float
-    """disarm beyond this pitch (DVL attitude), rad"""
-    cage_margin_m: float
-    """disarm when the DVL dead-reckoned position comes closer than this to a pool wall (pool.* box), m"""
-    max_run_time_s: float
-    """disarm after this long armed, s"""
-
-
-@dataclass(frozen=True, eq=False, repr=False)
 class IdentificationSection(Section):
     """``identification.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
@@ -603,62 +534,6 @@ class IdentificationSection(Section):
     (hindrax_ident identification/excitation.py)"""
     excitation_duration_s: float | None
     """length of the broadband run per DOF (excitation not ladder), s"""
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class CalibrationSection(Section):
-    """``calibration.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "calibration"
-
-    ballast_mass_kg: float
-    """mass of the ballast hung on the vehicle in the ballast step, kg"""
-    ballast_volume_m3: float
-    """displaced volume of that ballast, m^3 (weight in water (m - rho V) g must be > 0)"""
-    line_pull_force_n: float
-    """horizontal force of the line over the pool-edge pulley in the line_pull step (e.g. a hanging mass times g),
-    N"""
-    inclining_mass_kg: float
-    """test mass of the inclining step, kg"""
-    inclining_volume_m3: float
-    """displaced volume of that test mass, m^3 (it must sink)"""
-    inclining_arm_m: float
-    """horizontal arm of the test mass from the centre line (roll: to starboard, pitch: forward), m"""
-    float_mass_kg: float | None
-    """mass of the sealed float tied to the vehicle in the float step (optional), kg"""
-    float_volume_m3: float | None
-    """displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)"""
-    net_buoyancy_std_n: float | None
-    """1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the hover holds of the thrust calibration
-    measure the forward thrust against it; optional)"""
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class ControlSection(Section):
-    """``control.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "control"
-
-    rate_hz: float | None
-    """rate of the controller node's wrench, Hz (default 50)"""
-    depth_bandwidth_rad_s: float | None
-    """target bandwidth of the depth and altitude hold, rad/s (default 2)"""
-    heading_bandwidth_rad_s: float | None
-    """target bandwidth of the heading hold, rad/s (default 2)"""
-    attitude_bandwidth_rad_s: float | None
-    """target bandwidth of the roll and pitch holds, rad/s (default 2)"""
-    velocity_bandwidth_rad_s: float | None
-    """target bandwidth of the surge and sway velocity holds, rad/s (default 3)"""
-    damping_ratio: float | None
-    """damping ratio of the reference models and the PID, default 1"""
-    hold_fraction: float | None
-    """share of each axis' authority the holds may use, default 0.6"""
-    max_depth_rate_m_s: float | None
-    """largest depth rate the reference model asks for, m/s (default 0.3)"""
-    max_yaw_rate_rad_s: float | None
-    """largest yaw rate the reference model asks for, rad/s (default 0.6)"""
-    sensor_timeout_s: float | None
-    """the controller stops when depth or attitude is older than this, s (default 0.5)"""
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -839,3 +714,128 @@ class RecordingSection(Section):
     bytes; 0 = no check)"""
     topics: tuple[str, ...] | None
     """topics recorded by default (empty list not allowed by ROS: omit the key to record all topics)"""
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class SupervisorMinRateSection(Section):
+    """``supervisor.min_rate.*`` (docs: hindrax_drivers.config.SCHEMA)."""
+
+    PREFIX: ClassVar[str] = "supervisor.min_rate"
+
+    dvl_hz: float
+    """minimum dvl/data rate while armed, Hz (0 = not watched)"""
+    altimeter_hz: float
+    """minimum ping/altitude rate while armed, Hz (0 = not watched)"""
+    pressure_hz: float
+    """minimum pressure/depth rate while armed, Hz (0 = not watched)"""
+    imu_hz: float
+    """minimum imu/data_raw rate while armed, Hz (0 = not watched)"""
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class SupervisorRateCheckDisabledSection(Section):
+    """``supervisor.rate_check_disabled.*`` (docs: hindrax_drivers.config.SCHEMA)."""
+
+    PREFIX: ClassVar[str] = "supervisor.rate_check_disabled"
+
+    dvl: str | None
+    """why supervisor.min_rate.dvl_hz is 0 (required with 0, refused otherwise)"""
+    altimeter: str | None
+    """why supervisor.min_rate.altimeter_hz is 0 (required with 0)"""
+    pressure: str | None
+    """why supervisor.min_rate.pressure_hz is 0 (required with 0)"""
+    imu: str | None
+    """why supervisor.min_rate.imu_hz is 0 (required with 0)"""
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class SupervisorSection(Section):
+    """``supervisor.*`` (docs: hindrax_drivers.config.SCHEMA)."""
+
+    PREFIX: ClassVar[str] = "supervisor"
+
+    check_rate_hz: float
+    """rate of the supervisor's rate and run-time checks, Hz"""
+    rate_window_s: float
+    """window the sensor rates are measured over (at most supervisor.reaction_time_s), s"""
+    max_sample_age_s: float
+    """a sensor sample whose header stamp is further than this from the supervisor's time on arrival (older, or
+    ahead) is not alive: not counted, not used, s"""
+    max_identical_s: float
+    """a sensor stream bit-identical (header stamp aside) for longer than this is frozen: its samples are not alive
+    (sensor noise changes every reading within a few samples), s"""
+    reaction_time_s: float
+    """longest time a failed sensor (silent, stale or frozen) may go unnoticed while armed; bounds
+    supervisor.rate_window_s, max_invalid_dvl_s, max_sample_age_s and max_identical_s, s"""
+    min_rate: SupervisorMinRateSection
+    max_invalid_dvl_s: float
+    """armed with no valid DVL velocity for this long -> trip (the cage's dead reckoning is frozen meanwhile), s"""
+    rate_check_disabled: SupervisorRateCheckDisabledSection
+    max_depth_m: float
+    """disarm below this depth (pressure port), m"""
+    min_altitude_m: float
+    """disarm closer than this to the floor (altimeter), m"""
+    max_roll_rad: float
+    """disarm beyond this roll (DVL attitude), rad"""
+    max_pitch_rad: float
+    """disarm beyond this pitch (DVL attitude), rad"""
+    cage_margin_m: float
+    """disarm when the DVL dead-reckoned position comes closer than this to a pool wall (pool.* box), m"""
+    max_run_time_s: float
+    """disarm after this long armed, s"""
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class CalibrationSection(Section):
+    """``calibration.*`` (docs: hindrax_drivers.config.SCHEMA)."""
+
+    PREFIX: ClassVar[str] = "calibration"
+
+    ballast_mass_kg: float
+    """mass of the ballast hung on the vehicle in the ballast step, kg"""
+    ballast_volume_m3: float
+    """displaced volume of that ballast, m^3 (weight in water (m - rho V) g must be > 0)"""
+    line_pull_force_n: float
+    """horizontal force of the line over the pool-edge pulley in the line_pull step (e.g. a hanging mass times g),
+    N"""
+    inclining_mass_kg: float
+    """test mass of the inclining step, kg"""
+    inclining_volume_m3: float
+    """displaced volume of that test mass, m^3 (it must sink)"""
+    inclining_arm_m: float
+    """horizontal arm of the test mass from the centre line (roll: to starboard, pitch: forward), m"""
+    float_mass_kg: float | None
+    """mass of the sealed float tied to the vehicle in the float step (optional), kg"""
+    float_volume_m3: float | None
+    """displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)"""
+    net_buoyancy_std_n: float | None
+    """1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the hover holds of the thrust calibration
+    measure the forward thrust against it; optional)"""
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class ControlSection(Section):
+    """``control.*`` (docs: hindrax_drivers.config.SCHEMA)."""
+
+    PREFIX: ClassVar[str] = "control"
+
+    rate_hz: float | None
+    """rate of the controller node's wrench, Hz (default 50)"""
+    depth_bandwidth_rad_s: float | None
+    """target bandwidth of the depth and altitude hold, rad/s (default 2)"""
+    heading_bandwidth_rad_s: float | None
+    """target bandwidth of the heading hold, rad/s (default 2)"""
+    attitude_bandwidth_rad_s: float | None
+    """target bandwidth of the roll and pitch holds, rad/s (default 2)"""
+    velocity_bandwidth_rad_s: float | None
+    """target bandwidth of the surge and sway velocity holds, rad/s (default 3)"""
+    damping_ratio: float | None
+    """damping ratio of the reference models and the PID, default 1"""
+    hold_fraction: float | None
+    """share of each axis' authority the holds may use, default 0.6"""
+    max_depth_rate_m_s: float | None
+    """largest depth rate the reference model asks for, m/s (default 0.3)"""
+    max_yaw_rate_rad_s: float | None
+    """largest yaw rate the reference model asks for, rad/s (default 0.6)"""
+    sensor_timeout_s: float | None
+    """the controller stops when depth or attitude is older than this, s (default 0.5)"""

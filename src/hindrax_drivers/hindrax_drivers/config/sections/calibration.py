@@ -1,0 +1,76 @@
+"""``calibration.*``: the known forces of the campaign's reference steps (docs/identification.md §6), and
+their derived view (:class:`CalibrationConfig`).
+
+The section's schema (:data:`SCHEMA`), its optional keys (:data:`OPTIONAL`) and the checks that name one of its keys
+(:func:`cross_checks`); :mod:`hindrax_drivers.config.sections` joins the sections.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from ..spec import ConfigIssue, Spec, real
+
+SCHEMA: dict[str, Spec] = {
+    "calibration.ballast_mass_kg": real("mass of the ballast hung on the vehicle in the ballast step, kg", 0.01, 50.0),
+    "calibration.ballast_volume_m3": real("displaced volume of that ballast, m^3 (weight in water (m - rho V) g must be "
+                                          "> 0)", 0.0, 0.05),
+    "calibration.line_pull_force_n": real("horizontal force of the line over the pool-edge pulley in the line_pull "
+                                          "step (e.g. a hanging mass times g), N", 0.1, 200.0),
+    "calibration.inclining_mass_kg": real("test mass of the inclining step, kg", 0.01, 20.0),
+    "calibration.inclining_volume_m3": real("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
+    "calibration.inclining_arm_m": real("horizontal arm of the test mass from the centre line (roll: to starboard, "
+                                        "pitch: forward), m", 0.01, 2.0),
+    "calibration.float_mass_kg": real("mass of the sealed float tied to the vehicle in the float step (optional), kg",
+                                      0.0, 50.0),
+    "calibration.float_volume_m3": real("displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)",
+                                        1e-6, 0.1),
+    "calibration.net_buoyancy_std_n": real("1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the "
+                                           "hover holds of the thrust calibration measure the forward thrust against "
+                                           "it; optional)", 1e-4, 10.0),
+}
+
+#: Optional keys (prefixes): absent is fine; present must validate. Every other key of :data:`SCHEMA` is required.
+OPTIONAL: tuple[str, ...] = ("calibration.float_", "calibration.net_buoyancy_std_n")
+
+
+def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
+    """The ballast and the inclining test mass sink, the float floats (with the configured water density)."""
+    issues: list[ConfigIssue] = []
+    if "calibration.ballast_mass_kg" in c and "calibration.ballast_volume_m3" in c:
+        rho = float(c.get("environment.water_density_kg_m3", 1000.0))
+        v_max = c["calibration.ballast_mass_kg"] / rho
+        if c["calibration.ballast_volume_m3"] >= v_max:
+            issues.append(ConfigIssue("calibration.ballast_volume_m3", c["calibration.ballast_volume_m3"],
+                                      f"below calibration.ballast_mass_kg / water density = {v_max:.4g} (the ballast "
+                                      "must sink)"))
+    if "calibration.float_mass_kg" in c and "calibration.float_volume_m3" in c:
+        v_min = c["calibration.float_mass_kg"] / float(c.get("environment.water_density_kg_m3", 1000.0))
+        if c["calibration.float_volume_m3"] <= v_min:
+            issues.append(ConfigIssue("calibration.float_volume_m3", c["calibration.float_volume_m3"],
+                                      f"above calibration.float_mass_kg / water density = {v_min:.4g} (the float "
+                                      "must float)"))
+    if "calibration.inclining_mass_kg" in c and "calibration.inclining_volume_m3" in c:
+        v_max = c["calibration.inclining_mass_kg"] / float(c.get("environment.water_density_kg_m3", 1000.0))
+        if c["calibration.inclining_volume_m3"] >= v_max:
+            issues.append(ConfigIssue("calibration.inclining_volume_m3", c["calibration.inclining_volume_m3"],
+                                      f"below calibration.inclining_mass_kg / water density = {v_max:.4g} (the test "
+                                      "mass must sink)"))
+    return issues
+
+
+@dataclass(frozen=True)
+class CalibrationConfig:
+    """The known forces of the campaign's reference steps (``calibration.*``; docs/identification.md §6.1).
+
+    Weights in water and buoyancies are (m - rho V) g and (rho V - m) g with the configured water density and g.
+    ``float_net_buoyancy_n`` is None without the optional ``calibration.float_*`` keys; ``net_buoyancy_std_n``
+    defaults to 0.05 N (the vehicle weighed in water with a spring scale; ASSUMPTION when not configured).
+    """
+
+    ballast_weight_in_water_n: float
+    line_pull_force_n: float
+    inclining_weight_in_water_n: float
+    inclining_arm_m: float
+    float_net_buoyancy_n: float | None
+    net_buoyancy_std_n: float

@@ -1,0 +1,297 @@
+"""The validated vehicle configuration, :class:`VehicleConfig`: typed sections built on first use from the flat
+dotted keys, derived views (rigid-body and added-mass matrices, hydrodynamics per DOF, calibration forces) and the
+ROS-parameter conversion.
+
+Typed access: one frozen dataclass per section (``cfg.esc.output_latency_s``, ``cfg.sensors.dvl75.position_frd_m``,
+``cfg.supervisor.min_rate.imu_hz``), so a misspelt name is an AttributeError that mypy and the import of a module's
+tests catch, not a KeyError on the vehicle. The classes live in :mod:`.typed_sections`, GENERATED from the schema
+by ``scripts/gen_config_sections.py`` (a test checks the file is current and that every key has a field of its kind,
+and every field a key): writing them by hand next to a 250-key schema would let the two drift, and generating them
+at import time would hide them from mypy. Field names are the keys' last segments (ROS parameter names do not
+change), lists are tuples, optional keys are ``X | None``. Section objects are built lazily, once per configuration
+(it is immutable). A node's configuration holds only the keys it declared (:mod:`hindrax_drivers.node_parameters`):
+reading another required key raises KeyError naming it. ``cfg.thrusters`` is the hand-written
+:class:`~.sections.thrusters.ThrustersConfig` (per-thruster keys); ``cfg.hydrodynamics(dof)`` and
+``cfg.calibration`` are derived views over the raw sections ``cfg.hydrodynamics_section`` and
+``cfg.calibration_section``. ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter conversion, overrides and
+validation; modules outside the configuration do not index it by a literal key.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass
+from typing import Any, Mapping, TypeVar
+
+import numpy as np
+
+from .sections import is_optional
+from .sections.calibration import CalibrationConfig
+from .sections.hydrodynamics import DofHydrodynamics, added_mass_matrix_from_flat
+from .sections.thrusters import ThrustersConfig, thrusters_config
+from .spec import DOFS, ROTATIONAL_DOFS
+from .typed_sections import (
+    ABSENT,
+    CalibrationSection,
+    ControlSection,
+    EnvironmentSection,
+    EscSection,
+    HydrodynamicsSection,
+    IdentificationSection,
+    LightsSection,
+    LimitsSection,
+    PoolSection,
+    RecordingSection,
+    Section,
+    SensorsSection,
+    SimulationSection,
+    SupervisorSection,
+    VehicleSection,
+)
+from .validation import validate_flat
+
+__all__ = ["VehicleConfig", "build_section", "or_default"]
+
+_S = TypeVar("_S", bound=Section)
+_V = TypeVar("_V")
+
+
+def or_default(value: _V | None, default: _V) -> _V:
+    """``value``, or ``default`` when it is None (an absent optional key of a typed section)."""
+    return default if value is None else value
+
+
+def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
+    """The typed section ``cls`` (a generated :class:`~.typed_sections.Section`) from validated flat keys.
+
+    Lists become tuples; an absent optional key is None; an absent required key (a node's selection of keys) is
+    held as ABSENT and raises KeyError naming the key when read.
+    """
+    kw: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):  # type: ignore[arg-type]  # the generated sections are dataclasses
+        if isinstance(f.type, type) and issubclass(f.type, Section):
+            kw[f.name] = build_section(f.type, flat)
+            continue
+        key = f"{cls.PREFIX}.{f.name}"
+        if key in flat:
+            v = flat[key]
+            kw[f.name] = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
+        else:
+            kw[f.name] = None if is_optional(key) else ABSENT
+    built: _S = cls.build(kw)
+    return built
+
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """The validated vehicle configuration.
+
+    Typed sections (built once, on first use): ``vehicle``, ``environment``, ``hydrodynamics_section``,
+    ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``, ``limits``,
+    ``supervisor``, ``identification``, ``calibration_section``, ``control``, ``simulation``, ``recording``
+    (module docstring). Derived views: rigid-body and added-mass matrices, ``hydrodynamics(dof)``,
+    ``calibration``. ``flat`` holds every validated key (dotted names, SI values) for the ROS-parameter
+    conversion and overrides.
+    """
+
+    flat: Mapping[str, Any]
+    source: str = ""
+    sha256: str = ""
+
+    # -- generic access by dotted key (tools that list or convert keys; modules read the typed sections) --
+    def get(self, key: str) -> Any:
+        """Value of a dotted key (KeyError if absent)."""
+        return self.flat[key]
+
+    def section(self, prefix: str) -> dict[str, Any]:
+        """All keys under ``prefix.`` with the prefix removed, e.g. ``section("sensors.dvl75")``."""
+        p = prefix.rstrip(".") + "."
+        return {k[len(p):]: v for k, v in self.flat.items() if k.startswith(p)}
+
+    # -- typed sections --
+    @functools.cached_property
+    def vehicle(self) -> VehicleSection:
+        """``vehicle.*``: rigid-body data."""
+        return build_section(VehicleSection, self.flat)
+
+    @functools.cached_property
+    def environment(self) -> EnvironmentSection:
+        """``environment.*``: water and gravity."""
+        return build_section(EnvironmentSection, self.flat)
+
+    @functools.cached_property
+    def hydrodynamics_section(self) -> HydrodynamicsSection:
+        """``hydrodynamics.*`` as configured (see also :meth:`hydrodynamics` and :attr:`added_mass_matrix`)."""
+        return build_section(HydrodynamicsSection, self.flat)
+
+    @functools.cached_property
+    def esc(self) -> EscSection:
+        """``esc.*``: the PCA9685 ESC output."""
+        return build_section(EscSection, self.flat)
+
+    @functools.cached_property
+    def lights(self) -> LightsSection:
+        """``lights.*``."""
+        return build_section(LightsSection, self.flat)
+
+    @functools.cached_property
+    def sensors(self) -> SensorsSection:
+        """``sensors.*``: ``dvl75``, ``ping1d``, ``ms5837``, ``icm20948``."""
+        return build_section(SensorsSection, self.flat)
+
+    @functools.cached_property
+    def pool(self) -> PoolSection:
+        """``pool.*``: the pool box and start pose."""
+        return build_section(PoolSection, self.flat)
+
+    @functools.cached_property
+    def limits(self) -> LimitsSection:
+        """``limits.*``: the identification's own abort limits."""
+        return build_section(LimitsSection, self.flat)
+
+    @functools.cached_property
+    def supervisor(self) -> SupervisorSection:
+        """``supervisor.*``: the safety supervisor."""
+        return build_section(SupervisorSection, self.flat)
+
+    @functools.cached_property
+    def identification(self) -> IdentificationSection:
+        """``identification.*``."""
+        return build_section(IdentificationSection, self.flat)
+
+    @functools.cached_property
+    def calibration_section(self) -> CalibrationSection:
+        """``calibration.*`` as configured (masses, volumes; :attr:`calibration` gives the derived forces)."""
+        return build_section(CalibrationSection, self.flat)
+
+    @functools.cached_property
+    def control(self) -> ControlSection:
+        """``control.*``: the holds' settings (all optional: None when absent)."""
+        return build_section(ControlSection, self.flat)
+
+    @functools.cached_property
+    def simulation(self) -> SimulationSection:
+        """``simulation.*``: the virtual pool's integration and sensor models."""
+        return build_section(SimulationSection, self.flat)
+
+    @functools.cached_property
+    def recording(self) -> RecordingSection:
+        """``recording.*``: the MCAP recorder."""
+        return build_section(RecordingSection, self.flat)
+
+    # -- derived views --
+    @property
+    def mass_kg(self) -> float:
+        """``vehicle.mass_kg``, kg."""
+        return self.vehicle.mass_kg
+
+    @property
+    def displaced_volume_m3(self) -> float:
+        """``vehicle.displaced_volume_m3``, m^3."""
+        return self.vehicle.displaced_volume_m3
+
+    @property
+    def water_density_kg_m3(self) -> float:
+        """``environment.water_density_kg_m3``, kg/m^3."""
+        return self.environment.water_density_kg_m3
+
+    @property
+    def gravity_m_s2(self) -> float:
+        """``environment.gravity_m_s2``, m/s^2."""
+        return self.environment.gravity_m_s2
+
+    @property
+    def weight_n(self) -> float:
+        """W = m g, N."""
+        return self.mass_kg * self.gravity_m_s2
+
+    @property
+    def buoyancy_n(self) -> float:
+        """B = rho g V, N."""
+        return self.water_density_kg_m3 * self.gravity_m_s2 * self.displaced_volume_m3
+
+    @property
+    def inertia_matrix_kg_m2(self) -> np.ndarray:
+        """3x3 inertia tensor about the CG, kg m^2 (products of inertia with the usual minus sign)."""
+        ixx, iyy, izz = self.vehicle.inertia_kg_m2
+        ixy, ixz, iyz = self.vehicle.products_of_inertia_kg_m2
+        return np.array([[ixx, -ixy, -ixz], [-ixy, iyy, -iyz], [-ixz, -iyz, izz]])
+
+    @property
+    def centre_of_gravity_frd_m(self) -> np.ndarray:
+        return np.asarray(self.vehicle.centre_of_gravity_frd_m, dtype=float)
+
+    @property
+    def centre_of_buoyancy_frd_m(self) -> np.ndarray:
+        return np.asarray(self.vehicle.centre_of_buoyancy_frd_m, dtype=float)
+
+    @property
+    def added_mass_matrix(self) -> np.ndarray:
+        """6x6 positive-definite added-mass matrix M_A, FRD, SNAME order (kg, kg m, kg m^2)."""
+        return added_mass_matrix_from_flat(self.flat)
+
+    @functools.cached_property
+    def calibration(self) -> CalibrationConfig:
+        """Typed ``calibration.*`` section (:class:`CalibrationConfig`)."""
+        c = self.calibration_section
+        rho, g = self.water_density_kg_m3, self.gravity_m_s2
+        float_b = None
+        if c.float_mass_kg is not None and c.float_volume_m3 is not None:
+            float_b = (rho * c.float_volume_m3 - c.float_mass_kg) * g
+        return CalibrationConfig(
+            ballast_weight_in_water_n=(c.ballast_mass_kg - c.ballast_volume_m3 * rho) * g,
+            line_pull_force_n=float(c.line_pull_force_n),
+            inclining_weight_in_water_n=(c.inclining_mass_kg - c.inclining_volume_m3 * rho) * g,
+            inclining_arm_m=float(c.inclining_arm_m),
+            float_net_buoyancy_n=float_b,
+            net_buoyancy_std_n=float(or_default(c.net_buoyancy_std_n, 0.05)))
+
+    def hydrodynamics(self, dof: str) -> DofHydrodynamics:
+        """Typed hydrodynamic coefficients of one DOF (see :class:`DofHydrodynamics`)."""
+        if dof not in DOFS:
+            raise KeyError(f"unknown DOF {dof!r}; one of {', '.join(DOFS)}")
+        hs = self.hydrodynamics_section
+        if dof == "heave":
+            v = hs.heave
+            return DofHydrodynamics(dof, v.added_mass_kg, v.linear_damping_positive_kg_s,
+                                    v.linear_damping_negative_kg_s, v.quadratic_damping_positive_kg_m,
+                                    v.quadratic_damping_negative_kg_m)
+        if dof in ROTATIONAL_DOFS:
+            r = {"roll": hs.roll, "pitch": hs.pitch, "yaw": hs.yaw}[dof]
+            return DofHydrodynamics(dof, r.added_mass_kg_m2, r.linear_damping_kg_m2_s, r.linear_damping_kg_m2_s,
+                                    r.quadratic_damping_kg_m2, r.quadratic_damping_kg_m2)
+        t = {"surge": hs.surge, "sway": hs.sway}[dof]
+        return DofHydrodynamics(dof, t.added_mass_kg, t.linear_damping_kg_s, t.linear_damping_kg_s,
+                                t.quadratic_damping_kg_m, t.quadratic_damping_kg_m)
+
+    @functools.cached_property
+    def thrusters(self) -> ThrustersConfig:
+        """Typed thruster set (:func:`~.sections.thrusters.thrusters_config`); built once per configuration (the
+        configuration is immutable; the control and identification loops read it at every tick)."""
+        return thrusters_config(self.flat)
+
+    def summary(self) -> str:
+        """A short multi-line human summary of the vehicle (used by ``hindrax config check``)."""
+        t = self.thrusters
+        lines = [
+            f"vehicle {self.vehicle.name}: mass {self.mass_kg:g} kg, volume {self.displaced_volume_m3:g} m^3,"
+            f" net buoyancy {(self.buoyancy_n - self.weight_n):.3f} N (rho {self.water_density_kg_m3:g} kg/m^3)",
+            f"thrusters: {len(t.thrusters)} ({', '.join(t.names)}), pulse width "
+            f"{t.pulse_width_min_us:g}-{t.pulse_width_max_us:g} us, neutral {t.pulse_width_neutral_us:g} us",
+            "added mass (surge sway heave kg; roll pitch yaw kg m^2): "
+            + " ".join(f"{v:g}" for v in np.diag(self.added_mass_matrix)),
+            f"pool {self.pool.length_m:g} x {self.pool.width_m:g} x {self.pool.depth_m:g} m",
+            f"sha256 {self.sha256[:12]}" if self.sha256 else "",
+        ]
+        return "\n".join(x for x in lines if x)
+
+    def to_ros_parameters(self) -> dict[str, Any]:
+        """Flat dotted ROS parameter names -> values (lists as lists), for ``--params-file`` or declare."""
+        return {k: (list(v) if isinstance(v, (list, tuple, np.ndarray)) else v) for k, v in self.flat.items()}
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> "VehicleConfig":
+        """A new validated configuration with some dotted keys replaced (raises ConfigError)."""
+        flat = dict(self.flat)
+        flat.update(overrides)
+        return VehicleConfig(validate_flat(flat, source=self.source), self.source, self.sha256)
