@@ -115,6 +115,7 @@ def test_actuation_the_esc_takes_the_allocations_commands_by_its_subscription():
                 spin()
             wait_until(lambda: not esc.armed, 10, other_command, "disarmed by the other publisher")
             other_command()
+            esc.settle()  # the disarm's neutral, written by the ESC's chip thread
             assert np.allclose([emu.pulse_width_us(c) for c in range(8)], 1500.0, atol=1.3)
         finally:
             ex.shutdown()

@@ -521,3 +521,38 @@ def test_esc_process_without_its_bus_keeps_running_and_reports():
         if proc.poll() is None:
             proc.kill()
             proc.wait(5)
+
+
+def test_a_hung_esc_bus_turns_its_heartbeat_to_error_and_the_guard_asserts_oe(rig):
+    """The ESC's chip I/O runs on its own thread: a bus call that does not return (a hung adapter, an emulation
+    server that stopped answering) leaves the heartbeat running, and within BUS_CALL_TIMEOUT_S (0.15 s) it says
+    ERROR, output state unknown; the guard then drives /OE high (for that, not for a silent ESC). When the bus
+    answers again the chip is reconfigured at neutral and the ESC stays disarmed."""
+    import threading
+    import time
+
+    from hindrax_drivers.pca9685.worker import BUS_CALL_TIMEOUT_S
+
+    r = rig(guard=True)
+    r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(), "guard released /OE at neutral")
+    r.arm_at_1700()
+    release = threading.Event()
+    write = r.bus.write_i2c_block_data
+
+    def hung(address, register, data):
+        release.wait(30)
+        return write(address, register, data)
+
+    r.bus.write_i2c_block_data = hung
+    t_hang = time.monotonic()
+    r.command(1750.0)  # its write hangs
+    r.wait(lambda: r.esc.output_state == OUTPUT_UNKNOWN, "ESC output state unknown")
+    assert time.monotonic() - t_hang >= BUS_CALL_TIMEOUT_S and not r.esc.armed
+    assert "not returned" in r.esc.core.reason
+    r.wait(lambda: r.line.is_high(), "/OE asserted")
+    assert r.guard.core.reason.startswith("ESC output state unknown"), r.guard.core.reason
+    r.bus.write_i2c_block_data = write
+    release.set()
+    r.wait(lambda: r.esc.output_state == OUTPUT_NEUTRAL, "neutral confirmed once the bus answers")
+    r.wait(lambda: not r.line.is_high(), "/OE released at neutral, disarmed")
+    assert np.allclose(wire(r.emu), 1500.0, atol=TICK_US) and not r.esc.armed

@@ -293,7 +293,10 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     # would depend on the machine's speed
     hold = [Parameter("clock_stall_timeout_s", value=SIMULATED_TIME_HOLD_S)] if sim else []
     steady = [Parameter("steady_watchdog_timeout_s", value=SIMULATED_TIME_HOLD_S)] if sim and drive_clocks else []
-    nodes["esc"] = EscNode(bus=bus, **{**common, "parameter_overrides": params + wide_beats + steady})
+    # simulated: the chip jobs run in the executor thread, so that a write lands at the simulated instant of its
+    # command (lock-step; the emulated bus answers at once); on hardware the ESC's bus has a thread of its own
+    nodes["esc"] = EscNode(bus=bus, chip_thread=not sim,
+                           **{**common, "parameter_overrides": params + wide_beats + steady})
     nodes["thrust_allocation"] = ThrustAllocationNode(**common)
 
     # disarms the ESC on a breach (supervisor.*)

@@ -441,7 +441,8 @@ class DriverReplay:
         if "icm20948" in devices:
             self.nodes["icm20948"] = Icm20948Node(bus=hw.i2c_bus, **kw)
         if "pca9685" in devices:
-            self.nodes["esc"] = EscNode(bus=hw.i2c_bus, **kw)
+            # chip jobs in the executor thread: the replayed bus answers in the recorded order of its transactions
+            self.nodes["esc"] = EscNode(bus=hw.i2c_bus, chip_thread=False, **kw)
         self.published: collections.Counter[str] = collections.Counter()
         for node in self.nodes.values():
             for pub in node.publishers:

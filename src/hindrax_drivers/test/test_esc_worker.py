@@ -1,0 +1,145 @@
+"""The ESC's chip I/O worker (pca9685/worker.py) on the register-exact emulator, without ROS: the queue rules, the
+stuck-call bound, the bus opened in the worker."""
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from hindrax_drivers.pca9685.chip import EscChip
+from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+from hindrax_drivers.pca9685.worker import CONFIGURE, NEUTRAL, READBACK, WRITE, ChipJob, ChipWorker
+from hindrax_drivers.testing import wait_until
+from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
+
+COUNT_US = 1.24  # prescale 30 at 25 MHz (datasheet §7.3.5)
+NEUTRAL_US = np.full(8, 1500.0)
+
+
+class _Raw:
+    def begin_batch(self):
+        pass
+
+    def flush(self):
+        pass
+
+
+class _HeldBus:
+    """An EmulatedI2CBus whose block writes wait for :attr:`release` while :attr:`hold` is set (a bus that hangs)."""
+
+    def __init__(self, emu):
+        self.bus = EmulatedI2CBus({0x40: emu})
+        self.hold, self.release, self.writes = False, threading.Event(), []
+
+    def __getattr__(self, name):
+        return getattr(self.bus, name)
+
+    def write_i2c_block_data(self, address, register, data):
+        self.writes.append(list(data))
+        if self.hold:
+            self.release.wait(10)
+        return self.bus.write_i2c_block_data(address, register, data)
+
+
+def _worker(threaded=True, call_timeout_s=0.15, open_bus=None):
+    emu = Pca9685Emulator()
+    bus = _HeldBus(emu)
+    chip = EscChip(0x40, 30, 25e6, range(8), 8, _Raw())
+    worker = ChipWorker(chip, open_bus or (lambda: bus), threaded=threaded, call_timeout_s=call_timeout_s)
+    return worker, emu, bus
+
+
+def _job(kind, width=1500.0):
+    return ChipJob(kind, np.full(8, width), 1100.0)
+
+
+def _wire(emu):
+    return np.array([emu.pulse_width_us(c) for c in range(8)])
+
+
+def test_the_bus_is_opened_by_the_worker_and_a_configure_confirms_neutral():
+    worker, emu, _ = _worker()
+    worker.post(_job(CONFIGURE))
+    assert worker.wait_idle(5)
+    [result] = worker.results()
+    assert result.job.kind == CONFIGURE and not result.error and not result.mismatch
+    assert np.allclose(result.written_us, NEUTRAL_US, atol=COUNT_US) and emu.mode1 == 0x21
+    worker.stop()
+
+
+def test_no_bus_is_a_result_not_an_exception():
+    def absent():
+        raise FileNotFoundError(2, "No such file or directory: '/dev/i2c-1'")
+    worker, _, _ = _worker(open_bus=absent)
+    worker.post(_job(CONFIGURE))
+    assert worker.wait_idle(5)
+    [result] = worker.results()
+    assert result.no_bus and "no I2C bus" in result.error and worker.chip.device is None
+    worker.stop()
+
+
+def test_newest_thrust_wins_and_a_neutral_is_never_dropped_nor_overtaken():
+    """While the bus hangs on a write: two thrust writes queue as one (the newest), a neutral drops the thrust
+    before it, and a thrust posted after the neutral runs after it; the read-back and the configure are not queued
+    twice."""
+    worker, emu, bus = _worker()
+    worker.post(_job(CONFIGURE))
+    assert worker.wait_idle(5)
+    worker.results()
+    bus.hold, bus.writes[:] = True, []
+    worker.post(_job(WRITE, 1600.0))
+    wait_until(lambda: bus.writes, 5, message="the first write on the bus")
+    worker.post(_job(WRITE, 1650.0))
+    worker.post(_job(WRITE, 1700.0))  # replaces 1650
+    worker.post(_job(READBACK))
+    worker.post(_job(READBACK))  # already queued
+    worker.post(_job(WRITE, 1750.0))
+    worker.post(_job(NEUTRAL))  # drops 1750 (and 1700 before the read-back); keeps the read-back
+    worker.post(_job(WRITE, 1800.0))  # after the neutral
+    bus.release.set()
+    assert worker.wait_idle(5)
+    done = [(r.job.kind, r.job.widths_us[0]) for r in worker.results()]
+    assert done == [(WRITE, 1600.0), (READBACK, 1500.0), (NEUTRAL, 1500.0), (WRITE, 1800.0)]
+    assert _wire(emu)[0] == pytest.approx(1800.0, abs=COUNT_US)
+    worker.post(_job(CONFIGURE))
+    worker.post(_job(CONFIGURE))
+    assert worker.wait_idle(5) and [r.job.kind for r in worker.results()] == [CONFIGURE]
+    worker.stop()
+
+
+def test_a_call_that_does_not_return_is_reported_stuck_after_the_bound_and_only_then():
+    worker, _, bus = _worker(call_timeout_s=0.1)
+    worker.post(_job(CONFIGURE))
+    assert worker.wait_idle(5)
+    bus.hold = True
+    worker.post(_job(WRITE, 1600.0))
+    wait_until(lambda: bus.writes and worker.pending(WRITE), 5, message="the write on the bus")
+    t0 = worker.clock()
+    wait_until(lambda: worker.stuck_s() > 0.0, 5, message="stuck")
+    assert worker.clock() - t0 >= 0.1 - 0.02 and worker.stuck_s() > 0.1
+    bus.release.set()
+    assert worker.wait_idle(5) and worker.stuck_s() == 0.0
+    worker.stop()
+
+
+def test_without_a_thread_the_poster_runs_the_job():
+    worker, emu, _ = _worker(threaded=False)
+    worker.post(_job(CONFIGURE))
+    worker.post(_job(WRITE, 1700.0))
+    assert _wire(emu)[0] == pytest.approx(1700.0, abs=COUNT_US)  # done before post returned
+    assert [r.job.kind for r in worker.results()] == [CONFIGURE, WRITE]
+    assert worker._thread is None
+
+
+def test_a_failed_write_is_an_error_result_and_the_chip_forgets():
+    worker, _, bus = _worker()
+    worker.post(_job(CONFIGURE))
+    assert worker.wait_idle(5)
+    worker.results()
+    bus.bus.disconnected = True
+    worker.post(_job(WRITE, 1600.0))
+    assert worker.wait_idle(5)
+    [result] = worker.results()
+    assert result.error and not result.wrote and worker.chip._written_key is None
+    worker.stop()
