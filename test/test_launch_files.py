@@ -319,7 +319,7 @@ def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real
         given = dict(a.split(":=", 1) for a in args.split())
         check_launch(path, packages, {k: v or "x" for k, v in given.items() if "$" not in v})
     registered = {" ".join(words) for words, _m, _h in COMMANDS}
-    used = set(re.findall(r"`(?:docker exec -it hindrax )?hindrax ((?:[a-z-]+)(?: [a-z-]+)?)", text))
+    used = set(re.findall(r"`(?:docker exec -it hindrax )?hindrax ((?:[a-z][a-z0-9-]*)(?: [a-z-]+)?)", text))
     assert used and all(u in registered or u.split()[0] in registered for u in used), used - registered
 
 
