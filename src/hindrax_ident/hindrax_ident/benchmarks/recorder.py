@@ -174,10 +174,6 @@ def run(quick: bool = False) -> list[dict]:
     return rows
 
 
-if __name__ == "__main__":
-    for r in run(quick="--quick" in sys.argv):
-        print(r)
-
 
 def subscribe_recorder_counts(node, depth: int) -> tuple[dict[str, int], "threading.Lock"]:
     """Subscribe ``node`` to ``/diagnostics`` and keep the recorder's per-topic message counts (its
@@ -194,3 +190,8 @@ def subscribe_recorder_counts(node, depth: int) -> tuple[dict[str, int], "thread
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, depth)
     return counts, lock
+
+
+if __name__ == "__main__":
+    for r in run(quick="--quick" in sys.argv):
+        print(r)
