@@ -41,11 +41,12 @@ def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
 
     doc = read_identification(out / "identification.yaml")
     hs, hh = cfg.hydrodynamics("surge"), cfg.hydrodynamics("heave")
-    bias_heave = (cfg.water_density_kg_m3 * cfg.displaced_volume_m3 - cfg.mass_kg) * cfg.gravity_m_s2  # 0.785 N
+    v, env = cfg.vehicle, cfg.environment
+    bias_heave = (env.water_density_kg_m3 * v.displaced_volume_m3 - v.mass_kg) * env.gravity_m_s2  # 0.785 N
     truth = {
-        "surge": {"inertia": cfg.mass_kg + hs.added_mass, "quadratic_damping": hs.quadratic_damping_positive,
+        "surge": {"inertia": cfg.vehicle.mass_kg + hs.added_mass, "quadratic_damping": hs.quadratic_damping_positive,
                   "bias": 0.0},
-        "heave": {"inertia": cfg.mass_kg + hh.added_mass, "quadratic_damping_positive": hh.quadratic_damping_positive,
+        "heave": {"inertia": v.mass_kg + hh.added_mass, "quadratic_damping_positive": hh.quadratic_damping_positive,
                   "quadratic_damping_negative": hh.quadratic_damping_negative, "bias": bias_heave},
     }
     problems = []

@@ -19,7 +19,7 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from hindrax_msgs.msg import RawDeviceData
 
 from .config import ConfigError, VehicleConfig
-from .node_parameters import node_config
+from .node_parameters import declare_vehicle_parameters
 from .ros_process import RosProcess
 from .sd_notify import SystemdNotifier
 
@@ -354,11 +354,15 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
 
     keys: SCHEMA prefixes the node reads (None: all sections); dynamic: prefixes it applies while running
     (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason.
-    See :func:`hindrax_drivers.node_parameters.node_config`. Logs the one-line reason and re-raises
+    See :func:`hindrax_drivers.node_parameters.declare_vehicle_parameters` (the node must be created without
+    ``automatically_declare_parameters_from_overrides``). Logs the one-line reason and re-raises
     :class:`ConfigError` so :func:`run_node` exits with status 1.
     """
-    return node_config(node, on_error=lambda line: node.get_logger().fatal(f"invalid configuration: {line}"),
-                       keys=keys, dynamic=dynamic, on_change=on_change)
+    try:
+        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change)
+    except ConfigError as exc:
+        node.get_logger().fatal(f"invalid configuration: {exc}")
+        raise
 
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,

@@ -48,7 +48,7 @@ from .config import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleCon
 from .config.sections import cross_checks
 
 __all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
-           "declare_vehicle_parameters", "node_config", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
+           "declare_vehicle_parameters", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
            "check_whole_vehicle", "declare_node_parameter"]
 
 #: Name of the parameter naming a vehicle file to take defaults from ("" = the shipped file).
@@ -345,22 +345,3 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     node.add_on_set_parameters_callback(on_set)
     return state["cfg"]
 
-
-def node_config(node: Any, on_error: Callable[[str], None] | None = None, keys: Sequence[str] | None = None,
-                dynamic: Sequence[str] = (), on_change: Callable[["VehicleConfig"], None] | None = None
-                ) -> VehicleConfig:
-    """Declare the node's vehicle keys as described ROS parameters and return them validated.
-
-    See :func:`declare_vehicle_parameters`: the node must be created
-    without ``automatically_declare_parameters_from_overrides``; ``keys`` are the SCHEMA prefixes it reads
-    (None: all sections), ``dynamic`` those it applies while running (the others are read-only) and
-    ``on_change`` applies a validated change. Values: overrides (``--params-file``, ``-p``,
-    ``parameter_overrides``), else the ``config_file`` parameter's file, else :func:`default_config_path`.
-    Raises :class:`ConfigError`; ``on_error`` (if given) receives the one-line message first.
-    """
-    try:
-        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change)
-    except ConfigError as exc:
-        if on_error:
-            on_error(str(exc))
-        raise

@@ -41,7 +41,7 @@ def matrix_frd() -> np.ndarray:
     """B (6, 8), FRD about the CG: column [d; r x d] ([Hindrax-Drag] eq. 9), from the YAML numbers."""
     cols = []
     for th in T.thrusters:
-        r = np.asarray(th.position_frd_m) - CFG.centre_of_gravity_frd_m
+        r = np.asarray(th.position_frd_m) - CFG.vehicle.centre_of_gravity_frd_m
         d = np.asarray(th.direction_frd)
         cols.append(np.concatenate([d, np.cross(r, d)]))
     return np.array(cols).T

@@ -35,7 +35,7 @@ def test_real_file_loads_cleanly(cfg):
 
 def test_seed_numbers(cfg):
     # [Hindrax-AM] §2 / [Hindrax-Drag] §2.1
-    assert cfg.mass_kg == 15.22 and cfg.displaced_volume_m3 == 0.0153
+    assert cfg.vehicle.mass_kg == 15.22 and cfg.vehicle.displaced_volume_m3 == 0.0153
     assert (cfg.vehicle.length_m, cfg.vehicle.width_m, cfg.vehicle.height_m) == (0.59, 0.47, 0.40)
     # net buoyancy: [Hindrax-Drag] §5 computes f_b = 0.7845 N with rho = 1000 kg/m^3
     assert cfg.buoyancy_n - cfg.weight_n == pytest.approx(0.7845, abs=2e-3)

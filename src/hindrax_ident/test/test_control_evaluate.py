@@ -36,7 +36,7 @@ def known_model(cfg) -> ControlModel:
     axes = dict(base.axes)
     h = doc["hydrodynamics"]["heave"]
     a = base.axis("heave")
-    axes["heave"] = type(a)("heave", (cfg.mass_kg + h["added_mass_kg"]) / s, 0.05,
+    axes["heave"] = type(a)("heave", (cfg.vehicle.mass_kg + h["added_mass_kg"]) / s, 0.05,
                             h["linear_damping_positive_kg_s"] / s, h["linear_damping_negative_kg_s"] / s,
                             h["quadratic_damping_positive_kg_m"] / s, h["quadratic_damping_negative_kg_m"] / s,
                             (cfg.buoyancy_n - cfg.weight_n) / s, 0.0, {"inertia": "truth"})

@@ -32,11 +32,12 @@ def test_surge_and_heave_recover_the_configured_hydrodynamics():
     assert errors == {} and set(idents) == {"surge", "heave"}
 
     hs, hh = cfg.hydrodynamics("surge"), cfg.hydrodynamics("heave")
-    bias_heave = (cfg.water_density_kg_m3 * cfg.displaced_volume_m3 - cfg.mass_kg) * cfg.gravity_m_s2  # 0.785 N
+    v, env = cfg.vehicle, cfg.environment
+    bias_heave = (env.water_density_kg_m3 * v.displaced_volume_m3 - v.mass_kg) * env.gravity_m_s2  # 0.785 N
     expected = {
-        "surge": {"inertia": cfg.mass_kg + hs.added_mass, "added_mass": hs.added_mass,
+        "surge": {"inertia": cfg.vehicle.mass_kg + hs.added_mass, "added_mass": hs.added_mass,
                   "quadratic_damping": hs.quadratic_damping_positive, "bias": 0.0},
-        "heave": {"inertia": cfg.mass_kg + hh.added_mass, "added_mass": hh.added_mass,
+        "heave": {"inertia": cfg.vehicle.mass_kg + hh.added_mass, "added_mass": hh.added_mass,
                   "quadratic_damping_positive": hh.quadratic_damping_positive,
                   "quadratic_damping_negative": hh.quadratic_damping_negative, "bias": bias_heave},
     }

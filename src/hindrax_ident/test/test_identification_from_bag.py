@@ -76,8 +76,8 @@ def test_record_wrench_windows_and_runs_from_status_and_esc_widths():
     # depth log from the pressure: 9810 Pa above the surface pressure = 1 m of fresh water at the port
     depth = np.array([v[0] for _, v in rec.sensors["depth"]])
     port_above_origin = -cfg.flat["sensors.ms5837.position_frd_m"][2]
-    assert depth == pytest.approx(np.full(depth.size, 1000.0 * 9.81 / (cfg.water_density_kg_m3 * cfg.gravity_m_s2)
-                                          + port_above_origin), abs=1e-6)
+    rho_g = cfg.environment.water_density_kg_m3 * cfg.environment.gravity_m_s2
+    assert depth == pytest.approx(np.full(depth.size, 1000.0 * 9.81 / rho_g + port_above_origin), abs=1e-6)
     assert not rec.aborted
 
 

@@ -41,7 +41,7 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
     cfg = load_config(default_config_path(), OVERRIDES)
     f = cfg.flat
     assert f["limits.max_depth_m"] < 1.58 < f["supervisor.max_depth_m"]  # the premise of the depth case
-    rho_g = cfg.water_density_kg_m3 * cfg.gravity_m_s2
+    rho_g = cfg.environment.water_density_kg_m3 * cfg.environment.gravity_m_s2
     port_z = float(f["sensors.ms5837.position_frd_m"][2])  # the pressure port below the body origin, m (level)
     with ros_context() as ctx:
         emu = Pca9685Emulator()
@@ -101,7 +101,7 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
                 pubs["pressure"].publish(p)
             imu = Imu()
             imu.header.stamp = stamp
-            imu.linear_acceleration.z = cfg.gravity_m_s2 + float(rng.normal(0.0, 0.01))
+            imu.linear_acceleration.z = cfg.environment.gravity_m_s2 + float(rng.normal(0.0, 0.01))
             pubs["imu"].publish(imu)
             clock["ns"] += int(dt_s * 1e9)
             c = Clock()

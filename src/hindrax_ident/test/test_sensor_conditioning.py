@@ -108,7 +108,7 @@ def test_depth_from_pressure_uses_the_attitude_at_the_pressure_time(cfg):
     assert abs(r_p[0]) > 0.05
     for t, pitch in ((0.0, 0.0), (0.1, 0.4)):
         st.on_sample("dvl75_attitude", SimpleNamespace(stamp_s=t, roll_rad=0.0, pitch_rad=pitch, yaw_rad=0.0))
-    rho_g = cfg.water_density_kg_m3 * cfg.gravity_m_s2
+    rho_g = cfg.environment.water_density_kg_m3 * cfg.environment.gravity_m_s2
     p0 = cfg.environment.surface_pressure_pa
     st.on_sample("ms5837", SimpleNamespace(stamp_s=0.05, pressure_pa=p0 + rho_g * 1.0))
     theta = 0.2  # pitch at 0.05 s; port depth = origin depth + (R r_p)_z = d - sin(theta) x_p + cos(theta) z_p

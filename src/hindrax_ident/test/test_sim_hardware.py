@@ -69,7 +69,7 @@ def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample
     they are given follows the current depth, not the 10 Hz sensor-model sample (up to 100 ms, 3 cm, old)."""
     sim, vh, cfg = hw
     sim.reset(position_ned_m=[5.0, 3.0, 0.5], nu=[0.0, 0.0, 0.3, 0.0, 0.0, 0.0])
-    rho_g = cfg.water_density_kg_m3 * cfg.gravity_m_s2
+    rho_g = cfg.environment.water_density_kg_m3 * cfg.environment.gravity_m_s2
     port_z = cfg.sensors.ms5837.position_frd_m[2]
     errors, stale = [], []
     for _ in range(12):

@@ -30,7 +30,7 @@ def cfg():
 
 @pytest.fixture(scope="module")
 def neutral_cfg(cfg):
-    rho, vol = cfg.water_density_kg_m3, cfg.displaced_volume_m3
+    rho, vol = cfg.environment.water_density_kg_m3, cfg.vehicle.displaced_volume_m3
     return cfg.with_overrides({"vehicle.mass_kg": rho * vol, "vehicle.net_buoyancy_n": 0.0,
                                "vehicle.centre_of_buoyancy_frd_m": [0.0, 0.0, 0.0]})
 
@@ -83,8 +83,8 @@ def test_fast_path_equals_matrix_form(coupled_cfg):
 
 def test_coriolis_rigid_body_is_newton_euler(coupled_cfg):
     """C_RB(nu) nu (coordinate-free form) reproduces the Newton-Euler terms of [T] eqs. 2.4-2.5."""
-    m = coupled_cfg.mass_kg
-    r_g = coupled_cfg.centre_of_gravity_frd_m
+    m = coupled_cfg.vehicle.mass_kg
+    r_g = coupled_cfg.vehicle.centre_of_gravity_frd_m
     i_o = mdl.rigid_body_mass_matrix(m, r_g, coupled_cfg.inertia_matrix_kg_m2)[3:, 3:]
     rng = np.random.default_rng(5)
     for _ in range(20):
@@ -101,7 +101,7 @@ def test_coriolis_rigid_body_is_newton_euler(coupled_cfg):
 
 def test_parallel_axis_inertia(coupled_cfg):
     """I_o = I_cg + m (|r|^2 I - r r^T): the inertia about CO grows by the parallel-axis term."""
-    m, r = coupled_cfg.mass_kg, coupled_cfg.centre_of_gravity_frd_m
+    m, r = coupled_cfg.vehicle.mass_kg, np.asarray(coupled_cfg.vehicle.centre_of_gravity_frd_m)
     mrb = mdl.rigid_body_mass_matrix(m, r, coupled_cfg.inertia_matrix_kg_m2)
     expected = coupled_cfg.inertia_matrix_kg_m2 + m * (r @ r * np.eye(3) - np.outer(r, r))
     assert np.allclose(mrb[3:, 3:], expected)
@@ -121,7 +121,7 @@ def test_restoring_matches_fossen_eq_2_23(cfg, roll, pitch):
 def test_restoring_physics(cfg):
     """Level: net buoyancy B - W pushes up (g_z = W - B on the left side); rolled: the CB above the CG rights."""
     w, b = cfg.weight_n, cfg.buoyancy_n
-    r_b = cfg.centre_of_buoyancy_frd_m
+    r_b = cfg.vehicle.centre_of_buoyancy_frd_m
     g = mdl.restoring_vector(np.eye(3), w, b, np.zeros(3), r_b)
     assert g[2] == pytest.approx(-(w - b)) and b - w == pytest.approx(0.785, abs=0.001)  # [Hindrax-Drag] §5
     rot = Rotation.from_euler("x", 0.2).as_matrix()
@@ -205,7 +205,7 @@ def test_initial_acceleration_is_force_over_total_mass(neutral_cfg, dof):
     """Right after a load step from rest: dv/dt = F / (m + m_a) (or K / (I + I_a))."""
     i = DOFS.index(dof)
     load = 10.0 if i < 3 else 0.5
-    inertia = neutral_cfg.mass_kg if i < 3 else neutral_cfg.vehicle.inertia_kg_m2[i - 3]
+    inertia = neutral_cfg.vehicle.mass_kg if i < 3 else neutral_cfg.vehicle.inertia_kg_m2[i - 3]
     total = inertia + neutral_cfg.hydrodynamics(dof).added_mass
     sim = Simulator(neutral_cfg, pool=False, sensors=False)
     sim.reset(position_ned_m=[0, 0, 10], rpy_rad=[0, 0, 0])
@@ -222,7 +222,7 @@ def test_thruster_step_acceleration_and_lag(neutral_cfg):
     c4, c3, c2, c1 = neutral_cfg.thrusters.curve_positive
     f_one = c4 * p_us ** 3 + c3 * p_us ** 2 + c2 * p_us + c1
     x_force = 2.0 * f_one * math.cos(math.radians(55.0))
-    total = neutral_cfg.mass_kg + neutral_cfg.hydrodynamics("surge").added_mass
+    total = neutral_cfg.vehicle.mass_kg + neutral_cfg.hydrodynamics("surge").added_mass
     pw = [p_us, p_us, 1500, 1500, 1500, 1500, 1500, 1500]
 
     instant = neutral_cfg.with_overrides({"thrusters.time_constant_s": 0.0})

@@ -20,7 +20,7 @@ def hull_corners_ned(sim):
     f = sim.config.flat
     half = 0.5 * np.array([f["vehicle.length_m"], f["vehicle.width_m"], f["vehicle.height_m"]])
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    body = sim.config.centre_of_buoyancy_frd_m + signs * half
+    body = sim.config.vehicle.centre_of_buoyancy_frd_m + signs * half
     return sim.position_ned_m + body @ sim.rotation.T
 
 
@@ -46,7 +46,7 @@ def test_unpowered_vehicle_rises_and_floats_at_the_archimedes_waterline(cfg):
     sim.reset(position_ned_m=start)
     w, b = cfg.weight_n, cfg.buoyancy_n
     h = 0.5 * cfg.vehicle.height_m
-    z_eq = h * (2.0 * w / b - 1.0) - cfg.centre_of_buoyancy_frd_m[2]
+    z_eq = h * (2.0 * w / b - 1.0) - cfg.vehicle.centre_of_buoyancy_frd_m[2]
     depths = []
     for _ in range(int(round(60.0 / sim.step_s))):
         sim.step([1500.0] * 8)

@@ -76,7 +76,7 @@ def test_vehicle_rests_on_the_sloped_floor(cfg):
     sim.reset(position_ned_m=[7.0, 3.0, 1.0])
     sim.advance(20.0, [1500.0] * 8)
     f = cfg.flat
-    cb = cfg.centre_of_buoyancy_frd_m
+    cb = cfg.vehicle.centre_of_buoyancy_frd_m
     bottom = sim.position_ned_m[2] + cb[2] + 0.5 * f["vehicle.height_m"]
     floor = plane_depth(cfg, sim.position_ned_m[0] + cb[0], sim.position_ned_m[1] + cb[1])
     assert bottom == pytest.approx(floor, abs=0.01)
@@ -182,7 +182,7 @@ def test_floor_profile_depths_rays_and_contact(cfg):
     sink.pool.set_floor_profile(PROFILE)
     sink.reset(position_ned_m=[7.0, 3.0, 0.9])
     sink.advance(8.0, [1500.0] * 8)
-    cb = cfg.centre_of_buoyancy_frd_m
+    cb = cfg.vehicle.centre_of_buoyancy_frd_m
     bottom = sink.position_ned_m[2] + cb[2] + 0.5 * cfg.flat["vehicle.height_m"]
     assert bottom == pytest.approx(sink.pool.floor_depth_m(sink.position_ned_m[0] + cb[0], 3.0), abs=0.01)
     assert "floor" in sink.contact.faces

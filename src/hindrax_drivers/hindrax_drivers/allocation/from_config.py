@@ -26,7 +26,7 @@ def thrust_curve_from_config(cfg: VehicleConfig) -> ThrustCurve:
 def allocation_matrix_from_config(cfg: VehicleConfig) -> np.ndarray:
     """Thrust allocation matrix B (6, n), body FRD about the CG ([Hindrax-Drag] eq. 9): column i = [d_i; r_i x d_i]."""
     t = cfg.thrusters
-    return thrust_allocation_matrix(t.positions_frd_m - cfg.centre_of_gravity_frd_m, t.directions_frd)
+    return thrust_allocation_matrix(t.positions_frd_m - cfg.vehicle.centre_of_gravity_frd_m, t.directions_frd)
 
 
 def pca9685_pulse_step_us(cfg: VehicleConfig) -> float:

@@ -182,34 +182,14 @@ class VehicleConfig:
 
     # -- derived views --
     @property
-    def mass_kg(self) -> float:
-        """``vehicle.mass_kg``, kg."""
-        return self.vehicle.mass_kg
-
-    @property
-    def displaced_volume_m3(self) -> float:
-        """``vehicle.displaced_volume_m3``, m^3."""
-        return self.vehicle.displaced_volume_m3
-
-    @property
-    def water_density_kg_m3(self) -> float:
-        """``environment.water_density_kg_m3``, kg/m^3."""
-        return self.environment.water_density_kg_m3
-
-    @property
-    def gravity_m_s2(self) -> float:
-        """``environment.gravity_m_s2``, m/s^2."""
-        return self.environment.gravity_m_s2
-
-    @property
     def weight_n(self) -> float:
         """W = m g, N."""
-        return self.mass_kg * self.gravity_m_s2
+        return self.vehicle.mass_kg * self.environment.gravity_m_s2
 
     @property
     def buoyancy_n(self) -> float:
         """B = rho g V, N."""
-        return self.water_density_kg_m3 * self.gravity_m_s2 * self.displaced_volume_m3
+        return self.environment.water_density_kg_m3 * self.environment.gravity_m_s2 * self.vehicle.displaced_volume_m3
 
     @property
     def inertia_matrix_kg_m2(self) -> np.ndarray:
@@ -217,14 +197,6 @@ class VehicleConfig:
         ixx, iyy, izz = self.vehicle.inertia_kg_m2
         ixy, ixz, iyz = self.vehicle.products_of_inertia_kg_m2
         return np.array([[ixx, -ixy, -ixz], [-ixy, iyy, -iyz], [-ixz, -iyz, izz]])
-
-    @property
-    def centre_of_gravity_frd_m(self) -> np.ndarray:
-        return np.asarray(self.vehicle.centre_of_gravity_frd_m, dtype=float)
-
-    @property
-    def centre_of_buoyancy_frd_m(self) -> np.ndarray:
-        return np.asarray(self.vehicle.centre_of_buoyancy_frd_m, dtype=float)
 
     @property
     def added_mass_matrix(self) -> np.ndarray:
@@ -235,7 +207,7 @@ class VehicleConfig:
     def calibration(self) -> CalibrationConfig:
         """Typed ``calibration.*`` section (:class:`CalibrationConfig`)."""
         c = self.calibration_section
-        rho, g = self.water_density_kg_m3, self.gravity_m_s2
+        rho, g = self.environment.water_density_kg_m3, self.environment.gravity_m_s2
         float_b = None
         if c.float_mass_kg is not None and c.float_volume_m3 is not None:
             float_b = (rho * c.float_volume_m3 - c.float_mass_kg) * g
@@ -273,10 +245,10 @@ class VehicleConfig:
 
     def summary(self) -> str:
         """A short multi-line human summary of the vehicle (used by ``hindrax config check``)."""
-        t = self.thrusters
+        t, v = self.thrusters, self.vehicle
         lines = [
-            f"vehicle {self.vehicle.name}: mass {self.mass_kg:g} kg, volume {self.displaced_volume_m3:g} m^3,"
-            f" net buoyancy {(self.buoyancy_n - self.weight_n):.3f} N (rho {self.water_density_kg_m3:g} kg/m^3)",
+            f"vehicle {v.name}: mass {v.mass_kg:g} kg, volume {v.displaced_volume_m3:g} m^3, net buoyancy "
+            f"{(self.buoyancy_n - self.weight_n):.3f} N (rho {self.environment.water_density_kg_m3:g} kg/m^3)",
             f"thrusters: {len(t.thrusters)} ({', '.join(t.names)}), pulse width "
             f"{t.pulse_width_min_us:g}-{t.pulse_width_max_us:g} us, neutral {t.pulse_width_neutral_us:g} us",
             "added mass (surge sway heave kg; roll pitch yaw kg m^2): "

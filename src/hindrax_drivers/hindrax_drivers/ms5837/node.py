@@ -213,8 +213,8 @@ class Ms5837Node(Node):
         self.osr = int(s.oversampling)
         self.rate_hz = float(s.rate_hz)
         self.configured_variant = p.parse_variant(s.variant)
-        self.water_density_kg_m3 = float(cfg.water_density_kg_m3)
-        self.gravity_m_s2 = float(cfg.gravity_m_s2)
+        self.water_density_kg_m3 = float(cfg.environment.water_density_kg_m3)
+        self.gravity_m_s2 = float(cfg.environment.gravity_m_s2)
         self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
         #: zero_depth's atmospheric reference (Pa) and margin (Pa): the start-up surface pressure, fixed
         self.atmospheric_reference_pa = self.surface_pressure_pa

@@ -61,7 +61,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from hindrax_msgs.srv import StartRecording, StopRecording
 
 from ..config import ConfigError
-from ..node_parameters import node_config
+from ..node_common import load_node_config
 from ..ros_process import RosProcess
 from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
@@ -94,7 +94,7 @@ class RecorderNode(Node):
         #: os.statvfs, or a stand-in with the same result fields (tests)
         self._statvfs = statvfs or os.statvfs
         self._disk_full: str = ""
-        self._cfg = node_config(self, on_error=lambda m: self.get_logger().error(m), keys=("recording",))
+        self._cfg = load_node_config(self, ("recording",))
         self._topics_param = list(self._param("topics", []) or [])
         self._regex_param = str(self._param("topic_regex", ""))
         self._all_param = bool(self._param("all_topics", False))

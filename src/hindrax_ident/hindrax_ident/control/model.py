@@ -141,7 +141,7 @@ class ControlModel:
 def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
     """Rigid-body inertia of one DOF: the mass (kg) or the principal moment of inertia about the CG (kg m^2)."""
     i = DOFS.index(dof)
-    return float(cfg.mass_kg) if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
+    return float(cfg.vehicle.mass_kg) if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
 
 
 def declared_inertia_uncertainty_rel(cfg: VehicleConfig) -> float:
@@ -160,8 +160,9 @@ def model_from_config(cfg: VehicleConfig, source: str = VEHICLE_FILE) -> Control
         h = cfg.hydrodynamics(dof)
         i = DOFS.index(dof)
         bias = float(cfg.buoyancy_n - cfg.weight_n) if dof == "heave" else 0.0
-        restoring = float(cfg.centre_of_gravity_frd_m[2] * cfg.weight_n
-                          - cfg.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n) if dof in ("roll", "pitch") else 0.0
+        v = cfg.vehicle
+        restoring = float(v.centre_of_gravity_frd_m[2] * cfg.weight_n
+                          - v.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n) if dof in ("roll", "pitch") else 0.0
         axes[dof] = AxisModel(dof, rigid_inertia(cfg, dof) + float(cfg.added_mass_matrix[i, i]), rel,
                               h.linear_damping_positive, h.linear_damping_negative, h.quadratic_damping_positive,
                               h.quadratic_damping_negative, bias, restoring,

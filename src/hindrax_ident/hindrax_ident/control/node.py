@@ -64,8 +64,7 @@ from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_common import run_node
-from hindrax_drivers.node_parameters import node_config
+from hindrax_drivers.node_common import load_node_config, run_node
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus, ThrusterPwm
 
 from ..identification.maneuvers import HoldController, dof_authority
@@ -99,7 +98,7 @@ class ControllerNode(Node):
                  model_file: str | None = None, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
-        self.config = config if config is not None else node_config(self, on_error=log.error)
+        self.config = config if config is not None else load_node_config(self)
         self.settings = ControlSettings.from_config(self.config)
         if not self.has_parameter("model_file"):
             self.declare_parameter("model_file", "" if model_file is None else model_file, ParameterDescriptor(

@@ -117,7 +117,7 @@ def regressor_matrix(dof: str, acceleration, velocity, restoring=None) -> np.nda
 
 def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
     """Rigid-body mass or moment of inertia about the body origin (kg, kg m^2): diag of M_RB (Fossen eq. 2.7)."""
-    m = rigid_body_mass_matrix(cfg.mass_kg, cfg.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
+    m = rigid_body_mass_matrix(cfg.vehicle.mass_kg, cfg.vehicle.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
     return float(m[DOFS.index(dof), DOFS.index(dof)])
 
 
@@ -141,8 +141,8 @@ def truth_parameters(cfg: VehicleConfig, dof: str) -> dict[str, float]:
         out.update(quadratic_damping=h.quadratic_damping_positive, linear_damping=h.linear_damping_positive,
                    bias=0.0)
     if dof in ("roll", "pitch"):
-        out["restoring"] = float(cfg.centre_of_gravity_frd_m[2] * cfg.weight_n
-                                 - cfg.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n)
+        out["restoring"] = float(cfg.vehicle.centre_of_gravity_frd_m[2] * cfg.weight_n
+                                 - cfg.vehicle.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n)
     return {k: float(v) for k, v in out.items()}
 
 
@@ -162,7 +162,8 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
     k = DOFS.index(dof)
     acc = max(float(or_default(imu.accel_noise_std_m_s2, 0.05)), 1e-3)
     att = float(or_default(dvl.attitude_noise_std_rad, 0.005))
-    accel = {"accel": True, "accel_std": math.hypot(acc, cfg.gravity_m_s2 * att), "accel_jerk_psd": ACCEL_JERK_PSD}
+    accel = {"accel": True, "accel_std": math.hypot(acc, cfg.environment.gravity_m_s2 * att),
+             "accel_jerk_psd": ACCEL_JERK_PSD}
     if dof in ("surge", "sway"):
         std = max(float(or_default(dvl.noise_std_m_s, dvl.velocity_std_m_s)), 1e-3)
         std = math.hypot(std, 0.5 * float(or_default(dvl.scale_error_fraction, 0.0)))
@@ -170,7 +171,7 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
                 **accel}
     if dof == "heave":
         pa = float(or_default(cfg.sensors.ms5837.noise_std_pa, 20.0))
-        std = max(pa / (cfg.water_density_kg_m3 * cfg.gravity_m_s2), 5e-4)
+        std = max(pa / (cfg.environment.water_density_kg_m3 * cfg.environment.gravity_m_s2), 5e-4)
         return {"log": "depth", "column": 0, "measured": "position", "std": std, "jerk_psd": std ** 2 * 12.0 ** 6,
                 **accel}
     std = max(float(or_default(imu.gyro_noise_std_rad_s, 0.003)), 5e-4)

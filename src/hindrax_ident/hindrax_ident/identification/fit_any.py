@@ -283,8 +283,8 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
                 st.frames.add(msg.header.frame_id)
             elif role == "depth":
                 if ty == PRESSURE:
-                    rho = float(cfg.water_density_kg_m3) if cfg is not None else 1000.0
-                    g = float(cfg.gravity_m_s2) if cfg is not None else 9.80665
+                    rho = float(cfg.environment.water_density_kg_m3) if cfg is not None else 1000.0
+                    g = float(cfg.environment.gravity_m_s2) if cfg is not None else 9.80665
                     st.val.append([float(msg.fluid_pressure) / (rho * g)])
                 else:
                     p = msg.pose.pose.position if ty == ODOM else msg.pose.position
@@ -1009,7 +1009,7 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
                        "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
                        "configuration_sha256": cfg.sha256 if cfg is not None else None,
                        "vehicle_parameters": vehicle_parameters(cfg) if cfg is not None else None,
-                       "water_density_kg_m3": float(cfg.water_density_kg_m3) if cfg is not None else None,
+                       "water_density_kg_m3": float(cfg.environment.water_density_kg_m3) if cfg is not None else None,
                        "method": "hindrax ident fit: segment-wise output error (prediction error) over free-form "
                                  "excitation, equation-error start; model of [Hindrax-Drag] eq. 2 with "
                                  "inertia and bias",

@@ -92,7 +92,7 @@ def tilt_test_angle_rad(cfg: VehicleConfig, dof: str) -> float:
 def prior_inertia(cfg: VehicleConfig, dof: str) -> float:
     """A-priori rigid + added inertia of a DOF from the configuration (kg or kg m^2), for controller gains."""
     i = DOF_INDEX[dof]
-    rigid = cfg.mass_kg if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
+    rigid = cfg.vehicle.mass_kg if i < 3 else float(cfg.inertia_matrix_kg_m2[i - 3, i - 3])
     return float(rigid + cfg.added_mass_matrix[i, i])
 
 

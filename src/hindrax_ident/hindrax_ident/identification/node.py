@@ -106,8 +106,7 @@ from hindrax_drivers import frames
 from hindrax_drivers.lean_cdr import wrench_stamped_cdr
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_common import run_node
-from hindrax_drivers.node_parameters import node_config
+from hindrax_drivers.node_common import load_node_config, run_node
 from hindrax_drivers.polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
@@ -209,15 +208,16 @@ class _GoalRun:
 class IdentificationNode(PolledInputsMixin, Node):
     """The identification executive as a ROS node (module docstring).
 
-    config: a VehicleConfig (default: from the node's parameters, :func:`node_config`). Other keyword
-    arguments go to ``Node``. Raises :class:`ConfigError` for an invalid configuration.
+    config: a VehicleConfig (default: from the node's parameters,
+    :func:`~hindrax_drivers.node_common.load_node_config`). Other keyword arguments go to ``Node``. Raises
+    :class:`ConfigError` for an invalid configuration.
     """
 
     def __init__(self, *, config: VehicleConfig | None = None, node_name: str = "identification",
                  **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
-        self.config = config if config is not None else node_config(self, on_error=log.error)
+        self.config = config if config is not None else load_node_config(self)
         ident = self.config.identification
         self.tick_s = 1.0 / float(ident.estimate_rate_hz)
         self.publish_period_s = 1.0 / max(1.0, float(ident.publish_rate_hz))

@@ -45,7 +45,7 @@ def prior_std_rel_of(cfg, prior_std_rel: float | None = None) -> float:
 def rigid_inertia_of(cfg, dof: str) -> float:
     """Rigid-body mass (kg) or moment of inertia (kg m^2) of ``dof`` about the body origin, diag of M_RB
     ([Fossen2011] eq. 3.44)."""
-    m = rigid_body_mass_matrix(cfg.mass_kg, cfg.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
+    m = rigid_body_mass_matrix(cfg.vehicle.mass_kg, cfg.vehicle.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
     return float(m[DOFS.index(dof), DOFS.index(dof)])
 
 

@@ -97,8 +97,8 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
         return None
     a, b = _AREA_DIMENSIONS[r.dof]
     area = float(getattr(cfg.vehicle, a)) * float(getattr(cfg.vehicle, b))
-    rho = float(cfg.water_density_kg_m3)
-    length = characteristic_length_from_volume(float(cfg.displaced_volume_m3))
+    rho = float(cfg.environment.water_density_kg_m3)
+    length = characteristic_length_from_volume(float(cfg.vehicle.displaced_volume_m3))
     out: dict = {}
     names = (("c_d_positive", "quadratic_damping_positive"), ("c_d_negative", "quadratic_damping_negative")) \
         if r.dof == "heave" else (("c_d", "quadratic_damping"),)
@@ -216,7 +216,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
             "configuration_sha256": cfg.sha256,
             "vehicle_parameters": vehicle_parameters(cfg),  # what the values depend on (vehicle_match.py)
-            "water_density_kg_m3": float(cfg.water_density_kg_m3),
+            "water_density_kg_m3": float(cfg.environment.water_density_kg_m3),
             "method": method or ("[Hindrax-Drag] §4 self-propelled ladder; the fit core's segment-wise output error on "
                                  "the raw sensor samples (docs/identification.md §7); equation-error batch LS "
                                  "([Hindrax-Drag] eqs. 6-8), RLS online and steady-state LS ([Hindrax-Drag] "

@@ -180,12 +180,12 @@ class VehicleModel:
 
     def __init__(self, config: VehicleConfig, surface_fraction: SurfaceFraction | None = None) -> None:
         self.config = config
-        self.mass_kg = float(config.mass_kg)
-        self.gravity_m_s2 = float(config.gravity_m_s2)
+        self.mass_kg = float(config.vehicle.mass_kg)
+        self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.weight_n = float(config.weight_n)
         self.buoyancy_n = float(config.buoyancy_n)
-        self.r_g_m = np.array(config.centre_of_gravity_frd_m, dtype=float)
-        self.r_b_m = np.array(config.centre_of_buoyancy_frd_m, dtype=float)
+        self.r_g_m = np.array(config.vehicle.centre_of_gravity_frd_m, dtype=float)
+        self.r_b_m = np.array(config.vehicle.centre_of_buoyancy_frd_m, dtype=float)
         self.mass_matrix_rigid_body = rigid_body_mass_matrix(self.mass_kg, self.r_g_m, config.inertia_matrix_kg_m2)
         self.inertia_o_kg_m2 = self.mass_matrix_rigid_body[3:, 3:].copy()
         self.added_mass_matrix = np.array(config.added_mass_matrix, dtype=float)

@@ -65,8 +65,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import VehicleConfig
-from hindrax_drivers.node_common import run_node
-from hindrax_drivers.node_parameters import node_config
+from hindrax_drivers.node_common import load_node_config, run_node
 from hindrax_msgs.msg import ThrusterPwm
 
 from .pool import FACES
@@ -91,7 +90,8 @@ def time_msg(t_s: float) -> TimeMsg:
 class SimulatorNode(Node):
     """Thin rclpy node over :class:`Simulator` (module docstring).
 
-    config: a VehicleConfig (default: from the node's parameters, see :func:`node_config`).
+    config: a VehicleConfig (default: from the node's parameters, see
+    :func:`~hindrax_drivers.node_common.load_node_config`).
     pulse_width_source: optional callable replacing the ThrusterPwm subscription.
     simulator: optional prebuilt Simulator (must use ``config``). Other keyword arguments go to ``Node``.
     Raises :class:`ConfigError` for an invalid configuration (logged as one line first).
@@ -101,7 +101,7 @@ class SimulatorNode(Node):
                  simulator: Simulator | None = None, node_name: str = "hindrax_simulator", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         log = self.get_logger()
-        self.config = config if config is not None else node_config(self, on_error=log.error)
+        self.config = config if config is not None else load_node_config(self)
         self.simulator = simulator if simulator is not None else Simulator(self.config)
         sim = self.config.simulation
         self.real_time_factor = float(sim.real_time_factor)

@@ -126,7 +126,7 @@ class Pool:
     def from_config(cls, config: VehicleConfig) -> "Pool":
         """Pool and hull from ``pool.*`` and ``vehicle.length_m/width_m/height_m``, hull centred on the CB."""
         v, pool = config.vehicle, config.pool
-        surface = FreeSurface((0.5 * v.length_m, 0.5 * v.width_m, 0.5 * v.height_m), config.centre_of_buoyancy_frd_m)
+        surface = FreeSurface((0.5 * v.length_m, 0.5 * v.width_m, 0.5 * v.height_m), v.centre_of_buoyancy_frd_m)
         return cls(pool.length_m, pool.width_m, pool.depth_m, surface)
 
     # ------------------------------------------------------------------ geometry queries

@@ -432,7 +432,7 @@ class AccelModel(_ImuBase):
         s = config.simulation.sensors.icm20948_accel
         super().__init__("icm20948_accel", s.noise_std_m_s2, s.bias_m_s2, s.rate_hz, s.dropout_probability, config,
                          seed)
-        self.gravity_m_s2 = float(config.gravity_m_s2)
+        self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.position_frd_m = np.asarray(imu_position_frd_m, dtype=float)
         self.temperature_c = float(water_temperature_c)
 
@@ -480,8 +480,8 @@ class PressureModel(SensorModel):
         super().__init__("ms5837", NoiseSpec.from_settings(s.noise_std_pa, s.bias_pa, s.rate_hz, s.dropout_probability,
                                                            float(config.sensors.ms5837.rate_hz)), seed)
         self.position_frd_m = np.asarray(config.sensors.ms5837.position_frd_m, dtype=float)
-        self.density_kg_m3 = float(config.water_density_kg_m3)
-        self.gravity_m_s2 = float(config.gravity_m_s2)
+        self.density_kg_m3 = float(config.environment.water_density_kg_m3)
+        self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.surface_pressure_pa = float(config.environment.surface_pressure_pa)
         self.temperature_c = float(water_temperature_c)
 

@@ -51,7 +51,7 @@ class Thrusters:
         self.names = tuple(t.names)
         self.n = len(self.names)
         self.matrix_cg = thrust_allocation_matrix(t.positions_frd_m, t.directions_frd)
-        r_g = np.asarray(config.centre_of_gravity_frd_m, dtype=float)
+        r_g = np.asarray(config.vehicle.centre_of_gravity_frd_m, dtype=float)
         shift = np.eye(6)
         shift[3:, :3] = np.array([[0.0, -r_g[2], r_g[1]], [r_g[2], 0.0, -r_g[0]], [-r_g[1], r_g[0], 0.0]])
         self.matrix_co = shift @ self.matrix_cg

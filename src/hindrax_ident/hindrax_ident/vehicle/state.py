@@ -123,7 +123,7 @@ class SensorState:
         r_mount = rotation_ned_from_body(roll, pitch, yaw)  # sensor -> base_link (FLU): the same zyx Euler matrix
         self._frd_from_sensor = frames.R_FLU_FRD @ r_mount
         self._p0 = float(self.cfg.environment.surface_pressure_pa)
-        self._rho_g = float(self.cfg.water_density_kg_m3 * self.cfg.gravity_m_s2)
+        self._rho_g = float(self.cfg.environment.water_density_kg_m3 * self.cfg.environment.gravity_m_s2)
         self._r_pressure = np.asarray(sensors.ms5837.position_frd_m, dtype=float)
         self._r_dvl = np.asarray(sensors.dvl75.position_frd_m, dtype=float)
         self.position_ned_m = np.asarray(self.cfg.pool.start_position_ned_m, dtype=float).copy()
@@ -135,7 +135,7 @@ class SensorState:
         self.accel_bias_frd_m_s2 = np.zeros(3)
         self.acceleration_frd_m_s2 = np.full(3, np.nan)
         self.acceleration_ned_m_s2 = np.full(3, np.nan)
-        self._g = float(self.cfg.gravity_m_s2)
+        self._g = float(self.cfg.environment.gravity_m_s2)
         self.collecting_gyro_bias = False
         self.log = {k: [] for k in ("depth", "attitude", "gyro", "dvl", "altitude", "accel")}
         self.dvl_beam_range_m = np.full(4, np.nan)
