@@ -238,7 +238,11 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
 @pytest.mark.ros
 def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after():
     """Under the vehicle's executor (rclpy's EventsExecutor, system clock) the controller ticks at ``control.rate_hz``
-    (50 Hz), at 1 / GOAL_TICK_S (5 Hz) while an identification goal runs, and at 50 Hz again once it ends."""
+    (50 Hz), at 1 / GOAL_TICK_S (5 Hz) while an identification goal runs, and at 50 Hz again once it ends.
+
+    The rate is read where the node decides it, the period of the one tick timer that runs (load-independent); the
+    ticks counted in wall time are bounded from above only (a loaded machine delivers fewer, never more) and must
+    keep coming in each phase."""
     import time
 
     from rclpy.experimental.events_executor import EventsExecutor
@@ -268,17 +272,32 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
             wait_until(lambda: time.monotonic() - t0 >= seconds, seconds + 5, spin, f"{seconds} s of ticks")
             return ticks["n"] - n0
 
+        def tick_period_s() -> float:
+            """The period of the one tick timer that runs (the other is cancelled), s."""
+            running = [t for t in (node._tick_timer, node._goal_timer) if not t.is_canceled()]
+            assert len(running) == 1, f"{len(running)} tick timers running"
+            return running[0].timer_period_ns * 1e-9
+
+        def ticking() -> None:
+            n0 = ticks["n"]
+            wait_until(lambda: ticks["n"] >= n0 + 3, 30, spin, "three ticks")
+
         try:
             wait_until(lambda: status.get_subscription_count() == 1 and ticks["n"] >= 3, 10, spin, "matched")
-            rate = cfg.control.rate_hz  # bounds wide enough for a loaded machine, far from the other rate
-            assert 0.5 * rate <= ticks_in(1.0) <= 1.1 * rate
+            rate = cfg.control.rate_hz
+            assert tick_period_s() == pytest.approx(1.0 / rate)
+            assert ticks_in(1.0) <= 1.1 * rate
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
             wait_until(lambda: node._ident_running, 5, spin, "the goal seen")
+            assert tick_period_s() == pytest.approx(GOAL_TICK_S)
+            ticking()
             slow = ticks_in(2.0)
-            assert 0.5 * 2.0 / GOAL_TICK_S <= slow <= 2.0 * 2.0 / GOAL_TICK_S, slow
+            assert slow <= 2.0 * 2.0 / GOAL_TICK_S, slow  # 50 Hz would give 100
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
             wait_until(lambda: not node._ident_running, 5, spin, "the goal's end seen")
-            assert 0.5 * rate <= ticks_in(1.0) <= 1.1 * rate
+            assert tick_period_s() == pytest.approx(1.0 / rate)
+            ticking()
+            assert ticks_in(1.0) <= 1.1 * rate
         finally:
             ex.shutdown()
             probe.destroy_node()
