@@ -15,7 +15,11 @@ REP-103 FLU in ``base_link``):
   takes precedence; found by type with a Dvl velocity; an IMU frame other than the body frame is rotated with the
   bag's ``/tf_static``, else refused), else the attitude differentiated (odometry pose or DVL attitude);
 * depth (optional, ``--depth-topic``): ``sensor_msgs/msg/FluidPressure`` or the pose of an Odometry/PoseStamped;
-  when given, the heave velocity is its derivative (Savitzky-Golay) instead of the velocity topic's.
+  when given, the heave velocity is its derivative (Savitzky-Golay) instead of the velocity topic's;
+* allocation (optional, found by type with a WrenchStamped force): ``hindrax_msgs/msg/AllocationStatus``, the
+  wrench the thrust allocation achieved less the one requested (held from each status to the next, 0 before the
+  first): where it falls short (a thruster at its limit: the heave command clipped at the vertical thrusters'
+  limits) the fit core's saturation term is a candidate (:class:`.fit_core.Terms`).
 
 Preprocessing (:class:`Preprocessed`, reported in the ``preprocessing`` section): per topic, header stamps when
 every stamp is set, else receive (log) times; messages sorted by that time; repeated velocity values (a velocity
@@ -79,6 +83,7 @@ WRENCH, PWM = "geometry_msgs/msg/WrenchStamped", "hindrax_msgs/msg/ThrusterPwm"
 ODOM, TWIST_COV, TWIST, DVL = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/TwistWithCovarianceStamped",
                                "geometry_msgs/msg/TwistStamped", "hindrax_msgs/msg/Dvl")
 IMU, PRESSURE, POSE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/FluidPressure", "geometry_msgs/msg/PoseStamped"
+ALLOCATION = "hindrax_msgs/msg/AllocationStatus"
 
 #: role -> accepted message types
 ACCEPTED: dict[str, tuple[str, ...]] = {
@@ -211,6 +216,9 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
            "velocity": _select(path, topics, "velocity", choice.velocity, True),
            "imu": _select(path, topics, "imu", choice.imu, False) if choice.imu is not None else None,
            "depth": _select(path, topics, "depth", choice.depth, False) if choice.depth is not None else None}
+    alloc = [t for t, ty in topics.items() if ty == ALLOCATION]
+    # the allocation's shortfall belongs to a commanded wrench only (widths already carry the saturation)
+    sel["allocation"] = (alloc[0], ALLOCATION) if sel["wrench"][1] == WRENCH and len(alloc) == 1 else None
     if sel["wrench"][1] == PWM and cfg is None:
         raise FitInputError(f"{path}: force from {sel['wrench'][0]} [{PWM}] needs the thrust curves: give --config")
     if sel["velocity"][1] in (DVL, TWIST_COV, TWIST) and sel["imu"] is None:
@@ -281,6 +289,11 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
                 av = msg.angular_velocity
                 st.val.append(frames.flu_to_frd([av.x, av.y, av.z]))
                 st.frames.add(msg.header.frame_id)
+            elif role == "allocation":
+                a, q = msg.achieved_wrench, msg.requested_wrench
+                st.val.append(frames.wrench_flu_to_frd([a.force.x - q.force.x, a.force.y - q.force.y,
+                                                        a.force.z - q.force.z, a.torque.x - q.torque.x,
+                                                        a.torque.y - q.torque.y, a.torque.z - q.torque.z]))
             elif role == "depth":
                 if ty == PRESSURE:
                     rho = float(cfg.environment.water_density_kg_m3) if cfg is not None else 1000.0
@@ -323,6 +336,8 @@ def _read_streams(path: Path, choice: TopicChoice, cfg: VehicleConfig | None) ->
         del streams["attitude"]
     if "imu" in streams and not streams["imu"].val:
         del streams["imu"]
+    if "allocation" in streams and not streams["allocation"].val:
+        del streams["allocation"]
     return streams, info
 
 
@@ -369,12 +384,14 @@ def _gap_threshold(t: np.ndarray, opts: FitOptions) -> float:
 @dataclass
 class Chunk:
     """A continuous stretch on the uniform grid: t (n,) s from the bag's first force time; force (n, 6) FRD held;
-    velocity (n, 6) FRD interpolated (NaN where not measured); attitude (n, 3) Euler NED (NaN without one)."""
+    velocity (n, 6) FRD interpolated (NaN where not measured); attitude (n, 3) Euler NED (NaN without one);
+    shortfall (n, 6) FRD or None: the allocation's achieved less requested wrench, held as the force."""
 
     t: np.ndarray
     force: np.ndarray
     velocity: np.ndarray
     attitude: np.ndarray
+    shortfall: np.ndarray | None = None
 
 
 @dataclass
@@ -391,6 +408,7 @@ class Preprocessed:
     attitude: tuple[np.ndarray, np.ndarray] | None
     spans: list
     lag_s: float = 0.0
+    shortfall_values: np.ndarray | None = None
 
 
 def _derivative(t: np.ndarray, x: np.ndarray, window_s: float = 0.5) -> np.ndarray:
@@ -429,6 +447,9 @@ def _grid_chunks(pre: Preprocessed, delay_s: float, grid_s: float, step_mean: bo
             k = math.exp(-grid_s / sub / pre.lag_s)
             force = signal.lfilter([0.0, 1.0 - k], [1.0, -k], force - force[0], axis=0) + force[0]
         force = force.reshape(n, sub, -1).mean(axis=1)
+        short = None
+        if pre.shortfall_values is not None:
+            short = pre.shortfall_values[i].reshape(n, sub, -1).mean(axis=1)
         vel = np.column_stack([np.interp(t, pre.vel_times, pre.vel_values[:, k], left=np.nan, right=np.nan)
                                if np.isfinite(pre.vel_values[:, k]).any() else np.full(n, np.nan) for k in range(6)])
         att = np.full((n, 3), np.nan)
@@ -436,7 +457,7 @@ def _grid_chunks(pre: Preprocessed, delay_s: float, grid_s: float, step_mean: bo
             ta, va = pre.attitude
             un = np.unwrap(va, axis=0)
             att = np.column_stack([np.interp(t, ta, un[:, k], left=np.nan, right=np.nan) for k in range(3)])
-        chunks.append(Chunk(t, force, vel, att))
+        chunks.append(Chunk(t, force, vel, att, short))
     return chunks
 
 
@@ -451,6 +472,14 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     ft, tb = streams["wrench"].times()
     notes["time_base"]["force"] = tb
     ft, fv = _sorted(ft, np.asarray(streams["wrench"].val, dtype=float))
+    short = None
+    if "allocation" in streams:  # the status in force at each force sample (0 before the first)
+        at, tb = streams["allocation"].times()
+        at, av = _sorted(at, np.asarray(streams["allocation"].val, dtype=float))
+        j = np.searchsorted(at, ft + 1e-9, side="right") - 1
+        short = np.where(j[:, None] >= 0, av[np.clip(j, 0, None)], 0.0)
+        notes["saturation"] = (f"{streams['allocation'].topic} ({tb}): achieved less requested wrench, held from "
+                               "each status; the saturation term is a candidate where it falls short")
     known = np.all(np.isfinite(fv), axis=1)  # ThrusterPwm OUTPUT_UNKNOWN (NaN widths): the force is not known
     notes["force_unknown_dropped"] = int((~known).sum())
     if not known.any():
@@ -517,6 +546,7 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
             vel[:, 2] = zdot
             notes["heave_velocity"] += " (no attitude: taken as the body heave velocity, exact only when level)"
     ft, fv = ft[known], fv[known]
+    short = None if short is None else short[known]
     if t0 is None:
         t0 = float(ft[0])
     ft, lin_t = ft - t0, lin_t - t0
@@ -530,7 +560,8 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     notes["gaps"] = {"force_threshold_s": round(gf, 3), "velocity_threshold_s": round(gv, 3),
                      "continuous_spans": len(spans), "dropped_s": round(total - used, 3)}
     pre = Preprocessed(path, [], notes, ft, fv, lin_t, vel, None if attitude is None else (attitude[0] - t0,
-                                                                                            attitude[1]), spans)
+                                                                                            attitude[1]), spans,
+                       shortfall_values=short)
     if streams["wrench"].type == PWM:
         pre.lag_s = float(cfg.thrusters.time_constant_s)
         notes["thrust"] = (f"thrust curves and allocation matrix of {cfg.source} (ThrusterPwm: reversal and trim "
@@ -614,7 +645,8 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
                 xf = c.force[:, [DOFS.index(d) for d in force_names]].copy() if force_names else None
                 chunks.append(fit_core.Chunk(c.force[:, k].copy(), vs, np.zeros_like(vs), acc, pos[good], z[good],
                                              rest, fit_core.coriolis_products(c.velocity)[:, k, :], cross, b,
-                                             float(c.t[0]), cross_force=xf))
+                                             float(c.t[0]), cross_force=xf,
+                                             shortfall=None if c.shortfall is None else c.shortfall[:, k].copy()))
         src = "thrust_model" if any(p.lag_s > 0 or "thrust" in p.notes for p in pres) else "wrench"
         lag = max((p.lag_s for p in pres), default=0.0)
         out[dof] = fit_core.DofRecord(dof, h, "velocity", chunks, src, lag, cross_names, force_names=force_names,
@@ -793,6 +825,7 @@ def _units(dof: str, names: Sequence[str]) -> dict:
             other = n[len("cross_"):]
             u[n] = f"{force}/({'rad/s' if other in ('roll', 'pitch', 'yaw') else 'm/s'})"
     u["reverse_thrust_gain"] = "1"
+    u["saturation_gain"] = "1"
     return u
 
 
@@ -917,6 +950,10 @@ TERM_MEANING = {
     "cross_force": "part of another DOF's commanded force appearing here (coupling through the allocation: "
                    "thrusters that do not deliver what the allocation assumes, a thrust centre off the body origin)",
     "reverse_gain": "propellers weaker in reverse than forward (the force of negative commands times a gain)",
+    "saturation": "the commanded force clipped where the thrusters reach their limits (the thrust allocation's "
+                  "saturation, e.g. a heave command beyond what the vertical thrusters push): the force is the "
+                  "command plus saturation_gain times the allocation's shortfall (allocation/status achieved less "
+                  "requested wrench; 1: the thrusters' limits as the vehicle file has them)",
     "run_bias": "a constant force of its own in each run (tether lay, trim, buoyancy drift between runs), reported "
                 "per run in bias_per_run; a new run gets the mean",
 }
@@ -969,7 +1006,8 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
         e["model"] = c.terms.label
         e["terms"] = {"damping": c.terms.damping, "by_direction": c.terms.by_direction,
                       "coriolis": c.terms.coriolis, "cross": c.terms.cross, "reverse_gain": c.terms.reverse_gain,
-                      "cross_force": c.terms.cross_force, "run_bias": c.terms.run_bias}
+                      "cross_force": c.terms.cross_force, "run_bias": c.terms.run_bias,
+                      "saturation": c.terms.saturation}
         e["terms_meaning"] = {k: TERM_MEANING[k] for k, on in e["terms"].items() if on is True and k in TERM_MEANING}
         e["model_selection"] = model_selection(c)
         if c.persistence is not None:

@@ -28,7 +28,8 @@ raw measurements at their own times) and hand it here. Everything after the read
    predictions). Stage 1 chooses the damping (linear, quadratic, both; heave also one pair or one per direction),
    stage 2 adds, one at a time, the Coriolis and centripetal terms of the other DOFs' inertias, cross-DOF linear
    coupling (the other moving DOFs' velocities), the other DOFs' commanded forces (coupling through the
-   allocation) and, for a commanded wrench, a reverse thrust gain. Stage 1 takes
+   allocation), a per-run bias, the thrust saturation where the recorded allocation fell short of the command
+   (:attr:`DofRecord.saturates`) and, for a commanded wrench, a reverse thrust gain. Stage 1 takes
    the smallest CV error (the damping parameters are what a controller needs: a simpler damping law chosen by a
    one-standard-error rule biased the yaw damping moment by 29 % on the piloted test bags); an addition of stage 2
    is kept only when it lowers the CV error by more than one standard error of the fold-wise differences (the
@@ -80,6 +81,14 @@ MIN_CLUSTERS = 6
 CLUSTER_RHO_MAX = 0.2
 #: Reverse thrust gain bounds (ratio of the reverse to the forward force per unit of command)
 REVERSE_GAIN_BOUNDS = (0.2, 2.0)
+#: Bounds of the saturation gain (the fraction of the allocation's force shortfall that acts, :class:`Terms`): 0 the
+#: force as commanded, 1 as the allocation achieved it, up to 3 (thrusters that saturate sooner than their curves say)
+SATURATION_GAIN_BOUNDS = (0.0, 3.0)
+#: A DOF's force shortfall (achieved - commanded) counts as saturation when its largest magnitude is above this
+#: fraction of the largest commanded force (below it the column is rounding noise and its gain not identifiable)
+SATURATION_MIN_REL = 0.02
+#: The kinds of the parameters whose regressors are time-dependent columns (:attr:`SegmentData.cols`), by prefix
+_COLUMN_PREFIXES = ("cross", "xforce", "runbias", "sat")
 #: Relative margin by which a model's cross-validated nrmse must be below holding the velocity
 #: (:func:`persistence`). 0.05: the smallest gain the issue-46 real data show a physical term to be worth (a
 #: per-run bias, 0.02-0.06 nrmse, on hold scores of 0.5-0.9) and about the fold-to-fold scatter of a CV nrmse
@@ -108,7 +117,8 @@ class Chunk:
     g_k with C(nu) nu of this DOF = g_k . [M1..M6] (:func:`coriolis_products`); cross (n, c) or None: the other
     moving DOFs' velocities; group: the bag (record) it belongs to; force_start: the lagged force at tick 0 (None:
     settled at the first command); cross_force (n, f) or None: the other DOFs' commanded forces over each tick, as
-    ``force`` (before the delay and lag)."""
+    ``force`` (before the delay and lag); shortfall (n,) or None: the force the thrust allocation achieved less the
+    commanded ``force`` over each tick (its ``allocation/status``: 0 while no thruster saturates), as ``force``."""
 
     force: np.ndarray
     v: np.ndarray
@@ -123,6 +133,7 @@ class Chunk:
     t0: float = 0.0
     force_start: float | None = None
     cross_force: np.ndarray | None = None
+    shortfall: np.ndarray | None = None
 
 
 @dataclass
@@ -157,6 +168,15 @@ class DofRecord:
     def has_coupling(self) -> bool:
         return any(c.coupling is not None for c in self.chunks)
 
+    @property
+    def saturates(self) -> bool:
+        """The allocation fell short of the commanded force somewhere (:data:`SATURATION_MIN_REL`): the saturation
+        term is a candidate."""
+        top = max((float(np.max(np.abs(c.force))) for c in self.chunks if c.force.size), default=0.0)
+        short = max((float(np.max(np.abs(c.shortfall))) for c in self.chunks
+                     if c.shortfall is not None and c.shortfall.size), default=0.0)
+        return top > 0.0 and short > SATURATION_MIN_REL * top
+
 
 @dataclass(frozen=True)
 class Terms:
@@ -168,7 +188,11 @@ class Terms:
     do not deliver the force the allocation assumes put part of one DOF's command into another; they act with this
     DOF's delay and lag); run_bias: a constant force per run (bag) around the mean ``bias`` (tether lay, trim,
     buoyancy drift between runs; effects coding: ``bias_run_<k>`` for runs 1..R-1, run R the negative of their
-    sum, a run not fitted gets the mean)."""
+    sum, a run not fitted gets the mean); saturation: the commanded force plus a free gain times the allocation's
+    shortfall (the force it achieved less the commanded one, :attr:`Chunk.shortfall`): a heave command beyond what
+    the vertical thrusters can push is clipped at their limits (the allocation's saturation), and the gain says how
+    much of that clipping the motion shows (1: the vehicle file's thrust limits; it acts with this DOF's delay and
+    lag)."""
 
     damping: str = "both"
     by_direction: bool = False
@@ -177,6 +201,7 @@ class Terms:
     reverse_gain: bool = False
     cross_force: bool = False
     run_bias: bool = False
+    saturation: bool = False
 
     @property
     def label(self) -> str:
@@ -184,6 +209,7 @@ class Terms:
                  + " damping" + (" per direction" if self.by_direction else "")]
         for flag, name in ((self.coriolis, "Coriolis"), (self.cross, "cross-DOF coupling"),
                            (self.cross_force, "other DOFs' forces"), (self.run_bias, "per-run bias"),
+                           (self.saturation, "thrust saturation"),
                            (self.reverse_gain, "reverse thrust gain")):
             if flag:
                 parts.append(name)
@@ -240,7 +266,8 @@ def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequ
                      force_names: Sequence[str] = (), n_runs: int = 0) -> list[tuple]:
     """[(name, kind, lower, upper)] of the model's parameters in vector order: inertia; quadratic then linear damping
     (heave per direction: ``_positive`` (w > 0, down) and ``_negative``); bias; restoring (roll, pitch); cross
-    terms ``cross_<dof>``; other DOFs' force coefficients ``force_from_<dof>``; ``reverse_thrust_gain``. Bounds keep
+    terms ``cross_<dof>``; other DOFs' force coefficients ``force_from_<dof>``; per-run biases ``bias_run_<k>``;
+    ``saturation_gain`` (:data:`SATURATION_GAIN_BOUNDS`); ``reverse_thrust_gain``. Bounds keep
     them physical (module docstring)."""
     out = [("inertia", "inertia", 1e-6, np.inf)]
     split = dof == "heave" and terms.by_direction
@@ -261,6 +288,8 @@ def parameter_layout(dof: str, terms: Terms, n_cross: int = 0, cross_names: Sequ
         out += [(f"force_from_{d}", f"xforce{i}", -np.inf, np.inf) for i, d in enumerate(force_names)]
     if terms.run_bias and n_runs >= 2:
         out += [(f"bias_run_{k + 1}", f"runbias{k}", -np.inf, np.inf) for k in range(n_runs - 1)]
+    if terms.saturation:
+        out.append(("saturation_gain", "sat", *SATURATION_GAIN_BOUNDS))
     if terms.reverse_gain:
         out.append(("reverse_thrust_gain", "reverse", *REVERSE_GAIN_BOUNDS))
     return out
@@ -362,7 +391,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     k_dof = ["surge", "sway", "heave", "roll", "pitch", "yaw"].index(rec.dof)
     ncol = (1 if rec.dof in ("roll", "pitch") else 0) + (len(rec.cross_names) if terms.cross else 0) + \
         (len(rec.force_names) if terms.cross_force else 0) + (1 if terms.reverse_gain else 0) + \
-        (rec.run_count - 1 if terms.run_bias and rec.run_count >= 2 else 0)
+        (rec.run_count - 1 if terms.run_bias and rec.run_count >= 2 else 0) + (1 if terms.saturation else 0)
     U, C, V0, X0, G, SP, EX, VS, AS, FF = [], [], [], [], [], [], [], [], [], []
     s_seg, s_j, s_a, s_z = [], [], [], []
     for ci, ch in enumerate(rec.chunks):
@@ -394,6 +423,9 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
                     val = 1.0
                 col = np.full(n, val)
                 extra.append((col, col, col))
+        if terms.saturation:  # the allocation's shortfall through this DOF's delay and lag, as the force
+            g = ch.shortfall if ch.shortfall is not None else np.zeros(n)
+            extra.append(ThrustLag(timing.lag_s).over_ticks(_shift(g, timing.delay_s / h), h, None))
         if terms.reverse_gain:
             extra.append(tuple(np.minimum(x, 0.0) for x in inputs))
             inputs = [np.maximum(x, 0.0) for x in inputs]
@@ -483,8 +515,7 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     b = col("bias")
     split = kqp is not None or klp is not None
     # time-dependent regressors x their parameters, added to the input once for all ticks
-    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce",
-                                                                                             "runbias"))]
+    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
     U = np.broadcast_to(sd.u[:, None], (3, B) + sd.u.shape[1:])
     if tk:
         U = U + np.einsum("smlc,bc->sbml", sd.cols, P[:, tk])
@@ -596,8 +627,7 @@ def _equation_error_start(sd: SegmentData, dof: str, layout: list, a: np.ndarray
             rows.append(np.where(pos, 0.0, v))
         elif k == "bias":
             rows.append(np.ones_like(v))
-    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(("cross", "xforce",
-                                                                                                "runbias"))]
+    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
     for c in range(len(tcols)):
         rows.append(-sd.cols[0][..., c])
     A = np.stack(rows, axis=-1)
@@ -988,7 +1018,7 @@ def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layo
             continue
         start = full.theta.copy()
         tk = [j for j, (_n, k, _lo, _hi) in enumerate(layout) if k in ("restoring", "reverse")
-              or k.startswith(("cross", "xforce", "runbias"))]
+              or k.startswith(_COLUMN_PREFIXES)]
         for c, j in enumerate(tk):  # a regressor absent from this fold's training (a held-out run): 0, not the
             if c < tr.cols.shape[-1] and not np.any(tr.cols[0][..., c]):  # full fit's value (that would leak)
                 start[j] = 0.0
@@ -1122,6 +1152,8 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         changes.append(("cross_force", True))
     if rec.run_count >= 2 and rec.runs_known:
         changes.append(("run_bias", True))
+    if rec.saturates:
+        changes.append(("saturation", True))
     if rec.force_source == "wrench":
         changes.append(("reverse_gain", True))
     keep = []

@@ -97,7 +97,7 @@ def load_model(doc: dict) -> tuple[dict, np.ndarray]:
             raise ModelError(f"dofs.{dof}.terms: missing (written by an older hindrax ident fit: fit again)")
         terms = fit_core.Terms(str(t["damping"]), bool(t["by_direction"]), bool(t["coriolis"]), bool(t["cross"]),
                                bool(t["reverse_gain"]), bool(t.get("cross_force", False)),
-                               bool(t.get("run_bias", False)))
+                               bool(t.get("run_bias", False)), bool(t.get("saturation", False)))
         cross = tuple(n[len("cross_"):] for n in e if n.startswith("cross_")) if terms.cross else ()
         forces = tuple(n[len("force_from_"):] for n in e if n.startswith("force_from_")) if terms.cross_force else ()
         runs = sum(n.startswith("bias_run_") for n in e) + 1 if terms.run_bias else 0

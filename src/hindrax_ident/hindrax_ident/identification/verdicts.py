@@ -93,6 +93,7 @@ def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
         # b = 1), every other parameter only the forward one
         for i, n in enumerate(names):
             w[i] = (-1.0, 1.0) if n == "reverse_thrust_gain" else (1.0, 0.0)
+        w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
         return w
     if dof == "heave":
         for i, n in enumerate(names):
@@ -100,6 +101,7 @@ def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
                 w[i] = (1.0, 0.0)
             elif n.endswith("_negative"):
                 w[i] = (0.0, 1.0)
+    w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
     return w
 
 
@@ -635,6 +637,7 @@ RUN_KINDS = {
     "reverse": ("reverse-command runs", 20.0),
     "coupled": ("combined runs", 20.0),
     "ladder": ("speed-ladder runs", 60.0),
+    "full": ("full-command runs", 20.0),
 }
 
 
@@ -728,6 +731,12 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
         man = f"{dof}: runs with reverse (negative) commands as long as the forward ones"
         kind, lo, hi = "reverse", 0.0, top
         alt = ("reverse", f"{dof}: reverse-command steps of the same sizes as the forward ones", 0.0, top)
+    elif name == "saturation_gain":
+        used = np.abs(f) >= float(np.percentile(np.abs(f), 90)) if f.size else np.zeros(0, bool)
+        man = f"{dof}: commands held beyond the thrusters' limits (the allocation saturates), both directions"
+        kind, lo, hi = "full", 0.5 * top, top
+        alt = ("full", f"{dof}: full commands from rest to the top speed and back, both directions (the force at "
+                       "the thrusters' limits against the command)", 0.5 * top, top)
     else:
         used = np.abs(v) > 0.05 * vmax if vmax > 0 else np.ones(v.size, bool)
         man = f"{dof}: runs that move {dof} together with the coupled DOF"
