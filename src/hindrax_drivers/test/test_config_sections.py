@@ -163,3 +163,16 @@ def test_a_partial_thruster_selection_reads_typed_and_names_the_missing_key():
     with pytest.raises(KeyError, match=r"thrusters\.deadband_us"):
         _ = partial.thrusters.deadband_us
     assert "esc_channel=<absent>" in repr(t1)
+
+
+def test_each_key_has_one_name_on_the_configuration():
+    """A key is read through its section (``cfg.vehicle.mass_kg``), never also through a second name on the
+    configuration itself (the flat-era ``cfg.mass_kg``, ``cfg.gravity_m_s2``, ``cfg.centre_of_gravity_frd_m`` were
+    such aliases): no public attribute of VehicleConfig is named after a key's last segment."""
+    leaves = {k.rsplit(".", 1)[-1] for k in SCHEMA}
+    names = {n for n in dir(VehicleConfig) if not n.startswith("_")}
+    assert not names & leaves, sorted(names & leaves)
+    cfg = load_config(default_config_path())
+    for gone in ("mass_kg", "displaced_volume_m3", "water_density_kg_m3", "gravity_m_s2", "centre_of_gravity_frd_m"):
+        assert not hasattr(cfg, gone), gone
+    assert cfg.vehicle.mass_kg == cfg.flat["vehicle.mass_kg"]
