@@ -460,26 +460,39 @@ def test_runs_as_a_process_and_reports_a_missing_bus():
 
 def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):
     """Issue 23 finding 9: with the AK09916 missing, each retry re-ran the whole start-up (device reset): gaps of
-    341-352 ms in imu/data_raw every retry. The retry now re-initialises only the magnetometer, one step per poll."""
+    341-352 ms in imu/data_raw every retry. The retry now re-initialises only the magnetometer, one step per poll.
+
+    Asserted on what the node does, not on wall-clock gaps (a loaded machine stretches those whatever the node
+    does): no device reset and no full start-up during three retries, and accel/gyro samples published between
+    each retry and the next."""
     r = rig(truth=live_truth, overrides={"sensors.icm20948.mag_retry_interval_s": 0.3})
     r.wait(lambda: len(r.mag) >= 5 and len(r.imu) >= 50, 10, "IMU and magnetometer data")
-    before = np.array([stamp_ns(m) for m in r.imu]) * 1e-9
-    rate_before_hz = (len(before) - 1) / (before[-1] - before[0])  # what this machine's load lets the poll reach
+    resets: list[int] = []
+    device_reset = r.emu._device_reset
+
+    def counted_reset() -> None:
+        resets.append(1)
+        device_reset()
+
+    r.emu._device_reset = counted_reset  # a full start-up resets the device (PWR_MGMT_1 DEVICE_RESET)
+    published_at_retry: list[int] = []
+    begin_retry = r.node._begin_mag_retry
+
+    def counted_retry(now_s: float) -> None:
+        published_at_retry.append(r.node.diag.total_published)
+        begin_retry(now_s)
+
+    r.node._begin_mag_retry = counted_retry
     r.emu.aux_connected = False  # the AK09916 goes missing
     r.wait(lambda: r.node.diag.counts().get("mag_lost", 0) == 1 and r.node.running and not r.node.mag_available,
            5, "running without magnetometer")
-    attempts = r.node.startup_attempts
-    n0 = len(r.imu)
-    r.wait(lambda: r.node.diag.counts().get("mag_retries", 0) >= 3, 10, "three magnetometer retries")
+    attempts, resets_before = r.node.startup_attempts, len(resets)
+    r.wait(lambda: len(published_at_retry) >= 3, 30, "three magnetometer retries")
     r.wait_imu(5)
-    assert r.node.startup_attempts == attempts  # no full start-up (no device reset) for a retry
-    stamps = np.array([stamp_ns(m) for m in r.imu[n0:]]) * 1e-9
-    # a full start-up (the bug) leaves a gap of 0.34 s at every retry; 0.25 s still catches it and leaves room for
-    # the timer jitter of a saturated 2-core machine (a CI run with two test workers), which reached 0.1 s
-    assert np.max(np.diff(stamps)) < 0.25, np.max(np.diff(stamps))
-    # a full start-up per 0.3 s retry would cost more than half the samples; the rate is compared with the one
-    # reached before on the same machine, not with the nominal ODR, which a saturated machine does not reach
-    assert (len(stamps) - 1) / (stamps[-1] - stamps[0]) > 0.7 * rate_before_hz
+    assert r.node.startup_attempts == attempts  # no full start-up for a retry ...
+    assert len(resets) == resets_before  # ... and no device reset: the accel/gyro configuration stays
+    # samples went out between each retry and the next (the bug's start-up published none for 0.34 s)
+    assert all(b > a for a, b in zip(published_at_retry, published_at_retry[1:])), published_at_retry
     r.emu.aux_connected = True
     n_mag = len(r.mag)
     r.wait(lambda: len(r.mag) >= n_mag + 3, 10, "imu/mag published after a retry found the AK09916")
