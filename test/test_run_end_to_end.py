@@ -15,6 +15,7 @@ quadratic damping within 5 %, bias within 0.2 N, and each of their 95 % interval
 the report; the bag exists and replays (every message of
 the identification's topics decodes); the last widths the ESC node wrote are neutral with the output disarmed.
 """
+import re
 import subprocess
 import sys
 
@@ -27,6 +28,10 @@ from hindrax_ident.identification.results import read_identification
 
 pytestmark = pytest.mark.ros
 
+#: what Python prints at a careless exit: warnings ("RuntimeWarning: coroutine ... was never awaited",
+#: ResourceWarning), exceptions in __del__ or atexit ("Exception ignored in"), tracebacks
+EXIT_NOISE = re.compile(r"\w+Warning: |never awaited|Exception ignored|Traceback \(most recent call last\)")
+
 
 def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     cfg = load_config(default_config_path())
@@ -38,6 +43,9 @@ def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     log = proc.stdout[-3000:] + proc.stderr[-3000:]
     assert proc.returncode == 0, log
     assert "armed through esc/set_armed" in proc.stdout and "rel.err" in proc.stdout, log
+    # issue 45.6, no warnings at exit: no Python warning, unraisable exception or traceback anywhere in the output
+    # (ROS log lines say [WARN], which a run may log while it works, e.g. the IMU's gyro-bias estimate)
+    assert not EXIT_NOISE.search(proc.stdout + proc.stderr), EXIT_NOISE.search(proc.stdout + proc.stderr)
 
     doc = read_identification(out / "identification.yaml")
     hs, hh = cfg.hydrodynamics("surge"), cfg.hydrodynamics("heave")

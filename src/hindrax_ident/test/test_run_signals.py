@@ -1,5 +1,6 @@
 """Issue 45.6: ``hindrax run`` ends on SIGTERM (``docker stop``, ``kill``) as on Ctrl-C: the bag closed whole, the
 emulated ports' temporary folders removed, no "coroutine ... was never awaited" at exit."""
+import re
 import signal
 import subprocess
 import sys
@@ -37,5 +38,6 @@ def test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind(tm
     reader.join(10)
     text = "".join(lines)
     assert "never awaited" not in text and "Traceback" not in text, text
+    assert not re.search(r"\w+Warning: |Exception ignored", text), text  # no warnings at exit either
     assert BagReader(out / "bag").truncated_files == []  # the recorder closed it: summary written
     assert not list(tmp.glob("hindrax_pty_*"))
