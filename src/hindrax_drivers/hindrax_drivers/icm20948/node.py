@@ -84,9 +84,9 @@ Data-ready gates (``sensors.icm20948.require_data_ready``, ``not_ready_error_pol
   status read itself fails the sample is published (the NACK bit stays set until read, the next poll sees it). No fresh
   magnetometer sample (DRDY without NACK) for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-runs the
   start-up once (the AK09916 may have reset to power-down); if it is still missing the IMU publishes without
-  ``imu/mag``, the ERROR stays, and the start-up (with the magnetometer sequence) is retried every
-  ``mag_retry_interval_s`` (counted ``mag_retries``; each retry resets the chip, a gap of about one start-up in
-  ``imu/data_raw``) until the AK09916 answers again.
+  ``imu/mag``, the ERROR stays, and the magnetometer's part of the start-up is retried every
+  ``mag_retry_interval_s`` (counted ``mag_retries``; one step per poll, no device reset: ``imu/data_raw`` goes on)
+  until the AK09916 answers again.
 
 The bus is injected: ``smbus2.SMBus(sensors.icm20948.i2c_bus)`` on the Pi (closed after a failed start-up
 attempt and opened again at the next: :class:`~hindrax_drivers.transport.i2c.BusHandle`), an
