@@ -158,7 +158,7 @@ def test_launch_file_executables_and_parameter_files_resolve(path, packages):
 
 
 def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
-    from hindrax_drivers.composition import GROUPS
+    from hindrax_drivers.composition import GROUPS, IDENT_GROUPS
 
     root = REPO / "src"
     vehicle = dict.fromkeys(check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages))
@@ -179,12 +179,14 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
                             {"record": "true", "output_dir": "/ws/runs"})
     assert ("hindrax_drivers", "recorder_node") in recorded
     pool = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages)
-    assert ("hindrax_ident", "identification_node") in pool and ("hindrax_drivers", "recorder_node") in pool
+    assert ("hindrax_drivers", "recorder_node") in pool
     assert ("foxglove_bridge", "foxglove_bridge") not in pool
     live = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
     assert ("foxglove_bridge", "foxglove_bridge") in live
-    # the controller: launched with the pool test, optional (off by default) in the vehicle
-    assert ("hindrax_ident", "controller_node") in pool
+    # the pool test runs the identification node and the controller in one process (hindrax_ident.composition);
+    # the controller is optional (off by default) in the vehicle, alone there
+    assert ("hindrax_ident", "ident_control_node") in pool
+    assert IDENT_GROUPS["ident_control_node"] == ("identification", "controller")
     assert ("hindrax_ident", "controller_node") not in vehicle
     held = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
                         {"controller": "true", "model_file": "/ws/runs/x/identification.yaml"})

@@ -3,10 +3,10 @@
 Python dependencies are declared once, in the repository's requirements.txt (dev venv) and package.xml
 (rosdep on the Pi); they are deliberately not repeated here.
 
-Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node`` and the ``hindrax`` command as
-console scripts in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source
-install/setup.bash``), the launch files in ``share/hindrax_ident/launch`` and the Foxglove layout in
-``share/hindrax_ident/foxglove``.
+Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node``, ``ident_control_node`` (the
+first and the third in one process, :mod:`hindrax_ident.composition`) and the ``hindrax`` command as console scripts
+in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source install/setup.bash``), the
+launch files in ``share/hindrax_ident/launch`` and the Foxglove layout in ``share/hindrax_ident/foxglove``.
 """
 import sys
 from glob import glob
@@ -50,6 +50,7 @@ setup(
             "identification_node = hindrax_ident.identification.node:main",
             "simulator_node = hindrax_ident.sim.node:main",
             "controller_node = hindrax_ident.control.node:main",
+            "ident_control_node = hindrax_ident.composition:ident_control_main",
         ],
     },
 )

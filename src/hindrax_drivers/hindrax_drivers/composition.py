@@ -32,6 +32,12 @@ Groups (:data:`GROUPS`):
     (the path the vehicle takes is the path the tests take). The ESC node is built last and so closed first on
     exit: it writes neutral before anything else shuts down.
 
+``ident_control_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
+    the identification node and the controller: the two model-based nodes of hindrax_ident, both non-safety
+    (:mod:`hindrax_ident.composition` builds them; this package names them only). Apart they were the two largest
+    processes, 107-110 MB of proportional set size each, mostly the same Python modules loaded twice; in one process
+    117 MB (``make bench``, ``launch_pss_mb_*``). While a campaign runs the controller ticks every 0.2 s.
+
 ``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
 :data:`NODE_CLASSES` (for measurements; the launch files use the groups).
 """
@@ -39,9 +45,9 @@ from __future__ import annotations
 
 import importlib
 import sys
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
-__all__ = ["GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
+__all__ = ["GROUPS", "IDENT_GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
 
 #: node -> "module:class" of every node class that composes (the class is imported only when used)
 NODE_CLASSES: dict[str, str] = {
@@ -63,32 +69,41 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "actuation_node": ("thrust_allocation", "esc"),
 }
 
+#: hindrax_ident's composed processes: console script -> its nodes (the classes: hindrax_ident.composition; this
+#: package imports nothing of hindrax_ident, it only names the nodes for the launch-file readers)
+IDENT_GROUPS: dict[str, tuple[str, ...]] = {
+    "ident_control_node": ("identification", "controller"),
+}
+
 
 def node_names(package: str, executable: str, name: str | None = None) -> tuple[str, ...]:
     """The ROS node names a launch file's ``<node pkg exec name>`` process runs: a group's nodes (their own names),
     else ``name``, else the executable. Used where a process list from a launch file is compared with the nodes
     in the graph (``hindrax health``, the pool-day test)."""
-    if package == "hindrax_drivers" and executable in GROUPS:
-        return GROUPS[executable]
+    groups = {"hindrax_drivers": GROUPS, "hindrax_ident": IDENT_GROUPS}.get(package, {})
+    if executable in groups:
+        return groups[executable]
     return (name or executable,)
 
 
-def node_factories(names: Sequence[str]) -> list[Callable[[], Any]]:
-    """The node classes of ``names`` (keys of :data:`NODE_CLASSES`), imported. Raises ValueError naming an unknown
-    node and the known ones."""
+def node_factories(names: Sequence[str], classes: Mapping[str, str] = NODE_CLASSES) -> list[Callable[[], Any]]:
+    """The node classes of ``names`` (keys of ``classes``, node -> "module:class", default :data:`NODE_CLASSES`),
+    imported. Raises ValueError naming an unknown node and the known ones."""
     out = []
     for name in names:
-        if name not in NODE_CLASSES:
-            raise ValueError(f"unknown node {name!r}: choose from {', '.join(NODE_CLASSES)}")
-        module, _, cls = NODE_CLASSES[name].partition(":")
+        if name not in classes:
+            raise ValueError(f"unknown node {name!r}: choose from {', '.join(classes)}")
+        module, _, cls = classes[name].partition(":")
         out.append(getattr(importlib.import_module(module), cls))
     return out
 
 
-def run_group(names: Sequence[str], args: Sequence[str] | None = None) -> int:
-    """Run the nodes ``names`` in this process until SIGINT/SIGTERM (:func:`~hindrax_drivers.node_common.run_nodes`).
-    Returns the exit status (1 on an invalid configuration, one line on stderr)."""
-    return _run(node_factories(names), args)
+def run_group(names: Sequence[str], args: Sequence[str] | None = None,
+              classes: Mapping[str, str] = NODE_CLASSES) -> int:
+    """Run the nodes ``names`` (keys of ``classes``, :func:`node_factories`) in this process until SIGINT/SIGTERM
+    (:func:`~hindrax_drivers.node_common.run_nodes`). Returns the exit status (1 on an invalid configuration, one
+    line on stderr)."""
+    return _run(node_factories(names, classes), args)
 
 
 def _run(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None) -> int:

@@ -93,9 +93,10 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path
 
     procs = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1], {"output_dir": "/tmp/b"})
     entries = [p.module for p in procs]
-    assert "hindrax_ident.identification.node:main" in entries
-    assert "hindrax_ident.control.node:main" in entries  # the controller, launched with the pool test
-    controller = next(p for p in procs if p.module == "hindrax_ident.control.node:main")
+    # the identification node and the controller, in one process (hindrax_ident.composition)
+    assert "hindrax_ident.composition:ident_control_main" in entries
+    controller = next(p for p in procs if p.module == "hindrax_ident.composition:ident_control_main")
+    assert controller.process.node_names == ("identification", "controller")
     write, written = _values(tmp_path)
     controller.ros_args(write)
     assert {"model_file": ""} in written  # the empty default stays the empty string (not None, not "''")

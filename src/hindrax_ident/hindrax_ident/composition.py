@@ -1,0 +1,42 @@
+"""hindrax_ident's composed process: the identification node and the controller in one process.
+
+Console script ``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their own names (``identification``,
+``controller``) and read the same vehicle file; one executor spins them
+(:func:`hindrax_drivers.composition.run_group`, the EventsExecutor like every node process). The group's node list
+is :data:`hindrax_drivers.composition.IDENT_GROUPS` (the launch-file readers, ``hindrax health`` and the SROS2
+policy, take the node names from there); this module maps them to their classes.
+
+Why one process (docs/architecture.md §10.1): apart, the two were the launch layout's two largest processes, 107-110 MB
+of proportional set size each, mostly the same Python modules (numpy, the vehicle model, the control law, the sensor
+conditioning) loaded twice; together 117 MB, the layout's total 558 -> 456 MB (``make bench``, ``launch_pss_*``).
+Neither has a safety role (the supervisor, the output guard and the ESC's process stay alone, §8): a failure of
+one ends both, and the allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source.
+While an identification goal runs the controller is disabled and ticks every 0.2 s, so the pair costs about what
+the identification node costs alone.
+"""
+from __future__ import annotations
+
+import sys
+from typing import Sequence
+
+from hindrax_drivers.composition import IDENT_GROUPS, run_group
+
+__all__ = ["GROUPS", "NODE_CLASSES", "ident_control_main"]
+
+#: node -> "module:class" of the nodes this package composes
+NODE_CLASSES: dict[str, str] = {
+    "identification": "hindrax_ident.identification.node:IdentificationNode",
+    "controller": "hindrax_ident.control.node:ControllerNode",
+}
+#: console script -> its nodes, in construction order
+GROUPS = IDENT_GROUPS
+
+
+def ident_control_main(args: Sequence[str] | None = None) -> int:
+    """Console script ``ident_control_node``: the identification node and the controller in one process (module
+    docstring). Returns the exit status (1 on an invalid configuration, one line on stderr)."""
+    return run_group(GROUPS["ident_control_node"], args, NODE_CLASSES)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(ident_control_main())
