@@ -355,7 +355,7 @@ def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
 #: The configuration's modules (the package: schema per section, validation, loading, typed sections; the nodes'
 #: parameter declarations).
 CONFIG_MODULES = ("hindrax_drivers.config", "hindrax_drivers.config.sections", "hindrax_drivers.config.loader",
-                  "hindrax_drivers.config.typed_sections", "hindrax_drivers.node_parameters")
+                  "hindrax_drivers.config.typed_sections", "hindrax_drivers.config.node_parameters")
 #: Device drivers and safety nodes' packages: the configuration imports none of them, not even through another
 #: module; the hardware limits it checks live in ``hindrax_drivers.hardware_limits``, below the driver too.
 DRIVER_PACKAGES = tuple(f"hindrax_drivers.{p}" for p in (

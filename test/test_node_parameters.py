@@ -19,7 +19,7 @@ from rclpy.executors import SingleThreadedExecutor
 from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.config import OPTIONAL_PREFIXES, SCHEMA
 from hindrax_drivers.ms5837.node import Ms5837Node
-from hindrax_drivers.node_parameters import select_schema_keys
+from hindrax_drivers.config.node_parameters import select_schema_keys
 from hindrax_drivers.testing import config_parameters, ros_context, wait_until
 from hindrax_drivers.tf.node import StaticTfNode
 from hindrax_drivers.tf.static_tf import TF_KEYS

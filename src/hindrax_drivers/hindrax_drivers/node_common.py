@@ -19,7 +19,7 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from hindrax_msgs.msg import RawDeviceData
 
 from .config import ConfigError, VehicleConfig
-from .node_parameters import declare_vehicle_parameters
+from .config.node_parameters import declare_vehicle_parameters
 from .ros_process import RosProcess
 from .sd_notify import SystemdNotifier
 
@@ -354,7 +354,7 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
 
     keys: SCHEMA prefixes the node reads (None: all sections); dynamic: prefixes it applies while running
     (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason.
-    See :func:`hindrax_drivers.node_parameters.declare_vehicle_parameters` (the node must be created without
+    See :func:`hindrax_drivers.config.node_parameters.declare_vehicle_parameters` (the node must be created without
     ``automatically_declare_parameters_from_overrides``). Logs the one-line reason and re-raises
     :class:`ConfigError` so :func:`run_node` exits with status 1.
     """

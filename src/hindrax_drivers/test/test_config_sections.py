@@ -115,8 +115,8 @@ def test_optional_keys_are_none_when_absent():
 
 
 #: Where a dotted key by string is the point: the schema and its generated sections, and the validation of a node's
-#: raw parameter mapping (node_parameters.validate_selection, before any VehicleConfig exists).
-DECLARE_KEYS = ("hindrax_drivers/config/", "hindrax_drivers/node_parameters.py")
+#: raw parameter mapping (config.node_parameters.validate_selection, before any VehicleConfig exists).
+DECLARE_KEYS = ("hindrax_drivers/config/",)
 LOOKUP = re.compile(r"""flat\[\s*f?["']|flat\.get\(\s*f?["']|\.section\("""
                     r"""|\.get\(\s*f?["'][a-z0-9_]+\.[a-z0-9_.{}]+["']"""
                     r"""|\[\s*f?["'](?:""" + "|".join(c.SECTIONS) + r""")\.[a-z0-9_.{}]+["']\s*\](?!\s*=[^=])"""

@@ -10,7 +10,7 @@ import yaml
 from rclpy.parameter import Parameter
 
 from hindrax_drivers.config import ConfigError, default_config_path, load_config
-from hindrax_drivers.node_parameters import check_whole_vehicle
+from hindrax_drivers.config.node_parameters import check_whole_vehicle
 from hindrax_drivers.testing import child_env
 
 

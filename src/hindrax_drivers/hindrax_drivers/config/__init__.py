@@ -24,6 +24,8 @@ Where each thing is:
   owning its keys' schema, its optional keys and its checks across keys; ``sections/__init__`` joins them.
 * :mod:`.validation`: a flat mapping checked against every section; :mod:`.loader`: files and node parameters;
   :mod:`.vehicle_config`: :class:`VehicleConfig` and its typed sections (:mod:`.typed_sections`, generated).
+* :mod:`.node_parameters`: the keys each node declares as described ROS parameters, validated like the file, and
+  the read-only node parameters outside the file (rclpy; not imported here, so offline tools load no rclpy).
 
 Why our own validator rather than a schema library: the errors must name ROS parameter keys in the exact
 one-line form users see from ``hindrax config check``, and the same checks must run on a YAML file and on

@@ -9,7 +9,7 @@ Python. A Spec holds the same fields as one of its entries, so a later move is m
 (``double``, ``int``, ``string``, ``bool``, ``double_array``, ``string_array``), ``doc`` -> ``description``,
 ``lo``/``hi`` -> ``validation: {bounds<>: [lo, hi]}`` (``gt_eq<>``/``lt_eq<>`` with one bound), ``choices`` ->
 ``one_of<>``, ``length`` -> ``fixed_size<>``, ``pattern`` -> a custom validator, the ``<thruster>`` path segment ->
-``__map_thrusters.names``; read-only is per node (:mod:`hindrax_drivers.node_parameters`), as there.
+``__map_thrusters.names``; read-only is per node (:mod:`hindrax_drivers.config.node_parameters`), as there.
 """
 from __future__ import annotations
 

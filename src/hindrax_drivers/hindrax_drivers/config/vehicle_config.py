@@ -9,8 +9,8 @@ by ``scripts/gen_config_sections.py`` (a test checks the file is current and tha
 and every field a key): writing them by hand next to a 250-key schema would let the two drift, and generating them
 at import time would hide them from mypy. Field names are the keys' last segments (ROS parameter names do not
 change), lists are tuples, optional keys are ``X | None``. Section objects are built lazily, once per configuration
-(it is immutable). A node's configuration holds only the keys it declared (:mod:`hindrax_drivers.node_parameters`):
-reading another required key raises KeyError naming it. ``cfg.thrusters`` is the hand-written
+(it is immutable). A node's configuration holds only the keys it declared (:mod:`.node_parameters`): reading
+another required key raises KeyError naming it. ``cfg.thrusters`` is the hand-written
 :class:`~.sections.thrusters.ThrustersConfig` (per-thruster keys); ``cfg.hydrodynamics(dof)`` and
 ``cfg.calibration`` are derived views over the raw sections ``cfg.hydrodynamics_section`` and
 ``cfg.calibration_section``. ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter conversion, overrides and

@@ -52,7 +52,7 @@ from rclpy.node import Node
 from ..config import Spec, output_enable_gpio
 from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
-from ..node_parameters import declare_node_parameter
+from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
 from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
@@ -61,7 +61,7 @@ from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
 
 __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "HEARTBEAT_TIMEOUT", "open_output_enable", "open_watchdog_feed", "main"]
 
-#: node parameter ``heartbeat_timeout_s`` (read-only; :func:`~hindrax_drivers.node_parameters.declare_node_parameter`)
+#: node parameter ``heartbeat_timeout_s`` (read-only; declared by config.node_parameters.declare_node_parameter)
 HEARTBEAT_TIMEOUT = Spec("float", "the ESC's and the supervisor's heartbeats count as silent when older than this "
                          "(steady clock), s; default esc.guard_heartbeat_timeout_s, widened only where the three "
                          "safety nodes share one executor thread (hindrax bringup: none can stall alone)", 0.05, 10.0)

@@ -57,7 +57,7 @@ from ..config import Spec
 from ..lean_cdr import thruster_pwm_cdr
 from ..liveness import ClockStepMonitor, HeartbeatPublisher, heartbeat_qos
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
-from ..node_parameters import declare_node_parameter
+from ..config.node_parameters import declare_node_parameter
 from ..transport.i2c import open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
@@ -70,7 +70,7 @@ __all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_
 
 COMMAND_TOPIC = "thrusters/command_pulse_width"
 _UNKNOWN, _NEUTRAL, _COMMANDING = ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT_NEUTRAL, ThrusterPwm.OUTPUT_COMMANDING
-#: node parameter ``heartbeat_timeout_s`` (read-only; :func:`~hindrax_drivers.node_parameters.declare_node_parameter`)
+#: node parameter ``heartbeat_timeout_s`` (read-only; declared by config.node_parameters.declare_node_parameter)
 HEARTBEAT_TIMEOUT = Spec("float", "the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
                          "is older than this (steady clock), s; default esc.heartbeat_timeout_s, widened only where "
                          "the three safety nodes share one executor thread (hindrax bringup: none can stall alone)",

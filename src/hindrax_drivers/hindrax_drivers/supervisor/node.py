@@ -73,12 +73,12 @@ from ..lean_cdr import cdr_decoder
 from ..liveness import ClockStepMonitor, HeartbeatPublisher
 from ..config import Spec
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
-from ..node_parameters import declare_node_parameter
+from ..config.node_parameters import declare_node_parameter
 from .core import SupervisorCore, SupervisorLimits
 
 __all__ = ["SupervisorNode", "main"]
 
-#: node parameter ``clock_stall_timeout_s`` (read-only; :func:`~hindrax_drivers.node_parameters.declare_node_parameter`)
+#: node parameter ``clock_stall_timeout_s`` (read-only; declared by config.node_parameters.declare_node_parameter)
 CLOCK_STALL_TIMEOUT = Spec("float", "armed, ROS time standing still this long (steady clock) trips, s; default "
                            "supervisor.rate_window_s, widened only by an in-process simulator that holds simulated "
                            "time on purpose (hindrax bringup with the virtual pool)", 0.2, 120.0)

@@ -4,7 +4,7 @@ Each section module owns its keys: ``SCHEMA`` (dotted key -> :class:`~hindrax_dr
 under the section's name), ``OPTIONAL`` (prefixes of its optional keys) and ``cross_checks(flat)`` (the checks
 across keys that name one of its keys, each one issue of one line; they may read other sections' keys, run only
 when every key is individually valid, and skip what a partial mapping lacks: a node validates its own selection of
-keys with them, :func:`hindrax_drivers.node_parameters.validate_selection`). A check belongs to the section of the
+keys with them, :func:`hindrax_drivers.config.node_parameters.validate_selection`). A check belongs to the section of the
 key it names: ``lights.esc_channel`` against the thrusters' channels is the lights'. The section modules import
 nothing of this package but :mod:`..spec` (and the typed-section base) and nothing of a driver
 (``test_import_structure``).

@@ -43,9 +43,9 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 
-from . import config as _c
-from .config import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
-from .config.sections import cross_checks
+from .. import config as _c
+from . import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
+from .sections import cross_checks
 
 __all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
            "declare_vehicle_parameters", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
