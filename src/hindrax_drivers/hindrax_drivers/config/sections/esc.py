@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from ...hardware_limits import esc_prescale, PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, Pca9685Error
+from ...hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, Pca9685Error, esc_prescale
 from ..spec import ConfigIssue, Spec, flag, integer, real, text
 
 SCHEMA: dict[str, Spec] = {
