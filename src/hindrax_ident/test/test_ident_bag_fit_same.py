@@ -51,10 +51,11 @@ def _schedule(t_rel: float):
     return (2, LEVELS_N[int(k)]) if r < RUN_S else (3, None)  # RUNNING / RETURNING
 
 
-def write_surge_campaign_bag(path, cfg, seed: int = 5, walk_m_s: float = 0.0) -> dict:
+def write_surge_campaign_bag(path, cfg, seed: int = 5, walk_m_s: float = 0.0, truth: dict | None = None) -> dict:
     """The campaign bag of the module docstring at ``path``; returns the surge truth of the vehicle file.
     ``walk_m_s``: a random walk (m/s per sqrt(s)) the DVL measures on top of the force's response, the vehicle
-    pushed about by what the force does not explain (drawn from its own generator: 0 keeps the bag as it was)."""
+    pushed about by what the force does not explain (drawn from its own generator: 0 keeps the bag as it was);
+    ``truth``: surge parameters of the simulated vehicle that differ from the vehicle file's."""
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import FluidPressure
 
@@ -68,7 +69,7 @@ def write_surge_campaign_bag(path, cfg, seed: int = 5, walk_m_s: float = 0.0) ->
     neutral = float(cfg.thrusters.pulse_width_neutral_us)
     rev = np.array([t.reversed for t in ths], dtype=bool)
     trim = np.array([t.trim_us for t in ths], dtype=float)
-    truth = truth_parameters(cfg, "surge")
+    truth = {**truth_parameters(cfg, "surge"), **(truth or {})}
     m, kq, kl = truth["inertia"], truth["quadratic_damping"], truth["linear_damping"]
     tau, lat = float(cfg.thrusters.time_constant_s), float(cfg.esc.output_latency_s)
 
@@ -218,3 +219,29 @@ def test_ident_bag_says_when_no_model_beats_holding_the_velocity(tmp_path, capsy
     rows = {r["terms"]: r for r in s["model_selection"]}
     assert rows["hold the velocity (persistence)"]["cv_nrmse"] == pytest.approx(p["nrmse_hold"])
     assert [r for r in s["model_selection"] if r["chosen"]]
+
+
+def test_a_parameter_at_its_bound_says_so_instead_of_an_interval(tmp_path, capsys):
+    """Issue 46, "no interval reported for a parameter at a bound without saying so", for ``hindrax ident bag``: a
+    vehicle whose low-speed drag is below the quadratic law (linear damping -3 kg/s in the simulation; the fit keeps
+    it >= 0) puts linear_damping on its bound 0 (the empirical priors off, ``identification.prior_std_rel: 0``: they
+    would pull it just off the bound). identification.yaml marks it (``at_bound``), the printed row gives that
+    reason, and the report's interval cell says there is none."""
+    from hindrax_ident.commands.common import update_vehicle_file
+
+    cfg = load_config(default_config_path())
+    bag = tmp_path / "campaign"
+    write_surge_campaign_bag(bag, cfg, truth={"linear_damping": -3.0})
+    vehicle = tmp_path / "vehicle.yaml"
+    vehicle.write_text(default_config_path().read_text())
+    update_vehicle_file(vehicle, {"identification.prior_std_rel": 0.0})
+    out = tmp_path / "out"
+    assert cli.main(["ident", "bag", str(bag), "--out", str(out), "--config", str(vehicle)]) == 0, \
+        capsys.readouterr().err
+    printed = capsys.readouterr().out
+    s = yaml.safe_load((out / "identification.yaml").read_text())["dofs"]["surge"]
+    assert s["linear_damping"]["at_bound"] == 0.0 and s["linear_damping"]["verdict"] == "suspect"
+    assert "at_bound" not in s["quadratic_damping"]
+    row = next(x for x in printed.splitlines() if x.startswith("surge  linear_damping"))
+    assert "at its lower bound 0" in row and "no interval" in row and "nan" not in printed
+    assert "none: at its bound 0" in (out / "report" / "index.html").read_text()

@@ -95,16 +95,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def format_summary(identifications: dict) -> str:
-    """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error."""
+    """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error, verdict with its
+    first reason (a parameter at a bound: that one, it has no interval). A number that is not finite prints ``-``."""
     from ..identification.report import summary_rows
+
+    def num(x, spec):
+        return format(x, spec) if x is not None and math.isfinite(x) else format("-", ">" + spec.split(".")[0])
+
     lines = [f"{'DOF':6s} {'parameter':28s} {'identified':>12s} {'std':>9s} {'unit':9s} {'configured':>11s} "
              f"{'rel.err':>8s}  verdict"]
     for r in summary_rows(identifications):
         err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f}%"
         tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
-        why = f" ({r['reasons'][0]})" if r.get("reasons") else ""
-        lines.append(f"{r['dof']:6s} {r['parameter']:28s} {r['value']:12.5g} {r['std']:9.3g} {r['unit']:9s} "
-                     f"{tr:>11s} {err:>8s}  {r.get('verdict', '-')}{why}")
+        bound = [x for x in r.get("reasons", []) if "bound" in x and "no interval" in x]
+        why = f" ({(bound or r['reasons'])[0]})" if r.get("reasons") else ""
+        lines.append(f"{r['dof']:6s} {r['parameter']:28s} {num(r['value'], '12.5g')} {num(r['std'], '9.3g')} "
+                     f"{r['unit']:9s} {tr:>11s} {err:>8s}  {r.get('verdict', '-')}{why}")
     return "\n".join(lines)
 
 

@@ -30,17 +30,19 @@ from .estimators import _rest_terms  # noqa: E402
 __all__ = ["write_report", "summary_rows"]
 
 
-def _assessment(r, name: str) -> tuple[str, list]:
-    """(verdict, reasons) of one parameter from :func:`~.verdicts.apply_verdicts` ("-", [] when not assessed)."""
+def _assessment(r, name: str) -> tuple[str, list, float | None]:
+    """(verdict, reasons, the bound it sits at or None) of one parameter from :func:`~.verdicts.apply_verdicts`
+    ("-", [], None when not assessed)."""
     a = r.signals.get("assessment") if isinstance(getattr(r, "signals", None), dict) else None
     if not a or name not in a["parameters"]:
-        return "-", []
+        return "-", [], None
     p = a["parameters"][name]
-    return p["verdict"], list(p["reasons"])
+    return p["verdict"], list(p["reasons"]), p.get("at_bound")
 
 
 def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
-    """One row per DOF and parameter: value, std, ci95, configured truth, relative error, other methods."""
+    """One row per DOF and parameter: value, std, ci95, configured truth, relative error, other methods, verdict,
+    reasons and ``at_bound`` (the bound a parameter sits at, where its interval means nothing; else None)."""
     rows = []
     for dof, r in identifications.items():
         for name in list(r.names) + ["added_mass"]:
@@ -52,7 +54,8 @@ def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
                          "equation_error": r.equation_error.get(name, (math.nan, math.nan))[0],
                          "rls": r.online.get(name, (math.nan, math.nan))[0],
                          "steady": (r.steady or {}).get(name, (math.nan, math.nan))[0],
-                         "verdict": _assessment(r, name)[0], "reasons": _assessment(r, name)[1]})
+                         "verdict": _assessment(r, name)[0], "reasons": _assessment(r, name)[1],
+                         "at_bound": _assessment(r, name)[2]})
     return rows
 
 
@@ -265,7 +268,8 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
         lo, hi = row["ci95"]
         parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
             row["dof"], row["parameter"], _fmt(row["value"]), _fmt(row["std"], 2), row["unit"],
-            f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(row["truth"]),
+            f"[{_fmt(lo)}, {_fmt(hi)}]" if row["at_bound"] is None else f"none: at its bound {row['at_bound']:g}",
+            _fmt(row["truth"]),
             "-" if not math.isfinite(row["relative_error"]) else f"{100 * row['relative_error']:+.2f} %",
             _fmt(row["equation_error"]), _fmt(row["rls"]), _fmt(row["steady"]), row["verdict"],
             "; ".join(row["reasons"]))) + "</tr>")

@@ -176,6 +176,8 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
                 entry[name]["advice"] = pa["advice"]
             if "t_dof" in pa:
                 entry[name]["t_dof"] = int(pa["t_dof"])
+            if "at_bound" in pa:  # the interval means nothing there: say so next to it (as hindrax ident fit)
+                entry[name]["at_bound"] = float(pa["at_bound"])
             pri = (r.signals.get("joint") or {}).get("priors", {})
             if name == "added_mass" and "inertia" in pri:  # the inertia's prior less the (known) rigid part
                 rigid = float(r.values["inertia"]) - float(r.values["added_mass"])
