@@ -344,3 +344,31 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
         assert argv[:len(p.launch_prefix) + 2] == [*p.launch_prefix, "/opt/x/" + p.executable, "--ros-args"]
     assert "LimitNICE=-5" in (REPO / "docker/hindrax-bare-metal.service").read_text()
     assert "nice: 25" in (REPO / "docker/compose.yaml").read_text()
+
+
+#: Node parameters outside the vehicle file that widen a safety timeout for a single-process graph (hindrax bringup:
+#: config.node_parameters.declare_node_parameter); their defaults are the vehicle file's keys.
+SINGLE_PROCESS_WIDENINGS = ("heartbeat_timeout_s", "steady_watchdog_timeout_s", "clock_stall_timeout_s")
+
+
+@pytest.mark.parametrize("rel,given", READER_CASES, ids=lambda c: str(c))
+def test_the_vehicle_launches_keep_the_vehicle_files_safety_timeouts(rel, given):
+    """The launch files, where each safety node is a process of its own, set none of the single-process widenings:
+    the ESC, the guard and the supervisor take esc.heartbeat_timeout_s, esc.guard_heartbeat_timeout_s,
+    esc.watchdog_timeout_s and supervisor.rate_window_s from the vehicle file (0.2 s, not bringup's 2 s)."""
+    from hindrax_drivers.config import flatten
+    from hindrax_drivers.launch_xml import read_launch
+
+    processes = read_launch(REPO / "src" / rel, given, find_share=lambda pkg: REPO / "src" / pkg)
+    seen: set[str] = set()
+    for proc in processes:
+        names: set[str] = set()
+        for p in proc.parameters:
+            if isinstance(p, dict):
+                names |= set(p)
+            else:
+                doc = yaml.safe_load(Path(p).read_text())
+                names |= {k for body in doc.values() for k in flatten(body.get("ros__parameters", {}))}
+        assert not names & set(SINGLE_PROCESS_WIDENINGS), (proc.executable, sorted(names))
+        seen |= names
+    assert {"esc.heartbeat_timeout_s", "esc.guard_heartbeat_timeout_s"} <= seen  # the vehicle file was read
