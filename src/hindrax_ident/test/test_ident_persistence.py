@@ -11,7 +11,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy import signal
 
 from hindrax_ident.commands.ident_fit import format_table
 
@@ -19,38 +18,24 @@ from hindrax_ident.identification import fit_core
 from hindrax_ident.identification.fit_any import DofFit, assessment, build_document, FitResult
 
 
-def _noise_record(seed: int = 3) -> fit_core.DofRecord:
+def _noise_record(syn, seed: int = 3) -> fit_core.DofRecord:
     rng = np.random.default_rng(seed)
     h, n = 0.05, 1600  # 80 s chunks on a 20 Hz grid
     chunks = []
     for c in range(4):
-        # a piloted-like force: held steps of 1-4 s, +-20 N
-        force = np.empty(n)
-        i = 0
-        while i < n:
-            k = int(rng.integers(20, 80))
-            force[i:i + k] = rng.uniform(-20.0, 20.0)
-            i += k
-        # the force's own response (M 40 kg, linear damping 20 kg/s), exact for a held force
-        e = math.exp(-20.0 / 40.0 * h)
-        resp = np.zeros(n)
-        for j in range(1, n):
-            resp[j] = resp[j - 1] * e + (1.0 - e) * force[j - 1] / 20.0
+        force = syn.steps(rng, n, -20.0, 20.0)  # a piloted-like force: held steps of 1-4 s, +-20 N
+        resp = syn.first_order(force, 40.0, 20.0, h)  # the force's own response (M 40 kg, damping 20 kg/s)
         walk = np.cumsum(rng.normal(0.0, 1.0, n)) * 0.04  # random walk, m/s
         walk -= walk[0]
         v_true = walk + resp * (0.1 * np.std(walk) / np.std(resp))  # response std = 10 % of the walk's
-        meas = np.arange(0, n, 2)  # 10 Hz measurements with 5 mm/s white noise
-        z = v_true[meas] + rng.normal(0.0, 0.005, meas.size)
-        vs = signal.savgol_filter(np.interp(np.arange(n), meas, z), 11, 2)
-        acc = signal.savgol_filter(np.interp(np.arange(n), meas, z), 11, 2, deriv=1, delta=h)
-        chunks.append(fit_core.Chunk(force, vs, np.zeros(n), acc, meas.astype(float), z, group=0,
-                                     t0=c * (n + 100) * h))
+        # 10 Hz measurements with 5 mm/s white noise
+        chunks.append(syn.measured_chunk(rng, v_true, force, h, 0.005, group=0, t0=c * (n + 100) * h))
     return fit_core.DofRecord("surge", h, "velocity", chunks, "wrench")
 
 
 @pytest.fixture(scope="module")
-def noise_fit():
-    return fit_core.identify_dof(_noise_record())
+def noise_fit(synthetic_runs):
+    return fit_core.identify_dof(_noise_record(synthetic_runs))
 
 
 def test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter(noise_fit):
@@ -92,30 +77,17 @@ def test_printed_table_has_no_nan_and_the_cv_row_its_noise_floor(noise_fit):
     assert "nan" not in format_table(FitResult({"surge": fit}, {}, "test"))
 
 
-def test_a_delay_beyond_the_searched_range_is_reported_at_its_edge():
+def test_a_delay_beyond_the_searched_range_is_reported_at_its_edge(synthetic_runs):
     """A surge record whose force acts 0.6 s late, searched up to 0.3 s: the estimate sits at the bound and says
     so; searched up to 1 s it is found inside the range."""
+    syn = synthetic_runs
     rng = np.random.default_rng(5)
     h, n, M, D, lag_ticks = 0.05, 1600, 30.0, 25.0, 12
     chunks = []
     for c in range(3):
-        force = np.empty(n)
-        i = 0
-        while i < n:
-            k = int(rng.integers(20, 80))
-            force[i:i + k] = rng.uniform(-20.0, 20.0)
-            i += k
+        force = syn.steps(rng, n, -20.0, 20.0)
         late = np.concatenate([np.full(lag_ticks, force[0]), force[:-lag_ticks]])
-        e = math.exp(-D / M * h)
-        v = np.zeros(n)
-        for j in range(1, n):
-            v[j] = v[j - 1] * e + (1.0 - e) * late[j - 1] / D
-        meas = np.arange(0, n, 2)
-        z = v[meas] + rng.normal(0.0, 0.003, meas.size)
-        zi = np.interp(np.arange(n), meas, z)
-        chunks.append(fit_core.Chunk(force, signal.savgol_filter(zi, 11, 2), np.zeros(n),
-                                     signal.savgol_filter(zi, 11, 2, deriv=1, delta=h), meas.astype(float), z,
-                                     group=c))
+        chunks.append(syn.measured_chunk(rng, syn.first_order(late, M, D, h), force, h, 0.003, group=c))
     rec = fit_core.DofRecord("surge", h, "velocity", chunks, "wrench")
     short = fit_core.estimate_timing(rec, 0.3)
     assert short.bound_s == pytest.approx(0.3) and short.at_edge and "edge of its range" in short.edge_note

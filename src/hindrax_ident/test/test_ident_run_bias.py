@@ -5,10 +5,7 @@ Built here from its definition: three runs of one first-order surge model, each 
 (+2, -1.5, +0.5 N), integrated exactly for held forces; one bias for all runs cannot predict all three."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
-from scipy import signal
 
 from hindrax_ident.identification import fit_core
 from hindrax_ident.identification.fit_any import DofFit, FitResult, build_document
@@ -16,32 +13,19 @@ from hindrax_ident.identification.fit_any import DofFit, FitResult, build_docume
 BIASES = (2.0, -1.5, 0.5)
 
 
-def _record() -> fit_core.DofRecord:
+def _record(syn) -> fit_core.DofRecord:
     rng = np.random.default_rng(21)
     h, n, M, D = 0.05, 2000, 30.0, 25.0
     chunks = []
     for run, b in enumerate(BIASES):
-        own = np.empty(n)
-        i = 0
-        while i < n:
-            k = int(rng.integers(20, 80))
-            own[i:i + k] = rng.uniform(-15.0, 15.0)
-            i += k
-        e = math.exp(-D / M * h)
-        v = np.zeros(n)
-        for j in range(1, n):  # M v' = F - b_run - D v (the bias opposes the force, as the model writes it)
-            v[j] = v[j - 1] * e + (1.0 - e) * (own[j - 1] - b) / D
-        meas = np.arange(0, n, 2)
-        z = v[meas] + rng.normal(0.0, 0.005, meas.size)
-        zi = np.interp(np.arange(n), meas, z)
-        chunks.append(fit_core.Chunk(own, signal.savgol_filter(zi, 11, 2), np.zeros(n),
-                                     signal.savgol_filter(zi, 11, 2, deriv=1, delta=h), meas.astype(float), z,
-                                     group=run, t0=0.0))
+        own = syn.steps(rng, n, -15.0, 15.0)
+        v = syn.first_order(own, M, D, h, offset=b)  # M v' = F - b_run - D v (the bias opposes the force)
+        chunks.append(syn.measured_chunk(rng, v, own, h, 0.005, group=run, t0=0.0))
     return fit_core.DofRecord("surge", h, "velocity", chunks, "thrust_model", 0.0, run_count=len(BIASES))
 
 
-def test_a_bias_that_differs_between_runs_is_chosen_and_reported_per_run():
-    res = fit_core.identify_dof(_record())
+def test_a_bias_that_differs_between_runs_is_chosen_and_reported_per_run(synthetic_runs):
+    res = fit_core.identify_dof(_record(synthetic_runs))
     assert res.terms.run_bias, res.terms.label
     one = [k for k in res.candidates if not k.terms.run_bias and k.terms.damping == res.terms.damping]
     assert one and all(k.mse > 1.5 * res.chosen.mse for k in one)

@@ -31,8 +31,9 @@ def _stamp(msg, t_ns: int):
     return msg
 
 
-def write_heave_bag(path, cfg, seconds: float, top_n: float, seed: int = 2) -> None:
-    """The bag of the module docstring: heave command steps uniform in +-``top_n`` N (FLU, up positive)."""
+def write_heave_bag(path, cfg, steps, seconds: float, top_n: float, seed: int = 2) -> None:
+    """The bag of the module docstring: heave command steps uniform in +-``top_n`` N (FLU, up positive), held
+    1-4 s (``steps``: the ``synthetic_runs`` fixture's)."""
     from geometry_msgs.msg import Wrench, WrenchStamped
     from nav_msgs.msg import Odometry
     from rclpy.serialization import serialize_message
@@ -47,12 +48,7 @@ def write_heave_bag(path, cfg, seconds: float, top_n: float, seed: int = 2) -> N
     kq = (truth["quadratic_damping_positive"], truth["quadratic_damping_negative"])
     kl = (truth["linear_damping_positive"], truth["linear_damping_negative"])
     n20 = int(seconds * 20)
-    cmd = np.empty(n20)
-    i = 0
-    while i < n20:  # held 1-4 s
-        k = int(rng.integers(20, 80))
-        cmd[i:i + k] = rng.uniform(-top_n, top_n)
-        i += k
+    cmd = steps(rng, n20, -top_n, top_n)
     achieved = {}
     for c in np.unique(cmd):
         achieved[c] = float(alloc.allocate([0.0, 0.0, c, 0.0, 0.0, 0.0]).achieved_wrench_flu[2])
@@ -95,9 +91,9 @@ def cfg():
     return load_config(default_config_path())
 
 
-def test_heave_saturation_is_chosen_and_its_gain_is_the_allocations(tmp_path, cfg):
+def test_heave_saturation_is_chosen_and_its_gain_is_the_allocations(tmp_path, cfg, synthetic_runs):
     bag = tmp_path / "piloted_heave"
-    write_heave_bag(bag, cfg, 240.0, 110.0)
+    write_heave_bag(bag, cfg, synthetic_runs.steps, 240.0, 110.0)
     res = fit_any.fit_bags([bag], fit_any.TopicChoice(), None, ["heave"])
     r = res.dofs["heave"]
     assert r.status == "fitted", r.reason
@@ -116,11 +112,11 @@ def test_heave_saturation_is_chosen_and_its_gain_is_the_allocations(tmp_path, cf
     assert "allocation/status" in res.preprocessing["bags"][0]["saturation"]
 
 
-def test_no_saturation_candidate_while_the_allocation_delivers_the_command(tmp_path, cfg):
+def test_no_saturation_candidate_while_the_allocation_delivers_the_command(tmp_path, cfg, synthetic_runs):
     """Commands within the vertical thrusters' limits: the allocation achieves them, the shortfall is rounding
     only, and the term is not offered (its gain would not be identifiable)."""
     bag = tmp_path / "within_limits"
-    write_heave_bag(bag, cfg, 40.0, 50.0)
+    write_heave_bag(bag, cfg, synthetic_runs.steps, 40.0, 50.0)
     pre = fit_any.preprocess_bag(bag, fit_any.TopicChoice(), None, fit_any.FitOptions())
     rec = fit_any.dof_records([pre], ["heave"], fit_any.FitOptions())["heave"]
     assert all(ch.shortfall is not None for ch in rec.chunks)

@@ -42,11 +42,18 @@ def _plot(r, path: Path, h: float) -> None:
                 label="predicted (open loop from the segment start)" if i == 0 else None)
         ax.plot(t[ok], np.full(ok.sum(), meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
         ax.axvline(t[0], color="0.85", lw=0.8)
-    unit = "rad/s" if r.dof in ("roll", "pitch", "yaw") else "m/s"
-    ax.set_xlabel("validation time, s (segments end to end)")
-    ax.set_ylabel(f"{r.dof} velocity, {unit} (FRD)")
+    _save_velocity_plot(fig, ax, r.dof, "validation time, s (segments end to end)", f"{r.dof}: {p['data']} data",
+                        path)
+
+
+def _save_velocity_plot(fig, ax, dof: str, xlabel: str, title: str, path: Path) -> None:
+    """Label a velocity-over-time plot of ``dof`` (its unit, FRD), add the legend and title, write it to ``path``
+    and close it."""
+    unit = "rad/s" if dof in ("roll", "pitch", "yaw") else "m/s"
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"{dof} velocity, {unit} (FRD)")
     ax.legend(loc="upper right", fontsize=8)
-    ax.set_title(f"{r.dof}: {p['data']} data")
+    ax.set_title(title)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -82,14 +89,8 @@ def _time_plot(r, path: Path) -> None:
         sel = seg == i
         ax.plot(t[sel], z[sel], "k.", ms=2, label="measured" if i == 0 else None)
         ax.axvline(ti[0], color="0.85", lw=0.8)
-    unit = "rad/s" if r.dof in ("roll", "pitch", "yaw") else "m/s"
-    ax.set_xlabel("record time, s")
-    ax.set_ylabel(f"{r.dof} velocity, {unit} (FRD)")
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_title(f"{r.dof}: {r.plot['data']} data over time (the first 120 s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _save_velocity_plot(fig, ax, r.dof, "record time, s",
+                        f"{r.dof}: {r.plot['data']} data over time (the first 120 s)", path)
 
 
 def residual_acf(seg: np.ndarray, res: np.ndarray, max_lag: int) -> np.ndarray:
