@@ -48,7 +48,7 @@ def test_every_quoted_rclpy_version_is_the_installed_one():
     for path in _sources_and_docs():
         for m in re.finditer(r"\brclpy (\d+\.\d+)", path.read_text()):
             quotes.append((path.relative_to(ROOT).as_posix(), m.group(1)))
-    assert len(quotes) >= 3, quotes  # architecture.md §11, ros_process.py, identification/node.py at least
+    assert len(quotes) >= 3, quotes  # architecture.md §11, ros_process.py, identification/online/node.py at least
     wrong = [(path, v) for path, v in quotes if v != installed]
     assert not wrong, f"rclpy {installed} is installed; these quote another version: {wrong}"
 

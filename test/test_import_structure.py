@@ -18,6 +18,8 @@ Rules checked:
 - layers (:data:`LAYERS`): drivers < vehicle physics < identification and control < simulator < commands,
   benchmarks and the graph builders; no module imports a module of a higher layer, except the imports listed with
   their reason in :data:`KNOWN_LAYER_EXCEPTIONS`;
+- the identification package keeps its rooms (:data:`ROOMS`): bag input < fit, assessment < online < the
+  front-ends that span them; the online campaign does not import the identification.yaml writer;
 - the vehicle's shared physics is defined once (:data:`DEFINED_ONCE`): the angle wrap, the thrust lag, the thrust
   curve and the rigid-body mass matrix, each in its one module, and no other module writes their formulas out.
 
@@ -182,7 +184,7 @@ def graph() -> dict[str, set[str]]:
 
 def test_graph_covers_both_packages(graph):
     """Sanity: the graph holds the known modules and edges (a broken parser would pass the rules vacuously)."""
-    assert "hindrax_ident.identification.from_bag" in graph
+    assert "hindrax_ident.identification.bag_input.from_bag" in graph
     assert "hindrax_drivers.recording.writer" in graph
     assert "hindrax_ident.bringup" in graph["hindrax_ident.commands.bringup"]  # function-local import
     assert "hindrax_drivers.recording.recover" in graph["hindrax_drivers.recording.reader"]  # from . import x
@@ -235,7 +237,7 @@ TOP_LAYER = 4
 #: Imports from a lower layer to a higher one that exist today, each with its reason. A new one fails the test; an
 #: entry whose import is gone fails it too (so the list only shrinks).
 KNOWN_LAYER_EXCEPTIONS = {
-    ("hindrax_ident.identification.campaign", "hindrax_ident.sim.simulator"):
+    ("hindrax_ident.identification.online.campaign", "hindrax_ident.sim.simulator"):
         "the in-process campaign steps the simulator directly (issue 47.2: belongs in the simulator's room)",
     ("hindrax_ident.identification.graph_campaign", "hindrax_ident.bringup"):
         "the campaign over the composed graph builds that graph (an entry point in identification's room)",
@@ -287,6 +289,67 @@ def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
                     "< commands):\n" + "\n".join(new)
     assert not gone, "known exceptions that no longer exist (remove them):\n" + "\n".join(gone)
     assert all(layer_of(m) <= 1 for m in graph.get("hindrax_ident.vehicle.rigid_body", set()) if m in graph)
+
+
+# ------------------------------------------------------------------------------------------------ identification rooms
+IDENT = "hindrax_ident.identification"
+#: The rooms of the identification package, lowest first (issue 47.2): a module imports its own room and the
+#: rooms below it. ``fit`` and ``assessment`` share a level: the thrust calibration (fit) weighs with the verdicts'
+#: declared thrust uncertainty and the verdicts read the fit core's persistence.
+ROOMS = {"bag_input": 0, "fit": 1, "assessment": 1, "online": 2}
+#: Modules directly in the package, above every room: they span them (``hindrax run``: the campaign on the
+#: composed graph, then the offline fit of its bag and the outputs).
+FRONT_ENDS = frozenset({f"{IDENT}.graph_campaign"})
+#: Imports a room may not make although the target is below it: the online campaign never writes
+#: identification.yaml (its estimator's priors come from the fit's posterior module, not from the writer).
+ROOM_FORBIDDEN = {("online", f"{IDENT}.assessment.results")}
+
+
+def room_of(module: str) -> tuple[str, int] | None:
+    """(room, level) of an identification module; front-ends are (``""``, above every room), the package itself
+    and modules outside it None. A flat module that is neither a room nor a front-end is ("?", -1)."""
+    if not module.startswith(IDENT + "."):
+        return None
+    if module in FRONT_ENDS:
+        return "", max(ROOMS.values()) + 1
+    room = module[len(IDENT) + 1:].split(".")[0]
+    return (room, ROOMS[room]) if room in ROOMS else ("?", -1)
+
+
+def room_violations(graph: dict[str, set[str]]) -> list[str]:
+    """``"importer -> imported (why)"`` for each import against the rooms' order and for each module outside any
+    room."""
+    out = [f"{m} (in no room: move it into one of {sorted(ROOMS)})" for m in graph if room_of(m) == ("?", -1)]
+    for src, deps in graph.items():
+        rs = room_of(src)
+        for dst in deps:
+            rd = room_of(dst)
+            if rs is None or rd is None:
+                continue
+            if rd[1] > rs[1]:
+                out.append(f"{src} -> {dst} (room {rd[0] or 'front-end'} is above {rs[0] or 'front-end'})")
+            elif (rs[0], dst) in ROOM_FORBIDDEN:
+                out.append(f"{src} -> {dst} (forbidden for room {rs[0]})")
+    return sorted(out)
+
+
+def test_the_room_checker_sees_a_wrong_import():
+    graph = {f"{IDENT}.fit.fit_core": {f"{IDENT}.online.executive"},
+             f"{IDENT}.online.estimators": {f"{IDENT}.assessment.results", f"{IDENT}.fit.posterior"},
+             f"{IDENT}.assessment.verdicts": {f"{IDENT}.fit.fit_core", f"{IDENT}.bag_input.signals"},
+             f"{IDENT}.flat": set(), f"{IDENT}.graph_campaign": {f"{IDENT}.online.node"}}
+    assert room_violations(graph) == [
+        f"{IDENT}.fit.fit_core -> {IDENT}.online.executive (room online is above fit)",
+        f"{IDENT}.flat (in no room: move it into one of ['assessment', 'bag_input', 'fit', 'online'])",
+        f"{IDENT}.online.estimators -> {IDENT}.assessment.results (forbidden for room online)"]
+
+
+def test_identification_keeps_its_rooms(graph):
+    """bag input < fit, assessment < online < the front-ends; online does not write identification.yaml."""
+    rooms = {room_of(m)[0] for m in graph if room_of(m)}
+    assert set(ROOMS) <= rooms and FRONT_ENDS <= set(graph)  # the rule is not vacuous, no stale front-end
+    assert f"{IDENT}.fit.posterior" in graph[f"{IDENT}.online.estimators"]
+    assert room_violations(graph) == []
 
 
 # ------------------------------------------------------------------------------------------------ defined once

@@ -47,7 +47,7 @@ setup(
     entry_points={
         "console_scripts": [
             "hindrax = hindrax_ident.cli:main",
-            "identification_node = hindrax_ident.identification.node:main",
+            "identification_node = hindrax_ident.identification.online.node:main",
             "simulator_node = hindrax_ident.sim.node:main",
             "controller_node = hindrax_ident.control.node:main",
             "ident_control_node = hindrax_ident.composition:ident_control_main",

@@ -3,9 +3,9 @@ MultiThreadedExecutor is broken here, and launch is not available).
 
 Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust
 allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the static TF (/tf_static), the
-identification executive (:mod:`hindrax_ident.identification.node`, always: on the vehicle as in the virtual pool, it
-cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the recorder. On the vehicle they
-open the configured serial ports and
+identification executive (:mod:`hindrax_ident.identification.online.node`, always: on the vehicle as in the virtual
+pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the recorder. On the
+vehicle they open the configured serial ports and
 ``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
 ``/clock`` and :class:`~hindrax_ident.sim.hardware.VirtualHardware` (the five device emulators fed by the
 simulator: serial devices on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an
@@ -44,7 +44,7 @@ from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWat
 from hindrax_msgs.srv import SetArmed
 
 from .control.node import ControllerNode
-from .identification.node import IdentificationNode
+from .identification.online.node import IdentificationNode
 from .sim.hardware import VirtualHardware
 from .sim.node import SimulatorNode
 from .sim.simulator import Simulator

@@ -25,7 +25,7 @@ __all__ = ["GROUPS", "NODE_CLASSES", "ident_control_main"]
 
 #: node -> "module:class" of the nodes this package composes
 NODE_CLASSES: dict[str, str] = {
-    "identification": "hindrax_ident.identification.node:IdentificationNode",
+    "identification": "hindrax_ident.identification.online.node:IdentificationNode",
     "controller": "hindrax_ident.control.node:ControllerNode",
 }
 #: console script -> its nodes, in construction order

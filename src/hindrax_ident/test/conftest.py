@@ -2,7 +2,7 @@
 
 ``synthetic_runs``: the pieces the identification tests build their data from, each from its definition and none
 from the code under test: a pilot's held force steps, the exact response of a first-order model to a force held
-over each tick, and a record chunk (:class:`~hindrax_ident.identification.fit_core.Chunk`) of that velocity measured
+over each tick, and a record chunk (:class:`~hindrax_ident.identification.fit.fit_core.Chunk`) of that velocity measured
 at half the tick rate with white noise and smoothed (Savitzky-Golay) as the readers smooth it.
 """
 from __future__ import annotations
@@ -41,7 +41,7 @@ def _measured_chunk(rng: np.random.Generator, v: np.ndarray, force: np.ndarray, 
     measurements interpolated onto the ticks. ``chunk``: further :class:`~.fit_core.Chunk` fields (group, t0, ...)."""
     from scipy import signal
 
-    from hindrax_ident.identification import fit_core
+    from hindrax_ident.identification.fit import fit_core
 
     n = v.size
     meas = np.arange(0, n, 2)

@@ -1,6 +1,7 @@
 """The campaign's steps as objects (issue 26 item 3): each step run on its own on the in-process simulator, after the
 dive that every plan starts with, through the same sequencer as the whole campaign
-(:class:`~hindrax_ident.identification.executive.Executive` with an explicit step list); the plan the sequencer makes
+(:class:`~hindrax_ident.identification.online.executive.Executive` with an explicit step list); the plan the sequencer
+makes
 from its arguments; the virtual pool's operator.
 
 The known-force steps run against the "thrust_asymmetric" truth (forward thrust x0.95, reverse x0.85: the vehicle
@@ -16,12 +17,12 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.calibration import thrust_scales
-from hindrax_ident.identification.campaign import Campaign, PoolOperator
-from hindrax_ident.identification.executive import THRUST_STEPS, Executive, expand_calibration
-from hindrax_ident.identification.maneuvers import PoolBox
-from hindrax_ident.identification.steps import (Ballast, BroadbandRun, Dive, Float, Inclining, LinePull,
-                                                RotationLadder, TiltDecay, TranslationLadder)
+from hindrax_ident.identification.fit.calibration import thrust_scales
+from hindrax_ident.identification.online.campaign import Campaign, PoolOperator
+from hindrax_ident.identification.online.executive import THRUST_STEPS, Executive, expand_calibration
+from hindrax_ident.identification.online.maneuvers import PoolBox
+from hindrax_ident.identification.online.steps import (Ballast, BroadbandRun, Dive, Float, Inclining, LinePull,
+                                                       RotationLadder, TiltDecay, TranslationLadder)
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import truth_dir
 

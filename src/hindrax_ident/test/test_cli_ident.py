@@ -18,7 +18,7 @@ import pytest
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
 from hindrax_ident.estimation.thruster_fit import evaluate_cubic, point_reflection
-from hindrax_ident.identification.results import read_identification
+from hindrax_ident.identification.assessment.results import read_identification
 
 K, MB, MAD, ZETA, A, V = 659.9, 0.39, 0.82, 0.15, 0.02, 0.00056
 
@@ -174,7 +174,7 @@ def test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion(t
     assert os.readlink(runs / "latest") == names[1]
     assert all((runs / n / "identification.yaml").is_file() for n in names)  # the first result is intact
     # a run without a result (no DOF identified) does not move latest
-    import hindrax_ident.identification.calibration as calibration
+    import hindrax_ident.identification.fit.calibration as calibration
 
     monkeypatch.setattr(calibration, "identify_calibrated", lambda *a, **k: ({}, {"yaw": "no data"}))
     assert cli.main(argv) == 1

@@ -1,5 +1,5 @@
-"""Broadband excitation (issue 18 item 5): the signals of identification/excitation.py, the pool-box shaping, and the
-executive running one multisine run per DOF instead of the ladder on the in-process campaign."""
+"""Broadband excitation (issue 18 item 5): the signals of identification/online/excitation.py, the pool-box shaping, and
+the executive running one multisine run per DOF instead of the ladder on the in-process campaign."""
 from __future__ import annotations
 
 import math
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.excitation import (BoxShaping, Chirp, Multisine, Prbs, design_band, design_signal,
-                                                     steady_speed)
+from hindrax_ident.identification.online.excitation import (BoxShaping, Chirp, Multisine, Prbs, design_band,
+                                                            design_signal, steady_speed)
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -111,7 +111,7 @@ def test_box_shaping_keeps_a_double_integrator_with_drag_inside_the_box(kind):
 
 
 def test_ladder_is_the_default_and_the_excitation_comes_from_the_config():
-    from hindrax_ident.identification.executive import Executive
+    from hindrax_ident.identification.online.executive import Executive
 
     cfg = load_config(default_config_path())
     assert cfg.identification.excitation == "ladder"
@@ -125,8 +125,8 @@ def test_ladder_is_the_default_and_the_excitation_comes_from_the_config():
 
 
 def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
-    from hindrax_ident.identification.campaign import Campaign
-    from hindrax_ident.identification.campaign_fit import identify_dof
+    from hindrax_ident.identification.online.campaign import Campaign
+    from hindrax_ident.identification.fit.campaign_fit import identify_dof
 
     cfg = load_config(default_config_path())
     rec = Campaign(cfg, dofs=["surge"], seed=3, excitation="multisine", excitation_duration_s=40.0).run()

@@ -25,8 +25,8 @@ import yaml
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
-from hindrax_ident.identification.estimators import truth_parameters
-from hindrax_ident.identification.signals import thrust_of_written_widths
+from hindrax_ident.identification.fit.dof_model import truth_parameters
+from hindrax_ident.identification.bag_input.signals import thrust_of_written_widths
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -152,21 +152,22 @@ def test_ident_bag_and_ident_fit_give_the_same_values_and_intervals(tmp_path, ca
 
 def test_one_verdict_path_for_both_document_builders(tmp_path):
     """Issue 27 item 1, the verdicts: the same fit core result written by ``hindrax ident bag``'s builder
-    (:func:`~hindrax_ident.identification.results.build_results`: empirical priors by the joint estimate,
-    thrust-curve covariance and checks by :func:`~hindrax_ident.identification.verdicts.assess_dof`) and by
-    ``hindrax ident fit``'s (:func:`~hindrax_ident.identification.fit_any.build_document`) gives the same values,
+    (:func:`~hindrax_ident.identification.assessment.results.build_results`: empirical priors by the joint estimate,
+    thrust-curve covariance and checks by :func:`~hindrax_ident.identification.assessment.verdicts.assess_dof`) and by
+    ``hindrax ident fit``'s (:func:`~hindrax_ident.identification.fit.fit_any.build_document`) gives the same values,
     std (with the thrust curve), std_fit, priors, intervals and verdicts; the campaign builder may add DOF-wide
     reasons only from its steady windows (evidence the generic reader does not have) and the residual whiteness.
     Fails when either builder changes its priors, thrust term, intervals or per-parameter checks alone. (The
     whiteness check is the designed campaign's only.)"""
-    from hindrax_ident.identification import fit_any, from_bag
-    from hindrax_ident.identification.results import build_results
-    from hindrax_ident.identification.verdicts import declared_rel
+    from hindrax_ident.identification.fit import fit_any
+    from hindrax_ident.identification.fit.campaign_fit import identify_bag
+    from hindrax_ident.identification.assessment.results import build_results
+    from hindrax_ident.identification.assessment.verdicts import declared_rel
 
     cfg = load_config(default_config_path())
     bag = tmp_path / "campaign"
     truth = write_surge_campaign_bag(bag, cfg)
-    _record, idents, errors = from_bag.identify_bag(bag, cfg)
+    _record, idents, errors = identify_bag(bag, cfg)
     assert set(idents) == {"surge"}, errors
     core = idents["surge"].signals["core"]
     res = fit_any.FitResult({"surge": fit_any.DofFit("surge", "fitted", {}, core, {"cross_validation": dict(core.cv)})},

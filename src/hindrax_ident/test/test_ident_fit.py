@@ -3,7 +3,7 @@
 (:mod:`hindrax_ident.sim.piloted_bag`: random setpoints, velocity published at 20 Hz but updated at 10 Hz,
 late and bursty receive times, a 1.5 s gap, a 50 ms actuation delay).
 
-Acceptance (issue): the truth of the simulator (:func:`~hindrax_ident.identification.estimators.truth_parameters` on
+Acceptance (issue): the truth of the simulator (:func:`~hindrax_ident.identification.fit.dof_model.truth_parameters` on
 the truth configuration) recovered within 10 % for surge, sway, heave and yaw inertia and quadratic damping; nrmse on
 a held-out piloted bag below 0.3 for surge, sway and heave. Also: the output files and their sections, the
 preprocessing report, "not excited" DOFs, and the one-line errors (topic, type, frames, too little data).
@@ -18,9 +18,9 @@ import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
-from hindrax_ident.identification.estimators import truth_parameters
-from hindrax_ident.identification.fit_any import FitOptions, TopicChoice, fit_bags, preprocess_bag
-from hindrax_ident.identification.fit_core import SegmentData, coriolis_products, validation_measures
+from hindrax_ident.identification.fit.dof_model import truth_parameters
+from hindrax_ident.identification.fit.fit_any import FitOptions, TopicChoice, fit_bags, preprocess_bag
+from hindrax_ident.identification.fit.fit_core import SegmentData, coriolis_products, validation_measures
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 from hindrax_ident.sim.truth import load_truth
 

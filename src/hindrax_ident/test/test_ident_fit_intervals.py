@@ -8,7 +8,7 @@
   the blocks grow and the bias std follows the correlation; with white measurement noise only, the reported std stays
   the model-based one within a factor 1.5.
 * Without ``--config`` the file holds ``inertia`` but no ``added_mass``: ``config_ready: false`` with the reason,
-  printed too, and :func:`~hindrax_ident.identification.results.to_config_overrides` refuses it in one line.
+  printed too, and :func:`~hindrax_ident.identification.assessment.results.to_config_overrides` refuses it in one line.
 """
 from __future__ import annotations
 
@@ -21,9 +21,9 @@ from scipy import signal, stats
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
-from hindrax_ident.identification import fit_core
+from hindrax_ident.identification.fit import fit_core
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
-from hindrax_ident.identification.results import IdentificationFileError, to_config_overrides
+from hindrax_ident.identification.assessment.results import IdentificationFileError, to_config_overrides
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

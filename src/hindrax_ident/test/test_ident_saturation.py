@@ -20,8 +20,8 @@ import pytest
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification import fit_any
-from hindrax_ident.identification.estimators import truth_parameters
+from hindrax_ident.identification.fit import fit_any
+from hindrax_ident.identification.fit.dof_model import truth_parameters
 
 T0_NS = 1_000_000_000_000
 

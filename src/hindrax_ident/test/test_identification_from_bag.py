@@ -1,4 +1,4 @@
-"""Rebuilding the campaign record from recorded topics (identification/from_bag.py): the thrust-model wrench
+"""Rebuilding the campaign record from recorded topics (identification/bag_input/from_bag.py): the thrust-model wrench
 from the widths the ESC wrote (lag, allocation matrix), the DOF windows and runs from identification/status,
 and clear errors for bags without what is needed."""
 import math
@@ -13,7 +13,7 @@ from sensor_msgs.msg import FluidPressure
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import child_env
-from hindrax_ident.identification.from_bag import BagContentError, record_from_messages
+from hindrax_ident.identification.bag_input.from_bag import BagContentError, record_from_messages
 from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")

@@ -17,9 +17,9 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_ident.bringup import build_graph
-from hindrax_ident.identification.executive import ordered_samples
-from hindrax_ident.identification.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
-                                                  thrust_of_written_widths)
+from hindrax_ident.identification.online.executive import ordered_samples
+from hindrax_ident.identification.bag_input.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
+                                                            thrust_of_written_widths)
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
@@ -183,7 +183,7 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
 
     from unique_identifier_msgs.msg import UUID
 
-    from hindrax_ident.identification.node import ARMED_GRACE_S, NOT_ARMED, IdentificationNode
+    from hindrax_ident.identification.online.node import ARMED_GRACE_S, NOT_ARMED, IdentificationNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:
@@ -229,7 +229,7 @@ def test_node_parameters_are_described_read_only_and_checked():
     from rclpy.parameter import Parameter
 
     from hindrax_drivers.config import ConfigError
-    from hindrax_ident.identification.node import IdentificationNode
+    from hindrax_ident.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:
@@ -247,14 +247,14 @@ def test_node_parameters_are_described_read_only_and_checked():
 
 
 def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
-    """``python -m hindrax_ident.identification.node`` (run_node): ready, SIGINT -> status 0; an invalid node
+    """``python -m hindrax_ident.identification.online.node`` (run_node): ready, SIGINT -> status 0; an invalid node
     parameter -> status 1 with one line naming key, value and allowed range."""
     import signal
     import subprocess
 
     from hindrax_drivers.testing import child_env, python_executable
 
-    cmd = [python_executable(), "-m", "hindrax_ident.identification.node", "--ros-args", "--params-file",
+    cmd = [python_executable(), "-m", "hindrax_ident.identification.online.node", "--ros-args", "--params-file",
            str(default_config_path())]
     bad = subprocess.run(cmd + ["-p", "sensor_timeout_s:=-1.0"], env=child_env(), capture_output=True, text=True,
                          timeout=60)
@@ -282,7 +282,7 @@ def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_not_dispatched():
     executor leaves them queued, and the tick hands them to the handlers (armed flag, widths, sensor samples)."""
     from rclpy.executors import SingleThreadedExecutor
 
-    from hindrax_ident.identification.node import IdentificationNode
+    from hindrax_ident.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:

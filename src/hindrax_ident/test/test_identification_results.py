@@ -8,11 +8,12 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import DOFS, default_config_path, load_config
-from hindrax_ident.identification.estimators import (DofIdentification, parameter_names, parameter_units,
-                                                     regressor_matrix, truth_parameters)
-from hindrax_ident.identification.report import write_report
-from hindrax_ident.identification.results import (IdentificationFileError, build_results, read_identification,
-                                                  to_config_overrides, write_identification)
+from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
+                                                        regressor_matrix, truth_parameters)
+from hindrax_ident.identification.assessment.report import write_report
+from hindrax_ident.identification.assessment.results import (IdentificationFileError, build_results,
+                                                             read_identification, to_config_overrides,
+                                                             write_identification)
 from hindrax_ident.sim.simulator import Simulator
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")

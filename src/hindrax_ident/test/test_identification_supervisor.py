@@ -25,7 +25,7 @@ from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_ident.identification.node import IdentificationNode
+from hindrax_ident.identification.online.node import IdentificationNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, ManeuverStatus, ThrusterPwm
 from hindrax_msgs.srv import SetArmed

@@ -121,7 +121,7 @@ def test_tilt_decay_gives_rigid_plus_added_inertia_and_compares_with_the_campaig
 def test_tilt_decay_verdict_against_identification_yaml(tmp_path, capsys, monkeypatch):
     """A self-propelled roll inertia 10 % high (thrust curve 10 % optimistic) with a tight interval is suspect;
     one within its interval agrees."""
-    from hindrax_ident.identification import results
+    from hindrax_ident.identification.assessment import results
 
     f = tmp_path / "roll.csv"
     _roll_decay_csv(f)

@@ -1,5 +1,5 @@
-"""The output-error pieces (identification/output_error.py, identification/fit_core.py) against hand-computed values
-and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the Runge-Kutta step, the segment
+"""The output-error pieces (identification/fit/output_error.py, identification/fit/fit_core.py) against hand-computed
+values and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the Runge-Kutta step, the segment
 bookkeeping of the fit core, and the core's whole fit on records integrated by an independent solver (scipy's
 solve_ivp), with RuntimeWarnings turned into errors."""
 import math
@@ -9,8 +9,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from hindrax_ident.estimation.least_squares import EstimationError
-from hindrax_ident.identification import fit_core
-from hindrax_ident.identification.output_error import DofModel, model_terms, rk4_step
+from hindrax_ident.identification.fit import fit_core
+from hindrax_ident.identification.fit.output_error import DofModel, model_terms, rk4_step
 from hindrax_ident.vehicle.thrust_lag import ThrustLag
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")

@@ -150,9 +150,9 @@ def test_cli_priors_geometry_and_config(tmp_path, capsys):
 
 
 def test_identification_yaml_shows_the_priors_beside_the_identified_values():
-    from hindrax_ident.identification.estimators import (DofIdentification, parameter_names, parameter_units,
-                                                         truth_parameters)
-    from hindrax_ident.identification.results import build_results
+    from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
+                                                            truth_parameters)
+    from hindrax_ident.identification.assessment.results import build_results
 
     cfg = load_config(default_config_path())
     truth = truth_parameters(cfg, "surge")
@@ -172,8 +172,8 @@ def test_identification_yaml_shows_the_priors_beside_the_identified_values():
     assert prior["quadratic_damping"] == pytest.approx(expected["quadratic_damping"][0])
     assert "NTNU-Thesis" in prior["source"]
     # the report's references section shows the prior beside the identified value, and the calibration
-    from hindrax_ident.identification.calibration import calibration_section
-    from hindrax_ident.identification.report import references_html
+    from hindrax_ident.identification.fit.calibration import calibration_section
+    from hindrax_ident.identification.assessment.report import references_html
 
     doc["calibration"] = calibration_section({"vertical": {"value": 0.9012, "std": 0.0044, "known_force_n": 8.56,
                                                            "holding_force_n": [0.85, -8.65], "method": "ballast"}})

@@ -1,4 +1,4 @@
-"""Honest intervals and verdicts (identification/verdicts.py) and the scenario suite command (issue 16)."""
+"""Honest intervals and verdicts (identification/assessment/verdicts.py) and the scenario suite command (issue 16)."""
 from __future__ import annotations
 
 import json
@@ -9,10 +9,10 @@ import pytest
 from scipy import stats
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.estimators import (DofIdentification, parameter_names, parameter_units,
-                                                     truth_parameters)
-from hindrax_ident.identification.verdicts import (apply_verdicts, assess_dof, segment_count, spread_reasons,
-                                                   thrust_covariance)
+from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
+                                                        truth_parameters)
+from hindrax_ident.identification.assessment.verdicts import (apply_verdicts, assess_dof, segment_count, spread_reasons,
+                                                              thrust_covariance)
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

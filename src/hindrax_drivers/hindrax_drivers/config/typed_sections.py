@@ -531,7 +531,7 @@ class IdentificationSection(Section):
     start at zero), default 1"""
     excitation: str | None
     """force input per DOF: the constant-thrust ladder, or one broadband run shaped to stay in the pool box
-    (hindrax_ident identification/excitation.py)"""
+    (hindrax_ident identification/online/excitation.py)"""
     excitation_duration_s: float | None
     """length of the broadband run per DOF (excitation not ladder), s"""
 

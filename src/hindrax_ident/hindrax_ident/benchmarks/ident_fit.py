@@ -7,15 +7,15 @@ the real force differs from the recorded wrench: lag, ESC latency, reverse asymm
 simulated DVL, IMU and pressure sensor, and the scenario suite's disturbances (current, tether, DVL latency, scale
 error, misalignment and multipath dropouts). The first ``train`` bags are fitted, the other ``holdout`` bags are
 predicted. Per DOF and data set the held-out prediction NRMSE (RMS(v_pred - v_meas) / std(v_meas) over 10 s
-open-loop predictions re-initialised from the measured velocity, :func:`..identification.fit_any.validation_measures`)
-of
+open-loop predictions re-initialised from the measured velocity,
+:func:`..identification.fit.fit_any.validation_measures`) of
 
 * ``fit``: ``hindrax ident fit`` (no vehicle file, as on another vehicle's data);
 * ``ls``: a plain per-DOF least squares: M nu_dot + k_q |nu| nu + k_l nu + b = tau on the same resampled record,
   nu_dot the Savitzky-Golay derivative (0.5 s window), no delay, no coupling, simulated by the same predictor;
 * ``hold``: the velocity held at its initial value;
 
-and the noise floor (``nrmse_floor`` of :func:`..identification.fit_core.validation_measures`: the white measurement
+and the noise floor (``nrmse_floor`` of :func:`..identification.fit.fit_core.validation_measures`: the white measurement
 noise over the measured std, what a perfect model would still score).
 
 Acceptance on real held-out data: surge, sway and heave ``fit`` at least 10 % below ``ls`` and below
@@ -37,8 +37,8 @@ import numpy as np
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification import fit_any, fit_core
-from hindrax_ident.identification.fit_any import FitOptions, TopicChoice, fit_bags
+from hindrax_ident.identification.fit import fit_any, fit_core
+from hindrax_ident.identification.fit.fit_any import FitOptions, TopicChoice, fit_bags
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 
 #: DOFs compared (roll and pitch are not commanded by the pilots)
@@ -190,7 +190,7 @@ def make_bags(data: DataSet, root: Path, quick: bool = False) -> Bags:
 def plain_ls_theta(rec, dof: str):
     """Plain per-DOF least squares (module docstring) on the training record's moving segments: the layout and
     theta of M nu_dot + k_q |nu| nu + k_l nu + b = tau (one damping pair, no delay, no lag, no coupling), nu_dot the
-    Savitzky-Golay derivative of the record (:func:`..identification.fit_any.dof_records`), unconstrained."""
+    Savitzky-Golay derivative of the record (:func:`..identification.fit.fit_any.dof_records`), unconstrained."""
     terms = fit_core.Terms("both")
     timing = fit_core.Timing(0.0, 0.0)
     sd = fit_core.build_segments(rec, terms, timing, fit_core.VALIDATION_S)

@@ -3,9 +3,9 @@ identification of a recorded campaign bag.
 
 Writes ``identification.yaml`` and ``report/index.html`` into a new folder beside the bag,
 ``<bag>_ident_<time>`` (``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints the summary
-table; the reading is :mod:`hindrax_ident.identification.from_bag` (the campaign's topics into the campaign
-record) and :mod:`hindrax_ident.identification.campaign_fit` (the record into the fit core's per-DOF records), the
-fit is the fit core shared with ``hindrax ident fit`` (:mod:`hindrax_ident.identification.fit_core`,
+table; the reading is :mod:`hindrax_ident.identification.bag_input.from_bag` (the campaign's topics into the campaign
+record) and :mod:`hindrax_ident.identification.fit.campaign_fit` (the record into the fit core's per-DOF records), the
+fit is the fit core shared with ``hindrax ident fit`` (:mod:`hindrax_ident.identification.fit.fit_core`,
 docs/identification.md §7). When the bag holds the calibration steps' results
 (``identification/calibration``, published by the identification node when each step ends: ``hindrax ident start
 --calibrate ...`` with the recorder on), they are applied as ``hindrax run`` applies them: the thrust scales are
@@ -68,16 +68,18 @@ def _remove_if_empty(path: Path) -> None:
 
 
 def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, command: str, identify=None):
-    """Identify a campaign bag (the campaign reader and the fit core, :func:`~..identification.from_bag.identify_bag`)
-    and write identification.yaml and the report in ``out``; prints the DOFs without an estimate and the bag's
-    calibration. ``args`` gives ``restoring_n_m_per_rad`` and ``restoring_std`` (the free decay's stiffness when the
-    bag has no inclining step; absent: the vehicle file's); ``identify(bag, cfg)``: default
-    :func:`~..identification.from_bag.identify_bag` with the fit core's default options. Returns (record,
-    {dof: DofIdentification}, the yaml's path). Raises :class:`CommandError` (prefixed ``command``) for an unusable
-    bag or when no DOF is identified."""
+    """Identify a campaign bag (the campaign reader and the fit core,
+    :func:`~..identification.fit.campaign_fit.identify_bag`) and write identification.yaml and the report in ``out``;
+    prints the DOFs without an estimate and the bag's calibration. ``args`` gives ``restoring_n_m_per_rad`` and
+    ``restoring_std`` (the free decay's stiffness when the bag has no inclining step; absent: the vehicle file's);
+    ``identify(bag, cfg)``: default :func:`~..identification.fit.campaign_fit.identify_bag` with the fit core's default
+    options. Returns (record, {dof: DofIdentification}, the yaml's path). Raises :class:`CommandError` (prefixed
+    ``command``) for an unusable bag or when no DOF is identified."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.from_bag import BagContentError, identify_bag, truncation, write_outputs
+    from ..identification.assessment.report import write_outputs
+    from ..identification.bag_input.from_bag import BagContentError, truncation
+    from ..identification.fit.campaign_fit import identify_bag
     from .run import _add_reference_sections
 
     try:
@@ -115,8 +117,8 @@ def run(args: argparse.Namespace) -> int:
     """Identify from a bag, write the outputs, print the summary. Raises :class:`CommandError` on bad input."""
     import yaml
 
-    from ..identification.fit_core import NO_MODEL_VERDICT
-    from ..identification.verdicts import format_advice, no_model_line
+    from ..identification.assessment.verdicts import format_advice, no_model_line
+    from ..identification.fit.fit_core import NO_MODEL_VERDICT
     from .run import format_summary
 
     cfg = load_vehicle(args.config)

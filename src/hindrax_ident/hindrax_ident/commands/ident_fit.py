@@ -1,16 +1,16 @@
 """``hindrax ident fit BAG [BAG ...]``: identify from any bag (piloted, closed-loop, another vehicle's) and validate.
 
-Two readers feed one fit core (:mod:`hindrax_ident.identification.fit_core`, docs/identification.md §7). A bag with
-the campaign's topics (:func:`hindrax_ident.identification.from_bag.is_campaign_bag`), given alone with ``--config``
-and no topic, DOF or holdout choice, is read as the campaign (the campaign reader of ``hindrax ident bag``,
-:mod:`hindrax_ident.identification.campaign_fit`) and written as ``hindrax ident bag`` writes it: the same values
-and intervals. Any other bag goes through :mod:`hindrax_ident.identification.fit_any` (force and velocity by
+Two readers feed one fit core (:mod:`hindrax_ident.identification.fit.fit_core`, docs/identification.md §7). A bag with
+the campaign's topics (:func:`hindrax_ident.identification.bag_input.from_bag.is_campaign_bag`), given alone with
+``--config`` and no topic, DOF or holdout choice, is read as the campaign (the campaign reader of ``hindrax ident bag``,
+:mod:`hindrax_ident.identification.fit.campaign_fit`) and written as ``hindrax ident bag`` writes it: the same values
+and intervals. Any other bag goes through :mod:`hindrax_ident.identification.fit.fit_any` (force and velocity by
 message type, preprocessing, K-fold and holdout validation). Writes ``identification.yaml``
 (``dofs``, ``validation``, ``preprocessing``) and ``report/index.html`` (measured against predicted velocity on the
 validation data) in ``--out`` (new or empty; default: a new ``<first bag>_fit_<time>`` beside it) and prints a
 table. Without ``--config`` the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready:
-false`` with the reason, also printed (:func:`hindrax_ident.identification.results.to_config_overrides` refuses
-it). Exit 0, or 1 with one line on stderr for an unusable bag, topic, frame or too little data.
+false`` with the reason, also printed (:func:`hindrax_ident.identification.assessment.results.to_config_overrides`
+refuses it). Exit 0, or 1 with one line on stderr for an unusable bag, topic, frame or too little data.
 """
 from __future__ import annotations
 
@@ -63,12 +63,12 @@ def _num(x, width: int, fmt: str = ".3f") -> str:
 def format_table(res, cfg=None) -> str:
     """Parameters (value +- std, which covariance set the fit's std, 95 % interval, fold spread), the chosen model and
     timing per DOF, and the validation, one row each. Value, std and interval are identification.yaml's: the one
-    verdict path (:func:`~..identification.fit_any.assessment`: with ``cfg`` after the priors, with the thrust-curve
+    verdict path (:func:`~..identification.fit.fit_any.assessment`: with ``cfg`` after the priors, with the thrust-curve
     uncertainty)."""
     import numpy as np
 
-    from ..identification.fit_any import assessment
-    from ..identification.verdicts import no_model_line
+    from ..identification.assessment.verdicts import no_model_line
+    from ..identification.fit.fit_any import assessment
 
     lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
              f"{'fold spread':>11}"]
@@ -114,15 +114,15 @@ def _run_campaign(args: argparse.Namespace, cfg) -> int:
     bag`` (:func:`~.ident_bag.identify_campaign_bag`) and this command's table of the core's results."""
     from dataclasses import replace
 
-    from ..identification import fit_core
-    from ..identification import from_bag
-    from ..identification.fit_any import DofFit, FitResult
+    from ..identification.fit import fit_core
+    from ..identification.fit.campaign_fit import identify_bag
+    from ..identification.fit.fit_any import DofFit, FitResult
     from .ident_bag import _remove_if_empty, identify_campaign_bag, result_dir_for_bag
 
     bag = Path(args.bags[0])
     out = result_dir_for_bag(bag, args.out, "fit")
     opts = replace(fit_core.CoreOptions(), folds=args.folds)
-    identify = from_bag.identify_bag
+    identify = identify_bag
     try:
         _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit",
                                                       identify=lambda b, c: identify(b, c, opts=opts))
@@ -142,8 +142,8 @@ def _run_campaign(args: argparse.Namespace, cfg) -> int:
 def _campaign_hint(args: argparse.Namespace, cfg, dofs, choice) -> str:
     """'; it is a campaign bag: ...' when the first bag has the campaign's topics but was not read as the campaign
     (no --config, several bags, a holdout, DOFs or topics chosen), else ''."""
-    from ..identification.fit_any import TopicChoice
-    from ..identification.from_bag import is_campaign_bag
+    from ..identification.fit.fit_any import TopicChoice
+    from ..identification.bag_input.from_bag import is_campaign_bag
 
     try:
         if not is_campaign_bag(args.bags[0]):
@@ -164,9 +164,9 @@ def run(args: argparse.Namespace) -> int:
     """Fit, write the outputs, print the table. Raises :class:`CommandError` on bad input."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.fit_any import FitInputError, FitOptions, TopicChoice, build_document, fit_bags
-    from ..identification.verdicts import format_advice
-    from ..identification.fit_report import write_fit_outputs
+    from ..identification.fit.fit_any import FitInputError, FitOptions, TopicChoice, build_document, fit_bags
+    from ..identification.assessment.verdicts import format_advice
+    from ..identification.assessment.fit_report import write_fit_outputs
 
     cfg = None
     if args.config is not None:
@@ -178,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"ident fit: {b}: no such file or directory")
     if args.folds < 2:
         raise CommandError(f"ident fit: --folds {args.folds}: must be >= 2")
-    from ..identification.fit_core import PERSISTENCE_MARGIN
+    from ..identification.fit.fit_core import PERSISTENCE_MARGIN
 
     margin = PERSISTENCE_MARGIN if args.persistence_margin is None else float(args.persistence_margin)
     if not 0.0 <= margin < 1.0:
@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
     choice = TopicChoice(args.wrench_topic, args.velocity_topic, args.imu_topic, args.depth_topic)
     if cfg is not None and len(args.bags) == 1 and not args.holdout and dofs is None and choice == TopicChoice():
-        from ..identification.from_bag import is_campaign_bag
+        from ..identification.bag_input.from_bag import is_campaign_bag
 
         try:
             campaign = is_campaign_bag(args.bags[0])

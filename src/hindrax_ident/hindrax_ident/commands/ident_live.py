@@ -97,7 +97,7 @@ def format_status(msg: Any) -> str:
 def _parse_calibrate(args: argparse.Namespace) -> list[str]:
     """The ``--calibrate`` steps. Raises :class:`CommandError` for an unknown step or ``--calibration-only``
     without one."""
-    from ..identification.executive import CALIBRATION_STEPS
+    from ..identification.online.executive import CALIBRATION_STEPS
 
     steps = [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
     bad = [c for c in steps if c not in CALIBRATION_STEPS]

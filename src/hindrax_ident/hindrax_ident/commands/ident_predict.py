@@ -2,9 +2,9 @@
 model's open-loop predictions on bags, as CSV anyone can score (issue 46.5).
 
 Per bag and DOF of the model, ``DIR/<bag>_<dof>.csv`` with ``t_s,segment,measured,predicted`` (SI, body FRD, the
-frame and time origin in the first ``#`` line; :mod:`hindrax_ident.identification.predict`). With ``--segment-s S``
-the prediction restarts from the measured velocity every S seconds from the first instant with both force and
-velocity; without it, the tool's own rule (its holdout validation's 10 s segments). Prints per bag and DOF the
+frame and time origin in the first ``#`` line; :mod:`hindrax_ident.identification.assessment.predict`). With
+``--segment-s S`` the prediction restarts from the measured velocity every S seconds from the first instant with both
+force and velocity; without it, the tool's own rule (its holdout validation's 10 s segments). Prints per bag and DOF the
 segments, samples and nrmse, nrmse_hold, nrmse_zero of those rows (the definition in the predict module). Exit 0,
 or 1 with one line on stderr for an unusable model file, bag, topic or frame.
 """
@@ -44,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
 
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.fit_any import FitInputError, TopicChoice
-    from ..identification.predict import ModelError, dofs_of, load_model, predict_bag, rule_text, write_csv
+    from ..identification.fit.fit_any import FitInputError, TopicChoice
+    from ..identification.assessment.predict import ModelError, dofs_of, load_model, predict_bag, rule_text, write_csv
 
     if args.segment_s is not None and not 0.5 <= args.segment_s <= 3600.0:
         raise CommandError(f"ident predict: --segment-s {args.segment_s:g}: must be in [0.5, 3600] s")

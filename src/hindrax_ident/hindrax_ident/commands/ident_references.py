@@ -19,9 +19,9 @@
   fit_quadratic_free_decay`): rigid + added inertia independent of the thrust curve ([Hindrax-AM]
   eq. 4 applied to the vehicle, [SmallROV] eq. 12); ``total_inertia_kg_m2_std`` combines the fit's
   std (``_std_fit``, white residuals assumed) with C's (``--stiffness-std``). With ``--identification`` the
-  self-propelled inertia of that DOF is compared by the campaign's rule (:func:`~hindrax_ident.identification.verdicts.
-  apply_reference_verdicts`): ``verdict`` suspect, with the ``reason``, when the two differ by more than 1.96
-  combined std.
+  self-propelled inertia of that DOF is compared by the campaign's rule
+  (:func:`~hindrax_ident.identification.assessment.verdicts. apply_reference_verdicts`): ``verdict`` suspect, with the
+  ``reason``, when the two differ by more than 1.96 combined std.
 
 Exit status 0 on success, 1 on bad input (one-line message on stderr).
 """
@@ -125,7 +125,7 @@ def _inclining(args) -> int:
 
 
 def _self_propelled_inertia(path: str, dof: str):
-    from ..identification.results import read_identification
+    from ..identification.assessment.results import read_identification
 
     doc = read_identification(path)
     entry = doc["dofs"].get(dof)
@@ -136,11 +136,12 @@ def _self_propelled_inertia(path: str, dof: str):
 
 def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
     """Add ``self_propelled`` {inertia_kg_m2, inertia_kg_m2_std, z, verdict, rule[, reason]} to the free-decay
-    result ``out`` (in place): the campaign's verdict rule itself (:func:`~hindrax_ident.identification.verdicts.
-    apply_reference_verdicts` on a one-DOF document, i.e. :func:`~hindrax_ident.identification.verdicts.
-    free_decay_reason`: suspect beyond :data:`~hindrax_ident.identification.verdicts.REFERENCE_Z_MAX` combined
-    std). Raises ``ValueError`` when ``path`` has no ``dofs.<dof>``."""
-    from ..identification.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
+    result ``out`` (in place): the campaign's verdict rule itself
+    (:func:`~hindrax_ident.identification.assessment.verdicts. apply_reference_verdicts` on a one-DOF document, i.e.
+    :func:`~hindrax_ident.identification.assessment.verdicts. free_decay_reason`: suspect beyond
+    :data:`~hindrax_ident.identification.assessment.verdicts.REFERENCE_Z_MAX` combined std). Raises ``ValueError`` when
+    ``path`` has no ``dofs.<dof>``."""
+    from ..identification.assessment.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
 
     v, s = _self_propelled_inertia(path, dof)
     doc = apply_reference_verdicts({"dofs": {dof: {"inertia": {"value": v, "std": s}}}, "free_decay": {dof: out}})

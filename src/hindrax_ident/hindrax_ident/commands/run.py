@@ -6,18 +6,18 @@ sensor drivers, the ESC node, the thrust allocation, the identification node and
 armed through ``esc/set_armed`` (the operator's service, after ``esc.arming_time_s`` at neutral), the campaign
 runs as one ``run_identification`` action goal (progress lines from its feedback), then the vehicle is
 disarmed, the bag closed and the offline identification runs on the bag
-(:mod:`hindrax_ident.identification.from_bag`). The simulator runs in lock-step with the identification
+(:mod:`hindrax_ident.identification.bag_input.from_bag`). The simulator runs in lock-step with the identification
 node's control tick (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`), so CPU load slows the run
 but does not change it.
 
 ``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the simulator
-(:mod:`hindrax_ident.identification.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
+(:mod:`hindrax_ident.identification.online.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
 no ROS graph, no bag), about four times faster; for quick studies of the method.
 
 Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
 ``--in-process``; a second run in the same second gets ``_1`` and one line says so), with a ``latest`` link beside
 it moved once the run has completed (:mod:`hindrax_ident.output_dirs`), or ``--out``, which must be new or empty.
-It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.results`),
+It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`),
 ``report/index.html`` with its plots, and (graph) ``bag/`` (rosbag2 MCAP layout). At the end a table is printed:
 per DOF and parameter the identified value with its std, the configured value ("truth" in simulation) and the
 relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
@@ -97,7 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def format_summary(identifications: dict) -> str:
     """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error, verdict with its
     first reason (a parameter at a bound: that one, it has no interval). A number that is not finite prints ``-``."""
-    from ..identification.report import summary_rows
+    from ..identification.assessment.report import summary_rows
 
     def num(x, spec):
         return format(x, spec) if x is not None and math.isfinite(x) else format("-", ">" + spec.split(".")[0])
@@ -116,7 +116,7 @@ def format_summary(identifications: dict) -> str:
 
 def summary_markdown(identifications: dict) -> str:
     """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth, error, verdict)."""
-    from ..identification.report import summary_rows
+    from ..identification.assessment.report import summary_rows
     rows = []
     for r in summary_rows(identifications):
         err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f} %"
@@ -201,13 +201,13 @@ def _check_args(args) -> tuple[object, list[str]]:
     dur = getattr(args, "excitation_duration", None)
     if dur is not None and not (5.0 <= dur <= 1800.0):
         raise CommandError(f"--excitation-duration {dur}: allowed 5-1800 s (identification.excitation_duration_s)")
-    from ..identification.executive import CALIBRATION_STEPS
+    from ..identification.online.executive import CALIBRATION_STEPS
 
     cal = _calibration_steps(args)
     bad = [c for c in cal if c not in CALIBRATION_STEPS]
     if bad:
         raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
-    from ..identification.executive import expand_calibration
+    from ..identification.online.executive import expand_calibration
 
     if "float" in expand_calibration(cal) and cfg.calibration.float_net_buoyancy_n is None:
         raise CommandError("--calibrate: the float step needs calibration.float_mass_kg and "
@@ -278,10 +278,10 @@ def run_graph(args: argparse.Namespace) -> int:
 
 def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
     """identification.yaml ``free_decay``: per roll/pitch the inertia from the campaign's free decay
-    (:func:`~hindrax_ident.identification.calibration.decay_inertia`) and, when that DOF was identified
+    (:func:`~hindrax_ident.identification.fit.calibration.decay_inertia`) and, when that DOF was identified
     self-propelled, the comparison: verdict suspect when they differ by more than 1.96 combined std."""
     from ..estimation.least_squares import EstimationError
-    from ..identification.calibration import decay_inertia
+    from ..identification.fit.calibration import decay_inertia
 
     import dataclasses
 
@@ -329,16 +329,16 @@ def _add_reference_sections(doc: dict, record, cfg, idents: dict, args, progress
                                 for kk, vv in v.items()} for k, v in record.inclining.items()}
     if getattr(record, "decays", None):
         doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
-        from ..identification.verdicts import apply_reference_verdicts
+        from ..identification.assessment.verdicts import apply_reference_verdicts
         apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std
 
 
 def run_in_process(args: argparse.Namespace) -> int:
     """Run the campaign in-process on the simulator, identify, write the outputs, print the summary."""
-    from ..identification.campaign import Campaign
-    from ..identification.campaign_fit import identify_all_with_errors
-    from ..identification.report import write_report
-    from ..identification.results import build_results, write_identification
+    from ..identification.online.campaign import Campaign
+    from ..identification.fit.campaign_fit import identify_all_with_errors
+    from ..identification.assessment.report import write_report
+    from ..identification.assessment.results import build_results, write_identification
 
     cfg, dofs = _check_args(args)
     wall0 = time.monotonic()
@@ -354,7 +354,7 @@ def run_in_process(args: argparse.Namespace) -> int:
     except TruthError as exc:
         raise CommandError(f"--truth: {exc}") from exc
     cal = _calibration_steps(args)
-    from ..identification.executive import calibration_forces, inclining_load
+    from ..identification.online.executive import calibration_forces, inclining_load
     w_ballast, f_line = calibration_forces(cfg)
     campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
                         max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
@@ -365,7 +365,7 @@ def run_in_process(args: argparse.Namespace) -> int:
     record = campaign.run()
     progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
              + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
-    from ..identification.calibration import identify_calibrated
+    from ..identification.fit.calibration import identify_calibrated
 
     # the calibration's per-direction scales applied, the thrust shares attached for the joint estimate
     idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)

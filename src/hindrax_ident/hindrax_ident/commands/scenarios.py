@@ -1,12 +1,12 @@
 """``hindrax ident scenarios [--scenarios NAMES] [--seeds N] [--dofs ...] [--out DIR] [--jobs N]``: the scenario suite.
 
 For every named scenario (a truth file in ``ros_ws/config/truth/scenarios/``, :mod:`hindrax_ident.sim.truth`) and
-every seed 1..N, one in-process identification campaign (:class:`~hindrax_ident.identification.campaign.Campaign`,
-the simulator running on the scenario's truth, every estimator on the vehicle file), the offline identification
-and the verdicts (:mod:`hindrax_ident.identification.verdicts`). Each parameter is compared with the truth's
-value (:func:`~hindrax_ident.identification.estimators.truth_parameters` of the truth configuration): relative
-error, z = (estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its
-reasons.
+every seed 1..N, one in-process identification campaign
+(:class:`~hindrax_ident.identification.online.campaign.Campaign`, the simulator running on the scenario's truth, every
+estimator on the vehicle file), the offline identification and the verdicts
+(:mod:`hindrax_ident.identification.assessment.verdicts`). Each parameter is compared with the truth's value
+(:func:`~hindrax_ident.identification.fit.dof_model.truth_parameters` of the truth configuration): relative error, z =
+(estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its reasons.
 
 Writes ``<out>/scenarios.json`` (every case, the per-scenario summary, provenance) and ``<out>/scenarios.md`` (the
 table) and prints the table. A scenario *meets the target* when every parameter's interval covers the
@@ -15,7 +15,7 @@ no-disturbance scenario also needs at most 10 % of its parameters suspect. Exit 
 
 ``--excitation ladder,multisine,prbs`` runs every case once per excitation
 (``identification.excitation``: the constant-thrust ladder or one broadband run per DOF,
-:mod:`hindrax_ident.identification.excitation`; ``--excitation-duration`` its length); the scenario label becomes
+:mod:`hindrax_ident.identification.online.excitation`; ``--excitation-duration`` its length); the scenario label becomes
 ``<scenario> [<excitation>]`` for the other excitations, and a second table compares them
 (:func:`format_excitation_table`): pool seconds per DOF, mean |error| of the inertia and quadratic damping, their
 interval coverage, and the error scaled to 100 s of pool time (|error| x sqrt(pool s / 100), the 1 / sqrt(T) law of
@@ -113,9 +113,9 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     excitation / excitation_duration_s: the force input (default the vehicle file's ``identification.excitation``);
     another than ``ladder`` is appended to the label as `` [<excitation>]`` and to the cache key. calibrate: reference
-    steps run first (:data:`~hindrax_ident.identification.executive.CALIBRATION_STEPS`; the virtual pool plays the
-    operator): the record is identified with its thrust scales applied and estimated jointly with the fits
-    (:func:`~hindrax_ident.identification.calibration.identify_calibrated`, :func:`~hindrax_ident.identification.
+    steps run first (:data:`~hindrax_ident.identification.online.executive.CALIBRATION_STEPS`; the virtual pool plays
+    the operator): the record is identified with its thrust scales applied and estimated jointly with the fits
+    (:func:`~hindrax_ident.identification.fit.calibration.identify_calibrated`, :func:`~hindrax_ident.identification.
     calibration.joint_estimate`, as ``hindrax ident campaign``); the label gains `` [calibrate <steps>]``.
 
     Returns {"scenario", "seed", "wall_s", "aborted", "errors": {dof: msg}, "cases": [row, ...],
@@ -124,10 +124,10 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     """
     from hindrax_drivers.config import or_default
 
-    from ..identification.campaign import Campaign
-    from ..identification.campaign_fit import identify_all_with_errors
-    from ..identification.estimators import truth_parameters
-    from ..identification.verdicts import apply_verdicts, rls_published_std
+    from ..identification.online.campaign import Campaign
+    from ..identification.fit.campaign_fit import identify_all_with_errors
+    from ..identification.fit.dof_model import truth_parameters
+    from ..identification.assessment.verdicts import apply_verdicts, rls_published_std
     from ..sim.simulator import Simulator
     from ..sim.truth import load_truth
 
@@ -153,8 +153,8 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     else:
         sim = Simulator(cfg, seed=seed, truth=truth)
         if cal:
-            from ..identification.calibration import identify_calibrated, joint_estimate
-            from ..identification.executive import calibration_forces, inclining_load
+            from ..identification.fit.calibration import identify_calibrated, joint_estimate
+            from ..identification.online.executive import calibration_forces, inclining_load
 
             w_ballast, f_line = calibration_forces(cfg)
             record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim, excitation=exc,
@@ -236,7 +236,7 @@ def _case_star(args):
 def summarise(results: Sequence[dict]) -> dict:
     """Per scenario: per DOF and parameter the mean error, max |z|, covered / suspect / ok counts (ok = covered
     or suspect); totals; whether the scenario meets the target (module docstring)."""
-    from ..identification.verdicts import spread_reasons
+    from ..identification.assessment.verdicts import spread_reasons
 
     out: dict = {}
     by: dict = {}
@@ -384,7 +384,7 @@ def run(args: argparse.Namespace) -> int:
     if args.cached_only and not args.cache:
         print("--cached-only needs --cache DIR", file=sys.stderr)
         return 1
-    from ..identification.excitation import EXCITATIONS
+    from ..identification.online.excitation import EXCITATIONS
     excitations = [e.strip() for e in str(args.excitation).split(",") if e.strip()] if args.excitation else [None]
     if not excitations or any(e not in EXCITATIONS for e in excitations if e is not None):
         print(f"--excitation: {args.excitation!r}: comma-separated from {', '.join(EXCITATIONS)}", file=sys.stderr)
@@ -395,7 +395,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # seed-major: every scenario's seed 1 first, so that a suite cut short still covers every scenario
-    from ..identification.executive import CALIBRATION_STEPS
+    from ..identification.online.executive import CALIBRATION_STEPS
     cal = [c.strip() for c in str(args.calibrate or "").split(",") if c.strip()]
     if any(c not in CALIBRATION_STEPS for c in cal):
         print(f"--calibrate: {args.calibrate!r}: comma-separated from {', '.join(CALIBRATION_STEPS)}", file=sys.stderr)
@@ -412,7 +412,9 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.monotonic()
     results = []
     # import everything the workers need before they fork (the tree may change during a long suite)
-    from ..identification import campaign, estimators, verdicts  # noqa: F401
+    from ..identification.assessment import verdicts  # noqa: F401
+    from ..identification.fit import dof_model  # noqa: F401
+    from ..identification.online import campaign, estimators  # noqa: F401
     from ..sim import disturbances, simulator, truth  # noqa: F401
     if args.jobs > 1:
         import multiprocessing as mp

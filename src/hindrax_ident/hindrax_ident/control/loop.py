@@ -4,9 +4,9 @@
 the MS5837 with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
 :class:`~hindrax_ident.vehicle.state.DepthEstimator` (depth and depth rate from the pressure fused with
 the vertical acceleration), exactly as the identification executive does, and hands them to a hold
-(:class:`~hindrax_ident.identification.maneuvers.HoldController` or
+(:class:`~hindrax_ident.identification.online.maneuvers.HoldController` or
 :class:`~hindrax_ident.control.legacy.LegacyPDHold`). The controller node (:mod:`.node`) feeds it the samples of the
-driver topics (:mod:`hindrax_ident.identification.signals`), the evaluation (:mod:`.evaluate`) those of the
+driver topics (:mod:`hindrax_ident.identification.bag_input.signals`), the evaluation (:mod:`.evaluate`) those of the
 in-process simulator. Pure, no ROS.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 
 from hindrax_drivers.config import VehicleConfig
 
-from ..identification.estimators import measurement_settings
+from ..identification.fit.dof_model import measurement_settings
 from ..vehicle.state import DepthEstimator, SensorState
 
 __all__ = ["HoldLoop"]

@@ -9,7 +9,8 @@ z_g W - z_b B (moment = restoring sin(angle); feedforward). Two sources:
   identification exists. Its relative inertia uncertainty is the declared thrust-curve uncertainty
   (``thrusters.thrust_fit_uncertainty_rel`` or ``thrust_uncertainty_rel``, the RMS of the two directions): the
   file states no uncertainty for its added masses, so this is a lower bound.
-* :func:`load_model` - ``identification.yaml`` (:mod:`hindrax_ident.identification.results`), read by this small
+* :func:`load_model` - ``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`), read by this
+  small
   tolerant loader (only ``provenance.vehicle_parameters`` (or, in files written before it,
   ``provenance.configuration_sha256``), ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and
   ``joint.scales`` are used; unknown keys are ignored, so the schema may grow).
@@ -35,9 +36,9 @@ finite number, or a negative inertia or damping, also falls back. Each value car
 **Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no ``dofs``
 mapping, or an identification of another vehicle raise :class:`ModelFileError` (one line). The vehicle is matched
 by the parameters the identification depends on (``provenance.vehicle_parameters``,
-:mod:`hindrax_ident.identification.vehicle_match`: mass properties, thrust model, sensor mounting), so editing a
-comment, the ESC calibration or the disk floor keeps it valid; a file written before that section is matched by
-``provenance.configuration_sha256`` (the vehicle file's text).
+:mod:`hindrax_ident.identification.assessment.vehicle_match`: mass properties, thrust model, sensor mounting), so
+editing a comment, the ESC calibration or the disk floor keeps it valid; a file written before that section is matched
+by ``provenance.configuration_sha256`` (the vehicle file's text).
 
 Frames: body FRD, SNAME order (docs/architecture.md §3); the heave direction ``positive`` is downwards.
 """
@@ -53,8 +54,8 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-from ..identification.vehicle_match import parameter_differences
-from ..identification.verdicts import declared_rel
+from ..identification.assessment.vehicle_match import parameter_differences
+from ..identification.assessment.verdicts import declared_rel
 
 __all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "load_model", "rigid_inertia",
            "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE",
@@ -62,10 +63,11 @@ __all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "
 
 #: Source name of a value taken from the vehicle file.
 VEHICLE_FILE = "vehicle file"
-#: Substrings of verdict reasons (:mod:`hindrax_ident.identification.verdicts`) that do not disqualify a parameter for
-#: control in commanded-thrust units: a constant force other than the expected one (it is the measured holding force,
-#: which the feedforward should use) and the thrust curve differing from the vehicle (a uniform thrust scale cancels).
-#: A reason that matches none of them makes the parameter fall back (if the wording changes, it falls back: safe).
+#: Substrings of verdict reasons (:mod:`hindrax_ident.identification.assessment.verdicts`) that do not disqualify a
+#: parameter for control in commanded-thrust units: a constant force other than the expected one (it is the measured
+#: holding force, which the feedforward should use) and the thrust curve differing from the vehicle (a uniform thrust
+#: scale cancels). A reason that matches none of them makes the parameter fall back (if the wording changes, it falls
+#: back: safe).
 CONTROL_IRRELEVANT_REASONS = ("differs from the expected", "the thrust curves do not match the vehicle")
 #: A holding force (heave: the net buoyancy) in commanded-thrust units is the vehicle file's over the true thrust scale
 #: s; an identified one outside 1 / (1 +- this many times the larger declared thrust-curve 1-sigma) of the file's is no
@@ -147,7 +149,7 @@ def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
 def declared_inertia_uncertainty_rel(cfg: VehicleConfig) -> float:
     """Relative 1-sigma uncertainty the vehicle file declares for its force model: the RMS of the two thrust-curve
     directions' relative uncertainty (the rule of the identification intervals,
-    :mod:`hindrax_ident.identification.verdicts`)."""
+    :mod:`hindrax_ident.identification.assessment.verdicts`)."""
     neg, pos = declared_rel(cfg)
     return float(math.sqrt(0.5 * (neg * neg + pos * pos)))
 

@@ -2,8 +2,8 @@
 altitude than the vehicle file (``hindrax control scenarios``, docs/control.md §7).
 
 Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process identification campaign against that
-truth (:class:`~hindrax_ident.identification.campaign.Campaign`, surge, sway, heave and yaw, ``levels`` per DOF, the
-offline fit with its verdicts, :func:`~hindrax_ident.identification.results.build_results`), its
+truth (:class:`~hindrax_ident.identification.online.campaign.Campaign`, surge, sway, heave and yaw, ``levels`` per DOF,
+the offline fit with its verdicts, :func:`~hindrax_ident.identification.assessment.results.build_results`), its
 ``identification.yaml`` read back through :func:`~.model.load_model` (so the verdict fallbacks apply), then the
 depth step and the altitude hold of :mod:`.evaluate` with the identified model, the vehicle file's and the former PD
 hold, on the same truth. Writes ``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json`` and the
@@ -18,10 +18,10 @@ from typing import Callable, Sequence
 
 from hindrax_drivers.config import VehicleConfig
 
-from ..identification.calibration import apply_thrust_calibration
-from ..identification.campaign import Campaign
-from ..identification.campaign_fit import identify_all_with_errors
-from ..identification.results import build_results, write_identification
+from ..identification.fit.calibration import apply_thrust_calibration
+from ..identification.online.campaign import Campaign
+from ..identification.fit.campaign_fit import identify_all_with_errors
+from ..identification.assessment.results import build_results, write_identification
 from ..sim.simulator import Simulator
 from ..sim.truth import load_truth
 from ..sim.truth import truth_dir as shipped

@@ -44,7 +44,7 @@ exceeds the bound, which is cheap to test). :meth:`RecursiveLeastSquares.reset_c
 restarts P explicitly.
 
 Honesty options (all off by default in this class, so the plain algorithm above is unchanged; the
-identification executive switches all of them on, :func:`hindrax_ident.identification.estimators.online_rls`):
+identification executive switches all of them on, :func:`hindrax_ident.identification.online.estimators.online_rls`):
 
 * ``directional=True``: directional forgetting (Bittanti, Bolzern and Campi 1990, "Recursive least squares
   identification algorithms with incomplete excitation", IEEE TAC 35(12); Kulhavy 1987): information is forgotten

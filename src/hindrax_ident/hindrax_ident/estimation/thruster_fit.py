@@ -30,9 +30,9 @@ relative standard deviation of the fitted mean thrust over the fitted pulse-widt
 ``rel = sqrt(sum_P sd(P)^2 / sum_P f(P)^2)`` on a uniform grid of 101 widths (:meth:`CubicFit.relative_std`;
 weighting by f^2 keeps the widths near neutral, where f -> 0, from dominating). ``hindrax ident thruster-fit
 --write`` stores it as ``thrusters.thrust_fit_uncertainty_rel`` = [negative, positive], which then replaces the
-declared ``thrusters.thrust_uncertainty_rel`` in the intervals (:mod:`hindrax_ident.identification.verdicts`). It
-is the fit's statistical uncertainty at the bollard-pull test's battery voltage only; a voltage that sags during a
-session (thrust ~ V^1.2, docs/devices.md §5.3) is not in it.
+declared ``thrusters.thrust_uncertainty_rel`` in the intervals
+(:mod:`hindrax_ident.identification.assessment.verdicts`). It is the fit's statistical uncertainty at the bollard-pull
+test's battery voltage only; a voltage that sags during a session (thrust ~ V^1.2, docs/devices.md §5.3) is not in it.
 
 :func:`point_reflection` builds f_pos(P) = -f_neg(2 neutral - P). The vehicle configuration uses
 it because [Hindrax-Drag] Table 2's printed positive-direction row evaluates to about -1070 N at

@@ -38,7 +38,7 @@ SCHEMA: dict[str, Spec] = {
                                              "fraction of the prior value (0 = diffuse start at zero), default 1",
                                              0.0, 100.0),
     "identification.excitation": text("force input per DOF: the constant-thrust ladder, or one broadband run shaped to "
-                                      "stay in the pool box (hindrax_ident identification/excitation.py)",
+                                      "stay in the pool box (hindrax_ident identification/online/excitation.py)",
                                       ("ladder", "multisine", "prbs", "chirp")),
     "identification.excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s",
                                                  5.0, 1800.0),

@@ -8,7 +8,7 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
     dofs:
       <dof>:                        # surge sway heave roll pitch yaw
         <parameter>: {value: <float>, std: <float>, unit: <text>, ci95: [<low>, <high>], std_fit: <float>,
-                      verdict: trusted | suspect, reasons: [<text>, ...]}   # identification/verdicts.py
+                      verdict: trusted | suspect, reasons: [<text>, ...]}   # identification/assessment/verdicts.py
         verdict: trusted | suspect | no model beats holding the velocity   # suspect when any parameter is
         reasons: [<text>, ...]              # the DOF-wide checks that failed
         model: <text>                       # the fit core's terms chosen by cross-validation
@@ -46,19 +46,19 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-from ..estimation.drag_coefficient import (
+from ...estimation.drag_coefficient import (
     characteristic_length_from_volume,
     drag_coefficient,
     reynolds_range,
 )
-from ..estimation.least_squares import EstimationError
-from ..estimation.priors import priors_from_config
-from .calibration import calibration_section, joint_estimate
+from ...estimation.least_squares import EstimationError
+from ..fit.posterior import prior_entries
+from ..fit.calibration import calibration_section, joint_estimate
 from .vehicle_match import vehicle_parameters
 from .verdicts import apply_verdicts, model_selection, rls_published_std
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry",
-           "write_identification", "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "prior_entries"]
+           "write_identification", "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS"]
 
 SCHEMA_VERSION = 1
 
@@ -128,25 +128,10 @@ def _rls_entry(dof: str, r: Any, cfg: VehicleConfig) -> dict:
     return {n: [v, _f(float(s))] for n, v, s in zip(names, vals, pub)}
 
 
-def prior_entries(cfg: VehicleConfig) -> dict[str, dict]:
-    """Per DOF ``{added_mass, linear_damping, quadratic_damping, source}``: the empirical priors from the
-    configured geometry ([NTNU-Thesis] App. A.1/A.2, :func:`~..estimation.priors.priors_from_config`;
-    no projected areas in the vehicle file, so a solid prism: an upper bound). A value that cannot be computed is
-    None; ``{}`` if the configuration lacks the geometry."""
-    try:
-        p = priors_from_config(cfg)
-    except (KeyError, TypeError, EstimationError):
-        return {}
-    src = "[NTNU-Thesis] App. A.1/A.2 empirical estimate, solid prism of the configured box"
-    return {dof: {"added_mass": _f(p["added_mass"][i]), "linear_damping": _f(p["linear_damping"][i]),
-                  "quadratic_damping": _f(p["quadratic_damping"][i]), "source": src}
-            for i, dof in enumerate(DOFS)}
-
-
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
                   seed: int | None = None, method: str | None = None,
                   include_configured: bool = True, calibration: Mapping[str, Any] | None = None) -> dict:
-    """The identification.yaml document from :class:`~.estimators.DofIdentification` objects (per DOF).
+    """The identification.yaml document from :class:`~..fit.dof_model.DofIdentification` objects (per DOF).
 
     The intervals are the honest ones of :func:`~.verdicts.apply_verdicts` (fit covariance + thrust-curve
     uncertainty, Student t on the independent segments; applied here if not yet), each parameter with ``std_fit``
@@ -154,10 +139,10 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
 
     Before the verdicts the empirical priors (``identification.prior_std_rel``) and, with ``calibration`` (the
     record's calibration steps; the identifications then come from the record scaled by
-    :func:`~.calibration.apply_thrust_calibration`), the thrust scales are estimated jointly with the fits
-    (:func:`~.calibration.joint_estimate`, in place, skipped for DOFs already assessed); each parameter that had a
+    :func:`~..fit.calibration.apply_thrust_calibration`), the thrust scales are estimated jointly with the fits
+    (:func:`~..fit.calibration.joint_estimate`, in place, skipped for DOFs already assessed); each parameter that had a
     prior shows it as ``prior: [mean, std]`` beside its value, the document gains ``joint`` (the scales' posterior)
-    and, with a calibration, ``calibration`` (:func:`~.calibration.calibration_section`).
+    and, with a calibration, ``calibration`` (:func:`~..fit.calibration.calibration_section`).
     """
     joint = joint_estimate(identifications, cfg, calibration)
     assessments = apply_verdicts(identifications, cfg)
@@ -245,7 +230,7 @@ def write_identification(path: str | Path, document: Mapping) -> Path:
     validate(document)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text("# Hindrax identified hydrodynamics (hindrax_ident.identification.results, schema "
+    p.write_text("# Hindrax identified hydrodynamics (hindrax_ident.identification.assessment.results, schema "
                  f"{SCHEMA_VERSION})\n" + yaml.safe_dump(dict(document), sort_keys=False, default_flow_style=None))
     return p
 

@@ -9,7 +9,7 @@ group and rotation direction: ``vertical_forward``, ``vertical_reverse``, ``hori
 ``horizontal_reverse`` (forward = positive thrust along the thruster's configured direction, the curve_positive
 branch). The true force of thruster j is s_{g(j), d} F_j with d the sign of its commanded force F_j.
 
-* The calibration steps (:mod:`.steps.calibration_steps`) give, per hold, the parts P and N of the holding force
+* The calibration steps (:mod:`..online.steps.calibration_steps`) give, per hold, the parts P and N of the holding force
   on the step's axis made by forward and reverse thrust; at rest ``s_forward P + s_reverse N + E = R`` with E the
   known force (0 without it) and R the constant force the thrusters balance: for the vertical group the vehicle's
   net buoyancy (rho V - m) g, whose weighed value (``calibration.net_buoyancy_std_n``) makes every hover hold a
@@ -47,10 +47,10 @@ from scipy import optimize
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS
 
-from ..estimation.free_decay import fit_quadratic_free_decay
-from ..vehicle.thrust_lag import ThrustLag
+from ...estimation.free_decay import fit_quadratic_free_decay
+from ...vehicle.thrust_lag import ThrustLag
 from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, rigid_inertia_of, theta_priors
-from .verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel, thrust_weights
+from ..assessment.verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel, thrust_weights
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -84,7 +84,7 @@ def scale_prior_stds(cfg) -> dict[str, float]:
     """1-sigma of the prior N(1, u^2) of each direction's scale: {"forward": u_positive, "reverse": u_negative}
     from the bollard-pull fit's ``thrusters.thrust_fit_uncertainty_rel`` [negative, positive] when the vehicle file
     has it, else the declared ``thrusters.thrust_uncertainty_rel`` (the same choice as the intervals,
-    :func:`~.verdicts.declared_rel`)."""
+    :func:`~..assessment.verdicts.declared_rel`)."""
     neg, pos = declared_rel(cfg)
     return {"forward": float(pos), "reverse": float(neg)}
 
@@ -241,8 +241,8 @@ def _thruster_scales(model: ScaleModel, x: np.ndarray, cfg) -> tuple[np.ndarray,
 def lagged_parts(record: Any) -> tuple[np.ndarray, np.ndarray]:
     """The commanded thruster forces of ``record`` (``thrust_cmd_n``, (n, m) N) split into their positive and
     negative parts, each through the first-order thrust lag ``record.time_constant_s`` over the tick intervals
-    (zero before the first tick, as the executive and :mod:`.from_bag` lag them): (forward, reverse), (n, m) each,
-    the value at each tick."""
+    (zero before the first tick, as the executive and :mod:`..bag_input.from_bag` lag them): (forward, reverse), (n, m)
+    each, the value at each tick."""
     f = np.asarray(record.thrust_cmd_n, dtype=float)
     t = np.asarray(record.t_s, dtype=float)
     tau = float(record.time_constant_s)
@@ -281,9 +281,9 @@ def _rebuild(record: Any, cfg, fwd: np.ndarray, rev: np.ndarray) -> Any:
 
 
 def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None = None, cfg=None) -> Any:
-    """A copy of ``record`` (:class:`~.executive.CampaignRecord`) whose wrenches (n, 6) are rebuilt with the
-    calibration's point scales (:func:`thrust_scales`; ``calibration`` default ``record.calibration``): from the
-    commanded thruster forces ``thrust_cmd_n`` times the scale of each thruster's group and direction, lagged as the
+    """A copy of ``record`` (:class:`~..bag_input.campaign_record.CampaignRecord`) whose wrenches (n, 6) are rebuilt
+    with the calibration's point scales (:func:`thrust_scales`; ``calibration`` default ``record.calibration``): from
+    the commanded thruster forces ``thrust_cmd_n`` times the scale of each thruster's group and direction, lagged as the
     executive does (:func:`lagged_parts`), times the thrust allocation matrix of ``cfg``. A record without
     ``thrust_cmd_n`` (or without ``cfg``) gets each group's wrench columns (vertical: Z, K, M; horizontal: X, Y, N)
     times the mean of its two directions. The record itself without a calibration. Raises ``ValueError`` on a
@@ -306,8 +306,8 @@ def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None 
 def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
     """First-order guess of each parameter's weights on its group's two directions when the fit's sensitivity was
     not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust uncertainty's weights
-    (:func:`~.verdicts.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse, the rest
-    half each; other DOFs half each)."""
+    (:func:`~..assessment.verdicts.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse,
+    the rest half each; other DOFs half each)."""
     w = thrust_weights(dof, names)  # (p, 2): [positive, negative]
     g = _DOF_GROUP[dof]
     return {f"{g}_forward": w[:, 0].copy(), f"{g}_reverse": w[:, 1].copy()}
@@ -385,10 +385,10 @@ def attach_thrust_sensitivities(record: Any, identifications: Mapping[str, Any],
 def identify_calibrated(record: Any, cfg, identify) -> tuple[dict, dict]:
     """({dof: DofIdentification}, {dof: error}) of ``record`` with its calibration applied
     (:func:`apply_thrust_calibration` with ``cfg``) and each DOF's sensitivity to the thrust scales measured
-    (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate` (through :func:`~.results.build_results`).
-    identify: the fit of every DOF with a window in the record, called as identify(record, cfg)
-    (:func:`~.campaign_fit.identify_all_with_errors`; passed in, as campaign_fit depends on this module through
-    results)."""
+    (:func:`attach_thrust_sensitivities`), ready for :func:`joint_estimate` (through
+    :func:`~..assessment.results.build_results`). identify: the fit of every DOF with a window in the record, called as
+    identify(record, cfg) (:func:`~.campaign_fit.identify_all_with_errors`; passed in, as campaign_fit depends on this
+    module through results)."""
     idents, errors = identify(apply_thrust_calibration(record, cfg=cfg), cfg)
     attach_thrust_sensitivities(record, idents, cfg, identify)
     return idents, errors
@@ -471,7 +471,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     """Bayesian (regularised) least squares of the thrust scales, the empirical priors and the manoeuvres' fits
     together (docs/identification.md §6.2-§6.3; [Tarantola2005] Ch. 3), written into the identifications.
 
-    ``identifications``: {dof: :class:`~.estimators.DofIdentification`} fitted on the record whose thrust-model
+    ``identifications``: {dof: :class:`~.dof_model.DofIdentification`} fitted on the record whose thrust-model
     force was rebuilt with the calibration's point scales s_c (:func:`apply_thrust_calibration` with
     ``calibration`` and ``cfg``; the record as recorded without one), each with its measured sensitivity
     ``signals["thrust_sensitivity"]`` = G = d theta / d s (:func:`attach_thrust_sensitivities`; else the first-order
@@ -490,7 +490,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
     calibration's own uncertainty in the directions the parameter depends on, and the priors' pull. For one scale
     per DOF this is the reparametrisation theta = s phi of the single-scale model to first order (G = theta / s by
     homogeneity). Without a calibration the scales stay 1 (only the empirical priors act) and the thrust-curve
-    uncertainty is added later by :func:`~.verdicts.assess_dof`, per direction, as before.
+    uncertainty is added later by :func:`~..assessment.verdicts.assess_dof`, per direction, as before.
 
     ``prior_std_rel``: default ``identification.prior_std_rel`` (or :data:`~.posterior.DEFAULT_PRIOR_STD_REL`); 0
     leaves the priors out. Idempotent (a DOF with ``signals["joint"]`` is left alone). Returns the ``joint`` section of

@@ -3,7 +3,7 @@
 A :class:`Step` is one self-contained part of a campaign (the dive, a known-force calibration step, one DOF's
 ladder or broadband run): :meth:`Step.run` is a generator over control ticks on a
 :class:`~.context.StepContext` (each ``yield`` one FRD wrench (6,), N / N m). The sequencer
-(:class:`~hindrax_ident.identification.executive.Executive`) runs a list of steps one after the other, on the
+(:class:`~hindrax_ident.identification.online.executive.Executive`) runs a list of steps one after the other, on the
 simulator stepped in-process or on the ROS graph; a step never sees the plant.
 """
 from __future__ import annotations
@@ -36,7 +36,8 @@ class Dive(Step):
     """Dive to the altitude setpoint (``identification.altitude_setpoint_m``, from the Ping1D altitude and the
     depth; inside the pool box's depth range) with the depth setpoint ramped at 0.25 m/s, at most 25 s, heading
     held at ``pool.start_heading_rad``; then hold still 3 s while the gyro and accelerometer biases are averaged
-    (:meth:`~...vehicle.state.SensorState.start_gyro_bias`). Sets :attr:`~.context.StepContext.depth_hold_m`."""
+    (:meth:`~hindrax_ident.vehicle.state.SensorState.start_gyro_bias`). Sets
+    :attr:`~.context.StepContext.depth_hold_m`."""
 
     name = "dive"
 

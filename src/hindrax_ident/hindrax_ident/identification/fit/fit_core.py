@@ -36,7 +36,7 @@ raw measurements at their own times) and hand it here. Everything after the read
    one-standard-error rule of [Hastie-ESL2009] §7.10, against spurious coupling terms). Every candidate's CV score
    is reported, with holding the velocity and 0 scored on the same held-out samples (:func:`persistence`): a
    chosen model that does not beat holding the velocity by :data:`PERSISTENCE_MARGIN` makes the DOF's verdict
-   :data:`NO_MODEL_VERDICT` (:func:`.verdicts.assess`).
+   :data:`NO_MODEL_VERDICT` (:func:`..assessment.verdicts.assess`).
 5. **Intervals** (:func:`cluster_covariance`): the cluster-robust (sandwich) covariance of the M-estimator with
    contiguous blocks of segments as clusters, blocks lengthened (doubled) while the lag-1 autocorrelation of the
    block scores exceeds :data:`CLUSTER_RHO_MAX` and at least :data:`MIN_CLUSTERS` blocks remain, small-sample factor
@@ -58,8 +58,8 @@ import numpy as np
 from scipy import optimize, stats
 from scipy import signal as _signal
 
-from ..estimation.least_squares import EstimationError
-from ..vehicle.thrust_lag import ThrustLag
+from ...estimation.least_squares import EstimationError
+from ...vehicle.thrust_lag import ThrustLag
 
 __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUSTER_RHO_MAX", "Chunk", "DofRecord",
            "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments", "simulate", "fit_terms", "FitOutcome",

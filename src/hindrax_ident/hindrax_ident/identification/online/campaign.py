@@ -10,7 +10,7 @@ thruster is commanded neutral. The simulator's truth (position, attitude) goes i
 plots only; the executive never sees it.
 
 Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): the virtual pool plays the operator
-(:class:`PoolOperator`, shared with the graph's :class:`~.graph_campaign.VirtualOperator`). When the executive waits
+(:class:`PoolOperator`, shared with the graph's :class:`~..graph_campaign.VirtualOperator`). When the executive waits
 for the ballast to be attached, the simulator gets the ballast's weight in water (vertical, NED down, expressed in
 the body frame every tick) as an external force until the executive asks for its removal; the float is its net
 buoyancy, NED up; a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis
@@ -28,8 +28,9 @@ import numpy as np
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, VehicleConfig
 
-from ..sim.simulator import Simulator
-from .executive import CampaignAbort, CampaignRecord, Executive, TickInput
+from ...sim.simulator import Simulator
+from ..bag_input.campaign_record import CampaignRecord
+from .executive import CampaignAbort, Executive, TickInput
 from .steps import Ballast, Float, Inclining, LinePull
 
 __all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign", "inclining_wrench_frd", "PoolOperator"]
@@ -207,7 +208,8 @@ class Campaign:
         return w
 
     def run(self) -> CampaignRecord:
-        """Run the campaign; returns the :class:`CampaignRecord` (aborted campaigns too)."""
+        """Run the campaign; returns the :class:`~..bag_input.campaign_record.CampaignRecord` (aborted campaigns
+        too)."""
         self._wall0 = time.monotonic()
         self._sim0 = self.sim.t_s
         w = self.executive.start(self.sim.t_s)

@@ -1,8 +1,8 @@
-"""The campaign front-end of the fit core: a :class:`~.campaign.CampaignRecord` read into one
-:class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.estimators.DofIdentification`
+"""The campaign front-end of the fit core: a :class:`~..bag_input.campaign_record.CampaignRecord` read into one
+:class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.dof_model.DofIdentification`
 (docs/identification.md §7).
 
-``hindrax run``, ``hindrax ident bag`` (:mod:`.from_bag`) and the in-process campaign identify with
+``hindrax run``, ``hindrax ident bag`` (:mod:`..bag_input.from_bag`) and the in-process campaign identify with
 :func:`identify_all_with_errors`; ``hindrax ident fit`` on a bag with the campaign's topics reads it with
 :func:`dof_records` too (:mod:`.fit_any`). Everything after the reading (timing, segments, output-error fit, model
 terms by cross-validation, intervals) is :mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as
@@ -14,9 +14,9 @@ terms by cross-validation, intervals) is :mod:`.fit_core`'s, with the same :clas
   core, starting from the lagged force at the window's first tick);
 * **the vehicle's sensors**, conditioned as the identification node does (docs/architecture.md §5): surge and sway
   from the DVL velocity, heave from the pressure depth (a measured position: one free offset and initial velocity
-  per segment in the core), each aided by the 100 Hz accelerometer (:mod:`.fusion`); roll, pitch and yaw from the
-  gyro rate (:func:`~hindrax_ident.estimation.filters.smooth_kinematics`); the measurements go to the core at their
-  own times, the RTS-smoothed states only give the segments' initial states and the equation-error start;
+  per segment in the core), each aided by the 100 Hz accelerometer (:mod:`hindrax_ident.fusion`); roll, pitch and yaw
+  from the gyro rate (:func:`~hindrax_ident.estimation.filters.smooth_kinematics`); the measurements go to the core at
+  their own times, the RTS-smoothed states only give the segments' initial states and the equation-error start;
 * **the gyro bias** left after the on-board still window, measured against the DVL attitude (roll, pitch) and
   heading (yaw) by :func:`rate_bias_against_angle` and removed from the measured rate;
 * **the design**: the ladders were built to identify the full model (linear + quadratic damping, heave per direction,
@@ -33,21 +33,25 @@ All quantities SI, body FRD; times in s of the record's clock.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
-from ..estimation.filters import smooth_kinematics
-from ..estimation.least_squares import EstimationError, fit_linear_model
-from ..vehicle.fusion import smooth_with_acceleration, smooth_with_rate
-from ..vehicle.state import euler_rates
+from ...estimation.filters import smooth_kinematics
+from ...estimation.least_squares import EstimationError, fit_linear_model
+from ...vehicle.fusion import smooth_with_acceleration, smooth_with_rate
+from ...vehicle.state import euler_rates
+from ..bag_input.from_bag import record_from_bag
 from . import fit_core
-from .estimators import (DofIdentification, measurement_settings, parameter_names, parameter_units, regressor_matrix,
-                         restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
+from .calibration import identify_calibrated
+from .dof_model import (DofIdentification, measurement_settings, parameter_names, parameter_units, regressor_matrix,
+                        restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
-           "dof_records", "identification_of", "identify_all_with_errors", "identify_all", "identify_dof"]
+           "dof_records", "identification_of", "identify_all_with_errors", "identify_all", "identify_dof",
+           "identify_bag"]
 
 
 @dataclass
@@ -232,9 +236,9 @@ def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarra
 
 @dataclass(frozen=True)
 class AccelerometerAid:
-    """An accelerometer record aiding the smoother (:func:`~..vehicle.fusion.smooth_with_acceleration`): sample times
-    ``t_s`` (m,) s, ``acceleration`` (m,) along the DOF's axis (m/s^2), its noise ``std`` (m/s^2) and the aided
-    model's white-jerk PSD ``jerk_psd`` (m^2/s^5)."""
+    """An accelerometer record aiding the smoother (:func:`~hindrax_ident.vehicle.fusion.smooth_with_acceleration`):
+    sample times ``t_s`` (m,) s, ``acceleration`` (m,) along the DOF's axis (m/s^2), its noise ``std`` (m/s^2) and the
+    aided model's white-jerk PSD ``jerk_psd`` (m^2/s^5)."""
 
     t_s: np.ndarray
     acceleration: np.ndarray
@@ -244,8 +248,8 @@ class AccelerometerAid:
 
 @dataclass(frozen=True)
 class RateAid:
-    """A rate record aiding an angle smoother (:func:`~..vehicle.fusion.smooth_with_rate`): sample times ``t_s`` (m,) s,
-    ``rate`` (m,) rad/s (Euler-angle rate of the smoothed angle) and its noise ``std`` (rad/s)."""
+    """A rate record aiding an angle smoother (:func:`~hindrax_ident.vehicle.fusion.smooth_with_rate`): sample times
+    ``t_s`` (m,) s, ``rate`` (m,) rad/s (Euler-angle rate of the smoothed angle) and its noise ``std`` (rad/s)."""
 
     t_s: np.ndarray
     rate: np.ndarray
@@ -290,8 +294,8 @@ def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
 
     Why: the still window that gives the gyro bias on board is short and the vehicle is rarely quite still
     (a residual of 2-4 mrad/s in the graph campaign), and once the gyro aids the attitude
-    (:func:`~..vehicle.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude samples: roll and
-    pitch quadratic damping std rose from about 1 % to 5-10 % (measured through the ROS graph)."""
+    (:func:`~hindrax_ident.vehicle.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude
+    samples: roll and pitch quadratic damping std rose from about 1 % to 5-10 % (measured through the ROS graph)."""
     ta, a = np.asarray(t_angle, dtype=float), np.asarray(angle, dtype=float)
     tr, r = np.asarray(t_rate, dtype=float), np.asarray(rate, dtype=float)
     okr = np.isfinite(r) & np.isfinite(tr)
@@ -309,8 +313,8 @@ def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
 
 def _attitude_and_euler_rates(record, t: np.ndarray):
     """(t_att (m,), rpy (m, 3), t_gyro (n,), Euler-angle rates (n, 3)) over ``t`` (n,) plus 2 s before: the
-    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~.maneuvers.euler_rates`) at the
-    attitude interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude
+    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~..online.maneuvers.euler_rates`) at
+    the attitude interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude
     samples."""
     t0, t1 = t[0] - 2.0, t[-1]
     ta, rpy = _log_matrix(record.sensors["attitude"], t0, t1)
@@ -344,10 +348,10 @@ def _yaw_rate_bias(record, t: np.ndarray) -> float:
 def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Roll and pitch (rad) at the tick times ``t`` (n,) and the Euler-rate biases (2,) rad/s removed: the DVL-75
     attitude fused with the Euler-angle rates of the gyro (Fossen eq. 2.29, attitude interpolated to the gyro
-    times; constant bias removed by :func:`rate_bias_against_angle`) by :func:`~..vehicle.fusion.smooth_with_rate` (the
-    attitude alone, zero biases, when there is no gyro record). Angle noise from
-    ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk PSD those
-    of the roll filter (:func:`measurement_settings`)."""
+    times; constant bias removed by :func:`rate_bias_against_angle`) by
+    :func:`~hindrax_ident.vehicle.fusion.smooth_with_rate` (the attitude alone, zero biases, when there is no gyro
+    record). Angle noise from ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk
+    PSD those of the roll filter (:func:`measurement_settings`)."""
     ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
     std_att = max(float(or_default(cfg.sensors.dvl75.attitude_noise_std_rad, 0.005)), 1e-4)
     if tg.size == 0:
@@ -361,3 +365,13 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     return out[0], out[1], bias
 
 
+def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
+                 opts: fit_core.CoreOptions = fit_core.CoreOptions()):
+    """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag:
+    :func:`~..bag_input.from_bag.record_from_bag`, then :func:`identify_all_with_errors` with the fit core's options
+    ``opts``. With calibration results in the bag (``record.calibration``) the fits see the thrust-model force times the
+    measured scales (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays
+    unscaled. Raises ``ValueError`` for a non-positive scale in the bag."""
+    record = record_from_bag(bag_path, cfg, grid_s)
+    idents, errors = identify_calibrated(record, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
+    return record, idents, errors

@@ -1,21 +1,23 @@
-"""Offline identification from a recorded bag: rebuild the campaign record from the bag's topics.
+"""The campaign bag reader: rebuild the campaign record (:class:`~.campaign_record.CampaignRecord`) from a bag.
 
 ``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_ident.commands.ident_bag`), and ``hindrax
-ident fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), write ``identification.yaml`` and
-``report/index.html`` through :func:`identify_bag` and :func:`write_outputs`: the same analysis as the in-process
-campaign and ``hindrax run`` (:func:`~.campaign_fit.identify_all_with_errors`: the campaign reader and the fit core
-shared with ``hindrax ident fit``, docs/identification.md §7; the equation-error LS of [Hindrax-Drag] eqs. 6-8, its
-steady-state LS and the online RLS as comparisons).
+ident fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
+:func:`~..fit.campaign_fit.identify_bag` and write ``identification.yaml`` and ``report/index.html`` with
+:func:`~..assessment.report.write_outputs`: the same analysis as the in-process campaign and ``hindrax run``
+(:func:`~..fit.campaign_fit.identify_all_with_errors`: the campaign reader and the fit core shared with ``hindrax
+ident fit``, docs/identification.md §7; the equation-error LS of [Hindrax-Drag] eqs. 6-8, its steady-state LS and the
+online RLS as comparisons).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
-node, :mod:`.signals`, into :class:`~..vehicle.state.SensorState`), ``thrusters/pulse_width`` (the widths the ESC node
-wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
+node, :mod:`.signals`, into :class:`~hindrax_ident.vehicle.state.SensorState`), ``thrusters/pulse_width`` (the widths
+the ESC node wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
 ``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:
-the record's ``calibration``, ``inclining`` and ``decays``; :func:`identify_bag` scales the thrust-model force by the
-measured scales, :func:`~.calibration.apply_thrust_calibration`, and :func:`write_outputs` estimates them jointly
+the record's ``calibration``, ``inclining`` and ``decays``; :func:`~..fit.campaign_fit.identify_bag` scales the
+thrust-model force by the measured scales, :func:`~..fit.calibration.apply_thrust_calibration`, and
+:func:`~..assessment.report.write_outputs` estimates them jointly
 with the fits and writes the ``calibration`` and ``joint`` sections, as ``hindrax run`` does from the node's record).
 
 Time base: header stamps (ROS time). The record is built on a uniform grid of ``grid_s`` (default 10 ms,
@@ -39,15 +41,10 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.recording.reader import BagReader
 
-from ..vehicle.state import SensorState
-from ..vehicle.thrust_lag import ThrustLag
+from ...vehicle.state import SensorState
+from ...vehicle.thrust_lag import ThrustLag
 from . import calibration_topic
-from .calibration import identify_calibrated
-from .campaign import CampaignRecord
-from . import fit_core
-from .campaign_fit import identify_all_with_errors
-from .report import write_report
-from .results import build_results, write_identification
+from .campaign_record import CampaignRecord
 from .signals import (
     STILL_MESSAGE,
     sample_from_pressure,
@@ -57,8 +54,8 @@ from .signals import (
     thrust_of_written_widths,
 )
 
-__all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "identify_bag",
-           "write_outputs", "is_campaign_bag", "CAMPAIGN_TOPICS"]
+__all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "is_campaign_bag",
+           "CAMPAIGN_TOPICS"]
 
 SENSOR_TOPICS = ("dvl/data", "pressure/fluid_pressure", "imu/data_raw", "ping/altitude")
 TOPICS = SENSOR_TOPICS + ("thrusters/pulse_width", "identification/status", "identification/estimates",
@@ -74,7 +71,7 @@ class BagContentError(ValueError):
 
 
 class OnlineHistory:
-    """Stand-in for :class:`~.estimators.OnlineDofEstimator` built from recorded HydroEstimate messages.
+    """Stand-in for :class:`~..online.estimators.OnlineDofEstimator` built from recorded HydroEstimate messages.
 
     ``history`` {t, theta, std, excitation} and :meth:`result` as the live estimator provides them.
     """
@@ -299,33 +296,3 @@ def is_campaign_bag(bag_path: str | Path) -> bool:
     :class:`~hindrax_drivers.recording.reader.BagError` for an unreadable bag."""
     present = {tp.lstrip("/") for tp in BagReader(bag_path).topics}
     return all(tp in present for tp in CAMPAIGN_TOPICS)
-
-
-def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
-                 opts: fit_core.CoreOptions = fit_core.CoreOptions()):
-    """(record, {dof: DofIdentification}, {dof: error}) of a bag: :func:`record_from_bag`, then
-    :func:`~.campaign_fit.identify_all_with_errors` with the fit core's options ``opts``. With calibration results in
-    the bag (``record.calibration``) the fits see the thrust-model force times the measured scales
-    (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays unscaled.
-    Raises ``ValueError`` for a non-positive scale in the bag."""
-    record = record_from_bag(bag_path, cfg, grid_s)
-    idents, errors = identify_calibrated(record, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
-    return record, idents, errors
-
-
-def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | Path, note: str,
-                  source: str = "bag", seed: int | None = None, calibration: dict | None = None,
-                  sections=None) -> Path:
-    """identification.yaml (provenance names the bag) and report/index.html in ``out``; returns the yaml path.
-
-    calibration: the record's calibration steps (``record.calibration`` of :func:`identify_bag`): the thrust scales
-    are estimated jointly with the fits and identification.yaml gets the ``calibration`` and ``joint`` sections
-    (:func:`~.results.build_results`). sections(doc): optional, adds further sections (e.g. ``inclining`` and
-    ``free_decay``) before the file and the report are written."""
-    doc = build_results(idents, cfg, source=source, seed=seed, calibration=calibration or None)
-    doc["provenance"]["bag"] = str(bag_path)
-    if sections is not None:
-        sections(doc)
-    path = write_identification(out / "identification.yaml", doc)
-    write_report(out / "report", idents, doc, campaign_note=note)
-    return path

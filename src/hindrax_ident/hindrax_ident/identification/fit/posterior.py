@@ -10,7 +10,7 @@ for a linear problem) is
 
 D = diag(1 / sd_i^2) on the parameters with a prior (0 elsewhere). It is the no-calibration case of
 :func:`~.calibration.joint_estimate` (whose joint problem, without thrust scales, separates into this update per
-DOF), and that function calls this one then. Units: those of the parameters (:func:`~.estimators.parameter_units`).
+DOF), and that function calls this one then. Units: those of the parameters (:func:`~.dof_model.parameter_units`).
 """
 from __future__ import annotations
 
@@ -21,12 +21,12 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS, or_default
 
-from ..estimation.least_squares import EstimationError
-from ..estimation.priors import priors_from_config
-from ..vehicle.rigid_body import rigid_body_mass_matrix
+from ...estimation.least_squares import EstimationError
+from ...estimation.priors import priors_from_config
+from ...vehicle.rigid_body import rigid_body_mass_matrix
 
-__all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "rigid_inertia_of", "prior_entry", "theta_priors",
-           "prior_posterior"]
+__all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "rigid_inertia_of", "prior_entry", "prior_entries",
+           "theta_priors", "prior_posterior"]
 
 #: Default 1-sigma of an empirical prior as a fraction of the prior's value (``identification.prior_std_rel``).
 DEFAULT_PRIOR_STD_REL = 0.5
@@ -51,7 +51,7 @@ def rigid_inertia_of(cfg, dof: str) -> float:
 
 def prior_entry(cfg, dof: str) -> dict:
     """{added_mass, linear_damping, quadratic_damping} of ``dof`` from the configured geometry
-    (:func:`~hindrax_ident.estimation.priors.priors_from_config`, as :func:`~.results.prior_entries`); {} when the
+    (:func:`~hindrax_ident.estimation.priors.priors_from_config`, as :func:`prior_entries`); {} when the
     configuration lacks the geometry."""
     try:
         p = priors_from_config(cfg)
@@ -60,6 +60,24 @@ def prior_entry(cfg, dof: str) -> dict:
     i = DOFS.index(dof)
     return {k: (None if p[k][i] is None else float(p[k][i])) for k in ("added_mass", "linear_damping",
                                                                         "quadratic_damping")}
+
+
+def _finite_or_none(x) -> float | None:
+    return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
+
+
+def prior_entries(cfg) -> dict[str, dict]:
+    """Per DOF ``{added_mass, linear_damping, quadratic_damping, source}``: the empirical priors from the
+    configured geometry ([NTNU-Thesis] App. A.1/A.2, :func:`~hindrax_ident.estimation.priors.priors_from_config`;
+    no projected areas in the vehicle file, so a solid prism: an upper bound). A value that cannot be computed is
+    None; ``{}`` if the configuration lacks the geometry."""
+    try:
+        p = priors_from_config(cfg)
+    except (KeyError, TypeError, EstimationError):
+        return {}
+    src = "[NTNU-Thesis] App. A.1/A.2 empirical estimate, solid prism of the configured box"
+    keys = ("added_mass", "linear_damping", "quadratic_damping")
+    return {dof: {**{k: _finite_or_none(p[k][i]) for k in keys}, "source": src} for i, dof in enumerate(DOFS)}
 
 
 def theta_priors(dof: str, names: Sequence[str], cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:

@@ -2,8 +2,8 @@
 
 A thin rclpy node over :class:`~.executive.Executive` (pure: the dive, positioning, level ladders, holds, pool-box
 planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the in-process campaign
-steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples (:mod:`.signals`), and at
-every tick of its control timer (``identification.estimate_rate_hz``, ROS clock) hands the executive the samples
+steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples (:mod:`..bag_input.signals`),
+and at every tick of its control timer (``identification.estimate_rate_hz``, ROS clock) hands the executive the samples
 that came in since the last tick and publishes the wrench it returns. Nothing in a callback waits, and no coroutine
 runs while a goal does (see "Action execution" below). The node does not know whether the vehicle is simulated: it
 sees the same topics from the drivers either way.
@@ -13,7 +13,7 @@ The force in the regression is the thrust model of the pulse widths the ESC node
 [Hindrax-Drag] eq. 1, the first-order lag ``thrusters.time_constant_s`` and the thrust allocation
 matrix, [Hindrax-Drag] eq. 9), body FRD.
 
-Run alone: ``python -m hindrax_ident.identification.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+Run alone: ``python -m hindrax_ident.identification.online.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 
 Interfaces
 ----------
@@ -55,7 +55,8 @@ Publishes
     ``identification/calibration`` (diagnostic_msgs/DiagnosticArray, reliable, transient local, depth 1) when a
     calibration step ends (ballast, line pull surge / sway, inclining roll / pitch, tilt_decay roll / pitch): every
     step result since the node started, one DiagnosticStatus each, KeyValue pairs named with their units
-    (:mod:`.calibration_topic`); the recorder stores it with the campaign and ``hindrax ident bag`` applies it.
+    (:mod:`..bag_input.calibration_topic`); the recorder stores it with the campaign and ``hindrax ident bag`` applies
+    it.
 Parameters
     The vehicle configuration; node-specific ``dvl_lock_timeout_s`` (default 3.0): a surge or sway run
     aborts when the DVL had no valid velocity for this long (docs/architecture.md §8); ``sensor_timeout_s``
@@ -111,24 +112,24 @@ from hindrax_drivers.polled_input import PolledInputs, PolledInputsMixin, subscr
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
-from . import calibration_topic
-from .estimators import parameter_units
+from ..bag_input import calibration_topic
+from ..bag_input.campaign_record import CampaignRecord
+from ..bag_input.signals import (
+    sample_from_pressure,
+    sample_from_range,
+    samples_from_dvl,
+    samples_from_imu,
+    thrust_of_written_widths,
+)
+from ..fit.dof_model import parameter_units
 from .executive import (
     CALIBRATION_STEPS,
-    CampaignRecord,
     Executive,
     ExecutiveStatus,
     TickInput,
     calibration_forces,
     inclining_load,
     ordered_samples,
-)
-from .signals import (
-    sample_from_pressure,
-    sample_from_range,
-    samples_from_dvl,
-    samples_from_imu,
-    thrust_of_written_widths,
 )
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
@@ -165,8 +166,8 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
 
     ``std`` is :meth:`~.estimators.OnlineDofEstimator.published_std`: a number only where the scenario suite
     showed the online value's interval can cover the truth (converged damping of surge, sway, heave and yaw,
-    widened by the declared thrust uncertainty, :func:`~.verdicts.rls_published_std`); -1 means "not converged
-    or not trusted" (the message's float64 std has no NaN convention). ``covariance`` stays the raw RLS one.
+    widened by the declared thrust uncertainty, :func:`~..assessment.verdicts.rls_published_std`); -1 means "not
+    converged or not trusted" (the message's float64 std has no NaN convention). ``covariance`` stays the raw RLS one.
     """
     rls = estimator.rls
     units = parameter_units(dof)
@@ -579,7 +580,7 @@ class IdentificationNode(PolledInputsMixin, Node):
     def _publish_status_throttled(self, t: float, phase: int, st: ExecutiveStatus | None, message: str) -> None:
         """The running status at ROS time ``t`` (s): at once when phase, DOF, level or message changed, else at
         most every :data:`STATUS_PERIOD_S` (the status is a step signal: a bag's zero-order hold of it,
-        :mod:`.from_bag`, sees every change at its time)."""
+        :mod:`..bag_input.from_bag`, sees every change at its time)."""
         key = (phase, message) if st is None else (phase, message, st.dof, st.level_index, st.level_command)
         last_t, last_key = self._last_status
         if key == last_key and t - last_t < STATUS_PERIOD_S - 1e-9:

@@ -1,9 +1,9 @@
 """ROS messages -> identification samples: the pure adapters the identification node and the offline analysis share.
 
-The identification executive (:class:`~..vehicle.state.SensorState`) consumes samples in the simulator's form
-(:mod:`hindrax_ident.sim.sensors`: a device name and a namespace with ``stamp_s`` and the measured values).
+The identification executive (:class:`~hindrax_ident.vehicle.state.SensorState`) consumes samples in the simulator's
+form (:mod:`hindrax_ident.sim.sensors`: a device name and a namespace with ``stamp_s`` and the measured values).
 These functions make such samples from the drivers' ROS messages, rclpy or bag-decoded alike (they only read
-attributes), so the live node (:mod:`.node`) and the bag analysis (:mod:`.from_bag`) see the same numbers.
+attributes), so the live node (:mod:`..online.node`) and the bag analysis (:mod:`.from_bag`) see the same numbers.
 They also hold the thrust model of the widths the ESC node wrote (:func:`thrust_of_written_widths`) and the
 status prefix that marks the still window (:data:`STILL_MESSAGE`). No rclpy import: usable offline.
 """
@@ -41,8 +41,8 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 
     ``at_body_origin``: the driver publishes the velocity of base_link (it removes the lever arm with the
     ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
-    samples, so :class:`~..vehicle.state.SensorState` must not remove it again. (It did: at 1-2 rad/s of pitch
-    the surge velocity was 0.18 m x q off, 0.27 m/s rms, and the surge hold pushed the vehicle to 0.28 m/s
+    samples, so :class:`~hindrax_ident.vehicle.state.SensorState` must not remove it again. (It did: at 1-2 rad/s of
+    pitch the surge velocity was 0.18 m x q off, 0.27 m/s rms, and the surge hold pushed the vehicle to 0.28 m/s
     during the pitch runs; measured through the ROS graph in the virtual pool.)
 
     Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
@@ -75,8 +75,8 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 def samples_from_imu(msg, mounting_frd_from_flu: np.ndarray | None = None) -> list[tuple[str, Any]]:
     """``icm20948_gyro`` and ``icm20948_accel`` samples of a sensor_msgs/Imu (base_link FLU).
 
-    The simulator's samples are in the sensor axes, which :class:`~..vehicle.state.SensorState` rotates with the
-    configured mounting; the driver has already applied it, so the FLU vectors are taken back to sensor axes
+    The simulator's samples are in the sensor axes, which :class:`~hindrax_ident.vehicle.state.SensorState` rotates with
+    the configured mounting; the driver has already applied it, so the FLU vectors are taken back to sensor axes
     with ``mounting_frd_from_flu`` = R_mount^T (3, 3) (identity when None). Angular rate rad/s, specific
     force m/s^2.
     """

@@ -21,12 +21,12 @@ Driving it (one control tick of ``tick_s``)::
 
 ``thrust_n`` is the thrust model of what goes to the thrusters for this tick: in-process the thrust curve
 ([Hindrax-Drag] eq. 1) of the pulse widths the allocation gives for ``w``; on the graph that of the widths the ESC
-node last reported writing (:func:`~.signals.thrust_of_written_widths`). The recorded force is that thrust through
-the first-order lag ``thrusters.time_constant_s`` over the elapsed time (exact for a command held over the tick),
-times the thrust allocation matrix ([Hindrax-Drag] eq. 9), body FRD; the positive (forward) and negative
+node last reported writing (:func:`~..bag_input.signals.thrust_of_written_widths`). The recorded force is that thrust
+through the first-order lag ``thrusters.time_constant_s`` over the elapsed time (exact for a command held over the
+tick), times the thrust allocation matrix ([Hindrax-Drag] eq. 9), body FRD; the positive (forward) and negative
 (reverse) thrust are also lagged apart, so that a calibration step knows which rotation direction held a force,
 and the commanded thruster forces go into the record (``thrust_cmd_n``) for the per-direction thrust scales
-(:func:`~.calibration.apply_thrust_calibration`).
+(:func:`~..fit.calibration.apply_thrust_calibration`).
 
 Plan (:meth:`Executive.plan`, docs/identification.md §4 and §6): dive; the requested reference steps in a fixed order
 (``inclining`` roll, pitch; ``tilt_decay`` roll, pitch; ``ballast``; ``float``; ``line_pull`` +x, +y;
@@ -42,7 +42,7 @@ the ESC output disarmed, a cancel request. The caller then commands neutral thru
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Any, Callable, Iterable, Sequence
 
@@ -50,17 +50,19 @@ import numpy as np
 
 from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
-from ..vehicle.state import DepthEstimator
-from ..vehicle.thrust_lag import ThrustLag
+from ...vehicle.state import DepthEstimator
+from ...vehicle.thrust_lag import ThrustLag
 
-from .estimators import OnlineDofEstimator, measurement_settings
+from ..fit.dof_model import measurement_settings
+from .estimators import OnlineDofEstimator
 from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
 from .maneuvers import level_ladder
-from .signals import STILL_MESSAGE
+from ..bag_input.signals import STILL_MESSAGE
+from ..bag_input.campaign_record import CampaignRecord
 from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Dive,
                     Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder)
 
-__all__ = ["CampaignAbort", "CampaignRecord", "Executive", "ExecutiveStatus", "TickInput", "ordered_samples",
+__all__ = ["CampaignAbort", "Executive", "ExecutiveStatus", "TickInput", "ordered_samples",
            "CALIBRATION_STEPS", "THRUST_STEPS", "expand_calibration", "calibration_forces", "inclining_load",
            "float_buoyancy"]
 
@@ -108,71 +110,12 @@ def float_buoyancy(cfg: VehicleConfig) -> float:
 
 
 @dataclass
-class CampaignRecord:
-    """Everything a campaign produced (arrays per control tick, shape (n,) or (n, k)).
-
-    t_s: tick times (s). wrench_frd: thrust-model wrench at the tick (lagged), (n, 6) N / N m.
-    wrench_cmd_frd: wrench of the commanded thrust held over the tick (n, 6). active: index of the DOF
-    under test (-1 none). level: the test level commanded in a run (NaN outside runs). run_id: run counter
-    (-1 outside runs). truth_position_ned_m / truth_euler_rad (n, 3): simulator truth, for tests and plots
-    only (never used by control or estimation; NaN on the ROS graph). sensors: the conditioned sensor log of
-    :class:`~..vehicle.state.SensorState`. windows: DOF -> (t_start, t_end). online: DOF -> OnlineDofEstimator.
-    levels / authority: DOF -> ladder (N or N m) / (positive, negative) authority. aborted, abort_reason,
-    wall_time_s, tick_s, time_constant_s, seed, final_pulse_width_us.
-    """
-
-    t_s: np.ndarray
-    wrench_frd: np.ndarray
-    wrench_cmd_frd: np.ndarray
-    active: np.ndarray
-    level: np.ndarray
-    run_id: np.ndarray
-    truth_position_ned_m: np.ndarray
-    truth_euler_rad: np.ndarray
-    sensors: dict
-    windows: dict
-    online: dict
-    levels: dict
-    authority: dict
-    aborted: bool
-    abort_reason: str
-    wall_time_s: float
-    tick_s: float
-    time_constant_s: float
-    seed: int
-    final_pulse_width_us: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: known-force calibration results (:mod:`.steps.calibration_steps`): {key: {value, std, known_force_n,
-    #: direction, group, holding_force_n, holding_force_std_n, forward_force_n, reverse_force_n, method}}, key
-    #: vertical (ballast), vertical_negative (float), surge / sway (line pull +x / +y), surge_negative /
-    #: sway_negative (-x / -y); empty without a calibration step
-    calibration: dict = field(default_factory=dict)
-    #: roll/pitch free decays (:class:`.steps.TiltDecay`): DOF -> (t_release, t_end), s
-    decays: dict = field(default_factory=dict)
-    #: inclining steps (:class:`.steps.Inclining`): DOF -> {value (C, N m/rad), std, known_moment_n_m,
-    #: tilt_rad [without, with the mass], tilt_std_rad, method}; empty without the step
-    inclining: dict = field(default_factory=dict)
-    #: commanded thrust of every thruster held over each tick, (n, m) N (thrust model, along each thruster's
-    #: direction; positive = forward rotation): the per-direction thrust scales are applied to it
-    #: (:func:`~.calibration.apply_thrust_calibration`); (0, 0) when not recorded
-    thrust_cmd_n: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-
-    def dof_slice(self, dof: str) -> slice:
-        """Tick index range of one DOF's manoeuvres (empty slice when it was not run)."""
-        if dof not in self.windows:
-            return slice(0, 0)
-        t0, t1 = self.windows[dof]
-        i0 = int(np.searchsorted(self.t_s, t0, side="left"))
-        i1 = int(np.searchsorted(self.t_s, t1, side="right"))
-        return slice(i0, i1)
-
-
-@dataclass
 class TickInput:
     """What the plant hands the executive at a control tick.
 
     t_s: time of the tick (s, the plant's clock). elapsed_s: time the last command was held (s; the lag of the
     recorded force runs over it). samples: new sensor samples ``(device, sample)`` in the simulator's form
-    (:mod:`hindrax_ident.sim.sensors`, or :mod:`.signals` from ROS messages), in the order to condition them.
+    (:mod:`hindrax_ident.sim.sensors`, or :mod:`..bag_input.signals` from ROS messages), in the order to condition them.
     armed: the ESC output is armed. cancel: the operator asked to stop.
     """
 
@@ -329,7 +272,7 @@ class Executive:
         self.steps: list[Step] = list(steps) if steps is not None else self.plan()
 
     # ------------------------------------------------------------------ the shared state, by name
-    state = property(lambda self: self.ctx.state, doc="conditioned sensors (:class:`~..vehicle.state.SensorState`)")
+    state = property(lambda self: self.ctx.state, doc="conditioned sensors (:class:`~...vehicle.state.SensorState`)")
     ctrl = property(lambda self: self.ctx.ctrl, doc="the holds (:class:`~.maneuvers.HoldController`)")
     box = property(lambda self: self.ctx.box, doc="the pool box (:class:`~.maneuvers.PoolBox`)")
     core = property(lambda self: self.ctx.core, doc="the allocation model (AllocationCore)")
@@ -507,7 +450,8 @@ class Executive:
     def record(self, *, truth_position_ned_m: np.ndarray | None = None, truth_euler_rad: np.ndarray | None = None,
                wall_time_s: float = math.nan, seed: int = 0,
                final_pulse_width_us: np.ndarray | None = None) -> CampaignRecord:
-        """The :class:`CampaignRecord` so far (the truth arrays, when the plant has them, are NaN otherwise)."""
+        """The :class:`~..bag_input.campaign_record.CampaignRecord` so far (the truth arrays, when the plant has them,
+        are NaN otherwise)."""
         ctx = self.ctx
         r = ctx.rec
         n = len(r["t"])

@@ -33,9 +33,9 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
-from ..control.law import ControlInput, ControlSettings, Controller
-from ..control.model import ControlModel, inertia_vector, model_from_config
-from ..vehicle.state import SensorState
+from ...control.law import ControlInput, ControlSettings, Controller
+from ...control.model import ControlModel, inertia_vector, model_from_config
+from ...vehicle.state import SensorState
 
 __all__ = [
     "DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority", "level_ladder",

@@ -1,14 +1,14 @@
 """The calibration steps' results as a standard message: topic ``identification/calibration``.
 
-The identification node (:mod:`.node`) publishes, when a calibration step of a goal ends (``ballast``, ``float``,
-``line_pull`` and ``line_pull_negative`` surge and sway, ``inclining`` roll and pitch, ``tilt_decay`` roll and pitch;
-docs/identification.md §6), one ``diagnostic_msgs/msg/DiagnosticArray`` holding every step result measured since
-the node started, one ``DiagnosticStatus`` per result (a later result of the same name replaces the earlier one),
+The identification node (:mod:`..online.node`) publishes, when a calibration step of a goal ends (``ballast``,
+``float``, ``line_pull`` and ``line_pull_negative`` surge and sway, ``inclining`` roll and pitch, ``tilt_decay`` roll
+and pitch; docs/identification.md §6), one ``diagnostic_msgs/msg/DiagnosticArray`` holding every step result measured
+since the node started, one ``DiagnosticStatus`` per result (a later result of the same name replaces the earlier one),
 with transient-local
 durability (depth 1), so a recorder or a tool that subscribes later still receives all of them. The recorder
 stores the topic with the campaign, and ``hindrax ident bag`` (:mod:`.from_bag`) reads it back into the
-:class:`~.campaign.CampaignRecord`'s ``calibration``, ``inclining`` and ``decays``, so identification.yaml gets the
-``calibration`` and ``joint`` sections (and ``inclining`` / ``free_decay``) as ``hindrax run`` writes them from the
+:class:`~.campaign_record.CampaignRecord`'s ``calibration``, ``inclining`` and ``decays``, so identification.yaml gets
+the ``calibration`` and ``joint`` sections (and ``inclining`` / ``free_decay``) as ``hindrax run`` writes them from the
 node's record in-process.
 
 Each status: ``level`` OK, ``hardware_id`` :data:`HARDWARE_ID`, ``name`` ``<kind>/<key>``, ``message`` a
@@ -24,7 +24,7 @@ one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the f
     ``..._std_n`` (mean thrust-model force on the axis without and with the known force, N, FRD), and
     ``forward_force_without_n``, ``forward_force_with_n``, ``reverse_force_without_n``, ``reverse_force_with_n``: the
     parts of those holding forces made by thrusters turning forward and in reverse (N, FRD; their sum is the holding
-    force), from which the per-direction scales are estimated (:func:`~.calibration.scale_model`). A message of an
+    force), from which the per-direction scales are estimated (:func:`~..fit.calibration.scale_model`). A message of an
     older node without the four parts still reads: its scale then measures the mean of the two directions.
 ``inclining/roll``, ``inclining/pitch``
     ``step`` inclining, ``dof``, ``stiffness_n_m_per_rad`` and ``stiffness_n_m_per_rad_std`` (restoring C),
@@ -32,7 +32,7 @@ one-line summary, ``values`` KeyValue pairs (numbers as Python ``repr`` of the f
     ``tilt_with_rad`` and their ``..._std_rad`` (rad).
 ``tilt_decay/roll``, ``tilt_decay/pitch``
     ``step`` tilt_decay, ``dof``, ``release_time_s`` and ``end_time_s``: the recorded decay's window in ROS time (s,
-    the header stamps' time base); the inertia follows offline from the gyro (:func:`~.calibration.decay_inertia`).
+    the header stamps' time base); the inertia follows offline from the gyro (:func:`~..fit.calibration.decay_inertia`).
 
 Pure apart from the message import in :func:`calibration_array`; :func:`results_from_array` duck-types the
 message (rclpy or bag-decoded objects).
@@ -111,7 +111,7 @@ def calibration_array(results: Iterable[tuple[str, str, list[tuple[str, str]]]],
 
 def results_from_array(msg: Any) -> tuple[dict, dict, dict]:
     """(calibration, inclining, decays) of one DiagnosticArray (the inverse of :func:`statuses`, the same dict
-    layout as :class:`~.campaign.CampaignRecord`); statuses of another ``hardware_id`` or name are ignored.
+    layout as :class:`~.campaign_record.CampaignRecord`); statuses of another ``hardware_id`` or name are ignored.
     Raises ``ValueError`` naming the status when a needed key is missing or not a number."""
     cal: dict = {}
     incl: dict = {}

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ..calibration import KNOWN_FORCE_AXES
+from ...fit.calibration import KNOWN_FORCE_AXES
 from ..maneuvers import DOF_INDEX
 from .base import Step
 from .context import CampaignAbort, StepContext, Wrenches

@@ -8,9 +8,10 @@ REP-103 FLU in ``base_link``):
 
 * force: ``geometry_msgs/msg/WrenchStamped`` (commanded or measured wrench about base_link), or our
   ``hindrax_msgs/msg/ThrusterPwm`` through the configured thrust curves and allocation matrix
-  (:func:`.signals.thrust_of_written_widths`; needs ``--config``; the widths act ``esc.output_latency_s`` late);
+  (:func:`..bag_input.signals.thrust_of_written_widths`; needs ``--config``; the widths act ``esc.output_latency_s``
+  late);
 * velocity: ``nav_msgs/msg/Odometry`` (twist in ``child_frame_id``), ``TwistWithCovarianceStamped``,
-  ``TwistStamped`` or our ``hindrax_msgs/msg/Dvl`` (:func:`.signals.samples_from_dvl`);
+  ``TwistStamped`` or our ``hindrax_msgs/msg/Dvl`` (:func:`..bag_input.signals.samples_from_dvl`);
 * angular rate: the velocity message's angular part, else ``sensor_msgs/msg/Imu`` (``--imu-topic``, which then
   takes precedence; found by type with a Dvl velocity; an IMU frame other than the body frame is rotated with the
   bag's ``/tf_static``, else refused), else the attitude differentiated (odometry pose or DVL attitude);
@@ -34,10 +35,10 @@ docs/identification.md §7): per DOF the input delay and thrust lag (a commanded
 the vehicle file's latency and lag), the segment-wise output-error fit with physical bounds and a robust loss, the
 model terms chosen by cross-validation (damping law, heave per direction, Coriolis and centripetal force of the
 other DOFs' inertias, cross-DOF coupling, reverse thrust gain), the cluster-robust intervals, and the verdicts
-with what data would fix them: the one verdict path of both commands (:func:`assessment`, :func:`.verdicts.assess`:
-the empirical priors with a vehicle file, the thrust-curve covariance, the checks). Several bags are fitted jointly
-(their segments pooled; clusters never span two bags). A DOF whose force or velocity standard deviation is below
-:data:`EXCITATION_MIN` is "not excited" (reported with both numbers).
+with what data would fix them: the one verdict path of both commands (:func:`assessment`,
+:func:`..assessment.verdicts.assess`: the empirical priors with a vehicle file, the thrust-curve covariance, the
+checks). Several bags are fitted jointly (their segments pooled; clusters never span two bags). A DOF whose force or
+velocity standard deviation is below :data:`EXCITATION_MIN` is "not excited" (reported with both numbers).
 
 Validation (issues 18, 27): K-fold cross-validation on contiguous blocks of the moving validation segments and
 ``holdout`` bags. Per DOF ``nrmse`` = RMS(v_pred - v_meas) / std(v_meas) over the measurements of the 10 s
@@ -65,16 +66,16 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.recording.reader import BagReader
 
-from ..estimation.least_squares import EstimationError
+from ...estimation.least_squares import EstimationError
 from . import fit_core
-from .estimators import parameter_units, restoring_regressor, rigid_inertia
+from .dof_model import parameter_units, restoring_regressor, rigid_inertia
 from .fit_core import EXCITATION_MIN
-from .results import SCHEMA_VERSION
-from .signals import samples_from_dvl, thrust_of_written_widths
+from ..assessment.results import SCHEMA_VERSION
+from ..bag_input.signals import samples_from_dvl, thrust_of_written_widths
 from .posterior import prior_posterior, prior_std_rel_of, theta_priors
-from .vehicle_match import vehicle_parameters
-from .verdicts import (FitEvidence, assess, core_evidence, declared_rel, model_selection, thrust_curve_check,
-                       with_added_mass)
+from ..assessment.vehicle_match import vehicle_parameters
+from ..assessment.verdicts import (FitEvidence, assess, core_evidence, declared_rel, model_selection,
+                                   thrust_curve_check, with_added_mass)
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed",
            "preprocess_bag", "dof_records", "fit_bags", "DofFit", "FitResult", "CONFIG_READY_REASON", "assessment"]
@@ -809,7 +810,7 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
 
 # ------------------------------------------------------------------------------------------------ document
 def _units(dof: str, names: Sequence[str]) -> dict:
-    """Units of the core's parameters: the campaign's (:func:`.estimators.parameter_units`), cross terms in this
+    """Units of the core's parameters: the campaign's (:func:`.dof_model.parameter_units`), cross terms in this
     DOF's force per unit of the other DOF's velocity, the reverse gain dimensionless."""
     u = dict(parameter_units(dof))
     u.setdefault("quadratic_damping", u.get("quadratic_damping_positive", ""))
@@ -830,14 +831,14 @@ def _units(dof: str, names: Sequence[str]) -> dict:
 
 
 def assessment(r: DofFit, cfg: VehicleConfig | None) -> dict:
-    """The verdicts of one fitted DOF through the one verdict path (:func:`.verdicts.assess`, as ``hindrax ident bag``):
-    the fit core's estimate and cluster-robust covariance, with a vehicle file after its empirical priors
+    """The verdicts of one fitted DOF through the one verdict path (:func:`..assessment.verdicts.assess`, as ``hindrax
+    ident bag``): the fit core's estimate and cluster-robust covariance, with a vehicle file after its empirical priors
     (:func:`.posterior.prior_posterior`, ``identification.prior_std_rel``), the thrust-curve covariance
-    (:func:`.verdicts.declared_rel`: the vehicle file's, else the default), t with the core's clusters - 1
+    (:func:`..assessment.verdicts.declared_rel`: the vehicle file's, else the default), t with the core's clusters - 1
     degrees of freedom; the expected bias 0 (heave: the vehicle file's net buoyancy, unknown without one); no
     whiteness check (its threshold is the designed campaign's). ``added_mass`` with a vehicle file. Returns
-    :func:`.verdicts.assess`'s dict with ``fit_values`` (the core's, before the priors) and ``priors`` ({name:
-    [mean, std]})."""
+    :func:`..assessment.verdicts.assess`'s dict with ``fit_values`` (the core's, before the priors) and ``priors``
+    ({name: [mean, std]})."""
     c = r.core
     theta, cov = np.asarray(c.theta, dtype=float), np.asarray(c.covariance.cov, dtype=float)
     pri: dict = {}
@@ -982,9 +983,9 @@ def build_document(res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str
                    holdout: Sequence[str | Path] = ()) -> dict:
     """identification.yaml (docs/identification.md §7): ``dofs.<dof>.<param>.{value, std, unit, ci95, t_dof,
     std_source, std_model, std_cluster_robust, fold_spread, verdict, reasons, advice}`` of the fitted DOFs (the schema
-    of :mod:`.results`; ``added_mass`` only with a configuration, which gives the rigid-body inertia: without one
-    ``config_ready: false`` and ``config_ready_reason``; a damping term the chosen model leaves out is 0 with
-    ``model_term: excluded``), per DOF ``model`` (the chosen terms), ``model_selection`` (every candidate's CV
+    of :mod:`..assessment.results`; ``added_mass`` only with a configuration, which gives the rigid-body inertia:
+    without one ``config_ready: false`` and ``config_ready_reason``; a damping term the chosen model leaves out is 0
+    with ``model_term: excluded``), per DOF ``model`` (the chosen terms), ``model_selection`` (every candidate's CV
     nrmse), ``timing`` (delay, lag), ``interval`` (clusters, t degrees of freedom), ``verdict``, ``reasons`` and
     ``advice`` (:func:`assessment`: what data would fix each suspect parameter); ``std`` and ``ci95`` with the
     thrust-curve uncertainty and, with a vehicle file, after the empirical priors (``prior``, ``fit_value``);

@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
 
-from .estimators import truth_parameters  # noqa: E402
+from ..fit.dof_model import truth_parameters  # noqa: E402
 
 __all__ = ["write_fit_outputs", "residual_acf"]
 
@@ -61,7 +61,7 @@ def _save_velocity_plot(fig, ax, dof: str, xlabel: str, title: str, path: Path) 
 
 def _residuals(r) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(time s, segment, residual measured - predicted, measured) at the validation measurements of a fitted DOF's
-    plot data (its :class:`.fit_core.SegmentData`), in time order within each segment."""
+    plot data (its :class:`..fit.fit_core.SegmentData`), in time order within each segment."""
     sd = r.plot["segments"]
     pred = r.plot["predicted"]
     j1 = np.minimum(sd.s_j + 1, sd.L - 1)
@@ -161,13 +161,13 @@ def _parameter_plot(doc: dict, cfg, path: Path) -> bool:
 
 
 def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, Path]:
-    """Write ``out/identification.yaml`` (``doc``, :func:`.fit_any.build_document`) and ``out/report/index.html``;
+    """Write ``out/identification.yaml`` (``doc``, :func:`..fit.fit_any.build_document`) and ``out/report/index.html``;
     returns both paths."""
     out = Path(out)
     rep = out / "report"
     rep.mkdir(parents=True, exist_ok=True)
     path = out / "identification.yaml"
-    path.write_text("# Hindrax identified hydrodynamics (hindrax ident fit; hindrax_ident.identification.fit_any)\n"
+    path.write_text("# Hindrax identified hydrodynamics (hindrax ident fit; hindrax_ident.identification.fit.fit_any)\n"
                     + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
     parts = ["<!doctype html><html><head><meta charset='utf-8'><title>hindrax ident fit</title><style>body{"
              "font-family:sans-serif;max-width:1150px;margin:auto} table{border-collapse:collapse} td,th{border:1px "

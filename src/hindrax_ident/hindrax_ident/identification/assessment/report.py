@@ -25,9 +25,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from .estimators import _rest_terms  # noqa: E402
+from hindrax_drivers.config import VehicleConfig  # noqa: E402
 
-__all__ = ["write_report", "summary_rows"]
+from ..fit.dof_model import _rest_terms  # noqa: E402
+from .results import build_results, write_identification  # noqa: E402
+
+__all__ = ["write_report", "write_outputs", "summary_rows"]
 
 
 def _assessment(r, name: str) -> tuple[str, list, float | None]:
@@ -314,3 +317,21 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
     index = out / "index.html"
     index.write_text("\n".join(parts))
     return index
+
+
+def write_outputs(out: Path, idents: dict, cfg: VehicleConfig, bag_path: str | Path, note: str,
+                  source: str = "bag", seed: int | None = None, calibration: dict | None = None,
+                  sections=None) -> Path:
+    """identification.yaml (provenance names the bag) and report/index.html in ``out``; returns the yaml path.
+
+    calibration: the record's calibration steps (``record.calibration`` of :func:`~..fit.campaign_fit.identify_bag`):
+    the thrust scales are estimated jointly with the fits and identification.yaml gets the ``calibration`` and ``joint``
+    sections (:func:`~.results.build_results`). sections(doc): optional, adds further sections (e.g. ``inclining`` and
+    ``free_decay``) before the file and the report are written."""
+    doc = build_results(idents, cfg, source=source, seed=seed, calibration=calibration or None)
+    doc["provenance"]["bag"] = str(bag_path)
+    if sections is not None:
+        sections(doc)
+    path = write_identification(out / "identification.yaml", doc)
+    write_report(out / "report", idents, doc, campaign_note=note)
+    return path

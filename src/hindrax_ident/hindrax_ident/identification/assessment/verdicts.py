@@ -1,6 +1,6 @@
 """Honest intervals and a verdict for every identified parameter, added after the fit (the fit is not touched).
 
-:func:`apply_verdicts` takes the :class:`~.estimators.DofIdentification` of each DOF and the vehicle configuration
+:func:`apply_verdicts` takes the :class:`~..fit.dof_model.DofIdentification` of each DOF and the vehicle configuration
 and
 
 1. **adds the force model's uncertainty** to the fit covariance. Every parameter of the self-propelled model
@@ -50,7 +50,7 @@ and
      test, independent of the thrust curve) differs from the self-propelled inertia by more than
      :data:`REFERENCE_Z_MAX` combined standard deviations (docs/identification.md §6.4).
 
-All quantities SI, the parameters and units of :func:`~.estimators.parameter_names`.
+All quantities SI, the parameters and units of :func:`~..fit.dof_model.parameter_names`.
 """
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ from scipy import stats
 
 from hindrax_drivers.config import VehicleConfig
 
-from .fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
+from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
            "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
@@ -117,7 +117,7 @@ def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float
 
 
 def segment_count(dof: str, pool_time_s: float) -> int:
-    """Independent segments of the output-error fit (pool time / :data:`~.fit_core.SEGMENT_S`, every DOF)."""
+    """Independent segments of the output-error fit (pool time / :data:`~..fit.fit_core.SEGMENT_S`, every DOF)."""
     return max(1, int(pool_time_s // SEGMENT_S))
 
 
@@ -148,9 +148,9 @@ class FitEvidence:
     """What the verdicts of one DOF's fit are made from (:func:`assess`), whichever reader made the record.
 
 
-    dof; names (p,) the fit's parameters (:func:`~.estimators.parameter_names`, or the fit core's chosen terms);
-    theta (p,) their values (after the empirical priors, :mod:`.posterior`); cov (p, p) their covariance without the
-    thrust-curve term (the fit core's cluster-robust covariance after the priors; with ``thrust_in_covariance`` the
+    dof; names (p,) the fit's parameters (:func:`~..fit.dof_model.parameter_names`, or the fit core's chosen terms);
+    theta (p,) their values (after the empirical priors, :mod:`..fit.posterior`); cov (p, p) their covariance without
+    the thrust-curve term (the fit core's cluster-robust covariance after the priors; with ``thrust_in_covariance`` the
     calibrated joint estimate's, which already holds the thrust scales); t_dof: the interval's degrees of freedom
     (the fit core's clusters - 1); units {name: unit}; velocity, acceleration, force (n,): the smoothed velocity,
     acceleration and input force at the fitted ticks, ``h`` s apart (typical speed, :func:`data_advice`);
@@ -163,7 +163,7 @@ class FitEvidence:
     when unknown (heave without a vehicle file); fit_std {name: std} of the fit alone when ``thrust_in_covariance``;
     cv_nrmse_hold: holding the velocity's nrmse on the same cross-validation samples as ``cv_nrmse`` or None (no
     comparison); persistence_margin: the relative margin the model must beat it by
-    (:func:`~.fit_core.persistence`).
+    (:func:`~..fit.fit_core.persistence`).
     """
 
     dof: str
@@ -202,7 +202,7 @@ _RELATIVE = ("inertia", "added_mass", "restoring", "reverse_thrust_gain")
 def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     """Honest covariance, intervals and verdicts of one DOF's fit (module docstring).
 
-    The one verdict path of ``hindrax ident bag`` (:func:`assess_dof`) and ``hindrax ident fit`` (:mod:`.fit_any`).
+    The one verdict path of ``hindrax ident bag`` (:func:`assess_dof`) and ``hindrax ident fit`` (:mod:`..fit.fit_any`).
     ``rel`` = [negative,
     positive] 1-sigma relative thrust uncertainty (:func:`declared_rel`), added as :func:`thrust_covariance` unless
     ``ev.thrust_in_covariance``. A check runs when its evidence is there (the campaign reader gives the steady
@@ -212,15 +212,15 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
       damping force at the typical speed), ``methods`` (steady-state against transient quadratic damping),
       ``direction`` (steady windows of the two directions), ``whiteness`` (residual lag-1 above
       :data:`WHITENESS_MAX`), cross-validated nrmse at or above :data:`NRMSE_MAX`; with ``cv_nrmse_hold`` the model
-      must beat holding the velocity (:func:`~.fit_core.persistence`), else the DOF's verdict is
-      :data:`~.fit_core.NO_MODEL_VERDICT` and every parameter is suspect;
+      must beat holding the velocity (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
+      :data:`~..fit.fit_core.NO_MODEL_VERDICT` and every parameter is suspect;
     * per parameter: ``width`` (95 % half-width above :data:`WIDTH_MAX` of the value for inertia, quadratic
       damping, restoring and the reverse gain; for linear damping and bias of the damping force at the typical
       speed), on its physical bound 0, fold estimates spread by more than 3 fit std; each parameter with a reason
       of its own gets ``advice`` (:func:`data_advice`).
 
     Returns {"parameters": {name: {value, std, std_fit, ci95, t_dof, verdict, reasons[, advice]}}, "verdict"
-    (trusted | suspect | :data:`~.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
+    (trusted | suspect | :data:`~..fit.fit_core.NO_MODEL_VERDICT`), "reasons" (DOF-wide), "checks": {name: number}}.
     """
     names = list(ev.names)
     theta = np.asarray(ev.theta, dtype=float)
@@ -381,7 +381,7 @@ def _index_in(names: Sequence[str], core_names: Sequence[str]) -> list:
 
 def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(velocity, acceleration, force (n,), tick h s) of a fit core result's training segments
-    (:class:`~.fit_core.DofResult` ``train``: the smoothed velocity and acceleration and the input force at the
+    (:class:`~..fit.fit_core.DofResult` ``train``: the smoothed velocity and acceleration and the input force at the
     fitted ticks), the evidence of the typical speed and of :func:`data_advice` for both readers."""
     sd = core.train
     return (np.asarray(sd.v_s, dtype=float).ravel(), np.asarray(sd.a_s, dtype=float).ravel(),
@@ -389,12 +389,12 @@ def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 
 
 def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
-    """The :class:`FitEvidence` fields a fit core result (:class:`~.fit_core.DofResult`) gives, for both readers
+    """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives, for both readers
     (``hindrax ident bag`` through :func:`assess_dof`, ``hindrax ident fit`` through
-    :func:`~.fit_any.assessment`): the optimiser's bounds and the fold estimates of ``names`` (default the core's
+    :func:`~..fit.fit_any.assessment`): the optimiser's bounds and the fold estimates of ``names`` (default the core's
     own; heave's ``*_positive``/``*_negative`` map onto the one pair of both directions, absent ones get no bound and
     then no fold estimates), the chosen model's cross-validated nrmse, holding the velocity's on the same samples and
-    the margin (:func:`~.fit_core.persistence`), and the fitted segments' signals (:func:`core_signals`).
+    the margin (:func:`~..fit.fit_core.persistence`), and the fitted segments' signals (:func:`core_signals`).
     Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse, cv_nrmse_hold, persistence_margin, velocity,
     acceleration, force, h}."""
     core_names = list(core.names)
@@ -415,7 +415,8 @@ def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
 def model_selection(core: Any) -> list[dict]:
     """identification.yaml ``model_selection`` of a fit core result, for both document builders: every candidate's
     terms, parameter count and cross-validated nrmse (``chosen`` marks the model kept), then holding the velocity
-    (persistence) and the zero model scored on the chosen model's held-out samples (:func:`~.fit_core.persistence`)."""
+    (persistence) and the zero model scored on the chosen model's held-out samples
+    (:func:`~..fit.fit_core.persistence`)."""
     rows = [{"terms": k.terms.label, "parameters": k.n_params, "cv_nrmse": k.cv.get("nrmse"),
              "cv_nrmse_hold": k.cv.get("nrmse_hold"), "chosen": k is core.chosen} for k in core.candidates]
     if core.persistence is not None:
@@ -427,16 +428,16 @@ def model_selection(core: Any) -> list[dict]:
 
 def no_model_line(dof: str, per: Mapping[str, float]) -> str:
     """The printed verdict of a DOF whose model does not beat holding the velocity (``per``: the ``persistence``
-    entry, :func:`~.fit_core.persistence`), the same line for ``hindrax ident fit`` and ``hindrax ident bag``."""
+    entry, :func:`~..fit.fit_core.persistence`), the same line for ``hindrax ident fit`` and ``hindrax ident bag``."""
     return (f"{dof:6} verdict: {NO_MODEL_VERDICT} (cross-validated nrmse {per['nrmse']:.3f}, holding the velocity "
             f"{per['nrmse_hold']:.3f}, needs {100 * per['margin']:.0f} % less): no parameter trusted")
 
 
 def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None = None) -> dict:
-    """:func:`assess` of a :class:`~.estimators.DofIdentification` (the campaign reader's, ``ident bag``); ``r`` is not
-    modified. The fit core's bounds, fold estimates, cross-validated nrmse and holding the velocity's come from
+    """:func:`assess` of a :class:`~..fit.dof_model.DofIdentification` (the campaign reader's, ``ident bag``); ``r`` is
+    not modified. The fit core's bounds, fold estimates, cross-validated nrmse and holding the velocity's come from
     ``r.signals["core"]`` when present (:func:`core_evidence`, as for ``hindrax ident fit``; so a DOF no model beats
-    persistence in gets :data:`~.fit_core.NO_MODEL_VERDICT` here too); ``added_mass`` from the inertia
+    persistence in gets :data:`~..fit.fit_core.NO_MODEL_VERDICT` here too); ``added_mass`` from the inertia
     (:func:`with_added_mass`)."""
     names = list(r.names)
     theta = np.array([r.values[n] for n in names])

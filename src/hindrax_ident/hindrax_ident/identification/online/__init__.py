@@ -1,0 +1,1 @@
+"""The identification campaign as it runs: executive, steps, excitation, manoeuvres, online estimator, node."""
