@@ -203,7 +203,7 @@ def test_bringup_passes_its_safety_timeouts_as_read_only_parameters_ros2_param_g
                             "output_guard.heartbeat_timeout_s": 2.0, "supervisor.clock_stall_timeout_s": 30.0}
             # ... and the nodes use those values
             esc, guard, supervisor = (graph.nodes[n] for n in ("esc", "output_guard", "supervisor"))
-            assert (esc.heartbeat_timeout_s, esc.steady_watchdog_s) == (2.0, 30.0)
+            assert (esc.peers.timeout_s, esc.steady_watchdog_s) == (2.0, 30.0)
             assert guard.timeout_s == guard.core.timeout_s == guard.esc_age.max_step_s == 2.0
             assert supervisor.clock_stall_timeout_s == 30.0
             r = set_param(call, "esc", "heartbeat_timeout_s",

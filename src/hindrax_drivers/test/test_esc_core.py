@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hindrax_drivers.pca9685.core import (COMMAND_NODE, GUARD_CONFIRM_S, OUTPUT_COMMANDING, OUTPUT_NEUTRAL,
-                                          OUTPUT_UNKNOWN, RETRY_MAX_S, RETRY_MIN_S, EscCore, EscOutput,
-                                          command_fault, command_source_fault, heartbeat_verdict)
+from hindrax_drivers.pca9685.core import (COMMAND_NODE, CONFIGURE, GUARD_CONFIRM_S, NEUTRAL, OUTPUT_COMMANDING,
+                                          OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, READBACK, RETRY_MAX_S, RETRY_MIN_S, WRITE,
+                                          EscCore, EscOutput, SteadyWatchdog, command_fault, command_source_fault,
+                                          heartbeat_verdict)
 
 COUNT_US = 1.24
 
@@ -348,3 +349,76 @@ def test_a_foreign_commander_while_armed_disarms_and_its_commands_are_refused():
     assert fault in core.request_arm()
     core.set_command_source("")  # gone
     assert core.request_arm() == ""
+
+
+# (rule, job kind, result fields, chip confirmed before, expected event, output state after, substring of the reason)
+CHIP_RESULT_ROWS = [
+    ("configure read back: neutral confirmed", CONFIGURE, {}, False, "confirmed", OUTPUT_NEUTRAL, "holding neutral"),
+    ("no bus at start-up: unknown, retried", CONFIGURE, {"error": "no I2C bus: ENOENT", "no_bus": True}, False,
+     "lost", OUTPUT_UNKNOWN, "retrying"),
+    ("configure not read back", CONFIGURE, {"mismatch": "MODE1 0x11"}, True, "lost", OUTPUT_UNKNOWN,
+     "not confirmed: MODE1 0x11"),
+    ("read-back failed", READBACK, {"error": "NACK"}, True, "lost", OUTPUT_UNKNOWN, "read-back failed"),
+    ("read-back mismatch: re-initialise", READBACK, {"mismatch": "PRE_SCALE 121"}, True, "reinit", OUTPUT_NEUTRAL,
+     "re-initialised at neutral"),
+    ("thrust write failed: neutral next", WRITE, {"error": "NACK"}, True, "write_failed", OUTPUT_NEUTRAL, ""),
+    ("neutral write failed: unknown", NEUTRAL, {"error": "NACK"}, True, "lost", OUTPUT_UNKNOWN,
+     "cannot write neutral"),
+    ("thrust written", WRITE, {"wrote": True}, True, "done", OUTPUT_COMMANDING, ""),
+    ("a write posted before the chip was lost changes no state", WRITE, {"wrote": True}, False, "done",
+     OUTPUT_UNKNOWN, ""),
+]
+
+
+@pytest.mark.parametrize("rule, kind, fields, confirmed, event, state, why", CHIP_RESULT_ROWS,
+                         ids=[r[0] for r in CHIP_RESULT_ROWS])
+def test_what_a_chip_result_means(rule, kind, fields, confirmed, event, state, why):
+    core, clock = make()
+    if confirmed:
+        ready(core, clock)
+    out = core.chip_result(kind, written_us=np.array([1700.0, 1700.0]), output_state=OUTPUT_COMMANDING, **fields)
+    assert out.event == event and core.output_state == state
+    assert why in out.message or why in core.reason
+    assert not core.armed
+
+
+def test_a_failed_thrust_write_drops_the_command_and_a_mismatch_disarms():
+    core, clock = make()
+    ready(core, clock)
+    assert core.request_arm() == ""
+    core.on_command(0.0, [1700.0, 1700.0], True)
+    assert core.chip_result(WRITE, error="NACK").event == "write_failed" and core.command is None and core.armed
+    assert core.chip_result(READBACK, mismatch="MODE1 0x11").event == "reinit" and not core.armed
+
+
+def test_the_steady_watchdog_counts_executor_alive_time_only():
+    """A 2 s gap between two checks counts two periods (0.04 s); regular 20 ms checks without a command trip after
+    the timeout (0.2 s); a command restarts it; inactive (disarmed or no command) it never trips."""
+    dog = SteadyWatchdog(0.02, 0.2, t_s=100.0)
+    t = 102.0
+    assert not dog.check(t, True) and dog.age_s == pytest.approx(0.04)
+    for _ in range(7):
+        t += 0.02
+        assert not dog.check(t, True)
+    t += 0.02
+    assert not dog.check(t, True)  # 0.2 s: not beyond the timeout
+    t += 0.02
+    assert dog.check(t, True) and dog.trips == 1
+    dog.command(t)
+    assert dog.age_s == 0.0 and not dog.check(t + 0.02, True)
+    assert not dog.check(t + 10.0, False) and dog.age_s == 0.0
+
+
+def test_a_thrust_write_that_lands_after_the_chip_was_lost_keeps_the_retry_at_every_tick():
+    """A bus call that came back after the stuck bound (the chip already counted as lost) may have put thrust on the
+    wire: the chip is retried at once, not after the back-off, so that neutral follows within one tick."""
+    core, clock = make()
+    ready(core, clock)
+    core.chip_attempt()
+    core.chip_lost("PCA9685 bus call not returned after 0.16 s")
+    clock.t += 0.01  # well inside the back-off
+    assert core.chip_result(WRITE, wrote=True, written_us=np.array([1700.0, 1700.0]),
+                            output_state=OUTPUT_COMMANDING).event == "done"
+    assert core.output_state == OUTPUT_UNKNOWN and core.stale_width_possible and core.retry_due()
+    core.chip_result(NEUTRAL, wrote=True, written_us=np.array([1500.0, 1500.0]))
+    assert not core.stale_width_possible and not core.retry_due()

@@ -169,7 +169,7 @@ def test_watchdog_returns_to_neutral_within_one_period():
         wait_until(lambda: wire(emu)[0] > 1600, 10, command_and_advance, "commanded output")
         wait_until(lambda: np.allclose(wire(emu), 1500.0, atol=TICK_US), 10, advance, "watchdog neutral")
         # the node stamps each command on arrival with its (simulated) clock; the last one started the watchdog
-        elapsed_s = (node.get_clock().now() - node.command_time).nanoseconds * 1e-9
+        elapsed_s = node.get_clock().now().nanoseconds * 1e-9 - node.core.command_t_s
         assert 0.2 <= elapsed_s <= 0.2 + PERIOD_S + 0.005  # timeout + at most one output period (+1 clock step)
         assert node.watchdog_trips == 1
         ex.shutdown()
@@ -310,7 +310,7 @@ def test_sigterm_path_writes_neutral():
                                                                        "esc.oscillator_calibrated": True}))
         node.armed = True
         node.command = np.full(8, 1700.0)
-        node.command_time = node.get_clock().now()
+        node.core.command_t_s = node.get_clock().now().nanoseconds * 1e-9
         node.watchdog_s = 1e9
         node._peer_verdicts = lambda: ("", "")  # this test is about the shutdown path only
         holder["node"] = node
@@ -421,7 +421,7 @@ def _direct_beats(node):
 def _healthy(node):
     """Feed the node one OK supervisor and guard heartbeat (tests that call the node's methods directly)."""
     _direct_beats(node)
-    for feed in (node.on_supervisor_heartbeat, node.on_guard_heartbeat):
+    for feed in (node.peers.on_supervisor_heartbeat, node.peers.on_guard_heartbeat):
         feed(DiagnosticStatus(level=DiagnosticStatus.OK, message="ok"))
     node.steady_check()
 
@@ -442,13 +442,13 @@ def test_fault1_chip_reset_while_armed_is_detected_reinitialised_and_disarms(esc
     """A brown-out reset of the PCA9685 (all registers to their reset values: asleep, outputs off) while armed at
     1700 us: the read-back finds MODE1 wrong, re-initialises the chip at neutral, disarms and says so."""
     emu, node = esc["emu"], esc["node"]
-    node.readback_interval_s = 0.2
+    node.link.readback_interval_s = 0.2
     arm(esc)
     stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
     emu.reset()  # brown-out: MODE1 = 0x11 (SLEEP), every channel full OFF
     assert np.allclose(wire(emu), 0.0)
     # a controller keeps streaming 1700 us: the node must not keep reporting "armed, commanding" at 1700
-    stream(esc, [1700.0] * 8, lambda: node.chip_reinits >= 1 and not node.armed)
+    stream(esc, [1700.0] * 8, lambda: node.link.chip_reinits >= 1 and not node.armed)
     wait_until(lambda: np.allclose(wire(emu), NEUTRAL, atol=TICK_US), 5, esc["spin"], "neutral after re-init")
     assert emu.mode1 == 0x21 and emu.prescale == 30  # awake, auto-increment, 200 Hz again
     status = node.diag.status()
@@ -562,7 +562,7 @@ def test_fault3_dead_clock_steady_watchdog_returns_to_neutral():
                    "neutral with the clock dead")
         wall_s = time.monotonic() - t_last
         # ROS time stood still: by it the last command is younger than the timeout (the ROS watchdog cannot trip)
-        assert (node.get_clock().now() - node.command_time).nanoseconds * 1e-9 < 0.2
+        assert node.get_clock().now().nanoseconds * 1e-9 - node.core.command_t_s < 0.2
         assert node.steady_watchdog_trips == 1
         assert wall_s >= 0.2  # not before the timeout
         ex.shutdown()
@@ -790,8 +790,8 @@ def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
         _direct_beats(node)
         ok = DiagnosticStatus(level=DiagnosticStatus.OK, message="ok")
         err = DiagnosticStatus(level=DiagnosticStatus.ERROR, message="ESC output state unknown")
-        node.on_supervisor_heartbeat(ok)
-        node.on_guard_heartbeat(ok)
+        node.peers.on_supervisor_heartbeat(ok)
+        node.peers.on_guard_heartbeat(ok)
         assert node.neutral_confirmed_time is not None
         node._safety_tick(time.monotonic())  # neutral on the wire with the guard's OK from now
         assert node.neutral_on_wire_since is not None
@@ -799,15 +799,15 @@ def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
         res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
         assert not res.success and "at neutral" in res.message and not node.armed
         # the guard's ERROR and its next OK taken in one round: the time at neutral starts again
-        node.on_guard_heartbeat(err)
-        node.on_guard_heartbeat(ok)
+        node.peers.on_guard_heartbeat(err)
+        node.peers.on_guard_heartbeat(ok)
         assert node.neutral_on_wire_since is None
         node._safety_tick(time.monotonic())
         t0 = time.monotonic()
         wait_until(lambda: node.arming_remaining_s() == 0.0, 2, None, "guard confirmation time")
         assert time.monotonic() - t0 >= GUARD_CONFIRM_S - 0.02
-        node.on_supervisor_heartbeat(ok)
-        node.on_guard_heartbeat(ok)
+        node.peers.on_supervisor_heartbeat(ok)
+        node.peers.on_guard_heartbeat(ok)
         res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
         assert res.success and node.armed
         node.destroy_node()
@@ -816,10 +816,11 @@ def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
 
 
 def test_a_slow_bus_does_not_slow_the_heartbeat(esc):
-    """Every block write takes 100 ms (below the 0.15 s stuck-call bound; a socket round trip on a loaded machine is
-    7-10 ms): with commands streaming, esc/heartbeat keeps its 25 Hz (at least 40 % of it arrives here, on a loaded
-    machine; a chip write on the executor thread would let through about 8 beats a second at most), the ESC stays
-    armed with a known output state, and the newest command reaches the wire."""
+    """Every block write takes 150 ms (a socket round trip on a loaded machine is 7-10 ms): with commands streaming,
+    esc/heartbeat keeps its 25 Hz (at least 30 % of it arrives here, on a loaded machine; with the chip written on
+    the executor thread a tick lasted a write, 150 ms: at most 3.3 beats a second, 13 %), the ESC stays armed with a
+    known output state, and the newest command reaches the wire. (A call slower than the stuck bound is a fault:
+    test_safety_paths' hung bus; here the bound is widened so that the load of the machine cannot reach it.)"""
     from diagnostic_msgs.msg import DiagnosticStatus as Status
 
     arm(esc)
@@ -829,9 +830,12 @@ def test_a_slow_bus_does_not_slow_the_heartbeat(esc):
     write = bus.write_i2c_block_data
 
     def slow(address, register, data):
-        time.sleep(0.1)
+        time.sleep(0.15)
         return write(address, register, data)
 
+    node.chip_io.call_timeout_s = 2.0
+    # not about who publishes: a loaded machine's discovery ("_NODE_NAME_UNKNOWN_" for a while) must not disarm it
+    node._check_graph = lambda: None
     bus.write_i2c_block_data = slow
     widths = itertools.cycle([1640.0, 1660.0, 1680.0])
     t_end = time.monotonic() + 2.0
@@ -841,7 +845,7 @@ def test_a_slow_bus_does_not_slow_the_heartbeat(esc):
     wait_until(lambda: time.monotonic() > t_end, 10, lambda: (esc["command"]([next(widths)] * 8), esc["spin"]()),
                "2 s of commands")
     window_s = time.monotonic() - t0
-    assert len(beats) >= 0.4 * 25.0 * window_s, f"{len(beats)} heartbeats in {window_s:.2f} s"
-    assert node.armed and node.output_state == ThrusterPwm.OUTPUT_COMMANDING and node.bus_stalls == 0
+    assert len(beats) >= 0.3 * 25.0 * window_s, f"{len(beats)} heartbeats in {window_s:.2f} s"
+    assert node.armed and node.output_state == ThrusterPwm.OUTPUT_COMMANDING and node.link.bus_stalls == 0
     esc["command"]([1700.0] * 8)
     wait_until(lambda: abs(wire(emu)[0] - 1700.0) < TICK_US, 5, esc["spin"], "the newest command on the wire")

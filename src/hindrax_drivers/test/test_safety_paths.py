@@ -136,15 +136,15 @@ def rig():
 def test_f1_arming_is_refused_without_a_supervisor_or_while_it_is_tripped(rig):
     r = rig()
     r.beats.supervisor = None  # no supervisor running
-    r.wait(lambda: not r.esc.supervisor_age.fresh(r.esc.heartbeat_timeout_s), "heartbeat stale")
+    r.wait(lambda: not r.esc.peers.supervisor_age.fresh(r.esc.peers.timeout_s), "heartbeat stale")
     res = r.set_armed(True)
     assert not res.success and "no supervisor heartbeat" in res.message
     r.beats.supervisor = "depth 3.00 m beyond supervisor.max_depth_m 1.65"  # running, tripped
-    r.wait(lambda: r.esc.supervisor_age.fresh(0.1) and not r.esc.supervisor_ok, "tripped heartbeat")
+    r.wait(lambda: r.esc.peers.supervisor_age.fresh(0.1) and not r.esc.peers.supervisor_ok, "tripped heartbeat")
     res = r.set_armed(True)
     assert not res.success and "supervisor tripped: depth 3.00 m" in res.message
     r.beats.supervisor = ""
-    r.wait(lambda: r.esc.supervisor_ok and r.esc.arming_remaining_s() == 0.0, "OK heartbeat, time at neutral")
+    r.wait(lambda: r.esc.peers.supervisor_ok and r.esc.arming_remaining_s() == 0.0, "OK heartbeat, time at neutral")
     assert r.set_armed(True).success
 
 
@@ -407,7 +407,7 @@ def test_f3_i2c_outage_reports_unknown_and_thrust_needs_a_new_arm_request(rig):
         r.command(1600.0)
         r.spin()
     assert np.allclose(wire(r.emu), 1500.0, atol=TICK_US) and not r.esc.armed
-    assert r.esc.unknown_entries >= 1
+    assert r.esc.link.unknown_entries >= 1
 
 
 def test_esc_starts_without_its_bus_and_picks_it_up(monkeypatch):
@@ -447,12 +447,12 @@ def test_esc_starts_without_its_bus_and_picks_it_up(monkeypatch):
 def test_f7_clock_step_back_brown_out_detected_on_the_steady_clock(rig):
     r = rig(sim_time=True, overrides={"esc.readback_interval_s": 0.5})
     r.arm_at_1700()
-    reinits = r.esc.chip_reinits
+    reinits = r.esc.link.chip_reinits
     r.ns -= 100_000_000_000  # /clock steps back 100 s
     r.commanding()
     r.emu.reset()  # brown-out: asleep, every output off
     # before: the read-back waited for ROS time to catch up (4 s in the finding, 100 s here)
-    r.wait(lambda: r.esc.chip_reinits > reinits, "brown-out detected", timeout=3.0, poll=r.commanding)
+    r.wait(lambda: r.esc.link.chip_reinits > reinits, "brown-out detected", timeout=3.0, poll=r.commanding)
     assert not r.esc.armed and r.esc.clock_monitor.steps_back >= 1
     assert r.esc.diag.counts().get("clock_step", 0) >= 1
     r.wait(lambda: r.states[-1].output_state == ThrusterPwm.OUTPUT_NEUTRAL and not r.states[-1].armed,

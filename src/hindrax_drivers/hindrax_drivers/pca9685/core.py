@@ -8,7 +8,8 @@ the pulse widths to write now. The node owns the bus and the messages and does w
 
 Rules (one test row each in ``test/test_esc_core.py``):
 
-* **Chip**: thrust needs neutral confirmed on the chip by read-back (:meth:`EscCore.chip_confirmed`). A chip
+* **Chip** (:meth:`EscCore.chip_result`: what a chip job's result means): thrust needs neutral confirmed on the
+  chip by read-back (:meth:`EscCore.chip_confirmed`). A chip
   that cannot be written or read back (:meth:`EscCore.chip_lost`) makes the output state UNKNOWN (never
   "neutral"), disarms and drops the command; a read-back mismatch (:meth:`EscCore.chip_mismatch`) disarms.
 * **Retry** (:meth:`EscCore.retry_due`): an unreachable chip is retried with a back-off (:data:`RETRY_MIN_S`
@@ -27,6 +28,9 @@ Rules (one test row each in ``test/test_esc_core.py``):
 * **Command source** (:func:`command_source_fault`, :meth:`EscCore.set_command_source`): commands come only from the
   ``thrust_allocation`` node, alone on the topic. Any other publisher (``hindrax thruster-test`` goes through the
   allocation; a script, a replayed bag) refuses arming, disarms while armed and holds neutral until it is gone.
+* **Chip results**: a failed configure, read-back or neutral write is a lost chip; a failed thrust write drops the
+  command (the node writes neutral); a read-back mismatch asks for a re-initialisation; a result of a job posted
+  before the chip was lost changes nothing but what is known to be on the wire.
 * **Watchdog**: armed, a command older than ``watchdog_timeout_s`` (ROS time) gives neutral; so does
   :meth:`EscCore.watchdog_trip` (the node's steady-clock watchdog for a stopped ROS clock).
 * **Output**: armed with a fresh valid command -> the command's widths through :class:`EscOutput` (reversal,
@@ -41,8 +45,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 __all__ = ["OUTPUT_UNKNOWN", "OUTPUT_NEUTRAL", "OUTPUT_COMMANDING", "RETRY_MIN_S", "RETRY_MAX_S", "GUARD_CONFIRM_S",
-           "COMMAND_NODE", "EscOutput", "EscCore", "EscDecision", "command_fault", "command_source_fault",
-           "heartbeat_verdict"]
+           "COMMAND_NODE", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "EscOutput", "EscCore", "EscDecision",
+           "ChipOutcome", "SteadyWatchdog", "command_fault", "command_source_fault", "heartbeat_verdict"]
 
 #: output states, the values of hindrax_msgs/ThrusterPwm ``output_state`` (checked equal in the tests)
 OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING = 0, 1, 2
@@ -58,6 +62,51 @@ RETRY_MAX_S = 4.0
 GUARD_CONFIRM_S = 0.15
 #: the one node that may publish ``thrusters/command_pulse_width`` (docs/architecture.md §8.2)
 COMMAND_NODE = "thrust_allocation"
+#: chip jobs (:mod:`.worker`): (re)configure and read back; write the widths if they changed; write them whatever is
+#: believed on the chip (a neutral for safety); read the registers back
+CONFIGURE, WRITE, NEUTRAL, READBACK = "configure", "write", "neutral", "readback"
+
+
+@dataclass(frozen=True)
+class ChipOutcome:
+    """What a chip job's result means (:meth:`EscCore.chip_result`): ``event`` is ``"confirmed"`` (neutral read
+    back), ``"lost"`` (UNKNOWN; ``new``: a new outage), ``"reinit"`` (read-back mismatch: re-initialise the chip),
+    ``"write_failed"`` (write neutral now) or ``"done"``; ``message`` says why; ``count``: the diagnostics counter
+    to increment ('' none)."""
+
+    event: str
+    message: str = ""
+    count: str = ""
+    new: bool = False
+
+
+class SteadyWatchdog:
+    """The steady-clock command watchdog for a ROS clock that stops (``use_sim_time`` with a dead ``/clock``,
+    where the ROS-time watchdog stands still): trips after ``timeout_s`` of steady time without a command while
+    active. Only executor-alive time counts: a gap between two checks counts at most ``2 * period_s``, so a stalled
+    process does not trip it when it resumes. Times in s (``time.monotonic`` on the vehicle)."""
+
+    def __init__(self, period_s: float, timeout_s: float, t_s: float) -> None:
+        self.period_s, self.timeout_s = float(period_s), float(timeout_s)
+        self.last_check_s = self.last_command_s = float(t_s)
+        self.age_s = 0.0
+        self.trips = 0
+
+    def command(self, t_s: float) -> None:
+        """A command arrived at ``t_s``."""
+        self.age_s, self.last_command_s = 0.0, float(t_s)
+
+    def check(self, t_s: float, active: bool) -> bool:
+        """A check at ``t_s``; ``active``: armed with a command held. True when it trips (counted)."""
+        gap, self.last_check_s = t_s - self.last_check_s, t_s
+        if not active:
+            self.age_s = 0.0
+            return False
+        self.age_s += min(max(gap, 0.0), t_s - self.last_command_s, 2.0 * self.period_s)
+        if self.age_s > self.timeout_s:
+            self.trips += 1
+            return True
+        return False
 
 
 def command_source_fault(node_names: Sequence[str], topic: str = "thrusters/command_pulse_width",
@@ -142,6 +191,14 @@ class EscOutput:
         self.deadband_us = float(deadband_us)
         self.current = np.full(len(self.channels), self.neutral_us)
         self._computed_for: object = None  # the command object :attr:`current` was computed for (no slew limit)
+
+    @classmethod
+    def from_config(cls, thrusters, slew_rate_us_per_s: float, count_us: float) -> "EscOutput":
+        """From the ``thrusters`` configuration section (channels, reversal, trims, widths, deadband)."""
+        t = thrusters
+        return cls([th.esc_channel for th in t.thrusters], [th.reversed for th in t.thrusters],
+                   [th.trim_us for th in t.thrusters], t.pulse_width_min_us, t.pulse_width_neutral_us,
+                   t.pulse_width_max_us, slew_rate_us_per_s, count_us=count_us, deadband_us=t.deadband_us)
 
     def channel_neutral(self) -> np.ndarray:
         """(n,) ``neutral_us + trim_us`` clamped to the limits, us."""
@@ -277,9 +334,12 @@ class EscCore:
         self.reason = reason
 
     def wrote(self, widths_us: np.ndarray) -> None:
-        """The node wrote these widths (decoded from the counts) to the chip."""
+        """The node wrote these widths (decoded from the counts) to the chip. What is on the wire is known again;
+        a write that lands while the chip counts as lost (a bus call that came back after the stuck bound) leaves a
+        width that nothing confirmed: unless it is neutral, the chip is retried at every tick (module docstring)."""
         self.last_written = np.asarray(widths_us, dtype=float).copy()
-        self.stale_width_possible = False  # what is on the wire is known again
+        self.stale_width_possible = self.output_state == OUTPUT_UNKNOWN and \
+            not np.allclose(self.last_written, self.output.channel_neutral())
 
     def retry_due(self) -> bool:
         """Whether the node should try the chip now (module docstring, Retry)."""
@@ -288,6 +348,44 @@ class EscCore:
         if self.stale_width_possible or self.last_attempt is None:
             return True
         return self.clock() - self.last_attempt >= self.retry_s
+
+    def chip_result(self, kind: str, *, error: str = "", no_bus: bool = False, mismatch: str = "",
+                    wrote: bool = False, written_us: np.ndarray | None = None,
+                    output_state: int = OUTPUT_NEUTRAL) -> ChipOutcome:
+        """A chip job done (module docstring, Chip results): ``kind`` (:data:`CONFIGURE`, :data:`WRITE`,
+        :data:`NEUTRAL`, :data:`READBACK`), its ``error`` ('' or why the bus failed; ``no_bus``: it could not be
+        opened), a read-back ``mismatch`` ('' or what differed), ``wrote`` and ``written_us`` (n,) what is on the chip
+        now, and the ``output_state`` the job's widths give."""
+        if wrote and not error and written_us is not None:
+            self.wrote(written_us)
+        if kind == CONFIGURE:
+            if not (error or mismatch):
+                self.chip_confirmed()
+                return ChipOutcome("confirmed", self.reason)
+            why = (f"{error}; retrying" if no_bus else f"PCA9685 start-up failed: {error}" if error else
+                   f"PCA9685 start-up not confirmed: {mismatch}")
+            return self._lost(why, "no_bus" if no_bus else "i2c_error" if error else "readback_mismatch")
+        if self.neutral_confirmed_at is None:
+            return ChipOutcome("done")  # posted before the chip was lost: only a configure brings it back
+        if kind == READBACK and error:
+            return self._lost(f"PCA9685 read-back failed: {error}", "i2c_error")
+        if kind == READBACK and mismatch:
+            message = f"PCA9685 read-back mismatch: {mismatch}; re-initialised at neutral" + \
+                (", disarmed (re-arm after esc.arming_time_s)" if self.armed else "")
+            self.chip_mismatch(message)
+            return ChipOutcome("reinit", message, "chip_reinit")
+        if kind == WRITE and error:
+            self.command = None
+            return ChipOutcome("write_failed", f"fault: {error}", "output_exception")
+        if error:
+            return self._lost(f"cannot write neutral: {error}", "i2c_error")
+        if kind != READBACK:
+            self.output_state = output_state
+        return ChipOutcome("done")
+
+    def _lost(self, reason: str, count: str) -> ChipOutcome:
+        new = self.chip_lost(reason)
+        return ChipOutcome("lost", self.reason, count, new)
 
     # ------------------------------------------------------------------ peers and arming
     def set_peers(self, supervisor_refusal: str, guard_refusal: str) -> str:

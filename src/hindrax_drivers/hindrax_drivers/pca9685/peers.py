@@ -1,10 +1,12 @@
-"""What the ESC node hears from its safety peers: the supervisor's and the output guard's heartbeats, turned into
-the two verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not).
+"""What the ESC node hears from its peers: the supervisor's and the output guard's heartbeats, turned into the two
+verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not), and who publishes its commands
+(:func:`.core.command_source_fault`).
 
 :class:`EscPeers` subscribes to ``supervisor/heartbeat`` and ``guard/heartbeat`` through
 :class:`~hindrax_drivers.liveness.HeartbeatWatch` (a forged or replayed beat, a second publisher or another node name
 is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
-(:class:`~hindrax_drivers.liveness.AliveAge`). The verdict rules are :func:`.core.heartbeat_verdict`'s.
+(:class:`~hindrax_drivers.liveness.AliveAge`). The verdict rules are :func:`.core.heartbeat_verdict`'s. Node
+parameter (read-only, :data:`HEARTBEAT_TIMEOUT`): ``heartbeat_timeout_s`` (default ``esc.heartbeat_timeout_s``).
 """
 from __future__ import annotations
 
@@ -12,23 +14,37 @@ from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
+from ..config import Spec
 from ..liveness import HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok
-from .core import heartbeat_verdict
+from ..config.node_parameters import declare_node_parameter
+from .core import command_source_fault, heartbeat_verdict
 
-__all__ = ["EscPeers"]
+__all__ = ["EscPeers", "HEARTBEAT_TIMEOUT", "COMMAND_TOPIC"]
+
+COMMAND_TOPIC = "thrusters/command_pulse_width"
+#: node parameter ``heartbeat_timeout_s`` (read-only; declared by config.node_parameters.declare_node_parameter)
+HEARTBEAT_TIMEOUT = Spec("float", "the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
+                         "is older than this (steady clock), s; default esc.heartbeat_timeout_s, widened only where "
+                         "the three safety nodes share one executor thread (hindrax bringup: none can stall alone)",
+                         0.05, 10.0)
 
 
 class EscPeers:
     """The ESC's view of the supervisor and the output guard (module docstring).
 
-    ``node``: the ESC node (subscriptions); ``period_s``: its tick period, s (an age counts at most two periods per
-    gap between ticks); ``timeout_s``: the heartbeat timeout, s (``esc.heartbeat_timeout_s``); ``armed()``: whether
+    ``node``: the ESC node (subscriptions, its parameter, the graph); ``period_s``: its tick period, s (an age counts
+    at most two periods per gap between ticks); ``default_timeout_s``: ``esc.heartbeat_timeout_s``; ``armed()``: whether
     the ESC is armed (identity rules while armed); ``on_bad_news()``: called when a beat says the peer forbids thrust
     (a supervisor trip while armed, any guard beat that is not OK)."""
 
-    def __init__(self, node: Any, period_s: float, timeout_s: float, armed: Callable[[], bool],
+    def __init__(self, node: Any, period_s: float, default_timeout_s: float, armed: Callable[[], bool],
                  on_bad_news: Callable[[], Any]) -> None:
-        self.timeout_s = float(timeout_s)
+        self._node = node
+        #: heartbeat timeout, s: parameter ``heartbeat_timeout_s`` (:data:`HEARTBEAT_TIMEOUT`)
+        self.timeout_s = float(declare_node_parameter(node, "heartbeat_timeout_s", HEARTBEAT_TIMEOUT,
+                                                      default_timeout_s))
+        #: live publishers of the commands (the command subscription's liveliness event, :meth:`on_liveliness`)
+        self.command_publishers_alive = 0
         self.supervisor_age = AliveAge(2.0 * period_s)
         self.guard_age = AliveAge(2.0 * period_s)
         self.supervisor_ok, self.supervisor_message = False, ""
@@ -42,10 +58,17 @@ class EscPeers:
         self.supervisor_age.tick()
         self.guard_age.tick()
 
-    def check_identities(self) -> None:
-        """The heartbeats' identity checks against the graph (who publishes them)."""
+    def check_graph(self) -> str:
+        """The heartbeats' identity checks against the graph, then the command topic's: '' or why the commands
+        cannot be trusted (only the allocation may publish them, :func:`.core.command_source_fault`)."""
         for watch in self.watches.values():
             watch.check()
+        names = [info.node_name for info in self._node.get_publishers_info_by_topic(COMMAND_TOPIC)]
+        return command_source_fault(names, COMMAND_TOPIC, self.command_publishers_alive)
+
+    def on_liveliness(self, info: Any) -> None:
+        """The command subscription's liveliness event (1 s lease)."""
+        self.command_publishers_alive = int(info.alive_count)
 
     def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip

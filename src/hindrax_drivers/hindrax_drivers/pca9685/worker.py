@@ -30,6 +30,7 @@ import numpy as np
 
 from ..transport.i2c import I2CDevice, I2CError
 from .chip import EscChip
+from .core import CONFIGURE, NEUTRAL, READBACK, WRITE
 
 __all__ = ["BUS_CALL_TIMEOUT_S", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "ChipJob", "ChipResult", "ChipWorker"]
 
@@ -39,14 +40,11 @@ __all__ = ["BUS_CALL_TIMEOUT_S", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "C
 #: a loaded machine
 BUS_CALL_TIMEOUT_S = 0.15
 
-#: job kinds: (re)configure and read back; write the widths if they changed; write them whatever is believed on the
-#: chip (a neutral for safety); read the registers back
-CONFIGURE, WRITE, NEUTRAL, READBACK = "configure", "write", "neutral", "readback"
 
 
 @dataclass
 class ChipJob:
-    """What the chip should do: ``kind`` (:data:`CONFIGURE`, :data:`WRITE`, :data:`NEUTRAL`, :data:`READBACK`),
+    """What the chip should do: ``kind`` (:data:`.core.CONFIGURE`, ``WRITE``, ``NEUTRAL``, ``READBACK``),
     the thruster widths ``widths_us`` (n,) and the lights' ``lights_us`` (us; unused by a read-back), the
     ``output_state`` the widths give, and ``reason`` (text the node reports with it). ``seq`` is set by
     :meth:`ChipWorker.post` (increasing)."""

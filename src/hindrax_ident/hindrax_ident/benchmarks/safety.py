@@ -264,7 +264,7 @@ def run(quick: bool = False) -> list[dict]:
             # chip reset (brown-out) while armed and commanding
             r["armed_at_1700"]()
             emu.watch = False
-            reinits = esc.chip_reinits
+            reinits = esc.link.chip_reinits
             t0 = time.monotonic()
             emu.reset()
             emu.watch, emu.neutral_at = True, None
@@ -272,8 +272,8 @@ def run(quick: bool = False) -> list[dict]:
             def keep_commanding():
                 r["command"]()
                 r["spin"]()
-            r["wait_until"](lambda: esc.chip_reinits > reinits, 10, keep_commanding, "chip reset detected")
-            times["chip_reset_detect"].append(esc.last_chip_reinit_monotonic - t0)
+            r["wait_until"](lambda: esc.link.chip_reinits > reinits, 10, keep_commanding, "chip reset detected")
+            times["chip_reset_detect"].append(esc.link.last_chip_reinit_monotonic - t0)
             times["chip_reset_recover"].append(r["until_neutral"](poll=keep_commanding) - t0)
         _close(r)
         # /clock loss: the steady-clock watchdog
