@@ -182,3 +182,28 @@ def test_identification_yaml_shows_the_priors_beside_the_identified_values():
     ratio = expected["added_mass"][0] / truth["added_mass"]
     assert f"{ratio:.3g}" in page and "outside" in page      # the solid-prism prior is far above Table 6's 12.08 kg
     assert references_html({"dofs": {}}) == ""
+
+
+def test_table_spline_is_scipys_not_a_knot_spline():
+    """The priors' tables are interpolated by the module's own not-a-knot spline (scipy.interpolate stays out of the
+    identification node's process): the same values as scipy's CubicSpline(bc_type="not-a-knot"), inside the
+    table and extrapolated, for 2 to 9 points (the tables have 4-9) and for each table of the module."""
+    import numpy as np
+    from scipy.interpolate import CubicSpline
+
+    from hindrax_ident.estimation.priors import ADDED_MASS_2D, ADDED_MASS_3D, DRAG_2D, DRAG_3D, not_a_knot_spline
+
+    rng = np.random.default_rng(3)
+    cases = [(np.sort(rng.choice(np.linspace(0.0, 10.0, 201), n, replace=False)), rng.normal(size=n))
+             for n in (2, 3, 4, 5, 7, 9) for _ in range(10)]
+    for table in (ADDED_MASS_3D, DRAG_2D, DRAG_3D):
+        rows = sorted(table)
+        cases.append((np.array([r[0] for r in rows]), np.array([r[1] for r in rows])))
+    rows = sorted(ADDED_MASS_2D)
+    cases += [(np.array([r[0] for r in rows]), np.array([r[k] for r in rows])) for k in (1, 2)]
+    for x, y in cases:
+        ours, ref = not_a_knot_spline(x, y), CubicSpline(x, y, bc_type="not-a-knot")
+        for v in np.linspace(x[0] - 2.0, x[-1] + 2.0, 41):
+            assert ours(v) == pytest.approx(float(ref(v)), rel=1e-9, abs=1e-9)
+    with pytest.raises(EstimationError):
+        not_a_knot_spline([1.0, 1.0, 2.0], [0.0, 1.0, 2.0])

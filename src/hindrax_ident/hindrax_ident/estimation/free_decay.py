@@ -62,7 +62,6 @@ from dataclasses import dataclass, field
 from typing import Any, Optional, Tuple
 
 import numpy as np
-from scipy import integrate, optimize, signal
 
 from .drag_coefficient import (KINEMATIC_VISCOSITY_WATER_M2_S,
                                characteristic_length_from_volume, reynolds_number)
@@ -237,6 +236,8 @@ def _sample_rate(t: np.ndarray) -> float:
 
 
 def _highpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, padtype: str) -> np.ndarray:
+    from scipy import signal  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     sos = signal.butter(2, cutoff_hz, btype="highpass", fs=fs_hz, output="sos")
     padlen = int(min(x.size - 1, np.ceil(3.0 * fs_hz / cutoff_hz)))
     return signal.sosfiltfilt(sos, x, padtype=padtype, padlen=padlen)
@@ -265,6 +266,8 @@ def displacement_from_acceleration(t_s, acceleration_m_s2, highpass_hz: Optional
     Raises:
         EstimationError: bad shapes, NaN, non-increasing time, fewer than 8 samples, bad cut-off.
     """
+    from scipy import integrate  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     t = check_time_vector(t_s, "t_s", min_samples=8)
     a = as_float_array(acceleration_m_s2, "acceleration_m_s2", 1)
     check_same_length(t_s=t, acceleration_m_s2=a)
@@ -325,6 +328,8 @@ def _parabolic_time(t: np.ndarray, y: np.ndarray, i: int) -> float:
 
 def _alternating_extrema(sx: np.ndarray, distance: int):
     """Alternating (peak, trough, peak, ...) indices of sx starting with a peak at index 0."""
+    from scipy import signal  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     padded = np.concatenate([[-np.inf], sx])
     peaks = signal.find_peaks(padded, distance=distance)[0] - 1
     troughs = signal.find_peaks(-sx, distance=distance)[0]
@@ -422,6 +427,8 @@ class FreeDecayResult:
 
 def _fit_damped_sinusoid(t: np.ndarray, a: np.ndarray, omega0: float, sigma0: float):
     """curve_fit of exp(-s t)(C1 cos w t + C2 sin w t) + b; returns (w, w_std, zeta, zeta_std)."""
+    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     tt = t - t[0]
     b0 = float(np.mean(a))
 
@@ -477,6 +484,8 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
         EstimationError: bad input, no oscillation, fewer than one full period above the noise,
             or an over-damped/unphysical result (zeta >= 1).
     """
+    from scipy import signal  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     t = check_time_vector(t_s, "t_s", min_samples=16)
     a_all = as_float_array(acceleration_m_s2, "acceleration_m_s2", 1)
     check_same_length(t_s=t, acceleration_m_s2=a_all)
@@ -651,6 +660,8 @@ def _simulate_decay(tt: np.ndarray, theta: np.ndarray, k: float, output: str):
     theta = (M, b1, b2, x0, v0, bias); tt: (n,) times from 0. Returns (y, J): the model output
     (n,) and its Jacobian (n, 6) with respect to theta.
     """
+    from scipy import integrate  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     M, b1, b2, x0, v0, bias = (float(p) for p in theta)
     z0 = np.zeros(12)
     z0[0], z0[1] = x0, v0
@@ -716,6 +727,8 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
         EstimationError: bad input (shapes, NaN, time, k <= 0, unknown output), fewer than 32
             samples, no oscillation, or a failed integration/fit.
     """
+    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     if output not in DECAY_OUTPUTS:
         raise EstimationError(f"output must be one of {', '.join(DECAY_OUTPUTS)}, got {output!r}")
     t = check_time_vector(t_s, "t_s", min_samples=32)

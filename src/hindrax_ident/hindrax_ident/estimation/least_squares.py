@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 from typing import Optional, Sequence
 
 import numpy as np
-from scipy import stats
 
 __all__ = [
     "EstimationError",
@@ -388,6 +387,8 @@ def confidence_interval(value, std, dof: int, level: float = 0.95):
     Raises:
         EstimationError: dof < 1, level outside (0, 1), negative std.
     """
+    from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     if not (0.0 < float(level) < 1.0):
         raise EstimationError(f"level must be in (0, 1), got {level}")
     if int(dof) != dof or dof < 1:

@@ -7,9 +7,11 @@ derives them in Sec. 3.1.3 (added mass) and 3.1.4 (damping); where the scripts a
 are followed, because they produced the printed tables:
 
 * Tables are interpolated with MATLAB's ``spline`` (not-a-knot cubic spline through the points, sorted by
-  abscissa, extrapolated with the end polynomials): ``scipy.interpolate.CubicSpline`` with its default
-  ``bc_type="not-a-knot"``. A lookup outside a table's abscissa range is an extrapolation; it is reported in
-  ``notes``.
+  abscissa, extrapolated with the end polynomials), what ``scipy.interpolate.CubicSpline`` with its default
+  ``bc_type="not-a-knot"`` gives (:func:`not_a_knot_spline`, written out: the identification node builds these
+  priors at start, and importing ``scipy.interpolate`` would cost its process 45 MB of proportional set size,
+  29 MB of it private, for four tables of 4-9 points; a test checks it against scipy). A lookup outside a table's
+  abscissa range is an extrapolation; it is reported in ``notes``.
 * Added mass 3D table (DNV-RP-H103 rectangular prism, thesis Table 3.2): the script's values
   ``[1 .68; 2 .36; 3 .24; 4 .19; 5 .15; 6 .14; 7 .11]`` (Table 3.2 prints 0.13 at 6 and a point at 10).
 * Surge added mass: the 3D value A_3D = C_a(L/a) L a^2 rho Cp_yz^2 Cp_xz Cp_xy with a = (H + W)/2 (eq. 3.3)
@@ -40,13 +42,13 @@ from dataclasses import dataclass
 from typing import Any, Optional, Sequence
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from .least_squares import EstimationError
 
 __all__ = [
     "Geometry",
     "PriorInputs",
+    "not_a_knot_spline",
     "added_mass_priors",
     "quadratic_damping_priors",
     "linear_damping_priors",
@@ -88,6 +90,42 @@ def _columns(rows: Sequence[Sequence[float]]) -> tuple[list[float], list[float]]
     return [float(r[0]) for r in rows], [float(r[1]) for r in rows]
 
 
+def not_a_knot_spline(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray):
+    """The not-a-knot cubic spline through the points (x, y) (MATLAB ``spline``; ``scipy.interpolate.CubicSpline``
+    with ``bc_type="not-a-knot"``): a function of a scalar returning a float, extrapolating with the end cubics.
+
+    x (n,) strictly increasing, y (n,), n >= 2 (2 points: the line, 3: the parabola through them, as scipy does).
+    Second derivatives M at the knots from the continuity of the first derivative at the interior knots and of the
+    third derivative at the second and the second-to-last knot (de Boor, "A Practical Guide to Splines", Ch. IV).
+    Raises EstimationError for fewer than 2 points or an x not strictly increasing."""
+    xa, ya = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    n = xa.size
+    if n < 2 or ya.shape != xa.shape or np.any(np.diff(xa) <= 0):
+        raise EstimationError("a spline needs 2 or more points with strictly increasing x")
+    if n == 3:  # not-a-knot through 3 points: one cubic piece with zero cubic term, the parabola
+        c = np.polyfit(xa, ya, 2)
+        return lambda v: float(np.polyval(c, float(v)))
+    h = np.diff(xa)
+    m: np.ndarray = np.zeros(n)
+    if n > 3:
+        a, b = np.zeros((n, n)), np.zeros(n)
+        slope = np.diff(ya) / h
+        for i in range(1, n - 1):
+            a[i, i - 1:i + 2] = h[i - 1], 2.0 * (h[i - 1] + h[i]), h[i]
+            b[i] = 6.0 * (slope[i] - slope[i - 1])
+        a[0, :3] = h[1], -(h[0] + h[1]), h[0]
+        a[-1, -3:] = h[-1], -(h[-2] + h[-1]), h[-2]
+        m = np.linalg.solve(a, b)
+
+    def value(v: float) -> float:
+        v = float(v)
+        i = int(np.clip(np.searchsorted(xa, v) - 1, 0, n - 2))
+        hi, left, right = h[i], xa[i + 1] - v, v - xa[i]
+        return float(m[i] * left ** 3 / (6.0 * hi) + m[i + 1] * right ** 3 / (6.0 * hi)
+                     + (ya[i] / hi - m[i] * hi / 6.0) * left + (ya[i + 1] / hi - m[i + 1] * hi / 6.0) * right)
+    return value
+
+
 class _Table:
     """MATLAB ``spline``/``ppval`` on one table column; records out-of-range lookups in ``notes``."""
 
@@ -95,7 +133,7 @@ class _Table:
         xa, ya = np.asarray(x, float), np.asarray(y, float)
         order = np.argsort(xa)
         self.name, self.x, self.notes = name, xa[order], notes
-        self.spline = CubicSpline(xa[order], ya[order], bc_type="not-a-knot")
+        self.spline = not_a_knot_spline(xa[order], ya[order])
 
     def __call__(self, value: float, what: str) -> float:
         if not (self.x[0] <= value <= self.x[-1]):

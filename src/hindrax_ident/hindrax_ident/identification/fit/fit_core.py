@@ -55,8 +55,6 @@ from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
-from scipy import optimize, stats
-from scipy import signal as _signal
 
 from ...estimation.least_squares import EstimationError
 from ...vehicle.thrust_lag import ThrustLag
@@ -607,6 +605,8 @@ class FitOutcome:
 def _equation_error_start(sd: SegmentData, dof: str, layout: list, a: np.ndarray) -> np.ndarray:
     """Bounded equation-error least squares of the model on the smoothed velocity ``sd.v_s`` and acceleration ``a``
     (m, L) at the ticks, within the bounds of ``layout`` (scipy ``lsq_linear``): the physical start of the fit."""
+    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     kinds = _kinds(layout)
     v = sd.v_s
     rows = [a]
@@ -654,6 +654,8 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
               f_scale: float | None = None, max_nfev: int | None = None) -> FitOutcome:
     """Output-error fit of ``layout`` on ``sd`` from ``theta0`` (module docstring, step 3). ``f_scale``: the robust
     loss's scale (default 3 x the MAD sigma of the residuals at ``theta0``)."""
+    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     lower = np.array([lb for _n, _k, lb, _ub in layout], dtype=float)
     upper = np.array([ub for _n, _k, _lb, ub in layout], dtype=float)
     th0 = np.clip(np.asarray(theta0, dtype=float), lower, upper)
@@ -829,6 +831,8 @@ def resolvable_delay(rec: DofRecord, max_delay_s: float, segment_s: float = SEGM
     quarter period of the highest frequency the response carries, d trades against the inertia-to-damping phase lag
     of the dynamics (at most 90 degrees), so the data no longer tell them apart. Never below two grid steps (the
     sample rate's resolution; sub-step values come from the parabola refinement)."""
+    from scipy import signal as _signal
+
     h = rec.h
     limits = [(float(max_delay_s), f"option max_delay_s {max_delay_s:g} s"),
               (DELAY_SEGMENT_FRACTION * segment_s,
@@ -1210,6 +1214,8 @@ class DofResult:
 
     @property
     def t_quantile(self) -> float:
+        from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
         return float(stats.t.ppf(0.975, self.covariance.t_dof))
 
 
@@ -1241,6 +1247,8 @@ def refine_delay(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
     tolerance) within +-2 grid steps of the equation-error estimate, the lag kept. The equation-error delay is
     biased by the Savitzky-Golay derivative and by the coupling it leaves out (yaw on the piloted test bags: 0.080 s
     against the generator's 0.050 s, cross-validated nrmse 0.058 against 0.017 at the true delay)."""
+    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     if rec.force_source != "wrench":
         return timing
     terms = Terms("both", rec.dof == "heave", coriolis=inertia is not None and rec.has_coupling)
@@ -1273,6 +1281,8 @@ def refine_delay(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
 
 def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts: CoreOptions) -> DofResult:
     """Intervals (:func:`cluster_covariance`) of the chosen candidate and the result."""
+    from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
     cov = cluster_covariance(chosen.fit, chosen.train, opts.min_clusters)
     std = np.sqrt(np.maximum(np.diag(cov.cov), 0.0))
     tq = float(stats.t.ppf(0.975, cov.t_dof))

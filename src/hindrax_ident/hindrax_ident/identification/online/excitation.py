@@ -47,7 +47,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import signal
 
 __all__ = ["EXCITATIONS", "BROADBAND", "DEFAULT_AMPLITUDE_FRACTION", "Multisine", "Prbs", "Chirp", "Band",
            "design_band", "steady_speed", "BoxShaping", "design_signal"]
@@ -127,6 +126,8 @@ class Prbs:
     _bits: np.ndarray = field(init=False, repr=False, default=None)
 
     def __post_init__(self) -> None:
+        from scipy import signal  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
         if not (2 <= int(self.nbits) <= 20):
             raise ValueError(f"prbs: nbits must be in 2..20, got {self.nbits}")
         if not (self.clock_s > 0 and self.amplitude > 0):
@@ -170,6 +171,8 @@ class Chirp:
 
     def value(self, t):
         """Force (N or N m) at ``t`` (s, scalar or array)."""
+        from scipy import signal  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
+
         t = np.minimum(np.asarray(t, dtype=float), self.duration_s)
         return self.amplitude * signal.chirp(t, self.f_min_hz, self.duration_s, self.f_max_hz,
                                              method="logarithmic", phi=-90.0)

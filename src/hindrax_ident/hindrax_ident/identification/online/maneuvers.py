@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
@@ -35,7 +34,7 @@ from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
 from ...control.law import ControlInput, ControlSettings, Controller
 from ...control.model import ControlModel, inertia_vector, model_from_config
-from ...vehicle.state import SensorState
+from ...vehicle.state import SensorState, rotation_ned_from_body
 
 __all__ = [
     "DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority", "level_ladder",
@@ -206,7 +205,7 @@ class HoldController:
             velocity_bandwidth_rad_s=velocity_gain * wn, hold_fraction=self.hold_fraction)
         dvl = self.cfg.sensors.dvl75
         roll, pitch, yaw = dvl.sensor_orientation_rpy_rad
-        beams = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix() @ np.asarray(beam_directions_frd()).T
+        beams = rotation_ned_from_body(roll, pitch, yaw) @ np.asarray(beam_directions_frd()).T
         return Controller(self.model, self.authority, settings,
                           ping_position_frd_m=self.cfg.sensors.ping1d.position_frd_m,
                           dvl_position_frd_m=dvl.position_frd_m, dvl_beams_frd=beams.T,
