@@ -22,6 +22,10 @@ How the command acts (``actuation``):
   and deadband (``ros_ws/config/truth``) make the real force differ from the recorded command, as on a real
   vehicle; ``delay_s`` adds a transport delay before the allocation.
 
+With ``"thrusters"`` the bag also holds ``/allocation/status`` hindrax_msgs/msg/AllocationStatus (``base_link``), one
+per allocated command, as the allocation node publishes it: the requested and the achieved wrench (its thrusters'
+limits: saturation), header stamp = the command's stamp, received when it is allocated.
+
 The bag (:class:`hindrax_drivers.recording.writer.BagWriter`) holds, REP-103 FLU (:mod:`hindrax_drivers.frames`):
 
 * ``/wrench`` geometry_msgs/msg/WrenchStamped, ``base_link``, at ``control_hz`` (the commanded wrench, stamped at
@@ -56,6 +60,7 @@ from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import VehicleConfig
 from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+from hindrax_msgs.msg import AllocationStatus
 
 from .simulator import Simulator
 
@@ -206,6 +211,19 @@ class _Autopilot:
         return np.array([x, y, z, n])
 
 
+def _allocation_status(res, stamp_ns: int) -> AllocationStatus:
+    """The allocation node's ``allocation/status`` of one allocation ``res`` (FluAllocation) of the command
+    stamped ``stamp_ns``."""
+    st = AllocationStatus(scale=float(res.scale), thruster_saturated=[bool(x) for x in res.saturated],
+                          saturated=bool(np.any(res.saturated)))
+    _stamp(st.header, stamp_ns)
+    st.header.frame_id = "base_link"
+    for wrench, vec in ((st.requested_wrench, res.requested_wrench_flu), (st.achieved_wrench, res.achieved_wrench_flu)):
+        wrench.force.x, wrench.force.y, wrench.force.z = (float(x) for x in vec[:3])
+        wrench.torque.x, wrench.torque.y, wrench.torque.z = (float(x) for x in vec[3:])
+    return st
+
+
 def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                       settings: PilotSettings = PilotSettings(), truth=None) -> Path:
     """Fly one run (module docstring) and write it to the bag directory ``bag_dir``; returns the path.
@@ -244,7 +262,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     n_ticks = int(s.duration_s / tick_s)
     vel_every = max(1, int(round(s.control_hz / s.velocity_hz)))
     sat = np.array([s.max_force_n[0], s.max_force_n[0], s.max_force_n[1], s.max_moment_n_m])
-    pending: list[tuple[float, np.ndarray]] = []
+    pending: list[tuple[float, np.ndarray, int]] = []  # (time it acts, wrench FRD, command stamp ns)
     jitter = np.zeros(4)
     twist_held = np.zeros(6)
     r_dvl = np.asarray(vc.sensors.dvl75.position_frd_m, dtype=float)
@@ -256,6 +274,8 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     bag = Path(bag_dir)
     with BagWriter(bag, WriterOptions(fsync=False)) as w:
         w.add_topic("/wrench", "geometry_msgs/msg/WrenchStamped")
+        if core is not None:
+            w.add_topic("/allocation/status", "hindrax_msgs/msg/AllocationStatus")
         if dvl:
             w.add_topic("/dvl/twist", "geometry_msgs/msg/TwistWithCovarianceStamped")
             w.add_topic("/imu", "sensor_msgs/msg/Imu")
@@ -330,8 +350,8 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
             jitter = 0.9 * jitter + 0.1 * rng.normal(0.0, 1.0, 4) * sat * s.jitter * 3.0
             cmd4 = np.clip(u4 + jitter, -sat, sat)
             wrench_frd = np.array([cmd4[0], cmd4[1], cmd4[2], 0.0, 0.0, cmd4[3]])
-            pending.append((t + s.delay_s, wrench_frd))
             t_ns = EPOCH_NS + int(round(t * 1e9))
+            pending.append((t + s.delay_s, wrench_frd, t_ns))
             # commanded wrench, FLU
             wm = WrenchStamped()
             _stamp(wm.header, t_ns)
@@ -383,14 +403,17 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                 ts = t + i * sim.step_s
                 apply = None
                 while pending and pending[0][0] <= ts + 1e-9:
-                    apply = pending.pop(0)[1]
+                    _t_act, apply, cmd_ns = pending.pop(0)
                 if core is None:
                     samples = sim.step(None, apply)
                 else:
                     widths = None
                     if apply is not None:  # allocated to the thrusters; the ESC writes the wire widths
-                        logical = core.allocate(frames.wrench_frd_to_flu(apply)).pulse_width_us
+                        res = core.allocate(frames.wrench_frd_to_flu(apply))
+                        logical = res.pulse_width_us
                         widths = np.where(rev, 2.0 * neutral - logical, logical) + trim
+                        out.append((EPOCH_NS + int(round(ts * 1e9)) + int(rng.uniform(0.0, 0.005) * 1e9),
+                                    "/allocation/status", _serialize(_allocation_status(res, cmd_ns))))
                     samples = sim.step(widths)
                 if dvl and samples:
                     on_samples(samples)
