@@ -277,9 +277,10 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
             proc.wait()
 
 
-def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_not_dispatched():
-    """On the system clock the node's five inputs live on its intake node (no executor dispatches them): a spinning
-    executor leaves them queued, and the tick hands them to the handlers (armed flag, widths, sensor samples)."""
+def test_on_the_system_clock_the_inputs_are_callbacks_as_with_sim_time():
+    """On the system clock (the vehicle) the node's five inputs are subscription callbacks of the node itself, as with
+    use_sim_time (issue 47 item 1: one input path): each message reaches its handler once (armed flag, widths, sensor
+    samples)."""
     from rclpy.executors import SingleThreadedExecutor
 
     from hindrax_ident.identification.online.node import IdentificationNode
@@ -294,23 +295,20 @@ def test_on_the_system_clock_the_inputs_are_polled_at_the_tick_not_dispatched():
         try:
             inputs = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
                       "/thrusters/pulse_width"}
-            assert node.intake is not None
-            assert not inputs & {s.topic_name for s in node.subscriptions}
-            assert inputs == {s.topic_name for s in node.intake.node.subscriptions}
+            assert inputs <= {s.topic_name for s in node.subscriptions}
+            assert "identification_intake" not in probe.get_node_names()
             pwm = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
             imu = probe.create_publisher(Imu, "imu/data_raw", 10)
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
             wait_until(lambda: pwm.get_subscription_count() == 1 and imu.get_subscription_count() == 1, 10, spin,
-                       "intake matched")
+                       "subscriptions matched")
             pwm.publish(ThrusterPwm(pulse_width_us=[1600.0] * 8, armed=True))
             m = Imu()
             m.header.stamp = probe.get_clock().now().to_msg()
             imu.publish(m)
-            # the executor spins the node: its tick takes the inputs
             wait_until(lambda: node._armed and any(d.startswith("icm20948") for d in node._seen), 10, spin,
-                       "the tick took the armed flag and the IMU sample")
+                       "the armed flag and the IMU sample taken")
             assert node._written.tolist() == [1600.0] * 8 and node._pwm_count == 1
-            assert node.take_inputs() == 0  # each message handed over once
         finally:
             ex.shutdown()
             probe.destroy_node()

@@ -73,12 +73,10 @@ Action execution
     busy loop (72 % of a core in the launch layout while a goal ran; docs/architecture.md §11.5). With the
     SingleThreadedExecutor the same coroutine costs about 20 % of a core; without it the node costs about 5 % idle
     and 10-13 % running a goal (docs/architecture.md §10.1).
-CPU
-    On the system clock (the vehicle; ``use_sim_time`` false) the five inputs are polled subscriptions
-    (:class:`~hindrax_drivers.polled_input.PolledInputs`, as the recorder's): no executor wake-up per
-    message (about 130-180 messages/s); every tick first hands what arrived to the same handlers, so the tick sees
-    what the callbacks would have delivered by then (the samples keep their header stamps and are ordered by
-    them). With ``use_sim_time`` (the stepped simulation, ``hindrax run``) the inputs are callbacks.
+Inputs
+    The five inputs (about 130-180 messages/s) are subscription callbacks on the node's executor, whatever the clock
+    (the vehicle, the virtual pool, ``hindrax run`` and the tests take the same path); the samples keep their header
+    stamps and the executive orders them by stamp at its tick.
 Safety (docs/architecture.md §8)
     Limits of the executive (depth, altitude, roll, pitch, pool box) plus DVL lock and ESC disarm abort the
     goal; the vehicle is brought to neutral thrust at the end, on abort and on cancel, before the action ends.
@@ -108,7 +106,6 @@ from hindrax_drivers.lean_cdr import wrench_stamped_cdr
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node
-from hindrax_drivers.polled_input import PolledInputs, PolledInputsMixin, subscribe_input
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
@@ -206,7 +203,7 @@ class _GoalRun:
     calibration_results: int = 0  # step results of this goal already published on identification/calibration
 
 
-class IdentificationNode(PolledInputsMixin, Node):
+class IdentificationNode(Node):
     """The identification executive as a ROS node (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters,
@@ -259,14 +256,8 @@ class IdentificationNode(PolledInputsMixin, Node):
                   (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
                   (Imu, "imu/data_raw", self._on_imu, 50), (Range, "ping/altitude", self._on_range, 20),
                   (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))
-        #: on the system clock the inputs are polled at every tick (module docstring, "CPU"; :meth:`take_inputs` hands
-        #: them over topic by topic, the executive orders the samples by stamp, :func:`ordered_samples`); None with
-        #: use_sim_time
-        self.intake: PolledInputs | None = self.open_inputs("intake")
-        # every handler only reads fields: taken lean when polled (CDR decoded by rosbags, hindrax_drivers.lean_cdr:
-        # 31 instead of 77 us per Imu, docs/architecture.md §10.1)
-        for msg_type, topic, handler, depth in inputs:
-            subscribe_input(self, self.intake, msg_type, topic, handler, depth, lean=True, **sub_ev)
+        for msg_type, topic, handler, depth in inputs:  # callbacks (module docstring, "Inputs")
+            self.create_subscription(msg_type, topic, handler, depth, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10, **pub_ev)
         self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50, **pub_ev)
@@ -429,7 +420,6 @@ class IdentificationNode(PolledInputsMixin, Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_tick(self) -> None:
-        self.take_inputs()
         now = self.get_clock().now()
         t = now.nanoseconds * 1e-9
         run = self._run
