@@ -1,27 +1,30 @@
 """Light decoding and encoding of CDR bytes: ``rosbags``' generated (de)serialisers instead of rclpy's classes.
 
-Why (docs/architecture.md §10.1): taking a message as an rclpy object is mostly its conversion into Python objects,
-not DDS. Measured here (one process, 50 queued messages per take, thread CPU per message): an
-``Imu`` taken as an object 77 us, as CDR bytes 11 us; ``hindrax_msgs/Dvl`` 85 and 12 us; ``ThrusterPwm`` 43 and
-11 us. ``rosbags`` (a maintained bag library the project already uses) decodes the same bytes in 20, 29 and 10 us
-with deserialisers it generates per type, so a node that reads a few fields of every sample takes ``Imu`` for about
-31 us instead of 77. Its objects have the ROS field names (nested messages as objects, numeric arrays as numpy
-arrays), so a handler written for the rclpy message reads them unchanged; they are read-only data, not rclpy
-messages (no ``publish``, no rclpy type checks).
+Taking or publishing a message as an rclpy object is mostly its conversion between Python and C structures, not
+DDS. Measured here (one process, thread CPU per message): an ``Imu`` converted from bytes into an rclpy object 77 us,
+decoded by rosbags 31 us; ``hindrax_msgs/Dvl`` 85 and 41 us. Its objects have the ROS field names (nested messages as
+objects, numeric arrays as numpy arrays), so a handler written for the rclpy message reads them unchanged; they are
+read-only data, not rclpy messages (no ``publish``, no rclpy type checks).
+
+Where it is used, and why (every input is a subscription callback, the one input path of every node):
+
+* publishing the 50 Hz chain as bytes (:func:`cdr_encoder` of a rosbags object, ``Publisher.publish(bytes)``): the
+  identification node's ``wrench`` (:func:`wrench_stamped_cdr`), the allocation's command and the ESC's
+  ``thrusters/pulse_width`` (:func:`thruster_pwm_lean`, :func:`thruster_pwm_cdr`), the IMU (:func:`imu_cdr`) and
+  the safety heartbeats (:func:`diagnostic_status_cdr`). Measured: ``WrenchStamped`` 0.22-0.23 ms per publish of
+  an rclpy object, 0.17-0.18 ms building a rosbags object and publishing its bytes; ``Imu`` 0.30-0.31 -> 0.23-0.25
+  ms. The bytes differ from rclpy's only in padding (rosbags zeroes it), and every reader decodes them to the same
+  message (test_lean_cdr.py);
+* decoding (:func:`cdr_decoder`): the supervisor's ``imu/data_raw``, whose freshness check compares the bytes, and
+  the allocation's 50 Hz ``wrench`` (a subscribing process took 2.0 % of a core with rclpy objects, 1.7 % with
+  bytes decoded here). For a node's inputs in general it is not used: with callbacks at the controller's input
+  rates (186 msg/s: DVL, pressure, altitude 10 Hz, IMU 51 Hz, widths and wrench 50 Hz, allocation status 5 Hz) a
+  subscriber process took 3.0 / 5.1 / 3.8 % of a core with rclpy objects and 4.5 / 3.8 / 5.2 % with bytes decoded
+  here (three alternating 15 s windows each, load 14-19 on 2 cores): no margin beyond the spread.
 
 :func:`cdr_decoder` returns ``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class. The project's
 own interfaces (``hindrax_msgs``) are registered from their installed ``.msg`` files
 (:func:`hindrax_drivers.recording.msgdefs.message_definition`), the standard ones come with rosbags' Jazzy store.
-
-The same holds on the way out, on the 50 Hz wrench -> registers chain: an rclpy ``publish`` of a message object
-converts it into C structures before Fast DDS serialises it, and rclpy's EventsExecutor builds a Python object per
-received message before the callback. :func:`cdr_encoder` serialises a rosbags object (its classes:
-:func:`lean_class`) into bytes that rclpy publishes as they are (``Publisher.publish(bytes)``), and a subscription
-created with ``raw=True`` hands the callback bytes for :func:`cdr_decoder`. Measured here (a 50 Hz
-``WrenchStamped`` stream between two processes): publisher 0.216-0.233 ms per message object,
-0.169-0.178 ms building a rosbags object, serialising and publishing the bytes; the subscribing process 2.0 % of a core
-taking message objects, 1.7 % taking bytes and decoding them with rosbags. The bytes differ from rclpy's only in
-padding (rosbags zeroes it), and every reader decodes them to the same message (test_lean_cdr.py).
 """
 from __future__ import annotations
 
