@@ -30,6 +30,19 @@ from hindrax_msgs.msg import ManeuverStatus, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 
+#: This one process carries the whole vehicle graph and a real-time simulator on the wall clock, its sensors served
+#: by threads of this process. On a loaded 2-core machine its supervisor ended the campaign before the Ctrl-C this
+#: test is about: the IMU at 19.7 Hz (minimum 20) at load 17; with two busy processes beside it, the DVL 2 s without
+#: a valid velocity, then at 0.7 Hz with samples 1.0 s old. The supervisor's sensor watch is not what is tested here
+#: (test_supervisor.py checks it on its core with the time given; the launch layout runs each sensor process alone):
+#: the rates are unwatched and the ages and reaction times at the schema's maxima (10 s).
+SENSOR_WATCH_FOR_A_LOADED_MACHINE = {
+    **{f"supervisor.min_rate.{s}_hz": 0.0 for s in ("dvl", "altimeter", "pressure", "imu")},
+    **{f"supervisor.rate_check_disabled.{s}": "test_ident_vehicle_graph: one process on a loaded machine"
+       for s in ("dvl", "altimeter", "pressure", "imu")},
+    "supervisor.reaction_time_s": 10.0, "supervisor.max_invalid_dvl_s": 10.0, "supervisor.max_sample_age_s": 10.0}
+
+
 def _lines(stream, out: queue.Queue) -> None:
     for line in iter(stream.readline, ""):
         out.put(line)
@@ -38,7 +51,7 @@ def _lines(stream, out: queue.Queue) -> None:
 
 def test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral():
     overrides = {"esc.arming_time_s": 0.5, "pool.start_position_ned_m": [5.0, 3.0, 0.8],
-                 "simulation.real_time_factor": 1.0}
+                 "simulation.real_time_factor": 1.0, **SENSOR_WATCH_FOR_A_LOADED_MACHINE}
     if "esc.oscillator_calibrated" in load_config(default_config_path()).flat:
         overrides["esc.oscillator_calibrated"] = True  # the emulated PCA9685 runs at esc.oscillator_hz exactly
     cfg = load_config(default_config_path(), overrides)
