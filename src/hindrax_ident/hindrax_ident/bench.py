@@ -31,6 +31,7 @@ BENCHMARKS: dict[str, str | tuple[str, ...]] = {
     "safety": ("hindrax_ident.benchmarks.safety", "hindrax_ident.benchmarks.participant_churn"),
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
+    "i2c_socket": "hindrax_ident.benchmarks.i2c_socket",
     "identification": "hindrax_ident.benchmarks.identification",
     "ident_fit": "hindrax_ident.benchmarks.ident_fit",
     "scenarios": "hindrax_ident.benchmarks.scenarios",
