@@ -35,7 +35,7 @@ from .transport.emulated_i2c import EmulatedI2CBus
 from .transport.pty_device import PtyDevice
 from .transport.socket_i2c import SOCKET_ENV, I2CSocketServer
 
-__all__ = ["EmulatedDevices", "SERIAL_DEVICES", "I2C_DEVICES"]
+__all__ = ["EmulatedDevices", "SERIAL_DEVICES", "I2C_DEVICES", "driver_env", "driver_ros_arguments"]
 
 #: launch-file node name -> configuration section of its serial port
 SERIAL_DEVICES = {"dvl75": "sensors.dvl75", "ping1d": "sensors.ping1d"}
@@ -45,6 +45,20 @@ I2C_DEVICES = ("ms5837", "icm20948", "esc", "output_guard")
 _DEPTH_M, _ALTITUDE_M, _WOBBLE_M = 1.0, 1.5, 0.02
 _SURFACE_PA, _RHO_KG_M3, _G_M_S2 = 101325.0, 1000.0, 9.80665
 _EARTH_FIELD_T = (2.0e-5, 0.0, 4.0e-5)
+
+
+def driver_ros_arguments(ports: dict[str, str], name: str) -> list[str]:
+    """Extra ``--ros-args`` for the driver process of launch node ``name``: its serial port from ``ports`` (node name
+    -> path) as the ``sensors.<device>.port`` parameter; [] for a node without one."""
+    if name in SERIAL_DEVICES and name in ports:
+        return ["-p", f"{SERIAL_DEVICES[name]}.port:={ports[name]}"]
+    return []
+
+
+def driver_env(socket_path: str, name: str) -> dict[str, str]:
+    """Extra environment for the driver process of launch node ``name``: the emulated I2C bus's socket
+    (:data:`~hindrax_drivers.transport.socket_i2c.SOCKET_ENV`) for a node on the bus, else {}."""
+    return {SOCKET_ENV: socket_path} if name in I2C_DEVICES else {}
 
 
 def _wobble(t_s: float, period_s: float, amplitude: float) -> float:
@@ -89,13 +103,11 @@ class EmulatedDevices:
 
     def ros_arguments(self, name: str) -> list[str]:
         """Extra ``--ros-args`` for the driver process of node ``name`` (its emulated serial port), else []."""
-        if name in SERIAL_DEVICES:
-            return ["-p", f"{SERIAL_DEVICES[name]}.port:={self._serial[name].path}"]
-        return []
+        return driver_ros_arguments(self.ports, name)
 
     def env(self, name: str) -> dict[str, str]:
         """Extra environment for the driver process of node ``name`` (the emulated I2C bus), else {}."""
-        return {SOCKET_ENV: self.socket_path} if name in I2C_DEVICES else {}
+        return driver_env(self.socket_path, name)
 
     # -- a pool day ---------------------------------------------------------------------------------
     def unplug(self, name: str) -> None:

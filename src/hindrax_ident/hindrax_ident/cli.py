@@ -95,6 +95,10 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("control", "scenarios"), "hindrax_ident.commands.control",
      "for each scenario truth: identify in-process, then compare the depth and altitude holds of the identified model "
      "and the vehicle file (control_scenarios.md/.json)"),
+    (("control", "hold"), "hindrax_ident.commands.control_hold",
+     "the running controller holds a depth or an altitude (--depth-m / --altitude-m) and the heading, or where it is"),
+    (("control", "release"), "hindrax_ident.commands.control_hold",
+     "the running controller lets go (zero wrench)"),
     (("control", "model"), "hindrax_ident.commands.control",
      "the controller's gains and the source of each model value (--model identification.yaml or the vehicle file)"),
     (("sros2", "policy"), "hindrax_ident.commands.sros2",

@@ -192,6 +192,20 @@ class VirtualHardware:
             sim_node.add_clock_listener(link.tick)
             sim_node.add_step_gate(link.settled)
 
+    def serve_serial(self, lock: Any = None) -> None:
+        """Serve the DVL-75 and Ping1D ptys from their own threads (built with ``serial_threads=False``), each
+        emulator call under ``lock`` when given (the lock that also guards the simulator's stepping).
+
+        Raises:
+            RuntimeError: the ptys are served already (threads or :meth:`lock_step_serial`), or there are none.
+        """
+        if not self._ptys or any(p.threaded for p in self._ptys) or self.serial_lock_steps:
+            raise RuntimeError("serve_serial needs VirtualHardware(serve_serial=True, serial_threads=False), once")
+        for pty in self._ptys:
+            if lock is not None:
+                pty.lock = lock
+            pty.start()
+
     def serial_startup_done(self) -> bool:
         """:meth:`SerialLockStep.startup_done` of every lock-stepped serial device (True when there is none)."""
         return all([link.startup_done() for link in self.serial_lock_steps.values()])
