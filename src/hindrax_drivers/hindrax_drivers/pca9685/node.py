@@ -368,11 +368,15 @@ class EscNode(Node):
 
     def close(self) -> None:
         """Shutdown path: disarm and write neutral (SIGINT/SIGTERM via run_node, or destroy by the owner); waits up
-        to 1 s for the worker to write it."""
+        to 1 s for the worker to write it. Its results are taken at the next tick, if the node still runs (the
+        ROS context may be gone: nothing is published here)."""
         self.link.closing = True
-        self.core.disarm("shutdown")
-        self._safe_neutral("shutdown")
-        self.chip_io.wait_idle(1.0)
+        try:
+            self.core.disarm("shutdown")
+            self._safe_neutral("shutdown")
+            self.chip_io.wait_idle(1.0)
+        finally:
+            self.link.closing = False
 
     def destroy_node(self) -> None:
         self.chip_io.stop()

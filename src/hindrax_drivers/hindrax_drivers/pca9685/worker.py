@@ -145,6 +145,8 @@ class ChipWorker:
             self._cv.notify()
         if not self.threaded:
             self.run_pending()
+        elif job.kind == NEUTRAL:
+            time.sleep(0)  # release the GIL now: the worker writes the neutral without waiting for a switch interval
         return job
 
     def results(self) -> list[ChipResult]:
