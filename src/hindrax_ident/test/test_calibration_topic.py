@@ -150,7 +150,8 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     step. Without the message: no such sections and the force unscaled."""
     from builtin_interfaces.msg import Time
 
-    from hindrax_ident.identification.bag_input import from_bag
+    from hindrax_ident.identification.assessment import report
+    from hindrax_ident.identification.fit import campaign_fit
     from hindrax_ident.identification.fit.calibration import thrust_scales
 
     cfg = load_config(default_config_path())
@@ -165,9 +166,10 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
         seen.append(record)
         return {"heave": _ident("heave", [37.7, 93.5, 56.6, 5.3, 11.8, 0.78], [0.5, 3, 3, 3, 3, 0.05], cfg_)}, {}
 
-    # from_bag's own bindings (it imports both at its top): the other tests of this module see the real ones
-    monkeypatch.setattr(from_bag, "identify_all_with_errors", fake_identify)
-    monkeypatch.setattr(from_bag, "write_report", lambda out, *a, **k: out.mkdir(parents=True, exist_ok=True))
+    # the bindings identify_bag and write_outputs use (campaign_fit's own, report's own): the other tests of this
+    # module see the real ones
+    monkeypatch.setattr(campaign_fit, "identify_all_with_errors", fake_identify)
+    monkeypatch.setattr(report, "write_report", lambda out, *a, **k: out.mkdir(parents=True, exist_ok=True))
     assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "out")]) == 0, capsys.readouterr().err
     doc = yaml.safe_load((tmp_path / "out" / "identification.yaml").read_text())
     (rec,) = seen
