@@ -48,7 +48,7 @@ def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     assert not EXIT_NOISE.search(proc.stdout + proc.stderr), EXIT_NOISE.search(proc.stdout + proc.stderr)
 
     doc = read_identification(out / "identification.yaml")
-    hs, hh = cfg.hydrodynamics("surge"), cfg.hydrodynamics("heave")
+    hs, hh = cfg.dof_hydrodynamics("surge"), cfg.dof_hydrodynamics("heave")
     v, env = cfg.vehicle, cfg.environment
     bias_heave = (env.water_density_kg_m3 * v.displaced_volume_m3 - v.mass_kg) * env.gravity_m_s2  # 0.785 N
     truth = {

@@ -42,14 +42,14 @@ def test_seed_numbers(cfg):
     # [Hindrax-AM] Table 6
     assert np.diag(cfg.added_mass_matrix)[:3].tolist() == [12.08, 19.43, 22.48]
     # [Hindrax-Drag] Table 3, including the direction-dependent heave rows
-    assert cfg.hydrodynamics("surge").quadratic_damping_positive == 66.48
-    assert cfg.hydrodynamics("sway").linear_damping_positive == 14.54
-    heave = cfg.hydrodynamics("heave")
+    assert cfg.dof_hydrodynamics("surge").quadratic_damping_positive == 66.48
+    assert cfg.dof_hydrodynamics("sway").linear_damping_positive == 14.54
+    heave = cfg.dof_hydrodynamics("heave")
     assert (heave.quadratic_damping_positive, heave.linear_damping_positive) == (93.52, 5.26)
     assert (heave.quadratic_damping_negative, heave.linear_damping_negative) == (56.57, 11.84)
-    assert cfg.hydrodynamics("yaw").quadratic_damping_positive == 0.55
+    assert cfg.dof_hydrodynamics("yaw").quadratic_damping_positive == 0.55
     # substituted negative linear damping (roll -0.12, pitch -0.13 in Table 3) is non-negative
-    assert all(cfg.hydrodynamics(d).linear_damping_positive >= 0 for d in DOFS)
+    assert all(cfg.dof_hydrodynamics(d).linear_damping_positive >= 0 for d in DOFS)
     # PWM range, [Hindrax-Drag] §2.2.1
     t = cfg.thrusters
     assert (t.pulse_width_min_us, t.pulse_width_neutral_us, t.pulse_width_max_us) == (1100.0, 1500.0, 1900.0)

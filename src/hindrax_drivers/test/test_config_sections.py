@@ -17,8 +17,6 @@ from hindrax_drivers.config.typed_sections import Section
 ROOT = Path(__file__).resolve().parents[3]
 KIND_TYPES = {"float": float, "int": int, "str": str, "bool": bool, "float[]": tuple[float, ...],
               "str[]": tuple[str, ...]}
-#: section name -> VehicleConfig attribute holding its typed object (where a derived view took the plain name)
-ATTRIBUTE = {"hydrodynamics": "hydrodynamics_section", "calibration": "calibration_section"}
 
 
 def _leaf_fields(cls: type, prefix: str) -> dict[str, object]:
@@ -33,7 +31,7 @@ def _leaf_fields(cls: type, prefix: str) -> dict[str, object]:
 
 
 def _section_class(section: str) -> type:
-    return typing.get_type_hints(getattr(VehicleConfig, ATTRIBUTE.get(section, section)).func)["return"]
+    return typing.get_type_hints(getattr(VehicleConfig, section).func)["return"]
 
 
 def test_generated_sections_are_current():
@@ -73,7 +71,7 @@ def test_typed_sections_hold_the_validated_values():
     for section in c.SECTIONS:
         if section == "thrusters":
             continue
-        obj = getattr(cfg, ATTRIBUTE.get(section, section))
+        obj = getattr(cfg, section)  # every section under its own name
         for key in _leaf_fields(type(obj), section):
             value = obj
             for part in key.split(".")[1:]:

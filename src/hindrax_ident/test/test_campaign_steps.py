@@ -169,7 +169,7 @@ def test_broadband_run_is_one_run_shaped_into_the_box(cfg):
 @pytest.fixture(scope="module")
 def vertical(cfg):
     """Dive, the known sinker, then the known float, against the asymmetric truth."""
-    c = cfg.calibration
+    c = cfg.known_forces
     _, rec = _run(cfg, [Dive(), Ballast(c.ballast_weight_in_water_n, SETTLE_S, WINDOW_S),
                         Float(c.float_net_buoyancy_n, SETTLE_S, WINDOW_S)], seed=2, truth=ASYMMETRIC)
     assert not rec.aborted, rec.abort_reason
@@ -205,7 +205,7 @@ def test_the_sinker_is_held_by_reverse_thrust(cfg, vertical):
 
 def test_the_float_is_held_by_forward_thrust(cfg, vertical):
     e = vertical.calibration["vertical_negative"]
-    b, f = _net_buoyancy(cfg), cfg.calibration.float_net_buoyancy_n
+    b, f = _net_buoyancy(cfg), cfg.known_forces.float_net_buoyancy_n
     assert e["method"] == "float" and e["direction"] == "-z" and e["known_force_n"] == pytest.approx(f)
     assert e["forward_force_n"][1] == pytest.approx((b + f) / FWD, rel=0.03)
     assert abs(e["reverse_force_n"][1]) < 0.05
@@ -225,7 +225,7 @@ def test_a_line_pull_sees_two_thrusters_each_way(cfg):
     """The 55-degree layout: a horizontal force is held by two thrusters turning forward and two in reverse with
     equal thrust, in either sense, so a pull measures the mean of the two horizontal scales (0.90 here). The pull
     along -x (line_pull_negative); +x and +y: test_thrust_calibration.py."""
-    f = cfg.calibration.line_pull_force_n
+    f = cfg.known_forces.line_pull_force_n
     _, rec = _run(cfg, [Dive(), LinePull("surge", f, -1, 4.0, 9.0)], seed=2, truth=ASYMMETRIC)
     assert not rec.aborted, rec.abort_reason
     for key, sense in (("surge_negative", -1.0),):

@@ -137,7 +137,7 @@ def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
     assert r.method == "output-error"
     assert r.pool_time_s < 60.0  # 40 s run plus the settling
     m_true = cfg.vehicle.mass_kg + float(cfg.added_mass_matrix[0, 0])  # rigid + added mass of the vehicle file
-    kq_true = float(cfg.hydrodynamics("surge").quadratic_damping_positive)
+    kq_true = float(cfg.dof_hydrodynamics("surge").quadratic_damping_positive)
     assert r.values["inertia"] == pytest.approx(m_true, rel=0.15)
     assert r.values["quadratic_damping"] == pytest.approx(kq_true, rel=0.15)
     # the dead-reckoned track stayed inside the pool box (truth position of the simulator)

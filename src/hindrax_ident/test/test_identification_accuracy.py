@@ -31,7 +31,7 @@ def test_surge_and_heave_recover_the_configured_hydrodynamics():
     idents, errors = identify_all_with_errors(record, cfg)
     assert errors == {} and set(idents) == {"surge", "heave"}
 
-    hs, hh = cfg.hydrodynamics("surge"), cfg.hydrodynamics("heave")
+    hs, hh = cfg.dof_hydrodynamics("surge"), cfg.dof_hydrodynamics("heave")
     v, env = cfg.vehicle, cfg.environment
     bias_heave = (env.water_density_kg_m3 * v.displaced_volume_m3 - v.mass_kg) * env.gravity_m_s2  # 0.785 N
     expected = {

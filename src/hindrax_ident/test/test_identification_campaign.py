@@ -116,7 +116,7 @@ def test_roll_and_pitch_rotate_to_the_test_angle_return_and_are_identified(cfg):
         # restoring moment z_g W - z_b B (CB 3 cm above the CG)
         r = identify_dof(rec, dof, cfg)
         i = {"roll": 0, "pitch": 1}[dof]
-        h = cfg.hydrodynamics(dof)
+        h = cfg.dof_hydrodynamics(dof)
         assert r.values["inertia"] == pytest.approx(cfg.inertia_matrix_kg_m2[i, i] + h.added_mass, rel=0.10)
         assert r.values["quadratic_damping"] == pytest.approx(h.quadratic_damping_positive, rel=0.10)
         assert r.values["restoring"] == pytest.approx(0.03 * cfg.buoyancy_n, rel=0.10)

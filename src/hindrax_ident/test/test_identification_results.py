@@ -126,7 +126,7 @@ def test_overrides_feed_configuration_and_simulator(cfg, tmp_path):
     overrides = to_config_overrides(doc)
     cfg2 = load_config(default_config_path(), overrides=overrides)
     for d in DOFS:
-        h0, h2 = cfg.hydrodynamics(d), cfg2.hydrodynamics(d)
+        h0, h2 = cfg.dof_hydrodynamics(d), cfg2.dof_hydrodynamics(d)
         assert h2.added_mass == pytest.approx(doc["dofs"][d]["added_mass"]["value"])
         assert h2.quadratic_damping_positive == pytest.approx(1.2 * h0.quadratic_damping_positive)
         assert h2.linear_damping_negative == pytest.approx(1.2 * h0.linear_damping_negative)

@@ -166,7 +166,7 @@ def test_energy_conserved_without_damping_and_restoring(neutral_cfg):
 def test_steady_speed_pure_load(neutral_cfg, dof, load):
     """A constant pure force/moment at the CG gives the positive root of k_q|v|v + k_l v = F (b = 0)."""
     i = DOFS.index(dof)
-    h = neutral_cfg.hydrodynamics(dof)
+    h = neutral_cfg.dof_hydrodynamics(dof)
     sign = 1.0 if load > 0 else -1.0
     kq = h.quadratic_damping_positive if sign > 0 else h.quadratic_damping_negative
     kl = h.linear_damping_positive if sign > 0 else h.linear_damping_negative
@@ -185,7 +185,7 @@ def test_steady_speed_pure_load(neutral_cfg, dof, load):
 def test_steady_heave_with_net_buoyancy(cfg, force):
     """Heave keeps the real buoyancy: k_q|w|w + k_l w + b = Z with b = B - W (0.785 N, [Hindrax-Drag] §5), the
     positive-heave (down, w > 0) coefficients for w > 0 and the negative-heave ones for w < 0."""
-    h = cfg.hydrodynamics("heave")
+    h = cfg.dof_hydrodynamics("heave")
     b = cfg.buoyancy_n - cfg.weight_n
     net = force - b
     if net > 0:
@@ -206,7 +206,7 @@ def test_initial_acceleration_is_force_over_total_mass(neutral_cfg, dof):
     i = DOFS.index(dof)
     load = 10.0 if i < 3 else 0.5
     inertia = neutral_cfg.vehicle.mass_kg if i < 3 else neutral_cfg.vehicle.inertia_kg_m2[i - 3]
-    total = inertia + neutral_cfg.hydrodynamics(dof).added_mass
+    total = inertia + neutral_cfg.dof_hydrodynamics(dof).added_mass
     sim = Simulator(neutral_cfg, pool=False, sensors=False)
     sim.reset(position_ned_m=[0, 0, 10], rpy_rad=[0, 0, 0])
     wrench = np.zeros(6)
@@ -222,7 +222,7 @@ def test_thruster_step_acceleration_and_lag(neutral_cfg):
     c4, c3, c2, c1 = neutral_cfg.thrusters.curve_positive
     f_one = c4 * p_us ** 3 + c3 * p_us ** 2 + c2 * p_us + c1
     x_force = 2.0 * f_one * math.cos(math.radians(55.0))
-    total = neutral_cfg.vehicle.mass_kg + neutral_cfg.hydrodynamics("surge").added_mass
+    total = neutral_cfg.vehicle.mass_kg + neutral_cfg.dof_hydrodynamics("surge").added_mass
     pw = [p_us, p_us, 1500, 1500, 1500, 1500, 1500, 1500]
 
     instant = neutral_cfg.with_overrides({"thrusters.time_constant_s": 0.0})

@@ -11,10 +11,10 @@ at import time would hide them from mypy. Field names are the keys' last segment
 change), lists are tuples, optional keys are ``X | None``. Section objects are built lazily, once per configuration
 (it is immutable). A node's configuration holds only the keys it declared (:mod:`.node_parameters`): reading
 another required key raises KeyError naming it. ``cfg.thrusters`` is the hand-written
-:class:`~.sections.thrusters.ThrustersConfig` (per-thruster keys); ``cfg.hydrodynamics(dof)`` and
-``cfg.calibration`` are derived views over the raw sections ``cfg.hydrodynamics_section`` and
-``cfg.calibration_section``. ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter conversion, overrides and
-validation; modules outside the configuration do not index it by a literal key.
+:class:`~.sections.thrusters.ThrustersConfig` (per-thruster keys); ``cfg.dof_hydrodynamics(dof)`` and
+``cfg.known_forces`` are derived views over the sections ``cfg.hydrodynamics`` and ``cfg.calibration``
+(every section is read by its own name). ``cfg.flat`` (dotted key -> value) stays for the ROS-parameter
+conversion, overrides and validation; modules outside the configuration do not index it by a literal key.
 """
 from __future__ import annotations
 
@@ -87,11 +87,11 @@ def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
 class VehicleConfig:
     """The validated vehicle configuration.
 
-    Typed sections (built once, on first use): ``vehicle``, ``environment``, ``hydrodynamics_section``,
-    ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``, ``limits``,
-    ``supervisor``, ``identification``, ``calibration_section``, ``control``, ``simulation``, ``recording``
-    (module docstring). Derived views: rigid-body and added-mass matrices, ``hydrodynamics(dof)``,
-    ``calibration``. ``flat`` holds every validated key (dotted names, SI values) for the ROS-parameter
+    Typed sections (built once, on first use), each under its section's name: ``vehicle``, ``environment``,
+    ``hydrodynamics``, ``thrusters`` (:class:`ThrustersConfig`), ``esc``, ``lights``, ``sensors``, ``pool``,
+    ``limits``, ``supervisor``, ``identification``, ``calibration``, ``control``, ``simulation``, ``recording``
+    (module docstring). Derived views: rigid-body and added-mass matrices, ``dof_hydrodynamics(dof)``,
+    ``known_forces``. ``flat`` holds every validated key (dotted names, SI values) for the ROS-parameter
     conversion and overrides.
     """
 
@@ -121,8 +121,8 @@ class VehicleConfig:
         return build_section(EnvironmentSection, self.flat)
 
     @functools.cached_property
-    def hydrodynamics_section(self) -> HydrodynamicsSection:
-        """``hydrodynamics.*`` as configured (see also :meth:`hydrodynamics` and :attr:`added_mass_matrix`)."""
+    def hydrodynamics(self) -> HydrodynamicsSection:
+        """``hydrodynamics.*`` (per DOF uniformly: :meth:`dof_hydrodynamics`; the matrix: :attr:`added_mass_matrix`)."""
         return build_section(HydrodynamicsSection, self.flat)
 
     @functools.cached_property
@@ -161,8 +161,8 @@ class VehicleConfig:
         return build_section(IdentificationSection, self.flat)
 
     @functools.cached_property
-    def calibration_section(self) -> CalibrationSection:
-        """``calibration.*`` as configured (masses, volumes; :attr:`calibration` gives the derived forces)."""
+    def calibration(self) -> CalibrationSection:
+        """``calibration.*``: masses and volumes (:attr:`known_forces` gives the derived forces)."""
         return build_section(CalibrationSection, self.flat)
 
     @functools.cached_property
@@ -204,9 +204,9 @@ class VehicleConfig:
         return added_mass_matrix_from_flat(self.flat)
 
     @functools.cached_property
-    def calibration(self) -> CalibrationConfig:
-        """Typed ``calibration.*`` section (:class:`CalibrationConfig`)."""
-        c = self.calibration_section
+    def known_forces(self) -> CalibrationConfig:
+        """The known forces of the reference steps derived from ``calibration.*`` (:class:`CalibrationConfig`)."""
+        c = self.calibration
         rho, g = self.environment.water_density_kg_m3, self.environment.gravity_m_s2
         float_b = None
         if c.float_mass_kg is not None and c.float_volume_m3 is not None:
@@ -219,11 +219,11 @@ class VehicleConfig:
             float_net_buoyancy_n=float_b,
             net_buoyancy_std_n=float(or_default(c.net_buoyancy_std_n, 0.05)))
 
-    def hydrodynamics(self, dof: str) -> DofHydrodynamics:
-        """Typed hydrodynamic coefficients of one DOF (see :class:`DofHydrodynamics`)."""
+    def dof_hydrodynamics(self, dof: str) -> DofHydrodynamics:
+        """Hydrodynamic coefficients of one DOF, the same fields for every DOF (see :class:`DofHydrodynamics`)."""
         if dof not in DOFS:
             raise KeyError(f"unknown DOF {dof!r}; one of {', '.join(DOFS)}")
-        hs = self.hydrodynamics_section
+        hs = self.hydrodynamics
         if dof == "heave":
             v = hs.heave
             return DofHydrodynamics(dof, v.added_mass_kg, v.linear_damping_positive_kg_s,

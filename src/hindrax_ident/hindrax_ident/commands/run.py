@@ -209,7 +209,7 @@ def _check_args(args) -> tuple[object, list[str]]:
         raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
     from ..identification.online.executive import expand_calibration
 
-    if "float" in expand_calibration(cal) and cfg.calibration.float_net_buoyancy_n is None:
+    if "float" in expand_calibration(cal) and cfg.known_forces.float_net_buoyancy_n is None:
         raise CommandError("--calibrate: the float step needs calibration.float_mass_kg and "
                            "calibration.float_volume_m3 in the vehicle file")
     return cfg, dofs

@@ -159,7 +159,7 @@ def model_from_config(cfg: VehicleConfig, source: str = VEHICLE_FILE) -> Control
     rel = declared_inertia_uncertainty_rel(cfg)
     axes = {}
     for dof in DOFS:
-        h = cfg.hydrodynamics(dof)
+        h = cfg.dof_hydrodynamics(dof)
         i = DOFS.index(dof)
         bias = float(cfg.buoyancy_n - cfg.weight_n) if dof == "heave" else 0.0
         v = cfg.vehicle

@@ -20,7 +20,7 @@ Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eq
 * C_A from M_A (Fossen 2011): with ``a = M_A nu = [a1; a2]``,
   ``C_A = [0, -S(a1); -S(a1), -S(a2)]`` (skew-symmetric for any M_A; equals [T] eq. 2.83 in the diagonal case
   with M_A = -diag(derivatives)).
-* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.hydrodynamics(dof)`` ([Hindrax-Drag] eq. 2 / Table 3), the
+* D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.dof_hydrodynamics(dof)`` ([Hindrax-Drag] eq. 2 / Table 3), the
   coefficient pair chosen by the sign of the velocity; heave uses the ``*_positive`` pair for w > 0 (moving
   down, [Hindrax-Drag] §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.
 * g(eta) = -[R^T (f_g + f_b); r_g x R^T f_g + r_b x R^T f_b], f_g = [0, 0, W], f_b = [0, 0, -B]
@@ -193,7 +193,7 @@ class VehicleModel:
         if np.linalg.cond(self.mass_matrix) > 1e12:
             raise ValueError("M_RB + M_A is singular; check vehicle.mass_kg, inertia and added masses")
         self.mass_matrix_inverse = np.linalg.inv(self.mass_matrix)
-        hydro = [config.hydrodynamics(d) for d in DOFS]
+        hydro = [config.dof_hydrodynamics(d) for d in DOFS]
         self.damping_linear_positive = np.array([h.linear_damping_positive for h in hydro])
         self.damping_linear_negative = np.array([h.linear_damping_negative for h in hydro])
         self.damping_quadratic_positive = np.array([h.quadratic_damping_positive for h in hydro])

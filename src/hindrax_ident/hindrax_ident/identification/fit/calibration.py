@@ -180,7 +180,7 @@ def scale_model(calibration: Mapping[str, Any] | None, cfg=None) -> ScaleModel |
                 model.nuisance.append(nuis)
                 if nuis == NET_BUOYANCY and cfg is not None:
                     model.nuisance_prior[len(model.nuisance) - 1] = (
-                        float(cfg.buoyancy_n - cfg.weight_n), float(cfg.calibration.net_buoyancy_std_n))
+                        float(cfg.buoyancy_n - cfg.weight_n), float(cfg.known_forces.net_buoyancy_std_n))
             ri = model.nuisance.index(nuis)
             for h, ext in enumerate((0.0, known)):
                 sd = float(e["holding_force_std_n"][h])

@@ -116,7 +116,7 @@ def truth_parameters(cfg: VehicleConfig, dof: str) -> dict[str, float]:
     inertia = rigid + added mass (configuration hydrodynamics); bias: heave (rho V - m) g, FRD force holding
     depth (+0.785 N for Hindrax), 0 otherwise; restoring: z_g W - z_b B (module docstring).
     """
-    h = cfg.hydrodynamics(dof)
+    h = cfg.dof_hydrodynamics(dof)
     rigid = rigid_inertia(cfg, dof)
     out = {"inertia": rigid + float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)]),
            "added_mass": float(cfg.added_mass_matrix[DOFS.index(dof), DOFS.index(dof)])}

@@ -91,21 +91,21 @@ def expand_calibration(steps: Iterable[str]) -> list[str]:
 def calibration_forces(cfg: VehicleConfig) -> tuple[float, float]:
     """(ballast weight in water (m - rho V) g, line pull force), N, from the vehicle file's ``calibration.*`` keys
     (``ballast_mass_kg``, ``ballast_volume_m3``, ``line_pull_force_n``; validated there: the ballast sinks)."""
-    c = cfg.calibration
+    c = cfg.known_forces
     return c.ballast_weight_in_water_n, c.line_pull_force_n
 
 
 def inclining_load(cfg: VehicleConfig) -> tuple[float, float]:
     """(test mass weight in water (m - rho V) g, N; its arm from the centre line, m) of the inclining step, from
     ``calibration.inclining_mass_kg``, ``calibration.inclining_volume_m3`` and ``calibration.inclining_arm_m``."""
-    c = cfg.calibration
+    c = cfg.known_forces
     return c.inclining_weight_in_water_n, c.inclining_arm_m
 
 
 def float_buoyancy(cfg: VehicleConfig) -> float:
     """Net buoyancy (rho V - m) g of the float step's float, N (``calibration.float_mass_kg``, ``float_volume_m3``);
     0 when the vehicle file has no float."""
-    b = cfg.calibration.float_net_buoyancy_n
+    b = cfg.known_forces.float_net_buoyancy_n
     return 0.0 if b is None else float(b)
 
 
