@@ -33,6 +33,7 @@ pytestmark = pytest.mark.ros
 EXIT_NOISE = re.compile(r"\w+Warning: |never awaited|Exception ignored|Traceback \(most recent call last\)")
 
 
+@pytest.mark.timeout(1800)  # the run's own limit is 1500 s: about 205 s alone, 548 s at load 16-20 on 2 cores
 def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     cfg = load_config(default_config_path())
     out = tmp_path / "run"
