@@ -1,5 +1,6 @@
 """The ESC's chip I/O worker (pca9685/worker.py) on the register-exact emulator, without ROS: the queue rules, the
-stuck-call bound, the bus opened in the worker."""
+stuck-call bound, the bus opened in the worker, and with the link and core: a disarm during a thrust write ends at
+neutral, and NEUTRAL is reported only while neutral is on the chip."""
 from __future__ import annotations
 
 import threading
@@ -142,4 +143,95 @@ def test_a_failed_write_is_an_error_result_and_the_chip_forgets():
     assert worker.wait_idle(5)
     [result] = worker.results()
     assert result.error and not result.wrote and worker.chip._written_key is None
+    worker.stop()
+
+
+class _Diag:
+    """The node's diagnostics as the link uses them (state and counters only)."""
+
+    def __init__(self):
+        self.counts = {}
+
+    def set_state(self, *args):
+        pass
+
+    def count(self, key):
+        self.counts[key] = self.counts.get(key, 0) + 1
+
+    def warn(self, *args):
+        pass
+
+
+def _armed_link(call_timeout_s=0.15):
+    """A ChipLink over an EscCore and a threaded worker on the held bus, configured at neutral and armed."""
+    from hindrax_drivers.pca9685.core import OUTPUT_NEUTRAL, EscCore, EscOutput
+    from hindrax_drivers.pca9685.link import ChipLink
+
+    worker, emu, bus = _worker(call_timeout_s=call_timeout_s)
+    core = EscCore(EscOutput(range(8), [False] * 8, [0.0] * 8, 1100, 1500, 1900), arming_time_s=0.0,
+                   watchdog_timeout_s=1.0, oscillator_calibrated=True, clock=worker.clock, guard_confirm_s=0.0)
+    link = ChipLink(core, worker, _Diag(), lambda text: None, lambda: 1100.0, readback_interval_s=1e9)
+    link.configure()
+    assert worker.wait_idle(5)
+    link.take()
+    assert core.output_state == OUTPUT_NEUTRAL and core.neutral_confirmed_at is not None
+    core.set_peers("", "")
+    assert core.request_arm() == ""
+    return link, core, worker, emu, bus
+
+
+def _neutral_claims(link, core, emu, worker, until):
+    """Take results until ``until()``; every time the core says NEUTRAL (what lets the output guard release /OE),
+    the wire must hold neutral. Returns the output states seen."""
+    from hindrax_drivers.pca9685.core import OUTPUT_NEUTRAL
+
+    seen = []
+
+    def step():
+        link.take()
+        seen.append(core.output_state)
+        if core.output_state == OUTPUT_NEUTRAL:
+            assert np.allclose(_wire(emu), NEUTRAL_US, atol=COUNT_US), f"NEUTRAL reported with {_wire(emu)} on chip"
+        return until()
+    wait_until(step, 10, message="the link settled")
+    return seen
+
+
+def test_a_disarm_during_a_thrust_write_in_flight_ends_at_neutral_and_says_neutral_only_then():
+    """Fail closed across the worker: a thrust write is on the bus when the disarm's neutral is posted. The neutral
+    runs after it, the chip ends at neutral, and the output state says NEUTRAL only once neutral is on the chip."""
+    from hindrax_drivers.pca9685.core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL
+
+    link, core, worker, emu, bus = _armed_link()
+    bus.hold, bus.writes[:] = True, []
+    link.post(WRITE, np.full(8, 1700.0), OUTPUT_COMMANDING)
+    wait_until(lambda: bus.writes, 5, message="the thrust write on the bus")
+    core.disarm("test disarm")
+    link.neutral("test disarm")
+    link.post(WRITE, core.decide(0.0, 0.0).widths_us, OUTPUT_NEUTRAL)  # the next tick, disarmed: deduplicated
+    assert core.output_state == OUTPUT_NEUTRAL  # from the arm: the chip held neutral then
+    bus.release.set()
+    _neutral_claims(link, core, emu, worker, lambda: not worker.pending() and core.output_state == OUTPUT_NEUTRAL
+                    and np.allclose(link.written, NEUTRAL_US, atol=COUNT_US))
+    assert np.allclose(_wire(emu), NEUTRAL_US, atol=COUNT_US) and not core.armed
+    worker.stop()
+
+
+def test_a_thrust_write_that_returns_after_the_stuck_bound_is_overwritten_by_neutral():
+    """A thrust write hangs past the bound: the chip counts as lost (UNKNOWN, disarmed). When the call returns
+    late, its thrust is on the chip: the link re-configures at neutral, and NEUTRAL is said only after that."""
+    from hindrax_drivers.pca9685.core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN
+
+    link, core, worker, emu, bus = _armed_link(call_timeout_s=0.1)
+    bus.hold, bus.writes[:] = True, []
+    link.post(WRITE, np.full(8, 1700.0), OUTPUT_COMMANDING)
+    wait_until(lambda: (link.maintain(worker.clock()), core.output_state == OUTPUT_UNKNOWN)[1], 10,
+               message="the stuck call makes the chip UNKNOWN")
+    assert not core.armed
+    bus.release.set()
+    seen = _neutral_claims(link, core, emu, worker,
+                           lambda: (link.maintain(worker.clock()), not worker.pending()
+                                    and core.output_state == OUTPUT_NEUTRAL)[1])
+    assert OUTPUT_UNKNOWN in seen and np.allclose(_wire(emu), NEUTRAL_US, atol=COUNT_US)
+    assert link.bus_stalls == 1 and not core.stale_width_possible
     worker.stop()
