@@ -157,7 +157,7 @@ def test_goal_with_ballast_prompts_continue_proceeds_and_nothing_awaited_is_refu
                 wait_until(f.done, 10, spin, "goal answer")
                 assert not f.result().accepted
             assert graph.start_and_arm(arm, 60).success
-            wait_until(lambda: graph.nodes["identification"]._armed, 30, spin, "ESC reporting armed")
+            wait_until(lambda: graph.nodes["identification"].core.armed, 30, spin, "ESC reporting armed")
             f = action.send_goal_async(RunIdentification.Goal(calibrate=["ballast"], calibration_only=True),
                                        feedback_callback=lambda m: feedback.append(m.feedback))
             wait_until(f.done, 10, spin, "goal answer")
@@ -169,7 +169,7 @@ def test_goal_with_ballast_prompts_continue_proceeds_and_nothing_awaited_is_refu
             wait_until(lambda: any(s.message == prompts()[0] for s in status), 10, spin, "prompt in the status")
             t_prompt = sim.t_s
             wait_until(lambda: sim.t_s > t_prompt + 2.0, 30, spin, "two seconds of waiting")
-            assert graph.nodes["identification"]._run.executive.awaiting == "attach_ballast"  # still waits
+            assert graph.nodes["identification"].core.run.executive.awaiting == "attach_ballast"  # still waits
             # the test plays the operator: the ballast's weight in water on the simulator, then continue
             op = VirtualOperator(sim, W_BALLAST, 4.905, lambda: None)
             graph.nodes["simulator"].add_step_listener(op.on_step)

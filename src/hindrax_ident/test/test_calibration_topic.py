@@ -266,7 +266,7 @@ def test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recor
 
         try:
             assert graph.start_and_arm(arm, 60, lambda: action.server_is_ready() and cont.service_is_ready()).success
-            wait_until(lambda: graph.nodes["identification"]._armed, 30, spin, "ESC reporting armed")
+            wait_until(lambda: graph.nodes["identification"].core.armed, 30, spin, "ESC reporting armed")
             f = action.send_goal_async(RunIdentification.Goal(calibrate=["ballast"], calibration_only=True),
                                        feedback_callback=lambda m: op.on_prompt(m.feedback.prompt))
             wait_until(f.done, 10, spin, "goal answer")

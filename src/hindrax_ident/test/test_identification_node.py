@@ -183,7 +183,8 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
 
     from unique_identifier_msgs.msg import UUID
 
-    from hindrax_ident.identification.online.node import ARMED_GRACE_S, NOT_ARMED, IdentificationNode
+    from hindrax_ident.identification.online.core import ARMED_GRACE_S, NOT_ARMED
+    from hindrax_ident.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:
@@ -205,12 +206,12 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
             late = handle(1)
             node._on_accepted(late)
             node._on_tick()
-            assert node._run is not None and status[-1][1] == "waiting for the ESC output to report armed"
+            assert node.core.run is not None and status[-1][1] == "waiting for the ESC output to report armed"
             node._on_pwm(armed)  # the flag arrives within the grace: the goal goes on (to the sensors' wait)
             node._on_tick()
-            assert node._run is not None and not late.results and status[-1][1] == "waiting for the sensors"
-            node._run.ended = True  # leave this goal
-            node._run = None
+            assert node.core.run is not None and not late.results and status[-1][1] == "waiting for the sensors"
+            node.core.run.ended = True  # leave this goal
+            node.core.run = None
 
             node._on_pwm(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=False))
             never = handle(2)
@@ -219,7 +220,7 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
             wait_until(lambda: node._on_tick() or never.results, 10 * ARMED_GRACE_S, None, "the goal's end")
             assert node._now_s() - t0 >= ARMED_GRACE_S
             assert never.states == ["aborted"] and never.results[0].message == NOT_ARMED
-            assert not never.results[0].success and not wrenches and node._run is None
+            assert not never.results[0].success and not wrenches and node.core.run is None
             assert status[-1] == (ManeuverStatus.PHASE_ABORTED, NOT_ARMED)
         finally:
             node.destroy_node()
@@ -306,9 +307,9 @@ def test_on_the_system_clock_the_inputs_are_callbacks_as_with_sim_time():
             m = Imu()
             m.header.stamp = probe.get_clock().now().to_msg()
             imu.publish(m)
-            wait_until(lambda: node._armed and any(d.startswith("icm20948") for d in node._seen), 10, spin,
+            wait_until(lambda: node.core.armed and any(d.startswith("icm20948") for d in node.core.seen), 10, spin,
                        "the armed flag and the IMU sample taken")
-            assert node._written.tolist() == [1600.0] * 8 and node._pwm_count == 1
+            assert node.core.written.tolist() == [1600.0] * 8 and node.core.pwm_count == 1
         finally:
             ex.shutdown()
             probe.destroy_node()

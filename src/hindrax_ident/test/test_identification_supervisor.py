@@ -134,13 +134,14 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
             wait_until(lambda: esc.arming_remaining_s() == 0.0, 5, lambda: ex.spin_once(timeout_sec=0.01),
                        "ESC time at neutral")
             assert call(arm, SetArmed.Request(arm=True)).success
-            wait_until(lambda: ident._armed and sup.core.armed and emu.pulse_width_us(0) > 1690, 10, thrust,
+            wait_until(lambda: ident.core.armed and sup.core.armed and emu.pulse_width_us(0) > 1690, 10, thrust,
                        "armed, thrust on the wire")
             goal = action.send_goal_async(RunIdentification.Goal(dofs=["heave"]))
             wait_until(goal.done, 10, step, "goal answer")
             handle = goal.result()
             assert handle.accepted
-            wait_until(lambda: ident._run is not None and ident._run.executive.started, 30, step, "campaign started")
+            wait_until(lambda: ident.core.run is not None and ident.core.run.executive.started, 30, step,
+                       "campaign started")
             for _ in range(20):
                 step()
             assert not sup.core.tripped and not aborts

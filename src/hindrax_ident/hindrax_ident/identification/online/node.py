@@ -1,12 +1,15 @@
 """Identification node: the ``run_identification`` action over the identification executive.
 
-A thin rclpy node over :class:`~.executive.Executive` (pure: the dive, positioning, level ladders, holds, pool-box
-planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the in-process campaign
-steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples (:mod:`..bag_input.signals`),
-and at every tick of its control timer (``identification.estimate_rate_hz``, ROS clock) hands the executive the samples
-that came in since the last tick and publishes the wrench it returns. Nothing in a callback waits, and no coroutine
-runs while a goal does (see "Action execution" below). The node does not know whether the vehicle is simulated: it
-sees the same topics from the drivers either way.
+A thin rclpy node over two pure objects: :class:`~.core.IdentificationCore` (goal checks, the goal's life from
+acceptance to the end of its neutral hold, what each tick publishes; table-tested in
+``test/test_identification_core.py``) and the :class:`~.executive.Executive` it drives (the dive, positioning,
+level ladders, holds, pool-box planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the
+in-process campaign steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples
+(:mod:`..bag_input.signals`) for the core, and at every tick of its control timer
+(``identification.estimate_rate_hz``, ROS clock) turns the core's events into messages (wrench, status, feedback,
+estimates, calibration results, supervisor abort, the goal's result). Nothing in a callback waits, and no
+coroutine runs while a goal does (see "Action execution" below). The node does not know whether the vehicle is
+simulated: it sees the same topics from the drivers either way.
 
 The force in the regression is the thrust model of the pulse widths the ESC node actually wrote
 (``thrusters/pulse_width``: wire widths, un-reversed and un-trimmed, through the allocation's cubic curves,
@@ -25,7 +28,7 @@ Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     :func:`~.executive.inclining_load`), ``calibration_only`` (no
     ladders). Rejected when a goal is running or the goal is invalid (unknown DOF or step, fraction out of
     range, calibration_only without a step). The goal fails, commanding nothing, when the ESC output has not
-    reported armed within :data:`ARMED_GRACE_S` of its acceptance (an operator who arms and starts at once is
+    reported armed within :data:`~.core.ARMED_GRACE_S` of its acceptance (an operator who arms and starts at once is
     not refused while the armed flag is on its way). Feedback
     at every level change, at every operator prompt and once per second: DOF, level index and count, level
     command (N or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel):
@@ -48,7 +51,7 @@ Publishes
     goal runs; ``identification/estimates`` (HydroEstimate, method ``rls``, one per DOF with data) at
     ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) while a goal
     runs at once when the phase, DOF, level or message (current step) changes and otherwise at
-    :data:`STATUS_PERIOD_S` (2 Hz: the progress of a level), once at its end (DONE or ABORTED
+    :data:`~.core.STATUS_PERIOD_S` (2 Hz: the progress of a level), once at its end (DONE or ABORTED
     with the reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a
     goal aborts on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety
     supervisor (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset;
@@ -86,7 +89,6 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -103,7 +105,7 @@ from std_srvs.srv import Trigger
 
 from hindrax_drivers import frames
 from hindrax_drivers.lean_cdr import wrench_stamped_cdr
-from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
+from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node
 from hindrax_msgs.action import RunIdentification
@@ -111,51 +113,17 @@ from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
 from ..bag_input import calibration_topic
 from ..bag_input.campaign_record import CampaignRecord
-from ..bag_input.signals import (
-    sample_from_pressure,
-    sample_from_range,
-    samples_from_dvl,
-    samples_from_imu,
-    thrust_of_written_widths,
-)
+from ..bag_input.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from ..fit.dof_model import parameter_units
-from .executive import (
-    CALIBRATION_STEPS,
-    Executive,
-    ExecutiveStatus,
-    TickInput,
-    calibration_forces,
-    inclining_load,
-    ordered_samples,
-)
+from .core import Event, GoalRun, IdentificationCore, goal_problem
+from .executive import ExecutiveStatus
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 
-#: sensors that must have published before a goal starts moving the vehicle
-NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
-
-#: abort reasons not sent to the safety supervisor (the executive's words): an operator's cancel, and a disarmed
-#: ESC output (the thrusters are already stopped, possibly by the supervisor itself)
-NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
-#: period of ``identification/status`` while a goal runs and nothing changes, s (2 Hz: the progress on a topside
-#: display; every change of phase, DOF, level or message goes out at once, so a bag's zero-order hold of the status
-#: loses nothing; 10 Hz before, docs/architecture.md §10.1)
-STATUS_PERIOD_S = 0.5
-#: how long an accepted goal waits for the ESC to report armed on ``thrusters/pulse_width`` (published on every
-#: write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``) before it fails, s (ROS time)
-ARMED_GRACE_S = 0.5
-#: the result message of a goal whose ESC output did not report armed
-NOT_ARMED = "ESC output not armed: call esc/set_armed first"
-#: a sensor sample stamped further than this after the node's clock is impossible and left out (s): the drivers stamp
-#: with their receive time or a device time converted to the ROS clock, both at or before the tick that takes them
-FUTURE_STAMP_TOLERANCE_S = 1.0
-#: a sample stamped further than this before the previous tick is stale and left out (s): sensor latencies through the
-#: graph (a conversion start, a report's time of validity) are tens to hundreds of milliseconds
-STALE_STAMP_TOLERANCE_S = 2.0
-
-_PHASES = {"positioning": ManeuverStatus.PHASE_POSITIONING, "running": ManeuverStatus.PHASE_RUNNING,
-           "returning": ManeuverStatus.PHASE_RETURNING, "done": ManeuverStatus.PHASE_DONE,
-           "aborted": ManeuverStatus.PHASE_ABORTED}
+#: the core's phase names as ManeuverStatus phases
+_PHASES = {"idle": ManeuverStatus.PHASE_IDLE, "positioning": ManeuverStatus.PHASE_POSITIONING,
+           "running": ManeuverStatus.PHASE_RUNNING, "returning": ManeuverStatus.PHASE_RETURNING,
+           "done": ManeuverStatus.PHASE_DONE, "aborted": ManeuverStatus.PHASE_ABORTED}
 
 
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
@@ -184,25 +152,6 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
     return msg
 
 
-@dataclass
-class _GoalRun:
-    """One accepted goal: its handle, executive and end state."""
-
-    handle: Any
-    executive: Executive
-    accepted_s: float
-    written_us: np.ndarray
-    stop_since_s: float | None = None
-    ended: bool = False
-    pwm_count_at_stop: int = 0
-    error: str = ""
-    record: CampaignRecord | None = None
-    status: ExecutiveStatus | None = None
-    last_feedback: tuple = field(default_factory=lambda: (None, -1))
-    last_feedback_s: float = -math.inf
-    calibration_results: int = 0  # step results of this goal already published on identification/calibration
-
-
 class IdentificationNode(Node):
     """The identification executive as a ROS node (module docstring).
 
@@ -226,26 +175,11 @@ class IdentificationNode(Node):
         self.stop_timeout_s = self._param("stop_timeout_s", 2.0, "longest zero-wrench hold at the end of a goal "
                                           "while waiting for the ESC to report neutral widths, s")
         self._mount_t = mounting_rotation(self.config.sensors.icm20948.mounting_rpy_rad).T
-        self._n_thrusters = len(self.config.thrusters.thrusters)
-        self._neutral_us = float(self.config.thrusters.pulse_width_neutral_us)
-        self._samples: list = []
-        self._seen: set[str] = set()
-        self._written: np.ndarray | None = None
-        self._pwm_count = 0
-        #: sensor samples left out since start for a stamp after the node's clock or long before it
-        #: (``FUTURE_STAMP_TOLERANCE_S``, ``STALE_STAMP_TOLERANCE_S``)
-        self.samples_dropped = 0
-        self._armed = False
-        self._run: _GoalRun | None = None
-        self._ended: dict[bytes, _GoalRun] = {}  # goal UUID -> ended run whose result is being delivered
-        self._last_tick_s: float | None = None  # ROS time of the last control tick of a goal (step gate)
-        self._last_publish_t = -math.inf
-        self._last_idle_status_t = -math.inf
-        self._last_status: tuple[float, tuple] = (-math.inf, ())  # (ROS time, key) of the last running status
-        self.last_record: CampaignRecord | None = None
-        self.last_result: str = ""
-        #: step results published on identification/calibration: name -> (name, message, [(key, value)])
-        self.calibration_results: dict[str, tuple] = {}
+        #: the goal and tick logic (pure, :mod:`.core`); this node turns its events into messages
+        self.core = IdentificationCore(self.config, tick_s=self.tick_s, publish_period_s=self.publish_period_s,
+                                       dvl_lock_timeout_s=self.dvl_lock_timeout_s,
+                                       sensor_timeout_s=self.sensor_timeout_s, stop_timeout_s=self.stop_timeout_s)
+        self._ended: dict[bytes, GoalRun] = {}  # goal UUID -> ended run whose result is being delivered
 
         # no QoS event handlers (rclpy's default incompatible-QoS warning handler of each is visited in Python on
         # every executor spin); a sensor that does not arrive fails the goal (sensor_timeout_s, DVL lock)
@@ -286,86 +220,59 @@ class IdentificationNode(Node):
             raise ConfigError([issue], f"parameters of {self.get_name()}")
         return float(value)
 
+    @property
+    def samples_dropped(self) -> int:
+        """Sensor samples left out since start for a stamp after the node's clock or long before it (:mod:`.core`)."""
+        return self.core.samples_dropped
+
+    @property
+    def last_record(self) -> CampaignRecord | None:
+        """The campaign record of the last goal that ended (None before)."""
+        return self.core.last_record
+
+    @property
+    def last_result(self) -> str:
+        """The result message of the last goal that ended."""
+        return self.core.last_result
+
     # ------------------------------------------------------------------ inputs
     def _on_dvl(self, msg: Dvl) -> None:
-        self._add(samples_from_dvl(msg))
+        self.core.add_samples(samples_from_dvl(msg))
 
     def _on_imu(self, msg: Imu) -> None:
-        self._add(samples_from_imu(msg, self._mount_t))
+        self.core.add_samples(samples_from_imu(msg, self._mount_t))
 
     def _on_pressure(self, msg: FluidPressure) -> None:
-        self._add([sample_from_pressure(msg)])
+        self.core.add_samples([sample_from_pressure(msg)])
 
     def _on_range(self, msg: Range) -> None:
-        self._add([sample_from_range(msg)])
+        self.core.add_samples([sample_from_range(msg)])
 
     def _on_pwm(self, msg: ThrusterPwm) -> None:
-        w = np.asarray(msg.pulse_width_us, dtype=float)
-        if w.size == self._n_thrusters and np.all(np.isfinite(w)):
-            self._written = w
-        self._armed = bool(msg.armed)
-        self._pwm_count += 1
-
-    def _add(self, samples: list) -> None:
-        for dev, _s in samples:
-            self._seen.add(dev)
-        if self._run is not None:
-            self._samples.extend(samples)
+        self.core.on_pwm(msg.pulse_width_us, msg.armed)
 
     # ------------------------------------------------------------------ action
     def _on_goal(self, goal) -> GoalResponse:
-        if self._run is not None:
+        if self.core.busy:
             self.get_logger().warn("run_identification: a goal is already running; rejected")
             return GoalResponse.REJECT
-        problem = self._goal_problem(goal)
+        problem = goal_problem(goal.dofs, goal.calibrate, goal.calibration_only, goal.level_fractions)
         if problem:
             self.get_logger().error(f"run_identification: {problem}; rejected")
             return GoalResponse.REJECT
         return GoalResponse.ACCEPT
 
-    @staticmethod
-    def _goal_problem(goal) -> str:
-        bad = [d for d in goal.dofs if d not in DOFS]
-        if bad:
-            return f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}"
-        bad = [c for c in goal.calibrate if c not in CALIBRATION_STEPS]
-        if bad:
-            return f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}"
-        if goal.calibration_only and not goal.calibrate:
-            return "calibration_only without a calibration step"
-        fr = list(goal.level_fractions)
-        if any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in fr):
-            return f"level_fractions must be in (0, 1], got {fr}"
-        return ""
-
     def _on_accepted(self, goal_handle) -> None:
         """Accepted goal: set it up and return; the control timer runs it (once the ESC reports armed, within
-        :data:`ARMED_GRACE_S`) and ends it (:meth:`_end_goal`).
+        :data:`~.core.ARMED_GRACE_S`) and ends it (:meth:`_end_goal`).
 
         The goal is not executed here: its action state stays ACCEPTED while the campaign runs and becomes
         EXECUTING, then SUCCEEDED, ABORTED or CANCELED when it ends (module docstring, "Action execution")."""
-        goal = goal_handle.request
-        dofs = [] if goal.calibration_only else (list(goal.dofs) or list(DOFS))
-        calibrate = list(goal.calibrate)
-        w_ballast, f_line = calibration_forces(self.config) if calibrate else (0.0, 0.0)
-        incl = inclining_load(self.config) if "inclining" in calibrate else (0.0, 0.0)
-        executive = Executive(self.config, dofs, int(goal.levels_per_dof) or None, tick_s=self.tick_s,
-                              fractions=list(goal.level_fractions) or None,
-                              dvl_lock_timeout_s=self.dvl_lock_timeout_s, calibrate=calibrate,
-                              ballast_weight_in_water_n=w_ballast, line_pull_n=f_line, inclining_load_n_m=incl)
-        run = _GoalRun(goal_handle, executive, self._now_s(), np.full(self._n_thrusters, self._neutral_us))
-        self._samples = []
-        self._run = run
-        self.get_logger().info(f"run_identification: {', '.join(dofs) or 'no ladders'}"
-                               + (f"; calibration {', '.join(calibrate)}" if calibrate else ""))
+        self.get_logger().info(self.core.accept(goal_handle, goal_handle.request, self._now_s()))
 
-    def _end_goal(self, run: _GoalRun) -> None:
-        """The goal's end, from the control timer: the result is computed and the goal reaches its terminal state
+    def _end_goal(self, run: GoalRun) -> None:
+        """The goal's end (the core marked it ended): the result is computed and the goal reaches its terminal state
         through ``execute`` with :meth:`_goal_result`, a plain function that returns at once."""
-        run.ended = True
-        if self._run is run:
-            self._run = None
-            self._last_tick_s = None
         self._ended[bytes(run.handle.goal_id.uuid)] = run
         run.handle.execute(self._goal_result)
 
@@ -373,13 +280,7 @@ class IdentificationNode(Node):
         """Execute callback (plain, returns at once): the ended goal's result and terminal state."""
         run = self._ended.pop(bytes(goal_handle.goal_id.uuid))
         executive = run.executive
-        self.last_record = run.record
-        ok = run.record is not None and not run.record.aborted and not run.error
-        message = run.error or ("" if run.record is None else run.record.abort_reason) or "campaign complete"
-        if run.record is not None and run.record.calibration:  # the thrust scales measured, for the operator
-            message += "; thrust scale " + ", ".join(f"{k} {v['value']:.4f} +- {v['std']:.4f}"
-                                                     for k, v in run.record.calibration.items())
-        self.last_result = message
+        ok, message = self.core.finish(run)
         result = RunIdentification.Result(success=ok, message=message)
         if executive.started:
             stamp = self.get_clock().now().to_msg()
@@ -396,24 +297,11 @@ class IdentificationNode(Node):
 
     def _on_continue(self, _request, response):
         """``identification/continue``: resume the calibration step waiting for the operator (module docstring)."""
-        run = self._run
-        ex = None if run is None else run.executive
-        if ex is None or run.ended or run.stop_since_s is not None:
-            response.success, response.message = False, "no identification goal is running"
-        elif not ex.awaiting:
-            response.success, response.message = False, "nothing awaits the operator (no calibration step waits)"
-        else:
-            what = ex.awaiting
-            response.success = ex.operator_continue()
-            response.message = f"continuing: {what}"
+        what = None if self.core.run is None else self.core.run.executive.awaiting
+        response.success, response.message = self.core.operator_continue()
+        if response.success or response.message.startswith("continuing"):
             self.get_logger().info(f"identification/continue: {what}")
         return response
-
-    @staticmethod
-    def operator_prompt(ex: Executive) -> str:
-        """The operator prompt of ``ex`` as sent in feedback and status: ``[<awaiting>] <prompt>``, "" when nothing
-        waits."""
-        return f"[{ex.awaiting}] {ex.prompt}" if ex.awaiting else ""
 
     # ------------------------------------------------------------------ control tick
     def _now_s(self) -> float:
@@ -421,162 +309,51 @@ class IdentificationNode(Node):
 
     def _on_tick(self) -> None:
         now = self.get_clock().now()
-        t = now.nanoseconds * 1e-9
-        run = self._run
-        if run is None:
-            if t - self._last_idle_status_t >= 1.0:
-                self._last_idle_status_t = t
-                self._publish_status(ManeuverStatus.PHASE_IDLE, None, "idle")
-            return
-        if run.ended:
-            return
-        if run.stop_since_s is not None:
-            self._hold_neutral(run, t, now)
-            return
-        ex = run.executive
-        cancel = run.handle.is_cancel_requested
-        if not ex.started:
-            if not self._armed and not cancel:  # nothing commanded yet: the goal ends without a neutral hold
-                if t - run.accepted_s > ARMED_GRACE_S:
-                    run.error = NOT_ARMED
-                    self._publish_status(ManeuverStatus.PHASE_ABORTED, None, NOT_ARMED)
-                    self._end_goal(run)
-                else:
-                    self._publish_status_throttled(t, ManeuverStatus.PHASE_POSITIONING, None,
-                                                   "waiting for the ESC output to report armed")
-                return
-            if cancel or t - run.accepted_s > self.sensor_timeout_s:
-                self._stop(run, t, now, "cancelled" if cancel
-                           else f"sensors not publishing: {sorted(NEEDED_SENSORS - self._seen)}")
-                return
-            if not NEEDED_SENSORS <= self._seen:
-                self._publish_status_throttled(t, ManeuverStatus.PHASE_POSITIONING, None, "waiting for the sensors")
-                return
-            self._samples = []
-            w = ex.start(t)
-        else:
-            samples, self._samples = self._samples, []
-            previous = ex.t_s
-            valid = ordered_samples(samples, previous, t + FUTURE_STAMP_TOLERANCE_S,
-                                    previous - STALE_STAMP_TOLERANCE_S)
-            if len(valid) < len(samples):
-                self.samples_dropped += len(samples) - len(valid)
-                self.get_logger().warn(
-                    f"{self.samples_dropped} sensor samples left out, stamped more than {FUTURE_STAMP_TOLERANCE_S} s "
-                    f"after or {STALE_STAMP_TOLERANCE_S} s before this node's clock ({t:.3f} s): a publisher on "
-                    "another clock?", throttle_duration_sec=5.0)
-            w = ex.step(TickInput(t, max(0.0, t - previous), valid, self._armed, cancel))
-            if self._written is not None:
-                run.written_us = self._written
-        self._last_tick_s = t
-        self._publish_calibration(run)
-        if w is None:
-            self._stop(run, t, now, "")
-            return
-        ex.command(thrust_of_written_widths(self.config, ex.curve, run.written_us))
-        self._publish_wrench(w, now)
-        self._publish_progress(run, t)
+        run = self.core.run
+        cancel = run is not None and not run.ended and bool(run.handle.is_cancel_requested)
+        self._act(self.core.tick(now.nanoseconds * 1e-9, cancel), now)
 
-    def _publish_calibration(self, run: _GoalRun) -> None:
-        """``identification/calibration`` when the executive has a step result it had not at the last call (a
-        calibration step ended): all results since the node started, the new ones replacing older ones of the same
-        name (module docstring)."""
-        ex = run.executive
-        n = len(ex.calibration) + len(ex.inclining) + len(ex.decays)
-        if n == run.calibration_results:
-            return
-        run.calibration_results = n
-        for item in calibration_topic.statuses(ex.calibration, ex.inclining, ex.decays):
-            self.calibration_results[item[0]] = item
-        self.pub_calibration.publish(calibration_topic.calibration_array(
-            list(self.calibration_results.values()), self.get_clock().now().to_msg()))
-        self.get_logger().info("identification/calibration: " + "; ".join(
-            m for _n, m, _kv in self.calibration_results.values()))
-
-    def _stop(self, run: _GoalRun, t: float, now, error: str) -> None:
-        """End of the goal: record, final status, zero wrench; the action ends once the thrusters are neutral."""
-        run.error = error
-        run.stop_since_s = t
-        run.pwm_count_at_stop = self._pwm_count
-        reason = error
-        if run.executive.started:
-            run.record = run.executive.record()
-            st = run.executive.status()
-            phase = ManeuverStatus.PHASE_ABORTED if (error or st.phase == "aborted") else ManeuverStatus.PHASE_DONE
-            self._publish_status(phase, st, error or st.message)
-            reason = error or (run.record.abort_reason if run.record.aborted else "")
-        else:
-            self._publish_status(ManeuverStatus.PHASE_ABORTED, None, error)
-        if reason and reason not in NOT_SUPERVISOR_ABORTS:
-            self.get_logger().error(f"run_identification aborted: {reason}; tripping the safety supervisor")
-            self.pub_abort.publish(String(data=reason))
-        self._publish_wrench(np.zeros(6), now)
-        self._hold_neutral(run, t, now)
-
-    def _hold_neutral(self, run: _GoalRun, t: float, now) -> None:
-        """Zero wrench at every tick until the ESC node reported, after the stop, neutral widths (or disarmed), or
-        ``stop_timeout_s``; then complete the goal."""
-        self._last_tick_s = t
-        neutral = False
-        if self._pwm_count > run.pwm_count_at_stop:
-            if not self._armed:
-                neutral = True
-            elif self._written is not None:
-                f = thrust_of_written_widths(self.config, run.executive.curve, self._written)
-                neutral = bool(np.all(np.abs(f) < 1e-9))
-        if neutral or t - run.stop_since_s >= self.stop_timeout_s - 1e-9:
-            if not neutral:
-                self.get_logger().warn(f"run_identification: thrusters not reported neutral within "
-                                       f"{self.stop_timeout_s:g} s of the stop")
-            self._end_goal(run)
-            return
-        if t > run.stop_since_s:
-            self._publish_wrench(np.zeros(6), now)
+    def _act(self, events: list[Event], now) -> None:
+        """Do what the core decided, in its order (:class:`~.core.Event`)."""
+        log = self.get_logger()
+        for ev in events:
+            if ev.kind == "status":
+                self._publish_status(_PHASES[ev.data[0]], ev.data[1], ev.data[2])
+            elif ev.kind == "wrench":
+                self._publish_wrench(ev.data[0], now)
+            elif ev.kind == "feedback":
+                fb = ev.data[0]
+                self.core.run.handle.publish_feedback(RunIdentification.Feedback(
+                    dof=fb.dof, level_index=fb.level_index, level_count=fb.level_count,
+                    level_command=fb.level_command, progress=fb.progress, prompt=fb.prompt))
+            elif ev.kind == "estimates":
+                stamp = self.get_clock().now().to_msg()
+                for d, est in ev.data[0].online.items():
+                    if est.rls.n_samples > 0:
+                        self.pub_estimate.publish(hydro_estimate(d, est, stamp))
+            elif ev.kind == "calibration":
+                self.pub_calibration.publish(calibration_topic.calibration_array(
+                    ev.data[0], self.get_clock().now().to_msg()))
+            elif ev.kind == "abort":
+                self.pub_abort.publish(String(data=ev.data[0]))
+            elif ev.kind == "log":
+                getattr(log, ev.data[0])(ev.data[1])
+            elif ev.kind == "warn_throttled":
+                log.warn(ev.data[0], throttle_duration_sec=5.0)
+            elif ev.kind == "end":
+                self._end_goal(ev.data[0])
 
     def clock_may_advance(self, t_s: float) -> bool:
         """Step gate for a simulator in the same process (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`):
         False while a goal's control ticks run (manoeuvre and the neutral hold at its end) and the tick due at
         simulated time ``t_s`` (s) has not run yet, so the simulation never runs ahead of the control loop."""
-        if self._run is None or self._last_tick_s is None:
-            return True
-        return t_s + 1e-6 < self._last_tick_s + self.tick_s
+        return self.core.clock_may_advance(t_s)
 
     def _publish_wrench(self, w_frd: np.ndarray, now) -> None:
         # serialised by rosbags and published as bytes: the 50 Hz publish without rclpy's object conversion
         # (hindrax_drivers.lean_cdr, the measured gain)
         w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
         self.pub_wrench.publish(wrench_stamped_cdr(now.nanoseconds, "base_link", w))
-
-    def _publish_progress(self, run: _GoalRun, t: float) -> None:
-        ex = run.executive
-        st = ex.status()
-        prompt = self.operator_prompt(ex)
-        self._publish_status_throttled(t, _PHASES[st.phase], st, prompt or st.message)
-        key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0, prompt)
-        if key != run.last_feedback or t - run.last_feedback_s >= 1.0:
-            if prompt and prompt != run.last_feedback[-1]:
-                self.get_logger().info(f"operator: {prompt}")
-            run.last_feedback, run.last_feedback_s = key, t
-            run.handle.publish_feedback(RunIdentification.Feedback(
-                dof=st.dof, level_index=st.level_index, level_count=st.level_count, level_command=st.level_command,
-                progress=st.progress, prompt=prompt))
-        if t - self._last_publish_t >= self.publish_period_s - 1e-9:
-            self._last_publish_t = t
-            stamp = self.get_clock().now().to_msg()
-            for d, est in ex.online.items():
-                if est.rls.n_samples > 0:
-                    self.pub_estimate.publish(hydro_estimate(d, est, stamp))
-
-    def _publish_status_throttled(self, t: float, phase: int, st: ExecutiveStatus | None, message: str) -> None:
-        """The running status at ROS time ``t`` (s): at once when phase, DOF, level or message changed, else at
-        most every :data:`STATUS_PERIOD_S` (the status is a step signal: a bag's zero-order hold of it,
-        :mod:`..bag_input.from_bag`, sees every change at its time)."""
-        key = (phase, message) if st is None else (phase, message, st.dof, st.level_index, st.level_command)
-        last_t, last_key = self._last_status
-        if key == last_key and t - last_t < STATUS_PERIOD_S - 1e-9:
-            return
-        self._last_status = (t, key)
-        self._publish_status(phase, st, message)
 
     def _publish_status(self, phase: int, st: ExecutiveStatus | None, message: str) -> None:
         m = ManeuverStatus(phase=phase, message=message)
@@ -590,14 +367,11 @@ class IdentificationNode(Node):
 
     def close(self) -> None:
         """The graph's shutdown path: a running goal gets a zero wrench and ends ("node shutting down")."""
-        run = self._run
-        if run is not None and not run.ended:
+        run = self.core.close()
+        if run is not None:
             self._publish_wrench(np.zeros(6), self.get_clock().now())
-            run.error = run.error or "node shutting down"
-            if run.record is None and run.executive.started:
-                run.record = run.executive.record()
             if self.context.ok():
-                self._end_goal(run)
+                self._end_goal(self.core.end(run).data[0])
             else:  # SIGINT/SIGTERM already shut the context down: no result can be delivered any more
                 run.ended = True
 
