@@ -133,3 +133,29 @@ def test_altitude_manoeuvre_stays_in_the_pool_and_crosses_the_slope_change(cfg):
     assert shallowest_floor - s.altitude_m - ping_z - 0.5 * f["vehicle.height_m"] > 0.2  # hull top 20 cm under water
     # the heave rate the ramp asks for is inside the depth reference's rate limit
     assert s.surge_speed_m_s / 3.0 < cfg.control.max_depth_rate_m_s
+
+
+def test_the_hold_loop_keeps_its_sample_logs_bounded(cfg, monkeypatch):
+    """The controller runs between goals for hours with its sensor streams open: its HoldLoop cuts the state's
+    sample logs to the last LOG_HORIZON_S seconds (each log's newest sample kept), so they stop growing, while the
+    depth step still holds (the law reads only recent samples)."""
+    from hindrax_ident.control import loop as loop_module
+
+    seen = []
+
+    class Watched(loop_module.HoldLoop):
+        def add(self, samples):
+            super().add(samples)
+            seen.append({k: (v[-1][0], v[-1][0] - v[0][0]) for k, v in self.state.log.items() if v})
+
+    monkeypatch.setattr(ev, "HoldLoop", Watched)
+    truth = load_truth(cfg, CONTROL_TRUTH)
+    setup = ev.EvaluationSetup(depth_after_s=12.0, settle_s=8.0)
+    case = ev.run_case(cfg, truth, "depth_step", ev.make_hold("identified", cfg, setup, known_model(cfg)), setup, 2,
+                       "identified")
+    spans = {k: max(s[k][1] for s in seen if k in s) for k in ("depth", "attitude", "gyro", "dvl")}
+    assert all(span <= loop_module.LOG_HORIZON_S for span in spans.values()), spans
+    # the run was long enough for an unbounded log to pass the horizon 3 times over
+    gyro_newest = [s["gyro"][0] for s in seen if "gyro" in s]
+    assert gyro_newest[-1] - gyro_newest[0] > 3 * loop_module.LOG_HORIZON_S
+    assert abs(case.value[-1] - (setup.depth_start_m + setup.depth_step_m)) < 0.015

@@ -8,9 +8,16 @@ the vertical acceleration), exactly as the identification executive does, and ha
 :class:`~hindrax_ident.control.legacy.LegacyPDHold`). The controller node (:mod:`.node`) feeds it the samples of the
 driver topics (:mod:`hindrax_ident.identification.bag_input.signals`), the evaluation (:mod:`.evaluate`) those of the
 in-process simulator. Pure, no ROS.
+
+Memory: the state's sample logs (``SensorState.log``, which the identification executive keeps whole for its
+campaign record) are cut here to the last :data:`LOG_HORIZON_S` seconds of samples after every batch: the holds
+read only recent samples (rates and attitude interpolated at the stamps of the newest DVL and Ping1D samples), and
+the controller runs between goals for hours with its streams open, and its six lists grew without bound: 58 kB per
+second of samples in the virtual pool (IMU at 100 Hz; about 30 kB/s at the vehicle's 51 Hz), 100-200 MB an hour.
 """
 from __future__ import annotations
 
+import bisect
 import math
 from typing import Any, Iterable, Sequence
 
@@ -21,7 +28,10 @@ from hindrax_drivers.config import VehicleConfig
 from ..identification.fit.dof_model import measurement_settings
 from ..vehicle.state import DepthEstimator, SensorState
 
-__all__ = ["HoldLoop"]
+__all__ = ["HoldLoop", "LOG_HORIZON_S"]
+
+#: the span of samples the loop keeps in its state's logs, s (the newest sample of each log is always kept)
+LOG_HORIZON_S = 5.0
 
 
 class HoldLoop:
@@ -41,6 +51,15 @@ class HoldLoop:
         for dev, s in sorted(samples, key=lambda x: x[1].stamp_s):
             self.state.on_sample(dev, s)
             self.depth.on_sample(dev, s.stamp_s, self.state)
+        self._trim_logs()
+
+    def _trim_logs(self) -> None:
+        """Drop log samples older than :data:`LOG_HORIZON_S` before each log's newest one (module docstring)."""
+        for log in self.state.log.values():
+            if len(log) > 1:
+                cut = bisect.bisect_left(log, log[-1][0] - LOG_HORIZON_S, hi=len(log) - 1, key=lambda e: e[0])
+                if cut:
+                    del log[:cut]
 
     def depth_now(self, t_s: float) -> tuple[float, float]:
         """(depth m, depth rate m/s) of the body origin predicted to ``t_s`` (NaN before the first depth)."""
