@@ -412,8 +412,10 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                         res = core.allocate(frames.wrench_frd_to_flu(apply))
                         logical = res.pulse_width_us
                         widths = np.where(rev, 2.0 * neutral - logical, logical) + trim
-                        out.append((EPOCH_NS + int(round(ts * 1e9)) + int(rng.uniform(0.0, 0.005) * 1e9),
-                                    "/allocation/status", _serialize(_allocation_status(res, cmd_ns))))
+                        # received 1 ms after the allocation (no draw from rng: the bag's other data stay as
+                        # they were without this topic)
+                        out.append((EPOCH_NS + int(round(ts * 1e9)) + 1_000_000, "/allocation/status",
+                                    _serialize(_allocation_status(res, cmd_ns))))
                     samples = sim.step(widths)
                 if dvl and samples:
                     on_samples(samples)
