@@ -351,6 +351,36 @@ def test_a_foreign_commander_while_armed_disarms_and_its_commands_are_refused():
     assert core.request_arm() == ""
 
 
+def test_a_publisher_not_named_yet_holds_neutral_without_a_disarm_until_named_or_the_bound():
+    """Under load, discovery shows a new command publisher as _NODE_NAME_UNKNOWN_ for a while: that alone must not
+    disarm (it did), but its commands cannot be trusted meanwhile (it may be a foreign one): held at neutral. Once
+    named, the allocation's commands flow again; a stranger once named, one unnamed past the bound, or a second live
+    publisher beside the allocation is a fault that disarms."""
+    from hindrax_drivers.pca9685.core import NAME_RESOLVE_BOUND_S, UNNAMED_NODE, command_source_unnamed
+
+    names = [COMMAND_NODE, UNNAMED_NODE]
+    assert UNNAMED_NODE == "_NODE_NAME_UNKNOWN_"
+    assert command_source_fault(names, alive=1, unnamed_for_s=0.5) == ""
+    assert command_source_fault([UNNAMED_NODE], alive=1, unnamed_for_s=NAME_RESOLVE_BOUND_S - 0.1) == ""
+    assert "still unnamed after 2.5 s" in command_source_fault(names, alive=1, unnamed_for_s=2.5)
+    assert "2 live publishers" in command_source_fault(names, alive=2, unnamed_for_s=0.0)
+    assert "'rogue'" in command_source_fault([COMMAND_NODE, UNNAMED_NODE, "rogue"], alive=1)
+    unnamed = command_source_unnamed(names)
+    assert "not named yet" in unnamed and command_source_unnamed([COMMAND_NODE]) == ""
+
+    core, _clock = armed_commanding()
+    assert core.set_command_source("", unnamed) == ""
+    assert core.armed and core.decide(10.0, 0.02).widths_us.tolist() == [1500.0, 1500.0]
+    assert core.on_command(10.01, [1900.0, 1900.0], True) == unnamed
+    assert core.decide(10.02, 0.02).widths_us.tolist() == [1500.0, 1500.0]
+    core.set_command_source("", "")  # named: the allocation
+    assert core.on_command(10.03, [1700.0, 1700.0], True) == ""
+    assert core.armed and core.decide(10.04, 0.02).widths_us.tolist() == [1700.0, 1700.0]
+    fault = command_source_fault(names, alive=1, unnamed_for_s=2.5)
+    assert core.set_command_source(fault, command_source_unnamed(names)) == fault
+    assert not core.armed and core.command_unnamed == ""
+
+
 # (rule, job kind, result fields, chip confirmed before, expected event, output state after, substring of the reason)
 CHIP_RESULT_ROWS = [
     ("configure read back: neutral confirmed", CONFIGURE, {}, False, "confirmed", OUTPUT_NEUTRAL, "holding neutral"),

@@ -247,6 +247,39 @@ def test_only_the_allocation_may_command_a_second_publisher_disarms_and_is_refus
     arm(esc)
 
 
+def test_a_command_publisher_not_named_yet_holds_neutral_but_does_not_disarm(esc):
+    """Under load, discovery shows a new publisher as _NODE_NAME_UNKNOWN_ for a while: it disarmed the vehicle.
+    Now its commands are held at neutral (it may be a foreign one) while the ESC stays armed; once named the
+    allocation commands again; once named as a stranger it disarms. (The graph is stood in: discovery's timing
+    cannot be forced.)"""
+    from types import SimpleNamespace
+
+    node, emu = esc["node"], esc["emu"]
+    arm(esc)
+    stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
+    graph = node.get_publishers_info_by_topic
+    shown = {"extra": "_NODE_NAME_UNKNOWN_"}
+
+    def publishers(topic):
+        real = graph(topic)
+        if topic != "thrusters/command_pulse_width" or not shown["extra"]:
+            return real
+        return real + [SimpleNamespace(node_name=shown["extra"], node_namespace="/")]
+    node.get_publishers_info_by_topic = publishers
+    stream(esc, [1700.0] * 8, lambda: np.allclose(wire(emu), NEUTRAL, atol=TICK_US))
+    assert node.armed and node.core.command_unnamed and not node.core.command_source
+    assert node.diag.counts()["command_source_unnamed"] == 1
+    shown["extra"] = ""  # named: it was the allocation's own endpoint
+    stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
+    assert node.armed and node.diag.counts().get("command_source_fault", 0) == 0
+    shown["extra"] = "rogue"
+    wait_until(lambda: not node.armed, 10, lambda: (esc["command"]([1700.0] * 8), esc["spin"]()),
+               "disarmed on a named stranger")
+    node.settle()
+    assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US) and "'rogue'" in node.core.command_source
+    node.get_publishers_info_by_topic = graph
+
+
 def test_a_forged_supervisor_heartbeat_disarms_and_refuses_arming(esc):
     """Issue 43 finding 2 at the ESC: a 10-line script publishing level-0 supervisor/heartbeat was taken as the
     supervisor's. The ESC takes the heartbeats through their identity check (one live publisher, node

@@ -28,6 +28,8 @@ Rules (one test row each in ``test/test_esc_core.py``):
 * **Command source** (:func:`command_source_fault`, :meth:`EscCore.set_command_source`): commands come only from the
   ``thrust_allocation`` node, alone on the topic. Any other publisher (``hindrax thruster-test`` goes through the
   allocation; a script, a replayed bag) refuses arming, disarms while armed and holds neutral until it is gone.
+  A publisher not named yet by discovery holds neutral and refuses arming without a disarm, until it is named or
+  :data:`NAME_RESOLVE_BOUND_S` makes it a fault.
 * **Chip results**: a failed configure, read-back or neutral write is a lost chip; a failed thrust write drops the
   command (the node writes neutral); a read-back mismatch asks for a re-initialisation; a result of a job posted
   before the chip was lost changes nothing but what is known to be on the wire.
@@ -46,7 +48,8 @@ import numpy as np
 
 __all__ = ["OUTPUT_UNKNOWN", "OUTPUT_NEUTRAL", "OUTPUT_COMMANDING", "RETRY_MIN_S", "RETRY_MAX_S", "GUARD_CONFIRM_S",
            "COMMAND_NODE", "CONFIGURE", "WRITE", "NEUTRAL", "READBACK", "EscOutput", "EscCore", "EscDecision",
-           "ChipOutcome", "SteadyWatchdog", "command_fault", "command_source_fault", "heartbeat_verdict"]
+           "ChipOutcome", "SteadyWatchdog", "command_fault", "command_source_fault", "command_source_unnamed",
+           "heartbeat_verdict", "UNNAMED_NODE", "NAME_RESOLVE_BOUND_S"]
 
 #: output states, the values of hindrax_msgs/ThrusterPwm ``output_state`` (checked equal in the tests)
 OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING = 0, 1, 2
@@ -62,6 +65,11 @@ RETRY_MAX_S = 4.0
 GUARD_CONFIRM_S = 0.15
 #: the one node that may publish ``thrusters/command_pulse_width`` (docs/architecture.md §8.2)
 COMMAND_NODE = "thrust_allocation"
+#: the name the graph gives an endpoint seen before its participant's node names arrived (discovery not finished)
+UNNAMED_NODE = "_NODE_NAME_UNKNOWN_"
+#: how long a command publisher may stay unnamed before it is a command source fault, s: discovery names an
+#: endpoint within one participant-announcement round (0.1 s quiet); the rounds stretch on a loaded machine
+NAME_RESOLVE_BOUND_S = 2.0
 #: chip jobs (:mod:`.worker`): (re)configure and read back; write the widths if they changed; write them whatever is
 #: believed on the chip (a neutral for safety); read the registers back
 CONFIGURE, WRITE, NEUTRAL, READBACK = "configure", "write", "neutral", "readback"
@@ -110,20 +118,37 @@ class SteadyWatchdog:
 
 
 def command_source_fault(node_names: Sequence[str], topic: str = "thrusters/command_pulse_width",
-                         alive: int | None = None) -> str:
+                         alive: int | None = None, unnamed_for_s: float = 0.0) -> str:
     """Why the command topic cannot be trusted ('' when it can): ``node_names`` of every publisher the graph shows
     on it (``get_publishers_info_by_topic``) and ``alive``, how many of them are live (the subscription's DDS
     liveliness count; None: count the names). Only :data:`COMMAND_NODE` may be there, and only one live; none is
     no fault (no command comes). The live count, not the names, decides "one": a killed process stays in the graph
     for about 20 s (Fast DDS participant lease), its writer is not alive after the 1 s liveliness lease, so a
-    respawned allocation is not refused as a second one."""
-    strangers = sorted({n for n in node_names if n != COMMAND_NODE})
+    respawned allocation is not refused as a second one.
+
+    A publisher seen before its participant's node names arrived is named :data:`UNNAMED_NODE` (discovery not
+    finished): not a fault by itself (:func:`command_source_unnamed` holds the commands meanwhile) until it has
+    been there ``unnamed_for_s`` > :data:`NAME_RESOLVE_BOUND_S`; it still counts in ``alive``."""
+    strangers = sorted({n for n in node_names if n not in (COMMAND_NODE, UNNAMED_NODE)})
     if strangers:
         return (f"{topic} published by {', '.join(map(repr, strangers))}: only {COMMAND_NODE!r} may command the "
                 "thrusters")
+    if UNNAMED_NODE in node_names and unnamed_for_s > NAME_RESOLVE_BOUND_S:
+        return (f"{topic} has a publisher still unnamed after {unnamed_for_s:.1f} s (discovery bound "
+                f"{NAME_RESOLVE_BOUND_S:g} s): only {COMMAND_NODE!r} may command the thrusters")
     count = len(node_names) if alive is None else int(alive)
     if count > 1:
         return f"{count} live publishers named {COMMAND_NODE!r} on {topic}: only one may command the thrusters"
+    return ""
+
+
+def command_source_unnamed(node_names: Sequence[str], topic: str = "thrusters/command_pulse_width") -> str:
+    """Why the commands are held at neutral without a disarm ('' when they are not): a publisher on ``topic`` whose
+    node name discovery has not delivered yet (:data:`UNNAMED_NODE`). It may be a foreign one: its commands (and
+    the allocation's, which cannot be told apart) are refused until it is named or the bound makes it a fault
+    (:func:`command_source_fault`)."""
+    if UNNAMED_NODE in node_names:
+        return f"{topic} has a publisher not named yet (discovery): commands held at neutral"
     return ""
 
 
@@ -281,6 +306,7 @@ class EscCore:
         self.neutral_confirmed_at: float | None = None
         self.neutral_on_wire_since: float | None = None
         self.command_source = ""  # '' or why the command topic is not trusted (command_source_fault)
+        self.command_unnamed = ""  # '' or why commands are held without a disarm (command_source_unnamed)
         self.supervisor_refusal = "no supervisor heartbeat yet"
         self.guard_refusal = "no output-guard heartbeat yet"
         #: the last widths written may still be on the wire although the chip cannot be reached
@@ -403,15 +429,18 @@ class EscCore:
             return refusal
         return ""
 
-    def set_command_source(self, fault: str) -> str:
+    def set_command_source(self, fault: str, unnamed: str = "") -> str:
         """The command topic's publishers checked (:func:`command_source_fault`): a fault drops the command and
-        disarms while armed. Returns the reason of a disarm it causes ('' when none)."""
+        disarms while armed. ``unnamed`` (:func:`command_source_unnamed`, only without a fault): a publisher not
+        named yet; the command is dropped and commands are refused (neutral) until it is named, without a disarm.
+        Returns the reason of a disarm it causes ('' when none)."""
         self.command_source = fault
-        if fault:
+        self.command_unnamed = "" if fault else unnamed
+        if fault or unnamed:
             self.command = None
-            if self.armed:
-                self.disarm(fault)
-                return fault
+        if fault and self.armed:
+            self.disarm(fault)
+            return fault
         return ""
 
     def peer_refusal(self) -> str:
@@ -438,7 +467,7 @@ class EscCore:
         if self.neutral_confirmed_at is None:
             return ("PCA9685 not confirmed at neutral (not reachable or its registers did not read back)" +
                     (f": {bus_error}" if bus_error else ""))
-        refusal = self.peer_refusal() or self.command_source
+        refusal = self.peer_refusal() or self.command_source or self.command_unnamed
         if refusal:
             return refusal
         remaining = self.arming_remaining_s()
@@ -469,7 +498,7 @@ class EscCore:
     def on_command(self, ros_t_s: float, widths_us: Sequence[float], armed: bool) -> str:
         """A ThrusterPwm command arrived at ROS time ``ros_t_s``. Returns the fault ('' when it is valid); a fault
         drops the held command, so the next :meth:`decide` gives neutral with the reason."""
-        fault = self.command_source or \
+        fault = self.command_source or self.command_unnamed or \
             command_fault(widths_us, armed, len(self.output.channels), self.output.min_us, self.output.max_us)
         if fault:
             self.rejected_commands += 1

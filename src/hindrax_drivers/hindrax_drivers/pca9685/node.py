@@ -207,11 +207,13 @@ class EscNode(Node):
     def _check_graph(self) -> None:
         """Who publishes the heartbeats and the commands (every second safety tick and before an arm request,
         :meth:`.peers.EscPeers.check_graph`); a command source fault disarms and holds neutral while it lasts."""
-        fault = self.peers.check_graph()
+        fault, unnamed = self.peers.check_graph()
         if fault and fault != self.core.command_source:
             self.diag.count("command_source_fault")
             self.get_logger().error(f"command topic not trusted: {fault}")
-        if self.core.set_command_source(fault):
+        if unnamed and not fault and not self.core.command_unnamed:
+            self.diag.count("command_source_unnamed")
+        if self.core.set_command_source(fault, unnamed):
             self._after_disarm(fault)
 
     def _feed_peers(self) -> str:

@@ -10,6 +10,7 @@ parameter (read-only, :data:`HEARTBEAT_TIMEOUT`): ``heartbeat_timeout_s`` (defau
 """
 from __future__ import annotations
 
+import time
 from typing import Any, Callable
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -17,7 +18,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from ..config import Spec
 from ..liveness import HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok
 from ..config.node_parameters import declare_node_parameter
-from .core import command_source_fault, heartbeat_verdict
+from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
 __all__ = ["EscPeers", "HEARTBEAT_TIMEOUT", "COMMAND_TOPIC"]
 
@@ -45,6 +46,8 @@ class EscPeers:
                                                       default_timeout_s))
         #: live publishers of the commands (the command subscription's liveliness event, :meth:`on_liveliness`)
         self.command_publishers_alive = 0
+        #: steady time since when a command publisher has been unnamed (discovery not finished), s; None: none is
+        self.unnamed_since: float | None = None
         self.supervisor_age = AliveAge(2.0 * period_s)
         self.guard_age = AliveAge(2.0 * period_s)
         self.supervisor_ok, self.supervisor_message = False, ""
@@ -58,13 +61,22 @@ class EscPeers:
         self.supervisor_age.tick()
         self.guard_age.tick()
 
-    def check_graph(self) -> str:
-        """The heartbeats' identity checks against the graph, then the command topic's: '' or why the commands
-        cannot be trusted (only the allocation may publish them, :func:`.core.command_source_fault`)."""
+    def check_graph(self) -> tuple[str, str]:
+        """The heartbeats' identity checks against the graph, then the command topic's: (fault, unnamed), each ''
+        or why the commands cannot be trusted (only the allocation may publish them, :func:`.core.
+        command_source_fault`) or are held while a publisher is not named yet (:func:`.core.
+        command_source_unnamed`; a fault once unnamed for longer than :data:`.core.NAME_RESOLVE_BOUND_S`)."""
         for watch in self.watches.values():
             watch.check()
         names = [info.node_name for info in self._node.get_publishers_info_by_topic(COMMAND_TOPIC)]
-        return command_source_fault(names, COMMAND_TOPIC, self.command_publishers_alive)
+        now = time.monotonic()
+        if UNNAMED_NODE not in names:
+            self.unnamed_since = None
+        elif self.unnamed_since is None:
+            self.unnamed_since = now
+        unnamed_for_s = 0.0 if self.unnamed_since is None else now - self.unnamed_since
+        fault = command_source_fault(names, COMMAND_TOPIC, self.command_publishers_alive, unnamed_for_s)
+        return fault, command_source_unnamed(names, COMMAND_TOPIC)
 
     def on_liveliness(self, info: Any) -> None:
         """The command subscription's liveliness event (1 s lease)."""
