@@ -124,4 +124,6 @@ def test_guard_core_silences_on_an_untrusted_heartbeat():
     core.on_identity("2 live publishers on supervisor/heartbeat")
     assert core.decide(0.0, 0.0) == (True, True) and core.reason.startswith("heartbeat not trusted: 2 live")
     core.on_identity("")
+    assert core.decide(0.0, 0.0) == (True, False)  # no ESC beat since: the last one may predate an arm
+    core.on_esc(OUTPUT_NEUTRAL, False)
     assert core.decide(0.0, 0.0) == (False, True)

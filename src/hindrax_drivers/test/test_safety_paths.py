@@ -232,6 +232,24 @@ def test_f2_guard_start_holds_oe_until_a_live_esc_confirms_neutral():
     assert core.decide(0.0, 0.25)[0] and "no supervisor heartbeat" in core.reason
 
 
+def test_f2_the_guard_releases_only_on_an_esc_beat_received_after_the_cause():
+    """Seen under load: the guard asserted /OE on a forged supervisor beat and released it 37 ms later on the ESC's
+    newest beat, sent before the arm (disarmed, neutral), while the ESC was armed with 1700 us on the chip. A
+    release needs an ESC beat that arrived after the last decision with a cause."""
+    core = GuardCore(timeout_s=0.2)
+    core.on_supervisor(True, "")
+    core.on_esc(OUTPUT_NEUTRAL, False)  # before the arm
+    assert core.decide(0.0, 0.0) == (False, True)
+    core.on_identity("supervisor/heartbeat published by node '_NODE_NAME_UNKNOWN_'")  # (the ESC arms meanwhile)
+    assert core.decide(0.05, 0.0) == (True, True)
+    core.on_identity("")  # the forger gone; the pre-arm beat is still the newest, 0.1 s old
+    assert core.decide(0.1, 0.0)[0] and "waiting for the ESC" in core.reason
+    core.on_esc(OUTPUT_COMMANDING, True)  # the ESC's next beat: armed
+    assert core.decide(0.0, 0.0)[0]
+    core.on_esc(OUTPUT_NEUTRAL, False)  # disarmed at neutral, heard after the cause
+    assert core.decide(0.0, 0.0) == (False, True)
+
+
 def test_44_7_guard_without_its_line_says_error_retries_and_the_esc_refuses_to_arm(rig, monkeypatch):
     """Issue 44 item 7: the GPIO request fails at start-up (line busy): the guard's heartbeat is ERROR (it said OK
     before, and the ESC armed), the ESC refuses to arm on it; the guard retries and, once the line is granted, lets

@@ -19,7 +19,9 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
 
 Once asserted it stays asserted (latched) until every cause is gone AND the ESC reports that it is disarmed with
 neutral confirmed on the chip (``OUTPUT_NEUTRAL``, ``armed`` false): thrust can then only come back through a new
-arm request. It starts asserted: nothing is released until a live ESC has confirmed neutral.
+arm request. That report must be an ESC beat received after the last decision that had a cause: the newest beat
+before it may predate an arm (beats are 40 ms apart, accepted up to ``timeout_s`` old), and releasing on it let
+1700 us through with the ESC armed. It starts asserted: nothing is released until a live ESC has confirmed neutral.
 """
 from __future__ import annotations
 
@@ -45,10 +47,13 @@ class GuardCore:
     identity_fault: str = ""
     drive_fault: str = ""
     stall: str = ""
+    #: an ESC beat arrived since the last :meth:`decide` that had a cause (release needs one, module docstring)
+    esc_heard_since_cause: bool = False
 
     def on_esc(self, output_state: int, armed: bool) -> None:
         """The ESC's ``esc/heartbeat`` (output_state constant, armed flag)."""
         self.esc_state, self.esc_armed = int(output_state), bool(armed)
+        self.esc_heard_since_cause = True
 
     def on_supervisor(self, ok: bool, message: str) -> None:
         """The supervisor's heartbeat: ok (level OK) or the breach reason."""
@@ -95,8 +100,9 @@ class GuardCore:
         causes = self.causes(esc_age_s, supervisor_age_s)
         if causes:
             self.asserted, self.reason = True, causes[0]
+            self.esc_heard_since_cause = False
         elif self.asserted:
-            if self.esc_state == OUTPUT_NEUTRAL and not self.esc_armed:
+            if self.esc_heard_since_cause and self.esc_state == OUTPUT_NEUTRAL and not self.esc_armed:
                 self.asserted, self.reason = False, ""
             else:
                 self.reason = "cause cleared; waiting for the ESC to report disarmed at neutral"
