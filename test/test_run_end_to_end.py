@@ -86,7 +86,7 @@ def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     assert min(counts[t] for t in ("/dvl/data", "/wrench", "/thrusters/pulse_width")) > 500, counts
     # the status repeats an unchanged state every STATUS_PERIOD_S (every change goes out at once): at least that
     # often over the run, whose length the 10 Hz DVL gives
-    from hindrax_ident.identification.online.node import STATUS_PERIOD_S
+    from hindrax_ident.identification.online.core import STATUS_PERIOD_S
     assert counts["/identification/status"] >= 0.9 * (counts["/dvl/data"] / 10.0) / STATUS_PERIOD_S, counts
     assert last_written is not None and not last_written.armed
     assert list(last_written.pulse_width_us) == pytest.approx([1500.0] * len(cfg.thrusters.thrusters), abs=1.3)

@@ -59,3 +59,36 @@ def test_run_refuses_a_domain_with_another_esc_before_arming(tmp_path):
     assert err[-1].startswith(f"hindrax run: refused: ROS domain {domain} already has ESC /esc; refusing to run a "
                               "campaign beside another vehicle graph"), err
     assert not (tmp_path / "run" / "identification.yaml").exists()
+
+
+def test_bringup_sim_ends_when_another_supervisor_appears_after_its_start(tmp_path):
+    """Discovery on a loaded machine can outlast the start-up window: a supervisor seen later ends ``bringup``
+    the same way (one line, exit 1)."""
+    hindrax = str(Path(sys.executable).with_name("hindrax"))
+    with ros_context() as ctx, open(tmp_path / "stdout", "w") as out, open(tmp_path / "stderr", "w") as errf:
+        proc = subprocess.Popen([hindrax, "bringup", "--sim"], env=child_env(), cwd=tmp_path, stdout=out,
+                                stderr=errf)
+        ex = SingleThreadedExecutor(context=ctx)
+        other = None
+        try:
+            wait_until(lambda: "bringup:" in (tmp_path / "stdout").read_text() or proc.poll() is not None, 180,
+                       message="bringup started")
+            assert proc.poll() is None, (tmp_path / "stderr").read_text()
+            other = rclpy.create_node("supervisor", context=ctx)
+            beat = other.create_publisher(DiagnosticStatus, "supervisor/heartbeat", 10)
+            other.create_timer(0.05, lambda: beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK)))
+            ex.add_node(other)
+            wait_until(lambda: proc.poll() is not None, 120, lambda: ex.spin_once(timeout_sec=0.05),
+                       "bringup ending")
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            ex.shutdown()
+            if other is not None:
+                other.destroy_node()
+        err = (tmp_path / "stderr").read_text().strip().splitlines()
+        domain = ctx.get_domain_id()
+    assert proc.returncode == 1, err
+    assert err[-1].startswith(f"hindrax bringup: refused: ROS domain {domain} already has supervisor "
+                              "/supervisor"), err

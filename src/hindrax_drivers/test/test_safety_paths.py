@@ -136,6 +136,9 @@ def rig():
 def test_f1_arming_is_refused_without_a_supervisor_or_while_it_is_tripped(rig):
     r = rig()
     r.beats.supervisor = None  # no supervisor running
+    # the chip confirmed at neutral first (its worker thread answers when the machine lets it): that refusal comes
+    # before the supervisor's, and is not what this test is about
+    r.wait(lambda: r.esc.neutral_confirmed_time is not None, "PCA9685 confirmed at neutral")
     r.wait(lambda: not r.esc.peers.supervisor_age.fresh(r.esc.peers.timeout_s), "heartbeat stale")
     res = r.set_armed(True)
     assert not res.success and "no supervisor heartbeat" in res.message
