@@ -64,10 +64,15 @@ def test_run_refuses_a_domain_with_another_esc_before_arming(tmp_path):
 def test_bringup_sim_ends_when_another_supervisor_appears_after_its_start(tmp_path):
     """Discovery on a loaded machine can outlast the start-up window: a supervisor seen later ends ``bringup``
     the same way (one line, exit 1)."""
+    from domain_coordinator import domain_id
+
     hindrax = str(Path(sys.executable).with_name("hindrax"))
-    with ros_context() as ctx, open(tmp_path / "stdout", "w") as out, open(tmp_path / "stderr", "w") as errf:
-        proc = subprocess.Popen([hindrax, "bringup", "--sim"], env=child_env(), cwd=tmp_path, stdout=out,
-                                stderr=errf)
+    # a domain of its own: the other tests here leave a node named esc or supervisor in this worker's domain's
+    # discovery caches for a while, which would refuse the start itself
+    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx, open(tmp_path / "stdout", "w") as out, \
+            open(tmp_path / "stderr", "w") as errf:
+        proc = subprocess.Popen([hindrax, "bringup", "--sim"], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path,
+                                stdout=out, stderr=errf)
         ex = SingleThreadedExecutor(context=ctx)
         other = None
         try:
