@@ -22,8 +22,11 @@ pytestmark = pytest.mark.ros
 
 def _refusal(args: list[str], role_node: str, tmp_path: Path) -> tuple[int, list[str], int]:
     """Run ``hindrax ARGS`` while a node named ``role_node`` publishes its heartbeat on this test's domain; returns
-    (exit status, stderr lines, domain)."""
-    with ros_context() as ctx:
+    (exit status, stderr lines, domain). The domain is a fresh one: a node named esc or supervisor that an earlier
+    test of this worker left would still be in the worker's domain's discovery caches and be named too."""
+    from domain_coordinator import domain_id
+
+    with domain_id() as fresh, ros_context(domain_id=fresh) as ctx:
         other = rclpy.create_node(role_node, context=ctx)
         beat = other.create_publisher(DiagnosticStatus, f"{role_node}/heartbeat", 10)
         other.create_timer(0.05, lambda: beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK)))
@@ -31,7 +34,7 @@ def _refusal(args: list[str], role_node: str, tmp_path: Path) -> tuple[int, list
         ex.add_node(other)
         hindrax = str(Path(sys.executable).with_name("hindrax"))
         with open(tmp_path / "stdout", "w") as out, open(tmp_path / "stderr", "w") as errf:
-            proc = subprocess.Popen([hindrax, *args], env=child_env(), cwd=tmp_path, stdout=out, stderr=errf)
+            proc = subprocess.Popen([hindrax, *args], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path, stdout=out, stderr=errf)
         try:
             wait_until(lambda: proc.poll() is not None, 180, lambda: ex.spin_once(timeout_sec=0.05),
                        f"hindrax {args[0]} refusing")
