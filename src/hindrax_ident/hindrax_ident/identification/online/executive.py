@@ -168,6 +168,22 @@ def _positive(x: float) -> bool:
     return math.isfinite(x) and x > 0
 
 
+class _Shared(property):
+    """A read-only property of the :class:`Executive` that reads the :class:`~.steps.StepContext` field of the same
+    name (``self.ctx.<name>``); the docstring says what the field holds."""
+
+    def __init__(self, doc: str):
+        super().__init__(self._read)
+        self.__doc__ = doc  # a property subclass would otherwise show its class docstring
+        self.name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def _read(self, executive: "Executive") -> Any:
+        return getattr(executive.ctx, self.name)
+
+
 class Executive:
     """The identification campaign as a tick-driven sequencer of steps (module docstring).
 
@@ -272,30 +288,28 @@ class Executive:
         self.steps: list[Step] = list(steps) if steps is not None else self.plan()
 
     # ------------------------------------------------------------------ the shared state, by name
-    state = property(lambda self: self.ctx.state, doc="conditioned sensors (:class:`~...vehicle.state.SensorState`)")
-    ctrl = property(lambda self: self.ctx.ctrl, doc="the holds (:class:`~.maneuvers.HoldController`)")
-    box = property(lambda self: self.ctx.box, doc="the pool box (:class:`~.maneuvers.PoolBox`)")
-    core = property(lambda self: self.ctx.core, doc="the allocation model (AllocationCore)")
-    curve = property(lambda self: self.ctx.curve, doc="the thrust curve ([Hindrax-Drag] eq. 1)")
-    matrix = property(lambda self: self.ctx.matrix, doc="thrust allocation matrix (6, m), FRD")
-    authority = property(lambda self: self.ctx.authority, doc="DOF -> (positive, negative) authority, N or N m")
-    time_constant_s = property(lambda self: self.ctx.time_constant_s, doc="thrust lag, s")
-    calibration = property(lambda self: self.ctx.calibration, doc="thrust-scale step results (CampaignRecord)")
-    inclining = property(lambda self: self.ctx.inclining, doc="inclining step results (CampaignRecord)")
-    decays = property(lambda self: self.ctx.decays, doc="free-decay windows (CampaignRecord)")
-    windows = property(lambda self: self.ctx.windows, doc="DOF -> (t_start, t_end) of its manoeuvres, s")
-    levels = property(lambda self: self.ctx.levels, doc="DOF -> commanded levels, N or N m")
-    awaiting = property(lambda self: self.ctx.awaiting,
-                        doc="what a step waits for the operator to do ('' when not waiting): attach_ballast, "
-                            "remove_ballast, attach_float, remove_float, apply_line_pull_<surge|sway>[_negative], "
-                            "release_line_<surge|sway>[_negative], attach_inclining_mass_<dof>, "
-                            "remove_inclining_mass_<dof>")
-    prompt = property(lambda self: self.ctx.prompt,
-                      doc="the operator's instruction while :attr:`awaiting` ('' otherwise), e.g. 'calibration: "
-                          "attach the ballast (8.56 N in water), then call continue'")
-    message = property(lambda self: self.ctx.message, doc="the current step's last message")
-    depth_hold_m = property(lambda self: self.ctx.depth_hold_m, doc="depth held between manoeuvres, m")
-    t_s = property(lambda self: self.ctx.t_s, doc="time of the current tick, s")
+    state = _Shared("conditioned sensors (:class:`~...vehicle.state.SensorState`)")
+    ctrl = _Shared("the holds (:class:`~.maneuvers.HoldController`)")
+    box = _Shared("the pool box (:class:`~.maneuvers.PoolBox`)")
+    core = _Shared("the allocation model (AllocationCore)")
+    curve = _Shared("the thrust curve ([Hindrax-Drag] eq. 1)")
+    matrix = _Shared("thrust allocation matrix (6, m), FRD")
+    authority = _Shared("DOF -> (positive, negative) authority, N or N m")
+    time_constant_s = _Shared("thrust lag, s")
+    calibration = _Shared("thrust-scale step results (CampaignRecord)")
+    inclining = _Shared("inclining step results (CampaignRecord)")
+    decays = _Shared("free-decay windows (CampaignRecord)")
+    windows = _Shared("DOF -> (t_start, t_end) of its manoeuvres, s")
+    levels = _Shared("DOF -> commanded levels, N or N m")
+    awaiting = _Shared("what a step waits for the operator to do ('' when not waiting): attach_ballast, "
+                       "remove_ballast, attach_float, remove_float, apply_line_pull_<surge|sway>[_negative], "
+                       "release_line_<surge|sway>[_negative], attach_inclining_mass_<dof>, "
+                       "remove_inclining_mass_<dof>")
+    prompt = _Shared("the operator's instruction while :attr:`awaiting` ('' otherwise), e.g. 'calibration: "
+                     "attach the ballast (8.56 N in water), then call continue'")
+    message = _Shared("the current step's last message")
+    depth_hold_m = _Shared("depth held between manoeuvres, m")
+    t_s = _Shared("time of the current tick, s")
 
     def operator_continue(self) -> bool:
         """The operator's ``continue``: resumes a calibration step waiting in :attr:`awaiting`; False (nothing
