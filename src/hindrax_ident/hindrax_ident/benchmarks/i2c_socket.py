@@ -14,6 +14,7 @@ started it.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -22,6 +23,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
@@ -54,6 +56,23 @@ def _busy(stop: threading.Event) -> None:
         x += 1
 
 
+@contextlib.contextmanager
+def _busy_threads(n: int) -> Iterator[None]:
+    """``n`` CPU-bound Python threads (:func:`_busy`) spinning in this process for the ``with`` block; stopped and
+    joined when it ends, also on an error."""
+    stop = threading.Event()
+    threads = [threading.Thread(target=_busy, args=(stop,), daemon=True) for _ in range(n)]
+    try:
+        for th in threads:
+            th.start()
+        yield
+    finally:
+        stop.set()
+        for th in threads:
+            if th.is_alive():
+                th.join()
+
+
 def _measure(path: str, n: int) -> list[float]:
     out = subprocess.run([sys.executable, "-m", _MODULE, "--client", path, str(n)], check=True,
                          capture_output=True, text=True)
@@ -73,18 +92,13 @@ def run(quick: bool = False) -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="hindrax-i2c-bench-") as tmp:
         for case, busy, switch_s in (("quiet", 0, None), ("busy2", 2, None), ("busy2_switch0.5ms", 2, 0.0005)):
             path = str(Path(tmp) / f"{case}.sock")
-            server, stop, old = _server(path), threading.Event(), sys.getswitchinterval()
-            threads = [threading.Thread(target=_busy, args=(stop,), daemon=True) for _ in range(busy)]
+            server, old = _server(path), sys.getswitchinterval()
             try:
                 if switch_s is not None:
                     sys.setswitchinterval(switch_s)
-                for th in threads:
-                    th.start()
-                times = _measure(path, n)
+                with _busy_threads(busy):
+                    times = _measure(path, n)
             finally:
-                stop.set()
-                for th in threads:
-                    th.join()
                 sys.setswitchinterval(old)
                 server.close()
             rows += _row(f"i2c_socket_round_trip_{case}", times,
@@ -92,17 +106,11 @@ def run(quick: bool = False) -> list[dict]:
                          (f", switch interval {switch_s * 1e3:g} ms" if switch_s else ""))
         path = str(Path(tmp) / "own.sock")
         proc = subprocess.Popen([sys.executable, "-m", _MODULE, "--serve", path], stdout=subprocess.PIPE, text=True)
-        stop = threading.Event()
-        threads = [threading.Thread(target=_busy, args=(stop,), daemon=True) for _ in range(2)]
         try:
             proc.stdout.readline()  # "serving"
-            for th in threads:
-                th.start()
-            times = _measure(path, n)
+            with _busy_threads(2):
+                times = _measure(path, n)
         finally:
-            stop.set()
-            for th in threads:
-                th.join()
             proc.terminate()
             proc.wait(10)
         rows += _row("i2c_socket_round_trip_own_process", times,
@@ -116,8 +124,7 @@ if __name__ == "__main__":
     elif sys.argv[1:2] == ["--serve"]:
         _server(sys.argv[2])
         print("serving", flush=True)
-        while True:
-            time.sleep(3600)
+        threading.Event().wait()  # serve until terminated
     else:
         for row in run(quick=True):
             print(row)
