@@ -38,7 +38,9 @@ user + system time from ``/proc/<pid>/stat`` (all threads). The running phase is
 median over the windows, the note lists every window's value.
 
 Messages per second per topic: counted in the launch layout's bag by log time within each window (the one-process
-graph: the recorder's counts).
+graph: the recorder's counts). The IMU's timing in the running windows, from the same bag (:func:`imu_timing`): its
+rate, the largest gap between two messages and the age of a sample when the recorder receives it, so that a change of
+the process layout shows what it costs the 50 Hz sensor the supervisor watches (``launch_running_imu_*``).
 
 Machine speed: before and after the layouts, the CPU time of 5 million n-body steps here
 (:mod:`hindrax_ident.benchmarks.machine`, ``machine_nbody_cpu_s``, their mean). The development machines of this
@@ -88,6 +90,7 @@ import hindrax_drivers
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.launch_xml import write_parameter_file
+from hindrax_drivers.lean_cdr import cdr_decoder
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
 from hindrax_drivers.testing import GraphSettled, child_env, python_executable, ros_context, wait_until
@@ -107,6 +110,8 @@ EXCLUDE_REGEX = r"^/(sim/|clock$)"
 NODES = ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "identification", "supervisor",
          "recorder")
 WRENCH_RATE_HZ = 50.0
+#: the ICM-20948's topic, whose rate and gaps the running phase reports (:func:`imu_timing`)
+IMU_TOPIC = "/imu/data_raw"
 #: the launch layout is armed once its ROS graph has not changed for this long (s): the publish stalls of a new
 #: participant's first messages came 0-3.0 s after it appeared (hindrax_drivers.testing.GraphSettled)
 GRAPH_QUIET_S = 5.0
@@ -532,9 +537,11 @@ def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
 
 def _bag_rates(out: dict) -> None:
     """Messages per second per topic of every window, from the launch layout's bag (log time = the recorder's
-    reception time on the system clock, the windows' clock)."""
+    reception time on the system clock, the windows' clock), and the IMU's timing (:func:`imu_timing`)."""
     reader = BagReader(out["bag"])
     spans = [(w["t0_ns"], w["t1_ns"], w) for ph in out["phases"].values() for w in ph["windows"]]
+    imu: dict[int, list[tuple[int, int]]] = {id(w): [] for *_, w in spans}
+    decode = cdr_decoder("sensor_msgs/msg/Imu")
     for *_, w in spans:
         w["rates"] = collections.Counter()
     first = min(t0 for t0, _, _ in spans)
@@ -543,8 +550,32 @@ def _bag_rates(out: dict) -> None:
         for t0, t1, w in spans:
             if t0 <= m.log_time_ns < t1:
                 w["rates"][m.topic] += 1
+                if m.topic == IMU_TOPIC:
+                    stamp = decode(m.data).header.stamp
+                    imu[id(w)].append((m.log_time_ns, stamp.sec * 1_000_000_000 + stamp.nanosec))
     for t0, t1, w in spans:
         w["rates"] = {t: n / ((t1 - t0) * 1e-9) for t, n in w["rates"].items()}
+        w["imu"] = imu_timing(imu[id(w)])
+
+
+def imu_timing(samples: list[tuple[int, int]]) -> dict[str, float]:
+    """The IMU's timing as a subscriber in another process sees it (the recorder: what the supervisor's rate check
+    sees too). samples: (reception time, header stamp) of each message in one window, ns on the system clock, in
+    reception order (at least 2). Returns ``rate_hz`` (messages per second between the first and last reception),
+    ``gap_max_s`` (largest interval between two receptions), ``stamp_gap_max_s`` (largest interval between two
+    stamps: the driver's poll taken late), ``age_p50_ms``, ``age_p99_ms``, ``age_max_ms`` (reception time minus
+    stamp: the I2C read, the publish and the delivery; the ICM-20948 stamps its sample at the poll, before the
+    read). Raises ValueError for fewer than 2 samples."""
+    if len(samples) < 2:
+        raise ValueError(f"imu_timing: {len(samples)} sample(s), need at least 2")
+    log = [t for t, _ in samples]
+    stamps = sorted(s for _, s in samples)
+    ages = sorted((t - s) * 1e-6 for t, s in samples)
+    return {"rate_hz": (len(log) - 1) / ((log[-1] - log[0]) * 1e-9),
+            "gap_max_s": max(b - a for a, b in zip(log, log[1:])) * 1e-9,
+            "stamp_gap_max_s": max(b - a for a, b in zip(stamps, stamps[1:])) * 1e-9,
+            "age_p50_ms": ages[len(ages) // 2], "age_p99_ms": ages[min(len(ages) - 1, int(0.99 * len(ages)))],
+            "age_max_ms": ages[-1]}
 
 
 def _safety_log_lines(tmp: Path, names: list[str], keep: int = 12) -> str:
@@ -754,7 +785,33 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
                                  "the processes sharing them; identification and recording on) at the end of the "
                                  "running phase: " + ", ".join(f"{n} {v:.0f}" for n, v in pss.items())})
             rows += [{"name": f"launch_pss_mb_{n}", "value": v, "unit": "MB"} for n, v in pss.items()]
+            rows += _imu_rows(wins)
     return rows
+
+
+def _imu_rows(wins: list[dict]) -> list[dict]:
+    """The running phase's IMU timing rows (:func:`imu_timing` of each window; none when a window has none): the
+    rate, the largest gap and the sample age a subscriber in another process sees. The supervisor stops a campaign
+    below ``safety.min_rate.imu_hz``; the control tick is 50 Hz."""
+    timing = [w.get("imu") for w in wins]
+    if not timing or not all(timing):
+        return []
+
+    def each(key: str, scale: float = 1.0) -> str:
+        return "windows: " + " / ".join(f"{scale * t[key]:.3g}" for t in timing)
+
+    return [
+        {"name": "launch_running_imu_rate_hz", "value": _median([t["rate_hz"] for t in timing]), "unit": "Hz",
+         "target": ">= 48", "note": f"{IMU_TOPIC} received by the recorder; {each('rate_hz')}"},
+        {"name": "launch_running_imu_gap_max_s", "value": max(t["gap_max_s"] for t in timing), "unit": "s",
+         "target": "<= 0.1", "note": f"largest interval between two receptions, all windows ({each('gap_max_s')}); "
+                                     f"between two stamps (the poll taken late): "
+                                     f"{max(t['stamp_gap_max_s'] for t in timing):.3f} s"},
+        {"name": "launch_running_imu_age_p99_ms", "value": _median([t["age_p99_ms"] for t in timing]), "unit": "ms",
+         "note": f"reception minus stamp (I2C read, publish, delivery), 99th percentile ({each('age_p99_ms')}); "
+                 f"median {_median([t['age_p50_ms'] for t in timing]):.2f} ms, largest "
+                 f"{max(t['age_max_ms'] for t in timing):.1f} ms"},
+    ]
 
 
 def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
