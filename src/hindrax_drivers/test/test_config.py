@@ -253,9 +253,12 @@ def test_flatten():
                                             "supervisor.reaction_time_s (3 s)"),
     # the output guard's own heartbeat timeout: its range, and two supervisor beats (20 Hz shipped) within it
     ({"esc.guard_heartbeat_timeout_s": 2.0}, "esc.guard_heartbeat_timeout_s = 2.0: allowed number in [0.05, 1]"),
-    ({"esc.guard_heartbeat_timeout_s": 0.08},
+    ({"esc.guard_heartbeat_timeout_s": 0.08, "esc.bus_call_timeout_s": 0.05},
      "esc.guard_heartbeat_timeout_s = 0.08: allowed at least two supervisor heartbeats (2 / "
      "supervisor.check_rate_hz = 0.1 s)"),
+    # a bus call that hangs must be reported before the guard would miss the ESC's heartbeat anyway
+    ({"esc.bus_call_timeout_s": 0.2},
+     "esc.bus_call_timeout_s = 0.2: allowed < esc.guard_heartbeat_timeout_s = 0.2 s"),
 ])
 def test_values_checked_against_the_hardware_one_line_each(overrides, line):
     with pytest.raises(ConfigError) as err:

@@ -111,3 +111,23 @@ def test_the_output_guard_reads_its_own_heartbeat_timeout():
             guard.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def test_the_esc_reads_its_bus_call_timeout():
+    """The ESC's chip worker gives up on a bus call after esc.bus_call_timeout_s (shipped 0.15 s), so a vehicle
+    file can set it."""
+    import rclpy
+
+    from hindrax_drivers.pca9685.node import EscNode
+
+    assert load_config(default_config_path()).flat["esc.bus_call_timeout_s"] == 0.15
+    rclpy.init()
+    try:
+        esc = EscNode(bus=None, chip_thread=False,
+                      parameter_overrides=[Parameter("esc.bus_call_timeout_s", value=0.12)])
+        try:
+            assert esc.chip_io.call_timeout_s == 0.12
+        finally:
+            esc.destroy_node()
+    finally:
+        rclpy.shutdown()

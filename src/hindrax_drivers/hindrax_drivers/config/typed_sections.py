@@ -258,6 +258,10 @@ class EscSection(Section):
     readback_interval_s: float
     """MODE1, PRE_SCALE and the channel registers are read back this often; a mismatch (chip reset) re-initialises
     the chip and disarms, s"""
+    bus_call_timeout_s: float
+    """a PCA9685 bus call (write or read-back) not returned after this long makes the output state unknown: ESC
+    heartbeat ERROR, the guard asserts /OE (a block write takes 0.9 ms at 400 kHz; must be below
+    esc.guard_heartbeat_timeout_s), s"""
     heartbeat_timeout_s: float
     """the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat is older than this (steady
     clock; docs/architecture.md §8), s"""

@@ -4,7 +4,7 @@ its own), the peers' heartbeats and the command source :class:`.peers.EscPeers`'
 
 The executor thread (callbacks, the safety tick, ``esc/heartbeat``) never waits on the bus: it posts what the chip
 should hold and takes what the chip confirmed at its next command or tick. A bus call not returned within
-:data:`.worker.BUS_CALL_TIMEOUT_S` makes the output state UNKNOWN (heartbeat ERROR: the output guard stops the
+``esc.bus_call_timeout_s`` (0.15 s) makes the output state UNKNOWN (heartbeat ERROR: the output guard stops the
 outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by a later thrust write.
 
 - Chip: start-up and every recovery by :meth:`.chip.EscChip.configure` (neutral first), confirmed by read-back; a
@@ -97,7 +97,8 @@ class EscNode(Node):
         chip = EscChip(int(esc.i2c_address), self.prescale, self.oscillator_hz, self.output.channels,
                        lights.esc_channel, self.raw)
         #: the bus's thread; results taken at each command and tick (rclpy's EventsExecutor has no guard conditions)
-        self.chip_io = ChipWorker(chip, self._open_bus, self.raw.i2c_tap, threaded=chip_thread)
+        self.chip_io = ChipWorker(chip, self._open_bus, self.raw.i2c_tap, threaded=chip_thread,
+                                  call_timeout_s=esc.bus_call_timeout_s)
         if bus is not None:
             self.chip_io.use_bus(bus)
         now_s = lambda: self.get_clock().now().nanoseconds * 1e-9  # noqa: E731

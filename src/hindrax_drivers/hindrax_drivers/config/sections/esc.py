@@ -29,6 +29,10 @@ SCHEMA: dict[str, Spec] = {
                                       "arming is refused while false"),
     "esc.readback_interval_s": real("MODE1, PRE_SCALE and the channel registers are read back this often; a "
                                     "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
+    "esc.bus_call_timeout_s": real("a PCA9685 bus call (write or read-back) not returned after this long makes the "
+                                   "output state unknown: ESC heartbeat ERROR, the guard asserts /OE (a block write "
+                                   "takes 0.9 ms at 400 kHz; must be below esc.guard_heartbeat_timeout_s), s",
+                                   0.01, 1.0),
     "esc.heartbeat_timeout_s": real("the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
                                     "is older than this (steady clock; docs/architecture.md §8), s", 0.05, 1.0),
     "esc.guard_heartbeat_timeout_s": real("the output guard asserts /OE (or silences the chip over I2C) when "
@@ -104,4 +108,9 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             if c[key] < 2.0 * period:
                 issues.append(ConfigIssue(key, c[key], f"at least two supervisor heartbeats (2 / "
                                                        f"supervisor.check_rate_hz = {2.0 * period:g} s)"))
+    # an unreturned bus call must be reported (ERROR heartbeat) before the guard would notice the silence anyway
+    if "esc.bus_call_timeout_s" in c and "esc.guard_heartbeat_timeout_s" in c:
+        if c["esc.bus_call_timeout_s"] >= c["esc.guard_heartbeat_timeout_s"]:
+            issues.append(ConfigIssue("esc.bus_call_timeout_s", c["esc.bus_call_timeout_s"],
+                                      f"< esc.guard_heartbeat_timeout_s = {c['esc.guard_heartbeat_timeout_s']:g} s"))
     return issues
