@@ -17,10 +17,21 @@ The pieces every safety node (ESC, output guard, supervisor) shares:
   a SIGSTOPped one). A writer offering a longer lease (rclpy's default QoS: infinite) does not match at all: its
   beats never arrive, while the graph still shows its node name.
 
+A liveness judgement follows the clock of the graph it protects. On the system clock (the vehicle) that is the
+above. On simulated time (``use_sim_time``: the node's ROS clock is driven by ``/clock`` or by an in-process
+simulator, :func:`simulated_now_s`) the DDS lease, which runs on the wall clock, cannot silence a peer: a process
+starved on a loaded machine loses its lease although on the graph's clock nothing was late. There "no live
+publisher" needs no publisher in the graph at all (:meth:`HeartbeatIdentity.on_publishers`, ``simulated``), the
+other identity checks stay, and a dead or frozen peer is caught by its :class:`AliveAge` on the graph's clock.
+The QoS is the same in both modes (the writers and readers of a mixed graph keep matching).
+
 * :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` but only over time this
   process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``).
   A peer that dies or hangs in another process ages at wall-clock speed; this process's own stall (a busy
-  single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes.
+  single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes. On simulated
+  time the age is also counted on the graph's clock and the smaller of the two counts: a peer is late only when its
+  beat is late on the simulation's clock (a simulation slower than real time, or held, does not age it), and the
+  beats, paced by steady timers, are not made late by a simulation faster than real time.
 * :class:`ClockStepMonitor`: compares ROS time with the steady clock at each tick and reports a backward step of
   ROS time (``/clock`` restarted or a bag looped) and a stall (ROS time frozen while the steady clock runs), so a
   node can re-base its ROS-time checks and say so on ``/diagnostics``.
@@ -42,7 +53,7 @@ from .lean_cdr import diagnostic_status_cdr
 
 __all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_LEASE_S", "HEARTBEAT_NAMES", "HEARTBEAT_NODES",
            "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "beat_values", "heartbeat_ok",
-           "heartbeat_qos", "new_boot_id"]
+           "heartbeat_qos", "new_boot_id", "simulated_now_s"]
 
 #: heartbeat topics (diagnostic_msgs/DiagnosticStatus: level OK = healthy, ERROR = tripped/asserted + reason)
 HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbeat", "esc": "esc/heartbeat"}
@@ -59,6 +70,13 @@ def heartbeat_qos() -> Any:
     with a :data:`HEARTBEAT_LEASE_S` lease (module docstring)."""
     return QoSProfile(depth=10, liveliness=LivelinessPolicy.AUTOMATIC,
                       liveliness_lease_duration=Duration(seconds=HEARTBEAT_LEASE_S))
+
+
+def simulated_now_s(node: Any) -> float | None:
+    """``node``'s ROS time, s, when its clock runs on simulated time (``use_sim_time``: set by ``/clock`` or by a
+    simulator driving it), else None (the system clock: the vehicle)."""
+    clock = node.get_clock()
+    return clock.now().nanoseconds * 1e-9 if getattr(clock, "ros_time_is_active", False) else None
 
 
 def new_boot_id() -> str:
@@ -125,9 +143,12 @@ class HeartbeatIdentity:
         """'' when the peer's heartbeat can be trusted, else why not (publisher faults first)."""
         return self.publisher_fault or self.beat_fault
 
-    def on_publishers(self, node_names: Sequence[str], alive: int | None = None) -> str:
+    def on_publishers(self, node_names: Sequence[str], alive: int | None = None, simulated: bool = False) -> str:
         """The node names of every publisher the graph shows on :attr:`topic`, and how many of them are live (the
-        subscription's liveliness ``alive_count``; None: count the names). Returns :attr:`fault`."""
+        subscription's liveliness ``alive_count``; None: count the names). ``simulated``: the receiver's graph runs
+        on simulated time, where the wall-clock lease behind ``alive`` cannot make the topic silent (module
+        docstring): "no live publisher" then needs no publisher among ``node_names``; ``alive`` still decides
+        "more than one" (a dead duplicate stops counting after its lease in both modes). Returns :attr:`fault`."""
         names = sorted(node_names)
         count = len(names) if alive is None else int(alive)
         strangers = sorted({n for n in names if n != self.node_name})
@@ -137,7 +158,7 @@ class HeartbeatIdentity:
         elif count > 1:
             self.publisher_fault = (f"{count} live publishers on {self.topic}, only one {self.node_name!r} may "
                                     "publish it: a forged or replayed heartbeat")
-        elif count < 1:
+        elif count < 1 and not (simulated and names):
             self.publisher_fault = f"no live publisher on {self.topic}"
         else:
             self.publisher_fault = ""
@@ -189,7 +210,8 @@ class HeartbeatWatch:
     ``node``: the receiving rclpy node; ``kind``: a key of :data:`HEARTBEAT_NAMES`; ``handler(msg)``: called with
     every accepted beat (an rclpy DiagnosticStatus) only; ``armed()``: the receiver's armed state for the check.
     Call :meth:`check` at the receiver's tick (one ``get_publishers_info_by_topic``, about 30 us): it returns
-    :attr:`identity`'s fault ('' when trusted). Rejected beats are counted in :attr:`identity`.
+    :attr:`identity`'s fault ('' when trusted), judged for the receiver's clock at that moment (module docstring:
+    on simulated time the lease does not silence a peer). Rejected beats are counted in :attr:`identity`.
     """
 
     def __init__(self, node: Any, kind: str, handler: Callable[[Any], None], armed: Callable[[], bool]) -> None:
@@ -211,33 +233,51 @@ class HeartbeatWatch:
     def check(self) -> str:
         """Feed the publishers the graph shows and the live count to the identity check; returns its fault."""
         names = [i.node_name for i in self.node.get_publishers_info_by_topic(self.identity.topic)]
-        return self.identity.on_publishers(names, self.alive)
+        return self.identity.on_publishers(names, self.alive, simulated_now_s(self.node) is not None)
 
 
 class AliveAge:
-    """Age of the last message from a peer, s, in executor-alive steady time (module docstring).
+    """Age of the last message from a peer, s, in executor-alive steady time and, on simulated time, on the graph's
+    clock too (module docstring).
 
     ``max_step_s``: the most one tick-to-tick gap may add (two tick periods is the usual choice).
+    ``graph_now_s()``: the receiver's simulated time, s, or None on the system clock (:func:`simulated_now_s`);
+    when it gives a time at both the beat and the tick, :attr:`age_s` is the smaller of the steady age and the
+    simulated time since the beat (a backward step of simulated time restarts that count from the step).
     ``age_s`` is ``math.inf`` until the peer is first heard.
     """
 
-    def __init__(self, max_step_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, max_step_s: float, clock: Callable[[], float] = time.monotonic,
+                 graph_now_s: Callable[[], float | None] = lambda: None) -> None:
         self.max_step_s = float(max_step_s)
         self._clock = clock
+        self._graph_now_s = graph_now_s
         self._last_tick = clock()
+        #: the steady (executor-alive) age, s
+        self.steady_age_s = math.inf
+        #: simulated time of the last beat, s (None: on the system clock, or not heard since it became simulated)
+        self._heard_graph_s: float | None = None
         self.age_s = math.inf
 
     def heard(self, ago_s: float = 0.0) -> None:
-        """The peer spoke ``ago_s`` seconds ago (0: now; a message taken from a polled subscription passes the wall
-        time since its DDS reception, so that its age is what a callback at its arrival would have counted)."""
-        self.age_s = max(0.0, float(ago_s))
+        """The peer spoke ``ago_s`` seconds ago (0: now)."""
+        ago = max(0.0, float(ago_s))
+        graph = self._graph_now_s()
+        self._heard_graph_s = None if graph is None else graph - ago
+        self.steady_age_s = self.age_s = ago
 
     def tick(self) -> float:
         """Advance by the (capped) time since the previous tick; returns the age, s."""
         t = self._clock()
         gap, self._last_tick = t - self._last_tick, t
-        if math.isfinite(self.age_s):
-            self.age_s += min(max(gap, 0.0), self.max_step_s)
+        if math.isfinite(self.steady_age_s):
+            self.steady_age_s += min(max(gap, 0.0), self.max_step_s)
+        self.age_s = self.steady_age_s
+        graph = self._graph_now_s() if self._heard_graph_s is not None else None
+        if graph is not None:
+            if graph < self._heard_graph_s:  # simulated time stepped back: count from the step
+                self._heard_graph_s = graph
+            self.age_s = min(self.steady_age_s, graph - self._heard_graph_s)
         return self.age_s
 
     def fresh(self, timeout_s: float) -> bool:

@@ -1,5 +1,7 @@
 """Issue 43 item 2: a heartbeat carries its sender's per-start value and a sequence, and a receiver accepts one
-publisher with the expected node name (hindrax_drivers.liveness.HeartbeatIdentity, HeartbeatPublisher)."""
+publisher with the expected node name (hindrax_drivers.liveness.HeartbeatIdentity, HeartbeatPublisher). On
+simulated time the wall-clock liveliness lease does not silence a peer; its age on the graph's clock does
+(AliveAge with a graph clock; the processes: test/test_sim_clock_liveness.py)."""
 from __future__ import annotations
 
 import pytest
@@ -7,7 +9,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_drivers.liveness import HeartbeatIdentity, HeartbeatPublisher, beat_values, heartbeat_ok
+from hindrax_drivers.liveness import AliveAge, HeartbeatIdentity, HeartbeatPublisher, beat_values, heartbeat_ok
 from hindrax_drivers.testing import ros_context, wait_until
 
 A, B = "a1a1a1a1a1a1a1a1", "b2b2b2b2b2b2b2b2"
@@ -74,6 +76,76 @@ def test_publisher_table(case):
     assert (fault in out and "supervisor/heartbeat" in out) if fault else out == ""
     ident.on_publishers(["supervisor"], 1)  # the graph shows the supervisor alone again: the fault is gone
     assert ident.fault == ""
+
+
+# (publisher node names in the graph, live publishers by the lease, fault substring or "" on simulated time, the same
+# on the system clock)
+SIMULATED_TABLE = {
+    "the lease ran out on a starved machine, the supervisor still in the graph": (
+        ["supervisor"], 0, "", "no live publisher"),
+    "none in the graph": ([], 0, "no live publisher", "no live publisher"),
+    "a second live publisher": (["supervisor", "supervisor"], 2, "2 live publishers", "2 live publishers"),
+    "a restarted supervisor beside its dead self": (["supervisor", "supervisor"], 1, "", ""),
+    "a forger whose lease ran out": (["supervisor", "forger"], 0, "node 'forger'", "node 'forger'"),
+}
+
+
+@pytest.mark.parametrize("case", list(SIMULATED_TABLE), ids=list(SIMULATED_TABLE))
+def test_publisher_table_on_simulated_time(case):
+    names, alive, fault, wall_fault = SIMULATED_TABLE[case]
+    for simulated, expected in ((True, fault), (False, wall_fault)):
+        out = HeartbeatIdentity("supervisor/heartbeat", "supervisor").on_publishers(names, alive, simulated)
+        assert (expected in out and "supervisor/heartbeat" in out) if expected else out == "", (simulated, out)
+
+
+class Clocks:
+    """A steady clock and a simulated one, s, moved by the test."""
+
+    def __init__(self):
+        self.steady, self.sim = 100.0, 5000.0
+
+
+def test_alive_age_on_simulated_time_is_late_only_when_late_on_the_graphs_clock():
+    c = Clocks()
+    age = AliveAge(0.2, clock=lambda: c.steady, graph_now_s=lambda: c.sim)  # the guard: max step = its timeout
+    age.heard()
+    for _ in range(30):  # 1.5 s of wall time, 0.06 s of a simulation at 0.04 x real time
+        c.steady += 0.05
+        c.sim += 0.002
+        age.tick()
+    assert age.steady_age_s == pytest.approx(1.5) and age.age_s == pytest.approx(0.06) and age.fresh(0.2)
+    for _ in range(4):  # the simulation at real time: 0.2 s more on both clocks
+        c.steady += 0.05
+        c.sim += 0.05
+        age.tick()
+    assert age.age_s == pytest.approx(0.26) and not age.fresh(0.2)
+    # a simulation faster than real time does not make steady-paced beats late
+    age.heard()
+    for _ in range(3):
+        c.steady += 0.05
+        c.sim += 0.5
+        age.tick()
+    assert age.age_s == pytest.approx(0.15) and age.fresh(0.2)
+    # simulated time stepped back (a restarted /clock): counted from the step, not negative, not forgiven for ever
+    age.heard()
+    c.sim -= 100.0
+    c.steady += 0.05
+    assert age.tick() == 0.0
+    for _ in range(5):
+        c.steady += 0.05
+        c.sim += 0.05
+        age.tick()
+    assert age.age_s == pytest.approx(0.25) and not age.fresh(0.2)
+
+
+def test_alive_age_on_the_system_clock_is_the_steady_age():
+    c = Clocks()
+    age = AliveAge(0.2, clock=lambda: c.steady)
+    age.heard()
+    for _ in range(5):
+        c.steady += 0.05
+        age.tick()
+    assert age.age_s == pytest.approx(0.25) and not age.fresh(0.2)
 
 
 def test_publisher_fault_comes_before_a_beat_fault():

@@ -32,10 +32,11 @@ ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindr
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
-starved guard ages a dead peer at wall speed), timeout: the read-only node parameter ``heartbeat_timeout_s``
-(default ``esc.guard_heartbeat_timeout_s``). The two heartbeats are callbacks in both clock modes (the path the
-vehicle takes is the path the tests take). A small process of its own (EventsExecutor, two heartbeat inputs, one
-20 Hz timer) so that a fault in the supervisor's sensor code cannot take the second stop path with it.
+starved guard ages a dead peer at wall speed; on simulated time a peer is late only when also late on the graph's
+clock), timeout: the read-only node parameter ``heartbeat_timeout_s`` (default ``esc.guard_heartbeat_timeout_s``).
+The two heartbeats are callbacks in both clock modes (the path the vehicle takes is the path the tests take). A
+small process of its own (EventsExecutor, two heartbeat inputs, one 20 Hz timer) so that a fault in the supervisor's
+sensor code cannot take the second stop path with it.
 
 Run alone: ``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
@@ -50,7 +51,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from ..config import Spec, output_enable_gpio
-from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok
+from ..liveness import (AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok,
+                        simulated_now_s)
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
@@ -107,8 +109,9 @@ class OutputGuardNode(Node):
         period = 1.0 / GUARD_RATE_HZ
         #: a gap between two ticks counts in full up to the timeout, so that a starved guard still ages a dead peer
         #: at wall speed (a longer gap is this process's own stall; the watchdog feed covers it)
-        self.esc_age = AliveAge(self.timeout_s)
-        self.supervisor_age = AliveAge(self.timeout_s)
+        #: on simulated time, also on the graph's clock (liveness.AliveAge: late only when late in the simulation)
+        self.esc_age = AliveAge(self.timeout_s, graph_now_s=lambda: simulated_now_s(self))
+        self.supervisor_age = AliveAge(self.timeout_s, graph_now_s=lambda: simulated_now_s(self))
         self.gpio = output_enable_gpio(cfg)
         self.line = line
         self._bus, self._bus_number, self._address = bus, int(esc.i2c_bus), int(esc.i2c_address)

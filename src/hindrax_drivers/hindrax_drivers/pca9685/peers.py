@@ -5,8 +5,9 @@ verdicts :meth:`.core.EscCore.set_peers` takes ('' = trusted, else why not), and
 :class:`EscPeers` subscribes to ``supervisor/heartbeat`` and ``guard/heartbeat`` through
 :class:`~hindrax_drivers.liveness.HeartbeatWatch` (a forged or replayed beat, a second publisher or another node name
 is a fault; only accepted beats reach the handlers) and ages each on the steady clock in executor-alive time
-(:class:`~hindrax_drivers.liveness.AliveAge`). The verdict rules are :func:`.core.heartbeat_verdict`'s. Node
-parameter (read-only, :data:`HEARTBEAT_TIMEOUT`): ``heartbeat_timeout_s`` (default ``esc.heartbeat_timeout_s``).
+(:class:`~hindrax_drivers.liveness.AliveAge`; on simulated time also on the graph's clock). The verdict rules are
+:func:`.core.heartbeat_verdict`'s. Node parameter (read-only, :data:`HEARTBEAT_TIMEOUT`): ``heartbeat_timeout_s``
+(default ``esc.heartbeat_timeout_s``).
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..config import Spec
-from ..liveness import HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok
+from ..liveness import HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok, simulated_now_s
 from ..config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
@@ -48,8 +49,9 @@ class EscPeers:
         self.command_publishers_alive = 0
         #: steady time since when a command publisher has been unnamed (discovery not finished), s; None: none is
         self.unnamed_since: float | None = None
-        self.supervisor_age = AliveAge(2.0 * period_s)
-        self.guard_age = AliveAge(2.0 * period_s)
+        #: on simulated time, also on the graph's clock (liveness.AliveAge: late only when late in the simulation)
+        self.supervisor_age = AliveAge(2.0 * period_s, graph_now_s=lambda: simulated_now_s(node))
+        self.guard_age = AliveAge(2.0 * period_s, graph_now_s=lambda: simulated_now_s(node))
         self.supervisor_ok, self.supervisor_message = False, ""
         self.guard_ok, self.guard_message = False, ""
         self._armed, self._on_bad_news = armed, on_bad_news
