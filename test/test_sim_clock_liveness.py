@@ -96,5 +96,8 @@ def test_a_stalled_esc_on_a_slow_simulation_stays_armed_and_a_killed_one_still_s
         lay.kill("esc")
         wait_until(lambda: hw.line.is_high(), BOUND_S, None, "/OE asserted after the ESC was killed")
         assert not hw.thrust()
-        reasons = [m for t, level, m in lay.guard_beats if t > killed_at and level != 0]
-        assert reasons and reasons[0].startswith("ESC output state silent"), reasons[:3]
+
+        def reasons() -> list[str]:  # the guard's beat saying why follows its /OE write
+            return [m for t, level, m in lay.guard_beats if t > killed_at and level != 0]
+        wait_until(reasons, BOUND_S, None, "the guard's ERROR heartbeat")
+        assert reasons()[0].startswith("ESC output state silent"), reasons()[:3]
