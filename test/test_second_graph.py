@@ -1,5 +1,6 @@
 """A second vehicle graph is refused (issue 43.3): ``hindrax bringup --sim`` and ``hindrax run`` started on a domain
-where another ESC or supervisor is visible exit 1 with one line naming the domain and the process, before arming.
+where another ESC or supervisor is visible exit 1 with one line naming the domain and the process, before arming;
+one that appears after their start ends them the same way.
 
 The other vehicle is a node of this test process carrying the name the launch layout gives the supervisor or the
 ESC, publishing its heartbeat topic: what the graph shows of a live one.
@@ -34,7 +35,8 @@ def _refusal(args: list[str], role_node: str, tmp_path: Path) -> tuple[int, list
         ex.add_node(other)
         hindrax = str(Path(sys.executable).with_name("hindrax"))
         with open(tmp_path / "stdout", "w") as out, open(tmp_path / "stderr", "w") as errf:
-            proc = subprocess.Popen([hindrax, *args], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path, stdout=out, stderr=errf)
+            proc = subprocess.Popen([hindrax, *args], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path,
+                                    stdout=out, stderr=errf)
         try:
             wait_until(lambda: proc.poll() is not None, 180, lambda: ex.spin_once(timeout_sec=0.05),
                        f"hindrax {args[0]} refusing")
@@ -64,9 +66,13 @@ def test_run_refuses_a_domain_with_another_esc_before_arming(tmp_path):
     assert not (tmp_path / "run" / "identification.yaml").exists()
 
 
-def test_bringup_sim_ends_when_another_supervisor_appears_after_its_start(tmp_path):
-    """Discovery on a loaded machine can outlast the start-up window: a supervisor seen later ends ``bringup``
-    the same way (one line, exit 1)."""
+@pytest.mark.parametrize("args, started, role, named", [
+    (["bringup", "--sim"], "bringup:", "supervisor", "supervisor /supervisor"),
+    (["run", "--dofs", "surge", "--levels", "1", "--out", "run"], "armed through esc/set_armed", "esc", "ESC /esc"),
+], ids=["bringup", "run"])
+def test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start(tmp_path, args, started, role, named):
+    """Discovery on a loaded machine can outlast the start-up window, and a second graph may start later: an ESC or
+    supervisor seen after the start (``bringup`` running, ``run`` armed) ends it the same way (one line, exit 1)."""
     from domain_coordinator import domain_id
 
     hindrax = str(Path(sys.executable).with_name("hindrax"))
@@ -74,20 +80,20 @@ def test_bringup_sim_ends_when_another_supervisor_appears_after_its_start(tmp_pa
     # discovery caches for a while, which would refuse the start itself
     with domain_id() as fresh, ros_context(domain_id=fresh) as ctx, open(tmp_path / "stdout", "w") as out, \
             open(tmp_path / "stderr", "w") as errf:
-        proc = subprocess.Popen([hindrax, "bringup", "--sim"], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path,
+        proc = subprocess.Popen([hindrax, *args], env=child_env(ROS_DOMAIN_ID=str(fresh)), cwd=tmp_path,
                                 stdout=out, stderr=errf)
         ex = SingleThreadedExecutor(context=ctx)
         other = None
         try:
-            wait_until(lambda: "bringup:" in (tmp_path / "stdout").read_text() or proc.poll() is not None, 180,
-                       message="bringup started")
+            wait_until(lambda: started in (tmp_path / "stdout").read_text() or proc.poll() is not None, 180,
+                       message=f"{args[0]} started")
             assert proc.poll() is None, (tmp_path / "stderr").read_text()
-            other = rclpy.create_node("supervisor", context=ctx)
-            beat = other.create_publisher(DiagnosticStatus, "supervisor/heartbeat", 10)
+            other = rclpy.create_node(role, context=ctx)
+            beat = other.create_publisher(DiagnosticStatus, f"{role}/heartbeat", 10)
             other.create_timer(0.05, lambda: beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK)))
             ex.add_node(other)
             wait_until(lambda: proc.poll() is not None, 120, lambda: ex.spin_once(timeout_sec=0.05),
-                       "bringup ending")
+                       f"{args[0]} ending")
         finally:
             if proc.poll() is None:
                 proc.kill()
@@ -98,5 +104,5 @@ def test_bringup_sim_ends_when_another_supervisor_appears_after_its_start(tmp_pa
         err = (tmp_path / "stderr").read_text().strip().splitlines()
         domain = ctx.get_domain_id()
     assert proc.returncode == 1, err
-    assert err[-1].startswith(f"hindrax bringup: refused: ROS domain {domain} already has supervisor "
-                              "/supervisor"), err
+    assert err[-1].startswith(f"hindrax {args[0]}: refused: ROS domain {domain} already has {named};"), err
+    assert not (tmp_path / "run" / "identification.yaml").exists()

@@ -17,8 +17,9 @@ Pure core:
 
 Graph side (rclpy, no executor needed): :func:`graph_view` reads a node's view of the graph, :func:`own_view` the
 caller's own nodes;
-:class:`ForeignVehicleWatch` applies :func:`foreign_vehicle_processes` to it over a discovery window and raises
-:class:`ForeignVehicleError` (one line naming the domain and the process) when something is seen.
+:class:`ForeignVehicleWatch` applies :func:`foreign_vehicle_processes` to it over a discovery window, then every
+:data:`CHECK_PERIOD_S` for as long as the tool runs, and raises :class:`ForeignVehicleError` (one line naming the
+domain and the processes) when something is seen.
 """
 from __future__ import annotations
 
@@ -28,9 +29,9 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
-__all__ = ["DISCOVERY_WINDOW_S", "HEARTBEAT_TOPICS", "ROLE_NODES", "ForeignVehicleError", "ForeignVehicleWatch",
-           "GraphView", "foreign_vehicle_processes", "graph_view", "own_view", "split_vehicle_topics",
-           "vehicle_topic_reason"]
+__all__ = ["CHECK_PERIOD_S", "DISCOVERY_WINDOW_S", "HEARTBEAT_TOPICS", "ROLE_NODES", "ForeignVehicleError",
+           "ForeignVehicleWatch", "GraphView", "foreign_vehicle_processes", "graph_view", "own_view",
+           "split_vehicle_topics", "vehicle_topic_reason"]
 
 #: (pattern matched with ``re.search`` against the full topic name, why the topic speaks for the vehicle); the first
 #: match gives the reason
@@ -53,6 +54,9 @@ _UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 #: how long a new participant watches the graph before it trusts that no other ESC or supervisor is there, s.
 #: Cross-process discovery on loopback takes about 2 s (docs/architecture.md §11.5).
 DISCOVERY_WINDOW_S = 2.5
+#: how often a running tool looks again after the discovery window (:meth:`ForeignVehicleWatch.check_every`), s:
+#: discovery on a loaded machine can outlast the window, and a second vehicle graph may start later
+CHECK_PERIOD_S = 1.0
 
 
 def vehicle_topic_reason(topic: str) -> str | None:
@@ -156,7 +160,8 @@ class ForeignVehicleError(RuntimeError):
 
 
 class ForeignVehicleWatch:
-    """Watches ``node``'s graph for ESCs and supervisors that are not the caller's.
+    """Watches ``node``'s graph for ESCs and supervisors that are not the caller's: through the discovery window
+    (:meth:`settled`), then periodically while the tool runs (:meth:`check_every`).
 
     node: an rclpy node on the domain to check. own: callable returning the caller's own :class:`GraphView` (its
     nodes and heartbeat publishers; default nothing). what: the refusing tool, for the message (``hindrax run``).
@@ -179,14 +184,21 @@ class ForeignVehicleWatch:
 
     def check(self) -> None:
         """Raise :class:`ForeignVehicleError` when a foreign ESC or supervisor is visible now."""
-        found = self.found()
+        found = Counter(self.found())  # one phrase per process: two processes named /esc give it twice
         if found:
             domain = self.node.context.get_domain_id()
-            raise ForeignVehicleError(f"{self.what}: ROS domain {domain} already has {', '.join(found)}; "
-                                      f"{self.consequence}")
+            named = ", ".join(p if n == 1 else f"{p} ({n} processes)" for p, n in found.items())
+            raise ForeignVehicleError(f"{self.what}: ROS domain {domain} already has {named}; {self.consequence}")
 
     def settled(self) -> bool:
         """:meth:`check`, then True once the discovery window has passed since construction (nothing foreign seen
         through it). Poll it, e.g. as a ``wait_until`` predicate."""
         self.check()
         return self.clock() - self.t0 >= self.window_s
+
+    def check_every(self, period_s: float = CHECK_PERIOD_S) -> Any:
+        """Keep checking after the window for as long as ``node`` is spun: a timer of ``period_s`` (s, the node's
+        clock) running :meth:`check`, so a foreign ESC or supervisor discovered later raises
+        :class:`ForeignVehicleError` out of the executor's spin, the same one line. Returns the rclpy timer (it
+        goes with the node)."""
+        return self.node.create_timer(period_s, self.check)

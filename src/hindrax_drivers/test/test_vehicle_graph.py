@@ -62,6 +62,11 @@ class _Graph:
     def __init__(self, nodes, pubs=None, domain=7):
         self.nodes, self.pubs = nodes, dict(pubs or {})
         self.context = type("Ctx", (), {"get_domain_id": lambda _self: domain})()
+        self.timers = []  # (period_s, callback) of create_timer
+
+    def create_timer(self, period_s, callback):
+        self.timers.append((period_s, callback))
+        return len(self.timers)
 
     def get_node_names_and_namespaces(self):
         return [(n.rsplit("/", 1)[1], n.rsplit("/", 1)[0] or "/") for n in self.nodes]
@@ -88,3 +93,23 @@ def test_watch_settles_after_the_window_and_refuses_with_one_line_naming_domain_
     msg = str(err.value)
     assert "\n" not in msg
     assert msg == "refused: ROS domain 7 already has supervisor /supervisor; no second graph"
+
+
+def test_after_the_window_the_watch_checks_every_second_and_names_a_late_vehicle_once_per_name():
+    """``hindrax bringup`` and ``hindrax run`` keep checking after the window (a loaded machine discovers late, a
+    second graph may start later): one timer of CHECK_PERIOD_S whose every tick looks at the graph again."""
+    t = [0.0]
+    graph = _Graph(["/run", "/esc"], {"/esc/heartbeat": ["/esc"]})
+    own = GraphView(("/run", "/esc"), {"/esc/heartbeat": ("/esc",)})
+    watch = ForeignVehicleWatch(graph, "refused", "no second graph", own=lambda: own, clock=lambda: t[0])
+    t[0] = 2.5
+    assert watch.settled()
+    assert watch.check_every() == 1
+    [(period_s, tick)] = graph.timers
+    assert period_s == 1.0
+    tick()  # only its own ESC: nothing raised
+    graph.nodes += ["/esc", "/esc"]  # two more processes named /esc appear after the window
+    assert watch.found() == ["ESC /esc", "ESC /esc"]  # one phrase per process
+    with pytest.raises(ForeignVehicleError) as err:
+        tick()
+    assert str(err.value) == "refused: ROS domain 7 already has ESC /esc (2 processes); no second graph"

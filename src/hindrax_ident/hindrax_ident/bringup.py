@@ -348,16 +348,12 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     return Graph(cfg, nodes, executor, hardware, context, stepped=stepped)
 
 
-#: Period of ``hindrax bringup``'s check for another vehicle's ESC or supervisor after the discovery window, s.
-FOREIGN_CHECK_PERIOD_S = 1.0
-
-
 def refuse_foreign_vehicle(graph: Graph, consequence: str, spin_timeout_s: float = 0.05) -> ForeignVehicleWatch:
     """Spin ``graph`` through the discovery window (:data:`~hindrax_drivers.vehicle_graph.DISCOVERY_WINDOW_S`) and
     raise :class:`~hindrax_drivers.vehicle_graph.ForeignVehicleError` (one line naming the domain and the process,
     then ``consequence``) as soon as an ESC or supervisor other than the graph's own is visible on its domain.
-    Returns the watch, for a caller that keeps checking after the window (discovery on a loaded machine can take
-    longer than the window)."""
+    Returns the watch, for a caller that keeps checking after the window
+    (:meth:`~hindrax_drivers.vehicle_graph.ForeignVehicleWatch.check_every`)."""
     any_node = next(iter(graph.nodes.values()))
     watch = ForeignVehicleWatch(any_node, "refused", consequence, own=lambda: own_view(graph.nodes.values()))
     wait_until(watch.settled, 10 * watch.window_s, lambda: graph.executor.spin_once(timeout_sec=spin_timeout_s),
@@ -379,8 +375,7 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
         proc.at_exit(graph.shutdown)
         watch = refuse_foreign_vehicle(graph, "refusing to start a second vehicle graph on it (set ROS_DOMAIN_ID to "
                                               "a free domain)")
-        # and for as long as it runs: a vehicle discovered after the window (a loaded machine) ends it the same way
-        next(iter(graph.nodes.values())).create_timer(FOREIGN_CHECK_PERIOD_S, watch.check)
+        watch.check_every()  # a vehicle discovered after the window (a loaded machine) ends it the same way
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)
         proc.spin(graph.executor)

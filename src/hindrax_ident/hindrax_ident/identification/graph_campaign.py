@@ -275,6 +275,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                 outcome.message = f"arming refused: {armed.message}"
                 say(outcome.message)
                 return outcome
+            watch.check_every()  # one discovered later ends the run the same way, through spin()
             wait_until(lambda: armed_state[0] is True, 30, spin, "ESC reporting armed")
             say("armed through esc/set_armed; sending run_identification goal "
                 f"({', '.join(dofs)}, {levels or cfg.identification.levels_per_dof} levels)")
@@ -321,6 +322,9 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             t_disarmed = sim.t_s
             wait_until(lambda: sim.t_s >= t_disarmed + 0.2, 30, spin, "disarmed outputs recorded")
             graph.nodes["recorder"].stop_recording()
+            # a last look: a vehicle that appeared late (its forged heartbeat may have had the output guard disarm
+            # the ESC, ending the campaign, before the next periodic check) is named as what ended the run
+            watch.check()
             node_record = graph.nodes["identification"].last_record
             calibration = dict(node_record.calibration) if node_record is not None else {}
             outcome.node_record = node_record
