@@ -16,12 +16,12 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 __all__ = ["Spec", "ConfigIssue", "ConfigError", "check_value", "real", "integer", "text", "flag", "vector",
-           "FLOAT", "INT", "STR", "BOOL", "FLOATS", "STRS", "THRUSTER", "DOFS", "TRANSLATIONAL_DOFS",
+           "section", "FLOAT", "INT", "STR", "BOOL", "FLOATS", "STRS", "THRUSTER", "DOFS", "TRANSLATIONAL_DOFS",
            "ROTATIONAL_DOFS", "ROS_NAME_TOKEN"]
 
 DOFS: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")
@@ -107,6 +107,17 @@ def flag(doc: str) -> Spec:
 def vector(doc: str, length: int, lo: float | None = None, hi: float | None = None, unit: bool = False) -> Spec:
     """A list of ``length`` numbers, each in [lo, hi]; ``unit``: of unit length."""
     return Spec(FLOATS, doc, lo, hi, length=length, unit_vector=unit)
+
+
+def section(name: str, keys: Mapping[str, Spec],
+            optional: Sequence[str] = ()) -> tuple[dict[str, Spec], tuple[str, ...]]:
+    """One section of the vehicle file from its own keys, as a section module declares it
+    (:mod:`hindrax_drivers.config.sections`).
+
+    name: the section (``"lights"``). keys: key below ``name.`` -> :class:`Spec`, in the file's order (``<thruster>``,
+    :data:`THRUSTER`, for the per-thruster segment). optional: prefixes below ``name.`` of the keys a file may leave
+    out (``""``: the whole section). Returns (``SCHEMA``: dotted key -> Spec, ``OPTIONAL``: dotted prefixes)."""
+    return {f"{name}.{k}": v for k, v in keys.items()}, tuple(f"{name}.{p}" for p in optional)
 
 
 @dataclass(frozen=True)

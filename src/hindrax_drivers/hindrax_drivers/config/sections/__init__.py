@@ -1,13 +1,15 @@
 """The sections of the vehicle file, one module each, joined here in the file's order.
 
-Each section module owns its keys: ``SCHEMA`` (dotted key -> :class:`~hindrax_drivers.config.spec.Spec`, every key
-under the section's name), ``OPTIONAL`` (prefixes of its optional keys) and ``cross_checks(flat)`` (the checks
-across keys that name one of its keys, each one issue of one line; they may read other sections' keys, run only
-when every key is individually valid, and skip what a partial mapping lacks: a node validates its own selection of
-keys with them, :func:`hindrax_drivers.config.node_parameters.validate_selection`). A check belongs to the section of the
-key it names: ``lights.esc_channel`` against the thrusters' channels is the lights'. The section modules import
-nothing of this package but :mod:`..spec` (and the typed-section base) and nothing of a driver
-(``test_import_structure``).
+Each section module owns its keys: ``SCHEMA, OPTIONAL = section(name, keys, optional)``
+(:func:`~hindrax_drivers.config.spec.section`: ``SCHEMA`` maps each dotted key under the section's name to its
+:class:`~hindrax_drivers.config.spec.Spec`, ``OPTIONAL`` holds the prefixes of its optional keys) and, where keys
+constrain each other, ``cross_checks(flat)`` (the checks across keys that name one of its keys, each one issue of one
+line; they may read other sections' keys, run only when every key is individually valid, and skip what a partial
+mapping lacks: a node validates its own selection of keys with them,
+:func:`hindrax_drivers.config.node_parameters.validate_selection`). A section without it has every key checked by
+its own range alone. A check belongs to the section of the key it names: ``lights.esc_channel`` against the
+thrusters' channels is the lights'. The section modules import nothing of this package but :mod:`..spec` (and the
+typed-section base) and nothing of a driver (``test_import_structure``).
 """
 from __future__ import annotations
 
@@ -43,4 +45,4 @@ def is_optional(key: str) -> bool:
 
 def cross_checks(flat: Mapping[str, Any]) -> list[ConfigIssue]:
     """Every section's checks across keys, in the file's order of sections. Only run when every key is valid."""
-    return [issue for m in MODULES for issue in m.cross_checks(flat)]
+    return [issue for m in MODULES if hasattr(m, "cross_checks") for issue in m.cross_checks(flat)]

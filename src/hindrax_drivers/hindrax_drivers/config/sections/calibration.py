@@ -1,37 +1,31 @@
 """``calibration.*``: the known forces of the campaign's reference steps (docs/identification.md §6), and
 their derived view (:class:`CalibrationConfig`).
-
-The section's schema (:data:`SCHEMA`), its optional keys (:data:`OPTIONAL`) and the checks that name one of its keys
-(:func:`cross_checks`); :mod:`hindrax_drivers.config.sections` joins the sections.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from ..spec import ConfigIssue, Spec, real
+from ..spec import ConfigIssue, real, section
 
-SCHEMA: dict[str, Spec] = {
-    "calibration.ballast_mass_kg": real("mass of the ballast hung on the vehicle in the ballast step, kg", 0.01, 50.0),
-    "calibration.ballast_volume_m3": real("displaced volume of that ballast, m^3 (weight in water (m - rho V) g must be "
-                                          "> 0)", 0.0, 0.05),
-    "calibration.line_pull_force_n": real("horizontal force of the line over the pool-edge pulley in the line_pull "
-                                          "step (e.g. a hanging mass times g), N", 0.1, 200.0),
-    "calibration.inclining_mass_kg": real("test mass of the inclining step, kg", 0.01, 20.0),
-    "calibration.inclining_volume_m3": real("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
-    "calibration.inclining_arm_m": real("horizontal arm of the test mass from the centre line (roll: to starboard, "
-                                        "pitch: forward), m", 0.01, 2.0),
-    "calibration.float_mass_kg": real("mass of the sealed float tied to the vehicle in the float step (optional), kg",
-                                      0.0, 50.0),
-    "calibration.float_volume_m3": real("displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)",
-                                        1e-6, 0.1),
-    "calibration.net_buoyancy_std_n": real("1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the "
-                                           "hover holds of the thrust calibration measure the forward thrust against "
-                                           "it; optional)", 1e-4, 10.0),
-}
-
-#: Optional keys (prefixes): absent is fine; present must validate. Every other key of :data:`SCHEMA` is required.
-OPTIONAL: tuple[str, ...] = ("calibration.float_", "calibration.net_buoyancy_std_n")
+SCHEMA, OPTIONAL = section("calibration", {
+    "ballast_mass_kg": real("mass of the ballast hung on the vehicle in the ballast step, kg", 0.01, 50.0),
+    "ballast_volume_m3": real("displaced volume of that ballast, m^3 (weight in water (m - rho V) g must be "
+                              "> 0)", 0.0, 0.05),
+    "line_pull_force_n": real("horizontal force of the line over the pool-edge pulley in the line_pull "
+                              "step (e.g. a hanging mass times g), N", 0.1, 200.0),
+    "inclining_mass_kg": real("test mass of the inclining step, kg", 0.01, 20.0),
+    "inclining_volume_m3": real("displaced volume of that test mass, m^3 (it must sink)", 0.0, 0.02),
+    "inclining_arm_m": real("horizontal arm of the test mass from the centre line (roll: to starboard, "
+                            "pitch: forward), m", 0.01, 2.0),
+    "float_mass_kg": real("mass of the sealed float tied to the vehicle in the float step (optional), kg",
+                          0.0, 50.0),
+    "float_volume_m3": real("displaced volume of that float, m^3 (net buoyancy (rho V - m) g must be > 0)",
+                            1e-6, 0.1),
+    "net_buoyancy_std_n": real("1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the "
+                               "hover holds of the thrust calibration measure the forward thrust against "
+                               "it; optional)", 1e-4, 10.0),
+}, optional=("float_", "net_buoyancy_std_n"))
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:

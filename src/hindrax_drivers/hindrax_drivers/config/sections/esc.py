@@ -1,61 +1,55 @@
 """``esc.*``: the PCA9685 ESC output, its safety timeouts, the /OE line and the hardware watchdog's feed
 (docs/devices.md §5.1-5.2, docs/watchdog.md).
-
-The section's schema (:data:`SCHEMA`), its optional keys (:data:`OPTIONAL`) and the checks that name one of its keys
-(:func:`cross_checks`); :mod:`hindrax_drivers.config.sections` joins the sections.
 """
 from __future__ import annotations
 
 from typing import Any, Mapping
 
 from ...hardware_limits import PCA9685_OSCILLATOR_MAX_HZ, PCA9685_OSCILLATOR_MIN_HZ, Pca9685Error, esc_prescale
-from ..spec import ConfigIssue, Spec, flag, integer, real, text
+from ..spec import ConfigIssue, flag, integer, real, section, text
 
-SCHEMA: dict[str, Spec] = {
-    "esc.i2c_bus": integer("Linux I2C bus number (/dev/i2c-N)", 0, 31),
-    "esc.i2c_address": integer("PCA9685 7-bit address", 0x40, 0x7F),
-    "esc.pwm_frequency_hz": real("PWM frequency, Hz (Basic ESC max 400 Hz)", 24.0, 400.0),
-    "esc.oscillator_hz": real("calibrated PCA9685 internal oscillator frequency, Hz (25 MHz nominal, NXP PCA9685 "
-                              "data sheet §7.3.5; parts measure 23-27 MHz, docs/devices.md §5.1)",
-                              PCA9685_OSCILLATOR_MIN_HZ, PCA9685_OSCILLATOR_MAX_HZ),
-    "esc.arming_time_s": real("time at neutral before arming is accepted, s (docs/devices.md §5.2: BR holds 7 s)",
-                              0.0, 60.0),
-    "esc.watchdog_timeout_s": real("no command for this long -> all neutral, s", 0.02, 10.0),
-    "esc.output_rate_hz": real("rate the outputs are refreshed and the watchdog checked, Hz", 1.0, 400.0),
-    "esc.slew_rate_us_per_s": real("max pulse-width change rate, us/s (0 = off)", 0.0, 1e6),
-    "esc.output_latency_s": real("delay from the ESC node's stamp of a written width (thrusters/pulse_width) to the "
-                                 "thrust starting to change, s: the identification's force timing", 0.0, 0.5),
-    "esc.oscillator_calibrated": flag("esc.oscillator_hz was measured on this board (`hindrax esc calibrate`); "
-                                      "arming is refused while false"),
-    "esc.readback_interval_s": real("MODE1, PRE_SCALE and the channel registers are read back this often; a "
-                                    "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
-    "esc.bus_call_timeout_s": real("a PCA9685 bus call (write or read-back) not returned after this long makes the "
-                                   "output state unknown: ESC heartbeat ERROR, the guard asserts /OE (a block write "
-                                   "takes 0.9 ms at 400 kHz; must be below esc.guard_heartbeat_timeout_s), s",
-                                   0.01, 1.0),
-    "esc.heartbeat_timeout_s": real("the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
-                                    "is older than this (steady clock; docs/architecture.md §8), s", 0.05, 1.0),
-    "esc.guard_heartbeat_timeout_s": real("the output guard asserts /OE (or silences the chip over I2C) when "
-                                          "esc/heartbeat or supervisor/heartbeat is older than this (steady clock; "
-                                          "docs/architecture.md §8), s", 0.05, 1.0),
-    "esc.output_enable_gpio.chip": text("gpiochip of the PCA9685 /OE line, e.g. /dev/gpiochip0 (absent or null: /OE "
-                                        "not wired, the guard writes the chip's all-off and sleep registers instead)"),
-    "esc.output_enable_gpio.line": integer("line offset of the PCA9685 /OE on esc.output_enable_gpio.chip (BCM GPIO number "
-                                           "on a Pi 4)", 0, 1023),
-    "esc.output_enable_feed_gpio.chip": text("gpiochip of the hardware watchdog's feed line (docs/watchdog.md: a "
-                                             "retriggerable monostable that holds /OE high unless it sees rising "
-                                             "edges); absent or null: no hardware watchdog"),
-    "esc.output_enable_feed_gpio.line": integer("line offset of the watchdog feed on esc.output_enable_feed_gpio.chip (BCM "
-                                                "GPIO number on a Pi 4)", 0, 1023),
-    "esc.output_enable_feed_rate_hz": real("rising edges per second the output guard puts on the watchdog feed while "
-                                           "the ESC heartbeat is fresh and nothing is tripped, Hz", 2.0, 50.0),
-    "esc.output_enable_feed_timeout_s": real("the hardware watchdog's timeout: its monostable's pulse width "
-                                             "t_W = R_EXT * C_EXT (docs/watchdog.md); the outputs stop this long after "
-                                             "the last rising edge, s", 0.05, 2.0),
-}
-
-#: Optional keys (prefixes): absent is fine; present must validate. Every other key of :data:`SCHEMA` is required.
-OPTIONAL: tuple[str, ...] = ("esc.output_enable_gpio.", "esc.output_enable_feed")
+SCHEMA, OPTIONAL = section("esc", {
+    "i2c_bus": integer("Linux I2C bus number (/dev/i2c-N)", 0, 31),
+    "i2c_address": integer("PCA9685 7-bit address", 0x40, 0x7F),
+    "pwm_frequency_hz": real("PWM frequency, Hz (Basic ESC max 400 Hz)", 24.0, 400.0),
+    "oscillator_hz": real("calibrated PCA9685 internal oscillator frequency, Hz (25 MHz nominal, NXP PCA9685 "
+                          "data sheet §7.3.5; parts measure 23-27 MHz, docs/devices.md §5.1)",
+                          PCA9685_OSCILLATOR_MIN_HZ, PCA9685_OSCILLATOR_MAX_HZ),
+    "arming_time_s": real("time at neutral before arming is accepted, s (docs/devices.md §5.2: BR holds 7 s)",
+                          0.0, 60.0),
+    "watchdog_timeout_s": real("no command for this long -> all neutral, s", 0.02, 10.0),
+    "output_rate_hz": real("rate the outputs are refreshed and the watchdog checked, Hz", 1.0, 400.0),
+    "slew_rate_us_per_s": real("max pulse-width change rate, us/s (0 = off)", 0.0, 1e6),
+    "output_latency_s": real("delay from the ESC node's stamp of a written width (thrusters/pulse_width) to the "
+                             "thrust starting to change, s: the identification's force timing", 0.0, 0.5),
+    "oscillator_calibrated": flag("esc.oscillator_hz was measured on this board (`hindrax esc calibrate`); "
+                                  "arming is refused while false"),
+    "readback_interval_s": real("MODE1, PRE_SCALE and the channel registers are read back this often; a "
+                                "mismatch (chip reset) re-initialises the chip and disarms, s", 0.05, 10.0),
+    "bus_call_timeout_s": real("a PCA9685 bus call (write or read-back) not returned after this long makes the "
+                               "output state unknown: ESC heartbeat ERROR, the guard asserts /OE (a block write "
+                               "takes 0.9 ms at 400 kHz; must be below esc.guard_heartbeat_timeout_s), s",
+                               0.01, 1.0),
+    "heartbeat_timeout_s": real("the ESC refuses to arm, and disarms, when supervisor/heartbeat or guard/heartbeat "
+                                "is older than this (steady clock; docs/architecture.md §8), s", 0.05, 1.0),
+    "guard_heartbeat_timeout_s": real("the output guard asserts /OE (or silences the chip over I2C) when "
+                                      "esc/heartbeat or supervisor/heartbeat is older than this (steady clock; "
+                                      "docs/architecture.md §8), s", 0.05, 1.0),
+    "output_enable_gpio.chip": text("gpiochip of the PCA9685 /OE line, e.g. /dev/gpiochip0 (absent or null: /OE "
+                                    "not wired, the guard writes the chip's all-off and sleep registers instead)"),
+    "output_enable_gpio.line": integer("line offset of the PCA9685 /OE on esc.output_enable_gpio.chip (BCM GPIO number "
+                                       "on a Pi 4)", 0, 1023),
+    "output_enable_feed_gpio.chip": text("gpiochip of the hardware watchdog's feed line (docs/watchdog.md: a "
+                                         "retriggerable monostable that holds /OE high unless it sees rising "
+                                         "edges); absent or null: no hardware watchdog"),
+    "output_enable_feed_gpio.line": integer("line offset of the watchdog feed on esc.output_enable_feed_gpio.chip (BCM "
+                                            "GPIO number on a Pi 4)", 0, 1023),
+    "output_enable_feed_rate_hz": real("rising edges per second the output guard puts on the watchdog feed while "
+                                       "the ESC heartbeat is fresh and nothing is tripped, Hz", 2.0, 50.0),
+    "output_enable_feed_timeout_s": real("the hardware watchdog's timeout: its monostable's pulse width "
+                                         "t_W = R_EXT * C_EXT (docs/watchdog.md); the outputs stop this long after "
+                                         "the last rising edge, s", 0.05, 2.0),
+}, optional=("output_enable_gpio.", "output_enable_feed"))
 
 
 #: keys whose YAML value may be null, meaning "absent" (their sub-keys are optional)

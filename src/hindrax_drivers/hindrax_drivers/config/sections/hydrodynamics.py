@@ -1,8 +1,5 @@
 """``hydrodynamics.*``: added mass and damping per DOF (positive numbers; [Hindrax-AM] Table 6,
 [Hindrax-Drag] Table 3), and their typed view per DOF (:class:`DofHydrodynamics`).
-
-The section's schema (:data:`SCHEMA`), its optional keys (:data:`OPTIONAL`) and the checks that name one of its keys
-(:func:`cross_checks`); :mod:`hindrax_drivers.config.sections` joins the sections.
 """
 from __future__ import annotations
 
@@ -11,33 +8,31 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..spec import ROTATIONAL_DOFS, TRANSLATIONAL_DOFS, ConfigIssue, Spec, real, vector
+from ..spec import ROTATIONAL_DOFS, TRANSLATIONAL_DOFS, ConfigIssue, Spec, real, section, vector
 
-SCHEMA: dict[str, Spec] = {
-    "hydrodynamics.added_mass_coupling": vector(
+_KEYS: dict[str, Spec] = {
+    "added_mass_coupling": vector(
             "off-diagonal added-mass terms added to diag(added_mass), row-major 6x6 (kg, kg m, kg m^2); "
             "diagonal entries must be 0", 36, -1e4, 1e4),
 }
 for _dof in TRANSLATIONAL_DOFS:
-    SCHEMA[f"hydrodynamics.{_dof}.added_mass_kg"] = real(f"{_dof} added mass, kg", 0.0, 1e4)
+    _KEYS[f"{_dof}.added_mass_kg"] = real(f"{_dof} added mass, kg", 0.0, 1e4)
     if _dof == "heave":
         for _d in ("positive", "negative"):
-            SCHEMA[f"hydrodynamics.heave.linear_damping_{_d}_kg_s"] = real(
+            _KEYS[f"heave.linear_damping_{_d}_kg_s"] = real(
                   f"heave linear damping for {_d} w (positive = down), kg/s", 0.0, 1e4)
-            SCHEMA[f"hydrodynamics.heave.quadratic_damping_{_d}_kg_m"] = real(
+            _KEYS[f"heave.quadratic_damping_{_d}_kg_m"] = real(
                   f"heave quadratic damping for {_d} w (positive = down), kg/m", 0.0, 1e4)
     else:
-        SCHEMA[f"hydrodynamics.{_dof}.linear_damping_kg_s"] = real(f"{_dof} linear damping, kg/s", 0.0, 1e4)
-        SCHEMA[f"hydrodynamics.{_dof}.quadratic_damping_kg_m"] = real(f"{_dof} quadratic damping, kg/m", 0.0, 1e4)
+        _KEYS[f"{_dof}.linear_damping_kg_s"] = real(f"{_dof} linear damping, kg/s", 0.0, 1e4)
+        _KEYS[f"{_dof}.quadratic_damping_kg_m"] = real(f"{_dof} quadratic damping, kg/m", 0.0, 1e4)
 for _dof in ROTATIONAL_DOFS:
-    SCHEMA[f"hydrodynamics.{_dof}.added_mass_kg_m2"] = real(f"{_dof} added moment of inertia, kg m^2", 0.0, 1e3)
-    SCHEMA[f"hydrodynamics.{_dof}.linear_damping_kg_m2_s"] = real(
+    _KEYS[f"{_dof}.added_mass_kg_m2"] = real(f"{_dof} added moment of inertia, kg m^2", 0.0, 1e3)
+    _KEYS[f"{_dof}.linear_damping_kg_m2_s"] = real(
           f"{_dof} linear damping, N m/(rad/s) = kg m^2/s", 0.0, 1e3)
-    SCHEMA[f"hydrodynamics.{_dof}.quadratic_damping_kg_m2"] = real(
+    _KEYS[f"{_dof}.quadratic_damping_kg_m2"] = real(
           f"{_dof} quadratic damping, N m/(rad/s)^2 = kg m^2", 0.0, 1e3)
-
-#: Optional keys (prefixes): absent is fine; present must validate. Every other key of :data:`SCHEMA` is required.
-OPTIONAL: tuple[str, ...] = ()
+SCHEMA, OPTIONAL = section("hydrodynamics", _KEYS)
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:

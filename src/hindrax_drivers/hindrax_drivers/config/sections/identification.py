@@ -1,51 +1,44 @@
-"""``identification.*``: the campaign and its estimators (docs/architecture.md §5; [Hindrax-Drag] §4).
-
-The section's schema (:data:`SCHEMA`), its optional keys (:data:`OPTIONAL`) and the checks that name one of its keys
-(:func:`cross_checks`); :mod:`hindrax_drivers.config.sections` joins the sections.
-"""
+"""``identification.*``: the campaign and its estimators (docs/architecture.md §5; [Hindrax-Drag] §4)."""
 from __future__ import annotations
 
 from typing import Any, Mapping
 
-from ..spec import ConfigIssue, Spec, flag, integer, real, text
+from ..spec import ConfigIssue, flag, integer, real, section, text
 
-SCHEMA: dict[str, Spec] = {
-    "identification.levels_per_dof": integer("thrust levels in each DOF's ladder", 1, 50),
-    "identification.level_fraction_min": real("smallest level as a fraction of the DOF's authority", 0.01, 1.0),
-    "identification.level_fraction_max": real("largest level as a fraction of the DOF's authority", 0.01, 1.0),
-    "identification.forgetting_factor": real("RLS forgetting factor lambda", 0.9, 1.0),
-    "identification.estimate_rate_hz": real("RLS update rate, Hz", 1.0, 400.0),
-    "identification.publish_rate_hz": real("HydroEstimate publication rate, Hz", 0.1, 50.0),
-    "identification.altitude_setpoint_m": real("altitude held during manoeuvres, m ([Hindrax-Drag] §4: 0.8-1.0 m)",
-                                               0.1, 50.0),
-    "identification.roll_test_angle_rad": real("roll test turns back at this angle, rad ([Hindrax-Drag] §4.2: 30 deg)",
-                                               0.01, 1.5),
-    "identification.pitch_test_angle_rad": real("pitch test turns back at this angle, rad ([Hindrax-Drag] §4.2: 40 deg)",
-                                                0.01, 1.5),
-    "identification.max_level_duration_s": real("longest time one level is held, s", 1.0, 600.0),
-    "identification.converged_relative_std": real("converged when every std/|value| is below this", 0.001, 1.0),
-    "identification.prior_std_rel": real("1-sigma of the empirical priors in the batch fit, as a fraction of the prior "
-                                         "value (0 = no prior; docs/identification.md §6.3)", 0.0, 100.0),
-    "identification.rls_directional_forgetting": flag("online RLS: forget only along the regressor (Bittanti et al. "
-                                                      "1990), default true (docs/identification.md §1.D)"),
-    "identification.rls_min_excitation": real("online RLS: hold the estimate while the normalised excitation is below "
-                                              "this once reached (0 = no gate), default 0.001", 0.0, 1.0),
-    "identification.rls_change_threshold": real("online RLS: reset the covariance when the mean normalised a-priori error "
-                                                "over rls_change_window_s exceeds this (0 = no detector), default 6",
-                                                0.0, 1e6),
-    "identification.rls_change_window_s": real("online RLS: window of the change detector, s, default 10", 0.1, 600.0),
-    "identification.rls_prior_std_rel": real("online RLS: 1-sigma of its starting values (empirical priors) as a "
-                                             "fraction of the prior value (0 = diffuse start at zero), default 1",
-                                             0.0, 100.0),
-    "identification.excitation": text("force input per DOF: the constant-thrust ladder, or one broadband run shaped to "
-                                      "stay in the pool box (hindrax_ident identification/online/excitation.py)",
-                                      ("ladder", "multisine", "prbs", "chirp")),
-    "identification.excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s",
-                                                 5.0, 1800.0),
-}
-
-#: Optional keys (prefixes): absent is fine; present must validate. Every other key of :data:`SCHEMA` is required.
-OPTIONAL: tuple[str, ...] = ("identification.excitation", "identification.prior_std_rel", "identification.rls_")
+SCHEMA, OPTIONAL = section("identification", {
+    "levels_per_dof": integer("thrust levels in each DOF's ladder", 1, 50),
+    "level_fraction_min": real("smallest level as a fraction of the DOF's authority", 0.01, 1.0),
+    "level_fraction_max": real("largest level as a fraction of the DOF's authority", 0.01, 1.0),
+    "forgetting_factor": real("RLS forgetting factor lambda", 0.9, 1.0),
+    "estimate_rate_hz": real("RLS update rate, Hz", 1.0, 400.0),
+    "publish_rate_hz": real("HydroEstimate publication rate, Hz", 0.1, 50.0),
+    "altitude_setpoint_m": real("altitude held during manoeuvres, m ([Hindrax-Drag] §4: 0.8-1.0 m)",
+                                0.1, 50.0),
+    "roll_test_angle_rad": real("roll test turns back at this angle, rad ([Hindrax-Drag] §4.2: 30 deg)",
+                                0.01, 1.5),
+    "pitch_test_angle_rad": real("pitch test turns back at this angle, rad ([Hindrax-Drag] §4.2: 40 deg)",
+                                 0.01, 1.5),
+    "max_level_duration_s": real("longest time one level is held, s", 1.0, 600.0),
+    "converged_relative_std": real("converged when every std/|value| is below this", 0.001, 1.0),
+    "prior_std_rel": real("1-sigma of the empirical priors in the batch fit, as a fraction of the prior "
+                          "value (0 = no prior; docs/identification.md §6.3)", 0.0, 100.0),
+    "rls_directional_forgetting": flag("online RLS: forget only along the regressor (Bittanti et al. "
+                                       "1990), default true (docs/identification.md §1.D)"),
+    "rls_min_excitation": real("online RLS: hold the estimate while the normalised excitation is below "
+                               "this once reached (0 = no gate), default 0.001", 0.0, 1.0),
+    "rls_change_threshold": real("online RLS: reset the covariance when the mean normalised a-priori error "
+                                 "over rls_change_window_s exceeds this (0 = no detector), default 6",
+                                 0.0, 1e6),
+    "rls_change_window_s": real("online RLS: window of the change detector, s, default 10", 0.1, 600.0),
+    "rls_prior_std_rel": real("online RLS: 1-sigma of its starting values (empirical priors) as a "
+                              "fraction of the prior value (0 = diffuse start at zero), default 1",
+                              0.0, 100.0),
+    "excitation": text("force input per DOF: the constant-thrust ladder, or one broadband run shaped to "
+                       "stay in the pool box (hindrax_ident identification/online/excitation.py)",
+                       ("ladder", "multisine", "prbs", "chirp")),
+    "excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s",
+                                  5.0, 1800.0),
+}, optional=("excitation", "prior_std_rel", "rls_"))
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:

@@ -1,53 +1,47 @@
 """``supervisor.*``: the safety supervisor (:mod:`hindrax_drivers.supervisor`), the last line after the
 identification's own limits.
-
-The section's schema (:data:`SCHEMA`), its optional keys (:data:`OPTIONAL`) and the checks that name one of its keys
-(:func:`cross_checks`); :mod:`hindrax_drivers.config.sections` joins the sections.
 """
 from __future__ import annotations
 
 import math
 from typing import Any, Mapping
 
-from ..spec import ConfigIssue, Spec, real, text
+from ..spec import ConfigIssue, real, section, text
 
-SCHEMA: dict[str, Spec] = {
-    "supervisor.check_rate_hz": real("rate of the supervisor's rate and run-time checks, Hz", 1.0, 200.0),
-    "supervisor.rate_window_s": real("window the sensor rates are measured over (at most "
-                                     "supervisor.reaction_time_s), s", 0.2, 60.0),
-    "supervisor.max_sample_age_s": real("a sensor sample whose header stamp is further than this from the supervisor's "
-                                        "time on arrival (older, or ahead) is not alive: not counted, not used, s",
-                                        0.05, 10.0),
-    "supervisor.max_identical_s": real("a sensor stream bit-identical (header stamp aside) for longer than this is "
-                                       "frozen: its samples are not alive (sensor noise changes every reading within "
-                                       "a few samples), s", 0.1, 10.0),
-    "supervisor.reaction_time_s": real("longest time a failed sensor (silent, stale or frozen) may go unnoticed while "
-                                       "armed; bounds supervisor.rate_window_s, max_invalid_dvl_s, max_sample_age_s and "
-                                       "max_identical_s, s",
-                                       0.1, 10.0),
-    "supervisor.min_rate.dvl_hz": real("minimum dvl/data rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
-    "supervisor.min_rate.altimeter_hz": real("minimum ping/altitude rate while armed, Hz (0 = not watched)",
-                                             0.0, 1000.0),
-    "supervisor.min_rate.pressure_hz": real("minimum pressure/depth rate while armed, Hz (0 = not watched)",
-                                            0.0, 1000.0),
-    "supervisor.min_rate.imu_hz": real("minimum imu/data_raw rate while armed, Hz (0 = not watched)", 0.0, 2000.0),
-    "supervisor.max_invalid_dvl_s": real("armed with no valid DVL velocity for this long -> trip (the cage's dead "
-                                         "reckoning is frozen meanwhile), s", 0.1, 60.0),
-    "supervisor.rate_check_disabled.dvl": text("why supervisor.min_rate.dvl_hz is 0 (required with 0, refused otherwise)"),
-    "supervisor.rate_check_disabled.altimeter": text("why supervisor.min_rate.altimeter_hz is 0 (required with 0)"),
-    "supervisor.rate_check_disabled.pressure": text("why supervisor.min_rate.pressure_hz is 0 (required with 0)"),
-    "supervisor.rate_check_disabled.imu": text("why supervisor.min_rate.imu_hz is 0 (required with 0)"),
-    "supervisor.max_depth_m": real("disarm below this depth (pressure port), m", 0.0, 100.0),
-    "supervisor.min_altitude_m": real("disarm closer than this to the floor (altimeter), m", 0.0, 10.0),
-    "supervisor.max_roll_rad": real("disarm beyond this roll (DVL attitude), rad", 0.0, math.pi),
-    "supervisor.max_pitch_rad": real("disarm beyond this pitch (DVL attitude), rad", 0.0, math.pi / 2),
-    "supervisor.cage_margin_m": real("disarm when the DVL dead-reckoned position comes closer than this to a pool "
-                                     "wall (pool.* box), m", 0.0, 10.0),
-    "supervisor.max_run_time_s": real("disarm after this long armed, s", 1.0, 86400.0),
-}
-
-#: Optional keys (prefixes): absent is fine; present must validate. Every other key of :data:`SCHEMA` is required.
-OPTIONAL: tuple[str, ...] = ("supervisor.rate_check_disabled.",)
+SCHEMA, OPTIONAL = section("supervisor", {
+    "check_rate_hz": real("rate of the supervisor's rate and run-time checks, Hz", 1.0, 200.0),
+    "rate_window_s": real("window the sensor rates are measured over (at most "
+                          "supervisor.reaction_time_s), s", 0.2, 60.0),
+    "max_sample_age_s": real("a sensor sample whose header stamp is further than this from the supervisor's "
+                             "time on arrival (older, or ahead) is not alive: not counted, not used, s",
+                             0.05, 10.0),
+    "max_identical_s": real("a sensor stream bit-identical (header stamp aside) for longer than this is "
+                            "frozen: its samples are not alive (sensor noise changes every reading within "
+                            "a few samples), s", 0.1, 10.0),
+    "reaction_time_s": real("longest time a failed sensor (silent, stale or frozen) may go unnoticed while "
+                            "armed; bounds supervisor.rate_window_s, max_invalid_dvl_s, max_sample_age_s and "
+                            "max_identical_s, s",
+                            0.1, 10.0),
+    "min_rate.dvl_hz": real("minimum dvl/data rate while armed, Hz (0 = not watched)", 0.0, 1000.0),
+    "min_rate.altimeter_hz": real("minimum ping/altitude rate while armed, Hz (0 = not watched)",
+                                  0.0, 1000.0),
+    "min_rate.pressure_hz": real("minimum pressure/depth rate while armed, Hz (0 = not watched)",
+                                 0.0, 1000.0),
+    "min_rate.imu_hz": real("minimum imu/data_raw rate while armed, Hz (0 = not watched)", 0.0, 2000.0),
+    "max_invalid_dvl_s": real("armed with no valid DVL velocity for this long -> trip (the cage's dead "
+                              "reckoning is frozen meanwhile), s", 0.1, 60.0),
+    "rate_check_disabled.dvl": text("why supervisor.min_rate.dvl_hz is 0 (required with 0, refused otherwise)"),
+    "rate_check_disabled.altimeter": text("why supervisor.min_rate.altimeter_hz is 0 (required with 0)"),
+    "rate_check_disabled.pressure": text("why supervisor.min_rate.pressure_hz is 0 (required with 0)"),
+    "rate_check_disabled.imu": text("why supervisor.min_rate.imu_hz is 0 (required with 0)"),
+    "max_depth_m": real("disarm below this depth (pressure port), m", 0.0, 100.0),
+    "min_altitude_m": real("disarm closer than this to the floor (altimeter), m", 0.0, 10.0),
+    "max_roll_rad": real("disarm beyond this roll (DVL attitude), rad", 0.0, math.pi),
+    "max_pitch_rad": real("disarm beyond this pitch (DVL attitude), rad", 0.0, math.pi / 2),
+    "cage_margin_m": real("disarm when the DVL dead-reckoned position comes closer than this to a pool "
+                          "wall (pool.* box), m", 0.0, 10.0),
+    "max_run_time_s": real("disarm after this long armed, s", 1.0, 86400.0),
+}, optional=("rate_check_disabled.",))
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
@@ -71,8 +65,9 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             issues.append(ConfigIssue(key, c[key], f"{wider} {other} ({c[other]:g}): the identification aborts first"))
     if "supervisor.cage_margin_m" in c and "pool.width_m" in c and \
             2.0 * c["supervisor.cage_margin_m"] >= min(c["pool.length_m"], c["pool.width_m"]):
+        half_side = min(c["pool.length_m"], c["pool.width_m"]) / 2
         issues.append(ConfigIssue("supervisor.cage_margin_m", c["supervisor.cage_margin_m"],
-                                  f"below half the pool's smaller side ({min(c['pool.length_m'], c['pool.width_m']) / 2:g})"))
+                                  f"below half the pool's smaller side ({half_side:g})"))
     reaction = c.get("supervisor.reaction_time_s")
     if reaction is not None:
         for key in ("supervisor.rate_window_s", "supervisor.max_invalid_dvl_s", "supervisor.max_sample_age_s",

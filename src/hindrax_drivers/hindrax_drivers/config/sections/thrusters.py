@@ -1,9 +1,6 @@
 """``thrusters.*``: names, pulse-width range, thrust curves, allocation settings and the per-thruster keys
 (``thrusters.<name>.esc_channel``; [Hindrax-Drag] §2.2, eq. 1, Table 2, §4 eq. 9), and their hand-written typed view
 (:class:`ThrustersConfig`: its keys are per thruster name, so it is not generated).
-
-The section's schema (:data:`SCHEMA`), its optional keys (:data:`OPTIONAL`) and the checks that name one of its keys
-(:func:`cross_checks`); :mod:`hindrax_drivers.config.sections` joins the sections.
 """
 from __future__ import annotations
 
@@ -15,41 +12,40 @@ import numpy as np
 
 from ...allocation.thrust_curve import ThrustCurve, ThrustCurveError
 from ...hardware_limits import ESC_DEADBAND_US, ESC_NEUTRAL_US
-from ..spec import DOFS, STRS, THRUSTER, ConfigIssue, Spec, flag, integer, real, text, vector
+from ..spec import DOFS, STRS, THRUSTER, ConfigIssue, Spec, flag, integer, real, section, text, vector
 from ..typed_sections import ABSENT, Section
 
-SCHEMA: dict[str, Spec] = {
-    "thrusters.names": Spec(STRS, "thruster names in allocation order"),
-    "thrusters.pulse_width_min_us": real("lowest pulse width (full reverse), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
-    "thrusters.pulse_width_neutral_us": real("neutral pulse width (stop), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
-    "thrusters.pulse_width_max_us": real("highest pulse width (full forward), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
-    "thrusters.deadband_us": real("half-width of the ESC deadband around neutral, us (docs/devices.md §5.2)", 0.0, 200.0),
-    "thrusters.curve_negative": vector("cubic [c4, c3, c2, c1] for P below neutral, N ([Hindrax-Drag] eq. 1)", 4),
-    "thrusters.curve_positive": vector("cubic [c4, c3, c2, c1] for P above neutral, N ([Hindrax-Drag] eq. 1)", 4),
-    "thrusters.time_constant_s": real("first-order thruster lag time constant, s", 0.0, 5.0),
-    "thrusters.allocation_mode": text("saturation handling", ("uniform", "priority")),
-    "thrusters.priority_dofs": Spec(STRS, "DOFs kept exact in priority mode", choices=DOFS),
-    "thrusters.max_wrench_excess_ratio": real("a wrench beyond this many times what the thrusters can produce on an "
-                                              "axis is rejected (neutral), not scaled into full thrust", 1.0, 100.0),
-    "thrusters.wrench_timeout_s": real("wrench older than this is rejected as stale, s", 0.01, 10.0),
-    "thrusters.wrench_future_margin_s": real("wrench stamped further than this in the future is rejected (clock "
-                                             "offset allowed between the controller and this node), s", 0.0, 5.0),
-    f"thrusters.{THRUSTER}.position_frd_m": vector("thruster position relative to the CG, FRD, m", 3, -5.0, 5.0),
-    f"thrusters.{THRUSTER}.direction_frd": vector("unit thrust direction for positive thrust, FRD", 3, -1.0, 1.0, unit=True),
-    f"thrusters.{THRUSTER}.esc_channel": integer("PCA9685 output channel", 0, 15),
-    f"thrusters.{THRUSTER}.reversed": flag("mirror the pulse width about neutral (propeller/wiring reversed)"),
-    f"thrusters.{THRUSTER}.trim_us": real("pulse-width trim added after allocation, us", -100.0, 100.0),
-    f"thrusters.{THRUSTER}.allocation_weight": real("weight of this thruster in the weighted pseudo-inverse", 1e-3, 1e3),
+_KEYS: dict[str, Spec] = {
+    "names": Spec(STRS, "thruster names in allocation order"),
+    "pulse_width_min_us": real("lowest pulse width (full reverse), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
+    "pulse_width_neutral_us": real("neutral pulse width (stop), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
+    "pulse_width_max_us": real("highest pulse width (full forward), us ([Hindrax-Drag] §2.2.1)", 500.0, 2500.0),
+    "deadband_us": real("half-width of the ESC deadband around neutral, us (docs/devices.md §5.2)", 0.0, 200.0),
+    "curve_negative": vector("cubic [c4, c3, c2, c1] for P below neutral, N ([Hindrax-Drag] eq. 1)", 4),
+    "curve_positive": vector("cubic [c4, c3, c2, c1] for P above neutral, N ([Hindrax-Drag] eq. 1)", 4),
+    "time_constant_s": real("first-order thruster lag time constant, s", 0.0, 5.0),
+    "allocation_mode": text("saturation handling", ("uniform", "priority")),
+    "priority_dofs": Spec(STRS, "DOFs kept exact in priority mode", choices=DOFS),
+    "max_wrench_excess_ratio": real("a wrench beyond this many times what the thrusters can produce on an "
+                                    "axis is rejected (neutral), not scaled into full thrust", 1.0, 100.0),
+    "wrench_timeout_s": real("wrench older than this is rejected as stale, s", 0.01, 10.0),
+    "wrench_future_margin_s": real("wrench stamped further than this in the future is rejected (clock "
+                                   "offset allowed between the controller and this node), s", 0.0, 5.0),
+    f"{THRUSTER}.position_frd_m": vector("thruster position relative to the CG, FRD, m", 3, -5.0, 5.0),
+    f"{THRUSTER}.direction_frd": vector("unit thrust direction for positive thrust, FRD", 3, -1.0, 1.0, unit=True),
+    f"{THRUSTER}.esc_channel": integer("PCA9685 output channel", 0, 15),
+    f"{THRUSTER}.reversed": flag("mirror the pulse width about neutral (propeller/wiring reversed)"),
+    f"{THRUSTER}.trim_us": real("pulse-width trim added after allocation, us", -100.0, 100.0),
+    f"{THRUSTER}.allocation_weight": real("weight of this thruster in the weighted pseudo-inverse", 1e-3, 1e3),
 }
-SCHEMA["thrusters.thrust_uncertainty_rel"] = vector(
+_KEYS["thrust_uncertainty_rel"] = vector(
         "declared 1-sigma relative uncertainty of the thrust curves [negative, positive direction] (battery state, "
         "curve fit), added to the identification intervals", 2, 0.0, 1.0)
-SCHEMA["thrusters.thrust_fit_uncertainty_rel"] = vector(
+_KEYS["thrust_fit_uncertainty_rel"] = vector(
         "1-sigma relative uncertainty of the thrust curves [negative, positive direction] from the bollard-pull fit "
-        "(written by hindrax ident thruster-fit --write); replaces thrust_uncertainty_rel in the intervals", 2, 0.0, 1.0)
-
-#: Optional keys (prefixes): absent is fine; present must validate. Every other key of :data:`SCHEMA` is required.
-OPTIONAL: tuple[str, ...] = ("thrusters.thrust_uncertainty_rel", "thrusters.thrust_fit_uncertainty_rel")
+        "(written by hindrax ident thruster-fit --write); replaces thrust_uncertainty_rel in the intervals",
+        2, 0.0, 1.0)
+SCHEMA, OPTIONAL = section("thrusters", _KEYS, optional=("thrust_uncertainty_rel", "thrust_fit_uncertainty_rel"))
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
