@@ -161,22 +161,27 @@ class ForeignVehicleError(RuntimeError):
 
 class ForeignVehicleWatch:
     """Watches ``node``'s graph for ESCs and supervisors that are not the caller's: through the discovery window
-    (:meth:`settled`), then periodically while the tool runs (:meth:`check_every`).
+    (:meth:`settled`), then every ``period_s`` while the tool runs (:meth:`check_every` for a spun node,
+    :meth:`poll` for a loop of its own).
 
     node: an rclpy node on the domain to check. own: callable returning the caller's own :class:`GraphView` (its
     nodes and heartbeat publishers; default nothing). what: the refusing tool, for the message (``hindrax run``).
-    consequence: what the tool refuses to do. window_s: :data:`DISCOVERY_WINDOW_S`. clock: monotonic seconds.
+    consequence: what the tool refuses to do. window_s: :data:`DISCOVERY_WINDOW_S`. period_s:
+    :data:`CHECK_PERIOD_S`. clock: monotonic seconds.
     """
 
     def __init__(self, node: Any, what: str, consequence: str, own: Callable[[], GraphView] = GraphView,
-                 window_s: float = DISCOVERY_WINDOW_S, clock: Callable[[], float] = time.monotonic) -> None:
+                 window_s: float = DISCOVERY_WINDOW_S, period_s: float = CHECK_PERIOD_S,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.node = node
         self.what = what
         self.consequence = consequence
         self.own = own
         self.window_s = float(window_s)
+        self.period_s = float(period_s)
         self.clock = clock
         self.t0 = clock()
+        self._next_poll = self.t0
 
     def found(self) -> list[str]:
         """The foreign ESCs and supervisors seen now (:func:`foreign_vehicle_processes`)."""
@@ -196,9 +201,17 @@ class ForeignVehicleWatch:
         self.check()
         return self.clock() - self.t0 >= self.window_s
 
-    def check_every(self, period_s: float = CHECK_PERIOD_S) -> Any:
-        """Keep checking after the window for as long as ``node`` is spun: a timer of ``period_s`` (s, the node's
+    def check_every(self) -> Any:
+        """Keep checking after the window for as long as ``node`` is spun: a timer of ``period_s`` (the node's
         clock) running :meth:`check`, so a foreign ESC or supervisor discovered later raises
         :class:`ForeignVehicleError` out of the executor's spin, the same one line. Returns the rclpy timer (it
         goes with the node)."""
-        return self.node.create_timer(period_s, self.check)
+        return self.node.create_timer(self.period_s, self.check)
+
+    def poll(self) -> None:
+        """:meth:`check` when ``period_s`` has passed (``clock``) since the last poll's check: cheap enough to call
+        from a loop of the tool's own at every turn (``hindrax bag play`` between messages)."""
+        now = self.clock()
+        if now >= self._next_poll:
+            self._next_poll = now + self.period_s
+            self.check()

@@ -113,3 +113,24 @@ def test_after_the_window_the_watch_checks_every_second_and_names_a_late_vehicle
     with pytest.raises(ForeignVehicleError) as err:
         tick()
     assert str(err.value) == "refused: ROS domain 7 already has ESC /esc (2 processes); no second graph"
+
+
+def test_poll_looks_at_the_graph_once_per_period_of_its_clock():
+    """A loop of the tool's own (``hindrax bag play``) calls poll() at every turn: the graph is read once per
+    period_s, and a vehicle appearing in between is refused at the next due poll."""
+    t = [0.0]
+    graph = _Graph(["/player"])
+    reads = []
+    names = graph.get_node_names_and_namespaces
+    graph.get_node_names_and_namespaces = lambda: reads.append(t[0]) or names()
+    watch = ForeignVehicleWatch(graph, "refused", "no replay", period_s=0.2, clock=lambda: t[0])
+    for t[0] in (0.0, 0.05, 0.1, 0.19, 0.2, 0.3, 0.41):
+        watch.poll()
+    assert reads == [0.0, 0.2, 0.41]
+    graph.nodes.append("/supervisor")
+    t[0] = 0.5
+    watch.poll()  # not due yet (next at 0.61 s)
+    t[0] = 0.65
+    with pytest.raises(ForeignVehicleError, match="^refused: ROS domain 7 already has supervisor /supervisor; no "
+                                                  "replay$"):
+        watch.poll()

@@ -162,22 +162,22 @@ class BagPlayerNode(Node):
             me = self.get_fully_qualified_name()
             own = GraphView((me,), {t: (me,) for t in self.pubs})
             self.watch = ForeignVehicleWatch(self, "refused", "a bag's safety and actuation topics are never "
-                                             "published onto a live vehicle's graph", own=lambda: own)
-        self._next_check = 0.0
+                                             "published onto a live vehicle's graph", own=lambda: own,
+                                             period_s=GRAPH_CHECK_PERIOD_S)
 
     def _check_graph(self, force: bool = False) -> None:
         """With ``safety_topics``: raise :class:`PlayerError` when an ESC or supervisor is on the graph (looked at
         every :data:`GRAPH_CHECK_PERIOD_S` at most, unless ``force``)."""
         if self.watch is None:
             return
-        now = time.monotonic()
-        if force or now >= self._next_check:
-            self._next_check = now + GRAPH_CHECK_PERIOD_S
-            try:
+        try:
+            if force:
                 self.watch.check()
-            except ForeignVehicleError as exc:
-                self._stop.set()
-                raise PlayerError(str(exc)) from exc
+            else:
+                self.watch.poll()
+        except ForeignVehicleError as exc:
+            self._stop.set()
+            raise PlayerError(str(exc)) from exc
 
     def _graph_settled(self) -> bool:
         """True once the discovery window has passed with no ESC or supervisor seen (raises :class:`PlayerError`
