@@ -48,7 +48,7 @@ pytestmark = pytest.mark.timeout(1200)
 
 DRIVER_NODES = ["dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
                 "recorder_node", "player_node", "static_tf_node", "supervisor_node", "output_guard_node",
-                "serial_sensors_node", "i2c_sensors_node", "actuation_node"]  # composed processes (vehicle.launch)
+                "sensors_node", "actuation_node"]  # composed processes (vehicle.launch)
 IDENT_NODES = ["identification_node", "simulator_node", "hindrax"]
 
 

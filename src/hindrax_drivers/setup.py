@@ -37,8 +37,7 @@ NODES = {
 NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
 #: composed processes (hindrax_drivers.composition: several nodes, one process): console script -> module:function
 GROUPS = {
-    "i2c_sensors_node": "hindrax_drivers.composition:i2c_sensors_main",
-    "serial_sensors_node": "hindrax_drivers.composition:serial_sensors_main",
+    "sensors_node": "hindrax_drivers.composition:sensors_main",
     "actuation_node": "hindrax_drivers.composition:actuation_main",
 }
 

@@ -5,7 +5,7 @@ already runs in any process (``bringup.py`` composes them all for the virtual po
 that builds a fixed list of node classes and spins them with the process's executor
 (:func:`hindrax_drivers.node_common.run_nodes`: the EventsExecutor, orderly shutdown, each node's ``close()``).
 Nodes keep their own names and read the same vehicle file, so a group runs from a launch file exactly like the
-nodes it composes (``<node pkg="hindrax_drivers" exec="i2c_sensors_node">`` without ``name``: a ``name`` would
+nodes it composes (``<node pkg="hindrax_drivers" exec="sensors_node">`` without ``name``: a ``name`` would
 rename every node of the process). Every node keeps its own executable too (``ms5837_node`` ...).
 
 Why groups (docs/architecture.md §10, the measured gains): a message costs rclpy, rcl and Fast DDS work in the
@@ -17,15 +17,18 @@ node's work.
 
 Groups (:data:`GROUPS`):
 
-``i2c_sensors_node``
-    MS5837 and ICM-20948: the two sensors on the shared I2C bus (each node opens the bus itself; the kernel
-    serialises the transfers).
-``serial_sensors_node``
-    DVL-75 and Ping1D: the two serial devices (each keeps its port's reader thread); and the static transforms
-    (``static_tf``: publishes ``/tf_static`` once, latched, and then only waits), which alone were a whole Python
-    process with its DDS participant: 39 MB of proportional set size for one message (``make bench``,
-    ``launch_pss_mb_static_tf``). A light process of no safety role: a driver's failure takes the transforms with it
-    for the 2 s of the respawn, and late subscribers get them again from the new process.
+``sensors_node``
+    the four sensor drivers and the static transforms: DVL-75 and Ping1D (each keeps its serial port's reader
+    thread, which decodes and publishes), MS5837 and ICM-20948 on the shared I2C bus (each node opens the bus
+    itself; the kernel serialises the transfers), and ``static_tf`` (publishes ``/tf_static`` once, latched, then
+    only waits). Every Python process with rclpy and its DDS participant holds about 40 MB of proportional set size
+    of its own: as two processes (serial drivers + TF, I2C drivers) they held 48 + 49 MB, as one 57 MB
+    (``make bench``, ``launch_pss_mb_*``). The ICM-20948's polls share the executor and the GIL with the serial
+    reader threads and lose nothing by it: in the launch layout (load 6-13 on two cores) the recorder received the
+    IMU at 49.4-51.1 Hz in one process, 40.9-46.5 Hz in two (``launch_running_imu_*``). A light process of no
+    safety role: one driver's failure takes the others with it for the 2 s of the respawn (a campaign needs all four
+    sensors, so the supervisor stops it either way), and late subscribers get the transforms again from the new
+    process.
 ``actuation_node``
     thrust allocation and ESC output: the allocation's commands reach the ESC on ``thrusters/command_pulse_width``
     inside the process (one participant), taken by the ESC's subscription callback as from any other publisher
@@ -64,8 +67,7 @@ NODE_CLASSES: dict[str, str] = {
 
 #: console script -> the nodes it composes, in construction order (module docstring)
 GROUPS: dict[str, tuple[str, ...]] = {
-    "i2c_sensors_node": ("ms5837", "icm20948"),
-    "serial_sensors_node": ("dvl75", "ping1d", "static_tf"),
+    "sensors_node": ("dvl75", "ping1d", "ms5837", "icm20948", "static_tf"),
     "actuation_node": ("thrust_allocation", "esc"),
 }
 
@@ -113,15 +115,10 @@ def _run(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None) -> 
     return run_nodes(factories, args)
 
 
-def i2c_sensors_main(args: Sequence[str] | None = None) -> int:
-    """Console script ``i2c_sensors_node``: MS5837 and ICM-20948 in one process (module docstring)."""
-    return run_group(GROUPS["i2c_sensors_node"], args)
-
-
-def serial_sensors_main(args: Sequence[str] | None = None) -> int:
-    """Console script ``serial_sensors_node``: DVL-75, Ping1D and the static transforms in one process (module
+def sensors_main(args: Sequence[str] | None = None) -> int:
+    """Console script ``sensors_node``: the four sensor drivers and the static transforms in one process (module
     docstring)."""
-    return run_group(GROUPS["serial_sensors_node"], args)
+    return run_group(GROUPS["sensors_node"], args)
 
 
 def actuation_main(args: Sequence[str] | None = None) -> int:

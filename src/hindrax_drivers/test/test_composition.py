@@ -15,7 +15,7 @@ from hindrax_drivers.testing import child_env, python_executable, ros_context, w
 
 
 def test_every_group_names_known_nodes_once_and_unknown_nodes_are_refused(capsys):
-    assert set(GROUPS) == {"i2c_sensors_node", "serial_sensors_node", "actuation_node"}
+    assert set(GROUPS) == {"sensors_node", "actuation_node"}
     seen = [n for nodes in GROUPS.values() for n in nodes]
     assert len(seen) == len(set(seen)) and set(seen) <= set(NODE_CLASSES)
     for nodes in GROUPS.values():
@@ -29,24 +29,28 @@ def test_every_group_names_known_nodes_once_and_unknown_nodes_are_refused(capsys
 
 
 @pytest.mark.ros
-def test_i2c_sensors_group_runs_both_nodes_under_their_own_names_and_exits_0_on_sigint():
-    # the installed console script; no /dev/i2c-1 here: both drivers keep running and report it (as alone)
-    script = Path(python_executable()).with_name("i2c_sensors_node")
+def test_sensors_group_runs_its_five_nodes_under_their_own_names_and_exits_0_on_sigint():
+    # the installed console script; no serial ports, no /dev/i2c-1 here: every driver keeps running and reports it
+    # (as alone)
+    script = Path(python_executable()).with_name("sensors_node")
     proc = subprocess.Popen([str(script), "--ros-args", "--params-file", str(default_config_path())],
                             env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         with ros_context() as ctx:
             probe = rclpy.create_node("composition_probe", context=ctx)
-            wait_until(lambda: proc.poll() is None and {"ms5837", "icm20948"} <= set(probe.get_node_names()),
-                       30, None, "both nodes in the graph")
+            wait_until(lambda: proc.poll() is None and set(GROUPS["sensors_node"]) <= set(probe.get_node_names()),
+                       30, None, "the five nodes in the graph")
 
             def topics(node: str) -> set[str]:
                 return {t for t, _ in probe.get_publisher_names_and_types_by_node(node, "/")}
 
             # a node is discovered before its publishers: wait for each node's own topic under its own name
-            wait_until(lambda: "/pressure/fluid_pressure" in topics("ms5837") and "/imu/data_raw" in topics("icm20948"),
-                       30, None, "each node's publishers under its own name")
-            assert "/imu/data_raw" not in topics("ms5837") and "/pressure/fluid_pressure" not in topics("icm20948")
+            own = {"dvl75": "/dvl/data", "ping1d": "/ping/altitude", "ms5837": "/pressure/fluid_pressure",
+                   "icm20948": "/imu/data_raw", "static_tf": "/tf_static"}
+            wait_until(lambda: all(topic in topics(node) for node, topic in own.items()), 30, None,
+                       "each node's publishers under its own name")
+            for node, topic in own.items():
+                assert not [other for other in own if other != node and topic in topics(other)], topic
             probe.destroy_node()
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0, proc.stdout.read()

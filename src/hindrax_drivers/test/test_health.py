@@ -8,9 +8,9 @@ from hindrax_drivers.health import Seen, assess, expectation
 from hindrax_drivers.launch_xml import read_launch
 
 REPO = Path(__file__).resolve().parents[3]
-#: the vehicle's nodes in launch order (static TF shares the serial sensors' process, the allocation the ESC's,
-#: allocation first)
-VEHICLE = ["dvl75", "ping1d", "static_tf", "ms5837", "icm20948", "thrust_allocation", "esc", "supervisor",
+#: the vehicle's nodes in launch order (static TF shares the sensor drivers' process, last; the allocation the
+#: ESC's, allocation first)
+VEHICLE = ["dvl75", "ping1d", "ms5837", "icm20948", "static_tf", "thrust_allocation", "esc", "supervisor",
            "output_guard", "gateway"]
 STATUSES = ["hindrax/dvl75", "hindrax/ping1d", "hindrax/ms5837", "hindrax/icm20948", "hindrax/esc_pca9685",
             "hindrax/supervisor", "hindrax/output_guard"]

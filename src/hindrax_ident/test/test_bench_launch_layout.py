@@ -63,8 +63,8 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     outer = tmp_path / "outer.launch.xml"
     outer.write_text(f'<launch><arg name="out" default="x" description="d"/>'
                      f'<include file="{inc}"><arg name="rec" value="true"/><arg name="dir" value="$(var out)/bags"/>'
-                     f'</include><group><let name="g" value="i2c"/>'
-                     f'<node pkg="hindrax_drivers" exec="$(var g)_sensors_node" respawn="true"/></group>'
+                     f'</include><group><let name="g" value="sensors"/>'
+                     f'<node pkg="hindrax_drivers" exec="$(var g)_node" respawn="true"/></group>'
                      f'<node pkg="hindrax_drivers" exec="static_tf_node" unless="true"/>'
                      f'<node pkg="foxglove_bridge" exec="foxglove_bridge" if="false"/></launch>')
     esc, rec, group = launch_processes(outer, {"out": "/data"})
@@ -78,8 +78,7 @@ def test_launch_processes_reads_a_launch_file_as_ros2_launch_would(tmp_path):
     assert args[:4] == ["--ros-args", "-r", "__node:=recorder", "--params-file"]
     assert written == [{"output_dir": "/data/bags"}]
     # a composed process has no name: its nodes keep theirs; its row is the executable without _node
-    assert (group.name, group.label, group.module) == (None, "i2c_sensors",
-                                                       "hindrax_drivers.composition:i2c_sensors_main")
+    assert (group.name, group.label, group.module) == (None, "sensors", "hindrax_drivers.composition:sensors_main")
     with pytest.raises(ValueError, match="outt"):
         launch_processes(outer, {"outt": "/data"})
     outer.write_text('<launch><node pkg="hindrax_drivers" exec="no_such_node"/></launch>')
@@ -149,8 +148,7 @@ def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
 #: modules no vehicle process may hold: the virtual pool (simulator, emulated hardware) and the bench's own code
 _POOL_MODULES = ("hindrax_ident.sim", "hindrax_ident.benchmarks.launch_layout", "hindrax_ident.benchmarks.stack")
 #: the processes that run drivers or safety nodes only: they hold no scipy either (frames and mountings are numpy)
-_LEAN_PROCESSES = ("serial_sensors", "i2c_sensors", "actuation", "supervisor", "output_guard", "gateway",
-                   "recorder")
+_LEAN_PROCESSES = ("sensors", "actuation", "supervisor", "output_guard", "gateway", "recorder")
 #: the identification node and the controller: no scipy or filterpy at start either (the online filters step
 #: estimation/kalman.py, the priors' tables estimation/priors.py's own spline; the offline fits import scipy in the
 #: function that uses it): scipy held ~50 MB of proportional set size in that process
