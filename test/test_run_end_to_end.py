@@ -23,7 +23,7 @@ import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.testing import child_env
+from hindrax_drivers.testing import own_domain_env
 from hindrax_ident.identification.assessment.results import read_identification
 
 pytestmark = pytest.mark.ros
@@ -39,7 +39,7 @@ def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     out = tmp_path / "run"
     proc = subprocess.run([sys.executable, "-m", "hindrax_ident.cli", "run", "--dofs", "surge,heave", "--levels", "3",
                            "--seed", "1",
-                           "--out", str(out)], env=child_env(), capture_output=True, text=True,
+                           "--out", str(out)], env=own_domain_env(), capture_output=True, text=True,
                           timeout=1500)
     log = proc.stdout[-3000:] + proc.stderr[-3000:]
     assert proc.returncode == 0, log

@@ -38,6 +38,15 @@ def child_env(**extra: str) -> dict[str, str]:
     return env
 
 
+def own_domain_env(**extra: str) -> dict[str, str]:
+    """:func:`child_env` without ROS_DOMAIN_ID, for ``hindrax run``, which then reserves a domain no other process
+    holds (``domain_coordinator``), as it does for a user. A vehicle graph started on the worker's own domain would
+    meet the ESCs and supervisors of the worker's earlier tests still in the discovery caches, and be refused."""
+    env = child_env(**extra)
+    env.pop("ROS_DOMAIN_ID", None)
+    return env
+
+
 def python_executable() -> str:
     """The interpreter to start child processes with (this venv's python)."""
     return sys.executable

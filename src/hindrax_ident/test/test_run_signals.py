@@ -9,7 +9,7 @@ import threading
 import pytest
 
 from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.testing import child_env, wait_until
+from hindrax_drivers.testing import own_domain_env, wait_until
 
 
 @pytest.mark.ros
@@ -19,7 +19,7 @@ def test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind(tm
     tmp.mkdir()
     out = tmp_path / "out"
     p = subprocess.Popen([sys.executable, "-m", "hindrax_ident.cli", "run", "--dofs", "surge", "--levels", "1",
-                          "--out", str(out)], env=child_env(TMPDIR=str(tmp)), stdout=subprocess.PIPE,
+                          "--out", str(out)], env=own_domain_env(TMPDIR=str(tmp)), stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(p.stdout), daemon=True)
