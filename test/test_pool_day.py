@@ -232,15 +232,22 @@ def test_esc_starts_without_its_bus(colcon_install, tmp_path):
 
 
 # ------------------------------------------------------------------------------------- the README's pool day
+#: the README's instruction line that ends a launch (Ctrl-C: SIGINT to every process, the recorder closes its bag)
+STOP_LAUNCH = "Ctrl-C the launch"
+
+
 def readme_pool_day() -> list[tuple[str, str]]:
     """(machine, command line) of the README's pool-day block, in order; machine is ``vehicle`` or ``topside`` from the
-    ``# on the ...`` comment above the line (inline comments dropped)."""
+    ``# on the ...`` comment above the line (inline comments dropped). A machine line that says to Ctrl-C the launch
+    gives the step ``(machine, STOP_LAUNCH)``."""
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     block = readme.split("## A pool day", 1)[1].split("```bash", 1)[1].split("```", 1)[0]
     machine, out = "", []
     for line in block.strip().splitlines():
         if line.startswith("# on the "):
             machine = "topside" if "topside" in line else "vehicle"
+            if STOP_LAUNCH in line:
+                out.append((machine, STOP_LAUNCH))
             continue
         command = line.split("  #", 1)[0].strip()
         if command:
@@ -248,131 +255,246 @@ def readme_pool_day() -> list[tuple[str, str]]:
     return out
 
 
-#: README pool-day lines this test does not run (test_pool_day_as_the_readme_writes_it's docstring says why)
-CAMPAIGN_LINES = ("hindrax ident start", "hindrax ident continue", "hindrax ident bag", "hindrax control model")
+HEARTBEAT_TIMEOUT_S = 1.0  # the README pool day's heartbeat deadlines on this shared machine (see the test)
+BUS_CALL_TIMEOUT_S = 0.8  # and its PCA9685 bus-call deadline (below the guard's heartbeat deadline)
+CAMPAIGN_S = 900.0  # wall-time deadline of the campaign (about 190 s of pool time, on a loaded two-core machine)
 
 
 def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
-    """Every line of the README's pool day, on the machine it names, against the installed pool_test launch on
-    emulated devices: the vehicle on this worker's domain, the topside on another (LOCALHOST here, SUBNET at the
-    pool), the topside's settings from docker/topside.env.example's three variables. The lines ``ros2 launch``,
+    """Every line of the README's pool day, on the machine it names, against the installed pool_test launch on the
+    live virtual pool (hindrax_ident/sim/live_pool.py: the simulator behind the five emulated devices, in a process
+    of its own, on the wall clock): the vehicle on this worker's domain, the topside on another (LOCALHOST here,
+    SUBNET at the pool), the topside's settings from docker/topside.env.example's three variables. ``ros2 launch``,
     ``ros2 topic echo`` and ``ros2 service call`` (no ros2 CLI here) are done by the project's runner and rclpy;
-    every ``hindrax`` line runs as written, placeholders filled in. Armed from ``hindrax arm`` to ``hindrax disarm``
-    with no disarm between, while a topside subscriber comes and goes and ``hindrax health`` runs on the vehicle.
+    every ``hindrax`` line runs as written, placeholders filled in. The operator of the campaign's prompts is this
+    test: at each ``>>> [code]`` it does what the code asks in the pool (the ballast on or off) and runs the README's
+    ``hindrax ident continue``. Asserted: armed from each ``hindrax arm`` to its ``hindrax disarm`` with no disarm
+    between (a topside subscriber and ``hindrax health`` on the vehicle come and go while armed); the campaign
+    completes; ``ident bag`` identifies heave from the launch's own bag, its added mass within 35 % of the pool's
+    truth (the simulator's truth file, which the nodes never read); the identified model's hold keeps the true
+    altitude within 0.1 m of the README's 0.9 m. The deadlines it widens, and why: at ``vehicle_file`` below."""
+    import queue
+    import threading
 
-    Not run here: the campaign lines (:data:`CAMPAIGN_LINES`: ``ident start``/``continue``, and ``ident bag`` and
-    ``control model`` on its bag). The emulated devices report a vehicle at rest, so a campaign's ladders would only
-    time out; the campaign with its prompts answered runs through the graph on the virtual pool
-    (test_calibration_graph.py, test_run_end_to_end.py), its bag through ``ident bag`` in
-    test_identification_from_bag.py."""
     from domain_coordinator import domain_id
-    from std_srvs.srv import Trigger
 
     from diagnostic_msgs.msg import DiagnosticStatus
+    from hindrax_drivers.testing import child_env
+    from hindrax_ident.identification.graph_campaign import parse_prompt
+    from hindrax_ident.sim.live_pool import LivePool
+    from hindrax_ident.sim.truth import load_truth
     from hindrax_msgs.msg import ThrusterPwm
 
     install = colcon_install
     lines = readme_pool_day()
     machines = [m for m, _ in lines]
-    assert machines[0] == "vehicle" and "topside" in machines, lines
+    assert machines[0] == "vehicle" and "topside" in machines and (("vehicle", STOP_LAUNCH) in lines), lines
     # the vehicle file of this vehicle: the installed one, its oscillator measured (`hindrax esc calibrate --write`)
     doc = yaml.safe_load((install.share("hindrax_drivers") / "config" / "hindrax.yaml").read_text())
     doc["/**"]["ros__parameters"]["esc"]["oscillator_calibrated"] = True
+    # The load this test assumes: the whole vehicle launch, the live pool, the topside commands and the other xdist
+    # worker on two cores (load 2-6). There a Python process is sometimes not scheduled for 0.2 s, and the vehicle's
+    # deadlines disarm the campaign by design: a supervisor heartbeat gap of 0.20 s at load 4-5, a PCA9685 call on
+    # the emulated bus (served by the live pool's process) not returned after 0.16 s at load 5.9. This test is about
+    # the README's commands, so the deadlines are widened here; the vehicle's own are tested by the failure table
+    # (test_safety_paths.py) and test_forged_heartbeats.py.
+    esc = doc["/**"]["ros__parameters"]["esc"]
+    esc["heartbeat_timeout_s"] = esc["guard_heartbeat_timeout_s"] = HEARTBEAT_TIMEOUT_S
+    esc["bus_call_timeout_s"] = BUS_CALL_TIMEOUT_S
     vehicle_file = tmp_path / "hindrax.yaml"
     vehicle_file.write_text(yaml.safe_dump(doc))
     cfg = load_config(vehicle_file)
     name = cfg.vehicle.name
     runs = tmp_path / "runs"
     vehicle_env = {**install.env, "HINDRAX_CONFIG": str(vehicle_file)}
+    fill: dict[str, str] = {"/var/lib/hindrax/runs": str(runs), "<name>": name, "SUBNET": "LOCALHOST"}
 
-    def hindrax(env: dict, command: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    def filled(line: str) -> str:
+        for key in sorted(fill, key=len, reverse=True):  # <bag>_ident_<time> before <bag>
+            line = line.replace(key, fill[key])
+        return line
+
+    def hindrax(env: dict, command: str, timeout: float = 180.0) -> subprocess.CompletedProcess:
         words = command.split()
         assert words[0] == "hindrax", command
         return subprocess.run(words, env=env, capture_output=True, text=True, timeout=timeout)
 
-    with domain_id() as topside_domain, EmulatedDevices(cfg, tmp_path / "devices") as dev:
+    with domain_id() as topside_domain, LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
+            ros_context(domain_id=topside_domain) as top_ctx:
+        fill["<domain>"] = str(topside_domain)
         topside_env = {**install.env, "ROS_DOMAIN_ID": str(topside_domain),
                        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "HINDRAX_VEHICLE": name}
-        launch_args = {"config": str(vehicle_file), "output_dir": str(runs), "topside_domain_id": str(topside_domain),
-                       "topside_discovery_range": "LOCALHOST"}
-        it = iter(lines)
-        machine, line = next(it)
-        r = hindrax(vehicle_env, line)  # config check
-        assert r.returncode == 0, r.stdout + r.stderr
-        machine, line = next(it)
-        assert line.startswith("ros2 launch hindrax_ident pool_test.launch.xml"), line
-        with Day(install, dev, "hindrax_ident/pool_test.launch.xml", launch_args) as day:
-            armed: list[tuple[float, bool]] = []
-            day.node.create_subscription(ThrusterPwm, "thrusters/pulse_width",
-                                         lambda m: armed.append((time.monotonic(), bool(m.armed))), 50)
-            with ros_context(domain_id=topside_domain) as top_ctx:
-                top = rclpy.create_node("pool_day_topside", context=top_ctx)
-                top_ex = SingleThreadedExecutor(context=top_ctx)
-                top_ex.add_node(top)
-                echoed: list = []
-                not_run: list[str] = []
-                held: list[str] = []
-                try:
-                    t_arm = None
-                    for machine, line in it:
-                        env = vehicle_env if machine == "vehicle" else topside_env
-                        if line.startswith("hindrax health"):
-                            r = hindrax(env, line + f" output_dir:={runs} --timeout 60", timeout=180)
-                            assert r.returncode == 0 and "READY" in r.stdout, r.stdout + r.stderr
-                        elif line == "hindrax arm":
-                            day.wait(lambda: day.count("/dvl/data") >= 3, "the vehicle up")
-                            tries: list[subprocess.CompletedProcess] = []
-                            # the ESC refuses until its neutral period (esc.arming_time_s) and the heartbeats are in:
-                            # ask again until it says yes (each try is a command, not a sleep)
-                            day.wait(lambda: tries.append(hindrax(env, line)) or tries[-1].returncode == 0,
-                                     "hindrax arm accepted")
-                            r = tries[-1]
-                            assert r.stdout.strip() == f"{name}: armed", r.stdout + r.stderr
-                            t_arm = time.monotonic()
-                            day.wait(lambda: any(a for t, a in armed if t >= t_arm), "thrusters/pulse_width armed")
-                            # a health check on the vehicle while armed: a new participant, no disarm
-                            r = hindrax(vehicle_env, f"hindrax health --launch hindrax_ident/pool_test.launch.xml "
-                                                     f"output_dir:={runs} --timeout 60", timeout=180)
-                            assert r.returncode == 0, r.stdout + r.stderr
-                        elif line.startswith(CAMPAIGN_LINES):
-                            not_run.append(line)
-                        elif line.startswith("ros2 topic echo"):
-                            topic = line.split()[3].replace("<name>", name)
-                            sub = top.create_subscription(DiagnosticStatus, topic, echoed.append, 10)
-                            wait_until(lambda: echoed, WAIT_S, lambda: top_ex.spin_once(timeout_sec=0.05),
-                                       f"{topic} on the topside")
-                            top.destroy_subscription(sub)
-                        elif line == "hindrax disarm":
-                            r = hindrax(env, line)
-                            assert r.returncode == 0 and r.stdout.strip() == f"{name}: disarmed", r.stdout + r.stderr
-                            t_disarm = time.monotonic()
-                            day.wait(lambda: any(not a for t, a in armed if t >= t_disarm), "disarmed")
-                            during = [a for t, a in armed if t_arm <= t < t_disarm]
-                            assert during and all(during[during.index(True):]), "a disarm while armed"
-                        elif line.startswith("ros2 service call"):
-                            service = line.split()[3].replace("<name>", name)
-                            client = top.create_client(Trigger, service)
-                            wait_until(client.service_is_ready, WAIT_S, lambda: top_ex.spin_once(timeout_sec=0.05),
-                                       f"{service} on the topside")
-                            fut = client.call_async(Trigger.Request())
-                            wait_until(fut.done, WAIT_S, lambda: top_ex.spin_once(timeout_sec=0.05), "hold answer")
-                            assert fut.result().success, fut.result().message
-                        elif line.startswith("hindrax control hold"):  # through the gateway, named vehicle
-                            r = hindrax(env, line)
-                            assert r.returncode == 0 and r.stdout.startswith(f"{name}: "), r.stdout + r.stderr
-                            held.append(line)
-                        elif line.startswith("hindrax"):
-                            r = hindrax(env, line)
-                            assert r.returncode == 0, (line, r.stdout + r.stderr)
-                        else:
-                            raise AssertionError(f"README pool-day line not handled by this test: {line}")
-                finally:
-                    top_ex.shutdown()
-                    top.destroy_node()
-    # the campaign and what reads its bag, and nothing else, are left to the graph tests (docstring)
-    assert held == ["hindrax control hold --altitude-m 0.9"], held
-    assert [c.split()[1] + " " + c.split()[2] for c in not_run] == \
-        ["ident start", "ident continue", "ident bag", "control model"], not_run
+        top = rclpy.create_node("pool_day_topside", context=top_ctx)
+        top_ex = SingleThreadedExecutor(context=top_ctx)
+        top_ex.add_node(top)
+        day: Day | None = None
+        armed: list[tuple[float, bool]] = []
+        held: list[str] = []
+        t_arm = 0.0
+
+        def spin_top() -> None:
+            top_ex.spin_once(timeout_sec=0.05)
+
+        def launch(line: str) -> Day:
+            words = line.split()
+            assert words[:4] == ["ros2", "launch", "hindrax_ident", "pool_test.launch.xml"], line
+            args = dict(w.split(":=", 1) for w in words[4:])
+            d = Day(install, pool, "hindrax_ident/pool_test.launch.xml", {"config": str(vehicle_file), **args})
+            d.__enter__()
+            d.node.create_subscription(ThrusterPwm, "thrusters/pulse_width",
+                                       lambda m: armed.append((time.monotonic(), bool(m.armed))), 50)
+            return d
+
+        def stop(d: Day) -> None:
+            d.__exit__(None, None, None)
+            unclean = {k: s.exit_codes for k, s in d.final.items() if s.exit_codes[-1] != 0}
+            assert not unclean, "\n".join(f"{k} {c}:\n{d.runner.log(k)[-3000:]}" for k, c in unclean.items())
+
+        def campaign(start_line: str, continue_line: str) -> str:
+            """``ident start`` in one terminal, the operator's hands in the pool and ``ident continue`` in another."""
+            proc = subprocess.Popen(start_line.split(), env=topside_env, stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True)
+            out: queue.Queue = queue.Queue()
+            threading.Thread(target=lambda: [out.put(x) for x in proc.stdout], daemon=True).start()
+            printed: list[str] = []
+            deadline = time.monotonic() + CAMPAIGN_S
+            try:
+                while proc.poll() is None or not out.empty():
+                    assert time.monotonic() < deadline, "campaign not finished:\n" + "".join(printed[-40:])
+                    day.spin()
+                    try:
+                        text = out.get(timeout=0.05)
+                    except queue.Empty:
+                        continue
+                    printed.append(text)
+                    code = parse_prompt(text.split(">>>", 1)[1]) if ">>>" in text else ""
+                    if code:
+                        assert pool.act(code), f"the pool has no hands for {code!r}: {text}"
+                        held.append(code)
+                        r = hindrax(topside_env, continue_line)
+                        assert r.returncode == 0 and r.stdout.startswith("continued"), r.stdout + r.stderr
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                proc.wait()
+            transcript = "".join(printed)
+            assert proc.returncode == 0 and "result: complete" in transcript, \
+                f"{transcript[-4000:]}\npool truth {pool.truth()}\n" + "\n".join(
+                    f"--- {n}:\n{day.log(n)[-2500:]}" for n in ("supervisor", "esc", "output_guard", "identification"))
+            return transcript
+
+        try:
+            it = iter(lines)
+            for machine, line in it:
+                env = vehicle_env if machine == "vehicle" else topside_env
+                line = filled(line)
+                if line.startswith("ros2 launch"):
+                    assert day is None, "a second launch beside the first"
+                    day = launch(line)
+                elif line == STOP_LAUNCH:
+                    stop(day)
+                    day = None
+                elif line.startswith("hindrax health"):
+                    r = hindrax(env, line + f" output_dir:={runs} --timeout 60")
+                    assert r.returncode == 0 and "READY" in r.stdout, r.stdout + r.stderr
+                elif line == "hindrax arm":
+                    day.wait(lambda: day.count("/dvl/data") >= 3, "the vehicle up")
+                    tries: list[subprocess.CompletedProcess] = []
+                    # the ESC refuses until its neutral period (esc.arming_time_s) and the heartbeats are in: ask
+                    # again until it says yes (each try is a command, not a sleep)
+                    day.wait(lambda: tries.append(hindrax(env, line)) or tries[-1].returncode == 0, "hindrax arm")
+                    assert tries[-1].stdout.strip() == f"{name}: armed", tries[-1].stdout + tries[-1].stderr
+                    t_arm = time.monotonic()
+                    day.wait(lambda: any(a for t, a in armed if t >= t_arm), "thrusters/pulse_width armed")
+                    # a health check on the vehicle while armed: a new participant, no disarm
+                    r = hindrax(vehicle_env, f"hindrax health --launch hindrax_ident/pool_test.launch.xml "
+                                             f"output_dir:={runs} --timeout 60")
+                    assert r.returncode == 0, r.stdout + r.stderr
+                elif line.startswith("hindrax ident start"):
+                    _, continue_line = next(it)
+                    assert continue_line.startswith("hindrax ident continue"), continue_line
+                    campaign(line, continue_line)
+                    assert held == ["attach_ballast", "remove_ballast"], held
+                elif line.startswith("ros2 topic echo"):
+                    echoed: list = []
+                    sub = top.create_subscription(DiagnosticStatus, line.split()[3], echoed.append, 10)
+                    wait_until(lambda: echoed, WAIT_S, spin_top, f"{line.split()[3]} on the topside")
+                    top.destroy_subscription(sub)
+                elif line == "hindrax disarm":
+                    r = hindrax(env, line)
+                    assert r.returncode == 0 and r.stdout.strip() == f"{name}: disarmed", r.stdout + r.stderr
+                    t_disarm = time.monotonic()
+                    day.wait(lambda: any(not a for t, a in armed if t >= t_disarm), "disarmed")
+                    during = [a for t, a in armed if t_arm <= t < t_disarm]
+                    assert during and all(during[during.index(True):]), "a disarm while armed"
+                elif line.startswith("hindrax ident bag"):
+                    recorded = bags(runs)
+                    assert len(recorded) == 1, recorded
+                    fill["<bag>"] = recorded[0].name
+                    r = hindrax(env, filled(line), timeout=600)
+                    assert r.returncode == 0, r.stdout + r.stderr
+                    made = [b for b in bags(runs) if b.name.startswith(recorded[0].name + "_ident_")]
+                    assert len(made) == 1, (bags(runs), r.stdout)
+                    fill["<bag>_ident_<time>"] = made[0].name
+                    # heave against the pool's truth: the simulator's vehicle, not the vehicle file
+                    truth = load_truth(cfg, None).config
+                    ident = yaml.safe_load((made[0] / "identification.yaml").read_text())
+                    assert "heave" in str(ident), r.stdout
+                    check_heave(ident, truth, r.stdout)
+                elif line.startswith("hindrax control hold"):
+                    r = hindrax(env, line)
+                    assert r.returncode == 0 and r.stdout.startswith(f"{name}: "), r.stdout + r.stderr
+                    altitude_m = float(line.split("--altitude-m")[1].split()[0])
+                    check_hold(pool, day, cfg, altitude_m)
+                elif line.startswith("hindrax"):
+                    r = hindrax(env, line)
+                    assert r.returncode == 0, (line, r.stdout + r.stderr)
+                else:
+                    raise AssertionError(f"README pool-day line not handled by this test: {line}")
+            assert day is not None, "the README's pool day ends with the vehicle launched"
+            stop(day)
+            day = None
+        finally:
+            if day is not None:
+                day.__exit__(None, None, None)
+            top_ex.shutdown()
+            top.destroy_node()
+
+
+def check_heave(ident: dict, truth, printed: str) -> None:
+    """The identified heave (``identification.yaml``'s ``dofs.heave``) against the pool's truth: a verdict that a
+    model exists (trusted or suspect) and the added mass within 35 %. Loose on purpose: on this wall-clock bag of a
+    loaded two-core machine the output-error residuals are not white (lag-1 autocorrelation 0.82-0.95 against the
+    0.2 threshold, so "suspect"), and three runs gave the added mass within 0-15 % and the quadratic damping within
+    2-58 %; the identification's accuracy is asserted on the virtual pool's campaign (test_run_end_to_end.py,
+    test_identification_accuracy.py), the path here is what this test is for."""
+    heave = ident["dofs"]["heave"]
+    assert heave["verdict"] in ("trusted", "suspect"), f"heave {heave['verdict']}: {heave.get('reasons')}\n{printed}"
+    true = truth.flat["hydrodynamics.heave.added_mass_kg"]
+    assert abs(heave["added_mass"]["value"] - true) < 0.35 * true, f"added mass vs truth {true}\n{printed}"
+
+
+def check_hold(pool, day: Day, cfg, altitude_m: float, within_m: float = 0.1, settle_s: float = 40.0,
+               hold_s: float = 10.0) -> None:
+    """After ``hindrax control hold --altitude-m A``: the true altitude of the Ping1D (the pool floor under the
+    vehicle minus the Ping's depth, from the live pool, which no node reads) comes within ``within_m`` of ``A`` within
+    ``settle_s`` of wall time and stays there for ``hold_s``."""
+    ping_z_m = float(cfg.sensors.ping1d.position_frd_m[2])
+
+    def altitude() -> float:
+        t = pool.truth()
+        return t["floor_depth_m"] - (t["position_ned_m"][2] + ping_z_m)
+    seen: list[float] = []
+    deadline = time.monotonic() + settle_s
+    while not (seen and abs(seen[-1] - altitude_m) < within_m):
+        assert time.monotonic() < deadline, f"altitude never within {within_m} m of {altitude_m}: {seen[-20:]}"
+        day.spin()
+        seen.append(altitude())
+    t_in = time.monotonic()
+    while time.monotonic() - t_in < hold_s:
+        day.spin()
+        seen.append(altitude())
+        assert abs(seen[-1] - altitude_m) < within_m, f"left the hold: {seen[-20:]}"
 
 
 def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
