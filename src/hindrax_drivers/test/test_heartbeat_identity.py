@@ -8,8 +8,10 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
 
-from hindrax_drivers.liveness import AliveAge, HeartbeatIdentity, HeartbeatPublisher, beat_values, heartbeat_ok
+from hindrax_drivers.liveness import (AliveAge, HeartbeatIdentity, HeartbeatPublisher, beat_values, heartbeat_ok,
+                                      simulated_now_s)
 from hindrax_drivers.testing import ros_context, wait_until
 
 A, B = "a1a1a1a1a1a1a1a1", "b2b2b2b2b2b2b2b2"
@@ -146,6 +148,19 @@ def test_alive_age_on_the_system_clock_is_the_steady_age():
         c.steady += 0.05
         age.tick()
     assert age.age_s == pytest.approx(0.25) and not age.fresh(0.2)
+
+
+def test_the_clock_mode_is_the_receivers():
+    """A node on the system clock judges by the lease and the steady age (None); one on use_sim_time by its ROS
+    time, which follows /clock (or a simulator driving it)."""
+    with ros_context() as ctx:
+        wall = rclpy.create_node("wall", context=ctx)
+        sim = rclpy.create_node("sim", context=ctx, parameter_overrides=[Parameter("use_sim_time", value=True)])
+        assert simulated_now_s(wall) is None
+        sim.get_clock().set_ros_time_override(rclpy.time.Time(seconds=1234.5))
+        assert simulated_now_s(sim) == pytest.approx(1234.5)
+        sim.destroy_node()
+        wall.destroy_node()
 
 
 def test_publisher_fault_comes_before_a_beat_fault():
