@@ -41,12 +41,13 @@ INTERNAL_ENCLAVE_ROOT = "/vehicle"
 #: test_sros2_policy.py)
 INTERNAL_TOPICS = (
     "/allocation/status", "/controller/setpoint", "/controller/status", "/diagnostics", "/dvl/altitude", "/dvl/data",
-    "/dvl/twist", "/esc/heartbeat", "/guard/heartbeat", "/identification/calibration", "/identification/estimates",
-    "/identification/status", "/imu/data_raw", "/imu/mag", "/imu/temperature", "/lights/brightness", "/odom",
-    "/ping/altitude", "/ping/confidence", "/pressure/depth", "/pressure/fluid_pressure", "/pressure/temperature",
-    "/raw/dvl75", "/raw/icm20948", "/raw/ms5837", "/raw/pca9685", "/raw/ping1d", "/supervisor/abort",
-    "/supervisor/heartbeat", "/supervisor/status", "/tf", "/tf_static", "/thrusters/command_pulse_width",
-    "/thrusters/forces", "/thrusters/pulse_width", "/thrusters/test_forces", "/wrench",
+    "/dvl/twist", "/esc/heartbeat", "/esc/output_state", "/guard/heartbeat", "/identification/calibration",
+    "/identification/estimates", "/identification/status", "/imu/data_raw", "/imu/mag", "/imu/temperature",
+    "/lights/brightness", "/odom", "/ping/altitude", "/ping/confidence", "/pressure/depth",
+    "/pressure/fluid_pressure", "/pressure/temperature", "/raw/dvl75", "/raw/icm20948", "/raw/ms5837",
+    "/raw/pca9685", "/raw/ping1d", "/supervisor/abort", "/supervisor/heartbeat", "/supervisor/status", "/tf",
+    "/tf_static", "/thrusters/command_pulse_width", "/thrusters/forces", "/thrusters/pulse_width",
+    "/thrusters/test_forces", "/wrench",
 )
 #: every service of the internal graph besides the nodes' parameter services
 INTERNAL_SERVICES = (

@@ -116,6 +116,32 @@ def test_arming_needs_time_at_neutral_then_commands_reach_the_wire(esc):
                                                                  atol=1e-6), 5, esc["spin"], "written report")
 
 
+def test_output_state_is_latched_for_late_subscribers_and_follows_arming(esc):
+    """esc/output_state (esc_state.py): a subscriber that joins after the ESC started gets the current state at once
+    (transient local), then one message per change of armed or output state and one a second without a change,
+    not one per output tick."""
+    from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
+
+    node, probe, spin = esc["node"], esc["probe"], esc["spin"]
+    wait_until(lambda: node.output_state == ThrusterPwm.OUTPUT_NEUTRAL, 5, spin, "neutral confirmed")
+    got = []
+    probe.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, lambda m: got.append((time.monotonic(), m)),
+                              esc_state_qos())
+    wait_until(lambda: got, 10, spin, "the latched state")
+    assert read_esc_state(got[0][1]) == (ThrusterPwm.OUTPUT_NEUTRAL, False) and got[0][1].message == "neutral"
+    arm(esc)  # armed, then commanding
+    wait_until(lambda: (ThrusterPwm.OUTPUT_COMMANDING, True) in [read_esc_state(m) for _, m in got], 5, spin,
+               "armed, commanding")
+    esc["set_armed"](False)
+    wait_until(lambda: read_esc_state(got[-1][1]) == (ThrusterPwm.OUTPUT_NEUTRAL, False), 5, spin, "disarmed state")
+    n, t0 = len(got), time.monotonic()
+    wait_until(lambda: time.monotonic() > t0 + 2.5, 10, spin, "2.5 s without a change")
+    # 1 Hz repeats: 2 or 3 in 2.5 s (the 50 Hz output ticks would have given about 125; a loaded machine, one more
+    # or one less)
+    assert 1 <= len(got) - n <= 4, [round(t - t0, 2) for t, _ in got[n:]]
+    assert all(read_esc_state(m) == (ThrusterPwm.OUTPUT_NEUTRAL, False) for _, m in got[n:])
+
+
 def arm(esc):
     wait_until(lambda: esc["node"].arming_remaining_s() == 0.0, 5, esc["spin"], "arming time")
     assert esc["set_armed"](True).success

@@ -7,7 +7,8 @@ from hindrax_drivers.gateway.interface import (INTERFACE, VehicleChoiceError, ch
 
 def test_the_safety_graph_has_no_entry_in_the_interface():
     internal = {r.internal for r in INTERFACE}
-    for name in ("/supervisor/heartbeat", "/esc/heartbeat", "/guard/heartbeat", "/thrusters/command_pulse_width",
+    for name in ("/supervisor/heartbeat", "/esc/heartbeat", "/esc/output_state", "/guard/heartbeat",
+                 "/thrusters/command_pulse_width",
                  "/pressure/zero_depth", "/supervisor/abort", "/wrench"):
         assert name not in internal
     assert {r.who for r in INTERFACE if r.topside == "estop"} == {"anyone"}  # stopping needs no credentials

@@ -61,6 +61,21 @@ class Rig:
         self.probe.create_subscription(RawDeviceData, "raw/ms5837", self.raw.append, 500)
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self.diag.append, 10)
         self.zero = self.probe.create_client(Trigger, "pressure/zero_depth")
+        self._esc = None  # the ESC's latched esc/output_state, made by esc_state()
+
+    def esc_state(self, armed, output_state):
+        """Publish the ESC's latched output state as the ESC node does (DiagnosticStatus, esc_state.py) and wait
+        for the node to take it."""
+        from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+        from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
+        if self._esc is None:
+            self._esc = self.probe.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
+        msg = DiagnosticStatus(values=[KeyValue(key="output_state", value=str(output_state)),
+                                       KeyValue(key="armed", value="true" if armed else "false")])
+        self.node.esc_state_seen = False
+        self._esc.publish(msg)
+        self.wait(lambda: self.node.esc_state_seen, 10, "ESC state delivered")
 
     def spin(self):
         self.ex.spin_once(timeout_sec=0.01)
@@ -321,6 +336,7 @@ def test_zero_depth_service_sets_surface_pressure(rig):
     _, _, depths = r.wait_messages(3)
     assert -depths[-1].pose.pose.position.z == pytest.approx(expected_depth_m(truth_pa), abs=10.0 / 9810.0)
     r.wait(lambda: r.zero.service_is_ready(), 5, "zero_depth service")
+    r.esc_state(False, 1)  # the ESC reports disarmed at neutral
     fut = r.zero.call_async(Trigger.Request())
     r.wait(fut.done, 5, "zero_depth answer")
     assert fut.result().success
@@ -332,13 +348,11 @@ def test_zero_depth_service_sets_surface_pressure(rig):
 
 def test_zero_depth_is_refused_at_depth_and_while_armed(rig):
     """A zero taken at 1.5 m (14715 Pa above the 101325 Pa reference, hand arithmetic 1.5 * 1000 * 9.81) would move
-    every depth 1.5 m: refused beyond sensors.ms5837.zero_depth_margin_pa (5000 Pa). At the surface, refused while the
-    ESC reports armed, accepted once it reports disarmed."""
-    from hindrax_msgs.msg import ThrusterPwm
-
+    every depth 1.5 m: refused beyond sensors.ms5837.zero_depth_margin_pa (5000 Pa). At the surface, refused before
+    the ESC has reported its state, while it reports armed, and while its state is unknown after armed (it may still
+    be thrusting); accepted once it reports disarmed at neutral (esc/output_state, latched)."""
     truth = {"pa": SURFACE_PA + 1.5 * RHO_KG_M3 * G_M_S2}
     r = rig(lambda t: (truth["pa"], 18.0), "30BA")
-    esc = r.probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
     r.wait_messages(3)
     r.wait(lambda: r.zero.service_is_ready(), 5, "zero_depth service")
 
@@ -348,21 +362,26 @@ def test_zero_depth_is_refused_at_depth_and_while_armed(rig):
         return fut.result()
 
     res = zero()
+    assert not res.success and "no ESC output state" in res.message, res.message
+    r.esc_state(False, 1)
+    res = zero()
     assert not res.success and "+14715" in res.message and "zero_depth_margin_pa 5000" in res.message, res.message
     assert r.node.surface_pressure_pa == SURFACE_PA
     truth["pa"] = SURFACE_PA + 400.0  # at the surface, 4 cm of weather off the reference
     r.wait(lambda: r.pressure and abs(r.pressure[-1].fluid_pressure - truth["pa"]) <= 10.0, 10, "new pressure")
     r.wait_messages(int(25 * 1.2))  # a whole zero_depth window (1 s at 25 Hz) of surface readings
-    r.wait(lambda: esc.get_subscription_count() >= 1, 5, "ESC flag subscribed")
-    esc.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True, output_state=1))
-    r.wait(lambda: r.node.esc_armed, 5, "armed flag delivered")
-    res = zero()
-    assert not res.success and "armed" in res.message and r.node.surface_pressure_pa == SURFACE_PA
-    esc.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=False, output_state=1))
-    r.wait(lambda: not r.node.esc_armed, 5, "disarmed flag delivered")
+    for armed, state in ((True, 1), (False, 0)):  # armed; then unknown (the ESC says armed=false) after armed
+        r.esc_state(armed, state)
+        res = zero()
+        assert not res.success and "armed" in res.message and r.node.surface_pressure_pa == SURFACE_PA, res.message
+    r.esc_state(False, 1)
+    assert "esc_state_malformed" not in r.node.diag.counts()
     res = zero()
     assert res.success, res.message
     assert r.node.surface_pressure_pa == pytest.approx(SURFACE_PA + 400.0, abs=10.0)
+    r._esc.publish(DiagnosticStatus())  # malformed: counted, read as unknown (disarmed stays disarmed)
+    r.wait(lambda: r.node.diag.counts().get("esc_state_malformed") == 1, 10, "malformed state counted")
+    assert not r.node.esc_armed
 
 
 def test_zero_depth_before_any_reading_is_refused(rig):

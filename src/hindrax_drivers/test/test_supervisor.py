@@ -438,15 +438,26 @@ def test_supervisor_takes_imu_samples_by_callback_on_the_system_clock():
             sup.destroy_node()
 
 
-def test_supervisor_takes_the_esc_armed_flag_by_callback_and_disarms_a_tripped_arming():
-    """On the system clock ``thrusters/pulse_width`` is a callback too: the armed flag reaches the core dated at its
-    arrival; an ESC that reports armed while the supervisor is tripped gets an ``esc/set_armed(false)`` request."""
+def test_supervisor_takes_the_latched_esc_state_and_disarms_a_tripped_arming():
+    """``esc/output_state`` is latched (esc_state.py): a state the ESC published before the supervisor started
+    reaches the core at once, dated at its arrival; unknown after armed stays armed (it may still be thrusting); an
+    ESC that reports armed while the supervisor is tripped gets an ``esc/set_armed(false)`` request."""
     import time
 
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
+
+    def state(output_state, armed):
+        return DiagnosticStatus(values=[KeyValue(key="output_state", value=str(output_state)),
+                                        KeyValue(key="armed", value="true" if armed else "false")])
+
     with ros_context() as ctx:
-        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters({"supervisor.check_rate_hz": 20.0}))
         probe = rclpy.create_node("probe", context=ctx)
-        pub = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
+        pub = probe.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
+        t0 = time.time_ns() * 1e-9
+        pub.publish(state(ThrusterPwm.OUTPUT_NEUTRAL, True))  # before the supervisor exists
+        sup = SupervisorNode(context=ctx, parameter_overrides=config_parameters({"supervisor.check_rate_hz": 20.0}))
         requests: list = []
 
         def on_set_armed(req, resp):
@@ -459,17 +470,22 @@ def test_supervisor_takes_the_esc_armed_flag_by_callback_and_disarms_a_tripped_a
         ex.add_node(sup)
         ex.add_node(probe)
         try:
-            assert "/thrusters/pulse_width" in {s.topic_name for s in sup.subscriptions}
+            topics = {s.topic_name for s in sup.subscriptions}
+            assert "/esc/output_state" in topics and "/thrusters/pulse_width" not in topics
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
-            wait_until(lambda: pub.get_subscription_count() == 1, 10, spin, "subscription matched")
-            t0 = time.time_ns() * 1e-9
-            pub.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True, output_state=1))
-            wait_until(lambda: sup.core.armed, 10, spin, "armed flag taken")
+            wait_until(lambda: sup.core.armed, 10, spin, "latched armed state taken")
             assert t0 <= sup.core.armed_since_s <= time.time_ns() * 1e-9  # its arrival time
             assert requests == []
+            sub = next(s for s in sup.subscriptions if s.topic_name == "/esc/output_state")
+            taken, on_esc = [], sub.callback
+            sub.callback = lambda m: (on_esc(m), taken.append(m))  # noqa: E731 - the supervisor's, then noted
+            pub.publish(state(ThrusterPwm.OUTPUT_UNKNOWN, False))
+            wait_until(lambda: taken, 10, spin, "unknown delivered")
+            assert sup.core.armed and sup.esc_armed  # unknown after armed: still armed
             sup.core.trip("test breach")
-            pub.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True, output_state=1))
             wait_until(lambda: requests == [False], 10, spin, "disarm requested")
+            pub.publish(state(ThrusterPwm.OUTPUT_NEUTRAL, False))
+            wait_until(lambda: not sup.core.armed, 10, spin, "disarmed at neutral")
         finally:
             ex.shutdown()
             probe.destroy_node()

@@ -8,8 +8,9 @@ from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWat
     foreign_vehicle_processes, split_vehicle_topics, vehicle_topic_reason
 
 #: topics of the vehicle's launch layout that command the thrusters or vouch for a safety process
-SPEAKS = ["/supervisor/heartbeat", "guard/heartbeat", "/esc/heartbeat", "/thrusters/command_pulse_width",
-          "/thrusters/pulse_width", "/thrusters/forces", "/supervisor/status", "/supervisor/abort", "/wrench",
+SPEAKS = ["/supervisor/heartbeat", "guard/heartbeat", "/esc/heartbeat", "/esc/output_state",
+          "/thrusters/command_pulse_width", "/thrusters/pulse_width", "/thrusters/forces", "/supervisor/status",
+          "/supervisor/abort", "/wrench",
           "/controller/setpoint", "/run_identification/_action/status", "/run_identification/_action/feedback",
           "/rov1/esc/heartbeat", "/rov1/wrench", "/output_guard/state", "rq/esc/set_armedRequest"]
 #: sensor data and status a bag may replay onto any graph

@@ -108,7 +108,7 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             assert _call(enable, SetBool.Request(data=True), spin).success
             wait_until(lambda: len(ours()) > n + 5, 10, spin, "wrench again")
             streams = ("imu/data_raw", "dvl/data", "pressure/fluid_pressure", "ping/altitude", "allocation/status",
-                       "wrench", "thrusters/pulse_width")
+                       "wrench")
             subscribers = {t: probe.count_subscribers(t) for t in streams}
             ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING, dof="surge"))
             wait_until(lambda: not ctrl.enabled, 10, spin, "yield to the identification")
@@ -195,7 +195,9 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
     from sensor_msgs.msg import Imu
 
     from hindrax_ident.control.node import ControllerNode
-    from hindrax_msgs.msg import ThrusterPwm
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+    from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
 
     with ros_context() as ctx:
         node = ControllerNode(config=load_config(default_config_path()), context=ctx, model_file="")
@@ -205,18 +207,19 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
         ex.add_node(probe)
         try:
             streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
-                       "/allocation/status", "/wrench", "/thrusters/pulse_width"}
-            inputs = streams | {"/identification/status"}
+                       "/allocation/status", "/wrench"}
+            inputs = streams | {"/identification/status", "/esc/output_state"}
             topics = lambda: {s.topic_name for s in node.subscriptions} - {"/controller/setpoint"}  # noqa: E731
             assert topics() == inputs and "controller_intake" not in probe.get_node_names()
-            pwm = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
+            esc = probe.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
             imu = probe.create_publisher(Imu, "imu/data_raw", 10)
             status = probe.create_publisher(ManeuverStatus, "identification/status", 10)
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
-            wait_until(lambda: all(p.get_subscription_count() == 1 for p in (pwm, imu, status)), 10, spin,
+            wait_until(lambda: all(p.get_subscription_count() == 1 for p in (esc, imu, status)), 10, spin,
                        "subscriptions matched")
             t0 = time.time_ns() * 1e-9
-            pwm.publish(ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True))
+            esc.publish(DiagnosticStatus(values=[KeyValue(key="output_state", value="1"),
+                                                 KeyValue(key="armed", value="true")]))
             m = Imu()
             m.header.stamp = probe.get_clock().now().to_msg()
             imu.publish(m)
@@ -224,10 +227,14 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
             assert t0 <= node._last_sample_s["icm20948_gyro"] <= time.time_ns() * 1e-9
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
             wait_until(lambda: not streams & topics(), 10, spin, "streams dropped while the goal runs")
-            # the armed flag went with the streams: enabling waits for a fresh one after the goal
-            assert node._ident_running and topics() == {"/identification/status"} and not node._armed_seen
+            # the latched armed flag stays subscribed (about 1 message/s)
+            assert node._ident_running and topics() == {"/identification/status", "/esc/output_state"}
+            assert node._armed_seen and node._armed
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
             wait_until(lambda: topics() == inputs, 10, spin, "streams open again")
+            assert "no data yet" in str(node._refusal())  # the hold waits for fresh samples after the goal
+            esc.publish(DiagnosticStatus())  # malformed: read as disarmed, counted
+            wait_until(lambda: node.esc_state_malformed == 1, 10, spin, "malformed state counted")
             assert "not armed" in str(node._refusal())
         finally:
             ex.shutdown()

@@ -55,9 +55,11 @@ Service ``pressure/zero_depth`` (std_srvs/Trigger): sets the surface pressure to
 pressures of the last :data:`ZERO_DEPTH_WINDOW_S` seconds (run it with the vehicle at the surface);
 the value is also written to the node's ``environment.surface_pressure_pa`` parameter (not to the file).
 Refused (``success`` false, the reason in ``message``, surface pressure unchanged) while the ESC reports armed
-(``thrusters/pulse_width``, a subscription callback keeping the last flag: the last one received says armed) and
-when that mean is further than ``sensors.ms5837.zero_depth_margin_pa`` from the atmospheric reference, the
-``environment.surface_pressure_pa`` the node started with: a zero taken at 1.5 m would move every depth, and the
+(``esc/output_state``, latched, :mod:`hindrax_drivers.esc_state`: the last state received says armed, an output
+state that became unknown while armed counts as armed, and a dead ESC's last state stays), before any ESC state has
+arrived (nothing says the thrusters are off: fail closed), and when that mean is further than
+``sensors.ms5837.zero_depth_margin_pa`` from the atmospheric reference, the ``environment.surface_pressure_pa`` the
+node started with: a zero taken at 1.5 m would move every depth, and the
 depth limits with it, 1.5 m down.
 
 Time stamps: the device has no clock, so every message is stamped with the time of validity of its
@@ -101,8 +103,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import FluidPressure, Temperature
 from std_srvs.srv import Trigger
 
-from hindrax_msgs.msg import ThrusterPwm
-
+from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
@@ -219,7 +220,8 @@ class Ms5837Node(Node):
         #: zero_depth's atmospheric reference (Pa) and margin (Pa): the start-up surface pressure, fixed
         self.atmospheric_reference_pa = self.surface_pressure_pa
         self.zero_depth_margin_pa = float(s.zero_depth_margin_pa)
-        self.esc_armed = False  # the last thrusters/pulse_width taken (zero_depth's check)
+        self.esc_armed = False  # the last esc/output_state taken says armed (zero_depth's check)
+        self.esc_state_seen = False  # an esc/output_state arrived (none: zero_depth refuses)
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
         self.min_pressure_pa = float(s.min_pressure_pa)
         self.max_pressure_pa = float(s.max_pressure_pa)
@@ -254,8 +256,8 @@ class Ms5837Node(Node):
         self.pub_temperature = self.create_publisher(Temperature, "pressure/temperature", qos)
         self.pub_depth = self.create_publisher(PoseWithCovarianceStamped, "pressure/depth", qos)
         self.create_service(Trigger, "pressure/zero_depth", self.on_zero_depth)
-        # the ESC's armed flag for zero_depth's check (keep last 1)
-        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_esc_output, 1)
+        # the ESC's armed flag for zero_depth's check (latched: the current state arrives on matching)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_output, esc_state_qos())
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
 
         # One-shot timer (re-armed with the wanted delay) and the periodic cycle timer, both on ROS time.
@@ -500,20 +502,30 @@ class Ms5837Node(Node):
         self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
 
     def _on_esc_output(self, msg: Any) -> None:
-        # an output state that became unknown while armed may still be thrusting: still armed
-        self.esc_armed = bool(msg.armed) or (msg.output_state == ThrusterPwm.OUTPUT_UNKNOWN and self.esc_armed)
+        """An ``esc/output_state``: unknown after armed is still armed; a malformed one is counted and read as
+        unknown (:mod:`hindrax_drivers.esc_state`)."""
+        state = read_esc_state(msg)
+        if state is None:
+            self.diag.count("esc_state_malformed")
+            state = (OUTPUT_UNKNOWN, False)
+        self.esc_armed = armed_after(self.esc_armed, *state)
+        self.esc_state_seen = True
 
     def on_zero_depth(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Set the surface pressure to the mean pressure of the last ZERO_DEPTH_WINDOW_S seconds; refused while the
-        ESC is armed or with that mean further than ``zero_depth_margin_pa`` from the atmospheric reference."""
+        ESC is armed or has not reported its state yet, or with that mean further than ``zero_depth_margin_pa`` from
+        the atmospheric reference."""
         response.success = False
         if not self._recent:
             response.message = "no pressure reading yet; surface pressure unchanged"
             return response
         mean_pa = sum(v for _, v in self._recent) / len(self._recent)
         off_pa = mean_pa - self.atmospheric_reference_pa
-        if self.esc_armed:
-            response.message = "refused while the ESC is armed (thrusters/pulse_width); surface pressure unchanged"
+        if not self.esc_state_seen:
+            response.message = ("refused: no ESC output state yet (esc/output_state), the thrusters may be running; "
+                                "surface pressure unchanged")
+        elif self.esc_armed:
+            response.message = "refused while the ESC is armed (esc/output_state); surface pressure unchanged"
         elif abs(off_pa) > self.zero_depth_margin_pa:
             response.message = (f"refused: mean pressure {mean_pa:.1f} Pa is {off_pa:+.1f} Pa "
                                  f"({off_pa / (self.water_density_kg_m3 * self.gravity_m_s2):+.2f} m of water) from "

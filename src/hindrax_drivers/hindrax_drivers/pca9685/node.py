@@ -22,7 +22,9 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
 - Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output
   state; on every confirmed write and at a tick without one), ``esc/heartbeat`` (DiagnosticStatus every second
   steady tick: ``output_state``, ``armed``, ``reason``, ``boot_id``/``seq``; ERROR while unknown; the output guard's
-  sign of life), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on disarm, on any
+  sign of life), ``esc/output_state`` (the same state, latched: on every change of armed or output state and once a
+  second, :mod:`hindrax_drivers.esc_state`; for the nodes that need only "armed"), ``raw/pca9685`` (every I2C
+  transaction), ``/diagnostics``. Neutral is written on disarm, on any
   exception in the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via :func:`run_node`).
 - Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
   ``steady_watchdog_timeout_s`` (:data:`STEADY_WATCHDOG`, default ``esc.watchdog_timeout_s``).
@@ -47,7 +49,8 @@ from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from ..config import Spec
-from ..lean_cdr import thruster_pwm_cdr
+from ..esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
+from ..lean_cdr import diagnostic_status_cdr, thruster_pwm_cdr
 from ..liveness import ClockStepMonitor, HeartbeatPublisher, heartbeat_qos
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
@@ -111,6 +114,9 @@ class EscNode(Node):
         self.steady_watchdog = SteadyWatchdog(self.period_s, self.steady_watchdog_s, time.monotonic())
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
+        #: ``esc/output_state``, latched (reliable, transient local, keep last 1): on a change and once a second
+        self.pub_state = self.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
+        self.state_latch = EscStateLatch()
         self.peers = EscPeers(self, self.period_s, esc.heartbeat_timeout_s, lambda: self.armed, self._feed_peers)
         # every input is a callback, in both clock modes; the commands with the heartbeats' liveliness contract (1 s
         # lease): a publisher without a finite lease (a script, a bag player) is not matched, and refused by its name
@@ -248,6 +254,7 @@ class EscNode(Node):
             return response
         self.diag.clear("chip_reset")
         self.diag.set_state("armed, neutral", DiagnosticStatus.OK)
+        self._publish_state()
         response.success, response.armed, response.message = True, True, "armed"
         return response
 
@@ -336,13 +343,23 @@ class EscNode(Node):
         if self._heartbeat_tick % 2 == 0:
             self._publish_heartbeat()
         self.core.set_peers(*self._peer_verdicts())  # the arming time starts in the tick that confirmed neutral
+        self._publish_state()  # once a second without a change, on the steady clock (ROS time may stand still)
 
     def _publish_heartbeat(self) -> None:
         unknown = self.output_state == _UNKNOWN
-        self.heartbeat.publish(
-            DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, STATE_NAMES[self.output_state],
-            [("output_state", str(int(self.output_state))),
-             ("armed", "true" if self.armed and not unknown else "false"), ("reason", self.core.reason)])
+        self.heartbeat.publish(DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK,
+                               STATE_NAMES[self.output_state],
+                               esc_state_values(self.armed and not unknown, self.output_state, self.core.reason))
+
+    def _publish_state(self) -> None:
+        """``esc/output_state`` when :class:`~hindrax_drivers.esc_state.EscStateLatch` says so: a change of (armed,
+        output state), or a second without one."""
+        unknown = self.output_state == _UNKNOWN
+        armed = self.armed and not unknown
+        if self.state_latch.due(time.monotonic(), armed, self.output_state):
+            self.pub_state.publish(diagnostic_status_cdr(
+                DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK, "hindrax/esc",
+                STATE_NAMES[self.output_state], "esc", esc_state_values(armed, self.output_state, self.core.reason)))
 
     def diag_message(self) -> str:
         """The current /diagnostics message (why the state is what it is)."""
@@ -356,6 +373,7 @@ class EscNode(Node):
                                                   self.armed and not unknown, self.output_state))
         self.diag.published(now.nanoseconds * 1e-9)
         self._published_since_tick = True
+        self._publish_state()
 
     def _diag_extra(self):
         return [("armed", self.armed), ("watchdog_trips", self.watchdog_trips),

@@ -157,7 +157,7 @@ class SupervisorCore:
 
     # ------------------------------------------------------------------ state
     def set_armed(self, t_s: float, armed: bool) -> str:
-        """The ESC's armed flag (``thrusters/pulse_width``). Arming starts the run-time and rate grace clocks."""
+        """The ESC's armed flag (``esc/output_state``). Arming starts the run-time and rate grace clocks."""
         if armed and not self.armed:
             self.armed_since_s = t_s
         if not armed:

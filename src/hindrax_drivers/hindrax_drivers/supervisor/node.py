@@ -11,7 +11,9 @@ supported)
     ``dvl/data`` (hindrax_msgs/Dvl: attitude, velocity for the dead reckoning), ``ping/altitude``
     (sensor_msgs/Range), ``pressure/depth`` (geometry_msgs/PoseWithCovarianceStamped, ``position.z = -depth``),
     ``imu/data_raw`` (sensor_msgs/Imu: rate, freshness and the accelerometer's tilt; taken as serialised bytes, see
-    "CPU"), ``thrusters/pulse_width`` (hindrax_msgs/ThrusterPwm: the ESC's armed flag), ``supervisor/abort``
+    "CPU"), ``esc/output_state`` (the ESC's armed flag and output state, latched:
+    :mod:`hindrax_drivers.esc_state`; unknown after armed counts as armed; a dead ESC's last state stays, so the
+    supervisor keeps watching the envelope as if armed), ``supervisor/abort``
     (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
     a manoeuvre on a limit).
 Services
@@ -65,10 +67,11 @@ from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from hindrax_msgs.msg import Dvl, ThrusterPwm
+from hindrax_msgs.msg import Dvl
 from hindrax_msgs.srv import SetArmed
 
 from .. import frames
+from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
 from ..lean_cdr import cdr_decoder
 from ..liveness import ClockStepMonitor, HeartbeatPublisher
 from ..config import Spec
@@ -90,8 +93,6 @@ _NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 #: QoS depth of ``imu/data_raw``: 0.5 s at 102 Hz, room for an executor held up on a loaded machine (a sample lost
 #: in the queue lowers the rate the ``supervisor.min_rate.imu_hz`` check sees)
 IMU_QUEUE_DEPTH = 50
-#: QoS depth of ``thrusters/pulse_width`` (50 Hz: 0.4 s)
-ESC_QUEUE_DEPTH = 20
 
 
 class SupervisorNode(Node):
@@ -123,7 +124,7 @@ class SupervisorNode(Node):
         self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
         self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
         self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True, **ev)
-        self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self.on_esc, ESC_QUEUE_DEPTH, **ev)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos(), **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
@@ -171,9 +172,15 @@ class SupervisorNode(Node):
         self._handle(self.core.on_imu(t, _stamp_s(msg.header.stamp), bytes(data[12:]),
                                       frames.flu_to_frd(np.array([a.x, a.y, a.z], dtype=float))))
 
-    def on_esc(self, msg: ThrusterPwm) -> None:
-        # an output state that became unknown while armed may still be thrusting: keep checking
-        armed = bool(msg.armed) or (msg.output_state == ThrusterPwm.OUTPUT_UNKNOWN and self.core.armed)
+    def on_esc(self, msg: DiagnosticStatus) -> None:
+        """An ``esc/output_state``: an output state that became unknown while armed may still be thrusting, so the
+        checks go on (:func:`~hindrax_drivers.esc_state.armed_after`); a malformed one is counted and read as
+        unknown."""
+        state = read_esc_state(msg)
+        if state is None:
+            self.diag.count("esc_state_malformed")
+            state = (OUTPUT_UNKNOWN, False)
+        armed = armed_after(self.core.armed, *state)
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed

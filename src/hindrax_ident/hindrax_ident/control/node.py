@@ -10,7 +10,7 @@ Who owns ``wrench`` (docs/control.md §3): at most one source publishes at a tim
 only while its ``run_identification`` goal runs; a pilot (topside joystick) only while driving. The controller
 publishes only while **enabled**, which it never is at start-up, and it **yields**: it disables itself (and says why
 in ``controller/status`` and the log) when ``identification/status`` reports a running goal, when a ``wrench``
-message it did not send arrives (a pilot took over), when the ESC output is disarmed (``thrusters/pulse_width``),
+message it did not send arrives (a pilot took over), when the ESC output is disarmed (``esc/output_state``),
 or when its depth or attitude is older than ``control.sensor_timeout_s`` (then it publishes one zero wrench). It
 refuses to enable while a goal runs, while the ESC is disarmed or before its sensors have published. Enabling again
 is always an explicit request.
@@ -23,8 +23,10 @@ Services
     (std_srvs/SetBool): enable with the current setpoints (none given yet: as ``hold``) or disable (one zero wrench).
 Subscribes
     ``controller/setpoint`` (hindrax_msgs/ControlSetpoint); the sensor topics of the identification node
-    (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``); ``thrusters/pulse_width`` (armed
-    flag); ``allocation/status`` (achieved wrench: the anti-windup); ``identification/status``; ``wrench`` (other
+    (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``); ``esc/output_state`` (the ESC's
+    armed flag, latched: :mod:`hindrax_drivers.esc_state`; subscribed for the node's life, the current state arrives
+    at once; a malformed one reads as disarmed; a dead ESC's last state stays, and the guard silences its outputs);
+    ``allocation/status`` (achieved wrench: the anti-windup); ``identification/status``; ``wrench`` (other
     writers).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
@@ -33,7 +35,7 @@ Publishes
     :mod:`.odometry`), while its sensor streams are open (not while an identification goal runs).
 CPU
     Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual pool
-    and the tests take the same path; about 250 messages/s while the streams are open, 2 while a goal runs), each
+    and the tests take the same path; about 200 messages/s while the streams are open, 3 while a goal runs), each
     sensor sample counted at its arrival. While an identification goal runs the controller cannot be enabled and its
     sensor streams are closed, so the tick slows from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends
     (docs/architecture.md §10.1).
@@ -51,6 +53,7 @@ from collections import deque
 from typing import Any
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TransformStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
@@ -63,9 +66,10 @@ from tf2_msgs.msg import TFMessage
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
+from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node
-from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus, ThrusterPwm
+from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
 from ..identification.online.maneuvers import HoldController, dof_authority
 from ..identification.bag_input.signals import (sample_from_pressure, sample_from_range, samples_from_dvl,
@@ -85,9 +89,9 @@ STATUS_PERIOD_S = 0.5
 #: period of ``odom`` and the ``odom -> base_link`` transform on ``/tf`` (s): 10 Hz, enough for a 3D view
 ODOM_PERIOD_S = 0.1
 #: tick period (s) while an identification goal runs: the tick then only takes the goal's phase
-#: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams,
-#: ``thrusters/pulse_width`` among them, are closed. The goal's end is seen within 0.2 s (the streams open then;
-#: enabling waits for their first samples and a fresh armed flag anyway, :meth:`ControllerNode._refusal`)
+#: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams are
+#: closed. The goal's end is seen within 0.2 s (the streams open then; enabling waits for their first samples anyway,
+#: :meth:`ControllerNode._refusal`)
 GOAL_TICK_S = 0.2
 
 
@@ -130,8 +134,9 @@ class ControllerNode(Node):
         self._last_sample_s: dict[str, float] = {}
         self.enabled = False
         self.message = "disabled (start-up)"
-        self._armed = False
-        self._armed_seen = False
+        self._armed = False  # the last esc/output_state says armed
+        self._armed_seen = False  # an esc/output_state arrived
+        self.esc_state_malformed = 0  # esc/output_state messages without a valid state (read as disarmed)
         self._ident_running = False
         self._own = deque(maxlen=200)
         self._setpoint: ControlSetpoint | None = None
@@ -146,6 +151,7 @@ class ControllerNode(Node):
         self._streams: list = []
         self._open_streams()
         self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos(), **sub_ev)
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10, **pub_ev)
@@ -164,10 +170,8 @@ class ControllerNode(Node):
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
         """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics, ``wrench``
-        (other writers), ``allocation/status`` (anti-windup) and ``thrusters/pulse_width`` (the armed flag: enabling
-        waits for a fresh one). About 250 messages/s in the pool layout."""
+        (other writers) and ``allocation/status`` (anti-windup). About 200 messages/s in the pool layout."""
         self._streams = [
-            self._subscribe(ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20),
             self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20),
             self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
                             20),
@@ -191,7 +195,6 @@ class ControllerNode(Node):
         self._streams = []
         self._pending = []
         self._last_sample_s.clear()
-        self._armed_seen = False  # the armed flag comes again with the streams
         self.loop = HoldLoop(self.config, self.hold, self.tick_s)
 
     def _now_s(self) -> float:
@@ -203,8 +206,11 @@ class ControllerNode(Node):
             self._last_sample_s[dev] = now
         self._pending.extend(samples)
 
-    def _on_pwm(self, msg: ThrusterPwm) -> None:
-        self._armed = bool(msg.armed)
+    def _on_esc_state(self, msg: DiagnosticStatus) -> None:
+        state = read_esc_state(msg)
+        if state is None:
+            self.esc_state_malformed += 1
+        self._armed = state is not None and state[1]  # unknown: the ESC says armed=false, and the controller yields
         self._armed_seen = True
         if self.enabled and not self._armed:
             self._disable("yielded: the ESC output is disarmed", zero=False)

@@ -1,0 +1,92 @@
+"""The ESC's latched output state, ``esc/output_state``: whether the ESC is armed and what is on the wire, for the
+nodes that need only that (the supervisor, the MS5837 driver's ``pressure/zero_depth``, the controller) and not the
+50 Hz widths of ``thrusters/pulse_width`` (the identification node and the recorder keep those).
+
+Message: diagnostic_msgs/DiagnosticStatus with the fields of the ESC's ``esc/heartbeat`` (docs/architecture.md §8):
+level OK, or ERROR while the output state is unknown; ``message`` the state's name (``neutral``, ``commanding``,
+``unknown``); KeyValues ``output_state`` (the hindrax_msgs/ThrusterPwm ``OUTPUT_*`` constant, decimal text),
+``armed`` (``true`` / ``false``, as ``ThrusterPwm.armed``: false while unknown) and ``reason``. A standard type that
+the guard already reads in the same layout, so no interface package changes; ThrusterPwm with empty widths would
+say "no thruster" where it means "not a width report".
+
+QoS (:func:`esc_state_qos`): reliable, transient local, keep last 1 (``/tf_static``'s latching): a subscriber that
+joins late, or re-subscribes, gets the current state at once from the ESC's writer.
+
+Publishing (:class:`EscStateLatch`, pure): on every change of (armed, output_state), and again every
+:data:`REPUBLISH_PERIOD_S` of steady time (a reader that missed a sample catches up within a second; a recorder's
+bag shows the state once a second).
+
+Reading (:func:`read_esc_state`, :func:`armed_after`): a message without a valid ``output_state`` (0-2) or
+``armed`` (``true``/``false``) is malformed (None: the node counts it and treats it as OUTPUT_UNKNOWN, disarmed). An
+output state that became unknown while armed may still be thrusting: it counts as still armed. When the ESC is gone
+the last state stays (the writer's latched sample is not withdrawn): each reader says in its docstring what that
+means for it.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+__all__ = ["ESC_STATE_TOPIC", "REPUBLISH_PERIOD_S", "EscStateLatch", "armed_after", "esc_state_qos",
+           "esc_state_values", "read_esc_state"]
+
+#: the topic (relative: the vehicle's namespace)
+ESC_STATE_TOPIC = "esc/output_state"
+#: the state is published again after this long without a change, s (steady clock)
+REPUBLISH_PERIOD_S = 1.0
+#: hindrax_msgs/ThrusterPwm output states (the same values as :mod:`.pca9685.core`; checked equal in the tests)
+OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING = 0, 1, 2
+
+
+def esc_state_qos() -> QoSProfile:
+    """Reliable, transient local, keep last 1, for the writer and the readers (module docstring)."""
+    return QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class EscStateLatch:
+    """When the ESC publishes ``esc/output_state``: :meth:`due` is asked at every output (several per period) and
+    answers True on the first call, on a change of (armed, output_state) and when ``period_s`` (s) passed since the
+    last publication. Times in s of a steady clock (``time.monotonic`` on the vehicle)."""
+
+    def __init__(self, period_s: float = REPUBLISH_PERIOD_S) -> None:
+        self.period_s = float(period_s)
+        self.last: tuple[bool, int] | None = None
+        self.last_s = -math.inf
+        self.published = 0
+
+    def due(self, t_s: float, armed: bool, output_state: int) -> bool:
+        """True when the state (``armed``, ``output_state``) is to be published now (counted as published)."""
+        state = (bool(armed), int(output_state))
+        if state == self.last and t_s - self.last_s < self.period_s:
+            return False
+        self.last, self.last_s = state, float(t_s)
+        self.published += 1
+        return True
+
+
+def esc_state_values(armed: bool, output_state: int, reason: str) -> list[tuple[str, str]]:
+    """The KeyValues of one ``esc/output_state`` (and of ``esc/heartbeat``'s state part)."""
+    return [("output_state", str(int(output_state))), ("armed", "true" if armed else "false"), ("reason", reason)]
+
+
+def read_esc_state(msg: Any) -> tuple[int, bool] | None:
+    """(output_state, armed) of an ``esc/output_state`` DiagnosticStatus (rclpy's or rosbags' lean one), or None
+    when it is malformed (module docstring)."""
+    values = {kv.key: kv.value for kv in msg.values}
+    armed = values.get("armed")
+    try:
+        state = int(values.get("output_state", ""))
+    except ValueError:
+        return None
+    if state not in (OUTPUT_UNKNOWN, OUTPUT_NEUTRAL, OUTPUT_COMMANDING) or armed not in ("true", "false"):
+        return None
+    return state, armed == "true"
+
+
+def armed_after(previous: bool, output_state: int, armed: bool) -> bool:
+    """Whether thrust may be on the wire after a report of (``output_state``, ``armed``) when it may have been before
+    (``previous``): armed, or unknown after armed (an output state that became unknown may still be thrusting)."""
+    return bool(armed) or (int(output_state) == OUTPUT_UNKNOWN and bool(previous))
