@@ -38,15 +38,16 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
 from domain_coordinator import domain_id
 from rclpy.action import ActionClient
 from std_srvs.srv import Trigger
 
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.conditions import ros_context, wait_until
+from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.vehicle_graph import ForeignVehicleWatch, own_view
 from hindrax_msgs.action import RunIdentification
-from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from ..bringup import build_graph
@@ -241,8 +242,9 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         client = rclpy.create_node("hindrax_run", context=ctx)
         graph.executor.add_node(client)
         armed_state: list = [None]
-        client.create_subscription(ThrusterPwm, "thrusters/pulse_width",
-                                   lambda m: armed_state.__setitem__(0, bool(m.armed)), 10)
+        # the ESC's latched armed flag (a malformed state reads as not armed)
+        client.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, lambda m: armed_state.__setitem__(
+            0, bool((read_esc_state(m) or (0, False))[1])), esc_state_qos())
         arm = client.create_client(SetArmed, "esc/set_armed")
         action = ActionClient(client, RunIdentification, "run_identification")
         goals = GoalSender(client, action, "run_identification")  # survives a lost goal or result response
