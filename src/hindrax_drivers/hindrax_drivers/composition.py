@@ -25,7 +25,8 @@ Groups (:data:`GROUPS`):
     of its own: as two processes (serial drivers + TF, I2C drivers) they held 48 + 49 MB, as one 57 MB
     (``make bench``, ``launch_pss_mb_*``). The ICM-20948's polls share the executor and the GIL with the serial
     reader threads and lose nothing by it: in the launch layout (load 6-13 on two cores) the recorder received the
-    IMU at 49.4-51.1 Hz in one process, 40.9-46.5 Hz in two (``launch_running_imu_*``). A light process of no
+    IMU at 47.6-51.1 Hz in one process, 40.9-46.5 Hz in two, largest gaps 0.06-0.26 s and 0.15-0.20 s
+    (``launch_running_imu_*``, three runs each). A light process of no
     safety role: one driver's failure takes the others with it for the 2 s of the respawn (a campaign needs all four
     sensors, so the supervisor stops it either way), and late subscribers get the transforms again from the new
     process.
