@@ -445,7 +445,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
                     r = hindrax(env, line)
                     assert r.returncode == 0 and r.stdout.startswith(f"{name}: "), r.stdout + r.stderr
                     altitude_m = float(line.split("--altitude-m")[1].split()[0])
-                    check_hold(pool, day, cfg, altitude_m)
+                    check_hold(pool, day, altitude_m)
                 elif line.startswith("hindrax"):
                     r = hindrax(env, line)
                     assert r.returncode == 0, (line, r.stdout + r.stderr)
@@ -474,27 +474,23 @@ def check_heave(ident: dict, truth, printed: str) -> None:
     assert abs(heave["added_mass"]["value"] - true) < 0.35 * true, f"added mass vs truth {true}\n{printed}"
 
 
-def check_hold(pool, day: Day, cfg, altitude_m: float, within_m: float = 0.1, settle_s: float = 40.0,
+def check_hold(pool, day: Day, altitude_m: float, within_m: float = 0.1, settle_s: float = 40.0,
                hold_s: float = 10.0) -> None:
-    """After ``hindrax control hold --altitude-m A``: the true altitude of the Ping1D (the pool floor under the
-    vehicle minus the Ping's depth, from the live pool, which no node reads) comes within ``within_m`` of ``A`` within
-    ``settle_s`` of wall time and stays there for ``hold_s``."""
-    ping_z_m = float(cfg.sensors.ping1d.position_frd_m[2])
-
-    def altitude() -> float:
-        t = pool.truth()
-        return t["floor_depth_m"] - (t["position_ned_m"][2] + ping_z_m)
+    """After ``hindrax control hold --altitude-m A``: the true altitude, the Ping1D's noise-free range along the body
+    z axis (the live pool's ``altimeter_range_m``, which no node reads; what the hold holds, as
+    ``hindrax control evaluate`` scores it), comes within ``within_m`` of ``A`` within ``settle_s`` of wall time and
+    stays there for ``hold_s``."""
     seen: list[float] = []
     deadline = time.monotonic() + settle_s
     while not (seen and abs(seen[-1] - altitude_m) < within_m):
         assert time.monotonic() < deadline, f"altitude never within {within_m} m of {altitude_m}: {seen[-20:]}"
         day.spin()
-        seen.append(altitude())
+        seen.append(pool.truth()["altimeter_range_m"])
     t_in = time.monotonic()
     while time.monotonic() - t_in < hold_s:
         day.spin()
-        seen.append(altitude())
-        assert abs(seen[-1] - altitude_m) < within_m, f"left the hold: {seen[-20:]}"
+        seen.append(pool.truth()["altimeter_range_m"])
+        assert abs(seen[-1] - altitude_m) < within_m, f"left the hold: {seen[-20:]}\n{pool.truth()}"
 
 
 def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):

@@ -40,6 +40,11 @@ def test_live_pool_moves_with_the_pulse_widths_and_the_operator(tmp_path):
         wait_until(lambda: time.monotonic() - t0_wall > 1.0, 5.0)
         advanced = pool.truth()["t_s"] - t0_sim
         assert 0.5 < advanced < 3.0, advanced
+        # the altimeter's true range: from the Ping1D's mount straight down to the floor while the vehicle is about
+        # level (the floor's slope over the mount's 0.1 m forward offset and the tilt change it by millimetres)
+        t = pool.truth()
+        below = t["floor_depth_m"] - t["position_ned_m"][2] - float(cfg.sensors.ping1d.position_frd_m[2])
+        assert max(abs(a) for a in t["euler_rad"][:2]) < 0.05 and abs(t["altimeter_range_m"] - below) < 0.02, t
         # the DVL-75 speaks on its port: $DVPDL/$DVEXT sentences (Cerulean DVL-75 manual, serial output)
         with serial.Serial(pool.ports["dvl75"], 115200, timeout=0.2) as port:
             got = bytearray()

@@ -23,9 +23,10 @@ on the process's standard input; :class:`LivePool` is the client.
 
 Protocol (one line each way, JSON answers): the process prints ``{"ports": {...}, "i2c_socket": path}`` once its
 devices are served; then, per command line on stdin: ``act <code>`` -> ``{"ok": bool}`` (an operator prompt's code,
-e.g. ``attach_ballast``); ``truth`` -> ``{"t_s", "floor_depth_m", "position_ned_m", "euler_rad", "nu",
-"pulse_widths_us"}`` (the pool floor's depth under the vehicle, NED pool frame, FRD body, SI units, pulse widths in
-us); ``quit`` or the end of the input stops it.
+e.g. ``attach_ballast``); ``truth`` -> ``{"t_s", "floor_depth_m", "altimeter_range_m", "position_ned_m", "euler_rad",
+"nu", "pulse_widths_us"}`` (the pool floor's depth under the vehicle; the Ping1D's noise-free range along the body
+z axis from where it is mounted; NED pool frame, FRD body, SI units, pulse widths in us); ``quit`` or the end of
+the input stops it.
 """
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ import threading
 import time
 from pathlib import Path
 from typing import Any, Mapping
+
+import numpy as np
 
 from hindrax_drivers.config import load_config
 from hindrax_drivers.emulated_devices import driver_env, driver_ros_arguments
@@ -71,6 +74,8 @@ class LivePoolServer:
         cfg = load_config(config_path)
         self.sim = Simulator(cfg, truth=truth, seed=seed)
         self.lock = threading.RLock()
+        # where the Ping1D is mounted on the simulated vehicle (the truth's, not the vehicle file's), FRD, m
+        self._ping_position_frd_m = np.asarray(self.sim.config.sensors.ping1d.position_frd_m, dtype=float)
         self.hardware = VirtualHardware(self.sim, self.sim.config, seed=self.sim.seed, serial_threads=False)
         ballast_n, line_n = calibration_forces(cfg)
         self.operator = PoolOperator(ballast_n, line_n, inclining_load(cfg), float_buoyancy(cfg))
@@ -115,8 +120,12 @@ class LivePoolServer:
         """The vehicle's true state now (module docstring: the ``truth`` answer)."""
         with self.lock:
             x, y, _ = (float(v) for v in self.sim.position_ned_m)
-            floor = float(self.sim.pool.floor_depth_m(x, y)) if self.sim.pool is not None else float("nan")
-            return {"t_s": float(self.sim.t_s), "floor_depth_m": floor,
+            pool = self.sim.pool
+            floor = float(pool.floor_depth_m(x, y)) if pool is not None else float("nan")
+            rot = self.sim.rotation
+            ping = rot @ self._ping_position_frd_m + self.sim.position_ned_m
+            altimeter = float(pool.ray_distance_m(ping, rot[:, 2])) if pool is not None else float("nan")
+            return {"t_s": float(self.sim.t_s), "floor_depth_m": floor, "altimeter_range_m": altimeter,
                     "position_ned_m": [float(x) for x in self.sim.position_ned_m],
                     "euler_rad": [float(x) for x in self.sim.euler_rad], "nu": [float(x) for x in self.sim.nu],
                     "pulse_widths_us": [float(x) for x in self.hardware.pulse_widths_us()]}
