@@ -326,16 +326,18 @@ def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real
 
 
 def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_it(packages, tmp_path):
-    """docs/deployment.md §1: the ESC (actuation_node), the supervisor and the output guard run at nice -5 through
-    launch-prefix, nothing else does, and the project's runner (pool-day test, bench) puts the prefix first as
-    launch_ros does; the bare-metal unit and the compose file allow that nice value."""
+    """docs/deployment.md §1: the ESC (actuation_node), the supervisor, the output guard and the sensor drivers
+    (whose rates the supervisor checks) run at nice -5 through launch-prefix, nothing else does, and the project's
+    runner (pool-day test, bench) puts the prefix first as launch_ros does; the bare-metal unit and the compose file
+    allow that nice value."""
     from hindrax_drivers.launch_xml import read_launch
     from hindrax_drivers.process_runner import ProcessRunner
 
     read = read_launch(REPO / "src/hindrax_ident/launch/pool_test.launch.xml", {},
                        find_share=lambda pkg: REPO / "src" / pkg)
     prefixed = {p.executable: p.launch_prefix for p in read if p.launch_prefix}
-    assert prefixed == {e: ("nice", "-n", "-5") for e in ("actuation_node", "supervisor_node", "output_guard_node")}
+    assert prefixed == {e: ("nice", "-n", "-5") for e in ("sensors_node", "actuation_node", "supervisor_node",
+                                                                   "output_guard_node")}
     # Jazzy's launch labels a prefixed process after the prefix ("[nice-3]") unless exec_name says otherwise
     assert {p.executable: p.exec_name for p in read if p.launch_prefix} == {e: e for e in prefixed}
     runner = ProcessRunner(read, log_dir=tmp_path, command=lambda p: ["/opt/x/" + p.executable])
