@@ -109,6 +109,38 @@ def test_newest_thrust_wins_and_a_neutral_is_never_dropped_nor_overtaken():
     worker.stop()
 
 
+def test_a_checker_that_was_not_scheduled_defers_the_stuck_verdict_once():
+    """stuck_s() after its caller was away longer than the bound (a stalled process) puts the verdict off to the
+    next check, once per call: a call still hanging at that next check is reported (with its whole age)."""
+    now = [0.0]
+    worker, _, _ = _worker(threaded=False, call_timeout_s=0.15)
+    worker.clock = lambda: now[0]
+    assert worker.stuck_s() == 0.0  # idle: nothing to judge
+    worker._call_since = 0.0  # a call started at 0 (as _TimedBus marks it) and not returned
+    now[0] = 0.04
+    assert worker.stuck_s() == 0.0  # within the bound
+    now[0] = 0.84  # this checker was away 0.8 s: not conclusive
+    assert worker.stuck_s() == 0.0
+    now[0] = 0.88  # the next tick: still hanging, reported
+    assert worker.stuck_s() == pytest.approx(0.88)
+    now[0] = 2.0  # away again, same call: no second deferral
+    assert worker.stuck_s() == pytest.approx(2.0)
+    # a call that returns during the stall is never called stuck
+    worker._call_since = 3.0
+    now[0] = 3.05
+    assert worker.stuck_s() == 0.0
+    now[0] = 3.9
+    assert worker.stuck_s() == 0.0  # deferred
+    worker._call_since = None  # the worker got its turn and the reply
+    now[0] = 3.94
+    assert worker.stuck_s() == 0.0
+    # checks every 0.04 s on a hanging call: reported as soon as it passes the bound, no deferral
+    worker._call_since = 5.0
+    for k in range(1, 5):
+        now[0] = 5.0 + 0.04 * k
+        assert worker.stuck_s() == (pytest.approx(0.16) if k == 4 else 0.0)
+
+
 def test_a_call_that_does_not_return_is_reported_stuck_after_the_bound_and_only_then():
     worker, _, bus = _worker(call_timeout_s=0.1)
     worker.post(_job(CONFIGURE))

@@ -110,6 +110,8 @@ class ChipWorker:
         self._cv = threading.Condition()
         self._running: ChipJob | None = None
         self._call_since: float | None = None
+        self._checked_at: float | None = None  # the clock at the previous stuck_s() call
+        self._deferred_since: float | None = None  # the call whose judgement one late check put off
         self._seq = 0
         self._stop = False
         self._thread: threading.Thread | None = None
@@ -164,12 +166,26 @@ class ChipWorker:
         return any(kind is None or j.kind == kind for j in jobs)
 
     def stuck_s(self) -> float:
-        """How long the bus call in progress has run, s, when that is longer than ``call_timeout_s``; else 0."""
+        """How long the bus call in progress has run, s, when that is longer than ``call_timeout_s``; else 0.
+
+        Called regularly by the node (every tick and command). When this caller was itself away for longer than
+        ``call_timeout_s`` since its previous call (its process not scheduled: the worker thread, in the same
+        process, had no turn either, and its reply may be waiting in the socket), the first overdue verdict on a
+        call is put off to the next call; a second one is not. A bus that hangs is so reported at most one check
+        later, and a process that was merely not scheduled is not taken for a dead bus (an ESC process stopped for
+        0.8 s on a loaded machine was, and disarmed)."""
+        now = self.clock()
+        previous, self._checked_at = self._checked_at, now
         since = self._call_since
         if since is None:
             return 0.0
-        age = self.clock() - since
-        return age if age > self.call_timeout_s else 0.0
+        age = now - since
+        if age <= self.call_timeout_s:
+            return 0.0
+        if previous is not None and now - previous > self.call_timeout_s and self._deferred_since != since:
+            self._deferred_since = since
+            return 0.0
+        return age
 
     def wait_idle(self, timeout_s: float) -> bool:
         """Wait until no job is queued or running (a shutdown's neutral; tests). False when ``timeout_s`` passed."""
