@@ -95,7 +95,7 @@ def test_the_blocking_i2c_waits_are_those_section_10_lists():
         assert not re.search(r"\.sleep\(|write_sequence\(", text), device
     # the output guard retries once
     assert re.search(r'I2CDevice\([^)]*"pca9685-guard", retries=1\)', (DRIVERS / "guard" / "node.py").read_text())
-    assert "1 ms for the\n  output guard's single retry" in section
+    assert "1 ms for the guard's one retry" in section
 
 
 def test_failure_table_quotes_the_repeats_of_the_safety_benchmark():
