@@ -3,21 +3,22 @@ drives a graph step by step (``hindrax run``'s campaign, :meth:`hindrax_ident.br
 as for the tests and benchmarks (:mod:`hindrax_drivers.testing` re-exports these).
 
 A wait polls a condition (e.g. one executor spin per check), never sleeps a fixed time the caller relies on.
-rclpy is imported when a context is created, not when this module is.
 """
 from __future__ import annotations
 
 import contextlib
+import gc
 import threading
 import time
 from typing import Any, Callable, Iterator
 
 import rclpy
 from rclpy.context import Context
+from rclpy.node import Node
 
 from .dds_transport import loopback_transport
 
-__all__ = ["ConditionTimeout", "ros_context", "wait_until"]
+__all__ = ["ConditionTimeout", "destroy_nodes_of", "ros_context", "wait_until"]
 
 
 class ConditionTimeout(AssertionError):
@@ -50,7 +51,13 @@ def wait_until(predicate: Callable[[], Any], timeout_s: float = 10.0, poll: Call
 def ros_context(domain_id: int | None = None) -> Iterator[Any]:
     """An initialised, isolated rclpy Context (shut down on exit). Domain from ROS_DOMAIN_ID by default; discovery
     kept on loopback over the vehicle's loopback UDP transport (:func:`~hindrax_drivers.dds_transport.
-    loopback_transport`) unless the environment already asks for another discovery range."""
+    loopback_transport`) unless the environment already asks for another discovery range.
+
+    On exit every node still alive in the context is destroyed before the shutdown (:func:`destroy_nodes_of`).
+    Shutting a context down does not destroy its nodes, and a node that an exception's traceback still references
+    (pytest keeps the last failure's frames) keeps its DDS participant and publishers in the graph: the next user of
+    the domain would count its ``supervisor/heartbeat`` or ``thrust_allocation`` as a second, live publisher and be
+    refused (docs/architecture.md §8)."""
     loopback_transport()
     ctx = Context()
     kwargs = {}
@@ -60,5 +67,20 @@ def ros_context(domain_id: int | None = None) -> Iterator[Any]:
     try:
         yield ctx
     finally:
+        destroy_nodes_of(ctx)
         with contextlib.suppress(Exception):
             rclpy.shutdown(context=ctx)
+
+
+def destroy_nodes_of(ctx: Context) -> int:
+    """Destroy every rclpy node that still refers to ``ctx``; return how many were found (destroyed or not).
+
+    The nodes are found among the objects that refer to the context (:func:`gc.get_referrers`, a few ms); a node
+    destroyed already is destroyed again harmlessly. Errors while destroying are suppressed: this runs on the way
+    out of :func:`ros_context`, often after a failure.
+    """
+    nodes = [obj for obj in gc.get_referrers(ctx) if isinstance(obj, Node) and obj.context is ctx]
+    for node in nodes:
+        with contextlib.suppress(Exception):
+            node.destroy_node()
+    return len(nodes)

@@ -314,6 +314,7 @@ class EscCore:
         self.retry_s = RETRY_MIN_S
         self.last_attempt: float | None = None
         self.watchdog_trips = 0
+        self.watchdog_trip_t_s: float | None = None  # ROS time of the last ROS-time watchdog trip (decide), s
         self.heartbeat_disarms = 0
         self.rejected_commands = 0
         self.last_written: np.ndarray = output.neutral()
@@ -524,6 +525,7 @@ class EscCore:
         if self.armed and self.command is not None and self.command_t_s is not None \
                 and ros_t_s - self.command_t_s > self.watchdog_s:
             self.watchdog_trips += 1
+            self.watchdog_trip_t_s = ros_t_s
             self.command = None
             self.reason = f"watchdog: no command for {self.watchdog_s:g} s"
         if self.armed and self.command is not None:
