@@ -90,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
         "Benchmarks (`make bench`)" if not args.only else f"Benchmarks: {', '.join(names)}",
         f"{platform.platform()}, {os.cpu_count()} cores; wall time {wall_s['total']:.0f} s"
         f"{' (--quick)' if args.quick else ''}. Targets are the Pi budget of docs/architecture.md §10.\n\n{table}",
-        supersedes_prefix=None if args.only else "bench-")
+        supersedes_prefix=None if args.only else "bench-", supersedes_rows=("bench", names) if args.only else None)
     return 0
 
 

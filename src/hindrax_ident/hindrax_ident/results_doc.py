@@ -15,7 +15,10 @@ the scenario table. The commands take the document's path from ``--results-doc P
 
 A full run can *supersede* partial runs: ``make bench`` writes section ``bench`` and removes the sections
 ``bench-<names>`` that earlier ``--only`` runs left (their figures are older than the full table; a reader
-found a stale 72 % total beside the current 39 %).
+found a stale 72 % total beside the current 39 %). The other way round, a partial run takes its benchmarks' rows
+out of the full table and leaves one line there naming the section that holds the newer ones
+(:func:`supersede_rows`): a reader found the full table's 26.5 % CPU total of an older layout beside the
+current 50.9 %.
 
 The write is atomic (a temporary file in the same folder, then ``os.replace``): an interrupted command
 leaves the previous document, never half of one.
@@ -29,6 +32,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import Sequence
 
 #: the title written when the document does not exist yet
 TITLE = "# Measured results"
@@ -66,7 +70,8 @@ def provenance(command: str) -> str:
 
 
 def write_section(path: str | Path, name: str, title: str, body: str, command: str,
-                  supersedes_prefix: str | None = None) -> Path:
+                  supersedes_prefix: str | None = None,
+                  supersedes_rows: tuple[str, Sequence[str]] | None = None) -> Path:
     """Replace (or append) section ``name`` of the Markdown document ``path``.
 
     Args:
@@ -77,6 +82,9 @@ def write_section(path: str | Path, name: str, title: str, body: str, command: s
         command: the command line that produced it, for the provenance line.
         supersedes_prefix: when given, every other section whose name starts with it is removed in the same
             write (``bench-`` for the full benchmark run).
+        supersedes_rows: ``(section, keys)``: the table rows of that other section whose first cell is one of
+            ``keys`` are removed in the same write (:func:`supersede_rows`; ``("bench", ["stack"])`` for
+            ``--only stack``).
 
     Returns:
         The path written.
@@ -103,6 +111,8 @@ def write_section(path: str | Path, name: str, title: str, body: str, command: s
         text = text[:i] + block + text[j + len(end):]
     if supersedes_prefix:
         text = _remove_sections(text, path, supersedes_prefix, keep=name)
+    if supersedes_rows:
+        text = supersede_rows(text, supersedes_rows[0], supersedes_rows[1], f"## {title}")
     fd, tmp = tempfile.mkstemp(prefix=".results-", suffix=".md", dir=path.parent)
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as f:
@@ -124,6 +134,26 @@ def _remove_sections(text: str, path: Path, prefix: str, keep: str) -> str:
             raise ResultsDocError(f"{path}: section {other!r} has a broken pair of markers ({begin} ... {end})")
         text = text[:i].rstrip("\n") + "\n\n" + text[j + len(end):].lstrip("\n")
     return text.rstrip("\n") + "\n"
+
+
+def supersede_rows(text: str, section: str, keys: Sequence[str], newer: str) -> str:
+    """``text`` with the table rows of ``section`` whose first cell is one of ``keys`` removed, and one line at the
+    end of that section saying that ``newer`` (a heading) holds them now; ``text`` unchanged when the section is
+    absent or its markers are broken (the section's own writer reports those)."""
+    begin, end = _markers(section)
+    i, j = text.find(begin), text.find(end)
+    if i < 0 or j < i:
+        return text
+    wanted = set(keys)
+    note = f"*Rows of {', '.join(sorted(wanted))}: superseded by the newer section \"{newer.lstrip('# ')}\".*"
+    lines = []
+    for line in text[i:j].split("\n"):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("|") else []
+        if (cells and cells[0] in wanted) or line == note:
+            continue
+        lines.append(line)
+    inner = "\n".join(lines).rstrip("\n") + "\n\n" + note + "\n"
+    return text[:i] + inner + text[j:]
 
 
 def markdown_table(header: list[str], rows: list[list[object]]) -> str:
@@ -150,12 +180,14 @@ def command_line() -> str:
     return " ".join([program or "python", *sys.argv[1:]])
 
 
-def write_if_asked(args, name: str, title: str, body: str, supersedes_prefix: str | None = None) -> Path | None:
+def write_if_asked(args, name: str, title: str, body: str, supersedes_prefix: str | None = None,
+                   supersedes_rows: tuple[str, Sequence[str]] | None = None) -> Path | None:
     """:func:`write_section` into ``args.results_doc`` when the option was given (else nothing; returns None),
-    with :func:`command_line` as the provenance (``supersedes_prefix`` as there). Prints where it wrote."""
+    with :func:`command_line` as the provenance (``supersedes_prefix``, ``supersedes_rows`` as there). Prints
+    where it wrote."""
     path = getattr(args, "results_doc", None)
     if not path:
         return None
-    written = write_section(path, name, title, body, command_line(), supersedes_prefix)
+    written = write_section(path, name, title, body, command_line(), supersedes_prefix, supersedes_rows)
     print(f"results: section {name!r} of {written}", flush=True)
     return written

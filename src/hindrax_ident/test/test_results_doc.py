@@ -53,6 +53,28 @@ def test_a_full_run_removes_the_partial_runs_it_supersedes(tmp_path):
     assert "new partial" in doc.read_text()
 
 
+def test_a_partial_run_takes_its_rows_out_of_the_full_table(tmp_path):
+    """``bench --only stack`` after ``make bench``: the full table keeps every row but the stack's, and says once
+    which section holds them now; a second partial run does not repeat the line; rows of other benchmarks, a
+    measure that contains the word and the scenario table stay."""
+    doc = tmp_path / "results.md"
+    full = markdown_table(["benchmark", "measure", "value"], [["stack", "launch_running_cpu_total", "26.48"],
+                                                              ["safety", "stack_kill_s", "0.2"],
+                                                              ["i2c", "stack", "1"]])
+    write_section(doc, "bench", "Benchmarks (`make bench`)", full, "make bench", supersedes_prefix="bench-")
+    write_section(doc, "scenarios", "Scenario suite", "| stack | table A |", "hindrax ident scenarios")
+    newer = markdown_table(["benchmark", "measure", "value"], [["stack", "launch_running_cpu_total", "50.85"]])
+    for _ in range(2):
+        write_section(doc, "bench-stack", "Benchmarks: stack", newer, "bench --only stack",
+                      supersedes_rows=("bench", ["stack"]))
+    text = doc.read_text()
+    bench = text[text.index("<!-- results:bench:begin -->"):text.index("<!-- results:bench:end -->")]
+    assert "26.48" not in text and "50.85" in text
+    assert "| safety | stack_kill_s | 0.2 |" in bench and "| i2c | stack | 1 |" in bench
+    assert bench.count('superseded by the newer section "Benchmarks: stack"') == 1
+    assert "| stack | table A |" in text
+
+
 def test_a_broken_superseded_section_writes_nothing(tmp_path):
     doc = tmp_path / "results.md"
     original = "# R\n<!-- results:bench-old:begin -->\nhalf a section\n"
