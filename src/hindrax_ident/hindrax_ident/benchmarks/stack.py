@@ -93,7 +93,8 @@ from hindrax_drivers.launch_xml import write_parameter_file
 from hindrax_drivers.lean_cdr import cdr_decoder
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
-from hindrax_drivers.testing import GraphSettled, child_env, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
+                                     wait_until)
 from hindrax_ident.bringup import build_graph
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
@@ -463,7 +464,10 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                     answer[0] = fut.result().message
                     return fut.result().armed
 
-                wait_until(try_arm, 30, spin, "armed (last answer: see the log)")
+                try:
+                    wait_until(try_arm, 30, spin, "armed")
+                except ConditionTimeout as exc:
+                    raise ConditionTimeout(f"{exc}: the ESC's last answer was {answer[0]!r}") from None
                 print(f"stack benchmark, launch layout ({len(layout)} processes of {launch_file.name}): "
                       f"{answer[0]}", flush=True)
                 warm = time.monotonic() + 3.0
