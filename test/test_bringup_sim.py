@@ -88,36 +88,29 @@ def test_drivers_read_the_simulated_vehicle_and_thrust_moves_it():
 
 
 def test_hindrax_bringup_sim_command_starts_and_stops_cleanly():
-    import signal
     import subprocess
     import sys
     from pathlib import Path
 
     from domain_coordinator import domain_id
 
-    from hindrax_drivers.testing import child_env
+    from hindrax_drivers.testing import child_env, child_process, interrupt
 
     hindrax = str(Path(sys.executable).with_name("hindrax"))
     # a domain of its own: the ESCs of this worker's earlier tests may still be in its domain's discovery caches,
     # and bringup refuses a domain with another ESC
-    with domain_id() as fresh:
-        proc = subprocess.Popen([hindrax, "bringup", "--sim", "--rtf", "1"], env=child_env(ROS_DOMAIN_ID=str(fresh)),
-                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        try:
-            lines = []
-            while not (lines and lines[-1].startswith("bringup:")):
-                line = proc.stdout.readline()
-                assert line, "bringup exited early: " + "".join(lines)
-                lines.append(line)
-            assert lines[-1].startswith("bringup: 12 nodes (simulator, dvl75, ping1d, ms5837, icm20948, esc, "
-                                        "thrust_allocation, supervisor, output_guard, static_tf, gateway, "
-                                        "identification), virtual pool"), lines[-1]
-            proc.send_signal(signal.SIGINT)
-            assert proc.wait(timeout=30) == 0
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+    with domain_id() as fresh, child_process([hindrax, "bringup", "--sim", "--rtf", "1"],
+                                             env=child_env(ROS_DOMAIN_ID=str(fresh)), stdout=subprocess.PIPE,
+                                             stderr=subprocess.STDOUT, text=True) as proc:
+        lines = []
+        while not (lines and lines[-1].startswith("bringup:")):
+            line = proc.stdout.readline()
+            assert line, "bringup exited early: " + "".join(lines)
+            lines.append(line)
+        assert lines[-1].startswith("bringup: 12 nodes (simulator, dvl75, ping1d, ms5837, icm20948, esc, "
+                                    "thrust_allocation, supervisor, output_guard, static_tf, gateway, "
+                                    "identification), virtual pool"), lines[-1]
+        assert interrupt(proc, 30) == 0
 
 
 def _stepped_run(seed: int, duration_s: float) -> dict:

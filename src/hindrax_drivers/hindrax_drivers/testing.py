@@ -7,9 +7,13 @@ test session reserved (conftest.py).
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import subprocess
 import sys
 import time
+from typing import Iterator
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -23,7 +27,8 @@ from .conditions import ConditionTimeout, ros_context, wait_until  # production 
 from .config import default_config_path, load_config
 from .liveness import HEARTBEAT_NODES, HeartbeatPublisher, heartbeat_qos
 
-__all__ = ["AllocationStandIn", "ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env",
+__all__ = ["AllocationStandIn", "ConditionTimeout", "GraphSettled", "SafetyHeartbeats", "child_env", "child_process",
+           "interrupt",
            "config_parameters", "python_executable", "ros_context", "wait_until"]
 
 
@@ -45,6 +50,27 @@ def own_domain_env(**extra: str) -> dict[str, str]:
     env = child_env(**extra)
     env.pop("ROS_DOMAIN_ID", None)
     return env
+
+
+@contextlib.contextmanager
+def child_process(args, **popen_kwargs) -> Iterator[subprocess.Popen]:
+    """A child process (:class:`subprocess.Popen` of ``args`` with ``popen_kwargs``) that never outlives the block:
+    if it still runs on exit (a failed assertion, a timeout), it is killed (SIGKILL) and reaped, so that no node of
+    it stays in the test domain's graph."""
+    proc = subprocess.Popen(args, **popen_kwargs)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def interrupt(proc: subprocess.Popen, timeout_s: float) -> int:
+    """Send ``proc`` SIGINT (a Ctrl-C) and return its exit status; raises :class:`subprocess.TimeoutExpired` when it
+    has not ended within ``timeout_s`` seconds."""
+    proc.send_signal(signal.SIGINT)
+    return proc.wait(timeout=timeout_s)
 
 
 def python_executable() -> str:

@@ -9,7 +9,6 @@ import contextlib
 import dataclasses
 import math
 import random
-import signal
 import subprocess
 import time
 
@@ -31,7 +30,8 @@ from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvpdl, forma
 from hindrax_drivers.dvl75.report import DvlReportBuilder
 from hindrax_drivers.dvl75.stream import DvlStreamDecoder
 from hindrax_drivers.frames import quaternion_from_euler_ned, quaternion_marine_to_ros
-from hindrax_drivers.testing import child_env, config_parameters, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import (child_env, child_process, config_parameters, interrupt, python_executable,
+                                     ros_context, wait_until)
 from hindrax_drivers.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import Dvl, RawDeviceData
 
@@ -405,9 +405,9 @@ def test_main_runs_with_the_params_file_and_stops_cleanly_on_sigint():
     cmd = [python_executable(), "-m", "hindrax_drivers.dvl75.node", "--ros-args", "--params-file",
            str(default_config_path()), "-p", f"sensors.dvl75.port:={dev.path}",
            "-p", "stuck_limit_samples:=100000"]  # constant truth: identical reports, however slow the start
-    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        with ros_context() as ctx:
+        with child_process(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc, \
+                ros_context() as ctx:
             probe = rclpy.create_node("probe_main", context=ctx)
             got = []
             probe.create_subscription(Dvl, "dvl/data", got.append, 10)
@@ -419,12 +419,8 @@ def test_main_runs_with_the_params_file_and_stops_cleanly_on_sigint():
             assert "SEND-DVPDL ON" in emu.commands_received
             ex.shutdown()
             probe.destroy_node()
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=15) == 0
+            assert interrupt(proc, 15) == 0
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
         dev.close()
 
 

@@ -7,7 +7,6 @@ condition with a deadline.
 import contextlib
 import math
 import random
-import signal
 import subprocess
 import time
 
@@ -26,7 +25,8 @@ from hindrax_drivers.ping1d.node import Ping1dNode
 from hindrax_drivers.ping1d.protocol import Ping1dId, encode_frame
 from hindrax_drivers.ping1d.stream import Ping1dStreamDecoder
 from hindrax_drivers.ping1d.protocol import Profile
-from hindrax_drivers.testing import child_env, config_parameters, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import (child_env, child_process, config_parameters, interrupt, python_executable,
+                                     ros_context, wait_until)
 from hindrax_drivers.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import RawDeviceData
 
@@ -252,9 +252,9 @@ def test_main_runs_with_the_params_file_and_stops_cleanly_on_sigint():
     dev = PtyDevice(emu)
     cmd = [python_executable(), "-m", "hindrax_drivers.ping1d.node", "--ros-args", "--params-file",
            str(default_config_path()), "-p", f"sensors.ping1d.port:={dev.path}"]
-    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        with ros_context() as ctx:
+        with child_process(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc, \
+                ros_context() as ctx:
             probe = rclpy.create_node("probe_main", context=ctx)
             got = []
             probe.create_subscription(Range, "ping/altitude", got.append, 10)
@@ -266,12 +266,8 @@ def test_main_runs_with_the_params_file_and_stops_cleanly_on_sigint():
             assert got[-1].range == pytest.approx(2.0, abs=0.0005)
             ex.shutdown()
             probe.destroy_node()
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=15) == 0
+            assert interrupt(proc, 15) == 0
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
         dev.close()
 
 
