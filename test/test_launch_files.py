@@ -327,9 +327,10 @@ def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real
 
 def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_it(packages, tmp_path):
     """docs/deployment.md §1: the ESC (actuation_node), the supervisor, the output guard and the sensor drivers
-    (whose rates the supervisor checks) run at nice -5 through launch-prefix, nothing else does, and the project's
-    runner (pool-day test, bench) puts the prefix first as launch_ros does; the bare-metal unit and the compose file
-    allow that nice value."""
+    (whose rates the supervisor checks) ask for real-time scheduling (HINDRAX_REALTIME_PRIORITY, the guard highest,
+    the sensors lowest; hindrax_drivers/scheduling.py) and run at nice -5 through launch-prefix where it is refused,
+    nothing else does either, and the project's runner (pool-day test, bench) puts the prefix first and the
+    variable in the environment as launch_ros does; the bare-metal unit and the compose file allow both."""
     from hindrax_drivers.launch_xml import read_launch
     from hindrax_drivers.process_runner import ProcessRunner
 
@@ -346,6 +347,16 @@ def test_the_safety_processes_start_at_a_higher_priority_and_the_runner_applies_
         assert argv[:len(p.launch_prefix) + 2] == [*p.launch_prefix, "/opt/x/" + p.executable, "--ros-args"]
     assert "LimitNICE=-5" in (REPO / "docker/hindrax-bare-metal.service").read_text()
     assert "nice: 25" in (REPO / "docker/compose.yaml").read_text()
+    from hindrax_drivers.scheduling import PRIORITY_ENV, PRIORITY_RANGE, requested_priority
+    priority = {p.executable: requested_priority(dict(p.env)) for p in read}
+    assert {e for e, v in priority.items() if v} == set(prefixed), priority
+    assert priority["output_guard_node"] > priority["supervisor_node"] > priority["actuation_node"] \
+        > priority["sensors_node"] >= PRIORITY_RANGE[0], priority
+    for p in read:
+        assert runner.environment(p).get(PRIORITY_ENV, "") == dict(p.env).get(PRIORITY_ENV, ""), p.label
+    top = max(priority.values())
+    assert f"LimitRTPRIO={top}" in (REPO / "docker/hindrax-bare-metal.service").read_text()
+    assert f"rtprio: {top}" in (REPO / "docker/compose.yaml").read_text()
 
 
 #: Node parameters outside the vehicle file that widen a safety timeout for a single-process graph (hindrax bringup:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import collections
 import struct
+import sys
 import threading
 from typing import Any, Callable, Iterable, Sequence
 
@@ -21,6 +22,7 @@ from hindrax_msgs.msg import RawDeviceData
 from .config import ConfigError, VehicleConfig
 from .config.node_parameters import declare_vehicle_parameters
 from .ros_process import RosProcess
+from .scheduling import apply_realtime_priority, describe as describe_scheduling
 from .sd_notify import SystemdNotifier
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
@@ -387,10 +389,20 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     reverse order (the last built first). Same arguments, exit
     status and shutdown as :func:`run_node`; an exception out of any node's callback ends the whole process (every
     node's ``close()`` still runs). SIGINT shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a
-    callback (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``)."""
+    callback (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``). Before ``rclpy.init`` the
+    process takes the real-time priority its environment asks for (:mod:`hindrax_drivers.scheduling`; a bad value
+    of ``HINDRAX_REALTIME_PRIORITY`` is an invalid configuration), and logs the outcome once its nodes are built."""
+    try:
+        sched = apply_realtime_priority()
+    except ValueError as exc:
+        print(f"invalid configuration: {exc}", file=sys.stderr)
+        return 1
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor,
                     interrupt=False) as proc:
         nodes = [proc.own(factory()) for factory in factories]
+        level, text = describe_scheduling(sched)
+        if level and nodes:
+            getattr(nodes[0].get_logger(), level)(text)
         for node in nodes:
             proc.executor.add_node(node)
         if systemd_notify and nodes:

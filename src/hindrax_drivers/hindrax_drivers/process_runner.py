@@ -186,6 +186,11 @@ class ProcessRunner:
         return list(p.launch_prefix) + self._command(p) + p.ros_arguments(self._write_values) + \
             self._extra_args.get(p.label, [])
 
+    def environment(self, p: NodeProcess) -> dict[str, str]:
+        """The environment ``p`` is started with: this runner's, then the launch file's for it (``<set_env>``,
+        ``<env>``: :attr:`NodeProcess.env`, e.g. its real-time priority), then this runner's ``extra_env`` for it."""
+        return dict(self._env, **dict(p.env), **self._extra_env.get(p.label, {}))
+
     def command(self, label: str) -> list[str]:
         """The argv the process ``label`` is started with."""
         return list(self._slots[label].command)
@@ -213,7 +218,7 @@ class ProcessRunner:
         return write_parameter_file(values, self._params_dir)
 
     def _spawn(self, slot: _Slot) -> None:
-        env = dict(self._env, **dict(slot.process.env), **self._extra_env.get(slot.process.label, {}))
+        env = self.environment(slot.process)
         with open(slot.log_path, "a") as log:
             log.write(f"--- start {slot.starts + 1}: {' '.join(slot.command)}\n")
             log.flush()

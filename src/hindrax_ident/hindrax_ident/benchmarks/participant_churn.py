@@ -1,7 +1,7 @@
 """Safety benchmark rows ``participant_churn_*``: ROS 2 processes started while the vehicle is armed and commanded.
 
 The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process
-on the shipped transport, :mod:`hindrax_drivers.dds_transport`, at nice -5 as the vehicle launch file starts them;
+on the shipped transport, :mod:`hindrax_drivers.dds_transport`, scheduled as the vehicle launch file starts them;
 the layout of :func:`hindrax_ident.benchmarks.safety.run_processes`) are armed and commanded at 1700 us. Then a new
 ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s subscriber to
 ``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each
@@ -31,7 +31,7 @@ from hindrax_drivers.testing import python_executable, wait_until
 
 from hindrax_msgs.msg import ThrusterPwm
 
-from .safety import PROCESSES, _Layout, running_layout
+from .safety import PROCESSES, _Layout, running_layout, vehicle_scheduling
 
 #: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
 PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
@@ -55,14 +55,15 @@ rclpy.shutdown()
 
 
 class _VehicleLayout(_Layout):
-    """The safety layout with the vehicle's scheduling: the three safety processes at nice -5, as
-    ``vehicle.launch.xml``'s ``launch-prefix`` starts them (without the right to, ``nice`` warns and runs them at 0)."""
+    """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
+    is refused, as ``vehicle.launch.xml`` starts them (:func:`~hindrax_ident.benchmarks.safety.vehicle_scheduling`)."""
 
     def start(self, name: str, extra: tuple = ()) -> None:
         log = open(self.tmp / f"{name}.log", "a")
-        self.procs[name] = subprocess.Popen(["nice", "-n", "-5", self.py, "-m", PROCESSES[name], "--ros-args",
-                                             "--params-file", self.config, *extra], env=self.env, stdout=log,
-                                            stderr=subprocess.STDOUT)
+        prefix, env = vehicle_scheduling()[name]
+        self.procs[name] = subprocess.Popen([*prefix, self.py, "-m", PROCESSES[name], "--ros-args",
+                                             "--params-file", self.config, *extra], env=dict(self.env, **env),
+                                            stdout=log, stderr=subprocess.STDOUT)
 
 
 class _Watch:

@@ -419,7 +419,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                 if lp.label in procs:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
                 logs[lp.label] = open(tmp / f"{lp.label}.log", "w")
-                # the launch file's launch-prefix and environment too (the safety processes' nice -5,
+                # the launch file's launch-prefix and environment too (the safety processes' real-time priority,
                 # docs/deployment.md §1; the DDS transport, hindrax_drivers.dds_transport)
                 procs[lp.label] = subprocess.Popen([*lp.process.launch_prefix, py, *wrap, lp.module,
                                                     *lp.ros_args(values_file), *bench],

@@ -1,0 +1,125 @@
+"""A node process's CPU scheduling: real-time priority (``SCHED_FIFO``) for the safety processes, when allowed.
+
+The vehicle launch file gives the processes whose deadlines stop the thrusters (the actuation process with the ESC,
+the supervisor, the output guard) and the sensor drivers whose rates the supervisor checks the environment variable
+:data:`PRIORITY_ENV` (``<env name="HINDRAX_REALTIME_PRIORITY" value="..."/>`` in ``vehicle.launch.xml``).
+:func:`apply_realtime_priority`, called by every node process before ``rclpy.init``
+(:func:`hindrax_drivers.node_common.run_nodes`), puts every thread of the process under ``SCHED_FIFO`` at that
+priority; threads started later (Fast DDS's, the ESC's bus worker) inherit it (glibc's ``pthread_create`` default,
+``PTHREAD_INHERIT_SCHED``). The process logs the outcome once it has a node (:func:`describe`).
+
+Why not ``nice``: on a kernel with ``CONFIG_SCHED_AUTOGROUP`` (Debian's, Raspberry Pi OS's; enabled on this
+project's development machines, ``/proc/sys/kernel/sched_autogroup_enabled`` 1), a nice value only ranks a process
+against the other processes of its own session; each session's group shares the CPU equally with every other's.
+A process started in a session of its own (a systemd service, a ``setsid`` child, the test suite's process runner)
+therefore gains nothing from ``nice -n -5`` against a CPU-bound process of another session. Measured on this
+project's 2-core machine, the README's pool-day test (test/test_pool_day.py) beside two ``python3 -c 'while True:
+pass'`` (load 5-7), a per-thread ``/proc/<pid>/task/<tid>/schedstat`` sampler: runnable-but-waiting intervals of the
+actuation process's main thread of 0.62-0.79 s and of the output guard's of 0.53-0.63 s at nice -5, and a
+supervisor heartbeat gap over 1.0 s that disarmed the campaign; ``SCHED_FIFO`` threads are scheduled before every
+``SCHED_OTHER`` thread of every session (sched(7), "SCHED_FIFO"). The kernel's real-time throttling
+(``/proc/sys/kernel/sched_rt_runtime_us``, 0.95 s of every 1 s by default) leaves the rest of the machine a share
+even if a real-time process spins.
+
+Refused: setting ``SCHED_FIFO`` needs ``CAP_SYS_NICE`` or an ``RLIMIT_RTPRIO`` at least the priority (sched(7),
+"Privileges and resource limits"): root, ``LimitRTPRIO=`` in the bare-metal systemd unit, ``ulimits: rtprio:`` in
+the compose file (docs/deployment.md §1). Without it the process runs on under its ``nice`` value (the launch file's
+``launch-prefix``) and says so in one warning naming the priority and the limit; it never stops a node.
+
+Own code, not a library's: the standard library's ``os.sched_setscheduler`` is the whole interface; what is here is
+the choice of threads and the report.
+"""
+from __future__ import annotations
+
+import errno
+import os
+import resource
+from dataclasses import dataclass
+from typing import Mapping
+
+__all__ = ["PRIORITY_ENV", "PRIORITY_RANGE", "Scheduling", "apply_realtime_priority", "describe",
+           "requested_priority"]
+
+#: the environment variable naming a process's ``SCHED_FIFO`` priority (unset, empty or 0: not asked)
+PRIORITY_ENV = "HINDRAX_REALTIME_PRIORITY"
+#: the priorities allowed: above 0 (``SCHED_OTHER``), below the kernel's threaded interrupt handlers (50)
+PRIORITY_RANGE = (1, 49)
+
+
+@dataclass(frozen=True)
+class Scheduling:
+    """The outcome of :func:`apply_realtime_priority`. requested: the priority asked (0: none). granted: every thread
+    of the process runs ``SCHED_FIFO`` at ``requested``. reason: why not, when asked and not granted ("" otherwise).
+    threads: the threads set."""
+
+    requested: int
+    granted: bool
+    reason: str = ""
+    threads: int = 0
+
+
+def requested_priority(environ: Mapping[str, str] | None = None) -> int:
+    """The priority :data:`PRIORITY_ENV` asks for (0 when unset or empty).
+
+    Raises:
+        ValueError: a value that is not an integer in :data:`PRIORITY_RANGE` or 0, in one line naming the variable,
+            the value and the allowed range.
+    """
+    raw = (os.environ if environ is None else environ).get(PRIORITY_ENV, "").strip()
+    if not raw:
+        return 0
+    lo, hi = PRIORITY_RANGE
+    try:
+        value = int(raw)
+    except ValueError:
+        value = -1
+    if value != 0 and not lo <= value <= hi:
+        raise ValueError(f"{PRIORITY_ENV}={raw!r}: allowed 0 (not real-time) or an integer {lo}..{hi}")
+    return value
+
+
+def apply_realtime_priority(environ: Mapping[str, str] | None = None) -> Scheduling:
+    """Put every thread of this process under ``SCHED_FIFO`` at the priority :data:`PRIORITY_ENV` asks for (module
+    docstring). Call it before the process starts threads (before ``rclpy.init``): later threads inherit the policy.
+    A refusal (``EPERM``: neither ``CAP_SYS_NICE`` nor a large enough ``RLIMIT_RTPRIO``) leaves the process as it was
+    and is returned, not raised. Raises ``ValueError`` for a bad value (:func:`requested_priority`)."""
+    priority = requested_priority(environ)
+    if priority == 0:
+        return Scheduling(0, False)
+    param = os.sched_param(priority)
+    try:
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:
+        tids = [0]
+    done = 0
+    for tid in tids:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_FIFO, param)
+            done += 1
+        except ProcessLookupError:  # a thread that ended meanwhile
+            continue
+        except OSError as exc:
+            if done:  # the first thread was set: undo, one policy for the whole process
+                for t in tids:
+                    try:
+                        os.sched_setscheduler(t, os.SCHED_OTHER, os.sched_param(0))
+                    except OSError:
+                        pass
+            soft, _hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
+            why = "not permitted" if exc.errno == errno.EPERM else os.strerror(exc.errno or 0)
+            return Scheduling(priority, False, f"{why}: needs CAP_SYS_NICE or RLIMIT_RTPRIO >= {priority} "
+                                               f"(RLIMIT_RTPRIO is {soft})")
+    return Scheduling(priority, True, threads=done)
+
+
+def describe(result: Scheduling) -> tuple[str, str]:
+    """(level, text) of the start-up log line for ``result``: ``("info", "real-time scheduling: SCHED_FIFO priority 10 (1 thread at start)")``,
+    ``("warn", "SCHED_FIFO priority 10 refused (...): running at nice -5")`` or ``("", "")`` when none was asked."""
+    if result.requested == 0:
+        return "", ""
+    if result.granted:
+        threads = f"{result.threads} thread{'' if result.threads == 1 else 's'}"
+        return "info", f"real-time scheduling: SCHED_FIFO priority {result.requested} ({threads} at start)"
+    return "warn", (f"real-time scheduling SCHED_FIFO priority {result.requested} refused ({result.reason}): "
+                    f"running at nice {os.getpriority(os.PRIO_PROCESS, 0)}, late under CPU load "
+                    "(docs/deployment.md §1)")
