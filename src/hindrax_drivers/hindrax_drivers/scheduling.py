@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from typing import Mapping
 
 __all__ = ["PRIORITY_ENV", "PRIORITY_RANGE", "Scheduling", "apply_realtime_priority", "describe",
-           "requested_priority"]
+           "requested_priority", "set_every_thread"]
 
 #: the environment variable naming a process's ``SCHED_FIFO`` priority (unset, empty or 0: not asked)
 PRIORITY_ENV = "HINDRAX_REALTIME_PRIORITY"
@@ -86,35 +86,45 @@ def apply_realtime_priority(environ: Mapping[str, str] | None = None) -> Schedul
     priority = requested_priority(environ)
     if priority == 0:
         return Scheduling(0, False)
-    param = os.sched_param(priority)
+    try:
+        done = set_every_thread(os.SCHED_FIFO, priority)
+    except OSError as exc:
+        soft, _hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
+        why = "not permitted" if exc.errno == errno.EPERM else os.strerror(exc.errno or 0)
+        return Scheduling(priority, False, f"{why}: needs CAP_SYS_NICE or RLIMIT_RTPRIO >= {priority} "
+                                           f"(RLIMIT_RTPRIO is {soft})")
+    return Scheduling(priority, True, threads=done)
+
+
+def set_every_thread(policy: int, priority: int) -> int:
+    """Set ``policy`` (``os.SCHED_FIFO``, ``os.SCHED_OTHER``) at ``priority`` (0 for ``SCHED_OTHER``) on every thread
+    of this process; returns how many were set. All or none: on a refusal the threads already set go back to
+    ``SCHED_OTHER`` and the ``OSError`` is raised."""
     try:
         tids = [int(t) for t in os.listdir("/proc/self/task")]
     except OSError:
         tids = [0]
-    done = 0
+    done: list[int] = []
     for tid in tids:
         try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, param)
-            done += 1
+            os.sched_setscheduler(tid, policy, os.sched_param(priority))
+            done.append(tid)
         except ProcessLookupError:  # a thread that ended meanwhile
             continue
-        except OSError as exc:
-            if done:  # the first thread was set: undo, one policy for the whole process
-                for t in tids:
-                    try:
-                        os.sched_setscheduler(t, os.SCHED_OTHER, os.sched_param(0))
-                    except OSError:
-                        pass
-            soft, _hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
-            why = "not permitted" if exc.errno == errno.EPERM else os.strerror(exc.errno or 0)
-            return Scheduling(priority, False, f"{why}: needs CAP_SYS_NICE or RLIMIT_RTPRIO >= {priority} "
-                                               f"(RLIMIT_RTPRIO is {soft})")
-    return Scheduling(priority, True, threads=done)
+        except OSError:
+            for t in done:
+                try:
+                    os.sched_setscheduler(t, os.SCHED_OTHER, os.sched_param(0))
+                except OSError:
+                    pass
+            raise
+    return len(done)
 
 
 def describe(result: Scheduling) -> tuple[str, str]:
-    """(level, text) of the start-up log line for ``result``: ``("info", "real-time scheduling: SCHED_FIFO priority 10 (1 thread at start)")``,
-    ``("warn", "SCHED_FIFO priority 10 refused (...): running at nice -5")`` or ``("", "")`` when none was asked."""
+    """(level, text) of the start-up log line for ``result``: ``("info", "real-time scheduling: SCHED_FIFO priority
+    10 (1 thread at start)")``, ``("warn", "real-time scheduling SCHED_FIFO priority 10 refused (...): running at nice
+    -5 ...")``, or ``("", "")`` when none was asked."""
     if result.requested == 0:
         return "", ""
     if result.granted:

@@ -58,12 +58,18 @@ class _VehicleLayout(_Layout):
     """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
     is refused, as ``vehicle.launch.xml`` starts them (:func:`~hindrax_ident.benchmarks.safety.vehicle_scheduling`)."""
 
+    #: False: the real-time priority withheld (the launch file's nice -5 only), for a comparison
+    realtime = True
+
     def start(self, name: str, extra: tuple = ()) -> None:
         log = open(self.tmp / f"{name}.log", "a")
         prefix, env = vehicle_scheduling()[name]
+        env = env if self.realtime else {}
+        # a session of its own, as a launched process is (the project's runner, a systemd service): the kernel's
+        # session autogroups then rank it as they do on the vehicle (hindrax_drivers/scheduling.py)
         self.procs[name] = subprocess.Popen([*prefix, self.py, "-m", PROCESSES[name], "--ros-args",
                                              "--params-file", self.config, *extra], env=dict(self.env, **env),
-                                            stdout=log, stderr=subprocess.STDOUT)
+                                            stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
 
 
 class _Watch:

@@ -44,7 +44,10 @@ supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
   second heartbeat publisher is a fault), with the time from the replay process's start in the note.
 
 ROS 2 processes started while armed (:mod:`hindrax_ident.benchmarks.participant_churn`, the same layout):
-``participant_churn_disarms`` (target 0) and ``participant_churn_heartbeat_gap_max_ms`` (target 100 ms).
+``participant_churn_disarms`` (target 0) and ``participant_churn_heartbeat_gap_max_ms`` (target 100 ms). Beside two
+CPU-bound processes of another session (:mod:`hindrax_ident.benchmarks.busy_neighbours`, the same layout):
+``busy_neighbours_disarms`` (target 0) and ``busy_neighbours_heartbeat_gap_max_ms`` (target 100 ms), and the same
+at nice -5 only for comparison.
 
 The hardware watchdog on /OE (:func:`frozen_rows`, issue 44.2; docs/watchdog.md): the bench's layout has it fitted
 (the emulated monostable ORed into /OE, ``esc.output_enable_feed_timeout_s`` 0.33 s, fed by the guard at 10 Hz):

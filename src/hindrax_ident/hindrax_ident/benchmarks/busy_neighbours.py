@@ -1,0 +1,112 @@
+"""Safety benchmark rows ``busy_neighbours_*``: the armed vehicle beside CPU-bound processes of another session.
+
+The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process,
+scheduled as ``vehicle.launch.xml`` starts them: :func:`hindrax_ident.benchmarks.safety.vehicle_scheduling`; the
+layout of :func:`hindrax_ident.benchmarks.safety.running_layout`) are armed and commanded at 1700 us. Then
+:data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a session of their own (as another service or
+a terminal on the Pi), run for :data:`DURATION_S` seconds. This process stands for the hardware (it serves the
+emulated PCA9685 and its /OE line) and watches the heartbeats; hardware is never starved by a CPU load, so for the
+run it takes ``SCHED_FIFO`` at :data:`HARDWARE_PRIORITY`, above the safety processes.
+
+* ``busy_neighbours_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
+* ``busy_neighbours_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
+* ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (``HINDRAX_REALTIME_PRIORITY=0``:
+  the launch file's nice -5 only), no target: what the priority buys (docs/deployment.md §1).
+
+Without the right to set ``SCHED_FIFO`` (not root, no ``RLIMIT_RTPRIO``) the rows are not measured and say so.
+
+Run alone: ``python -m hindrax_ident.benchmarks.busy_neighbours [--quick]`` (prints the rows as JSON).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+from hindrax_drivers.scheduling import set_every_thread
+from hindrax_drivers.testing import python_executable, wait_until
+
+from .participant_churn import _VehicleLayout, _Watch
+from .safety import running_layout
+
+#: CPU-bound neighbours, and how long they run while the vehicle is armed (QUICK_DURATION_S with --quick), s
+NEIGHBOURS, DURATION_S, QUICK_DURATION_S = 2, 60.0, 20.0
+GAP_TARGET_MS = 100.0
+#: this process's SCHED_FIFO priority during the run: the emulated hardware, above the safety processes (at most 12)
+HARDWARE_PRIORITY = 20
+
+
+class _NiceOnlyLayout(_VehicleLayout):
+    """The vehicle layout with the real-time priority withheld: the launch file's nice -5 only."""
+
+    realtime = False
+
+
+def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
+    """The two rows of one run (module docstring); ``realtime`` False: the nice-only comparison run."""
+    duration_s = QUICK_DURATION_S if quick else DURATION_S
+    prefix = "busy_neighbours_" if realtime else "busy_neighbours_nice_only_"
+    target = (lambda t: t) if realtime else (lambda t: None)
+    neighbours: list[subprocess.Popen] = []
+    try:
+        with running_layout("hindrax-bench-busy-", layout=_VehicleLayout if realtime else _NiceOnlyLayout) as lay:
+            # this process's threads (emulated hardware, probe) are all running now: real-time from here on, and
+            # SCHED_RESET_ON_FORK so that what it starts (the node processes, the neighbours) does not inherit it
+            try:
+                set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_PRIORITY)
+            except OSError as exc:
+                why = f"not measured: SCHED_FIFO not permitted here ({exc.strerror})"
+                return [{"name": prefix + "disarms", "value": None, "unit": "disarms", "target": target(0),
+                         "note": why}, {"name": prefix + "heartbeat_gap_max_ms", "value": None, "unit": "ms",
+                                        "target": target(GAP_TARGET_MS), "note": why}]
+            watch = _Watch(lay.probe)
+            lay.armed_at_1700()
+            watch.armed, watch.disarms, watch.active = True, 0, True
+            for _ in range(NEIGHBOURS):
+                neighbours.append(subprocess.Popen([python_executable(), "-c", "while True: pass"],
+                                                   start_new_session=True, stdout=subprocess.DEVNULL,
+                                                   stderr=subprocess.DEVNULL))
+                if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:  # a real-time busy loop: stop now
+                    raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
+            t0 = time.monotonic()
+            wait_until(lambda: time.monotonic() - t0 >= duration_s, duration_s + 10.0,
+                       lambda: time.sleep(0.05), "the neighbours' run")
+            watch.active = False
+            load = os.getloadavg()[0]
+            gap_s, who = watch.largest_gap_s()
+            beats = sum(len(v) for v in watch.arrivals.values())
+    finally:
+        for p in neighbours:
+            p.kill()
+            p.wait(10)
+        set_every_thread(os.SCHED_OTHER, 0)  # no-op when it was refused
+    what = (f"armed at 1700 us for {duration_s:g} s beside {NEIGHBOURS} CPU-bound processes of another session "
+            f"(1-minute load {load:.1f} at the end); safety processes "
+            + ("real-time as vehicle.launch.xml starts them" if realtime else "at nice -5 only"))
+    return [
+        {"name": prefix + "disarms", "value": watch.disarms, "unit": "disarms", "target": target(0), "note": what},
+        {"name": prefix + "heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms", "target": target(GAP_TARGET_MS),
+         "n": beats, "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+    ]
+
+
+def run(quick: bool = False) -> list[dict]:
+    """The ``safety`` section's rows (``make bench``; :mod:`hindrax_ident.bench`): the vehicle's scheduling, then
+    the nice-only comparison."""
+    return busy_rows(quick) + busy_rows(quick, realtime=False)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the rows alone and print them as JSON."""
+    parser = argparse.ArgumentParser(prog="busy_neighbours")
+    parser.add_argument("--quick", action="store_true", help=f"{QUICK_DURATION_S:g} s instead of {DURATION_S:g} s")
+    print(json.dumps(run(parser.parse_args(argv).quick), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
