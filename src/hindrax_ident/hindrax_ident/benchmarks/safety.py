@@ -83,6 +83,7 @@ from hindrax_drivers.liveness import heartbeat_qos
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.recording.reader import BagReader
+from hindrax_drivers.scheduling import PRIORITY_ENV
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import (
     AllocationStandIn,
@@ -106,6 +107,8 @@ from std_srvs.srv import Trigger
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_msgs.msg import ThrusterPwm
 from hindrax_msgs.srv import SetArmed
+
+from .launch_layout import launch_processes, package_share
 
 NEUTRAL_US = 1500.0
 #: Repeats per path: in-process paths, process failures (kill/stop/outage/brown-out), and both with ``--quick``
@@ -371,10 +374,6 @@ def vehicle_scheduling() -> dict[str, tuple[tuple[str, ...], dict[str, str]]]:
     process with: ``nice -n -5`` and ``HINDRAX_REALTIME_PRIORITY`` (docs/deployment.md §1,
     :mod:`hindrax_drivers.scheduling`), read from the launch file, so a benchmark schedules the safety processes as
     the vehicle does."""
-    from hindrax_drivers.scheduling import PRIORITY_ENV
-
-    from .launch_layout import launch_processes, package_share
-
     read = {lp.process.executable: lp.process for lp in
             launch_processes(package_share("hindrax_drivers") / "launch" / "vehicle.launch.xml")}
     return {name: (tuple(read[exe].launch_prefix),
