@@ -30,7 +30,7 @@ import sys
 import time
 
 from hindrax_drivers.scheduling import set_every_thread
-from hindrax_drivers.testing import python_executable, wait_until
+from hindrax_drivers.testing import python_executable
 
 from .participant_churn import _VehicleLayout, _Watch
 from .safety import running_layout
@@ -72,9 +72,7 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
                                                    stderr=subprocess.DEVNULL))
                 if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:  # a real-time busy loop: stop now
                     raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
-            t0 = time.monotonic()
-            wait_until(lambda: time.monotonic() - t0 >= duration_s, duration_s + 10.0,
-                       lambda: time.sleep(0.05), "the neighbours' run")
+            time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's own thread)
             watch.active = False
             load = os.getloadavg()[0]
             gap_s, who = watch.largest_gap_s()

@@ -31,7 +31,7 @@ from hindrax_drivers.testing import python_executable, wait_until
 
 from hindrax_msgs.msg import ThrusterPwm
 
-from .safety import PROCESSES, _Layout, running_layout, vehicle_scheduling
+from .safety import _Layout, running_layout
 
 #: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
 PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
@@ -56,20 +56,10 @@ rclpy.shutdown()
 
 class _VehicleLayout(_Layout):
     """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
-    is refused, as ``vehicle.launch.xml`` starts them (:func:`~hindrax_ident.benchmarks.safety.vehicle_scheduling`)."""
+    is refused, as ``vehicle.launch.xml`` starts them (:func:`~hindrax_ident.benchmarks.safety.vehicle_scheduling`),
+    each in a session of its own as a launched process is."""
 
-    #: False: the real-time priority withheld (the launch file's nice -5 only), for a comparison
-    realtime = True
-
-    def start(self, name: str, extra: tuple = ()) -> None:
-        log = open(self.tmp / f"{name}.log", "a")
-        prefix, env = vehicle_scheduling()[name]
-        env = env if self.realtime else {}
-        # a session of its own, as a launched process is (the project's runner, a systemd service): the kernel's
-        # session autogroups then rank it as they do on the vehicle (hindrax_drivers/scheduling.py)
-        self.procs[name] = subprocess.Popen([*prefix, self.py, "-m", PROCESSES[name], "--ros-args",
-                                             "--params-file", self.config, *extra], env=dict(self.env, **env),
-                                            stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    new_session = True
 
 
 class _Watch:

@@ -62,6 +62,7 @@ Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal as _signal
@@ -369,11 +370,12 @@ PROCESSES = {"esc": "hindrax_drivers.pca9685.node", "supervisor": "hindrax_drive
 VEHICLE_EXECUTABLES = {"esc": "actuation_node", "supervisor": "supervisor_node", "guard": "output_guard_node"}
 
 
+@functools.cache
 def vehicle_scheduling() -> dict[str, tuple[tuple[str, ...], dict[str, str]]]:
     """Name of :data:`PROCESSES` -> (launch prefix, environment additions) that ``vehicle.launch.xml`` starts its
     process with: ``nice -n -5`` and ``HINDRAX_REALTIME_PRIORITY`` (docs/deployment.md §1,
     :mod:`hindrax_drivers.scheduling`), read from the launch file, so a benchmark schedules the safety processes as
-    the vehicle does."""
+    the vehicle does. Read once per process (the launch file and the installed console scripts)."""
     read = {lp.process.executable: lp.process for lp in
             launch_processes(package_share("hindrax_drivers") / "launch" / "vehicle.launch.xml")}
     return {name: (tuple(read[exe].launch_prefix),
@@ -537,6 +539,12 @@ class _Layout:
                 self.diag.append((t, st))
 
     # -- processes
+    #: False: the real-time priority withheld (the launch file's nice -5 only), for a comparison
+    realtime = True
+    #: True: each node process in a session of its own, as a launched process is (the project's runner, a systemd
+    #: service), so that the kernel's session autogroups rank it as on the vehicle (hindrax_drivers/scheduling.py)
+    new_session = False
+
     def start(self, name: str, extra: tuple = ()) -> None:
 
         log = open(self.tmp / f"{name}.log", "a")
@@ -545,8 +553,9 @@ class _Layout:
         # machine's load, not the failure measured
         prefix, env = vehicle_scheduling()[name]
         self.procs[name] = subprocess.Popen([*prefix, self.py, "-m", PROCESSES[name], "--ros-args",
-                                             "--params-file", self.config, *extra], env=dict(self.env, **env),
-                                            stdout=log, stderr=subprocess.STDOUT)
+                                             "--params-file", self.config, *extra],
+                                            env=dict(self.env, **(env if self.realtime else {})), stdout=log,
+                                            stderr=subprocess.STDOUT, start_new_session=self.new_session)
 
     def ensure(self) -> None:
         for name in PROCESSES:
