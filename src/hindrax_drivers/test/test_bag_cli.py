@@ -16,7 +16,7 @@ from std_msgs.msg import String
 from hindrax_drivers.recording.info import bag_info
 from hindrax_drivers.recording.make_test_bags import STREAMS
 from hindrax_drivers.recording.metadata import read_metadata
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import burst_qos, child_env, python_executable, ros_context, wait_until
 from hindrax_ident.cli import main as cli_main
 
 DATA = Path(__file__).parent / "data"
@@ -73,8 +73,8 @@ def test_bag_record_until_interrupted(tmp_path):
             node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: counts.update(
                 {kv.key[6:]: int(kv.value) for st in m.status for kv in st.values if kv.key.startswith("topic:")}),
                 10)
-            a = node.create_publisher(String, "/cli/a", 10)
-            b = node.create_publisher(String, "/cli/regex_match", 10)
+            a = node.create_publisher(String, "/cli/a", burst_qos())  # all 7, however the match ends
+            b = node.create_publisher(String, "/cli/regex_match", burst_qos())
             c = node.create_publisher(String, "/cli/other", 10)
             wait_until(lambda: (a.get_subscription_count() and b.get_subscription_count()) or proc.poll() is not None,
                        20, spin, "record subscribed")

@@ -14,13 +14,13 @@ import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 
+from hindrax_drivers.conditions import ConditionTimeout
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.recover import is_complete, iter_file_records, recover_bag
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import burst_qos, child_env, python_executable, ros_context, wait_until
 from hindrax_msgs.msg import RawDeviceData
 
 pytestmark = pytest.mark.ros
@@ -65,8 +65,7 @@ def run_until_written(proc, ctx) -> None:
                     written["n"] = int(kv.value)
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
-    pub = node.create_publisher(RawDeviceData, TOPIC,
-                                QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE))
+    pub = node.create_publisher(RawDeviceData, TOPIC, burst_qos())  # the whole burst, however the match ends
     spin = lambda: ex.spin_once(timeout_sec=0.02)  # noqa: E731
     try:
         wait_until(lambda: pub.get_subscription_count() > 0 or proc.poll() is not None, 20, spin,
@@ -74,7 +73,10 @@ def run_until_written(proc, ctx) -> None:
         assert proc.poll() is None, proc.stderr.read().decode()
         for i in range(N):
             pub.publish(numbered(i))
-        wait_until(lambda: written["n"] == N, 20, spin, f"recorder reports {N} messages written")
+        try:
+            wait_until(lambda: written["n"] == N, 20, spin, f"recorder reports {N} messages written")
+        except ConditionTimeout as exc:
+            raise AssertionError(f"{exc}; its last report: {written['n']}") from None
     finally:
         ex.shutdown()
         node.destroy_node()
