@@ -21,6 +21,7 @@ from hindrax_msgs.msg import RawDeviceData
 
 from .config import ConfigError, VehicleConfig
 from .config.node_parameters import declare_vehicle_parameters
+from . import ros_process
 from .ros_process import RosProcess
 from .scheduling import apply_realtime_priority, describe as describe_scheduling
 from .sd_notify import SystemdNotifier
@@ -391,14 +392,16 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     node's ``close()`` still runs). SIGINT shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a
     callback (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``). Before ``rclpy.init`` the
     process takes the real-time priority its environment asks for (:mod:`hindrax_drivers.scheduling`; a bad value
-    of ``HINDRAX_REALTIME_PRIORITY`` is an invalid configuration), and logs the outcome once its nodes are built."""
+    of ``HINDRAX_REALTIME_PRIORITY`` is an invalid configuration), and logs the outcome once its nodes are built. A
+    shutdown that takes longer than :data:`~hindrax_drivers.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every thread's
+    traceback to stderr and exits with status 1 (:class:`~hindrax_drivers.ros_process.RosProcess`)."""
     try:
         sched = apply_realtime_priority()
     except ValueError as exc:
         print(f"invalid configuration: {exc}", file=sys.stderr)
         return 1
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor,
-                    interrupt=False) as proc:
+                    interrupt=False, shutdown_budget_s=ros_process.SHUTDOWN_BUDGET_S) as proc:
         nodes = [proc.own(factory()) for factory in factories]
         level, text = describe_scheduling(sched)
         if level and nodes:

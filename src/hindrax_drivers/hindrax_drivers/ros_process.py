@@ -62,6 +62,12 @@ handlers before ``rclpy.init`` (rclpy's then chain to them):
 In another thread (a test running a node process in a thread) the handlers are left as they are: only the main
 thread may set them.
 
+Bounded shutdown: with ``shutdown_budget_s`` (node processes: :data:`SHUTDOWN_BUDGET_S`, 8 s), ``__exit__`` arms
+the standard library's ``faulthandler.dump_traceback_later(..., exit=True)`` first: a shutdown that is still running
+after the budget (a clean-up, the executor's or the context's shutdown that hangs) writes every thread's Python
+traceback to stderr and ends the process with status 1, before ``ros2 launch``'s SIGKILL at 10 s would end it
+with nothing said. Signals cannot do this: from the first instruction of ``__exit__`` they are absorbed.
+
 Garbage collection: :meth:`RosProcess.spin` collects once and then freezes every object alive at start-up
 (``gc.freeze``, Python's documented way to keep a long-lived heap out of every later collection) before it spins. A
 node process holds 34,000-57,000 objects once rclpy, numpy and its modules are loaded (94,000 with the
@@ -81,6 +87,7 @@ rclpy is imported when the block is entered, not when this module is.
 """
 from __future__ import annotations
 
+import faulthandler
 import gc
 import os
 import signal
@@ -95,10 +102,15 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options, uninstall_signal_handlers
 
-__all__ = ["EXECUTORS", "RosProcess", "executor_kind", "freeze_startup_heap"]
+__all__ = ["EXECUTORS", "RosProcess", "SHUTDOWN_BUDGET_S", "executor_kind", "freeze_startup_heap"]
 
 #: values of ``HINDRAX_EXECUTOR``
 EXECUTORS = ("events", "single")
+
+#: the longest a node process's shutdown may take before it dumps its threads' tracebacks and exits with status 1
+#: (module docstring, "Bounded shutdown"): below ``ros2 launch``'s SIGKILL, 10 s after its SIGINT; the slowest
+#: clean-up measured, the recorder finishing a bag, takes well under a second
+SHUTDOWN_BUDGET_S = 8.0
 
 #: the signals that end a process (module docstring, "Signals")
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -179,16 +191,21 @@ class RosProcess:
     args: command-line arguments for ``rclpy.init`` (``None``: ``sys.argv``, so ``--ros-args`` are honoured;
     ``[]`` for a process whose arguments are not ROS arguments). errors: {exception type: message prefix}.
     executor: ``events`` or ``single`` to fix the executor, None to follow ``HINDRAX_EXECUTOR``. Raises
-    ``ValueError`` for another value.
+    ``ValueError`` for another value. interrupt: whether SIGINT raises ``KeyboardInterrupt`` in the block.
+    shutdown_budget_s: seconds the exit may take (module docstring, "Bounded shutdown"); None, unbounded.
     """
 
     def __init__(self, args: Sequence[str] | None = None, errors: Mapping[type, str] | None = None,
-                 executor: str | None = None, interrupt: bool = True) -> None:
+                 executor: str | None = None, interrupt: bool = True,
+                 shutdown_budget_s: float | None = None) -> None:
         if executor is not None and executor not in EXECUTORS:
             raise ValueError(f"executor={executor!r}: allowed values are {', '.join(EXECUTORS)}")
         self.executor_kind = executor
         """``events`` or ``single``; None: from ``HINDRAX_EXECUTOR`` (:func:`executor_kind`)."""
         self.args = list(args) if args is not None else list(sys.argv)
+        self.shutdown_budget_s = shutdown_budget_s
+        """Seconds the exit may take before every thread's traceback is dumped and the process ends with status 1
+        (module docstring, "Bounded shutdown"); None: unbounded."""
         self.interrupt = bool(interrupt)
         """Whether SIGINT raises ``KeyboardInterrupt`` in the block (module docstring, "Signals")."""
         self.errors = dict(errors or {})
@@ -294,10 +311,14 @@ class RosProcess:
     def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: Any) -> bool:
 
         self._stopping = True  # first: from here on SIGINT and SIGTERM are absorbed (_on_signal)
+        if self.shutdown_budget_s is not None:
+            faulthandler.dump_traceback_later(self.shutdown_budget_s, exit=True)
         try:
             return self._shut_down(exc_type, exc)
         finally:
             self._release_signals()
+            if self.shutdown_budget_s is not None:
+                faulthandler.cancel_dump_traceback_later()
 
     def _shut_down(self, exc_type: type | None, exc: BaseException | None) -> bool:
         """The exit (class docstring): clean-ups, executor and context shutdown; returns whether ``exc`` is

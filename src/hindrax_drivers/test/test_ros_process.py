@@ -160,7 +160,7 @@ def test_spin_loop_reads_rclpy_ok_at_most_every_check_period(monkeypatch):
 # "closing" when its close() starts, then waits in close() for the file argv[1] and, once run_node has returned
 # ("returned <status>"), for argv[1] + ".2" before it exits with run_node's status. With argv[2] == "thread", its
 # constructor ends with one SIGINT taken by another thread (what test_controller_node met on a loaded machine);
-# with "thread-spinning", its first tick does.
+# with "thread-spinning", its first tick does. With "budget", its shutdown budget is 1 s instead of 8.
 SIGNAL_PROBE = r"""
 import ctypes, gc, os, signal, sys, time
 from pathlib import Path
@@ -168,9 +168,12 @@ from pathlib import Path
 from rclpy.node import Node
 
 from hindrax_drivers.conditions import wait_until
+from hindrax_drivers import ros_process
 from hindrax_drivers.node_common import run_node
 
 go, mode = Path(sys.argv[1]), sys.argv[2]
+if mode == "budget":
+    ros_process.SHUTDOWN_BUDGET_S = 1.0
 
 
 def say(line):
@@ -288,6 +291,24 @@ def test_signals_during_and_after_the_shutdown_leave_exit_status_0(tmp_path, fir
         probe.wait_for("returned 0")
         probe.send(signal.SIGINT, signal.SIGTERM)
         assert probe.finish() == 0, "".join(probe.lines)
+    finally:
+        probe.kill()
+
+
+def test_a_hung_shutdown_dumps_every_thread_and_exits_1_after_its_budget(tmp_path):
+    """A node process whose close() never returns (the probe waits for a file nobody writes) does not wait for
+    ``ros2 launch``'s SIGKILL: after its shutdown budget it writes every thread's traceback to stderr, the hung
+    close() among them, and exits with status 1. Signals during the shutdown are still absorbed."""
+    probe = SignalProbe(tmp_path, mode="budget")
+    try:
+        probe.wait_for("spinning")
+        probe.send(signal.SIGINT)
+        probe.wait_for("closing")
+        probe.send(signal.SIGTERM)
+        assert probe.proc.wait(timeout=30) == 1, "".join(probe.lines)
+        out = "".join(probe.lines)
+        assert "most recent call first" in out and "in close" in out, out
+        assert not any(line.startswith("returned") for line in probe.lines), out  # run_node never returned
     finally:
         probe.kill()
 
