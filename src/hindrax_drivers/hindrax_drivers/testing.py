@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import resource
 import signal
 import subprocess
 import sys
@@ -72,6 +73,12 @@ def interrupt(proc: subprocess.Popen, timeout_s: float) -> int:
     has not ended within ``timeout_s`` seconds."""
     proc.send_signal(signal.SIGINT)
     return proc.wait(timeout=timeout_s)
+
+
+def may_set_fifo(priority: int) -> bool:
+    """Whether this test's own user may set ``SCHED_FIFO`` at ``priority`` (sched(7), "Privileges and resource
+    limits"): root (``CAP_SYS_NICE``), or an ``RLIMIT_RTPRIO`` at least the priority."""
+    return os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= priority
 
 
 def burst_qos() -> QoSProfile:

@@ -16,7 +16,7 @@ import sys
 import pytest
 
 from hindrax_drivers.scheduling import PRIORITY_ENV, requested_priority
-from hindrax_drivers.testing import child_env
+from hindrax_drivers.testing import child_env, may_set_fifo
 
 CHILD = r"""
 import json, os, threading
@@ -39,12 +39,6 @@ def run_child(priority: str, prefix: tuple[str, ...] = ()) -> dict:
     out = subprocess.run([*prefix, sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     return json.loads(out.stdout.strip().splitlines()[-1])
-
-
-def may_set_fifo(priority: int) -> bool:
-    """Whether this test's own user may set SCHED_FIFO at ``priority`` (sched(7), "Privileges and resource
-    limits"): root (CAP_SYS_NICE), or an RTPRIO limit at least the priority."""
-    return os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= priority
 
 
 def test_the_requested_priority_is_checked_and_named_in_one_line():

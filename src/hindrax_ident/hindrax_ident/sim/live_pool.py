@@ -46,6 +46,7 @@ import numpy as np
 
 from hindrax_drivers.config import load_config
 from hindrax_drivers.emulated_devices import driver_env, driver_ros_arguments
+from hindrax_drivers.scheduling import set_every_thread
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer
 
 from ..identification.online.campaign import PoolOperator
@@ -138,6 +139,30 @@ class LivePoolServer:
         self.hardware.close()
 
 
+#: the pool's ``SCHED_FIFO`` priority: above every vehicle process (5-12, ``vehicle.launch.xml``), as hardware answers
+#: whatever the Pi's load, and within :data:`hindrax_drivers.scheduling.PRIORITY_RANGE`
+POOL_REALTIME_PRIORITY = 20
+
+
+def take_hardware_priority() -> str:
+    """Put every thread of this process under ``SCHED_FIFO`` :data:`POOL_REALTIME_PRIORITY`, so the emulated devices
+    answer in microseconds whatever the load, as the vehicle's hardware does. A nice value cannot do that: it ranks
+    a process only within its own session (:mod:`hindrax_drivers.scheduling`). Call it before the devices' threads
+    start: they inherit it. Not with ``SCHED_RESET_ON_FORK``: the kernel applies that to every new thread too, and
+    the serving threads would run ``SCHED_OTHER``; the process starts no other process. Refused (no
+    ``CAP_SYS_NICE``): nice -10 if permitted. Returns the one line that says which."""
+    try:
+        threads = set_every_thread(os.SCHED_FIFO, POOL_REALTIME_PRIORITY)
+        return f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} ({threads} thread(s) at start)"
+    except OSError as exc:
+        refused = f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} refused ({os.strerror(exc.errno or 0)})"
+    try:
+        os.nice(-10)
+        return f"{refused}; nice -10 (its devices may answer late under load)"
+    except OSError:
+        return f"{refused}; nice -10 not permitted either (its devices may answer late under load)"
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m hindrax_ident.sim.live_pool --config FILE --directory DIR [--truth FILE] [--seed N]``: serve the
     live pool until ``quit`` or the end of standard input (module docstring: protocol)."""
@@ -148,10 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=None, help="sensor-noise seed (default simulation.seed)")
     args = ap.parse_args(argv)
     sys.setswitchinterval(0.001)  # the emulators answer other processes' bus calls: short waits for the GIL
-    try:  # devices answer in microseconds whatever the Pi's load: the pool is not starved by what it serves
-        os.nice(-10)
-    except OSError:  # not permitted (not root): the pool runs at the drivers' priority
-        print("live pool: cannot raise its priority (nice -10 not permitted)", file=sys.stderr, flush=True)
+    print(f"live pool: {take_hardware_priority()}", file=sys.stderr, flush=True)
     pool = LivePoolServer(args.config, args.directory, truth=args.truth, seed=args.seed)
     try:
         print(json.dumps({"ports": pool.ports, "i2c_socket": pool.socket_path}), flush=True)
@@ -194,6 +216,8 @@ class LivePool:
         self._stderr = open(self.directory / "live_pool.log", "w")
         self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
                                       text=True, env=dict(env) if env is not None else None)
+        self.pid: int = self._proc.pid
+        """The pool process's id."""
         hello = self._read(start_timeout_s)
         self.ports: dict[str, str] = hello["ports"]
         self.socket_path: str = hello["i2c_socket"]
