@@ -46,7 +46,7 @@ import numpy as np
 
 from hindrax_drivers.config import load_config
 from hindrax_drivers.emulated_devices import driver_env, driver_ros_arguments
-from hindrax_drivers.scheduling import set_every_thread
+from hindrax_drivers.scheduling import PRIORITY_ENV, apply_realtime_priority
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer
 
 from ..identification.online.campaign import PoolOperator
@@ -151,11 +151,10 @@ def take_hardware_priority() -> str:
     start: they inherit it. Not with ``SCHED_RESET_ON_FORK``: the kernel applies that to every new thread too, and
     the serving threads would run ``SCHED_OTHER``; the process starts no other process. Refused (no
     ``CAP_SYS_NICE``): nice -10 if permitted. Returns the one line that says which."""
-    try:
-        threads = set_every_thread(os.SCHED_FIFO, POOL_REALTIME_PRIORITY)
-        return f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} ({threads} thread(s) at start)"
-    except OSError as exc:
-        refused = f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} refused ({os.strerror(exc.errno or 0)})"
+    result = apply_realtime_priority({PRIORITY_ENV: str(POOL_REALTIME_PRIORITY)})
+    if result.granted:
+        return f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} ({result.threads} thread(s) at start)"
+    refused = f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} refused ({result.reason})"
     try:
         os.nice(-10)
         return f"{refused}; nice -10 (its devices may answer late under load)"
