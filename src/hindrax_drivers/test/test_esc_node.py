@@ -276,25 +276,25 @@ def test_only_the_allocation_may_command_a_second_publisher_disarms_and_is_refus
     arm(esc)
 
 
-def test_a_command_publisher_not_named_yet_holds_neutral_but_does_not_disarm(esc):
+def test_a_command_publisher_not_named_yet_holds_neutral_but_does_not_disarm(esc, monkeypatch):
     """Under load, discovery shows a new publisher as _NODE_NAME_UNKNOWN_ for a while: it disarmed the vehicle.
     Now its commands are held at neutral (it may be a foreign one) while the ESC stays armed; once named the
     allocation commands again; once named as a stranger it disarms. (The graph is stood in: discovery's timing
     cannot be forced.)"""
-    from types import SimpleNamespace
+    from hindrax_drivers.pca9685 import peers as peers_module
 
     node, emu = esc["node"], esc["emu"]
     arm(esc)
     stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
-    graph = node.get_publishers_info_by_topic
+    graph = peers_module.publisher_node_names
     shown = {"extra": "_NODE_NAME_UNKNOWN_"}
 
-    def publishers(topic):
-        real = graph(topic)
+    def publishers(of, topic):
+        real = graph(of, topic)
         if topic != "thrusters/command_pulse_width" or not shown["extra"]:
             return real
-        return real + [SimpleNamespace(node_name=shown["extra"], node_namespace="/")]
-    node.get_publishers_info_by_topic = publishers
+        return real + [shown["extra"]]
+    monkeypatch.setattr(peers_module, "publisher_node_names", publishers)
     stream(esc, [1700.0] * 8, lambda: np.allclose(wire(emu), NEUTRAL, atol=TICK_US))
     assert node.armed and node.core.command_unnamed and not node.core.command_source
     assert node.diag.counts()["command_source_unnamed"] == 1
@@ -306,7 +306,6 @@ def test_a_command_publisher_not_named_yet_holds_neutral_but_does_not_disarm(esc
                "disarmed on a named stranger")
     node.settle()
     assert np.allclose(wire(emu), NEUTRAL, atol=TICK_US) and "'rogue'" in node.core.command_source
-    node.get_publishers_info_by_topic = graph
 
 
 def test_a_forged_supervisor_heartbeat_disarms_and_refuses_arming(esc):

@@ -214,3 +214,33 @@ def test_guard_core_silences_on_an_untrusted_heartbeat():
     assert core.decide(0.0, 0.0) == (True, False)  # no ESC beat since: the last one may predate an arm
     core.on_esc(OUTPUT_NEUTRAL, False)
     assert core.decide(0.0, 0.0) == (False, True)
+
+
+def test_publisher_node_names_is_what_rclpy_s_endpoint_query_names():
+    """The safety ticks' lean graph query (no TopicEndpointInfo per endpoint) names the same publishers as rclpy's
+    ``get_publishers_info_by_topic``, for a relative, an absolute and a remapped topic, a namespaced receiver
+    included, and follows a publisher leaving."""
+    from hindrax_drivers.liveness import publisher_node_names
+
+    with ros_context() as ctx:
+        a = rclpy.create_node("supervisor", context=ctx)
+        b = rclpy.create_node("forger", context=ctx)
+        ns = rclpy.create_node("receiver", namespace="/robot", context=ctx,
+                               cli_args=["--ros-args", "-r", "renamed/heartbeat:=/supervisor/heartbeat"])
+        plain = rclpy.create_node("receiver", context=ctx)
+        pubs = [a.create_publisher(DiagnosticStatus, "supervisor/heartbeat", 10),
+                b.create_publisher(DiagnosticStatus, "/supervisor/heartbeat", 10)]
+
+        def rclpy_names(node, topic):
+            return sorted(i.node_name for i in node.get_publishers_info_by_topic(topic))
+        wait_until(lambda: rclpy_names(plain, "supervisor/heartbeat") == ["forger", "supervisor"], 10, None,
+                   "both publishers in the graph")
+        for node, topic in ((plain, "supervisor/heartbeat"), (plain, "/supervisor/heartbeat"),
+                            (ns, "/supervisor/heartbeat"), (ns, "renamed/heartbeat")):
+            assert sorted(publisher_node_names(node, topic)) == rclpy_names(node, topic) == ["forger", "supervisor"]
+        assert publisher_node_names(ns, "supervisor/heartbeat") == []  # /robot/supervisor/heartbeat: nobody
+        b.destroy_publisher(pubs[1])
+        wait_until(lambda: publisher_node_names(plain, "supervisor/heartbeat") == ["supervisor"], 10, None,
+                   "the forger gone")
+        with pytest.raises(Exception, match="topic"):
+            publisher_node_names(plain, "bad topic name")

@@ -17,7 +17,8 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..config import Spec
-from ..liveness import HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok, simulated_now_s
+from ..liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok, publisher_node_names,
+                        simulated_now_s)
 from ..config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
@@ -70,7 +71,7 @@ class EscPeers:
         command_source_unnamed`; a fault once unnamed for longer than :data:`.core.NAME_RESOLVE_BOUND_S`)."""
         for watch in self.watches.values():
             watch.check()
-        names = [info.node_name for info in self._node.get_publishers_info_by_topic(COMMAND_TOPIC)]
+        names = publisher_node_names(self._node, COMMAND_TOPIC)
         now = time.monotonic()
         if UNNAMED_NODE not in names:
             self.unnamed_since = None
