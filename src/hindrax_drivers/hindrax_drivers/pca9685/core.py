@@ -216,6 +216,12 @@ class EscOutput:
         self.deadband_us = float(deadband_us)
         self.current = np.full(len(self.channels), self.neutral_us)
         self._computed_for: object = None  # the command object :attr:`current` was computed for (no slew limit)
+        # computed once (read-only): the output path asks for it twice per 20 ms period
+        self._channel_neutral = np.clip(np.full(len(self.channels), self.neutral_us) + self.trim_us, self.min_us,
+                                        self.max_us)
+        self._channel_neutral.flags.writeable = False
+        self._grid_bounds = (math.ceil(self.min_us / self.count_us - 1e-9),
+                             math.floor(self.max_us / self.count_us + 1e-9)) if self.count_us > 0.0 else (0, 0)
 
     @classmethod
     def from_config(cls, thrusters, slew_rate_us_per_s: float, count_us: float) -> "EscOutput":
@@ -226,13 +232,13 @@ class EscOutput:
                    t.pulse_width_max_us, slew_rate_us_per_s, count_us=count_us, deadband_us=t.deadband_us)
 
     def channel_neutral(self) -> np.ndarray:
-        """(n,) ``neutral_us + trim_us`` clamped to the limits, us."""
-        return np.clip(np.full(len(self.channels), self.neutral_us) + self.trim_us, self.min_us, self.max_us)
+        """(n,) ``neutral_us + trim_us`` clamped to the limits, us (read-only)."""
+        return self._channel_neutral
 
     def neutral(self) -> np.ndarray:
         """(n,) neutral widths (:meth:`channel_neutral`; the widths :meth:`target` gives for a neutral command).
         Also resets the slew-limiter state (neutral is immediate)."""
-        self.current = self.channel_neutral()
+        self.current = self.channel_neutral().copy()
         self._computed_for = None
         return self.current.copy()
 
@@ -248,7 +254,7 @@ class EscOutput:
         counts = np.where(outside, np.where(widths_us > mid, np.ceil(x - 1e-9), np.floor(x + 1e-9)),
                           np.floor(x + 0.5))
         # never beyond the ESC's range: the nearest count inside it there
-        lo, hi = math.ceil(self.min_us / self.count_us - 1e-9), math.floor(self.max_us / self.count_us + 1e-9)
+        lo, hi = self._grid_bounds
         return np.clip(counts, lo, hi) * self.count_us
 
     def target(self, command, dt_s: float) -> np.ndarray:
@@ -332,7 +338,7 @@ class EscCore:
         self.retry_s = RETRY_MIN_S
         self.stale_width_possible = False
         self.output_state = OUTPUT_NEUTRAL
-        self.last_written = self.output.channel_neutral()
+        self.last_written = self.output.channel_neutral().copy()
         self.reason = "holding neutral, disarmed"
 
     def chip_lost(self, reason: str) -> bool:
