@@ -30,6 +30,7 @@ from .dvl75.emulator import Dvl75Emulator, DvlTruth
 from .icm20948.emulator import Icm20948Emulator
 from .ms5837.emulator import Ms5837Emulator
 from .pca9685.emulator import Pca9685Emulator
+from .scheduling import HARDWARE_STAND_IN_PRIORITY
 from .ping1d.emulator import Ping1dEmulator, Ping1dTruth
 from .transport.emulated_i2c import EmulatedI2CBus
 from .transport.pty_device import PtyDevice
@@ -69,7 +70,9 @@ class EmulatedDevices:
     """The five emulated devices (module docstring), serving as soon as constructed unless ``serve_i2c`` is False.
 
     config: the vehicle configuration (I2C addresses, PCA9685 oscillator). directory: where the I2C socket goes
-    (default: a new temporary directory). Use as a context manager or call :meth:`close`.
+    (default: a new temporary directory). Use as a context manager or call :meth:`close`. The threads that serve the
+    devices run ``SCHED_FIFO`` :data:`~hindrax_drivers.scheduling.HARDWARE_STAND_IN_PRIORITY`, above the vehicle's
+    processes, and the rest of the process keeps its scheduling (refused without ``CAP_SYS_NICE``: they keep it too).
     """
 
     def __init__(self, config: VehicleConfig, directory: str | os.PathLike | None = None,
@@ -79,9 +82,9 @@ class EmulatedDevices:
         self.directory.mkdir(parents=True, exist_ok=True)
         self.socket_path = str(self.directory / "i2c.sock")
         self.dvl = PtyDevice(Dvl75Emulator(self._dvl_truth, rate_hz=10.0), poll_period_s=poll_period_s,
-                             link_name="hindrax-dvl")
+                             link_name="hindrax-dvl", realtime_priority=HARDWARE_STAND_IN_PRIORITY)
         self.ping = PtyDevice(Ping1dEmulator(self._ping_truth), poll_period_s=poll_period_s,
-                              link_name="hindrax-ping")
+                              link_name="hindrax-ping", realtime_priority=HARDWARE_STAND_IN_PRIORITY)
         self._serial = {"dvl75": self.dvl, "ping1d": self.ping}
         esc = config.esc
         self.pca9685 = Pca9685Emulator(oscillator_hz=float(esc.oscillator_hz))
@@ -124,7 +127,8 @@ class EmulatedDevices:
             if self._server is None:
                 if os.path.exists(self.socket_path):
                     os.unlink(self.socket_path)
-                self._server = I2CSocketServer(self.bus, self.socket_path)
+                self._server = I2CSocketServer(self.bus, self.socket_path,
+                                               realtime_priority=HARDWARE_STAND_IN_PRIORITY)
 
     def stop_i2c(self) -> None:
         """The I2C bus is gone: opening fails, open connections fail with ENODEV (idempotent)."""

@@ -37,13 +37,17 @@ import resource
 from dataclasses import dataclass
 from typing import Mapping
 
-__all__ = ["PRIORITY_ENV", "PRIORITY_RANGE", "Scheduling", "apply_realtime_priority", "describe",
-           "requested_priority", "set_every_thread"]
+__all__ = ["HARDWARE_STAND_IN_PRIORITY", "PRIORITY_ENV", "PRIORITY_RANGE", "Scheduling", "apply_realtime_priority",
+           "describe", "requested_priority", "set_every_thread", "set_this_thread"]
 
 #: the environment variable naming a process's ``SCHED_FIFO`` priority (unset, empty or 0: not asked)
 PRIORITY_ENV = "HINDRAX_REALTIME_PRIORITY"
 #: the priorities allowed: above 0 (``SCHED_OTHER``), below the kernel's threaded interrupt handlers (50)
 PRIORITY_RANGE = (1, 49)
+#: ``SCHED_FIFO`` priority of what stands in for the vehicle's hardware on a machine without it (the emulated
+#: devices' serving threads, the live pool): above every vehicle process (5-12, ``vehicle.launch.xml``), as the real
+#: devices answer whatever the CPU load
+HARDWARE_STAND_IN_PRIORITY = 20
 
 
 @dataclass(frozen=True)
@@ -119,6 +123,18 @@ def set_every_thread(policy: int, priority: int) -> int:
                     pass
             raise
     return len(done)
+
+
+def set_this_thread(priority: int) -> str:
+    """Put the calling thread alone under ``SCHED_FIFO`` ``priority`` (Linux schedules threads, not processes: sched(7);
+    threads it starts afterwards inherit it). For a thread that stands in for hardware inside a process that must not
+    become real-time as a whole (a test process serving emulated devices). Returns '' when granted, else why not
+    (``CAP_SYS_NICE`` or ``RLIMIT_RTPRIO``); the thread then keeps its scheduling."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        return f"SCHED_FIFO priority {priority} refused: {exc.strerror}"
+    return ""
 
 
 def describe(result: Scheduling) -> tuple[str, str]:

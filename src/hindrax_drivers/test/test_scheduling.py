@@ -119,3 +119,43 @@ def test_a_node_process_refuses_a_bad_priority_with_one_line_and_reports_a_good_
             assert "refused" in text, text
         proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=60) == 0, log.read_text()
+
+
+def test_emulated_devices_serve_from_real_time_threads_only(tmp_path):
+    """The hardware stand-in of the pool-day tests (EmulatedDevices, served from the test's own process) answers within
+    the drivers' deadlines on a loaded machine: its serving threads run SCHED_FIFO at HARDWARE_STAND_IN_PRIORITY,
+    above the vehicle's processes, and the rest of the test process stays SCHED_OTHER. (A full-suite run lost an
+    armed pool-day test to an emulated I2C call that took 0.18 s against the ESC's 0.15 s bound.)"""
+    import threading
+
+    from hindrax_drivers.config import default_config_path, load_config
+    from hindrax_drivers.emulated_devices import EmulatedDevices
+    from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY
+    from hindrax_drivers.testing import wait_until
+    from hindrax_drivers.transport.socket_i2c import SocketI2CBus
+
+    cfg = load_config(default_config_path())
+    serving = {"i2c-socket-accept", "i2c-socket", "PtyDevice"}
+    with EmulatedDevices(cfg, tmp_path) as dev:
+        client = SocketI2CBus(dev.socket_path)
+        try:
+            client.read_byte_data(int(cfg.esc.i2c_address), 0x00)  # MODE1: a connection, so a serving thread
+
+            def policies() -> dict[str, set]:
+                out: dict[str, set] = {}
+                for t in threading.enumerate():
+                    if t.name in serving and t.native_id is not None:
+                        out.setdefault(t.name, set()).add((os.sched_getscheduler(t.native_id),
+                                                           os.sched_getparam(t.native_id).sched_priority))
+                return out
+            if may_set_fifo(HARDWARE_STAND_IN_PRIORITY):
+                fifo = {(os.SCHED_FIFO, HARDWARE_STAND_IN_PRIORITY)}
+                got = wait_until(lambda: (lambda p: p if set(p) == serving and all(v == fifo for v in p.values())
+                                          else None)(policies()), 5, None, "the serving threads SCHED_FIFO")
+                assert len(got) == 3
+            else:
+                wait_until(lambda: dev.dvl.scheduling_refused and dev.ping.scheduling_refused, 5, None, "refusals")
+                assert "refused" in dev.dvl.scheduling_refused
+            assert os.sched_getscheduler(0) == os.SCHED_OTHER  # the test's own thread: untouched
+        finally:
+            client.close()

@@ -37,6 +37,8 @@ import time
 import tty
 from typing import Callable, Optional, Protocol, TypeVar, runtime_checkable
 
+from ..scheduling import set_this_thread
+
 __all__ = ["ByteStreamEmulator", "StreamFaults", "PeriodicSchedule", "PtyDevice"]
 
 T = TypeVar("T")
@@ -261,17 +263,22 @@ class PtyDevice:
         poll_period_s: wall-clock period of the service loop.
         link_name: file name of the stable symlink inside a private temporary directory.
         start: start the service thread immediately.
+        realtime_priority: > 0: the service thread alone runs ``SCHED_FIFO`` at it
+            (:func:`hindrax_drivers.scheduling.set_this_thread`): bytes on time on a loaded machine, as a UART's.
     Raises:
         OSError: if a pty cannot be created.
     """
 
     def __init__(self, emulator: ByteStreamEmulator, clock: Callable[[], float] = time.monotonic,
-                 poll_period_s: float = 0.002, link_name: str = "tty", start: bool = True) -> None:
+                 poll_period_s: float = 0.002, link_name: str = "tty", start: bool = True,
+                 realtime_priority: int = 0) -> None:
         if poll_period_s <= 0:
             raise ValueError("poll_period_s must be positive")
         self.emulator = emulator
         self.clock = clock
         self.poll_period_s = float(poll_period_s)
+        #: ``SCHED_FIFO`` priority of the service thread (0: the process's scheduling); '' or why it was refused.
+        self.realtime_priority, self.scheduling_refused = int(realtime_priority), ""
         #: Lock held around every emulator call.
         self.lock = threading.RLock()
         self._dir = tempfile.mkdtemp(prefix="hindrax_pty_")
@@ -361,6 +368,8 @@ class PtyDevice:
             self._thread.start()
 
     def _run(self) -> None:
+        if self.realtime_priority:
+            self.scheduling_refused = set_this_thread(self.realtime_priority)
         while not self._stop.is_set():
             if not self._cycle(self.poll_period_s, None, True):
                 self._stop.wait(self.poll_period_s)

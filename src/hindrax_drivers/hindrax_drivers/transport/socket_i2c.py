@@ -27,6 +27,8 @@ import threading
 from multiprocessing.connection import Client, Listener
 from typing import Any
 
+from ..scheduling import set_this_thread
+
 __all__ = ["SOCKET_ENV", "I2CSocketServer", "SocketI2CBus"]
 
 #: environment variable: path of an :class:`I2CSocketServer` socket that ``open_smbus`` connects to instead of
@@ -92,11 +94,15 @@ class SocketI2CBus:
 class I2CSocketServer:
     """Serves ``bus`` (an EmulatedI2CBus, or any object with its methods) to :class:`SocketI2CBus` clients at
     ``path``, one thread per connection; every call holds ``lock`` (share it with whatever else drives the
-    emulators, e.g. a simulator's stepping). :meth:`close` stops serving: the socket file goes and every client's
+    emulators, e.g. a simulator's stepping). ``realtime_priority`` > 0: the serving threads alone run ``SCHED_FIFO``
+    at it (:func:`hindrax_drivers.scheduling.set_this_thread`), so that they answer within the drivers' bus deadlines
+    on a loaded machine, as the hardware does. :meth:`close` stops serving: the socket file goes and every client's
     next call fails (a removed adapter)."""
 
-    def __init__(self, bus: Any, path: str, lock: threading.Lock | None = None) -> None:
+    def __init__(self, bus: Any, path: str, lock: threading.Lock | None = None, realtime_priority: int = 0) -> None:
         self.bus, self.lock, self.path = bus, lock or threading.Lock(), path
+        #: ``SCHED_FIFO`` priority of the serving threads (0: they keep the process's scheduling); '' or why refused
+        self.realtime_priority, self.scheduling_refused = int(realtime_priority), ""
         self._listener = Listener(path, family="AF_UNIX")
         self._conns: list[Any] = []
         self._conns_lock = threading.Lock()
@@ -121,6 +127,8 @@ class I2CSocketServer:
                 pass
 
     def _accept(self) -> None:
+        if self.realtime_priority:  # the serving threads it starts inherit it
+            self.scheduling_refused = set_this_thread(self.realtime_priority)
         while True:
             try:
                 conn = self._listener.accept()

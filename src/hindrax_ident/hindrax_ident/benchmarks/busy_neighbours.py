@@ -29,7 +29,7 @@ import subprocess
 import sys
 import time
 
-from hindrax_drivers.scheduling import set_every_thread
+from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
 from hindrax_drivers.testing import python_executable
 
 from .participant_churn import _VehicleLayout, _Watch
@@ -39,7 +39,7 @@ from .safety import running_layout
 NEIGHBOURS, DURATION_S, QUICK_DURATION_S = 2, 60.0, 20.0
 GAP_TARGET_MS = 100.0
 #: this process's SCHED_FIFO priority during the run: the emulated hardware, above the safety processes (at most 12)
-HARDWARE_PRIORITY = 20
+HARDWARE_PRIORITY = HARDWARE_STAND_IN_PRIORITY
 
 
 class _NiceOnlyLayout(_VehicleLayout):

@@ -46,7 +46,7 @@ import numpy as np
 
 from hindrax_drivers.config import load_config
 from hindrax_drivers.emulated_devices import driver_env, driver_ros_arguments
-from hindrax_drivers.scheduling import PRIORITY_ENV, apply_realtime_priority
+from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, PRIORITY_ENV, apply_realtime_priority
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer
 
 from ..identification.online.campaign import PoolOperator
@@ -139,9 +139,8 @@ class LivePoolServer:
         self.hardware.close()
 
 
-#: the pool's ``SCHED_FIFO`` priority: above every vehicle process (5-12, ``vehicle.launch.xml``), as hardware answers
-#: whatever the Pi's load, and within :data:`hindrax_drivers.scheduling.PRIORITY_RANGE`
-POOL_REALTIME_PRIORITY = 20
+#: the pool's ``SCHED_FIFO`` priority: the hardware stand-in's, above every vehicle process
+POOL_REALTIME_PRIORITY = HARDWARE_STAND_IN_PRIORITY
 
 
 def take_hardware_priority() -> str:
