@@ -131,11 +131,13 @@ def test_emulated_devices_serve_from_real_time_threads_only(tmp_path):
     from hindrax_drivers.config import default_config_path, load_config
     from hindrax_drivers.emulated_devices import EmulatedDevices
     from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY
+    from hindrax_drivers.conditions import ConditionTimeout
     from hindrax_drivers.testing import wait_until
     from hindrax_drivers.transport.socket_i2c import SocketI2CBus
 
     cfg = load_config(default_config_path())
     serving = {"i2c-socket-accept", "i2c-socket", "PtyDevice"}
+    earlier = set(threading.enumerate())  # the worker's earlier tests may leave threads of these names behind
     with EmulatedDevices(cfg, tmp_path) as dev:
         client = SocketI2CBus(dev.socket_path)
         try:
@@ -143,16 +145,18 @@ def test_emulated_devices_serve_from_real_time_threads_only(tmp_path):
 
             def policies() -> dict[str, set]:
                 out: dict[str, set] = {}
-                for t in threading.enumerate():
+                for t in set(threading.enumerate()) - earlier:
                     if t.name in serving and t.native_id is not None:
                         out.setdefault(t.name, set()).add((os.sched_getscheduler(t.native_id),
                                                            os.sched_getparam(t.native_id).sched_priority))
                 return out
             if may_set_fifo(HARDWARE_STAND_IN_PRIORITY):
                 fifo = {(os.SCHED_FIFO, HARDWARE_STAND_IN_PRIORITY)}
-                got = wait_until(lambda: (lambda p: p if set(p) == serving and all(v == fifo for v in p.values())
-                                          else None)(policies()), 5, None, "the serving threads SCHED_FIFO")
-                assert len(got) == 3
+                try:
+                    wait_until(lambda: (lambda p: set(p) == serving and all(v == fifo for v in p.values()))(
+                        policies()), 5, None, "the serving threads SCHED_FIFO")
+                except ConditionTimeout:
+                    raise AssertionError(f"(policy, priority) by thread: {policies()}") from None
             else:
                 wait_until(lambda: dev.dvl.scheduling_refused and dev.ping.scheduling_refused, 5, None, "refusals")
                 assert "refused" in dev.dvl.scheduling_refused
