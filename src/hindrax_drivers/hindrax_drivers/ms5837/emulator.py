@@ -73,7 +73,9 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
 
     Returns:
         (D1, D2), each 0..2^24-1. The round trip error is within half an output LSB
-        (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range.
+        (30BA: 5 Pa, 02BA: 0.5 Pa; 0.005 degC) plus the ADC step, inside the representable range; with
+        the second-order model up to 0.01 degC, where TEMP and Ti change at the same D2 and TEMP2 skips a
+        value.
 
     Raises:
         Ms5837Error: non-finite inputs.
