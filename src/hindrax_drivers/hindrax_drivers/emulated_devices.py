@@ -30,8 +30,8 @@ from .dvl75.emulator import Dvl75Emulator, DvlTruth
 from .icm20948.emulator import Icm20948Emulator
 from .ms5837.emulator import Ms5837Emulator
 from .pca9685.emulator import Pca9685Emulator
-from .scheduling import HARDWARE_STAND_IN_PRIORITY
 from .ping1d.emulator import Ping1dEmulator, Ping1dTruth
+from .scheduling import HARDWARE_STAND_IN_PRIORITY
 from .transport.emulated_i2c import EmulatedI2CBus
 from .transport.pty_device import PtyDevice
 from .transport.socket_i2c import SOCKET_ENV, I2CSocketServer

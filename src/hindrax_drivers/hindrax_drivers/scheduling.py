@@ -93,11 +93,15 @@ def apply_realtime_priority(environ: Mapping[str, str] | None = None) -> Schedul
     try:
         done = set_every_thread(os.SCHED_FIFO, priority)
     except OSError as exc:
-        soft, _hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
-        why = "not permitted" if exc.errno == errno.EPERM else os.strerror(exc.errno or 0)
-        return Scheduling(priority, False, f"{why}: needs CAP_SYS_NICE or RLIMIT_RTPRIO >= {priority} "
-                                           f"(RLIMIT_RTPRIO is {soft})")
+        return Scheduling(priority, False, _refusal(exc, priority))
     return Scheduling(priority, True, threads=done)
+
+
+def _refusal(exc: OSError, priority: int) -> str:
+    """Why ``SCHED_FIFO`` at ``priority`` was refused (``exc``: the ``sched_setscheduler`` error)."""
+    soft, _hard = resource.getrlimit(resource.RLIMIT_RTPRIO)
+    why = "not permitted" if exc.errno == errno.EPERM else os.strerror(exc.errno or 0)
+    return f"{why}: needs CAP_SYS_NICE or RLIMIT_RTPRIO >= {priority} (RLIMIT_RTPRIO is {soft})"
 
 
 def set_every_thread(policy: int, priority: int) -> int:
@@ -129,11 +133,13 @@ def set_this_thread(priority: int) -> str:
     """Put the calling thread alone under ``SCHED_FIFO`` ``priority`` (Linux schedules threads, not processes: sched(7);
     threads it starts afterwards inherit it). For a thread that stands in for hardware inside a process that must not
     become real-time as a whole (a test process serving emulated devices). Returns '' when granted, else why not
-    (``CAP_SYS_NICE`` or ``RLIMIT_RTPRIO``); the thread then keeps its scheduling."""
+    (``CAP_SYS_NICE`` or ``RLIMIT_RTPRIO``); the thread then keeps its scheduling. ``priority`` 0: nothing asked."""
+    if priority <= 0:
+        return ""
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except OSError as exc:
-        return f"SCHED_FIFO priority {priority} refused: {exc.strerror}"
+        return f"SCHED_FIFO priority {priority} refused ({_refusal(exc, priority)})"
     return ""
 
 

@@ -11,9 +11,10 @@ import serial
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.conditions import wait_until
 from hindrax_drivers.emulated_devices import I2C_DEVICES, SERIAL_DEVICES
+from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY
 from hindrax_drivers.testing import child_env, may_set_fifo
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV, SocketI2CBus
-from hindrax_ident.sim.live_pool import POOL_REALTIME_PRIORITY, LivePool
+from hindrax_ident.sim.live_pool import LivePool
 
 
 # PCA9685 registers (NXP PCA9685 datasheet rev. 4, §7.3): MODE1, LED0_ON_L, PRE_SCALE
@@ -41,11 +42,11 @@ def test_live_pool_moves_with_the_pulse_widths_and_the_operator(tmp_path):
         # the serving threads too, started after the call: they inherited it
         policies = {(os.sched_getscheduler(int(t)), os.sched_getparam(int(t)).sched_priority)
                     for t in os.listdir(f"/proc/{pool.pid}/task")}
-        if may_set_fifo(POOL_REALTIME_PRIORITY):
-            assert policies == {(os.SCHED_FIFO, POOL_REALTIME_PRIORITY)}, policies
-            assert f"live pool: SCHED_FIFO priority {POOL_REALTIME_PRIORITY} (" in pool.log(), pool.log()
+        if may_set_fifo(HARDWARE_STAND_IN_PRIORITY):
+            assert policies == {(os.SCHED_FIFO, HARDWARE_STAND_IN_PRIORITY)}, policies
+            assert f"live pool: SCHED_FIFO priority {HARDWARE_STAND_IN_PRIORITY} (" in pool.log(), pool.log()
         else:
-            assert f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} refused" in pool.log(), pool.log()
+            assert f"SCHED_FIFO priority {HARDWARE_STAND_IN_PRIORITY} refused" in pool.log(), pool.log()
         # simulated time follows the wall clock
         t0_sim, t0_wall = pool.truth()["t_s"], time.monotonic()
         wait_until(lambda: time.monotonic() - t0_wall > 1.0, 5.0)

@@ -368,8 +368,7 @@ class PtyDevice:
             self._thread.start()
 
     def _run(self) -> None:
-        if self.realtime_priority:
-            self.scheduling_refused = set_this_thread(self.realtime_priority)
+        self.scheduling_refused = set_this_thread(self.realtime_priority)
         while not self._stop.is_set():
             if not self._cycle(self.poll_period_s, None, True):
                 self._stop.wait(self.poll_period_s)

@@ -127,8 +127,7 @@ class I2CSocketServer:
                 pass
 
     def _accept(self) -> None:
-        if self.realtime_priority:  # the serving threads it starts inherit it
-            self.scheduling_refused = set_this_thread(self.realtime_priority)
+        self.scheduling_refused = set_this_thread(self.realtime_priority)  # the serving threads inherit it
         while True:
             try:
                 conn = self._listener.accept()

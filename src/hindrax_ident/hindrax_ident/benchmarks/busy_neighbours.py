@@ -6,7 +6,7 @@ layout of :func:`hindrax_ident.benchmarks.safety.running_layout`) are armed and 
 :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a session of their own (as another service or
 a terminal on the Pi), run for :data:`DURATION_S` seconds. This process stands for the hardware (it serves the
 emulated PCA9685 and its /OE line) and watches the heartbeats; hardware is never starved by a CPU load, so for the
-run it takes ``SCHED_FIFO`` at :data:`HARDWARE_PRIORITY`, above the safety processes.
+run it takes ``SCHED_FIFO`` at :data:`HARDWARE_STAND_IN_PRIORITY`, above the safety processes.
 
 * ``busy_neighbours_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
 * ``busy_neighbours_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three
@@ -38,8 +38,6 @@ from .safety import running_layout
 #: CPU-bound neighbours, and how long they run while the vehicle is armed (QUICK_DURATION_S with --quick), s
 NEIGHBOURS, DURATION_S, QUICK_DURATION_S = 2, 60.0, 20.0
 GAP_TARGET_MS = 100.0
-#: this process's SCHED_FIFO priority during the run: the emulated hardware, above the safety processes (at most 12)
-HARDWARE_PRIORITY = HARDWARE_STAND_IN_PRIORITY
 
 
 class _NiceOnlyLayout(_VehicleLayout):
@@ -58,7 +56,7 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
             # this process's threads (emulated hardware, probe) are all running now: real-time from here on, and
             # SCHED_RESET_ON_FORK so that what it starts (the node processes, the neighbours) does not inherit it
             try:
-                set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_PRIORITY)
+                set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_STAND_IN_PRIORITY)
             except OSError as exc:
                 why = f"not measured: SCHED_FIFO not permitted here ({exc.strerror})"
                 return [{"name": prefix + "disarms", "value": None, "unit": "disarms", "note": why},

@@ -139,21 +139,17 @@ class LivePoolServer:
         self.hardware.close()
 
 
-#: the pool's ``SCHED_FIFO`` priority: the hardware stand-in's, above every vehicle process
-POOL_REALTIME_PRIORITY = HARDWARE_STAND_IN_PRIORITY
-
-
 def take_hardware_priority() -> str:
-    """Put every thread of this process under ``SCHED_FIFO`` :data:`POOL_REALTIME_PRIORITY`, so the emulated devices
+    """Put every thread of this process under ``SCHED_FIFO`` :data:`HARDWARE_STAND_IN_PRIORITY`, so the emulated devices
     answer in microseconds whatever the load, as the vehicle's hardware does. A nice value cannot do that: it ranks
     a process only within its own session (:mod:`hindrax_drivers.scheduling`). Call it before the devices' threads
     start: they inherit it. Not with ``SCHED_RESET_ON_FORK``: the kernel applies that to every new thread too, and
     the serving threads would run ``SCHED_OTHER``; the process starts no other process. Refused (no
     ``CAP_SYS_NICE``): nice -10 if permitted. Returns the one line that says which."""
-    result = apply_realtime_priority({PRIORITY_ENV: str(POOL_REALTIME_PRIORITY)})
+    result = apply_realtime_priority({PRIORITY_ENV: str(HARDWARE_STAND_IN_PRIORITY)})
     if result.granted:
-        return f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} ({result.threads} thread(s) at start)"
-    refused = f"SCHED_FIFO priority {POOL_REALTIME_PRIORITY} refused ({result.reason})"
+        return f"SCHED_FIFO priority {HARDWARE_STAND_IN_PRIORITY} ({result.threads} thread(s) at start)"
+    refused = f"SCHED_FIFO priority {HARDWARE_STAND_IN_PRIORITY} refused ({result.reason})"
     try:
         os.nice(-10)
         return f"{refused}; nice -10 (its devices may answer late under load)"
