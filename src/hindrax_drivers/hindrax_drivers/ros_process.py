@@ -19,9 +19,11 @@ Exceptions leaving the block:
 - ``KeyboardInterrupt`` and rclpy's ``ExternalShutdownException`` (SIGINT/SIGTERM) end the process normally;
 - an exception of a type listed in ``errors`` (e.g. an invalid configuration) is printed as one line,
   ``"<prefix>: <first line of the message>"``, on stderr and sets :attr:`RosProcess.status` to 1;
-- any other exception is re-raised, except while the context is already shutting down: a callback that was
-  running when the signal arrived may then fail inside rcl ("publisher's context is invalid"), which is part
-  of the orderly shutdown, not a crash.
+- any other exception is re-raised, except while the context is already shutting down or after a SIGINT/SIGTERM:
+  a callback that was running when the signal arrived may then fail inside rcl ("publisher's context is
+  invalid"), and a ``KeyboardInterrupt`` raised while the main thread was inside a C extension's call back into
+  Python comes out renamed (pybind11: ``RuntimeError: Unable to convert call argument ...``); both are part of the
+  orderly shutdown, not a crash.
 
 The executor is rclpy's ``EventsExecutor`` (``rclpy.experimental``, Jazzy) unless the environment variable
 ``HINDRAX_EXECUTOR`` says ``single`` (rclpy's ``SingleThreadedExecutor``). The SingleThreadedExecutor rebuilds
@@ -351,7 +353,7 @@ class RosProcess:
                 print(f"{prefix}: {lines[0] if lines else exc_type.__name__}", file=sys.stderr)
                 self.status = 1
                 return True
-        return isinstance(exc, Exception) and shutting_down
+        return isinstance(exc, Exception) and (shutting_down or bool(self.signals))
 
 
 def _in_exit(frame: FrameType | None) -> bool:

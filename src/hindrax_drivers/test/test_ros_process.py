@@ -79,6 +79,20 @@ def test_an_error_during_shutdown_is_part_of_the_orderly_exit():
     assert proc.status == 0
 
 
+def test_an_interruption_renamed_by_a_c_extension_is_part_of_the_orderly_exit():
+    """SIGINT's KeyboardInterrupt raised inside pybind11's call back into Python comes out as a RuntimeError (CI,
+    a9227b6, rclpy's ``take_goal_response``), possibly before rclpy's own handler thread shut the context down."""
+    log: list = []
+    with RosProcess([]) as proc:
+        proc.own(FakeNode("a", log))
+        try:
+            proc._on_signal(signal.SIGINT, None)  # Python's handler, as the interpreter runs it
+        except KeyboardInterrupt:
+            assert rclpy.ok()  # the context is still up: only the recorded signal tells
+            raise RuntimeError("Unable to convert call argument '1' to Python object") from None
+    assert proc.status == 0 and log == ["close a", "destroy a"] and not rclpy.ok()
+
+
 def test_a_failing_cleanup_does_not_skip_the_others():
     log: list = []
     with pytest.raises(OSError, match="bus gone"):

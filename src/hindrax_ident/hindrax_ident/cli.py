@@ -164,10 +164,26 @@ def _add_module_arguments(parser: argparse.ArgumentParser, module: str) -> None:
     mod.add_arguments(parser)
 
 
+#: the stop signals (SIGINT, SIGTERM) this process received, in order (:func:`_terminate`)
+_stop_signals: list[int] = []
+
+
 def _terminate(signum: int, _frame) -> None:
-    """SIGTERM handler: raise KeyboardInterrupt in the main thread, so a command cleans up (closes its bag, removes
-    its emulated ports) exactly as on Ctrl-C."""
+    """SIGINT and SIGTERM handler: record the signal and raise KeyboardInterrupt in the main thread, so a command
+    cleans up (closes its bag, removes its emulated ports) on SIGTERM (``docker stop``, ``kill``) exactly as on
+    Ctrl-C.
+
+    Python runs this handler at the next bytecode of the main thread, which may be inside a C extension's call back
+    into Python: pybind11 (rclpy's ``take_goal_response`` converting the response message) then replaces the
+    ``KeyboardInterrupt`` by ``RuntimeError: Unable to convert call argument ...``. :func:`main` therefore reads any
+    exception that ends a command after a stop signal as the interruption (:data:`_stop_signals`)."""
+    _stop_signals.append(signum)
     raise KeyboardInterrupt(f"signal {signum}")
+
+
+def _interrupted() -> int:
+    print("interrupted", file=sys.stderr)
+    return 130
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -179,15 +195,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     from hindrax_drivers.dds_transport import loopback_transport  # stdlib only; --help never gets here
 
-    from .commands.common import CommandError
-
     try:
         loopback_transport()  # before any command creates a participant
     except FileNotFoundError as exc:
         print(f"hindrax: {exc}", file=sys.stderr)
         return 1
     mod = importlib.import_module(args._module)
-    signal.signal(signal.SIGTERM, _terminate)  # SIGTERM (docker stop, kill) ends a command as Ctrl-C does
+    _stop_signals.clear()
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for sig in previous:  # SIGTERM (docker stop, kill) ends a command as Ctrl-C does
+        signal.signal(sig, _terminate)
+    try:
+        return _run_command(mod, args, argv)
+    except Exception:
+        if _stop_signals:  # the interruption, renamed on its way through a C extension (_terminate)
+            return _interrupted()
+        raise
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+
+
+def _run_command(mod, args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """Run the command module ``mod`` on ``args``; returns the exit status, with the errors a user can meet said in
+    one line (1), an interruption 130 and a closed output pipe 141."""
+    from .commands.common import CommandError
+
     try:
         status = int(mod.run(args) or 0)
         sys.stdout.flush()  # inside the try: a closed pipe (| head) is said here, not at interpreter exit
@@ -196,8 +229,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(str(exc), file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+        return _interrupted()
     except (UnicodeDecodeError, RecursionError) as exc:  # an input no reader of the command caught: one line
         what = "a binary file where text was expected" if isinstance(exc, UnicodeDecodeError) else \
             "input nested too deeply (recursion limit)"
