@@ -5,10 +5,13 @@
 - Each pytest-xdist worker (and a plain run) reserves its own ROS domain ID through
   ``domain_coordinator`` (a port lock, so concurrent test runs on one machine never share a domain) and
   exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it.
+- A test that leaves SIGINT or SIGTERM ignored in its worker fails (:func:`_stop_signals_not_left_ignored`): every
+  child the worker starts later would inherit the ignored signal, and ``kill`` or Ctrl-C could not end it.
 """
 from __future__ import annotations
 
 import os
+import signal
 
 import pytest
 
@@ -50,3 +53,19 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         except Exception:  # noqa: BLE001 - releasing the port lock must not fail the run
             pass
         _domain_ctx = None
+
+
+@pytest.fixture(autouse=True)
+def _stop_signals_not_left_ignored():
+    """Fail a test that leaves SIGINT or SIGTERM ignored (``SIG_IGN``, which ``exec`` passes on to children) where it
+    was not before, and put the handler found back. A process that got a stop signal ignores further ones until it
+    exits (:mod:`hindrax_drivers.ros_process`), so a test running such a process in its worker's main thread must
+    restore the handlers. Found by a fresh clone of e0567a0: a ``RosProcess`` test left both ignored, and a later
+    test's bash could not end its own background loop with ``kill``."""
+    sigs = (signal.SIGINT, signal.SIGTERM)
+    before = {sig: signal.getsignal(sig) for sig in sigs}
+    yield
+    left = [sig for sig in sigs if signal.getsignal(sig) == signal.SIG_IGN != before[sig]]
+    for sig in left:
+        signal.signal(sig, before[sig])
+    assert not left, f"the test left {', '.join(signal.Signals(s).name for s in left)} ignored in its worker"
