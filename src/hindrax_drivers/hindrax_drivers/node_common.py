@@ -369,7 +369,7 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
 
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,
-             systemd_notify: bool = False) -> int:
+             systemd_notify: bool = False, exit_process: bool = True) -> int:
     """Process entry point of a node: init, build the node, spin the process's executor, shut down cleanly.
 
     factory: creates the node after ``rclpy.init``. executor: ``events``, ``single`` or None for the default
@@ -378,13 +378,15 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
     1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
     (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
     systemd_notify: READY=1 and WATCHDOG=1 to systemd from the executor (the safety processes,
-    :class:`~hindrax_drivers.sd_notify.SystemdNotifier`).
+    :class:`~hindrax_drivers.sd_notify.SystemdNotifier`). exit_process: in the main thread the process ends on
+    return, without the DDS participant's teardown (:mod:`hindrax_drivers.ros_process`, "Exit without the DDS
+    participant's teardown"): the exit status above becomes the process's, and nothing runs after; False returns it.
     """
-    return run_nodes([factory], args, executor, systemd_notify)
+    return run_nodes([factory], args, executor, systemd_notify, exit_process)
 
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
-              executor: str | None = None, systemd_notify: bool = False) -> int:
+              executor: str | None = None, systemd_notify: bool = False, exit_process: bool = True) -> int:
     """Process entry point of several nodes composed in one process (:mod:`hindrax_drivers.composition`): the nodes
     are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
     reverse order (the last built first). Same arguments, exit
@@ -394,14 +396,16 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
     process takes the real-time priority its environment asks for (:mod:`hindrax_drivers.scheduling`; a bad value
     of ``HINDRAX_REALTIME_PRIORITY`` is an invalid configuration), and logs the outcome once its nodes are built. A
     shutdown that takes longer than :data:`~hindrax_drivers.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every thread's
-    traceback to stderr and exits with status 1 (:class:`~hindrax_drivers.ros_process.RosProcess`)."""
+    traceback to stderr and exits with status 1 (:class:`~hindrax_drivers.ros_process.RosProcess`). exit_process: as
+    for :func:`run_node`."""
     try:
         sched = apply_realtime_priority()
     except ValueError as exc:
         print(f"invalid configuration: {exc}", file=sys.stderr)
         return 1
     with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor=executor,
-                    interrupt=False, shutdown_budget_s=ros_process.SHUTDOWN_BUDGET_S) as proc:
+                    interrupt=False, shutdown_budget_s=ros_process.SHUTDOWN_BUDGET_S,
+                    exit_process=exit_process) as proc:
         nodes = [proc.own(factory()) for factory in factories]
         level, text = describe_scheduling(sched)
         if level and nodes:

@@ -70,6 +70,24 @@ after the budget (a clean-up, the executor's or the context's shutdown that hang
 traceback to stderr and ends the process with status 1, before ``ros2 launch``'s SIGKILL at 10 s would end it
 with nothing said. Signals cannot do this: from the first instruction of ``__exit__`` they are absorbed.
 
+Exit without the DDS participant's teardown: with ``exit_process=True`` (node processes run as programs,
+:func:`~hindrax_drivers.node_common.run_nodes`), ``__exit__`` ends the process itself once the clean-ups, the executor's
+and the context's shutdown are done (``os._exit`` with :attr:`RosProcess.status`, after flushing stdout and stderr; 1
+with the traceback for an exception that would have propagated). Why: rmw_fastrtps destroys the process's DDS
+participant with its last node, and Fast DDS 2.14's ``DomainParticipant::set_listener(nullptr)`` then spins, holding the
+lock that an in-flight discovery callback needs to finish (Fast-DDS issue 6513). At a launch-wide Ctrl-C every peer
+removes its endpoints at once, so such callbacks are in flight: in a reproduction (a receiver and 4 peers with 5
+heartbeat topics each, all sent SIGINT at once) a process spun in it for more than 4 s in 5 of 340 trials, 1 of 150 with
+the vehicle's UDP-only transport (gdb: the main thread in ``destroy_participant`` -> ``set_listener``, a receive thread
+in ``onWriterDiscovery`` or ``onReaderDiscovery`` waiting for the lock), and none in 474 trials with this exit; the
+output guard of the README's pool-day test once exceeded its 8 s budget there. So a hidden node (``_exit_<pid>``, no
+global arguments, no rosout, no parameter services) takes a reference to the participant, every node of the process is
+still destroyed (its endpoints disposed and its name taken off the graph, as before), and the participant itself is left
+to the process's end: peers drop it when its lease expires, and see the hidden node until then. The hidden node is made
+in the first node's clean-up, after its ``close()`` (the ESC's neutral write first). The process's remaining objects are
+never finalised, so the interpreter's exit cannot reach that teardown (nor rclpy's crash at exit, rclpy issue 1644).
+Only in the main thread, and only when the context is still up.
+
 Garbage collection: :meth:`RosProcess.spin` collects once and then freezes every object alive at start-up
 (``gc.freeze``, Python's documented way to keep a long-lived heap out of every later collection) before it spins. A
 node process holds 34,000-57,000 objects once rclpy, numpy and its modules are loaded (94,000 with the
@@ -96,6 +114,7 @@ import signal
 import sys
 import threading
 import time
+import traceback
 from types import FrameType
 from typing import Any, Callable, Mapping, Sequence
 
@@ -195,11 +214,13 @@ class RosProcess:
     executor: ``events`` or ``single`` to fix the executor, None to follow ``HINDRAX_EXECUTOR``. Raises
     ``ValueError`` for another value. interrupt: whether SIGINT raises ``KeyboardInterrupt`` in the block.
     shutdown_budget_s: seconds the exit may take (module docstring, "Bounded shutdown"); None, unbounded.
+    exit_process: end the process on leaving the block, without the DDS participant's teardown (module docstring,
+    "Exit without the DDS participant's teardown"); only in the main thread.
     """
 
     def __init__(self, args: Sequence[str] | None = None, errors: Mapping[type, str] | None = None,
                  executor: str | None = None, interrupt: bool = True,
-                 shutdown_budget_s: float | None = None) -> None:
+                 shutdown_budget_s: float | None = None, exit_process: bool = False) -> None:
         if executor is not None and executor not in EXECUTORS:
             raise ValueError(f"executor={executor!r}: allowed values are {', '.join(EXECUTORS)}")
         self.executor_kind = executor
@@ -208,6 +229,9 @@ class RosProcess:
         self.shutdown_budget_s = shutdown_budget_s
         """Seconds the exit may take before every thread's traceback is dumped and the process ends with status 1
         (module docstring, "Bounded shutdown"); None: unbounded."""
+        self.exit_process = bool(exit_process)
+        """Whether leaving the block ends the process (module docstring, "Exit without the DDS participant's
+        teardown")."""
         self.interrupt = bool(interrupt)
         """Whether SIGINT raises ``KeyboardInterrupt`` in the block (module docstring, "Signals")."""
         self.errors = dict(errors or {})
@@ -219,6 +243,7 @@ class RosProcess:
         """The SIGINT/SIGTERM received, in order (main thread only)."""
         self._stopping = False
         self._previous: dict[int, Any] = {}
+        self._holder: Any = None
         self.frozen_objects = 0
         """Objects frozen for the garbage collector by :meth:`spin` (0 before it)."""
 
@@ -303,6 +328,7 @@ class RosProcess:
             flush_pending = getattr(getattr(node, "raw", None), "flush_pending", None)
             if callable(flush_pending):
                 flush_pending()
+            self._hold_participant()  # after close(): the ESC's neutral write is not delayed by it
             if self._executor is not None:
                 self._executor.remove_node(node)
             node.destroy_node()
@@ -316,11 +342,40 @@ class RosProcess:
         if self.shutdown_budget_s is not None:
             faulthandler.dump_traceback_later(self.shutdown_budget_s, exit=True)
         try:
-            return self._shut_down(exc_type, exc)
-        finally:
+            handled = self._shut_down(exc_type, exc)
+        except BaseException as failure:
+            if self._holder is not None:
+                self._end_process(failure)  # the budget stays armed until the process has ended
             self._release_signals()
             if self.shutdown_budget_s is not None:
                 faulthandler.cancel_dump_traceback_later()
+            raise
+        if self._holder is not None:
+            self._end_process(None if handled or exc_type is None else exc)
+        self._release_signals()
+        if self.shutdown_budget_s is not None:
+            faulthandler.cancel_dump_traceback_later()
+        return handled
+
+    def _hold_participant(self) -> None:
+        """With :attr:`exit_process`, in the main thread, once: the hidden node that keeps the DDS participant to the
+        process's end (:func:`_hold_participant`), before the first node is destroyed."""
+        if self.exit_process and self._holder is None and threading.current_thread() is threading.main_thread():
+            self._holder = _hold_participant()
+
+    def _end_process(self, failure: BaseException | None) -> None:
+        """End the process now (module docstring, "Exit without the DDS participant's teardown"): the traceback of
+        ``failure`` and status 1, or :attr:`status`."""
+        status = self.status
+        if failure is not None:
+            traceback.print_exception(failure)
+            status = 1
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):  # a closed pipe or stream: nothing more can be said
+                pass
+        os._exit(status)
 
     def _shut_down(self, exc_type: type | None, exc: BaseException | None) -> bool:
         """The exit (class docstring): clean-ups, executor and context shutdown; returns whether ``exc`` is
@@ -354,6 +409,20 @@ class RosProcess:
                 self.status = 1
                 return True
         return isinstance(exc, Exception) and (shutting_down or bool(self.signals))
+
+
+def _hold_participant() -> Any:
+    """A hidden node whose only purpose is to keep the process's DDS participant (rmw_fastrtps destroys it with the
+    context's last node) until the process ends (module docstring, "Exit without the DDS participant's teardown").
+    No global arguments (a launch's ``-r __node:=esc`` would name it ``esc``), no rosout, no parameter services.
+    None when the context is already shut down (the ordinary exit follows)."""
+    if not rclpy.ok():
+        return None
+    try:
+        return rclpy.create_node(f"_exit_{os.getpid()}", use_global_arguments=False, enable_rosout=False,
+                                 start_parameter_services=False)
+    except Exception:  # noqa: BLE001 - the context went down meanwhile: the ordinary exit follows
+        return None
 
 
 def _in_exit(frame: FrameType | None) -> bool:

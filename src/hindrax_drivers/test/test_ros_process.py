@@ -242,7 +242,7 @@ class Probe(Node):
         wait_until(go.exists, 60, message="go")
 
 
-rc = run_node(Probe, [])
+rc = run_node(Probe, [], exit_process=False)  # the tests below also look at what follows its return
 say(f"returned {rc}")
 wait_until(Path(f"{go}.2").exists, 60, message="go 2")
 sys.exit(rc)
@@ -370,13 +370,14 @@ def test_a_node_process_shuts_down_on_sigint_without_a_keyboard_interrupt_in_a_c
 
     class Recording(RosProcess):
         def __init__(self, *args, **kwargs):
-            built.append(kwargs)
+            built.append(dict(kwargs))
+            kwargs["exit_process"] = False  # this is pytest's worker: it must go on
             super().__init__(*args, **kwargs)
 
     monkeypatch.setattr(node_common, "RosProcess", Recording)
     with pytest.raises(RuntimeError):  # the factory fails at once: only the construction is looked at here
         node_common.run_nodes([lambda: (_ for _ in ()).throw(RuntimeError("no node"))], [])
-    assert built and built[0].get("interrupt") is False
+    assert built and built[0].get("interrupt") is False and built[0].get("exit_process") is True
     probe = SignalProbe(tmp_path)
     try:
         probe.wait_for("spinning")
@@ -437,3 +438,75 @@ def test_freeze_startup_heap_collects_start_up_garbage_and_freezes_the_rest():
     finally:
         sys.setswitchinterval(interval)
         gc.unfreeze()
+
+
+# A node process as the vehicle runs it (run_node, exit_process left at its default): a node publishing on
+# exit_probe/beat, "spinning" at its first tick, "closed" when its close() has run; "returned" would follow run_node's
+# return, which must not come.
+EXIT_PROBE = r"""
+from rclpy.node import Node
+from std_msgs.msg import Empty
+
+from hindrax_drivers.node_common import run_node
+
+
+class ExitProbe(Node):
+    def __init__(self):
+        super().__init__("exit_probe")
+        self.pub = self.create_publisher(Empty, "exit_probe/beat", 10)
+        self.ticks = 0
+        self.create_timer(0.02, self.tick)
+
+    def tick(self):
+        self.pub.publish(Empty())
+        self.ticks += 1
+        if self.ticks == 1:
+            print("spinning", flush=True)
+
+    def close(self):
+        print("closed", flush=True)
+
+
+rc = run_node(ExitProbe, [])
+print(f"returned {rc}", flush=True)
+"""
+
+
+def test_a_node_process_ends_in_run_node_after_destroying_its_node(tmp_path):
+    """A node process ends inside run_node (module docstring of ros_process, "Exit without the DDS participant's
+    teardown"): on SIGINT its close() runs, it exits 0 with nothing after run_node run, and its node and publisher
+    leave the graph of a process that watches it, as with an ordinary exit (only its participant is left to its
+    lease)."""
+    script = tmp_path / "exit_probe.py"
+    script.write_text(EXIT_PROBE)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        watcher = rclpy.create_node("exit_watcher", context=context)
+
+        def seen() -> bool:
+            return "exit_probe" in watcher.get_node_names() and watcher.count_publishers("/exit_probe/beat") == 1
+
+        with subprocess.Popen([python_executable(), str(script)], env=child_env(), stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, text=True) as proc:
+            try:
+                lines: list[str] = []
+                reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+                reader.start()
+                wait_until(lambda: any("spinning" in ln for ln in lines) and seen() or proc.poll() is not None, 60,
+                           message="the probe spinning and on the graph")
+                assert proc.poll() is None, "".join(lines)
+                proc.send_signal(signal.SIGINT)
+                assert proc.wait(timeout=30) == 0, "".join(lines)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+                    proc.wait()
+            reader.join(10)
+        out = "".join(lines)
+        assert "closed" in out and "returned" not in out and "Traceback" not in out, out
+        wait_until(lambda: "exit_probe" not in watcher.get_node_names()
+                   and watcher.count_publishers("/exit_probe/beat") == 0, 10,
+                   message="the probe's node and publisher off the graph")
+    finally:
+        rclpy.try_shutdown(context=context)
