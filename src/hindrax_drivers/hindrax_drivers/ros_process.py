@@ -341,27 +341,26 @@ class RosProcess:
         self._stopping = True  # first: from here on SIGINT and SIGTERM are absorbed (_on_signal)
         if self.shutdown_budget_s is not None:
             faulthandler.dump_traceback_later(self.shutdown_budget_s, exit=True)
-        try:
-            handled = self._shut_down(exc_type, exc)
-        except BaseException as failure:
+        try:  # _end_process never returns: the budget stays armed until the process has ended
+            try:
+                handled = self._shut_down(exc_type, exc)
+            except BaseException as failure:
+                if self._holder is not None:
+                    self._end_process(failure)
+                raise
             if self._holder is not None:
-                self._end_process(failure)  # the budget stays armed until the process has ended
+                self._end_process(None if handled or exc_type is None else exc)
+            return handled
+        finally:
             self._release_signals()
             if self.shutdown_budget_s is not None:
                 faulthandler.cancel_dump_traceback_later()
-            raise
-        if self._holder is not None:
-            self._end_process(None if handled or exc_type is None else exc)
-        self._release_signals()
-        if self.shutdown_budget_s is not None:
-            faulthandler.cancel_dump_traceback_later()
-        return handled
 
     def _hold_participant(self) -> None:
         """With :attr:`exit_process`, in the main thread, once: the hidden node that keeps the DDS participant to the
-        process's end (:func:`_hold_participant`), before the first node is destroyed."""
+        process's end (:func:`_participant_holder`), before the first node is destroyed."""
         if self.exit_process and self._holder is None and threading.current_thread() is threading.main_thread():
-            self._holder = _hold_participant()
+            self._holder = _participant_holder()
 
     def _end_process(self, failure: BaseException | None) -> None:
         """End the process now (module docstring, "Exit without the DDS participant's teardown"): the traceback of
@@ -411,7 +410,7 @@ class RosProcess:
         return isinstance(exc, Exception) and (shutting_down or bool(self.signals))
 
 
-def _hold_participant() -> Any:
+def _participant_holder() -> Any:
     """A hidden node whose only purpose is to keep the process's DDS participant (rmw_fastrtps destroys it with the
     context's last node) until the process ends (module docstring, "Exit without the DDS participant's teardown").
     No global arguments (a launch's ``-r __node:=esc`` would name it ``esc``), no rosout, no parameter services.

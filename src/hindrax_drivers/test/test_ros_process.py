@@ -14,7 +14,7 @@ from rclpy.executors import ExternalShutdownException
 from hindrax_drivers.config import ConfigError
 from hindrax_drivers import ros_process
 from hindrax_drivers.ros_process import RosProcess, executor_kind, freeze_startup_heap
-from hindrax_drivers.testing import child_env, python_executable, wait_until
+from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -487,22 +487,16 @@ def test_a_node_process_ends_in_run_node_after_destroying_its_node(tmp_path):
         def seen() -> bool:
             return "exit_probe" in watcher.get_node_names() and watcher.count_publishers("/exit_probe/beat") == 1
 
-        with subprocess.Popen([python_executable(), str(script)], env=child_env(), stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True) as proc:
-            try:
-                lines: list[str] = []
-                reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
-                reader.start()
-                wait_until(lambda: any("spinning" in ln for ln in lines) and seen() or proc.poll() is not None, 60,
-                           message="the probe spinning and on the graph")
-                assert proc.poll() is None, "".join(lines)
-                proc.send_signal(signal.SIGINT)
-                assert proc.wait(timeout=30) == 0, "".join(lines)
-            finally:
-                if proc.poll() is None:
-                    proc.kill()
-                    proc.wait()
-            reader.join(10)
+        with child_process([python_executable(), str(script)], env=child_env(), stdout=subprocess.PIPE,
+                           stderr=subprocess.STDOUT, text=True) as proc:
+            lines: list[str] = []
+            reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+            reader.start()
+            wait_until(lambda: any("spinning" in ln for ln in lines) and seen() or proc.poll() is not None, 60,
+                       message="the probe spinning and on the graph")
+            assert proc.poll() is None, "".join(lines)
+            assert interrupt(proc, 30) == 0, "".join(lines)
+        reader.join(10)
         out = "".join(lines)
         assert "closed" in out and "returned" not in out and "Traceback" not in out, out
         wait_until(lambda: "exit_probe" not in watcher.get_node_names()
