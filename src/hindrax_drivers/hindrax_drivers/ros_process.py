@@ -123,7 +123,8 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options, uninstall_signal_handlers
 
-__all__ = ["EXECUTORS", "RosProcess", "SHUTDOWN_BUDGET_S", "executor_kind", "freeze_startup_heap"]
+__all__ = ["BEFORE_PROCESS_END", "EXECUTORS", "RosProcess", "SHUTDOWN_BUDGET_S", "executor_kind",
+           "freeze_startup_heap"]
 
 #: values of ``HINDRAX_EXECUTOR``
 EXECUTORS = ("events", "single")
@@ -132,6 +133,11 @@ EXECUTORS = ("events", "single")
 #: (module docstring, "Bounded shutdown"): below ``ros2 launch``'s SIGKILL, 10 s after its SIGINT; the slowest
 #: clean-up measured, the recorder finishing a bag, takes well under a second
 SHUTDOWN_BUDGET_S = 8.0
+
+#: callables run, in order, by a process that ends itself (``exit_process=True``) just before ``os._exit``: what a
+#: program would have put in ``atexit`` or a ``finally`` after the block (the bench's cProfile dump), which that exit
+#: skips; an exception out of one is printed and the others still run
+BEFORE_PROCESS_END: list[Callable[[], Any]] = []
 
 #: the signals that end a process (module docstring, "Signals")
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -369,6 +375,11 @@ class RosProcess:
         if failure is not None:
             traceback.print_exception(failure)
             status = 1
+        for hook in BEFORE_PROCESS_END:
+            try:
+                hook()
+            except Exception as error:  # noqa: BLE001 - the exit goes on; say what failed
+                traceback.print_exception(error)
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()

@@ -195,3 +195,63 @@ def test_node_processes_import_neither_the_pool_nor_scipy():
         if found:
             bad[label] = found
     assert not bad, f"node processes import what they must not: {bad}"
+
+
+_PROFILED_NODE = r"""
+from rclpy.node import Node
+
+from hindrax_drivers.node_common import run_node
+
+
+class ProfiledProbe(Node):
+    def __init__(self):
+        super().__init__("profiled_probe")
+        self.ticks = 0
+        self.create_timer(0.02, self.probe_tick)
+
+    def probe_tick(self):
+        self.ticks += 1
+        if self.ticks == 5:
+            print("spinning", flush=True)
+
+    def close(self):
+        print("closed", flush=True)
+
+
+def main():
+    return run_node(ProfiledProbe, [])
+"""
+
+
+def test_a_profiled_node_process_writes_its_profile_although_it_ends_itself(tmp_path):
+    """``HINDRAX_BENCH_PROFILE``: a node process run by launch_node under cProfile writes ``<module>.prof`` when
+    SIGINT ends it, although a node process ends itself with ``os._exit`` (ros_process, "Exit without the DDS
+    participant's teardown"), which skips launch_node's ``finally``; the profile holds the node's timer callback.
+    Before BEFORE_PROCESS_END no file was written."""
+    import pstats
+    import subprocess
+    import threading
+
+    from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, wait_until
+    from hindrax_ident.benchmarks.launch_node import PROFILE_ENV
+
+    (tmp_path / "profiled_probe.py").write_text(_PROFILED_NODE)
+    profile_dir = tmp_path / "prof"
+    profile_dir.mkdir()
+    env = child_env()
+    env[PROFILE_ENV] = str(profile_dir)
+    env["PYTHONPATH"] = str(tmp_path) + (":" + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    with child_process([python_executable(), "-m", "hindrax_ident.benchmarks.launch_node", "profiled_probe:main"],
+                       env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as proc:
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+        reader.start()
+        wait_until(lambda: any("spinning" in ln for ln in lines) or proc.poll() is not None, 60,
+                   message="the profiled probe spinning")
+        assert proc.poll() is None, "".join(lines)
+        assert interrupt(proc, 30) == 0, "".join(lines)
+    reader.join(10)
+    assert "closed" in "".join(lines), "".join(lines)
+    stats = pstats.Stats(str(profile_dir / "profiled_probe.main.prof"))
+    ticks = [calls for (_, _, name), (calls, *_rest) in stats.stats.items() if name == "probe_tick"]
+    assert ticks and ticks[0] >= 5, ticks

@@ -8,7 +8,8 @@ so nothing of the node is replaced. This module imports nothing else: no simulat
 (:mod:`hindrax_ident.benchmarks.launch_layout` runs the pool in its own process), so a benchmarked process holds
 the modules, and the memory, the vehicle's process holds (``test_bench_launch_layout.py`` checks it). With
 ``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`) the node runs under cProfile and writes
-``DIR/<module>.prof`` on exit (``python -m pstats``).
+``DIR/<module>.prof`` on exit (``python -m pstats``), also when the node process ends itself with ``os._exit``
+(:data:`hindrax_drivers.ros_process.BEFORE_PROCESS_END`).
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import os
 import sys
 from pathlib import Path
 
+from hindrax_drivers.ros_process import BEFORE_PROCESS_END
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
 
 __all__ = ["PROFILE_ENV", "SOCKET_ENV", "main"]
@@ -44,10 +46,18 @@ def main(argv: list[str] | None = None) -> int:
         return int(run() or 0)
 
     profiler = cProfile.Profile()
+    path = str(Path(profile_dir) / f"{entry.replace(':', '.')}.prof")
+
+    def dump() -> None:
+        profiler.disable()
+        profiler.dump_stats(path)
+
+    BEFORE_PROCESS_END.append(dump)
     try:
         return int(profiler.runcall(run) or 0)
     finally:
-        profiler.dump_stats(str(Path(profile_dir) / f"{entry.replace(':', '.')}.prof"))
+        BEFORE_PROCESS_END.remove(dump)
+        profiler.dump_stats(path)
 
 
 if __name__ == "__main__":
