@@ -19,10 +19,10 @@ import pytest
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.fit.calibration import thrust_scales
 from hindrax_ident.identification.online.campaign import Campaign, PoolOperator
-from hindrax_ident.identification.online.executive import THRUST_STEPS, Executive, expand_calibration
+from hindrax_ident.identification.online.executive import THRUST_STEPS, Executive, TickInput, expand_calibration
 from hindrax_ident.identification.online.maneuvers import PoolBox
 from hindrax_ident.identification.online.steps import (Ballast, BroadbandRun, Dive, Float, Inclining, LinePull,
-                                                       RotationLadder, TiltDecay, TranslationLadder)
+                                                       RotationLadder, Step, TiltDecay, TranslationLadder)
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import truth_dir
 
@@ -251,3 +251,26 @@ def test_attitude_steps_validate_their_arguments():
         Ballast(-1.0)
     with pytest.raises(ValueError, match="surge or sway"):
         LinePull("heave", 4.9)
+
+
+# ------------------------------------------------------------------------------------------------ command rate
+class _Ramp(Step):
+    """A step whose law gives a new wrench every tick: surge force = the tick's index."""
+    name = "ramp"
+
+    def run(self, ctx):
+        for k in range(1000):
+            yield np.array([float(k), 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("rate_hz, ticks", [(25.0, 2), (50.0, 1), (10.0, 5), (None, 2)])
+def test_a_command_is_the_laws_output_of_its_tick_held_for_whole_ticks(cfg, rate_hz, ticks):
+    """Executive "Command rate": the law steps every tick (its output is the tick's index here); every ``ticks``-th
+    tick's output is the command, held unchanged and flagged not new in between. None: the vehicle file's
+    identification.command_rate_hz (25 Hz at the 50 Hz tick)."""
+    ex = Executive(cfg, [], tick_s=0.02, steps=[_Ramp()], command_rate_hz=rate_hz)
+    assert ex.command_ticks == ticks
+    got = [(ex.start(0.0)[0], ex.new_command)]
+    for k in range(1, 21):
+        got.append((ex.step(TickInput(0.02 * k, 0.02, (), True, False))[0], ex.new_command))
+    assert got == [(float(k - k % ticks), k % ticks == 0) for k in range(21)]

@@ -32,6 +32,7 @@ class StandInExecutive:
         self.awaiting, self.prompt, self.continued = "", "", 0
         self.calibration, self.inclining, self.decays, self.online = {}, {}, {}, {}
         self.aborted, self.abort_reason, self.inputs, self.commands = False, "", [], []
+        self.new_command = True                                  # Executive: this tick's wrench is a new command
 
     def start(self, t):
         self.started, self.t_s = True, t
@@ -171,6 +172,22 @@ def test_the_goal_starts_once_every_sensor_has_published_and_commands_the_writte
     c.tick(1.02, False)
     assert ex.commands[-1].shape == (N,) and np.any(np.abs(ex.commands[-1]) > 1.0)
     assert ex.inputs[-1].armed and ex.inputs[-1].elapsed_s == pytest.approx(0.02)
+
+
+def test_a_held_command_is_not_sent_again_but_the_tick_still_records_the_written_thrust():
+    """Executive.new_command false (a tick between two commands, executive module docstring "Command rate"): no
+    wrench event, the written thrust is still recorded and the tick still goes to the executive."""
+    c = core()
+    ready(c)
+    c.accept("h", goal(), 0.0)
+    assert "wrench" in kinds(c.tick(1.0, False))
+    ex = c.run.executive
+    ex.new_command = False
+    assert "wrench" not in kinds(c.tick(1.02, False))
+    assert len(ex.commands) == 2 and len(ex.inputs) == 1
+    ex.new_command = True
+    out = c.tick(1.04, False)
+    assert kinds(out)[0] == "wrench" and len(ex.commands) == 3
 
 
 def test_samples_stamped_in_the_future_or_long_before_are_left_out_and_counted():

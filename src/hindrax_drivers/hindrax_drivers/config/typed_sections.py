@@ -504,6 +504,9 @@ class IdentificationSection(Section):
     """RLS forgetting factor lambda"""
     estimate_rate_hz: float
     """RLS update rate, Hz"""
+    command_rate_hz: float | None
+    """manoeuvre wrench command rate, Hz: the control law steps at estimate_rate_hz and its wrench is sent and held
+    at this rate (a whole fraction of estimate_rate_hz; default estimate_rate_hz)"""
     publish_rate_hz: float
     """HydroEstimate publication rate, Hz"""
     altitude_setpoint_m: float

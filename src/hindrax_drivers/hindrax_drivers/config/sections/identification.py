@@ -11,6 +11,9 @@ SCHEMA, OPTIONAL = section("identification", {
     "level_fraction_max": real("largest level as a fraction of the DOF's authority", 0.01, 1.0),
     "forgetting_factor": real("RLS forgetting factor lambda", 0.9, 1.0),
     "estimate_rate_hz": real("RLS update rate, Hz", 1.0, 400.0),
+    "command_rate_hz": real("manoeuvre wrench command rate, Hz: the control law steps at estimate_rate_hz and "
+                            "its wrench is sent and held at this rate (a whole fraction of estimate_rate_hz; "
+                            "default estimate_rate_hz)", 1.0, 400.0),
     "publish_rate_hz": real("HydroEstimate publication rate, Hz", 0.1, 50.0),
     "altitude_setpoint_m": real("altitude held during manoeuvres, m ([Hindrax-Drag] §4: 0.8-1.0 m)",
                                 0.1, 50.0),
@@ -38,10 +41,17 @@ SCHEMA, OPTIONAL = section("identification", {
                        ("ladder", "multisine", "prbs", "chirp")),
     "excitation_duration_s": real("length of the broadband run per DOF (excitation not ladder), s",
                                   5.0, 1800.0),
-}, optional=("excitation", "prior_std_rel", "rls_"))
+}, optional=("excitation", "prior_std_rel", "rls_", "command_rate_hz"))
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
-    """The ladder's smallest level at most its largest."""
+    """The ladder's smallest level at most its largest; the command rate a whole fraction of the estimate rate
+    (1, 1/2, 1/3, ... of it: a command is held for a whole number of control ticks)."""
     a, b = "identification.level_fraction_min", "identification.level_fraction_max"
-    return [ConfigIssue(a, c[a], f"at most {b} ({c[b]:g})")] if a in c and b in c and c[a] > c[b] else []
+    out = [ConfigIssue(a, c[a], f"at most {b} ({c[b]:g})")] if a in c and b in c and c[a] > c[b] else []
+    k, e = "identification.command_rate_hz", "identification.estimate_rate_hz"
+    if c.get(k) is not None and e in c:
+        ratio = c[e] / c[k]
+        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+            out.append(ConfigIssue(k, c[k], f"{e} ({c[e]:g}) divided by a whole number (1, 2, 3, ...)"))
+    return out

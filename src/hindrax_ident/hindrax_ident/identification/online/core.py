@@ -312,7 +312,8 @@ class IdentificationCore:
             self._stop(run, t, "", out)
             return out
         ex.command(thrust_of_written_widths(self.config, ex.curve, run.written_us))
-        out.append(Event("wrench", (np.asarray(w, dtype=float),)))
+        if ex.new_command:  # a held command is not sent again (executive module docstring, "Command rate")
+            out.append(Event("wrench", (np.asarray(w, dtype=float),)))
         self._progress(run, t, out)
         return out
 

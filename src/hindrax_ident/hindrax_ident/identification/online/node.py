@@ -47,14 +47,15 @@ Subscribes
     (FluidPressure, Pa), ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range),
     ``thrusters/pulse_width`` (ThrusterPwm, widths written by the ESC node and the armed flag).
 Publishes
-    ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.estimate_rate_hz`` while a
-    goal runs; ``identification/estimates`` (HydroEstimate, method ``rls``, one per DOF with data) at
-    ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) while a goal
-    runs at once when the phase, DOF, level or message (current step) changes and otherwise at
-    :data:`~.core.STATUS_PERIOD_S` (2 Hz: the progress of a level), once at its end (DONE or ABORTED
-    with the reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a
-    goal aborts on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety
-    supervisor (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset;
+    ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.command_rate_hz`` (the control tick
+    is ``identification.estimate_rate_hz``; executive module docstring, "Command rate") while a goal runs, every
+    tick during the neutral hold that ends it; ``identification/estimates`` (HydroEstimate, method ``rls``, one per
+    DOF with data) at ``identification.publish_rate_hz`` (>= 1 Hz); ``identification/status`` (ManeuverStatus) while
+    a goal runs at once when the phase, DOF, level or message (current step) changes and otherwise at
+    :data:`~.core.STATUS_PERIOD_S` (2 Hz: the progress of a level), once at its end (DONE or ABORTED with the
+    reason) and at 1 Hz when idle; ``supervisor/abort`` (std_msgs/String, data = the reason) once when a goal aborts
+    on a limit, DVL lock loss or an error (not on a cancel or a disarmed ESC output): the safety supervisor
+    (:mod:`hindrax_drivers.supervisor.node`) then disarms the ESC and stays tripped until reset;
     ``identification/calibration`` (diagnostic_msgs/DiagnosticArray, reliable, transient local, depth 1) when a
     calibration step ends (ballast, line pull surge / sway, inclining roll / pitch, tilt_decay roll / pitch): every
     step result since the node started, one DiagnosticStatus each, KeyValue pairs named with their units
@@ -350,7 +351,7 @@ class IdentificationNode(Node):
         return self.core.clock_may_advance(t_s)
 
     def _publish_wrench(self, w_frd: np.ndarray, now) -> None:
-        # serialised by rosbags and published as bytes: the 50 Hz publish without rclpy's object conversion
+        # serialised by rosbags and published as bytes: the command-rate publish without rclpy's object conversion
         # (hindrax_drivers.lean_cdr, the measured gain)
         w = frames.wrench_frd_to_flu(np.asarray(w_frd, dtype=float))
         self.pub_wrench.publish(wrench_stamped_cdr(now.nanoseconds, "base_link", w))
