@@ -248,3 +248,12 @@ def test_a_campaign_started_on_the_topside_runs_on_the_named_vehicle_only(pool):
     assert r.returncode == 0, r.stdout + r.stderr
     assert "campaign started: surge" in r.stdout and "result: complete: stand-in campaign done" in r.stdout
     assert ("run_identification", ["surge"]) in alpha.calls and bravo.calls == before_b
+
+
+def test_the_gateway_starts_without_a_rosout_clash(pool):
+    """The topside nodes have no rosout: the front node's logger name is the internal node's, and rcl refused its
+    rosout publisher with "Publisher already registered for node name: 'gateway'" at every start."""
+    for runner in pool["runners"]:
+        wait_until(lambda r=runner: "internal domain" in r.log("gateway"), 60, message="the gateway started")
+        log = runner.log("gateway")
+        assert "already registered" not in log, log[-2000:]

@@ -138,8 +138,11 @@ class Gateway:
         self.settings = settings
         self.internal = internal
         ns = "/" + settings.vehicle_name
+        # no rosout: these nodes never log, and the front node's logger name (<vehicle>.gateway) is the internal
+        # node's, whose rosout publisher rcl keys by that name in the process (a second one was refused with a
+        # warning at every start, and destroying either node would have unregistered the other's)
         make = lambda name: Node(name, namespace=ns, context=topside_context,  # noqa: E731
-                                 use_global_arguments=False, start_parameter_services=False)
+                                 use_global_arguments=False, start_parameter_services=False, enable_rosout=False)
         self.front = make(GATEWAY_NODE)
         self.operator = make(GATEWAY_NODE + "_operator")
         self.campaign = make(GATEWAY_NODE + "_campaign")
