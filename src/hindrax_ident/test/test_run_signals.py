@@ -11,7 +11,7 @@ import time
 import pytest
 
 from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.testing import own_domain_env, wait_until
+from hindrax_drivers.testing import child_process, own_domain_env, wait_until
 from hindrax_ident import cli
 from hindrax_ident.commands import decode
 
@@ -22,23 +22,18 @@ def test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind(tm
     tmp = tmp_path / "tmp"
     tmp.mkdir()
     out = tmp_path / "out"
-    p = subprocess.Popen([sys.executable, "-m", "hindrax_ident.cli", "run", "--dofs", "surge", "--levels", "1",
-                          "--out", str(out)], env=own_domain_env(TMPDIR=str(tmp)), stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True)
     lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(p.stdout), daemon=True)
-    reader.start()
-    try:
+    with child_process([sys.executable, "-m", "hindrax_ident.cli", "run", "--dofs", "surge", "--levels", "1",
+                        "--out", str(out)], env=own_domain_env(TMPDIR=str(tmp)), stdout=subprocess.PIPE,
+                       stderr=subprocess.STDOUT, text=True) as p:
+        reader = threading.Thread(target=lambda: lines.extend(p.stdout), daemon=True)
+        reader.start()
         wait_until(lambda: any("sending run_identification goal" in ln for ln in lines) or p.poll() is not None,
                    300, lambda: reader.join(0.1), "the campaign's goal sent")
         assert p.poll() is None, "".join(lines)
         assert list(tmp.glob("hindrax_pty_*")), "the run's emulated ports live in TMPDIR"
         p.send_signal(signal.SIGTERM)
         assert p.wait(timeout=120) == 130, "".join(lines)
-    finally:
-        if p.poll() is None:
-            p.kill()
-            p.wait()
     reader.join(10)
     text = "".join(lines)
     assert "never awaited" not in text and "Traceback" not in text, text
