@@ -70,7 +70,7 @@ from ..bag_input.campaign_record import CampaignRecord
 from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Dive,
                     Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder)
 
-__all__ = ["CampaignAbort", "Executive", "ExecutiveStatus", "TickInput", "ordered_samples",
+__all__ = ["CampaignAbort", "Executive", "ExecutiveStatus", "TickInput", "command_ticks", "ordered_samples",
            "CALIBRATION_STEPS", "THRUST_STEPS", "expand_calibration", "calibration_forces", "inclining_load",
            "float_buoyancy"]
 
@@ -192,6 +192,17 @@ class _Shared(property):
         return getattr(executive.ctx, self.name)
 
 
+def command_ticks(cfg: VehicleConfig, tick_s: float, command_rate_hz: float | None = None) -> int:
+    """Control ticks of ``tick_s`` (s) a wrench command is held for (module docstring, "Command rate"):
+    ``round(1 / (rate * tick_s))``, at least 1, with ``command_rate_hz`` (Hz) or else ``identification.command_rate_hz``
+    of ``cfg``, else every tick. Raises ``ValueError`` for a rate that is not finite and > 0."""
+    rate = or_default(cfg.identification.command_rate_hz, 1.0 / tick_s) if command_rate_hz is None \
+        else command_rate_hz
+    if not (math.isfinite(rate) and rate > 0.0):
+        raise ValueError(f"command_rate_hz must be > 0 Hz, got {rate}")
+    return max(1, round(1.0 / (float(rate) * tick_s)))
+
+
 class Executive:
     """The identification campaign as a tick-driven sequencer of steps (module docstring).
 
@@ -213,7 +224,7 @@ class Executive:
     the DOF's smaller authority. steps: run these :class:`~.steps.Step` objects instead of :meth:`plan` (a test of
     one step: ``[Dive(), Ballast(w, settle_s=3, window_s=9)]``). command_rate_hz: rate of new wrench commands
     (module docstring, "Command rate"; default ``identification.command_rate_hz``, else every tick); a command is
-    held for ``round(1 / (command_rate_hz * tick_s))`` ticks, at least 1.
+    held for :func:`command_ticks` ticks.
     Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0, an unknown
     calibration step or a missing known force, an unknown excitation or a non-positive duration or command rate.
     """
@@ -273,11 +284,8 @@ class Executive:
         self.cfg = cfg
         self.dofs = list(dofs)
         self.tick_s = float(tick_s)
-        rate = or_default(ident.command_rate_hz, 1.0 / self.tick_s) if command_rate_hz is None else command_rate_hz
-        if not (math.isfinite(rate) and rate > 0.0):
-            raise ValueError(f"command_rate_hz must be > 0 Hz, got {rate}")
         #: ticks a wrench command is held for (module docstring, "Command rate")
-        self.command_ticks = max(1, round(1.0 / (float(rate) * self.tick_s)))
+        self.command_ticks = command_ticks(cfg, self.tick_s, command_rate_hz)
         #: whether the wrench of the last start() or step() is a new command (else the held one)
         self.new_command = False
         self._ticks = 0

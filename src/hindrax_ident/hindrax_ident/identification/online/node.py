@@ -106,7 +106,7 @@ from std_srvs.srv import Trigger
 
 from hindrax_drivers import frames
 from hindrax_drivers.lean_cdr import wrench_stamped_cdr
-from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig, or_default
+from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node
 from hindrax_msgs.action import RunIdentification
@@ -117,7 +117,7 @@ from ..bag_input.campaign_record import CampaignRecord
 from ..bag_input.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from ..fit.dof_model import parameter_units
 from .core import Event, GoalRun, IdentificationCore, goal_problem
-from .executive import ExecutiveStatus
+from .executive import ExecutiveStatus, command_ticks
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 
@@ -206,7 +206,7 @@ class IdentificationNode(Node):
                                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self.create_service(Trigger, "identification/continue", self._on_continue)
         self._timer = self.create_timer(self.tick_s, self._on_tick)
-        command_hz = or_default(ident.command_rate_hz, 1.0 / self.tick_s)
+        command_hz = 1.0 / (self.tick_s * command_ticks(self.config, self.tick_s))
         log.info(f"identification executive ready: action run_identification, ticks at "
                  f"{1.0 / self.tick_s:g} Hz, wrench at {command_hz:g} Hz, estimates at "
                  f"{1.0 / self.publish_period_s:g} Hz")
