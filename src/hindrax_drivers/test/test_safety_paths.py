@@ -348,6 +348,67 @@ def test_44_2_frozen_guard_and_esc_the_hardware_watchdog_stops_the_outputs(rig):
     assert r.guard.assertions >= 1  # the guard saw that the watchdog had cut the outputs, and latched
 
 
+def _thrust_seen(r, seen):
+    """Command 1700 us, spin once, and record any thrust on the wire (a width off neutral, pulses on)."""
+    r.commanding()
+    w = wire(r.emu)
+    seen.append(bool(np.any((w > 0.0) & (np.abs(w - 1500.0) > TICK_US))))
+
+
+def test_a_launch_frozen_before_the_guard_heard_the_arm_latches_all_the_same(rig):
+    """The launch freezes just after an arm, before an ESC beat saying "armed" has reached the guard (beats are
+    40 ms apart): the guard's last beat says disarmed. The stall must latch all the same. Before, a stall with the
+    ESC last heard disarmed was exempted: the guard fed the watchdog again after the resume and thrust came back
+    with the ESC still armed (CI's test_frozen_launch; 51 of 300 freezes on a loaded 2-core machine)."""
+    r = rig(guard=True, watchdog_s=0.33)
+    r.wait(lambda: not r.guard.core.asserted and r.feed.rises >= 2, "guard released and feeding")
+    heard, held = r.guard.core.on_esc, [True]
+    r.guard.core.on_esc = lambda state, armed: None if held[0] else heard(state, armed)  # the beats are late
+    r.arm_at_1700()
+    assert not r.guard.core.esc_armed  # the guard's newest beat predates the arm
+    # both peers' last beats reached the guard after its last tick: after the resume their ages read 0.2 s, the
+    # timeout, so neither looks silent (an age grows by at most the timeout per tick gap)
+    r.guard.esc_age.heard()
+    r.guard.supervisor_age.heard()
+    r.ex.remove_node(r.guard)  # the launch freezes
+    r.ex.remove_node(r.esc)
+    wait_until(lambda: np.all(wire(r.emu) == 0.0), 10, None, "the hardware watchdog cut the outputs")
+    r.guard.tick()  # the guard's first decision after the resume, before any new ESC beat
+    assert r.guard.core.asserted and "hardware watchdog cut the outputs" in r.guard.core.reason, r.guard.core.reason
+    held[0] = False
+    r.ex.add_node(r.esc)
+    r.ex.add_node(r.guard)
+    seen: list[bool] = []
+    r.wait(lambda: not r.esc.armed, "disarmed after the freeze", poll=lambda: _thrust_seen(r, seen), timeout=20.0)
+    assert not any(seen), "thrust came back after the freeze"
+
+
+def test_a_stall_between_the_feed_check_and_its_edge_latches_before_thrust_returns(rig):
+    """The guard (and with it the launch: one executor here) stalls after deciding to feed and before the rising
+    edge, long enough for the hardware watchdog to run out; the late edge retriggers it. The guard must assert /OE
+    in that same callback. Before, the edge counted as a normal feed taken after the stall: thrust came back with
+    the ESC armed and nothing latched."""
+    r = rig(guard=True, watchdog_s=0.33)
+    r.wait(lambda: not r.guard.core.asserted and r.feed.rises >= 2, "guard released and feeding")
+    r.arm_at_1700()
+    check, stalled = r.guard.feeding, []
+
+    def feeding(*args):
+        ok = check(*args)
+        if ok and not r.guard._feed_high and not stalled:  # the next edge rises: stall here, once
+            stalled.append(True)
+            wait_until(r.feed.expired, 5, None, "the hardware watchdog ran out during the stall")
+        return ok
+    r.guard.feeding = feeding
+    r.wait(lambda: stalled, "the guard stalled once", poll=r.commanding)
+    assert not r.feed.expired()  # the late edge went out and retriggered the watchdog ...
+    assert r.line.is_high() and np.all(wire(r.emu) == 0.0)  # ... and the guard's /OE holds the outputs off
+    assert r.guard.core.asserted and "hardware watchdog cut the outputs" in r.guard.core.reason, r.guard.core.reason
+    seen: list[bool] = []
+    r.wait(lambda: not r.esc.armed, "disarmed after the stall", poll=lambda: _thrust_seen(r, seen))
+    assert not any(seen), "thrust came back after the stall"
+
+
 def test_44_2_the_guard_does_not_feed_while_asserted(rig):
     import time
 

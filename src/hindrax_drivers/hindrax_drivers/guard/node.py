@@ -178,29 +178,43 @@ class OutputGuardNode(Node):
         except (OSError, ImportError) as exc:
             self._drive_failed(f"cannot request the watchdog feed {self.feed_gpio[0]}:{self.feed_gpio[1]}: {exc}")
 
-    def feeding(self) -> bool:
-        """Whether the watchdog gets edges now: outputs released by the last decision, which is recent (half the
-        watchdog's timeout: a starved or frozen guard stops feeding, and the outputs stop at most
-        1.5 x ``esc.output_enable_feed_timeout_s`` after its last decision)."""
-        fresh = time.monotonic() - self._last_decision <= 0.5 * float(self.feed_timeout_s or 0.0)
+    def feeding(self, now_s: float | None = None) -> bool:
+        """Whether the watchdog gets edges at ``now_s`` (``time.monotonic()``, s; default now): outputs released by
+        the last decision, which is recent (half the watchdog's timeout: a starved or frozen guard stops feeding,
+        and the outputs stop at most 1.5 x ``esc.output_enable_feed_timeout_s`` after its last decision)."""
+        now_s = time.monotonic() if now_s is None else now_s
+        fresh = now_s - self._last_decision <= 0.5 * float(self.feed_timeout_s or 0.0)
         return fresh and not self.core.asserted and not self.core.drive_fault
 
+    def _feed_quiet_s(self, now_s: float) -> float:
+        """Seconds since the last rising edge sent or the last release, whichever is later (0 before any edge)."""
+        return 0.0 if self._last_rise is None else now_s - max(self._last_rise, self._released_at)
+
     def watchdog_ran_out(self) -> str:
-        """'' or why the watchdog has (probably) disabled the outputs of an armed ESC although this guard released
-        them: no rising edge sent for longer than its timeout (this process was frozen or starved). The outputs then
-        stay off until the ESC has disarmed: thrust comes back only through a new arm request. A disarmed ESC has
-        no thrust to come back: a stall then (a busy start-up) is not latched."""
-        if not self.feeds or self.core.asserted or not self.core.esc_armed or self._last_rise is None:
+        """'' or why the watchdog has (probably) disabled the outputs although this guard released them: no rising
+        edge sent for longer than its timeout (this process was frozen or starved). The outputs then stay off until
+        the ESC has reported disarmed at neutral in a beat received after the stall: thrust comes back only through
+        a new arm request. This holds whatever the last ESC beat said: that beat may predate an arm (beats are 40 ms
+        apart; a launch frozen just after an arm, with the guard's last beat still "disarmed", kept thrust after the
+        resume in 51 of 300 freezes on a loaded 2-core machine when a disarmed ESC exempted the stall), and a stall
+        with the ESC in fact disarmed costs one assertion, released by its next beat."""
+        if not self.feeds or self.core.asserted:
             return ""
-        quiet = time.monotonic() - max(self._last_rise, self._released_at)
+        quiet = self._feed_quiet_s(time.monotonic())
         if quiet <= float(self.feed_timeout_s):
             return ""
         return (f"no watchdog feed edge for {quiet:.2f} s (esc.output_enable_feed_timeout_s "
                 f"{float(self.feed_timeout_s):g}): the guard stalled, the hardware watchdog cut the outputs")
 
     def feed_tick(self) -> None:
-        """Toggle the feed line (twice ``esc.output_enable_feed_rate_hz``) while :meth:`feeding`; else hold it."""
-        if not self.feeding():
+        """Toggle the feed line (twice ``esc.output_enable_feed_rate_hz``) while :meth:`feeding`; else hold it.
+
+        The time is read before the check and the edge, so a stall anywhere after the check counts as a quiet feed.
+        A rising edge that went out later than the watchdog's timeout after the previous one (this process stalled
+        between its check and the edge, when the watchdog may already have cut the outputs and the edge let them
+        through again) runs the decision at once (:meth:`tick`, which latches the stall) before it counts."""
+        asked = time.monotonic()  # before the check and the edge: quiet times are upper bounds
+        if not self.feeding(asked):
             return
         if self.feed is None:
             if time.monotonic() - self._last_drive_attempt < DRIVE_RETRY_S:
@@ -210,11 +224,12 @@ class OutputGuardNode(Node):
             if self.feed is None:
                 return
         try:
-            asked = time.monotonic()  # before the call: the edge is no earlier, so quiet times are upper bounds
             self.feed.set_high(not self._feed_high)
             self._feed_high = not self._feed_high
             if self._feed_high:
                 self.feed_edges += 1
+                if self._feed_quiet_s(time.monotonic()) > float(self.feed_timeout_s):
+                    self.tick()  # stalled between the check and the edge: latch before the edge counts as a feed
                 self._last_rise = asked
         except OSError as exc:
             self._drive_failed(f"cannot feed the watchdog: {exc}")
