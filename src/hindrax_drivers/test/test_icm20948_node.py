@@ -7,7 +7,6 @@ it in the AK09916's own axes (Y and Z inverted, docs/devices.md §4.7), so equal
 """
 import math
 import os
-import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -26,7 +25,7 @@ from hindrax_drivers.icm20948 import protocol as p
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.icm20948.node import GyroBiasEstimator, Icm20948Node
 from hindrax_drivers.node_common import unbatch_raw
-from hindrax_drivers.testing import child_env, config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import child_env, child_process, config_parameters, interrupt, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData
 
@@ -439,8 +438,7 @@ def test_runs_as_a_process_and_reports_a_missing_bus():
     cmd = [sys.executable, "-m", "hindrax_drivers.icm20948.node", "--ros-args", "--params-file",
            str(default_config_path()), "-p", "sensors.icm20948.i2c_bus:=31"]
     assert not os.path.exists("/dev/i2c-31")
-    proc = subprocess.Popen(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    try:
+    with child_process(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT) as proc:
         with ros_context() as ctx:
             probe = rclpy.create_node("probe", context=ctx)
             ex = SingleThreadedExecutor(context=ctx)
@@ -452,12 +450,7 @@ def test_runs_as_a_process_and_reports_a_missing_bus():
                        "bus error in diagnostics")
             ex.shutdown()
             probe.destroy_node()
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
+        assert interrupt(proc, 10) == 0
 
 
 def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):

@@ -6,7 +6,6 @@ of P (30BA: 0.1 mbar = 10 Pa, 02BA: 0.01 mbar = 1 Pa) and of TEMP (0.01 degC) (d
 """
 import math
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -25,7 +24,7 @@ from std_srvs.srv import Trigger
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator
 from hindrax_drivers.ms5837.node import Ms5837Node
-from hindrax_drivers.testing import child_env, config_parameters, ros_context, wait_until
+from hindrax_drivers.testing import child_env, child_process, config_parameters, interrupt, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.msg import RawDeviceData
 
@@ -462,8 +461,7 @@ def test_runs_as_a_process_and_reports_a_missing_bus():
     cmd = [sys.executable, "-m", "hindrax_drivers.ms5837.node", "--ros-args", "--params-file",
            str(default_config_path()), "-p", "sensors.ms5837.i2c_bus:=31"]
     assert not os.path.exists("/dev/i2c-31")
-    proc = subprocess.Popen(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    try:
+    with child_process(cmd, cwd=repo, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT) as proc:
         with ros_context() as ctx:
             probe = rclpy.create_node("probe", context=ctx)
             ex = SingleThreadedExecutor(context=ctx)
@@ -475,9 +473,4 @@ def test_runs_as_a_process_and_reports_a_missing_bus():
                        "bus error in diagnostics")
             ex.shutdown()
             probe.destroy_node()
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
+        assert interrupt(proc, 10) == 0

@@ -25,8 +25,8 @@ from hindrax_drivers.guard.node import OutputGuardNode
 from hindrax_drivers.liveness import AliveAge, ClockStepMonitor
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.testing import (AllocationStandIn, SafetyHeartbeats, child_env, config_parameters, ros_context,
-                                     wait_until)
+from hindrax_drivers.testing import (AllocationStandIn, SafetyHeartbeats, child_env, child_process, config_parameters,
+                                     interrupt, ros_context, wait_until)
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
 from hindrax_drivers.transport.shared_emulation import EmulationServer, SharedGpioLine
@@ -573,11 +573,10 @@ def test_esc_process_without_its_bus_keeps_running_and_reports():
     assert not os.path.exists("/dev/i2c-31")
     env = child_env()
     env.pop("HINDRAX_EMULATION_SOCKET", None)
-    proc = subprocess.Popen([sys.executable, "-m", "hindrax_drivers.pca9685.node", "--ros-args", "--params-file",
-                             str(default_config_path()), "-p", "esc.i2c_bus:=31", "-p",
-                             "esc.oscillator_calibrated:=true"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    try:
+    with child_process([sys.executable, "-m", "hindrax_drivers.pca9685.node", "--ros-args", "--params-file",
+                        str(default_config_path()), "-p", "esc.i2c_bus:=31", "-p",
+                        "esc.oscillator_calibrated:=true"], env=env,
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT) as proc:
         with ros_context() as ctx:
             probe = rclpy.create_node("probe", context=ctx)
             ex = SingleThreadedExecutor(context=ctx)
@@ -598,12 +597,7 @@ def test_esc_process_without_its_bus_keeps_running_and_reports():
             assert proc.poll() is None
             ex.shutdown()
             probe.destroy_node()
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(10) == 0
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(5)
+        assert interrupt(proc, 10) == 0
 
 
 def test_a_hung_esc_bus_turns_its_heartbeat_to_error_and_the_guard_asserts_oe(rig):

@@ -143,12 +143,11 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
     """``python -m hindrax_ident.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
     the vehicle file's model, SIGINT -> 0; a bad ``control.*`` value, or a model file of another vehicle (never a
     silent fallback, issue 45.4) -> 1 with one line naming key, value and allowed range."""
-    import signal
     import subprocess
 
     import yaml
 
-    from hindrax_drivers.testing import child_env, python_executable
+    from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable
 
     other = tmp_path / "identification.yaml"
     other.write_text(yaml.safe_dump({"schema_version": 1, "provenance": {"configuration_sha256": "0" * 64},
@@ -167,8 +166,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
     last = refused.stderr.splitlines()[-1]
     assert last.startswith("invalid configuration: ") and "model_file = " in last and str(other) in last
     assert "another vehicle" in last
-    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
+    with child_process(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as proc:
         lines = []
         for line in proc.stdout:  # the node logs once when ready
             lines.append(line)
@@ -176,12 +174,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
                 break
         text = "".join(lines)
         assert "controller ready (disabled): model vehicle file" in text, text
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 0, proc.stdout.read()
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        assert interrupt(proc, 30) == 0, proc.stdout.read()
 
 
 @pytest.mark.ros

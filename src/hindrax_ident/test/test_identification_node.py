@@ -250,10 +250,9 @@ def test_node_parameters_are_described_read_only_and_checked():
 def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
     """``python -m hindrax_ident.identification.online.node`` (run_node): ready, SIGINT -> status 0; an invalid node
     parameter -> status 1 with one line naming key, value and allowed range."""
-    import signal
     import subprocess
 
-    from hindrax_drivers.testing import child_env, python_executable
+    from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable
 
     cmd = [python_executable(), "-m", "hindrax_ident.identification.online.node", "--ros-args", "--params-file",
            str(default_config_path())]
@@ -262,8 +261,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
     assert bad.returncode == 1, bad.stderr
     assert bad.stderr.splitlines()[-1] == ("invalid configuration: parameters of identification: "
                                            "sensor_timeout_s = -1.0: allowed a number > 0")
-    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
+    with child_process(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as proc:
         lines = []
         for line in proc.stdout:  # the node logs once when ready
             lines.append(line)
@@ -271,12 +269,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
                 break
         assert lines and "ready" in lines[-1], "".join(lines)
         assert "ticks at 50 Hz, wrench at 25 Hz" in lines[-1]  # the vehicle file's estimate and command rates
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 0, proc.stdout.read()
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        assert interrupt(proc, 30) == 0, proc.stdout.read()
 
 
 def test_on_the_system_clock_the_inputs_are_callbacks_as_with_sim_time():

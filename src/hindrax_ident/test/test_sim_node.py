@@ -15,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import child_env, child_process, python_executable, ros_context, wait_until
 from hindrax_ident.sim.node import SimulatorNode, time_msg
 from hindrax_msgs.msg import ThrusterPwm
 
@@ -212,8 +212,7 @@ def test_node_runs_alone_from_the_params_file():
     params = str(default_config_path())
     cmd = [python_executable(), "-m", "hindrax_ident.sim.node", "--ros-args", "--params-file", params,
            "-p", "simulation.real_time_factor:=0.0"]
-    proc = subprocess.Popen(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
+    with child_process(cmd, env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         with ros_context() as ctx:
             node = rclpy.create_node("alone_probe", context=ctx)
             seen = []
@@ -228,10 +227,6 @@ def test_node_runs_alone_from_the_params_file():
         _, err = proc.communicate(timeout=20)
         assert proc.returncode == 0, err
         assert "Traceback" not in err
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
 
     bad = subprocess.run(cmd + ["-p", "simulation.step_s:=5.0"], env=child_env(), capture_output=True, text=True,
                          timeout=30)
