@@ -914,3 +914,55 @@ def test_a_slow_bus_does_not_slow_the_heartbeat(esc):
     # still in the previous command's 150 ms block writes, and give neutral (as it should)
     wait_until(lambda: abs(wire(emu)[0] - 1700.0) < TICK_US, 5, lambda: (esc["command"]([1700.0] * 8), esc["spin"]()),
                "the newest command on the wire")
+
+
+def test_pulse_width_goes_out_on_every_write_and_repeats_only_after_a_quiet_period(monkeypatch):
+    """``thrusters/pulse_width``: every confirmed write goes out at once; the output tick repeats the last widths only
+    when none went out for REPEAT_AFTER_PERIODS output periods (ROS time). With commands at 25 Hz (the
+    identification's) and the tick at 50 Hz, that is one message per write, each width once; at rest, every second
+    tick; a step back of ROS time repeats at once. Before, every tick without a write repeated: 50 Hz in both."""
+    import rclpy.time
+    from rclpy.serialization import deserialize_message
+
+    import hindrax_drivers.pca9685.node as esc_node
+
+    fake = {"t": 100.0}
+    monkeypatch.setattr(esc_node.time, "monotonic", lambda: fake["t"])
+    with ros_context() as ctx:
+        node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, sim_time=True, ctx=ctx)
+        clock = node.get_clock()
+        sent = []
+        node.pub_written = type("Pub", (), {"publish": lambda self, data: sent.append(data)})()
+        ros = {"ns": 5_000_000_000}
+
+        def tick(n=1):  # n output periods: the safety tick (takes the chip's results) and the output tick
+            for _ in range(n):
+                ros["ns"] += round(PERIOD_S * 1e9)
+                fake["t"] += PERIOD_S
+                clock.set_ros_time_override(rclpy.time.Time(nanoseconds=ros["ns"], clock_type=clock.clock_type))
+                node.settle()
+                node.steady_check()
+                node.tick()
+
+        _healthy(node)
+        fake["t"] += esc_node.GUARD_CONFIRM_S
+        _healthy(node)
+        tick(4)
+        sent.clear()
+        tick(20)  # at rest: a repeat every second tick
+        assert len(sent) == 10
+        assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
+        tick(2)
+        sent.clear()
+        widths = [1550.0 + 10.0 * k for k in range(10)]
+        for w in widths:  # 25 Hz commands, each a new width
+            node.on_command(ThrusterPwm(pulse_width_us=[w] * 8, armed=True))
+            tick(2)
+        got = [deserialize_message(m, ThrusterPwm).pulse_width_us[0] for m in sent]
+        assert len(sent) == len(widths), got  # one message per write: no repeat between two writes
+        assert got == [pytest.approx(w, abs=TICK_US) for w in widths]
+        sent.clear()
+        ros["ns"] -= 1_000_000_000  # ROS time steps back (a restarted /clock): the next tick repeats at once
+        tick()
+        assert len(sent) == 1
+        node.destroy_node()

@@ -20,12 +20,14 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   ROS-time steps) and then the output tick (:meth:`EscNode.tick`: the ROS-time command watchdog); with
   ``use_sim_time`` the output tick is a ROS-time timer of its own.
 - Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output
-  state; on every confirmed write and at a tick without one), ``esc/heartbeat`` (DiagnosticStatus every second
-  steady tick: ``output_state``, ``armed``, ``reason``, ``boot_id``/``seq``; ERROR while unknown; the output guard's
-  sign of life), ``esc/output_state`` (the same state, latched: on every change of armed or output state and once a
-  second, :mod:`hindrax_drivers.esc_state`; for the nodes that need only "armed"), ``raw/pca9685`` (every I2C
-  transaction), ``/diagnostics``. Neutral is written on disarm, on any
-  exception in the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via :func:`run_node`).
+  state; on every confirmed write or change of state, and repeated by the output tick when nothing went out for
+  :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz at rest and under the identification's 25 Hz commands),
+  ``esc/heartbeat`` (DiagnosticStatus every second steady tick: ``output_state``, ``armed``, ``reason``,
+  ``boot_id``/``seq``; ERROR while unknown; the output guard's sign of life), ``esc/output_state`` (the same state,
+  latched: on every change of armed or output state and once a second, :mod:`hindrax_drivers.esc_state`; for the
+  nodes that need only "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on
+  disarm, on any exception in the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via
+  :func:`run_node`).
 - Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
   ``steady_watchdog_timeout_s`` (:data:`STEADY_WATCHDOG`, default ``esc.watchdog_timeout_s``).
 
@@ -63,7 +65,7 @@ from .peers import COMMAND_TOPIC, EscPeers
 from .link import ChipLink
 from .worker import ChipWorker
 
-__all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "main"]
+__all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "REPEAT_AFTER_PERIODS", "main"]
 
 _UNKNOWN, _NEUTRAL, _COMMANDING = ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT_NEUTRAL, ThrusterPwm.OUTPUT_COMMANDING
 #: node parameter ``steady_watchdog_timeout_s``: the steady-clock watchdog counts wall time (time.monotonic) during
@@ -72,6 +74,11 @@ _UNKNOWN, _NEUTRAL, _COMMANDING = ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT
 STEADY_WATCHDOG = Spec("float", "no command for this long of steady-clock time (the executor running) -> all neutral, "
                        "s; default esc.watchdog_timeout_s, widened only by an in-process simulator that holds "
                        "simulated time on purpose (hindrax bringup's stepped graph)", 0.02, 60.0)
+#: the output tick repeats ``thrusters/pulse_width`` (the last widths, a new stamp) only when none went out for this
+#: many output periods (ROS time; a step back repeats at once). Every confirmed write and change of state goes out at
+#: once, so no width is lost: the readers hold the last one (identification, bag fit, simulator). With the
+#: identification's commands at 25 Hz, one repeat between two writes at 50 Hz had carried nothing new.
+REPEAT_AFTER_PERIODS = 1.5
 
 
 class EscNode(Node):
@@ -110,7 +117,7 @@ class EscNode(Node):
                              esc.readback_interval_s)
         self.clock_monitor = ClockStepMonitor(now_s)
         self._last_target_time = None
-        self._published_since_tick = False
+        self._written_published_ns: int | None = None  # ROS time of the last thrusters/pulse_width
         self.steady_watchdog = SteadyWatchdog(self.period_s, self.steady_watchdog_s, time.monotonic())
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
@@ -303,9 +310,10 @@ class EscNode(Node):
         now = self.get_clock().now()
         if self.neutral_confirmed_time is not None:
             self._output(now)
-        if not self._published_since_tick:
+        last = self._written_published_ns
+        since_ns = None if last is None else now.nanoseconds - last
+        if since_ns is None or not 0 <= since_ns < REPEAT_AFTER_PERIODS * self.period_s * 1e9:
             self._publish_written(now)
-        self._published_since_tick = False
 
     def _steady_and_output_tick(self) -> None:
         """The system clock's one timer: :meth:`steady_check`, then :meth:`tick` (ROS time = wall time there)."""
@@ -372,7 +380,7 @@ class EscNode(Node):
         self.pub_written.publish(thruster_pwm_cdr(now.nanoseconds, "base_link", widths,
                                                   self.armed and not unknown, self.output_state))
         self.diag.published(now.nanoseconds * 1e-9)
-        self._published_since_tick = True
+        self._written_published_ns = now.nanoseconds
         self._publish_state()
 
     def _diag_extra(self):
