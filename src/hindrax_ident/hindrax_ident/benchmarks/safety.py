@@ -958,7 +958,7 @@ def run_processes(quick: bool = False) -> list[dict]:
     times = _process_rows(QUICK_REPEATS if quick else PROCESS_REPEATS)
     notes = {"supervisor_killed_outputs_stopped": "SIGKILL: ESC heartbeat timeout 0.2 s and guard /OE",
              "supervisor_hung_outputs_stopped": "SIGSTOP: the same paths",
-             "esc_killed_oe_asserted": "SIGKILL: guard sees thrusters/pulse_width silent for 0.2 s",
+             "esc_killed_oe_asserted": "SIGKILL: guard sees esc/heartbeat silent for 0.2 s",
              "esc_hung_oe_asserted": "SIGSTOP: the same path",
              "i2c_outage_state_unknown": "PCA9685 NACKs: thrusters/pulse_width output_state UNKNOWN",
              "clock_step_back_detected": "/clock -100 s: supervisor /diagnostics errors.clock_step"}
