@@ -2,7 +2,6 @@
 process (the installed group executable), a group ends cleanly on SIGINT, and a bad node list is refused."""
 from __future__ import annotations
 
-import signal
 import subprocess
 from pathlib import Path
 
@@ -11,7 +10,7 @@ import rclpy
 
 from hindrax_drivers.composition import GROUPS, NODE_CLASSES, main, node_factories
 from hindrax_drivers.config import default_config_path
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import child_env, child_process, interrupt, python_executable, ros_context, wait_until
 
 
 def test_every_group_names_known_nodes_once_and_unknown_nodes_are_refused(capsys):
@@ -33,9 +32,8 @@ def test_sensors_group_runs_its_five_nodes_under_their_own_names_and_exits_0_on_
     # the installed console script; no serial ports, no /dev/i2c-1 here: every driver keeps running and reports it
     # (as alone)
     script = Path(python_executable()).with_name("sensors_node")
-    proc = subprocess.Popen([str(script), "--ros-args", "--params-file", str(default_config_path())],
-                            env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
+    with child_process([str(script), "--ros-args", "--params-file", str(default_config_path())],
+                       env=child_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as proc:
         with ros_context() as ctx:
             probe = rclpy.create_node("composition_probe", context=ctx)
             wait_until(lambda: proc.poll() is None and set(GROUPS["sensors_node"]) <= set(probe.get_node_names()),
@@ -52,11 +50,7 @@ def test_sensors_group_runs_its_five_nodes_under_their_own_names_and_exits_0_on_
             for node, topic in own.items():
                 assert not [other for other in own if other != node and topic in topics(other)], topic
             probe.destroy_node()
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 0, proc.stdout.read()
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+        assert interrupt(proc, 30) == 0, proc.stdout.read()
 
 
 @pytest.mark.ros
