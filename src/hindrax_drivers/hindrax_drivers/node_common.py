@@ -74,6 +74,12 @@ class DeviceDiagnostics:
             while self._stamps and self._stamps[0] < t - self._window_s:
                 self._stamps.popleft()
 
+    @property
+    def last_publish_s(self) -> float | None:
+        """The clock's time of the last :meth:`published` message, s (None before the first)."""
+        with self._lock:
+            return self._last_publish_s
+
     def count(self, kind: str, n: int = 1) -> None:
         """Add ``n`` to the error counter ``kind``."""
         if n:

@@ -117,7 +117,6 @@ class EscNode(Node):
                              esc.readback_interval_s)
         self.clock_monitor = ClockStepMonitor(now_s)
         self._last_target_time = None
-        self._written_published_ns: int | None = None  # ROS time of the last thrusters/pulse_width
         self.steady_watchdog = SteadyWatchdog(self.period_s, self.steady_watchdog_s, time.monotonic())
 
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
@@ -310,9 +309,8 @@ class EscNode(Node):
         now = self.get_clock().now()
         if self.neutral_confirmed_time is not None:
             self._output(now)
-        last = self._written_published_ns
-        since_ns = None if last is None else now.nanoseconds - last
-        if since_ns is None or not 0 <= since_ns < REPEAT_AFTER_PERIODS * self.period_s * 1e9:
+        last_s = self.diag.last_publish_s  # the last thrusters/pulse_width, ROS time (_publish_written)
+        if last_s is None or not 0.0 <= now.nanoseconds * 1e-9 - last_s < REPEAT_AFTER_PERIODS * self.period_s:
             self._publish_written(now)
 
     def _steady_and_output_tick(self) -> None:
@@ -380,7 +378,6 @@ class EscNode(Node):
         self.pub_written.publish(thruster_pwm_cdr(now.nanoseconds, "base_link", widths,
                                                   self.armed and not unknown, self.output_state))
         self.diag.published(now.nanoseconds * 1e-9)
-        self._written_published_ns = now.nanoseconds
         self._publish_state()
 
     def _diag_extra(self):
