@@ -208,7 +208,7 @@ def test_property_feasible_wrench_is_achieved(allocator, layout, curve, fraction
     wrench = np.asarray(fractions) * auth
     minimum_norm = np.linalg.pinv(b) @ wrench  # independent minimum-norm allocation
     assume(np.all((minimum_norm < 0.999 * upper) & (minimum_norm > 0.999 * lower)))
-    # the seed's curve cannot give less than 1.2 N (deadband edge): keep forces clear of that band
+    # the [Hindrax-Drag] curve cannot give less than 1.2 N (deadband edge): keep forces clear of that band
     smallest = curve.smallest_forward_n
     assume(np.all(np.abs(minimum_norm) > 1.01 * smallest))
     res = allocator.allocate(wrench)

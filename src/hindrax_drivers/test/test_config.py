@@ -1,4 +1,4 @@
-"""Vehicle configuration: the shipped file loads, seed numbers are where they should be, every error path
+"""Vehicle configuration: the shipped file loads, the papers' numbers are where they should be, every error path
 produces one line naming key, value and allowed range."""
 import math
 from pathlib import Path
@@ -33,7 +33,7 @@ def test_real_file_loads_cleanly(cfg):
     assert len(cfg.sha256) == 64
 
 
-def test_seed_numbers(cfg):
+def test_paper_numbers(cfg):
     # [Hindrax-AM] §2 / [Hindrax-Drag] §2.1
     assert cfg.vehicle.mass_kg == 15.22 and cfg.vehicle.displaced_volume_m3 == 0.0153
     assert (cfg.vehicle.length_m, cfg.vehicle.width_m, cfg.vehicle.height_m) == (0.59, 0.47, 0.40)

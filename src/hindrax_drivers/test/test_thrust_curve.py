@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hindrax_drivers.allocation.thrust_curve import (
-    SEED_003_NEGATIVE_COEFFS,
-    SEED_003_POSITIVE_COEFFS_AS_PRINTED,
+    HINDRAX_DRAG_NEGATIVE_COEFFS,
+    HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED,
     ThrustCurve,
     ThrustCurveError,
     hindrax_default_curve,
@@ -42,12 +42,12 @@ def f_pos_reflected(p):
     return -f_neg(3000.0 - np.asarray(p, dtype=float))
 
 
-# ---------------------------------------------------------------- facts about the seed's coefficients
+# ---------------------------------------------------------------- facts about [Hindrax-Drag]'s coefficients
 def test_seed_negative_row_values_at_ends():
     # docs/architecture.md §4: about -15.6 N at 1100 us and -1.1 N at 1500 us (computed: -15.53 N, -1.09 N).
     assert f_neg(1100.0) == pytest.approx(-15.5283, abs=1e-4)
     assert f_neg(1500.0) == pytest.approx(-1.0923, abs=1e-4)
-    assert SEED_003_NEGATIVE_COEFFS == (C4, C3, C2, C1)
+    assert HINDRAX_DRAG_NEGATIVE_COEFFS == (C4, C3, C2, C1)
     curve = hindrax_default_curve()
     assert curve.max_reverse_n == pytest.approx(float(f_neg(1100.0)), abs=1e-9)
     assert curve.max_forward_n == pytest.approx(-float(f_neg(1100.0)), abs=1e-9)
@@ -75,9 +75,9 @@ def test_seed_positive_row_as_printed_is_inconsistent_and_rejected():
 
     assert f_printed(1500.0) == pytest.approx(-1070.05, abs=0.01)
     assert f_printed(1900.0) < -2000.0
-    assert SEED_003_POSITIVE_COEFFS_AS_PRINTED == (P4, P3, P2, P1)
+    assert HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED == (P4, P3, P2, P1)
     with pytest.raises(ThrustCurveError, match="positive"):
-        ThrustCurve(SEED_003_NEGATIVE_COEFFS, SEED_003_POSITIVE_COEFFS_AS_PRINTED)
+        ThrustCurve(HINDRAX_DRAG_NEGATIVE_COEFFS, HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED)
 
 
 def test_point_reflection_matches_definition_and_is_an_involution():
@@ -116,7 +116,7 @@ def test_forward_zero_in_deadband_and_cubic_outside():
 def test_forward_neutral_is_zero_without_deadband_and_cubic_next_to_it():
     curve = hindrax_default_curve(deadband_us=0.0)
     assert curve.thrust_n(1500.0) == 0.0
-    # next to neutral the seed's cubic does not go to zero: about -1.09 N
+    # next to neutral [Hindrax-Drag]'s cubic does not go to zero: about -1.09 N
     assert curve.thrust_n(1499.0) == pytest.approx(float(f_neg(1499.0)), abs=1e-9)
     assert curve.thrust_n(1501.0) == pytest.approx(float(f_pos_reflected(1501.0)), abs=1e-9)
 
@@ -266,7 +266,7 @@ def test_inverse_then_forward_is_nearest_producible_force(force, voltage_scale):
     target = min(max(force, lo), hi)
     smallest = voltage_scale * curve.smallest_forward_n  # symmetric default curve
     if abs(target) >= smallest:
-        # on the branch: slope <= 0.055 N/us (seed curve), table cell 0.005 us
+        # on the branch: slope <= 0.055 N/us ([Hindrax-Drag] curve), table cell 0.005 us
         assert actual == pytest.approx(target, abs=voltage_scale * 0.055 * 0.005 + 1e-9)
     else:
         assert abs(actual - target) <= 0.5 * smallest + 1e-9

@@ -15,7 +15,7 @@ from hindrax_ident.estimation.drag_coefficient import (
 from hindrax_ident.estimation.least_squares import EstimationError
 
 
-def test_characteristic_lengths_of_seed000():
+def test_characteristic_lengths_of_hindrax_am():
     """[Hindrax-AM] section 4: V^(1/3) = 0.0824 m (model, 0.00056 m^3), 0.2483 m (0.0153 m^3)."""
     assert characteristic_length_from_volume(0.00056) == pytest.approx(0.0824, abs=5e-5)
     assert characteristic_length_from_volume(0.0153) == pytest.approx(0.2483, abs=5e-5)

@@ -6,7 +6,7 @@ c (eq. 6) from (zeta, k_eq, m_b + printed m_ad eq. 5); error % (eq. 11) from the
 added masses; KC (eq. 9) from A and D = V^(1/3) of the 0.00056 m^3 model. The tolerance is the
 printed rounding: the computed value is evaluated over the box of inputs within half a unit of
 their last printed digit, widened by half a unit of the printed output's last digit. Cells where
-the paper disagrees with its own inputs beyond that are listed in SEED000_DISAGREEMENTS with the
+the paper disagrees with its own inputs beyond that are listed in HINDRAX_AM_DISAGREEMENTS with the
 value the equations give (hand arithmetic in the comment); the test asserts both that our code
 gives that value and that the printed value lies outside the rounding interval, so the
 discrepancy stays documented instead of being absorbed by a loose tolerance.
@@ -45,7 +45,7 @@ PROTOTYPE_VOLUME_M3 = 0.0153  # [Hindrax-AM] section 2
 RHO = 1000.0                  # [Hindrax-AM] eq. 12 text
 
 # (table, direction, A mm, k_eq, omega_d, zeta, c, m_ad eq7, m_ad eq5, error %, KC) as printed
-SEED000_ROWS = [
+HINDRAX_AM_ROWS = [
     ("3", "surge", "4", 1127.7, "36.7824", "0.0713", "4.35", "0.4435", "0.4401", "0.77", "0.3"),
     ("3", "sway", "5", 1127.7, "31.7580", "0.1155", "8.14", "0.7281", "0.7132", "2.09", "0.38"),
     ("4", "heave", "6", 1127.7, "30.3976", "0.0604", "4.47", "0.8304", "0.8260", "0.53", "0.46"),
@@ -61,8 +61,8 @@ SEED000_ROWS = [
 COLUMNS = ("damping", "m7", "m5", "error", "kc")
 
 # Printed cells that disagree with their own inputs beyond rounding.
-# key: (table, direction, A mm, column) -> value given by the seed's equations.
-SEED000_DISAGREEMENTS = {
+# key: (table, direction, A mm, column) -> value given by the paper's equations.
+HINDRAX_AM_DISAGREEMENTS = {
     # Table 3 surge: eq. 5 = 1127.7 (1 - 0.0713^2) / 36.7824^2 - 0.39 = 0.82928 - 0.39 = 0.4393,
     # printed 0.4401 (the printed eq. 7 value 0.4435 matches; eq. 11 on the printed masses gives
     # the printed 0.77 %, eq. 11 on the computed masses would give 0.96 %).
@@ -134,19 +134,19 @@ def _cell(column, row, exact=False):
     return min(vals), max(vals)
 
 
-CASES = [(row, col) for row in SEED000_ROWS for col in COLUMNS]
+CASES = [(row, col) for row in HINDRAX_AM_ROWS for col in COLUMNS]
 
 
 @pytest.mark.parametrize("row,column", CASES,
                          ids=[f"T{r[0]}-{r[1]}-{r[2]}mm-{c}" for r, c in CASES])
-def test_seed000_table_cells(row, column):
+def test_hindrax_am_table_cells(row, column):
     printed = dict(zip(COLUMNS, row[6:]))[column]
     lo, hi = _cell(column, row)
     tol = _half_ulp(printed)
     key = (row[0], row[1], row[2], column)
     computed = _cell(column, row, exact=True)
-    if key in SEED000_DISAGREEMENTS:
-        expected = SEED000_DISAGREEMENTS[key]
+    if key in HINDRAX_AM_DISAGREEMENTS:
+        expected = HINDRAX_AM_DISAGREEMENTS[key]
         assert computed == pytest.approx(expected, abs=1e-3 * max(1.0, abs(expected)))
         # the printed cell really is outside its rounding interval (documented disagreement)
         assert not (lo - tol <= float(printed) <= hi + tol)
@@ -172,11 +172,11 @@ def test_table_row_function_matches_the_equations():
     assert row["kc"] == pytest.approx(0.46, abs=0.005)
 
 
-def test_seed000_table6_from_printed_added_masses():
+def test_hindrax_am_table6_from_printed_added_masses():
     """[Hindrax-AM] Table 6 from the seventh column of Tables 3-5 (eqs. 8 and 12)."""
     surge = inertia_coefficient(0.4401, MODEL_VOLUME_M3, RHO)
     sway = inertia_coefficient(0.7132, MODEL_VOLUME_M3, RHO)
-    heave_m = np.array([float(r[8]) for r in SEED000_ROWS if r[1] == "heave"])
+    heave_m = np.array([float(r[8]) for r in HINDRAX_AM_ROWS if r[1] == "heave"])
     assert heave_m.size == 9
     # section 5: "The mean was 0.8227, and the standard deviation was +-0.0042 ... 0.51 %"
     assert heave_m.mean() == pytest.approx(0.8227, abs=5e-5)
@@ -199,7 +199,7 @@ def test_seed000_table6_from_printed_added_masses():
     assert prototype_added_mass(1.27, PROTOTYPE_VOLUME_M3, RHO) == pytest.approx(19.43, abs=0.005)
 
 
-def test_seed000_reynolds_range_of_heave_rows():
+def test_hindrax_am_reynolds_range_of_heave_rows():
     """Section 4: 0.14e5 <= Re <= 0.67e5 with Re = U_m V^(1/3) / nu, nu = 1.01e-6 m^2/s.
 
     U_m of a linear oscillator released from rest at A: v = -A (wn^2/wd) e^(-s t) sin(wd t),
@@ -211,7 +211,7 @@ def test_seed000_reynolds_range_of_heave_rows():
     from hindrax_ident.estimation.drag_coefficient import reynolds_number
 
     res = []
-    for row in SEED000_ROWS:
+    for row in HINDRAX_AM_ROWS:
         if row[1] != "heave":
             continue
         a_m, wd, z = float(row[2]) / 1000, float(row[4]), float(row[5])
@@ -312,7 +312,7 @@ def test_synthetic_free_decay_recovers_parameters(k, mad, zeta, amp, sign):
         # the acceleration-fit cross-check agrees as well
         assert r.omega_d_fit_rad_s == pytest.approx(wd, rel=0.005)
         assert r.zeta_fit == pytest.approx(zeta, rel=0.10)
-        # Re from the peak speed of the oscillator (see test_seed000_reynolds_range...)
+        # Re from the peak speed of the oscillator (see test_hindrax_am_reynolds_range...)
         assert r.max_velocity_m_s == pytest.approx(np.max(np.abs(v)), rel=0.03)
         # simplified mass over-estimates (eq. 11 error positive and grows with zeta)
         assert r.added_mass_simplified_kg > r.added_mass_kg

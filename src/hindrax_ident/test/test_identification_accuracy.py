@@ -58,7 +58,7 @@ def test_surge_and_heave_recover_the_configured_hydrodynamics():
 
     # both methods reported, with the pool time each needed
     surge, heave = idents["surge"], idents["heave"]
-    assert surge.steady is not None  # the seed's steady-state LS found windows in surge (10 m pool) ...
+    assert surge.steady is not None  # [Hindrax-Drag]'s steady-state LS found windows in surge (10 m pool) ...
     assert abs(surge.relative_error("quadratic_damping", "steady")) < 0.10
     assert surge.steady_time_s is not None and 0 < surge.steady_time_s <= surge.pool_time_s
     assert heave.steady is None  # ... but not in heave (no steady state in the depth available, [Hindrax-Drag] §5)

@@ -111,7 +111,7 @@ def hindrax_default_layout(horizontal_x_m: float = 0.20, horizontal_y_m: float =
                            horizontal_angle_rad: float = HINDRAX_HORIZONTAL_ANGLE_RAD) -> ThrusterLayout:
     """Default Hindrax geometry, eight thrusters T1-T8 (FRD, origin at the centre of gravity).
 
-    What the seed fixes ([Hindrax-Drag] sections 2.2 and 4, Figures 2 and 5): two layers; the lower layer
+    What the paper fixes ([Hindrax-Drag] sections 2.2 and 4, Figures 2 and 5): two layers; the lower layer
     holds the horizontal thrusters T1-T4 (surge, sway, yaw), the upper layer the vertical thrusters
     T5-T8 (heave, roll, pitch); T1-T4 are rotated 55 degrees, T1 decomposing as ``F_x = cos(a) F``,
     ``F_y = sin(a) F``, ``F_z = 0``; the vehicle is symmetric about the xz and yz planes; in the
@@ -124,7 +124,7 @@ def hindrax_default_layout(horizontal_x_m: float = 0.20, horizontal_y_m: float =
     T5-T8 pushes along +z (down, FRD); T5 front-starboard, T6 front-port, T7 rear-starboard,
     T8 rear-port (ordering ASSUMED, same as T1-T4).
 
-    ASSUMPTIONS: the seed prints no thruster coordinates. The defaults (horizontals at x = +-0.20,
+    ASSUMPTIONS: [Hindrax-Drag] prints no thruster coordinates. The defaults (horizontals at x = +-0.20,
     y = +-0.15, z = +0.10 m, i.e. below the centre of gravity; verticals at x = +-0.20, y = +-0.17,
     z = -0.12 m, above it) are chosen inside the 0.59 x 0.47 x 0.40 m envelope ([Hindrax-Drag] section 2.1)
     and must be replaced by measured values. Because the horizontals sit below the centre of gravity,

@@ -5,7 +5,7 @@ pulse width P (us), ``tau = c4 P^3 + c3 P^2 + c2 P + c1``, with one cubic for ne
 (1100-1500 us) and one for positive rotation (1500-1900 us); 1500 us stops the motor. Coefficient
 tuples are always ordered ``(c4, c3, c2, c1)``, i.e. highest power first (``numpy.polyval`` order).
 
-Facts about the seed's coefficients (computed, and asserted in ``test/test_thrust_curve.py``):
+Facts about [Hindrax-Drag]'s coefficients (computed, and asserted in ``test/test_thrust_curve.py``):
 
 * Table 2 negative row ``(-4.61e-7, 0.001794, -2.2726, 927.1827)``: -15.53 N at 1100 us and
   -1.09 N at 1500 us (not zero). Its derivative has roots at about 1098.6 us and 1495.8 us, so the
@@ -24,7 +24,7 @@ model returns 0 N inside the deadband; outside it the cubic applies.
 
 Usable branches and the inverse. On each side only the monotone branch that starts at the range end
 (1100 or 1900 us) and runs towards neutral is used: it ends at the first extremum of the cubic, at the
-cubic's first zero crossing, or at the deadband edge, whichever is reached first. For the seed curve
+cubic's first zero crossing, or at the deadband edge, whichever is reached first. For the [Hindrax-Drag] curve
 with the default 25 us deadband the branches are 1100-1475 us (-15.53 N to -1.20 N) and
 1525-1900 us (+1.20 N to +15.53 N). Forces whose magnitude is smaller than the branch's smallest
 magnitude cannot be produced by the model; they map (policy ``small_force="nearest"``, default) to
@@ -55,8 +55,8 @@ import numpy as np
 
 __all__ = [
     "ThrustCurveError",
-    "SEED_003_NEGATIVE_COEFFS",
-    "SEED_003_POSITIVE_COEFFS_AS_PRINTED",
+    "HINDRAX_DRAG_NEGATIVE_COEFFS",
+    "HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED",
     "HINDRAX_NOMINAL_VOLTAGE_V",
     "BASIC_ESC_DEADBAND_US",
     "point_reflection",
@@ -67,10 +67,10 @@ __all__ = [
 ]
 
 #: [Hindrax-Drag] Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).
-SEED_003_NEGATIVE_COEFFS: tuple[float, float, float, float] = (-4.61e-7, 0.001794, -2.2726, 927.1827)
+HINDRAX_DRAG_NEGATIVE_COEFFS: tuple[float, float, float, float] = (-4.61e-7, 0.001794, -2.2726, 927.1827)
 #: [Hindrax-Drag] Table 2, positive direction exactly as printed. Inconsistent (about -1070 N at 1500 us);
 #: kept only to document and test that it is rejected.
-SEED_003_POSITIVE_COEFFS_AS_PRINTED: tuple[float, float, float, float] = (-3.52e-7, 1.82e-4, -0.3106, 174.3542)
+HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED: tuple[float, float, float, float] = (-3.52e-7, 1.82e-4, -0.3106, 174.3542)
 #: Hindrax battery nominal voltage, [Hindrax-Drag] section 2.1 (14.8 V, 19.2 Ah).
 HINDRAX_NOMINAL_VOLTAGE_V = 14.8
 #: Blue Robotics Basic ESC deadband half-width, docs/devices.md §5.2 (1500 +- 25 us; UNVERIFIED there).
@@ -199,7 +199,7 @@ class ThrustCurve:
     Each side must, at its range end, be monotone increasing with the right sign (negative at
     ``pulse_width_min_us``, positive at ``pulse_width_max_us``); the usable branch then runs from the
     end towards neutral up to the first extremum, zero crossing or deadband edge. Violations (for
-    example the seed's printed positive row) raise :class:`ThrustCurveError`.
+    example [Hindrax-Drag]'s printed positive row) raise :class:`ThrustCurveError`.
 
     Attributes (all read-only, at ``voltage_scale = 1``): ``max_forward_n`` (> 0, thrust at
     ``pulse_width_max_us``), ``max_reverse_n`` (< 0, thrust at ``pulse_width_min_us``),
@@ -426,5 +426,5 @@ def hindrax_default_curve(deadband_us: float = BASIC_ESC_DEADBAND_US, small_forc
 
     Raises :class:`ThrustCurveError` for a bad ``deadband_us`` or ``small_force``.
     """
-    return ThrustCurve(SEED_003_NEGATIVE_COEFFS, point_reflection(SEED_003_NEGATIVE_COEFFS, 1500.0),
+    return ThrustCurve(HINDRAX_DRAG_NEGATIVE_COEFFS, point_reflection(HINDRAX_DRAG_NEGATIVE_COEFFS, 1500.0),
                        deadband_us=deadband_us, small_force=small_force)

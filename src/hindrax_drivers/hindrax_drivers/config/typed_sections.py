@@ -87,7 +87,7 @@ class EnvironmentSection(Section):
     PREFIX: ClassVar[str] = "environment"
 
     water_density_kg_m3: float
-    """water density, kg/m^3 (seeds use 1000)"""
+    """water density, kg/m^3 (the Hindrax papers use 1000)"""
     gravity_m_s2: float
     """gravitational acceleration, m/s^2"""
     kinematic_viscosity_m2_s: float

@@ -15,7 +15,7 @@ implement (and what we cannot verify against the paper):
   form, but we cannot confirm it: with the Table 3 coefficients the implied areas
   2 k_q / (rho C_D) are 0.058 m^2 (surge) and 0.041 m^2 (sway), i.e. sway smaller than surge,
   which contradicts the paper's statement that surge has the smallest projected area.
-* Rotational DOFs (our definition; the seed gives none): M = 0.5 rho C_D A_p R^3 w |w|, i.e. the
+* Rotational DOFs (our definition; [Hindrax-Drag] gives none): M = 0.5 rho C_D A_p R^3 w |w|, i.e. the
   plate-at-radius form with the edge speed w R ([T] quadrant method 3.9-3.10 uses the same edge
   speed), so C_D = 2 k_q / (rho A_p R^3) with k_q in N m/(rad/s)^2 = kg m^2.
   :func:`rotational_drag_coefficient`. Table 4's rotational values (0.022-0.049) cannot be

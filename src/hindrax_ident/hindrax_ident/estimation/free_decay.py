@@ -11,7 +11,7 @@ the log decrement delta, and computes:
             -> zeta = delta / sqrt(4 pi^2 + delta^2)            (docs/identification.md §1.D)
     eq. 4   omega_n = sqrt(k_eq / (m_b + m_ad))
     eq. 5   m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b           ("exact", based on omega_d)
-    eq. 6   c = 2 zeta sqrt(k_eq (m_b + m_ad))                    (N s/m; the seed prints N.m.s)
+    eq. 6   c = 2 zeta sqrt(k_eq (m_b + m_ad))                    (N s/m; [Hindrax-AM] prints N.m.s)
     eq. 7   m_ad = k_eq / omega_n^2 - m_b with damping omitted, i.e. the measured frequency taken
             as omega_n: m_ad = k_eq / omega_d^2 - m_b ("simplified"; this is how the sixth
             column of [Hindrax-AM] Tables 3-5 is computed, e.g. surge 1127.7 / 36.7824^2 - 0.39
@@ -23,7 +23,7 @@ the log decrement delta, and computes:
     eq. 12  m_ad,prototype = C_M rho V_prototype
     Re = U_m V^(1/3) / nu, nu = 1.01e-6 m^2/s (section 4)
 
-Signal processing (our choices; the seed only says "double integration" in MATLAB):
+Signal processing (our choices; [Hindrax-AM] only says "double integration" in MATLAB):
 
 * Release: the first sample whose |a - median(a)| exceeds ``release_threshold`` (0.5) times
   the largest deviation (at release the acceleration jumps to its largest value, -omega_n^2 A).
@@ -205,7 +205,7 @@ def free_decay_table_row(omega_d_rad_s: float, zeta: float, stiffness_n_per_m: f
     """One row of [Hindrax-AM] Tables 3-5 from (omega_d, zeta, k_eq, m_b) (and A, D for KC).
 
     Returns a dict with ``omega_n_rad_s`` (eq. 2), ``damping_n_s_per_m`` (eq. 6 with the eq. 5
-    added mass, as the seed's text prescribes), ``added_mass_simplified_kg`` (eq. 7),
+    added mass, as [Hindrax-AM]'s text prescribes), ``added_mass_simplified_kg`` (eq. 7),
     ``added_mass_kg`` (eq. 5), ``added_mass_error_percent`` (eq. 11) and, when both
     ``initial_displacement_m`` and ``characteristic_length_m`` are given, ``kc`` (eq. 9).
 
@@ -463,7 +463,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     """Full [Hindrax-AM] analysis of one free-decay record (module docstring for the method).
 
     Args:
-        t_s: (n,) strictly increasing sample times in s (seed: 330 Hz for 10 s).
+        t_s: (n,) strictly increasing sample times in s ([Hindrax-AM]: 330 Hz for 10 s).
         acceleration_m_s2: (n,) acceleration along the tested axis in m/s^2 (any constant
             bias, e.g. gravity on a tilted sensor, is removed).
         stiffness_n_per_m: equivalent spring stiffness k_eq ([Hindrax-AM]: 1127.7 or 659.9 N/m).

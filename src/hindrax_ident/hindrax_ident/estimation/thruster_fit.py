@@ -17,13 +17,13 @@ anchored at the stop point. An ESC dead band can be excluded with ``deadband_us`
 Conditioning: raw powers of P (P^3 ~ 7e9 us^3) make X^T X extremely ill-conditioned. We fit the
 cubic in the centred and scaled variable s = (P - neutral_us) / scale_us (scale 400 us) with
 :func:`hindrax_ident.estimation.least_squares.fit_linear_model`, then map the coefficients to the
-seed's raw form exactly: tau = sum_k a_k s^k = sum_j c_j P^j with c = T a, where
+[Hindrax-Drag]'s raw form exactly: tau = sum_k a_k s^k = sum_j c_j P^j with c = T a, where
 T[j, k] = binom(k, j) (-neutral)^(k-j) / scale^k, and the covariance is propagated exactly,
 Cov(c) = T Cov(a) T^T. The raw standard deviations are large and strongly correlated (as in
 [Hindrax-Drag] Table 2, e.g. c1 = 927.18 +- 137.82): use :meth:`CubicFit.predict_std` for the
 uncertainty of the thrust itself.
 
-Relative thrust uncertainty for the identification intervals (our definition, the seed gives
+Relative thrust uncertainty for the identification intervals (our definition, [Hindrax-Drag] gives
 none): a self-propelled identification sees the thrust only through a scale (every identified parameter scales
 with it, docs/identification.md), so the curve's covariance is summarised per direction as the thrust-weighted RMS
 relative standard deviation of the fitted mean thrust over the fitted pulse-width range,
@@ -236,7 +236,7 @@ def fit_thruster_curve(pulse_width_us, thrust_n, neutral_us: float = NEUTRAL_US,
     """Fit one cubic per rotation direction from bollard-pull data ([Hindrax-Drag] section 2.2.1).
 
     Args:
-        pulse_width_us: (n,) pulse widths in us (seed: 1100-1900 us).
+        pulse_width_us: (n,) pulse widths in us ([Hindrax-Drag]: 1100-1900 us).
         thrust_n: (n,) thrust in N (negative for the negative rotation).
         neutral_us: stop pulse width (1500 us).
         include_neutral: add the samples at neutral to both fits (module docstring).

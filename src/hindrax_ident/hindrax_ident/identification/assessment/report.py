@@ -4,7 +4,7 @@ Plots per DOF:
 
 * ``<dof>_force_velocity.png`` - force (moment) vs velocity as [Hindrax-Drag] Figs. 8-10: the drag samples
   tau - M nu_dot - k_r s(eta) (thrust model minus the identified inertial and restoring terms) against the
-  smoothed velocity, the steady-window means of the seed's method, and the fitted curve
+  smoothed velocity, the steady-window means of [Hindrax-Drag]'s method, and the fitted curve
   k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
 * ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band and the
   reported (offline) value.

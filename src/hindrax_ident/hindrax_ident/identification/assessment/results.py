@@ -92,7 +92,7 @@ def drag_coefficient_entry(r: Any, cfg: VehicleConfig) -> dict | None:
     (:func:`~hindrax_ident.estimation.drag_coefficient.drag_coefficient`; heave per direction), A_p the
     bounding-box area normal to the motion (:data:`_AREA_DIMENSIONS`), and the Reynolds range Re = |v| L / nu
     with L = V^(1/3) ([Hindrax-AM] eq. 10) over the DOF's filtered speeds above :data:`REYNOLDS_MIN_SPEED_M_S`.
-    None for rotational DOFs (the seed defines neither their area nor their radius)."""
+    None for rotational DOFs ([Hindrax-Drag] defines neither their area nor their radius)."""
     if r.dof not in _AREA_DIMENSIONS:
         return None
     a, b = _AREA_DIMENSIONS[r.dof]
