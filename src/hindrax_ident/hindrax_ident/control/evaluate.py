@@ -3,7 +3,8 @@
 ``hindrax control evaluate --truth FILE --model YAML`` (docs/control.md §6). The simulator runs in-process on a
 truth that differs from the vehicle file (:mod:`hindrax_ident.sim.truth`); the loop is the one of the campaign
 (:class:`~.loop.HoldLoop`: sensor samples -> conditioning -> hold -> wrench -> thrust allocation -> pulse widths ->
-thrusters), at the identification tick (``identification.estimate_rate_hz``). Three manoeuvres
+thrusters), at the controller node's rate (``control.rate_hz``, 50 Hz: the rate of the holds the vehicle flies, not
+the identification's slower tick). Three manoeuvres
 (:data:`MANEUVERS`):
 
 * ``depth_step``: hold depth at ``depth_start_m``, then a ``depth_step_m`` (0.3 m) step down;
@@ -197,7 +198,7 @@ def run_case(cfg: VehicleConfig, truth: Truth, maneuver: str, hold, setup: Evalu
     start_xy, surge_speed, surge_s = ((setup.altitude_start_xy_m, setup.surge_speed_m_s, setup.surge_s)
                                       if maneuver == "altitude_hold" else
                                       (setup.gentle_start_xy_m, setup.gentle_surge_speed_m_s, setup.gentle_surge_s))
-    rate = float(cfg.identification.estimate_rate_hz)
+    rate = ControlSettings.from_config(cfg).rate_hz  # the key may be absent: its default
     steps = max(1, int(round(1.0 / (rate * sim.step_s))))
     tick = steps * sim.step_s
     ping = np.asarray(cfg.sensors.ping1d.position_frd_m, dtype=float)
