@@ -253,6 +253,29 @@ def test_attitude_steps_validate_their_arguments():
         LinePull("heave", 4.9)
 
 
+class _Waits(Step):
+    """A step that waits for the operator, then gives a surge force of 1 N."""
+    name = "waits"
+
+    def run(self, ctx):
+        yield from ctx.wait_operator("attach_ballast", "calibration: attach the ballast")
+        for _ in range(10):
+            yield np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+def test_a_second_continue_before_the_next_tick_finds_nothing_awaited(cfg):
+    """StepContext.operator_continue: the first continue clears the prompt at once; a double press before the step's
+    next tick is refused (it once answered "continuing" twice, the graph test's presses 9 ms apart), and the step
+    resumes at that tick."""
+    ex = Executive(cfg, [], tick_s=0.04, steps=[_Waits()], command_rate_hz=25.0)
+    w = ex.start(0.0)
+    assert ex.awaiting == "attach_ballast" and ex.prompt.endswith("then call continue") and w[0] == 0.0
+    assert ex.operator_continue() is True
+    assert ex.awaiting == "" and ex.prompt == ""
+    assert ex.operator_continue() is False  # the double press
+    assert ex.step(TickInput(0.04, 0.04, (), True, False))[0] == 1.0
+
+
 # ------------------------------------------------------------------------------------------------ command rate
 class _Ramp(Step):
     """A step whose law gives a new wrench every tick: surge force = the tick's index."""

@@ -240,10 +240,13 @@ class StepContext:
     # ------------------------------------------------------------------ operator
     def operator_continue(self) -> bool:
         """The operator's ``continue``: resumes a step waiting in :attr:`awaiting`; False (nothing done) when no
-        step waits."""
+        step waits. :attr:`awaiting` and :attr:`prompt` clear at once, not at the step's next tick: a second
+        ``continue`` before that tick (a double press, 9 ms apart in the graph test) finds nothing awaited and is
+        refused, instead of being taken for the next prompt's."""
         if not self.awaiting:
             return False
         self._continue = True
+        self.awaiting, self.prompt = "", ""
         return True
 
     def wait_operator(self, what: str, prompt: str, max_s: float = 900.0) -> Wrenches:
