@@ -154,9 +154,9 @@ def test_cross_checks(tmp_path):
         tmp_path, lambda p: p["vehicle"].update(net_buoyancy_n=5.0))
     assert "thrusters.pulse_width_neutral_us = 1950.0" in one_line_error(
         tmp_path, lambda p: p["thrusters"].update(pulse_width_neutral_us=1950.0))
-    # a command held for a whole number of control ticks: 50 Hz / 20 Hz = 2.5 ticks is refused, 50 / 100 too
-    for rate in (20.0, 100.0):
-        assert f"identification.command_rate_hz = {rate}: allowed identification.estimate_rate_hz (50) divided " \
+    # a command held for a whole number of control ticks: 25 Hz / 20 Hz = 1.25 ticks is refused, 25 / 50 too
+    for rate in (20.0, 50.0):
+        assert f"identification.command_rate_hz = {rate}: allowed identification.estimate_rate_hz (25) divided " \
                "by a whole number" in one_line_error(
                    tmp_path, lambda p, r=rate: p["identification"].update(command_rate_hz=r))
 

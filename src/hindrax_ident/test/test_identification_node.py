@@ -268,7 +268,7 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
             if "identification executive ready" in line:
                 break
         assert lines and "ready" in lines[-1], "".join(lines)
-        assert "ticks at 50 Hz, wrench at 25 Hz" in lines[-1]  # the vehicle file's estimate and command rates
+        assert "ticks at 25 Hz, wrench at 25 Hz" in lines[-1]  # the vehicle file's estimate and command rates
         assert interrupt(proc, 30) == 0, proc.stdout.read()
 
 

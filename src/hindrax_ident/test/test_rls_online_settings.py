@@ -74,7 +74,8 @@ def test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign(cfg):
     c.run()
     truth = truth_parameters(cfg, "surge")
     prior_quad = priors_from_config(cfg)["quadratic_damping"][0]
-    assert first["quadratic_damping"] == pytest.approx(prior_quad, rel=0.02)  # starts at the prior, not 0
+    # starts at the prior, not 0 nor the truth (28 % away): the first update moves it 2.3 % at the 25 Hz tick
+    assert first["quadratic_damping"] == pytest.approx(prior_quad, rel=0.05)
     assert abs(prior_quad - truth["quadratic_damping"]) > 0.3 * truth["quadratic_damping"]
     final = dict(zip(est.names, est.rls.theta))
     assert est.rls.n_samples > 1000 and est.rls.changes_detected == 0

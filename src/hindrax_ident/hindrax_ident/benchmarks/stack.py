@@ -796,7 +796,7 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
 def _imu_rows(wins: list[dict]) -> list[dict]:
     """The running phase's IMU timing rows (:func:`imu_timing` of each window; none when a window has none): the
     rate, the largest gap and the sample age a subscriber in another process sees. The supervisor stops a campaign
-    below ``safety.min_rate.imu_hz``; the control tick is 50 Hz."""
+    below ``safety.min_rate.imu_hz``; the identification's tick is 25 Hz."""
     timing = [w.get("imu") for w in wins]
     if not timing or not all(timing):
         return []

@@ -32,7 +32,7 @@ ticks would then see a state ahead of the clock by an amount that depends on the
 
 Lock-step (``add_step_gate(gate)``): a gate is a callable ``gate(t_s) -> bool`` asked at every /clock boundary
 whether simulated time may advance past ``t_s``; while one says no, the node does not step (and checks again
-at its next timer callback). In one process with the identification node this keeps the 50 Hz control loop
+at its next timer callback). In one process with the identification node this keeps the control loop
 on every control tick whatever the CPU load (a loaded machine otherwise lets the simulation run ahead of the
 controller, which then overshoots its planned runs). A gate that has refused for :data:`GATE_TIMEOUT_S` of
 wall time is overridden with a warning, so a stalled node cannot freeze the simulation.

@@ -5,9 +5,9 @@ RLS with forgetting (``identification.forgetting_factor``) on the regressor row 
 :class:`~hindrax_ident.estimation.rls.RecursiveLeastSquares`; directional forgetting, the excitation gate,
 physical-sign bounds, the change detector and the start at the empirical priors as :func:`online_rls` sets them
 from ``identification.rls_*``. The causal filter lags the fast transients and the forgetting window
-(1 / (1 - lambda) = 20 s at 50 Hz) is short, so the online values are a live indicator (a few per cent in
-surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly conditioned online), not the reported
-estimate (that is the fit core's, :mod:`..fit.fit_core`).
+(1 / (1 - lambda) = 500 ticks, 20 s at the 25 Hz tick) is short, so the online values are a live indicator (a few
+per cent in surge/sway/heave/yaw; the roll/pitch linear/quadratic split is poorly conditioned online), not the
+reported estimate (that is the fit core's, :mod:`..fit.fit_core`).
 """
 from __future__ import annotations
 
