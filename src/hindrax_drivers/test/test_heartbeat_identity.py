@@ -206,14 +206,14 @@ def test_guard_core_silences_on_an_untrusted_heartbeat():
 
     core = GuardCore(timeout_s=0.2)
     core.on_supervisor(True, "")
-    core.on_esc(OUTPUT_NEUTRAL, False)
-    assert core.decide(0.0, 0.0) == (False, True)
+    core.on_esc(OUTPUT_NEUTRAL, False, 1)  # the ESC handled the guard's first (start-up, ERROR) beat
+    assert core.decide(0.0, 0.0, 2) == (False, True)
     core.on_identity("2 live publishers on supervisor/heartbeat")
-    assert core.decide(0.0, 0.0) == (True, True) and core.reason.startswith("heartbeat not trusted: 2 live")
+    assert core.decide(0.0, 0.0, 3) == (True, True) and core.reason.startswith("heartbeat not trusted: 2 live")
     core.on_identity("")
-    assert core.decide(0.0, 0.0) == (True, False)  # no ESC beat since: the last one may predate an arm
-    core.on_esc(OUTPUT_NEUTRAL, False)
-    assert core.decide(0.0, 0.0) == (False, True)
+    assert core.decide(0.0, 0.0, 4) == (True, False)  # the ESC has not acknowledged beat 3 (ERROR) yet
+    core.on_esc(OUTPUT_NEUTRAL, False, 3)
+    assert core.decide(0.0, 0.0, 5) == (False, True)
 
 
 def test_publisher_node_names_is_what_rclpy_s_endpoint_query_names():

@@ -15,7 +15,7 @@ import sys
 import numpy as np
 import pytest
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
@@ -225,33 +225,59 @@ def test_f2_a_second_supervisor_heartbeat_publisher_asserts_oe(rig, forger_name)
 
 def test_f2_guard_start_holds_oe_until_a_live_esc_confirms_neutral():
     core = GuardCore(timeout_s=0.2)
-    assert core.decide(math.inf, 0.0)[0]  # no ESC heard yet
+    assert core.decide(math.inf, 0.0, 1)[0]  # no ESC heard yet
     core.on_supervisor(True, "")
-    core.on_esc(OUTPUT_COMMANDING, True)
-    assert core.decide(0.0, 0.0)[0]  # latched: an armed ESC never releases it
-    core.on_esc(OUTPUT_UNKNOWN, False)
-    assert core.decide(0.0, 0.0)[0] and "unknown" in core.reason
-    core.on_esc(OUTPUT_NEUTRAL, False)
-    assert core.decide(0.0, 0.0) == (False, True)
-    assert core.decide(0.0, 0.25)[0] and "no supervisor heartbeat" in core.reason
+    core.on_esc(OUTPUT_COMMANDING, True, 1)
+    assert core.decide(0.0, 0.0, 2)[0]  # latched: an armed ESC never releases it
+    core.on_esc(OUTPUT_UNKNOWN, False, 2)
+    assert core.decide(0.0, 0.0, 3)[0] and "unknown" in core.reason
+    core.on_esc(OUTPUT_NEUTRAL, False, 0)  # at neutral, but it acknowledges no beat of this guard (its restart)
+    assert core.decide(0.0, 0.0, 4)[0] and "waiting for the ESC" in core.reason
+    core.on_esc(OUTPUT_NEUTRAL, False, 4)
+    assert core.decide(0.0, 0.0, 5) == (False, True)
+    assert core.decide(0.0, 0.25, 6)[0] and "no supervisor heartbeat" in core.reason
 
 
-def test_f2_the_guard_releases_only_on_an_esc_beat_received_after_the_cause():
+def test_f2_the_guard_releases_only_on_an_esc_beat_acknowledging_an_error_beat_after_the_cause():
     """Seen under load: the guard asserted /OE on a forged supervisor beat and released it 37 ms later on the ESC's
-    newest beat, sent before the arm (disarmed, neutral), while the ESC was armed with 1700 us on the chip. A
-    release needs an ESC beat that arrived after the last decision with a cause."""
+    newest beat, sent before the arm (disarmed, neutral), while the ESC was armed with 1700 us on the chip. Then the
+    rule was "an ESC beat received after the cause", which a pre-arm beat delivered late still met. A release now
+    needs an ESC beat that acknowledges a guard beat published since the last cause (the ESC handled that ERROR
+    beat, so it disarmed and cannot have armed again), whenever it arrives."""
     core = GuardCore(timeout_s=0.2)
     core.on_supervisor(True, "")
-    core.on_esc(OUTPUT_NEUTRAL, False)  # before the arm
-    assert core.decide(0.0, 0.0) == (False, True)
+    core.on_esc(OUTPUT_NEUTRAL, False, 1)
+    assert core.decide(0.0, 0.0, 2) == (False, True)  # beat 2 says OK: the ESC may arm on it
     core.on_identity("supervisor/heartbeat published by node '_NODE_NAME_UNKNOWN_'")  # (the ESC arms meanwhile)
-    assert core.decide(0.05, 0.0) == (True, True)
-    core.on_identity("")  # the forger gone; the pre-arm beat is still the newest, 0.1 s old
-    assert core.decide(0.1, 0.0)[0] and "waiting for the ESC" in core.reason
-    core.on_esc(OUTPUT_COMMANDING, True)  # the ESC's next beat: armed
-    assert core.decide(0.0, 0.0)[0]
-    core.on_esc(OUTPUT_NEUTRAL, False)  # disarmed at neutral, heard after the cause
-    assert core.decide(0.0, 0.0) == (False, True)
+    assert core.decide(0.05, 0.0, 3) == (True, True)  # beat 3: ERROR
+    core.on_identity("")  # the forger gone
+    core.on_esc(OUTPUT_NEUTRAL, False, 2)  # a beat from before the arm, delivered late: received after the cause
+    assert core.decide(0.0, 0.0, 4)[0] and "waiting for the ESC" in core.reason
+    core.on_esc(OUTPUT_COMMANDING, False, 3)  # it handled beat 3 and disarmed; neutral not yet confirmed on the chip
+    assert core.decide(0.0, 0.0, 5)[0]
+    core.on_esc(OUTPUT_NEUTRAL, False, 5)  # disarmed at neutral, after an ERROR beat since the cause
+    assert core.decide(0.0, 0.0, 6) == (False, True)
+
+
+def test_f2_the_esc_beat_acknowledges_the_guard_beat_it_handled_and_the_guard_releases_on_it(rig):
+    """The node side of the release rule: the ESC's beat echoes this guard's boot and the newest guard beat it
+    handled; the guard releases at start-up and after a supervisor trip only once that echo reaches the ERROR beat
+    of the last cause, and an echo of another guard boot acknowledges nothing."""
+    r = rig(guard=True)
+    r.wait(lambda: not r.guard.core.asserted, "guard released at start-up")
+    assert r.esc.peers.guard_ack[0] == r.guard.heartbeat.boot_id
+    assert r.guard.core.esc_ack_seq >= r.guard.core.cause_seq >= 1
+    r.arm_at_1700()
+    r.beats.supervisor = "depth limit"  # a breach: the guard asserts, the ESC disarms
+    r.wait(lambda: r.guard.core.asserted, "guard asserted on the trip", poll=r.commanding)
+    r.beats.supervisor = ""
+    r.wait(lambda: not r.guard.core.asserted, "guard released after the trip")
+    assert not r.esc.armed and r.guard.core.esc_ack_seq >= r.guard.core.cause_seq > 1
+    other = DiagnosticStatus(values=[KeyValue(key=k, value=v) for k, v in (
+        ("output_state", str(OUTPUT_NEUTRAL)), ("armed", "false"), ("guard_boot_id", "another-boot"),
+        ("guard_seq", "1000000"))])
+    r.guard.on_esc(other)
+    assert r.guard.core.esc_ack_seq == 0
 
 
 def test_44_7_guard_without_its_line_says_error_retries_and_the_esc_refuses_to_arm(rig, monkeypatch):
@@ -363,7 +389,7 @@ def test_a_launch_frozen_before_the_guard_heard_the_arm_latches_all_the_same(rig
     r = rig(guard=True, watchdog_s=0.33)
     r.wait(lambda: not r.guard.core.asserted and r.feed.rises >= 2, "guard released and feeding")
     heard, held = r.guard.core.on_esc, [True]
-    r.guard.core.on_esc = lambda state, armed: None if held[0] else heard(state, armed)  # the beats are late
+    r.guard.core.on_esc = lambda state, armed, ack: None if held[0] else heard(state, armed, ack)  # the beats are late
     r.arm_at_1700()
     assert not r.guard.core.esc_armed  # the guard's newest beat predates the arm
     # both peers' last beats reached the guard after its last tick: after the resume their ages read 0.2 s, the

@@ -19,9 +19,14 @@ chip's all-off and sleep registers where /OE is not wired) when any of these hol
 
 Once asserted it stays asserted (latched) until every cause is gone AND the ESC reports that it is disarmed with
 neutral confirmed on the chip (``OUTPUT_NEUTRAL``, ``armed`` false): thrust can then only come back through a new
-arm request. That report must be an ESC beat received after the last decision that had a cause: the newest beat
-before it may predate an arm (beats are 40 ms apart, accepted up to ``timeout_s`` old), and releasing on it let
-1700 us through with the ESC armed. It starts asserted: nothing is released until a live ESC has confirmed neutral.
+arm request. That report must come after the ESC acted on one of the guard's own ERROR beats published since the
+last cause: each ESC beat echoes the newest guard beat it has handled (``guard_boot_id``, ``guard_seq``), and the ESC
+disarms in the handler of any guard beat that is not OK, and cannot arm again before a guard OK beat, which is only
+published after the release. So an ESC beat acknowledging ``guard_seq`` >= :attr:`GuardCore.cause_seq` reports a
+state later than that disarm, whatever the delivery delays. Why: the rule before ("an ESC beat received after the
+last cause") accepted a beat published before an arm and delivered late; the one before that (the newest beat)
+let 1700 us through with the ESC armed. It starts asserted: nothing is released until a live ESC has acknowledged
+one of this guard's ERROR beats at neutral.
 """
 from __future__ import annotations
 
@@ -47,13 +52,16 @@ class GuardCore:
     identity_fault: str = ""
     drive_fault: str = ""
     stall: str = ""
-    #: an ESC beat arrived since the last :meth:`decide` that had a cause (release needs one, module docstring)
-    esc_heard_since_cause: bool = False
+    #: the guard beat the newest ESC beat acknowledges (its ``guard_seq``; 0: none of this guard's boot)
+    esc_ack_seq: int = 0
+    #: the sequence number of the guard beat that carried the last decision with a cause (the first beat, asserted
+    #: at start-up, until a cause is seen); release needs an ESC acknowledgement of it or later (module docstring)
+    cause_seq: int = 1
 
-    def on_esc(self, output_state: int, armed: bool) -> None:
-        """The ESC's ``esc/heartbeat`` (output_state constant, armed flag)."""
-        self.esc_state, self.esc_armed = int(output_state), bool(armed)
-        self.esc_heard_since_cause = True
+    def on_esc(self, output_state: int, armed: bool, ack_seq: int) -> None:
+        """The ESC's ``esc/heartbeat``: output_state constant, armed flag, and the sequence number of the newest
+        beat of this guard it has handled (0 when it echoes none, or another boot's)."""
+        self.esc_state, self.esc_armed, self.esc_ack_seq = int(output_state), bool(armed), int(ack_seq)
 
     def on_supervisor(self, ok: bool, message: str) -> None:
         """The supervisor's heartbeat: ok (level OK) or the breach reason."""
@@ -94,15 +102,16 @@ class GuardCore:
             out.append(f"supervisor tripped: {self.supervisor_message}")
         return out
 
-    def decide(self, esc_age_s: float, supervisor_age_s: float) -> tuple[bool, bool]:
-        """Update :attr:`asserted`/:attr:`reason`. Returns ``(asserted, changed)``."""
+    def decide(self, esc_age_s: float, supervisor_age_s: float, beat_seq: int) -> tuple[bool, bool]:
+        """Update :attr:`asserted`/:attr:`reason`; ``beat_seq``: the sequence number of the guard beat that will carry
+        this decision. Returns ``(asserted, changed)``."""
         was = self.asserted
         causes = self.causes(esc_age_s, supervisor_age_s)
         if causes:
             self.asserted, self.reason = True, causes[0]
-            self.esc_heard_since_cause = False
+            self.cause_seq = int(beat_seq)
         elif self.asserted:
-            if self.esc_heard_since_cause and self.esc_state == OUTPUT_NEUTRAL and not self.esc_armed:
+            if self.esc_ack_seq >= self.cause_seq and self.esc_state == OUTPUT_NEUTRAL and not self.esc_armed:
                 self.asserted, self.reason = False, ""
             else:
                 self.reason = "cause cleared; waiting for the ESC to report disarmed at neutral"

@@ -193,11 +193,12 @@ class OutputGuardNode(Node):
     def watchdog_ran_out(self) -> str:
         """'' or why the watchdog has (probably) disabled the outputs although this guard released them: no rising
         edge sent for longer than its timeout (this process was frozen or starved). The outputs then stay off until
-        the ESC has reported disarmed at neutral in a beat received after the stall: thrust comes back only through
-        a new arm request. This holds whatever the last ESC beat said: that beat may predate an arm (beats are 40 ms
-        apart; a launch frozen just after an arm, with the guard's last beat still "disarmed", kept thrust after the
-        resume in 51 of 300 freezes on a loaded 2-core machine when a disarmed ESC exempted the stall), and a stall
-        with the ESC in fact disarmed costs one assertion, released by its next beat."""
+        the ESC has reported disarmed at neutral in a beat acknowledging a guard ERROR beat sent after the stall
+        (:mod:`.core`): thrust comes back only through a new arm request. This holds whatever the last ESC beat
+        said: that beat may predate an arm (beats are 40 ms apart; a launch frozen just after an arm, with the
+        guard's last beat still "disarmed", kept thrust after the resume in 51 of 300 freezes on a loaded 2-core
+        machine when a disarmed ESC exempted the stall), and a stall with the ESC in fact disarmed costs one
+        assertion, released by its first beat acknowledging it."""
         if not self.feeds or self.core.asserted:
             return ""
         quiet = self._feed_quiet_s(time.monotonic())
@@ -313,8 +314,12 @@ class OutputGuardNode(Node):
             state = int(values.get("output_state", OUTPUT_UNKNOWN))
         except ValueError:
             state = OUTPUT_UNKNOWN
+        try:  # the newest beat of this guard the ESC has handled (core module docstring)
+            ack = int(values.get("guard_seq", "")) if values.get("guard_boot_id") == self.heartbeat.boot_id else 0
+        except ValueError:
+            ack = 0
         self.esc_age.heard()
-        self.core.on_esc(state, values.get("armed") == "true")
+        self.core.on_esc(state, values.get("armed") == "true", ack)
 
     def on_supervisor(self, msg: DiagnosticStatus) -> None:
         """An accepted ``supervisor/heartbeat``: OK or the breach."""
@@ -335,7 +340,8 @@ class OutputGuardNode(Node):
         self.supervisor_age.tick()
         self.check_identity()
         self.core.on_stall(self.watchdog_ran_out())
-        asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s)
+        beat_seq = self.heartbeat.seq + 1  # the beat below carries this decision
+        asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, beat_seq)
         if changed and asserted:
             self.assertions += 1
             self.last_assert_monotonic = time.monotonic()
@@ -343,12 +349,12 @@ class OutputGuardNode(Node):
             self.get_logger().warn(f"outputs silenced: {self.core.reason}")
         elif changed:
             self._released_at = time.monotonic()
-            self.get_logger().info("outputs enabled: the ESC reports disarmed at neutral")
+            self.get_logger().info("outputs enabled: the ESC reports disarmed at neutral, after an ERROR beat")
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
         if self.core.drive_fault and not asserted:  # the fault is a cause: decided at the next tick at the latest
-            asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s)
+            asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, beat_seq)
         self.heartbeat.publish(DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
                                self.core.reason if asserted else "outputs enabled")
         self.diag.published()

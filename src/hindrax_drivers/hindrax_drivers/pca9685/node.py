@@ -23,9 +23,10 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   state; on every confirmed write or change of state, and repeated by the output tick when nothing went out for
   :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz at rest and under the identification's 25 Hz commands),
   ``esc/heartbeat`` (DiagnosticStatus every second steady tick: ``output_state``, ``armed``, ``reason``,
-  ``boot_id``/``seq``; ERROR while unknown; the output guard's sign of life), ``esc/output_state`` (the same state,
-  latched: on every change of armed or output state and once a second, :mod:`hindrax_drivers.esc_state`; for the
-  nodes that need only "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on
+  ``boot_id``/``seq``, the newest guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the
+  output guard's sign of life and its release condition), ``esc/output_state`` (the same state, latched: on every
+  change of armed or output state and once a second, :mod:`hindrax_drivers.esc_state`; for the nodes that need
+  only "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on
   disarm, on any exception in the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via
   :func:`run_node`).
 - Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
@@ -355,7 +356,8 @@ class EscNode(Node):
         unknown = self.output_state == _UNKNOWN
         self.heartbeat.publish(DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK,
                                STATE_NAMES[self.output_state],
-                               esc_state_values(self.armed and not unknown, self.output_state, self.core.reason))
+                               esc_state_values(self.armed and not unknown, self.output_state, self.core.reason)
+                               + self.peers.ack_values())
 
     def _publish_state(self) -> None:
         """``esc/output_state`` when :class:`~hindrax_drivers.esc_state.EscStateLatch` says so: a change of (armed,

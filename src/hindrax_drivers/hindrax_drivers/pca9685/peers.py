@@ -17,8 +17,8 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..config import Spec
-from ..liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok, publisher_node_names,
-                        simulated_now_s)
+from ..liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, beat_values, heartbeat_ok,
+                        publisher_node_names, simulated_now_s)
 from ..config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
@@ -55,6 +55,8 @@ class EscPeers:
         self.guard_age = AliveAge(2.0 * period_s, graph_now_s=lambda: simulated_now_s(node))
         self.supervisor_ok, self.supervisor_message = False, ""
         self.guard_ok, self.guard_message = False, ""
+        #: the newest accepted guard beat, handled: (its boot_id, its seq); ("", 0) before the first
+        self.guard_ack: tuple[str, int] = ("", 0)
         self._armed, self._on_bad_news = armed, on_bad_news
         self.watches = {"supervisor": HeartbeatWatch(node, "supervisor", self.on_supervisor_heartbeat, armed),
                         "guard": HeartbeatWatch(node, "guard", self.on_guard_heartbeat, armed)}
@@ -95,11 +97,23 @@ class EscPeers:
             self._on_bad_news()
 
     def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
-        """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low)."""
+        """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low). Once handled (a beat that is
+        not OK has disarmed), the beat is what :meth:`ack_values` acknowledges: the guard releases its outputs only
+        on an ESC beat at neutral that acknowledges one of its ERROR beats (:mod:`hindrax_drivers.guard.core`)."""
         self.guard_age.heard()
         self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:
             self._on_bad_news()  # restarts the time at neutral even if a later beat of the same take says OK
+        values = beat_values(msg)  # through HeartbeatWatch, an accepted beat has a boot_id and an integer seq
+        try:
+            self.guard_ack = (values.get("boot_id", ""), int(values.get("seq", "")))
+        except ValueError:
+            self.guard_ack = ("", 0)  # no guard beat of a known boot handled: nothing the guard can release on
+
+    def ack_values(self) -> list[tuple[str, str]]:
+        """The ``esc/heartbeat`` KeyValues acknowledging the newest guard beat handled: ``guard_boot_id``,
+        ``guard_seq``."""
+        return [("guard_boot_id", self.guard_ack[0]), ("guard_seq", str(self.guard_ack[1]))]
 
     def verdicts(self) -> tuple[str, str]:
         """The supervisor's and the guard's verdicts ('' = trusted, else why not)."""
