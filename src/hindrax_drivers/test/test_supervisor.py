@@ -335,8 +335,11 @@ def arm_and_thrust(g):
 
 def until_neutral(g, keep_commanding=True, max_steps=400):
     """Step (commanding 1700 us like a controller that did not notice) until the chip is at neutral; returns the
-    simulated time at which neutral was read back."""
+    simulated time at which neutral was read back. Before each look at the wire the ESC's chip thread finishes
+    what it was posted: it runs on wall time while /clock is held, and on a loaded machine (a fresh clone's suite,
+    2 workers on 2 cores) a starved thread let 28 slices of 1 ms pass before its neutral write landed."""
     for _ in range(max_steps):
+        assert g["esc"].link.worker.wait_idle(5.0), "the ESC's chip thread hangs"
         if np.allclose(wire(g["emu"]), 1500.0, atol=TICK_US):
             return sim_s(g)
         if keep_commanding:
