@@ -17,8 +17,8 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..config import Spec
-from ..liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, beat_values, heartbeat_ok,
-                        publisher_node_names, simulated_now_s)
+from ..liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok, publisher_node_names,
+                        simulated_now_s)
 from ..config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
@@ -104,11 +104,8 @@ class EscPeers:
         self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:
             self._on_bad_news()  # restarts the time at neutral even if a later beat of the same take says OK
-        values = beat_values(msg)  # through HeartbeatWatch, an accepted beat has a boot_id and an integer seq
-        try:
-            self.guard_ack = (values.get("boot_id", ""), int(values.get("seq", "")))
-        except ValueError:
-            self.guard_ack = ("", 0)  # no guard beat of a known boot handled: nothing the guard can release on
+        ident = self.watches["guard"].identity  # the beat the watch just accepted, its values parsed there
+        self.guard_ack = (ident.boot_id or "", ident.seq or 0)
 
     def ack_values(self) -> list[tuple[str, str]]:
         """The ``esc/heartbeat`` KeyValues acknowledging the newest guard beat handled: ``guard_boot_id``,

@@ -260,7 +260,7 @@ class StepContext:
             if self.t_s - t0 > max_s:
                 raise CampaignAbort(f"no continue within {max_s:g} s ({what})")
             yield self.ctrl.wrench(self.state, (), self.tick_s)
-        self.awaiting, self._continue, self.prompt = "", False, ""
+        self._continue = False  # operator_continue cleared awaiting and the prompt
         self.say(f"operator continued ({what}): holding")
 
     def clear_operator(self) -> None:
