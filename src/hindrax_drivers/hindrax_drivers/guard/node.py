@@ -51,6 +51,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from ..config import Spec, output_enable_gpio
+from ..esc_state import read_guard_ack
 from ..liveness import (AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok,
                         simulated_now_s)
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
@@ -314,12 +315,8 @@ class OutputGuardNode(Node):
             state = int(values.get("output_state", OUTPUT_UNKNOWN))
         except ValueError:
             state = OUTPUT_UNKNOWN
-        try:  # the newest beat of this guard the ESC has handled (core module docstring)
-            ack = int(values.get("guard_seq", "")) if values.get("guard_boot_id") == self.heartbeat.boot_id else 0
-        except ValueError:
-            ack = 0
-        self.esc_age.heard()
-        self.core.on_esc(state, values.get("armed") == "true", ack)
+        self.esc_age.heard()  # the ack: the newest beat of this guard the ESC has handled (core module docstring)
+        self.core.on_esc(state, values.get("armed") == "true", read_guard_ack(values, self.heartbeat.boot_id))
 
     def on_supervisor(self, msg: DiagnosticStatus) -> None:
         """An accepted ``supervisor/heartbeat``: OK or the breach."""

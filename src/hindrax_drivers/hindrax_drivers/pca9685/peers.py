@@ -17,6 +17,7 @@ from typing import Any, Callable
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..config import Spec
+from ..esc_state import guard_ack_values
 from ..liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok, publisher_node_names,
                         simulated_now_s)
 from ..config.node_parameters import declare_node_parameter
@@ -110,7 +111,7 @@ class EscPeers:
     def ack_values(self) -> list[tuple[str, str]]:
         """The ``esc/heartbeat`` KeyValues acknowledging the newest guard beat handled: ``guard_boot_id``,
         ``guard_seq``."""
-        return [("guard_boot_id", self.guard_ack[0]), ("guard_seq", str(self.guard_ack[1]))]
+        return guard_ack_values(*self.guard_ack)
 
     def verdicts(self) -> tuple[str, str]:
         """The supervisor's and the guard's verdicts ('' = trusted, else why not)."""
