@@ -358,17 +358,19 @@ class StuckDetector:
 
 
 def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
-                     on_change: Callable[[VehicleConfig], None] | None = None) -> VehicleConfig:
+                     on_change: Callable[[VehicleConfig], None] | None = None,
+                     locked: Callable[[], str] | None = None) -> VehicleConfig:
     """Declare the node's own vehicle keys (with descriptors) and return them validated.
 
     keys: SCHEMA prefixes the node reads (None: all sections); dynamic: prefixes it applies while running
-    (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason.
+    (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason;
+    locked() gives the reason a change is refused now ('' = allowed: the ESC disarmed, ``ArmedWatch.refusal``).
     See :func:`hindrax_drivers.config.node_parameters.declare_vehicle_parameters` (the node must be created without
     ``automatically_declare_parameters_from_overrides``). Logs the one-line reason and re-raises
     :class:`ConfigError` so :func:`run_node` exits with status 1.
     """
     try:
-        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change)
+        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change, locked=locked)
     except ConfigError as exc:
         node.get_logger().fatal(f"invalid configuration: {exc}")
         raise

@@ -53,7 +53,8 @@ Publishes (reliable, depth 10):
 
 Service ``pressure/zero_depth`` (std_srvs/Trigger): sets the surface pressure to the mean of the
 pressures of the last :data:`ZERO_DEPTH_WINDOW_S` seconds (run it with the vehicle at the surface);
-the value is also written to the node's ``environment.surface_pressure_pa`` parameter (not to the file).
+the value is also written to the node's ``environment.surface_pressure_pa`` parameter (not to the file). Setting that
+parameter (``ros2 param set``) is refused in the same ESC states as the service, with the same reason.
 Refused (``success`` false, the reason in ``message``, surface pressure unchanged) while the ESC reports armed
 (``esc/output_state``, latched, :mod:`hindrax_drivers.esc_state`: the last state received says armed, an output
 state that became unknown while armed counts as armed, and a dead ESC's last state stays), before any ESC state has
@@ -103,7 +104,7 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import FluidPressure, Temperature
 from std_srvs.srv import Trigger
 
-from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
+from ..esc_state import ArmedWatch
 from ..node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher,
                            StuckDetector, declare_frame_ids, load_node_config, run_node)
 from ..transport.i2c import BusHandle, I2CDevice, I2CError
@@ -205,9 +206,11 @@ class Ms5837Node(Node):
     def __init__(self, bus: Any = None, **kwargs: Any):
         super().__init__("ms5837", **kwargs)
         self.frames = declare_frame_ids(self, {"frame_id": SENSOR_FRAME_ID, "depth_frame_id": DEPTH_FRAME_ID})
-        # The surface pressure is the one key applied while running (hindrax zero_depth and ros2 param set).
+        #: the ESC's armed flag (latched: the current state arrives on matching): zero_depth and a change of the
+        #: surface pressure, the one key applied while running (hindrax zero_depth, ros2 param set), need it disarmed
+        self.armed = ArmedWatch(lambda: self.diag.count("esc_state_malformed"))
         cfg = load_node_config(self, ("sensors.ms5837", "environment"), dynamic=("environment.surface_pressure_pa",),
-                               on_change=self._on_vehicle_parameters)
+                               on_change=self._on_vehicle_parameters, locked=self.armed.refusal)
         s = cfg.sensors.ms5837
         self.i2c_bus_number = int(s.i2c_bus)
         self.address = int(s.i2c_address)
@@ -220,8 +223,6 @@ class Ms5837Node(Node):
         #: zero_depth's atmospheric reference (Pa) and margin (Pa): the start-up surface pressure, fixed
         self.atmospheric_reference_pa = self.surface_pressure_pa
         self.zero_depth_margin_pa = float(s.zero_depth_margin_pa)
-        self.esc_armed = False  # the last esc/output_state taken says armed (zero_depth's check)
-        self.esc_state_seen = False  # an esc/output_state arrived (none: zero_depth refuses)
         self.conversion_wait_s = p.conversion_time_s(self.osr) + CONVERSION_MARGIN_S
         self.min_pressure_pa = float(s.min_pressure_pa)
         self.max_pressure_pa = float(s.max_pressure_pa)
@@ -256,8 +257,7 @@ class Ms5837Node(Node):
         self.pub_temperature = self.create_publisher(Temperature, "pressure/temperature", qos)
         self.pub_depth = self.create_publisher(PoseWithCovarianceStamped, "pressure/depth", qos)
         self.create_service(Trigger, "pressure/zero_depth", self.on_zero_depth)
-        # the ESC's armed flag for zero_depth's check (latched: the current state arrives on matching)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_output, esc_state_qos())
+        self.armed.subscribe(self)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
 
         # One-shot timer (re-armed with the wanted delay) and the periodic cycle timer, both on ROS time.
@@ -501,16 +501,6 @@ class Ms5837Node(Node):
         """Apply a validated change of ``environment.surface_pressure_pa`` (this node's one writable key)."""
         self.surface_pressure_pa = float(cfg.environment.surface_pressure_pa)
 
-    def _on_esc_output(self, msg: Any) -> None:
-        """An ``esc/output_state``: unknown after armed is still armed; a malformed one is counted and read as
-        unknown (:mod:`hindrax_drivers.esc_state`)."""
-        state = read_esc_state(msg)
-        if state is None:
-            self.diag.count("esc_state_malformed")
-            state = (OUTPUT_UNKNOWN, False)
-        self.esc_armed = armed_after(self.esc_armed, *state)
-        self.esc_state_seen = True
-
     def on_zero_depth(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Set the surface pressure to the mean pressure of the last ZERO_DEPTH_WINDOW_S seconds; refused while the
         ESC is armed or has not reported its state yet, or with that mean further than ``zero_depth_margin_pa`` from
@@ -521,11 +511,9 @@ class Ms5837Node(Node):
             return response
         mean_pa = sum(v for _, v in self._recent) / len(self._recent)
         off_pa = mean_pa - self.atmospheric_reference_pa
-        if not self.esc_state_seen:
-            response.message = ("refused: no ESC output state yet (esc/output_state), the thrusters may be running; "
-                                "surface pressure unchanged")
-        elif self.esc_armed:
-            response.message = "refused while the ESC is armed (esc/output_state); surface pressure unchanged"
+        refusal = self.armed.refusal()
+        if refusal:
+            response.message = f"{refusal}; surface pressure unchanged"
         elif abs(off_pa) > self.zero_depth_margin_pa:
             response.message = (f"refused: mean pressure {mean_pa:.1f} Pa is {off_pa:+.1f} Pa "
                                  f"({off_pa / (self.water_density_kg_m3 * self.gravity_m_s2):+.2f} m of water) from "
