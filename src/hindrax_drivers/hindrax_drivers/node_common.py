@@ -357,6 +357,65 @@ class StuckDetector:
         return self._repeats >= self.limit
 
 
+class StuckAlarm:
+    """A device's ERROR ``stuck`` over a :class:`StuckDetector`: raised in ``diag`` (counted ``stuck_events``) when
+    ``limit`` raw readings in a row are bit-identical, cleared when they change (pure; the node logs and publishes).
+
+    ``update(value, text)`` returns True while stuck; ``text`` (what is identical) goes into the ERROR's message when
+    it is raised now, after which :attr:`raised` is True until the next update. ``reset()`` forgets the readings and
+    clears the ERROR."""
+
+    def __init__(self, limit: int, diag: DeviceDiagnostics) -> None:
+        self.limit, self.diag = int(limit), diag
+        self.detector = StuckDetector(self.limit)
+        self.stuck = self.raised = False
+
+    def update(self, value: Any, text: str) -> bool:
+        """Feed one raw reading (any value compared with ``==``)."""
+        stuck = self.detector.update(value)
+        self.raised = stuck and not self.stuck
+        if self.raised:
+            self.diag.error("stuck", f"stuck: {text} for >= {self.limit} readings")
+            self.diag.count("stuck_events")
+        elif self.stuck and not stuck:
+            self.diag.clear("stuck")
+        self.stuck = stuck
+        return stuck
+
+    def reset(self) -> None:
+        """A restarted device: no readings seen, the ERROR cleared."""
+        self.detector = StuckDetector(self.limit)
+        self.stuck = self.raised = False
+        self.diag.clear("stuck")
+
+
+class OneShot:
+    """One callback at a time, once, after a delay of the node's ROS time, from one timer of ``node`` (a device's
+    start-up waits and conversion waits without sleeping in a callback): ``schedule(delay_s, fn)`` replaces what was
+    pending; ``cancel()``."""
+
+    def __init__(self, node: Any) -> None:
+        self._fn: Callable[[], None] | None = None
+        self._timer = node.create_timer(1.0, self._fire, autostart=False)
+
+    def schedule(self, delay_s: float, fn: Callable[[], None]) -> None:
+        """Run ``fn`` once after ``delay_s`` (s; 0: at the next executor turn)."""
+        self._fn = fn
+        self._timer.timer_period_ns = max(1, int(delay_s * 1e9))
+        self._timer.reset()
+
+    def cancel(self) -> None:
+        """Drop what is pending."""
+        self._timer.cancel()
+        self._fn = None
+
+    def _fire(self) -> None:
+        self._timer.cancel()
+        fn, self._fn = self._fn, None
+        if fn is not None:
+            fn()
+
+
 def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
                      on_change: Callable[[VehicleConfig], None] | None = None,
                      locked: Callable[[], str] | None = None) -> VehicleConfig:

@@ -12,7 +12,7 @@ from hindrax_drivers.config import ConfigError, default_config_path, load_config
 from hindrax_drivers.dvl75.protocol import DvlPositionDelta
 from hindrax_drivers.dvl75.report import DvlReportBuilder
 from hindrax_drivers.ms5837 import protocol as ms
-from hindrax_drivers.ms5837.node import DepthGate
+from hindrax_drivers.ms5837.core import DepthGate
 from hindrax_drivers.ping1d.node import rep117_range
 from hindrax_drivers.supervisor.core import SupervisorCore, SupervisorLimits
 
