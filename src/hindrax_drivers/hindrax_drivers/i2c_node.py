@@ -49,6 +49,15 @@ class I2cSensorNode(Node):
         """The ERROR ``stuck`` is raised."""
         return self.stuck.stuck
 
+    def alarm(self, key: str, text: str, counter: str = "") -> None:
+        """Raise the ERROR ``key`` with ``text`` (counted ``counter`` if given), log it and publish the diagnostics
+        at once (not at the next period)."""
+        self.diag.error(key, text)
+        if counter:
+            self.diag.count(counter)
+        self.get_logger().error(f"{self.label} {text}")
+        self.diagnostics.publish()
+
     def stuck_reading(self, value: Any, text: str) -> bool:
         """Feed one raw reading to the ERROR ``stuck`` (logged and published at once when raised; ``text`` says what
         is identical). True while stuck: the reading is not published."""

@@ -26,7 +26,28 @@ register-exact emulator:
   gyro and accelerometer standard deviation shows a still vehicle);
 - the per-poll decisions on the bytes read: :class:`FrozenBlockWatch` (an all-zero or repeated sensor block: check
   whether the chip reset), :func:`chip_reset_problems` (the read-back that says it did), :class:`DataReadyGate`
-  (INT_STATUS_1.RAW_DATA_0_RDY) and :class:`MagNackFilter` (the I2C master's SLV0_NACK).
+  (INT_STATUS_1.RAW_DATA_0_RDY) and :class:`MagNackFilter` (the I2C master's SLV0_NACK);
+- :func:`read_poll`: the transactions of one poll (data ready, the burst, the magnetometer's status or block);
+- :class:`MagnetometerWatch`: which AK09916 samples go out (new, no overflow, at most ``MAG_PUBLISH_HZ``), when the
+  magnetometer counts as lost and when its re-initialisation runs; :func:`diagnostic_values`.
+
+What those decisions do on the vehicle:
+
+- Data ready (``sensors.icm20948.require_data_ready``): a poll whose INT_STATUS_1.RAW_DATA_0_RDY is not set (the chip
+  and host clocks drift at the same nominal rate, so a poll may come before the next sample) publishes nothing
+  (counted ``not_ready``); ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``, cleared by the next
+  ready sample. A failed status read leaves the flag unknown and the sample is published as without the gate (a
+  replay of a bag recorded without these reads publishes what it recorded).
+- Chip reset (power glitch): a reset chip's data registers read 0 and stop updating, PWR_MGMT_1 reads 0x41 (asleep)
+  and USER_CTRL 0 (I2C master off). An all-zero block, or ``frozen_check_samples`` bit-identical blocks in a row,
+  make the node read USER_CTRL..PWR_MGMT_1 back; a chip asleep, or with the master off in ``i2c_master`` mode, is a
+  reset: counted ``chip_resets``, ERROR, the suspect samples not published, the start-up run again at once. The
+  all-zero block itself is never published.
+- Magnetometer in ``i2c_master`` mode: I2C_MST_STATUS.SLV0_NACK means EXT_SLV_SENS_DATA holds an old sample:
+  ``imu/mag`` is not published (counted ``mag_nack``) until that block changes. No fresh sample (DRDY without NACK)
+  for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises the magnetometer alone, one step
+  per poll (no device reset: ``imu/data_raw`` goes on); while it is still missing that is retried every
+  ``mag_retry_interval_s`` (counted ``mag_retries``) until the AK09916 answers again.
 """
 from __future__ import annotations
 
@@ -39,12 +60,14 @@ import numpy as np
 
 from ..transport.i2c import I2CError, RegisterWrite
 from . import protocol as p
+from .mounting import mounting_rotation
 
 __all__ = ["ACCEL_NOISE_BANDWIDTH_HZ", "ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ", "BankedRegisters", "DataReadyGate",
-           "FrozenBlockWatch", "MagNackFilter", "chip_reset_problems",
-           "GYRO_NOISE_BANDWIDTH_HZ", "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBiasEstimator", "GyroBiasResult",
-           "MAG_ATTEMPTS", "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings",
-           "imu_noise_variances", "mag_mode_for_rate"]
+           "FrozenBlockWatch", "ImuSettings", "PollResult", "read_poll", "MagNackFilter", "MagnetometerWatch",
+           "chip_reset_problems", "diagnostic_values", "GYRO_NOISE_BANDWIDTH_HZ",
+           "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBias", "GyroBiasEstimator", "GyroBiasResult", "MAG_ATTEMPTS",
+           "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings", "imu_noise_variances",
+           "mag_mode_for_rate"]
 
 #: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, docs/devices.md §4.3 step 7).
 MAG_ATTEMPTS = 3
@@ -71,6 +94,47 @@ class I2CPort(Protocol):
 
 
 # ---------------------------------------------------------------------------------------- settings
+@dataclass(frozen=True)
+class ImuSettings:
+    """What the node derives from ``sensors.icm20948.*`` once (:meth:`from_section`): the register fields
+    (``config``), the achieved output rate ``odr_hz`` (Hz), the AK09916 mode, the mounting ``rotation`` (3x3,
+    sensor -> base_link FLU), per-axis noise variances and the rotated covariances (3x3; accel m^2/s^4, gyro
+    rad^2/s^2), the temperature variance (degC^2), the decimations of ``imu/temperature`` and ``imu/mag`` (every
+    k-th sample) and the start-up ``warnings`` (an unreachable rate, a gyro that ignores its divider)."""
+
+    config: p.ImuConfig
+    odr_hz: float
+    mag_mode: int
+    rotation: np.ndarray
+    accel_var: float
+    gyro_var: float
+    accel_cov: np.ndarray
+    gyro_cov: np.ndarray
+    temperature_var: float
+    temperature_every: int
+    mag_every: int
+    warnings: tuple[str, ...]
+
+    @classmethod
+    def from_section(cls, s: Any, temperature_hz: float, mag_hz: float) -> "ImuSettings":
+        """s: the validated ``sensors.icm20948`` section; temperature_hz, mag_hz: the highest publishing rates, Hz."""
+        rate = float(s.sample_rate_hz)
+        config = imu_config_from_settings(s.accel_full_scale_g, s.gyro_full_scale_dps, s.dlpf_config, rate)
+        odr, rot = config.accel_odr_hz, mounting_rotation(s.mounting_rpy_rad)
+        mag_mode = mag_mode_for_rate(odr)
+        a_var, g_var = imu_noise_variances(config)
+        warnings = []
+        if abs(odr - rate) > 0.05 * rate:
+            warnings.append(f"sensors.icm20948.sample_rate_hz = {rate:g} Hz is not reachable: the chip runs at "
+                            f"1125 / (1 + div) Hz, here {odr:.2f} Hz")
+        if not 0 < config.gyro_dlpfcfg < 7:
+            warnings.append(f"dlpf_config {config.gyro_dlpfcfg}: the gyro ignores its sample-rate divider "
+                            f"(docs/devices.md §4.4) and runs at 1125 Hz; polled at {odr:.2f} Hz")
+        return cls(config, odr, mag_mode, rot, a_var, g_var, (rot * a_var) @ rot.T, (rot * g_var) @ rot.T,
+                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, max(1, round(odr / temperature_hz)),
+                   max(1, round(min(p.AK_CONTINUOUS_MODE_RATE_HZ[mag_mode], odr) / mag_hz)), tuple(warnings))
+
+
 def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,
                              sample_rate_hz: float) -> p.ImuConfig:
     """Register fields from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4).
@@ -422,6 +486,41 @@ class GyroBiasEstimator:
         return self.result
 
 
+class GyroBias:
+    """The start-up gyro-bias calibration (``sensors.icm20948.estimate_gyro_bias``): ``bias_rad_s`` (3,) is what the
+    node subtracts (zero until a still window gave one); :meth:`start` after each start-up begins the window once
+    (True while it runs); :meth:`add` feeds it; ``result`` and :attr:`status` report it."""
+
+    def __init__(self, enabled: bool, duration_s: float, gyro_var: float, accel_var: float) -> None:
+        self.enabled, self.duration_s = bool(enabled), float(duration_s)
+        self.gyro_std, self.accel_std = STILL_STD_FACTOR * math.sqrt(gyro_var), STILL_STD_FACTOR * math.sqrt(accel_var)
+        self.bias_rad_s = np.zeros(3)
+        self.estimator: GyroBiasEstimator | None = None
+        self.result: GyroBiasResult | None = None
+
+    def start(self) -> bool:
+        """Begin the window unless disabled or done; True while estimating."""
+        if self.enabled and self.result is None:
+            self.estimator = GyroBiasEstimator(self.duration_s, self.gyro_std, self.accel_std)
+        return self.estimator is not None
+
+    def add(self, t_s: float, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> GyroBiasResult | None:
+        """One sample (s, rad/s, m/s^2); the result once, when the window ends (applied if still)."""
+        if self.estimator is None:
+            return None
+        self.result = self.estimator.add(t_s, gyro_rad_s, accel_m_s2)
+        if self.result is not None:
+            self.estimator = None
+            if self.result.still:
+                self.bias_rad_s = self.result.bias_rad_s
+        return self.result
+
+    @property
+    def status(self) -> str | None:
+        """The diagnostics' ``gyro_bias_status``: the result's message, ``estimating``, or None."""
+        return self.result.message if self.result is not None else "estimating" if self.estimator else None
+
+
 # ---------------------------------------------------------------------------------------- per-poll decisions
 class FrozenBlockWatch:
     """Says when a sensor block calls for a chip-state read-back (docs/devices.md §4.3: a reset chip's data registers
@@ -476,6 +575,12 @@ class DataReadyVerdict:
     clear_error: bool
     polls: int
 
+    @property
+    def text(self) -> str:
+        """The ERROR ``data_ready``'s message."""
+        return (f"data_ready: INT_STATUS_1.RAW_DATA_0_RDY not set for {self.polls} consecutive polls: no new "
+                "accel/gyro sample, nothing published")
+
 
 class DataReadyGate:
     """INT_STATUS_1.RAW_DATA_0_RDY per poll (DS-000189, bank 0 0x1A bit 0, clears on read): a poll without it holds
@@ -518,3 +623,134 @@ class MagNackFilter:
     def reset(self) -> None:
         """Forget the NACKed block (after a re-initialisation)."""
         self.frozen = None
+
+
+class MagnetometerWatch:
+    """Which AK09916 samples are published and when the magnetometer is re-initialised (module docstring; times in s
+    of ROS time). every: publish every k-th valid sample (k = round(AK09916 rate / MAG_PUBLISH_HZ), counted from each
+    start-up); stale_timeout_s: no fresh sample this long is a lost magnetometer; retry_interval_s: between
+    re-initialisations while it stays lost."""
+
+    def __init__(self, every: int, stale_timeout_s: float, retry_interval_s: float) -> None:
+        self.every, self.stale_timeout_s = int(every), float(stale_timeout_s)
+        self.retry_interval_s = float(retry_interval_s)
+        self.fresh_s: float | None = None  # the last fresh sample (None: not watched)
+        self.lost = False
+        self.retry_due_s: float | None = None
+        self.retrying = False  # a magnetometer-only re-initialisation runs, one step per poll
+        self.step_due_s = 0.0
+        self.count = 0  # valid samples since the start-up
+
+    def started(self, now_s: float, available: bool) -> None:
+        """A whole start-up finished, with the magnetometer ``available`` or not."""
+        self.count, self.retrying = 0, False
+        self.fresh_s = now_s if available else None
+        self.lost = self.lost and not available
+        self.retry_due_s = now_s + self.retry_interval_s if self.lost else None
+
+    def sample(self, now_s: float, data_ready: bool, overflow: bool) -> bool:
+        """One AK09916 block (ST1.DRDY, ST2.HOFL): True when it is published."""
+        if not data_ready:
+            return False
+        self.fresh_s = now_s
+        if overflow:
+            return False
+        self.count += 1
+        return (self.count - 1) % self.every == 0
+
+    def stale(self, now_s: float) -> str:
+        """The ERROR text when no fresh sample came for the timeout (the magnetometer is then lost and its
+        re-initialisation begins), else ''."""
+        if self.fresh_s is None or now_s - self.fresh_s <= self.stale_timeout_s:
+            return ""
+        text = (f"magnetometer: no new AK09916 sample for {now_s - self.fresh_s:.2f} s (SLV0 NACK or no DRDY): "
+                "imu/mag not published, re-initialising")
+        self.lost, self.fresh_s = True, None
+        return text
+
+    def retry_due(self, now_s: float) -> bool:
+        """True once when the next re-initialisation of a lost magnetometer is due."""
+        if self.retry_due_s is None or now_s < self.retry_due_s:
+            return False
+        self.retry_due_s = None
+        return True
+
+    def begin(self, now_s: float) -> None:
+        """A magnetometer-only re-initialisation starts (its first step now)."""
+        self.retrying, self.step_due_s = True, now_s
+
+    def step_due(self, now_s: float) -> bool:
+        """A step of the re-initialisation is due now."""
+        return self.retrying and now_s >= self.step_due_s
+
+    def finished(self, now_s: float, available: bool) -> None:
+        """The re-initialisation ended: the AK09916 answers (watched again) or not (retried later)."""
+        self.retrying = False
+        if available:
+            self.lost, self.fresh_s = False, now_s
+        else:
+            self.retry_due_s = now_s + self.retry_interval_s
+
+
+def diagnostic_values(config: p.ImuConfig, who_am_i: int | None, sample_rate_hz: float, mag_mode: str,
+                      mag_available: bool, mag_messages: int, startup_attempts: int, gyro_bias_rad_s: Any,
+                      bias_status: str | None) -> list[tuple[str, Any]]:
+    """The device-specific KeyValues of the IMU's ``/diagnostics`` entry (bias_status None: no calibration)."""
+    out = [("who_am_i", f"0x{who_am_i:02x}" if who_am_i is not None else "unknown"),
+           ("sample_rate_configured_hz", f"{sample_rate_hz:g}"), ("output_data_rate_hz", f"{config.accel_odr_hz:.3f}"),
+           ("accel_full_scale_g", f"{p.ACCEL_RANGE_G[config.accel_fs_sel]:g}"),
+           ("gyro_full_scale_dps", f"{p.GYRO_RANGE_DPS[config.gyro_fs_sel]:g}"), ("dlpf_config", config.gyro_dlpfcfg),
+           ("magnetometer_mode", mag_mode), ("magnetometer_available", mag_available),
+           ("magnetometer_messages", mag_messages), ("startup_attempts", startup_attempts),
+           ("gyro_bias_rad_s", " ".join(f"{v:.6f}" for v in gyro_bias_rad_s))]
+    return out + ([("gyro_bias_status", bias_status)] if bias_status is not None else [])
+
+
+@dataclass(frozen=True)
+class PollResult:
+    """One poll's reads (:func:`read_poll`). ready: INT_STATUS_1.RAW_DATA_0_RDY (None: not read, or its read
+    failed); block: the 14-byte accel/gyro/temperature block (None when the burst failed: ``error``); mag_block: the
+    AK09916's ST1..ST2 (None: no magnetometer, its read failed, or stale after a NACK); counters: diagnostics counters
+    to add (``data_ready_read_failure``, ``mag_status_failure``, ``mag_nack``, ``mag_i2c_failure``)."""
+
+    ready: bool | None
+    block: bytes | None
+    mag_block: bytes | None
+    counters: tuple[str, ...]
+    error: I2CError | None = None
+
+
+def read_poll(regs: BankedRegisters, mag_device: I2CPort, mag_mode: str, mag_available: bool,
+              require_data_ready: bool, nack_filter: MagNackFilter) -> PollResult:
+    """The reads of one poll, in bank 0 (module docstring of the node): INT_STATUS_1 when ``require_data_ready`` (it
+    lies 19 bytes before ACCEL_XOUT_H: a separate 1-byte read; a failed read leaves the bank as it was), the burst from
+    ACCEL_XOUT_H (plus the AK09916 block in ``i2c_master`` mode, then I2C_MST_STATUS for SLV0_NACK through
+    ``nack_filter``), or in ``bypass`` mode the AK09916 block at 0x0C:0x10. Only the burst's failure is an error."""
+    counters: list[str] = []
+    ready = None
+    if require_data_ready:
+        try:
+            ready = bool(regs.read(p.INT_STATUS_1)[0] & p.INT_STATUS_1_RAW_DATA_0_RDY)
+        except I2CError:
+            counters.append("data_ready_read_failure")
+    master = mag_mode == "i2c_master" and mag_available
+    try:
+        data = bytes(regs.read(p.ACCEL_XOUT_H, p.SENSOR_BLOCK_LENGTH + (p.AK09916_BLOCK_LENGTH if master else 0)))
+    except I2CError as exc:
+        return PollResult(ready, None, None, tuple(counters), exc)
+    mag_block = None
+    if master:
+        try:
+            nack = bool(regs.device.read_block(p.I2C_MST_STATUS.address, 1)[0] & p.I2C_MST_STATUS_SLV0_NACK)
+        except I2CError:
+            nack = False
+            counters.append("mag_status_failure")
+        if nack:
+            counters.append("mag_nack")
+        mag_block = nack_filter.update(data[p.SENSOR_BLOCK_LENGTH:], nack)  # None: the sample of before the NACK
+    elif mag_mode == "bypass" and mag_available:
+        try:
+            mag_block = mag_device.read_block(p.AK_ST1.address, p.AK09916_BLOCK_LENGTH)
+        except I2CError:
+            counters.append("mag_i2c_failure")
+    return PollResult(ready, data[:p.SENSOR_BLOCK_LENGTH], mag_block, tuple(counters))
