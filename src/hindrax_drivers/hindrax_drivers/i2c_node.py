@@ -12,15 +12,19 @@ from __future__ import annotations
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 
-from .node_common import DeviceDiagnostics, DiagnosticsPublisher, OneShot, RawDataPublisher, StuckAlarm
+from .node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, OneShot, RawDataPublisher,
+                          StuckAlarm)
 from .transport.i2c import BusHandle, I2CDevice
 
-__all__ = ["I2cSensorNode", "RETRY_PERIOD_S"]
+__all__ = ["I2cSensorNode", "RETRY_PERIOD_S", "STUCK_AFTER_S"]
 
 #: Wait between start-up attempts after a failure (wrong identity, bad PROM, bus error, bus not openable), s.
 RETRY_PERIOD_S = 1.0
+#: Bit-identical raw readings for this long (at least 3 readings) raise the ERROR ``stuck``, s.
+STUCK_AFTER_S = 2.0
 
 
 class I2cSensorNode(Node):
@@ -28,16 +32,16 @@ class I2cSensorNode(Node):
 
     label = "I2C device"
 
-    def setup_device(self, device_name: str, i2c_bus: int, address: int, bus: Any, stuck_limit: int) -> None:
+    def setup_device(self, device_name: str, i2c_bus: int, address: int, bus: Any, rate_hz: float) -> None:
         """Bus (``bus`` injected, else ``smbus2.SMBus(i2c_bus)`` opened at start-up), ``raw/<device_name>``,
-        diagnostics ``hindrax/<device_name>``, the ERROR ``stuck`` after ``stuck_limit`` identical readings; the
-        first start-up from the executor, not the constructor."""
+        diagnostics ``hindrax/<device_name>``, the ERROR ``stuck`` after :data:`STUCK_AFTER_S` of identical readings
+        at ``rate_hz``; the first start-up from the executor, not the constructor."""
         self.i2c_bus_number, self.address = int(i2c_bus), int(address)
         self._bus = BusHandle(self.i2c_bus_number, bus)  # reopened after a failed start-up when owned
         self.raw = RawDataPublisher(self, device_name)
         self.diag = DeviceDiagnostics(f"hindrax/{device_name}", f"i2c-{self.i2c_bus_number}@0x{self.address:02x}",
                                       self._now_s)
-        self.stuck = StuckAlarm(stuck_limit, self.diag)
+        self.stuck = StuckAlarm(max(3, round(STUCK_AFTER_S * rate_hz)), self.diag)
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.startup_attempts = 0
         self.periodic = None  # the subclass's cycle or poll timer
@@ -48,6 +52,12 @@ class I2cSensorNode(Node):
     def is_stuck(self) -> bool:
         """The ERROR ``stuck`` is raised."""
         return self.stuck.stuck
+
+    def sensor_publisher(self, msg_type: Any, topic: str) -> Any:
+        """A reliable publisher (depth 10) without QoS event handlers: rclpy's default incompatible-QoS handler of
+        each publisher is visited in Python on every executor spin, at the sensor's rate."""
+        return self.create_publisher(msg_type, topic, DEFAULT_QOS_DEPTH,
+                                     event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
     def alarm(self, key: str, text: str, counter: str = "") -> None:
         """Raise the ERROR ``key`` with ``text`` (counted ``counter`` if given), log it and publish the diagnostics

@@ -472,13 +472,13 @@ def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):
 
     r.emu._device_reset = counted_reset  # a full start-up resets the device (PWR_MGMT_1 DEVICE_RESET)
     published_at_retry: list[int] = []
-    begin_retry = r.node._begin_mag_retry
+    begin_retry = r.node.mag.begin
 
     def counted_retry(now_s: float) -> None:
         published_at_retry.append(r.node.diag.total_published)
         begin_retry(now_s)
 
-    r.node._begin_mag_retry = counted_retry
+    r.node.mag.begin = counted_retry
     r.emu.aux_connected = False  # the AK09916 goes missing
     r.wait(lambda: r.node.diag.counts().get("mag_lost", 0) == 1 and r.node.running and not r.node.mag_available,
            5, "running without magnetometer")

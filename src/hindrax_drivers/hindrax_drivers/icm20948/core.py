@@ -22,8 +22,9 @@ register-exact emulator:
 
   ``StartupSequence(..., magnetometer_only=True)`` is step 4 alone, which the node runs one step per poll to bring
   back a lost AK09916 without resetting the chip;
-- :class:`GyroBiasEstimator`: the start-up gyro-bias calibration (mean over a window, applied only when every axis's
-  gyro and accelerometer standard deviation shows a still vehicle);
+- :class:`GyroBiasEstimator`, :class:`GyroBias`: the start-up gyro-bias calibration (the mean over the first
+  ``gyro_bias_duration_s`` of data, published uncorrected meanwhile; subtracted only when every axis's gyro and
+  accelerometer standard deviation shows a still vehicle, else a WARN says why);
 - the per-poll decisions on the bytes read: :class:`FrozenBlockWatch` (an all-zero or repeated sensor block: check
   whether the chip reset), :func:`chip_reset_problems` (the read-back that says it did), :class:`DataReadyGate`
   (INT_STATUS_1.RAW_DATA_0_RDY) and :class:`MagNackFilter` (the I2C master's SLV0_NACK);
@@ -67,7 +68,7 @@ __all__ = ["ACCEL_NOISE_BANDWIDTH_HZ", "ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ", "Ban
            "chip_reset_problems", "diagnostic_values", "GYRO_NOISE_BANDWIDTH_HZ",
            "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBias", "GyroBiasEstimator", "GyroBiasResult", "MAG_ATTEMPTS",
            "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings", "imu_noise_variances",
-           "mag_mode_for_rate"]
+           "mag_mode_for_rate", "CHIP_STATE_LENGTH", "PollFailures", "read_asleep", "read_chip_reset"]
 
 #: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, docs/devices.md §4.3 step 7).
 MAG_ATTEMPTS = 3
@@ -81,6 +82,10 @@ GYRO_NOISE_BANDWIDTH_HZ = (229.8, 187.6, 154.3, 73.3, 35.9, 17.8, 8.9, 376.5)
 ACCEL_NOISE_BANDWIDTH_HZ = (265.0, 265.0, 136.0, 68.8, 34.4, 17.0, 8.3, 499.0)
 #: The vehicle is "still" when every axis's std is below this many times the expected noise std.
 STILL_STD_FACTOR = 5.0
+#: rate of ``imu/temperature``, Hz (diagnostics and bag: the die temperature drifts over minutes)
+TEMPERATURE_PUBLISH_HZ = 1.0
+#: highest rate of ``imu/mag``, Hz (heading on the topside; AK09916 continuous mode 2 is 20 Hz, docs/devices.md §4.5)
+MAG_PUBLISH_HZ = 20.0
 
 
 class I2CPort(Protocol):
@@ -115,8 +120,15 @@ class ImuSettings:
     mag_every: int
     warnings: tuple[str, ...]
 
+    def describe(self) -> str:
+        """Rate and ranges in one line (the start-up's log)."""
+        c = self.config
+        return (f"{self.odr_hz:.2f} Hz (FS {p.ACCEL_RANGE_G[c.accel_fs_sel]:g} g, {p.GYRO_RANGE_DPS[c.gyro_fs_sel]:g} "
+                f"dps, DLPFCFG {c.gyro_dlpfcfg})")
+
     @classmethod
-    def from_section(cls, s: Any, temperature_hz: float, mag_hz: float) -> "ImuSettings":
+    def from_section(cls, s: Any, temperature_hz: float = TEMPERATURE_PUBLISH_HZ,
+                     mag_hz: float = MAG_PUBLISH_HZ) -> "ImuSettings":
         """s: the validated ``sensors.icm20948`` section; temperature_hz, mag_hz: the highest publishing rates, Hz."""
         rate = float(s.sample_rate_hz)
         config = imu_config_from_settings(s.accel_full_scale_g, s.gyro_full_scale_dps, s.dlpf_config, rate)
@@ -127,8 +139,8 @@ class ImuSettings:
         if abs(odr - rate) > 0.05 * rate:
             warnings.append(f"sensors.icm20948.sample_rate_hz = {rate:g} Hz is not reachable: the chip runs at "
                             f"1125 / (1 + div) Hz, here {odr:.2f} Hz")
-        if not 0 < config.gyro_dlpfcfg < 7:
-            warnings.append(f"dlpf_config {config.gyro_dlpfcfg}: the gyro ignores its sample-rate divider "
+        if not 0 < int(s.dlpf_config) < 7:
+            warnings.append(f"dlpf_config {int(s.dlpf_config)}: the gyro ignores its sample-rate divider "
                             f"(docs/devices.md §4.4) and runs at 1125 Hz; polled at {odr:.2f} Hz")
         return cls(config, odr, mag_mode, rot, a_var, g_var, (rot * a_var) @ rot.T, (rot * g_var) @ rot.T,
                    (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, max(1, round(odr / temperature_hz)),
@@ -553,6 +565,39 @@ class FrozenBlockWatch:
         self._last = None
 
 
+#: Bytes read back by the chip-state check: USER_CTRL (0x03), reserved 0x04, LP_CONFIG 0x05, PWR_MGMT_1 0x06.
+CHIP_STATE_LENGTH = 4
+
+
+def read_chip_reset(regs: BankedRegisters, master_expected: bool) -> list[str]:
+    """Read USER_CTRL..PWR_MGMT_1 back (one 4-byte read, bank 0) and say what shows a chip that reset
+    (:func:`chip_reset_problems`; empty: none). Raises I2CError."""
+    return chip_reset_problems(regs.read(p.USER_CTRL, CHIP_STATE_LENGTH), master_expected)
+
+
+def read_asleep(regs: BankedRegisters) -> bool:
+    """PWR_MGMT_1.SLEEP read back: a frozen chip found asleep was reset by a power glitch. Raises I2CError."""
+    return bool(regs.read(p.PWR_MGMT_1)[0] & p.PWR_MGMT_1_SLEEP)
+
+
+class PollFailures:
+    """Failed polls in a row (ROS time, s): :meth:`failed` says ``restart`` once they have lasted ``reinit_after_s``
+    (the start-up runs again), else ``warn``; :meth:`ok` after a poll that read its burst."""
+
+    def __init__(self, reinit_after_s: float) -> None:
+        self.reinit_after_s = float(reinit_after_s)
+        self.since_s: float | None = None
+
+    def ok(self) -> None:
+        """A poll read its burst."""
+        self.since_s = None
+
+    def failed(self, now_s: float) -> str:
+        """One more failed poll at ``now_s``."""
+        self.since_s = now_s if self.since_s is None else self.since_s
+        return "restart" if now_s - self.since_s >= self.reinit_after_s else "warn"
+
+
 def chip_reset_problems(state: bytes, master_expected: bool) -> list[str]:
     """What in the read-back USER_CTRL..PWR_MGMT_1 (4 bytes from 0x03, bank 0) shows a chip that reset: asleep
     (PWR_MGMT_1.SLEEP), or the I2C master off while ``master_expected`` (docs/devices.md §4.3). Empty: no reset."""
@@ -629,21 +674,25 @@ class MagnetometerWatch:
     """Which AK09916 samples are published and when the magnetometer is re-initialised (module docstring; times in s
     of ROS time). every: publish every k-th valid sample (k = round(AK09916 rate / MAG_PUBLISH_HZ), counted from each
     start-up); stale_timeout_s: no fresh sample this long is a lost magnetometer; retry_interval_s: between
-    re-initialisations while it stays lost."""
+    re-initialisations while it stays lost. A re-initialisation is a magnetometer-only :class:`StartupSequence`
+    (``make_reinit()``), run one step per poll by :meth:`after_sample`."""
 
-    def __init__(self, every: int, stale_timeout_s: float, retry_interval_s: float) -> None:
+    def __init__(self, every: int, stale_timeout_s: float, retry_interval_s: float,
+                 make_reinit: Callable[[], StartupSequence]) -> None:
         self.every, self.stale_timeout_s = int(every), float(stale_timeout_s)
         self.retry_interval_s = float(retry_interval_s)
+        self.make_reinit = make_reinit
+        self.reinit: StartupSequence | None = None  # the running re-initialisation
         self.fresh_s: float | None = None  # the last fresh sample (None: not watched)
         self.lost = False
         self.retry_due_s: float | None = None
-        self.retrying = False  # a magnetometer-only re-initialisation runs, one step per poll
         self.step_due_s = 0.0
         self.count = 0  # valid samples since the start-up
+        self.text = ""  # the ERROR ``magnetometer``'s text when lost
 
     def started(self, now_s: float, available: bool) -> None:
         """A whole start-up finished, with the magnetometer ``available`` or not."""
-        self.count, self.retrying = 0, False
+        self.count, self.reinit = 0, None
         self.fresh_s = now_s if available else None
         self.lost = self.lost and not available
         self.retry_due_s = now_s + self.retry_interval_s if self.lost else None
@@ -658,38 +707,35 @@ class MagnetometerWatch:
         self.count += 1
         return (self.count - 1) % self.every == 0
 
-    def stale(self, now_s: float) -> str:
-        """The ERROR text when no fresh sample came for the timeout (the magnetometer is then lost and its
-        re-initialisation begins), else ''."""
-        if self.fresh_s is None or now_s - self.fresh_s <= self.stale_timeout_s:
-            return ""
-        text = (f"magnetometer: no new AK09916 sample for {now_s - self.fresh_s:.2f} s (SLV0 NACK or no DRDY): "
-                "imu/mag not published, re-initialising")
-        self.lost, self.fresh_s = True, None
-        return text
-
-    def retry_due(self, now_s: float) -> bool:
-        """True once when the next re-initialisation of a lost magnetometer is due."""
-        if self.retry_due_s is None or now_s < self.retry_due_s:
-            return False
-        self.retry_due_s = None
-        return True
-
     def begin(self, now_s: float) -> None:
         """A magnetometer-only re-initialisation starts (its first step now)."""
-        self.retrying, self.step_due_s = True, now_s
+        self.reinit, self.step_due_s = self.make_reinit(), now_s
 
-    def step_due(self, now_s: float) -> bool:
-        """A step of the re-initialisation is due now."""
-        return self.retrying and now_s >= self.step_due_s
-
-    def finished(self, now_s: float, available: bool) -> None:
-        """The re-initialisation ended: the AK09916 answers (watched again) or not (retried later)."""
-        self.retrying = False
-        if available:
-            self.lost, self.fresh_s = False, now_s
-        else:
+    def after_sample(self, now_s: float, available: bool) -> str:
+        """After each published sample: ``lost`` (no fresh sample for the timeout while ``available``: ``text`` says
+        why; the re-initialisation begins), ``retry`` (a re-initialisation of a lost magnetometer begins),
+        ``recovered`` (a re-initialisation ended and the AK09916 answers), or ''. Runs one due step."""
+        if available and self.fresh_s is not None and now_s - self.fresh_s > self.stale_timeout_s:
+            self.text = (f"magnetometer: no new AK09916 sample for {now_s - self.fresh_s:.2f} s (SLV0 NACK or no "
+                         "DRDY): imu/mag not published, re-initialising")
+            self.lost, self.fresh_s = True, None
+            self.begin(now_s)
+            return "lost"
+        event = ""
+        if self.retry_due_s is not None and now_s >= self.retry_due_s:
+            self.retry_due_s, event = None, "retry"
+            self.begin(now_s)
+        if self.reinit is None or now_s < self.step_due_s:
+            return event
+        if not self.reinit.finished:
+            self.step_due_s = now_s + self.reinit.step().wait_s
+            return event
+        self.reinit = None
+        if not available:
             self.retry_due_s = now_s + self.retry_interval_s
+            return event
+        self.lost, self.fresh_s = False, now_s
+        return "recovered"
 
 
 def diagnostic_values(config: p.ImuConfig, who_am_i: int | None, sample_rate_hz: float, mag_mode: str,

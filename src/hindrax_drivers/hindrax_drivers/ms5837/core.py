@@ -35,6 +35,7 @@ from __future__ import annotations
 import collections
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from . import protocol as p
 
@@ -102,7 +103,7 @@ def temperature_warning(reading: p.Reading) -> str:
 
 def diagnostic_values(variant: p.Variant | None, configured: p.Variant | None, osr: int, conversion_wait_s: float,
                       surface_pressure_pa: float, cycles: int, startup_attempts: int,
-                      calibration: p.Calibration | None) -> list[tuple[str, object]]:
+                      calibration: p.Calibration | None) -> list[tuple[str, Any]]:
     """The device-specific KeyValues of the driver's ``/diagnostics`` entry."""
     out = [("variant", variant.value if variant else "unknown"),
            ("variant_configured", configured.value if configured else "auto"), ("oversampling", osr),

@@ -12,7 +12,7 @@ compensate (:func:`hindrax_drivers.ms5837.protocol.compensate`, second order); p
 that cycle only (counted ``adc_zero``, ``adc_saturated``, ``i2c_failure``); :data:`FAILED_CYCLES_FOR_ERROR` in a row
 are an ERROR and rerun the start-up (a part that lost power needs the reset to reload its PROM). A cycle still running
 when the next is due is skipped (``cycle_overrun``; OSR 8192 cannot reach ~28 Hz: a warning at start-up). Bit-identical
-D1 and D2 for :data:`STUCK_AFTER_S` s raise the ERROR ``stuck``; implausible and stuck readings are not published.
+D1 and D2 for 2 s raise the ERROR ``stuck``; implausible and stuck readings are not published.
 
 Publishes (reliable, depth 10), stamped at the pressure's time of validity
 (:func:`~hindrax_drivers.ms5837.core.stamp_offset_s`): ``pressure/fluid_pressure`` sensor_msgs/FluidPressure (Pa,
@@ -46,7 +46,7 @@ from std_srvs.srv import Trigger
 
 from ..esc_state import ArmedWatch
 from ..i2c_node import I2cSensorNode
-from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, load_node_config, run_node
+from ..node_common import declare_frame_ids, load_node_config, run_node
 from ..transport.i2c import I2CDevice, I2CError
 from . import protocol as p
 from .core import (TEMPERATURE_RESOLUTION_C, DepthGate, Plausibility, ZeroDepth, adc_problem, check_prom,
@@ -56,8 +56,6 @@ __all__ = ["Ms5837Node", "main"]
 
 #: Added to the conversion time before the ADC read, s (timer jitter is always late, never early).
 CONVERSION_MARGIN_S = 0.0005
-#: Identical raw readings for this long mean a stuck sensor, s.
-STUCK_AFTER_S = 2.0
 #: Consecutive failed cycles after which the device state turns to ERROR and the start-up (reset, PROM) reruns.
 FAILED_CYCLES_FOR_ERROR = 3
 #: Frame of the pressure and temperature messages (the pressure port).
@@ -100,17 +98,16 @@ class Ms5837Node(I2cSensorNode):
         self.device: I2CDevice | None = None  # made at the first start-up (open_device)
         self.calibration: p.Calibration | None = None
         self.variant: p.Variant | None = None
-        self.setup_device("ms5837", s.i2c_bus, s.i2c_address, bus, max(3, round(STUCK_AFTER_S * self.rate_hz)))
+        self.setup_device("ms5837", s.i2c_bus, s.i2c_address, bus, self.rate_hz)
         self.cycles = 0
         self._failed_cycles = 0
         self._phase = "idle"  # idle | d1 | d2
         self._d1: int | None = None
         self._d1_stamp = None  # time of validity of the pressure of the running cycle
 
-        qos = DEFAULT_QOS_DEPTH
-        self.pub_pressure = self.create_publisher(FluidPressure, "pressure/fluid_pressure", qos)
-        self.pub_temperature = self.create_publisher(Temperature, "pressure/temperature", qos)
-        self.pub_depth = self.create_publisher(PoseWithCovarianceStamped, "pressure/depth", qos)
+        self.pub_pressure = self.sensor_publisher(FluidPressure, "pressure/fluid_pressure")
+        self.pub_temperature = self.sensor_publisher(Temperature, "pressure/temperature")
+        self.pub_depth = self.sensor_publisher(PoseWithCovarianceStamped, "pressure/depth")
         self.create_service(Trigger, "pressure/zero_depth", self.on_zero_depth)
         self.armed.subscribe(self)
         self.periodic = self.create_timer(1.0 / self.rate_hz, self._start_cycle, autostart=False)  # ROS time
