@@ -1,4 +1,4 @@
-"""Issue 23 findings 4, 5, 6, 8 and 10: values that are invalid, implausible after a transformation, or
+"""Values that are invalid, implausible after a transformation, or
 configured unsafely are never taken as valid (docs/architecture.md §8). Each test failed on 3f4c425."""
 from __future__ import annotations
 
