@@ -1,11 +1,8 @@
-"""The base of the I2C sensor nodes (MS5837, ICM-20948): the bus handle, the raw-traffic tap, the device diagnostics
-with the ERROR ``stuck``, the one-shot timer of the start-up and conversion waits, and the start-up's failure path
-(ERROR with the reason, the bus closed, the start-up retried every :data:`RETRY_PERIOD_S` of ROS time: a bus that
-went and came back is picked up; never a crash, never a sleep in a callback).
-
-A subclass calls :meth:`I2cSensorNode.setup_device` after reading its configuration, implements ``_start`` (the
-start-up, which begins with :meth:`I2cSensorNode.open_bus`) and ``_diag_extra`` (its diagnostics' KeyValues), and
-keeps its periodic timer in ``periodic``.
+"""The base of the I2C sensor nodes (MS5837, ICM-20948): bus, raw tap, diagnostics with the ERROR ``stuck``, the
+one-shot timer of the waits, and the start-up's failure path (ERROR with the reason, the bus closed, the start-up
+retried every :data:`RETRY_PERIOD_S`). A subclass calls :meth:`I2cSensorNode.setup_device` after its configuration,
+implements ``_start`` (beginning with :meth:`~I2cSensorNode.open_device`) and ``_diag_extra``, and keeps its
+periodic timer in ``periodic``.
 """
 from __future__ import annotations
 
@@ -60,8 +57,7 @@ class I2cSensorNode(Node):
                                      event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
     def alarm(self, key: str, text: str, counter: str = "") -> None:
-        """Raise the ERROR ``key`` with ``text`` (counted ``counter`` if given), log it and publish the diagnostics
-        at once (not at the next period)."""
+        """Raise the ERROR ``key`` with ``text`` (counted ``counter`` if given), logged and published at once."""
         self.diag.error(key, text)
         if counter:
             self.diag.count(counter)
@@ -69,8 +65,7 @@ class I2cSensorNode(Node):
         self.diagnostics.publish()
 
     def stuck_reading(self, value: Any, text: str) -> bool:
-        """Feed one raw reading to the ERROR ``stuck`` (logged and published at once when raised; ``text`` says what
-        is identical). True while stuck: the reading is not published."""
+        """Feed one raw reading to the ERROR ``stuck`` (``text``: what is identical); True while stuck."""
         if self.stuck.update(value, text) and self.stuck.raised:
             self.get_logger().error(f"{self.label} stuck: {text} for {self.stuck.limit} readings: not published")
             self.diagnostics.publish()
@@ -79,25 +74,17 @@ class I2cSensorNode(Node):
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def open_bus(self) -> Any:
-        """Begin a start-up attempt: counted, the periodic timer stopped; the bus (the same, or opened afresh after a
-        failed attempt), or None after :meth:`_fail` when it cannot be opened."""
+    def open_device(self, name: str) -> Any:
+        """Begin a start-up attempt (counted, the periodic timer stopped): the bus (the same, or opened afresh after a
+        failed attempt) and ``self.device`` on it (no backoff: no sleep in a callback; its counters kept across
+        reopened buses), or None after :meth:`_fail` when the bus cannot be opened."""
         self.startup_attempts += 1
         if self.periodic is not None:
             self.periodic.cancel()
         try:
-            return self._bus.get()
+            bus = self._bus.get()
         except (OSError, ImportError) as exc:
-            self._fail(str(exc))
-            return None
-
-    def open_device(self, name: str) -> Any:
-        """:meth:`open_bus`, and the sensor's :class:`~hindrax_drivers.transport.i2c.I2CDevice` at ``address`` on it
-        (``self.device``, its counters kept across reopened buses; immediate retries: no sleep in a callback), or
-        None after :meth:`_fail`."""
-        bus = self.open_bus()
-        if bus is None:
-            return None
+            return self._fail(str(exc))
         if getattr(self, "device", None) is None:
             self.device = I2CDevice(bus, self.address, name, backoff_s=0.0, raw_tap=self.raw.i2c_tap)
         self.device.bus = bus
@@ -109,12 +96,6 @@ class I2cSensorNode(Node):
         self.get_logger().error(f"{self.label} start-up failed: {reason}", throttle_duration_sec=10.0)
         self._bus.reset()
         self._after.schedule(RETRY_PERIOD_S, self._start)
-
-    def _start(self) -> None:  # pragma: no cover - every subclass has its own
-        raise NotImplementedError
-
-    def _diag_extra(self) -> list:  # pragma: no cover - every subclass has its own
-        return []
 
     def close(self) -> None:
         """Stop the timers and close the bus if this node opened it (run_node calls this on shutdown)."""

@@ -359,11 +359,7 @@ class StuckDetector:
 
 class StuckAlarm:
     """A device's ERROR ``stuck`` over a :class:`StuckDetector`: raised in ``diag`` (counted ``stuck_events``) when
-    ``limit`` raw readings in a row are bit-identical, cleared when they change (pure; the node logs and publishes).
-
-    ``update(value, text)`` returns True while stuck; ``text`` (what is identical) goes into the ERROR's message when
-    it is raised now, after which :attr:`raised` is True until the next update. ``reset()`` forgets the readings and
-    clears the ERROR."""
+    ``limit`` raw readings in a row are bit-identical (:attr:`raised` True on that update), cleared when they change."""
 
     def __init__(self, limit: int, diag: DeviceDiagnostics) -> None:
         self.limit, self.diag = int(limit), diag
@@ -371,7 +367,7 @@ class StuckAlarm:
         self.stuck = self.raised = False
 
     def update(self, value: Any, text: str) -> bool:
-        """Feed one raw reading (any value compared with ``==``)."""
+        """Feed one raw reading (compared with ``==``; ``text``: what is identical, for the ERROR); True while stuck."""
         stuck = self.detector.update(value)
         self.raised = stuck and not self.stuck
         if self.raised:
@@ -390,9 +386,8 @@ class StuckAlarm:
 
 
 class OneShot:
-    """One callback at a time, once, after a delay of the node's ROS time, from one timer of ``node`` (a device's
-    start-up waits and conversion waits without sleeping in a callback): ``schedule(delay_s, fn)`` replaces what was
-    pending; ``cancel()``."""
+    """One callback at a time, once, after a delay of ``node``'s ROS time, from one timer (a device's waits without
+    sleeping in a callback): ``schedule(delay_s, fn)`` replaces what was pending."""
 
     def __init__(self, node: Any) -> None:
         self._fn: Callable[[], None] | None = None

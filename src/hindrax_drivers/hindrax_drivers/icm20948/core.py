@@ -1,54 +1,32 @@
-"""ICM-20948 start-up and calibration core: pure, no rclpy, no clock, no sleep (docs/devices.md §4).
+"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4). What the node (:mod:`.node`) runs
+from its timers, through injected I2C ports, so that it can be tested step by step against the register-exact emulator.
 
-What the node (:mod:`.node`) runs from its timers, written so that it can be tested step by step against the
-register-exact emulator:
-
-- :func:`imu_config_from_settings`, :func:`imu_noise_variances`, :func:`mag_mode_for_rate`: the register fields,
-  noise variances and AK09916 mode from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4, §4.6);
-- :class:`BankedRegisters`: register access through REG_BANK_SEL with the selected bank cached (docs/devices.md
-  §4.1); a failed transfer or a DEVICE_RESET makes the bank unknown, so the next access selects it again;
-- :class:`StartupSequence`: the start-up of docs/devices.md §4.3 as a list of steps, each returning the wait the
-  datasheet asks for after it:
-
-  1. select bank 0, read WHO_AM_I and check 0xEA (a wrong identity or an I2C failure ends the attempt with the
-     reason; the node retries);
-  2. DEVICE_RESET, 10 ms; wake (SLEEP = 0, CLKSEL = auto), 20 ms; all axes on (:func:`.protocol.reset_wake_sequence`);
-  3. bank 2: sample-rate dividers, DLPF and full scale (:func:`.protocol.configure_sequence`);
-  4. magnetometer (``i2c_master``: the I2C master set up by :func:`.protocol.mag_master_sequence`, then the AK09916
-     identity WIA2 = 0x09 read once through SLV4, retried up to :data:`MAG_ATTEMPTS` times with I2C_MST_RST in
-     between, docs/devices.md §4.3 step 7; ``bypass``: BYPASS_EN, then WIA1/WIA2 at 0x0C, soft reset and continuous
-     mode written directly). A magnetometer that does not answer is reported through ``on_magnetometer``, never a
-     failure of the start-up: the IMU runs without it.
-
-  ``StartupSequence(..., magnetometer_only=True)`` is step 4 alone, which the node runs one step per poll to bring
-  back a lost AK09916 without resetting the chip;
-- :class:`GyroBiasEstimator`, :class:`GyroBias`: the start-up gyro-bias calibration (the mean over the first
-  ``gyro_bias_duration_s`` of data, published uncorrected meanwhile; subtracted only when every axis's gyro and
-  accelerometer standard deviation shows a still vehicle, else a WARN says why);
-- the per-poll decisions on the bytes read: :class:`FrozenBlockWatch` (an all-zero or repeated sensor block: check
-  whether the chip reset), :func:`chip_reset_problems` (the read-back that says it did), :class:`DataReadyGate`
-  (INT_STATUS_1.RAW_DATA_0_RDY) and :class:`MagNackFilter` (the I2C master's SLV0_NACK);
-- :func:`read_poll`: the transactions of one poll (data ready, the burst, the magnetometer's status or block);
-- :class:`MagnetometerWatch`: which AK09916 samples go out (new, no overflow, at most ``MAG_PUBLISH_HZ``), when the
-  magnetometer counts as lost and when its re-initialisation runs; :func:`diagnostic_values`.
-
-What those decisions do on the vehicle:
-
-- Data ready (``sensors.icm20948.require_data_ready``): a poll whose INT_STATUS_1.RAW_DATA_0_RDY is not set (the chip
-  and host clocks drift at the same nominal rate, so a poll may come before the next sample) publishes nothing
-  (counted ``not_ready``); ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``, cleared by the next
-  ready sample. A failed status read leaves the flag unknown and the sample is published as without the gate (a
-  replay of a bag recorded without these reads publishes what it recorded).
-- Chip reset (power glitch): a reset chip's data registers read 0 and stop updating, PWR_MGMT_1 reads 0x41 (asleep)
-  and USER_CTRL 0 (I2C master off). An all-zero block, or ``frozen_check_samples`` bit-identical blocks in a row,
-  make the node read USER_CTRL..PWR_MGMT_1 back; a chip asleep, or with the master off in ``i2c_master`` mode, is a
-  reset: counted ``chip_resets``, ERROR, the suspect samples not published, the start-up run again at once. The
-  all-zero block itself is never published.
-- Magnetometer in ``i2c_master`` mode: I2C_MST_STATUS.SLV0_NACK means EXT_SLV_SENS_DATA holds an old sample:
-  ``imu/mag`` is not published (counted ``mag_nack``) until that block changes. No fresh sample (DRDY without NACK)
-  for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises the magnetometer alone, one step
-  per poll (no device reset: ``imu/data_raw`` goes on); while it is still missing that is retried every
-  ``mag_retry_interval_s`` (counted ``mag_retries``) until the AK09916 answers again.
+- Settings (:class:`ImuSettings`, :func:`imu_config_from_settings`, :func:`imu_noise_variances`,
+  :func:`mag_mode_for_rate`): register fields, noise variances, AK09916 mode and publishing rates from
+  ``sensors.icm20948.*`` (docs/devices.md §4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the bank cached
+  (§4.1); a failed transfer or a DEVICE_RESET makes it unknown, so the next access selects it again.
+- :class:`StartupSequence` (§4.3), steps each returning the datasheet's wait: bank 0, WHO_AM_I 0xEA (a wrong identity
+  or an I2C failure ends the attempt; the node retries); DEVICE_RESET, 10 ms; wake, 20 ms; all axes on; bank 2
+  dividers, DLPF, full scale; the magnetometer (``i2c_master``: the I2C master, then WIA2 = 0x09 through SLV4, up to
+  :data:`MAG_ATTEMPTS` tries with I2C_MST_RST between; ``bypass``: BYPASS_EN, WIA1/WIA2 at 0x0C, soft reset,
+  continuous mode). A silent magnetometer is reported through ``on_magnetometer``, never a start-up failure;
+  ``magnetometer_only=True`` is that last part alone, which brings a lost AK09916 back without resetting the chip.
+- Gyro bias (:class:`GyroBiasEstimator`, :class:`GyroBias`): the mean over the first ``gyro_bias_duration_s`` of
+  data (published uncorrected meanwhile), subtracted only when every axis's gyro and accelerometer std shows a still
+  vehicle, else a WARN says why.
+- Each poll (:func:`read_poll`): with ``require_data_ready`` a poll whose INT_STATUS_1.RAW_DATA_0_RDY is not set
+  (chip and host clocks drift) publishes nothing (:class:`DataReadyGate`: counted ``not_ready``;
+  ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``; a failed status read publishes, as without the
+  gate, so a replay of an older bag publishes what it recorded).
+- Chip reset (power glitch): its data registers read 0 and stop updating, PWR_MGMT_1 reads 0x41 (asleep), USER_CTRL
+  0 (I2C master off). An all-zero block or ``frozen_check_samples`` identical blocks (:class:`FrozenBlockWatch`)
+  make the node read the state back (:func:`read_chip_reset`); a reset is counted ``chip_resets``, an ERROR, its
+  suspect samples unpublished, the start-up run again. The all-zero block is never published.
+- Magnetometer: in ``i2c_master`` mode I2C_MST_STATUS.SLV0_NACK means the block is old (:class:`MagNackFilter`:
+  not published, counted ``mag_nack``, until it changes). :class:`MagnetometerWatch`: new samples without overflow
+  at most ``MAG_PUBLISH_HZ``; none for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises
+  the magnetometer alone, one step per poll (``imu/data_raw`` goes on), retried every ``mag_retry_interval_s``
+  (counted ``mag_retries``) until the AK09916 answers.
 """
 from __future__ import annotations
 

@@ -1,34 +1,22 @@
-"""The MS5837 driver's decisions, without ROS: what a compensated reading turns into (depth, variances), whether it
-is plausible, and whether ``pressure/zero_depth`` may move the surface pressure. The node
-(:mod:`hindrax_drivers.ms5837.node`) does the I2C cycle and publishes what these say.
+"""The MS5837 driver's decisions, without ROS (the node, :mod:`hindrax_drivers.ms5837.node`, runs the I2C cycle).
 
-Readings: the PROM (:func:`check_prom`: CRC-4; with ``sensors.ms5837.prom_reject_blank_words`` no coefficient
-0x0000/0xFFFF, which an all-zero PROM would pass; the variant configured or by Blue Robotics' C1 heuristic,
-docs/devices.md §3.9) and each ADC word (:func:`adc_problem`: 0 is no completed conversion, docs/devices.md §3.1;
-0xFFFFFF a bus held high or a broken bridge, no reading in the sensor's range comes near it).
-
-Time of validity (:func:`stamp_offset_s`): the device has no clock; a reading is stamped at the ROS time the D1
-conversion was commanded plus half the OSR's conversion time (4.5 ms at OSR 4096), the middle of the interval over
-which the ADC integrates the pressure. The read time is later by the full wait plus the timer's latency: at 0.3 m/s
-of heave, 10 ms of stamp error is 3 mm of depth, which biases the identified heave inertia and damping.
-
-Depth: depth_m = (P - surface_pressure_pa) / (water_density_kg_m3 * gravity_m_s2) of the pressure port
-(docs/devices.md §3.6); its variance is variance_P / (rho g)^2. Pressure variance: resolution^2 + LSB^2/12
-(:func:`pressure_variance_pa2`); the pose components a depth sensor does not measure get :data:`UNKNOWN_VARIANCE`.
-
-Plausibility (:class:`Plausibility`; ERROR ``implausible``, held :data:`IMPLAUSIBLE_HOLD_S` after the last rejection;
-nothing is published for that cycle): a compensated pressure outside [``sensors.ms5837.min_pressure_pa``,
-``max_pressure_pa``] (counted ``implausible_pressure``); then :class:`DepthGate`: a depth outside
-[``min_depth_m``, ``max_depth_m``], or one that moved faster than ``max_depth_rate_m_s`` from the last published
-depth and is not confirmed by the next sample (counted ``implausible_depth``). Garbage ADC words (a bus returning
-noise, not errors) pass the pressure window in about 4.5 % of random pairs; the rate gate needs two consecutive
-garbage depths to agree, which they almost never do.
-
-Zero depth (:class:`ZeroDepth`): the surface pressure becomes the mean of the pressures of the last
-:data:`ZERO_DEPTH_WINDOW_S` seconds; refused while the ESC may be thrusting (the arm lock's reason,
-:class:`hindrax_drivers.esc_state.ArmedWatch`), and when that mean is further than
-``sensors.ms5837.zero_depth_margin_pa`` from the atmospheric reference (the surface pressure the node started with):
-a zero taken at 1.5 m would move every depth, and the depth limits with it, 1.5 m down.
+- Readings: the PROM (:func:`check_prom`: CRC-4; with ``sensors.ms5837.prom_reject_blank_words`` no coefficient
+  0x0000/0xFFFF, which an all-zero PROM would pass; the variant configured or by Blue Robotics' C1 heuristic,
+  docs/devices.md §3.9) and each ADC word (:func:`adc_problem`: 0 is no completed conversion, §3.1; 0xFFFFFF a bus
+  held high or a broken bridge).
+- Time of validity (:func:`stamp_offset_s`): the D1 command's ROS time plus half the OSR's conversion time (4.5 ms at
+  OSR 4096), the middle of the ADC's integration; at 0.3 m/s of heave 10 ms of stamp error is 3 mm of depth.
+- Depth = (P - surface_pressure_pa) / (water_density_kg_m3 * gravity_m_s2) of the port (§3.6), variance
+  variance_P / (rho g)^2 (:func:`depth_covariance`); pressure variance resolution^2 + LSB^2/12.
+- Plausibility (:class:`Plausibility`; ERROR ``implausible``, held :data:`IMPLAUSIBLE_HOLD_S` after the last
+  rejection; nothing published for that cycle): a pressure outside [``min_pressure_pa``, ``max_pressure_pa``]
+  (counted ``implausible_pressure``), then :class:`DepthGate`: a depth outside [``min_depth_m``, ``max_depth_m``] or
+  one faster than ``max_depth_rate_m_s`` not confirmed by the next sample (``implausible_depth``). Garbage ADC words
+  pass the pressure window in about 4.5 % of random pairs; the rate gate needs two consecutive ones to agree.
+- Zero depth (:class:`ZeroDepth`): the surface pressure becomes the mean of the last :data:`ZERO_DEPTH_WINDOW_S`;
+  refused while the ESC may be thrusting (:class:`hindrax_drivers.esc_state.ArmedWatch`'s reason) and when that mean
+  is further than ``zero_depth_margin_pa`` from the pressure the node started with (a zero taken at 1.5 m would move
+  every depth, and the depth limits with it, 1.5 m down).
 """
 from __future__ import annotations
 

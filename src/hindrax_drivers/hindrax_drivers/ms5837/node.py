@@ -1,36 +1,21 @@
-"""MS5837 pressure-sensor node (TE MS5837-30BA / -02BA on I2C, address 0x76; docs/devices.md §3): the I2C cycle and
-the messages; what a reading means (depth, variances, plausibility, zero depth) is :mod:`hindrax_drivers.ms5837.core`.
+"""MS5837 pressure-sensor node (TE MS5837-30BA / -02BA on I2C at 0x76; docs/devices.md §3): the I2C cycle and the
+messages; what a reading means (PROM and ADC checks, stamps, depth, variances, plausibility, zero depth) is
+:mod:`hindrax_drivers.ms5837.core`, the start-up's retry and the ERROR ``stuck`` :mod:`hindrax_drivers.i2c_node`.
 
-Start-up (docs/devices.md §3.1-3.3, §3.9): reset command 0x1E, wait 10 ms, read the 8 PROM words and check them
-(:func:`~hindrax_drivers.ms5837.core.check_prom`). A failure is an ERROR with the reason, and the start-up is retried
-(:class:`~hindrax_drivers.i2c_node.I2cSensorNode`); never a crash.
+Start-up: reset command 0x1E, 10 ms, the 8 PROM words. Cycle, every 1 / ``sensors.ms5837.rate_hz`` s from ROS timers
+(no sleep in any callback): convert D1, wait the OSR's conversion time + :data:`CONVERSION_MARGIN_S`, ADC read; the
+same for D2; compensate (second order); publish. A rejected ADC word or an I2C failure abandons that cycle only
+(counted); :data:`FAILED_CYCLES_FOR_ERROR` in a row are an ERROR and rerun the start-up (a part that lost power needs
+the reset to reload its PROM). A cycle still running when the next is due is skipped (``cycle_overrun``).
 
-Cycle, every 1 / ``sensors.ms5837.rate_hz`` s, from ROS timers (no sleep in any callback): convert D1, wait the OSR's
-conversion time (TE's library waits, docs/devices.md §3.1) + :data:`CONVERSION_MARGIN_S`, ADC read; the same for D2;
-compensate (:func:`hindrax_drivers.ms5837.protocol.compensate`, second order); publish. A rejected ADC word
-(:func:`~hindrax_drivers.ms5837.core.adc_problem`) or an I2C failure after the transport's immediate retries abandons
-that cycle only (counted ``adc_zero``, ``adc_saturated``, ``i2c_failure``); :data:`FAILED_CYCLES_FOR_ERROR` in a row
-are an ERROR and rerun the start-up (a part that lost power needs the reset to reload its PROM). A cycle still running
-when the next is due is skipped (``cycle_overrun``; OSR 8192 cannot reach ~28 Hz: a warning at start-up). Bit-identical
-D1 and D2 for 2 s raise the ERROR ``stuck``; implausible and stuck readings are not published.
-
-Publishes (reliable, depth 10), stamped at the pressure's time of validity
-(:func:`~hindrax_drivers.ms5837.core.stamp_offset_s`): ``pressure/fluid_pressure`` sensor_msgs/FluidPressure (Pa,
-frame ``pressure_link``: the port, at ``sensors.ms5837.position_frd_m`` from the CG), ``pressure/temperature``
-(degC), ``pressure/depth`` geometry_msgs/PoseWithCovarianceStamped (frame ``odom``, REP-105 ENU, ``position.z =
--depth_m`` of the port: the stamp, frame and variance a depth filter needs, docs/architecture.md §3; the lever arm to
-base_link is the state estimator's job), ``raw/ms5837`` (a cycle's four I2C transactions in one message) and
-``/diagnostics`` (state, rate, I2C and cycle counters, variant, OSR, surface pressure, ERRORs ``stuck``,
-``implausible``).
-
-Service ``pressure/zero_depth`` (std_srvs/Trigger, :class:`~hindrax_drivers.ms5837.core.ZeroDepth`): the surface
-pressure becomes the mean of the last second, also in the node's ``environment.surface_pressure_pa`` parameter (not the
-file). It and a change of that parameter (``ros2 param set``) are refused while the ESC reports armed and before it has
-reported (:class:`hindrax_drivers.esc_state.ArmedWatch`), with the same reason.
-
-The bus: ``smbus2.SMBus(sensors.ms5837.i2c_bus)`` on the Pi, an :class:`~hindrax_drivers.ms5837.emulator.Ms5837Emulator`
-on an :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` in tests and simulation. Alone:
-``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
+Publishes (reliable, depth 10): ``pressure/fluid_pressure`` (Pa, frame ``pressure_link``, the port at
+``sensors.ms5837.position_frd_m``), ``pressure/temperature`` (degC), ``pressure/depth``
+geometry_msgs/PoseWithCovarianceStamped (frame ``odom``, ``position.z = -depth_m`` of the port; docs/architecture.md
+§3), ``raw/ms5837`` (a cycle's I2C transactions in one message), ``/diagnostics``. Service ``pressure/zero_depth``
+(std_srvs/Trigger): the surface pressure becomes the mean of the last second, also in the node's
+``environment.surface_pressure_pa`` parameter; it and a change of that parameter are refused while the ESC reports
+armed or has not reported (:class:`hindrax_drivers.esc_state.ArmedWatch`), with the same reason.
+Run alone: ``python -m hindrax_drivers.ms5837.node --ros-args --params-file ros_ws/config/hindrax.yaml``.
 """
 from __future__ import annotations
 
