@@ -148,6 +148,22 @@ def test_read_only_and_invalid_changes_are_refused_with_a_reason_and_valid_ones_
         assert not r.successful and "esc_channel" in r.reason and "already used" in r.reason
 
 
+def test_a_writable_vehicle_key_cannot_be_declared_without_the_arm_lock():
+    """Every key a node applies while running is read-only while armed: declaring one without a ``locked`` check (the
+    ESC's :class:`~hindrax_drivers.esc_state.ArmedWatch`) is a programming error, caught before any parameter exists."""
+    from hindrax_drivers.config.node_parameters import declare_vehicle_parameters
+
+    with ros_context() as ctx:
+        node = rclpy.create_node("lockless", context=ctx)
+        try:
+            with pytest.raises(ValueError, match="locked"):
+                declare_vehicle_parameters(node, ("environment",), dynamic=("environment.surface_pressure_pa",),
+                                           on_change=lambda cfg: None)
+            assert not node.has_parameter("environment.surface_pressure_pa")
+        finally:
+            node.destroy_node()
+
+
 def test_without_overrides_the_node_takes_the_shipped_vehicle_file_and_still_only_its_keys():
     with running(lambda c: StaticTfNode(context=c)) as (nodes, call):
         names = listed(call, "static_tf")
