@@ -11,6 +11,7 @@ import contextlib
 
 import pytest
 import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import DescribeParameters, ListParameters, SetParameters
@@ -20,6 +21,7 @@ from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.config import OPTIONAL_PREFIXES, SCHEMA
 from hindrax_drivers.ms5837.node import Ms5837Node
 from hindrax_drivers.config.node_parameters import select_schema_keys
+from hindrax_drivers.esc_state import esc_state_values
 from hindrax_drivers.testing import config_parameters, ros_context, wait_until
 from hindrax_drivers.tf.node import StaticTfNode
 from hindrax_drivers.tf.static_tf import TF_KEYS
@@ -126,7 +128,13 @@ def test_read_only_and_invalid_changes_are_refused_with_a_reason_and_valid_ones_
         r = set_param(call, "ms5837", "environment.surface_pressure_pa",
                       ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="high"))
         assert not r.successful and r.reason
-        # writable, valid: applied by the node
+        # writable, valid: refused until the ESC reports disarmed (read-only while armed), then applied by the node
+        r = set_param(call, "ms5837", "environment.surface_pressure_pa",
+                      ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=101000.0))
+        assert not r.successful and "esc/output_state" in r.reason and baro.surface_pressure_pa == 101325.0
+        disarmed = DiagnosticStatus(values=[KeyValue(key=k, value=v) for k, v in esc_state_values(False, 1, "")])
+        alloc.armed.take(disarmed)
+        baro.armed.take(disarmed)
         r = set_param(call, "ms5837", "environment.surface_pressure_pa",
                       ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=101000.0))
         assert r.successful and baro.surface_pressure_pa == pytest.approx(101000.0)
@@ -138,6 +146,22 @@ def test_read_only_and_invalid_changes_are_refused_with_a_reason_and_valid_ones_
         r = set_param(call, "thrust_allocation", "thrusters.t2.esc_channel",
                       ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=0))
         assert not r.successful and "esc_channel" in r.reason and "already used" in r.reason
+
+
+def test_a_writable_vehicle_key_cannot_be_declared_without_the_arm_lock():
+    """Every key a node applies while running is read-only while armed: declaring one without a ``locked`` check (the
+    ESC's :class:`~hindrax_drivers.esc_state.ArmedWatch`) is a programming error, caught before any parameter exists."""
+    from hindrax_drivers.config.node_parameters import declare_vehicle_parameters
+
+    with ros_context() as ctx:
+        node = rclpy.create_node("lockless", context=ctx)
+        try:
+            with pytest.raises(ValueError, match="locked"):
+                declare_vehicle_parameters(node, ("environment",), dynamic=("environment.surface_pressure_pa",),
+                                           on_change=lambda cfg: None)
+            assert not node.has_parameter("environment.surface_pressure_pa")
+        finally:
+            node.destroy_node()
 
 
 def test_without_overrides_the_node_takes_the_shipped_vehicle_file_and_still_only_its_keys():

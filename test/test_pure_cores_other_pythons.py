@@ -31,7 +31,7 @@ TARGET = (3, 12)
 #: the test files of the pure cores; each imports the core, numpy and the packages below, never rclpy or messages
 PURE_CORE_TESTS = [f"src/hindrax_drivers/test/{name}.py" for name in (
     "test_esc_core", "test_esc_chip", "test_pca9685", "test_icm20948_core", "test_icm20948_protocol",
-    "test_ms5837_protocol", "test_ping1d_protocol", "test_thrust_curve", "test_allocation")]
+    "test_ms5837_protocol", "test_ms5837_core", "test_ping1d_protocol", "test_thrust_curve", "test_allocation")]
 #: what those files import besides the standard library (ament_index_python: the configuration finds the shipped
 #: vehicle file with it; a pure-Python wheel); versions from constraints.txt
 CORE_PACKAGES = ["numpy", "PyYAML", "ros-ament-index-python", "pytest", "hypothesis"]

@@ -22,15 +22,21 @@ Reading (:func:`read_esc_state`, :func:`armed_after`): a message without a valid
 output state that became unknown while armed may still be thrusting: it counts as still armed. When the ESC is gone
 the last state stays (the writer's latched sample is not withdrawn): each reader says in its docstring what that
 means for it.
+
+Arm lock (:class:`ArmedWatch`): the one reading of that state for refusing a change while the thrusters may run
+(``pressure/zero_depth``, and every vehicle key a node applies while running: surface pressure, thruster limits,
+trims, timeouts; :func:`hindrax_drivers.config.node_parameters.declare_vehicle_parameters`). It refuses while the
+last state says armed (or unknown after armed) and before any state has arrived (fail closed).
 """
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Callable
 
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-__all__ = ["ESC_STATE_TOPIC", "REPUBLISH_PERIOD_S", "EscStateLatch", "armed_after", "esc_state_qos",
+__all__ = ["ESC_STATE_TOPIC", "REPUBLISH_PERIOD_S", "ArmedWatch", "EscStateLatch", "armed_after", "esc_state_qos",
            "esc_state_values", "guard_ack_values", "read_esc_state", "read_guard_ack"]
 
 #: the topic (relative: the vehicle's namespace)
@@ -109,3 +115,37 @@ def armed_after(previous: bool, output_state: int, armed: bool) -> bool:
     """Whether thrust may be on the wire after a report of (``output_state``, ``armed``) when it may have been before
     (``previous``): armed, or unknown after armed (an output state that became unknown may still be thrusting)."""
     return bool(armed) or (int(output_state) == OUTPUT_UNKNOWN and bool(previous))
+
+
+class ArmedWatch:
+    """Whether the ESC may be thrusting, from its ``esc/output_state`` (module docstring, "Arm lock").
+
+    :meth:`take` is the subscription's callback (:meth:`subscribe` makes it); :meth:`refusal` is '' when a change is
+    allowed (a state arrived and says disarmed), else the reason. A malformed state is read as unknown (a disarmed
+    ESC stays disarmed, an armed one stays armed) and reported to ``on_malformed()`` (the node counts it)."""
+
+    def __init__(self, on_malformed: Callable[[], None] | None = None) -> None:
+        self.armed = False  # the last state taken says armed, or unknown after armed
+        self.seen = False  # a state arrived
+        self.on_malformed = on_malformed
+
+    def take(self, msg: Any) -> None:
+        """One ``esc/output_state`` (DiagnosticStatus)."""
+        state = read_esc_state(msg)
+        if state is None:
+            if self.on_malformed is not None:
+                self.on_malformed()
+            state = (OUTPUT_UNKNOWN, False)
+        self.armed = armed_after(self.armed, *state)
+        self.seen = True
+
+    def refusal(self) -> str:
+        """'' when the ESC reported disarmed; else why a change is refused (one line, no trailing period)."""
+        if not self.seen:
+            return "refused: no ESC output state yet (esc/output_state), the thrusters may be running"
+        return "refused while the ESC is armed (esc/output_state)" if self.armed else ""
+
+    def subscribe(self, node: Any, **kwargs: Any) -> Any:
+        """Subscribe ``node`` to ``esc/output_state`` with :meth:`take` (latched QoS); kwargs go to
+        ``create_subscription``. Returns the subscription."""
+        return node.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.take, esc_state_qos(), **kwargs)

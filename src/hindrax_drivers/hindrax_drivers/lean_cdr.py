@@ -1,26 +1,18 @@
 """Light decoding and encoding of CDR bytes: ``rosbags``' generated (de)serialisers instead of rclpy's classes.
 
-Taking or publishing a message as an rclpy object is mostly its conversion between Python and C structures, not
-DDS. Measured here (one process, thread CPU per message): an ``Imu`` converted from bytes into an rclpy object 77 us,
-decoded by rosbags 31 us; ``hindrax_msgs/Dvl`` 85 and 41 us. Its objects have the ROS field names (nested messages as
-objects, numeric arrays as numpy arrays), so a handler written for the rclpy message reads them unchanged; they are
-read-only data, not rclpy messages (no ``publish``, no rclpy type checks).
+Taking or publishing a message as an rclpy object is mostly its conversion between Python and C structures, not DDS;
+rosbags' objects skip that. They have the ROS field names (nested messages as objects, numeric arrays as numpy
+arrays), so a handler written for the rclpy message reads them unchanged; they are read-only data, not rclpy messages
+(no ``publish``, no rclpy type checks). The bytes differ from rclpy's only in padding (rosbags zeroes it), and every
+reader decodes them to the same message (test_lean_cdr.py).
 
-Where it is used, and why (every input is a subscription callback, the one input path of every node):
-
-* publishing the 50 Hz chain as bytes (:func:`cdr_encoder` of a rosbags object, ``Publisher.publish(bytes)``): the
-  identification node's ``wrench`` (:func:`wrench_stamped_cdr`), the allocation's command and the ESC's
-  ``thrusters/pulse_width`` (:func:`thruster_pwm_lean`, :func:`thruster_pwm_cdr`), the IMU (:func:`imu_cdr`) and
-  the safety heartbeats (:func:`diagnostic_status_cdr`). Measured: ``WrenchStamped`` 0.22-0.23 ms per publish of
-  an rclpy object, 0.17-0.18 ms building a rosbags object and publishing its bytes; ``Imu`` 0.30-0.31 -> 0.23-0.25
-  ms. The bytes differ from rclpy's only in padding (rosbags zeroes it), and every reader decodes them to the same
-  message (test_lean_cdr.py);
-* decoding (:func:`cdr_decoder`): the supervisor's ``imu/data_raw``, whose freshness check compares the bytes, and
-  the allocation's 50 Hz ``wrench`` (a subscribing process took 2.0 % of a core with rclpy objects, 1.7 % with
-  bytes decoded here). For a node's inputs in general it is not used: with callbacks at the controller's input
-  rates (186 msg/s: DVL, pressure, altitude 10 Hz, IMU 51 Hz, widths and wrench 50 Hz, allocation status 5 Hz) a
-  subscriber process took 3.0 / 5.1 / 3.8 % of a core with rclpy objects and 4.5 / 3.8 / 5.2 % with bytes decoded
-  here (three alternating 15 s windows each, load 14-19 on 2 cores): no margin beyond the spread.
+Used on the 50 Hz chain and the safety path (every input is a subscription callback, the one input path of every
+node): publishing as bytes (:func:`cdr_encoder`, ``Publisher.publish(bytes)``) the identification node's ``wrench``
+(:func:`wrench_stamped_cdr`), the allocation's command and the ESC's ``thrusters/pulse_width``
+(:func:`thruster_pwm_lean`, :func:`thruster_pwm_cdr`), the IMU (:func:`imu_cdr`) and the safety heartbeats
+(:func:`diagnostic_status_cdr`); decoding (:func:`cdr_decoder`) the supervisor's ``imu/data_raw``, whose freshness
+check compares the bytes, and the allocation's ``wrench``. A node's other inputs stay rclpy objects: at the
+controller's input rates the two cost the same within the spread (docs/architecture.md §10).
 
 :func:`cdr_decoder` returns ``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class. The project's
 own interfaces (``hindrax_msgs``) are registered from their installed ``.msg`` files

@@ -357,18 +357,74 @@ class StuckDetector:
         return self._repeats >= self.limit
 
 
+class StuckAlarm:
+    """A device's ERROR ``stuck`` over a :class:`StuckDetector`: raised in ``diag`` (counted ``stuck_events``) when
+    ``limit`` raw readings in a row are bit-identical (:attr:`raised` True on that update), cleared when they change."""
+
+    def __init__(self, limit: int, diag: DeviceDiagnostics) -> None:
+        self.limit, self.diag = int(limit), diag
+        self.detector = StuckDetector(self.limit)
+        self.stuck = self.raised = False
+
+    def update(self, value: Any, text: str) -> bool:
+        """Feed one raw reading (compared with ``==``; ``text``: what is identical, for the ERROR); True while stuck."""
+        stuck = self.detector.update(value)
+        self.raised = stuck and not self.stuck
+        if self.raised:
+            self.diag.error("stuck", f"stuck: {text} for >= {self.limit} readings")
+            self.diag.count("stuck_events")
+        elif self.stuck and not stuck:
+            self.diag.clear("stuck")
+        self.stuck = stuck
+        return stuck
+
+    def reset(self) -> None:
+        """A restarted device: no readings seen, the ERROR cleared."""
+        self.detector = StuckDetector(self.limit)
+        self.stuck = self.raised = False
+        self.diag.clear("stuck")
+
+
+class OneShot:
+    """One callback at a time, once, after a delay of ``node``'s ROS time, from one timer (a device's waits without
+    sleeping in a callback): ``schedule(delay_s, fn)`` replaces what was pending."""
+
+    def __init__(self, node: Any) -> None:
+        self._fn: Callable[[], None] | None = None
+        self._timer = node.create_timer(1.0, self._fire, autostart=False)
+
+    def schedule(self, delay_s: float, fn: Callable[[], None]) -> None:
+        """Run ``fn`` once after ``delay_s`` (s; 0: at the next executor turn)."""
+        self._fn = fn
+        self._timer.timer_period_ns = max(1, int(delay_s * 1e9))
+        self._timer.reset()
+
+    def cancel(self) -> None:
+        """Drop what is pending."""
+        self._timer.cancel()
+        self._fn = None
+
+    def _fire(self) -> None:
+        self._timer.cancel()
+        fn, self._fn = self._fn, None
+        if fn is not None:
+            fn()
+
+
 def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
-                     on_change: Callable[[VehicleConfig], None] | None = None) -> VehicleConfig:
+                     on_change: Callable[[VehicleConfig], None] | None = None,
+                     locked: Callable[[], str] | None = None) -> VehicleConfig:
     """Declare the node's own vehicle keys (with descriptors) and return them validated.
 
     keys: SCHEMA prefixes the node reads (None: all sections); dynamic: prefixes it applies while running
-    (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason.
+    (the rest are read-only); on_change(cfg) applies a validated change or raises ValueError with the reason;
+    locked() gives the reason a change is refused now ('' = allowed: the ESC disarmed, ``ArmedWatch.refusal``).
     See :func:`hindrax_drivers.config.node_parameters.declare_vehicle_parameters` (the node must be created without
     ``automatically_declare_parameters_from_overrides``). Logs the one-line reason and re-raises
     :class:`ConfigError` so :func:`run_node` exits with status 1.
     """
     try:
-        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change)
+        return declare_vehicle_parameters(node, keys, dynamic=dynamic, on_change=on_change, locked=locked)
     except ConfigError as exc:
         node.get_logger().fatal(f"invalid configuration: {exc}")
         raise

@@ -1,4 +1,4 @@
-"""The thrust allocation outside the ESC deadband (allocation/deadband.py, allocator.py step 3; issue 26 item 4).
+"""The thrust allocation outside the ESC deadband (allocation/deadband.py, allocator.py step 3).
 
 Independent references used here: the thrust allocation matrix rebuilt from the configured positions and
 directions with numpy (columns [d; r x d], [Hindrax-Drag] eq. 9), the thrust curves evaluated from the configured

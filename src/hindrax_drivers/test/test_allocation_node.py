@@ -5,12 +5,15 @@ import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.esc_state import esc_state_values
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
@@ -128,8 +131,9 @@ def test_allocator_is_rebuilt_on_parameter_change_only(graph):
     before = node.core.allocator
     send([1.0, 0, 0, 0, 0, 0])
     assert node.core.allocator is before  # not rebuilt per message
-    from rclpy.parameter import Parameter
-
+    res = node.set_parameters([Parameter("thrusters.t1.allocation_weight", value=100.0)])
+    assert not res[0].successful and "no ESC output state" in res[0].reason  # fail closed until the ESC reports
+    node.armed.take(esc_state(armed=False, output_state=1))
     res = node.set_parameters([Parameter("thrusters.t1.allocation_weight", value=100.0)])
     assert res[0].successful and node.core.allocator is not before
     _, forces, _ = send([0.0, 10.0, 0, 0, 0, 0])
@@ -137,6 +141,28 @@ def test_allocator_is_rebuilt_on_parameter_change_only(graph):
     res = node.set_parameters([Parameter("thrusters.t1.allocation_weight", value=-1.0)])
     # refused by the descriptor's range (rclpy's reason names key, range and value)
     assert not res[0].successful and "thrusters.t1.allocation_weight" in res[0].reason and "-1.0" in res[0].reason
+
+
+def esc_state(armed, output_state):
+    """An ``esc/output_state`` as the ESC publishes it."""
+    return DiagnosticStatus(values=[KeyValue(key=k, value=v) for k, v in esc_state_values(armed, output_state, "")])
+
+
+@pytest.mark.parametrize("key,value", [("thrusters.t1.trim_us", 10.0), ("thrusters.wrench_timeout_s", 5.0),
+                                       ("thrusters.pulse_width_max_us", 1850.0)])
+def test_thruster_keys_are_read_only_while_armed(graph, key, value):
+    """Trims, timeouts and limits change what reaches the wire: a change while the ESC reports armed (or unknown
+    after armed) is refused with the reason and leaves the allocator as it was."""
+    node = graph[0]
+    before = (node.core.allocator, node.timeout_s, node.get_parameter(key).value)
+    for armed, state in ((True, 2), (False, 0)):
+        node.armed.take(esc_state(armed, state))
+        res = node.set_parameters([Parameter(key, value=value)])[0]
+        assert not res.successful and key in res.reason and "armed" in res.reason, res.reason
+        assert (node.core.allocator, node.timeout_s, node.get_parameter(key).value) == before
+    node.armed.take(esc_state(False, 1))
+    assert node.set_parameters([Parameter(key, value=value)])[0].successful
+    assert node.get_parameter(key).value == value
 
 
 def test_forces_and_status_are_throttled_and_the_latest_is_sent(graph):

@@ -1,4 +1,4 @@
-"""Issue 23 findings 4, 5, 6, 8 and 10: values that are invalid, implausible after a transformation, or
+"""Values that are invalid, implausible after a transformation, or
 configured unsafely are never taken as valid (docs/architecture.md §8). Each test failed on 3f4c425."""
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from hindrax_drivers.config import ConfigError, default_config_path, load_config
 from hindrax_drivers.dvl75.protocol import DvlPositionDelta
 from hindrax_drivers.dvl75.report import DvlReportBuilder
 from hindrax_drivers.ms5837 import protocol as ms
-from hindrax_drivers.ms5837.node import DepthGate
+from hindrax_drivers.ms5837.core import DepthGate
 from hindrax_drivers.ping1d.node import rep117_range
 from hindrax_drivers.supervisor.core import SupervisorCore, SupervisorLimits
 

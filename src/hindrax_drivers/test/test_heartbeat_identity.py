@@ -1,4 +1,4 @@
-"""Issue 43 item 2: a heartbeat carries its sender's per-start value and a sequence, and a receiver accepts one
+"""A heartbeat carries its sender's per-start value and a sequence, and a receiver accepts one
 publisher with the expected node name (hindrax_drivers.liveness.HeartbeatIdentity, HeartbeatPublisher). On
 simulated time the wall-clock liveliness lease does not silence a peer; its age on the graph's clock does
 (AliveAge with a graph clock; the processes: test/test_sim_clock_liveness.py)."""

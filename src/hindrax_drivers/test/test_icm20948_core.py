@@ -7,13 +7,16 @@ round(1125 / 50) - 1 = 21, DLPFCFG 4 (docs/devices.md §4.4); the slowest AK0991
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from hindrax_drivers.icm20948 import protocol as p
-from hindrax_drivers.icm20948.core import (MAG_ATTEMPTS, BankedRegisters, DataReadyGate, FrozenBlockWatch,
-                                           MagNackFilter, StartupSequence, chip_reset_problems,
-                                           imu_config_from_settings, mag_mode_for_rate)
+from hindrax_drivers.icm20948.core import (MAG_ATTEMPTS, BankedRegisters, DataReadyGate, FrozenBlockWatch, GyroBias,
+                                           ImuSettings, MagnetometerWatch, MagNackFilter, PollFailures,
+                                           StartupSequence, chip_reset_problems, diagnostic_values,
+                                           imu_config_from_settings, mag_mode_for_rate, read_poll)
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus, ManualClock
 from hindrax_drivers.transport.i2c import I2CDevice
@@ -216,3 +219,114 @@ def test_mag_nack_filter_drops_the_block_held_since_the_nack_until_it_changes():
     assert f.update(old, nack=False) is None       # the same block re-read between two master cycles
     assert f.update(new, nack=False) == new        # the AK09916 answered again
     assert f.update(new, nack=False) == new
+
+
+# ---------------------------------------------------------------------------------------- node decisions
+class FakeReinit:
+    """A magnetometer-only re-initialisation of ``steps`` steps of 0.01 s each."""
+
+    def __init__(self, steps=2):
+        self.left = steps
+
+    @property
+    def finished(self):
+        return self.left == 0
+
+    def step(self):
+        self.left -= 1
+        return type("R", (), {"wait_s": 0.01})()
+
+
+# (time s, magnetometer available, data_ready sample) -> event; timeout 0.5 s, retry every 2 s, reinit 2 steps
+MAG_EVENTS = [
+    ("fresh samples keep it watched", [(0.0, True, True), (0.4, True, True), (0.8, True, True)], ["", "", ""]),
+    ("lost after 0.5 s without a fresh sample", [(0.0, True, True), (0.4, True, False), (0.6, True, False)],
+     ["", "", "lost"]),
+    ("the re-initialisation steps once per due poll, then recovers", [(0.0, True, True), (0.6, True, False),
+     (0.6, False, False), (0.61, False, False), (0.62, True, False)], ["", "lost", "", "", "recovered"]),
+    ("still missing: retried after the interval", [(0.0, True, True), (0.6, True, False), (0.6, False, False),
+     (0.61, False, False), (0.62, False, False), (2.0, False, False), (2.62, False, False)],
+     ["", "lost", "", "", "", "", "retry"]),
+]
+
+
+@pytest.mark.parametrize("name,polls,events", MAG_EVENTS, ids=[row[0] for row in MAG_EVENTS])
+def test_magnetometer_watch_table(name, polls, events):
+    made = []
+    watch = MagnetometerWatch(1, 0.5, 2.0, lambda: made.append(FakeReinit()) or made[-1])
+    watch.started(0.0, True)
+    got = []
+    for t_s, available, fresh in polls:
+        if fresh:
+            watch.sample(t_s, True, False)
+        got.append(watch.after_sample(t_s, available))
+    assert got == events
+    assert len(made) == events.count("lost") + events.count("retry")
+    assert ("lost" not in events) or "0.6" in watch.text or "recovered" in events
+
+
+@pytest.mark.parametrize("samples,every,published", [
+    ([(True, False)] * 6, 3, [True, False, False, True, False, False]),  # every 3rd valid sample
+    ([(False, False), (True, True), (True, False)], 1, [False, False, True]),  # no DRDY; overflow: not published
+])
+def test_magnetometer_decimation(samples, every, published):
+    watch = MagnetometerWatch(every, 0.5, 2.0, FakeReinit)
+    assert [watch.sample(0.1 * i, ready, overflow) for i, (ready, overflow) in enumerate(samples)] == published
+
+
+def test_poll_failures_restart_after_the_interval():
+    failures = PollFailures(1.0)
+    assert [failures.failed(t) for t in (5.0, 5.5, 6.0)] == ["warn", "warn", "restart"]
+    failures.ok()
+    assert failures.failed(6.1) == "warn"
+
+
+def test_settings_rates_covariances_and_warnings():
+    section = SimpleNamespace(sample_rate_hz=100.0, accel_full_scale_g=4.0, gyro_full_scale_dps=500.0,
+                              dlpf_config=4, mounting_rpy_rad=[0.0, 0.0, np.pi / 2])
+    st = ImuSettings.from_section(section)
+    assert st.odr_hz == pytest.approx(1125 / 11) and not st.warnings  # 102.27 Hz is within 5 % of 100 Hz
+    assert st.temperature_every == 102 and st.mag_every == 5  # 1 Hz; 100 Hz AK09916 mode / 20 Hz
+    assert np.allclose(st.rotation @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])  # yaw 90 deg: x -> y
+    assert np.allclose(np.diag(st.accel_cov), st.accel_var)  # isotropic noise stays diagonal under rotation
+    slow = ImuSettings.from_section(SimpleNamespace(**{**vars(section), "sample_rate_hz": 700.0, "dlpf_config": 0}))
+    assert len(slow.warnings) == 2 and "not reachable" in slow.warnings[0] and "1125 Hz" in slow.warnings[1]
+    assert "FS 4 g, 500 dps, DLPFCFG 4" in st.describe()
+
+
+def test_gyro_bias_applied_only_when_still():
+    bias = GyroBias(True, 0.1, gyro_var=1e-6, accel_var=1e-4)
+    assert bias.start() and bias.status == "estimating"
+    results = [bias.add(0.01 * k, np.array([0.0, 0.0, 0.01]), np.array([0.0, 0.0, 9.81])) for k in range(12)]
+    result = next(r for r in results if r is not None)  # once, when 0.1 s has passed
+    assert results.count(None) == 11 and result.still and np.allclose(bias.bias_rad_s, [0.0, 0.0, 0.01])
+    assert not bias.start()  # done once per process
+    assert bias.status == result.message
+    off = GyroBias(False, 0.1, 1e-6, 1e-4)
+    assert not off.start() and off.status is None and off.add(0.0, np.zeros(3), np.zeros(3)) is None
+
+
+def test_data_ready_text_and_diagnostic_values():
+    gate = DataReadyGate(5)
+    verdicts = [gate.update(False) for _ in range(5)]
+    assert [v.raise_error for v in verdicts] == [False] * 4 + [True]
+    assert "not set for 5 consecutive polls" in verdicts[-1].text
+    values = dict(diagnostic_values(CONFIG, 0xEA, 50.0, "bypass", True, 7, 2, np.array([0.0, 0.001, -0.002]), None))
+    assert values["who_am_i"] == "0xea" and values["output_data_rate_hz"] == "51.136"
+    assert values["gyro_bias_rad_s"] == "0.000000 0.001000 -0.002000" and "gyro_bias_status" not in values
+
+
+@pytest.mark.parametrize("mode,available,require,counters,has_mag", [
+    ("i2c_master", True, True, (), True),
+    ("bypass", True, False, (), True),
+    ("i2c_master", False, False, (), False),  # no magnetometer: the 14-byte burst only
+])
+def test_read_poll_reads_what_the_mode_needs(mode, available, require, counters, has_mag):
+    rig = Rig(mode=mode)
+    seq, result, _ = rig.run()
+    assert result.done
+    rig.regs.select_bank(0)
+    rig.clock.advance(0.05)
+    r = read_poll(rig.regs, rig.mag, mode, available, require, MagNackFilter())
+    assert r.error is None and len(r.block) == p.SENSOR_BLOCK_LENGTH and r.counters == counters
+    assert (r.ready is not None) == require and (r.mag_block is not None) == has_mag

@@ -23,7 +23,8 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.icm20948 import protocol as p
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
-from hindrax_drivers.icm20948.node import GyroBiasEstimator, Icm20948Node
+from hindrax_drivers.icm20948.core import GyroBiasEstimator
+from hindrax_drivers.icm20948.node import Icm20948Node
 from hindrax_drivers.node_common import unbatch_raw
 from hindrax_drivers.testing import child_env, child_process, config_parameters, interrupt, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
@@ -378,9 +379,9 @@ def test_gyro_bias_is_estimated_and_subtracted_when_still(rig):
     bias = np.array([0.021, -0.013, 0.0047])  # rad/s; the "true" rate is zero: a still vehicle
     r = rig(truth=lambda t: (ACCEL, bias, MAG, TEMP_C),
             overrides={"sensors.icm20948.estimate_gyro_bias": True, "sensors.icm20948.gyro_bias_duration_s": 0.3})
-    r.wait(lambda: r.node.bias_result is not None, 10, "bias estimate")
-    assert r.node.bias_result.still
-    assert np.allclose(r.node.gyro_bias_rad_s, bias, atol=GYRO_LSB / 2 + 1e-9)
+    r.wait(lambda: r.node.bias.result is not None, 10, "bias estimate")
+    assert r.node.bias.result.still
+    assert np.allclose(r.node.bias.bias_rad_s, bias, atol=GYRO_LSB / 2 + 1e-9)
     for m in r.wait_imu(5):
         assert np.allclose(vec(m.angular_velocity), 0.0, atol=1e-12)
     values = r.diag_values()
@@ -391,9 +392,9 @@ def test_gyro_bias_is_estimated_and_subtracted_when_still(rig):
 def test_gyro_bias_is_not_applied_when_the_vehicle_moves(rig):
     r = rig(truth=lambda t: (ACCEL, GYRO * math.sin(12.0 * t), MAG, TEMP_C),
             overrides={"sensors.icm20948.estimate_gyro_bias": True, "sensors.icm20948.gyro_bias_duration_s": 0.3})
-    r.wait(lambda: r.node.bias_result is not None, 10, "bias estimate")
-    assert not r.node.bias_result.still
-    assert np.all(r.node.gyro_bias_rad_s == 0.0)
+    r.wait(lambda: r.node.bias.result is not None, 10, "bias estimate")
+    assert not r.node.bias.result.still
+    assert np.all(r.node.bias.bias_rad_s == 0.0)
     status = r.node.diag.status()
     assert status.level == DiagnosticStatus.WARN and "not still" in status.message
 
@@ -471,13 +472,13 @@ def test_magnetometer_retry_does_not_interrupt_accel_and_gyro(rig):
 
     r.emu._device_reset = counted_reset  # a full start-up resets the device (PWR_MGMT_1 DEVICE_RESET)
     published_at_retry: list[int] = []
-    begin_retry = r.node._begin_mag_retry
+    begin_retry = r.node.mag.begin
 
     def counted_retry(now_s: float) -> None:
         published_at_retry.append(r.node.diag.total_published)
         begin_retry(now_s)
 
-    r.node._begin_mag_retry = counted_retry
+    r.node.mag.begin = counted_retry
     r.emu.aux_connected = False  # the AK09916 goes missing
     r.wait(lambda: r.node.diag.counts().get("mag_lost", 0) == 1 and r.node.running and not r.node.mag_available,
            5, "running without magnetometer")

@@ -72,9 +72,9 @@ class Rig:
             self._esc = self.probe.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
         msg = DiagnosticStatus(values=[KeyValue(key="output_state", value=str(output_state)),
                                        KeyValue(key="armed", value="true" if armed else "false")])
-        self.node.esc_state_seen = False
+        self.node.armed.seen = False
         self._esc.publish(msg)
-        self.wait(lambda: self.node.esc_state_seen, 10, "ESC state delivered")
+        self.wait(lambda: self.node.armed.seen, 10, "ESC state delivered")
 
     def spin(self):
         self.ex.spin_once(timeout_sec=0.01)
@@ -380,7 +380,27 @@ def test_zero_depth_is_refused_at_depth_and_while_armed(rig):
     assert r.node.surface_pressure_pa == pytest.approx(SURFACE_PA + 400.0, abs=10.0)
     r._esc.publish(DiagnosticStatus())  # malformed: counted, read as unknown (disarmed stays disarmed)
     r.wait(lambda: r.node.diag.counts().get("esc_state_malformed") == 1, 10, "malformed state counted")
-    assert not r.node.esc_armed
+    assert not r.node.armed.armed
+
+
+def test_surface_pressure_parameter_is_read_only_while_armed(rig):
+    """``ros2 param set environment.surface_pressure_pa`` is the zero_depth service without its checks: while armed a
+    101325 -> 118983 Pa change (1.8 m of water, 17658 Pa = 1.8 * 1000 * 9.81) would publish 3.00 m as 1.20 m and
+    blind the depth limit. Refused before the ESC reported, while armed and while unknown after armed, with the reason;
+    applied once the ESC reports disarmed."""
+    r = rig(lambda t: (SURFACE_PA, 18.0), "30BA")
+    change = [Parameter("environment.surface_pressure_pa", value=118983.0)]
+    res = r.node.set_parameters(change)[0]
+    assert not res.successful and "no ESC output state" in res.reason, res.reason
+    for armed, state in ((True, 2), (False, 0)):  # armed; then unknown after armed
+        r.esc_state(armed, state)
+        res = r.node.set_parameters(change)[0]
+        assert not res.successful and "environment.surface_pressure_pa" in res.reason and "armed" in res.reason
+        assert r.node.surface_pressure_pa == SURFACE_PA
+        assert r.node.get_parameter("environment.surface_pressure_pa").value == SURFACE_PA
+    r.esc_state(False, 1)
+    assert r.node.set_parameters(change)[0].successful
+    assert r.node.surface_pressure_pa == 118983.0
 
 
 def test_zero_depth_before_any_reading_is_refused(rig):

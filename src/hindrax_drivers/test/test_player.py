@@ -4,7 +4,7 @@ Pure part: due times follow wall = wall_0 + (t - origin) / rate exactly; /clock 
 Process part: the committed test bag is played into subscriptions of this process; the bytes received must be
 the recorded CDR bytes, per topic in order, with /clock, a start offset, a topic subset and looping. A bag of the
 vehicle's safety graph (heartbeats, thruster commands, wrench) plays its sensor data only, unless asked with
-``--safety-topics``, and even then never while an ESC is on the graph (issue 43.3).
+``--safety-topics``, and even then never while an ESC is on the graph.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 23: no single failure leaves a thruster running (docs/architecture.md §8).
+"""No single failure leaves a thruster running (docs/architecture.md §8).
 
 Each test reproduces one finding against the register-exact PCA9685 emulator (what is on the wire), with the
 supervisor's and the guard's heartbeats from a stand-in or the real nodes. Every one of them failed on the code

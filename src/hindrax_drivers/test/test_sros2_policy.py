@@ -1,4 +1,4 @@
-"""SROS2 on the Pi (issue 43.6): the vehicle's permissions policies validate against sros2's policy schema and grant
+"""SROS2 on the Pi: the vehicle's permissions policies validate against sros2's policy schema and grant
 what docs/architecture.md §8.2 says: e-stop to any topside enclave, the rest of the gateway's interface to the operator
 enclave only, the internal graph's topics to the vehicle's own enclaves only.
 

@@ -1,5 +1,5 @@
 """What speaks for a vehicle on a ROS graph (:mod:`hindrax_drivers.vehicle_graph`), pure: the topics a bag must not
-replay by default, and the ESCs and supervisors a graph shows beyond the caller's own (issue 43.3)."""
+replay by default, and the ESCs and supervisors a graph shows beyond the caller's own."""
 from __future__ import annotations
 
 import pytest

@@ -1,4 +1,4 @@
-"""Issue 44 item 2: the hardware watchdog on /OE (its emulation and configuration) and the systemd watchdog pings
+"""The hardware watchdog on /OE (its emulation and configuration) and the systemd watchdog pings
 of the safety processes (hindrax_drivers.transport.gpio, hindrax_drivers.sd_notify, docs/watchdog.md)."""
 from __future__ import annotations
 

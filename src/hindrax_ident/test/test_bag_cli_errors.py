@@ -1,4 +1,4 @@
-"""Issue 23 finding 11: every bag command on a missing, empty, truncated or non-MCAP file says so in one line
+"""Every bag command on a missing, empty, truncated or non-MCAP file says so in one line
 on stderr and exits 1 (``bag info``, ``bag play`` and ``ident fit`` printed a 20-29 line traceback)."""
 from __future__ import annotations
 

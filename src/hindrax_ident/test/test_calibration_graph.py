@@ -1,4 +1,4 @@
-"""Calibration steps on the ROS graph (issue 17 item 1): the run_identification goal's ``calibrate`` field, the
+"""Calibration steps on the ROS graph: the run_identification goal's ``calibrate`` field, the
 operator prompt in the action feedback and in ``identification/status``, the ``identification/continue`` service
 (std_srvs/Trigger), the virtual operator of ``hindrax run`` (:class:`~hindrax_ident.identification.graph_campaign.
 VirtualOperator`) and the ``calibration.*`` keys of the vehicle file.

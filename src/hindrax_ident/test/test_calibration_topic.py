@@ -1,4 +1,4 @@
-"""The calibration steps' results on ``identification/calibration`` (issue 17, "Absolute references" on the vehicle):
+"""The calibration steps' results on ``identification/calibration``:
 the identification node publishes them when a step ends (diagnostic_msgs/DiagnosticArray, transient local), the
 recorder stores them, and ``hindrax ident bag`` applies them (sections ``calibration`` and ``joint``, and
 ``inclining`` / ``free_decay``) as ``hindrax run`` does from the node's record (docs/identification.md §6).

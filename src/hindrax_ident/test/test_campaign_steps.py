@@ -1,4 +1,4 @@
-"""The campaign's steps as objects (issue 26 item 3): each step run on its own on the in-process simulator, after the
+"""The campaign's steps as objects: each step run on its own on the in-process simulator, after the
 dive that every plan starts with, through the same sequencer as the whole campaign
 (:class:`~hindrax_ident.identification.online.executive.Executive` with an explicit step list); the plan the sequencer
 makes

@@ -1,4 +1,4 @@
-"""``hindrax --help`` imports only the argument parser (issue 14, "One helper for each repeated mechanism").
+"""``hindrax --help`` imports only the argument parser.
 
 Structural, not timed (the time is in ``make bench``, benchmark ``cli``): a fresh interpreter runs the
 ``hindrax`` entry point with the given arguments and reports which heavy packages ended up in

@@ -1,4 +1,4 @@
-"""Issue 44.9: ``hindrax`` on a binary or 5000-deep YAML file says so in one line, and a closed output pipe
+"""``hindrax`` on a binary or 5000-deep YAML file says so in one line, and a closed output pipe
 (``| head``) ends it quietly (exit 141), never with a traceback."""
 import subprocess
 import sys

@@ -1,8 +1,7 @@
 """The controller node in the virtual pool graph (docs/control.md §3): refuses before arming, holds the current state,
 follows depth and altitude setpoints (checked on the simulator's truth), and yields ``wrench`` to a pilot and to a
 running identification goal; its estimate goes out as ``odom`` and ``odom -> base_link`` on ``/tf`` (REP-105); a bad
-model file stops its start-up with one line (never the vehicle file's model in its place, issue 45.4: the process
-test below)."""
+model file stops its start-up with one line (never the vehicle file's model in its place)."""
 from __future__ import annotations
 
 import math

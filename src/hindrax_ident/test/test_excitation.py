@@ -1,4 +1,4 @@
-"""Broadband excitation (issue 18 item 5): the signals of identification/online/excitation.py, the pool-box shaping, and
+"""Broadband excitation: the signals of identification/online/excitation.py, the pool-box shaping, and
 the executive running one multisine run per DOF instead of the ladder on the in-process campaign."""
 from __future__ import annotations
 

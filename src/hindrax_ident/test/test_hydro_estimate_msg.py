@@ -1,4 +1,4 @@
-"""identification/estimates carries the RLS std only where it is worth publishing (issue 16 item 5)."""
+"""identification/estimates carries the RLS std only where it is worth publishing."""
 from __future__ import annotations
 
 from types import SimpleNamespace

@@ -1,4 +1,4 @@
-"""Numbers people can use (issue 46 items 2 and 4): advice in pool units (runs of a named kind, a speed range,
+"""Numbers people can use: advice in pool units (runs of a named kind, a speed range,
 minutes), never above a pool day nor nothing; a parameter at a bound says so instead of an interval; a parameter
 no amount of the data's own manoeuvre can fix names the kind of run that would."""
 from __future__ import annotations

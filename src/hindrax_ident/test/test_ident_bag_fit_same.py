@@ -1,4 +1,4 @@
-"""Issue 27 item 1, "one fit core": ``hindrax ident bag`` and ``hindrax ident fit`` on the same campaign bag give the
+"""``hindrax ident bag`` and ``hindrax ident fit`` on the same campaign bag give the
 same values and intervals (docs/identification.md §7).
 
 The bag is written here: a surge ladder (8 runs of 6 s at +-10, +-20, +-30, +-15 N, each followed by 6 s of coasting

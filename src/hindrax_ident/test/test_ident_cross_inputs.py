@@ -1,4 +1,4 @@
-"""Cross-channel inputs (issue 46.2): another DOF's commanded force as a candidate term chosen by cross-validation.
+"""Cross-channel inputs: another DOF's commanded force as a candidate term chosen by cross-validation.
 
 The data are built here from the definition of coupling through the allocation: sway receives its own command plus
 30 % of the surge command (thrusters that do not deliver what the allocation assumes), a first-order sway model

@@ -1,5 +1,4 @@
-"""``hindrax ident fit`` on every bag committed to the repository (issue 27, "no warning and no traceback on any bag
-of the suite").
+"""``hindrax ident fit`` on every bag committed to the repository.
 
 Each committed bag (``src/*/test/data/*``) is run through the in-process CLI once per pair of (wrench topic,
 velocity topic) of an accepted type it carries, with RuntimeWarning turned into an error and any other warning

@@ -1,4 +1,4 @@
-"""``hindrax ident fit`` and ``hindrax ident bag`` (issue 27): honest intervals and the config-ready flag.
+"""``hindrax ident fit`` and ``hindrax ident bag``: honest intervals and the config-ready flag.
 
 * The reported covariance is the cluster-robust (sandwich) covariance with contiguous blocks of segments as
   clusters, blocks lengthened while their scores are correlated (lag-1 autocorrelation above 0.2) down to 6 clusters,

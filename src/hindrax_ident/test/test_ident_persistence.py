@@ -1,4 +1,4 @@
-"""Never worse than persistence (issue 46.1): a DOF whose velocity is mostly a random walk the force does not
+"""Never worse than persistence: a DOF whose velocity is mostly a random walk the force does not
 explain gets the verdict "no model beats holding the velocity" and no trusted parameter.
 
 The construction is independent of the code: for a random walk (integrated white noise) the conditional mean of a

@@ -1,4 +1,4 @@
-"""``hindrax ident predict`` (issue 46.5): the CSV it writes, scored by an independent script written from the
+"""``hindrax ident predict``: the CSV it writes, scored by an independent script written from the
 definition the tool documents (nrmse = RMS(predicted - measured) / std(measured) over the rows with a segment),
 gives the nrmse the tool prints for its own segment rule; ``--segment-s`` restarts every S seconds."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Per-run bias (issue 46.3): a constant force that differs between runs (tether lay, trim), a CV-chosen candidate
+"""Per-run bias: a constant force that differs between runs (tether lay, trim), a CV-chosen candidate
 reported per run.
 
 Built here from its definition: three runs of one first-order surge model, each with its own constant force

@@ -1,4 +1,4 @@
-"""The vertical thrust's saturation as a candidate term (issue 46.2), chosen by cross-validation like the other
+"""The vertical thrust's saturation as a candidate term, chosen by cross-validation like the other
 cross-channel inputs.
 
 The bag is written here: a pilot's heave commands (geometry_msgs/WrenchStamped, held steps up to +-110 N, 20 Hz)

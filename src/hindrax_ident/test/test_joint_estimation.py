@@ -1,4 +1,4 @@
-"""Issue 17 items 2 and 5, issue 26 item 1 (batch part): the thrust scales per thruster group and rotation direction
+"""The thrust scales per thruster group and rotation direction
 and the empirical priors estimated jointly with the fits (:func:`hindrax_ident.identification.fit.calibration.
 joint_estimate`), checked against closed forms.
 

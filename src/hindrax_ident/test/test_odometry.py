@@ -1,4 +1,4 @@
-"""Issue 45.8: the vehicle's estimate as nav_msgs/Odometry and odom -> base_link (REP-103/105)."""
+"""The vehicle's estimate as nav_msgs/Odometry and odom -> base_link (REP-103/105)."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Issue 45.6: campaign feedback as one updating line, not 48 copies of "positioning 0.0 %"."""
+"""Campaign feedback as one updating line, not 48 copies of "positioning 0.0 %"."""
 import io
 
 from hindrax_ident.progress_line import ProgressLine

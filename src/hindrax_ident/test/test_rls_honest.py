@@ -1,4 +1,4 @@
-"""The honesty options of the online RLS (issue 16 item 5): directional forgetting, excitation gate, physical
+"""The honesty options of the online RLS: directional forgetting, excitation gate, physical
 signs, change detection with covariance reset, and a standard deviation published only when converged."""
 from __future__ import annotations
 

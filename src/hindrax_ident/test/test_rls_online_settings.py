@@ -1,4 +1,4 @@
-"""The executive's online RLS (issue 16 item 5, issue 17 item 5): directional forgetting, the excitation gate,
+"""The executive's online RLS: directional forgetting, the excitation gate,
 physical-sign bounds and the change detector switched on from the vehicle file, and the start at the empirical
 priors with the stated weight."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 45.6: ``hindrax run`` ends on SIGTERM (``docker stop``, ``kill``) as on Ctrl-C: the bag closed whole, the
+"""``hindrax run`` ends on SIGTERM (``docker stop``, ``kill``) as on Ctrl-C: the bag closed whole, the
 emulated ports' temporary folders removed, no "coroutine ... was never awaited" at exit."""
 import os
 import re

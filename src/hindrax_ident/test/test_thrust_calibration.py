@@ -1,4 +1,4 @@
-"""Issue 17 items 1-2 and issue 26 items 1-2: known-force calibration steps in the campaign and the thrust scales
+"""Known-force calibration steps in the campaign and the thrust scales
 per thruster group and rotation direction applied to the identification, so that a pool whose thrusters give less
 than their curves ("thrust x0.90" truth; "thrust_asymmetric": forward x0.95, reverse x0.85) still yields surge and
 heave inertia and quadratic damping within 5 % with intervals that cover the truth.

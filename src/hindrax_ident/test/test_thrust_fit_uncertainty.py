@@ -1,4 +1,4 @@
-"""The thrust curve's own uncertainty in the identification intervals (issue 16 item 4, first half):
+"""The thrust curve's own uncertainty in the identification intervals:
 `hindrax ident thruster-fit --write` stores the fit's relative thrust std per direction as
 ``thrusters.thrust_fit_uncertainty_rel``, and the intervals use it instead of the declared
 ``thrusters.thrust_uncertainty_rel``."""

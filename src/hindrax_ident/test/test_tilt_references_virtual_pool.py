@@ -1,4 +1,4 @@
-"""Issue 17 item 3 in the virtual pool: roll and pitch inertia from an inclining test and a free decay, under the
+"""Roll and pitch inertia from an inclining test and a free decay, under the
 "thrust x0.90" truth (ros_ws/config/truth/scenarios/thrust_0.90.yaml: every thruster 10 % weaker than its curve).
 
 The in-process simulator is driven here; its IMU records are written to CSV and analysed offline by the commands

@@ -1,4 +1,4 @@
-"""Truth apart from belief (issue 16): the simulator reads the truth file, the nodes and estimators the vehicle file."""
+"""Truth apart from belief: the simulator reads the truth file, the nodes and estimators the vehicle file."""
 from __future__ import annotations
 
 import ast

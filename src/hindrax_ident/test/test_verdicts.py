@@ -1,4 +1,4 @@
-"""Honest intervals and verdicts (identification/assessment/verdicts.py) and the scenario suite command (issue 16)."""
+"""Honest intervals and verdicts (identification/assessment/verdicts.py) and the scenario suite command."""
 from __future__ import annotations
 
 import json

@@ -23,7 +23,9 @@ neutral (1500 us) and the status says why. If no wrench arrives for ``wrench_tim
 and reports ``stale``; the ESC node's watchdog is the second line of defence (docs/architecture.md §8).
 
 The core (:class:`~hindrax_drivers.allocation.core.AllocationCore`) is built at start-up and rebuilt only
-when a parameter changes, never per message. Configuration: the vehicle file as ROS parameters
+when a parameter changes, never per message. The thruster keys (geometry, curves, trims, limits, wrench timeout) are
+applied while running; a change is refused while the ESC is armed or has not reported its state
+(:class:`~hindrax_drivers.esc_state.ArmedWatch`), with the reason. Configuration: the vehicle file as ROS parameters
 (``--ros-args --params-file ros_ws/config/hindrax.yaml``). Time: ROS time (``use_sim_time`` supported).
 """
 from __future__ import annotations
@@ -36,6 +38,7 @@ from rclpy.node import Node
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
+from ..esc_state import ArmedWatch
 from ..lean_cdr import cdr_decoder, thruster_pwm_encode, thruster_pwm_lean
 from ..liveness import heartbeat_qos
 from ..node_common import load_node_config, run_node, time_from_ns
@@ -84,8 +87,11 @@ class ThrustAllocationNode(Node):
     def __init__(self, **kwargs: Any):
         super().__init__("thrust_allocation", **kwargs)
         # Thruster geometry, curves and weights are applied while running (ros2 param set); the PCA9685
-        # timing that sets the pulse-width step and the CG need a restart.
-        cfg = load_node_config(self, ALLOCATION_KEYS, dynamic=("thrusters",), on_change=self.on_configuration)
+        # timing that sets the pulse-width step and the CG need a restart. Not while armed (esc/output_state).
+        self.armed = ArmedWatch()
+        cfg = load_node_config(self, ALLOCATION_KEYS, dynamic=("thrusters",), on_change=self.on_configuration,
+                               locked=self.armed.refusal)
+        self.armed.subscribe(self)
         self.core = AllocationCore(cfg)
         self.timeout_s = cfg.thrusters.wrench_timeout_s
         self.future_margin_s = cfg.thrusters.wrench_future_margin_s

@@ -6,7 +6,8 @@ keys of a params file or of ``parameter_overrides`` are not declared, but valida
 Each declared parameter gets a ``rcl_interfaces/ParameterDescriptor`` built from the schema: description
 (meaning and unit), ``additional_constraints`` (the allowed range as the loader prints it), a
 floating-point or integer range where the schema has both bounds, a static type, and ``read_only`` unless
-the node can apply a change while running (``dynamic``). A change to a dynamic key is validated like the
+the node can apply a change while running (``dynamic``). A change to a dynamic key is refused while the node's
+``locked`` says why (the ESC armed: :class:`hindrax_drivers.esc_state.ArmedWatch`), else validated like the
 file (type, range, cross-key checks) and then handed to the node's ``on_change``; a rejected change returns
 ``SetParametersResult(successful=False, reason=<one line naming key, value and allowed range>)``. A change
 to a read-only key is refused by rclpy with the reason ``Trying to set a read-only parameter: <name>.``
@@ -239,21 +240,24 @@ def declare_node_parameter(node: Any, name: str, spec: Spec, default: Any) -> An
 
 
 def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, dynamic: Sequence[str] = (),
-                               on_change: Callable[[VehicleConfig], None] | None = None) -> VehicleConfig:
+                               on_change: Callable[[VehicleConfig], None] | None = None,
+                               locked: Callable[[], str] | None = None) -> VehicleConfig:
     """Declare the node's vehicle keys as described ROS parameters and return them validated.
 
     node: an rclpy Node created *without* ``automatically_declare_parameters_from_overrides``.
     keys: SCHEMA key prefixes the node reads (None: every section, for nodes that use the whole vehicle,
     such as the simulator). dynamic: prefixes (within ``keys``) the node applies while running; they stay
     writable, everything else is read-only. on_change(cfg): called with the validated configuration after
-    a change to dynamic keys; raise ValueError (or ConfigError) with the reason to refuse it.
+    a change to dynamic keys; raise ValueError (or ConfigError) with the reason to refuse it. locked(): '' while a
+    change may be applied, else the reason it is refused (``ArmedWatch.refusal``: safety-relevant keys are read-only
+    while armed); required with dynamic keys.
     Returns a :class:`VehicleConfig` holding the node's keys only (``flat``). Raises :class:`ConfigError`
     (one line per issue) on a missing, mistyped or out-of-range value.
     """
     generic = select_schema_keys(keys)
     dynamic = tuple(dynamic)
-    if dynamic and on_change is None:
-        raise ValueError("dynamic keys need an on_change callback that applies them")
+    if dynamic and (on_change is None or locked is None):
+        raise ValueError("dynamic keys need an on_change callback that applies them and a locked() check")
     if node.has_parameter(CONFIG_FILE_PARAMETER):
         config_file = node.get_parameter(CONFIG_FILE_PARAMETER).value or ""
     else:
@@ -328,6 +332,9 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
         changed = {p.name: _plain(p.value) for p in params if p.name in declared_set}
         if not changed:
             return SetParametersResult(successful=True)
+        reason = locked() if locked is not None else ""
+        if reason:
+            return SetParametersResult(successful=False, reason=f"{', '.join(sorted(changed))}: {reason}; unchanged")
         candidate = dict(state["cfg"].flat)
         candidate.update(changed)
         try:

@@ -1,32 +1,32 @@
-"""ICM-20948 start-up and calibration core: pure, no rclpy, no clock, no sleep (docs/devices.md §4).
+"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4). What the node (:mod:`.node`) runs
+from its timers, through injected I2C ports, so that it can be tested step by step against the register-exact emulator.
 
-What the node (:mod:`.node`) runs from its timers, written so that it can be tested step by step against the
-register-exact emulator:
-
-- :func:`imu_config_from_settings`, :func:`imu_noise_variances`, :func:`mag_mode_for_rate`: the register fields,
-  noise variances and AK09916 mode from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4, §4.6);
-- :class:`BankedRegisters`: register access through REG_BANK_SEL with the selected bank cached (docs/devices.md
-  §4.1); a failed transfer or a DEVICE_RESET makes the bank unknown, so the next access selects it again;
-- :class:`StartupSequence`: the start-up of docs/devices.md §4.3 as a list of steps, each returning the wait the
-  datasheet asks for after it:
-
-  1. select bank 0, read WHO_AM_I and check 0xEA (a wrong identity or an I2C failure ends the attempt with the
-     reason; the node retries);
-  2. DEVICE_RESET, 10 ms; wake (SLEEP = 0, CLKSEL = auto), 20 ms; all axes on (:func:`.protocol.reset_wake_sequence`);
-  3. bank 2: sample-rate dividers, DLPF and full scale (:func:`.protocol.configure_sequence`);
-  4. magnetometer (``i2c_master``: the I2C master set up by :func:`.protocol.mag_master_sequence`, then the AK09916
-     identity WIA2 = 0x09 read once through SLV4, retried up to :data:`MAG_ATTEMPTS` times with I2C_MST_RST in
-     between, docs/devices.md §4.3 step 7; ``bypass``: BYPASS_EN, then WIA1/WIA2 at 0x0C, soft reset and continuous
-     mode written directly). A magnetometer that does not answer is reported through ``on_magnetometer``, never a
-     failure of the start-up: the IMU runs without it.
-
-  ``StartupSequence(..., magnetometer_only=True)`` is step 4 alone, which the node runs one step per poll to bring
-  back a lost AK09916 without resetting the chip;
-- :class:`GyroBiasEstimator`: the start-up gyro-bias calibration (mean over a window, applied only when every axis's
-  gyro and accelerometer standard deviation shows a still vehicle);
-- the per-poll decisions on the bytes read: :class:`FrozenBlockWatch` (an all-zero or repeated sensor block: check
-  whether the chip reset), :func:`chip_reset_problems` (the read-back that says it did), :class:`DataReadyGate`
-  (INT_STATUS_1.RAW_DATA_0_RDY) and :class:`MagNackFilter` (the I2C master's SLV0_NACK).
+- Settings (:class:`ImuSettings`, :func:`imu_config_from_settings`, :func:`imu_noise_variances`,
+  :func:`mag_mode_for_rate`): register fields, noise variances, AK09916 mode and publishing rates from
+  ``sensors.icm20948.*`` (docs/devices.md §4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the bank cached
+  (§4.1); a failed transfer or a DEVICE_RESET makes it unknown, so the next access selects it again.
+- :class:`StartupSequence` (§4.3), steps each returning the datasheet's wait: bank 0, WHO_AM_I 0xEA (a wrong identity
+  or an I2C failure ends the attempt; the node retries); DEVICE_RESET, 10 ms; wake, 20 ms; all axes on; bank 2
+  dividers, DLPF, full scale; the magnetometer (``i2c_master``: the I2C master, then WIA2 = 0x09 through SLV4, up to
+  :data:`MAG_ATTEMPTS` tries with I2C_MST_RST between; ``bypass``: BYPASS_EN, WIA1/WIA2 at 0x0C, soft reset,
+  continuous mode). A silent magnetometer is reported through ``on_magnetometer``, never a start-up failure;
+  ``magnetometer_only=True`` is that last part alone, which brings a lost AK09916 back without resetting the chip.
+- Gyro bias (:class:`GyroBiasEstimator`, :class:`GyroBias`): the mean over the first ``gyro_bias_duration_s`` of
+  data (published uncorrected meanwhile), subtracted only when every axis's gyro and accelerometer std shows a still
+  vehicle, else a WARN says why.
+- Each poll (:func:`read_poll`): with ``require_data_ready`` a poll whose INT_STATUS_1.RAW_DATA_0_RDY is not set
+  (chip and host clocks drift) publishes nothing (:class:`DataReadyGate`: counted ``not_ready``;
+  ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``; a failed status read publishes, as without the
+  gate, so a replay of an older bag publishes what it recorded).
+- Chip reset (power glitch): its data registers read 0 and stop updating, PWR_MGMT_1 reads 0x41 (asleep), USER_CTRL
+  0 (I2C master off). An all-zero block or ``frozen_check_samples`` identical blocks (:class:`FrozenBlockWatch`)
+  make the node read the state back (:func:`read_chip_reset`); a reset is counted ``chip_resets``, an ERROR, its
+  suspect samples unpublished, the start-up run again. The all-zero block is never published.
+- Magnetometer: in ``i2c_master`` mode I2C_MST_STATUS.SLV0_NACK means the block is old (:class:`MagNackFilter`:
+  not published, counted ``mag_nack``, until it changes). :class:`MagnetometerWatch`: new samples without overflow
+  at most ``MAG_PUBLISH_HZ``; none for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises
+  the magnetometer alone, one step per poll (``imu/data_raw`` goes on), retried every ``mag_retry_interval_s``
+  (counted ``mag_retries``) until the AK09916 answers.
 """
 from __future__ import annotations
 
@@ -39,12 +39,14 @@ import numpy as np
 
 from ..transport.i2c import I2CError, RegisterWrite
 from . import protocol as p
+from .mounting import mounting_rotation
 
 __all__ = ["ACCEL_NOISE_BANDWIDTH_HZ", "ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ", "BankedRegisters", "DataReadyGate",
-           "FrozenBlockWatch", "MagNackFilter", "chip_reset_problems",
-           "GYRO_NOISE_BANDWIDTH_HZ", "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBiasEstimator", "GyroBiasResult",
-           "MAG_ATTEMPTS", "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings",
-           "imu_noise_variances", "mag_mode_for_rate"]
+           "FrozenBlockWatch", "ImuSettings", "PollResult", "read_poll", "MagNackFilter", "MagnetometerWatch",
+           "chip_reset_problems", "diagnostic_values", "GYRO_NOISE_BANDWIDTH_HZ",
+           "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBias", "GyroBiasEstimator", "GyroBiasResult", "MAG_ATTEMPTS",
+           "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings", "imu_noise_variances",
+           "mag_mode_for_rate", "CHIP_STATE_LENGTH", "PollFailures", "read_asleep", "read_chip_reset"]
 
 #: Attempts to reach the AK09916 through the I2C master (SparkFun retries too, docs/devices.md §4.3 step 7).
 MAG_ATTEMPTS = 3
@@ -58,6 +60,10 @@ GYRO_NOISE_BANDWIDTH_HZ = (229.8, 187.6, 154.3, 73.3, 35.9, 17.8, 8.9, 376.5)
 ACCEL_NOISE_BANDWIDTH_HZ = (265.0, 265.0, 136.0, 68.8, 34.4, 17.0, 8.3, 499.0)
 #: The vehicle is "still" when every axis's std is below this many times the expected noise std.
 STILL_STD_FACTOR = 5.0
+#: rate of ``imu/temperature``, Hz (diagnostics and bag: the die temperature drifts over minutes)
+TEMPERATURE_PUBLISH_HZ = 1.0
+#: highest rate of ``imu/mag``, Hz (heading on the topside; AK09916 continuous mode 2 is 20 Hz, docs/devices.md §4.5)
+MAG_PUBLISH_HZ = 20.0
 
 
 class I2CPort(Protocol):
@@ -71,6 +77,54 @@ class I2CPort(Protocol):
 
 
 # ---------------------------------------------------------------------------------------- settings
+@dataclass(frozen=True)
+class ImuSettings:
+    """What the node derives from ``sensors.icm20948.*`` once (:meth:`from_section`): the register fields
+    (``config``), the achieved output rate ``odr_hz`` (Hz), the AK09916 mode, the mounting ``rotation`` (3x3,
+    sensor -> base_link FLU), per-axis noise variances and the rotated covariances (3x3; accel m^2/s^4, gyro
+    rad^2/s^2), the temperature variance (degC^2), the decimations of ``imu/temperature`` and ``imu/mag`` (every
+    k-th sample) and the start-up ``warnings`` (an unreachable rate, a gyro that ignores its divider)."""
+
+    config: p.ImuConfig
+    odr_hz: float
+    mag_mode: int
+    rotation: np.ndarray
+    accel_var: float
+    gyro_var: float
+    accel_cov: np.ndarray
+    gyro_cov: np.ndarray
+    temperature_var: float
+    temperature_every: int
+    mag_every: int
+    warnings: tuple[str, ...]
+
+    def describe(self) -> str:
+        """Rate and ranges in one line (the start-up's log)."""
+        c = self.config
+        return (f"{self.odr_hz:.2f} Hz (FS {p.ACCEL_RANGE_G[c.accel_fs_sel]:g} g, {p.GYRO_RANGE_DPS[c.gyro_fs_sel]:g} "
+                f"dps, DLPFCFG {c.gyro_dlpfcfg})")
+
+    @classmethod
+    def from_section(cls, s: Any, temperature_hz: float = TEMPERATURE_PUBLISH_HZ,
+                     mag_hz: float = MAG_PUBLISH_HZ) -> "ImuSettings":
+        """s: the validated ``sensors.icm20948`` section; temperature_hz, mag_hz: the highest publishing rates, Hz."""
+        rate = float(s.sample_rate_hz)
+        config = imu_config_from_settings(s.accel_full_scale_g, s.gyro_full_scale_dps, s.dlpf_config, rate)
+        odr, rot = config.accel_odr_hz, mounting_rotation(s.mounting_rpy_rad)
+        mag_mode = mag_mode_for_rate(odr)
+        a_var, g_var = imu_noise_variances(config)
+        warnings = []
+        if abs(odr - rate) > 0.05 * rate:
+            warnings.append(f"sensors.icm20948.sample_rate_hz = {rate:g} Hz is not reachable: the chip runs at "
+                            f"1125 / (1 + div) Hz, here {odr:.2f} Hz")
+        if not 0 < int(s.dlpf_config) < 7:
+            warnings.append(f"dlpf_config {int(s.dlpf_config)}: the gyro ignores its sample-rate divider "
+                            f"(docs/devices.md §4.4) and runs at 1125 Hz; polled at {odr:.2f} Hz")
+        return cls(config, odr, mag_mode, rot, a_var, g_var, (rot * a_var) @ rot.T, (rot * g_var) @ rot.T,
+                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, max(1, round(odr / temperature_hz)),
+                   max(1, round(min(p.AK_CONTINUOUS_MODE_RATE_HZ[mag_mode], odr) / mag_hz)), tuple(warnings))
+
+
 def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,
                              sample_rate_hz: float) -> p.ImuConfig:
     """Register fields from the ``sensors.icm20948.*`` settings (docs/devices.md §4.4).
@@ -422,6 +476,41 @@ class GyroBiasEstimator:
         return self.result
 
 
+class GyroBias:
+    """The start-up gyro-bias calibration (``sensors.icm20948.estimate_gyro_bias``): ``bias_rad_s`` (3,) is what the
+    node subtracts (zero until a still window gave one); :meth:`start` after each start-up begins the window once
+    (True while it runs); :meth:`add` feeds it; ``result`` and :attr:`status` report it."""
+
+    def __init__(self, enabled: bool, duration_s: float, gyro_var: float, accel_var: float) -> None:
+        self.enabled, self.duration_s = bool(enabled), float(duration_s)
+        self.gyro_std, self.accel_std = STILL_STD_FACTOR * math.sqrt(gyro_var), STILL_STD_FACTOR * math.sqrt(accel_var)
+        self.bias_rad_s = np.zeros(3)
+        self.estimator: GyroBiasEstimator | None = None
+        self.result: GyroBiasResult | None = None
+
+    def start(self) -> bool:
+        """Begin the window unless disabled or done; True while estimating."""
+        if self.enabled and self.result is None:
+            self.estimator = GyroBiasEstimator(self.duration_s, self.gyro_std, self.accel_std)
+        return self.estimator is not None
+
+    def add(self, t_s: float, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> GyroBiasResult | None:
+        """One sample (s, rad/s, m/s^2); the result once, when the window ends (applied if still)."""
+        if self.estimator is None:
+            return None
+        self.result = self.estimator.add(t_s, gyro_rad_s, accel_m_s2)
+        if self.result is not None:
+            self.estimator = None
+            if self.result.still:
+                self.bias_rad_s = self.result.bias_rad_s
+        return self.result
+
+    @property
+    def status(self) -> str | None:
+        """The diagnostics' ``gyro_bias_status``: the result's message, ``estimating``, or None."""
+        return self.result.message if self.result is not None else "estimating" if self.estimator else None
+
+
 # ---------------------------------------------------------------------------------------- per-poll decisions
 class FrozenBlockWatch:
     """Says when a sensor block calls for a chip-state read-back (docs/devices.md §4.3: a reset chip's data registers
@@ -454,6 +543,39 @@ class FrozenBlockWatch:
         self._last = None
 
 
+#: Bytes read back by the chip-state check: USER_CTRL (0x03), reserved 0x04, LP_CONFIG 0x05, PWR_MGMT_1 0x06.
+CHIP_STATE_LENGTH = 4
+
+
+def read_chip_reset(regs: BankedRegisters, master_expected: bool) -> list[str]:
+    """Read USER_CTRL..PWR_MGMT_1 back (one 4-byte read, bank 0) and say what shows a chip that reset
+    (:func:`chip_reset_problems`; empty: none). Raises I2CError."""
+    return chip_reset_problems(regs.read(p.USER_CTRL, CHIP_STATE_LENGTH), master_expected)
+
+
+def read_asleep(regs: BankedRegisters) -> bool:
+    """PWR_MGMT_1.SLEEP read back: a frozen chip found asleep was reset by a power glitch. Raises I2CError."""
+    return bool(regs.read(p.PWR_MGMT_1)[0] & p.PWR_MGMT_1_SLEEP)
+
+
+class PollFailures:
+    """Failed polls in a row (ROS time, s): :meth:`failed` says ``restart`` once they have lasted ``reinit_after_s``
+    (the start-up runs again), else ``warn``; :meth:`ok` after a poll that read its burst."""
+
+    def __init__(self, reinit_after_s: float) -> None:
+        self.reinit_after_s = float(reinit_after_s)
+        self.since_s: float | None = None
+
+    def ok(self) -> None:
+        """A poll read its burst."""
+        self.since_s = None
+
+    def failed(self, now_s: float) -> str:
+        """One more failed poll at ``now_s``."""
+        self.since_s = now_s if self.since_s is None else self.since_s
+        return "restart" if now_s - self.since_s >= self.reinit_after_s else "warn"
+
+
 def chip_reset_problems(state: bytes, master_expected: bool) -> list[str]:
     """What in the read-back USER_CTRL..PWR_MGMT_1 (4 bytes from 0x03, bank 0) shows a chip that reset: asleep
     (PWR_MGMT_1.SLEEP), or the I2C master off while ``master_expected`` (docs/devices.md §4.3). Empty: no reset."""
@@ -475,6 +597,12 @@ class DataReadyVerdict:
     raise_error: bool
     clear_error: bool
     polls: int
+
+    @property
+    def text(self) -> str:
+        """The ERROR ``data_ready``'s message."""
+        return (f"data_ready: INT_STATUS_1.RAW_DATA_0_RDY not set for {self.polls} consecutive polls: no new "
+                "accel/gyro sample, nothing published")
 
 
 class DataReadyGate:
@@ -518,3 +646,135 @@ class MagNackFilter:
     def reset(self) -> None:
         """Forget the NACKed block (after a re-initialisation)."""
         self.frozen = None
+
+
+class MagnetometerWatch:
+    """Which AK09916 samples are published and when the magnetometer is re-initialised (module docstring; times in s
+    of ROS time). every: publish every k-th valid sample (k = round(AK09916 rate / MAG_PUBLISH_HZ), counted from each
+    start-up); stale_timeout_s: no fresh sample this long is a lost magnetometer; retry_interval_s: between
+    re-initialisations while it stays lost. A re-initialisation is a magnetometer-only :class:`StartupSequence`
+    (``make_reinit()``), run one step per poll by :meth:`after_sample`."""
+
+    def __init__(self, every: int, stale_timeout_s: float, retry_interval_s: float,
+                 make_reinit: Callable[[], StartupSequence]) -> None:
+        self.every, self.stale_timeout_s = int(every), float(stale_timeout_s)
+        self.retry_interval_s = float(retry_interval_s)
+        self.make_reinit = make_reinit
+        self.reinit: StartupSequence | None = None  # the running re-initialisation
+        self.fresh_s: float | None = None  # the last fresh sample (None: not watched)
+        self.lost = False
+        self.retry_due_s: float | None = None
+        self.step_due_s = 0.0
+        self.count = 0  # valid samples since the start-up
+        self.text = ""  # the ERROR ``magnetometer``'s text when lost
+
+    def started(self, now_s: float, available: bool) -> None:
+        """A whole start-up finished, with the magnetometer ``available`` or not."""
+        self.count, self.reinit = 0, None
+        self.fresh_s = now_s if available else None
+        self.lost = self.lost and not available
+        self.retry_due_s = now_s + self.retry_interval_s if self.lost else None
+
+    def sample(self, now_s: float, data_ready: bool, overflow: bool) -> bool:
+        """One AK09916 block (ST1.DRDY, ST2.HOFL): True when it is published."""
+        if not data_ready:
+            return False
+        self.fresh_s = now_s
+        if overflow:
+            return False
+        self.count += 1
+        return (self.count - 1) % self.every == 0
+
+    def begin(self, now_s: float) -> None:
+        """A magnetometer-only re-initialisation starts (its first step now)."""
+        self.reinit, self.step_due_s = self.make_reinit(), now_s
+
+    def after_sample(self, now_s: float, available: bool) -> str:
+        """After each published sample: ``lost`` (no fresh sample for the timeout while ``available``: ``text`` says
+        why; the re-initialisation begins), ``retry`` (a re-initialisation of a lost magnetometer begins),
+        ``recovered`` (a re-initialisation ended and the AK09916 answers), or ''. Runs one due step."""
+        if available and self.fresh_s is not None and now_s - self.fresh_s > self.stale_timeout_s:
+            self.text = (f"magnetometer: no new AK09916 sample for {now_s - self.fresh_s:.2f} s (SLV0 NACK or no "
+                         "DRDY): imu/mag not published, re-initialising")
+            self.lost, self.fresh_s = True, None
+            self.begin(now_s)
+            return "lost"
+        event = ""
+        if self.retry_due_s is not None and now_s >= self.retry_due_s:
+            self.retry_due_s, event = None, "retry"
+            self.begin(now_s)
+        if self.reinit is None or now_s < self.step_due_s:
+            return event
+        if not self.reinit.finished:
+            self.step_due_s = now_s + self.reinit.step().wait_s
+            return event
+        self.reinit = None
+        if not available:
+            self.retry_due_s = now_s + self.retry_interval_s
+            return event
+        self.lost, self.fresh_s = False, now_s
+        return "recovered"
+
+
+def diagnostic_values(config: p.ImuConfig, who_am_i: int | None, sample_rate_hz: float, mag_mode: str,
+                      mag_available: bool, mag_messages: int, startup_attempts: int, gyro_bias_rad_s: Any,
+                      bias_status: str | None) -> list[tuple[str, Any]]:
+    """The device-specific KeyValues of the IMU's ``/diagnostics`` entry (bias_status None: no calibration)."""
+    out = [("who_am_i", f"0x{who_am_i:02x}" if who_am_i is not None else "unknown"),
+           ("sample_rate_configured_hz", f"{sample_rate_hz:g}"), ("output_data_rate_hz", f"{config.accel_odr_hz:.3f}"),
+           ("accel_full_scale_g", f"{p.ACCEL_RANGE_G[config.accel_fs_sel]:g}"),
+           ("gyro_full_scale_dps", f"{p.GYRO_RANGE_DPS[config.gyro_fs_sel]:g}"), ("dlpf_config", config.gyro_dlpfcfg),
+           ("magnetometer_mode", mag_mode), ("magnetometer_available", mag_available),
+           ("magnetometer_messages", mag_messages), ("startup_attempts", startup_attempts),
+           ("gyro_bias_rad_s", " ".join(f"{v:.6f}" for v in gyro_bias_rad_s))]
+    return out + ([("gyro_bias_status", bias_status)] if bias_status is not None else [])
+
+
+@dataclass(frozen=True)
+class PollResult:
+    """One poll's reads (:func:`read_poll`). ready: INT_STATUS_1.RAW_DATA_0_RDY (None: not read, or its read
+    failed); block: the 14-byte accel/gyro/temperature block (None when the burst failed: ``error``); mag_block: the
+    AK09916's ST1..ST2 (None: no magnetometer, its read failed, or stale after a NACK); counters: diagnostics counters
+    to add (``data_ready_read_failure``, ``mag_status_failure``, ``mag_nack``, ``mag_i2c_failure``)."""
+
+    ready: bool | None
+    block: bytes | None
+    mag_block: bytes | None
+    counters: tuple[str, ...]
+    error: I2CError | None = None
+
+
+def read_poll(regs: BankedRegisters, mag_device: I2CPort, mag_mode: str, mag_available: bool,
+              require_data_ready: bool, nack_filter: MagNackFilter) -> PollResult:
+    """The reads of one poll, in bank 0 (module docstring of the node): INT_STATUS_1 when ``require_data_ready`` (it
+    lies 19 bytes before ACCEL_XOUT_H: a separate 1-byte read; a failed read leaves the bank as it was), the burst from
+    ACCEL_XOUT_H (plus the AK09916 block in ``i2c_master`` mode, then I2C_MST_STATUS for SLV0_NACK through
+    ``nack_filter``), or in ``bypass`` mode the AK09916 block at 0x0C:0x10. Only the burst's failure is an error."""
+    counters: list[str] = []
+    ready = None
+    if require_data_ready:
+        try:
+            ready = bool(regs.read(p.INT_STATUS_1)[0] & p.INT_STATUS_1_RAW_DATA_0_RDY)
+        except I2CError:
+            counters.append("data_ready_read_failure")
+    master = mag_mode == "i2c_master" and mag_available
+    try:
+        data = bytes(regs.read(p.ACCEL_XOUT_H, p.SENSOR_BLOCK_LENGTH + (p.AK09916_BLOCK_LENGTH if master else 0)))
+    except I2CError as exc:
+        return PollResult(ready, None, None, tuple(counters), exc)
+    mag_block = None
+    if master:
+        try:
+            nack = bool(regs.device.read_block(p.I2C_MST_STATUS.address, 1)[0] & p.I2C_MST_STATUS_SLV0_NACK)
+        except I2CError:
+            nack = False
+            counters.append("mag_status_failure")
+        if nack:
+            counters.append("mag_nack")
+        mag_block = nack_filter.update(data[p.SENSOR_BLOCK_LENGTH:], nack)  # None: the sample of before the NACK
+    elif mag_mode == "bypass" and mag_available:
+        try:
+            mag_block = mag_device.read_block(p.AK_ST1.address, p.AK09916_BLOCK_LENGTH)
+        except I2CError:
+            counters.append("mag_i2c_failure")
+    return PollResult(ready, data[:p.SENSOR_BLOCK_LENGTH], mag_block, tuple(counters))

@@ -576,7 +576,7 @@ def recorded_parsed(bag_path: str | Path) -> dict[str, list[Any]]:
     reader = BagReader(bag_path)
     wanted = [t for t in list(PARSED_TOPICS) + ["/thrusters/pulse_width"] if t in reader.topics]
     out: dict[str, list[Any]] = {t: [] for t in wanted}
-    # a bag recorded before a message changed (ThrusterPwm gained output_state, issue 23) decodes from its stored
+    # a bag recorded before a message changed (ThrusterPwm gained output_state) decodes from its stored
     # definition, the new field at its default (OUTPUT_UNKNOWN: those bags did not record the state on the wire)
     for m, msg in reader.installed_messages(wanted):
         out[m.topic].append(msg)

@@ -65,7 +65,7 @@ def allocator_cost(quick: bool = False) -> list[dict]:
         rows += [
             {"name": f"allocate_cpu_p50{label}", "value": float(np.percentile(per_call, 50)), "unit": "us"},
             {"name": f"allocate_cpu_p99{label}", "value": float(np.percentile(per_call, 99)), "unit": "us",
-             **({"target": "the search adds well under 1 ms (issue 26)"} if search else {})},
+             **({"target": "the search adds well under 1 ms"} if search else {})},
         ]
     repeat = np.empty(n)
     for i, w in enumerate(wrenches):  # each wrench twice in a row: the second call is the repeat
@@ -151,7 +151,7 @@ def run(quick: bool = False) -> list[dict]:
     return [
         {"name": "wrench_to_registers_p50", "value": float(np.percentile(lat_ms, 50)), "unit": "ms"},
         {"name": "wrench_to_registers_p99", "value": float(np.percentile(lat_ms, 99)), "unit": "ms",
-         "target": "<= 5 ms (issue 15: event-driven ESC output)"},
+         "target": "<= 5 ms (event-driven ESC output)"},
         {"name": "wrench_to_registers_cpu_p99", "value": float(np.percentile(np.array(cpu_latencies) * 1e3, 99)),
          "unit": "ms", "note": "process CPU time over the same interval: the work itself, without the time the "
                                "process waited for a core (a shared machine's p99 above is mostly that wait)"},

@@ -1,4 +1,4 @@
-"""Real-like data to tune ``hindrax ident fit`` on (issue 46.6), and the figures it gives: piloted and closed-loop
+"""Real-like data to tune ``hindrax ident fit`` on, and the figures it gives: piloted and closed-loop
 virtual-pool bags with what real pool days have and the vehicle file does not.
 
 Two data sets of :mod:`.ident_fit` (same bag generator, :mod:`hindrax_ident.identification.piloted_bag`, the
@@ -16,7 +16,7 @@ command through the thrust allocation to the simulated thrusters and sensors), b
 
 The first three bags of each set are fitted (no vehicle file, as on another vehicle's data), the other two are
 predicted; per DOF the held-out NRMSE of the fit, of a plain least squares and of holding the velocity
-(:func:`.ident_fit.evaluate`), the cross-validated scores, the verdict (never worse than persistence, issue 46.1)
+(:func:`.ident_fit.evaluate`), the cross-validated scores, the verdict (never worse than persistence)
 and whether the delay sat at its bound.
 
 Usage: ``python -m hindrax_ident.benchmarks.ident_realdata [--keep DIR] [--only NAME,...]
@@ -165,10 +165,10 @@ def main(argv: list[str] | None = None) -> int:
                           for n, r in res.items())
         body = ("Three bags fitted, two predicted, no vehicle file; held-out nrmse = RMS(predicted - measured) / "
                 "std(measured) of 10 s open-loop predictions from the measured velocity "
-                "(`python -m hindrax_ident.benchmarks.ident_realdata`, issue 46.6).\n\n" + notes + "\n\n"
+                "(`python -m hindrax_ident.benchmarks.ident_realdata`).\n\n" + notes + "\n\n"
                 + results_doc.markdown_table(HEADER, table_rows(res))
                 + f"\n\n![held-out nrmse per data set and DOF]({png.relative_to(doc.parent).as_posix()})\n")
-        results_doc.write_if_asked(a, "ident-realdata", "Identification on real-like data (issue 46.6)", body)
+        results_doc.write_if_asked(a, "ident-realdata", "Identification on real-like data", body)
     return 0
 
 

@@ -31,7 +31,7 @@ an emulated PCA9685 and its /OE line that this process serves over a Unix socket
 * ``clock_step_back_detected``: a supervisor on ``use_sim_time``, ``/clock`` (100 Hz from here) steps back 100 s,
   until its ``/diagnostics`` carries ``errors.clock_step``.
 
-A bag of the vehicle replayed on its own domain (:func:`replay_rows`, issue 43.1): the same three processes, armed
+A bag of the vehicle replayed on its own domain (:func:`replay_rows`): the same three processes, armed
 at 1700 us, recorded for :data:`REPLAY_RECORD_S` by the project's recorder (every topic, as the vehicle launch
 records); then that bag is replayed in a loop with every topic, heartbeats and commands included (the worst case:
 the player with ``safety_topics`` and its graph check off, as a tool without that check would publish), and the
@@ -49,7 +49,7 @@ CPU-bound processes of another session (:mod:`hindrax_ident.benchmarks.busy_neig
 ``busy_neighbours_disarms`` (target 0) and ``busy_neighbours_heartbeat_gap_max_ms`` (target 100 ms), and the same
 at nice -5 only for comparison.
 
-The hardware watchdog on /OE (:func:`frozen_rows`, issue 44.2; docs/watchdog.md): the bench's layout has it fitted
+The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench's layout has it fitted
 (the emulated monostable ORed into /OE, ``esc.output_enable_feed_timeout_s`` 0.33 s, fed by the guard at 10 Hz):
 
 * ``launch_frozen_outputs_stopped``: SIGSTOP of the guard, the ESC and the supervisor while armed at 1700 us, until
@@ -729,7 +729,7 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
 
 
 def replay_rows(quick: bool = False) -> list[dict]:
-    """Rows of the supervisor killed while a bag of the vehicle replays (module docstring; issue 43 asks
+    """Rows of the supervisor killed while a bag of the vehicle replays (module docstring; target
     <= 500 ms median and max)."""
     repeats = QUICK_REPEATS if quick else PROCESS_REPEATS
     after_kill: list[float] = []
@@ -790,8 +790,8 @@ def replay_rows(quick: bool = False) -> list[dict]:
 
 
 def frozen_rows(quick: bool = False) -> list[dict]:
-    """Rows of the hardware watchdog (module docstring; issue 44 asks <= 500 ms median and max for the frozen
-    launch, and arming refused by a guard without its line)."""
+    """Rows of the hardware watchdog (module docstring; targets <= 500 ms median and max for the
+    frozen launch, and arming refused by a guard without its line)."""
     repeats = QUICK_REPEATS if quick else PROCESS_REPEATS
     stopped: list[float] = []
     oe_low = 0  # repeats in which the guard's own /OE line was still low when the outputs stopped
@@ -954,7 +954,7 @@ def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
 
 
 def run_processes(quick: bool = False) -> list[dict]:
-    """Rows of the process, bus and clock failures (issue 23: each <= 0.5 s), median and max in ms."""
+    """Rows of the process, bus and clock failures (target: each <= 0.5 s), median and max in ms."""
     times = _process_rows(QUICK_REPEATS if quick else PROCESS_REPEATS)
     notes = {"supervisor_killed_outputs_stopped": "SIGKILL: ESC heartbeat timeout 0.2 s and guard /OE",
              "supervisor_hung_outputs_stopped": "SIGSTOP: the same paths",

@@ -1,5 +1,5 @@
 """``hindrax ident predict BAG [BAG ...] --model identification.yaml --out DIR [--segment-s S]``: the identified
-model's open-loop predictions on bags, as CSV anyone can score (issue 46.5).
+model's open-loop predictions on bags, as CSV anyone can score.
 
 Per bag and DOF of the model, ``DIR/<bag>_<dof>.csv`` with ``t_s,segment,measured,predicted`` (SI, body FRD, the
 frame and time origin in the first ``#`` line; :mod:`hindrax_ident.identification.assessment.predict`). With

@@ -45,7 +45,7 @@ from .common import add_config_argument, load_vehicle
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
            "format_excitation_table"]
 
-#: DOFs of the full suite (issue 16: surge, sway, heave, yaw).
+#: DOFs of the full suite: surge, sway, heave, yaw.
 DEFAULT_DOFS = ("surge", "sway", "heave", "yaw")
 #: Parameters compared with the truth (added_mass is inertia minus a constant, so it is left out).
 REPORTED = ("inertia", "quadratic_damping", "quadratic_damping_positive", "quadratic_damping_negative",
@@ -192,7 +192,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
             rs = rls_std.get(name, math.nan)
             rls = {"rls_value": float(rv), "rls_std": rs if math.isfinite(rs) else None,
                    "rls_covers": bool(math.isfinite(rs) and abs(float(rv) - tr) <= 1.96 * rs)}
-            # before issue 16: the fit's own std and the t quantile of (samples - parameters), no verdict
+            # the older interval: the fit's own std and the t quantile of (samples - parameters), no verdict
             t_before = float(stats.t.ppf(0.975, max(int(r.residual_dof), 1)))
             before = bool(abs(v - tr) <= t_before * a[name]["std_fit"])
             rows.append({**rls, "covered_before": before, "dof": dof, "parameter": name, "value": v, "std": s,
