@@ -30,7 +30,8 @@ def run_entrypoint(tmp_path, args, **env):
     for name in ("hindrax", "ros2"):
         fake = bindir / name
         fake.write_text(f"#!/usr/bin/env bash\necho \"RUN={name} $*\"\necho \"RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE\"\n"
-                        "echo \"SECURITY=${ROS_SECURITY_ENABLE-unset} ${ROS_SECURITY_STRATEGY-} ${ROS_SECURITY_KEYSTORE-} "
+                        "echo \"SECURITY=${ROS_SECURITY_ENABLE-unset} ${ROS_SECURITY_STRATEGY-} "
+                        "${ROS_SECURITY_KEYSTORE-} "
                         "${ROS_SECURITY_ENCLAVE_OVERRIDE-}\"\n"
                         "echo \"DOMAIN=$ROS_DOMAIN_ID\"\necho \"SOURCED=$FAKE_ROS_SOURCED$FAKE_WS_SOURCED\"\n"
                         "echo \"CONFIG=${HINDRAX_CONFIG-unset}\"\n")
@@ -69,7 +70,8 @@ def test_entrypoint_runs_the_launch_layout_on_the_tether(tmp_path):
 def test_entrypoint_ships_sros2_on_and_refuses_a_vehicle_without_its_keystore(tmp_path):
     r = run_entrypoint(tmp_path, [], ROS_DOMAIN_ID="42", HINDRAX_KEYSTORE=str(tmp_path / "none"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
-    assert f"HINDRAX_KEYSTORE={tmp_path / 'none'}: no SROS2 keystore (create it with `hindrax sros2 keystore" in r.stderr
+    assert f"HINDRAX_KEYSTORE={tmp_path / 'none'}: no SROS2 keystore (create it with `hindrax sros2 keystore" \
+        in r.stderr
     r = run_entrypoint(tmp_path, [], ROS_DOMAIN_ID="42", HINDRAX_KEYSTORE=str(tmp_path / "none"), HINDRAX_SROS2="0")
     assert r.returncode == 0 and "SECURITY=unset" in r.stdout, r.stderr  # a bench without DDS Security
     r = run_entrypoint(tmp_path, ["hindrax", "health", "--quiet"], ROS_DOMAIN_ID="42")

@@ -57,7 +57,8 @@ class Day:
         # node -> the label of the process that runs it (a composed process runs several: hindrax_drivers.composition)
         self.process_of = {n: p.label for p in self.processes for n in p.node_names}
         self.runner = ProcessRunner(
-            self.processes, command=lambda p: [str(install.executable(p.package, p.executable))], env=env or install.env,
+            self.processes, command=lambda p: [str(install.executable(p.package, p.executable))],
+            env=env or install.env,
             extra_env={p.label: {k: v for n in p.node_names for k, v in devices.env(n).items()}
                        for p in self.processes},
             extra_ros_args={p.label: [a for n in p.node_names for a in devices.ros_arguments(n)]

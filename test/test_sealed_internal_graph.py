@@ -53,7 +53,8 @@ laptop_profile.write_text("""<?xml version="1.0" encoding="UTF-8"?>
 vehicle_env = env(ROS_STATIC_PEERS="")
 procs = {
     "gateway": subprocess.Popen([sys.executable, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
-                                 config, "-p", f"topside_domain_id:={TOPSIDE}", "-p", "topside_discovery_range:=SUBNET"],
+                                 config, "-p", f"topside_domain_id:={TOPSIDE}", "-p",
+                                 "topside_discovery_range:=SUBNET"],
                                 env=vehicle_env,
                                 stdout=open(out / "gateway.log", "w"), stderr=subprocess.STDOUT),
     "control": subprocess.Popen([sys.executable, "-c", "import rclpy, time; rclpy.init(); "

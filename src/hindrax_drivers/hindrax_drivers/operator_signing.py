@@ -61,10 +61,12 @@ def key_path(vehicle: str) -> Path:
 
 def create_key(path: Path, force: bool = False) -> Path:
     """Write a new random 32-byte key (:func:`secrets.token_bytes`) to ``path`` as hex, mode 0600 from creation;
-    the folder is made (mode 0700) if missing. Raises :class:`OperatorKeyError` when the file exists and not ``force``."""
+    the folder is made (mode 0700) if missing. Raises :class:`OperatorKeyError` when the file exists and not
+    ``force``."""
     path = Path(path)
     if path.exists() and not force:
-        raise OperatorKeyError(f"{path} exists (a new key means copying it to the topside again): use --force to replace it")
+        raise OperatorKeyError(f"{path} exists (a new key means copying it to the topside again): use --force to "
+                               "replace it")
     path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
     tmp = path.with_name(path.name + ".new")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
@@ -85,7 +87,8 @@ def load_key(path: Path) -> bytes:
     except OSError as exc:
         raise OperatorKeyError(f"operator key {path}: {exc.strerror or exc} (create it with `hindrax keys`)") from None
     if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise OperatorKeyError(f"operator key {path}: mode {stat.S_IMODE(mode):04o} lets others read it: chmod 600 {path}")
+        raise OperatorKeyError(f"operator key {path}: mode {stat.S_IMODE(mode):04o} lets others read it: "
+                               f"chmod 600 {path}")
     try:
         key = bytes.fromhex(text)
     except ValueError:

@@ -36,7 +36,8 @@ from typing import Iterable, Mapping
 
 from .gateway.interface import GATEWAY_NODE, INTERFACE, Relay
 
-__all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS", "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
+__all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS",
+           "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
            "NODE_TOPICS", "POLICY_VERSION", "enclave_of", "gateway_internal_enclave", "internal_policy",
            "launch_enclaves", "topside_enclaves", "topside_policy"]
 
@@ -141,7 +142,8 @@ def internal_policy(enclaves: Mapping[str, Iterable[str]]) -> str:
              ("services", {"reply": "ALLOW", "request": "ALLOW"}, list(INTERNAL_SERVICES)),
              ("actions", {"call": "ALLOW", "execute": "ALLOW"}, list(INTERNAL_ACTIONS))]
     doc: dict = {}
-    for enclave, nodes in {**dict(enclaves), gateway_internal_enclave(): ("gateway",), TOOLS_ENCLAVE: ("tools",)}.items():
+    own = {gateway_internal_enclave(): ("gateway",), TOOLS_ENCLAVE: ("tools",)}
+    for enclave, nodes in {**dict(enclaves), **own}.items():
         doc[enclave] = [("/", n, _node_rules() + graph) for n in nodes]
     return _policy(doc)
 

@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from ..allocation.core import AllocationCore
 from ..config import DOFS, VehicleConfig
 
 __all__ = ["MAX_CALIBRATION_STEPS", "MAX_NAME_CHARS", "RequestBounds", "top_speeds_m_s"]
@@ -39,8 +40,6 @@ def top_speeds_m_s(cfg: VehicleConfig) -> dict[str, float]:
     """{``surge``, ``sway``: the steady speed, m/s, at which the damping (``hydrodynamics.*``) equals the thrusters'
     smaller capacity of the two directions on that axis (:meth:`~hindrax_drivers.allocation.core.AllocationCore.
     wrench_capacity_frd`)}: linear v + quadratic v^2 = F."""
-    from ..allocation.core import AllocationCore
-
     low, high = AllocationCore(cfg).wrench_capacity_frd()
     out = {}
     for i, dof in enumerate(("surge", "sway")):

@@ -26,7 +26,19 @@ import threading
 from dataclasses import asdict, dataclass
 from typing import Any, Sequence
 
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.action import ActionClient
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+
 from ..config import ConfigError, ConfigIssue
+from ..node_common import load_node_config
+from ..ros_process import RosProcess
+from .bounds import RequestBounds
+from .interface import GATEWAY_NODE, relays
+from .link import Channel
 
 __all__ = ["BOUNDS_SECTIONS", "DISCOVERY_RANGES", "GatewaySettings", "InternalSide", "interface_type", "main",
            "read_settings"]
@@ -56,8 +68,6 @@ class GatewaySettings:
 def read_settings(node: Any) -> tuple[GatewaySettings, Any]:
     """Declare and read the gateway's parameters on ``node`` (module docstring): (settings, the vehicle file's
     :data:`BOUNDS_SECTIONS`). Raises :class:`~hindrax_drivers.config.ConfigError` naming key, value and range."""
-    from ..node_common import load_node_config
-
     cfg = load_node_config(node, BOUNDS_SECTIONS)
     domain = node.declare_parameter("topside_domain_id", 0).value
     scope = node.declare_parameter("topside_discovery_range", "LOCALHOST").value
@@ -82,12 +92,6 @@ class InternalSide:
     (:class:`.link.Channel`); :meth:`serve` reads them until the channel ends."""
 
     def __init__(self, node: Any, channel: Any) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.action import ActionClient
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-        from .interface import relays
-
         self.node, self.channel = node, channel
         self.clients: dict[str, tuple[Any, Any]] = {}
         for relay in relays("service"):
@@ -106,7 +110,6 @@ class InternalSide:
         self.action = ActionClient(node, self.action_type, action.internal)
         self.goals: dict[int, Any] = {}
         self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self._array = DiagnosticArray
 
     def _forward(self, topside: str) -> Any:
         return lambda data: self.channel.send({"k": "topic", "name": topside}, data)
@@ -125,8 +128,6 @@ class InternalSide:
         self.node.get_logger().warn(f"gateway link: unknown frame {head.get('k')!r} ignored")
 
     def _on_call(self, head: dict, payload: bytes) -> None:
-        from rclpy.serialization import deserialize_message, serialize_message
-
         reply = {"k": "answer", "id": head["id"]}
         if head.get("name") not in self.clients:
             self.channel.send(dict(reply, ok=False, why="not in the gateway's interface"))
@@ -143,16 +144,11 @@ class InternalSide:
             self.publishers[head["name"]].publish(payload)
 
     def _on_status(self, _head: dict, payload: bytes) -> None:
-        from diagnostic_msgs.msg import DiagnosticStatus
-        from rclpy.serialization import deserialize_message
-
-        msg = self._array(status=[deserialize_message(payload, DiagnosticStatus)])
+        msg = DiagnosticArray(status=[deserialize_message(payload, DiagnosticStatus)])
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.diagnostics.publish(msg)
 
     def _on_goal(self, head: dict, payload: bytes) -> None:
-        from rclpy.serialization import deserialize_message, serialize_message
-
         goal_id = head["id"]
         if not self.action.server_is_ready():
             self.channel.send({"k": "accepted", "id": goal_id, "ok": False,
@@ -184,13 +180,6 @@ class InternalSide:
 def main(args: Sequence[str] | None = None) -> int:
     """Process entry point (module docstring): ``--link-fd N`` then the ROS arguments. Exit status 0 when the
     channel or a signal ends it, 1 on a bad setting (one line)."""
-    import rclpy
-    from rclpy.node import Node
-
-    from ..ros_process import RosProcess
-    from .interface import GATEWAY_NODE
-    from .link import Channel
-
     parser = argparse.ArgumentParser(prog="gateway internal side")
     parser.add_argument("--link-fd", type=int, required=True)
     known, ros_args = parser.parse_known_args(args)
@@ -202,8 +191,6 @@ def main(args: Sequence[str] | None = None) -> int:
             settings, cfg = read_settings(boot)
         finally:
             boot.destroy_node()
-        from .bounds import RequestBounds
-
         node = proc.own(Node(GATEWAY_NODE, namespace="/" + settings.vehicle_name))
         proc.executor.add_node(node)
         side = InternalSide(node, channel)
