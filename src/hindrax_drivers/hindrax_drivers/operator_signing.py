@@ -21,11 +21,12 @@ import json
 import os
 import secrets
 import stat
+import threading
 import time
 from dataclasses import dataclass, field
 from hashlib import sha256
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 __all__ = ["KEYS_DIR_ENV", "KEY_BYTES", "NEW_LINK_WINDOW", "OperatorKeyError", "Signature", "Signer", "Verifier",
            "create_key", "key_path", "keys_dir", "load_key", "mac", "signed_payload", "timestamp_now"]
@@ -39,7 +40,7 @@ EPOCH_S = 1420070400
 #: the timestamp's largest value (48 bits)
 TIMESTAMP_MAX = (1 << 48) - 1
 #: a link not seen before is accepted when its first timestamp is no older than this below the newest timestamp
-#: accepted on any link (MAVLink: one minute), in timestamp units (10 us)
+#: accepted on any link and the vehicle's clock (MAVLink: one minute), in timestamp units (10 us)
 NEW_LINK_WINDOW = 60 * 100_000
 #: what is signed starts with this (domain separation from any other use of the key)
 _CONTEXT = b"hindrax-operator-v1\0"
@@ -168,18 +169,25 @@ class Signer:
 class Verifier:
     """Checks operator requests for one vehicle (the gateway): ``key`` None = no key on the vehicle, every request
     refused. :meth:`check` returns None (accepted) or the one-line reason; ``counts`` has ``accepted``,
-    ``unsigned``, ``bad_signature``, ``replayed`` and ``no_key``."""
+    ``unsigned``, ``bad_signature``, ``replayed`` and ``no_key``. ``now``: the vehicle's clock as a timestamp
+    (chrony keeps the Pi on the topside's clock); safe to call from several threads."""
 
     key: bytes | None
     vehicle: str
+    now: Callable[[], int] = timestamp_now
     last: dict[int, int] = field(default_factory=dict)
     counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(
         ("accepted", "unsigned", "bad_signature", "replayed", "no_key"), 0))
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def check(self, relay: str, signature: Signature, payload: bytes) -> str | None:
         """None when ``signature`` is a valid signature of ``payload`` for ``relay`` with a timestamp above the
         last accepted on its link (a new link: within :data:`NEW_LINK_WINDOW` of the newest on any link); else the
         reason, counted. Only an accepted request moves its link's timestamp."""
+        with self._lock:
+            return self._check(relay, signature, payload)
+
+    def _check(self, relay: str, signature: Signature, payload: bytes) -> str | None:
         if self.key is None:
             return self._refuse("no_key", f"{relay}: refused: no operator key on the vehicle ({key_path(self.vehicle)};"
                                           " create it with `hindrax keys`)")
@@ -190,10 +198,11 @@ class Verifier:
         if not hmac.compare_digest(expected, bytes(signature.mac)):
             return self._refuse("bad_signature", f"{relay}: refused: bad signature (not this vehicle's key)")
         last = self.last.get(signature.link_id)
-        floor = last if last is not None else max(self.last.values(), default=0) - NEW_LINK_WINDOW
+        floor = last if last is not None else max(max(self.last.values(), default=0), self.now()) - NEW_LINK_WINDOW
         if signature.timestamp <= floor:
             return self._refuse("replayed", f"{relay}: refused: replayed or stale (link {signature.link_id} "
-                                            f"timestamp {signature.timestamp} not above {max(floor, 0)})")
+                                            f"timestamp {signature.timestamp} not above {max(floor, 0)}; a new link "
+                                            "must be within 60 s of the vehicle's clock)")
         self.last[signature.link_id] = signature.timestamp
         self.counts["accepted"] += 1
         return None

@@ -47,7 +47,7 @@ def test_unsigned_wrong_key_and_retargeted_requests_are_refused_and_counted():
 
 
 def test_timestamps_must_rise_per_link_and_a_new_link_may_not_start_far_in_the_past():
-    verifier = Verifier(KEY, "alpha")
+    verifier = Verifier(KEY, "alpha", now=lambda: 0)
     sign = lambda link, ts: Signature(link, ts, mac(KEY, "alpha", "arm", link, ts, b""))  # noqa: E731
     assert verifier.check("arm", sign(1, 10 * NEW_LINK_WINDOW), b"") is None
     assert verifier.check("arm", sign(1, 10 * NEW_LINK_WINDOW - 1), b"") is not None  # older on the same link
@@ -105,3 +105,12 @@ def test_a_key_others_can_read_or_a_malformed_one_is_refused_in_one_line(tmp_pat
         load_key(path)
     with pytest.raises(OperatorKeyError, match="hindrax keys"):
         load_key(tmp_path / "missing.key")
+
+
+def test_a_recorded_request_replayed_after_a_gateway_restart_is_stale_by_the_vehicle_clock():
+    """A restarted gateway has no links yet: a new link's first timestamp must be within 60 s of the vehicle's
+    clock, so an arm captured earlier cannot be replayed then."""
+    sig = Signer(KEY, "alpha").sign("arm", b"")
+    assert Verifier(KEY, "alpha").check("arm", sig, b"") is None  # fresh: accepted by a new gateway
+    later = Verifier(KEY, "alpha", now=lambda: sig.timestamp + NEW_LINK_WINDOW + 1)  # restarted 60 s later
+    assert later.check("arm", sig, b"").startswith("arm: refused: replayed or stale")
