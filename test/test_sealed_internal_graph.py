@@ -57,8 +57,8 @@ procs = {
                                  "topside_discovery_range:=SUBNET"],
                                 env=vehicle_env,
                                 stdout=open(out / "gateway.log", "w"), stderr=subprocess.STDOUT),
-    "control": subprocess.Popen([sys.executable, "-c", "import rclpy, time; rclpy.init(); "
-                                 "n = rclpy.create_node('control'); time.sleep(600)"],
+    "control": subprocess.Popen([sys.executable, "-c", "import rclpy; rclpy.init(); "
+                                 "rclpy.spin(rclpy.create_node('control'))"],
                                 env=env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", FASTRTPS_DEFAULT_PROFILES_FILE="")),
 }
 
