@@ -16,6 +16,11 @@
 #   HINDRAX_RECORD           1 (default): record every topic; 0: no recording
 #   HINDRAX_RUNS_DIR         root folder of the bags, a new timestamped bag per start (default /var/lib/hindrax/runs)
 #   HINDRAX_CONFIG           a vehicle file to use instead of the installed one (a mounted file); must exist
+#   HINDRAX_SROS2            1 (default): DDS Security (SROS2) on, Enforce, the keystore must exist; 0: off (a bench)
+#   HINDRAX_KEYSTORE         the SROS2 keystore (default /etc/hindrax/keystore: `hindrax sros2 keystore DIR`); the
+#                            launch gives each process its enclave, commands run here get /vehicle/tools
+#   HINDRAX_KEYS_DIR         the operator key's folder (default /etc/hindrax/keys: `hindrax keys`); without the key
+#                            the gateway refuses every operator request (the e-stop still works)
 #   ROS_SETUP, WS_SETUP      setup scripts to source (defaults: /opt/ros/jazzy/setup.bash, /ws/install/setup.bash)
 # With no arguments: ros2 launch $HINDRAX_LAUNCH [config:=$HINDRAX_CONFIG] record:=true|false output_dir:=$HINDRAX_RUNS_DIR
 # `hindrax health` without --launch checks that same launch, with those arguments (the container's HEALTHCHECK).
@@ -48,6 +53,14 @@ if [ -n "${HINDRAX_CONFIG:-}" ]; then
 else
   unset HINDRAX_CONFIG  # commands and the launch file use the installed vehicle file
 fi
+export HINDRAX_KEYS_DIR=${HINDRAX_KEYS_DIR:-/etc/hindrax/keys}
+case "${HINDRAX_SROS2:-1}" in
+  1) keystore=${HINDRAX_KEYSTORE:-/etc/hindrax/keystore}
+     [ -d "$keystore/enclaves" ] || die "HINDRAX_KEYSTORE=$keystore: no SROS2 keystore (create it with \`hindrax sros2 keystore $keystore\`; HINDRAX_SROS2=0 runs without DDS Security)"
+     export ROS_SECURITY_KEYSTORE="$keystore" ROS_SECURITY_ENABLE=true ROS_SECURITY_STRATEGY=Enforce ;;
+  0) unset ROS_SECURITY_KEYSTORE ROS_SECURITY_ENABLE ROS_SECURITY_STRATEGY ;;
+  *) die "HINDRAX_SROS2=$HINDRAX_SROS2: allowed 1 or 0" ;;
+esac
 case "${HINDRAX_RECORD:-1}" in
   1) record=true ;;
   0) record=false ;;
@@ -79,6 +92,8 @@ if [ "$#" -eq 0 ]; then
   echo "entrypoint: ros2 launch $launch_pkg $launch_file ${launch_args[*]} (internal domain $internal_domain on loopback; gateway: topside domain $topside_domain, discovery $range)" >&2
   exec ros2 launch "$launch_pkg" "$launch_file" "${launch_args[@]}"
 fi
+# a command run here joins the internal graph with the tools' enclave (the launch gives each process its own)
+[ "${ROS_SECURITY_ENABLE:-}" = true ] && export ROS_SECURITY_ENCLAVE_OVERRIDE=/vehicle/tools
 if [ "$(basename "$1")" = "hindrax" ] && [ "${2:-}" = "health" ] && [[ " $* " != *" --launch "* ]]; then
   set -- "$@" --launch "$launch_pkg/$launch_file" "${launch_args[@]}"
 fi

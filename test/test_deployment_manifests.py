@@ -134,8 +134,9 @@ def _fakes(tmp_path):
     ros2.write_text("#!/usr/bin/env bash\necho \"ROS2=$*\"\n")
     ros2.chmod(0o755)
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_AUTOMATIC", "ROS_DOMAIN", "HINDRAX"))}
+    (tmp_path / "keystore" / "enclaves").mkdir(parents=True)  # SROS2 is on as shipped: the entry point needs one
     env.update(ROS_SETUP=str(ros), WS_SETUP=str(ws), PATH=f"{tmp_path}:{os.environ['PATH']}",
-               HINDRAX_RUNS_DIR=str(tmp_path / "runs"))
+               HINDRAX_RUNS_DIR=str(tmp_path / "runs"), HINDRAX_KEYSTORE=str(tmp_path / "keystore"))
     return cmd, env
 
 

@@ -30,12 +30,17 @@ def run_entrypoint(tmp_path, args, **env):
     for name in ("hindrax", "ros2"):
         fake = bindir / name
         fake.write_text(f"#!/usr/bin/env bash\necho \"RUN={name} $*\"\necho \"RANGE=$ROS_AUTOMATIC_DISCOVERY_RANGE\"\n"
+                        "echo \"SECURITY=${ROS_SECURITY_ENABLE-unset} ${ROS_SECURITY_STRATEGY-} "
+                        "${ROS_SECURITY_KEYSTORE-} "
+                        "${ROS_SECURITY_ENCLAVE_OVERRIDE-}\"\n"
                         "echo \"DOMAIN=$ROS_DOMAIN_ID\"\necho \"SOURCED=$FAKE_ROS_SOURCED$FAKE_WS_SOURCED\"\n"
                         "echo \"CONFIG=${HINDRAX_CONFIG-unset}\"\n")
         fake.chmod(0o755)
     e = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "HINDRAX_"))}
+    (tmp_path / "keystore" / "enclaves").mkdir(parents=True, exist_ok=True)
     e.update(ROS_SETUP=str(ros), WS_SETUP=str(ws), PATH=f"{bindir}:{os.environ['PATH']}",
-             HINDRAX_RUNS_DIR=str(tmp_path / "runs"), **env)
+             HINDRAX_RUNS_DIR=str(tmp_path / "runs"), HINDRAX_KEYSTORE=str(tmp_path / "keystore"))
+    e.update(env)
     return subprocess.run([str(DOCKER / "entrypoint.sh"), *args], capture_output=True, text=True, env=e, timeout=30)
 
 
@@ -58,6 +63,19 @@ def test_entrypoint_runs_the_launch_layout_on_the_tether(tmp_path):
     assert "RANGE=LOCALHOST" in r.stdout and "DOMAIN=0" in r.stdout and "SOURCED=11" in r.stdout
     assert "CONFIG=unset" in r.stdout  # the installed vehicle file, unless one is named
     assert runs.is_dir()  # created for the recorder
+    # SROS2 on as shipped: the keystore's enclaves, enforced (the launch passes each process its --enclave)
+    assert f"SECURITY=true Enforce {tmp_path / 'keystore'} " in r.stdout, r.stdout
+
+
+def test_entrypoint_ships_sros2_on_and_refuses_a_vehicle_without_its_keystore(tmp_path):
+    r = run_entrypoint(tmp_path, [], ROS_DOMAIN_ID="42", HINDRAX_KEYSTORE=str(tmp_path / "none"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert f"HINDRAX_KEYSTORE={tmp_path / 'none'}: no SROS2 keystore (create it with `hindrax sros2 keystore" \
+        in r.stderr
+    r = run_entrypoint(tmp_path, [], ROS_DOMAIN_ID="42", HINDRAX_KEYSTORE=str(tmp_path / "none"), HINDRAX_SROS2="0")
+    assert r.returncode == 0 and "SECURITY=unset" in r.stdout, r.stderr  # a bench without DDS Security
+    r = run_entrypoint(tmp_path, ["hindrax", "health", "--quiet"], ROS_DOMAIN_ID="42")
+    assert r.returncode == 0 and "/vehicle/tools" in r.stdout, r.stdout + r.stderr  # a command gets the tools' enclave
 
 
 def test_the_launch_arguments_the_entrypoint_passes_are_declared_by_both_launch_files(tmp_path):

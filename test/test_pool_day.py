@@ -49,14 +49,16 @@ WAIT_S = 60.0  # deadline of every condition (a loaded two-core machine starts t
 class Day:
     """The runner of one launch, the emulated devices and a probe node counting what arrives (arrival times)."""
 
-    def __init__(self, install, devices: EmulatedDevices, launch_file: str, arguments: dict, only=None) -> None:
+    def __init__(self, install, devices: EmulatedDevices, launch_file: str, arguments: dict, only=None,
+                 env: dict | None = None) -> None:
         procs = read_launch(install.share(launch_file.split("/")[0]) / "launch" / launch_file.split("/")[1],
                             arguments, find_share=install.share)
         self.processes = [p for p in procs if only is None or set(p.node_names) & set(only)]
         # node -> the label of the process that runs it (a composed process runs several: hindrax_drivers.composition)
         self.process_of = {n: p.label for p in self.processes for n in p.node_names}
         self.runner = ProcessRunner(
-            self.processes, command=lambda p: [str(install.executable(p.package, p.executable))], env=install.env,
+            self.processes, command=lambda p: [str(install.executable(p.package, p.executable))],
+            env=env or install.env,
             extra_env={p.label: {k: v for n in p.node_names for k, v in devices.env(n).items()}
                        for p in self.processes},
             extra_ros_args={p.label: [a for n in p.node_names for a in devices.ros_arguments(n)]
@@ -297,7 +299,9 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
     cfg = load_config(vehicle_file)
     name = cfg.vehicle.name
     runs = tmp_path / "runs"
-    vehicle_env = {**install.env, "HINDRAX_CONFIG": str(vehicle_file)}
+    # the operator key: `hindrax keys` writes it on the vehicle; the topside's copy is the same file on this machine
+    keys = {"HINDRAX_KEYS_DIR": str(tmp_path / "keys")}
+    vehicle_env = {**install.env, "HINDRAX_CONFIG": str(vehicle_file), **keys}
     fill: dict[str, str] = {"/var/lib/hindrax/runs": str(runs), "<name>": name, "SUBNET": "LOCALHOST"}
 
     def filled(line: str) -> str:
@@ -314,7 +318,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
             ros_context(domain_id=topside_domain) as top_ctx:
         fill["<domain>"] = str(topside_domain)
         topside_env = {**install.env, "ROS_DOMAIN_ID": str(topside_domain),
-                       "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "HINDRAX_VEHICLE": name}
+                       "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "HINDRAX_VEHICLE": name, **keys}
         top = rclpy.create_node("pool_day_topside", context=top_ctx)
         top_ex = SingleThreadedExecutor(context=top_ctx)
         top_ex.add_node(top)
@@ -330,7 +334,8 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
             words = line.split()
             assert words[:4] == ["ros2", "launch", "hindrax_ident", "pool_test.launch.xml"], line
             args = dict(w.split(":=", 1) for w in words[4:])
-            d = Day(install, pool, "hindrax_ident/pool_test.launch.xml", {"config": str(vehicle_file), **args})
+            d = Day(install, pool, "hindrax_ident/pool_test.launch.xml", {"config": str(vehicle_file), **args},
+                    env={**install.env, **keys})
             d.__enter__()
             d.node.create_subscription(ThrusterPwm, "thrusters/pulse_width",
                                        lambda m: armed.append((time.monotonic(), bool(m.armed))), 50)

@@ -6,7 +6,8 @@ its permissions grant (default deny). This module writes the policy that matches
 
 - **internal domain** (the vehicle's loopback graph): one enclave per process of the launch layout, named by the
   ``--enclave`` its ``<node>`` passes (``/vehicle/<process>``, :func:`launch_enclaves`), plus ``/vehicle/gateway``
-  (the gateway's internal context). Each may use every topic, service and action of the internal graph
+  (the gateway's internal side) and ``/vehicle/tools`` (the ``hindrax`` commands run on the vehicle). Each may
+  use every topic, service and action of the internal graph
   (:data:`INTERNAL_TOPICS`, :data:`INTERNAL_SERVICES`, :data:`INTERNAL_ACTIONS`): the vehicle trusts its own
   processes; what it keeps from the topside is the domain itself.
 - **topside domain**, under ``/<vehicle.name>/``: ``/<name>/gateway`` serves the gateway's interface
@@ -14,6 +15,13 @@ its permissions grant (default deny). This module writes the policy that matches
   reset, setpoints, campaign, recorder); ``/<name>/topside`` (every other topside participant) may call ``estop``
   and read the telemetry, nothing else. No topside enclave is granted an internal topic (heartbeats,
   ``thrusters/*``, ``esc/*``): they exist on the internal domain only.
+
+**Governance** (:func:`governance`): sros2's default governance refuses every participant without a certificate,
+which would refuse an e-stop from a laptop without credentials ("stopping never needs credentials"). The vehicle's
+governance (DDS Security 1.1 §9.4.1.2) allows unauthenticated participants on the topside domain and leaves exactly
+the e-stop's two DDS topics (``rq/<name>/estopRequest``, ``rr/<name>/estopReply``) open, without access control or
+protection; every other topic of the topside, and the whole internal domain, needs a certificate and its
+permissions, encrypted. ``hindrax sros2 keystore`` writes it into the keystore and signs it with the permissions CA.
 
 DDS permissions name one domain per grant (sros2 writes ``ROS_DOMAIN_ID`` into every grant), so the internal and the
 topside enclaves are two policies, :func:`internal_policy` and :func:`topside_policy`, turned into permissions with
@@ -28,7 +36,8 @@ from typing import Iterable, Mapping
 
 from .gateway.interface import GATEWAY_NODE, INTERFACE, Relay
 
-__all__ = ["INTERNAL_ACTIONS", "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
+__all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS",
+           "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
            "NODE_TOPICS", "POLICY_VERSION", "enclave_of", "gateway_internal_enclave", "internal_policy",
            "launch_enclaves", "topside_enclaves", "topside_policy"]
 
@@ -37,6 +46,9 @@ POLICY_VERSION = "0.2.0"
 #: prefix of the internal enclaves (one vehicle per keystore: the name is not needed on the loopback graph)
 INTERNAL_ENCLAVE_ROOT = "/vehicle"
 
+#: the enclave of the ``hindrax`` commands run on the vehicle (``hindrax health``, the container's health check):
+#: the entry point gives it through ``ROS_SECURITY_ENCLAVE_OVERRIDE``
+TOOLS_ENCLAVE = f"{INTERNAL_ENCLAVE_ROOT}/tools"
 #: every topic of the vehicle's internal graph (what its nodes publish or subscribe; checked against the nodes by
 #: test_sros2_policy.py)
 INTERNAL_TOPICS = (
@@ -130,7 +142,8 @@ def internal_policy(enclaves: Mapping[str, Iterable[str]]) -> str:
              ("services", {"reply": "ALLOW", "request": "ALLOW"}, list(INTERNAL_SERVICES)),
              ("actions", {"call": "ALLOW", "execute": "ALLOW"}, list(INTERNAL_ACTIONS))]
     doc: dict = {}
-    for enclave, nodes in {**dict(enclaves), gateway_internal_enclave(): ("gateway",)}.items():
+    own = {gateway_internal_enclave(): ("gateway",), TOOLS_ENCLAVE: ("tools",)}
+    for enclave, nodes in {**dict(enclaves), **own}.items():
         doc[enclave] = [("/", n, _node_rules() + graph) for n in nodes]
     return _policy(doc)
 
@@ -168,3 +181,42 @@ def topside_policy(vehicle_name: str, interface: Iterable[Relay] = INTERFACE) ->
     return _policy({roles["gateway"]: [(ns, GATEWAY_NODE, gateway), *siblings],
                     roles["operator"]: [("/", "hindrax_operator", operator)],
                     roles["topside"]: [("/", "hindrax_topside", anyone)]})
+
+
+def _rule(parent: ET.Element, expression: str, open_: bool) -> None:
+    rule = ET.SubElement(parent, "topic_rule")
+    ET.SubElement(rule, "topic_expression").text = expression
+    for key in ("enable_discovery_protection", "enable_liveliness_protection", "enable_read_access_control",
+                "enable_write_access_control"):
+        ET.SubElement(rule, key).text = "false" if open_ else "true"
+    for key in ("metadata_protection_kind", "data_protection_kind"):
+        ET.SubElement(rule, key).text = "NONE" if open_ else "ENCRYPT"
+
+
+def governance(vehicle_name: str, internal_domain: int, topside_domain: int) -> str:
+    """XML text of the vehicle's DDS Security governance (module docstring, "Governance"): the internal domain closed
+    to participants without a certificate; on the topside domain those may use the e-stop of ``vehicle_name`` and
+    nothing else. Raises ValueError when the two domains are the same."""
+    if internal_domain == topside_domain:
+        raise ValueError(f"internal and topside domain are both {internal_domain}: the vehicle needs two")
+    root = ET.Element("dds", {"xmlns:xsi": "http://www.w3.org/2001/XMLSchema-instance",
+                              "xsi:noNamespaceSchemaLocation":
+                              "http://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_governance.xsd"})
+    rules = ET.SubElement(root, "domain_access_rules")
+    for domain, unauthenticated in ((internal_domain, False), (topside_domain, True)):
+        rule = ET.SubElement(rules, "domain_rule")
+        ET.SubElement(ET.SubElement(rule, "domains"), "id").text = str(domain)
+        ET.SubElement(rule, "allow_unauthenticated_participants").text = "true" if unauthenticated else "false"
+        ET.SubElement(rule, "enable_join_access_control").text = "true"
+        # an unauthenticated participant can discover and talk RTPS only where these are NONE
+        for key, closed in (("discovery_protection_kind", "ENCRYPT"), ("liveliness_protection_kind", "ENCRYPT"),
+                            ("rtps_protection_kind", "SIGN")):
+            ET.SubElement(rule, key).text = "NONE" if unauthenticated else closed
+        topics = ET.SubElement(rule, "topic_access_rules")
+        if unauthenticated:
+            (estop,) = [r for r in INTERFACE if r.who == "anyone"]
+            for prefix, suffix in (("rq", "Request"), ("rr", "Reply")):
+                _rule(topics, f"{prefix}/{vehicle_name}/{estop.topside}{suffix}", True)
+        _rule(topics, "*", False)
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

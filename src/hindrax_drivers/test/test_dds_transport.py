@@ -146,15 +146,17 @@ def test_every_vehicle_udp_socket_binds_loopback_and_no_process_uses_shared_memo
             states = runner.states()
             assert all(s.running for s in states.values()), states
             for label, state in states.items():
+                pids = [state.pid]
                 if label == "gateway":
-                    # the one vehicle process meant for the network (docs/architecture.md §8.2): a Fast DDS profile
-                    # applies to every participant of a process, so it keeps the default transports; only the
-                    # gateway's own internal node is reachable through them, and DDS forwards nothing to the rest
-                    continue
-                sockets = _udp_sockets(state.pid)
-                assert sockets, label  # a DDS participant holds UDP sockets: this looked at the right process
-                assert all(_loopback_or_multicast(a) for a, _ in sockets), (label, sockets)
-                assert not _maps_shared_memory(state.pid), label
+                    # its topside process must reach the tether; its internal side is its child, on loopback like
+                    # every other vehicle process (docs/architecture.md §8.2)
+                    pids = [int(c) for c in Path(f"/proc/{state.pid}/task/{state.pid}/children").read_text().split()]
+                    assert len(pids) == 1, (label, pids)
+                for pid in pids:
+                    sockets = _udp_sockets(pid)
+                    assert sockets, label  # a DDS participant holds UDP sockets: this looked at the right process
+                    assert all(_loopback_or_multicast(a) for a, _ in sockets), (label, sockets)
+                    assert not _maps_shared_memory(pid), label
             assert not any(a == "0.0.0.0" for a, _ in _udp_sockets(os.getpid()))  # the tests' own process too
         finally:
             if control is not None:

@@ -33,3 +33,26 @@ def test_choose_exactly_one_or_refuse_in_one_line():
         with pytest.raises(VehicleChoiceError) as exc:
             choose_vehicle(seen, wanted, "domain 7")
         assert words in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_two_gateways_with_one_name_are_named_in_one_line():
+    from hindrax_drivers.gateway.interface import duplicate_problem, participants
+
+    one = bytes(range(12)) + b"\x00\x00\x01\x03"
+    same_participant = bytes(range(12)) + b"\x00\x00\x02\x03"  # another endpoint of the same gateway
+    other = bytes(range(100, 112)) + b"\x00\x00\x01\x03"
+    assert participants([one, same_participant]) == ["00.01.02.03.04.05.06.07.08.09.0a.0b"]
+    assert duplicate_problem("alpha", participants([one, same_participant])) == ""
+    line = duplicate_problem("alpha", participants([one, other]))
+    assert line == ("vehicle 'alpha' is answered by 2 gateways (participants 00.01.02.03.04.05.06.07.08.09.0a.0b, "
+                    "64.65.66.67.68.69.6a.6b.6c.6d.6e.6f): two vehicles share the name; give one another vehicle.name")
+
+
+def test_every_operator_element_carries_a_signature_and_the_estop_none():
+    from hindrax_drivers.gateway.internal import interface_type
+
+    for relay in INTERFACE:
+        cls = interface_type(relay.type)
+        fields = (cls.Request if relay.kind == "service" else cls.Goal if relay.kind == "action" else cls)
+        signed = "signature" in fields.get_fields_and_field_types()
+        assert signed == (relay.who == "operator"), relay

@@ -17,7 +17,7 @@ from lxml import etree
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.gateway.interface import INTERFACE
 from hindrax_drivers.sros2_policy import INTERNAL_ACTIONS, INTERNAL_SERVICES, INTERNAL_TOPICS, NODE_SERVICES, \
-    NODE_TOPICS, gateway_internal_enclave, launch_enclaves, topside_enclaves
+    NODE_TOPICS, TOOLS_ENCLAVE, gateway_internal_enclave, launch_enclaves, topside_enclaves
 from hindrax_ident.commands.sros2 import write_policies
 
 SCHEMAS = Path(__file__).resolve().parents[3] / "third_party" / "sros2"
@@ -106,10 +106,10 @@ def test_every_vehicle_process_has_an_enclave_with_the_internal_graph(policies):
     hindrax = [p for p in processes if p.package.startswith("hindrax")]
     enclaves = launch_enclaves(hindrax)  # raises for a process without --enclave
     tree = policies["internal"]
-    assert {e.get("path") for e in tree.iter("enclave")} == set(enclaves) | {gateway_internal_enclave()}
+    assert {e.get("path") for e in tree.iter("enclave")} == set(enclaves) | {gateway_internal_enclave(), TOOLS_ENCLAVE}
     assert {n for nodes in enclaves.values() for n in nodes} >= {"esc", "supervisor", "output_guard", "recorder",
                                                                   "thrust_allocation", "identification"}
-    for enclave in enclaves:
+    for enclave in [*enclaves, TOOLS_ENCLAVE]:
         g = grants(tree, enclave)
         assert set(INTERNAL_TOPICS) <= g[("topics", "publish", "ALLOW")]
         assert set(INTERNAL_SERVICES) <= g[("services", "request", "ALLOW")]
@@ -141,7 +141,7 @@ def test_the_internal_lists_cover_every_name_the_vehicle_nodes_use(tmp_path):
     assert used_services - parameters <= set(INTERNAL_SERVICES), sorted(used_services - parameters)
     for relay in INTERFACE:
         internal = {"service": INTERNAL_SERVICES, "action": INTERNAL_ACTIONS}.get(relay.kind, INTERNAL_TOPICS)
-        assert relay.internal in internal, relay
+        assert relay.internal in internal or (relay.topside, relay.internal) == ("gateway/status", ""), relay
 
 
 def test_keystore_without_sros2_says_where_it_comes_from(tmp_path):
@@ -150,3 +150,28 @@ def test_keystore_without_sros2_says_where_it_comes_from(tmp_path):
     assert r.returncode == 1
     assert r.stderr.strip().splitlines() == [r.stderr.strip()]
     assert "ros-jazzy-sros2" in r.stderr and "sros2 is not installed" in r.stderr
+
+
+def test_the_governance_opens_the_topside_estop_to_unauthenticated_participants_and_nothing_else():
+    """The DDS Security governance (sros2's default refuses every participant without a certificate, the e-stop
+    included). Checked on its structure: the OMG governance schema is not available here (no sros2, no network)."""
+    from hindrax_drivers.sros2_policy import governance
+
+    root = etree.fromstring(governance("alpha", 3, 42).encode())
+    rules = {int(r.findtext("domains/id")): r for r in root.iterfind("domain_access_rules/domain_rule")}
+    assert sorted(rules) == [3, 42]
+    assert rules[3].findtext("allow_unauthenticated_participants") == "false"
+    assert rules[42].findtext("allow_unauthenticated_participants") == "true"
+    assert {rules[42].findtext(k) for k in ("discovery_protection_kind", "liveliness_protection_kind",
+                                            "rtps_protection_kind")} == {"NONE"}
+
+    def topics(rule):
+        return [(t.findtext("topic_expression"), t.findtext("enable_read_access_control"),
+                 t.findtext("enable_write_access_control"), t.findtext("data_protection_kind"))
+                for t in rule.iterfind("topic_access_rules/topic_rule")]
+    # first match wins: the e-stop's request and reply open, then everything else closed and encrypted
+    assert topics(rules[42]) == [("rq/alpha/estopRequest", "false", "false", "NONE"),
+                                 ("rr/alpha/estopReply", "false", "false", "NONE"), ("*", "true", "true", "ENCRYPT")]
+    assert topics(rules[3]) == [("*", "true", "true", "ENCRYPT")]
+    with pytest.raises(ValueError, match="both 7"):
+        governance("alpha", 7, 7)

@@ -105,6 +105,9 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "write the vehicle's SROS2 permissions policies (internal and topside domain) for its name and launch files"),
     (("sros2", "keystore"), "hindrax_ident.commands.sros2",
      "create the vehicle's SROS2 keystore: enclaves, certificates, signed permissions (needs sros2, on the Pi)"),
+    (("keys",), "hindrax_ident.commands.keys",
+     "create the vehicle's operator key (mode 0600) that signs arm, campaign and setpoints; says where the topside "
+     "copy goes"),
     (("esc", "calibrate"), "hindrax_ident.commands.esc",
      "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
 ]

@@ -31,6 +31,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.gateway.interface import relays
+from hindrax_drivers.operator_signing import Signer, create_key, load_key
 from hindrax_drivers.launch_xml import read_launch
 from hindrax_drivers.process_runner import ProcessRunner
 from hindrax_drivers.testing import child_env, ros_context, wait_until
@@ -98,17 +99,28 @@ class StandIns:
         import rclpy
 
         self.node = rclpy.create_node("vehicle_stand_ins", context=ctx)
+        # the ESC on a node and thread of its own: a test holds its answer (arm_gate) while the e-stop goes through
+        self.esc = rclpy.create_node("esc_stand_in", context=ctx)
+        self.arm_gate, self.arm_entered = threading.Event(), threading.Event()
+        self.arm_gate.set()
+        self.setpoints: list[float] = []
 
-        def service(kind, name, answer):
+        def service(kind, name, answer, node=self.node):
             def callback(request, response):
+                if getattr(request, "arm", False):
+                    self.arm_entered.set()
+                    self.arm_gate.wait(30.0)
                 self.calls.append(answer(request))
                 response.success = True
                 if hasattr(response, "armed"):
                     response.armed = bool(request.arm)
                 return response
-            self.node.create_service(kind, name, callback)
+            node.create_service(kind, name, callback)
 
-        service(SetArmed, "esc/set_armed", lambda r: ("set_armed", bool(r.arm)))
+        service(SetArmed, "esc/set_armed", lambda r: ("set_armed", bool(r.arm)), node=self.esc)
+        from hindrax_msgs.msg import ControlSetpoint
+        self.node.create_subscription(ControlSetpoint, "controller/setpoint",
+                                      lambda m: self.setpoints.append(m.depth_m), 10)
         for name in ("supervisor/estop", "supervisor/reset", "pressure/zero_depth"):
             service(Trigger, name, lambda _r, n=name: n)
         service(StopRecording, "recorder/stop", lambda _r: "recorder/stop")
@@ -130,21 +142,37 @@ class StandIns:
         status = self.node.create_publisher(DiagnosticStatus, "supervisor/status", 10)
         self.node.create_timer(0.2, lambda: status.publish(DiagnosticStatus(level=DiagnosticStatus.OK,
                                                                            name="supervisor", message="ok")))
-        self.executor = SingleThreadedExecutor(context=ctx)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+        self.executors = [SingleThreadedExecutor(context=ctx), SingleThreadedExecutor(context=ctx)]
+        self.executors[0].add_node(self.node)
+        self.executors[1].add_node(self.esc)
+        self.threads = [threading.Thread(target=self._spin, args=(ex,), daemon=True) for ex in self.executors]
+        for thread in self.threads:
+            thread.start()
 
-    def _spin(self) -> None:
+    @staticmethod
+    def _spin(executor) -> None:
         try:
-            self.executor.spin()
+            executor.spin()
         except Exception:  # noqa: BLE001 - the context shut down at the end of the test module
             pass
 
     def close(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
-        self.thread.join(timeout=5.0)
+        self.arm_gate.set()
+        for executor, thread in zip(self.executors, self.threads):
+            executor.shutdown(timeout_sec=2.0)
+            thread.join(timeout=5.0)
         self.node.destroy_node()
+        self.esc.destroy_node()
+
+
+def vehicle_file(tmp: Path, name: str) -> Path:
+    """The vehicle file with ``vehicle.name`` = ``name`` (and a relay timeout long enough for a held arm)."""
+    params = yaml.safe_load(default_config_path().read_text())
+    params["/**"]["ros__parameters"]["vehicle"]["name"] = name
+    params["/**"]["ros__parameters"]["call_timeout_s"] = 10.0
+    config = tmp / f"{name}.yaml"
+    config.write_text(yaml.safe_dump(params))
+    return config
 
 
 def gateway_process(config: Path, topside: int):
@@ -160,22 +188,22 @@ def gateway_process(config: Path, topside: int):
 def pool(tmp_path_factory):
     """Two vehicles (stand-ins + gateway each) on internal domains of their own, one topside domain."""
     tmp = tmp_path_factory.mktemp("pool")
+    keys = tmp / "keys"
+    for name in VEHICLES:
+        create_key(keys / f"{name}.key")
     with domain_id() as topside, domain_id() as internal_a, domain_id() as internal_b:
         vehicles = {}
         runners = []
         try:
             with ros_context(internal_a) as ctx_a, ros_context(internal_b) as ctx_b:
                 for name, internal, ctx in (("alpha", internal_a, ctx_a), ("bravo", internal_b, ctx_b)):
-                    params = yaml.safe_load(default_config_path().read_text())
-                    params["/**"]["ros__parameters"]["vehicle"]["name"] = name
-                    config = tmp / f"{name}.yaml"
-                    config.write_text(yaml.safe_dump(params))
                     vehicles[name] = StandIns(ctx)
-                    runner = ProcessRunner([gateway_process(config, topside)],
-                                           env=child_env(ROS_DOMAIN_ID=str(internal)), log_dir=tmp / name)
+                    runner = ProcessRunner([gateway_process(vehicle_file(tmp, name), topside)],
+                                           env=child_env(ROS_DOMAIN_ID=str(internal), HINDRAX_KEYS_DIR=str(keys)),
+                                           log_dir=tmp / name)
                     runner.start()
                     runners.append(runner)
-                yield {"topside": topside, "vehicles": vehicles, "runners": runners}
+                yield {"topside": topside, "vehicles": vehicles, "runners": runners, "keys": keys, "tmp": tmp}
                 for v in vehicles.values():
                     v.close()
         finally:
@@ -185,7 +213,8 @@ def pool(tmp_path_factory):
 
 def hindrax(pool, *args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "hindrax_ident.cli", *args], capture_output=True, text=True,
-                          env=child_env(ROS_DOMAIN_ID=str(pool["topside"])), timeout=120)
+                          env=child_env(ROS_DOMAIN_ID=str(pool["topside"]), HINDRAX_KEYS_DIR=str(pool["keys"])),
+                          timeout=120)
 
 
 def test_a_process_on_the_topside_reaches_only_the_interface(pool):
@@ -257,3 +286,156 @@ def test_the_gateway_starts_without_a_rosout_clash(pool):
         wait_until(lambda r=runner: "internal domain" in r.log("gateway"), 60, message="the gateway started")
         log = runner.log("gateway")
         assert "already registered" not in log, log[-2000:]
+
+
+class Topside:
+    """A participant of this test on the topside domain: calls, publishes and reads with the operator's key or not."""
+
+    def __init__(self, ctx, pool) -> None:
+        import rclpy
+
+        self.node = rclpy.create_node("operator_test", context=ctx)
+        self.executor = SingleThreadedExecutor(context=ctx)
+        self.executor.add_node(self.node)
+        self.key = load_key(pool["keys"] / "alpha.key")
+
+    def call(self, srv, name: str, request):
+        client = self.node.create_client(srv, name)
+        wait_until(client.service_is_ready, WAIT_S, lambda: self.executor.spin_once(timeout_sec=0.1), f"{name} seen")
+        future = client.call_async(request)
+        wait_until(future.done, WAIT_S, lambda: self.executor.spin_once(timeout_sec=0.1), f"{name} answered")
+        return future.result()
+
+    def status(self, vehicle: str, done):
+        """The gateway's status messages until ``done(last)`` holds."""
+        from diagnostic_msgs.msg import DiagnosticStatus
+
+        got: list = []
+        sub = self.node.create_subscription(DiagnosticStatus, f"/{vehicle}/gateway/status", got.append, 10)
+        wait_until(lambda: got and done(got[-1]), WAIT_S, lambda: self.executor.spin_once(timeout_sec=0.1),
+                   f"{vehicle}'s gateway status")
+        self.node.destroy_subscription(sub)
+        return got[-1]
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def topside(pool):
+    from hindrax_drivers.testing import ros_context
+
+    with ros_context(pool["topside"]) as ctx:
+        side = Topside(ctx, pool)
+        yield side
+        side.close()
+
+
+def counts(status) -> dict:
+    return {kv.key: kv.value for kv in status.values}
+
+
+def test_unsigned_wrong_key_and_replayed_operator_requests_are_refused_and_counted(pool, topside):
+    from hindrax_msgs.srv import SignedTrigger
+
+    alpha = pool["vehicles"]["alpha"]
+    before = len(alpha.calls)
+    unsigned = topside.call(SignedTrigger, "/alpha/arm", SignedTrigger.Request())
+    assert not unsigned.success and unsigned.message.startswith("arm: refused: unsigned"), unsigned.message
+    wrong = Signer(bytes(32), "alpha").sign_message("arm", SignedTrigger.Request())
+    answer = topside.call(SignedTrigger, "/alpha/arm", wrong)
+    assert not answer.success and answer.message.startswith("arm: refused: bad signature"), answer.message
+    signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())
+    assert topside.call(SignedTrigger, "/alpha/arm", signed).success
+    replay = topside.call(SignedTrigger, "/alpha/arm", signed)
+    assert not replay.success and replay.message.startswith("arm: refused: replayed"), replay.message
+    assert "\n" not in unsigned.message + answer.message + replay.message
+    assert alpha.calls[before:] == [("set_armed", True)]  # the signed one, once
+    status = topside.status("alpha", lambda s: int(counts(s)["requests.replayed"]) >= 1)
+    c = counts(status)
+    assert int(c["requests.unsigned"]) >= 1 and int(c["requests.bad_signature"]) >= 1, c
+    # the e-stop needs no signature
+    from std_srvs.srv import Trigger
+    assert topside.call(Trigger, "/alpha/estop", Trigger.Request()).success
+
+
+def test_a_goal_or_setpoint_beyond_the_vehicle_is_refused_before_it_goes_inside(pool, topside):
+    from hindrax_msgs.msg import ControlSetpoint
+    from rclpy.qos import QoSProfile
+
+    alpha = pool["vehicles"]["alpha"]
+    before = len(alpha.calls)
+    r = hindrax(pool, "ident", "start", "--vehicle", "alpha", "--dofs", "surge", "--levels", str(2**32 - 1),
+                "--server-timeout", "30")
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "1 DOFs x 4294967295 levels x 30 s" in r.stdout and "supervisor.max_run_time_s = 1800 s" in r.stdout
+    assert alpha.calls[before:] == []  # the stand-in identification node never saw it
+    pub = topside.node.create_publisher(ControlSetpoint, "/alpha/controller/setpoint", QoSProfile(depth=10))
+    signer = Signer(topside.key, "alpha")
+    wait_until(lambda: pub.get_subscription_count() > 0, WAIT_S, lambda: topside.executor.spin_once(timeout_sec=0.1),
+               "the gateway's setpoint subscription")
+    depth = lambda d: signer.sign_message("controller/setpoint", ControlSetpoint(vertical_mode=1, depth_m=d))  # noqa
+    pub.publish(depth(1e30))  # first, on the same reliable publisher: it would arrive before the next ones
+    pub.publish(ControlSetpoint(vertical_mode=1, depth_m=0.5))  # unsigned
+    wait_until(lambda: 1.0 in alpha.setpoints, WAIT_S,
+               lambda: (pub.publish(depth(1.0)), topside.executor.spin_once(timeout_sec=0.2)), "a valid setpoint")
+    assert set(alpha.setpoints) == {1.0}, alpha.setpoints
+    status = topside.status("alpha", lambda s: "depth_m = 1e+30" in counts(s)["last_refusal"] or
+                            int(counts(s)["out_of_bounds"]) >= 2)
+    assert int(counts(status)["out_of_bounds"]) >= 2, counts(status)  # the goal and the setpoint
+
+
+def test_an_arm_an_estop_overtook_is_refused_and_the_vehicle_disarmed(pool, topside):
+    from std_srvs.srv import Trigger
+
+    alpha = pool["vehicles"]["alpha"]
+    estop = topside.node.create_client(Trigger, "/alpha/estop")
+    wait_until(estop.service_is_ready, WAIT_S, lambda: topside.executor.spin_once(timeout_sec=0.1), "estop")
+    before = len(alpha.calls)
+    alpha.arm_entered.clear()
+    alpha.arm_gate.clear()  # the ESC takes the arm and holds its answer
+    env = child_env(ROS_DOMAIN_ID=str(pool["topside"]), HINDRAX_KEYS_DIR=str(pool["keys"]))
+    with subprocess.Popen([sys.executable, "-m", "hindrax_ident.cli", "arm", "--vehicle", "alpha", "--timeout", "30"],
+                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env) as arm:
+        try:
+            wait_until(alpha.arm_entered.is_set, 120, message="the arm reached the ESC")
+            future = estop.call_async(Trigger.Request())
+            wait_until(future.done, WAIT_S, lambda: topside.executor.spin_once(timeout_sec=0.05), "e-stop answer")
+            assert future.result().success
+        finally:
+            alpha.arm_gate.set()  # now the ESC answers "armed", after the e-stop
+        out, err = arm.communicate(timeout=60)
+    assert arm.returncode == 1, out + err
+    assert "alpha: arm refused: arm: refused: an e-stop arrived before the arm completed; disarmed again" in err, err
+    wait_until(lambda: ("set_armed", False) in alpha.calls[before:], 10.0, message="the gateway disarmed again")
+    # (the stand-in records the arm when it answers, after the e-stop it let through meanwhile)
+    assert alpha.calls[before:] == ["supervisor/estop", ("set_armed", True), ("set_armed", False)], alpha.calls[before:]
+
+
+def test_a_second_gateway_with_the_same_name_is_reported_and_arming_refused(pool, topside):
+    """Runs last: the impostor stays on the topside graph's caches for a while after it stops."""
+    from hindrax_msgs.srv import SignedTrigger
+
+    alpha = pool["vehicles"]["alpha"]
+    with domain_id() as impostor_domain:
+        runner = ProcessRunner([gateway_process(vehicle_file(pool["tmp"], "alpha"), pool["topside"])],
+                               env=child_env(ROS_DOMAIN_ID=str(impostor_domain), HINDRAX_KEYS_DIR=str(pool["keys"])),
+                               log_dir=pool["tmp"] / "impostor")
+        runner.start()
+        try:
+            wait_until(lambda: "internal domain" in runner.log("gateway"), 60, message="the impostor started")
+            status = topside.status("alpha", lambda s: s.level == b"\x02")
+            assert "is answered by 2 gateways" in status.message, status.message
+            before = len(alpha.calls)
+            r = hindrax(pool, "arm", "--vehicle", "alpha")
+            assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+            line = r.stderr.strip()
+            assert "vehicle 'alpha' is answered by 2 gateways (participants " in line, line
+            assert len(line.split("(participants ")[1].split(")")[0].split(", ")) == 2, line  # names both
+            signed = Signer(topside.key, "alpha").sign_message("arm", SignedTrigger.Request())
+            answer = topside.call(SignedTrigger, "/alpha/arm", signed)
+            assert not answer.success and "is answered by 2 gateways" in answer.message, answer.message
+            assert ("set_armed", True) not in alpha.calls[before:]
+        finally:
+            runner.stop()

@@ -14,7 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable
 
-__all__ = ["GATEWAY_NODE", "INTERFACE", "Relay", "VehicleChoiceError", "choose_vehicle", "relays", "vehicles_seen"]
+__all__ = ["GATEWAY_NODE", "INTERFACE", "STATUS_TOPIC", "Relay", "VehicleChoiceError", "choose_vehicle",
+           "duplicate_problem", "participants", "relays", "vehicles_seen"]
 
 #: the node name the gateway has on both graphs, in the namespace ``/<vehicle.name>``; tools find vehicles by it
 GATEWAY_NODE = "gateway"
@@ -24,10 +25,12 @@ GATEWAY_NODE = "gateway"
 class Relay:
     """One element of the topside interface.
 
-    topside: name relative to ``/<vehicle.name>/``; internal: absolute name on the vehicle's internal graph;
-    kind: ``service``, ``action``, ``topic_in`` (topside -> vehicle) or ``topic_out`` (vehicle -> topside);
-    type: the ROS interface type on the topside (``pkg/srv/Name``, ``pkg/action/Name``, ``pkg/msg/Name``);
-    who: ``anyone``, ``operator`` or ``read`` (module docstring).
+    topside: name relative to ``/<vehicle.name>/``; internal: absolute name on the vehicle's internal graph (""
+    for the gateway's own status); kind: ``service``, ``action``, ``topic_in`` (topside -> vehicle) or
+    ``topic_out`` (vehicle -> topside); type: the ROS interface type on the topside (``pkg/srv/Name``,
+    ``pkg/action/Name``, ``pkg/msg/Name``); who: ``anyone``, ``operator`` or ``read`` (module docstring);
+    internal_type: the type on the internal graph when it differs (an operator's signed request, e.g.
+    ``hindrax_msgs/srv/SignedTrigger`` on the topside, ``std_srvs/srv/Trigger`` inside).
     """
 
     topside: str
@@ -35,28 +38,44 @@ class Relay:
     kind: str
     type: str
     who: str
+    internal_type: str = ""
+
+    @property
+    def inner_type(self) -> str:
+        """The type on the internal graph."""
+        return self.internal_type or self.type
 
 
 _TRIGGER = "std_srvs/srv/Trigger"
+#: an operator's Trigger: signed on the topside (hindrax_drivers.operator_signing), plain inside
+_SIGNED = "hindrax_msgs/srv/SignedTrigger"
 
-#: the topside interface, in full (module docstring). ``arm``/``disarm`` call ``esc/set_armed`` (hindrax_msgs/SetArmed)
+#: the topside interface, in full (module docstring). ``arm``/``disarm`` call ``esc/set_armed`` (hindrax_msgs/SetArmed).
+#: Every ``operator`` element carries a signature (hindrax_msgs/Signature) the gateway checks; the e-stop has none.
 INTERFACE: tuple[Relay, ...] = (
     Relay("estop", "/supervisor/estop", "service", _TRIGGER, "anyone"),
-    Relay("arm", "/esc/set_armed", "service", _TRIGGER, "operator"),
-    Relay("disarm", "/esc/set_armed", "service", _TRIGGER, "operator"),
-    Relay("reset", "/supervisor/reset", "service", _TRIGGER, "operator"),
+    Relay("arm", "/esc/set_armed", "service", _SIGNED, "operator", "hindrax_msgs/srv/SetArmed"),
+    Relay("disarm", "/esc/set_armed", "service", _SIGNED, "operator", "hindrax_msgs/srv/SetArmed"),
+    Relay("reset", "/supervisor/reset", "service", _SIGNED, "operator", _TRIGGER),
     Relay("recorder/start", "/recorder/start", "service", "hindrax_msgs/srv/StartRecording", "operator"),
     Relay("recorder/stop", "/recorder/stop", "service", "hindrax_msgs/srv/StopRecording", "operator"),
-    Relay("identification/continue", "/identification/continue", "service", _TRIGGER, "operator"),
-    Relay("controller/hold", "/controller/hold", "service", _TRIGGER, "operator"),
-    Relay("controller/enable", "/controller/enable", "service", "std_srvs/srv/SetBool", "operator"),
+    Relay("identification/continue", "/identification/continue", "service", _SIGNED, "operator", _TRIGGER),
+    Relay("controller/hold", "/controller/hold", "service", _SIGNED, "operator", _TRIGGER),
+    Relay("controller/enable", "/controller/enable", "service", "hindrax_msgs/srv/SignedSetBool", "operator",
+          "std_srvs/srv/SetBool"),
     Relay("run_identification", "/run_identification", "action", "hindrax_msgs/action/RunIdentification", "operator"),
     Relay("controller/setpoint", "/controller/setpoint", "topic_in", "hindrax_msgs/msg/ControlSetpoint", "operator"),
     Relay("supervisor/status", "/supervisor/status", "topic_out", "diagnostic_msgs/msg/DiagnosticStatus", "read"),
     Relay("identification/status", "/identification/status", "topic_out", "hindrax_msgs/msg/ManeuverStatus", "read"),
     Relay("controller/status", "/controller/status", "topic_out", "hindrax_msgs/msg/ControllerStatus", "read"),
     Relay("odom", "/odom", "topic_out", "nav_msgs/msg/Odometry", "read"),
+    Relay("gateway/status", "", "topic_out", "diagnostic_msgs/msg/DiagnosticStatus", "read"),
 )
+
+
+#: the gateway's own status under ``/<vehicle.name>/``: published by gateways only, so its publishers are the gateways
+#: answering to that name (:func:`participants`)
+STATUS_TOPIC = "gateway/status"
 
 
 def relays(kind: str) -> tuple[Relay, ...]:
@@ -92,3 +111,19 @@ def choose_vehicle(seen: Iterable[str], wanted: str | None, domain: str = "this 
     if len(seen) > 1:
         raise VehicleChoiceError(f"several vehicles on {domain} ({', '.join(seen)}): name one with --vehicle")
     return seen[0]
+
+
+def participants(gids: Iterable[bytes]) -> list[str]:
+    """The DDS participants (GUID prefix, 12 bytes, as dotted hex) of endpoints given by their gids (rclpy
+    ``TopicEndpointInfo.endpoint_gid``), sorted, without duplicates."""
+    return sorted({".".join(f"{b:02x}" for b in bytes(g)[:12]) for g in gids})
+
+
+def duplicate_problem(vehicle: str, gateways: Iterable[str]) -> str:
+    """One line when more than one gateway (participants, :func:`participants` of the publishers of
+    ``/<vehicle>/`` :data:`STATUS_TOPIC`) answers to ``vehicle``, naming them; "" for one or none."""
+    found = sorted(set(gateways))
+    if len(found) < 2:
+        return ""
+    return (f"vehicle {vehicle!r} is answered by {len(found)} gateways (participants {', '.join(found)}): two vehicles "
+            "share the name; give one another vehicle.name")

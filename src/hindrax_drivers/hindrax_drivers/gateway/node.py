@@ -1,275 +1,322 @@
-"""The gateway process: the vehicle's only participant on the topside domain (docs/architecture.md §8.2).
+"""The gateway: the vehicle's only door to the topside domain, as two processes (docs/architecture.md §8.2).
 
-One process, two rclpy Contexts:
+* This process (``gateway_node``) is the topside side: the only participant on ``topside_domain_id`` with
+  ``topside_discovery_range`` (SUBNET on the vehicle, LOCALHOST in tests) and Fast DDS's default transports (it must
+  reach the tether). It has no participant on the vehicle's internal domain.
+* Its child, :mod:`hindrax_drivers.gateway.internal`, is the internal side: the vehicle's loopback transport (every
+  UDP socket on 127.0.0.1, :mod:`hindrax_drivers.dds_transport`), like every other vehicle process.
 
-* the *internal* context: the vehicle's own domain (``ROS_DOMAIN_ID``), discovery on loopback only
-  (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, forced here whatever the environment says). Its node
-  ``/<vehicle.name>/gateway`` holds the clients, publishers and subscriptions that reach the vehicle's nodes;
-* the *topside* context: ``topside_domain_id`` with ``topside_discovery_range`` (SUBNET on the vehicle, LOCALHOST
-  in tests). rcl reads the discovery range (and ``ROS_STATIC_PEERS``) from the environment at each context's
-  init, so the environment is set for that init and restored after it. Under ``/<vehicle.name>/`` it serves the
-  relays of :data:`hindrax_drivers.gateway.interface.INTERFACE` and nothing else.
+Why two processes: a Fast DDS profile (``FASTRTPS_DEFAULT_PROFILES_FILE``) applies to every participant of a
+process and is read once, and rmw_fastrtps picks no profile per context; under ``LOCALHOST`` it binds its own UDP
+transport to 0.0.0.0. One process could not have a loopback-bound internal participant and a topside one that
+reaches the tether. The two are joined by a Unix socket pair (:mod:`.link`) that carries only the interface's
+elements (:data:`.interface.INTERFACE`), as serialized messages; each ends when the other does.
 
-A Fast DDS profile named by ``FASTRTPS_DEFAULT_PROFILES_FILE`` applies to every participant of a process, and the
-vehicle's profile binds UDP to 127.0.0.1: the gateway drops that variable before the first init, or its topside
-participant could not reach the tether.
+Every request is checked here before it goes inside: an operator element's signature
+(:class:`~hindrax_drivers.operator_signing.Verifier`, the key ``<keys dir>/<vehicle>.key``; none on the vehicle =
+every operator request refused, the e-stop still works), a goal's and a setpoint's bounds
+(:class:`.bounds.RequestBounds`), ``arm`` while another gateway answers to this vehicle's name (refused), and an
+``arm`` that an e-stop overtook: one that arrived before an e-stop (while the operator's requests were busy) but is
+answered after it is refused, and the vehicle disarmed again. A refusal is one line, counted in the gateway's status
+(``/<name>/gateway/status`` on the topside, ``/diagnostics`` inside; ERROR while another gateway has this name).
 
-Threads: the internal context is spun by the main thread; the topside has three nodes, each with its own
-SingleThreadedExecutor and thread, because a relay waits for the internal answer (at most ``call_timeout_s``) and a
-campaign for its whole run: ``/<name>/gateway`` (``estop``, telemetry, setpoints), ``/<name>/gateway_operator``
-(the operator's services) and ``/<name>/gateway_campaign`` (the ``run_identification`` action). A slow arm or a
-running campaign therefore never delays an e-stop. Messages are relayed as serialized bytes (``raw=True``), never
-decoded.
+Threads: three topside nodes, each with its own SingleThreadedExecutor and thread: ``/<name>/gateway`` (``estop``,
+telemetry, setpoints, status), ``/<name>/gateway_operator`` (the operator's services), ``/<name>/gateway_campaign``
+(the ``run_identification`` action): a slow arm or a running campaign never delays an e-stop. One thread reads the
+channel. A relay whose internal server is absent or silent (``call_timeout_s``) answers ``success: false`` with the
+reason; the action relay aborts its goal the same way, and a cancel of the topside goal cancels the internal one.
 
-A relay whose internal server is absent or silent answers ``success: false`` with the reason (one line); the
-action relay aborts its goal the same way, and a cancel of the topside goal cancels the internal one.
-
-Parameters: the vehicle file's ``vehicle.*`` keys (``vehicle.name``: the namespace), ``topside_domain_id`` (int,
-0-101), ``topside_discovery_range`` (``LOCALHOST``, ``SUBNET``, ``SYSTEM_DEFAULT``, ``OFF``), ``call_timeout_s``
-(0.1-30 s, default 2). A bad value stops the start with one line naming key, value and allowed range.
-
-Run alone: ``python -m hindrax_drivers.gateway.node --ros-args --params-file ros_ws/config/hindrax.yaml -p
-topside_domain_id:=7``.
+Parameters: read by the internal side (:mod:`.internal`). Run alone: ``python -m hindrax_drivers.gateway.node
+--ros-args --params-file ros_ws/config/hindrax.yaml -p topside_domain_id:=7``.
 """
 from __future__ import annotations
 
-import importlib
+import itertools
+import math
 import os
+import queue
+import signal
+import socket
+import subprocess
+import sys
 import threading
-from dataclasses import dataclass
+import time
 from typing import Any, Callable, Sequence
 
 import rclpy
 from action_msgs.msg import GoalStatus
-from rclpy.action import ActionClient, ActionServer, CancelResponse
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.action import ActionServer, CancelResponse
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message, serialize_message
 
-from ..config import ConfigError, ConfigIssue
-from ..node_common import load_node_config
+from ..dds_transport import PROFILE_ENV, RANGE_ENV, loopback_transport
+from ..operator_signing import OperatorKeyError, Verifier, key_path, load_key
 from ..ros_process import RosProcess
 from ..sros2_policy import topside_enclaves
-from .interface import GATEWAY_NODE, relays
+from .bounds import RequestBounds
+from .interface import GATEWAY_NODE, STATUS_TOPIC, duplicate_problem, participants, relays
+from .internal import GatewaySettings, interface_type
+from .link import Channel, Pending
 
-__all__ = ["DISCOVERY_RANGES", "GatewaySettings", "Gateway", "main", "read_settings"]
+__all__ = ["Gateway", "main"]
 
-#: allowed values of ``topside_discovery_range`` (Jazzy's ``ROS_AUTOMATIC_DISCOVERY_RANGE``)
-DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "SYSTEM_DEFAULT", "OFF")
-#: default longest wait for an internal service's answer, s
-DEFAULT_CALL_TIMEOUT_S = 2.0
-#: the relay of these topics takes best-effort publishers too (odometry is often published best effort)
-BEST_EFFORT_TOPICS = frozenset({"odom"})
 #: how often a relayed campaign checks for a cancel of the topside goal, s
 CANCEL_POLL_S = 0.1
-
-
-@dataclass(frozen=True)
-class GatewaySettings:
-    """The gateway's settings: ``vehicle_name`` (namespace), ``topside_domain_id``, ``topside_discovery_range``,
-    ``call_timeout_s`` (s)."""
-
-    vehicle_name: str
-    topside_domain_id: int
-    topside_discovery_range: str
-    call_timeout_s: float
-
-
-def read_settings(node: Any) -> GatewaySettings:
-    """Declare and read the gateway's parameters on ``node`` (module docstring). Raises
-    :class:`~hindrax_drivers.config.ConfigError` naming key, value and allowed range."""
-    cfg = load_node_config(node, ("vehicle",))
-    domain = node.declare_parameter("topside_domain_id", 0).value
-    scope = node.declare_parameter("topside_discovery_range", "LOCALHOST").value
-    timeout = node.declare_parameter("call_timeout_s", DEFAULT_CALL_TIMEOUT_S).value
-    if isinstance(domain, bool) or not isinstance(domain, int) or not 0 <= domain <= 101:
-        raise ConfigError([ConfigIssue("topside_domain_id", domain, "integer in [0, 101]")])
-    if scope not in DISCOVERY_RANGES:
-        raise ConfigError([ConfigIssue("topside_discovery_range", scope, "one of " + ", ".join(DISCOVERY_RANGES))])
-    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0.1 <= timeout <= 30.0:
-        raise ConfigError([ConfigIssue("call_timeout_s", timeout, "number in [0.1, 30]")])
-    return GatewaySettings(cfg.vehicle.name, int(domain), str(scope), float(timeout))
-
-
-def interface_type(name: str) -> Any:
-    """The Python class of a ROS interface type ``pkg/kind/Name`` (kind ``msg``, ``srv`` or ``action``)."""
-    package, kind, cls = name.split("/")
-    return getattr(importlib.import_module(f"{package}.{kind}"), cls)
-
-
-def wait_for(future: Any, timeout_s: float) -> bool:
-    """Wait up to ``timeout_s`` (wall clock) for an rclpy Future completed by another thread's executor; True if
-    done."""
-    done = threading.Event()
-    future.add_done_callback(lambda _f: done.set())
-    return done.wait(timeout_s) or future.done()
-
-
-def init_topside_context(domain_id: int, discovery_range: str, static_peers: str | None,
-                         enclave: str | None = None) -> Any:
-    """An initialised rclpy Context on the topside domain. rcl reads ``ROS_AUTOMATIC_DISCOVERY_RANGE`` and
-    ``ROS_STATIC_PEERS`` at init: they are set for this init only, and the environment restored after. ``enclave``:
-    the SROS2 enclave of this context (``/<vehicle.name>/gateway``, :mod:`hindrax_drivers.sros2_policy`; used when
-    ``ROS_SECURITY_ENABLE`` is true, on the Pi)."""
-    saved = {k: os.environ.get(k) for k in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS")}
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = discovery_range
-    if static_peers:
-        os.environ["ROS_STATIC_PEERS"] = static_peers
-    context = rclpy.Context()
-    try:
-        rclpy.init(args=["--ros-args", "--enclave", enclave] if enclave else [], context=context,
-                   domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-    return context
+#: the gateway's status (and its check for another gateway with its name) period, s
+STATUS_PERIOD_S = 1.0
+#: an operator request starting less than this after the previous one ended may have waited behind it: an e-stop
+#: since the start of that busy spell overtook it, s
+QUEUE_GAP_S = 0.5
 
 
 class Gateway:
-    """The relays between ``internal`` (a node of the internal context, spun by the caller) and three topside nodes
-    of ``topside_context`` under ``/<settings.vehicle_name>`` (module docstring). :meth:`start` spins the topside
-    in threads of its own; :meth:`close` stops and destroys them (the context is left to the caller)."""
+    """The topside side (module docstring): three nodes of ``context`` under ``/<settings.vehicle_name>``, relaying
+    through ``channel`` (:class:`.link.Channel`) to the internal side. :meth:`start` spins them and reads the
+    channel in threads of their own; :meth:`close` stops them (the context is left to the caller)."""
 
-    def __init__(self, internal: Any, topside_context: Any, settings: GatewaySettings) -> None:
-        self.settings = settings
-        self.internal = internal
+    def __init__(self, channel: Channel, context: Any, settings: GatewaySettings, bounds: RequestBounds,
+                 verifier: Verifier) -> None:
+        self.settings, self.channel, self.bounds, self.verifier = settings, channel, bounds, verifier
         ns = "/" + settings.vehicle_name
-        # no rosout: these nodes never log, and the front node's logger name (<vehicle>.gateway) is the internal
-        # node's, whose rosout publisher rcl keys by that name in the process (a second one was refused with a
-        # warning at every start, and destroying either node would have unregistered the other's)
-        make = lambda name: Node(name, namespace=ns, context=topside_context,  # noqa: E731
+        make = lambda name: Node(name, namespace=ns, context=context,  # noqa: E731
                                  use_global_arguments=False, start_parameter_services=False, enable_rosout=False)
         self.front = make(GATEWAY_NODE)
         self.operator = make(GATEWAY_NODE + "_operator")
         self.campaign = make(GATEWAY_NODE + "_campaign")
         self.nodes = (self.front, self.operator, self.campaign)
-        self.relayed = {"services": 0, "failed": 0, "messages": 0}
-        """Counts: service calls relayed, of those failed (absent or silent server), topic messages relayed."""
-        self._clients: dict[str, Any] = {}
+        self.relayed = {"services": 0, "failed": 0, "messages": 0, "out_of_bounds": 0, "overtaken_by_estop": 0,
+                        "refused_duplicate_name": 0}
+        """Counts: service calls relayed, of those failed (absent or silent server), topic messages relayed, and the
+        requests refused for bounds, an e-stop that overtook them, another gateway with this name."""
+        self.duplicate = ""
+        """One line while another gateway answers to this vehicle's name (:func:`.interface.duplicate_problem`)."""
+        self.last_refusal = ""
+        self._ids = itertools.count(1)
+        self._pending: dict[int, Pending] = {}
+        self._goals: dict[int, queue.Queue] = {}
+        self._last_estop_s = -math.inf
+        self._operator_idle_s = -math.inf
+        self._busy_since_s = -math.inf
         for relay in relays("service"):
             node = self.front if relay.who == "anyone" else self.operator
-            internal_type = interface_type("hindrax_msgs/srv/SetArmed") if relay.internal == "/esc/set_armed" \
-                else interface_type(relay.type)
-            if relay.internal not in self._clients:
-                self._clients[relay.internal] = internal.create_client(internal_type, relay.internal)
             node.create_service(interface_type(relay.type), relay.topside, self._service_callback(relay))
         reliable = QoSProfile(depth=10)
-        best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
-        for relay in relays("topic_out"):
-            cls = interface_type(relay.type)
-            pub = self.front.create_publisher(cls, relay.topside, reliable)
-            internal.create_subscription(cls, relay.internal, self._forward(pub), best_effort
-                                         if relay.topside in BEST_EFFORT_TOPICS else reliable, raw=True)
+        self._out = {r.topside: self.front.create_publisher(interface_type(r.type), r.topside, reliable)
+                     for r in relays("topic_out")}
         for relay in relays("topic_in"):
-            cls = interface_type(relay.type)
-            pub = internal.create_publisher(cls, relay.internal, reliable)
-            self.front.create_subscription(cls, relay.topside, self._forward(pub), reliable, raw=True)
+            self.front.create_subscription(interface_type(relay.type), relay.topside, self._topic_in(relay), reliable)
         (action,) = relays("action")
         self._action_type = interface_type(action.type)
-        self._action_client = ActionClient(internal, self._action_type, action.internal)
         self._action_server = ActionServer(self.campaign, self._action_type, action.topside, self._run_goal,
                                            cancel_callback=lambda _goal: CancelResponse.ACCEPT)
+        self.front.create_timer(STATUS_PERIOD_S, self.publish_status)
         self.executors = []
         for node in self.nodes:
-            executor = SingleThreadedExecutor(context=topside_context)
+            executor = SingleThreadedExecutor(context=context)
             executor.add_node(node)
             self.executors.append(executor)
         self._threads: list[threading.Thread] = []
 
+    # ------------------------------------------------------------------------------------------- checks
+    def _refuse(self, why: str, count: str | None = None) -> str:
+        if count:
+            self.relayed[count] += 1
+        self.last_refusal = why
+        self.front.get_logger().warn(why)
+        return why
+
+    def _operator_check(self, relay: Any, request: Any) -> str:
+        """Why an operator's request is refused before it goes inside ("" = relay it)."""
+        why = self.verifier.check_message(relay.topside, request)
+        if why:
+            return self._refuse(why)
+        if relay.topside == "arm" and self.duplicate:
+            return self._refuse(f"arm: refused: {self.duplicate}", "refused_duplicate_name")
+        return ""
+
+    def publish_status(self) -> None:
+        """Look for another gateway with this vehicle's name; publish the gateway's status (topside and inside)."""
+        name = self.settings.vehicle_name
+        infos = self.front.get_publishers_info_by_topic(f"/{name}/{STATUS_TOPIC}")
+        self.duplicate = duplicate_problem(name, participants(i.endpoint_gid for i in infos))
+        if self.duplicate:
+            self.front.get_logger().error(self.duplicate, throttle_duration_sec=10.0)
+        no_key = self.verifier.key is None
+        level = DiagnosticStatus.ERROR if self.duplicate else DiagnosticStatus.WARN if no_key else DiagnosticStatus.OK
+        message = self.duplicate or ("no operator key on the vehicle: operator requests refused" if no_key else "ok")
+        values = {**{f"requests.{k}": v for k, v in self.verifier.counts.items()}, **self.relayed,
+                  "last_refusal": self.last_refusal}
+        status = DiagnosticStatus(level=level, name=f"{name}/gateway", message=message,
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        self._out[STATUS_TOPIC].publish(status)
+        self.channel.send({"k": "status"}, serialize_message(status))
+
     # ------------------------------------------------------------------------------------------- relays
-    def _forward(self, publisher: Any) -> Callable[[bytes], None]:
-        def forward(data: bytes) -> None:
+    def _topic_in(self, relay: Any) -> Callable[[Any], None]:
+        def forward(msg: Any) -> None:
+            why = self.verifier.check_message(relay.topside, msg)
+            if why:
+                self._refuse(why)
+                return
+            why = self.bounds.setpoint_problem(msg)
+            if why:
+                self._refuse(why, "out_of_bounds")
+                return
             self.relayed["messages"] += 1
-            publisher.publish(data)
+            self.channel.send({"k": "publish", "name": relay.internal}, serialize_message(msg))
         return forward
 
     def _service_callback(self, relay: Any) -> Callable[[Any, Any], Any]:
-        client = self._clients[relay.internal]
-        if relay.internal == "/esc/set_armed":
-            set_armed = interface_type("hindrax_msgs/srv/SetArmed")
-            arm = relay.topside == "arm"
+        inner = interface_type(relay.inner_type)
+        operator = relay.who == "operator"
+        arm = relay.topside == "arm"
 
-            def to_internal(_request: Any) -> Any:
-                return set_armed.Request(arm=arm)
-
-            def to_topside(answer: Any, response: Any) -> Any:
-                response.success = bool(answer.success)
-                response.message = answer.message or ("armed" if answer.armed else "disarmed")
-                return response
-        else:
-            def to_internal(request: Any) -> Any:
-                return request
-
-            def to_topside(answer: Any, _response: Any) -> Any:
-                return answer
+        def to_internal(request: Any) -> Any:
+            if relay.internal == "/esc/set_armed":
+                return inner.Request(arm=arm)
+            out = inner.Request()
+            for key in out.get_fields_and_field_types():
+                setattr(out, key, getattr(request, key))
+            return out
 
         def callback(request: Any, response: Any) -> Any:
-            self.relayed["services"] += 1
-            answer, why = self.call(client, to_internal(request))
-            if answer is None:
-                self.relayed["failed"] += 1
-                response.success = False
-                response.message = f"{relay.internal}: {why}"
+            started = time.monotonic()
+            if relay.topside == "estop":
+                self._last_estop_s = started
+            if operator:
+                if started - self._operator_idle_s > QUEUE_GAP_S:
+                    self._busy_since_s = started
+            try:
+                why = self._operator_check(relay, request) if operator else ""
+                if not why and arm and self._last_estop_s >= self._busy_since_s:
+                    why = self._refuse("arm: refused: an e-stop arrived while it waited; send it again after reset",
+                                       "overtaken_by_estop")
+                if why:
+                    response.success, response.message = False, why
+                    return response
+                self.relayed["services"] += 1
+                answer, why = self.call(relay.internal, to_internal(request), inner)
+                if answer is None:
+                    self.relayed["failed"] += 1
+                    response.success, response.message = False, f"{relay.internal}: {why}"
+                    return response
+                if arm and answer.success and self._last_estop_s >= self._busy_since_s:
+                    self.call(relay.internal, inner.Request(arm=False), inner)
+                    response.success = False
+                    response.message = self._refuse("arm: refused: an e-stop arrived before the arm completed; "
+                                                    "disarmed again", "overtaken_by_estop")
+                    return response
+                for key in response.get_fields_and_field_types():
+                    if hasattr(answer, key):
+                        setattr(response, key, getattr(answer, key))
+                if relay.internal == "/esc/set_armed":
+                    response.message = answer.message or ("armed" if answer.armed else "disarmed")
                 return response
-            return to_topside(answer, response)
+            finally:
+                if operator:
+                    self._operator_idle_s = time.monotonic()
         return callback
 
-    def call(self, client: Any, request: Any) -> tuple[Any, str]:
-        """Call an internal service and wait for its answer: (response, "") or (None, one-line reason)."""
-        if not client.service_is_ready():
-            return None, "not available on the vehicle (its node is not running)"
-        future = client.call_async(request)
-        if not wait_for(future, self.settings.call_timeout_s):
-            client.remove_pending_request(future)
-            return None, f"no answer within {self.settings.call_timeout_s:g} s"
-        return future.result(), ""
+    def call(self, name: str, request: Any, cls: Any) -> tuple[Any, str]:
+        """Call internal service ``name`` (type ``cls``) through the internal side and wait for its answer:
+        (response, "") or (None, one-line reason)."""
+        call_id = next(self._ids)
+        pending = self._pending[call_id] = Pending()
+        try:
+            if not self.channel.send({"k": "call", "id": call_id, "name": name}, serialize_message(request)):
+                return None, "the gateway's internal side is gone"
+            if not pending.wait(self.settings.call_timeout_s):
+                return None, f"no answer within {self.settings.call_timeout_s:g} s"
+        finally:
+            self._pending.pop(call_id, None)
+        if not pending.header.get("ok"):
+            return None, str(pending.header.get("why", "failed"))
+        return deserialize_message(pending.payload, cls.Response), ""
 
     def _run_goal(self, goal_handle: Any) -> Any:
-        """The topside ``run_identification`` goal: sent to the identification node, its feedback relayed, a cancel
-        passed on; ends as the internal goal ended."""
+        """The topside ``run_identification`` goal, checked, sent to the identification node; its feedback relayed,
+        a cancel passed on; ends as the internal goal ended."""
         result_type = self._action_type.Result
 
         def failed(why: str) -> Any:
             goal_handle.abort()
-            return result_type(success=False, message=f"run_identification: {why}")
+            return result_type(success=False, message=why if why.startswith("run_identification") else
+                               f"run_identification: {why}")
 
-        if not self._action_client.server_is_ready():
-            return failed("the identification node is not running on the vehicle")
-        sent = self._action_client.send_goal_async(
-            goal_handle.request, feedback_callback=lambda fb: goal_handle.publish_feedback(fb.feedback))
-        if not wait_for(sent, self.settings.call_timeout_s):
-            return failed(f"no answer from the identification node within {self.settings.call_timeout_s:g} s")
-        inner = sent.result()
-        if not inner.accepted:
-            return failed("refused by the identification node (see identification/status)")
-        result = inner.get_result_async()
-        cancelling = False
-        while not wait_for(result, CANCEL_POLL_S):
-            if goal_handle.is_cancel_requested and not cancelling:
-                inner.cancel_goal_async()
-                cancelling = True
-            if not self.campaign.context.ok():
-                return failed("the gateway is shutting down")
-        answer = result.result()
-        if answer.status == GoalStatus.STATUS_SUCCEEDED:
+        why = self.verifier.check_message("run_identification", goal_handle.request)
+        if why:
+            return failed(self._refuse(why))
+        why = self.bounds.goal_problem(goal_handle.request)
+        if why:
+            return failed(self._refuse(why, "out_of_bounds"))
+        goal_id = next(self._ids)
+        replies: queue.Queue = queue.Queue()
+        self._goals[goal_id] = replies
+        try:
+            self.channel.send({"k": "goal", "id": goal_id}, serialize_message(goal_handle.request))
+            try:
+                head, _ = replies.get(timeout=self.settings.call_timeout_s)
+            except queue.Empty:
+                return failed(f"no answer from the identification node within {self.settings.call_timeout_s:g} s")
+            if not head.get("ok"):
+                return failed(str(head.get("why", "refused")))
+            cancelling = False
+            while True:
+                try:
+                    head, payload = replies.get(timeout=CANCEL_POLL_S)
+                except queue.Empty:
+                    if goal_handle.is_cancel_requested and not cancelling:
+                        self.channel.send({"k": "cancel", "id": goal_id})
+                        cancelling = True
+                    if not self.campaign.context.ok():
+                        return failed("the gateway is shutting down")
+                    continue
+                if head["k"] == "feedback":
+                    goal_handle.publish_feedback(deserialize_message(payload, self._action_type.Feedback))
+                elif head["k"] == "result":
+                    break
+                else:
+                    return failed("the gateway's internal side is gone")
+        finally:
+            self._goals.pop(goal_id, None)
+        status = head.get("status")
+        if status == GoalStatus.STATUS_SUCCEEDED:
             goal_handle.succeed()
-        elif answer.status == GoalStatus.STATUS_CANCELED and goal_handle.is_cancel_requested:
+        elif status == GoalStatus.STATUS_CANCELED and goal_handle.is_cancel_requested:
             goal_handle.canceled()
         else:
             goal_handle.abort()
-        return answer.result
+        return deserialize_message(payload, result_type)
+
+    def _read_channel(self) -> None:
+        """The channel's reader thread: answers, telemetry, the campaign's replies; at its end the process ends."""
+        while (frame := self.channel.recv()) is not None:
+            head, payload = frame
+            kind = head.get("k")
+            if kind == "answer" and head.get("id") in self._pending:
+                self._pending[head["id"]].deliver(head, payload)
+            elif kind == "topic" and head.get("name") in self._out:
+                self.relayed["messages"] += 1
+                self._out[head["name"]].publish(payload)
+            elif kind in ("accepted", "feedback", "result") and head.get("id") in self._goals:
+                self._goals[head["id"]].put((head, payload))
+        for replies in list(self._goals.values()):
+            replies.put(({"k": "gone"}, b""))
+        if self.executors:
+            self.front.get_logger().error("the gateway's internal side ended: ending the gateway")
+            os.kill(os.getpid(), signal.SIGTERM)
 
     # ------------------------------------------------------------------------------------------- life
     def start(self) -> None:
-        """Spin each topside node in a thread of its own."""
+        """Spin each topside node in a thread of its own; read the channel in another."""
         for executor in self.executors:
             thread = threading.Thread(target=self._spin, args=(executor,), daemon=True, name="gateway-topside")
             thread.start()
             self._threads.append(thread)
+        threading.Thread(target=self._read_channel, daemon=True, name="gateway-link").start()
 
     @staticmethod
     def _spin(executor: Any) -> None:
@@ -280,42 +327,71 @@ class Gateway:
 
     def close(self) -> None:
         """Stop the topside executors, join their threads, destroy the topside nodes (idempotent)."""
-        for executor in self.executors:
+        executors, self.executors = self.executors, []
+        for executor in executors:
             executor.shutdown(timeout_sec=1.0)
         for thread in self._threads:
             thread.join(timeout=2.0)
         self._threads = []
-        self._action_server.destroy()
-        for node in self.nodes:
-            node.destroy_node()
-        self.executors = []
+        if executors:
+            self._action_server.destroy()
+            for node in self.nodes:
+                node.destroy_node()
+
+
+def start_internal_side(argv: Sequence[str]) -> tuple[subprocess.Popen, Channel]:
+    """Start the internal side (:mod:`.internal`) with the vehicle's loopback transport and the same ROS arguments;
+    returns it and this end of the channel."""
+    env = {k: v for k, v in os.environ.items() if k != "ROS_STATIC_PEERS"}
+    env[RANGE_ENV] = "LOCALHOST"
+    loopback_transport(env)
+    ours, theirs = socket.socketpair()
+    child = subprocess.Popen([sys.executable, "-m", "hindrax_drivers.gateway.internal", "--link-fd",
+                              str(theirs.fileno()), *argv], pass_fds=(theirs.fileno(),), env=env)
+    theirs.close()
+    return child, Channel(ours)
 
 
 def main(args: Sequence[str] | None = None) -> int:
-    """Process entry point (module docstring). Exit status 0 on SIGINT/SIGTERM, 1 on a bad setting (one line)."""
-    os.environ.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)  # module docstring: the topside must not be loopback-bound
-    static_peers = os.environ.pop("ROS_STATIC_PEERS", None)  # the topside's, not the internal graph's
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"  # the internal context: loopback whatever was set
-    with RosProcess(args, errors={ConfigError: "invalid configuration"}, executor="single",
-                    interrupt=False) as proc:
-        boot = Node("gateway", automatically_declare_parameters_from_overrides=False)
+    """Process entry point (module docstring). Exit status 0 on SIGINT/SIGTERM, 1 on a bad setting (one line, from
+    the internal side) or when the internal side cannot start."""
+    argv = list(sys.argv[1:] if args is None else args)
+    internal_domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    child, channel = start_internal_side(argv)
+    try:
+        first = channel.recv()
+        if first is None or first[0].get("k") != "settings":
+            child.wait(timeout=30)
+            return 1
+        settings = GatewaySettings(**first[0]["settings"])
+        bounds = RequestBounds(**first[0]["bounds"])
         try:
-            settings = read_settings(boot)
-        finally:
-            boot.destroy_node()
-        internal = proc.own(Node("gateway", namespace="/" + settings.vehicle_name, use_global_arguments=False))
-        proc.executor.add_node(internal)
-        topside = init_topside_context(settings.topside_domain_id, settings.topside_discovery_range, static_peers,
-                                       enclave=topside_enclaves(settings.vehicle_name)["gateway"])
-        proc.at_exit(lambda: rclpy.try_shutdown(context=topside))
-        gateway = Gateway(internal, topside, settings)
-        proc.at_exit(gateway.close)
-        gateway.start()
-        internal.get_logger().info(
-            f"vehicle {settings.vehicle_name!r}: internal domain {os.environ.get('ROS_DOMAIN_ID', '0')} (loopback), "
-            f"topside domain {settings.topside_domain_id} ({settings.topside_discovery_range})")
-        proc.spin()
-    return proc.status
+            verifier = Verifier(load_key(key_path(settings.vehicle_name)), settings.vehicle_name)
+        except OperatorKeyError as exc:
+            print(f"gateway: {exc}: every operator request will be refused (the e-stop works)", file=sys.stderr,
+                  flush=True)
+            verifier = Verifier(None, settings.vehicle_name)
+        # this process's participants are the topside's only: its range, peers and default transports
+        os.environ.pop(PROFILE_ENV, None)
+        os.environ[RANGE_ENV] = settings.topside_discovery_range
+        os.environ["ROS_DOMAIN_ID"] = str(settings.topside_domain_id)
+        with RosProcess(["gateway_node", "--ros-args", "--enclave", topside_enclaves(settings.vehicle_name)["gateway"]],
+                        executor="single", interrupt=False) as proc:
+            gateway = Gateway(channel, rclpy.get_default_context(), settings, bounds, verifier)
+            proc.at_exit(gateway.close)
+            gateway.start()
+            gateway.front.get_logger().info(
+                f"vehicle {settings.vehicle_name!r}: internal domain {internal_domain} (loopback, process "
+                f"{child.pid}), topside domain {settings.topside_domain_id} ({settings.topside_discovery_range})")
+            proc.spin()
+        return proc.status
+    finally:
+        channel.close()
+        try:
+            child.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
 
 
 if __name__ == "__main__":

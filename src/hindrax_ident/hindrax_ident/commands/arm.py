@@ -1,7 +1,8 @@
 """``hindrax arm|disarm [--vehicle NAME]``: arm or disarm a vehicle's thruster outputs.
 
 On the topside (the operator's PC on the vehicle's topside domain) the command calls the gateway's ``/<name>/arm``
-or ``/<name>/disarm`` (std_srvs/Trigger, docs/architecture.md §8.2); run on the vehicle itself it calls the ESC's
+or ``/<name>/disarm`` (hindrax_msgs/SignedTrigger, signed with the vehicle's key, docs/architecture.md §8.2); run on
+the vehicle itself it calls the ESC's
 ``esc/set_armed`` (hindrax_msgs/SetArmed). The vehicle is the one named, or the only one on the domain
 (:mod:`hindrax_ident.commands.vehicle`). Prints one line, ``<name>: armed`` / ``<name>: disarmed``, and exits 0;
 a refusal (the ESC's reason: not yet at neutral long enough, the supervisor tripped, the guard silent...) or no
@@ -31,18 +32,12 @@ def set_armed(node: Any, executor: Any, arm: bool, wanted: str | None, discovery
               timeout_s: float) -> tuple[str, bool, str]:
     """Arm (``arm`` True) or disarm the vehicle found by :func:`~hindrax_ident.commands.vehicle.find_vehicle`.
     Returns (vehicle name, success, message). Raises :class:`CommandError` when no vehicle or no answer."""
-    from std_srvs.srv import Trigger
-
     from hindrax_msgs.srv import SetArmed
 
     target = find_vehicle(node, executor, wanted, discovery_timeout_s)
     verb = "arm" if arm else "disarm"
-    if target.topside:
-        service, request = f"/{target.name}/{verb}", Trigger.Request()
-        client = node.create_client(Trigger, service)
-    else:
-        service, request = "esc/set_armed", SetArmed.Request(arm=arm)
-        client = node.create_client(SetArmed, service)
+    srv, service, request = target.service(verb, "esc/set_armed", SetArmed, **({} if target.topside else {"arm": arm}))
+    client = node.create_client(srv, service)
     deadline = time.monotonic() + timeout_s
     while not client.service_is_ready():
         if time.monotonic() > deadline:

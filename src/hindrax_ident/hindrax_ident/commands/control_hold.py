@@ -62,7 +62,8 @@ def _wait(executor: Any, done, timeout_s: float, what: str) -> None:
         executor.spin_once(timeout_sec=0.05)
 
 
-def _call(node: Any, executor: Any, srv_type: Any, name: str, request: Any, timeout_s: float) -> Any:
+def _call(node: Any, executor: Any, spec: tuple[Any, str, Any], timeout_s: float) -> Any:
+    srv_type, name, request = spec
     client = node.create_client(srv_type, name)
     _wait(executor, client.service_is_ready, timeout_s, f"no {name} service")
     future = client.call_async(request)
@@ -99,7 +100,7 @@ def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Name
             return True
         if time.monotonic() - sent[0] > 0.5:  # again: a relayed topic's first message may meet no subscriber yet
             msg.header.stamp = node.get_clock().now().to_msg()
-            pub.publish(msg)
+            pub.publish(target.sign("controller/setpoint", msg))
             sent[0] = time.monotonic()
         return False
     _wait(executor, arrived, args.timeout, f"{target.name}: the controller did not take the setpoint")
@@ -111,15 +112,14 @@ def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple
     from std_srvs.srv import SetBool, Trigger
 
     target = find_vehicle(node, executor, args.vehicle, args.discovery_timeout)
-    enable = target.resolve("controller/enable", "controller/enable")
+    enable = lambda on: target.service("controller/enable", "controller/enable", SetBool, data=on)  # noqa: E731
     if not args._hold:
-        answer = _call(node, executor, SetBool, enable, SetBool.Request(data=False), args.timeout)
+        answer = _call(node, executor, enable(False), args.timeout)
     elif args.depth_m is None and args.altitude_m is None:
-        answer = _call(node, executor, Trigger, target.resolve("controller/hold", "controller/hold"),
-                       Trigger.Request(), args.timeout)
+        answer = _call(node, executor, target.service("controller/hold", "controller/hold", Trigger), args.timeout)
     else:
         _send_setpoint(node, executor, target, args)
-        answer = _call(node, executor, SetBool, enable, SetBool.Request(data=True), args.timeout)
+        answer = _call(node, executor, enable(True), args.timeout)
     return target.name, bool(answer.success), str(answer.message)
 
 

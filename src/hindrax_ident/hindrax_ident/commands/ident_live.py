@@ -130,11 +130,13 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
                    server_timeout_s: float, print_line: Callable[[str], None] = print,
                    cancel_requested: Callable[[], bool] = lambda: False,
                    give_up: Callable[[], bool] = lambda: False, calibrate: list[str] | None = None,
-                   calibration_only: bool = False, action_name: str = "run_identification") -> tuple[bool, str]:
+                   calibration_only: bool = False, action_name: str = "run_identification",
+                   sign: Callable[[Any], Any] = lambda goal: goal) -> tuple[bool, str]:
     """Send one goal from ``node`` (spun by ``executor``), print its feedback (an operator prompt once, when it
     appears, prefixed ``>>>``), cancel it once ``cancel_requested()`` turns True, and wait for its end
     (``give_up()`` True stops waiting after a cancel). ``calibrate`` / ``calibration_only``: the goal's fields.
-    ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside).
+    ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside); ``sign``:
+    signs the goal for the gateway (:meth:`~hindrax_ident.commands.vehicle.Target.sign`).
     Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
     from rclpy.action import ActionClient
 
@@ -154,6 +156,7 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
         spin()
     goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions,
                                   calibrate=list(calibrate or []), calibration_only=bool(calibration_only))
+    goal = sign(goal)
     last_prompt = [""]
     # the feedback comes several times a second: one updating line on a terminal, each new state once elsewhere
     progress = ProgressLine(print_line, tty=None if print_line is print else False)
@@ -214,7 +217,8 @@ def _start(args: argparse.Namespace) -> int:
             node, ex, dofs, levels, fractions, args.server_timeout, lambda s: print(s, flush=True),
             cancel_requested=lambda: len(interrupts) >= 1, give_up=lambda: len(interrupts) >= 2,
             calibrate=calibrate, calibration_only=bool(args.calibration_only),
-            action_name=target.resolve("run_identification", "run_identification")))
+            action_name=target.resolve("run_identification", "run_identification"),
+            sign=lambda goal: target.sign("run_identification", goal)))
     finally:
         signal.signal(signal.SIGINT, previous)
     print(f"result: {'complete' if ok else 'not complete'}: {message}", flush=True)
@@ -240,22 +244,23 @@ def _status(args: argparse.Namespace) -> int:
     return _on_vehicle(args, body)
 
 
-def call_continue(node: Any, executor: Any, timeout_s: float,
-                  service: str = "identification/continue") -> tuple[bool, str]:
-    """Call ``service`` (std_srvs/Trigger; ``/<vehicle>/identification/continue`` through the gateway) from ``node``
-    (spun by ``executor``) once; returns the node's (success, message). Raises :class:`CommandError` when the
-    service is not there or does not answer within ``timeout_s`` (wall). Not repeated on a lost answer: a second
-    continue could skip the next prompt."""
+def call_continue(node: Any, executor: Any, timeout_s: float, target: Target | None = None) -> tuple[bool, str]:
+    """Call ``identification/continue`` (std_srvs/Trigger; through the gateway on the topside, signed, when
+    ``target`` is a topside one) from ``node`` (spun by ``executor``) once; returns the node's (success, message).
+    Raises :class:`CommandError` when the service is not there or does not answer within ``timeout_s`` (wall). Not
+    repeated on a lost answer: a second continue could skip the next prompt."""
     from std_srvs.srv import Trigger
 
-    client = node.create_client(Trigger, service)
+    name = "identification/continue"
+    srv, service, request = (target or Target("", False)).service(name, name, Trigger)
+    client = node.create_client(srv, service)
     deadline = time.monotonic() + timeout_s
     while not client.service_is_ready():
         if time.monotonic() > deadline:
             raise CommandError(f"no identification/continue service within {timeout_s:g} s: is the stack running "
                                "(hindrax bringup)?")
         executor.spin_once(timeout_sec=0.1)
-    fut = client.call_async(Trigger.Request())
+    fut = client.call_async(request)
     while not fut.done():
         if time.monotonic() > deadline:
             raise CommandError(f"identification/continue did not answer within {timeout_s:g} s; check with "
@@ -266,8 +271,7 @@ def call_continue(node: Any, executor: Any, timeout_s: float,
 
 
 def _continue(args: argparse.Namespace) -> int:
-    ok, message = _on_vehicle(args, lambda node, ex, target: call_continue(
-        node, ex, args.timeout, target.resolve("identification/continue", "identification/continue")))
+    ok, message = _on_vehicle(args, lambda node, ex, target: call_continue(node, ex, args.timeout, target))
     print(f"{'continued' if ok else 'not continued'}: {message}", flush=True)
     return 0 if ok else 1
 

@@ -8,7 +8,9 @@ files (``vehicle.launch.xml``, ``pool_test.launch.xml``). Runs anywhere (no sros
 keystore on the vehicle (or adds to it): the two policies under ``KEYSTORE/policies/``, then sros2's own artifact
 generation (``ros2 security generate_artifacts``' Python API: certificate authority, one key, certificate and signed
 permissions per enclave), the internal enclaves' permissions for the internal domain, the topside ones for the topside
-domain. Needs sros2 (``ros-jazzy-sros2`` from apt, on the Pi); without it, exit 1 with one line saying so.
+domain; then the vehicle's governance (:func:`hindrax_drivers.sros2_policy.governance`: participants without a
+certificate may call the e-stop on the topside, nothing else) replaces sros2's default one, signed with the keystore's
+permissions CA. Needs sros2 (``ros-jazzy-sros2`` from apt, on the Pi); without it, exit 1 with one line saying so.
 Exit 1 with one line for an invalid vehicle file or launch file.
 """
 from __future__ import annotations
@@ -73,6 +75,26 @@ def write_policies(config: str | None, out: Path) -> dict[str, Path]:
     return paths
 
 
+def write_governance(keystore: Path, vehicle_name: str, internal_domain: int, topside_domain: int) -> Path:
+    """Write the vehicle's governance into ``keystore/enclaves/governance.xml`` and sign it (S/MIME, the permissions
+    CA) into ``governance.p7s``, the file every enclave's ``governance.p7s`` links to. Needs sros2."""
+    from sros2._utilities import create_smime_signed_file
+
+    from hindrax_drivers.sros2_policy import governance
+
+    try:
+        text = governance(vehicle_name, internal_domain, topside_domain)
+    except ValueError as exc:
+        raise CommandError(f"hindrax sros2 keystore: {exc}") from None
+    enclaves = keystore / "enclaves"
+    (enclaves / "governance.xml").write_text(text)
+    create_smime_signed_file(keystore / "public" / "permissions_ca.cert.pem",
+                             keystore / "private" / "permissions_ca.key.pem",
+                             enclaves / "governance.xml", enclaves / "governance.p7s")
+    print(f"governance: {enclaves / 'governance.p7s'} (the e-stop open to participants without a certificate)")
+    return enclaves / "governance.p7s"
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     if not hasattr(args, "keystore"):
@@ -98,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
             os.environ.pop("ROS_DOMAIN_ID", None)
         else:
             os.environ["ROS_DOMAIN_ID"] = saved
+    write_governance(keystore, load_vehicle(args.config).vehicle.name, internal_domain, args.topside_domain_id)
     print(f"keystore {keystore}: set ROS_SECURITY_KEYSTORE={keystore.resolve()} ROS_SECURITY_ENABLE=true "
           "ROS_SECURITY_STRATEGY=Enforce for the vehicle's processes")
     return 0

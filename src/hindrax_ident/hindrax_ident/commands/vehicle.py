@@ -4,7 +4,11 @@ A vehicle shows itself by its gateway's node, ``/<vehicle.name>/gateway`` (docs/
 topside domain and on the vehicle's internal graph alike. On the topside the vehicle's interface is the gateway's
 relays under ``/<name>/`` (:data:`hindrax_drivers.gateway.interface.INTERFACE`); on the internal graph (a command
 run on the vehicle itself) the nodes' own names, without a namespace. :func:`find_vehicle` tells the two apart by
-the gateway's topside-only node ``/<name>/gateway_operator``.
+the gateway's topside-only node ``/<name>/gateway_operator``, and refuses a name two gateways answer to.
+
+On the topside an operator's request is signed (:mod:`hindrax_drivers.operator_signing`) with the vehicle's key,
+``<keys dir>/<name>.key`` (``hindrax keys``), when this PC has it; without it the gateway refuses the request and
+says where the key goes. The e-stop is never signed.
 """
 from __future__ import annotations
 
@@ -28,15 +32,37 @@ DISCOVERY_SETTLE_S = 3.0
 
 @dataclass(frozen=True)
 class Target:
-    """The vehicle a command talks to: its ``name`` and whether the command is on the ``topside`` domain (through
-    the gateway) or on the vehicle's internal graph."""
+    """The vehicle a command talks to: its ``name``, whether the command is on the ``topside`` domain (through
+    the gateway) or on the vehicle's internal graph, and the ``signer`` of its operator requests (topside, with the
+    key on this PC; else None)."""
 
     name: str
     topside: bool
+    signer: Any = None
 
     def resolve(self, topside_name: str, internal_name: str) -> str:
         """The absolute name to use: ``/<name>/<topside_name>`` on the topside, ``internal_name`` on the vehicle."""
         return f"/{self.name}/{topside_name}" if self.topside else internal_name
+
+    def service(self, topside_name: str, internal_name: str, internal_type: Any, **fields: Any) -> tuple[Any, str, Any]:
+        """(service type, absolute name, request with ``fields``) of an operator service: on the topside the
+        gateway's signed type (:data:`~hindrax_drivers.gateway.interface.INTERFACE`), the request signed; on the
+        vehicle ``internal_type`` and ``internal_name``."""
+        if not self.topside:
+            return internal_type, internal_name, internal_type.Request(**fields)
+        from hindrax_drivers.gateway.interface import INTERFACE
+        from hindrax_drivers.gateway.internal import interface_type
+
+        (relay,) = [r for r in INTERFACE if r.topside == topside_name]
+        srv = interface_type(relay.type)
+        return srv, self.resolve(topside_name, internal_name), self.sign(topside_name, srv.Request(**fields))
+
+    def sign(self, topside_name: str, message: Any) -> Any:
+        """``message`` (with a ``signature`` field) signed for relay ``topside_name`` when there is a signer;
+        returned either way."""
+        if self.topside and self.signer is not None:
+            self.signer.sign_message(topside_name, message)
+        return message
 
 
 def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
@@ -50,11 +76,12 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float) -> Target:
-    """Spin ``executor`` until ``wanted``'s gateway is seen, or (no name given) until a gateway is seen and
-    :data:`DISCOVERY_SETTLE_S` more have passed, at most ``timeout_s``; then choose
-    (:func:`hindrax_drivers.gateway.interface.choose_vehicle`). Raises :class:`CommandError` (one line) for no
-    vehicle, several, or not the one named."""
-    from hindrax_drivers.gateway.interface import GATEWAY_NODE, VehicleChoiceError, choose_vehicle, vehicles_seen
+    """Spin ``executor`` until a gateway (``wanted``'s, if given) is seen and :data:`DISCOVERY_SETTLE_S` more have
+    passed, at most ``timeout_s``; then choose (:func:`hindrax_drivers.gateway.interface.choose_vehicle`). Raises
+    :class:`CommandError` (one line) for no vehicle, several, not the one named, or a name two gateways answer to."""
+    from hindrax_drivers.gateway.interface import (GATEWAY_NODE, STATUS_TOPIC, VehicleChoiceError, choose_vehicle,
+                                                   duplicate_problem, participants, vehicles_seen)
+    from hindrax_drivers.operator_signing import OperatorKeyError, Signer, key_path, load_key
 
     start = time.monotonic()
     first_seen: float | None = None
@@ -62,11 +89,9 @@ def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float)
         nodes = node.get_node_names_and_namespaces()
         seen = vehicles_seen(nodes)
         now = time.monotonic()
-        if seen and first_seen is None:
+        if (wanted is None and seen or wanted in seen) and first_seen is None:
             first_seen = now
-        if wanted is not None and wanted in seen:
-            break
-        if wanted is None and first_seen is not None and now - first_seen >= DISCOVERY_SETTLE_S:
+        if first_seen is not None and now - first_seen >= DISCOVERY_SETTLE_S:
             break
         if now - start >= timeout_s:
             break
@@ -76,7 +101,20 @@ def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float)
         name = choose_vehicle(seen, wanted, domain)
     except VehicleChoiceError as exc:
         raise CommandError(str(exc)) from None
-    return Target(name, (GATEWAY_NODE + "_operator", "/" + name) in nodes)
+    topside = (GATEWAY_NODE + "_operator", "/" + name) in nodes
+    if not topside:
+        return Target(name, False)
+    gids = [i.endpoint_gid for i in node.get_publishers_info_by_topic(f"/{name}/{STATUS_TOPIC}")]
+    duplicate = duplicate_problem(name, participants(gids))
+    if duplicate:
+        raise CommandError(f"refusing to command it: {duplicate}")
+    path = key_path(name)
+    if not path.exists():
+        return Target(name, True)
+    try:
+        return Target(name, True, Signer(load_key(path), name))
+    except OperatorKeyError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def with_ros(body: Callable[[Any, Any], Any], node_name: str) -> Any:
