@@ -413,7 +413,7 @@ class EscNode(Node):
 
 def main(args=None) -> int:
     """``python -m hindrax_drivers.pca9685.node --ros-args --params-file ros_ws/config/hindrax.yaml`` (Pi)."""
-    return run_node(EscNode, args, systemd_notify=True)  # READY=1, WATCHDOG=1 (sd_notify.py)
+    return run_node(EscNode, args)
 
 
 if __name__ == "__main__":
