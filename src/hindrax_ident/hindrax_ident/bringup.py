@@ -270,10 +270,11 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         hardware = VirtualHardware(simulator, simulator.config, seed=cfg.simulation.seed, serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
-        # The emulated PCA9685 runs at exactly esc.oscillator_hz (VirtualHardware builds it from the configuration):
-        # calibrated by construction, so the ESC node may arm (on the vehicle a scope measurement sets the flag).
+        # The emulated PCA9685 reports its oscillator (VirtualHardware builds it at esc.oscillator_hz): measured, as
+        # `hindrax esc calibrate` measures a real part, when it is the configured one (then the ESC puts pulses out)
+        measured = hardware.pca9685.oscillator_hz == cfg.esc.oscillator_hz
         cfg = cfg.with_overrides({"sensors.dvl75.port": hardware.dvl_port, "sensors.ping1d.port": hardware.ping_port,
-                                  "esc.oscillator_calibrated": True})
+                                  "esc.oscillator_calibrated": measured})
         bus = hardware.i2c_bus
     else:
         bus = i2c_bus  # None: each I2C node opens smbus2.SMBus(<its configured bus>)
