@@ -47,7 +47,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 
 from ..ros_process import RosProcess
-from ..vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, GraphView, split_vehicle_topics
+from ..vehicle_graph import (DISCOVERY_WINDOW_S, ForeignVehicleError, ForeignVehicleWatch, GraphView,
+                             split_vehicle_topics)
 from .msgtypes import TypeNotInstalledError, message_class
 from .playback import PlayStats, play
 from .qos import playback_profile, profiles_from_yaml
@@ -80,10 +81,16 @@ _PARAMETER_DOCS = {
 GRAPH_CHECK_PERIOD_S = 0.2
 
 
-class BagPlayerNode(Node):
-    """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction."""
+#: what the player refuses beside a live ESC or supervisor (with ``safety_topics``)
+REFUSAL = "a bag's safety and actuation topics are never published onto a live vehicle's graph"
 
-    def __init__(self, node_name: str = "player", **kwargs: Any) -> None:
+
+class BagPlayerNode(Node):
+    """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction. ``window_s``: the
+    discovery window watched before the first publisher (with ``safety_topics``; 0 when the caller watched it
+    already, :func:`~hindrax_drivers.vehicle_graph.refuse_before_start`)."""
+
+    def __init__(self, node_name: str = "player", window_s: float = DISCOVERY_WINDOW_S, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         bag = str(self._param("bag", ""))
         self.rate = float(self._param("rate", 1.0))
@@ -141,9 +148,9 @@ class BagPlayerNode(Node):
             # the discovery window before the first publisher: a refused play must leave nothing on a vehicle's
             # graph (a second heartbeat publisher, even for the window, disarms its ESC)
             me = self.get_fully_qualified_name()
-            self.watch = ForeignVehicleWatch(
-                self, "refused", "a bag's safety and actuation topics are never published onto a live vehicle's "
-                "graph", own=lambda: GraphView((me,), {t: (me,) for t in self.pubs}), period_s=GRAPH_CHECK_PERIOD_S)
+            self.watch = ForeignVehicleWatch(self, "refused", REFUSAL, window_s=window_s,
+                                             own=lambda: GraphView((me,), {t: (me,) for t in self.pubs}),
+                                             period_s=GRAPH_CHECK_PERIOD_S)
             while not self._stop.is_set() and not self._graph_settled():
                 self._wait(0.05)
         for topic in selected:

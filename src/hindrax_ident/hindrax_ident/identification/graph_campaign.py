@@ -278,7 +278,8 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             # and one that appears meanwhile: refused before arming, and while the run lasts
             watch = ForeignVehicleWatch(client, "refused", _BESIDE,
                                         own=lambda: own_view([*graph.nodes.values(), client]), window_s=0.0)
-            armed = graph.start_and_arm(arm, 120, lambda: action.server_is_ready() and watch.settled())
+            # the watch first: it looks at every poll, not only once the action server is up
+            armed = graph.start_and_arm(arm, 120, lambda: watch.settled() and action.server_is_ready())
             if not armed.success:
                 outcome.message = f"arming refused: {armed.message}"
                 say(outcome.message)
