@@ -24,7 +24,6 @@ from .config.node_parameters import declare_vehicle_parameters
 from . import ros_process
 from .ros_process import RosProcess
 from .scheduling import apply_realtime_priority, describe as describe_scheduling
-from .sd_notify import SystemdNotifier
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
@@ -431,7 +430,7 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
 
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,
-             systemd_notify: bool = False, exit_process: bool = True) -> int:
+             exit_process: bool = True) -> int:
     """Process entry point of a node: init, build the node, spin the process's executor, shut down cleanly.
 
     factory: creates the node after ``rclpy.init``. executor: ``events``, ``single`` or None for the default
@@ -439,16 +438,15 @@ def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, exec
     status: 0 on SIGINT/SIGTERM,
     1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
     (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
-    systemd_notify: READY=1 and WATCHDOG=1 to systemd from the executor (the safety processes,
-    :class:`~hindrax_drivers.sd_notify.SystemdNotifier`). exit_process: in the main thread the process ends on
+    exit_process: in the main thread the process ends on
     return, without the DDS participant's teardown (:mod:`hindrax_drivers.ros_process`, "Exit without the DDS
     participant's teardown"): the exit status above becomes the process's, and nothing runs after; False returns it.
     """
-    return run_nodes([factory], args, executor, systemd_notify, exit_process)
+    return run_nodes([factory], args, executor, exit_process)
 
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
-              executor: str | None = None, systemd_notify: bool = False, exit_process: bool = True) -> int:
+              executor: str | None = None, exit_process: bool = True) -> int:
     """Process entry point of several nodes composed in one process (:mod:`hindrax_drivers.composition`): the nodes
     are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
     reverse order (the last built first). Same arguments, exit
@@ -474,8 +472,6 @@ def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None
             getattr(nodes[0].get_logger(), level)(text)
         for node in nodes:
             proc.executor.add_node(node)
-        if systemd_notify and nodes:
-            SystemdNotifier(nodes[0])
         proc.spin()
     return proc.status
 

@@ -2,13 +2,14 @@
 
 The bare-metal unit (``docker/hindrax-bare-metal.service``) runs the launch as ``Type=notify`` with
 ``NotifyAccess=all`` and ``WatchdogSec``: systemd puts ``NOTIFY_SOCKET`` and ``WATCHDOG_USEC`` in the environment
-that the launch hands to its nodes, and the ESC, the supervisor and the output guard (``run_node(...,
-systemd_notify=True)``) each send READY=1 once their executor runs and WATCHDOG=1 every half ``WATCHDOG_USEC``
-from a steady-clock timer of that executor. A launch frozen as a whole (Ctrl-Z, ``docker pause``, a cgroup freeze:
-every safety process stopped) sends nothing; after ``WatchdogSec`` systemd kills the unit (``WatchdogSignal``) and
-``Restart=on-failure`` starts it again: the killed processes' GPIO requests are freed, /OE returns to its pull-up,
-and the new processes start with the outputs off (docs/watchdog.md). A single frozen process is the heartbeats'
-case (docs/architecture.md §8), not this one: any live process's ping keeps the unit.
+that the launch hands to its nodes. One process speaks for the three safety processes: the output guard, which
+already watches the ESC's and the supervisor's heartbeats (identity-checked). At each of its ticks
+(:class:`SafetyNotifier`) it sends WATCHDOG=1 only while both beats are fresh (:func:`stale_heartbeats`: younger than
+its heartbeat timeout), READY=1 the first time they are. A frozen or dead ESC, supervisor or guard therefore stops the
+pings whichever process still runs: after ``WatchdogSec`` systemd aborts the unit (``WatchdogSignal``, SIGABRT, then
+SIGCONT to stopped processes) and ``Restart=on-failure`` starts it again; the guard's GPIO requests are freed, /OE
+returns to its pull-up, and the new processes start with the outputs off (docs/watchdog.md). The ESC and the
+supervisor send nothing: a live process's ping would keep a unit whose safety process is frozen.
 
 Why our own 30 lines: the protocol is one datagram on a Unix socket (``socket`` from the standard library);
 ``systemd-python`` needs libsystemd's headers and a compiler on the vehicle's image, and the ``sdnotify`` package
@@ -18,11 +19,9 @@ from __future__ import annotations
 
 import os
 import socket
-from typing import Any, Mapping
+from typing import Mapping
 
-from rclpy.clock import Clock, ClockType
-
-__all__ = ["SystemdNotifier", "notify", "watchdog_period_s"]
+__all__ = ["SafetyNotifier", "notify", "stale_heartbeats", "watchdog_period_s"]
 
 
 def notify(state: str, environ: Mapping[str, str] = os.environ) -> bool:
@@ -51,26 +50,39 @@ def watchdog_period_s(environ: Mapping[str, str] = os.environ) -> float | None:
     return usec * 1e-6 if usec > 0 else None
 
 
-class SystemdNotifier:
-    """READY=1 at the first tick of ``node``'s executor, then WATCHDOG=1 every half the unit's watchdog period
-    (module docstring), from a steady-clock timer on ``node``. Does nothing without ``$NOTIFY_SOCKET``.
-    :attr:`sent` counts the datagrams sent."""
+def stale_heartbeats(ages_s: Mapping[str, float], timeout_s: float) -> list[str]:
+    """The safety heartbeats that are not fresh: ``ages_s`` maps a sender (``"esc"``, ``"supervisor"``) to its
+    beat's age in s (inf or NaN: never heard); fresh = age <= ``timeout_s``. Empty: the unit may be pinged."""
+    return [name for name, age in ages_s.items() if not (age <= timeout_s)]
 
-    def __init__(self, node: Any, environ: Mapping[str, str] = os.environ) -> None:
+
+class SafetyNotifier:
+    """READY=1 and WATCHDOG=1 from the process that watches the safety heartbeats (module docstring): call
+    :meth:`update` at every tick of that process. Does nothing without ``$NOTIFY_SOCKET``. :attr:`sent` counts the
+    datagrams sent, :attr:`withheld` the ticks without a ping (a stale heartbeat), :attr:`reason` the last one's."""
+
+    def __init__(self, environ: Mapping[str, str] = os.environ) -> None:
         self.environ = environ
+        self.enabled = bool(environ.get("NOTIFY_SOCKET"))
+        self.watchdog = watchdog_period_s(environ) is not None
         self.sent = 0
+        self.withheld = 0
         self.ready = False
-        self.timer = None
-        if not environ.get("NOTIFY_SOCKET"):
-            return
-        period = watchdog_period_s(environ)
-        self.timer = node.create_timer(period / 2.0 if period else 1.0, self.tick,
-                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.reason = ""
 
-    def tick(self) -> None:
-        """Send READY=1 (first time) and WATCHDOG=1 (when the unit has a watchdog)."""
+    def update(self, ages_s: Mapping[str, float], timeout_s: float) -> bool:
+        """Ping systemd when every heartbeat in ``ages_s`` is fresh (:func:`stale_heartbeats`); READY=1 the first
+        time. Returns True when a ping went out."""
+        stale = stale_heartbeats(ages_s, timeout_s)
+        self.reason = f"stale heartbeat(s): {', '.join(stale)}" if stale else ""
+        if not self.enabled:
+            return False
+        if stale:
+            self.withheld += 1
+            return False
         if not self.ready:
             self.ready = notify("READY=1", self.environ)
             self.sent += self.ready
-        if watchdog_period_s(self.environ) is not None and notify("WATCHDOG=1", self.environ):
-            self.sent += 1
+        pinged = self.watchdog and notify("WATCHDOG=1", self.environ)
+        self.sent += pinged
+        return bool(pinged)

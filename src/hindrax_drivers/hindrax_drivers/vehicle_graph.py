@@ -19,19 +19,25 @@ Graph side (rclpy, no executor needed): :func:`graph_view` reads a node's view o
 caller's own nodes;
 :class:`ForeignVehicleWatch` applies :func:`foreign_vehicle_processes` to it over a discovery window, then every
 :data:`CHECK_PERIOD_S` for as long as the tool runs, and raises :class:`ForeignVehicleError` (one line naming the
-domain and the processes) when something is seen.
+domain and the processes) when something is seen. :func:`refuse_before_start` runs the window from a bare look-out
+node before a tool creates anything: a refused tool must leave no trace on the vehicle's graph (its heartbeat
+publishers, even for the second before the refusal, disarm the vehicle's ESC).
 """
 from __future__ import annotations
 
 import re
+import threading
 import time
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
+import rclpy
+from rclpy.parameter import Parameter
+
 __all__ = ["CHECK_PERIOD_S", "DISCOVERY_WINDOW_S", "HEARTBEAT_TOPICS", "ROLE_NODES", "ForeignVehicleError",
            "ForeignVehicleWatch", "GraphView", "foreign_vehicle_processes", "graph_view", "own_view",
-           "split_vehicle_topics", "vehicle_topic_reason"]
+           "refuse_before_start", "split_vehicle_topics", "vehicle_topic_reason"]
 
 #: (pattern matched with ``re.search`` against the full topic name, why the topic speaks for the vehicle); the first
 #: match gives the reason
@@ -215,3 +221,23 @@ class ForeignVehicleWatch:
         if now >= self._next_poll:
             self._next_poll = now + self.period_s
             self.check()
+
+
+def refuse_before_start(context: Any, consequence: str, what: str = "refused",
+                        window_s: float = DISCOVERY_WINDOW_S) -> None:
+    """Watch the domain of ``context`` (an initialised rclpy Context, None: the default one) through the discovery
+    window from a bare look-out node (no publisher, no service, no rosout), then destroy it; raise
+    :class:`ForeignVehicleError` (:meth:`ForeignVehicleWatch.check`'s line) as soon as an ESC or supervisor is seen.
+    Call it before the tool creates any node or publisher of its own: the look-out is one more participant, which
+    the vehicle ignores, where a tool's heartbeat publishers would disarm it. The caller's own watch afterwards
+    (``window_s=0``) keeps checking while it runs."""
+    lookout = rclpy.create_node("vehicle_graph_check", context=context, enable_rosout=False,
+                                start_parameter_services=False,
+                                parameter_overrides=[Parameter("start_type_description_service", value=False)])
+    try:
+        watch = ForeignVehicleWatch(lookout, what, consequence, window_s=window_s)
+        pause = threading.Event()
+        while not watch.settled():
+            pause.wait(0.05)
+    finally:
+        lookout.destroy_node()

@@ -107,7 +107,7 @@ def test_wrong_type(tmp_path):
 
 def test_out_of_range(tmp_path):
     msg = one_line_error(tmp_path, lambda p: p["thrusters"]["t3"].update(esc_channel=17))
-    assert "thrusters.t3.esc_channel = 17: allowed integer in [0, 15]" in msg
+    assert "thrusters.t3.esc_channel = 17: allowed integer in [0, 14]" in msg
 
 
 def test_bad_choice(tmp_path):
@@ -144,7 +144,7 @@ def test_wrong_list_length_and_non_unit_direction(tmp_path):
 
 def test_missing_key(tmp_path):
     msg = one_line_error(tmp_path, lambda p: p["thrusters"]["t8"].pop("esc_channel"))
-    assert "thrusters.t8.esc_channel is missing: allowed integer in [0, 15]" in msg
+    assert "thrusters.t8.esc_channel is missing: allowed integer in [0, 14]" in msg
 
 
 def test_cross_checks(tmp_path):

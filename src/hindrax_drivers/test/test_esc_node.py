@@ -675,6 +675,28 @@ def test_fault5_uncalibrated_oscillator_refuses_arming_and_neutral_applies_trim(
     assert out.target([1500.0, 1500.0, 1500.0], 0.02).tolist() == out.neutral().tolist()
 
 
+def test_fault9_an_unmeasured_oscillator_keeps_the_thruster_outputs_off():
+    """The shipped file (oscillator not measured) on a 23 MHz part: every thruster channel is full OFF (no pulses)
+    instead of a "neutral" computed at the nominal 25 MHz (1500 * 25 / 23 = 1630.4 us on the wire, inside the ESC's
+    forward range); channel 15 carries that same reference pulse for the scope; arming is refused."""
+    from hindrax_drivers.pca9685 import protocol as p
+
+    with ros_context() as ctx:
+        emu = Pca9685Emulator(oscillator_hz=23.0e6)
+        node = EscNode(bus=EmulatedI2CBus({0x40: emu}), context=ctx, parameter_overrides=config_parameters({}))
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        wait_until(lambda: node.core.neutral_confirmed_at is not None, 10, lambda: ex.spin_once(timeout_sec=0.01),
+                   "chip configured and read back")
+        assert wire(emu).tolist() == [0.0] * 8
+        assert all(emu.channel_registers(c).full_off for c in range(8))
+        assert abs(emu.pulse_width_us(p.REFERENCE_CHANNEL) - 1500.0 * 25.0 / 23.0) < 1.5
+        res = node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response())
+        assert not res.success and "oscillator_calibrated" in res.message
+        ex.shutdown()
+        node.destroy_node()
+
+
 def test_fault5_oscillator_calibration_from_one_scope_reading():
     """A 24.06 MHz part with the nominal 25 MHz configured: neutral on the wire is 1500 * 25 / 24.06 = 1558.6 us
     (outside the 1475-1525 us deadband). One reading of it calibrates the oscillator; then neutral is 1500 us."""

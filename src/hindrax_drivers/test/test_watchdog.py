@@ -2,18 +2,20 @@
 of the safety processes (hindrax_drivers.transport.gpio, hindrax_drivers.sd_notify, docs/watchdog.md)."""
 from __future__ import annotations
 
+import math
 import os
 import signal
 import socket
 import subprocess
 import sys
-import time
 
 import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import ConfigError, default_config_path, load_config
-from hindrax_drivers.sd_notify import notify, watchdog_period_s
-from hindrax_drivers.testing import child_env, wait_until
+from hindrax_drivers.sd_notify import SafetyNotifier, notify, stale_heartbeats, watchdog_period_s
+from hindrax_drivers.testing import child_env, ros_context, wait_until
 from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
 
 
@@ -121,28 +123,51 @@ def test_notify_and_watchdog_period(notify_socket):
         abstract.close()
 
 
-def test_the_guard_process_pings_systemd_and_a_frozen_one_does_not(notify_socket):
-    """READY=1, then WATCHDOG=1 every half WATCHDOG_USEC; SIGSTOP (a frozen launch) stops the pings, so systemd's
-    WatchdogSec ends the unit."""
+def test_the_notifier_pings_only_while_every_safety_heartbeat_is_fresh(notify_socket):
+    """The unit's watchdog hears WATCHDOG=1 only while the ESC's and the supervisor's beats are fresh (the guard's
+    own tick sends it): one stale or never-heard beat withholds the ping, so a partial freeze ends the unit."""
+    sock, path = notify_socket
+    env = {"NOTIFY_SOCKET": path, "WATCHDOG_USEC": "200000"}
+    assert stale_heartbeats({"esc": 0.05, "supervisor": 0.2}, 0.2) == []
+    assert stale_heartbeats({"esc": 0.21, "supervisor": math.inf}, 0.2) == ["esc", "supervisor"]
+    assert stale_heartbeats({"esc": math.nan, "supervisor": 0.0}, 0.2) == ["esc"]
+    n = SafetyNotifier(env)
+    assert not n.update({"esc": math.inf, "supervisor": math.inf}, 0.2)  # start-up: nobody heard yet
+    assert _received(sock) == [] and not n.ready
+    assert n.update({"esc": 0.04, "supervisor": 0.05}, 0.2)
+    assert _received(sock) == ["READY=1", "WATCHDOG=1"]
+    assert not n.update({"esc": 0.25, "supervisor": 0.01}, 0.2)  # the ESC frozen
+    assert not n.update({"esc": 0.01, "supervisor": 0.3}, 0.2)  # the supervisor frozen
+    assert _received(sock) == [] and n.withheld == 3 and n.reason == "stale heartbeat(s): supervisor"
+    assert n.update({"esc": 0.0, "supervisor": 0.0}, 0.2) and _received(sock) == ["WATCHDOG=1"]  # READY=1 once
+    assert not SafetyNotifier({}).update({"esc": 0.0, "supervisor": 0.0}, 0.2)  # not under systemd: nothing
+
+
+@pytest.mark.ros
+def test_a_guard_without_its_esc_and_supervisor_does_not_ping_systemd(notify_socket):
+    """Alone, the guard hears no ESC and no supervisor: no READY=1, no WATCHDOG=1 (a live guard used to keep the
+    unit whatever the other safety processes did). Its diagnostics say why."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
     sock, path = notify_socket
     env = child_env(NOTIFY_SOCKET=path, WATCHDOG_USEC="200000")
     env.pop("HINDRAX_EMULATION_SOCKET", None)
     proc = subprocess.Popen([sys.executable, "-m", "hindrax_drivers.guard.node", "--ros-args", "--params-file",
                              str(default_config_path())], env=env, stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
-    got: list[str] = []
+    said: list[str] = []
     try:
-        wait_until(lambda: got.extend(_received(sock)) or got.count("WATCHDOG=1") >= 5, 60, None, "pings")
-        assert got[0] == "READY=1" and got.count("READY=1") == 1
-        proc.send_signal(signal.SIGSTOP)
-        _received(sock)  # what was sent before the stop
-        stopped_at = time.monotonic()
-        wait_until(lambda: time.monotonic() - stopped_at > 0.6, 5, None, "3 ping periods frozen")
-        assert "WATCHDOG=1" not in _received(sock)
-        proc.send_signal(signal.SIGCONT)
-        wait_until(lambda: "WATCHDOG=1" in _received(sock), 20, None, "pings again")
+        with ros_context() as ctx:
+            node = rclpy.create_node("watchdog_probe", context=ctx)
+            node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: said.extend(
+                kv.value for st in m.status for kv in st.values if kv.key == "systemd_watchdog"), 10)
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(node)
+            wait_until(lambda: said, 60, lambda: ex.spin_once(timeout_sec=0.05), "guard diagnostics")
+            ex.shutdown()
+        assert said[-1] == "stale heartbeat(s): esc, supervisor", said
+        assert _received(sock) == []
     finally:
-        proc.send_signal(signal.SIGCONT)
         proc.send_signal(signal.SIGINT)
         try:
             proc.wait(10)
@@ -152,8 +177,9 @@ def test_the_guard_process_pings_systemd_and_a_frozen_one_does_not(notify_socket
 
 
 def test_units_and_the_safety_processes_use_the_systemd_watchdog():
-    """The bare-metal unit waits for READY=1 and aborts a unit that stops pinging; the Pi's drop-in hands the
-    hardware watchdog to systemd; the three safety entry points send the pings."""
+    """The bare-metal unit waits for READY=1 and kills a unit that stops pinging within 0.2 s; the Pi's drop-in hands
+    the hardware watchdog to systemd; the guard alone sends the pings (sd_notify.SafetyNotifier), the ESC and the
+    supervisor none (a live one would keep the unit while the other two are frozen)."""
     import inspect
     import re
     from pathlib import Path
@@ -164,14 +190,16 @@ def test_units_and_the_safety_processes_use_the_systemd_watchdog():
 
     docker = Path(__file__).resolve().parents[3] / "docker"
     bare = (docker / "hindrax-bare-metal.service").read_text()
-    for line in ("Type=notify", "NotifyAccess=all", "WatchdogSec=2", "Restart=on-failure"):
+    for line in ("Type=notify", "NotifyAccess=all", "WatchdogSec=200ms", "WatchdogSignal=SIGKILL",
+                 "Restart=on-failure"):
         assert re.search(rf"^{line}$", bare, re.M), line
     dropin = (docker / "systemd" / "hindrax-watchdog.conf").read_text()
     assert re.search(r"^\[Manager\]$", dropin, re.M)
     seconds = int(re.search(r"^RuntimeWatchdogSec=(\d+)s$", dropin, re.M).group(1))
     assert 1 <= seconds <= 15  # the BCM2711 watchdog's longest timeout
-    for module in (guard, esc, supervisor):
-        assert "systemd_notify=True" in inspect.getsource(module.main), module.__name__
+    assert "SafetyNotifier" in inspect.getsource(guard.OutputGuardNode)
+    for module in (esc, supervisor):
+        assert "notif" not in inspect.getsource(module).lower(), module.__name__
 
 
 def test_44_9_a_starved_guard_ages_a_dead_peer_at_wall_speed():

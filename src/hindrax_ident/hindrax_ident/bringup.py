@@ -40,7 +40,7 @@ from hindrax_drivers.ros_process import RosProcess
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.tf.node import StaticTfNode
-from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, own_view
+from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, own_view, refuse_before_start
 from hindrax_msgs.srv import SetArmed
 
 from .control.node import ControllerNode
@@ -270,10 +270,11 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         hardware = VirtualHardware(simulator, simulator.config, seed=cfg.simulation.seed, serial_threads=False)
         nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
-        # The emulated PCA9685 runs at exactly esc.oscillator_hz (VirtualHardware builds it from the configuration):
-        # calibrated by construction, so the ESC node may arm (on the vehicle a scope measurement sets the flag).
+        # The emulated PCA9685 reports its oscillator (VirtualHardware builds it at esc.oscillator_hz): measured, as
+        # `hindrax esc calibrate` measures a real part, when it is the configured one (then the ESC puts pulses out)
+        measured = hardware.pca9685.oscillator_hz == cfg.esc.oscillator_hz
         cfg = cfg.with_overrides({"sensors.dvl75.port": hardware.dvl_port, "sensors.ping1d.port": hardware.ping_port,
-                                  "esc.oscillator_calibrated": True})
+                                  "esc.oscillator_calibrated": measured})
         bus = hardware.i2c_bus
     else:
         bus = i2c_bus  # None: each I2C node opens smbus2.SMBus(<its configured bus>)
@@ -348,19 +349,6 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     return Graph(cfg, nodes, executor, hardware, context, stepped=stepped)
 
 
-def refuse_foreign_vehicle(graph: Graph, consequence: str, spin_timeout_s: float = 0.05) -> ForeignVehicleWatch:
-    """Spin ``graph`` through the discovery window (:data:`~hindrax_drivers.vehicle_graph.DISCOVERY_WINDOW_S`) and
-    raise :class:`~hindrax_drivers.vehicle_graph.ForeignVehicleError` (one line naming the domain and the process,
-    then ``consequence``) as soon as an ESC or supervisor other than the graph's own is visible on its domain.
-    Returns the watch, for a caller that keeps checking after the window
-    (:meth:`~hindrax_drivers.vehicle_graph.ForeignVehicleWatch.check_every`)."""
-    any_node = next(iter(graph.nodes.values()))
-    watch = ForeignVehicleWatch(any_node, "refused", consequence, own=lambda: own_view(graph.nodes.values()))
-    wait_until(watch.settled, 10 * watch.window_s, lambda: graph.executor.spin_once(timeout_sec=spin_timeout_s),
-               "discovery window")
-    return watch
-
-
 def run(config_path: str | Path, *, sim: bool = False, record: bool = False, record_dir: str = "",
         seed: int | None = None, real_time_factor: float | None = None, controller: bool = False,
         model_file: str = "") -> int:
@@ -370,11 +358,15 @@ def run(config_path: str | Path, *, sim: bool = False, record: bool = False, rec
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST" if sim else "SUBNET")
     loopback_transport()  # loopback discovery: over the vehicle's loopback UDP transport
     with RosProcess(errors={ConfigError: "invalid configuration", ForeignVehicleError: "hindrax bringup"}) as proc:
+        consequence = "refusing to start a second vehicle graph on it (set ROS_DOMAIN_ID to a free domain)"
+        load_config(config_path)  # an invalid file is refused before the domain is watched
+        refuse_before_start(None, consequence)  # before any node: a refused start leaves no heartbeat publisher
         graph = build_graph(config_path, sim=sim, record=record, record_dir=record_dir, seed=seed,
                             real_time_factor=real_time_factor, controller=controller, model_file=model_file)
         proc.at_exit(graph.shutdown)
-        watch = refuse_foreign_vehicle(graph, "refusing to start a second vehicle graph on it (set ROS_DOMAIN_ID to "
-                                              "a free domain)")
+        watch = ForeignVehicleWatch(next(iter(graph.nodes.values())), "refused", consequence,
+                                    own=lambda: own_view(graph.nodes.values()), window_s=0.0)
+        watch.check()
         watch.check_every()  # a vehicle discovered after the window (a loaded machine) ends it the same way
         print(f"bringup: {len(graph.nodes)} nodes ({', '.join(graph.nodes)}), "
               f"{'virtual pool' if sim else 'hardware'}; Ctrl-C to stop", flush=True)

@@ -32,7 +32,7 @@ def test_each_error_is_one_line_and_exit_1(tmp_path):
     assert r.returncode == 1
     lines = r.stdout.strip().splitlines()
     assert len(lines) == 3
-    assert f"{bad}: thrusters.t3.esc_channel = 17: allowed integer in [0, 15]" in lines
+    assert f"{bad}: thrusters.t3.esc_channel = 17: allowed integer in [0, 14]" in lines
     assert f"{bad}: sensors.ms5837.variant = '100BA': allowed one of 30BA, 02BA, auto" in lines
     assert f"{bad}: vehicle.colour = 'yellow': unknown key" in lines
 
@@ -65,7 +65,7 @@ def test_every_command_reading_the_vehicle_file_reports_an_invalid_one_in_one_li
         assert cli.main(argv) == 1, argv
         out, err = capsys.readouterr()
         assert out == "" and err.splitlines() == [
-            f"invalid configuration: {bad}: thrusters.t3.esc_channel = 17: allowed integer in [0, 15]"], (argv, err)
+            f"invalid configuration: {bad}: thrusters.t3.esc_channel = 17: allowed integer in [0, 14]"], (argv, err)
     assert bad.read_text() == before and not (tmp_path / "suite").exists()
 
 

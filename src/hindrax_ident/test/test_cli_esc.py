@@ -31,7 +31,11 @@ def test_calibrate_from_one_scope_reading_and_write(tmp_path):
     assert "# nominal; calibrate per board" in cfg.read_text()  # the file's comments survive
     # config check no longer prints the calibration note
     assert "oscillator_calibrated is false" not in run("config", "check", str(cfg)).stdout
-    assert "hindrax esc calibrate" in run("config", "check", str(default_config_path())).stdout
+    unmeasured = run("config", "check", str(default_config_path())).stdout
+    # an unmeasured 23-27 MHz is not taken as neutral-safe: the check says the outputs stay off and where to measure
+    assert "warning: esc.oscillator_calibrated is false" in unmeasured, unmeasured
+    assert "keeps the thruster outputs off (no pulses)" in unmeasured and "channel 15" in unmeasured
+    assert "hindrax esc calibrate" in unmeasured
 
 
 def test_calibrate_rejects_an_impossible_reading_and_leaves_the_file(tmp_path):

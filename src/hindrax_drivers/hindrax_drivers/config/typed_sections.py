@@ -285,7 +285,7 @@ class LightsSection(Section):
     PREFIX: ClassVar[str] = "lights"
 
     esc_channel: int
-    """PCA9685 channel of the lights"""
+    """PCA9685 channel of the lights (15 carries the reference pulse for `hindrax esc calibrate`)"""
     pulse_width_off_us: float
     """pulse width for lights off, us"""
     pulse_width_full_us: float

@@ -26,9 +26,11 @@ starved), the guard asserts and latches: thrust comes back only through a new ar
 
 Subscribes ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus from the ESC's steady-clock tick: its output state
 and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
-``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus). Publishes ``guard/heartbeat``
-(diagnostic_msgs/DiagnosticStatus at every tick: level OK = outputs enabled, ERROR = silenced with the reason; the
-ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
+``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
+unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_drivers.sd_notify`): a
+frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
+``guard/heartbeat`` (diagnostic_msgs/DiagnosticStatus at every tick: level OK = outputs enabled, ERROR = silenced
+with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
@@ -59,6 +61,7 @@ from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
 from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
+from ..sd_notify import SafetyNotifier
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
 from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
 
@@ -132,6 +135,8 @@ class OutputGuardNode(Node):
         self._last_rise: float | None = None  # time.monotonic() of the last rising edge sent
         self._released_at = -1e9  # time.monotonic() of the last release of the outputs (feeding starts again)
         self.feed_timeout_s = esc.output_enable_feed_timeout_s
+        #: READY=1 / WATCHDOG=1 for the systemd unit (sd_notify.py): at each tick while both heartbeats are fresh
+        self.notifier = SafetyNotifier()
         if (self.feed_gpio is not None or feed is not None) and not self.feed_rate_hz:
             raise ValueError("the watchdog feed needs esc.output_enable_feed_rate_hz")
         where = (f"/OE {self.gpio[0]}:{self.gpio[1]}" if self.gpio else "/OE (injected line)" if line is not None
@@ -355,6 +360,8 @@ class OutputGuardNode(Node):
         self.heartbeat.publish(DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
                                self.core.reason if asserted else "outputs enabled")
         self.diag.published()
+        # systemd's watchdog hears from this process alone, and only while all three safety processes run
+        self.notifier.update({"esc": self.esc_age.age_s, "supervisor": self.supervisor_age.age_s}, self.timeout_s)
 
     def _diag_extra(self):
         return [("asserted", self.core.asserted), ("reason", self.core.reason), ("assertions", self.assertions),
@@ -362,6 +369,7 @@ class OutputGuardNode(Node):
                 ("output_enable_gpio", f"{self.gpio[0]}:{self.gpio[1]}" if self.gpio else "not wired"),
                 ("watchdog_feed", ("feeding" if self.feeding() else "held") if self.feeds else "not fitted"),
                 ("watchdog_feed_edges", self.feed_edges),
+                ("systemd_watchdog", (self.notifier.reason or "pinging") if self.notifier.enabled else "no unit"),
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
                 ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values()))]
@@ -386,7 +394,7 @@ class OutputGuardNode(Node):
 
 def main(args=None) -> int:
     """``python -m hindrax_drivers.guard.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
-    return run_node(OutputGuardNode, args, systemd_notify=True)  # READY=1, WATCHDOG=1 (sd_notify.py)
+    return run_node(OutputGuardNode, args)
 
 
 if __name__ == "__main__":

@@ -37,7 +37,8 @@ class EscChip:
 
     ``address`` (7-bit I2C), ``prescale`` (3..255) and ``oscillator_hz`` (the calibrated oscillator, Hz) give the
     count grid; ``channels`` (n,) are the thrusters' PCA9685 channels in thruster order, ``lights_channel`` the
-    lights'. ``raw``: an object with ``begin_batch()`` and ``flush()`` (the node's ``raw/pca9685`` recorder), so that
+    lights'; ``reference``: (channel, us) of a constant pulse on a channel no ESC is on, or None. ``raw``: an object
+    with ``begin_batch()`` and ``flush()`` (the node's ``raw/pca9685`` recorder), so that
     the transactions of one update go out in one message. :attr:`device` is None until the bus is open.
     :attr:`written` (n,) holds the thruster widths on the chip as decoded from the counts written, us.
     """
@@ -46,10 +47,13 @@ class EscChip:
     EXPECTED_MODE1 = p.MODE1_AI | p.MODE1_ALLCALL
 
     def __init__(self, address: int, prescale: int, oscillator_hz: float, channels: Sequence[int],
-                 lights_channel: int, raw: Any, device: I2CDevice | None = None) -> None:
+                 lights_channel: int, raw: Any, device: I2CDevice | None = None,
+                 reference: tuple[int, float] | None = None) -> None:
         self.address, self.prescale, self.oscillator_hz = int(address), int(prescale), float(oscillator_hz)
         self.channels = [int(c) for c in channels]
         self.lights_channel = int(lights_channel)
+        #: (channel, us): a constant pulse written with every update, for the scope (``hindrax esc calibrate``)
+        self.reference = reference
         self.raw = raw
         self.device = device
         self.written = np.full(len(self.channels), np.nan)
@@ -116,6 +120,8 @@ class EscChip:
         device = self._need_device("write")
         per_channel = {ch: float(w) for ch, w in zip(self.channels, widths_us)}
         per_channel[self.lights_channel] = float(lights_us)
+        if self.reference is not None:
+            per_channel[self.reference[0]] = float(self.reference[1])
         self.raw.begin_batch()
         decoded: dict[int, float] = {}
         for run in channel_runs(sorted(per_channel)):

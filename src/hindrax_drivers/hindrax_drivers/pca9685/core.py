@@ -200,13 +200,18 @@ class EscOutput:
     moves a thrust command back inside the deadband (a reversed thruster's mirrored 1525 us landed at 1474.8 +
     trim before). ``count_us`` 0 leaves the widths off the grid (the chip rounds half-up).
 
+    ``outputs_off``: the oscillator is not measured (``esc.oscillator_calibrated`` false), so no width is known to
+    be neutral on the wire: "neutral" is then no pulse at all, 0 us (the channel's full-OFF bit), which the Basic
+    ESC treats as stop (docs/devices.md §5.2).
+
     ``target(command, dt_s)`` returns the (n,) widths to write now. Raises :class:`ValueError` for a command of
     the wrong length or with a non-finite value. Without a slew limit the widths of a command are computed once
     (the same command object again returns them as they are); a new object, or :meth:`neutral`, computes anew.
     """
 
     def __init__(self, channels, reversed_, trim_us, min_us: float, neutral_us: float, max_us: float,
-                 slew_rate_us_per_s: float = 0.0, count_us: float = 0.0, deadband_us: float = 0.0):
+                 slew_rate_us_per_s: float = 0.0, count_us: float = 0.0, deadband_us: float = 0.0,
+                 outputs_off: bool = False):
         self.channels = np.asarray(channels, dtype=int)
         self.reversed = np.asarray(reversed_, dtype=bool)
         self.trim_us = np.asarray(trim_us, dtype=float)
@@ -217,22 +222,24 @@ class EscOutput:
         self.current = np.full(len(self.channels), self.neutral_us)
         self._computed_for: object = None  # the command object :attr:`current` was computed for (no slew limit)
         # computed once (read-only): the output path asks for it twice per 20 ms period
-        self._channel_neutral = np.clip(np.full(len(self.channels), self.neutral_us) + self.trim_us, self.min_us,
-                                        self.max_us)
+        self._channel_neutral = np.zeros(len(self.channels)) if outputs_off else np.clip(
+            np.full(len(self.channels), self.neutral_us) + self.trim_us, self.min_us, self.max_us)
         self._channel_neutral.flags.writeable = False
         self._grid_bounds = (math.ceil(self.min_us / self.count_us - 1e-9),
                              math.floor(self.max_us / self.count_us + 1e-9)) if self.count_us > 0.0 else (0, 0)
 
     @classmethod
-    def from_config(cls, thrusters, slew_rate_us_per_s: float, count_us: float) -> "EscOutput":
+    def from_config(cls, thrusters, slew_rate_us_per_s: float, count_us: float,
+                    outputs_off: bool = False) -> "EscOutput":
         """From the ``thrusters`` configuration section (channels, reversal, trims, widths, deadband)."""
         t = thrusters
         return cls([th.esc_channel for th in t.thrusters], [th.reversed for th in t.thrusters],
                    [th.trim_us for th in t.thrusters], t.pulse_width_min_us, t.pulse_width_neutral_us,
-                   t.pulse_width_max_us, slew_rate_us_per_s, count_us=count_us, deadband_us=t.deadband_us)
+                   t.pulse_width_max_us, slew_rate_us_per_s, count_us=count_us, deadband_us=t.deadband_us,
+                   outputs_off=outputs_off)
 
     def channel_neutral(self) -> np.ndarray:
-        """(n,) ``neutral_us + trim_us`` clamped to the limits, us (read-only)."""
+        """(n,) ``neutral_us + trim_us`` clamped to the limits, us (read-only); zeros with ``outputs_off``."""
         return self._channel_neutral
 
     def neutral(self) -> np.ndarray:

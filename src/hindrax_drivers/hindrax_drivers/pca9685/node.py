@@ -7,6 +7,10 @@ should hold and takes what the chip confirmed at its next command or tick. A bus
 ``esc.bus_call_timeout_s`` (0.15 s) makes the output state UNKNOWN (heartbeat ERROR: the output guard stops the
 outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by a later thrust write.
 
+- Oscillator not measured (``esc.oscillator_calibrated`` false): "neutral" is no pulse on every thruster channel
+  (full OFF: a width computed from an unmeasured 23-27 MHz oscillator may be outside the ESC's deadband), arming is
+  refused, and channel :data:`~.protocol.REFERENCE_CHANNEL` carries the configured neutral width for the scope
+  (``hindrax esc calibrate``).
 - Chip: start-up and every recovery by :meth:`.chip.EscChip.configure` (neutral first), confirmed by read-back; a
   failed write or read-back is ``OUTPUT_UNKNOWN`` (widths NaN on ``thrusters/pulse_width``, never "neutral"); a
   read-back mismatch every ``esc.readback_interval_s`` (brown-out) re-initialises the chip and disarms. No bus at
@@ -98,15 +102,19 @@ class EscNode(Node):
         self.lights_us = self.lights_off_us
         self.oscillator_hz = esc.oscillator_hz
         self.prescale = p.esc_prescale(esc.pwm_frequency_hz, self.oscillator_hz)
+        # an oscillator nobody measured gives no known neutral: the thruster outputs stay off (no pulses), and the
+        # reference channel carries the configured neutral width for the scope (hindrax esc calibrate)
         self.output = EscOutput.from_config(t, esc.slew_rate_us_per_s, p.count_duration_us(self.prescale,
-                                                                                             self.oscillator_hz))
+                                                                                             self.oscillator_hz),
+                                            outputs_off=not esc.oscillator_calibrated)
         #: the decisions (arm, refuse, disarm, neutral, output state, reason): :mod:`.core`
         self.core = EscCore(self.output, arming_time_s=esc.arming_time_s, watchdog_timeout_s=esc.watchdog_timeout_s,
                             oscillator_calibrated=esc.oscillator_calibrated, clock=lambda: time.monotonic())
         self.i2c_bus_number = int(esc.i2c_bus)
         self.raw = RawDataPublisher(self, "pca9685")
         chip = EscChip(int(esc.i2c_address), self.prescale, self.oscillator_hz, self.output.channels,
-                       lights.esc_channel, self.raw)
+                       lights.esc_channel, self.raw, reference=None if esc.oscillator_calibrated else (
+                           p.REFERENCE_CHANNEL, t.pulse_width_neutral_us))
         #: the bus's thread; results taken at each command and tick (rclpy's EventsExecutor has no guard conditions)
         self.chip_io = ChipWorker(chip, self._open_bus, self.raw.i2c_tap, threaded=chip_thread,
                                   call_timeout_s=esc.bus_call_timeout_s)
@@ -413,7 +421,7 @@ class EscNode(Node):
 
 def main(args=None) -> int:
     """``python -m hindrax_drivers.pca9685.node --ros-args --params-file ros_ws/config/hindrax.yaml`` (Pi)."""
-    return run_node(EscNode, args, systemd_notify=True)  # READY=1, WATCHDOG=1 (sd_notify.py)
+    return run_node(EscNode, args)
 
 
 if __name__ == "__main__":

@@ -75,6 +75,10 @@ MODE2_OUTDRV = 0x04
 MODE2_OUTNE_MASK = 0x03
 #: Bit 4 of LEDn_ON_H (full ON) and LEDn_OFF_H (full OFF).
 FULL_BIT = 0x10
+#: The channel that carries a constant reference pulse (the configured neutral width) while the oscillator is not
+#: measured (``esc.oscillator_calibrated`` false): the thruster channels are then off, and a scope measures this one
+#: for ``hindrax esc calibrate``. The chip's last channel: no ESC or light may be on it (config cross-check).
+REFERENCE_CHANNEL = 15
 
 #: Reset values (docs/devices.md §5.1; the MODE1 SLEEP default is UNVERIFIED there).
 MODE1_RESET = 0x11

@@ -20,8 +20,9 @@ Thin rclpy node over :mod:`~hindrax_drivers.recording.reader` (raw CDR messages 
   setpoints, action and service topics: :func:`~hindrax_drivers.vehicle_graph.vehicle_topic_reason`) are withheld
   unless ``safety_topics:=true``: a bag must never answer for the vehicle's supervisor or drive its thrusters. Naming
   one in ``topics`` without it is an error. With it, the player watches the graph
-  (:class:`~hindrax_drivers.vehicle_graph.ForeignVehicleWatch`) for at least the discovery window before the first
-  message and all through the play, and stops with a :class:`PlayerError` naming the ESC or supervisor it sees.
+  (:class:`~hindrax_drivers.vehicle_graph.ForeignVehicleWatch`) for the discovery window before it creates its first
+  publisher (a refused play leaves nothing on a vehicle's graph) and all through the play, and stops with a
+  :class:`PlayerError` naming the ESC or supervisor it sees.
 
 Parameters: ``bag`` (string, required), ``rate`` (1.0), ``start_offset_s`` (0.0), ``topics`` (string[],
 empty = all), ``loop`` (false), ``clock`` (false), ``clock_rate_hz`` (100.0),
@@ -46,7 +47,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosgraph_msgs.msg import Clock
 
 from ..ros_process import RosProcess
-from ..vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, GraphView, split_vehicle_topics
+from ..vehicle_graph import (DISCOVERY_WINDOW_S, ForeignVehicleError, ForeignVehicleWatch, GraphView,
+                             split_vehicle_topics)
 from .msgtypes import TypeNotInstalledError, message_class
 from .playback import PlayStats, play
 from .qos import playback_profile, profiles_from_yaml
@@ -79,10 +81,16 @@ _PARAMETER_DOCS = {
 GRAPH_CHECK_PERIOD_S = 0.2
 
 
-class BagPlayerNode(Node):
-    """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction."""
+#: what the player refuses beside a live ESC or supervisor (with ``safety_topics``)
+REFUSAL = "a bag's safety and actuation topics are never published onto a live vehicle's graph"
 
-    def __init__(self, node_name: str = "player", **kwargs: Any) -> None:
+
+class BagPlayerNode(Node):
+    """Publishes a bag; see the module docstring. Raises :class:`PlayerError` at construction. ``window_s``: the
+    discovery window watched before the first publisher (with ``safety_topics``; 0 when the caller watched it
+    already, :func:`~hindrax_drivers.vehicle_graph.refuse_before_start`)."""
+
+    def __init__(self, node_name: str = "player", window_s: float = DISCOVERY_WINDOW_S, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         bag = str(self._param("bag", ""))
         self.rate = float(self._param("rate", 1.0))
@@ -126,7 +134,25 @@ class BagPlayerNode(Node):
             if self.withheld:
                 self.get_logger().info(f"not publishing {len(self.withheld)} safety and actuation topic(s) "
                                        f"({' '.join(self.withheld)}); --safety-topics to publish them")
+        if self.reader.start_ns is None:
+            raise PlayerError(f"{bag}: the bag holds no messages")
+        self.bag_start_ns = self.reader.start_ns
+        self.origin_ns = self.bag_start_ns + int(round(self.start_offset_s * 1e9))
+        if self.origin_ns > self.reader.end_ns:
+            raise PlayerError(f"start offset {self.start_offset_s:g} s is beyond the end of {bag} "
+                              f"({(self.reader.end_ns - self.bag_start_ns) / 1e9:.3f} s long)")
         self.pubs: dict[str, Any] = {}
+        self._stop = threading.Event()
+        self.watch: ForeignVehicleWatch | None = None
+        if self.safety_topics:
+            # the discovery window before the first publisher: a refused play must leave nothing on a vehicle's
+            # graph (a second heartbeat publisher, even for the window, disarms its ESC)
+            me = self.get_fully_qualified_name()
+            self.watch = ForeignVehicleWatch(self, "refused", REFUSAL, window_s=window_s,
+                                             own=lambda: GraphView((me,), {t: (me,) for t in self.pubs}),
+                                             period_s=GRAPH_CHECK_PERIOD_S)
+            while not self._stop.is_set() and not self._graph_settled():
+                self._wait(0.05)
         for topic in selected:
             ch = self.reader.channels[topic]
             try:
@@ -149,21 +175,6 @@ class BagPlayerNode(Node):
                 list(self.skipped.values()) + ([f"the bag's {len(self.withheld)} safety and actuation topic(s) are "
                                                 "withheld (--safety-topics)"] if self.withheld else [])))
         self.clock_pub = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
-        if self.reader.start_ns is None:
-            raise PlayerError(f"{bag}: the bag holds no messages")
-        self.bag_start_ns = self.reader.start_ns
-        self.origin_ns = self.bag_start_ns + int(round(self.start_offset_s * 1e9))
-        if self.origin_ns > self.reader.end_ns:
-            raise PlayerError(f"start offset {self.start_offset_s:g} s is beyond the end of {bag} "
-                              f"({(self.reader.end_ns - self.bag_start_ns) / 1e9:.3f} s long)")
-        self._stop = threading.Event()
-        self.watch: ForeignVehicleWatch | None = None
-        if self.safety_topics:
-            me = self.get_fully_qualified_name()
-            own = GraphView((me,), {t: (me,) for t in self.pubs})
-            self.watch = ForeignVehicleWatch(self, "refused", "a bag's safety and actuation topics are never "
-                                             "published onto a live vehicle's graph", own=lambda: own,
-                                             period_s=GRAPH_CHECK_PERIOD_S)
 
     def _check_graph(self, force: bool = False) -> None:
         """With ``safety_topics``: raise :class:`PlayerError` when an ESC or supervisor is on the graph (looked at

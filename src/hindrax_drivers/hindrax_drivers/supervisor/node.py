@@ -284,7 +284,7 @@ def _stamp_s(stamp: Any) -> float:
 
 def main(args=None) -> int:
     """``python -m hindrax_drivers.supervisor.node --ros-args --params-file ros_ws/config/hindrax.yaml``."""
-    return run_node(SupervisorNode, args, systemd_notify=True)  # READY=1, WATCHDOG=1 (sd_notify.py)
+    return run_node(SupervisorNode, args)
 
 
 if __name__ == "__main__":

@@ -57,6 +57,15 @@ The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench'
 * ``guard_without_line_arming_refused``: the guard started while its /OE line is busy (the request fails); the arm
   requests refused of those made, then the line is granted and the time until an arm is accepted is in the note.
 
+A partial freeze without the hardware watchdog (:func:`partial_freeze_rows`; the shipped vehicle file has no feed
+line): the same layout with /OE but no feed, its processes under :class:`SystemdWatchdogStandIn` (what systemd does
+for the bare-metal unit: ``WatchdogSec`` :data:`UNIT_WATCHDOG_S`, SIGKILL; without systemd's timer slack of up to
+0.25 s):
+
+* ``partial_freeze_no_feed_outputs_stopped_ms``: SIGSTOP of the ESC and the guard while the supervisor runs, armed
+  at 1700 us, until no thruster carries a pulse (the guard's pings stop, the unit is killed, the freed /OE line
+  goes high). The Docker unit has no watchdog (no ``$NOTIFY_SOCKET`` in the container): there only the feed stops it.
+
 Each path is repeated (:data:`QUICK_REPEATS` times with ``--quick``, otherwise :data:`REPEATS` in-process and
 :data:`PROCESS_REPEATS` for the process failures); rows give the median and the maximum in ms.
 """
@@ -66,6 +75,7 @@ import functools
 import json
 import os
 import signal as _signal
+import socket
 import subprocess
 import tempfile
 import threading
@@ -305,7 +315,8 @@ def run(quick: bool = False) -> list[dict]:
             row["note"] = notes[name]
         rows.append(row)
     # The participant-churn rows join this section from their own module (bench.BENCHMARKS): it imports _Layout.
-    return rows + run_processes(quick) + replay_rows(quick) + frozen_rows(quick) + gc_rows(quick)
+    return (rows + run_processes(quick) + replay_rows(quick) + frozen_rows(quick) + partial_freeze_rows(quick)
+            + gc_rows(quick))
 
 
 # ------------------------------------------------------------------------------------ garbage collection pauses
@@ -391,7 +402,7 @@ class _Hardware:
     processes; records when the outputs stop. :attr:`line_busy`: the /OE line refuses requests (another consumer
     holds it)."""
 
-    def __init__(self, sock: str) -> None:
+    def __init__(self, sock: str, feed: bool = True) -> None:
 
         hw = self
         self.line_busy = False
@@ -418,10 +429,11 @@ class _Hardware:
                 hw._event()
 
         self.line = Line(pull_high=True)
-        self.feed = Feed(WATCHDOG_TIMEOUT_S)
-        self.emu = Chip(output_enable_line=WatchedOutputEnable(self.line, self.feed))
+        self.feed = Feed(WATCHDOG_TIMEOUT_S) if feed else None  # None: no hardware watchdog fitted
+        self.emu = Chip(output_enable_line=WatchedOutputEnable(self.line, self.feed) if feed else self.line)
         self.bus = EmulatedI2CBus({0x40: self.emu})
-        self.server = EmulationServer(sock, bus=self.bus, lines={"oe": self.line, "oe_feed": self.feed})
+        self.server = EmulationServer(sock, bus=self.bus, lines={"oe": self.line, **({"oe_feed": self.feed} if feed
+                                                                                      else {})})
         self.watch = False
         self.stopped_at: float | None = None  # every thruster at neutral or without pulses
         self.oe_at: float | None = None  # /OE high
@@ -444,8 +456,8 @@ class _Hardware:
         run-out (no event marks it), whichever came first; None while thrust is on."""
         if self.thrust():
             return None
-        times = [t for t in (self.stopped_at, self.feed.expires_at() if self.feed.expired() else None)
-                 if t is not None]
+        ran_out = self.feed is not None and self.feed.expired()
+        times = [t for t in (self.stopped_at, self.feed.expires_at() if ran_out else None) if t is not None]
         return min(times) if times else time.monotonic()
 
     def arm_watch(self) -> None:
@@ -456,8 +468,9 @@ class _Hardware:
         self.server.close()
 
 
-def _config_file(tmp) -> str:
-    """The shipped vehicle file with /OE wired, no sensors watched, no arming hold (the bench's own file)."""
+def _config_file(tmp, feed: bool = True) -> str:
+    """The shipped vehicle file with /OE wired, no sensors watched, no arming hold (the bench's own file); ``feed``:
+    the hardware watchdog's feed line wired too (the shipped file has none)."""
     doc = yaml.safe_load(default_config_path().read_text())
     params = doc["/**"]["ros__parameters"]
     for key, value in {"esc.arming_time_s": 0.0, "esc.oscillator_calibrated": True,
@@ -468,9 +481,10 @@ def _config_file(tmp) -> str:
             node = node.setdefault(p, {})
         node[leaf] = value
     params["esc"]["output_enable_gpio"] = {"chip": "/dev/gpiochip0", "line": 17}  # served by _Hardware
-    params["esc"]["output_enable_feed_gpio"] = {"chip": "/dev/gpiochip0", "line": 27}  # the watchdog's feed, too
-    params["esc"]["output_enable_feed_rate_hz"] = 10.0
-    params["esc"]["output_enable_feed_timeout_s"] = WATCHDOG_TIMEOUT_S
+    if feed:
+        params["esc"]["output_enable_feed_gpio"] = {"chip": "/dev/gpiochip0", "line": 27}  # the watchdog's feed
+        params["esc"]["output_enable_feed_rate_hz"] = 10.0
+        params["esc"]["output_enable_feed_timeout_s"] = WATCHDOG_TIMEOUT_S
     path = tmp / "vehicle.yaml"
     path.write_text(yaml.safe_dump(doc))
     load_config(path)  # the bench's file must validate like any vehicle file
@@ -483,10 +497,10 @@ class _Layout:
     def __init__(self, ctx, did: int, tmp, hw: _Hardware) -> None:
 
         self.ctx, self.tmp, self.hw = ctx, tmp, hw
-        self.config = _config_file(tmp)
+        self.config = _config_file(tmp, feed=self.feed)
         # unbuffered logs: a failure prints the processes' last lines while they still run
         self.env = child_env(ROS_DOMAIN_ID=str(did), RCUTILS_LOGGING_BUFFERED_STREAM="0", PYTHONUNBUFFERED="1",
-                             **{SOCKET_ENV: hw.server.path})
+                             **{SOCKET_ENV: hw.server.path}, **self.unit_env())
         self.py = python_executable()
         self.procs: dict = {}
         self.SetArmed, self.Trigger, self.ThrusterPwm = SetArmed, Trigger, ThrusterPwm
@@ -537,6 +551,13 @@ class _Layout:
                 self.last_esc_diag = f"{st.name}: {st.message} " + ", ".join(f"{kv.key}={kv.value}" for kv in st.values)
             if st.name == "hindrax/supervisor" and any(kv.key == "errors.clock_step" for kv in st.values):
                 self.diag.append((t, st))
+
+    #: the hardware watchdog on /OE fitted (its feed line in the vehicle file)
+    feed = True
+
+    def unit_env(self) -> dict[str, str]:
+        """Environment a service manager gives the node processes (none here; :class:`_UnitLayout`)."""
+        return {}
 
     # -- processes
     #: False: the real-time priority withheld (the launch file's nice -5 only), for a comparison
@@ -661,7 +682,7 @@ def running_layout(prefix: str, did: int | None = None, layout: type[_Layout] = 
     with tempfile.TemporaryDirectory(prefix=prefix) as d, \
             (nullcontext(did) if did is not None else domain_id()) as did, ros_context(domain_id=did) as ctx:
         tmp = Path(d)
-        hw = _Hardware(str(tmp / "emulation.sock"))
+        hw = _Hardware(str(tmp / "emulation.sock"), feed=layout.feed)
         lay = layout(ctx, did, tmp, hw)
         try:
             yield lay
@@ -672,6 +693,109 @@ def running_layout(prefix: str, did: int | None = None, layout: type[_Layout] = 
         finally:
             lay.close()
             hw.close()
+
+
+#: the bare-metal unit's WatchdogSec (docker/hindrax-bare-metal.service), s
+UNIT_WATCHDOG_S = 0.2
+
+
+class SystemdWatchdogStandIn:
+    """What systemd does for the bare-metal unit (``Type=notify``, ``NotifyAccess=all``, ``WatchdogSec``,
+    ``WatchdogSignal=SIGKILL``; systemd.service(5)): a datagram socket at ``path`` for ``$NOTIFY_SOCKET``; once
+    READY=1 came, when no WATCHDOG=1 arrives for ``watchdog_s`` every process ``pids()`` lists gets SIGKILL (the unit
+    is stopped; ``Restart=`` would start it again). :attr:`fired_at`: monotonic time of the last kill. systemd's own
+    timer may fire up to its event loop's default accuracy (250 ms, sd_event_add_time(3)) later; this one polls
+    every 5 ms."""
+
+    def __init__(self, path: str, watchdog_s: float, pids) -> None:
+        self.path, self.watchdog_s, self.pids = path, float(watchdog_s), pids
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self.sock.bind(path)
+        self.sock.settimeout(0.005)
+        self.ready = False
+        self.last_ping = time.monotonic()
+        self.pings = 0
+        self.fired_at: float | None = None
+        self._run = True
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def env(self) -> dict[str, str]:
+        """``NOTIFY_SOCKET`` and ``WATCHDOG_USEC`` as systemd sets them for the unit's processes."""
+        return {"NOTIFY_SOCKET": self.path, "WATCHDOG_USEC": str(int(round(self.watchdog_s * 1e6)))}
+
+    def _loop(self) -> None:
+        while self._run:
+            try:
+                for state in self.sock.recv(256).decode(errors="replace").split("\n"):
+                    if state == "READY=1" and not self.ready:
+                        self.ready, self.last_ping = True, time.monotonic()
+                    elif state == "WATCHDOG=1":
+                        self.pings += 1
+                        self.last_ping = time.monotonic()
+            except OSError:
+                pass
+            if self.ready and time.monotonic() - self.last_ping > self.watchdog_s:
+                self.fired_at = time.monotonic()
+                self.ready = False  # the unit is stopped; its next start sends READY=1 again
+                for pid in self.pids():
+                    try:
+                        os.kill(pid, _signal.SIGKILL)
+                    except ProcessLookupError:
+                        pass
+
+    def close(self) -> None:
+        self._run = False
+        self.thread.join(5)
+        self.sock.close()
+
+
+class _UnitLayout(_Layout):
+    """The layout as the bare-metal unit runs it, with the shipped vehicle file's wiring (/OE, no watchdog feed):
+    the node processes under :class:`SystemdWatchdogStandIn` (:attr:`unit`)."""
+
+    feed = False
+
+    def unit_env(self) -> dict[str, str]:
+        self.unit = SystemdWatchdogStandIn(str(self.tmp / "notify"), UNIT_WATCHDOG_S,
+                                           lambda: [p.pid for p in self.procs.values() if p.poll() is None])
+        return self.unit.env()
+
+    def close(self) -> None:
+        super().close()
+        self.unit.close()
+
+
+def partial_freeze_rows(quick: bool = False) -> list[dict]:
+    """Row of a partial freeze without the /OE watchdog feed (module docstring): SIGSTOP of the ESC and the guard
+    while the supervisor runs, armed at 1700 us, until no thruster carries a pulse (the unit stopped, the guard's
+    line freed, /OE at its pull-up)."""
+    repeats = QUICK_REPEATS if quick else PROCESS_REPEATS
+    stopped: list[float] = []
+    with running_layout("hindrax-bench-partial-", layout=_UnitLayout) as lay:
+        lay.ensure()
+        wait_until(GraphSettled(lay.probe, quiet_s=3.0, min_nodes=3), 90, None, "graph settled")
+        for _ in range(repeats):
+            stopped.append(partial_freeze_stop_s(lay))
+    ms = np.array(stopped) * 1e3
+    return [{"name": "partial_freeze_no_feed_outputs_stopped_ms", "value": float(np.median(ms)), "unit": "ms",
+             "max": float(np.max(ms)), "n": int(ms.size), "target": 500.0,
+             "note": f"SIGSTOP of ESC and guard while the supervisor runs, armed at 1700 us, no watchdog feed; the "
+                     f"guard's pings stop, the unit's watchdog ({UNIT_WATCHDOG_S:g} s, systemd's behaviour emulated "
+                     "without its timer slack of up to 250 ms) kills the unit, the freed /OE line goes high"}]
+
+
+def partial_freeze_stop_s(lay: _UnitLayout, timeout_s: float = 10.0) -> float:
+    """Arm ``lay`` at 1700 us, SIGSTOP its ESC and guard; seconds until the outputs stopped (ConditionTimeout
+    after ``timeout_s``). The unit's processes are killed on the way; the next arm starts them again."""
+    hw = lay.hw
+    lay.armed_at_1700()
+    wait_until(lambda: lay.unit.ready, 30, None, "READY=1 from the guard")
+    t0 = time.monotonic()
+    for name in ("guard", "esc"):
+        lay.signal(name, _signal.SIGSTOP)
+    wait_until(lambda: hw.stop_time() is not None, timeout_s, None, "outputs stopped")
+    return max(0.0, hw.stop_time() - t0)
 
 
 #: how long the armed layout is recorded for the replay rows, s
@@ -689,12 +813,16 @@ import sys, time
 from rclpy.parameter import Parameter
 from hindrax_drivers.recording.player_node import BagPlayerNode
 from hindrax_drivers.ros_process import RosProcess
+class Unchecked(BagPlayerNode):
+    def _check_graph(self, force=False):
+        pass
+    def _graph_settled(self):
+        return True
 with RosProcess([]) as proc:
-    node = proc.own(BagPlayerNode(parameter_overrides=[
+    node = proc.own(Unchecked(parameter_overrides=[
         Parameter("bag", value=sys.argv[1]), Parameter("start_offset_s", value=float(sys.argv[2])),
         Parameter("loop", value=True), Parameter("safety_topics", value=True),
         Parameter("wait_for_subscribers_timeout_s", value=1.0)]))
-    node.watch = None
     node.wait_for_subscribers()
     print(time.monotonic(), flush=True)
     node.play()

@@ -19,6 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.config import ConfigError, default_config_path, load_config, output_enable_gpio
+    from hindrax_drivers.pca9685.protocol import REFERENCE_CHANNEL
 
     if args.file is None:
         try:
@@ -35,8 +36,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.file}: OK")
     print(cfg.summary())
     if not cfg.esc.oscillator_calibrated:
-        print(f"note: esc.oscillator_calibrated is false: the ESC node will refuse to arm. Hold neutral (hindrax "
-              f"bringup), measure one thruster channel's pulse with a scope, then run `hindrax esc calibrate "
+        print(f"warning: esc.oscillator_calibrated is false: esc.oscillator_hz {cfg.esc.oscillator_hz:g} Hz is not "
+              f"measured (parts run at 23-27 MHz), so no width is known to be neutral: the ESC node keeps the "
+              f"thruster outputs off (no pulses) and refuses to arm. Start the stack (hindrax bringup), measure the "
+              f"reference pulse on PCA9685 channel {REFERENCE_CHANNEL} with a scope, then run `hindrax esc calibrate "
               f"--measured-us X --config {args.file} --write` (sets esc.oscillator_hz and the flag).")
     if output_enable_gpio(cfg) is None:
         print("warning: esc.output_enable_gpio is not wired: the vehicle has no hardware cut-off. The output guard "

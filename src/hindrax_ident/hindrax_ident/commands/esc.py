@@ -2,12 +2,12 @@
 
 Calibrates the PCA9685's internal oscillator (``esc.oscillator_hz``) from one oscilloscope reading, so that
 "neutral" on the wire is really neutral: real parts run at 23-27 MHz (docs/devices.md §5.1), and with the
-nominal 25 MHz a 24.06 MHz part puts 1559 us on the wire for 1500 us, outside the ESC deadband. The ESC node
-refuses to arm until ``esc.oscillator_calibrated`` is true.
+nominal 25 MHz a 24.06 MHz part puts 1559 us on the wire for 1500 us, outside the ESC deadband. Until
+``esc.oscillator_calibrated`` is true the ESC node keeps every thruster channel off (no pulses) and refuses to arm.
 
-Procedure: start the stack (``hindrax bringup``; the ESC node holds every thruster channel at neutral,
-``thrusters.pulse_width_neutral_us``, from start-up, no arming needed), measure the high time of one thruster
-channel's pulse with a scope (trim 0 on that channel), and run this command with the reading. It prints one JSON
+Procedure: start the stack (``hindrax bringup``; while not calibrated the ESC node puts the reference pulse,
+``thrusters.pulse_width_neutral_us``, on PCA9685 channel 15, which no ESC is on), measure its high time with a
+scope, and run this command with the reading. It prints one JSON
 object (assumed and calibrated oscillator, prescale, counts, the pulse width the calibrated value gives);
 ``--write`` sets ``esc.oscillator_hz`` and ``esc.oscillator_calibrated: true`` in the configuration file (comments
 kept, validated, the original restored if the result is invalid). A reading that gives an oscillator outside the
@@ -31,7 +31,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="high time of the pulse measured on the scope, us")
     parser.add_argument("--commanded-us", type=float, default=None,
                         help="pulse width the ESC node commanded on that channel, us "
-                             "(default thrusters.pulse_width_neutral_us, what it holds from start-up)")
+                             "(default thrusters.pulse_width_neutral_us, the reference pulse on channel 15)")
     add_config_argument(parser)
     parser.add_argument("--write", action="store_true",
                         help="write esc.oscillator_hz and esc.oscillator_calibrated: true into --config")

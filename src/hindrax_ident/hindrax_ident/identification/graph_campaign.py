@@ -46,7 +46,7 @@ from std_srvs.srv import Trigger
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.conditions import ros_context, wait_until
 from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
-from hindrax_drivers.vehicle_graph import ForeignVehicleWatch, own_view
+from hindrax_drivers.vehicle_graph import ForeignVehicleWatch, own_view, refuse_before_start
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
@@ -210,6 +210,11 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
                 level_fractions, wall0, truth, list(calibrate), sections)
 
 
+#: what a campaign refuses beside another vehicle's ESC or supervisor
+_BESIDE = ("refusing to run a campaign beside another vehicle graph (set ROS_DOMAIN_ID to a free domain, or unset it "
+           "to get one reserved)")
+
+
 @contextlib.contextmanager
 def run_domain(say: Callable[[str], None]):
     """The ROS domain ID for a graph run: ``ROS_DOMAIN_ID`` when the environment sets it (the user's choice, e.g.
@@ -235,6 +240,9 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     ov = dict(overrides or {})
     ov["simulation.real_time_factor"] = float(real_time_factor)
     with run_domain(say) as did, ros_context(domain_id=did) as ctx:
+        # a second graph on a domain with another ESC or supervisor would mix the two safety graphs: refused before
+        # any node of this run exists (its heartbeat publishers alone would disarm the other vehicle)
+        refuse_before_start(ctx, _BESIDE)
         graph = build_graph(config_path, sim=True, record=True, record_dir=str(bag_dir), context=ctx, seed=seed,
                             overrides=ov, identification=True, drive_clocks=True, truth=truth)
         cfg = graph.config
@@ -267,12 +275,11 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             # Simulated time starts only when discovery, port opening and the devices' start-up exchanges are
             # over, and stands still while the operator's calls are answered: the run then depends on the seed
             # alone, not on how long those took in wall time (graph_campaign module docstring).
-            # a second graph on a domain with another ESC or supervisor would mix the two safety graphs (issue 43.3):
-            # refused before arming, as soon as one is seen, after a discovery window without one
-            watch = ForeignVehicleWatch(client, "refused", "refusing to run a campaign beside another vehicle graph "
-                                        "(set ROS_DOMAIN_ID to a free domain, or unset it to get one reserved)",
-                                        own=lambda: own_view([*graph.nodes.values(), client]))
-            armed = graph.start_and_arm(arm, 120, lambda: action.server_is_ready() and watch.settled())
+            # and one that appears meanwhile: refused before arming, and while the run lasts
+            watch = ForeignVehicleWatch(client, "refused", _BESIDE,
+                                        own=lambda: own_view([*graph.nodes.values(), client]), window_s=0.0)
+            # the watch first: it looks at every poll, not only once the action server is up
+            armed = graph.start_and_arm(arm, 120, lambda: watch.settled() and action.server_is_ready())
             if not armed.success:
                 outcome.message = f"arming refused: {armed.message}"
                 say(outcome.message)

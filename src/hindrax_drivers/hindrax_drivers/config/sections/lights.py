@@ -6,7 +6,8 @@ from typing import Any, Mapping
 from ..spec import ConfigIssue, integer, real, section
 
 SCHEMA, OPTIONAL = section("lights", {
-    "esc_channel": integer("PCA9685 channel of the lights", 0, 15),
+    "esc_channel": integer("PCA9685 channel of the lights (15 carries the reference pulse for `hindrax esc calibrate`)",
+                           0, 14),
     "pulse_width_off_us": real("pulse width for lights off, us", 500.0, 2500.0),
     "pulse_width_full_us": real("pulse width for full brightness, us", 500.0, 2500.0),
 })

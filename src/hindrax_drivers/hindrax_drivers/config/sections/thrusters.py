@@ -33,7 +33,8 @@ _KEYS: dict[str, Spec] = {
                                    "offset allowed between the controller and this node), s", 0.0, 5.0),
     f"{THRUSTER}.position_frd_m": vector("thruster position relative to the CG, FRD, m", 3, -5.0, 5.0),
     f"{THRUSTER}.direction_frd": vector("unit thrust direction for positive thrust, FRD", 3, -1.0, 1.0, unit=True),
-    f"{THRUSTER}.esc_channel": integer("PCA9685 output channel", 0, 15),
+    f"{THRUSTER}.esc_channel": integer("PCA9685 output channel (15 carries the reference pulse for "
+                                                 "`hindrax esc calibrate`)", 0, 14),
     f"{THRUSTER}.reversed": flag("mirror the pulse width about neutral (propeller/wiring reversed)"),
     f"{THRUSTER}.trim_us": real("pulse-width trim added after allocation, us", -100.0, 100.0),
     f"{THRUSTER}.allocation_weight": real("weight of this thruster in the weighted pseudo-inverse", 1e-3, 1e3),

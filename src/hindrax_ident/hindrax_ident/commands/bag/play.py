@@ -37,8 +37,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from rclpy.parameter import Parameter
 
-    from hindrax_drivers.recording.player_node import BagPlayerNode, PlayerError
+    from hindrax_drivers.recording.player_node import REFUSAL, BagPlayerNode, PlayerError
     from hindrax_drivers.ros_process import RosProcess
+    from hindrax_drivers.vehicle_graph import ForeignVehicleError, refuse_before_start
 
     overrides = [Parameter("bag", value=str(args.bag)), Parameter("rate", value=float(args.rate)),
                  Parameter("start_offset_s", value=float(args.start_offset)), Parameter("loop", value=bool(args.loop)),
@@ -48,8 +49,10 @@ def run(args: argparse.Namespace) -> int:
                  Parameter("safety_topics", value=bool(args.safety_topics))]
     if args.topics:
         overrides.append(Parameter("topics", value=list(args.topics)))
-    with RosProcess([], errors={PlayerError: "hindrax bag play"}) as proc:
-        node = proc.own(BagPlayerNode(parameter_overrides=overrides))
+    with RosProcess([], errors={PlayerError: "hindrax bag play", ForeignVehicleError: "hindrax bag play"}) as proc:
+        if args.safety_topics:  # the domain watched before the player's node exists: a refusal leaves nothing
+            refuse_before_start(None, REFUSAL)
+        node = proc.own(BagPlayerNode(parameter_overrides=overrides, window_s=0.0))  # (the window was just watched)
         node.wait_for_subscribers()
         stats = node.play()
         print(f"{args.bag}: published {stats.published} messages in {stats.passes} pass(es)")
