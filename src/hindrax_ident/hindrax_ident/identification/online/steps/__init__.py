@@ -16,6 +16,7 @@ from .calibration_steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ball
 from .context import CALIBRATION_BLOCK_S, CampaignAbort, StepContext, Wrenches
 from .ladders import RotationLadder, TranslationLadder
 
-__all__ = ["Step", "Confirm", "undo_line", "Dive", "DofStep", "TranslationLadder", "RotationLadder", "BroadbandRun", "KnownForceStep",
+__all__ = ["Step", "Confirm", "undo_line",
+           "Dive", "DofStep", "TranslationLadder", "RotationLadder", "BroadbandRun", "KnownForceStep",
            "Ballast", "Float", "LinePull", "Inclining", "TiltDecay", "StepContext", "CampaignAbort", "Wrenches",
            "CALIBRATION_SETTLE_S", "CALIBRATION_WINDOW_S", "CALIBRATION_BLOCK_S"]

@@ -260,7 +260,8 @@ class Inclining(Step):
         m1, ms1 = ctx.mean_recorded_force(i + 3, t1)
         remove = (f"remove_inclining_mass_{dof}", "inclining: remove the test mass")
         yield from ctx.wait_operator(f"attach_inclining_mass_{dof}",
-                                     f"inclining: hang the test mass ({w:.3g} N in water) {d:.3g} m {where}", undo=remove)
+                                     f"inclining: hang the test mass ({w:.3g} N in water) {d:.3g} m {where}",
+                                     undo=remove)
         yield from ctx.hold_free(dof, self.settle_s)
         t2 = ctx.t_s
         yield from ctx.hold_free(dof, self.window_s)
