@@ -413,7 +413,8 @@ class IdentificationCore:
                                                  f"{self.stop_timeout_s:g} s of the stop")))
             if disarmed:
                 run.cause = self._disarm_message(run)
-                out.append(Event("status", ("aborted", run.executive.status(), run.cause)))
+                undo = f"; {undo_line(self.pending_undo)}" if self.pending_undo else ""
+                out.append(Event("status", ("aborted", run.executive.status(), run.cause + undo)))
             out.append(self.end(run))
             return
         if t > run.stop_since_s:
