@@ -105,6 +105,8 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
      "write the vehicle's SROS2 permissions policies (internal and topside domain) for its name and launch files"),
     (("sros2", "keystore"), "hindrax_ident.commands.sros2",
      "create the vehicle's SROS2 keystore: enclaves, certificates, signed permissions (needs sros2, on the Pi)"),
+    (("pool", "rehearse"), "hindrax_ident.commands.pool",
+     "the README's pool day on a laptop: the live pool, the installed launch, the two shells' environments"),
     (("esc", "calibrate"), "hindrax_ident.commands.esc",
      "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
 ]
