@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import queue
 import shlex
+import signal
 import subprocess
 import threading
 import time
@@ -97,8 +98,12 @@ def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_pat
             out.until("rehearsal: stopped", 120)
             assert proc.wait(60) == 0
         finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+            if proc.poll() is None:  # Ctrl-C: the command stops its launch and pool (a SIGKILL would orphan them)
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(90)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
     assert any((tmp_path / "runs").iterdir()), "the launch's recorder wrote no bag"
     assert sorted(p.name for p in (tmp_path / "logs").iterdir()), os.listdir(tmp_path)
