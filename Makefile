@@ -17,8 +17,12 @@ SETUP_INPUTS := requirements.txt requirements-colcon.txt constraints.txt scripts
 
 setup: $(STAMP)
 
+# With RECORD_DURATIONS=1, setup's and a plain ros-install's times go into docs/results.md (section durations), which
+# the README quotes; without it they change no tracked file (a fresh clone stays clean after make test).
+RECORD_DURATIONS ?=
+RESULTS_FOR_DURATIONS := $(if $(RECORD_DURATIONS),$(wildcard docs/results.md))
 $(STAMP): $(SETUP_INPUTS)
-	VENV=$(VENV) bash scripts/setup_venv.sh
+	VENV=$(VENV) RESULTS_DOC=$(RESULTS_FOR_DURATIONS) bash scripts/setup_venv.sh
 	touch $@
 
 # Main job: a complete virtual pool identification campaign (options: make run RUN_ARGS="--dofs surge"); its table
@@ -36,11 +40,15 @@ bench: setup
 # The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels (the
 # Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source
 # .venv/bin/activate && source ros_ws/install/setup.bash; `hindrax`, the nodes (ros_ws/install/lib/<package>/)
-# and share/ are there. Extra colcon options: COLCON_ARGS="--symlink-install" (docs/deployment.md §3).
+# and share/ are there. Extra colcon options: COLCON_ARGS="--symlink-install" (docs/deployment.md §3). A progress line
+# shows what colcon builds (hindrax_ident.progress_run); RECORD_DURATIONS=1: a plain build's time into docs/results.md.
 COLCON_ARGS ?=
+ROS_INSTALL_RECORD := $(if $(and $(RESULTS_FOR_DURATIONS),$(if $(COLCON_ARGS),,plain)),--results-doc \
+	$(abspath docs/results.md) --record "make ros-install")
 ros-install: setup
 	cd ros_ws && source $(abspath $(VENV))/bin/activate && \
-	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV colcon build --merge-install $(COLCON_ARGS) \
+	  AMENT_PREFIX_PATH=$$VIRTUAL_ENV CMAKE_PREFIX_PATH=$$VIRTUAL_ENV python -m hindrax_ident.progress_run ros-install \
+	    $(ROS_INSTALL_RECORD) -- colcon build --merge-install $(COLCON_ARGS) \
 	    --event-handlers console_cohesion- --cmake-args -DPython3_EXECUTABLE=$$VIRTUAL_ENV/bin/python3 -DBUILD_TESTING=OFF
 
 clean:

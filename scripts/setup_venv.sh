@@ -32,7 +32,8 @@ STEPS=5
 source scripts/progress.sh
 
 step "Python venv $VENV"
-[ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"
+SETUP_KIND=existing
+[ -x "$VENV/bin/python" ] || { SETUP_KIND=new; "$PYTHON" -m venv "$VENV"; }
 PY="$VENV/bin/python"
 # pip, quiet, without the noise of index locations a machine's pip.conf may list but not have.
 pipq() {
@@ -85,3 +86,8 @@ step "import check"
 "$PY" -c 'import rclpy, tf2_msgs.msg, hindrax_msgs.msg, hindrax_msgs.srv, hindrax_msgs.action, hindrax_drivers, hindrax_ident'
 progress_done
 echo "setup: ready in $VENV ($((SECONDS - t0)) s)"
+# The time into the measurements document the README quotes (RESULTS_DOC, from the Makefile): a warning if not.
+if [ -n "${RESULTS_DOC:-}" ]; then
+  "$PY" -m hindrax_ident.results_doc duration --results-doc "$RESULTS_DOC" "make setup ($SETUP_KIND .venv)" \
+    $((SECONDS - t0)) || echo "setup: the time was not recorded in $RESULTS_DOC" >&2
+fi

@@ -260,6 +260,22 @@ def readme_pool_day() -> list[tuple[str, str]]:
     return out
 
 
+def test_the_readme_pool_day_names_the_machine_and_the_domain_of_each_line():
+    """Each step of the README's pool day says on which machine and in which of the two domains it runs, with one
+    name for each (internal, topside), defined once above the block; the vehicle's shell is never said to be on the
+    topside's ``ROS_DOMAIN_ID`` (it is the internal one)."""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme.split("## A pool day", 1)[1].split("\n## ", 1)[0]
+    intro, block = section.split("```bash", 1)[0], section.split("```bash", 1)[1].split("```", 1)[0]
+    assert "**internal domain**" in intro and "**topside domain**" in intro
+    assert "the vehicle's `ROS_DOMAIN_ID`" not in readme
+    headers = [ln for ln in block.splitlines() if ln.startswith("# on the ")]
+    assert len(headers) == 4 and all(
+        ("internal domain" in h) == h.startswith("# on the vehicle") and ("topside domain" in h) ==
+        h.startswith("# on the topside PC") for h in headers), headers
+    assert all("<topside_domain>" in ln for ln in block.splitlines() if "topside_domain_id:=" in ln)
+
+
 CAMPAIGN_S = 900.0  # wall-time deadline of the campaign (about 190 s of pool time, on a loaded two-core machine)
 
 
@@ -319,7 +335,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
 
     with domain_id() as topside_domain, LivePool(vehicle_file, tmp_path / "pool", env=child_env()) as pool, \
             ros_context(domain_id=topside_domain) as top_ctx:
-        fill["<domain>"] = str(topside_domain)
+        fill["<topside_domain>"] = str(topside_domain)
         topside_env = {**install.env, "ROS_DOMAIN_ID": str(topside_domain),
                        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "HINDRAX_VEHICLE": name, **keys}
         top = rclpy.create_node("pool_day_topside", context=top_ctx)

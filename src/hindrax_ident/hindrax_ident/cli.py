@@ -108,6 +108,8 @@ COMMANDS: list[tuple[tuple[str, ...], str, str]] = [
     (("keys",), "hindrax_ident.commands.keys",
      "create the vehicle's operator key (mode 0600) that signs arm, campaign and setpoints; says where the topside "
      "copy goes"),
+    (("pool", "rehearse"), "hindrax_ident.commands.pool",
+     "the README's pool day on a laptop: the live pool, the installed launch, the two shells' environments"),
     (("esc", "calibrate"), "hindrax_ident.commands.esc",
      "PCA9685 oscillator (esc.oscillator_hz) from one scope reading of a pulse: --measured-us X [--write]"),
 ]

@@ -3,14 +3,18 @@
 A long command (a campaign's feedback at several hertz) must not scroll the same line: on a terminal
 :meth:`ProgressLine.update` rewrites the current line (carriage return, erase to the end of the line); in a log or
 a pipe, where a carriage return would pile up, it writes a line only when the text changed. :meth:`ProgressLine.line`
-prints a line that stays (a prompt, a result), ending the updating line first.
+prints a line that stays (a prompt, a result), ending the updating line first. :class:`Ticker` keeps a long step
+alive on a terminal (its text and the seconds elapsed, rewritten every second) and names each new step once
+elsewhere: ``hindrax ident bag``'s fit, ``make ros-install``'s colcon build (:mod:`hindrax_ident.progress_run`).
 """
 from __future__ import annotations
 
 import sys
+import threading
+import time
 from typing import Callable, TextIO
 
-__all__ = ["ProgressLine"]
+__all__ = ["ProgressLine", "Ticker"]
 
 
 class ProgressLine:
@@ -51,3 +55,58 @@ class ProgressLine:
             self._stream.write("\n")
             self._stream.flush()
             self._open = False
+
+
+class Ticker:
+    """A step's text with the seconds elapsed since the ticker started, on a :class:`ProgressLine`: rewritten every
+    ``period_s`` (s) on a terminal by a thread of its own; elsewhere the text alone, once per change (no ticks in a
+    log). A context manager: the thread stops and the line ends on the way out. ``clock``: seconds (monotonic).
+
+    ``with Ticker(ProgressLine(), "ident bag: fitting") as t: ...; t.set("ident bag: writing the report")``
+    """
+
+    def __init__(self, progress: ProgressLine, text: str, period_s: float = 1.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.progress, self.period_s, self.clock = progress, float(period_s), clock
+        self.t0 = clock()
+        self._text = text
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def elapsed_s(self) -> float:
+        """Seconds since the ticker started."""
+        return self.clock() - self.t0
+
+    def show(self) -> None:
+        """Show the current text (with the elapsed seconds on a terminal)."""
+        with self._lock:
+            tty = self.progress._tty
+            self.progress.update(f"{self._text}  {self.elapsed_s():.0f} s" if tty else self._text)
+
+    def set(self, text: str) -> None:
+        """A new step: show ``text`` now."""
+        self._text = text
+        self.show()
+
+    def line(self, text: str) -> None:
+        """A line that stays (a package built, a warning), above the ticking one."""
+        with self._lock:
+            self.progress.line(text)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.period_s):
+            self.show()
+
+    def __enter__(self) -> "Ticker":
+        self.show()
+        if self.progress._tty:
+            self._thread = threading.Thread(target=self._run, daemon=True, name="progress-ticker")
+            self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        self.progress.close()

@@ -22,9 +22,15 @@ current 50.9 %.
 
 The write is atomic (a temporary file in the same folder, then ``os.replace``): an interrupted command
 leaves the previous document, never half of one.
+
+Section ``durations`` (:func:`record_duration`) holds one row per long command (``make setup`` on a new and on an
+existing ``.venv``, ``make ros-install``), each written by that command itself at its end with the seconds it took
+and the machine's load: the README quotes these figures. From a shell: ``python -m hindrax_ident.results_doc
+duration --results-doc docs/results.md "make setup (new .venv)" 211``.
 """
 from __future__ import annotations
 
+import argparse
 import datetime as _dt
 import os
 import re
@@ -191,3 +197,58 @@ def write_if_asked(args, name: str, title: str, body: str, supersedes_prefix: st
     written = write_section(path, name, title, body, command_line(), supersedes_prefix, supersedes_rows)
     print(f"results: section {name!r} of {written}", flush=True)
     return written
+
+
+#: section of :func:`record_duration`, and its table's header
+DURATIONS = "durations"
+_DURATION_HEADER = ["command", "seconds", "minutes", "load (1 min average at the end)", "measured"]
+
+
+def duration_rows(text: str) -> dict[str, list[str]]:
+    """{command: row cells} of the ``durations`` section of a document's ``text`` (empty when it has none)."""
+    begin, end = _markers(DURATIONS)
+    i, j = text.find(begin), text.find(end)
+    rows: dict[str, list[str]] = {}
+    for line in (text[i:j].split("\n") if 0 <= i < j else []):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.startswith("| ") else []
+        if len(cells) == len(_DURATION_HEADER) and cells[0] != _DURATION_HEADER[0]:
+            rows[cells[0]] = cells
+    return rows
+
+
+def record_duration(path: str | Path, command: str, seconds: float) -> Path:
+    """Add or replace ``command``'s row (its ``seconds``, the 1-minute load average now, the date) in section
+    :data:`DURATIONS` of the document ``path``, keeping the other commands' rows. Raises ``ValueError`` for a
+    negative or non-finite time, :class:`ResultsDocError` / ``FileNotFoundError`` as :func:`write_section`."""
+    if not (seconds >= 0.0 and seconds != float("inf")):
+        raise ValueError(f"duration of {command!r}: {seconds} s is not a finite time >= 0")
+    path = Path(path)
+    rows = duration_rows(path.read_text(encoding="utf-8") if path.exists() else "")
+    when = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d")
+    rows[command] = [command, f"{seconds:.0f}", f"{seconds / 60.0:.1f}", f"{os.getloadavg()[0]:.1f}", when]
+    body = ("Each row is written by the command itself when it ends (wall time; the load is the machine's, other "
+            "jobs included). The README quotes these.\n\n")
+    body += markdown_table(_DURATION_HEADER, [rows[k] for k in sorted(rows)])
+    return write_section(path, DURATIONS, "Durations of the long commands", body, command)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m hindrax_ident.results_doc duration --results-doc PATH COMMAND SECONDS`` (module docstring).
+    Returns 0, or 1 with one line on stderr when the document cannot be written."""
+    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.results_doc")
+    sub = parser.add_subparsers(dest="what", required=True)
+    dur = sub.add_parser("duration", help="record how long a command took (section durations)")
+    dur.add_argument("command", help="the command as the README names it, e.g. 'make setup (new .venv)'")
+    dur.add_argument("seconds", type=float, help="its wall time, s")
+    dur.add_argument("--results-doc", required=True, metavar="PATH", help="the measurements document")
+    args = parser.parse_args(argv)
+    try:
+        record_duration(args.results_doc, args.command, args.seconds)
+    except (ValueError, OSError) as exc:
+        print(f"results: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -171,6 +171,8 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     monkeypatch.setattr(campaign_fit, "identify_all_with_errors", fake_identify)
     monkeypatch.setattr(report, "write_report", lambda out, *a, **k: out.mkdir(parents=True, exist_ok=True))
     assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "out")]) == 0, capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert out.startswith(f"ident bag: reading and fitting {bag}\n"), out  # the fit's progress (Ticker), first
     doc = yaml.safe_load((tmp_path / "out" / "identification.yaml").read_text())
     (rec,) = seen
     z = rec.wrench_cmd_frd[:, 2]
@@ -182,7 +184,7 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
         assert "calibration" not in doc and "inclining" not in doc
         assert doc.get("joint", {}).get("scales", {}) == {}
         return
-    assert "calibration from the bag" in capsys.readouterr().out
+    assert "calibration from the bag" in out
     # the heave run pushes down with every vertical thruster (1600 us): forward thrust, the vertical forward scale
     # of the bag's calibration (the sinker's and the hovers' holds, thrust_scales: test_thrust_calibration.py)
     sc = thrust_scales(CAL, cfg)

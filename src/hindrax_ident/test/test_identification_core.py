@@ -9,8 +9,8 @@ import pytest
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.online.core import (ARMED_GRACE_S, NEEDED_SENSORS, NOT_ARMED, STATUS_PERIOD_S,
-                                                      IdentificationCore, goal_problem)
+from hindrax_ident.identification.online.core import (ARMED_GRACE_S, DISARMED, NEEDED_SENSORS, NOT_ARMED,
+                                                      STATUS_PERIOD_S, IdentificationCore, goal_problem)
 from hindrax_ident.identification.online.executive import ExecutiveStatus
 
 CFG = load_config(default_config_path())
@@ -33,6 +33,7 @@ class StandInExecutive:
         self.calibration, self.inclining, self.decays, self.online = {}, {}, {}, {}
         self.aborted, self.abort_reason, self.inputs, self.commands = False, "", [], []
         self.new_command = True                                  # Executive: this tick's wrench is a new command
+        self.undo = []                                           # Executive: loads asked for and not removed
 
     def start(self, t):
         self.started, self.t_s = True, t
@@ -205,7 +206,6 @@ def test_samples_stamped_in_the_future_or_long_before_are_left_out_and_counted()
 @pytest.mark.parametrize("phase, abort_reason, status, to_supervisor", [
     ("done", "", ("done", "surge done"), False),
     ("aborted", "depth 1.9 m beyond the limit", ("aborted", "surge done"), True),
-    ("aborted", "ESC output disarmed", ("aborted", "surge done"), False),
     ("aborted", "cancelled", ("aborted", "surge done"), False),
 ])
 def test_the_end_of_a_campaign_reports_and_trips_the_supervisor_only_for_limits(phase, abort_reason, status,
@@ -226,6 +226,57 @@ def test_the_end_of_a_campaign_reports_and_trips_the_supervisor_only_for_limits(
     ok, message = c.finish(out[0].data[0])
     assert ok == (phase == "done") and message == (abort_reason or "campaign complete")
     assert c.last_result == message
+
+
+GUARD_CAUSE = ("output guard: ESC output state silent for 0.21 s (esc/heartbeat): ESC process dead or hung; next: "
+               "check the ESC process (hindrax health; the launch respawns it), then hindrax arm")
+
+
+@pytest.mark.parametrize("cause_after_ticks", [0, 3, None])
+def test_a_disarmed_end_waits_for_the_supervisors_cause_and_names_it(cause_after_ticks):
+    """The ESC output disarmed under the campaign: the goal ends once the supervisor named the cause (or after
+    stop_timeout_s without one), and the result and the last status carry it in one line with the next step."""
+    c = core()
+    c.on_disarm_cause("supervisor: an older stop; next: hindrax arm")  # before this arming: not this goal's
+    ready(c)
+    c.accept("h", goal(), 0.0)
+    ex = c.run.executive
+    c.tick(1.0, False)
+    assert ex.inputs == [] and c.run.cause_at_start.startswith("supervisor: an older")
+    c.on_disarm_cause("")                                        # the supervisor cleared it at the arming
+    ex.wrenches = [None]
+    ex.phase, ex.aborted, ex.abort_reason = "aborted", True, DISARMED
+    c.on_pwm([NEUTRAL] * N, False)
+    out = c.tick(1.02, False)                                    # the executive stopped on the disarm
+    assert "abort" not in kinds(out)
+    t, ticks = 1.02, 0
+    while c.run is not None and t < 1.02 + 2.0:
+        if ticks == cause_after_ticks:
+            c.on_disarm_cause(GUARD_CAUSE)
+        c.on_pwm([NEUTRAL] * N, False)
+        t, ticks = t + TICK, ticks + 1
+        out = c.tick(t, False)
+    assert kinds(out)[-2:] == ["status", "end"]
+    ok, message = c.finish(out[-1].data[0])
+    expected = f"{DISARMED} by {GUARD_CAUSE}" if cause_after_ticks is not None else \
+        f"{DISARMED} (the supervisor named no cause); next: hindrax health, then hindrax arm"
+    assert not ok and message == expected and statuses(out)[-1] == ("aborted", expected)
+    assert ticks == (cause_after_ticks + 1 if cause_after_ticks is not None else round(2.0 / TICK))
+
+
+def test_a_new_disarm_cause_while_armed_stops_the_campaign():
+    """A killed ESC reports nothing: its last pulse_width said armed; the supervisor's new cause (the output
+    guard's) is the executive's disarm."""
+    c = core()
+    ready(c)
+    c.accept("h", goal(), 0.0)
+    c.tick(1.0, False)
+    c.tick(1.02, False)
+    ex = c.run.executive
+    assert ex.inputs[-1].armed
+    c.on_disarm_cause(GUARD_CAUSE)
+    c.tick(1.04, False)
+    assert not ex.inputs[-1].armed and c.armed
 
 
 @pytest.mark.parametrize("report, ends", [

@@ -15,7 +15,8 @@ supported)
     :mod:`hindrax_drivers.esc_state`; unknown after armed counts as armed; a dead ESC's last state stays, so the
     supervisor keeps watching the envelope as if armed), ``supervisor/abort``
     (std_msgs/String: any node trips the supervisor with a reason, e.g. the identification node when it aborts
-    a manoeuvre on a limit).
+    a manoeuvre on a limit), ``guard/heartbeat`` (the output guard's reason while it silences the outputs: read
+    for the disarm cause only, :mod:`.disarm_cause`).
 Services
     ``supervisor/estop`` (std_srvs/Trigger): operator emergency stop: trip and disarm now.
     ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again; a disarm
@@ -28,7 +29,8 @@ Publishes
     (docs/architecture.md §8). It is the supervisor's independent stop path: a dead or hung supervisor stops
     heartbeating, which they act on within ``esc.heartbeat_timeout_s`` and ``esc.guard_heartbeat_timeout_s``.
     ``supervisor/status`` (diagnostic_msgs/DiagnosticStatus: level OK or ERROR, message = the breach reason, values
-    = the supervised quantities) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
+    = the supervised quantities and, once the thrust stopped, ``disarm_cause``: ``<process>: <cause>; next:
+    <step>``, :mod:`.disarm_cause`) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
 CPU (README "Performance on the Pi")
     Publishers and subscriptions carry no QoS event handlers (rclpy's default is one incompatible-QoS warning
     handler each, visited in Python on every executor spin): a sensor that stops reaching the supervisor, for a
@@ -73,11 +75,12 @@ from hindrax_msgs.srv import SetArmed
 from .. import frames
 from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
 from ..lean_cdr import cdr_decoder
-from ..liveness import ClockStepMonitor, HeartbeatPublisher
+from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, heartbeat_ok, heartbeat_qos
 from ..config import Spec
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from .core import SupervisorCore, SupervisorLimits
+from .disarm_cause import DisarmCauses
 
 __all__ = ["SupervisorNode", "main"]
 
@@ -102,6 +105,8 @@ class SupervisorNode(Node):
         super().__init__("supervisor", **kwargs)
         cfg = load_node_config(self, ("supervisor", "pool"))
         self.core = SupervisorCore(SupervisorLimits.from_config(cfg))
+        #: why the thrust last stopped, for the operator (``disarm_cause`` of the status)
+        self.causes = DisarmCauses()
         self._decode_imu = cdr_decoder(Imu)
         self.diag = DeviceDiagnostics("hindrax/supervisor", "supervisor", self._now_s)
         self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
@@ -126,6 +131,7 @@ class SupervisorNode(Node):
         self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True, **ev)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos(), **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
+        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")
@@ -184,9 +190,24 @@ class SupervisorNode(Node):
         if armed != self.esc_armed:
             self._status_dirty = True
         self.esc_armed = armed
+        self._cause(lambda: self.causes.on_armed(armed, next((kv.value for kv in msg.values if kv.key == "reason"),
+                                                              "")))
         self.core.set_armed(self._sample_time_s(), armed)
         if armed and self.core.tripped:
             self._disarm()
+
+    def on_guard(self, msg: DiagnosticStatus) -> None:
+        """A ``guard/heartbeat``: its reason while it silences the outputs names a disarm (:mod:`.disarm_cause`)."""
+        self._cause(lambda: self.causes.on_guard(heartbeat_ok(msg), msg.message))
+
+    def _cause(self, update) -> None:
+        """Apply ``update`` to :attr:`causes`; a new cause line is published at once."""
+        before = self.causes.line
+        update()
+        if self.causes.line != before:
+            if self.causes.line:
+                self.get_logger().warn(f"thrust stopped: {self.causes.line}")
+            self._status_dirty = True
 
     def on_abort(self, msg: String) -> None:
         self._handle(self.core.trip(f"abort requested: {msg.data}"), force=True)
@@ -245,6 +266,7 @@ class SupervisorNode(Node):
         known to be armed (e-stop, abort)."""
         if not reason:
             return
+        self.causes.on_trip(reason)
         self.breaches += 1
         self.last_breach_time_s = self._now_s()
         self.diag.count("breach")
@@ -271,7 +293,8 @@ class SupervisorNode(Node):
         st = DiagnosticStatus(level=DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK,
                               name="hindrax/supervisor", message=tripped or "within the envelope",
                               hardware_id="supervisor")
-        st.values = [KeyValue(key=k, value=v) for k, v in self.core.values(t)]
+        cause = [("disarm_cause", self.causes.line)] if self.causes.line else []
+        st.values = [KeyValue(key=k, value=v) for k, v in self.core.values(t) + cause]
         self.pub_status.publish(st)
         self.diag.published()
         self._status_dirty = False

@@ -70,8 +70,10 @@ def _remove_if_empty(path: Path) -> None:
 def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, command: str, identify=None):
     """Identify a campaign bag (the campaign reader and the fit core,
     :func:`~..identification.fit.campaign_fit.identify_bag`) and write identification.yaml and the report in ``out``;
-    prints the DOFs without an estimate and the bag's calibration. ``args`` gives ``restoring_n_m_per_rad`` and
-    ``restoring_std`` (the free decay's stiffness when the bag has no inclining step; absent: the vehicle file's);
+    prints the DOFs without an estimate and the bag's calibration, and the fit's progress while it runs (a minute or
+    two for a whole campaign: :class:`~..progress_line.Ticker`, the seconds on a terminal). ``args`` gives
+    ``restoring_n_m_per_rad`` and ``restoring_std`` (the free decay's stiffness when the bag has no inclining step;
+    absent: the vehicle file's);
     ``identify(bag, cfg)``: default :func:`~..identification.fit.campaign_fit.identify_bag` with the fit core's default
     options. Returns (record, {dof: DofIdentification}, the yaml's path). Raises :class:`CommandError` (prefixed
     ``command``) for an unusable bag or when no DOF is identified."""
@@ -80,10 +82,12 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
     from ..identification.assessment.report import write_outputs
     from ..identification.bag_input.from_bag import BagContentError, truncation
     from ..identification.fit.campaign_fit import identify_bag
+    from ..progress_line import ProgressLine, Ticker
     from .run import _add_reference_sections
 
     try:
-        record, idents, errors = (identify or identify_bag)(bag, cfg)
+        with Ticker(ProgressLine(lambda s: print(s, flush=True)), f"{command}: reading and fitting {bag}"):
+            record, idents, errors = (identify or identify_bag)(bag, cfg)
         lacking = truncation(bag)
     except (BagError, BagContentError, OSError, ValueError) as exc:
         raise CommandError(f"{command}: {exc}") from exc

@@ -75,9 +75,10 @@ def _unit(dof: str) -> str:
 
 
 def format_feedback(fb: Any) -> str:
-    """One line of a RunIdentification feedback: DOF, level i/n, command with its unit, progress."""
+    """One line of a RunIdentification feedback: DOF, level i/n, command with its unit, or else the phase and the
+    step the node is in (e.g. ``calibration (ballast): hold depth without the ballast``); progress."""
     where = (f"{fb.dof} level {fb.level_index + 1}/{fb.level_count} {fb.level_command:+.2f} {_unit(fb.dof)}"
-             if fb.dof else "positioning")
+             if fb.dof else (fb.phase or "positioning") + (f": {fb.step}" if fb.step else ""))
     return f"{where}  progress {100.0 * fb.progress:5.1f} %"
 
 

@@ -137,7 +137,8 @@ class Campaign:
     run per DOF and its length (default ``identification.excitation*``; :class:`~.executive.Executive`).
     calibrate, ballast_weight_in_water_n, line_pull_n, float_buoyancy_n, inclining_load_n_m: the reference steps
     and their known forces (:class:`~.executive.Executive`); steps: run these step objects instead of the plan (a
-    test of one step). Raises ``ValueError`` for an unknown DOF.
+    test of one step); confirm: the loads an aborted campaign left, confirmed first (:class:`~.executive.Executive`).
+    Raises ``ValueError`` for an unknown DOF.
     """
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
@@ -146,7 +147,7 @@ class Campaign:
                  sim: Simulator | None = None, heave_repeats: int = 3, calibrate: Sequence[str] = (),
                  ballast_weight_in_water_n: float = 0.0, line_pull_n: float = 0.0, excitation: str | None = None,
                  excitation_duration_s: float | None = None, inclining_load_n_m=(0.0, 0.0),
-                 float_buoyancy_n: float | None = None, steps=None) -> None:
+                 float_buoyancy_n: float | None = None, steps=None, confirm=()) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -161,7 +162,7 @@ class Campaign:
                                    ballast_weight_in_water_n=ballast_weight_in_water_n, line_pull_n=line_pull_n,
                                    excitation=excitation, excitation_duration_s=excitation_duration_s,
                                    inclining_load_n_m=inclining_load_n_m, float_buoyancy_n=float_buoyancy_n,
-                                   steps=steps)
+                                   steps=steps, confirm=confirm)
         #: the virtual pool's operator of the calibration steps: the known forces the steps prompt for
         self.operator = PoolOperator.for_steps(self.executive.steps)
         self._external_used = False

@@ -22,10 +22,16 @@ Rules (one test row each in ``test/test_identification_core.py``):
 * **Stop** (done, abort, cancel, error): the final status, ``supervisor/abort`` with the reason unless it is one
   of :data:`NOT_SUPERVISOR_ABORTS`, then a zero wrench every tick until the ESC reports, after the stop, neutral
   widths or disarmed, or ``stop_timeout_s`` has passed; then the goal ends.
+* **Disarm cause** (:meth:`~IdentificationCore.on_disarm_cause`, the supervisor's ``disarm_cause``,
+  :mod:`hindrax_drivers.supervisor.disarm_cause`): a new cause while a goal runs is a stop of the thrust (a killed
+  ESC reports nothing, only the output guard says so) and aborts it as :data:`DISARMED`; the end of a goal aborted
+  as :data:`DISARMED` waits for the cause (within ``stop_timeout_s``) and its result and final status name it.
 * **Status** (:data:`STATUS_PERIOD_S`): the running status goes out at once when the phase, DOF, level or
   message changes, else at most every period; 1 Hz ``idle`` without a goal.
-* **Feedback**: at every change of DOF, level or prompt and at least once per second; estimates every
-  ``publish_period_s``.
+* **Feedback**: at every change of DOF, level, prompt or step message and at least once per second, with the
+  phase and the step's message; estimates every ``publish_period_s``.
+* **Undo** (:attr:`~IdentificationCore.pending_undo`): the loads a stopped goal's calibration asked for and did not
+  see removed are named in its result and confirmed first by the next goal (:class:`~.steps.Confirm`).
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
   past the next control tick while a goal runs.
 """
@@ -44,16 +50,19 @@ from ..bag_input.campaign_record import CampaignRecord
 from ..bag_input.signals import thrust_of_written_widths
 from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput, calibration_forces, inclining_load,
                         ordered_samples)
+from .steps import undo_line
 
 __all__ = ["IdentificationCore", "GoalRun", "Event", "Feedback", "goal_problem", "operator_prompt", "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED", "FUTURE_STAMP_TOLERANCE_S",
-           "STALE_STAMP_TOLERANCE_S"]
+           "STALE_STAMP_TOLERANCE_S", "DISARMED"]
 
 #: sensors that must have published before a goal starts moving the vehicle
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
 #: abort reasons not sent to the safety supervisor (the executive's words): an operator's cancel, and a disarmed
 #: ESC output (the thrusters are already stopped, possibly by the supervisor itself)
-NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
+#: the executive's abort reason when the thrust stopped under it
+DISARMED = "ESC output disarmed"
+NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", DISARMED})
 #: period of ``identification/status`` while a goal runs and nothing changes, s (2 Hz: the progress on a topside
 #: display; every change of phase, DOF, level or message goes out at once, so a bag's zero-order hold of the status
 #: loses nothing)
@@ -98,7 +107,8 @@ def operator_prompt(ex: Any) -> str:
 
 @dataclass(frozen=True)
 class Feedback:
-    """The action feedback: DOF, level index and count, level command (N or N m, FRD), progress 0-1, prompt."""
+    """The action feedback: DOF, level index and count, level command (N or N m, FRD), progress 0-1, prompt, the
+    phase (positioning, running, returning) and the current step's message."""
 
     dof: str
     level_index: int
@@ -106,6 +116,8 @@ class Feedback:
     level_command: float
     progress: float
     prompt: str
+    phase: str = ""
+    step: str = ""
 
 
 @dataclass(frozen=True)
@@ -139,6 +151,8 @@ class GoalRun:
     last_feedback: tuple = field(default_factory=lambda: (None, -1))
     last_feedback_s: float = -math.inf
     calibration_results: int = 0  # step results of this goal already published on identification/calibration
+    cause_at_start: str = ""  # the supervisor's disarm cause when the campaign started (an older stop's)
+    cause: str = ""  # a DISARMED abort's reason with its cause, once known (the result message)
 
 
 class IdentificationCore:
@@ -165,6 +179,10 @@ class IdentificationCore:
         self.written: np.ndarray | None = None
         self.pwm_count = 0
         self.armed = False
+        #: the supervisor's ``disarm_cause`` ('' while none): why the thrust last stopped, and the next step
+        self.disarm_cause = ""
+        #: loads an aborted goal left on the vehicle, (remove code, instruction): the next goal confirms them first
+        self.pending_undo: list[tuple[str, str]] = []
         #: sensor samples left out since start (:data:`FUTURE_STAMP_TOLERANCE_S`, :data:`STALE_STAMP_TOLERANCE_S`)
         self.samples_dropped = 0
         self.run: GoalRun | None = None
@@ -195,6 +213,24 @@ class IdentificationCore:
         self.armed = bool(armed)
         self.pwm_count += 1
 
+    def on_disarm_cause(self, line: str) -> None:
+        """The ``disarm_cause`` of a ``supervisor/status`` ('' when it has none): ``<process>: <cause>; next:
+        <step>``."""
+        self.disarm_cause = str(line)
+
+    def _new_cause(self, run: GoalRun) -> bool:
+        """Whether the supervisor names a stop of the thrust newer than the campaign's start."""
+        return bool(self.disarm_cause) and self.disarm_cause != run.cause_at_start
+
+    def _armed_now(self, run: GoalRun) -> bool:
+        """The ESC's armed flag, false once the supervisor names a stop newer than the campaign's start."""
+        return self.armed and not self._new_cause(run)
+
+    def _disarm_message(self, run: GoalRun) -> str:
+        """The result of a goal aborted as :data:`DISARMED`: with the supervisor's cause and next step."""
+        return (f"{DISARMED} by {self.disarm_cause}" if self._new_cause(run) else
+                f"{DISARMED} (the supervisor named no cause); next: hindrax health, then hindrax arm")
+
     # ------------------------------------------------------------------ goals
     @property
     def busy(self) -> bool:
@@ -212,7 +248,7 @@ class IdentificationCore:
                                     fractions=list(goal.level_fractions) or None,
                                     dvl_lock_timeout_s=self.dvl_lock_timeout_s, calibrate=calibrate,
                                     ballast_weight_in_water_n=w_ballast, line_pull_n=f_line,
-                                    inclining_load_n_m=incl)
+                                    inclining_load_n_m=incl, confirm=list(self.pending_undo))
         self.samples = []
         self.run = GoalRun(handle, executive, t, np.full(self.n_thrusters, self.neutral_us))
         return (f"run_identification: {', '.join(dofs) or 'no ladders'}"
@@ -222,7 +258,10 @@ class IdentificationCore:
         """(success, result message) of an ended goal; kept as :attr:`last_record` / :attr:`last_result`."""
         self.last_record = run.record
         ok = run.record is not None and not run.record.aborted and not run.error
-        message = run.error or ("" if run.record is None else run.record.abort_reason) or "campaign complete"
+        message = run.error or ("" if run.record is None else run.cause or run.record.abort_reason) \
+            or "campaign complete"
+        if self.pending_undo:
+            message += "; " + undo_line(self.pending_undo)
         if run.record is not None and run.record.calibration:  # the thrust scales measured, for the operator
             message += "; thrust scale " + ", ".join(f"{k} {v['value']:.4f} +- {v['std']:.4f}"
                                                      for k, v in run.record.calibration.items())
@@ -291,6 +330,7 @@ class IdentificationCore:
                 self._status_throttled(t, "positioning", None, "waiting for the sensors", out)
                 return out
             self.samples = []
+            run.cause_at_start = self.disarm_cause
             w = ex.start(t)
         else:
             samples, self.samples = self.samples, []
@@ -303,7 +343,7 @@ class IdentificationCore:
                     f"{self.samples_dropped} sensor samples left out, stamped more than {FUTURE_STAMP_TOLERANCE_S} s "
                     f"after or {STALE_STAMP_TOLERANCE_S} s before this node's clock ({t:.3f} s): a publisher on "
                     "another clock?",)))
-            w = ex.step(TickInput(t, max(0.0, t - previous), valid, self.armed, cancel))
+            w = ex.step(TickInput(t, max(0.0, t - previous), valid, self._armed_now(run), cancel))
             if self.written is not None:
                 run.written_us = self.written
         self.last_tick_s = t
@@ -336,6 +376,7 @@ class IdentificationCore:
         run.error = error
         run.stop_since_s = t
         run.pwm_count_at_stop = self.pwm_count
+        self.pending_undo = list(run.executive.undo)
         reason = error
         if run.executive.started:
             run.record = run.executive.record()
@@ -362,10 +403,18 @@ class IdentificationCore:
             elif self.written is not None:
                 f = thrust_of_written_widths(self.config, run.executive.curve, self.written)
                 neutral = bool(np.all(np.abs(f) < 1e-9))
-        if neutral or t - run.stop_since_s >= self.stop_timeout_s - 1e-9:
-            if not neutral:
+        timed_out = t - run.stop_since_s >= self.stop_timeout_s - 1e-9
+        disarmed = run.record is not None and run.record.abort_reason == DISARMED and not run.error
+        if neutral and disarmed and not timed_out and not self._new_cause(run):
+            neutral = False  # the supervisor has not named the cause yet: wait for it (module docstring)
+        if neutral or timed_out:
+            if not neutral and not disarmed:
                 out.append(Event("log", ("warn", f"run_identification: thrusters not reported neutral within "
                                                  f"{self.stop_timeout_s:g} s of the stop")))
+            if disarmed:
+                run.cause = self._disarm_message(run)
+                undo = f"; {undo_line(self.pending_undo)}" if self.pending_undo else ""
+                out.append(Event("status", ("aborted", run.executive.status(), run.cause + undo)))
             out.append(self.end(run))
             return
         if t > run.stop_since_s:
@@ -383,13 +432,14 @@ class IdentificationCore:
         st = ex.status()
         prompt = operator_prompt(ex)
         self._status_throttled(t, st.phase, st, prompt or st.message, out)
-        key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0, prompt)
+        key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0, prompt,
+               st.message)
         if key != run.last_feedback or t - run.last_feedback_s >= 1.0:
             if prompt and prompt != run.last_feedback[-1]:
                 out.append(Event("log", ("info", f"operator: {prompt}")))
             run.last_feedback, run.last_feedback_s = key, t
             out.append(Event("feedback", (Feedback(st.dof, st.level_index, st.level_count, st.level_command,
-                                                   st.progress, prompt),)))
+                                                   st.progress, prompt, st.phase, st.message),)))
         if t - self._last_publish_t >= self.publish_period_s - 1e-9:
             self._last_publish_t = t
             out.append(Event("estimates", (ex,)))

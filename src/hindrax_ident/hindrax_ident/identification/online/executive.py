@@ -46,7 +46,10 @@ Hindrax now ticks at 25 Hz (``identification.estimate_rate_hz``), so its command
 
 Stops (:class:`CampaignAbort`, the record says why): a limit (``limits.*``: depth, altitude, roll, pitch; the
 pool box grown by half ``pool.margin_m``), no valid DVL velocity for ``dvl_lock_timeout_s`` during surge or sway,
-the ESC output disarmed, a cancel request. The caller then commands neutral thrust.
+the ESC output disarmed, a cancel request. The caller then commands neutral thrust. A calibration step stopped after
+it asked for a load (ballast, float, line, test mass) leaves it in :attr:`Executive.undo`: the aborted status asks
+to remove it (:func:`~.steps.undo_line`), and a campaign given it as ``confirm`` first waits, thrusters stopped, for
+the operator to confirm each removal (:class:`~.steps.Confirm`).
 """
 from __future__ import annotations
 
@@ -68,8 +71,9 @@ from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
 from .maneuvers import level_ladder
 from ..bag_input.signals import STILL_MESSAGE
 from ..bag_input.campaign_record import CampaignRecord
-from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Dive,
-                    Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder)
+from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Confirm, Dive,
+                    Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder,
+                    undo_line)
 
 __all__ = ["CampaignAbort", "Executive", "ExecutiveStatus", "TickInput", "command_ticks", "ordered_samples",
            "CALIBRATION_STEPS", "THRUST_STEPS", "expand_calibration", "calibration_forces", "inclining_load",
@@ -225,7 +229,8 @@ class Executive:
     the DOF's smaller authority. steps: run these :class:`~.steps.Step` objects instead of :meth:`plan` (a test of
     one step: ``[Dive(), Ballast(w, settle_s=3, window_s=9)]``). command_rate_hz: rate of new wrench commands
     (module docstring, "Command rate"; default ``identification.command_rate_hz``, else every tick); a command is
-    held for :func:`command_ticks` ticks.
+    held for :func:`command_ticks` ticks. confirm: (remove code, instruction) pairs an aborted campaign left
+    (its :attr:`undo`): the operator confirms each first, thrusters stopped (module docstring, "Stops").
     Raises ``ValueError`` for an unknown DOF, a fraction outside (0, 1] or a tick_s that is not > 0, an unknown
     calibration step or a missing known force, an unknown excitation or a non-positive duration or command rate.
     """
@@ -239,7 +244,7 @@ class Executive:
                  excitation_duration_s: float | None = None,
                  excitation_amplitude_fraction: float = DEFAULT_AMPLITUDE_FRACTION,
                  float_buoyancy_n: float | None = None, steps: Sequence[Step] | None = None,
-                 command_rate_hz: float | None = None) -> None:
+                 command_rate_hz: float | None = None, confirm: Sequence[tuple[str, str]] = ()) -> None:
         bad = [d for d in dofs if d not in DOFS]
         if bad:
             raise ValueError(f"unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
@@ -313,8 +318,11 @@ class Executive:
         self.abort_reason = ""
         self._last_level = ("", 0)
         self._gen = None
-        #: the steps run by :meth:`start`, in order
+        #: the steps run by :meth:`start`, in order; first the :class:`~.steps.Confirm` of ``confirm``
         self.steps: list[Step] = list(steps) if steps is not None else self.plan()
+        if confirm:
+            self.steps.insert(0, Confirm(confirm))
+            self.ctx.undo.update(dict(confirm))
 
     # ------------------------------------------------------------------ the shared state, by name
     state = _Shared("conditioned sensors (:class:`~...vehicle.state.SensorState`)")
@@ -339,6 +347,11 @@ class Executive:
     message = _Shared("the current step's last message")
     depth_hold_m = _Shared("depth held between manoeuvres, m")
     t_s = _Shared("time of the current tick, s")
+
+    @property
+    def undo(self) -> list[tuple[str, str]]:
+        """Loads asked for and not removed yet: (remove code, instruction) pairs (module docstring, "Stops")."""
+        return list(self.ctx.undo.items())
 
     def operator_continue(self) -> bool:
         """The operator's ``continue``: resumes a calibration step waiting in :attr:`awaiting`; False (nothing
@@ -479,7 +492,7 @@ class Executive:
     def _abort(self, reason: str) -> None:
         ctx = self.ctx
         self.aborted, self.abort_reason = True, reason
-        ctx.say(f"ABORT: {reason}")
+        ctx.say(f"ABORT: {reason}" + (f"; {undo_line(self.undo)}" if self.undo else ""))
         if ctx.active >= 0 and DOFS[ctx.active] not in ctx.windows:
             ctx.windows[DOFS[ctx.active]] = (self._dof_start(), ctx.t_s)
         if self._gen is not None:
@@ -551,7 +564,8 @@ class Executive:
         dof, i, count, cmd = self.level_position()
         if self.finished:
             phase = "aborted" if self.aborted else "done"
-            message = self.abort_reason if self.aborted else "campaign complete"
+            message = "; ".join(filter(None, (self.abort_reason, undo_line(self.undo)))) if self.aborted \
+                else "campaign complete"
         else:
             phase = "running" if self.ctx.run >= 0 else ("returning" if dof else "positioning")
             message = STILL_MESSAGE if self.state.collecting_gyro_bias else self.message

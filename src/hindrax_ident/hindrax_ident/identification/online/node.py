@@ -45,7 +45,8 @@ Service ``identification/continue`` (std_srvs/Trigger)
 Subscribes
     ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure``
     (FluidPressure, Pa), ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range),
-    ``thrusters/pulse_width`` (ThrusterPwm, widths written by the ESC node and the armed flag).
+    ``thrusters/pulse_width`` (ThrusterPwm, widths written by the ESC node and the armed flag),
+    ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust, and why, for the result; :mod:`.core`).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.command_rate_hz`` (the control tick
     is ``identification.estimate_rate_hz``; executive module docstring, "Command rate") while a goal runs, every
@@ -93,7 +94,7 @@ import sys
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -193,6 +194,8 @@ class IdentificationNode(Node):
                   (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))
         for msg_type, topic, handler, depth in inputs:  # callbacks (module docstring, "Inputs")
             self.create_subscription(msg_type, topic, handler, depth, **sub_ev)
+        self.create_subscription(DiagnosticStatus, "supervisor/status", lambda m: self.core.on_disarm_cause(
+            next((kv.value for kv in m.values if kv.key == "disarm_cause"), "")), 10, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
         self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10, **pub_ev)
         self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50, **pub_ev)
@@ -328,7 +331,8 @@ class IdentificationNode(Node):
                 fb = ev.data[0]
                 self.core.run.handle.publish_feedback(RunIdentification.Feedback(
                     dof=fb.dof, level_index=fb.level_index, level_count=fb.level_count,
-                    level_command=fb.level_command, progress=fb.progress, prompt=fb.prompt))
+                    level_command=fb.level_command, progress=fb.progress, prompt=fb.prompt, phase=fb.phase,
+                    step=fb.step))
             elif ev.kind == "estimates":
                 stamp = self.get_clock().now().to_msg()
                 for d, est in ev.data[0].online.items():

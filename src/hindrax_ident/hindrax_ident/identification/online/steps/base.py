@@ -15,7 +15,7 @@ import numpy as np
 from ..maneuvers import DOF_INDEX
 from .context import StepContext, Wrenches
 
-__all__ = ["Step", "Dive", "DofStep"]
+__all__ = ["Step", "Confirm", "Dive", "DofStep", "undo_line"]
 
 
 class Step:
@@ -30,6 +30,31 @@ class Step:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name}>"
+
+
+def undo_line(undo) -> str:
+    """One line asking the operator to undo the loads an aborted campaign left (``undo``: (remove code,
+    instruction) pairs, :attr:`~.context.StepContext.undo`); '' when there are none."""
+    texts = [text.split(": ", 1)[-1] for _code, text in undo]
+    return (f"undo: {'; '.join(texts)} (the next campaign asks to confirm it first)") if texts else ""
+
+
+class Confirm(Step):
+    """Before anything moves: the operator confirms that the loads an aborted campaign left are gone (``undo``:
+    (remove code, instruction) pairs, e.g. ``("remove_ballast", "calibration: remove the ballast")``), one prompt
+    each, thrusters stopped (zero wrench) meanwhile. They are in :attr:`~.context.StepContext.undo` until
+    confirmed, so a campaign aborted or cancelled here leaves them to the next one."""
+
+    name = "confirm"
+
+    def __init__(self, undo) -> None:
+        self.items = [(str(code), str(text)) for code, text in undo]
+
+    def run(self, ctx: StepContext) -> Wrenches:
+        ctx.undo.update(self.items)
+        for code, text in self.items:
+            yield from ctx.wait_operator(code, f"before this campaign (the last one was aborted): "
+                                               f"{text.split(': ', 1)[-1]}", hold=False)
 
 
 class Dive(Step):

@@ -110,7 +110,7 @@ class KnownForceStep(Step):
         means: list = []
         ctx.say(self.start_message())
         yield from self._measure(ctx, c, means)
-        yield from ctx.wait_operator(apply_code, apply_text)
+        yield from ctx.wait_operator(apply_code, apply_text, undo=(remove_code, remove_text))
         yield from self._measure(ctx, c, means)
         yield from ctx.wait_operator(remove_code, remove_text)
         yield from self._holds(ctx, self.settle_s, c)
@@ -258,14 +258,16 @@ class Inclining(Step):
         yield from ctx.hold_free(dof, self.window_s)
         a1, s1 = ctx.mean_tilt(i, t1)
         m1, ms1 = ctx.mean_recorded_force(i + 3, t1)
+        remove = (f"remove_inclining_mass_{dof}", "inclining: remove the test mass")
         yield from ctx.wait_operator(f"attach_inclining_mass_{dof}",
-                                     f"inclining: hang the test mass ({w:.3g} N in water) {d:.3g} m {where}")
+                                     f"inclining: hang the test mass ({w:.3g} N in water) {d:.3g} m {where}",
+                                     undo=remove)
         yield from ctx.hold_free(dof, self.settle_s)
         t2 = ctx.t_s
         yield from ctx.hold_free(dof, self.window_s)
         a2, s2 = ctx.mean_tilt(i, t2)
         m2, ms2 = ctx.mean_recorded_force(i + 3, t2)
-        yield from ctx.wait_operator(f"remove_inclining_mass_{dof}", "inclining: remove the test mass")
+        yield from ctx.wait_operator(*remove)
         yield from ctx.hold(self.settle_s)
         dt = math.tan(a2) - math.tan(a1)
         total = moment + m2 - m1

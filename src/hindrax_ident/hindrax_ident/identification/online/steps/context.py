@@ -12,7 +12,8 @@ conditioned that tick's sensor samples. Between yields the step reads the campai
 * the run bookkeeping the record keeps per tick: the DOF under test (:attr:`active`), the commanded test level and
   the run counter (:meth:`start_run`, :meth:`end_run`), and the results of the steps (:attr:`calibration`,
   :attr:`inclining`, :attr:`decays`, :attr:`windows`, :attr:`levels`);
-* the operator hand-shake (:meth:`wait_operator`, :attr:`awaiting`, :attr:`prompt`, :meth:`operator_continue`);
+* the operator hand-shake (:meth:`wait_operator`, :attr:`awaiting`, :attr:`prompt`, :meth:`operator_continue`)
+  and what it left on the vehicle (:attr:`undo`: a load asked for and not yet removed, for an abort's prompt);
 * the motion primitives every step shares (:meth:`hold`, :meth:`station`, :meth:`move_to_centre`,
   :meth:`wait_still`), which are generators too (``yield from ctx.hold(2.0)``).
 
@@ -84,6 +85,9 @@ class StepContext:
         #: the operator's instruction while :attr:`awaiting` ("" otherwise)
         self.prompt = ""
         self._continue = False
+        #: loads asked for and not yet removed: {remove code: instruction}, e.g. {"remove_ballast": "calibration:
+        #: remove the ballast"} (:meth:`wait_operator`'s ``undo``); what an abort leaves to undo
+        self.undo: dict[str, str] = {}
 
     # ------------------------------------------------------------------ messages and bookkeeping
     def say(self, msg: str) -> None:
@@ -249,9 +253,15 @@ class StepContext:
         self.awaiting, self.prompt = "", ""
         return True
 
-    def wait_operator(self, what: str, prompt: str, max_s: float = 900.0) -> Wrenches:
-        """Hold (all DOFs) until :meth:`operator_continue`; :attr:`awaiting` is ``what`` and :attr:`prompt` reads
-        ``"<prompt>, then call continue"`` meanwhile. Raises :class:`CampaignAbort` after ``max_s``."""
+    def wait_operator(self, what: str, prompt: str, max_s: float = 900.0, undo: tuple[str, str] | None = None,
+                      hold: bool = True) -> Wrenches:
+        """Hold (all DOFs; ``hold`` False: zero wrench, the thrusters stopped) until :meth:`operator_continue`;
+        :attr:`awaiting` is ``what`` and :attr:`prompt` reads ``"<prompt>, then call continue"`` meanwhile. ``undo``:
+        (remove code, instruction) of the load this prompt asks for, in :attr:`undo` from the prompt on (the operator
+        may have acted before the continue); a continue of ``what`` takes it out of :attr:`undo`. Raises
+        :class:`CampaignAbort` after ``max_s``."""
+        if undo is not None:
+            self.undo[undo[0]] = undo[1]
         self.awaiting, self._continue = what, False
         self.prompt = f"{prompt}, then call continue"
         self.say(self.prompt)
@@ -259,8 +269,9 @@ class StepContext:
         while not self._continue:
             if self.t_s - t0 > max_s:
                 raise CampaignAbort(f"no continue within {max_s:g} s ({what})")
-            yield self.ctrl.wrench(self.state, (), self.tick_s)
+            yield self.ctrl.wrench(self.state, (), self.tick_s) if hold else np.zeros(6)
         self._continue = False  # operator_continue cleared awaiting and the prompt
+        self.undo.pop(what, None)
         self.say(f"operator continued ({what}): holding")
 
     def clear_operator(self) -> None:

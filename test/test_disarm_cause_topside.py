@@ -1,0 +1,112 @@
+"""The cause of a disarm reaches the topside in one line with the next step (supervisor/disarm_cause.py).
+
+The vehicle's emulated safety layout (ESC, supervisor and output guard each in its own process, the PCA9685 and its
+/OE line served by this process: :mod:`hindrax_ident.benchmarks.safety`), armed at 1700 us, with the gateway
+process relaying to a topside domain of its own; a probe there reads ``/<vehicle>/supervisor/status`` as the
+operator's tools do. Three stops, each from a fresh arming: a tripped limit (a depth beyond
+``supervisor.max_depth_m``), a guard silence (the ESC process stopped, SIGSTOP, until the guard has cut the outputs,
+then continued: its beats were late, not lost) and a killed ESC (SIGKILL: its last armed state stays latched, only
+the guard's beat says that the outputs were silenced). Before, the topside saw the supervisor "within the envelope"
+for the last two, and the cause only in the Pi's log.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from domain_coordinator import domain_id
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_drivers.config import load_config
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_ident.benchmarks.safety import running_layout
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(600)]
+
+WAIT_S = 30.0  # generous: a loaded two-core machine
+
+
+@pytest.fixture(scope="module")
+def topside():
+    """(layout, probe on the topside domain, the statuses it read, its executor)."""
+    with running_layout("hindrax-cause-", int(os.environ["ROS_DOMAIN_ID"])) as lay, domain_id() as top, \
+            ros_context(domain_id=top) as ctx:
+        name = load_config(lay.config).get("vehicle.name")
+        with open(lay.tmp / "gateway.log", "w") as log:
+            gateway = subprocess.Popen([lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
+                                        lay.config, "-p", f"topside_domain_id:={top}", "-p",
+                                        "topside_discovery_range:=LOCALHOST"], env=lay.env, stdout=log,
+                                       stderr=subprocess.STDOUT)
+        probe = rclpy.create_node("topside_operator", context=ctx)
+        seen: list = []
+        probe.create_subscription(DiagnosticStatus, f"/{name}/supervisor/status", seen.append, 50)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(probe)
+        try:
+            yield lay, seen, executor
+        finally:
+            gateway.send_signal(signal.SIGINT)
+            try:
+                gateway.wait(10)
+            except subprocess.TimeoutExpired:
+                gateway.kill()
+                gateway.wait(5)
+            executor.shutdown()
+            probe.destroy_node()
+
+
+def _cause_on_topside(seen: list, executor, *words: str) -> str:
+    """Wait until a topside supervisor/status carries a ``disarm_cause`` with every one of ``words``; returns it."""
+    def found() -> str:
+        for st in reversed(seen):
+            cause = next((kv.value for kv in st.values if kv.key == "disarm_cause"), "")
+            if cause and all(w in cause for w in words):
+                return cause
+        return ""
+    seen.clear()
+    try:
+        wait_until(found, WAIT_S, lambda: executor.spin_once(timeout_sec=0.05), f"disarm cause with {words}")
+    except Exception as exc:
+        last = [next((kv.value for kv in st.values if kv.key == "disarm_cause"), "") for st in seen[-3:]]
+        raise AssertionError(f"{exc}; the last causes on the topside: {last}") from exc
+    return found()
+
+
+def test_a_tripped_limit_is_named_on_the_topside(topside):
+    lay, seen, executor = topside
+    lay.armed_at_1700()
+    pub = lay.probe.create_publisher(PoseWithCovarianceStamped, "pressure/depth", 10)
+    msg = PoseWithCovarianceStamped()
+    msg.header.stamp = lay.probe.get_clock().now().to_msg()
+    msg.pose.pose.position.z = -9.0  # 9 m down: beyond any pool's supervisor.max_depth_m
+    pub.publish(msg)
+    cause = _cause_on_topside(seen, executor, "supervisor: depth 9.00 m beyond supervisor.max_depth_m")
+    assert cause.endswith("; next: bring the vehicle back inside the envelope (or fix what the cause names), then "
+                          "hindrax reset, hindrax arm"), cause
+    lay.probe.destroy_publisher(pub)
+
+
+def test_a_guard_silence_is_named_on_the_topside(topside):
+    lay, seen, executor = topside
+    lay.armed_at_1700()
+    lay.signal("esc", signal.SIGSTOP)
+    try:
+        wait_until(lambda: lay.hw.stopped_at is not None, WAIT_S, None, "the guard cut the outputs")
+    finally:
+        lay.signal("esc", signal.SIGCONT)
+    cause = _cause_on_topside(seen, executor, "output guard: ESC output state silent for", "(esc/heartbeat)")
+    assert "; next: check the ESC process (hindrax health; the launch respawns it), then hindrax arm" in cause
+
+
+def test_a_killed_esc_is_named_on_the_topside(topside):
+    lay, seen, executor = topside
+    lay.armed_at_1700()
+    lay.kill("esc")
+    cause = _cause_on_topside(seen, executor, "output guard: ESC output state silent", "ESC process dead or hung",
+                              "; next: check the ESC process")
+    assert cause.count("; next: ") == 1

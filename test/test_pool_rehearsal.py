@@ -1,0 +1,109 @@
+"""``hindrax pool rehearse``: one command gives a newcomer the README's pool day without a vehicle.
+
+From the colcon install (test/conftest.py), as the README says to run it: the command starts the live pool and the
+installed pool_test launch on this worker's domain (the internal one) with the gateway on another (the topside one),
+and prints the two shells' environments. Then, as the README's pool day does: ``hindrax health`` in the vehicle's
+shell says READY, ``hindrax arm`` and ``hindrax disarm`` in the topside's shell answer, the pool's operator attaches
+and removes the ballast through the command's input, and ``quit`` stops everything cleanly. Before, a newcomer had to
+piece this together from the live pool module, a hand-edited vehicle file and a test.
+"""
+from __future__ import annotations
+
+import os
+import queue
+import shlex
+import signal
+import subprocess
+import threading
+import time
+
+import pytest
+from domain_coordinator import domain_id
+
+from hindrax_drivers.testing import wait_until
+
+pytestmark = [pytest.mark.ros, pytest.mark.timeout(900)]
+
+WAIT_S = 180.0  # a loaded two-core machine starts ten Python processes
+
+
+def _exports(path: str) -> dict[str, str]:
+    out = {}
+    for line in open(path).read().splitlines():
+        words = shlex.split(line)
+        if words[:1] == ["export"]:
+            key, _, value = words[1].partition("=")
+            out[key] = value
+    return out
+
+
+class _Lines:
+    """The command's output lines, read by a thread of their own (a select() on a buffered text pipe misses lines
+    already in the buffer)."""
+
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self.proc, self.lines, self._queue = proc, [], queue.Queue()
+        threading.Thread(target=lambda: [self._queue.put(x) for x in proc.stdout] + [self._queue.put(None)],
+                         daemon=True).start()
+
+    def until(self, prefix: str, timeout_s: float) -> str:
+        """The next line starting with ``prefix`` (the lines before it kept in :attr:`lines`)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                line = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                line = None
+            if line is None:
+                raise AssertionError(f"no line starting {prefix!r} within {timeout_s:g} s (exit {self.proc.poll()}): "
+                                     f"{self.lines[-20:]}")
+            self.lines.append(line.rstrip("\n"))
+            if line.startswith(prefix):
+                return line
+
+
+def test_the_rehearsal_runs_the_readme_pool_day_commands(colcon_install, tmp_path):
+    install = colcon_install
+    with domain_id() as topside:
+        proc = subprocess.Popen(["hindrax", "pool", "rehearse", "--topside-domain", str(topside), "--dir",
+                                 str(tmp_path)], env=install.env, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, bufsize=1)
+        out = _Lines(proc)
+        seen = out.lines
+        try:
+            out.until("rehearsal: ", 120)
+            shells = {m: _exports(str(tmp_path / f"{m}.env")) for m in ("vehicle", "topside")}
+            assert shells["vehicle"]["ROS_DOMAIN_ID"] == install.env["ROS_DOMAIN_ID"]
+            assert shells["topside"]["ROS_DOMAIN_ID"] == str(topside) and shells["topside"]["HINDRAX_VEHICLE"]
+            assert any(s.startswith("# topside shell (topside domain") for s in seen), seen
+            vehicle_env, topside_env = ({**install.env, **shells[m]} for m in ("vehicle", "topside"))
+            health = subprocess.run(["hindrax", "health", "--launch", "hindrax_ident/pool_test.launch.xml",
+                                     f"output_dir:={tmp_path / 'runs'}", "--timeout", str(WAIT_S)], env=vehicle_env,
+                                    capture_output=True, text=True, timeout=WAIT_S + 60)
+            assert health.returncode == 0 and "READY to dive" in health.stdout, health.stdout + health.stderr
+            # the ESC refuses until its neutral period and the heartbeats are in: the operator asks again (each try
+            # is a command, not a sleep), as test_pool_day's README walk does
+            tries: list[subprocess.CompletedProcess] = []
+            for command in ("arm", "disarm"):
+                wait_until(lambda: tries.append(subprocess.run(["hindrax", command], env=topside_env,
+                                                               capture_output=True, text=True, timeout=120))
+                           or tries[-1].returncode == 0, WAIT_S, None, f"hindrax {command} on the topside")
+                assert tries[-1].stdout.strip() == f"{shells['topside']['HINDRAX_VEHICLE']}: {command}ed", tries[-1]
+            for code in ("attach_ballast", "remove_ballast"):
+                proc.stdin.write(code + "\n")
+                proc.stdin.flush()
+                assert out.until("pool: ", 30).strip() == f"pool: {code} done"
+            proc.stdin.write("quit\n")
+            proc.stdin.flush()
+            out.until("rehearsal: stopped", 120)
+            assert proc.wait(60) == 0
+        finally:
+            if proc.poll() is None:  # Ctrl-C: the command stops its launch and pool (a SIGKILL would orphan them)
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(90)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+    assert any((tmp_path / "runs").iterdir()), "the launch's recorder wrote no bag"
+    assert sorted(p.name for p in (tmp_path / "logs").iterdir()), os.listdir(tmp_path)
