@@ -24,12 +24,15 @@ import subprocess
 import tempfile
 from pathlib import Path
 
+import rclpy
 import yaml
 from domain_coordinator import domain_id
 from hindrax_drivers.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
 from hindrax_drivers.proc_sockets import child_pids, exposed, udp_sockets
 from hindrax_drivers.testing import ros_context, wait_until
 from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_msgs.srv import SignedTrigger
 
 from .safety import running_layout
 
@@ -69,8 +72,6 @@ def _arm(executor, client, request):
 
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: fewer requests); returns its result rows."""
-    from hindrax_msgs.srv import SignedTrigger
-
     n = QUICK_REQUESTS if quick else REQUESTS
     with running_layout("hindrax-bench-authority-") as lay, domain_id() as topside, \
             tempfile.TemporaryDirectory(prefix="hindrax-bench-keys-") as keys:
@@ -91,8 +92,6 @@ def run(quick: bool = False) -> list[dict]:
             wait_until(lambda: all(udp_sockets(pid) for pid in pids.values()), WAIT_S, None, "every participant")
             rows = [exposure_row({name: udp_sockets(pid) for name, pid in pids.items()})]
             with ros_context(domain_id=topside) as ctx:
-                import rclpy
-
                 node = rclpy.create_node("bench_operator", context=ctx)
                 executor = SingleThreadedExecutor(context=ctx)
                 executor.add_node(node)
