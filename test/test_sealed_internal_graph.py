@@ -27,7 +27,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: run as root in a fresh network namespace: addresses, the three processes, the laptop's view; one JSON line
 PROBE = r'''
-import json, os, socket, struct, subprocess, sys, time
+import json, os, subprocess, sys, time
 from pathlib import Path
 
 repo, config, out = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
@@ -62,29 +62,10 @@ procs = {
                                 env=env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", FASTRTPS_DEFAULT_PROFILES_FILE="")),
 }
 
-def udp(pid):
-    inodes = set()
-    for fd in Path(f"/proc/{pid}/fd").iterdir():
-        try:
-            t = os.readlink(fd)
-        except OSError:
-            continue
-        if t.startswith("socket:["):
-            inodes.add(t[8:-1])
-    found = []
-    for table in ("udp", "udp6"):
-        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
-            f = line.split()
-            if f[9] in inodes:
-                a, p = f[1].split(":")
-                found.append(socket.inet_ntoa(struct.pack("<I", int(a, 16))) if table == "udp" else "ipv6")
-    return sorted(set(found))
+from hindrax_drivers.proc_sockets import child_pids as children, udp_sockets
 
-def children(pid):
-    try:
-        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
-    except OSError:
-        return []
+def udp(pid):
+    return sorted({a for a, _ in udp_sockets(pid)})
 
 import rclpy
 os.environ.update(ROS_DOMAIN_ID=INTERNAL, ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS="10.77.0.1",

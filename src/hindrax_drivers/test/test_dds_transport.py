@@ -9,8 +9,6 @@ process maps Fast DDS shared memory, while a LOCALHOST process (the control) doe
 from __future__ import annotations
 
 import os
-import socket
-import struct
 import subprocess
 import sys
 import time
@@ -26,6 +24,7 @@ from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV, loopback_trans
 from hindrax_drivers.emulated_devices import EmulatedDevices
 from hindrax_drivers.launch_xml import read_launch
 from hindrax_drivers.process_runner import ProcessRunner
+from hindrax_drivers.proc_sockets import child_pids, reachable_from_network, udp_sockets
 from hindrax_drivers.testing import child_env, ros_context, wait_until
 
 REPO = Path(__file__).resolve().parents[3]
@@ -75,37 +74,9 @@ def test_every_launched_process_gets_the_profile(launch):
         assert Path(env[PROFILE_ENV]).resolve() == profile_path().resolve(), p.label
 
 
-def _udp_sockets(pid: int) -> list[tuple[str, int]]:
-    """(local IPv4 address, port) of every UDP socket process ``pid`` holds (IPv6 ones as ('ipv6', port))."""
-    inodes = set()
-    for fd in Path(f"/proc/{pid}/fd").iterdir():
-        try:
-            target = os.readlink(fd)
-        except OSError:
-            continue
-        if target.startswith("socket:["):
-            inodes.add(target[8:-1])
-    out = []
-    for table, family in (("udp", "ipv4"), ("udp6", "ipv6")):
-        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
-            fields = line.split()
-            if fields[9] not in inodes:
-                continue
-            address, port = fields[1].split(":")
-            if family == "ipv4":
-                out.append((socket.inet_ntoa(struct.pack("<I", int(address, 16))), int(port, 16)))
-            else:
-                out.append(("ipv6", int(port, 16)))
-    return out
-
-
 def _maps_shared_memory(pid: int) -> bool:
     """True when process ``pid`` maps a Fast DDS shared-memory segment (/dev/shm/fastrtps_*)."""
     return "/dev/shm/fastrtps" in Path(f"/proc/{pid}/maps").read_text()
-
-
-def _loopback_or_multicast(address: str) -> bool:
-    return address == "127.0.0.1" or (address != "ipv6" and 224 <= int(address.split(".")[0]) <= 239)
 
 
 @pytest.mark.ros
@@ -150,14 +121,14 @@ def test_every_vehicle_udp_socket_binds_loopback_and_no_process_uses_shared_memo
                 if label == "gateway":
                     # its topside process must reach the tether; its internal side is its child, on loopback like
                     # every other vehicle process (docs/architecture.md §8.2)
-                    pids = [int(c) for c in Path(f"/proc/{state.pid}/task/{state.pid}/children").read_text().split()]
+                    pids = child_pids(state.pid)
                     assert len(pids) == 1, (label, pids)
                 for pid in pids:
-                    sockets = _udp_sockets(pid)
+                    sockets = udp_sockets(pid)
                     assert sockets, label  # a DDS participant holds UDP sockets: this looked at the right process
-                    assert all(_loopback_or_multicast(a) for a, _ in sockets), (label, sockets)
+                    assert not any(reachable_from_network(a) for a, _ in sockets), (label, sockets)
                     assert not _maps_shared_memory(pid), label
-            assert not any(a == "0.0.0.0" for a, _ in _udp_sockets(os.getpid()))  # the tests' own process too
+            assert not any(a == "0.0.0.0" for a, _ in udp_sockets(os.getpid()))  # the tests' own process too
         finally:
             if control is not None:
                 control.kill()

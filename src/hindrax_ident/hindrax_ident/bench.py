@@ -29,7 +29,7 @@ BENCHMARKS: dict[str, str | tuple[str, ...]] = {
     "stack": "hindrax_ident.benchmarks.stack",
     "actuation": "hindrax_ident.benchmarks.actuation",
     "safety": ("hindrax_ident.benchmarks.safety", "hindrax_ident.benchmarks.participant_churn",
-               "hindrax_ident.benchmarks.busy_neighbours"),
+               "hindrax_ident.benchmarks.busy_neighbours", "hindrax_ident.benchmarks.sealed_authority"),
     "simulator": "hindrax_ident.benchmarks.simulator",
     "i2c_drivers": "hindrax_ident.benchmarks.i2c_drivers",
     "i2c_socket": "hindrax_ident.benchmarks.i2c_socket",

@@ -48,6 +48,8 @@ ROS 2 processes started while armed (:mod:`hindrax_ident.benchmarks.participant_
 CPU-bound processes of another session (:mod:`hindrax_ident.benchmarks.busy_neighbours`, the same layout):
 ``busy_neighbours_disarms`` (target 0) and ``busy_neighbours_heartbeat_gap_max_ms`` (target 100 ms), and the same
 at nice -5 only for comparison.
+The authority rows (:mod:`hindrax_ident.benchmarks.sealed_authority`, the same layout with the gateway):
+``internal_sockets_reachable_from_network`` and ``operator_*_requests_accepted`` (target 0).
 
 The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench's layout has it fitted
 (the emulated monostable ORed into /OE, ``esc.output_enable_feed_timeout_s`` 0.33 s, fed by the guard at 10 Hz):
