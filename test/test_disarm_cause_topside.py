@@ -11,6 +11,7 @@ for the last two, and the cause only in the Pi's log.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -23,7 +24,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import load_config
-from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_drivers.testing import child_process, interrupt, ros_context, wait_until
 from hindrax_ident.benchmarks.safety import running_layout
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(600)]
@@ -35,13 +36,13 @@ WAIT_S = 30.0  # generous: a loaded two-core machine
 def topside():
     """(layout, probe on the topside domain, the statuses it read, its executor)."""
     with running_layout("hindrax-cause-", int(os.environ["ROS_DOMAIN_ID"])) as lay, domain_id() as top, \
-            ros_context(domain_id=top) as ctx:
+            ros_context(domain_id=top) as ctx, contextlib.ExitStack() as stack:
         name = load_config(lay.config).get("vehicle.name")
-        with open(lay.tmp / "gateway.log", "w") as log:
-            gateway = subprocess.Popen([lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
-                                        lay.config, "-p", f"topside_domain_id:={top}", "-p",
-                                        "topside_discovery_range:=LOCALHOST"], env=lay.env, stdout=log,
-                                       stderr=subprocess.STDOUT)
+        log = stack.enter_context(open(lay.tmp / "gateway.log", "w"))
+        gateway = stack.enter_context(child_process(
+            [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config, "-p",
+             f"topside_domain_id:={top}", "-p", "topside_discovery_range:=LOCALHOST"], env=lay.env, stdout=log,
+            stderr=subprocess.STDOUT))
         probe = rclpy.create_node("topside_operator", context=ctx)
         seen: list = []
         probe.create_subscription(DiagnosticStatus, f"/{name}/supervisor/status", seen.append, 50)
@@ -50,12 +51,10 @@ def topside():
         try:
             yield lay, seen, executor
         finally:
-            gateway.send_signal(signal.SIGINT)
             try:
-                gateway.wait(10)
+                interrupt(gateway, 10)
             except subprocess.TimeoutExpired:
-                gateway.kill()
-                gateway.wait(5)
+                pass  # child_process kills it
             executor.shutdown()
             probe.destroy_node()
 
