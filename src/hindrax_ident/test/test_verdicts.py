@@ -80,6 +80,23 @@ def test_bias_where_none_is_expected_makes_the_dof_suspect(cfg):
     assert not any("bias" in x for x in h["reasons"])
 
 
+def test_a_small_bias_outside_its_interval_is_suspect_alone(cfg):
+    """0.05 N of surge bias, far below the damping force at the typical speed, yet 20 std from the expected 0: the
+    bias is not trusted (its interval misses the expected force); the other parameters keep their verdicts."""
+    r = _ident(cfg, "surge", bias=0.05)
+    r.std["bias"] = 0.0025
+    cov = r.signals["covariance"]
+    cov[r.names.index("bias"), r.names.index("bias")] = 0.0025 ** 2
+    a = assess_dof(r, cfg)
+    b = a["parameters"]["bias"]
+    assert b["verdict"] == "suspect" and any("outside its interval" in x for x in b["reasons"])
+    assert not (b["ci95"][0] <= 0.0 <= b["ci95"][1])
+    assert a["parameters"]["inertia"]["verdict"] == "trusted" and not a["reasons"]
+    # within its interval: trusted
+    r.values["bias"] = 0.001
+    assert assess_dof(r, cfg)["parameters"]["bias"]["verdict"] == "trusted"
+
+
 def test_heave_bias_off_the_net_buoyancy_makes_every_dof_suspect(cfg):
     """The net buoyancy is known from mass and volume: a heave bias far from it says the thrust curves are wrong."""
     good = {"surge": _ident(cfg, "surge"), "heave": _ident(cfg, "heave")}

@@ -24,7 +24,9 @@ and
 3. **gives each parameter ``verdict: trusted | suspect`` and the reasons**, from the checks a pool engineer makes:
 
    * ``bias``: the constant force differs significantly from the one expected (0; heave: the configured net
-     buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide.
+     buoyancy): something the model does not have is pushing (current, tether, thrust offset). DOF-wide when the
+     difference is more than :data:`BIAS_MIN_REL` of the damping force at the typical speed, else the bias alone (a
+     small bias outside its interval is a miss whatever its size).
    * ``methods``: the steady-state fit ([Hindrax-Drag] eqs. 2-8) disagrees with the reported
      quadratic damping by more than :data:`METHODS_MAX` and beyond 3 combined standard deviations: the model does not
      explain the transients and the steady states with the same numbers (lag, latency, coupling). DOF-wide. (The
@@ -208,7 +210,8 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     windows; both give the rest):
 
     * DOF-wide: ``bias`` (off the expected force beyond the t quantile and by more than :data:`BIAS_MIN_REL` of the
-      damping force at the typical speed), ``methods`` (steady-state against transient quadratic damping),
+      damping force at the typical speed; beyond the t quantile alone: the bias itself suspect), ``methods``
+      (steady-state against transient quadratic damping),
       ``direction`` (steady windows of the two directions), ``whiteness`` (residual lag-1 above
       :data:`WHITENESS_MAX`), cross-validated nrmse at or above :data:`NRMSE_MAX`; with ``cv_nrmse_hold`` the model
       must beat holding the velocity (:func:`~..fit.fit_core.persistence`), else the DOF's verdict is
@@ -255,10 +258,14 @@ def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
         z = (b - ev.expected_bias) / sb if sb > 0 else 0.0
         checks["bias_z"] = z
         checks["bias_off"] = bool(abs(z) > tq and abs(b - ev.expected_bias) > BIAS_MIN_REL * total)
+        unit = ev.units.get("bias", "")
         if checks["bias_off"]:
-            unit = ev.units.get("bias", "")
             dof_reasons.append(f"bias {b:+.3g} {unit} differs from the expected {ev.expected_bias:+.3g} {unit} "
                                f"(z = {z:+.1f}): an unmodelled force (current, tether, thrust offset)")
+        elif abs(z) > tq:  # too small to doubt the DOF, but its interval misses the expected force: not trusted
+            out["bias"]["reasons"].append(f"bias {b:+.3g} {unit} outside its interval around the expected "
+                                          f"{ev.expected_bias:+.3g} {unit} (z = {z:+.1f}): a small unmodelled force "
+                                          "(current, tether, thrust offset) the interval does not hold")
     # --- methods: steady-state against the reported fit
     for n in (x for x in names if x.startswith("quadratic")):
         st = (ev.steady or {}).get(n)

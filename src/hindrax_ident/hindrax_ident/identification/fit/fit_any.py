@@ -769,12 +769,12 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
                                **({"searched_up_to_s": round(r.timing.bound_s, 4), "bound": r.timing.bound_why,
                                    "at_edge": r.timing.at_edge} if r.timing.bound_s is not None else {})}
                            for d, r in results.items()}
-    pre_notes["delay_method"] = ("per DOF: a commanded wrench's delay is the force shift "
+    pre_notes["delay_method"] = ("per DOF: a commanded wrench's delay (force shift) "
                                  f"(0 up to the smallest of {opts.max_delay_s:g} s, a tenth of the segment and a "
                                  "quarter period of the excitation bandwidth: fit_core.resolvable_delay) "
-                                 "minimising the equation-error residual (parabola refinement), then the first-order "
-                                 "lag tau among 0, d/2, d with the smallest training output error (delay d - tau); a "
-                                 "thrust-model force keeps thrusters.time_constant_s and esc.output_latency_s")
+                                 "and first-order lag with the smallest cross-validated output error of the 1-DOF "
+                                 "model over a grid of both (fit_core.estimate_timing); a thrust-model force keeps "
+                                 "thrusters.time_constant_s and esc.output_latency_s")
     pre_notes["coupling"] = ("Coriolis and centripetal force of the diagonal inertias (Fossen 2011) from the "
                              "interpolated velocities, with the fitted inertias (" + ", ".join(
                                  f"{d} {inertia[DOFS.index(d)]:.4g}" for d in results) + "): a candidate term, "

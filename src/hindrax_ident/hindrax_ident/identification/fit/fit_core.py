@@ -5,11 +5,11 @@ Both commands read a bag their own way (the campaign's topics, or any topics) in
 raw measurements at their own times) and hand it here. Everything after the reading is this module's:
 
 1. **Timing** (:func:`estimate_timing`): a force from a thrust model of the recorded pulse widths carries its own
-   latency and lag (``known``); a commanded wrench gets its input delay estimated per DOF (the shift of the force
-   minimising the equation-error residual, parabola through the minimum) and a first-order thrust lag chosen by
-   the training output error among tau = 0, d/2, d (with the delay d - tau). The search stops at what the data
-   can resolve (:func:`resolvable_delay`: the option, a tenth of the segment, a quarter period of the excitation
-   bandwidth); an estimate at that bound is reported as such (``Timing.at_edge``).
+   latency and lag (``known``); a commanded wrench gets its input delay and first-order thrust lag per DOF from the
+   cross-validated simulation error of the 1-DOF model over a coarse-to-fine grid of both (each point a fit per
+   fold, all at once: :mod:`.timing_grid`), not from an equation-error residual that a noisy channel biases. The
+   search stops at what the data can resolve (:func:`resolvable_delay`: the option, a tenth of the segment, a
+   quarter period of the excitation bandwidth); an estimate at that bound is reported as such (``Timing.at_edge``).
 2. **Segments** (:func:`build_segments`): the chunks cut into equal segments of ``segment_s``; a segment is used
    when the DOF moves in it (RMS velocity or force standard deviation above :data:`EXCITATION_MIN`). Each segment
    is simulated open loop from its own smoothed initial state.
@@ -33,7 +33,9 @@ raw measurements at their own times) and hand it here. Everything after the read
    the smallest CV error (the damping parameters are what a controller needs: a simpler damping law chosen by a
    one-standard-error rule biased the yaw damping moment by 29 % on the piloted test bags); an addition of stage 2
    is kept only when it lowers the CV error by more than one standard error of the fold-wise differences (the
-   one-standard-error rule of [Hastie-ESL2009] §7.10, against spurious coupling terms). Every candidate's CV score
+   one-standard-error rule of [Hastie-ESL2009] §7.10, against spurious coupling terms); the nested 1-DOF model
+   (:data:`NESTED`) is always a candidate and replaces the chosen one when its CV error is lower
+   (:func:`not_below_nested`). Every candidate's CV score
    is reported, with holding the velocity and 0 scored on the same held-out samples (:func:`persistence`): a
    chosen model that does not beat holding the velocity by :data:`PERSISTENCE_MARGIN` makes the DOF's verdict
    :data:`NO_MODEL_VERDICT` (:func:`..assessment.verdicts.assess`).
@@ -58,13 +60,14 @@ import numpy as np
 
 from ...estimation.least_squares import EstimationError
 from ...vehicle.thrust_lag import ThrustLag
+from . import timing_grid
 
 __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUSTER_RHO_MAX", "Chunk", "DofRecord",
            "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments", "simulate", "fit_terms", "FitOutcome",
            "cluster_covariance", "estimate_timing", "validation_measures", "DofResult", "select_terms",
            "identify_dof", "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
            "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN", "NO_MODEL_VERDICT",
-           "resolvable_delay", "with_edge"]
+           "resolvable_delay", "with_edge", "NESTED", "not_below_nested"]
 
 #: (force std, velocity std) within a segment below which it does not move the DOF: translational (N, m/s),
 #: rotational (N m, rad/s)
@@ -796,26 +799,8 @@ def cluster_covariance(fit: FitOutcome, sd: SegmentData, min_clusters: int = MIN
     return Covariance(cov, model_p, sand_p, G, b, rho, max(G - 1, 1), rho_r)
 
 
+
 # ------------------------------------------------------------------------------------------------ timing
-def _ee_rows(rec: DofRecord, force: list, terms: Terms) -> tuple[np.ndarray, np.ndarray]:
-    """Equation-error rows [a, |v|v, v, 1 (, s)] and right-hand side (force list per chunk) over the chunks' ticks
-    that move the DOF."""
-    rows, rhs = [], []
-    fmin, vmin = EXCITATION_MIN[excited_kind(rec.dof)]
-    for ch, f in zip(rec.chunks, force):
-        v, a = ch.v, ch.a
-        cols = [a, np.abs(v) * v, v, np.ones_like(v)]
-        if rec.dof in ("roll", "pitch"):
-            cols.append(ch.restoring if ch.restoring is not None else np.zeros_like(v))
-        A = np.stack(cols, axis=-1)
-        ok = np.all(np.isfinite(A), axis=1) & np.isfinite(f)
-        rows.append(A[ok])
-        rhs.append(f[ok])
-    if not rows:
-        return np.zeros((0, 4)), np.zeros(0)
-    return np.concatenate(rows), np.concatenate(rhs)
-
-
 #: Fraction of a training segment a delay may take (each segment starts from its measured state: a delay of a
 #: tenth of it already leaves a tenth of every segment driven by force from before its start)
 DELAY_SEGMENT_FRACTION = 0.1
@@ -830,7 +815,7 @@ def resolvable_delay(rec: DofRecord, max_delay_s: float, segment_s: float = SEGM
     power lies (Welch periodogram of each chunk, pooled): a pure delay d shifts the phase by 2 pi f d, and at a
     quarter period of the highest frequency the response carries, d trades against the inertia-to-damping phase lag
     of the dynamics (at most 90 degrees), so the data no longer tell them apart. Never below two grid steps (the
-    sample rate's resolution; sub-step values come from the parabola refinement)."""
+    sample rate's resolution; the fine grid steps 25 ms)."""
     from scipy import signal as _signal
 
     h = rec.h
@@ -864,39 +849,79 @@ def with_edge(timing: Timing, h: float) -> Timing:
     return replace(timing, at_edge=bool(timing.delay_s + timing.lag_s >= timing.bound_s - h))
 
 
-def estimate_timing(rec: DofRecord, max_delay_s: float, inertia: np.ndarray | None = None,
-                    segment_s: float = SEGMENT_S) -> Timing:
-    """The input delay of a commanded wrench (module docstring, step 1; lag chosen later by
-    :func:`choose_lag`): shift s = 0..max of the force minimising the equation-error residual normalised by the
-    force variance, refined by a parabola. With ``inertia`` (6,) the Coriolis force of the other DOFs is subtracted
-    from the force first (it is not delayed). A thrust-model force keeps its known timing (``rec.lag_s``, no
-    delay)."""
+#: Coarse grid of the timing search (:func:`estimate_timing`): delay step, s, and the first-order thrust lags, s
+DELAY_STEP_S = 0.1
+LAGS_S = (0.0, 0.05, 0.15, 0.4)
+#: Fine grid around the coarse optimum: delay offsets, s
+FINE_DELAYS_S = (-0.05, -0.025, 0.0, 0.025, 0.05)
+#: Grid points fitted at once (bounds the memory of the batched simulation)
+GRID_BATCH = 6
+
+
+def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentData, folds: "Folds",
+                   segment_s: float, validation_s: float, excited_only: bool) -> np.ndarray:
+    """Cross-validated simulation-error mse of the 1-DOF model (:mod:`.timing_grid`) at each (delay, lag) of
+    ``points``: per point the inputs rebuilt with that timing, per fold a fit on its training segments and the
+    prediction of its held-out ones (:func:`make_folds`; without folds, the training error on all segments)."""
+    terms = Terms("both")
+    layout = parameter_layout(rec.dof, terms)
+    if folds.held:
+        train = np.zeros((len(folds.train), sd.m), dtype=bool)
+        held = np.zeros((len(folds.held), sv.m), dtype=bool)
+        for k, (t, hh) in enumerate(zip(folds.train, folds.held)):
+            train[k, t] = True
+            held[k, hh] = True
+    else:
+        train = held = np.ones((1, sd.m), dtype=bool)
+        sv = sd
+    out = np.empty(len(points))
+    for a in range(0, len(points), GRID_BATCH):
+        batch = points[a:a + GRID_BATCH]
+        tms = [Timing(d, lag, "estimated") for d, lag in batch]
+        sds = [build_segments(rec, terms, tm, segment_s, excited_only=excited_only) for tm in tms]
+        svs = sds if sv is sd else [build_segments(rec, terms, tm, validation_s, excited_only=not rec.all_segments)
+                                    for tm in tms]
+        U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
+        start = np.stack([_equation_error_start(x, rec.dof, layout, x.a_s) for x in sds])
+        smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
+        th = timing_grid.fit_batch(U, sd.v0, smp, train, start, sd.h, sd.cols[..., :start.shape[1] - 4])
+        sse, n = timing_grid.held_out_sse(Uv, sv.v0, (sv.s_seg, sv.s_j, sv.s_a, sv.s_z), held, th, sv.h,
+                                          sv.cols[..., :start.shape[1] - 4])
+        out[a:a + len(batch)] = np.sum(sse, axis=1) / max(float(np.sum(n)), 1.0)
+    return out
+
+
+def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGMENT_S,
+                    validation_s: float = VALIDATION_S, folds: int = 4, excited_only: bool = True) -> Timing:
+    """The input delay and first-order thrust lag of a commanded wrench (module docstring, step 1), chosen by the
+    cross-validated simulation error of the 1-DOF model ``M v' = u(t - d) - k_q |v| v - k_l v - b`` with the lag
+    (:func:`_timing_scores`, each grid point a full fit per fold): a coarse grid (delay every
+    :data:`DELAY_STEP_S`, lags :data:`LAGS_S`, delay + lag within :func:`resolvable_delay`), then
+    :data:`FINE_DELAYS_S` around its best delay with the best lag and its neighbours halfway to the next coarse
+    lags. ``curve``: [(delay, lag, cv mse)] of every point. A thrust-model force keeps its known timing
+    (``rec.lag_s``, no delay). Raises :class:`EstimationError` when no segment moves the DOF."""
     if rec.force_source != "wrench":
         return Timing(0.0, rec.lag_s, "known")
     bound, why = resolvable_delay(rec, max_delay_s, segment_s)
-    kmax = max(1, int(round(bound / rec.h)))
-    mi = None
-    if inertia is not None and rec.has_coupling:
-        mi = np.where(np.isfinite(inertia), inertia, 0.0).copy()
-        mi[["surge", "sway", "heave", "roll", "pitch", "yaw"].index(rec.dof)] = 0.0
-    res = []
-    for s in range(kmax + 1):
-        forces = [_shift(ch.force, s) - (ch.coupling @ mi if mi is not None and ch.coupling is not None else 0.0)
-                  for ch in rec.chunks]
-        X, y = _ee_rows(rec, forces, Terms())
-        if y.size < 20:
-            return Timing(0.0, 0.0, "estimated (too little data: 0)", (), bound, why)
-        th, *_ = np.linalg.lstsq(X, y, rcond=None)
-        res.append(float(np.mean((y - X @ th) ** 2) / max(float(np.var(y)), 1e-12)))
-    j = int(np.argmin(res))
-    d = float(j)
-    if 0 < j < kmax:
-        a, b, c = res[j - 1], res[j], res[j + 1]
-        den = a - 2 * b + c
-        if den > 0:
-            d = j + 0.5 * (a - c) / den
-    curve = tuple((round(s * rec.h, 4), round(r, 6)) for s, r in enumerate(res))
-    return with_edge(Timing(d * rec.h, 0.0, "estimated", curve, bound, why), rec.h)
+    zero = Timing()
+    sd = build_segments(rec, Terms("both"), zero, segment_s, excited_only=excited_only)
+    sv = build_segments(rec, Terms("both"), zero, validation_s, excited_only=not rec.all_segments)
+    fo = make_folds(sd, sv, folds)
+    step = max(rec.h, DELAY_STEP_S)
+    coarse = [(round(float(d), 6), lag) for lag in LAGS_S for d in np.arange(0.0, bound + 1e-9, step)
+              if d + lag <= bound + 1e-9]
+    scores = dict(zip(coarse, _timing_scores(rec, coarse, sd, sv, fo, segment_s, validation_s, excited_only)))
+    d0, lag0 = min(scores, key=scores.get)
+    i = LAGS_S.index(lag0)
+    lags = {lag0, 0.5 * (lag0 + LAGS_S[i - 1]) if i > 0 else lag0,
+            0.5 * (lag0 + LAGS_S[i + 1]) if i + 1 < len(LAGS_S) else lag0}
+    fine = [(round(d0 + x, 6), lag) for lag in sorted(lags) for x in FINE_DELAYS_S
+            if d0 + x >= 0.0 and d0 + x + lag <= bound + 1e-9 and (round(d0 + x, 6), lag) not in scores]
+    if fine:
+        scores.update(zip(fine, _timing_scores(rec, fine, sd, sv, fo, segment_s, validation_s, excited_only)))
+    d, lag = min(scores, key=scores.get)
+    curve = tuple((round(a, 4), round(b, 4), float(c)) for (a, b), c in sorted(scores.items()))
+    return with_edge(Timing(d, lag, "estimated (output-error cross-validation)", curve, bound, why), rec.h)
 
 
 # ------------------------------------------------------------------------------------------------ validation
@@ -948,7 +973,7 @@ def predict_validation(sd: SegmentData, layout: list, theta: np.ndarray) -> np.n
 
 
 # ------------------------------------------------------------------------------------------------ selection
-@dataclass
+@dataclass(eq=False)  # compared by identity: two fits of the same terms are two candidates
 class Candidate:
     """One model's fit on all training segments and its cross-validation: terms, layout, full-data fit, fold
     estimates (K, p) (NaN rows: the fold could not be fitted), per-fold held-out sse, n and sst, the pooled CV
@@ -1117,6 +1142,19 @@ def _improves(base: Candidate, c: Candidate) -> bool:
     return float(np.mean(d)) > se
 
 
+#: The 1-DOF model (linear + quadratic damping, bias; no coupling, one law for both directions): always a
+#: candidate of :func:`select_terms`, with the timing chosen for it (:func:`estimate_timing`)
+NESTED = Terms("both")
+
+
+def not_below_nested(chosen: Candidate, tried: list[Candidate]) -> Candidate:
+    """``chosen``, or the nested 1-DOF model (:data:`NESTED`) among ``tried`` when its cross-validated error is lower:
+    a model with more terms never predicts worse than the one it contains."""
+    nested = [c for c in tried if c.terms == NESTED and math.isfinite(c.mse)]
+    best = min(nested, key=lambda c: c.mse, default=None)
+    return best if best is not None and best.mse < chosen.mse else chosen
+
+
 def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.ndarray | None,
                  stage: int = 0, base: Candidate | None = None) -> tuple[Candidate, list[Candidate]]:
     """Stage 1 (``stage`` 1): damping; stage 2: the additions on ``base`` (module docstring, step 4); 0: both.
@@ -1140,6 +1178,8 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         for by_dir in splits:
             for damping in ("quadratic", "linear", "both"):
                 run(Terms(damping, by_dir, coriolis=cor))
+        if cor:  # the nested 1-DOF model, as it is fitted alone
+            run(NESTED)
         if not tried:
             raise EstimationError(f"{rec.dof}: no model could be fitted")
         base = _best_cv(tried)
@@ -1172,6 +1212,7 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         singles = [t for t in tried if t.terms in [replace(base.terms, **{n: v}) for n, v in keep]]
         best_single = min(singles, key=lambda t: t.mse)
         chosen = c if c is not None and _improves(best_single, c) else best_single
+    chosen = not_below_nested(chosen, tried)
     if not persistence(chosen.cv, opts.persistence_margin)["beats"]:
         # the one-standard-error rule kept a simpler model that holding the velocity beats: the best one that does
         better = [t for t in tried if persistence(t.cv, opts.persistence_margin)["beats"]]
@@ -1219,66 +1260,6 @@ class DofResult:
         return float(stats.t.ppf(0.975, self.covariance.t_dof))
 
 
-def choose_lag(rec: DofRecord, timing: Timing, opts: CoreOptions) -> Timing:
-    """For a commanded wrench: the first-order lag tau among 0, d/2 and d (delay d - tau, d the estimated delay)
-    with the smallest training output-error cost of the full model (a thrust spin-up reads partly as a delay)."""
-    if rec.force_source != "wrench" or timing.delay_s <= 2 * rec.h:
-        return timing
-    best = None
-    terms = Terms("both", rec.dof == "heave")
-    for frac in (0.0, 0.5, 1.0):
-        tm = replace(timing, delay_s=timing.delay_s * (1.0 - frac), lag_s=timing.delay_s * frac)
-        try:
-            sd = build_segments(rec, terms, tm, opts.segment_s)
-            layout = parameter_layout(rec.dof, terms)
-            start = _equation_error_start(sd, rec.dof, layout, sd.a_s)
-            f = fit_terms(sd, rec.dof, layout, start, opts.robust, max_nfev=80)
-        except (EstimationError, ValueError, np.linalg.LinAlgError):
-            continue
-        cost = float(np.sum(f.residuals ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, tm)
-    return best[1] if best is not None else timing
-
-
-def refine_delay(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.ndarray | None = None) -> Timing:
-    """For a commanded wrench: the delay refined by the training output error of the full model (linear + quadratic
-    damping, the Coriolis force when ``inertia`` is given), bounded scalar search (scipy ``minimize_scalar``, 5 ms
-    tolerance) within +-2 grid steps of the equation-error estimate, the lag kept. The equation-error delay is
-    biased by the Savitzky-Golay derivative and by the coupling it leaves out (yaw on the piloted test bags: 0.080 s
-    against the generator's 0.050 s, cross-validated nrmse 0.058 against 0.017 at the true delay)."""
-    from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
-    if rec.force_source != "wrench":
-        return timing
-    terms = Terms("both", rec.dof == "heave", coriolis=inertia is not None and rec.has_coupling)
-    layout = parameter_layout(rec.dof, terms)
-    cache: dict = {}
-
-    def cost(d):
-        tm = replace(timing, delay_s=float(d))
-        try:
-            sd = build_segments(rec, terms, tm, opts.segment_s, inertia)
-            start = cache.get("theta")
-            if start is None:
-                start = _equation_error_start(sd, rec.dof, layout, sd.a_s)
-            f = fit_terms(sd, rec.dof, layout, start, False, max_nfev=20)
-        except (EstimationError, ValueError, np.linalg.LinAlgError):
-            return math.inf
-        cache["theta"] = f.theta
-        return float(np.mean(f.residuals ** 2))
-
-    lo = max(0.0, timing.delay_s - 2 * rec.h)
-    top = timing.bound_s if timing.bound_s is not None else opts.max_delay_s
-    hi = min(top - timing.lag_s, timing.delay_s + 2 * rec.h)
-    if hi - lo < 1e-3:
-        return timing
-    sol = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 0.005})
-    if not math.isfinite(sol.fun):
-        return timing
-    return with_edge(replace(timing, delay_s=float(sol.x), source="estimated (output-error refined)"), rec.h)
-
-
 def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts: CoreOptions) -> DofResult:
     """Intervals (:func:`cluster_covariance`) of the chosen candidate and the result."""
     from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
@@ -1294,13 +1275,17 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
                      else None)
 
 
+def _timing(rec: DofRecord, opts: CoreOptions) -> Timing:
+    return estimate_timing(rec, opts.max_delay_s, opts.segment_s, opts.validation_s, opts.folds,
+                           _excited_only(rec, opts))
+
+
 def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None
                  ) -> DofResult:
     """Timing, terms by cross-validation (or ``opts.terms``), fit and intervals of one DOF (module docstring).
     ``inertia`` (6,): the other DOFs' inertias for the Coriolis candidate (NaN: unknown). Raises
     :class:`EstimationError`."""
-    timing = estimate_timing(rec, opts.max_delay_s, segment_s=opts.segment_s)
-    timing = with_edge(choose_lag(rec, timing, opts), rec.h)
+    timing = _timing(rec, opts)
     if opts.select and rec.terms is None:
         chosen, tried = select_terms(rec, timing, opts, inertia)
     else:
@@ -1327,8 +1312,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     timings, base, tried, errors, first = {}, {}, {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
         try:
-            tm = choose_lag(rec, estimate_timing(rec, opts.max_delay_s, segment_s=opts.segment_s), opts)
-            timings[dof] = tm
+            tm = timings[dof] = _timing(rec, opts)
             terms = Terms("both", rec.dof == "heave")
             sd = build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
             layout = parameter_layout(rec.dof, terms)
@@ -1358,11 +1342,6 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     inertia0 = inertia1
     for dof in first:
         rec = records[dof]
-        if rec.force_source == "wrench":  # again, without the Coriolis force, then refined by the output error
-            tm = choose_lag(rec, estimate_timing(rec, opts.max_delay_s, inertia0 if rec.has_coupling else None,
-                                                 opts.segment_s), opts)
-            timings[dof] = refine_delay(rec, tm, opts, inertia0 if rec.has_coupling else None)
-        timings[dof] = with_edge(timings[dof], rec.h)
         tm = timings[dof]
         try:
             if opts.select and rec.terms is None:
@@ -1379,6 +1358,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
             if opts.select and rec.terms is None:
                 chosen, more = select_terms(rec, timings[dof], opts, inertia0, stage=2, base=b)
                 allc = tried[dof] + [c for c in more if c not in tried[dof]]
+                chosen = not_below_nested(chosen, allc)
             else:
                 chosen, allc = b, tried[dof]
             results[dof] = finish(rec, chosen, allc, timings[dof], opts)
