@@ -29,7 +29,7 @@ def published_topics() -> dict[str, type]:
                 words = item.split()
                 if words:
                     imported[words[-1]] = (pkg, words[0])
-        for type_name, topic in re.findall(r'create_publisher\(\s*(\w+)\s*,\s*"([^"]+)"', text):
+        for type_name, topic in re.findall(r'(?:create|sensor)_publisher\(\s*(\w+)\s*,\s*"([^"]+)"', text):
             if type_name not in imported:
                 continue
             pkg, real = imported[type_name]
