@@ -23,7 +23,8 @@ Rules (one test row each in ``test/test_identification_core.py``):
   of :data:`NOT_SUPERVISOR_ABORTS`, then a zero wrench every tick until the ESC reports, after the stop, neutral
   widths or disarmed, or ``stop_timeout_s`` has passed; then the goal ends.
 * **Status** (:data:`STATUS_PERIOD_S`): the running status goes out at once when the phase, DOF, level or
-  message changes, else at most every period; 1 Hz ``idle`` without a goal.
+  message changes, else at most every period; ``idle`` every :data:`IDLE_STATUS_PERIOD_S` without a goal (a
+  tick early by up to half a control tick counts: the node then ticks at that period).
 * **Feedback**: at every change of DOF, level or prompt and at least once per second; estimates every
   ``publish_period_s``.
 * **Step gate** (:meth:`~IdentificationCore.clock_may_advance`): a simulator in the same process may not step
@@ -46,7 +47,7 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
                         ordered_samples)
 
 __all__ = ["IdentificationCore", "GoalRun", "Event", "Feedback", "goal_problem", "operator_prompt", "NEEDED_SENSORS",
-           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED", "FUTURE_STAMP_TOLERANCE_S",
+           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED", "FUTURE_STAMP_TOLERANCE_S",
            "STALE_STAMP_TOLERANCE_S"]
 
 #: sensors that must have published before a goal starts moving the vehicle
@@ -58,8 +59,11 @@ NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", "ESC output disarmed"})
 #: display; every change of phase, DOF, level or message goes out at once, so a bag's zero-order hold of the status
 #: loses nothing)
 STATUS_PERIOD_S = 0.5
-#: how long an accepted goal waits for the ESC to report armed on ``thrusters/pulse_width`` (published on every
-#: write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``) before it fails, s (ROS time)
+#: period of the ``idle`` status without a goal, s; also the node's tick period then
+IDLE_STATUS_PERIOD_S = 1.0
+#: how long an accepted goal waits for the ESC to report armed (latched ``esc/output_state``, and
+#: ``thrusters/pulse_width``: published on every write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``)
+#: before it fails, s (ROS time)
 ARMED_GRACE_S = 0.5
 #: the result message of a goal whose ESC output did not report armed
 NOT_ARMED = "ESC output not armed: call esc/set_armed first"
@@ -195,6 +199,12 @@ class IdentificationCore:
         self.armed = bool(armed)
         self.pwm_count += 1
 
+    def forget_inputs(self) -> None:
+        """The node opens its sensor inputs for a goal: the sensors seen and widths written before count no more
+        (the goal waits for fresh samples); the armed flag stays (the ESC's latched state keeps it current)."""
+        self.seen.clear()
+        self.written = None
+
     # ------------------------------------------------------------------ goals
     @property
     def busy(self) -> bool:
@@ -264,7 +274,7 @@ class IdentificationCore:
         out: list[Event] = []
         run = self.run
         if run is None:
-            if t - self._last_idle_status_t >= 1.0:
+            if t - self._last_idle_status_t >= IDLE_STATUS_PERIOD_S - 0.5 * self.tick_s:
                 self._last_idle_status_t = t
                 out.append(Event("status", ("idle", None, "idle")))
             return out
