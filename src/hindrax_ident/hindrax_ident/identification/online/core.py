@@ -47,8 +47,8 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
                         ordered_samples)
 
 __all__ = ["IdentificationCore", "GoalRun", "Event", "Feedback", "goal_problem", "operator_prompt", "NEEDED_SENSORS",
-           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED", "FUTURE_STAMP_TOLERANCE_S",
-           "STALE_STAMP_TOLERANCE_S"]
+           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
+           "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S"]
 
 #: sensors that must have published before a goal starts moving the vehicle
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
