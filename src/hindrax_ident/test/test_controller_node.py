@@ -105,6 +105,7 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             assert len(ours()) == n  # nothing from the controller
             # enabled again on request; then an identification goal runs: it yields, and refuses to enable
             assert _call(enable, SetBool.Request(data=True), spin).success
+            assert _tick_period_s(ctrl) == pytest.approx(ctrl.tick_s)  # enabled: control.rate_hz
             wait_until(lambda: len(ours()) > n + 5, 10, spin, "wrench again")
             streams = ("imu/data_raw", "dvl/data", "pressure/fluid_pressure", "ping/altitude", "allocation/status",
                        "wrench")
@@ -119,11 +120,15 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             assert not r.success and "identification goal is running" in r.message
             ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_DONE))
             wait_until(lambda: not ctrl._ident_running, 10, spin, "identification done")
-            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] for t in streams), 10, spin,
-                       "the controller's streams back")
+            sensors = streams[:4]  # back when the goal ends; wrench and allocation/status only once enabled
+            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] for t in sensors), 10, spin,
+                       "the controller's sensor streams back")
+            assert all(probe.count_subscribers(t) == subscribers[t] - 1 for t in streams[4:])
             wait_until(lambda: {"ms5837", "dvl75_attitude", "icm20948_gyro"} <= set(ctrl._last_sample_s), 10, spin,
                        "fresh sensor data after the goal")
             assert _call(enable, SetBool.Request(data=True), spin).success
+            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] for t in streams[4:]), 10, spin,
+                       "wrench and allocation/status read while enabled")
             assert _call(enable, SetBool.Request(data=False), spin).success
             assert not ctrl.enabled
             def last_is_zero():
@@ -138,6 +143,13 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
 
 
 @pytest.mark.ros
+def _tick_period_s(node) -> float:
+    """The period of the one tick timer of a ControllerNode that runs (the others are cancelled), s."""
+    running = [t for t in (node._tick_timer, node._idle_timer, node._goal_timer) if not t.is_canceled()]
+    assert len(running) == 1, f"{len(running)} tick timers running"
+    return running[0].timer_period_ns * 1e-9
+
+
 def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter(tmp_path):
     """``python -m hindrax_ident.control.node`` (what ``ros2 run hindrax_ident controller_node`` runs): ready with
     the vehicle file's model, SIGINT -> 0; a bad ``control.*`` value, or a model file of another vehicle (never a
@@ -198,8 +210,8 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
         ex.add_node(node)
         ex.add_node(probe)
         try:
-            streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
-                       "/allocation/status", "/wrench"}
+            # disabled: the sensors, not wrench and allocation/status (read only while enabled)
+            streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude"}
             inputs = streams | {"/identification/status", "/esc/output_state"}
             topics = lambda: {s.topic_name for s in node.subscriptions} - {"/controller/setpoint"}  # noqa: E731
             assert topics() == inputs and "controller_intake" not in probe.get_node_names()
@@ -236,8 +248,10 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
 
 @pytest.mark.ros
 def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after():
-    """Under the vehicle's executor (rclpy's EventsExecutor, system clock) the controller ticks at ``control.rate_hz``
-    (50 Hz), at 1 / GOAL_TICK_S (5 Hz) while an identification goal runs, and at 50 Hz again once it ends.
+    """Under the vehicle's executor (rclpy's EventsExecutor, system clock) the disabled controller ticks every
+    ODOM_PERIOD_S (10 Hz, not ``control.rate_hz``: idle work), at 1 / GOAL_TICK_S (5 Hz) while an identification goal
+    runs, and at 10 Hz again once it ends (``control.rate_hz`` while enabled:
+    ``test_controller_holds_depth_and_altitude_and_yields_wrench``).
 
     The rate is read where the node decides it, the period of the one tick timer that runs (load-independent); the
     ticks counted in wall time are bounded from above only (a loaded machine delivers fewer, never more) and must
@@ -246,7 +260,7 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
 
     from rclpy.experimental.events_executor import EventsExecutor
 
-    from hindrax_ident.control.node import GOAL_TICK_S, ControllerNode
+    from hindrax_ident.control.node import GOAL_TICK_S, ODOM_PERIOD_S, ControllerNode
 
     cfg = load_config(default_config_path())
     with ros_context() as ctx:
@@ -271,30 +285,25 @@ def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after(
             wait_until(lambda: time.monotonic() - t0 >= seconds, seconds + 5, spin, f"{seconds} s of ticks")
             return ticks["n"] - n0
 
-        def tick_period_s() -> float:
-            """The period of the one tick timer that runs (the other is cancelled), s."""
-            running = [t for t in (node._tick_timer, node._goal_timer) if not t.is_canceled()]
-            assert len(running) == 1, f"{len(running)} tick timers running"
-            return running[0].timer_period_ns * 1e-9
-
+        tick_period_s = lambda: _tick_period_s(node)  # noqa: E731
         def ticking() -> None:
             n0 = ticks["n"]
             wait_until(lambda: ticks["n"] >= n0 + 3, 30, spin, "three ticks")
 
         try:
             wait_until(lambda: status.get_subscription_count() == 1 and ticks["n"] >= 3, 10, spin, "matched")
-            rate = cfg.control.rate_hz
-            assert tick_period_s() == pytest.approx(1.0 / rate)
+            rate = 1.0 / ODOM_PERIOD_S
+            assert rate < cfg.control.rate_hz and tick_period_s() == pytest.approx(ODOM_PERIOD_S)
             assert ticks_in(1.0) <= 1.1 * rate
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_RUNNING))
             wait_until(lambda: node._ident_running, 5, spin, "the goal seen")
             assert tick_period_s() == pytest.approx(GOAL_TICK_S)
             ticking()
             slow = ticks_in(2.0)
-            assert slow <= 2.0 * 2.0 / GOAL_TICK_S, slow  # 50 Hz would give 100
+            assert slow <= 2.0 * 2.0 / GOAL_TICK_S, slow  # 10 Hz would give 20
             status.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_IDLE))
             wait_until(lambda: not node._ident_running, 5, spin, "the goal's end seen")
-            assert tick_period_s() == pytest.approx(1.0 / rate)
+            assert tick_period_s() == pytest.approx(ODOM_PERIOD_S)
             ticking()
             assert ticks_in(1.0) <= 1.1 * rate
         finally:

@@ -175,14 +175,22 @@ def test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral():
             probe.destroy_node()
 
 
+def _stand_in_handle(k: int) -> SimpleNamespace:
+    """A goal handle stand-in (goal id ``[k] * 16``, a surge goal) recording its terminal states and results."""
+    from unique_identifier_msgs.msg import UUID
+
+    h = SimpleNamespace(request=RunIdentification.Goal(dofs=["surge"]), is_cancel_requested=False,
+                        goal_id=UUID(uuid=[k] * 16), states=[], results=[], publish_feedback=lambda _fb: None)
+    h.abort, h.succeed = (lambda: h.states.append("aborted")), (lambda: h.states.append("succeeded"))
+    h.canceled = lambda: h.states.append("canceled")
+    h.execute = lambda cb: h.results.append(cb(h))
+    return h
+
+
 def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_commanding_after_it():
     """An operator who arms and starts at once: the goal is accepted while the ESC's armed flag is on its way and
     goes on once it arrives; without it the goal ends after ARMED_GRACE_S with the "not armed" result, having
     commanded nothing. The node's own callbacks are driven directly (no graph), with a stand-in goal handle."""
-    from types import SimpleNamespace
-
-    from unique_identifier_msgs.msg import UUID
-
     from hindrax_ident.identification.online.core import ARMED_GRACE_S, NOT_ARMED
     from hindrax_ident.identification.online.node import IdentificationNode
 
@@ -193,15 +201,7 @@ def test_a_goal_waits_for_the_armed_flag_within_its_grace_and_fails_without_comm
         node._publish_wrench = lambda w, now: wrenches.append(w)
         node._publish_status = lambda phase, st, message: status.append((phase, message))
         try:
-            def handle(k: int):
-                h = SimpleNamespace(request=RunIdentification.Goal(dofs=["surge"]), is_cancel_requested=False,
-                                    goal_id=UUID(uuid=[k] * 16), states=[], results=[],
-                                    publish_feedback=lambda _fb: None)
-                h.abort, h.succeed = (lambda: h.states.append("aborted")), (lambda: h.states.append("succeeded"))
-                h.canceled = lambda: h.states.append("canceled")
-                h.execute = lambda cb: h.results.append(cb(h))
-                return h
-
+            handle = _stand_in_handle
             armed = ThrusterPwm(pulse_width_us=[1500.0] * 8, armed=True)
             late = handle(1)
             node._on_accepted(late)
@@ -290,6 +290,8 @@ def test_on_the_system_clock_the_inputs_are_callbacks_as_with_sim_time():
         try:
             inputs = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
                       "/thrusters/pulse_width"}
+            assert not inputs & {s.topic_name for s in node.subscriptions}  # idle: none
+            node._set_active(True)  # what an accepted goal does
             assert inputs <= {s.topic_name for s in node.subscriptions}
             assert "identification_intake" not in probe.get_node_names()
             pwm = probe.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
@@ -304,6 +306,51 @@ def test_on_the_system_clock_the_inputs_are_callbacks_as_with_sim_time():
             wait_until(lambda: node.core.armed and any(d.startswith("icm20948") for d in node.core.seen), 10, spin,
                        "the armed flag and the IMU sample taken")
             assert node.core.written.tolist() == [1600.0] * 8 and node.core.pwm_count == 1
+        finally:
+            ex.shutdown()
+            probe.destroy_node()
+            node.destroy_node()
+
+
+@pytest.mark.ros
+def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_before_and_after_a_goal():
+    """Idle work: without a goal the node has none of the five input subscriptions and only its idle timer runs
+    (IDLE_STATUS_PERIOD_S); an accepted goal opens them and the control tick, its end closes them again. The armed
+    flag is known while idle from the ESC's latched ``esc/output_state``."""
+    from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
+    from hindrax_ident.identification.online.core import ARMED_GRACE_S, IDLE_STATUS_PERIOD_S, NOT_ARMED
+    from hindrax_ident.identification.online.node import IdentificationNode
+
+    cfg = load_config(default_config_path())
+    inputs = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude", "/thrusters/pulse_width"}
+    with ros_context() as ctx:
+        node = IdentificationNode(config=cfg, context=ctx)
+        probe = rclpy.create_node("probe", context=ctx)
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        ex.add_node(probe)
+
+        def state() -> tuple[set, float]:
+            """(input topics subscribed, period of the one timer that runs in s)."""
+            running = [t for t in (node._timer, node._idle_timer) if not t.is_canceled()]
+            assert len(running) == 1, f"{len(running)} tick timers running"
+            return inputs & {s.topic_name for s in node.subscriptions}, running[0].timer_period_ns * 1e-9
+
+        try:
+            assert state() == (set(), pytest.approx(IDLE_STATUS_PERIOD_S))
+            goal = _stand_in_handle(1)
+            node._on_accepted(goal)
+            assert state() == (inputs, pytest.approx(1.0 / cfg.identification.estimate_rate_hz))
+            wait_until(lambda: node._on_tick() or goal.results, 10 * ARMED_GRACE_S, None, "the goal's end")
+            assert goal.results[0].message == NOT_ARMED
+            assert state() == (set(), pytest.approx(IDLE_STATUS_PERIOD_S))
+            esc = probe.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
+            esc.publish(DiagnosticStatus(values=[KeyValue(key="output_state", value="1"),
+                                                 KeyValue(key="armed", value="true")]))
+            wait_until(lambda: node.core.armed, 10, lambda: ex.spin_once(timeout_sec=0.01), "the latched armed flag")
         finally:
             ex.shutdown()
             probe.destroy_node()

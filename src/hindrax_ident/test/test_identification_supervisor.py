@@ -125,7 +125,9 @@ def test_identification_abort_trips_the_supervisor_and_disarms_the_esc(end):
             step()
 
         try:
-            wait_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()) and arm.service_is_ready()
+            # fluid_pressure has no reader before a goal (the identification node subscribes to it on acceptance)
+            wait_until(lambda: all(p.get_subscription_count() > 0 for k, p in pubs.items() if k != "pressure")
+                       and arm.service_is_ready()
                        and reset.service_is_ready() and sup.esc_client.service_is_ready()
                        and action.server_is_ready(), 30, step, "graph ready")
             for _ in range(120):  # a whole supervisor rate window of sensors before arming

@@ -27,7 +27,8 @@ Rules (one test row each in ``test/test_identification_core.py``):
   ESC reports nothing, only the output guard says so) and aborts it as :data:`DISARMED`; the end of a goal aborted
   as :data:`DISARMED` waits for the cause (within ``stop_timeout_s``) and its result and final status name it.
 * **Status** (:data:`STATUS_PERIOD_S`): the running status goes out at once when the phase, DOF, level or
-  message changes, else at most every period; 1 Hz ``idle`` without a goal.
+  message changes, else at most every period; ``idle`` every :data:`IDLE_STATUS_PERIOD_S` without a goal (a
+  tick early by up to half a control tick counts: the node then ticks at that period).
 * **Feedback**: at every change of DOF, level, prompt or step message and at least once per second, with the
   phase and the step's message; estimates every ``publish_period_s``.
 * **Undo** (:attr:`~IdentificationCore.pending_undo`): the loads a stopped goal's calibration asked for and did not
@@ -53,8 +54,8 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
 from .steps import undo_line
 
 __all__ = ["IdentificationCore", "GoalRun", "Event", "Feedback", "goal_problem", "operator_prompt", "NEEDED_SENSORS",
-           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED", "FUTURE_STAMP_TOLERANCE_S",
-           "STALE_STAMP_TOLERANCE_S", "DISARMED"]
+           "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
+           "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED"]
 
 #: sensors that must have published before a goal starts moving the vehicle
 NEEDED_SENSORS = frozenset({"ms5837", "dvl75", "dvl75_attitude", "icm20948_gyro", "ping1d"})
@@ -67,8 +68,11 @@ NOT_SUPERVISOR_ABORTS = frozenset({"cancelled", DISARMED})
 #: display; every change of phase, DOF, level or message goes out at once, so a bag's zero-order hold of the status
 #: loses nothing)
 STATUS_PERIOD_S = 0.5
-#: how long an accepted goal waits for the ESC to report armed on ``thrusters/pulse_width`` (published on every
-#: write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``) before it fails, s (ROS time)
+#: period of the ``idle`` status without a goal, s; also the node's tick period then
+IDLE_STATUS_PERIOD_S = 1.0
+#: how long an accepted goal waits for the ESC to report armed (latched ``esc/output_state``, and
+#: ``thrusters/pulse_width``: published on every write and at least every 0.1 s, ``hindrax_drivers.pca9685.node``)
+#: before it fails, s (ROS time)
 ARMED_GRACE_S = 0.5
 #: the result message of a goal whose ESC output did not report armed
 NOT_ARMED = "ESC output not armed: call esc/set_armed first"
@@ -231,6 +235,12 @@ class IdentificationCore:
         return (f"{DISARMED} by {self.disarm_cause}" if self._new_cause(run) else
                 f"{DISARMED} (the supervisor named no cause); next: hindrax health, then hindrax arm")
 
+    def forget_inputs(self) -> None:
+        """The node opens its sensor inputs for a goal: the sensors seen and widths written before count no more
+        (the goal waits for fresh samples); the armed flag stays (the ESC's latched state keeps it current)."""
+        self.seen.clear()
+        self.written = None
+
     # ------------------------------------------------------------------ goals
     @property
     def busy(self) -> bool:
@@ -303,7 +313,7 @@ class IdentificationCore:
         out: list[Event] = []
         run = self.run
         if run is None:
-            if t - self._last_idle_status_t >= 1.0:
+            if t - self._last_idle_status_t >= IDLE_STATUS_PERIOD_S - 0.5 * self.tick_s:
                 self._last_idle_status_t = t
                 out.append(Event("status", ("idle", None, "idle")))
             return out

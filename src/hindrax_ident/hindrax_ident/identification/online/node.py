@@ -45,8 +45,10 @@ Service ``identification/continue`` (std_srvs/Trigger)
 Subscribes
     ``dvl/data`` (hindrax_msgs/Dvl: velocity FLU and attitude ENU), ``pressure/fluid_pressure``
     (FluidPressure, Pa), ``imu/data_raw`` (Imu, FLU), ``ping/altitude`` (Range),
-    ``thrusters/pulse_width`` (ThrusterPwm, widths written by the ESC node and the armed flag),
-    ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust, and why, for the result; :mod:`.core`).
+    ``thrusters/pulse_width`` (ThrusterPwm, widths written by the ESC node and the armed flag): only while a goal is
+    accepted or runs (see "Inputs"); ``esc/output_state`` (the ESC's armed flag, latched, on change; always);
+    ``supervisor/status`` (its ``disarm_cause``: a stop of the thrust, and why, for the result; :mod:`.core`;
+    always).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``identification.command_rate_hz`` (the control tick
     is ``identification.estimate_rate_hz``; executive module docstring, "Command rate") while a goal runs, every
@@ -81,7 +83,10 @@ Action execution
 Inputs
     The five inputs (about 130-180 messages/s) are subscription callbacks on the node's executor, whatever the clock
     (the vehicle, the virtual pool, ``hindrax run`` and the tests take the same path); the samples keep their header
-    stamps and the executive orders them by stamp at its tick.
+    stamps and the executive orders them by stamp at its tick. They are subscribed when a goal is accepted (the
+    goal waits for their first samples, ``sensor_timeout_s``) and dropped when it ends, and the control timer runs
+    only then: without a goal the node takes no sensor message and ticks every :data:`~.core.IDLE_STATUS_PERIOD_S`
+    (the idle status), so an idle vehicle pays nothing for identification.
 Safety (docs/architecture.md §8)
     Limits of the executive (depth, altitude, roll, pitch, pool box) plus DVL lock and ESC disarm abort the
     goal; the vehicle is brought to neutral thrust at the end, on abort and on cancel, before the action ends.
@@ -106,6 +111,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from hindrax_drivers import frames
+from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.lean_cdr import wrench_stamped_cdr
 from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
@@ -117,7 +123,7 @@ from ..bag_input import calibration_topic
 from ..bag_input.campaign_record import CampaignRecord
 from ..bag_input.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from ..fit.dof_model import parameter_units
-from .core import Event, GoalRun, IdentificationCore, goal_problem
+from .core import IDLE_STATUS_PERIOD_S, Event, GoalRun, IdentificationCore, goal_problem
 from .executive import ExecutiveStatus, command_ticks
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
@@ -187,13 +193,10 @@ class IdentificationNode(Node):
         # every executor spin); a sensor that does not arrive fails the goal (sensor_timeout_s, DVL lock)
         sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
-        # inputs (type, topic, handler, QoS depth): the depths hold what arrives in 0.4-2 s, many ticks
-        inputs = ((Dvl, "dvl/data", self._on_dvl, 20),
-                  (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
-                  (Imu, "imu/data_raw", self._on_imu, 50), (Range, "ping/altitude", self._on_range, 20),
-                  (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))
-        for msg_type, topic, handler, depth in inputs:  # callbacks (module docstring, "Inputs")
-            self.create_subscription(msg_type, topic, handler, depth, **sub_ev)
+        self._sub_ev = sub_ev
+        self._inputs: list = []  # the sensor subscriptions, open while a goal is accepted or runs
+        # the ESC's armed flag while no goal runs (latched, on change; the goal's pulse_width reports carry it too)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos(), **sub_ev)
         self.create_subscription(DiagnosticStatus, "supervisor/status", lambda m: self.core.on_disarm_cause(
             next((kv.value for kv in m.values if kv.key == "disarm_cause"), "")), 10, **sub_ev)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
@@ -208,7 +211,9 @@ class IdentificationNode(Node):
                                     goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
                                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
         self.create_service(Trigger, "identification/continue", self._on_continue)
-        self._timer = self.create_timer(self.tick_s, self._on_tick)
+        # one timer runs at a time: the control tick while a goal is accepted or runs, the idle status period else
+        self._timer = self.create_timer(self.tick_s, self._on_tick, autostart=False)
+        self._idle_timer = self.create_timer(IDLE_STATUS_PERIOD_S, self._on_tick)
         command_hz = 1.0 / (self.tick_s * command_ticks(self.config, self.tick_s))
         log.info(f"identification executive ready: action run_identification, ticks at "
                  f"{1.0 / self.tick_s:g} Hz, wrench at {command_hz:g} Hz, estimates at "
@@ -242,6 +247,32 @@ class IdentificationNode(Node):
         return self.core.last_result
 
     # ------------------------------------------------------------------ inputs
+    def _set_active(self, active: bool) -> None:
+        """Open the sensor subscriptions and the control tick for a goal (``active``), or close them and tick at
+        :data:`~.core.IDLE_STATUS_PERIOD_S` when it has ended (module docstring, "Inputs"). Opening forgets the
+        previous goal's sensors (:meth:`~.core.IdentificationCore.forget_inputs`): the goal waits for fresh ones."""
+        if active == bool(self._inputs):
+            return
+        if active:
+            self.core.forget_inputs()
+            # (type, topic, handler, QoS depth): the depths hold what arrives in 0.4-2 s, many ticks
+            self._inputs = [self.create_subscription(msg_type, topic, handler, depth, **self._sub_ev)
+                            for msg_type, topic, handler, depth in (
+                                (Dvl, "dvl/data", self._on_dvl, 20),
+                                (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
+                                (Imu, "imu/data_raw", self._on_imu, 50), (Range, "ping/altitude", self._on_range, 20),
+                                (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))]
+        else:
+            for sub in self._inputs:
+                self.destroy_subscription(sub)
+            self._inputs = []
+        (self._timer if active else self._idle_timer).reset()
+        (self._idle_timer if active else self._timer).cancel()
+
+    def _on_esc_state(self, msg: DiagnosticStatus) -> None:
+        state = read_esc_state(msg)
+        self.core.armed = state is not None and state[1]  # malformed: disarmed
+
     def _on_dvl(self, msg: Dvl) -> None:
         self.core.add_samples(samples_from_dvl(msg))
 
@@ -275,11 +306,13 @@ class IdentificationNode(Node):
         The goal is not executed here: its action state stays ACCEPTED while the campaign runs and becomes
         EXECUTING, then SUCCEEDED, ABORTED or CANCELED when it ends (module docstring, "Action execution")."""
         self.get_logger().info(self.core.accept(goal_handle, goal_handle.request, self._now_s()))
+        self._set_active(True)
 
     def _end_goal(self, run: GoalRun) -> None:
         """The goal's end (the core marked it ended): the result is computed and the goal reaches its terminal state
         through ``execute`` with :meth:`_goal_result`, a plain function that returns at once."""
         self._ended[bytes(run.handle.goal_id.uuid)] = run
+        self._set_active(False)
         run.handle.execute(self._goal_result)
 
     def _goal_result(self, goal_handle) -> RunIdentification.Result:
