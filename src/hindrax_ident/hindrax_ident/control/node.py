@@ -26,8 +26,8 @@ Subscribes
     (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``); ``esc/output_state`` (the ESC's
     armed flag, latched: :mod:`hindrax_drivers.esc_state`; subscribed for the node's life, the current state arrives
     at once; a malformed one reads as disarmed; a dead ESC's last state stays, and the guard silences its outputs);
-    ``allocation/status`` (achieved wrench: the anti-windup) and ``wrench`` (other writers), both only while enabled;
-    ``identification/status``.
+    ``allocation/status`` (achieved wrench: the anti-windup); ``identification/status``; ``wrench`` (other
+    writers).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
     ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change; ``odom``
@@ -38,9 +38,9 @@ CPU
     and the tests take the same path; about 200 messages/s while the streams are open, 3 while a goal runs), each
     sensor sample counted at its arrival. While an identification goal runs the controller cannot be enabled and its
     sensor streams are closed, so the tick slows from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends
-    (docs/architecture.md §10.1). While disabled the sensor streams stay open (``odom``, ``controller/status`` and
-    the enable checks read them) but ``wrench`` and ``allocation/status`` are dropped and the tick runs every
-    :data:`ODOM_PERIOD_S` (the odometry rate) instead of at ``control.rate_hz``, which it takes only while enabled.
+    (docs/architecture.md §10.1). While disabled the streams stay open (``odom``, ``controller/status`` and the
+    enable checks read them) but the tick runs every :data:`ODOM_PERIOD_S` (the odometry rate) instead of at
+    ``control.rate_hz``, which it takes only while enabled.
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
     ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
@@ -151,7 +151,6 @@ class ControllerNode(Node):
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
         self._sub_ev = sub_ev
         self._streams: list = []
-        self._command: list = []  # wrench and allocation/status, while enabled
         self._open_streams()
         self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos(), **sub_ev)
@@ -174,27 +173,17 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
-        """Subscribe to the four sensor topics (while no identification goal runs: odometry and the enable checks read
-        them). About 150 messages/s in the pool layout."""
+        """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics, ``wrench``
+        (other writers) and ``allocation/status`` (anti-windup). About 200 messages/s in the pool layout."""
         self._streams = [
             self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20),
             self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
                             20),
             self._subscribe(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)), 50),
             self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20),
+            self._subscribe(AllocationStatus, "allocation/status", self._on_allocation, 20),
+            self._subscribe(WrenchStamped, "wrench", self._on_wrench, 50),
         ]
-
-    def _command_streams_while_enabled(self) -> None:
-        """``wrench`` (other writers: the yield) and ``allocation/status`` (anti-windup) are read only while enabled:
-        subscribed by :meth:`_enable`, dropped at the first tick after a disable (not inside their own callback).
-        A pilot's stream at 50 Hz then costs a disabled controller nothing."""
-        if self.enabled and not self._command:
-            self._command = [self._subscribe(AllocationStatus, "allocation/status", self._on_allocation, 20),
-                             self._subscribe(WrenchStamped, "wrench", self._on_wrench, 50)]
-        elif not self.enabled and self._command:
-            for sub in self._command:
-                self.destroy_subscription(sub)
-            self._command = []
 
     def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
         """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
@@ -347,7 +336,6 @@ class ControllerNode(Node):
         self.enabled = True
         self.message = why
         self._last_tick_s = self._now_s()  # the step gate lets the clock reach the control timer's first tick
-        self._command_streams_while_enabled()
         self._retime()
         self.get_logger().info(f"controller: {why}")
         self._publish_status(force=True)
@@ -370,7 +358,6 @@ class ControllerNode(Node):
         self.loop.add(self._pending)
         self._pending = []
         self._last_tick_s = t
-        self._command_streams_while_enabled()
         if self.enabled:
             stale = [d for d in ("ms5837", "dvl75_attitude") if t - self._last_sample_s.get(d, -math.inf)
                      > self.settings.sensor_timeout_s]
