@@ -60,6 +60,10 @@ _UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 #: how long a new participant watches the graph before it trusts that no other ESC or supervisor is there, s.
 #: Cross-process discovery on loopback takes about 2 s (docs/architecture.md §11.5).
 DISCOVERY_WINDOW_S = 2.5
+#: past the window, the look-out waits until the domain's topic list has not changed for this long, s ...
+SETTLED_S = 1.0
+#: ... but no longer than this from its start, s (a domain whose graph keeps changing)
+DISCOVERY_CAP_S = 8.0
 #: how often a running tool looks again after the discovery window (:meth:`ForeignVehicleWatch.check_every`), s:
 #: discovery on a loaded machine can outlast the window, and a second vehicle graph may start later
 CHECK_PERIOD_S = 1.0
@@ -237,7 +241,29 @@ def refuse_before_start(context: Any, consequence: str, what: str = "refused",
     try:
         watch = ForeignVehicleWatch(lookout, what, consequence, window_s=window_s)
         pause = threading.Event()
-        while not watch.settled():
+        endpoints, changed_at = -1, watch.t0
+        while True:
+            settled = watch.settled()  # a named ESC or supervisor: its line
+            if settled:  # names lag behind endpoints: an unnamed heartbeat publisher refuses too
+                _refuse_heartbeat_endpoint(lookout, watch)
+            now = watch.clock()
+            count = len(lookout.get_topic_names_and_types())
+            if count != endpoints:
+                endpoints, changed_at = count, now
+            # past the window, wait on while discovery is still bringing topics in (a loaded machine), up to a cap
+            if settled and (now - changed_at >= SETTLED_S or now - watch.t0 >= DISCOVERY_CAP_S):
+                return
             pause.wait(0.05)
     finally:
         lookout.destroy_node()
+
+
+def _refuse_heartbeat_endpoint(lookout: Any, watch: ForeignVehicleWatch) -> None:
+    """Raise :class:`ForeignVehicleError` when any publisher of a safety heartbeat is on the domain, its node named
+    or not yet: the look-out has none of its own, and rmw knows an endpoint before its node's name arrives."""
+    for name, _types in lookout.get_topic_names_and_types():
+        role = next((r for t, r in HEARTBEAT_TOPICS.items() if name.endswith("/" + t)), None)
+        if role is not None and lookout.count_publishers(name) > 0:
+            domain = lookout.context.get_domain_id()
+            raise ForeignVehicleError(f"{watch.what}: ROS domain {domain} already has a publisher of {name} "
+                                      f"({role}); {watch.consequence}")
