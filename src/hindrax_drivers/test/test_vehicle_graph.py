@@ -2,10 +2,12 @@
 replay by default, and the ESCs and supervisors a graph shows beyond the caller's own."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 
 from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, GraphView, \
-    foreign_vehicle_processes, split_vehicle_topics, vehicle_topic_reason
+    _refuse_heartbeat_endpoint, foreign_vehicle_processes, split_vehicle_topics, vehicle_topic_reason
 
 #: topics of the vehicle's launch layout that command the thrusters or vouch for a safety process
 SPEAKS = ["/supervisor/heartbeat", "guard/heartbeat", "/esc/heartbeat", "/esc/output_state",
@@ -135,3 +137,21 @@ def test_poll_looks_at_the_graph_once_per_period_of_its_clock():
     with pytest.raises(ForeignVehicleError, match="^refused: ROS domain 7 already has supervisor /supervisor; no "
                                                   "replay$"):
         watch.poll()
+
+
+def test_an_unnamed_heartbeat_publisher_refuses_once_the_window_has_passed():
+    """rmw lists a publisher before its node's name arrives (``_NODE_NAME_UNKNOWN_``): the look-out, which has no
+    publisher of its own, refuses on the endpoint alone; a subscriber or another topic refuses nothing."""
+    def lookout(publishers: dict[str, int]):
+        return SimpleNamespace(
+            get_topic_names_and_types=lambda: [(t, ["diagnostic_msgs/msg/DiagnosticStatus"]) for t in publishers],
+            count_publishers=lambda name: publishers[name],
+            context=SimpleNamespace(get_domain_id=lambda: 42))
+
+    watch = SimpleNamespace(what="refused", consequence="refusing to start")
+    _refuse_heartbeat_endpoint(lookout({"/esc/heartbeat": 0, "/imu/data_raw": 1}), watch)  # a reader only: fine
+    with pytest.raises(ForeignVehicleError, match=r"^refused: ROS domain 42 already has a publisher of "
+                                                  r"/pool/esc/heartbeat \(ESC\); refusing to start$"):
+        _refuse_heartbeat_endpoint(lookout({"/pool/esc/heartbeat": 1}), watch)
+    with pytest.raises(ForeignVehicleError, match=r"supervisor/heartbeat \(supervisor\)"):
+        _refuse_heartbeat_endpoint(lookout({"/supervisor/heartbeat": 2}), watch)
