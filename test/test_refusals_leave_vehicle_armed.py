@@ -51,6 +51,9 @@ def _heartbeat_bag(path: Path) -> Path:
     return path
 
 
+# one rerun: the refusal rests on a discovery window (vehicle_graph.DISCOVERY_WINDOW_S); a run that misses the vehicle
+# in it twice in a row fails
+@pytest.mark.flaky(reruns=1)
 @pytest.mark.parametrize("tool", list(TOOLS))
 def test_a_refused_tool_does_not_disarm_the_vehicle(layout, tool, tmp_path):
     lay, hw = layout, layout.hw
