@@ -116,64 +116,6 @@ def pytest_unconfigure(config: pytest.Config) -> None:
             pass
         _domain_ctx = None
 
-#: The longest tests, longest first: seconds of one full run at load 13-19 on 2 cores (about three times a quiet
-#: run's), setup included (the colcon build, test/conftest.py, falls to the first pool-day test), and the test's
-#: ``file::function``. Tests not listed follow in collection order; refresh the list from ``--durations=80``.
-LONGEST_FIRST = """
-678 test_pool_day.py::test_pool_day_as_the_readme_writes_it
-599 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
-247 test_pool_day.py::test_pool_day
-184 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
-149 test_identification_accuracy.py::test_surge_and_heave_recover_the_configured_hydrodynamics
-123 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
-115 test_identification_campaign.py::test_translation_and_yaw_runs_stay_inside_the_pool_box
-110 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
-108 test_thrust_calibration.py::test_sinker_and_float_recover_heave_under_asymmetric_thrust
-102 test_thrust_calibration.py::test_line_pull_measures_the_horizontal_scale_in_surge_and_sway
-100 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
- 84 test_calibration_graph.py::test_goal_with_ballast_prompts_continue_proceeds_and_nothing_awaited_is_refused
- 83 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
- 81 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
- 78 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
- 69 test_ident_fit.py::test_imu_in_a_rotated_frame_and_unset_header_stamps
- 65 test_cli_ident.py::test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion
- 62 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
- 58 test_calibration_graph.py::test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch
- 57 test_thrust_calibration.py::test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90
- 54 test_rls_online_settings.py::test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign
- 54 test_ident_bag_fit_same.py::test_ident_bag_and_ident_fit_give_the_same_values_and_intervals
- 53 test_verdicts.py::test_scenarios_command_writes_table_and_json
- 52 test_control_evaluate.py::test_known_model_holds_the_depth_step_better_than_the_vehicle_file
- 44 test_tilt_references_virtual_pool.py::test_free_decay_inertia_within_10_percent_under_thrust_0_90
- 44 test_run_signals.py::test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind
- 41 test_second_graph.py::test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start
- 35 test_rls.py::test_noise_variance_estimate_and_calibrated_std_with_forgetting
- 33 test_ident_bag_fit_same.py::test_ident_bag_says_when_no_model_beats_holding_the_velocity
- 33 test_ident_bag_fit_same.py::test_a_parameter_at_its_bound_says_so_instead_of_an_interval
- 33 test_campaign_steps.py::test_the_sinker_is_held_by_reverse_thrust
- 27 test_ident_persistence.py::test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter
- 27 test_ident_bag_fit_same.py::test_one_verdict_path_for_both_document_builders
- 26 test_control_evaluate.py::test_without_sensor_noise_is_the_same_run_for_every_seed
- 25 test_sensor_conditioning.py::test_holds_stay_calm_with_80_ms_of_command_latency
- 25 test_allocation.py::test_fault10_quantisation_never_rounds_into_the_deadband
- 24 test_second_graph.py::test_bringup_sim_refuses_a_domain_with_another_supervisor
- 23 test_results_doc.py::test_bench_writes_its_section_only_when_asked
- 23 test_cli_ident.py::test_run_writes_identification_report_and_summary
- 22 test_one_input_path.py::test_no_subscription_depends_on_the_clock
- 22 test_bringup_sim.py::test_stepped_graph_gives_the_same_messages_for_the_same_seed
- 22 test_identification_campaign.py::test_roll_and_pitch_rotate_to_the_test_angle_return_and_are_identified
- 21 test_one_input_path.py::test_no_node_takes_a_message_outside_its_executor
- 21 test_cli_ident.py::test_run_default_directory_and_latest_link
- 20 test_pool_day.py::test_armed_esc_stays_armed_while_thrust_flows
- 20 test_one_input_path.py::test_the_polled_input_helpers_are_gone
- 20 test_lint.py::test_mypy_passes_on_the_pure_cores
- 20 test_ident_vehicle_graph.py::test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral
- 20 test_identification_from_bag.py::test_ident_bag_command_rejects_a_missing_or_wrong_bag
- 20 test_controller_node.py::test_controller_holds_depth_and_altitude_and_yields_wrench
- 19 test_second_graph.py::test_run_refuses_a_domain_with_another_esc_before_arming
- 19 test_excitation.py::test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping
-"""
-
 
 @pytest.fixture(autouse=True)
 def _stop_signals_not_left_ignored():

@@ -272,21 +272,29 @@ def test_main_runs_alone_exits_0_on_sigint_and_1_on_a_bad_parameter():
         assert interrupt(proc, 30) == 0, proc.stdout.read()
 
 
-def test_on_the_system_clock_the_inputs_are_callbacks_as_with_sim_time():
-    """On the system clock (the vehicle) the node's five inputs are subscription callbacks of the node itself, as with
-    use_sim_time (issue 47 item 1: one input path): each message reaches its handler once (armed flag, widths, sensor
-    samples)."""
+
+def _node_and_probe(cfg, ctx):
+    """An identification node and a bare probe node of ``ctx``, both on one single-threaded executor."""
     from rclpy.executors import SingleThreadedExecutor
 
     from hindrax_ident.identification.online.node import IdentificationNode
 
+    node = IdentificationNode(config=cfg, context=ctx)
+    probe = rclpy.create_node("probe", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(probe)
+    return node, probe, ex
+
+def test_on_the_system_clock_the_inputs_are_callbacks_as_with_sim_time():
+    """On the system clock (the vehicle) the node's five inputs are subscription callbacks of the node itself, as with
+    use_sim_time (issue 47 item 1: one input path): each message reaches its handler once (armed flag, widths, sensor
+    samples)."""
+
+
     cfg = load_config(default_config_path())
     with ros_context() as ctx:
-        node = IdentificationNode(config=cfg, context=ctx)
-        probe = rclpy.create_node("probe", context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(probe)
+        node, probe, ex = _node_and_probe(cfg, ctx)
         try:
             inputs = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
                       "/thrusters/pulse_width"}
@@ -318,20 +326,14 @@ def test_an_idle_node_takes_no_sensor_message_and_ticks_at_the_idle_period_befor
     (IDLE_STATUS_PERIOD_S); an accepted goal opens them and the control tick, its end closes them again. The armed
     flag is known while idle from the ESC's latched ``esc/output_state``."""
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
-    from rclpy.executors import SingleThreadedExecutor
 
     from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos
     from hindrax_ident.identification.online.core import ARMED_GRACE_S, IDLE_STATUS_PERIOD_S, NOT_ARMED
-    from hindrax_ident.identification.online.node import IdentificationNode
 
     cfg = load_config(default_config_path())
     inputs = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude", "/thrusters/pulse_width"}
     with ros_context() as ctx:
-        node = IdentificationNode(config=cfg, context=ctx)
-        probe = rclpy.create_node("probe", context=ctx)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(probe)
+        node, probe, ex = _node_and_probe(cfg, ctx)
 
         def state() -> tuple[set, float]:
             """(input topics subscribed, period of the one timer that runs in s)."""
