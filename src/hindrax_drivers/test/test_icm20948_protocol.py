@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from hindrax_drivers.icm20948 import protocol as icm
@@ -200,6 +200,7 @@ def test_device_side_quantisation():
 @given(st.lists(st.floats(-15 * G, 15 * G), min_size=3, max_size=3),
        st.lists(st.floats(-30.0, 30.0), min_size=3, max_size=3),
        st.floats(-40.0, 85.0), st.integers(0, 3))
+@example([0.0, 0.0, 0.0], [0.0, 0.0, 17.4375], 0.0, 2)   # 999.1 dps: nominal range, past int16 (clamps)
 def test_quantisation_round_trip(accel, gyro, temperature, fs):
     cfg = icm.ImuConfig(accel_fs_sel=3, gyro_fs_sel=fs)
     block = icm.encode_sensor_block(icm.accel_to_raw(accel, 3), icm.gyro_to_raw(gyro, fs),
@@ -207,7 +208,9 @@ def test_quantisation_round_trip(accel, gyro, temperature, fs):
     s = icm.parse_sensor_block(block, cfg)
     np.testing.assert_allclose(s.accel_m_s2, accel, atol=0.5 * G / 2048 + 1e-9)
     gyro_lsb = math.radians(1 / icm.GYRO_LSB_PER_DPS[fs])
-    in_range = np.abs(np.degrees(gyro)) < icm.GYRO_RANGE_DPS[fs]
+    # In range = representable in int16 (32767 counts is 998.99 dps at fs=2, below the nominal 1000 dps);
+    # beyond it the device clamps (docs/devices.md §4.8 item 3), checked in test_device_side_quantisation.
+    in_range = np.abs(np.degrees(gyro)) * icm.GYRO_LSB_PER_DPS[fs] < 32767.5
     np.testing.assert_allclose(s.gyro_rad_s[in_range], np.asarray(gyro)[in_range], atol=0.5 * gyro_lsb + 1e-9)
     assert abs(s.temperature_c - temperature) <= 0.5 / 333.87 + 1e-9
 
