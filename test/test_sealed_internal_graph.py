@@ -1,13 +1,15 @@
 """The vehicle's internal graph is sealed from the tether (docs/architecture.md §8.2): no internal participant, the
 gateway's included, can be reached from a non-loopback address.
 
-Everything here runs in a private network namespace (``unshare -n``: its own loopback, no real interface) that also
-carries two non-loopback addresses, 10.77.0.1 (the "vehicle") and 10.77.0.2 (the "laptop"). In it: the gateway as
-vehicle.launch.xml starts it, a control participant on the internal domain with Fast DDS's default transports (what
-any process listening on every address looks like), and the laptop: a participant bound to 10.77.0.2 only, with
-``ROS_STATIC_PEERS=10.77.0.1`` and the vehicle's internal domain id, as an engineer on the pool's network would
+Everything here runs in a private network namespace (``unshare -n``), the "Pi", joined by a veth pair to a second
+namespace, the "laptop": 10.77.0.1 on the Pi's side, 10.77.0.2 on the laptop's, a separate host as far as DDS can
+tell. On the Pi: the gateway as vehicle.launch.xml starts it and a control participant on the internal domain with
+Fast DDS's default transports (what any process listening on every address looks like). On the laptop: a participant
+with ``ROS_STATIC_PEERS=10.77.0.1`` and the vehicle's internal domain id, as an engineer on the pool's network would
 set them. The laptop must discover the control (the path works) and, in the same time and 5 s more, no node of the
-vehicle. The probe script prints one JSON line with what it saw and the UDP sockets of every process.
+vehicle. The gateway before its split into two processes fails both halves: the laptop found /hindrax/gateway and
+its internal participant had a socket on 0.0.0.0. The probe prints one JSON line with what the laptop saw and the UDP
+sockets of the gateway's processes.
 """
 from __future__ import annotations
 
@@ -31,8 +33,13 @@ import json, os, subprocess, sys, time
 from pathlib import Path
 
 repo, config, out = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
-for cmd in (["ip", "link", "set", "lo", "up"], ["ip", "addr", "add", "10.77.0.1/32", "dev", "lo"],
-            ["ip", "addr", "add", "10.77.0.2/32", "dev", "lo"]):
+NS = f"hindrax-laptop-{os.getpid()}"
+for cmd in (["ip", "link", "set", "lo", "up"], ["ip", "link", "add", "pi0", "type", "veth", "peer", "name", "lap0"],
+            ["ip", "netns", "add", NS], ["ip", "link", "set", "lap0", "netns", NS],
+            ["ip", "addr", "add", "10.77.0.1/24", "dev", "pi0"], ["ip", "link", "set", "pi0", "up"],
+            ["ip", "netns", "exec", NS, "ip", "addr", "add", "10.77.0.2/24", "dev", "lap0"],
+            ["ip", "netns", "exec", NS, "ip", "link", "set", "lap0", "up"],
+            ["ip", "netns", "exec", NS, "ip", "link", "set", "lo", "up"]):
     subprocess.run(cmd, check=True)
 INTERNAL, TOPSIDE = "11", "12"
 
@@ -41,15 +48,6 @@ def env(**extra):
     e.update(extra)
     return {k: v for k, v in e.items() if v}
 
-laptop_profile = out / "laptop.xml"
-laptop_profile.write_text("""<?xml version="1.0" encoding="UTF-8"?>
-<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
-  <transport_descriptors><transport_descriptor><transport_id>lan</transport_id><type>UDPv4</type>
-    <interfaceWhiteList><address>10.77.0.2</address></interfaceWhiteList></transport_descriptor></transport_descriptors>
-  <participant profile_name="laptop" is_default_profile="true"><rtps>
-    <userTransports><transport_id>lan</transport_id></userTransports>
-    <useBuiltinTransports>false</useBuiltinTransports></rtps></participant>
-</profiles>""")
 vehicle_env = env(ROS_STATIC_PEERS="")
 procs = {
     "gateway": subprocess.Popen([sys.executable, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
@@ -67,9 +65,11 @@ from hindrax_drivers.proc_sockets import child_pids as children, udp_sockets
 def udp(pid):
     return sorted({a for a, _ in udp_sockets(pid)})
 
+LAPTOP = r"""
+import json, os, sys, time
+from pathlib import Path
 import rclpy
-os.environ.update(ROS_DOMAIN_ID=INTERNAL, ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS="10.77.0.1",
-                  FASTRTPS_DEFAULT_PROFILES_FILE=str(laptop_profile))
+out = Path(sys.argv[1])
 rclpy.init()
 laptop = rclpy.create_node("laptop")
 seen, control_at, deadline = set(), None, time.monotonic() + 90
@@ -81,14 +81,26 @@ while time.monotonic() < deadline:
         control_at = time.monotonic()
     if control_at is not None and time.monotonic() - control_at > 5.0:
         break
-sockets = {"gateway": udp(procs["gateway"].pid), "laptop": udp(os.getpid())}
+print(json.dumps({"seen": sorted(seen), "control_seen": control_at is not None}))
+"""
+try:  # the named namespace is a mount outside this one: always removed
+    lap = subprocess.run(["ip", "netns", "exec", NS, sys.executable, "-c", LAPTOP, str(out)], capture_output=True,
+                         text=True, env=env(ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET", ROS_STATIC_PEERS="10.77.0.1",
+                                            FASTRTPS_DEFAULT_PROFILES_FILE=""), timeout=150)
+finally:
+    subprocess.run(["ip", "netns", "del", NS], check=False)
+if lap.returncode:
+    sys.exit(lap.stderr[-3000:])
+laptop_saw = json.loads(lap.stdout.strip().splitlines()[-1])
+gateway_ready = lambda: "internal domain" in (out / "gateway.log").read_text()
+sockets = {"gateway": udp(procs["gateway"].pid)}
 for child in children(procs["gateway"].pid):
     sockets[f"gateway child {child}"] = udp(child)
 procs["gateway"].terminate()  # the gateway ends on SIGTERM; the control (rclpy's handler) only on SIGKILL
 procs["control"].kill()
 for p in procs.values():
     p.wait(timeout=30)
-print(json.dumps({"seen": sorted(seen), "control_seen": control_at is not None, "gateway_ready": gateway_ready(),
+print(json.dumps({**laptop_saw, "gateway_ready": gateway_ready(),
                   "sockets": sockets}))
 '''
 
