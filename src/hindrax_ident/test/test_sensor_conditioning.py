@@ -63,7 +63,7 @@ def test_driver_dvl_velocity_is_already_at_the_body_origin(cfg):
     """dvl/data carries the base_link velocity (the driver removed the lever arm): not corrected twice."""
     from hindrax_msgs.msg import Dvl
 
-    from hindrax_ident.identification.bag_input.signals import samples_from_dvl
+    from hindrax_ident.vehicle.signals import samples_from_dvl
 
     st = SensorState(cfg)
     _gyro(st, 0.0, [0.0, 1.5, 0.0])

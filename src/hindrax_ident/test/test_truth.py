@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.fit.dof_model import measurement_settings
+from hindrax_ident.vehicle.uncertainty import measurement_settings
 from hindrax_ident.identification.online.estimators import OnlineDofEstimator
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import (DISTURBANCE_GROUPS, DISTURBANCE_SCHEMA, Disturbances, TruthError,

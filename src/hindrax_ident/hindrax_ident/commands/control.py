@@ -110,7 +110,7 @@ def _load_model(path, cfg):
 
 def _model(args, cfg) -> int:
     from ..control.law import ControlSettings, Controller
-    from ..identification.online.maneuvers import dof_authority
+    from ..control.maneuvers import dof_authority
     from hindrax_drivers.allocation.core import AllocationCore
     from hindrax_drivers.config import DOFS
 

@@ -77,7 +77,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.frames import wrap_angle
 
-from ..identification.online.maneuvers import HoldController, dof_authority
+from .maneuvers import HoldController, dof_authority
 from ..sim.simulator import Simulator
 from ..sim.truth import Truth, with_floor_gradient, without_sensor_noise
 from .law import ControlSettings, ReferenceModel
