@@ -11,7 +11,7 @@ import pytest
 
 from hindrax_drivers import frames
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.online.campaign import Campaign
+from hindrax_ident.sim.campaign import Campaign
 from hindrax_ident.identification.fit.campaign_fit import rate_bias_against_angle
 from hindrax_ident.vehicle.fusion import smooth_with_rate
 from hindrax_ident.vehicle.state import DepthEstimator, SensorState, euler_rates, rotation_ned_from_body
