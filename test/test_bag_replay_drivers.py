@@ -4,7 +4,7 @@ the drivers re-publish the same parsed messages (same values, same count)."""
 import pytest
 
 from hindrax_drivers.config import default_config_path
-from hindrax_ident.sim.record_bag import record_simulated_run
+from hindrax_ident.record_bag import record_simulated_run
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.replay_devices import (PARSED_TOPICS, DriverReplay, compare_parsed,
                                                       recorded_parsed)
@@ -66,7 +66,7 @@ def test_raw_device_data_replayed_through_fresh_drivers_reproduces_the_parsed_to
 
 def test_committed_simulator_bag_replays_through_fresh_drivers():
     """The small bag committed under src/hindrax_drivers/test/data (recorded from the simulator by
-    ``python -m hindrax_ident.sim.record_bag``) drives fresh drivers to the same parsed
+    ``python -m hindrax_ident.record_bag``) drives fresh drivers to the same parsed
     messages: the regression guard for any change in a driver's parsing."""
     from pathlib import Path
 

@@ -15,11 +15,11 @@ Rules checked:
   need live in pure modules that the nodes import too.
 - production code does not import the test helpers (:data:`TESTING`): only the benchmarks
   (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``;
-- layers (:data:`LAYERS`): drivers < vehicle physics < identification and control < simulator < commands,
-  benchmarks and the graph builders; no module imports a module of a higher layer, except the imports listed with
-  their reason in :data:`KNOWN_LAYER_EXCEPTIONS`;
-- the identification package keeps its rooms (:data:`ROOMS`): bag input < fit, assessment < online < the
-  front-ends that span them; the online campaign does not import the identification.yaml writer;
+- layers (:data:`LAYERS`), one strict order: drivers < estimation < vehicle < control < identification < simulator
+  < the graph builders < commands, benchmarks, the command line and the runs on the composed graph; no module imports
+  a module of a higher layer, without exceptions;
+- the identification package keeps its rooms (:data:`ROOMS`): bag input < fit, assessment < online; the online
+  campaign does not import the identification.yaml writer;
 - the vehicle's shared physics is defined once (:data:`DEFINED_ONCE`): the angle wrap, the thrust lag, the thrust
   curve and the rigid-body mass matrix, each in its one module, and no other module writes their formulas out.
 
@@ -222,36 +222,21 @@ def test_entry_points_exist(graph):
 
 
 # ------------------------------------------------------------------------------------------------ layers
-#: (module prefix, layer), the longest matching prefix wins; a module matching none is in the top layer
-#: (commands, benchmarks, the graph builders, the command line). docs/architecture.md §2.
+#: (module prefix, layer), the longest matching prefix wins; a module matching none is in the top layer (commands,
+#: benchmarks, the command line, the runs on the composed graph). docs/architecture.md §2. The controller the vehicle
+#: runs sits below identification (which holds with it); the simulator above both (it runs their campaigns and
+#: closed-loop evaluations); the graph builders above every node they compose.
 LAYERS = (
     ("hindrax_drivers", 0),
-    ("hindrax_ident.vehicle", 1),
     ("hindrax_ident.estimation", 1),
-    ("hindrax_ident.identification", 2),
-    ("hindrax_ident.control", 2),
-    ("hindrax_ident.sim", 3),
+    ("hindrax_ident.vehicle", 2),
+    ("hindrax_ident.control", 3),
+    ("hindrax_ident.identification", 4),
+    ("hindrax_ident.sim", 5),
+    ("hindrax_ident.bringup", 6),
+    ("hindrax_ident.composition", 6),
 )
-TOP_LAYER = 4
-
-#: Imports from a lower layer to a higher one that exist today, each with its reason. A new one fails the test; an
-#: entry whose import is gone fails it too (so the list only shrinks).
-KNOWN_LAYER_EXCEPTIONS = {
-    ("hindrax_ident.identification.online.campaign", "hindrax_ident.sim.simulator"):
-        "the in-process campaign steps the simulator directly (issue 47.2: belongs in the simulator's room)",
-    ("hindrax_ident.identification.graph_campaign", "hindrax_ident.bringup"):
-        "the campaign over the composed graph builds that graph (an entry point in identification's room)",
-    ("hindrax_ident.control.evaluate", "hindrax_ident.sim.simulator"):
-        "the closed-loop evaluation runs its holds against the simulator",
-    ("hindrax_ident.control.evaluate", "hindrax_ident.sim.truth"):
-        "the closed-loop evaluation sets the simulator's truth (floor gradient, noise-free sensors)",
-    ("hindrax_ident.control.suite", "hindrax_ident.sim.simulator"):
-        "the control suite runs the evaluation's scenarios in the simulator",
-    ("hindrax_ident.control.suite", "hindrax_ident.sim.truth"):
-        "the control suite loads the shipped truths",
-    ("hindrax_ident.sim.record_bag", "hindrax_ident.bringup"):
-        "the simulated bag recorder runs the whole composed graph (an entry point in the simulator's room)",
-}
+TOP_LAYER = 7
 
 
 def layer_of(module: str) -> int:
@@ -279,39 +264,37 @@ def test_the_layer_checker_sees_an_upward_import():
              "hindrax_drivers.frames": set()}
     assert upward_imports(graph) == {("hindrax_ident.vehicle.x", "hindrax_ident.sim.model")}
     assert layer_of("hindrax_ident.commands.run") == TOP_LAYER and layer_of("hindrax_drivers.frames") == 0
+    assert [layer_of(f"hindrax_ident.{m}") for m in ("vehicle.state", "control.node", "identification.online.node",
+                                                     "sim.campaign", "bringup", "graph_campaign")] == [2, 3, 4, 5, 6, 7]
 
 
 def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
-    found = upward_imports(graph)
-    new = sorted(f"{a} -> {b}" for a, b in found - set(KNOWN_LAYER_EXCEPTIONS))
-    gone = sorted(f"{a} -> {b}" for a, b in set(KNOWN_LAYER_EXCEPTIONS) - found)
-    assert not new, "imports from a lower layer to a higher one (drivers < vehicle < identification, control < sim " \
-                    "< commands):\n" + "\n".join(new)
-    assert not gone, "known exceptions that no longer exist (remove them):\n" + "\n".join(gone)
-    assert all(layer_of(m) <= 1 for m in graph.get("hindrax_ident.vehicle.rigid_body", set()) if m in graph)
+    # the order is not vacuous: identification holds with the controller's law, the simulator runs the campaign
+    assert "hindrax_ident.control.maneuvers" in graph["hindrax_ident.identification.online.steps.context"]
+    assert "hindrax_ident.identification.online.executive" in graph["hindrax_ident.sim.campaign"]
+    up = sorted(f"{a} -> {b}" for a, b in upward_imports(graph))
+    assert not up, "imports from a lower layer to a higher one (drivers < estimation < vehicle < control < " \
+                   "identification < sim < bringup < commands):\n" + "\n".join(up)
+    assert all(layer_of(m) <= layer_of("hindrax_ident.vehicle")
+               for m in graph.get("hindrax_ident.vehicle.rigid_body", set()) if m in graph)
 
 
 # ------------------------------------------------------------------------------------------------ identification rooms
 IDENT = "hindrax_ident.identification"
-#: The rooms of the identification package, lowest first (issue 47.2): a module imports its own room and the
-#: rooms below it. ``fit`` and ``assessment`` share a level: the thrust calibration (fit) weighs with the verdicts'
-#: declared thrust uncertainty and the verdicts read the fit core's persistence.
+#: The rooms of the identification package, lowest first: a module imports its own room and the rooms below it.
+#: ``fit`` and ``assessment`` share a level: the thrust calibration (fit) weighs with the verdicts' thrust weights and
+#: the verdicts read the fit core's persistence.
 ROOMS = {"bag_input": 0, "fit": 1, "assessment": 1, "online": 2}
-#: Modules directly in the package, above every room: they span them (``hindrax run``: the campaign on the
-#: composed graph, then the offline fit of its bag and the outputs).
-FRONT_ENDS = frozenset({f"{IDENT}.graph_campaign"})
 #: Imports a room may not make although the target is below it: the online campaign never writes
 #: identification.yaml (its estimator's priors come from the fit's posterior module, not from the writer).
 ROOM_FORBIDDEN = {("online", f"{IDENT}.assessment.results")}
 
 
 def room_of(module: str) -> tuple[str, int] | None:
-    """(room, level) of an identification module; front-ends are (``""``, above every room), the package itself
-    and modules outside it None. A flat module that is neither a room nor a front-end is ("?", -1)."""
+    """(room, level) of an identification module; the package itself and modules outside it None. A flat module
+    outside the rooms is ("?", -1)."""
     if not module.startswith(IDENT + "."):
         return None
-    if module in FRONT_ENDS:
-        return "", max(ROOMS.values()) + 1
     room = module[len(IDENT) + 1:].split(".")[0]
     return (room, ROOMS[room]) if room in ROOMS else ("?", -1)
 
@@ -327,7 +310,7 @@ def room_violations(graph: dict[str, set[str]]) -> list[str]:
             if rs is None or rd is None:
                 continue
             if rd[1] > rs[1]:
-                out.append(f"{src} -> {dst} (room {rd[0] or 'front-end'} is above {rs[0] or 'front-end'})")
+                out.append(f"{src} -> {dst} (room {rd[0]} is above {rs[0]})")
             elif (rs[0], dst) in ROOM_FORBIDDEN:
                 out.append(f"{src} -> {dst} (forbidden for room {rs[0]})")
     return sorted(out)
@@ -336,8 +319,8 @@ def room_violations(graph: dict[str, set[str]]) -> list[str]:
 def test_the_room_checker_sees_a_wrong_import():
     graph = {f"{IDENT}.fit.fit_core": {f"{IDENT}.online.executive"},
              f"{IDENT}.online.estimators": {f"{IDENT}.assessment.results", f"{IDENT}.fit.posterior"},
-             f"{IDENT}.assessment.verdicts": {f"{IDENT}.fit.fit_core", f"{IDENT}.bag_input.signals"},
-             f"{IDENT}.flat": set(), f"{IDENT}.graph_campaign": {f"{IDENT}.online.node"}}
+             f"{IDENT}.assessment.verdicts": {f"{IDENT}.fit.fit_core", f"{IDENT}.bag_input.from_bag"},
+             f"{IDENT}.flat": set()}
     assert room_violations(graph) == [
         f"{IDENT}.fit.fit_core -> {IDENT}.online.executive (room online is above fit)",
         f"{IDENT}.flat (in no room: move it into one of ['assessment', 'bag_input', 'fit', 'online'])",
@@ -345,9 +328,9 @@ def test_the_room_checker_sees_a_wrong_import():
 
 
 def test_identification_keeps_its_rooms(graph):
-    """bag input < fit, assessment < online < the front-ends; online does not write identification.yaml."""
+    """bag input < fit, assessment < online; online does not write identification.yaml."""
     rooms = {room_of(m)[0] for m in graph if room_of(m)}
-    assert set(ROOMS) <= rooms and FRONT_ENDS <= set(graph)  # the rule is not vacuous, no stale front-end
+    assert set(ROOMS) <= rooms  # the rule is not vacuous
     assert f"{IDENT}.fit.posterior" in graph[f"{IDENT}.online.estimators"]
     assert room_violations(graph) == []
 

@@ -301,7 +301,7 @@ def test_pool_day_as_the_readme_writes_it(colcon_install, tmp_path):
 
     from diagnostic_msgs.msg import DiagnosticStatus
     from hindrax_drivers.testing import child_env
-    from hindrax_ident.identification.graph_campaign import parse_prompt
+    from hindrax_ident.graph_campaign import parse_prompt
     from hindrax_ident.sim.live_pool import LivePool
     from hindrax_ident.sim.truth import load_truth
     from hindrax_msgs.msg import ThrusterPwm

@@ -1,6 +1,6 @@
 """Calibration steps on the ROS graph: the run_identification goal's ``calibrate`` field, the
 operator prompt in the action feedback and in ``identification/status``, the ``identification/continue`` service
-(std_srvs/Trigger), the virtual operator of ``hindrax run`` (:class:`~hindrax_ident.identification.graph_campaign.
+(std_srvs/Trigger), the virtual operator of ``hindrax run`` (:class:`~hindrax_ident.graph_campaign.
 VirtualOperator`) and the ``calibration.*`` keys of the vehicle file.
 
 The graph tests shorten the ballast step's settling and averaging times (executive module constants, read at run
@@ -21,7 +21,7 @@ from hindrax_drivers.config import ConfigError, default_config_path, load_config
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_ident import cli
 from hindrax_ident.identification.online import executive
-from hindrax_ident.identification.graph_campaign import VirtualOperator, parse_prompt
+from hindrax_ident.graph_campaign import VirtualOperator, parse_prompt
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import ManeuverStatus
 from hindrax_msgs.srv import SetArmed
@@ -232,7 +232,7 @@ def test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch(monkeypa
     seed 3 roll 4.464 +- 0.136, pitch 4.554 +- 0.139 (within 2.3 %, |z| < 0.8). Without the thrusters' realised
     moment on the free DOF (thruster_moment_n_m, about 0.02 N m against the mass's 0.64 N m) pitch read 6 % high
     (2.8 std)."""
-    from hindrax_ident.identification.online.campaign import Campaign
+    from hindrax_ident.sim.campaign import Campaign
     from hindrax_ident.identification.online.executive import inclining_load
 
     monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 10.0)

@@ -237,7 +237,7 @@ def test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recor
     from hindrax_drivers.recording.reader import BagReader
     from hindrax_drivers.testing import ros_context, wait_until
     from hindrax_ident.bringup import build_graph
-    from hindrax_ident.identification.graph_campaign import VirtualOperator
+    from hindrax_ident.graph_campaign import VirtualOperator
     from hindrax_msgs.action import RunIdentification
     from hindrax_msgs.srv import SetArmed
 

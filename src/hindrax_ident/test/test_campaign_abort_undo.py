@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.online.campaign import Campaign
+from hindrax_ident.sim.campaign import Campaign
 from hindrax_ident.identification.online.core import IdentificationCore
 from hindrax_ident.identification.online.executive import TickInput
 from hindrax_ident.identification.online.steps import Ballast, Dive, Float, Inclining, LinePull, TiltDecay

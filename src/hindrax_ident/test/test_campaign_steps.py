@@ -18,9 +18,9 @@ import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.identification.fit.calibration import thrust_scales
-from hindrax_ident.identification.online.campaign import Campaign, PoolOperator
+from hindrax_ident.sim.campaign import Campaign, PoolOperator
 from hindrax_ident.identification.online.executive import THRUST_STEPS, Executive, TickInput, expand_calibration
-from hindrax_ident.identification.online.maneuvers import PoolBox
+from hindrax_ident.control.maneuvers import PoolBox
 from hindrax_ident.identification.online.steps import (Ballast, BroadbandRun, Dive, Float, Inclining, LinePull,
                                                        RotationLadder, Step, TiltDecay, TranslationLadder)
 from hindrax_ident.sim.simulator import Simulator

@@ -125,7 +125,7 @@ def test_ladder_is_the_default_and_the_excitation_comes_from_the_config():
 
 
 def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
-    from hindrax_ident.identification.online.campaign import Campaign
+    from hindrax_ident.sim.campaign import Campaign
     from hindrax_ident.identification.fit.campaign_fit import identify_dof
 
     cfg = load_config(default_config_path())

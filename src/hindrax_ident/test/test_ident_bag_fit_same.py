@@ -26,7 +26,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
 from hindrax_ident.identification.fit.dof_model import truth_parameters
-from hindrax_ident.identification.bag_input.signals import thrust_of_written_widths
+from hindrax_ident.vehicle.signals import thrust_of_written_widths
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
@@ -162,7 +162,7 @@ def test_one_verdict_path_for_both_document_builders(tmp_path):
     from hindrax_ident.identification.fit import fit_any
     from hindrax_ident.identification.fit.campaign_fit import identify_bag
     from hindrax_ident.identification.assessment.results import build_results
-    from hindrax_ident.identification.assessment.verdicts import declared_rel
+    from hindrax_ident.vehicle.uncertainty import declared_rel
 
     cfg = load_config(default_config_path())
     bag = tmp_path / "campaign"

@@ -18,7 +18,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_ident.bringup import build_graph
 from hindrax_ident.identification.online.executive import ordered_samples
-from hindrax_ident.identification.bag_input.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
+from hindrax_ident.vehicle.signals import (sample_from_range, samples_from_dvl, samples_from_imu,
                                                             thrust_of_written_widths)
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm

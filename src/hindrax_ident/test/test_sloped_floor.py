@@ -12,7 +12,7 @@ import pytest
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.dvl75.protocol import BEAM_TILT_RAD
 from hindrax_ident.vehicle.state import SensorState
-from hindrax_ident.identification.bag_input.signals import samples_from_dvl
+from hindrax_ident.vehicle.signals import samples_from_dvl
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import TruthError, load_truth, truth_from_mapping, with_floor_gradient
 

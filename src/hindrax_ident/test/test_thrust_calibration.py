@@ -166,7 +166,7 @@ def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys
 
 def test_line_pull_measures_the_horizontal_scale_in_surge_and_sway():
     """Dive and the two line pulls only (no ladders): 4.905 N along body +x, then +y, under the thrust x0.90 truth."""
-    from hindrax_ident.identification.online.campaign import Campaign
+    from hindrax_ident.sim.campaign import Campaign
     from hindrax_ident.sim.simulator import Simulator
 
     cfg = load_config(default_config_path())

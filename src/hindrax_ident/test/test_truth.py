@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.fit.dof_model import measurement_settings
+from hindrax_ident.vehicle.uncertainty import measurement_settings
 from hindrax_ident.identification.online.estimators import OnlineDofEstimator
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import (DISTURBANCE_GROUPS, DISTURBANCE_SCHEMA, Disturbances, TruthError,
@@ -157,7 +157,7 @@ def test_graph_simulator_runs_on_the_truth_and_the_nodes_on_the_vehicle_file(tmp
 def test_five_percent_weaker_thrust_is_covered_or_suspect(vehicle):
     """Issue 16, done when: a truth whose thrust curves are 5 % weaker than the vehicle file's gives surge and heave
     inertia intervals that cover the truth (or a suspect verdict). The truth's hydrodynamics are the vehicle's."""
-    from hindrax_ident.identification.online.campaign import Campaign
+    from hindrax_ident.sim.campaign import Campaign
     from hindrax_ident.identification.fit.campaign_fit import identify_all_with_errors
     from hindrax_ident.identification.fit.dof_model import truth_parameters
     from hindrax_ident.identification.assessment.verdicts import apply_verdicts

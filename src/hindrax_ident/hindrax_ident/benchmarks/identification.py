@@ -13,7 +13,7 @@ import math
 import time
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.online.campaign import Campaign
+from hindrax_ident.sim.campaign import Campaign
 from hindrax_ident.identification.fit.campaign_fit import identify_all_with_errors
 
 

@@ -2,7 +2,7 @@
 
 * ``hindrax control evaluate --truth FILE --model YAML [--out DIR] [--maneuvers ...] [--models ...] [--seed N]
   [--seeds N]``:
-  closed-loop runs in the in-process virtual pool on the truth FILE (:mod:`hindrax_ident.control.evaluate`): a 0.3 m
+  closed-loop runs in the in-process virtual pool on the truth FILE (:mod:`hindrax_ident.sim.control_evaluate`): a 0.3 m
   depth step, an altitude hold at 0.5 m over a sloped floor and a 30 degree heading step, each with the model of
   YAML, the vehicle file's model and the former PD hold. Prints the table (RMSE, overshoot, settling time, RMS thrust)
   and the ratios, writes ``control.json`` and ``report/index.html`` (plots) in DIR (default
@@ -110,7 +110,7 @@ def _load_model(path, cfg):
 
 def _model(args, cfg) -> int:
     from ..control.law import ControlSettings, Controller
-    from ..identification.online.maneuvers import dof_authority
+    from ..control.maneuvers import dof_authority
     from hindrax_drivers.allocation.core import AllocationCore
     from hindrax_drivers.config import DOFS
 
@@ -123,7 +123,7 @@ def _model(args, cfg) -> int:
 
 
 def _evaluate(args, cfg) -> int:
-    from ..control import evaluate as ev
+    from ..sim import control_evaluate as ev
     from ..sim.truth import TruthError, load_truth
 
     maneuvers = _list(args.maneuvers, ev.MANEUVERS, "maneuvers")
@@ -168,7 +168,7 @@ def _evaluate(args, cfg) -> int:
 
 
 def _scenarios(args, cfg) -> int:
-    from ..control import suite
+    from ..sim import control_suite as suite
 
     try:
         names, truth_dir = suite.scenario_names(args.scenarios, args.truth_dir)

@@ -11,7 +11,7 @@ node's control tick (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`
 but does not change it.
 
 ``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the simulator
-(:mod:`hindrax_ident.identification.online.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
+(:mod:`hindrax_ident.sim.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
 no ROS graph, no bag), about four times faster; for quick studies of the method.
 
 Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
@@ -238,7 +238,7 @@ def run_graph(args: argparse.Namespace) -> int:
 
     from hindrax_drivers.vehicle_graph import ForeignVehicleError
 
-    from ..identification.graph_campaign import run_graph_campaign
+    from ..graph_campaign import run_graph_campaign
 
     cfg, dofs = _check_args(args)
 
@@ -335,7 +335,7 @@ def _add_reference_sections(doc: dict, record, cfg, idents: dict, args, progress
 
 def run_in_process(args: argparse.Namespace) -> int:
     """Run the campaign in-process on the simulator, identify, write the outputs, print the summary."""
-    from ..identification.online.campaign import Campaign
+    from ..sim.campaign import Campaign
     from ..identification.fit.campaign_fit import identify_all_with_errors
     from ..identification.assessment.report import write_report
     from ..identification.assessment.results import build_results, write_identification

@@ -2,7 +2,7 @@
 
 For every named scenario (a truth file in ``ros_ws/config/truth/scenarios/``, :mod:`hindrax_ident.sim.truth`) and
 every seed 1..N, one in-process identification campaign
-(:class:`~hindrax_ident.identification.online.campaign.Campaign`, the simulator running on the scenario's truth, every
+(:class:`~hindrax_ident.sim.campaign.Campaign`, the simulator running on the scenario's truth, every
 estimator on the vehicle file), the offline identification and the verdicts
 (:mod:`hindrax_ident.identification.assessment.verdicts`). Each parameter is compared with the truth's value
 (:func:`~hindrax_ident.identification.fit.dof_model.truth_parameters` of the truth configuration): relative error, z =
@@ -124,7 +124,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     """
     from hindrax_drivers.config import or_default
 
-    from ..identification.online.campaign import Campaign
+    from ..sim.campaign import Campaign
     from ..identification.fit.campaign_fit import identify_all_with_errors
     from ..identification.fit.dof_model import truth_parameters
     from ..identification.assessment.verdicts import apply_verdicts, rls_published_std
@@ -414,8 +414,8 @@ def run(args: argparse.Namespace) -> int:
     # import everything the workers need before they fork (the tree may change during a long suite)
     from ..identification.assessment import verdicts  # noqa: F401
     from ..identification.fit import dof_model  # noqa: F401
-    from ..identification.online import campaign, estimators  # noqa: F401
-    from ..sim import disturbances, simulator, truth  # noqa: F401
+    from ..identification.online import estimators  # noqa: F401
+    from ..sim import campaign, disturbances, simulator, truth  # noqa: F401
     if args.jobs > 1:
         import multiprocessing as mp
         with mp.get_context("fork").Pool(args.jobs) as pool:

@@ -4,9 +4,9 @@
 the MS5837 with the lever arm, attitude, gyro, DVL velocity, Ping1D range) and a
 :class:`~hindrax_ident.vehicle.state.DepthEstimator` (depth and depth rate from the pressure fused with
 the vertical acceleration), exactly as the identification executive does, and hands them to a hold
-(:class:`~hindrax_ident.identification.online.maneuvers.HoldController` or
+(:class:`~hindrax_ident.control.maneuvers.HoldController` or
 :class:`~hindrax_ident.control.legacy.LegacyPDHold`). The controller node (:mod:`.node`) feeds it the samples of the
-driver topics (:mod:`hindrax_ident.identification.bag_input.signals`), the evaluation (:mod:`.evaluate`) those of the
+driver topics (:mod:`hindrax_ident.vehicle.signals`), the evaluation (:mod:`.evaluate`) those of the
 in-process simulator. Pure, no ROS.
 
 Memory: the state's sample logs (``SensorState.log``, which the identification executive keeps whole for its
@@ -25,8 +25,8 @@ import numpy as np
 
 from hindrax_drivers.config import VehicleConfig
 
-from ..identification.fit.dof_model import measurement_settings
 from ..vehicle.state import DepthEstimator, SensorState
+from ..vehicle.uncertainty import measurement_settings
 
 __all__ = ["HoldLoop", "LOG_HORIZON_S"]
 
@@ -47,7 +47,7 @@ class HoldLoop:
         self.depth = DepthEstimator(hv["std"], hv["accel_std"], hv["accel_jerk_psd"])
 
     def add(self, samples: Iterable[tuple[str, Any]]) -> None:
-        """Condition samples ``(device, sample)`` in stamp order (the simulator's or :mod:`.signals`' form)."""
+        """Condition samples ``(device, sample)`` in stamp order (the simulator's or :mod:`..vehicle.signals`' form)."""
         for dev, s in sorted(samples, key=lambda x: x[1].stamp_s):
             self.state.on_sample(dev, s)
             self.depth.on_sample(dev, s.stamp_s, self.state)

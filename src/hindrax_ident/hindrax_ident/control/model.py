@@ -36,7 +36,7 @@ finite number, or a negative inertia or damping, also falls back. Each value car
 **Bad input** is an error, never a silent fallback: a missing or unreadable file, invalid YAML, no ``dofs``
 mapping, or an identification of another vehicle raise :class:`ModelFileError` (one line). The vehicle is matched
 by the parameters the identification depends on (``provenance.vehicle_parameters``,
-:mod:`hindrax_ident.identification.assessment.vehicle_match`: mass properties, thrust model, sensor mounting), so
+:mod:`hindrax_ident.vehicle.vehicle_match`: mass properties, thrust model, sensor mounting), so
 editing a comment, the ESC calibration or the disk floor keeps it valid; a file written before that section is matched
 by ``provenance.configuration_sha256`` (the vehicle file's text).
 
@@ -54,8 +54,8 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-from ..identification.assessment.vehicle_match import parameter_differences
-from ..identification.assessment.verdicts import declared_rel
+from ..vehicle.vehicle_match import parameter_differences
+from ..vehicle.uncertainty import declared_rel
 
 __all__ = ["AxisModel", "ControlModel", "ModelFileError", "model_from_config", "load_model", "rigid_inertia",
            "declared_inertia_uncertainty_rel", "CONTROL_IRRELEVANT_REASONS", "VEHICLE_FILE",

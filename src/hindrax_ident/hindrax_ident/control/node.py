@@ -1,7 +1,7 @@
 """Controller node: depth or altitude, heading and surge/sway velocity holds as one more ``wrench`` source.
 
 A thin rclpy node over :class:`~.loop.HoldLoop` (the campaign's sensor conditioning) and
-:class:`~hindrax_ident.identification.online.maneuvers.HoldController` (the model-based law of :mod:`.law`, the model of
+:class:`~hindrax_ident.control.maneuvers.HoldController` (the model-based law of :mod:`.law`, the model of
 :mod:`.model`). The ESC, the thrust allocation and the supervisor are unchanged: the controller publishes a
 ``wrench`` like the identification node or a pilot, and the allocation turns it into pulse widths. Run alone:
 ``ros2 run hindrax_ident controller_node --ros-args --params-file hindrax.yaml -p model_file:=identification.yaml``.
@@ -73,8 +73,8 @@ from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
-from ..identification.online.maneuvers import HoldController, dof_authority
-from ..identification.bag_input.signals import (sample_from_pressure, sample_from_range, samples_from_dvl,
+from .maneuvers import HoldController, dof_authority
+from ..vehicle.signals import (sample_from_pressure, sample_from_range, samples_from_dvl,
                                                 samples_from_imu)
 from .law import ControlSettings
 from .loop import HoldLoop

@@ -18,7 +18,7 @@ milliseconds, the ESC's heartbeat follows them, and the output guard stops the t
 spends about 2 % of a core stepping the simulator (0.08 ms per 5 ms step on the development machine).
 
 The operator's hands (the calibration steps' ballast, float, line pulls and inclining mass:
-:class:`~hindrax_ident.identification.online.campaign.PoolOperator`, the same as the in-process campaign's) are commands
+:class:`~hindrax_ident.sim.campaign.PoolOperator`, the same as the in-process campaign's) are commands
 on the process's standard input; :class:`LivePool` is the client.
 
 Protocol (one line each way, JSON answers): the process prints ``{"ports": {...}, "i2c_socket": path}`` once its
@@ -49,7 +49,7 @@ from hindrax_drivers.emulated_devices import driver_env, driver_ros_arguments
 from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, PRIORITY_ENV, apply_realtime_priority
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer
 
-from ..identification.online.campaign import PoolOperator
+from .campaign import PoolOperator
 from ..identification.online.executive import calibration_forces, float_buoyancy, inclining_load
 from .hardware import VirtualHardware
 from .simulator import Simulator

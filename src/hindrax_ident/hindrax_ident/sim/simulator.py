@@ -259,7 +259,7 @@ class Simulator:
     def set_external_wrench(self, wrench_frd: Sequence[float]) -> None:
         """Hold ``wrench_frd`` (6,) [X Y Z K M N] about the body origin (FRD, N, N m) from the next step on, as
         :meth:`step`'s ``external_wrench_frd`` does, for a plant stepped by someone else (the simulator node): e.g.
-        the known force of a calibration step (:mod:`hindrax_ident.identification.graph_campaign`). Raises
+        the known force of a calibration step (:mod:`hindrax_ident.graph_campaign`). Raises
         ``ValueError`` unless 6 finite numbers."""
         w = [float(x) for x in wrench_frd]
         if len(w) != 6 or not all(math.isfinite(x) for x in w):

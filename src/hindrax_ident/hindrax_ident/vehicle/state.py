@@ -269,7 +269,7 @@ class DepthEstimator:
     the filter's time (samples come in stamp order per control tick; a late depth is not dropped).
     ``predict_to(t_s)`` returns (depth m, depth rate m/s), NaN before the first depth sample.
     depth_std_m, accel_std_m_s2, jerk_psd: the filter's noise settings (the campaign passes those of
-    :func:`~hindrax_ident.identification.fit.dof_model.measurement_settings` for heave). Raises
+    :func:`~.uncertainty.measurement_settings` for heave). Raises
     :class:`~hindrax_ident.estimation.least_squares.EstimationError` for a setting that is not > 0.
     """
 

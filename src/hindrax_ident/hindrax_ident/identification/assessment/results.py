@@ -54,7 +54,7 @@ from ...estimation.drag_coefficient import (
 from ...estimation.least_squares import EstimationError
 from ..fit.posterior import prior_entries
 from ..fit.calibration import calibration_section, joint_estimate
-from .vehicle_match import vehicle_parameters
+from ...vehicle.vehicle_match import vehicle_parameters
 from .verdicts import apply_verdicts, model_selection, rls_published_std
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "drag_coefficient_entry",

@@ -64,18 +64,17 @@ import numpy as np
 
 from hindrax_drivers.config import VehicleConfig
 
+from ...vehicle.uncertainty import declared_rel
 from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
-           "DEFAULT_THRUST_UNCERTAINTY_REL", "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
-           "segment_count", "declared_rel", "FitEvidence", "core_signals", "core_evidence", "model_selection",
+           "WHITENESS_MAX", "WIDTH_MAX", "thrust_weights", "thrust_covariance",
+           "segment_count", "FitEvidence", "core_signals", "core_evidence", "model_selection",
            "no_model_line", "NRMSE_MAX", "BIAS_MIN_REL", "assess",
            "with_added_mass", "assess_dof",
            "apply_verdicts", "thrust_curve_check", "spread_reasons", "data_advice", "format_advice", "ADVICE_TARGET",
            "POOL_DAY_S", "RUN_KINDS"]
 
-#: 1-sigma relative thrust uncertainty [negative, positive] when the vehicle file declares none.
-DEFAULT_THRUST_UNCERTAINTY_REL = (0.05, 0.10)
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
 WHITENESS_MAX = 0.2
 #: Relative difference of the steady-state and transient quadratic damping flagged (with |z| > 3).
@@ -120,24 +119,6 @@ def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float
 def segment_count(dof: str, pool_time_s: float) -> int:
     """Independent segments of the output-error fit (pool time / :data:`~..fit.fit_core.SEGMENT_S`, every DOF)."""
     return max(1, int(pool_time_s // SEGMENT_S))
-
-
-def declared_rel(cfg: VehicleConfig | None, thruster_fit_rel: Sequence[float] | None = None
-                 ) -> tuple[float, float]:
-    """1-sigma relative thrust uncertainty [negative, positive]: a calibration's scale std (``thruster_fit_rel``),
-    else the vehicle file's bollard-pull fit (``thrusters.thrust_fit_uncertainty_rel``), else its declared
-    ``thrusters.thrust_uncertainty_rel``, else (also without a vehicle file: a commanded wrench is realised by thrust
-    curves nobody measured here) :data:`DEFAULT_THRUST_UNCERTAINTY_REL`."""
-    if thruster_fit_rel is not None:
-        return float(thruster_fit_rel[0]), float(thruster_fit_rel[1])
-    if cfg is None:
-        return DEFAULT_THRUST_UNCERTAINTY_REL
-    # the bollard-pull fit's own uncertainty (hindrax ident thruster-fit --write) replaces the declared one
-    v = cfg.thrusters.thrust_fit_uncertainty_rel
-    if v is not None:
-        return float(v[0]), float(v[1])
-    v = cfg.thrusters.thrust_uncertainty_rel
-    return tuple(float(x) for x in v) if v is not None else DEFAULT_THRUST_UNCERTAINTY_REL  # type: ignore
 
 
 def _expected_bias(cfg: VehicleConfig, dof: str) -> float:

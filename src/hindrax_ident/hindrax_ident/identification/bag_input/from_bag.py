@@ -10,8 +10,8 @@ online RLS as comparisons).
 
 Topics read (the identification node's inputs and outputs, README "Topics"): ``dvl/data``,
 ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude`` (sensor samples through the same adapters as the
-node, :mod:`.signals`, into :class:`~hindrax_ident.vehicle.state.SensorState`), ``thrusters/pulse_width`` (the widths
-the ESC node wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
+node, :mod:`...vehicle.signals`, into :class:`~hindrax_ident.vehicle.state.SensorState`), ``thrusters/pulse_width``
+(the widths the ESC node wrote: thrust model of [Hindrax-Drag] eq. 1, first-order lag, thrust allocation matrix),
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
 ``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:
@@ -45,7 +45,7 @@ from ...vehicle.state import SensorState
 from ...vehicle.thrust_lag import ThrustLag
 from . import calibration_topic
 from .campaign_record import CampaignRecord
-from .signals import (
+from ...vehicle.signals import (
     STILL_MESSAGE,
     sample_from_pressure,
     sample_from_range,

@@ -48,8 +48,9 @@ from hindrax_drivers.config import DOFS
 
 from ...estimation.free_decay import fit_quadratic_free_decay
 from ...vehicle.thrust_lag import ThrustLag
+from ...vehicle.uncertainty import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel
 from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, rigid_inertia_of, theta_priors
-from ..assessment.verdicts import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel, thrust_weights
+from ..assessment.verdicts import thrust_weights
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -83,7 +84,7 @@ def scale_prior_stds(cfg) -> dict[str, float]:
     """1-sigma of the prior N(1, u^2) of each direction's scale: {"forward": u_positive, "reverse": u_negative}
     from the bollard-pull fit's ``thrusters.thrust_fit_uncertainty_rel`` [negative, positive] when the vehicle file
     has it, else the declared ``thrusters.thrust_uncertainty_rel`` (the same choice as the intervals,
-    :func:`~..assessment.verdicts.declared_rel`)."""
+    :func:`~...vehicle.uncertainty.declared_rel`)."""
     neg, pos = declared_rel(cfg)
     return {"forward": float(pos), "reverse": float(neg)}
 

@@ -43,10 +43,11 @@ from ...estimation.filters import smooth_kinematics
 from ...estimation.least_squares import EstimationError, fit_linear_model
 from ...vehicle.fusion import smooth_with_acceleration, smooth_with_rate
 from ...vehicle.state import euler_rates
+from ...vehicle.uncertainty import measurement_settings
 from ..bag_input.from_bag import record_from_bag
 from . import fit_core
 from .calibration import identify_calibrated
-from .dof_model import (DofIdentification, measurement_settings, parameter_names, parameter_units, regressor_matrix,
+from .dof_model import (DofIdentification, parameter_names, parameter_units, regressor_matrix,
                         restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
@@ -313,7 +314,7 @@ def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
 
 def _attitude_and_euler_rates(record, t: np.ndarray):
     """(t_att (m,), rpy (m, 3), t_gyro (n,), Euler-angle rates (n, 3)) over ``t`` (n,) plus 2 s before: the
-    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~..online.maneuvers.euler_rates`) at
+    attitude log and the gyro's body rates turned into Euler-angle rates (:func:`~...vehicle.state.euler_rates`) at
     the attitude interpolated to the gyro times. The rates are empty (0, 3) with fewer than 10 gyro or 2 attitude
     samples."""
     t0, t1 = t[0] - 2.0, t[-1]
@@ -351,7 +352,7 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     times; constant bias removed by :func:`rate_bias_against_angle`) by
     :func:`~hindrax_ident.vehicle.fusion.smooth_with_rate` (the attitude alone, zero biases, when there is no gyro
     record). Angle noise from ``sensors.dvl75.attitude_noise_std_rad`` (default 0.005 rad), rate noise and white-jerk
-    PSD those of the roll filter (:func:`measurement_settings`)."""
+    PSD those of the roll filter (:func:`~...vehicle.uncertainty.measurement_settings`)."""
     ta, rpy, tg, rates = _attitude_and_euler_rates(record, t)
     std_att = max(float(or_default(cfg.sensors.dvl75.attitude_noise_std_rad, 0.005)), 1e-4)
     if tg.size == 0:

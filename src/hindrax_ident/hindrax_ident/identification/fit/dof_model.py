@@ -15,7 +15,8 @@ coefficients), body FRD, tau the thrust-model force (N) or moment (N m) on the a
 
 Signals: velocity and acceleration come from filters, never raw differences (docs/architecture.md §5): surge/sway
 from the DVL velocity, heave from the pressure depth, each aided by the 100 Hz accelerometer
-(:mod:`hindrax_ident.vehicle.fusion`); roll/pitch/yaw from the gyro rate (:func:`measurement_settings`). Online:
+(:mod:`hindrax_ident.vehicle.fusion`); roll/pitch/yaw from the gyro rate
+(:func:`~...vehicle.uncertainty.measurement_settings`). Online:
 :class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter` (or the accelerometer-aided filter); offline the
 campaign reader :mod:`.campaign_fit` (RTS smoothers, gyro bias against the DVL attitude, restoring regressor).
 
@@ -44,7 +45,7 @@ from typing import Optional
 
 import numpy as np
 
-from hindrax_drivers.config import DOFS, VehicleConfig, or_default
+from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ...estimation.least_squares import EstimationError, fit_drag
 from ...estimation.steady_windows import detect_steady_windows
@@ -53,12 +54,8 @@ from .output_error import model_terms
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
-    "measurement_settings", "DofIdentification", "steady_state_fit",
+    "DofIdentification", "steady_state_fit",
 ]
-
-#: White-jerk PSD (m^2/s^5) of the accelerometer-aided filter (fusion.py) for surge, sway and heave.
-ACCEL_JERK_PSD = 20.0
-
 
 def parameter_names(dof: str) -> list[str]:
     """Parameter names of a DOF's regression, in regressor-column order (module docstring)."""
@@ -133,39 +130,6 @@ def truth_parameters(cfg: VehicleConfig, dof: str) -> dict[str, float]:
         out["restoring"] = float(cfg.vehicle.centre_of_gravity_frd_m[2] * cfg.weight_n
                                  - cfg.vehicle.centre_of_buoyancy_frd_m[2] * cfg.buoyancy_n)
     return {k: float(v) for k, v in out.items()}
-
-
-def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
-    """Which conditioned signal measures a DOF and the filter tuning.
-
-    Returns {"log": SensorState log key, "column": index, "measured": 'position'|'velocity',
-    "std": measurement std, "jerk_psd": q, "accel": True when the accelerometer aids the filter (surge, sway,
-    heave; then also "accel_std" and "accel_jerk_psd", :mod:`hindrax_ident.fusion`)}. The noise std comes from
-    the noise the vehicle file declares (``sensors.dvl75.noise_std_m_s``, ``scale_error_fraction``,
-    ``attitude_noise_std_rad``, ``sensors.ms5837.noise_std_pa``, ``sensors.icm20948.*_noise_std_*``; else
-    ``sensors.dvl75.velocity_std_m_s`` / typical values), never the simulator's truth; q = std^2 w^k puts the filter
-    bandwidth near w = 12 rad/s (translation) or 20 rad/s (rotation) (filters.py: bandwidth ~ (q / std^2)^(1/4) for
-    velocity and ^(1/6) for position measurements).
-    """
-    dvl, imu = cfg.sensors.dvl75, cfg.sensors.icm20948
-    k = DOFS.index(dof)
-    acc = max(float(or_default(imu.accel_noise_std_m_s2, 0.05)), 1e-3)
-    att = float(or_default(dvl.attitude_noise_std_rad, 0.005))
-    accel = {"accel": True, "accel_std": math.hypot(acc, cfg.environment.gravity_m_s2 * att),
-             "accel_jerk_psd": ACCEL_JERK_PSD}
-    if dof in ("surge", "sway"):
-        std = max(float(or_default(dvl.noise_std_m_s, dvl.velocity_std_m_s)), 1e-3)
-        std = math.hypot(std, 0.5 * float(or_default(dvl.scale_error_fraction, 0.0)))
-        return {"log": "dvl", "column": k, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 12.0 ** 4,
-                **accel}
-    if dof == "heave":
-        pa = float(or_default(cfg.sensors.ms5837.noise_std_pa, 20.0))
-        std = max(pa / (cfg.environment.water_density_kg_m3 * cfg.environment.gravity_m_s2), 5e-4)
-        return {"log": "depth", "column": 0, "measured": "position", "std": std, "jerk_psd": std ** 2 * 12.0 ** 6,
-                **accel}
-    std = max(float(or_default(imu.gyro_noise_std_rad_s, 0.003)), 5e-4)
-    return {"log": "gyro", "column": k - 3, "measured": "velocity", "std": std, "jerk_psd": std ** 2 * 20.0 ** 4,
-            "accel": False}
 
 
 @dataclass

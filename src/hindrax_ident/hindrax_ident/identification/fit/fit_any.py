@@ -8,10 +8,10 @@ REP-103 FLU in ``base_link``):
 
 * force: ``geometry_msgs/msg/WrenchStamped`` (commanded or measured wrench about base_link), or our
   ``hindrax_msgs/msg/ThrusterPwm`` through the configured thrust curves and allocation matrix
-  (:func:`..bag_input.signals.thrust_of_written_widths`; needs ``--config``; the widths act ``esc.output_latency_s``
+  (:func:`...vehicle.signals.thrust_of_written_widths`; needs ``--config``; the widths act ``esc.output_latency_s``
   late);
 * velocity: ``nav_msgs/msg/Odometry`` (twist in ``child_frame_id``), ``TwistWithCovarianceStamped``,
-  ``TwistStamped`` or our ``hindrax_msgs/msg/Dvl`` (:func:`..bag_input.signals.samples_from_dvl`);
+  ``TwistStamped`` or our ``hindrax_msgs/msg/Dvl`` (:func:`...vehicle.signals.samples_from_dvl`);
 * angular rate: the velocity message's angular part, else ``sensor_msgs/msg/Imu`` (``--imu-topic``, which then
   takes precedence; found by type with a Dvl velocity; an IMU frame other than the body frame is rotated with the
   bag's ``/tf_static``, else refused), else the attitude differentiated (odometry pose or DVL attitude);
@@ -71,10 +71,11 @@ from . import fit_core
 from .dof_model import parameter_units, restoring_regressor, rigid_inertia
 from .fit_core import EXCITATION_MIN
 from ..assessment.results import SCHEMA_VERSION
-from ..bag_input.signals import samples_from_dvl, thrust_of_written_widths
+from ...vehicle.signals import samples_from_dvl, thrust_of_written_widths
 from .posterior import prior_posterior, prior_std_rel_of, theta_priors
-from ..assessment.vehicle_match import vehicle_parameters
-from ..assessment.verdicts import (FitEvidence, assess, core_evidence, declared_rel, model_selection,
+from ...vehicle.uncertainty import declared_rel
+from ...vehicle.vehicle_match import vehicle_parameters
+from ..assessment.verdicts import (FitEvidence, assess, core_evidence, model_selection,
                                    thrust_curve_check, with_added_mass)
 
 __all__ = ["ACCEPTED", "EXCITATION_MIN", "FitInputError", "FitOptions", "TopicChoice", "Preprocessed",
@@ -834,7 +835,7 @@ def assessment(r: DofFit, cfg: VehicleConfig | None) -> dict:
     """The verdicts of one fitted DOF through the one verdict path (:func:`..assessment.verdicts.assess`, as ``hindrax
     ident bag``): the fit core's estimate and cluster-robust covariance, with a vehicle file after its empirical priors
     (:func:`.posterior.prior_posterior`, ``identification.prior_std_rel``), the thrust-curve covariance
-    (:func:`..assessment.verdicts.declared_rel`: the vehicle file's, else the default), t with the core's clusters - 1
+    (:func:`...vehicle.uncertainty.declared_rel`: the vehicle file's, else the default), t with the core's clusters - 1
     degrees of freedom; the expected bias 0 (heave: the vehicle file's net buoyancy, unknown without one); no
     whiteness check (its threshold is the designed campaign's). ``added_mass`` with a vehicle file. Returns
     :func:`..assessment.verdicts.assess`'s dict with ``fit_values`` (the core's, before the priors) and ``priors``

@@ -2,7 +2,7 @@
 
 :class:`IdentificationCore` is the state machine of the identification node (:mod:`.node`, its module docstring
 describes the interface). Its inputs are explicit calls: sensor samples (:meth:`~IdentificationCore.add_samples`,
-the samples of :mod:`..bag_input.signals`), the ESC's written widths and armed flag
+the samples of :mod:`...vehicle.signals`), the ESC's written widths and armed flag
 (:meth:`~IdentificationCore.on_pwm`), an accepted goal (:meth:`~IdentificationCore.accept`), the operator's
 "continue" and, at every control tick, the ROS time (s) and whether a cancel was requested
 (:meth:`~IdentificationCore.tick`). Its outputs are the ordered :class:`Event` list of each call: the statuses,
@@ -48,7 +48,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..bag_input import calibration_topic
 from ..bag_input.campaign_record import CampaignRecord
-from ..bag_input.signals import thrust_of_written_widths
+from ...vehicle.signals import thrust_of_written_widths
 from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput, calibration_forces, inclining_load,
                         ordered_samples)
 from .steps import undo_line

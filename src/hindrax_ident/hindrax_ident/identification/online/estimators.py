@@ -21,8 +21,9 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from ...estimation.filters import KinematicKalmanFilter
 from ...estimation.rls import RecursiveLeastSquares
 from ...vehicle.fusion import AccelAidedFilter
+from ...vehicle.uncertainty import measurement_settings
 from ..assessment.verdicts import rls_published_std
-from ..fit.dof_model import (measurement_settings, parameter_names, regressor_matrix, restoring_regressor,
+from ..fit.dof_model import (parameter_names, regressor_matrix, restoring_regressor,
                              rigid_inertia, truth_parameters)
 from ..fit.posterior import prior_entries
 

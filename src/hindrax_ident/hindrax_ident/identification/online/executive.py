@@ -21,7 +21,7 @@ Driving it (one control tick of ``tick_s``)::
 
 ``thrust_n`` is the thrust model of what goes to the thrusters for this tick: in-process the thrust curve
 ([Hindrax-Drag] eq. 1) of the pulse widths the allocation gives for ``w``; on the graph that of the widths the ESC
-node last reported writing (:func:`~..bag_input.signals.thrust_of_written_widths`). The recorded force is that thrust
+node last reported writing (:func:`~...vehicle.signals.thrust_of_written_widths`). The recorded force is that thrust
 through the first-order lag ``thrusters.time_constant_s`` over the elapsed time (exact for a command held over the
 tick), times the thrust allocation matrix ([Hindrax-Drag] eq. 9), body FRD; the positive (forward) and negative
 (reverse) thrust are also lagged apart, so that a calibration step knows which rotation direction held a force,
@@ -64,12 +64,12 @@ from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
 from ...vehicle.state import DepthEstimator
 from ...vehicle.thrust_lag import ThrustLag
+from ...vehicle.uncertainty import measurement_settings
 
-from ..fit.dof_model import measurement_settings
 from .estimators import OnlineDofEstimator
 from .excitation import BROADBAND, DEFAULT_AMPLITUDE_FRACTION, EXCITATIONS
-from .maneuvers import level_ladder
-from ..bag_input.signals import STILL_MESSAGE
+from ...control.maneuvers import level_ladder
+from ...vehicle.signals import STILL_MESSAGE
 from ..bag_input.campaign_record import CampaignRecord
 from .steps import (CALIBRATION_SETTLE_S, CALIBRATION_WINDOW_S, Ballast, BroadbandRun, CampaignAbort, Confirm, Dive,
                     Float, Inclining, LinePull, RotationLadder, Step, StepContext, TiltDecay, TranslationLadder,
@@ -128,7 +128,7 @@ class TickInput:
 
     t_s: time of the tick (s, the plant's clock). elapsed_s: time the last command was held (s; the lag of the
     recorded force runs over it). samples: new sensor samples ``(device, sample)`` in the simulator's form
-    (:mod:`hindrax_ident.sim.sensors`, or :mod:`..bag_input.signals` from ROS messages), in the order to condition them.
+    (:mod:`hindrax_ident.sim.sensors`, or :mod:`...vehicle.signals` from ROS messages), in the order to condition them.
     armed: the ESC output is armed. cancel: the operator asked to stop.
     """
 
@@ -326,8 +326,8 @@ class Executive:
 
     # ------------------------------------------------------------------ the shared state, by name
     state = _Shared("conditioned sensors (:class:`~...vehicle.state.SensorState`)")
-    ctrl = _Shared("the holds (:class:`~.maneuvers.HoldController`)")
-    box = _Shared("the pool box (:class:`~.maneuvers.PoolBox`)")
+    ctrl = _Shared("the holds (:class:`~...control.maneuvers.HoldController`)")
+    box = _Shared("the pool box (:class:`~...control.maneuvers.PoolBox`)")
     core = _Shared("the allocation model (AllocationCore)")
     curve = _Shared("the thrust curve ([Hindrax-Drag] eq. 1)")
     matrix = _Shared("thrust allocation matrix (6, m), FRD")
@@ -361,7 +361,7 @@ class Executive:
     # ------------------------------------------------------------------ the plan
     def ladder(self, dof: str) -> list[float]:
         """Levels of one DOF (N or N m): the explicit fractions times the DOF's smaller authority, else
-        :func:`.maneuvers.level_ladder` of it."""
+        :func:`...control.maneuvers.level_ladder` of it."""
         if self.fractions:
             return [x * min(self.authority[dof]) for x in self.fractions]
         return level_ladder(self.cfg, min(self.authority[dof]), self.levels_per_dof)

@@ -5,7 +5,7 @@ acceptance to the end of its neutral hold, what each tick publishes; table-teste
 ``test/test_identification_core.py``) and the :class:`~.executive.Executive` it drives (the dive, positioning,
 level ladders, holds, pool-box planning, limits and online Kalman + RLS of [Hindrax-Drag] §4; the same object the
 in-process campaign steps on the simulator, :mod:`.campaign`). The node turns the sensor topics into samples
-(:mod:`..bag_input.signals`) for the core, and at every tick of its control timer
+(:mod:`...vehicle.signals`) for the core, and at every tick of its control timer
 (``identification.estimate_rate_hz``, ROS clock) turns the core's events into messages (wrench, status, feedback,
 estimates, calibration results, supervisor abort, the goal's result). Nothing in a callback waits, and no
 coroutine runs while a goal does (see "Action execution" below). The node does not know whether the vehicle is
@@ -121,7 +121,7 @@ from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
 from ..bag_input import calibration_topic
 from ..bag_input.campaign_record import CampaignRecord
-from ..bag_input.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
+from ...vehicle.signals import sample_from_pressure, sample_from_range, samples_from_dvl, samples_from_imu
 from ..fit.dof_model import parameter_units
 from .core import IDLE_STATUS_PERIOD_S, Event, GoalRun, IdentificationCore, goal_problem
 from .executive import ExecutiveStatus, command_ticks

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from ..maneuvers import DOF_INDEX
+from ....control.maneuvers import DOF_INDEX
 from .context import StepContext, Wrenches
 
 __all__ = ["Step", "Confirm", "Dive", "DofStep", "undo_line"]

@@ -14,7 +14,7 @@ from ...fit.dof_model import truth_parameters
 from ..excitation import BROADBAND, BoxShaping, design_band, design_signal
 from hindrax_drivers.frames import wrap_angle
 
-from ..maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
+from ....control.maneuvers import DOF_INDEX, prior_inertia, tilt_test_angle_rad
 from .base import DofStep
 from .context import StepContext, Wrenches
 

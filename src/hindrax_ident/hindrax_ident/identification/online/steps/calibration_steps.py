@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from ...fit.calibration import KNOWN_FORCE_AXES
-from ..maneuvers import DOF_INDEX
+from ....control.maneuvers import DOF_INDEX
 from .base import Step
 from .context import CampaignAbort, StepContext, Wrenches
 

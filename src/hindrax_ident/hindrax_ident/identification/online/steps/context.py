@@ -5,7 +5,7 @@ tick, and the step resumes once the sequencer (:class:`~hindrax_ident.identifica
 conditioned that tick's sensor samples. Between yields the step reads the campaign's state through the context:
 
 * the conditioned sensors (:attr:`state`, :class:`~hindrax_ident.vehicle.state.SensorState`), the holds (:attr:`ctrl`,
-  :class:`~..maneuvers.HoldController`, used through its public interface only: setpoints and ``wrench``), the
+  :class:`~....control.maneuvers.HoldController`, used through its public interface only: setpoints and ``wrench``), the
   pool box (:attr:`box`), each DOF's authority and the allocation model (:attr:`core`, :attr:`matrix`);
 * the tick log: the thrust-model wrench of every tick and its parts from the thrusters turning forward (positive
   thrust) and in reverse (:meth:`mean_recorded_force`, :meth:`mean_force_by_direction`);
@@ -30,7 +30,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ....vehicle.state import SensorState
-from ..maneuvers import DOF_INDEX, HoldController, PoolBox, dof_authority
+from ....control.maneuvers import DOF_INDEX, HoldController, PoolBox, dof_authority
 
 __all__ = ["CampaignAbort", "StepContext", "Wrenches", "CALIBRATION_BLOCK_S"]
 

@@ -2,12 +2,12 @@
 altitude than the vehicle file (``hindrax control scenarios``, docs/control.md §7).
 
 Per scenario (a truth file of ``ros_ws/config/truth/scenarios/``): an in-process identification campaign against that
-truth (:class:`~hindrax_ident.identification.online.campaign.Campaign`, surge, sway, heave and yaw, ``levels`` per DOF,
+truth (:class:`~hindrax_ident.sim.campaign.Campaign`, surge, sway, heave and yaw, ``levels`` per DOF,
 the offline fit with its verdicts, :func:`~hindrax_ident.identification.assessment.results.build_results`), its
-``identification.yaml`` read back through :func:`~.model.load_model` (so the verdict fallbacks apply), then the
-depth step and the altitude hold of :mod:`.evaluate` with the identified model, the vehicle file's and the former PD
-hold, on the same truth. Writes ``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json`` and the
-summary ``<out>/control_scenarios.json`` / ``control_scenarios.md``.
+``identification.yaml`` read back through :func:`~..control.model.load_model` (so the verdict fallbacks apply), then the
+depth step and the altitude hold of :mod:`.control_evaluate` with the identified model, the vehicle file's and the
+former PD hold, on the same truth. Writes ``<out>/<scenario>/identification.yaml``, ``<out>/<scenario>/control.json``
+and the summary ``<out>/control_scenarios.json`` / ``control_scenarios.md``.
 """
 from __future__ import annotations
 
@@ -19,14 +19,14 @@ from typing import Callable, Sequence
 from hindrax_drivers.config import VehicleConfig
 
 from ..identification.fit.calibration import apply_thrust_calibration
-from ..identification.online.campaign import Campaign
+from .campaign import Campaign
 from ..identification.fit.campaign_fit import identify_all_with_errors
 from ..identification.assessment.results import build_results, write_identification
-from ..sim.simulator import Simulator
-from ..sim.truth import load_truth
-from ..sim.truth import truth_dir as shipped
-from .evaluate import EvaluationSetup, evaluate, ratios, setup_dict, write_outputs
-from .model import ControlModel, load_model, model_from_config
+from .simulator import Simulator
+from .truth import load_truth
+from .truth import truth_dir as shipped
+from .control_evaluate import EvaluationSetup, evaluate, ratios, setup_dict, write_outputs
+from ..control.model import ControlModel, load_model, model_from_config
 
 __all__ = ["SUITE_DOFS", "SUITE_MANEUVERS", "scenario_names", "run_scenario", "run_suite", "write_suite",
            "format_suite"]
@@ -93,9 +93,9 @@ def run_suite(cfg: VehicleConfig, names: Sequence[str], truth_dir: Path, out: Pa
 
 
 def _heave_source(sources: dict) -> str:
-    """The table's "heave model" cell from the heave axis' sources (:attr:`~.model.AxisModel.sources`): identified,
-    the vehicle file with the first reason, or the inertia identified while the force terms (damping, bias) fell back
-    (:func:`~.model.unexplained_bias`)."""
+    """The table's "heave model" cell from the heave axis' sources (:attr:`~..control.model.AxisModel.sources`):
+    identified, the vehicle file with the first reason, or the inertia identified while the force terms (damping, bias)
+    fell back (:func:`~..control.model.unexplained_bias`)."""
     src = str(sources.get("inertia", "?"))
     if not src.startswith("identified"):
         return "file: " + src.split(": ", 1)[-1][:40].rstrip(")") if "suspect" in src else "file"

@@ -4,18 +4,19 @@
 emulators, drivers, ESC node, thrust allocation, identification node, recorder into ``out/bag``) on one
 SingleThreadedExecutor; wait for the sensors and the ESC arming time; arm through ``esc/set_armed`` (the
 operator's service); send one ``run_identification`` goal and report its feedback; disarm; close the bag;
-run the offline identification on the bag (:mod:`.bag_input.from_bag`) and write ``identification.yaml`` and the report.
-All waits are on simulated-time conditions with wall-clock deadlines.
+run the offline identification on the bag (:mod:`.identification.bag_input.from_bag`) and write ``identification.yaml``
+and the report. All waits are on simulated-time conditions with wall-clock deadlines.
 
-Calibration steps (``calibrate``, :data:`~.online.executive.CALIBRATION_STEPS`): sent in the goal;
+Calibration steps (``calibrate``, :data:`~.identification.online.executive.CALIBRATION_STEPS`): sent in the goal;
 :class:`VirtualOperator` plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for the ballast,
 the float or a line pull (``[attach_ballast] ...``, ``[attach_float] ...``, ``[apply_line_pull_surge] ...``), it applies
-the known force in the simulator (as the in-process campaign does, :class:`~.online.campaign.PoolOperator`: the
+the known force in the simulator (as the in-process campaign does, :class:`~.sim.campaign.PoolOperator`: the
 ballast's weight in water, NED down; the float's net buoyancy, NED up; the line pull, fixed in the pool frame along the
 body axis and sense named, all expressed in the body frame at every integration step) or removes it, and calls
 ``identification/continue``. The thrust scales the node measured (its record) are applied to the bag's record
-before the offline identification and estimated jointly with the fits (:func:`~.assessment.results.build_results`), with
-the ``calibration`` section of ``identification.yaml``, as ``hindrax ident campaign --calibrate`` does.
+before the offline identification and estimated jointly with the fits
+(:func:`~.identification.assessment.results.build_results`), with the ``calibration`` section of
+``identification.yaml``, as ``hindrax ident campaign --calibrate`` does.
 
 Reproducibility: with the serial devices in lock-step (:class:`~hindrax_ident.sim.hardware.SerialLockStep`),
 simulated time frozen until every driver has finished its start-up exchange and the recorder is subscribed to
@@ -50,14 +51,14 @@ from hindrax_drivers.vehicle_graph import ForeignVehicleWatch, own_view, refuse_
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
-from ..bringup import build_graph
-from .fit.calibration import identify_calibrated
-from .online.campaign import PoolOperator
-from .fit.campaign_fit import identify_all_with_errors
-from .online.executive import calibration_forces, float_buoyancy, inclining_load
-from .bag_input.from_bag import BagContentError, record_from_bag
-from .assessment.report import write_report
-from .assessment.results import build_results, write_identification
+from .bringup import build_graph
+from .identification.fit.calibration import identify_calibrated
+from .sim.campaign import PoolOperator
+from .identification.fit.campaign_fit import identify_all_with_errors
+from .identification.online.executive import calibration_forces, float_buoyancy, inclining_load
+from .identification.bag_input.from_bag import BagContentError, record_from_bag
+from .identification.assessment.report import write_report
+from .identification.assessment.results import build_results, write_identification
 
 __all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
 
@@ -74,18 +75,18 @@ class VirtualOperator:
     """The virtual pool's operator for the calibration steps on the ROS graph (module docstring).
 
     simulator: the :class:`~hindrax_ident.sim.simulator.Simulator` (``set_external_wrench``, ``rotation``);
-    ballast_weight_n / line_pull_n: the known forces, N (:func:`~.online.executive.calibration_forces`);
+    ballast_weight_n / line_pull_n: the known forces, N (:func:`~.identification.online.executive.calibration_forces`);
     request_continue: callable that sends one ``identification/continue`` request and returns its future (or None);
     inclining_load_n_m: (weight in water N, arm m) of the inclining test mass
-    (:func:`~.online.executive.inclining_load`); float_buoyancy_n: net buoyancy of the float, N
-    (:func:`~.online.executive.float_buoyancy`); say: progress lines; freeze / resume: stop and restart simulated time
-    (:meth:`~hindrax_ident.bringup.Graph. freeze_time`) from acting on a prompt until the continue answer, so the step
-    goes on at the simulated instant the operator acted, whatever the wall time the call took. Feed it every feedback
-    prompt (:meth:`on_prompt`), call :meth:`on_step` after every integration step (a step listener of the simulator
-    node) and :meth:`poll` from the wait loop (a request with no answer within ``resend_after_s`` of wall time is sent
-    again: after a continue every step holds at least :data:`~.online.steps.CALIBRATION_SETTLE_S` before its next
-    prompt, so a repeat finds nothing awaited and is answered False). What each code does is
-    :class:`~.online.campaign.PoolOperator`'s, as in-process.
+    (:func:`~.identification.online.executive.inclining_load`); float_buoyancy_n: net buoyancy of the float, N
+    (:func:`~.identification.online.executive.float_buoyancy`); say: progress lines; freeze / resume: stop and restart
+    simulated time (:meth:`~hindrax_ident.bringup.Graph. freeze_time`) from acting on a prompt until the continue
+    answer, so the step goes on at the simulated instant the operator acted, whatever the wall time the call took. Feed
+    it every feedback prompt (:meth:`on_prompt`), call :meth:`on_step` after every integration step (a step listener of
+    the simulator node) and :meth:`poll` from the wait loop (a request with no answer within ``resend_after_s`` of wall
+    time is sent again: after a continue every step holds at least
+    :data:`~.identification.online.steps.CALIBRATION_SETTLE_S` before its next prompt, so a repeat finds nothing awaited
+    and is answered False). What each code does is :class:`~.sim.campaign.PoolOperator`'s, as in-process.
     """
 
     def __init__(self, simulator, ballast_weight_n: float, line_pull_n: float,
@@ -95,7 +96,7 @@ class VirtualOperator:
                  float_buoyancy_n: float = 0.0) -> None:
 
         self.sim = simulator
-        #: which known forces hang on the vehicle (:class:`~.online.campaign.PoolOperator`)
+        #: which known forces hang on the vehicle (:class:`~.sim.campaign.PoolOperator`)
         self.pool = PoolOperator(ballast_weight_n, line_pull_n, inclining_load_n_m, float_buoyancy_n)
         self._request = request_continue
         self._say = say
@@ -165,12 +166,13 @@ class GraphCampaignOutcome:
     """What a graph campaign produced.
 
     success / message: the action result; estimates: the action's online (RLS) HydroEstimates;
-    identifications / errors: offline results per DOF (:func:`~.fit.campaign_fit.identify_all_with_errors`) from the
-    bag; bag_dir; record: the CampaignRecord rebuilt from the bag; disarmed: the ESC reported disarmed after
-    the run; sim_time_s / wall_time_s of the whole run; final_pulse_width_us: the PCA9685 outputs after shutdown;
-    calibration: the identification node's calibration step results
-    (:attr:`~.bag_input.campaign_record.CampaignRecord.calibration`, {} without a step); node_record: the identification
-    node's own CampaignRecord (its sensor log, calibration, inclining and free-decay windows).
+    identifications / errors: offline results per DOF
+    (:func:`~.identification.fit.campaign_fit.identify_all_with_errors`) from the bag; bag_dir; record: the
+    CampaignRecord rebuilt from the bag; disarmed: the ESC reported disarmed after the run; sim_time_s / wall_time_s of
+    the whole run; final_pulse_width_us: the PCA9685 outputs after shutdown; calibration: the identification node's
+    calibration step results (:attr:`~.identification.bag_input.campaign_record.CampaignRecord.calibration`, {} without
+    a step); node_record: the identification node's own CampaignRecord (its sensor log, calibration, inclining and
+    free-decay windows).
     """
 
     success: bool = False

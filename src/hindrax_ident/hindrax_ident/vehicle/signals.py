@@ -1,9 +1,10 @@
-"""ROS messages -> identification samples: the pure adapters the identification node and the offline analysis share.
+"""ROS messages -> sensor samples: the pure adapters the identification node, the controller and offline tools share.
 
 The identification executive (:class:`~hindrax_ident.vehicle.state.SensorState`) consumes samples in the simulator's
 form (:mod:`hindrax_ident.sim.sensors`: a device name and a namespace with ``stamp_s`` and the measured values).
 These functions make such samples from the drivers' ROS messages, rclpy or bag-decoded alike (they only read
-attributes), so the live node (:mod:`..online.node`) and the bag analysis (:mod:`.from_bag`) see the same numbers.
+attributes), so the live node (:mod:`..identification.online.node`), the controller (:mod:`..control.node`) and the
+bag analysis (:mod:`..identification.bag_input.from_bag`) see the same numbers.
 They also hold the thrust model of the widths the ESC node wrote (:func:`thrust_of_written_widths`) and the
 status prefix that marks the still window (:data:`STILL_MESSAGE`). No rclpy import: usable offline.
 """
@@ -22,7 +23,7 @@ __all__ = ["STILL_MESSAGE", "samples_from_dvl", "samples_from_imu", "sample_from
            "thrust_of_written_widths"]
 
 #: Message prefix of the status while the gyro/accelerometer biases are averaged (the vehicle is held still);
-#: :mod:`.from_bag` finds the still window by it.
+#: :mod:`..identification.bag_input.from_bag` finds the still window by it.
 STILL_MESSAGE = "still: averaging gyro and accelerometer bias"
 
 

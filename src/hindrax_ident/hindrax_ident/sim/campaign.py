@@ -1,19 +1,19 @@
 """Identification campaign on the simulator stepped in-process (no ROS graph): ``hindrax ident campaign``.
 
-The campaign logic is the :class:`~.executive.Executive` (the same object the identification node drives on the
-ROS graph, :mod:`.node`); here its plant is a :class:`~hindrax_ident.sim.simulator.Simulator` stepped in this
-process: each control tick (``identification.estimate_rate_hz``; the simulator steps in between) the wrench is
-allocated (:class:`~hindrax_drivers.allocation.core.AllocationCore`), its pulse widths drive the simulator's
-thrusters, the thrust curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and
-the sensor samples the simulator produced during the tick go to the executive. At the end or on abort every
-thruster is commanded neutral. The simulator's truth (position, attitude) goes into the record for tests and
-plots only; the executive never sees it.
+The campaign logic is the :class:`~..identification.online.executive.Executive` (the same object the identification node
+drives on the ROS graph, :mod:`..identification.online.node`); here its plant is a
+:class:`~hindrax_ident.sim.simulator.Simulator` stepped in this process: each control tick
+(``identification.estimate_rate_hz``; the simulator steps in between) the wrench is allocated
+(:class:`~hindrax_drivers.allocation.core.AllocationCore`), its pulse widths drive the simulator's thrusters, the thrust
+curve of those widths ([Hindrax-Drag] eq. 1) is what the executive records, and the sensor samples the simulator
+produced during the tick go to the executive. At the end or on abort every thruster is commanded neutral. The
+simulator's truth (position, attitude) goes into the record for tests and plots only; the executive never sees it.
 
-Calibration steps (``calibrate``, :data:`~.executive.CALIBRATION_STEPS`): the virtual pool plays the operator
-(:class:`PoolOperator`, shared with the graph's :class:`~..graph_campaign.VirtualOperator`). When the executive waits
-for the ballast to be attached, the simulator gets the ballast's weight in water (vertical, NED down, expressed in
-the body frame every tick) as an external force until the executive asks for its removal; the float is its net
-buoyancy, NED up; a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis
+Calibration steps (``calibrate``, :data:`~..identification.online.executive.CALIBRATION_STEPS`): the virtual pool plays
+the operator (:class:`PoolOperator`, shared with the graph's :class:`~..graph_campaign.VirtualOperator`). When the
+executive waits for the ballast to be attached, the simulator gets the ballast's weight in water (vertical, NED down,
+expressed in the body frame every tick) as an external force until the executive asks for its removal; the float is its
+net buoyancy, NED up; a line pull is a horizontal force of ``line_pull_n`` fixed in the pool frame along the body axis
 and sense the step names (as a line over a pulley at the pool edge); an inclining test mass is its weight in water
 at the step's arm (:func:`inclining_wrench_frd`). Each time ``continue`` is given at once.
 """
@@ -28,10 +28,10 @@ import numpy as np
 from hindrax_drivers import frames
 from hindrax_drivers.config import DOFS, VehicleConfig
 
-from ...sim.simulator import Simulator
-from ..bag_input.campaign_record import CampaignRecord
-from .executive import CampaignAbort, Executive, TickInput
-from .steps import Ballast, Float, Inclining, LinePull
+from ..identification.bag_input.campaign_record import CampaignRecord
+from ..identification.online.executive import CampaignAbort, Executive, TickInput
+from ..identification.online.steps import Ballast, Float, Inclining, LinePull
+from .simulator import Simulator
 
 __all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign", "inclining_wrench_frd", "PoolOperator"]
 
@@ -48,10 +48,11 @@ def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, do
 class PoolOperator:
     """The virtual pool's operator of the calibration steps: which known force hangs on the vehicle.
 
-    ballast_weight_n / float_buoyancy_n / line_pull_n: the known forces, N (:func:`~.executive.calibration_forces`,
-    :func:`~.executive.float_buoyancy`); inclining_load_n_m: (weight in water N, arm m) of the inclining test mass.
-    :meth:`act` does what a step's operator code asks (``attach_ballast``, ``remove_ballast``, ``attach_float``,
-    ``remove_float``, ``apply_line_pull_<surge|sway>[_negative]``, ``release_line_<...>``,
+    ballast_weight_n / float_buoyancy_n / line_pull_n: the known forces, N
+    (:func:`~..identification.online.executive.calibration_forces`,
+    :func:`~..identification.online.executive.float_buoyancy`); inclining_load_n_m: (weight in water N, arm m) of the
+    inclining test mass. :meth:`act` does what a step's operator code asks (``attach_ballast``, ``remove_ballast``,
+    ``attach_float``, ``remove_float``, ``apply_line_pull_<surge|sway>[_negative]``, ``release_line_<...>``,
     ``attach_inclining_mass_<dof>``, ``remove_inclining_mass_<dof>``); :meth:`external_wrench_frd` is the wrench the
     applied forces exert on the vehicle at its current attitude.
     """
@@ -69,8 +70,8 @@ class PoolOperator:
 
     @classmethod
     def for_steps(cls, steps) -> "PoolOperator":
-        """The operator of a campaign's steps (:mod:`.steps`): the known force each reference step prompts for
-        (ballast, float, line pull, inclining test mass) is the one it applies."""
+        """The operator of a campaign's steps (:mod:`..identification.online.steps`): the known force each reference
+        step prompts for (ballast, float, line pull, inclining test mass) is the one it applies."""
         kw: dict = {}
         for st in steps:
             if isinstance(st, Ballast):
@@ -124,7 +125,7 @@ class PoolOperator:
 
 
 class Campaign:
-    """Runs the identification campaign (:class:`~.executive.Executive`) on a
+    """Runs the identification campaign (:class:`~..identification.online.executive.Executive`) on a
     :class:`~hindrax_ident.sim.simulator.Simulator` (module docstring).
 
     cfg: vehicle configuration. dofs: DOFs to test, in order (default all six). levels: levels per DOF
@@ -134,11 +135,12 @@ class Campaign:
     simulation against the wall clock (0: as fast as possible). sim: an existing simulator (else built).
     heave_repeats: down/up pairs per heave level (heave runs last 1-3 s in the depth available, so each level
     is repeated to collect enough transient data). excitation, excitation_duration_s: ``ladder`` or one broadband
-    run per DOF and its length (default ``identification.excitation*``; :class:`~.executive.Executive`).
-    calibrate, ballast_weight_in_water_n, line_pull_n, float_buoyancy_n, inclining_load_n_m: the reference steps
-    and their known forces (:class:`~.executive.Executive`); steps: run these step objects instead of the plan (a
-    test of one step); confirm: the loads an aborted campaign left, confirmed first (:class:`~.executive.Executive`).
-    Raises ``ValueError`` for an unknown DOF.
+    run per DOF and its length (default ``identification.excitation*``;
+    :class:`~..identification.online.executive.Executive`). calibrate, ballast_weight_in_water_n, line_pull_n,
+    float_buoyancy_n, inclining_load_n_m: the reference steps and their known forces
+    (:class:`~..identification.online.executive.Executive`); steps: run these step objects instead of the plan (a test
+    of one step); confirm: the loads an aborted campaign left, confirmed first
+    (:class:`~..identification.online.executive.Executive`). Raises ``ValueError`` for an unknown DOF.
     """
 
     def __init__(self, cfg: VehicleConfig, dofs: Sequence[str] = DOFS, levels: int | None = None,
@@ -178,7 +180,7 @@ class Campaign:
 
     @property
     def online(self) -> dict:
-        """DOF -> :class:`~.estimators.OnlineDofEstimator` of the executive."""
+        """DOF -> :class:`~..identification.online.estimators.OnlineDofEstimator` of the executive."""
         return self.executive.online
 
     def tick(self, wrench_frd: np.ndarray) -> np.ndarray | None:
@@ -223,7 +225,7 @@ class Campaign:
             final_pulse_width_us=np.array(self.sim.thrusters.pulse_width_us, copy=True))
 
     def ladder(self, dof: str) -> list[float]:
-        """Levels of one DOF (N or N m), :meth:`~.executive.Executive.ladder`."""
+        """Levels of one DOF (N or N m), :meth:`~..identification.online.executive.Executive.ladder`."""
         return self.executive.ladder(dof)
 
     def _neutral(self) -> None:

@@ -1,6 +1,6 @@
 """Record the driver test bag from the virtual pool: ``sim_drivers_3s`` under ``src/hindrax_drivers/test/data/``.
 
-Usage: ``python -m hindrax_ident.sim.record_bag [--out DIR]`` (default: the repository's
+Usage: ``python -m hindrax_ident.record_bag [--out DIR]`` (default: the repository's
 ``src/hindrax_drivers/test/data``; the synthetic bags are :mod:`hindrax_drivers.recording.make_test_bags`).
 
 Content: the whole driver graph on the virtual pool (:func:`hindrax_ident.bringup.build_graph` with
@@ -39,7 +39,7 @@ from hindrax_drivers.recording.reader import BagReader
 
 from hindrax_drivers.config import default_config_path
 
-from ..bringup import build_graph
+from .bringup import build_graph
 
 __all__ = ["SIM_BAGS", "SIM_SEED", "START_POSITION_NED_M", "record_simulated_run", "write_sim_bag", "main"]
 

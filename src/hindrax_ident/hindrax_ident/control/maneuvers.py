@@ -32,9 +32,9 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
-from ...control.law import ControlInput, ControlSettings, Controller
-from ...control.model import ControlModel, inertia_vector, model_from_config
-from ...vehicle.state import SensorState, rotation_ned_from_body
+from .law import ControlInput, ControlSettings, Controller
+from .model import ControlModel, inertia_vector, model_from_config
+from ..vehicle.state import SensorState, rotation_ned_from_body
 
 __all__ = [
     "DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority", "level_ladder",

@@ -2,9 +2,9 @@
 
 ``hindrax control evaluate --truth FILE --model YAML`` (docs/control.md §6). The simulator runs in-process on a
 truth that differs from the vehicle file (:mod:`hindrax_ident.sim.truth`); the loop is the one of the campaign
-(:class:`~.loop.HoldLoop`: sensor samples -> conditioning -> hold -> wrench -> thrust allocation -> pulse widths ->
-thrusters), at the controller node's rate (``control.rate_hz``, 50 Hz: the rate of the holds the vehicle flies, not
-the identification's slower tick). Three manoeuvres
+(:class:`~..control.loop.HoldLoop`: sensor samples -> conditioning -> hold -> wrench -> thrust allocation -> pulse
+widths -> thrusters), at the controller node's rate (``control.rate_hz``, 50 Hz: the rate of the holds the vehicle
+flies, not the identification's slower tick). Three manoeuvres
 (:data:`MANEUVERS`):
 
 * ``depth_step``: hold depth at ``depth_start_m``, then a ``depth_step_m`` (0.3 m) step down;
@@ -24,7 +24,7 @@ the identification's slower tick). Three manoeuvres
     allow at most 1:3 where the water is deeper than about 1.5 m (5 ft) and 1:10 to 1:15 in the shallow part, with
     the break between them at about 1.5 m (ASSUMPTION: the profile of a code-built pool with a 1.8 m deep end, not
     the measured floor of the paper's pool). A floor that changes slope is what a seabed does too: the hold then
-    has transients (the floor estimate of :mod:`.law` must follow a new gradient, the vehicle must accelerate
+    has transients (the floor estimate of :mod:`..control.law` must follow a new gradient, the vehicle must accelerate
     vertically) instead of a steady climb that the integrator absorbs. The run-in over the flat deep end keeps the
     start of the surge (the velocity reference's acceleration saturates surge for about a second) away from the
     floor's slopes;
@@ -37,15 +37,16 @@ the identification's slower tick). Three manoeuvres
   sensor-noise floor (docs/control.md §6);
 * ``heading_step``: a ``heading_step_rad`` (30 deg) heading step;
 
-each with three holds (:data:`MODELS`): ``identified`` (the model-based law, :mod:`.law`, with the model of
-``identification.yaml``, :func:`~.model.load_model`), ``vehicle_file`` (the same law with the vehicle file's model)
-and ``pd_hold`` (the campaign's former PD/PI holds, :class:`~.legacy.LegacyPDHold`, gains from the vehicle file).
+each with three holds (:data:`MODELS`): ``identified`` (the model-based law, :mod:`..control.law`, with the model of
+``identification.yaml``, :func:`~..control.model.load_model`), ``vehicle_file`` (the same law with the vehicle file's
+model) and ``pd_hold`` (the campaign's former PD/PI holds, :class:`~..control.legacy.LegacyPDHold`, gains from the
+vehicle file).
 
 **Fair comparison.** The same target bandwidth (``bandwidth_rad_s`` for the position holds, ``velocity_gain`` times it
 for the velocity holds), the same saturation (``hold_fraction`` of the allocation's smaller authority per axis), the
 same sensors, noise seed, start and setpoints. The specified response (``spec``) is the same for all: the critically
-damped second-order response at the target bandwidth (:class:`~.law.ReferenceModel`: the response the PD hold is
-designed for, k_p = M w^2, k_d = 2 M w, on a pure inertia), started from the setpoint before the step; in the
+damped second-order response at the target bandwidth (:class:`~..control.law.ReferenceModel`: the response the PD hold
+is designed for, k_p = M w^2, k_d = 2 M w, on a pure inertia), started from the setpoint before the step; in the
 altitude case the setpoint itself. So the difference between ``identified`` and ``vehicle_file`` is the model alone.
 
 **Metrics** (SI; computed from the simulator's truth, never seen by the loop), over the manoeuvre window (from the
@@ -77,13 +78,13 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.frames import wrap_angle
 
-from ..identification.online.maneuvers import HoldController, dof_authority
-from ..sim.simulator import Simulator
-from ..sim.truth import Truth, with_floor_gradient, without_sensor_noise
-from .law import ControlSettings, ReferenceModel
-from .legacy import LegacyPDHold
-from .loop import HoldLoop
-from .model import ControlModel, model_from_config
+from ..control.maneuvers import HoldController, dof_authority
+from .simulator import Simulator
+from .truth import Truth, with_floor_gradient, without_sensor_noise
+from ..control.law import ControlSettings, ReferenceModel
+from ..control.legacy import LegacyPDHold
+from ..control.loop import HoldLoop
+from ..control.model import ControlModel, model_from_config
 
 __all__ = ["MANEUVERS", "ALTITUDE_MANEUVERS", "MODELS", "METRICS", "EvaluationSetup", "CaseResult", "run_case",
            "evaluate", "metrics", "summarise", "format_table", "write_outputs", "ratios", "make_hold",
@@ -149,7 +150,7 @@ def _authority(cfg: VehicleConfig) -> np.ndarray:
 
 def reference_limits(cfg: VehicleConfig, setup: EvaluationSetup) -> dict:
     """The reference models' acceleration limits every hold and the specified response share: those the vehicle
-    file's model gives (:class:`~.law.Controller`), so that no hold is asked for a different response."""
+    file's model gives (:class:`~..control.law.Controller`), so that no hold is asked for a different response."""
     return dict(HoldController(cfg, _authority(cfg), setup.bandwidth_rad_s, setup.hold_fraction,
                                model_from_config(cfg), setup.velocity_gain).core.reference_accel)
 
