@@ -24,12 +24,12 @@ later without any software alive. A feed line that cannot be requested or driven
 heartbeat). When no edge went out for longer than the timeout while the ESC was armed (this process was frozen or
 starved), the guard asserts and latches: thrust comes back only through a new arm request.
 
-Subscribes ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus from the ESC's steady-clock tick: its output state
-and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
-``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
+Subscribes ``esc/heartbeat`` (hindrax_msgs/Heartbeat from the ESC's steady-clock tick: its output state, armed
+flag and the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold)
+and ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
 unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_drivers.sd_notify`): a
 frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
-``guard/heartbeat`` (diagnostic_msgs/DiagnosticStatus at every tick: level OK = outputs enabled, ERROR = silenced
+``guard/heartbeat`` (hindrax_msgs/Heartbeat at every tick: level OK = outputs enabled, ERROR = silenced
 with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
@@ -53,9 +53,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from ..config import Spec, output_enable_gpio
-from ..esc_state import read_guard_ack
-from ..liveness import (AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok,
-                        simulated_now_s)
+from ..lean_cdr import Beat
+from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, heartbeat_ok, simulated_now_s
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
@@ -63,7 +62,7 @@ from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..sd_notify import SafetyNotifier
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
-from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
+from .core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
 
 __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "HEARTBEAT_TIMEOUT", "open_output_enable", "open_watchdog_feed", "main"]
 
@@ -149,7 +148,7 @@ class OutputGuardNode(Node):
             self.diag.warn("no_hardware_watchdog", "esc.output_enable_feed_gpio not wired: a frozen launch or Pi "
                                                    "keeps the last widths until systemd restarts the unit")
         self._open_line()
-        self.heartbeat = HeartbeatPublisher(self, "guard", "hindrax/output_guard", "output_guard")
+        self.heartbeat = HeartbeatPublisher(self, "guard")
         #: the peers' heartbeats through their identity checks (module docstring)
         #: "armed" for their boot_id rule: the ESC reported armed and the outputs are let through; once /OE is
         #: asserted a peer's new start (a restart after a crash) is accepted, since release still needs the ESC to
@@ -313,17 +312,15 @@ class OutputGuardNode(Node):
     def _armed_through(self) -> bool:
         return self.core.esc_armed and not self.core.asserted
 
-    def on_esc(self, msg: DiagnosticStatus) -> None:
-        """An accepted ``esc/heartbeat``: the ESC's output state and armed flag."""
-        values = beat_values(msg)
-        try:
-            state = int(values.get("output_state", OUTPUT_UNKNOWN))
-        except ValueError:
-            state = OUTPUT_UNKNOWN
-        self.esc_age.heard()  # the ack: the newest beat of this guard the ESC has handled (core module docstring)
-        self.core.on_esc(state, values.get("armed") == "true", read_guard_ack(values, self.heartbeat.boot_id))
+    def on_esc(self, msg: Beat) -> None:
+        """An accepted ``esc/heartbeat``: the ESC's output state and armed flag, and the newest beat of this guard the
+        ESC has handled (core module docstring; an echo of another boot acknowledges nothing)."""
+        self.esc_age.heard()
+        ack = msg.guard_seq if msg.guard_boot_id == self.heartbeat.boot_id else 0
+        state = msg.output_state if msg.output_state in (OUTPUT_NEUTRAL, OUTPUT_COMMANDING) else OUTPUT_UNKNOWN
+        self.core.on_esc(state, bool(msg.armed), ack)
 
-    def on_supervisor(self, msg: DiagnosticStatus) -> None:
+    def on_supervisor(self, msg: Beat) -> None:
         """An accepted ``supervisor/heartbeat``: OK or the breach."""
         self.supervisor_age.heard()
         self.core.on_supervisor(heartbeat_ok(msg), msg.message)
@@ -357,8 +354,7 @@ class OutputGuardNode(Node):
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
         if self.core.drive_fault and not asserted:  # the fault is a cause: decided at the next tick at the latest
             asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, beat_seq)
-        self.heartbeat.publish(DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
-                               self.core.reason if asserted else "outputs enabled")
+        self.heartbeat.publish(not asserted, self.core.reason if asserted else "outputs enabled")
         self.diag.published()
         # systemd's watchdog hears from this process alone, and only while all three safety processes run
         self.notifier.update({"esc": self.esc_age.age_s, "supervisor": self.supervisor_age.age_s}, self.timeout_s)

@@ -24,12 +24,11 @@ import subprocess
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
 from hindrax_drivers.testing import python_executable, wait_until
 
-from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 
 from .safety import _Layout, running_layout
 
@@ -40,12 +39,13 @@ GAP_TARGET_MS = 100.0
 _SUBSCRIBER = r"""
 import sys, time
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
+from hindrax_msgs.msg import Heartbeat
 rclpy.init()
 node = rclpy.create_node("churn_subscriber_" + sys.argv[1])
 node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: None, 10)
 for topic in ("supervisor/heartbeat", "guard/heartbeat", "esc/heartbeat"):
-    node.create_subscription(DiagnosticStatus, topic, lambda m: None, 10)
+    node.create_subscription(Heartbeat, topic, lambda m: None, 10)
 end = time.monotonic() + 3.0
 while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.05)
@@ -71,7 +71,7 @@ class _Watch:
         self.disarms = 0
         self.active = False
         for name, topic in HEARTBEAT_NAMES.items():
-            node.create_subscription(DiagnosticStatus, topic, lambda _m, n=name: self._beat(n), 50)
+            node.create_subscription(Heartbeat, topic, lambda _m, n=name: self._beat(n), 50)
         node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
 
     def _beat(self, name: str) -> None:
