@@ -63,7 +63,7 @@ from .lean_cdr import heartbeat_cdr, read_heartbeat
 from .pca9685.core import UNNAMED_NODE
 
 __all__ = ["AliveAge", "BACKSTOP_S", "ClockStepMonitor", "HEARTBEAT_LEASE_S", "HEARTBEAT_NAMES", "HEARTBEAT_NODES",
-           "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "PublisherNames", "SETTLE_S",
+           "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "PublisherNames", "SETTLE_S", "TickGaps",
            "heartbeat_ok", "heartbeat_qos", "new_boot_id", "publisher_node_names", "simulated_now_s"]
 
 #: heartbeat topics (hindrax_msgs/Heartbeat: level OK = healthy, ERROR = tripped/asserted + reason)
@@ -344,6 +344,36 @@ class AliveAge:
     def fresh(self, timeout_s: float) -> bool:
         """Heard within ``timeout_s``."""
         return self.age_s <= timeout_s
+
+
+class TickGaps:
+    """The longest gap between two calls of a node's steady tick since the last :meth:`report`, and where the CPU went
+    during it: the calling (executor) thread's CPU time, high when a long callback held the tick, and the whole
+    process's, which also counts its other threads (the ESC's chip worker, DDS). Both low: the process was not
+    running (not scheduled, or blocked). Clocks in s: ``clock`` steady, ``thread_clock`` and ``process_clock`` CPU."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic,
+                 thread_clock: Callable[[], float] = time.thread_time,
+                 process_clock: Callable[[], float] = time.process_time) -> None:
+        self._clocks = (clock, thread_clock, process_clock)
+        self._last = tuple(c() for c in self._clocks)
+        self.worst = (0.0, 0.0, 0.0)
+
+    def tick(self) -> None:
+        """Call at every tick, from the ticking thread."""
+        now = tuple(c() for c in self._clocks)
+        gap = tuple(b - a for a, b in zip(self._last, now))
+        self._last = now
+        if gap[0] > self.worst[0]:
+            self.worst = gap
+
+    def report(self) -> list[tuple[str, str]]:
+        """``/diagnostics`` pairs of the worst gap since the last report (ms): ``tick_gap_max_ms``,
+        ``tick_gap_thread_cpu_ms``, ``tick_gap_process_cpu_ms``; then starts again."""
+        out = [(k, f"{v * 1e3:.1f}") for k, v in zip(("tick_gap_max_ms", "tick_gap_thread_cpu_ms",
+                                                        "tick_gap_process_cpu_ms"), self.worst)]
+        self.worst = (0.0, 0.0, 0.0)
+        return out
 
 
 class ClockStepMonitor:

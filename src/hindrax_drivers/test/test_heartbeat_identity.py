@@ -296,3 +296,22 @@ def test_the_graph_is_asked_on_dds_events_not_at_every_check():
         assert sorted(names.names()) == ["forger", "supervisor"]
         ex.shutdown()
         rx.destroy_node()
+
+
+def test_tick_gaps_report_the_longest_gap_and_where_the_cpu_went():
+    """TickGaps keeps the longest gap between two ticks with the ticking thread's and the process's CPU time in it,
+    reports it in ms and starts again."""
+    from hindrax_drivers.liveness import TickGaps
+
+    c = {"wall": 10.0, "thread": 1.0, "process": 2.0}
+    gaps = TickGaps(lambda: c["wall"], lambda: c["thread"], lambda: c["process"])
+    for wall, thread, process in ((0.02, 0.001, 0.002), (0.27, 0.001, 0.2), (0.05, 0.04, 0.045)):
+        c["wall"] += wall
+        c["thread"] += thread
+        c["process"] += process
+        gaps.tick()
+    assert dict(gaps.report()) == {"tick_gap_max_ms": "270.0", "tick_gap_thread_cpu_ms": "1.0",
+                                   "tick_gap_process_cpu_ms": "200.0"}
+    c["wall"] += 0.02
+    gaps.tick()
+    assert dict(gaps.report())["tick_gap_max_ms"] == "20.0"

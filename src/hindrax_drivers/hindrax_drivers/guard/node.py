@@ -54,7 +54,7 @@ from rclpy.node import Node
 
 from ..config import Spec, output_enable_gpio
 from ..lean_cdr import Beat
-from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, heartbeat_ok, simulated_now_s
+from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, TickGaps, heartbeat_ok, simulated_now_s
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
@@ -155,6 +155,7 @@ class OutputGuardNode(Node):
         #: report disarmed at neutral
         self.watches = {kind: HeartbeatWatch(self, kind, handler, self._armed_through)
                         for kind, handler in (("esc", self.on_esc), ("supervisor", self.on_supervisor))}
+        self.tick_gaps = TickGaps()  # how late the tick (and its heartbeat) ran, on /diagnostics
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.feeds:
@@ -334,6 +335,7 @@ class OutputGuardNode(Node):
         return fault
 
     def tick(self) -> None:
+        self.tick_gaps.tick()
         self._last_decision = time.monotonic()
         self.esc_age.tick()
         self.supervisor_age.tick()
@@ -368,7 +370,8 @@ class OutputGuardNode(Node):
                 ("systemd_watchdog", (self.notifier.reason or "pinging") if self.notifier.enabled else "no unit"),
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
-                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values()))]
+                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
+                *self.tick_gaps.report()]
 
     def close(self) -> None:
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:

@@ -57,7 +57,7 @@ from hindrax_msgs.srv import SetArmed
 from ..config import Spec
 from ..esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
 from ..lean_cdr import diagnostic_status_cdr, thruster_pwm_cdr
-from ..liveness import ClockStepMonitor, HeartbeatPublisher, heartbeat_qos
+from ..liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..transport.i2c import open_smbus
@@ -141,6 +141,7 @@ class EscNode(Node):
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.heartbeat = HeartbeatPublisher(self, "esc")
         self._heartbeat_tick = 0
+        self.tick_gaps = TickGaps()  # how late the safety tick (and its heartbeat) ran, on /diagnostics
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.lights_us = self.lights_off_us
         self.link.configure()
@@ -330,6 +331,7 @@ class EscNode(Node):
     def steady_check(self) -> None:
         """The safety tick, then the steady-clock watchdog (:class:`.core.SteadyWatchdog`, parameter
         ``steady_watchdog_timeout_s``)."""
+        self.tick_gaps.tick()
         t = time.monotonic()
         self._safety_tick(t)
         if self.steady_watchdog.check(t, self.armed and self.command is not None):
@@ -397,7 +399,7 @@ class EscNode(Node):
                 ("output_state", STATE_NAMES[self.output_state]), *self.peers.diagnostics(),
                 ("heartbeat_disarms", self.heartbeat_disarms), ("rejected_commands", self.core.rejected_commands),
                 ("reason", self.core.reason), ("command_source", self.core.command_source or "thrust_allocation"),
-                ("clock_steps_back", self.clock_monitor.steps_back),
+                ("clock_steps_back", self.clock_monitor.steps_back), *self.tick_gaps.report(),
                 *(self.device.stats.diagnostics() if self.device is not None else [("i2c_bus", "not open")])]
 
     def close(self) -> None:

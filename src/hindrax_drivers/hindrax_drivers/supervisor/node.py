@@ -75,7 +75,7 @@ from hindrax_msgs.srv import SetArmed
 from .. import frames
 from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
 from ..lean_cdr import cdr_decoder, read_heartbeat
-from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, heartbeat_ok, heartbeat_qos
+from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_ok, heartbeat_qos
 from ..config import Spec
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
@@ -134,7 +134,9 @@ class SupervisorNode(Node):
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")
-        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=lambda: self.core.values(self._now_s()))
+        self.tick_gaps = TickGaps()  # how late the check (and its heartbeat) ran, on /diagnostics
+        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=lambda: [*self.core.values(self._now_s()),
+                                                                                  *self.tick_gaps.report()])
         self.create_timer(1.0 / cfg.supervisor.check_rate_hz, self.on_check,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_status)
@@ -246,6 +248,7 @@ class SupervisorNode(Node):
         return self._now_s()
 
     def on_check(self) -> None:
+        self.tick_gaps.tick()
         self._sample_time_s()  # a backward step of ROS time: re-base first
         if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
             self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "

@@ -10,7 +10,9 @@ run it takes ``SCHED_FIFO`` at :data:`HARDWARE_STAND_IN_PRIORITY`, above the saf
 
 * ``busy_neighbours_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
 * ``busy_neighbours_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three
-  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms), and
+  ``busy_neighbours_heartbeat_sent_gap_max_ms`` between their send stamps (``Heartbeat.steady_ns``: the sender
+  late, apart from the delivery);
 * ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's nice -5 only),
   no target: what the priority buys here. In this three-process layout little: the starvation that nice -5 let
   through was seen with the whole launch layout, the live pool and the suite's other worker on the two cores
@@ -59,8 +61,9 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
                 set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_STAND_IN_PRIORITY)
             except OSError as exc:
                 why = f"not measured: SCHED_FIFO not permitted here ({exc.strerror})"
-                return [{"name": prefix + "disarms", "value": None, "unit": "disarms", "note": why},
-                        {"name": prefix + "heartbeat_gap_max_ms", "value": None, "unit": "ms", "note": why}]
+                return [{"name": prefix + name, "value": None, "unit": unit, "note": why} for name, unit in
+                        (("disarms", "disarms"), ("heartbeat_gap_max_ms", "ms"), ("heartbeat_sent_gap_max_ms", "ms"),
+                         ("tick_gap_max_ms", "ms"))]
             watch = _Watch(lay.probe)
             lay.armed_at_1700()
             watch.armed, watch.disarms, watch.active = True, 0, True
@@ -74,6 +77,7 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
             watch.active = False
             load = os.getloadavg()[0]
             gap_s, who = watch.largest_gap_s()
+            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
             beats = sum(len(v) for v in watch.arrivals.values())
     finally:
         for p in neighbours:
@@ -87,6 +91,9 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
         {"name": prefix + "disarms", "value": watch.disarms, "unit": "disarms", "target": 0, "note": what},
         {"name": prefix + "heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms", "target": GAP_TARGET_MS,
          "n": beats, "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+        {"name": prefix + "heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
+         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
+        watch.tick_gap_row(prefix + "tick_gap_max_ms"),
     ]
     return rows if realtime else [{k: v for k, v in r.items() if k != "target"} for r in rows]
 

@@ -10,7 +10,8 @@ on such a start and disarmed the vehicle in 2-3 of 10 trials; the rows say wheth
 
 * ``participant_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
 * ``participant_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive messages of any of the three
-  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms).
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
+  ``participant_churn_heartbeat_sent_gap_max_ms`` between their send stamps (the sender late, not the delivery).
 
 Run alone: ``python -m hindrax_ident.benchmarks.participant_churn [--quick] [--default-transports]`` (prints the
 rows as JSON); ``--default-transports`` runs every process with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and no
@@ -24,6 +25,7 @@ import subprocess
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
 from hindrax_drivers.testing import python_executable, wait_until
@@ -63,30 +65,56 @@ class _VehicleLayout(_Layout):
 
 
 class _Watch:
-    """Arrival times of the three heartbeats and the ESC's armed transitions, from subscriptions on ``node``."""
+    """Arrival times and send stamps (the sender's steady clock, ``Heartbeat.steady_ns``) of the three heartbeats and
+    the ESC's armed transitions, from subscriptions on ``node``."""
 
     def __init__(self, node) -> None:
         self.arrivals: dict[str, list[float]] = {name: [] for name in HEARTBEAT_NAMES}
+        self.sent: dict[str, list[float]] = {name: [] for name in HEARTBEAT_NAMES}
         self.armed: bool | None = None
         self.disarms = 0
         self.active = False
         for name, topic in HEARTBEAT_NAMES.items():
-            node.create_subscription(Heartbeat, topic, lambda _m, n=name: self._beat(n), 50)
+            node.create_subscription(Heartbeat, topic, lambda m, n=name: self._beat(n, m), 50)
         node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
+        #: status name -> the worst tick gap it reported on /diagnostics, (gap, thread CPU, process CPU) in ms
+        self.tick_gaps: dict[str, tuple[float, float, float]] = {}
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
 
-    def _beat(self, name: str) -> None:
+    def _diagnostics(self, msg) -> None:
+        for status in msg.status if self.active else ():
+            values = {kv.key: kv.value for kv in status.values}
+            if "tick_gap_max_ms" in values:
+                gap = tuple(float(values[k]) for k in ("tick_gap_max_ms", "tick_gap_thread_cpu_ms",
+                                                       "tick_gap_process_cpu_ms"))
+                if gap[0] > self.tick_gaps.get(status.name, (-1.0,))[0]:
+                    self.tick_gaps[status.name] = gap
+
+    def tick_gap_row(self, name: str) -> dict:
+        """Row ``name``: the longest tick gap a safety process reported (TickGaps), with its CPU split."""
+        if not self.tick_gaps:
+            return {"name": name, "value": None, "unit": "ms", "note": "no tick gap reported on /diagnostics"}
+        who, (gap, thread, process) = max(self.tick_gaps.items(), key=lambda kv: kv[1][0])
+        others = ", ".join(f"{k} {v[0]:.0f}" for k, v in sorted(self.tick_gaps.items()) if k != who)
+        return {"name": name, "value": gap, "unit": "ms",
+                "note": f"longest gap between two steady ticks of a safety process ({who}; CPU in it: its executor "
+                        f"thread {thread:.1f} ms, the whole process {process:.1f} ms; the others' worst: {others})"}
+
+    def _beat(self, name: str, msg) -> None:
         if self.active:
             self.arrivals[name].append(time.monotonic())
+            self.sent[name].append(msg.steady_ns * 1e-9)
 
     def _state(self, msg) -> None:
         if self.active and self.armed and not msg.armed:
             self.disarms += 1
         self.armed = bool(msg.armed)
 
-    def largest_gap_s(self) -> tuple[float, str]:
-        """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent."""
+    def largest_gap_s(self, sent: bool = False) -> tuple[float, str]:
+        """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent.
+        ``sent``: between their send stamps (the sender late) instead of their arrivals here."""
         worst, who = 0.0, ""
-        for name, times in self.arrivals.items():
+        for name, times in (self.sent if sent else self.arrivals).items():
             if len(times) < 2:
                 return float("inf"), name
             gap = max(b - a for a, b in zip(times, times[1:]))
@@ -124,6 +152,7 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
             for p in started:
                 p.wait(60)
             gap_s, who = watch.largest_gap_s()
+            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
             beats = sum(len(v) for v in watch.arrivals.values())
         finally:
             for p in started:
@@ -138,6 +167,9 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
         {"name": "participant_churn_heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms",
          "target": GAP_TARGET_MS, "n": beats,
          "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+        {"name": "participant_churn_heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
+         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
+        watch.tick_gap_row("participant_churn_tick_gap_max_ms"),
     ]
 
 
