@@ -3,8 +3,8 @@
 The decision is :class:`~hindrax_drivers.guard.core.GuardCore` (ESC output state silent or unknown, supervisor
 heartbeat silent or tripped, either heartbeat not its sender's -> silence, latched until the ESC reports disarmed at
 neutral). Each heartbeat comes through a :class:`~hindrax_drivers.liveness.HeartbeatWatch` (its identity check:
-at every tick the topic's publishers' node names and live count, at every beat its ``boot_id`` and ``seq``; a
-rejected beat does not count as the peer being heard). How it silences:
+at every tick the topic's live count and its publishers' node names, asked of the graph when DDS reports a change,
+at every beat its ``boot_id`` and ``seq``; a rejected beat does not count as the peer being heard). How it silences:
 
 * ``esc.output_enable_gpio`` set (chip and line): the PCA9685 /OE line through libgpiod
   (:class:`~hindrax_drivers.transport.gpio.GpiodLine`), driven HIGH (outputs off, no pulses: the Basic ESC
@@ -29,8 +29,9 @@ flag and the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS t
 and ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
 unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_drivers.sd_notify`): a
 frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
-``guard/heartbeat`` (hindrax_msgs/Heartbeat at every tick: level OK = outputs enabled, ERROR = silenced
-with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
+``guard/heartbeat`` (hindrax_msgs/Heartbeat at every tick, before the tick's /OE write: level OK = outputs enabled,
+ERROR = silenced with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics``
+(``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
@@ -343,6 +344,8 @@ class OutputGuardNode(Node):
         self.core.on_stall(self.watchdog_ran_out())
         beat_seq = self.heartbeat.seq + 1  # the beat below carries this decision
         asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, beat_seq)
+        # the beat before the write: a slow /OE or register write (an emulated line's socket round trip under load:
+        # up to 135 ms measured) does not hold it; the write follows in the same tick
         if changed and asserted:
             self.assertions += 1
             self.last_assert_monotonic = time.monotonic()
@@ -351,13 +354,15 @@ class OutputGuardNode(Node):
         elif changed:
             self._released_at = time.monotonic()
             self.get_logger().info("outputs enabled: the ESC reports disarmed at neutral, after an ERROR beat")
+        self.heartbeat.publish(not asserted, self.core.reason if asserted else "outputs enabled")
+        self.diag.published()
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
-        if self.core.drive_fault and not asserted:  # the fault is a cause: decided at the next tick at the latest
-            asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, beat_seq)
-        self.heartbeat.publish(not asserted, self.core.reason if asserted else "outputs enabled")
-        self.diag.published()
+        if self.core.drive_fault and not asserted:  # the write failed: a cause, said in a beat of its own at once
+            asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, self.heartbeat.seq + 1)
+            if asserted:
+                self.heartbeat.publish(False, self.core.reason)
         # systemd's watchdog hears from this process alone, and only while all three safety processes run
         self.notifier.update({"esc": self.esc_age.age_s, "supervisor": self.supervisor_age.age_s}, self.timeout_s)
 
