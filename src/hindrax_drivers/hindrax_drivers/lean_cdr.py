@@ -36,7 +36,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from .recording.msgdefs import DELIMITER, message_definition
 
 __all__ = ["Beat", "cdr_decoder", "cdr_encoder", "diagnostic_status_cdr", "heartbeat_cdr", "imu_cdr", "lean_class",
-           "read_heartbeat", "thruster_pwm_cdr", "thruster_pwm_encode", "thruster_pwm_lean", "type_name_of",
+           "prepare", "read_heartbeat", "thruster_pwm_cdr", "thruster_pwm_encode", "thruster_pwm_lean", "type_name_of",
            "wrench_stamped_cdr"]
 
 _lock = threading.Lock()
@@ -82,16 +82,33 @@ def _registered_store(type_name: str) -> Any:
     return store
 
 
+def _compiled_store(type_name: str) -> Any:
+    """The store with ``type_name`` registered and its code generated (rosbags does that at the first message)."""
+    store = _registered_store(type_name)
+    store.get_msgdef(type_name)
+    return store
+
+
 @functools.lru_cache(maxsize=None)
 def _decoder(type_name: str) -> Callable[[bytes], Any]:
-    deserialize = _registered_store(type_name).deserialize_cdr
+    deserialize = _compiled_store(type_name).deserialize_cdr
     return lambda data: deserialize(data, type_name)
 
 
 @functools.lru_cache(maxsize=None)
 def _encoder(type_name: str) -> Callable[[Any], bytes]:
-    serialize = _registered_store(type_name).serialize_cdr
+    serialize = _compiled_store(type_name).serialize_cdr
     return lambda obj: bytes(serialize(obj, type_name))
+
+
+def prepare(*msg_types: Any) -> None:
+    """Register ``msg_types`` (rclpy message classes or ``pkg/msg/Type`` names) and generate their rosbags code now,
+    as :func:`cdr_encoder` and :func:`cdr_decoder` do when they make a codec. A node calls it while it starts for
+    the types its callbacks and ticks (de)serialise: the first use costs 80 ms of CPU here for a ``ThrusterPwm``
+    (the type store, the ``.msg`` files, the generated code), which a tick of the ESC's executor paid while
+    its heartbeat waited. Raises as :func:`cdr_decoder`."""
+    for msg_type in msg_types:
+        _compiled_store(type_name_of(msg_type))
 
 
 def cdr_encoder(msg_type: Any) -> Callable[[Any], bytes]:

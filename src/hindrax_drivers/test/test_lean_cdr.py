@@ -138,3 +138,18 @@ def test_a_heartbeat_says_ok_only_at_level_ok():
         assert heartbeat_ok(read_heartbeat(data)) is ok  # struct
     for odd in (None, False, "0", b"", b"\x00", 0.0):
         assert heartbeat_ok(SimpleNamespace(level=odd)) is False
+
+
+def test_prepare_generates_the_code_when_asked_not_at_the_first_message(monkeypatch):
+    """rosbags generates a type's code at its first message (80 ms of CPU here for the first ThrusterPwm); a node
+    asks for it while it starts (lean_cdr.prepare), so that no tick of its executor pays it."""
+    from hindrax_drivers import lean_cdr
+
+    store = lean_cdr._typestore()
+    asked = []
+    real = store.get_msgdef
+    monkeypatch.setattr(store, "get_msgdef", lambda name: (asked.append(name), real(name))[1])
+    lean_cdr.prepare(ThrusterPwm, "geometry_msgs/msg/WrenchStamped")
+    assert asked == ["hindrax_msgs/msg/ThrusterPwm", "geometry_msgs/msg/WrenchStamped"]
+    with pytest.raises(ValueError, match="not a ROS message class"):
+        lean_cdr.prepare(42)

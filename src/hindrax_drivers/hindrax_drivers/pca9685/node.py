@@ -56,7 +56,7 @@ from hindrax_msgs.srv import SetArmed
 
 from ..config import Spec
 from ..esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
-from ..lean_cdr import diagnostic_status_cdr, thruster_pwm_cdr
+from ..lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
 from ..liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
@@ -127,6 +127,7 @@ class EscNode(Node):
         self._last_target_time = None
         self.steady_watchdog = SteadyWatchdog(self.period_s, self.steady_watchdog_s, time.monotonic())
 
+        prepare(ThrusterPwm, DiagnosticStatus)  # before the ticks: the first use would hold one (lean_cdr.prepare)
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
         #: ``esc/output_state``, latched (reliable, transient local, keep last 1): on a change and once a second
         self.pub_state = self.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
