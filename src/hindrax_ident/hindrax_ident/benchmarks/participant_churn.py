@@ -21,13 +21,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
+from typing import Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
+from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
 from hindrax_drivers.testing import python_executable, wait_until
 
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
@@ -54,6 +58,23 @@ while time.monotonic() < end:
 node.destroy_node()
 rclpy.shutdown()
 """
+
+
+@contextmanager
+def hardware_priority() -> Iterator[str]:
+    """Every thread of this process (the emulated PCA9685 and /OE line, the probe) under ``SCHED_FIFO``
+    :data:`HARDWARE_STAND_IN_PRIORITY` for the block, as the vehicle's hardware is never starved by a CPU load (the
+    live pool takes the same, ``sim/live_pool.py``); with ``SCHED_RESET_ON_FORK``, so that the processes it starts do
+    not inherit it. Yields '' or, when refused (not root, no ``RLIMIT_RTPRIO``), why."""
+    try:
+        set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_STAND_IN_PRIORITY)
+    except OSError as exc:
+        yield f"SCHED_FIFO not permitted here ({exc.strerror})"
+        return
+    try:
+        yield ""
+    finally:
+        set_every_thread(os.SCHED_OTHER, 0)
 
 
 class _VehicleLayout(_Layout):
@@ -124,7 +145,7 @@ class _Watch:
 
 
 def churn_rows(quick: bool = False, default_transports: bool = False) -> list[dict]:
-    """The two ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
+    """The ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
     with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
         if default_transports:
@@ -134,21 +155,23 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
         started: list[subprocess.Popen] = []
         try:
             lay.armed_at_1700()
-            watch.armed, watch.disarms, watch.active = True, 0, True
-            t0 = time.monotonic()
-            k = 0
-            while time.monotonic() - t0 < duration_s:
-                if k % 2 == 0:
-                    argv = [python_executable(), "-c", _SUBSCRIBER, str(k)]
-                else:
-                    argv = [python_executable(), "-m", "hindrax_ident.cli", "health", "--quiet", "--timeout", "3"]
-                started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
-                                                stderr=subprocess.DEVNULL))
-                k += 1
-                next_start = t0 + k * PERIOD_S
-                wait_until(lambda: time.monotonic() >= next_start, PERIOD_S + 5.0, lambda: time.sleep(0.02),
-                           "next participant's start")
-            watch.active = False
+            with hardware_priority() as refused:
+                watch.armed, watch.disarms, watch.active = True, 0, True
+                t0 = time.monotonic()
+                k = 0
+                while time.monotonic() - t0 < duration_s:
+                    if k % 2 == 0:
+                        argv = [python_executable(), "-c", _SUBSCRIBER, str(k)]
+                    else:
+                        argv = [python_executable(), "-m", "hindrax_ident.cli", "health", "--quiet", "--timeout",
+                                "3"]
+                    started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
+                                                    stderr=subprocess.DEVNULL))
+                    k += 1
+                    next_start = t0 + k * PERIOD_S
+                    wait_until(lambda: time.monotonic() >= next_start, PERIOD_S + 5.0, lambda: time.sleep(0.02),
+                               "next participant's start")
+                watch.active = False
             for p in started:
                 p.wait(60)
             gap_s, who = watch.largest_gap_s()
@@ -160,7 +183,8 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
                     p.kill()
     what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
             f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
-            + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport"))
+            + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport")
+            + f"; emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
     return [
         {"name": "participant_churn_disarms", "value": watch.disarms, "unit": "disarms", "target": 0,
          "n": k, "note": what},
