@@ -92,7 +92,7 @@ def test_a_stalled_esc_on_a_slow_simulation_stays_armed_and_a_killed_one_still_s
         wait_until(lambda: hw.line.is_high(), BOUND_S, None, "/OE asserted after the ESC was killed")
         assert not hw.thrust()
 
-        def reasons() -> list[str]:  # the guard's beat saying why follows its /OE write
+        def reasons() -> list[str]:  # the guard's beat saying why goes out just before its /OE write
             return [m for t, level, m in lay.guard_beats if t > killed_at and level != 0]
         wait_until(reasons, BOUND_S, None, "the guard's ERROR heartbeat")
         assert reasons()[0].startswith("ESC output state silent"), reasons()[:3]
