@@ -2,7 +2,7 @@
 
 The vehicle's emulated layout (ESC, supervisor and output guard each in its own process, the PCA9685 and its /OE
 line served by this process: :mod:`hindrax_ident.benchmarks.safety`), armed at 1700 us. A plain rclpy script then
-publishes level-0 ``DiagnosticStatus`` on ``supervisor/heartbeat`` and ``esc/heartbeat`` (or replays the live
+publishes level-0 ``hindrax_msgs/Heartbeat`` on ``supervisor/heartbeat`` and ``esc/heartbeat`` (or replays the live
 heartbeats it captured), and the supervisor is SIGKILLed: the outputs must stop as they do without the script.
 Before the heartbeat identity check the forged beats were taken as the supervisor's, and thrust stayed on.
 """
@@ -27,7 +27,7 @@ STOP_BOUND_S = 2.0
 _FORGER = r"""
 import sys, rclpy
 from rclpy.node import Node
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from hindrax_msgs.msg import Heartbeat
 mode, name = sys.argv[1], sys.argv[2]
 rclpy.init()
 node = Node(name)
@@ -37,12 +37,12 @@ else:
     from hindrax_drivers.liveness import heartbeat_qos
     qos = heartbeat_qos()
 topics = ("supervisor/heartbeat", "esc/heartbeat")
-pubs = {t: node.create_publisher(DiagnosticStatus, t, qos) for t in topics}
+pubs = {t: node.create_publisher(Heartbeat, t, qos) for t in topics}
 captured = {t: [] for t in topics}
 state = {"seq": 0, "i": 0}
 if mode == "replay":  # capture the live beats for a while, then play them back in a loop
     for t in topics:
-        node.create_subscription(DiagnosticStatus, t, captured[t].append, 50)
+        node.create_subscription(Heartbeat, t, captured[t].append, 50)
 
 def beat():
     state["seq"] += 1
@@ -55,10 +55,9 @@ def beat():
         if state["i"] == 1:
             print("replaying", flush=True)
         return
-    values = [KeyValue(key="boot_id", value="f0" * 8), KeyValue(key="seq", value=str(10 ** 6 + state["seq"]))]
-    pubs["supervisor/heartbeat"].publish(DiagnosticStatus(level=b"\x00", message="within the envelope", values=values))
-    pubs["esc/heartbeat"].publish(DiagnosticStatus(level=b"\x00", message="neutral", values=values + [
-        KeyValue(key="output_state", value="1"), KeyValue(key="armed", value="false")]))
+    ident = dict(boot_id=0xF0F0F0F0F0F0F0F0, seq=10 ** 6 + state["seq"], level=Heartbeat.OK)
+    pubs["supervisor/heartbeat"].publish(Heartbeat(message="within the envelope", **ident))
+    pubs["esc/heartbeat"].publish(Heartbeat(message="neutral", output_state=1, armed=False, **ident))
     if state["seq"] == 1:
         print("forging", flush=True)
 
@@ -73,7 +72,7 @@ finally:
 """
 
 # (mode, node name): the issue's 10-line script with rclpy's default QoS under the supervisor's own name; the same
-# copying the heartbeats' QoS and their KeyValues; a replay of the live stream under the supervisor's name
+# copying the heartbeats' QoS and their fields; a replay of the live stream under the supervisor's name
 VARIANTS = [("plain", "supervisor"), ("copied_qos", "heartbeat_forger"), ("replay", "supervisor")]
 
 

@@ -517,9 +517,8 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
     between ESC heartbeats, as this probe sees them, go into the failure message."""
     from geometry_msgs.msg import WrenchStamped
 
-    from diagnostic_msgs.msg import DiagnosticStatus
     from hindrax_drivers.liveness import heartbeat_qos
-    from hindrax_msgs.msg import ThrusterPwm
+    from hindrax_msgs.msg import Heartbeat, ThrusterPwm
     from hindrax_msgs.srv import SetArmed
 
     install = colcon_install
@@ -537,11 +536,10 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
         guard: list[tuple[float, int, str]] = []
         day.node.create_subscription(ThrusterPwm, "thrusters/pulse_width", lambda m: pwm.append(
             (time.monotonic(), bool(m.armed), max(abs(w - neutral) for w in m.pulse_width_us))), 50)
-        day.node.create_subscription(DiagnosticStatus, "esc/heartbeat", lambda m: beats.append(time.monotonic()),
+        day.node.create_subscription(Heartbeat, "esc/heartbeat", lambda m: beats.append(time.monotonic()),
                                      heartbeat_qos())
-        day.node.create_subscription(DiagnosticStatus, "guard/heartbeat", lambda m: guard.append(
-            (time.monotonic(), m.level[0] if isinstance(m.level, bytes) else int(m.level), m.message)),
-            heartbeat_qos())
+        day.node.create_subscription(Heartbeat, "guard/heartbeat", lambda m: guard.append(
+            (time.monotonic(), m.level, m.message)), heartbeat_qos())
         wrench = day.node.create_publisher(WrenchStamped, "wrench", 10)
         arm = day.node.create_client(SetArmed, "esc/set_armed")
         day.wait(lambda: arm.service_is_ready() and len(beats) > 10 and guard and guard[-1][1] == 0, "vehicle up")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus
+from hindrax_msgs.msg import Heartbeat
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.testing import child_env, ros_context, wait_until
@@ -29,8 +29,8 @@ def _refusal(args: list[str], role_node: str, tmp_path: Path) -> tuple[int, list
 
     with domain_id() as fresh, ros_context(domain_id=fresh) as ctx:
         other = rclpy.create_node(role_node, context=ctx)
-        beat = other.create_publisher(DiagnosticStatus, f"{role_node}/heartbeat", 10)
-        other.create_timer(0.05, lambda: beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK)))
+        beat = other.create_publisher(Heartbeat, f"{role_node}/heartbeat", 10)
+        other.create_timer(0.05, lambda: beat.publish(Heartbeat(level=Heartbeat.OK, boot_id=1, seq=1)))
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(other)
         hindrax = str(Path(sys.executable).with_name("hindrax"))
@@ -97,8 +97,8 @@ def test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start(tmp_p
                        message=f"{args[0]} started")
             assert proc.poll() is None, (tmp_path / "stderr").read_text()
             other = rclpy.create_node(role, context=ctx)
-            beat = other.create_publisher(DiagnosticStatus, f"{role}/heartbeat", 10)
-            other.create_timer(0.05, lambda: beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK)))
+            beat = other.create_publisher(Heartbeat, f"{role}/heartbeat", 10)
+            other.create_timer(0.05, lambda: beat.publish(Heartbeat(level=Heartbeat.OK, boot_id=1, seq=1)))
             ex.add_node(other)
             wait_until(lambda: proc.poll() is not None, 120, lambda: ex.spin_once(timeout_sec=0.05),
                        f"{args[0]} ending")

@@ -15,12 +15,12 @@ import os
 import signal
 import time
 
-from diagnostic_msgs.msg import DiagnosticStatus
 from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.liveness import heartbeat_qos
 from hindrax_drivers.testing import wait_until
 from hindrax_ident.benchmarks.safety import _Layout, running_layout
+from hindrax_msgs.msg import Heartbeat
 
 #: simulated seconds per wall second while the ESC is stopped: 1.5 s stopped (and up to 3.5 s more before its next
 #: beat reaches the guard on a loaded machine) stay below the 0.2 s timeout on the graph's clock
@@ -44,7 +44,7 @@ class SimClockLayout(_Layout):
         super().__init__(*args, **kwargs)
         self._clock = self.probe.create_publisher(Clock, "/clock", 10)
         self.probe.create_timer(0.01, self._tick_clock)
-        self.probe.create_subscription(DiagnosticStatus, "guard/heartbeat", self._on_guard, heartbeat_qos())
+        self.probe.create_subscription(Heartbeat, "guard/heartbeat", self._on_guard, heartbeat_qos())
 
     def _tick_clock(self) -> None:
         now = time.monotonic()
@@ -55,8 +55,7 @@ class SimClockLayout(_Layout):
         self._clock.publish(msg)
 
     def _on_guard(self, msg) -> None:
-        level = msg.level[0] if isinstance(msg.level, bytes) else int(msg.level)
-        self.guard_beats.append((time.monotonic(), level, msg.message))
+        self.guard_beats.append((time.monotonic(), msg.level, msg.message))
 
     def start(self, name: str, extra: tuple = ()) -> None:
         super().start(name, ("-p", "use_sim_time:=true", *extra))
@@ -93,7 +92,7 @@ def test_a_stalled_esc_on_a_slow_simulation_stays_armed_and_a_killed_one_still_s
         wait_until(lambda: hw.line.is_high(), BOUND_S, None, "/OE asserted after the ESC was killed")
         assert not hw.thrust()
 
-        def reasons() -> list[str]:  # the guard's beat saying why follows its /OE write
+        def reasons() -> list[str]:  # the guard's beat saying why goes out just before its /OE write
             return [m for t, level, m in lay.guard_beats if t > killed_at and level != 0]
         wait_until(reasons, BOUND_S, None, "the guard's ERROR heartbeat")
         assert reasons()[0].startswith("ESC output state silent"), reasons()[:3]

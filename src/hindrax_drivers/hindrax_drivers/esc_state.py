@@ -2,13 +2,12 @@
 nodes that need only that (the supervisor, the MS5837 driver's ``pressure/zero_depth``, the controller) and not the
 50 Hz widths of ``thrusters/pulse_width`` (the identification node and the recorder keep those).
 
-Message: diagnostic_msgs/DiagnosticStatus with the fields of the ESC's ``esc/heartbeat`` (docs/architecture.md §8):
+Message: diagnostic_msgs/DiagnosticStatus with the state of the ESC's ``esc/heartbeat`` (docs/architecture.md §8):
 level OK, or ERROR while the output state is unknown; ``message`` the state's name (``neutral``, ``commanding``,
 ``unknown``); KeyValues ``output_state`` (the hindrax_msgs/ThrusterPwm ``OUTPUT_*`` constant, decimal text),
 ``armed`` (``true`` / ``false``, as ``ThrusterPwm.armed``: false while unknown) and ``reason``. A standard type that
-the guard already reads in the same layout, so no interface package changes; ThrusterPwm with empty widths would
-say "no thruster" where it means "not a width report". ``esc/heartbeat`` adds the newest guard beat handled
-(``guard_boot_id``, ``guard_seq``: :func:`guard_ack_values` writes them, :func:`read_guard_ack` reads them).
+tools read (at 1 Hz its key-value list costs nothing worth saving); ThrusterPwm with empty widths would say "no
+thruster" where it means "not a width report".
 
 QoS (:func:`esc_state_qos`): reliable, transient local, keep last 1 (``/tf_static``'s latching): a subscriber that
 joins late, or re-subscribes, gets the current state at once from the ESC's writer.
@@ -37,7 +36,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 __all__ = ["ESC_STATE_TOPIC", "REPUBLISH_PERIOD_S", "ArmedWatch", "EscStateLatch", "armed_after", "esc_state_qos",
-           "esc_state_values", "guard_ack_values", "read_esc_state", "read_guard_ack"]
+           "esc_state_values", "read_esc_state"]
 
 #: the topic (relative: the vehicle's namespace)
 ESC_STATE_TOPIC = "esc/output_state"
@@ -75,26 +74,8 @@ class EscStateLatch:
 
 
 def esc_state_values(armed: bool, output_state: int, reason: str) -> list[tuple[str, str]]:
-    """The KeyValues of one ``esc/output_state`` (and of ``esc/heartbeat``'s state part)."""
+    """The KeyValues of one ``esc/output_state``."""
     return [("output_state", str(int(output_state))), ("armed", "true" if armed else "false"), ("reason", reason)]
-
-
-def guard_ack_values(guard_boot_id: str, guard_seq: int) -> list[tuple[str, str]]:
-    """The ``esc/heartbeat`` KeyValues acknowledging the newest guard beat the ESC has handled (its ``boot_id`` and
-    ``seq``; ``("", 0)`` before the first): the output guard's release condition (:mod:`.guard.core`)."""
-    return [("guard_boot_id", guard_boot_id), ("guard_seq", str(int(guard_seq)))]
-
-
-def read_guard_ack(values: dict[str, str], guard_boot_id: str) -> int:
-    """The guard beat an ``esc/heartbeat``'s KeyValues (``values``) acknowledge, for the guard whose boot is
-    ``guard_boot_id``: its ``guard_seq``, or 0 (acknowledges nothing) when the echo is of another boot, missing or
-    not an integer (:func:`guard_ack_values`)."""
-    if values.get("guard_boot_id") != guard_boot_id:
-        return 0
-    try:
-        return int(values.get("guard_seq", ""))
-    except ValueError:
-        return 0
 
 
 def read_esc_state(msg: Any) -> tuple[int, bool] | None:

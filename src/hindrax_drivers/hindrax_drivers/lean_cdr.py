@@ -9,7 +9,7 @@ reader decodes them to the same message (test_lean_cdr.py).
 Used on the 50 Hz chain and the safety path (every input is a subscription callback, the one input path of every
 node): publishing as bytes (:func:`cdr_encoder`, ``Publisher.publish(bytes)``) the identification node's ``wrench``
 (:func:`wrench_stamped_cdr`), the allocation's command and the ESC's ``thrusters/pulse_width``
-(:func:`thruster_pwm_lean`, :func:`thruster_pwm_cdr`), the IMU (:func:`imu_cdr`) and the safety heartbeats
+(:func:`thruster_pwm_lean`, :func:`thruster_pwm_cdr`), the IMU (:func:`imu_cdr`) and the ESC's latched state
 (:func:`diagnostic_status_cdr`); decoding (:func:`cdr_decoder`) the supervisor's ``imu/data_raw``, whose freshness
 check compares the bytes, and the allocation's ``wrench``. A node's other inputs stay rclpy objects: at the
 controller's input rates the two cost the same within the spread (docs/architecture.md §10).
@@ -17,20 +17,27 @@ controller's input rates the two cost the same within the spread (docs/architect
 :func:`cdr_decoder` returns ``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class. The project's
 own interfaces (``hindrax_msgs``) are registered from their installed ``.msg`` files
 (:func:`hindrax_drivers.recording.msgdefs.message_definition`), the standard ones come with rosbags' Jazzy store.
+
+The safety heartbeats (``hindrax_msgs/Heartbeat``, 20-25 Hz in three processes) are a fixed layout, fixed-size
+fields first and one string last: :func:`heartbeat_cdr` and :func:`read_heartbeat` pack and read it with
+:mod:`struct` at fixed offsets (about 1 us each here, where rosbags' generic code takes tens), and rclpy's own
+serialiser is the reference they are tested against.
 """
 from __future__ import annotations
 
 import functools
+import struct
 import threading
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, NamedTuple, Sequence
 
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .recording.msgdefs import DELIMITER, message_definition
 
-__all__ = ["cdr_decoder", "cdr_encoder", "diagnostic_status_cdr", "imu_cdr", "lean_class", "thruster_pwm_cdr",
-           "thruster_pwm_encode", "thruster_pwm_lean", "type_name_of", "wrench_stamped_cdr"]
+__all__ = ["Beat", "cdr_decoder", "cdr_encoder", "diagnostic_status_cdr", "heartbeat_cdr", "imu_cdr", "lean_class",
+           "prepare", "read_heartbeat", "thruster_pwm_cdr", "thruster_pwm_encode", "thruster_pwm_lean", "type_name_of",
+           "wrench_stamped_cdr"]
 
 _lock = threading.Lock()
 
@@ -75,16 +82,33 @@ def _registered_store(type_name: str) -> Any:
     return store
 
 
+def _compiled_store(type_name: str) -> Any:
+    """The store with ``type_name`` registered and its code generated (rosbags does that at the first message)."""
+    store = _registered_store(type_name)
+    store.get_msgdef(type_name)
+    return store
+
+
 @functools.lru_cache(maxsize=None)
 def _decoder(type_name: str) -> Callable[[bytes], Any]:
-    deserialize = _registered_store(type_name).deserialize_cdr
+    deserialize = _compiled_store(type_name).deserialize_cdr
     return lambda data: deserialize(data, type_name)
 
 
 @functools.lru_cache(maxsize=None)
 def _encoder(type_name: str) -> Callable[[Any], bytes]:
-    serialize = _registered_store(type_name).serialize_cdr
+    serialize = _compiled_store(type_name).serialize_cdr
     return lambda obj: bytes(serialize(obj, type_name))
+
+
+def prepare(*msg_types: Any) -> None:
+    """Register ``msg_types`` (rclpy message classes or ``pkg/msg/Type`` names) and generate their rosbags code now,
+    as :func:`cdr_encoder` and :func:`cdr_decoder` do when they make a codec. A node calls it while it starts for
+    the types its callbacks and ticks (de)serialise: the first use costs 80 ms of CPU here for a ``ThrusterPwm``
+    (the type store, the ``.msg`` files, the generated code), which a tick of the ESC's executor paid while
+    its heartbeat waited. Raises as :func:`cdr_decoder`."""
+    for msg_type in msg_types:
+        _compiled_store(type_name_of(msg_type))
 
 
 def cdr_encoder(msg_type: Any) -> Callable[[Any], bytes]:
@@ -185,7 +209,7 @@ def imu_cdr(stamp_ns: int, frame_id: str, accel_m_s2: Any, gyro_rad_s: Any, acce
                       linear_acceleration_covariance=np.asarray(accel_cov, dtype=np.float64).ravel()))
 
 
-# -- the safety heartbeats
+# -- the ESC's latched state (esc_state.py)
 @functools.lru_cache(maxsize=1)
 def _status_parts() -> tuple[Any, ...]:
     return (lean_class("diagnostic_msgs/msg/DiagnosticStatus"), lean_class("diagnostic_msgs/msg/KeyValue"),
@@ -194,11 +218,59 @@ def _status_parts() -> tuple[Any, ...]:
 
 def diagnostic_status_cdr(level: int, name: str, message: str, hardware_id: str,
                           values: Sequence[tuple[str, str]] = ()) -> bytes:
-    """CDR of a ``diagnostic_msgs/DiagnosticStatus`` (:func:`cdr_encoder`): the safety heartbeats (20-25 Hz each,
-    docs/architecture.md §8). ``level``: the message's constants (OK 0 ... STALE 3, an int or rclpy's one-byte
+    """CDR of a ``diagnostic_msgs/DiagnosticStatus`` (:func:`cdr_encoder`): ``esc/output_state``
+    (:mod:`hindrax_drivers.esc_state`). ``level``: the message's constants (OK 0 ... STALE 3, an int or rclpy's one-byte
     bytes); ``values``: (key, value) pairs."""
     cls, key_value, encode = _status_parts()
     if isinstance(level, (bytes, bytearray)):  # rclpy's constants are one-byte bytes (``byte`` fields)
         level = level[0]
     return encode(cls(level=int(level), name=name, message=message, hardware_id=hardware_id,
                       values=[key_value(key=k, value=v) for k, v in values]))
+
+
+# -- the safety heartbeats (module docstring)
+#: CDR little-endian encapsulation (plain CDR, options 0), as rclpy publishes on every ROS 2 host here
+_CDR_LE = b"\x00\x01\x00\x00"
+#: hindrax_msgs/Heartbeat up to the string's length: header, boot_id, seq, steady_ns, guard_boot_id, guard_seq (uint64,
+#: offsets 0-39 of the payload), level, output_state, armed (40-42), one byte of alignment, the string length (44)
+_BEAT = struct.Struct("<4sQQQQQBB?xI")
+
+
+class Beat(NamedTuple):
+    """One ``hindrax_msgs/Heartbeat`` as :func:`read_heartbeat` reads it: the message's fields, same names and
+    meaning (``hindrax_msgs/msg/Heartbeat.msg``), so a handler reads it or an rclpy ``Heartbeat`` alike."""
+
+    boot_id: int
+    seq: int
+    steady_ns: int
+    guard_boot_id: int
+    guard_seq: int
+    level: int
+    output_state: int
+    armed: bool
+    message: str
+
+
+def heartbeat_cdr(boot_id: int, seq: int, steady_ns: int, level: int, message: str = "", output_state: int = 0,
+                  armed: bool = False, guard_boot_id: int = 0, guard_seq: int = 0) -> bytes:
+    """CDR of a ``hindrax_msgs/Heartbeat`` for ``Publisher.publish(bytes)``: the fields of :class:`Beat` (integers in
+    their field's range: ``struct.error`` otherwise; ``message`` UTF-8)."""
+    text = message.encode("utf-8") + b"\0"
+    return _BEAT.pack(_CDR_LE, boot_id, seq, steady_ns, guard_boot_id, guard_seq, level, output_state, armed,
+                      len(text)) + text
+
+
+def read_heartbeat(data: bytes) -> Beat | None:
+    """The :class:`Beat` in the CDR bytes of a ``hindrax_msgs/Heartbeat`` (a raw subscription's message), or None when
+    they are not one: another encapsulation, too short, a string that does not fit or is not UTF-8."""
+    if len(data) < _BEAT.size or data[:4] != _CDR_LE:
+        return None
+    _, boot_id, seq, steady_ns, guard_boot_id, guard_seq, level, output_state, armed, n = _BEAT.unpack_from(data)
+    end = _BEAT.size + n
+    if n < 1 or len(data) < end or data[end - 1] != 0:
+        return None
+    try:
+        message = data[_BEAT.size:end - 1].decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+    return Beat(boot_id, seq, steady_ns, guard_boot_id, guard_seq, level, output_state, armed, message)

@@ -2,20 +2,26 @@
 
 The pieces every safety node (ESC, output guard, supervisor) shares:
 
-* :class:`HeartbeatPublisher`: publishes a node's heartbeat with the two KeyValues that make it hard to take for
-  another process's: ``boot_id`` (random hex, new at every node start) and ``seq`` (1, 2, 3 ... per beat).
+* :class:`HeartbeatPublisher`: publishes a node's heartbeat (``hindrax_msgs/Heartbeat``) with the two fields that
+  make it hard to take for another process's: ``boot_id`` (random, non-zero, new at every node start) and ``seq``
+  (1, 2, 3 ... per beat).
 * :class:`HeartbeatIdentity`: the pure check a receiver runs on a peer's heartbeat: exactly one live publisher on
   the topic, every publisher with the expected node name (``Node.get_publishers_info_by_topic``); ``seq`` strictly
   increasing within one ``boot_id``; no ``boot_id`` change while armed. A forged publisher or a replayed bag of the
   vehicle's own beats is a second publisher, a wrong node name, a sequence that goes back or a new boot while armed:
   a fault, and a beat it rejects does not count as the peer being alive.
-* :class:`HeartbeatWatch`: the receiver's subscription that feeds it. Heartbeats use :func:`heartbeat_qos`: DDS
+* :class:`HeartbeatWatch`: the receiver's subscription that feeds it, taking the beats as bytes
+  (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: DDS
   AUTOMATIC liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the subscription's liveliness event counts the
   *live* publishers. Why not the graph's count alone: a SIGKILLed process's endpoints stay in the ROS graph until
   its DDS participant lease runs out (20 s with Fast DDS's default, measured here), so a supervisor restarted after
   a crash would be refused for 20 s; its writer is no longer alive after one lease (0.95-1.0 s measured, also for
   a SIGSTOPped one). A writer offering a longer lease (rclpy's default QoS: infinite) does not match at all: its
   beats never arrive, while the graph still shows its node name.
+* :class:`PublisherNames`: the node names of a topic's publishers, asked of the graph only when DDS says something
+  changed (the subscription's matched, liveliness, incompatible-QoS and incompatible-type events), for
+  :data:`SETTLE_S` after such an event (a node name arrives in the graph after its endpoint matches), while a
+  publisher is still unnamed, and every :data:`BACKSTOP_S` (a change no event reports); not at every tick.
 
 A liveness judgement follows the clock of the graph it protects. On the system clock (the vehicle) that is the
 above. On simulated time (``use_sim_time``: the node's ROS clock is driven by ``/clock`` or by an in-process
@@ -42,9 +48,8 @@ import math
 import secrets
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any, Callable, Sequence
 
-from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.duration import Duration
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.expand_topic_name import expand_topic_name
@@ -52,13 +57,16 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import LivelinessPolicy, QoSProfile
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
-from .lean_cdr import diagnostic_status_cdr
+from hindrax_msgs.msg import Heartbeat
 
-__all__ = ["AliveAge", "ClockStepMonitor", "HEARTBEAT_LEASE_S", "HEARTBEAT_NAMES", "HEARTBEAT_NODES",
-           "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "beat_values", "heartbeat_ok",
-           "heartbeat_qos", "new_boot_id", "publisher_node_names", "simulated_now_s"]
+from .lean_cdr import heartbeat_cdr, read_heartbeat
+from .pca9685.core import UNNAMED_NODE
 
-#: heartbeat topics (diagnostic_msgs/DiagnosticStatus: level OK = healthy, ERROR = tripped/asserted + reason)
+__all__ = ["AliveAge", "BACKSTOP_S", "ClockStepMonitor", "HEARTBEAT_LEASE_S", "HEARTBEAT_NAMES", "HEARTBEAT_NODES",
+           "HeartbeatIdentity", "HeartbeatPublisher", "HeartbeatWatch", "PublisherNames", "SETTLE_S", "TickGaps",
+           "heartbeat_ok", "heartbeat_qos", "new_boot_id", "publisher_node_names", "simulated_now_s"]
+
+#: heartbeat topics (hindrax_msgs/Heartbeat: level OK = healthy, ERROR = tripped/asserted + reason)
 HEARTBEAT_NAMES = {"supervisor": "supervisor/heartbeat", "guard": "guard/heartbeat", "esc": "esc/heartbeat"}
 #: the one node allowed to publish each heartbeat (internal graph names, docs/architecture.md §8)
 HEARTBEAT_NODES = {"supervisor": "supervisor", "guard": "output_guard", "esc": "esc"}
@@ -66,6 +74,12 @@ HEARTBEAT_NODES = {"supervisor": "supervisor", "guard": "output_guard", "esc": "
 #: counts as live; the heartbeat ages (``esc.heartbeat_timeout_s``, ``esc.guard_heartbeat_timeout_s``: 0.2 s) stop
 #: the outputs long before
 HEARTBEAT_LEASE_S = 1.0
+#: :class:`PublisherNames` asks the graph at every check for this long after a DDS event, s: an endpoint and its node
+#: name reach the graph by discovery traffic of their own, not in step with the DDS match that raised the event
+SETTLE_S = 0.5
+#: and at least this often without an event, s (a change no event reports: rmw_fastrtps raises no incompatible-type
+#: event here, so a publisher of another type, whose beats never arrive, is named within this)
+BACKSTOP_S = 1.0
 
 
 def heartbeat_qos() -> Any:
@@ -87,7 +101,7 @@ def publisher_node_names(node: Any, topic: str) -> list[str]:
     node.get_publishers_info_by_topic(topic)]`` gives (the same rcl query, the topic expanded, validated and
     remapped as rclpy does, once per node and topic), without the ``TopicEndpointInfo`` and ``QoSProfile`` objects
     rclpy builds per endpoint, which the safety ticks never read: 19 us instead of 51 us a call with two publishers
-    here, and the ESC and the output guard ask 115 times a second. Raises as ``get_publishers_info_by_topic`` for an
+    here (:class:`PublisherNames` says when it is asked). Raises as ``get_publishers_info_by_topic`` for an
     invalid topic name. Uses rclpy's own binding (``rclpy.impl.implementation_singleton``), as its ``Node`` does."""
     resolved = node.__dict__.setdefault("_hindrax_resolved_topics", {})
     fq = resolved.get(topic)
@@ -100,40 +114,35 @@ def publisher_node_names(node: Any, topic: str) -> list[str]:
         return [info["node_name"] for info in _rclpy.rclpy_get_publishers_info_by_topic(node.handle, fq, False)]
 
 
-def new_boot_id() -> str:
-    """A heartbeat's per-start value: 16 random hex digits (64 bits from :mod:`secrets`)."""
-    return secrets.token_hex(8)
-
-
-def beat_values(msg: Any) -> dict[str, str]:
-    """A heartbeat's KeyValues as a dict (an rclpy DiagnosticStatus or rosbags' lean decoding of one)."""
-    return {kv.key: kv.value for kv in msg.values}
+def new_boot_id() -> int:
+    """A heartbeat's per-start value: 64 random bits from :mod:`secrets`, never 0 (0 means "none")."""
+    return secrets.randbits(64) or 1
 
 
 class HeartbeatPublisher:
-    """One node's heartbeat (diagnostic_msgs/DiagnosticStatus on ``HEARTBEAT_NAMES[kind]``) carrying ``boot_id`` and
-    ``seq`` (module docstring), published as CDR bytes (:func:`hindrax_drivers.lean_cdr.diagnostic_status_cdr`: no
-    rclpy object per beat).
+    """One node's heartbeat (``hindrax_msgs/Heartbeat`` on ``HEARTBEAT_NAMES[kind]``) carrying ``boot_id`` and ``seq``
+    (module docstring), published as CDR bytes (:func:`hindrax_drivers.lean_cdr.heartbeat_cdr`: no rclpy object per
+    beat).
 
     ``node``: the publishing rclpy node (it must be named ``HEARTBEAT_NODES[kind]`` for receivers to accept it); the
-    QoS is :func:`heartbeat_qos`;
-    ``name``/``hardware_id``: the status fields; further keyword arguments go to ``create_publisher``.
+    QoS is :func:`heartbeat_qos`; keyword arguments go to ``create_publisher``.
     :attr:`boot_id` is new for every instance (a node re-created in the same process is a new start).
     """
 
-    def __init__(self, node: Any, kind: str, name: str, hardware_id: str, **publisher_kwargs: Any) -> None:
+    def __init__(self, node: Any, kind: str, **publisher_kwargs: Any) -> None:
         self.topic = HEARTBEAT_NAMES[kind]
-        self.name, self.hardware_id = name, hardware_id
         self.boot_id = new_boot_id()
         self.seq = 0
-        self.publisher = node.create_publisher(DiagnosticStatus, self.topic, heartbeat_qos(), **publisher_kwargs)
+        self.publisher = node.create_publisher(Heartbeat, self.topic, heartbeat_qos(), **publisher_kwargs)
 
-    def publish(self, level: Any, message: str, values: Iterable[tuple[str, str]] = ()) -> None:
-        """Publish one beat: ``level`` (DiagnosticStatus constant), ``message``, extra (key, value) pairs."""
+    def publish(self, ok: bool, message: str, output_state: int = 0, armed: bool = False, guard_ack: tuple[int, int]
+                = (0, 0)) -> None:
+        """Publish one beat: ``ok`` (level OK, else ERROR), ``message`` (one line); the ESC's fields
+        ``output_state``, ``armed`` and ``guard_ack`` (the guard beat it handled last: boot_id, seq)."""
         self.seq += 1
-        self.publisher.publish(diagnostic_status_cdr(
-            level, self.name, message, self.hardware_id,
-            [("boot_id", self.boot_id), ("seq", str(self.seq)), *values]))
+        self.publisher.publish(heartbeat_cdr(self.boot_id, self.seq, time.monotonic_ns(),
+                                             Heartbeat.OK if ok else Heartbeat.ERROR, message, int(output_state),
+                                             bool(armed), *guard_ack))
 
 
 @dataclass
@@ -143,7 +152,7 @@ class HeartbeatIdentity:
     (:meth:`on_beat`, with its own armed state). :attr:`fault` is '' or the reason, naming the topic.
 
     Faults: a number of live publishers other than one (a forger or a bag player beside the peer; none), a
-    publisher with another node name, a beat without a valid ``boot_id``/``seq``, a ``seq`` not
+    publisher with another node name, a beat that is not a Heartbeat or has ``boot_id`` or ``seq`` 0, a ``seq`` not
     greater than the last accepted one of the same ``boot_id`` (a replay or a repeat), a ``boot_id`` change while
     armed (a forger or a replay of another boot taking over a dead peer's topic). The publisher faults hold while
     the graph shows them; a beat fault holds until a beat is accepted while not armed (while armed, it stays until
@@ -153,7 +162,7 @@ class HeartbeatIdentity:
 
     topic: str
     node_name: str
-    boot_id: str | None = None
+    boot_id: int | None = None
     seq: int | None = None
     publisher_fault: str = ""
     beat_fault: str = ""
@@ -185,21 +194,17 @@ class HeartbeatIdentity:
             self.publisher_fault = ""
         return self.fault
 
-    def on_beat(self, values: Mapping[str, str], armed: bool) -> bool:
-        """One beat's KeyValues (:func:`beat_values`); ``armed``: the receiver's (or the vehicle's) armed state. True
-        when the beat is accepted (the peer counts as heard), False when it is rejected (:attr:`beat_fault` says
-        why, :attr:`rejected` counts it)."""
-        boot_id = values.get("boot_id", "")
-        try:
-            seq = int(values.get("seq", ""))
-        except ValueError:
-            seq = None
+    def on_beat(self, beat: Any, armed: bool) -> bool:
+        """One beat (a :class:`~hindrax_drivers.lean_cdr.Beat` or an rclpy ``Heartbeat``; None: bytes that are not
+        one); ``armed``: the receiver's (or the vehicle's) armed state. True when the beat is accepted (the peer
+        counts as heard), False when it is rejected (:attr:`beat_fault` says why, :attr:`rejected` counts it)."""
+        boot_id, seq = (0, 0) if beat is None else (beat.boot_id, beat.seq)
         fault = ""
-        if not boot_id or seq is None:
+        if not boot_id or not seq:
             fault = f"{self.topic} beat without boot_id/seq: not from a {self.node_name} of this stack"
         elif self.boot_id is not None and boot_id != self.boot_id:
             if armed:
-                fault = (f"{self.topic} boot_id changed from {self.boot_id} to {boot_id} while armed: "
+                fault = (f"{self.topic} boot_id changed from {self.boot_id:016x} to {boot_id:016x} while armed: "
                          f"{self.node_name} restarted or another process publishes it")
         elif self.seq is not None and seq <= self.seq:
             fault = (f"{self.topic} seq {seq} after {self.seq}: " +
@@ -214,25 +219,58 @@ class HeartbeatIdentity:
         return True
 
 
-def heartbeat_ok(msg) -> bool:
-    """Whether a heartbeat (diagnostic_msgs/DiagnosticStatus) says OK (level 0). ``level`` is a ``byte`` field:
-    rclpy gives one-byte ``bytes`` (``DiagnosticStatus.OK`` is the byte 0), rosbags' lean decoding
-    (:mod:`hindrax_drivers.lean_cdr`) an int; both are read here, so a beat taken either way means the same. Any
-    other type is not OK."""
+def heartbeat_ok(msg: Any) -> bool:
+    """Whether a heartbeat (a :class:`~hindrax_drivers.lean_cdr.Beat` or an rclpy ``Heartbeat``) says OK (level
+    0); any other level or type is not OK."""
     level = msg.level
-    if isinstance(level, (bytes, bytearray)):
-        return len(level) == 1 and level[0] == 0
-    return isinstance(level, int) and not isinstance(level, bool) and level == 0
+    return isinstance(level, int) and not isinstance(level, bool) and level == Heartbeat.OK
+
+
+class PublisherNames:
+    """The node names of ``topic``'s publishers as ``node``'s graph shows them (:func:`publisher_node_names`), asked
+    only when they may have changed (module docstring): :meth:`changed` is the subscription's event callback (any
+    of its DDS events), :meth:`names` answers at a tick. ``clock``: steady time, s."""
+
+    def __init__(self, node: Any, topic: str, clock: Callable[[], float] = time.monotonic) -> None:
+        self.node, self.topic, self._clock = node, topic, clock
+        self._names: list[str] = []
+        self._asked_s = self._event_s = -math.inf
+        #: graph queries made (the benches count them)
+        self.queries = 0
+
+    def changed(self, _info: Any = None) -> None:
+        """A DDS event on the topic's subscription (matched, liveliness, incompatible QoS or type)."""
+        self._event_s = self._clock()
+
+    def names(self) -> list[str]:
+        """The publishers' node names, from the graph when due, else as last asked."""
+        now = self._clock()
+        if (now - self._event_s <= SETTLE_S or now - self._asked_s >= BACKSTOP_S or UNNAMED_NODE in self._names):
+            self._names = publisher_node_names(self.node, self.topic)
+            self._asked_s = now
+            self.queries += 1
+        return self._names
+
+    def event_callbacks(self, **others: Callable[[Any], None]) -> SubscriptionEventCallbacks:
+        """Subscription event callbacks that call :meth:`changed` on every graph-related event; ``others`` (e.g.
+        ``liveliness=f``) are called too."""
+        def both(name: str) -> Callable[[Any], None]:
+            extra = others.get(name)
+            if extra is None:
+                return self.changed
+            return lambda info: (extra(info), self.changed(info))
+        return SubscriptionEventCallbacks(**{k: both(k) for k in
+                                             ("matched", "liveliness", "incompatible_qos", "incompatible_type")})
 
 
 class HeartbeatWatch:
     """A receiver's subscription to a peer's heartbeat through its :class:`HeartbeatIdentity` (module docstring).
 
-    ``node``: the receiving rclpy node; ``kind``: a key of :data:`HEARTBEAT_NAMES`; ``handler(msg)``: called with
-    every accepted beat (an rclpy DiagnosticStatus) only; ``armed()``: the receiver's armed state for the check.
-    Call :meth:`check` at the receiver's tick (one :func:`publisher_node_names`, about 20 us): it returns
-    :attr:`identity`'s fault ('' when trusted), judged for the receiver's clock at that moment (module docstring:
-    on simulated time the lease does not silence a peer). Rejected beats are counted in :attr:`identity`.
+    ``node``: the receiving rclpy node; ``kind``: a key of :data:`HEARTBEAT_NAMES`; ``handler(beat)``: called with
+    every accepted beat (a :class:`~hindrax_drivers.lean_cdr.Beat`) only; ``armed()``: the receiver's armed state
+    for the check. Call :meth:`check` at the receiver's tick (the graph asked only when due, :class:`PublisherNames`):
+    it returns :attr:`identity`'s fault ('' when trusted), judged for the receiver's clock at that moment (module
+    docstring: on simulated time the lease does not silence a peer). Rejected beats are counted in :attr:`identity`.
     """
 
     def __init__(self, node: Any, kind: str, handler: Callable[[Any], None], armed: Callable[[], bool]) -> None:
@@ -240,21 +278,23 @@ class HeartbeatWatch:
         self.identity = HeartbeatIdentity(HEARTBEAT_NAMES[kind], HEARTBEAT_NODES[kind])
         #: live publishers (the subscription's liveliness ``alive_count``; 0 until the first event)
         self.alive = 0
+        self.publishers = PublisherNames(node, self.identity.topic)
         self.subscription = node.create_subscription(
-            DiagnosticStatus, self.identity.topic, self._on_beat, heartbeat_qos(),
-            event_callbacks=SubscriptionEventCallbacks(liveliness=self._on_liveliness))
+            Heartbeat, self.identity.topic, self._on_beat, heartbeat_qos(), raw=True,
+            event_callbacks=self.publishers.event_callbacks(liveliness=self._on_liveliness))
 
     def _on_liveliness(self, info: Any) -> None:
         self.alive = int(info.alive_count)
 
-    def _on_beat(self, msg: Any) -> None:
-        if self.identity.on_beat(beat_values(msg), bool(self.armed())):
-            self.handler(msg)
+    def _on_beat(self, data: bytes) -> None:
+        beat = read_heartbeat(data)
+        if self.identity.on_beat(beat, bool(self.armed())):
+            self.handler(beat)
 
     def check(self) -> str:
         """Feed the publishers the graph shows and the live count to the identity check; returns its fault."""
-        names = publisher_node_names(self.node, self.identity.topic)
-        return self.identity.on_publishers(names, self.alive, simulated_now_s(self.node) is not None)
+        return self.identity.on_publishers(self.publishers.names(), self.alive,
+                                           simulated_now_s(self.node) is not None)
 
 
 class AliveAge:
@@ -304,6 +344,36 @@ class AliveAge:
     def fresh(self, timeout_s: float) -> bool:
         """Heard within ``timeout_s``."""
         return self.age_s <= timeout_s
+
+
+class TickGaps:
+    """The longest gap between two calls of a node's steady tick since the last :meth:`report`, and where the CPU went
+    during it: the calling (executor) thread's CPU time, high when a long callback held the tick, and the whole
+    process's, which also counts its other threads (the ESC's chip worker, DDS). Both low: the process was not
+    running (not scheduled, or blocked). Clocks in s: ``clock`` steady, ``thread_clock`` and ``process_clock`` CPU."""
+
+    def __init__(self, clock: Callable[[], float] = time.monotonic,
+                 thread_clock: Callable[[], float] = time.thread_time,
+                 process_clock: Callable[[], float] = time.process_time) -> None:
+        self._clocks = (clock, thread_clock, process_clock)
+        self._last = tuple(c() for c in self._clocks)
+        self.worst = (0.0, 0.0, 0.0)
+
+    def tick(self) -> None:
+        """Call at every tick, from the ticking thread."""
+        now = tuple(c() for c in self._clocks)
+        gap = tuple(b - a for a, b in zip(self._last, now))
+        self._last = now
+        if gap[0] > self.worst[0]:
+            self.worst = gap
+
+    def report(self) -> list[tuple[str, str]]:
+        """``/diagnostics`` pairs of the worst gap since the last report (ms): ``tick_gap_max_ms``,
+        ``tick_gap_thread_cpu_ms``, ``tick_gap_process_cpu_ms``; then starts again."""
+        out = [(k, f"{v * 1e3:.1f}") for k, v in zip(("tick_gap_max_ms", "tick_gap_thread_cpu_ms",
+                                                        "tick_gap_process_cpu_ms"), self.worst)]
+        self.worst = (0.0, 0.0, 0.0)
+        return out
 
 
 class ClockStepMonitor:

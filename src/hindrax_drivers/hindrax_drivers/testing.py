@@ -17,7 +17,6 @@ import time
 from typing import Iterator
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -121,7 +120,6 @@ class SafetyHeartbeats:
     """
 
     def __init__(self, node, supervisor: str | None = "", guard: str | None = "", rate_hz: float = 20.0) -> None:
-        self._status = DiagnosticStatus
         self._node = node
         self.supervisor, self.guard = supervisor, guard
         self.publishers: dict[str, HeartbeatPublisher] = {}
@@ -147,7 +145,7 @@ class SafetyHeartbeats:
             peer = rclpy.create_node(HEARTBEAT_NODES[kind], namespace=self._node.get_namespace(),
                                      context=self._node.context, start_parameter_services=False)
             self.nodes.append(peer)
-            self.publishers[kind] = HeartbeatPublisher(peer, kind, f"hindrax/{HEARTBEAT_NODES[kind]}", kind)
+            self.publishers[kind] = HeartbeatPublisher(peer, kind)
         return self.publishers[kind]
 
     def publish(self) -> None:
@@ -155,8 +153,7 @@ class SafetyHeartbeats:
         for name, state in (("supervisor", self.supervisor), ("guard", self.guard)):
             if state is None:
                 continue
-            level = self._status.OK if state == "" else self._status.ERROR
-            self._publisher(name).publish(level, state or "ok")
+            self._publisher(name).publish(state == "", state or "ok")
 
 
 class AllocationStandIn:

@@ -16,7 +16,7 @@ from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode, EscOutput
 from hindrax_drivers.testing import AllocationStandIn, SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 pytestmark = pytest.mark.ros
@@ -281,12 +281,12 @@ def test_a_command_publisher_not_named_yet_holds_neutral_but_does_not_disarm(esc
     Now its commands are held at neutral (it may be a foreign one) while the ESC stays armed; once named the
     allocation commands again; once named as a stranger it disarms. (The graph is stood in: discovery's timing
     cannot be forced.)"""
-    from hindrax_drivers.pca9685 import peers as peers_module
+    from hindrax_drivers import liveness as graph_module
 
     node, emu = esc["node"], esc["emu"]
     arm(esc)
     stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
-    graph = peers_module.publisher_node_names
+    graph = graph_module.publisher_node_names
     shown = {"extra": "_NODE_NAME_UNKNOWN_"}
 
     def publishers(of, topic):
@@ -294,7 +294,7 @@ def test_a_command_publisher_not_named_yet_holds_neutral_but_does_not_disarm(esc
         if topic != "thrusters/command_pulse_width" or not shown["extra"]:
             return real
         return real + [shown["extra"]]
-    monkeypatch.setattr(peers_module, "publisher_node_names", publishers)
+    monkeypatch.setattr(graph_module, "publisher_node_names", publishers)
     stream(esc, [1700.0] * 8, lambda: np.allclose(wire(emu), NEUTRAL, atol=TICK_US))
     assert node.armed and node.core.command_unnamed and not node.core.command_source
     assert node.diag.counts()["command_source_unnamed"] == 1
@@ -319,10 +319,10 @@ def test_a_forged_supervisor_heartbeat_disarms_and_refuses_arming(esc):
     arm(esc)
     stream(esc, [1700.0] * 8, lambda: wire(emu)[0] > 1690)
     forger = rclpy.create_node("forger", context=probe.context)
-    beat = HeartbeatPublisher(forger, "supervisor", "hindrax/supervisor", "supervisor")
+    beat = HeartbeatPublisher(forger, "supervisor")
 
     def forge():
-        beat.publish(DiagnosticStatus.OK, "ok")
+        beat.publish(True, "ok")
         esc["command"]([1700.0] * 8)
         esc["spin"]()
     wait_until(lambda: not node.armed, 10, forge, "disarmed on the forged heartbeat")
@@ -485,7 +485,7 @@ def _healthy(node):
     """Feed the node one OK supervisor and guard heartbeat (tests that call the node's methods directly)."""
     _direct_beats(node)
     for feed in (node.peers.on_supervisor_heartbeat, node.peers.on_guard_heartbeat):
-        feed(DiagnosticStatus(level=DiagnosticStatus.OK, message="ok"))
+        feed(Heartbeat(level=Heartbeat.OK, message="ok"))
     node.steady_check()
 
 
@@ -873,8 +873,8 @@ def test_an_arm_waits_for_the_guard_to_confirm_even_with_no_arming_time():
     with ros_context() as ctx:
         node = _node(Pca9685Emulator(), {"esc.arming_time_s": 0.0}, ctx=ctx, heartbeat_timeout_s=2.0)
         _direct_beats(node)
-        ok = DiagnosticStatus(level=DiagnosticStatus.OK, message="ok")
-        err = DiagnosticStatus(level=DiagnosticStatus.ERROR, message="ESC output state unknown")
+        ok = Heartbeat(level=Heartbeat.OK, message="ok")
+        err = Heartbeat(level=Heartbeat.ERROR, message="ESC output state unknown")
         node.peers.on_supervisor_heartbeat(ok)
         node.peers.on_guard_heartbeat(ok)
         assert node.neutral_confirmed_time is not None
@@ -906,7 +906,7 @@ def test_a_slow_bus_does_not_slow_the_heartbeat(esc):
     the executor thread a tick lasted a write, 150 ms: at most 3.3 beats a second, 13 %), the ESC stays armed with a
     known output state, and the newest command reaches the wire. (A call slower than the stuck bound is a fault:
     test_safety_paths' hung bus; here the bound is widened so that the load of the machine cannot reach it.)"""
-    from diagnostic_msgs.msg import DiagnosticStatus as Status
+    from hindrax_msgs.msg import Heartbeat as Status
 
     arm(esc)
     node, emu, bus, probe = esc["node"], esc["emu"], esc["bus"], esc["probe"]

@@ -6,19 +6,19 @@ from __future__ import annotations
 
 import pytest
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 
-from hindrax_drivers.liveness import (AliveAge, HeartbeatIdentity, HeartbeatPublisher, beat_values, heartbeat_ok,
-                                      simulated_now_s)
+from hindrax_drivers.lean_cdr import Beat
+from hindrax_drivers.liveness import AliveAge, HeartbeatIdentity, HeartbeatPublisher, heartbeat_ok, simulated_now_s
 from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_msgs.msg import Heartbeat
 
-A, B = "a1a1a1a1a1a1a1a1", "b2b2b2b2b2b2b2b2"
+A, B = 0xA1A1A1A1A1A1A1A1, 0xB2B2B2B2B2B2B2B2
 
 
 def beat(boot_id, seq):
-    return {"boot_id": boot_id, "seq": str(seq)}
+    return Beat(boot_id, seq, 0, 0, 0, 0, 0, False, "")
 
 
 # (beats as (boot_id, seq, armed), accepted flags expected, fault substring expected at the end or "")
@@ -32,8 +32,8 @@ BEAT_TABLE = {
     "boot change while armed, then the old boot goes on": (
         [(A, 9, True), (B, 10, True), (A, 10, True)], [True, False, True], "boot_id changed"),
     "restart while disarmed": ([(A, 9, False), (B, 1, False), (B, 2, True)], [True, True, True], ""),
-    "no boot_id": ([("", 1, False)], [False], "without boot_id"),
-    "seq not a number": ([(A, "x", False)], [False], "without boot_id"),
+    "no boot_id": ([(0, 1, False)], [False], "without boot_id"),
+    "no seq": ([(A, 0, False)], [False], "without boot_id"),
     "fault cleared by a beat accepted while disarmed": (
         [(A, 5, True), (A, 5, True), (A, 6, True), (A, 7, False)], [True, False, True, True], ""),
 }
@@ -51,6 +51,16 @@ def test_beat_table(case):
     else:
         assert ident.fault == ""
     assert ident.rejected == accepted.count(False)
+
+
+def test_bytes_that_are_not_a_beat_are_rejected_and_do_not_count():
+    """A raw subscription hands the watch bytes that read_heartbeat cannot read (None): rejected, counted, and the
+    fault holds until a beat is accepted while not armed."""
+    ident = HeartbeatIdentity("supervisor/heartbeat", "supervisor")
+    assert ident.on_beat(beat(A, 1), True)
+    assert not ident.on_beat(None, True) and "without boot_id" in ident.fault and ident.rejected == 1
+    assert ident.on_beat(beat(A, 2), True) and ident.fault  # still armed: the fault stays
+    assert ident.on_beat(beat(A, 3), False) and ident.fault == ""
 
 
 # (publisher node names in the graph, live publishers (None: count the names), fault substring or "")
@@ -178,23 +188,24 @@ def test_heartbeat_publisher_stamps_boot_id_and_seq_on_the_wire():
         node = rclpy.create_node("supervisor", context=ctx)
         probe = rclpy.create_node("probe", context=ctx)
         got = []
-        probe.create_subscription(DiagnosticStatus, "supervisor/heartbeat", got.append, 10)
-        first = HeartbeatPublisher(node, "supervisor", "hindrax/supervisor", "supervisor")
+        probe.create_subscription(Heartbeat, "supervisor/heartbeat", got.append, 10)
+        first = HeartbeatPublisher(node, "supervisor")
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(probe)
         wait_until(lambda: first.publisher.get_subscription_count() > 0, 10, lambda: ex.spin_once(0.01), "matched")
         for _ in range(3):
-            first.publish(DiagnosticStatus.OK, "within the envelope", [("extra", "1")])
+            first.publish(True, "within the envelope", output_state=1, armed=True, guard_ack=(5, 4))
         wait_until(lambda: len(got) >= 3, 10, lambda: ex.spin_once(0.01), "three beats")
-        values = [beat_values(m) for m in got]
-        assert [v["seq"] for v in values] == ["1", "2", "3"]
-        assert {v["boot_id"] for v in values} == {first.boot_id} and len(first.boot_id) == 16
-        assert values[0]["extra"] == "1" and heartbeat_ok(got[0]) and got[0].message == "within the envelope"
+        assert [m.seq for m in got] == [1, 2, 3]
+        assert {m.boot_id for m in got} == {first.boot_id} and first.boot_id != 0
+        assert heartbeat_ok(got[0]) and got[0].message == "within the envelope"
+        assert (got[0].output_state, got[0].armed, got[0].guard_boot_id, got[0].guard_seq) == (1, True, 5, 4)
+        assert 0 < got[0].steady_ns <= got[1].steady_ns <= got[2].steady_ns
         # a receiver accepts them, and a restarted node is a new boot
         ident = HeartbeatIdentity("supervisor/heartbeat", "supervisor")
         ident.on_publishers([i.node_name for i in probe.get_publishers_info_by_topic("supervisor/heartbeat")], 1)
-        assert all(ident.on_beat(v, True) for v in values) and ident.fault == ""
-        second = HeartbeatPublisher(node, "supervisor", "hindrax/supervisor", "supervisor")
+        assert all(ident.on_beat(m, True) for m in got) and ident.fault == ""
+        second = HeartbeatPublisher(node, "supervisor")
         assert second.boot_id != first.boot_id
         ex.shutdown()
         probe.destroy_node()
@@ -228,8 +239,8 @@ def test_publisher_node_names_is_what_rclpy_s_endpoint_query_names():
         ns = rclpy.create_node("receiver", namespace="/robot", context=ctx,
                                cli_args=["--ros-args", "-r", "renamed/heartbeat:=/supervisor/heartbeat"])
         plain = rclpy.create_node("receiver", context=ctx)
-        pubs = [a.create_publisher(DiagnosticStatus, "supervisor/heartbeat", 10),
-                b.create_publisher(DiagnosticStatus, "/supervisor/heartbeat", 10)]
+        pubs = [a.create_publisher(Heartbeat, "supervisor/heartbeat", 10),
+                b.create_publisher(Heartbeat, "/supervisor/heartbeat", 10)]
 
         def rclpy_names(node, topic):
             return sorted(i.node_name for i in node.get_publishers_info_by_topic(topic))
@@ -244,3 +255,63 @@ def test_publisher_node_names_is_what_rclpy_s_endpoint_query_names():
                    "the forger gone")
         with pytest.raises(Exception, match="topic"):
             publisher_node_names(plain, "bad topic name")
+
+
+def test_the_graph_is_asked_on_dds_events_not_at_every_check():
+    """PublisherNames asks the graph after a DDS event on the subscription (a publisher matched, or one of an
+    incompatible QoS: rclpy's default QoS offers an infinite lease), for SETTLE_S after it, and at least every
+    BACKSTOP_S; between, a check reuses the last answer. Every new publisher is named within the settle window."""
+    from hindrax_drivers.liveness import BACKSTOP_S, SETTLE_S, PublisherNames, heartbeat_qos
+
+    t = {"now": 100.0}
+    with ros_context() as ctx, ros_context() as other:
+        rx = rclpy.create_node("receiver", context=ctx)
+        names = PublisherNames(rx, "supervisor/heartbeat", clock=lambda: t["now"])
+        rx.create_subscription(Heartbeat, "supervisor/heartbeat", lambda _m: None, heartbeat_qos(), raw=True,
+                               event_callbacks=names.event_callbacks())
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(rx)
+        assert names.names() == [] and names.queries == 1  # the first check asks
+        for _ in range(10):  # quiet: 10 checks in half the backstop ask nothing
+            t["now"] += BACKSTOP_S / 20
+            ex.spin_once(timeout_sec=0.01)
+            names.names()
+        assert names.queries == 1
+        t["now"] += BACKSTOP_S / 2 + 0.01
+        names.names()
+        assert names.queries == 2  # the backstop
+        peers = []
+        for who, qos in (("supervisor", heartbeat_qos()), ("forger", 10)):
+            peers.append(rclpy.create_node(who, context=other))
+            peers[-1].create_publisher(Heartbeat, "supervisor/heartbeat", qos)
+            asked = names.queries
+            wait_until(lambda: who in names.names(), 20, lambda: ex.spin_once(timeout_sec=0.05), f"{who} named")
+            assert names.queries > asked  # by the event: the fake clock stood still, the backstop never came
+            t["now"] += SETTLE_S + 0.01  # settled: checks reuse the answer again
+            asked = names.queries
+            for _ in range(3):
+                t["now"] += 0.01
+                names.names()
+            assert names.queries == asked
+        assert sorted(names.names()) == ["forger", "supervisor"]
+        ex.shutdown()
+        rx.destroy_node()
+
+
+def test_tick_gaps_report_the_longest_gap_and_where_the_cpu_went():
+    """TickGaps keeps the longest gap between two ticks with the ticking thread's and the process's CPU time in it,
+    reports it in ms and starts again."""
+    from hindrax_drivers.liveness import TickGaps
+
+    c = {"wall": 10.0, "thread": 1.0, "process": 2.0}
+    gaps = TickGaps(lambda: c["wall"], lambda: c["thread"], lambda: c["process"])
+    for wall, thread, process in ((0.02, 0.001, 0.002), (0.27, 0.001, 0.2), (0.05, 0.04, 0.045)):
+        c["wall"] += wall
+        c["thread"] += thread
+        c["process"] += process
+        gaps.tick()
+    assert dict(gaps.report()) == {"tick_gap_max_ms": "270.0", "tick_gap_thread_cpu_ms": "1.0",
+                                   "tick_gap_process_cpu_ms": "200.0"}
+    c["wall"] += 0.02
+    gaps.tick()
+    assert dict(gaps.report())["tick_gap_max_ms"] == "20.0"

@@ -66,7 +66,7 @@ def test_an_imu_sample_encoded_by_rosbags_is_the_message_rclpy_would_publish():
     assert deserialize_message(imu_cdr(7_000_000_500, "imu_link", acc, gyr, acc_cov, gyr_cov), Imu) == ref
 
 
-def test_a_heartbeat_encoded_by_rosbags_is_the_status_rclpy_would_publish():
+def test_the_esc_state_encoded_by_rosbags_is_the_status_rclpy_would_publish():
     from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
     from hindrax_drivers.lean_cdr import diagnostic_status_cdr
@@ -82,20 +82,74 @@ def test_a_heartbeat_encoded_by_rosbags_is_the_status_rclpy_would_publish():
                                DiagnosticStatus) == empty  # rclpy's constant (b"\x00") as well as an int
 
 
-def test_a_heartbeat_says_ok_the_same_whether_taken_as_an_rclpy_object_or_lean():
-    """The safety nodes take the heartbeats lean (rosbags: ``level`` an int) where rclpy gives one-byte bytes: an OK
-    or ERROR beat must read the same both ways, and a beat that is not a level 0 is never OK."""
+#: heartbeats as rclpy builds them: every field at its extremes, an empty, an ASCII and a UTF-8 message
+HEARTBEATS = [
+    dict(boot_id=1, seq=1, steady_ns=0, level=0, message=""),
+    dict(boot_id=2**64 - 1, seq=2**64 - 1, steady_ns=2**63, guard_boot_id=2**64 - 1, guard_seq=2**64 - 1, level=2,
+         output_state=2, armed=True, message="output state unknown: I2C write failed"),
+    dict(boot_id=0x0123456789ABCDEF, seq=7, steady_ns=123_456_789, guard_boot_id=42, guard_seq=41, level=0,
+         output_state=1, armed=False, message="Tiefe über 2 m, 40 °"),
+]
+
+
+@pytest.mark.parametrize("fields", HEARTBEATS, ids=["smallest", "largest", "utf-8"])
+def test_a_heartbeat_packed_at_fixed_offsets_is_the_message_rclpy_would_publish(fields):
+    """The heartbeats are packed and read with struct (lean_cdr.heartbeat_cdr, read_heartbeat), not by a generated
+    serialiser: both must agree with rclpy's own, both ways."""
+    from hindrax_msgs.msg import Heartbeat
+
+    from hindrax_drivers.lean_cdr import heartbeat_cdr, read_heartbeat
+
+    ref = Heartbeat(**fields)
+    assert deserialize_message(heartbeat_cdr(**fields), Heartbeat) == ref
+    beat = read_heartbeat(serialize_message(ref))
+    assert beat is not None and beat._asdict() == {k: getattr(ref, k) for k in beat._fields}
+
+
+def test_bytes_that_are_not_a_heartbeat_read_as_none():
+    """What a raw heartbeat subscription may be handed that is not one: never a crash, never a beat (fail closed:
+    the receiver rejects it and does not count the peer as heard)."""
+    from hindrax_msgs.msg import Heartbeat
+
+    from hindrax_drivers.lean_cdr import read_heartbeat
+
+    good = serialize_message(Heartbeat(boot_id=1, seq=1, message="ok"))
+    assert read_heartbeat(good) is not None
+    bad = {"empty": b"", "header only": good[:4], "cut in the fields": good[:30], "cut in the string": good[:-2],
+           "big-endian encapsulation": b"\x00\x00" + good[2:], "no NUL": good[:-1] + b"x",
+           "not UTF-8": good[:-3] + b"\xff\xfe\x00", "string length 0": good[:48] + b"\x00" * 4}
+    for name, data in bad.items():
+        assert read_heartbeat(data) is None, name
+
+
+def test_a_heartbeat_says_ok_only_at_level_ok():
+    """A beat taken as bytes (lean_cdr.Beat) or as an rclpy Heartbeat reads the same; a level other than OK, or a
+    level that is not an integer, is never OK."""
     from types import SimpleNamespace
 
-    from diagnostic_msgs.msg import DiagnosticStatus
+    from hindrax_msgs.msg import Heartbeat
 
-    from hindrax_drivers.lean_cdr import diagnostic_status_cdr
+    from hindrax_drivers.lean_cdr import heartbeat_cdr, read_heartbeat
     from hindrax_drivers.liveness import heartbeat_ok
 
-    for level, ok in ((DiagnosticStatus.OK, True), (DiagnosticStatus.WARN, False), (DiagnosticStatus.ERROR, False),
-                      (DiagnosticStatus.STALE, False)):
-        data = diagnostic_status_cdr(level, "hindrax/supervisor", "x", "supervisor")
-        assert heartbeat_ok(deserialize_message(data, DiagnosticStatus)) is ok  # rclpy: bytes
-        assert heartbeat_ok(cdr_decoder(DiagnosticStatus)(data)) is ok  # rosbags: int
-    for odd in (None, False, "0", b"", b"\x00\x00", 0.0):
+    for level, ok in ((Heartbeat.OK, True), (1, False), (Heartbeat.ERROR, False), (3, False), (255, False)):
+        data = heartbeat_cdr(1, 1, 0, level, "x")
+        assert heartbeat_ok(deserialize_message(data, Heartbeat)) is ok  # rclpy
+        assert heartbeat_ok(read_heartbeat(data)) is ok  # struct
+    for odd in (None, False, "0", b"", b"\x00", 0.0):
         assert heartbeat_ok(SimpleNamespace(level=odd)) is False
+
+
+def test_prepare_generates_the_code_when_asked_not_at_the_first_message(monkeypatch):
+    """rosbags generates a type's code at its first message (80 ms of CPU here for the first ThrusterPwm); a node
+    asks for it while it starts (lean_cdr.prepare), so that no tick of its executor pays it."""
+    from hindrax_drivers import lean_cdr
+
+    store = lean_cdr._typestore()
+    asked = []
+    real = store.get_msgdef
+    monkeypatch.setattr(store, "get_msgdef", lambda name: (asked.append(name), real(name))[1])
+    lean_cdr.prepare(ThrusterPwm, "geometry_msgs/msg/WrenchStamped")
+    assert asked == ["hindrax_msgs/msg/ThrusterPwm", "geometry_msgs/msg/WrenchStamped"]
+    with pytest.raises(ValueError, match="not a ROS message class"):
+        lean_cdr.prepare(42)

@@ -15,13 +15,14 @@ import sys
 import numpy as np
 import pytest
 import rclpy
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.guard.core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
 from hindrax_drivers.guard.node import OutputGuardNode
+from hindrax_drivers.lean_cdr import Beat
 from hindrax_drivers.liveness import AliveAge, ClockStepMonitor
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
 from hindrax_drivers.pca9685.node import EscNode
@@ -210,11 +211,11 @@ def test_f2_a_second_supervisor_heartbeat_publisher_asserts_oe(rig, forger_name)
     r.arm_at_1700()
     with ros_context() as other:  # a participant of its own, as another process's would be
         forger = rclpy.create_node(forger_name, context=other)
-        beats = HeartbeatPublisher(forger, "supervisor", "hindrax/supervisor", "supervisor")
+        beats = HeartbeatPublisher(forger, "supervisor")
         # both stop paths act on it: the guard's identity check and the ESC's (a loaded machine may also make the
         # guard's first reason "ESC output state silent"; the forger must not be gone before the ESC has seen it)
         r.wait(lambda: r.line.is_high() and not r.esc.armed and "supervisor/heartbeat" in r.guard.core.identity_fault,
-               "/OE asserted and the ESC disarmed", poll=lambda: (beats.publish(DiagnosticStatus.OK, "ok"),
+               "/OE asserted and the ESC disarmed", poll=lambda: (beats.publish(True, "ok"),
                                                                   r.commanding()))
         assert np.all(wire(r.emu) == 0.0)
         forger.destroy_node()
@@ -273,9 +274,8 @@ def test_f2_the_esc_beat_acknowledges_the_guard_beat_it_handled_and_the_guard_re
     r.beats.supervisor = ""
     r.wait(lambda: not r.guard.core.asserted, "guard released after the trip")
     assert not r.esc.armed and r.guard.core.esc_ack_seq >= r.guard.core.cause_seq > 1
-    other = DiagnosticStatus(values=[KeyValue(key=k, value=v) for k, v in (
-        ("output_state", str(OUTPUT_NEUTRAL)), ("armed", "false"), ("guard_boot_id", "another-boot"),
-        ("guard_seq", "1000000"))])
+    other = Beat(boot_id=1, seq=1, steady_ns=0, guard_boot_id=r.guard.heartbeat.boot_id ^ 1, guard_seq=1000000,
+                 level=0, output_state=OUTPUT_NEUTRAL, armed=False, message="")
     r.guard.on_esc(other)
     assert r.guard.core.esc_ack_seq == 0
 

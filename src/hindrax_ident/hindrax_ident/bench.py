@@ -28,6 +28,7 @@ loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 BENCHMARKS: dict[str, str | tuple[str, ...]] = {
     "stack": "hindrax_ident.benchmarks.stack",
     "actuation": "hindrax_ident.benchmarks.actuation",
+    "heartbeats": "hindrax_ident.benchmarks.heartbeats",
     "safety": ("hindrax_ident.benchmarks.safety", "hindrax_ident.benchmarks.participant_churn",
                "hindrax_ident.benchmarks.busy_neighbours", "hindrax_ident.benchmarks.sealed_authority"),
     "simulator": "hindrax_ident.benchmarks.simulator",

@@ -45,7 +45,7 @@ INTRUDER = r'''
 import json, sys, time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
-from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from std_srvs.srv import Trigger
 rclpy.init()
 node = rclpy.create_node("intruder")
@@ -61,7 +61,7 @@ rclpy.spin_once(node, timeout_sec=0.5)
 graph = {"services": sorted(names()), "topics": sorted(n for n, _ in node.get_topic_names_and_types())}
 pwm = {t: node.create_publisher(ThrusterPwm, t, 10) for t in ("thrusters/command_pulse_width",
                                                               "/alpha/thrusters/command_pulse_width")}
-beat = node.create_publisher(DiagnosticStatus, "supervisor/heartbeat", 10)
+beat = node.create_publisher(Heartbeat, "supervisor/heartbeat", 10)
 calls = {}
 for name in ("/supervisor/reset", "/pressure/zero_depth", "/alpha/pressure/zero_depth", "/recorder/stop"):
     client = node.create_client(Trigger, name)
@@ -70,7 +70,7 @@ end = time.monotonic() + 1.5
 while time.monotonic() < end:
     for p in pwm.values():
         p.publish(ThrusterPwm(pulse_width_us=[1900.0] * 8, armed=True))
-    beat.publish(DiagnosticStatus(level=DiagnosticStatus.OK, name="supervisor"))
+    beat.publish(Heartbeat(level=Heartbeat.OK, boot_id=1, seq=1))
     rclpy.spin_once(node, timeout_sec=0.05)
 estop = node.create_client(Trigger, "/alpha/estop")
 answer = None
@@ -90,7 +90,7 @@ class StandIns:
 
     def __init__(self, ctx) -> None:
         from diagnostic_msgs.msg import DiagnosticStatus
-        from hindrax_msgs.msg import ThrusterPwm
+        from hindrax_msgs.msg import Heartbeat, ThrusterPwm
         from hindrax_msgs.srv import SetArmed, StopRecording
         from std_srvs.srv import Trigger
 
@@ -126,7 +126,7 @@ class StandIns:
         service(StopRecording, "recorder/stop", lambda _r: "recorder/stop")
         self.node.create_subscription(ThrusterPwm, "thrusters/command_pulse_width",
                                       lambda _m: self.messages.append("command_pulse_width"), 10)
-        self.node.create_subscription(DiagnosticStatus, "supervisor/heartbeat",
+        self.node.create_subscription(Heartbeat, "supervisor/heartbeat",
                                       lambda _m: self.messages.append("heartbeat"), 10)
         from hindrax_msgs.action import RunIdentification
         from rclpy.action import ActionServer

@@ -39,7 +39,7 @@ from rclpy.node import Node
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
 from ..esc_state import ArmedWatch
-from ..lean_cdr import cdr_decoder, thruster_pwm_encode, thruster_pwm_lean
+from ..lean_cdr import cdr_decoder, prepare, thruster_pwm_encode, thruster_pwm_lean
 from ..liveness import heartbeat_qos
 from ..node_common import load_node_config, run_node, time_from_ns
 from .allocator import InvalidWrenchError
@@ -103,6 +103,7 @@ class ThrustAllocationNode(Node):
         #: ``wrench`` is taken as CDR bytes and decoded by rosbags (:mod:`hindrax_drivers.lean_cdr`: a lighter 50 Hz
         #: path than rclpy's message objects); :meth:`on_wrench` reads fields only, so it takes either form
         self._decode_wrench = cdr_decoder(WrenchStamped)
+        prepare(ThrusterPwm)  # the commands' encoder: now, not in the first wrench's callback (lean_cdr.prepare)
         self.undecodable = 0
         self.create_subscription(WrenchStamped, "wrench", self.on_wrench_cdr, 10, raw=True)
         self.create_subscription(ThrusterForces, "thrusters/test_forces", self.on_test_forces, 10)

@@ -3,8 +3,8 @@
 The decision is :class:`~hindrax_drivers.guard.core.GuardCore` (ESC output state silent or unknown, supervisor
 heartbeat silent or tripped, either heartbeat not its sender's -> silence, latched until the ESC reports disarmed at
 neutral). Each heartbeat comes through a :class:`~hindrax_drivers.liveness.HeartbeatWatch` (its identity check:
-at every tick the topic's publishers' node names and live count, at every beat its ``boot_id`` and ``seq``; a
-rejected beat does not count as the peer being heard). How it silences:
+at every tick the topic's live count and its publishers' node names, asked of the graph when DDS reports a change,
+at every beat its ``boot_id`` and ``seq``; a rejected beat does not count as the peer being heard). How it silences:
 
 * ``esc.output_enable_gpio`` set (chip and line): the PCA9685 /OE line through libgpiod
   (:class:`~hindrax_drivers.transport.gpio.GpiodLine`), driven HIGH (outputs off, no pulses: the Basic ESC
@@ -24,13 +24,14 @@ later without any software alive. A feed line that cannot be requested or driven
 heartbeat). When no edge went out for longer than the timeout while the ESC was armed (this process was frozen or
 starved), the guard asserts and latches: thrust comes back only through a new arm request.
 
-Subscribes ``esc/heartbeat`` (diagnostic_msgs/DiagnosticStatus from the ESC's steady-clock tick: its output state
-and armed flag; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold) and
-``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
+Subscribes ``esc/heartbeat`` (hindrax_msgs/Heartbeat from the ESC's steady-clock tick: its output state, armed
+flag and the guard beat it acknowledges; ``thrusters/pulse_width`` follows ROS time, which a simulation may hold)
+and ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat). Under systemd (``$NOTIFY_SOCKET``) it alone sends the
 unit's READY=1 and WATCHDOG=1, at each tick while both heartbeats are fresh (:mod:`~hindrax_drivers.sd_notify`): a
 frozen ESC, supervisor or guard stops the pings, and systemd stops the unit after ``WatchdogSec``. Publishes
-``guard/heartbeat`` (diagnostic_msgs/DiagnosticStatus at every tick: level OK = outputs enabled, ERROR = silenced
-with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics`` (``hindrax/output_guard``).
+``guard/heartbeat`` (hindrax_msgs/Heartbeat at every tick, before the tick's /OE write: level OK = outputs enabled,
+ERROR = silenced with the reason; the ESC refuses to arm and disarms without a fresh OK) and ``/diagnostics``
+(``hindrax/output_guard``).
 
 Timing: one steady-clock timer at ``GUARD_RATE_HZ``; ages in executor-alive steady time
 (:class:`~hindrax_drivers.liveness.AliveAge`: a gap between two ticks counts in full up to the timeout, so a
@@ -53,9 +54,8 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from ..config import Spec, output_enable_gpio
-from ..esc_state import read_guard_ack
-from ..liveness import (AliveAge, HeartbeatPublisher, HeartbeatWatch, beat_values, heartbeat_ok,
-                        simulated_now_s)
+from ..lean_cdr import Beat
+from ..liveness import AliveAge, HeartbeatPublisher, HeartbeatWatch, TickGaps, heartbeat_ok, simulated_now_s
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..pca9685 import protocol as p
@@ -63,7 +63,7 @@ from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..sd_notify import SafetyNotifier
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
-from .core import OUTPUT_COMMANDING, OUTPUT_UNKNOWN, GuardCore
+from .core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
 
 __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "HEARTBEAT_TIMEOUT", "open_output_enable", "open_watchdog_feed", "main"]
 
@@ -149,13 +149,14 @@ class OutputGuardNode(Node):
             self.diag.warn("no_hardware_watchdog", "esc.output_enable_feed_gpio not wired: a frozen launch or Pi "
                                                    "keeps the last widths until systemd restarts the unit")
         self._open_line()
-        self.heartbeat = HeartbeatPublisher(self, "guard", "hindrax/output_guard", "output_guard")
+        self.heartbeat = HeartbeatPublisher(self, "guard")
         #: the peers' heartbeats through their identity checks (module docstring)
         #: "armed" for their boot_id rule: the ESC reported armed and the outputs are let through; once /OE is
         #: asserted a peer's new start (a restart after a crash) is accepted, since release still needs the ESC to
         #: report disarmed at neutral
         self.watches = {kind: HeartbeatWatch(self, kind, handler, self._armed_through)
                         for kind, handler in (("esc", self.on_esc), ("supervisor", self.on_supervisor))}
+        self.tick_gaps = TickGaps()  # how late the tick (and its heartbeat) ran, on /diagnostics
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.create_timer(period, self.tick, clock=Clock(clock_type=ClockType.STEADY_TIME))
         if self.feeds:
@@ -313,17 +314,15 @@ class OutputGuardNode(Node):
     def _armed_through(self) -> bool:
         return self.core.esc_armed and not self.core.asserted
 
-    def on_esc(self, msg: DiagnosticStatus) -> None:
-        """An accepted ``esc/heartbeat``: the ESC's output state and armed flag."""
-        values = beat_values(msg)
-        try:
-            state = int(values.get("output_state", OUTPUT_UNKNOWN))
-        except ValueError:
-            state = OUTPUT_UNKNOWN
-        self.esc_age.heard()  # the ack: the newest beat of this guard the ESC has handled (core module docstring)
-        self.core.on_esc(state, values.get("armed") == "true", read_guard_ack(values, self.heartbeat.boot_id))
+    def on_esc(self, msg: Beat) -> None:
+        """An accepted ``esc/heartbeat``: the ESC's output state and armed flag, and the newest beat of this guard the
+        ESC has handled (core module docstring; an echo of another boot acknowledges nothing)."""
+        self.esc_age.heard()
+        ack = msg.guard_seq if msg.guard_boot_id == self.heartbeat.boot_id else 0
+        state = msg.output_state if msg.output_state in (OUTPUT_NEUTRAL, OUTPUT_COMMANDING) else OUTPUT_UNKNOWN
+        self.core.on_esc(state, bool(msg.armed), ack)
 
-    def on_supervisor(self, msg: DiagnosticStatus) -> None:
+    def on_supervisor(self, msg: Beat) -> None:
         """An accepted ``supervisor/heartbeat``: OK or the breach."""
         self.supervisor_age.heard()
         self.core.on_supervisor(heartbeat_ok(msg), msg.message)
@@ -337,6 +336,7 @@ class OutputGuardNode(Node):
         return fault
 
     def tick(self) -> None:
+        self.tick_gaps.tick()
         self._last_decision = time.monotonic()
         self.esc_age.tick()
         self.supervisor_age.tick()
@@ -344,6 +344,8 @@ class OutputGuardNode(Node):
         self.core.on_stall(self.watchdog_ran_out())
         beat_seq = self.heartbeat.seq + 1  # the beat below carries this decision
         asserted, changed = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, beat_seq)
+        # the beat before the write: a slow /OE or register write (an emulated line's socket round trip under load:
+        # up to 135 ms measured) does not hold it; the write follows in the same tick
         if changed and asserted:
             self.assertions += 1
             self.last_assert_monotonic = time.monotonic()
@@ -352,14 +354,15 @@ class OutputGuardNode(Node):
         elif changed:
             self._released_at = time.monotonic()
             self.get_logger().info("outputs enabled: the ESC reports disarmed at neutral, after an ERROR beat")
+        self.heartbeat.publish(not asserted, self.core.reason if asserted else "outputs enabled")
+        self.diag.published()
         # without /OE, the registers are written only once the ESC was heard (a guard starting before the ESC has
         # nothing to silence: the ESC's own start-up writes neutral before anything runs)
         self._apply(asserted, force=changed and (self.wired or math.isfinite(self.esc_age.age_s)))
-        if self.core.drive_fault and not asserted:  # the fault is a cause: decided at the next tick at the latest
-            asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, beat_seq)
-        self.heartbeat.publish(DiagnosticStatus.ERROR if asserted else DiagnosticStatus.OK,
-                               self.core.reason if asserted else "outputs enabled")
-        self.diag.published()
+        if self.core.drive_fault and not asserted:  # the write failed: a cause, said in a beat of its own at once
+            asserted, _ = self.core.decide(self.esc_age.age_s, self.supervisor_age.age_s, self.heartbeat.seq + 1)
+            if asserted:
+                self.heartbeat.publish(False, self.core.reason)
         # systemd's watchdog hears from this process alone, and only while all three safety processes run
         self.notifier.update({"esc": self.esc_age.age_s, "supervisor": self.supervisor_age.age_s}, self.timeout_s)
 
@@ -372,7 +375,8 @@ class OutputGuardNode(Node):
                 ("systemd_watchdog", (self.notifier.reason or "pinging") if self.notifier.enabled else "no unit"),
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
-                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values()))]
+                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
+                *self.tick_gaps.report()]
 
     def close(self) -> None:
         """Shutdown: with /OE, drive it high and release the line (the pull-up keeps it off). Without /OE, nothing:

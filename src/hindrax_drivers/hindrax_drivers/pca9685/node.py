@@ -26,11 +26,11 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
 - Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output
   state; on every confirmed write or change of state, and repeated by the output tick when nothing went out for
   :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz at rest and under the identification's 25 Hz commands),
-  ``esc/heartbeat`` (DiagnosticStatus every second steady tick: ``output_state``, ``armed``, ``reason``,
-  ``boot_id``/``seq``, the newest guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the
-  output guard's sign of life and its release condition), ``esc/output_state`` (the same state, latched: on every
-  change of armed or output state and once a second, :mod:`hindrax_drivers.esc_state`; for the nodes that need
-  only "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on
+  ``esc/heartbeat`` (hindrax_msgs/Heartbeat every second steady tick: ``output_state``, ``armed``, the reason as
+  ``message``, ``boot_id``/``seq``, the newest guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while
+  unknown; the output guard's sign of life and its release condition), ``esc/output_state`` (the same state,
+  latched: on every change of armed or output state and once a second, :mod:`hindrax_drivers.esc_state`; for the
+  nodes that need only "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on
   disarm, on any exception in the output path and on shutdown (:meth:`EscNode.close`, SIGINT/SIGTERM via
   :func:`run_node`).
 - Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
@@ -48,7 +48,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from std_msgs.msg import Float64
 
@@ -57,8 +56,8 @@ from hindrax_msgs.srv import SetArmed
 
 from ..config import Spec
 from ..esc_state import ESC_STATE_TOPIC, EscStateLatch, esc_state_qos, esc_state_values
-from ..lean_cdr import diagnostic_status_cdr, thruster_pwm_cdr
-from ..liveness import ClockStepMonitor, HeartbeatPublisher, heartbeat_qos
+from ..lean_cdr import diagnostic_status_cdr, prepare, thruster_pwm_cdr
+from ..liveness import ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_qos
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
 from ..transport.i2c import open_smbus
@@ -128,6 +127,7 @@ class EscNode(Node):
         self._last_target_time = None
         self.steady_watchdog = SteadyWatchdog(self.period_s, self.steady_watchdog_s, time.monotonic())
 
+        prepare(ThrusterPwm, DiagnosticStatus)  # before the ticks: the first use would hold one (lean_cdr.prepare)
         self.pub_written = self.create_publisher(ThrusterPwm, "thrusters/pulse_width", 10)
         #: ``esc/output_state``, latched (reliable, transient local, keep last 1): on a change and once a second
         self.pub_state = self.create_publisher(DiagnosticStatus, ESC_STATE_TOPIC, esc_state_qos())
@@ -136,11 +136,13 @@ class EscNode(Node):
         # every input is a callback, in both clock modes; the commands with the heartbeats' liveliness contract (1 s
         # lease): a publisher without a finite lease (a script, a bag player) is not matched, and refused by its name
         self.create_subscription(ThrusterPwm, COMMAND_TOPIC, self.on_command, heartbeat_qos(),
-                                 event_callbacks=SubscriptionEventCallbacks(liveliness=self.peers.on_liveliness))
+                                 event_callbacks=self.peers.command_publishers.event_callbacks(
+                                     liveliness=self.peers.on_liveliness))
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
-        self.heartbeat = HeartbeatPublisher(self, "esc", "hindrax/esc", "esc")
+        self.heartbeat = HeartbeatPublisher(self, "esc")
         self._heartbeat_tick = 0
+        self.tick_gaps = TickGaps()  # how late the safety tick (and its heartbeat) ran, on /diagnostics
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.lights_us = self.lights_off_us
         self.link.configure()
@@ -330,6 +332,7 @@ class EscNode(Node):
     def steady_check(self) -> None:
         """The safety tick, then the steady-clock watchdog (:class:`.core.SteadyWatchdog`, parameter
         ``steady_watchdog_timeout_s``)."""
+        self.tick_gaps.tick()
         t = time.monotonic()
         self._safety_tick(t)
         if self.steady_watchdog.check(t, self.armed and self.command is not None):
@@ -351,7 +354,7 @@ class EscNode(Node):
         if self.link.maintain(t):  # results, a stuck bus call (UNKNOWN: the beat below says ERROR), retries
             self._publish_written(self.get_clock().now())
         self.peers.tick()
-        if self._heartbeat_tick % 2 == 0:  # 25 Hz, in the ticks without a beat: three graph queries (~26 us each)
+        if self._heartbeat_tick % 2 == 0:  # 25 Hz, in the ticks without a beat (the graph asked only when due)
             self._check_graph()
         self._feed_peers()
         self._heartbeat_tick += 1
@@ -362,10 +365,8 @@ class EscNode(Node):
 
     def _publish_heartbeat(self) -> None:
         unknown = self.output_state == _UNKNOWN
-        self.heartbeat.publish(DiagnosticStatus.ERROR if unknown else DiagnosticStatus.OK,
-                               STATE_NAMES[self.output_state],
-                               esc_state_values(self.armed and not unknown, self.output_state, self.core.reason)
-                               + self.peers.ack_values())
+        self.heartbeat.publish(not unknown, self.core.reason, self.output_state, self.armed and not unknown,
+                               self.peers.guard_ack)
 
     def _publish_state(self) -> None:
         """``esc/output_state`` when :class:`~hindrax_drivers.esc_state.EscStateLatch` says so: a change of (armed,
@@ -399,7 +400,7 @@ class EscNode(Node):
                 ("output_state", STATE_NAMES[self.output_state]), *self.peers.diagnostics(),
                 ("heartbeat_disarms", self.heartbeat_disarms), ("rejected_commands", self.core.rejected_commands),
                 ("reason", self.core.reason), ("command_source", self.core.command_source or "thrust_allocation"),
-                ("clock_steps_back", self.clock_monitor.steps_back),
+                ("clock_steps_back", self.clock_monitor.steps_back), *self.tick_gaps.report(),
                 *(self.device.stats.diagnostics() if self.device is not None else [("i2c_bus", "not open")])]
 
     def close(self) -> None:

@@ -14,12 +14,9 @@ from __future__ import annotations
 import time
 from typing import Any, Callable
 
-from diagnostic_msgs.msg import DiagnosticStatus
-
 from ..config import Spec
-from ..esc_state import guard_ack_values
-from ..liveness import (HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, heartbeat_ok, publisher_node_names,
-                        simulated_now_s)
+from ..lean_cdr import Beat
+from ..liveness import HEARTBEAT_NAMES, AliveAge, HeartbeatWatch, PublisherNames, heartbeat_ok, simulated_now_s
 from ..config.node_parameters import declare_node_parameter
 from .core import UNNAMED_NODE, command_source_fault, command_source_unnamed, heartbeat_verdict
 
@@ -49,6 +46,9 @@ class EscPeers:
                                                       default_timeout_s))
         #: live publishers of the commands (the command subscription's liveliness event, :meth:`on_liveliness`)
         self.command_publishers_alive = 0
+        #: who publishes the commands, asked of the graph when the command subscription's events say it changed
+        #: (its ``event_callbacks``: the node passes them to that subscription)
+        self.command_publishers = PublisherNames(node, COMMAND_TOPIC)
         #: steady time since when a command publisher has been unnamed (discovery not finished), s; None: none is
         self.unnamed_since: float | None = None
         #: on simulated time, also on the graph's clock (liveness.AliveAge: late only when late in the simulation)
@@ -56,8 +56,8 @@ class EscPeers:
         self.guard_age = AliveAge(2.0 * period_s, graph_now_s=lambda: simulated_now_s(node))
         self.supervisor_ok, self.supervisor_message = False, ""
         self.guard_ok, self.guard_message = False, ""
-        #: the newest accepted guard beat, handled: (its boot_id, its seq); ("", 0) before the first
-        self.guard_ack: tuple[str, int] = ("", 0)
+        #: the newest accepted guard beat, handled: (its boot_id, its seq); (0, 0) before the first
+        self.guard_ack: tuple[int, int] = (0, 0)
         self._armed, self._on_bad_news = armed, on_bad_news
         self.watches = {"supervisor": HeartbeatWatch(node, "supervisor", self.on_supervisor_heartbeat, armed),
                         "guard": HeartbeatWatch(node, "guard", self.on_guard_heartbeat, armed)}
@@ -74,7 +74,7 @@ class EscPeers:
         command_source_unnamed`; a fault once unnamed for longer than :data:`.core.NAME_RESOLVE_BOUND_S`)."""
         for watch in self.watches.values():
             watch.check()
-        names = publisher_node_names(self._node, COMMAND_TOPIC)
+        names = self.command_publishers.names()
         now = time.monotonic()
         if UNNAMED_NODE not in names:
             self.unnamed_since = None
@@ -88,7 +88,7 @@ class EscPeers:
         """The command subscription's liveliness event (1 s lease)."""
         self.command_publishers_alive = int(info.alive_count)
 
-    def on_supervisor_heartbeat(self, msg: DiagnosticStatus) -> None:
+    def on_supervisor_heartbeat(self, msg: Beat) -> None:
         """``supervisor/heartbeat``: level OK = within the envelope; otherwise the breach is latched. A trip
         disarms when it is handled (at once as a callback; at the next safety tick on the system clock, where
         the supervisor's own ``esc/set_armed`` request has disarmed already)."""
@@ -97,21 +97,15 @@ class EscPeers:
         if not self.supervisor_ok and self._armed():
             self._on_bad_news()
 
-    def on_guard_heartbeat(self, msg: DiagnosticStatus) -> None:
+    def on_guard_heartbeat(self, msg: Beat) -> None:
         """``guard/heartbeat``: level OK = the guard lets the outputs through (/OE low). Once handled (a beat that is
-        not OK has disarmed), the beat is what :meth:`ack_values` acknowledges: the guard releases its outputs only
+        not OK has disarmed), the beat is what :attr:`guard_ack` acknowledges: the guard releases its outputs only
         on an ESC beat at neutral that acknowledges one of its ERROR beats (:mod:`hindrax_drivers.guard.core`)."""
         self.guard_age.heard()
         self.guard_ok, self.guard_message = heartbeat_ok(msg), msg.message
         if not self.guard_ok:
             self._on_bad_news()  # restarts the time at neutral even if a later beat of the same take says OK
-        ident = self.watches["guard"].identity  # the beat the watch just accepted, its values parsed there
-        self.guard_ack = (ident.boot_id or "", ident.seq or 0)
-
-    def ack_values(self) -> list[tuple[str, str]]:
-        """The ``esc/heartbeat`` KeyValues acknowledging the newest guard beat handled: ``guard_boot_id``,
-        ``guard_seq``."""
-        return guard_ack_values(*self.guard_ack)
+        self.guard_ack = (msg.boot_id, msg.seq)
 
     def verdicts(self) -> tuple[str, str]:
         """The supervisor's and the guard's verdicts ('' = trusted, else why not)."""

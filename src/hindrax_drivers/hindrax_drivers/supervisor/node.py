@@ -22,7 +22,7 @@ Services
     ``supervisor/reset`` (std_srvs/Trigger): clear the latched breach (the ESC must then be armed again; a disarm
     request still in flight, :attr:`SupervisorNode.disarm_future`, may land after a very quick re-arm).
 Publishes
-    ``supervisor/heartbeat`` (diagnostic_msgs/DiagnosticStatus, values ``boot_id`` and ``seq``:
+    ``supervisor/heartbeat`` (hindrax_msgs/Heartbeat with ``boot_id`` and ``seq``:
     :class:`~hindrax_drivers.liveness.HeartbeatPublisher`) at every check
     (``supervisor.check_rate_hz``, steady clock): level OK within the envelope, ERROR with the latched reason. The
     ESC refuses to arm and disarms without a fresh OK one; the output guard silences the outputs without one
@@ -69,13 +69,13 @@ from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from hindrax_msgs.msg import Dvl
+from hindrax_msgs.msg import Dvl, Heartbeat
 from hindrax_msgs.srv import SetArmed
 
 from .. import frames
 from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_qos, read_esc_state
-from ..lean_cdr import cdr_decoder
-from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, heartbeat_ok, heartbeat_qos
+from ..lean_cdr import cdr_decoder, read_heartbeat
+from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_ok, heartbeat_qos
 from ..config import Spec
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
@@ -116,8 +116,7 @@ class SupervisorNode(Node):
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
-        self.heartbeat = HeartbeatPublisher(self, "supervisor", "hindrax/supervisor", "supervisor",
-                                            event_callbacks=_NO_PUB_EVENTS)
+        self.heartbeat = HeartbeatPublisher(self, "supervisor", event_callbacks=_NO_PUB_EVENTS)
         self.clock_monitor = ClockStepMonitor(self._now_s)
         #: ROS time standing still this long (steady s) while armed trips: parameter ``clock_stall_timeout_s``
         self.clock_stall_timeout_s = float(declare_node_parameter(self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT,
@@ -131,11 +130,13 @@ class SupervisorNode(Node):
         self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True, **ev)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos(), **ev)
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
-        self.create_subscription(DiagnosticStatus, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), **ev)
+        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), raw=True, **ev)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")
-        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=lambda: self.core.values(self._now_s()))
+        self.tick_gaps = TickGaps()  # how late the check (and its heartbeat) ran, on /diagnostics
+        self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=lambda: [*self.core.values(self._now_s()),
+                                                                                  *self.tick_gaps.report()])
         self.create_timer(1.0 / cfg.supervisor.check_rate_hz, self.on_check,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(1.0, self._publish_status)
@@ -196,9 +197,12 @@ class SupervisorNode(Node):
         if armed and self.core.tripped:
             self._disarm()
 
-    def on_guard(self, msg: DiagnosticStatus) -> None:
-        """A ``guard/heartbeat``: its reason while it silences the outputs names a disarm (:mod:`.disarm_cause`)."""
-        self._cause(lambda: self.causes.on_guard(heartbeat_ok(msg), msg.message))
+    def on_guard(self, data: bytes) -> None:
+        """A ``guard/heartbeat`` (its CDR bytes): its reason while it silences the outputs names a disarm
+        (:mod:`.disarm_cause`); bytes that are not a heartbeat are ignored."""
+        beat = read_heartbeat(data)
+        if beat is not None:
+            self._cause(lambda: self.causes.on_guard(heartbeat_ok(beat), beat.message))
 
     def _cause(self, update) -> None:
         """Apply ``update`` to :attr:`causes`; a new cause line is published at once."""
@@ -244,6 +248,7 @@ class SupervisorNode(Node):
         return self._now_s()
 
     def on_check(self) -> None:
+        self.tick_gaps.tick()
         self._sample_time_s()  # a backward step of ROS time: re-base first
         if self.core.armed and self.clock_monitor.stalled_for_s() > self.clock_stall_timeout_s:
             self._handle(self.core.trip(f"ROS time stalled for {self.clock_monitor.stalled_for_s():.1f} s while "
@@ -257,8 +262,7 @@ class SupervisorNode(Node):
 
     def _publish_heartbeat(self) -> None:
         tripped = self.core.tripped
-        self.heartbeat.publish(DiagnosticStatus.ERROR if tripped else DiagnosticStatus.OK,
-                               tripped or "within the envelope")
+        self.heartbeat.publish(not tripped, tripped or "within the envelope")
 
     # ------------------------------------------------------------------ breach
     def _handle(self, reason: str, force: bool = False) -> None:

@@ -10,7 +10,9 @@ run it takes ``SCHED_FIFO`` at :data:`HARDWARE_STAND_IN_PRIORITY`, above the saf
 
 * ``busy_neighbours_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
 * ``busy_neighbours_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three
-  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms), and
+  ``busy_neighbours_heartbeat_sent_gap_max_ms`` between their send stamps (``Heartbeat.steady_ns``: the sender
+  late, apart from the delivery);
 * ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's nice -5 only),
   no target: what the priority buys here. In this three-process layout little: the starvation that nice -5 let
   through was seen with the whole launch layout, the live pool and the suite's other worker on the two cores
@@ -29,10 +31,9 @@ import subprocess
 import sys
 import time
 
-from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
 from hindrax_drivers.testing import python_executable
 
-from .participant_churn import _VehicleLayout, _Watch
+from .participant_churn import _VehicleLayout, _Watch, hardware_priority
 from .safety import running_layout
 
 #: CPU-bound neighbours, and how long they run while the vehicle is armed (QUICK_DURATION_S with --quick), s
@@ -47,39 +48,39 @@ class _NiceOnlyLayout(_VehicleLayout):
 
 
 def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
-    """The two rows of one run (module docstring); ``realtime`` False: the nice-only comparison run."""
+    """The rows of one run (module docstring); ``realtime`` False: the nice-only comparison run."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
     prefix = "busy_neighbours_" if realtime else "busy_neighbours_nice_only_"
     neighbours: list[subprocess.Popen] = []
     try:
         with running_layout("hindrax-bench-busy-", layout=_VehicleLayout if realtime else _NiceOnlyLayout) as lay:
-            # this process's threads (emulated hardware, probe) are all running now: real-time from here on, and
-            # SCHED_RESET_ON_FORK so that what it starts (the node processes, the neighbours) does not inherit it
-            try:
-                set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_STAND_IN_PRIORITY)
-            except OSError as exc:
-                why = f"not measured: SCHED_FIFO not permitted here ({exc.strerror})"
-                return [{"name": prefix + "disarms", "value": None, "unit": "disarms", "note": why},
-                        {"name": prefix + "heartbeat_gap_max_ms", "value": None, "unit": "ms", "note": why}]
             watch = _Watch(lay.probe)
             lay.armed_at_1700()
-            watch.armed, watch.disarms, watch.active = True, 0, True
-            for _ in range(NEIGHBOURS):
-                neighbours.append(subprocess.Popen([python_executable(), "-c", "while True: pass"],
-                                                   start_new_session=True, stdout=subprocess.DEVNULL,
-                                                   stderr=subprocess.DEVNULL))
-                if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:  # a real-time busy loop: stop now
-                    raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
-            time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's own thread)
-            watch.active = False
-            load = os.getloadavg()[0]
-            gap_s, who = watch.largest_gap_s()
-            beats = sum(len(v) for v in watch.arrivals.values())
+            # real-time from here on: every thread of this process, the emulation's serving threads included (one
+            # per node process, started when it connected: a thread started under SCHED_RESET_ON_FORK would not be)
+            with hardware_priority() as refused:
+                if refused:
+                    why = f"not measured: {refused}"
+                    return [{"name": prefix + name, "value": None, "unit": unit, "note": why} for name, unit in
+                            (("disarms", "disarms"), ("heartbeat_gap_max_ms", "ms"),
+                             ("heartbeat_sent_gap_max_ms", "ms"), ("tick_gap_max_ms", "ms"))]
+                watch.armed, watch.disarms, watch.active = True, 0, True
+                for _ in range(NEIGHBOURS):
+                    neighbours.append(subprocess.Popen([python_executable(), "-c", "while True: pass"],
+                                                       start_new_session=True, stdout=subprocess.DEVNULL,
+                                                       stderr=subprocess.DEVNULL))
+                    if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:  # a real-time busy loop: stop
+                        raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
+                time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's own thread)
+                watch.active = False
+                load = os.getloadavg()[0]
+                gap_s, who = watch.largest_gap_s()
+                sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
+                beats = sum(len(v) for v in watch.arrivals.values())
     finally:
         for p in neighbours:
             p.kill()
             p.wait(10)
-        set_every_thread(os.SCHED_OTHER, 0)  # no-op when it was refused
     what = (f"armed at 1700 us for {duration_s:g} s beside {NEIGHBOURS} CPU-bound processes of another session "
             f"(1-minute load {load:.1f} at the end); safety processes "
             + ("real-time as vehicle.launch.xml starts them" if realtime else "at nice -5 only"))
@@ -87,6 +88,9 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
         {"name": prefix + "disarms", "value": watch.disarms, "unit": "disarms", "target": 0, "note": what},
         {"name": prefix + "heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms", "target": GAP_TARGET_MS,
          "n": beats, "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+        {"name": prefix + "heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
+         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
+        watch.tick_gap_row(prefix + "tick_gap_max_ms"),
     ]
     return rows if realtime else [{k: v for k, v in r.items() if k != "target"} for r in rows]
 

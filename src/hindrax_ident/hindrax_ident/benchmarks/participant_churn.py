@@ -10,7 +10,8 @@ on such a start and disarmed the vehicle in 2-3 of 10 trials; the rows say wheth
 
 * ``participant_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
 * ``participant_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive messages of any of the three
-  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms).
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
+  ``participant_churn_heartbeat_sent_gap_max_ms`` between their send stamps (the sender late, not the delivery).
 
 Run alone: ``python -m hindrax_ident.benchmarks.participant_churn [--quick] [--default-transports]`` (prints the
 rows as JSON); ``--default-transports`` runs every process with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and no
@@ -20,16 +21,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
+from typing import Iterator
 
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
+from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
 from hindrax_drivers.testing import python_executable, wait_until
 
-from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 
 from .safety import _Layout, running_layout
 
@@ -40,18 +45,36 @@ GAP_TARGET_MS = 100.0
 _SUBSCRIBER = r"""
 import sys, time
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
+from hindrax_msgs.msg import Heartbeat
 rclpy.init()
 node = rclpy.create_node("churn_subscriber_" + sys.argv[1])
 node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: None, 10)
 for topic in ("supervisor/heartbeat", "guard/heartbeat", "esc/heartbeat"):
-    node.create_subscription(DiagnosticStatus, topic, lambda m: None, 10)
+    node.create_subscription(Heartbeat, topic, lambda m: None, 10)
 end = time.monotonic() + 3.0
 while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.05)
 node.destroy_node()
 rclpy.shutdown()
 """
+
+
+@contextmanager
+def hardware_priority() -> Iterator[str]:
+    """Every thread of this process (the emulated PCA9685 and /OE line, the probe) under ``SCHED_FIFO``
+    :data:`HARDWARE_STAND_IN_PRIORITY` for the block, as the vehicle's hardware is never starved by a CPU load (the
+    live pool takes the same, ``sim/live_pool.py``); with ``SCHED_RESET_ON_FORK``, so that the processes it starts do
+    not inherit it. Yields '' or, when refused (not root, no ``RLIMIT_RTPRIO``), why."""
+    try:
+        set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_STAND_IN_PRIORITY)
+    except OSError as exc:
+        yield f"SCHED_FIFO not permitted here ({exc.strerror})"
+        return
+    try:
+        yield ""
+    finally:
+        set_every_thread(os.SCHED_OTHER, 0)
 
 
 class _VehicleLayout(_Layout):
@@ -63,30 +86,65 @@ class _VehicleLayout(_Layout):
 
 
 class _Watch:
-    """Arrival times of the three heartbeats and the ESC's armed transitions, from subscriptions on ``node``."""
+    """Arrival times and send stamps (the sender's steady clock, ``Heartbeat.steady_ns``) of the three heartbeats and
+    the ESC's armed transitions, from subscriptions on ``node``."""
 
     def __init__(self, node) -> None:
         self.arrivals: dict[str, list[float]] = {name: [] for name in HEARTBEAT_NAMES}
+        self.sent: dict[str, list[float]] = {name: [] for name in HEARTBEAT_NAMES}
         self.armed: bool | None = None
         self.disarms = 0
         self.active = False
         for name, topic in HEARTBEAT_NAMES.items():
-            node.create_subscription(DiagnosticStatus, topic, lambda _m, n=name: self._beat(n), 50)
+            node.create_subscription(Heartbeat, topic, lambda m, n=name: self._beat(n, m), 50)
         node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
+        #: status name -> the worst tick gap it reported on /diagnostics, (gap, thread CPU, process CPU) in ms
+        self.tick_gaps: dict[str, tuple[float, float, float]] = {}
+        self._active_since: float | None = None
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
 
-    def _beat(self, name: str) -> None:
+    def _diagnostics(self, msg) -> None:
+        now = time.monotonic()
+        if not self.active:
+            self._active_since = None
+            return
+        if self._active_since is None:
+            self._active_since = now
+        if now - self._active_since < 1.1:  # a 1 Hz report may cover time before the window (the arming)
+            return
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if "tick_gap_max_ms" in values:
+                gap = tuple(float(values[k]) for k in ("tick_gap_max_ms", "tick_gap_thread_cpu_ms",
+                                                       "tick_gap_process_cpu_ms"))
+                if gap[0] > self.tick_gaps.get(status.name, (-1.0,))[0]:
+                    self.tick_gaps[status.name] = gap
+
+    def tick_gap_row(self, name: str) -> dict:
+        """Row ``name``: the longest tick gap a safety process reported (TickGaps), with its CPU split."""
+        if not self.tick_gaps:
+            return {"name": name, "value": None, "unit": "ms", "note": "no tick gap reported on /diagnostics"}
+        worst = max(v[0] for v in self.tick_gaps.values())
+        each = "; ".join(f"{k} {g:.0f} ms ({t:.1f} / {p:.1f})" for k, (g, t, p) in sorted(self.tick_gaps.items()))
+        return {"name": name, "value": worst, "unit": "ms",
+                "note": f"longest gap between two steady ticks of a safety process (reports covering the window "
+                        f"only), each with the CPU time in it (its executor thread / the whole process, ms): {each}"}
+
+    def _beat(self, name: str, msg) -> None:
         if self.active:
             self.arrivals[name].append(time.monotonic())
+            self.sent[name].append(msg.steady_ns * 1e-9)
 
     def _state(self, msg) -> None:
         if self.active and self.armed and not msg.armed:
             self.disarms += 1
         self.armed = bool(msg.armed)
 
-    def largest_gap_s(self) -> tuple[float, str]:
-        """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent."""
+    def largest_gap_s(self, sent: bool = False) -> tuple[float, str]:
+        """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent.
+        ``sent``: between their send stamps (the sender late) instead of their arrivals here."""
         worst, who = 0.0, ""
-        for name, times in self.arrivals.items():
+        for name, times in (self.sent if sent else self.arrivals).items():
             if len(times) < 2:
                 return float("inf"), name
             gap = max(b - a for a, b in zip(times, times[1:]))
@@ -96,7 +154,7 @@ class _Watch:
 
 
 def churn_rows(quick: bool = False, default_transports: bool = False) -> list[dict]:
-    """The two ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
+    """The ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
     with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
         if default_transports:
@@ -106,24 +164,27 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
         started: list[subprocess.Popen] = []
         try:
             lay.armed_at_1700()
-            watch.armed, watch.disarms, watch.active = True, 0, True
-            t0 = time.monotonic()
-            k = 0
-            while time.monotonic() - t0 < duration_s:
-                if k % 2 == 0:
-                    argv = [python_executable(), "-c", _SUBSCRIBER, str(k)]
-                else:
-                    argv = [python_executable(), "-m", "hindrax_ident.cli", "health", "--quiet", "--timeout", "3"]
-                started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
-                                                stderr=subprocess.DEVNULL))
-                k += 1
-                next_start = t0 + k * PERIOD_S
-                wait_until(lambda: time.monotonic() >= next_start, PERIOD_S + 5.0, lambda: time.sleep(0.02),
-                           "next participant's start")
-            watch.active = False
+            with hardware_priority() as refused:
+                watch.armed, watch.disarms, watch.active = True, 0, True
+                t0 = time.monotonic()
+                k = 0
+                while time.monotonic() - t0 < duration_s:
+                    if k % 2 == 0:
+                        argv = [python_executable(), "-c", _SUBSCRIBER, str(k)]
+                    else:
+                        argv = [python_executable(), "-m", "hindrax_ident.cli", "health", "--quiet", "--timeout",
+                                "3"]
+                    started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
+                                                    stderr=subprocess.DEVNULL))
+                    k += 1
+                    next_start = t0 + k * PERIOD_S
+                    wait_until(lambda: time.monotonic() >= next_start, PERIOD_S + 5.0, lambda: time.sleep(0.02),
+                               "next participant's start")
+                watch.active = False
             for p in started:
                 p.wait(60)
             gap_s, who = watch.largest_gap_s()
+            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
             beats = sum(len(v) for v in watch.arrivals.values())
         finally:
             for p in started:
@@ -131,13 +192,17 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
                     p.kill()
     what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
             f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
-            + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport"))
+            + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport")
+            + f"; emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
     return [
         {"name": "participant_churn_disarms", "value": watch.disarms, "unit": "disarms", "target": 0,
          "n": k, "note": what},
         {"name": "participant_churn_heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms",
          "target": GAP_TARGET_MS, "n": beats,
          "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+        {"name": "participant_churn_heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
+         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
+        watch.tick_gap_row("participant_churn_tick_gap_max_ms"),
     ]
 
 

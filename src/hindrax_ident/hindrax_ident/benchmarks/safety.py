@@ -89,7 +89,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from domain_coordinator import domain_id
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from hindrax_drivers.liveness import heartbeat_qos
@@ -118,7 +118,7 @@ from rosgraph_msgs.msg import Clock
 from std_srvs.srv import Trigger
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_msgs.msg import ThrusterPwm
+from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .launch_layout import launch_processes, package_share
@@ -964,7 +964,7 @@ def _guard_without_line(lay: _Layout, hw: _Hardware, attempts: int = 5) -> tuple
     try:
         lay.ensure()
         heard = []
-        sub = lay.probe.create_subscription(DiagnosticStatus, "guard/heartbeat", heard.append, heartbeat_qos())
+        sub = lay.probe.create_subscription(Heartbeat, "guard/heartbeat", heard.append, heartbeat_qos())
         wait_until(lambda: len(heard) >= 5, 60, None, "guard heartbeats")
         refused, answer = 0, ""
         for _ in range(attempts):
