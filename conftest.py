@@ -31,7 +31,7 @@ _domain_ctx = None
 #: run's), setup included (the colcon build, test/conftest.py, falls to the first pool-day test), and the test's
 #: ``file::function``. Tests not listed follow in collection order; refresh the list from ``--durations=80``. An xdist
 #: group (a module with a module-scoped fixture) runs as one unit where its first test stands: a long group is listed
-#: by one of its tests with the seconds of the whole group.
+#: by its first test (its tests run in the listed one's place, in file order) with the seconds of the whole group.
 LONGEST_FIRST = """
 678 test_pool_day.py::test_pool_day_as_the_readme_writes_it
 599 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
@@ -44,7 +44,7 @@ LONGEST_FIRST = """
 108 test_thrust_calibration.py::test_sinker_and_float_recover_heave_under_asymmetric_thrust
 102 test_thrust_calibration.py::test_line_pull_measures_the_horizontal_scale_in_surge_and_sway
 100 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
- 90 test_gateway.py::test_a_command_aimed_at_one_vehicle_never_moves_the_other
+ 90 test_gateway.py::test_a_process_on_the_topside_reaches_only_the_interface
  83 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
  81 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
  78 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
