@@ -29,7 +29,9 @@ _domain_ctx = None
 
 #: The longest tests, longest first: seconds of one full run at load 13-19 on 2 cores (about three times a quiet
 #: run's), setup included (the colcon build, test/conftest.py, falls to the first pool-day test), and the test's
-#: ``file::function``. Tests not listed follow in collection order; refresh the list from ``--durations=80``.
+#: ``file::function``. Tests not listed follow in collection order; refresh the list from ``--durations=80``. An xdist
+#: group (a module with a module-scoped fixture) runs as one unit where its first test stands: a long group is listed
+#: by its first test (its tests run in the listed one's place, in file order) with the seconds of the whole group.
 LONGEST_FIRST = """
 678 test_pool_day.py::test_pool_day_as_the_readme_writes_it
 599 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
@@ -42,13 +44,14 @@ LONGEST_FIRST = """
 108 test_thrust_calibration.py::test_sinker_and_float_recover_heave_under_asymmetric_thrust
 102 test_thrust_calibration.py::test_line_pull_measures_the_horizontal_scale_in_surge_and_sway
 100 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
- 84 test_calibration_graph.py::test_goal_with_ballast_prompts_continue_proceeds_and_nothing_awaited_is_refused
+ 90 test_gateway.py::test_a_process_on_the_topside_reaches_only_the_interface
  83 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
  81 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
  78 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
  69 test_ident_fit.py::test_imu_in_a_rotated_frame_and_unset_header_stamps
  65 test_cli_ident.py::test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion
  62 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
+ 60 test_ros_install.py::test_every_node_and_hindrax_are_installed
  58 test_calibration_graph.py::test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch
  57 test_thrust_calibration.py::test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90
  54 test_rls_online_settings.py::test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign
@@ -58,6 +61,7 @@ LONGEST_FIRST = """
  44 test_tilt_references_virtual_pool.py::test_free_decay_inertia_within_10_percent_under_thrust_0_90
  44 test_run_signals.py::test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind
  41 test_second_graph.py::test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start
+ 40 test_import_structure.py::test_graph_covers_both_packages
  35 test_rls.py::test_noise_variance_estimate_and_calibrated_std_with_forgetting
  33 test_ident_bag_fit_same.py::test_ident_bag_says_when_no_model_beats_holding_the_velocity
  33 test_ident_bag_fit_same.py::test_a_parameter_at_its_bound_says_so_instead_of_an_interval
@@ -143,6 +147,20 @@ def _uses_a_module_fixture(item: pytest.Item) -> bool:
                                     for defs in info.name2fixturedefs.values())
 
 
+def _name_the_group(item: pytest.Item) -> None:
+    """Append ``@<group>`` to the node id of an item marked ``xdist_group``, as pytest-xdist's worker does for
+    loadgroup (xdist/remote.py), where its scheduler reads the group. pytest-xdist 3.8 writes ``item._nodeid``, which
+    pytest 9 no longer reads (the id is ``item._id``): without this every test was a unit of its own, and a module's
+    module-scoped fixture was built again on each worker that ran one of its tests."""
+    from _pytest.nodes import NodeId
+
+    names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                    for m in item.iter_markers("xdist_group")})
+    suffix = "@" + "_".join(names)
+    if names and not item.nodeid.endswith(suffix):
+        item._id = NodeId.parse(item.nodeid + suffix)
+
+
 @pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]):
     """Before the other hooks: the tests of a module with a module-scoped fixture form one xdist group (the module),
@@ -152,6 +170,9 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if _uses_a_module_fixture(item):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
     result = yield
+    if getattr(config.option, "loadgroup", False):  # an xdist worker of a --dist loadgroup run
+        for item in items:
+            _name_the_group(item)
     rank = _longest_first_rank()
     items.sort(key=lambda it: rank.get(f"{it.path.name}::{getattr(it, 'originalname', it.name)}", len(rank)))
     return result

@@ -17,6 +17,7 @@ Run alone: ``.venv/bin/python -m pytest -n0 test/test_one_input_path.py -q``.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,13 +34,21 @@ POLLED_NAMES = frozenset({"polled_input", "PolledInputs", "PolledSubscriptions",
 SUBSCRIBE_CALLS = frozenset({"create_subscription", "subscribe", "subscribe_input"})
 
 
+@functools.cache
 def _modules() -> dict[str, ast.Module]:
-    """{path relative to the package's parent: parsed module} of every module of :data:`PACKAGES`."""
+    """{path relative to the package's parent: parsed module} of every module of :data:`PACKAGES`, parsed once per
+    process: the checks only read the trees."""
     out = {}
     for root in PACKAGES:
         for path in sorted(root.rglob("*.py")):
             out[str(path.relative_to(root.parent))] = ast.parse(path.read_text(), filename=str(path))
     return out
+
+
+@functools.cache
+def _nodes() -> dict[str, tuple[ast.AST, ...]]:
+    """{path: every node of its tree (``ast.walk`` order)} of :func:`_modules`, walked once per process."""
+    return {path: tuple(ast.walk(tree)) for path, tree in _modules().items()}
 
 
 def _call_name(node: ast.AST) -> str:
@@ -49,29 +58,32 @@ def _call_name(node: ast.AST) -> str:
     return node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
 
 
-def _reads_use_sim_time(node: ast.AST) -> bool:
-    """True when ``node`` contains a call with the string ``"use_sim_time"`` as its first argument
+def _is_use_sim_time_read(n: ast.AST) -> bool:
+    """True when ``n`` is a call with the string ``"use_sim_time"`` as its first argument
     (``get_parameter("use_sim_time")``, ``has_parameter(...)``): reading the parameter, not setting it."""
-    return any(isinstance(n, ast.Call) and _call_name(n) in ("get_parameter", "has_parameter", "get_parameter_or")
-               and n.args and isinstance(n.args[0], ast.Constant) and n.args[0].value == "use_sim_time"
-               for n in ast.walk(node))
+    return (isinstance(n, ast.Call) and _call_name(n) in ("get_parameter", "has_parameter", "get_parameter_or")
+            and bool(n.args) and isinstance(n.args[0], ast.Constant) and n.args[0].value == "use_sim_time")
+
+
+def _reads_use_sim_time(node: ast.AST) -> bool:
+    """True when ``node`` contains a read of the ``use_sim_time`` parameter (:func:`_is_use_sim_time_read`)."""
+    return any(map(_is_use_sim_time_read, ast.walk(node)))
 
 
 def test_no_node_takes_a_message_outside_its_executor():
-    found = [f"{path}:{n.lineno}" for path, tree in _modules().items() for n in ast.walk(tree)
-             if _call_name(n) == "take_message"]
+    found = [f"{path}:{n.lineno}" for path, nodes in _nodes().items() for n in nodes if _call_name(n) == "take_message"]
     assert not found, f"messages taken outside an executor (a polled intake, a second input path): {found}"
 
 
 def test_no_subscription_depends_on_the_clock():
     readers, branched = set(), []
-    for path, tree in _modules().items():
-        for n in ast.walk(tree):
+    for path, nodes in _nodes().items():
+        for n in nodes:
             if isinstance(n, (ast.If, ast.IfExp)) and _reads_use_sim_time(n.test):
                 branches = n.body + n.orelse if isinstance(n, ast.If) else [n.body, n.orelse]
                 branched += [f"{path}:{c.lineno}" for b in branches for c in ast.walk(b)
                              if _call_name(c) in SUBSCRIBE_CALLS]
-        if _reads_use_sim_time(tree):
+        if any(map(_is_use_sim_time_read, nodes)):
             readers.add(path)
     assert not branched, f"subscriptions chosen by use_sim_time (one input path in both clock modes): {branched}"
     assert readers == set(CLOCK_READERS), (
@@ -91,7 +103,7 @@ def _names(node: ast.AST) -> list[str]:
 def test_the_polled_input_helpers_are_gone():
     modules = _modules()
     assert not [p for p in modules if Path(p).stem in POLLED_NAMES]
-    used = sorted({f"{path}: {name}" for path, tree in modules.items() for n in ast.walk(tree) for name in _names(n)
+    used = sorted({f"{path}: {name}" for path, nodes in _nodes().items() for n in nodes for name in _names(n)
                    if name.rsplit(".", 1)[-1] in POLLED_NAMES})
     assert not used, f"polled-input helpers imported or defined again: {used}"
 

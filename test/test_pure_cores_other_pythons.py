@@ -72,13 +72,14 @@ def find_interpreters(version: tuple[int, int] = TARGET) -> list[str]:
 
 
 def _core_venv(python: str, where: Path) -> Path:
-    """A venv of ``python`` in ``where`` with only :data:`CORE_PACKAGES` (constraints.txt versions, no pip cache).
-    pip runs from this venv against the new one (``pip --python``): the interpreter needs no ensurepip of its own.
-    Returns its python. Raises AssertionError with pip's last lines when the install fails."""
+    """A venv of ``python`` in ``where`` with only :data:`CORE_PACKAGES` (constraints.txt versions; wheels from pip's
+    cache when it holds them, not byte-compiled at install: the run compiles what it imports). pip runs from this venv
+    against the new one (``pip --python``): the interpreter needs no ensurepip of its own. Returns its python. Raises
+    AssertionError with pip's last lines when the install fails."""
     venv = where / "venv"
     subprocess.run([python, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
     vpy = venv / "bin" / "python"
-    res = subprocess.run([sys.executable, "-m", "pip", "--python", str(vpy), "install", "--quiet", "--no-cache-dir",
+    res = subprocess.run([sys.executable, "-m", "pip", "--python", str(vpy), "install", "--quiet", "--no-compile",
                           "--disable-pip-version-check", "--only-binary", ":all:", "-c", str(ROOT / "constraints.txt"),
                           *CORE_PACKAGES], capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, (f"cannot install the cores' packages for {python} (no package index reachable?): "

@@ -15,7 +15,6 @@ import yaml
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
 from hindrax_ident.identification.bag_input import calibration_topic
-from hindrax_ident.identification.online import executive
 from hindrax_ident.identification.fit.dof_model import parameter_names
 
 # step results in the steps' layout (identification/steps: Ballast, LinePull, Inclining, TiltDecay): the holding
@@ -224,78 +223,26 @@ def test_ident_bag_prints_and_writes_the_data_advice_of_suspect_parameters(tmp_p
         assert f"{a['runs']} {a['run_kind']} of about" in printed
 
 
-def test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it(monkeypatch, tmp_path):
-    """Ballast step on the graph (virtual pool; steps shortened) with the recorder on: no calibration message while
-    the step runs; when it ends the node publishes the scale it measured (its record's numbers, exactly); a
-    subscriber that arrives afterwards still gets it (transient local), and the bag holds it."""
-    import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.action import ActionClient
-    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from std_srvs.srv import Trigger
-
+def test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it(
+        ballast_goal_on_the_graph):
+    """Ballast step on the graph (virtual pool; steps shortened; conftest.py ``ballast_goal_on_the_graph``) with the
+    recorder on: no calibration message while the step runs; when it ends the node publishes the scale it measured
+    (its record's numbers, exactly); a subscriber that arrives afterwards still gets it (transient local), and the
+    bag holds it."""
     from hindrax_drivers.recording.reader import BagReader
-    from hindrax_drivers.testing import ros_context, wait_until
-    from hindrax_ident.bringup import build_graph
-    from hindrax_ident.graph_campaign import VirtualOperator
-    from hindrax_msgs.action import RunIdentification
-    from hindrax_msgs.srv import SetArmed
 
-    monkeypatch.setattr(executive, "CALIBRATION_SETTLE_S", 3.0)
-    monkeypatch.setattr(executive, "CALIBRATION_WINDOW_S", 9.0)
-    bag_dir = tmp_path / "bag"
-    with ros_context() as ctx:
-        graph = build_graph(default_config_path(), sim=True, context=ctx, seed=4, record=True,
-                            record_dir=str(bag_dir),
-                            overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 0.0})
-        probe = rclpy.create_node("operator", context=ctx)
-        graph.executor.add_node(probe)
-        sim = graph.nodes["simulator"].simulator
-        early: list = []
-        probe.create_subscription(DiagnosticArray, "identification/calibration", early.append,
-                                  QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
-        arm = probe.create_client(SetArmed, "esc/set_armed")
-        cont = probe.create_client(Trigger, "identification/continue")
-        action = ActionClient(probe, RunIdentification, "run_identification")
-        op = VirtualOperator(sim, *executive.calibration_forces(graph.config),
-                             lambda: cont.call_async(Trigger.Request()))
-        graph.nodes["simulator"].add_step_listener(op.on_step)
-
-        def spin():
-            graph.spin_once(0.005)
-            op.poll()
-
-        try:
-            assert graph.start_and_arm(arm, 60, lambda: action.server_is_ready() and cont.service_is_ready()).success
-            wait_until(lambda: graph.nodes["identification"].core.armed, 30, spin, "ESC reporting armed")
-            f = action.send_goal_async(RunIdentification.Goal(calibrate=["ballast"], calibration_only=True),
-                                       feedback_callback=lambda m: op.on_prompt(m.feedback.prompt))
-            wait_until(f.done, 10, spin, "goal answer")
-            assert f.result().accepted
-            # the step takes about 40 s of wall time alone; 120 s ran out twice with three test processes on two cores
-            wait_until(lambda: op.handled == "remove_ballast", 300, spin, "the ballast step's last prompt")
-            assert early == []  # nothing before the step's result exists
-            res = f.result().get_result_async()
-            wait_until(lambda: res.done() and early, 300, spin, "result and calibration message")
-            assert res.result().result.success, res.result().result.message
-            cal = graph.nodes["identification"].last_record.calibration
-            assert set(cal) == {"vertical"} and cal["vertical"]["value"] == pytest.approx(1.0, abs=0.1)
-            assert len(early) == 1 and calibration_topic.results_from_array(early[0]) == (cal, {}, {})
-            # a late subscriber (a recorder started now) still receives it
-            late: list = []
-            probe.create_subscription(DiagnosticArray, "identification/calibration", late.append,
-                                      QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                                 durability=DurabilityPolicy.TRANSIENT_LOCAL))
-            wait_until(lambda: late, 10, spin, "late subscriber")
-            kv = {v.key: v.value for v in late[0].status[0].values}
-            assert late[0].status[0].name == "thrust_scale/vertical" and kv["group"] == "vertical"
-            assert float(kv["scale"]) == cal["vertical"]["value"] and float(kv["known_force_n"]) > 8.0
-            graph.nodes["recorder"].stop_recording()
-        finally:
-            graph.shutdown()
-            probe.destroy_node()
-    reader = BagReader(bag_dir)
+    run = ballast_goal_on_the_graph
+    assert run.calibration_before_end == []  # nothing before the step's result exists
+    assert run.result.success, run.result.message
+    cal = run.calibration
+    assert set(cal) == {"vertical"} and cal["vertical"]["value"] == pytest.approx(1.0, abs=0.1)
+    assert len(run.published) == 1 and calibration_topic.results_from_array(run.published[0]) == (cal, {}, {})
+    # a late subscriber (a recorder started after the result) still receives it
+    late = run.late
+    kv = {v.key: v.value for v in late[0].status[0].values}
+    assert late[0].status[0].name == "thrust_scale/vertical" and kv["group"] == "vertical"
+    assert float(kv["scale"]) == cal["vertical"]["value"] and float(kv["known_force_n"]) > 8.0
+    reader = BagReader(run.bag)
     topic = next(tp for tp in reader.topics if tp.lstrip("/") == "identification/calibration")
     msgs = [obj for _m, obj in reader.decoded([topic])]
     assert msgs and calibration_topic.merge_results(msgs) == (cal, {}, {})
