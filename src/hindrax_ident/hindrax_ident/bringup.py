@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
+from rclpy.executors import ShutdownException, TimeoutException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -45,6 +45,7 @@ from hindrax_msgs.srv import SetArmed
 
 from .control.node import ControllerNode
 from .identification.online.node import IdentificationNode
+from .ordered_executor import ordered_executor
 from .sim.hardware import VirtualHardware
 from .sim.node import SimulatorNode
 from .sim.simulator import Simulator
@@ -193,37 +194,6 @@ class Graph:
         finally:
             if self.hardware is not None:
                 self.hardware.close()
-
-
-def ordered_executor(**kwargs: Any) -> Any:
-    """A ``SingleThreadedExecutor`` that visits its nodes in the order they were added.
-
-    rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready at the same
-    instant run (e.g. the allocation's wrench subscription and the ESC node's output timer) follows the nodes'
-    memory addresses and changes from one run to the next; with a fixed order a stepped simulation is
-    reproducible. ``kwargs`` go to the executor (``context``)."""
-
-    class _OrderedExecutor(SingleThreadedExecutor):
-        def __init__(self, **kw: Any) -> None:
-            self._order: list = []
-            super().__init__(**kw)
-
-        def add_node(self, node: Any) -> bool:
-            added = super().add_node(node)
-            if node not in self._order:
-                self._order.append(node)
-            return added
-
-        def remove_node(self, node: Any) -> None:
-            super().remove_node(node)
-            if node in self._order:
-                self._order.remove(node)
-
-        def get_nodes(self) -> list:
-            present = set(super().get_nodes())
-            return [n for n in self._order if n in present]
-
-    return _OrderedExecutor(**kwargs)
 
 
 #: heartbeat timeout of the ESC and the output guard inside one process (their parameter ``heartbeat_timeout_s``;

@@ -137,3 +137,42 @@ def test_ident_bag_command_rejects_a_missing_or_wrong_bag(tmp_path):
     p = subprocess.run([hindrax, "ident", "bag", str(tmp_path / "empty")], env=child_env(), capture_output=True,
                        text=True, timeout=60)
     assert p.returncode == 1 and p.stderr.startswith("ident bag:") and len(p.stderr.strip().splitlines()) == 1
+
+
+def _same_record(a, b) -> None:
+    for name in ("t_s", "wrench_frd", "wrench_cmd_frd", "active", "run_id", "level"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert a.windows == b.windows and a.aborted == b.aborted
+    assert {k: [(s[0], list(s[1])) for s in v] for k, v in a.sensors.items()} == \
+        {k: [(s[0], list(s[1])) for s in v] for k, v in b.sensors.items()}
+
+
+def test_bag_record_is_the_messages_record_by_either_decoder(tmp_path, monkeypatch):
+    """record_from_bag decodes installed types with rclpy (a type not installed: every topic from the bag's own
+    definitions); both give the record of the messages themselves."""
+    from rclpy.serialization import serialize_message
+
+    from hindrax_drivers.recording import reader
+    from hindrax_drivers.recording.msgtypes import TypeNotInstalledError
+    from hindrax_drivers.recording.writer import BagWriter, WriterOptions
+    from hindrax_ident.identification.bag_input.from_bag import record_from_bag
+
+    cfg = load_config(default_config_path())
+    msgs = _messages(cfg)
+    with BagWriter(tmp_path / "bag", WriterOptions(fsync=False)) as w:
+        for topic, type_name in (("/identification/status", "hindrax_msgs/msg/ManeuverStatus"),
+                                 ("/thrusters/pulse_width", "hindrax_msgs/msg/ThrusterPwm"),
+                                 ("/pressure/fluid_pressure", "sensor_msgs/msg/FluidPressure"),
+                                 ("/dvl/data", "hindrax_msgs/msg/Dvl"), ("/imu/data_raw", "sensor_msgs/msg/Imu")):
+            w.add_topic(topic, type_name)
+        for topic, m in msgs:
+            w.write("/" + topic, m.header.stamp.sec * 10**9 + m.header.stamp.nanosec, serialize_message(m))
+    direct = record_from_messages(msgs, cfg)
+    _same_record(record_from_bag(tmp_path / "bag", cfg), direct)
+
+    def not_installed(self, topics):
+        raise TypeNotInstalledError("hindrax_msgs/msg/ThrusterPwm is not installed")
+        yield  # a generator, as the reader's
+
+    monkeypatch.setattr(reader.BagReader, "installed_messages", not_installed)
+    _same_record(record_from_bag(tmp_path / "bag", cfg), direct)

@@ -39,6 +39,7 @@ import numpy as np
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
+from hindrax_drivers.recording.msgtypes import TypeNotInstalledError
 from hindrax_drivers.recording.reader import BagReader
 
 from ...vehicle.state import SensorState
@@ -254,7 +255,13 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
     if missing:
         raise BagContentError(f"{bag_path}: missing topic(s) {', '.join(missing)}")
     wanted = [tp for tp in present if tp.lstrip("/") in TOPICS]
-    return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.decoded(wanted)), cfg, grid_s)
+    # rclpy's C deserializer for the installed types (a type changed since: from the bag's definition); a type not
+    # installed here: every topic from the bag's definitions (mcap_ros2)
+    try:
+        return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.installed_messages(wanted)),
+                                    cfg, grid_s)
+    except TypeNotInstalledError:
+        return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.decoded(wanted)), cfg, grid_s)
 
 
 def truncation(bag_path: str | Path) -> list[str]:

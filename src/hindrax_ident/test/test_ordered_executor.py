@@ -1,0 +1,70 @@
+"""The one-process graph's executor (hindrax_ident.ordered_executor): the lean wait yields what rclpy's own wait yields,
+in the same order, and the executor visits its nodes in the order they were added."""
+from __future__ import annotations
+
+import rclpy
+from rclpy.executors import Executor, TimeoutException
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_ident.ordered_executor import ordered_executor
+
+
+def _drain(gen) -> list:
+    """Entities a wait generator yields (handlers not run) until it times out."""
+    out = []
+    try:
+        for _handler, entity, node in gen:
+            out.append((node.get_name(), type(entity).__name__, id(entity)))
+    except TimeoutException:
+        pass
+    return out
+
+
+def _forget(executor) -> None:
+    """Undo what yielding did (handlers never run): the entities wait again, no task is pending."""
+    for task, entity, _node in executor._tasks:
+        entity._executor_event = False
+        task.cancel()  # its coroutine closed, never run
+    executor._tasks.clear()
+
+
+def test_lean_wait_yields_rclpys_callbacks_in_rclpys_order():
+    with ros_context() as ctx:
+        ex = ordered_executor(context=ctx)
+        names = ["zeta", "alpha", "mid"]  # added in this order, not alphabetical
+        nodes = [rclpy.create_node(n, context=ctx) for n in names]
+        for node in nodes:
+            ex.add_node(node)
+        got: list = []
+        pubs = []
+        timers = []
+        for node in nodes:
+            timers.append(node.create_timer(0.001, lambda: None))
+            node.create_subscription(String, "chatter", got.append, 10)
+            node.create_subscription(String, f"{node.get_name()}/own", got.append, 10)
+            node.create_service(Trigger, f"{node.get_name()}/go", lambda _q, r: r)
+            pubs.append(node.create_publisher(String, "chatter", 10))
+        clients = [nodes[0].create_client(Trigger, f"{n}/go") for n in names]
+        wait_until(lambda: all(c.service_is_ready() for c in clients) and pubs[0].get_subscription_count() == 3,
+                   20, lambda: None, "discovery")
+        for c in clients[::-1]:
+            c.call_async(Trigger.Request())
+        pubs[1].publish(String(data="x"))
+        guard = nodes[2].create_guard_condition(lambda: None)
+        guard.trigger()
+        # every timer due, every service and subscription with work: both waits see the same ready entities
+        wait_until(lambda: all(t.time_until_next_call() <= 0 for t in timers), 5, None, "timers due")
+        lean = _drain(ex._wait_for_ready_callbacks(0.0))
+        _forget(ex)
+        plain = _drain(Executor._wait_for_ready_callbacks(ex, 0.0))
+        _forget(ex)
+        assert lean == plain
+        kinds = [k for _n, k, _i in lean]
+        assert {"Timer", "Subscription", "Service", "GuardCondition"} <= set(kinds)
+        assert [n for n in dict.fromkeys(n for n, _k, _i in lean)] == names  # nodes in the order added
+        assert ex.get_nodes() == nodes
+        ex.remove_node(nodes[1])
+        assert ex.get_nodes() == [nodes[0], nodes[2]]
+        ex.shutdown()
