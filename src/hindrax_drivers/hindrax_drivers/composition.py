@@ -47,11 +47,10 @@ Groups (:data:`GROUPS`):
 """
 from __future__ import annotations
 
-import importlib
 import sys
 from typing import Any, Callable, Mapping, Sequence
 
-from .devices import DEVICES
+from .devices import DEVICES, load
 
 __all__ = ["GROUPS", "IDENT_GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
 
@@ -94,8 +93,7 @@ def node_factories(names: Sequence[str], classes: Mapping[str, str] = NODE_CLASS
     for name in names:
         if name not in classes:
             raise ValueError(f"unknown node {name!r}: choose from {', '.join(classes)}")
-        module, _, cls = classes[name].partition(":")
-        out.append(getattr(importlib.import_module(module), cls))
+        out.append(load(classes[name]))
     return out
 
 

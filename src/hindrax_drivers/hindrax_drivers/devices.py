@@ -10,9 +10,9 @@ from __future__ import annotations
 import functools
 import importlib
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
-__all__ = ["Device", "DEVICES", "SERIAL", "I2C", "load", "section", "build_node", "build_emulator"]
+__all__ = ["Device", "DEVICES", "SERIAL", "I2C", "load", "section", "build_node"]
 
 SERIAL, I2C = "serial", "i2c"
 
@@ -27,6 +27,7 @@ class Device:
     factory is called as ``emulator(config, truth, clock, seed)`` (truth: a callable of time, s, or None for an
     output). section: dotted configuration section. topics: parsed topic (absolute) -> message type, the topics a
     replay compares. output: an actuator (its reads echo the driver's writes; not part of the sensors group).
+    status: its ``/diagnostics`` status name, "" for ``hindrax/<node>``.
     """
 
     name: str
@@ -37,6 +38,7 @@ class Device:
     section: str
     topics: dict[str, str] = field(default_factory=dict)
     output: bool = False
+    status: str = ""
 
 
 #: every device, in construction order (bringup builds the drivers in this order; the ESC, an output, last)
@@ -53,7 +55,8 @@ DEVICES: tuple[Device, ...] = (
     Device("icm20948", "icm20948", I2C, ".icm20948.node:Icm20948Node", ".icm20948.emulator:from_config",
            "sensors.icm20948", {"/imu/data_raw": "sensor_msgs/msg/Imu", "/imu/mag": "sensor_msgs/msg/MagneticField",
                                 "/imu/temperature": "sensor_msgs/msg/Temperature"}),
-    Device("pca9685", "esc", I2C, ".pca9685.node:EscNode", ".pca9685.emulator:from_config", "esc", output=True),
+    Device("pca9685", "esc", I2C, ".pca9685.node:EscNode", ".pca9685.emulator:from_config", "esc", output=True,
+           status="hindrax/esc_pca9685"),
 )
 
 
@@ -77,7 +80,3 @@ def build_node(device: Device, bus: Any = None, **kwargs: Any) -> Any:
     cls = load(device.node_class)
     return cls(bus=bus, **kwargs) if device.transport == I2C else cls(**kwargs)
 
-
-def build_emulator(device: Device, config: Any, truth: Any, clock: Callable[[], float], seed: int = 0) -> Any:
-    """The emulator of ``device`` (its factory, :class:`Device`) for ``config``, ``truth``, ``clock`` (s)."""
-    return load(device.emulator)(config, truth, clock, seed)

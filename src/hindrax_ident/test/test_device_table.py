@@ -1,6 +1,6 @@
 """The device table (hindrax_drivers.devices) is the one list of devices: every path that builds devices (the
-composed processes, the pool-day emulators, the drive replay, the simulator's virtual hardware, bringup) has
-exactly the table's devices, and a device added to the table alone appears in bringup, the replay and the
+composed processes, ``hindrax health``, the pool-day emulators, the drive replay, the simulator's virtual hardware,
+bringup) has exactly the table's devices, and a device added to the table alone appears in bringup, the replay and the
 simulator."""
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from hindrax_drivers import devices
 from hindrax_drivers.composition import GROUPS, NODE_CLASSES
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.emulated_devices import I2C_DEVICES, SERIAL_DEVICES, EmulatedDevices
+from hindrax_drivers.health import STATUS_OF_NODE
 from hindrax_drivers.recording import replay_devices
 from hindrax_drivers.testing import ros_context
 from hindrax_ident.bringup import build_graph
@@ -38,6 +39,9 @@ def test_the_table_holds_the_five_devices_and_every_path_exactly_them():
     assert nodes <= set(NODE_CLASSES)
     assert set(GROUPS["sensors_node"]) - {"static_tf"} == {d.node for d in devices.DEVICES if not d.output}
     assert {d.node for d in devices.DEVICES if d.output} <= set(GROUPS["actuation_node"])
+    assert {n: s for n, s in STATUS_OF_NODE.items() if n in nodes} == {
+        "dvl75": "hindrax/dvl75", "ping1d": "hindrax/ping1d", "ms5837": "hindrax/ms5837",
+        "icm20948": "hindrax/icm20948", "esc": "hindrax/esc_pca9685"}  # what each node reports on /diagnostics
     assert set(SERIAL_DEVICES) == SERIAL and set(I2C_DEVICES) - {"output_guard"} == {"ms5837", "icm20948", "esc"}
     pool = EmulatedDevices(cfg, serve_i2c=False)
     try:

@@ -566,8 +566,7 @@ def _corrupt_nmea_checksum(message: bytes) -> bytes:
 
 
 def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0) -> Dvl75Emulator:
-    """The simulator's DVL-75 (``simulation.sensors.dvl75``: rate, altitude range) answering from ``truth``
-    (hindrax_drivers.devices factory; the pty supplies the clock)."""
+    """The simulator's DVL-75 (``simulation.sensors.dvl75``) on ``truth`` (devices.py factory; clock: the pty's)."""
     s = config.simulation.sensors.dvl75
     return Dvl75Emulator(truth, rate_hz=s.rate_hz, flash=DvlFlash(), min_altitude_m=s.min_altitude_m,
                          max_altitude_m=s.max_altitude_m, seed=seed)

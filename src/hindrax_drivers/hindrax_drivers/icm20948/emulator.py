@@ -484,6 +484,5 @@ class Icm20948Emulator(RegisterPointerEmulator):
 
 
 def from_config(config, truth: ImuTruth, clock: Callable[[], float], seed: int = 0) -> Icm20948Emulator:
-    """The ICM-20948 at ``sensors.icm20948.i2c_address`` answering from ``truth`` on ``clock`` (s)
-    (hindrax_drivers.devices factory)."""
+    """The ICM-20948 at ``sensors.icm20948.i2c_address`` on ``truth`` and ``clock`` (s) (devices.py factory)."""
     return Icm20948Emulator(truth, clock, address=config.sensors.icm20948.i2c_address)

@@ -250,7 +250,6 @@ class Ms5837Emulator:
 
 
 def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0) -> Ms5837Emulator:
-    """The configured MS5837 variant ("auto": 30BA) answering from ``truth`` on ``clock`` (s)
-    (hindrax_drivers.devices factory)."""
+    """The configured MS5837 variant ("auto": 30BA) on ``truth`` and ``clock`` (s) (devices.py factory)."""
     variant = config.sensors.ms5837.variant
     return Ms5837Emulator(truth, clock, variant="30BA" if variant == "auto" else variant)

@@ -217,6 +217,5 @@ class Pca9685Emulator(RegisterPointerEmulator):
 
 
 def from_config(config, truth: None, clock: Callable[[], float], seed: int = 0) -> Pca9685Emulator:
-    """The PCA9685 with the configured ``esc.oscillator_hz`` on ``clock`` (s); an output: no truth
-    (hindrax_drivers.devices factory)."""
+    """The PCA9685 at the configured ``esc.oscillator_hz`` on ``clock`` (s); no truth (devices.py factory)."""
     return Pca9685Emulator(oscillator_hz=config.esc.oscillator_hz, clock=clock)

@@ -407,6 +407,5 @@ def _corrupt_checksum(frame: bytes) -> bytes:
 
 
 def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0) -> Ping1dEmulator:
-    """The simulator's Ping1D, sound at the configured ``sensors.ping1d.speed_of_sound_m_s``, answering from
-    ``truth`` (hindrax_drivers.devices factory; the pty supplies the clock)."""
+    """The simulator's Ping1D (configured speed of sound) on ``truth`` (devices.py factory; clock: the pty's)."""
     return Ping1dEmulator(truth, true_speed_of_sound_m_s=config.sensors.ping1d.speed_of_sound_m_s, seed=seed)

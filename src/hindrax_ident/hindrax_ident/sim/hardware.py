@@ -144,7 +144,7 @@ class VirtualHardware:
         bus: dict[int, Any] = {}
         for d in device_table.DEVICES:
             truth = getattr(self, f"_{d.name}_truth", None)
-            emulator = self.emulators[d.name] = device_table.build_emulator(d, config, truth, clock, seed)
+            emulator = self.emulators[d.name] = device_table.load(d.emulator)(config, truth, clock, seed)
             if d.transport == device_table.I2C:
                 bus[device_table.section(config, d).i2c_address] = emulator
             elif serve_serial:
