@@ -63,8 +63,8 @@ def test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral(
     hindrax = str(Path(sys.executable).with_name("hindrax"))
     with ros_context() as ctx:
         graph = build_graph(default_config_path(), context=ctx, i2c_bus=hardware.i2c_bus,
-                            overrides={**overrides, "sensors.dvl75.port": hardware.dvl_port,
-                                       "sensors.ping1d.port": hardware.ping_port})
+                            overrides={**overrides, "sensors.dvl75.port": hardware.ports["dvl75"],
+                                       "sensors.ping1d.port": hardware.ports["ping1d"]})
         assert "identification" in graph.nodes and "simulator" not in graph.nodes
         plant = SimulatorNode(config=cfg, simulator=simulator, pulse_width_source=hardware.pulse_widths_us,
                               context=ctx)

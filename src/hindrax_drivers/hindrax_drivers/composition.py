@@ -47,19 +47,16 @@ Groups (:data:`GROUPS`):
 """
 from __future__ import annotations
 
-import importlib
 import sys
 from typing import Any, Callable, Mapping, Sequence
+
+from .devices import DEVICES, load
 
 __all__ = ["GROUPS", "IDENT_GROUPS", "NODE_CLASSES", "node_factories", "node_names", "run_group"]
 
 #: node -> "module:class" of every node class that composes (the class is imported only when used)
 NODE_CLASSES: dict[str, str] = {
-    "dvl75": "hindrax_drivers.dvl75.node:Dvl75Node",
-    "ping1d": "hindrax_drivers.ping1d.node:Ping1dNode",
-    "ms5837": "hindrax_drivers.ms5837.node:Ms5837Node",
-    "icm20948": "hindrax_drivers.icm20948.node:Icm20948Node",
-    "esc": "hindrax_drivers.pca9685.node:EscNode",
+    **{d.node: "hindrax_drivers" + d.node_class for d in DEVICES},
     "thrust_allocation": "hindrax_drivers.allocation.node:ThrustAllocationNode",
     "static_tf": "hindrax_drivers.tf.node:StaticTfNode",
     "supervisor": "hindrax_drivers.supervisor.node:SupervisorNode",
@@ -68,7 +65,7 @@ NODE_CLASSES: dict[str, str] = {
 
 #: console script -> the nodes it composes, in construction order (module docstring)
 GROUPS: dict[str, tuple[str, ...]] = {
-    "sensors_node": ("dvl75", "ping1d", "ms5837", "icm20948", "static_tf"),
+    "sensors_node": tuple(d.node for d in DEVICES if not d.output) + ("static_tf",),
     "actuation_node": ("thrust_allocation", "esc"),
 }
 
@@ -96,8 +93,7 @@ def node_factories(names: Sequence[str], classes: Mapping[str, str] = NODE_CLASS
     for name in names:
         if name not in classes:
             raise ValueError(f"unknown node {name!r}: choose from {', '.join(classes)}")
-        module, _, cls = classes[name].partition(":")
-        out.append(getattr(importlib.import_module(module), cls))
+        out.append(load(classes[name]))
     return out
 
 

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from .config import VehicleConfig
+from .devices import DEVICES, I2C, SERIAL
 from .dvl75.emulator import Dvl75Emulator, DvlTruth
 from .icm20948.emulator import Icm20948Emulator
 from .ms5837.emulator import Ms5837Emulator
@@ -39,9 +40,9 @@ from .transport.socket_i2c import SOCKET_ENV, I2CSocketServer
 __all__ = ["EmulatedDevices", "SERIAL_DEVICES", "I2C_DEVICES", "driver_env", "driver_ros_arguments"]
 
 #: launch-file node name -> configuration section of its serial port
-SERIAL_DEVICES = {"dvl75": "sensors.dvl75", "ping1d": "sensors.ping1d"}
-#: launch-file node names of the drivers on the I2C bus
-I2C_DEVICES = ("ms5837", "icm20948", "esc", "output_guard")
+SERIAL_DEVICES = {d.node: d.section for d in DEVICES if d.transport == SERIAL}
+#: launch-file node names of the drivers on the I2C bus (the output guard silences the PCA9685 over it)
+I2C_DEVICES = tuple(d.node for d in DEVICES if d.transport == I2C) + ("output_guard",)
 
 _DEPTH_M, _ALTITUDE_M, _WOBBLE_M = 1.0, 1.5, 0.02
 _SURFACE_PA, _RHO_KG_M3, _G_M_S2 = 101325.0, 1000.0, 9.80665

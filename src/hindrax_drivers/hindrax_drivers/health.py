@@ -15,17 +15,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Iterable, Mapping
 
+from .devices import DEVICES
+
 __all__ = ["STATUS_OF_NODE", "SUPERVISOR_STATUS_TOPIC", "Expectation", "HealthReport", "Seen", "assess",
            "expectation", "level_name"]
 
 #: node name in the launch files -> the name of the status it publishes on /diagnostics (nodes absent here publish
 #: none; their presence in the graph is what is checked)
 STATUS_OF_NODE = {
-    "dvl75": "hindrax/dvl75",
-    "ping1d": "hindrax/ping1d",
-    "ms5837": "hindrax/ms5837",
-    "icm20948": "hindrax/icm20948",
-    "esc": "hindrax/esc_pca9685",
+    **{d.node: d.status or f"hindrax/{d.node}" for d in DEVICES},
     "supervisor": "hindrax/supervisor",
     "output_guard": "hindrax/output_guard",
     "recorder": "recorder: recording",

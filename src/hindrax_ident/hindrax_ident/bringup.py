@@ -1,16 +1,15 @@
 """Bring up the Hindrax node graph in one process (SingleThreadedExecutor; docs/architecture.md §11.5: the
 MultiThreadedExecutor is broken here, and launch is not available).
 
-Nodes: the four sensor drivers (DVL-75, Ping1D, MS5837, ICM-20948), the ESC output (PCA9685), the thrust
-allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the static TF (/tf_static), the
-identification executive (:mod:`hindrax_ident.identification.online.node`, always: on the vehicle as in the virtual
-pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and, optionally, the recorder. On the
-vehicle they open the configured serial ports and
-``/dev/i2c-N``. With ``sim=True`` the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing
-``/clock`` and :class:`~hindrax_ident.sim.hardware.VirtualHardware` (the five device emulators fed by the
-simulator: serial devices on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an
-emulated bus); every other node then runs
-with ``use_sim_time`` and the simulator takes the thrusters' pulse widths from the PCA9685 registers.
+Nodes: the device drivers (:data:`hindrax_drivers.devices.DEVICES`: DVL-75, Ping1D, MS5837, ICM-20948, and the ESC
+output on the PCA9685), the thrust allocation, the safety supervisor (:mod:`hindrax_drivers.supervisor.node`), the
+static TF (/tf_static), the identification executive (:mod:`hindrax_ident.identification.online.node`, always: on
+the vehicle as in the virtual pool, it cannot tell them apart; ``hindrax ident start`` sends it a campaign) and,
+optionally, the recorder. On the vehicle they open the configured serial ports and ``/dev/i2c-N``. With ``sim=True``
+the virtual pool replaces the hardware: a :class:`SimulatorNode` publishing ``/clock`` and
+:class:`~hindrax_ident.sim.hardware.VirtualHardware` (every device's emulator fed by the simulator: serial devices
+on pseudo-terminals served in lock-step with the simulated clock, I2C devices on an emulated bus); every other node
+then runs with ``use_sim_time`` and the simulator takes the thrusters' pulse widths from the PCA9685 registers.
 
 Each node class also runs alone (``python -m hindrax_drivers.<device>.node --ros-args --params-file ...``).
 """
@@ -25,16 +24,12 @@ from rclpy.executors import ShutdownException, TimeoutException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from hindrax_drivers import devices as device_table
 from hindrax_drivers.allocation.node import ThrustAllocationNode
 from hindrax_drivers.conditions import wait_until
 from hindrax_drivers.config import ConfigError, VehicleConfig, load_config
-from hindrax_drivers.dvl75.node import Dvl75Node
 from hindrax_drivers.gateway.interface import GATEWAY_NODE
 from hindrax_drivers.guard.node import OutputGuardNode
-from hindrax_drivers.icm20948.node import Icm20948Node
-from hindrax_drivers.ms5837.node import Ms5837Node
-from hindrax_drivers.pca9685.node import EscNode
-from hindrax_drivers.ping1d.node import Ping1dNode
 from hindrax_drivers.recording.recorder_node import RecorderNode
 from hindrax_drivers.ros_process import RosProcess
 from hindrax_drivers.supervisor.node import SupervisorNode
@@ -242,9 +237,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
                                            pulse_width_source=hardware.pulse_widths_us, **kw)
         # The emulated PCA9685 reports its oscillator (VirtualHardware builds it at esc.oscillator_hz): measured, as
         # `hindrax esc calibrate` measures a real part, when it is the configured one (then the ESC puts pulses out)
-        measured = hardware.pca9685.oscillator_hz == cfg.esc.oscillator_hz
-        cfg = cfg.with_overrides({"sensors.dvl75.port": hardware.dvl_port, "sensors.ping1d.port": hardware.ping_port,
-                                  "esc.oscillator_calibrated": measured})
+        measured = hardware.emulators["pca9685"].oscillator_hz == cfg.esc.oscillator_hz
+        ports = {f"{d.section}.port": hardware.ports[d.name] for d in device_table.DEVICES if d.name in hardware.ports}
+        cfg = cfg.with_overrides({**ports, "esc.oscillator_calibrated": measured})
         bus = hardware.i2c_bus
     else:
         bus = i2c_bus  # None: each I2C node opens smbus2.SMBus(<its configured bus>)
@@ -252,10 +247,6 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     if sim:
         params.append(Parameter("use_sim_time", value=True))
     common = dict(parameter_overrides=params, **kw)
-    nodes["dvl75"] = Dvl75Node(**common)
-    nodes["ping1d"] = Ping1dNode(**common)
-    nodes["ms5837"] = Ms5837Node(bus=bus, **common)
-    nodes["icm20948"] = Icm20948Node(bus=bus, **common)
     # one process, one executor thread: a slow callback delays the ESC, the supervisor and the guard alike, and none
     # of them can die or hang alone, so their heartbeats get a wide timeout (the vehicle runs them as processes)
     wide_beats = [Parameter("heartbeat_timeout_s", value=SINGLE_PROCESS_HEARTBEAT_TIMEOUT_S)]
@@ -266,8 +257,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     steady = [Parameter("steady_watchdog_timeout_s", value=SIMULATED_TIME_HOLD_S)] if sim and drive_clocks else []
     # simulated: the chip jobs run in the executor thread, so that a write lands at the simulated instant of its
     # command (lock-step; the emulated bus answers at once); on hardware the ESC's bus has a thread of its own
-    nodes["esc"] = EscNode(bus=bus, chip_thread=not sim,
-                           **{**common, "parameter_overrides": params + wide_beats + steady})
+    extra = {"esc": {"chip_thread": not sim, "parameter_overrides": params + wide_beats + steady}}
+    for d in device_table.DEVICES:
+        nodes[d.node] = device_table.build_node(d, bus, **{**common, **extra.get(d.node, {})})
     nodes["thrust_allocation"] = ThrustAllocationNode(**common)
 
     # disarms the ESC on a breach (supervisor.*)
@@ -294,9 +286,10 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         ms5837_clock = nodes["ms5837"].get_clock()
         hardware.use_clock(lambda: ms5837_clock.now().nanoseconds * 1e-9)
         # serial devices in lock-step: sent at the clock tick, handled by the driver before time moves on
-        serial = ("dvl75", "ping1d")
-        hardware.lock_step_serial(nodes["simulator"], {n: nodes[n].transport for n in serial},
-                                  ready={n: (lambda c=nodes[n].commands: c.sequences_completed >= 1) for n in serial})
+        serial = {d.name: nodes[d.node] for d in device_table.DEVICES if d.transport == device_table.SERIAL}
+        hardware.lock_step_serial(nodes["simulator"], {n: node.transport for n, node in serial.items()},
+                                  ready={n: (lambda c=node.commands: c.sequences_completed >= 1)
+                                         for n, node in serial.items()})
     if record:
         rec_params = params + [Parameter("all_topics", value=True), Parameter("autostart", value=True),
                                Parameter("output_dir", value=str(record_dir))]

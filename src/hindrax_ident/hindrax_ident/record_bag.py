@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hindrax_drivers.conditions import ros_context
+from hindrax_drivers.devices import DEVICES, I2C
 from hindrax_drivers.recording.make_test_bags import default_output_dir, write_bags
 from hindrax_drivers.recording.reader import BagReader
 
@@ -103,7 +104,7 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
                 published[topic] += 1
         pub.publish = publish
 
-    drivers = [graph.nodes[n] for n in ("dvl75", "ping1d", "ms5837", "icm20948", "esc")]
+    drivers = [graph.nodes[d.node] for d in DEVICES]
     for node in drivers + [sim_node]:
         for pub in node.publishers:
             count(pub)
@@ -123,8 +124,8 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
         def flushed() -> bool:
             # the I2C drivers' raw records still pending (RawDataPublisher publishes them every 0.1 s), also those
             # of a poll that was due at the freeze and runs now
-            for name in ("ms5837", "icm20948", "esc"):
-                graph.nodes[name].raw.flush_pending()
+            for node in [graph.nodes[d.node] for d in DEVICES if d.transport == I2C]:
+                node.raw.flush_pending()
             # the serial devices are in lock-step: every byte sent was handled by its driver before time moved on
             got = recorder._writer.topic_counts() if recorder._writer is not None else {}
             return all(link.settled() for link in links) and all(

@@ -41,7 +41,7 @@ def test_pca9685_registers_drive_the_simulated_thrusters(hw):
 def test_dvl_emulator_on_a_pty_reports_the_simulated_velocity(hw):
     sim, vh, cfg = hw
     sim.reset(position_ned_m=[5.0, 3.0, 0.9], nu=[0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
-    port = serial.serial_for_url(vh.dvl_port, baudrate=115200, timeout=0.05)
+    port = serial.serial_for_url(vh.ports["dvl75"], baudrate=115200, timeout=0.05)
     try:
         port.write(b"SEND-DVPDL ON\n")
         framer = dvl.DvlLineFramer()
@@ -74,12 +74,13 @@ def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample
     errors, stale = [], []
     for _ in range(12):
         sim.advance(0.035)  # off the 10 Hz grid of the pressure model
-        pressure_pa = float(np.mean([vh.ms5837.truth(0.0)[0] for _ in range(20)]))  # what a conversion samples
+        # what a conversion samples
+        pressure_pa = float(np.mean([vh.emulators["ms5837"].truth(0.0)[0] for _ in range(20)]))
         port_depth = (pressure_pa - cfg.environment.surface_pressure_pa) / rho_g
         errors.append(port_depth - port_z - sim.position_ned_m[2])
         stale.append(sim.t_s - sim.latest_sample("ms5837").stamp_s)
     assert max(stale) > 0.05  # the grid sample was old at several of these reads
     noise_m = cfg.simulation.sensors.ms5837.noise_std_pa / rho_g / np.sqrt(20)
     assert np.max(np.abs(errors)) < 0.002 + 4 * noise_m  # the depth now (a 50 ms old sample is 15 mm off)
-    spec_gyro = vh.icm20948.truth(0.0)[1]
+    spec_gyro = vh.emulators["icm20948"].truth(0.0)[1]
     assert np.allclose(spec_gyro, sim.measure("icm20948_gyro").angular_rate_rad_s, atol=0.05)

@@ -101,7 +101,7 @@ def test_dvl_emulator_reports_the_simulated_beam_ranges():
     vh = VirtualHardware(sim, sim.config)
     try:
         sim.reset(position_ned_m=[5.0, 3.0, 1.0])
-        port = serial.serial_for_url(vh.dvl_port, baudrate=115200, timeout=0.05)
+        port = serial.serial_for_url(vh.ports["dvl75"], baudrate=115200, timeout=0.05)
         framer = dvl.DvlLineFramer()
         records = []
 

@@ -69,7 +69,7 @@ from .protocol import (
     parse_line,
 )
 
-__all__ = ["DvlTruth", "DvlFlash", "Dvl75Emulator", "EARTH_RADIUS_M"]
+__all__ = ["from_config", "DvlTruth", "DvlFlash", "Dvl75Emulator", "EARTH_RADIUS_M"]
 
 #: Mean Earth radius used for dead-reckoned latitude/longitude [EMULATOR].
 EARTH_RADIUS_M = 6371000.0
@@ -564,3 +564,9 @@ def _corrupt_nmea_checksum(message: bytes) -> bytes:
     body = message.rstrip(b"\r\n")
     return body[:-1] + b"#" + message[len(body):] if body else message
 
+
+def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0) -> Dvl75Emulator:
+    """The simulator's DVL-75 (``simulation.sensors.dvl75``) on ``truth`` (devices.py factory; clock: the pty's)."""
+    s = config.simulation.sensors.dvl75
+    return Dvl75Emulator(truth, rate_hz=s.rate_hz, flash=DvlFlash(), min_altitude_m=s.min_altitude_m,
+                         max_altitude_m=s.max_altitude_m, seed=seed)

@@ -39,7 +39,7 @@ import numpy as np
 from ..transport.emulated_i2c import RegisterPointerEmulator, remote_io_error
 from . import protocol as p
 
-__all__ = ["Icm20948Emulator", "Ak09916Emulator", "ImuTruth"]
+__all__ = ["from_config", "Icm20948Emulator", "Ak09916Emulator", "ImuTruth"]
 
 #: Truth source in the sensor frame: t_s -> (specific_force_m_s2 (3,), angular_rate_rad_s (3,),
 #: magnetic_field_t (3,), temperature_c).
@@ -481,3 +481,8 @@ class Icm20948Emulator(RegisterPointerEmulator):
         if reg[:2] == p.I2C_SLV4_CTRL[:2] and value & p.I2C_SLV_CTRL_EN and self.master_enabled \
                 and not self.sleeping:
             self._run_slv4()
+
+
+def from_config(config, truth: ImuTruth, clock: Callable[[], float], seed: int = 0) -> Icm20948Emulator:
+    """The ICM-20948 at ``sensors.icm20948.i2c_address`` on ``truth`` and ``clock`` (s) (devices.py factory)."""
+    return Icm20948Emulator(truth, clock, address=config.sensors.icm20948.i2c_address)

@@ -31,7 +31,7 @@ from typing import Callable, Sequence
 
 from . import protocol as p
 
-__all__ = ["Ms5837Emulator", "invert_to_raw", "TruthSource"]
+__all__ = ["from_config", "Ms5837Emulator", "invert_to_raw", "TruthSource"]
 
 #: Truth source: time in s -> (absolute pressure in Pa, temperature in degC).
 TruthSource = Callable[[float], "tuple[float, float]"]
@@ -247,3 +247,9 @@ class Ms5837Emulator:
             out = (self._output + bytes(max(0, n - len(self._output))))[:n]
             self._output = self._output[n:]
             return out
+
+
+def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0) -> Ms5837Emulator:
+    """The configured MS5837 variant ("auto": 30BA) on ``truth`` and ``clock`` (s) (devices.py factory)."""
+    variant = config.sensors.ms5837.variant
+    return Ms5837Emulator(truth, clock, variant="30BA" if variant == "auto" else variant)

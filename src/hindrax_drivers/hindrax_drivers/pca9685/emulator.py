@@ -39,7 +39,7 @@ from typing import Callable
 from ..transport.emulated_i2c import RegisterPointerEmulator
 from . import protocol as p
 
-__all__ = ["Pca9685Emulator", "WriteLogEntry"]
+__all__ = ["from_config", "Pca9685Emulator", "WriteLogEntry"]
 
 
 @dataclass(frozen=True)
@@ -214,3 +214,8 @@ class Pca9685Emulator(RegisterPointerEmulator):
         elif register in (p.SUBADR1, p.SUBADR2, p.SUBADR3, p.ALLCALLADR):
             regs[register] = value
         # 0x46..0xF9 reserved and 0xFF TestMode: ignored
+
+
+def from_config(config, truth: None, clock: Callable[[], float], seed: int = 0) -> Pca9685Emulator:
+    """The PCA9685 at the configured ``esc.oscillator_hz`` on ``clock`` (s); no truth (devices.py factory)."""
+    return Pca9685Emulator(oscillator_hz=config.esc.oscillator_hz, clock=clock)

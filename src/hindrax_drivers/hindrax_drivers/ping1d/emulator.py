@@ -81,7 +81,7 @@ from .protocol import (
     encode_message,
 )
 
-__all__ = ["Ping1dTruth", "Ping1dSettings", "Ping1dMeasurement", "Ping1dEmulator"]
+__all__ = ["from_config", "Ping1dTruth", "Ping1dSettings", "Ping1dMeasurement", "Ping1dEmulator"]
 
 _BROADCAST_ID = 0xFF
 _MIN_PING_INTERVAL_S = 0.01  # [EMULATOR]
@@ -404,3 +404,8 @@ def _corrupt_checksum(frame: bytes) -> bytes:
     if len(frame) < 2:
         return frame
     return frame[:-1] + bytes([frame[-1] ^ 0xFF])
+
+
+def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0) -> Ping1dEmulator:
+    """The simulator's Ping1D (configured speed of sound) on ``truth`` (devices.py factory; clock: the pty's)."""
+    return Ping1dEmulator(truth, true_speed_of_sound_m_s=config.sensors.ping1d.speed_of_sound_m_s, seed=seed)

@@ -54,14 +54,10 @@ from rosgraph_msgs.msg import Clock
 
 from hindrax_msgs.msg import RawDeviceData
 
+from .. import devices as device_table
 from ..config import load_config
-from ..dvl75.node import Dvl75Node
-from ..icm20948.node import Icm20948Node
-from ..ms5837.node import Ms5837Node
 from ..node_common import raw_transactions
 from ..pca9685.emulator import Pca9685Emulator
-from ..pca9685.node import EscNode
-from ..ping1d.node import Ping1dNode
 from ..transport.emulated_i2c import EmulatedI2CBus
 from ..transport.pty_device import PtyDevice
 from .msgtypes import message_class
@@ -71,14 +67,9 @@ __all__ = ["ReplayClock", "SerialReplayDevice", "I2CReplayDevice", "ReplayHardwa
            "PARSED_TOPICS", "RECEIVE_TIME_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed",
            "strip_stamp"]
 
-#: Parsed topics of the driver nodes (absolute names, as in :func:`hindrax_ident.bringup.build_graph`),
-#: with the device whose raw data they are parsed from.
-PARSED_TOPICS: dict[str, str] = {
-    "/dvl/data": "dvl75", "/dvl/twist": "dvl75", "/dvl/altitude": "dvl75",
-    "/ping/altitude": "ping1d", "/ping/confidence": "ping1d",
-    "/pressure/fluid_pressure": "ms5837", "/pressure/temperature": "ms5837", "/pressure/depth": "ms5837",
-    "/imu/data_raw": "icm20948", "/imu/mag": "icm20948", "/imu/temperature": "icm20948",
-}
+#: Parsed topics of the driver nodes (absolute names, :data:`~hindrax_drivers.devices.DEVICES`), with the device
+#: whose raw data they are parsed from.
+PARSED_TOPICS: dict[str, str] = {t: d.name for d in device_table.DEVICES for t in d.topics}
 #: Topics whose header stamp is the driver's receive time (ROS time of the read), so it differs between a
 #: run and its replay. ``/dvl/data`` and ``/dvl/twist`` are stamped with the DVL's own clock instead
 #: (``$DVPDL`` ``tu``) mapped to ROS time by the receive-time-based clock-offset estimate; see compare_parsed.
@@ -282,8 +273,8 @@ class ReplayHardware:
 
     Args:
         bag_path: the bag (directory or .mcap).
-        devices: device names to serve (default: those with raw data in the bag among ``dvl75``, ``ping1d``,
-            ``ms5837``, ``icm20948``, ``pca9685``).
+        devices: device names to serve (default: those of :data:`~hindrax_drivers.devices.DEVICES` with raw data
+            in the bag).
         paced: see :class:`SerialReplayDevice`.
     Attributes:
         clock (ReplayClock), serial (name -> SerialReplayDevice), ptys (name -> PtyDevice), ports (name ->
@@ -291,9 +282,6 @@ class ReplayHardware:
     Raises:
         FileNotFoundError / BagError: bad bag path.
     """
-
-    SERIAL = ("dvl75", "ping1d")
-    I2C = ("ms5837", "icm20948", "pca9685")
 
     def __init__(self, bag_path: str | Path, devices: Iterable[str] | None = None, paced: bool = True) -> None:
         self.clock = ReplayClock()
@@ -304,10 +292,10 @@ class ReplayHardware:
         self.outputs: dict[int, Any] = {}  # PCA9685: emulated, not replayed (see below)
         self.i2c_device_of: dict[int, str] = {}
         self.recorded_host_bytes: dict[str, bytes] = {}
-        wanted = tuple(devices) if devices is not None else self.SERIAL + self.I2C
-        for name in wanted:
+        table = {d.name: d for d in device_table.DEVICES}
+        for name in tuple(devices) if devices is not None else table:
             items = list(iter_raw_device_data(bag_path, name))
-            if name in self.SERIAL:
+            if table[name].transport == device_table.SERIAL:
                 rx, tx = serial_chunks(items)
                 if not rx and not tx:
                     continue
@@ -316,7 +304,7 @@ class ReplayHardware:
                 self.recorded_host_bytes[name] = b"".join(d for _, d in tx)
                 self.ptys[name] = PtyDevice(dev, clock=self.clock.seconds, link_name=name)
                 self.ports[name] = str(self.ptys[name].path)
-            elif name == "pca9685":
+            elif table[name].output:
                 # an output device: its reads only echo the driver's writes, and the ESC node's read-back runs on the
                 # steady clock (docs/architecture.md §8), so their number depends on wall time, not on the bag: the
                 # register-exact emulator answers them (its outputs are not compared)
@@ -422,27 +410,16 @@ class DriverReplay:
         self.hardware = ReplayHardware(self.bag_path)
         hw = self.hardware
         ov = dict(overrides or {})
-        if "dvl75" in hw.ports:
-            ov["sensors.dvl75.port"] = hw.ports["dvl75"]
-        if "ping1d" in hw.ports:
-            ov["sensors.ping1d.port"] = hw.ports["ping1d"]
+        present = [d for d in device_table.DEVICES if d.name in set(hw.serial) | set(hw.i2c_device_of.values())]
+        ov.update({f"{d.section}.port": hw.ports[d.name] for d in present if d.name in hw.ports})
         cfg = load_config(config_path, ov)
         params = [Parameter(k, value=v) for k, v in cfg.to_ros_parameters().items()]
         params.append(Parameter("use_sim_time", value=True))
         kw = dict(parameter_overrides=params, context=context)
-        devices = set(hw.serial) | set(hw.i2c_device_of.values())
-        self.nodes: dict[str, Any] = {}
-        if "dvl75" in devices:
-            self.nodes["dvl75"] = Dvl75Node(**kw)
-        if "ping1d" in devices:
-            self.nodes["ping1d"] = Ping1dNode(**kw)
-        if "ms5837" in devices:
-            self.nodes["ms5837"] = Ms5837Node(bus=hw.i2c_bus, **kw)
-        if "icm20948" in devices:
-            self.nodes["icm20948"] = Icm20948Node(bus=hw.i2c_bus, **kw)
-        if "pca9685" in devices:
-            # chip jobs in the executor thread: the replayed bus answers in the recorded order of its transactions
-            self.nodes["esc"] = EscNode(bus=hw.i2c_bus, chip_thread=False, **kw)
+        # the ESC's chip jobs in the executor thread: the replayed bus answers in the recorded order of its transactions
+        extra = {"esc": {"chip_thread": False}}
+        self.nodes: dict[str, Any] = {d.node: device_table.build_node(d, hw.i2c_bus, **extra.get(d.node, {}), **kw)
+                                      for d in present}
         self.published: collections.Counter[str] = collections.Counter()
         for node in self.nodes.values():
             for pub in node.publishers:
@@ -461,14 +438,8 @@ class DriverReplay:
 
     @staticmethod
     def _type_of(topic: str) -> str:
-        return {"/dvl/data": "hindrax_msgs/msg/Dvl", "/dvl/twist": "geometry_msgs/msg/TwistWithCovarianceStamped",
-                "/dvl/altitude": "sensor_msgs/msg/Range", "/ping/altitude": "sensor_msgs/msg/Range",
-                "/ping/confidence": "std_msgs/msg/Float32", "/pressure/fluid_pressure": "sensor_msgs/msg/FluidPressure",
-                "/pressure/temperature": "sensor_msgs/msg/Temperature",
-                "/pressure/depth": "geometry_msgs/msg/PoseWithCovarianceStamped",
-                "/imu/data_raw": "sensor_msgs/msg/Imu",
-                "/imu/mag": "sensor_msgs/msg/MagneticField", "/imu/temperature": "sensor_msgs/msg/Temperature",
-                "/thrusters/pulse_width": "hindrax_msgs/msg/ThrusterPwm"}[topic]
+        types = {t: k for d in device_table.DEVICES for t, k in d.topics.items()}
+        return {**types, "/thrusters/pulse_width": "hindrax_msgs/msg/ThrusterPwm"}[topic]
 
     def _count(self, pub: Any) -> None:
         topic = pub.topic_name

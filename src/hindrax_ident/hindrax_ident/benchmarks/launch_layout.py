@@ -188,7 +188,7 @@ def _pool(argv: list[str]) -> int:
 
     node._step_once = locked_step
     server = I2CSocketServer(hardware.i2c_bus, args.socket, lock)
-    write_ports_file(args.ports_file, {"dvl75": hardware.dvl_port, "ping1d": hardware.ping_port})
+    write_ports_file(args.ports_file, hardware.ports)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     try:

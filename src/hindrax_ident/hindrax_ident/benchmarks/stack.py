@@ -285,7 +285,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
                 sim_cpu[0] += time.thread_time() - t0
 
         sim_node.advance_clock_period = timed_advance
-        for device in (hw.ms5837, hw.icm20948, hw.pca9685):
+        for device in (hw.emulators[n] for n in ("ms5837", "icm20948", "pca9685")):
             for meth in ("i2c_read", "i2c_write"):
                 def timed(*a: Any, _orig: Any = getattr(device, meth)) -> Any:
                     t0 = time.thread_time()
@@ -348,7 +348,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             for name in NODES:
                 if name in graph.nodes:
                     per[name] = cpu.get(name, 0.0) - emu.get(name, 0.0)
-            for port, name in ((hw.dvl_port, "dvl75"), (hw.ping_port, "ping1d")):
+            for name, port in hw.ports.items():
                 per[name] += sum(v for k, v in thr.items() if k == f"SerialTransport({port})")
             per["recorder"] += sum(v for k, v in thr.items() if k.startswith("bag-writer"))
             emu_total = sum(emu.values())

@@ -23,12 +23,10 @@ from typing import Any, Callable
 
 import numpy as np
 
+from hindrax_drivers import devices as device_table
 from hindrax_drivers.config import VehicleConfig
-from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlFlash, DvlTruth
-from hindrax_drivers.icm20948.emulator import Icm20948Emulator
-from hindrax_drivers.ms5837.emulator import Ms5837Emulator
-from hindrax_drivers.pca9685.emulator import Pca9685Emulator
-from hindrax_drivers.ping1d.emulator import Ping1dEmulator, Ping1dTruth
+from hindrax_drivers.dvl75.emulator import DvlTruth
+from hindrax_drivers.ping1d.emulator import Ping1dTruth
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.pty_device import PtyDevice
 
@@ -119,11 +117,11 @@ class SerialLockStep:
 
 
 class VirtualHardware:
-    """Emulators of every Hindrax device, fed by ``sim`` (see the module docstring).
+    """Emulators of every device of :data:`~hindrax_drivers.devices.DEVICES`, fed by ``sim`` (module docstring);
+    a device's truth adapter is the method ``_<name>_truth`` (an output has none).
 
-    Attributes: ``i2c_bus`` (EmulatedI2CBus with the MS5837, ICM-20948 and PCA9685), ``dvl_port`` and
-    ``ping_port`` (pty paths for the serial drivers), the emulators themselves (``dvl``, ``ping``,
-    ``ms5837``, ``icm20948``, ``pca9685``). Call :meth:`close` to stop the pty threads.
+    Attributes: ``emulators`` (device name -> emulator), ``i2c_bus`` (EmulatedI2CBus with the I2C devices at their
+    configured addresses), ``ports`` (serial device name -> pty path). Call :meth:`close` to stop the pty threads.
     ``serve_serial=False`` skips the ptys (for tests that only need the I2C side). The ptys are served by their own
     threads, or, with ``serial_threads=False``, in lock-step with a simulator node once :meth:`lock_step_serial`
     is called (what :func:`~hindrax_ident.bringup.build_graph` does).
@@ -140,31 +138,22 @@ class VirtualHardware:
         self._clock_fn = lambda: math.floor(sim.t_s / period_s + 1e-9) * period_s  # noqa: E731
         clock = lambda: self._clock_fn()  # noqa: E731 - indirection so use_clock() can swap it later
         self._ensure_samples()
-        sim_dvl, sensors = config.simulation.sensors.dvl75, config.sensors
-        self.dvl = Dvl75Emulator(self._dvl_truth, rate_hz=sim_dvl.rate_hz,
-                                 flash=DvlFlash(), min_altitude_m=sim_dvl.min_altitude_m,
-                                 max_altitude_m=sim_dvl.max_altitude_m, seed=seed)
-        self.ping = Ping1dEmulator(self._ping_truth, true_speed_of_sound_m_s=sensors.ping1d.speed_of_sound_m_s,
-                                   seed=seed)
-        variant = sensors.ms5837.variant
-        self.ms5837 = Ms5837Emulator(self._pressure_truth, clock, variant="30BA" if variant == "auto" else variant)
-        self.icm20948 = Icm20948Emulator(self._imu_truth, clock, address=sensors.icm20948.i2c_address)
-        self.pca9685 = Pca9685Emulator(oscillator_hz=config.esc.oscillator_hz, clock=clock)
-        devices: dict[int, Any] = {
-            sensors.ms5837.i2c_address: self.ms5837,
-            sensors.icm20948.i2c_address: self.icm20948,
-            config.esc.i2c_address: self.pca9685,
-        }
-        if sensors.icm20948.magnetometer_mode == "bypass":
-            devices[0x0C] = self.icm20948.aux_port
-        self.i2c_bus = EmulatedI2CBus(devices)
+        self.emulators: dict[str, Any] = {}
+        self._ptys: dict[str, PtyDevice] = {}
+        self.ports: dict[str, str] = {}
+        bus: dict[int, Any] = {}
+        for d in device_table.DEVICES:
+            truth = getattr(self, f"_{d.name}_truth", None)
+            emulator = self.emulators[d.name] = device_table.load(d.emulator)(config, truth, clock, seed)
+            if d.transport == device_table.I2C:
+                bus[device_table.section(config, d).i2c_address] = emulator
+            elif serve_serial:
+                self._ptys[d.name] = PtyDevice(emulator, clock=clock, link_name=d.name, start=serial_threads)
+                self.ports[d.name] = str(self._ptys[d.name].path)
+        if config.sensors.icm20948.magnetometer_mode == "bypass":
+            bus[0x0C] = self.emulators["icm20948"].aux_port
+        self.i2c_bus = EmulatedI2CBus(bus)
         self._channels = [t.esc_channel for t in config.thrusters.thrusters]
-        self._ptys: list[PtyDevice] = []
-        self.dvl_port = self.ping_port = None
-        if serve_serial:
-            self._ptys = [PtyDevice(self.dvl, clock=clock, link_name="dvl75", start=serial_threads),
-                          PtyDevice(self.ping, clock=clock, link_name="ping1d", start=serial_threads)]
-            self.dvl_port, self.ping_port = (str(p.path) for p in self._ptys)
         #: the serial lock-steps by device name ("dvl75", "ping1d") after :meth:`lock_step_serial`
         self.serial_lock_steps: dict[str, SerialLockStep] = {}
 
@@ -175,33 +164,32 @@ class VirtualHardware:
 
     def lock_step_serial(self, sim_node: Any, transports: dict[str, Any],
                          ready: dict[str, Callable[[], bool]] | None = None) -> None:
-        """Serve the DVL-75 and Ping1D ptys from ``sim_node``'s clock ticks and gate its time on their drivers
-        (:class:`SerialLockStep`). ``transports``: the drivers' transports by device name, ``"dvl75"`` and/or
-        ``"ping1d"``; a device left out is not served at all. ``ready``: optional start-up conditions by device
+        """Serve the serial devices' ptys from ``sim_node``'s clock ticks and gate its time on their drivers
+        (:class:`SerialLockStep`). ``transports``: the drivers' transports by device name (``"dvl75"`` ...); a
+        device left out is not served at all. ``ready``: optional start-up conditions by device
         name (:meth:`SerialLockStep.startup_done`).
 
         Raises:
             RuntimeError: the ptys are already served by threads (``serial_threads=True``), or there are none.
         """
-        ptys = dict(zip(("dvl75", "ping1d"), self._ptys))
-        if not ptys or any(p.threaded for p in ptys.values()):
+        if not self._ptys or any(p.threaded for p in self._ptys.values()):
             raise RuntimeError("lock_step_serial needs VirtualHardware(serve_serial=True, serial_threads=False)")
         for name, transport in transports.items():
-            link = SerialLockStep(ptys[name], transport, ready=(ready or {}).get(name, lambda: True))
+            link = SerialLockStep(self._ptys[name], transport, ready=(ready or {}).get(name, lambda: True))
             self.serial_lock_steps[name] = link
             sim_node.add_clock_listener(link.tick)
             sim_node.add_step_gate(link.settled)
 
     def serve_serial(self, lock: Any = None) -> None:
-        """Serve the DVL-75 and Ping1D ptys from their own threads (built with ``serial_threads=False``), each
+        """Serve the serial devices' ptys from their own threads (built with ``serial_threads=False``), each
         emulator call under ``lock`` when given (the lock that also guards the simulator's stepping).
 
         Raises:
             RuntimeError: the ptys are served already (threads or :meth:`lock_step_serial`), or there are none.
         """
-        if not self._ptys or any(p.threaded for p in self._ptys) or self.serial_lock_steps:
+        if not self._ptys or any(p.threaded for p in self._ptys.values()) or self.serial_lock_steps:
             raise RuntimeError("serve_serial needs VirtualHardware(serve_serial=True, serial_threads=False), once")
-        for pty in self._ptys:
+        for pty in self._ptys.values():
             if lock is not None:
                 pty.lock = lock
             pty.start()
@@ -218,7 +206,7 @@ class VirtualHardware:
             self.sim.step(None)
 
     # -- truth adapters (simulator samples -> emulator truth types)
-    def _dvl_truth(self, _t: float) -> DvlTruth:
+    def _dvl75_truth(self, _t: float) -> DvlTruth:
         # measured at the ping (the emulator's cycle): the driver's time of validity (middle of the $DVPDL
         # interval of the trapezoidal deltas) is then exact; a dropout is a ping without bottom lock
         v = self.sim.measure("dvl75", dropout=True)
@@ -231,7 +219,7 @@ class VirtualHardware:
                         altitude_m=altitude, roll_rad=roll, pitch_rad=pitch, yaw_rad=yaw, bottom_lock=locked,
                         confidence_pct=100.0 if locked else 0.0, beam_range_m=beams)
 
-    def _ping_truth(self, _t: float) -> Ping1dTruth:
+    def _ping1d_truth(self, _t: float) -> Ping1dTruth:
         s = self.sim.measure("ping1d", dropout=True)  # at the ping, as the DVL
         if s is None or not s.valid or not math.isfinite(s.distance_m):
             return Ping1dTruth(altitude_m=None, confidence_pct=0.0)
@@ -240,11 +228,11 @@ class VirtualHardware:
     # The I2C devices sample the vehicle when the emulator asks (start of an MS5837 conversion, an ICM-20948
     # output-data-rate tick), as the real parts do; the newest rate-grid sample would be up to one model period
     # old (100 ms for the pressure model) and showed up as a 60 ms late depth in graph bags.
-    def _pressure_truth(self, _t: float) -> tuple[float, float]:
+    def _ms5837_truth(self, _t: float) -> tuple[float, float]:
         s = self.sim.measure("ms5837")
         return (float(s.pressure_pa), float(s.temperature_c))
 
-    def _imu_truth(self, _t: float):
+    def _icm20948_truth(self, _t: float):
         a = self.sim.measure("icm20948_accel")
         g = self.sim.measure("icm20948_gyro")
         m = self.sim.measure("icm20948_mag")
@@ -253,10 +241,10 @@ class VirtualHardware:
     # -- actuation
     def pulse_widths_us(self) -> np.ndarray:
         """(n,) pulse widths the PCA9685 actually outputs on the thrusters' channels, us (0 = no pulses)."""
-        return np.array([self.pca9685.pulse_width_us(ch) for ch in self._channels])
+        return np.array([self.emulators["pca9685"].pulse_width_us(ch) for ch in self._channels])
 
     def close(self) -> None:
         """Stop the pseudo-terminal threads (idempotent)."""
-        for p in self._ptys:
+        for p in self._ptys.values():
             p.close()
-        self._ptys = []
+        self._ptys = {}

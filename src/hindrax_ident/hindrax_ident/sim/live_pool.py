@@ -83,7 +83,7 @@ class LivePoolServer:
         self._wall0, self._sim0 = time.monotonic(), self.sim.t_s
         # the emulators' time is the wall clock since the start (as a driver's waits measure it), continuous
         self.hardware.use_clock(lambda: self._sim0 + (time.monotonic() - self._wall0))
-        self.ports = {"dvl75": self.hardware.dvl_port, "ping1d": self.hardware.ping_port}
+        self.ports = dict(self.hardware.ports)
         self.hardware.serve_serial(lock=self.lock)
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
