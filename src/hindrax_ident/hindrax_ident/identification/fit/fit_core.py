@@ -814,10 +814,10 @@ def input_correlation(residuals: np.ndarray, sd: SegmentData, max_lag_s: float =
     (a per-direction error), both less their mean in each segment, pairs within a segment only, at lags tau from 0 to
     ``max_lag_s`` (every measurement interval). A model whose dynamics are right leaves residuals independent of past
     inputs whatever the colour of the disturbances it does not model; a wrong inertia, damping law, lag or
-    direction asymmetry leaves a part of the input's response in them. ``z``: r(tau_max) over its standard deviation
-    under independence from the Newey-West (Bartlett) variance of the products e(t) g(t - tau) within each segment,
+    direction asymmetry leaves a part of the input's response in them. z(tau): r(tau) over its standard deviation
+    under independence, from the Newey-West (Bartlett) variance of the products e(t) g(t - tau) within each segment,
     bandwidth ``max_lag_s`` (both signals are coloured: the white-noise bound 1 / sqrt(k) would be far too narrow).
-    Returns {"r": max |r|, "lag_s", "input": "force" | "|force|", "z"}."""
+    Returns the lag and input of the largest z: {"z", "r": |r| there, "lag_s", "input": "force" | "force magnitude"}."""
     h = sd.h
     pos = sd.s_j + sd.s_a
     same = sd.s_seg[1:] == sd.s_seg[:-1]
@@ -825,8 +825,8 @@ def input_correlation(residuals: np.ndarray, sd: SegmentData, max_lag_s: float =
     lags = np.arange(0, int(round(max_lag_s / h)) + 1, max(1, int(round(step))))
     band = max(1, int(math.ceil(max_lag_s / (step * h))))
     e_all = np.asarray(residuals, dtype=float)
-    best = {"r": 0.0, "lag_s": 0.0, "input": "force", "z": 0.0}
-    for name, g in (("force", sd.u[0]), ("|force|", np.abs(sd.u[0]))):
+    best = {"z": 0.0, "r": 0.0, "lag_s": 0.0, "input": "force"}
+    for name, g in (("force", sd.u[0]), ("force magnitude", np.abs(sd.u[0]))):
         for tau in lags:
             ok = sd.s_j >= tau
             x_all = g[sd.s_seg, np.maximum(sd.s_j - tau, 0)]
@@ -839,10 +839,10 @@ def input_correlation(residuals: np.ndarray, sd: SegmentData, max_lag_s: float =
                 w = e * x
                 num, see, sgg = num + w.sum(), see + e @ e, sgg + x @ x
                 var += w @ w + sum(2.0 * (1.0 - k / (band + 1)) * (w[k:] @ w[:-k]) for k in range(1, min(band, w.size)))
-            r = num / math.sqrt(see * sgg) if see > 0 and sgg > 0 else 0.0
-            if abs(r) > best["r"]:
-                best = {"r": abs(r), "lag_s": float(tau * h), "input": name,
-                        "z": abs(num) / math.sqrt(var) if var > 0 else 0.0}
+            z = abs(num) / math.sqrt(var) if var > 0 else 0.0
+            if z > best["z"]:
+                best = {"z": z, "r": abs(num) / math.sqrt(see * sgg) if see > 0 and sgg > 0 else 0.0,
+                        "lag_s": float(tau * h), "input": name}
     return best
 
 
