@@ -191,7 +191,8 @@ def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, si
         signals={"t": t, "velocity": sig.v, "acceleration": sig.a, "force": force, "velocity_fit": v_fit,
                  "restoring": sig.restoring, "windows": [(w.velocity_mean, float(np.mean(force[w.start:w.stop])))
                                                          for w in wins],
-                 "residual_autocorrelation": core.covariance.residual_rho, "t_dof": core.covariance.t_dof,
+                 "residual_autocorrelation": core.covariance.residual_rho,
+                 "input_correlation": core.covariance.input_corr, "t_dof": core.covariance.t_dof,
                  "covariance": cov, "model": core.terms.label, "core": core,
                  "online_history": online.history if online is not None else {}})
 

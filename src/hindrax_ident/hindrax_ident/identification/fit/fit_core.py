@@ -67,7 +67,8 @@ __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUST
            "cluster_covariance", "estimate_timing", "validation_measures", "DofResult", "select_terms",
            "identify_dof", "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
            "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN", "NO_MODEL_VERDICT",
-           "resolvable_delay", "with_edge", "NESTED", "not_below_nested"]
+           "resolvable_delay", "with_edge", "NESTED", "not_below_nested", "input_correlation",
+           "INPUT_CORRELATION_LAG_S"]
 
 #: (force std, velocity std) within a segment below which it does not move the DOF: translational (N, m/s),
 #: rotational (N m, rad/s)
@@ -720,7 +721,8 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
 class Covariance:
     """cov (p, p) reported (at least the model-based one, parameter by parameter); model, sandwich (p, p); clusters
     G, block (segments per cluster), rho (lag-1 autocorrelation of the cluster scores at that block), t_dof = G - 1,
-    residual_rho (lag-1 autocorrelation of consecutive residual samples)."""
+    residual_rho (lag-1 autocorrelation of consecutive residual samples); input_corr: the residuals' correlation with
+    the input (:func:`input_correlation`; a measured position only, else None)."""
 
     cov: np.ndarray
     model: np.ndarray
@@ -730,6 +732,7 @@ class Covariance:
     rho: float
     t_dof: int
     residual_rho: float
+    input_corr: dict | None = None
 
 
 def _blocks(group: np.ndarray, b: int) -> np.ndarray:
@@ -798,6 +801,49 @@ def cluster_covariance(fit: FitOutcome, sd: SegmentData, min_clusters: int = MIN
     cov = model_p * np.outer(d, d)
     return Covariance(cov, model_p, sand_p, G, b, rho, max(G - 1, 1), rho_r)
 
+
+
+#: Longest lag of the input in :func:`input_correlation`, s (a few damping time constants M / (dD/dv) of the heave)
+INPUT_CORRELATION_LAG_S = 2.0
+
+
+def input_correlation(residuals: np.ndarray, sd: SegmentData, max_lag_s: float = INPUT_CORRELATION_LAG_S) -> dict:
+    """The independence test of output-error residuals ([Ljung1999] §16.6): the normalised cross-correlation
+    r(tau) = sum e(t) g(t - tau) / sqrt(sum e^2 sum g^2) of the residuals e (k,) at the measurements of ``sd`` with
+    the model's input g (the force at the tick, :attr:`SegmentData.u`, after delay and lag) and with its magnitude |g|
+    (a per-direction error), both less their mean in each segment, pairs within a segment only, at lags tau from 0 to
+    ``max_lag_s`` (every measurement interval). A model whose dynamics are right leaves residuals independent of past
+    inputs whatever the colour of the disturbances it does not model; a wrong inertia, damping law, lag or
+    direction asymmetry leaves a part of the input's response in them. z(tau): r(tau) over its standard deviation
+    under independence, from the Newey-West (Bartlett) variance of the products e(t) g(t - tau) within each segment,
+    bandwidth ``max_lag_s`` (both signals are coloured: the white-noise bound 1 / sqrt(k) would be far too narrow).
+    Returns the lag and input of the largest z: {"z", "r": |r| there, "lag_s", "input": "force" | "force magnitude"}."""
+    h = sd.h
+    pos = sd.s_j + sd.s_a
+    same = sd.s_seg[1:] == sd.s_seg[:-1]
+    step = float(np.median(np.diff(pos)[same])) if np.any(same) else 1.0
+    lags = np.arange(0, int(round(max_lag_s / h)) + 1, max(1, int(round(step))))
+    band = max(1, int(math.ceil(max_lag_s / (step * h))))
+    e_all = np.asarray(residuals, dtype=float)
+    best = {"z": 0.0, "r": 0.0, "lag_s": 0.0, "input": "force"}
+    for name, g in (("force", sd.u[0]), ("force magnitude", np.abs(sd.u[0]))):
+        for tau in lags:
+            ok = sd.s_j >= tau
+            x_all = g[sd.s_seg, np.maximum(sd.s_j - tau, 0)]
+            num = var = see = sgg = 0.0
+            for s in np.unique(sd.s_seg[ok]):
+                m = ok & (sd.s_seg == s)
+                if m.sum() < 3:
+                    continue
+                e, x = e_all[m] - e_all[m].mean(), x_all[m] - x_all[m].mean()
+                w = e * x
+                num, see, sgg = num + w.sum(), see + e @ e, sgg + x @ x
+                var += w @ w + sum(2.0 * (1.0 - k / (band + 1)) * (w[k:] @ w[:-k]) for k in range(1, min(band, w.size)))
+            z = abs(num) / math.sqrt(var) if var > 0 else 0.0
+            if z > best["z"]:
+                best = {"z": z, "r": abs(num) / math.sqrt(see * sgg) if see > 0 and sgg > 0 else 0.0,
+                        "lag_s": float(tau * h), "input": name}
+    return best
 
 
 # ------------------------------------------------------------------------------------------------ timing
@@ -1265,6 +1311,8 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
     from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
     cov = cluster_covariance(chosen.fit, chosen.train, opts.min_clusters)
+    if rec.measured == "position":
+        cov = replace(cov, input_corr=input_correlation(chosen.fit.residuals, chosen.train))
     std = np.sqrt(np.maximum(np.diag(cov.cov), 0.0))
     tq = float(stats.t.ppf(0.975, cov.t_dof))
     th = chosen.fit.theta
