@@ -233,6 +233,7 @@ LAYERS = (
     ("hindrax_ident.control", 3),
     ("hindrax_ident.identification", 4),
     ("hindrax_ident.sim", 5),
+    ("hindrax_ident.ordered_executor", 6),  # the graph builders' executor
     ("hindrax_ident.bringup", 6),
     ("hindrax_ident.composition", 6),
 )
