@@ -12,7 +12,7 @@ import importlib
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Device", "DEVICES", "SERIAL", "I2C", "load", "section", "build_node"]
+__all__ = ["Device", "DEVICES", "SERIAL", "I2C", "load", "settings", "build_node"]
 
 SERIAL, I2C = "serial", "i2c"
 
@@ -69,7 +69,7 @@ def load(ref: Any) -> Any:
     return getattr(importlib.import_module(module, __package__), attr)
 
 
-def section(config: Any, device: Device) -> Any:
+def settings(config: Any, device: Device) -> Any:
     """The configuration section of ``device`` in ``config`` (a VehicleConfig)."""
     return functools.reduce(getattr, device.section.split("."), config)
 

@@ -29,7 +29,7 @@ I2C = {d.name for d in devices.DEVICES if d.transport == devices.I2C}
 
 
 def _addresses(config) -> set[int]:
-    return {devices.section(config, d).i2c_address for d in devices.DEVICES if d.transport == devices.I2C}
+    return {devices.settings(config, d).i2c_address for d in devices.DEVICES if d.transport == devices.I2C}
 
 
 def test_the_table_holds_the_five_devices_and_every_path_exactly_them():
@@ -93,10 +93,10 @@ FAKE_ADDRESS = 0x50
 @pytest.fixture
 def fake_device(monkeypatch):
     """The table with the fake device added (its configuration section, at :data:`FAKE_ADDRESS`, is the test's)."""
-    section = devices.section
+    settings = devices.settings
     monkeypatch.setattr(devices, "DEVICES", devices.DEVICES + (FAKE,))
-    monkeypatch.setattr(devices, "section", lambda config, d: SimpleNamespace(i2c_address=FAKE_ADDRESS)
-                        if d is FAKE else section(config, d))
+    monkeypatch.setattr(devices, "settings", lambda config, d: SimpleNamespace(i2c_address=FAKE_ADDRESS)
+                        if d is FAKE else settings(config, d))
     raw = replay_devices.iter_raw_device_data
 
     def recorded(bag, name):  # the bag holds one read of the fake device

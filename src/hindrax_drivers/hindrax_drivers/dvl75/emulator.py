@@ -565,8 +565,9 @@ def _corrupt_nmea_checksum(message: bytes) -> bytes:
     return body[:-1] + b"#" + message[len(body):] if body else message
 
 
-def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0) -> Dvl75Emulator:
-    """The simulator's DVL-75 (``simulation.sensors.dvl75``) on ``truth`` (devices.py factory; clock: the pty's)."""
-    s = config.simulation.sensors.dvl75
-    return Dvl75Emulator(truth, rate_hz=s.rate_hz, flash=DvlFlash(), min_altitude_m=s.min_altitude_m,
-                         max_altitude_m=s.max_altitude_m, seed=seed)
+def from_config(config, truth: TruthSource, clock: Callable[[], float], seed: int = 0, *, rate_hz: float = 10.0,
+                min_altitude_m: float = 0.3, max_altitude_m: float = 40.0) -> Dvl75Emulator:
+    """A DVL-75 on ``truth`` (devices.py factory; clock: the pty's). Ping rate, Hz, and bottom-lock range, m, are
+    the simulated part's (the simulator passes its truth's); the defaults are the emulator's."""
+    return Dvl75Emulator(truth, rate_hz=rate_hz, flash=DvlFlash(), min_altitude_m=min_altitude_m,
+                         max_altitude_m=max_altitude_m, seed=seed)

@@ -636,6 +636,11 @@ class _Layout:
         self.ensure()
         wait_until(lambda: self.arm_client.service_is_ready() and self.reset_client.service_is_ready(), 60, None,
                    "processes up")
+        if self.last_msg is not None and self.last_msg.armed:
+            # still armed from the caller's previous step, its commands stopped above: disarm first, or the 1700 us
+            # found on the wire below may be the old arm's, with the ESC watchdog's neutral still to come
+            self.call(self.arm_client, self.SetArmed.Request(arm=False))
+            wait_until(lambda: not self.last_msg.armed and not self.hw.thrust(), 10, None, "disarmed")
         self.call(self.reset_client, self.Trigger.Request())
         answer = [""]
 
