@@ -120,11 +120,16 @@ def test_controller_holds_depth_and_altitude_and_yields_wrench(tmp_path):
             assert not r.success and "identification goal is running" in r.message
             ident.publish(ManeuverStatus(phase=ManeuverStatus.PHASE_DONE))
             wait_until(lambda: not ctrl._ident_running, 10, spin, "identification done")
-            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] for t in streams), 10, spin,
-                       "the controller's streams back")
+            # disabled: the sensors back, the pilot's wrench and the allocation's status only once enabled
+            sensors = streams[:4]
+            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] for t in sensors), 10, spin,
+                       "the controller's sensor streams back")
+            assert all(probe.count_subscribers(t) == subscribers[t] - 1 for t in streams[4:])
             wait_until(lambda: {"ms5837", "dvl75_attitude", "icm20948_gyro"} <= set(ctrl._last_sample_s), 10, spin,
                        "fresh sensor data after the goal")
             assert _call(enable, SetBool.Request(data=True), spin).success
+            wait_until(lambda: all(probe.count_subscribers(t) == subscribers[t] for t in streams), 10, spin,
+                       "every stream of an enabled controller")
             assert _call(enable, SetBool.Request(data=False), spin).success
             assert not ctrl.enabled
             def last_is_zero():
@@ -206,8 +211,8 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
         ex.add_node(node)
         ex.add_node(probe)
         try:
-            streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude",
-                       "/allocation/status", "/wrench"}
+            # disabled: the sensors; /allocation/status and /wrench (a pilot) only while enabled
+            streams = {"/dvl/data", "/pressure/fluid_pressure", "/imu/data_raw", "/ping/altitude"}
             inputs = streams | {"/identification/status", "/esc/output_state"}
             topics = lambda: {s.topic_name for s in node.subscriptions} - {"/controller/setpoint"}  # noqa: E731
             assert topics() == inputs and "controller_intake" not in probe.get_node_names()

@@ -26,8 +26,8 @@ Subscribes
     (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``); ``esc/output_state`` (the ESC's
     armed flag, latched: :mod:`hindrax_drivers.esc_state`; subscribed for the node's life, the current state arrives
     at once; a malformed one reads as disarmed; a dead ESC's last state stays, and the guard silences its outputs);
-    ``allocation/status`` (achieved wrench: the anti-windup); ``identification/status``; ``wrench`` (other
-    writers).
+    ``identification/status``; while enabled only, ``allocation/status`` (achieved wrench: the anti-windup) and
+    ``wrench`` (other writers).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
     ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change; ``odom``
@@ -35,7 +35,7 @@ Publishes
     :mod:`.odometry`), while its sensor streams are open (not while an identification goal runs).
 CPU
     Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual pool
-    and the tests take the same path; about 200 messages/s while the streams are open, 3 while a goal runs), each
+    and the tests take the same path; about 80 messages/s while the streams are open, 3 while a goal runs), each
     sensor sample counted at its arrival. While an identification goal runs the controller cannot be enabled and its
     sensor streams are closed, so the tick slows from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends
     (docs/architecture.md §10.1). While disabled the streams stay open (``odom``, ``controller/status`` and the
@@ -151,6 +151,7 @@ class ControllerNode(Node):
         pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
         self._sub_ev = sub_ev
         self._streams: list = []
+        self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
         self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos(), **sub_ev)
@@ -173,17 +174,28 @@ class ControllerNode(Node):
 
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
-        """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics, ``wrench``
-        (other writers) and ``allocation/status`` (anti-windup). About 200 messages/s in the pool layout."""
+        """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics (about 80
+        messages/s in the pool layout)."""
         self._streams = [
             self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20),
             self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
                             20),
             self._subscribe(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)), 50),
             self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20),
-            self._subscribe(AllocationStatus, "allocation/status", self._on_allocation, 20),
-            self._subscribe(WrenchStamped, "wrench", self._on_wrench, 50),
         ]
+
+    def _open_enabled_streams(self) -> None:
+        """Subscribe to what only an enabled controller reads: ``wrench`` (other writers: a pilot's message makes it
+        yield) and ``allocation/status`` (anti-windup); a disabled controller ignored both, and the pilot's 50 Hz
+        stream cost it a callback per message."""
+        if not self._enabled_streams:
+            self._enabled_streams = [self._subscribe(AllocationStatus, "allocation/status", self._on_allocation, 20),
+                                     self._subscribe(WrenchStamped, "wrench", self._on_wrench, 50)]
+
+    def _close_enabled_streams(self) -> None:
+        for sub in self._enabled_streams:
+            self.destroy_subscription(sub)
+        self._enabled_streams = []
 
     def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
         """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
@@ -335,6 +347,7 @@ class ControllerNode(Node):
         self.hold.core.reset()  # references start from the measured state, integrators empty
         self.enabled = True
         self.message = why
+        self._open_enabled_streams()
         self._last_tick_s = self._now_s()  # the step gate lets the clock reach the control timer's first tick
         self._retime()
         self.get_logger().info(f"controller: {why}")
@@ -343,6 +356,7 @@ class ControllerNode(Node):
     def _disable(self, why: str, zero: bool) -> None:
         self.enabled = False
         self.message = why
+        self._close_enabled_streams()
         self._retime()
         if why.startswith(("yielded", "stopped")):
             self.get_logger().warn(f"controller: {why}")
