@@ -4,13 +4,15 @@ Each module in :mod:`hindrax_ident.benchmarks` (listed in :data:`BENCHMARKS`) pr
 ``run(quick: bool) -> list[dict]``: rows with at least ``name``, ``value``, ``unit`` and optionally
 ``target`` and ``note``. Benchmarks measure; tests never time anything (README, "Tests").
 
-Usage: ``python -m hindrax_ident.bench [--only NAME[,NAME]] [--quick] [--out DIR]``.
+Usage: ``python -m hindrax_ident.bench [--only NAME[,NAME]] [--quick] [--out DIR] [--baseline GIT_REF]``
+(``--baseline``: the stack section measures that commit's launch layout too, in the same run).
 """
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
 import importlib
+import inspect
 import json
 import os
 import platform
@@ -50,6 +52,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", default="", help="comma-separated benchmark names")
     parser.add_argument("--quick", action="store_true", help="shorter runs (smoke check of the scripts)")
     parser.add_argument("--out", default="bench-results", help="directory for results.json")
+    parser.add_argument("--baseline", default=None, metavar="GIT_REF",
+                        help="the stack section also measures this commit's launch layout in the same run and "
+                             "reports today's CPU over it (hindrax_ident.benchmarks.stack.baseline_launch)")
     results_doc.add_argument(parser)
     args = parser.parse_args(argv)
     names = [n for n in args.only.split(",") if n] or list(BENCHMARKS)
@@ -65,7 +70,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"== {name}", flush=True)
         t0 = time.monotonic()
         for module in (modules,) if isinstance(modules, str) else modules:
-            for row in importlib.import_module(module).run(quick=args.quick):
+            run = importlib.import_module(module).run
+            extra = {"baseline": args.baseline} if args.baseline and "baseline" in inspect.signature(run).parameters \
+                else {}
+            for row in run(quick=args.quick, **extra):
                 rows.append({"benchmark": name, **row})
         wall_s[name] = round(time.monotonic() - t0, 1)
         print(f"== {name}: {wall_s[name]:.0f} s", flush=True)

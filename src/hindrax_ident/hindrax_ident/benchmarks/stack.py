@@ -100,6 +100,7 @@ from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
 from .launch_layout import launch_processes, package_share, read_ports_file
+from .actuation import wrench_to_registers
 from .launch_node import SOCKET_ENV
 from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s
 from .recorder import subscribe_recorder_counts
@@ -121,6 +122,21 @@ GRAPH_QUIET_S = 5.0
 def _proc_cpu_s(pid: int | str = "self") -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / _CLK
+
+
+def _proc_wakeups(pid: int) -> tuple[int, int]:
+    """(every thread's, the main thread's) voluntary context switches of a process so far: each is a sleep that
+    ends in a wake-up (a timer, a message, a reply on a socket). Threads that ended before the call are not counted."""
+    total = main = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            text = (task / "status").read_text()
+        except OSError:  # the thread ended meanwhile
+            continue
+        n = next(int(ln.split()[1]) for ln in text.splitlines() if ln.startswith("voluntary_ctxt_switches:"))
+        total += n
+        main += n if task.name == str(pid) else 0
+    return total, main
 
 
 def _proc_rss_mb(pid: int) -> float:
@@ -391,6 +407,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
     launch_file = launch_file or package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1]
     layout = launch_processes(launch_file, {"output_dir": str(bag_root)})
     procs: dict[str, subprocess.Popen] = {}
+    extra: dict[str, subprocess.Popen] = {}  # the participant probes (PARTICIPANT_PROBES)
     logs: dict[str, Any] = {}
     out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": None,
                  "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}", "module": lp.module}
@@ -426,6 +443,10 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                                    env=dict(env, **dict(lp.process.env), **{SOCKET_ENV: sock}),
                                                    stdout=logs[lp.label],
                                                    stderr=subprocess.STDOUT)
+            for name, topics in PARTICIPANT_PROBES.items():  # what one more process costs (not in the totals)
+                logs[name] = open(tmp / f"{name}.log", "w")
+                extra[name] = subprocess.Popen([py, "-c", _PARTICIPANT, name, json.dumps(topics)], env=env,
+                                               stdout=logs[name], stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
                 counts, lock = subscribe_recorder_counts(probe, 50)
@@ -480,17 +501,23 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                     for k in range(windows if phase == "running" else 1):
                         if py_spy_dir is not None and phase == "running" and k == 0:
                             spies.extend(_start_py_spy(procs, py_spy_dir, duration_s))
-                        cpu0 = {n: _proc_cpu_s(p.pid) for n, p in procs.items()}
+                        cpu0 = {n: _proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
+                        wake0 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
                         bench0, load0 = _proc_cpu_s(), os.getloadavg()[0]
                         wall0, t0_ns = time.monotonic(), time.time_ns()
                         end = wall0 + duration_s
                         wait_until(lambda: time.monotonic() > end, duration_s + 30, spin, f"{phase} window")
-                        cpu1 = {n: _proc_cpu_s(p.pid) for n, p in procs.items()}
+                        cpu1 = {n: _proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
+                        wake1 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
                         wall, t1_ns = time.monotonic() - wall0, time.time_ns()
                         alive()
                         results.append({"wall_s": wall, "t0_ns": t0_ns, "t1_ns": t1_ns,
                                         "per_process": {n: (cpu1[n] - cpu0[n]) / wall for n in procs if n != "pool"},
                                         "pool": (cpu1["pool"] - cpu0["pool"]) / wall,
+                                        "wakeups": {n: tuple((b - a) / wall for a, b in zip(wake0[n], wake1[n]))
+                                                    for n in procs if n != "pool"},
+                                        "participants": {n: ((cpu1[n] - cpu0[n]) / wall,
+                                                             (wake1[n][0] - wake0[n][0]) / wall) for n in extra},
                                         "bench": (_proc_cpu_s() - bench0) / wall,
                                         "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
                                         "goal_status": goal_status[0](),
@@ -512,7 +539,10 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
             for name in reversed(list(procs)):
                 if procs[name].poll() is None:
                     procs[name].send_signal(signal.SIGINT)
-            for name, p in procs.items():
+            for p in extra.values():
+                if p.poll() is None:
+                    p.send_signal(signal.SIGINT)
+            for name, p in {**procs, **extra}.items():
                 try:
                     p.wait(15)
                 except subprocess.TimeoutExpired:
@@ -605,6 +635,34 @@ def _check_alive(procs: dict, tmp: Path) -> bool:
             tail = ""
         raise RuntimeError(f"launch layout: process(es) {dead} exited; {dead[0]}'s log ends:\n{tail}")
     return True
+
+
+#: the participant probes of the launch layout: name -> topics it subscribes (raw CDR, like the recorder without
+#: writing): one more process with its participant and executor and nothing to do, and the same with the sensor
+#: topics the identification and the controller take: what a node costs apart from the process of its publishers
+PARTICIPANT_PROBES = {
+    "participant_idle": [],
+    "participant_sensor_subscriber": [["/imu/data_raw", "sensor_msgs/msg/Imu"], ["/dvl/data", "hindrax_msgs/msg/Dvl"],
+                                      ["/pressure/fluid_pressure", "sensor_msgs/msg/FluidPressure"],
+                                      ["/ping/altitude", "sensor_msgs/msg/Range"]],
+}
+_PARTICIPANT = textwrap.dedent('''
+    import importlib, json, sys
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.experimental.events_executor import EventsExecutor
+    rclpy.init()
+    node = rclpy.create_node(sys.argv[1])
+    for topic, type_name in json.loads(sys.argv[2]):
+        pkg, _, name = type_name.split("/")
+        node.create_subscription(getattr(importlib.import_module(pkg + ".msg"), name), topic, lambda _m: None, 10,
+                                 raw=True)
+    ex = EventsExecutor(); ex.add_node(node)
+    try:
+        ex.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+''')
 
 
 # ---------------------------------------------------------------------------------------------- baselines
@@ -757,6 +815,7 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
             worst_ratio = _median([w["per_process"][worst] / p for w, p in zip(wins, pools)])
             rows += [
                 {"name": f"launch_{phase}_cpu_total_per_pool", "value": ratio, "unit": "x",
+                 "target": "<= 1.3" if phase == "running" else "<= 1.0",
                  "note": f"launch_{phase}_cpu_total / the virtual pool's CPU in the same windows "
                          f"({' / '.join(f'{r:.2f}' for r in ratios)}): the pool's code is the same in every run, "
                          f"so this ratio is the stack's cost in units of this machine's speed for wake-up-heavy "
@@ -768,6 +827,28 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
                 {"name": f"launch_{phase}_cpu_max_process_at_reference_pool",
                  "value": 100 * worst_ratio * REFERENCE_POOL_CPU, "unit": "% of a core", "note": worst},
             ]
+            for name in names:
+                rows.append({"name": f"launch_{phase}_cpu_{name}_per_pool", "unit": "x",
+                             "value": _median([w["per_process"][name] / p for w, p in zip(wins, pools)]),
+                             "target": "<= 0.1" if phase == "idle" and name.startswith("ident_") else "<= 0.35"})
+        if all("wakeups" in w for w in wins):
+            for name in names:
+                rows.append({"name": f"launch_{phase}_wakeups_{name}", "unit": "1/s",
+                             "value": _median([w["wakeups"][name][0] for w in wins]),
+                             "note": f"voluntary context switches of every thread per second (each sleep ends in "
+                                     f"a wake-up); main thread "
+                                     f"{_median([w['wakeups'][name][1] for w in wins]):.0f}/s"})
+            rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
+                         "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
+        for name in wins[0].get("participants", {}):
+            cpu = [w["participants"][name][0] for w in wins]
+            topics = ", ".join(t for t, _ in PARTICIPANT_PROBES.get(name, [])) or "no topic"
+            rows.append({"name": f"launch_{phase}_cpu_{name}", "unit": "% of a core", "value": 100 * _median(cpu),
+                         "note": f"one more process (rclpy, one node, the EventsExecutor), not in the totals, "
+                                 f"subscribing {topics}; "
+                                 f"{_median([w['participants'][name][1] for w in wins]):.0f} wake-ups/s"
+                                 + (f"; {_median([c / p for c, p in zip(cpu, pools)]):.3f} pool units"
+                                    if all(p > 0.0 for p in pools) else "")})
         if phase == "running":
             rows += [
                 {"name": "launch_running_cpu_excluded", "value": 100 * _median([w["pool"] + w["bench"] for w in wins]),
@@ -826,16 +907,19 @@ def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
 
 def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
         duration_s: float | None = None, baselines: bool = True, py_spy_dir: Path | None = None,
-        launch_file: Path | None = None) -> list[dict]:
+        launch_file: Path | None = None, baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
     windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
     s; baselines: the bare rclpy baselines (they need the layouts' rates); launch_file: another launch file for the
-    launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument)."""
+    launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument); baseline: a git ref whose
+    launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
+    the baseline's (``..._vs_baseline``)."""
     # windows: 10 s per phase and layout (the launch layout's running phase: 3 of them, medians), 8 s per baseline
     duration_s = duration_s or (8.0 if quick else 10.0)
     windows = windows or (1 if quick else RUNNING_WINDOWS)
     base_s = 6.0 if quick else 8.0
     inproc = launch = None
+    before = baseline_launch(baseline, windows, duration_s) if baseline else None
     nbody_before = nbody_cpu_s()  # the machine's speed before and after the layouts (it drifts within minutes)
     with tempfile.TemporaryDirectory(prefix="hindrax-bench-stack-") as tmpdir:
         tmp = Path(tmpdir)
@@ -902,6 +986,8 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                 {"name": "launch_vs_bare_pubsub_ratio", "value": launch_total / pubsub if pubsub else -1, "unit": "x",
                  "target": "<= 1.2", "note": "launch_running_cpu_total / cpu_bare_rclpy_pub_sub"},
             ]
+        if before is not None:
+            rows += baseline_rows(rows, before, baseline)
         for topic, rate in running.items():
             rows.append({"name": f"rate {topic}", "value": round(rate, 2), "unit": "msg/s",
                          "note": f"launch layout, running; idle {idle.get(topic, 0.0):.2f}"})
@@ -911,7 +997,61 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
              "note": "achieved in the one-process graph (configured 1.0)"},
             {"name": "recorder_drops", "value": inproc["dropped"], "unit": "messages", "target": "0"},
         ]
+    # the command path the controller waits on: wrench -> PCA9685 registers through the actuation process's nodes
+    rows += [dict(r, name=f"actuation_{r['name']}") for r in wrench_to_registers(300 if quick else 1000)
+             if r["name"].startswith("wrench_to_registers")]
     return rows
+
+
+def baseline_launch(ref: str, windows: int, duration_s: float) -> list[dict]:
+    """The launch layout's rows of the code at git ref ``ref``: a detached worktree of this checkout's repository
+    at ``ref`` (in a temporary folder, removed after), its own stack benchmark (``--layouts launch --no-baselines``)
+    run by this venv's interpreter with PYTHONPATH at the worktree's two Python packages, so that every process of
+    that layout (its launch file, its nodes, its virtual pool) runs the baseline's code. Raises RuntimeError when
+    git refuses the ref or the baseline's benchmark fails (the end of its output)."""
+    repo = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=Path(__file__).parent, capture_output=True,
+                          text=True, check=True).stdout.strip()
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-baseline-") as tmpdir:
+        tree = Path(tmpdir) / "tree"
+        made = subprocess.run(["git", "-C", repo, "worktree", "add", "--detach", str(tree), ref], capture_output=True,
+                              text=True)
+        if made.returncode != 0:
+            raise RuntimeError(f"--baseline {ref!r}: git worktree add failed: {made.stderr.strip()}")
+        try:
+            out = Path(tmpdir) / "rows.json"
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+                [str(tree / "src" / "hindrax_drivers"), str(tree / "src" / "hindrax_ident")]))
+            print(f"stack benchmark: the baseline {ref} first", flush=True)
+            done = subprocess.run([python_executable(), "-m", "hindrax_ident.benchmarks.stack", "--layouts", "launch",
+                                   "--no-baselines", "--windows", str(windows), "--window-s", str(duration_s),
+                                   "--json", str(out)], env=env, cwd=tree, capture_output=True, text=True)
+            if done.returncode != 0 or not out.is_file():
+                tail = (done.stdout + done.stderr)[-3000:]
+                raise RuntimeError(f"--baseline {ref}: its stack benchmark failed:\n{tail}")
+            return json.loads(out.read_text())
+        finally:
+            subprocess.run(["git", "-C", repo, "worktree", "remove", "--force", str(tree)], capture_output=True)
+
+
+def baseline_rows(rows: list[dict], before: list[dict], ref: str) -> list[dict]:
+    """Today's launch-layout CPU over the baseline's, measured in the same run (:func:`baseline_launch`): total and
+    total per pool unit of each phase, the largest process, and every process label both layouts have."""
+    now = {r["name"]: r["value"] for r in rows}
+    then = {r["name"]: r["value"] for r in before}
+    out = []
+    for phase in ("running", "idle"):
+        for key in ("cpu_total", "cpu_total_per_pool", "cpu_max_process", "wakeups_total"):
+            name = f"launch_{phase}_{key}"
+            if name in now and then.get(name):
+                out.append({"name": f"{name}_vs_baseline", "value": now[name] / then[name], "unit": "x",
+                            "note": f"today {now[name]:.4g} / baseline {ref} {then[name]:.4g}, same run"})
+        out.append({"name": f"launch_{phase}_cpu_baseline_processes", "value": then.get(f"launch_{phase}_cpu_total",
+                                                                                       float("nan")),
+                    "unit": "% of a core", "note": f"baseline {ref}: " + ", ".join(
+                        f"{r['name'][len(f'launch_{phase}_cpu_'):]} {r['value']:.1f}" for r in before
+                        if re.fullmatch(rf"launch_{phase}_cpu_[a-z_]+", r["name"]) and r["unit"] == "% of a core"
+                        and not re.search(r"_(total|max_process|excluded)", r["name"]))})
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -932,6 +1072,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--launch-file", type=Path, default=None,
                         help="launch file of the launch layout (default: hindrax_ident's pool_test.launch.xml with "
                              "output_dir set; another file must declare output_dir too)")
+    parser.add_argument("--baseline", default=None, metavar="GIT_REF",
+                        help="also measure the launch layout of this commit first, in the same run (a detached git "
+                             "worktree, this venv, PYTHONPATH at it): rows ..._vs_baseline")
     parser.add_argument("--quick", action="store_true", help="one 8 s window")
     parser.add_argument("--json", type=Path, default=None, help="also write the rows to this file")
     args = parser.parse_args(argv)
@@ -940,7 +1083,8 @@ def main(argv: list[str] | None = None) -> int:
     if bad or not layouts:
         parser.error(f"--layouts {args.layouts!r}: choose from inproc, launch")
     rows = run(quick=args.quick, layouts=layouts, windows=args.windows, duration_s=args.window_s,
-               baselines=not args.no_baselines, py_spy_dir=args.py_spy, launch_file=args.launch_file)
+               baselines=not args.no_baselines, py_spy_dir=args.py_spy, launch_file=args.launch_file,
+               baseline=args.baseline)
     width = max(len(r["name"]) for r in rows)
     for r in rows:
         print(f"{r['name']:<{width}} {r['value']:10.4g} {r.get('unit', ''):<12} {r.get('target', ''):<6} "
