@@ -648,20 +648,18 @@ PARTICIPANT_PROBES = {
 }
 _PARTICIPANT = textwrap.dedent('''
     import importlib, json, sys
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.experimental.events_executor import EventsExecutor
-    rclpy.init()
-    node = rclpy.create_node(sys.argv[1])
-    for topic, type_name in json.loads(sys.argv[2]):
-        pkg, _, name = type_name.split("/")
-        node.create_subscription(getattr(importlib.import_module(pkg + ".msg"), name), topic, lambda _m: None, 10,
-                                 raw=True)
-    ex = EventsExecutor(); ex.add_node(node)
-    try:
-        ex.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+    from rclpy.node import Node
+    from hindrax_drivers.node_common import run_nodes  # the node processes' entry point: the same executor and spin
+
+    class Probe(Node):
+        def __init__(self):
+            super().__init__(sys.argv[1])
+            for topic, type_name in json.loads(sys.argv[2]):
+                pkg, _, name = type_name.split("/")
+                self.create_subscription(getattr(importlib.import_module(pkg + ".msg"), name), topic, lambda _m: None,
+                                         10, raw=True)
+
+    sys.exit(run_nodes([Probe], []))
 ''')
 
 
@@ -844,7 +842,7 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
             cpu = [w["participants"][name][0] for w in wins]
             topics = ", ".join(t for t, _ in PARTICIPANT_PROBES.get(name, [])) or "no topic"
             rows.append({"name": f"launch_{phase}_cpu_{name}", "unit": "% of a core", "value": 100 * _median(cpu),
-                         "note": f"one more process (rclpy, one node, the EventsExecutor), not in the totals, "
+                         "note": f"one more process (a node process's entry point, run_nodes), not in the totals, "
                                  f"subscribing {topics}; "
                                  f"{_median([w['participants'][name][1] for w in wins]):.0f} wake-ups/s"
                                  + (f"; {_median([c / p for c, p in zip(cpu, pools)]):.3f} pool units"
