@@ -96,10 +96,11 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
     for el in root:
         cond = el.get("if")
         enabled = True
-        if cond is not None:
-            enabled = substitute(cond, args, packages)
-            assert enabled in ("true", "false"), f"{path.name}: condition {cond} is not a boolean"
-            enabled = enabled == "true"
+        for attr, want in (("if", "true"), ("unless", "false")):
+            if el.get(attr) is not None:
+                value = substitute(el.get(attr), args, packages)
+                assert value in ("true", "false"), f"{path.name}: condition {el.get(attr)} is not a boolean"
+                enabled = enabled and value == want
         if el.tag == "node":
             pkg, exe = el.get("pkg"), el.get("exec")
             if pkg in packages:
@@ -179,13 +180,17 @@ def test_vehicle_and_pool_test_start_what_the_campaign_needs(packages):
                             {"record": "true", "output_dir": "/ws/runs"})
     assert ("hindrax_drivers", "recorder_node") in recorded
     pool = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages)
-    assert ("hindrax_drivers", "recorder_node") in pool
+    # the pool test records in the identification's process (hindrax_ident.composition), never twice
+    assert ("hindrax_drivers", "recorder_node") not in pool and ("hindrax_ident", "ident_record_node") in pool
+    assert IDENT_GROUPS["ident_record_node"] == ("identification", "controller", "recorder")
+    unrecorded = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"record": "false"})
+    assert ("hindrax_ident", "ident_control_node") in unrecorded
+    assert not {exe for _pkg, exe in unrecorded} & {"recorder_node", "ident_record_node"}
     assert ("foxglove_bridge", "foxglove_bridge") not in pool
     live = check_launch(root / "hindrax_ident/launch/pool_test.launch.xml", packages, {"foxglove": "true"})
     assert ("foxglove_bridge", "foxglove_bridge") in live
     # the pool test runs the identification node and the controller in one process (hindrax_ident.composition);
     # the controller is optional (off by default) in the vehicle, alone there
-    assert ("hindrax_ident", "ident_control_node") in pool
     assert IDENT_GROUPS["ident_control_node"] == ("identification", "controller")
     assert ("hindrax_ident", "controller_node") not in vehicle
     held = check_launch(root / "hindrax_drivers/launch/vehicle.launch.xml", packages,
@@ -301,11 +306,14 @@ def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_
                 f"{path.name}: {el.get('name')} does not respawn after a delay"
     read = read_launch(REPO / "src/hindrax_drivers/launch/vehicle.launch.xml", {"record": "true", "output_dir": "/x"},
                        find_share=lambda pkg: REPO / "src" / pkg)
-    recorder = next(p for p in read if p.executable == "recorder_node")
-    values = {k: v for p in recorder.parameters if isinstance(p, dict) for k, v in p.items()}
-    # the root of new timestamped bags (recording/bag_dir.py), not one bag directory that the next launch would find
-    assert values["recording.output_root"] == "/x" and "output_dir" not in values
-    assert values["autostart"] is True
+    pool = read_launch(REPO / "src/hindrax_ident/launch/pool_test.launch.xml", {"output_dir": "/x"},
+                       find_share=lambda pkg: REPO / "src" / pkg)
+    for recorder in (next(p for p in read if p.executable == "recorder_node"),
+                     next(p for p in pool if p.executable == "ident_record_node")):
+        values = {k: v for p in recorder.parameters if isinstance(p, dict) for k, v in p.items()}
+        # the root of new timestamped bags (recording/bag_dir.py), not one bag directory the next launch would find
+        assert values["recording.output_root"] == "/x" and "output_dir" not in values
+        assert values["autostart"] is True and values["all_topics"] is True
 
 
 def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real_commands(packages):

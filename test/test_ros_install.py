@@ -49,7 +49,7 @@ pytestmark = pytest.mark.timeout(1200)
 DRIVER_NODES = ["dvl75_node", "ping1d_node", "ms5837_node", "icm20948_node", "esc_node", "allocation_node",
                 "recorder_node", "player_node", "static_tf_node", "supervisor_node", "output_guard_node",
                 "sensors_node", "actuation_node"]  # composed processes (vehicle.launch)
-IDENT_NODES = ["identification_node", "simulator_node", "hindrax"]
+IDENT_NODES = ["identification_node", "simulator_node", "hindrax", "ident_control_node", "ident_record_node"]
 
 
 @pytest.fixture(scope="module")

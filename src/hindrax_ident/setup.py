@@ -4,7 +4,8 @@ Python dependencies are declared once, in the repository's requirements.txt (dev
 (rosdep on the Pi); they are deliberately not repeated here.
 
 Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node``, ``ident_control_node`` (the
-first and the third in one process, :mod:`hindrax_ident.composition`) and the ``hindrax`` command as console scripts
+first and the third in one process, :mod:`hindrax_ident.composition`), ``ident_record_node`` (the same with the
+recorder) and the ``hindrax`` command as console scripts
 in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source install/setup.bash``), the
 launch files in ``share/hindrax_ident/launch`` and the Foxglove layout in ``share/hindrax_ident/foxglove``.
 """
@@ -51,6 +52,7 @@ setup(
             "simulator_node = hindrax_ident.sim.node:main",
             "controller_node = hindrax_ident.control.node:main",
             "ident_control_node = hindrax_ident.composition:ident_control_main",
+            "ident_record_node = hindrax_ident.composition:ident_record_main",
         ],
     },
 )

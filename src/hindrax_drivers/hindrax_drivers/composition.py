@@ -41,6 +41,8 @@ Groups (:data:`GROUPS`):
     (:mod:`hindrax_ident.composition` builds them; this package names them only). Apart they were the two largest
     processes, 107-110 MB of proportional set size each, mostly the same Python modules loaded twice; in one process
     117 MB (``make bench``, ``launch_pss_mb_*``). While a campaign runs the controller ticks every 0.2 s.
+``ident_record_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
+    the same two and the recorder: the pool test's layout with recording on (hindrax_ident.composition).
 
 ``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
 :data:`NODE_CLASSES` (for measurements; the launch files use the groups).
@@ -73,6 +75,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
 #: package imports nothing of hindrax_ident, it only names the nodes for the launch-file readers)
 IDENT_GROUPS: dict[str, tuple[str, ...]] = {
     "ident_control_node": ("identification", "controller"),
+    "ident_record_node": ("identification", "controller", "recorder"),
 }
 
 

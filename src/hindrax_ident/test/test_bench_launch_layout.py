@@ -92,19 +92,16 @@ def test_the_bench_measures_the_pool_test_launch_file_with_recording_on(tmp_path
 
     procs = launch_processes(package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1], {"output_dir": "/tmp/b"})
     entries = [p.module for p in procs]
-    # the identification node and the controller, in one process (hindrax_ident.composition)
-    assert "hindrax_ident.composition:ident_control_main" in entries
-    controller = next(p for p in procs if p.module == "hindrax_ident.composition:ident_control_main")
-    assert controller.process.node_names == ("identification", "controller")
+    # the identification node, the controller and the recorder, in one process (hindrax_ident.composition)
+    assert "hindrax_ident.composition:ident_record_main" in entries
+    assert not [p for p in procs if p.module.startswith("hindrax_drivers.recording")]  # recorded once
+    controller = next(p for p in procs if p.module == "hindrax_ident.composition:ident_record_main")
+    assert controller.process.node_names == ("identification", "controller", "recorder")
     write, written = _values(tmp_path)
     controller.ros_args(write)
-    assert {"model_file": ""} in written  # the empty default stays the empty string (not None, not "''")
-    # output_dir is the root of the recorder's timestamped bags (recording/bag_dir.py)
-    written.clear()
-    recorder = [p for p in procs if p.module.startswith("hindrax_drivers.recording")]
-    assert len(recorder) == 1
-    recorder[0].ros_args(write)
-    assert any(w.get("recording.output_root") == "/tmp/b" and w.get("autostart") is True for w in written)
+    # the empty default stays the empty string (not None, not "''"); output_dir is the root of the recorder's
+    # timestamped bags (recording/bag_dir.py)
+    assert {"model_file": "", "recording.output_root": "/tmp/b", "autostart": True, "all_topics": True} in written
 
 
 def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
@@ -148,11 +145,11 @@ def test_ports_file_appears_whole_or_not_at_all(tmp_path, monkeypatch):
 #: modules no vehicle process may hold: the virtual pool (simulator, emulated hardware) and the bench's own code
 _POOL_MODULES = ("hindrax_ident.sim", "hindrax_ident.benchmarks.launch_layout", "hindrax_ident.benchmarks.stack")
 #: the processes that run drivers or safety nodes only: they hold no scipy either (frames and mountings are numpy)
-_LEAN_PROCESSES = ("sensors", "actuation", "supervisor", "output_guard", "gateway", "recorder")
+_LEAN_PROCESSES = ("sensors", "actuation", "supervisor", "output_guard", "gateway")
 #: the identification node and the controller: no scipy or filterpy at start either (the online filters step
 #: estimation/kalman.py, the priors' tables estimation/priors.py's own spline; the offline fits import scipy in the
 #: function that uses it): scipy held ~50 MB of proportional set size in that process
-_MODEL_PROCESSES = ("ident_control",)
+_MODEL_PROCESSES = ("ident_record",)
 _IMPORTS = """
 import importlib, json, sys
 sys.argv = ["x"]
