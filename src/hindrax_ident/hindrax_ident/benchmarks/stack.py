@@ -53,6 +53,14 @@ given per unit of the pool's CPU in the same windows (``launch_*_cpu_total_per_p
 sessions whose totals read 36-72 %), and at the pool's CPU on the reference machine, :data:`REFERENCE_POOL_CPU`
 (``..._at_reference_pool``). The targets stay on the figures measured here.
 
+Wake-ups: per process, the voluntary context switches of all its threads per window (each sleep ends in one;
+``launch_*_wakeups_*``, the main thread's in the note). What one more process costs: two probe processes run beside
+the layout, not in its totals (:data:`PARTICIPANT_PROBES`: a node process with nothing to do, and one subscribing to
+the four sensor topics the identification and the controller take). ``--baseline GIT_REF``: that commit's launch
+layout is measured first in the same run (:func:`baseline_launch`), and the rows ``..._vs_baseline`` give today's
+figures over its. The command path: ``actuation_wrench_to_registers_*``
+(:func:`~hindrax_ident.benchmarks.actuation.wrench_to_registers`).
+
 Baselines (each a child process, plain rclpy, the EventsExecutor like every node process, one timer per topic
 publishing a default-constructed message of the topic's type at its measured rate):
 ``cpu_bare_rclpy_same_topics``: publishers only, nobody subscribed (the historical baseline), for the topics of
@@ -1032,14 +1040,17 @@ def baseline_launch(ref: str, windows: int, duration_s: float) -> list[dict]:
 
 
 def baseline_rows(rows: list[dict], before: list[dict], ref: str) -> list[dict]:
-    """Today's launch-layout CPU over the baseline's, measured in the same run (:func:`baseline_launch`): total and
-    total per pool unit of each phase, the largest process, and every process label both layouts have."""
+    """Today's launch-layout figures over the baseline's, measured in the same run (:func:`baseline_launch`): per
+    phase the CPU total, total per pool unit, largest process and wake-ups (and PSS, the IMU's rate and largest gap in
+    the running phase), as ratios, and the baseline's CPU per process."""
     now = {r["name"]: r["value"] for r in rows}
     then = {r["name"]: r["value"] for r in before}
     out = []
     for phase in ("running", "idle"):
-        for key in ("cpu_total", "cpu_total_per_pool", "cpu_max_process", "wakeups_total"):
-            name = f"launch_{phase}_{key}"
+        more = ("launch_pss_total_mb", "launch_running_imu_rate_hz", "launch_running_imu_gap_max_s") \
+            if phase == "running" else ()
+        for name in [f"launch_{phase}_{key}" for key in ("cpu_total", "cpu_total_per_pool", "cpu_max_process",
+                                                        "wakeups_total")] + list(more):
             if name in now and then.get(name):
                 out.append({"name": f"{name}_vs_baseline", "value": now[name] / then[name], "unit": "x",
                             "note": f"today {now[name]:.4g} / baseline {ref} {then[name]:.4g}, same run"})
