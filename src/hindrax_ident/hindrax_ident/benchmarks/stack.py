@@ -132,19 +132,29 @@ def _proc_cpu_s(pid: int | str = "self") -> float:
     return (int(fields[11]) + int(fields[12])) / _CLK
 
 
-def _proc_wakeups(pid: int) -> tuple[int, int]:
-    """(every thread's, the main thread's) voluntary context switches of a process so far: each is a sleep that
-    ends in a wake-up (a timer, a message, a reply on a socket). Threads that ended before the call are not counted."""
+def _proc_wakeups(pid: int) -> tuple[int, int, dict[str, int]]:
+    """(every thread's, the main thread's, by thread name) voluntary context switches of a process so far: each is a
+    sleep that ends in a wake-up (a timer, a message, a reply on a socket). Threads that ended before the call are
+    not counted; threads of one name (Fast DDS's ``dds.udp.*`` receivers ...) are summed."""
     total = main = 0
+    named: dict[str, int] = collections.defaultdict(int)
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
             text = (task / "status").read_text()
         except OSError:  # the thread ended meanwhile
             continue
-        n = next(int(ln.split()[1]) for ln in text.splitlines() if ln.startswith("voluntary_ctxt_switches:"))
+        fields = dict(ln.split(":", 1) for ln in text.splitlines() if ":" in ln)
+        n = int(fields["voluntary_ctxt_switches"])
         total += n
         main += n if task.name == str(pid) else 0
-    return total, main
+        named["main" if task.name == str(pid) else fields["Name"].strip()] += n
+    return total, main, named
+
+
+def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, float, dict[str, float]]:
+    """Wake-ups per second between two :func:`_proc_wakeups` readings (total, main thread, by thread name)."""
+    return ((after[0] - before[0]) / wall_s, (after[1] - before[1]) / wall_s,
+            {k: (v - before[2].get(k, 0)) / wall_s for k, v in after[2].items()})
 
 
 def _proc_rss_mb(pid: int) -> float:
@@ -522,7 +532,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                         results.append({"wall_s": wall, "t0_ns": t0_ns, "t1_ns": t1_ns,
                                         "per_process": {n: (cpu1[n] - cpu0[n]) / wall for n in procs if n != "pool"},
                                         "pool": (cpu1["pool"] - cpu0["pool"]) / wall,
-                                        "wakeups": {n: tuple((b - a) / wall for a, b in zip(wake0[n], wake1[n]))
+                                        "wakeups": {n: _wakeup_rates(wake0[n], wake1[n], wall)
                                                     for n in procs if n != "pool"},
                                         "participants": {n: ((cpu1[n] - cpu0[n]) / wall,
                                                              (wake1[n][0] - wake0[n][0]) / wall) for n in extra},
@@ -839,11 +849,12 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
                              "target": "<= 0.1" if phase == "idle" and name.startswith("ident_") else "<= 0.35"})
         if all("wakeups" in w for w in wins):
             for name in names:
+                threads = collections.Counter(wins[0]["wakeups"][name][2])
                 rows.append({"name": f"launch_{phase}_wakeups_{name}", "unit": "1/s",
                              "value": _median([w["wakeups"][name][0] for w in wins]),
-                             "note": f"voluntary context switches of every thread per second (each sleep ends in "
-                                     f"a wake-up); main thread "
-                                     f"{_median([w['wakeups'][name][1] for w in wins]):.0f}/s"})
+                             "note": "voluntary context switches of every thread per second (each sleep ends in "
+                                     "a wake-up); by thread (first window): "
+                                     + ", ".join(f"{k} {v:.0f}" for k, v in threads.most_common(6))})
             rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
                          "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
         for name in wins[0].get("participants", {}):
