@@ -93,7 +93,9 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
     for name in given or {}:
         assert name in args, f"{path.name}: no argument {name!r}"
     nodes = []
-    for el in root:
+    elements = list(root)
+    while elements:
+        el = elements.pop(0)
         cond = el.get("if")
         enabled = True
         for attr, want in (("if", "true"), ("unless", "false")):
@@ -131,6 +133,10 @@ def check_launch(path: Path, packages, given: dict[str, str] | None = None) -> l
             passed = {a.get("name"): substitute(a.get("value"), args, packages) for a in el.findall("arg")}
             if enabled:
                 nodes += check_launch(inc, packages, passed)
+        elif el.tag == "group":  # scoped (ROS 2 launch's default): what an <include> in it sets stays inside
+            assert el.get("scoped", "true") == "true", f"{path.name}: an unscoped <group>"
+            if enabled:
+                elements[:0] = list(el)
         elif el.tag == "set_env":  # the DDS transport (hindrax_drivers.dds_transport): its files must exist
             value = substitute(el.get("value"), args, packages)
             if el.get("name") == "FASTRTPS_DEFAULT_PROFILES_FILE":
