@@ -67,3 +67,68 @@ def test_totals_per_pool_divide_by_the_pool_of_the_same_window():
     no_pool["phases"]["running"]["windows"] = [{**no_pool["phases"]["running"]["windows"][0], "pool": 0.0}]
     names = {r["name"] for r in stack.launch_rows(no_pool)}
     assert "launch_running_cpu_total_per_pool" not in names and "launch_idle_cpu_total_per_pool" in names
+
+
+def test_per_process_per_pool_and_wake_up_rows():
+    """Each process in pool units of its window (a: 0.4 / 0.2 = 2.0, target 0.35; an idle identification process
+    0.1 / 0.2 = 0.5 against its 0.1), and its wake-ups per second with the busiest threads by name in the note."""
+    launch = _launch({"a": 0.4, "ident_record": 0.1})
+    for phase in ("idle", "running"):
+        w = launch["phases"][phase]["windows"][0]
+        w["wakeups"] = {"a": (300.0, 100.0, {"main": 100.0, "dds.udp.7411": 200.0}),
+                        "ident_record": (50.0, 20.0, {"main": 20.0, "bag-writer": 30.0})}
+    rows = {r["name"]: r for r in stack.launch_rows(launch)}
+    assert rows["launch_running_cpu_a_per_pool"]["value"] == pytest.approx(2.0)
+    assert rows["launch_running_cpu_a_per_pool"]["target"] == "<= 0.35"
+    assert rows["launch_idle_cpu_ident_record_per_pool"]["value"] == pytest.approx(0.5)
+    assert rows["launch_idle_cpu_ident_record_per_pool"]["target"] == "<= 0.1"
+    assert rows["launch_running_wakeups_a"]["value"] == 300.0
+    assert "dds.udp.7411 200, main 100" in rows["launch_running_wakeups_a"]["note"]
+    assert rows["launch_idle_wakeups_total"]["value"] == 350.0
+
+
+def test_proc_wakeups_counts_this_process_threads():
+    """This process's voluntary context switches: the main thread's are part of the total, the names' counts add up
+    to it, and a thread that slept 20 times while alive adds at least 20 (threads are named by the OS: Fast DDS names
+    its own, a Python thread has the process's name)."""
+    import os
+    import threading
+
+    slept, finish = threading.Event(), threading.Event()
+
+    def sleeper():
+        for _ in range(20):
+            finish.wait(0.001)
+        slept.set()
+        finish.wait(30)
+
+    before = stack._proc_wakeups(os.getpid())
+    t = threading.Thread(target=sleeper)
+    t.start()
+    try:
+        assert slept.wait(30)
+        after = stack._proc_wakeups(os.getpid())
+    finally:
+        finish.set()
+        t.join()
+    total, main, named = after
+    assert total >= main and named["main"] == main and sum(named.values()) == total
+    assert total - before[0] >= 20
+    rates = stack._wakeup_rates(before, after, 2.0)
+    assert rates[:2] == ((total - before[0]) / 2.0, (main - before[1]) / 2.0)
+
+
+def test_baseline_rows_are_todays_figures_over_the_baselines():
+    """The ratio rows divide today's row by the baseline's row of the same name (running 30 / 40 = 0.75); a row the
+    baseline lacks gives no ratio; the baseline's processes are listed in a note."""
+    today = [{"name": "launch_running_cpu_total", "value": 30.0, "unit": "% of a core"},
+             {"name": "launch_running_wakeups_total", "value": 900.0, "unit": "1/s"},
+             {"name": "launch_idle_cpu_total_per_pool", "value": 1.5, "unit": "x"}]
+    before = [{"name": "launch_running_cpu_total", "value": 40.0, "unit": "% of a core"},
+              {"name": "launch_running_cpu_recorder", "value": 4.0, "unit": "% of a core"},
+              {"name": "launch_idle_cpu_total_per_pool", "value": 2.0, "unit": "x"}]
+    rows = {r["name"]: r for r in stack.baseline_rows(today, before, "abc1234")}
+    assert rows["launch_running_cpu_total_vs_baseline"]["value"] == pytest.approx(0.75)
+    assert rows["launch_idle_cpu_total_per_pool_vs_baseline"]["value"] == pytest.approx(0.75)
+    assert "launch_running_wakeups_total_vs_baseline" not in rows
+    assert rows["launch_running_cpu_baseline_processes"]["note"] == "baseline abc1234: recorder 4.0"
