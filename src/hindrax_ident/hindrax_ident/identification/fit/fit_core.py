@@ -1194,11 +1194,15 @@ NESTED = Terms("both")
 
 
 def not_below_nested(chosen: Candidate, tried: list[Candidate]) -> Candidate:
-    """``chosen``, or the nested 1-DOF model (:data:`NESTED`) among ``tried`` when its cross-validated error is lower:
-    a model with more terms never predicts worse than the one it contains."""
+    """``chosen`` when its cross-validated error is below the nested 1-DOF model's (:data:`NESTED`, among ``tried``)
+    by more than one standard error of the fold differences (:func:`_improves`), else the nested model: selection
+    moves away from the model every richer one contains only when cross-validation says so (the one-standard-error
+    rule, [Hastie-ESL2009] §7.10)."""
     nested = [c for c in tried if c.terms == NESTED and math.isfinite(c.mse)]
     best = min(nested, key=lambda c: c.mse, default=None)
-    return best if best is not None and best.mse < chosen.mse else chosen
+    if best is None or best is chosen:
+        return chosen
+    return chosen if _improves(best, chosen) else best
 
 
 def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.ndarray | None,
