@@ -21,6 +21,7 @@ from rclpy.serialization import serialize_message
 
 from hindrax_drivers.recording.writer import BagWriter
 from hindrax_drivers.testing import wait_until
+from hindrax_ident.benchmarks.participant_churn import hardware_priority
 from hindrax_ident.benchmarks.safety import running_layout
 
 pytestmark = pytest.mark.ros
@@ -51,9 +52,6 @@ def _heartbeat_bag(path: Path) -> Path:
     return path
 
 
-# one rerun: the refusal rests on a discovery window (vehicle_graph.DISCOVERY_WINDOW_S); a run that misses the vehicle
-# in it twice in a row fails
-@pytest.mark.flaky(reruns=1)
 @pytest.mark.parametrize("tool", list(TOOLS))
 def test_a_refused_tool_does_not_disarm_the_vehicle(layout, tool, tmp_path):
     lay, hw = layout, layout.hw
@@ -62,16 +60,18 @@ def test_a_refused_tool_does_not_disarm_the_vehicle(layout, tool, tmp_path):
     args = [a.format(bag=bag, tmp=tmp_path) for a in args]
     lay.armed_at_1700()
     hindrax = str(Path(sys.executable).with_name("hindrax"))
-    with open(tmp_path / "stderr", "w") as errf:
+    # the emulated hardware real-time while the tool runs, as the benches run it (the vehicle's /OE line is never
+    # starved by a CPU load; this process's starved line held a guard tick 0.22 s at load 24); the tool is not
+    with hardware_priority(), open(tmp_path / "stderr", "w") as errf:
         proc = subprocess.Popen([hindrax, *args], env=lay.env, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=errf)
-    try:
-        wait_until(lambda: proc.poll() is not None or hw.stopped_at is not None, 180, None, f"{tool} refusing")
-        stopped_while_running = hw.stopped_at is not None
-        wait_until(lambda: proc.poll() is not None, 180, None, f"{tool} exiting")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        try:
+            wait_until(lambda: proc.poll() is not None or hw.stopped_at is not None, 180, None, f"{tool} refusing")
+            stopped_while_running = hw.stopped_at is not None
+            wait_until(lambda: proc.poll() is not None, 180, None, f"{tool} exiting")
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
     err = (tmp_path / "stderr").read_text().strip().splitlines()
     assert proc.returncode == 1 and err and err[-1].startswith(refusal), err
     assert not stopped_while_running and not lay.disarmed_after_arm, (

@@ -215,6 +215,22 @@ class RawDataPublisher:
         self._i2c: list[tuple[int, int, int, bytes]] = []
         self._i2c_bytes = 0
         self._i2c_since_ns: int | None = None
+        self._closed = False
+
+    def _publish(self, msg: Any) -> None:
+        """Publish ``msg``; nothing once :meth:`close` ran or the ROS context is shut down (a transport thread's
+        last records at shutdown, e.g. the ESC's neutral write: lost with the process, at most ``i2c_period_s``)."""
+        if self._closed:
+            return
+        try:
+            self.publisher.publish(msg)
+        except Exception:  # noqa: BLE001 - rclpy raises its own types for a publisher whose context is gone
+            if self._node.context.ok():
+                raise
+
+    def close(self) -> None:
+        """Publish nothing from now on (the node is being destroyed; a transport thread may still call a tap)."""
+        self._closed = True
 
     def _msg(self, transport: int, direction: int, data: bytes, address: int = 0, register: int = -1):
         m = RawDeviceData()
@@ -254,14 +270,14 @@ class RawDataPublisher:
             if end_batch:
                 self._batching = False
         if serial:
-            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
+            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
                                              serial))
         if len(i2c) == 1:
             d, address, reg, data = i2c[0]
-            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
+            self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
         elif i2c:
             packed = b"".join(_RAW_RECORD.pack(d, a, r, len(data)) + data for d, a, r, data in i2c)
-            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, i2c[0][0], packed, i2c[0][1],
+            self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, i2c[0][0], packed, i2c[0][1],
                                              RAW_BATCH_REGISTER))
 
     def serial_tap(self, direction: str, data: bytes, _t: float | None = None) -> None:
@@ -270,20 +286,16 @@ class RawDataPublisher:
                 if self._batching:
                     self._serial += data
                     return
-            self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
+            self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_DEVICE_TO_HOST,
                                              data))
             return
         self.flush(end_batch=False)  # received bytes first: one direction per message, in wire order
-        self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_HOST_TO_DEVICE, data))
+        self._publish(self._msg(RawDeviceData.TRANSPORT_SERIAL, RawDeviceData.DIRECTION_HOST_TO_DEVICE, data))
 
     def flush_pending(self) -> None:
         """Publish everything still held (at shutdown, and before a recording is closed); nothing when the ROS
         context is already shut down (the records are then lost with the process, at most ``i2c_period_s``)."""
-        try:
-            self.flush(end_batch=False, force=True)
-        except Exception:  # noqa: BLE001 - rclpy raises its own types for a publisher whose context is gone
-            if self._node.context.ok():
-                raise
+        self.flush(end_batch=False, force=True)
 
     def i2c_tap(self, kind: str, address: int, register: int | None, data: bytes, _t: float | None = None) -> None:
         d = RawDeviceData.DIRECTION_DEVICE_TO_HOST if kind == "read" else RawDeviceData.DIRECTION_HOST_TO_DEVICE
@@ -301,7 +313,7 @@ class RawDataPublisher:
         if pending:
             self.flush(end_batch=False, force=True)  # outside a batch: what was pending, with this one, at once
             return
-        self.publisher.publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
+        self._publish(self._msg(RawDeviceData.TRANSPORT_I2C, d, data, address, reg))
 
 
 def raw_transactions(msg: Any) -> list[tuple[int, int, int, bytes]]:

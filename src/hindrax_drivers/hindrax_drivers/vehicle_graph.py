@@ -35,6 +35,8 @@ from typing import Any, Callable, Iterable, Mapping
 import rclpy
 from rclpy.parameter import Parameter
 
+from .dds_transport import DISCOVERY_BOUND_S, wait_discovered
+
 __all__ = ["CHECK_PERIOD_S", "DISCOVERY_WINDOW_S", "HEARTBEAT_TOPICS", "ROLE_NODES", "ForeignVehicleError",
            "ForeignVehicleWatch", "GraphView", "foreign_vehicle_processes", "graph_view", "own_view",
            "refuse_before_start", "split_vehicle_topics", "vehicle_topic_reason"]
@@ -57,13 +59,9 @@ ROLE_NODES = {"esc": "ESC", "supervisor": "supervisor"}
 HEARTBEAT_TOPICS = {"esc/heartbeat": "ESC", "supervisor/heartbeat": "supervisor"}
 #: rmw's node name for an endpoint whose participant's node list has not been received yet
 _UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
-#: how long a new participant watches the graph before it trusts that no other ESC or supervisor is there, s.
-#: Cross-process discovery on loopback takes about 2 s (docs/architecture.md §11.5).
-DISCOVERY_WINDOW_S = 2.5
-#: past the window, the look-out waits until the domain's topic list has not changed for this long, s ...
-SETTLED_S = 1.0
-#: ... but no longer than this from its start, s (a domain whose graph keeps changing)
-DISCOVERY_CAP_S = 8.0
+#: how long a new participant watches the graph before it trusts that no other ESC or supervisor is there, s:
+#: three announcement periods of the vehicle's profile (:data:`~hindrax_drivers.dds_transport.DISCOVERY_BOUND_S`)
+DISCOVERY_WINDOW_S = DISCOVERY_BOUND_S
 #: how often a running tool looks again after the discovery window (:meth:`ForeignVehicleWatch.check_every`), s:
 #: discovery on a loaded machine can outlast the window, and a second vehicle graph may start later
 CHECK_PERIOD_S = 1.0
@@ -241,19 +239,16 @@ def refuse_before_start(context: Any, consequence: str, what: str = "refused",
     try:
         watch = ForeignVehicleWatch(lookout, what, consequence, window_s=window_s)
         pause = threading.Event()
-        endpoints, changed_at = -1, watch.t0
-        while True:
+
+        def ready() -> bool:
             settled = watch.settled()  # a named ESC or supervisor: its line
             if settled:  # names lag behind endpoints: an unnamed heartbeat publisher refuses too
                 _refuse_heartbeat_endpoint(lookout, watch)
-            now = watch.clock()
-            count = len(lookout.get_topic_names_and_types())
-            if count != endpoints:
-                endpoints, changed_at = count, now
-            # past the window, wait on while discovery is still bringing topics in (a loaded machine), up to a cap
-            if settled and (now - changed_at >= SETTLED_S or now - watch.t0 >= DISCOVERY_CAP_S):
-                return
-            pause.wait(0.05)
+            return settled
+        # past the window, wait on while discovery is still bringing nodes or topics in (a loaded machine), up to a cap
+        wait_discovered(lambda: (len(lookout.get_node_names_and_namespaces()),
+                                 len(lookout.get_topic_names_and_types())),
+                        ready, lambda: pause.wait(0.05), bound_s=window_s)
     finally:
         lookout.destroy_node()
 

@@ -20,7 +20,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV, loopback_transport, profile_path
+from hindrax_drivers.dds_transport import (ANNOUNCE_PERIOD_S, DISCOVERY_BOUND_S, PROFILE_ENV, PROFILE_FILE, RANGE_ENV,
+                                          TOPSIDE_PROFILE_FILE, loopback_transport, profile_path, wait_discovered)
 from hindrax_drivers.emulated_devices import EmulatedDevices
 from hindrax_drivers.launch_xml import read_launch
 from hindrax_drivers.process_runner import ProcessRunner
@@ -45,11 +46,72 @@ def test_loopback_discovery_becomes_the_udp_loopback_profile(given):
     assert Path(env[PROFILE_ENV]).resolve() == (REPO / "ros_ws/config/fastdds_loopback.xml").resolve()
 
 
-@pytest.mark.parametrize("given", ["SUBNET", "OFF", "SYSTEM_DEFAULT"])
+@pytest.mark.parametrize("given", ["OFF", "SYSTEM_DEFAULT"])
 def test_other_discovery_ranges_keep_their_transports(given):
     env = {RANGE_ENV: given}
     loopback_transport(env)
-    assert env == {RANGE_ENV: given}  # the topside's SUBNET reaches the network with Fast DDS's defaults
+    assert env == {RANGE_ENV: given}
+
+
+def test_the_topside_keeps_its_range_and_gets_the_announcement_period_unless_a_profile_is_named():
+    env = {RANGE_ENV: "SUBNET"}
+    loopback_transport(env)
+    assert env[RANGE_ENV] == "SUBNET"  # the topside's SUBNET reaches the network with Fast DDS's transports
+    assert Path(env[PROFILE_ENV]).resolve() == (REPO / "ros_ws/config/fastdds_topside.xml").resolve()
+    own = {RANGE_ENV: "SUBNET", PROFILE_ENV: "/etc/my_profile.xml"}
+    assert loopback_transport(dict(own)) == own
+
+
+@pytest.mark.parametrize("name", [PROFILE_FILE, TOPSIDE_PROFILE_FILE])
+def test_both_profiles_announce_every_participant_at_the_period_the_discovery_waits_assume(name):
+    participant = ET.parse(profile_path(name)).getroot().find(f"{NS}participant")
+    assert participant.get("is_default_profile") == "true"
+    lease = participant.find(f"{NS}rtps/{NS}builtin/{NS}discovery_config/{NS}leaseAnnouncement")
+    assert int(lease.findtext(f"{NS}sec")) + int(lease.findtext(f"{NS}nanosec")) * 1e-9 == ANNOUNCE_PERIOD_S
+    if name == TOPSIDE_PROFILE_FILE:  # no transport named: the range's own (the tether) stay
+        assert participant.find(f"{NS}rtps/{NS}userTransports") is None
+        assert participant.find(f"{NS}rtps/{NS}useBuiltinTransports") is None
+
+
+class _Graph:
+    """A graph whose view changes at the times given, and a clock that each pause advances by 0.05 s."""
+
+    def __init__(self, changes=(), ready_at=0.0):
+        self.t, self.changes, self.ready_at = 0.0, list(changes), ready_at
+
+    def view(self):
+        return sum(1 for c in self.changes if c <= self.t)
+
+    def ready(self):
+        return self.t >= self.ready_at
+
+    def pause(self):
+        self.t = round(self.t + 0.05, 6)
+
+
+def _wait(graph, **kw):
+    return wait_discovered(graph.view, graph.ready, graph.pause, clock=lambda: graph.t, **kw)
+
+
+def test_discovery_wait_lasts_the_bound_then_until_the_graph_is_quiet_for_one_announcement_period():
+    g = _Graph()
+    assert _wait(g) and g.t == DISCOVERY_BOUND_S == 3 * ANNOUNCE_PERIOD_S  # nothing changes: the bound
+    g = _Graph(changes=[0.3, 1.4])
+    assert _wait(g) and g.t == pytest.approx(1.4 + ANNOUNCE_PERIOD_S)  # a late arrival: quiet after it
+    g = _Graph(ready_at=2.2)
+    assert _wait(g) and g.t == pytest.approx(2.2)  # not ready: waits for the condition
+
+
+def test_discovery_wait_gives_up_at_its_cap_and_lets_a_refusal_through():
+    g = _Graph(changes=[0.1 * k for k in range(200)])  # a graph that keeps changing
+    assert not _wait(g, cap_s=4.0) and g.t == pytest.approx(4.0)
+    g = _Graph(ready_at=99.0)
+    assert not _wait(g, cap_s=2.0)
+
+    def refuse():
+        raise RuntimeError("a second vehicle")
+    with pytest.raises(RuntimeError, match="a second vehicle"):
+        wait_discovered(lambda: 0, refuse, lambda: None)
 
 
 def test_the_profile_is_udpv4_on_loopback_only_without_builtin_transports():

@@ -379,13 +379,20 @@ def test_sigterm_path_writes_neutral():
         holder["node"] = node
         return node
 
-    t = threading.Thread(target=lambda: holder.setdefault("rc", run_node(factory, [])))
-    t.start()
-    wait_until(lambda: "node" in holder and emu.pulse_width_us(0) > 1650, 10, message="commanding 1700 us")
-    rclpy.shutdown()  # what the SIGINT/SIGTERM handler does
-    t.join(10)
+    raised = []  # an exception in any thread (the chip worker's raw publish once failed after the shutdown)
+    hook, threading.excepthook = threading.excepthook, raised.append
+    try:
+        t = threading.Thread(target=lambda: holder.setdefault("rc", run_node(factory, [])))
+        t.start()
+        wait_until(lambda: "node" in holder and emu.pulse_width_us(0) > 1650, 10, message="commanding 1700 us")
+        rclpy.shutdown()  # what the SIGINT/SIGTERM handler does
+        t.join(10)
+    finally:
+        threading.excepthook = hook
     assert not t.is_alive() and holder["rc"] == 0
     assert np.allclose(wire(emu), 1500.0, atol=TICK_US)
+    assert not holder["node"].chip_io._thread.is_alive()  # joined before the node was destroyed
+    assert not raised, [(a.thread.name, a.exc_value) for a in raised]
 
 
 def test_output_logic_slew_and_errors():

@@ -1,6 +1,8 @@
 """Raw device data batched (node_common.RawDataPublisher): I2C read cycles together for up to 0.1 s (one cycle per
 message with a zero period), unpacked again by raw_transactions and by the replay's I2C grouping, in wire order;
 a serial report's chunks concatenated."""
+import pytest
+
 from hindrax_drivers.node_common import RAW_BATCH_REGISTER, RAW_I2C_PERIOD_S, RawDataPublisher, raw_transactions
 from hindrax_drivers.recording.replay_devices import i2c_transactions
 from hindrax_msgs.msg import RawDeviceData
@@ -153,3 +155,26 @@ def test_unbatch_raw_gives_one_message_per_transaction():
     assert all(m.device_name == "icm20948" and m.transport == RawDeviceData.TRANSPORT_I2C for m in parts)
     plain = RawDeviceData(i2c_register=0x2D)
     assert unbatch_raw(plain) == [plain]
+
+
+def test_after_close_or_with_the_context_gone_nothing_is_published_and_nothing_raises():
+    """A transport thread's last records at shutdown (the ESC's neutral written by its chip worker after
+    rclpy.shutdown, or after the node was destroyed): dropped, not raised in that thread."""
+    node = _Node()
+
+    class _Gone:
+        def ok(self):
+            return False
+
+    def fail(_msg):
+        raise RuntimeError("publisher's context is invalid")
+    raw = RawDataPublisher(node, "pca9685", i2c_period_s=0.0)
+    raw.publisher.publish = fail
+    node.context = _Gone()
+    raw.i2c_tap("write", 0x40, 0x06, b"\x00\x00\xdc\x05")  # no exception
+    node.context.ok = lambda: True
+    with pytest.raises(RuntimeError, match="context is invalid"):  # with the context up a failed publish is a fault
+        raw.i2c_tap("write", 0x40, 0x06, b"\x00\x00\xdc\x05")
+    raw.close()
+    raw.i2c_tap("write", 0x40, 0x06, b"\x00\x00\xdc\x05")  # would raise (fail) if it were published
+    raw.flush_pending()

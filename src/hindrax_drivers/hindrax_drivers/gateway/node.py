@@ -2,7 +2,8 @@
 
 * This process (``gateway_node``) is the topside side: the only participant on ``topside_domain_id`` with
   ``topside_discovery_range`` (SUBNET on the vehicle, LOCALHOST in tests) and Fast DDS's default transports (it must
-  reach the tether). It has no participant on the vehicle's internal domain.
+  reach the tether; the topside profile's 0.5 s announcement period, ``fastdds_topside.xml``). It has no
+  participant on the vehicle's internal domain.
 * Its child, :mod:`hindrax_drivers.gateway.internal`, is the internal side: the vehicle's loopback transport (every
   UDP socket on 127.0.0.1, :mod:`hindrax_drivers.dds_transport`), like every other vehicle process.
 
@@ -52,7 +53,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message, serialize_message
 
-from ..dds_transport import PROFILE_ENV, RANGE_ENV, loopback_transport
+from ..dds_transport import PROFILE_ENV, RANGE_ENV, TOPSIDE_PROFILE_FILE, loopback_transport, profile_path
 from ..operator_signing import OperatorKeyError, Verifier, key_path, load_key
 from ..ros_process import RosProcess
 from ..sros2_policy import topside_enclaves
@@ -371,8 +372,9 @@ def main(args: Sequence[str] | None = None) -> int:
             print(f"gateway: {exc}: every operator request will be refused (the e-stop works)", file=sys.stderr,
                   flush=True)
             verifier = Verifier(None, settings.vehicle_name)
-        # this process's participants are the topside's only: its range, peers and default transports
-        os.environ.pop(PROFILE_ENV, None)
+        # this process's participants are the topside's only: its range, peers and default transports, with the
+        # topside profile's announcement period
+        os.environ[PROFILE_ENV] = str(profile_path(TOPSIDE_PROFILE_FILE))
         os.environ[RANGE_ENV] = settings.topside_discovery_range
         os.environ["ROS_DOMAIN_ID"] = str(settings.topside_domain_id)
         with RosProcess(["gateway_node", "--ros-args", "--enclave", topside_enclaves(settings.vehicle_name)["gateway"]],

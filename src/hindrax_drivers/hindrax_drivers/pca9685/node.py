@@ -416,7 +416,10 @@ class EscNode(Node):
             self.link.closing = False
 
     def destroy_node(self) -> None:
+        """Join the chip worker (after its queued jobs, the shutdown's neutral; up to 1 s), then silence its raw tap
+        (a call left hanging past the join publishes nothing on a destroyed node), then destroy the node."""
         self.chip_io.stop()
+        self.raw.close()
         super().destroy_node()
 
 

@@ -30,6 +30,8 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from hindrax_drivers.testing import python_executable
 
@@ -47,40 +49,48 @@ class _NiceOnlyLayout(_VehicleLayout):
     realtime = False
 
 
-def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
-    """The rows of one run (module docstring); ``realtime`` False: the nice-only comparison run."""
-    duration_s = QUICK_DURATION_S if quick else DURATION_S
-    prefix = "busy_neighbours_" if realtime else "busy_neighbours_nice_only_"
+@contextmanager
+def cpu_bound_neighbours(n: int = NEIGHBOURS) -> Iterator[list[subprocess.Popen]]:
+    """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of its own (another
+    service or a terminal on the Pi), for the block; killed on the way out. Raises RuntimeError if one inherited
+    this process's real-time priority (it would starve the vehicle's processes, not stand beside them)."""
     neighbours: list[subprocess.Popen] = []
     try:
-        with running_layout("hindrax-bench-busy-", layout=_VehicleLayout if realtime else _NiceOnlyLayout) as lay:
-            watch = _Watch(lay.probe)
-            lay.armed_at_1700()
-            # real-time from here on: every thread of this process, the emulation's serving threads included (one
-            # per node process, started when it connected: a thread started under SCHED_RESET_ON_FORK would not be)
-            with hardware_priority() as refused:
-                if refused:
-                    why = f"not measured: {refused}"
-                    return [{"name": prefix + name, "value": None, "unit": unit, "note": why} for name, unit in
-                            (("disarms", "disarms"), ("heartbeat_gap_max_ms", "ms"),
-                             ("heartbeat_sent_gap_max_ms", "ms"), ("tick_gap_max_ms", "ms"))]
-                watch.armed, watch.disarms, watch.active = True, 0, True
-                for _ in range(NEIGHBOURS):
-                    neighbours.append(subprocess.Popen([python_executable(), "-c", "while True: pass"],
-                                                       start_new_session=True, stdout=subprocess.DEVNULL,
-                                                       stderr=subprocess.DEVNULL))
-                    if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:  # a real-time busy loop: stop
-                        raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
-                time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's own thread)
-                watch.active = False
-                load = os.getloadavg()[0]
-                gap_s, who = watch.largest_gap_s()
-                sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
-                beats = sum(len(v) for v in watch.arrivals.values())
+        for _ in range(n):
+            neighbours.append(subprocess.Popen([python_executable(), "-c", "while True: pass"], start_new_session=True,
+                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:
+                raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
+        yield neighbours
     finally:
         for p in neighbours:
             p.kill()
             p.wait(10)
+
+
+def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
+    """The rows of one run (module docstring); ``realtime`` False: the nice-only comparison run."""
+    duration_s = QUICK_DURATION_S if quick else DURATION_S
+    prefix = "busy_neighbours_" if realtime else "busy_neighbours_nice_only_"
+    with running_layout("hindrax-bench-busy-", layout=_VehicleLayout if realtime else _NiceOnlyLayout) as lay:
+        watch = _Watch(lay.probe)
+        lay.armed_at_1700()
+        # real-time from here on: every thread of this process, the emulation's serving threads included (one
+        # per node process, started when it connected: a thread started under SCHED_RESET_ON_FORK would not be)
+        with hardware_priority() as refused:
+            if refused:
+                why = f"not measured: {refused}"
+                return [{"name": prefix + name, "value": None, "unit": unit, "note": why} for name, unit in
+                        (("disarms", "disarms"), ("heartbeat_gap_max_ms", "ms"),
+                         ("heartbeat_sent_gap_max_ms", "ms"), ("tick_gap_max_ms", "ms"))]
+            watch.armed, watch.disarms, watch.active = True, 0, True
+            with cpu_bound_neighbours(NEIGHBOURS):
+                time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's thread)
+            watch.active = False
+            load = os.getloadavg()[0]
+            gap_s, who = watch.largest_gap_s()
+            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
+            beats = sum(len(v) for v in watch.arrivals.values())
     what = (f"armed at 1700 us for {duration_s:g} s beside {NEIGHBOURS} CPU-bound processes of another session "
             f"(1-minute load {load:.1f} at the end); safety processes "
             + ("real-time as vehicle.launch.xml starts them" if realtime else "at nice -5 only"))

@@ -42,22 +42,31 @@ from .safety import _Layout, running_layout
 PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
 GAP_TARGET_MS = 100.0
 
+#: a subscriber process, as ``ros2 topic echo`` would be: ``-c _SUBSCRIBER NAME SECONDS MODULE:TYPE=TOPIC...``
 _SUBSCRIBER = r"""
-import sys, time
+import importlib, sys, time
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
-from hindrax_msgs.msg import Heartbeat
 rclpy.init()
 node = rclpy.create_node("churn_subscriber_" + sys.argv[1])
-node.create_subscription(DiagnosticArray, "/diagnostics", lambda m: None, 10)
-for topic in ("supervisor/heartbeat", "guard/heartbeat", "esc/heartbeat"):
-    node.create_subscription(Heartbeat, topic, lambda m: None, 10)
-end = time.monotonic() + 3.0
+for spec in sys.argv[3:]:
+    kind, topic = spec.split("=", 1)
+    module, name = kind.split(":")
+    node.create_subscription(getattr(importlib.import_module(module), name), topic, lambda m: None, 10)
+end = time.monotonic() + float(sys.argv[2])
 while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.05)
 node.destroy_node()
 rclpy.shutdown()
 """
+#: what a subscriber on the internal graph listens to: /diagnostics and the three safety heartbeats
+INTERNAL_TOPICS = ("diagnostic_msgs.msg:DiagnosticArray=/diagnostics",
+                   *(f"hindrax_msgs.msg:Heartbeat={topic}" for topic in HEARTBEAT_NAMES.values()))
+
+
+def subscriber_argv(name: str, duration_s: float, topics: tuple[str, ...] = INTERNAL_TOPICS) -> list[str]:
+    """The command of a subscriber process named ``churn_subscriber_<name>`` that listens to ``topics``
+    (``module:Type=topic``) for ``duration_s`` s and exits."""
+    return [python_executable(), "-c", _SUBSCRIBER, name, f"{duration_s:g}", *topics]
 
 
 @contextmanager
@@ -140,16 +149,16 @@ class _Watch:
             self.disarms += 1
         self.armed = bool(msg.armed)
 
+    def gaps_s(self, sent: bool = False) -> dict[str, float]:
+        """Heartbeat name -> the largest gap between two of its consecutive beats (inf with fewer than two), s;
+        ``sent``: between their send stamps (the sender late) instead of their arrivals here."""
+        return {name: max((b - a for a, b in zip(times, times[1:])), default=float("inf"))
+                for name, times in (self.sent if sent else self.arrivals).items()}
+
     def largest_gap_s(self, sent: bool = False) -> tuple[float, str]:
         """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent.
         ``sent``: between their send stamps (the sender late) instead of their arrivals here."""
-        worst, who = 0.0, ""
-        for name, times in (self.sent if sent else self.arrivals).items():
-            if len(times) < 2:
-                return float("inf"), name
-            gap = max(b - a for a, b in zip(times, times[1:]))
-            if gap > worst:
-                worst, who = gap, name
+        who, worst = max(self.gaps_s(sent).items(), key=lambda item: item[1])
         return worst, who
 
 
@@ -170,7 +179,7 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
                 k = 0
                 while time.monotonic() - t0 < duration_s:
                     if k % 2 == 0:
-                        argv = [python_executable(), "-c", _SUBSCRIBER, str(k)]
+                        argv = subscriber_argv(str(k), 3.0)
                     else:
                         argv = [python_executable(), "-m", "hindrax_ident.cli", "health", "--quiet", "--timeout",
                                 "3"]

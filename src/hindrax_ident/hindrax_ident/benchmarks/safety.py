@@ -47,7 +47,10 @@ ROS 2 processes started while armed (:mod:`hindrax_ident.benchmarks.participant_
 ``participant_churn_disarms`` (target 0) and ``participant_churn_heartbeat_gap_max_ms`` (target 100 ms). Beside two
 CPU-bound processes of another session (:mod:`hindrax_ident.benchmarks.busy_neighbours`, the same layout):
 ``busy_neighbours_disarms`` (target 0) and ``busy_neighbours_heartbeat_gap_max_ms`` (target 100 ms), and the same
-at nice -5 only for comparison.
+at nice -5 only for comparison. The pool day's churn check (:mod:`hindrax_ident.benchmarks.pool_day_churn`, the same
+layout with the gateway, two CPU-bound neighbours; per trial a 1 s subscriber inside on default transports, one on
+the topside and ``hindrax health``): ``pool_day_churn_disarms`` (target 0 in 15 trials) and
+``pool_day_churn_heartbeat_gap_max_ms`` (target 150 ms).
 The authority rows (:mod:`hindrax_ident.benchmarks.sealed_authority`, the same layout with the gateway):
 ``internal_sockets_reachable_from_network`` and ``operator_*_requests_accepted`` (target 0).
 

@@ -22,6 +22,8 @@ import argparse
 import json
 import subprocess
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import rclpy
@@ -70,6 +72,29 @@ def _arm(executor, client, request):
     return future.result()
 
 
+@contextmanager
+def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
+    """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
+    (:func:`~hindrax_ident.benchmarks.safety.running_layout`), on its internal domain and the topside domain
+    ``topside`` (LOCALHOST, the shipped file's range), with operator keys from ``keys_dir`` (none: every operator
+    request refused); yields its process once its internal participant has sockets, and stops it on the way out."""
+    log = open(lay.tmp / "gateway.log", "w")
+    env = dict(lay.env, **({KEYS_DIR_ENV: keys_dir} if keys_dir else {}))
+    gateway = subprocess.Popen([lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
+                                lay.config, "-p", f"topside_domain_id:={topside}"],
+                               env=env, stdout=log, stderr=subprocess.STDOUT)
+    try:
+        wait_until(lambda: "internal domain" in (lay.tmp / "gateway.log").read_text(), WAIT_S, None,
+                   "gateway started")
+        wait_until(lambda: len(child_pids(gateway.pid)) == 1 and udp_sockets(child_pids(gateway.pid)[0]),
+                   WAIT_S, None, "gateway's internal participant")
+        yield gateway
+    finally:
+        gateway.terminate()
+        gateway.wait(30)
+        log.close()
+
+
 def run(quick: bool = False) -> list[dict]:
     """Run this benchmark (``quick``: fewer requests); returns its result rows."""
     n = QUICK_REQUESTS if quick else REQUESTS
@@ -78,15 +103,7 @@ def run(quick: bool = False) -> list[dict]:
         vehicle = yaml.safe_load(Path(lay.config).read_text())["/**"]["ros__parameters"]["vehicle"]["name"]
         key = load_key(create_key(Path(keys) / f"{vehicle}.key"))
         lay.ensure()
-        log = open(lay.tmp / "gateway.log", "w")
-        gateway = subprocess.Popen([lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
-                                    lay.config, "-p", f"topside_domain_id:={topside}"],
-                                   env=dict(lay.env, **{KEYS_DIR_ENV: keys}), stdout=log, stderr=subprocess.STDOUT)
-        try:
-            wait_until(lambda: "internal domain" in (lay.tmp / "gateway.log").read_text(), WAIT_S, None,
-                       "gateway started")
-            wait_until(lambda: len(child_pids(gateway.pid)) == 1 and udp_sockets(child_pids(gateway.pid)[0]),
-                       WAIT_S, None, "gateway's internal participant")
+        with gateway_running(lay, topside, keys) as gateway:
             pids = {name: p.pid for name, p in lay.procs.items()}
             pids["gateway internal"] = child_pids(gateway.pid)[0]
             wait_until(lambda: all(udp_sockets(pid) for pid in pids.values()), WAIT_S, None, "every participant")
@@ -131,10 +148,6 @@ def run(quick: bool = False) -> list[dict]:
                 executor.shutdown()
                 node.destroy_node()
             return rows + signing_rows(answers)
-        finally:
-            gateway.terminate()
-            gateway.wait(30)
-            log.close()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,20 +14,16 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
 from .common import CommandError
 
-__all__ = ["DISCOVERY_SETTLE_S", "VEHICLE_ENV", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros"]
+__all__ = ["VEHICLE_ENV", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros"]
 
 #: the environment variable naming the vehicle a topside PC commands (docker/topside.env.example): ``--vehicle``'s
 #: default
 VEHICLE_ENV = "HINDRAX_VEHICLE"
-#: after the first gateway appears, how long to keep listening for others before choosing, s (cross-process
-#: discovery of peers already running arrives within about 1 s of the first, docs/architecture.md §11.5)
-DISCOVERY_SETTLE_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -76,26 +72,28 @@ def add_vehicle_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def find_vehicle(node: Any, executor: Any, wanted: str | None, timeout_s: float) -> Target:
-    """Spin ``executor`` until a gateway (``wanted``'s, if given) is seen and :data:`DISCOVERY_SETTLE_S` more have
-    passed, at most ``timeout_s``; then choose (:func:`hindrax_drivers.gateway.interface.choose_vehicle`). Raises
+    """Spin ``executor`` until a gateway (``wanted``'s, if given) is seen and discovery has settled
+    (:func:`hindrax_drivers.dds_transport.wait_discovered`: every gateway running has announced itself), at most
+    ``timeout_s``; then choose (:func:`hindrax_drivers.gateway.interface.choose_vehicle`). Raises
     :class:`CommandError` (one line) for no vehicle, several, not the one named, or a name two gateways answer to."""
+    from hindrax_drivers.dds_transport import wait_discovered
     from hindrax_drivers.gateway.interface import (GATEWAY_NODE, STATUS_TOPIC, VehicleChoiceError, choose_vehicle,
                                                    duplicate_problem, participants, vehicles_seen)
     from hindrax_drivers.operator_signing import OperatorKeyError, Signer, key_path, load_key
 
-    start = time.monotonic()
-    first_seen: float | None = None
-    while True:
+    nodes = node.get_node_names_and_namespaces()
+
+    def view() -> frozenset:
+        nonlocal nodes
         nodes = node.get_node_names_and_namespaces()
+        return frozenset(nodes)
+
+    def ready() -> bool:
         seen = vehicles_seen(nodes)
-        now = time.monotonic()
-        if (wanted is None and seen or wanted in seen) and first_seen is None:
-            first_seen = now
-        if first_seen is not None and now - first_seen >= DISCOVERY_SETTLE_S:
-            break
-        if now - start >= timeout_s:
-            break
-        executor.spin_once(timeout_sec=0.1)
+        return bool(seen) if wanted is None else wanted in seen
+
+    wait_discovered(view, ready, lambda: executor.spin_once(timeout_sec=0.1), cap_s=timeout_s)
+    seen = vehicles_seen(nodes)
     domain = f"ROS domain {os.environ.get('ROS_DOMAIN_ID', '0')}"
     try:
         name = choose_vehicle(seen, wanted, domain)
