@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.fit.fit_any import FitInputError, TopicChoice
+    from ..identification.bag_input.reader import FitInputError, TopicChoice
     from ..identification.assessment.predict import ModelError, dofs_of, load_model, predict_bag, rule_text, write_csv
 
     if args.segment_s is not None and not 0.5 <= args.segment_s <= 3600.0:

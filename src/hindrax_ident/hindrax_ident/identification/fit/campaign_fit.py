@@ -2,11 +2,11 @@
 :class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.dof_model.DofIdentification`
 (docs/identification.md §7).
 
-``hindrax run``, ``hindrax ident bag`` (:mod:`..bag_input.from_bag`) and the in-process campaign identify with
-:func:`identify_all_with_errors`; ``hindrax ident fit`` on a bag with the campaign's topics reads it with
-:func:`dof_records` too (:mod:`.fit_any`). Everything after the reading (timing, segments, output-error fit, model
-terms by cross-validation, intervals) is :mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as
-``hindrax ident fit``. What the campaign knows that an arbitrary bag does not, and this reader uses:
+``hindrax run``, ``hindrax ident bag`` and ``hindrax ident fit`` on a bag with the campaign's topics (the campaign
+adapter of :mod:`..bag_input.reader`) and the in-process campaign identify with :func:`identify_all_with_errors`.
+Everything after the reading (timing, segments, output-error fit, model terms by cross-validation, intervals) is
+:mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as ``hindrax ident fit``. What the campaign knows
+that an arbitrary bag does not, and this reader uses:
 
 * **the DOF windows** (``identification/status``): each DOF's record is its window only, one chunk on the record's
   tick grid (``record.tick_s``, 10 ms), the force the thrust model of the widths the ESC wrote (``thrust_model``:
@@ -33,7 +33,6 @@ All quantities SI, body FRD; times in s of the record's clock.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -44,15 +43,12 @@ from ...estimation.least_squares import EstimationError, fit_linear_model
 from ...vehicle.fusion import smooth_with_acceleration, smooth_with_rate
 from ...vehicle.state import euler_rates
 from ...vehicle.uncertainty import measurement_settings
-from ..bag_input.from_bag import record_from_bag
 from . import fit_core
-from .calibration import identify_calibrated
 from .dof_model import (DofIdentification, parameter_names, parameter_units, regressor_matrix,
                         restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
-           "dof_records", "identification_of", "identify_all_with_errors", "identify_all", "identify_dof",
-           "identify_bag"]
+           "dof_records", "identification_of", "identify_all_with_errors", "identify_all", "identify_dof"]
 
 
 @dataclass
@@ -365,15 +361,3 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     out = [_smooth_on_ticks(t, ta, rpy[:, i], "position", ms["jerk_psd"], std_att,
                             RateAid(tg, rates[:, i] - bias[i], ms["std"]))[0] for i in (0, 1)]
     return out[0], out[1], bias
-
-
-def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
-                 opts: fit_core.CoreOptions = fit_core.CoreOptions()):
-    """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag:
-    :func:`~..bag_input.from_bag.record_from_bag`, then :func:`identify_all_with_errors` with the fit core's options
-    ``opts``. With calibration results in the bag (``record.calibration``) the fits see the thrust-model force times the
-    measured scales (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays
-    unscaled. Raises ``ValueError`` for a non-positive scale in the bag."""
-    record = record_from_bag(bag_path, cfg, grid_s)
-    idents, errors = identify_calibrated(record, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
-    return record, idents, errors
