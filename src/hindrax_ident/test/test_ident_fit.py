@@ -262,7 +262,7 @@ def test_imu_in_a_rotated_frame_and_unset_header_stamps(tmp_path):
         assert r.status == "fitted"
         t = truth_parameters(truth, dof)
         for name in names:
-            v = float(r.theta[r.names.index(name)])
+            v = float(r.core.theta[r.core.names.index(name)])
             if abs(v - t[name]) > (0.15 if name == "quadratic_damping" else 0.10) * t[name]:
                 problems.append(f"{dof} {name} {v:.4g}, truth {t[name]:.4g}")
         assert r.validation["cross_validation"]["nrmse"] < 0.3

@@ -130,23 +130,18 @@ def _run_campaign(args: argparse.Namespace, cfg) -> int:
     return 0
 
 
-def _campaign_hint(args: argparse.Namespace, cfg, dofs, choice) -> str:
-    """'; it is a campaign bag: ...' when the first bag has the campaign's topics but was not read as the campaign
-    (no --config, several bags, a holdout, DOFs or topics chosen), else ''."""
-    from ..identification.bag_input.reader import TopicChoice, is_campaign_bag
+def _campaign_hint(args: argparse.Namespace, cfg) -> str:
+    """'; it is a campaign bag: ...' when the first bag, not read as the campaign (no --config, several bags, a
+    holdout, DOFs or topics chosen), has the campaign's topics, else ''."""
+    from ..identification.bag_input.reader import is_campaign_bag
 
     try:
         if not is_campaign_bag(args.bags[0]):
             return ""
     except Exception:  # noqa: BLE001 - the hint is optional; the error itself was already said
         return ""
-    if cfg is None:
-        why = "give --config VEHICLE.yaml to read it as the campaign"
-    else:
-        why = ("give it alone, with --config and without --holdout, --dofs or --*-topic, to read it as the campaign "
-               "(as hindrax ident bag does)")
-    if cfg is not None and len(args.bags) == 1 and not args.holdout and dofs is None and choice == TopicChoice():
-        return ""
+    why = ("give --config VEHICLE.yaml to read it as the campaign" if cfg is None else "give it alone, with --config "
+           "and without --holdout, --dofs or --*-topic, to read it as the campaign (as hindrax ident bag does)")
     return f"; {args.bags[0]} is a campaign bag: {why}"
 
 
@@ -185,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
         res = fit_bags(args.bags, choice, cfg, dofs, args.holdout,
                        FitOptions(folds=args.folds, persistence_margin=margin, max_delay_s=args.max_delay_s))
     except (FitInputError, BagError, OSError) as exc:
-        raise CommandError(f"ident fit: {exc}{_campaign_hint(args, cfg, dofs, choice)}") from exc
+        raise CommandError(f"ident fit: {exc}{_campaign_hint(args, cfg)}") from exc
     if not any(r.status == "fitted" for r in res.dofs.values()):
         print(format_table(res, cfg))
         raise CommandError("ident fit: no DOF could be identified (see the table: not excited or failed)")

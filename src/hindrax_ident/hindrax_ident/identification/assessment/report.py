@@ -8,8 +8,6 @@ Plots per DOF:
   k_q |v| v + k_l v + b with its 95 % band (delta method on the damping/bias covariance, Student-t).
 * ``<dof>_rls.png`` - RLS convergence: every parameter's online estimate with its +-1.96 std band and the
   reported (offline) value.
-* ``free_decay.png`` - when a :class:`~hindrax_ident.estimation.free_decay.FreeDecayResult` is given: the
-  displacement record, its peaks and the fitted envelope ([Hindrax-AM] Figs. 6-7).
 
 For a fit of bags of any topics (``hindrax ident fit``, :func:`write_fit_outputs`): per fitted DOF, the validation
 segments laid end to end (the holdout bags when given, else the cross-validation folds), measured velocity, the
@@ -23,7 +21,7 @@ from __future__ import annotations
 import html
 import math
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping
 
 import matplotlib
 
@@ -138,23 +136,6 @@ def _rls_plot(r, path: Path) -> bool:
     return True
 
 
-def _free_decay_plot(fd, path: Path) -> None:
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.plot(fd.t_s, fd.displacement_m * 1e3, lw=1, label="displacement")
-    ax.plot(fd.peak_times_s, fd.peak_amplitudes_m * 1e3, "o", ms=3, label="peaks")
-    if getattr(fd, "envelope_m", None) is not None and len(fd.envelope_m) == len(fd.t_s):
-        ax.plot(fd.t_s, fd.envelope_m * 1e3, "--", lw=1, label="envelope")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("displacement (mm)")
-    ax.set_title(f"free decay: omega_d {fd.omega_d_rad_s:.2f} rad/s, zeta {fd.zeta:.3f}, "
-                 f"m_ad {fd.added_mass_kg:.3f} kg")
-    ax.legend(fontsize=7)
-    ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-
-
 def _fmt(x, digits: int = 4) -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "-"
@@ -259,7 +240,7 @@ def references_html(document: Mapping) -> str:
 
 
 def write_report(out_dir: str | Path, identifications: Mapping[str, Any], document: Mapping,
-                 free_decay: Optional[Any] = None, campaign_note: str = "") -> Path:
+                 campaign_note: str = "") -> Path:
     """Write ``out_dir/index.html`` and the PNGs; returns the index path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -317,10 +298,6 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
         if _rls_plot(r, rl):
             parts.append(f"<img src='{rl.name}' alt='{dof} RLS convergence'>")
     parts.append(references_html(document))
-    if free_decay is not None:
-        fd = out / "free_decay.png"
-        _free_decay_plot(free_decay, fd)
-        parts.append("<h2>Free decay ([Hindrax-AM])</h2><img src='free_decay.png' alt='free decay'>")
     parts.append("</body></html>")
     index = out / "index.html"
     index.write_text("\n".join(parts))

@@ -135,6 +135,16 @@ def _rls_entry(dof: str, r: Any, cfg: VehicleConfig) -> dict:
     return {n: [v, _f(float(s))] for n, v, s in zip(names, vals, pub)}
 
 
+def _provenance(cfg: VehicleConfig | None, source: str, method: str, seed: int | None) -> dict:
+    """identification.yaml ``provenance``: the data, the date, the vehicle file the values depend on
+    (:func:`~...vehicle.vehicle_match.vehicle_parameters`; None without one), the method and the seed."""
+    return {"source": source, "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
+            "configuration_sha256": None if cfg is None else cfg.sha256,
+            "vehicle_parameters": None if cfg is None else vehicle_parameters(cfg),
+            "water_density_kg_m3": None if cfg is None else float(cfg.environment.water_density_kg_m3),
+            "method": method, "seed": seed}
+
+
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
                   seed: int | None = None, method: str | None = None,
                   include_configured: bool = True, calibration: Mapping[str, Any] | None = None) -> dict:
@@ -181,10 +191,9 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         core = r.signals.get("core")
         if core is not None:  # the fit core's choice, scored against holding the velocity and 0 (fit_core.persistence)
             entry["model"] = core.terms.label
-            entry["model_selection"] = _plain_rows(model_selection(core))
+            entry["model_selection"] = _plain(model_selection(core))
             if core.persistence is not None:
-                entry["persistence"] = {k: (bool(v) if k == "beats" else float(v))
-                                        for k, v in core.persistence.items()}
+                entry["persistence"] = _plain(core.persistence)
         entry["method"] = r.method
         entry["pool_time_s"] = float(r.pool_time_s)
         entry["comparison"] = {
@@ -205,18 +214,10 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
         dofs[dof] = entry
     doc = {
         "schema_version": SCHEMA_VERSION,
-        "provenance": {
-            "source": source,
-            "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
-            "configuration_sha256": cfg.sha256,
-            "vehicle_parameters": vehicle_parameters(cfg),  # what the values depend on (vehicle_match.py)
-            "water_density_kg_m3": float(cfg.environment.water_density_kg_m3),
-            "method": method or ("[Hindrax-Drag] §4 self-propelled ladder; the fit core's segment-wise output error on "
-                                 "the raw sensor samples (docs/identification.md §7); equation-error batch LS "
-                                 "([Hindrax-Drag] eqs. 6-8), RLS online and steady-state LS ([Hindrax-Drag] "
-                                 "eqs. 2-8) for comparison"),
-            "seed": seed,
-        },
+        "provenance": _provenance(cfg, source, method or (
+            "[Hindrax-Drag] §4 self-propelled ladder; the fit core's segment-wise output error on the raw sensor "
+            "samples (docs/identification.md §7); equation-error batch LS ([Hindrax-Drag] eqs. 6-8), RLS online and "
+            "steady-state LS ([Hindrax-Drag] eqs. 2-8) for comparison"), seed),
         "dofs": dofs,
     }
     if joint:
@@ -224,12 +225,6 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
     if calibration:
         doc["calibration"] = calibration_section(calibration, cfg)
     return doc
-
-
-def _plain_rows(rows: list) -> list:
-    """:func:`~.verdicts.model_selection` rows with plain ``int``/``float``/``bool`` values (safe_dump)."""
-    return [{k: (v if isinstance(v, (str, bool)) or v is None else int(v) if k == "parameters" else float(v))
-             for k, v in row.items()} for row in rows]
 
 
 def write_identification(path: str | Path, document: Mapping, check: bool = True) -> Path:
@@ -566,15 +561,10 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
                                else v) for k, v in r.validation.items()}}
     return _plain({
         "schema_version": SCHEMA_VERSION,
-        "provenance": {"source": ", ".join(str(b) for b in bags),
-                       "date": _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
-                       "configuration_sha256": cfg.sha256 if cfg is not None else None,
-                       "vehicle_parameters": vehicle_parameters(cfg) if cfg is not None else None,
-                       "water_density_kg_m3": float(cfg.environment.water_density_kg_m3) if cfg is not None else None,
-                       "method": "hindrax ident fit: segment-wise output error (prediction error) over free-form "
-                                 "excitation, equation-error start; model of [Hindrax-Drag] eq. 2 with "
-                                 "inertia and bias",
-                       "seed": None, "bags": [str(b) for b in bags], "holdout": [str(b) for b in holdout],
+        "provenance": {**_provenance(cfg, ", ".join(str(b) for b in bags), "hindrax ident fit: segment-wise output "
+                                     "error (prediction error) over free-form excitation, equation-error start; model "
+                                     "of [Hindrax-Drag] eq. 2 with inertia and bias", None),
+                       "bags": [str(b) for b in bags], "holdout": [str(b) for b in holdout],
                        "validation_design": res.design},
         "config_ready": cfg is not None,
         "config_ready_reason": (CONFIG_READY_REASON if cfg is None else

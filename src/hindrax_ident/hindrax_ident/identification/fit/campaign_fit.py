@@ -48,7 +48,7 @@ from .dof_model import (DofIdentification, parameter_names, parameter_units, reg
                         restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
-           "dof_records", "identification_of", "identify_all_with_errors", "identify_all", "identify_dof"]
+           "dof_records", "identification_of", "identify_all_with_errors", "identify_dof"]
 
 
 @dataclass
@@ -204,11 +204,6 @@ def identify_all_with_errors(record, cfg: VehicleConfig, opts: fit_core.CoreOpti
     out = {dof: identification_of(dof, cfg, results[dof], sigs[dof], record.online.get(dof))
            for dof in DOFS if dof in results}
     return out, {d: errors[d] for d in DOFS if d in errors}
-
-
-def identify_all(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()) -> dict:
-    """:func:`identify_all_with_errors` without the errors (DOFs without usable data are left out)."""
-    return identify_all_with_errors(record, cfg, opts)[0]
 
 
 def identify_dof(record, dof: str, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()

@@ -43,22 +43,6 @@ class DofFit:
     reason: str = ""
 
     @property
-    def names(self) -> list:
-        return list(self.core.names) if self.core is not None else []
-
-    @property
-    def theta(self) -> np.ndarray | None:
-        return None if self.core is None else self.core.theta
-
-    @property
-    def std(self) -> np.ndarray | None:
-        return None if self.core is None else self.core.std
-
-    @property
-    def ci95(self) -> np.ndarray | None:
-        return None if self.core is None else self.core.ci95
-
-    @property
     def folds(self) -> list:
         if self.core is None:
             return []
