@@ -66,7 +66,7 @@ def format_table(res, cfg=None) -> str:
     thrust-curve uncertainty)."""
     import numpy as np
 
-    from ..identification.assessment.results import assessment
+    from ..identification.assessment.results import assessment, training_lines
     from ..identification.assessment.verdicts import no_model_line
 
     lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
@@ -92,6 +92,7 @@ def format_table(res, cfg=None) -> str:
                      f"({c.covariance.clusters} clusters)")
         if c.timing.at_edge:
             lines.append(f"{dof:6} timing: {c.timing.edge_note}")
+        lines += [f"{dof:6} {line}" for line in training_lines(c.training)]
         if not c.beats_persistence:
             lines.append(no_model_line(dof, c.persistence))
     lines.append("")

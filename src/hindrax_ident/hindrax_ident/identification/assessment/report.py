@@ -34,7 +34,7 @@ from scipy import stats  # noqa: E402
 from hindrax_drivers.config import VehicleConfig  # noqa: E402
 
 from ..fit.dof_model import _rest_terms, truth_parameters  # noqa: E402
-from .results import build_results, write_identification  # noqa: E402
+from .results import build_results, training_lines, write_identification  # noqa: E402
 
 __all__ = ["write_report", "write_outputs", "summary_rows", "write_fit_outputs", "residual_acf"]
 
@@ -265,7 +265,8 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
             "-" if not math.isfinite(row["relative_error"]) else f"{100 * row['relative_error']:+.2f} %",
             _fmt(row["equation_error"]), _fmt(row["rls"]), _fmt(row["steady"]), row["verdict"],
             "; ".join(row["reasons"]))) + "</tr>")
-    parts.append("</table>")
+    parts.append("</table><p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in document["dofs"].items()
+                                           for line in training_lines(e.get("training"))) + "</p>")
     for dof, r in identifications.items():
         a = r.signals.get("assessment")
         if a:
@@ -495,7 +496,8 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
         parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
             dof, e.get("model", "-"), cands, f"{e['timing']['delay_s']:.3f}", f"{e['timing']['lag_s']:.3f}",
             e["interval"]["clusters"])) + "</tr>")
-    parts.append("</table>")
+    parts.append("</table><p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in doc["dofs"].items()
+                                           for line in training_lines(e.get("training"))) + "</p>")
     advice = [(dof, a) for dof, e in doc["dofs"].items() for a in e.get("advice", [])]
     if advice:
         parts.append("<h2>What data would fix the suspect parameters</h2><table><tr><th>parameter</th>"

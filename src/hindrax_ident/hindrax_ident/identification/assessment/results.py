@@ -14,6 +14,8 @@ Schema (docs/architecture.md §5; version :data:`SCHEMA_VERSION`)::
         model: <text>                       # the fit core's terms chosen by cross-validation
         model_selection: [{terms, parameters, cv_nrmse, cv_nrmse_hold, chosen}, ...]  # + persistence and zero
         persistence: {nrmse, nrmse_hold, nrmse_zero, margin, beats}   # fit_core.persistence
+        training: {initial_state: {used, cv_nrmse: {<rule>: <float>}},        # fit_core.training_rules
+                   segments: {used: moving_only, moving_only | all_segments: {cv_nrmse, segments, parameters}}}
         method: "output-error" | "equation-error"
         pool_time_s: <float>
         comparison: {equation_error: {<parameter>: [value, std]}, rls: {...}, steady_state: {...} | null,
@@ -64,8 +66,8 @@ from .verdicts import (FitEvidence, apply_reference_verdicts, apply_verdicts, as
                        rls_published_std, thrust_curve_check, with_added_mass)
 
 __all__ = ["SCHEMA_VERSION", "IdentificationFileError", "build_results", "build_document", "assessment",
-           "reference_sections", "drag_coefficient_entry", "write_identification", "read_identification",
-           "to_config_overrides", "REQUIRED_PARAMETERS", "TERM_MEANING", "CONFIG_READY_REASON"]
+           "reference_sections", "training_lines", "drag_coefficient_entry", "write_identification",
+           "read_identification", "to_config_overrides", "REQUIRED_PARAMETERS", "TERM_MEANING", "CONFIG_READY_REASON"]
 
 SCHEMA_VERSION = 1
 
@@ -194,6 +196,8 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             entry["model_selection"] = _plain(model_selection(core))
             if core.persistence is not None:
                 entry["persistence"] = _plain(core.persistence)
+            if core.training:
+                entry["training"] = _plain(core.training)
         entry["method"] = r.method
         entry["pool_time_s"] = float(r.pool_time_s)
         entry["comparison"] = {
@@ -458,6 +462,27 @@ def _per_run_bias(c, a: dict, bags: Sequence, unit: str) -> list:
     return out
 
 
+def training_lines(training: Mapping | None) -> list[str]:
+    """The training rules of a fit (:func:`~..fit.fit_core.training_rules`) in words, one line each: the initial
+    state used (with each rule's CV nrmse for a measured position) and, for a fit on the moving segments, both fits'
+    CV nrmse and segment counts, the verdict's marked."""
+    def num(x):
+        return "-" if x is None or not math.isfinite(x) else f"{x:.4f}"
+
+    out = []
+    part = (training or {}).get("initial_state")
+    if part:
+        cv = ", ".join(f"{k} {num(v)}" for k, v in part.get("cv_nrmse", {}).items())
+        out.append(f"training initial state: {part['used']}" + (f" (CV nrmse {cv})" if cv else ""))
+    part = (training or {}).get("segments")
+    if part:
+        out.append("training segments: " + "; ".join(
+            f"{k.replace('_', ' ')}{' (the verdict uses it)' if k == part['used'] else ''}: CV nrmse "
+            f"{num(part[k]['cv_nrmse'])}, {part[k]['segments']} segments"
+            for k in ("moving_only", "all_segments") if part.get(k)))
+    return out
+
+
 #: The physical meaning of each optional term of the chosen model (identification.yaml ``terms_meaning``)
 TERM_MEANING = {
     "by_direction": "damping per direction of motion (a frame that is not symmetric top to bottom)",
@@ -530,6 +555,8 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
         e["model_selection"] = model_selection(c)
         if c.persistence is not None:
             e["persistence"] = dict(c.persistence)
+        if c.training:
+            e["training"] = c.training
         e["timing"] = {"delay_s": c.timing.delay_s, "lag_s": c.timing.lag_s, "source": c.timing.source}
         if c.timing.bound_s is not None:
             e["timing"].update(searched_up_to_s=c.timing.bound_s, bound=c.timing.bound_why,

@@ -22,9 +22,8 @@ that an arbitrary bag does not, and this reader uses:
 * **the design**: the ladders were built to identify the full model (linear + quadratic damping, heave per direction,
   roll/pitch restoring), so the record fixes those terms (``DofRecord.terms``) and its window is fitted whole
   (``DofRecord.all_segments``) instead of choosing terms by cross-validation among the moving segments, as the core
-  does for an arbitrary bag. Cross-validation could not tell the linear term of surge apart from noise (CV nrmse
-  0.0548 quadratic only, 0.0551 linear + quadratic, in-process campaign, seed 1) and the quadratic-only law put the
-  surge quadratic damping 4.3 % high against 0.9 % for the full model;
+  does for an arbitrary bag (docs/identification.md §7: cross-validation cannot see what a designed ladder
+  identifies);
 * **the restoring regressor** of roll and pitch, s(eta) = cos(theta) sin(phi) / sin(theta) ([NTNU-Thesis]
   eq. 2.23), from the DVL attitude fused with the gyro's Euler-angle rates (:func:`_smoothed_roll_pitch`).
 
