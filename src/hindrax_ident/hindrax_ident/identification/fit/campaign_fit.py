@@ -6,26 +6,14 @@
 adapter of :mod:`..bag_input.reader`) and the in-process campaign identify with :func:`identify_all_with_errors`.
 Everything after the reading (timing, segments, output-error fit, model terms by cross-validation, intervals) is
 :mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as ``hindrax ident fit``. What the campaign knows
-that an arbitrary bag does not, and this reader uses:
-
-* **the DOF windows** (``identification/status``): each DOF's record is its window only, one chunk on the record's
-  tick grid (``record.tick_s``, 10 ms), the force the thrust model of the widths the ESC wrote (``thrust_model``:
-  the ESC latency already in the record, the first-order thrust lag ``thrusters.time_constant_s`` applied by the
-  core, starting from the lagged force at the window's first tick);
-* **the vehicle's sensors**, conditioned as the identification node does (docs/architecture.md §5): surge and sway
-  from the DVL velocity, heave from the pressure depth (a measured position: one free offset and initial velocity
-  per segment in the core), each aided by the 100 Hz accelerometer (:mod:`hindrax_ident.fusion`); roll, pitch and yaw
-  from the gyro rate (:func:`~hindrax_ident.estimation.filters.smooth_kinematics`); the measurements go to the core at
-  their own times, the RTS-smoothed states only give the segments' initial states and the equation-error start;
-* **the gyro bias** left after the on-board still window, measured against the DVL attitude (roll, pitch) and
-  heading (yaw) by :func:`rate_bias_against_angle` and removed from the measured rate;
-* **the design**: the ladders were built to identify the full model (linear + quadratic damping, heave per direction,
-  roll/pitch restoring), so the record fixes those terms (``DofRecord.terms``) and its window is fitted whole
-  (``DofRecord.all_segments``) instead of choosing terms by cross-validation among the moving segments, as the core
-  does for an arbitrary bag (docs/identification.md §7: cross-validation cannot see what a designed ladder
-  identifies);
-* **the restoring regressor** of roll and pitch, s(eta) = cos(theta) sin(phi) / sin(theta) ([NTNU-Thesis]
-  eq. 2.23), from the DVL attitude fused with the gyro's Euler-angle rates (:func:`_smoothed_roll_pitch`).
+that an arbitrary bag does not, and this reader uses (docs/identification.md §7): the DOF windows
+(``identification/status``: one chunk per window on the record's tick grid, the thrust-model force of the widths the
+ESC wrote, the lag applied by the core); the vehicle's sensors conditioned as the identification node does (DVL
+velocity, pressure depth as a measured position, gyro rate; accelerometer-aided RTS smoothers give the initial states
+and the equation-error start); the gyro bias left after the still window (:func:`rate_bias_against_angle`); the
+design (the ladders' full model fixed, ``DofRecord.terms``, the window fitted whole, ``DofRecord.all_segments``); and
+the roll/pitch restoring regressor s(eta) = cos(theta) sin(phi) / sin(theta) ([NTNU-Thesis] eq. 2.23) from the DVL
+attitude fused with the gyro (:func:`_smoothed_roll_pitch`).
 
 All quantities SI, body FRD; times in s of the record's clock.
 """
