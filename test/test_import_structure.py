@@ -18,8 +18,11 @@ Rules checked:
 - layers (:data:`LAYERS`), one strict order: drivers < estimation < vehicle < control < identification < simulator
   < the graph builders < commands, benchmarks, the command line and the runs on the composed graph; no module imports
   a module of a higher layer, without exceptions;
-- the identification package keeps its rooms (:data:`ROOMS`): bag input < fit, assessment < online; the online
-  campaign does not import the identification.yaml writer;
+- the identification package keeps its rooms (:data:`ROOMS`): fit < bag input < assessment < online (the fit core
+  defines the per-DOF record the bag reader returns; the assessment runs the pipeline and writes its outputs); the
+  online campaign does not import the identification.yaml writer; only the bag input room reads bags
+  (:data:`BAG_READER`) and, outside the identification package, only the pipeline's faces are used
+  (:data:`PIPELINE_FACES`);
 - the vehicle's shared physics is defined once (:data:`DEFINED_ONCE`): the angle wrap, the thrust lag, the thrust
   curve and the rigid-body mass matrix, each in its one module, and no other module writes their formulas out.
 
@@ -282,10 +285,10 @@ def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
 
 # ------------------------------------------------------------------------------------------------ identification rooms
 IDENT = "hindrax_ident.identification"
-#: The rooms of the identification package, lowest first: a module imports its own room and the rooms below it.
-#: ``fit`` and ``assessment`` share a level: the thrust calibration (fit) weighs with the verdicts' thrust weights and
-#: the verdicts read the fit core's persistence.
-ROOMS = {"bag_input": 0, "fit": 1, "assessment": 1, "online": 2}
+#: The rooms of the identification package, lowest first: a module imports its own room and the rooms below it. The
+#: fit core defines the per-DOF record (``fit_core.DofRecord``, ``Chunk``) that the bag reader returns; the
+#: assessment (verdicts, identification.yaml, report, the pipeline) reads, fits and writes.
+ROOMS = {"fit": 0, "bag_input": 1, "assessment": 2, "online": 3}
 #: Imports a room may not make although the target is below it: the online campaign never writes
 #: identification.yaml (its estimator's priors come from the fit's posterior module, not from the writer).
 ROOM_FORBIDDEN = {("online", f"{IDENT}.assessment.results")}
@@ -319,21 +322,82 @@ def room_violations(graph: dict[str, set[str]]) -> list[str]:
 
 def test_the_room_checker_sees_a_wrong_import():
     graph = {f"{IDENT}.fit.fit_core": {f"{IDENT}.online.executive"},
+             f"{IDENT}.fit.calibration": {f"{IDENT}.assessment.verdicts"},
              f"{IDENT}.online.estimators": {f"{IDENT}.assessment.results", f"{IDENT}.fit.posterior"},
              f"{IDENT}.assessment.verdicts": {f"{IDENT}.fit.fit_core", f"{IDENT}.bag_input.from_bag"},
              f"{IDENT}.flat": set()}
     assert room_violations(graph) == [
+        f"{IDENT}.fit.calibration -> {IDENT}.assessment.verdicts (room assessment is above fit)",
         f"{IDENT}.fit.fit_core -> {IDENT}.online.executive (room online is above fit)",
         f"{IDENT}.flat (in no room: move it into one of ['assessment', 'bag_input', 'fit', 'online'])",
         f"{IDENT}.online.estimators -> {IDENT}.assessment.results (forbidden for room online)"]
 
 
 def test_identification_keeps_its_rooms(graph):
-    """bag input < fit, assessment < online; online does not write identification.yaml."""
+    """fit < bag input < assessment < online; online does not write identification.yaml."""
     rooms = {room_of(m)[0] for m in graph if room_of(m)}
     assert set(ROOMS) <= rooms  # the rule is not vacuous
     assert f"{IDENT}.fit.posterior" in graph[f"{IDENT}.online.estimators"]
+    assert f"{IDENT}.fit.fit_core" in graph[f"{IDENT}.bag_input.any_topics"]
     assert room_violations(graph) == []
+
+
+#: The bag reader: within the identification package, only the bag input room imports it.
+BAG_READER = "hindrax_drivers.recording.reader"
+#: What modules outside the identification package may import of it: the pipeline (read, fit, write), the campaign's
+#: own pieces (its record, its calibration topic, the record's fit and references), the yaml's reader and schema, and
+#: the rooms below the assessment's writers. The adapters (``bag_input.from_bag``, ``bag_input.any_topics``), the
+#: fits of bags (``fit.fit_any``) and the writers' internals stay behind these faces.
+PIPELINE_FACES = frozenset({
+    f"{IDENT}.assessment.pipeline", f"{IDENT}.assessment.results", f"{IDENT}.assessment.report",
+    f"{IDENT}.assessment.verdicts", f"{IDENT}.assessment.predict", f"{IDENT}.bag_input.reader",
+    f"{IDENT}.bag_input.campaign_record", f"{IDENT}.bag_input.calibration_topic",
+})
+#: Rooms whose every module is a face (the fit's maths and the online campaign are used by the controller, the
+#: simulator and the benchmarks directly); the fits of bags in ``fit.fit_any`` are not (:data:`PIPELINE_ONLY`).
+OPEN_ROOMS = ("fit", "online")
+PIPELINE_ONLY = frozenset({f"{IDENT}.fit.fit_any"})
+
+
+def pipeline_violations(graph: dict[str, set[str]]) -> list[str]:
+    """``"importer -> imported (why)"`` for a bag read outside the bag input room and for an import of the pipeline's
+    insides from outside the identification package (:data:`PIPELINE_FACES`)."""
+    out = []
+    for src, deps in graph.items():
+        rs = room_of(src)
+        if rs is not None and rs[0] != "bag_input" and BAG_READER in deps:
+            out.append(f"{src} -> {BAG_READER} (only the bag input room reads bags)")
+        if rs is not None:
+            continue
+        for dst in deps:
+            rd = room_of(dst)
+            if rd is None or dst in PIPELINE_FACES or dst == f"{IDENT}.{rd[0]}" or (
+                    rd[0] in OPEN_ROOMS and dst not in PIPELINE_ONLY):
+                continue
+            out.append(f"{src} -> {dst} (outside identification: use the pipeline, "
+                       f"{IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)")
+    return sorted(out)
+
+
+def test_the_pipeline_checker_sees_a_reader_or_an_adapter_used_elsewhere():
+    graph = {f"{IDENT}.fit.fit_any": {BAG_READER},
+             "hindrax_ident.commands.ident_fit": {f"{IDENT}.bag_input.any_topics", f"{IDENT}.fit.fit_any",
+                                                  f"{IDENT}.assessment.pipeline", f"{IDENT}.fit.fit_core"},
+             f"{IDENT}.bag_input.from_bag": {BAG_READER}}
+    assert pipeline_violations(graph) == [
+        f"hindrax_ident.commands.ident_fit -> {IDENT}.bag_input.any_topics (outside identification: use the "
+        f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)",
+        f"hindrax_ident.commands.ident_fit -> {IDENT}.fit.fit_any (outside identification: use the "
+        f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)",
+        f"{IDENT}.fit.fit_any -> {BAG_READER} (only the bag input room reads bags)"]
+
+
+def test_one_pipeline_reads_bags_and_writes_identification(graph):
+    """Only the bag input room reads bags; commands, the simulator and the graph runs go through the pipeline."""
+    assert BAG_READER in graph[f"{IDENT}.bag_input.any_topics"]  # the rule is not vacuous
+    assert f"{IDENT}.assessment.pipeline" in graph["hindrax_ident.commands.ident_fit"]
+    assert all(m in graph for m in PIPELINE_FACES | PIPELINE_ONLY)
+    assert pipeline_violations(graph) == []
 
 
 # ------------------------------------------------------------------------------------------------ defined once
@@ -347,11 +411,12 @@ DEFINED_ONCE = {
 }
 #: Other names the same things had; none may be defined anywhere.
 FORMER_NAMES = ("wrap", "_wrap", "_wrap_angle", "angle_wrap", "LaggedThrust", "_lagged", "lag_factor", "_skew")
-#: The formulas written out: the wrap ``(a + pi) % (2 pi) - pi`` or ``atan2(sin a, cos a)`` (a heading in
-#: [0, 2 pi) is another convention), a lag factor ``exp(-t / time_constant | lag | tau)``, and a ThrustCurve built
-#: outside the allocation's modules.
+#: The formulas written out: the wrap ``(a + pi) % (2 pi) - pi``, ``atan2(sin a, cos a)`` or ``remainder(a, 2 pi)``
+#: (a heading in [0, 2 pi) is another convention), a lag factor ``exp(-t / time_constant | lag | tau)``, and a
+#: ThrustCurve built outside the allocation's modules.
 FORMULAS = {
-    "the angle wrap": (r"pi\s*\)\s*%\s*\(\s*2(\.0)?\s*\*\s*(math|np)\.pi|atan2\(\s*(math|np)\.sin\(", ("frames.py",)),
+    "the angle wrap": (r"pi\s*\)\s*%\s*\(\s*2(\.0)?\s*\*\s*(math|np)\.pi|atan2\(\s*(math|np)\.sin\(|"
+                       r"remainder\([^\n]*,\s*2(\.0)?\s*\*\s*(math|np)\.pi", ("frames.py",)),
     "the thrust lag": (r"exp\(\s*-[^\n]*?/\s*(self\.)?(time_constant|lag|tau)", ("vehicle/thrust_lag.py",)),
     # the thrusters' section builds one only to validate the configured coefficients (its one-line refusal)
     "a thrust curve": (r"\bThrustCurve\(", ("allocation/thrust_curve.py", "allocation/from_config.py",
@@ -391,6 +456,7 @@ def test_the_defined_once_scan_sees_a_second_definition(tmp_path):
     pattern = FORMULAS["the angle wrap"][0]
     assert re.search(pattern, "return (a + math.pi) % (2.0 * math.pi) - math.pi")
     assert re.search(pattern, "math.atan2(math.sin(angle), math.cos(angle))")
+    assert re.search(pattern, "e_psi = math.remainder(psi_ref - eul[2], 2 * math.pi)")
     assert not re.search(pattern, "heading_rad=truth.yaw_rad % (2.0 * math.pi),")
     assert re.search(FORMULAS["the thrust lag"][0], "k = math.exp(-grid_s / tau) if tau > 0 else 0.0")
     assert re.search(FORMULAS["the thrust lag"][0], "k = math.exp(-float(dt) / self.time_constant_s)")

@@ -4,7 +4,7 @@
 emulators, drivers, ESC node, thrust allocation, identification node, recorder into ``out/bag``) on one
 SingleThreadedExecutor; wait for the sensors and the ESC arming time; arm through ``esc/set_armed`` (the
 operator's service); send one ``run_identification`` goal and report its feedback; disarm; close the bag;
-run the offline identification on the bag (:mod:`.identification.bag_input.from_bag`) and write ``identification.yaml``
+run the offline identification on the bag (:mod:`.identification.bag_input.reader`) and write ``identification.yaml``
 and the report. All waits are on simulated-time conditions with wall-clock deadlines.
 
 Calibration steps (``calibrate``, :data:`~.identification.online.executive.CALIBRATION_STEPS`): sent in the goal;
@@ -56,9 +56,8 @@ from .identification.fit.calibration import identify_calibrated
 from .sim.campaign import PoolOperator
 from .identification.fit.campaign_fit import identify_all_with_errors
 from .identification.online.executive import calibration_forces, float_buoyancy, inclining_load
-from .identification.bag_input.from_bag import BagContentError, record_from_bag
-from .identification.assessment.report import write_report
-from .identification.assessment.results import build_results, write_identification
+from .identification.bag_input.reader import BagContentError, read_campaign
+from .identification.assessment.report import write_outputs
 
 __all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
 
@@ -351,7 +350,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
     say("offline identification from the bag")
 
     try:
-        record = record_from_bag(bag_dir, cfg)
+        record = read_campaign(bag_dir, cfg).campaign
         idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg,
                                              identify_all_with_errors)
     except BagContentError as exc:
@@ -363,11 +362,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                 f"{outcome.sim_time_s:.0f} s simulated, wall {outcome.wall_time_s:.0f} s; "
                 f"action result: {outcome.message}")
         # with a calibration: thrust scales estimated jointly with the fits, calibration section (build_results)
-        doc = build_results(idents, cfg, source="simulation", seed=int(cfg.simulation.seed),
-                            calibration=calibration or None)
-        doc["provenance"]["bag"] = str(bag_dir)
-        if sections is not None and outcome.node_record is not None:
-            sections(doc, outcome.node_record, idents)
-        write_identification(out / "identification.yaml", doc)
-        write_report(out / "report", idents, doc, campaign_note=note)
+        add = sections if sections is not None and outcome.node_record is not None else None
+        write_outputs(out, idents, cfg, bag_dir, note, source="simulation", seed=int(cfg.simulation.seed),
+                      calibration=calibration, sections=add and (lambda doc: add(doc, outcome.node_record, idents)))
     return outcome

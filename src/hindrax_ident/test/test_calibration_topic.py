@@ -150,7 +150,7 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
     from builtin_interfaces.msg import Time
 
     from hindrax_ident.identification.assessment import report
-    from hindrax_ident.identification.fit import campaign_fit
+    from hindrax_ident.identification.assessment import pipeline
     from hindrax_ident.identification.fit.calibration import thrust_scales
 
     cfg = load_config(default_config_path())
@@ -165,9 +165,9 @@ def test_ident_bag_applies_the_calibration_in_the_bag(tmp_path, monkeypatch, cap
         seen.append(record)
         return {"heave": _ident("heave", [37.7, 93.5, 56.6, 5.3, 11.8, 0.78], [0.5, 3, 3, 3, 3, 0.05], cfg_)}, {}
 
-    # the bindings identify_bag and write_outputs use (campaign_fit's own, report's own): the other tests of this
+    # the bindings identify_bag and write_outputs use (the pipeline's own, report's own): the other tests of this
     # module see the real ones
-    monkeypatch.setattr(campaign_fit, "identify_all_with_errors", fake_identify)
+    monkeypatch.setattr(pipeline, "identify_all_with_errors", fake_identify)
     monkeypatch.setattr(report, "write_report", lambda out, *a, **k: out.mkdir(parents=True, exist_ok=True))
     assert cli.main(["ident", "bag", str(bag), "--out", str(tmp_path / "out")]) == 0, capsys.readouterr().err
     out = capsys.readouterr().out

@@ -154,13 +154,15 @@ def test_one_verdict_path_for_both_document_builders(tmp_path):
     """Issue 27 item 1, the verdicts: the same fit core result written by ``hindrax ident bag``'s builder
     (:func:`~hindrax_ident.identification.assessment.results.build_results`: empirical priors by the joint estimate,
     thrust-curve covariance and checks by :func:`~hindrax_ident.identification.assessment.verdicts.assess_dof`) and by
-    ``hindrax ident fit``'s (:func:`~hindrax_ident.identification.fit.fit_any.build_document`) gives the same values,
+    ``hindrax ident fit``'s (:func:`~hindrax_ident.identification.assessment.results.
+    build_document`) gives the same values,
     std (with the thrust curve), std_fit, priors, intervals and verdicts; the campaign builder may add DOF-wide
     reasons only from its steady windows (evidence the generic reader does not have) and the residual whiteness.
     Fails when either builder changes its priors, thrust term, intervals or per-parameter checks alone. (The
     whiteness check is the designed campaign's only.)"""
+    from hindrax_ident.identification.assessment.pipeline import identify_bag
+    from hindrax_ident.identification.assessment.results import build_document
     from hindrax_ident.identification.fit import fit_any
-    from hindrax_ident.identification.fit.campaign_fit import identify_bag
     from hindrax_ident.identification.assessment.results import build_results
     from hindrax_ident.vehicle.uncertainty import declared_rel
 
@@ -172,7 +174,7 @@ def test_one_verdict_path_for_both_document_builders(tmp_path):
     core = idents["surge"].signals["core"]
     res = fit_any.FitResult({"surge": fit_any.DofFit("surge", "fitted", {}, core, {"cross_validation": dict(core.cv)})},
                             {}, "test")
-    b = fit_any.build_document(res, cfg, [bag])["dofs"]["surge"]
+    b = build_document(res, cfg, [bag])["dofs"]["surge"]
     a = build_results(idents, cfg)["dofs"]["surge"]
     rel = declared_rel(cfg)
     steady_only = {x for x in a["reasons"]

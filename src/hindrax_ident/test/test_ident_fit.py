@@ -19,7 +19,8 @@ import yaml
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident import cli
 from hindrax_ident.identification.fit.dof_model import truth_parameters
-from hindrax_ident.identification.fit.fit_any import FitOptions, TopicChoice, fit_bags, preprocess_bag
+from hindrax_ident.identification.assessment.pipeline import fit_bags
+from hindrax_ident.identification.bag_input.any_topics import FitOptions, TopicChoice, preprocess_bag
 from hindrax_ident.identification.fit.fit_core import SegmentData, coriolis_products, validation_measures
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 from hindrax_ident.sim.truth import load_truth
@@ -124,8 +125,8 @@ def test_one_bag_is_cross_validated_by_blocks_of_segments(piloted):
     with_depth = preprocess_bag(hold, TopicChoice(depth="/odometry"), None, FitOptions())
     plain = preprocess_bag(hold, TopicChoice(), None, FitOptions())
     assert "rotated into the body" in with_depth.notes["heave_velocity"]
-    a = np.concatenate([c.velocity[:, 2] for c in with_depth.chunks])
-    b = np.concatenate([c.velocity[:, 2] for c in plain.chunks])
+    a = np.concatenate([c.velocity[:, 2] for c in with_depth.stretches])
+    b = np.concatenate([c.velocity[:, 2] for c in plain.stretches])
     ok = np.isfinite(a) & np.isfinite(b)
     assert ok.sum() > 1000 and np.sqrt(np.mean((a[ok] - b[ok]) ** 2)) < 0.25 * np.std(b[ok])
 
@@ -261,7 +262,7 @@ def test_imu_in_a_rotated_frame_and_unset_header_stamps(tmp_path):
         assert r.status == "fitted"
         t = truth_parameters(truth, dof)
         for name in names:
-            v = float(r.theta[r.names.index(name)])
+            v = float(r.core.theta[r.core.names.index(name)])
             if abs(v - t[name]) > (0.15 if name == "quadratic_damping" else 0.10) * t[name]:
                 problems.append(f"{dof} {name} {v:.4g}, truth {t[name]:.4g}")
         assert r.validation["cross_validation"]["nrmse"] < 0.3
@@ -301,7 +302,7 @@ def test_thruster_widths_need_the_vehicle_file_and_go_through_its_thrust_model(t
     pre = preprocess_bag(bag, TopicChoice(), cfg, FitOptions())
     assert "thrusters.time_constant_s" in pre.notes["thrust"]
     assert pre.notes["topics"]["velocity"] == "/dvl/data [hindrax_msgs/msg/Dvl]"
-    assert np.all(np.concatenate([c.force for c in pre.chunks]) == 0.0)
+    assert np.all(np.concatenate([c.force for c in pre.stretches]) == 0.0)
     assert pre.notes["angular_rate"] == "none"
 
 
@@ -337,6 +338,6 @@ def test_unknown_esc_output_is_missing_force_not_neutral_thrust(tmp_path):
     lo, hi = 14.9 + lat, 17.0 + lat  # last known sample before, first known after (bag-relative, s)
     assert len(pre.spans) == 2, pre.spans
     assert all(b <= lo + 1e-6 or a >= hi - 1e-6 for a, b in pre.spans), pre.spans
-    t_all = np.concatenate([c.t for c in pre.chunks])
+    t_all = np.concatenate([c.t for c in pre.stretches])
     assert not np.any((t_all > lo + 1e-6) & (t_all < hi - 1e-6))
-    assert np.all(np.isfinite(np.concatenate([c.force for c in pre.chunks])))
+    assert np.all(np.isfinite(np.concatenate([c.force for c in pre.stretches])))

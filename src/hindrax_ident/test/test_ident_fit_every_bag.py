@@ -19,7 +19,7 @@ import pytest
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_ident import cli
-from hindrax_ident.identification.fit.fit_any import ACCEPTED
+from hindrax_ident.identification.bag_input.any_topics import ACCEPTED
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 

@@ -15,7 +15,8 @@ import pytest
 from hindrax_ident.commands.ident_fit import format_table
 
 from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.identification.fit.fit_any import DofFit, assessment, build_document, FitResult
+from hindrax_ident.identification.assessment.results import assessment, build_document
+from hindrax_ident.identification.fit.fit_any import DofFit, FitResult
 
 
 def _noise_record(syn, seed: int = 3) -> fit_core.DofRecord:

@@ -95,7 +95,7 @@ def test_predict_csv_scored_independently_matches_the_printed_nrmse(fitted, caps
 
 
 def test_residual_autocorrelation_of_the_report_follows_its_definition():
-    from hindrax_ident.identification.assessment.fit_report import residual_acf
+    from hindrax_ident.identification.assessment.report import residual_acf
 
     rng = np.random.default_rng(4)
     # an AR(1) residual with coefficient 0.8 in 40 segments of 100 samples: lag-k autocorrelation 0.8^k

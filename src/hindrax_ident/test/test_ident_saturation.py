@@ -20,7 +20,8 @@ import pytest
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.fit import fit_any
+from hindrax_ident.identification.assessment import pipeline, results
+from hindrax_ident.identification.bag_input import any_topics
 from hindrax_ident.identification.fit.dof_model import truth_parameters
 
 T0_NS = 1_000_000_000_000
@@ -94,7 +95,7 @@ def cfg():
 def test_heave_saturation_is_chosen_and_its_gain_is_the_allocations(tmp_path, cfg, synthetic_runs):
     bag = tmp_path / "piloted_heave"
     write_heave_bag(bag, cfg, synthetic_runs.steps, 240.0, 110.0)
-    res = fit_any.fit_bags([bag], fit_any.TopicChoice(), None, ["heave"])
+    res = pipeline.fit_bags([bag], any_topics.TopicChoice(), None, ["heave"])
     r = res.dofs["heave"]
     assert r.status == "fitted", r.reason
     c = r.core
@@ -106,7 +107,7 @@ def test_heave_saturation_is_chosen_and_its_gain_is_the_allocations(tmp_path, cf
     # the term is what predicts heave: every candidate without it does worse in cross-validation
     without = [k for k in c.candidates if not k.terms.saturation]
     assert without and min(k.mse for k in without) > 1.5 * c.chosen.mse
-    doc = fit_any.build_document(res, None, [bag])["dofs"]["heave"]
+    doc = results.build_document(res, None, [bag])["dofs"]["heave"]
     assert doc["terms"]["saturation"] is True and "allocation" in doc["terms_meaning"]["saturation"]
     assert doc["saturation_gain"]["unit"] == "1"
     assert "allocation/status" in res.preprocessing["bags"][0]["saturation"]
@@ -117,7 +118,7 @@ def test_no_saturation_candidate_while_the_allocation_delivers_the_command(tmp_p
     only, and the term is not offered (its gain would not be identifiable)."""
     bag = tmp_path / "within_limits"
     write_heave_bag(bag, cfg, synthetic_runs.steps, 40.0, 50.0)
-    pre = fit_any.preprocess_bag(bag, fit_any.TopicChoice(), None, fit_any.FitOptions())
-    rec = fit_any.dof_records([pre], ["heave"], fit_any.FitOptions())["heave"]
+    pre = any_topics.preprocess_bag(bag, any_topics.TopicChoice(), None, any_topics.FitOptions())
+    rec = any_topics.dof_records([pre], ["heave"], any_topics.FitOptions())["heave"]
     assert all(ch.shortfall is not None for ch in rec.chunks)
     assert not rec.saturates

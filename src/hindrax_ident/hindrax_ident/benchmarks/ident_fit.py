@@ -8,7 +8,7 @@ simulated DVL, IMU and pressure sensor, and the scenario suite's disturbances (c
 error, misalignment and multipath dropouts). The first ``train`` bags are fitted, the other ``holdout`` bags are
 predicted. Per DOF and data set the held-out prediction NRMSE (RMS(v_pred - v_meas) / std(v_meas) over 10 s
 open-loop predictions re-initialised from the measured velocity,
-:func:`..identification.fit.fit_any.validation_measures`) of
+:func:`..identification.fit.fit_core.validation_measures`) of
 
 * ``fit``: ``hindrax ident fit`` (no vehicle file, as on another vehicle's data);
 * ``ls``: a plain per-DOF least squares: M nu_dot + k_q |nu| nu + k_l nu + b = tau on the same resampled record,
@@ -37,8 +37,11 @@ import numpy as np
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.fit import fit_any, fit_core
-from hindrax_ident.identification.fit.fit_any import FitOptions, TopicChoice, fit_bags
+from hindrax_ident.identification.assessment.pipeline import fit_bags
+from hindrax_ident.identification.assessment.results import assessment
+from hindrax_ident.identification.bag_input import reader
+from hindrax_ident.identification.bag_input.reader import FitOptions, TopicChoice
+from hindrax_ident.identification.fit import fit_core
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 
 #: DOFs compared (roll and pitch are not commanded by the pilots)
@@ -190,7 +193,7 @@ def make_bags(data: DataSet, root: Path, quick: bool = False) -> Bags:
 def plain_ls_theta(rec, dof: str):
     """Plain per-DOF least squares (module docstring) on the training record's moving segments: the layout and
     theta of M nu_dot + k_q |nu| nu + k_l nu + b = tau (one damping pair, no delay, no lag, no coupling), nu_dot the
-    Savitzky-Golay derivative of the record (:func:`..identification.fit.fit_any.dof_records`), unconstrained."""
+    Savitzky-Golay derivative of the record (:func:`..identification.bag_input.reader.dof_records`), unconstrained."""
     terms = fit_core.Terms("both")
     timing = fit_core.Timing(0.0, 0.0)
     sd = fit_core.build_segments(rec, terms, timing, fit_core.VALIDATION_S)
@@ -211,8 +214,8 @@ def evaluate(bags: Bags, opts: FitOptions = FitOptions()) -> dict:
         warnings.simplefilter("always")
         res = fit_bags(bags.train, choice, None, list(DOFS_COMPARED), bags.holdout, opts)
     runtime_warnings = sum(issubclass(w.category, RuntimeWarning) for w in caught)
-    train = [fit_any.preprocess_bag(b, choice, None, opts) for b in bags.train]
-    hold = [fit_any.preprocess_bag(b, choice, None, opts) for b in bags.holdout]
+    train = [reader.preprocess_bag(b, choice, None, opts) for b in bags.train]
+    hold = [reader.preprocess_bag(b, choice, None, opts) for b in bags.holdout]
     out: dict = {"runtime_warnings": runtime_warnings}
     for dof in DOFS_COMPARED:
         r = res.dofs.get(dof)
@@ -222,12 +225,12 @@ def evaluate(bags: Bags, opts: FitOptions = FitOptions()) -> dict:
             row.update(fit=v["nrmse"], hold=v["nrmse_hold"], samples=v["samples"], floor=v["nrmse_floor"])
             row["cv"] = r.validation.get("cross_validation", {}).get("nrmse", math.nan)
             row["model"] = f"{r.core.terms.label}; delay {r.core.timing.delay_s:.2f} lag {r.core.timing.lag_s:.2f}"
-            row["verdict"] = fit_any.assessment(r, None)["verdict"]
+            row["verdict"] = assessment(r, None)["verdict"]
             row["at_edge"] = bool(r.core.timing.at_edge)
             row["cv_hold"] = (r.core.persistence or {}).get("nrmse_hold", math.nan)
         try:
-            rt = fit_any.dof_records(train, [dof], opts)[dof]
-            rh = fit_any.dof_records(hold, [dof], opts)[dof]
+            rt = reader.dof_records(train, [dof], opts)[dof]
+            rh = reader.dof_records(hold, [dof], opts)[dof]
             layout, th, terms, timing = plain_ls_theta(rt, dof)
             sd = fit_core.build_segments(rh, terms, timing, fit_core.VALIDATION_S, excited_only=False)
             vp = fit_core.predict_validation(sd, layout, th)

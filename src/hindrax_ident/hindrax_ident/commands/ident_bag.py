@@ -3,10 +3,9 @@ identification of a recorded campaign bag.
 
 Writes ``identification.yaml`` and ``report/index.html`` into a new folder beside the bag,
 ``<bag>_ident_<time>`` (``--out``: a new or empty folder; :func:`result_dir_for_bag`), and prints the summary
-table; the reading is :mod:`hindrax_ident.identification.bag_input.from_bag` (the campaign's topics into the campaign
-record) and :mod:`hindrax_ident.identification.fit.campaign_fit` (the record into the fit core's per-DOF records), the
-fit is the fit core shared with ``hindrax ident fit`` (:mod:`hindrax_ident.identification.fit.fit_core`,
-docs/identification.md §7). When the bag holds the calibration steps' results
+table; the pipeline is :mod:`hindrax_ident.identification.assessment.pipeline` (the campaign adapter of the bag
+reader, the fit core shared with ``hindrax ident fit``, docs/identification.md §7). When the bag holds the calibration
+steps' results
 (``identification/calibration``, published by the identification node when each step ends: ``hindrax ident start
 --calibrate ...`` with the recorder on), they are applied as ``hindrax run`` applies them: the thrust scales are
 estimated jointly with the fits (sections ``calibration`` and ``joint``), the inclining steps give the section
@@ -67,28 +66,25 @@ def _remove_if_empty(path: Path) -> None:
         pass
 
 
-def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, command: str, identify=None):
-    """Identify a campaign bag (the campaign reader and the fit core,
-    :func:`~..identification.fit.campaign_fit.identify_bag`) and write identification.yaml and the report in ``out``;
-    prints the DOFs without an estimate and the bag's calibration, and the fit's progress while it runs (a minute or
-    two for a whole campaign: :class:`~..progress_line.Ticker`, the seconds on a terminal). ``args`` gives
-    ``restoring_n_m_per_rad`` and ``restoring_std`` (the free decay's stiffness when the bag has no inclining step;
-    absent: the vehicle file's);
-    ``identify(bag, cfg)``: default :func:`~..identification.fit.campaign_fit.identify_bag` with the fit core's default
-    options. Returns (record, {dof: DofIdentification}, the yaml's path). Raises :class:`CommandError` (prefixed
-    ``command``) for an unusable bag or when no DOF is identified."""
+def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, command: str, opts=None):
+    """Identify a campaign bag (:func:`~..identification.assessment.pipeline.identify_bag`, the fit core's ``opts``:
+    default its defaults) and write identification.yaml and the report in ``out``
+    (:func:`~..identification.assessment.pipeline.write_campaign_outputs`); prints the DOFs without an estimate and
+    the bag's calibration, and the fit's progress while it runs (a minute or two for a whole campaign:
+    :class:`~..progress_line.Ticker`, the seconds on a terminal). ``args`` gives ``restoring_n_m_per_rad`` and
+    ``restoring_std`` (the free decay's stiffness when the bag has no inclining step; absent: the vehicle file's).
+    Returns (record, {dof: DofIdentification}, the yaml's path). Raises :class:`CommandError` (prefixed ``command``)
+    for an unusable bag or when no DOF is identified."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.assessment.report import write_outputs
-    from ..identification.bag_input.from_bag import BagContentError, truncation
-    from ..identification.fit.campaign_fit import identify_bag
+    from ..identification.assessment import pipeline
+    from ..identification.bag_input.reader import BagContentError
     from ..progress_line import ProgressLine, Ticker
-    from .run import _add_reference_sections
 
     try:
         with Ticker(ProgressLine(lambda s: print(s, flush=True)), f"{command}: reading and fitting {bag}"):
-            record, idents, errors = (identify or identify_bag)(bag, cfg)
-        lacking = truncation(bag)
+            record, idents, errors = pipeline.identify_bag(bag, cfg, opts=opts)
+        lacking = pipeline.truncation(bag)
     except (BagError, BagContentError, OSError, ValueError) as exc:
         raise CommandError(f"{command}: {exc}") from exc
     if lacking:
@@ -101,19 +97,9 @@ def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, c
     if record.calibration:
         print("calibration from the bag (identification/calibration): " + ", ".join(
             f"{k} {v['value']:.4f} +- {v['std']:.4f}" for k, v in record.calibration.items()))
-    note = (f"Offline identification of bag {bag}, {record.t_s[-1] - record.t_s[0]:.0f} s of campaign"
-            + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
-    ref = argparse.Namespace(restoring_n_m_per_rad=getattr(args, "restoring_n_m_per_rad", None),
-                             restoring_std=getattr(args, "restoring_std", 0.0))
-    if lacking:
-        note += "; TRUNCATED: " + "; ".join(lacking)
-
-    def sections(doc: dict) -> None:
-        _add_reference_sections(doc, record, cfg, idents, ref, print)
-        if lacking:
-            doc["provenance"]["truncated"] = list(lacking)
-
-    path = write_outputs(out, idents, cfg, bag, note, calibration=record.calibration, sections=sections)
+    path = pipeline.write_campaign_outputs(out, record, idents, cfg, bag, lacking,
+                                           getattr(args, "restoring_n_m_per_rad", None),
+                                           getattr(args, "restoring_std", 0.0))
     return record, idents, path
 
 

@@ -1,11 +1,10 @@
 """``hindrax ident fit BAG [BAG ...]``: identify from any bag (piloted, closed-loop, another vehicle's) and validate.
 
-Two readers feed one fit core (:mod:`hindrax_ident.identification.fit.fit_core`, docs/identification.md §7). A bag with
-the campaign's topics (:func:`hindrax_ident.identification.bag_input.from_bag.is_campaign_bag`), given alone with
-``--config`` and no topic, DOF or holdout choice, is read as the campaign (the campaign reader of ``hindrax ident bag``,
-:mod:`hindrax_ident.identification.fit.campaign_fit`) and written as ``hindrax ident bag`` writes it: the same values
-and intervals. Any other bag goes through :mod:`hindrax_ident.identification.fit.fit_any` (force and velocity by
-message type, preprocessing, K-fold and holdout validation). Writes ``identification.yaml``
+One bag reader with two adapters feeds one fit core (:mod:`hindrax_ident.identification.bag_input.reader`,
+:mod:`hindrax_ident.identification.assessment.pipeline`, docs/identification.md §7). A bag with the campaign's topics,
+given alone with ``--config`` and no topic, DOF or holdout choice, is read as the campaign (as ``hindrax ident bag``
+reads it) and written as ``hindrax ident bag`` writes it: the same values and intervals. Any other bag is read by
+message type (preprocessing, K-fold and holdout validation). Writes ``identification.yaml``
 (``dofs``, ``validation``, ``preprocessing``) and ``report/index.html`` (measured against predicted velocity on the
 validation data) in ``--out`` (new or empty; default: a new ``<first bag>_fit_<time>`` beside it) and prints a
 table. Without ``--config`` the file holds ``inertia`` (rigid + added) but no ``added_mass``: ``config_ready:
@@ -63,12 +62,12 @@ def _num(x, width: int, fmt: str = ".3f") -> str:
 def format_table(res, cfg=None) -> str:
     """Parameters (value +- std, which covariance set the fit's std, 95 % interval, fold spread), the chosen model and
     timing per DOF, and the validation, one row each. Value, std and interval are identification.yaml's: the one
-    verdict path (:func:`~..identification.fit.fit_any.assessment`: with ``cfg`` after the priors, with the thrust-curve
-    uncertainty)."""
+    verdict path (:func:`~..identification.assessment.results.assessment`: with ``cfg`` after the priors, with the
+    thrust-curve uncertainty)."""
     import numpy as np
 
+    from ..identification.assessment.results import assessment, training_lines
     from ..identification.assessment.verdicts import no_model_line
-    from ..identification.fit.fit_any import assessment
 
     lines = [f"{'DOF':6} {'parameter':28} {'value':>10} {'std':>9} {'std from':>14} {'95 % interval':>23} "
              f"{'fold spread':>11}"]
@@ -93,6 +92,7 @@ def format_table(res, cfg=None) -> str:
                      f"({c.covariance.clusters} clusters)")
         if c.timing.at_edge:
             lines.append(f"{dof:6} timing: {c.timing.edge_note}")
+        lines += [f"{dof:6} {line}" for line in training_lines(c.training)]
         if not c.beats_persistence:
             lines.append(no_model_line(dof, c.persistence))
     lines.append("")
@@ -112,26 +112,18 @@ def format_table(res, cfg=None) -> str:
 def _run_campaign(args: argparse.Namespace, cfg) -> int:
     """A campaign bag: the campaign reader, the fit core with this command's folds, the outputs of ``hindrax ident
     bag`` (:func:`~.ident_bag.identify_campaign_bag`) and this command's table of the core's results."""
-    from dataclasses import replace
-
-    from ..identification.fit import fit_core
-    from ..identification.fit.campaign_fit import identify_bag
-    from ..identification.fit.fit_any import DofFit, FitResult
+    from ..identification.assessment.pipeline import campaign_result, core_options
     from .ident_bag import _remove_if_empty, identify_campaign_bag, result_dir_for_bag
 
     bag = Path(args.bags[0])
     out = result_dir_for_bag(bag, args.out, "fit")
-    opts = replace(fit_core.CoreOptions(), folds=args.folds)
-    identify = identify_bag
+    opts = core_options(args.folds)
     try:
-        _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit",
-                                                      identify=lambda b, c: identify(b, c, opts=opts))
+        _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit", opts)
     except CommandError:
         _remove_if_empty(out)
         raise
-    res = FitResult({d: DofFit(d, "fitted", {}, r.signals["core"], {"cross_validation": dict(r.signals["core"].cv)})
-                     for d, r in idents.items()}, {}, f"{args.folds}-fold cross-validation by contiguous blocks of the "
-                    f"{opts.validation_s:g} s validation segments of each DOF's window")
+    res = campaign_result(idents, args.folds, opts)
     print(f"{bag}: the campaign's topics: read as hindrax ident bag reads them (DOF windows from "
           "identification/status, thrust model of the ESC widths, the vehicle's sensors)")
     print(format_table(res, cfg))
@@ -139,24 +131,18 @@ def _run_campaign(args: argparse.Namespace, cfg) -> int:
     return 0
 
 
-def _campaign_hint(args: argparse.Namespace, cfg, dofs, choice) -> str:
-    """'; it is a campaign bag: ...' when the first bag has the campaign's topics but was not read as the campaign
-    (no --config, several bags, a holdout, DOFs or topics chosen), else ''."""
-    from ..identification.fit.fit_any import TopicChoice
-    from ..identification.bag_input.from_bag import is_campaign_bag
+def _campaign_hint(args: argparse.Namespace, cfg) -> str:
+    """'; it is a campaign bag: ...' when the first bag, not read as the campaign (no --config, several bags, a
+    holdout, DOFs or topics chosen), has the campaign's topics, else ''."""
+    from ..identification.bag_input.reader import is_campaign_bag
 
     try:
         if not is_campaign_bag(args.bags[0]):
             return ""
     except Exception:  # noqa: BLE001 - the hint is optional; the error itself was already said
         return ""
-    if cfg is None:
-        why = "give --config VEHICLE.yaml to read it as the campaign"
-    else:
-        why = ("give it alone, with --config and without --holdout, --dofs or --*-topic, to read it as the campaign "
-               "(as hindrax ident bag does)")
-    if cfg is not None and len(args.bags) == 1 and not args.holdout and dofs is None and choice == TopicChoice():
-        return ""
+    why = ("give --config VEHICLE.yaml to read it as the campaign" if cfg is None else "give it alone, with --config "
+           "and without --holdout, --dofs or --*-topic, to read it as the campaign (as hindrax ident bag does)")
     return f"; {args.bags[0]} is a campaign bag: {why}"
 
 
@@ -164,9 +150,9 @@ def run(args: argparse.Namespace) -> int:
     """Fit, write the outputs, print the table. Raises :class:`CommandError` on bad input."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.fit.fit_any import FitInputError, FitOptions, TopicChoice, build_document, fit_bags
+    from ..identification.assessment.pipeline import fit_bags, write_any_outputs
     from ..identification.assessment.verdicts import format_advice
-    from ..identification.assessment.fit_report import write_fit_outputs
+    from ..identification.bag_input.reader import FitInputError, FitOptions, TopicChoice, reads_as_campaign
 
     cfg = None
     if args.config is not None:
@@ -178,37 +164,31 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"ident fit: {b}: no such file or directory")
     if args.folds < 2:
         raise CommandError(f"ident fit: --folds {args.folds}: must be >= 2")
-    from ..identification.fit.fit_core import PERSISTENCE_MARGIN
-
-    margin = PERSISTENCE_MARGIN if args.persistence_margin is None else float(args.persistence_margin)
+    margin = FitOptions().persistence_margin if args.persistence_margin is None else float(args.persistence_margin)
     if not 0.0 <= margin < 1.0:
         raise CommandError(f"ident fit: --persistence-margin {margin:g}: must be in [0, 1)")
     if not 0.0 < args.max_delay_s <= 5.0:
         raise CommandError(f"ident fit: --max-delay-s {args.max_delay_s:g}: must be in (0, 5]")
     dofs = [d.strip() for d in args.dofs.split(",") if d.strip()] if args.dofs else None
     choice = TopicChoice(args.wrench_topic, args.velocity_topic, args.imu_topic, args.depth_topic)
-    if cfg is not None and len(args.bags) == 1 and not args.holdout and dofs is None and choice == TopicChoice():
-        from ..identification.bag_input.from_bag import is_campaign_bag
-
-        try:
-            campaign = is_campaign_bag(args.bags[0])
-        except (BagError, OSError) as exc:
-            raise CommandError(f"ident fit: {exc}") from exc
-        if campaign:
-            return _run_campaign(args, cfg)
+    try:
+        campaign = reads_as_campaign(args.bags, choice, cfg, dofs, args.holdout)
+    except (BagError, OSError) as exc:
+        raise CommandError(f"ident fit: {exc}") from exc
+    if campaign:
+        return _run_campaign(args, cfg)
     try:
         res = fit_bags(args.bags, choice, cfg, dofs, args.holdout,
                        FitOptions(folds=args.folds, persistence_margin=margin, max_delay_s=args.max_delay_s))
     except (FitInputError, BagError, OSError) as exc:
-        raise CommandError(f"ident fit: {exc}{_campaign_hint(args, cfg, dofs, choice)}") from exc
+        raise CommandError(f"ident fit: {exc}{_campaign_hint(args, cfg)}") from exc
     if not any(r.status == "fitted" for r in res.dofs.values()):
         print(format_table(res, cfg))
         raise CommandError("ident fit: no DOF could be identified (see the table: not excited or failed)")
     from .ident_bag import result_dir_for_bag
 
     out = result_dir_for_bag(Path(args.bags[0]), args.out, "fit")
-    doc = build_document(res, cfg, args.bags, args.holdout)
-    path, index = write_fit_outputs(out, res, doc, cfg)
+    doc, path, index = write_any_outputs(out, res, cfg, args.bags, args.holdout)
     print(format_table(res, cfg))
     for dof, e in doc["dofs"].items():
         if e.get("verdict") != "trusted":

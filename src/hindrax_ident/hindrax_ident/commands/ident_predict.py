@@ -11,10 +11,10 @@ or 1 with one line on stderr for an unusable model file, bag, topic or frame.
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 from .common import CommandError
+from .ident_fit import _num
 
 __all__ = ["add_arguments", "run"]
 
@@ -34,17 +34,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", default=None, help="vehicle file (needed for a ThrusterPwm force)")
 
 
-def _num(x: float) -> str:
-    return "      -" if not math.isfinite(x) else f"{x:7.3f}"
-
-
 def run(args: argparse.Namespace) -> int:
     """Predict, write the CSV files, print the scores. Raises :class:`CommandError` on bad input."""
     import yaml
 
     from hindrax_drivers.recording.reader import BagError
 
-    from ..identification.fit.fit_any import FitInputError, TopicChoice
+    from ..identification.bag_input.reader import FitInputError, TopicChoice
     from ..identification.assessment.predict import ModelError, dofs_of, load_model, predict_bag, rule_text, write_csv
 
     if args.segment_s is not None and not 0.5 <= args.segment_s <= 3600.0:
@@ -78,8 +74,8 @@ def run(args: argparse.Namespace) -> int:
             p = preds[dof]
             path = write_csv(out / f"{name}_{dof}.csv", p, str(b), rule)
             s = p.scores
-            print(f"{name[:24]:24} {dof:6} {s['segments']:8d} {s['samples']:8d} {_num(s['nrmse'])} "
-                  f"{_num(s['nrmse_hold']):>10} {_num(s['nrmse_zero']):>10}  {path}")
+            print(f"{name[:24]:24} {dof:6} {s['segments']:8d} {s['samples']:8d} {_num(s['nrmse'], 7)} "
+                  f"{_num(s['nrmse_hold'], 7):>10} {_num(s['nrmse_zero'], 7):>10}  {path}")
             if models[dof].verdict not in ("", "trusted", "suspect"):
                 print(f"{'':24} {dof:6} verdict of the model file: {models[dof].verdict}")
     return 0

@@ -239,6 +239,7 @@ def run_graph(args: argparse.Namespace) -> int:
     from hindrax_drivers.vehicle_graph import ForeignVehicleError
 
     from ..graph_campaign import run_graph_campaign
+    from ..identification.assessment.results import reference_sections
 
     cfg, dofs = _check_args(args)
 
@@ -260,8 +261,9 @@ def run_graph(args: argparse.Namespace) -> int:
                                      seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
                                      progress=progress, truth=getattr(args, "truth", None),
                                      calibrate=_calibration_steps(args),
-                                     sections=lambda doc, rec, idents: _add_reference_sections(doc, rec, cfg, idents,
-                                                                                               args, progress))
+                                     sections=lambda doc, rec, idents: reference_sections(
+                                         doc, rec, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std,
+                                         progress))
     except ForeignVehicleError as exc:
         raise CommandError(f"hindrax run: {exc}") from exc
     for dof, msg in outcome.errors.items():
@@ -276,69 +278,12 @@ def run_graph(args: argparse.Namespace) -> int:
     return 1
 
 
-def _free_decay_section(record, cfg, idents: dict, args, progress) -> dict:
-    """identification.yaml ``free_decay``: per roll/pitch the inertia from the campaign's free decay
-    (:func:`~hindrax_ident.identification.fit.calibration.decay_inertia`) and, when that DOF was identified
-    self-propelled, the comparison: verdict suspect when they differ by more than 1.96 combined std."""
-    from ..estimation.least_squares import EstimationError
-    from ..identification.fit.calibration import decay_inertia
-
-    import dataclasses
-
-    # strictly increasing gyro stamps (the identification node moves samples that arrive after their tick to the tick
-    # time, executive.ordered_samples, so its log can repeat a stamp); the in-process log is unchanged by this
-    gyro, last = [], -math.inf
-    for t, r in sorted(record.sensors.get("gyro", []), key=lambda x: x[0]):
-        if t > last:
-            gyro.append((t, r))
-            last = t
-    record = dataclasses.replace(record, sensors={**record.sensors, "gyro": gyro})
-    measured = args.restoring_n_m_per_rad is not None
-    c0 = float(args.restoring_n_m_per_rad) if measured else float(cfg.weight_n) * (
-        float(cfg.vehicle.centre_of_gravity_frd_m[2]) - float(cfg.vehicle.centre_of_buoyancy_frd_m[2]))
-    out: dict = {}
-    for dof in record.decays:
-        i = {"roll": 0, "pitch": 1}[dof]
-        incl = getattr(record, "inclining", {}).get(dof)
-        c, c_std = (float(incl["value"]), float(incl["std"])) if incl else (c0, float(args.restoring_std))
-        try:
-            e = decay_inertia(record, dof, c, c_std, float(cfg.vehicle.inertia_kg_m2[i]))
-        except (EstimationError, KeyError, ValueError) as exc:
-            progress(f"{dof} free decay: no estimate ({exc})")
-            continue
-        e["stiffness_source"] = ("inclining campaign step (--calibrate inclining)" if incl else
-                                 "--restoring-n-m-per-rad (inclining test)" if measured else
-                                 "vehicle file m g BG (not measured: run hindrax ident inclining or --calibrate "
-                                 "inclining)")
-        r = idents.get(dof)
-        if r is not None:
-            v, sd = float(r.values["inertia"]), float(r.std["inertia"])
-            comb = math.hypot(sd, e["total_inertia_kg_m2_std"])
-            z = abs(e["total_inertia_kg_m2"] - v) / comb if comb > 0 else math.inf
-            e["self_propelled"] = {"inertia_kg_m2": v, "inertia_kg_m2_std": sd, "z": z,
-                                   "verdict": "suspect" if z > 1.96 else "agrees"}
-        out[dof] = e
-    return out
-
-
-def _add_reference_sections(doc: dict, record, cfg, idents: dict, args, progress) -> None:
-    """identification.yaml ``inclining`` (restoring stiffness per DOF from the inclining step) and ``free_decay``
-    (:func:`_free_decay_section`, with the reference verdicts) of a campaign record that has them; in place."""
-    if getattr(record, "inclining", None):
-        doc["inclining"] = {k: {kk: ([float(x) for x in vv] if isinstance(vv, list) else vv)
-                                for kk, vv in v.items()} for k, v in record.inclining.items()}
-    if getattr(record, "decays", None):
-        doc["free_decay"] = _free_decay_section(record, cfg, idents, args, progress)
-        from ..identification.assessment.verdicts import apply_reference_verdicts
-        apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std
-
-
 def run_in_process(args: argparse.Namespace) -> int:
     """Run the campaign in-process on the simulator, identify, write the outputs, print the summary."""
     from ..sim.campaign import Campaign
     from ..identification.fit.campaign_fit import identify_all_with_errors
-    from ..identification.assessment.report import write_report
-    from ..identification.assessment.results import build_results, write_identification
+    from ..identification.assessment.report import write_outputs
+    from ..identification.assessment.results import reference_sections
 
     cfg, dofs = _check_args(args)
     wall0 = time.monotonic()
@@ -373,13 +318,12 @@ def run_in_process(args: argparse.Namespace) -> int:
         progress(f"{dof}: no estimate ({msg})")
     out = _output_dir(cfg, args.out, "sim-in-process", dofs)
     if idents:
-        # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
-        doc = build_results(idents, cfg, source="simulation", seed=record.seed, calibration=record.calibration)
-        _add_reference_sections(doc, record, cfg, idents, args, progress)
-        write_identification(out / "identification.yaml", doc)
         note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
                 + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
-        write_report(out / "report", idents, doc, campaign_note=note)
+        # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
+        write_outputs(out, idents, cfg, None, note, source="simulation", seed=record.seed,
+                      calibration=record.calibration, sections=lambda doc: reference_sections(
+                          doc, record, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std, progress))
         print(format_summary(idents))
         _write_results(args, idents, "in-process (no ROS graph)", time.monotonic() - wall0)
     print(f"output: {out}  (wall time {time.monotonic() - wall0:.0f} s)")

@@ -40,7 +40,7 @@ The bag (:class:`hindrax_drivers.recording.writer.BagWriter`) holds, REP-103 FLU
   while the DVL has no bottom lock), ``/imu`` sensor_msgs/msg/Imu (``base_link``, angular rate and specific force
   at 100 Hz), ``/pressure`` sensor_msgs/msg/FluidPressure, receive times late by 0-``late_s`` and ``gap`` lost.
 
-Messy on purpose: :mod:`.fit_any` must handle every one of those.
+Messy on purpose: the any-topics reader (:mod:`..identification.bag_input.any_topics`) must handle every one of those.
 """
 from __future__ import annotations
 
@@ -165,7 +165,7 @@ class _SetpointPilot:
         c, sn = math.cos(eul[2]), math.sin(eul[2])
         e = self.target_pos - pos
         err = np.array([c * e[0] + sn * e[1], -sn * e[0] + c * e[1], e[2],
-                        math.remainder(self.target_yaw - eul[2], 2 * math.pi)])
+                        frames.wrap_angle(self.target_yaw - eul[2])])
         return self.kp * err - self.kd * np.array([nu[0], nu[1], nu[2], nu[5]])
 
 
@@ -195,7 +195,7 @@ class _Autopilot:
             self.lane_y = float(np.clip(nxt, lo[1], hi[1]))
             self.depth = float(self.rng.uniform(lo[2], hi[2]))
         psi_ref = 0.0 if self.leg_dir > 0 else math.pi
-        e_psi = math.remainder(psi_ref - eul[2], 2 * math.pi)
+        e_psi = frames.wrap_angle(psi_ref - eul[2])
         # slow down while the heading is off (the turn at the end of a leg)
         u_ref = s.cruise_m_s * max(0.0, math.cos(e_psi)) ** 4
         c, sn = math.cos(eul[2]), math.sin(eul[2])

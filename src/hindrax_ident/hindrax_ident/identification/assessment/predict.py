@@ -1,13 +1,14 @@
 """Open-loop predictions of an identified model on bags, written so that anyone can score them (``hindrax ident
 predict``, issue 46.5).
 
-The model is an identification.yaml of ``hindrax ident fit`` (:func:`..fit.fit_any.build_document`): per DOF its
+The model is an identification.yaml of ``hindrax ident fit`` (:func:`.results.build_document`): per DOF its
 chosen ``terms``, the parameters' ``value``, the ``timing`` (input delay and first-order thrust lag) and, for the
 Coriolis term, the other fitted DOFs' inertias. The bags are read as ``hindrax ident fit`` reads them
-(:func:`..fit.fit_any.preprocess_bag`, :func:`..fit.fit_any.dof_records`: force held on the 0.05 s grid, velocity
-samples at their own times, body FRD) and every DOF of the model is simulated open loop from the recorded force
-(:func:`..fit.fit_core.simulate`), re-initialised at the start of each segment from the measured velocity there (the
-Savitzky-Golay-smoothed measurement, 0.5 s window, the same initial state as the tool's validation).
+(:func:`..bag_input.any_topics.preprocess_bag`, :func:`..bag_input.any_topics.dof_records`: force held on the 0.05 s
+grid, velocity samples at their own times, body FRD) and every DOF of the model is simulated open loop from the
+recorded force (:func:`..fit.fit_core.simulate`), re-initialised at the start of each segment from the measured
+velocity there (the Savitzky-Golay-smoothed measurement, 0.5 s window, the same initial state as the tool's
+validation).
 
 Segments:
 
@@ -15,9 +16,9 @@ Segments:
   exist (the bag's first continuous chunk), whatever the DOF does; a gap in the data ends a segment and the next
   starts where the data resume; pieces shorter than 10 grid steps (0.5 s) or with fewer than 3 measurements are not
   predicted;
-* ``segment_s`` None: the tool's own rule, the one of its holdout validation (:func:`..fit.fit_any._holdout`): segments
-  of :data:`..fit.fit_core.VALIDATION_S` from each continuous chunk's start, a last part kept when at least half a
-  segment long.
+* ``segment_s`` None: the tool's own rule, the one of its holdout validation (:func:`..fit.fit_any.fit_records`):
+  segments of :data:`..fit.fit_core.VALIDATION_S` from each continuous chunk's start, a last part kept when at least
+  half a segment long.
 
 Scores (:func:`score`, the definition an independent script reproduces): over the rows whose ``segment`` is >= 0
 and whose measurement lies strictly after its segment's start, ``nrmse = sqrt(mean((predicted - measured)^2)) /
@@ -40,7 +41,7 @@ import numpy as np
 from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..fit import fit_core
-from ..fit.fit_any import FitInputError, FitOptions, TopicChoice, dof_records, preprocess_bag
+from ..bag_input.any_topics import FitInputError, FitOptions, TopicChoice, dof_records, preprocess_bag
 
 __all__ = ["ModelError", "DofModel", "load_model", "Prediction", "predict_bag", "score", "write_csv",
            "VELOCITY_NAMES"]
@@ -148,12 +149,12 @@ def predict_bag(path: str | Path, models: dict, inertia: np.ndarray, choice: Top
                 cfg: VehicleConfig | None = None, segment_s: float | None = None,
                 opts: FitOptions = FitOptions()) -> dict:
     """{dof: :class:`Prediction`} of every DOF of ``models`` (:func:`load_model`) on the bag ``path`` (module
-    docstring). Raises :class:`..fit.fit_any.FitInputError` (topics, frames, a ThrusterPwm force without ``cfg``) or
-    ``BagError``."""
+    docstring). Raises :class:`..bag_input.any_topics.FitInputError` (topics, frames, a ThrusterPwm force without
+    ``cfg``) or ``BagError``."""
     pre = preprocess_bag(path, choice, cfg, opts)
-    if not pre.chunks:
+    if not pre.stretches:
         raise FitInputError(f"{path}: no continuous stretch of force and velocity")
-    anchor = float(pre.chunks[0].t[0])
+    anchor = float(pre.stretches[0].t[0])
     out = {}
     for dof, m in models.items():
         recs = dof_records([pre], [dof], opts, [dof, *m.cross_names], m.force_names)

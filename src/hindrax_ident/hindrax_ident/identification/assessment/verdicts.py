@@ -71,6 +71,7 @@ import numpy as np
 from hindrax_drivers.config import VehicleConfig
 
 from ...vehicle.uncertainty import declared_rel
+from ..fit.dof_model import thrust_weights
 from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
@@ -95,26 +96,6 @@ METHODS_MAX = 0.05
 DIRECTION_MAX = 0.05
 #: Relative 95 % half-width above which a parameter is too uncertain for controller design.
 WIDTH_MAX = 0.3
-
-
-def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
-    """(p, 2) weights [a_pos, b_neg] of each parameter on the positive / negative thrust scale (module docstring)."""
-    w = np.full((len(names), 2), 0.5)
-    if "reverse_thrust_gain" in names:
-        # the force of negative commands is the gain times the curve's: the gain takes the reverse scale (a = -1,
-        # b = 1), every other parameter only the forward one
-        for i, n in enumerate(names):
-            w[i] = (-1.0, 1.0) if n == "reverse_thrust_gain" else (1.0, 0.0)
-        w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
-        return w
-    if dof == "heave":
-        for i, n in enumerate(names):
-            if n.endswith("_positive") or n == "bias":
-                w[i] = (1.0, 0.0)
-            elif n.endswith("_negative"):
-                w[i] = (0.0, 1.0)
-    w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
-    return w
 
 
 def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float]) -> np.ndarray:
@@ -198,11 +179,10 @@ _RELATIVE = ("inertia", "added_mass", "restoring", "reverse_thrust_gain")
 def assess(ev: FitEvidence, rel: Sequence[float]) -> dict:
     """Honest covariance, intervals and verdicts of one DOF's fit (module docstring).
 
-    The one verdict path of ``hindrax ident bag`` (:func:`assess_dof`) and ``hindrax ident fit`` (:mod:`..fit.fit_any`).
-    ``rel`` = [negative,
-    positive] 1-sigma relative thrust uncertainty (:func:`declared_rel`), added as :func:`thrust_covariance` unless
-    ``ev.thrust_in_covariance``. A check runs when its evidence is there (the campaign reader gives the steady
-    windows; both give the rest):
+    The one verdict path of ``hindrax ident bag`` (:func:`assess_dof`) and ``hindrax ident fit``
+    (:func:`.results.assessment`). ``rel`` = [negative, positive] 1-sigma relative thrust uncertainty
+    (:func:`declared_rel`), added as :func:`thrust_covariance` unless ``ev.thrust_in_covariance``. A check runs when
+    its evidence is there (the campaign reader gives the steady windows; both give the rest):
 
     * DOF-wide: ``bias`` (off the expected force beyond the t quantile and by more than :data:`BIAS_MIN_REL` of the
       damping force at the typical speed; beyond the t quantile alone: the bias itself suspect), ``methods``
@@ -401,7 +381,7 @@ def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
 def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
     """The :class:`FitEvidence` fields a fit core result (:class:`~..fit.fit_core.DofResult`) gives, for both readers
     (``hindrax ident bag`` through :func:`assess_dof`, ``hindrax ident fit`` through
-    :func:`~..fit.fit_any.assessment`): the optimiser's bounds and the fold estimates of ``names`` (default the core's
+    :func:`~.results.assessment`): the optimiser's bounds and the fold estimates of ``names`` (default the core's
     own; heave's ``*_positive``/``*_negative`` map onto the one pair of both directions, absent ones get no bound and
     then no fold estimates), the chosen model's cross-validated nrmse, holding the velocity's on the same samples and
     the margin (:func:`~..fit.fit_core.persistence`), and the fitted segments' signals (:func:`core_signals`).

@@ -2,7 +2,7 @@
 
 ``hindrax ident bag BAG [--out DIR] [--config FILE]`` (:mod:`hindrax_ident.commands.ident_bag`), and ``hindrax
 ident fit`` on a bag with the campaign's topics (:func:`is_campaign_bag`), identify the record it returns with
-:func:`~..fit.campaign_fit.identify_bag` and write ``identification.yaml`` and ``report/index.html`` with
+:func:`~..assessment.pipeline.identify_bag` and write ``identification.yaml`` and ``report/index.html`` with
 :func:`~..assessment.report.write_outputs`: the same analysis as the in-process campaign and ``hindrax run``
 (:func:`~..fit.campaign_fit.identify_all_with_errors`: the campaign reader and the fit core shared with ``hindrax
 ident fit``, docs/identification.md §7; the equation-error LS of [Hindrax-Drag] eqs. 6-8, its steady-state LS and the
@@ -15,7 +15,7 @@ node, :mod:`...vehicle.signals`, into :class:`~hindrax_ident.vehicle.state.Senso
 ``identification/status`` (DOF under test, level, run boundaries, the still window used for the gyro and
 accelerometer biases), ``identification/estimates`` (the online RLS history, for the report) and, when present,
 ``identification/calibration`` (the calibration steps' results the node published, :mod:`.calibration_topic`:
-the record's ``calibration``, ``inclining`` and ``decays``; :func:`~..fit.campaign_fit.identify_bag` scales the
+the record's ``calibration``, ``inclining`` and ``decays``; :func:`~..assessment.pipeline.identify_bag` scales the
 thrust-model force by the measured scales, :func:`~..fit.calibration.apply_thrust_calibration`, and
 :func:`~..assessment.report.write_outputs` estimates them jointly
 with the fits and writes the ``calibration`` and ``joint`` sections, as ``hindrax run`` does from the node's record).

@@ -49,8 +49,8 @@ from hindrax_drivers.config import DOFS
 from ...estimation.free_decay import fit_quadratic_free_decay
 from ...vehicle.thrust_lag import ThrustLag
 from ...vehicle.uncertainty import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel
+from .dof_model import thrust_weights
 from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, rigid_inertia_of, theta_priors
-from ..assessment.verdicts import thrust_weights
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -306,7 +306,7 @@ def apply_thrust_calibration(record: Any, calibration: Mapping[str, Any] | None 
 def _fallback_weights(dof: str, names) -> dict[str, np.ndarray]:
     """First-order guess of each parameter's weights on its group's two directions when the fit's sensitivity was
     not measured (:func:`attach_thrust_sensitivities` not run): the declared thrust uncertainty's weights
-    (:func:`~..assessment.verdicts.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse,
+    (:func:`~.dof_model.thrust_weights`: heave ``*_positive`` and the bias forward, ``*_negative`` reverse,
     the rest half each; other DOFs half each)."""
     w = thrust_weights(dof, names)  # (p, 2): [positive, negative]
     g = _DOF_GROUP[dof]

@@ -2,38 +2,24 @@
 :class:`~.fit_core.DofRecord` per DOF, fitted by :mod:`.fit_core`, reported as :class:`~.dof_model.DofIdentification`
 (docs/identification.md §7).
 
-``hindrax run``, ``hindrax ident bag`` (:mod:`..bag_input.from_bag`) and the in-process campaign identify with
-:func:`identify_all_with_errors`; ``hindrax ident fit`` on a bag with the campaign's topics reads it with
-:func:`dof_records` too (:mod:`.fit_any`). Everything after the reading (timing, segments, output-error fit, model
-terms by cross-validation, intervals) is :mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as
-``hindrax ident fit``. What the campaign knows that an arbitrary bag does not, and this reader uses:
-
-* **the DOF windows** (``identification/status``): each DOF's record is its window only, one chunk on the record's
-  tick grid (``record.tick_s``, 10 ms), the force the thrust model of the widths the ESC wrote (``thrust_model``:
-  the ESC latency already in the record, the first-order thrust lag ``thrusters.time_constant_s`` applied by the
-  core, starting from the lagged force at the window's first tick);
-* **the vehicle's sensors**, conditioned as the identification node does (docs/architecture.md §5): surge and sway
-  from the DVL velocity, heave from the pressure depth (a measured position: one free offset and initial velocity
-  per segment in the core), each aided by the 100 Hz accelerometer (:mod:`hindrax_ident.fusion`); roll, pitch and yaw
-  from the gyro rate (:func:`~hindrax_ident.estimation.filters.smooth_kinematics`); the measurements go to the core at
-  their own times, the RTS-smoothed states only give the segments' initial states and the equation-error start;
-* **the gyro bias** left after the on-board still window, measured against the DVL attitude (roll, pitch) and
-  heading (yaw) by :func:`rate_bias_against_angle` and removed from the measured rate;
-* **the design**: the ladders were built to identify the full model (linear + quadratic damping, heave per direction,
-  roll/pitch restoring), so the record fixes those terms (``DofRecord.terms``) and its window is fitted whole
-  (``DofRecord.all_segments``) instead of choosing terms by cross-validation among the moving segments, as the core
-  does for an arbitrary bag. Cross-validation could not tell the linear term of surge apart from noise (CV nrmse
-  0.0548 quadratic only, 0.0551 linear + quadratic, in-process campaign, seed 1) and the quadratic-only law put the
-  surge quadratic damping 4.3 % high against 0.9 % for the full model;
-* **the restoring regressor** of roll and pitch, s(eta) = cos(theta) sin(phi) / sin(theta) ([NTNU-Thesis]
-  eq. 2.23), from the DVL attitude fused with the gyro's Euler-angle rates (:func:`_smoothed_roll_pitch`).
+``hindrax run``, ``hindrax ident bag`` and ``hindrax ident fit`` on a bag with the campaign's topics (the campaign
+adapter of :mod:`..bag_input.reader`) and the in-process campaign identify with :func:`identify_all_with_errors`.
+Everything after the reading (timing, segments, output-error fit, model terms by cross-validation, intervals) is
+:mod:`.fit_core`'s, with the same :class:`~.fit_core.CoreOptions` as ``hindrax ident fit``. What the campaign knows
+that an arbitrary bag does not, and this reader uses (docs/identification.md §7): the DOF windows
+(``identification/status``: one chunk per window on the record's tick grid, the thrust-model force of the widths the
+ESC wrote, the lag applied by the core); the vehicle's sensors conditioned as the identification node does (DVL
+velocity, pressure depth as a measured position, gyro rate; accelerometer-aided RTS smoothers give the initial states
+and the equation-error start); the gyro bias left after the still window (:func:`rate_bias_against_angle`); the
+design (the ladders' full model fixed, ``DofRecord.terms``, the window fitted whole, ``DofRecord.all_segments``); and
+the roll/pitch restoring regressor s(eta) = cos(theta) sin(phi) / sin(theta) ([NTNU-Thesis] eq. 2.23) from the DVL
+attitude fused with the gyro (:func:`_smoothed_roll_pitch`).
 
 All quantities SI, body FRD; times in s of the record's clock.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -44,15 +30,12 @@ from ...estimation.least_squares import EstimationError, fit_linear_model
 from ...vehicle.fusion import smooth_with_acceleration, smooth_with_rate
 from ...vehicle.state import euler_rates
 from ...vehicle.uncertainty import measurement_settings
-from ..bag_input.from_bag import record_from_bag
 from . import fit_core
-from .calibration import identify_calibrated
 from .dof_model import (DofIdentification, parameter_names, parameter_units, regressor_matrix,
                         restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
-           "dof_records", "identification_of", "identify_all_with_errors", "identify_all", "identify_dof",
-           "identify_bag"]
+           "dof_records", "identification_of", "identify_all_with_errors", "identify_dof"]
 
 
 @dataclass
@@ -210,11 +193,6 @@ def identify_all_with_errors(record, cfg: VehicleConfig, opts: fit_core.CoreOpti
     return out, {d: errors[d] for d in DOFS if d in errors}
 
 
-def identify_all(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()) -> dict:
-    """:func:`identify_all_with_errors` without the errors (DOFs without usable data are left out)."""
-    return identify_all_with_errors(record, cfg, opts)[0]
-
-
 def identify_dof(record, dof: str, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()
                  ) -> DofIdentification:
     """One DOF of :func:`identify_all_with_errors`. Raises
@@ -365,15 +343,3 @@ def _smoothed_roll_pitch(record, cfg: VehicleConfig, t: np.ndarray) -> tuple[np.
     out = [_smooth_on_ticks(t, ta, rpy[:, i], "position", ms["jerk_psd"], std_att,
                             RateAid(tg, rates[:, i] - bias[i], ms["std"]))[0] for i in (0, 1)]
     return out[0], out[1], bias
-
-
-def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
-                 opts: fit_core.CoreOptions = fit_core.CoreOptions()):
-    """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag:
-    :func:`~..bag_input.from_bag.record_from_bag`, then :func:`identify_all_with_errors` with the fit core's options
-    ``opts``. With calibration results in the bag (``record.calibration``) the fits see the thrust-model force times the
-    measured scales (:func:`~.calibration.apply_thrust_calibration`, as ``hindrax run``); ``record`` itself stays
-    unscaled. Raises ``ValueError`` for a non-positive scale in the bag."""
-    record = record_from_bag(bag_path, cfg, grid_s)
-    idents, errors = identify_calibrated(record, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
-    return record, idents, errors

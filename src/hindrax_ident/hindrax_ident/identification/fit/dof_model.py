@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -54,7 +54,7 @@ from .output_error import model_terms
 
 __all__ = [
     "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
-    "DofIdentification", "steady_state_fit",
+    "DofIdentification", "steady_state_fit", "thrust_weights",
 ]
 
 def parameter_names(dof: str) -> list[str]:
@@ -217,3 +217,25 @@ def steady_state_fit(dof: str, t, velocity, force, run_id, restoring=None, resto
     except EstimationError as exc:
         return None, wins, f"steady-state fit failed: {exc}", t_end
     return out, wins, f"{len(wins)} steady windows", t_end
+
+
+def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
+    """(p, 2) weights [a_pos, b_neg] of each parameter on the positive / negative thrust scale: a parameter scales with
+    the thrust of the directions it is fitted from (heave ``*_positive`` and the bias forward, ``*_negative`` reverse,
+    the others both halves; with a reverse gain the gain takes the reverse scale; a saturation gain none)."""
+    w = np.full((len(names), 2), 0.5)
+    if "reverse_thrust_gain" in names:
+        # the force of negative commands is the gain times the curve's: the gain takes the reverse scale (a = -1,
+        # b = 1), every other parameter only the forward one
+        for i, n in enumerate(names):
+            w[i] = (-1.0, 1.0) if n == "reverse_thrust_gain" else (1.0, 0.0)
+        w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
+        return w
+    if dof == "heave":
+        for i, n in enumerate(names):
+            if n.endswith("_positive") or n == "bias":
+                w[i] = (1.0, 0.0)
+            elif n.endswith("_negative"):
+                w[i] = (0.0, 1.0)
+    w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
+    return w

@@ -1,0 +1,98 @@
+"""The identification pipeline: bags read (:mod:`..bag_input.reader`), fitted (:mod:`..fit`), written
+(identification.yaml by :mod:`.results`, report/index.html by :mod:`.report`).
+
+The commands parse their arguments and call these: ``hindrax ident fit`` (:func:`fit_bags` or, for a campaign bag,
+:func:`identify_bag`), ``hindrax ident bag`` (:func:`identify_bag`, :func:`write_campaign_outputs`), ``hindrax run``
+(:func:`.report.write_outputs` on the campaign's record). docs/identification.md §7.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Sequence
+
+from hindrax_drivers.config import VehicleConfig
+
+from ..bag_input.any_topics import FitOptions, TopicChoice
+from ..bag_input.from_bag import truncation
+from ..bag_input.reader import read_any_topics, read_campaign
+from ..fit import fit_core
+from ..fit.calibration import identify_calibrated
+from ..fit.campaign_fit import identify_all_with_errors
+from ..fit.fit_any import DofFit, FitResult, fit_records
+from .report import write_fit_outputs, write_outputs
+from .results import build_document, reference_sections
+
+__all__ = ["fit_bags", "identify_bag", "truncation", "campaign_result", "core_options", "write_any_outputs",
+           "write_campaign_outputs"]
+
+
+def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig | None = None,
+             dofs: Sequence[str] | None = None, holdout: Sequence[str | Path] = (), opts: FitOptions = FitOptions()
+             ) -> FitResult:
+    """Bags of any topics read (:func:`..bag_input.reader.read_any_topics`) and fitted jointly with ``hindrax ident
+    fit``'s options (:func:`..fit.fit_any.fit_records`), validated by K-fold cross-validation and on the ``holdout``
+    bags. Raises :class:`..bag_input.any_topics.FitInputError` (bad DOF, topics, frames, too little data) or
+    ``BagError``."""
+    core = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s,
+                                persistence_margin=opts.persistence_margin)
+    design = (f"{opts.folds}-fold cross-validation by contiguous blocks of the {opts.validation_s:g} s validation "
+              "segments that move each DOF (training segments overlapping a held-out one left out)")
+    if holdout:
+        design += f"; holdout: {', '.join(str(b) for b in holdout)}"
+    return fit_records(read_any_topics(bags, choice, cfg, dofs, holdout, opts), core, design)
+
+
+def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
+                 opts: fit_core.CoreOptions | None = None):
+    """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag: :func:`..bag_input.reader.read_campaign`,
+    then :func:`..fit.campaign_fit.identify_all_with_errors` with the fit core's options ``opts`` (None: the
+    defaults). With calibration
+    results in the bag (``record.calibration``) the fits see the thrust-model force times the measured scales
+    (:func:`..fit.calibration.identify_calibrated`, as ``hindrax run``); ``record`` itself stays unscaled. Raises
+    ``ValueError`` for a non-positive scale in the bag."""
+    record = read_campaign(bag_path, cfg, grid_s).campaign
+    opts = fit_core.CoreOptions() if opts is None else opts
+    idents, errors = identify_calibrated(record, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
+    return record, idents, errors
+
+
+def campaign_result(idents: dict, folds: int, opts: fit_core.CoreOptions) -> FitResult:
+    """A campaign's identifications as a :class:`..fit.fit_any.FitResult` (``hindrax ident fit``'s table): the fit
+    core's result and cross-validation of each DOF."""
+    return FitResult({d: DofFit(d, "fitted", {}, r.signals["core"], {"cross_validation": dict(r.signals["core"].cv)})
+                      for d, r in idents.items()}, {}, f"{folds}-fold cross-validation by contiguous blocks of the "
+                     f"{opts.validation_s:g} s validation segments of each DOF's window")
+
+
+def core_options(folds: int) -> fit_core.CoreOptions:
+    """The fit core's default options with ``folds`` folds."""
+    return replace(fit_core.CoreOptions(), folds=folds)
+
+
+def write_any_outputs(out: Path, res: FitResult, cfg: VehicleConfig | None, bags: Sequence[str | Path],
+                      holdout: Sequence[str | Path] = ()) -> tuple[dict, Path, Path]:
+    """(document, identification.yaml, report/index.html) of a fit of bags of any topics, written in ``out``."""
+    doc = build_document(res, cfg, bags, holdout)
+    path, index = write_fit_outputs(out, res, doc, cfg)
+    return doc, path, index
+
+
+def write_campaign_outputs(out: Path, record, idents: dict, cfg: VehicleConfig, bag: str | Path, lacking: list,
+                           restoring_n_m_per_rad: float | None = None, restoring_std: float = 0.0,
+                           progress=print) -> Path:
+    """identification.yaml (its path) and the report of a campaign bag's identifications, written in ``out``: the
+    calibration's sections, the reference sections (:func:`.results.reference_sections`: inclining, free decay with
+    ``restoring_n_m_per_rad`` when the bag has no inclining step) and, for a truncated bag (``lacking``: what
+    :func:`..bag_input.from_bag.truncation` says it lacks), ``provenance.truncated``."""
+    note = (f"Offline identification of bag {bag}, {record.t_s[-1] - record.t_s[0]:.0f} s of campaign"
+            + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
+    if lacking:
+        note += "; TRUNCATED: " + "; ".join(lacking)
+
+    def sections(doc: dict) -> None:
+        reference_sections(doc, record, cfg, idents, restoring_n_m_per_rad, restoring_std, progress)
+        if lacking:
+            doc["provenance"]["truncated"] = list(lacking)
+
+    return write_outputs(out, idents, cfg, bag, note, calibration=record.calibration, sections=sections)
