@@ -243,6 +243,16 @@ def test_inversion_temperature_where_the_second_order_step_skips_a_value():
     assert temperature_bound_c(False) < error <= temperature_bound_c(True)
 
 
+@settings(max_examples=80, deadline=None)
+@given(st.floats(80_000.0, 3_000_000.0), st.floats(-20.0, 60.0), st.booleans(),
+       st.tuples(st.integers(0, ms.ADC_MAX), st.integers(0, ms.ADC_MAX)))
+def test_inversion_from_a_hint_gives_the_same_counts(pressure_pa, temperature_c, second, hint):
+    """The emulator starts each inversion at the previous one's counts: any hint, near or far, gives the counts of
+    the full bisection."""
+    assert invert_to_raw(pressure_pa, temperature_c, CAL_30BA, V30, second, hint) == \
+        invert_to_raw(pressure_pa, temperature_c, CAL_30BA, V30, second)
+
+
 def test_inversion_saturates_outside_the_adc_range():
     d1, _ = invert_to_raw(1e9, 20.0, CAL_30BA, V30)
     assert d1 == ms.ADC_MAX

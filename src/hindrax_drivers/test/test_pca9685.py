@@ -217,6 +217,37 @@ def test_full_on_full_off_and_invert():
     assert emu.pulse_width_us(3) == pytest.approx(period_us - 307 * 122 / 25e6 * 1e6)
 
 
+def test_pulse_widths_follow_every_change_the_channels_depend_on():
+    """pulse_widths_us (asked at every simulator step, computed again only on a change) equals pulse_width_us per
+    channel after a channel write, MODE2.INVRT, sleep and /OE."""
+    class Line:
+        high = False
+
+        def is_high(self):
+            return self.high
+
+    clock, emu, bus, dev = make()
+    emu.output_enable_line = line = Line()
+    start(dev, 121)
+    channels = [0, 3, 7]
+
+    def same():
+        return emu.pulse_widths_us(channels) == [emu.pulse_width_us(c) for c in channels]
+
+    dev.write_block(pca.led_register(3), pca.channel_bytes_for_pulse(1500, 121))
+    assert same() and emu.pulse_widths_us(channels)[1] > 0.0
+    dev.write_block(pca.led_register(3), pca.channel_bytes_for_pulse(1200, 121))
+    assert same() and abs(emu.pulse_widths_us(channels)[1] - 1200) <= pca.count_duration_us(121)
+    dev.write_byte_data(0x01, 0x04 | pca.MODE2_INVRT)
+    assert same()
+    line.high = True
+    assert same() and emu.pulse_widths_us(channels) == [0.0, 0.0, 0.0]
+    line.high = False
+    dev.write_byte_data(0x01, 0x04)  # not inverted: asleep is no pulse
+    dev.write_byte_data(0x00, pca.MODE1_SLEEP | pca.MODE1_AI)
+    assert same() and emu.pulse_widths_us(channels) == [0.0, 0.0, 0.0]
+
+
 def test_all_led_writes_every_channel():
     clock, emu, bus, dev = make()
     start(dev, 121)

@@ -204,7 +204,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
                 overrides: dict | None = None, context: Any = None, seed: int | None = None,
                 real_time_factor: float | None = None, identification: bool = True,
                 drive_clocks: bool = False, i2c_bus: Any = None, truth: Any = None, controller: bool = False,
-                model_file: str = "") -> Graph:
+                model_file: str = "", truth_rate_hz: float | None = None) -> Graph:
     """Create every node of the stack (rclpy must be initialised for ``context``).
 
     config_path: vehicle configuration. sim: virtual pool instead of hardware. record: start the recorder
@@ -219,6 +219,8 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     drive_clocks (sim only): the simulator sets the nodes' clocks directly and publishes no /clock (about 20 %
     faster; for a graph nothing outside this process needs simulated time from, e.g. ``hindrax run``), and the
     graph is ``stepped``: drive it with :meth:`Graph.spin_once`, not ``executor.spin()``.
+    truth_rate_hz (sim only): rate of the simulator's ground truth (sim/odometry, sim/wrench), Hz (default the clock
+    rate; no node under test reads it).
     Raises :class:`~hindrax_drivers.config.ConfigError` for an invalid configuration.
     """
     overrides = dict(overrides or {})
@@ -233,8 +235,9 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     if sim:
         simulator = Simulator(cfg, truth=truth)  # the pool's truth (sim/truth.py); the nodes keep cfg
         hardware = VirtualHardware(simulator, simulator.config, seed=cfg.simulation.seed, serial_threads=False)
-        nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator,
-                                           pulse_width_source=hardware.pulse_widths_us, **kw)
+        rate = [] if truth_rate_hz is None else [Parameter("truth_rate_hz", value=float(truth_rate_hz))]
+        nodes["simulator"] = SimulatorNode(config=cfg, simulator=simulator, pulse_width_source=hardware.pulse_widths_us,
+                                           parameter_overrides=rate, **kw)
         # The emulated PCA9685 reports its oscillator (VirtualHardware builds it at esc.oscillator_hz): measured, as
         # `hindrax esc calibrate` measures a real part, when it is the configured one (then the ESC puts pulses out)
         measured = hardware.emulators["pca9685"].oscillator_hz == cfg.esc.oscillator_hz

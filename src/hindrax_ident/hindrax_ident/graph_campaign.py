@@ -211,6 +211,9 @@ def run_graph_campaign(config_path, out: Path, dofs: Sequence[str], levels: int 
                 level_fractions, wall0, truth, list(calibrate), sections)
 
 
+#: rate of the simulator's ground truth (sim/odometry, sim/wrench) in the campaign's bag, Hz: for plots and checks
+#: only (the offline identification reads the drivers' topics), a tenth of the 100 Hz clock's messages
+TRUTH_RATE_HZ = 10.0
 #: what a campaign refuses beside another vehicle's ESC or supervisor
 _BESIDE = ("refusing to run a campaign beside another vehicle graph (set ROS_DOMAIN_ID to a free domain, or unset it "
            "to get one reserved)")
@@ -245,7 +248,8 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         # any node of this run exists (its heartbeat publishers alone would disarm the other vehicle)
         refuse_before_start(ctx, _BESIDE)
         graph = build_graph(config_path, sim=True, record=True, record_dir=str(bag_dir), context=ctx, seed=seed,
-                            overrides=ov, identification=True, drive_clocks=True, truth=truth)
+                            overrides=ov, identification=True, drive_clocks=True, truth=truth,
+                            truth_rate_hz=TRUTH_RATE_HZ)
         cfg = graph.config
         sim = graph.nodes["simulator"].simulator
         client = rclpy.create_node("hindrax_run", context=ctx)

@@ -8,18 +8,22 @@ addresses and changes from one run to the next; with a fixed order a stepped sim
 Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each entity's handle through an
 ``ExitStack``, asking every entity's callback group (a weak reference and a lock each), adding up the waitables'
 ``NumberOfEntities`` one object at a time and looking every entity of every node up in the ready lists; the virtual
-pool's graph has about 370 entities (90 parameter services, 120 QoS event handlers) and waits once per /clock tick:
-1.1 ms of CPU a wait. :meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the same
-callbacks in the same order (tasks in progress; ready waitables node by node; then per node its timers,
-subscriptions, guard conditions, clients and services in creation order) in 0.7 ms: handles entered directly, rclpy's
-two callback groups answered from their state, the waitables' entity counts summed as integers once known, the ready
-entities found by their handle pointers.
+pool's graph has about 370 entities (90 parameter services, 120 QoS event handlers) and waits once per /clock tick.
+:meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the same callbacks in the same order
+(tasks in progress; ready waitables node by node; then per node its timers, subscriptions, guard conditions, clients
+and services in creation order) from a snapshot of the nodes' entities (:class:`_Snapshot`: handles, entity counts,
+each entity's rank in that order by its handle pointer), taken again whenever an entity or a node comes or goes
+(rclpy wakes the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is free to run
+(a callback group is busy, or an entity's handler pending, only inside a task), so the snapshot's lists go into the
+wait set as they are; otherwise each entity is asked as rclpy asks it. QoS event handlers (most waitables) enter their
+event handle into the wait set directly, without their Python wrappers. A wait over a subset of the nodes is rclpy's.
 """
 from __future__ import annotations
 
 from typing import Any, Callable
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.event_handler import EventHandler
 from rclpy.executors import (ConditionReachedException, ExternalShutdownException, ShutdownException,
                              SingleThreadedExecutor, TimeoutException, TimeoutObject, timeout_sec_to_nsec)
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -32,6 +36,8 @@ __all__ = ["LeanWaitExecutor", "ordered_executor"]
 #: services, events)
 _COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num_clients", "num_services",
                  "num_events")
+#: entity kinds in rclpy's per-node order of ready callbacks
+_TIMER, _SUB, _GUARD, _CLIENT, _SERVICE = range(5)
 
 
 def _free(entity) -> bool:
@@ -56,32 +62,78 @@ def _counts(waitable) -> tuple:
     return c
 
 
+class _Snapshot:
+    """The entities of ``nodes`` (in that order) as the wait needs them: per kind the entities in rclpy's order,
+    the waitables with their node, ``rank``: handle pointer -> (rank in rclpy's order of ready callbacks, kind,
+    entity, node)."""
+
+    def __init__(self, nodes: list) -> None:
+        self.nodes = nodes
+        self.subs, self.timers, self.clients, self.services, self.guards = [], [], [], [], []
+        self.waitables: list = []  # (waitable, node)
+        self.rank: dict = {}
+        self.guard_rank: list = []  # (rank, kind, guard, node)
+        counts = [0] * 6
+        r = 0
+        for node in nodes:
+            for kind, entities, out in ((_TIMER, node.timers, self.timers), (_SUB, node.subscriptions, self.subs),
+                                        (_GUARD, node.guards, self.guards), (_CLIENT, node.clients, self.clients),
+                                        (_SERVICE, node.services, self.services)):
+                for e in entities:
+                    out.append(e)
+                    entry = (r, kind, e, node)
+                    if kind == _GUARD:
+                        self.guard_rank.append(entry)
+                    else:
+                        self.rank[e.handle.pointer] = entry
+                    r += 1
+            for wt in node.waitables:
+                self.waitables.append((wt, node))
+                counts = [a + b for a, b in zip(counts, _counts(wt))]
+        self.waitable_counts = counts
+
+
 class LeanWaitExecutor(SingleThreadedExecutor):
     """A ``SingleThreadedExecutor`` whose nodes run in the order they were added and whose wait is
     :meth:`_wait_for_ready_callbacks` (module docstring). ``kwargs`` go to the executor (``context``)."""
 
     def __init__(self, **kw: Any) -> None:
         self._order: list = []
+        self._snapshot: _Snapshot | None = None
         super().__init__(**kw)
+
+    def wake(self) -> None:
+        """rclpy's wake (an entity was created or destroyed, a task finished); the next wait takes a new snapshot."""
+        self._snapshot = None
+        super().wake()
 
     def add_node(self, node: Any) -> bool:
         added = super().add_node(node)
         if node not in self._order:
             self._order.append(node)
+        self._snapshot = None
         return added
 
     def remove_node(self, node: Any) -> None:
         super().remove_node(node)
         if node in self._order:
             self._order.remove(node)
+        self._snapshot = None
 
     def get_nodes(self) -> list:
         present = set(super().get_nodes())
         return [n for n in self._order if n in present]
 
+    def _take(self, kind: int) -> Callable:
+        return (self._take_timer, self._take_subscription, self._take_guard_condition, self._take_client,
+                self._take_service)[kind]
+
     def _wait_for_ready_callbacks(self, timeout_sec=None, nodes=None, condition: Callable[[], bool] = lambda: False):
         """rclpy's ``Executor._wait_for_ready_callbacks`` (same arguments, exceptions, callbacks and order), with the
         wait set built as the module docstring says."""
+        if nodes is not None:
+            yield from super()._wait_for_ready_callbacks(timeout_sec, nodes, condition)
+            return
         timeout_timer = None
         timeout_nsec = timeout_sec_to_nsec(
             timeout_sec.timeout if isinstance(timeout_sec, TimeoutObject) else timeout_sec)
@@ -90,7 +142,10 @@ class LeanWaitExecutor(SingleThreadedExecutor):
 
         yielded_work = False
         while not yielded_work and not self._is_shutdown and not condition():
-            nodes_to_use = self.get_nodes() if nodes is None else nodes
+            snap = self._snapshot
+            if snap is None:
+                snap = self._snapshot = _Snapshot(self.get_nodes())
+            nodes_to_use = snap.nodes
 
             # tasks in progress first
             with self._tasks_lock:
@@ -102,25 +157,26 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                         yield task, entity, node
                 with self._tasks_lock:
                     self._tasks = [t for t in self._tasks if not t[0].done() and not t[0].cancelled()]
+                    busy = bool(self._tasks)
+            else:
+                busy = False
 
-            can = _free
-            subs, timers, clients, services, guards, waitables = [], [], [], [], [], []
-            for node in nodes_to_use:
-                subs.extend(filter(can, node.subscriptions))
-                timers.extend(filter(can, node.timers))
-                clients.extend(filter(can, node.clients))
-                services.extend(filter(can, node.services))
-                for gc in filter(can, node.guards):
-                    if gc._executor_triggered:  # retrigger a guard condition that was triggered but not handled
-                        gc.trigger()
-                    guards.append(gc)
-                waitables.extend(filter(can, node.waitables))
+            # with no task in progress every entity is free (module docstring)
+            pick = (lambda xs: list(filter(_free, xs))) if busy else list
+            subs, timers, clients, services = pick(snap.subs), pick(snap.timers), pick(snap.clients), \
+                pick(snap.services)
+            guards = []
+            for gc in pick(snap.guards):
+                if gc._executor_triggered:  # retrigger a guard condition that was triggered but not handled
+                    gc.trigger()
+                guards.append(gc)
+            waitables = [(wt, node) for wt, node in snap.waitables if not busy or _free(wt)]
             if timeout_timer is not None:
                 timers.append(timeout_timer)
             guards.append(self._guard)
             guards.append(self._sigint_gc)
 
-            entered: list = []  # handles (and waitables) marked in use while waiting, exited in reverse order
+            entered: list = []  # handles marked in use while waiting, exited in reverse order
             try:
                 handles = []
                 for group in (subs, clients, services, timers, guards):
@@ -135,32 +191,38 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                         kept.append(h)
                     handles.append(kept)
                 sub_h, cli_h, srv_h, tmr_h, gc_h = handles
-                counts = [len(sub_h), len(gc_h), len(tmr_h), len(cli_h), len(srv_h), 0]
-                in_set = []
-                for wt in waitables:
+                events, others = [], []  # (waitable, node, event handle) / (waitable, node)
+                for wt, node in waitables:
+                    h = wt._EventHandler__event if isinstance(wt, EventHandler) else wt
                     try:
-                        wt.__enter__()
+                        h.__enter__()
                     except InvalidHandle:
                         continue
-                    entered.append(wt)
-                    in_set.append(wt)
-                    counts = [a + b for a, b in zip(counts, _counts(wt))]
+                    entered.append(h)
+                    if h is wt:
+                        others.append((wt, node))
+                    else:
+                        events.append((wt, node, h))
+                counts = [len(sub_h), len(gc_h), len(tmr_h), len(cli_h), len(srv_h), 0]
+                if busy or len(events) + len(others) != len(snap.waitables):
+                    for wt, *_ in events + others:
+                        counts = [a + b for a, b in zip(counts, _counts(wt))]
+                else:
+                    counts = [a + b for a, b in zip(counts, snap.waitable_counts)]
                 self._context.handle.__enter__()
                 entered.append(self._context.handle)
 
                 wait_set = _rclpy.WaitSet(*counts, self._context.handle)
                 wait_set.clear_entities()
-                for h in sub_h:
-                    wait_set.add_subscription(h)
-                for h in cli_h:
-                    wait_set.add_client(h)
-                for h in srv_h:
-                    wait_set.add_service(h)
-                for h in tmr_h:
-                    wait_set.add_timer(h)
-                for h in gc_h:
-                    wait_set.add_guard_condition(h)
-                for wt in in_set:
+                for add, hs in ((wait_set.add_subscription, sub_h), (wait_set.add_client, cli_h),
+                                (wait_set.add_service, srv_h), (wait_set.add_timer, tmr_h),
+                                (wait_set.add_guard_condition, gc_h)):
+                    for h in hs:
+                        add(h)
+                add_event = wait_set.add_event
+                for wt, _node, h in events:
+                    wt._event_index = add_event(h)
+                for wt, _node in others:
                     wt.add_to_wait_set(wait_set)
 
                 wait_set.wait(timeout_nsec)
@@ -169,55 +231,44 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                 if not self._context.ok():
                     raise ExternalShutdownException()
 
-                subs_ready = set(wait_set.get_ready_entities('subscription'))
+                subs_ready = wait_set.get_ready_entities('subscription')
                 guards_ready = set(wait_set.get_ready_entities('guard_condition'))
-                timers_ready = set(wait_set.get_ready_entities('timer'))
-                clients_ready = set(wait_set.get_ready_entities('client'))
-                services_ready = set(wait_set.get_ready_entities('service'))
+                timers_ready = wait_set.get_ready_entities('timer')
+                clients_ready = wait_set.get_ready_entities('client')
+                services_ready = wait_set.get_ready_entities('service')
 
                 # guards are auto-taken: mark them triggered before yielding
                 for gc in guards:
                     if gc.handle.pointer in guards_ready:
                         gc._executor_triggered = True
 
-                # ready waitables, checked before the wait set is destroyed
-                waiting = set(map(id, in_set))
-                for node in nodes_to_use:
-                    for wt in node.waitables:
-                        if id(wt) in waiting and wt.is_ready(wait_set) and wt.callback_group.can_execute(wt):
-                            yielded_work = True
-                            yield self._make_handler(wt, node, self._take_waitable), wt, node
+                # ready waitables (node by node, in each node's order), checked before the wait set is destroyed
+                is_ready = wait_set.is_ready
+                ready_events = {id(wt) for wt, _node, _h in events
+                                if wt._ready_to_take_data or is_ready('event', wt._event_index)}
+                in_set = ready_events | {id(wt) for wt, _node in others}
+                for wt, node in snap.waitables:
+                    if id(wt) in in_set and wt.is_ready(wait_set) and wt.callback_group.can_execute(wt):
+                        yielded_work = True
+                        yield self._make_handler(wt, node, self._take_waitable), wt, node
             finally:
                 for h in reversed(entered):
                     h.__exit__(None, None, None)
 
             # ready entities one node at a time, in rclpy's order
-            for node in nodes_to_use:
-                if timers_ready:
-                    for tmr in node.timers:
-                        if tmr.handle.pointer in timers_ready and tmr.handle.is_timer_ready() and \
-                                tmr.callback_group.can_execute(tmr):
-                            yielded_work = True
-                            yield self._make_handler(tmr, node, self._take_timer), tmr, node
-                if subs_ready:
-                    for sub in node.subscriptions:
-                        if sub.handle.pointer in subs_ready and sub.callback_group.can_execute(sub):
-                            yielded_work = True
-                            yield self._make_handler(sub, node, self._take_subscription), sub, node
-                for gc in node.guards:
-                    if gc._executor_triggered and gc.callback_group.can_execute(gc):
-                        yielded_work = True
-                        yield self._make_handler(gc, node, self._take_guard_condition), gc, node
-                if clients_ready:
-                    for client in node.clients:
-                        if client.handle.pointer in clients_ready and client.callback_group.can_execute(client):
-                            yielded_work = True
-                            yield self._make_handler(client, node, self._take_client), client, node
-                if services_ready:
-                    for srv in node.services:
-                        if srv.handle.pointer in services_ready and srv.callback_group.can_execute(srv):
-                            yielded_work = True
-                            yield self._make_handler(srv, node, self._take_service), srv, node
+            rank = snap.rank
+            ready = [rank[p] for ps in (timers_ready, subs_ready, clients_ready, services_ready) for p in ps
+                     if p in rank]
+            ready.extend(g for g in snap.guard_rank if g[2]._executor_triggered)
+            ready.sort(key=lambda x: x[0])
+            for _r, kind, entity, node in ready:
+                if kind == _TIMER and not entity.handle.is_timer_ready():
+                    continue
+                if kind == _GUARD and not entity._executor_triggered:
+                    continue
+                if entity.callback_group.can_execute(entity):
+                    yielded_work = True
+                    yield self._make_handler(entity, node, self._take(kind)), entity, node
 
             if timeout_nsec == 0 or (timeout_timer is not None and timeout_timer.handle.pointer in timers_ready):
                 raise TimeoutException()

@@ -37,13 +37,30 @@ __all__ = ["from_config", "Ms5837Emulator", "invert_to_raw", "TruthSource"]
 TruthSource = Callable[[float], "tuple[float, float]"]
 
 
-def _closest_monotonic(f: Callable[[int], int], target: float, lo: int, hi: int) -> int:
-    """Integer x in [lo, hi] whose non-decreasing f(x) is closest to target (bisection)."""
-    if f(hi) < target:
-        return hi
-    if f(lo) >= target:
-        return lo
-    a, b = lo, hi  # invariant: f(a) < target <= f(b)
+def _closest_monotonic(f: Callable[[int], int], target: float, lo: int, hi: int, hint: int | None = None) -> int:
+    """Integer x in [lo, hi] whose non-decreasing f(x) is closest to target (bisection). ``hint``: a guess (e.g. the
+    previous answer): the bracket is found by doubling steps out from it, then bisected; for a non-decreasing f the
+    answer is the one without a hint, in a few evaluations when the target moved little."""
+    if hint is not None and lo < hint < hi:
+        a = b = hint
+        step = 1
+        if f(hint) < target:
+            while b < hi and f(b) < target:
+                a, b, step = b, min(b + step, hi), 2 * step
+            if f(b) < target:
+                return hi
+        else:
+            while a > lo and f(a) >= target:
+                a, b, step = max(a - step, lo), a, 2 * step
+            if f(a) >= target:
+                return lo
+    else:
+        if f(hi) < target:
+            return hi
+        if f(lo) >= target:
+            return lo
+        a, b = lo, hi
+    # invariant: f(a) < target <= f(b)
     while b - a > 1:
         mid = (a + b) // 2
         if f(mid) < target:
@@ -54,7 +71,8 @@ def _closest_monotonic(f: Callable[[int], int], target: float, lo: int, hi: int)
 
 
 def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calibration,
-                  variant: p.Variant, apply_second_order: bool = True) -> tuple[int, int]:
+                  variant: p.Variant, apply_second_order: bool = True,
+                  hint: tuple[int, int] | None = None) -> tuple[int, int]:
     """Raw (D1, D2) whose compensation is closest to the given pressure and temperature.
 
     Implements docs/devices.md §3.8: D2 is chosen so that TEMP (TEMP2 with second order) is closest to
@@ -70,6 +88,7 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
         calibration: PROM contents.
         variant: sensor variant.
         apply_second_order: invert the second-order model (as a driver using it will see).
+        hint: (D1, D2) of a previous inversion, where the search starts (same answer, fewer evaluations).
 
     Returns:
         (D1, D2), each 0..2^24-1. The round trip error is within half an output LSB
@@ -88,14 +107,14 @@ def invert_to_raw(pressure_pa: float, temperature_c: float, calibration: p.Calib
     def temp_of(d2: int) -> int:
         return p.compensate(reference_d1, d2, calibration, variant, apply_second_order).compensation.temp
 
-    d2 = _closest_monotonic(temp_of, temperature_c * 100.0, 0, p.ADC_MAX)
+    d2 = _closest_monotonic(temp_of, temperature_c * 100.0, 0, p.ADC_MAX, hint and hint[1])
     target_p = pressure_pa * p.pressure_counts_per_pa(variant)
 
     def p_of(d1: int) -> int:
         return p.compensate(d1, d2, calibration, variant, apply_second_order).compensation.p
 
     if p_of(p.ADC_MAX) >= p_of(0):
-        d1 = _closest_monotonic(p_of, target_p, 0, p.ADC_MAX)
+        d1 = _closest_monotonic(p_of, target_p, 0, p.ADC_MAX, hint and hint[0])
     else:  # non-physical calibration (SENS <= 0): pick the closer end
         d1 = min((0, p.ADC_MAX), key=lambda x: abs(p_of(x) - target_p))
     return d1, d2
@@ -155,6 +174,7 @@ class Ms5837Emulator:
         self.adc_reads = 0
         self.zero_reads = 0
         self._last_raw = {"convert_d1": 0, "convert_d2": 0}
+        self._raw_hint: tuple[int, int] | None = None  # the last inversion, where the next one starts
         self._reset_state()
 
     # ------------------------------------------------------------------ state
@@ -189,8 +209,9 @@ class Ms5837Emulator:
     def raw_for_truth(self, t_s: float) -> tuple[int, int]:
         """(D1, D2) the device produces for the truth at ``t_s`` (no faults applied)."""
         pressure_pa, temperature_c = self.truth(t_s)
-        return invert_to_raw(float(pressure_pa), float(temperature_c), self.calibration,
-                             self.variant, self.apply_second_order)
+        self._raw_hint = invert_to_raw(float(pressure_pa), float(temperature_c), self.calibration, self.variant,
+                                       self.apply_second_order, self._raw_hint)
+        return self._raw_hint
 
     # ------------------------------------------------------------------ I2CDeviceEmulator
     def i2c_write(self, data: bytes) -> None:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import collections
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 from ..transport.emulated_i2c import RegisterPointerEmulator
 from . import protocol as p
@@ -74,6 +74,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
         self.external_clock_hz = external_clock_hz
         self.clock = clock
         self.write_log: collections.deque[WriteLogEntry] = collections.deque(maxlen=write_log_max)
+        self._widths: tuple = (None, [])  # (what pulse_widths_us computed them from, widths)
         self._power_on_reset()
 
     # ------------------------------------------------------------------ state
@@ -157,6 +158,16 @@ class Pca9685Emulator(RegisterPointerEmulator):
             if self._regs[p.MODE2] & p.MODE2_INVRT:
                 return period_us - high
             return high
+
+    def pulse_widths_us(self, channels: Sequence[int]) -> list[float]:
+        """:meth:`pulse_width_us` of each of ``channels``, us, computed again only when what they depend on changed
+        (the registers, RESTART, the clock, /OE): the virtual pool asks at every integration step."""
+        disabled = self.outputs_disabled()
+        with self._lock:
+            key = (bytes(self._regs), self._restart_pending, self.effective_oscillator_hz, disabled, tuple(channels))
+            if key != self._widths[0]:
+                self._widths = (key, [self.pulse_width_us(c) for c in channels])
+            return list(self._widths[1])
 
     def outputs_disabled(self) -> bool:
         """True while the /OE line reads high (every output off, OUTNE = 00: low), datasheet §7.4."""

@@ -251,7 +251,7 @@ class VirtualHardware:
     # -- actuation
     def pulse_widths_us(self) -> np.ndarray:
         """(n,) pulse widths the PCA9685 actually outputs on the thrusters' channels, us (0 = no pulses)."""
-        return np.array([self.emulators["pca9685"].pulse_width_us(ch) for ch in self._channels])
+        return np.array(self.emulators["pca9685"].pulse_widths_us(self._channels))
 
     def close(self) -> None:
         """Stop the pseudo-terminal threads (idempotent)."""
