@@ -12,7 +12,8 @@ leave-one-run-out cross-validation on the training runs only, each grid point a 
 
 It shares nothing with the estimator under test but the input record (:class:`~hindrax_ident.identification.fit.
 fit_core.DofRecord`: the commanded force on the tick grid, the smoothed velocity for the initial states, the
-measurements at their own times): its own delay and lag, its own simulation, its own least squares, its own score.
+measurements at their own times) and the vehicle's first-order lag filter (:class:`~hindrax_ident.vehicle.
+thrust_lag.ThrustLag`): its own delay, its own simulation, its own least squares, its own timing search and score.
 Score (:func:`nrmse`): RMS(predicted - measured) / std(measured) pooled over every measurement after the start of
 its segment; segments of ``segment_s`` from each chunk's start, a last part of at least half a segment kept (the
 rule of ``hindrax ident predict --segment-s``, docs/identification.md §4).
@@ -27,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import optimize
+
+from ..vehicle.thrust_lag import ThrustLag
 
 #: Delay grid, s, and thrust-lag grid, s, of the cross-validation
 DELAYS_S = tuple(round(0.05 * k, 2) for k in range(13))
@@ -53,15 +56,7 @@ def _delayed_lagged(force: np.ndarray, h: float, delay_s: float, lag_s: float) -
     n = force.size
     src = np.arange(n) - delay_s / h
     f = np.interp(src, np.arange(n), force, left=force[0])
-    if lag_s <= 0:
-        return f
-    alpha = 1.0 - math.exp(-h / lag_s)
-    u = np.empty(n)
-    acc = f[0]
-    for j in range(n):
-        u[j] = acc
-        acc += alpha * (f[j] - acc)
-    return u
+    return ThrustLag(lag_s).over_ticks(f, h, float(f[0]))[0]
 
 
 def segments(rec, delay_s: float, lag_s: float, segment_s: float = 10.0) -> _Segments:

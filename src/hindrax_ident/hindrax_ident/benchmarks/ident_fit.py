@@ -44,6 +44,8 @@ from hindrax_ident.identification.bag_input.reader import FitOptions, TopicChoic
 from hindrax_ident.identification.fit import fit_core
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 
+from . import graybox
+
 #: DOFs compared (roll and pitch are not commanded by the pilots)
 DOFS_COMPARED = ("surge", "sway", "heave", "yaw")
 
@@ -206,9 +208,10 @@ def plain_ls_theta(rec, dof: str):
     return layout, th, terms, timing
 
 
-def evaluate(bags: Bags, opts: FitOptions = FitOptions()) -> dict:
+def evaluate(bags: Bags, opts: FitOptions = FitOptions(), gray_box: bool = False) -> dict:
     """{dof: {fit, ls, hold, samples, cv, cv_hold, model, verdict, at_edge}} held-out NRMSE of the three predictors
-    (module docstring), the cross-validated scores, the DOF's verdict and whether its delay sat at its bound."""
+    (module docstring), the cross-validated scores, the DOF's verdict and whether its delay sat at its bound; with
+    ``gray_box`` also ``gray_box`` (the held-out NRMSE of :mod:`.graybox`'s 1-DOF model) and ``gray_box_timing``."""
     choice = TopicChoice()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -238,6 +241,9 @@ def evaluate(bags: Bags, opts: FitOptions = FitOptions()) -> dict:
             row["ls"] = m["nrmse"]
             if not math.isfinite(row["hold"]):
                 row["hold"] = m["nrmse_hold"]
+            if gray_box:
+                g = graybox.holdout_nrmse(rt, rh)
+                row["gray_box"], row["gray_box_timing"] = g["nrmse"], (g["delay_s"], g["lag_s"])
         except (ValueError, np.linalg.LinAlgError, fit_core.EstimationError):
             pass
         out[dof] = row
