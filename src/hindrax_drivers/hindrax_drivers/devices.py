@@ -78,8 +78,7 @@ def settings(config: Any, device: Device) -> Any:
 
 
 def truth_settings(config: Any, device: Device) -> dict[str, Any]:
-    """The keywords of ``device``'s emulator factory that only the simulated truth knows (its :attr:`Device.truth`
-    keys of ``config``), {} for a device without."""
+    """``device``'s emulator keywords that only the simulated truth knows (:attr:`Device.truth`, read in ``config``)."""
     return {key.rsplit(".", 1)[-1]: functools.reduce(getattr, key.split("."), config) for key in device.truth}
 
 
