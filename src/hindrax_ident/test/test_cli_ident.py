@@ -150,8 +150,8 @@ def _campaign_records() -> dict:
 def one_simulated_campaign(monkeypatch, _campaign_records):
     """The output-folder tests run ``hindrax run --in-process`` with the same settings several times; what they check
     is where each run writes, so each campaign of the same settings (DOFs, levels, seed, level duration, calibration,
-    excitation; the default truth: no ``--truth``) is simulated once and every run gets a copy of its record (the identification, report and folders still run
-    each time; the record, its copy and the simulator's determinism are the in-process tests' above)."""
+    excitation; the default truth: no ``--truth``) is simulated once and every run gets a copy of its record (the
+    identification, report and folders still run each time)."""
     from hindrax_ident.sim import campaign
 
     class Reused(campaign.Campaign):
