@@ -78,7 +78,8 @@ def settings(config: Any, device: Device) -> Any:
 
 
 def truth_settings(config: Any, device: Device) -> dict[str, Any]:
-    """``device``'s emulator keywords that only the simulated truth knows (:attr:`Device.truth`, read in ``config``)."""
+    """The keywords of ``device``'s emulator factory that only the simulated truth knows (its :attr:`Device.truth`
+    keys of ``config``), {} for a device without."""
     return {key.rsplit(".", 1)[-1]: functools.reduce(getattr, key.split("."), config) for key in device.truth}
 
 
