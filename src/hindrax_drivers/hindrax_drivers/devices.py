@@ -12,7 +12,7 @@ import importlib
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Device", "DEVICES", "SERIAL", "I2C", "load", "settings", "truth_settings", "build_node"]
+__all__ = ["Device", "DEVICES", "SERIAL", "I2C", "load", "settings", "build_node"]
 
 SERIAL, I2C = "serial", "i2c"
 
@@ -27,8 +27,7 @@ class Device:
     factory is called as ``emulator(config, truth, clock, seed)`` (truth: a callable of time, s, or None for an
     output). section: dotted configuration section. topics: parsed topic (absolute) -> message type, the topics a
     replay compares. output: an actuator (its reads echo the driver's writes; not part of the sensors group).
-    status: its ``/diagnostics`` status name, "" for ``hindrax/<node>``. truth: the dotted keys of the settings only
-    the simulated truth knows (``simulation.*``) that the emulator factory takes, each as the keyword of its last name.
+    status: its ``/diagnostics`` status name, "" for ``hindrax/<node>``.
     """
 
     name: str
@@ -40,15 +39,13 @@ class Device:
     topics: dict[str, str] = field(default_factory=dict)
     output: bool = False
     status: str = ""
-    truth: tuple[str, ...] = ()
 
 
 #: every device, in construction order (bringup builds the drivers in this order; the ESC, an output, last)
 DEVICES: tuple[Device, ...] = (
     Device("dvl75", "dvl75", SERIAL, ".dvl75.node:Dvl75Node", ".dvl75.emulator:from_config", "sensors.dvl75",
            {"/dvl/data": "hindrax_msgs/msg/Dvl", "/dvl/twist": "geometry_msgs/msg/TwistWithCovarianceStamped",
-            "/dvl/altitude": "sensor_msgs/msg/Range"},
-           truth=tuple(f"simulation.sensors.dvl75.{k}" for k in ("rate_hz", "min_altitude_m", "max_altitude_m"))),
+            "/dvl/altitude": "sensor_msgs/msg/Range"}),
     Device("ping1d", "ping1d", SERIAL, ".ping1d.node:Ping1dNode", ".ping1d.emulator:from_config", "sensors.ping1d",
            {"/ping/altitude": "sensor_msgs/msg/Range", "/ping/confidence": "std_msgs/msg/Float32"}),
     Device("ms5837", "ms5837", I2C, ".ms5837.node:Ms5837Node", ".ms5837.emulator:from_config", "sensors.ms5837",
@@ -75,12 +72,6 @@ def load(ref: Any) -> Any:
 def settings(config: Any, device: Device) -> Any:
     """The configuration section of ``device`` in ``config`` (a VehicleConfig)."""
     return functools.reduce(getattr, device.section.split("."), config)
-
-
-def truth_settings(config: Any, device: Device) -> dict[str, Any]:
-    """The keywords of ``device``'s emulator factory that only the simulated truth knows (its :attr:`Device.truth`
-    keys of ``config``), {} for a device without."""
-    return {key.rsplit(".", 1)[-1]: functools.reduce(getattr, key.split("."), config) for key in device.truth}
 
 
 def build_node(device: Device, bus: Any = None, **kwargs: Any) -> Any:

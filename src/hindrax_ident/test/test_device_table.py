@@ -4,7 +4,6 @@ bringup) has exactly the table's devices, and a device added to the table alone 
 simulator."""
 from __future__ import annotations
 
-import inspect
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -21,7 +20,6 @@ from hindrax_drivers.testing import ros_context
 from hindrax_ident.bringup import build_graph
 from hindrax_ident.sim.hardware import VirtualHardware
 from hindrax_ident.sim.simulator import Simulator
-from hindrax_ident.sim.truth import load_truth
 from hindrax_msgs.msg import RawDeviceData
 
 BAG = Path(__file__).resolve().parents[2] / "hindrax_drivers" / "test" / "data" / "sim_drivers_3s"
@@ -63,21 +61,6 @@ def test_the_table_holds_the_five_devices_and_every_path_exactly_them():
         assert _addresses(cfg) <= set(vh.i2c_bus.devices)
     finally:
         vh.close()
-
-
-def test_each_device_names_the_truth_settings_its_emulator_takes():
-    """A truth-only keyword of an emulator factory (one without a default would fail to build; one with a default
-    would silently keep it) is in the device's truth section, with the value of the simulator's truth file."""
-    cfg = load_truth(load_config(default_config_path())).config
-    for d in devices.DEVICES:
-        keywords = {p.name for p in inspect.signature(devices.load(d.emulator)).parameters.values()
-                    if p.kind == p.KEYWORD_ONLY}
-        truth = devices.truth_settings(cfg, d)
-        assert set(truth) == keywords, d.name
-        assert all(v is not None for v in truth.values()), d.name
-    dvl, truth = next(d for d in devices.DEVICES if d.name == "dvl75"), cfg.simulation.sensors.dvl75
-    assert devices.truth_settings(cfg, dvl) == {"rate_hz": truth.rate_hz, "min_altitude_m": truth.min_altitude_m,
-                                                "max_altitude_m": truth.max_altitude_m}
 
 
 class FakeNode(Node):
