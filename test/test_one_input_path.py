@@ -20,6 +20,11 @@ import ast
 import functools
 from pathlib import Path
 
+import pytest
+
+#: one xdist worker parses the packages once for every check here (:func:`_modules` is cached per process)
+pytestmark = pytest.mark.xdist_group("one_input_path")
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = (ROOT / "src" / "hindrax_drivers" / "hindrax_drivers", ROOT / "src" / "hindrax_ident" / "hindrax_ident")
 

@@ -543,7 +543,7 @@ def test_fault10_quantisation_never_rounds_into_the_deadband(layout, curve):
         p1 = res.pulse_width_us
         counts = p1 / TICK_US
         np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)  # on the PCA9685 grid
-        exact = np.array([curve.pulse_width_us(f) for f in res.allocated_force_n])
+        exact = curve.pulse_width_us(res.allocated_force_n)
         assert np.all(np.abs(p1 - exact) <= 0.5 * TICK_US + 1e-9)  # nearest grid width
         neutral = np.abs(p1 - 1500.0) <= 0.5 * TICK_US
         assert np.array_equal(neutral, res.allocated_force_n == 0.0)

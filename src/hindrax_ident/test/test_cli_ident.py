@@ -7,6 +7,7 @@ and its point reflection, plus 0.05 N noise.
 """
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -139,7 +140,35 @@ def test_run_writes_identification_report_and_summary(tmp_path, capsys):
     assert "27.3" in line and "%" in line
 
 
-def test_run_default_directory_and_latest_link(tmp_path, capsys, monkeypatch):
+@pytest.fixture(scope="module")
+def _campaign_records() -> dict:
+    """Records of :func:`one_simulated_campaign`'s campaigns by their settings, kept for the module."""
+    return {}
+
+
+@pytest.fixture
+def one_simulated_campaign(monkeypatch, _campaign_records):
+    """The output-folder tests run ``hindrax run --in-process`` with the same settings several times; what they check
+    is where each run writes, so each campaign of the same settings (DOFs, levels, seed, level duration, calibration,
+    excitation; the default truth: no ``--truth``) is simulated once and every run gets a copy of its record (the
+    identification, report and folders still run each time)."""
+    from hindrax_ident.sim import campaign
+
+    class Reused(campaign.Campaign):
+        def __init__(self, cfg, dofs, levels=None, seed=None, max_level_duration_s=None, **kwargs):
+            super().__init__(cfg, dofs, levels, seed, max_level_duration_s=max_level_duration_s, **kwargs)
+            self.key = (tuple(dofs), levels, self.seed, max_level_duration_s, tuple(kwargs.get("calibrate") or ()),
+                        kwargs.get("excitation"))
+
+        def run(self):
+            if self.key not in _campaign_records:
+                _campaign_records[self.key] = super().run()
+            return copy.deepcopy(_campaign_records[self.key])
+
+    monkeypatch.setattr(campaign, "Campaign", Reused)
+
+
+def test_run_default_directory_and_latest_link(tmp_path, capsys, monkeypatch, one_simulated_campaign):
     monkeypatch.chdir(tmp_path)
     rc = cli.main(["run", "--in-process", "--dofs", "yaw", "--levels", "1", "--max-level-duration", "4"])
     capsys.readouterr()
@@ -150,7 +179,8 @@ def test_run_default_directory_and_latest_link(tmp_path, capsys, monkeypatch):
     assert os.readlink(latest).startswith("sim-in-process_yaw_")  # named by its input and time
 
 
-def test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion(tmp_path, capsys, monkeypatch):
+def test_two_runs_in_one_second_get_two_folders_and_latest_moves_on_completion(tmp_path, capsys, monkeypatch,
+                                                                              one_simulated_campaign):
     """Issue 45.3: the second run of the same second picks a new name with one line; an aborted run leaves latest."""
     import datetime as dt
 
