@@ -27,7 +27,9 @@ class Device:
     factory is called as ``emulator(config, truth, clock, seed)`` (truth: a callable of time, s, or None for an
     output). section: dotted configuration section. topics: parsed topic (absolute) -> message type, the topics a
     replay compares. output: an actuator (its reads echo the driver's writes; not part of the sensors group).
-    status: its ``/diagnostics`` status name, "" for ``hindrax/<node>``.
+    status: its ``/diagnostics`` status name, "" for ``hindrax/<node>``. truth_keywords: the emulator factory's
+    keyword-only arguments that only the simulated part knows (the simulator passes each from its truth's section
+    of this device, by name).
     """
 
     name: str
@@ -39,13 +41,15 @@ class Device:
     topics: dict[str, str] = field(default_factory=dict)
     output: bool = False
     status: str = ""
+    truth_keywords: tuple[str, ...] = ()
 
 
 #: every device, in construction order (bringup builds the drivers in this order; the ESC, an output, last)
 DEVICES: tuple[Device, ...] = (
     Device("dvl75", "dvl75", SERIAL, ".dvl75.node:Dvl75Node", ".dvl75.emulator:from_config", "sensors.dvl75",
            {"/dvl/data": "hindrax_msgs/msg/Dvl", "/dvl/twist": "geometry_msgs/msg/TwistWithCovarianceStamped",
-            "/dvl/altitude": "sensor_msgs/msg/Range"}),
+            "/dvl/altitude": "sensor_msgs/msg/Range"},
+           truth_keywords=("rate_hz", "min_altitude_m", "max_altitude_m")),
     Device("ping1d", "ping1d", SERIAL, ".ping1d.node:Ping1dNode", ".ping1d.emulator:from_config", "sensors.ping1d",
            {"/ping/altitude": "sensor_msgs/msg/Range", "/ping/confidence": "std_msgs/msg/Float32"}),
     Device("ms5837", "ms5837", I2C, ".ms5837.node:Ms5837Node", ".ms5837.emulator:from_config", "sensors.ms5837",

@@ -4,6 +4,7 @@ bringup) has exactly the table's devices, and a device added to the table alone 
 simulator."""
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -20,6 +21,7 @@ from hindrax_drivers.testing import ros_context
 from hindrax_ident.bringup import build_graph
 from hindrax_ident.sim.hardware import VirtualHardware
 from hindrax_ident.sim.simulator import Simulator
+from hindrax_ident.sim.truth import truth_from_mapping
 from hindrax_msgs.msg import RawDeviceData
 
 BAG = Path(__file__).resolve().parents[2] / "hindrax_drivers" / "test" / "data" / "sim_drivers_3s"
@@ -131,3 +133,19 @@ def test_a_device_added_to_the_table_alone_appears_in_bringup_replay_and_the_sim
             assert {d.node for d in devices.DEVICES} <= set(replay.nodes)
         finally:
             replay.close()
+
+
+def test_each_device_names_the_truth_keywords_its_emulator_takes_and_the_simulator_passes_them():
+    """A truth-only setting is a field of its device: the table names every keyword-only argument of each emulator
+    factory, and the simulator hands each the truth's value (a bottom-lock floor other than the emulator's default)."""
+    for d in devices.DEVICES:
+        params = inspect.signature(devices.load(d.emulator)).parameters.values()
+        assert set(d.truth_keywords) == {p.name for p in params if p.kind is p.KEYWORD_ONLY}, d.name
+    cfg = load_config(default_config_path())
+    sim = Simulator(truth_from_mapping(cfg, {"simulation": {"sensors": {"dvl75": {"min_altitude_m": 0.55}}}}).config,
+                    seed=1)
+    vh = VirtualHardware(sim, sim.config, serve_serial=False)
+    try:
+        assert vh.emulators["dvl75"].min_altitude_m == 0.55
+    finally:
+        vh.close()

@@ -33,13 +33,12 @@ from hindrax_drivers.transport.pty_device import PtyDevice
 from .simulator import Simulator
 
 
-def truth_keywords(config: VehicleConfig, device: str) -> dict[str, float]:
-    """Keywords of ``device``'s emulator factory that only the truth knows (``simulation.sensors.<device>``): the
-    simulated DVL's ping rate, Hz, and bottom-lock range, m. Other devices: none."""
-    if device != "dvl75":
-        return {}
-    s = config.simulation.sensors.dvl75
-    return {"rate_hz": s.rate_hz, "min_altitude_m": s.min_altitude_m, "max_altitude_m": s.max_altitude_m}
+def truth_keywords(config: VehicleConfig, device: device_table.Device) -> dict[str, float]:
+    """Keywords of ``device``'s emulator factory that only the truth knows: each of its ``truth_keywords`` from
+    ``simulation.sensors.<device>`` (the simulated DVL's ping rate, Hz, and bottom-lock range, m)."""
+    section = getattr(config.simulation.sensors, device.name, None)
+    return {k: getattr(section, k) for k in device.truth_keywords}
+
 
 #: Wall time a serial step gate waits with its driver's reader idle before it re-bases its byte count, s.
 RESYNC_AFTER_S = 1.0
@@ -154,7 +153,7 @@ class VirtualHardware:
         for d in device_table.DEVICES:
             truth = getattr(self, f"_{d.name}_truth", None)
             emulator = self.emulators[d.name] = device_table.load(d.emulator)(config, truth, clock, seed,
-                                                                             **truth_keywords(config, d.name))
+                                                                             **truth_keywords(config, d))
             if d.transport == device_table.I2C:
                 bus[device_table.settings(config, d).i2c_address] = emulator
             elif serve_serial:
