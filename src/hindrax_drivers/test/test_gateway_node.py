@@ -22,3 +22,43 @@ def test_bad_setting_stops_the_start_in_one_line(setting, line):
     assert r.returncode == 1
     errors = [x for x in r.stderr.splitlines() if x.startswith("invalid configuration")]
     assert len(errors) == 1 and line in errors[0], r.stderr
+
+
+def test_feedback_that_overtakes_the_acceptance_is_relayed_and_the_goal_runs_on():
+    """On the internal side a running goal's first feedback can reach the gateway before its acceptance (the action
+    client's feedback callback runs before the send-goal future's): the topside goal is relayed that feedback and
+    ends with the internal result, never read as refused."""
+    import itertools
+    import queue
+    from types import SimpleNamespace
+
+    from action_msgs.msg import GoalStatus
+    from rclpy.serialization import serialize_message
+
+    from hindrax_drivers.gateway.node import Gateway
+    from hindrax_msgs.action import RunIdentification
+
+    feedback = RunIdentification.Feedback(dof="surge", level_index=0, level_count=1)
+    result = RunIdentification.Result(success=True, message="done")
+    gw = SimpleNamespace(verifier=SimpleNamespace(check_message=lambda *_: ""),
+                         bounds=SimpleNamespace(goal_problem=lambda _g: ""), _ids=itertools.count(1), _goals={},
+                         settings=SimpleNamespace(call_timeout_s=1.0), _action_type=RunIdentification,
+                         campaign=SimpleNamespace(context=SimpleNamespace(ok=lambda: True)), _refuse=lambda w, *_: w)
+
+    def send(head, payload=b""):
+        if head["k"] == "goal":
+            q = gw._goals[head["id"]]
+            q.put(({"k": "feedback", "id": head["id"]}, serialize_message(feedback)))
+            q.put(({"k": "accepted", "id": head["id"], "ok": True, "why": ""}, b""))
+            q.put(({"k": "result", "id": head["id"], "status": GoalStatus.STATUS_SUCCEEDED},
+                   serialize_message(result)))
+
+    gw.channel = SimpleNamespace(send=send)
+    seen = []
+    handle = SimpleNamespace(request=RunIdentification.Goal(dofs=["surge"]), is_cancel_requested=False,
+                             publish_feedback=seen.append, succeed=lambda: seen.append("succeeded"),
+                             abort=lambda: seen.append("aborted"), canceled=lambda: seen.append("canceled"))
+    out = Gateway._run_goal(gw, handle)
+    assert out.success and out.message == "done"
+    assert [type(x).__name__ if not isinstance(x, str) else x for x in seen] == [
+        "RunIdentification_Feedback", "succeeded"]

@@ -261,8 +261,6 @@ def test_a_command_aimed_at_one_vehicle_never_moves_the_other(pool):
     assert bravo.calls[before_b:] == [("set_armed", False)] and alpha.calls[before_a:] == [("set_armed", True)]
 
 
-# one rerun: the goal was refused once in two fresh-clone runs of the merged code (cause not found yet)
-@pytest.mark.flaky(reruns=1)
 def test_thruster_test_names_its_vehicle_and_never_runs_from_the_topside(pool):
     before = {name: list(v.calls) for name, v in pool["vehicles"].items()}
     r = hindrax(pool, "thruster-test", "--step-s", "0.1")
@@ -272,8 +270,6 @@ def test_thruster_test_names_its_vehicle_and_never_runs_from_the_topside(pool):
     assert {name: v.calls for name, v in pool["vehicles"].items()} == before  # neither vehicle was armed
 
 
-# one rerun: the goal was refused once in two fresh-clone runs of the merged code (cause not found yet)
-@pytest.mark.flaky(reruns=1)
 def test_a_campaign_started_on_the_topside_runs_on_the_named_vehicle_only(pool):
     alpha, bravo = pool["vehicles"]["alpha"], pool["vehicles"]["bravo"]
     before_b = list(bravo.calls)

@@ -259,7 +259,10 @@ class Gateway:
         try:
             self.channel.send({"k": "goal", "id": goal_id}, serialize_message(goal_handle.request))
             try:
-                head, _ = replies.get(timeout=self.settings.call_timeout_s)
+                head, payload = replies.get(timeout=self.settings.call_timeout_s)
+                while head.get("k") == "feedback":  # a running goal's feedback can overtake its acceptance
+                    goal_handle.publish_feedback(deserialize_message(payload, self._action_type.Feedback))
+                    head, payload = replies.get(timeout=self.settings.call_timeout_s)
             except queue.Empty:
                 return failed(f"no answer from the identification node within {self.settings.call_timeout_s:g} s")
             if not head.get("ok"):
