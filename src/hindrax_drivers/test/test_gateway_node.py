@@ -29,7 +29,6 @@ def test_feedback_that_overtakes_the_acceptance_is_relayed_and_the_goal_runs_on(
     client's feedback callback runs before the send-goal future's): the topside goal is relayed that feedback and
     ends with the internal result, never read as refused."""
     import itertools
-    import queue
     from types import SimpleNamespace
 
     from action_msgs.msg import GoalStatus
