@@ -109,11 +109,6 @@ class DeviceDiagnostics:
         with self._lock:
             self._errors[key] = message
 
-    def has_error(self, key: str | None = None) -> bool:
-        """True while the named ERROR condition (any, with ``key`` None) is raised."""
-        with self._lock:
-            return bool(self._errors) if key is None else key in self._errors
-
     def clear(self, key: str) -> None:
         """Clear a named warning or ERROR condition."""
         with self._lock:

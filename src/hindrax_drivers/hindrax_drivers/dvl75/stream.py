@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import collections
 from dataclasses import dataclass
-from typing import Deque, Dict, List, Optional, Union
+from typing import Dict, List, Optional, Union
 
 from .protocol import (
     DvlLineFramer,
@@ -102,7 +102,6 @@ class DvlStreamDecoder:
         self.lines_seen = 0
         self.errors: List[DvlStreamError] = []
         self.last_error: Optional[DvlStreamError] = None
-        self._recent: Deque[DvlStreamError] = collections.deque(maxlen=20)
 
     def _error(self, kind: str, count: int, reason: str) -> None:
         if count <= 0:
@@ -110,7 +109,6 @@ class DvlStreamDecoder:
         self.counts[kind] += count
         err = DvlStreamError(kind, self.lines_seen, count, reason)
         self.last_error = err
-        self._recent.append(err)
         if self._keep:
             self.errors.append(err)
 
@@ -153,7 +151,3 @@ class DvlStreamDecoder:
         self._error("truncated", self._pending_dollars, "partial sentence dropped at reconnect")
         self._error("garbage_bytes", discarded, f"{discarded} byte(s) of a partial line dropped")
         self._pending_dollars = 0
-
-    def recent_errors(self) -> List[DvlStreamError]:
-        """The last (up to 20) errors, oldest first."""
-        return list(self._recent)

@@ -30,7 +30,7 @@ from __future__ import annotations
 import bisect
 import collections
 from dataclasses import dataclass
-from typing import Deque, Dict, List, Optional, Union
+from typing import Dict, List, Optional, Union
 
 from .protocol import (
     CHECKSUM_BYTES,
@@ -95,13 +95,11 @@ class Ping1dStreamDecoder:
         self.bytes_seen = 0
         self.errors: List[Ping1dStreamError] = []
         self.last_error: Optional[Ping1dStreamError] = None
-        self._recent: Deque[Ping1dStreamError] = collections.deque(maxlen=20)
 
     def _error(self, kind: str, offset: int, count: int, reason: str) -> None:
         self.counts[kind] += count
         err = Ping1dStreamError(kind, offset, count, reason)
         self.last_error = err
-        self._recent.append(err)
         if self._keep:
             self.errors.append(err)
 
@@ -216,7 +214,3 @@ class Ping1dStreamDecoder:
         self._framer.reset()
 
     reset = finish  # after a reconnect the held bytes are the remains of the lost connection
-
-    def recent_errors(self) -> List[Ping1dStreamError]:
-        """The last (up to 20) errors, oldest first."""
-        return list(self._recent)

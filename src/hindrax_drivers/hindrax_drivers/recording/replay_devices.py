@@ -42,7 +42,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -345,10 +345,6 @@ def strip_stamp(msg: Any) -> Any:
     return out
 
 
-def _stamp_ns(msg: Any) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
 def _equal(a: Any, b: Any) -> bool:
     """Field-wise equality of two rclpy messages where NaN equals NaN (an invalid DVL velocity is NaN)."""
     if hasattr(a, "get_fields_and_field_types"):
@@ -552,10 +548,3 @@ def recorded_parsed(bag_path: str | Path) -> dict[str, list[Any]]:
     for m, msg in reader.installed_messages(wanted):
         out[m.topic].append(msg)
     return out
-
-
-def iter_parsed(bag_path: str | Path) -> Iterator[tuple[str, Any]]:
-    """(topic, message) of the parsed topics in log-time order (convenience for tools)."""
-    for topic, msgs in recorded_parsed(bag_path).items():
-        for m in msgs:
-            yield topic, m

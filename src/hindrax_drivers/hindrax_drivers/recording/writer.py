@@ -164,9 +164,6 @@ class BagWriter:
         """Registered topics (name -> TopicInfo with running message counts)."""
         return {name: t.info for name, t in self._topics.items()}
 
-    def has_topic(self, name: str) -> bool:
-        return name in self._topics
-
     def add_topic(self, name: str, type_name: str, offered_qos_profiles: Iterable[Mapping[str, Any]] = (),
                   definition: str | None = None, type_hash: str | None = None) -> TopicInfo:
         """Register a topic: schema (full ros2msg definition) and channel with rosbag2 metadata.

@@ -94,7 +94,6 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.action import ActionClient
 from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
 
-import hindrax_drivers
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.launch_xml import write_parameter_file
@@ -187,11 +186,6 @@ def _thread_cpu_s() -> dict[str, float]:
         except (OSError, IndexError, ValueError, TypeError):
             continue
     return out
-
-
-def _supervisor_available() -> bool:
-
-    return (Path(hindrax_drivers.__file__).parent / "supervisor" / "node.py").is_file()
 
 
 def _wrench_msg(stamp: Any) -> Any:

@@ -123,22 +123,6 @@ class ControlModel:
         """The model of one DOF. Raises ``KeyError`` for an unknown DOF."""
         return self.axes[dof]
 
-    def source_table(self) -> list[str]:
-        """One line per DOF: each value with its source (for the node's log and ``hindrax control model``)."""
-        lines = []
-        for dof in DOFS:
-            a = self.axes[dof]
-            parts = [f"inertia {a.inertia:.4g} (+-{100 * a.inertia_rel_std:.1f} %) [{a.sources.get('inertia', '?')}]",
-                     f"damping lin {a.linear_damping_positive:.3g}/{a.linear_damping_negative:.3g} quad "
-                     f"{a.quadratic_damping_positive:.3g}/{a.quadratic_damping_negative:.3g} "
-                     f"[{a.sources.get('damping', '?')}]"]
-            if dof == "heave":
-                parts.append(f"net buoyancy {a.bias:+.3f} N [{a.sources.get('bias', '?')}]")
-            if dof in ("roll", "pitch"):
-                parts.append(f"restoring {a.restoring:.3g} N m [{a.sources.get('restoring', '?')}]")
-            lines.append(f"{dof}: " + "; ".join(parts))
-        return lines
-
 
 def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
     """Rigid-body inertia of one DOF: the mass (kg) or the principal moment of inertia about the CG (kg m^2)."""

@@ -87,15 +87,9 @@ class FreeSurface:
         a, b, c = self.hull_half_extents_m
         return a * abs(r20) + b * abs(r21) + c * abs(r22)
 
-    def centre_depth_m(self, depth_co_m: float, r20: float, r21: float, r22: float) -> float:
-        """Depth (m, NED z) of the hull centre given the depth of CO and the last row of R."""
-        cx, cy, cz = self.hull_centre_frd_m
-        return depth_co_m + r20 * cx + r21 * cy + r22 * cz
-
     def __call__(self, depth_co_m: float, r20: float, r21: float, r22: float) -> float:
         """Submerged fraction in [0, 1]: clip((z_c + h) / (2 h), 0, 1) (module docstring)."""
-        a, b, c = self.hull_half_extents_m
-        h = a * abs(r20) + b * abs(r21) + c * abs(r22)
+        h = self.vertical_half_extent_m(r20, r21, r22)
         cx, cy, cz = self.hull_centre_frd_m
         zc = depth_co_m + r20 * cx + r21 * cy + r22 * cz
         f = (zc + h) / (2.0 * h)

@@ -100,4 +100,3 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
                                           f"at most {other} ({c[other]:g}, {what}): a deeper limit never trips"))
                 break  # one line per key
     return issues
-    return issues

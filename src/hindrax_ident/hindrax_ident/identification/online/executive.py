@@ -394,11 +394,6 @@ class Executive:
                 out += [LinePull(axis, self.line_pull_n, sense, **hold) for axis in ("surge", "sway")]
         return out + [self.dof_step(d) for d in self.dofs]
 
-    def excitation_design(self, dof: str):
-        """(signal, band, shaping) of the broadband run of one DOF (:meth:`~.steps.BroadbandRun.design`)."""
-        kind = self.excitation if self.excitation in BROADBAND else BROADBAND[0]
-        return BroadbandRun(dof, kind, self.excitation_duration_s, self.excitation_amplitude_fraction).design(self.ctx)
-
     # ------------------------------------------------------------------ driving
     @property
     def started(self) -> bool:
