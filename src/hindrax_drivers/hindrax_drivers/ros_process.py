@@ -25,83 +25,57 @@ Exceptions leaving the block:
   Python comes out renamed (pybind11: ``RuntimeError: Unable to convert call argument ...``); both are part of the
   orderly shutdown, not a crash.
 
-The executor is rclpy's ``EventsExecutor`` (``rclpy.experimental``, Jazzy) unless the environment variable
-``HINDRAX_EXECUTOR`` says ``single`` (rclpy's ``SingleThreadedExecutor``). The SingleThreadedExecutor rebuilds
-its wait set in Python on every spin, one spin per message, and that was the largest item of every node
-process's profile (docs/architecture.md §10); the EventsExecutor dispatches from a C++ event queue instead.
-Measured on this machine with one process taking three 100 Hz ``sensor_msgs/Imu`` topics and publishing one 50 Hz
-topic: 8.4-10.5 % of a core with the SingleThreadedExecutor, 3.6-4.4 % with the EventsExecutor. Every node
-process spins it, the recorder and the identification node included, within the EventsExecutor's limits of
-rclpy 7.1 (docs/architecture.md §11.5): no subscription callback takes the message info (the recorder writes
-the reception time as each record's publish time), and no coroutine waits for long (the identification action
-has none).
+The executor is rclpy's ``EventsExecutor`` (``rclpy.experimental``, Jazzy; it dispatches from a C++
+event queue instead of rebuilding a wait set in Python on every spin, docs/architecture.md §10)
+unless the environment variable ``HINDRAX_EXECUTOR`` says ``single`` (rclpy's
+``SingleThreadedExecutor``). Every node process stays within its limits in rclpy 7.1
+(docs/architecture.md §11.5): no subscription callback takes the message info, no coroutine waits
+for long.
 
-Signals: one SIGINT or SIGTERM ends the process with status 0, and so does any number of them at any moment after
-start-up. rclpy's handler (installed by ``rclpy.init``) chains to Python's and shuts the context down from a thread
-of its own; Python's raises ``KeyboardInterrupt`` in the main thread when that thread next checks for signals, which
-for a signal the kernel handed to another thread (a DDS thread) may be after the body has seen the context shut down
-and left the block: the ``KeyboardInterrupt`` then lands in a clean-up and ends the process with status -2 (-SIGINT),
-its remaining clean-ups not run (28 times in 30 in a reproduction, a clean-up that waits on the GIL); a second signal
-during the shutdown does the same. So, in the main thread, :class:`RosProcess` sets Python's SIGINT and SIGTERM
-handlers before ``rclpy.init`` (rclpy's then chain to them):
+Signals: one SIGINT or SIGTERM, or any number of them at any moment after start-up, ends the process
+with status 0. Python raises ``KeyboardInterrupt`` in the main thread only when that thread next
+checks for signals, which could land it in a clean-up (status -2, the remaining clean-ups not run).
+So, in the main thread, :class:`RosProcess` sets Python's SIGINT and SIGTERM handlers before
+``rclpy.init`` (rclpy's then chain to them):
 
-- while the block runs, SIGINT raises ``KeyboardInterrupt`` in it as Python's default handler does (a command may
-  catch it), SIGTERM only shuts the context down (rclpy's handler);
-- with ``interrupt=False`` (node processes, :func:`~hindrax_drivers.node_common.run_nodes`) rclpy installs no
-  handler at all (``SignalHandlerOptions.NO``): both signals are only recorded, and :meth:`RosProcess.spin`, a loop
-  of ``spin_once`` with a 0.08 s timeout (:data:`SPIN_TIMEOUT_S`), returns at the next turn once one is; the
-  context is shut down after the clean-ups, never under a running callback. rclpy's own handler shuts it down from
-  its own thread while a callback may run: a timer callback that publishes then fails ("publisher's context is
-  invalid") and rclpy prints ``[FATAL] Exception in 'timers' callback`` with a traceback (measured: 1 launch Ctrl-C
-  in 2); a ``KeyboardInterrupt`` raised inside a callback does the same;
-- from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end (the ESC node's
-  neutral write among them);
-- at the end rclpy's handlers are uninstalled (``rclpy.try_shutdown`` leaves them) and the handlers found on entry
-  restored, unless a signal arrived: the process is then ending on request, and SIGINT and SIGTERM stay ignored
-  until it has exited (the interpreter's finalization resets a signal that Python handles to its default action,
-  which for SIGINT would end the process with -2).
+- while the block runs, SIGINT raises ``KeyboardInterrupt`` in it (a command may catch it), SIGTERM
+  only shuts the context down (rclpy's handler);
+- with ``interrupt=False`` (node processes, :func:`~hindrax_drivers.node_common.run_nodes`) rclpy
+  installs no handler (``SignalHandlerOptions.NO``): both signals are only recorded,
+  :meth:`RosProcess.spin` (``spin_once`` with a :data:`SPIN_TIMEOUT_S` timeout) returns at its next
+  turn, and the context is shut down after the clean-ups, never under a running callback (whose
+  publish would fail with "publisher's context is invalid");
+- from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end;
+- at the end rclpy's handlers are uninstalled and the handlers found on entry restored, unless a
+  signal arrived: SIGINT and SIGTERM then stay ignored until the process has exited (the
+  interpreter's finalization would otherwise reset SIGINT to its default action, status -2).
 
-In another thread (a test running a node process in a thread) the handlers are left as they are: only the main
-thread may set them.
+In another thread (a test running a node process in a thread) the handlers are left as they are.
 
-Bounded shutdown: with ``shutdown_budget_s`` (node processes: :data:`SHUTDOWN_BUDGET_S`, 8 s), ``__exit__`` arms
-the standard library's ``faulthandler.dump_traceback_later(..., exit=True)`` first: a shutdown that is still running
-after the budget (a clean-up, the executor's or the context's shutdown that hangs) writes every thread's Python
-traceback to stderr and ends the process with status 1, before ``ros2 launch``'s SIGKILL at 10 s would end it
-with nothing said. Signals cannot do this: from the first instruction of ``__exit__`` they are absorbed.
+Bounded shutdown: with ``shutdown_budget_s`` (node processes: :data:`SHUTDOWN_BUDGET_S`),
+``__exit__`` first arms ``faulthandler.dump_traceback_later(..., exit=True)``: a shutdown still
+running after the budget writes every thread's traceback to stderr and ends the process with status
+1, before ``ros2 launch``'s SIGKILL at 10 s.
 
-Exit without the DDS participant's teardown: with ``exit_process=True`` (node processes run as programs,
-:func:`~hindrax_drivers.node_common.run_nodes`), ``__exit__`` ends the process itself once the clean-ups, the executor's
-and the context's shutdown are done (``os._exit`` with :attr:`RosProcess.status`, after flushing stdout and stderr; 1
-with the traceback for an exception that would have propagated). Why: rmw_fastrtps destroys the process's DDS
-participant with its last node, and Fast DDS 2.14's ``DomainParticipant::set_listener(nullptr)`` then spins, holding the
-lock that an in-flight discovery callback needs to finish (Fast-DDS issue 6513). At a launch-wide Ctrl-C every peer
-removes its endpoints at once, so such callbacks are in flight: in a reproduction (a receiver and 4 peers with 5
-heartbeat topics each, all sent SIGINT at once) a process spun in it for more than 4 s in 5 of 340 trials, 1 of 150 with
-the vehicle's UDP-only transport (gdb: the main thread in ``destroy_participant`` -> ``set_listener``, a receive thread
-in ``onWriterDiscovery`` or ``onReaderDiscovery`` waiting for the lock), and none in 474 trials with this exit; the
-output guard of the README's pool-day test once exceeded its 8 s budget there. So a hidden node (``_exit_<pid>``, no
-global arguments, no rosout, no parameter services) takes a reference to the participant, every node of the process is
-still destroyed (its endpoints disposed and its name taken off the graph, as before), and the participant itself is left
-to the process's end: peers drop it when its lease expires, and see the hidden node until then. The hidden node is made
-in the first node's clean-up, after its ``close()`` (the ESC's neutral write first). The process's remaining objects are
-never finalised, so the interpreter's exit cannot reach that teardown (nor rclpy's crash at exit, rclpy issue 1644).
-Only in the main thread, and only when the context is still up.
+Exit without the DDS participant's teardown: with ``exit_process=True`` (node processes run as
+programs, :func:`~hindrax_drivers.node_common.run_nodes`), ``__exit__`` ends the process itself
+(``os._exit`` with :attr:`RosProcess.status` after flushing stdout and stderr; 1 with the traceback
+for an exception that would have propagated) once the clean-ups and the executor's and context's
+shutdown are done. Fast DDS 2.14 can spin for seconds in
+``DomainParticipant::set_listener(nullptr)`` while peers remove their endpoints at once (Fast-DDS
+issue 6513), so a hidden node (``_exit_<pid>``, no global arguments, no rosout, no parameter
+services), made in the first node's clean-up after its ``close()``, holds the participant: every
+node is still destroyed (endpoints disposed, name off the graph) and the participant is left to the
+process's end (peers drop it at lease expiry). Only in the main thread, and only when the context is
+still up.
 
-Garbage collection: :meth:`RosProcess.spin` collects once and then freezes every object alive at start-up
-(``gc.freeze``, Python's documented way to keep a long-lived heap out of every later collection) before it spins. A
-node process holds 34,000-57,000 objects once rclpy, numpy and its modules are loaded (94,000 with the
-identification node's), nearly all of them alive for the whole run; a full (generation 2) collection traverses all
-of them and holds the GIL meanwhile: 8-35 ms of CPU here for the output guard's, the supervisor's and
-``actuation_node``'s modules (``make bench``, ``gc_full_collection_cpu_ms_*_unfrozen``; 59 ms with the
-identification node's), 50-210 ms on the Pi 4 by the README's 6x planning factor, against the 0.2 s heartbeat
-timeouts of the ESC and the output guard (docs/architecture.md §8); in the stack benchmark's processes the full
-collections observed at start-up and shut-down took 55-140 ms of wall time. Python starts such a collection by
-itself whenever enough objects have survived the young generations, so without the freeze one could stop the ESC's,
-the supervisor's or the guard's tick at any moment of a dive. After it, a full collection traverses only what was
-allocated since start-up (``make bench``: ``gc_full_collection_cpu_ms_*``, ``benchmarks/safety.py``). The price: a
-frozen object that later ends up in a reference cycle is never collected (one freed by its reference count still
-is); what is frozen here is modules, classes, functions and the nodes, which live as long as the process.
+Garbage collection: :meth:`RosProcess.spin` collects once and then freezes every object alive at
+start-up (``gc.freeze``) before it spins, so that a full collection, which holds the GIL while it
+traverses every object (tens of thousands in a node process), cannot stall the ESC's, the
+supervisor's or the guard's tick against their 0.2 s heartbeat timeouts (docs/architecture.md §8;
+``make bench``: ``gc_full_collection_cpu_ms_*``). The price: a frozen object that later ends up in a
+reference cycle is never collected; what is frozen is modules, classes, functions and the nodes,
+which live as long as the process.
 
 rclpy is imported when the block is entered, not when this module is.
 """
