@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import textwrap
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,7 +31,7 @@ check that this file is current. Field names are the keys' last segments, nested
 of the keys, optional keys are ``X | None`` (None when absent) and lists are tuples. Build them through
 :class:`hindrax_drivers.config.VehicleConfig` (``cfg.esc.output_latency_s``), never by hand. A required key that
 a node did not declare among its parameters is absent from its configuration: reading it raises KeyError naming
-the key.
+the key. Each field's unit and meaning: its key's ``Spec.doc`` in SCHEMA.
 """
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
@@ -110,9 +109,6 @@ def _classes(path: str, node: dict, out: list[str]) -> None:
             key, spec = sub
             typ = TYPES[spec.kind] + (" | None" if c.is_optional(key) else "")
             lines.append(f"    {name}: {typ}")
-            doc = textwrap.wrap(f'"""{spec.doc.replace(chr(92), "/")}"""', 116, initial_indent="    ",
-                                subsequent_indent="    ")
-            lines.extend(doc)
     out.append("\n".join(lines) + "\n")
 
 
