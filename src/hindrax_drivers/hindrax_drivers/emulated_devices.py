@@ -138,10 +138,6 @@ class EmulatedDevices:
         if server is not None:
             server.close()
 
-    @property
-    def i2c_served(self) -> bool:
-        return self._server is not None
-
     def close(self) -> None:
         """Stop serving everything and remove the pseudo-terminals."""
         self.stop_i2c()

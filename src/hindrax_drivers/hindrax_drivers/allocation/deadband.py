@@ -171,11 +171,6 @@ class DeadbandSearch:
                     self._subset_pinv, self._seed_affine, self._seed_nonfree):
             arr.flags.writeable = False
 
-    @property
-    def n_seeds(self) -> int:
-        """Number of seeds evaluated by every :meth:`solve`."""
-        return int(self._seed_free.size)
-
     def objective(self, forces, tau) -> np.ndarray:
         """J of force vectors ``forces`` (..., n) for the request ``tau`` (6,): the quantity :meth:`solve` minimises."""
         f = np.asarray(forces, dtype=float)

@@ -236,16 +236,6 @@ class Dvl75Emulator:
         """Fault: report ``$DVPDL`` confidence 0 (with zero deltas) regardless of the truth."""
         self._force_zero_confidence = bool(zero)
 
-    @property
-    def booted(self) -> bool:
-        """True once the first poll has booted the emulated device."""
-        return self._boot_t is not None
-
-    @property
-    def paused(self) -> bool:
-        """True after PAUSE until RESUME/REBOOT."""
-        return self._paused
-
     # --- host interface ---------------------------------------------------------------------------
     def feed_host_bytes(self, data: bytes) -> None:
         """Receive bytes written by the host; complete command lines are executed immediately and

@@ -83,13 +83,8 @@ __all__ = [
     "cmd_set_sensor_orientation",
     "cmd_set_speed_of_sound",
     "cmd_set_velocity_adjustment",
-    "cmd_declination",
-    "cmd_set_position",
-    "cmd_suppress_gps",
     "cmd_baud_rate",
-    "cmd_pause",
     "cmd_resume",
-    "cmd_reboot",
     "cmd_configuration",
     "startup_commands",
     "iter_records",
@@ -916,40 +911,6 @@ def cmd_set_velocity_adjustment(factor: float) -> bytes:
     return build_command("SET-VELOCITY-ADJUSTMENT", _num(factor, 4))
 
 
-def cmd_declination(declination_rad: float) -> bytes:
-    """``DECLINATION <deg>`` (docs/devices.md §1.4; + = magnetic north east of true, sticky).
-
-    Raises:
-        ValueError: outside ±pi rad or non-finite.
-    """
-    if not math.isfinite(declination_rad) or abs(declination_rad) > math.pi:
-        raise ValueError(f"declination {declination_rad} rad outside ±pi")
-    return build_command("DECLINATION", _num(math.degrees(declination_rad), 2))
-
-
-def cmd_set_position(latitude_deg: float, longitude_deg: float) -> bytes:
-    """``SET-POSITION <lat>,<lon>`` in decimal degrees (docs/devices.md §1.4; counts as a GPS fix, fresh
-    for 1.5 s).
-
-    Raises:
-        ValueError: latitude outside ±90 or longitude outside ±180.
-    """
-    if not (-90.0 <= latitude_deg <= 90.0 and -180.0 <= longitude_deg <= 180.0):
-        raise ValueError(f"position ({latitude_deg}, {longitude_deg}) out of range")
-    return build_command("SET-POSITION", "%.6f,%.6f" % (latitude_deg, longitude_deg))
-
-
-def cmd_suppress_gps(duration_s: float) -> bytes:
-    """``SUPPRESS-GPS <s>``: ignore the GPS while submerging (docs/devices.md §1.4).
-
-    Raises:
-        ValueError: negative or non-finite duration.
-    """
-    if not (math.isfinite(duration_s) and duration_s >= 0):
-        raise ValueError(f"invalid duration {duration_s}")
-    return build_command("SUPPRESS-GPS", "%d" % round(duration_s))
-
-
 def cmd_baud_rate(baud: int) -> bytes:
     """``BAUD-RATE <n>`` (docs/devices.md §1.1/§1.4: 9600..921600, sticky, applied at next boot).
 
@@ -961,19 +922,9 @@ def cmd_baud_rate(baud: int) -> bytes:
     return build_command("BAUD-RATE", "%d" % int(baud))
 
 
-def cmd_pause() -> bytes:
-    """``PAUSE``: stop pinging (docs/devices.md §1.4)."""
-    return build_command("PAUSE")
-
-
 def cmd_resume() -> bytes:
     """``RESUME``: restart pinging (docs/devices.md §1.4)."""
     return build_command("RESUME")
-
-
-def cmd_reboot() -> bytes:
-    """``REBOOT``: restart all processors (docs/devices.md §1.4)."""
-    return build_command("REBOOT")
 
 
 def cmd_configuration() -> bytes:

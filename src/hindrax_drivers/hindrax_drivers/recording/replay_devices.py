@@ -126,10 +126,6 @@ class I2CTransactions:
     reads: dict[int, list[bytes]] = field(default_factory=dict)
     writes: list[bytes] = field(default_factory=list)
 
-    @property
-    def n_reads(self) -> int:
-        return sum(len(v) for v in self.reads.values())
-
 
 def i2c_transactions(items: Iterable[tuple[int, Any]]) -> dict[int, I2CTransactions]:
     """Group ``iter_raw_device_data`` output of an I2C device by 7-bit address (see :class:`I2CTransactions`).

@@ -335,11 +335,6 @@ class PtyDevice:
         return self._link
 
     @property
-    def slave_path(self) -> str:
-        """Current real ``/dev/pts/N`` path ("" while disconnected)."""
-        return self._slave_name if self._master is not None else ""
-
-    @property
     def connected(self) -> bool:
         """True while the pty exists."""
         return self._master is not None

@@ -33,7 +33,7 @@ from ..identification.online.executive import CampaignAbort, Executive, TickInpu
 from ..identification.online.steps import Ballast, Float, Inclining, LinePull
 from .simulator import Simulator
 
-__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "run_campaign", "inclining_wrench_frd", "PoolOperator"]
+__all__ = ["CampaignAbort", "CampaignRecord", "Campaign", "inclining_wrench_frd", "PoolOperator"]
 
 
 def inclining_wrench_frd(rotation: np.ndarray, weight_n: float, arm_m: float, dof: str) -> np.ndarray:
@@ -232,7 +232,3 @@ class Campaign:
         """Command neutral pulse widths on every thruster (end of campaign or abort)."""
         self.sim.step(np.full(len(self.core.names), self.neutral_us))
 
-
-def run_campaign(cfg: VehicleConfig, **kwargs) -> CampaignRecord:
-    """Build a :class:`Campaign` with ``kwargs`` and run it."""
-    return Campaign(cfg, **kwargs).run()

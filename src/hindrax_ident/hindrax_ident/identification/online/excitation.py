@@ -148,11 +148,6 @@ class Prbs:
         """(2^nbits - 1) clock_s, s."""
         return (2 ** int(self.nbits) - 1) * self.clock_s
 
-    @property
-    def bits(self) -> np.ndarray:
-        """(2^nbits - 1,) the m-sequence, 0/1."""
-        return self._bits.copy()
-
     def value(self, t):
         """Force (N or N m) at ``t`` (s, scalar or array): +-amplitude, the bit of clock floor(t / clock_s)."""
         i = np.floor(np.asarray(t, dtype=float) / self.clock_s + 1e-9).astype(int) % self._bits.size
