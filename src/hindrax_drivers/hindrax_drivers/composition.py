@@ -21,12 +21,9 @@ Groups (:data:`GROUPS`):
     the four sensor drivers and the static transforms: DVL-75 and Ping1D (each keeps its serial port's reader
     thread, which decodes and publishes), MS5837 and ICM-20948 on the shared I2C bus (each node opens the bus
     itself; the kernel serialises the transfers), and ``static_tf`` (publishes ``/tf_static`` once, latched, then
-    only waits). Every Python process with rclpy and its DDS participant holds about 40 MB of proportional set size
-    of its own: as two processes (serial drivers + TF, I2C drivers) they held 48 + 49 MB, as one 57 MB
-    (``make bench``, ``launch_pss_mb_*``). The ICM-20948's polls share the executor and the GIL with the serial
-    reader threads and lose nothing by it: in the launch layout (load 6-13 on two cores) the recorder received the
-    IMU at 47.6-51.1 Hz in one process, 40.9-46.5 Hz in two, largest gaps 0.06-0.26 s and 0.15-0.20 s
-    (``launch_running_imu_*``, three runs each). A light process of no
+    only waits). One process instead of two saves a participant's memory (``make bench``,
+    ``launch_pss_mb_*``); the ICM-20948's polls share the executor and the GIL with the serial
+    reader threads and lose nothing by it (``launch_running_imu_*``). A light process of no
     safety role: one driver's failure takes the others with it for the 2 s of the respawn (a campaign needs all four
     sensors, so the supervisor stops it either way), and late subscribers get the transforms again from the new
     process.
@@ -38,9 +35,9 @@ Groups (:data:`GROUPS`):
 
 ``ident_control_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
     the identification node and the controller: the two model-based nodes of hindrax_ident, both non-safety
-    (:mod:`hindrax_ident.composition` builds them; this package names them only). Apart they were the two largest
-    processes, 107-110 MB of proportional set size each, mostly the same Python modules loaded twice; in one process
-    117 MB (``make bench``, ``launch_pss_mb_*``). While a campaign runs the controller ticks every 0.2 s.
+    (:mod:`hindrax_ident.composition` builds them; this package names them only): the same Python
+    modules are loaded once (``make bench``, ``launch_pss_mb_*``). While a campaign runs the
+    controller ticks every 0.2 s.
 ``ident_record_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
     the same two and the recorder: the pool test's layout with recording on (hindrax_ident.composition).
 

@@ -14,9 +14,9 @@ The pieces every safety node (ESC, output guard, supervisor) shares:
   (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: DDS
   AUTOMATIC liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the subscription's liveliness event counts the
   *live* publishers. Why not the graph's count alone: a SIGKILLed process's endpoints stay in the ROS graph until
-  its DDS participant lease runs out (20 s with Fast DDS's default, measured here), so a supervisor restarted after
-  a crash would be refused for 20 s; its writer is no longer alive after one lease (0.95-1.0 s measured, also for
-  a SIGSTOPped one). A writer offering a longer lease (rclpy's default QoS: infinite) does not match at all: its
+  its DDS participant lease runs out (20 s with Fast DDS's default), while its writer is no longer
+  alive after one heartbeat lease. A writer offering a longer lease (rclpy's default QoS: infinite)
+  does not match at all: its
   beats never arrive, while the graph still shows its node name.
 * :class:`PublisherNames`: the node names of a topic's publishers, asked of the graph only when DDS says something
   changed (the subscription's matched, liveliness, incompatible-QoS and incompatible-type events), for

@@ -12,14 +12,10 @@ Why not ``nice``: on a kernel with ``CONFIG_SCHED_AUTOGROUP`` (Debian's, Raspber
 project's development machines, ``/proc/sys/kernel/sched_autogroup_enabled`` 1), a nice value only ranks a process
 against the other processes of its own session; each session's group shares the CPU equally with every other's.
 A process started in a session of its own (a systemd service, a ``setsid`` child, the test suite's process runner)
-therefore gains nothing from ``nice -n -5`` against a CPU-bound process of another session. Measured on this
-project's 2-core machine, the README's pool-day test (test/test_pool_day.py) beside two ``python3 -c 'while True:
-pass'`` (load 5-7), a per-thread ``/proc/<pid>/task/<tid>/schedstat`` sampler: runnable-but-waiting intervals of the
-actuation process's main thread of 0.62-0.79 s and of the output guard's of 0.53-0.63 s at nice -5, and a
-supervisor heartbeat gap over 1.0 s that disarmed the campaign; ``SCHED_FIFO`` threads are scheduled before every
-``SCHED_OTHER`` thread of every session (sched(7), "SCHED_FIFO"). The kernel's real-time throttling
-(``/proc/sys/kernel/sched_rt_runtime_us``, 0.95 s of every 1 s by default) leaves the rest of the machine a share
-even if a real-time process spins.
+therefore gains nothing from ``nice -n -5`` against a CPU-bound process of another session;
+``SCHED_FIFO`` threads are scheduled before every ``SCHED_OTHER`` thread of every session (sched(7),
+"SCHED_FIFO"). Real-time throttling (``/proc/sys/kernel/sched_rt_runtime_us``, 0.95 s of every 1 s
+by default) leaves the rest of the machine a share even if a real-time process spins.
 
 Refused: setting ``SCHED_FIFO`` needs ``CAP_SYS_NICE`` or an ``RLIMIT_RTPRIO`` at least the priority (sched(7),
 "Privileges and resource limits"): root, ``LimitRTPRIO=`` in the bare-metal systemd unit, ``ulimits: rtprio:`` in

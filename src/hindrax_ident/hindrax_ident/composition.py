@@ -7,9 +7,9 @@ Console script ``ident_control_node`` (``pool_test.launch.xml``): both nodes kee
 is :data:`hindrax_drivers.composition.IDENT_GROUPS` (the launch-file readers, ``hindrax health`` and the SROS2
 policy, take the node names from there); this module maps them to their classes.
 
-Why one process (docs/architecture.md §10.1): apart, the two were the launch layout's two largest processes, 107-110 MB
-of proportional set size each, mostly the same Python modules (numpy, the vehicle model, the control law, the sensor
-conditioning) loaded twice; together 117 MB, the layout's total 558 -> 456 MB (``make bench``, ``launch_pss_*``).
+Why one process (docs/architecture.md §10.1): the two largest processes of the launch layout load
+mostly the same Python modules (numpy, the vehicle model, the control law, the sensor conditioning)
+once (``launch_pss_*``).
 Neither has a safety role (the supervisor, the output guard and the ESC's process stay alone, §8): a failure of
 one ends both, and the allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source.
 While an identification goal runs the controller is disabled and ticks every 0.2 s, so the pair costs about what

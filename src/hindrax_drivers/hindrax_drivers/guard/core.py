@@ -23,10 +23,9 @@ arm request. That report must come after the ESC acted on one of the guard's own
 last cause: each ESC beat echoes the newest guard beat it has handled (``guard_boot_id``, ``guard_seq``), and the ESC
 disarms in the handler of any guard beat that is not OK, and cannot arm again before a guard OK beat, which is only
 published after the release. So an ESC beat acknowledging ``guard_seq`` >= :attr:`GuardCore.cause_seq` reports a
-state later than that disarm, whatever the delivery delays. Why: the rule before ("an ESC beat received after the
-last cause") accepted a beat published before an arm and delivered late; the one before that (the newest beat)
-let 1700 us through with the ESC armed. It starts asserted: nothing is released until a live ESC has acknowledged
-one of this guard's ERROR beats at neutral.
+state later than that disarm, whatever the delivery delays (a beat merely received after the last
+cause may have been published before an arm and delivered late). It starts asserted: nothing is
+released until a live ESC has acknowledged one of this guard's ERROR beats at neutral.
 """
 from __future__ import annotations
 

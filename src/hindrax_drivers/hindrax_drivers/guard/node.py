@@ -202,10 +202,8 @@ class OutputGuardNode(Node):
         edge sent for longer than its timeout (this process was frozen or starved). The outputs then stay off until
         the ESC has reported disarmed at neutral in a beat acknowledging a guard ERROR beat sent after the stall
         (:mod:`.core`): thrust comes back only through a new arm request. This holds whatever the last ESC beat
-        said: that beat may predate an arm (beats are 40 ms apart; a launch frozen just after an arm, with the
-        guard's last beat still "disarmed", kept thrust after the resume in 51 of 300 freezes on a loaded 2-core
-        machine when a disarmed ESC exempted the stall), and a stall with the ESC in fact disarmed costs one
-        assertion, released by its first beat acknowledging it."""
+        said: that beat may predate an arm (beats are 40 ms apart), and a stall with the ESC in fact
+        disarmed costs one assertion, released by its first beat acknowledging it."""
         if not self.feeds or self.core.asserted:
             return ""
         quiet = self._feed_quiet_s(time.monotonic())

@@ -2,12 +2,9 @@
 and the same figure on another machine, another session's or another moment's.
 
 Why. The stack benchmark's CPU figures are "% of a core here", and "here" is not one machine: the development
-machines of this project differ by about 2x from one session to the next. The same code (commits 01ae545 and
-c04cb0f) measured ``launch_running_cpu_total`` 71.7 % in one session and 41.6 % in the next, and the virtual
-pool's processes (unchanged code) 41.9 % and 23.8 % in the same runs. Within one session the same program's CPU
-time also moves: 26.8-43.3 s for the workload below in ten quiet runs a few minutes apart (no steal time in
-``/proc/stat``), while its least over a few runs stayed within 26.8-27.2 s. So a comparison between sessions
-needs the machine's speed beside the figures, and within a session repeated runs.
+machines differ by about 2x from one session to the next, and within one session a program's CPU
+time moves while its least over a few runs stays steady. So a comparison between sessions needs the
+machine's speed beside the figures, and within a session repeated runs.
 
 What. :func:`nbody_cpu_s`: the CPU time (``time.process_time``) of the classic n-body workload (the Sun and the
 four giant planets, pairwise gravity, a semi-implicit Euler step of 0.01 years), the least over a few runs,

@@ -5,8 +5,8 @@ on the shipped transport, :mod:`hindrax_drivers.dds_transport`, scheduled as the
 the layout of :func:`hindrax_ident.benchmarks.safety.run_processes`) are armed and commanded at 1700 us. Then a new
 ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s subscriber to
 ``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each
-exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) stalled a safety process 333 ms
-on such a start and disarmed the vehicle in 2-3 of 10 trials; the rows say whether that is gone:
+exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a safety
+process on such a start; the rows say whether it does:
 
 * ``participant_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
 * ``participant_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive messages of any of the three

@@ -9,10 +9,8 @@ node (:class:`~hindrax_ident.estimation.filters.KinematicKalmanFilter`,
 (:func:`~hindrax_ident.estimation.filters.smooth_kinematics`, :mod:`hindrax_ident.vehicle.fusion`'s) keep filterpy's
 ``batch_filter`` and ``rts_smoother``.
 
-Why our own step for the online filters: importing ``filterpy.kalman`` (any of its filters: the package imports
-``filterpy.stats``, which imports ``scipy.stats``, ``scipy.sparse`` and ``scipy.linalg``) costs a process 66 MB of
-proportional set size, 44 MB of it private (measured on the pool-test launch layout's Python with numpy and rclpy
-loaded), for the two equations below; the controller's process held scipy for nothing else.
+Why our own step for the online filters: importing ``filterpy.kalman`` pulls in ``scipy.stats``,
+``scipy.sparse`` and ``scipy.linalg`` (tens of MB per process) for the two equations below.
 
 Shapes: state x (n, 1), covariance P (n, n); F, Q (n, n); measurement z (m, 1), H (m, n), R (m, m).
 """

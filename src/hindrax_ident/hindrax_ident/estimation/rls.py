@@ -56,26 +56,23 @@ identification executive switches all of them on, :func:`hindrax_ident.identific
   estimate and P are updated only while it stays at or above it: samples that cannot separate the parameters (a
   long hold at one speed fills the forgetting window with collinear rows) do not move them. Before the gate has
   opened for the first time every sample updates (nothing is published then, :meth:`converged_mask`): gating the
-  start would throw away the first levels, whose rows are what later lifts the excitation above the threshold
-  (with the gate closed from the first sample, a surge campaign whose final excitation is 0.006 passed only the
-  330 samples when it was briefly above 0.01 and ended with the inertia at 0 and the bias at 19 N).
+  start would throw away the first levels, whose rows are what later lifts the excitation above the
+  threshold.
 * ``lower_bounds`` (p,): :attr:`theta` is the estimate constrained to theta >= lower bound (physical signs:
   positive inertia, non-negative damping; NaN = unbounded): the projection of the unconstrained estimate in the
   metric of the information matrix P^-1, min (t - theta_u)^T P^-1 (t - theta_u) subject to t >= lb, which is the
   exact constrained minimiser of the (forgetting-weighted) least-squares cost, because that cost is this quadratic
   form plus a constant (the projection used for least-squares estimates in adaptive control, e.g. Goodwin and Sin
   1984, "Adaptive Filtering Prediction and Control", ch. 3: it must use the P^-1 metric). It is solved by an
-  active set (p <= 6: at most p small solves). The recursion keeps the unconstrained estimate: feeding a
-  Euclidean clip back into it (as first written) made every DOF of a campaign diverge to 1e14-1e27, because each
-  clip leaves an error the next gain K e pushes along the correlated directions. :meth:`at_bound` says which parameters
-  sit on their bound.
+  active set (p <= 6: at most p small solves). The recursion keeps the unconstrained estimate (a
+  clip fed back diverges: the next gain K e pushes its error along the correlated directions).
+  :meth:`at_bound` says which parameters sit on their bound.
 * ``change_threshold``: a change detector on the normalised a-priori error ``e^2 / (sigma2_hat (1 + phi^T P phi))``
   (chi-square with 1 degree of freedom for a correct model): when its mean over ``change_samples`` consecutive
   samples exceeds the threshold, the covariance is reset (:meth:`reset_covariance`) and the residual statistics
   restart, so the estimate re-adapts to the changed parameters (:attr:`changes_detected` counts them). The model
-  errors of a real DOF (the causal filter's lag at every level step) make that mean exceed 1 for a few seconds:
-  over 1 s windows it reached 28 in a no-disturbance surge campaign, over 10 s at most 3.6, so the window must
-  span several level steps.
+  errors of a real DOF (the causal filter's lag at every level step) lift that mean above 1 for a
+  few seconds, so the window must span several level steps.
 * :meth:`published_std`: the standard deviation where the estimate has converged (std <= rel_tol |theta| + abs_tol,
   enough samples, excitation above ``min_excitation``), NaN elsewhere: "not converged" rather than a number that
   does not cover the truth.

@@ -257,12 +257,10 @@ class DepthEstimator:
     ms after its conversion) fused with the 100 Hz vertical acceleration (:class:`~.fusion.AccelAidedFilter`,
     position measured, NED z).
 
-    Why: the hold's rate feedback from the 10 Hz depth alone lagged by about its own filter bandwidth (6 rad/s),
-    close to the loop's crossover (about 4 rad/s at ``natural_frequency_rad_s`` 2); with the latencies of the
-    ROS graph (depth used 30-40 ms after its conversion, wrench on the thrusters 30-40 ms after it was
-    computed) the depth hold went into a limit cycle of +-25-35 N at 0.7 Hz, and the 0.1-0.2 m/s heave it
-    caused coupled into the roll and pitch runs (Munk moment, Fossen eq. 6.55). The acceleration gives the
-    rate without that lag.
+    Why: a rate from the 10 Hz depth alone lags by about its own filter bandwidth, close to the
+    hold's crossover; with the ROS graph's latencies that drives the depth hold into a limit cycle
+    whose heave couples into the roll and pitch runs (Munk moment, Fossen eq. 6.55). The
+    acceleration gives the rate without that lag.
 
     ``on_sample(device, stamp_s, state)`` takes every conditioned sample (``ms5837``: ``state.depth_m``;
     ``icm20948_accel``: ``state.acceleration_ned_m_s2[2]``); a sample older than the filter's time is fused at
