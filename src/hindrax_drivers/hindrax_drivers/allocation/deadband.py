@@ -4,9 +4,8 @@ Why this module exists. An ESC gives no thrust inside its deadband (docs/devices
 so a thruster produces either 0 N or at least the thrust at the first pulse width outside it (about 1.2 N
 for the [Hindrax-Drag] eq. 1 curve at the PCA9685's step). The weighted pseudo-inverse spreads a small
 request over every thruster: ``[-2 0 0 0 0 0]`` asks each horizontal thruster for 0.87 N, which none can
-give; rounding each one up to 1.2 N gave -2.77 N of surge (+38 %) and a 0.28 N m pitch moment. Running only
-a symmetric pair at 1.74 N gives the -2 N exactly. This module chooses *which* thrusters run as well as
-how hard.
+give (rounding each up overshoots and adds a pitch moment), while a symmetric pair at 1.74 N gives
+the -2 N exactly. This module chooses *which* thrusters run as well as how hard.
 
 Problem. Find the forces F (n,) minimising
 
@@ -25,8 +24,8 @@ on/off and a sign per thruster.
 
 Method: a search over active sets (which thrusters run, which sit at their smallest thrust), vectorised over
 all of them at once. It is the project's own: no maintained Python solver answers a mixed-integer QP in well
-under a millisecond (``scipy.optimize.milp``, HiGHS, takes only a linear objective, and the L1 form of this
-problem with 16 binaries took 28 ms median, 66 ms p99 of CPU per call on the development machine).
+under a millisecond (``scipy.optimize.milp``, HiGHS, takes only a linear objective and is tens of ms
+here).
 
 1. *Seeds.* Every subset S of thrusters that may run (2^n seeds, the others held at 0 N), with the forces of
    S the least-squares solution of ``B_S F_S = tau`` of least W-norm (a weighted pseudo-inverse per subset,
@@ -48,9 +47,7 @@ problem with 16 binaries took 28 ms median, 66 ms p99 of CPU per call on the dev
 
 For requests without an exact solution (e.g. a pitch moment smaller than the verticals' smallest pair makes)
 the search is a heuristic for the exact solve of all 3^n sign patterns (6561 box-constrained least squares
-for n = 8): on 208 random requests that needed it, its J was within 1 % of that brute-force optimum in 206;
-in the other two its forces were exact (residual < 1e-14 N) where the optimum left 0.006 and 0.010 N of
-residual for about 15 N^2 less thrust (``test/test_allocation_deadband.py`` checks two fixed requests).
+for n = 8; ``test/test_allocation_deadband.py`` checks two fixed requests against it).
 The subsets are enumerated for n <= :data:`MAX_THRUSTERS` (4096 subsets); for more thrusters the allocator
 runs without the search. What a call costs: ``make bench`` (``actuation``: ``allocate_cpu_p50`` and
 ``allocate_cpu_p99``, with and without the search).

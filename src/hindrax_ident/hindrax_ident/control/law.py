@@ -40,9 +40,8 @@ are fed forward before the altimeter sees them.
 
 Why our own code: the reference model, feedforward and anti-windup are a few lines each around the model, and no
 maintained Python library implements marine model-based PID with reference feedforward. The floor filter steps with
-:class:`~hindrax_ident.estimation.kalman.LinearKalman`, filterpy's predict/update equations: ``filterpy.kalman``
-itself would bring scipy.stats into the controller's process (66 MB of proportional set size, that module's
-docstring).
+:class:`~hindrax_ident.estimation.kalman.LinearKalman`, filterpy's predict/update equations without
+scipy (that module's docstring).
 
 Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, heading clockwise from north.
 """

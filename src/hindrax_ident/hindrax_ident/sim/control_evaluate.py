@@ -11,26 +11,8 @@ flies, not the identification's slower tick). Three manoeuvres
 * ``altitude_hold``: hold ``altitude_m`` (0.5 m, Ping1D) while surging north at the survey speed
   ``surge_speed_m_s`` (0.4 m/s) for ``surge_s`` (12 s), then stopping, over a floor whose slope changes
   (``floor_profile_m``, :meth:`~hindrax_ident.sim.pool.Pool.set_floor_profile`): flat at the pool's 1.8 m, then rising
-  at 1:3 to 1.5 m over 0.9 m, then at 1:12. Why these numbers (chosen from the vehicle's job before the comparison
-  was run; docs/control.md §6):
-
-  - the speed: Hindrax surveys scallop beds surging over them ([Hindrax-Drag] §2.1); its self-propelled surge tests
-    reached 0.20-0.45 m/s ([Hindrax-Drag] Table 4, surge Re 0.5e5-1.1e5 with L = V^(1/3) = 0.248 m and
-    nu = 1.0e-6 m^2/s, :mod:`hindrax_ident.estimation.drag_coefficient`), so the survey speed is taken in the upper
-    part of the speeds the vehicle is known to reach; 0.4 rather than 0.45 m/s for the authority: the steady surge
-    force on the control truth, (85 kg/m x 0.4^2 + 2.5 kg/s x 0.4) / 0.85 = 17.2 N commanded, stays below the holds'
-    surge limit (0.6 x 35.6 N = 21.4 N), where 0.45 m/s would need 21.5 N, the whole limit;
-  - the floor: the test pool ([Hindrax-Drag] §4: 10 x 6 x 1.8 m) has no published profile; the usual pool codes
-    allow at most 1:3 where the water is deeper than about 1.5 m (5 ft) and 1:10 to 1:15 in the shallow part, with
-    the break between them at about 1.5 m (ASSUMPTION: the profile of a code-built pool with a 1.8 m deep end, not
-    the measured floor of the paper's pool). A floor that changes slope is what a seabed does too: the hold then
-    has transients (the floor estimate of :mod:`..control.law` must follow a new gradient, the vehicle must accelerate
-    vertically) instead of a steady climb that the integrator absorbs. The run-in over the flat deep end keeps the
-    start of the surge (the velocity reference's acceleration saturates surge for about a second) away from the
-    floor's slopes;
-  - inside the box and the authority: start 2 m from the south wall, about 4.8 m run (the ramp reached after about
-    4 s), floor 1.8 -> 1.28 m under the vehicle; heave rate demand 0.13 m/s on the 1:3 ramp (the depth reference
-    allows ``max_depth_rate_m_s`` 0.3), heave force well inside the holds' limit (0.6 x 62.1 N);
+  at 1:3 to 1.5 m over 0.9 m, then at 1:12. Why these numbers (the survey speed, the pool floor, the
+  box and the authority): docs/control.md §6, "Why this altitude manoeuvre";
 * ``altitude_gentle``: the former altitude manoeuvre, kept so that nothing is hidden: a plane floor rising 8 cm
   per metre northwards (``gentle_floor_gradient``) while surging at ``gentle_surge_speed_m_s`` (0.3 m/s) for
   ``gentle_surge_s`` (18 s): heave rate demand 0.024 m/s, forces near the ESC deadband, both model-based holds at the

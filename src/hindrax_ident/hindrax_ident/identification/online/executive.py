@@ -39,10 +39,9 @@ Command rate (``identification.command_rate_hz``, default the tick's rate): the 
 and the wrench :meth:`Executive.start` or :meth:`Executive.step` returns is the law's output of the last command tick,
 every :attr:`Executive.command_ticks` ticks, held in between (sample-and-hold); :attr:`Executive.new_command` says
 whether this tick's wrench is a new one (the identification node publishes only those). Both plants get the same
-held command. Why: on the vehicle each wrench is a message through the allocation, the ESC and the recorder; at 25
-instead of 50 Hz the launch layout took about 9 % less CPU per unit of the virtual pool's (docs/architecture.md
-§10.1), while the samples, the recorded force, the online estimators and the thrust lag stay at the tick's rate.
-Hindrax now ticks at 25 Hz (``identification.estimate_rate_hz``), so its command goes out at every tick.
+held command. Why: on the vehicle each wrench is a message through the allocation, the ESC and the
+recorder (docs/architecture.md §10.1), while the samples, the recorded force, the online estimators
+and the thrust lag stay at the tick's rate.
 
 Stops (:class:`CampaignAbort`, the record says why): a limit (``limits.*``: depth, altitude, roll, pitch; the
 pool box grown by half ``pool.margin_m``), no valid DVL velocity for ``dvl_lock_timeout_s`` during surge or sway,
