@@ -57,6 +57,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.frames import wrap_angle
 
 from ..estimation.kalman import LinearKalman
+from ..vehicle.state import rotation_ned_from_body
 from .model import AxisModel, ControlModel
 
 __all__ = ["ControlSettings", "AxisGains", "design_gains", "ReferenceModel", "PositionAxis", "VelocityAxis",
@@ -340,16 +341,6 @@ class VelocityAxis(_Axis):
         return out
 
 
-def rotation_ned_from_body(rpy_rad) -> np.ndarray:
-    """Body FRD -> NED rotation (3, 3) of roll, pitch, heading (Fossen ZYX, [Fossen2011] eq. 2.18)."""
-    phi, theta, psi = (float(x) for x in rpy_rad)
-    cf, sf, ct, st, cp, sp = (math.cos(phi), math.sin(phi), math.cos(theta), math.sin(theta), math.cos(psi),
-                              math.sin(psi))
-    return np.array([[cp * ct, -sp * cf + cp * st * sf, sp * sf + cp * cf * st],
-                     [sp * ct, cp * cf + sf * st * sp, -cp * sf + st * sp * cf],
-                     [-st, ct * sf, ct * cf]])
-
-
 class FloorEstimator:
     """The floor under the vehicle as a local plane: depth z_f at the body origin's horizontal position (NED z, m)
     and its gradient (g_n, g_e) (depth change per metre north and east); a linear Kalman filter
@@ -574,7 +565,7 @@ class Controller:
         """Fuse the new Ping1D range and DVL beam ranges of ``inp`` as floor points (:class:`FloorEstimator`)."""
         if not math.isfinite(inp.depth_m) or not np.all(np.isfinite(inp.rpy_rad)):
             return
-        rot = rotation_ned_from_body(inp.rpy_rad)
+        rot = rotation_ned_from_body(*inp.rpy_rad)
         v_ne = self._velocity_ne(inp)
         if math.isfinite(inp.altitude_m) and math.isfinite(inp.altitude_stamp_s) \
                 and inp.altitude_stamp_s > self._last_alt_stamp:
@@ -654,7 +645,7 @@ class Controller:
             zf, gn, ge = self.floor.floor_at(inp.t_s, self._velocity_ne(inp))
             if self.floor.stale(inp.t_s):
                 v_ne, a_ne = np.zeros(2), np.zeros(2)
-            rot = rotation_ned_from_body(rpy)
+            rot = rotation_ned_from_body(*rpy)
             foot = rot @ (self.ping_position_frd_m + np.array([0.0, 0.0, float(self.altitude_m)]))
             zfp = zf + gn * foot[0] + ge * foot[1]  # floor depth under the altimeter's footprint
             engaging = not (self.mode == "altitude" and self.altitude_ref.ready and ax.engaged)
