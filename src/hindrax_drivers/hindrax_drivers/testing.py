@@ -190,8 +190,7 @@ class GraphSettled:
     shared-memory transport, and the first message a process sends to a new participant's port runs Fast DDS's port
     health check, which can sleep 333 ms (a third of the 1 s ``healthy_check_timeout_ms``) while the sending
     participant's send lock is held: every publish of that process waits (docs/architecture.md §10.1, "The publish
-    stalls"). Measured in the stack benchmark (7 runs, ``perf`` scheduler trace): every main-thread stall over 0.15 s
-    of the nine node processes came 0-3.0 s after the newest participant was created, none later. So anything
+    stalls"), and such stalls come within seconds of the newest participant's creation. So anything
     that arms the ESC in a freshly started layout waits for this first.
     """
 
