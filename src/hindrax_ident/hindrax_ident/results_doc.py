@@ -14,11 +14,10 @@ the scenario table. The commands take the document's path from ``--results-doc P
 ``docs/results.md``. Without the option nothing is written (tests and ad-hoc runs never touch the file).
 
 A full run can *supersede* partial runs: ``make bench`` writes section ``bench`` and removes the sections
-``bench-<names>`` that earlier ``--only`` runs left (their figures are older than the full table; a reader
-found a stale 72 % total beside the current 39 %). The other way round, a partial run takes its benchmarks' rows
-out of the full table and leaves one line there naming the section that holds the newer ones
-(:func:`supersede_rows`): a reader found the full table's 26.5 % CPU total of an older layout beside the
-current 50.9 %.
+``bench-<names>`` that earlier ``--only`` runs left (their figures are older than the full table).
+The other way round, a partial run takes its benchmarks' rows out of the full table and leaves one
+line there naming the section that holds the newer ones (:func:`supersede_rows`), so no older figure
+stands beside a newer one.
 
 The write is atomic (a temporary file in the same folder, then ``os.replace``): an interrupted command
 leaves the previous document, never half of one.

@@ -224,8 +224,8 @@ class SimulatorNode(Node):
         ``get_clock()`` in this process) at every /clock tick, directly: the in-process alternative to each node
         taking /clock from DDS (``rclpy.clock.ROSClock.set_ros_time_override``, what a TimeSource does on each
         /clock message). All driven clocks change together, before any node runs; with every in-process node
-        driven, ``publish_clock_topic = False`` saves the /clock messages (in the one-process graph they were 43 %
-        of all messages taken by the executor)."""
+        driven, ``publish_clock_topic = False`` saves the /clock messages (a large share of the
+        one-process graph's messages)."""
         self._driven_clocks.append(clock)
 
     def add_step_gate(self, gate: Callable[[float], bool]) -> None:

@@ -42,16 +42,14 @@ def samples_from_dvl(msg) -> list[tuple[str, Any]]:
 
     ``at_body_origin``: the driver publishes the velocity of base_link (it removes the lever arm with the
     ``$DVPDL`` rotation, :mod:`hindrax_drivers.dvl75.report`), unlike the simulator's transducer-velocity
-    samples, so :class:`~hindrax_ident.vehicle.state.SensorState` must not remove it again. (It did: at 1-2 rad/s of
-    pitch the surge velocity was 0.18 m x q off, 0.27 m/s rms, and the surge hold pushed the vehicle to 0.28 m/s
-    during the pitch runs; measured through the ROS graph in the virtual pool.)
+    samples, so :class:`~hindrax_ident.vehicle.state.SensorState` must not remove it again.
 
     Times: the header stamp is the velocity's time of validity, the middle of the ``$DVPDL`` interval; the
     attitude comes from the driver's latest ``$DVEXT``, which is the one of the same ping when the DVL sends it
     first (as the emulator does; the real order is undocumented, docs/devices.md §1.3: check a pool capture), i.e.
     measured at the end of that interval: stamp + ``delta_time_s`` / 2 (the stamp when the interval is unknown). A
-    50 ms error there shows up in roll and pitch as a restoring moment out of phase, i.e. as damping
-    (measured in the virtual pool: roll quadratic damping +14 %, linear damping of the wrong sign).
+    50 ms error there shows up in roll and pitch as a restoring moment out of phase, i.e. as
+    damping.
     """
     t = _stamp_s(msg.header)
     half = 0.5 * float(msg.delta_time_s)

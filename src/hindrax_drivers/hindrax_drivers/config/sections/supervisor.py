@@ -51,8 +51,7 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
       half the pool's smaller side; ``min_altitude_m`` at least the Ping's blind zone; ``max_depth_m`` at most the
       pool's depth and the depth sensor's plausibility gate (a deeper limit never trips).
     * ``rate_window_s``, ``max_invalid_dvl_s``, ``max_sample_age_s`` and ``max_identical_s`` at most
-      ``reaction_time_s``: a dead sensor is found at the latest one rate window after it stops (60 s found a dead
-      depth sensor after 48 s).
+      ``reaction_time_s``: a dead sensor is found at the latest one rate window after it stops.
     * A rate check is off (``min_rate.<sensor>_hz: 0``) only with a reason (``rate_check_disabled.<sensor>``).
     """
     issues: list[ConfigIssue] = []

@@ -531,9 +531,9 @@ def rls_published_std(dof: str, names: Sequence[str], theta, converged_std, cfg:
 
     ``converged_std`` (p,): the RLS std where the estimator has converged, NaN elsewhere. Only the damping
     parameters of :data:`RLS_STD_DOFS` keep a number, widened by the thrust-curve uncertainty
-    (:func:`thrust_covariance`): in the scenario suite (no disturbance, seed 1) the RLS inertia read 2-5 % low
-    (z = -4 to -7) and the bias was off by up to 1.6 N (z = -32), the lag of the causal filter behind the
-    acceleration, so their std would not cover the truth; roll and pitch are not in the suite.
+    (:func:`thrust_covariance`): the RLS inertia and bias carry the lag of the causal filter behind
+    the acceleration, so their std would not cover the truth; roll and pitch are not in the scenario
+    suite.
     """
     std = np.asarray(converged_std, dtype=float).copy()
     theta = np.asarray(theta, dtype=float)
