@@ -35,7 +35,7 @@ test: setup
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 bench: setup
-	$(PY) -m hindrax_ident.bench --results-doc docs/results.md $(BENCH_ARGS)
+	$(PY) -m hindrax_ident.tools.bench --results-doc docs/results.md $(BENCH_ARGS)
 
 # The colcon workspace as the vehicle builds it: ros_ws/{build,install,log}, against the venv's ROS wheels (the
 # Pi builds the same packages against /opt/ros/jazzy; colcon comes with `make setup`). Then: source

@@ -16,8 +16,11 @@ Rules checked:
 - production code does not import the test helpers (:data:`TESTING`): only the benchmarks
   (:data:`ENTRY_POINT_PACKAGES`) may; what production needs of them lives in ``hindrax_drivers.conditions``;
 - layers (:data:`LAYERS`), one strict order: drivers < estimation < vehicle < control < identification < simulator
-  < the graph builders < commands, benchmarks, the command line and the runs on the composed graph; no module imports
-  a module of a higher layer, without exceptions;
+  < the graph builders < the runs on the composed graph and the tools room (:data:`TOOLS`: the
+  command line, its
+  commands and the benchmarks); no module imports a module of a higher layer, without exceptions,
+  and nothing outside
+  the tools room imports it;
 - the identification package keeps its rooms (:data:`ROOMS`): fit < bag input < assessment < online (the fit core
   defines the per-DOF record the bag reader returns; the assessment runs the pipeline and writes its outputs); the
   online campaign does not import the identification.yaml writer; only the bag input room reads bags
@@ -44,11 +47,11 @@ PACKAGES = {"hindrax_drivers": ROOT / "src" / "hindrax_drivers" / "hindrax_drive
 ENTRY_POINTS = frozenset({
     "hindrax_ident.bringup",
     "hindrax_drivers.recording.replay_devices",
-    "hindrax_ident.commands.bag.play",
-    "hindrax_ident.commands.bag.record",
+    "hindrax_ident.tools.commands.bag.play",
+    "hindrax_ident.tools.commands.bag.record",
 })
 #: Packages whose every module is an entry point: the ``make bench`` benchmarks start the nodes they measure.
-ENTRY_POINT_PACKAGES = ("hindrax_ident.benchmarks",)
+ENTRY_POINT_PACKAGES = ("hindrax_ident.tools.benchmarks",)
 
 
 def is_entry_point(name: str) -> bool:
@@ -189,7 +192,8 @@ def test_graph_covers_both_packages(graph):
     """Sanity: the graph holds the known modules and edges (a broken parser would pass the rules vacuously)."""
     assert "hindrax_ident.identification.bag_input.from_bag" in graph
     assert "hindrax_drivers.recording.writer" in graph
-    assert "hindrax_ident.bringup" in graph["hindrax_ident.commands.bringup"]  # function-local import
+    # function-local import
+    assert "hindrax_ident.bringup" in graph["hindrax_ident.tools.commands.bringup"]
     assert "hindrax_drivers.recording.recover" in graph["hindrax_drivers.recording.reader"]  # from . import x
     assert len(graph) > 80
 
@@ -267,9 +271,32 @@ def test_the_layer_checker_sees_an_upward_import():
              "hindrax_ident.sim.model": {"hindrax_ident.vehicle.x", "hindrax_drivers.frames"},
              "hindrax_drivers.frames": set()}
     assert upward_imports(graph) == {("hindrax_ident.vehicle.x", "hindrax_ident.sim.model")}
-    assert layer_of("hindrax_ident.commands.run") == TOP_LAYER and layer_of("hindrax_drivers.frames") == 0
+    assert layer_of("hindrax_ident.tools.commands.run") == TOP_LAYER
+    assert layer_of("hindrax_drivers.frames") == 0
     assert [layer_of(f"hindrax_ident.{m}") for m in ("vehicle.state", "control.node", "identification.online.node",
                                                      "sim.campaign", "bringup", "graph_campaign")] == [2, 3, 4, 5, 6, 7]
+
+
+#: The tools room: what engineers run beside the vehicle (``hindrax``, ``make bench``), never what
+#it runs.
+TOOLS = "hindrax_ident.tools"
+
+
+def imports_of_tools(graph: dict[str, set[str]]) -> list[str]:
+    """``"importer -> tools module"`` for every import of the tools room from outside it."""
+    def inside(m: str) -> bool:
+        return m == TOOLS or m.startswith(TOOLS + ".")
+
+    return sorted(f"{src} -> {dst}" for src, deps in graph.items() for dst in deps
+                  if inside(dst) and not inside(src))
+
+
+def test_nothing_outside_the_tools_room_imports_it(graph):
+    assert f"{TOOLS}.commands.run" in graph and f"{TOOLS}.benchmarks.stack" in graph  # not vacuous
+    seen = imports_of_tools({"hindrax_ident.sim.x": {f"{TOOLS}.cli"},
+                             f"{TOOLS}.cli": {f"{TOOLS}.bench"}})
+    assert seen == [f"hindrax_ident.sim.x -> {TOOLS}.cli"]
+    assert imports_of_tools(graph) == []
 
 
 def test_no_import_from_a_lower_layer_to_a_higher_one(graph):
@@ -381,21 +408,24 @@ def pipeline_violations(graph: dict[str, set[str]]) -> list[str]:
 
 def test_the_pipeline_checker_sees_a_reader_or_an_adapter_used_elsewhere():
     graph = {f"{IDENT}.fit.fit_any": {BAG_READER},
-             "hindrax_ident.commands.ident_fit": {f"{IDENT}.bag_input.any_topics", f"{IDENT}.fit.fit_any",
-                                                  f"{IDENT}.assessment.pipeline", f"{IDENT}.fit.fit_core"},
+             "hindrax_ident.tools.commands.ident_fit": {
+                 f"{IDENT}.bag_input.any_topics", f"{IDENT}.fit.fit_any",
+                 f"{IDENT}.assessment.pipeline", f"{IDENT}.fit.fit_core"},
              f"{IDENT}.bag_input.from_bag": {BAG_READER}}
     assert pipeline_violations(graph) == [
-        f"hindrax_ident.commands.ident_fit -> {IDENT}.bag_input.any_topics (outside identification: use the "
+        f"{IDENT}.fit.fit_any -> {BAG_READER} (only the bag input room reads bags)",
+        f"hindrax_ident.tools.commands.ident_fit -> {IDENT}.bag_input.any_topics "
+        "(outside identification: use the "
         f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)",
-        f"hindrax_ident.commands.ident_fit -> {IDENT}.fit.fit_any (outside identification: use the "
-        f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)",
-        f"{IDENT}.fit.fit_any -> {BAG_READER} (only the bag input room reads bags)"]
+        f"hindrax_ident.tools.commands.ident_fit -> {IDENT}.fit.fit_any "
+        "(outside identification: use the "
+        f"pipeline, {IDENT}.assessment.pipeline, or the bag reader, {IDENT}.bag_input.reader)"]
 
 
 def test_one_pipeline_reads_bags_and_writes_identification(graph):
     """Only the bag input room reads bags; commands, the simulator and the graph runs go through the pipeline."""
     assert BAG_READER in graph[f"{IDENT}.bag_input.any_topics"]  # the rule is not vacuous
-    assert f"{IDENT}.assessment.pipeline" in graph["hindrax_ident.commands.ident_fit"]
+    assert f"{IDENT}.assessment.pipeline" in graph["hindrax_ident.tools.commands.ident_fit"]
     assert all(m in graph for m in PIPELINE_FACES | PIPELINE_ONLY)
     assert pipeline_violations(graph) == []
 

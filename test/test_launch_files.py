@@ -325,7 +325,7 @@ def test_every_node_of_the_vehicle_respawns_and_the_recorder_gets_output_dir_as_
 def test_deployment_doc_names_installed_launch_files_declared_arguments_and_real_commands(packages):
     """docs/deployment.md, the "Running on the Pi" steps: each `ros2 launch PKG FILE [name:=value]` names an installed
     launch file and arguments it declares; each `hindrax <command>` is a registered command."""
-    from hindrax_ident.cli import COMMANDS
+    from hindrax_ident.tools.cli import COMMANDS
 
     text = (REPO / "docs" / "deployment.md").read_text()
     launches = re.findall(r"ros2 launch (\w+) ([\w.]+\.launch\.xml)((?: \w+:=[^\s`]*)*)", text)

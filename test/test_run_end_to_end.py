@@ -37,7 +37,8 @@ EXIT_NOISE = re.compile(r"\w+Warning: |never awaited|Exception ignored|Traceback
 def test_hindrax_run_surge_and_heave_through_the_graph(tmp_path):
     cfg = load_config(default_config_path())
     out = tmp_path / "run"
-    proc = subprocess.run([sys.executable, "-m", "hindrax_ident.cli", "run", "--dofs", "surge,heave", "--levels", "3",
+    proc = subprocess.run([sys.executable, "-m", "hindrax_ident.tools.cli", "run", "--dofs",
+                           "surge,heave", "--levels", "3",
                            "--seed", "1",
                            "--out", str(out)], env=own_domain_env(), capture_output=True, text=True,
                           timeout=1500)

@@ -47,7 +47,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "hindrax = hindrax_ident.cli:main",
+            "hindrax = hindrax_ident.tools.cli:main",
             "identification_node = hindrax_ident.identification.online.node:main",
             "simulator_node = hindrax_ident.sim.node:main",
             "controller_node = hindrax_ident.control.node:main",

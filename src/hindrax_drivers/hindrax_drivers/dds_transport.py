@@ -17,7 +17,8 @@ A process that asks for ``SUBNET`` (the topside, the gateway's topside side) kee
 with the topside profile's announcement period (``fastdds_topside.xml``: 0.5 s like the vehicle's).
 
 Applied by: ``vehicle.launch.xml`` (``<set_env>`` for every vehicle process), the ``hindrax`` command
-(:mod:`hindrax_ident.cli`), the virtual pool's bring-up, the tests (conftest, :func:`hindrax_drivers.testing.
+(:mod:`hindrax_ident.tools.cli`), the virtual pool's bring-up, the tests (conftest,
+:func:`hindrax_drivers.testing.
 child_env`) and ``make bench``. This module imports nothing but the standard library, so ``hindrax --help``
 stays fast.
 """

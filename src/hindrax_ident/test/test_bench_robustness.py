@@ -1,4 +1,5 @@
-"""The parser fuzzing of the robustness benchmark (hindrax_ident.benchmarks.robustness): its checks run.
+"""The parser fuzzing of the robustness benchmark (hindrax_ident.tools.benchmarks.robustness): its
+checks run.
 
 The benchmark's DVL check read the speed gate as ``section["max_speed_m_s"]`` after the configuration became typed
 sections; every valid ``$DVPDL`` then counted as a parser crash (91 of 100,000 inputs in ``make bench``), in the
@@ -6,7 +7,7 @@ harness and not in the driver. These tests fail on that kind of harness error be
 """
 from hindrax_drivers.dvl75.protocol import DvlPositionDelta, format_dvpdl
 
-from hindrax_ident.benchmarks import robustness
+from hindrax_ident.tools.benchmarks import robustness
 
 
 def test_the_dvl_check_accepts_a_valid_position_delta_within_the_gates():

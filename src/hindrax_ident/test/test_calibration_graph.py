@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import ConfigError, default_config_path, load_config, ros_parameters_from_yaml
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.identification.online import executive
 from hindrax_ident.graph_campaign import VirtualOperator, parse_prompt
 

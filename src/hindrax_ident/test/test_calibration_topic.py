@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.identification.bag_input import calibration_topic
 from hindrax_ident.identification.fit.dof_model import parameter_names
 

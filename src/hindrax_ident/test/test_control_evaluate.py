@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.sim import control_evaluate as ev
 from hindrax_ident.control.model import ControlModel, model_from_config
 from hindrax_ident.sim.truth import load_truth, truth_dir

@@ -149,8 +149,8 @@ def test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping():
 def test_run_options_reach_the_campaign_and_the_graph_override():
     import argparse
 
-    from hindrax_ident.commands import run as run_cmd
-    from hindrax_ident.commands.common import CommandError
+    from hindrax_ident.tools.commands import run as run_cmd
+    from hindrax_ident.tools.commands.common import CommandError
 
     parser = argparse.ArgumentParser(prog="hindrax run")
     run_cmd.add_arguments(parser)
@@ -165,7 +165,7 @@ def test_run_options_reach_the_campaign_and_the_graph_override():
 
 
 def test_excitation_table_scales_errors_to_100_s_of_pool_time():
-    from hindrax_ident.commands.scenarios import format_excitation_table
+    from hindrax_ident.tools.commands.scenarios import format_excitation_table
 
     def row(param, err, std_fit, truth, covered):
         return {"dof": "surge", "parameter": param, "rel_error": err, "std": 99.0, "std_fit": std_fit,

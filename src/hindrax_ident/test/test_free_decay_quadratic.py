@@ -15,7 +15,7 @@ import json
 import numpy as np
 import pytest
 
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.estimation.free_decay import fit_quadratic_free_decay
 from hindrax_ident.estimation.least_squares import EstimationError
 

@@ -212,7 +212,8 @@ def pool(tmp_path_factory):
 
 
 def hindrax(pool, *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "hindrax_ident.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "hindrax_ident.tools.cli", *args],
+                          capture_output=True, text=True,
                           env=child_env(ROS_DOMAIN_ID=str(pool["topside"]), HINDRAX_KEYS_DIR=str(pool["keys"])),
                           timeout=120)
 
@@ -396,7 +397,8 @@ def test_an_arm_an_estop_overtook_is_refused_and_the_vehicle_disarmed(pool, tops
     alpha.arm_entered.clear()
     alpha.arm_gate.clear()  # the ESC takes the arm and holds its answer
     env = child_env(ROS_DOMAIN_ID=str(pool["topside"]), HINDRAX_KEYS_DIR=str(pool["keys"]))
-    with subprocess.Popen([sys.executable, "-m", "hindrax_ident.cli", "arm", "--vehicle", "alpha", "--timeout", "30"],
+    with subprocess.Popen([sys.executable, "-m", "hindrax_ident.tools.cli", "arm", "--vehicle",
+                           "alpha", "--timeout", "30"],
                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env) as arm:
         try:
             wait_until(alpha.arm_entered.is_set, 120, message="the arm reached the ESC")

@@ -24,7 +24,7 @@ import yaml
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.identification.fit.dof_model import truth_parameters
 from hindrax_ident.vehicle.signals import thrust_of_written_widths
 
@@ -230,7 +230,7 @@ def test_a_parameter_at_its_bound_says_so_instead_of_an_interval(tmp_path, capsy
     it >= 0) puts linear_damping on its bound 0 (the empirical priors off, ``identification.prior_std_rel: 0``: they
     would pull it just off the bound). identification.yaml marks it (``at_bound``), the printed row gives that
     reason, and the report's interval cell says there is none."""
-    from hindrax_ident.commands.common import update_vehicle_file
+    from hindrax_ident.tools.commands.common import update_vehicle_file
 
     cfg = load_config(default_config_path())
     bag = tmp_path / "campaign"

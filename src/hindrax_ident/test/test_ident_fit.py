@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.identification.fit.dof_model import truth_parameters
 from hindrax_ident.identification.assessment.pipeline import fit_bags
 from hindrax_ident.identification.bag_input.any_topics import FitOptions, TopicChoice, preprocess_bag

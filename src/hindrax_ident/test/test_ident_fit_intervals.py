@@ -20,7 +20,7 @@ import yaml
 from scipy import signal, stats
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.identification.fit import fit_core
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 from hindrax_ident.identification.assessment.results import IdentificationFileError, to_config_overrides

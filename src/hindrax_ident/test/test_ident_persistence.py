@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_ident.commands.ident_fit import format_table
+from hindrax_ident.tools.commands.ident_fit import format_table
 
 from hindrax_ident.identification.fit import fit_core
 from hindrax_ident.identification.assessment.results import assessment, build_document

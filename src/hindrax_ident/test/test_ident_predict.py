@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.sim.piloted_bag import PilotSettings, write_piloted_bag
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.estimation.free_decay import restoring_from_inclining
 from hindrax_ident.estimation.least_squares import EstimationError
 

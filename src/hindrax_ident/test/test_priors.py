@@ -33,7 +33,7 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import DOFS, default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.estimation.least_squares import EstimationError
 from hindrax_ident.estimation.priors import (Geometry, PriorInputs, added_mass_priors, empirical_priors,
                                              priors_from_config, quadratic_damping_priors)

@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.identification.fit.calibration import apply_thrust_calibration, calibration_section, thrust_scales
 from hindrax_ident.identification.online.executive import Executive
 from hindrax_ident.sim.truth import truth_dir

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.estimation.thruster_fit import evaluate_cubic, fit_thruster_curve, point_reflection
 from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                         truth_parameters)

@@ -29,7 +29,7 @@ import pytest
 from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident import cli
+from hindrax_ident.tools import cli
 from hindrax_ident.sim.simulator import Simulator
 from hindrax_ident.sim.truth import truth_dir
 

@@ -145,7 +145,7 @@ def test_spread_check():
 
 
 def test_scenarios_command_writes_table_and_json(tmp_path):
-    from hindrax_ident.cli import main
+    from hindrax_ident.tools.cli import main
     out = tmp_path / "suite"
     assert main(["ident", "scenarios", "--scenarios", "thrust_0.90", "--seeds", "1", "--dofs", "surge",
                  "--levels", "2", "--out", str(out)]) == 0

@@ -1,5 +1,5 @@
 """A piloted or closed-loop virtual-pool run written as a bag of standard messages only (``hindrax ident fit``,
-its tests and the realistic-data benchmark :mod:`hindrax_ident.benchmarks.ident_fit`).
+its tests and the realistic-data benchmark :mod:`hindrax_ident.tools.benchmarks.ident_fit`).
 
 Who flies (``PilotSettings.pilot``):
 

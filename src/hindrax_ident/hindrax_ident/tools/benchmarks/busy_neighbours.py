@@ -1,0 +1,127 @@
+"""Safety benchmark rows ``busy_neighbours_*``: the armed vehicle beside CPU-bound processes of another session.
+
+The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process,
+scheduled as ``vehicle.launch.xml`` starts them:
+:func:`hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`; the
+layout of :func:`hindrax_ident.tools.benchmarks.safety.running_layout`) are armed and commanded at
+1700 us. Then
+:data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a session of their own (as another service or
+a terminal on the Pi), run for :data:`DURATION_S` seconds. This process stands for the hardware (it serves the
+emulated PCA9685 and its /OE line) and watches the heartbeats; hardware is never starved by a CPU load, so for the
+run it takes ``SCHED_FIFO`` at :data:`HARDWARE_STAND_IN_PRIORITY`, above the safety processes.
+
+* ``busy_neighbours_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
+* ``busy_neighbours_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms), and
+  ``busy_neighbours_heartbeat_sent_gap_max_ms`` between their send stamps (``Heartbeat.steady_ns``: the sender
+  late, apart from the delivery);
+* ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's nice -5 only),
+  no target: what the priority buys here. In this three-process layout little: the starvation that nice -5 let
+  through was seen with the whole launch layout, the live pool and the suite's other worker on the two cores
+  (docs/deployment.md §1).
+
+Without the right to set ``SCHED_FIFO`` (not root, no ``RLIMIT_RTPRIO``) the rows are not measured and say so.
+
+Run alone: ``python -m hindrax_ident.tools.benchmarks.busy_neighbours [--quick]`` (prints the rows
+as JSON).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from hindrax_drivers.testing import python_executable
+
+from .participant_churn import _VehicleLayout, _Watch, hardware_priority
+from .safety import running_layout
+
+#: CPU-bound neighbours, and how long they run while the vehicle is armed (QUICK_DURATION_S with --quick), s
+NEIGHBOURS, DURATION_S, QUICK_DURATION_S = 2, 60.0, 20.0
+GAP_TARGET_MS = 100.0
+
+
+class _NiceOnlyLayout(_VehicleLayout):
+    """The vehicle layout with the real-time priority withheld: the launch file's nice -5 only."""
+
+    realtime = False
+
+
+@contextmanager
+def cpu_bound_neighbours(n: int = NEIGHBOURS) -> Iterator[list[subprocess.Popen]]:
+    """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of its own (another
+    service or a terminal on the Pi), for the block; killed on the way out. Raises RuntimeError if one inherited
+    this process's real-time priority (it would starve the vehicle's processes, not stand beside them)."""
+    neighbours: list[subprocess.Popen] = []
+    try:
+        for _ in range(n):
+            neighbours.append(subprocess.Popen([python_executable(), "-c", "while True: pass"], start_new_session=True,
+                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:
+                raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
+        yield neighbours
+    finally:
+        for p in neighbours:
+            p.kill()
+            p.wait(10)
+
+
+def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
+    """The rows of one run (module docstring); ``realtime`` False: the nice-only comparison run."""
+    duration_s = QUICK_DURATION_S if quick else DURATION_S
+    prefix = "busy_neighbours_" if realtime else "busy_neighbours_nice_only_"
+    with running_layout("hindrax-bench-busy-", layout=_VehicleLayout if realtime else _NiceOnlyLayout) as lay:
+        watch = _Watch(lay.probe)
+        lay.armed_at_1700()
+        # real-time from here on: every thread of this process, the emulation's serving threads included (one
+        # per node process, started when it connected: a thread started under SCHED_RESET_ON_FORK would not be)
+        with hardware_priority() as refused:
+            if refused:
+                why = f"not measured: {refused}"
+                return [{"name": prefix + name, "value": None, "unit": unit, "note": why} for name, unit in
+                        (("disarms", "disarms"), ("heartbeat_gap_max_ms", "ms"),
+                         ("heartbeat_sent_gap_max_ms", "ms"), ("tick_gap_max_ms", "ms"))]
+            watch.armed, watch.disarms, watch.active = True, 0, True
+            with cpu_bound_neighbours(NEIGHBOURS):
+                time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's thread)
+            watch.active = False
+            load = os.getloadavg()[0]
+            gap_s, who = watch.largest_gap_s()
+            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
+            beats = sum(len(v) for v in watch.arrivals.values())
+    what = (f"armed at 1700 us for {duration_s:g} s beside {NEIGHBOURS} CPU-bound processes of another session "
+            f"(1-minute load {load:.1f} at the end); safety processes "
+            + ("real-time as vehicle.launch.xml starts them" if realtime else "at nice -5 only"))
+    rows = [
+        {"name": prefix + "disarms", "value": watch.disarms, "unit": "disarms", "target": 0, "note": what},
+        {"name": prefix + "heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms", "target": GAP_TARGET_MS,
+         "n": beats, "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+        {"name": prefix + "heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
+         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
+        watch.tick_gap_row(prefix + "tick_gap_max_ms"),
+    ]
+    return rows if realtime else [{k: v for k, v in r.items() if k != "target"} for r in rows]
+
+
+def run(quick: bool = False) -> list[dict]:
+    """The ``safety`` section's rows (``make bench``; :mod:`hindrax_ident.tools.bench`): the
+    vehicle's scheduling, then
+    the nice-only comparison."""
+    return busy_rows(quick) + busy_rows(quick, realtime=False)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the rows alone and print them as JSON."""
+    parser = argparse.ArgumentParser(prog="busy_neighbours")
+    parser.add_argument("--quick", action="store_true", help=f"{QUICK_DURATION_S:g} s instead of {DURATION_S:g} s")
+    print(json.dumps(run(parser.parse_args(argv).quick), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,240 @@
+"""Safety benchmark rows ``participant_churn_*``: ROS 2 processes started while the vehicle is armed and commanded.
+
+The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process
+on the shipped transport, :mod:`hindrax_drivers.dds_transport`, scheduled as the vehicle launch file starts them;
+the layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes`) are armed and commanded
+at 1700 us. Then a new
+ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s subscriber to
+``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each
+exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a safety
+process on such a start; the rows say whether it does:
+
+* ``participant_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
+* ``participant_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive messages of any of the three
+  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
+  ``participant_churn_heartbeat_sent_gap_max_ms`` between their send stamps (the sender late, not the delivery).
+
+Run alone: ``python -m hindrax_ident.tools.benchmarks.participant_churn [--quick]
+[--default-transports]`` (prints the
+rows as JSON); ``--default-transports`` runs every process with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and no
+profile (rmw_fastrtps's shared memory + UDP), for comparison.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from typing import Iterator
+
+from diagnostic_msgs.msg import DiagnosticArray
+from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
+from hindrax_drivers.liveness import HEARTBEAT_NAMES
+from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
+from hindrax_drivers.testing import python_executable, wait_until
+
+from hindrax_msgs.msg import Heartbeat, ThrusterPwm
+
+from .safety import _Layout, running_layout
+
+#: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
+PERIOD_S, DURATION_S, QUICK_DURATION_S = 2.0, 60.0, 20.0
+GAP_TARGET_MS = 100.0
+
+#: a subscriber process, as ``ros2 topic echo`` would be: ``-c _SUBSCRIBER NAME SECONDS MODULE:TYPE=TOPIC...``
+_SUBSCRIBER = r"""
+import importlib, sys, time
+import rclpy
+rclpy.init()
+node = rclpy.create_node("churn_subscriber_" + sys.argv[1])
+for spec in sys.argv[3:]:
+    kind, topic = spec.split("=", 1)
+    module, name = kind.split(":")
+    node.create_subscription(getattr(importlib.import_module(module), name), topic, lambda m: None, 10)
+end = time.monotonic() + float(sys.argv[2])
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.05)
+node.destroy_node()
+rclpy.shutdown()
+"""
+#: what a subscriber on the internal graph listens to: /diagnostics and the three safety heartbeats
+INTERNAL_TOPICS = ("diagnostic_msgs.msg:DiagnosticArray=/diagnostics",
+                   *(f"hindrax_msgs.msg:Heartbeat={topic}" for topic in HEARTBEAT_NAMES.values()))
+
+
+def subscriber_argv(name: str, duration_s: float, topics: tuple[str, ...] = INTERNAL_TOPICS) -> list[str]:
+    """The command of a subscriber process named ``churn_subscriber_<name>`` that listens to ``topics``
+    (``module:Type=topic``) for ``duration_s`` s and exits."""
+    return [python_executable(), "-c", _SUBSCRIBER, name, f"{duration_s:g}", *topics]
+
+
+@contextmanager
+def hardware_priority() -> Iterator[str]:
+    """Every thread of this process (the emulated PCA9685 and /OE line, the probe) under ``SCHED_FIFO``
+    :data:`HARDWARE_STAND_IN_PRIORITY` for the block, as the vehicle's hardware is never starved by a CPU load (the
+    live pool takes the same, ``sim/live_pool.py``); with ``SCHED_RESET_ON_FORK``, so that the processes it starts do
+    not inherit it. Yields '' or, when refused (not root, no ``RLIMIT_RTPRIO``), why."""
+    try:
+        set_every_thread(os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, HARDWARE_STAND_IN_PRIORITY)
+    except OSError as exc:
+        yield f"SCHED_FIFO not permitted here ({exc.strerror})"
+        return
+    try:
+        yield ""
+    finally:
+        set_every_thread(os.SCHED_OTHER, 0)
+
+
+class _VehicleLayout(_Layout):
+    """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
+    is refused, as ``vehicle.launch.xml`` starts them
+    (:func:`~hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`),
+    each in a session of its own as a launched process is."""
+
+    new_session = True
+
+
+class _Watch:
+    """Arrival times and send stamps (the sender's steady clock, ``Heartbeat.steady_ns``) of the three heartbeats and
+    the ESC's armed transitions, from subscriptions on ``node``."""
+
+    def __init__(self, node) -> None:
+        self.arrivals: dict[str, list[float]] = {name: [] for name in HEARTBEAT_NAMES}
+        self.sent: dict[str, list[float]] = {name: [] for name in HEARTBEAT_NAMES}
+        self.armed: bool | None = None
+        self.disarms = 0
+        self.active = False
+        for name, topic in HEARTBEAT_NAMES.items():
+            node.create_subscription(Heartbeat, topic, lambda m, n=name: self._beat(n, m), 50)
+        node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
+        #: status name -> the worst tick gap it reported on /diagnostics, (gap, thread CPU, process CPU) in ms
+        self.tick_gaps: dict[str, tuple[float, float, float]] = {}
+        self._active_since: float | None = None
+        node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
+
+    def _diagnostics(self, msg) -> None:
+        now = time.monotonic()
+        if not self.active:
+            self._active_since = None
+            return
+        if self._active_since is None:
+            self._active_since = now
+        if now - self._active_since < 1.1:  # a 1 Hz report may cover time before the window (the arming)
+            return
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if "tick_gap_max_ms" in values:
+                gap = tuple(float(values[k]) for k in ("tick_gap_max_ms", "tick_gap_thread_cpu_ms",
+                                                       "tick_gap_process_cpu_ms"))
+                if gap[0] > self.tick_gaps.get(status.name, (-1.0,))[0]:
+                    self.tick_gaps[status.name] = gap
+
+    def tick_gap_row(self, name: str) -> dict:
+        """Row ``name``: the longest tick gap a safety process reported (TickGaps), with its CPU split."""
+        if not self.tick_gaps:
+            return {"name": name, "value": None, "unit": "ms", "note": "no tick gap reported on /diagnostics"}
+        worst = max(v[0] for v in self.tick_gaps.values())
+        each = "; ".join(f"{k} {g:.0f} ms ({t:.1f} / {p:.1f})" for k, (g, t, p) in sorted(self.tick_gaps.items()))
+        return {"name": name, "value": worst, "unit": "ms",
+                "note": f"longest gap between two steady ticks of a safety process (reports covering the window "
+                        f"only), each with the CPU time in it (its executor thread / the whole process, ms): {each}"}
+
+    def _beat(self, name: str, msg) -> None:
+        if self.active:
+            self.arrivals[name].append(time.monotonic())
+            self.sent[name].append(msg.steady_ns * 1e-9)
+
+    def _state(self, msg) -> None:
+        if self.active and self.armed and not msg.armed:
+            self.disarms += 1
+        self.armed = bool(msg.armed)
+
+    def gaps_s(self, sent: bool = False) -> dict[str, float]:
+        """Heartbeat name -> the largest gap between two of its consecutive beats (inf with fewer than two), s;
+        ``sent``: between their send stamps (the sender late) instead of their arrivals here."""
+        return {name: max((b - a for a, b in zip(times, times[1:])), default=float("inf"))
+                for name, times in (self.sent if sent else self.arrivals).items()}
+
+    def largest_gap_s(self, sent: bool = False) -> tuple[float, str]:
+        """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent.
+        ``sent``: between their send stamps (the sender late) instead of their arrivals here."""
+        who, worst = max(self.gaps_s(sent).items(), key=lambda item: item[1])
+        return worst, who
+
+
+def churn_rows(quick: bool = False, default_transports: bool = False) -> list[dict]:
+    """The ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
+    duration_s = QUICK_DURATION_S if quick else DURATION_S
+    with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
+        if default_transports:
+            lay.env = {k: v for k, v in lay.env.items() if k != PROFILE_ENV}
+            lay.env[RANGE_ENV] = "LOCALHOST"
+        watch = _Watch(lay.probe)
+        started: list[subprocess.Popen] = []
+        try:
+            lay.armed_at_1700()
+            with hardware_priority() as refused:
+                watch.armed, watch.disarms, watch.active = True, 0, True
+                t0 = time.monotonic()
+                k = 0
+                while time.monotonic() - t0 < duration_s:
+                    if k % 2 == 0:
+                        argv = subscriber_argv(str(k), 3.0)
+                    else:
+                        argv = [python_executable(), "-m", "hindrax_ident.tools.cli", "health",
+                                "--quiet", "--timeout",
+                                "3"]
+                    started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
+                                                    stderr=subprocess.DEVNULL))
+                    k += 1
+                    next_start = t0 + k * PERIOD_S
+                    wait_until(lambda: time.monotonic() >= next_start, PERIOD_S + 5.0, lambda: time.sleep(0.02),
+                               "next participant's start")
+                watch.active = False
+            for p in started:
+                p.wait(60)
+            gap_s, who = watch.largest_gap_s()
+            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
+            beats = sum(len(v) for v in watch.arrivals.values())
+        finally:
+            for p in started:
+                if p.poll() is None:
+                    p.kill()
+    what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
+            f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
+            + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport")
+            + f"; emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
+    return [
+        {"name": "participant_churn_disarms", "value": watch.disarms, "unit": "disarms", "target": 0,
+         "n": k, "note": what},
+        {"name": "participant_churn_heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms",
+         "target": GAP_TARGET_MS, "n": beats,
+         "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
+        {"name": "participant_churn_heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
+         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
+        watch.tick_gap_row("participant_churn_tick_gap_max_ms"),
+    ]
+
+
+def run(quick: bool = False) -> list[dict]:
+    """The ``safety`` section's churn rows on the shipped transport (``make bench``;
+    :mod:`hindrax_ident.tools.bench`)."""
+    return churn_rows(quick)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the rows alone and print them as JSON."""
+    parser = argparse.ArgumentParser(prog="participant_churn")
+    parser.add_argument("--quick", action="store_true", help=f"{QUICK_DURATION_S:g} s instead of {DURATION_S:g} s")
+    parser.add_argument("--default-transports", action="store_true",
+                        help="LOCALHOST with rmw_fastrtps's shared memory + UDP instead of the vehicle's profile")
+    args = parser.parse_args(argv)
+    print(json.dumps(churn_rows(args.quick, args.default_transports), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,121 @@
+"""Safety benchmark rows ``pool_day_churn_*``: the pool day's churn check beside two CPU-bound neighbours.
+
+The vehicle's three safety processes, scheduled as ``vehicle.launch.xml`` starts them, with the gateway beside
+them (the layout of :mod:`hindrax_ident.tools.benchmarks.participant_churn` and
+:func:`hindrax_ident.tools.benchmarks.sealed_authority.gateway_running`), are armed and commanded at
+1700 us, 50 Hz.
+:data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'`` at normal priority run throughout
+(:func:`hindrax_ident.tools.benchmarks.busy_neighbours.cpu_bound_neighbours`). Each of
+:data:`TRIALS` trials starts
+three processes together and waits for them to exit, as an operator and a curious user do on the pool day:
+
+* a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three heartbeats on the Pi's internal domain with
+  Fast DDS's default transports (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, no profile: shared memory + UDP);
+* a :data:`SUBSCRIBER_S` s subscriber to the gateway's topside topics on the topside domain;
+* ``hindrax health --quiet`` on the internal domain (the Pi's shell).
+
+Rows:
+
+* ``pool_day_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
+* ``pool_day_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three safety
+  heartbeats as this process received them (target :data:`GAP_TARGET_MS`; the heartbeat timeouts are 200 ms), each
+  heartbeat's largest gap in the note; ``..._sent_gap_max_ms`` between their send stamps (the sender late);
+* ``pool_day_churn_tick_gap_max_ms``: the longest tick gap a safety process reported on ``/diagnostics``.
+
+Run alone: ``python -m hindrax_ident.tools.benchmarks.pool_day_churn [--quick]`` (prints the rows as
+JSON).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+from domain_coordinator import domain_id
+from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
+
+from .busy_neighbours import cpu_bound_neighbours
+from .participant_churn import _VehicleLayout, _Watch, hardware_priority, subscriber_argv
+from .safety import running_layout
+from .sealed_authority import gateway_running
+
+#: trials (QUICK_TRIALS with --quick), CPU-bound neighbours, each subscriber's life (s), the gap target (ms)
+TRIALS, QUICK_TRIALS, NEIGHBOURS, SUBSCRIBER_S, GAP_TARGET_MS = 15, 3, 2, 1.0, 150.0
+#: how long one trial's three processes may take to exit under the load before the bench stops, s
+TRIAL_TIMEOUT_S = 60.0
+
+
+def topside_topics(vehicle: str) -> tuple[str, ...]:
+    """What the topside subscriber listens to (``module:Type=topic``): the gateway's status topics and odometry."""
+    return (f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/supervisor/status",
+            f"diagnostic_msgs.msg:DiagnosticStatus=/{vehicle}/gateway/status",
+            f"nav_msgs.msg:Odometry=/{vehicle}/odom")
+
+
+def run(quick: bool = False) -> list[dict]:
+    """The ``pool_day_churn_*`` rows (module docstring); ``quick``: :data:`QUICK_TRIALS` trials."""
+    trials = QUICK_TRIALS if quick else TRIALS
+    exits: list[int] = []
+    with running_layout("hindrax-bench-poolday-", layout=_VehicleLayout) as lay, domain_id() as topside:
+        vehicle = yaml.safe_load(Path(lay.config).read_text())["/**"]["ros__parameters"]["vehicle"]["name"]
+        watch = _Watch(lay.probe)
+        lay.ensure()
+        internal_default = {k: v for k, v in lay.env.items() if k != PROFILE_ENV} | {RANGE_ENV: "LOCALHOST"}
+        topside_env = internal_default | {"ROS_DOMAIN_ID": str(topside)}
+        with gateway_running(lay, topside):
+            lay.armed_at_1700()
+            with hardware_priority() as refused, cpu_bound_neighbours(NEIGHBOURS):
+                watch.armed, watch.disarms, watch.active = True, 0, True
+                for k in range(trials):
+                    procs = [subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                             for argv, env in (
+                                 (subscriber_argv(f"internal_{k}", SUBSCRIBER_S), internal_default),
+                                 (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topside_topics(vehicle)), topside_env),
+                                 ([lay.py, "-m", "hindrax_ident.tools.cli", "health", "--quiet",
+                                   "--timeout", "3"],
+                                  lay.env))]
+                    try:
+                        exits += [p.wait(TRIAL_TIMEOUT_S) for p in procs]
+                    finally:
+                        for p in procs:
+                            if p.poll() is None:
+                                p.kill()
+                watch.active = False
+                load = os.getloadavg()[0]
+        gaps, sent = watch.gaps_s(), watch.gaps_s(sent=True)
+        beats = sum(len(v) for v in watch.arrivals.values())
+    who = max(gaps, key=gaps.get)
+    sent_who = max(sent, key=sent.get)
+    each = ", ".join(f"{name} {gaps[name] * 1e3:.0f}" for name in gaps)
+    each_sent = ", ".join(f"{name} {sent[name] * 1e3:.0f}" for name in sent)
+    what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with default transports, "
+            f"one on the topside and `hindrax health` started together (exit codes {sorted(set(exits))}), armed and "
+            f"commanded at 1700 us, 50 Hz, beside {NEIGHBOURS} CPU-bound processes (1-minute load {load:.1f} at the "
+            f"end); emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
+    return [
+        {"name": "pool_day_churn_disarms", "value": watch.disarms, "unit": "disarms", "target": 0, "n": trials,
+         "note": what},
+        {"name": "pool_day_churn_heartbeat_gap_max_ms", "value": gaps[who] * 1e3, "unit": "ms",
+         "target": GAP_TARGET_MS, "n": beats,
+         "note": f"largest gap between two received beats of one heartbeat, over {beats} beats; each (ms): {each}"},
+        {"name": "pool_day_churn_heartbeat_sent_gap_max_ms", "value": sent[sent_who] * 1e3, "unit": "ms", "n": beats,
+         "note": f"the same between the beats' send stamps (the sender late, not the delivery); each (ms): "
+                 f"{each_sent}"},
+        watch.tick_gap_row("pool_day_churn_tick_gap_max_ms"),
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the rows alone and print them as JSON."""
+    parser = argparse.ArgumentParser(prog="pool_day_churn")
+    parser.add_argument("--quick", action="store_true", help=f"{QUICK_TRIALS} trials instead of {TRIALS}")
+    print(json.dumps(run(parser.parse_args(argv).quick), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,165 @@
+"""Safety benchmark rows of the vehicle's authority (docs/architecture.md §8.2): a sealed internal graph and signed
+operator requests.
+
+The layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes` (the ESC node, the
+supervisor and the output
+guard, each in its own process on the vehicle's transport) with the gateway beside them, started as
+``python -m hindrax_drivers.gateway.node`` on the layout's internal domain and a topside domain of its own, with an
+operator key for the vehicle (``HINDRAX_KEYS_DIR``):
+
+* ``internal_sockets_reachable_from_network``: UDP sockets (:mod:`hindrax_drivers.proc_sockets`) of the ESC,
+  supervisor, guard and the gateway's internal process bound outside 127.0.0.1 and the multicast groups (target
+  0). The gateway's topside process is not counted: it must reach the tether;
+* ``operator_{unsigned,wrong_key,replayed}_requests_accepted``: of :data:`REQUESTS` (:data:`QUICK_REQUESTS`) arm
+  requests sent to ``/<vehicle>/arm`` from the topside domain, each unsigned, signed with another key, or a copy of
+  an arm the gateway had accepted (the ESC disarmed again in between), those answered with success (target 0). A
+  freshly signed arm before and after them is answered armed (the path works; otherwise the bench stops).
+
+Run alone: ``python -m hindrax_ident.tools.benchmarks.sealed_authority [--quick]`` (prints the rows
+as JSON).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import rclpy
+import yaml
+from domain_coordinator import domain_id
+from hindrax_drivers.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
+from hindrax_drivers.proc_sockets import child_pids, exposed, udp_sockets
+from hindrax_drivers.testing import ros_context, wait_until
+from rclpy.executors import SingleThreadedExecutor
+
+from hindrax_msgs.srv import SignedTrigger
+
+from .safety import running_layout
+
+#: arm requests of each kind (unsigned, wrong key, replayed); with ``--quick``
+REQUESTS, QUICK_REQUESTS = 10, 3
+WAIT_S = 60.0
+#: what each kind of request of :func:`signing_rows` is
+KINDS = {"unsigned": "unsigned", "wrong_key": "signed with another key",
+         "replayed": "each a copy of an arm the gateway had accepted"}
+
+
+def exposure_row(sockets_by_process: dict[str, list[tuple[str, int]]]) -> dict:
+    """The row ``internal_sockets_reachable_from_network`` from process label -> its UDP sockets (address, port):
+    value = how many are reachable from the network (:func:`~hindrax_drivers.proc_sockets.exposed`)."""
+    found = exposed(sockets_by_process)
+    total = sum(len(s) for s in sockets_by_process.values())
+    return {"name": "internal_sockets_reachable_from_network", "value": sum(len(s) for s in found.values()),
+            "unit": "sockets", "target": 0,
+            "note": f"of {total} UDP sockets of {', '.join(sockets_by_process)} (/proc); gateway topside process not "
+                    "counted" + (f"; reachable: {found}" if found else "")}
+
+
+def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
+    """Rows ``operator_<kind>_requests_accepted`` from kind -> the ``success`` of each answer to such a request."""
+    return [{"name": f"operator_{kind}_requests_accepted", "value": sum(bool(a) for a in got),
+             "unit": f"of {len(got)} requests", "target": 0,
+             "note": f"arm requests to the gateway from the topside, {KINDS.get(kind, kind)}; freshly signed arms "
+                     "before and after them were accepted"} for kind, got in answers.items()]
+
+
+def _arm(executor, client, request):
+    """Send ``request`` through ``client`` and wait for the answer, spinning ``executor``."""
+    future = client.call_async(request)
+    wait_until(future.done, WAIT_S, lambda: executor.spin_once(timeout_sec=0.05), "gateway answer")
+    return future.result()
+
+
+@contextmanager
+def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
+    """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
+    (:func:`~hindrax_ident.tools.benchmarks.safety.running_layout`), on its internal domain and the
+    topside domain
+    ``topside`` (LOCALHOST, the shipped file's range), with operator keys from ``keys_dir`` (none: every operator
+    request refused); yields its process once its internal participant has sockets, and stops it on the way out."""
+    log = open(lay.tmp / "gateway.log", "w")
+    env = dict(lay.env, **({KEYS_DIR_ENV: keys_dir} if keys_dir else {}))
+    gateway = subprocess.Popen([lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file",
+                                lay.config, "-p", f"topside_domain_id:={topside}"],
+                               env=env, stdout=log, stderr=subprocess.STDOUT)
+    try:
+        wait_until(lambda: "internal domain" in (lay.tmp / "gateway.log").read_text(), WAIT_S, None,
+                   "gateway started")
+        wait_until(lambda: len(child_pids(gateway.pid)) == 1 and udp_sockets(child_pids(gateway.pid)[0]),
+                   WAIT_S, None, "gateway's internal participant")
+        yield gateway
+    finally:
+        gateway.terminate()
+        gateway.wait(30)
+        log.close()
+
+
+def run(quick: bool = False) -> list[dict]:
+    """Run this benchmark (``quick``: fewer requests); returns its result rows."""
+    n = QUICK_REQUESTS if quick else REQUESTS
+    with running_layout("hindrax-bench-authority-") as lay, domain_id() as topside, \
+            tempfile.TemporaryDirectory(prefix="hindrax-bench-keys-") as keys:
+        vehicle = yaml.safe_load(Path(lay.config).read_text())["/**"]["ros__parameters"]["vehicle"]["name"]
+        key = load_key(create_key(Path(keys) / f"{vehicle}.key"))
+        lay.ensure()
+        with gateway_running(lay, topside, keys) as gateway:
+            pids = {name: p.pid for name, p in lay.procs.items()}
+            pids["gateway internal"] = child_pids(gateway.pid)[0]
+            wait_until(lambda: all(udp_sockets(pid) for pid in pids.values()), WAIT_S, None, "every participant")
+            rows = [exposure_row({name: udp_sockets(pid) for name, pid in pids.items()})]
+            with ros_context(domain_id=topside) as ctx:
+                node = rclpy.create_node("bench_operator", context=ctx)
+                executor = SingleThreadedExecutor(context=ctx)
+                executor.add_node(node)
+                client = node.create_client(SignedTrigger, f"/{vehicle}/arm")
+                wait_until(client.service_is_ready, WAIT_S, lambda: executor.spin_once(timeout_sec=0.1),
+                           f"/{vehicle}/arm on the topside")
+                signer = Signer(key, vehicle)
+                wait_until(lambda: lay.arm_client.service_is_ready() and lay.reset_client.service_is_ready(),
+                           WAIT_S, None, "ESC and supervisor up")
+
+                def signed_arm():
+                    """A freshly signed arm until the ESC takes it (it refuses while the guard holds /OE); then
+                    disarmed again through the ESC itself. Returns the accepted request."""
+                    got = []
+
+                    def attempt() -> bool:
+                        lay.call(lay.reset_client, lay.Trigger.Request())
+                        req = signer.sign_message("arm", SignedTrigger.Request())
+                        if _arm(executor, client, req).success:
+                            got.append(req)
+                        return bool(got)
+                    wait_until(attempt, WAIT_S, None, "a signed arm accepted")
+                    lay.call(lay.arm_client, lay.SetArmed.Request(arm=False))
+                    return got[0]
+
+                accepted = signed_arm()
+                other = Signer(bytes(32), vehicle)
+                answers = {"unsigned": [], "wrong_key": [], "replayed": []}
+                for _ in range(n):
+                    answers["unsigned"].append(_arm(executor, client, SignedTrigger.Request()).success)
+                    wrong = other.sign_message("arm", SignedTrigger.Request())
+                    answers["wrong_key"].append(_arm(executor, client, wrong).success)
+                    answers["replayed"].append(_arm(executor, client, accepted).success)
+                    if any(v[-1] for v in answers.values()):
+                        lay.call(lay.arm_client, lay.SetArmed.Request(arm=False))
+                signed_arm()  # the path still worked after them
+                executor.shutdown()
+                node.destroy_node()
+            return rows + signing_rows(answers)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point: prints the rows as JSON; returns the exit code."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    print(json.dumps(run(quick=parser.parse_args(argv).quick), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1120 @@
+"""Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process and in the
+launch layout (the processes of the vehicle's launch file), messages per second per topic, and the cost of a bare
+rclpy process sending the same topics at the same rates.
+
+CPU is always process (or thread) CPU time over wall time: it does not count the time a process waited for a core,
+so it moves less with the load of a shared machine than latency does; it still grows with that load (other
+processes evict the caches a wake-up needs), by 20-40 % between a quiet and a loaded run of this two-core
+machine, so compare layouts in runs close in time, and repeat.
+
+The graph: the four sensor drivers, the ESC node (PCA9685), the thrust allocation, the identification node
+(idle, then running a surge goal), the safety supervisor when the package has one
+(``hindrax_drivers.supervisor.node``), and the recorder with raw device data on (every topic except the
+simulator's ground truth ``sim/*`` and ``/clock``, which do not exist on the vehicle). Devices are emulated
+and their work is excluded from the stack's CPU. Two phases, each measured over ``duration_s`` of wall time:
+
+* ``running`` (first, from the configured start position): the identification node running a surge goal (it
+  sends the wrench itself);
+* ``idle`` (after cancelling the goal): the identification node idle, a 50 Hz ``wrench`` stream from the
+  benchmark (the pilot's controller) keeping the allocation and ESC busy.
+
+One process (``inproc``): the graph of ``hindrax run`` (:func:`hindrax_ident.bringup.build_graph` with
+``drive_clocks``: the simulator sets the nodes' clocks directly, no ``/clock`` messages) at real-time factor 1,
+in one SingleThreadedExecutor. Per node: CPU of its executor callbacks (``time.thread_time``) minus the time
+spent inside the I2C device emulators during them, plus its own threads (serial reader threads of the DVL-75
+and Ping1D drivers, the recorder's bag writer thread) from ``/proc/self/task/<tid>/stat``. ``executor+dds``:
+the rest of the process (rclpy's wait-set handling and the DDS threads). Whole stack = process CPU minus the
+simulator's steps, the emulators and the benchmark's own probe.
+
+Launch layout (``launch``): the processes ``ros2 launch hindrax_ident pool_test.launch.xml`` starts (the vehicle
+launch file with recording on, plus the identification node; read from the launch file by
+:func:`~hindrax_ident.tools.benchmarks.launch_layout.launch_processes`, so a process added to or
+merged in the launch
+file is measured as it will run), each its console script's function with the launch file's arguments
+(``-r __node:=``, ``--params-file``, ``-p``) plus the bench's device ports; the virtual pool in another process
+(:mod:`hindrax_ident.tools.benchmarks.launch_layout`: simulator at real time, serial emulators on
+pseudo-terminals,
+I2C emulators behind a Unix socket standing in for ``/dev/i2c-1``); every node on system time. CPU per process:
+user + system time from ``/proc/<pid>/stat`` (all threads). The running phase is measured in
+:data:`RUNNING_WINDOWS` consecutive windows (the goal must still run at the end of the last); each row is the
+median over the windows, the note lists every window's value.
+
+Messages per second per topic: counted in the launch layout's bag by log time within each window (the one-process
+graph: the recorder's counts). The IMU's timing in the running windows, from the same bag (:func:`imu_timing`): its
+rate, the largest gap between two messages and the age of a sample when the recorder receives it, so that a change of
+the process layout shows what it costs the 50 Hz sensor the supervisor watches (``launch_running_imu_*``).
+
+Machine speed: before and after the layouts, the CPU time of 5 million n-body steps here
+(:mod:`hindrax_ident.tools.benchmarks.machine`, ``machine_nbody_cpu_s``, their mean). The
+development machines of this
+project differ by about 2x between sessions; the launch totals are also given at the speed of a reference machine
+(``launch_*_cpu_total_at_reference_speed``, ``..._max_process_at_reference_speed``: the figures to compare between
+sessions). The n-body time did not follow what this workload meets, though: at about the same n-body time
+(26.9-27.9 s) the total read 36.4 % in one session's ``make bench`` and 47-56 % in four runs of the next session,
+and the virtual pool, whose code is the same in every run, moved with it (20.3 -> 28-33 %). So the totals are also
+given per unit of the pool's CPU in the same windows (``launch_*_cpu_total_per_pool``: 1.58-1.79 in six runs of two
+sessions whose totals read 36-72 %), and at the pool's CPU on the reference machine, :data:`REFERENCE_POOL_CPU`
+(``..._at_reference_pool``). The targets stay on the figures measured here.
+
+Wake-ups: per process, the voluntary context switches of all its threads per window (each sleep ends in one;
+``launch_*_wakeups_*``, the main thread's in the note). What one more process costs: two probe processes run beside
+the layout, not in its totals (:data:`PARTICIPANT_PROBES`: a node process with nothing to do, and one subscribing to
+the four sensor topics the identification and the controller take). ``--baseline GIT_REF``: that commit's launch
+layout is measured first in the same run (:func:`baseline_launch`), and the rows ``..._vs_baseline`` give today's
+figures over its. The command path: ``actuation_wrench_to_registers_*``
+(:func:`~hindrax_ident.tools.benchmarks.actuation.wrench_to_registers`).
+
+Baselines (each a child process, plain rclpy, the EventsExecutor like every node process, one timer per topic
+publishing a default-constructed message of the topic's type at its measured rate):
+``cpu_bare_rclpy_same_topics``: publishers only, nobody subscribed (the historical baseline), for the topics of
+the one-process idle phase; ``cpu_bare_rclpy_pub_sub``: the same publisher process plus a bare subscriber process
+(raw CDR subscriptions to every topic, like the recorder without writing), for the topics of the launch layout's
+running phase: the bare cost of moving the same messages between processes.
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import functools
+import json
+import os
+import re
+import shutil
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import textwrap
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from domain_coordinator import domain_id
+from geometry_msgs.msg import WrenchStamped
+from rclpy.action import ActionClient
+from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
+
+from hindrax_drivers.action_goal import GoalSender
+from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.launch_xml import write_parameter_file
+from hindrax_drivers.lean_cdr import cdr_decoder
+from hindrax_drivers.recording.reader import BagReader
+from hindrax_drivers.recording.selection import TopicSelection
+from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
+                                     wait_until)
+from hindrax_ident.bringup import build_graph
+from hindrax_msgs.action import RunIdentification
+from hindrax_msgs.srv import SetArmed
+
+from .launch_layout import launch_processes, package_share, read_ports_file
+from .actuation import wrench_to_registers
+from .launch_node import SOCKET_ENV
+from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s
+from .recorder import subscribe_recorder_counts
+
+_CLK = os.sysconf("SC_CLK_TCK")
+#: not recorded in either layout: the simulator's ground truth and /clock (they do not exist on the vehicle)
+EXCLUDE_REGEX = r"^/(sim/|clock$)"
+#: the processes / nodes of the stack, in launch order
+NODES = ("dvl75", "ping1d", "ms5837", "icm20948", "esc", "thrust_allocation", "identification", "supervisor",
+         "recorder")
+WRENCH_RATE_HZ = 50.0
+#: the ICM-20948's topic, whose rate and gaps the running phase reports (:func:`imu_timing`)
+IMU_TOPIC = "/imu/data_raw"
+#: the launch layout is armed once its ROS graph has not changed for this long (s): the publish stalls of a new
+#: participant's first messages came 0-3.0 s after it appeared (hindrax_drivers.testing.GraphSettled)
+GRAPH_QUIET_S = 5.0
+
+
+def _proc_cpu_s(pid: int | str = "self") -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / _CLK
+
+
+def _proc_wakeups(pid: int) -> tuple[int, int, dict[str, int]]:
+    """(every thread's, the main thread's, by thread name) voluntary context switches of a process so far: each is a
+    sleep that ends in a wake-up (a timer, a message, a reply on a socket). Threads that ended before the call are
+    not counted; threads of one name (Fast DDS's ``dds.udp.*`` receivers ...) are summed."""
+    total = main = 0
+    named: dict[str, int] = collections.defaultdict(int)
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            text = (task / "status").read_text()
+        except OSError:  # the thread ended meanwhile
+            continue
+        fields = dict(ln.split(":", 1) for ln in text.splitlines() if ":" in ln)
+        n = int(fields["voluntary_ctxt_switches"])
+        total += n
+        main += n if task.name == str(pid) else 0
+        named["main" if task.name == str(pid) else fields["Name"].strip()] += n
+    return total, main, named
+
+
+def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, float, dict[str, float]]:
+    """Wake-ups per second between two :func:`_proc_wakeups` readings (total, main thread, by thread name)."""
+    return ((after[0] - before[0]) / wall_s, (after[1] - before[1]) / wall_s,
+            {k: (v - before[2].get(k, 0)) / wall_s for k, v in after[2].items()})
+
+
+def _proc_rss_mb(pid: int) -> float:
+    """Resident set size of a process (``VmRSS``), MB (10^6 bytes)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) * 1024 / 1e6
+    return float("nan")
+
+
+def _proc_pss_mb(pid: int) -> float:
+    """Proportional set size of a process (``Pss`` of /proc/PID/smaps_rollup), MB (10^6 bytes): its private pages
+    plus its share of the pages it shares (the venv's libraries mapped by every node process), so the sum over
+    processes is the memory they hold together, unlike the sum of RSS, which counts shared pages once per process."""
+    for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
+        if line.startswith("Pss:"):
+            return int(line.split()[1]) * 1024 / 1e6
+    return float("nan")
+
+
+def _thread_cpu_s() -> dict[str, float]:
+    """CPU seconds per Python thread name of this process (other than the calling thread)."""
+    out: dict[str, float] = collections.defaultdict(float)
+    me = threading.get_native_id()
+    for t in threading.enumerate():
+        if t.native_id == me:
+            continue
+        try:
+            out[t.name] += _proc_cpu_s(f"self/task/{t.native_id}")
+        except (OSError, IndexError, ValueError, TypeError):
+            continue
+    return out
+
+
+def _wrench_msg(stamp: Any) -> Any:
+
+    m = WrenchStamped()
+    m.header.frame_id = "base_link"
+    m.header.stamp = stamp
+    m.wrench.force.x = 6.0
+    m.wrench.torque.z = 0.5
+    return m
+
+
+def _goal() -> Any:
+
+    return RunIdentification.Goal(dofs=["surge"], levels_per_dof=3)
+
+
+class _SwitchedStream(dict):
+    """``{"on": bool}`` for :func:`_running_then_idle` that also starts (``True``) and cancels (``False``) the timer
+    sending the stream (an rclpy ``Timer``)."""
+
+    def __init__(self, timer: Any) -> None:
+        super().__init__(on=False)
+        self.timer = timer
+
+    def __setitem__(self, key: str, value: bool) -> None:
+        super().__setitem__(key, value)
+        if key == "on":
+            if value:
+                self.timer.reset()
+            else:
+                self.timer.cancel()
+
+
+def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin: Any, spin_idle: Any,
+                       warm_timeout_s: float, what: str, goal_status: list | None = None) -> None:
+    """The measured sequence of both layouts: the surge goal (sent through
+    :class:`~hindrax_drivers.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s of
+    warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
+
+    stream: {"on": bool} switches the wrench stream; window(label) measures one window; spin / spin_idle: one
+    executor spin while running / while idle. goal_status: a one-item list whose item is set to a function
+    returning the goal's last action status code (action_msgs/GoalStatus) seen on the status topic. Raises
+    RuntimeError when the goal is rejected, or when it ended before the running window did (the window would not
+    have measured a running campaign)."""
+    goals = GoalSender(probe, action, "run_identification")
+    stream["on"] = False
+    handle = goals.send(_goal(), spin, 30)
+    if not handle.accepted:
+        raise RuntimeError(f"{what}: the surge goal was rejected")
+    if goal_status is not None:
+        goal_status[0] = lambda: goals.status(handle)
+    warm = time.monotonic() + 3.0
+    wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin, "running warm-up")
+    window("running")
+    if goals.status(handle) in (4, 5, 6):  # SUCCEEDED, CANCELED, ABORTED: the campaign did not run throughout
+        got: list = []
+        try:  # the node's reason, for the error
+            wait_until(lambda: got.append(goals.poll_result(handle)) or got[-1] is not None, 10, spin, "goal result")
+            why = getattr(got[-1].result, "message", "")
+        except Exception:  # noqa: BLE001 - the reason is a courtesy; the error below is what matters
+            why = "(no result received)"
+        raise RuntimeError(f"{what}: the surge goal ended (status {goals.status(handle)}) during the running "
+                           f"window: {why}")
+    wait_until(lambda: goals.cancel(handle), 30, spin, "goal cancel")
+    stream["on"] = True
+    warm = time.monotonic() + 2.0
+    wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin_idle, "idle warm-up")
+    window("idle")
+    goals.destroy()
+
+
+# ---------------------------------------------------------------------------------------------- one process
+def _in_process(duration_s: float, tmp: Path) -> dict:
+
+    cpu: dict[str, float] = collections.defaultdict(float)  # callbacks by node name
+    emu: dict[str, float] = collections.defaultdict(float)  # emulator time inside callbacks, by node name
+    current: list[str | None] = [None]
+    sim_cpu = [0.0]
+    out: dict = {"phases": {}}
+    with ros_context() as ctx:
+        graph = build_graph(default_config_path(), sim=True, record=True, record_dir=str(tmp / "unused-bag"),
+                            context=ctx, overrides={"esc.arming_time_s": 1.0}, real_time_factor=1.0,
+                            identification=True, drive_clocks=True)
+        ex = graph.executor
+        hw = graph.hardware
+        names = {id(n): name for name, n in graph.nodes.items()}
+
+        def run_handler(handler: Any, node: Any) -> None:
+            name = names.get(id(node), node.get_name() if node is not None else "(executor)")
+            current[0] = name
+            t0 = time.thread_time()
+            handler()
+            cpu[name] += time.thread_time() - t0
+            current[0] = None
+            if handler.exception() is not None:
+                raise handler.exception()
+
+        def spin_until_idle(max_callbacks: int = 100_000) -> int:
+            for n in range(max_callbacks):
+                try:
+                    handler, _entity, node = ex.wait_for_ready_callbacks(0.0)
+                except (TimeoutException, ShutdownException):
+                    return n
+                run_handler(handler, node)
+            return max_callbacks
+
+        def ex_spin_once(timeout_sec: float | None = None) -> None:
+            try:
+                handler, _entity, node = ex.wait_for_ready_callbacks(timeout_sec=timeout_sec)
+            except (TimeoutException, ShutdownException):
+                return
+            run_handler(handler, node)
+
+        graph.spin_until_idle = spin_until_idle
+        ex.spin_once = ex_spin_once
+        sim_node = graph.nodes["simulator"]
+        advance = sim_node.advance_clock_period
+
+        def timed_advance() -> bool:
+            t0 = time.thread_time()
+            try:
+                return advance()
+            finally:
+                sim_cpu[0] += time.thread_time() - t0
+
+        sim_node.advance_clock_period = timed_advance
+        for device in (hw.emulators[n] for n in ("ms5837", "icm20948", "pca9685")):
+            for meth in ("i2c_read", "i2c_write"):
+                def timed(*a: Any, _orig: Any = getattr(device, meth)) -> Any:
+                    t0 = time.thread_time()
+                    try:
+                        return _orig(*a)
+                    finally:
+                        emu[current[0] or "(outside callbacks)"] += time.thread_time() - t0
+                setattr(device, meth, timed)
+
+        recorder = graph.nodes["recorder"]
+        recorder.stop_recording()
+        selection = TopicSelection(all_topics=True, exclude_regex=EXCLUDE_REGEX)
+        recorder.start_recording(str(tmp / "inproc-bag"), selection)
+
+        def startup_complete() -> bool:
+            if not hw.serial_startup_done():
+                return False
+            recorder.discover_now()
+            wanted = {pub.topic_name for name, n in graph.nodes.items() if name != "recorder"
+                      for pub in n.publishers if selection.matches(pub.topic_name)}
+            return recorder.subscribed_to(wanted)
+
+        graph.startup_complete = startup_complete
+        probe = rclpy.create_node("bench_probe", context=ctx)
+        ex.add_node(probe)
+        names[id(probe)] = "bench_probe"
+        wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
+        arm = probe.create_client(SetArmed, "esc/set_armed")
+        action = ActionClient(probe, RunIdentification, "run_identification")
+        spin = lambda: graph.spin_once(0.01)  # noqa: E731
+        graph.start_and_arm(arm, 120, ready=action.server_is_ready)
+        alloc_clock = graph.nodes["thrust_allocation"].get_clock()
+        stream = {"on": False, "next": time.monotonic()}
+
+        def spin_with_wrench() -> None:
+            now = time.monotonic()
+            if stream["on"] and now >= stream["next"]:
+                stream["next"] = max(stream["next"] + 1.0 / WRENCH_RATE_HZ, now - 0.1)
+                wrench.publish(_wrench_msg(alloc_clock.now().to_msg()))
+            spin()
+
+        def window(phase: str) -> None:
+            writer = recorder._writer
+            counts0 = writer.topic_counts()
+            cpu.clear()
+            emu.clear()
+            sim_cpu[0] = 0.0
+            threads0 = _thread_cpu_s()
+            main0, proc0, wall0 = time.thread_time(), time.process_time(), time.monotonic()
+            sim_t0 = sim_node.simulator.t_s
+            end = wall0 + duration_s
+            wait_until(lambda: time.monotonic() > end, duration_s + 60, spin_with_wrench, f"{phase} window")
+            wall = time.monotonic() - wall0
+            proc = time.process_time() - proc0
+            main = time.thread_time() - main0
+            threads1 = _thread_cpu_s()
+            counts1 = writer.topic_counts()
+            thr = {k: threads1.get(k, 0.0) - threads0.get(k, 0.0) for k in threads1}
+            per: dict[str, float] = {}
+            for name in NODES:
+                if name in graph.nodes:
+                    per[name] = cpu.get(name, 0.0) - emu.get(name, 0.0)
+            for name, port in hw.ports.items():
+                per[name] += sum(v for k, v in thr.items() if k == f"SerialTransport({port})")
+            per["recorder"] += sum(v for k, v in thr.items() if k.startswith("bag-writer"))
+            emu_total = sum(emu.values())
+            probe_cpu = cpu.get("bench_probe", 0.0)
+            stack = proc - sim_cpu[0] - emu_total - probe_cpu
+            per["executor+dds"] = stack - sum(per.values())
+            rates = {t: (counts1.get(t, 0) - counts0.get(t, 0)) / wall for t in counts1}
+            out["phases"][phase] = {
+                "wall_s": wall, "per_node": {k: v / wall for k, v in per.items()}, "stack": stack / wall,
+                "process": proc / wall, "simulator": sim_cpu[0] / wall, "emulators": emu_total / wall,
+                "main_thread": main / wall, "rates": rates,
+                "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall,
+            }
+
+        _running_then_idle(probe, action, stream, window, spin, spin_with_wrench, 60,
+                           "in-process stack benchmark")
+        out["types"] = {pub.topic_name: _type_name(pub.msg_type) for n in graph.nodes.values() for pub in n.publishers}
+        out["dropped"] = recorder._writer.dropped
+        graph.shutdown()
+        probe.destroy_node()
+    return out
+
+
+def _type_name(cls: Any) -> str:
+    return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
+
+
+# ---------------------------------------------------------------------------------------------- launch layout
+def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | None = None,
+            launch_file: Path | None = None) -> dict:
+    """The launch layout: every process of ``launch_file`` (default :data:`LAUNCH_FILE`, recording on), the
+    virtual pool in another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the
+    idle phase); per window the CPU of every process and its wall-clock span (the rates come from the bag).
+    py_spy_dir: record every node process with ``py-spy`` during the first running window (raw collapsed stacks,
+    ``<label>.txt``)."""
+    py = python_executable()
+    sock = str(tmp / "i2c.sock")
+    ports_file = tmp / "ports.json"
+    bag_root = tmp / "launch-bags"  # the launch files' output_dir: the root the recorder makes its bag beneath
+    launch_file = launch_file or package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1]
+    layout = launch_processes(launch_file, {"output_dir": str(bag_root)})
+    procs: dict[str, subprocess.Popen] = {}
+    extra: dict[str, subprocess.Popen] = {}  # the participant probes (PARTICIPANT_PROBES)
+    logs: dict[str, Any] = {}
+    out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": None,
+                 "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}", "module": lp.module}
+                               for lp in layout}}
+    with domain_id() as did:
+        env = child_env(ROS_DOMAIN_ID=str(did))
+        try:
+            logs["pool"] = open(tmp / "pool.log", "w")
+            pool_argv = [py, "-m", "hindrax_ident.tools.benchmarks.launch_layout", "pool",
+                         "--socket", sock, "--ports-file", str(ports_file)]
+            procs["pool"] = subprocess.Popen(pool_argv, env=env, stdout=logs["pool"],
+                                             stderr=subprocess.STDOUT)
+            ports = wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and read_ports_file(ports_file), 60,
+                               None, "pool process ready")
+            params = str(default_config_path())
+            # the bench's devices: the serial emulators' pseudo-terminals, a short arming time, and the emulated
+            # PCA9685's oscillator, exactly nominal: calibrated (the ESC refuses to arm otherwise). Vehicle keys,
+            # so every process may get them: a node ignores the keys it does not declare.
+            bench = ["-p", f"sensors.dvl75.port:={ports['dvl75']}", "-p", f"sensors.ping1d.port:={ports['ping1d']}",
+                     "-p", "esc.arming_time_s:=1.0"]
+            if load_config(params).esc.oscillator_calibrated is not None:  # a required key: always (file validated)
+                bench += ["-p", "esc.oscillator_calibrated:=true"]
+            wrap = ["-m",
+                    "hindrax_ident.tools.benchmarks.launch_node"]  # no simulator in a node process
+            (tmp / "params").mkdir(exist_ok=True)
+            values_file = functools.partial(write_parameter_file, directory=tmp / "params")
+            for lp in layout:
+                if lp.label in procs:
+                    raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
+                logs[lp.label] = open(tmp / f"{lp.label}.log", "w")
+                # the launch file's launch-prefix and environment too (the safety processes' real-time priority,
+                # docs/deployment.md §1; the DDS transport, hindrax_drivers.dds_transport)
+                procs[lp.label] = subprocess.Popen([*lp.process.launch_prefix, py, *wrap, lp.module,
+                                                    *lp.ros_args(values_file), *bench],
+                                                   env=dict(env, **dict(lp.process.env), **{SOCKET_ENV: sock}),
+                                                   stdout=logs[lp.label],
+                                                   stderr=subprocess.STDOUT)
+            for name, topics in PARTICIPANT_PROBES.items():  # what one more process costs (not in the totals)
+                logs[name] = open(tmp / f"{name}.log", "w")
+                extra[name] = subprocess.Popen([py, "-c", _PARTICIPANT, name, json.dumps(topics)], env=env,
+                                               stdout=logs[name], stderr=subprocess.STDOUT)
+            with ros_context(domain_id=did) as ctx:
+                probe = rclpy.create_node("bench_probe", context=ctx)
+                counts, lock = subscribe_recorder_counts(probe, 50)
+                wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
+                arm = probe.create_client(SetArmed, "esc/set_armed")
+                action = ActionClient(probe, RunIdentification, "run_identification")
+                # the pilot's wrench stream (idle phase): its timer runs only while the stream is on, so that this
+                # process (excluded from the totals, but on the same two cores) wakes no 50 Hz timer in the running
+                # phase
+                stream = _SwitchedStream(probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
+                    _wrench_msg(probe.get_clock().now().to_msg())), autostart=False))
+                ex = SingleThreadedExecutor(context=ctx)
+                ex.add_node(probe)
+                spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
+
+                def alive() -> bool:
+                    return _check_alive(procs, tmp)
+
+                sensors = ("/dvl/data", "/imu/data_raw", "/pressure/fluid_pressure", "/ping/altitude")
+                wait_until(lambda: alive() and all(counts.get(t, 0) > 5 for t in sensors), 120, spin,
+                           "every sensor topic recorded")
+                wait_until(lambda: alive() and arm.service_is_ready() and action.server_is_ready(), 60, spin,
+                           "esc/set_armed and run_identification")
+                # arm only once discovery has settled: a process's first message to a new participant can stall its
+                # publishes 0.33 s (Fast DDS's shared-memory port health check, GraphSettled), which silences a
+                # safety heartbeat past its 0.2 s timeout and disarms the ESC before or during the running window
+                settled = GraphSettled(probe, quiet_s=GRAPH_QUIET_S, min_nodes=len(layout))
+                wait_until(lambda: alive() and settled(), 120, spin, "the ROS graph unchanged for "
+                                                                       f"{GRAPH_QUIET_S:g} s")
+
+                answer = [""]
+
+                def try_arm() -> bool:
+                    fut = arm.call_async(SetArmed.Request(arm=True))
+                    wait_until(fut.done, 10, spin, "arm answer")
+                    answer[0] = fut.result().message
+                    return fut.result().armed
+
+                try:
+                    wait_until(try_arm, 30, spin, "armed")
+                except ConditionTimeout as exc:
+                    raise ConditionTimeout(f"{exc}: the ESC's last answer was {answer[0]!r}") from None
+                print(f"stack benchmark, launch layout ({len(layout)} processes of {launch_file.name}): "
+                      f"{answer[0]}", flush=True)
+                warm = time.monotonic() + 3.0
+                wait_until(lambda: time.monotonic() > warm, 30, spin, "warm-up")
+                spies: list[subprocess.Popen] = []
+
+                def window(phase: str) -> None:
+                    alive()
+                    results = []
+                    for k in range(windows if phase == "running" else 1):
+                        if py_spy_dir is not None and phase == "running" and k == 0:
+                            spies.extend(_start_py_spy(procs, py_spy_dir, duration_s))
+                        cpu0 = {n: _proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
+                        wake0 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
+                        bench0, load0 = _proc_cpu_s(), os.getloadavg()[0]
+                        wall0, t0_ns = time.monotonic(), time.time_ns()
+                        end = wall0 + duration_s
+                        wait_until(lambda: time.monotonic() > end, duration_s + 30, spin, f"{phase} window")
+                        cpu1 = {n: _proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
+                        wake1 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
+                        wall, t1_ns = time.monotonic() - wall0, time.time_ns()
+                        alive()
+                        results.append({"wall_s": wall, "t0_ns": t0_ns, "t1_ns": t1_ns,
+                                        "per_process": {n: (cpu1[n] - cpu0[n]) / wall for n in procs if n != "pool"},
+                                        "pool": (cpu1["pool"] - cpu0["pool"]) / wall,
+                                        "wakeups": {n: _wakeup_rates(wake0[n], wake1[n], wall)
+                                                    for n in procs if n != "pool"},
+                                        "participants": {n: ((cpu1[n] - cpu0[n]) / wall,
+                                                             (wake1[n][0] - wake0[n][0]) / wall) for n in extra},
+                                        "bench": (_proc_cpu_s() - bench0) / wall,
+                                        "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
+                                        "goal_status": goal_status[0](),
+                                        "rss_mb": {n: _proc_rss_mb(p.pid) for n, p in procs.items() if n != "pool"},
+                                        "pss_mb": {n: _proc_pss_mb(p.pid) for n, p in procs.items() if n != "pool"}})
+                    out["phases"][phase] = {"windows": results}
+
+                goal_status = [lambda: None]
+                try:
+                    _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark",
+                                       goal_status=goal_status)
+                except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
+                    raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
+                for spy in spies:
+                    spy.wait(duration_s + 30)
+                ex.shutdown()
+                probe.destroy_node()
+        finally:
+            for name in reversed(list(procs)):
+                if procs[name].poll() is None:
+                    procs[name].send_signal(signal.SIGINT)
+            for p in extra.values():
+                if p.poll() is None:
+                    p.send_signal(signal.SIGINT)
+            for name, p in {**procs, **extra}.items():
+                try:
+                    p.wait(15)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait(5)
+            for f in logs.values():
+                f.close()
+    bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
+    if len(bags) != 1:  # one recorder start (nothing respawns here)
+        raise RuntimeError(f"expected one bag under {bag_root}, found {[b.name for b in bags]}")
+    out["bag"] = str(bags[0])
+    _bag_rates(out)
+    return out
+
+
+def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
+    """``py-spy record`` (raw collapsed stacks, non-blocking, 100 Hz, only samples that hold the GIL: Python's CPU,
+    not its waits in a socket or the executor) of every node process for ``duration_s``."""
+    exe = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return [subprocess.Popen([exe, "record", "--nonblocking", "--gil", "-r", "100", "-d", str(int(round(duration_s))),
+                              "-f", "raw", "-o", str(out_dir / f"{name}.txt"), "-p", str(p.pid)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for name, p in procs.items() if name != "pool"]
+
+
+def _bag_rates(out: dict) -> None:
+    """Messages per second per topic of every window, from the launch layout's bag (log time = the recorder's
+    reception time on the system clock, the windows' clock), and the IMU's timing (:func:`imu_timing`)."""
+    reader = BagReader(out["bag"])
+    spans = [(w["t0_ns"], w["t1_ns"], w) for ph in out["phases"].values() for w in ph["windows"]]
+    imu: dict[int, list[tuple[int, int]]] = {id(w): [] for *_, w in spans}
+    decode = cdr_decoder("sensor_msgs/msg/Imu")
+    for *_, w in spans:
+        w["rates"] = collections.Counter()
+    first = min(t0 for t0, _, _ in spans)
+    last = max(t1 for _, t1, _ in spans)
+    for m in reader.messages(start_ns=first, end_ns=last):
+        for t0, t1, w in spans:
+            if t0 <= m.log_time_ns < t1:
+                w["rates"][m.topic] += 1
+                if m.topic == IMU_TOPIC:
+                    stamp = decode(m.data).header.stamp
+                    imu[id(w)].append((m.log_time_ns, stamp.sec * 1_000_000_000 + stamp.nanosec))
+    for t0, t1, w in spans:
+        w["rates"] = {t: n / ((t1 - t0) * 1e-9) for t, n in w["rates"].items()}
+        w["imu"] = imu_timing(imu[id(w)])
+
+
+def imu_timing(samples: list[tuple[int, int]]) -> dict[str, float]:
+    """The IMU's timing as a subscriber in another process sees it (the recorder: what the supervisor's rate check
+    sees too). samples: (reception time, header stamp) of each message in one window, ns on the system clock, in
+    reception order (at least 2). Returns ``rate_hz`` (messages per second between the first and last reception),
+    ``gap_max_s`` (largest interval between two receptions), ``stamp_gap_max_s`` (largest interval between two
+    stamps: the driver's poll taken late), ``age_p50_ms``, ``age_p99_ms``, ``age_max_ms`` (reception time minus
+    stamp: the I2C read, the publish and the delivery; the ICM-20948 stamps its sample at the poll, before the
+    read). Raises ValueError for fewer than 2 samples."""
+    if len(samples) < 2:
+        raise ValueError(f"imu_timing: {len(samples)} sample(s), need at least 2")
+    log = [t for t, _ in samples]
+    stamps = sorted(s for _, s in samples)
+    ages = sorted((t - s) * 1e-6 for t, s in samples)
+    return {"rate_hz": (len(log) - 1) / ((log[-1] - log[0]) * 1e-9),
+            "gap_max_s": max(b - a for a, b in zip(log, log[1:])) * 1e-9,
+            "stamp_gap_max_s": max(b - a for a, b in zip(stamps, stamps[1:])) * 1e-9,
+            "age_p50_ms": ages[len(ages) // 2], "age_p99_ms": ages[min(len(ages) - 1, int(0.99 * len(ages)))],
+            "age_max_ms": ages[-1]}
+
+
+def _safety_log_lines(tmp: Path, names: list[str], keep: int = 12) -> str:
+    """The last ``keep`` lines of each process log that speak of arming, heartbeats, trips or the watchdog."""
+    out = []
+    for name in names:
+        try:
+            lines = (tmp / f"{name}.log").read_text(errors="replace").splitlines()
+        except OSError:
+            continue
+        hits = [ln for ln in lines if re.search(r"arm|heartbeat|trip|watchdog|stale|guard", ln, re.I)]
+        out += [f"{name}: {ln[:300]}" for ln in hits[-keep:]]
+    return "\n".join(out) or "(no process logged a disarm, trip or heartbeat)"
+
+
+def _check_alive(procs: dict, tmp: Path) -> bool:
+    """True while every process runs; else RuntimeError with the end of the first dead one's log."""
+    dead = [n for n, p in procs.items() if p.poll() is not None]
+    if dead:
+        try:
+            tail = (tmp / f"{dead[0]}.log").read_text()[-2000:]
+        except OSError:
+            tail = ""
+        raise RuntimeError(f"launch layout: process(es) {dead} exited; {dead[0]}'s log ends:\n{tail}")
+    return True
+
+
+#: the participant probes of the launch layout: name -> topics it subscribes (raw CDR, like the recorder without
+#: writing): one more process with its participant and executor and nothing to do, and the same with the sensor
+#: topics the identification and the controller take: what a node costs apart from the process of its publishers
+PARTICIPANT_PROBES = {
+    "participant_idle": [],
+    "participant_sensor_subscriber": [["/imu/data_raw", "sensor_msgs/msg/Imu"], ["/dvl/data", "hindrax_msgs/msg/Dvl"],
+                                      ["/pressure/fluid_pressure", "sensor_msgs/msg/FluidPressure"],
+                                      ["/ping/altitude", "sensor_msgs/msg/Range"]],
+}
+_PARTICIPANT = textwrap.dedent('''
+    import importlib, json, sys
+    from rclpy.node import Node
+    from hindrax_drivers.node_common import run_nodes  # the node processes' entry point: the same executor and spin
+
+    class Probe(Node):
+        def __init__(self):
+            super().__init__(sys.argv[1])
+            for topic, type_name in json.loads(sys.argv[2]):
+                pkg, _, name = type_name.split("/")
+                self.create_subscription(getattr(importlib.import_module(pkg + ".msg"), name), topic, lambda _m: None,
+                                         10, raw=True)
+
+    sys.exit(run_nodes([Probe], []))
+''')
+
+
+# ---------------------------------------------------------------------------------------------- baselines
+_BARE_PUB = textwrap.dedent('''
+    import importlib, json, sys, time
+    import rclpy
+    from rclpy.experimental.events_executor import EventsExecutor
+    spec = json.loads(sys.argv[1]); duration = float(sys.argv[2])
+    rclpy.init(); node = rclpy.create_node("bare_publisher")
+    for topic, type_name, rate in spec:
+        pkg, _, name = type_name.split("/")
+        cls = getattr(importlib.import_module(pkg + ".msg"), name)
+        pub = node.create_publisher(cls, "/baseline" + topic, 10)
+        node.create_timer(1.0 / rate, (lambda p, m: (lambda: p.publish(m)))(pub, cls()))
+    ex = EventsExecutor(); ex.add_node(node)
+    if len(sys.argv) > 3:  # wait for the subscriber process
+        t_end = time.monotonic() + 30
+        while time.monotonic() < t_end and node.count_subscribers("/baseline" + spec[0][0]) == 0:
+            ex.spin_once(timeout_sec=0.05)
+    t_end = time.monotonic() + duration
+    c0 = time.process_time()
+    while time.monotonic() < t_end:
+        ex.spin_once(timeout_sec=0.05)
+    print(json.dumps({"cpu_s": time.process_time() - c0}), flush=True)
+''')
+
+_BARE_SUB = textwrap.dedent('''
+    import importlib, json, sys, time
+    import rclpy
+    from rclpy.experimental.events_executor import EventsExecutor
+    spec = json.loads(sys.argv[1]); duration = float(sys.argv[2])
+    rclpy.init(); node = rclpy.create_node("bare_subscriber")
+    got = [0]
+    def cb(_data): got[0] += 1
+    for topic, type_name, rate in spec:
+        pkg, _, name = type_name.split("/")
+        cls = getattr(importlib.import_module(pkg + ".msg"), name)
+        node.create_subscription(cls, "/baseline" + topic, cb, 10, raw=True)
+    ex = EventsExecutor(); ex.add_node(node)
+    while got[0] == 0:
+        ex.spin_once(timeout_sec=0.05)
+    t_end = time.monotonic() + duration
+    c0 = time.process_time()
+    while time.monotonic() < t_end:
+        ex.spin_once(timeout_sec=0.05)
+    print(json.dumps({"cpu_s": time.process_time() - c0, "received": got[0]}), flush=True)
+''')
+
+
+def _bare(spec: list, duration_s: float, with_subscriber: bool) -> tuple[float, float]:
+    """(publisher CPU, subscriber CPU) in fractions of a core, each over ``duration_s``."""
+    with domain_id() as did:
+        env = child_env(ROS_DOMAIN_ID=str(did))
+        args = [json.dumps(spec), str(duration_s)]
+        sub = None
+        if with_subscriber:
+            sub = subprocess.Popen([python_executable(), "-c", _BARE_SUB, *args], env=env, stdout=subprocess.PIPE,
+                                   text=True)
+        pub = subprocess.run([python_executable(), "-c", _BARE_PUB, *args] + (["wait"] if sub else []),
+                             capture_output=True, text=True, env=env, timeout=duration_s + 90)
+        pub_cpu = json.loads(pub.stdout.strip().splitlines()[-1])["cpu_s"]
+        sub_cpu = 0.0
+        if sub is not None:
+            so, _ = sub.communicate(timeout=duration_s + 60)
+            sub_cpu = json.loads(so.strip().splitlines()[-1])["cpu_s"]
+    return pub_cpu / duration_s, sub_cpu / duration_s
+
+
+def _spec(rates: dict[str, float], types: dict[str, str]) -> list:
+    return [(t, types[t], r) for t, r in sorted(rates.items()) if r > 0.05 and t in types]
+
+
+# ---------------------------------------------------------------------------------------------- rows
+#: Assumed slowdown of this stack on a Raspberry Pi 4 against this machine (planning figure, not measured on a Pi).
+#: Basis: the Benchmarks Game n-body program in Python, 5 million steps: 158.3 s on a Raspberry Pi 4 Model B at
+#: 1.5 GHz, performance governor (C. Mehta, "Performance Analysis of Languages on Raspberry Pi",
+#: chaitanyamehta.github.io; Python version not stated), 14.6 s of CPU here (CPython 3.11.7, measured with the
+#: same program): 10.8x. CPython 3.11 runs such code about 1.3-1.6x faster than the 3.7-3.9 interpreters of Pi
+#: OS images of that time, so about 7-8x for pure Python; the C/C++ half of the cost (rcl, Fast DDS) scales
+#: like the Pi 4's Linpack/SPEC-style figures, 3-4x. 6x is the planning figure for this mix.
+PI4_FACTOR = 6.0
+PI4_NOTE = ("planning factor: n-body (Python) 158.3 s on a Pi 4 at 1.5 GHz (published, chaitanyamehta.github.io) vs "
+            "14.6 s CPU here = 10.8x, about 7-8x for the same CPython version; C/C++ (rcl, DDS) 3-4x; "
+            "not measured on a Pi")
+
+#: The virtual pool's CPU (simulator and emulators, fraction of a core) in the running windows of the launch layout
+#: on the reference machine: docs/results.md, make bench at c7544b1, machine_nbody_cpu_s 27.2 s (the reference
+#: machine of :data:`~hindrax_ident.tools.benchmarks.machine.REFERENCE_NBODY_CPU_S`)
+REFERENCE_POOL_CPU = 0.203
+
+#: the launch file the launch layout starts (package, path in its share directory), with recording on
+LAUNCH_FILE = ("hindrax_ident", "launch/pool_test.launch.xml")
+#: running-phase windows of the launch layout in ``make bench`` (their medians are the rows)
+RUNNING_WINDOWS = 3
+
+
+def _median(values: list[float]) -> float:
+    return float(statistics.median(values)) if values else float("nan")
+
+
+def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
+    """Rows of the launch layout: per process, total, largest process and messages per second of each phase, each
+    the median over the phase's windows (the notes list every window's value). ``nbody_s``: this machine's n-body
+    time (:func:`~hindrax_ident.tools.benchmarks.machine.nbody_cpu_s`), for the total and the
+    largest process at the
+    reference machine's speed (``..._at_reference_speed``); None: no such rows."""
+    rows: list[dict] = []
+    for phase in ("idle", "running"):
+        wins = launch["phases"][phase]["windows"]
+        names = list(wins[0]["per_process"])
+        per = {n: _median([w["per_process"][n] for w in wins]) for n in names}
+
+        def span(vals):
+            return "" if len(vals) < 2 else "windows: " + " / ".join(f"{100 * v:.1f}" for v in vals)
+
+        for name in names:
+            rows.append({"name": f"launch_{phase}_cpu_{name}", "value": 100 * per[name], "unit": "% of a core",
+                         "target": "<= 15" if phase == "running" else "",
+                         "note": span([w["per_process"][name] for w in wins])})
+        totals = [sum(w["per_process"].values()) for w in wins]
+        total = _median(totals)
+        worst = max(per, key=per.get)
+        rates = [sum(w["rates"].values()) for w in wins]
+        rows += [
+            {"name": f"launch_{phase}_cpu_total", "value": 100 * total, "unit": "% of a core",
+             "target": "<= 40", "note": f"{len(names)} processes of {Path(launch['launch_file']).name}, recorder on; "
+                                        f"{len(wins)} window(s) of {wins[0]['wall_s']:.0f} s"
+                                        + (f" ({span(totals)})" if len(wins) > 1 else "")
+                                        + f"; x{PI4_FACTOR:g} on a Pi 4 = {PI4_FACTOR * 100 * total:.0f} % of one "
+                                          f"Pi core (of 4)"},
+            {"name": f"launch_{phase}_cpu_max_process", "value": 100 * per[worst], "unit": "% of a core",
+             "target": "<= 15", "note": worst},
+            {"name": f"launch_{phase}_msgs_per_s", "value": _median(rates), "unit": "msg/s",
+             "note": "recorded topics, from the bag"},
+        ]
+        if nbody_s:
+            scale = REFERENCE_NBODY_CPU_S / nbody_s
+            rows += [
+                {"name": f"launch_{phase}_cpu_total_at_reference_speed", "value": 100 * total * scale,
+                 "unit": "% of a core",
+                 "note": f"launch_{phase}_cpu_total x {scale:.3g} (machine_nbody_cpu_s {nbody_s:.1f} s here, "
+                         f"{REFERENCE_NBODY_CPU_S:g} s on the reference machine): the figure to compare between "
+                         f"sessions' machines"},
+                {"name": f"launch_{phase}_cpu_max_process_at_reference_speed", "value": 100 * per[worst] * scale,
+                 "unit": "% of a core", "note": worst},
+            ]
+        pools = [w.get("pool") or 0.0 for w in wins]
+        if all(p > 0.0 for p in pools):
+            ratios = [t / p for t, p in zip(totals, pools)]
+            ratio = _median(ratios)
+            worst_ratio = _median([w["per_process"][worst] / p for w, p in zip(wins, pools)])
+            rows += [
+                {"name": f"launch_{phase}_cpu_total_per_pool", "value": ratio, "unit": "x",
+                 "target": "<= 1.3" if phase == "running" else "<= 1.0",
+                 "note": f"launch_{phase}_cpu_total / the virtual pool's CPU in the same windows "
+                         f"({' / '.join(f'{r:.2f}' for r in ratios)}): the pool's code is the same in every run, "
+                         f"so this ratio is the stack's cost in units of this machine's speed for wake-up-heavy "
+                         f"Python (module docstring, \"Machine speed\")"},
+                {"name": f"launch_{phase}_cpu_total_at_reference_pool", "value": 100 * ratio * REFERENCE_POOL_CPU,
+                 "unit": "% of a core",
+                 "note": f"launch_{phase}_cpu_total_per_pool x {100 * REFERENCE_POOL_CPU:g} % (the virtual pool on "
+                         f"the reference machine): the figure to compare between sessions' machines"},
+                {"name": f"launch_{phase}_cpu_max_process_at_reference_pool",
+                 "value": 100 * worst_ratio * REFERENCE_POOL_CPU, "unit": "% of a core", "note": worst},
+            ]
+            for name in names:
+                rows.append({"name": f"launch_{phase}_cpu_{name}_per_pool", "unit": "x",
+                             "value": _median([w["per_process"][name] / p for w, p in zip(wins, pools)]),
+                             "target": "<= 0.1" if phase == "idle" and name.startswith("ident_") else "<= 0.35"})
+        if all("wakeups" in w for w in wins):
+            for name in names:
+                threads = collections.Counter(wins[0]["wakeups"][name][2])
+                rows.append({"name": f"launch_{phase}_wakeups_{name}", "unit": "1/s",
+                             "value": _median([w["wakeups"][name][0] for w in wins]),
+                             "note": "voluntary context switches of every thread per second (each sleep ends in "
+                                     "a wake-up); by thread (first window): "
+                                     + ", ".join(f"{k} {v:.0f}" for k, v in threads.most_common(6))})
+            rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
+                         "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
+        for name in wins[0].get("participants", {}):
+            cpu = [w["participants"][name][0] for w in wins]
+            topics = ", ".join(t for t, _ in PARTICIPANT_PROBES.get(name, [])) or "no topic"
+            rows.append({"name": f"launch_{phase}_cpu_{name}", "unit": "% of a core", "value": 100 * _median(cpu),
+                         "note": f"one more process (a node process's entry point, run_nodes), not in the totals, "
+                                 f"subscribing {topics}; "
+                                 f"{_median([w['participants'][name][1] for w in wins]):.0f} wake-ups/s"
+                                 + (f"; {_median([c / p for c, p in zip(cpu, pools)]):.3f} pool units"
+                                    if all(p > 0.0 for p in pools) else "")})
+        if phase == "running":
+            rows += [
+                {"name": "launch_running_cpu_excluded", "value": 100 * _median([w["pool"] + w["bench"] for w in wins]),
+                 "unit": "% of a core",
+                 "note": f"not in the total: the virtual pool (simulator, emulators) "
+                         f"{100 * _median([w['pool'] for w in wins]):.1f} % and this benchmark's own process "
+                         f"{100 * _median([w['bench'] for w in wins]):.1f} %"},
+                {"name": "launch_running_loadavg", "value": _median([w["loadavg"] for w in wins]), "unit": "",
+                 "note": f"1-minute load average of the machine ({os.cpu_count()} CPUs) during the windows: "
+                         f"above the CPU count, every figure here is inflated (cache misses, waits)"},
+            ]
+            rss = wins[-1]["rss_mb"]
+            rows.append({"name": "launch_rss_total_mb", "value": sum(rss.values()), "unit": "MB",
+                         "note": "resident memory of the launch layout's processes at the end of the running phase: "
+                                 + ", ".join(f"{n} {v:.0f}" for n, v in rss.items())})
+            pss = wins[-1]["pss_mb"]
+            rows.append({"name": "launch_pss_total_mb", "value": sum(pss.values()), "unit": "MB", "target": 400.0,
+                         "note": "proportional set size of the launch layout's processes (shared pages divided among "
+                                 "the processes sharing them; identification and recording on) at the end of the "
+                                 "running phase: " + ", ".join(f"{n} {v:.0f}" for n, v in pss.items())})
+            rows += [{"name": f"launch_pss_mb_{n}", "value": v, "unit": "MB"} for n, v in pss.items()]
+            rows += _imu_rows(wins)
+    return rows
+
+
+def _imu_rows(wins: list[dict]) -> list[dict]:
+    """The running phase's IMU timing rows (:func:`imu_timing` of each window; none when a window has none): the
+    rate, the largest gap and the sample age a subscriber in another process sees. The supervisor stops a campaign
+    below ``safety.min_rate.imu_hz``; the identification's tick is 25 Hz."""
+    timing = [w.get("imu") for w in wins]
+    if not timing or not all(timing):
+        return []
+
+    def each(key: str, scale: float = 1.0) -> str:
+        return "windows: " + " / ".join(f"{scale * t[key]:.3g}" for t in timing)
+
+    return [
+        {"name": "launch_running_imu_rate_hz", "value": _median([t["rate_hz"] for t in timing]), "unit": "Hz",
+         "target": ">= 48", "note": f"{IMU_TOPIC} received by the recorder; {each('rate_hz')}"},
+        {"name": "launch_running_imu_gap_max_s", "value": max(t["gap_max_s"] for t in timing), "unit": "s",
+         "target": "<= 0.1", "note": f"largest interval between two receptions, all windows ({each('gap_max_s')}); "
+                                     f"between two stamps (the poll taken late): "
+                                     f"{max(t['stamp_gap_max_s'] for t in timing):.3f} s"},
+        {"name": "launch_running_imu_age_p99_ms", "value": _median([t["age_p99_ms"] for t in timing]), "unit": "ms",
+         "note": f"reception minus stamp (I2C read, publish, delivery), 99th percentile ({each('age_p99_ms')}); "
+                 f"median {_median([t['age_p50_ms'] for t in timing]):.2f} ms, largest "
+                 f"{max(t['age_max_ms'] for t in timing):.1f} ms"},
+    ]
+
+
+def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
+    wins = launch["phases"][phase]["windows"]
+    topics = sorted({t for w in wins for t in w["rates"]})
+    return {t: _median([w["rates"].get(t, 0.0) for w in wins]) for t in topics}
+
+
+def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
+        duration_s: float | None = None, baselines: bool = True, py_spy_dir: Path | None = None,
+        launch_file: Path | None = None, baseline: str | None = None) -> list[dict]:
+    """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
+    windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
+    s; baselines: the bare rclpy baselines (they need the layouts' rates); launch_file: another launch file for the
+    launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument); baseline: a git ref whose
+    launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
+    the baseline's (``..._vs_baseline``)."""
+    # windows: 10 s per phase and layout (the launch layout's running phase: 3 of them, medians), 8 s per baseline
+    duration_s = duration_s or (8.0 if quick else 10.0)
+    windows = windows or (1 if quick else RUNNING_WINDOWS)
+    base_s = 6.0 if quick else 8.0
+    inproc = launch = None
+    before = baseline_launch(baseline, windows, duration_s) if baseline else None
+    nbody_before = nbody_cpu_s()  # the machine's speed before and after the layouts (it drifts within minutes)
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-stack-") as tmpdir:
+        tmp = Path(tmpdir)
+        if "inproc" in layouts:
+            inproc = _in_process(duration_s, tmp)
+        if "launch" in layouts:
+            launch = _launch(duration_s, tmp, windows=windows, py_spy_dir=py_spy_dir, launch_file=launch_file)
+            launch["types"] = BagReader(launch["bag"]).topics
+    types = dict(launch["types"]) if launch else {}
+    if inproc:
+        types.update(inproc["types"])
+    types.setdefault("/rosout", "rcl_interfaces/msg/Log")
+    types.setdefault("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+
+    nbody_after = nbody_cpu_s()
+    nbody_s = (nbody_before + nbody_after) / 2
+    rows: list[dict] = [
+        {"name": "pi4_factor_assumed", "value": PI4_FACTOR, "unit": "x", "note": PI4_NOTE},
+        {"name": "machine_nbody_cpu_s", "value": nbody_s, "unit": "s",
+         "note": f"this machine's Python speed: CPU time of 5 million n-body steps (benchmarks/machine.py, least of "
+                 f"5 runs of 100,000), mean of {nbody_before:.1f} s before the layouts and {nbody_after:.1f} s "
+                 f"after; {REFERENCE_NBODY_CPU_S:g} s on the reference machine, about 47 s on the one of the "
+                 f"previous session (by its virtual pool's CPU)"},
+    ]
+    if inproc:
+        for phase in ("idle", "running"):
+            ph = inproc["phases"][phase]
+            for name, v in ph["per_node"].items():
+                rows.append({"name": f"inproc_{phase}_cpu_{name}", "value": 100 * v, "unit": "% of a core"})
+            rows.append({"name": f"inproc_{phase}_msgs_per_s", "value": sum(ph["rates"].values()),
+                         "unit": "msg/s", "note": "recorded topics"})
+            if phase == "idle":
+                rows.append({"name": "cpu_stack_excluding_simulator", "value": 100 * ph["stack"],
+                             "unit": "% of a core", "note": "one process, identification idle, 50 Hz wrench stream, "
+                                                           "recorder on; emulators and simulator excluded"})
+            else:
+                rows.append({"name": "inproc_running_cpu_stack", "value": 100 * ph["stack"], "unit": "% of a core",
+                             "note": "one process, identification running surge, recorder on"})
+        if baselines:
+            idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
+            bare_pub, _ = _bare(idle_spec, base_s, with_subscriber=False)
+            idle_msgs = sum(r for *_, r in idle_spec)
+            rows += [
+                {"name": "cpu_bare_rclpy_same_topics", "value": 100 * bare_pub, "unit": "% of a core",
+                 "note": f"publishers only, {len(idle_spec)} topics, {idle_msgs:.0f} msg/s (one-process idle phase)"},
+                {"name": "stack_vs_bare_ratio",
+                 "value": inproc["phases"]["idle"]["stack"] / bare_pub if bare_pub else -1,
+                 "unit": "x", "note": "cpu_stack_excluding_simulator / cpu_bare_rclpy_same_topics (stack includes "
+                                      "the recorder and every subscriber; the baseline has none)"},
+            ]
+    if launch:
+        rows += launch_rows(launch, nbody_s)
+        running = _phase_rates(launch, "running")
+        idle = _phase_rates(launch, "idle")
+        if baselines:
+            launch_spec = _spec(running, types)
+            pubsub_pub, pubsub_sub = _bare(launch_spec, base_s, with_subscriber=True)
+            pubsub = pubsub_pub + pubsub_sub
+            launch_total = next(r["value"] for r in rows if r["name"] == "launch_running_cpu_total") / 100
+            rows += [
+                {"name": "cpu_bare_rclpy_pub_sub", "value": 100 * pubsub, "unit": "% of a core",
+                 "note": f"bare publisher {100 * pubsub_pub:.1f} % + bare raw subscriber {100 * pubsub_sub:.1f} %, "
+                         f"{len(launch_spec)} topics of the launch layout's running phase"},
+                {"name": "launch_vs_bare_pubsub_ratio", "value": launch_total / pubsub if pubsub else -1, "unit": "x",
+                 "target": "<= 1.2", "note": "launch_running_cpu_total / cpu_bare_rclpy_pub_sub"},
+            ]
+        if before is not None:
+            rows += baseline_rows(rows, before, baseline)
+        for topic, rate in running.items():
+            rows.append({"name": f"rate {topic}", "value": round(rate, 2), "unit": "msg/s",
+                         "note": f"launch layout, running; idle {idle.get(topic, 0.0):.2f}"})
+    if inproc:
+        rows += [
+            {"name": "simulator_real_time_factor", "value": inproc["phases"]["idle"]["sim_rtf"], "unit": "x",
+             "note": "achieved in the one-process graph (configured 1.0)"},
+            {"name": "recorder_drops", "value": inproc["dropped"], "unit": "messages", "target": "0"},
+        ]
+    # the command path the controller waits on: wrench -> PCA9685 registers through the actuation process's nodes
+    rows += [dict(r, name=f"actuation_{r['name']}") for r in wrench_to_registers(300 if quick else 1000)
+             if r["name"].startswith("wrench_to_registers")]
+    return rows
+
+
+def baseline_launch(ref: str, windows: int, duration_s: float) -> list[dict]:
+    """The launch layout's rows of the code at git ref ``ref``: a detached worktree of this checkout's repository
+    at ``ref`` (in a temporary folder, removed after), its own stack benchmark (``--layouts launch --no-baselines``)
+    run by this venv's interpreter with PYTHONPATH at the worktree's two Python packages, so that every process of
+    that layout (its launch file, its nodes, its virtual pool) runs the baseline's code. Raises RuntimeError when
+    git refuses the ref or the baseline's benchmark fails (the end of its output)."""
+    repo = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=Path(__file__).parent, capture_output=True,
+                          text=True, check=True).stdout.strip()
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-baseline-") as tmpdir:
+        tree = Path(tmpdir) / "tree"
+        made = subprocess.run(["git", "-C", repo, "worktree", "add", "--detach", str(tree), ref], capture_output=True,
+                              text=True)
+        if made.returncode != 0:
+            raise RuntimeError(f"--baseline {ref!r}: git worktree add failed: {made.stderr.strip()}")
+        try:
+            out = Path(tmpdir) / "rows.json"
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+                [str(tree / "src" / "hindrax_drivers"), str(tree / "src" / "hindrax_ident")]))
+            print(f"stack benchmark: the baseline {ref} first", flush=True)
+            done = subprocess.run([python_executable(), "-m",
+                                   "hindrax_ident.tools.benchmarks.stack", "--layouts", "launch",
+                                   "--no-baselines", "--windows", str(windows), "--window-s", str(duration_s),
+                                   "--json", str(out)], env=env, cwd=tree, capture_output=True, text=True)
+            if done.returncode != 0 or not out.is_file():
+                tail = (done.stdout + done.stderr)[-3000:]
+                raise RuntimeError(f"--baseline {ref}: its stack benchmark failed:\n{tail}")
+            return json.loads(out.read_text())
+        finally:
+            subprocess.run(["git", "-C", repo, "worktree", "remove", "--force", str(tree)], capture_output=True)
+
+
+def baseline_rows(rows: list[dict], before: list[dict], ref: str) -> list[dict]:
+    """Today's launch-layout figures over the baseline's, measured in the same run (:func:`baseline_launch`): per
+    phase the CPU total, total per pool unit, largest process and wake-ups (and PSS, the IMU's rate and largest gap in
+    the running phase), as ratios, and the baseline's CPU per process."""
+    now = {r["name"]: r["value"] for r in rows}
+    then = {r["name"]: r["value"] for r in before}
+    out = []
+    for phase in ("running", "idle"):
+        more = ("launch_pss_total_mb", "launch_running_imu_rate_hz", "launch_running_imu_gap_max_s") \
+            if phase == "running" else ()
+        for name in [f"launch_{phase}_{key}" for key in ("cpu_total", "cpu_total_per_pool", "cpu_max_process",
+                                                        "wakeups_total")] + list(more):
+            if name in now and then.get(name):
+                out.append({"name": f"{name}_vs_baseline", "value": now[name] / then[name], "unit": "x",
+                            "note": f"today {now[name]:.4g} / baseline {ref} {then[name]:.4g}, same run"})
+        out.append({"name": f"launch_{phase}_cpu_baseline_processes", "value": then.get(f"launch_{phase}_cpu_total",
+                                                                                       float("nan")),
+                    "unit": "% of a core", "note": f"baseline {ref}: " + ", ".join(
+                        f"{r['name'][len(f'launch_{phase}_cpu_'):]} {r['value']:.1f}" for r in before
+                        if re.fullmatch(rf"launch_{phase}_cpu_[a-z_]+", r["name"]) and r["unit"] == "% of a core"
+                        and not re.search(r"_(total|max_process|excluded)", r["name"]))})
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m hindrax_ident.tools.benchmarks.stack``: the stack benchmark alone, with the
+    options ``make bench``
+    does not take (see ``--help``); prints the rows and writes them as JSON with ``--json``."""
+    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.stack",
+                                     description="The Pi budget: CPU of the vehicle graph in the launch layout "
+                                                 "(one process per <node> of pool_test.launch.xml) and in one "
+                                                 "process. CPU = process CPU time / wall time.")
+    parser.add_argument("--layouts", default="inproc,launch", help="inproc, launch or both (default both)")
+    parser.add_argument("--windows", type=int, default=None,
+                        help=f"running windows of the launch layout (default {RUNNING_WINDOWS}); rows are medians")
+    parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")
+    parser.add_argument("--no-baselines", action="store_true", help="skip the bare rclpy baselines")
+    parser.add_argument("--py-spy", type=Path, default=None, metavar="DIR",
+                        help="record every launch-layout process with py-spy during the first running window "
+                             "(DIR/<process>.txt, raw collapsed stacks)")
+    parser.add_argument("--launch-file", type=Path, default=None,
+                        help="launch file of the launch layout (default: hindrax_ident's pool_test.launch.xml with "
+                             "output_dir set; another file must declare output_dir too)")
+    parser.add_argument("--baseline", default=None, metavar="GIT_REF",
+                        help="also measure the launch layout of this commit first, in the same run (a detached git "
+                             "worktree, this venv, PYTHONPATH at it): rows ..._vs_baseline")
+    parser.add_argument("--quick", action="store_true", help="one 8 s window")
+    parser.add_argument("--json", type=Path, default=None, help="also write the rows to this file")
+    args = parser.parse_args(argv)
+    layouts = tuple(x for x in args.layouts.split(",") if x)
+    bad = [x for x in layouts if x not in ("inproc", "launch")]
+    if bad or not layouts:
+        parser.error(f"--layouts {args.layouts!r}: choose from inproc, launch")
+    rows = run(quick=args.quick, layouts=layouts, windows=args.windows, duration_s=args.window_s,
+               baselines=not args.no_baselines, py_spy_dir=args.py_spy, launch_file=args.launch_file,
+               baseline=args.baseline)
+    width = max(len(r["name"]) for r in rows)
+    for r in rows:
+        print(f"{r['name']:<{width}} {r['value']:10.4g} {r.get('unit', ''):<12} {r.get('target', ''):<6} "
+              f"{r.get('note', '')}")
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

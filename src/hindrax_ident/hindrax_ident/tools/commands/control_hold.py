@@ -1,0 +1,134 @@
+"""``hindrax control hold [--depth-m D | --altitude-m A] [--heading-deg H] [--vehicle NAME]`` and
+``hindrax control release [--vehicle NAME]``: the running controller of a vehicle holds, or lets go.
+
+``hold`` with a depth or an altitude sends that setpoint (hindrax_msgs/ControlSetpoint on ``controller/setpoint``,
+depth of base_link below the surface or altitude above the floor, m; the heading given, else the one the controller
+measures now; zero velocity over the bottom), waits until the controller's status carries it, then enables the
+controller (``controller/enable``, std_srvs/SetBool). Without a target it calls ``controller/hold`` (hold depth and
+heading where the vehicle is). ``release`` disables the controller (zero wrench). The controller refuses while the
+ESC is not armed or an identification goal owns the wrench (docs/control.md §3); the refusal is printed and the
+exit code is 1.
+
+On the topside the names are the gateway's ``/<name>/controller/...`` (docs/architecture.md §8.2); on the vehicle
+they are the controller's own. The vehicle is the one named, or the only one on the domain
+(:mod:`hindrax_ident.tools.commands.vehicle`). Prints one line, ``<name>: <the controller's
+message>``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from typing import Any
+
+from .common import CommandError
+from .vehicle import Target, add_vehicle_arguments, find_vehicle, with_ros
+
+__all__ = ["add_arguments", "run"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options of ``hold`` or ``release`` (the verb is the subcommand's own name) to ``parser``."""
+    hold = parser.prog.split()[-1] == "hold"
+    parser.set_defaults(_hold=hold)
+    add_vehicle_arguments(parser)
+    parser.add_argument("--timeout", type=float, default=10.0, metavar="S",
+                        help="how long to wait for the controller's answer, s (default 10)")
+    if hold:
+        target = parser.add_mutually_exclusive_group()
+        target.add_argument("--depth-m", type=float, default=None, metavar="D",
+                            help="hold this depth of base_link below the surface, m (positive down)")
+        target.add_argument("--altitude-m", type=float, default=None, metavar="A",
+                            help="hold this altitude above the floor (Ping1D range), m")
+        parser.add_argument("--heading-deg", type=float, default=None, metavar="H",
+                            help="hold this compass heading, deg clockwise from north (default: the heading now)")
+
+
+def _check(args: argparse.Namespace) -> None:
+    for key in ("depth_m", "altitude_m", "heading_deg"):
+        value = getattr(args, key, None)
+        if value is not None and not math.isfinite(value):
+            raise CommandError(f"--{key.replace('_', '-')} {value}: allowed a finite number")
+    if getattr(args, "depth_m", None) is not None and args.depth_m < 0.0:
+        raise CommandError(f"--depth-m {args.depth_m:g}: allowed >= 0 (positive down)")
+    if getattr(args, "altitude_m", None) is not None and args.altitude_m <= 0.0:
+        raise CommandError(f"--altitude-m {args.altitude_m:g}: allowed > 0")
+
+
+def _wait(executor: Any, done, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        if time.monotonic() > deadline:
+            raise CommandError(f"{what} within {timeout_s:g} s (check with hindrax health on the vehicle)")
+        executor.spin_once(timeout_sec=0.05)
+
+
+def _call(node: Any, executor: Any, spec: tuple[Any, str, Any], timeout_s: float) -> Any:
+    srv_type, name, request = spec
+    client = node.create_client(srv_type, name)
+    _wait(executor, client.service_is_ready, timeout_s, f"no {name} service")
+    future = client.call_async(request)
+    _wait(executor, future.done, timeout_s, f"{name} did not answer")
+    return future.result()
+
+
+def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Namespace) -> None:
+    """Publish the setpoint until the controller's status shows it (a topic: nothing else says it arrived)."""
+    from hindrax_msgs.msg import ControllerStatus, ControlSetpoint
+
+    statuses: list = []
+    node.create_subscription(ControllerStatus, target.resolve("controller/status", "controller/status"),
+                             statuses.append, 10)
+    pub = node.create_publisher(ControlSetpoint, target.resolve("controller/setpoint", "controller/setpoint"), 10)
+    _wait(executor, lambda: statuses and pub.get_subscription_count() > 0, args.timeout,
+          f"{target.name}: no controller status")
+    msg = ControlSetpoint()
+    msg.header.frame_id = "base_link"
+    if args.depth_m is not None:
+        msg.vertical_mode, msg.depth_m, value = ControlSetpoint.VERTICAL_DEPTH, float(args.depth_m), "depth_setpoint_m"
+    else:
+        msg.vertical_mode, msg.altitude_m = ControlSetpoint.VERTICAL_ALTITUDE, float(args.altitude_m)
+        value = "altitude_setpoint_m"
+    heading = math.radians(args.heading_deg) if args.heading_deg is not None else statuses[-1].heading_rad
+    msg.hold_heading, msg.heading_rad = math.isfinite(heading), float(heading) if math.isfinite(heading) else 0.0
+    msg.hold_velocity, msg.surge_m_s, msg.sway_m_s = True, 0.0, 0.0
+    wanted = msg.depth_m if msg.vertical_mode == ControlSetpoint.VERTICAL_DEPTH else msg.altitude_m
+    sent = [0.0]
+
+    def arrived() -> bool:
+        s = statuses[-1]
+        if s.vertical_mode == msg.vertical_mode and abs(getattr(s, value) - wanted) < 1e-9:
+            return True
+        if time.monotonic() - sent[0] > 0.5:  # again: a relayed topic's first message may meet no subscriber yet
+            msg.header.stamp = node.get_clock().now().to_msg()
+            pub.publish(target.sign("controller/setpoint", msg))
+            sent[0] = time.monotonic()
+        return False
+    _wait(executor, arrived, args.timeout, f"{target.name}: the controller did not take the setpoint")
+
+
+def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple[str, bool, str]:
+    """Do ``hold`` or ``release`` on the vehicle found. Returns (vehicle name, success, the controller's message).
+    Raises :class:`CommandError` for no vehicle or no answer."""
+    from std_srvs.srv import SetBool, Trigger
+
+    target = find_vehicle(node, executor, args.vehicle, args.discovery_timeout)
+    enable = lambda on: target.service("controller/enable", "controller/enable", SetBool, data=on)  # noqa: E731
+    if not args._hold:
+        answer = _call(node, executor, enable(False), args.timeout)
+    elif args.depth_m is None and args.altitude_m is None:
+        answer = _call(node, executor, target.service("controller/hold", "controller/hold", Trigger), args.timeout)
+    else:
+        _send_setpoint(node, executor, target, args)
+        answer = _call(node, executor, enable(True), args.timeout)
+    return target.name, bool(answer.success), str(answer.message)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the command with the parsed ``args``; returns the process exit code."""
+    _check(args)
+    name, ok, message = with_ros(lambda node, ex: hold_or_release(node, ex, args), "hindrax_control")
+    if not ok:
+        raise CommandError(f"{name}: {'hold' if args._hold else 'release'} refused: {message}")
+    print(f"{name}: {message}", flush=True)
+    return 0

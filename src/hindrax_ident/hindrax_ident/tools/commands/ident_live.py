@@ -1,0 +1,284 @@
+"""``hindrax ident start | status | continue``: the identification campaign on a running stack (vehicle or virtual
+pool).
+
+* ``hindrax ident start [--dofs surge,heave,...] [--levels N] [--fractions F1,F2,...] [--calibrate ballast,line_pull
+  [--calibration-only]] [--server-timeout S]``
+  sends one ``run_identification`` goal (hindrax_msgs/action/RunIdentification) to the identification node of a
+  running graph (``hindrax bringup``, with or without ``--sim``) and prints its feedback as one updating line on a
+  terminal (:mod:`hindrax_ident.progress_line`; in a log, a line only when it changes): DOF, level, command,
+  progress; a calibration step's operator prompt (``>>> [attach_ballast]
+  calibration: attach the ballast (8.56 N in water), then call continue``) is printed once when it appears. Ctrl-C
+  cancels the goal: the node brings the vehicle to a zero wrench and holds it until the ESC reports neutral widths, then
+  the action ends; the command waits for that end (a second Ctrl-C stops waiting). The result line carries the node's
+  message and the final online estimates. Exit 0 when the campaign completed, 1 when it was rejected, aborted or
+  cancelled, or no server answered.
+* ``hindrax ident status [--timeout S]`` prints the next ``identification/status`` message (ManeuverStatus):
+  phase, DOF, level, command, progress and the current step. Exit 1 when none arrives within the timeout.
+* ``hindrax ident continue [--timeout S]`` calls ``identification/continue`` (std_srvs/Trigger) once the operator
+  did what the prompt asked (ballast attached, line pulled, ...): prints the node's answer; exit 1 when nothing
+  was awaited (the reason is printed) or no service answered.
+
+Each subcommand talks to the vehicle named by ``--vehicle NAME``, or to the only one on the domain, and refuses
+with one line when it sees none or several (:mod:`hindrax_ident.tools.commands.vehicle`): on the
+topside through the
+vehicle's gateway (``/<name>/run_identification``, ``/<name>/identification/...``), on the vehicle itself directly.
+
+The ESC output must be armed first (``hindrax arm``); the node refuses a goal otherwise.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import time
+from typing import Any, Callable
+
+from .common import CommandError
+from .vehicle import Target, add_vehicle_arguments, find_vehicle, with_ros
+
+__all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign", "call_continue"]
+
+_PHASE_NAMES = {0: "idle", 1: "positioning", 2: "running", 3: "returning", 4: "done", 5: "aborted"}
+_ROTATIONS = ("roll", "pitch", "yaw")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Arguments of ``start`` or ``status`` (the subcommand is the last word of ``parser.prog``)."""
+    which = parser.prog.split()[-1]
+    parser.set_defaults(_live=which)
+    if which == "start":
+        parser.add_argument("--dofs", default="", help="comma-separated DOFs, in order (default: all six)")
+        parser.add_argument("--levels", type=int, default=0,
+                            help="levels per DOF (default 0: identification.levels_per_dof of the running node)")
+        parser.add_argument("--fractions", default="",
+                            help="explicit level fractions of each DOF's authority, comma-separated, each in (0, 1]")
+        parser.add_argument("--calibrate", default="",
+                            help="reference steps before the ladders, comma-separated: thrust (= ballast, float, "
+                                 "line_pull, line_pull_negative), or some of ballast, float, line_pull, "
+                                 "line_pull_negative; tilt_decay, inclining (the node prompts; answer with `hindrax "
+                                 "ident continue`; docs/identification.md §6.1)")
+        parser.add_argument("--calibration-only", action="store_true",
+                            help="run only the --calibrate steps (no ladders)")
+        parser.add_argument("--server-timeout", type=float, default=10.0,
+                            help="wall time to wait for the run_identification server, s (default 10)")
+    elif which == "continue":
+        parser.add_argument("--timeout", type=float, default=10.0,
+                            help="wall time to wait for the identification/continue service and its answer, s "
+                                 "(default 10)")
+    else:
+        parser.add_argument("--timeout", type=float, default=5.0,
+                            help="wall time to wait for a status message, s (default 5)")
+    add_vehicle_arguments(parser)
+
+
+def _unit(dof: str) -> str:
+    return "N m" if dof in _ROTATIONS else "N"
+
+
+def format_feedback(fb: Any) -> str:
+    """One line of a RunIdentification feedback: DOF, level i/n, command with its unit, or else the phase and the
+    step the node is in (e.g. ``calibration (ballast): hold depth without the ballast``); progress."""
+    where = (f"{fb.dof} level {fb.level_index + 1}/{fb.level_count} {fb.level_command:+.2f} {_unit(fb.dof)}"
+             if fb.dof else (fb.phase or "positioning") + (f": {fb.step}" if fb.step else ""))
+    return f"{where}  progress {100.0 * fb.progress:5.1f} %"
+
+
+def format_status(msg: Any) -> str:
+    """One line of a ManeuverStatus: phase, DOF, level, command, progress, message."""
+    phase = _PHASE_NAMES.get(int(msg.phase), str(msg.phase))
+    parts = [f"phase {phase}"]
+    if msg.dof:
+        parts.append(f"dof {msg.dof} level {msg.level_index + 1}/{msg.level_count} "
+                     f"command {msg.level_command:+.2f} {_unit(msg.dof)}")
+    parts.append(f"progress {100.0 * msg.progress:.1f} %")
+    if msg.message:
+        parts.append(msg.message)
+    return "  ".join(parts)
+
+
+def _parse_calibrate(args: argparse.Namespace) -> list[str]:
+    """The ``--calibrate`` steps. Raises :class:`CommandError` for an unknown step or ``--calibration-only``
+    without one."""
+    from ...identification.online.executive import CALIBRATION_STEPS
+
+    steps = [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
+    bad = [c for c in steps if c not in CALIBRATION_STEPS]
+    if bad:
+        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+    if getattr(args, "calibration_only", False) and not steps:
+        raise CommandError("--calibration-only needs --calibrate STEP[,STEP]")
+    return steps
+
+
+def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float]]:
+    from hindrax_drivers.config import DOFS
+
+    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
+    bad = [d for d in dofs if d not in DOFS]
+    if bad:
+        raise CommandError(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
+    if args.levels < 0:
+        raise CommandError(f"--levels: {args.levels} is not >= 0")
+    try:
+        fractions = [float(x) for x in str(args.fractions).split(",") if x.strip()]
+    except ValueError:
+        raise CommandError(f"--fractions: not numbers: {args.fractions!r}") from None
+    if any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in fractions):
+        raise CommandError(f"--fractions: each must be in (0, 1], got {fractions}")
+    return dofs, int(args.levels), fractions
+
+
+def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fractions: list[float],
+                   server_timeout_s: float, print_line: Callable[[str], None] = print,
+                   cancel_requested: Callable[[], bool] = lambda: False,
+                   give_up: Callable[[], bool] = lambda: False, calibrate: list[str] | None = None,
+                   calibration_only: bool = False, action_name: str = "run_identification",
+                   sign: Callable[[Any], Any] = lambda goal: goal) -> tuple[bool, str]:
+    """Send one goal from ``node`` (spun by ``executor``), print its feedback (an operator prompt once, when it
+    appears, prefixed ``>>>``), cancel it once ``cancel_requested()`` turns True, and wait for its end
+    (``give_up()`` True stops waiting after a cancel). ``calibrate`` / ``calibration_only``: the goal's fields.
+    ``action_name``: the action (``/<vehicle>/run_identification`` through the gateway, on the topside); ``sign``:
+    signs the goal for the gateway (:meth:`~hindrax_ident.tools.commands.vehicle.Target.sign`).
+    Returns (success, message). Raises :class:`CommandError` when no server answers or the goal is rejected."""
+    from rclpy.action import ActionClient
+
+    from hindrax_drivers.action_goal import GoalNotAnswered, GoalSender
+    from hindrax_msgs.action import RunIdentification
+
+    from ...progress_line import ProgressLine
+
+    client = ActionClient(node, RunIdentification, action_name)
+    goals = GoalSender(node, client, action_name)
+    spin = lambda: executor.spin_once(timeout_sec=0.1)  # noqa: E731
+    deadline = time.monotonic() + server_timeout_s
+    while not client.server_is_ready():
+        if time.monotonic() > deadline:
+            raise CommandError(f"no run_identification server within {server_timeout_s:g} s: is the stack running "
+                               "(hindrax bringup)?")
+        spin()
+    goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions,
+                                  calibrate=list(calibrate or []), calibration_only=bool(calibration_only))
+    goal = sign(goal)
+    last_prompt = [""]
+    # the feedback comes several times a second: one updating line on a terminal, each new state once elsewhere
+    progress = ProgressLine(print_line, tty=None if print_line is print else False)
+    print_line = progress.line
+
+    def on_feedback(m) -> None:
+        fb = m.feedback
+        if fb.prompt:
+            if fb.prompt != last_prompt[0]:
+                print_line(f">>> {fb.prompt} (hindrax ident continue)")
+        else:
+            progress.update(format_feedback(fb))
+        last_prompt[0] = fb.prompt
+
+    try:
+        handle = goals.send(goal, spin, max(server_timeout_s, 5.0), feedback_callback=on_feedback)
+    except GoalNotAnswered as exc:
+        raise CommandError(f"run_identification: {exc}; the node's status: hindrax ident status") from None
+    if not handle.accepted:
+        raise CommandError("goal rejected: a campaign is already running or the goal is invalid "
+                           "(see the identification node's log)")
+    what = "calibration only" if calibration_only else (', '.join(dofs) or 'all DOFs')
+    cal = f" after calibration {', '.join(calibrate)}" if (calibrate and not calibration_only) else ""
+    print_line(f"campaign started: {what}{cal}; Ctrl-C cancels")
+    cancelled = False
+    while (result := goals.poll_result(handle)) is None:
+        if not cancelled and cancel_requested():
+            cancelled = True
+            print_line("cancelling: the vehicle is brought to a zero wrench and held ...")
+        if cancelled:
+            goals.cancel(handle)
+        if cancelled and give_up():
+            return False, "stopped waiting for the end of the cancelled goal"
+        spin()
+    res = result.result
+    for e in res.estimates:
+        values = ", ".join(f"{n} {v:.4g}" for n, v in zip(e.parameter_names, e.values))
+        print_line(f"  {e.dof}: {values}")
+    return bool(res.success), str(res.message)
+
+
+def _with_ros(body: Callable[[Any, Any], int]) -> int:
+    return with_ros(body, "hindrax_ident_cli")  # Ctrl-C is ours (cancel)
+
+
+def _on_vehicle(args: argparse.Namespace, body: Callable[[Any, Any, Target], Any]) -> Any:
+    """``body(node, executor, target)`` with the vehicle the arguments name (:func:`find_vehicle`)."""
+    return _with_ros(lambda node, ex: body(node, ex, find_vehicle(node, ex, args.vehicle, args.discovery_timeout)))
+
+
+def _start(args: argparse.Namespace) -> int:
+    dofs, levels, fractions = _parse(args)
+    calibrate = _parse_calibrate(args)
+    interrupts = []
+    previous = signal.signal(signal.SIGINT, lambda *_: interrupts.append(time.monotonic()))
+    try:
+        ok, message = _on_vehicle(args, lambda node, ex, target: start_campaign(
+            node, ex, dofs, levels, fractions, args.server_timeout, lambda s: print(s, flush=True),
+            cancel_requested=lambda: len(interrupts) >= 1, give_up=lambda: len(interrupts) >= 2,
+            calibrate=calibrate, calibration_only=bool(args.calibration_only),
+            action_name=target.resolve("run_identification", "run_identification"),
+            sign=lambda goal: target.sign("run_identification", goal)))
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    print(f"result: {'complete' if ok else 'not complete'}: {message}", flush=True)
+    return 0 if ok else 1
+
+
+def _status(args: argparse.Namespace) -> int:
+    from hindrax_msgs.msg import ManeuverStatus
+
+    def body(node, executor, target) -> int:
+        got: list = []
+        node.create_subscription(ManeuverStatus, target.resolve("identification/status", "identification/status"),
+                                 got.append, 10)
+        deadline = time.monotonic() + args.timeout
+        while not got and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        if not got:
+            raise CommandError(f"no identification/status within {args.timeout:g} s: is the stack running "
+                               "(hindrax bringup)?")
+        print(format_status(got[-1]), flush=True)
+        return 0
+
+    return _on_vehicle(args, body)
+
+
+def call_continue(node: Any, executor: Any, timeout_s: float, target: Target | None = None) -> tuple[bool, str]:
+    """Call ``identification/continue`` (std_srvs/Trigger; through the gateway on the topside, signed, when
+    ``target`` is a topside one) from ``node`` (spun by ``executor``) once; returns the node's (success, message).
+    Raises :class:`CommandError` when the service is not there or does not answer within ``timeout_s`` (wall). Not
+    repeated on a lost answer: a second continue could skip the next prompt."""
+    from std_srvs.srv import Trigger
+
+    name = "identification/continue"
+    srv, service, request = (target or Target("", False)).service(name, name, Trigger)
+    client = node.create_client(srv, service)
+    deadline = time.monotonic() + timeout_s
+    while not client.service_is_ready():
+        if time.monotonic() > deadline:
+            raise CommandError(f"no identification/continue service within {timeout_s:g} s: is the stack running "
+                               "(hindrax bringup)?")
+        executor.spin_once(timeout_sec=0.1)
+    fut = client.call_async(request)
+    while not fut.done():
+        if time.monotonic() > deadline:
+            raise CommandError(f"identification/continue did not answer within {timeout_s:g} s; check with "
+                               "hindrax ident status before calling it again")
+        executor.spin_once(timeout_sec=0.1)
+    res = fut.result()
+    return bool(res.success), str(res.message)
+
+
+def _continue(args: argparse.Namespace) -> int:
+    ok, message = _on_vehicle(args, lambda node, ex, target: call_continue(node, ex, args.timeout, target))
+    print(f"{'continued' if ok else 'not continued'}: {message}", flush=True)
+    return 0 if ok else 1
+
+
+def run(args: argparse.Namespace) -> int:
+    """Dispatch on the subcommand."""
+    which = getattr(args, "_live", "")
+    return _start(args) if which == "start" else (_continue(args) if which == "continue" else _status(args))

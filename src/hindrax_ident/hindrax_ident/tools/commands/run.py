@@ -1,0 +1,333 @@
+"""``hindrax run [--dofs surge,heave,...] [--levels N] [--rtf X] [--seed N] [--out DIR] [--in-process]``: the main job.
+
+Default: the campaign through the ROS graph, in one process with a SingleThreadedExecutor
+(:func:`hindrax_ident.bringup.build_graph`): the virtual pool simulator, the five device emulators, the four
+sensor drivers, the ESC node, the thrust allocation, the identification node and the recorder. The vehicle is
+armed through ``esc/set_armed`` (the operator's service, after ``esc.arming_time_s`` at neutral), the campaign
+runs as one ``run_identification`` action goal (progress lines from its feedback), then the vehicle is
+disarmed, the bag closed and the offline identification runs on the bag
+(:mod:`hindrax_ident.identification.bag_input.from_bag`). The simulator runs in lock-step with the identification
+node's control tick (:meth:`~hindrax_ident.sim.node.SimulatorNode.add_step_gate`), so CPU load slows the run
+but does not change it.
+
+``--in-process`` (also ``hindrax ident campaign``): the same campaign stepped in-process on the simulator
+(:mod:`hindrax_ident.sim.campaign`: the same manoeuvres, sensor models and estimators, no drivers,
+no ROS graph, no bag), about four times faster; for quick studies of the method.
+
+Output directory: a new ``<recording.output_root>/sim_<DOFs>_<time>/`` (``sim-in-process_...`` for
+``--in-process``; a second run in the same second gets ``_1`` and one line says so), with a ``latest`` link beside
+it moved once the run has completed (:mod:`hindrax_ident.output_dirs`), or ``--out``, which must be new or empty.
+It holds ``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`),
+``report/index.html`` with its plots, and (graph) ``bag/`` (rosbag2 MCAP layout). At the end a table is printed:
+per DOF and parameter the identified value with its std, the configured value ("truth" in simulation) and the
+relative error. Exit 0, or 1 when the campaign aborted or produced no estimate.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import time
+from pathlib import Path
+
+from ... import results_doc
+from .common import CommandError, add_config_argument, load_vehicle
+
+__all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``hindrax run`` (and ``hindrax ident campaign``)."""
+    from hindrax_drivers.config import DOFS
+
+    if parser.prog.endswith("campaign"):
+        parser.description = ("Run the identification campaign in-process on the simulator (no ROS graph, no bag) "
+                              "and write identification.yaml and report/index.html.")
+    else:
+        parser.description = ("Run the identification campaign on the virtual pool through the whole ROS node graph "
+                              "(simulator, device emulators, drivers, ESC, allocation, identification node, recorder "
+                              "-> bag/), identify from the bag and write identification.yaml and report/index.html.")
+    parser.add_argument("--dofs", default=",".join(DOFS), help=f"comma-separated DOFs (default {','.join(DOFS)})")
+    parser.add_argument("--levels", type=int, default=None,
+                        help="levels per DOF (default identification.levels_per_dof)")
+    parser.add_argument("--rtf", type=float, default=0.0, help="real-time factor, 0 = as fast as possible (default)")
+    parser.add_argument("--seed", type=int, default=None, help="simulation seed (default simulation.seed)")
+    parser.add_argument("--out", default=None, help="output directory (default runs/<UTC timestamp>/)")
+    results_doc.add_argument(parser)
+    add_config_argument(parser)
+    parser.add_argument("--truth", default=None,
+                        help="truth file of the virtual pool: overlay of the vehicle file + disturbances, read by the "
+                             "simulator and emulators only (default ros_ws/config/truth/default.yaml)")
+    parser.add_argument("--max-level-duration", type=float, default=None,
+                        help="longest run of one level, s (default identification.max_level_duration_s)")
+    parser.add_argument("--calibrate", default="",
+                        help="reference steps before the ladders, comma-separated: thrust (= ballast, float, "
+                             "line_pull, line_pull_negative: every step the thrust scales per thruster group and "
+                             "rotation direction need, docs/identification.md §6.1), or some of them: ballast (a known "
+                             "sinker), float (a known float, calibration.float_*), line_pull (+x, +y), "
+                             "line_pull_negative (-x, -y) (known forces: the thrust scales are applied to the "
+                             "identification, identification.yaml gains calibration and joint sections), tilt_decay "
+                             "(roll and pitch free decay: rigid + added inertia with "
+                             "--restoring-n-m-per-rad or the inclining step, section free_decay), inclining (restoring "
+                             "stiffness C of roll and pitch from a known mass at a known arm, calibration.inclining_*; "
+                             "section inclining); through the graph the virtual pool plays "
+                             "the operator (applies the known force, calls identification/continue)")
+    parser.add_argument("--ballast-mass-kg", type=float, default=None,
+                        help="ballast mass, kg (default calibration.ballast_mass_kg of the vehicle file)")
+    parser.add_argument("--ballast-volume-m3", type=float, default=None,
+                        help="ballast displaced volume, m^3 (default calibration.ballast_volume_m3)")
+    parser.add_argument("--restoring-n-m-per-rad", type=float, default=None,
+                        help="roll/pitch restoring stiffness C for tilt_decay (from `hindrax ident inclining`; default "
+                             "m g BG of the vehicle file, marked not measured)")
+    parser.add_argument("--restoring-std", type=float, default=0.0, help="1-sigma of C, N m/rad")
+    parser.add_argument("--excitation", default=None, choices=("ladder", "multisine", "prbs", "chirp"),
+                        help="force input per DOF: the constant-thrust ladder, or one broadband run (Schroeder "
+                             "multisine, m-sequence PRBS, log chirp) shaped to stay in the pool box "
+                             "(default identification.excitation of the vehicle file)")
+    parser.add_argument("--excitation-duration", type=float, default=None,
+                        help="length of the broadband run per DOF, s (default identification.excitation_duration_s)")
+    parser.add_argument("--line-pull-n", type=float, default=None,
+                        help="horizontal line force over the pulley, N (default calibration.line_pull_force_n)")
+    if not parser.prog.endswith("campaign"):
+        parser.add_argument("--in-process", action="store_true",
+                            help="step the simulator in-process instead (no drivers, no ROS graph, no bag; about 4x "
+                                 "faster), as `hindrax ident campaign`")
+
+
+def format_summary(identifications: dict) -> str:
+    """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error, verdict with its
+    first reason (a parameter at a bound: that one, it has no interval). A number that is not finite prints ``-``."""
+    from ...identification.assessment.report import summary_rows
+
+    def num(x, spec):
+        return format(x, spec) if x is not None and math.isfinite(x) else format("-", ">" + spec.split(".")[0])
+
+    lines = [f"{'DOF':6s} {'parameter':28s} {'identified':>12s} {'std':>9s} {'unit':9s} {'configured':>11s} "
+             f"{'rel.err':>8s}  verdict"]
+    for r in summary_rows(identifications):
+        err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f}%"
+        tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
+        bound = [x for x in r.get("reasons", []) if "bound" in x and "no interval" in x]
+        why = f" ({(bound or r['reasons'])[0]})" if r.get("reasons") else ""
+        lines.append(f"{r['dof']:6s} {r['parameter']:28s} {num(r['value'], '12.5g')} {num(r['std'], '9.3g')} "
+                     f"{r['unit']:9s} {tr:>11s} {err:>8s}  {r.get('verdict', '-')}{why}")
+    return "\n".join(lines)
+
+
+def summary_markdown(identifications: dict) -> str:
+    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth, error, verdict)."""
+    from ...identification.assessment.report import summary_rows
+    rows = []
+    for r in summary_rows(identifications):
+        err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f} %"
+        tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
+        why = f" ({r['reasons'][0]})" if r.get("reasons") else ""
+        rows.append([r["dof"], r["parameter"], f"{r['value']:.5g}", f"{r['std']:.3g}", r["unit"], tr, err,
+                     f"{r.get('verdict', '-')}{why}"])
+    return results_doc.markdown_table(["DOF", "parameter", "identified", "std", "unit", "configured (truth)",
+                                       "rel. error", "verdict"], rows)
+
+
+def _write_results(args: argparse.Namespace, identifications: dict, path: str, wall_s: float) -> None:
+    """Section ``run`` of ``--results-doc`` (docs/results.md): the end-of-run table of this campaign."""
+    body = (f"Campaign {path}, DOFs {args.dofs}, levels {args.levels or 'default'}, seed "
+            f"{'default' if args.seed is None else args.seed}, truth {getattr(args, 'truth', None) or 'default'}; "
+            f"wall time {wall_s:.0f} s on {os.cpu_count()} cores.\n\n" + summary_markdown(identifications))
+    results_doc.write_if_asked(args, "run", "The main job: identified against the simulator's truth", body)
+
+
+def _output_dir(cfg, out: str | None, kind: str, dofs: list[str]) -> Path:
+    """``--out`` (new or empty, else CommandError), or a new folder under ``recording.output_root`` named by the
+    campaign (``kind``, the DOFs) and the time (:mod:`hindrax_ident.output_dirs`)."""
+    from hindrax_drivers.config import DOFS
+
+    from ...output_dirs import OutputDirError, explicit_result_dir, new_result_dir
+
+    try:
+        if out:
+            return explicit_result_dir(out)
+        label = "all" if set(dofs) == set(DOFS) else "-".join(dofs)
+        path, notice = new_result_dir(Path(str(cfg.recording.output_root)), f"{kind}_{label}")
+    except OutputDirError as exc:
+        raise CommandError(str(exc)) from exc
+    except OSError as exc:
+        raise CommandError(f"recording.output_root {cfg.recording.output_root}: cannot create a run folder "
+                           f"({exc.strerror or exc})") from exc
+    if notice:
+        print(notice, flush=True)
+    return path
+
+
+def _completed(out: Path, explicit: bool) -> None:
+    """A run folder is complete: ``latest`` beside it points at it now (not for ``--out``)."""
+    if explicit:
+        return
+    from ...output_dirs import point_latest
+
+    try:
+        point_latest(out)
+    except OSError as exc:
+        print(f"{out.parent / 'latest'}: not updated ({exc.strerror or exc})")
+
+
+def run(args: argparse.Namespace) -> int:
+    """``hindrax run``: through the ROS graph (default) or in-process on the simulator (``--in-process``, and
+    ``hindrax ident campaign``)."""
+    if hasattr(args, "in_process") and not args.in_process:
+        return run_graph(args)
+    return run_in_process(args)
+
+
+def _check_args(args) -> tuple[object, list[str]]:
+    """(vehicle configuration, DOFs to identify). Raises :class:`~.common.CommandError` on a bad argument."""
+    from hindrax_drivers.config import DOFS
+
+    cfg = load_vehicle(args.config)
+    overrides = _calibration_overrides(args)
+    if overrides:  # the options replace the vehicle file's calibration.* keys, validated like the file
+        from hindrax_drivers.config import ConfigError, load_config
+        try:
+            cfg = load_config(cfg.source, overrides)
+        except ConfigError as exc:
+            raise CommandError(f"--ballast-mass-kg/--ballast-volume-m3/--line-pull-n: {exc}") from exc
+    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
+    bad = [d for d in dofs if d not in DOFS]
+    if bad or not dofs:
+        raise CommandError(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
+    if args.levels is not None and args.levels < 1:
+        raise CommandError("--levels must be >= 1")
+    if args.rtf < 0:
+        raise CommandError("--rtf must be >= 0")
+    dur = getattr(args, "excitation_duration", None)
+    if dur is not None and not (5.0 <= dur <= 1800.0):
+        raise CommandError(f"--excitation-duration {dur}: allowed 5-1800 s (identification.excitation_duration_s)")
+    from ...identification.online.executive import CALIBRATION_STEPS
+
+    cal = _calibration_steps(args)
+    bad = [c for c in cal if c not in CALIBRATION_STEPS]
+    if bad:
+        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+    from ...identification.online.executive import expand_calibration
+
+    if "float" in expand_calibration(cal) and cfg.known_forces.float_net_buoyancy_n is None:
+        raise CommandError("--calibrate: the float step needs calibration.float_mass_kg and "
+                           "calibration.float_volume_m3 in the vehicle file")
+    return cfg, dofs
+
+
+def _calibration_steps(args) -> list[str]:
+    return [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
+
+
+def _calibration_overrides(args) -> dict:
+    """``calibration.*`` keys given on the command line (``--ballast-mass-kg``, ``--ballast-volume-m3``,
+    ``--line-pull-n``): {key: value} of those given."""
+    out = {}
+    for opt, key in (("ballast_mass_kg", "calibration.ballast_mass_kg"),
+                     ("ballast_volume_m3", "calibration.ballast_volume_m3"),
+                     ("line_pull_n", "calibration.line_pull_force_n")):
+        v = getattr(args, opt, None)
+        if v is not None:
+            out[key] = float(v)
+    return out
+
+
+def run_graph(args: argparse.Namespace) -> int:
+    """The campaign through the ROS graph (module docstring). Returns the exit status."""
+    from hindrax_drivers.config import default_config_path
+
+    from hindrax_drivers.vehicle_graph import ForeignVehicleError
+
+    from ...graph_campaign import run_graph_campaign
+    from ...identification.assessment.results import reference_sections
+
+    cfg, dofs = _check_args(args)
+
+    wall0 = time.monotonic()
+
+    def progress(msg: str) -> None:
+        print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
+
+    out = _output_dir(cfg, args.out, "sim", dofs)
+    overrides = _calibration_overrides(args)
+    if args.max_level_duration is not None:
+        overrides["identification.max_level_duration_s"] = float(args.max_level_duration)
+    if getattr(args, "excitation", None):  # reaches the identification node through the vehicle file override
+        overrides["identification.excitation"] = args.excitation
+    if getattr(args, "excitation_duration", None) is not None:
+        overrides["identification.excitation_duration_s"] = float(args.excitation_duration)
+    try:
+        outcome = run_graph_campaign(args.config or default_config_path(), out, dofs=dofs, levels=args.levels,
+                                     seed=args.seed, real_time_factor=args.rtf, overrides=overrides,
+                                     progress=progress, truth=getattr(args, "truth", None),
+                                     calibrate=_calibration_steps(args),
+                                     sections=lambda doc, rec, idents: reference_sections(
+                                         doc, rec, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std,
+                                         progress))
+    except ForeignVehicleError as exc:
+        raise CommandError(f"hindrax run: {exc}") from exc
+    for dof, msg in outcome.errors.items():
+        progress(f"{dof}: no estimate ({msg})")
+    if outcome.identifications:
+        print(format_summary(outcome.identifications))
+        _write_results(args, outcome.identifications, "through the node graph", time.monotonic() - wall0)
+    print(f"output: {out}  (bag {outcome.bag_dir}; wall time {time.monotonic() - wall0:.0f} s)")
+    if outcome.success and outcome.identifications:
+        _completed(out, bool(args.out))
+        return 0
+    return 1
+
+
+def run_in_process(args: argparse.Namespace) -> int:
+    """Run the campaign in-process on the simulator, identify, write the outputs, print the summary."""
+    from ...sim.campaign import Campaign
+    from ...identification.fit.campaign_fit import identify_all_with_errors
+    from ...identification.assessment.report import write_outputs
+    from ...identification.assessment.results import reference_sections
+
+    cfg, dofs = _check_args(args)
+    wall0 = time.monotonic()
+
+    def progress(msg: str) -> None:
+        print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
+
+    print("campaign in-process on the simulator (no ROS graph, no bag)", flush=True)
+    from ...sim.simulator import Simulator
+    from ...sim.truth import TruthError
+    try:
+        sim = Simulator(cfg, seed=args.seed, truth=getattr(args, "truth", None))
+    except TruthError as exc:
+        raise CommandError(f"--truth: {exc}") from exc
+    cal = _calibration_steps(args)
+    from ...identification.online.executive import calibration_forces, inclining_load
+    w_ballast, f_line = calibration_forces(cfg)
+    campaign = Campaign(cfg, dofs=dofs, levels=args.levels, seed=args.seed,
+                        max_level_duration_s=args.max_level_duration, progress=progress, real_time_factor=args.rtf,
+                        sim=sim, calibrate=cal, excitation=getattr(args, "excitation", None),
+                        excitation_duration_s=getattr(args, "excitation_duration", None),
+                        ballast_weight_in_water_n=w_ballast, line_pull_n=f_line,
+                        inclining_load_n_m=inclining_load(cfg) if "inclining" in cal else (0.0, 0.0))
+    record = campaign.run()
+    progress(f"campaign finished: {record.t_s[-1] if record.t_s.size else 0:.0f} s simulated"
+             + (f", ABORTED: {record.abort_reason}" if record.aborted else ""))
+    from ...identification.fit.calibration import identify_calibrated
+
+    # the calibration's per-direction scales applied, the thrust shares attached for the joint estimate
+    idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
+    for dof, msg in errors.items():
+        progress(f"{dof}: no estimate ({msg})")
+    out = _output_dir(cfg, args.out, "sim-in-process", dofs)
+    if idents:
+        note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
+                + (f"; ABORTED: {record.abort_reason}" if record.aborted else ""))
+        # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
+        write_outputs(out, idents, cfg, None, note, source="simulation", seed=record.seed,
+                      calibration=record.calibration, sections=lambda doc: reference_sections(
+                          doc, record, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std, progress))
+        print(format_summary(idents))
+        _write_results(args, idents, "in-process (no ROS graph)", time.monotonic() - wall0)
+    print(f"output: {out}  (wall time {time.monotonic() - wall0:.0f} s)")
+    if record.aborted or not idents:
+        return 1
+    _completed(out, bool(args.out))
+    return 0
