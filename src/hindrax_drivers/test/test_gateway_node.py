@@ -24,33 +24,27 @@ def test_bad_setting_stops_the_start_in_one_line(setting, line):
     assert len(errors) == 1 and line in errors[0], r.stderr
 
 
-def test_feedback_that_overtakes_the_acceptance_is_relayed_and_the_goal_runs_on():
-    """On the internal side a running goal's first feedback can reach the gateway before its acceptance (the action
-    client's feedback callback runs before the send-goal future's): the topside goal is relayed that feedback and
-    ends with the internal result, never read as refused."""
+def _run_goal_against(frames):
+    """Run the gateway's goal relay on a stand-in gateway whose internal side answers a goal with ``frames``
+    ([(head, message or None)], ids filled in); returns (result, what the topside handle saw)."""
     import itertools
     from types import SimpleNamespace
 
-    from action_msgs.msg import GoalStatus
     from rclpy.serialization import serialize_message
 
     from hindrax_drivers.gateway.node import Gateway
     from hindrax_msgs.action import RunIdentification
 
-    feedback = RunIdentification.Feedback(dof="surge", level_index=0, level_count=1)
-    result = RunIdentification.Result(success=True, message="done")
     gw = SimpleNamespace(verifier=SimpleNamespace(check_message=lambda *_: ""),
                          bounds=SimpleNamespace(goal_problem=lambda _g: ""), _ids=itertools.count(1), _goals={},
-                         settings=SimpleNamespace(call_timeout_s=1.0), _action_type=RunIdentification,
+                         settings=SimpleNamespace(call_timeout_s=0.3), _action_type=RunIdentification,
                          campaign=SimpleNamespace(context=SimpleNamespace(ok=lambda: True)), _refuse=lambda w, *_: w)
 
     def send(head, payload=b""):
         if head["k"] == "goal":
-            q = gw._goals[head["id"]]
-            q.put(({"k": "feedback", "id": head["id"]}, serialize_message(feedback)))
-            q.put(({"k": "accepted", "id": head["id"], "ok": True, "why": ""}, b""))
-            q.put(({"k": "result", "id": head["id"], "status": GoalStatus.STATUS_SUCCEEDED},
-                   serialize_message(result)))
+            for frame, message in frames:
+                gw._goals[head["id"]].put(({**frame, "id": head["id"]},
+                                           b"" if message is None else serialize_message(message)))
 
     gw.channel = SimpleNamespace(send=send)
     seen = []
@@ -58,6 +52,34 @@ def test_feedback_that_overtakes_the_acceptance_is_relayed_and_the_goal_runs_on(
                              publish_feedback=seen.append, succeed=lambda: seen.append("succeeded"),
                              abort=lambda: seen.append("aborted"), canceled=lambda: seen.append("canceled"))
     out = Gateway._run_goal(gw, handle)
+    return out, [type(x).__name__ if not isinstance(x, str) else x for x in seen]
+
+
+def test_feedback_that_overtakes_the_acceptance_is_relayed_and_the_goal_runs_on():
+    """On the internal side a running goal's first feedback can reach the gateway before its acceptance (the action
+    client's feedback callback runs before the send-goal future's): the topside goal is relayed that feedback and
+    ends with the internal result, never read as refused."""
+    from action_msgs.msg import GoalStatus
+
+    from hindrax_msgs.action import RunIdentification
+
+    out, seen = _run_goal_against([
+        ({"k": "feedback"}, RunIdentification.Feedback(dof="surge", level_index=0, level_count=1)),
+        ({"k": "accepted", "ok": True, "why": ""}, None),
+        ({"k": "result", "status": GoalStatus.STATUS_SUCCEEDED}, RunIdentification.Result(success=True,
+                                                                                          message="done"))])
     assert out.success and out.message == "done"
-    assert [type(x).__name__ if not isinstance(x, str) else x for x in seen] == [
-        "RunIdentification_Feedback", "succeeded"]
+    assert seen == ["RunIdentification_Feedback", "succeeded"]
+
+
+@pytest.mark.parametrize("frames, message", [
+    ([({"k": "accepted", "ok": False, "why": "not armed"}, None)], "run_identification: not armed"),
+    ([({"k": "gone"}, None)], "run_identification: the gateway's internal side is gone"),
+    ([], "run_identification: no answer from the identification node within 0.3 s"),
+])
+def test_a_goal_that_is_not_accepted_fails_on_the_topside_with_its_cause(frames, message):
+    """A refusal, the internal side ending, or no answer before the call timeout each abort the topside goal with
+    their own cause (the internal side ending is not reported as a refusal)."""
+    out, seen = _run_goal_against(frames)
+    assert not out.success and out.message == message
+    assert seen == ["aborted"]

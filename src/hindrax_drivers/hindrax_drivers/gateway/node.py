@@ -256,31 +256,31 @@ class Gateway:
         goal_id = next(self._ids)
         replies: queue.Queue = queue.Queue()
         self._goals[goal_id] = replies
+        answer_by = time.monotonic() + self.settings.call_timeout_s
+        accepted = cancelling = False
         try:
             self.channel.send({"k": "goal", "id": goal_id}, serialize_message(goal_handle.request))
-            try:
-                head, payload = replies.get(timeout=self.settings.call_timeout_s)
-                while head.get("k") == "feedback":  # a running goal's feedback can overtake its acceptance
-                    goal_handle.publish_feedback(deserialize_message(payload, self._action_type.Feedback))
-                    head, payload = replies.get(timeout=self.settings.call_timeout_s)
-            except queue.Empty:
-                return failed(f"no answer from the identification node within {self.settings.call_timeout_s:g} s")
-            if not head.get("ok"):
-                return failed(str(head.get("why", "refused")))
-            cancelling = False
-            while True:
+            while True:  # one loop over the frame kinds: a goal's feedback can overtake its acceptance
                 try:
                     head, payload = replies.get(timeout=CANCEL_POLL_S)
                 except queue.Empty:
-                    if goal_handle.is_cancel_requested and not cancelling:
+                    if not accepted and time.monotonic() > answer_by:
+                        return failed("no answer from the identification node within "
+                                      f"{self.settings.call_timeout_s:g} s")
+                    if accepted and goal_handle.is_cancel_requested and not cancelling:
                         self.channel.send({"k": "cancel", "id": goal_id})
                         cancelling = True
                     if not self.campaign.context.ok():
                         return failed("the gateway is shutting down")
                     continue
-                if head["k"] == "feedback":
+                kind = head.get("k")
+                if kind == "feedback":
                     goal_handle.publish_feedback(deserialize_message(payload, self._action_type.Feedback))
-                elif head["k"] == "result":
+                elif kind == "accepted":
+                    if not head.get("ok"):
+                        return failed(str(head.get("why", "refused")))
+                    accepted = True
+                elif kind == "result":
                     break
                 else:
                     return failed("the gateway's internal side is gone")

@@ -1,5 +1,5 @@
 """Open-loop predictions of an identified model on bags, written so that anyone can score them (``hindrax ident
-predict``, issue 46.5).
+predict``).
 
 The model is an identification.yaml of ``hindrax ident fit`` (:func:`.results.build_document`): per DOF its
 chosen ``terms``, the parameters' ``value``, the ``timing`` (input delay and first-order thrust lag) and, for the

@@ -148,7 +148,7 @@ _USES_MEAN = {"horizontal": "surge, sway, yaw use this", "vertical": "roll, pitc
 
 
 def references_html(document: Mapping) -> str:
-    """The "References" section (issue 17 item 6): the known-force calibration (``document["calibration"]``), the
+    """The "References" section: the known-force calibration (``document["calibration"]``), the
     jointly estimated thrust scales (``document["joint"]["scales"]``: posterior, prior, steps, the error the
     uncalibrated self-propelled values would have and z against the curve), the free-decay inertias
     (``document["free_decay"]``) beside the self-propelled ones with z and verdict, and per DOF the empirical priors

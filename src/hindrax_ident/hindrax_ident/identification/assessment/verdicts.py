@@ -522,7 +522,7 @@ def thrust_curve_check(assessments: Mapping[str, dict], dofs: Sequence[str]) -> 
             a["verdict"] = "suspect"
 
 
-#: DOFs whose online RLS damping std the scenario suite measured (issue 16 item 5). Elsewhere it is not published.
+#: DOFs whose online RLS damping std the scenario suite measured. Elsewhere it is not published.
 RLS_STD_DOFS = ("surge", "sway", "heave", "yaw")
 
 

@@ -140,7 +140,7 @@ def results_from_array(msg: Any) -> tuple[dict, dict, dict]:
                 cal[key]["direction"] = kv["direction"]
             if "group" in kv:
                 cal[key]["group"] = kv["group"]
-            if "forward_force_without_n" in kv:  # a node of issue 26 on: the per-direction parts
+            if "forward_force_without_n" in kv:  # newer nodes: the per-direction parts
                 cal[key]["forward_force_n"] = pair("forward_force", "n")
                 cal[key]["reverse_force_n"] = pair("reverse_force", "n")
         elif kind == "inclining":

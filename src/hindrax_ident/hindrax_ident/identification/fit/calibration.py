@@ -412,7 +412,7 @@ def calibration_section(calibration: Mapping[str, Any] | None, cfg=None) -> dict
 
 def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness_std: float = 0.0,
                   rigid_inertia_kg_m2: float | None = None) -> dict:
-    """Rigid + added inertia of ``dof`` (roll | pitch) from the campaign's free decay (issue 17 item 3).
+    """Rigid + added inertia of ``dof`` (roll | pitch) from the campaign's free decay.
 
     The de-biased gyro rate of the recorded window ``record.decays[dof]`` (from its largest excursion on) is
     fitted with I x'' + b1 x' + b2 |x'| x' + C x = 0 (:func:`~hindrax_ident.estimation.free_decay.
@@ -443,8 +443,7 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Joint estimation: thrust scales and empirical priors as parameters (issue 17 items 2 and 5, issue 26 item 1;
-# docs/identification.md §6.2-§6.3)
+# Joint estimation: thrust scales and empirical priors as parameters (docs/identification.md §6.2-§6.3)
 # ---------------------------------------------------------------------------------------------------------------
 
 def _sensitivity_matrix(r, model: ScaleModel, s_c: np.ndarray) -> np.ndarray:

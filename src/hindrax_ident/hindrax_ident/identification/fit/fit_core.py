@@ -954,7 +954,7 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGME
 def validation_measures(sd: SegmentData, V: np.ndarray) -> dict:
     """nrmse, nrmse_hold, nrmse_zero, nrmse_floor and samples of predictions ``V`` (m, L) on ``sd``:
     RMS(prediction - measured) / std(measured) over the measurements after each segment's start; ``hold``: the
-    initial velocity held; ``zero``: 0 (issue 18). A measured position is validated on the smoothed velocity at the
+    initial velocity held; ``zero``: 0. A measured position is validated on the smoothed velocity at the
     ticks. ``nrmse_floor``: the white measurement noise over std(measured), the nrmse a perfect model would still
     have, sigma^2 = mean(d2^2) / 6 with d2 the second differences of consecutive measurements in a segment (white
     noise of variance sigma^2 gives var(d2) = 6 sigma^2; a smooth velocity adds little at the sensor's rate), NaN

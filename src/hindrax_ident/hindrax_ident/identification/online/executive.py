@@ -78,7 +78,7 @@ __all__ = ["CampaignAbort", "Executive", "ExecutiveStatus", "TickInput", "comman
            "CALIBRATION_STEPS", "THRUST_STEPS", "expand_calibration", "calibration_forces", "inclining_load",
            "float_buoyancy"]
 
-#: Reference steps the executive can run before the manoeuvres (issue 17 item 1, issue 26 item 2); ``thrust`` runs
+#: Reference steps the executive can run before the manoeuvres; ``thrust`` runs
 #: every step of :data:`THRUST_STEPS`.
 CALIBRATION_STEPS = ("ballast", "line_pull", "tilt_decay", "inclining", "float", "line_pull_negative", "thrust")
 #: The steps the per-direction thrust scales need (docs/identification.md §6.1): sinker and float (the vertical

@@ -223,7 +223,7 @@ class LinePull(KnownForceStep):
 
 
 class Inclining(Step):
-    """Restoring stiffness C of roll or pitch by an inclining test (issue 17 item 3): with that DOF free (no moment
+    """Restoring stiffness C of roll or pitch by an inclining test: with that DOF free (no moment
     from the thrusters; depth, position and the other angles held) average the angle a1; the operator hangs the
     test mass (weight in water w) at arm d to starboard (roll: body +y) or forward (pitch: body +x), a moment
     K = w d (roll) or -w d (pitch); average a2; the mass is removed. Equilibrium w d cos(a) = C sin(a) + M0 gives
@@ -282,7 +282,7 @@ class Inclining(Step):
 
 
 class TiltDecay(Step):
-    """Roll or pitch free decay, self-propelled (issue 17 item 3): the vertical thrusters ramp a moment of
+    """Roll or pitch free decay, self-propelled: the vertical thrusters ramp a moment of
     C0 :data:`TILT_DECAY_ANGLE_RAD` (C0 = m g BG of the vehicle file, so the angle reached is only roughly the
     target: the thrust curve need not be right; at most 0.8 of the smaller authority), hold it, then release (zero
     moment on that DOF, the others held) and record :data:`TILT_DECAY_RECORD_S` s; the window goes to
