@@ -54,7 +54,9 @@ sessions whose totals read 36-72 %), and at the pool's CPU on the reference mach
 (``..._at_reference_pool``). The targets stay on the figures measured here.
 
 Wake-ups: per process, the voluntary context switches of all its threads per window (each sleep ends in one;
-``launch_*_wakeups_*``, the main thread's in the note). What one more process costs: two probe processes run beside
+``launch_*_wakeups_*``; in the note the busiest threads by name, each with its CPU: a count of wake-ups says where a
+process sleeps, not where its CPU goes), and ``launch_*_cpu_dds_threads``: Fast DDS's own threads (``dds.*``) of
+every process together. What one more process costs: two probe processes run beside
 the layout, not in its totals (:data:`PARTICIPANT_PROBES`: a node process with nothing to do, and one subscribing to
 the four sensor topics the identification and the controller take). ``--baseline GIT_REF``: that commit's launch
 layout is measured first in the same run (:func:`baseline_launch`), and the rows ``..._vs_baseline`` give today's
