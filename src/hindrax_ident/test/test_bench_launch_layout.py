@@ -255,3 +255,25 @@ def test_a_profiled_node_process_writes_its_profile_although_it_ends_itself(tmp_
     stats = pstats.Stats(str(profile_dir / "profiled_probe.main.prof"))
     ticks = [calls for (_, _, name), (calls, *_rest) in stats.stats.items() if name == "probe_tick"]
     assert ticks and ticks[0] >= 5, ticks
+
+
+def test_benchmarked_threads_carry_their_python_names():
+    """A thread started after :func:`launch_node.name_os_threads` shows its ``threading`` name (cut to 15 bytes) as
+    its OS name, where the benchmark reads wake-ups and CPU by thread; without it it would read ``python``."""
+    import threading
+    from pathlib import Path
+
+    from hindrax_ident.benchmarks import launch_node
+
+    start = threading.Thread._bootstrap_inner
+    seen = {}
+    try:
+        launch_node.name_os_threads()
+        t = threading.Thread(target=lambda: seen.update(
+            comm=Path(f"/proc/self/task/{threading.get_native_id()}/comm").read_text().strip()),
+            name="dvl-serial-reader-thread")
+        t.start()
+        t.join(30)
+    finally:
+        threading.Thread._bootstrap_inner = start
+    assert seen["comm"] == "dvl-serial-read"

@@ -77,16 +77,21 @@ def test_per_process_per_pool_and_wake_up_rows():
     launch = _launch({"a": 0.4, "ident_record": 0.1})
     for phase in ("idle", "running"):
         w = launch["phases"][phase]["windows"][0]
-        w["wakeups"] = {"a": (300.0, 100.0, {"main": 100.0, "dds.udp.7411": 200.0}),
-                        "ident_record": (50.0, 20.0, {"main": 20.0, "bag-writer": 30.0})}
+        w["wakeups"] = {"a": (300.0, 100.0, {"main": 100.0, "dds.udp.7411": 200.0},
+                              {"main": 0.3, "dds.udp.7411": 0.02}),
+                        "ident_record": (50.0, 20.0, {"main": 20.0, "bag-writer": 30.0},
+                                         {"main": 0.06, "bag-writer": 0.01, "dds.ev.0": 0.01})}
     rows = {r["name"]: r for r in stack.launch_rows(launch)}
     assert rows["launch_running_cpu_a_per_pool"]["value"] == pytest.approx(2.0)
     assert rows["launch_running_cpu_a_per_pool"]["target"] == "<= 0.35"
     assert rows["launch_idle_cpu_ident_record_per_pool"]["value"] == pytest.approx(0.5)
     assert rows["launch_idle_cpu_ident_record_per_pool"]["target"] == "<= 0.1"
     assert rows["launch_running_wakeups_a"]["value"] == 300.0
-    assert "dds.udp.7411 200, main 100" in rows["launch_running_wakeups_a"]["note"]
+    assert "dds.udp.7411 200 (2.0), main 100 (30.0)" in rows["launch_running_wakeups_a"]["note"]
     assert rows["launch_idle_wakeups_total"]["value"] == 350.0
+    # Fast DDS's threads: 0.02 + 0.01 of a core, of a total 0.4 + 0.1
+    assert rows["launch_running_cpu_dds_threads"]["value"] == pytest.approx(3.0)
+    assert "6 % of the total" in rows["launch_running_cpu_dds_threads"]["note"]
 
 
 def test_proc_wakeups_counts_this_process_threads():
@@ -113,11 +118,13 @@ def test_proc_wakeups_counts_this_process_threads():
     finally:
         finish.set()
         t.join()
-    total, main, named = after
+    total, main, named, cpu = after
     assert total >= main and named["main"] == main and sum(named.values()) == total
     assert total - before[0] >= 20
+    assert set(cpu) == set(named) and cpu["main"] >= before[3]["main"] > 0.0  # this process has run Python
     rates = stack._wakeup_rates(before, after, 2.0)
     assert rates[:2] == ((total - before[0]) / 2.0, (main - before[1]) / 2.0)
+    assert rates[3]["main"] == pytest.approx((cpu["main"] - before[3]["main"]) / 2.0)
 
 
 def test_baseline_rows_are_todays_figures_over_the_baselines():

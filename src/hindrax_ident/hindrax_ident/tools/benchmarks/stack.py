@@ -57,7 +57,9 @@ sessions whose totals read 36-72 %), and at the pool's CPU on the reference mach
 (``..._at_reference_pool``). The targets stay on the figures measured here.
 
 Wake-ups: per process, the voluntary context switches of all its threads per window (each sleep ends in one;
-``launch_*_wakeups_*``, the main thread's in the note). What one more process costs: two probe processes run beside
+``launch_*_wakeups_*``; in the note the busiest threads by name, each with its CPU: a count of wake-ups says where a
+process sleeps, not where its CPU goes), and ``launch_*_cpu_dds_threads``: Fast DDS's own threads (``dds.*``) of
+every process together. What one more process costs: two probe processes run beside
 the layout, not in its totals (:data:`PARTICIPANT_PROBES`: a node process with nothing to do, and one subscribing to
 the four sensor topics the identification and the controller take). ``--baseline GIT_REF``: that commit's launch
 layout is measured first in the same run (:func:`baseline_launch`), and the rows ``..._vs_baseline`` give today's
@@ -134,29 +136,37 @@ def _proc_cpu_s(pid: int | str = "self") -> float:
     return (int(fields[11]) + int(fields[12])) / _CLK
 
 
-def _proc_wakeups(pid: int) -> tuple[int, int, dict[str, int]]:
-    """(every thread's, the main thread's, by thread name) voluntary context switches of a process so far: each is a
-    sleep that ends in a wake-up (a timer, a message, a reply on a socket). Threads that ended before the call are
-    not counted; threads of one name (Fast DDS's ``dds.udp.*`` receivers ...) are summed."""
+def _proc_wakeups(pid: int) -> tuple[int, int, dict[str, int], dict[str, float]]:
+    """(every thread's, the main thread's, by thread name) voluntary context switches of a process so far, and the
+    CPU seconds by thread name: each switch is a sleep that ends in a wake-up (a timer, a message, a reply on a
+    socket). Threads that ended before the call are not counted; threads of one name (Fast DDS's ``dds.udp.*``
+    receivers ...) are summed."""
     total = main = 0
     named: dict[str, int] = collections.defaultdict(int)
+    cpu: dict[str, float] = collections.defaultdict(float)
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:
             text = (task / "status").read_text()
+            stat = (task / "stat").read_text().rsplit(")", 1)[1].split()
         except OSError:  # the thread ended meanwhile
             continue
         fields = dict(ln.split(":", 1) for ln in text.splitlines() if ":" in ln)
         n = int(fields["voluntary_ctxt_switches"])
         total += n
         main += n if task.name == str(pid) else 0
-        named["main" if task.name == str(pid) else fields["Name"].strip()] += n
-    return total, main, named
+        name = "main" if task.name == str(pid) else fields["Name"].strip()
+        named[name] += n
+        cpu[name] += (int(stat[11]) + int(stat[12])) / _CLK
+    return total, main, named, cpu
 
 
-def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, float, dict[str, float]]:
-    """Wake-ups per second between two :func:`_proc_wakeups` readings (total, main thread, by thread name)."""
+def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, float, dict[str, float],
+                                                                        dict[str, float]]:
+    """Wake-ups per second between two :func:`_proc_wakeups` readings (total, main thread, by thread name), and the
+    CPU by thread name over the same interval, fraction of a core."""
     return ((after[0] - before[0]) / wall_s, (after[1] - before[1]) / wall_s,
-            {k: (v - before[2].get(k, 0)) / wall_s for k, v in after[2].items()})
+            {k: (v - before[2].get(k, 0)) / wall_s for k, v in after[2].items()},
+            {k: (v - before[3].get(k, 0.0)) / wall_s for k, v in after[3].items()})
 
 
 def _proc_rss_mb(pid: int) -> float:
@@ -850,13 +860,24 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
         if all("wakeups" in w for w in wins):
             for name in names:
                 threads = collections.Counter(wins[0]["wakeups"][name][2])
+                cpu = wins[0]["wakeups"][name][3] if len(wins[0]["wakeups"][name]) > 3 else {}
                 rows.append({"name": f"launch_{phase}_wakeups_{name}", "unit": "1/s",
                              "value": _median([w["wakeups"][name][0] for w in wins]),
                              "note": "voluntary context switches of every thread per second (each sleep ends in "
-                                     "a wake-up); by thread (first window): "
-                                     + ", ".join(f"{k} {v:.0f}" for k, v in threads.most_common(6))})
+                                     "a wake-up); by thread (first window), wake-ups/s (its CPU, % of a core): "
+                                     + ", ".join(f"{k} {v:.0f}" + (f" ({100 * cpu[k]:.1f})" if k in cpu else "")
+                                                 for k, v in threads.most_common(6))})
             rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
                          "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
+            if all(len(v) > 3 for w in wins for v in w["wakeups"].values()):
+                dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items() if k.startswith("dds."))
+                       for w in wins]
+                total = _median([sum(w["per_process"].values()) for w in wins])
+                rows.append({"name": f"launch_{phase}_cpu_dds_threads", "unit": "% of a core",
+                             "value": 100 * _median(dds),
+                             "note": f"Fast DDS's own threads (dds.ev event/timer, dds.udp receive, ...) of every "
+                                     f"process, {100 * _median(dds) / total:.0f} % of the total"
+                                     if total > 0 else "Fast DDS's own threads of every process"})
         for name in wins[0].get("participants", {}):
             cpu = [w["participants"][name][0] for w in wins]
             topics = ", ".join(t for t, _ in PARTICIPANT_PROBES.get(name, [])) or "no topic"
