@@ -263,7 +263,7 @@ def test_benchmarked_threads_carry_their_python_names():
     import threading
     from pathlib import Path
 
-    from hindrax_ident.benchmarks import launch_node
+    from hindrax_ident.tools.benchmarks import launch_node
 
     start = threading.Thread._bootstrap_inner
     seen = {}
