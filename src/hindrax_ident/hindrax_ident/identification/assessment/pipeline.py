@@ -15,7 +15,7 @@ from hindrax_drivers.config import VehicleConfig
 
 from ..bag_input.any_topics import FitOptions, TopicChoice
 from ..bag_input.from_bag import truncation
-from ..bag_input.reader import read_any_topics, read_campaign
+from ..bag_input.reader import BagRecords, read_any_topics, read_campaign
 from ..fit import fit_core
 from ..fit.calibration import identify_calibrated
 from ..fit.campaign_fit import identify_all_with_errors
@@ -23,7 +23,7 @@ from ..fit.fit_any import DofFit, FitResult, fit_records
 from .report import write_fit_outputs, write_outputs
 from .results import build_document, reference_sections
 
-__all__ = ["fit_bags", "identify_bag", "truncation", "campaign_result", "core_options", "write_any_outputs",
+__all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_result", "core_options", "write_any_outputs",
            "write_campaign_outputs"]
 
 
@@ -34,13 +34,19 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
     fit``'s options (:func:`..fit.fit_any.fit_records`), validated by K-fold cross-validation and on the ``holdout``
     bags. Raises :class:`..bag_input.any_topics.FitInputError` (bad DOF, topics, frames, too little data) or
     ``BagError``."""
+    return fit_read(read_any_topics(bags, choice, cfg, dofs, holdout, opts), holdout, opts)
+
+
+def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (), opts: FitOptions = FitOptions()) -> FitResult:
+    """:func:`fit_bags` of bags already read (:func:`..bag_input.reader.read_any_topics` of the training bags and
+    the ``holdout`` bags, named in the design)."""
     core = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s,
                                 persistence_margin=opts.persistence_margin)
     design = (f"{opts.folds}-fold cross-validation by contiguous blocks of the {opts.validation_s:g} s validation "
               "segments that move each DOF (training segments overlapping a held-out one left out)")
     if holdout:
         design += f"; holdout: {', '.join(str(b) for b in holdout)}"
-    return fit_records(read_any_topics(bags, choice, cfg, dofs, holdout, opts), core, design)
+    return fit_records(records, core, design)
 
 
 def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,

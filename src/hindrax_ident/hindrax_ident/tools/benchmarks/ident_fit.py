@@ -38,7 +38,7 @@ import numpy as np
 import yaml
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_ident.identification.assessment.pipeline import fit_bags
+from hindrax_ident.identification.assessment.pipeline import fit_read
 from hindrax_ident.identification.assessment.results import assessment
 from hindrax_ident.identification.bag_input import reader
 from hindrax_ident.identification.bag_input.reader import FitOptions, TopicChoice
@@ -213,13 +213,11 @@ def evaluate(bags: Bags, opts: FitOptions = FitOptions(), gray_box: bool = False
     """{dof: {fit, ls, hold, samples, cv, cv_hold, model, verdict, at_edge}} held-out NRMSE of the three predictors
     (module docstring), the cross-validated scores, the DOF's verdict and whether its delay sat at its bound; with
     ``gray_box`` also ``gray_box`` (the held-out NRMSE of :mod:`.graybox`'s 1-DOF model) and ``gray_box_timing``."""
-    choice = TopicChoice()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = fit_bags(bags.train, choice, None, list(DOFS_COMPARED), bags.holdout, opts)
+        read = reader.read_any_topics(bags.train, TopicChoice(), None, list(DOFS_COMPARED), bags.holdout, opts)
+        res = fit_read(read, bags.holdout, opts)
     runtime_warnings = sum(issubclass(w.category, RuntimeWarning) for w in caught)
-    train = [reader.preprocess_bag(b, choice, None, opts) for b in bags.train]
-    hold = [reader.preprocess_bag(b, choice, None, opts) for b in bags.holdout]
     out: dict = {"runtime_warnings": runtime_warnings}
     for dof in DOFS_COMPARED:
         r = res.dofs.get(dof)
@@ -232,9 +230,8 @@ def evaluate(bags: Bags, opts: FitOptions = FitOptions(), gray_box: bool = False
             row["verdict"] = assessment(r, None)["verdict"]
             row["at_edge"] = bool(r.core.timing.at_edge)
             row["cv_hold"] = (r.core.persistence or {}).get("nrmse_hold", math.nan)
-        try:
-            rt = reader.dof_records(train, [dof], opts)[dof]
-            rh = reader.dof_records(hold, [dof], opts)[dof]
+        try:  # the records the fit read (the baselines use no cross-DOF column)
+            rt, rh = read.records[dof], read.holdout_records[dof]
             layout, th, terms, timing = plain_ls_theta(rt, dof)
             sd = fit_core.build_segments(rh, terms, timing, fit_core.VALIDATION_S, excited_only=False)
             vp = fit_core.predict_validation(sd, layout, th)
@@ -245,7 +242,7 @@ def evaluate(bags: Bags, opts: FitOptions = FitOptions(), gray_box: bool = False
             if gray_box:
                 g = graybox.holdout_nrmse(rt, rh)
                 row["gray_box"], row["gray_box_timing"] = g["nrmse"], (g["delay_s"], g["lag_s"])
-        except (ValueError, np.linalg.LinAlgError, fit_core.EstimationError):
+        except (KeyError, ValueError, np.linalg.LinAlgError, fit_core.EstimationError):
             pass
         out[dof] = row
     return out
