@@ -19,7 +19,6 @@ Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a rea
 from __future__ import annotations
 
 import heapq
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -79,16 +78,12 @@ def bag_files(path: str | Path) -> list[Path]:
         present = []
     # metadata.yaml may be stale after a crash (written before the last split): add unlisted files
     listed = {f.name for f in present}
-    extra = [f for f in sorted(path.glob("*.mcap"), key=_file_index) if f.name not in listed]
+    extra = [f for f in sorted(path.glob("*.mcap"), key=_recover.file_index)
+             if f.name not in listed]
     files = present + extra
     if not files:
         raise BagError(f"{path}: no .mcap files")
     return files
-
-
-def _file_index(p: Path) -> tuple[int, str]:
-    m = re.search(r"_(\d+)\.mcap$", p.name)
-    return (int(m.group(1)) if m else -1, p.name)
 
 
 class BagReader:
