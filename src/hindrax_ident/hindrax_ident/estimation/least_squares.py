@@ -59,6 +59,14 @@ class EstimationError(ValueError):
 # --------------------------------------------------------------------------------------
 # Shared validation helpers (used by rls, filters, steady_windows, free_decay, ...)
 # --------------------------------------------------------------------------------------
+def positive(value: float, name: str) -> float:
+    """``value`` as a float; EstimationError naming ``name`` unless it is finite and > 0."""
+    value = float(value)
+    if not (np.isfinite(value) and value > 0):
+        raise EstimationError(f"{name} must be a finite number > 0, got {value}")
+    return value
+
+
 def as_float_array(value, name: str, ndim: int, allow_nan: bool = False) -> np.ndarray:
     """Convert ``value`` to a float ndarray with ``ndim`` dimensions or raise EstimationError.
 
