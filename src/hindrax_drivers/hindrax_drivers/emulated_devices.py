@@ -37,7 +37,7 @@ from .transport.emulated_i2c import EmulatedI2CBus
 from .transport.pty_device import PtyDevice
 from .transport.socket_i2c import SOCKET_ENV, I2CSocketServer
 
-__all__ = ["EmulatedDevices", "SERIAL_DEVICES", "I2C_DEVICES", "driver_env", "driver_ros_arguments"]
+__all__ = ["EmulatedDevices", "DriverEndpoints", "SERIAL_DEVICES", "I2C_DEVICES"]
 
 #: launch-file node name -> configuration section of its serial port
 SERIAL_DEVICES = {d.node: d.section for d in DEVICES if d.transport == SERIAL}
@@ -49,25 +49,44 @@ _SURFACE_PA, _RHO_KG_M3, _G_M_S2 = 101325.0, 1000.0, 9.80665
 _EARTH_FIELD_T = (2.0e-5, 0.0, 4.0e-5)
 
 
-def driver_ros_arguments(ports: dict[str, str], name: str) -> list[str]:
-    """Extra ``--ros-args`` for the driver process of launch node ``name``: its serial port from ``ports`` (node name
-    -> path) as the ``sensors.<device>.port`` parameter; [] for a node without one."""
-    if name in SERIAL_DEVICES and name in ports:
-        return ["-p", f"{SERIAL_DEVICES[name]}.port:={ports[name]}"]
-    return []
+class DriverEndpoints:
+    """Where the driver processes of a launch layout find emulated devices: :attr:`ports` (launch
+    node name -> serial port path) and :attr:`socket_path` (the emulated I2C bus's socket). A
+    context manager that calls :meth:`close`. Shared by :class:`EmulatedDevices` and the live
+    pool's client (:class:`hindrax_ident.sim.live_pool.LivePool`)."""
 
+    ports: dict[str, str]
+    socket_path: str
 
-def driver_env(socket_path: str, name: str) -> dict[str, str]:
-    """Extra environment for the driver process of launch node ``name``: the emulated I2C bus's socket
-    (:data:`~hindrax_drivers.transport.socket_i2c.SOCKET_ENV`) for a node on the bus, else {}."""
-    return {SOCKET_ENV: socket_path} if name in I2C_DEVICES else {}
+    def ros_arguments(self, name: str) -> list[str]:
+        """Extra ``--ros-args`` for the driver process of launch node ``name``: its serial port as
+        the ``sensors.<device>.port`` parameter; [] for a node without one."""
+        if name in SERIAL_DEVICES and name in self.ports:
+            return ["-p", f"{SERIAL_DEVICES[name]}.port:={self.ports[name]}"]
+        return []
+
+    def env(self, name: str) -> dict[str, str]:
+        """Extra environment for the driver process of launch node ``name``: the emulated I2C bus's
+        socket (:data:`~hindrax_drivers.transport.socket_i2c.SOCKET_ENV`) for a node on the bus,
+        else {}."""
+        return {SOCKET_ENV: self.socket_path} if name in I2C_DEVICES else {}
+
+    def close(self) -> None:  # pragma: no cover - abstract
+        """Stop serving the devices."""
+        raise NotImplementedError
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
 
 
 def _wobble(t_s: float, period_s: float, amplitude: float) -> float:
     return amplitude * math.sin(2.0 * math.pi * t_s / period_s)
 
 
-class EmulatedDevices:
+class EmulatedDevices(DriverEndpoints):
     """The five emulated devices (module docstring), serving as soon as constructed unless ``serve_i2c`` is False.
 
     config: the vehicle configuration (I2C addresses, PCA9685 oscillator). directory: where the I2C socket goes
@@ -99,19 +118,11 @@ class EmulatedDevices:
         if serve_i2c:
             self.start_i2c()
 
-    # -- what the driver processes need -------------------------------------------------------------
+    # -- what the driver processes need (with DriverEndpoints' ros_arguments, env) -------------
     @property
     def ports(self) -> dict[str, str]:
         """Node name -> serial port path (stable across :meth:`unplug` / :meth:`replug`)."""
         return {name: dev.path for name, dev in self._serial.items()}
-
-    def ros_arguments(self, name: str) -> list[str]:
-        """Extra ``--ros-args`` for the driver process of node ``name`` (its emulated serial port), else []."""
-        return driver_ros_arguments(self.ports, name)
-
-    def env(self, name: str) -> dict[str, str]:
-        """Extra environment for the driver process of node ``name`` (the emulated I2C bus), else {}."""
-        return driver_env(self.socket_path, name)
 
     # -- a pool day ---------------------------------------------------------------------------------
     def unplug(self, name: str) -> None:
@@ -143,12 +154,6 @@ class EmulatedDevices:
         self.stop_i2c()
         for dev in self._serial.values():
             dev.close()
-
-    def __enter__(self) -> EmulatedDevices:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
     # -- truth: a vehicle holding station -------------------------------------------------------------
     def _t(self) -> float:

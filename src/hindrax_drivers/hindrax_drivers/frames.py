@@ -148,15 +148,18 @@ def twist_frd_to_flu(nu) -> np.ndarray:
     return wrench_frd_to_flu(nu)
 
 
+def _rotate_covariance(cov, r: np.ndarray) -> np.ndarray:
+    c = np.asarray(cov, dtype=float)
+    if c.shape == (6, 6):
+        r = np.kron(np.eye(2), r)
+    elif c.shape != (3, 3):
+        raise ValueError(f"expected a 3x3 or 6x6 covariance, got shape {c.shape}")
+    return r @ c @ r.T
+
+
 def covariance_flu_to_frd(cov) -> np.ndarray:
     """Covariance of a 3-vector (3x3) or of a twist/wrench (6x6, two 3-blocks) from FLU to FRD: R C R^T."""
-    c = np.asarray(cov, dtype=float)
-    if c.shape == (3, 3):
-        return R_FLU_FRD @ c @ R_FLU_FRD.T
-    if c.shape == (6, 6):
-        r6 = np.kron(np.eye(2), R_FLU_FRD)
-        return r6 @ c @ r6.T
-    raise ValueError(f"expected a 3x3 or 6x6 covariance, got shape {c.shape}")
+    return _rotate_covariance(cov, R_FLU_FRD)
 
 
 covariance_frd_to_flu = covariance_flu_to_frd  # the rotation is its own inverse
@@ -164,13 +167,7 @@ covariance_frd_to_flu = covariance_flu_to_frd  # the rotation is its own inverse
 
 def covariance_enu_to_ned(cov) -> np.ndarray:
     """Covariance of a 3-vector (3x3) or pose/twist (6x6) from ENU to NED axes: R C R^T."""
-    c = np.asarray(cov, dtype=float)
-    if c.shape == (3, 3):
-        return R_ENU_NED @ c @ R_ENU_NED.T
-    if c.shape == (6, 6):
-        r6 = np.kron(np.eye(2), R_ENU_NED)
-        return r6 @ c @ r6.T
-    raise ValueError(f"expected a 3x3 or 6x6 covariance, got shape {c.shape}")
+    return _rotate_covariance(cov, R_ENU_NED)
 
 
 covariance_ned_to_enu = covariance_enu_to_ned

@@ -55,7 +55,7 @@ from typing import Sequence
 import numpy as np
 
 from .deadband import MAX_THRUSTERS, ZERO_FORCE_N, DeadbandSearch
-from .thrust_curve import ThrustCurve, forward_thrust
+from .thrust_curve import ThrustCurve, check_voltage_scale, forward_thrust
 
 __all__ = [
     "AXIS_NAMES",
@@ -409,20 +409,10 @@ class ThrustAllocator:
     def force_limits_n(self, voltage_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)`` force limits (n,) in N: each curve's max reverse (< 0) and forward (> 0)
         thrust times ``voltage_scale``. Raises ``ValueError`` for a non-finite or non-positive scale."""
-        s = self._check_scale(voltage_scale)
+        s = check_voltage_scale(voltage_scale)
         return s * self._base_lower, s * self._base_upper
 
     # ----------------------------------------------------------------- allocation
-    @staticmethod
-    def _check_scale(voltage_scale: float) -> float:
-        try:
-            s = float(voltage_scale)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"voltage_scale must be a finite positive number, got {voltage_scale!r}") from exc
-        if not (math.isfinite(s) and s > 0.0):
-            raise ValueError(f"voltage_scale must be a finite positive number, got {voltage_scale!r}")
-        return s
-
     @staticmethod
     def _max_multiplier(base: np.ndarray, step: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> float:
         """Largest t >= 0 with lower <= base + t * step <= upper (inf if step is zero)."""
@@ -463,7 +453,7 @@ class ThrustAllocator:
             raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}") from exc
         if tau.shape != (6,) or not np.isfinite(tau).all():
             raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}")
-        s_v = self._check_scale(voltage_scale)
+        s_v = check_voltage_scale(voltage_scale)
         key = tau.tobytes()
         last = self._last
         if last is not None and last[0] == key and last[1] == s_v:

@@ -61,6 +61,7 @@ __all__ = [
     "BASIC_ESC_DEADBAND_US",
     "point_reflection",
     "voltage_thrust_scale",
+    "check_voltage_scale",
     "ThrustCurve",
     "hindrax_default_curve",
     "forward_thrust",
@@ -131,7 +132,9 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
     return float((battery_voltage_v / nominal_voltage_v) ** exponent)
 
 
-def _check_voltage_scale(voltage_scale: float) -> float:
+def check_voltage_scale(voltage_scale: float) -> float:
+    """``voltage_scale`` as a float. Raises :class:`ThrustCurveError` (a ValueError) naming it when
+    it is not a finite positive number."""
     try:
         value = float(voltage_scale)
     except (TypeError, ValueError) as exc:
@@ -351,7 +354,7 @@ class ThrustCurve:
 
         Raises :class:`ThrustCurveError` for a non-finite or non-positive ``voltage_scale``.
         """
-        s = _check_voltage_scale(voltage_scale)
+        s = check_voltage_scale(voltage_scale)
         return (s * self.max_reverse_n, s * self.max_forward_n)
 
     # ----------------------------------------------------------------- forward model
@@ -366,7 +369,7 @@ class ThrustCurve:
         Source: [Hindrax-Drag] eq. 1, docs/devices.md §5.2. Raises :class:`ThrustCurveError` for non-finite
         input or a bad ``voltage_scale``.
         """
-        s = _check_voltage_scale(voltage_scale)
+        s = check_voltage_scale(voltage_scale)
         p = _finite_array(pulse_width_us, "pulse_width_us")
         return _out(s * forward_thrust(p, *self.forward_parameters))
 
@@ -381,7 +384,7 @@ class ThrustCurve:
         ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] eq. 1. Raises
         :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``.
         """
-        s = _check_voltage_scale(voltage_scale)
+        s = check_voltage_scale(voltage_scale)
         return _out(self._pulse_width_unchecked(_finite_array(force_n, "force_n"), s))
 
     def _pulse_width_unchecked(self, force: np.ndarray, s: float) -> np.ndarray:

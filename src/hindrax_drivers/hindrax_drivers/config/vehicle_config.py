@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from dataclasses import dataclass
-from typing import Any, Mapping, TypeVar
+from typing import Any, Generic, Mapping, TypeVar
 
 import numpy as np
 
@@ -82,6 +82,24 @@ def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
     return built
 
 
+class _TypedSection(Generic[_S]):
+    """A :class:`VehicleConfig` attribute: its typed section ``cls`` (``cfg.esc``), built from the
+    flat keys on first use and kept (the configuration is immutable). ``doc``: what it holds."""
+
+    def __init__(self, cls: type[_S], doc: str = "") -> None:
+        self.cls = cls
+        self.__doc__ = f"``{cls.PREFIX}.*``" + (f": {doc}" if doc else ".")
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, cfg: Any, owner: type | None = None) -> _S:
+        if cfg is None:
+            return self  # type: ignore[return-value]  # the class attribute (documentation)
+        section = build_section(self.cls, cfg.flat)
+        cfg.__dict__[self.name] = section  # a plain attribute from now on, as a cached_property
+        return section
+
 
 @dataclass(frozen=True)
 class VehicleConfig:
@@ -110,75 +128,22 @@ class VehicleConfig:
         return {k[len(p):]: v for k, v in self.flat.items() if k.startswith(p)}
 
     # -- typed sections --
-    @functools.cached_property
-    def vehicle(self) -> VehicleSection:
-        """``vehicle.*``: rigid-body data."""
-        return build_section(VehicleSection, self.flat)
-
-    @functools.cached_property
-    def environment(self) -> EnvironmentSection:
-        """``environment.*``: water and gravity."""
-        return build_section(EnvironmentSection, self.flat)
-
-    @functools.cached_property
-    def hydrodynamics(self) -> HydrodynamicsSection:
-        """``hydrodynamics.*`` (per DOF uniformly: :meth:`dof_hydrodynamics`; the matrix: :attr:`added_mass_matrix`)."""
-        return build_section(HydrodynamicsSection, self.flat)
-
-    @functools.cached_property
-    def esc(self) -> EscSection:
-        """``esc.*``: the PCA9685 ESC output."""
-        return build_section(EscSection, self.flat)
-
-    @functools.cached_property
-    def lights(self) -> LightsSection:
-        """``lights.*``."""
-        return build_section(LightsSection, self.flat)
-
-    @functools.cached_property
-    def sensors(self) -> SensorsSection:
-        """``sensors.*``: ``dvl75``, ``ping1d``, ``ms5837``, ``icm20948``."""
-        return build_section(SensorsSection, self.flat)
-
-    @functools.cached_property
-    def pool(self) -> PoolSection:
-        """``pool.*``: the pool box and start pose."""
-        return build_section(PoolSection, self.flat)
-
-    @functools.cached_property
-    def limits(self) -> LimitsSection:
-        """``limits.*``: the identification's own abort limits."""
-        return build_section(LimitsSection, self.flat)
-
-    @functools.cached_property
-    def supervisor(self) -> SupervisorSection:
-        """``supervisor.*``: the safety supervisor."""
-        return build_section(SupervisorSection, self.flat)
-
-    @functools.cached_property
-    def identification(self) -> IdentificationSection:
-        """``identification.*``."""
-        return build_section(IdentificationSection, self.flat)
-
-    @functools.cached_property
-    def calibration(self) -> CalibrationSection:
-        """``calibration.*``: masses and volumes (:attr:`known_forces` gives the derived forces)."""
-        return build_section(CalibrationSection, self.flat)
-
-    @functools.cached_property
-    def control(self) -> ControlSection:
-        """``control.*``: the holds' settings (all optional: None when absent)."""
-        return build_section(ControlSection, self.flat)
-
-    @functools.cached_property
-    def simulation(self) -> SimulationSection:
-        """``simulation.*``: the virtual pool's integration and sensor models."""
-        return build_section(SimulationSection, self.flat)
-
-    @functools.cached_property
-    def recording(self) -> RecordingSection:
-        """``recording.*``: the MCAP recorder."""
-        return build_section(RecordingSection, self.flat)
+    vehicle = _TypedSection(VehicleSection, "rigid-body data.")
+    environment = _TypedSection(EnvironmentSection, "water and gravity.")
+    hydrodynamics = _TypedSection(HydrodynamicsSection, "per DOF: :meth:`dof_hydrodynamics`; the "
+                                  "matrix: :attr:`added_mass_matrix`.")
+    esc = _TypedSection(EscSection, "the PCA9685 ESC output.")
+    lights = _TypedSection(LightsSection)
+    sensors = _TypedSection(SensorsSection, "``dvl75``, ``ping1d``, ``ms5837``, ``icm20948``.")
+    pool = _TypedSection(PoolSection, "the pool box and start pose.")
+    limits = _TypedSection(LimitsSection, "the identification's own abort limits.")
+    supervisor = _TypedSection(SupervisorSection, "the safety supervisor.")
+    identification = _TypedSection(IdentificationSection)
+    calibration = _TypedSection(CalibrationSection, "masses and volumes (:attr:`known_forces`: "
+                                "the derived forces).")
+    control = _TypedSection(ControlSection, "the holds' settings (all optional: None when absent).")
+    simulation = _TypedSection(SimulationSection, "the virtual pool's integration, sensor models.")
+    recording = _TypedSection(RecordingSection, "the MCAP recorder.")
 
     # -- derived views --
     @property

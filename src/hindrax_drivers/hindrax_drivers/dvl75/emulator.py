@@ -257,13 +257,7 @@ class Dvl75Emulator:
                 for t_cycle in self._schedule.due(t_s, self.max_backlog_s):
                     self._cycle(t_cycle)
             messages, self._pending = self._pending, []
-            garbage = self.faults.take_garbage()
-            if self.faults.disconnected:
-                return b""
-            out = bytearray(garbage)
-            for msg in messages:
-                out += self.faults.apply(msg, _corrupt_nmea_checksum)
-            return bytes(out)
+            return self.faults.transmit(messages, _corrupt_nmea_checksum)
 
     def reboot(self, t_s: float) -> None:
         """Restart as at power-up at time ``t_s``: boot time (``tu`` = 0), non-sticky state

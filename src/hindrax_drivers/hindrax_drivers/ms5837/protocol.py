@@ -265,6 +265,18 @@ def prom_with_crc(word0: int, coefficients: Sequence[int], word7: int = 0) -> tu
     return tuple(words)
 
 
+class _Coefficient:
+    """``Calibration.c<k>``: PROM word k, the coefficient Ck (docs/devices.md §3.2)."""
+
+    def __init__(self, k: int, doc: str) -> None:
+        self.k, self.__doc__ = k, f"{doc} (word {k})."
+
+    def __get__(self, cal: "Calibration | None", owner: type) -> int:
+        if cal is None:
+            return self  # type: ignore[return-value]  # the class attribute (documentation)
+        return cal.words[self.k]
+
+
 @dataclass(frozen=True)
 class Calibration:
     """Parsed PROM (docs/devices.md §3.2).
@@ -299,35 +311,12 @@ class Calibration:
         """Calibration from C1..C6 with a valid CRC computed over ``word0`` (for tests/emulation)."""
         return cls(prom_with_crc(word0, coefficients))
 
-    @property
-    def c1(self) -> int:
-        """C1 = SENS_T1, pressure sensitivity (word 1)."""
-        return self.words[1]
-
-    @property
-    def c2(self) -> int:
-        """C2 = OFF_T1, pressure offset (word 2)."""
-        return self.words[2]
-
-    @property
-    def c3(self) -> int:
-        """C3 = TCS, temperature coefficient of sensitivity (word 3)."""
-        return self.words[3]
-
-    @property
-    def c4(self) -> int:
-        """C4 = TCO, temperature coefficient of offset (word 4)."""
-        return self.words[4]
-
-    @property
-    def c5(self) -> int:
-        """C5 = T_REF, reference temperature (word 5)."""
-        return self.words[5]
-
-    @property
-    def c6(self) -> int:
-        """C6 = TEMPSENS, temperature coefficient of the temperature (word 6)."""
-        return self.words[6]
+    c1 = _Coefficient(1, "C1 = SENS_T1, pressure sensitivity")
+    c2 = _Coefficient(2, "C2 = OFF_T1, pressure offset")
+    c3 = _Coefficient(3, "C3 = TCS, temperature coefficient of sensitivity")
+    c4 = _Coefficient(4, "C4 = TCO, temperature coefficient of offset")
+    c5 = _Coefficient(5, "C5 = T_REF, reference temperature")
+    c6 = _Coefficient(6, "C6 = TEMPSENS, temperature coefficient of the temperature")
 
     @property
     def crc(self) -> int:

@@ -223,13 +223,7 @@ class Ping1dEmulator:
             for message in inbox:
                 self._handle(message)
             messages, self._pending = self._pending, []
-            garbage = self.faults.take_garbage()
-            if self.faults.disconnected:
-                return b""
-            out = bytearray(garbage)
-            for msg in messages:
-                out += self.faults.apply(msg, _corrupt_checksum)
-            return bytes(out)
+            return self.faults.transmit(messages, _corrupt_checksum)
 
     # --- measurement model --------------------------------------------------------------------------
     def _interval_s(self) -> float:

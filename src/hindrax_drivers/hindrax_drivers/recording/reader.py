@@ -18,8 +18,6 @@ Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a rea
 """
 from __future__ import annotations
 
-import heapq
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Iterator
@@ -79,16 +77,12 @@ def bag_files(path: str | Path) -> list[Path]:
         present = []
     # metadata.yaml may be stale after a crash (written before the last split): add unlisted files
     listed = {f.name for f in present}
-    extra = [f for f in sorted(path.glob("*.mcap"), key=_file_index) if f.name not in listed]
+    extra = [f for f in sorted(path.glob("*.mcap"), key=_recover.file_index)
+             if f.name not in listed]
     files = present + extra
     if not files:
         raise BagError(f"{path}: no .mcap files")
     return files
-
-
-def _file_index(p: Path) -> tuple[int, str]:
-    m = re.search(r"_(\d+)\.mcap$", p.name)
-    return (int(m.group(1)) if m else -1, p.name)
 
 
 class BagReader:
@@ -122,26 +116,19 @@ class BagReader:
             summary = None
         if summary is None or summary.statistics is None:
             self.truncated_files.append(f)
-            counts: dict[int, int] = {}
-            schemas: dict[int, Schema] = {}
-            chans: dict[int, Channel] = {}
+            messages = 0
             try:
-                for rec in _recover.iter_file_records(f):
-                    if isinstance(rec, Schema):
-                        schemas[rec.id] = rec
-                    elif isinstance(rec, Channel):
-                        chans[rec.id] = rec
-                    elif isinstance(rec, Message):
-                        counts[rec.channel_id] = counts.get(rec.channel_id, 0) + 1
-                        self._span(rec.log_time, rec.log_time)
+                for ch, schema, msg in _stream_records(f):
+                    self._add_channel(ch, schema, int(msg is not None))
+                    if msg is not None:
+                        messages += 1
+                        self._span(msg.log_time, msg.log_time)
             except _recover.RecoverError as exc:  # not MCAP at all (empty file, wrong magic)
                 raise BagError(str(exc)) from exc
-            if not counts:
+            if not messages:
                 raise BagError(f"{f}: truncated MCAP without a summary and without one complete message "
                                "(nothing to read)")
             self._summaries[f] = None
-            for cid, ch in chans.items():
-                self._add_channel(ch, schemas.get(ch.schema_id), counts.get(cid, 0))
             return
         self._summaries[f] = summary
         if summary.statistics.message_count:
@@ -271,30 +258,31 @@ class BagReader:
             yield m, dec(m.data)
 
 
-def _sorted_stream_messages(f: Path, wanted: set[str] | None, start_ns: int | None,
-                            end_ns: int | None) -> Iterator[RawMessage]:
-    """Messages of a file without summary, tolerant of truncation, merged into log-time order per chunk."""
+def _stream_records(f: Path) -> Iterator[tuple[Channel, Schema | None, Message | None]]:
+    """A file without summary, tolerant of truncation: (channel, its schema, None) at each channel
+    record and (channel, schema, message) at each message of a channel seen before it."""
     schemas: dict[int, Schema] = {}
     chans: dict[int, Channel] = {}
-    heap: list[tuple[int, int, RawMessage]] = []
-    n = 0
     for rec in _recover.iter_file_records(f):
         if isinstance(rec, Schema):
             schemas[rec.id] = rec
         elif isinstance(rec, Channel):
             chans[rec.id] = rec
-        elif isinstance(rec, Message):
-            ch = chans.get(rec.channel_id)
-            if ch is None or (wanted is not None and ch.topic not in wanted):
-                continue
-            if (start_ns is not None and rec.log_time < start_ns) or (end_ns is not None and rec.log_time >= end_ns):
-                continue
-            schema = schemas.get(ch.schema_id)
-            heapq.heappush(heap, (rec.log_time, n, RawMessage(ch.topic, schema.name if schema else "",
-                                                              rec.log_time, rec.publish_time, rec.data)))
-            n += 1
-    while heap:
-        yield heapq.heappop(heap)[2]
+            yield rec, schemas.get(rec.schema_id), None
+        elif isinstance(rec, Message) and rec.channel_id in chans:
+            ch = chans[rec.channel_id]
+            yield ch, schemas.get(ch.schema_id), rec
+
+
+def _sorted_stream_messages(f: Path, wanted: set[str] | None, start_ns: int | None,
+                            end_ns: int | None) -> Iterator[RawMessage]:
+    """Messages of a file without summary, tolerant of truncation, in log-time order (stable)."""
+    found = [RawMessage(ch.topic, schema.name if schema else "", m.log_time, m.publish_time, m.data)
+             for ch, schema, m in _stream_records(f)
+             if m is not None and (wanted is None or ch.topic in wanted)
+             and (start_ns is None or m.log_time >= start_ns)
+             and (end_ns is None or m.log_time < end_ns)]
+    yield from sorted(found, key=lambda r: r.log_time_ns)
 
 
 def iter_raw_device_data(bag_path: str | Path, device_name: str) -> Iterator[tuple[int, Any]]:

@@ -37,6 +37,7 @@ from .qos import profiles_from_yaml
 
 MAGIC = bytes([137, 77, 67, 65, 80, 48, 13, 10])
 _VALID_OPCODES = {int(o) for o in Opcode}
+_END_OPCODES = (Opcode.FOOTER, Opcode.DATA_END)
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "": CompressionType.NONE}
 
 
@@ -81,6 +82,30 @@ def is_complete(path: str | Path) -> bool:
         return False
 
 
+def _raw_records(f, size: int) -> Iterator[tuple[int, int, bytes]]:
+    """(opcode, end offset, header + body) of each complete record of the data section of open file
+    ``f`` (``size`` bytes), stopping at the first invalid opcode (zero fill), Footer/DataEnd or
+    truncated record."""
+    pos = len(MAGIC)
+    while pos + 9 <= size:
+        f.seek(pos)
+        hdr = f.read(9)
+        opcode, length = struct.unpack("<BQ", hdr)
+        if opcode not in _VALID_OPCODES or opcode in _END_OPCODES or pos + 9 + length > size:
+            return
+        pos += 9 + length
+        yield opcode, pos, hdr + f.read(length)
+
+
+def _parse(raw: bytes) -> object:
+    """The mcap record of one raw record (header + body). Raises McapError, struct.error, ..."""
+    return next(iter(StreamReader(io.BytesIO(raw), skip_magic=True, emit_chunks=True).records))
+
+
+_SUMMARY_OPCODES = (Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX, Opcode.STATISTICS,
+                    Opcode.SUMMARY_OFFSET, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX)
+
+
 def iter_file_records(path: str | Path, stats: FileRecovery | None = None) -> Iterator[object]:
     """Complete records of the data section of an MCAP file, tolerant of truncation (see module doc).
 
@@ -90,26 +115,14 @@ def iter_file_records(path: str | Path, stats: FileRecovery | None = None) -> It
     path = Path(path)
     size = path.stat().st_size
     with open(path, "rb") as f:
-        head = f.read(len(MAGIC))
-        if head != MAGIC:
+        if f.read(len(MAGIC)) != MAGIC:
             raise RecoverError(f"{path}: not an MCAP file (bad magic)")
         pos = len(MAGIC)
-        while pos + 9 <= size:
-            f.seek(pos)
-            hdr = f.read(9)
-            opcode, length = struct.unpack("<BQ", hdr)
-            if opcode not in _VALID_OPCODES or opcode in (Opcode.FOOTER, Opcode.DATA_END):
-                break
-            end = pos + 9 + length
-            if end > size:
-                break
-            body = f.read(length)
-            pos = end
-            if opcode in (Opcode.MESSAGE_INDEX, Opcode.CHUNK_INDEX, Opcode.STATISTICS, Opcode.SUMMARY_OFFSET,
-                          Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX):
+        for opcode, pos, raw in _raw_records(f, size):
+            if opcode in _SUMMARY_OPCODES:
                 continue
             try:
-                rec = next(iter(StreamReader(io.BytesIO(hdr + body), skip_magic=True, emit_chunks=True).records))
+                rec = _parse(raw)
             except (McapError, struct.error, UnicodeDecodeError, StopIteration, ValueError):
                 if stats is not None and opcode == Opcode.CHUNK:
                     stats.corrupt_chunks += 1
@@ -135,35 +148,19 @@ def _ends_complete(f, size: int, pos: int) -> bool:
         return False
     f.seek(pos)
     opcode = f.read(1)
-    return bool(opcode) and opcode[0] in (Opcode.DATA_END, Opcode.FOOTER)
+    return bool(opcode) and opcode[0] in _END_OPCODES
 
 
 def _chunk_compression(path: Path) -> str:
-    """Compression of the first chunk of a file ("" when none or no chunk is readable)."""
-    for rec in _iter_chunks_only(path):
-        return rec.compression
-    return "zstd"
-
-
-def _iter_chunks_only(path: Path) -> Iterator[Chunk]:
-    size = path.stat().st_size
+    """Compression of the first chunk of a file ("zstd" when no chunk is readable)."""
     with open(path, "rb") as f:
-        pos = len(MAGIC)
-        while pos + 9 <= size:
-            f.seek(pos)
-            hdr = f.read(9)
-            opcode, length = struct.unpack("<BQ", hdr)
-            if opcode not in _VALID_OPCODES or pos + 9 + length > size:
-                return
+        for opcode, _, raw in _raw_records(f, path.stat().st_size):
             if opcode == Opcode.CHUNK:
-                body = f.read(length)
                 try:
-                    rec = next(iter(StreamReader(io.BytesIO(hdr + body), skip_magic=True, emit_chunks=True).records))
+                    return _parse(raw).compression  # type: ignore[attr-defined]  # a Chunk
                 except (McapError, struct.error, StopIteration, ValueError):
-                    return
-                yield rec
-                return
-            pos += 9 + length
+                    return "zstd"
+    return "zstd"
 
 
 def recover_file(path: str | Path, keep_original: bool = False, force: bool = False,
@@ -273,7 +270,8 @@ def metadata_from_files(files: list[Path]) -> BagMetadata:
     return BagMetadata(files=infos, topics=list(topics.values()))
 
 
-def _index(p: Path) -> tuple[int, str]:
+def file_index(p: Path) -> tuple[int, str]:
+    """Sort key of a bag's split file ``<bag>_<n>.mcap``: (n, name); n = -1 without ``_<n>``."""
     m = re.search(r"_(\d+)\.mcap$", p.name)
     return (int(m.group(1)) if m else -1, p.name)
 
@@ -290,7 +288,7 @@ def recover_bag(bag_path: str | Path, keep_original: bool = False) -> tuple[BagM
     if bag_path.is_file():
         res = recover_file(bag_path, keep_original=keep_original)
         return metadata_from_files([bag_path]), [res]
-    files = sorted(bag_path.glob("*.mcap"), key=_index)
+    files = sorted(bag_path.glob("*.mcap"), key=file_index)
     if not files:
         raise RecoverError(f"{bag_path}: no .mcap files")
     results = [recover_file(f, keep_original=keep_original) for f in files]

@@ -35,7 +35,7 @@ import tempfile
 import threading
 import time
 import tty
-from typing import Callable, Optional, Protocol, TypeVar, runtime_checkable
+from typing import Callable, Iterable, Optional, Protocol, TypeVar, runtime_checkable
 
 from ..scheduling import set_this_thread
 
@@ -158,6 +158,15 @@ class StreamFaults:
             self._garbage.clear()
             self.garbage_bytes_sent += len(data)
             return data
+
+    def transmit(self, messages: Iterable[bytes],
+                 corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
+        """The bytes a device sends at one poll: the queued garbage, then each of ``messages``
+        through :meth:`apply`; b"" while disconnected (the garbage is taken all the same)."""
+        garbage = self.take_garbage()
+        if self.disconnected:
+            return b""
+        return garbage + b"".join(self.apply(m, corrupt_checksum) for m in messages)
 
     def apply(self, message: bytes, corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
         """Apply the queued per-message fault (if any) to one outgoing message.

@@ -33,7 +33,7 @@ from typing import Tuple
 
 import numpy as np
 
-from .least_squares import EstimationError, as_float_array, check_same_length
+from .least_squares import EstimationError, as_float_array, check_same_length, positive
 
 __all__ = [
     "KINEMATIC_VISCOSITY_WATER_M2_S",
@@ -49,20 +49,13 @@ __all__ = [
 KINEMATIC_VISCOSITY_WATER_M2_S = 1.01e-6
 
 
-def _positive(value: float, name: str) -> float:
-    value = float(value)
-    if not (np.isfinite(value) and value > 0):
-        raise EstimationError(f"{name} must be a finite number > 0, got {value}")
-    return value
-
-
 def characteristic_length_from_volume(volume_m3: float) -> float:
     """L = V^(1/3) in m ([Hindrax-AM] eq. 10: 0.0824 m for the 1:3 model, 0.2483 m prototype).
 
     Raises:
         EstimationError: volume not > 0.
     """
-    return _positive(volume_m3, "volume_m3") ** (1.0 / 3.0)
+    return positive(volume_m3, "volume_m3") ** (1.0 / 3.0)
 
 
 def reynolds_number(speed, characteristic_length_m: float,
@@ -77,8 +70,8 @@ def reynolds_number(speed, characteristic_length_m: float,
     Raises:
         EstimationError: non-positive L or nu.
     """
-    L = _positive(characteristic_length_m, "characteristic_length_m")
-    nu = _positive(kinematic_viscosity_m2_s, "kinematic_viscosity_m2_s")
+    L = positive(characteristic_length_m, "characteristic_length_m")
+    nu = positive(kinematic_viscosity_m2_s, "kinematic_viscosity_m2_s")
     re = np.abs(np.asarray(speed, dtype=float)) * L / nu
     return float(re) if re.ndim == 0 else re
 
@@ -122,8 +115,8 @@ def drag_coefficient(quadratic_damping: float, projected_area_m2: float,
     Raises:
         EstimationError: non-positive area/density or negative std.
     """
-    A = _positive(projected_area_m2, "projected_area_m2")
-    rho = _positive(fluid_density_kg_m3, "fluid_density_kg_m3")
+    A = positive(projected_area_m2, "projected_area_m2")
+    rho = positive(fluid_density_kg_m3, "fluid_density_kg_m3")
     if not quadratic_damping_std >= 0:
         raise EstimationError("quadratic_damping_std must be >= 0")
     scale = 2.0 / (rho * A)
@@ -145,7 +138,7 @@ def rotational_drag_coefficient(quadratic_damping: float, projected_area_m2: flo
     Returns:
         (c_d, c_d_std).
     """
-    R = _positive(radius_m, "radius_m")
+    R = positive(radius_m, "radius_m")
     c, s = drag_coefficient(quadratic_damping, projected_area_m2, fluid_density_kg_m3,
                             quadratic_damping_std)
     return c / R**3, s / R**3
@@ -172,8 +165,8 @@ def drag_coefficient_samples(velocity, force, projected_area_m2: float,
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)
     check_same_length(velocity=v, force=f)
-    A = _positive(projected_area_m2, "projected_area_m2")
-    rho = _positive(fluid_density_kg_m3, "fluid_density_kg_m3")
+    A = positive(projected_area_m2, "projected_area_m2")
+    rho = positive(fluid_density_kg_m3, "fluid_density_kg_m3")
     keep = np.abs(v) > min_speed
     if np.count_nonzero(keep) < 2:
         raise EstimationError(f"need at least 2 samples with |v| > {min_speed}")

@@ -65,7 +65,8 @@ import numpy as np
 
 from .drag_coefficient import (KINEMATIC_VISCOSITY_WATER_M2_S,
                                characteristic_length_from_volume, reynolds_number)
-from .least_squares import EstimationError, as_float_array, check_same_length, check_time_vector
+from .least_squares import (EstimationError, as_float_array, check_same_length, check_time_vector,
+                            positive)
 
 __all__ = [
     "FreeDecayResult",
@@ -96,13 +97,6 @@ __all__ = [
 # --------------------------------------------------------------------------------------
 # Closed-form relations ([Hindrax-AM] eqs. 2-12)
 # --------------------------------------------------------------------------------------
-def _pos(x: float, name: str) -> float:
-    x = float(x)
-    if not (np.isfinite(x) and x > 0):
-        raise EstimationError(f"{name} must be a finite number > 0, got {x}")
-    return x
-
-
 def _zeta(z: float) -> float:
     z = float(z)
     if not (np.isfinite(z) and 0.0 <= z < 1.0):
@@ -143,15 +137,15 @@ def log_decrement_from_damping_ratio(zeta: float) -> float:
 
 def natural_frequency(omega_d_rad_s: float, zeta: float) -> float:
     """omega_n = omega_d / sqrt(1 - zeta^2) in rad/s ([Hindrax-AM] eq. 2)."""
-    return _pos(omega_d_rad_s, "omega_d_rad_s") / np.sqrt(1.0 - _zeta(zeta) ** 2)
+    return positive(omega_d_rad_s, "omega_d_rad_s") / np.sqrt(1.0 - _zeta(zeta) ** 2)
 
 
 def added_mass_exact(stiffness_n_per_m: float, omega_d_rad_s: float, zeta: float,
                      mass_kg: float) -> float:
     """m_ad = k_eq (1 - zeta^2) / omega_d^2 - m_b in kg ([Hindrax-AM] eq. 5, based on omega_d)."""
-    k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
-    wd = _pos(omega_d_rad_s, "omega_d_rad_s")
-    return k * (1.0 - _zeta(zeta) ** 2) / wd**2 - _pos(mass_kg, "mass_kg")
+    k = positive(stiffness_n_per_m, "stiffness_n_per_m")
+    wd = positive(omega_d_rad_s, "omega_d_rad_s")
+    return k * (1.0 - _zeta(zeta) ** 2) / wd**2 - positive(mass_kg, "mass_kg")
 
 
 def added_mass_simplified(stiffness_n_per_m: float, omega_rad_s: float, mass_kg: float) -> float:
@@ -160,9 +154,9 @@ def added_mass_simplified(stiffness_n_per_m: float, omega_rad_s: float, mass_kg:
     ``omega_rad_s`` is the measured oscillation frequency taken as omega_n (damping neglected);
     [Hindrax-AM] Tables 3-5 (sixth column) evaluate it with the measured omega_d.
     """
-    k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
-    w = _pos(omega_rad_s, "omega_rad_s")
-    return k / w**2 - _pos(mass_kg, "mass_kg")
+    k = positive(stiffness_n_per_m, "stiffness_n_per_m")
+    w = positive(omega_rad_s, "omega_rad_s")
+    return k / w**2 - positive(mass_kg, "mass_kg")
 
 
 def added_mass_error_percent(added_mass_simplified_kg: float, added_mass_exact_kg: float) -> float:
@@ -175,27 +169,27 @@ def added_mass_error_percent(added_mass_simplified_kg: float, added_mass_exact_k
 
 def damping_coefficient(zeta: float, stiffness_n_per_m: float, total_mass_kg: float) -> float:
     """c = 2 zeta sqrt(k_eq m) in N s/m, m = m_b + m_ad ([Hindrax-AM] eq. 6)."""
-    return 2.0 * _zeta(zeta) * np.sqrt(_pos(stiffness_n_per_m, "stiffness_n_per_m")
-                                       * _pos(total_mass_kg, "total_mass_kg"))
+    return 2.0 * _zeta(zeta) * np.sqrt(positive(stiffness_n_per_m, "stiffness_n_per_m")
+                                       * positive(total_mass_kg, "total_mass_kg"))
 
 
 def inertia_coefficient(added_mass_kg: float, volume_m3: float,
                         fluid_density_kg_m3: float = 1000.0) -> float:
     """C_M = m_ad / (rho V), dimensionless ([Hindrax-AM] eq. 8)."""
-    return float(added_mass_kg) / (_pos(fluid_density_kg_m3, "fluid_density_kg_m3")
-                                   * _pos(volume_m3, "volume_m3"))
+    return float(added_mass_kg) / (positive(fluid_density_kg_m3, "fluid_density_kg_m3")
+                                   * positive(volume_m3, "volume_m3"))
 
 
 def keulegan_carpenter(amplitude_m: float, characteristic_length_m: float) -> float:
     """KC = 2 pi A / D ([Hindrax-AM] eq. 9; D = V^(1/3) for the ROV model)."""
-    return 2.0 * np.pi * abs(float(amplitude_m)) / _pos(characteristic_length_m,
+    return 2.0 * np.pi * abs(float(amplitude_m)) / positive(characteristic_length_m,
                                                          "characteristic_length_m")
 
 
 def prototype_added_mass(c_m: float, prototype_volume_m3: float,
                          fluid_density_kg_m3: float = 1000.0) -> float:
     """m_ad,prototype = C_M rho V_prototype in kg ([Hindrax-AM] eq. 12; V = 0.0153 m^3 for Hindrax)."""
-    return float(c_m) * _pos(fluid_density_kg_m3, "fluid_density_kg_m3") * _pos(
+    return float(c_m) * positive(fluid_density_kg_m3, "fluid_density_kg_m3") * positive(
         prototype_volume_m3, "prototype_volume_m3")
 
 
@@ -489,10 +483,10 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     t = check_time_vector(t_s, "t_s", min_samples=16)
     a_all = as_float_array(acceleration_m_s2, "acceleration_m_s2", 1)
     check_same_length(t_s=t, acceleration_m_s2=a_all)
-    k = _pos(stiffness_n_per_m, "stiffness_n_per_m")
-    mb = _pos(mass_kg, "mass_kg")
-    vol = _pos(volume_m3, "volume_m3")
-    rho = _pos(fluid_density_kg_m3, "fluid_density_kg_m3")
+    k = positive(stiffness_n_per_m, "stiffness_n_per_m")
+    mb = positive(mass_kg, "mass_kg")
+    vol = positive(volume_m3, "volume_m3")
+    rho = positive(fluid_density_kg_m3, "fluid_density_kg_m3")
     if not (0.0 < min_peak_fraction < 1.0):
         raise EstimationError(f"min_peak_fraction must be in (0, 1), got {min_peak_fraction}")
 
@@ -734,7 +728,7 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
     t = check_time_vector(t_s, "t_s", min_samples=32)
     yy = as_float_array(y, "y", 1)
     check_same_length(t_s=t, y=yy)
-    k = _pos(stiffness, "stiffness")
+    k = positive(stiffness, "stiffness")
     tt = t - t[0]
 
     f_hz = _dominant_frequency_hz(t, yy)
@@ -795,7 +789,7 @@ def fit_quadratic_free_decay(t_s, y, stiffness: float, rigid_inertia: Optional[f
         cov = np.full((6, 6), np.nan)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     M = float(theta[0])
-    mb = None if rigid_inertia is None else _pos(rigid_inertia, "rigid_inertia")
+    mb = None if rigid_inertia is None else positive(rigid_inertia, "rigid_inertia")
     return QuadraticDecayFit(
         total_inertia=M, total_inertia_std=float(std[0]),
         added_inertia=float("nan") if mb is None else M - mb, added_inertia_std=float(std[0]),
@@ -889,8 +883,8 @@ def restoring_from_inclining(arm_m, tilt_rad, test_mass_kg: float, test_volume_m
         raise EstimationError("need at least two different arms")
     if np.any(np.abs(phi) >= 0.5 * np.pi):
         raise EstimationError("tilts must be within +-90 deg (radians expected)")
-    w = (_pos(test_mass_kg, "test_mass_kg") - float(test_volume_m3) * _pos(fluid_density_kg_m3,
-                                                                          "fluid_density_kg_m3")) * gravity_m_s2
+    rho = positive(fluid_density_kg_m3, "fluid_density_kg_m3")
+    w = (positive(test_mass_kg, "test_mass_kg") - float(test_volume_m3) * rho) * gravity_m_s2
     if not w > 0:
         raise EstimationError(f"test mass must be heavier than the water it displaces, weight in water {w} N")
     y = w * d
@@ -908,7 +902,7 @@ def restoring_from_inclining(arm_m, tilt_rad, test_mass_kg: float, test_volume_m
     if not c > 0:
         raise EstimationError(f"restoring stiffness came out {c:.4g} N m/rad (<= 0): check the signs of arm and tilt")
     if vehicle_mass_kg is not None:
-        wv = _pos(vehicle_mass_kg, "vehicle_mass_kg") * gravity_m_s2
+        wv = positive(vehicle_mass_kg, "vehicle_mass_kg") * gravity_m_s2
         bg, bg_std = c / wv, c_std / wv
     else:
         bg, bg_std = float("nan"), float("nan")

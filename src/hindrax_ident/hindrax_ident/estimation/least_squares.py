@@ -59,6 +59,14 @@ class EstimationError(ValueError):
 # --------------------------------------------------------------------------------------
 # Shared validation helpers (used by rls, filters, steady_windows, free_decay, ...)
 # --------------------------------------------------------------------------------------
+def positive(value: float, name: str) -> float:
+    """``value`` as a float; EstimationError naming ``name`` unless it is finite and > 0."""
+    value = float(value)
+    if not (np.isfinite(value) and value > 0):
+        raise EstimationError(f"{name} must be a finite number > 0, got {value}")
+    return value
+
+
 def as_float_array(value, name: str, ndim: int, allow_nan: bool = False) -> np.ndarray:
     """Convert ``value`` to a float ndarray with ``ndim`` dimensions or raise EstimationError.
 
@@ -170,6 +178,23 @@ class LsResult:
         }
 
 
+class _Param:
+    """A fit's attribute ``<name>``: the fitted value of parameter ``<name>``; ``<name>_std``: its
+    standard deviation (from the fit's :class:`LsResult`); None when the model lacks it."""
+
+    def __init__(self, doc: str) -> None:
+        self.__doc__ = doc
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.std = name.endswith("_std")
+        self.name = name[:-4] if self.std else name
+
+    def __get__(self, fit: "_NamedFit | None", owner: type) -> Optional[float]:
+        if fit is None:
+            return self  # type: ignore[return-value]  # the class attribute (documentation)
+        return fit._std(self.name) if self.std else fit._value(self.name)
+
+
 class _NamedFit:
     """Mixin giving value/std access by parameter name on top of an :class:`LsResult`."""
 
@@ -185,35 +210,14 @@ class _NamedFit:
             return None
         return float(self.ls.std[self.ls.index(name)])
 
-    @property
-    def quadratic_damping(self) -> Optional[float]:
-        """Quadratic damping k_q of [Hindrax-Drag] eq. 2 (None when not fitted, e.g. fitted per direction)."""
-        return self._value("quadratic_damping")
-
-    @property
-    def quadratic_damping_std(self) -> Optional[float]:
-        """Standard deviation of k_q ([Hindrax-Drag] eq. 7)."""
-        return self._std("quadratic_damping")
-
-    @property
-    def linear_damping(self) -> Optional[float]:
-        """Linear damping k_l of [Hindrax-Drag] eq. 2 (Table 3 second column)."""
-        return self._value("linear_damping")
-
-    @property
-    def linear_damping_std(self) -> Optional[float]:
-        """Standard deviation of k_l."""
-        return self._std("linear_damping")
-
-    @property
-    def bias(self) -> Optional[float]:
-        """Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net buoyancy in heave)."""
-        return self._value("bias")
-
-    @property
-    def bias_std(self) -> Optional[float]:
-        """Standard deviation of b."""
-        return self._std("bias")
+    quadratic_damping = _Param("Quadratic damping k_q of [Hindrax-Drag] eq. 2 (None when not "
+                                "fitted, e.g. fitted per direction).")
+    quadratic_damping_std = _Param("Standard deviation of k_q ([Hindrax-Drag] eq. 7).")
+    linear_damping = _Param("Linear damping k_l of [Hindrax-Drag] eq. 2 (Table 3 second column).")
+    linear_damping_std = _Param("Standard deviation of k_l.")
+    bias = _Param("Constant force/moment b of [Hindrax-Drag] eq. 2 (Table 3 third column; net "
+                   "buoyancy in heave).")
+    bias_std = _Param("Standard deviation of b.")
 
     def to_dict(self) -> dict:
         """``{name: value, name_std: std, ..., "n": n, "residual_std": s}`` (plain floats)."""
@@ -263,45 +267,15 @@ class DynamicFit(_NamedFit):
 
     ls: LsResult
 
-    @property
-    def inertia(self) -> Optional[float]:
-        """Total inertia m = m_RB + m_A (kg or kg m^2)."""
-        return self._value("inertia")
-
-    @property
-    def inertia_std(self) -> Optional[float]:
-        """Standard deviation of the total inertia."""
-        return self._std("inertia")
-
-    @property
-    def quadratic_damping_positive(self) -> Optional[float]:
-        """k_q for v > 0 (heave: positive = down, [Hindrax-Drag] section 4.1)."""
-        return self._value("quadratic_damping_positive")
-
-    @property
-    def quadratic_damping_positive_std(self) -> Optional[float]:
-        """Standard deviation of k_q for v > 0."""
-        return self._std("quadratic_damping_positive")
-
-    @property
-    def quadratic_damping_negative(self) -> Optional[float]:
-        """k_q for v < 0 (heave: negative = up)."""
-        return self._value("quadratic_damping_negative")
-
-    @property
-    def quadratic_damping_negative_std(self) -> Optional[float]:
-        """Standard deviation of k_q for v < 0."""
-        return self._std("quadratic_damping_negative")
-
-    @property
-    def restoring(self) -> Optional[float]:
-        """Coefficient of the restoring regressor (W*BG in N m for sin(roll/pitch))."""
-        return self._value("restoring")
-
-    @property
-    def restoring_std(self) -> Optional[float]:
-        """Standard deviation of the restoring coefficient."""
-        return self._std("restoring")
+    inertia = _Param("Total inertia m = m_RB + m_A (kg or kg m^2).")
+    inertia_std = _Param("Standard deviation of the total inertia.")
+    quadratic_damping_positive = _Param("k_q for v > 0 (heave: positive = down, [Hindrax-Drag] "
+                                         "section 4.1).")
+    quadratic_damping_positive_std = _Param("Standard deviation of k_q for v > 0.")
+    quadratic_damping_negative = _Param("k_q for v < 0 (heave: negative = up).")
+    quadratic_damping_negative_std = _Param("Standard deviation of k_q for v < 0.")
+    restoring = _Param("Coefficient of the restoring regressor (W*BG in N m for sin(roll/pitch)).")
+    restoring_std = _Param("Standard deviation of the restoring coefficient.")
 
 
 # --------------------------------------------------------------------------------------

@@ -70,7 +70,7 @@ from ..control.model import ControlModel, model_from_config
 
 __all__ = ["MANEUVERS", "ALTITUDE_MANEUVERS", "MODELS", "METRICS", "EvaluationSetup", "CaseResult", "run_case",
            "evaluate", "metrics", "summarise", "format_table", "write_outputs", "ratios", "make_hold",
-           "reference_limits", "without_sensor_noise"]
+           "reference_limits", "without_sensor_noise", "jsonable"]
 
 MANEUVERS = ("depth_step", "altitude_hold", "heading_step", "altitude_gentle")
 ALTITUDE_MANEUVERS = ("altitude_hold", "altitude_gentle")
@@ -369,13 +369,15 @@ def format_table(cases: Sequence) -> str:
     return "\n".join(lines)
 
 
-def _jsonable(x: Any) -> Any:
+def jsonable(x: Any) -> Any:
+    """``x`` with every non-finite float (NaN, inf) as None, in nested dicts, lists and tuples
+    (as lists): JSON has no NaN."""
     if isinstance(x, float) and not math.isfinite(x):
         return None
     if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
+        return {k: jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
+        return [jsonable(v) for v in x]
     return x
 
 
@@ -388,10 +390,10 @@ def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mappin
     out = Path(out_dir)
     (out / "report").mkdir(parents=True, exist_ok=True)
     summary = summarise(cases)
-    doc = {"cases": _jsonable(summary),
-           "runs": [_jsonable({"maneuver": c.maneuver, "model": c.model, "seed": c.seed, **c.metrics, "unit": c.unit})
-                    for c in cases],
-           "ratios": _jsonable(ratios(summary)), "info": _jsonable(dict(info))}
+    doc = {"cases": jsonable(summary),
+           "runs": [jsonable({"maneuver": c.maneuver, "model": c.model, "seed": c.seed, **c.metrics,
+                              "unit": c.unit}) for c in cases],
+           "ratios": jsonable(ratios(summary)), "info": jsonable(dict(info))}
     path = out / "control.json"
     path.write_text(json.dumps(doc, indent=2) + "\n")
     first = min(c.seed for c in cases) if cases else 1
@@ -443,5 +445,5 @@ def _report(folder: Path, cases: Sequence[CaseResult], info: Mapping[str, Any], 
 
 def setup_dict(setup: EvaluationSetup) -> dict:
     """The setup as a JSON-ready dict."""
-    return _jsonable(asdict(setup))
+    return jsonable(asdict(setup))
 

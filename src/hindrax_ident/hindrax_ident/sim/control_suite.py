@@ -25,7 +25,7 @@ from ..identification.assessment.results import build_results, write_identificat
 from .simulator import Simulator
 from .truth import load_truth
 from .truth import truth_dir as shipped
-from .control_evaluate import EvaluationSetup, evaluate, ratios, setup_dict, write_outputs
+from .control_evaluate import EvaluationSetup, evaluate, jsonable, ratios, setup_dict, write_outputs
 from ..control.model import ControlModel, load_model, model_from_config
 
 __all__ = ["SUITE_DOFS", "SUITE_MANEUVERS", "scenario_names", "run_scenario", "run_suite", "write_suite",
@@ -127,18 +127,9 @@ def format_suite(rows: Sequence[dict]) -> str:
 
 def write_suite(out: Path, rows: Sequence[dict], cfg: VehicleConfig) -> Path:
     """``control_scenarios.json`` and ``control_scenarios.md`` in ``out``; returns the markdown path."""
-    def clean(x):
-        if isinstance(x, float) and not math.isfinite(x):
-            return None
-        if isinstance(x, dict):
-            return {k: clean(v) for k, v in x.items()}
-        if isinstance(x, (list, tuple)):
-            return [clean(v) for v in x]
-        return x
-
     (out / "control_scenarios.json").write_text(json.dumps(
         {"vehicle_file": cfg.source, "dofs": list(SUITE_DOFS), "maneuvers": list(SUITE_MANEUVERS),
-         "rows": clean(list(rows))}, indent=2) + "\n")
+         "rows": jsonable(list(rows))}, indent=2) + "\n")
     text = ("# Identified model vs vehicle file in closed loop, per scenario truth (hindrax control scenarios)\n\n"
             "RMSE against the specified response (docs/control.md §6); ratio < 1: the identified model holds "
             "better.\n\n" + format_suite(rows) + "\n")

@@ -8,9 +8,9 @@ the emulators of :class:`~hindrax_ident.sim.hardware.VirtualHardware` there, fed
 :class:`~hindrax_ident.sim.simulator.Simulator` that this process steps to keep up with the wall clock. The
 simulator takes the thrusters' pulse widths from the PCA9685 emulator's registers, so wrench -> allocation -> ESC
 process -> I2C -> thrust -> motion -> sensors -> drivers is the vehicle's path, with a simulated vehicle at its end.
-The devices are reached as :class:`~hindrax_drivers.emulated_devices.EmulatedDevices` are (serial ports behind
-stable symlinks, the I2C bus over a Unix socket: :func:`~hindrax_drivers.emulated_devices.driver_ros_arguments`,
-:func:`~hindrax_drivers.emulated_devices.driver_env`), which hold a vehicle at rest instead.
+The devices are reached as :class:`~hindrax_drivers.emulated_devices.EmulatedDevices` are
+(serial ports behind stable symlinks, the I2C bus over a Unix socket:
+:class:`~hindrax_drivers.emulated_devices.DriverEndpoints`), which hold a vehicle at rest instead.
 
 Why a process of its own: the I2C emulators answer inside the drivers' bus calls, from a Python thread; in a busy
 process (a test's probe nodes, a campaign client) those answers wait for the interpreter lock for tens of
@@ -40,12 +40,12 @@ import tempfile
 import threading
 import time
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Mapping
 
 import numpy as np
 
 from hindrax_drivers.config import load_config
-from hindrax_drivers.emulated_devices import driver_env, driver_ros_arguments
+from hindrax_drivers.emulated_devices import DriverEndpoints
 from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, PRIORITY_ENV, apply_realtime_priority
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer
 
@@ -188,13 +188,14 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-class LivePool:
+class LivePool(DriverEndpoints):
     """Client of a live pool process (module docstring): start it, reach its devices, act as the operator.
 
     config_path: the vehicle file; directory: a folder for the socket (default: a new temporary one); env: the
     child's environment (default: this one); truth / seed: as :class:`LivePoolServer`; start_timeout_s: wall time
     for the devices to come up. Use as a context manager. The driver-facing methods are those of
-    :class:`~hindrax_drivers.emulated_devices.EmulatedDevices` (``ports``, :meth:`ros_arguments`, :meth:`env`).
+    :class:`~hindrax_drivers.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`,
+    :meth:`env`).
     Raises RuntimeError when the process does not come up or does not answer within ``timeout_s``.
     """
 
@@ -231,14 +232,6 @@ class LivePool:
         self._proc.stdin.flush()
         return self._read(timeout_s)
 
-    def ros_arguments(self, name: str) -> list[str]:
-        """Extra ``--ros-args`` for the driver process of node ``name`` (its serial port), else []."""
-        return driver_ros_arguments(self.ports, name)
-
-    def env(self, name: str) -> dict[str, str]:
-        """Extra environment for the driver process of node ``name`` (the I2C socket), else {}."""
-        return driver_env(self.socket_path, name)
-
     def act(self, code: str) -> bool:
         """The operator does what a prompt's ``code`` asks (e.g. ``attach_ballast``); False for an unknown code."""
         return bool(self._ask(f"act {code}")["ok"])
@@ -262,12 +255,6 @@ class LivePool:
                 self._proc.kill()
                 self._proc.wait()
         self._stderr.close()
-
-    def __enter__(self) -> LivePool:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
 
 if __name__ == "__main__":

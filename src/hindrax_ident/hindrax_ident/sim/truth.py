@@ -55,11 +55,10 @@ Disturbances (``disturbances:`` section; the physical source of each; all defaul
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Generic, Mapping, TypeVar
 
 import yaml
 from ament_index_python.packages import get_package_share_directory
@@ -227,12 +226,26 @@ class PressureDisturbance:
     random_walk_pa_sqrt_s: float
 
 
-#: group of ``disturbances.<group>.*`` -> its typed dataclass (test_truth checks they match DISTURBANCE_SCHEMA)
-DISTURBANCE_GROUPS: dict[str, type] = {
-    "thrust": ThrustDisturbance, "battery": BatteryDisturbance, "inflow": InflowDisturbance,
-    "hydrodynamics": HydrodynamicsDisturbance, "current": CurrentDisturbance, "tether": TetherDisturbance,
-    "floor": FloorDisturbance, "dvl": DvlDisturbance, "imu": ImuDisturbance, "pressure": PressureDisturbance,
-}
+T = TypeVar("T")
+
+
+class _Group(Generic[T]):
+    """``Disturbances.<group>``: the typed ``disturbances.<group>.*`` values (the default where the
+    file does not set a key), built on first use and kept."""
+
+    def __init__(self, cls: type[T]) -> None:
+        self.cls = cls
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, owner: type | None = None) -> T:
+        if obj is None:
+            return self  # type: ignore[return-value]  # the class attribute
+        fields = dataclasses.fields(self.cls)  # type: ignore[arg-type]  # a dataclass
+        value = self.cls(**{f.name: obj.get(f"{self.name}.{f.name}") for f in fields})
+        obj.__dict__[self.name] = value  # a plain attribute from now on, as a cached_property
+        return value
 
 
 @dataclass(frozen=True)
@@ -245,59 +258,16 @@ class Disturbances:
 
     values: Mapping[str, Any] = field(default_factory=dict)
 
-    def _group(self, group: str) -> Any:
-        cls = DISTURBANCE_GROUPS[group]
-        return cls(**{f.name: self.get(f"{group}.{f.name}") for f in dataclasses.fields(cls)})
-
-    @functools.cached_property
-    def thrust(self) -> ThrustDisturbance:
-        """``disturbances.thrust.*``."""
-        return self._group("thrust")
-
-    @functools.cached_property
-    def battery(self) -> BatteryDisturbance:
-        """``disturbances.battery.*``."""
-        return self._group("battery")
-
-    @functools.cached_property
-    def inflow(self) -> InflowDisturbance:
-        """``disturbances.inflow.*``."""
-        return self._group("inflow")
-
-    @functools.cached_property
-    def hydrodynamics(self) -> HydrodynamicsDisturbance:
-        """``disturbances.hydrodynamics.*``."""
-        return self._group("hydrodynamics")
-
-    @functools.cached_property
-    def current(self) -> CurrentDisturbance:
-        """``disturbances.current.*``."""
-        return self._group("current")
-
-    @functools.cached_property
-    def tether(self) -> TetherDisturbance:
-        """``disturbances.tether.*``."""
-        return self._group("tether")
-
-    @functools.cached_property
-    def floor(self) -> FloorDisturbance:
-        """``disturbances.floor.*``."""
-        return self._group("floor")
-
-    @functools.cached_property
-    def dvl(self) -> DvlDisturbance:
-        """``disturbances.dvl.*``."""
-        return self._group("dvl")
-
-    @functools.cached_property
-    def imu(self) -> ImuDisturbance:
-        """``disturbances.imu.*``."""
-        return self._group("imu")
-
-    @functools.cached_property
-    def pressure(self) -> PressureDisturbance:
-        """``disturbances.pressure.*``."""
-        return self._group("pressure")
+    thrust = _Group(ThrustDisturbance)
+    battery = _Group(BatteryDisturbance)
+    inflow = _Group(InflowDisturbance)
+    hydrodynamics = _Group(HydrodynamicsDisturbance)
+    current = _Group(CurrentDisturbance)
+    tether = _Group(TetherDisturbance)
+    floor = _Group(FloorDisturbance)
+    dvl = _Group(DvlDisturbance)
+    imu = _Group(ImuDisturbance)
+    pressure = _Group(PressureDisturbance)
 
     def get(self, key: str) -> Any:
         """Value of ``disturbances.<key>`` (the default when the file does not set it)."""
@@ -319,6 +289,11 @@ class Disturbances:
     def active(self) -> list[str]:
         """The keys that differ from their defaults (empty: a pool that does what the vehicle file says)."""
         return sorted(k for k in self.values if self._differs(k))
+
+
+#: ``disturbances.<group>.*`` -> its typed dataclass (test_truth: matches DISTURBANCE_SCHEMA)
+DISTURBANCE_GROUPS: dict[str, type] = {n: g.cls for n, g in vars(Disturbances).items()
+                                       if isinstance(g, _Group)}
 
 
 def _validate_disturbances(flat: Mapping[str, Any], n_thrusters: int, source: str) -> Disturbances:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import html
 import math
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import matplotlib
 
@@ -142,6 +142,30 @@ def _fmt(x, digits: int = 4) -> str:
     return f"{x:.{digits}g}"
 
 
+def _head(title: str) -> str:
+    """The start of a report page, up to ``<body>``: its title and the reports' one style."""
+    return (f"<!doctype html><html><head><meta charset='utf-8'><title>{title}</title><style>"
+            "body{font-family:sans-serif;max-width:1150px;margin:auto}"
+            " table{border-collapse:collapse} td,th{border:1px solid #ccc;padding:2px 6px;"
+            "font-size:13px;text-align:right}</style></head><body>")
+
+
+def _table(headers: Sequence[str], rows: Iterable[Iterable[Any]]) -> str:
+    """An HTML table: the header row, then a row per item of ``rows`` (each cell str(), escaped)."""
+    def row(tag: str, cells: Iterable[Any]) -> str:
+        return "<tr>" + "".join(f"<{tag}>{html.escape(str(c))}</{tag}>" for c in cells) + "</tr>"
+    return "<table>" + row("th", headers) + "".join(row("td", r) for r in rows) + "</table>"
+
+
+def _advice_table(advice: Iterable[tuple[str, Mapping]]) -> str:
+    """What data would fix the suspect parameters (:func:`.verdicts.data_advice`), a row per (label,
+    advice)."""
+    heads = ("parameter", "runs", "manoeuvre", "speeds", "pool time, min", "in the data, s", "why")
+    return _table(heads, ((label, f"{a.get('runs', '-')} {a.get('run_kind', '')}", a["manoeuvre"],
+                           "{:g}-{:g} {}".format(*a["speed_range"]), a.get("minutes", "-"),
+                           a["seconds_in_data"], a["why"]) for label, a in advice))
+
+
 #: The manoeuvres that use a thruster group's two rotation directions equally (docs/identification.md §6.1).
 _USES_MEAN = {"horizontal": "surge, sway, yaw use this", "vertical": "roll, pitch use this",
               "common": "surge, sway, yaw, roll, pitch use this"}
@@ -158,15 +182,14 @@ def references_html(document: Mapping) -> str:
     cal = document.get("calibration") or {}
     for name, c in (cal.get("steps") or cal).items():
         if isinstance(c, Mapping) and "value" in c and "known_force_n" in c:
-            rows.append(f"<tr><td>{html.escape(name)}</td><td>{_fmt(c.get('value'))}</td><td>{_fmt(c.get('std'), 2)}"
-                        f"</td><td>{_fmt(c.get('known_force_n'))}</td><td>{html.escape(str(c.get('method', '')))}"
-                        f"</td><td>{html.escape(str(c.get('holding_force_n', '')))}</td></tr>")
+            rows.append((name, _fmt(c.get("value")), _fmt(c.get("std"), 2),
+                         _fmt(c.get("known_force_n")), c.get("method", ""),
+                         c.get("holding_force_n", "")))
     parts = []
     if rows:
-        parts.append("<h3>Known-force calibration</h3><table><tr><th>scale</th><th>value</th><th>std</th>"
-                     "<th>known force (N)</th><th>method</th><th>holding force (N)</th></tr>" + "".join(rows)
-                     + "</table>" + (f"<p>{html.escape(str(cal.get('applied_to', '')))}</p>" if cal.get("applied_to")
-                                     else ""))
+        parts.append("<h3>Known-force calibration</h3>" + _table(
+            ("scale", "value", "std", "known force (N)", "method", "holding force (N)"), rows)
+            + (f"<p>{html.escape(str(cal['applied_to']))}</p>" if cal.get("applied_to") else ""))
     scales = (document.get("joint") or {}).get("scales") or {}
     srow = []
     for name, j in scales.items():
@@ -175,41 +198,39 @@ def references_html(document: Mapping) -> str:
         off = 1.0 / v - 1.0 if v > 0 else math.nan
         steps = "; ".join(f"{m['step']} {_fmt(m['value'])} +- {_fmt(m['std'], 2)}" for m in j.get("measurements", []))
         verdict = "curve off" if abs(z) > 1.96 else "curve agrees"
-        srow.append(f"<tr><td>{html.escape(name)}</td><td>{_fmt(v)}</td><td>{_fmt(sd, 2)}</td>"
-                    f"<td>{_fmt(j['prior'][0], 3)} +- {_fmt(j['prior'][1], 2)}</td><td>{html.escape(steps)}</td>"
-                    f"<td>{html.escape(', '.join(j.get('dofs', [])))}</td><td>{100 * off:+.1f} %</td>"
-                    f"<td>{_fmt(z, 3)}</td><td>{verdict}</td></tr>")
+        prior = f"{_fmt(j['prior'][0], 3)} +- {_fmt(j['prior'][1], 2)}"
+        srow.append((name, _fmt(v), _fmt(sd, 2), prior, steps, ", ".join(j.get("dofs", [])),
+                     f"{100 * off:+.1f} %", _fmt(z, 3), verdict))
     for g, j in ((document.get("joint") or {}).get("group_means") or {}).items():
         v, sd = float(j["value"]), float(j["std"])
         z = (v - 1.0) / sd if sd > 0 else math.nan
-        srow.append(f"<tr><td>{html.escape(g)} mean of both directions</td><td>{_fmt(v)}</td><td>{_fmt(sd, 2)}</td>"
-                    f"<td>-</td><td>-</td><td>{_USES_MEAN.get(g, '')}</td>"
-                    f"<td>{100 * (1.0 / v - 1.0):+.1f} %</td><td>{_fmt(z, 3)}</td>"
-                    f"<td>{'curve off' if abs(z) > 1.96 else 'curve agrees'}</td></tr>")
+        srow.append((f"{g} mean of both directions", _fmt(v), _fmt(sd, 2), "-", "-",
+                     _USES_MEAN.get(g, ""), f"{100 * (1.0 / v - 1.0):+.1f} %", _fmt(z, 3),
+                     "curve off" if abs(z) > 1.96 else "curve agrees"))
     if srow:
         parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each "
                      "scale s (true thrust / curve thrust, per thruster group and rotation direction) from its prior "
                      "and the calibration steps; the "
                      "self-propelled values without the calibration would be off by 1/s - 1; z = (s - 1) / std "
-                     "(|z| > 1.96: the thrust curve disagrees with the known forces)</p><table><tr><th>scale</th>"
-                     "<th>value</th><th>std</th><th>prior</th><th>steps</th><th>DOFs</th><th>uncalibrated error"
-                     "</th><th>z</th><th>verdict</th></tr>" + "".join(srow) + "</table>")
+                     "(|z| > 1.96: the thrust curve disagrees with the known forces)</p>" + _table(
+                         ("scale", "value", "std", "prior", "steps", "DOFs", "uncalibrated error",
+                          "z", "verdict"), srow))
     frow = []
     for dof, fd in (document.get("free_decay") or {}).items():
         sp = fd.get("self_propelled") or {}
-        frow.append(f"<tr><td>{html.escape(dof)}</td><td>{_fmt(fd.get('total_inertia_kg_m2'))}</td>"
-                    f"<td>{_fmt(fd.get('total_inertia_kg_m2_std'), 2)}</td><td>{_fmt(fd.get('added_inertia_kg_m2'))}"
-                    f"</td><td>{_fmt(fd.get('stiffness_n_m_per_rad'))}</td>"
-                    f"<td>{html.escape(str(fd.get('stiffness_source', '')))}</td>"
-                    f"<td>{_fmt(sp.get('inertia_kg_m2'))}</td><td>{_fmt(sp.get('inertia_kg_m2_std'), 2)}</td>"
-                    f"<td>{_fmt(sp.get('z'), 3)}</td><td>{html.escape(str(sp.get('verdict', '-')))}</td></tr>")
+        frow.append((dof, _fmt(fd.get("total_inertia_kg_m2")),
+                     _fmt(fd.get("total_inertia_kg_m2_std"), 2),
+                     _fmt(fd.get("added_inertia_kg_m2")),
+                     _fmt(fd.get("stiffness_n_m_per_rad")), fd.get("stiffness_source", ""),
+                     _fmt(sp.get("inertia_kg_m2")), _fmt(sp.get("inertia_kg_m2_std"), 2),
+                     _fmt(sp.get("z"), 3), sp.get("verdict", "-")))
     if frow:
         parts.append("<h3>Free decay: rigid + added inertia without the thrust curve ([Hindrax-AM], "
                      "[SmallROV])</h3><p>suspect: |free decay - self-propelled| beyond 1.96 combined std "
-                     "(the self-propelled inertia then carries verdict suspect)</p><table><tr><th>DOF</th>"
-                     "<th>free-decay inertia (kg m^2)</th><th>std</th><th>added</th><th>stiffness (N m/rad)</th>"
-                     "<th>stiffness from</th><th>self-propelled</th><th>std</th><th>z</th><th>verdict</th></tr>"
-                     + "".join(frow) + "</table>")
+                     "(the self-propelled inertia then carries verdict suspect)</p>" + _table(
+                         ("DOF", "free-decay inertia (kg m^2)", "std", "added",
+                          "stiffness (N m/rad)", "stiffness from", "self-propelled", "std", "z",
+                          "verdict"), frow))
     prow = []
     for dof, e in (document.get("dofs") or {}).items():
         prior = e.get("prior") if isinstance(e, Mapping) else None
@@ -223,17 +244,16 @@ def references_html(document: Mapping) -> str:
                 lo, hi = (par.get("ci95") or [math.nan, math.nan])[:2]
                 ratio = p / par["value"] if (p is not None and par["value"]) else math.nan
                 inside = "-" if p is None else ("inside" if lo <= p <= hi else "outside")
-                prow.append(f"<tr><td>{html.escape(dof)}</td><td>{html.escape(n)}</td><td>{_fmt(par['value'])}</td>"
-                            f"<td>[{_fmt(lo)}, {_fmt(hi)}]</td><td>{_fmt(p)}</td><td>{_fmt(ratio, 3)}</td>"
-                            f"<td>{inside}</td></tr>")
+                prow.append((dof, n, _fmt(par["value"]), f"[{_fmt(lo)}, {_fmt(hi)}]", _fmt(p),
+                             _fmt(ratio, 3), inside))
     if prow:
         parts.append("<h3>Empirical priors from geometry ([NTNU-Thesis] App. A.1/A.2)</h3><p>rough "
                      "estimates (the thesis reports differences of tens of percent against panel codes and CFD); "
                      "a prior outside the identified interval is expected and is not a verdict; in the batch fit each "
                      f"weighs with 1-sigma {_fmt((document.get('joint') or {}).get('prior_std_rel'), 3)} x its value "
-                     "(identification.prior_std_rel)</p><table><tr><th>DOF"
-                     "</th><th>parameter</th><th>identified</th><th>95 % interval</th><th>prior</th>"
-                     "<th>prior / identified</th><th>prior in interval</th></tr>" + "".join(prow) + "</table>")
+                     "(identification.prior_std_rel)</p>" + _table(
+                         ("DOF", "parameter", "identified", "95 % interval", "prior",
+                          "prior / identified", "prior in interval"), prow))
     if not parts:
         return ""
     return "<h2>References (independent of the thrust curve)</h2>" + "".join(parts)
@@ -244,29 +264,24 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
     """Write ``out_dir/index.html`` and the PNGs; returns the index path."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>Hindrax identification</title>",
-             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto} table{border-collapse:collapse}"
-             " td,th{border:1px solid #ccc;padding:2px 6px;font-size:13px;text-align:right}</style></head><body>",
-             "<h1>Hindrax hydrodynamic identification</h1>"]
+    parts = [_head("Hindrax identification"), "<h1>Hindrax hydrodynamic identification</h1>"]
     prov = document.get("provenance", {})
     parts.append("<p>" + "<br>".join(f"<b>{html.escape(str(k))}</b>: {html.escape(str(v))}" for k, v in prov.items())
                  + "</p>")
     if campaign_note:
         parts.append(f"<p>{html.escape(campaign_note)}</p>")
-    parts.append("<h2>Summary</h2><table><tr><th>DOF</th><th>parameter</th><th>value</th><th>std</th><th>unit</th>"
-                 "<th>95 % interval</th><th>configured</th><th>rel. error</th><th>equation-error LS</th>"
-                 "<th>RLS</th><th>steady-state LS</th><th>verdict</th><th>reasons</th></tr>")
-    for row in summary_rows(identifications):
-        lo, hi = row["ci95"]
-        parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-            row["dof"], row["parameter"], _fmt(row["value"]), _fmt(row["std"], 2), row["unit"],
-            f"[{_fmt(lo)}, {_fmt(hi)}]" if row["at_bound"] is None else f"none: at its bound {row['at_bound']:g}",
-            _fmt(row["truth"]),
-            "-" if not math.isfinite(row["relative_error"]) else f"{100 * row['relative_error']:+.2f} %",
-            _fmt(row["equation_error"]), _fmt(row["rls"]), _fmt(row["steady"]), row["verdict"],
-            "; ".join(row["reasons"]))) + "</tr>")
-    parts.append("</table><p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in document["dofs"].items()
-                                           for line in training_lines(e.get("training"))) + "</p>")
+    dofs = document["dofs"]
+    parts.append("<h2>Summary</h2>" + _table(
+        ("DOF", "parameter", "value", "std", "unit", "95 % interval", "configured", "rel. error",
+         "equation-error LS", "RLS", "steady-state LS", "verdict", "reasons"),
+        ((r["dof"], r["parameter"], _fmt(r["value"]), _fmt(r["std"], 2), r["unit"],
+          f"[{_fmt(r['ci95'][0])}, {_fmt(r['ci95'][1])}]" if r["at_bound"] is None
+          else f"none: at its bound {r['at_bound']:g}", _fmt(r["truth"]),
+          "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f} %",
+          _fmt(r["equation_error"]), _fmt(r["rls"]), _fmt(r["steady"]), r["verdict"],
+          "; ".join(r["reasons"])) for r in summary_rows(identifications))))
+    parts.append("<p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in dofs.items()
+                                     for line in training_lines(e.get("training"))) + "</p>")
     for dof, r in identifications.items():
         a = r.signals.get("assessment")
         if a:
@@ -281,14 +296,8 @@ def write_report(out_dir: str | Path, identifications: Mapping[str, Any], docume
                 + f", Student t with {a['parameters']['inertia'].get('t_dof', '-')} degrees of freedom (clusters of "
                 "segments - 1, docs/identification.md §7)</p>")
             adv = [(n, e["advice"]) for n, e in a["parameters"].items() if e.get("advice")]
-            if adv:  # what data would fix the suspect parameters (verdicts.data_advice)
-                parts.append("<table><tr><th>parameter</th><th>runs</th><th>manoeuvre</th><th>speeds</th>"
-                             "<th>pool time, min</th><th>in the data, s</th><th>why</th></tr>" + "".join(
-                                 "<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-                                     n, f"{v.get('runs', '-')} {v.get('run_kind', '')}", v["manoeuvre"],
-                                     f"{v['speed_range'][0]:g}-{v['speed_range'][1]:g} {v['speed_range'][2]}",
-                                     v.get("minutes", "-"), v["seconds_in_data"], v["why"]))
-                                 + "</tr>" for n, v in adv) + "</table>")
+            if adv:
+                parts.append(_advice_table(adv))
         parts.append(f"<h2>{html.escape(dof)}</h2><p>method {html.escape(r.method)}; pool time "
                      f"{r.pool_time_s:.0f} s; RLS converged after {_fmt(r.rls_time_s, 3)} s; steady-state: "
                      f"{html.escape(r.steady_note)}</p>")
@@ -469,62 +478,52 @@ def write_fit_outputs(out: str | Path, res, doc: dict, cfg=None) -> tuple[Path, 
     rep = out / "report"
     rep.mkdir(parents=True, exist_ok=True)
     path = write_identification(out / "identification.yaml", doc, check=False)
-    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>hindrax ident fit</title><style>body{"
-             "font-family:sans-serif;max-width:1150px;margin:auto} table{border-collapse:collapse} td,th{border:1px "
-             "solid #ccc;padding:2px 6px;font-size:13px;text-align:right}</style></head><body>",
-             "<h1>Identification from bags (hindrax ident fit)</h1>",
-             f"<p>{html.escape(res.design)}</p><h2>Parameters</h2><table><tr><th>DOF</th><th>parameter</th>"
-             "<th>value</th><th>std</th><th>std from</th><th>unit</th><th>95 % interval</th><th>fold spread (std)</th>"
-             "<th>verdict</th></tr>"]
-    for dof, e in doc["dofs"].items():
-        for name, p in e.items():
-            if isinstance(p, dict) and "value" in p:
-                sp = p.get("fold_spread", {}).get("std")
-                parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-                    dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}", p.get("std_source", p.get("model_term", "-")),
-                    p["unit"], f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]" if "at_bound" not in p else
-                    f"none: at its bound {p['at_bound']:g}", "-" if sp is None else f"{sp:.3g}",
-                    p.get("verdict", "-"))) + "</tr>")
-    parts.append("</table><p>std: the cluster-robust (sandwich) covariance with contiguous blocks of segments as "
-                 "clusters, at least the model-based one; 95 % intervals Student t with clusters - 1 degrees of "
-                 "freedom (docs/identification.md §7).</p><h2>Model and timing</h2><table><tr><th>DOF</th>"
-                 "<th>model (chosen by cross-validation)</th><th>candidates: CV nrmse</th><th>delay, s</th>"
-                 "<th>lag, s</th><th>clusters</th></tr>")
-    for dof, e in doc["dofs"].items():
-        cands = "; ".join(f"{c['terms']}: {c['cv_nrmse']:.3f}" if c.get("cv_nrmse") is not None else c["terms"]
-                          for c in e.get("model_selection", []))
-        parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-            dof, e.get("model", "-"), cands, f"{e['timing']['delay_s']:.3f}", f"{e['timing']['lag_s']:.3f}",
-            e["interval"]["clusters"])) + "</tr>")
-    parts.append("</table><p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in doc["dofs"].items()
-                                           for line in training_lines(e.get("training"))) + "</p>")
-    advice = [(dof, a) for dof, e in doc["dofs"].items() for a in e.get("advice", [])]
+    dofs = doc["dofs"]
+    params = [(dof, name, p) for dof, e in dofs.items() for name, p in e.items()
+              if isinstance(p, dict) and "value" in p]
+    parts = [_head("hindrax ident fit"), "<h1>Identification from bags (hindrax ident fit)</h1>",
+             f"<p>{html.escape(res.design)}</p><h2>Parameters</h2>" + _table(
+                 ("DOF", "parameter", "value", "std", "std from", "unit", "95 % interval",
+                  "fold spread (std)", "verdict"),
+                 ((dof, name, f"{p['value']:.4g}", f"{p['std']:.3g}",
+                   p.get("std_source", p.get("model_term", "-")), p["unit"],
+                   "[{:.4g}, {:.4g}]".format(*p["ci95"][:2]) if "at_bound" not in p
+                   else f"none: at its bound {p['at_bound']:g}",
+                   _fmt(p.get("fold_spread", {}).get("std"), 3), p.get("verdict", "-"))
+                  for dof, name, p in params))]
+
+    def candidates(e: Mapping) -> str:
+        return "; ".join(f"{c['terms']}: {c['cv_nrmse']:.3f}" if c.get("cv_nrmse") is not None
+                         else c["terms"] for c in e.get("model_selection", []))
+    parts.append("<p>std: the cluster-robust (sandwich) covariance with contiguous blocks of "
+                 "segments as clusters, at least the model-based one; 95 % intervals Student t "
+                 "with clusters - 1 degrees of freedom (docs/identification.md §7).</p>"
+                 "<h2>Model and timing</h2>" + _table(
+                     ("DOF", "model (chosen by cross-validation)", "candidates: CV nrmse",
+                      "delay, s", "lag, s", "clusters"),
+                     ((dof, e.get("model", "-"), candidates(e), f"{e['timing']['delay_s']:.3f}",
+                       f"{e['timing']['lag_s']:.3f}", e["interval"]["clusters"])
+                      for dof, e in dofs.items())))
+    parts.append("<p>" + "<br>".join(html.escape(f"{dof}: {line}") for dof, e in dofs.items()
+                                     for line in training_lines(e.get("training"))) + "</p>")
+    advice = [(f"{dof} {a['parameter']}", a) for dof, e in dofs.items()
+              for a in e.get("advice", [])]
     if advice:
-        parts.append("<h2>What data would fix the suspect parameters</h2><table><tr><th>parameter</th>"
-                     "<th>runs</th><th>manoeuvre</th><th>speeds</th><th>pool time, min</th><th>in the data, s</th>"
-                     "<th>why</th></tr>")
-        for dof, a in advice:
-            parts.append("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in (
-                f"{dof} {a['parameter']}", f"{a.get('runs', '-')} {a.get('run_kind', '')}", a["manoeuvre"],
-                f"{a['speed_range'][0]:g}-{a['speed_range'][1]:g} {a['speed_range'][2]}",
-                a.get("minutes", "-"), a["seconds_in_data"], a["why"])) + "</tr>")
-        parts.append("</table>")
+        parts.append("<h2>What data would fix the suspect parameters</h2>" + _advice_table(advice))
     if not doc.get("config_ready", True):
         parts.append(f"<p><b>config_ready: false</b>: {html.escape(doc['config_ready_reason'])}</p>")
     for dof, e in doc.get("not_identified", {}).items():
         parts.append(f"<p><b>{html.escape(dof)}</b>: {html.escape(e['status'])} ({html.escape(e['reason'])})</p>")
-    parts.append("<h2>Validation</h2><table><tr><th>DOF</th><th>data</th><th>nrmse</th><th>nrmse_hold</th>"
-                 "<th>nrmse_zero</th><th>samples</th></tr>")
-    for dof, r in res.dofs.items():
-        for key, v in r.validation.items():
-            if not isinstance(v, dict) or "nrmse" not in v:
-                continue
-            parts.append("<tr>" + "".join(f"<td>{c}</td>" for c in (
-                dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")), v["samples"]))
-                + "</tr>")
-    parts.append("</table><p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, v_pred "
-                 "simulated open loop from the recorded force and re-initialised from the measured velocity at the "
-                 "start of each segment; nrmse_hold: velocity held at the segment's initial value; nrmse_zero: 0.</p>")
+    parts.append("<h2>Validation</h2>" + _table(
+        ("DOF", "data", "nrmse", "nrmse_hold", "nrmse_zero", "samples"),
+        ((dof, key, _num(v["nrmse"]), _num(v.get("nrmse_hold")), _num(v.get("nrmse_zero")),
+          v["samples"])
+         for dof, r in res.dofs.items() for key, v in r.validation.items()
+         if isinstance(v, dict) and "nrmse" in v)))
+    parts.append("<p>nrmse = RMS(v_pred - v_meas) / std(v_meas) over the validation samples, "
+                 "v_pred simulated open loop from the recorded force and re-initialised from the "
+                 "measured velocity at the start of each segment; nrmse_hold: velocity held at the "
+                 "segment's initial value; nrmse_zero: 0.</p>")
     for dof, r in res.dofs.items():
         if r.status == "fitted" and r.plot:
             png = rep / f"{dof}_validation.png"

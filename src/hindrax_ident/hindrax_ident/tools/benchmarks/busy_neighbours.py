@@ -27,17 +27,15 @@ as JSON).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 from hindrax_drivers.testing import python_executable
 
+from . import run_alone
 from .participant_churn import _VehicleLayout, _Watch, hardware_priority
 from .safety import running_layout
 
@@ -115,13 +113,5 @@ def run(quick: bool = False) -> list[dict]:
     return busy_rows(quick) + busy_rows(quick, realtime=False)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the rows alone and print them as JSON."""
-    parser = argparse.ArgumentParser(prog="busy_neighbours")
-    parser.add_argument("--quick", action="store_true", help=f"{QUICK_DURATION_S:g} s instead of {DURATION_S:g} s")
-    print(json.dumps(run(parser.parse_args(argv).quick), indent=2))
-    return 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(run_alone(run))

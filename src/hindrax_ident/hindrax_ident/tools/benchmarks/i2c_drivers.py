@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import bisect
 import time
+from typing import Any, Callable
 
 import numpy as np
 import rclpy
@@ -83,39 +84,53 @@ def _idle_load(duration_s: float) -> float:
     return load
 
 
-def _marginal_row(prefix: str, cpu: float, emulator_cpu: float, wall: float, published: int, idle: float) -> dict:
-    marginal = (cpu - emulator_cpu - idle * wall) / max(published, 1) * 1e3
-    return {"name": f"{prefix}_cpu_per_message_marginal", "value": marginal, "unit": "ms",
-            "note": f"minus the idle DDS background ({idle * 100:.2f} % of a core)"}
-
-
-def _icm20948(duration_s: float, idle: float) -> list[dict]:
-
-    reads_ns: list[int] = []
-
-    emulator_cpu = [0.0]
-
-    class TimedIcm(Icm20948Emulator):
+def _timed(cls: type, timed_read: Callable[[int], bool]) -> type:
+    """Emulator class ``cls`` that also keeps ``reads_ns``, the wall time of each read of n bytes
+    with ``timed_read(n)``, and ``cpu_s``, the CPU time its reads and writes took (not the
+    driver's)."""
+    class Timed(cls):  # type: ignore[misc, valid-type]
         def i2c_read(self, n: int) -> bytes:
             c0 = time.process_time()
             out = super().i2c_read(n)
-            if n >= 14:
-                reads_ns.append(time.time_ns())
-            emulator_cpu[0] += time.process_time() - c0
+            if timed_read(n):
+                self.reads_ns.append(time.time_ns())
+            self.cpu_s += time.process_time() - c0
             return out
 
-        def i2c_write(self, data: bytes) -> None:
+        def i2c_write(self, data: bytes) -> None:  # MS5837 conversion start: inverts compensation
             c0 = time.process_time()
             super().i2c_write(data)
-            emulator_cpu[0] += time.process_time() - c0
+            self.cpu_s += time.process_time() - c0
+    Timed.reads_ns, Timed.cpu_s = [], 0.0
+    return Timed
 
+
+def _cpu_rows(prefix: str, emu: Any, cpu: float, wall: float, published: int, idle: float,
+              per: str, unit: str, emulator_note: str = "") -> list[dict]:
+    """The CPU rows of a driver: per message and load (node + probe + DDS, the emulator's CPU
+    excluded), the same minus the idle DDS background, and the emulator's own per message."""
+    own, n = cpu - emu.cpu_s, max(published, 1)
+    return [
+        {"name": f"{prefix}_cpu_per_message", "value": own / n * 1e3, "unit": "ms",
+         "note": f"per {per}; node + probe + DDS, emulator excluded"},
+        {"name": f"{prefix}_cpu_load", "value": own / wall * 100.0, "unit": "% of a core",
+         "note": f"{published / wall:.3g} {unit}; emulator excluded"},
+        {"name": f"{prefix}_cpu_per_message_marginal", "value": (own - idle * wall) / n * 1e3,
+         "unit": "ms", "note": f"minus the idle DDS background ({idle * 100:.2f} % of a core)"},
+        {"name": f"{prefix}_emulator_cpu_per_message", "value": emu.cpu_s / n * 1e3, "unit": "ms",
+         **({"note": emulator_note} if emulator_note else {})},
+    ]
+
+
+def _icm20948(duration_s: float, idle: float) -> list[dict]:
     def truth(t):
         s = np.sin(3.0 * t)
         return (np.array([0.1, -0.2, 9.8]) + 0.3 * s, np.array([0.01, 0.02, -0.03]) * s,
                 np.array([2e-5, -5e-6, 4e-5]), 25.0 + s)
 
     params = config_parameters({"sensors.icm20948.estimate_gyro_bias": False})
-    emu = TimedIcm(truth, address=0x69)
+    emu = _timed(Icm20948Emulator, lambda n: n >= 14)(truth, address=0x69)
+    reads_ns = emu.reads_ns
     cpu, wall, published, receipts = _run(
         lambda bus, ctx: Icm20948Node(bus=bus, context=ctx, parameter_overrides=params), emu, 0x69, Imu,
         "imu/data_raw", duration_s)
@@ -128,38 +143,16 @@ def _icm20948(duration_s: float, idle: float) -> list[dict]:
     return [
         {"name": "icm20948_read_to_topic_p50", "value": p50, "unit": "ms", "target": "< 10 ms (one 100 Hz period)"},
         {"name": "icm20948_read_to_topic_p99", "value": p99, "unit": "ms"},
-        {"name": "icm20948_cpu_per_message", "value": (cpu - emulator_cpu[0]) / max(published, 1) * 1e3, "unit": "ms",
-         "note": "per Imu (+ Temperature, MagneticField, raw) cycle; node + probe + DDS, emulator excluded"},
-        {"name": "icm20948_cpu_load", "value": (cpu - emulator_cpu[0]) / wall * 100.0, "unit": "% of a core",
-         "note": f"{published / wall:.1f} Imu/s; emulator excluded"},
-        _marginal_row("icm20948", cpu, emulator_cpu[0], wall, published, idle),
-        {"name": "icm20948_emulator_cpu_per_message", "value": emulator_cpu[0] / max(published, 1) * 1e3,
-         "unit": "ms"},
+        *_cpu_rows("icm20948", emu, cpu, wall, published, idle,
+                   "Imu (+ Temperature, MagneticField, raw) cycle", "Imu/s"),
     ]
 
 
 def _ms5837(duration_s: float, idle: float) -> list[dict]:
-
-    adc_reads_ns: list[int] = []
-
-    emulator_cpu = [0.0]
-
-    class TimedMs5837(Ms5837Emulator):
-        def i2c_read(self, n: int) -> bytes:
-            c0 = time.process_time()
-            out = super().i2c_read(n)
-            if n == 3:
-                adc_reads_ns.append(time.time_ns())
-            emulator_cpu[0] += time.process_time() - c0
-            return out
-
-        def i2c_write(self, data: bytes) -> None:  # a conversion start inverts the compensation (costly)
-            c0 = time.process_time()
-            super().i2c_write(data)
-            emulator_cpu[0] += time.process_time() - c0
-
     params = config_parameters({})
-    emu = TimedMs5837(lambda t: (110000.0 + 500.0 * np.sin(t), 18.0 + np.sin(0.5 * t)), variant="30BA")
+    emu = _timed(Ms5837Emulator, lambda n: n == 3)(
+        lambda t: (110000.0 + 500.0 * np.sin(t), 18.0 + np.sin(0.5 * t)), variant="30BA")
+    adc_reads_ns = emu.reads_ns
     cpu, wall, published, receipts = _run(
         lambda bus, ctx: Ms5837Node(bus=bus, context=ctx, parameter_overrides=params), emu, 0x76, FluidPressure,
         "pressure/fluid_pressure", duration_s)
@@ -179,13 +172,9 @@ def _ms5837(duration_s: float, idle: float) -> list[dict]:
         {"name": "ms5837_stamp_age_p50", "value": a50, "unit": "ms",
          "note": "stamp (middle of the D1 conversion) to receipt: includes the D2 conversion (9.5 ms at OSR 4096)"},
         {"name": "ms5837_stamp_age_p99", "value": a99, "unit": "ms"},
-        {"name": "ms5837_cpu_per_message", "value": (cpu - emulator_cpu[0]) / max(published, 1) * 1e3, "unit": "ms",
-         "note": "per cycle (FluidPressure + Temperature + depth + raw); node + probe + DDS, emulator excluded"},
-        {"name": "ms5837_cpu_load", "value": (cpu - emulator_cpu[0]) / wall * 100.0, "unit": "% of a core",
-         "note": f"{published / wall:.2f} cycles/s; emulator excluded"},
-        _marginal_row("ms5837", cpu, emulator_cpu[0], wall, published, idle),
-        {"name": "ms5837_emulator_cpu_per_message", "value": emulator_cpu[0] / max(published, 1) * 1e3,
-         "unit": "ms", "note": "two compensation inversions per conversion (bisection)"},
+        *_cpu_rows("ms5837", emu, cpu, wall, published, idle,
+                   "cycle (FluidPressure + Temperature + depth + raw)", "cycles/s",
+                   "two compensation inversions per conversion (bisection)"),
     ]
 
 

@@ -27,17 +27,15 @@ JSON).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import yaml
 from domain_coordinator import domain_id
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 
+from . import run_alone
 from .busy_neighbours import cpu_bound_neighbours
 from .participant_churn import _VehicleLayout, _Watch, hardware_priority, subscriber_argv
 from .safety import running_layout
@@ -109,13 +107,5 @@ def run(quick: bool = False) -> list[dict]:
     ]
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the rows alone and print them as JSON."""
-    parser = argparse.ArgumentParser(prog="pool_day_churn")
-    parser.add_argument("--quick", action="store_true", help=f"{QUICK_TRIALS} trials instead of {TRIALS}")
-    print(json.dumps(run(parser.parse_args(argv).quick), indent=2))
-    return 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(run_alone(run))

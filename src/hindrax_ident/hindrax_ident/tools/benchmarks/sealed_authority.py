@@ -20,8 +20,6 @@ as JSON).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import subprocess
 import tempfile
 from collections.abc import Iterator
@@ -38,6 +36,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_msgs.srv import SignedTrigger
 
+from . import run_alone
 from .safety import running_layout
 
 #: arm requests of each kind (unsigned, wrong key, replayed); with ``--quick``
@@ -153,13 +152,5 @@ def run(quick: bool = False) -> list[dict]:
             return rows + signing_rows(answers)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point: prints the rows as JSON; returns the exit code."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true")
-    print(json.dumps(run(quick=parser.parse_args(argv).quick), indent=2))
-    return 0
-
-
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(run_alone(run))

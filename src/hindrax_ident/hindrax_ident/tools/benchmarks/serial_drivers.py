@@ -75,9 +75,9 @@ def _percentiles_ms(values_ns: list[int]) -> tuple[float, float]:
     return float(np.percentile(arr, 50)), float(np.percentile(arr, 99))
 
 
-def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str):
-    """Run node + probe for ``duration_s`` after a warm-up; return (reader_cpu_s, other_cpu_s, wall_s,
-    reports, {topic: latencies_ns})."""
+def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str,
+             rate: str) -> list[dict]:
+    """Run node + probe for ``duration_s`` after a warm-up; the rows of :func:`_rows`."""
     latencies: dict[str, list[int]] = {topic: [] for topic, _, _ in subscriptions}
     dev = PtyDevice(emulator)
     try:
@@ -112,11 +112,12 @@ def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str
             node.destroy_node()
     finally:
         dev.close()
-    return reader, cpu - emu - reader, wall, reports, latencies
+    return _rows(name, rate, reader, cpu - emu - reader, wall, reports, latencies)
 
 
 def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float, reports: int,
-          latencies: dict, topics: dict) -> list[dict]:
+          latencies: dict[str, list[int]]) -> list[dict]:
+    """Reports, CPU per report and load, and per topic the latency from the device's bytes."""
     n = max(reports, 1)
     rows = [
         {"name": f"{device} reports published", "value": reports, "unit": "msgs",
@@ -127,8 +128,7 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
          "note": "process CPU minus the emulator thread"},
         {"name": f"{device} node+probe+DDS load", "value": (reader_s + other_s) / wall_s * 100.0, "unit": "% core"},
     ]
-    for topic, label in topics.items():
-        values = latencies[topic]
+    for label, values in latencies.items():
         if not values:
             continue
         p50, p99 = _percentiles_ms(values)
@@ -139,8 +139,6 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
 
 
 def _bench_dvl(duration_s: float) -> list[dict]:
-
-
     pending: list = []
     written: dict = {}
     counter = {"k": 0}
@@ -164,15 +162,11 @@ def _bench_dvl(duration_s: float) -> list[dict]:
         return Dvl75Node(context=ctx, parameter_overrides=config_parameters(
             {"sensors.dvl75.port": port, "sensors.dvl75.position_frd_m": [0.0, 0.0, 0.0]}))
 
-    reader, other, wall, reports, lat = _measure(
-        factory, emu, [("dvl/data", Dvl, data_key), ("dvl/altitude", Range, altitude_key)], duration_s, "dvl75")
-    return _rows("dvl75", f"{DVL_RATE_HZ:g} Hz", reader, other, wall, reports, lat,
-                 {"dvl/data": "dvl/data", "dvl/altitude": "dvl/altitude"})
+    subscriptions = [("dvl/data", Dvl, data_key), ("dvl/altitude", Range, altitude_key)]
+    return _measure(factory, emu, subscriptions, duration_s, "dvl75", f"{DVL_RATE_HZ:g} Hz")
 
 
 def _bench_ping(duration_s: float) -> list[dict]:
-
-
     c = float(load_config(default_config_path()).sensors.ping1d.speed_of_sound_m_s)
     pending: list = []
     written: dict = {}
@@ -195,10 +189,8 @@ def _bench_ping(duration_s: float) -> list[dict]:
         return Ping1dNode(context=ctx, parameter_overrides=config_parameters(
             {"sensors.ping1d.port": port, "sensors.ping1d.ping_interval_s": PING_INTERVAL_S}))
 
-    reader, other, wall, reports, lat = _measure(factory, emu, [("ping/altitude", Range, range_key)], duration_s,
-                                                 "ping1d")
-    return _rows("ping1d", f"{1 / PING_INTERVAL_S:g} Hz", reader, other, wall, reports, lat,
-                 {"ping/altitude": "ping/altitude"})
+    return _measure(factory, emu, [("ping/altitude", Range, range_key)], duration_s, "ping1d",
+                    f"{1 / PING_INTERVAL_S:g} Hz")
 
 
 def run(quick: bool = False) -> list[dict]:

@@ -12,11 +12,10 @@ answer prints the reason on stderr and exits 1.
 from __future__ import annotations
 
 import argparse
-import time
 from typing import Any
 
 from .common import CommandError
-from .vehicle import add_vehicle_arguments, find_vehicle, with_ros
+from .vehicle import add_vehicle_arguments, call_service, find_vehicle, with_ros
 
 __all__ = ["add_arguments", "run", "set_armed"]
 
@@ -39,19 +38,8 @@ def set_armed(node: Any, executor: Any, arm: bool, wanted: str | None, discovery
     target = find_vehicle(node, executor, wanted, discovery_timeout_s)
     verb = "arm" if arm else "disarm"
     srv, service, request = target.service(verb, "esc/set_armed", SetArmed, **({} if target.topside else {"arm": arm}))
-    client = node.create_client(srv, service)
-    deadline = time.monotonic() + timeout_s
-    while not client.service_is_ready():
-        if time.monotonic() > deadline:
-            raise CommandError(f"{target.name}: no {service} service within {timeout_s:g} s")
-        executor.spin_once(timeout_sec=0.1)
-    future = client.call_async(request)
-    while not future.done():
-        if time.monotonic() > deadline:
-            raise CommandError(f"{target.name}: {service} did not answer within {timeout_s:g} s "
-                               "(check with hindrax health on the vehicle)")
-        executor.spin_once(timeout_sec=0.1)
-    answer = future.result()
+    answer = call_service(node, executor, (srv, service, request), timeout_s,
+                          f"vehicle {target.name}; check with hindrax health on it")
     message = answer.message or (("armed" if answer.armed else "disarmed") if not target.topside else verb + "ed")
     return target.name, bool(answer.success), message
 

@@ -22,7 +22,7 @@ import time
 from typing import Any
 
 from .common import CommandError
-from .vehicle import Target, add_vehicle_arguments, find_vehicle, with_ros
+from .vehicle import Target, add_vehicle_arguments, call_service, find_vehicle, wait_for, with_ros
 
 __all__ = ["add_arguments", "run"]
 
@@ -55,23 +55,6 @@ def _check(args: argparse.Namespace) -> None:
         raise CommandError(f"--altitude-m {args.altitude_m:g}: allowed > 0")
 
 
-def _wait(executor: Any, done, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not done():
-        if time.monotonic() > deadline:
-            raise CommandError(f"{what} within {timeout_s:g} s (check with hindrax health on the vehicle)")
-        executor.spin_once(timeout_sec=0.05)
-
-
-def _call(node: Any, executor: Any, spec: tuple[Any, str, Any], timeout_s: float) -> Any:
-    srv_type, name, request = spec
-    client = node.create_client(srv_type, name)
-    _wait(executor, client.service_is_ready, timeout_s, f"no {name} service")
-    future = client.call_async(request)
-    _wait(executor, future.done, timeout_s, f"{name} did not answer")
-    return future.result()
-
-
 def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Namespace) -> None:
     """Publish the setpoint until the controller's status shows it (a topic: nothing else says it arrived)."""
     from hindrax_msgs.msg import ControllerStatus, ControlSetpoint
@@ -80,7 +63,7 @@ def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Name
     node.create_subscription(ControllerStatus, target.resolve("controller/status", "controller/status"),
                              statuses.append, 10)
     pub = node.create_publisher(ControlSetpoint, target.resolve("controller/setpoint", "controller/setpoint"), 10)
-    _wait(executor, lambda: statuses and pub.get_subscription_count() > 0, args.timeout,
+    wait_for(executor, lambda: statuses and pub.get_subscription_count() > 0, args.timeout,
           f"{target.name}: no controller status")
     msg = ControlSetpoint()
     msg.header.frame_id = "base_link"
@@ -104,7 +87,8 @@ def _send_setpoint(node: Any, executor: Any, target: Target, args: argparse.Name
             pub.publish(target.sign("controller/setpoint", msg))
             sent[0] = time.monotonic()
         return False
-    _wait(executor, arrived, args.timeout, f"{target.name}: the controller did not take the setpoint")
+    wait_for(executor, arrived, args.timeout,
+             f"{target.name}: the controller did not take the setpoint")
 
 
 def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple[str, bool, str]:
@@ -115,12 +99,13 @@ def hold_or_release(node: Any, executor: Any, args: argparse.Namespace) -> tuple
     target = find_vehicle(node, executor, args.vehicle, args.discovery_timeout)
     enable = lambda on: target.service("controller/enable", "controller/enable", SetBool, data=on)  # noqa: E731
     if not args._hold:
-        answer = _call(node, executor, enable(False), args.timeout)
+        answer = call_service(node, executor, enable(False), args.timeout)
     elif args.depth_m is None and args.altitude_m is None:
-        answer = _call(node, executor, target.service("controller/hold", "controller/hold", Trigger), args.timeout)
+        hold = target.service("controller/hold", "controller/hold", Trigger)
+        answer = call_service(node, executor, hold, args.timeout)
     else:
         _send_setpoint(node, executor, target, args)
-        answer = _call(node, executor, enable(True), args.timeout)
+        answer = call_service(node, executor, enable(True), args.timeout)
     return target.name, bool(answer.success), str(answer.message)
 
 

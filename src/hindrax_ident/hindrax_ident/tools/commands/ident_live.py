@@ -34,7 +34,7 @@ import time
 from typing import Any, Callable
 
 from .common import CommandError
-from .vehicle import Target, add_vehicle_arguments, find_vehicle, with_ros
+from .vehicle import Target, add_vehicle_arguments, call_service, find_vehicle, with_ros
 
 __all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign", "call_continue"]
 
@@ -255,20 +255,9 @@ def call_continue(node: Any, executor: Any, timeout_s: float, target: Target | N
 
     name = "identification/continue"
     srv, service, request = (target or Target("", False)).service(name, name, Trigger)
-    client = node.create_client(srv, service)
-    deadline = time.monotonic() + timeout_s
-    while not client.service_is_ready():
-        if time.monotonic() > deadline:
-            raise CommandError(f"no identification/continue service within {timeout_s:g} s: is the stack running "
-                               "(hindrax bringup)?")
-        executor.spin_once(timeout_sec=0.1)
-    fut = client.call_async(request)
-    while not fut.done():
-        if time.monotonic() > deadline:
-            raise CommandError(f"identification/continue did not answer within {timeout_s:g} s; check with "
-                               "hindrax ident status before calling it again")
-        executor.spin_once(timeout_sec=0.1)
-    res = fut.result()
+    res = call_service(node, executor, (srv, service, request), timeout_s,
+                       "is the stack running (hindrax bringup)?",
+                       "check with hindrax ident status before calling it again")
     return bool(res.success), str(res.message)
 
 

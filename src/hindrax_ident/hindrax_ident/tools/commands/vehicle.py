@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
 from .common import CommandError
 
-__all__ = ["VEHICLE_ENV", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros"]
+__all__ = ["VEHICLE_ENV", "Target", "add_vehicle_arguments", "find_vehicle", "with_ros", "wait_for",
+           "call_service"]
 
 #: the environment variable naming the vehicle a topside PC commands (docker/topside.env.example): ``--vehicle``'s
 #: default
@@ -133,3 +135,31 @@ def with_ros(body: Callable[[Any, Any], Any], node_name: str) -> Any:
         executor.shutdown()
         node.destroy_node()
         context.try_shutdown()
+
+
+_HEALTH = "check with hindrax health on the vehicle"
+
+
+def wait_for(executor: Any, done: Callable[[], Any], timeout_s: float, what: str,
+             hint: str = _HEALTH) -> None:
+    """Spin ``executor`` until ``done()`` is true. Raises :class:`CommandError` ``"<what> within
+    <timeout_s> s (<hint>)"`` when it is not within ``timeout_s`` (wall time)."""
+    deadline = time.monotonic() + timeout_s
+    while not done():
+        if time.monotonic() > deadline:
+            raise CommandError(f"{what} within {timeout_s:g} s ({hint})")
+        executor.spin_once(timeout_sec=0.05)
+
+
+def call_service(node: Any, executor: Any, spec: tuple[Any, str, Any], timeout_s: float,
+                 hint: str = _HEALTH, answer_hint: str | None = None) -> Any:
+    """The answer of one call ``spec`` = (service type, name, request) (:meth:`Target.service`) from
+    ``node``, spun by ``executor``. Raises :class:`CommandError` naming the service when it is not
+    there (``hint``) or does not answer (``answer_hint``, default ``hint``) within ``timeout_s``
+    each (wall)."""
+    srv_type, name, request = spec
+    client = node.create_client(srv_type, name)
+    wait_for(executor, client.service_is_ready, timeout_s, f"no {name} service", hint)
+    future = client.call_async(request)
+    wait_for(executor, future.done, timeout_s, f"{name} did not answer", answer_hint or hint)
+    return future.result()
