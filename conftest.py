@@ -163,5 +163,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         for item in items:
             _name_the_group(item)
     rank = _longest_first_rank()
-    items.sort(key=lambda it: rank.get(f"{it.path.name}::{getattr(it, 'originalname', it.name)}", len(rank)))
+    own = {it: rank.get(f"{it.path.name}::{getattr(it, 'originalname', it.name)}", len(rank)) for it in items}
+    # a group stands at its best-ranked test and keeps its collection order (a module's tests may rely on it)
+    group: dict[str, int] = {}
+    for it in items:
+        for m in it.iter_markers("xdist_group"):
+            name = str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+            group[name] = min(group.get(name, len(rank)), own[it])
+    items.sort(key=lambda it: min([own[it], *(group[str(m.args[0] if m.args else m.kwargs.get("name", "default"))]
+                                              for m in it.iter_markers("xdist_group"))]))
     return result
