@@ -17,10 +17,15 @@ from hindrax_msgs.srv import SetArmed
 pytestmark = pytest.mark.ros
 
 
-# one rerun: the last pulse widths read neutral while armed and pushed once in two fresh-clone runs of the
-# merged code (cause not found yet)
-@pytest.mark.flaky(reruns=1)
 def test_drivers_read_the_simulated_vehicle_and_thrust_moves_it():
+    """Drivers read the simulated vehicle; a wrench, armed, moves it (real-time factor 1: the graph on the wall clock).
+
+    The widths are checked by waiting, while pushing, for a report armed and above neutral, not by reading the last
+    report: on the wall clock a starved process (a loaded machine) can leave the ESC without a command for longer
+    than its watchdog (``esc.watchdog_timeout_s``, 0.5 s, steady and ROS time) or the allocation without a wrench for
+    ``thrusters.wrench_timeout_s``; both then write neutral, still armed, by design, until the next wrench. One such
+    report came last once in two fresh-clone runs (neutral 1500.4 us, armed, after the vehicle had moved); beside
+    two to four busy loops the gap between two pushes reached 0.26 s of simulated time, against 0.03 s quiet."""
     with ros_context() as ctx:
         graph = build_graph(default_config_path(), sim=True, context=ctx, seed=5,
                             overrides={"esc.arming_time_s": 1.0, "simulation.real_time_factor": 1.0,
@@ -79,7 +84,8 @@ def test_drivers_read_the_simulated_vehicle_and_thrust_moves_it():
 
             wait_until(lambda: len(moving()) >= 3, 60, push, "3 DVL reports stamped while surging")
             assert sim.truth().position_ned_m[0] > x0
-            assert got["pwm"][-1].armed and max(got["pwm"][-1].pulse_width_us) > 1550
+            wait_until(lambda: got["pwm"][-1].armed and max(got["pwm"][-1].pulse_width_us) > 1550, 10, push,
+                       "thrusters/pulse_width armed and above neutral while pushed")
             t_hist, u_hist = np.array(surge_history).T
             for m in moving():
                 u_true = np.interp(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, t_hist, u_hist)

@@ -83,8 +83,14 @@ def record() -> fit_core.DofRecord:
     return _record()
 
 
-def test_the_right_model_under_a_coloured_disturbance_is_trusted(record):
-    res = fit_core.identify_dof(record)
+@pytest.fixture(scope="module")
+def right_fit(record) -> fit_core.DofResult:
+    """The right model's fit of :func:`record`, once for the tests that read it (the fit is the costly part)."""
+    return fit_core.identify_dof(record)
+
+
+def test_the_right_model_under_a_coloured_disturbance_is_trusted(right_fit):
+    res = right_fit
     cov = res.covariance
     # what the lag-1 whiteness check saw: far above its threshold although the model is the truth's
     assert cov.residual_rho > 3 * verdicts.WHITENESS_MAX, cov.residual_rho
@@ -102,9 +108,9 @@ def test_a_model_without_quadratic_damping_is_flagged(record):
 
 
 @pytest.mark.parametrize("factor", [0.7, 1.3])
-def test_a_wrong_added_mass_is_flagged(record, factor):
+def test_a_wrong_added_mass_is_flagged(right_fit, factor):
     """The right terms with the inertia held 30 % off (the other parameters and initial velocities refitted)."""
-    res = fit_core.identify_dof(record)
+    res = right_fit
     layout = list(res.chosen.layout)
     theta = res.theta.copy()
     theta[0] *= factor
