@@ -414,9 +414,22 @@ def test_zero_depth_before_any_reading_is_refused(rig):
     assert r.node.diag.status().level == DiagnosticStatus.ERROR  # bus down reported, node alive
 
 
+def _node_clock(holder, sim):
+    """A clock for the emulator: the ROS time of ``holder["node"]`` (the /clock it has received), s; before the
+    node exists, ``sim["t"]``."""
+    def now_s():
+        node = holder.get("node")
+        return node.get_clock().now().nanoseconds * 1e-9 if node is not None else sim["t"]
+    return now_s
+
+
 def test_use_sim_time_stamps_and_timers_follow_the_clock(rig):
-    sim = {"t": 1000.0}
-    r = rig(lambda t: (115000.0, 14.0), "30BA", clock=lambda: sim["t"], sim_time=True)
+    sim, holder = {"t": 1000.0}, {}
+    # the emulator reads the node's own ROS clock: with a separate simulator variable, /clock messages delivered
+    # late under load made the node's clock lag by a varying amount, and a wait that began at a large lag and
+    # ended at a small one read early in the emulator's time (seen once in a loaded fresh clone)
+    r = rig(lambda t: (115000.0, 14.0), "30BA", clock=_node_clock(holder, sim), sim_time=True)
+    holder["node"] = r.node
     clock_pub = r.probe.create_publisher(Clock, "/clock", 10)
 
     def tick():  # a simulator publishing /clock in 2 ms steps, driving the emulator with the same time
@@ -447,12 +460,8 @@ def test_stamp_is_the_time_of_validity_of_the_pressure(rig):
     sim = {"t": 1000.0}
     ramp_pa_s = 1.0e5
     holder = {}
-
-    def node_clock():
-        node = holder.get("node")
-        return node.get_clock().now().nanoseconds * 1e-9 if node is not None else sim["t"]
-
-    r = rig(lambda t: (101000.0 + ramp_pa_s * (t - 1000.0), 14.0), "30BA", clock=node_clock, sim_time=True,
+    r = rig(lambda t: (101000.0 + ramp_pa_s * (t - 1000.0), 14.0), "30BA", clock=_node_clock(holder, sim),
+            sim_time=True,
             overrides={"sensors.ms5837.min_pressure_pa": 0.0, "sensors.ms5837.max_pressure_pa": 3.1e6,
                        # the synthetic ramp is 10 m/s of depth: beyond the vehicle's physics the gate holds to
                        "sensors.ms5837.max_depth_rate_m_s": 20.0, "sensors.ms5837.max_depth_m": 300.0})
