@@ -20,6 +20,7 @@ event handle into the wait set directly, without their Python wrappers. A wait o
 """
 from __future__ import annotations
 
+from collections import deque
 from typing import Any, Callable
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -91,6 +92,30 @@ class _Snapshot:
                 self.waitables.append((wt, node))
                 counts = [a + b for a, b in zip(counts, _counts(wt))]
         self.waitable_counts = counts
+        # with every entity free (no task in progress) the wait takes these as they are: the handles of the
+        # subscriptions, clients, services and timers, then the QoS event handlers' event handles (module docstring)
+        self.sub_h, self.cli_h, self.srv_h, self.tmr_h = ([e.handle for e in group] for group in (
+            self.subs, self.clients, self.services, self.timers))
+        self.events = [(wt, node, wt._EventHandler__event) for wt, node in self.waitables
+                       if isinstance(wt, EventHandler)]
+        self.others = [(wt, node) for wt, node in self.waitables if not isinstance(wt, EventHandler)]
+        self.handles = self.sub_h + self.cli_h + self.srv_h + self.tmr_h + [h for *_w, h in self.events]
+
+
+def _enter_each(handles: list) -> list | None:
+    """Mark every handle in use (``__enter__``) in order and return them, or None (none left held) when one is no
+    longer valid."""
+    entered: list = []
+    keep = entered.append
+    try:
+        for h in handles:
+            h.__enter__()
+            keep(h)
+    except InvalidHandle:
+        for h in reversed(entered):
+            h.__exit__(None, None, None)
+        return None
+    return entered
 
 
 class LeanWaitExecutor(SingleThreadedExecutor):
@@ -176,10 +201,13 @@ class LeanWaitExecutor(SingleThreadedExecutor):
             guards.append(self._guard)
             guards.append(self._sigint_gc)
 
-            entered: list = []  # handles marked in use while waiting, exited in reverse order
+            # handles marked in use while waiting, exited in reverse order: with every entity free the snapshot's
+            fast = None if busy else _enter_each(snap.handles)
+            entered: list = fast or []
             try:
                 handles = []
-                for group in (subs, clients, services, timers, guards):
+                for group in ((timers[len(snap.timers):], guards) if fast is not None else
+                              (subs, clients, services, timers, guards)):
                     kept = []
                     for entity in group:
                         h = entity.handle
@@ -190,8 +218,13 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                         entered.append(h)
                         kept.append(h)
                     handles.append(kept)
-                sub_h, cli_h, srv_h, tmr_h, gc_h = handles
-                events, others = [], []  # (waitable, node, event handle) / (waitable, node)
+                if fast is not None:
+                    extra_tmr_h, gc_h = handles
+                    sub_h, cli_h, srv_h, tmr_h = snap.sub_h, snap.cli_h, snap.srv_h, snap.tmr_h + extra_tmr_h
+                    events, others, waitables = snap.events, [], snap.others
+                else:
+                    sub_h, cli_h, srv_h, tmr_h, gc_h = handles
+                    events, others = [], []  # (waitable, node, event handle) / (waitable, node)
                 for wt, node in waitables:
                     h = wt._EventHandler__event if isinstance(wt, EventHandler) else wt
                     try:
@@ -217,8 +250,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                 for add, hs in ((wait_set.add_subscription, sub_h), (wait_set.add_client, cli_h),
                                 (wait_set.add_service, srv_h), (wait_set.add_timer, tmr_h),
                                 (wait_set.add_guard_condition, gc_h)):
-                    for h in hs:
-                        add(h)
+                    deque(map(add, hs), 0)
                 add_event = wait_set.add_event
                 for wt, _node, h in events:
                     wt._event_index = add_event(h)
