@@ -30,6 +30,7 @@ delay after wake, filter dynamics (the DLPF only sets the output rate here).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from typing import Callable, Sequence
@@ -40,6 +41,10 @@ from ..transport.emulated_i2c import RegisterPointerEmulator, remote_io_error
 from . import protocol as p
 
 __all__ = ["from_config", "Icm20948Emulator", "Ak09916Emulator", "ImuTruth"]
+
+#: the accel/gyro configuration of the bank-2 register values (:meth:`~.protocol.ImuConfig.from_registers`; frozen,
+#: so one decoded object serves every transaction until a register changes)
+_decoded_config = functools.lru_cache(maxsize=16)(p.ImuConfig.from_registers)
 
 #: Truth source in the sensor frame: t_s -> (specific_force_m_s2 (3,), angular_rate_rad_s (3,),
 #: magnetic_field_t (3,), temperature_c).
@@ -276,9 +281,9 @@ class Icm20948Emulator(RegisterPointerEmulator):
     @property
     def config(self) -> p.ImuConfig:
         """Accel/gyro configuration decoded from the bank-2 registers."""
-        return p.ImuConfig.from_registers(self._get(p.GYRO_SMPLRT_DIV), self._get(p.GYRO_CONFIG_1),
-                                          self._get(p.ACCEL_SMPLRT_DIV_1), self._get(p.ACCEL_SMPLRT_DIV_2),
-                                          self._get(p.ACCEL_CONFIG))
+        return _decoded_config(self._get(p.GYRO_SMPLRT_DIV), self._get(p.GYRO_CONFIG_1),
+                               self._get(p.ACCEL_SMPLRT_DIV_1), self._get(p.ACCEL_SMPLRT_DIV_2),
+                               self._get(p.ACCEL_CONFIG))
 
     @property
     def stuck(self) -> bool:
