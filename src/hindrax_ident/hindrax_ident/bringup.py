@@ -287,7 +287,13 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     if hardware is not None:
         # emulators on the drivers' ROS clock (the MS5837 driver's): conversion waits line up exactly
         ms5837_clock = nodes["ms5837"].get_clock()
-        hardware.use_clock(lambda: ms5837_clock.now().nanoseconds * 1e-9)
+        if drive_clocks:  # the clock moves only at the simulator's ticks: read once per tick, before the emulators
+            now_s = [ms5837_clock.now().nanoseconds * 1e-9]
+            nodes["simulator"].add_clock_listener(lambda _t: now_s.__setitem__(0, ms5837_clock.now().nanoseconds
+                                                                               * 1e-9))
+            hardware.use_clock(lambda: now_s[0])
+        else:
+            hardware.use_clock(lambda: ms5837_clock.now().nanoseconds * 1e-9)
         # serial devices in lock-step: sent at the clock tick, handled by the driver before time moves on
         serial = {d.name: nodes[d.node] for d in device_table.DEVICES if d.transport == device_table.SERIAL}
         hardware.lock_step_serial(nodes["simulator"], {n: node.transport for n, node in serial.items()},
