@@ -21,6 +21,7 @@ event handle into the wait set directly, without their Python wrappers. A wait o
 from __future__ import annotations
 
 from collections import deque
+from operator import methodcaller
 from typing import Any, Callable
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -39,6 +40,8 @@ _COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num
                  "num_events")
 #: entity kinds in rclpy's per-node order of ready callbacks
 _TIMER, _SUB, _GUARD, _CLIENT, _SERVICE = range(5)
+#: a handle's ``__enter__`` / ``__exit__`` as C-level calls (the wait enters and leaves some 330 handles)
+_ENTER, _EXIT = methodcaller("__enter__"), methodcaller("__exit__", None, None, None)
 
 
 def _free(entity) -> bool:
@@ -103,19 +106,20 @@ class _Snapshot:
 
 
 def _enter_each(handles: list) -> list | None:
-    """Mark every handle in use (``__enter__``) in order and return them, or None (none left held) when one is no
-    longer valid."""
-    entered: list = []
-    keep = entered.append
+    """Mark every handle in use (``__enter__``) in order and return a new list of them, or None (none left held) when
+    one is no longer valid."""
+    rest = iter(handles)
     try:
-        for h in handles:
-            h.__enter__()
-            keep(h)
+        deque(map(_ENTER, rest), 0)
     except InvalidHandle:
-        for h in reversed(entered):
-            h.__exit__(None, None, None)
+        _exit_each(handles[:len(handles) - len(list(rest)) - 1])
         return None
-    return entered
+    return list(handles)
+
+
+def _exit_each(handles: list) -> None:
+    """Release handles entered by :func:`_enter_each` (or one by one), last first."""
+    deque(map(_EXIT, reversed(handles)), 0)
 
 
 class LeanWaitExecutor(SingleThreadedExecutor):
@@ -284,8 +288,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                         yielded_work = True
                         yield self._make_handler(wt, node, self._take_waitable), wt, node
             finally:
-                for h in reversed(entered):
-                    h.__exit__(None, None, None)
+                _exit_each(entered)
 
             # ready entities one node at a time, in rclpy's order
             rank = snap.rank

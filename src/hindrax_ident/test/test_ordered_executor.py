@@ -68,3 +68,33 @@ def test_lean_wait_yields_rclpys_callbacks_in_rclpys_order():
         ex.remove_node(nodes[1])
         assert ex.get_nodes() == [nodes[0], nodes[2]]
         ex.shutdown()
+
+
+def test_a_handle_no_longer_valid_leaves_none_held():
+    """The lean wait enters the snapshot's handles in one pass: when one of them was destroyed meanwhile, the ones
+    entered before it are released again (last first) and the wait goes the entity-by-entity way."""
+    from rclpy.exceptions import InvalidHandle
+
+    from hindrax_ident.ordered_executor import _enter_each
+
+    log: list = []
+
+    class Handle:
+        def __init__(self, name: str, valid: bool = True) -> None:
+            self.name, self.valid = name, valid
+
+        def __enter__(self):
+            if not self.valid:
+                raise InvalidHandle("destroyed")
+            log.append(("enter", self.name))
+
+        def __exit__(self, *_exc) -> None:
+            log.append(("exit", self.name))
+
+    good = [Handle("a"), Handle("b"), Handle("c")]
+    held = _enter_each(good)
+    assert held == good and held is not good
+    assert log == [("enter", "a"), ("enter", "b"), ("enter", "c")]
+    log.clear()
+    assert _enter_each([Handle("a"), Handle("b"), Handle("x", valid=False), Handle("d")]) is None
+    assert log == [("enter", "a"), ("enter", "b"), ("exit", "b"), ("exit", "a")]
