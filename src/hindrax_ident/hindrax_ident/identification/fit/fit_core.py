@@ -709,8 +709,10 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     def fun(x):
         if with_steps:
             return batch(x)["R"][0].copy()  # least_squares scales what it gets in place
-        th, v0 = split(x)
-        return _residuals(sd, layout, th[None, :], v0)[0]
+        if not np.array_equal(last.get("x1"), x):  # least_squares starts where r0 below was computed
+            th, v0 = split(x)
+            last.update(x1=np.array(x, copy=True), r1=_residuals(sd, layout, th[None, :], v0)[0])
+        return last["r1"].copy()
 
     def jac(x):
         b = batch(x)
