@@ -507,45 +507,71 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     v = np.broadcast_to(sd.v0, (B, sd.m)).copy() if v0 is None else np.array(v0, dtype=float)
     x = np.broadcast_to(sd.x0, (B, sd.m)).copy()
     L = sd.L
-    V = np.empty((B, sd.m, L))
-    X = np.empty((B, sd.m, L)) if position else None
-    V[:, :, 0] = v
+    V = np.empty((L, B, sd.m))  # tick first (rows written contiguously), returned as (B, m, L) views
+    X = np.empty((L, B, sd.m)) if position else None
+    V[0] = v
     if position:
-        X[:, :, 0] = x
+        X[0] = x
 
     if split:
         kqp_, kqn_ = (kqp if kqp is not None else 0.0), (kqn if kqn is not None else 0.0)
         klp_, kln_ = (klp if klp is not None else 0.0), (kln if kln is not None else 0.0)
 
-        def damp(vv):
+        def damp(vv, out):
             pos = vv > 0
             return np.abs(vv) * vv * np.where(pos, kqp_, kqn_) + vv * np.where(pos, klp_, kln_)
     elif kq is not None and kl is not None:
-        def damp(vv):
-            return (kq * np.abs(vv) + kl) * vv
+        def damp(vv, out):  # (kq |v| + kl) v, in place
+            np.abs(vv, out=out)
+            out *= kq
+            out += kl
+            out *= vv
+            return out
     elif kq is not None:
-        def damp(vv):
-            return kq * np.abs(vv) * vv
+        def damp(vv, out):
+            np.abs(vv, out=out)
+            out *= kq
+            out *= vv
+            return out
     else:
-        def damp(vv):
-            return kl * vv
+        def damp(vv, out):
+            return np.multiply(kl, vv, out=out)
+
+    def stage(u, vv, out):  # (u - damp(vv)) / M, in place
+        d = damp(vv, out)
+        np.subtract(u, d, out=out)
+        out *= inv_m
+        return out
 
     hh = 0.5 * h
+    Ut = np.ascontiguousarray(np.moveaxis(U, -1, 1))  # (3, L, B, m): one tick's inputs contiguous
+    k1, k2, k3, k4, w = (np.empty((B, sd.m)) for _ in range(5))
     with np.errstate(all="ignore"):
         for i in range(L - 1):
-            u0, um, u1 = U[0][:, :, i], U[1][:, :, i], U[2][:, :, i]
-            k1 = (u0 - damp(v)) * inv_m
-            k2 = (um - damp(v + hh * k1)) * inv_m
-            k3 = (um - damp(v + hh * k2)) * inv_m
-            k4 = (u1 - damp(v + h * k3)) * inv_m
+            u0, um, u1 = Ut[0, i], Ut[1, i], Ut[2, i]
+            stage(u0, v, k1)
+            np.multiply(hh, k1, out=w)
+            w += v
+            stage(um, w, k2)
+            np.multiply(hh, k2, out=w)
+            w += v
+            stage(um, w, k3)
+            np.multiply(h, k3, out=w)
+            w += v
+            stage(u1, w, k4)
             if position:
                 x = x + h * v + (h * h / 6.0) * (k1 + k2 + k3)
-                np.clip(x, -bound, bound, out=x)
-                X[:, :, i + 1] = x
-            v = v + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
-            np.clip(v, -bound, bound, out=v)  # a NaN (inf - inf) cannot arise from bounded states
-            V[:, :, i + 1] = v
-    return V, X
+                np.minimum(np.maximum(x, -bound, out=x), bound, out=x)
+                X[i + 1] = x
+            np.add(k2, k3, out=w)
+            w *= 2.0
+            w += k1
+            w += k4
+            w *= h / 6.0
+            v = v + w
+            np.minimum(np.maximum(v, -bound, out=v), bound, out=v)  # a NaN (inf - inf) cannot arise
+            V[i + 1] = v
+    return np.moveaxis(V, 0, -1), None if X is None else np.moveaxis(X, 0, -1)
 
 
 def _at_samples(sd: SegmentData, Y: np.ndarray) -> np.ndarray:
@@ -658,22 +684,39 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     def split(x):
         return x[:p], (x[p:][None, :] if free_v0 else None)
 
-    def fun(x):
-        th, v0 = split(x)
-        return _residuals(sd, layout, th[None, :], v0)[0]
+    last: dict = {}
+    # without time-dependent regressors a row's residuals do not depend on the batch it is simulated in: fun
+    # simulates x's forward steps too (the Jacobian least_squares asks for next is at the point it last evaluated)
+    with_steps = not any(k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES) for k in _kinds(layout))
 
-    def jac(x):
+    def batch(x):
+        """Residuals at x (row 0) and at its forward steps (rows 1..) in one simulation, kept for the last x."""
+        if last.get("x") is not None and np.array_equal(last["x"], x):
+            return last
         th, v0 = split(x)
         d = 1e-6 * np.maximum(np.abs(th), 1e-3 * np.maximum(np.abs(th0), 1e-6))
         # forward steps that stay inside the bounds
         d = np.where(th + d > upper, -d, d)
         P = np.vstack([th, th + np.diag(d)])
-        V0 = None
+        V0, dv = None, 0.0
         if free_v0:
             dv = 1e-6 * max(1.0, float(np.max(np.abs(v0))))
             V0 = np.vstack([np.repeat(v0, p + 1, axis=0), v0 + dv])
             P = np.vstack([P, th])
-        R = _residuals(sd, layout, P, V0)
+        last.update(x=np.array(x, copy=True), R=_residuals(sd, layout, P, V0), d=d, dv=dv)
+        return last
+
+    def fun(x):
+        if with_steps:
+            return batch(x)["R"][0].copy()  # least_squares scales what it gets in place
+        if not np.array_equal(last.get("x1"), x):  # least_squares starts where r0 below was computed
+            th, v0 = split(x)
+            last.update(x1=np.array(x, copy=True), r1=_residuals(sd, layout, th[None, :], v0)[0])
+        return last["r1"].copy()
+
+    def jac(x):
+        b = batch(x)
+        R, d, dv = b["R"], b["d"], b["dv"]
         J = (R[1:p + 1] - R[0]) / d[:, None]
         if not free_v0:
             return J.T

@@ -33,7 +33,7 @@ def simulate_batch(U: np.ndarray, v0: np.ndarray, theta: np.ndarray, h: float,
     m, L = U.shape[2], U.shape[3]
     inv_m = (1.0 / theta[..., 0])[..., None]
     kq, kl, b = (theta[..., i][..., None] for i in (1, 2, 3))
-    Ut = np.moveaxis(U, -1, 1)[:, :, :, None, :]  # (3, L, G, 1, m): one tick's inputs a view
+    Ut = np.ascontiguousarray(np.moveaxis(U, -1, 1))[:, :, :, None, :]  # (3, L, G, 1, m): a tick contiguous
     if cols is not None and cols.shape[-1]:
         Ut = Ut + np.moveaxis(np.einsum("smlc,gbc->sgbml", cols, theta[..., 4:]), -1, 1)
     v = np.broadcast_to(v0, (G, B, m)).copy()
@@ -41,18 +41,38 @@ def simulate_batch(U: np.ndarray, v0: np.ndarray, theta: np.ndarray, h: float,
     V[0] = v
     bound = 1e3 * (float(np.max(np.abs(v0))) + 1.0)
     hh = 0.5 * h
+    u0, um, u1, k1, k2, k3, k4, w = (np.empty((G, B, m)) for _ in range(8))
+
+    def stage(u, vv, out):  # (u - (kq |vv| + kl) vv) / M, in place
+        np.abs(vv, out=out)
+        out *= kq
+        out += kl
+        out *= vv
+        np.subtract(u, out, out=out)
+        out *= inv_m
+
     with np.errstate(all="ignore"):
         for i in range(L - 1):
-            u0, um, u1 = Ut[0, i] - b, Ut[1, i] - b, Ut[2, i] - b
-            k1 = (u0 - (kq * np.abs(v) + kl) * v) * inv_m
-            w = v + hh * k1
-            k2 = (um - (kq * np.abs(w) + kl) * w) * inv_m
-            w = v + hh * k2
-            k3 = (um - (kq * np.abs(w) + kl) * w) * inv_m
-            w = v + h * k3
-            k4 = (u1 - (kq * np.abs(w) + kl) * w) * inv_m
-            v = v + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
-            np.clip(v, -bound, bound, out=v)
+            np.subtract(Ut[0, i], b, out=u0)
+            np.subtract(Ut[1, i], b, out=um)
+            np.subtract(Ut[2, i], b, out=u1)
+            stage(u0, v, k1)
+            np.multiply(hh, k1, out=w)
+            w += v
+            stage(um, w, k2)
+            np.multiply(hh, k2, out=w)
+            w += v
+            stage(um, w, k3)
+            np.multiply(h, k3, out=w)
+            w += v
+            stage(u1, w, k4)
+            np.add(k2, k3, out=w)  # v + h/6 (k1 + 2 (k2 + k3) + k4)
+            w *= 2.0
+            w += k1
+            w += k4
+            w *= h / 6.0
+            v += w
+            np.minimum(np.maximum(v, -bound, out=v), bound, out=v)
             V[i + 1] = v
     return np.moveaxis(V, 0, -1)
 
@@ -75,9 +95,12 @@ def tick_weights(samples: tuple, m: int, L: int) -> tuple:
 def _apply(tw, V):
     """(Q V - q) for V (..., m, L) with Q the tridiagonal form of :func:`tick_weights`."""
     D0, D1, q, _c = tw
-    out = D0 * V - q
-    out[..., :-1] += D1[:, :-1] * V[..., 1:]
-    out[..., 1:] += D1[:, :-1] * V[..., :-1]
+    out = D0 * V
+    out -= q
+    d1 = D1[:, :-1]
+    t = d1 * V[..., 1:]
+    out[..., :-1] += t
+    out[..., 1:] += np.multiply(d1, V[..., :-1], out=t)
     return out
 
 
