@@ -543,31 +543,15 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
         out *= inv_m
         return out
 
-    hh = 0.5 * h
     Ut = np.ascontiguousarray(np.moveaxis(U, -1, 1))  # (3, L, B, m): one tick's inputs contiguous
     k1, k2, k3, k4, w = (np.empty((B, sd.m)) for _ in range(5))
     with np.errstate(all="ignore"):
         for i in range(L - 1):
-            u0, um, u1 = Ut[0, i], Ut[1, i], Ut[2, i]
-            stage(u0, v, k1)
-            np.multiply(hh, k1, out=w)
-            w += v
-            stage(um, w, k2)
-            np.multiply(hh, k2, out=w)
-            w += v
-            stage(um, w, k3)
-            np.multiply(h, k3, out=w)
-            w += v
-            stage(u1, w, k4)
-            if position:
+            timing_grid.rk4_step(stage, Ut[0, i], Ut[1, i], Ut[2, i], v, h, (k1, k2, k3, k4), w)
+            if position:  # Runge-Kutta-Nystrom (the stages k1..k3 of the velocity)
                 x = x + h * v + (h * h / 6.0) * (k1 + k2 + k3)
                 np.minimum(np.maximum(x, -bound, out=x), bound, out=x)
                 X[i + 1] = x
-            np.add(k2, k3, out=w)
-            w *= 2.0
-            w += k1
-            w += k4
-            w *= h / 6.0
             v = v + w
             np.minimum(np.maximum(v, -bound, out=v), bound, out=v)  # a NaN (inf - inf) cannot arise
             V[i + 1] = v

@@ -18,10 +18,35 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["simulate_batch", "fit_batch", "held_out_sse"]
+__all__ = ["rk4_step", "simulate_batch", "fit_batch", "held_out_sse"]
 
 #: Levenberg-Marquardt iterations of one batch (each one simulation of every problem and its perturbations)
 ITERATIONS = 12
+
+
+def rk4_step(stage, u0, um, u1, v, h: float, k: tuple, w: np.ndarray) -> np.ndarray:
+    """One classical RK4 step of v' = f(u, v), in place: ``stage(u, vv, out)`` writes f into
+    ``out``; ``u0``, ``um``, ``u1`` the inputs at the start, middle and end of the tick. The stages
+    go into the buffers ``k`` (k1..k4, shaped as ``v``), the increment h/6 (k1 + 2 (k2 + k3) + k4)
+    into ``w``, which is returned; ``v`` is left as it is."""
+    k1, k2, k3, k4 = k
+    hh = 0.5 * h
+    stage(u0, v, k1)
+    np.multiply(hh, k1, out=w)
+    w += v
+    stage(um, w, k2)
+    np.multiply(hh, k2, out=w)
+    w += v
+    stage(um, w, k3)
+    np.multiply(h, k3, out=w)
+    w += v
+    stage(u1, w, k4)
+    np.add(k2, k3, out=w)
+    w *= 2.0
+    w += k1
+    w += k4
+    w *= h / 6.0
+    return w
 
 
 def simulate_batch(U: np.ndarray, v0: np.ndarray, theta: np.ndarray, h: float,
@@ -33,15 +58,14 @@ def simulate_batch(U: np.ndarray, v0: np.ndarray, theta: np.ndarray, h: float,
     m, L = U.shape[2], U.shape[3]
     inv_m = (1.0 / theta[..., 0])[..., None]
     kq, kl, b = (theta[..., i][..., None] for i in (1, 2, 3))
-    Ut = np.ascontiguousarray(np.moveaxis(U, -1, 1))[:, :, :, None, :]  # (3, L, G, 1, m): a tick contiguous
+    Ut = np.ascontiguousarray(np.moveaxis(U, -1, 1))[:, :, :, None, :]  # (3, L, G, 1, m)
     if cols is not None and cols.shape[-1]:
         Ut = Ut + np.moveaxis(np.einsum("smlc,gbc->sgbml", cols, theta[..., 4:]), -1, 1)
     v = np.broadcast_to(v0, (G, B, m)).copy()
     V = np.empty((L, G, B, m))
     V[0] = v
     bound = 1e3 * (float(np.max(np.abs(v0))) + 1.0)
-    hh = 0.5 * h
-    u0, um, u1, k1, k2, k3, k4, w = (np.empty((G, B, m)) for _ in range(8))
+    u0, um, u1, w, *k = (np.empty((G, B, m)) for _ in range(8))
 
     def stage(u, vv, out):  # (u - (kq |vv| + kl) vv) / M, in place
         np.abs(vv, out=out)
@@ -56,22 +80,7 @@ def simulate_batch(U: np.ndarray, v0: np.ndarray, theta: np.ndarray, h: float,
             np.subtract(Ut[0, i], b, out=u0)
             np.subtract(Ut[1, i], b, out=um)
             np.subtract(Ut[2, i], b, out=u1)
-            stage(u0, v, k1)
-            np.multiply(hh, k1, out=w)
-            w += v
-            stage(um, w, k2)
-            np.multiply(hh, k2, out=w)
-            w += v
-            stage(um, w, k3)
-            np.multiply(h, k3, out=w)
-            w += v
-            stage(u1, w, k4)
-            np.add(k2, k3, out=w)  # v + h/6 (k1 + 2 (k2 + k3) + k4)
-            w *= 2.0
-            w += k1
-            w += k4
-            w *= h / 6.0
-            v += w
+            v += rk4_step(stage, u0, um, u1, v, h, k, w)
             np.minimum(np.maximum(v, -bound, out=v), bound, out=v)
             V[i + 1] = v
     return np.moveaxis(V, 0, -1)
