@@ -17,6 +17,7 @@ It is not a simulation (no thrust, no dynamics): the virtual pool is ``hindrax b
 """
 from __future__ import annotations
 
+import abc
 import math
 import os
 import tempfile
@@ -49,7 +50,7 @@ _SURFACE_PA, _RHO_KG_M3, _G_M_S2 = 101325.0, 1000.0, 9.80665
 _EARTH_FIELD_T = (2.0e-5, 0.0, 4.0e-5)
 
 
-class DriverEndpoints:
+class DriverEndpoints(abc.ABC):
     """Where the driver processes of a launch layout find emulated devices: :attr:`ports` (launch
     node name -> serial port path) and :attr:`socket_path` (the emulated I2C bus's socket). A
     context manager that calls :meth:`close`. Shared by :class:`EmulatedDevices` and the live
@@ -71,9 +72,9 @@ class DriverEndpoints:
         else {}."""
         return {SOCKET_ENV: self.socket_path} if name in I2C_DEVICES else {}
 
-    def close(self) -> None:  # pragma: no cover - abstract
+    @abc.abstractmethod
+    def close(self) -> None:
         """Stop serving the devices."""
-        raise NotImplementedError
 
     def __enter__(self) -> Any:
         return self
