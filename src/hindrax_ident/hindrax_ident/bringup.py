@@ -51,9 +51,10 @@ class Graph:
     """A running node graph: ``nodes`` (name -> node), the executor, the virtual hardware (sim only).
 
     ``stepped`` (sim with driven clocks, :func:`build_graph`): the simulator node is not in the executor; each
-    :meth:`spin_once` advances it by one /clock period and then runs every other node until none has work left
-    at that instant. What runs at a tick then never depends on wall-clock timing (on a timer, the simulator
-    could advance again before a driver's timer due at this tick had run, or not, depending on the load).
+    :meth:`spin_once` advances it by one /clock period and then runs the callbacks ready at that
+    instant (:meth:`spin_until_idle`). What runs at a tick then never depends on wall-clock timing
+    (on a timer, the simulator could advance again before a driver's timer due at this tick had
+    run, or not, depending on the load).
     """
 
     config: VehicleConfig
@@ -81,7 +82,8 @@ class Graph:
         self.spin_until_idle()
 
     def spin_until_idle(self, max_callbacks: int = 100_000) -> int:
-        """Run executor callbacks until a wait with zero timeout finds nothing ready; returns how many ran."""
+        """Run the callbacks one wait with zero timeout finds ready (rclpy ends a zero-timeout
+        pass with a timeout: those these make ready run at the next call); returns how many ran."""
         for n in range(max_callbacks):
             try:
                 handler, _entity, _node = self.executor.wait_for_ready_callbacks(0.0)
