@@ -242,6 +242,18 @@ def test_too_little_data_says_how_much_is_needed(tmp_path, capsys):
     assert "too little data" in err and "20 s" in err
 
 
+def test_a_non_empty_out_folder_is_refused_before_the_fit(tmp_path, capsys, monkeypatch):
+    import hindrax_ident.identification.assessment.pipeline as pipeline
+
+    fits = []
+    monkeypatch.setattr(pipeline, "fit_bags", lambda *a, **k: fits.append(a))
+    bag, out = str(_small_bag(tmp_path / "b")), tmp_path / "o"
+    out.mkdir()
+    (out / "identification.yaml").write_text("{}\n")
+    err = _fails([bag, "--out", str(out)], capsys)
+    assert str(out) in err and "not empty" in err and fits == []
+
+
 def test_imu_in_a_rotated_frame_and_unset_header_stamps(tmp_path):
     """Angular rate from an upside-down IMU (its rotation in /tf_static), every header stamp unset (receive times),
     no vehicle file: surge and yaw still identified. The receive times put the velocity 0-30 ms late (5 % of the

@@ -109,20 +109,16 @@ def format_table(res, cfg=None) -> str:
     return "\n".join(lines)
 
 
-def _run_campaign(args: argparse.Namespace, cfg) -> int:
-    """A campaign bag: the campaign reader, the fit core with this command's folds, the outputs of ``hindrax ident
-    bag`` (:func:`~.ident_bag.identify_campaign_bag`) and this command's table of the core's results."""
+def _run_campaign(args: argparse.Namespace, cfg, out: Path) -> int:
+    """A campaign bag: the campaign reader, the fit core with this command's folds, the outputs of
+    ``hindrax ident bag`` (:func:`~.ident_bag.identify_campaign_bag`) into ``out`` and this
+    command's table of the core's results."""
     from ...identification.assessment.pipeline import campaign_result, core_options
-    from .ident_bag import _remove_if_empty, identify_campaign_bag, result_dir_for_bag
+    from .ident_bag import identify_campaign_bag
 
     bag = Path(args.bags[0])
-    out = result_dir_for_bag(bag, args.out, "fit")
     opts = core_options(args.folds)
-    try:
-        _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit", opts)
-    except CommandError:
-        _remove_if_empty(out)
-        raise
+    _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident fit", opts)
     res = campaign_result(idents, args.folds, opts)
     print(f"{bag}: the campaign's topics: read as hindrax ident bag reads them (DOF windows from "
           "identification/status, thrust model of the ESC widths, the vehicle's sensors)")
@@ -147,13 +143,12 @@ def _campaign_hint(args: argparse.Namespace, cfg) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Fit, write the outputs, print the table. Raises :class:`CommandError` on bad input."""
+    """Fit, write the outputs, print the table. Raises :class:`CommandError` on bad input (an
+    output folder that cannot be used: before anything is fitted)."""
     from hindrax_drivers.recording.reader import BagError
 
-    from ...identification.assessment.pipeline import fit_bags, write_any_outputs
-    from ...identification.assessment.verdicts import format_advice
-    from ...identification.bag_input.reader import (FitInputError, FitOptions, TopicChoice,
-                                                    reads_as_campaign)
+    from ...identification.bag_input.reader import FitOptions, TopicChoice, reads_as_campaign
+    from .ident_bag import _remove_if_empty, result_dir_for_bag
 
     cfg = None
     if args.config is not None:
@@ -176,19 +171,33 @@ def run(args: argparse.Namespace) -> int:
         campaign = reads_as_campaign(args.bags, choice, cfg, dofs, args.holdout)
     except (BagError, OSError) as exc:
         raise CommandError(f"ident fit: {exc}") from exc
-    if campaign:
-        return _run_campaign(args, cfg)
+    out = result_dir_for_bag(Path(args.bags[0]), args.out, "fit")
     try:
-        res = fit_bags(args.bags, choice, cfg, dofs, args.holdout,
-                       FitOptions(folds=args.folds, persistence_margin=margin, max_delay_s=args.max_delay_s))
+        if campaign:
+            return _run_campaign(args, cfg, out)
+        opts = FitOptions(folds=args.folds, persistence_margin=margin, max_delay_s=args.max_delay_s)
+        return _run_any(args, cfg, out, choice, dofs, opts)
+    except BaseException:  # a failed or interrupted fit leaves no empty result folder
+        _remove_if_empty(out)
+        raise
+
+
+def _run_any(args: argparse.Namespace, cfg, out: Path, choice, dofs, options) -> int:
+    """Bags of any topics: fit (:func:`~...identification.assessment.pipeline.fit_bags`), write
+    into ``out``, print."""
+    from hindrax_drivers.recording.reader import BagError
+
+    from ...identification.assessment.pipeline import fit_bags, write_any_outputs
+    from ...identification.assessment.verdicts import format_advice
+    from ...identification.bag_input.reader import FitInputError
+
+    try:
+        res = fit_bags(args.bags, choice, cfg, dofs, args.holdout, options)
     except (FitInputError, BagError, OSError) as exc:
         raise CommandError(f"ident fit: {exc}{_campaign_hint(args, cfg)}") from exc
     if not any(r.status == "fitted" for r in res.dofs.values()):
         print(format_table(res, cfg))
         raise CommandError("ident fit: no DOF could be identified (see the table: not excited or failed)")
-    from .ident_bag import result_dir_for_bag
-
-    out = result_dir_for_bag(Path(args.bags[0]), args.out, "fit")
     doc, path, index = write_any_outputs(out, res, cfg, args.bags, args.holdout)
     print(format_table(res, cfg))
     for dof, e in doc["dofs"].items():
