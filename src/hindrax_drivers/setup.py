@@ -1,14 +1,15 @@
 """ament_python package hindrax_drivers (colcon on the Pi; editable pip install in the dev venv).
 
-Python dependencies are declared once, in the repository's requirements.txt (dev venv) and package.xml
-(rosdep on the Pi); they are deliberately not repeated here.
+Python dependencies are declared once, in the repository's requirements.txt (dev venv) and
+package.xml (rosdep on the Pi); they are deliberately not repeated here.
 
-Installed (colcon): every node as a console script in ``lib/hindrax_drivers`` (``ros2 run hindrax_drivers
-<node>``; setup.cfg puts scripts there), the vehicle file in ``share/hindrax_drivers/config/hindrax.yaml``
-(``config`` is a symlink to the repository's ``ros_ws/config``, the one vehicle file), the virtual pool's truth
-files beside it in ``share/hindrax_drivers/config/truth`` (``truth/scenarios``: the scenario suite; read by the
-simulator of ``hindrax run``, ``hindrax bringup --sim`` and ``simulator_node``, never by a vehicle node) and the
-launch files in ``share/hindrax_drivers/launch``.
+Installed (colcon): every node as a console script in ``lib/hindrax_drivers`` (``ros2 run
+hindrax_drivers <node>``; setup.cfg puts scripts there), the vehicle file in
+``share/hindrax_drivers/config/hindrax.yaml`` (``config`` is a symlink to the repository's
+``ros_ws/config``, the one vehicle file), the virtual pool's truth files beside it in
+``share/hindrax_drivers/config/truth`` (``truth/scenarios``: the scenario suite; read by the
+simulator of ``hindrax run``, ``hindrax bringup --sim`` and ``simulator_node``, never by a vehicle
+node) and the launch files in ``share/hindrax_drivers/launch``.
 """
 from glob import glob
 from pathlib import Path
@@ -18,7 +19,8 @@ from setuptools import find_packages, setup
 PACKAGE = "hindrax_drivers"
 HERE = Path(__file__).resolve().parent
 
-#: console script -> module with main(); the names `ros2 run hindrax_drivers <name>` and launch files use.
+#: console script -> module with main(); the names `ros2 run hindrax_drivers <name>` and launch
+#: files use.
 NODES = {
     "dvl75_node": "hindrax_drivers.dvl75.node",
     "ping1d_node": "hindrax_drivers.ping1d.node",
@@ -34,8 +36,10 @@ NODES = {
     "gateway_node": "hindrax_drivers.gateway.node",
 }
 # A node whose module is not in this checkout is not installed (no entry point to a missing module).
-NODES = {name: mod for name, mod in NODES.items() if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
-#: composed processes (hindrax_drivers.composition: several nodes, one process): console script -> module:function
+NODES = {name: mod for name, mod in NODES.items()
+         if (HERE / (mod.replace(".", "/") + ".py")).is_file()}
+#: composed processes (hindrax_drivers.composition: several nodes, one process):
+#: console script -> module:function
 GROUPS = {
     "sensors_node": "hindrax_drivers.composition:sensors_main",
     "actuation_node": "hindrax_drivers.composition:actuation_main",
@@ -61,7 +65,7 @@ setup(
     zip_safe=True,
     maintainer="Hindrax onboard team",
     maintainer_email="dev@hindrax.invalid",
-    description="Hindrax ROV device drivers, emulators, thrust allocation, configuration and recording",
+    description="Hindrax ROV drivers, emulators, thrust allocation, configuration and recording",
     license="Apache-2.0",
     entry_points={
         "console_scripts": [f"{name} = {mod}:main" for name, mod in NODES.items()]

@@ -1,13 +1,14 @@
 """ament_python package hindrax_ident (colcon on the Pi; editable pip install in the dev venv).
 
-Python dependencies are declared once, in the repository's requirements.txt (dev venv) and package.xml
-(rosdep on the Pi); they are deliberately not repeated here.
+Python dependencies are declared once, in the repository's requirements.txt (dev venv) and
+package.xml (rosdep on the Pi); they are deliberately not repeated here.
 
-Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node``, ``ident_control_node`` (the
-first and the third in one process, :mod:`hindrax_ident.composition`), ``ident_record_node`` (the same with the
-recorder) and the ``hindrax`` command as console scripts
-in ``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH after ``source install/setup.bash``), the
-launch files in ``share/hindrax_ident/launch`` and the Foxglove layout in ``share/hindrax_ident/foxglove``.
+Installed (colcon): ``identification_node``, ``simulator_node``, ``controller_node``,
+``ident_control_node`` (the first and the third in one process, :mod:`hindrax_ident.composition`),
+``ident_record_node`` (the same with the recorder) and the ``hindrax`` command as console scripts in
+``lib/hindrax_ident`` (``ros2 run``), ``bin/hindrax`` (a wrapper on PATH once
+``install/setup.bash`` is sourced), the launch files in ``share/hindrax_ident/launch`` and the
+Foxglove layout in ``share/hindrax_ident/foxglove``.
 """
 import sys
 from glob import glob
@@ -18,10 +19,11 @@ from setuptools import find_packages, setup
 PACKAGE = "hindrax_ident"
 
 
-#: bin/hindrax only for what colcon runs: `setup.py install` (a plain build), `setup.py develop ... symlink_data`
-#: (colcon build --symlink-install; symlink_data is colcon's own command, which links the data files colcon read
-#: from `setup.py --dry-run` beforehand, so that run must list it too). A pip install (editable or wheel) already
-#: puts the console script itself in the environment's bin/, which the wrapper must not replace.
+#: bin/hindrax only for what colcon runs: `setup.py install` (a plain build), `setup.py develop ...
+#: symlink_data` (colcon build --symlink-install; symlink_data is colcon's own command, which links
+#: the data files colcon read from `setup.py --dry-run` beforehand, so that run must list it too). A
+#: pip install (editable or wheel) already puts the console script itself in the environment's bin/,
+#: which the wrapper must not replace.
 COLCON_COMMANDS = {"install", "symlink_data", "--dry-run"}
 BIN = [("bin", ["bin/hindrax"])] if COLCON_COMMANDS & set(sys.argv[1:]) else []
 

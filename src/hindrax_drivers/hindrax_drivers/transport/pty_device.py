@@ -1,13 +1,13 @@
-"""Serve an I/O-free byte-stream device emulator on a pseudo-terminal, plus the emulator fault helper.
+"""Serve an I/O-free byte-stream device emulator on a pseudo-terminal; the emulators' fault helper.
 
 Two things every serial device emulator in this package shares (docs/architecture.md §2, §6):
 
 1. :class:`PtyDevice` runs an emulator -- any object with ``feed_host_bytes(data: bytes)`` and
-   ``poll(t_s: float) -> bytes`` (:class:`ByteStreamEmulator`) -- behind a Linux pseudo-terminal in a
-   background thread, so the *real* pyserial code path of a driver runs against it.  The driver opens
-   :attr:`PtyDevice.path`, a symlink in a private temporary directory that stays the same across
-   :meth:`PtyDevice.disconnect` / :meth:`PtyDevice.reconnect` (the device "disappears": the pty
-   master is closed so the driver's reads fail, the symlink is removed so re-opening fails; on
+   ``poll(t_s: float) -> bytes`` (:class:`ByteStreamEmulator`) -- behind a Linux pseudo-terminal in
+   a background thread, so the *real* pyserial code path of a driver runs against it.  The driver
+   opens :attr:`PtyDevice.path`, a symlink in a private temporary directory that stays the same
+   across :meth:`PtyDevice.disconnect` / :meth:`PtyDevice.reconnect` (the device "disappears": the
+   pty master is closed so the driver's reads fail, the symlink is removed so re-opening fails; on
    reconnect a fresh pty is created and the symlink is re-pointed).  Simulation time drives the
    emulator through the ``clock`` callable.
 
@@ -16,9 +16,9 @@ Two things every serial device emulator in this package shares (docs/architectur
    "disconnected" device).  Protocol-specific corruption (where a checksum lives) is passed in by
    the emulator.  :class:`PeriodicSchedule` gives both emulators drift-free output instants.
 
-Why our own code: pyserial's ``loop://`` and ``socket://`` URL handlers do not exercise the termios /
-select / fd code path a real ``/dev/ttyUSB*`` uses, and ``socat`` would be an external process
-dependency.  ``os.openpty`` + ``tty.setraw`` gives a real tty with no extra dependency.
+Why our own code: pyserial's ``loop://`` and ``socket://`` URL handlers do not exercise the
+termios, select and fd code path a real ``/dev/ttyUSB*`` uses, and ``socat`` would be an external
+process dependency.  ``os.openpty`` + ``tty.setraw`` gives a real tty with no extra dependency.
 
 Linux/POSIX only (pty, termios).
 """
@@ -49,8 +49,8 @@ _TICK_TOLERANCE_S = 1e-9
 class ByteStreamEmulator(Protocol):
     """Contract of an I/O-free serial device emulator (docs/architecture.md §2 layer 2).
 
-    ``feed_host_bytes(data)`` receives bytes the host wrote; ``poll(t_s)`` returns the bytes the device
-    sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls).
+    ``feed_host_bytes(data)`` receives bytes the host wrote; ``poll(t_s)`` returns the bytes the
+    device sends by time ``t_s`` (seconds on the emulator's clock, non-decreasing between calls).
     """
 
     def feed_host_bytes(self, data: bytes) -> None:  # pragma: no cover - protocol
@@ -61,8 +61,8 @@ class ByteStreamEmulator(Protocol):
 
 
 class StreamFaults:
-    """Fault injection shared by the byte-stream device emulators (docs/architecture.md §2: "fault injection is
-    part of its API").  Thread-safe: test code may call it while a :class:`PtyDevice` thread polls.
+    """Fault injection shared by the byte-stream device emulators, part of their API
+    (docs/architecture.md §2). Thread-safe: test code may call it while a PtyDevice thread polls.
 
     Per-message faults are queued and consumed, in this order of precedence, by the next messages
     passed through :meth:`apply`: drop, truncate, corrupt checksum.  Garbage is emitted at the next
@@ -96,8 +96,8 @@ class StreamFaults:
 
     # --- queueing ---------------------------------------------------------------------------
     def inject_garbage(self, data: Optional[bytes] = None, n_bytes: int = 16) -> bytes:
-        """Queue garbage bytes for the next poll: ``data`` verbatim, or ``n_bytes`` random bytes from
-        the alphabet.  Returns the queued bytes."""
+        """Queue garbage bytes for the next poll: ``data`` verbatim, or ``n_bytes`` random bytes
+        from the alphabet.  Returns the queued bytes."""
         with self._lock:
             if data is None:
                 if n_bytes < 0:
@@ -112,8 +112,8 @@ class StreamFaults:
             self._drop += max(0, int(n_messages))
 
     def truncate(self, n_messages: int = 1) -> None:
-        """Send only the first half of the next ``n_messages`` messages (no terminator), so they merge
-        with whatever follows."""
+        """Send only the first half of the next ``n_messages`` messages (no terminator), so they
+        merge with whatever follows."""
         with self._lock:
             self._truncate += max(0, int(n_messages))
 
@@ -173,7 +173,8 @@ class StreamFaults:
 
         Args:
             message: the complete message as the device would send it.
-            corrupt_checksum: protocol-specific function returning ``message`` with a wrong checksum.
+            corrupt_checksum: protocol-specific function returning ``message`` with a wrong
+                checksum.
         Returns:
             the bytes to actually send (b"" when dropped).
         """
@@ -224,7 +225,7 @@ class PeriodicSchedule:
         self._anchor_s, self._k = float(t0_s), int(first_tick_in_periods)
 
     def set_period(self, period_s: float) -> None:
-        """Change the period; the already scheduled next tick is kept, later ones use the new period.
+        """Change the period; the next tick already scheduled is kept, later ones use the new one.
 
         Raises:
             ValueError: non-positive or non-finite period.
@@ -262,8 +263,8 @@ class PtyDevice:
     to the master side.  Output that cannot be written (nobody reading, tty buffer full) is dropped
     and counted in :attr:`bytes_dropped`, as on a real UART.  Every emulator call happens with
     :attr:`lock` held, so test code can mutate the emulator safely with ``with device.lock: ...``.
-    With ``start=False`` the caller drives the device instead, one :meth:`service` call per tick of its
-    own clock (lock-step with a simulator).
+    With ``start=False`` the caller drives the device instead, one :meth:`service` call per tick of
+    its own clock (lock-step with a simulator).
 
     Args:
         emulator: the device emulator.
@@ -273,7 +274,8 @@ class PtyDevice:
         link_name: file name of the stable symlink inside a private temporary directory.
         start: start the service thread immediately.
         realtime_priority: > 0: the service thread alone runs ``SCHED_FIFO`` at it
-            (:func:`hindrax_drivers.scheduling.set_this_thread`): bytes on time on a loaded machine, as a UART's.
+            (:func:`hindrax_drivers.scheduling.set_this_thread`): bytes on time on a loaded
+            machine, as a UART's.
     Raises:
         OSError: if a pty cannot be created.
     """
@@ -286,7 +288,7 @@ class PtyDevice:
         self.emulator = emulator
         self.clock = clock
         self.poll_period_s = float(poll_period_s)
-        #: ``SCHED_FIFO`` priority of the service thread (0: the process's scheduling); '' or why it was refused.
+        #: SCHED_FIFO priority of the service thread (0: the process's); '' or why it was refused.
         self.realtime_priority, self.scheduling_refused = int(realtime_priority), ""
         #: Lock held around every emulator call.
         self.lock = threading.RLock()
@@ -378,24 +380,26 @@ class PtyDevice:
                 self._stop.wait(self.poll_period_s)
 
     def service(self, t_s: Optional[float] = None, deliver: bool = True) -> int:
-        """One service cycle, synchronously and without waiting, for a caller that drives the device itself
-        instead of the thread (``start=False``; e.g. a simulator at every clock tick, so the bytes go out at
-        the simulated instant they are due): take the bytes the host wrote, then write
-        ``emulator.poll(t_s)`` (``t_s`` None: ``clock()``). ``deliver=False`` discards the output (counted in
-        :attr:`bytes_dropped`), as a UART nobody listens to. Returns the number of bytes delivered.
+        """One service cycle, synchronously and without waiting, for a caller that drives the device
+        itself instead of the thread (``start=False``; e.g. a simulator at every clock tick, so the
+        bytes go out at the simulated instant they are due): take the bytes the host wrote, then
+        write ``emulator.poll(t_s)`` (``t_s`` None: ``clock()``). ``deliver=False`` discards the
+        output (counted in :attr:`bytes_dropped`), as a UART nobody listens to. Returns the number
+        of bytes delivered.
 
         Raises:
             RuntimeError: while the service thread runs (one driver of the emulator at a time).
         """
         if self._thread is not None:
-            raise RuntimeError("PtyDevice.service() needs start=False: the service thread drives this device")
+            raise RuntimeError("PtyDevice.service() needs start=False: "
+                               "the service thread drives this device")
         before = self.bytes_to_host
         self._cycle(0.0, t_s, deliver)
         return self.bytes_to_host - before
 
     def _cycle(self, wait_s: float, t_s: Optional[float], deliver: bool) -> bool:
-        """Read host bytes (waiting up to ``wait_s`` for the first), feed them, poll, write. False while the
-        pty is disconnected."""
+        """Read host bytes (waiting up to ``wait_s`` for the first), feed them, poll, write. False
+        while the pty is disconnected."""
         # The fd lock is held across select/read so disconnect() cannot close the fd (and the
         # number be reused by another open) underneath this thread.
         with self._fd_lock:
@@ -406,7 +410,8 @@ class PtyDevice:
                 if data:
                     self.bytes_from_host += len(data)
                     self.emulator.feed_host_bytes(data)
-                out = self.emulator.poll(self.clock() if t_s is None else t_s)  # disconnected: the output is lost
+                # disconnected: the output is lost
+                out = self.emulator.poll(self.clock() if t_s is None else t_s)
         except Exception as exc:  # noqa: BLE001 - keep serving; the error is reported
             self.emulator_errors += 1
             self.last_error = repr(exc)

@@ -23,23 +23,24 @@ from ..fit.fit_any import DofFit, FitResult, fit_records
 from .report import write_fit_outputs, write_outputs
 from .results import build_document, reference_sections
 
-__all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_result", "core_options", "write_any_outputs",
-           "write_campaign_outputs"]
+__all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_result", "core_options",
+           "write_any_outputs", "write_campaign_outputs"]
 
 
 def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig | None = None,
              dofs: Sequence[str] | None = None, holdout: Sequence[str | Path] = (), opts: FitOptions = FitOptions()
              ) -> FitResult:
-    """Bags of any topics read (:func:`..bag_input.reader.read_any_topics`) and fitted jointly with ``hindrax ident
-    fit``'s options (:func:`..fit.fit_any.fit_records`), validated by K-fold cross-validation and on the ``holdout``
-    bags. Raises :class:`..bag_input.any_topics.FitInputError` (bad DOF, topics, frames, too little data) or
-    ``BagError``."""
+    """Bags of any topics read (:func:`..bag_input.reader.read_any_topics`) and fitted jointly with
+    ``hindrax ident fit``'s options (:func:`..fit.fit_any.fit_records`), validated by K-fold
+    cross-validation and on the ``holdout`` bags. Raises ``BagError`` or
+    :class:`..bag_input.any_topics.FitInputError` (bad DOF, topics, frames, too little data)."""
     return fit_read(read_any_topics(bags, choice, cfg, dofs, holdout, opts), holdout, opts)
 
 
-def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (), opts: FitOptions = FitOptions()) -> FitResult:
-    """:func:`fit_bags` of bags already read (:func:`..bag_input.reader.read_any_topics` of the training bags and
-    the ``holdout`` bags, named in the design)."""
+def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
+             opts: FitOptions = FitOptions()) -> FitResult:
+    """:func:`fit_bags` of bags already read (:func:`..bag_input.reader.read_any_topics` of the
+    training bags and the ``holdout`` bags, named in the design)."""
     core = fit_core.CoreOptions(segment_s=opts.segment_s, folds=opts.folds, max_delay_s=opts.max_delay_s,
                                 persistence_margin=opts.persistence_margin)
     design = (f"{opts.folds}-fold cross-validation by contiguous blocks of the {opts.validation_s:g} s validation "

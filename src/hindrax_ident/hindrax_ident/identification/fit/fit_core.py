@@ -18,9 +18,9 @@ tick grid with the commanded force, the smoothed states and the raw measurements
    segments; stage 1 the damping law by the smallest CV error, stage 2 each addition (Coriolis, cross coupling,
    other DOFs' forces, per-run bias, saturation, reverse gain) kept by the one-standard-error rule
    ([Hastie-ESL2009] §7.10); the nested 1-DOF model (:data:`NESTED`) replaces a worse choice
-   (:func:`not_below_nested`); a model that does not beat holding the velocity by :data:`PERSISTENCE_MARGIN` gives
-   :data:`NO_MODEL_VERDICT` (:func:`persistence`); a Coriolis force is scored with the inertias the result states,
-   those it is predicted with (:func:`coupling_consistent`).
+   (:func:`not_below_nested`); a model that does not beat holding the velocity by
+   :data:`PERSISTENCE_MARGIN` gives :data:`NO_MODEL_VERDICT` (:func:`persistence`); a Coriolis
+   force is scored with the inertias the result states (:func:`coupling_consistent`).
 5. **Intervals** (:func:`cluster_covariance`): the cluster-robust sandwich with contiguous blocks of segments as
    clusters (lengthened while their scores correlate above :data:`CLUSTER_RHO_MAX`, at least :data:`MIN_CLUSTERS`),
    G / (G - 1), Student t with G - 1 degrees of freedom ([Liang-Zeger1986]; [Bester-Conley-Hansen2011];
@@ -507,7 +507,7 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     v = np.broadcast_to(sd.v0, (B, sd.m)).copy() if v0 is None else np.array(v0, dtype=float)
     x = np.broadcast_to(sd.x0, (B, sd.m)).copy()
     L = sd.L
-    V = np.empty((L, B, sd.m))  # tick first (rows written contiguously), returned as (B, m, L) views
+    V = np.empty((L, B, sd.m))  # tick first (rows contiguous), returned as (B, m, L) views
     X = np.empty((L, B, sd.m)) if position else None
     V[0] = v
     if position:
@@ -669,12 +669,13 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
         return x[:p], (x[p:][None, :] if free_v0 else None)
 
     last: dict = {}
-    # without time-dependent regressors a row's residuals do not depend on the batch it is simulated in: fun
-    # simulates x's forward steps too (the Jacobian least_squares asks for next is at the point it last evaluated)
-    with_steps = not any(k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES) for k in _kinds(layout))
+    # without time-dependent regressors a row's residuals do not depend on its batch: fun simulates
+    # x's forward steps too (least_squares next asks the Jacobian at the point it last evaluated)
+    with_steps = not any(k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)
+                         for k in _kinds(layout))
 
     def batch(x):
-        """Residuals at x (row 0) and at its forward steps (rows 1..) in one simulation, kept for the last x."""
+        """Residuals at x (row 0) and its forward steps (rows 1..) in one simulation, kept."""
         if last.get("x") is not None and np.array_equal(last["x"], x):
             return last
         th, v0 = split(x)
@@ -693,7 +694,7 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     def fun(x):
         if with_steps:
             return batch(x)["R"][0].copy()  # least_squares scales what it gets in place
-        if not np.array_equal(last.get("x1"), x):  # least_squares starts where r0 below was computed
+        if not np.array_equal(last.get("x1"), x):  # least_squares starts where r0 below was
             th, v0 = split(x)
             last.update(x1=np.array(x, copy=True), r1=_residuals(sd, layout, th[None, :], v0)[0])
         return last["r1"].copy()
@@ -981,12 +982,13 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGME
 # ------------------------------------------------------------------------------------------------ validation
 def validation_measures(sd: SegmentData, V: np.ndarray) -> dict:
     """nrmse, nrmse_hold, nrmse_zero, nrmse_floor and samples of predictions ``V`` (m, L) on ``sd``:
-    RMS(prediction - measured) / std(measured) over the measurements after each segment's start; ``hold``: the
-    initial velocity held; ``zero``: 0. A measured position is validated on the smoothed velocity at the
-    ticks. ``nrmse_floor``: the white measurement noise over std(measured), the nrmse a perfect model would still
-    have, sigma^2 = mean(d2^2) / 6 with d2 the second differences of consecutive measurements in a segment (white
-    noise of variance sigma^2 gives var(d2) = 6 sigma^2; a smooth velocity adds little at the sensor's rate), NaN
-    for a measured position or fewer than 3 measurements in every segment."""
+    RMS(prediction - measured) / std(measured) over the measurements after each segment's start;
+    ``hold``: the initial velocity held; ``zero``: 0. A measured position is validated on the
+    smoothed velocity at the ticks. ``nrmse_floor``: the white measurement noise over
+    std(measured), the nrmse a perfect model would still have, sigma^2 = mean(d2^2) / 6 with d2 the
+    second differences of consecutive measurements in a segment (white noise of variance sigma^2
+    gives var(d2) = 6 sigma^2; a smooth velocity adds little at the sensor's rate), NaN for a
+    measured position or fewer than 3 measurements in every segment."""
     if sd.measured == "position":
         z = sd.v_s[:, 1:].ravel()
         pred = V[:, 1:].ravel()
@@ -1416,10 +1418,11 @@ def inertia_vector(results: dict) -> np.ndarray:
 
 
 def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dict, dict]:
-    """:func:`identify_dof` for several DOFs at once, so that the Coriolis force of each uses the others' inertias:
-    timing and a first fit (linear + quadratic damping) of every DOF for the inertias, then per DOF stage 1 (damping,
-    with the Coriolis force of those inertias), stage 2 (without it; cross coupling; reverse gain), the chosen
-    Coriolis models refitted with the inertias the result states (:func:`coupling_consistent`) and the intervals.
+    """:func:`identify_dof` for several DOFs at once, so that the Coriolis force of each uses the
+    others' inertias: timing and a first fit (linear + quadratic damping) of every DOF for the
+    inertias, then per DOF stage 1 (damping, with the Coriolis force of those inertias), stage 2
+    (without it; cross coupling; reverse gain), the chosen Coriolis models refitted with the
+    inertias the result states (:func:`coupling_consistent`) and the intervals.
     Returns ({dof: DofResult}, {dof: error message})."""
     timings, base, tried, errors, first = {}, {}, {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
@@ -1486,25 +1489,25 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     return results, errors
 
 
-#: Largest relative difference between an inertia a DOF's Coriolis force was fitted with and the one the result
-#: states for that DOF (:func:`coupling_consistent`); passes of refits at most
+#: Largest relative difference between an inertia a DOF's Coriolis force was fitted with and the
+#: one the result states for that DOF (:func:`coupling_consistent`); passes of refits at most
 COUPLING_RTOL = 0.01
 COUPLING_PASSES = 3
 
 
 def _inertia_moved(used: np.ndarray, stated: np.ndarray, dof: str) -> bool:
-    """The other DOFs' inertias ``used`` (6,) differ from ``stated`` (6,) by more than :data:`COUPLING_RTOL`."""
+    """The other DOFs' inertias ``used`` (6,) differ from ``stated`` (6,) by > COUPLING_RTOL."""
     k = ["surge", "sway", "heave", "roll", "pitch", "yaw"].index(dof)
     a, b = np.delete(np.nan_to_num(used), k), np.delete(np.nan_to_num(stated), k)
     return bool(np.any(np.abs(a - b) > COUPLING_RTOL * np.maximum(np.abs(b), 1e-9)))
 
 
-def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts: CoreOptions,
-                   inertia: np.ndarray) -> tuple[Candidate, list]:
-    """``chosen`` (with the Coriolis force) fitted and cross-validated again with the other DOFs' inertias
-    ``inertia`` (6,), replacing it among ``tried``; then :func:`not_below_nested` against the nested 1-DOF model
-    (which has no Coriolis force: its score does not depend on the inertias). A refit that fails: the nested model
-    (or ``chosen`` without one). Returns (the model, the candidates)."""
+def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing,
+                   opts: CoreOptions, inertia: np.ndarray) -> tuple[Candidate, list]:
+    """``chosen`` (with the Coriolis force) fitted and cross-validated again with the other DOFs'
+    inertias ``inertia`` (6,), replacing it among ``tried``; then :func:`not_below_nested` against
+    the nested 1-DOF model (no Coriolis force). A refit that fails: the nested model (or ``chosen``
+    without one). Returns (the model, the candidates)."""
     rest = [t for t in tried if t is not chosen]
     try:
         c = _candidate(rec, chosen.terms, timing, opts, inertia, {}, chosen.fit.theta)
@@ -1516,24 +1519,24 @@ def refit_coupling(rec: DofRecord, chosen: Candidate, tried: list, timing: Timin
 
 def coupling_consistent(records: dict, timings: dict, chosen: dict, tried: dict, used: dict,
                         opts: CoreOptions) -> dict:
-    """Score every chosen model with the inertias it is predicted with. A DOF's Coriolis force C(nu) nu uses the
-    other DOFs' inertias; selection fits it with preliminary ones (``used``: {dof: (6,)}), while the result states
-    each DOF's chosen inertia and ``hindrax ident predict`` (and the holdout) compute the force from those. The two
-    differ most where the data determine an inertia poorly (closed loop: little excitation) and the yaw Munk moment
-    (M2 - M1) u v is the small difference of two large inertias: a 26 % smaller M1 made it nine times larger on
-    the closed-loop real-like data, and the coupling terms that had absorbed the preliminary force then predicted
-    the held-out runs worse than the 1-DOF model although they had won its cross-validation (0.225 against 0.246).
-    So, until the inertias used agree with those stated (:data:`COUPLING_RTOL`, at most :data:`COUPLING_PASSES`
-    passes): each chosen model with the Coriolis force whose used inertias moved is refitted and cross-validated
-    with the stated ones (:func:`refit_coupling`), and kept only when it still beats the nested 1-DOF model.
-    Updates ``chosen`` and ``tried`` in place; returns the inertias each DOF's model was fitted with ({dof: (6,)})."""
+    """Score every chosen model with the inertias it is predicted with. A DOF's Coriolis force
+    C(nu) nu uses the other DOFs' inertias; selection fits it with preliminary ones (``used``:
+    {dof: (6,)}), while the result states each DOF's chosen inertia and prediction (``hindrax ident
+    predict``, the holdout) uses those; they differ most where the data determine an inertia poorly
+    (the yaw Munk moment (M2 - M1) u v is a small difference of two large inertias). Until they
+    agree (:data:`COUPLING_RTOL`, at most :data:`COUPLING_PASSES` passes) each chosen model with a
+    Coriolis force whose inertias moved is refitted and cross-validated with the stated ones
+    (:func:`refit_coupling`), kept only when it still beats the nested 1-DOF model. Updates
+    ``chosen`` and ``tried`` in place; returns the inertias each DOF's model was fitted with."""
     used = dict(used)
     for _ in range(COUPLING_PASSES):
         stated = inertia_vector(chosen)
-        stale = [d for d, c in chosen.items() if c.terms.coriolis and _inertia_moved(used[d], stated, d)]
+        stale = [d for d, c in chosen.items()
+                 if c.terms.coriolis and _inertia_moved(used[d], stated, d)]
         if not stale:
             break
         for d in stale:
-            chosen[d], tried[d] = refit_coupling(records[d], chosen[d], tried[d], timings[d], opts, stated)
+            chosen[d], tried[d] = refit_coupling(records[d], chosen[d], tried[d], timings[d], opts,
+                                                 stated)
             used[d] = stated
     return used
