@@ -1,6 +1,6 @@
 """The output-error pieces (identification/fit/output_error.py, identification/fit/fit_core.py) against hand-computed
-values and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the Runge-Kutta step, the segment
-bookkeeping of the fit core, and the core's whole fit on records integrated by an independent solver (scipy's
+values and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the core's Runge-Kutta step, the
+segment bookkeeping of the fit core, and the core's whole fit on records integrated by an independent solver (scipy's
 solve_ivp), with RuntimeWarnings turned into errors."""
 import math
 
@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 
 from hindrax_ident.estimation.least_squares import EstimationError
 from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.identification.fit.output_error import DofModel, model_terms, rk4_step
+from hindrax_ident.identification.fit.output_error import DofModel, model_terms
 from hindrax_ident.vehicle.thrust_lag import ThrustLag
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -42,43 +42,49 @@ def test_lagged_thrust_inside_a_tick():
 
 
 # ---------------------------------------------------------------------------------------------------- the integrator
-def _integrate(model, v0, force, h, n):
-    v, x = np.array([v0]), np.array([0.0])
-    for _ in range(n):
-        v, x = rk4_step(model.acceleration, v, x, h, (force, force, force))
-    return float(v[0]), float(x[0])
+def _simulate(theta, v0, forces, h, n):
+    """(v, x) after n ticks of h of the fit core's simulation (:func:`fit_core.simulate`: RK4 for v,
+    Runge-Kutta-Nystrom for x) of surge with ``theta`` [M, k_q, k_l, b] from v0, x = 0, under the force
+    ``forces`` (start, middle, end of every tick)."""
+    L = n + 1
+    u = np.broadcast_to(np.asarray(forces, dtype=float)[:, None, None], (3, 1, L)).copy()
+    empty_i, empty_f, zeros = np.zeros(0, int), np.zeros(0), np.zeros((1, L))
+    sd = fit_core.SegmentData(h, L, u, np.zeros((3, 1, L, 0)), np.array([v0]), np.zeros(1), empty_i, empty_i,
+                              empty_f, empty_f, np.zeros(1, int), np.zeros((1, 2)), np.ones(1, bool), zeros,
+                              zeros, zeros)
+    layout = fit_core.parameter_layout("surge", fit_core.Terms("both"))
+    V, X = fit_core.simulate(sd, layout, np.asarray(theta, dtype=float), position=True)
+    return float(V[0, 0, -1]), float(X[0, 0, -1])
 
 
 def test_rk4_step_against_linear_damping_and_its_fourth_order():
     m, k, f, v0 = 20.0, 8.0, 10.0, -0.2  # M v' = F - k v: v = F/k + (v0 - F/k) exp(-k t / M)
-    model = DofModel("surge", np.array([m, 0.0, k, 0.0]))
     t = 2.0
     vt = f / k + (v0 - f / k) * math.exp(-k * t / m)
     xt = f / k * t + (v0 - f / k) * m / k * (1.0 - math.exp(-k * t / m))
-    v, x = _integrate(model, v0, f, 0.02, 100)
+    v, x = _simulate([m, 0.0, k, 0.0], v0, (f, f, f), 0.02, 100)
     assert v == pytest.approx(vt, abs=1e-10) and x == pytest.approx(xt, abs=1e-10)
     # fourth order: errors fall about 16 times when the step halves (large steps, so they are above round-off)
-    e1 = abs(_integrate(model, v0, f, 1.0, 2)[0] - vt)
-    e2 = abs(_integrate(model, v0, f, 0.5, 4)[0] - vt)
+    e1 = abs(_simulate([m, 0.0, k, 0.0], v0, (f, f, f), 1.0, 2)[0] - vt)
+    e2 = abs(_simulate([m, 0.0, k, 0.0], v0, (f, f, f), 0.5, 4)[0] - vt)
     assert 12.0 < e1 / e2 < 20.0
 
 
 def test_rk4_step_against_quadratic_damping():
     m, kq, f = 27.3, 66.5, 20.0  # from rest: v = vt tanh(kq vt t / M), x = M / kq ln cosh(kq vt t / M)
-    model = DofModel("surge", np.array([m, kq, 0.0, 0.0]))
     vt = math.sqrt(f / kq)
     t = 3.0
-    v, x = _integrate(model, 0.0, f, 0.02, 150)
+    v, x = _simulate([m, kq, 0.0, 0.0], 0.0, (f, f, f), 0.02, 150)
     assert v == pytest.approx(vt * math.tanh(kq * vt * t / m), abs=1e-9)
     assert x == pytest.approx(m / kq * math.log(math.cosh(kq * vt * t / m)), abs=1e-8)
 
 
 def test_rk4_step_with_the_lagged_thrust_integrates_the_impulse():
     lag = ThrustLag(0.1)
-    free = DofModel("surge", np.array([1.0, 0.0, 0.0, 0.0]))  # M = 1, no damping: v(h) = v0 + integral of f
-    v, x = rk4_step(free.acceleration, np.array([0.3]), np.array([0.0]), 0.02, lag.within_tick(2.0, 10.0, 0.02))
+    # M = 1, no damping: v(h) = v0 + integral of f
+    v, _x = _simulate([1.0, 0.0, 0.0, 0.0], 0.3, lag.within_tick(2.0, 10.0, 0.02), 0.02, 1)
     impulse = 10.0 * 0.02 + (2.0 - 10.0) * 0.1 * (1.0 - math.exp(-0.2))
-    assert float(v[0]) == pytest.approx(0.3 + impulse, abs=1e-7)
+    assert v == pytest.approx(0.3 + impulse, abs=1e-7)
 
 
 # ---------------------------------------------------------------------------------------------------- segments

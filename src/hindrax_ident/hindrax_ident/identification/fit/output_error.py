@@ -13,22 +13,17 @@ of w (down positive): ``[M, k_q+, k_q-, k_l+, k_l-, b]``. Roll and pitch add the
 * :class:`DofModel` - the acceleration nu_dot of that model for given parameters.
 * the force inside one control tick (the thrust reaching the commanded value through the first-order lag
   ``thrusters.time_constant_s``) is :meth:`hindrax_ident.vehicle.thrust_lag.ThrustLag.within_tick`.
-* :func:`rk4_step` - one classical Runge-Kutta step of the velocity, and the matching Runge-Kutta-Nystrom
-  step of the position (x' = v, v' = a(v, t)), force and restoring regressor given at the start, middle and
-  end of the step.
 
-The fit itself (segments, bounded robust least squares, intervals) is the fit core shared by ``hindrax ident bag``
-and ``hindrax ident fit``, :mod:`.fit_core` (docs/identification.md §7); this module keeps the model's pieces
-that the online estimators and the tests use.
+The fit itself (segments, the RK4 simulation, bounded robust least squares, intervals) is the fit core shared by
+``hindrax ident bag`` and ``hindrax ident fit``, :mod:`.fit_core` (docs/identification.md §7); this module keeps
+the model's pieces that the online estimators and the tests use.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
-
 import numpy as np
 
-__all__ = ["model_terms", "DofModel", "rk4_step"]
+__all__ = ["model_terms", "DofModel"]
 
 
 def model_terms(dof: str, velocity, restoring=None) -> np.ndarray:
@@ -60,17 +55,3 @@ class DofModel:
         ``force`` and ``restoring`` broadcast against it."""
         return (force - model_terms(self.dof, velocity, restoring) @ self.theta[1:]) / self.theta[0]
 
-
-def rk4_step(acceleration: Callable, v, x, h: float, forces: tuple, restorings: tuple = (None, None, None)):
-    """One step of ``h`` (s) of x' = v, v' = acceleration(v, f, r): classical Runge-Kutta for v, Runge-Kutta-Nystrom
-    for x (x + h v + h^2 / 6 (k1 + k2 + k3)); ``forces`` and ``restorings`` at the start, middle and end of the
-    step. Returns (v, x) at the end; fourth order in h for smooth inputs."""
-    f0, fh, f1 = forces
-    r0, rh, r1 = restorings
-    k1 = acceleration(v, f0, r0)
-    k2 = acceleration(v + 0.5 * h * k1, fh, rh)
-    k3 = acceleration(v + 0.5 * h * k2, fh, rh)
-    k4 = acceleration(v + h * k3, f1, r1)
-    x = x + h * v + h * h / 6.0 * (k1 + k2 + k3)
-    v = v + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return v, x
