@@ -9,10 +9,12 @@ Only the standard library is imported here at module level, so defining a comman
 from __future__ import annotations
 
 import argparse
+import time
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["CommandError", "CONFIG_HELP", "add_config_argument", "load_vehicle", "update_vehicle_file", "yaml_float"]
+__all__ = ["CommandError", "CONFIG_HELP", "WallProgress", "add_config_argument", "load_vehicle",
+           "remove_if_empty", "result_dir", "update_vehicle_file", "yaml_float"]
 
 CONFIG_HELP = "vehicle configuration (default ros_ws/config/hindrax.yaml)"
 
@@ -39,6 +41,47 @@ def load_vehicle(path: str | None = None) -> Any:
         return load_config(path or default_config_path())
     except ConfigError as exc:
         raise CommandError(f"invalid configuration: {exc}") from exc
+
+
+def result_dir(out: str | None, root: Path, name: str, unwritable: str) -> Path:
+    """The folder of one result (:mod:`hindrax_ident.output_dirs`): ``out`` when given (new or empty),
+    else a new ``<root>/<name>_<time>[_N]`` (one line printed when the plain name was taken). Raises
+    CommandError: ``out`` unusable, or ``unwritable`` with the reason when ``root`` is not writable."""
+    from ...output_dirs import OutputDirError, explicit_result_dir, new_result_dir
+
+    try:
+        if out:
+            return explicit_result_dir(out)
+        path, notice = new_result_dir(root, name)
+    except OutputDirError as exc:
+        raise CommandError(str(exc)) from exc
+    except OSError as exc:
+        raise CommandError(unwritable.format(why=exc.strerror or exc)) from exc
+    if notice:
+        print(notice, flush=True)
+    return path
+
+
+def remove_if_empty(path: Path) -> None:
+    """Remove the folder ``path`` if it is empty: a failed command leaves no half-named result."""
+    try:
+        path.rmdir()
+    except OSError:
+        pass
+
+
+class WallProgress:
+    """A progress printer: ``progress(msg)`` prints ``[  t s] msg``, t the wall seconds
+    (:meth:`elapsed`) since it was made."""
+
+    def __init__(self) -> None:
+        self.start = time.monotonic()
+
+    def elapsed(self) -> float:
+        return time.monotonic() - self.start
+
+    def __call__(self, msg: str) -> None:
+        print(f"[{self.elapsed():6.1f} s] {msg}", flush=True)
 
 
 def _round_trip_yaml() -> Any:

@@ -24,11 +24,10 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import math
-import time
 from pathlib import Path
 
 from ... import results_doc
-from .common import CommandError, add_config_argument, load_vehicle
+from .common import CommandError, WallProgress, add_config_argument, load_vehicle
 
 __all__ = ["add_arguments", "run"]
 
@@ -133,12 +132,8 @@ def _evaluate(args, cfg) -> int:
     except TruthError as exc:
         raise CommandError(f"--truth: {exc}") from exc
     model = _load_model(args.model, cfg)
-    wall0 = time.monotonic()
+    progress = WallProgress()
     setup = ev.EvaluationSetup(sensor_noise=not args.no_sensor_noise)
-
-    def progress(msg: str) -> None:
-        print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
-
     if args.seeds < 1:
         raise CommandError(f"--seeds: {args.seeds}: a number >= 1")
     cases = ev.evaluate(cfg, truth, model, maneuvers, models, setup, seed=args.seed, progress=progress,
@@ -163,7 +158,7 @@ def _evaluate(args, cfg) -> int:
                                + (", sensor noise off (diagnostic)" if args.no_sensor_noise else "")
                                + f".\n\n```\n{ev.format_table(cases)}\n"
                                + "\n".join(ratio_lines) + "\n```")
-    print(f"output: {path} and {path.parent / 'report' / 'index.html'}  (wall time {time.monotonic() - wall0:.0f} s)")
+    print(f"output: {path} and {path.parent / 'report' / 'index.html'}  (wall time {progress.elapsed():.0f} s)")
     return 0
 
 
@@ -175,14 +170,10 @@ def _scenarios(args, cfg) -> int:
     except ValueError as exc:
         raise CommandError(f"--scenarios: {exc}") from exc
     out = _out_dir(cfg, args.out, "control-scenarios")
-    wall0 = time.monotonic()
-
-    def progress(msg: str) -> None:
-        print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
-
+    progress = WallProgress()
     rows = suite.run_suite(cfg, names, truth_dir, out, seed=args.seed, levels=args.levels, progress=progress)
     md = suite.write_suite(out, rows, cfg)
     print(md.read_text())
     results_doc.write_if_asked(args, "control-scenarios", "Closed loop over the scenario suite", md.read_text())
-    print(f"output: {out / 'control_scenarios.json'} and {md}  (wall time {time.monotonic() - wall0:.0f} s)")
+    print(f"output: {out / 'control_scenarios.json'} and {md}  (wall time {progress.elapsed():.0f} s)")
     return 0

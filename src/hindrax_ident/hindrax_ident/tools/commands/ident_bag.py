@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError, add_config_argument, load_vehicle
+from .common import CommandError, add_config_argument, load_vehicle, remove_if_empty, result_dir
 
 __all__ = ["add_arguments", "run", "identify_campaign_bag", "result_dir_for_bag"]
 
@@ -38,32 +38,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def result_dir_for_bag(bag: Path, out: str | None, kind: str = "ident") -> Path:
-    """The folder of one result from ``bag`` (:mod:`hindrax_ident.output_dirs`): ``out`` when given (new or empty,
-    else CommandError), else a new ``<bag name>_<kind>_<time>[_N]`` beside the bag, never the bags' shared parent
-    itself. Prints one line when the plain name was taken."""
-    from ...output_dirs import OutputDirError, explicit_result_dir, new_result_dir
-
-    try:
-        if out:
-            return explicit_result_dir(out)
-        resolved = bag.resolve()
-        name = resolved.stem if resolved.is_file() else resolved.name
-        path, notice = new_result_dir(resolved.parent, f"{name}_{kind}")
-    except OutputDirError as exc:
-        raise CommandError(str(exc)) from exc
-    except OSError as exc:
-        raise CommandError(f"{bag}: cannot create a result folder beside it ({exc.strerror or exc}); "
-                           "give --out") from exc
-    if notice:
-        print(notice)
-    return path
-
-
-def _remove_if_empty(path: Path) -> None:
-    try:
-        path.rmdir()  # only an empty folder: a failed identification leaves no half-named result
-    except OSError:
-        pass
+    """The folder of one result from ``bag`` (:func:`.common.result_dir`): ``out``, else a new
+    ``<bag name>_<kind>_<time>[_N]`` beside the bag, never the bags' shared parent itself."""
+    resolved = bag.resolve()
+    name = resolved.stem if resolved.is_file() else resolved.name
+    return result_dir(out, resolved.parent, f"{name}_{kind}",
+                      f"{bag}: cannot create a result folder beside it ({{why}}); give --out")
 
 
 def identify_campaign_bag(bag: Path, out: Path, cfg, args: argparse.Namespace, command: str, opts=None):
@@ -119,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         _record, idents, path = identify_campaign_bag(bag, out, cfg, args, "ident bag")
     except CommandError:
-        _remove_if_empty(out)
+        remove_if_empty(out)
         raise
     print(format_summary(idents))
     doc = yaml.safe_load(Path(path).read_text())

@@ -148,7 +148,8 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.recording.reader import BagError
 
     from ...identification.bag_input.reader import FitOptions, TopicChoice, reads_as_campaign
-    from .ident_bag import _remove_if_empty, result_dir_for_bag
+    from .common import remove_if_empty
+    from .ident_bag import result_dir_for_bag
 
     cfg = None
     if args.config is not None:
@@ -178,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
         opts = FitOptions(folds=args.folds, persistence_margin=margin, max_delay_s=args.max_delay_s)
         return _run_any(args, cfg, out, choice, dofs, opts)
     except BaseException:  # a failed or interrupted fit leaves no empty result folder
-        _remove_if_empty(out)
+        remove_if_empty(out)
         raise
 
 

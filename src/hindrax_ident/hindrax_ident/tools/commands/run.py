@@ -27,11 +27,10 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import time
 from pathlib import Path
 
 from ... import results_doc
-from .common import CommandError, add_config_argument, load_vehicle
+from .common import CommandError, WallProgress, add_config_argument, load_vehicle, result_dir
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
 
@@ -137,25 +136,14 @@ def _write_results(args: argparse.Namespace, identifications: dict, path: str, w
 
 
 def _output_dir(cfg, out: str | None, kind: str, dofs: list[str]) -> Path:
-    """``--out`` (new or empty, else CommandError), or a new folder under ``recording.output_root`` named by the
-    campaign (``kind``, the DOFs) and the time (:mod:`hindrax_ident.output_dirs`)."""
+    """``--out`` (new or empty), or a new folder under ``recording.output_root`` named by the campaign
+    (``kind``, the DOFs) and the time (:func:`.common.result_dir`)."""
     from hindrax_drivers.config import DOFS
 
-    from ...output_dirs import OutputDirError, explicit_result_dir, new_result_dir
-
-    try:
-        if out:
-            return explicit_result_dir(out)
-        label = "all" if set(dofs) == set(DOFS) else "-".join(dofs)
-        path, notice = new_result_dir(Path(str(cfg.recording.output_root)), f"{kind}_{label}")
-    except OutputDirError as exc:
-        raise CommandError(str(exc)) from exc
-    except OSError as exc:
-        raise CommandError(f"recording.output_root {cfg.recording.output_root}: cannot create a run folder "
-                           f"({exc.strerror or exc})") from exc
-    if notice:
-        print(notice, flush=True)
-    return path
+    root = cfg.recording.output_root
+    label = "all" if set(dofs) == set(DOFS) else "-".join(dofs)
+    return result_dir(out, Path(str(root)), f"{kind}_{label}",
+                      f"recording.output_root {root}: cannot create a run folder ({{why}})")
 
 
 def _completed(out: Path, explicit: bool) -> None:
@@ -242,12 +230,7 @@ def run_graph(args: argparse.Namespace) -> int:
     from ...identification.assessment.results import reference_sections
 
     cfg, dofs = _check_args(args)
-
-    wall0 = time.monotonic()
-
-    def progress(msg: str) -> None:
-        print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
-
+    progress = WallProgress()
     out = _output_dir(cfg, args.out, "sim", dofs)
     overrides = _calibration_overrides(args)
     if args.max_level_duration is not None:
@@ -270,8 +253,8 @@ def run_graph(args: argparse.Namespace) -> int:
         progress(f"{dof}: no estimate ({msg})")
     if outcome.identifications:
         print(format_summary(outcome.identifications))
-        _write_results(args, outcome.identifications, "through the node graph", time.monotonic() - wall0)
-    print(f"output: {out}  (bag {outcome.bag_dir}; wall time {time.monotonic() - wall0:.0f} s)")
+        _write_results(args, outcome.identifications, "through the node graph", progress.elapsed())
+    print(f"output: {out}  (bag {outcome.bag_dir}; wall time {progress.elapsed():.0f} s)")
     if outcome.success and outcome.identifications:
         _completed(out, bool(args.out))
         return 0
@@ -286,11 +269,7 @@ def run_in_process(args: argparse.Namespace) -> int:
     from ...identification.assessment.results import reference_sections
 
     cfg, dofs = _check_args(args)
-    wall0 = time.monotonic()
-
-    def progress(msg: str) -> None:
-        print(f"[{time.monotonic() - wall0:6.1f} s] {msg}", flush=True)
-
+    progress = WallProgress()
     print("campaign in-process on the simulator (no ROS graph, no bag)", flush=True)
     from ...sim.simulator import Simulator
     from ...sim.truth import TruthError
@@ -325,8 +304,8 @@ def run_in_process(args: argparse.Namespace) -> int:
                       calibration=record.calibration, sections=lambda doc: reference_sections(
                           doc, record, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std, progress))
         print(format_summary(idents))
-        _write_results(args, idents, "in-process (no ROS graph)", time.monotonic() - wall0)
-    print(f"output: {out}  (wall time {time.monotonic() - wall0:.0f} s)")
+        _write_results(args, idents, "in-process (no ROS graph)", progress.elapsed())
+    print(f"output: {out}  (wall time {progress.elapsed():.0f} s)")
     if record.aborted or not idents:
         return 1
     _completed(out, bool(args.out))
