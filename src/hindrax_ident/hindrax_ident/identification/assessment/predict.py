@@ -178,8 +178,7 @@ def predict_bag(path: str | Path, models: dict, inertia: np.ndarray, choice: Top
                 sd = None
             if sd is not None:
                 V = fit_core.predict_validation(sd, m.layout, m.theta)
-                j1 = np.minimum(sd.s_j + 1, sd.L - 1)
-                p = V[sd.s_seg, sd.s_j] * (1.0 - sd.s_a) + V[sd.s_seg, j1] * sd.s_a
+                p = fit_core.at_samples(sd, V)
                 t_seg = sd.span[sd.s_seg, 0] + (sd.s_j + sd.s_a) * sd.h
                 # the segment rows are measurements of t_all: match them by time
                 idx = np.searchsorted(t_all, t_seg - 1e-6)

@@ -33,6 +33,7 @@ from scipy import stats  # noqa: E402
 
 from hindrax_drivers.config import VehicleConfig  # noqa: E402
 
+from ..fit import fit_core  # noqa: E402
 from ..fit.dof_model import _rest_terms, truth_parameters  # noqa: E402
 from .results import build_results, training_lines, write_identification  # noqa: E402
 
@@ -68,6 +69,12 @@ def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
     return rows
 
 
+def _save(fig, path: Path, dpi: int = 90) -> None:
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def _force_velocity_plot(r, path: Path) -> None:
     s = r.signals
     v, a, f = s["velocity"], s["acceleration"], s["force"]
@@ -99,9 +106,7 @@ def _force_velocity_plot(r, path: Path) -> None:
     ax.set_title(f"{r.dof}: force vs velocity ({r.method})")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def _rls_plot(r, path: Path) -> bool:
@@ -130,9 +135,7 @@ def _rls_plot(r, path: Path) -> bool:
     axes[0].legend(fontsize=6)
     axes[0].set_title(f"{r.dof}: RLS convergence (+-1.96 std)")
     axes[-1].set_xlabel("time in the DOF's manoeuvres (s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    _save(fig, path, dpi=80)
     return True
 
 
@@ -365,9 +368,7 @@ def _save_velocity_plot(fig, ax, dof: str, xlabel: str, title: str, path: Path) 
     ax.set_ylabel(f"{dof} velocity, {unit} (FRD)")
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def _residuals(r) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -375,8 +376,7 @@ def _residuals(r) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     plot data (its :class:`..fit.fit_core.SegmentData`), in time order within each segment."""
     sd = r.plot["segments"]
     pred = r.plot["predicted"]
-    j1 = np.minimum(sd.s_j + 1, sd.L - 1)
-    p = pred[sd.s_seg, sd.s_j] * (1.0 - sd.s_a) + pred[sd.s_seg, j1] * sd.s_a
+    p = fit_core.at_samples(sd, pred)
     t = sd.span[sd.s_seg, 0] + (sd.s_j + sd.s_a) * sd.h
     order = np.lexsort((t, sd.s_seg))
     return t[order], sd.s_seg[order], (sd.s_z - p)[order], sd.s_z[order]
@@ -432,9 +432,7 @@ def _acf_plot(r, path: Path) -> None:
     ax.set_ylabel("autocorrelation")
     ax.set_title(f"{r.dof}: residuals of the {r.plot['data']} predictions")
     ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def _parameter_plot(doc: dict, cfg, path: Path) -> bool:
@@ -465,9 +463,7 @@ def _parameter_plot(doc: dict, cfg, path: Path) -> bool:
     ax.set_xlim(-3.0, 3.0)
     ax.axvline(0.0, color="0.85", lw=0.8)
     ax.set_xlabel("value / max(|identified|, |vehicle file|): identified with its 95 % interval (o), vehicle file (x)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    _save(fig, path)
     return True
 
 

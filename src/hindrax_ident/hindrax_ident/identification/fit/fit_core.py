@@ -38,13 +38,15 @@ from typing import Sequence
 
 import numpy as np
 
+from hindrax_drivers.config import DOFS
+
 from ...estimation.least_squares import EstimationError
 from ...vehicle.thrust_lag import ThrustLag
 from . import timing_grid
 
 __all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUSTER_RHO_MAX", "Chunk", "DofRecord",
-           "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments", "simulate", "fit_terms", "FitOutcome",
-           "cluster_covariance", "estimate_timing", "validation_measures", "DofResult", "select_terms",
+           "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments", "simulate", "at_samples", "fit_terms",
+           "FitOutcome", "cluster_covariance", "estimate_timing", "validation_measures", "DofResult", "select_terms",
            "identify_dof", "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
            "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN", "NO_MODEL_VERDICT",
            "resolvable_delay", "with_edge", "NESTED", "not_below_nested", "input_correlation",
@@ -370,7 +372,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     h = rec.h
     L = max(10, int(round(seconds / h)))
     fmin, vmin = EXCITATION_MIN[excited_kind(rec.dof)]
-    k_dof = ["surge", "sway", "heave", "roll", "pitch", "yaw"].index(rec.dof)
+    k_dof = DOFS.index(rec.dof)
     ncol = (1 if rec.dof in ("roll", "pitch") else 0) + (len(rec.cross_names) if terms.cross else 0) + \
         (len(rec.force_names) if terms.cross_force else 0) + (1 if terms.reverse_gain else 0) + \
         (rec.run_count - 1 if terms.run_bias and rec.run_count >= 2 else 0) + (1 if terms.saturation else 0)
@@ -558,10 +560,10 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     return np.moveaxis(V, 0, -1), None if X is None else np.moveaxis(X, 0, -1)
 
 
-def _at_samples(sd: SegmentData, Y: np.ndarray) -> np.ndarray:
-    """Y (B, m, L) linearly interpolated at the measurement times: (B, k)."""
+def at_samples(sd: SegmentData, Y: np.ndarray) -> np.ndarray:
+    """Y (..., m, L) linearly interpolated at the measurement times: (..., k)."""
     j1 = np.minimum(sd.s_j + 1, sd.L - 1)
-    return Y[:, sd.s_seg, sd.s_j] * (1.0 - sd.s_a) + Y[:, sd.s_seg, j1] * sd.s_a
+    return Y[..., sd.s_seg, sd.s_j] * (1.0 - sd.s_a) + Y[..., sd.s_seg, j1] * sd.s_a
 
 
 def _residuals(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None) -> np.ndarray:
@@ -569,8 +571,8 @@ def _residuals(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | No
     pos = sd.measured == "position"
     V, X = simulate(sd, layout, P, v0, position=pos)
     if not pos:
-        return _at_samples(sd, V) - sd.s_z
-    r = _at_samples(sd, X) - sd.s_z
+        return at_samples(sd, V) - sd.s_z
+    r = at_samples(sd, X) - sd.s_z
     cnt = np.bincount(sd.s_seg, minlength=sd.m).astype(float)
     out = np.empty_like(r)
     for bi in range(r.shape[0]):
@@ -995,7 +997,7 @@ def validation_measures(sd: SegmentData, V: np.ndarray) -> dict:
         hold = np.repeat(sd.v0, sd.L - 1)
     else:
         z = sd.s_z
-        pred = _at_samples(sd, V[None])[0]
+        pred = at_samples(sd, V)
         hold = sd.v0[sd.s_seg]
     ok = np.isfinite(z) & np.isfinite(pred)
     z, pred, hold = z[ok], pred[ok], hold[ok]
@@ -1339,10 +1341,8 @@ def training_rules(rec: DofRecord, chosen: Candidate, timing: Timing, opts: Core
     measurement at each segment's start; both are reported and the verdict's named.
 
     * initial state (a measured position only: a velocity always starts from the smoothed measurement, as scored):
-      each training segment's initial velocity fitted (the verdict's), or the smoothed measurement. The fitted start
-      stays the verdict's even where the other predicts better: without the free initial velocities the intervals
-      lose their spread and miss the truth (the synthetic heave of ``test_heave_independence.py``: CV nrmse 0.0320
-      against 0.0340, and the quadratic damping's 95 % interval above the true 93.5 N s^2/m^2);
+      each training segment's initial velocity fitted (the verdict's, even where the other predicts better: without
+      the free initial velocities the intervals lose their spread), or the smoothed measurement;
     * segments (a record fitted on its moving segments only, :func:`_excited_only`): the fit on every segment beside
       it; the moving segments' fit stays the verdict's.
 
@@ -1408,12 +1408,11 @@ def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.
 
 
 def inertia_vector(results: dict) -> np.ndarray:
-    """[M1..M6] of the fitted DOFs (NaN where not fitted): the inertias of the Coriolis terms."""
-    dofs = ["surge", "sway", "heave", "roll", "pitch", "yaw"]
+    """[M1..M6] of the fitted DOFs (NaN where not fitted): the inertias of the Coriolis terms.
+    ``results``: {dof: DofResult, Candidate or FitOutcome}."""
     out = np.full(6, np.nan)
     for d, r in results.items():
-        th = r.theta if isinstance(r, DofResult) else r.fit.theta
-        out[dofs.index(d)] = float(th[0])
+        out[DOFS.index(d)] = float(getattr(r, "fit", r).theta[0])
     return out
 
 
@@ -1435,9 +1434,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
                                    max_nfev=40)
         except (EstimationError, ValueError, np.linalg.LinAlgError) as exc:
             errors[dof] = str(exc)
-    inertia0 = np.full(6, np.nan)
-    for dof, f in first.items():
-        inertia0[["surge", "sway", "heave", "roll", "pitch", "yaw"].index(dof)] = float(f.theta[0])
+    inertia0 = inertia_vector(first)
     # once more with the Coriolis force of those inertias (a surge fit without it reads the centripetal force of a
     # turning run as inertia or damping, and the yaw Munk moment (M2 - M1) u v depends on both)
     inertia1 = inertia0.copy()
@@ -1451,7 +1448,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
                                 excited_only=_excited_only(rec, opts))
             layout = parameter_layout(rec.dof, terms)
             f1 = fit_terms(sd, dof, layout, f.theta, opts.robust, max_nfev=40)
-            inertia1[["surge", "sway", "heave", "roll", "pitch", "yaw"].index(dof)] = float(f1.theta[0])
+            inertia1[DOFS.index(dof)] = float(f1.theta[0])
         except (EstimationError, ValueError, np.linalg.LinAlgError):
             pass
     inertia0 = inertia1
@@ -1497,7 +1494,7 @@ COUPLING_PASSES = 3
 
 def _inertia_moved(used: np.ndarray, stated: np.ndarray, dof: str) -> bool:
     """The other DOFs' inertias ``used`` (6,) differ from ``stated`` (6,) by > COUPLING_RTOL."""
-    k = ["surge", "sway", "heave", "roll", "pitch", "yaw"].index(dof)
+    k = DOFS.index(dof)
     a, b = np.delete(np.nan_to_num(used), k), np.delete(np.nan_to_num(stated), k)
     return bool(np.any(np.abs(a - b) > COUPLING_RTOL * np.maximum(np.abs(b), 1e-9)))
 

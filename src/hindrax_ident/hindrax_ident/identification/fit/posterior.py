@@ -25,7 +25,7 @@ from ...estimation.least_squares import EstimationError
 from ...estimation.priors import priors_from_config
 from ...vehicle.rigid_body import rigid_body_mass_matrix
 
-__all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "rigid_inertia_of", "prior_entry", "prior_entries",
+__all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "rigid_inertia_of", "prior_entries",
            "theta_priors", "prior_posterior"]
 
 #: Default 1-sigma of an empirical prior as a fraction of the prior's value (``identification.prior_std_rel``).
@@ -47,19 +47,6 @@ def rigid_inertia_of(cfg, dof: str) -> float:
     ([Fossen2011] eq. 3.44)."""
     m = rigid_body_mass_matrix(cfg.vehicle.mass_kg, cfg.vehicle.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
     return float(m[DOFS.index(dof), DOFS.index(dof)])
-
-
-def prior_entry(cfg, dof: str) -> dict:
-    """{added_mass, linear_damping, quadratic_damping} of ``dof`` from the configured geometry
-    (:func:`~hindrax_ident.estimation.priors.priors_from_config`, as :func:`prior_entries`); {} when the
-    configuration lacks the geometry."""
-    try:
-        p = priors_from_config(cfg)
-    except (KeyError, TypeError, EstimationError):
-        return {}
-    i = DOFS.index(dof)
-    return {k: (None if p[k][i] is None else float(p[k][i])) for k in ("added_mass", "linear_damping",
-                                                                        "quadratic_damping")}
 
 
 def _finite_or_none(x) -> float | None:
@@ -87,7 +74,7 @@ def theta_priors(dof: str, names: Sequence[str], cfg, prior_std_rel: float) -> d
     restoring, cross-coupling and the reverse thrust gain have none."""
     if not prior_std_rel > 0:
         return {}
-    p = prior_entry(cfg, dof)
+    p = prior_entries(cfg).get(dof)
     if not p:
         return {}
     out = {}
