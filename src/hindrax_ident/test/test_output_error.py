@@ -10,13 +10,23 @@ from scipy.integrate import solve_ivp
 
 from hindrax_ident.estimation.least_squares import EstimationError
 from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.identification.fit.output_error import DofModel, model_terms
+from hindrax_ident.identification.fit.output_error import model_terms
 from hindrax_ident.vehicle.thrust_lag import ThrustLag
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 
 # ---------------------------------------------------------------------------------------------------- the model
+class DofModel:
+    """The one-DOF model of output_error's docstring: nu_dot = (tau - model_terms . theta[1:]) / M."""
+
+    def __init__(self, dof, theta):
+        self.dof, self.theta = dof, np.asarray(theta, dtype=float)
+
+    def acceleration(self, velocity, force, restoring=None):
+        return (force - model_terms(self.dof, velocity, restoring) @ self.theta[1:]) / self.theta[0]
+
+
 def test_model_acceleration_by_hand():
     surge = DofModel("surge", np.array([20.0, 50.0, 2.0, 0.5]))  # M, k_q, k_l, b
     # (10 - (50 * 0.3^2 + 2 * 0.3 + 0.5)) / 20

@@ -1,4 +1,4 @@
-"""Output-error fit of the one-DOF model: the model, the integrator and the segment bookkeeping, each on its own.
+"""The one-DOF model's regressor columns, shared by the batch and online fits of :mod:`.dof_model`.
 
 Model (docs/identification.md; [Hindrax-Drag] eq. 2 with the inertia term; Fossen/SNAME positive
 coefficients), body FRD, for the DOF under test with velocity nu (m/s or rad/s) and thrust-model force tau
@@ -8,22 +8,15 @@ coefficients), body FRD, for the DOF under test with velocity nu (m/s or rad/s) 
 
 ``theta = [M, k_q, k_l, b (, k_r)]`` in :func:`model_terms` column order; heave has ``k_q`` and ``k_l`` per sign
 of w (down positive): ``[M, k_q+, k_q-, k_l+, k_l-, b]``. Roll and pitch add the restoring moment ``k_r s(eta)``,
-``s`` = cos(theta) sin(phi) (roll) or sin(theta) (pitch) ([NTNU-Thesis] eq. 2.23).
-
-* :class:`DofModel` - the acceleration nu_dot of that model for given parameters.
-* the force inside one control tick (the thrust reaching the commanded value through the first-order lag
-  ``thrusters.time_constant_s``) is :meth:`hindrax_ident.vehicle.thrust_lag.ThrustLag.within_tick`.
-
-The fit itself (segments, the RK4 simulation, bounded robust least squares, intervals) is the fit core shared by
-``hindrax ident bag`` and ``hindrax ident fit``, :mod:`.fit_core` (docs/identification.md §7); this module keeps
-the model's pieces that the online estimators and the tests use.
+``s`` = cos(theta) sin(phi) (roll) or sin(theta) (pitch) ([NTNU-Thesis] eq. 2.23). The output-error fit itself
+(segments, the RK4 simulation, bounded robust least squares, intervals) is :mod:`.fit_core`
+(docs/identification.md §7).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 import numpy as np
 
-__all__ = ["model_terms", "DofModel"]
+__all__ = ["model_terms"]
 
 
 def model_terms(dof: str, velocity, restoring=None) -> np.ndarray:
@@ -41,17 +34,4 @@ def model_terms(dof: str, velocity, restoring=None) -> np.ndarray:
         if dof in ("roll", "pitch"):
             cols.append(np.zeros_like(v) if restoring is None else np.asarray(restoring, dtype=float))
     return np.stack(cols, axis=-1)
-
-
-@dataclass(frozen=True)
-class DofModel:
-    """The one-DOF model of the module docstring with parameters ``theta`` ((p,), ``theta[0]`` = M > 0)."""
-
-    dof: str
-    theta: np.ndarray
-
-    def acceleration(self, velocity, force, restoring=None) -> np.ndarray:
-        """nu_dot = (tau - [k_q |nu| nu + k_l nu + b (+ k_r s)]) / M, elementwise over ``velocity`` (...) with
-        ``force`` and ``restoring`` broadcast against it."""
-        return (force - model_terms(self.dof, velocity, restoring) @ self.theta[1:]) / self.theta[0]
 
