@@ -1,7 +1,7 @@
 """The output-error pieces (identification/fit/output_error.py, identification/fit/fit_core.py) against hand-computed
-values and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the core's Runge-Kutta step, the
-segment bookkeeping of the fit core, and the core's whole fit on records integrated by an independent solver (scipy's
-solve_ivp), with RuntimeWarnings turned into errors."""
+values and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the core's
+Runge-Kutta step, the segment bookkeeping of the fit core, and the core's whole fit on records
+integrated by an independent solver (scipy's solve_ivp), with RuntimeWarnings turned into errors."""
 import math
 
 import numpy as np
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 # ---------------------------------------------------------------------------------------------------- the model
 class DofModel:
-    """The one-DOF model of output_error's docstring: nu_dot = (tau - model_terms . theta[1:]) / M."""
+    """The one-DOF model of output_error: nu_dot = (tau - model_terms . theta[1:]) / M."""
 
     def __init__(self, dof, theta):
         self.dof, self.theta = dof, np.asarray(theta, dtype=float)
@@ -54,14 +54,14 @@ def test_lagged_thrust_inside_a_tick():
 # ---------------------------------------------------------------------------------------------------- the integrator
 def _simulate(theta, v0, forces, h, n):
     """(v, x) after n ticks of h of the fit core's simulation (:func:`fit_core.simulate`: RK4 for v,
-    Runge-Kutta-Nystrom for x) of surge with ``theta`` [M, k_q, k_l, b] from v0, x = 0, under the force
-    ``forces`` (start, middle, end of every tick)."""
+    Runge-Kutta-Nystrom for x) of surge with ``theta`` [M, k_q, k_l, b] from v0, x = 0, under the
+    force ``forces`` (start, middle, end of every tick)."""
     L = n + 1
     u = np.broadcast_to(np.asarray(forces, dtype=float)[:, None, None], (3, 1, L)).copy()
     empty_i, empty_f, zeros = np.zeros(0, int), np.zeros(0), np.zeros((1, L))
-    sd = fit_core.SegmentData(h, L, u, np.zeros((3, 1, L, 0)), np.array([v0]), np.zeros(1), empty_i, empty_i,
-                              empty_f, empty_f, np.zeros(1, int), np.zeros((1, 2)), np.ones(1, bool), zeros,
-                              zeros, zeros)
+    sd = fit_core.SegmentData(h, L, u, np.zeros((3, 1, L, 0)), np.array([v0]), np.zeros(1),
+                              empty_i, empty_i, empty_f, empty_f, np.zeros(1, int),
+                              np.zeros((1, 2)), np.ones(1, bool), zeros, zeros, zeros)
     layout = fit_core.parameter_layout("surge", fit_core.Terms("both"))
     V, X = fit_core.simulate(sd, layout, np.asarray(theta, dtype=float), position=True)
     return float(V[0, 0, -1]), float(X[0, 0, -1])

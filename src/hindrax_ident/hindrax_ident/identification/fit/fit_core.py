@@ -44,13 +44,15 @@ from ...estimation.least_squares import EstimationError
 from ...vehicle.thrust_lag import ThrustLag
 from . import timing_grid
 
-__all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUSTER_RHO_MAX", "Chunk", "DofRecord",
-           "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments", "simulate", "at_samples", "fit_terms",
-           "FitOutcome", "cluster_covariance", "estimate_timing", "validation_measures", "DofResult", "select_terms",
-           "identify_dof", "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
-           "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN", "NO_MODEL_VERDICT",
-           "resolvable_delay", "with_edge", "NESTED", "not_below_nested", "input_correlation",
-           "INPUT_CORRELATION_LAG_S", "coupling_consistent", "refit_coupling", "COUPLING_RTOL"]
+__all__ = ["EXCITATION_MIN", "SEGMENT_S", "VALIDATION_S", "MIN_CLUSTERS", "CLUSTER_RHO_MAX",
+           "Chunk", "DofRecord", "Terms", "CoreOptions", "Timing", "SegmentData", "build_segments",
+           "simulate", "at_samples", "fit_terms", "FitOutcome", "cluster_covariance",
+           "estimate_timing", "validation_measures", "DofResult", "select_terms", "identify_dof",
+           "identify_dofs", "inertia_vector", "predict_validation", "parameter_layout",
+           "excited_kind", "coriolis_products", "persistence", "PERSISTENCE_MARGIN",
+           "NO_MODEL_VERDICT", "resolvable_delay", "with_edge", "NESTED", "not_below_nested",
+           "input_correlation", "INPUT_CORRELATION_LAG_S", "coupling_consistent", "refit_coupling",
+           "COUPLING_RTOL"]
 
 #: (force std, velocity std) within a segment below which it does not move the DOF: translational (N, m/s),
 #: rotational (N m, rad/s)
@@ -1341,8 +1343,8 @@ def training_rules(rec: DofRecord, chosen: Candidate, timing: Timing, opts: Core
     measurement at each segment's start; both are reported and the verdict's named.
 
     * initial state (a measured position only: a velocity always starts from the smoothed measurement, as scored):
-      each training segment's initial velocity fitted (the verdict's, even where the other predicts better: without
-      the free initial velocities the intervals lose their spread), or the smoothed measurement;
+      each training segment's initial velocity fitted (the verdict's, even where the other predicts
+      better: without them the intervals lose their spread), or the smoothed measurement;
     * segments (a record fitted on its moving segments only, :func:`_excited_only`): the fit on every segment beside
       it; the moving segments' fit stays the verdict's.
 

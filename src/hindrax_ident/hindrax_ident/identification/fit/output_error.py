@@ -8,8 +8,8 @@ coefficients), body FRD, for the DOF under test with velocity nu (m/s or rad/s) 
 
 ``theta = [M, k_q, k_l, b (, k_r)]`` in :func:`model_terms` column order; heave has ``k_q`` and ``k_l`` per sign
 of w (down positive): ``[M, k_q+, k_q-, k_l+, k_l-, b]``. Roll and pitch add the restoring moment ``k_r s(eta)``,
-``s`` = cos(theta) sin(phi) (roll) or sin(theta) (pitch) ([NTNU-Thesis] eq. 2.23). The output-error fit itself
-(segments, the RK4 simulation, bounded robust least squares, intervals) is :mod:`.fit_core`
+``s`` = cos(theta) sin(phi) (roll) or sin(theta) (pitch) ([NTNU-Thesis] eq. 2.23). The output-error
+fit itself (segments, the RK4 simulation, robust least squares, intervals) is :mod:`.fit_core`
 (docs/identification.md §7).
 """
 from __future__ import annotations

@@ -158,7 +158,8 @@ def _evaluate(args, cfg) -> int:
                                + (", sensor noise off (diagnostic)" if args.no_sensor_noise else "")
                                + f".\n\n```\n{ev.format_table(cases)}\n"
                                + "\n".join(ratio_lines) + "\n```")
-    print(f"output: {path} and {path.parent / 'report' / 'index.html'}  (wall time {progress.elapsed():.0f} s)")
+    print(f"output: {path} and {path.parent / 'report' / 'index.html'}  "
+          f"(wall time {progress.elapsed():.0f} s)")
     return 0
 
 
@@ -175,5 +176,6 @@ def _scenarios(args, cfg) -> int:
     md = suite.write_suite(out, rows, cfg)
     print(md.read_text())
     results_doc.write_if_asked(args, "control-scenarios", "Closed loop over the scenario suite", md.read_text())
-    print(f"output: {out / 'control_scenarios.json'} and {md}  (wall time {progress.elapsed():.0f} s)")
+    print(f"output: {out / 'control_scenarios.json'} and {md}  "
+          f"(wall time {progress.elapsed():.0f} s)")
     return 0

@@ -136,8 +136,8 @@ def _write_results(args: argparse.Namespace, identifications: dict, path: str, w
 
 
 def _output_dir(cfg, out: str | None, kind: str, dofs: list[str]) -> Path:
-    """``--out`` (new or empty), or a new folder under ``recording.output_root`` named by the campaign
-    (``kind``, the DOFs) and the time (:func:`.common.result_dir`)."""
+    """``--out`` (new or empty), or a new folder under ``recording.output_root`` named by the
+    campaign (``kind``, the DOFs) and the time (:func:`.common.result_dir`)."""
     from hindrax_drivers.config import DOFS
 
     root = cfg.recording.output_root
