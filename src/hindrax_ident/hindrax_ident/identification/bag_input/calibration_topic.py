@@ -156,12 +156,8 @@ def results_from_array(msg: Any) -> tuple[dict, dict, dict]:
 def merge_results(messages: Iterable[Any]) -> tuple[dict, dict, dict]:
     """(calibration, inclining, decays) of several DiagnosticArrays in time order: a later result of the same name
     replaces an earlier one (the node's messages are cumulative, so the last one normally holds everything)."""
-    cal: dict = {}
-    incl: dict = {}
-    decays: dict = {}
+    out: tuple[dict, dict, dict] = ({}, {}, {})
     for m in messages:
-        c, i, d = results_from_array(m)
-        cal.update(c)
-        incl.update(i)
-        decays.update(d)
-    return cal, incl, decays
+        for merged, part in zip(out, results_from_array(m)):
+            merged.update(part)
+    return out
