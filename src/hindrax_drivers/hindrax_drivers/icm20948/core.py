@@ -732,9 +732,10 @@ def diagnostic_values(config: p.ImuConfig, who_am_i: int | None, sample_rate_hz:
 
 @dataclass(frozen=True)
 class PollResult:
-    """One poll's reads (:func:`read_poll`). ready: INT_STATUS_1.RAW_DATA_0_RDY (None: not read); block: the 14-byte accel/gyro/temperature block (None when the burst failed: ``error``); mag_block: the
-    AK09916's ST1..ST2 (None: no magnetometer, its read failed, or stale after a NACK); counters: diagnostics counters
-    to add (``mag_nack``, ``mag_i2c_failure``)."""
+    """One poll's reads (:func:`read_poll`). ready: INT_STATUS_1.RAW_DATA_0_RDY (None: not read); block: the 14-byte
+    accel/gyro/temperature block (None when the burst failed: ``error``); mag_block: the AK09916's ST1..ST2 (None: no
+    magnetometer, its read failed, or stale after a NACK); counters: diagnostics counters to add (``mag_nack``,
+    ``mag_i2c_failure``)."""
 
     ready: bool | None
     block: bytes | None

@@ -28,6 +28,8 @@ import threading
 from multiprocessing.connection import Client, Listener
 from typing import Any
 
+from smbus2 import i2c_msg
+
 from ..scheduling import set_this_thread
 from .emulated_i2c import I2C_M_RD
 
@@ -104,8 +106,6 @@ class SocketI2CBus:
 def _rdwr(bus: Any, spec: list) -> list[bytes]:
     """Run a :meth:`SocketI2CBus.i2c_rdwr` request on ``bus``: its messages as ``smbus2.i2c_msg``; returns what the
     read messages read, in order."""
-    from smbus2 import i2c_msg
-
     msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data) for addr, flags, data in spec]
     bus.i2c_rdwr(*msgs)
     return [bytes(m) for m in msgs if m.flags & I2C_M_RD]
