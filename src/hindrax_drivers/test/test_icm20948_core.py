@@ -316,17 +316,23 @@ def test_data_ready_text_and_diagnostic_values():
     assert values["gyro_bias_rad_s"] == "0.000000 0.001000 -0.002000" and "gyro_bias_status" not in values
 
 
-@pytest.mark.parametrize("mode,available,require,counters,has_mag", [
-    ("i2c_master", True, True, (), True),
-    ("bypass", True, False, (), True),
-    ("i2c_master", False, False, (), False),  # no magnetometer: the 14-byte burst only
+@pytest.mark.parametrize("mode,available,require,counters,has_mag,reads", [
+    ("i2c_master", True, True, (), True, [(0x17, 45)]),  # status registers, data, EXT_SLV_SENS_DATA: one burst
+    ("i2c_master", True, False, (), True, [(0x17, 45)]),
+    ("bypass", True, False, (), True, [(0x2D, 14), (0x10, 9)]),
+    ("bypass", True, True, (), True, [(0x1A, 33), (0x10, 9)]),
+    ("i2c_master", False, False, (), False, [(0x2D, 14)]),  # no magnetometer: the 14-byte burst only
 ])
-def test_read_poll_reads_what_the_mode_needs(mode, available, require, counters, has_mag):
+def test_read_poll_reads_what_the_mode_needs(mode, available, require, counters, has_mag, reads):
     rig = Rig(mode=mode)
     seq, result, _ = rig.run()
     assert result.done
     rig.regs.select_bank(0)
     rig.clock.advance(0.05)
+    taps = []
+    for dev in (rig.regs.device, rig.mag):
+        dev.raw_tap = lambda direction, address, register, data, *_: taps.append((direction, register, len(data)))
     r = read_poll(rig.regs, rig.mag, mode, available, require, MagNackFilter())
     assert r.error is None and len(r.block) == p.SENSOR_BLOCK_LENGTH and r.counters == counters
     assert (r.ready is not None) == require and (r.mag_block is not None) == has_mag
+    assert [(reg, n) for d, reg, n in taps if d == "read"] == reads  # one bus transaction per poll (bypass: two)

@@ -166,9 +166,13 @@ def test_i2c_master_mode_configures_the_chip_and_publishes_the_truth(rig):
     m = imus[-1]
     assert np.allclose(m.linear_acceleration_covariance, np.diag([accel_var] * 3).ravel())
     assert np.allclose(m.angular_velocity_covariance, np.diag([gyro_var] * 3).ravel())
-    # One 23-byte burst per poll from ACCEL_XOUT_H: accel, gyro, temperature and ST1..ST2 of the AK09916.
-    polls = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST and x.i2c_register == 0x2D]
-    assert polls and all(len(x.data) == 23 for x in polls)
+    # One 45-byte burst per poll from I2C_MST_STATUS (0x17): the status registers, then from ACCEL_XOUT_H (22 bytes
+    # on) accel, gyro, temperature and ST1..ST2 of the AK09916; no read of INT_STATUS_1 or ACCEL_XOUT_H of its own.
+    reads = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST]
+    first = next(i for i, x in enumerate(reads) if x.i2c_register == 0x17 and len(x.data) > 1)  # the start-up's end
+    polls = [x for x in reads[first:] if x.i2c_register == 0x17]
+    assert len(polls) >= 5 and all(len(x.data) == 45 for x in polls)
+    assert not [x for x in reads if x.i2c_register in (p.INT_STATUS_1.address, p.ACCEL_XOUT_H.address)]
     values = r.diag_values()
     assert values["who_am_i"] == "0xea" and values["magnetometer_available"] == "True"
     assert float(values["output_data_rate_hz"]) == pytest.approx(1125 / 22, abs=1e-3)
@@ -201,8 +205,9 @@ def test_missing_magnetometer_is_a_warning_and_the_imu_keeps_publishing(rig):
     resets = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_HOST_TO_DEVICE
               and x.i2c_register == p.USER_CTRL.address and x.data[0] & p.USER_CTRL_I2C_MST_RST]
     assert len(resets) == 2
-    polls = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST and x.i2c_register == 0x2D]
-    assert all(len(x.data) == 14 for x in polls[-5:])  # no EXT_SLV_SENS_DATA read without a magnetometer
+    # no EXT_SLV_SENS_DATA read without a magnetometer: INT_STATUS_1 (0x1A) to the end of the 14-byte block
+    polls = [x for x in r.raw if x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST and x.i2c_register == 0x1A]
+    assert polls and all(len(x.data) == 19 + 14 for x in polls[-5:])
 
 
 def test_wrong_identity_is_reported_and_retried(rig):
@@ -346,14 +351,15 @@ def test_lost_magnetometer_is_retried_periodically_until_it_answers_again(rig):
 def test_sample_without_data_ready_is_not_published(rig):
     """INT_STATUS_1.RAW_DATA_0_RDY stuck low: the data registers still update, but no sample is published,
     every poll counts not_ready and after not_ready_error_polls the ERROR data_ready is raised; it clears with
-    the flag. The flag is one 1-byte read of INT_STATUS_1 (0x1A) per poll."""
+    the flag. The flag is read in each poll's one burst from I2C_MST_STATUS (0x17): INT_STATUS_1 is its 4th byte."""
     r = rig(truth=live_truth, overrides={"sensors.icm20948.not_ready_error_polls": 10})
     r.wait_imu(10)
-    is_flag = lambda x: (x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST  # noqa: E731
-                         and x.i2c_register == p.INT_STATUS_1.address)
-    r.wait(lambda: any(is_flag(x) for x in r.raw), 5, "raw INT_STATUS_1 reads (published every 0.1 s)")
-    reads = [x for x in r.raw if is_flag(x)]
-    assert reads and all(len(x.data) == 1 for x in reads)
+    is_poll = lambda x: (x.direction == RawDeviceData.DIRECTION_DEVICE_TO_HOST  # noqa: E731
+                         and x.i2c_register == p.I2C_MST_STATUS.address and len(x.data) == 45)
+    r.wait(lambda: any(is_poll(x) for x in r.raw), 5, "raw poll bursts (published every 0.1 s)")
+    assert not [x for x in r.raw if x.i2c_register == p.INT_STATUS_1.address]  # no read of its own
+    assert any(x.data[p.INT_STATUS_1.address - p.I2C_MST_STATUS.address] & p.INT_STATUS_1_RAW_DATA_0_RDY
+               for x in r.raw if is_poll(x))
     # polls a little faster than the sample rate meet an unset flag now and then before the fault: count from here
     before = r.node.diag.counts().get("not_ready", 0)
     r.emu.data_ready_stuck_low = True
@@ -372,7 +378,7 @@ def test_data_ready_gate_can_be_switched_off(rig):
     r.emu.data_ready_stuck_low = True
     r.wait_imu(20)
     assert r.node.diag.counts().get("not_ready", 0) == 0
-    assert not [x for x in r.raw if x.i2c_register == p.INT_STATUS_1.address]  # no extra read
+    assert not [x for x in r.raw if x.i2c_register == p.INT_STATUS_1.address]  # the burst does not start there
 
 
 def test_gyro_bias_is_estimated_and_subtracted_when_still(rig):

@@ -26,6 +26,12 @@ def test_socket_bus_serves_the_emulated_bus(tmp_path):
     # and a burst read returns what the registers hold
     assert device.read_block(p.led_register(0), 4) == p.channel_bytes_for_pulse(1700.0, prescale,
                                                                                 p.INTERNAL_OSCILLATOR_HZ)
+    # longer than an SMBus block (32 bytes): i2c_rdwr through the socket, both ways (ten channels, 40 bytes)
+    block = b"".join(p.channel_bytes_for_pulse(1100.0 + 50.0 * k, prescale, p.INTERNAL_OSCILLATOR_HZ)
+                     for k in range(10))
+    device.write_block(p.led_register(0), block)
+    assert emulator.pulse_width_us(9) == pytest.approx(1550.0, abs=5.0)
+    assert device.read_block(p.led_register(0), len(block)) == block
     with pytest.raises(OSError) as exc:
         bus.read_byte_data(0x41, 0x00)  # nobody at 0x41: a NACK, as smbus2 reports it
     assert exc.value.errno == errno.EREMOTEIO

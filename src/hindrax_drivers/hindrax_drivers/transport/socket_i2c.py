@@ -21,13 +21,17 @@ does the framing.
 """
 from __future__ import annotations
 
+import ctypes
 import errno
 import socket
 import threading
 from multiprocessing.connection import Client, Listener
 from typing import Any
 
+from smbus2 import i2c_msg
+
 from ..scheduling import set_this_thread
+from .emulated_i2c import I2C_M_RD
 
 __all__ = ["SOCKET_ENV", "I2CSocketServer", "SocketI2CBus"]
 
@@ -84,11 +88,27 @@ class SocketI2CBus:
     def read_i2c_block_data(self, addr, register, length, force=None):
         return self._call("read_i2c_block_data", addr, register, length)
 
+    def i2c_rdwr(self, *i2c_msgs):
+        """``smbus2.i2c_msg`` transfers (ctypes, not picklable) sent as (address, flags, bytes or length); the read
+        messages' buffers are filled from the answer, as the kernel fills them."""
+        spec = [(int(m.addr), int(m.flags), int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
+                for m in i2c_msgs]
+        for m, data in zip((m for m in i2c_msgs if m.flags & I2C_M_RD), self._call("i2c_rdwr", spec)):
+            ctypes.memmove(m.buf, data, m.len)
+
     def close(self) -> None:
         try:
             self._conn.close()
         except OSError:
             pass
+
+
+def _rdwr(bus: Any, spec: list) -> list[bytes]:
+    """Run a :meth:`SocketI2CBus.i2c_rdwr` request on ``bus``: its messages as ``smbus2.i2c_msg``; returns what the
+    read messages read, in order."""
+    msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data) for addr, flags, data in spec]
+    bus.i2c_rdwr(*msgs)
+    return [bytes(m) for m in msgs if m.flags & I2C_M_RD]
 
 
 class I2CSocketServer:
@@ -148,7 +168,7 @@ class I2CSocketServer:
                 return
             try:
                 with self.lock:
-                    result = getattr(self.bus, name)(*args)
+                    result = _rdwr(self.bus, *args) if name == "i2c_rdwr" else getattr(self.bus, name)(*args)
                 reply = (True, result)
             except OSError as exc:
                 reply = (False, (exc.errno, str(exc)))

@@ -75,7 +75,7 @@ _KEYS: dict[str, Spec] = {
     "icm20948.frozen_check_samples": integer("data-ready gate: after this many bit-identical samples in a row "
                                              "the chip's PWR_MGMT_1/USER_CTRL are read back (reset check)", 1, 100),
     "icm20948.require_data_ready": flag("data-ready gate: read INT_STATUS_1.RAW_DATA_0_RDY (bank 0, 0x1A) "
-                                        "before each poll and publish no sample without it"),
+                                        "in each poll's burst and publish no sample without it"),
     "icm20948.not_ready_error_polls": integer("data-ready gate: this many consecutive polls without "
                                               "RAW_DATA_0_RDY raise the ERROR data_ready", 1, 10000),
     "icm20948.mag_retry_interval_s": real("lost AK09916: period of the magnetometer re-initialisation "
