@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any, Callable
 
 from rclpy.executors import ShutdownException, TimeoutException
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from hindrax_drivers import devices as device_table
@@ -36,6 +35,7 @@ from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_drivers.tf.node import StaticTfNode
 from hindrax_drivers.vehicle_graph import ForeignVehicleError, ForeignVehicleWatch, own_view, refuse_before_start
+from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.srv import SetArmed
 
 from .control.node import ControllerNode
@@ -275,7 +275,7 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
     nodes["static_tf"] = StaticTfNode(**common)  # base_link -> every sensor and thruster frame, on /tf_static
     # the vehicle's name on its graph, where commands that move a vehicle look for it (the launch layout's gateway
     # node; this single-process graph has no topside: docs/architecture.md §8.2)
-    nodes["gateway"] = Node(GATEWAY_NODE, namespace="/" + cfg.vehicle.name, start_parameter_services=False, **kw)
+    nodes["gateway"] = VehicleNode(GATEWAY_NODE, namespace="/" + cfg.vehicle.name, **kw)
     if identification:
         nodes["identification"] = IdentificationNode(config=cfg, **common)
         if sim:  # lock-step: simulated time waits for every control tick of a running manoeuvre
