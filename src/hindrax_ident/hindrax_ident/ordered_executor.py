@@ -1,34 +1,46 @@
-"""The one-process graph's executor: rclpy's ``SingleThreadedExecutor`` visiting its nodes in the order they were added,
-with a leaner construction of its wait set.
+"""The one-process graph's executor: rclpy's ``SingleThreadedExecutor`` visiting its nodes in the
+order they were added, with a leaner construction of its wait set and of its callbacks' handlers.
 
-Order: rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready at the same
-instant run (e.g. the allocation's wrench subscription and the ESC node's output timer) follows the nodes' memory
-addresses and changes from one run to the next; with a fixed order a stepped simulation is reproducible.
+Order: rclpy keeps an executor's nodes in a set, so the order in which the callbacks that are ready
+at the same instant run (e.g. the allocation's wrench subscription and the ESC node's output timer)
+follows the nodes' memory addresses and changes from one run to the next; with a fixed order a
+stepped simulation is reproducible.
 
-Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each entity's handle through an
-``ExitStack``, asking every entity's callback group (a weak reference and a lock each), adding up the waitables'
-``NumberOfEntities`` one object at a time and looking every entity of every node up in the ready lists; the virtual
-pool's graph has about 370 entities (90 parameter services, 120 QoS event handlers) and waits once per /clock tick.
-:meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the same callbacks in the same order
-(tasks in progress; ready waitables node by node; then per node its timers, subscriptions, guard conditions, clients
-and services in creation order) from a snapshot of the nodes' entities (:class:`_Snapshot`: handles, entity counts,
-each entity's rank in that order by its handle pointer), taken again whenever an entity or a node comes or goes
-(rclpy wakes the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is free to run
-(a callback group is busy, or an entity's handler pending, only inside a task), so the snapshot's lists go into the
-wait set as they are; otherwise each entity is asked as rclpy asks it. QoS event handlers (most waitables) enter their
-event handle into the wait set directly, without their Python wrappers. A wait over a subset of the nodes is rclpy's.
+Wait set: rclpy 7.1 (Jazzy) builds a new wait set for every wait, entering each entity's handle
+through an ``ExitStack``, asking every entity's callback group (a weak reference and a lock each),
+adding up the waitables' ``NumberOfEntities`` one object at a time and looking every entity of
+every node up in the ready lists; the virtual pool's graph waits once per /clock tick, on about 120
+entities (:class:`~hindrax_drivers.vehicle_node.VehicleNode`s: no parameter services, few QoS event
+handlers). :meth:`LeanWaitExecutor._wait_for_ready_callbacks` does the same wait and yields the
+same callbacks in the same order (tasks in progress; ready waitables node by node; then per node
+its timers, subscriptions, guard conditions, clients and services in creation order) from a
+snapshot of the nodes' entities (:class:`_Snapshot`: handles, entity counts, each entity's rank in
+that order by its handle pointer), taken again whenever an entity or a node comes or goes (rclpy
+wakes the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is
+free to run (a callback group is busy, or an entity's handler pending, only inside a task), so the
+snapshot's lists go into the wait set as they are; otherwise each entity is asked as rclpy asks it.
+QoS event handlers (most waitables) enter their event handle into the wait set directly, without
+their Python wrappers. A wait over a subset of the nodes is rclpy's.
+
+Handlers: a ready timer or subscription whose callback is a plain function gets a :class:`_Call`
+(take and run at once) instead of rclpy's ``Task`` over two coroutines; the other entities
+(waitables such as action servers, guard conditions, clients, services, coroutine callbacks) get
+rclpy's.
 """
 from __future__ import annotations
 
+import inspect
 from collections import deque
 from operator import methodcaller
 from typing import Any, Callable
 
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.event_handler import EventHandler
-from rclpy.executors import (ConditionReachedException, ExternalShutdownException, ShutdownException,
-                             SingleThreadedExecutor, TimeoutException, TimeoutObject, timeout_sec_to_nsec)
+from rclpy.executors import (ConditionReachedException, ExternalShutdownException,
+                             ShutdownException, SingleThreadedExecutor, TimeoutException,
+                             TimeoutObject, timeout_sec_to_nsec)
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rclpy.exceptions import InvalidHandle
 
@@ -42,6 +54,7 @@ _COUNT_FIELDS = ("num_subscriptions", "num_guard_conditions", "num_timers", "num
 _TIMER, _SUB, _GUARD, _CLIENT, _SERVICE = range(5)
 #: a handle's ``__enter__`` / ``__exit__`` as C-level calls (the wait enters and leaves some 330 handles)
 _ENTER, _EXIT = methodcaller("__enter__"), methodcaller("__exit__", None, None, None)
+_MESSAGE_ONLY = Subscription.CallbackType.MessageOnly
 
 
 def _free(entity) -> bool:
@@ -303,7 +316,10 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                     continue
                 if entity.callback_group.can_execute(entity):
                     yielded_work = True
-                    yield self._make_handler(entity, node, self._take(kind)), entity, node
+                    if kind <= _SUB and _plain(entity):
+                        yield _Call(entity, kind), entity, node
+                    else:
+                        yield self._make_handler(entity, node, self._take(kind)), entity, node
 
             if timeout_nsec == 0 or (timeout_timer is not None and timeout_timer.handle.pointer in timers_ready):
                 raise TimeoutException()
@@ -311,6 +327,62 @@ class LeanWaitExecutor(SingleThreadedExecutor):
             raise ShutdownException()
         if condition():
             raise ConditionReachedException()
+
+
+class _Call:
+    """The handler of a ready timer or subscription whose callback is a plain function: takes and
+    runs it when called, with the part of rclpy's ``Task`` interface that ``spin_once`` and
+    ``Graph.spin_until_idle`` use (call, ``exception``, ``result``, ``done``). rclpy instead wraps
+    every callback in a ``Task`` over two coroutines and triggers the executor's guard condition
+    twice; with one thread running one callback at a time, every callback group is free and the
+    handler runs before the next wait, so none of that changes what runs or in which order."""
+
+    __slots__ = ("_entity", "_kind", "_exc", "_done")
+
+    def __init__(self, entity: Any, kind: int) -> None:
+        self._entity, self._kind, self._exc, self._done = entity, kind, None, False
+
+    def __call__(self) -> None:
+        if self._done:
+            return
+        self._done = True
+        e = self._entity
+        try:
+            try:
+                with e.handle:
+                    if self._kind == _TIMER:
+                        e.handle.call_timer()
+                        args: tuple = ()
+                    else:
+                        taken = e.handle.take_message(e.msg_type, e.raw)
+                        if taken is None:
+                            return
+                        args = taken[:1] if e._callback_type is _MESSAGE_ONLY else taken
+            except InvalidHandle:  # destroyed meanwhile: nothing to run, as rclpy
+                return
+            e.callback(*args)
+        except Exception as exc:  # noqa: BLE001 - kept for the caller, as rclpy's Task keeps it
+            self._exc = exc
+
+    def exception(self) -> Exception | None:
+        return self._exc
+
+    def result(self) -> None:
+        if self._exc is not None:
+            raise self._exc
+
+    def done(self) -> bool:
+        return self._done
+
+
+def _plain(entity: Any) -> bool:
+    """The entity's callback is a plain function (not a coroutine function), asked once per
+    callback object."""
+    cb = entity.callback
+    c = entity.__dict__.get("_lean_plain")
+    if c is None or c[0] is not cb:
+        c = entity.__dict__["_lean_plain"] = (cb, not inspect.iscoroutinefunction(cb))
+    return c[1]
 
 
 def ordered_executor(**kwargs: Any) -> LeanWaitExecutor:
