@@ -1,15 +1,15 @@
-"""The base of every vehicle node: an rclpy ``Node`` without the entities nothing on the vehicle
-uses.
+"""The base of every vehicle node: an rclpy ``Node`` without the entities nothing uses.
 
-rclpy gives every node six parameter services and a type-description service, and every publisher
-and subscription two QoS event handlers (incompatible QoS, incompatible type) that only log. Each
-is one more entity in every wait of the node's executor, visited in Python at every spin: in the
+rclpy gives every publisher and subscription two QoS event handlers (incompatible QoS, incompatible
+type) that only log, and every node six parameter services and a type-description service. Each is
+one more entity in every wait of the node's executor, visited in Python at every spin: in the
 one-process graph of the virtual pool (13 nodes) they were two thirds of the wait set (213 of 325).
-Nothing calls a vehicle node's parameter services (no ``ros2 param`` here: the gateway is the only
-topside access, docs/architecture.md §8.2; tests and tools set parameters in-process), so
-:class:`VehicleNode` starts none, and its publishers and subscriptions get no default event
-handler. Event callbacks a node passes itself (e.g. the heartbeat subscriptions' liveliness and
-matched events, :mod:`hindrax_drivers.liveness`) are kept as given.
+:class:`VehicleNode`'s publishers and subscriptions get no default event handler; event callbacks a
+node passes itself (e.g. the heartbeat subscriptions' liveliness and matched events,
+:mod:`hindrax_drivers.liveness`) are kept as given. Its parameter services stay (``ros2 param``
+reads and sets the nodes' parameters) unless the node is built with
+``start_parameter_services=False``, which then also leaves out the type-description service: the
+one-process graph of ``hindrax run`` does so (nothing outside its process talks to it).
 """
 from __future__ import annotations
 
@@ -29,14 +29,14 @@ _TYPE_SERVICE = "start_type_description_service"
 
 
 class VehicleNode(Node):
-    """``rclpy.node.Node`` (same arguments) without parameter services (unless
-    ``start_parameter_services=True``), type-description service, or default QoS event handlers
-    (module docstring)."""
+    """``rclpy.node.Node`` (same arguments) without default QoS event handlers; with
+    ``start_parameter_services=False`` without the type-description service either (module
+    docstring)."""
 
     def __init__(self, node_name: str, **kwargs: Any) -> None:
-        kwargs.setdefault("start_parameter_services", False)
         overrides = list(kwargs.get("parameter_overrides") or [])
-        if not any(p.name == _TYPE_SERVICE for p in overrides):
+        if kwargs.get("start_parameter_services") is False and not any(
+                p.name == _TYPE_SERVICE for p in overrides):
             kwargs["parameter_overrides"] = overrides + [Parameter(_TYPE_SERVICE, value=False)]
         super().__init__(node_name, **kwargs)
 
