@@ -9,12 +9,11 @@ from __future__ import annotations
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.node import Node
 
 from .node_common import (DEFAULT_QOS_DEPTH, DeviceDiagnostics, DiagnosticsPublisher, OneShot, RawDataPublisher,
                           StuckAlarm)
 from .transport.i2c import BusHandle, I2CDevice
+from .vehicle_node import VehicleNode
 
 __all__ = ["I2cSensorNode", "RETRY_PERIOD_S", "STUCK_AFTER_S"]
 
@@ -24,7 +23,7 @@ RETRY_PERIOD_S = 1.0
 STUCK_AFTER_S = 2.0
 
 
-class I2cSensorNode(Node):
+class I2cSensorNode(VehicleNode):
     """rclpy Node of one I2C sensor (module docstring). ``label`` names the part in the log ("MS5837")."""
 
     label = "I2C device"
@@ -51,10 +50,8 @@ class I2cSensorNode(Node):
         return self.stuck.stuck
 
     def sensor_publisher(self, msg_type: Any, topic: str) -> Any:
-        """A reliable publisher (depth 10) without QoS event handlers: rclpy's default incompatible-QoS handler of
-        each publisher is visited in Python on every executor spin, at the sensor's rate."""
-        return self.create_publisher(msg_type, topic, DEFAULT_QOS_DEPTH,
-                                     event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
+        """A reliable publisher (depth 10; no QoS event handlers, :class:`VehicleNode`)."""
+        return self.create_publisher(msg_type, topic, DEFAULT_QOS_DEPTH)
 
     def alarm(self, key: str, text: str, counter: str = "") -> None:
         """Raise the ERROR ``key`` with ``text`` (counted ``counter`` if given), logged and published at once."""

@@ -34,12 +34,12 @@ from typing import Any, Iterable, List, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.node import Node
 
 from .config import ConfigError, ConfigIssue, build_section
 from .config.typed_sections import SensorsDvl75Section, SensorsPing1dSection
 from .node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector, load_node_config
 from .transport.serial_transport import SerialTransport, SerialTransportError
+from .vehicle_node import VehicleNode
 
 __all__ = ["SerialDeviceNode", "CommandSequencer", "NO_DATA_TIMEOUT_S"]
 
@@ -127,7 +127,7 @@ class CommandSequencer:
             self._thread.join(timeout=5.0)
 
 
-class SerialDeviceNode(Node):
+class SerialDeviceNode(VehicleNode):
     """Common part of the serial driver nodes (see the module docstring).
 
     Args:

@@ -249,7 +249,7 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         refuse_before_start(ctx, _BESIDE)
         graph = build_graph(config_path, sim=True, record=True, record_dir=str(bag_dir), context=ctx, seed=seed,
                             overrides=ov, identification=True, drive_clocks=True, truth=truth,
-                            truth_rate_hz=TRUTH_RATE_HZ)
+                            truth_rate_hz=TRUTH_RATE_HZ, parameter_services=False)
         cfg = graph.config
         sim = graph.nodes["simulator"].simulator
         client = rclpy.create_node("hindrax_run", context=ctx)

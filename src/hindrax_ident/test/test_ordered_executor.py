@@ -1,5 +1,6 @@
-"""The one-process graph's executor (hindrax_ident.ordered_executor): the lean wait yields what rclpy's own wait yields,
-in the same order, and the executor visits its nodes in the order they were added."""
+"""The one-process graph's executor (hindrax_ident.ordered_executor): the lean wait yields what
+rclpy's own wait yields, in the same order, the executor visits its nodes in the order they were
+added, and plain callbacks run through its own handler."""
 from __future__ import annotations
 
 import rclpy
@@ -47,15 +48,18 @@ def test_lean_wait_yields_rclpys_callbacks_in_rclpys_order():
             node.create_service(Trigger, f"{node.get_name()}/go", lambda _q, r: r)
             pubs.append(node.create_publisher(String, "chatter", 10))
         clients = [nodes[0].create_client(Trigger, f"{n}/go") for n in names]
-        wait_until(lambda: all(c.service_is_ready() for c in clients) and pubs[0].get_subscription_count() == 3,
+        wait_until(lambda: (all(c.service_is_ready() for c in clients)
+                            and pubs[0].get_subscription_count() == 3),
                    20, lambda: None, "discovery")
         for c in clients[::-1]:
             c.call_async(Trigger.Request())
         pubs[1].publish(String(data="x"))
         guard = nodes[2].create_guard_condition(lambda: None)
         guard.trigger()
-        # every timer due, every service and subscription with work: both waits see the same ready entities
-        wait_until(lambda: all(t.time_until_next_call() <= 0 for t in timers), 5, None, "timers due")
+        # every timer due, every service and subscription with work: both waits see the same ready
+        # entities
+        wait_until(lambda: all(t.time_until_next_call() <= 0 for t in timers), 5, None,
+                   "timers due")
         lean = _drain(ex._wait_for_ready_callbacks(0.0))
         _forget(ex)
         plain = _drain(Executor._wait_for_ready_callbacks(ex, 0.0))
@@ -63,7 +67,8 @@ def test_lean_wait_yields_rclpys_callbacks_in_rclpys_order():
         assert lean == plain
         kinds = [k for _n, k, _i in lean]
         assert {"Timer", "Subscription", "Service", "GuardCondition"} <= set(kinds)
-        assert [n for n in dict.fromkeys(n for n, _k, _i in lean)] == names  # nodes in the order added
+        # nodes in the order added
+        assert [n for n in dict.fromkeys(n for n, _k, _i in lean)] == names
         assert ex.get_nodes() == nodes
         ex.remove_node(nodes[1])
         assert ex.get_nodes() == [nodes[0], nodes[2]]
@@ -71,8 +76,9 @@ def test_lean_wait_yields_rclpys_callbacks_in_rclpys_order():
 
 
 def test_a_handle_no_longer_valid_leaves_none_held():
-    """The lean wait enters the snapshot's handles in one pass: when one of them was destroyed meanwhile, the ones
-    entered before it are released again (last first) and the wait goes the entity-by-entity way."""
+    """The lean wait enters the snapshot's handles in one pass: when one of them was destroyed
+    meanwhile, the ones entered before it are released again (last first) and the wait goes the
+    entity-by-entity way."""
     from rclpy.exceptions import InvalidHandle
 
     from hindrax_ident.ordered_executor import _enter_each
@@ -98,3 +104,45 @@ def test_a_handle_no_longer_valid_leaves_none_held():
     log.clear()
     assert _enter_each([Handle("a"), Handle("b"), Handle("x", valid=False), Handle("d")]) is None
     assert log == [("enter", "a"), ("enter", "b"), ("exit", "b"), ("exit", "a")]
+
+
+def test_plain_callbacks_run_at_once_and_their_errors_reach_the_spinner():
+    """A ready timer or subscription with a plain callback runs through the executor's own handler
+    (message delivered, the exception raised from ``spin_once``); a coroutine callback still runs
+    through rclpy's Task."""
+    import pytest
+
+    from hindrax_ident.ordered_executor import _Call
+
+    with ros_context() as ctx:
+        ex = ordered_executor(context=ctx)
+        node = rclpy.create_node("calls", context=ctx)
+        ex.add_node(node)
+        got: list = []
+        node.create_subscription(String, "plain", lambda m: got.append(m.data), 10)
+
+        async def later(m):
+            got.append("async " + m.data)
+        node.create_subscription(String, "coro", later, 10)
+        pub, pub_coro = (node.create_publisher(String, t, 10) for t in ("plain", "coro"))
+        wait_until(lambda: (pub.get_subscription_count() == 1
+                            and pub_coro.get_subscription_count() == 1),
+                   20, lambda: None, "discovery")
+        pub.publish(String(data="a"))
+        handler, _entity, _node = ex.wait_for_ready_callbacks(5.0)
+        assert isinstance(handler, _Call) and got == []
+        handler()
+        assert handler.done() and handler.exception() is None and got == ["a"]
+        pub_coro.publish(String(data="b"))
+        handler, _entity, _node = ex.wait_for_ready_callbacks(5.0)
+        assert not isinstance(handler, _Call)
+        handler()
+        assert got == ["a", "async b"]
+
+        def boom():
+            raise ValueError("tick failed")
+        timer = node.create_timer(0.001, boom)
+        wait_until(lambda: timer.time_until_next_call() <= 0, 5, None, "timer due")
+        with pytest.raises(ValueError, match="tick failed"):
+            ex.spin_once(5.0)
+        ex.shutdown()

@@ -34,7 +34,6 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
-from rclpy.node import Node
 
 from hindrax_msgs.msg import AllocationStatus, ThrusterForces, ThrusterPwm
 
@@ -42,6 +41,7 @@ from ..esc_state import ArmedWatch
 from ..lean_cdr import cdr_decoder, prepare, thruster_pwm_encode, thruster_pwm_lean
 from ..liveness import heartbeat_qos
 from ..node_common import load_node_config, run_node, time_from_ns
+from ..vehicle_node import VehicleNode
 from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
@@ -81,7 +81,7 @@ def _wrench_msg(w: np.ndarray) -> Wrench:
 ALLOCATION_KEYS = ("thrusters", "vehicle.centre_of_gravity_frd_m", "esc.oscillator_hz", "esc.pwm_frequency_hz")
 
 
-class ThrustAllocationNode(Node):
+class ThrustAllocationNode(VehicleNode):
     """ROS wrapper of :class:`AllocationCore` (see the module docstring for topics and behaviour)."""
 
     def __init__(self, **kwargs: Any):

@@ -51,7 +51,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 
 from ..config import Spec, output_enable_gpio
 from ..lean_cdr import Beat
@@ -63,6 +62,7 @@ from ..transport.gpio import open_output_line
 from ..transport.i2c import I2CDevice, I2CError, open_smbus
 from ..sd_notify import SafetyNotifier
 from ..transport.shared_emulation import open_shared_bus, open_shared_line
+from ..vehicle_node import VehicleNode
 from .core import OUTPUT_COMMANDING, OUTPUT_NEUTRAL, OUTPUT_UNKNOWN, GuardCore
 
 __all__ = ["OutputGuardNode", "GUARD_RATE_HZ", "HEARTBEAT_TIMEOUT", "open_output_enable", "open_watchdog_feed", "main"]
@@ -97,7 +97,7 @@ def open_watchdog_feed(chip: str, line: int) -> Any:
     return open_output_line(chip, line, initial_high=False, consumer="hindrax-watchdog-feed")
 
 
-class OutputGuardNode(Node):
+class OutputGuardNode(VehicleNode):
     """The output guard (module docstring). ``line``: an injected /OE line (``set_high``/``release``); ``bus``: an
     injected SMBus-like bus for the register fallback; ``feed``: an injected watchdog feed line (with
     ``esc.output_enable_feed_rate_hz`` configured). Without them, they are opened from the configuration."""

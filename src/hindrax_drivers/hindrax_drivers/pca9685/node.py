@@ -48,7 +48,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from std_msgs.msg import Float64
 
 from hindrax_msgs.msg import ThrusterPwm
@@ -63,6 +62,7 @@ from ..config.node_parameters import declare_node_parameter
 from ..transport.i2c import open_smbus
 from ..transport.shared_emulation import open_shared_bus
 from . import protocol as p
+from ..vehicle_node import VehicleNode
 from .chip import EscChip
 from .core import GUARD_CONFIRM_S, RETRY_MAX_S, RETRY_MIN_S, STATE_NAMES, WRITE, EscCore, EscOutput, SteadyWatchdog
 from .peers import COMMAND_TOPIC, EscPeers
@@ -85,7 +85,7 @@ STEADY_WATCHDOG = Spec("float", "no command for this long of steady-clock time (
 REPEAT_AFTER_PERIODS = 1.5
 
 
-class EscNode(Node):
+class EscNode(VehicleNode):
     """PCA9685 ESC output node (see the module docstring). ``bus``: SMBus-like object (default: opened by the
     worker, smbus2); ``chip_thread``: False runs the chip jobs in the executor thread (a lock-step simulation)."""
 

@@ -54,8 +54,6 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from hindrax_msgs.srv import StartRecording, StopRecording
@@ -63,6 +61,7 @@ from hindrax_msgs.srv import StartRecording, StopRecording
 from ..config import ConfigError
 from ..node_common import load_node_config
 from ..ros_process import RosProcess
+from ..vehicle_node import VehicleNode
 from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
 from .msgdefs import normalize_type_name
@@ -73,16 +72,13 @@ from .writer import WriterOptions
 from .writer_thread import ThreadedBagWriter
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
-#: The recorder's subscriptions carry no QoS event handlers: each would be visited in Python on every executor spin
-#: (rclpy's SingleThreadedExecutor), and the recorder matches every publisher's QoS itself (recording.qos).
-_NO_EVENT_HANDLERS = SubscriptionEventCallbacks(use_default_callbacks=False)
 #: default ``drain_period_s``, s: the writer thread drains what the callbacks queued 10 times a second
 #: (docs/architecture.md §10.1)
 DRAIN_PERIOD_S = 0.1
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
 
 
-class RecorderNode(Node):
+class RecorderNode(VehicleNode):
     """Records selected topics to MCAP bags; see the module docstring for parameters and interfaces.
 
     Raises :class:`hindrax_drivers.config.ConfigError` when the vehicle configuration is invalid and
@@ -286,8 +282,7 @@ class RecorderNode(Node):
                              reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
             self._writer.add_topic(topic, type_name, profiles)
             self._subs[topic] = self.create_subscription(
-                cls, topic, functools.partial(self._on_message, topic), qos, raw=True,
-                event_callbacks=_NO_EVENT_HANDLERS)
+                cls, topic, functools.partial(self._on_message, topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
 
     def _on_message(self, topic: str, data: bytes) -> None:

@@ -64,7 +64,6 @@ from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.node import Node
 from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -79,6 +78,7 @@ from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, Ti
 from ..config import Spec
 from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
 from ..config.node_parameters import declare_node_parameter
+from ..vehicle_node import VehicleNode
 from .core import SupervisorCore, SupervisorLimits
 from .disarm_cause import DisarmCauses
 
@@ -98,7 +98,7 @@ _NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 IMU_QUEUE_DEPTH = 50
 
 
-class SupervisorNode(Node):
+class SupervisorNode(VehicleNode):
     """The safety supervisor (see the module docstring)."""
 
     def __init__(self, **kwargs: Any):

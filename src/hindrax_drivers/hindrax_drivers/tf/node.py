@@ -17,11 +17,11 @@ from typing import Any
 
 from geometry_msgs.msg import TransformStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from tf2_msgs.msg import TFMessage
 
 from ..node_common import load_node_config, run_node
+from ..vehicle_node import VehicleNode
 from .static_tf import DEFAULT_FRAME_IDS, TF_KEYS, vehicle_transforms
 
 __all__ = ["StaticTfNode", "STATIC_TF_QOS", "main"]
@@ -34,7 +34,7 @@ _FRAME_PARAMS = {"base": "base_frame", "imu": "imu_frame", "dvl": "dvl_frame", "
                  "pressure": "pressure_frame", "thruster_prefix": "thruster_frame_prefix"}
 
 
-class StaticTfNode(Node):
+class StaticTfNode(VehicleNode):
     """Publishes the vehicle's static transforms once at start-up (latched). Raises ConfigError."""
 
     def __init__(self, node_name: str = "static_tf", **kwargs: Any):

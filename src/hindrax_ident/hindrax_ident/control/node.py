@@ -59,8 +59,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TransformStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.node import Node
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_srvs.srv import SetBool, Trigger
 from tf2_msgs.msg import TFMessage
@@ -71,6 +69,7 @@ from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node
+from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
 from .maneuvers import HoldController, dof_authority
@@ -97,7 +96,7 @@ ODOM_PERIOD_S = 0.1
 GOAL_TICK_S = 0.2
 
 
-class ControllerNode(Node):
+class ControllerNode(VehicleNode):
     """The controller as a ROS node (module docstring). config: a VehicleConfig (default: the node's parameters);
     model_file: overrides the ``model_file`` parameter. Raises :class:`ConfigError` for an invalid configuration."""
 
@@ -147,20 +146,17 @@ class ControllerNode(Node):
         self._last_odom_s = -math.inf
         self._last_tick_s: float | None = None
         self._report = self.hold.core.gain_report()
-        sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
-        pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
-        self._sub_ev = sub_ev
         self._streams: list = []
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
         self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos(), **sub_ev)
-        self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10, **sub_ev)
-        self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
-        self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10, **pub_ev)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
+        self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10)
+        self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
+        self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10)
         # the estimate for ROS tools (REP-105): nav_msgs/Odometry and the odom -> base_link transform
-        self.pub_odom = self.create_publisher(Odometry, "odom", 10, **pub_ev)
-        self.pub_tf = self.create_publisher(TFMessage, "/tf", 10, **pub_ev)
+        self.pub_odom = self.create_publisher(Odometry, "odom", 10)
+        self.pub_tf = self.create_publisher(TFMessage, "/tf", 10)
         self.create_service(Trigger, "controller/hold", self._on_hold)
         self.create_service(SetBool, "controller/enable", self._on_enable)
         # one tick timer runs at a time (:meth:`_retime`): control.rate_hz while enabled, ODOM_PERIOD_S while disabled,
@@ -200,7 +196,7 @@ class ControllerNode(Node):
     def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
         """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
         room for an executor held up on a loaded machine."""
-        return self.create_subscription(msg_type, topic, handler, depth, **self._sub_ev)
+        return self.create_subscription(msg_type, topic, handler, depth)
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the

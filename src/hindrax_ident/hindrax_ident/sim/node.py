@@ -58,7 +58,6 @@ from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -66,6 +65,7 @@ from rosgraph_msgs.msg import Clock as ClockMsg
 from hindrax_drivers import frames
 from hindrax_drivers.config import VehicleConfig
 from hindrax_drivers.node_common import load_node_config, run_node
+from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.msg import ThrusterPwm
 
 from .pool import FACES
@@ -87,7 +87,7 @@ def time_msg(t_s: float) -> TimeMsg:
     return TimeMsg(sec=sec, nanosec=nsec)
 
 
-class SimulatorNode(Node):
+class SimulatorNode(VehicleNode):
     """Thin rclpy node over :class:`Simulator` (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters, see

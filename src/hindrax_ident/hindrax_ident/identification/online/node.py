@@ -103,8 +103,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure, Imu, Range
 from std_msgs.msg import String
@@ -116,6 +114,7 @@ from hindrax_drivers.lean_cdr import wrench_stamped_cdr
 from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
 from hindrax_drivers.node_common import load_node_config, run_node
+from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
 
@@ -160,7 +159,7 @@ def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEsti
     return msg
 
 
-class IdentificationNode(Node):
+class IdentificationNode(VehicleNode):
     """The identification executive as a ROS node (module docstring).
 
     config: a VehicleConfig (default: from the node's parameters,
@@ -189,24 +188,21 @@ class IdentificationNode(Node):
                                        sensor_timeout_s=self.sensor_timeout_s, stop_timeout_s=self.stop_timeout_s)
         self._ended: dict[bytes, GoalRun] = {}  # goal UUID -> ended run whose result is being delivered
 
-        # no QoS event handlers (rclpy's default incompatible-QoS warning handler of each is visited in Python on
-        # every executor spin); a sensor that does not arrive fails the goal (sensor_timeout_s, DVL lock)
-        sub_ev = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
-        pub_ev = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
-        self._sub_ev = sub_ev
+        # no QoS event handlers (VehicleNode): a sensor that does not arrive fails the goal (sensor_timeout_s,
+        # DVL lock)
         self._inputs: list = []  # the sensor subscriptions, open while a goal is accepted or runs
         # the ESC's armed flag while no goal runs (latched, on change; the goal's pulse_width reports carry it too)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos(), **sub_ev)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
         self.create_subscription(DiagnosticStatus, "supervisor/status", lambda m: self.core.on_disarm_cause(
-            next((kv.value for kv in m.values if kv.key == "disarm_cause"), "")), 10, **sub_ev)
-        self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10, **pub_ev)
-        self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10, **pub_ev)
-        self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50, **pub_ev)
-        self.pub_abort = self.create_publisher(String, "supervisor/abort", 10, **pub_ev)
+            next((kv.value for kv in m.values if kv.key == "disarm_cause"), "")), 10)
+        self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
+        self.pub_estimate = self.create_publisher(HydroEstimate, "identification/estimates", 10)
+        self.pub_status = self.create_publisher(ManeuverStatus, "identification/status", 50)
+        self.pub_abort = self.create_publisher(String, "supervisor/abort", 10)
         # transient local: a recorder or tool that subscribes after the step still gets every result
         latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC, latched, **pub_ev)
+        self.pub_calibration = self.create_publisher(DiagnosticArray, calibration_topic.TOPIC, latched)
         self._action = ActionServer(self, RunIdentification, "run_identification", execute_callback=self._goal_result,
                                     goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
                                     cancel_callback=lambda _goal: CancelResponse.ACCEPT)
@@ -256,7 +252,7 @@ class IdentificationNode(Node):
         if active:
             self.core.forget_inputs()
             # (type, topic, handler, QoS depth): the depths hold what arrives in 0.4-2 s, many ticks
-            self._inputs = [self.create_subscription(msg_type, topic, handler, depth, **self._sub_ev)
+            self._inputs = [self.create_subscription(msg_type, topic, handler, depth)
                             for msg_type, topic, handler, depth in (
                                 (Dvl, "dvl/data", self._on_dvl, 20),
                                 (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
