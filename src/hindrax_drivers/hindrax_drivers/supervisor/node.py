@@ -32,9 +32,10 @@ Publishes
     = the supervised quantities and, once the thrust stopped, ``disarm_cause``: ``<process>: <cause>; next:
     <step>``, :mod:`.disarm_cause`) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
 CPU (README "Performance on the Pi")
-    Publishers and subscriptions carry no QoS event handlers (rclpy's default is one incompatible-QoS warning
-    handler each, visited in Python on every executor spin): a sensor that stops reaching the supervisor, for a
-    QoS mismatch or any other reason, trips it through the ``supervisor.min_rate.*`` checks (where not 0).
+    A :class:`~hindrax_drivers.vehicle_node.VehicleNode`: no QoS event handlers (rclpy's default is one
+    incompatible-QoS warning handler each, visited in Python on every executor spin): a sensor that stops
+    reaching the supervisor, for a QoS mismatch or any other reason, trips it through the
+    ``supervisor.min_rate.*`` checks (where not 0).
     Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual
     pool and the tests take the same path): each sample is counted at the ROS time of its arrival and can trip at
     once; an ESC that reports armed while the supervisor is tripped is disarmed from that callback.
@@ -63,7 +64,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.clock import Clock, ClockType
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -90,9 +90,6 @@ CLOCK_STALL_TIMEOUT = Spec("float", "armed, ROS time standing still this long (s
                            "time on purpose (hindrax bringup with the virtual pool)", 0.2, 120.0)
 #: A disarm request is repeated this often while the ESC still reports armed after a breach, s.
 DISARM_RETRY_S = 0.2
-#: no QoS event handlers (module docstring, "CPU")
-_NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
-_NO_PUB_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 #: QoS depth of ``imu/data_raw``: 0.5 s at 102 Hz, room for an executor held up on a loaded machine (a sample lost
 #: in the queue lowers the rate the ``supervisor.min_rate.imu_hz`` check sees)
 IMU_QUEUE_DEPTH = 50
@@ -116,21 +113,19 @@ class SupervisorNode(VehicleNode):
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
         self.disarm_future = None  # the last esc/set_armed(arm=False) request
-        self.heartbeat = HeartbeatPublisher(self, "supervisor", event_callbacks=_NO_PUB_EVENTS)
+        self.heartbeat = HeartbeatPublisher(self, "supervisor")
         self.clock_monitor = ClockStepMonitor(self._now_s)
         #: ROS time standing still this long (steady s) while armed trips: parameter ``clock_stall_timeout_s``
         self.clock_stall_timeout_s = float(declare_node_parameter(self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT,
                                                                   cfg.supervisor.rate_window_s))
-        self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10,
-                                                event_callbacks=_NO_PUB_EVENTS)
-        ev = {"event_callbacks": _NO_SUB_EVENTS}
-        self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10, **ev)
-        self.create_subscription(Range, "ping/altitude", self.on_altitude, 10, **ev)
-        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10, **ev)
-        self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True, **ev)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos(), **ev)
-        self.create_subscription(String, "supervisor/abort", self.on_abort, 10, **ev)
-        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), raw=True, **ev)
+        self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10)
+        self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10)
+        self.create_subscription(Range, "ping/altitude", self.on_altitude, 10)
+        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10)
+        self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos())
+        self.create_subscription(String, "supervisor/abort", self.on_abort, 10)
+        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), raw=True)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")
