@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 
 import pytest
 
@@ -25,57 +26,67 @@ from hindrax_drivers.dds_transport import loopback_transport  # noqa: E402 - aft
 loopback_transport()
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+
+def _keep_bytecode() -> None:
+    """Where ``PYTHONDONTWRITEBYTECODE`` is set, let this session write bytecode (``__pycache__``, git-ignored) as on a
+    machine without it: the Python processes a run starts (nodes, launches, ``hindrax`` commands) then compile the
+    project once, not each at its start (0.3 s of CPU a process that imports the graph). Subprocesses inherit it."""
+    if os.environ.pop("PYTHONDONTWRITEBYTECODE", None):
+        sys.dont_write_bytecode = False
+
+
+_keep_bytecode()
+
 _domain_ctx = None
 
-#: The longest tests, longest first: seconds of one full run at load 7-10 on 2 cores (1610 s; about twice a quiet
-#: run's), setup included (the colcon build, test/conftest.py, falls to the first pool-day test), and the test's
-#: ``file::function``. Tests not listed follow in collection order; refresh the list from ``--durations=80``. An xdist
-#: group (a module with a module-scoped fixture) runs as one unit where its listed test stands (its tests run there,
-#: in file order), with the seconds of the whole group.
+#: The longest tests, longest first: seconds of each run alone (``-n 0 --durations=0``) at load 4-9 on 2 cores, setup
+#: included (the colcon build, test/conftest.py, falls to the first pool-day test), and the test's ``file::function``.
+#: Tests not listed follow in collection order; refresh the list from ``--durations``. An xdist group (a module with a
+#: module-scoped fixture, or the readers of a shared run) runs as one unit where its listed test stands (its tests run
+#: there, in file order), with the seconds of the whole group.
 LONGEST_FIRST = """
-439 test_pool_day.py::test_pool_day_as_the_readme_writes_it
-187 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
-160 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
-129 test_heave_independence.py::test_the_right_model_under_a_coloured_disturbance_is_trusted
-107 test_ident_timing_cv.py::test_the_equation_error_delay_goes_wrong_and_the_cross_validated_one_does_not
- 83 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
- 81 test_identification_accuracy.py::test_surge_and_heave_recover_the_configured_hydrodynamics
- 60 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
- 45 test_campaign_steps.py::test_the_sinker_is_held_by_reverse_thrust
- 41 test_ident_fit_intervals.py::test_with_config_the_file_is_config_ready
- 40 test_ident_persistence.py::test_a_delay_beyond_the_searched_range_is_reported_at_its_edge
- 37 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
- 35 test_calibration_graph.py::test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch
- 33 test_identification_campaign.py::test_translation_and_yaw_runs_stay_inside_the_pool_box
- 30 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
- 30 test_ident_persistence.py::test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter
- 30 test_ident_fit.py::test_imu_in_a_rotated_frame_and_unset_header_stamps
- 28 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
- 27 test_thrust_calibration.py::test_sinker_and_float_recover_heave_under_asymmetric_thrust
- 27 test_pool_rehearsal.py::test_the_rehearsal_runs_the_readme_pool_day_commands
- 24 test_campaign_abort_undo.py::test_an_aborted_calibration_asks_to_undo_its_load_and_the_next_campaign_confirms_it
+428 test_pool_day.py::test_pool_day_as_the_readme_writes_it
+118 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
+ 66 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
+ 57 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
+ 46 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
+ 40 test_gateway.py::test_a_command_aimed_at_one_vehicle_never_moves_the_other
+ 28 test_pool_rehearsal.py::test_the_rehearsal_runs_the_readme_pool_day_commands
+ 27 test_identification_campaign.py::test_translation_and_yaw_runs_stay_inside_the_pool_box
+ 26 test_ident_timing_cv.py::test_the_equation_error_delay_goes_wrong_and_the_cross_validated_one_does_not
+ 24 test_calibration_graph.py::test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch
+ 23 test_identification_accuracy.py::test_surge_and_heave_recover_the_configured_hydrodynamics
+ 23 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
+ 23 test_campaign_steps.py::test_the_sinker_is_held_by_reverse_thrust
  23 test_pool_day.py::test_pool_day
- 22 test_bench_robustness.py::test_twenty_thousand_fuzzed_inputs_per_parser_crash_none
- 21 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
- 21 test_ident_bag_fit_same.py::test_ident_bag_and_ident_fit_give_the_same_values_and_intervals
- 20 test_gateway.py::test_a_command_aimed_at_one_vehicle_never_moves_the_other
- 19 test_graybox_baseline.py::test_timing_chosen_by_cross_validation_is_the_truth
- 19 test_controller_node.py::test_controller_holds_depth_and_altitude_and_yields_wrench
- 18 test_thrust_calibration.py::test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90
+ 22 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
+ 21 test_second_graph.py::test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start
+ 21 test_thrust_calibration.py::test_sinker_and_float_recover_heave_under_asymmetric_thrust
+ 19 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
  18 test_pool_day.py::test_armed_esc_stays_armed_while_thrust_flows
- 17 test_thrust_calibration.py::test_line_pull_measures_the_horizontal_scale_in_surge_and_sway
- 17 test_refusals_leave_vehicle_armed.py::test_a_refused_tool_does_not_disarm_the_vehicle
- 16 test_second_graph.py::test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start
- 16 test_ident_bag_fit_same.py::test_a_parameter_at_its_bound_says_so_instead_of_an_interval
- 15 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
- 15 test_run_signals.py::test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind
- 15 test_ident_fit_every_bag.py::test_ident_fit_on_a_committed_bag_is_clean
- 14 test_rls_online_settings.py::test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign
- 14 test_rls.py::test_noise_variance_estimate_and_calibrated_std_with_forgetting
- 14 test_calibration_topic.py::test_ident_bag_names_a_truncated_bag_with_what_it_lacks
- 13 test_verdicts.py::test_scenarios_command_writes_table_and_json
- 13 test_ident_bag_fit_same.py::test_one_verdict_path_for_both_document_builders
- 12 test_excitation.py::test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping
+ 18 test_campaign_abort_undo.py::test_an_aborted_calibration_asks_to_undo_its_load_and_the_next_campaign_confirms_it
+ 17 test_heave_independence.py::test_the_right_model_under_a_coloured_disturbance_is_trusted
+ 17 test_ident_fit_intervals.py::test_with_config_the_file_is_config_ready
+ 16 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
+ 16 test_ident_persistence.py::test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter
+ 16 test_run_signals.py::test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind
+ 16 test_controller_node.py::test_controller_holds_depth_and_altitude_and_yields_wrench
+ 15 test_ident_fit.py::test_imu_in_a_rotated_frame_and_unset_header_stamps
+ 15 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
+ 14 test_refusals_leave_vehicle_armed.py::test_a_refused_tool_does_not_disarm_the_vehicle
+ 13 test_thrust_calibration.py::test_line_pull_measures_the_horizontal_scale_in_surge_and_sway
+ 12 test_ident_bag_fit_same.py::test_ident_bag_and_ident_fit_give_the_same_values_and_intervals
+ 12 test_control_evaluate.py::test_known_model_holds_the_depth_step_better_than_the_vehicle_file
+ 11 test_graybox_baseline.py::test_timing_chosen_by_cross_validation_is_the_truth
+ 10 test_thrust_calibration.py::test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90
+ 10 test_results_doc.py::test_bench_writes_its_section_only_when_asked
+ 10 test_verdicts.py::test_scenarios_command_writes_table_and_json
+ 10 test_cli_ident.py::test_run_writes_identification_report_and_summary
+ 10 test_ident_fit_every_bag.py::test_ident_fit_on_a_committed_bag_is_clean
+ 10 test_rls_online_settings.py::test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign
+  9 test_rls.py::test_noise_variance_estimate_and_calibrated_std_with_forgetting
+  8 test_excitation.py::test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping
+  6 test_bench_robustness.py::test_twenty_thousand_fuzzed_inputs_per_parser_crash_none
 """
 
 
