@@ -76,7 +76,9 @@ def _reads_use_sim_time(node: ast.AST) -> bool:
 
 
 def test_no_node_takes_a_message_outside_its_executor():
-    found = [f"{path}:{n.lineno}" for path, nodes in _nodes().items() for n in nodes if _call_name(n) == "take_message"]
+    # the ordered executor is an executor: it takes a ready subscription's message as rclpy's does
+    found = [f"{path}:{n.lineno}" for path, nodes in _nodes().items() for n in nodes
+             if _call_name(n) == "take_message" and path != "hindrax_ident/ordered_executor.py"]
     assert not found, f"messages taken outside an executor (a polled intake, a second input path): {found}"
 
 

@@ -33,8 +33,9 @@ PURE_CORE_TESTS = [f"src/hindrax_drivers/test/{name}.py" for name in (
     "test_esc_core", "test_esc_chip", "test_pca9685", "test_icm20948_core", "test_icm20948_protocol",
     "test_ms5837_protocol", "test_ms5837_core", "test_ping1d_protocol", "test_thrust_curve", "test_allocation")]
 #: what those files import besides the standard library (ament_index_python: the configuration finds the shipped
-#: vehicle file with it; a pure-Python wheel); versions from constraints.txt
-CORE_PACKAGES = ["numpy", "PyYAML", "ros-ament-index-python", "pytest", "hypothesis"]
+#: vehicle file with it; a pure-Python wheel; smbus2: an I2C burst over 32 bytes is an i2c_rdwr of smbus2.i2c_msg);
+#: versions from constraints.txt
+CORE_PACKAGES = ["numpy", "PyYAML", "ros-ament-index-python", "smbus2", "pytest", "hypothesis"]
 #: left to the 3.11 suite: 21 s alone at load 13 on 2 cores (3^8 sign patterns), numpy arithmetic the other
 #: allocation tests run too; the rest of the run takes about 45 s there
 NOT_HERE = ["test_fault10_quantisation_never_rounds_into_the_deadband"]
