@@ -17,10 +17,9 @@ pytestmark = pytest.mark.ros
 # the /clock steps, which a replay cannot reproduce. With it on, every later gyro value differs by the two
 # runs' bias estimates; it is switched off in both runs so that every field is compared exactly.
 OVERRIDES = {"sensors.icm20948.estimate_gyro_bias": False}
-# The committed bag was recorded with the ICM-20948 at 100 Hz (102.27 Hz achieved) and DLPFCFG 3, the vehicle file
-# before issue 25 set 50 Hz (51.1 Hz) and DLPFCFG 4: a replay runs the drivers with the recording's configuration
-# (DriverReplay's overrides), or the fresh driver would poll at another rate than the recorded reads.
-COMMITTED_BAG_OVERRIDES = {**OVERRIDES, "sensors.icm20948.sample_rate_hz": 100.0, "sensors.icm20948.dlpf_config": 3}
+# The committed bag was recorded (python -m hindrax_ident.record_bag) with the vehicle file's driver settings and
+# the same switch; a replay runs the drivers with the recording's configuration (DriverReplay's overrides).
+COMMITTED_BAG_OVERRIDES = OVERRIDES
 
 
 def test_raw_device_data_replayed_through_fresh_drivers_reproduces_the_parsed_topics(tmp_path):
