@@ -732,10 +732,10 @@ def diagnostic_values(config: p.ImuConfig, who_am_i: int | None, sample_rate_hz:
 
 @dataclass(frozen=True)
 class PollResult:
-    """One poll's reads (:func:`read_poll`). ready: INT_STATUS_1.RAW_DATA_0_RDY (None: not read); block: the 14-byte
-    accel/gyro/temperature block (None when the burst failed: ``error``); mag_block: the AK09916's ST1..ST2 (None: no
-    magnetometer, its read failed, or stale after a NACK); counters: diagnostics counters to add (``mag_nack``,
-    ``mag_i2c_failure``)."""
+    """One poll's reads (:func:`read_poll`). ready: INT_STATUS_1.RAW_DATA_0_RDY (None: not read);
+    block: the 14-byte accel/gyro/temperature block (None when the burst failed: ``error``);
+    mag_block: the AK09916's ST1..ST2 (None: no magnetometer, its read failed, or stale after a
+    NACK); counters: diagnostics counters to add (``mag_nack``, ``mag_i2c_failure``)."""
 
     ready: bool | None
     block: bytes | None
@@ -746,19 +746,22 @@ class PollResult:
 
 def read_poll(regs: BankedRegisters, mag_device: I2CPort, mag_mode: str, mag_available: bool,
               require_data_ready: bool, nack_filter: MagNackFilter) -> PollResult:
-    """The reads of one poll, in bank 0 (module docstring of the node): one burst ending with the sensor block from
-    ACCEL_XOUT_H (plus the AK09916 block in ``i2c_master`` mode), starting early enough to take the status registers
-    the poll needs in the same transfer: I2C_MST_STATUS (0x17, SLV0_NACK through ``nack_filter``) in ``i2c_master``
-    mode, else INT_STATUS_1 (0x1A, RAW_DATA_0_RDY) when ``require_data_ready``, else ACCEL_XOUT_H itself. One bus
-    transaction (one system call, one wake-up) per poll instead of three; the status registers between them
-    (INT_STATUS, INT_STATUS_2/3) are read and cleared too, which no step uses. In ``bypass`` mode the AK09916 block
-    is a second read, at 0x0C:0x10. Only the burst's failure is an error (the poll is dropped)."""
+    """The reads of one poll, in bank 0 (module docstring of the node): one burst ending with the
+    sensor block from ACCEL_XOUT_H (plus the AK09916 block in ``i2c_master`` mode), starting early
+    enough to take the status registers the poll needs in the same transfer: I2C_MST_STATUS (0x17,
+    SLV0_NACK through ``nack_filter``) in ``i2c_master`` mode, else INT_STATUS_1 (0x1A,
+    RAW_DATA_0_RDY) when ``require_data_ready``, else ACCEL_XOUT_H itself. One bus transaction (one
+    system call, one wake-up) per poll instead of three; the status registers between them
+    (INT_STATUS, INT_STATUS_2/3) are read and cleared too, which no step uses. In ``bypass`` mode
+    the AK09916 block is a second read, at 0x0C:0x10. Only the burst's failure is an error (the poll
+    is dropped)."""
     counters: list[str] = []
     master = mag_mode == "i2c_master" and mag_available
     first = p.I2C_MST_STATUS if master else p.INT_STATUS_1 if require_data_ready else p.ACCEL_XOUT_H
     skip = p.ACCEL_XOUT_H.address - first.address
     try:
-        data = bytes(regs.read(first, skip + p.SENSOR_BLOCK_LENGTH + (p.AK09916_BLOCK_LENGTH if master else 0)))
+        length = skip + p.SENSOR_BLOCK_LENGTH + (p.AK09916_BLOCK_LENGTH if master else 0)
+        data = bytes(regs.read(first, length))
     except I2CError as exc:
         return PollResult(None, None, None, (), exc)
     ready = bool(data[p.INT_STATUS_1.address - first.address] & p.INT_STATUS_1_RAW_DATA_0_RDY) \
@@ -769,7 +772,8 @@ def read_poll(regs: BankedRegisters, mag_device: I2CPort, mag_mode: str, mag_ava
         nack = bool(data[0] & p.I2C_MST_STATUS_SLV0_NACK)
         if nack:
             counters.append("mag_nack")
-        mag_block = nack_filter.update(data[skip + p.SENSOR_BLOCK_LENGTH:], nack)  # None: the sample before the NACK
+        # None: the sample before the NACK
+        mag_block = nack_filter.update(data[skip + p.SENSOR_BLOCK_LENGTH:], nack)
     elif mag_mode == "bypass" and mag_available:
         try:
             mag_block = mag_device.read_block(p.AK_ST1.address, p.AK09916_BLOCK_LENGTH)

@@ -89,11 +89,13 @@ class SocketI2CBus:
         return self._call("read_i2c_block_data", addr, register, length)
 
     def i2c_rdwr(self, *i2c_msgs):
-        """``smbus2.i2c_msg`` transfers (ctypes, not picklable) sent as (address, flags, bytes or length); the read
-        messages' buffers are filled from the answer, as the kernel fills them."""
-        spec = [(int(m.addr), int(m.flags), int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
+        """``smbus2.i2c_msg`` transfers (ctypes, not picklable) sent as (address, flags, bytes or
+        length); the read messages' buffers are filled from the answer, as the kernel fills them."""
+        spec = [(int(m.addr), int(m.flags),
+                 int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
                 for m in i2c_msgs]
-        for m, data in zip((m for m in i2c_msgs if m.flags & I2C_M_RD), self._call("i2c_rdwr", spec)):
+        reads = (m for m in i2c_msgs if m.flags & I2C_M_RD)
+        for m, data in zip(reads, self._call("i2c_rdwr", spec)):
             ctypes.memmove(m.buf, data, m.len)
 
     def close(self) -> None:
@@ -104,9 +106,10 @@ class SocketI2CBus:
 
 
 def _rdwr(bus: Any, spec: list) -> list[bytes]:
-    """Run a :meth:`SocketI2CBus.i2c_rdwr` request on ``bus``: its messages as ``smbus2.i2c_msg``; returns what the
-    read messages read, in order."""
-    msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data) for addr, flags, data in spec]
+    """Run a :meth:`SocketI2CBus.i2c_rdwr` request on ``bus``: its messages as ``smbus2.i2c_msg``;
+    returns what the read messages read, in order."""
+    msgs = [i2c_msg.read(addr, data) if flags & I2C_M_RD else i2c_msg.write(addr, data)
+            for addr, flags, data in spec]
     bus.i2c_rdwr(*msgs)
     return [bytes(m) for m in msgs if m.flags & I2C_M_RD]
 
