@@ -32,8 +32,8 @@ Publishes
     = the supervised quantities and, once the thrust stopped, ``disarm_cause``: ``<process>: <cause>; next:
     <step>``, :mod:`.disarm_cause`) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
 CPU (README "Performance on the Pi")
-    A :class:`~hindrax_drivers.vehicle_node.VehicleNode`: no QoS event handlers (rclpy's default is one
-    incompatible-QoS warning handler each, visited in Python on every executor spin): a sensor that stops
+    A :class:`~hindrax_drivers.vehicle_node.VehicleNode`: no QoS event handlers (rclpy's default is
+    one incompatible-QoS warning handler each, visited in Python on every spin): a sensor that stops
     reaching the supervisor, for a QoS mismatch or any other reason, trips it through the
     ``supervisor.min_rate.*`` checks (where not 0).
     Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual
@@ -125,7 +125,8 @@ class SupervisorNode(VehicleNode):
         self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos())
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10)
-        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard, heartbeat_qos(), raw=True)
+        self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard,
+                                 heartbeat_qos(), raw=True)
         self.create_service(Trigger, "supervisor/estop", self.on_estop)
         self.create_service(Trigger, "supervisor/reset", self.on_reset)
         self.esc_client = self.create_client(SetArmed, "esc/set_armed")

@@ -171,7 +171,8 @@ class I2CSocketServer:
                 return
             try:
                 with self.lock:
-                    result = _rdwr(self.bus, *args) if name == "i2c_rdwr" else getattr(self.bus, name)(*args)
+                    call = getattr(self.bus, name) if name != "i2c_rdwr" else None
+                    result = call(*args) if call else _rdwr(self.bus, *args)
                 reply = (True, result)
             except OSError as exc:
                 reply = (False, (exc.errno, str(exc)))

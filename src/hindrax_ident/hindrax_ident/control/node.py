@@ -150,7 +150,8 @@ class ControllerNode(VehicleNode):
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
         self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
+                                 esc_state_qos())
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10)

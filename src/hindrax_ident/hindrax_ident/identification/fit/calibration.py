@@ -442,7 +442,7 @@ def decay_inertia(record: Any, dof: str, stiffness_n_m_per_rad: float, stiffness
             "window_s": [float(t0), float(t1)]}
 
 
-# Joint estimation: thrust scales and empirical priors as parameters (docs/identification.md §6.2-3)
+# Joint estimation: thrust scales and empirical priors as unknowns (docs/identification.md §6.2-3)
 
 def _sensitivity_matrix(r, model: ScaleModel, s_c: np.ndarray) -> np.ndarray:
     """(p, n_scales) d theta / d s of a DOF's parameters at the point scales s_c: the measured
