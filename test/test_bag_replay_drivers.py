@@ -6,8 +6,9 @@ import pytest
 from hindrax_drivers.config import default_config_path
 from hindrax_ident.record_bag import record_simulated_run
 from hindrax_drivers.recording.reader import BagReader
-from hindrax_drivers.recording.replay_devices import (PARSED_TOPICS, DriverReplay, compare_parsed,
-                                                      recorded_parsed)
+from hindrax_drivers.recording.replay_devices import (PARSED_TOPICS, DriverReplay, ReplayHardware, compare_parsed,
+                                                      i2c_transactions, recorded_parsed)
+from hindrax_drivers.recording.reader import iter_raw_device_data
 from hindrax_drivers.testing import ros_context
 
 pytestmark = pytest.mark.ros
@@ -48,9 +49,9 @@ def test_raw_device_data_replayed_through_fresh_drivers_reproduces_the_parsed_to
             replay.close()
     hw = replay.hardware
     # everything recorded was consumed: every serial byte read, every I2C read served, no serial byte dropped
-    assert all(d.done for d in hw.serial.values())
+    assert [n for n, d in hw.serial.items() if not d.done] == []
     assert set(dropped) == {"dvl75", "ping1d"} and all(n == 0 for n in dropped.values()), dropped
-    assert hw.i2c_done()
+    assert hw.i2c_reads_left() == {}  # else: the device whose recorded reads the fresh driver did not make
     # the fresh MS5837 and ICM-20948 drivers wrote exactly the recorded register writes, in order
     for address, dev in hw.i2c.items():
         if hw.i2c_device_of[address] in ("ms5837", "icm20948"):
@@ -78,5 +79,28 @@ def test_committed_simulator_bag_replays_through_fresh_drivers():
             replay.run(timeout_s=30.0)
         finally:
             replay.close()
-    assert replay.hardware.i2c_done() and all(d.done for d in replay.hardware.serial.values())
+    # a stale bag (a driver that now reads otherwise) names the device whose recorded reads were not consumed
+    assert replay.hardware.i2c_reads_left() == {}, "rerecord with python -m hindrax_ident.record_bag"
+    assert [n for n, d in replay.hardware.serial.items() if not d.done] == []
     assert compare_parsed(recorded, replay.received) == []
+
+
+def test_the_replay_names_the_i2c_device_whose_recorded_reads_are_left():
+    """What a stale bag reports: each I2C device with recorded reads not made, by name and count; a device whose
+    every recorded read was made leaves the list."""
+    from pathlib import Path
+
+    bag = Path(__file__).resolve().parents[1] / "src" / "hindrax_drivers" / "test" / "data" / "sim_drivers_3s"
+    hw = ReplayHardware(bag, devices=("ms5837", "icm20948"))
+    try:
+        left = hw.i2c_reads_left()
+        assert set(left) == {"ms5837", "icm20948"} and all(n > 0 for n in left.values()) and not hw.i2c_done()
+        for address, tr in i2c_transactions(iter_raw_device_data(bag, "ms5837")).items():
+            for register, reads in tr.reads.items():
+                for data in reads:  # the driver's reads, in the recorded order, register pointer first
+                    if register >= 0:
+                        hw.i2c[address].i2c_write(bytes([register]))
+                    assert hw.i2c[address].i2c_read(len(data)) == data
+        assert hw.i2c_reads_left() == {"icm20948": left["icm20948"]}
+    finally:
+        hw.close()

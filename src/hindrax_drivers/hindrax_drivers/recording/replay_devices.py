@@ -318,9 +318,13 @@ class ReplayHardware:
         dev = self.serial[name]
         return dev.done and bytes_read >= dev.total_bytes
 
+    def i2c_reads_left(self) -> dict[str, int]:
+        """{device name: recorded I2C reads not served yet} of the devices with any left ({}: all served)."""
+        return {self.i2c_device_of[a]: d.reads_left for a, d in self.i2c.items() if d.reads_left}
+
     def i2c_done(self) -> bool:
-        """True when every recorded I2C read has been served."""
-        return all(d.reads_left == 0 for d in self.i2c.values())
+        """True when every recorded I2C read has been served (:meth:`i2c_reads_left` is empty)."""
+        return not self.i2c_reads_left()
 
     def close(self) -> None:
         """Stop the pty threads (idempotent)."""
