@@ -162,7 +162,6 @@ def covariance_flu_to_frd(cov) -> np.ndarray:
     return _rotate_covariance(cov, R_FLU_FRD)
 
 
-covariance_frd_to_flu = covariance_flu_to_frd  # the rotation is its own inverse
 
 
 def covariance_enu_to_ned(cov) -> np.ndarray:
@@ -170,7 +169,6 @@ def covariance_enu_to_ned(cov) -> np.ndarray:
     return _rotate_covariance(cov, R_ENU_NED)
 
 
-covariance_ned_to_enu = covariance_enu_to_ned
 
 
 def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
@@ -235,15 +233,3 @@ def rotation_matrix_from_quaternion(q_xyzw) -> np.ndarray:
                      np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
                      np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1)],
                     axis=-2)
-
-
-def wrench_about_point(force, torque, application_point, reference_point=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """Move a wrench to a new reference point: tau_ref = [F; T + (p_app - p_ref) x F].
-
-    force (N), torque (N m) and points (m) are 3-vectors in one and the same frame (any of FLU/FRD).
-    Returns the 6-vector [F; T_ref]. [Hindrax-Drag] eq. 9 is the special case torque = 0, reference = CG.
-    """
-    f = _vec3(force)
-    t = _vec3(torque)
-    r = _vec3(application_point) - _vec3(reference_point)
-    return np.concatenate([f, t + np.cross(r, f)], axis=-1)

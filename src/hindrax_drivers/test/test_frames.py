@@ -60,7 +60,7 @@ def test_covariances():
     ned = frames.covariance_enu_to_ned(c)
     assert np.allclose(np.diag(ned), [2, 1, 3]) and ned[0, 1] == pytest.approx(0.5)
     six = frames.covariance_flu_to_frd(np.eye(6) + 0.1)
-    assert np.allclose(frames.covariance_frd_to_flu(six), np.eye(6) + 0.1)
+    assert np.allclose(frames.covariance_flu_to_frd(six), np.eye(6) + 0.1)  # its own inverse
     with pytest.raises(ValueError):
         frames.covariance_flu_to_frd(np.eye(4))
 
@@ -95,17 +95,6 @@ def test_rotating_a_vector_commutes_with_the_conversion(v):
     q_mar = frames.quaternion_ros_to_marine(q_ros)
     world_ned = Rotation.from_quat(q_mar).apply(frames.flu_to_frd(v))
     assert np.allclose(frames.enu_to_ned(world_enu), world_ned, atol=1e-9)
-
-
-def test_wrench_at_an_offset():
-    # 10 N forward applied 0.2 m to starboard of the CG (FRD) turns the vehicle to port: N = -2 N m
-    w = frames.wrench_about_point([10.0, 0, 0], [0, 0, 0], [0, 0.2, 0])
-    assert w.tolist() == pytest.approx([10, 0, 0, 0, 0, -2.0])
-    # same physics expressed in FLU: starboard is -y, yaw moment about up is +2 N m (turning left)
-    w_flu = frames.wrench_about_point([10.0, 0, 0], [0, 0, 0], [0, -0.2, 0])
-    assert np.allclose(frames.wrench_flu_to_frd(w_flu), w)
-    # a pure couple is unchanged by moving the reference point
-    assert np.allclose(frames.wrench_about_point([0, 0, 0], [1, 2, 3], [5, 5, 5], [1, 1, 1])[3:], [1, 2, 3])
 
 
 def test_quaternion_map_and_euler_angles_agree_with_scipys_rotations():

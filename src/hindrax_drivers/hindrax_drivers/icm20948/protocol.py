@@ -74,12 +74,9 @@ ACCEL_XOUT_H = Register(0, 0x2D, "ACCEL_XOUT_H")
 GYRO_XOUT_H = Register(0, 0x33, "GYRO_XOUT_H")
 TEMP_OUT_H = Register(0, 0x39, "TEMP_OUT_H")
 EXT_SLV_SENS_DATA_00 = Register(0, 0x3B, "EXT_SLV_SENS_DATA_00")
-FIFO_EN_1 = Register(0, 0x66, "FIFO_EN_1")
-FIFO_EN_2 = Register(0, 0x67, "FIFO_EN_2")
 FIFO_RST = Register(0, 0x68, "FIFO_RST")
 FIFO_MODE = Register(0, 0x69, "FIFO_MODE")
 FIFO_COUNTH = Register(0, 0x70, "FIFO_COUNTH")
-FIFO_COUNTL = Register(0, 0x71, "FIFO_COUNTL")
 FIFO_R_W = Register(0, 0x72, "FIFO_R_W")
 DATA_RDY_STATUS = Register(0, 0x74, "DATA_RDY_STATUS")
 FIFO_CFG = Register(0, 0x76, "FIFO_CFG")
@@ -95,7 +92,6 @@ TIMEBASE_CORRECTION_PLL = Register(1, 0x28, "TIMEBASE_CORRECTION_PLL")
 GYRO_SMPLRT_DIV = Register(2, 0x00, "GYRO_SMPLRT_DIV")
 GYRO_CONFIG_1 = Register(2, 0x01, "GYRO_CONFIG_1")
 GYRO_CONFIG_2 = Register(2, 0x02, "GYRO_CONFIG_2")
-XG_OFFS_USRH = Register(2, 0x03, "XG_OFFS_USRH")
 ODR_ALIGN_EN = Register(2, 0x09, "ODR_ALIGN_EN")
 ACCEL_SMPLRT_DIV_1 = Register(2, 0x10, "ACCEL_SMPLRT_DIV_1")
 ACCEL_SMPLRT_DIV_2 = Register(2, 0x11, "ACCEL_SMPLRT_DIV_2")
@@ -124,8 +120,6 @@ def slave_registers(slave: int) -> tuple[Register, Register, Register, Register]
 
 
 # ------------------------------------------------------------------------------ bits (MSB = 7)
-USER_CTRL_DMP_EN = 0x80
-USER_CTRL_FIFO_EN = 0x40
 USER_CTRL_I2C_MST_EN = 0x20
 USER_CTRL_I2C_IF_DIS = 0x10
 USER_CTRL_DMP_RST = 0x08
@@ -133,19 +127,14 @@ USER_CTRL_SRAM_RST = 0x04
 USER_CTRL_I2C_MST_RST = 0x02
 PWR_MGMT_1_DEVICE_RESET = 0x80
 PWR_MGMT_1_SLEEP = 0x40
-PWR_MGMT_1_LP_EN = 0x20
 PWR_MGMT_1_TEMP_DIS = 0x08
-PWR_MGMT_1_CLKSEL_MASK = 0x07
 CLKSEL_AUTO = 0x01
 INT_PIN_CFG_BYPASS_EN = 0x02
-INT_ENABLE_1_RAW_DATA_0_RDY_EN = 0x01
 #: INT_STATUS_1 bit 0 RAW_DATA_0_RDY_INT (datasheet register description; not in docs/devices.md).
 INT_STATUS_1_RAW_DATA_0_RDY = 0x01
 #: I2C_MST_STATUS bits (docs/devices.md gives bit 7 PASS_THROUGH; the others follow the datasheet
 #: register description: 6 SLV4_DONE, 5 LOST_ARB, 4 SLV4_NACK, 3..0 SLV3..SLV0_NACK).
-I2C_MST_STATUS_PASS_THROUGH = 0x80
 I2C_MST_STATUS_SLV4_DONE = 0x40
-I2C_MST_STATUS_LOST_ARB = 0x20
 I2C_MST_STATUS_SLV4_NACK = 0x10
 I2C_MST_STATUS_SLV0_NACK = 0x01
 I2C_SLV_ADDR_RNW = 0x80
@@ -154,10 +143,7 @@ I2C_SLV_CTRL_BYTE_SW = 0x40
 I2C_SLV_CTRL_REG_DIS = 0x20
 I2C_SLV_CTRL_GRP = 0x10
 I2C_SLV_CTRL_LENG_MASK = 0x0F
-I2C_SLV4_CTRL_INT_EN = 0x40
-I2C_MST_CTRL_MULT_MST_EN = 0x80
 I2C_MST_CTRL_P_NSR = 0x10
-I2C_MST_CTRL_CLK_MASK = 0x0F
 #: P_NSR | CLK = 7 (345.6 kHz), the recommended value used by SparkFun (docs/devices.md §4.6).
 I2C_MST_CTRL_RECOMMENDED = I2C_MST_CTRL_P_NSR | 0x07
 
@@ -204,17 +190,12 @@ AK09916_BLOCK_LENGTH = 9
 # ------------------------------------------------------------------------------ AK09916
 AK_WIA1 = Register(None, 0x00, "WIA1")
 AK_WIA2 = Register(None, 0x01, "WIA2")
-AK_RSV1 = Register(None, 0x02, "RSV1")
-AK_RSV2 = Register(None, 0x03, "RSV2")
 AK_ST1 = Register(None, 0x10, "ST1")
 AK_HXL = Register(None, 0x11, "HXL")
 AK_TMPS = Register(None, 0x17, "TMPS")
 AK_ST2 = Register(None, 0x18, "ST2")
-AK_CNTL1 = Register(None, 0x30, "CNTL1")
 AK_CNTL2 = Register(None, 0x31, "CNTL2")
 AK_CNTL3 = Register(None, 0x32, "CNTL3")
-AK_TS1 = Register(None, 0x33, "TS1")
-AK_TS2 = Register(None, 0x34, "TS2")
 AK_ST1_DRDY = 0x01
 AK_ST1_DOR = 0x02
 AK_ST2_HOFL = 0x08

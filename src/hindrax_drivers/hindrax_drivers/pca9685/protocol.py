@@ -42,8 +42,6 @@ DEFAULT_ADDRESS = 0x40
 GENERAL_CALL_ADDRESS = 0x00
 #: Software reset: data byte 0x06 written to the general-call address (docs/devices.md §5.1 [Q1 §7.1.4]).
 SWRST_DATA = 0x06
-#: LED All-Call 7-bit address (ALLCALLADR reset 0xE0, 8-bit) [UNVERIFIED, §5.1].
-ALLCALL_ADDRESS = 0x70
 
 # ------------------------------------------------------------------------------ registers
 MODE1 = 0x00
@@ -55,8 +53,6 @@ ALLCALLADR = 0x05
 LED0_ON_L = 0x06
 LAST_LED_REGISTER = 0x45
 ALL_LED_ON_L = 0xFA
-ALL_LED_ON_H = 0xFB
-ALL_LED_OFF_L = 0xFC
 ALL_LED_OFF_H = 0xFD
 PRE_SCALE = 0xFE
 TESTMODE = 0xFF
@@ -65,14 +61,10 @@ MODE1_RESTART = 0x80
 MODE1_EXTCLK = 0x40
 MODE1_AI = 0x20
 MODE1_SLEEP = 0x10
-MODE1_SUB1 = 0x08
-MODE1_SUB2 = 0x04
-MODE1_SUB3 = 0x02
 MODE1_ALLCALL = 0x01
 MODE2_INVRT = 0x10
 MODE2_OCH = 0x08
 MODE2_OUTDRV = 0x04
-MODE2_OUTNE_MASK = 0x03
 #: Bit 4 of LEDn_ON_H (full ON) and LEDn_OFF_H (full OFF).
 FULL_BIT = 0x10
 #: The channel that carries a constant reference pulse (the configured neutral width) while the oscillator is not

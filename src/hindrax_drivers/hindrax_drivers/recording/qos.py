@@ -39,11 +39,6 @@ def duration_to_dict(ns: int) -> dict[str, int]:
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
-def duration_from_dict(d: Mapping[str, Any]) -> int:
-    """``{"sec", "nsec"}`` -> nanoseconds (values beyond 2^63-1 ns clamp to infinity)."""
-    return min(int(d.get("sec", 0)) * 1_000_000_000 + int(d.get("nsec", 0)), INFINITE_NS)
-
-
 def default_profile(reliability: str = "reliable", durability: str = "volatile", depth: int = 10) -> dict:
     """A rosbag2-layout profile with default deadline/lifespan/liveliness (all infinite / automatic)."""
     inf = duration_to_dict(INFINITE_NS)

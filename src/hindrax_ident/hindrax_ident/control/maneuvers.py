@@ -131,13 +131,6 @@ class PoolBox:
         return np.array([0.5 * (self.x_min + self.x_max), 0.5 * (self.y_min + self.y_max),
                          0.5 * (self.z_min + self.z_max)])
 
-    def contains(self, p_ned_m: Sequence[float], tolerance_m: float = 0.0) -> bool:
-        """True when the point (3,) NED is inside the box grown by ``tolerance_m``."""
-        x, y, z = (float(v) for v in p_ned_m)
-        t = tolerance_m
-        return (self.x_min - t <= x <= self.x_max + t and self.y_min - t <= y <= self.y_max + t
-                and self.z_min - t <= z <= self.z_max + t)
-
     def room_m(self, p_ned_m: Sequence[float], direction_ned: Sequence[float]) -> float:
         """Distance (m) from ``p_ned_m`` along the unit ``direction_ned`` (3,) to the box boundary (0 if outside)."""
         p = np.asarray(p_ned_m, dtype=float)

@@ -152,11 +152,6 @@ class LsResult:
         """sqrt(sigma2): standard deviation of the residuals (units of y)."""
         return float(np.sqrt(self.sigma2))
 
-    def confidence_intervals(self, level: float = 0.95) -> np.ndarray:
-        """(p, 2) Student-t confidence intervals [low, high] of every parameter (n - p dof)."""
-        low, high = confidence_interval(self.theta, self.std, self.dof, level)
-        return np.column_stack([low, high])
-
     def index(self, name: str) -> int:
         """Index of the parameter called ``name``; KeyError if unknown or unnamed."""
         if self.names is None or name not in self.names:

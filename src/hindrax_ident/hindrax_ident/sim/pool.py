@@ -52,7 +52,7 @@ class ContactState:
     """Contact report at time ``t_s`` (s, simulated).
 
     ``since_s``: face name -> simulated time the current contact with that face started (only faces in
-    contact now). ``faces``: the names, in :data:`FACES` order. ``any_solid``: a wall or the floor is touched.
+    contact now). ``faces``: the names, in :data:`FACES` order.
     """
 
     t_s: float
@@ -61,11 +61,6 @@ class ContactState:
     @property
     def faces(self) -> tuple[str, ...]:
         return tuple(f for f in FACES if f in self.since_s)
-
-    @property
-    def any_solid(self) -> bool:
-        return any(f != "surface" for f in self.since_s)
-
 
 class FreeSurface:
     """Submerged fraction of a box hull at the free surface (module docstring).

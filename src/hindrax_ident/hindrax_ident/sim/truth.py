@@ -341,18 +341,6 @@ class Truth:
     overlay: Mapping[str, Any]
     source: str
 
-    @property
-    def differs(self) -> dict[str, tuple[Any, Any]]:
-        """Vehicle keys whose truth value differs from the vehicle file: key -> (vehicle, truth)."""
-        out = {}
-        for k, v in self.config.flat.items():
-            if k.startswith("simulation."):
-                continue
-            if self.vehicle.flat.get(k) != v:
-                out[k] = (self.vehicle.flat.get(k), v)
-        return out
-
-
 def truth_from_mapping(vehicle: VehicleConfig, doc: Any, source: str = "truth", fill_only: bool = False) -> Truth:
     """A :class:`Truth` from a parsed truth document (nested mapping, module docstring).
 
