@@ -27,6 +27,23 @@ def test_nbody_cpu_s_extrapolates_to_the_published_step_count_and_rejects_nonsen
         machine.nbody_cpu_s(repeats=0)
 
 
+def test_proc_cpu_s_counts_the_processes_cpu_time():
+    """The CPU time of this process from /proc agrees with the interpreter's own count (both tick-rounded), and a
+    gone process is an OSError."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    before, own0 = machine.proc_cpu_s(), time.process_time()
+    machine._advance(machine._bodies(), 20_000)  # some CPU
+    assert machine.proc_cpu_s() - before == pytest.approx(time.process_time() - own0, abs=0.05)
+    assert machine.proc_cpu_s(os.getpid()) == pytest.approx(machine.proc_cpu_s(), abs=0.05)
+    child = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    with pytest.raises(OSError):
+        machine.proc_cpu_s(int(child.stdout))
+
+
 def _launch(total_per_process: dict[str, float]) -> dict:
     window = {"per_process": total_per_process, "rates": {"/wrench": 50.0}, "wall_s": 10.0, "pool": 0.2,
               "bench": 0.05, "loadavg": 1.0, "rss_mb": {n: 100.0 for n in total_per_process},

@@ -20,6 +20,7 @@ Fast DDS) may scale differently between machines.
 from __future__ import annotations
 
 import math
+import os
 import time
 
 __all__ = ["NBODY_STEPS", "REFERENCE_NBODY_CPU_S", "nbody_cpu_s", "nbody_energy"]
@@ -103,3 +104,11 @@ def nbody_cpu_s(steps: int = 100_000, repeats: int = 5) -> float:
         _advance(bodies, steps)
         best = min(best, time.process_time() - t0)
     return best * NBODY_STEPS / steps
+
+
+def proc_cpu_s(pid: int | str = "self") -> float:
+    """User + system CPU seconds of process ``pid`` so far (all its threads; ``/proc/<pid>/stat``, proc(5));
+    ``"self/task/<tid>"`` gives one thread's. Raises OSError when the process is gone."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")

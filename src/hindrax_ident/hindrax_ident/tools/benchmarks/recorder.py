@@ -18,7 +18,6 @@ reserved ROS domain.
 """
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -39,6 +38,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 
+from .machine import proc_cpu_s
+
 NOMINAL = (  # topic suffix, stream in make_test_bags.STREAMS (for the message), rate Hz, best effort
     ("imu/data", "/imu/data", 100.0, True),
     ("imu/mag", "/imu/mag", 100.0, True),
@@ -54,11 +55,6 @@ NOMINAL = (  # topic suffix, stream in make_test_bags.STREAMS (for the message),
     ("raw/pca9685", "/raw/ms5837", 50.0, False),
 )
 RAMP_RATES_HZ = (1000.0, 2000.0, 3000.0, 4000.0, 6000.0)
-
-
-def _cpu_s(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def run(quick: bool = False) -> list[dict]:
@@ -98,7 +94,7 @@ def run(quick: bool = False) -> list[dict]:
                     wait_until(lambda: all(p.get_subscription_count() > 0 for p, *_ in pubs), 20, spin,
                                "recorder subscribed to every benchmark topic")
                     published = {t: 0 for *_, t in pubs}
-                    cpu0, t0 = _cpu_s(proc.pid), time.monotonic()
+                    cpu0, t0 = proc_cpu_s(proc.pid), time.monotonic()
                     next_due = [t0 for _ in pubs]
                     ev = threading.Event()
                     while True:
@@ -126,7 +122,7 @@ def run(quick: bool = False) -> list[dict]:
                             last, stable_since = got, time.monotonic()
                         elif time.monotonic() - stable_since > 2.0:
                             break
-                    cpu = _cpu_s(proc.pid) - cpu0
+                    cpu = proc_cpu_s(proc.pid) - cpu0
                     with lock:
                         recorded = {t: counts.get(t, 0) for t in published}
                     return published, recorded, cpu, wall

@@ -129,6 +129,7 @@ from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
 from .launch_layout import launch_processes, package_share
+from .machine import proc_cpu_s
 
 NEUTRAL_US = 1500.0
 #: Repeats per path: in-process paths, process failures (kill/stop/outage/brown-out), and both with ``--quick``
@@ -1048,13 +1049,9 @@ def _process_rows(repeats: int) -> dict[str, list]:
 
 def _cpu_share(pid: int, window_s: float) -> float:
     """CPU time of process ``pid`` (user + system, /proc) over ``window_s`` of wall time, in % of one core."""
-
-    def cpu_s() -> float:
-        fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    c0, t0 = cpu_s(), time.monotonic()
+    c0, t0 = proc_cpu_s(pid), time.monotonic()
     time.sleep(window_s)  # a measurement window, not a wait for a condition
-    return 100.0 * (cpu_s() - c0) / (time.monotonic() - t0)
+    return 100.0 * (proc_cpu_s(pid) - c0) / (time.monotonic() - t0)
 
 
 def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:

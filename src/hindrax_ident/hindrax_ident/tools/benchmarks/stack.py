@@ -28,12 +28,10 @@ simulator's steps, the emulators and the benchmark's own probe.
 
 Launch layout (``launch``): the processes ``ros2 launch hindrax_ident pool_test.launch.xml`` starts (the vehicle
 launch file with recording on, plus the identification node; read from the launch file by
-:func:`~hindrax_ident.tools.benchmarks.launch_layout.launch_processes`, so a process added to or
-merged in the launch
-file is measured as it will run), each its console script's function with the launch file's arguments
+:func:`~hindrax_ident.tools.benchmarks.launch_layout.launch_processes`, so a process added to or merged in the
+launch file is measured as it will run), each its console script's function with the launch file's arguments
 (``-r __node:=``, ``--params-file``, ``-p``) plus the bench's device ports; the virtual pool in another process
-(:mod:`hindrax_ident.tools.benchmarks.launch_layout`: simulator at real time, serial emulators on
-pseudo-terminals,
+(:mod:`hindrax_ident.tools.benchmarks.launch_layout`: simulator at real time, serial emulators on pseudo-terminals,
 I2C emulators behind a Unix socket standing in for ``/dev/i2c-1``); every node on system time. CPU per process:
 user + system time from ``/proc/<pid>/stat`` (all threads). The running phase is measured in
 :data:`RUNNING_WINDOWS` consecutive windows (the goal must still run at the end of the last); each row is the
@@ -45,16 +43,12 @@ rate, the largest gap between two messages and the age of a sample when the reco
 the process layout shows what it costs the 50 Hz sensor the supervisor watches (``launch_running_imu_*``).
 
 Machine speed: before and after the layouts, the CPU time of 5 million n-body steps here
-(:mod:`hindrax_ident.tools.benchmarks.machine`, ``machine_nbody_cpu_s``, their mean). The
-development machines of this
-project differ by about 2x between sessions; the launch totals are also given at the speed of a reference machine
-(``launch_*_cpu_total_at_reference_speed``, ``..._max_process_at_reference_speed``: the figures to compare between
-sessions). The n-body time did not follow what this workload meets, though: at about the same n-body time
-(26.9-27.9 s) the total read 36.4 % in one session's ``make bench`` and 47-56 % in four runs of the next session,
-and the virtual pool, whose code is the same in every run, moved with it (20.3 -> 28-33 %). So the totals are also
-given per unit of the pool's CPU in the same windows (``launch_*_cpu_total_per_pool``: 1.58-1.79 in six runs of two
-sessions whose totals read 36-72 %), and at the pool's CPU on the reference machine, :data:`REFERENCE_POOL_CPU`
-(``..._at_reference_pool``). The targets stay on the figures measured here.
+(:mod:`hindrax_ident.tools.benchmarks.machine`, ``machine_nbody_cpu_s``, their mean). The launch totals are also
+given at the speed of a reference machine (``launch_*_cpu_total_at_reference_speed``,
+``..._max_process_at_reference_speed``), per unit of the virtual pool's CPU in the same windows (the pool's code is
+the same in every run: ``launch_*_cpu_total_per_pool``) and at the pool's CPU on the reference machine,
+:data:`REFERENCE_POOL_CPU` (``..._at_reference_pool``): the figures to compare between machines. The targets stay
+on the figures measured here.
 
 Wake-ups: per process, the voluntary context switches of all its threads per window (each sleep ends in one;
 ``launch_*_wakeups_*``; in the note the busiest threads by name, each with its CPU: a count of wake-ups says where a
@@ -114,7 +108,7 @@ from hindrax_msgs.srv import SetArmed
 from .launch_layout import launch_processes, package_share, read_ports_file
 from .actuation import wrench_to_registers
 from .launch_node import SOCKET_ENV
-from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s
+from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s, proc_cpu_s
 from .recorder import subscribe_recorder_counts
 
 _CLK = os.sysconf("SC_CLK_TCK")
@@ -129,11 +123,6 @@ IMU_TOPIC = "/imu/data_raw"
 #: the launch layout is armed once its ROS graph has not changed for this long (s): the publish stalls of a new
 #: participant's first messages came 0-3.0 s after it appeared (hindrax_drivers.testing.GraphSettled)
 GRAPH_QUIET_S = 5.0
-
-
-def _proc_cpu_s(pid: int | str = "self") -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / _CLK
 
 
 def _proc_wakeups(pid: int) -> tuple[int, int, dict[str, int], dict[str, float]]:
@@ -195,7 +184,7 @@ def _thread_cpu_s() -> dict[str, float]:
         if t.native_id == me:
             continue
         try:
-            out[t.name] += _proc_cpu_s(f"self/task/{t.native_id}")
+            out[t.name] += proc_cpu_s(f"self/task/{t.native_id}")
         except (OSError, IndexError, ValueError, TypeError):
             continue
     return out
@@ -528,13 +517,13 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                     for k in range(windows if phase == "running" else 1):
                         if py_spy_dir is not None and phase == "running" and k == 0:
                             spies.extend(_start_py_spy(procs, py_spy_dir, duration_s))
-                        cpu0 = {n: _proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
+                        cpu0 = {n: proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
                         wake0 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
-                        bench0, load0 = _proc_cpu_s(), os.getloadavg()[0]
+                        bench0, load0 = proc_cpu_s(), os.getloadavg()[0]
                         wall0, t0_ns = time.monotonic(), time.time_ns()
                         end = wall0 + duration_s
                         wait_until(lambda: time.monotonic() > end, duration_s + 30, spin, f"{phase} window")
-                        cpu1 = {n: _proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
+                        cpu1 = {n: proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
                         wake1 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
                         wall, t1_ns = time.monotonic() - wall0, time.time_ns()
                         alive()
@@ -545,7 +534,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                                     for n in procs if n != "pool"},
                                         "participants": {n: ((cpu1[n] - cpu0[n]) / wall,
                                                              (wake1[n][0] - wake0[n][0]) / wall) for n in extra},
-                                        "bench": (_proc_cpu_s() - bench0) / wall,
+                                        "bench": (proc_cpu_s() - bench0) / wall,
                                         "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
                                         "goal_status": goal_status[0](),
                                         "rss_mb": {n: _proc_rss_mb(p.pid) for n, p in procs.items() if n != "pool"},
