@@ -18,9 +18,8 @@ with the topside profile's announcement period (``fastdds_topside.xml``: 0.5 s l
 
 Applied by: ``vehicle.launch.xml`` (``<set_env>`` for every vehicle process), the ``hindrax`` command
 (:mod:`hindrax_ident.tools.cli`), the virtual pool's bring-up, the tests (conftest,
-:func:`hindrax_drivers.testing.
-child_env`) and ``make bench``. This module imports nothing but the standard library, so ``hindrax --help``
-stays fast.
+:func:`hindrax_drivers.testing.child_env`) and ``make bench``. This module imports nothing but the standard
+library, so ``hindrax --help`` stays fast.
 """
 from __future__ import annotations
 

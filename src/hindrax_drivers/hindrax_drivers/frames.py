@@ -176,8 +176,8 @@ def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
 
     q_xyzw: (..., 4) quaternion(s) in ROS order (x, y, z, w), normalised here. Returns (..., 4) in the same order.
     R_ned_frd = R_ned_enu . R_enu_flu . R_flu_frd, applied as the constant linear map :data:`_Q_ROS_MARINE` that
-    the Hamilton product defines (the same result as composing scipy Rotations, 120 us per call through them,
-    for every DVL message in three nodes). Raises ValueError for a zero or non-finite quaternion.
+    the Hamilton product defines (the same result as composing scipy Rotations, without their cost per call).
+    Raises ValueError for a zero or non-finite quaternion.
     """
     return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
 
@@ -193,8 +193,8 @@ def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:
 
     Theta = [roll, pitch, yaw] with R = Rz(psi) Ry(theta) Rx(phi) (Fossen eq. 2.18; docs/identification.md §1.A,
     [NTNU-Thesis] eq. 2.2), from the unit quaternion's rotation matrix entries (Fossen 2011 eqs. 2.50 and 2.68):
-    phi = atan2(R32, R33), theta = -asin(R31), psi = atan2(R21, R11). Written out, not scipy's ``as_euler``
-    (56 us per call here, every DVL message in three nodes); the tests compare both. At theta = +-pi/2 (gimbal
+    phi = atan2(R32, R33), theta = -asin(R31), psi = atan2(R21, R11). Written out (scipy's ``as_euler`` costs
+    more per call, for every DVL message in three nodes); the tests compare both. At theta = +-pi/2 (gimbal
     lock, outside any ROV's envelope) phi and psi are not unique; this gives one valid pair.
     """
     q = _unit_quaternions(q_xyzw)

@@ -4,8 +4,7 @@
 truth that differs from the vehicle file (:mod:`hindrax_ident.sim.truth`); the loop is the one of the campaign
 (:class:`~..control.loop.HoldLoop`: sensor samples -> conditioning -> hold -> wrench -> thrust allocation -> pulse
 widths -> thrusters), at the controller node's rate (``control.rate_hz``, 50 Hz: the rate of the holds the vehicle
-flies, not the identification's slower tick). Three manoeuvres
-(:data:`MANEUVERS`):
+flies, not the identification's slower tick). Three manoeuvres (:data:`MANEUVERS`):
 
 * ``depth_step``: hold depth at ``depth_start_m``, then a ``depth_step_m`` (0.3 m) step down;
 * ``altitude_hold``: hold ``altitude_m`` (0.5 m, Ping1D) while surging north at the survey speed

@@ -77,9 +77,7 @@ Action execution
     cancel request), then EXECUTING and its end state together; the feedback, the result and cancelling work as
     for any goal. Why: an execute callback that is a coroutine awaiting the end stays a pending task for the whole
     campaign, and rclpy 7.1's EventsExecutor, which every node process spins, re-queues a pending task at once, a
-    busy loop (72 % of a core in the launch layout while a goal ran; docs/architecture.md §11.5). With the
-    SingleThreadedExecutor the same coroutine costs about 20 % of a core; without it the node costs about 5 % idle
-    and 10-13 % running a goal (docs/architecture.md §10.1).
+    busy loop (docs/architecture.md §11.5).
 Inputs
     The five inputs (about 130-180 messages/s) are subscription callbacks on the node's executor, whatever the clock
     (the vehicle, the virtual pool, ``hindrax run`` and the tests take the same path); the samples keep their header

@@ -1,11 +1,9 @@
 """Safety benchmark rows ``busy_neighbours_*``: the armed vehicle beside CPU-bound processes of another session.
 
 The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process,
-scheduled as ``vehicle.launch.xml`` starts them:
-:func:`hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`; the
-layout of :func:`hindrax_ident.tools.benchmarks.safety.running_layout`) are armed and commanded at
-1700 us. Then
-:data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a session of their own (as another service or
+scheduled as ``vehicle.launch.xml`` starts them: :func:`hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`;
+the layout of :func:`hindrax_ident.tools.benchmarks.safety.running_layout`) are armed and commanded at 1700 us.
+Then :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'``, in a session of their own (as another service or
 a terminal on the Pi), run for :data:`DURATION_S` seconds. This process stands for the hardware (it serves the
 emulated PCA9685 and its /OE line) and watches the heartbeats; hardware is never starved by a CPU load, so for the
 run it takes ``SCHED_FIFO`` at :data:`HARDWARE_STAND_IN_PRIORITY`, above the safety processes.
@@ -22,8 +20,7 @@ run it takes ``SCHED_FIFO`` at :data:`HARDWARE_STAND_IN_PRIORITY`, above the saf
 
 Without the right to set ``SCHED_FIFO`` (not root, no ``RLIMIT_RTPRIO``) the rows are not measured and say so.
 
-Run alone: ``python -m hindrax_ident.tools.benchmarks.busy_neighbours [--quick]`` (prints the rows
-as JSON).
+Run alone: ``python -m hindrax_ident.tools.benchmarks.busy_neighbours [--quick]`` (prints the rows as JSON).
 """
 from __future__ import annotations
 
@@ -107,9 +104,8 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
 
 
 def run(quick: bool = False) -> list[dict]:
-    """The ``safety`` section's rows (``make bench``; :mod:`hindrax_ident.tools.bench`): the
-    vehicle's scheduling, then
-    the nice-only comparison."""
+    """The ``safety`` section's rows (``make bench``; :mod:`hindrax_ident.tools.bench`): the vehicle's scheduling,
+    then the nice-only comparison."""
     return busy_rows(quick) + busy_rows(quick, realtime=False)
 
 

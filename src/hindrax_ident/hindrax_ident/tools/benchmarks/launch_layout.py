@@ -17,9 +17,8 @@ One entry point, ``python -m hindrax_ident.tools.benchmarks.launch_layout pool .
     (:class:`I2CSocketServer`). The emulators run on ``time.monotonic`` (the drivers' clock here). The pty paths
     are written to ``--ports-file`` (JSON, :func:`write_ports_file`: whole or not at all) once everything is up.
 
-The node processes run through :mod:`hindrax_ident.tools.benchmarks.launch_node`, which imports none
-of this module's
-simulator and emulators.
+The node processes run through :mod:`hindrax_ident.tools.benchmarks.launch_node`, which imports none of this
+module's simulator and emulators.
 """
 from __future__ import annotations
 

@@ -1,12 +1,8 @@
 """How fast this machine runs Python, measured in every stack benchmark run: the scale between a CPU figure here
-and the same figure on another machine, another session's or another moment's.
+("% of a core here") and the same figure on another machine or at another moment; and the CPU time of a process
+(:func:`proc_cpu_s`).
 
-Why. The stack benchmark's CPU figures are "% of a core here", and "here" is not one machine: the development
-machines differ by about 2x from one session to the next, and within one session a program's CPU
-time moves while its least over a few runs stays steady. So a comparison between sessions needs the
-machine's speed beside the figures, and within a session repeated runs.
-
-What. :func:`nbody_cpu_s`: the CPU time (``time.process_time``) of the classic n-body workload (the Sun and the
+:func:`nbody_cpu_s`: the CPU time (``time.process_time``) of the classic n-body workload (the Sun and the
 four giant planets, pairwise gravity, a semi-implicit Euler step of 0.01 years), the least over a few runs,
 extrapolated to the 5 million steps of the Computer Language Benchmarks Game's n-body timings. It is the project's
 own code for that algorithm, checked against the Benchmarks Game's published energies (tests); its times are not
@@ -23,13 +19,11 @@ import math
 import os
 import time
 
-__all__ = ["NBODY_STEPS", "REFERENCE_NBODY_CPU_S", "nbody_cpu_s", "nbody_energy"]
+__all__ = ["NBODY_STEPS", "REFERENCE_NBODY_CPU_S", "nbody_cpu_s", "nbody_energy", "proc_cpu_s"]
 
 #: Steps of the published timings (Benchmarks Game n-body, argument 5000000).
 NBODY_STEPS = 5_000_000
-#: :func:`nbody_cpu_s` on the reference machine, s: the development machine of 2026-11-23's last session (commit
-#: c04cb0f; least of 12 quiet runs 26.8 s, the others' least-of-3 26.8-27.2 s), on which that commit's
-#: ``launch_running_cpu_total`` read 41.6 %.
+#: :func:`nbody_cpu_s` on the reference machine, s (the least of 12 quiet runs: 26.8 s).
 REFERENCE_NBODY_CPU_S = 27.0
 
 _DAYS_PER_YEAR = 365.24

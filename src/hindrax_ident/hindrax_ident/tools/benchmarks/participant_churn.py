@@ -2,12 +2,11 @@
 
 The vehicle's three safety processes (the ESC node, the supervisor and the output guard, each in its own process
 on the shipped transport, :mod:`hindrax_drivers.dds_transport`, scheduled as the vehicle launch file starts them;
-the layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes`) are armed and commanded
-at 1700 us. Then a new
-ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s subscriber to
-``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health --quiet``), each
-exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a safety
-process on such a start; the rows say whether it does:
+the layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes`) are armed and commanded at 1700 us.
+Then a new ROS 2 process starts every :data:`PERIOD_S` seconds for :data:`DURATION_S` seconds (alternately a 3 s
+subscriber to ``/diagnostics`` and the three heartbeats, as ``ros2 topic echo`` would, and ``hindrax health
+--quiet``), each exiting on its own. Fast DDS's shared-memory health check (Fast-DDS issue 6535) can stall a
+safety process on such a start; the rows say whether it does:
 
 * ``participant_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
 * ``participant_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive messages of any of the three
@@ -91,8 +90,8 @@ def hardware_priority() -> Iterator[str]:
 class _VehicleLayout(_Layout):
     """The safety layout with the vehicle's scheduling: the three safety processes real-time, at nice -5 where that
     is refused, as ``vehicle.launch.xml`` starts them
-    (:func:`~hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`),
-    each in a session of its own as a launched process is."""
+    (:func:`~hindrax_ident.tools.benchmarks.safety.vehicle_scheduling`), each in a session of its own as a
+    launched process is."""
 
     new_session = True
 

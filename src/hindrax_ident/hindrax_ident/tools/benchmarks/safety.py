@@ -6,8 +6,8 @@ commanded to 1700 us on every thruster, then the event happens; the time is take
 I2C transaction after which the emulator decodes every thruster channel at neutral (1500 us within one count):
 
 * ``watchdog``: commands stop; measured from the last command the node took, so it includes
-  ``esc.watchdog_timeout_s``
-  (0.5 s in the shipped file); the row ``..._beyond_timeout`` subtracts it (the design bound: one output period);
+  ``esc.watchdog_timeout_s`` (0.5 s in the shipped file); the row ``..._beyond_timeout`` subtracts it (the design
+  bound: one output period);
 * ``disarm_service``: ``esc/set_armed`` with ``arm=False`` called;
 * ``supervisor_breach``: a ``pressure/depth`` message beyond ``supervisor.max_depth_m`` published;
 * ``estop``: ``supervisor/estop`` called;
@@ -43,19 +43,15 @@ supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
 * ``replay_alone_stopped_outputs``: the repeats in which the replay itself stopped the outputs before the kill (a
   second heartbeat publisher is a fault), with the time from the replay process's start in the note.
 
-ROS 2 processes started while armed (:mod:`hindrax_ident.tools.benchmarks.participant_churn`, the
-same layout):
+ROS 2 processes started while armed (:mod:`hindrax_ident.tools.benchmarks.participant_churn`, the same layout):
 ``participant_churn_disarms`` (target 0) and ``participant_churn_heartbeat_gap_max_ms`` (target 100 ms). Beside two
-CPU-bound processes of another session (:mod:`hindrax_ident.tools.benchmarks.busy_neighbours`, the
-same layout):
+CPU-bound processes of another session (:mod:`hindrax_ident.tools.benchmarks.busy_neighbours`, the same layout):
 ``busy_neighbours_disarms`` (target 0) and ``busy_neighbours_heartbeat_gap_max_ms`` (target 100 ms), and the same
-at nice -5 only for comparison. The pool day's churn check
-(:mod:`hindrax_ident.tools.benchmarks.pool_day_churn`, the same
-layout with the gateway, two CPU-bound neighbours; per trial a 1 s subscriber inside on default transports, one on
-the topside and ``hindrax health``): ``pool_day_churn_disarms`` (target 0 in 15 trials) and
-``pool_day_churn_heartbeat_gap_max_ms`` (target 150 ms).
-The authority rows (:mod:`hindrax_ident.tools.benchmarks.sealed_authority`, the same layout with the
-gateway):
+at nice -5 only for comparison. The pool day's churn check (:mod:`hindrax_ident.tools.benchmarks.pool_day_churn`,
+the same layout with the gateway, two CPU-bound neighbours; per trial a 1 s subscriber inside on default
+transports, one on the topside and ``hindrax health``): ``pool_day_churn_disarms`` (target 0 in 15 trials) and
+``pool_day_churn_heartbeat_gap_max_ms`` (target 150 ms). The authority rows
+(:mod:`hindrax_ident.tools.benchmarks.sealed_authority`, the same layout with the gateway):
 ``internal_sockets_reachable_from_network`` and ``operator_*_requests_accepted`` (target 0).
 
 The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench's layout has it fitted
