@@ -41,13 +41,19 @@ ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 
 
 class Section:
-    """Base of the generated sections: ``PREFIX`` is the dotted path; reading an absent key raises KeyError.
+    """Base of the generated sections: ``PREFIX`` is the dotted path (the ``prefix`` class keyword of a subclass,
+    ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
     read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`.
     """
 
     PREFIX: ClassVar[str] = ""
+
+    def __init_subclass__(cls, prefix: str | None = None, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if prefix is not None:
+            cls.PREFIX = prefix
 
     @classmethod
     def build(cls, values: dict[str, Any], prefix: str | None = None) -> Any:
@@ -99,9 +105,9 @@ def _classes(path: str, node: dict, out: list[str]) -> None:
             _classes(f"{path}.{name}" if path else name, sub, out)
     if not path:
         return
-    lines = ["", "", "@dataclass(frozen=True, eq=False, repr=False)", f"class {_camel(path)}(Section):",
-             f'    """``{path}.*`` (docs: hindrax_drivers.config.SCHEMA)."""', "",
-             f'    PREFIX: ClassVar[str] = "{path}"', ""]
+    lines = ["", "", "@dataclass(frozen=True, eq=False, repr=False)",
+             f'class {_camel(path)}(Section, prefix="{path}"):',
+             f'    """``{path}.*`` (docs: hindrax_drivers.config.SCHEMA)."""', ""]
     for name, sub in node.items():
         if isinstance(sub, dict):
             lines.append(f"    {name}: {_camel(f'{path}.{name}')}")

@@ -15,13 +15,19 @@ ABSENT: Any = type("Absent", (), {"__repr__": lambda self: "<absent>"})()
 
 
 class Section:
-    """Base of the generated sections: ``PREFIX`` is the dotted path; reading an absent key raises KeyError.
+    """Base of the generated sections: ``PREFIX`` is the dotted path (the ``prefix`` class keyword of a subclass,
+    ``class X(Section, prefix="esc")``); reading an absent key raises KeyError.
 
     An absent required key is simply not set on the instance, so reading a present field is a plain attribute
     read (no per-access check on the control loops' paths) and only a missing one reaches :meth:`__getattr__`.
     """
 
     PREFIX: ClassVar[str] = ""
+
+    def __init_subclass__(cls, prefix: str | None = None, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if prefix is not None:
+            cls.PREFIX = prefix
 
     @classmethod
     def build(cls, values: dict[str, Any], prefix: str | None = None) -> Any:
@@ -50,10 +56,8 @@ class Section:
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class VehicleSection(Section):
+class VehicleSection(Section, prefix="vehicle"):
     """``vehicle.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "vehicle"
 
     name: str
     mass_kg: float
@@ -69,10 +73,8 @@ class VehicleSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class EnvironmentSection(Section):
+class EnvironmentSection(Section, prefix="environment"):
     """``environment.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "environment"
 
     water_density_kg_m3: float
     gravity_m_s2: float
@@ -81,32 +83,26 @@ class EnvironmentSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsSurgeSection(Section):
+class HydrodynamicsSurgeSection(Section, prefix="hydrodynamics.surge"):
     """``hydrodynamics.surge.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
-    PREFIX: ClassVar[str] = "hydrodynamics.surge"
-
     added_mass_kg: float
     linear_damping_kg_s: float
     quadratic_damping_kg_m: float
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsSwaySection(Section):
+class HydrodynamicsSwaySection(Section, prefix="hydrodynamics.sway"):
     """``hydrodynamics.sway.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
-    PREFIX: ClassVar[str] = "hydrodynamics.sway"
-
     added_mass_kg: float
     linear_damping_kg_s: float
     quadratic_damping_kg_m: float
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsHeaveSection(Section):
+class HydrodynamicsHeaveSection(Section, prefix="hydrodynamics.heave"):
     """``hydrodynamics.heave.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "hydrodynamics.heave"
 
     added_mass_kg: float
     linear_damping_positive_kg_s: float
@@ -116,43 +112,35 @@ class HydrodynamicsHeaveSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsRollSection(Section):
+class HydrodynamicsRollSection(Section, prefix="hydrodynamics.roll"):
     """``hydrodynamics.roll.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
-    PREFIX: ClassVar[str] = "hydrodynamics.roll"
-
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsPitchSection(Section):
+class HydrodynamicsPitchSection(Section, prefix="hydrodynamics.pitch"):
     """``hydrodynamics.pitch.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
-    PREFIX: ClassVar[str] = "hydrodynamics.pitch"
-
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsYawSection(Section):
+class HydrodynamicsYawSection(Section, prefix="hydrodynamics.yaw"):
     """``hydrodynamics.yaw.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
-    PREFIX: ClassVar[str] = "hydrodynamics.yaw"
-
     added_mass_kg_m2: float
     linear_damping_kg_m2_s: float
     quadratic_damping_kg_m2: float
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class HydrodynamicsSection(Section):
+class HydrodynamicsSection(Section, prefix="hydrodynamics"):
     """``hydrodynamics.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "hydrodynamics"
 
     added_mass_coupling: tuple[float, ...]
     surge: HydrodynamicsSurgeSection
@@ -164,30 +152,24 @@ class HydrodynamicsSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class EscOutputEnableGpioSection(Section):
+class EscOutputEnableGpioSection(Section, prefix="esc.output_enable_gpio"):
     """``esc.output_enable_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
-    PREFIX: ClassVar[str] = "esc.output_enable_gpio"
-
     chip: str | None
     line: int | None
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class EscOutputEnableFeedGpioSection(Section):
+class EscOutputEnableFeedGpioSection(Section, prefix="esc.output_enable_feed_gpio"):
     """``esc.output_enable_feed_gpio.*`` (docs: hindrax_drivers.config.SCHEMA)."""
 
-    PREFIX: ClassVar[str] = "esc.output_enable_feed_gpio"
-
     chip: str | None
     line: int | None
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class EscSection(Section):
+class EscSection(Section, prefix="esc"):
     """``esc.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "esc"
 
     i2c_bus: int
     i2c_address: int
@@ -210,10 +192,8 @@ class EscSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class LightsSection(Section):
+class LightsSection(Section, prefix="lights"):
     """``lights.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "lights"
 
     esc_channel: int
     pulse_width_off_us: float
@@ -221,10 +201,8 @@ class LightsSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SensorsDvl75Section(Section):
+class SensorsDvl75Section(Section, prefix="sensors.dvl75"):
     """``sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "sensors.dvl75"
 
     port: str
     baud_rate: int
@@ -242,10 +220,8 @@ class SensorsDvl75Section(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SensorsPing1dSection(Section):
+class SensorsPing1dSection(Section, prefix="sensors.ping1d"):
     """``sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "sensors.ping1d"
 
     port: str
     baud_rate: int
@@ -259,10 +235,8 @@ class SensorsPing1dSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SensorsMs5837Section(Section):
+class SensorsMs5837Section(Section, prefix="sensors.ms5837"):
     """``sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "sensors.ms5837"
 
     i2c_bus: int
     i2c_address: int
@@ -281,10 +255,8 @@ class SensorsMs5837Section(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SensorsIcm20948Section(Section):
+class SensorsIcm20948Section(Section, prefix="sensors.icm20948"):
     """``sensors.icm20948.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "sensors.icm20948"
 
     i2c_bus: int
     i2c_address: int
@@ -307,10 +279,8 @@ class SensorsIcm20948Section(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SensorsSection(Section):
+class SensorsSection(Section, prefix="sensors"):
     """``sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "sensors"
 
     dvl75: SensorsDvl75Section
     ping1d: SensorsPing1dSection
@@ -319,10 +289,8 @@ class SensorsSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class PoolSection(Section):
+class PoolSection(Section, prefix="pool"):
     """``pool.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "pool"
 
     length_m: float
     width_m: float
@@ -333,10 +301,8 @@ class PoolSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class LimitsSection(Section):
+class LimitsSection(Section, prefix="limits"):
     """``limits.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "limits"
 
     max_depth_m: float
     min_altitude_m: float
@@ -345,10 +311,8 @@ class LimitsSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class IdentificationSection(Section):
+class IdentificationSection(Section, prefix="identification"):
     """``identification.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "identification"
 
     levels_per_dof: int
     level_fraction_min: float
@@ -373,10 +337,8 @@ class IdentificationSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsDvl75Section(Section):
+class SimulationSensorsDvl75Section(Section, prefix="simulation.sensors.dvl75"):
     """``simulation.sensors.dvl75.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors.dvl75"
 
     noise_std_m_s: float | None
     bias_m_s: float | None
@@ -389,10 +351,8 @@ class SimulationSensorsDvl75Section(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsPing1dSection(Section):
+class SimulationSensorsPing1dSection(Section, prefix="simulation.sensors.ping1d"):
     """``simulation.sensors.ping1d.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors.ping1d"
 
     noise_std_m: float | None
     bias_m: float | None
@@ -401,10 +361,8 @@ class SimulationSensorsPing1dSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsMs5837Section(Section):
+class SimulationSensorsMs5837Section(Section, prefix="simulation.sensors.ms5837"):
     """``simulation.sensors.ms5837.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors.ms5837"
 
     noise_std_pa: float | None
     bias_pa: float | None
@@ -413,10 +371,8 @@ class SimulationSensorsMs5837Section(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsIcm20948AccelSection(Section):
+class SimulationSensorsIcm20948AccelSection(Section, prefix="simulation.sensors.icm20948_accel"):
     """``simulation.sensors.icm20948_accel.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors.icm20948_accel"
 
     noise_std_m_s2: float | None
     bias_m_s2: float | None
@@ -425,10 +381,8 @@ class SimulationSensorsIcm20948AccelSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsIcm20948GyroSection(Section):
+class SimulationSensorsIcm20948GyroSection(Section, prefix="simulation.sensors.icm20948_gyro"):
     """``simulation.sensors.icm20948_gyro.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors.icm20948_gyro"
 
     noise_std_rad_s: float | None
     bias_rad_s: float | None
@@ -437,10 +391,8 @@ class SimulationSensorsIcm20948GyroSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsIcm20948MagSection(Section):
+class SimulationSensorsIcm20948MagSection(Section, prefix="simulation.sensors.icm20948_mag"):
     """``simulation.sensors.icm20948_mag.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors.icm20948_mag"
 
     noise_std_t: float | None
     bias_t: float | None
@@ -450,10 +402,8 @@ class SimulationSensorsIcm20948MagSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsDvl75AttitudeSection(Section):
+class SimulationSensorsDvl75AttitudeSection(Section, prefix="simulation.sensors.dvl75_attitude"):
     """``simulation.sensors.dvl75_attitude.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors.dvl75_attitude"
 
     noise_std_rad: float | None
     bias_rad: float | None
@@ -462,10 +412,8 @@ class SimulationSensorsDvl75AttitudeSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSensorsSection(Section):
+class SimulationSensorsSection(Section, prefix="simulation.sensors"):
     """``simulation.sensors.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation.sensors"
 
     dvl75: SimulationSensorsDvl75Section
     ping1d: SimulationSensorsPing1dSection
@@ -477,10 +425,8 @@ class SimulationSensorsSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SimulationSection(Section):
+class SimulationSection(Section, prefix="simulation"):
     """``simulation.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "simulation"
 
     step_s: float
     real_time_factor: float
@@ -490,10 +436,8 @@ class SimulationSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class RecordingSection(Section):
+class RecordingSection(Section, prefix="recording"):
     """``recording.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "recording"
 
     output_root: str
     compression: str
@@ -506,10 +450,8 @@ class RecordingSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SupervisorMinRateSection(Section):
+class SupervisorMinRateSection(Section, prefix="supervisor.min_rate"):
     """``supervisor.min_rate.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "supervisor.min_rate"
 
     dvl_hz: float
     altimeter_hz: float
@@ -518,10 +460,8 @@ class SupervisorMinRateSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SupervisorRateCheckDisabledSection(Section):
+class SupervisorRateCheckDisabledSection(Section, prefix="supervisor.rate_check_disabled"):
     """``supervisor.rate_check_disabled.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "supervisor.rate_check_disabled"
 
     dvl: str | None
     altimeter: str | None
@@ -530,10 +470,8 @@ class SupervisorRateCheckDisabledSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class SupervisorSection(Section):
+class SupervisorSection(Section, prefix="supervisor"):
     """``supervisor.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "supervisor"
 
     check_rate_hz: float
     rate_window_s: float
@@ -552,10 +490,8 @@ class SupervisorSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class CalibrationSection(Section):
+class CalibrationSection(Section, prefix="calibration"):
     """``calibration.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "calibration"
 
     ballast_mass_kg: float
     ballast_volume_m3: float
@@ -569,10 +505,8 @@ class CalibrationSection(Section):
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class ControlSection(Section):
+class ControlSection(Section, prefix="control"):
     """``control.*`` (docs: hindrax_drivers.config.SCHEMA)."""
-
-    PREFIX: ClassVar[str] = "control"
 
     rate_hz: float | None
     depth_bandwidth_rad_s: float | None
