@@ -11,12 +11,11 @@ The pieces every safety node (ESC, output guard, supervisor) shares:
   vehicle's own beats is a second publisher, a wrong node name, a sequence that goes back or a new boot while armed:
   a fault, and a beat it rejects does not count as the peer being alive.
 * :class:`HeartbeatWatch`: the receiver's subscription that feeds it, taking the beats as bytes
-  (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: DDS
-  AUTOMATIC liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the subscription's liveliness event counts the
-  *live* publishers. Why not the graph's count alone: a SIGKILLed process's endpoints stay in the ROS graph until
-  its DDS participant lease runs out (20 s with Fast DDS's default), while its writer is no longer
-  alive after one heartbeat lease. A writer offering a longer lease (rclpy's default QoS: infinite)
-  does not match at all: its
+  (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: DDS AUTOMATIC
+  liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the subscription's liveliness event counts the *live*
+  publishers. Why not the graph's count alone: a SIGKILLed process's endpoints stay in the ROS graph until its
+  DDS participant lease runs out (20 s with Fast DDS's default), while its writer is no longer alive after one
+  heartbeat lease. A writer offering a longer lease (rclpy's default QoS: infinite) does not match at all: its
   beats never arrive, while the graph still shows its node name.
 * :class:`PublisherNames`: the node names of a topic's publishers, asked of the graph only when DDS says something
   changed (the subscription's matched, liveliness, incompatible-QoS and incompatible-type events), for

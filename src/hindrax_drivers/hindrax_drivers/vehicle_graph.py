@@ -16,12 +16,11 @@ Pure core:
   phrase naming the node.
 
 Graph side (rclpy, no executor needed): :func:`graph_view` reads a node's view of the graph, :func:`own_view` the
-caller's own nodes;
-:class:`ForeignVehicleWatch` applies :func:`foreign_vehicle_processes` to it over a discovery window, then every
-:data:`CHECK_PERIOD_S` for as long as the tool runs, and raises :class:`ForeignVehicleError` (one line naming the
-domain and the processes) when something is seen. :func:`refuse_before_start` runs the window from a bare look-out
-node before a tool creates anything: a refused tool must leave no trace on the vehicle's graph (its heartbeat
-publishers, even for the second before the refusal, disarm the vehicle's ESC).
+caller's own nodes; :class:`ForeignVehicleWatch` applies :func:`foreign_vehicle_processes` to it over a discovery
+window, then every :data:`CHECK_PERIOD_S` for as long as the tool runs, and raises :class:`ForeignVehicleError`
+(one line naming the domain and the processes) when something is seen. :func:`refuse_before_start` runs the window
+from a bare look-out node before a tool creates anything: a refused tool must leave no trace on the vehicle's
+graph (its heartbeat publishers, even for the second before the refusal, disarm the vehicle's ESC).
 """
 from __future__ import annotations
 

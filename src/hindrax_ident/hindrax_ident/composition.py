@@ -7,9 +7,8 @@ Console script ``ident_control_node`` (``pool_test.launch.xml``): both nodes kee
 is :data:`hindrax_drivers.composition.IDENT_GROUPS` (the launch-file readers, ``hindrax health`` and the SROS2
 policy, take the node names from there); this module maps them to their classes.
 
-Why one process (docs/architecture.md §10.1): the two largest processes of the launch layout load
-mostly the same Python modules (numpy, the vehicle model, the control law, the sensor conditioning)
-once (``launch_pss_*``).
+Why one process (docs/architecture.md §10.1): the two largest processes of the launch layout load mostly the same
+Python modules (numpy, the vehicle model, the control law, the sensor conditioning) once (``launch_pss_*``).
 Neither has a safety role (the supervisor, the output guard and the ESC's process stay alone, §8): a failure of
 one ends both, and the allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source.
 While an identification goal runs the controller is disabled and ticks every 0.2 s, so the pair costs about what

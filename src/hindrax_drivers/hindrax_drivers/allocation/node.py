@@ -8,13 +8,12 @@ Subscribes
     staleness rule as for wrenches applies to either stream.
 Publishes
     ``thrusters/command_pulse_width`` (hindrax_msgs/ThrusterPwm): pulse widths for the ESC node, us.
-    ``thrusters/forces`` (hindrax_msgs/ThrusterForces): thrust each thruster will produce, N.
-    ``allocation/status`` (hindrax_msgs/AllocationStatus): requested and achieved wrench (base_link),
-    scale, per-thruster saturation, rejection reason.
-    Pulse widths go out for every wrench; forces and status (display
-    and bag) at most every :data:`STATUS_PERIOD_S` (5 Hz) with the latest allocation, and at once when rejected,
-    the saturated thrusters or the kind of rejection change. The latest one is always sent: a held one goes out from the
-    stale-check timer once the period has passed.
+    ``thrusters/forces`` (hindrax_msgs/ThrusterForces): thrust each thruster will produce, N. ``allocation/status``
+    (hindrax_msgs/AllocationStatus): requested and achieved wrench (base_link), scale, per-thruster saturation,
+    rejection reason. Pulse widths go out for every wrench; forces and status (display and bag) at most every
+    :data:`STATUS_PERIOD_S` (5 Hz) with the latest allocation, and at once when rejected, the saturated thrusters or the
+    kind of rejection change. The latest one is always sent: a held one goes out from the stale-check timer once the
+    period has passed.
 
 A NaN/inf wrench, a wrench with an empty frame_id or in another frame than ``base_link``, one without a
 stamp (0: its age cannot be checked), a stale one (stamp older than ``thrusters.wrench_timeout_s`` by the node's

@@ -245,14 +245,13 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     """Declare the node's vehicle keys as described ROS parameters and return them validated.
 
     node: an rclpy Node created *without* ``automatically_declare_parameters_from_overrides``.
-    keys: SCHEMA key prefixes the node reads (None: every section, for nodes that use the whole vehicle,
-    such as the simulator). dynamic: prefixes (within ``keys``) the node applies while running; they stay
-    writable, everything else is read-only. on_change(cfg): called with the validated configuration after
-    a change to dynamic keys; raise ValueError (or ConfigError) with the reason to refuse it. locked(): '' while a
-    change may be applied, else the reason it is refused (``ArmedWatch.refusal``: safety-relevant keys are read-only
-    while armed); required with dynamic keys.
-    Returns a :class:`VehicleConfig` holding the node's keys only (``flat``). Raises :class:`ConfigError`
-    (one line per issue) on a missing, mistyped or out-of-range value.
+    keys: SCHEMA key prefixes the node reads (None: every section, for nodes that use the whole vehicle, such as the
+    simulator). dynamic: prefixes (within ``keys``) the node applies while running; they stay writable, everything
+    else is read-only. on_change(cfg): called with the validated configuration after a change to dynamic keys; raise
+    ValueError (or ConfigError) with the reason to refuse it. locked(): '' while a change may be applied, else the
+    reason it is refused (``ArmedWatch.refusal``: safety-relevant keys are read-only while armed); required with
+    dynamic keys. Returns a :class:`VehicleConfig` holding the node's keys only (``flat``). Raises
+    :class:`ConfigError` (one line per issue) on a missing, mistyped or out-of-range value.
     """
     generic = select_schema_keys(keys)
     dynamic = tuple(dynamic)

@@ -10,8 +10,7 @@ z_g W - z_b B (moment = restoring sin(angle); feedforward). Two sources:
   (``thrusters.thrust_fit_uncertainty_rel`` or ``thrust_uncertainty_rel``, the RMS of the two directions): the
   file states no uncertainty for its added masses, so this is a lower bound.
 * :func:`load_model` - ``identification.yaml`` (:mod:`hindrax_ident.identification.assessment.results`), read by this
-  small
-  tolerant loader (only ``provenance.vehicle_parameters`` (or, in files written before it,
+  small tolerant loader (only ``provenance.vehicle_parameters`` (or, in files written before it,
   ``provenance.configuration_sha256``), ``dofs.<dof>.<parameter>.value / std / verdict / reasons`` and
   ``joint.scales`` are used; unknown keys are ignored, so the schema may grow).
 

@@ -242,10 +242,9 @@ def displacement_from_acceleration(t_s, acceleration_m_s2, highpass_hz: Optional
     """Displacement and velocity by double integration with drift removal (module docstring).
 
     Steps: subtract the trapezoid-weighted mean acceleration (bias; exact for a record from rest
-    to rest) ->
-    cumulative trapezoid to velocity (0 at the first sample) -> optional zero-phase high-pass
-    (Butterworth order 2, odd padding) -> cumulative trapezoid to displacement -> subtract its
-    mean -> optional zero-phase high-pass (even padding).
+    to rest) -> cumulative trapezoid to velocity (0 at the first sample) -> optional zero-phase
+    high-pass (Butterworth order 2, odd padding) -> cumulative trapezoid to displacement ->
+    subtract its mean -> optional zero-phase high-pass (even padding).
 
     Args:
         t_s: (n,) strictly increasing times in s (should start at the release, from rest).

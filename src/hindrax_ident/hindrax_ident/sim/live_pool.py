@@ -194,8 +194,7 @@ class LivePool(DriverEndpoints):
     config_path: the vehicle file; directory: a folder for the socket (default: a new temporary one); env: the
     child's environment (default: this one); truth / seed: as :class:`LivePoolServer`; start_timeout_s: wall time
     for the devices to come up. Use as a context manager. The driver-facing methods are those of
-    :class:`~hindrax_drivers.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`,
-    :meth:`env`).
+    :class:`~hindrax_drivers.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`, :meth:`env`).
     Raises RuntimeError when the process does not come up or does not answer within ``timeout_s``.
     """
 

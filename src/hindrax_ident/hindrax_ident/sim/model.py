@@ -17,9 +17,8 @@ Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eq
 * C_RB: the coordinate-free form (docs/identification.md, Fossen 2011)
   ``C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)]``,
   whose product with nu equals the Newton-Euler terms of [T] eqs. 2.4-2.5.
-* C_A from M_A (Fossen 2011): with ``a = M_A nu = [a1; a2]``,
-  ``C_A = [0, -S(a1); -S(a1), -S(a2)]`` (skew-symmetric for any M_A; equals [T] eq. 2.83 in the diagonal case
-  with M_A = -diag(derivatives)).
+* C_A from M_A (Fossen 2011): with ``a = M_A nu = [a1; a2]``, ``C_A = [0, -S(a1); -S(a1), -S(a2)]``
+  (skew-symmetric for any M_A; equals [T] eq. 2.83 in the diagonal case with M_A = -diag(derivatives)).
 * D(nu) nu: per DOF ``k_l v + k_q |v| v`` from ``config.dof_hydrodynamics(dof)`` ([Hindrax-Drag] eq. 2 / Table 3), the
   coefficient pair chosen by the sign of the velocity; heave uses the ``*_positive`` pair for w > 0 (moving
   down, [Hindrax-Drag] §4.1) and ``*_negative`` for w < 0. Off-diagonal damping is not modelled.

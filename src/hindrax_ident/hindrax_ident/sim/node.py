@@ -9,14 +9,13 @@ Subscribes (default pulse-width source)
     false means neutral. The last valid message is held (a real PWM generator keeps its output).
     Messages with the wrong length or non-finite values are ignored with a one-line warning.
 Publishes
-    ``/clock`` (rosgraph_msgs/Clock) at ``simulation.clock_rate_hz`` of simulated time;
-    ``sim/odometry`` (nav_msgs/Odometry): pose of base_link in odom (ENU, origin at the pool corner on the
-    surface), twist in base_link (FLU), converted with :mod:`hindrax_drivers.frames`; covariances zero
-    (exact ground truth);
-    ``sim/wrench`` (geometry_msgs/WrenchStamped, base_link FLU): the true thruster wrench about base_link;
-    ``sim/contact`` (diagnostic_msgs/DiagnosticArray): one status per pool face (``sim/contact/<face>``,
-    WARN while touching, value ``since_s``), on every change and once per simulated second.
-    Ground truth is for evaluation only: no node under test may read ``sim/*``.
+    ``/clock`` (rosgraph_msgs/Clock) at ``simulation.clock_rate_hz`` of simulated time; ``sim/odometry``
+    (nav_msgs/Odometry): pose of base_link in odom (ENU, origin at the pool corner on the surface), twist
+    in base_link (FLU), converted with :mod:`hindrax_drivers.frames`; covariances zero (exact ground
+    truth); ``sim/wrench`` (geometry_msgs/WrenchStamped, base_link FLU): the true thruster wrench about
+    base_link; ``sim/contact`` (diagnostic_msgs/DiagnosticArray): one status per pool face
+    (``sim/contact/<face>``, WARN while touching, value ``since_s``), on every change and once per
+    simulated second. Ground truth is for evaluation only: no node under test may read ``sim/*``.
 Parameters
     The vehicle configuration (``--params-file hindrax.yaml``; or ``config_file``; or the shipped file).
     Node-specific: ``truth_rate_hz`` (simulated-time rate of sim/odometry and sim/wrench, default

@@ -25,13 +25,12 @@ Action server ``run_identification`` (hindrax_msgs/action/RunIdentification)
     ``level_fractions`` (optional explicit fractions of the DOF's authority, each in (0, 1]), ``calibrate``
     (known-force steps after the dive, before the ladders: ballast, line_pull, tilt_decay, inclining; the known
     forces are the ``calibration.*`` parameters, :func:`~.executive.calibration_forces`,
-    :func:`~.executive.inclining_load`), ``calibration_only`` (no
-    ladders). Rejected when a goal is running or the goal is invalid (unknown DOF or step, fraction out of
-    range, calibration_only without a step). The goal fails, commanding nothing, when the ESC output has not
-    reported armed within :data:`~.core.ARMED_GRACE_S` of its acceptance (an operator who arms and starts at once is
-    not refused while the armed flag is on its way). Feedback
-    at every level change, at every operator prompt and once per second: DOF, level index and count, level
-    command (N or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel):
+    :func:`~.executive.inclining_load`), ``calibration_only`` (no ladders). Rejected when a goal is running or the
+    goal is invalid (unknown DOF or step, fraction out of range, calibration_only without a step). The goal fails,
+    commanding nothing, when the ESC output has not reported armed within :data:`~.core.ARMED_GRACE_S` of its
+    acceptance (an operator who arms and starts at once is not refused while the armed flag is on its way). Feedback
+    at every level change, at every operator prompt and once per second: DOF, level index and count, level command (N
+    or N m, FRD), progress 0-1, ``prompt`` (see ``identification/continue``). End (done, abort or cancel):
     the node publishes a zero wrench every tick until the ESC node reports neutral widths (zero thrust on every
     thruster, or disarmed) or ``stop_timeout_s`` has passed, and only then ends the action; afterwards it publishes no
     wrench (the allocation's wrench timeout keeps the thrusters neutral). Result: success, message (abort

@@ -2,12 +2,11 @@
 
 The vehicle's three safety processes, scheduled as ``vehicle.launch.xml`` starts them, with the gateway beside
 them (the layout of :mod:`hindrax_ident.tools.benchmarks.participant_churn` and
-:func:`hindrax_ident.tools.benchmarks.sealed_authority.gateway_running`), are armed and commanded at
-1700 us, 50 Hz.
-:data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'`` at normal priority run throughout
-(:func:`hindrax_ident.tools.benchmarks.busy_neighbours.cpu_bound_neighbours`). Each of
-:data:`TRIALS` trials starts
-three processes together and waits for them to exit, as an operator and a curious user do on the pool day:
+:func:`hindrax_ident.tools.benchmarks.sealed_authority.gateway_running`), are armed and commanded at 1700 us,
+50 Hz. :data:`NEIGHBOURS` processes ``python3 -c 'while True: pass'`` at normal priority run throughout
+(:func:`hindrax_ident.tools.benchmarks.busy_neighbours.cpu_bound_neighbours`). Each of :data:`TRIALS` trials
+starts three processes together and waits for them to exit, as an operator and a curious user do on the pool
+day:
 
 * a :data:`SUBSCRIBER_S` s subscriber to ``/diagnostics`` and the three heartbeats on the Pi's internal domain with
   Fast DDS's default transports (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, no profile: shared memory + UDP);

@@ -2,10 +2,9 @@
 [--model YAML]]``.
 
 Starts the whole node graph in this process (:mod:`hindrax_ident.bringup`): with ``--sim`` against the virtual pool
-and the device emulators (the virtual pool's and the tests' graph).
-``--controller`` adds the controller node (depth/altitude, heading and velocity holds from ``--model``, disabled until
-``controller/hold``; docs/control.md §3). Runs until Ctrl-C / SIGTERM, then commands
-neutral thrust and closes any bag.
+and the device emulators (the virtual pool's and the tests' graph). ``--controller`` adds the controller node
+(depth/altitude, heading and velocity holds from ``--model``, disabled until ``controller/hold``; docs/control.md §3).
+Runs until Ctrl-C / SIGTERM, then commands neutral thrust and closes any bag.
 
 The vehicle does not run this: it runs the launch layout, one process per node, respawned
 (``ros2 launch hindrax_drivers vehicle.launch.xml``, started by the Docker image and the systemd unit;

@@ -1,10 +1,9 @@
 """What every ``hindrax`` command shares: the ``--config`` option, loading the vehicle file, the error exit.
 
 A command raises :class:`CommandError` for a problem it found (bad input, invalid configuration): the
-``hindrax`` entry point (:func:`hindrax_ident.tools.cli.main`) prints its one-line message on stderr
-and exits 1.
-Only the standard library is imported here at module level, so defining a command's arguments stays cheap
-(``hindrax --help`` imports no command module at all, :mod:`hindrax_ident.tools.cli`).
+``hindrax`` entry point (:func:`hindrax_ident.tools.cli.main`) prints its one-line message on stderr and
+exits 1. Only the standard library is imported here at module level, so defining a command's arguments
+stays cheap (``hindrax --help`` imports no command module at all, :mod:`hindrax_ident.tools.cli`).
 """
 from __future__ import annotations
 

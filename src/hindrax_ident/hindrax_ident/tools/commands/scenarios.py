@@ -1,9 +1,8 @@
 """``hindrax ident scenarios [--scenarios NAMES] [--seeds N] [--dofs ...] [--out DIR] [--jobs N]``: the scenario suite.
 
 For every named scenario (a truth file in ``ros_ws/config/truth/scenarios/``, :mod:`hindrax_ident.sim.truth`) and
-every seed 1..N, one in-process identification campaign
-(:class:`~hindrax_ident.sim.campaign.Campaign`, the simulator running on the scenario's truth, every
-estimator on the vehicle file), the offline identification and the verdicts
+every seed 1..N, one in-process identification campaign (:class:`~hindrax_ident.sim.campaign.Campaign`, the simulator
+running on the scenario's truth, every estimator on the vehicle file), the offline identification and the verdicts
 (:mod:`hindrax_ident.identification.assessment.verdicts`). Each parameter is compared with the truth's value
 (:func:`~hindrax_ident.identification.fit.dof_model.truth_parameters` of the truth configuration): relative error, z =
 (estimate - truth) / std, whether the 95 % interval covers the truth, and the verdict with its reasons.
