@@ -57,15 +57,8 @@ import numpy as np
 from .deadband import MAX_THRUSTERS, ZERO_FORCE_N, DeadbandSearch
 from .thrust_curve import ThrustCurve, check_voltage_scale, forward_thrust
 
-__all__ = [
-    "AXIS_NAMES",
-    "DEFAULT_PRIORITY_GROUPS",
-    "InvalidWrenchError",
-    "AllocationResult",
-    "DEFAULT_EFFORT_WEIGHT",
-    "ThrustAllocator",
-    "weighted_pseudo_inverse",
-]
+__all__ = ["AXIS_NAMES", "DEFAULT_PRIORITY_GROUPS", "InvalidWrenchError", "AllocationResult",
+           "DEFAULT_EFFORT_WEIGHT", "ThrustAllocator", "weighted_pseudo_inverse"]
 
 #: Wrench axes in order ([Hindrax-Drag] section 3 notation, SNAME): tau = [X Y Z K M N].
 AXIS_NAMES: tuple[str, ...] = ("surge", "sway", "heave", "roll", "pitch", "yaw")

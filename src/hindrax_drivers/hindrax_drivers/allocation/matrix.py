@@ -16,13 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = [
-    "HINDRAX_HORIZONTAL_ANGLE_RAD",
-    "ThrusterLayout",
-    "thrust_allocation_matrix",
-    "horizontal_direction",
-    "hindrax_default_layout",
-]
+__all__ = ["HINDRAX_HORIZONTAL_ANGLE_RAD", "ThrusterLayout", "thrust_allocation_matrix",
+           "horizontal_direction", "hindrax_default_layout"]
 
 #: Rotation of the horizontal thrusters T1-T4 from the x axis, [Hindrax-Drag] section 4 (55 degrees).
 HINDRAX_HORIZONTAL_ANGLE_RAD = math.radians(55.0)

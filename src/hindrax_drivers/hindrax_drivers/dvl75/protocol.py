@@ -50,45 +50,14 @@ from dataclasses import dataclass
 from functools import reduce
 from typing import Iterable, Optional, Sequence, Tuple, Union
 
-__all__ = [
-    "DvlParseError",
-    "DvlPositionDelta",
-    "DvlExtended",
-    "DvlGprmc",
-    "DvlText",
-    "DvlUnknown",
-    "DvlRecord",
-    "DvlCommand",
-    "DvlLineFramer",
-    "BEAM_NAMES",
-    "BEAM_TILT_RAD",
-    "beam_directions_frd",
-    "LINE_TERMINATOR",
-    "KNOT_M_S",
-    "nmea_checksum",
-    "format_sentence",
-    "split_sentence",
-    "parse_line",
-    "parse_dvpdl",
-    "parse_dvext",
-    "parse_gprmc",
-    "format_dvpdl",
-    "format_dvext",
-    "format_gprmc",
-    "format_dvtxt",
-    "parse_command",
-    "build_command",
-    "cmd_send",
-    "cmd_retweet",
-    "cmd_set_sensor_orientation",
-    "cmd_set_speed_of_sound",
-    "cmd_set_velocity_adjustment",
-    "cmd_baud_rate",
-    "cmd_resume",
-    "cmd_configuration",
-    "startup_commands",
-    "iter_records",
-]
+__all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown",
+           "DvlRecord", "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD",
+           "beam_directions_frd", "LINE_TERMINATOR", "KNOT_M_S", "nmea_checksum", "format_sentence",
+           "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext", "parse_gprmc",
+           "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
+           "build_command", "cmd_send", "cmd_retweet", "cmd_set_sensor_orientation",
+           "cmd_set_speed_of_sound", "cmd_set_velocity_adjustment", "cmd_baud_rate", "cmd_resume",
+           "cmd_configuration", "startup_commands", "iter_records"]
 
 #: Line terminator the DVL uses and the driver sends (CR LF; docs/devices.md §1.2, §1.4).
 LINE_TERMINATOR = b"\r\n"

@@ -27,14 +27,12 @@ import numpy as np
 
 from ..transport.i2c import RegisterWrite
 
-__all__ = [
-    "Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
-    "imu_config_from_si", "flatten_writes", "reset_wake_sequence", "configure_sequence",
-    "slave_read_writes", "slave_write_writes", "mag_master_sequence", "mag_bypass_sequence",
-    "ak09916_direct_init_writes", "ak09916_mode_for_rate", "parse_sensor_block",
-    "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
-    "encode_sensor_block", "bank_select_value", "gyro_odr_hz", "accel_odr_hz",
-]
+__all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
+           "imu_config_from_si", "flatten_writes", "reset_wake_sequence", "configure_sequence",
+           "slave_read_writes", "slave_write_writes", "mag_master_sequence", "mag_bypass_sequence",
+           "ak09916_direct_init_writes", "ak09916_mode_for_rate", "parse_sensor_block",
+           "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
+           "encode_sensor_block", "bank_select_value", "gyro_odr_hz", "accel_odr_hz"]
 
 
 class Icm20948Error(ValueError):

@@ -32,16 +32,8 @@ import random
 import threading
 from typing import Iterable, Mapping, Protocol, runtime_checkable
 
-__all__ = [
-    "I2C_SMBUS_BLOCK_MAX",
-    "I2C_M_RD",
-    "GENERAL_CALL_ADDRESS",
-    "I2CDeviceEmulator",
-    "EmulatedI2CBus",
-    "RegisterPointerEmulator",
-    "ManualClock",
-    "remote_io_error",
-]
+__all__ = ["I2C_SMBUS_BLOCK_MAX", "I2C_M_RD", "GENERAL_CALL_ADDRESS", "I2CDeviceEmulator",
+           "EmulatedI2CBus", "RegisterPointerEmulator", "ManualClock", "remote_io_error"]
 
 #: Maximum length of an SMBus/I2C block transfer through ``read/write_i2c_block_data`` (smbus2 and
 #: Linux ``I2C_SMBUS_BLOCK_MAX``).

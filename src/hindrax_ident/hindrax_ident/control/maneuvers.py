@@ -36,10 +36,8 @@ from .law import ControlInput, ControlSettings, Controller
 from .model import ControlModel, inertia_vector, model_from_config
 from ..vehicle.state import SensorState, rotation_ned_from_body
 
-__all__ = [
-    "DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority", "level_ladder",
-    "prior_inertia", "PoolBox", "HoldController",
-]
+__all__ = ["DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority",
+           "level_ladder", "prior_inertia", "PoolBox", "HoldController"]
 
 #: DOF name -> index in nu / tau (SNAME order).
 DOF_INDEX = {d: i for i, d in enumerate(DOFS)}

@@ -35,15 +35,9 @@ import numpy as np
 
 from .least_squares import EstimationError, as_float_array, check_same_length, positive
 
-__all__ = [
-    "KINEMATIC_VISCOSITY_WATER_M2_S",
-    "characteristic_length_from_volume",
-    "reynolds_number",
-    "reynolds_range",
-    "drag_coefficient",
-    "rotational_drag_coefficient",
-    "drag_coefficient_samples",
-]
+__all__ = ["KINEMATIC_VISCOSITY_WATER_M2_S", "characteristic_length_from_volume", "reynolds_number",
+           "reynolds_range", "drag_coefficient", "rotational_drag_coefficient",
+           "drag_coefficient_samples"]
 
 #: Kinematic viscosity of water used by [Hindrax-AM] (section 4): 1.01e-6 m^2/s.
 KINEMATIC_VISCOSITY_WATER_M2_S = 1.01e-6

@@ -68,30 +68,13 @@ from .drag_coefficient import (KINEMATIC_VISCOSITY_WATER_M2_S,
 from .least_squares import (EstimationError, as_float_array, check_same_length, check_time_vector,
                             positive)
 
-__all__ = [
-    "FreeDecayResult",
-    "analyse_free_decay",
-    "displacement_from_acceleration",
-    "find_release_index",
-    "log_decrement",
-    "damping_ratio_from_log_decrement",
-    "log_decrement_from_damping_ratio",
-    "natural_frequency",
-    "added_mass_exact",
-    "added_mass_simplified",
-    "added_mass_error_percent",
-    "damping_coefficient",
-    "inertia_coefficient",
-    "keulegan_carpenter",
-    "prototype_added_mass",
-    "free_decay_table_row",
-    "DECAY_OUTPUTS",
-    "QuadraticDecayFit",
-    "fit_quadratic_free_decay",
-    "quadratic_free_decay_keys",
-    "IncliningResult",
-    "restoring_from_inclining",
-]
+__all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_acceleration",
+           "find_release_index", "log_decrement", "damping_ratio_from_log_decrement",
+           "log_decrement_from_damping_ratio", "natural_frequency", "added_mass_exact",
+           "added_mass_simplified", "added_mass_error_percent", "damping_coefficient",
+           "inertia_coefficient", "keulegan_carpenter", "prototype_added_mass",
+           "free_decay_table_row", "DECAY_OUTPUTS", "QuadraticDecayFit", "fit_quadratic_free_decay",
+           "quadratic_free_decay_keys", "IncliningResult", "restoring_from_inclining"]
 
 
 # --------------------------------------------------------------------------------------

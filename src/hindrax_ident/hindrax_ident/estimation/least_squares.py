@@ -36,16 +36,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-__all__ = [
-    "EstimationError",
-    "LsResult",
-    "DragFit",
-    "DynamicFit",
-    "fit_linear_model",
-    "fit_drag",
-    "fit_dynamic",
-    "confidence_interval",
-]
+__all__ = ["EstimationError", "LsResult", "DragFit", "DynamicFit", "fit_linear_model", "fit_drag",
+           "fit_dynamic", "confidence_interval"]
 
 
 class EstimationError(ValueError):

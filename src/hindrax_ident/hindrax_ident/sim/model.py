@@ -50,19 +50,9 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..vehicle.rigid_body import rigid_body_mass_matrix, skew
 
-__all__ = [
-    "STATE_SIZE",
-    "skew",
-    "rigid_body_mass_matrix",
-    "coriolis_rigid_body",
-    "coriolis_added_mass",
-    "damping_vector",
-    "restoring_vector",
-    "restoring_vector_euler",
-    "rotation_matrix_from_quaternion",
-    "euler_from_rotation_matrix",
-    "VehicleModel",
-]
+__all__ = ["STATE_SIZE", "skew", "rigid_body_mass_matrix", "coriolis_rigid_body",
+           "coriolis_added_mass", "damping_vector", "restoring_vector", "restoring_vector_euler",
+           "rotation_matrix_from_quaternion", "euler_from_rotation_matrix", "VehicleModel"]
 
 #: Length of the state vector [position NED (3), quaternion xyzw (4), nu (6)].
 STATE_SIZE = 13

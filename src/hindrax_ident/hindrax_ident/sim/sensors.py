@@ -59,25 +59,10 @@ from hindrax_drivers.frames import wrap_angle
 
 from .pool import Pool
 
-__all__ = [
-    "DEFAULT_EARTH_FIELD_NED_T",
-    "DEFAULT_WATER_TEMPERATURE_C",
-    "DEVICE_INDEX",
-    "VehicleTruth",
-    "DvlVelocitySample",
-    "DvlAttitudeSample",
-    "AccelSample",
-    "GyroSample",
-    "MagSample",
-    "PressureSample",
-    "AltitudeSample",
-    "NoiseSpec",
-    "SensorModel",
-    "SensorSuite",
-    "specific_force_frd",
-    "point_velocity_frd",
-    "pressure_at_depth_pa",
-]
+__all__ = ["DEFAULT_EARTH_FIELD_NED_T", "DEFAULT_WATER_TEMPERATURE_C", "DEVICE_INDEX",
+           "VehicleTruth", "DvlVelocitySample", "DvlAttitudeSample", "AccelSample", "GyroSample",
+           "MagSample", "PressureSample", "AltitudeSample", "NoiseSpec", "SensorModel",
+           "SensorSuite", "specific_force_frd", "point_velocity_frd", "pressure_at_depth_pa"]
 
 #: Earth magnetic field in NED, tesla, used when ``simulation.sensors.icm20948_mag.earth_field_ned_t`` is absent.
 #: ASSUMPTION, approximate for the Peruvian coast (Paracas, 13.8 S 76.3 W), close to the magnetic dip equator

@@ -52,10 +52,8 @@ from ...estimation.steady_windows import detect_steady_windows
 from ...vehicle.rigid_body import rigid_body_mass_matrix
 from .output_error import model_terms
 
-__all__ = [
-    "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia", "truth_parameters",
-    "DofIdentification", "steady_state_fit", "thrust_weights",
-]
+__all__ = ["parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia",
+           "truth_parameters", "DofIdentification", "steady_state_fit", "thrust_weights"]
 
 def parameter_names(dof: str) -> list[str]:
     """Parameter names of a DOF's regression, in regressor-column order (module docstring)."""
