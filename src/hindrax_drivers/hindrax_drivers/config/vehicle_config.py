@@ -30,24 +30,10 @@ from .sections.calibration import CalibrationConfig
 from .sections.hydrodynamics import DofHydrodynamics, added_mass_matrix_from_flat
 from .sections.thrusters import ThrustersConfig, thrusters_config
 from .spec import DOFS, ROTATIONAL_DOFS
-from .typed_sections import (
-    ABSENT,
-    CalibrationSection,
-    ControlSection,
-    EnvironmentSection,
-    EscSection,
-    HydrodynamicsSection,
-    IdentificationSection,
-    LightsSection,
-    LimitsSection,
-    PoolSection,
-    RecordingSection,
-    Section,
-    SensorsSection,
-    SimulationSection,
-    SupervisorSection,
-    VehicleSection,
-)
+from .typed_sections import (ABSENT, CalibrationSection, ControlSection, EnvironmentSection,
+                             EscSection, HydrodynamicsSection, IdentificationSection, LightsSection,
+                             LimitsSection, PoolSection, RecordingSection, Section, SensorsSection,
+                             SimulationSection, SupervisorSection, VehicleSection)
 from .validation import validate_flat
 
 __all__ = ["VehicleConfig", "build_section", "or_default"]

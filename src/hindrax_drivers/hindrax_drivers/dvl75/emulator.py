@@ -55,19 +55,9 @@ from scipy.spatial.transform import Rotation
 from .. import frames
 from ..frames import wrap_angle
 from ..transport.pty_device import PeriodicSchedule, StreamFaults
-from .protocol import (
-    DvlExtended,
-    DvlGprmc,
-    DvlLineFramer,
-    DvlParseError,
-    DvlPositionDelta,
-    format_dvext,
-    format_dvpdl,
-    format_dvtxt,
-    format_gprmc,
-    parse_command,
-    parse_line,
-)
+from .protocol import (DvlExtended, DvlGprmc, DvlLineFramer, DvlParseError, DvlPositionDelta,
+                       format_dvext, format_dvpdl, format_dvtxt, format_gprmc, parse_command,
+                       parse_line)
 
 __all__ = ["from_config", "DvlTruth", "DvlFlash", "Dvl75Emulator", "EARTH_RADIUS_M"]
 

@@ -41,45 +41,14 @@ from typing import Callable, Dict, List, Optional, Union
 import numpy as np
 
 from ..transport.pty_device import PeriodicSchedule, StreamFaults
-from .protocol import (
-    Ack,
-    ContinuousStart,
-    ContinuousStop,
-    DeviceId,
-    DeviceInformation,
-    Distance,
-    DistanceSimple,
-    FirmwareVersion,
-    GainSetting,
-    GeneralInfo,
-    GeneralRequest,
-    ModeAuto,
-    Nack,
-    PcbTemperature,
-    Ping1dFramer,
-    Ping1dId,
-    Ping1dMessage,
-    Ping1dParseError,
-    Ping1dPayload,
-    PingEnable,
-    PingInterval,
-    ProcessorTemperature,
-    Profile,
-    ProtocolVersion,
-    Range,
-    SetDeviceId,
-    SetGainSetting,
-    SetModeAuto,
-    SetPingEnable,
-    SetPingInterval,
-    SetRange,
-    SetSpeedOfSound,
-    SpeedOfSound,
-    TransmitDuration,
-    Voltage5,
-    decode_message,
-    encode_message,
-)
+from .protocol import (Ack, ContinuousStart, ContinuousStop, DeviceId, DeviceInformation, Distance,
+                       DistanceSimple, FirmwareVersion, GainSetting, GeneralInfo, GeneralRequest,
+                       ModeAuto, Nack, PcbTemperature, Ping1dFramer, Ping1dId, Ping1dMessage,
+                       Ping1dParseError, Ping1dPayload, PingEnable, PingInterval,
+                       ProcessorTemperature, Profile, ProtocolVersion, Range, SetDeviceId,
+                       SetGainSetting, SetModeAuto, SetPingEnable, SetPingInterval, SetRange,
+                       SetSpeedOfSound, SpeedOfSound, TransmitDuration, Voltage5, decode_message,
+                       encode_message)
 
 __all__ = ["from_config", "Ping1dTruth", "Ping1dSettings", "Ping1dMeasurement", "Ping1dEmulator"]
 

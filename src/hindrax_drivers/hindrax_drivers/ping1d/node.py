@@ -50,25 +50,9 @@ from std_msgs.msg import Float32
 from ..config.typed_sections import SensorsPing1dSection
 from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
 from ..serial_node import SerialDeviceNode
-from .protocol import (
-    SYNC_BYTE,
-    Ack,
-    AsciiText,
-    ContinuousStart,
-    Distance,
-    DistanceSimple,
-    FirmwareVersion,
-    GeneralInfo,
-    Nack,
-    Ping1dId,
-    Profile,
-    SetModeAuto,
-    SetPingEnable,
-    SetPingInterval,
-    SetSpeedOfSound,
-    SpeedOfSound,
-    request_frame,
-)
+from .protocol import (SYNC_BYTE, Ack, AsciiText, ContinuousStart, Distance, DistanceSimple,
+                       FirmwareVersion, GeneralInfo, Nack, Ping1dId, Profile, SetModeAuto,
+                       SetPingEnable, SetPingInterval, SetSpeedOfSound, SpeedOfSound, request_frame)
 from .stream import Ping1dStreamDecoder
 
 __all__ = ["Ping1dNode", "main", "COMMAND_GAP_S", "startup_frames"]

@@ -32,16 +32,8 @@ import collections
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Union
 
-from .protocol import (
-    CHECKSUM_BYTES,
-    HEADER_BYTES,
-    PAYLOAD_TYPES,
-    Ping1dFramer,
-    Ping1dMessage,
-    Ping1dParseError,
-    Ping1dPayload,
-    decode_message,
-)
+from .protocol import (CHECKSUM_BYTES, HEADER_BYTES, PAYLOAD_TYPES, Ping1dFramer, Ping1dMessage,
+                       Ping1dParseError, Ping1dPayload, decode_message)
 
 __all__ = ["Ping1dStreamDecoder", "Ping1dStreamError", "Ping1dDecoded", "ERROR_KINDS"]
 

@@ -50,11 +50,8 @@ import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
 
-from ...estimation.drag_coefficient import (
-    characteristic_length_from_volume,
-    drag_coefficient,
-    reynolds_range,
-)
+from ...estimation.drag_coefficient import (characteristic_length_from_volume, drag_coefficient,
+                                            reynolds_range)
 from ...estimation.least_squares import EstimationError
 from ..fit.calibration import calibration_section, decay_inertia, joint_estimate
 from ..fit.dof_model import parameter_units, rigid_inertia

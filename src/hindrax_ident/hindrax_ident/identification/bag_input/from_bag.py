@@ -45,14 +45,8 @@ from ...vehicle.state import SensorState
 from ...vehicle.thrust_lag import ThrustLag
 from . import calibration_topic
 from .campaign_record import CampaignRecord
-from ...vehicle.signals import (
-    STILL_MESSAGE,
-    sample_from_pressure,
-    sample_from_range,
-    samples_from_dvl,
-    samples_from_imu,
-    thrust_of_written_widths,
-)
+from ...vehicle.signals import (STILL_MESSAGE, sample_from_pressure, sample_from_range,
+                                samples_from_dvl, samples_from_imu, thrust_of_written_widths)
 
 __all__ = ["BagContentError", "OnlineHistory", "record_from_messages", "record_from_bag", "is_campaign_bag",
            "CAMPAIGN_TOPICS"]

@@ -101,17 +101,9 @@ from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.scheduling import PRIORITY_ENV
 from hindrax_drivers.supervisor.node import SupervisorNode
-from hindrax_drivers.testing import (
-    AllocationStandIn,
-    ConditionTimeout,
-    GraphSettled,
-    SafetyHeartbeats,
-    child_env,
-    config_parameters,
-    python_executable,
-    ros_context,
-    wait_until,
-)
+from hindrax_drivers.testing import (AllocationStandIn, ConditionTimeout, GraphSettled,
+                                     SafetyHeartbeats, child_env, config_parameters,
+                                     python_executable, ros_context, wait_until)
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
 from hindrax_drivers.transport.shared_emulation import SOCKET_ENV, EmulationServer
