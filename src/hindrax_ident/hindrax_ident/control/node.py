@@ -68,7 +68,7 @@ from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_common import load_node_config, run_node
+from hindrax_drivers.node_common import load_node_config, run_node, sensor_input_qos
 from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
@@ -173,11 +173,12 @@ class ControllerNode(VehicleNode):
         """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics (about 80
         messages/s in the pool layout)."""
         self._streams = [
-            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20),
+            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), sensor_input_qos(20)),
             self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
-                            20),
-            self._subscribe(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)), 50),
-            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20),
+                            sensor_input_qos(20)),
+            self._subscribe(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)),
+                            sensor_input_qos(50)),
+            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), sensor_input_qos(20)),
         ]
 
     def _open_enabled_streams(self) -> None:
@@ -193,10 +194,11 @@ class ControllerNode(VehicleNode):
             self.destroy_subscription(sub)
         self._enabled_streams = []
 
-    def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
+    def _subscribe(self, msg_type: Any, topic: str, handler: Any, qos: Any) -> Any:
         """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
-        room for an executor held up on a loaded machine."""
-        return self.create_subscription(msg_type, topic, handler, depth)
+        room for an executor held up on a loaded machine; the sensors' readers are best effort
+        (:func:`~hindrax_drivers.node_common.sensor_input_qos`)."""
+        return self.create_subscription(msg_type, topic, handler, qos)
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
