@@ -16,6 +16,7 @@ from typing import Any, Callable, Iterable, Sequence
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from hindrax_msgs.msg import RawDeviceData
 
@@ -27,6 +28,15 @@ from .scheduling import apply_realtime_priority, describe as describe_scheduling
 
 #: QoS depth used for sensor topics (sensor-data QoS is best effort; parsed topics use reliable, depth 10)
 DEFAULT_QOS_DEPTH = 10
+
+
+def sensor_input_qos(depth: int) -> QoSProfile:
+    """QoS of a reader of sensor samples (the supervisor's, the controller's and the identification's sensor
+    inputs): keep last ``depth``, best effort, volatile. It matches the drivers' reliable writers; a best-effort
+    reader sends no acknowledgements, so a writer whose readers are all best effort runs no reliability protocol
+    (Fast DDS: 1.6 event-thread wake-ups per sample less, docs/architecture.md §10.1). On the vehicle's loopback a
+    sample is lost only to a full socket buffer, and every reader here takes the newest sample and counts rates."""
+    return QoSProfile(depth=int(depth), reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 def time_from_ns(ns: int) -> Time:

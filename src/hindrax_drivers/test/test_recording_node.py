@@ -105,38 +105,44 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
 
     wait_until(lambda: imu.get_subscription_count() and raw.get_subscription_count()
                and latched.get_subscription_count(), 15, spin, "recorder subscribed")
-    # Best effort: a sample sent before the recorder's reader has matched this writer is lost, and the writer's
-    # subscription count above is only its own side of the match (Fast-DDS issues 2641, 3009; the reliable topics get
-    # theirs again from the writer's history). So a warm-up sample (x = -1) goes first, again every 2 s until the
-    # recorder counts it, and the 50 follow a reader known to be there.
+    # Best effort (the recorder's readers of volatile topics, recorder_policies): a sample sent before the recorder's
+    # reader has matched this writer is lost, and the writer's subscription count above is only its own side of the
+    # match (Fast-DDS issues 2641, 3009). So a warm-up sample goes first on each topic, again every 2 s until the
+    # recorder counts it, and the samples counted follow a reader known to be there.
+    def warm_up(pub, msg, topic: str) -> int:
+        def counted() -> bool:
+            pub.publish(msg)
+            try:
+                wait_until(lambda: counts.get(topic, 0) > 0, 2, spin, f"the warm-up sample of {topic} counted")
+            except ConditionTimeout:
+                return False
+            return True
+        wait_until(counted, 30, None, f"the recorder receiving {topic}")
+        return counts[topic]
+
     def imu_sample(x: float) -> Imu:
         m = Imu()
         m.linear_acceleration.x = x
         return m
 
-    def warm_up_counted() -> bool:
-        imu.publish(imu_sample(-1.0))
-        try:
-            wait_until(lambda: counts.get("/n/imu", 0) > 0, 2, spin, "the warm-up sample counted")
-        except ConditionTimeout:
-            return False
-        return True
-    wait_until(warm_up_counted, 30, None, "the recorder receiving /n/imu")
-    warm = counts["/n/imu"]
+    warm = warm_up(imu, imu_sample(-1.0), "/n/imu")
+    warm_raw = warm_up(raw, RawDeviceData(device_name="warm-up"), "/n/raw")
     for i in range(50):
         imu.publish(imu_sample(float(i)))
         raw.publish(RawDeviceData(device_name="ms5837", data=bytes([i, 255 - i])))
         other.publish(String(data="not selected"))
     late = node.create_publisher(String, "/n/late", 10)  # appears after the start: found by the graph poll
     wait_until(lambda: late.get_subscription_count() > 0, 15, spin, "late topic subscribed")
+    warm_late = warm_up(late, String(data="warm-up"), "/n/late")
     for i in range(10):
         late.publish(String(data=f"late {i}"))
-    expected = {"/n/imu": warm + 50, "/n/raw": 50, "/n/latched": 1, "/n/late": 10}
+    expected = {"/n/imu": warm + 50, "/n/raw": warm_raw + 50, "/n/latched": 1, "/n/late": warm_late + 10}
     wait_until(lambda: all(counts.get(t) == n for t, n in expected.items()), 15, spin,
                f"recorder counts {expected}")
     res = call(r["stop"], StopRecording.Request())
     t_stop_ns = time.time_ns()
-    assert res.success and res.message_count == warm + 111 and res.bag_path == str(bag1)
+    total = sum(expected.values())
+    assert res.success and res.message_count == total and res.bag_path == str(bag1)
 
     meta = read_metadata(bag1)
     assert {t.name: t.message_count for t in meta.topics} == expected  # /other/x not selected
@@ -149,7 +155,8 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
         for c, _, data in reader.messages():
             by_topic.setdefault(c.topic, []).append(reader.deserialize(data, c.msgtype))
     assert [m.linear_acceleration.x for m in by_topic["/n/imu"]] == [-1.0] * warm + [float(i) for i in range(50)]
-    assert [bytes(m.data) for m in by_topic["/n/raw"]] == [bytes([i, 255 - i]) for i in range(50)]
+    assert [bytes(m.data) for m in by_topic["/n/raw"]] == [b""] * warm_raw + [bytes([i, 255 - i])
+                                                                              for i in range(50)]
     assert by_topic["/n/latched"][0].data == "published before the recording started"
     # log time = publish time = the node's clock (the system clock here) in the callback, within the recording's
     # span (recorder_node docstring)
@@ -157,7 +164,7 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
 
     with open(next(bag1.glob("*.mcap")), "rb") as f:
         times = {(c.topic, m.log_time, m.publish_time) for _, c, m in make_reader(f).iter_messages()}
-    assert len(times) == warm + 111 and all(pub == log for _, log, pub in times)
+    assert len(times) == total and all(pub == log for _, log, pub in times)
     assert all(t_start_ns <= log <= t_stop_ns for _, log, _ in times)
 
     # a second recording selected by regular expression; stopping twice is reported, not fatal
@@ -165,10 +172,11 @@ def test_services_qos_matching_late_topics_and_selection(recorder, tmp_path):
     res = call(r["start"], StartRecording.Request(output_dir=str(bag2), topic_regex="^/other/"))
     assert res.success, res.message
     wait_until(lambda: "/other/x" in counts, 15, spin, "regex topic subscribed")
+    warm_other = warm_up(other, String(data="warm-up"), "/other/x")
     for _ in range(5):
         other.publish(String(data="now selected"))
-    wait_until(lambda: counts.get("/other/x") == 5, 15, spin, "5 messages on /other/x")
-    assert call(r["stop"], StopRecording.Request()).message_count == 5
+    wait_until(lambda: counts.get("/other/x") == warm_other + 5, 15, spin, "5 messages on /other/x")
+    assert call(r["stop"], StopRecording.Request()).message_count == warm_other + 5
     assert not call(r["stop"], StopRecording.Request()).success
     assert [t.name for t in read_metadata(bag2).topics] == ["/other/x"]
     bad = call(r["start"], StartRecording.Request(output_dir=str(tmp_path / "bag3"), topic_regex="("))

@@ -15,7 +15,7 @@ import yaml
 from hindrax_drivers.recording import msgdefs
 from hindrax_drivers.recording.qos import (INFINITE_NS, default_profile, duration_to_dict,
                                            playback_profile, profile_from_rclpy, profiles_from_yaml,
-                                           profiles_to_yaml, subscription_policies)
+                                           profiles_to_yaml, recorder_policies, subscription_policies)
 from hindrax_drivers.recording.selection import TopicSelection
 
 SHARE = Path(sys.prefix) / "share"
@@ -142,6 +142,16 @@ def test_subscription_matches_every_publisher():
     assert subscription_policies([tl]) == ("reliable", "transient_local")
     assert subscription_policies([tl, rel]) == ("reliable", "volatile")
     assert subscription_policies([]) == ("reliable", "volatile")
+
+
+def test_recorder_requests_best_effort_except_for_transient_local_topics():
+    rel, be = default_profile("reliable"), default_profile("best_effort")
+    tl = default_profile("reliable", "transient_local")
+    assert recorder_policies([rel]) == ("best_effort", "volatile")
+    assert recorder_policies([rel, be]) == ("best_effort", "volatile")
+    assert recorder_policies([tl]) == ("reliable", "transient_local")  # the latched history needs a reliable reader
+    assert recorder_policies([tl, rel]) == ("best_effort", "volatile")
+    assert recorder_policies([]) == ("best_effort", "volatile")
 
 
 def test_playback_offers_the_recorded_profile_when_publishers_agreed():

@@ -13,6 +13,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu, Range
 from std_msgs.msg import String
@@ -418,6 +419,11 @@ def test_supervisor_takes_imu_samples_by_callback_on_the_system_clock():
         try:
             assert "/imu/data_raw" in {s.topic_name for s in sup.subscriptions}
             assert "supervisor_intake" not in probe.get_node_names()
+            # the sensor readers are best effort (no acknowledgements); they match the drivers' reliable writers
+            sensors = ("/imu/data_raw", "/dvl/data", "/ping/altitude", "/pressure/depth")
+            assert {s.topic_name: s.qos_profile.reliability for s in sup.subscriptions if s.topic_name in sensors} \
+                == dict.fromkeys(sensors, ReliabilityPolicy.BEST_EFFORT)
+            assert pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE
             spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
             wait_until(lambda: pub.get_subscription_count() == 1, 10, spin, "subscription matched")
             t0 = time.time_ns() * 1e-9

@@ -247,6 +247,40 @@ def test_on_the_system_clock_the_inputs_are_callbacks_and_streams_drop_while_a_g
             node.destroy_node()
 
 
+def test_disabled_the_controller_conditions_one_imu_message_in_idle_imu_every():
+    """The IMU arrives as CDR bytes: disabled, one message in IDLE_IMU_EVERY is decoded and conditioned (the odometry's
+    10 Hz), the first one included; enabled, every one. A conditioned sample is the rclpy message's."""
+    import numpy as np
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import Imu
+
+    from hindrax_ident.control.node import IDLE_IMU_EVERY, ControllerNode
+    from hindrax_ident.vehicle.signals import samples_from_imu
+
+    with ros_context() as ctx:
+        node = ControllerNode(config=load_config(default_config_path()), context=ctx, model_file="")
+        try:
+            m = Imu()
+            m.header.stamp.sec, m.header.stamp.nanosec = 5, 250_000_000
+            m.angular_velocity.x, m.angular_velocity.z = 0.1, -0.25
+            m.linear_acceleration.z = 9.81
+            data = serialize_message(m)
+            gyro = lambda: [s for d, s in node._pending if d == "icm20948_gyro"]  # noqa: E731
+            for _ in range(2 * IDLE_IMU_EVERY):
+                node._on_imu(data)
+            assert len(gyro()) == 2 and len(node._pending) == 4  # the 1st and the (IDLE_IMU_EVERY + 1)-th
+            want = dict(samples_from_imu(m, node._mount_t))
+            assert gyro()[0].stamp_s == 5.25
+            assert np.allclose(gyro()[0].angular_rate_rad_s, want["icm20948_gyro"].angular_rate_rad_s)
+            node._pending = []
+            node.enabled = True
+            for _ in range(3):
+                node._on_imu(data)
+            assert len(gyro()) == 3
+        finally:
+            node.destroy_node()
+
+
 @pytest.mark.ros
 def test_on_the_system_clock_the_tick_slows_while_a_goal_runs_and_resumes_after():
     """Under the vehicle's executor (rclpy's EventsExecutor, system clock) the disabled controller ticks every

@@ -8,10 +8,11 @@ Behaviour
   configuration key ``recording.topics`` is used, and without it every topic. The graph is polled every
   ``discovery_period_s`` so topics that appear after the start are recorded too. A topic is subscribed
   to once it has a publisher (its QoS is then known).
-- QoS: each subscription matches the topic's publishers as rosbag2 does
-  (:func:`~hindrax_drivers.recording.qos.subscription_policies`: best-effort if any publisher is
-  best-effort, transient-local only if all are), keep-last depth ``queue_depth``; the publishers'
-  profiles are stored in the bag (``offered_qos_profiles``).
+- QoS: each subscription is best effort unless the topic is transient local, where it matches the topic's
+  publishers as rosbag2 does (:func:`~hindrax_drivers.recording.qos.recorder_policies`: the writers then run no
+  reliability protocol for the recorder), keep-last depth ``queue_depth``; the publishers' profiles are stored in
+  the bag (``offered_qos_profiles``). A sample sent before the recorder's reader has matched its writer is not
+  recorded.
 - Data: one subscription callback per message on the node's executor, whatever the clock (the vehicle, the
   virtual pool and the tests take the same path). The subscriptions are raw: the callback gets the CDR bytes and
   they are written unchanged, never converted into a Python message and back (an ``Imu`` taken as an object costs
@@ -66,7 +67,7 @@ from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
 from .msgdefs import normalize_type_name
 from .msgtypes import TypeNotInstalledError, message_class
-from .qos import profile_from_rclpy, subscription_policies
+from .qos import profile_from_rclpy, recorder_policies
 from .selection import TopicSelection
 from .writer import WriterOptions
 from .writer_thread import ThreadedBagWriter
@@ -277,7 +278,7 @@ class RecorderNode(VehicleNode):
                 continue
             profiles = [profile_from_rclpy(i.qos_profile) for i in infos if normalize_type_name(i.topic_type)
                         == type_name]
-            reliability, durability = subscription_policies(profiles)
+            reliability, durability = recorder_policies(profiles)
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._queue_depth,
                              reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
             self._writer.add_topic(topic, type_name, profiles)

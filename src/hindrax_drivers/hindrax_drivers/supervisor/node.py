@@ -76,7 +76,7 @@ from ..esc_state import ESC_STATE_TOPIC, OUTPUT_UNKNOWN, armed_after, esc_state_
 from ..lean_cdr import cdr_decoder, read_heartbeat
 from ..liveness import HEARTBEAT_NAMES, ClockStepMonitor, HeartbeatPublisher, TickGaps, heartbeat_ok, heartbeat_qos
 from ..config import Spec
-from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node
+from ..node_common import DeviceDiagnostics, DiagnosticsPublisher, load_node_config, run_node, sensor_input_qos
 from ..config.node_parameters import declare_node_parameter
 from ..vehicle_node import VehicleNode
 from .core import SupervisorCore, SupervisorLimits
@@ -119,10 +119,11 @@ class SupervisorNode(VehicleNode):
         self.clock_stall_timeout_s = float(declare_node_parameter(self, "clock_stall_timeout_s", CLOCK_STALL_TIMEOUT,
                                                                   cfg.supervisor.rate_window_s))
         self.pub_status = self.create_publisher(DiagnosticStatus, "supervisor/status", 10)
-        self.create_subscription(Dvl, "dvl/data", self.on_dvl, 10)
-        self.create_subscription(Range, "ping/altitude", self.on_altitude, 10)
-        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, 10)
-        self.create_subscription(Imu, "imu/data_raw", self.on_imu, IMU_QUEUE_DEPTH, raw=True)
+        # the sensors best effort (sensor_input_qos): a lost sample only lowers the rate the check counts
+        self.create_subscription(Dvl, "dvl/data", self.on_dvl, sensor_input_qos(10))
+        self.create_subscription(Range, "ping/altitude", self.on_altitude, sensor_input_qos(10))
+        self.create_subscription(PoseWithCovarianceStamped, "pressure/depth", self.on_depth, sensor_input_qos(10))
+        self.create_subscription(Imu, "imu/data_raw", self.on_imu, sensor_input_qos(IMU_QUEUE_DEPTH), raw=True)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self.on_esc, esc_state_qos())
         self.create_subscription(String, "supervisor/abort", self.on_abort, 10)
         self.create_subscription(Heartbeat, HEARTBEAT_NAMES["guard"], self.on_guard,

@@ -40,7 +40,8 @@ CPU
     sensor streams are closed, so the tick slows from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends
     (docs/architecture.md §10.1). While disabled the streams stay open (``odom``, ``controller/status`` and the
     enable checks read them) but the tick runs every :data:`ODOM_PERIOD_S` (the odometry rate) instead of at
-    ``control.rate_hz``, which it takes only while enabled.
+    ``control.rate_hz``, which it takes only while enabled, and one IMU message in :data:`IDLE_IMU_EVERY` is
+    conditioned (the IMU is taken as CDR bytes, decoded only when used: :mod:`hindrax_drivers.lean_cdr`).
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
     ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
@@ -67,8 +68,9 @@ from hindrax_drivers import frames
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import DOFS, ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_state
+from hindrax_drivers.lean_cdr import cdr_decoder
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_common import load_node_config, run_node
+from hindrax_drivers.node_common import load_node_config, run_node, sensor_input_qos
 from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.msg import AllocationStatus, ControllerStatus, ControlSetpoint, Dvl, ManeuverStatus
 
@@ -89,6 +91,9 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
 STATUS_PERIOD_S = 0.5
 #: period of ``odom`` and the ``odom -> base_link`` transform on ``/tf`` (s): 10 Hz, enough for a 3D view
 ODOM_PERIOD_S = 0.1
+#: while disabled, one ``imu/data_raw`` message in this many is conditioned (51 Hz -> 10 Hz: the odometry's rate);
+#: the others are taken as bytes and dropped undecoded. Enabled, every one is (module docstring, "CPU")
+IDLE_IMU_EVERY = 5
 #: tick period (s) while an identification goal runs: the tick then only takes the goal's phase
 #: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams are
 #: closed. The goal's end is seen within 0.2 s (the streams open then; enabling waits for their first samples anyway,
@@ -132,6 +137,7 @@ class ControllerNode(VehicleNode):
         self.loop = HoldLoop(self.config, self.hold, self.tick_s)
         self._mount_t = mounting_rotation(self.config.sensors.icm20948.mounting_rpy_rad).T
         self._pending: list = []
+        self._decode_imu = cdr_decoder(Imu)
         self._last_sample_s: dict[str, float] = {}
         self.enabled = False
         self.message = "disabled (start-up)"
@@ -172,13 +178,14 @@ class ControllerNode(VehicleNode):
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
         """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics (about 80
-        messages/s in the pool layout)."""
+        messages/s in the pool layout). The first IMU message after opening is conditioned (:meth:`_on_imu`)."""
+        self._imu_count = IDLE_IMU_EVERY - 1
         self._streams = [
-            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), 20),
+            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), sensor_input_qos(20)),
             self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
-                            20),
-            self._subscribe(Imu, "imu/data_raw", lambda m: self._add(samples_from_imu(m, self._mount_t)), 50),
-            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), 20),
+                            sensor_input_qos(20)),
+            self._subscribe(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
+            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), sensor_input_qos(20)),
         ]
 
     def _open_enabled_streams(self) -> None:
@@ -194,10 +201,11 @@ class ControllerNode(VehicleNode):
             self.destroy_subscription(sub)
         self._enabled_streams = []
 
-    def _subscribe(self, msg_type: Any, topic: str, handler: Any, depth: int) -> Any:
+    def _subscribe(self, msg_type: Any, topic: str, handler: Any, qos: Any, raw: bool = False) -> Any:
         """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
-        room for an executor held up on a loaded machine."""
-        return self.create_subscription(msg_type, topic, handler, depth)
+        room for an executor held up on a loaded machine; the sensors' readers are best effort
+        (:func:`~hindrax_drivers.node_common.sensor_input_qos`)."""
+        return self.create_subscription(msg_type, topic, handler, qos, raw=raw)
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
@@ -218,6 +226,13 @@ class ControllerNode(VehicleNode):
         for dev, _s in samples:
             self._last_sample_s[dev] = now
         self._pending.extend(samples)
+
+    def _on_imu(self, data: bytes) -> None:
+        """``imu/data_raw`` as CDR bytes: every message while enabled, one in :data:`IDLE_IMU_EVERY` while disabled."""
+        self._imu_count += 1
+        if self.enabled or self._imu_count >= IDLE_IMU_EVERY:
+            self._imu_count = 0
+            self._add(samples_from_imu(self._decode_imu(data), self._mount_t))
 
     def _on_esc_state(self, msg: DiagnosticStatus) -> None:
         state = read_esc_state(msg)

@@ -110,7 +110,7 @@ from hindrax_drivers.esc_state import ESC_STATE_TOPIC, esc_state_qos, read_esc_s
 from hindrax_drivers.lean_cdr import wrench_stamped_cdr
 from hindrax_drivers.config import ConfigError, ConfigIssue, VehicleConfig
 from hindrax_drivers.icm20948.mounting import mounting_rotation
-from hindrax_drivers.node_common import load_node_config, run_node
+from hindrax_drivers.node_common import load_node_config, run_node, sensor_input_qos
 from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.msg import Dvl, HydroEstimate, ManeuverStatus, ThrusterPwm
@@ -251,7 +251,8 @@ class IdentificationNode(VehicleNode):
         if active:
             self.core.forget_inputs()
             # (type, topic, handler, QoS depth): the depths hold what arrives in 0.4-2 s, many ticks
-            self._inputs = [self.create_subscription(msg_type, topic, handler, depth)
+            # best effort (sensor_input_qos): the writers then run no reliability protocol for this reader
+            self._inputs = [self.create_subscription(msg_type, topic, handler, sensor_input_qos(depth))
                             for msg_type, topic, handler, depth in (
                                 (Dvl, "dvl/data", self._on_dvl, 20),
                                 (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
