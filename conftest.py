@@ -7,7 +7,7 @@
   exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it.
 - A test that leaves SIGINT or SIGTERM ignored in its worker fails (:func:`_stop_signals_not_left_ignored`): every
   child the worker starts later would inherit the ignored signal, and ``kill`` or Ctrl-C could not end it.
-- Scheduling over the two workers (pytest.ini: ``--dist loadgroup --no-loadscope-reorder``): each test is a unit of
+- Scheduling over the workers (pytest.ini: ``--dist loadgroup --no-loadscope-reorder``): each test is a unit of
   its own, dealt in order to the worker that is free, so the longest tests (:data:`LONGEST_FIRST`) go first and no
   worker is left running one of them alone at the end; the tests of a module that uses a module-scoped fixture stay
   one unit (:func:`pytest_collection_modifyitems`), so the fixture is built once.
