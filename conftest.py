@@ -7,7 +7,7 @@
   exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it.
 - A test that leaves SIGINT or SIGTERM ignored in its worker fails (:func:`_stop_signals_not_left_ignored`): every
   child the worker starts later would inherit the ignored signal, and ``kill`` or Ctrl-C could not end it.
-- Scheduling over the two workers (pytest.ini: ``--dist loadgroup --no-loadscope-reorder``): each test is a unit of
+- Scheduling over the workers (pytest.ini: ``--dist loadgroup --no-loadscope-reorder``): each test is a unit of
   its own, dealt in order to the worker that is free, so the longest tests (:data:`LONGEST_FIRST`) go first and no
   worker is left running one of them alone at the end; the tests of a module that uses a module-scoped fixture stay
   one unit (:func:`pytest_collection_modifyitems`), so the fixture is built once.
@@ -45,7 +45,7 @@ _domain_ctx = None
 #: module-scoped fixture, or the readers of a shared run) runs as one unit where its listed test stands (its tests run
 #: there, in file order), with the seconds of the whole group.
 LONGEST_FIRST = """
-428 test_pool_day.py::test_pool_day_as_the_readme_writes_it
+373 test_pool_day.py::test_pool_day_as_the_readme_writes_it
 118 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
  66 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
  57 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
@@ -74,7 +74,6 @@ LONGEST_FIRST = """
  15 test_ident_fit.py::test_imu_in_a_rotated_frame_and_unset_header_stamps
  15 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
  14 test_refusals_leave_vehicle_armed.py::test_a_refused_tool_does_not_disarm_the_vehicle
- 13 test_thrust_calibration.py::test_line_pull_measures_the_horizontal_scale_in_surge_and_sway
  12 test_ident_bag_fit_same.py::test_ident_bag_and_ident_fit_give_the_same_values_and_intervals
  12 test_control_evaluate.py::test_known_model_holds_the_depth_step_better_than_the_vehicle_file
  11 test_graybox_baseline.py::test_timing_chosen_by_cross_validation_is_the_truth

@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.config import ConfigError, default_config_path, load_config
 from hindrax_ident.identification.fit.calibration import thrust_scales
 from hindrax_ident.sim.campaign import Campaign, PoolOperator
 from hindrax_ident.identification.online.executive import THRUST_STEPS, Executive, TickInput, expand_calibration
@@ -55,6 +55,13 @@ def test_the_plan_runs_the_reference_steps_in_a_fixed_order_and_thrust_expands(c
     assert ex.steps[4].force_n == pytest.approx((1000.0 * 0.001 - 0.05) * 9.81)   # the shipped float: 1 l, 50 g
     assert isinstance(ex.steps[9], TranslationLadder) and isinstance(ex.steps[11], RotationLadder)
     assert ex.steps[9].levels == pytest.approx(ex.ladder("surge"))
+    # the holds: 15 s settling and 30 s averaging, unless the vehicle file's calibration.hold_* keys say otherwise
+    assert {(s.settle_s, s.window_s) for s in ex.steps[1:9]} == {(15.0, 30.0)}
+    short = cfg.with_overrides({"calibration.hold_settle_s": 6.0, "calibration.hold_window_s": 12.0})
+    assert [(s.settle_s, s.window_s) for s in Executive(short, ["heave"], tick_s=0.02, calibrate=["ballast"],
+                                                        ballast_weight_in_water_n=8.56).steps[1:2]] == [(6.0, 12.0)]
+    with pytest.raises(ConfigError, match=r"calibration.hold_window_s = 0.5: allowed number in \[1, 600\]"):
+        cfg.with_overrides({"calibration.hold_window_s": 0.5})
     bb = Executive(cfg, ["sway"], tick_s=0.02, excitation="prbs", excitation_duration_s=40.0)
     assert isinstance(bb.steps[1], BroadbandRun) and bb.steps[1].duration_s == 40.0
     # a known force the step needs must be given (the float's comes from the vehicle file)

@@ -165,11 +165,13 @@ def test_sinker_and_float_recover_heave_under_asymmetric_thrust(tmp_path, capsys
 
 
 def test_line_pull_measures_the_horizontal_scale_in_surge_and_sway():
-    """Dive and the two line pulls only (no ladders): 4.905 N along body +x, then +y, under the thrust x0.90 truth."""
+    """Dive and the two line pulls only (no ladders): 4.905 N along body +x, then +y, under the thrust x0.90 truth;
+    holds shortened (the vehicle file's calibration.hold_*: 5 s settling, 12 s averaging, four 3 s blocks)."""
     from hindrax_ident.sim.campaign import Campaign
     from hindrax_ident.sim.simulator import Simulator
 
-    cfg = load_config(default_config_path())
+    cfg = load_config(default_config_path()).with_overrides({"calibration.hold_settle_s": 5.0,
+                                                             "calibration.hold_window_s": 12.0})
     sim = Simulator(cfg, seed=2, truth=str(THRUST_090))
     rec = Campaign(cfg, dofs=[], seed=2, sim=sim, calibrate=["line_pull"], line_pull_n=4.905).run()
     assert not rec.aborted, rec.abort_reason

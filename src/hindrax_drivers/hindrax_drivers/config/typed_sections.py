@@ -502,6 +502,8 @@ class CalibrationSection(Section, prefix="calibration"):
     float_mass_kg: float | None
     float_volume_m3: float | None
     net_buoyancy_std_n: float | None
+    hold_settle_s: float | None
+    hold_window_s: float | None
 
 
 @dataclass(frozen=True, eq=False, repr=False)

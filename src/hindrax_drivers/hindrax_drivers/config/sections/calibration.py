@@ -1,5 +1,5 @@
-"""``calibration.*``: the known forces of the campaign's reference steps (docs/identification.md §6), and
-their derived view (:class:`CalibrationConfig`).
+"""``calibration.*``: the known forces of the campaign's reference steps (docs/identification.md §6), the times
+of their holds, and the forces' derived view (:class:`CalibrationConfig`).
 """
 from __future__ import annotations
 
@@ -25,7 +25,11 @@ SCHEMA, OPTIONAL = section("calibration", {
     "net_buoyancy_std_n": real("1-sigma of the vehicle's net buoyancy (rho V - m) g as weighed, N (the "
                                "hover holds of the thrust calibration measure the forward thrust against "
                                "it; optional)", 1e-4, 10.0),
-}, optional=("float_", "net_buoyancy_std_n"))
+    "hold_settle_s": real("settling time before each averaging hold of the reference steps, s (optional; "
+                          "default 15)", 1.0, 600.0),
+    "hold_window_s": real("averaging time of each hold of the reference steps, s (optional; default 30)",
+                          1.0, 600.0),
+}, optional=("float_", "net_buoyancy_std_n", "hold_"))
 
 
 def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:

@@ -375,10 +375,13 @@ class Executive:
 
     def plan(self) -> list[Step]:
         """The steps of the campaign (module docstring): dive, the reference steps of :attr:`calibrate` in their
-        fixed order, one manoeuvre step per DOF. The calibration holds last :data:`CALIBRATION_SETTLE_S` and
-        :data:`CALIBRATION_WINDOW_S` (this module's values when the plan is made)."""
-        hold = {"settle_s": CALIBRATION_SETTLE_S, "window_s": CALIBRATION_WINDOW_S}
+        fixed order, one manoeuvre step per DOF. The calibration holds last ``calibration.hold_settle_s`` and
+        ``hold_window_s`` of the vehicle file, else :data:`CALIBRATION_SETTLE_S` and :data:`CALIBRATION_WINDOW_S`
+        (this module's values when the plan is made)."""
         cal = self.calibrate
+        c = self.cfg.calibration
+        hold = {"settle_s": or_default(c.hold_settle_s, CALIBRATION_SETTLE_S),
+                "window_s": or_default(c.hold_window_s, CALIBRATION_WINDOW_S)} if cal else {}
         out: list[Step] = [Dive()]
         if "inclining" in cal:
             out += [Inclining(d, *self.inclining_load_n_m, **hold) for d in ("roll", "pitch")]
