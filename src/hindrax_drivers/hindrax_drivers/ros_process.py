@@ -29,8 +29,8 @@ The executor is rclpy's ``EventsExecutor`` (``rclpy.experimental``, Jazzy; it di
 event queue instead of rebuilding a wait set in Python on every spin, docs/architecture.md §10)
 unless the environment variable ``HINDRAX_EXECUTOR`` says ``single`` (rclpy's
 ``SingleThreadedExecutor``). Every node process stays within its limits in rclpy 7.1
-(docs/architecture.md §11.5): no subscription callback takes the message info, no coroutine waits
-for long.
+(docs/architecture.md §11.5): a subscription callback takes the message info only through
+:class:`WithMessageInfo`, no coroutine waits for long.
 
 Signals: one SIGINT or SIGTERM, or any number of them at any moment after start-up, ends the process
 with status 0. Python raises ``KeyboardInterrupt`` in the main thread only when that thread next
@@ -83,6 +83,7 @@ from __future__ import annotations
 
 import faulthandler
 import gc
+import inspect
 import os
 import signal
 import sys
@@ -97,7 +98,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.signals import SignalHandlerOptions, get_current_signal_handlers_options, uninstall_signal_handlers
 
-__all__ = ["BEFORE_PROCESS_END", "EXECUTORS", "RosProcess", "SHUTDOWN_BUDGET_S", "executor_kind",
+__all__ = ["BEFORE_PROCESS_END", "EXECUTORS", "RosProcess", "SHUTDOWN_BUDGET_S", "WithMessageInfo", "executor_kind",
            "freeze_startup_heap"]
 
 #: values of ``HINDRAX_EXECUTOR``
@@ -153,6 +154,29 @@ def _spin_while(executor: Any, go_on: Callable[[], bool]) -> None:
                 return
             next_check = now + OK_CHECK_PERIOD_S
         executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+
+
+class WithMessageInfo:
+    """A subscription callback ``fn(msg, info)`` that every executor here calls with the message and its info.
+
+    ``info``: rclpy's ``MessageInfo`` dict of the rmw message info (``source_timestamp``, ``received_timestamp``, ns;
+    ``publication_sequence_number``, int; ``reception_sequence_number``, None with rmw_fastrtps_cpp; no publisher
+    gid). rclpy marks a callback "with message info" when its signature binds two arguments (``Subscription.callback``);
+    the ``SingleThreadedExecutor`` and ``LeanWaitExecutor`` then call it with two, rclpy 7.1's ``EventsExecutor``
+    with the ``(msg, info)`` tuple as one (its ``HandleSubscriptionReady``; a plain ``def cb(msg, info)`` fails there
+    with "SystemError: null argument to internal routine"). This adapter takes both forms."""
+
+    __slots__ = ("_fn",)
+    __signature__ = inspect.Signature([inspect.Parameter(n, inspect.Parameter.POSITIONAL_ONLY)
+                                       for n in ("msg", "info")])
+
+    def __init__(self, fn: Callable[[Any, dict], None]) -> None:
+        self._fn = fn
+
+    def __call__(self, msg: Any, info: dict | None = None) -> None:
+        if info is None:  # the EventsExecutor's one tuple
+            msg, info = msg
+        self._fn(msg, info)
 
 
 class _EventsLoop:

@@ -18,18 +18,23 @@ Behaviour
   they are written unchanged, never converted into a Python message and back (an ``Imu`` taken as an object costs
   77 us, as bytes 11 us: :mod:`hindrax_drivers.lean_cdr`; at the stack's 430 msg/s that is about 2 % of a core).
   Log time = the node's clock in the callback (sim time with ``use_sim_time``, so a stepped simulation's bag depends
-  on its seed only); publish time = the log time (the callback takes the message alone: rclpy 7.1's
-  EventsExecutor, which this process spins, fails on a callback that takes ``(msg, info)``, docs/architecture.md
-  §11.5; the MCAP specification asks for the log time where the publish time is not available). No reader of this
-  project uses the publish time (a message's ``header.stamp`` is the time of its data). Writing happens in one
+  on its seed only); publish time = the log time (not the DDS source timestamp, which is wall-clock time; the MCAP
+  specification asks for the log time where the publish time is not available). No reader of this project uses the
+  publish time (a message's ``header.stamp`` is the time of its data). Writing happens in one
   writer thread (the mcap writer is not thread-safe), which drains what the callbacks queued every
   ``drain_period_s``.
 - Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
   (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
   the bag (summary, metadata.yaml). A SIGKILL or power loss loses at most the open chunk
   (:mod:`~hindrax_drivers.recording.writer`); ``hindrax bag recover`` repairs the bag.
+- Loss in transit: the callback also gets the message info (:class:`~hindrax_drivers.ros_process.WithMessageInfo`);
+  gaps in each topic's publication sequence numbers count the samples lost between its writer and this reader
+  (:class:`~hindrax_drivers.recording.sequence_gaps.SequenceGaps`; a best-effort reader's loss is otherwise silent).
+  The info has no publisher gid here, so the count is keyed by topic and a gap counts only while the topic has one
+  publisher (``get_publisher_count``, asked on a gap only).
 - Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag,
-  messages written and dropped, and one key per topic (``topic:/name`` -> count).
+  messages written, dropped (the writer's queue) and lost (in transit; WARN when either is above 0), one key per
+  topic (``topic:/name`` -> count) and one per topic that lost samples (``lost:/name`` -> samples lost).
 - Disk floor: every ``disk_check_period_s`` (and before a start) the free space of the filesystem the bag
   goes to is compared with ``recording.min_free_disk_mb``; below it the recorder stops cleanly (the bag is
   finished: summary, metadata.yaml), refuses new starts, and reports the reason at level ERROR on
@@ -61,7 +66,7 @@ from hindrax_msgs.srv import StartRecording, StopRecording
 
 from ..config import ConfigError
 from ..node_common import load_node_config
-from ..ros_process import RosProcess
+from ..ros_process import RosProcess, WithMessageInfo
 from ..vehicle_node import VehicleNode
 from .bag_dir import new_bag_dir
 from .metadata import BagMetadata
@@ -69,6 +74,7 @@ from .msgdefs import normalize_type_name
 from .msgtypes import TypeNotInstalledError, message_class
 from .qos import profile_from_rclpy, recorder_policies
 from .selection import TopicSelection
+from .sequence_gaps import SequenceGaps
 from .writer import WriterOptions
 from .writer_thread import ThreadedBagWriter
 
@@ -107,6 +113,7 @@ class RecorderNode(VehicleNode):
         self._drain_period_s = float(self._param("drain_period_s", DRAIN_PERIOD_S))
 
         self._writer: ThreadedBagWriter | None = None
+        self._gaps = SequenceGaps()
         self._selection: TopicSelection | None = None
         self._subs: dict[str, Any] = {}
         self._skipped: set[str] = set()
@@ -205,6 +212,7 @@ class RecorderNode(VehicleNode):
         out = Path(named) if named else new_bag_dir(self._output_root)
         self._selection = selection or self.default_selection()
         self._writer = ThreadedBagWriter(out, self._options, drain_period_s=self._drain_period_s)
+        self._gaps = SequenceGaps(self._publisher_count)
         self._skipped.clear()
         self.get_logger().info(f"recording {self._selection.describe()} to {out}")
         self._discover()
@@ -225,8 +233,13 @@ class RecorderNode(VehicleNode):
         self._last_metadata = meta
         self._last_bag = writer.bag_dir
         self._log(f"bag {writer.bag_dir} closed: {meta.message_count} messages in {len(meta.files)} file(s), "
-                  f"{writer.dropped} dropped")
+                  f"{writer.dropped} dropped, {self._gaps.lost} lost in transit")
         return meta
+
+    def _publisher_count(self, topic: str) -> int:
+        """Publishers of ``topic`` matched with the recorder's subscription (0 when not subscribed)."""
+        sub = self._subs.get(topic)
+        return sub.get_publisher_count() if sub is not None else 0
 
     def _log(self, text: str, warning: bool = False) -> None:
         """Log through ROS while the context is up; after SIGINT/SIGTERM (context shut down) to stderr."""
@@ -283,17 +296,18 @@ class RecorderNode(VehicleNode):
                              reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
             self._writer.add_topic(topic, type_name, profiles)
             self._subs[topic] = self.create_subscription(
-                cls, topic, functools.partial(self._on_message, topic), qos, raw=True)
+                cls, topic, WithMessageInfo(functools.partial(self._on_message, topic)), qos, raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
 
-    def _on_message(self, topic: str, data: bytes) -> None:
-        """One received message (CDR bytes) of ``topic``: queued for the writer thread, log time = publish time = the
-        node's clock now (module docstring)."""
+    def _on_message(self, topic: str, data: bytes, info: dict) -> None:
+        """One received message (CDR bytes) of ``topic`` and its rmw message info: queued for the writer thread, log
+        time = publish time = the node's clock now; its publication sequence number counted (module docstring)."""
         writer = self._writer
         if writer is None:
             return
         now_ns = self.get_clock().now().nanoseconds
         writer.write(topic, now_ns, data, now_ns)
+        self._gaps.observe(topic, info["publication_sequence_number"])
 
     # -- services and status ----------------------------------------------------------------------
     def _on_start(self, request: StartRecording.Request, response: StartRecording.Response):
@@ -344,14 +358,17 @@ class RecorderNode(VehicleNode):
             st.level = DiagnosticStatus.OK
             st.message = "idle"
         else:
-            st.level = DiagnosticStatus.ERROR if w.error else (DiagnosticStatus.WARN if w.dropped else
+            lost = self._gaps.lost_by_writer()
+            st.level = DiagnosticStatus.ERROR if w.error else (DiagnosticStatus.WARN if w.dropped or lost else
                                                                 DiagnosticStatus.OK)
             st.message = f"writer failed: {w.error}" if w.error else f"recording to {w.bag_dir}"
             values += [KeyValue(key="messages_written", value=str(w.written)),
                        KeyValue(key="messages_dropped", value=str(w.dropped)),
+                       KeyValue(key="messages_lost", value=str(sum(lost.values()))),
                        KeyValue(key="messages_queued", value=str(w.pending)),
                        KeyValue(key="file", value=str(w.current_file.name))]
             values += [KeyValue(key=f"topic:{t}", value=str(n)) for t, n in sorted(w.topic_counts().items())]
+            values += [KeyValue(key=f"lost:{t}", value=str(n)) for t, n in sorted(lost.items())]
         st.values = values
         return st
 
