@@ -126,6 +126,26 @@ def test_wrench_stream_stopping_commands_neutral(graph):
     assert set(got["pwm"][-1].pulse_width_us) == {1500.0}
 
 
+def test_the_stale_check_sleeps_while_no_wrench_comes(graph):
+    """The stale check's timer runs only from a wrench to its stale report (and a held status): idle, nothing wakes
+    the allocation to find nothing (it had woken 10 times a second for ever after the first stale report, and from
+    start-up). A wrench restarts it: the stream stopping again commands neutral again, and nothing is sent idle."""
+    node, send, got, spin = graph
+    assert node.stale_timer.is_canceled()  # before the first wrench
+    for _ in range(2):
+        send([8.0, 0, 0, 0, 0, 0])
+        assert not node.stale_timer.is_canceled()
+        n = len(got["status"])
+        wait_until(lambda: len(got["status"]) > n and got["status"][-1].rejected, 10, spin, "stale timeout")
+        assert "no wrench" in got["status"][-1].reason and set(got["pwm"][-1].pulse_width_us) == {1500.0}
+        wait_until(node.stale_timer.is_canceled, 10, spin, "the stale check asleep")
+        sent = len(got["pwm"]), len(got["status"]), len(got["forces"])
+        span_end = node.get_clock().now().nanoseconds + 3 * node.stale_timer.timer_period_ns
+        wait_until(lambda: node.get_clock().now().nanoseconds > span_end, 10, spin, "three stale-check periods")
+        assert (len(got["pwm"]), len(got["status"]), len(got["forces"])) == sent
+        assert node.stale_timer.is_canceled()
+
+
 def test_allocator_is_rebuilt_on_parameter_change_only(graph):
     node, send, _, _ = graph
     before = node.core.allocator

@@ -948,8 +948,10 @@ def test_a_slow_bus_does_not_slow_the_heartbeat(esc):
 def test_pulse_width_goes_out_on_every_write_and_repeats_only_after_a_quiet_period(monkeypatch):
     """``thrusters/pulse_width``: every confirmed write goes out at once; the output tick repeats the last widths only
     when none went out for REPEAT_AFTER_PERIODS output periods (ROS time). With commands at 25 Hz (the
-    identification's) and the tick at 50 Hz, that is one message per write, each width once; at rest, every second
-    tick; a step back of ROS time repeats at once. Before, every tick without a write repeated: 50 Hz in both."""
+    identification's) and the tick at 50 Hz, that is one message per write, each width once; armed at rest, every
+    second tick; disarmed at neutral, a keep-alive every DISARMED_REPEAT_S (it had been every second tick: 25 Hz of
+    nothing new while the vehicle waits); the arm and the disarm go out within a tick; a step back of ROS time
+    repeats at once. Before, every tick without a write repeated: 50 Hz in both."""
     import rclpy.time
     from rclpy.serialization import deserialize_message
 
@@ -978,10 +980,17 @@ def test_pulse_width_goes_out_on_every_write_and_repeats_only_after_a_quiet_peri
         _healthy(node)
         tick(4)
         sent.clear()
-        tick(20)  # at rest: a repeat every second tick
-        assert len(sent) == 10
+        rest_ticks = round(4 * esc_node.DISARMED_REPEAT_S / PERIOD_S)
+        tick(rest_ticks)  # disarmed at neutral: the keep-alive only
+        assert len(sent) == 4, f"{len(sent)} messages in {rest_ticks} ticks disarmed at rest"
+        assert not deserialize_message(sent[-1], ThrusterPwm).armed
         assert node.on_set_armed(SetArmed.Request(arm=True), SetArmed.Response()).success
+        sent.clear()
         tick(2)
+        assert sent and deserialize_message(sent[-1], ThrusterPwm).armed  # the arm goes out at the tick rate
+        sent.clear()
+        tick(20)  # armed at rest: a repeat every second tick
+        assert len(sent) == 10
         sent.clear()
         widths = [1550.0 + 10.0 * k for k in range(10)]
         for w in widths:  # 25 Hz commands, each a new width
@@ -994,4 +1003,10 @@ def test_pulse_width_goes_out_on_every_write_and_repeats_only_after_a_quiet_peri
         ros["ns"] -= 1_000_000_000  # ROS time steps back (a restarted /clock): the next tick repeats at once
         tick()
         assert len(sent) == 1
+        sent.clear()
+        assert node.on_set_armed(SetArmed.Request(arm=False), SetArmed.Response()).success
+        assert sent and not deserialize_message(sent[-1], ThrusterPwm).armed  # the disarm goes out at once
+        sent.clear()
+        tick(rest_ticks)
+        assert len(sent) <= 4, f"{len(sent)} messages in {rest_ticks} ticks disarmed at rest after a disarm"
         node.destroy_node()

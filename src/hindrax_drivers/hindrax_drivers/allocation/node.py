@@ -115,8 +115,9 @@ class ThrustAllocationNode(VehicleNode):
         self._last_status_key: tuple = ()
         self._last_status_ns = -(1 << 62)
         #: the stale check, restarted by every wrench: it wakes the process only when wrenches stop (a held status
-        #: then goes out from it), not 10 times a second beside the 50 Hz wrenches (docs/architecture.md §10.1)
-        self.stale_timer = self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale)
+        #: then goes out from it), not 10 times a second beside the 50 Hz wrenches (docs/architecture.md §10.1), and
+        #: it sleeps once the stop is reported and nothing is held (idle, it finds nothing to do)
+        self.stale_timer = self.create_timer(max(0.02, self.timeout_s / 5.0), self.check_stale, autostart=False)
 
     # -- parameters: rebuild the core when a validated change of the thruster keys arrives
     def on_configuration(self, cfg) -> None:
@@ -190,12 +191,14 @@ class ThrustAllocationNode(VehicleNode):
         now_ns = self.get_clock().now().nanoseconds
         if self._held is not None and now_ns - self._last_status_ns >= STATUS_PERIOD_NS:
             self._send_status(now_ns)
-        if self.last_wrench_ns is None or self.stale_reported:
-            return
-        age_s = (now_ns - self.last_wrench_ns) * 1e-9
-        if age_s > self.timeout_s:
-            self.stale_reported = True
-            self.reject(None, np.zeros(6), f"stale: no wrench for {age_s:.3f} s (limit {self.timeout_s:g} s)", now_ns)
+        if self.last_wrench_ns is not None and not self.stale_reported:
+            age_s = (now_ns - self.last_wrench_ns) * 1e-9
+            if age_s > self.timeout_s:
+                self.stale_reported = True
+                self.reject(None, np.zeros(6), f"stale: no wrench for {age_s:.3f} s (limit {self.timeout_s:g} s)",
+                            now_ns)
+        if self.stale_reported and self._held is None:
+            self.stale_timer.cancel()  # nothing left to check or send: the next wrench restarts it
 
     def publish(self, msg: WrenchStamped | None, pulse_width_us: np.ndarray, force_n: np.ndarray,
                 requested: np.ndarray, achieved: np.ndarray, scale: float, saturated: np.ndarray,

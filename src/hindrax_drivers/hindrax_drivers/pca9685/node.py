@@ -25,7 +25,8 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   ``use_sim_time`` the output tick is a ROS-time timer of its own.
 - Outputs: ``thrusters/pulse_width`` (the widths on the chip decoded from the register counts, armed flag, output
   state; on every confirmed write or change of state, and repeated by the output tick when nothing went out for
-  :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz at rest and under the identification's 25 Hz commands),
+  :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz armed and under the identification's 25 Hz commands; disarmed at
+  neutral every :data:`DISARMED_REPEAT_S`),
   ``esc/heartbeat`` (hindrax_msgs/Heartbeat every second steady tick: ``output_state``, ``armed``, the reason as
   ``message``, ``boot_id``/``seq``, the newest guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while
   unknown; the output guard's sign of life and its release condition), ``esc/output_state`` (the same state,
@@ -69,7 +70,8 @@ from .peers import COMMAND_TOPIC, EscPeers
 from .link import ChipLink
 from .worker import ChipWorker
 
-__all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "REPEAT_AFTER_PERIODS", "main"]
+__all__ = ["EscNode", "EscOutput", "GUARD_CONFIRM_S", "RETRY_MIN_S", "RETRY_MAX_S", "REPEAT_AFTER_PERIODS",
+           "DISARMED_REPEAT_S", "main"]
 
 _UNKNOWN, _NEUTRAL, _COMMANDING = ThrusterPwm.OUTPUT_UNKNOWN, ThrusterPwm.OUTPUT_NEUTRAL, ThrusterPwm.OUTPUT_COMMANDING
 #: node parameter ``steady_watchdog_timeout_s``: the steady-clock watchdog counts wall time (time.monotonic) during
@@ -83,6 +85,9 @@ STEADY_WATCHDOG = Spec("float", "no command for this long of steady-clock time (
 #: once, so no width is lost: the readers hold the last one (identification, bag fit, simulator). With the
 #: identification's commands at 25 Hz, one repeat between two writes at 50 Hz had carried nothing new.
 REPEAT_AFTER_PERIODS = 1.5
+#: disarmed at neutral the repeat is a keep-alive every this many s (ROS time): the state is on ``esc/heartbeat`` at
+#: 25 Hz for the guard and on ``esc/output_state`` for the rest; no reader needs the widths faster at rest
+DISARMED_REPEAT_S = 0.5
 
 
 class EscNode(VehicleNode):
@@ -321,7 +326,9 @@ class EscNode(VehicleNode):
         if self.neutral_confirmed_time is not None:
             self._output(now)
         last_s = self.diag.last_publish_s  # the last thrusters/pulse_width, ROS time (_publish_written)
-        if last_s is None or not 0.0 <= now.nanoseconds * 1e-9 - last_s < REPEAT_AFTER_PERIODS * self.period_s:
+        rest = not self.armed and self.output_state == _NEUTRAL
+        repeat_s = DISARMED_REPEAT_S if rest else REPEAT_AFTER_PERIODS * self.period_s
+        if last_s is None or not 0.0 <= now.nanoseconds * 1e-9 - last_s < repeat_s:
             self._publish_written(now)
 
     def _steady_and_output_tick(self) -> None:
