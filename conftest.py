@@ -45,7 +45,7 @@ _domain_ctx = None
 #: module-scoped fixture, or the readers of a shared run) runs as one unit where its listed test stands (its tests run
 #: there, in file order), with the seconds of the whole group.
 LONGEST_FIRST = """
-373 test_pool_day.py::test_pool_day_as_the_readme_writes_it
+428 test_pool_day.py::test_pool_day_as_the_readme_writes_it
 118 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
  66 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
  57 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
