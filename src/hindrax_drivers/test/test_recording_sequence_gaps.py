@@ -17,6 +17,8 @@ CASES = [
      [0, 0, 0, 1, 0, 0], {"b": 1}),
     ("writer restart: back to 1 is no loss", [("a", 1), ("a", 2), ("a", 900), ("a", 1), ("a", 2), ("a", 4)],
      [0, 0, 897, 0, 0, 1], {"a": 898}),
+    ("an rmw without sequence numbers: None or UINT64_MAX count nothing",
+     [("a", 1), ("a", None), ("a", 2), ("b", 5), ("b", 2**64 - 1), ("b", 6)], [0] * 6, {}),
 ]
 
 

@@ -307,7 +307,7 @@ class RecorderNode(VehicleNode):
             return
         now_ns = self.get_clock().now().nanoseconds
         writer.write(topic, now_ns, data, now_ns)
-        self._gaps.observe(topic, info["publication_sequence_number"])
+        self._gaps.observe(topic, info.get("publication_sequence_number"))
 
     # -- services and status ----------------------------------------------------------------------
     def _on_start(self, request: StartRecording.Request, response: StartRecording.Response):

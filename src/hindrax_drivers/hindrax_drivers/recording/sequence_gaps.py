@@ -10,6 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Callable, Hashable
 
+#: rmw's ``RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED`` (UINT64_MAX): an rmw that does not number its samples
+SEQUENCE_NUMBER_UNSUPPORTED = 2**64 - 1
+
 
 class SequenceGaps:
     """Counts the samples each writer lost on the way to one reader, from gaps in its sequence numbers.
@@ -34,7 +37,10 @@ class SequenceGaps:
 
     def observe(self, writer: Hashable, seq: int) -> int:
         """Take one received sample's sequence number ``seq`` (int, >= 1) from ``writer``; returns the samples lost
-        just before it (0 unless a gap shows)."""
+        just before it (0 unless a gap shows). A number the rmw does not give (None, not an int, or
+        :data:`SEQUENCE_NUMBER_UNSUPPORTED`) counts nothing and raises nothing."""
+        if not isinstance(seq, int) or seq == SEQUENCE_NUMBER_UNSUPPORTED:
+            return 0
         last = self._last.get(writer)
         self._last[writer] = seq
         if last is None or seq <= last + 1 or self._writer_count(writer) != 1:
