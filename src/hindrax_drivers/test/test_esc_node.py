@@ -554,6 +554,9 @@ def test_i2c_outage_without_oe_the_returning_bus_gets_neutral_first_within_one_t
         samples.append(wire(emu))
 
     bus.write_i2c_block_data = sampled
+    # the bus returns between two ticks: a (re)configuration the last tick posted has failed by then (under load the
+    # worker can still be inside its attempts, and the tick posts no second one while it is pending)
+    node.settle()
     bus.disconnected = False
     node.steady_check()  # the next tick
     node.settle()
