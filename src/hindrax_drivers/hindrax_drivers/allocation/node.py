@@ -138,14 +138,18 @@ class ThrustAllocationNode(VehicleNode):
             return
         self.on_wrench(msg)
 
+    def _input_arrived(self, now_ns: int) -> None:
+        """A wrench or test forces came at ``now_ns`` (ns, the node's clock): the stale check starts over."""
+        self.last_wrench_ns = now_ns
+        self.stale_reported = False
+        self.stale_timer.reset()
+
     def on_wrench(self, msg: WrenchStamped) -> None:
         """One wrench: an rclpy ``WrenchStamped`` or rosbags' decoding of one (fields are only read)."""
         now_ns = self.get_clock().now().nanoseconds
         f, t = msg.wrench.force, msg.wrench.torque
         w = np.array([f.x, f.y, f.z, t.x, t.y, t.z])
-        self.last_wrench_ns = now_ns
-        self.stale_reported = False
-        self.stale_timer.reset()
+        self._input_arrived(now_ns)
         stamp = msg.header.stamp
         reason = wrench_header_problem(msg.header.frame_id, stamp.sec * 1_000_000_000 + stamp.nanosec, now_ns,
                                        self.timeout_s, self.future_margin_s)
@@ -165,9 +169,7 @@ class ThrustAllocationNode(VehicleNode):
     def on_test_forces(self, msg: ThrusterForces) -> None:
         """Per-thruster test forces (``hindrax thruster-test``): widths from each curve, or neutral and the reason."""
         now_ns = self.get_clock().now().nanoseconds
-        self.last_wrench_ns = now_ns
-        self.stale_reported = False
-        self.stale_timer.reset()
+        self._input_arrived(now_ns)
         n = len(self.core.names)
         try:
             widths = self.core.test_pulse_widths(msg.force_n)
