@@ -277,6 +277,8 @@ class HeartbeatWatch:
         self.identity = HeartbeatIdentity(HEARTBEAT_NAMES[kind], HEARTBEAT_NODES[kind])
         #: live publishers (the subscription's liveliness ``alive_count``; 0 until the first event)
         self.alive = 0
+        #: beats taken at a stale judgement rather than by the executor (:meth:`fresh`)
+        self.taken_late = 0
         self.publishers = PublisherNames(node, self.identity.topic)
         self.subscription = node.create_subscription(
             Heartbeat, self.identity.topic, self._on_beat, heartbeat_qos(), raw=True,
@@ -285,15 +287,31 @@ class HeartbeatWatch:
     def _on_liveliness(self, info: Any) -> None:
         self.alive = int(info.alive_count)
 
-    def _on_beat(self, data: bytes) -> None:
+    def _on_beat(self, data: bytes) -> Any:
         beat = read_heartbeat(data)
         if self.identity.on_beat(beat, bool(self.armed())):
             self.handler(beat)
+            return beat
+        return None
 
     def check(self) -> str:
         """Feed the publishers the graph shows and the live count to the identity check; returns its fault."""
         return self.identity.on_publishers(self.publishers.names(), self.alive,
                                            simulated_now_s(self.node) is not None)
+
+    def fresh(self, age: AliveAge, timeout_s: float) -> bool:
+        """Whether ``age`` (this peer's, just ticked) is within ``timeout_s``; when not, the beats already waiting on
+        the subscription are taken first (this process was starved and its timer ran before their callbacks), through
+        the same check and handler, the newest accepted aged from its send stamp (``steady_ns``: ``time.monotonic``
+        of the same host), so a peer that died is not made younger. :attr:`taken_late` counts the beats taken so."""
+        if not age.fresh(timeout_s):
+            newest = None
+            while (taken := self.subscription.handle.take_message(Heartbeat, True)) is not None:
+                self.taken_late += 1
+                newest = self._on_beat(taken[0]) or newest
+            if newest is not None:
+                age.heard(time.monotonic() - newest.steady_ns * 1e-9)
+        return age.fresh(timeout_s)
 
 
 class AliveAge:

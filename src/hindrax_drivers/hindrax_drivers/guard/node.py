@@ -336,8 +336,9 @@ class OutputGuardNode(VehicleNode):
     def tick(self) -> None:
         self.tick_gaps.tick()
         self._last_decision = time.monotonic()
-        self.esc_age.tick()
-        self.supervisor_age.tick()
+        for kind, age in (("esc", self.esc_age), ("supervisor", self.supervisor_age)):
+            age.tick()
+            self.watches[kind].fresh(age, self.timeout_s)  # a stale one's waiting beats taken first (starved)
         self.check_identity()
         self.core.on_stall(self.watchdog_ran_out())
         beat_seq = self.heartbeat.seq + 1  # the beat below carries this decision
@@ -374,6 +375,7 @@ class OutputGuardNode(VehicleNode):
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
                 ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
+                ("heartbeats_taken_late", sum(w.taken_late for w in self.watches.values())),
                 *self.tick_gaps.report()]
 
     def close(self) -> None:
