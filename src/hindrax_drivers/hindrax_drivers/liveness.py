@@ -30,13 +30,13 @@ publisher" needs no publisher in the graph at all (:meth:`HeartbeatIdentity.on_p
 other identity checks stay, and a dead or frozen peer is caught by its :class:`AliveAge` on the graph's clock.
 The QoS is the same in both modes (the writers and readers of a mixed graph keep matching).
 
-* :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` but only over time this
-  process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``).
-  A peer that dies or hangs in another process ages at wall-clock speed; this process's own stall (a busy
-  single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes. On simulated
-  time the age is also counted on the graph's clock and the smaller of the two counts: a peer is late only when its
-  beat is late on the simulation's clock (a simulation slower than real time, or held, does not age it), and the
-  beats, paced by steady timers, are not made late by a simulation faster than real time.
+* :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` from its beat but only over
+  time this process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most
+  ``max_step_s``). A peer that dies or hangs in another process ages at wall-clock speed; this process's own stall
+  (a busy single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes. On
+  simulated time the age is also counted on the graph's clock and the smaller of the two counts: a peer is late only
+  when its beat is late on the simulation's clock (a simulation slower than real time, or held, does not age it), and
+  the beats, paced by steady timers, are not made late by a simulation faster than real time.
 * :class:`ClockStepMonitor`: compares ROS time with the steady clock at each tick and reports a backward step of
   ROS time (``/clock`` restarted or a bag looped) and a stall (ROS time frozen while the steady clock runs), so a
   node can re-base its ROS-time checks and say so on ``/diagnostics``.
@@ -338,11 +338,12 @@ class AliveAge:
         self.age_s = math.inf
 
     def heard(self, ago_s: float = 0.0) -> None:
-        """The peer spoke ``ago_s`` seconds ago (0: now)."""
+        """The peer spoke ``ago_s`` seconds ago (0: now). The next tick counts from now, not from the tick before."""
         ago = max(0.0, float(ago_s))
         graph = self._graph_now_s()
         self._heard_graph_s = None if graph is None else graph - ago
         self.steady_age_s = self.age_s = ago
+        self._last_tick = self._clock()
 
     def tick(self) -> float:
         """Advance by the (capped) time since the previous tick; returns the age, s."""
