@@ -493,7 +493,6 @@ class Controller:
         self.velocity_frd_m_s = np.zeros(2)
         self.attitude_rad = np.zeros(2)
         self.mode = "none"  # vertical hold of the last tick: depth | altitude | waiting_altitude | none
-        self.floor_state = (math.nan, math.nan, math.nan)  # altitude mode: floor depth under the footprint, gradient
         self._gradient_prev: tuple[float, np.ndarray] | None = None  # (t_s, gradient) of the last altitude tick
         self.gradient_rate = np.zeros(2)  # low-passed d/dt of the floor gradient estimate (north, east), 1/s
 
@@ -669,7 +668,6 @@ class Controller:
             xd, vd, ad = zfp - offset - a_d * tilt, zf_rate - a_rate, zf_acc - a_acc
             out = ax.track(xd, vd, ad, z, zr, dt, proj)
             ax.ref.reset(xd, vd)  # a later switch to depth mode continues from here
-            self.floor_state = (zfp, gn, ge)
             return out
         if not math.isfinite(self.depth_m):
             # altitude asked, no range yet: hold the depth the reference is at (the measured depth when engaging)
