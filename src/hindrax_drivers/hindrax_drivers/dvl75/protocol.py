@@ -879,15 +879,11 @@ def cmd_configuration() -> bytes:
 
 def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 0.0, 0.0),
                      speed_of_sound_m_s: Optional[float] = None,
-                     enable_dvext: bool = True,
-                     enable_gprmc: bool = False,
-                     retweet_imu: bool = False,
-                     retweet_gps: bool = False,
                      request_configuration: bool = True) -> list:
     """The command lines a driver sends at start-up, modelled on the BlueOS sequence [D17]
-    (docs/devices.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT``,
-    ``SEND-GPRMC``, ``RETWEET-IMU``, ``RETWEET-GPS``, ``SET-SENSOR-ORIENTATION``, optionally
-    ``SET-SPEED-OF-SOUND``, ``RESUME`` and optionally ``CONFIGURATION``.
+    (docs/devices.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT ON``,
+    ``SEND-GPRMC OFF``, ``RETWEET-IMU OFF``, ``RETWEET-GPS OFF``, ``SET-SENSOR-ORIENTATION``,
+    optionally ``SET-SPEED-OF-SOUND``, ``RESUME`` and optionally ``CONFIGURATION``.
 
     Args:
         sensor_orientation_rad: (roll, pitch, heading) sensor -> vehicle rotation, rad.
@@ -899,10 +895,10 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
     """
     cmds = [
         cmd_send("DVPDL", True),
-        cmd_send("DVEXT", enable_dvext),
-        cmd_send("GPRMC", enable_gprmc),
-        cmd_retweet("IMU", retweet_imu),
-        cmd_retweet("GPS", retweet_gps),
+        cmd_send("DVEXT", True),
+        cmd_send("GPRMC", False),
+        cmd_retweet("IMU", False),
+        cmd_retweet("GPS", False),
         cmd_set_sensor_orientation(*sensor_orientation_rad),
     ]
     if speed_of_sound_m_s is not None:
