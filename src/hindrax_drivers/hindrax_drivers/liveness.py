@@ -399,8 +399,7 @@ class ClockStepMonitor:
 
     ``ros_now_s``: the node's ROS time in seconds; ``tolerance_s``: a backward move smaller than this is jitter.
     :meth:`check` returns the step in seconds (negative) when ROS time went back, else 0.0; :attr:`steps_back`
-    counts them, :attr:`last_step_s` keeps the last. :meth:`stalled_for_s` is how long ROS time has not moved
-    while the steady clock ran.
+    counts them. :meth:`stalled_for_s` is how long ROS time has not moved while the steady clock ran.
     """
 
     def __init__(self, ros_now_s: Callable[[], float], tolerance_s: float = 0.05,
@@ -411,7 +410,6 @@ class ClockStepMonitor:
         self._last_ros = ros_now_s()
         self._moved_at = clock()
         self.steps_back = 0
-        self.last_step_s = 0.0
 
     def check(self) -> float:
         """Call at every steady tick. Returns the backward step (s, < 0) or 0.0."""
@@ -422,7 +420,6 @@ class ClockStepMonitor:
             self._moved_at = self._clock()
         if delta < -self.tolerance_s:
             self.steps_back += 1
-            self.last_step_s = delta
             return delta
         return 0.0
 

@@ -121,7 +121,6 @@ class OutputGuardNode(VehicleNode):
         self._bus, self._bus_number, self._address = bus, int(esc.i2c_bus), int(esc.i2c_address)
         self.device: I2CDevice | None = None
         self.assertions = 0
-        self.last_assert_monotonic: float | None = None
         self.silence_failures = 0
         self._last_rewrite = -1e9
         self._last_drive_attempt = -1e9
@@ -347,7 +346,6 @@ class OutputGuardNode(VehicleNode):
         # up to 135 ms measured) does not hold it; the write follows in the same tick
         if changed and asserted:
             self.assertions += 1
-            self.last_assert_monotonic = time.monotonic()
             self.diag.count("asserted")
             self.get_logger().warn(f"outputs silenced: {self.core.reason}")
         elif changed:

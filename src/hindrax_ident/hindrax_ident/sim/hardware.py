@@ -64,7 +64,7 @@ class SerialLockStep:
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
     on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
     reconnect between a write and the check), a gate that has waited :data:`RESYNC_AFTER_S` of wall time with the
-    reader idle re-bases the count (``resyncs``) rather than stall the simulation.
+    reader idle re-bases the count rather than stall the simulation.
 
     Args:
         pty: the emulator's pseudo-terminal, created with ``start=False``.
@@ -79,8 +79,6 @@ class SerialLockStep:
         self._connection: int | None = None
         self._written0 = self._handled0 = 0
         self._stalled_since: float | None = None
-        #: re-based counts (see the class docstring)
-        self.resyncs = 0
 
     def tick(self, _t_s: float = 0.0) -> None:
         """Send what the emulator has due now (its clock: the drivers' clock), if the driver's port is open, and
@@ -118,7 +116,6 @@ class SerialLockStep:
             self._stalled_since = now
         elif now - self._stalled_since > RESYNC_AFTER_S and st.bytes_rx == st.bytes_handled:
             self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
-            self.resyncs += 1
             self._stalled_since = None
             return True
         return False
