@@ -1,9 +1,8 @@
 """Sensor truth and noise models: what each Hindrax device would measure in the virtual pool. Pure numpy.
 
 Each model samples the simulated vehicle at its own rate and returns a plain frozen dataclass holding the
-*measured* value (truth + bias + noise, with dropouts and lock rules) and the *true* value beside it.
-Device emulators (DVL-75, Ping1D, MS5837, ICM-20948) consume these as their truth source; ground truth
-topics use the true fields.
+*measured* value (truth + bias + noise, with dropouts and lock rules). Device emulators (DVL-75, Ping1D,
+MS5837, ICM-20948) consume these as their truth source.
 
 Configuration (all optional keys under ``simulation.sensors.<device>``; absent = no noise, no bias, no
 dropout, the device's configured or default rate):
@@ -106,55 +105,49 @@ class VehicleTruth:
 @dataclass(frozen=True)
 class DvlVelocitySample:
     """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock;
-    altitude_m: true vertical distance DVL -> floor (NaN out of the water); true_velocity_frd_m_s: v + w x r;
-    beam_range_m: range along each beam A-D (port, stern, starboard, bow) to the floor with the DVL's range noise
-    (NaN for a beam without lock)."""
+    altitude_m: true vertical distance DVL -> floor (NaN out of the water); beam_range_m: range along each beam A-D
+    (port, stern, starboard, bow) to the floor with the DVL's range noise (NaN for a beam without lock)."""
 
     stamp_s: float
     velocity_frd_m_s: tuple[float, float, float]
     locked: bool
     altitude_m: float
-    true_velocity_frd_m_s: tuple[float, float, float]
     beam_range_m: tuple[float, float, float, float] = (math.nan, math.nan, math.nan, math.nan)
 
 
 @dataclass(frozen=True)
 class DvlAttitudeSample:
-    """DVL-75 attitude report: measured roll, pitch, yaw (rad, Fossen ZYX in NED) and the true values."""
+    """DVL-75 attitude report: measured roll, pitch, yaw (rad, Fossen ZYX in NED)."""
 
     stamp_s: float
     roll_rad: float
     pitch_rad: float
     yaw_rad: float
-    true_rpy_rad: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
 class AccelSample:
-    """ICM-20948 accelerometer: specific force (m/s^2) in the sensor frame, measured and true; temperature."""
+    """ICM-20948 accelerometer: measured specific force (m/s^2) in the sensor frame; temperature."""
 
     stamp_s: float
     specific_force_m_s2: tuple[float, float, float]
-    true_specific_force_m_s2: tuple[float, float, float]
     temperature_c: float
 
 
 @dataclass(frozen=True)
 class GyroSample:
-    """ICM-20948 gyroscope: angular rate (rad/s) in the sensor frame, measured and true."""
+    """ICM-20948 gyroscope: measured angular rate (rad/s) in the sensor frame."""
 
     stamp_s: float
     angular_rate_rad_s: tuple[float, float, float]
-    true_angular_rate_rad_s: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
 class MagSample:
-    """AK09916 magnetometer (in the ICM sensor frame): magnetic field (T), measured and true."""
+    """AK09916 magnetometer (in the ICM sensor frame): measured magnetic field (T)."""
 
     stamp_s: float
     magnetic_field_t: tuple[float, float, float]
-    true_magnetic_field_t: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -170,13 +163,11 @@ class PressureSample:
 
 @dataclass(frozen=True)
 class AltitudeSample:
-    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid),
-    valid flag, and the true distance (inf when the beam hits nothing)."""
+    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid), valid flag."""
 
     stamp_s: float
     distance_m: float
     valid: bool
-    true_distance_m: float
 
 
 # --------------------------------------------------------------------------------------------- physics
@@ -357,17 +348,15 @@ class DvlVelocityModel(SensorModel):
     def measure(self, truth: VehicleTruth) -> DvlVelocitySample | None:
         point = truth.position_ned_m + truth.rotation @ self.position_frd_m
         locked, altitude = self.locked(point)
-        v_true = point_velocity_frd(truth.nu, self.position_frd_m)
-        true3 = (float(v_true[0]), float(v_true[1]), float(v_true[2]))
         if not locked:
-            return DvlVelocitySample(truth.t_s, (math.nan, math.nan, math.nan), False, altitude, true3)
+            return DvlVelocitySample(truth.t_s, (math.nan, math.nan, math.nan), False, altitude)
         beams = self.beam_ranges(point, truth.rotation)
         if self.multipath_probability > 0.0 and self.pool is not None:
             d = self.pool.wall_distance_m(point)
             if d < self.multipath_distance_m and \
                     self.walk_rng.random() < self.multipath_probability * (1.0 - d / self.multipath_distance_m):
                 return None  # side-lobe return from the wall: the report is lost
-        v_meas = v_true
+        v_meas = point_velocity_frd(truth.nu, self.position_frd_m)
         if self.latency_s > 0.0 and self.delayed_state is not None:
             st = self.delayed_state(self.latency_s)
             v_meas = point_velocity_frd(np.asarray(st[7:13]), self.position_frd_m)
@@ -379,7 +368,7 @@ class DvlVelocityModel(SensorModel):
             g = 1.0 + self.floor_noise_gain * (self.floor_reference_m / max(altitude, 0.05)) ** 2
             extra = self.walk_rng.normal(0.0, self.spec.noise_std * math.sqrt(g * g - 1.0), 3)
             out = (out[0] + float(extra[0]), out[1] + float(extra[1]), out[2] + float(extra[2]))
-        return DvlVelocitySample(truth.t_s, out, True, altitude, true3, beams)
+        return DvlVelocitySample(truth.t_s, out, True, altitude, beams)
 
 
 class DvlAttitudeModel(SensorModel):
@@ -391,9 +380,8 @@ class DvlAttitudeModel(SensorModel):
                                                                    s.dropout_probability, 10.0), seed)
 
     def measure(self, truth: VehicleTruth) -> DvlAttitudeSample:
-        e = truth.euler_rad
-        m = self._noisy3(e)
-        return DvlAttitudeSample(truth.t_s, m[0], m[1], wrap_angle(m[2]), (float(e[0]), float(e[1]), float(e[2])))
+        m = self._noisy3(truth.euler_rad)
+        return DvlAttitudeSample(truth.t_s, m[0], m[1], wrap_angle(m[2]))
 
 
 class _ImuBase(SensorModel):
@@ -425,7 +413,7 @@ class AccelModel(_ImuBase):
         f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2,
                                                self.position_frd_m))
         m = f + self.extra_bias(truth.t_s) if self.disturbed else f
-        return AccelSample(truth.t_s, self._noisy3(m), (float(f[0]), float(f[1]), float(f[2])), self.temperature_c)
+        return AccelSample(truth.t_s, self._noisy3(m), self.temperature_c)
 
 
 class GyroModel(_ImuBase):
@@ -439,7 +427,7 @@ class GyroModel(_ImuBase):
     def measure(self, truth: VehicleTruth) -> GyroSample:
         w = self._to_sensor(truth.nu[3:])
         m = w + self.extra_bias(truth.t_s) if self.disturbed else w
-        return GyroSample(truth.t_s, self._noisy3(m), (float(w[0]), float(w[1]), float(w[2])))
+        return GyroSample(truth.t_s, self._noisy3(m))
 
 
 class MagModel(_ImuBase):
@@ -452,8 +440,7 @@ class MagModel(_ImuBase):
         self.earth_field_ned_t = np.asarray(field, dtype=float)
 
     def measure(self, truth: VehicleTruth) -> MagSample:
-        b = self._to_sensor(truth.rotation.T @ self.earth_field_ned_t)
-        return MagSample(truth.t_s, self._noisy3(b), (float(b[0]), float(b[1]), float(b[2])))
+        return MagSample(truth.t_s, self._noisy3(self._to_sensor(truth.rotation.T @ self.earth_field_ned_t)))
 
 
 class PressureModel(SensorModel):
@@ -492,11 +479,11 @@ class AltitudeModel(SensorModel):
     def measure(self, truth: VehicleTruth) -> AltitudeSample:
         point = truth.position_ned_m + truth.rotation @ self.position_frd_m
         if self.pool is None:
-            return AltitudeSample(truth.t_s, math.nan, False, math.inf)
+            return AltitudeSample(truth.t_s, math.nan, False)
         true_d = self.pool.ray_distance_m(point, truth.rotation[:, 2])
         valid = point[2] > 0.0 and math.isfinite(true_d) and self.min_range_m <= true_d <= self.max_range_m
         measured = self._noisy1(true_d) if valid else math.nan
-        return AltitudeSample(truth.t_s, measured, bool(valid), float(true_d))
+        return AltitudeSample(truth.t_s, measured, bool(valid))
 
 
 # --------------------------------------------------------------------------------------------- the suite
