@@ -57,7 +57,7 @@ Signal processing (our choices; [Hindrax-AM] only says "double integration" in M
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Optional, Tuple
 
 import numpy as np
@@ -333,21 +333,15 @@ class FreeDecayResult:
     velocity_m_s: np.ndarray = field(repr=False)
     envelope_m: np.ndarray = field(repr=False)
 
-    _SCALARS = ("omega_d_rad_s", "zeta", "log_decrement", "omega_n_rad_s", "added_mass_kg",
-                "added_mass_simplified_kg", "added_mass_error_percent", "damping_n_s_per_m",
-                "c_m", "kc", "reynolds", "first_peak_displacement_m", "max_velocity_m_s",
-                "n_periods", "omega_d_fit_rad_s", "omega_d_fit_std_rad_s", "zeta_fit",
-                "zeta_fit_std", "stiffness_n_per_m", "mass_kg", "volume_m3",
-                "fluid_density_kg_m3", "release_index")
-
     def to_dict(self, include_signals: bool = False) -> dict:
         """JSON-friendly dict: every scalar attribute (same keys), ``peaks`` (list of indices),
         ``peak_times_s`` and ``peak_amplitudes_m`` (lists); with ``include_signals`` also the
         plot arrays as lists."""
         out: dict[str, Any] = {}
-        for k in self._SCALARS:
-            v = getattr(self, k)
-            out[k] = int(v) if k in ("n_periods", "release_index") else float(v)
+        for f in fields(self):
+            if f.repr:  # the scalars (the arrays are repr=False)
+                v = getattr(self, f.name)
+                out[f.name] = int(v) if f.type == "int" else float(v)
         out["peaks"] = [int(i) for i in self.peaks]
         out["peak_times_s"] = [float(x) for x in self.peak_times_s]
         out["peak_amplitudes_m"] = [float(x) for x in self.peak_amplitudes_m]

@@ -686,8 +686,6 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     vmax = float(np.percentile(np.abs(vv), 98)) if vv.size else 0.0
     top = vmax if vmax >= 1e-3 else 0.5  # nothing moved: the usual top speed of a small ROV, 0.5 m/s or rad/s
     direction = "" if sign == 0.0 else (" down (w > 0)" if sign > 0 else " up (w < 0)")
-    if dof in ("roll", "pitch", "yaw") and sign == 0.0:
-        direction = ""
     if name in ("inertia", "added_mass"):
         thr = float(np.percentile(np.abs(a), 70)) if a.size else 0.0
         used = np.abs(a) >= thr if a.size else np.zeros(0, bool)
