@@ -131,14 +131,14 @@ class CubicFit:
         out = np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
         return float(out[0]) if np.ndim(pulse_width_us) == 0 else out
 
-    def relative_std(self, points: int = 101) -> float:
+    def relative_std(self) -> float:
         """Thrust-weighted RMS relative std of the fitted mean thrust over [pulse_width_min_us, pulse_width_max_us]
-        (dimensionless, module docstring): sqrt(sum sd^2 / sum f^2) on ``points`` uniformly spaced widths.
+        (dimensionless, module docstring): sqrt(sum sd^2 / sum f^2) on 101 uniformly spaced widths.
 
         Raises:
             EstimationError: the fitted thrust is zero over the whole range.
         """
-        P = np.linspace(self.pulse_width_min_us, self.pulse_width_max_us, int(points))
+        P = np.linspace(self.pulse_width_min_us, self.pulse_width_max_us, 101)
         f2 = float(np.sum(np.asarray(self.predict(P)) ** 2))
         if not f2 > 0.0:
             raise EstimationError("the fitted thrust is zero over the data's range: no relative uncertainty")
