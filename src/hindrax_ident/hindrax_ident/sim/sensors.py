@@ -212,12 +212,13 @@ class NoiseSpec:
     dropout_probability: float = 0.0
 
     @classmethod
-    def from_settings(cls, noise_std: float | None, bias: float | None, rate_hz: float | None,
-                      dropout_probability: float | None, default_rate_hz: float) -> "NoiseSpec":
-        """From the optional ``simulation.sensors.<device>.{noise_std_<unit>, bias_<unit>, rate_hz,
-        dropout_probability}`` values (None: absent -> 0, 0, ``default_rate_hz``, 0)."""
-        return cls(float(or_default(noise_std, 0.0)), float(or_default(bias, 0.0)),
-                   float(or_default(rate_hz, default_rate_hz)), float(or_default(dropout_probability, 0.0)))
+    def of(cls, section: Any, unit: str, default_rate_hz: float) -> "NoiseSpec":
+        """From a ``simulation.sensors.<device>`` section: its optional ``noise_std_<unit>``, ``bias_<unit>``,
+        ``rate_hz`` and ``dropout_probability`` (None: absent -> 0, 0, ``default_rate_hz``, 0)."""
+        return cls(float(or_default(getattr(section, f"noise_std_{unit}"), 0.0)),
+                   float(or_default(getattr(section, f"bias_{unit}"), 0.0)),
+                   float(or_default(section.rate_hz, default_rate_hz)),
+                   float(or_default(section.dropout_probability, 0.0)))
 
 
 class SensorModel:
@@ -293,8 +294,7 @@ class DvlVelocityModel(SensorModel):
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
         s = config.simulation.sensors.dvl75
-        super().__init__("dvl75", NoiseSpec.from_settings(s.noise_std_m_s, s.bias_m_s, s.rate_hz, s.dropout_probability,
-                                                          10.0), seed)
+        super().__init__("dvl75", NoiseSpec.of(s, "m_s", 10.0), seed)
         self.scale_error_fraction = float(or_default(s.scale_error_fraction, 0.0))
         self.min_altitude_m = float(or_default(s.min_altitude_m, 0.0))
         self.max_altitude_m = float(or_default(s.max_altitude_m, math.inf))
@@ -375,9 +375,7 @@ class DvlAttitudeModel(SensorModel):
     """DVL-75 attitude (roll, pitch, yaw) with bias and noise."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        s = config.simulation.sensors.dvl75_attitude
-        super().__init__("dvl75_attitude", NoiseSpec.from_settings(s.noise_std_rad, s.bias_rad, s.rate_hz,
-                                                                   s.dropout_probability, 10.0), seed)
+        super().__init__("dvl75_attitude", NoiseSpec.of(config.simulation.sensors.dvl75_attitude, "rad", 10.0), seed)
 
     def measure(self, truth: VehicleTruth) -> DvlAttitudeSample:
         m = self._noisy3(truth.euler_rad)
@@ -385,10 +383,9 @@ class DvlAttitudeModel(SensorModel):
 
 
 class _ImuBase(SensorModel):
-    def __init__(self, name: str, noise_std: float | None, bias: float | None, rate_hz: float | None,
-                 dropout_probability: float | None, config: VehicleConfig, seed: int) -> None:
-        super().__init__(name, NoiseSpec.from_settings(noise_std, bias, rate_hz, dropout_probability,
-                                                       float(config.sensors.icm20948.sample_rate_hz)), seed)
+    def __init__(self, name: str, unit: str, config: VehicleConfig, seed: int) -> None:
+        section = getattr(config.simulation.sensors, name)
+        super().__init__(name, NoiseSpec.of(section, unit, float(config.sensors.icm20948.sample_rate_hz)), seed)
         roll, pitch, yaw = config.sensors.icm20948.mounting_rpy_rad
         r_mount = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # sensor -> base_link (FLU)
         self.sensor_from_frd = r_mount.T @ frames.R_FLU_FRD
@@ -402,9 +399,7 @@ class AccelModel(_ImuBase):
 
     def __init__(self, config: VehicleConfig, seed: int, imu_position_frd_m=(0.0, 0.0, 0.0),
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
-        s = config.simulation.sensors.icm20948_accel
-        super().__init__("icm20948_accel", s.noise_std_m_s2, s.bias_m_s2, s.rate_hz, s.dropout_probability, config,
-                         seed)
+        super().__init__("icm20948_accel", "m_s2", config, seed)
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.position_frd_m = np.asarray(imu_position_frd_m, dtype=float)
         self.temperature_c = float(water_temperature_c)
@@ -420,9 +415,7 @@ class GyroModel(_ImuBase):
     """ICM-20948 gyroscope: body angular rate in the sensor frame."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        s = config.simulation.sensors.icm20948_gyro
-        super().__init__("icm20948_gyro", s.noise_std_rad_s, s.bias_rad_s, s.rate_hz, s.dropout_probability, config,
-                         seed)
+        super().__init__("icm20948_gyro", "rad_s", config, seed)
 
     def measure(self, truth: VehicleTruth) -> GyroSample:
         w = self._to_sensor(truth.nu[3:])
@@ -434,9 +427,8 @@ class MagModel(_ImuBase):
     """AK09916 magnetometer: the earth field R^T B_ned in the ICM sensor frame."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        s = config.simulation.sensors.icm20948_mag
-        super().__init__("icm20948_mag", s.noise_std_t, s.bias_t, s.rate_hz, s.dropout_probability, config, seed)
-        field = or_default(s.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
+        super().__init__("icm20948_mag", "t", config, seed)
+        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
         self.earth_field_ned_t = np.asarray(field, dtype=float)
 
     def measure(self, truth: VehicleTruth) -> MagSample:
@@ -448,9 +440,8 @@ class PressureModel(SensorModel):
 
     def __init__(self, config: VehicleConfig, seed: int,
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
-        s = config.simulation.sensors.ms5837
-        super().__init__("ms5837", NoiseSpec.from_settings(s.noise_std_pa, s.bias_pa, s.rate_hz, s.dropout_probability,
-                                                           float(config.sensors.ms5837.rate_hz)), seed)
+        super().__init__("ms5837", NoiseSpec.of(config.simulation.sensors.ms5837, "pa",
+                                                float(config.sensors.ms5837.rate_hz)), seed)
         self.position_frd_m = np.asarray(config.sensors.ms5837.position_frd_m, dtype=float)
         self.density_kg_m3 = float(config.environment.water_density_kg_m3)
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
@@ -468,9 +459,8 @@ class AltitudeModel(SensorModel):
     """Ping1D slant range along the vehicle's down axis (module docstring)."""
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
-        s, ping = config.simulation.sensors.ping1d, config.sensors.ping1d
-        super().__init__("ping1d", NoiseSpec.from_settings(s.noise_std_m, s.bias_m, s.rate_hz, s.dropout_probability,
-                                                           1.0 / float(ping.ping_interval_s)), seed)
+        ping = config.sensors.ping1d
+        super().__init__("ping1d", NoiseSpec.of(config.simulation.sensors.ping1d, "m", 1 / ping.ping_interval_s), seed)
         self.position_frd_m = np.asarray(ping.position_frd_m, dtype=float)
         self.min_range_m = float(ping.min_range_m)
         self.max_range_m = float(ping.max_range_m)
