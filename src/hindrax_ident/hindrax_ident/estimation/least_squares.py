@@ -179,23 +179,16 @@ class _Param:
     def __get__(self, fit: "_NamedFit | None", owner: type) -> Optional[float]:
         if fit is None:
             return self  # type: ignore[return-value]  # the class attribute (documentation)
-        return fit._std(self.name) if self.std else fit._value(self.name)
+        ls = fit.ls
+        if ls.names is None or self.name not in ls.names:
+            return None
+        return float((ls.std if self.std else ls.theta)[ls.index(self.name)])
 
 
 class _NamedFit:
     """Mixin giving value/std access by parameter name on top of an :class:`LsResult`."""
 
     ls: LsResult
-
-    def _value(self, name: str) -> Optional[float]:
-        if self.ls.names is None or name not in self.ls.names:
-            return None
-        return float(self.ls.theta[self.ls.index(name)])
-
-    def _std(self, name: str) -> Optional[float]:
-        if self.ls.names is None or name not in self.ls.names:
-            return None
-        return float(self.ls.std[self.ls.index(name)])
 
     quadratic_damping = _Param("Quadratic damping k_q of [Hindrax-Drag] eq. 2 (None when not "
                                 "fitted, e.g. fitted per direction).")
@@ -228,16 +221,18 @@ class DragFit(_NamedFit):
 
     ls: LsResult
 
+    def _regressors(self, velocity) -> np.ndarray:
+        names = self.ls.names or ()
+        return _drag_regressors(np.asarray(velocity, dtype=float), "quadratic_damping" in names,
+                                "linear_damping" in names, "bias" in names)
+
     def predict(self, velocity) -> np.ndarray:
         """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""
-        v, names = np.asarray(velocity, dtype=float), self.ls.names or ()
-        return _drag_regressors(v, "quadratic_damping" in names, "linear_damping" in names,
-                                "bias" in names) @ self.ls.theta
+        return self._regressors(velocity) @ self.ls.theta
 
     def predict_std(self, velocity) -> np.ndarray:
         """Standard deviation of the fitted mean force at ``velocity`` (for plot bands)."""
-        v, names = np.asarray(velocity, dtype=float), self.ls.names or ()
-        X = _drag_regressors(v, "quadratic_damping" in names, "linear_damping" in names, "bias" in names)
+        X = self._regressors(velocity)
         return np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
 
 
