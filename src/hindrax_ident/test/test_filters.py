@@ -57,8 +57,7 @@ def test_transition_and_process_noise_matrices():
 def test_smoother_velocity_and_acceleration_from_noisy_position():
     rng = np.random.default_rng(0)
     t, x, v, a, z = trajectory(rng)
-    pos, vel, acc, pos_sd, vel_sd, acc_sd = smooth_kinematics(
-        t, z, measured="position", jerk_psd=0.5, measurement_std=0.01, return_std=True)
+    pos, vel, acc = smooth_kinematics(t, z, measured="position", jerk_psd=0.5, measurement_std=0.01)
     inner = slice(20, -20)          # away from the record ends
     assert rms(pos[inner] - x[inner]) < 0.01
     assert rms(vel[inner] - v[inner]) < 0.03          # vs 0.28 m/s finite differences
@@ -67,10 +66,6 @@ def test_smoother_velocity_and_acceleration_from_noisy_position():
     gap = slice(150, 170)
     assert np.all(np.isfinite(vel[gap]))
     assert rms(vel[gap] - v[gap]) < 0.06
-    # reported smoothed std is consistent with the errors (about 95 % within 2 sigma)
-    inside = np.abs(vel[inner] - v[inner]) < 2 * vel_sd[inner]
-    assert inside.mean() > 0.9
-    assert np.all(vel_sd[inner] > 0)
 
 
 def test_smoother_from_velocity_measurements():
