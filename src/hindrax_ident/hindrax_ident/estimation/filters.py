@@ -192,36 +192,11 @@ class KinematicKalmanFilter:
         return (float(x[0]), float(x[1]), float(x[2]))
 
     @property
-    def position(self) -> float:
-        """Position estimate (m or rad; integral of velocity in velocity mode)."""
-        return self.state_tuple()[0]
-
-    @property
-    def velocity(self) -> float:
-        """Velocity estimate (m/s or rad/s)."""
-        return self.state_tuple()[1]
-
-    @property
-    def acceleration(self) -> float:
-        """Acceleration estimate (m/s^2 or rad/s^2)."""
-        return self.state_tuple()[2]
-
-    @property
     def covariance(self) -> np.ndarray:
         """(3, 3) state covariance (NaN before initialisation)."""
         if not self._initialised:
             return np.full((3, 3), np.nan)
         return np.array(self._kf.P, copy=True)
-
-    @property
-    def velocity_std(self) -> float:
-        """Standard deviation of the velocity estimate."""
-        return float(np.sqrt(self.covariance[1, 1]))
-
-    @property
-    def acceleration_std(self) -> float:
-        """Standard deviation of the acceleration estimate."""
-        return float(np.sqrt(self.covariance[2, 2]))
 
 
 def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
