@@ -53,21 +53,11 @@ from .least_squares import (EstimationError, LsResult, as_float_array, check_sam
                             fit_linear_model)
 
 __all__ = ["CubicFit", "ThrusterCurveFit", "fit_cubic", "fit_thruster_curve",
-           "point_reflection", "evaluate_cubic", "NEUTRAL_US"]
+           "point_reflection", "NEUTRAL_US"]
 
 #: ESC stop pulse width ([Hindrax-Drag] section 2.2.1).
 NEUTRAL_US = 1500.0
 _SCALE_US = 400.0
-
-
-def evaluate_cubic(c4: float, c3: float, c2: float, c1: float, pulse_width_us) -> float | np.ndarray:
-    """tau = c4 P^3 + c3 P^2 + c2 P + c1 in N at pulse widths P in us ([Hindrax-Drag] eq. 1).
-
-    Returns a float for scalar input, an array otherwise.
-    """
-    P = np.asarray(pulse_width_us, dtype=float)
-    out = np.asarray(Polynomial([c1, c2, c3, c4])(P))
-    return float(out) if out.ndim == 0 else out
 
 
 def _raw_transform(centre: float, scale: float) -> np.ndarray:
