@@ -18,7 +18,7 @@ import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.tools import cli
-from hindrax_ident.estimation.thruster_fit import evaluate_cubic, point_reflection
+from hindrax_ident.estimation.thruster_fit import point_reflection
 from hindrax_ident.identification.assessment.results import read_identification
 
 K, MB, MAD, ZETA, A, V = 659.9, 0.39, 0.82, 0.15, 0.02, 0.00056
@@ -74,7 +74,7 @@ def _thrust_csv(path, cfg):
     rng = np.random.default_rng(4)
     # outside the ESC dead band only (the cubic branches end at +-1.09 N, not at 0 N, [Hindrax-Drag] Table 2)
     pw = np.concatenate([np.arange(1100, 1480, 10.0), np.arange(1530, 1901, 10.0)])
-    thrust = np.where(pw < 1500, evaluate_cubic(*neg, pw), evaluate_cubic(*pos, pw))
+    thrust = np.where(pw < 1500, np.polyval(neg, pw), np.polyval(pos, pw))
     thrust = thrust + rng.normal(0, 0.05, pw.size)
     with open(path, "w") as fh:
         fh.write("pulse_width_us,thrust_n\n")
@@ -97,8 +97,8 @@ def test_thruster_fit_prints_cubics_and_writes_config(tmp_path, capsys):
         c = out[side]
         for k in ("c4", "c3", "c2", "c1", "c4_std", "c3_std", "c2_std", "c1_std"):
             assert math.isfinite(c[k])
-        fitted = evaluate_cubic(c["c4"], c["c3"], c["c2"], c["c1"], np.array(pws, dtype=float))
-        assert np.allclose(fitted, evaluate_cubic(*truth, np.array(pws, dtype=float)), atol=0.1)
+        fitted = np.polyval([c["c4"], c["c3"], c["c2"], c["c1"]], np.array(pws, dtype=float))
+        assert np.allclose(fitted, np.polyval(truth, np.array(pws, dtype=float)), atol=0.1)
     text = conf.read_text()
     assert "# [Hindrax-Drag] Table 2 prints for the positive direction" in text  # comments kept
     cfg2 = load_config(conf)

@@ -7,10 +7,8 @@ from hindrax_ident.estimation.drag_coefficient import (
     KINEMATIC_VISCOSITY_WATER_M2_S,
     characteristic_length_from_volume,
     drag_coefficient,
-    drag_coefficient_samples,
     reynolds_number,
     reynolds_range,
-    rotational_drag_coefficient,
 )
 from hindrax_ident.estimation.least_squares import EstimationError
 
@@ -43,22 +41,6 @@ def test_drag_coefficient_definition():
     assert 0.5 * 1000.0 * cd * 0.188 * v * v == pytest.approx(66.48 * v * v)
 
 
-def test_rotational_drag_coefficient_plate_at_radius():
-    """M = 0.5 rho C_D A (w R)^2 R -> k_q = 0.5 rho C_D A R^3."""
-    cd, _ = rotational_drag_coefficient(1.29, 0.236, 0.295)
-    assert 0.5 * 1000.0 * cd * 0.236 * 0.295**3 == pytest.approx(1.29)
-
-
-def test_per_sample_drag_coefficients():
-    rng = np.random.default_rng(0)
-    v = rng.uniform(0.1, 0.5, 50) * rng.choice([-1.0, 1.0], 50)
-    cd_true, area = 1.1, 0.2
-    f = 0.5 * 1000.0 * cd_true * area * np.abs(v) * v
-    mean, std, n = drag_coefficient_samples(np.r_[v, 0.0], np.r_[f, 0.3], area)
-    assert n == 50                              # the v = 0 sample is dropped
-    assert mean == pytest.approx(cd_true) and std == pytest.approx(0.0, abs=1e-12)
-
-
 @pytest.mark.parametrize("call", [
     lambda: characteristic_length_from_volume(0.0),
     lambda: reynolds_number(1.0, -1.0),
@@ -66,9 +48,6 @@ def test_per_sample_drag_coefficients():
     lambda: reynolds_range([0.0, 0.0], 1.0, min_speed=0.01),
     lambda: drag_coefficient(66.0, 0.0),
     lambda: drag_coefficient(66.0, 0.1, quadratic_damping_std=-1.0),
-    lambda: rotational_drag_coefficient(1.0, 0.1, 0.0),
-    lambda: drag_coefficient_samples([0.01, 0.02], [1.0, 2.0], 0.1),
-    lambda: drag_coefficient_samples([0.3, 0.4], [1.0], 0.1),
 ])
 def test_errors(call):
     with pytest.raises(EstimationError):

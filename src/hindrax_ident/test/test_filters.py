@@ -57,8 +57,7 @@ def test_transition_and_process_noise_matrices():
 def test_smoother_velocity_and_acceleration_from_noisy_position():
     rng = np.random.default_rng(0)
     t, x, v, a, z = trajectory(rng)
-    pos, vel, acc, pos_sd, vel_sd, acc_sd = smooth_kinematics(
-        t, z, measured="position", jerk_psd=0.5, measurement_std=0.01, return_std=True)
+    pos, vel, acc = smooth_kinematics(t, z, measured="position", jerk_psd=0.5, measurement_std=0.01)
     inner = slice(20, -20)          # away from the record ends
     assert rms(pos[inner] - x[inner]) < 0.01
     assert rms(vel[inner] - v[inner]) < 0.03          # vs 0.28 m/s finite differences
@@ -67,10 +66,6 @@ def test_smoother_velocity_and_acceleration_from_noisy_position():
     gap = slice(150, 170)
     assert np.all(np.isfinite(vel[gap]))
     assert rms(vel[gap] - v[gap]) < 0.06
-    # reported smoothed std is consistent with the errors (about 95 % within 2 sigma)
-    inside = np.abs(vel[inner] - v[inner]) < 2 * vel_sd[inner]
-    assert inside.mean() > 0.9
-    assert np.all(vel_sd[inner] > 0)
 
 
 def test_smoother_from_velocity_measurements():
@@ -106,8 +101,8 @@ def test_online_filter_with_dropouts_and_irregular_times():
     assert rms(est[settled, 1] - v[settled]) < 0.1      # causal: worse than the smoother
     assert rms(est[settled, 2] - a[settled]) < 0.4
     assert kf.initialised and kf.t_s == t[-1]
-    assert kf.velocity == est[-1, 1]
-    assert kf.velocity_std > 0 and kf.acceleration_std > 0
+    assert kf.state_tuple()[1] == est[-1, 1]
+    assert kf.covariance[1, 1] > 0 and kf.covariance[2, 2] > 0
     # predictions bridge a missing sample: covariance grows, estimate moves with the model
     p_before = kf.covariance[0, 0]
     kf.step(t[-1] + 0.5, None)
@@ -117,7 +112,7 @@ def test_online_filter_with_dropouts_and_irregular_times():
 def test_online_filter_before_first_measurement_and_equal_times():
     kf = KinematicKalmanFilter("velocity", measurement_std=0.02)
     assert np.all(np.isnan(kf.step(0.0, np.nan)))
-    assert np.isnan(kf.velocity) and np.all(np.isnan(kf.covariance))
+    assert np.isnan(kf.state_tuple()[1]) and np.all(np.isnan(kf.covariance))
     pos, vel, acc = kf.step(0.1, 0.3)
     assert (pos, vel, acc) == (0.0, 0.3, 0.0)
     kf.step(0.1, 0.31)              # same time stamp: fused without prediction

@@ -320,10 +320,10 @@ def test_feedback_on_every_change_and_at_least_every_second_with_the_prompt():
     ex = c.run.executive
     ex.awaiting, ex.prompt = "attach_ballast", "calibration: attach the ballast, then call continue"
     out = c.tick(2.02, False)
-    fb = next(e.data[0] for e in out if e.kind == "feedback")
-    assert fb.prompt == "[attach_ballast] calibration: attach the ballast, then call continue"
-    assert ("log", ("info", f"operator: {fb.prompt}")) in [(e.kind, e.data) for e in out]
-    assert statuses(out) == [("running", fb.prompt)]             # the prompt replaces the step's message
+    prompt = next(e.data[1] for e in out if e.kind == "feedback")
+    assert prompt == "[attach_ballast] calibration: attach the ballast, then call continue"
+    assert ("log", ("info", f"operator: {prompt}")) in [(e.kind, e.data) for e in out]
+    assert statuses(out) == [("running", prompt)]             # the prompt replaces the step's message
 
 
 @pytest.mark.parametrize("state, answer", [

@@ -9,7 +9,6 @@ from hindrax_ident.estimation.steady_windows import (
     SteadyWindow,
     constant_force_segments,
     detect_steady_windows,
-    steady_state_data,
 )
 
 # Surge, [Hindrax-Drag] Table 3: k_q = 66.48 N/(m/s)^2, k_l = 1.25 N/(m/s); inertia 15.22 + 12.08 kg
@@ -66,11 +65,12 @@ def test_one_window_per_level_after_the_transient():
 def test_steady_state_ls_on_the_windows_recovers_table3_surge():
     t, v, f, _ = ladder()
     windows = detect_steady_windows(t, v, f, max_slope=0.01, max_std=0.01)
-    vm, fm = steady_state_data(windows)
+    vm, fm = np.array([w.velocity_mean for w in windows]), np.array([w.force_mean for w in windows])
     fit = fit_drag(vm, fm)
     assert fit.quadratic_damping == pytest.approx(KQ, rel=0.05)
     assert abs(fit.linear_damping - KL) < 2.0
-    vs, fs = steady_state_data(windows, v, f, use_means=False)
+    idx = np.concatenate([np.arange(w.start, w.stop) for w in windows])
+    vs, fs = v[idx], f[idx]
     assert vs.size == sum(w.n for w in windows)
     fit_all = fit_drag(vs, fs)
     assert fit_all.quadratic_damping == pytest.approx(KQ, rel=0.05)
@@ -102,9 +102,6 @@ def test_force_tolerance_segments():
     lambda: detect_steady_windows([0.0, 1.0, 2.0], [0.0] * 3, [1.0] * 3, min_duration_s=0),
     lambda: detect_steady_windows([0.0, 1.0, 2.0], [0.0] * 3, [1.0] * 3, max_std=-1),
     lambda: constant_force_segments([1.0, 2.0], force_tolerance=-0.1),
-    lambda: steady_state_data([]),
-    lambda: steady_state_data([SteadyWindow(0, 2, 0.0, 1.0, 0.1, 0.0, 0.0, 1.0, 0.0, 2)],
-                              use_means=False),
 ])
 def test_errors(call):
     with pytest.raises(EstimationError):

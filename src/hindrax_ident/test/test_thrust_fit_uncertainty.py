@@ -12,7 +12,7 @@ import pytest
 
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_ident.tools import cli
-from hindrax_ident.estimation.thruster_fit import evaluate_cubic, fit_thruster_curve, point_reflection
+from hindrax_ident.estimation.thruster_fit import fit_thruster_curve, point_reflection
 from hindrax_ident.identification.fit.dof_model import (DofIdentification, parameter_names, parameter_units,
                                                         truth_parameters)
 from hindrax_ident.identification.assessment.verdicts import assess_dof
@@ -24,7 +24,7 @@ def _bollard(cfg, noise_n, seed=4, repeats=1):
     neg = cfg.thrusters.curve_negative
     pos = point_reflection(*neg)
     pw = np.tile(np.concatenate([np.arange(1100, 1480, 10.0), np.arange(1530, 1901, 10.0)]), repeats)
-    f = np.where(pw < 1500, evaluate_cubic(*neg, pw), evaluate_cubic(*pos, pw))
+    f = np.where(pw < 1500, np.polyval(neg, pw), np.polyval(pos, pw))
     return pw, f + np.random.default_rng(seed).normal(0.0, noise_n, pw.size)
 
 

@@ -7,7 +7,6 @@ from hypothesis import strategies as st
 
 from hindrax_ident.estimation.least_squares import EstimationError
 from hindrax_ident.estimation.thruster_fit import (
-    evaluate_cubic,
     fit_cubic,
     fit_thruster_curve,
     point_reflection,
@@ -29,8 +28,8 @@ def rounding_bound(half_ulps, p_us):
 def test_table2_negative_row_is_consistent():
     """docs/architecture.md §4: -15.6 N at 1100 us and about -1.1 N at 1500 us (the coefficients
     are printed to 3-5 significant digits; c4's rounding alone moves tau by 0.67 N at 1100 us)."""
-    at_1100 = evaluate_cubic(*TABLE2_NEGATIVE, 1100.0)
-    at_1500 = evaluate_cubic(*TABLE2_NEGATIVE, 1500.0)
+    at_1100 = np.polyval(TABLE2_NEGATIVE, 1100.0)
+    at_1500 = np.polyval(TABLE2_NEGATIVE, 1500.0)
     assert abs(at_1100 - (-15.6)) <= rounding_bound(TABLE2_NEGATIVE_HALF_ULP, 1100.0) + 0.05
     assert abs(at_1500 - (-1.1)) <= 0.05
     # hand arithmetic: -613.591 + 2170.740 - 2499.860 + 927.183 = -15.528 N
@@ -40,7 +39,7 @@ def test_table2_negative_row_is_consistent():
 def test_table2_positive_row_as_printed_is_inconsistent():
     """docs/architecture.md §4: the printed positive row gives about -1070 N at 1500 us, far outside
     what coefficient rounding can explain (bound ~ 1.7 N); hence the point reflection."""
-    at_1500 = evaluate_cubic(*TABLE2_POSITIVE, 1500.0)
+    at_1500 = np.polyval(TABLE2_POSITIVE, 1500.0)
     # hand arithmetic: -1188.000 + 409.500 - 465.900 + 174.354 = -1070.046 N
     assert at_1500 == pytest.approx(-1070.05, abs=0.01)
     assert abs(at_1500) > 100 * rounding_bound(TABLE2_POSITIVE_HALF_ULP, 1500.0)
@@ -48,8 +47,8 @@ def test_table2_positive_row_as_printed_is_inconsistent():
 
 def test_point_reflection_of_table2_negative_row():
     pos = point_reflection(*TABLE2_NEGATIVE)
-    assert evaluate_cubic(*pos, 1900.0) == pytest.approx(15.528, abs=1e-3)
-    assert evaluate_cubic(*pos, 1500.0) == pytest.approx(1.0923, abs=1e-3)
+    assert np.polyval(pos, 1900.0) == pytest.approx(15.528, abs=1e-3)
+    assert np.polyval(pos, 1500.0) == pytest.approx(1.0923, abs=1e-3)
     # a point reflection keeps the cubic coefficient
     assert pos[0] == pytest.approx(TABLE2_NEGATIVE[0], rel=1e-12)
 
@@ -62,8 +61,8 @@ def test_point_reflection_identity(c, d, neutral):
     scale = (1e-6, 1e-4, 1e-2, 1.0)
     neg = tuple(ci * s for ci, s in zip(c, scale))
     pos = point_reflection(*neg, neutral_us=neutral)
-    lhs = evaluate_cubic(*pos, neutral + d)
-    rhs = -evaluate_cubic(*neg, neutral - d)
+    lhs = np.polyval(pos, neutral + d)
+    rhs = -np.polyval(neg, neutral - d)
     assert lhs == pytest.approx(rhs, rel=1e-9, abs=1e-6)
 
 
@@ -73,7 +72,7 @@ def synthetic_bollard(rng, noise_n=0.3, with_neutral=False):
     pos = point_reflection(*neg)
     P = np.concatenate([np.repeat(np.arange(1100.0, 1500.0, 25.0), 2),
                         np.repeat(np.arange(1525.0, 1901.0, 25.0), 2)])
-    tau = np.where(P < 1500, evaluate_cubic(*neg, P), evaluate_cubic(*pos, P))
+    tau = np.where(P < 1500, np.polyval(neg, P), np.polyval(pos, P))
     if with_neutral:
         P = np.append(P, [1500.0] * 3)
         tau = np.append(tau, [0.0] * 3)
@@ -92,7 +91,7 @@ def test_fit_recovers_known_cubics_within_three_sigma():
         assert cf.residual_std_n == pytest.approx(0.3, rel=0.35)
         # the fitted thrust is far better determined than the raw coefficients
         grid = np.linspace(cf.pulse_width_min_us, cf.pulse_width_max_us, 9)
-        truth = evaluate_cubic(*true, grid)
+        truth = np.polyval(true, grid)
         assert np.all(np.abs(cf.predict(grid) - truth) < 4 * cf.predict_std(grid))
         assert np.all(cf.predict_std(grid) < 0.3)
     d = fit.to_dict()
@@ -111,7 +110,7 @@ def test_raw_covariance_is_the_exact_transform_of_the_centred_one():
     raw_rows = np.column_stack([grid**3, grid**2, grid, np.ones_like(grid)])
     raw_var = np.einsum("ij,jk,ik->i", raw_rows, cf.covariance, raw_rows)
     np.testing.assert_allclose(np.sqrt(raw_var), cf.predict_std(grid), rtol=1e-5)
-    np.testing.assert_allclose(evaluate_cubic(*cf.coefficients, grid), cf.predict(grid),
+    np.testing.assert_allclose(np.polyval(cf.coefficients, grid), cf.predict(grid),
                                atol=1e-6)
     np.testing.assert_allclose(np.sqrt(np.diag(cf.covariance)),
                                [cf.c4_std, cf.c3_std, cf.c2_std, cf.c1_std])

@@ -8,21 +8,11 @@ implement (and what we cannot verify against the paper):
 * Translational DOFs, from the quadratic damping (docs/identification.md §1.A (h), [T] 4.6.3):
   C_D = 2 k_q / (rho A_p), A_p the projected area normal to the motion (m^2). Valid when C_D
   does not depend on Re (prisms above Re ~ 1e4, docs/identification.md §1.A flow physics).
-  :func:`drag_coefficient` propagates the std of k_q linearly.
-* Per-sample form (Blevins, docs/identification.md §1.A, [NTNU-Thesis] eq. 3.6): C_D,i = F_i / (0.5 rho A_p v_i |v_i|),
-  then mean and standard deviation over samples: :func:`drag_coefficient_samples`. Table 4's
-  wording "mean values of the drag coefficients ... and the standard deviations" suggests this
-  form, but we cannot confirm it: with the Table 3 coefficients the implied areas
-  2 k_q / (rho C_D) are 0.058 m^2 (surge) and 0.041 m^2 (sway), i.e. sway smaller than surge,
-  which contradicts the paper's statement that surge has the smallest projected area.
-* Rotational DOFs (our definition; [Hindrax-Drag] gives none): M = 0.5 rho C_D A_p R^3 w |w|, i.e. the
-  plate-at-radius form with the edge speed w R ([T] quadrant method 3.9-3.10 uses the same edge
-  speed), so C_D = 2 k_q / (rho A_p R^3) with k_q in N m/(rad/s)^2 = kg m^2.
-  :func:`rotational_drag_coefficient`. Table 4's rotational values (0.022-0.049) cannot be
-  reproduced without the paper's A_p and R.
+  :func:`drag_coefficient` propagates the std of k_q linearly. Rotational DOFs get none: [Hindrax-Drag]
+  defines neither their area nor their radius.
 * Reynolds number Re = U L / nu ([T] eq. 2.60; [Hindrax-AM] section 4 uses U_m V^(1/3) / nu with
   nu = 1.01e-6 m^2/s). Default characteristic length: L = V^(1/3) ([Hindrax-AM] eq. 10 choice;
-  0.2483 m for the Hindrax prototype). For rotations U = |w| R. [Hindrax-Drag] does not state its L;
+  0.2483 m for the Hindrax prototype). [Hindrax-Drag] does not state its L;
   with L = 0.2483 m its surge range 0.5e5-1.1e5 corresponds to 0.20-0.45 m/s, plausible for
   the tests ("0.5 m/s needs about 25 N") but not verifiable.
 """
@@ -33,11 +23,10 @@ from typing import Tuple
 
 import numpy as np
 
-from .least_squares import EstimationError, as_float_array, check_same_length, positive
+from .least_squares import EstimationError, as_float_array, positive
 
 __all__ = ["KINEMATIC_VISCOSITY_WATER_M2_S", "characteristic_length_from_volume", "reynolds_number",
-           "reynolds_range", "drag_coefficient", "rotational_drag_coefficient",
-           "drag_coefficient_samples"]
+           "reynolds_range", "drag_coefficient"]
 
 #: Kinematic viscosity of water used by [Hindrax-AM] (section 4): 1.01e-6 m^2/s.
 KINEMATIC_VISCOSITY_WATER_M2_S = 1.01e-6
@@ -116,53 +105,3 @@ def drag_coefficient(quadratic_damping: float, projected_area_m2: float,
     scale = 2.0 / (rho * A)
     return float(scale * quadratic_damping), float(scale * quadratic_damping_std)
 
-
-def rotational_drag_coefficient(quadratic_damping: float, projected_area_m2: float,
-                                radius_m: float, fluid_density_kg_m3: float = 1000.0,
-                                quadratic_damping_std: float = 0.0) -> Tuple[float, float]:
-    """C_D = 2 k_q / (rho A_p R^3) for a rotational DOF (our definition, module docstring).
-
-    Args:
-        quadratic_damping: k_q in N m/(rad/s)^2 = kg m^2.
-        projected_area_m2: projected area swept by the rotation in m^2.
-        radius_m: characteristic radius R in m (e.g. half the vehicle length).
-        fluid_density_kg_m3: rho.
-        quadratic_damping_std: std of k_q.
-
-    Returns:
-        (c_d, c_d_std).
-    """
-    R = positive(radius_m, "radius_m")
-    c, s = drag_coefficient(quadratic_damping, projected_area_m2, fluid_density_kg_m3,
-                            quadratic_damping_std)
-    return c / R**3, s / R**3
-
-
-def drag_coefficient_samples(velocity, force, projected_area_m2: float,
-                             fluid_density_kg_m3: float = 1000.0,
-                             min_speed: float = 0.05) -> Tuple[float, float, int]:
-    """Per-sample C_D,i = F_i / (0.5 rho A_p v_i |v_i|), then (mean, std, n) (Blevins form).
-
-    Args:
-        velocity: (n,) steady velocities in m/s (or w R in m/s for rotations).
-        force: (n,) force in N balancing the drag (bias already removed if relevant).
-        projected_area_m2: A_p in m^2.
-        fluid_density_kg_m3: rho.
-        min_speed: samples with |v| <= min_speed are dropped (C_D is ill-defined near 0).
-
-    Returns:
-        (mean C_D, sample std C_D (ddof=1), number of samples used).
-
-    Raises:
-        EstimationError: fewer than 2 usable samples, bad input.
-    """
-    v = as_float_array(velocity, "velocity", 1)
-    f = as_float_array(force, "force", 1)
-    check_same_length(velocity=v, force=f)
-    A = positive(projected_area_m2, "projected_area_m2")
-    rho = positive(fluid_density_kg_m3, "fluid_density_kg_m3")
-    keep = np.abs(v) > min_speed
-    if np.count_nonzero(keep) < 2:
-        raise EstimationError(f"need at least 2 samples with |v| > {min_speed}")
-    cd = f[keep] / (0.5 * rho * A * v[keep] * np.abs(v[keep]))
-    return float(np.mean(cd)), float(np.std(cd, ddof=1)), int(cd.size)

@@ -192,41 +192,16 @@ class KinematicKalmanFilter:
         return (float(x[0]), float(x[1]), float(x[2]))
 
     @property
-    def position(self) -> float:
-        """Position estimate (m or rad; integral of velocity in velocity mode)."""
-        return self.state_tuple()[0]
-
-    @property
-    def velocity(self) -> float:
-        """Velocity estimate (m/s or rad/s)."""
-        return self.state_tuple()[1]
-
-    @property
-    def acceleration(self) -> float:
-        """Acceleration estimate (m/s^2 or rad/s^2)."""
-        return self.state_tuple()[2]
-
-    @property
     def covariance(self) -> np.ndarray:
         """(3, 3) state covariance (NaN before initialisation)."""
         if not self._initialised:
             return np.full((3, 3), np.nan)
         return np.array(self._kf.P, copy=True)
 
-    @property
-    def velocity_std(self) -> float:
-        """Standard deviation of the velocity estimate."""
-        return float(np.sqrt(self.covariance[1, 1]))
-
-    @property
-    def acceleration_std(self) -> float:
-        """Standard deviation of the acceleration estimate."""
-        return float(np.sqrt(self.covariance[2, 2]))
-
 
 def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
                       measurement_std: float = 0.01, initial_velocity_std: float = 1.0,
-                      initial_acceleration_std: float = 1.0, return_std: bool = False):
+                      initial_acceleration_std: float = 1.0):
     """Offline position, velocity and acceleration from a whole record (Kalman + RTS smoother).
 
     Runs filterpy's ``KalmanFilter.batch_filter`` with per-interval F(dt), Q(dt) (non-uniform
@@ -239,11 +214,9 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
         measured: ``'position'`` or ``'velocity'``.
         jerk_psd, measurement_std, initial_velocity_std, initial_acceleration_std: as
             :class:`KinematicKalmanFilter`.
-        return_std: also return the smoothed standard deviations.
 
     Returns:
-        ``(pos, vel, acc)``, each (n,), or ``(pos, vel, acc, pos_std, vel_std, acc_std)``
-        with ``return_std``. Samples before the first valid measurement are NaN. In velocity
+        ``(pos, vel, acc)``, each (n,). Samples before the first valid measurement are NaN. In velocity
         mode ``pos`` is the integrated velocity, 0 at the first valid sample.
 
     Raises:
@@ -274,13 +247,8 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
     # The first sample initialises the state; do not fuse it a second time.
     zs[0] = None
     means, covs, _, _ = kf.batch_filter(zs, Fs=Fs, Qs=Qs)
-    xs, Ps, _, _ = kf.rts_smoother(means, covs, Fs=Fs, Qs=Qs)
+    xs, _, _, _ = kf.rts_smoother(means, covs, Fs=Fs, Qs=Qs)
     xs = xs.reshape(len(tt), 3)
     out = np.full((n, 3), np.nan)
     out[i0:] = xs
-    pos, vel, acc = out[:, 0], out[:, 1], out[:, 2]
-    if not return_std:
-        return pos, vel, acc
-    sd = np.full((n, 3), np.nan)
-    sd[i0:] = np.sqrt(np.clip(np.diagonal(Ps, axis1=1, axis2=2), 0.0, None))
-    return pos, vel, acc, sd[:, 0], sd[:, 1], sd[:, 2]
+    return out[:, 0], out[:, 1], out[:, 2]

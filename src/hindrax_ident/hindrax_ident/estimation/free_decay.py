@@ -20,7 +20,6 @@ the log decrement delta, and computes:
     eq. 9   KC = 2 pi A / D with D = V^(1/3) (section 3) and A = the initial displacement
             (in :func:`analyse_free_decay`: the first peak, i.e. the release displacement)
     eq. 11  error % = (m_ad,eq7 - m_ad,eq5) / m_ad,eq5 * 100
-    eq. 12  m_ad,prototype = C_M rho V_prototype
     Re = U_m V^(1/3) / nu, nu = 1.01e-6 m^2/s (section 4)
 
 Signal processing (our choices; [Hindrax-AM] only says "double integration" in MATLAB):
@@ -58,7 +57,7 @@ Signal processing (our choices; [Hindrax-AM] only says "double integration" in M
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Optional, Tuple
 
 import numpy as np
@@ -70,10 +69,9 @@ from .least_squares import (EstimationError, as_float_array, check_same_length, 
 
 __all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_acceleration",
            "find_release_index", "log_decrement", "damping_ratio_from_log_decrement",
-           "log_decrement_from_damping_ratio", "natural_frequency", "added_mass_exact",
-           "added_mass_simplified", "added_mass_error_percent", "damping_coefficient",
-           "inertia_coefficient", "keulegan_carpenter", "prototype_added_mass",
-           "free_decay_table_row", "DECAY_OUTPUTS", "QuadraticDecayFit", "fit_quadratic_free_decay",
+           "natural_frequency", "added_mass_exact", "added_mass_simplified",
+           "added_mass_error_percent", "damping_coefficient", "inertia_coefficient",
+           "keulegan_carpenter", "DECAY_OUTPUTS", "QuadraticDecayFit", "fit_quadratic_free_decay",
            "quadratic_free_decay_keys", "IncliningResult", "restoring_from_inclining"]
 
 
@@ -110,12 +108,6 @@ def damping_ratio_from_log_decrement(delta: float) -> float:
     if not (np.isfinite(delta) and delta >= 0):
         raise EstimationError(f"log decrement must be >= 0, got {delta}")
     return delta / np.sqrt(4.0 * np.pi**2 + delta**2)
-
-
-def log_decrement_from_damping_ratio(zeta: float) -> float:
-    """delta = 2 pi zeta / sqrt(1 - zeta^2) ([Hindrax-AM] eq. 3)."""
-    z = _zeta(zeta)
-    return 2.0 * np.pi * z / np.sqrt(1.0 - z * z)
 
 
 def natural_frequency(omega_d_rad_s: float, zeta: float) -> float:
@@ -167,42 +159,6 @@ def keulegan_carpenter(amplitude_m: float, characteristic_length_m: float) -> fl
     """KC = 2 pi A / D ([Hindrax-AM] eq. 9; D = V^(1/3) for the ROV model)."""
     return 2.0 * np.pi * abs(float(amplitude_m)) / positive(characteristic_length_m,
                                                          "characteristic_length_m")
-
-
-def prototype_added_mass(c_m: float, prototype_volume_m3: float,
-                         fluid_density_kg_m3: float = 1000.0) -> float:
-    """m_ad,prototype = C_M rho V_prototype in kg ([Hindrax-AM] eq. 12; V = 0.0153 m^3 for Hindrax)."""
-    return float(c_m) * positive(fluid_density_kg_m3, "fluid_density_kg_m3") * positive(
-        prototype_volume_m3, "prototype_volume_m3")
-
-
-def free_decay_table_row(omega_d_rad_s: float, zeta: float, stiffness_n_per_m: float,
-                         mass_kg: float, initial_displacement_m: Optional[float] = None,
-                         characteristic_length_m: Optional[float] = None) -> dict:
-    """One row of [Hindrax-AM] Tables 3-5 from (omega_d, zeta, k_eq, m_b) (and A, D for KC).
-
-    Returns a dict with ``omega_n_rad_s`` (eq. 2), ``damping_n_s_per_m`` (eq. 6 with the eq. 5
-    added mass, as [Hindrax-AM]'s text prescribes), ``added_mass_simplified_kg`` (eq. 7),
-    ``added_mass_kg`` (eq. 5), ``added_mass_error_percent`` (eq. 11) and, when both
-    ``initial_displacement_m`` and ``characteristic_length_m`` are given, ``kc`` (eq. 9).
-
-    Raises:
-        EstimationError: invalid inputs (non-positive k, m, omega; zeta outside [0, 1)).
-    """
-    m5 = added_mass_exact(stiffness_n_per_m, omega_d_rad_s, zeta, mass_kg)
-    m7 = added_mass_simplified(stiffness_n_per_m, omega_d_rad_s, mass_kg)
-    row = {
-        "omega_d_rad_s": float(omega_d_rad_s),
-        "zeta": float(zeta),
-        "omega_n_rad_s": natural_frequency(omega_d_rad_s, zeta),
-        "damping_n_s_per_m": damping_coefficient(zeta, stiffness_n_per_m, mass_kg + m5),
-        "added_mass_simplified_kg": m7,
-        "added_mass_kg": m5,
-        "added_mass_error_percent": added_mass_error_percent(m7, m5),
-    }
-    if initial_displacement_m is not None and characteristic_length_m is not None:
-        row["kc"] = keulegan_carpenter(initial_displacement_m, characteristic_length_m)
-    return row
 
 
 # --------------------------------------------------------------------------------------
@@ -377,21 +333,15 @@ class FreeDecayResult:
     velocity_m_s: np.ndarray = field(repr=False)
     envelope_m: np.ndarray = field(repr=False)
 
-    _SCALARS = ("omega_d_rad_s", "zeta", "log_decrement", "omega_n_rad_s", "added_mass_kg",
-                "added_mass_simplified_kg", "added_mass_error_percent", "damping_n_s_per_m",
-                "c_m", "kc", "reynolds", "first_peak_displacement_m", "max_velocity_m_s",
-                "n_periods", "omega_d_fit_rad_s", "omega_d_fit_std_rad_s", "zeta_fit",
-                "zeta_fit_std", "stiffness_n_per_m", "mass_kg", "volume_m3",
-                "fluid_density_kg_m3", "release_index")
-
     def to_dict(self, include_signals: bool = False) -> dict:
         """JSON-friendly dict: every scalar attribute (same keys), ``peaks`` (list of indices),
         ``peak_times_s`` and ``peak_amplitudes_m`` (lists); with ``include_signals`` also the
         plot arrays as lists."""
         out: dict[str, Any] = {}
-        for k in self._SCALARS:
-            v = getattr(self, k)
-            out[k] = int(v) if k in ("n_periods", "release_index") else float(v)
+        for f in fields(self):
+            if f.repr:  # the scalars (the arrays are repr=False)
+                v = getattr(self, f.name)
+                out[f.name] = int(v) if f.type == "int" else float(v)
         out["peaks"] = [int(i) for i in self.peaks]
         out["peak_times_s"] = [float(x) for x in self.peak_times_s]
         out["peak_amplitudes_m"] = [float(x) for x in self.peak_amplitudes_m]

@@ -10,12 +10,6 @@ This module is the offline estimation core of the identification package:
   [Hindrax-Drag] eq. 3 prints the regressor column as x^2; we use |v| v, as eq. 2 and its text state
   ("the absolute value symbol is to conserve the velocity sign"), so that one model covers
   both signs of the velocity.
-* :func:`fit_dynamic` fits the 1-DOF transient model
-  tau = m v_dot + k_q |v| v + k_l v + b (+ W*BG sin(angle)) (docs/architecture.md §5; Fossen/SNAME,
-  positive added mass and damping), optionally with separate quadratic damping for v > 0 and
-  v < 0 (heave: [Hindrax-Drag] Table 3 reports positive and negative heave separately).
-* :func:`confidence_interval` gives Student-t intervals for any estimate with n - p degrees of
-  freedom.
 
 Why not ``numpy.linalg.lstsq`` alone: it returns theta but neither the covariance of eq. 7 nor a
 rank diagnosis we can turn into a clear error; we use an SVD of the column-equilibrated
@@ -36,8 +30,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-__all__ = ["EstimationError", "LsResult", "DragFit", "DynamicFit", "fit_linear_model", "fit_drag",
-           "fit_dynamic", "confidence_interval"]
+__all__ = ["EstimationError", "LsResult", "DragFit", "fit_linear_model", "fit_drag"]
 
 
 class EstimationError(ValueError):
@@ -179,23 +172,16 @@ class _Param:
     def __get__(self, fit: "_NamedFit | None", owner: type) -> Optional[float]:
         if fit is None:
             return self  # type: ignore[return-value]  # the class attribute (documentation)
-        return fit._std(self.name) if self.std else fit._value(self.name)
+        ls = fit.ls
+        if ls.names is None or self.name not in ls.names:
+            return None
+        return float((ls.std if self.std else ls.theta)[ls.index(self.name)])
 
 
 class _NamedFit:
     """Mixin giving value/std access by parameter name on top of an :class:`LsResult`."""
 
     ls: LsResult
-
-    def _value(self, name: str) -> Optional[float]:
-        if self.ls.names is None or name not in self.ls.names:
-            return None
-        return float(self.ls.theta[self.ls.index(name)])
-
-    def _std(self, name: str) -> Optional[float]:
-        if self.ls.names is None or name not in self.ls.names:
-            return None
-        return float(self.ls.std[self.ls.index(name)])
 
     quadratic_damping = _Param("Quadratic damping k_q of [Hindrax-Drag] eq. 2 (None when not "
                                 "fitted, e.g. fitted per direction).")
@@ -228,41 +214,19 @@ class DragFit(_NamedFit):
 
     ls: LsResult
 
+    def _regressors(self, velocity) -> np.ndarray:
+        names = self.ls.names or ()
+        return _drag_regressors(np.asarray(velocity, dtype=float), "quadratic_damping" in names,
+                                "linear_damping" in names, "bias" in names)
+
     def predict(self, velocity) -> np.ndarray:
         """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""
-        v, names = np.asarray(velocity, dtype=float), self.ls.names or ()
-        return _drag_regressors(v, "quadratic_damping" in names, "linear_damping" in names,
-                                "bias" in names) @ self.ls.theta
+        return self._regressors(velocity) @ self.ls.theta
 
     def predict_std(self, velocity) -> np.ndarray:
         """Standard deviation of the fitted mean force at ``velocity`` (for plot bands)."""
-        v, names = np.asarray(velocity, dtype=float), self.ls.names or ()
-        X = _drag_regressors(v, "quadratic_damping" in names, "linear_damping" in names, "bias" in names)
+        X = self._regressors(velocity)
         return np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
-
-
-@dataclass(frozen=True, eq=False)
-class DynamicFit(_NamedFit):
-    """1-DOF transient fit tau = m v_dot + k_q |v| v + k_l v + b (+ k_r r).
-
-    Parameter names in ``ls.names``: ``inertia`` (rigid-body + added mass, kg or kg m^2),
-    either ``quadratic_damping`` or the pair ``quadratic_damping_positive`` /
-    ``quadratic_damping_negative``, ``linear_damping``, ``bias`` and ``restoring`` (the
-    coefficient of the restoring regressor, e.g. W*BG in N m when the regressor is sin(angle)).
-    Properties return ``None`` for terms not in the model.
-    """
-
-    ls: LsResult
-
-    inertia = _Param("Total inertia m = m_RB + m_A (kg or kg m^2).")
-    inertia_std = _Param("Standard deviation of the total inertia.")
-    quadratic_damping_positive = _Param("k_q for v > 0 (heave: positive = down, [Hindrax-Drag] "
-                                         "section 4.1).")
-    quadratic_damping_positive_std = _Param("Standard deviation of k_q for v > 0.")
-    quadratic_damping_negative = _Param("k_q for v < 0 (heave: negative = up).")
-    quadratic_damping_negative_std = _Param("Standard deviation of k_q for v < 0.")
-    restoring = _Param("Coefficient of the restoring regressor (W*BG in N m for sin(roll/pitch)).")
-    restoring_std = _Param("Standard deviation of the restoring coefficient.")
 
 
 # --------------------------------------------------------------------------------------
@@ -333,38 +297,6 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
                     residuals=residuals, n=n, p=p, names=names)
 
 
-def confidence_interval(value, std, dof: int, level: float = 0.95):
-    """Two-sided Student-t confidence interval value -+ t_{(1+level)/2, dof} * std.
-
-    Args:
-        value: estimate(s) (scalar or array).
-        std: standard deviation(s) of the estimate(s), same shape as ``value``.
-        dof: degrees of freedom (n - p for an LS fit, [Hindrax-Drag] eq. 8), integer >= 1.
-        level: confidence level in (0, 1), default 0.95.
-
-    Returns:
-        (low, high), scalars or arrays like ``value``.
-
-    Raises:
-        EstimationError: dof < 1, level outside (0, 1), negative std.
-    """
-    from scipy import stats  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
-
-    if not (0.0 < float(level) < 1.0):
-        raise EstimationError(f"level must be in (0, 1), got {level}")
-    if int(dof) != dof or dof < 1:
-        raise EstimationError(f"dof must be an integer >= 1, got {dof}")
-    value = np.asarray(value, dtype=float)
-    std = np.asarray(std, dtype=float)
-    if np.any(std < 0):
-        raise EstimationError("std must be non-negative")
-    half = stats.t.ppf(0.5 * (1.0 + float(level)), int(dof)) * std
-    low, high = value - half, value + half
-    if low.ndim == 0:
-        return float(low), float(high)
-    return low, high
-
-
 # --------------------------------------------------------------------------------------
 # Hydrodynamic models
 # --------------------------------------------------------------------------------------
@@ -408,58 +340,3 @@ def fit_drag(velocity, force, include_linear: bool = True, include_bias: bool = 
     X = _drag_regressors(v, True, include_linear, include_bias)
     return DragFit(ls=fit_linear_model(X, f, names))
 
-
-def fit_dynamic(acceleration, velocity, force, separate_quadratic: bool = False,
-                restoring=None, include_linear: bool = True,
-                include_bias: bool = True) -> DynamicFit:
-    """Fit the 1-DOF transient model tau = m v_dot + k_q |v| v + k_l v + b (+ k_r r).
-
-    Regressor row: [v_dot, |v| v, v, 1] (docs/architecture.md §5), or with
-    ``separate_quadratic`` [v_dot, |v| v [v > 0], |v| v [v < 0], v, 1] ([Hindrax-Drag] Table 3
-    positive/negative heave), plus the optional restoring column r (e.g. sin(roll) so that the
-    coefficient is W*BG in N m, Fossen's g(eta) for roll/pitch, docs/identification.md §3 C4).
-
-    Args:
-        acceleration: (n,) v_dot in m/s^2 (rad/s^2), from a filter (filters.py), body frame.
-        velocity: (n,) v in m/s (rad/s).
-        force: (n,) applied force in N (moment in N m).
-        separate_quadratic: fit one quadratic damping per velocity sign.
-        restoring: optional (n,) restoring regressor (dimensionless for sin(angle)).
-        include_linear: include k_l v.
-        include_bias: include b.
-
-    Returns:
-        :class:`DynamicFit` with names ``inertia``, ``quadratic_damping`` (or ``_positive``
-        and ``_negative``), ``linear_damping``, ``bias``, ``restoring`` as present.
-
-    Raises:
-        EstimationError: shape mismatch, NaN, n <= p, or rank deficiency (e.g. separate
-            quadratic terms without samples of both signs, or no acceleration excitation).
-    """
-    a = as_float_array(acceleration, "acceleration", 1)
-    v = as_float_array(velocity, "velocity", 1)
-    f = as_float_array(force, "force", 1)
-    arrays = dict(acceleration=a, velocity=v, force=f)
-    if restoring is not None:
-        r = as_float_array(restoring, "restoring", 1)
-        arrays["restoring"] = r
-    check_same_length(**arrays)
-    cols = [a]
-    names = ["inertia"]
-    q = np.abs(v) * v
-    if separate_quadratic:
-        cols += [np.where(v > 0, q, 0.0), np.where(v < 0, q, 0.0)]
-        names += ["quadratic_damping_positive", "quadratic_damping_negative"]
-    else:
-        cols.append(q)
-        names.append("quadratic_damping")
-    if include_linear:
-        cols.append(v)
-        names.append("linear_damping")
-    if include_bias:
-        cols.append(np.ones_like(v))
-        names.append("bias")
-    if restoring is not None:
-        cols.append(r)
-        names.append("restoring")
-    return DynamicFit(ls=fit_linear_model(np.column_stack(cols), f, names))

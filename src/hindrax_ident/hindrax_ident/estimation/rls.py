@@ -290,14 +290,6 @@ class RecursiveLeastSquares:
                     self._Q = np.linalg.inv(self._P)
         return float(err)
 
-    def update_batch(self, Phi, Y) -> np.ndarray:
-        """Run :meth:`update` over rows of ``Phi`` (n, p) and ``Y`` (n,); return a-priori errors."""
-        Phi = as_float_array(Phi, "Phi", 2)
-        Y = as_float_array(Y, "Y", 1)
-        if Phi.shape[0] != Y.shape[0]:
-            raise EstimationError("Phi and Y must have the same number of rows")
-        return np.array([self.update(Phi[i], Y[i]) for i in range(Y.shape[0])])
-
     def predict(self, phi) -> float:
         """Model output phi^T theta for a (p,) regressor (the constrained :attr:`theta`)."""
         return float(np.asarray(phi, dtype=float) @ self.theta)

@@ -27,20 +27,19 @@ Algorithm (all thresholds are arguments; defaults in brackets):
 Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise
 (DVL ~ 0.01 m/s, filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient
 accelerations (force / inertia). [Hindrax-Drag]'s heave runs never became steady for lack of depth
-(section 5); expect no windows there and use the transient fit (least_squares.fit_dynamic).
+(section 5); expect no windows there and use the transient fit (the fit core, :mod:`..identification.fit.fit_core`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, asdict
-from typing import List, Sequence, Tuple
+from typing import List, Tuple
 
 import numpy as np
 
 from .least_squares import EstimationError, as_float_array, check_same_length, check_time_vector
 
-__all__ = ["SteadyWindow", "detect_steady_windows", "constant_force_segments",
-           "steady_state_data"]
+__all__ = ["SteadyWindow", "detect_steady_windows", "constant_force_segments"]
 
 
 @dataclass(frozen=True)
@@ -202,34 +201,3 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
                 n=int(e - s)))
     return windows
 
-
-def steady_state_data(windows: Sequence[SteadyWindow], velocity=None, force=None,
-                      use_means: bool = True) -> Tuple[np.ndarray, np.ndarray]:
-    """Data for the steady-state LS of [Hindrax-Drag] eqs. 3-8 from detected windows.
-
-    Args:
-        windows: output of :func:`detect_steady_windows`.
-        velocity, force: the full (n,) records; required when ``use_means`` is False.
-        use_means: True -> one (velocity_mean, force_mean) point per window; False -> all
-            samples inside the windows concatenated (what [Hindrax-Drag] section 5 describes).
-
-    Returns:
-        (velocity, force) 1-D arrays ready for ``fit_drag``.
-
-    Raises:
-        EstimationError: no windows, or records missing when ``use_means`` is False.
-    """
-    if len(windows) == 0:
-        raise EstimationError("no steady windows: nothing to fit")
-    if use_means:
-        return (np.array([w.velocity_mean for w in windows]),
-                np.array([w.force_mean for w in windows]))
-    if velocity is None or force is None:
-        raise EstimationError("velocity and force records are required when use_means=False")
-    v = as_float_array(velocity, "velocity", 1)
-    f = as_float_array(force, "force", 1)
-    check_same_length(velocity=v, force=f)
-    idx = np.concatenate([np.arange(w.start, w.stop) for w in windows])
-    if idx.max() >= v.size:
-        raise EstimationError("windows do not belong to these records (index out of range)")
-    return v[idx], f[idx]

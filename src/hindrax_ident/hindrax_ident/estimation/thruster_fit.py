@@ -53,21 +53,11 @@ from .least_squares import (EstimationError, LsResult, as_float_array, check_sam
                             fit_linear_model)
 
 __all__ = ["CubicFit", "ThrusterCurveFit", "fit_cubic", "fit_thruster_curve",
-           "point_reflection", "evaluate_cubic", "NEUTRAL_US"]
+           "point_reflection", "NEUTRAL_US"]
 
 #: ESC stop pulse width ([Hindrax-Drag] section 2.2.1).
 NEUTRAL_US = 1500.0
 _SCALE_US = 400.0
-
-
-def evaluate_cubic(c4: float, c3: float, c2: float, c1: float, pulse_width_us) -> float | np.ndarray:
-    """tau = c4 P^3 + c3 P^2 + c2 P + c1 in N at pulse widths P in us ([Hindrax-Drag] eq. 1).
-
-    Returns a float for scalar input, an array otherwise.
-    """
-    P = np.asarray(pulse_width_us, dtype=float)
-    out = np.asarray(Polynomial([c1, c2, c3, c4])(P))
-    return float(out) if out.ndim == 0 else out
 
 
 def _raw_transform(centre: float, scale: float) -> np.ndarray:
@@ -131,14 +121,14 @@ class CubicFit:
         out = np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
         return float(out[0]) if np.ndim(pulse_width_us) == 0 else out
 
-    def relative_std(self, points: int = 101) -> float:
+    def relative_std(self) -> float:
         """Thrust-weighted RMS relative std of the fitted mean thrust over [pulse_width_min_us, pulse_width_max_us]
-        (dimensionless, module docstring): sqrt(sum sd^2 / sum f^2) on ``points`` uniformly spaced widths.
+        (dimensionless, module docstring): sqrt(sum sd^2 / sum f^2) on 101 uniformly spaced widths.
 
         Raises:
             EstimationError: the fitted thrust is zero over the whole range.
         """
-        P = np.linspace(self.pulse_width_min_us, self.pulse_width_max_us, int(points))
+        P = np.linspace(self.pulse_width_min_us, self.pulse_width_max_us, 101)
         f2 = float(np.sum(np.asarray(self.predict(P)) ** 2))
         if not f2 > 0.0:
             raise EstimationError("the fitted thrust is zero over the data's range: no relative uncertainty")

@@ -1,9 +1,8 @@
 """Sensor truth and noise models: what each Hindrax device would measure in the virtual pool. Pure numpy.
 
 Each model samples the simulated vehicle at its own rate and returns a plain frozen dataclass holding the
-*measured* value (truth + bias + noise, with dropouts and lock rules) and the *true* value beside it.
-Device emulators (DVL-75, Ping1D, MS5837, ICM-20948) consume these as their truth source; ground truth
-topics use the true fields.
+*measured* value (truth + bias + noise, with dropouts and lock rules). Device emulators (DVL-75, Ping1D,
+MS5837, ICM-20948) consume these as their truth source.
 
 Configuration (all optional keys under ``simulation.sensors.<device>``; absent = no noise, no bias, no
 dropout, the device's configured or default rate):
@@ -106,55 +105,49 @@ class VehicleTruth:
 @dataclass(frozen=True)
 class DvlVelocitySample:
     """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock;
-    altitude_m: true vertical distance DVL -> floor (NaN out of the water); true_velocity_frd_m_s: v + w x r;
-    beam_range_m: range along each beam A-D (port, stern, starboard, bow) to the floor with the DVL's range noise
-    (NaN for a beam without lock)."""
+    altitude_m: true vertical distance DVL -> floor (NaN out of the water); beam_range_m: range along each beam A-D
+    (port, stern, starboard, bow) to the floor with the DVL's range noise (NaN for a beam without lock)."""
 
     stamp_s: float
     velocity_frd_m_s: tuple[float, float, float]
     locked: bool
     altitude_m: float
-    true_velocity_frd_m_s: tuple[float, float, float]
     beam_range_m: tuple[float, float, float, float] = (math.nan, math.nan, math.nan, math.nan)
 
 
 @dataclass(frozen=True)
 class DvlAttitudeSample:
-    """DVL-75 attitude report: measured roll, pitch, yaw (rad, Fossen ZYX in NED) and the true values."""
+    """DVL-75 attitude report: measured roll, pitch, yaw (rad, Fossen ZYX in NED)."""
 
     stamp_s: float
     roll_rad: float
     pitch_rad: float
     yaw_rad: float
-    true_rpy_rad: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
 class AccelSample:
-    """ICM-20948 accelerometer: specific force (m/s^2) in the sensor frame, measured and true; temperature."""
+    """ICM-20948 accelerometer: measured specific force (m/s^2) in the sensor frame; temperature."""
 
     stamp_s: float
     specific_force_m_s2: tuple[float, float, float]
-    true_specific_force_m_s2: tuple[float, float, float]
     temperature_c: float
 
 
 @dataclass(frozen=True)
 class GyroSample:
-    """ICM-20948 gyroscope: angular rate (rad/s) in the sensor frame, measured and true."""
+    """ICM-20948 gyroscope: measured angular rate (rad/s) in the sensor frame."""
 
     stamp_s: float
     angular_rate_rad_s: tuple[float, float, float]
-    true_angular_rate_rad_s: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
 class MagSample:
-    """AK09916 magnetometer (in the ICM sensor frame): magnetic field (T), measured and true."""
+    """AK09916 magnetometer (in the ICM sensor frame): measured magnetic field (T)."""
 
     stamp_s: float
     magnetic_field_t: tuple[float, float, float]
-    true_magnetic_field_t: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -170,13 +163,11 @@ class PressureSample:
 
 @dataclass(frozen=True)
 class AltitudeSample:
-    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid),
-    valid flag, and the true distance (inf when the beam hits nothing)."""
+    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid), valid flag."""
 
     stamp_s: float
     distance_m: float
     valid: bool
-    true_distance_m: float
 
 
 # --------------------------------------------------------------------------------------------- physics
@@ -221,12 +212,13 @@ class NoiseSpec:
     dropout_probability: float = 0.0
 
     @classmethod
-    def from_settings(cls, noise_std: float | None, bias: float | None, rate_hz: float | None,
-                      dropout_probability: float | None, default_rate_hz: float) -> "NoiseSpec":
-        """From the optional ``simulation.sensors.<device>.{noise_std_<unit>, bias_<unit>, rate_hz,
-        dropout_probability}`` values (None: absent -> 0, 0, ``default_rate_hz``, 0)."""
-        return cls(float(or_default(noise_std, 0.0)), float(or_default(bias, 0.0)),
-                   float(or_default(rate_hz, default_rate_hz)), float(or_default(dropout_probability, 0.0)))
+    def of(cls, section: Any, unit: str, default_rate_hz: float) -> "NoiseSpec":
+        """From a ``simulation.sensors.<device>`` section: its optional ``noise_std_<unit>``, ``bias_<unit>``,
+        ``rate_hz`` and ``dropout_probability`` (None: absent -> 0, 0, ``default_rate_hz``, 0)."""
+        return cls(float(or_default(getattr(section, f"noise_std_{unit}"), 0.0)),
+                   float(or_default(getattr(section, f"bias_{unit}"), 0.0)),
+                   float(or_default(section.rate_hz, default_rate_hz)),
+                   float(or_default(section.dropout_probability, 0.0)))
 
 
 class SensorModel:
@@ -302,8 +294,7 @@ class DvlVelocityModel(SensorModel):
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
         s = config.simulation.sensors.dvl75
-        super().__init__("dvl75", NoiseSpec.from_settings(s.noise_std_m_s, s.bias_m_s, s.rate_hz, s.dropout_probability,
-                                                          10.0), seed)
+        super().__init__("dvl75", NoiseSpec.of(s, "m_s", 10.0), seed)
         self.scale_error_fraction = float(or_default(s.scale_error_fraction, 0.0))
         self.min_altitude_m = float(or_default(s.min_altitude_m, 0.0))
         self.max_altitude_m = float(or_default(s.max_altitude_m, math.inf))
@@ -357,17 +348,15 @@ class DvlVelocityModel(SensorModel):
     def measure(self, truth: VehicleTruth) -> DvlVelocitySample | None:
         point = truth.position_ned_m + truth.rotation @ self.position_frd_m
         locked, altitude = self.locked(point)
-        v_true = point_velocity_frd(truth.nu, self.position_frd_m)
-        true3 = (float(v_true[0]), float(v_true[1]), float(v_true[2]))
         if not locked:
-            return DvlVelocitySample(truth.t_s, (math.nan, math.nan, math.nan), False, altitude, true3)
+            return DvlVelocitySample(truth.t_s, (math.nan, math.nan, math.nan), False, altitude)
         beams = self.beam_ranges(point, truth.rotation)
         if self.multipath_probability > 0.0 and self.pool is not None:
             d = self.pool.wall_distance_m(point)
             if d < self.multipath_distance_m and \
                     self.walk_rng.random() < self.multipath_probability * (1.0 - d / self.multipath_distance_m):
                 return None  # side-lobe return from the wall: the report is lost
-        v_meas = v_true
+        v_meas = point_velocity_frd(truth.nu, self.position_frd_m)
         if self.latency_s > 0.0 and self.delayed_state is not None:
             st = self.delayed_state(self.latency_s)
             v_meas = point_velocity_frd(np.asarray(st[7:13]), self.position_frd_m)
@@ -379,28 +368,24 @@ class DvlVelocityModel(SensorModel):
             g = 1.0 + self.floor_noise_gain * (self.floor_reference_m / max(altitude, 0.05)) ** 2
             extra = self.walk_rng.normal(0.0, self.spec.noise_std * math.sqrt(g * g - 1.0), 3)
             out = (out[0] + float(extra[0]), out[1] + float(extra[1]), out[2] + float(extra[2]))
-        return DvlVelocitySample(truth.t_s, out, True, altitude, true3, beams)
+        return DvlVelocitySample(truth.t_s, out, True, altitude, beams)
 
 
 class DvlAttitudeModel(SensorModel):
     """DVL-75 attitude (roll, pitch, yaw) with bias and noise."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        s = config.simulation.sensors.dvl75_attitude
-        super().__init__("dvl75_attitude", NoiseSpec.from_settings(s.noise_std_rad, s.bias_rad, s.rate_hz,
-                                                                   s.dropout_probability, 10.0), seed)
+        super().__init__("dvl75_attitude", NoiseSpec.of(config.simulation.sensors.dvl75_attitude, "rad", 10.0), seed)
 
     def measure(self, truth: VehicleTruth) -> DvlAttitudeSample:
-        e = truth.euler_rad
-        m = self._noisy3(e)
-        return DvlAttitudeSample(truth.t_s, m[0], m[1], wrap_angle(m[2]), (float(e[0]), float(e[1]), float(e[2])))
+        m = self._noisy3(truth.euler_rad)
+        return DvlAttitudeSample(truth.t_s, m[0], m[1], wrap_angle(m[2]))
 
 
 class _ImuBase(SensorModel):
-    def __init__(self, name: str, noise_std: float | None, bias: float | None, rate_hz: float | None,
-                 dropout_probability: float | None, config: VehicleConfig, seed: int) -> None:
-        super().__init__(name, NoiseSpec.from_settings(noise_std, bias, rate_hz, dropout_probability,
-                                                       float(config.sensors.icm20948.sample_rate_hz)), seed)
+    def __init__(self, name: str, unit: str, config: VehicleConfig, seed: int) -> None:
+        section = getattr(config.simulation.sensors, name)
+        super().__init__(name, NoiseSpec.of(section, unit, float(config.sensors.icm20948.sample_rate_hz)), seed)
         roll, pitch, yaw = config.sensors.icm20948.mounting_rpy_rad
         r_mount = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # sensor -> base_link (FLU)
         self.sensor_from_frd = r_mount.T @ frames.R_FLU_FRD
@@ -414,9 +399,7 @@ class AccelModel(_ImuBase):
 
     def __init__(self, config: VehicleConfig, seed: int, imu_position_frd_m=(0.0, 0.0, 0.0),
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
-        s = config.simulation.sensors.icm20948_accel
-        super().__init__("icm20948_accel", s.noise_std_m_s2, s.bias_m_s2, s.rate_hz, s.dropout_probability, config,
-                         seed)
+        super().__init__("icm20948_accel", "m_s2", config, seed)
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.position_frd_m = np.asarray(imu_position_frd_m, dtype=float)
         self.temperature_c = float(water_temperature_c)
@@ -425,35 +408,31 @@ class AccelModel(_ImuBase):
         f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2,
                                                self.position_frd_m))
         m = f + self.extra_bias(truth.t_s) if self.disturbed else f
-        return AccelSample(truth.t_s, self._noisy3(m), (float(f[0]), float(f[1]), float(f[2])), self.temperature_c)
+        return AccelSample(truth.t_s, self._noisy3(m), self.temperature_c)
 
 
 class GyroModel(_ImuBase):
     """ICM-20948 gyroscope: body angular rate in the sensor frame."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        s = config.simulation.sensors.icm20948_gyro
-        super().__init__("icm20948_gyro", s.noise_std_rad_s, s.bias_rad_s, s.rate_hz, s.dropout_probability, config,
-                         seed)
+        super().__init__("icm20948_gyro", "rad_s", config, seed)
 
     def measure(self, truth: VehicleTruth) -> GyroSample:
         w = self._to_sensor(truth.nu[3:])
         m = w + self.extra_bias(truth.t_s) if self.disturbed else w
-        return GyroSample(truth.t_s, self._noisy3(m), (float(w[0]), float(w[1]), float(w[2])))
+        return GyroSample(truth.t_s, self._noisy3(m))
 
 
 class MagModel(_ImuBase):
     """AK09916 magnetometer: the earth field R^T B_ned in the ICM sensor frame."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        s = config.simulation.sensors.icm20948_mag
-        super().__init__("icm20948_mag", s.noise_std_t, s.bias_t, s.rate_hz, s.dropout_probability, config, seed)
-        field = or_default(s.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
+        super().__init__("icm20948_mag", "t", config, seed)
+        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
         self.earth_field_ned_t = np.asarray(field, dtype=float)
 
     def measure(self, truth: VehicleTruth) -> MagSample:
-        b = self._to_sensor(truth.rotation.T @ self.earth_field_ned_t)
-        return MagSample(truth.t_s, self._noisy3(b), (float(b[0]), float(b[1]), float(b[2])))
+        return MagSample(truth.t_s, self._noisy3(self._to_sensor(truth.rotation.T @ self.earth_field_ned_t)))
 
 
 class PressureModel(SensorModel):
@@ -461,9 +440,8 @@ class PressureModel(SensorModel):
 
     def __init__(self, config: VehicleConfig, seed: int,
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
-        s = config.simulation.sensors.ms5837
-        super().__init__("ms5837", NoiseSpec.from_settings(s.noise_std_pa, s.bias_pa, s.rate_hz, s.dropout_probability,
-                                                           float(config.sensors.ms5837.rate_hz)), seed)
+        super().__init__("ms5837", NoiseSpec.of(config.simulation.sensors.ms5837, "pa",
+                                                float(config.sensors.ms5837.rate_hz)), seed)
         self.position_frd_m = np.asarray(config.sensors.ms5837.position_frd_m, dtype=float)
         self.density_kg_m3 = float(config.environment.water_density_kg_m3)
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
@@ -481,9 +459,8 @@ class AltitudeModel(SensorModel):
     """Ping1D slant range along the vehicle's down axis (module docstring)."""
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
-        s, ping = config.simulation.sensors.ping1d, config.sensors.ping1d
-        super().__init__("ping1d", NoiseSpec.from_settings(s.noise_std_m, s.bias_m, s.rate_hz, s.dropout_probability,
-                                                           1.0 / float(ping.ping_interval_s)), seed)
+        ping = config.sensors.ping1d
+        super().__init__("ping1d", NoiseSpec.of(config.simulation.sensors.ping1d, "m", 1 / ping.ping_interval_s), seed)
         self.position_frd_m = np.asarray(ping.position_frd_m, dtype=float)
         self.min_range_m = float(ping.min_range_m)
         self.max_range_m = float(ping.max_range_m)
@@ -492,11 +469,11 @@ class AltitudeModel(SensorModel):
     def measure(self, truth: VehicleTruth) -> AltitudeSample:
         point = truth.position_ned_m + truth.rotation @ self.position_frd_m
         if self.pool is None:
-            return AltitudeSample(truth.t_s, math.nan, False, math.inf)
+            return AltitudeSample(truth.t_s, math.nan, False)
         true_d = self.pool.ray_distance_m(point, truth.rotation[:, 2])
         valid = point[2] > 0.0 and math.isfinite(true_d) and self.min_range_m <= true_d <= self.max_range_m
         measured = self._noisy1(true_d) if valid else math.nan
-        return AltitudeSample(truth.t_s, measured, bool(valid), float(true_d))
+        return AltitudeSample(truth.t_s, measured, bool(valid))
 
 
 # --------------------------------------------------------------------------------------------- the suite

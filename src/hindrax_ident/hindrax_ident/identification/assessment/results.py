@@ -146,7 +146,7 @@ def _provenance(cfg: VehicleConfig | None, source: str, method: str, seed: int |
 
 def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source: str = "simulation",
                   seed: int | None = None, method: str | None = None,
-                  include_configured: bool = True, calibration: Mapping[str, Any] | None = None) -> dict:
+                  calibration: Mapping[str, Any] | None = None) -> dict:
     """The identification.yaml document from :class:`~..fit.dof_model.DofIdentification` objects (per DOF).
 
     The intervals are the honest ones of :func:`~.verdicts.apply_verdicts` (fit covariance + thrust-curve
@@ -205,8 +205,7 @@ def build_results(identifications: Mapping[str, Any], cfg: VehicleConfig, source
             "rls_time_s": _f(r.rls_time_s),
             "steady_state_time_s": _f(r.steady_time_s),
         }
-        if include_configured:
-            entry["configured"] = {k: float(v) for k, v in r.truth.items()}
+        entry["configured"] = {k: float(v) for k, v in r.truth.items()}
         if dof in priors:
             entry["prior"] = priors[dof]
         drag = drag_coefficient_entry(r, cfg)

@@ -15,8 +15,7 @@ and
    inertia a = b = 1/2. When a thrust-curve fit covariance is known it replaces the declared value: the vehicle
    file's ``thrusters.thrust_fit_uncertainty_rel`` (written by ``hindrax ident thruster-fit --write``: the
    thrust-weighted relative std of the fitted curve over the pulse widths of the bollard-pull data,
-   :meth:`~hindrax_ident.estimation.thruster_fit.CubicFit.relative_std`), or a calibration's scale std
-   (``thruster_fit_rel``), which takes precedence;
+   :meth:`~hindrax_ident.estimation.thruster_fit.CubicFit.relative_std`);
 2. **uses degrees of freedom that match the independent information**: the output-error residuals are correlated
    inside a segment and between neighbouring segments, so the fit core's covariance is cluster-robust
    (docs/identification.md §7, step 5) and the 95 % interval uses the Student t quantile with its (clusters - 1)
@@ -423,7 +422,7 @@ def no_model_line(dof: str, per: Mapping[str, float]) -> str:
             f"{per['nrmse_hold']:.3f}, needs {100 * per['margin']:.0f} % less): no parameter trusted")
 
 
-def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | None = None) -> dict:
+def assess_dof(r: Any, cfg: VehicleConfig) -> dict:
     """:func:`assess` of a :class:`~..fit.dof_model.DofIdentification` (the campaign reader's, ``ident bag``); ``r`` is
     not modified. The fit core's bounds, fold estimates, cross-validated nrmse and holding the velocity's come from
     ``r.signals["core"]`` when present (:func:`core_evidence`, as for ``hindrax ident fit``; so a DOF no model beats
@@ -456,7 +455,7 @@ def assess_dof(r: Any, cfg: VehicleConfig, thruster_fit_rel: Sequence[float] | N
             setattr(ev, key, value)
     elif not have and sig.get("velocity") is not None:  # the typical speed without the advice's signals
         ev.velocity = np.asarray(sig["velocity"], dtype=float)
-    a = assess(ev, declared_rel(cfg, thruster_fit_rel))
+    a = assess(ev, declared_rel(cfg))
     a["checks"]["segments"] = nseg
     return with_added_mass(a, float(r.values["added_mass"]))
 
@@ -476,8 +475,7 @@ def _drag(dof: str, values: Mapping[str, float], v: np.ndarray, bias: bool = Tru
     return kq * np.abs(v) * v + kl * v + (float(values.get("bias", 0.0)) if bias else 0.0)
 
 
-def apply_verdicts(identifications: Mapping[str, Any], cfg: VehicleConfig,
-                   thruster_fit_rel: Sequence[float] | None = None) -> dict:
+def apply_verdicts(identifications: Mapping[str, Any], cfg: VehicleConfig) -> dict:
     """:func:`assess_dof` for every DOF, written into each identification (idempotent): ``std`` and ``ci95``
     become the honest ones, the fit-only std moves to ``signals["std_fit"]``, ``signals["assessment"]`` holds
     the verdicts. Returns {dof: assessment}."""
@@ -487,7 +485,7 @@ def apply_verdicts(identifications: Mapping[str, Any], cfg: VehicleConfig,
         if "assessment" in r.signals:
             out[dof] = r.signals["assessment"]
             continue
-        a = assess_dof(r, cfg, thruster_fit_rel)
+        a = assess_dof(r, cfg)
         r.signals["std_fit"] = dict(r.std)
         for n, e in a["parameters"].items():
             r.std[n] = e["std"]
@@ -563,23 +561,22 @@ def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float
 REFERENCE_Z_MAX = 1.96
 
 
-def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay: tuple[float, float],
-                      z_max: float = REFERENCE_Z_MAX) -> str | None:
+def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay: tuple[float, float]) -> str | None:
     """The reason text when the free-decay inertia (value, std; kg m^2) contradicts the self-propelled one
-    (value, std): |I_sp - I_fd| > ``z_max`` sqrt(std_sp^2 + std_fd^2); None when they agree. Raises ``ValueError``
-    for a negative std."""
+    (value, std): |I_sp - I_fd| > :data:`REFERENCE_Z_MAX` sqrt(std_sp^2 + std_fd^2); None when they agree. Raises
+    ``ValueError`` for a negative std."""
     (v, sd), (vf, sf) = self_propelled, free_decay
     if sd < 0 or sf < 0:
         raise ValueError(f"{dof}: std must be >= 0, got {sd} and {sf}")
     comb = math.hypot(sd, sf)
     z = (v - vf) / comb if comb > 0 else (0.0 if v == vf else math.copysign(math.inf, v - vf))
-    if abs(z) <= z_max:
+    if abs(z) <= REFERENCE_Z_MAX:
         return None
     return (f"{dof} inertia {v:.4g} kg m^2 (self-propelled) differs from the free decay's {vf:.4g} +- {sf:.2g} kg m^2 "
-            f"(z = {z:+.1f}, beyond {z_max:g} combined std): the thrust curve (or the model) is off in {dof}")
+            f"(z = {z:+.1f}, beyond {REFERENCE_Z_MAX:g} combined std): the thrust curve (or the model) is off in {dof}")
 
 
-def apply_reference_verdicts(document: dict, z_max: float = REFERENCE_Z_MAX) -> dict:
+def apply_reference_verdicts(document: dict) -> dict:
     """Independent references against the self-propelled result in an identification.yaml ``document`` (changed
     in place; returned): for every roll/pitch of ``document["free_decay"]`` (``total_inertia_kg_m2`` and
     ``total_inertia_kg_m2_std``) also identified self-propelled (``dofs.<dof>.inertia`` value and honest std), a
@@ -593,7 +590,7 @@ def apply_reference_verdicts(document: dict, z_max: float = REFERENCE_Z_MAX) -> 
         v, sd = float(entry["inertia"]["value"]), float(entry["inertia"]["std"])
         vf, sf = float(fd["total_inertia_kg_m2"]), float(fd["total_inertia_kg_m2_std"])
         comb = math.hypot(sd, sf)
-        reason = free_decay_reason(dof, (v, sd), (vf, sf), z_max)
+        reason = free_decay_reason(dof, (v, sd), (vf, sf))
         fd["self_propelled"] = {"inertia_kg_m2": v, "inertia_kg_m2_std": sd,
                                 "z": abs(v - vf) / comb if comb > 0 else 0.0,
                                 "verdict": "agrees" if reason is None else "suspect"}
@@ -686,8 +683,6 @@ def data_advice(dof: str, name: str, value: float, half_width: float, velocity, 
     vmax = float(np.percentile(np.abs(vv), 98)) if vv.size else 0.0
     top = vmax if vmax >= 1e-3 else 0.5  # nothing moved: the usual top speed of a small ROV, 0.5 m/s or rad/s
     direction = "" if sign == 0.0 else (" down (w > 0)" if sign > 0 else " up (w < 0)")
-    if dof in ("roll", "pitch", "yaw") and sign == 0.0:
-        direction = ""
     if name in ("inertia", "added_mass"):
         thr = float(np.percentile(np.abs(a), 70)) if a.size else 0.0
         used = np.abs(a) >= thr if a.size else np.zeros(0, bool)

@@ -76,7 +76,7 @@ SATURATION_MIN_REL = 0.02
 #: The kinds of the parameters whose regressors are time-dependent columns (:attr:`SegmentData.cols`), by prefix
 _COLUMN_PREFIXES = ("cross", "xforce", "runbias", "sat")
 #: Relative margin by which a model's cross-validated nrmse must be below holding the velocity
-#: (:func:`persistence`). 0.05: the smallest gain the issue-46 real data show a physical term to be worth (a
+#: (:func:`persistence`). 0.05: the smallest gain real pool data show a physical term to be worth (a
 #: per-run bias, 0.02-0.06 nrmse, on hold scores of 0.5-0.9) and about the fold-to-fold scatter of a CV nrmse
 #: over 4 folds of a few minutes each; a model within it of holding the velocity predicts nothing the last
 #: measurement does not.

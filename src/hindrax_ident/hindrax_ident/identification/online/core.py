@@ -53,7 +53,7 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
                         ordered_samples)
 from .steps import undo_line
 
-__all__ = ["IdentificationCore", "GoalRun", "Event", "Feedback", "goal_problem", "operator_prompt", "NEEDED_SENSORS",
+__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem", "operator_prompt", "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
            "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED"]
 
@@ -110,26 +110,12 @@ def operator_prompt(ex: Any) -> str:
 
 
 @dataclass(frozen=True)
-class Feedback:
-    """The action feedback: DOF, level index and count, level command (N or N m, FRD), progress 0-1, prompt, the
-    phase (positioning, running, returning) and the current step's message."""
-
-    dof: str
-    level_index: int
-    level_count: int
-    level_command: float
-    progress: float
-    prompt: str
-    phase: str = ""
-    step: str = ""
-
-
-@dataclass(frozen=True)
 class Event:
     """One thing the node does, in order; ``kind`` and its ``data`` are below.
 
     ``status`` (phase name: idle, positioning, running, returning, done, aborted; ExecutiveStatus or None;
-    message), ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (:class:`Feedback`), ``estimates`` (the
+    message), ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus, operator prompt: the action
+    feedback), ``estimates`` (the
     executive whose online estimates to publish), ``calibration`` (every step result since start, list of
     :func:`~..bag_input.calibration_topic.statuses` items), ``abort`` (the reason for ``supervisor/abort``),
     ``log`` (level info / warn / error, text), ``warn_throttled`` (text), ``end`` (the :class:`GoalRun` that ended:
@@ -448,8 +434,7 @@ class IdentificationCore:
             if prompt and prompt != run.last_feedback[-1]:
                 out.append(Event("log", ("info", f"operator: {prompt}")))
             run.last_feedback, run.last_feedback_s = key, t
-            out.append(Event("feedback", (Feedback(st.dof, st.level_index, st.level_count, st.level_command,
-                                                   st.progress, prompt, st.phase, st.message),)))
+            out.append(Event("feedback", (st, prompt)))
         if t - self._last_publish_t >= self.publish_period_s - 1e-9:
             self._last_publish_t = t
             out.append(Event("estimates", (ex,)))

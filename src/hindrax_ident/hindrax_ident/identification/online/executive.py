@@ -325,7 +325,6 @@ class Executive:
 
     # ------------------------------------------------------------------ the shared state, by name
     state = _Shared("conditioned sensors (:class:`~...vehicle.state.SensorState`)")
-    ctrl = _Shared("the holds (:class:`~...control.maneuvers.HoldController`)")
     box = _Shared("the pool box (:class:`~...control.maneuvers.PoolBox`)")
     core = _Shared("the allocation model (AllocationCore)")
     curve = _Shared("the thrust curve ([Hindrax-Drag] eq. 1)")

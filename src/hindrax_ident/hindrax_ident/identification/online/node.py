@@ -357,11 +357,11 @@ class IdentificationNode(VehicleNode):
             elif ev.kind == "wrench":
                 self._publish_wrench(ev.data[0], now)
             elif ev.kind == "feedback":
-                fb = ev.data[0]
+                st, prompt = ev.data
                 self.core.run.handle.publish_feedback(RunIdentification.Feedback(
-                    dof=fb.dof, level_index=fb.level_index, level_count=fb.level_count,
-                    level_command=fb.level_command, progress=fb.progress, prompt=fb.prompt, phase=fb.phase,
-                    step=fb.step))
+                    dof=st.dof, level_index=st.level_index, level_count=st.level_count,
+                    level_command=st.level_command, progress=st.progress, prompt=prompt, phase=st.phase,
+                    step=st.message))
             elif ev.kind == "estimates":
                 stamp = self.get_clock().now().to_msg()
                 for d, est in ev.data[0].online.items():

@@ -81,7 +81,7 @@ class KnownForceStep(Step):
 
     # texts of one step (subclasses)
     def label(self) -> str:
-        raise NotImplementedError  # pragma: no cover
+        return self.name
 
     def prompts(self) -> tuple[tuple[str, str], tuple[str, str]]:
         """((apply code, apply instruction), (remove code, remove instruction))."""
@@ -146,9 +146,6 @@ class Ballast(KnownForceStep):
     key = "vertical"
     method = "ballast"
 
-    def label(self) -> str:
-        return "ballast"
-
     def prompts(self):
         return (("attach_ballast", f"calibration: attach the ballast ({self.force_n:.3g} N in water)"),
                 ("remove_ballast", "calibration: remove the ballast"))
@@ -170,9 +167,6 @@ class Float(KnownForceStep):
     name = "float"
     key = "vertical_negative"
     method = "float"
-
-    def label(self) -> str:
-        return "float"
 
     def prompts(self):
         return (("attach_float", f"calibration: tie the float ({self.force_n:.3g} N net buoyancy) above the "
