@@ -124,6 +124,8 @@ class SerialTransport:
         self.clock = clock
         self._ser: Optional[serial.SerialBase] = None
         self._ser_lock = threading.Lock()  # guards _ser swaps and writes
+        self._read_lock = threading.Lock()  # one reader at a time: the thread, or :meth:`pump`'s caller
+        self._caller_reads = False
         self._stats_lock = threading.Lock()
         self._handled = threading.Condition(self._stats_lock)
         self._stop = threading.Event()
@@ -179,6 +181,29 @@ class SerialTransport:
         time passes (the GIL is released meanwhile). Returns True when they have."""
         with self._handled:
             return self._handled.wait_for(lambda: self._bytes_handled >= n_bytes, timeout=max(0.0, timeout_s))
+
+    def read_in_caller(self) -> None:
+        """From now on received bytes are read and handled only in :meth:`pump`'s calling thread (the reader thread
+        keeps opening and re-opening the port): a simulator in the same process serves the device and has the
+        driver handle its bytes in one thread, without a wake-up of the reader thread per message."""
+        self._caller_reads = True
+        with self._ser_lock:
+            ser = self._ser
+        if ser is not None and hasattr(ser, "cancel_read"):
+            ser.cancel_read()  # a read in progress returns (what it got is handled as usual)
+
+    def pump(self, n_bytes: int, timeout_s: float) -> bool:
+        """After :meth:`read_in_caller`: read and handle received bytes in this thread until ``n_bytes`` have been
+        handled (the count of :meth:`wait_handled`) or ``timeout_s`` of wall time has passed (a read in progress
+        may take up to ``read_timeout_s`` more). Returns True when they have."""
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        with self._read_lock:
+            while self._bytes_handled < n_bytes and time.monotonic() < deadline:
+                with self._ser_lock:
+                    ser = self._ser
+                if ser is None or not self._read_chunk(ser):
+                    break
+        return self._bytes_handled >= n_bytes
 
     def write(self, data: bytes) -> int:
         """Write all of ``data``; returns the number of bytes written.  Thread-safe.
@@ -298,27 +323,40 @@ class SerialTransport:
                     self._stop.wait(delay)
                     delay = min(delay * 2.0, self.reconnect_max_s)
                 continue
-            try:
-                data = ser.read(max(1, ser.in_waiting))
-            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
-                # TypeError/AttributeError: pyserial internals after a concurrent close().
+            if self._caller_reads:  # :meth:`pump` reads; this thread only (re)opens the port
+                self._stop.wait(self.read_timeout_s)
+                continue
+            with self._read_lock:
+                ok = self._read_chunk(ser)
+            if not ok:
                 if self._stop.is_set():
                     break
-                text = f"read failed: {exc}"
-                self._note_error(text)
-                with self._ser_lock:
-                    if self._ser is ser:
-                        self._close_port_locked()
-                if self.on_disconnect is not None:
-                    self._call(self.on_disconnect, text)
                 self._stop.wait(delay)
-                continue
-            if data:
-                with self._stats_lock:
-                    self._bytes_rx += len(data)
-                self._tap("rx", data)
-                if self.on_data is not None:
-                    self._call(self.on_data, data)
-                with self._handled:
-                    self._bytes_handled += len(data)
-                    self._handled.notify_all()
+
+    def _read_chunk(self, ser: Any) -> bool:
+        """Read what ``ser`` has (waiting up to ``read_timeout_s`` for a first byte) and hand it to the tap and
+        ``on_data``; False when the read failed (the port is then closed, ``on_disconnect`` told)."""
+        try:
+            data = ser.read(max(1, ser.in_waiting))
+        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+            # TypeError/AttributeError: pyserial internals after a concurrent close().
+            if self._stop.is_set():
+                return False
+            text = f"read failed: {exc}"
+            self._note_error(text)
+            with self._ser_lock:
+                if self._ser is ser:
+                    self._close_port_locked()
+            if self.on_disconnect is not None:
+                self._call(self.on_disconnect, text)
+            return False
+        if data:
+            with self._stats_lock:
+                self._bytes_rx += len(data)
+            self._tap("rx", data)
+            if self.on_data is not None:
+                self._call(self.on_data, data)
+            with self._handled:
+                self._bytes_handled += len(data)
+                self._handled.notify_all()
+        return True
