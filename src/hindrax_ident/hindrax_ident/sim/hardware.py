@@ -81,7 +81,7 @@ class SerialLockStep:
         self._stalled_since: float | None = None
         #: re-based counts (see the class docstring)
         self.resyncs = 0
-        transport.read_in_caller()
+        transport.pump(0, 0.0)  # from now on the driver's bytes are read in the simulator's thread
 
     def tick(self, _t_s: float = 0.0) -> None:
         """Send what the emulator has due now (its clock: the drivers' clock), if the driver's port is open, and
