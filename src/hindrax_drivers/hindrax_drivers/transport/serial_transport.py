@@ -174,22 +174,19 @@ class SerialTransport:
         return self._connected_event.wait(timeout_s)
 
     def pump(self, n_bytes: int, timeout_s: float) -> bool:
-        """Read and handle received bytes in the calling thread until ``n_bytes`` of them (counted since
-        construction, as ``status().bytes_handled``) have been through the raw tap and ``on_data``, or ``timeout_s``
-        of wall time has passed without a byte (a read in progress may add ``read_timeout_s``); True when they have. The first call
-        takes the reading over from the reader thread for good (it keeps only (re)opening the port)."""
+        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since construction, as
+        ``status().bytes_handled``) have been through the tap and ``on_data``, or ``timeout_s`` of wall time passed
+        without a byte (a read in progress may add ``read_timeout_s``); True when they have. The first call takes
+        the reading over from the reader thread for good (it keeps only (re)opening the port)."""
         if not self._caller_reads:
             self._caller_reads = True
-            with self._ser_lock:
-                ser = self._ser
+            ser = self._ser
             if ser is not None and hasattr(ser, "cancel_read"):
                 ser.cancel_read()  # a read in progress returns (what it got is handled as usual)
         deadline = time.monotonic() + max(0.0, timeout_s)
         with self._read_lock:
             while self._bytes_handled < n_bytes and time.monotonic() < deadline:
-                with self._ser_lock:
-                    ser = self._ser
-                before = self._bytes_handled
+                ser, before = self._ser, self._bytes_handled
                 if ser is None or not self._read_chunk(ser):
                     break
                 if self._bytes_handled > before:  # a slow driver is no lost byte
