@@ -19,9 +19,8 @@ Features
   node can publish/record the raw traffic (docs/architecture.md §7).
 - Callback exceptions are caught and counted; they never kill the reader thread.
 - ``close()`` stops and joins the thread.
-- ``pump(n, timeout_s)`` reads in the calling thread until ``n`` received bytes have been through the
-  callbacks: a simulator in the same process serves the device and has the driver handle its bytes within the
-  tick they were sent (lock-step, see :mod:`hindrax_ident.sim.hardware`).
+- ``pump(n, timeout_s)`` reads in the calling thread until ``n`` received bytes have been through the callbacks
+  (a simulator's lock-step: :mod:`hindrax_ident.sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
 error and has no reconnect, state, or tap.
@@ -320,8 +319,8 @@ class SerialTransport:
                 self._stop.wait(delay)
 
     def _read_chunk(self, ser: Any) -> bool:
-        """Read what ``ser`` has (waiting up to ``read_timeout_s`` for a first byte) and hand it to the tap and
-        ``on_data``; False when the read failed (the port is then closed, ``on_disconnect`` told)."""
+        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and ``on_data``; False when
+        the read failed (the port is then closed, ``on_disconnect`` told)."""
         try:
             data = ser.read(max(1, ser.in_waiting))
             data += ser.read(ser.in_waiting) if data else b""  # the rest of a message: one chunk, one callback
