@@ -30,13 +30,13 @@ publisher" needs no publisher in the graph at all (:meth:`HeartbeatIdentity.on_p
 other identity checks stay, and a dead or frozen peer is caught by its :class:`AliveAge` on the graph's clock.
 The QoS is the same in both modes (the writers and readers of a mixed graph keep matching).
 
-* :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` but only over time this
-  process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``).
-  A peer that dies or hangs in another process ages at wall-clock speed; this process's own stall (a busy
-  single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes. On simulated
-  time the age is also counted on the graph's clock and the smaller of the two counts: a peer is late only when its
-  beat is late on the simulation's clock (a simulation slower than real time, or held, does not age it), and the
-  beats, paced by steady timers, are not made late by a simulation faster than real time.
+* :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` from its beat but only over
+  time this process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most
+  ``max_step_s``). A peer that dies or hangs in another process ages at wall-clock speed; this process's own stall
+  (a busy single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes. On
+  simulated time the age is also counted on the graph's clock and the smaller of the two counts: a peer is late only
+  when its beat is late on the simulation's clock (a simulation slower than real time, or held, does not age it), and
+  the beats, paced by steady timers, are not made late by a simulation faster than real time.
 * :class:`ClockStepMonitor`: compares ROS time with the steady clock at each tick and reports a backward step of
   ROS time (``/clock`` restarted or a bag looped) and a stall (ROS time frozen while the steady clock runs), so a
   node can re-base its ROS-time checks and say so on ``/diagnostics``.
@@ -277,6 +277,8 @@ class HeartbeatWatch:
         self.identity = HeartbeatIdentity(HEARTBEAT_NAMES[kind], HEARTBEAT_NODES[kind])
         #: live publishers (the subscription's liveliness ``alive_count``; 0 until the first event)
         self.alive = 0
+        #: beats taken at a stale judgement rather than by the executor (:meth:`fresh`)
+        self.taken_late = 0
         self.publishers = PublisherNames(node, self.identity.topic)
         self.subscription = node.create_subscription(
             Heartbeat, self.identity.topic, self._on_beat, heartbeat_qos(), raw=True,
@@ -285,15 +287,31 @@ class HeartbeatWatch:
     def _on_liveliness(self, info: Any) -> None:
         self.alive = int(info.alive_count)
 
-    def _on_beat(self, data: bytes) -> None:
+    def _on_beat(self, data: bytes) -> Any:
         beat = read_heartbeat(data)
         if self.identity.on_beat(beat, bool(self.armed())):
             self.handler(beat)
+            return beat
+        return None
 
     def check(self) -> str:
         """Feed the publishers the graph shows and the live count to the identity check; returns its fault."""
         return self.identity.on_publishers(self.publishers.names(), self.alive,
                                            simulated_now_s(self.node) is not None)
+
+    def fresh(self, age: AliveAge, timeout_s: float) -> bool:
+        """Whether ``age`` (this peer's, just ticked) is within ``timeout_s``; when not, the beats already waiting on
+        the subscription are taken first (this process was starved and its timer ran before their callbacks), through
+        the same check and handler, the newest accepted aged from its send stamp (``steady_ns``: ``time.monotonic``
+        of the same host), so a peer that died is not made younger. :attr:`taken_late` counts the beats taken so."""
+        if not age.fresh(timeout_s):
+            newest = None
+            while (taken := self.subscription.handle.take_message(Heartbeat, True)) is not None:
+                self.taken_late += 1
+                newest = self._on_beat(taken[0]) or newest
+            if newest is not None:
+                age.heard(time.monotonic() - newest.steady_ns * 1e-9)
+        return age.fresh(timeout_s)
 
 
 class AliveAge:
@@ -320,11 +338,12 @@ class AliveAge:
         self.age_s = math.inf
 
     def heard(self, ago_s: float = 0.0) -> None:
-        """The peer spoke ``ago_s`` seconds ago (0: now)."""
+        """The peer spoke ``ago_s`` seconds ago (0: now). The next tick counts from now, not from the tick before."""
         ago = max(0.0, float(ago_s))
         graph = self._graph_now_s()
         self._heard_graph_s = None if graph is None else graph - ago
         self.steady_age_s = self.age_s = ago
+        self._last_tick = self._clock()
 
     def tick(self) -> float:
         """Advance by the (capped) time since the previous tick; returns the age, s."""
@@ -380,8 +399,7 @@ class ClockStepMonitor:
 
     ``ros_now_s``: the node's ROS time in seconds; ``tolerance_s``: a backward move smaller than this is jitter.
     :meth:`check` returns the step in seconds (negative) when ROS time went back, else 0.0; :attr:`steps_back`
-    counts them, :attr:`last_step_s` keeps the last. :meth:`stalled_for_s` is how long ROS time has not moved
-    while the steady clock ran.
+    counts them. :meth:`stalled_for_s` is how long ROS time has not moved while the steady clock ran.
     """
 
     def __init__(self, ros_now_s: Callable[[], float], tolerance_s: float = 0.05,
@@ -392,7 +410,6 @@ class ClockStepMonitor:
         self._last_ros = ros_now_s()
         self._moved_at = clock()
         self.steps_back = 0
-        self.last_step_s = 0.0
 
     def check(self) -> float:
         """Call at every steady tick. Returns the backward step (s, < 0) or 0.0."""
@@ -403,7 +420,6 @@ class ClockStepMonitor:
             self._moved_at = self._clock()
         if delta < -self.tolerance_s:
             self.steps_back += 1
-            self.last_step_s = delta
             return delta
         return 0.0
 

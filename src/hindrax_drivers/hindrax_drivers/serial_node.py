@@ -158,6 +158,7 @@ class SerialDeviceNode(VehicleNode):
         self._last_publish_ns = 0
         self._last_link_ns = 0
         self._stuck: dict[str, StuckDetector] = {}
+        self._decoder_counts: dict[str, int] = {}  # the decoder's counts already in the diagnostics
         self._stuck_now: set[str] = set()
         self.raw = RawDataPublisher(self, device_name)
         self.raw.begin_batch()  # raw/<device>: one message per parsed report (see _on_data), not per read chunk
@@ -182,6 +183,15 @@ class SerialDeviceNode(VehicleNode):
             self.get_logger().fatal(f"invalid configuration: {issue.line()}")
             raise ConfigError([issue], f"parameters of {self.get_name()}")
         return int(value)
+
+    def count_decoder_events(self, counts: dict[str, int]) -> None:
+        """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total: garbage bytes, bad
+        checksums, ...) grew by since the last call."""
+        for kind, total in counts.items():
+            delta = total - self._decoder_counts.get(kind, 0)
+            if delta:
+                self.diag.count(kind, delta)
+                self._decoder_counts[kind] = total
 
     def now_ns(self) -> int:
         """Current ROS time (sim time with ``use_sim_time``), ns."""

@@ -160,6 +160,25 @@ def test_alive_age_on_the_system_clock_is_the_steady_age():
     assert age.age_s == pytest.approx(0.25) and not age.fresh(0.2)
 
 
+def test_alive_age_counts_from_the_beat_not_from_the_tick_before_it():
+    """The busy-neighbours bench at nice -5 disarmed on an ESC beat gap of 182 ms, under the guard's 0.2 s: the age
+    counted each tick-to-tick gap in full, from the tick before the beat was heard, so at the guard's 20 Hz ticks a
+    live peer read up to 50 ms older than its beat. A 180 ms gap between live beats, one tick 10 ms late: 165 ms."""
+    c = Clocks()
+    age = AliveAge(0.2, clock=lambda: c.steady)  # the guard: ticks every 50 ms, max step = its timeout
+    c.steady += 0.045
+    age.heard()  # 45 ms after a tick
+    for dt in (0.005, 0.05, 0.05, 0.06):  # the ticks at 50, 100, 150 and 210 ms
+        c.steady += dt
+        age.tick()
+        assert age.fresh(0.2), age.age_s
+    assert age.age_s == pytest.approx(0.165)
+    for _ in range(2):  # no beat since: dead, stale once its beat is older than the timeout
+        c.steady += 0.05
+        age.tick()
+    assert age.age_s == pytest.approx(0.265) and not age.fresh(0.2)
+
+
 def test_the_clock_mode_is_the_receivers():
     """A node on the system clock judges by the lease and the steady age (None); one on use_sim_time by its ROS
     time, which follows /clock (or a simulator driving it)."""

@@ -24,16 +24,13 @@ def test_register_map_matches_devices_doc():
     expected = {
         "WHO_AM_I": (0, 0x00), "USER_CTRL": (0, 0x03), "LP_CONFIG": (0, 0x05), "PWR_MGMT_1": (0, 0x06),
         "PWR_MGMT_2": (0, 0x07), "INT_PIN_CFG": (0, 0x0F), "INT_ENABLE_1": (0, 0x11),
-        "I2C_MST_STATUS": (0, 0x17), "INT_STATUS": (0, 0x19), "INT_STATUS_3": (0, 0x1C),
+        "I2C_MST_STATUS": (0, 0x17), "INT_STATUS_1": (0, 0x1A),
         "ACCEL_XOUT_H": (0, 0x2D), "GYRO_XOUT_H": (0, 0x33), "TEMP_OUT_H": (0, 0x39),
-        "EXT_SLV_SENS_DATA_00": (0, 0x3B), "FIFO_RST": (0, 0x68), "FIFO_MODE": (0, 0x69),
-        "FIFO_COUNTH": (0, 0x70), "FIFO_R_W": (0, 0x72), "DATA_RDY_STATUS": (0, 0x74), "FIFO_CFG": (0, 0x76),
-        "XA_OFFS_H": (1, 0x14), "TIMEBASE_CORRECTION_PLL": (1, 0x28),
-        "GYRO_SMPLRT_DIV": (2, 0x00), "GYRO_CONFIG_1": (2, 0x01), "GYRO_CONFIG_2": (2, 0x02),
-        "ODR_ALIGN_EN": (2, 0x09), "ACCEL_SMPLRT_DIV_1": (2, 0x10), "ACCEL_SMPLRT_DIV_2": (2, 0x11),
-        "ACCEL_CONFIG": (2, 0x14), "ACCEL_CONFIG_2": (2, 0x15), "TEMP_CONFIG": (2, 0x53),
-        "I2C_MST_ODR_CONFIG": (3, 0x00), "I2C_MST_CTRL": (3, 0x01), "I2C_MST_DELAY_CTRL": (3, 0x02),
-        "I2C_SLV4_ADDR": (3, 0x13), "I2C_SLV4_CTRL": (3, 0x15), "I2C_SLV4_DI": (3, 0x17),
+        "EXT_SLV_SENS_DATA_00": (0, 0x3B),
+        "GYRO_SMPLRT_DIV": (2, 0x00), "GYRO_CONFIG_1": (2, 0x01),
+        "ACCEL_SMPLRT_DIV_1": (2, 0x10), "ACCEL_SMPLRT_DIV_2": (2, 0x11), "ACCEL_CONFIG": (2, 0x14),
+        "I2C_MST_CTRL": (3, 0x01), "I2C_SLV4_ADDR": (3, 0x13), "I2C_SLV4_REG": (3, 0x14),
+        "I2C_SLV4_CTRL": (3, 0x15), "I2C_SLV4_DO": (3, 0x16), "I2C_SLV4_DI": (3, 0x17),
     }
     for name, (bank, address) in expected.items():
         reg = getattr(icm, name)

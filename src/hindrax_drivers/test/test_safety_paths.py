@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -180,6 +181,38 @@ def test_f2_esc_process_gone_while_armed_the_guard_drives_oe_high(rig):
     r.ex.add_node(r.esc)
     r.wait(lambda: not r.line.is_high(), "released after the ESC disarmed", poll=r.commanding)
     assert not r.esc.armed and np.allclose(wire(r.emu), 1500.0, atol=TICK_US)
+
+
+def test_f2_a_starved_guard_takes_the_waiting_beats_before_it_judges_a_dead_esc_still_stops(rig):
+    """The busy-neighbours bench at nice -5 disarmed once: a guard starved past its 0.2 s timeout ran its tick before
+    the callbacks of the ESC beats that had arrived meanwhile, and took a live ESC for a dead one. Starved here by
+    leaving the executor (the ESC beating on); its tick must take those beats first. A dead ESC must still stop the
+    outputs: the beats waiting then are aged from their send stamps, older than the timeout."""
+    r = rig(guard=True, overrides={"esc.heartbeat_timeout_s": 1.0})  # the ESC does not disarm on the quiet guard
+    r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(), "guard released /OE at neutral")
+    r.arm_at_1700()
+
+    def spin_for(seconds):
+        start = time.monotonic()
+        r.wait(lambda: time.monotonic() - start > seconds, f"{seconds} s passed", poll=r.commanding)
+
+    def starve_guard(esc_dies=False):
+        r.guard.tick()  # its last tick before the stall (a beat heard since: its age is above 0)
+        r.ex.remove_node(r.guard)
+        spin_for(0.3)  # the ESC's beats wait on the guard's subscription
+        if esc_dies:
+            r.ex.remove_node(r.esc)
+            spin_for(0.3)
+        r.ex.add_node(r.guard)
+        r.guard.tick()  # its timer before the beats' callbacks
+
+    starve_guard()
+    assert not r.guard.core.asserted and not r.line.is_high() and r.guard.watches["esc"].taken_late > 0
+    assert r.esc.armed and wire(r.emu)[0] > 1690
+    taken = r.guard.watches["esc"].taken_late
+    starve_guard(esc_dies=True)  # the ESC dies while the guard is starved: its beats wait, the newest 0.3 s old
+    assert r.guard.watches["esc"].taken_late > taken
+    assert r.guard.core.asserted and r.line.is_high() and "ESC output state silent" in r.guard.core.reason
 
 
 def test_f2_supervisor_breach_asserts_oe_too(rig):

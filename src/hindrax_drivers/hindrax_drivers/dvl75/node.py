@@ -110,7 +110,6 @@ class Dvl75Node(SerialDeviceNode):
                                         max_angular_rate_rad_s=float(s.max_angular_rate_rad_s))
         self.decoder = DvlStreamDecoder()
         self.clock_sync = DeviceClockSync()
-        self._reported_counts = dict(self.decoder.counts)
         self._last_tu_s: Optional[float] = None
         self._last_dvpdl_ns: Optional[int] = None
         self._last_dvext_ns: Optional[int] = None
@@ -139,7 +138,7 @@ class Dvl75Node(SerialDeviceNode):
     def on_link_up(self) -> None:
         """A new connection: a partial line is garbage, and the DVL may have rebooted meanwhile."""
         self.decoder.reset()
-        self._sync_counts()
+        self.count_decoder_events(self.decoder.counts)
         self.clock_sync.reset()
         self._last_tu_s = None
 
@@ -147,7 +146,7 @@ class Dvl75Node(SerialDeviceNode):
     def handle_bytes(self, data: bytes, receive_ns: int) -> None:
         """Decode a chunk and publish what it completes."""
         records = self.decoder.feed(data)
-        self._sync_counts()
+        self.count_decoder_events(self.decoder.counts)
         for record in records:
             if isinstance(record, DvlPositionDelta):
                 self._on_dvpdl(record, receive_ns)
@@ -160,13 +159,6 @@ class Dvl75Node(SerialDeviceNode):
                 getattr(self.get_logger(), level)(f"DVL text: {record.text}")
             elif isinstance(record, DvlGprmc):
                 pass  # the DVL's GPS emulation; not used (switched off at start-up)
-
-    def _sync_counts(self) -> None:
-        for kind, total in self.decoder.counts.items():
-            delta = total - self._reported_counts.get(kind, 0)
-            if delta:
-                self.diag.count(kind, delta)
-                self._reported_counts[kind] = total
 
     def _on_dvpdl(self, pdl: DvlPositionDelta, receive_ns: int) -> None:
         if self._last_tu_s is not None and pdl.time_since_boot_s < self._last_tu_s:

@@ -48,7 +48,7 @@ import math
 import re
 from dataclasses import dataclass
 from functools import reduce
-from typing import Iterable, Optional, Sequence, Tuple, Union
+from typing import Any, Iterable, Optional, Sequence, Tuple, Union
 
 __all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown",
            "DvlRecord", "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD",
@@ -425,6 +425,23 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
 # ---------------------------------------------------------------------------------------------
 
 
+def _fmt_gain(gain_db: float) -> str:
+    return "%d" % round(gain_db)
+
+
+#: $DVEXT fields 4-14 (after lock, GPS status and IMU calibration): (record attribute, field name, printf format);
+#: the angles are degrees on the wire (radians in the record), data_skips an integer
+_DVEXT_SCALARS = (("roll_rad", "roll", "%.1f"), ("pitch_rad", "pitch", "%.1f"), ("heading_rad", "heading", "%.1f"),
+                  ("data_skips", "data_skips", "%d"), ("velocity_up_m_s", "velocity_up", "%.3f"),
+                  ("altitude_m", "altitude", "%.2f"), ("velocity_north_m_s", "velocity_north", "%.3f"),
+                  ("velocity_east_m_s", "velocity_east", "%.3f"), ("latitude_deg", "latitude", "%.9f"),
+                  ("longitude_deg", "longitude", "%.9f"), ("ekf_elapsed_time_s", "elapsed_time", "%.3f"))
+#: $DVEXT fields 15-34, four each (quaternion w x y z, beams A-D): (attribute, field name, parse, format)
+_DVEXT_FOURS = (("orientation_wxyz", "q", _float, "%.6f".__mod__), ("beam_gain_db", "gain", _float, _fmt_gain),
+                ("beam_locked", "lock", _flag, _tf), ("beam_velocity_m_s", "velocity", _float, "%.4f".__mod__),
+                ("beam_range_m", "range", _float, "%.3f".__mod__))
+
+
 def parse_dvext(fields: Sequence[str]) -> DvlExtended:
     """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty
     field 35 that real sentences carry (``...,rd,*hh``); a sentence without the trailing comma is
@@ -445,36 +462,15 @@ def parse_dvext(fields: Sequence[str]) -> DvlExtended:
         raise DvlParseError(f"$DVEXT: GPS status must be one letter, got {gps[:20]!r}")
     cal_raw = f[2]
     cal = tuple(int(c) for c in cal_raw) if _CAL_RE.fullmatch(cal_raw) else None
-
-    def four(start: int, conv, name: str) -> tuple:
-        return tuple(conv(f[start + k], f"{name}{'ABCD'[k]}") for k in range(4))
-
-    return DvlExtended(
-        locked=_flag(f[0], "lock"),
-        gps_status=gps,
-        imu_calibration=cal,  # type: ignore[arg-type]
-        imu_calibration_raw=cal_raw,
-        roll_rad=math.radians(_float(f[3], "roll")),
-        pitch_rad=math.radians(_float(f[4], "pitch")),
-        heading_rad=math.radians(_float(f[5], "heading")),
-        data_skips=_int(f[6], "data_skips"),
-        velocity_up_m_s=_float(f[7], "velocity_up"),
-        altitude_m=_float(f[8], "altitude"),
-        velocity_north_m_s=_float(f[9], "velocity_north"),
-        velocity_east_m_s=_float(f[10], "velocity_east"),
-        latitude_deg=_float(f[11], "latitude"),
-        longitude_deg=_float(f[12], "longitude"),
-        ekf_elapsed_time_s=_float(f[13], "elapsed_time"),
-        orientation_wxyz=four(14, _float, "q"),
-        beam_gain_db=four(18, _float, "gain"),
-        beam_locked=four(22, _flag, "lock"),
-        beam_velocity_m_s=four(26, _float, "velocity"),
-        beam_range_m=four(30, _float, "range"),
-    )
-
-
-def _fmt_gain(gain_db: float) -> str:
-    return "%d" % round(gain_db)
+    locked = _flag(f[0], "lock")
+    scalars: dict[str, Any] = {}
+    for k, (attr, name, fmt) in enumerate(_DVEXT_SCALARS, start=3):
+        value = _int(f[k], name) if fmt == "%d" else _float(f[k], name)
+        scalars[attr] = math.radians(value) if attr.endswith("_rad") else value
+    fours: dict[str, Any] = {attr: tuple(parse(f[14 + 4 * j + k], f"{name}{'ABCD'[k]}") for k in range(4))
+                             for j, (attr, name, parse, _) in enumerate(_DVEXT_FOURS)}
+    return DvlExtended(locked=locked, gps_status=gps, imu_calibration=cal,  # type: ignore[arg-type]
+                       imu_calibration_raw=cal_raw, **scalars, **fours)
 
 
 def format_dvext(record: DvlExtended) -> bytes:
@@ -489,35 +485,15 @@ def format_dvext(record: DvlExtended) -> bytes:
         ValueError: non-finite values, or a GPS status / calibration field that is not printable.
     """
     r = record
-    floats = (r.roll_rad, r.pitch_rad, r.heading_rad, r.velocity_up_m_s, r.altitude_m,
-              r.velocity_north_m_s, r.velocity_east_m_s, r.latitude_deg, r.longitude_deg,
-              r.ekf_elapsed_time_s, *r.orientation_wxyz, *r.beam_gain_db, *r.beam_velocity_m_s,
-              *r.beam_range_m)
+    floats = [getattr(r, attr) for attr, _, fmt in _DVEXT_SCALARS if fmt != "%d"] + [
+        v for attr, _, parse, _ in _DVEXT_FOURS if parse is _float for v in getattr(r, attr)]
     if not all(math.isfinite(v) for v in floats):
         raise ValueError("non-finite value in $DVEXT record")
-    parts = [
-        "DVEXT",
-        _tf(r.locked),
-        r.gps_status,
-        r.imu_calibration_raw,
-        "%.1f" % math.degrees(r.roll_rad),
-        "%.1f" % math.degrees(r.pitch_rad),
-        "%.1f" % math.degrees(r.heading_rad),
-        "%d" % r.data_skips,
-        "%.3f" % r.velocity_up_m_s,
-        "%.2f" % r.altitude_m,
-        "%.3f" % r.velocity_north_m_s,
-        "%.3f" % r.velocity_east_m_s,
-        "%.9f" % r.latitude_deg,
-        "%.9f" % r.longitude_deg,
-        "%.3f" % r.ekf_elapsed_time_s,
-        *("%.6f" % q for q in r.orientation_wxyz),
-        *(_fmt_gain(g) for g in r.beam_gain_db),
-        *(_tf(b) for b in r.beam_locked),
-        *("%.4f" % v for v in r.beam_velocity_m_s),
-        *("%.3f" % d for d in r.beam_range_m),
-        "",  # trailing empty field (§0 item 3)
-    ]
+    parts = ["DVEXT", _tf(r.locked), r.gps_status, r.imu_calibration_raw,
+             *(fmt % (math.degrees(getattr(r, attr)) if attr.endswith("_rad") else getattr(r, attr))
+               for attr, _, fmt in _DVEXT_SCALARS),
+             *(out(v) for attr, _, _, out in _DVEXT_FOURS for v in getattr(r, attr)),
+             ""]  # trailing empty field (§0 item 3)
     return format_sentence(",".join(parts))
 
 
@@ -903,15 +879,11 @@ def cmd_configuration() -> bytes:
 
 def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 0.0, 0.0),
                      speed_of_sound_m_s: Optional[float] = None,
-                     enable_dvext: bool = True,
-                     enable_gprmc: bool = False,
-                     retweet_imu: bool = False,
-                     retweet_gps: bool = False,
                      request_configuration: bool = True) -> list:
     """The command lines a driver sends at start-up, modelled on the BlueOS sequence [D17]
-    (docs/devices.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT``,
-    ``SEND-GPRMC``, ``RETWEET-IMU``, ``RETWEET-GPS``, ``SET-SENSOR-ORIENTATION``, optionally
-    ``SET-SPEED-OF-SOUND``, ``RESUME`` and optionally ``CONFIGURATION``.
+    (docs/devices.md §0 item 1, §1.4): ``SEND-DVPDL ON`` (factory OFF!), ``SEND-DVEXT ON``,
+    ``SEND-GPRMC OFF``, ``RETWEET-IMU OFF``, ``RETWEET-GPS OFF``, ``SET-SENSOR-ORIENTATION``,
+    optionally ``SET-SPEED-OF-SOUND``, ``RESUME`` and optionally ``CONFIGURATION``.
 
     Args:
         sensor_orientation_rad: (roll, pitch, heading) sensor -> vehicle rotation, rad.
@@ -923,10 +895,10 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
     """
     cmds = [
         cmd_send("DVPDL", True),
-        cmd_send("DVEXT", enable_dvext),
-        cmd_send("GPRMC", enable_gprmc),
-        cmd_retweet("IMU", retweet_imu),
-        cmd_retweet("GPS", retweet_gps),
+        cmd_send("DVEXT", True),
+        cmd_send("GPRMC", False),
+        cmd_retweet("IMU", False),
+        cmd_retweet("GPS", False),
         cmd_set_sensor_orientation(*sensor_orientation_rad),
     ]
     if speed_of_sound_m_s is not None:

@@ -121,7 +121,6 @@ class OutputGuardNode(VehicleNode):
         self._bus, self._bus_number, self._address = bus, int(esc.i2c_bus), int(esc.i2c_address)
         self.device: I2CDevice | None = None
         self.assertions = 0
-        self.last_assert_monotonic: float | None = None
         self.silence_failures = 0
         self._last_rewrite = -1e9
         self._last_drive_attempt = -1e9
@@ -336,8 +335,9 @@ class OutputGuardNode(VehicleNode):
     def tick(self) -> None:
         self.tick_gaps.tick()
         self._last_decision = time.monotonic()
-        self.esc_age.tick()
-        self.supervisor_age.tick()
+        for kind, age in (("esc", self.esc_age), ("supervisor", self.supervisor_age)):
+            age.tick()
+            self.watches[kind].fresh(age, self.timeout_s)  # a stale one's waiting beats taken first (starved)
         self.check_identity()
         self.core.on_stall(self.watchdog_ran_out())
         beat_seq = self.heartbeat.seq + 1  # the beat below carries this decision
@@ -346,7 +346,6 @@ class OutputGuardNode(VehicleNode):
         # up to 135 ms measured) does not hold it; the write follows in the same tick
         if changed and asserted:
             self.assertions += 1
-            self.last_assert_monotonic = time.monotonic()
             self.diag.count("asserted")
             self.get_logger().warn(f"outputs silenced: {self.core.reason}")
         elif changed:
@@ -374,6 +373,7 @@ class OutputGuardNode(VehicleNode):
                 ("esc_age_s", f"{self.esc_age.age_s:.2f}"), ("supervisor_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("heartbeat_identity", self.core.identity_fault or "ok"),
                 ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
+                ("heartbeats_taken_late", sum(w.taken_late for w in self.watches.values())),
                 *self.tick_gaps.report()]
 
     def close(self) -> None:

@@ -1,11 +1,11 @@
 """TDK InvenSense ICM-20948 (with AK09916 magnetometer): pure protocol layer (no I/O, no clocks).
 
-Register map with banks, identity values, the reset/wake and configuration sequences as data
-(lists of register writes), full-scale / DLPF / sample-rate register values from SI settings,
-conversion of raw burst reads to SI (accel m/s^2, gyro rad/s, temperature degC, magnetic field T
-rotated into the accel/gyro frame), the AK09916 status flags, and the device-side quantisation
-used by the emulator. Everything is from docs/devices.md §4 (datasheet DS-000189 [I1], SparkFun [I2],
-Pimoroni [I3], PX4 [I4]).
+The registers the driver uses (the full map: docs/devices.md §4.1), identity values, the reset/wake
+and configuration sequences as data (lists of register writes), full-scale / DLPF / sample-rate
+register values from SI settings, conversion of raw burst reads to SI (accel m/s^2, gyro rad/s,
+temperature degC, magnetic field T rotated into the accel/gyro frame), the AK09916 status flags, and
+the device-side quantisation used by the emulator. Everything is from docs/devices.md §4 (datasheet
+DS-000189 [I1], SparkFun [I2], Pimoroni [I3], PX4 [I4]).
 
 Why our own code: the available Python packages (Pimoroni ``icm20948``) do I/O inside the
 conversion code, hard-code one configuration and write a questionable I2C_MST_CTRL value
@@ -64,43 +64,24 @@ PWR_MGMT_2 = Register(0, 0x07, "PWR_MGMT_2")
 INT_PIN_CFG = Register(0, 0x0F, "INT_PIN_CFG")
 INT_ENABLE_1 = Register(0, 0x11, "INT_ENABLE_1")
 I2C_MST_STATUS = Register(0, 0x17, "I2C_MST_STATUS")
-INT_STATUS = Register(0, 0x19, "INT_STATUS")
 INT_STATUS_1 = Register(0, 0x1A, "INT_STATUS_1")
-INT_STATUS_2 = Register(0, 0x1B, "INT_STATUS_2")
-INT_STATUS_3 = Register(0, 0x1C, "INT_STATUS_3")
 ACCEL_XOUT_H = Register(0, 0x2D, "ACCEL_XOUT_H")
 GYRO_XOUT_H = Register(0, 0x33, "GYRO_XOUT_H")
 TEMP_OUT_H = Register(0, 0x39, "TEMP_OUT_H")
 EXT_SLV_SENS_DATA_00 = Register(0, 0x3B, "EXT_SLV_SENS_DATA_00")
-FIFO_RST = Register(0, 0x68, "FIFO_RST")
-FIFO_MODE = Register(0, 0x69, "FIFO_MODE")
-FIFO_COUNTH = Register(0, 0x70, "FIFO_COUNTH")
-FIFO_R_W = Register(0, 0x72, "FIFO_R_W")
-DATA_RDY_STATUS = Register(0, 0x74, "DATA_RDY_STATUS")
-FIFO_CFG = Register(0, 0x76, "FIFO_CFG")
 #: REG_BANK_SEL is at 0x7F in every bank, bank in bits 5:4 (docs/devices.md §4.1).
 REG_BANK_SEL_ADDRESS = 0x7F
 EXT_SLV_SENS_DATA_LENGTH = 24
 
-# ------------------------------------------------------------------------------ bank 1
-XA_OFFS_H = Register(1, 0x14, "XA_OFFS_H")
-TIMEBASE_CORRECTION_PLL = Register(1, 0x28, "TIMEBASE_CORRECTION_PLL")
-
 # ------------------------------------------------------------------------------ bank 2
 GYRO_SMPLRT_DIV = Register(2, 0x00, "GYRO_SMPLRT_DIV")
 GYRO_CONFIG_1 = Register(2, 0x01, "GYRO_CONFIG_1")
-GYRO_CONFIG_2 = Register(2, 0x02, "GYRO_CONFIG_2")
-ODR_ALIGN_EN = Register(2, 0x09, "ODR_ALIGN_EN")
 ACCEL_SMPLRT_DIV_1 = Register(2, 0x10, "ACCEL_SMPLRT_DIV_1")
 ACCEL_SMPLRT_DIV_2 = Register(2, 0x11, "ACCEL_SMPLRT_DIV_2")
 ACCEL_CONFIG = Register(2, 0x14, "ACCEL_CONFIG")
-ACCEL_CONFIG_2 = Register(2, 0x15, "ACCEL_CONFIG_2")
-TEMP_CONFIG = Register(2, 0x53, "TEMP_CONFIG")
 
 # ------------------------------------------------------------------------------ bank 3
-I2C_MST_ODR_CONFIG = Register(3, 0x00, "I2C_MST_ODR_CONFIG")
 I2C_MST_CTRL = Register(3, 0x01, "I2C_MST_CTRL")
-I2C_MST_DELAY_CTRL = Register(3, 0x02, "I2C_MST_DELAY_CTRL")
 I2C_SLV4_ADDR = Register(3, 0x13, "I2C_SLV4_ADDR")
 I2C_SLV4_REG = Register(3, 0x14, "I2C_SLV4_REG")
 I2C_SLV4_CTRL = Register(3, 0x15, "I2C_SLV4_CTRL")

@@ -139,7 +139,7 @@ class Ms5837Emulator:
         ``blank_prom``: every PROM word reads 0 (whose CRC-4 is 0: it passes the CRC check).
         ``raw_override``: (D1, D2) counts every conversion returns instead of the truth's, or None.
 
-    Counters: ``conversions``, ``adc_reads``, ``zero_reads`` (ADC reads that returned 0).
+    Counter: ``zero_reads`` (ADC reads that returned 0).
     """
 
     address = p.ADDRESS
@@ -170,8 +170,6 @@ class Ms5837Emulator:
         self.raw_override: tuple[int, int] | None = None
         self.needs_reset = False
         self.resets = 0
-        self.conversions = 0
-        self.adc_reads = 0
         self.zero_reads = 0
         self._last_raw = {"convert_d1": 0, "convert_d2": 0}
         self._raw_hint: tuple[int, int] | None = None  # the last inversion, where the next one starts
@@ -233,7 +231,6 @@ class Ms5837Emulator:
             elif cmd.kind == "prom_read":
                 self._output = p.encode_prom_word(self.prom_words[cmd.index])
             elif cmd.kind == "adc_read":
-                self.adc_reads += 1
                 if self._conversion is not None:  # read during conversion: 0, and corrupt it
                     self._conversion["corrupt"] = True
                     value = 0
@@ -244,7 +241,6 @@ class Ms5837Emulator:
                     self.zero_reads += 1
                 self._output = p.encode_adc(value)
             else:  # convert_d1 / convert_d2
-                self.conversions += 1
                 corrupt = self._conversion is not None  # new conversion during one: bad result
                 if self.needs_reset:
                     value = 0

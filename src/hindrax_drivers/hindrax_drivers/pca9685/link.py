@@ -37,7 +37,6 @@ class ChipLink:
         self.written = np.full(len(core.output.channels), np.nan)
         self.bus_error = ""  # why the bus could not be opened ('' when it is open)
         self.unknown_entries = self.chip_reinits = self.bus_stalls = 0
-        self.last_unknown_monotonic: float | None = None
         self.last_chip_reinit_monotonic: float | None = None
         self.last_readback = -math.inf
         self.closing = False  # shutdown: results are not taken any more (the ROS context may be gone)
@@ -126,6 +125,5 @@ class ChipLink:
         """The core has lost the chip (UNKNOWN, disarmed, retry with backoff): log a new outage, report ERROR."""
         if new:
             self.unknown_entries += 1
-            self.last_unknown_monotonic = time.monotonic()
             self._log(f"output state unknown: {self.core.reason}")
         self.diag.set_state("i2c error", DiagnosticStatus.ERROR, f"{self.core.reason} (output state unknown)")

@@ -63,9 +63,11 @@ class EscPeers:
                         "guard": HeartbeatWatch(node, "guard", self.on_guard_heartbeat, armed)}
 
     def tick(self) -> None:
-        """Advance both ages to now (the safety tick and an arm request; the beats arrive by callbacks)."""
-        self.supervisor_age.tick()
-        self.guard_age.tick()
+        """Advance both ages to now (the safety tick and an arm request; the beats arrive by callbacks, a stale one's
+        waiting beats are taken first: :meth:`~hindrax_drivers.liveness.HeartbeatWatch.fresh`)."""
+        for kind, age in (("supervisor", self.supervisor_age), ("guard", self.guard_age)):
+            age.tick()
+            self.watches[kind].fresh(age, self.timeout_s)
 
     def check_graph(self) -> tuple[str, str]:
         """The heartbeats' identity checks against the graph, then the command topic's: (fault, unnamed), each ''
@@ -130,4 +132,5 @@ class EscPeers:
         """Key-values for /diagnostics."""
         return [("supervisor_heartbeat_age_s", f"{self.supervisor_age.age_s:.2f}"),
                 ("guard_heartbeat_age_s", f"{self.guard_age.age_s:.2f}"),
-                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values()))]
+                ("heartbeats_rejected", sum(w.identity.rejected for w in self.watches.values())),
+                ("heartbeats_taken_late", sum(w.taken_late for w in self.watches.values()))]

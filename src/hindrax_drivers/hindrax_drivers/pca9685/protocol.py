@@ -249,19 +249,16 @@ def set_frequency_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL)
     ]
 
 
-def startup_sequence(prescale: int, mode2: int = MODE2_OUTDRV,
-                     mode1: int = MODE1_AI | MODE1_ALLCALL) -> list[RegisterWrite]:
-    """MODE2 (default totem-pole outputs, the reset value 0x04) then :func:`set_frequency_sequence`.
+def startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL) -> list[RegisterWrite]:
+    """MODE2 (totem-pole outputs, the reset value 0x04) then :func:`set_frequency_sequence`.
 
     Channel registers are not touched: at power-up every channel is full OFF (no pulses, which the
     ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel.
     """
-    if not 0 <= mode2 <= 0xFF:
-        raise Pca9685Error(f"mode2 must be a byte, got {mode2}")
-    return [RegisterWrite(MODE2, mode2, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
+    return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
 
 
-def safe_startup_sequence(prescale: int, mode2: int = MODE2_OUTDRV, mode1: int = MODE1_AI | MODE1_ALLCALL
+def safe_startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL
                           ) -> tuple[list[RegisterWrite], list[RegisterWrite]]:
     """Start-up in two halves, with the channel registers written in between: ``(before, after)``.
 
@@ -274,10 +271,8 @@ def safe_startup_sequence(prescale: int, mode2: int = MODE2_OUTDRV, mode1: int =
     still hold (datasheet §7.3.1.1), e.g. the 1700 us of a previous process that died while armed, until the
     driver writes neutral. Here the registers hold neutral (or full OFF) before RESTART.
     """
-    if not 0 <= mode2 <= 0xFF:
-        raise Pca9685Error(f"mode2 must be a byte, got {mode2}")
     freq = set_frequency_sequence(prescale, mode1)
-    before = [RegisterWrite(MODE2, mode2, 0.0, "MODE2"),
+    before = [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"),
               RegisterWrite(ALL_LED_OFF_H, FULL_BIT, 0.0, "every output full OFF before anything can restart"),
               *freq[:2]]
     return before, freq[2:]

@@ -121,8 +121,7 @@ class Ping1dEmulator:
         seed: seed of the fault generator.
     Attributes:
         settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`),
-        streaming (streamed id -> destination device id), received (counts of accepted host messages by id),
-        nacks_sent.
+        streaming (streamed id -> destination device id), received (counts of accepted host messages by id).
     """
 
     def __init__(self, truth_source: TruthSource, *, settings: Optional[Ping1dSettings] = None,
@@ -153,7 +152,6 @@ class Ping1dEmulator:
         self.measurement = Ping1dMeasurement()
         self.streaming: Dict[int, int] = {}
         self.received: Dict[int, int] = {}
-        self.nacks_sent = 0
         self._force_zero_confidence = False
         self._lock = threading.RLock()
         self._pending: List[bytes] = []
@@ -247,7 +245,6 @@ class Ping1dEmulator:
         self._pending.append(encode_message(payload, self.settings.device_id, dst))
 
     def _nack(self, nacked_id: int, reason: str, dst: int) -> None:
-        self.nacks_sent += 1
         self._send(Nack(nacked_id & 0xFFFF, reason), dst)
 
     def _addressed_to_me(self, m: Ping1dMessage) -> bool:

@@ -102,7 +102,6 @@ class Ping1dNode(SerialDeviceNode):
         self.max_range_m = float(s.max_range_m)
         self.silence_timeout_s = max(1.0, 5.0 * self.ping_interval_s)
         self.decoder = Ping1dStreamDecoder()
-        self._reported_counts = dict(self.decoder.counts)
         self._frames = startup_frames(self.speed_of_sound_m_s, self.ping_interval_s, self.mode_auto)
         self._last_startup_ns = 0
         self._last_distance_ns: Optional[int] = None
@@ -125,7 +124,7 @@ class Ping1dNode(SerialDeviceNode):
 
     def on_link_up(self) -> None:
         self.decoder.reset()
-        self._sync_counts()
+        self.count_decoder_events(self.decoder.counts)
         self._last_ping_number = None
         self._checks.clear()
         self.settings_verified = None
@@ -134,7 +133,7 @@ class Ping1dNode(SerialDeviceNode):
     def handle_bytes(self, data: bytes, receive_ns: int) -> None:
         """Decode a chunk and publish what it completes."""
         decoded = self.decoder.feed(data)
-        self._sync_counts()
+        self.count_decoder_events(self.decoder.counts)
         for item in decoded:
             p = item.payload
             if isinstance(p, (Profile, Distance, DistanceSimple)):
@@ -158,13 +157,6 @@ class Ping1dNode(SerialDeviceNode):
                 self.get_logger().warn(f"Ping1D {text}", throttle_duration_sec=5.0)
             elif isinstance(p, AsciiText):
                 self.get_logger().debug(f"Ping1D text: {p.text}")
-
-    def _sync_counts(self) -> None:
-        for kind, total in self.decoder.counts.items():
-            delta = total - self._reported_counts.get(kind, 0)
-            if delta:
-                self.diag.count(kind, delta)
-                self._reported_counts[kind] = total
 
     def _check(self, name: str, reported: Any, configured: Any, tolerance: float) -> None:
         ok = (reported == configured) if tolerance == 0 else abs(float(reported) - float(configured)) <= tolerance

@@ -71,7 +71,6 @@ class Ping1dStreamDecoder:
     Attributes:
         counts: error kind -> total (all keys of :data:`ERROR_KINDS` present).
         messages: payload type name -> number decoded.
-        bytes_seen: stream bytes fed so far.
         errors: list of errors (only with ``keep_errors``); last_error: the most recent one or None.
     """
 
@@ -84,7 +83,6 @@ class Ping1dStreamDecoder:
         self._keep = bool(keep_errors)
         self.counts: Dict[str, int] = {k: 0 for k in ERROR_KINDS}
         self.messages: Dict[str, int] = collections.Counter()
-        self.bytes_seen = 0
         self.errors: List[Ping1dStreamError] = []
         self.last_error: Optional[Ping1dStreamError] = None
 
@@ -163,7 +161,6 @@ class Ping1dStreamDecoder:
     def feed(self, data: Union[bytes, bytearray]) -> List[Ping1dDecoded]:
         """Decode a chunk; return the valid frames it completes, in stream order."""
         data = bytes(data)
-        self.bytes_seen += len(data)
         self._window += data
         out: List[Ping1dDecoded] = []
         for message in self._framer.feed(data):

@@ -26,11 +26,10 @@ from typing import Any, Callable, Iterable, Iterator
 
 @dataclass
 class PlayStats:
-    """What a run of :func:`play` did: messages published per pass, passes, /clock messages, stopped early."""
+    """What a run of :func:`play` did: messages published per pass, passes, stopped early."""
 
     published: int = 0
     passes: int = 0
-    clock_messages: int = 0
     stopped: bool = False
 
 
@@ -82,7 +81,6 @@ def play(messages: Callable[[], Iterable[Any]], publish: Callable[[Any], None], 
                     t = bag_time_ns(next_tick, origin_ns, wall0, rate)
                     if last_clock is None or t > last_clock:
                         publish_clock(t)
-                        stats.clock_messages += 1
                         last_clock = t
                     # next grid point after now (ticks missed while busy are skipped, not bunched)
                     next_tick += clock_period_s * max(1, int((now - next_tick) // clock_period_s) + 1)
@@ -93,7 +91,6 @@ def play(messages: Callable[[], Iterable[Any]], publish: Callable[[Any], None], 
                 wait(max(0.0, target - now))
             if publish_clock is not None and (last_clock is None or m.log_time_ns > last_clock):
                 publish_clock(m.log_time_ns)
-                stats.clock_messages += 1
                 last_clock = m.log_time_ns
             publish(m)
             stats.published += 1

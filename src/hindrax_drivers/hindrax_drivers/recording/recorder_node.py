@@ -8,33 +8,36 @@ Behaviour
   configuration key ``recording.topics`` is used, and without it every topic. The graph is polled every
   ``discovery_period_s`` so topics that appear after the start are recorded too. A topic is subscribed
   to once it has a publisher (its QoS is then known).
-- QoS: each subscription is best effort unless the topic is transient local, where it matches the topic's
-  publishers as rosbag2 does (:func:`~hindrax_drivers.recording.qos.recorder_policies`: the writers then run no
-  reliability protocol for the recorder), keep-last depth ``queue_depth``; the publishers' profiles are stored in
-  the bag (``offered_qos_profiles``). A sample sent before the recorder's reader has matched its writer is not
-  recorded.
-- Data: one subscription callback per message on the node's executor, whatever the clock (the vehicle, the
-  virtual pool and the tests take the same path). The subscriptions are raw: the callback gets the CDR bytes and
-  they are written unchanged, never converted into a Python message and back (an ``Imu`` taken as an object costs
-  77 us, as bytes 11 us: :mod:`hindrax_drivers.lean_cdr`; at the stack's 430 msg/s that is about 2 % of a core).
-  Log time = the node's clock in the callback (sim time with ``use_sim_time``, so a stepped simulation's bag depends
-  on its seed only); publish time = the log time (not the DDS source timestamp, which is wall-clock time; the MCAP
-  specification asks for the log time where the publish time is not available). No reader of this project uses the
-  publish time (a message's ``header.stamp`` is the time of its data). Writing happens in one
-  writer thread (the mcap writer is not thread-safe), which drains what the callbacks queued every
-  ``drain_period_s``.
+- QoS: each subscription is best effort unless the topic is transient local, where it matches the
+  topic's publishers as rosbag2 does (:func:`~hindrax_drivers.recording.qos.recorder_policies`: the
+  writers then run no reliability protocol for the recorder), keep-last depth ``queue_depth``; the
+  publishers' profiles are stored in the bag (``offered_qos_profiles``). A sample sent before the
+  recorder's reader has matched its writer is not recorded.
+- Data: one subscription callback per message on the node's executor, whatever the clock (the
+  vehicle, the virtual pool and the tests take the same path). The subscriptions are raw: the
+  callback gets the CDR bytes and they are written unchanged, never converted into a Python message
+  and back (an ``Imu`` taken as an object costs 77 us, as bytes 11 us:
+  :mod:`hindrax_drivers.lean_cdr`; at the stack's 430 msg/s that is about 2 % of a core). Log time =
+  the node's clock in the callback (sim time with ``use_sim_time``, so a stepped simulation's bag
+  depends on its seed only); publish time = the log time (not the DDS source timestamp, which is
+  wall-clock time; the MCAP specification asks for the log time where the publish time is not
+  available). No reader of this project uses the publish time (a message's ``header.stamp`` is the
+  time of its data). Writing happens in one writer thread (the mcap writer is not thread-safe),
+  which drains what the callbacks queued every ``drain_period_s``.
 - Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
   (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
   the bag (summary, metadata.yaml). A SIGKILL or power loss loses at most the open chunk
   (:mod:`~hindrax_drivers.recording.writer`); ``hindrax bag recover`` repairs the bag.
-- Loss in transit: the callback also gets the message info (:class:`~hindrax_drivers.ros_process.WithMessageInfo`);
-  gaps in each topic's publication sequence numbers count the samples lost between its writer and this reader
-  (:class:`~hindrax_drivers.recording.sequence_gaps.SequenceGaps`; a best-effort reader's loss is otherwise silent).
-  The info has no publisher gid here, so the count is keyed by topic and a gap counts only while the topic has one
-  publisher (``get_publisher_count``, asked on a gap only).
+- Loss in transit: the callback also gets the message info
+  (:class:`~hindrax_drivers.ros_process.WithMessageInfo`); gaps in each topic's publication sequence
+  numbers count the samples lost between its writer and this reader
+  (:class:`~hindrax_drivers.recording.sequence_gaps.SequenceGaps`; a best-effort reader's loss is
+  otherwise silent). The info has no publisher gid here, so the count is keyed by topic and a gap
+  counts only while the topic has one publisher (``get_publisher_count``, asked on a gap only).
 - Status: ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) every ``status_period_s``: state, bag,
-  messages written, dropped (the writer's queue) and lost (in transit; WARN when either is above 0), one key per
-  topic (``topic:/name`` -> count) and one per topic that lost samples (``lost:/name`` -> samples lost).
+  messages written, dropped (the writer's queue) and lost (in transit; WARN when either is above 0),
+  one key per topic (``topic:/name`` -> count) and one per topic that lost samples (``lost:/name``
+  -> samples lost).
 - Disk floor: every ``disk_check_period_s`` (and before a start) the free space of the filesystem the bag
   goes to is compared with ``recording.min_free_disk_mb``; below it the recorder stops cleanly (the bag is
   finished: summary, metadata.yaml), refuses new starts, and reports the reason at level ERROR on
@@ -237,7 +240,8 @@ class RecorderNode(VehicleNode):
         return meta
 
     def _publisher_count(self, topic: str) -> int:
-        """Publishers of ``topic`` matched with the recorder's subscription (0 when not subscribed)."""
+        """Publishers of ``topic`` matched with the recorder's subscription (0 when not
+        subscribed)."""
         sub = self._subs.get(topic)
         return sub.get_publisher_count() if sub is not None else 0
 
@@ -295,13 +299,14 @@ class RecorderNode(VehicleNode):
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._queue_depth,
                              reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
             self._writer.add_topic(topic, type_name, profiles)
-            self._subs[topic] = self.create_subscription(
-                cls, topic, WithMessageInfo(functools.partial(self._on_message, topic)), qos, raw=True)
+            on_message = WithMessageInfo(functools.partial(self._on_message, topic))
+            self._subs[topic] = self.create_subscription(cls, topic, on_message, qos, raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}] ({reliability}, {durability})")
 
     def _on_message(self, topic: str, data: bytes, info: dict) -> None:
-        """One received message (CDR bytes) of ``topic`` and its rmw message info: queued for the writer thread, log
-        time = publish time = the node's clock now; its publication sequence number counted (module docstring)."""
+        """One received message (CDR bytes) of ``topic`` and its rmw message info: queued for the
+        writer thread, log time = publish time = the node's clock now; its publication sequence
+        number counted (module docstring)."""
         writer = self._writer
         if writer is None:
             return
@@ -359,8 +364,8 @@ class RecorderNode(VehicleNode):
             st.message = "idle"
         else:
             lost = self._gaps.lost_by_writer()
-            st.level = DiagnosticStatus.ERROR if w.error else (DiagnosticStatus.WARN if w.dropped or lost else
-                                                                DiagnosticStatus.OK)
+            st.level = (DiagnosticStatus.ERROR if w.error else
+                        DiagnosticStatus.WARN if w.dropped or lost else DiagnosticStatus.OK)
             st.message = f"writer failed: {w.error}" if w.error else f"recording to {w.bag_dir}"
             values += [KeyValue(key="messages_written", value=str(w.written)),
                        KeyValue(key="messages_dropped", value=str(w.dropped)),

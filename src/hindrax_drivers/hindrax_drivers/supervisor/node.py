@@ -108,7 +108,6 @@ class SupervisorNode(VehicleNode):
         self.diag = DeviceDiagnostics("hindrax/supervisor", "supervisor", self._now_s)
         self.diag.set_state("ok", DiagnosticStatus.OK, "within the envelope")
         self.esc_armed = False
-        self.breaches = 0
         self.last_breach_time_s: float | None = None
         self._last_disarm_request_s = -math.inf
         self._status_dirty = True
@@ -268,7 +267,6 @@ class SupervisorNode(VehicleNode):
         if not reason:
             return
         self.causes.on_trip(reason)
-        self.breaches += 1
         self.last_breach_time_s = self._now_s()
         self.diag.count("breach")
         self.diag.set_state("tripped", DiagnosticStatus.ERROR, reason)

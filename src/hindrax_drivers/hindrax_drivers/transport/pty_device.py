@@ -88,11 +88,6 @@ class StreamFaults:
         self._held: object = None
         self._has_held = False
         self._disconnected = False
-        #: Counters of faults actually applied.
-        self.garbage_bytes_sent = 0
-        self.messages_dropped = 0
-        self.messages_truncated = 0
-        self.messages_corrupted = 0
 
     # --- queueing ---------------------------------------------------------------------------
     def inject_garbage(self, data: Optional[bytes] = None, n_bytes: int = 16) -> bytes:
@@ -156,7 +151,6 @@ class StreamFaults:
         with self._lock:
             data = bytes(self._garbage)
             self._garbage.clear()
-            self.garbage_bytes_sent += len(data)
             return data
 
     def transmit(self, messages: Iterable[bytes],
@@ -181,15 +175,12 @@ class StreamFaults:
         with self._lock:
             if self._drop:
                 self._drop -= 1
-                self.messages_dropped += 1
                 return b""
             if self._truncate:
                 self._truncate -= 1
-                self.messages_truncated += 1
                 return message[: max(1, len(message) // 2)]
             if self._corrupt:
                 self._corrupt -= 1
-                self.messages_corrupted += 1
                 return corrupt_checksum(message)
             return message
 
@@ -297,7 +288,6 @@ class PtyDevice:
         self._fd_lock = threading.Lock()
         self._master: Optional[int] = None
         self._slave: Optional[int] = None
-        self._slave_name = ""
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
         #: Bytes delivered to / received from the host, and output bytes dropped.
@@ -306,8 +296,7 @@ class PtyDevice:
         self.bytes_dropped = 0
         #: Number of completed :meth:`reconnect` calls.
         self.reconnects = 0
-        #: Exceptions raised by the emulator inside the service thread (the thread keeps running).
-        self.emulator_errors = 0
+        #: The last exception raised by the emulator inside the service thread (the thread keeps running).
         self.last_error: Optional[str] = None
         self._open_pty()
         if start:
@@ -325,7 +314,7 @@ class PtyDevice:
         os.symlink(name, tmp)
         os.replace(tmp, self._link)
         with self._fd_lock:
-            self._master, self._slave, self._slave_name = master, slave, name
+            self._master, self._slave = master, slave
 
     def _close_pty(self) -> None:
         with self._fd_lock:
@@ -413,7 +402,6 @@ class PtyDevice:
                 # disconnected: the output is lost
                 out = self.emulator.poll(self.clock() if t_s is None else t_s)
         except Exception as exc:  # noqa: BLE001 - keep serving; the error is reported
-            self.emulator_errors += 1
             self.last_error = repr(exc)
             return master is not None
         if out:

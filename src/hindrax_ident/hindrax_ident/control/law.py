@@ -26,16 +26,17 @@ feedback linearisation, whose feedforward part this is; docs/control.md §2). Fo
   ``allocation/status``' achieved wrench), in the direction of the error (conditional integration, [AstromHagglund2006]
   Ch. 3), and the integral term alone never exceeds the limit.
 
-Depth is NED z of the body origin (down positive); the heave force is projected on the body z axis as Z = F /
-(cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range: the floor under the vehicle is a local plane
-(:class:`FloorEstimator`, a linear Kalman filter on the floor depth under the body origin and its gradient), fed with
-every range as a floor point (the Ping1D along body z and the four DVL-75 beams, each beam's variance including the
-plane's own error at its distance from the altimeter's footprint, :data:`FLOOR_SLOPE_CHANGE_STD`); the depth hold
-follows x_d = z_f(footprint) - (R r_ping)_z - a_d cos(roll) cos(pitch), x_d' = g . v_ref - a_d', x_d'' = g . a_ref +
-g' . v_ref - a_d'' with g the gradient, g' its low-passed time derivative (a floor whose slope changes under the
-moving vehicle, :meth:`Controller._floor_gradient_rate`), v_ref and a_ref the surge/sway references in NED and a_d the
-reference model of the altitude setpoint: the floor's rate and acceleration under a moving vehicle are fed forward
-before the altimeter sees them.
+Depth is NED z of the body origin (down positive); the heave force is projected on the body z axis
+as Z = F / (cos(roll) cos(pitch)). **Altitude** mode holds the Ping1D range: the floor under the
+vehicle is a local plane (:class:`FloorEstimator`, a linear Kalman filter on the floor depth under
+the body origin and its gradient), fed with every range as a floor point (the Ping1D along body z
+and the four DVL-75 beams, each beam's variance including the plane's own error at its distance from
+the altimeter's footprint, :data:`FLOOR_SLOPE_CHANGE_STD`); the depth hold follows
+x_d = z_f(footprint) - (R r_ping)_z - a_d cos(roll) cos(pitch), x_d' = g . v_ref - a_d',
+x_d'' = g . a_ref + g' . v_ref - a_d'' with g the gradient, g' its low-passed time derivative (a
+floor whose slope changes under the moving vehicle, :meth:`Controller._floor_gradient_rate`), v_ref
+and a_ref the surge/sway references in NED and a_d the reference model of the altitude setpoint: the
+floor's rate and acceleration under a moving vehicle are fed forward before the altimeter sees them.
 
 Why our own code: the reference model, feedforward and anti-windup are a few lines each around the model, and no
 maintained Python library implements marine model-based PID with reference feedforward. The floor filter steps with
@@ -492,7 +493,6 @@ class Controller:
         self.velocity_frd_m_s = np.zeros(2)
         self.attitude_rad = np.zeros(2)
         self.mode = "none"  # vertical hold of the last tick: depth | altitude | waiting_altitude | none
-        self.floor_state = (math.nan, math.nan, math.nan)  # altitude mode: floor depth under the footprint, gradient
         self._gradient_prev: tuple[float, np.ndarray] | None = None  # (t_s, gradient) of the last altitude tick
         self.gradient_rate = np.zeros(2)  # low-passed d/dt of the floor gradient estimate (north, east), 1/s
 
@@ -668,7 +668,6 @@ class Controller:
             xd, vd, ad = zfp - offset - a_d * tilt, zf_rate - a_rate, zf_acc - a_acc
             out = ax.track(xd, vd, ad, z, zr, dt, proj)
             ax.ref.reset(xd, vd)  # a later switch to depth mode continues from here
-            self.floor_state = (zfp, gn, ge)
             return out
         if not math.isfinite(self.depth_m):
             # altitude asked, no range yet: hold the depth the reference is at (the measured depth when engaging)

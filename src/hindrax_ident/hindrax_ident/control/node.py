@@ -18,35 +18,41 @@ is always an explicit request.
 Interfaces
 ----------
 Services
-    ``controller/hold`` (std_srvs/Trigger): hold the current state (the measured depth, or the measured altitude when
-    an altitude setpoint was given before, the current heading, zero velocity) and enable. ``controller/enable``
-    (std_srvs/SetBool): enable with the current setpoints (none given yet: as ``hold``) or disable (one zero wrench).
+    ``controller/hold`` (std_srvs/Trigger): hold the current state (the measured depth, or the
+    measured altitude when an altitude setpoint was given before, the current heading, zero
+    velocity) and enable. ``controller/enable`` (std_srvs/SetBool): enable with the current
+    setpoints (none given yet: as ``hold``) or disable (one zero wrench).
 Subscribes
-    ``controller/setpoint`` (hindrax_msgs/ControlSetpoint); the sensor topics of the identification node
-    (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``); ``esc/output_state`` (the ESC's
-    armed flag, latched: :mod:`hindrax_drivers.esc_state`; subscribed for the node's life, the current state arrives
-    at once; a malformed one reads as disarmed; a dead ESC's last state stays, and the guard silences its outputs);
-    ``identification/status``; while enabled only, ``allocation/status`` (achieved wrench: the anti-windup) and
-    ``wrench`` (other writers).
+    ``controller/setpoint`` (hindrax_msgs/ControlSetpoint); the sensor topics of the identification
+    node (``dvl/data``, ``pressure/fluid_pressure``, ``imu/data_raw``, ``ping/altitude``);
+    ``esc/output_state`` (the ESC's armed flag, latched: :mod:`hindrax_drivers.esc_state`;
+    subscribed for the node's life, the current state arrives at once; a malformed one reads as
+    disarmed; a dead ESC's last state stays, and the guard silences its outputs);
+    ``identification/status``; while enabled only, ``allocation/status`` (achieved wrench: the
+    anti-windup) and ``wrench`` (other writers).
 Publishes
     ``wrench`` (geometry_msgs/WrenchStamped, base_link FLU) at ``control.rate_hz`` while enabled;
     ``controller/status`` (hindrax_msgs/ControllerStatus) at 2 Hz and at once on a change; ``odom``
-    (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz from its sensor conditioning (REP-105,
-    :mod:`.odometry`), while its sensor streams are open (not while an identification goal runs).
+    (nav_msgs/Odometry) and ``odom -> base_link`` on ``/tf`` at 10 Hz from its sensor conditioning
+    (REP-105, :mod:`.odometry`), while its sensor streams are open (not while an identification goal
+    runs).
 CPU
-    Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual pool
-    and the tests take the same path; about 80 messages/s while the streams are open, 3 while a goal runs), each
-    sensor sample counted at its arrival. While an identification goal runs the controller cannot be enabled and its
-    sensor streams are closed, so the tick slows from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends
-    (docs/architecture.md §10.1). While disabled the streams stay open (``odom``, ``controller/status`` and the
-    enable checks read them) but the tick runs every :data:`ODOM_PERIOD_S` (the odometry rate) instead of at
-    ``control.rate_hz``, which it takes only while enabled, and one IMU message in :data:`IDLE_IMU_EVERY` is
-    conditioned (the IMU is taken as CDR bytes, decoded only when used: :mod:`hindrax_drivers.lean_cdr`).
+    Every input is a subscription callback on the node's executor, whatever the clock (the vehicle,
+    the virtual pool and the tests take the same path; about 80 messages/s while the streams are
+    open, 3 while a goal runs), each sensor sample counted at its arrival. While an identification
+    goal runs the controller cannot be enabled and its sensor streams are closed, so the tick slows
+    from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends (docs/architecture.md
+    §10.1). While disabled the streams stay open (``odom``, ``controller/status`` and the enable
+    checks read them) but the tick runs every :data:`ODOM_PERIOD_S` (the odometry rate) instead of
+    at ``control.rate_hz``, which it takes only while enabled, and one IMU message in
+    :data:`IDLE_IMU_EVERY` is conditioned (the IMU is taken as CDR bytes, decoded only when used:
+    :mod:`hindrax_drivers.lean_cdr`).
 Parameters
-    The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``, ``rate_hz``,
-    ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""): identification.yaml to take the model from
-    ("" = the vehicle file); a file that cannot be used (unreadable, not an identification, another vehicle's)
-    stops the start-up with one line naming ``model_file``, never the vehicle file's model in its place.
+    The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``,
+    ``rate_hz``, ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""):
+    identification.yaml to take the model from ("" = the vehicle file); a file that cannot be used
+    (unreadable, not an identification, another vehicle's) stops the start-up with one line naming
+    ``model_file``, never the vehicle file's model in its place.
 """
 from __future__ import annotations
 
@@ -91,8 +97,9 @@ RUNNING_PHASES = frozenset({ManeuverStatus.PHASE_POSITIONING, ManeuverStatus.PHA
 STATUS_PERIOD_S = 0.5
 #: period of ``odom`` and the ``odom -> base_link`` transform on ``/tf`` (s): 10 Hz, enough for a 3D view
 ODOM_PERIOD_S = 0.1
-#: while disabled, one ``imu/data_raw`` message in this many is conditioned (51 Hz -> 10 Hz: the odometry's rate);
-#: the others are taken as bytes and dropped undecoded. Enabled, every one is (module docstring, "CPU")
+#: while disabled, one ``imu/data_raw`` message in this many is conditioned (51 Hz -> 10 Hz: the
+#: odometry's rate); the others are taken as bytes and dropped undecoded. Enabled, every one is
+#: (module docstring, "CPU")
 IDLE_IMU_EVERY = 5
 #: tick period (s) while an identification goal runs: the tick then only takes the goal's phase
 #: (``identification/status``) and publishes ``controller/status`` (every :data:`STATUS_PERIOD_S`); the streams are
@@ -177,15 +184,18 @@ class ControllerNode(VehicleNode):
 
     # ------------------------------------------------------------------ inputs
     def _open_streams(self) -> None:
-        """Subscribe to the streams only a controller that may be enabled needs: the four sensor topics (about 80
-        messages/s in the pool layout). The first IMU message after opening is conditioned (:meth:`_on_imu`)."""
+        """Subscribe to the streams only a controller that may be enabled needs: the four sensor
+        topics (about 80 messages/s in the pool layout). The first IMU message after opening is
+        conditioned (:meth:`_on_imu`)."""
         self._imu_count = IDLE_IMU_EVERY - 1
         self._streams = [
-            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), sensor_input_qos(20)),
-            self._subscribe(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]),
+            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)),
                             sensor_input_qos(20)),
+            self._subscribe(FluidPressure, "pressure/fluid_pressure",
+                            lambda m: self._add([sample_from_pressure(m)]), sensor_input_qos(20)),
             self._subscribe(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
-            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), sensor_input_qos(20)),
+            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]),
+                            sensor_input_qos(20)),
         ]
 
     def _open_enabled_streams(self) -> None:
@@ -201,7 +211,8 @@ class ControllerNode(VehicleNode):
             self.destroy_subscription(sub)
         self._enabled_streams = []
 
-    def _subscribe(self, msg_type: Any, topic: str, handler: Any, qos: Any, raw: bool = False) -> Any:
+    def _subscribe(self, msg_type: Any, topic: str, handler: Any, qos: Any,
+                   raw: bool = False) -> Any:
         """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
         room for an executor held up on a loaded machine; the sensors' readers are best effort
         (:func:`~hindrax_drivers.node_common.sensor_input_qos`)."""
@@ -228,7 +239,8 @@ class ControllerNode(VehicleNode):
         self._pending.extend(samples)
 
     def _on_imu(self, data: bytes) -> None:
-        """``imu/data_raw`` as CDR bytes: every message while enabled, one in :data:`IDLE_IMU_EVERY` while disabled."""
+        """``imu/data_raw`` as CDR bytes: every message while enabled, one in :data:`IDLE_IMU_EVERY`
+        while disabled."""
         self._imu_count += 1
         if self.enabled or self._imu_count >= IDLE_IMU_EVERY:
             self._imu_count = 0

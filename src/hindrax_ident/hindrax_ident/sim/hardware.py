@@ -61,7 +61,7 @@ class SerialLockStep:
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
     on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
     reconnect between a write and the check), a gate that has waited :data:`RESYNC_AFTER_S` of wall time with the
-    reader idle re-bases the count (``resyncs``) rather than stall the simulation.
+    reader idle re-bases the count rather than stall the simulation.
 
     Args:
         pty: the emulator's pseudo-terminal, created with ``start=False``.
@@ -76,8 +76,6 @@ class SerialLockStep:
         self._connection: int | None = None
         self._written0 = self._handled0 = 0
         self._stalled_since: float | None = None
-        #: re-based counts (see the class docstring)
-        self.resyncs = 0
         transport.pump(0, 0.0)  # from now on the driver's bytes are read in the simulator's thread
 
     def tick(self, _t_s: float = 0.0) -> None:
@@ -116,7 +114,6 @@ class SerialLockStep:
             self._stalled_since = now
         elif now - self._stalled_since > RESYNC_AFTER_S and st.bytes_rx == st.bytes_handled:
             self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
-            self.resyncs += 1
             self._stalled_since = None
             return True
         return False

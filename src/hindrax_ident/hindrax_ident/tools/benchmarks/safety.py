@@ -216,9 +216,7 @@ def _rig(ctx, sim_time: bool = False):
 
     wait_until(lambda: r["cmd"].get_subscription_count() > 0 and r["arm"].service_is_ready()
                and r["estop"].service_is_ready() and sup.esc_client.service_is_ready(), 20, spin, "graph ready")
-    r.update(spin=spin, call=call, command=command, armed_at_1700=armed_at_1700, until_neutral=until_neutral,
-             SetArmed=SetArmed, Trigger=Trigger, PoseWithCovarianceStamped=PoseWithCovarianceStamped,
-             wait_until=wait_until)
+    r.update(spin=spin, call=call, command=command, armed_at_1700=armed_at_1700, until_neutral=until_neutral)
     return r
 
 
@@ -226,6 +224,13 @@ def _close(r) -> None:
     r["ex"].shutdown()
     for n in (r["probe"], r["sup"], r["esc"], r["allocation"].node):
         n.destroy_node()
+
+
+def _ms_row(name: str, seconds, **extra) -> dict:
+    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus ``extra`` keys."""
+    ms = np.asarray(seconds, dtype=float) * 1e3
+    return {"name": name, "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)), "n": int(ms.size),
+            **extra}
 
 
 def run(quick: bool = False) -> list[dict]:
@@ -239,43 +244,32 @@ def run(quick: bool = False) -> list[dict]:
         r = _rig(ctx)
         esc, emu = r["esc"], r["emu"]
         watchdog_s = esc.watchdog_s
+
+        def deep():  # a fresh sample beyond the depth limit (a stamp-0 one is not alive)
+            m = PoseWithCovarianceStamped()
+            m.header.stamp = r["sup"].get_clock().now().to_msg()
+            m.pose.pose.position.z = -(r["sup"].core.limits.max_depth_m + 0.1)
+            return m
+
+        #: each path's event (a service call returns its future, answered before the next path)
+        events = {"disarm_service": lambda: r["arm"].call_async(SetArmed.Request(arm=False)),
+                  "supervisor_breach": lambda: r["depth"].publish(deep()),
+                  "estop": lambda: r["estop"].call_async(Trigger.Request()),
+                  "exception": lambda: r["command"](float("nan")),  # a fault in the output path
+                  "shutdown": esc.close}
         for _ in range(repeats):
             # watchdog: the controller stops
             r["armed_at_1700"]()
-            t_neutral = r["until_neutral"]()
-            dt = t_neutral - esc._steady_command  # from the last command the node took (steady clock)
+            dt = r["until_neutral"]() - esc._steady_command  # from the last command the node took (steady clock)
             times["watchdog"].append(dt)
             times["watchdog_beyond_timeout"].append(dt - watchdog_s)
-            # disarm service
-            r["armed_at_1700"]()
-            fut = r["arm"].call_async(r["SetArmed"].Request(arm=False))
-            t0 = time.monotonic()
-            times["disarm_service"].append(r["until_neutral"]() - t0)
-            r["wait_until"](fut.done, 5, r["spin"], "disarm answer")
-            # supervisor breach: too deep
-            r["armed_at_1700"]()
-            m = r["PoseWithCovarianceStamped"]()
-            m.header.stamp = r["sup"].get_clock().now().to_msg()  # a fresh sample: a stamp-0 one is not alive
-            m.pose.pose.position.z = -(r["sup"].core.limits.max_depth_m + 0.1)
-            t0 = time.monotonic()
-            r["depth"].publish(m)
-            times["supervisor_breach"].append(r["until_neutral"]() - t0)
-            # operator e-stop
-            r["armed_at_1700"]()
-            fut = r["estop"].call_async(r["Trigger"].Request())
-            t0 = time.monotonic()
-            times["estop"].append(r["until_neutral"]() - t0)
-            r["wait_until"](fut.done, 5, r["spin"], "estop answer")
-            # exception in the output path
-            r["armed_at_1700"]()
-            t0 = time.monotonic()
-            r["command"](float("nan"))
-            times["exception"].append(r["until_neutral"]() - t0)
-            # shutdown path
-            r["armed_at_1700"]()
-            t0 = time.monotonic()
-            esc.close()
-            times["shutdown"].append(r["until_neutral"]() - t0)
+            for name, event in events.items():  # from the event to neutral on the chip
+                r["armed_at_1700"]()
+                t0 = time.monotonic()
+                fut = event()
+                times[name].append(r["until_neutral"]() - t0)
+                if fut is not None:
+                    wait_until(fut.done, 5, r["spin"], f"{name} answer")
             # chip reset (brown-out) while armed and commanding
             r["armed_at_1700"]()
             emu.watch = False
@@ -287,7 +281,7 @@ def run(quick: bool = False) -> list[dict]:
             def keep_commanding():
                 r["command"]()
                 r["spin"]()
-            r["wait_until"](lambda: esc.link.chip_reinits > reinits, 10, keep_commanding, "chip reset detected")
+            wait_until(lambda: esc.link.chip_reinits > reinits, 10, keep_commanding, "chip reset detected")
             times["chip_reset_detect"].append(esc.link.last_chip_reinit_monotonic - t0)
             times["chip_reset_recover"].append(r["until_neutral"](poll=keep_commanding) - t0)
         _close(r)
@@ -299,19 +293,13 @@ def run(quick: bool = False) -> list[dict]:
             times["clock_loss"].append(t_neutral - rs["esc"]._steady_command)
         _close(rs)
 
-    rows = []
     notes = {"watchdog": f"from the last command; includes esc.watchdog_timeout_s = {watchdog_s:g} s",
              "watchdog_beyond_timeout": "design bound: one output period (20 ms at 50 Hz)",
              "chip_reset_detect": "read-back every esc.readback_interval_s (0.25 s)",
              "chip_reset_recover": "re-initialised at neutral, disarmed",
              "clock_loss": "use_sim_time, /clock stops: steady-clock watchdog (includes the 0.5 s timeout)"}
-    for name, values in times.items():
-        ms = np.array(values) * 1e3
-        row = {"name": f"neutral_after_{name}_ms" if not name.startswith(("chip", "clock")) else f"{name}_ms",
-               "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)), "n": int(ms.size)}
-        if name in notes:
-            row["note"] = notes[name]
-        rows.append(row)
+    rows = [_ms_row(f"{name}_ms" if name.startswith(("chip", "clock")) else f"neutral_after_{name}_ms", values,
+                    **({"note": notes[name]} if name in notes else {})) for name, values in times.items()]
     # The participant-churn rows join this section from their own module (bench.BENCHMARKS): it imports _Layout.
     return (rows + run_processes(quick) + replay_rows(quick) + frozen_rows(quick) + partial_freeze_rows(quick)
             + gc_rows(quick))
@@ -780,12 +768,11 @@ def partial_freeze_rows(quick: bool = False) -> list[dict]:
         wait_until(GraphSettled(lay.probe, quiet_s=3.0, min_nodes=3), 90, None, "graph settled")
         for _ in range(repeats):
             stopped.append(partial_freeze_stop_s(lay))
-    ms = np.array(stopped) * 1e3
-    return [{"name": "partial_freeze_no_feed_outputs_stopped_ms", "value": float(np.median(ms)), "unit": "ms",
-             "max": float(np.max(ms)), "n": int(ms.size), "target": 500.0,
-             "note": f"SIGSTOP of ESC and guard while the supervisor runs, armed at 1700 us, no watchdog feed; the "
-                     f"guard's pings stop, the unit's watchdog ({UNIT_WATCHDOG_S:g} s, systemd's behaviour emulated "
-                     "without its timer slack of up to 250 ms) kills the unit, the freed /OE line goes high"}]
+    return [_ms_row("partial_freeze_no_feed_outputs_stopped_ms", stopped, target=500.0,
+                    note=f"SIGSTOP of ESC and guard while the supervisor runs, armed at 1700 us, no watchdog "
+                         f"feed; the guard's pings stop, the unit's watchdog ({UNIT_WATCHDOG_S:g} s, systemd's "
+                         "behaviour emulated without its timer slack of up to 250 ms) kills the unit, the freed /OE "
+                         "line goes high")]
 
 
 def partial_freeze_stop_s(lay: _UnitLayout, timeout_s: float = 10.0) -> float:
@@ -905,7 +892,6 @@ def replay_rows(quick: bool = False) -> list[dict]:
             finally:
                 replay.kill()
                 replay.wait(10)
-    ms = np.array(after_kill) * 1e3
     note = ("bag of the armed layout replayed in a loop with every topic (heartbeats, commands), supervisor SIGKILLed "
             f"{REPLAY_LEAD_S:g} s into the replay; {censored} of {repeats} still had thrust "
             f"{REPLAY_CENSOR_S:g} s after the kill (counted as {REPLAY_CENSOR_S * 1e3:.0f} ms), {len(by_replay)} had "
@@ -914,8 +900,7 @@ def replay_rows(quick: bool = False) -> list[dict]:
                     "before the kill" + (f", {1e3 * float(np.median(by_replay)):.0f} ms median, "
                                          f"{1e3 * float(np.max(by_replay)):.0f} ms max after the replay process "
                                          "started" if by_replay else ""))
-    return [{"name": "supervisor_killed_during_replay_thrust_after_kill_ms", "value": float(np.median(ms)),
-             "unit": "ms", "max": float(np.max(ms)), "n": int(ms.size), "target": 500.0, "note": note},
+    return [_ms_row("supervisor_killed_during_replay_thrust_after_kill_ms", after_kill, target=500.0, note=note),
             {"name": "replay_alone_stopped_outputs", "value": len(by_replay), "unit": f"of {repeats} repeats",
              "note": stopped_note}]
 
@@ -943,12 +928,10 @@ def frozen_rows(quick: bool = False) -> list[dict]:
                 for name in ("supervisor", "esc", "guard"):
                     lay.signal(name, _signal.SIGCONT)
         refused, attempts, answer, granted_s = _guard_without_line(lay, hw)
-    ms = np.array(stopped) * 1e3
-    return [{"name": "launch_frozen_outputs_stopped_ms", "value": float(np.median(ms)), "unit": "ms",
-             "max": float(np.max(ms)), "n": int(ms.size), "target": 500.0,
-             "note": f"SIGSTOP of guard, ESC and supervisor while armed at 1700 us; the emulated watchdog "
-                     f"(t_W {WATCHDOG_TIMEOUT_S:g} s, fed at 10 Hz) ran out; the guard's own /OE line was still low "
-                     f"in {oe_low} of {len(stopped)}"},
+    return [_ms_row("launch_frozen_outputs_stopped_ms", stopped, target=500.0,
+                    note=f"SIGSTOP of guard, ESC and supervisor while armed at 1700 us; the emulated watchdog "
+                         f"(t_W {WATCHDOG_TIMEOUT_S:g} s, fed at 10 Hz) ran out; the guard's own /OE line was "
+                         f"still low in {oe_low} of {len(stopped)}"),
             {"name": "guard_without_line_arming_refused", "value": refused, "unit": f"of {attempts} arm requests",
              "note": f"/OE line busy when the guard started; the ESC answered {answer[:140]!r}; line granted -> "
                      f"armed after {granted_s:.1f} s"}]
@@ -999,30 +982,20 @@ def _process_rows(repeats: int) -> dict[str, list]:
         lay.armed_at_1700()
         times["guard_cpu_percent"] = [_cpu_share(lay.procs["guard"].pid, 5.0 if repeats <= 3 else 10.0)]
         for _ in range(repeats):
-            for who, sig in (("supervisor", _signal.SIGKILL), ("supervisor", _signal.SIGSTOP)):
-                lay.armed_at_1700()
-                t0 = time.monotonic()
-                if sig == _signal.SIGKILL:
-                    lay.kill(who)
-                else:
-                    lay.signal(who, sig)
-                wait_until(lambda: hw.stopped_at is not None, 10, None, "outputs stopped")
-                kind = "killed" if sig == _signal.SIGKILL else "hung"
-                times[f"supervisor_{kind}_outputs_stopped"].append(hw.stopped_at - t0)
-                if sig == _signal.SIGSTOP:
-                    lay.signal(who, _signal.SIGCONT)
-            for sig in (_signal.SIGKILL, _signal.SIGSTOP):
-                lay.armed_at_1700()
-                t0 = time.monotonic()
-                if sig == _signal.SIGKILL:
-                    lay.kill("esc")
-                else:
-                    lay.signal("esc", sig)
-                wait_until(lambda: hw.oe_at is not None, 10, None, "/OE asserted")
-                kind = "killed" if sig == _signal.SIGKILL else "hung"
-                times[f"esc_{kind}_oe_asserted"].append(hw.oe_at - t0)
-                if sig == _signal.SIGSTOP:
-                    lay.signal("esc", _signal.SIGCONT)
+            # the supervisor killed / hung until the outputs stop, then the ESC until /OE is high
+            for who, what, at in (("supervisor", "outputs_stopped", lambda: hw.stopped_at),
+                                  ("esc", "oe_asserted", lambda: hw.oe_at)):
+                for kind in ("killed", "hung"):
+                    lay.armed_at_1700()
+                    t0 = time.monotonic()
+                    if kind == "killed":
+                        lay.kill(who)
+                    else:
+                        lay.signal(who, _signal.SIGSTOP)
+                    wait_until(lambda: at() is not None, 10, None, what)
+                    times[f"{who}_{kind}_{what}"].append(at() - t0)
+                    if kind == "hung":
+                        lay.signal(who, _signal.SIGCONT)
             lay.armed_at_1700()
             t0 = time.monotonic()
             hw.bus.disconnected = True
@@ -1096,8 +1069,4 @@ def run_processes(quick: bool = False) -> list[dict]:
                  "note": f"of {5 * (QUICK_REPEATS if quick else PROCESS_REPEATS) + 1} arm requests, the ESC "
                          "disarmed itself before 1700 us reached the wire (the bench armed again)"
                          + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")})
-    for name, values in times.items():
-        ms = np.array(values) * 1e3
-        rows.append({"name": f"{name}_ms", "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)),
-                     "n": int(ms.size), "target": 500.0, "note": notes[name]})
-    return rows
+    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name]) for name, values in times.items()]

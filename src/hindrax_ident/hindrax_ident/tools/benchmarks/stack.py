@@ -158,20 +158,14 @@ def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, fl
             {k: (v - before[3].get(k, 0.0)) / wall_s for k, v in after[3].items()})
 
 
-def _proc_rss_mb(pid: int) -> float:
-    """Resident set size of a process (``VmRSS``), MB (10^6 bytes)."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) * 1024 / 1e6
-    return float("nan")
-
-
-def _proc_pss_mb(pid: int) -> float:
-    """Proportional set size of a process (``Pss`` of /proc/PID/smaps_rollup), MB (10^6 bytes): its private pages
-    plus its share of the pages it shares (the venv's libraries mapped by every node process), so the sum over
-    processes is the memory they hold together, unlike the sum of RSS, which counts shared pages once per process."""
-    for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines():
-        if line.startswith("Pss:"):
+def _proc_mb(pid: int, key: str) -> float:
+    """A memory figure of a process, MB (10^6 bytes), NaN when absent: ``VmRSS`` (resident set size, from
+    /proc/PID/status) or ``Pss`` (proportional set size, /proc/PID/smaps_rollup: its private pages plus its share of
+    the pages it shares, the venv's libraries mapped by every node process, so the sum over processes is the memory
+    they hold together, unlike the sum of RSS, which counts shared pages once per process)."""
+    path = Path(f"/proc/{pid}/{'status' if key == 'VmRSS' else 'smaps_rollup'}")
+    for line in path.read_text().splitlines():
+        if line.startswith(key + ":"):
             return int(line.split()[1]) * 1024 / 1e6
     return float("nan")
 
@@ -537,8 +531,9 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                         "bench": (proc_cpu_s() - bench0) / wall,
                                         "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
                                         "goal_status": goal_status[0](),
-                                        "rss_mb": {n: _proc_rss_mb(p.pid) for n, p in procs.items() if n != "pool"},
-                                        "pss_mb": {n: _proc_pss_mb(p.pid) for n, p in procs.items() if n != "pool"}})
+                                        "rss_mb": {n: _proc_mb(p.pid, "VmRSS") for n, p in procs.items()
+                                                   if n != "pool"},
+                                        "pss_mb": {n: _proc_mb(p.pid, "Pss") for n, p in procs.items() if n != "pool"}})
                     out["phases"][phase] = {"windows": results}
 
                 goal_status = [lambda: None]
@@ -680,44 +675,32 @@ _PARTICIPANT = textwrap.dedent('''
 
 
 # ---------------------------------------------------------------------------------------------- baselines
-_BARE_PUB = textwrap.dedent('''
+#: the bare baseline process: argv mode (``publisher``: a timer per topic at its rate, a default-constructed message;
+#: ``subscriber``: raw subscriptions), spec, duration_s, and for a publisher optionally ``wait`` (for the subscriber)
+_BARE = textwrap.dedent('''
     import importlib, json, sys, time
     import rclpy
     from rclpy.experimental.events_executor import EventsExecutor
-    spec = json.loads(sys.argv[1]); duration = float(sys.argv[2])
-    rclpy.init(); node = rclpy.create_node("bare_publisher")
-    for topic, type_name, rate in spec:
-        pkg, _, name = type_name.split("/")
-        cls = getattr(importlib.import_module(pkg + ".msg"), name)
-        pub = node.create_publisher(cls, "/baseline" + topic, 10)
-        node.create_timer(1.0 / rate, (lambda p, m: (lambda: p.publish(m)))(pub, cls()))
-    ex = EventsExecutor(); ex.add_node(node)
-    if len(sys.argv) > 3:  # wait for the subscriber process
-        t_end = time.monotonic() + 30
-        while time.monotonic() < t_end and node.count_subscribers("/baseline" + spec[0][0]) == 0:
-            ex.spin_once(timeout_sec=0.05)
-    t_end = time.monotonic() + duration
-    c0 = time.process_time()
-    while time.monotonic() < t_end:
-        ex.spin_once(timeout_sec=0.05)
-    print(json.dumps({"cpu_s": time.process_time() - c0}), flush=True)
-''')
-
-_BARE_SUB = textwrap.dedent('''
-    import importlib, json, sys, time
-    import rclpy
-    from rclpy.experimental.events_executor import EventsExecutor
-    spec = json.loads(sys.argv[1]); duration = float(sys.argv[2])
-    rclpy.init(); node = rclpy.create_node("bare_subscriber")
+    mode, spec, duration = sys.argv[1], json.loads(sys.argv[2]), float(sys.argv[3])
+    rclpy.init(); node = rclpy.create_node("bare_" + mode)
     got = [0]
     def cb(_data): got[0] += 1
     for topic, type_name, rate in spec:
         pkg, _, name = type_name.split("/")
         cls = getattr(importlib.import_module(pkg + ".msg"), name)
-        node.create_subscription(cls, "/baseline" + topic, cb, 10, raw=True)
+        if mode == "subscriber":
+            node.create_subscription(cls, "/baseline" + topic, cb, 10, raw=True)
+        else:
+            pub = node.create_publisher(cls, "/baseline" + topic, 10)
+            node.create_timer(1.0 / rate, (lambda p, m: (lambda: p.publish(m)))(pub, cls()))
     ex = EventsExecutor(); ex.add_node(node)
-    while got[0] == 0:
-        ex.spin_once(timeout_sec=0.05)
+    if mode == "subscriber":  # until the publisher's first message
+        while got[0] == 0:
+            ex.spin_once(timeout_sec=0.05)
+    elif len(sys.argv) > 4:  # wait for the subscriber process
+        t_end = time.monotonic() + 30
+        while time.monotonic() < t_end and node.count_subscribers("/baseline" + spec[0][0]) == 0:
+            ex.spin_once(timeout_sec=0.05)
     t_end = time.monotonic() + duration
     c0 = time.process_time()
     while time.monotonic() < t_end:
@@ -733,9 +716,9 @@ def _bare(spec: list, duration_s: float, with_subscriber: bool) -> tuple[float, 
         args = [json.dumps(spec), str(duration_s)]
         sub = None
         if with_subscriber:
-            sub = subprocess.Popen([python_executable(), "-c", _BARE_SUB, *args], env=env, stdout=subprocess.PIPE,
-                                   text=True)
-        pub = subprocess.run([python_executable(), "-c", _BARE_PUB, *args] + (["wait"] if sub else []),
+            sub = subprocess.Popen([python_executable(), "-c", _BARE, "subscriber", *args], env=env,
+                                   stdout=subprocess.PIPE, text=True)
+        pub = subprocess.run([python_executable(), "-c", _BARE, "publisher", *args] + (["wait"] if sub else []),
                              capture_output=True, text=True, env=env, timeout=duration_s + 90)
         pub_cpu = json.loads(pub.stdout.strip().splitlines()[-1])["cpu_s"]
         sub_cpu = 0.0
