@@ -298,34 +298,25 @@ def test_close_joins_thread_and_loop_url_works():
     tr.close()  # idempotent
 
 
-def test_caller_driven_device_and_wait_handled_count_every_byte_through_the_callback():
+def test_caller_driven_device_and_pump_hand_every_byte_to_the_callback_in_the_calling_thread():
     """``PtyDevice(start=False).service(t)``: output only when the caller serves it, at the caller's time; the
-    transport's ``wait_handled`` returns once the callback has run on every byte sent (the lock-step a simulator
-    uses), and ``bytes_handled`` never runs ahead of ``bytes_rx``."""
+    transport's ``pump`` reads until the callback has run on every byte sent, in the calling thread (the lock-step a
+    simulator uses; the reader thread reads no more), and times out when nothing more comes."""
     emu = Dvl75Emulator(DvlTruth(velocity_frd_m_s=(0.2, 0.0, 0.0), altitude_m=1.5), rate_hz=10)
     dev = PtyDevice(emu, clock=lambda: 0.0, start=False)
-    col = Collector("dvl")
-    gate = threading.Event()
-
-    def slow(data: bytes) -> None:  # the callback is held until the test lets it go
-        gate.wait(WAIT_S)
-        col.on_data(data)
-
-    tr = SerialTransport(dev.path, on_data=slow)
+    col, threads = Collector("dvl"), []
+    tr = SerialTransport(dev.path, on_data=lambda data: (threads.append(threading.current_thread()), col.on_data(data)))
     try:
         assert tr.wait_connected(WAIT_S) and tr.status().connections == 1
-        assert not dev.threaded
+        assert not dev.threaded and tr.pump(0, 0.0)
         dev.service(0.0)  # boot banner; nothing is due before the first ping
         sent = dev.service(1.0)  # ten pings: exactly 10 $DVEXT (the caller's time, not the wall clock)
         assert sent > 0 and dev.bytes_from_host == 0
-        assert not tr.wait_handled(dev.bytes_to_host, 0.05)  # read perhaps, but the callback is held
-        st = tr.status()
-        assert st.bytes_handled <= st.bytes_rx and st.bytes_handled < dev.bytes_to_host
-        gate.set()
-        assert tr.wait_handled(dev.bytes_to_host, WAIT_S)
+        assert tr.pump(dev.bytes_to_host, WAIT_S)
         st = tr.status()
         assert st.bytes_handled == st.bytes_rx == dev.bytes_to_host
-        assert col.count(DvlExtended) == 10
+        assert col.count(DvlExtended) == 10 and set(threads) == {threading.current_thread()}
+        assert not tr.pump(dev.bytes_to_host + 1, 0.05)
         with pytest.raises(RuntimeError):
             dev.start()
             dev.service(2.0)

@@ -1,4 +1,6 @@
 """Virtual hardware: emulators fed by the simulator, through the real transports."""
+import threading
+
 import numpy as np
 import pytest
 import serial
@@ -7,8 +9,11 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.dvl75 import protocol as dvl
 from hindrax_drivers.pca9685 import protocol as pca
 from hindrax_drivers.testing import wait_until
+from hindrax_drivers.dvl75.emulator import Dvl75Emulator, DvlTruth
 from hindrax_drivers.transport.i2c import I2CDevice
-from hindrax_ident.sim.hardware import VirtualHardware
+from hindrax_drivers.transport.pty_device import PtyDevice
+from hindrax_drivers.transport.serial_transport import SerialTransport
+from hindrax_ident.sim.hardware import HANDOFF_TIMEOUT_S, SerialLockStep, VirtualHardware
 from hindrax_ident.sim.simulator import Simulator
 
 
@@ -84,3 +89,31 @@ def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample
     assert np.max(np.abs(errors)) < 0.002 + 4 * noise_m  # the depth now (a 50 ms old sample is 15 mm off)
     spec_gyro = vh.emulators["icm20948"].truth(0.0)[1]
     assert np.allclose(spec_gyro, sim.measure("icm20948_gyro").angular_rate_rad_s, atol=0.05)
+
+
+def test_serial_lock_step_has_a_slow_driver_handle_every_byte_before_the_tick_ends():
+    """A driver hop slower than the hand-off timeout (a starved machine): when ``tick`` returns, the driver has
+    handled every byte sent at that tick, in the simulator's thread, so what it publishes is there before the other
+    nodes run at the tick and before simulated time moves on (the recorded data does not depend on the load)."""
+    t = [0.0]
+    pty = PtyDevice(Dvl75Emulator(DvlTruth(velocity_frd_m_s=(0.2, 0.0, 0.0), altitude_m=1.5), rate_hz=10),
+                    clock=lambda: t[0], start=False)
+    threads, never = [], threading.Event()
+
+    def slow_driver(_data: bytes) -> None:
+        threads.append(threading.current_thread())
+        if len(threads) == 1:
+            never.wait(HANDOFF_TIMEOUT_S + 0.2)  # the first message's handling outlasts the hand-off timeout
+
+    transport = SerialTransport(pty.path, on_data=slow_driver)
+    try:
+        assert transport.wait_connected(5.0)
+        link = SerialLockStep(pty, transport)
+        for t[0] in (0.0, 0.1, 0.2):
+            link.tick()
+            assert transport.status().bytes_handled == pty.bytes_to_host
+            assert link.settled()
+        assert pty.bytes_to_host > 0 and set(threads) == {threading.current_thread()}
+    finally:
+        transport.close()
+        pty.close()

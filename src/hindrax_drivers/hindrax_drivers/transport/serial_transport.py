@@ -8,7 +8,7 @@ Features
 - Opens ``port`` with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a pyserial
   URL such as ``loop://`` / ``socket://host:port``), 8N1 at ``baudrate`` (both devices use
   115200 8N1, docs/devices.md §1.1 and §2.1).
-- Reader thread delivers every received chunk to ``on_data(bytes)``.
+- Reader thread (or :meth:`SerialTransport.pump`'s caller) delivers every received chunk to ``on_data(bytes)``.
 - ``write(bytes)`` from any thread.
 - When the port disappears (read/write error, USB unplug, pty closed) the thread closes it and
   re-opens with exponential backoff (``reconnect_initial_s`` doubling up to ``reconnect_max_s``);
@@ -19,10 +19,8 @@ Features
   node can publish/record the raw traffic (docs/architecture.md §7).
 - Callback exceptions are caught and counted; they never kill the reader thread.
 - ``close()`` stops and joins the thread.
-- ``wait_handled(n, timeout_s)`` blocks until ``n`` received bytes have been through the callbacks: a
-  simulator in the same process holds simulated time on it so a driver stamps what it reads at the time
-  it was sent (lock-step, see :mod:`hindrax_ident.sim.hardware`); a bag replay waits on it before it
-  compares what the driver published.
+- ``pump(n, timeout_s)`` reads in the calling thread until ``n`` received bytes have been through the callbacks
+  (a simulator's lock-step: :mod:`hindrax_ident.sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
 error and has no reconnect, state, or tap.
@@ -81,7 +79,7 @@ class SerialTransport:
     Args:
         port: device path or pyserial URL.
         baudrate: bit rate (8N1).
-        on_data: called from the reader thread with each received chunk (bytes).
+        on_data: called from the reader thread (or :meth:`pump`'s) with each received chunk (bytes).
         on_raw: raw tap ``(direction 'rx'|'tx', data, t_monotonic_s)``; 'tx' is called from the
             writing thread.
         on_connect: called from the reader thread after every successful (re)open.
@@ -124,8 +122,9 @@ class SerialTransport:
         self.clock = clock
         self._ser: Optional[serial.SerialBase] = None
         self._ser_lock = threading.Lock()  # guards _ser swaps and writes
+        self._read_lock = threading.Lock()  # one reader at a time: the thread, or :meth:`pump`'s caller
+        self._caller_reads = False
         self._stats_lock = threading.Lock()
-        self._handled = threading.Condition(self._stats_lock)
         self._stop = threading.Event()
         self._connected_event = threading.Event()
         self._thread: Optional[threading.Thread] = None
@@ -173,12 +172,25 @@ class SerialTransport:
         """Block until connected or ``timeout_s`` passes; returns :attr:`connected`."""
         return self._connected_event.wait(timeout_s)
 
-    def wait_handled(self, n_bytes: int, timeout_s: float) -> bool:
-        """Block until at least ``n_bytes`` received bytes (counted since construction, as
-        ``status().bytes_handled``) have been through the raw tap and ``on_data``, or ``timeout_s`` of wall
-        time passes (the GIL is released meanwhile). Returns True when they have."""
-        with self._handled:
-            return self._handled.wait_for(lambda: self._bytes_handled >= n_bytes, timeout=max(0.0, timeout_s))
+    def pump(self, n_bytes: int, timeout_s: float) -> bool:
+        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since construction, as
+        ``status().bytes_handled``) have been through the tap and ``on_data``, or ``timeout_s`` of wall time passed
+        without a byte (a read in progress may add ``read_timeout_s``); True when they have. The first call takes
+        the reading over from the reader thread for good (it keeps only (re)opening the port)."""
+        if not self._caller_reads:
+            self._caller_reads = True
+            ser = self._ser
+            if ser is not None and hasattr(ser, "cancel_read"):
+                ser.cancel_read()  # a read in progress returns (what it got is handled as usual)
+        deadline = time.monotonic() + max(0.0, timeout_s)
+        with self._read_lock:
+            while self._bytes_handled < n_bytes and time.monotonic() < deadline:
+                ser, before = self._ser, self._bytes_handled
+                if ser is None or not self._read_chunk(ser):
+                    break
+                if self._bytes_handled > before:  # a slow driver is no lost byte
+                    deadline = time.monotonic() + max(0.0, timeout_s)
+        return self._bytes_handled >= n_bytes
 
     def write(self, data: bytes) -> int:
         """Write all of ``data``; returns the number of bytes written.  Thread-safe.
@@ -298,27 +310,38 @@ class SerialTransport:
                     self._stop.wait(delay)
                     delay = min(delay * 2.0, self.reconnect_max_s)
                 continue
-            try:
-                data = ser.read(max(1, ser.in_waiting))
-            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
-                # TypeError/AttributeError: pyserial internals after a concurrent close().
-                if self._stop.is_set():
-                    break
-                text = f"read failed: {exc}"
-                self._note_error(text)
-                with self._ser_lock:
-                    if self._ser is ser:
-                        self._close_port_locked()
-                if self.on_disconnect is not None:
-                    self._call(self.on_disconnect, text)
-                self._stop.wait(delay)
+            if self._caller_reads:  # :meth:`pump` reads; this thread only (re)opens the port
+                self._stop.wait(self.read_timeout_s)
                 continue
-            if data:
-                with self._stats_lock:
-                    self._bytes_rx += len(data)
-                self._tap("rx", data)
-                if self.on_data is not None:
-                    self._call(self.on_data, data)
-                with self._handled:
-                    self._bytes_handled += len(data)
-                    self._handled.notify_all()
+            with self._read_lock:
+                ok = self._read_chunk(ser)
+            if not ok and not self._stop.is_set():
+                self._stop.wait(delay)
+
+    def _read_chunk(self, ser: Any) -> bool:
+        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and ``on_data``; False when
+        the read failed (the port is then closed, ``on_disconnect`` told)."""
+        try:
+            data = ser.read(max(1, ser.in_waiting))
+            data += ser.read(ser.in_waiting) if data else b""  # the rest of a message: one chunk, one callback
+        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+            # TypeError/AttributeError: pyserial internals after a concurrent close().
+            if self._stop.is_set():
+                return False
+            text = f"read failed: {exc}"
+            self._note_error(text)
+            with self._ser_lock:
+                if self._ser is ser:
+                    self._close_port_locked()
+            if self.on_disconnect is not None:
+                self._call(self.on_disconnect, text)
+            return False
+        if data:
+            with self._stats_lock:
+                self._bytes_rx += len(data)
+            self._tap("rx", data)
+            if self.on_data is not None:
+                self._call(self.on_data, data)
+            with self._stats_lock:
+                self._bytes_handled += len(data)
+        return True

@@ -52,14 +52,11 @@ class SerialLockStep:
     """Serve one serial device emulator at the simulator's clock ticks and hold simulated time until its driver has
     handled every byte sent: the serial counterpart of the I2C emulators, which answer inside the driver's call.
 
-    On a free-running pty thread (:class:`PtyDevice` default) the bytes of a ping leave when the thread next wakes
-    (wall time) and the driver stamps them when its reader thread next runs, so on a loaded machine a DVL report
-    went out and was stamped tens of simulated milliseconds after the instant it describes, by an amount that
-    changed from run to run. Here :meth:`tick` (a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode`)
-    writes what is due at tick ``t`` with the driver's clock already at ``t``, and :meth:`settled` (a step gate)
-    lets time advance only when the driver's transport has read and handled all of it
-    (:meth:`~hindrax_drivers.transport.serial_transport.SerialTransport.wait_handled`): the driver stamps every
-    message at the tick it was sent, whatever the load.
+    :meth:`tick` (a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode`) writes what is due at tick
+    ``t``, the driver's clock already at ``t``, and has the driver read and handle it in the simulator's thread
+    (:meth:`~hindrax_drivers.transport.serial_transport.SerialTransport.pump`); :meth:`settled` (a step gate) lets
+    time advance only when all of it is handled: the driver stamps every message at the tick it was sent, whatever
+    the load.
 
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
     on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
@@ -69,7 +66,7 @@ class SerialLockStep:
     Args:
         pty: the emulator's pseudo-terminal, created with ``start=False``.
         transport: the driver's :class:`~hindrax_drivers.transport.serial_transport.SerialTransport`.
-        wait_s: wall time :meth:`settled` blocks for the reader (GIL released) before it answers False, s.
+        wait_s: wall time :meth:`settled` reads for before it answers False, s.
         ready: extra start-up condition for :meth:`startup_done` (the driver's start-up commands are sent).
     """
 
@@ -79,10 +76,11 @@ class SerialLockStep:
         self._connection: int | None = None
         self._written0 = self._handled0 = 0
         self._stalled_since: float | None = None
+        transport.pump(0, 0.0)  # from now on the driver's bytes are read in the simulator's thread
 
     def tick(self, _t_s: float = 0.0) -> None:
         """Send what the emulator has due now (its clock: the drivers' clock), if the driver's port is open, and
-        wait (up to :data:`HANDOFF_TIMEOUT_S` of wall time) until the driver has handled it: its messages are
+        read it (up to :data:`HANDOFF_TIMEOUT_S` of wall time) until the driver has handled it: its messages are
         then published before any other node runs at this tick, whatever the load."""
         st = self.transport.status()
         if not st.connected:
@@ -92,7 +90,7 @@ class SerialLockStep:
             self._connection = st.connections
             self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
         if self.pty.service():
-            self.transport.wait_handled(self._handled0 + self.pty.bytes_to_host - self._written0, HANDOFF_TIMEOUT_S)
+            self.transport.pump(self._handled0 + self.pty.bytes_to_host - self._written0, HANDOFF_TIMEOUT_S)
 
     def startup_done(self) -> bool:
         """With simulated time frozen (call repeatedly, it serves the device at the frozen instant): True when the
@@ -108,7 +106,7 @@ class SerialLockStep:
         if self._connection is None or not self.transport.connected:
             return True
         target = self._handled0 + self.pty.bytes_to_host - self._written0
-        if self.transport.wait_handled(target, self.wait_s):
+        if self.transport.pump(target, self.wait_s):
             self._stalled_since = None
             return True
         st, now = self.transport.status(), time.monotonic()
