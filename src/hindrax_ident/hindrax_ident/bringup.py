@@ -313,15 +313,13 @@ def build_graph(config_path: str | Path, *, sim: bool = False, record: bool = Fa
         nodes["recorder"] = RecorderNode(parameter_overrides=rec_params, **nkw)
     if sim and drive_clocks:
         # The simulator sets every node's ROS clock directly at each tick instead of publishing /clock to ten
-        # subscriptions (the nodes keep use_sim_time, so they start on simulated time; their own idle /clock
-        # subscriptions go, each cost every executor wait). /clock is then not on the wire: a ROS tool in another
-        # process that needs simulated time sees none (the bag keeps every header stamp; `hindrax bag play --clock`
-        # rebuilds it).
+        # subscriptions (the nodes keep use_sim_time, so they start on simulated time; their own /clock
+        # subscriptions stay idle). /clock is then not on the wire: a ROS tool in another process that needs
+        # simulated time sees none (the bag keeps every header stamp; `hindrax bag play --clock` rebuilds it).
         sim_node = nodes["simulator"]
         for name, node in nodes.items():
             if name != "simulator":
                 sim_node.drive_clock(node.get_clock())
-                node._time_source.detach_node()  # rclpy's TimeSource: its /clock subscription; the clock stays
         sim_node.publish_clock_topic = False
     executor = ordered_executor(**kw)
     stepped = bool(sim and drive_clocks)
