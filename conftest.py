@@ -2,9 +2,10 @@
 
 - Discovery and data stay on loopback, over the vehicle's transport: UDPv4 bound to 127.0.0.1, no shared memory
   (:mod:`hindrax_drivers.dds_transport`; docs/architecture.md §11.4).
-- Each pytest-xdist worker (and a plain run) reserves its own ROS domain ID through
+- Each pytest-xdist worker (three, pytest.ini; and a plain run) reserves its own ROS domain ID through
   ``domain_coordinator`` (a port lock, so concurrent test runs on one machine never share a domain) and
-  exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it.
+  exports it as ROS_DOMAIN_ID before any test imports rclpy; subprocesses inherit it. Worker gwN tries
+  10 N + 2 + pid % 7 first (gw0 2-8, gw1 12-18, gw2 22-28), then the next ones up; a taken domain is skipped.
 - A test that leaves SIGINT or SIGTERM ignored in its worker fails (:func:`_stop_signals_not_left_ignored`): every
   child the worker starts later would inherit the ignored signal, and ``kill`` or Ctrl-C could not end it.
 - Scheduling over the workers (pytest.ini: ``--dist loadgroup --no-loadscope-reorder``): each test is a unit of
@@ -39,53 +40,55 @@ _keep_bytecode()
 
 _domain_ctx = None
 
-#: The longest tests, longest first: seconds of each run alone (``-n 0 --durations=0``) at load 4-9 on 2 cores, setup
-#: included (the colcon build, test/conftest.py, falls to the first pool-day test), and the test's ``file::function``.
-#: Tests not listed follow in collection order; refresh the list from ``--durations``. An xdist group (a module with a
-#: module-scoped fixture, or the readers of a shared run) runs as one unit where its listed test stands (its tests run
-#: there, in file order), with the seconds of the whole group.
+#: The longest tests, longest first: seconds of each in a full run with three workers on 2 cores (``-n 3
+#: --durations=60``, quiet machine, 536 s in all), setup included (the colcon build, test/conftest.py, falls to the
+#: first pool-day test), and the test's ``file::function``; tests of 6 s and more. Tests not listed follow in
+#: collection order; refresh the list from ``--durations``. An xdist group (a module with a module-scoped fixture, or
+#: the readers of a shared run) runs as one unit where its listed test stands (its tests run there, in file order),
+#: with the seconds of the whole group (its parts of 5 s and more).
 LONGEST_FIRST = """
-428 test_pool_day.py::test_pool_day_as_the_readme_writes_it
-118 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
- 66 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
- 57 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
- 46 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
- 40 test_gateway.py::test_a_command_aimed_at_one_vehicle_never_moves_the_other
- 28 test_pool_rehearsal.py::test_the_rehearsal_runs_the_readme_pool_day_commands
- 27 test_identification_campaign.py::test_translation_and_yaw_runs_stay_inside_the_pool_box
- 26 test_ident_timing_cv.py::test_the_equation_error_delay_goes_wrong_and_the_cross_validated_one_does_not
- 24 test_calibration_graph.py::test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch
- 23 test_identification_accuracy.py::test_surge_and_heave_recover_the_configured_hydrodynamics
- 23 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
- 23 test_campaign_steps.py::test_the_sinker_is_held_by_reverse_thrust
- 23 test_pool_day.py::test_pool_day
- 22 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
- 21 test_second_graph.py::test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start
- 21 test_thrust_calibration.py::test_sinker_and_float_recover_heave_under_asymmetric_thrust
- 19 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
+348 test_pool_day.py::test_pool_day_as_the_readme_writes_it
+ 95 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
+ 54 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
+ 32 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
+ 32 test_calibration_graph.py::test_hindrax_run_calibrate_ballast_through_the_graph_plays_the_operator
+ 28 test_thrust_calibration.py::test_sinker_and_float_recover_heave_under_asymmetric_thrust
+ 25 test_identification_campaign.py::test_translation_and_yaw_runs_stay_inside_the_pool_box
+ 23 test_gateway.py::test_a_command_aimed_at_one_vehicle_never_moves_the_other
+ 21 test_pure_cores_other_pythons.py::test_pure_core_tests_pass_under_python_3_12_when_present
+ 20 test_second_graph.py::test_a_vehicle_graph_ends_when_another_vehicle_appears_after_its_start
+ 20 test_truth.py::test_five_percent_weaker_thrust_is_covered_or_suspect
+ 18 test_identification_accuracy.py::test_surge_and_heave_recover_the_configured_hydrodynamics
+ 18 test_pool_day.py::test_pool_day
+ 18 test_ident_timing_cv.py::test_the_equation_error_delay_goes_wrong_and_the_cross_validated_one_does_not
+ 18 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
  18 test_pool_day.py::test_armed_esc_stays_armed_while_thrust_flows
- 18 test_campaign_abort_undo.py::test_an_aborted_calibration_asks_to_undo_its_load_and_the_next_campaign_confirms_it
- 17 test_heave_independence.py::test_the_right_model_under_a_coloured_disturbance_is_trusted
- 17 test_ident_fit_intervals.py::test_with_config_the_file_is_config_ready
- 16 test_ident_predict.py::test_predict_csv_scored_independently_matches_the_printed_nrmse
- 16 test_ident_persistence.py::test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter
- 16 test_run_signals.py::test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind
- 16 test_controller_node.py::test_controller_holds_depth_and_altitude_and_yields_wrench
- 15 test_ident_fit.py::test_imu_in_a_rotated_frame_and_unset_header_stamps
- 15 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
- 14 test_refusals_leave_vehicle_armed.py::test_a_refused_tool_does_not_disarm_the_vehicle
- 12 test_ident_bag_fit_same.py::test_ident_bag_and_ident_fit_give_the_same_values_and_intervals
- 12 test_control_evaluate.py::test_known_model_holds_the_depth_step_better_than_the_vehicle_file
- 11 test_graybox_baseline.py::test_timing_chosen_by_cross_validation_is_the_truth
- 10 test_thrust_calibration.py::test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90
- 10 test_results_doc.py::test_bench_writes_its_section_only_when_asked
+ 16 test_calibration_graph.py::test_inclining_step_gives_the_restoring_stiffness_of_roll_and_pitch
+ 15 test_pool_rehearsal.py::test_the_rehearsal_runs_the_readme_pool_day_commands
+ 15 test_thrust_calibration.py::test_tilt_decay_step_gives_roll_and_pitch_inertia_under_thrust_0_90
+ 14 test_ident_fit.py::test_imu_in_a_rotated_frame_and_unset_header_stamps
+ 14 test_ident_saturation.py::test_heave_saturation_is_chosen_and_its_gain_is_the_allocations
+ 13 test_ident_vehicle_graph.py::test_ident_start_on_the_vehicle_graph_reports_and_ctrl_c_cancels_to_neutral
+ 12 test_run_signals.py::test_sigterm_during_the_campaign_closes_the_bag_and_leaves_nothing_behind
+ 11 test_ident_bag_fit_same.py::test_ident_bag_and_ident_fit_give_the_same_values_and_intervals
+ 11 test_rls_online_settings.py::test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign
+ 11 test_identification_node.py::test_action_validates_refuses_disarmed_reports_and_cancels_to_neutral
+ 11 test_control_evaluate.py::test_known_model_holds_the_depth_step_better_than_the_vehicle_file
  10 test_verdicts.py::test_scenarios_command_writes_table_and_json
- 10 test_cli_ident.py::test_run_writes_identification_report_and_summary
- 10 test_ident_fit_every_bag.py::test_ident_fit_on_a_committed_bag_is_clean
- 10 test_rls_online_settings.py::test_online_rls_starts_at_the_priors_and_converges_on_a_short_campaign
-  9 test_rls.py::test_noise_variance_estimate_and_calibrated_std_with_forgetting
-  8 test_excitation.py::test_multisine_campaign_recovers_surge_inertia_and_quadratic_damping
-  6 test_bench_robustness.py::test_twenty_thousand_fuzzed_inputs_per_parser_crash_none
+ 10 test_controller_node.py::test_controller_holds_depth_and_altitude_and_yields_wrench
+  9 test_ident_persistence.py::test_a_dof_that_is_mostly_noise_gets_no_model_and_no_trusted_parameter
+  8 test_campaign_steps.py::test_the_sinker_is_held_by_reverse_thrust
+  8 test_heave_independence.py::test_the_right_model_under_a_coloured_disturbance_is_trusted
+  7 test_ident_persistence.py::test_a_delay_beyond_the_searched_range_is_reported_at_its_edge
+  7 test_thrust_calibration.py::test_line_pull_measures_the_horizontal_scale_in_surge_and_sway
+  7 test_sealed_internal_graph.py::test_no_internal_participant_is_reachable_from_a_non_loopback_address
+  7 test_cli_ident.py::test_run_writes_identification_report_and_summary
+  6 test_icm20948_node.py::test_magnetometer_retry_does_not_interrupt_accel_and_gyro
+  6 test_forged_heartbeats.py::test_supervisor_killed_while_heartbeats_are_forged_stops_the_outputs
+  6 test_graybox_baseline.py::test_timing_chosen_by_cross_validation_is_the_truth
+  6 test_icm20948_node.py::test_lost_magnetometer_is_retried_periodically_until_it_answers_again
+  6 test_ident_fit_intervals.py::test_with_config_the_file_is_config_ready
+  6 test_bringup_sim.py::test_stepped_graph_gives_the_same_messages_for_the_same_seed
 """
 
 

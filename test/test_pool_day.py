@@ -38,6 +38,7 @@ from hindrax_drivers.emulated_devices import EmulatedDevices
 from hindrax_drivers.launch_xml import read_launch
 from hindrax_drivers.process_runner import ProcessRunner
 from hindrax_drivers.testing import ros_context, wait_until
+from hindrax_ident.tools.benchmarks.participant_churn import hardware_priority
 from hindrax_msgs.msg import Dvl
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(1200)]
@@ -514,7 +515,8 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
     identification send it) for several seconds: the ESC stays armed throughout, the widths follow the wrench, the
     output guard never silences the outputs for a late ``esc/heartbeat`` (``esc.guard_heartbeat_timeout_s``) and
     the PCA9685 is never re-initialised while armed (the guard's sleep read back); the one disarm allowed is the
-    guard's for a late supervisor heartbeat (that process starved on a loaded machine, a disarm by design). The gaps
+    supervisor's (its heartbeat late for the guard, or a sensor below its minimum rate: a process starved on a loaded
+    machine, a disarm by design). The gaps
     between ESC heartbeats, as this probe sees them, go into the failure message."""
     from geometry_msgs.msg import WrenchStamped
 
@@ -544,30 +546,34 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
         wrench = day.node.create_publisher(WrenchStamped, "wrench", 10)
         arm = day.node.create_client(SetArmed, "esc/set_armed")
         day.wait(lambda: arm.service_is_ready() and len(beats) > 10 and guard and guard[-1][1] == 0, "vehicle up")
-        answers: list = []
+        # the whole test process real-time while armed (hardware_priority), not only the emulated devices' serving
+        # threads: they need the GIL, and a starved main thread holding it delayed an ESC bus call to 0.16 s (limit
+        # 0.15 s) in a full run at load 13; the vehicle's hardware is never starved by a CPU load
+        with hardware_priority():
+            answers: list = []
 
-        def armed_now() -> bool:  # the ESC refuses until its neutral period and the heartbeats are in: ask again
-            if answers and not answers[-1].done():
+            def armed_now() -> bool:  # the ESC refuses until its neutral period and the heartbeats are in: ask again
+                if answers and not answers[-1].done():
+                    return False
+                if answers and answers[-1].result().success:
+                    return True
+                answers.append(arm.call_async(SetArmed.Request(arm=True)))
                 return False
-            if answers and answers[-1].result().success:
-                return True
-            answers.append(arm.call_async(SetArmed.Request(arm=True)))
-            return False
-        day.wait(armed_now, "armed")
-        day.wait(lambda: pwm and pwm[-1][1], "thrusters/pulse_width armed")
-        t0 = time.monotonic()
-        k = 0
-        while time.monotonic() - t0 < 8.0:  # 50 Hz, surge +-20 N alternating every second
-            if time.monotonic() >= t0 + k * 0.02:
-                msg = WrenchStamped()
-                msg.header.frame_id = "base_link"
-                msg.header.stamp = day.node.get_clock().now().to_msg()
-                msg.wrench.force.x = 20.0 if (k // 50) % 2 == 0 else -20.0
-                wrench.publish(msg)
-                k += 1
-            day.executor.spin_once(timeout_sec=0.005)
-        t1 = time.monotonic()
-        day.wait(lambda: pwm and pwm[-1][0] > t1 and beats[-1] > t1, "reports after the thrust")
+            day.wait(armed_now, "armed")
+            day.wait(lambda: pwm and pwm[-1][1], "thrusters/pulse_width armed")
+            t0 = time.monotonic()
+            k = 0
+            while time.monotonic() - t0 < 8.0:  # 50 Hz, surge +-20 N alternating every second
+                if time.monotonic() >= t0 + k * 0.02:
+                    msg = WrenchStamped()
+                    msg.header.frame_id = "base_link"
+                    msg.header.stamp = day.node.get_clock().now().to_msg()
+                    msg.wrench.force.x = 20.0 if (k // 50) % 2 == 0 else -20.0
+                    wrench.publish(msg)
+                    k += 1
+                day.executor.spin_once(timeout_sec=0.005)
+            t1 = time.monotonic()
+            day.wait(lambda: pwm and pwm[-1][0] > t1 and beats[-1] > t1, "reports after the thrust")
         during = [(t, a, d) for t, a, d in pwm if t0 <= t <= t1]
         beat_times = [t for t in beats if t0 - 0.5 <= t <= t1]
         gaps = [b - a for a, b in zip(beat_times, beat_times[1:])]
@@ -579,8 +585,10 @@ def test_armed_esc_stays_armed_while_thrust_flows(colcon_install, tmp_path):
         # the ESC's heartbeat was never late for the guard, and the chip was never re-initialised under thrust
         assert not [m for _, m in silenced if m.startswith("ESC output state silent")], summary
         assert "re-initialised at neutral, disarmed" not in day.log("esc"), summary
-        # no disarm at all, unless the supervisor's own heartbeat was late for the guard (a starved supervisor
-        # process on a loaded machine: a disarm by design, and not the ESC's)
-        supervisor_late = [m for _, m in silenced if m.startswith("no supervisor heartbeat")]
+        # no disarm at all, unless the supervisor's own heartbeat was late for the guard, or the supervisor tripped
+        # for a sensor below its minimum rate (a starved supervisor or driver process on a loaded machine: a disarm
+        # by design, and not the ESC's; seen once in 5 runs beside two busy loops at load 9: imu/data_raw at 19.3 Hz)
+        supervisor_late = [m for _, m in silenced if m.startswith("no supervisor heartbeat")
+                           or (m.startswith("supervisor tripped:") and "below supervisor.min_rate." in m)]
         assert all(a for _, a, _ in during) or supervisor_late, summary
         assert not silenced or supervisor_late, summary
