@@ -498,7 +498,8 @@ class _Layout:
         self.commanding = False
         self.last_state: tuple[float, int] | None = None  # (monotonic receive time, output_state)
         self.last_msg = None  # the last thrusters/pulse_width (for the failure message)
-        self.seen_armed = False  # thrusters/pulse_width said armed since the last arm
+        self.arming = False  # from just before an arm request until the next step stops commanding
+        self.seen_armed = False  # thrusters/pulse_width said armed since the last arm request
         self.disarmed_after_arm = False  # ... and then disarmed, before 1700 us reached the wire
         self.rearms: list[str] = []  # why the ESC disarmed itself right after an arm (its log line)
         self.last_esc_diag: str = ""
@@ -522,7 +523,7 @@ class _Layout:
         t = time.monotonic()
         self.last_state = (t, msg.output_state)
         self.last_msg = msg
-        if self.commanding:
+        if self.arming:  # from before the request: the armed state may come before its answer is read
             if msg.armed:
                 self.seen_armed = True
             elif self.seen_armed:
@@ -616,7 +617,7 @@ class _Layout:
         """(Re)start what is not running, arm (retrying while the ESC still refuses), command 1700 us until it is
         on the wire."""
         self.hw.watch = False
-        self.commanding = False
+        self.commanding = self.arming = False
         self.ensure()
         wait_until(lambda: self.arm_client.service_is_ready() and self.reset_client.service_is_ready(), 60, None,
                    "processes up")
@@ -635,11 +636,12 @@ class _Layout:
                 time.sleep(0.05)  # the ESC refuses until the guard has released /OE: ask again
             return res.success
         for _ in range(ARM_ATTEMPTS):
+            self.seen_armed = self.disarmed_after_arm = False
+            self.arming = True
             try:
                 wait_until(arm, 30, None, "armed")
             except Exception as exc:
                 raise RuntimeError(f"{exc}: last answer {answer[0]!r}") from exc
-            self.seen_armed = self.disarmed_after_arm = False
             self.commanding = True
             try:
                 wait_until(lambda: self.disarmed_after_arm or (
