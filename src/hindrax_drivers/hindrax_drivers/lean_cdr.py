@@ -11,7 +11,8 @@ node): publishing as bytes (:func:`cdr_encoder`, ``Publisher.publish(bytes)``) t
 (:func:`wrench_stamped_cdr`), the allocation's command and the ESC's ``thrusters/pulse_width``
 (:func:`thruster_pwm_lean`, :func:`thruster_pwm_cdr`), the IMU (:func:`imu_cdr`) and the ESC's latched state
 (:func:`diagnostic_status_cdr`); decoding (:func:`cdr_decoder`) the supervisor's ``imu/data_raw``, whose freshness
-check compares the bytes, and the allocation's ``wrench``. A node's other inputs stay rclpy objects: at the
+check compares the bytes, the allocation's ``wrench`` and the campaign bag reader's topics
+(``BagReader.installed_messages(lean=True)``, half rclpy's time). A node's other inputs stay rclpy objects: at the
 controller's input rates the two cost the same within the spread (docs/architecture.md §10).
 
 :func:`cdr_decoder` returns ``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class. The project's

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import gc
 import math
 import os
 import time
@@ -352,13 +353,15 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
-
+    gc.disable()  # the read and the fits make ~10^6 short-lived objects, few in cycles: no collector passes (1 s)
     try:
         record = read_campaign(bag_dir, cfg).campaign
         idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg,
                                              identify_all_with_errors)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
+    finally:
+        gc.enable()
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
     outcome.wall_time_s = time.monotonic() - wall0
     if idents:

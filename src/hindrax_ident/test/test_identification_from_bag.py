@@ -148,8 +148,8 @@ def _same_record(a, b) -> None:
 
 
 def test_bag_record_is_the_messages_record_by_either_decoder(tmp_path, monkeypatch):
-    """record_from_bag decodes installed types with rclpy (a type not installed: every topic from the bag's own
-    definitions); both give the record of the messages themselves."""
+    """record_from_bag decodes installed types with the lean decoder (a type not installed: every topic from the
+    bag's own definitions); both give the record of the rclpy messages themselves."""
     from rclpy.serialization import serialize_message
 
     from hindrax_drivers.recording import reader
@@ -170,7 +170,7 @@ def test_bag_record_is_the_messages_record_by_either_decoder(tmp_path, monkeypat
     direct = record_from_messages(msgs, cfg)
     _same_record(record_from_bag(tmp_path / "bag", cfg), direct)
 
-    def not_installed(self, topics):
+    def not_installed(self, topics, lean=False):
         raise TypeNotInstalledError("hindrax_msgs/msg/ThrusterPwm is not installed")
         yield  # a generator, as the reader's
 

@@ -157,3 +157,21 @@ def test_report_writes_html_and_pngs(cfg, tmp_path):
     assert "surge_force_velocity.png" in text and "surge_rls.png" in text
     assert (tmp_path / "report" / "surge_force_velocity.png").stat().st_size > 1000
     assert (tmp_path / "report" / "surge_rls.png").stat().st_size > 1000
+
+
+def test_a_report_plot_is_laid_out_once_and_drawn_once(tmp_path, monkeypatch):
+    """The report's plots (a dozen per campaign) are laid out by tight_layout and then drawn once by savefig, not
+    twice (the placeholder engine tight_layout leaves makes savefig draw the figure before drawing it again)."""
+    import matplotlib.figure
+    import matplotlib.pyplot as plt
+
+    from hindrax_ident.identification.assessment import report
+
+    draws = []
+    draw = matplotlib.figure.Figure.draw
+    monkeypatch.setattr(matplotlib.figure.Figure, "draw", lambda self, r: (draws.append(self), draw(self, r))[1])
+    fig, ax = plt.subplots(2, 1)
+    ax[0].plot([0.0, 1.0], [0.0, 1.0])
+    ax[1].set_ylabel("a long label that tight_layout has to make room for")
+    report._save(fig, tmp_path / "p.png")
+    assert len(draws) == 1 and (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")

@@ -101,7 +101,7 @@ def sample_from_range(msg) -> tuple[str, Any]:
 
 
 def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[float]) -> np.ndarray:
-    """Thruster forces (n,) N of the WIRE pulse widths the ESC node wrote (ThrusterPwm of ``thrusters/pulse_width``).
+    """Thruster forces (n,) N of the WIRE pulse widths (n,) the ESC wrote (``thrusters/pulse_width``); (k, n) of (k, n).
 
     The ESC applies reversal (2 neutral - w) and trim after the allocation
     (:class:`hindrax_drivers.pca9685.node.EscOutput`); both are undone here, then the allocation's thrust curve
@@ -110,7 +110,7 @@ def thrust_of_written_widths(cfg: VehicleConfig, curve, written_us: Sequence[flo
     """
     w = np.asarray(written_us, dtype=float)
     th = cfg.thrusters.thrusters
-    if w.shape != (len(th),):
+    if w.shape[-1:] != (len(th),) or w.ndim > 2:
         raise ValueError(f"{w.size} pulse widths, expected {len(th)}")
     neutral = float(cfg.thrusters.pulse_width_neutral_us)
     trim = np.array([t.trim_us for t in th], dtype=float)

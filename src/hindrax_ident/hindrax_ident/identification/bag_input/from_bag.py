@@ -158,25 +158,26 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
     core = AllocationCore(cfg)
     curve = core.allocator.curves[0]
     matrix = np.asarray(core.matrix_frd, dtype=float)
-    n_thr = matrix.shape[1]
-    neutral = np.full(n_thr, float(cfg.thrusters.pulse_width_neutral_us))
     # NaN widths: ESC output state OUTPUT_UNKNOWN (armed or not), the force on the wire is not known: missing
     # (NaN), never neutral thrust; the lagged force stays unknown until 5 time constants after it ends
-    forces = np.array([np.full(n_thr, np.nan) if not np.all(np.isfinite(p[1]))
-                       else thrust_of_written_widths(cfg, curve, p[1] if p[2] else neutral) for p in pwm])
+    widths, armed = np.array([p[1] for p in pwm]), np.array([[p[2]] for p in pwm])
+    known = np.all(np.isfinite(widths), axis=1)[:, None]
+    forces = np.where(known, thrust_of_written_widths(cfg, curve, np.where(
+        known & armed, widths, float(cfg.thrusters.pulse_width_neutral_us))), np.nan)
     f_cmd = np.where(ipw[:, None] >= 0, forces[np.clip(ipw, 0, None)], 0.0)
     tau = float(cfg.thrusters.time_constant_s)
     thrust_lag = ThrustLag(tau)
     settle = int(math.ceil(5.0 * tau / grid_s)) if tau > 0 else 0
     f_lag = np.zeros_like(f_cmd)
-    lag = np.zeros(n_thr)
+    lag = np.zeros(matrix.shape[1])
     wait = 0
+    known = np.all(np.isfinite(f_cmd), axis=1)
     for i in range(n):
-        if not np.all(np.isfinite(f_cmd[i])):
+        if not known[i]:
             f_lag[i], lag, wait = np.nan, f_cmd[i], settle
             continue
         if wait:
-            lag = f_cmd[i] if not np.all(np.isfinite(lag)) else lag
+            lag = f_cmd[i] if i and not known[i - 1] else lag  # the lag starts again from the first known force
             wait -= 1
             f_lag[i] = np.nan
         else:
@@ -251,11 +252,11 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
     if missing:
         raise BagContentError(f"{bag_path}: missing topic(s) {', '.join(missing)}")
     wanted = [tp for tp in present if tp.lstrip("/") in TOPICS]
-    # rclpy's C deserializer for the installed types (a type changed since: from the bag's definition); a type not
-    # installed here: every topic from the bag's definitions (mcap_ros2)
+    # the installed types' lean decoder (a type changed since: from the bag's definition); a type not installed
+    # here: every topic from the bag's definitions (mcap_ros2)
     try:
-        return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.installed_messages(wanted)),
-                                    cfg, grid_s)
+        return record_from_messages(((m.topic.lstrip("/"), obj)
+                                     for m, obj in reader.installed_messages(wanted, lean=True)), cfg, grid_s)
     except TypeNotInstalledError:
         return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.decoded(wanted)), cfg, grid_s)
 
