@@ -5,7 +5,7 @@ in the order of ``relative_file_paths`` (split files are consecutive in time); a
 usable metadata.yaml falls back to its ``*.mcap`` files sorted by their ``_<n>`` index.
 
 - :class:`BagReader` ``.messages(topics, start_ns, end_ns)`` yields :class:`RawMessage` (CDR bytes
-  unchanged) in ascending log time, reading only the wanted records through the chunks' message indexes;
+  unchanged) in ascending log time, using the MCAP chunk indexes;
 - ``.decoded(...)`` decodes with ``mcap_ros2`` from the bag's own ``ros2msg`` schemas, so custom types
   decode without their Python package;
 - :func:`iter_raw_device_data` gives a device emulator the ``hindrax_msgs/RawDeviceData`` of one device.
@@ -18,18 +18,13 @@ Errors: ``FileNotFoundError`` (no bag at the path), :class:`BagError` (not a rea
 """
 from __future__ import annotations
 
-import heapq
-import math
-import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Iterator
 
-from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Message, Schema
-from mcap.stream_reader import get_chunk_data_stream
+from mcap.records import Channel, Message, Schema
 
 from . import msgdefs
 from . import recover as _recover
@@ -37,9 +32,6 @@ from .metadata import MetadataError, read_metadata
 from .msgtypes import TypeNotInstalledError, message_class
 
 RAW_DEVICE_DATA_TYPE = "hindrax_msgs/msg/RawDeviceData"
-#: MCAP records (little-endian): a message index's opcode, length, channel id, entries' byte length; a message's
-#: opcode, length, channel id, sequence, log time, publish time (its data follows)
-_INDEX, _MESSAGE = struct.Struct("<BQHI"), struct.Struct("<BQHIQQ")
 
 
 class BagError(ValueError):
@@ -220,37 +212,18 @@ class BagReader:
         if summary is None:
             yield from _sorted_stream_messages(f, wanted, start_ns, end_ns)
             return
-        ids = {cid: ch for cid, ch in summary.channels.items() if wanted is None or ch.topic in wanted}
-        lo, hi = -1 if start_ns is None else int(start_ns), math.inf if end_ns is None else int(end_ns)
         with open(f, "rb") as fh:
-            if not all(c.message_index_offsets for c in summary.chunk_indexes):  # mcap's reader parses every record
-                yield from (RawMessage(ch.topic, sc.name if sc else "", m.log_time, m.publish_time, m.data)
-                            for sc, ch, m in make_reader(fh).iter_messages(
-                                None if wanted is None else sorted(wanted), starting_at=start_ns, ending_before=end_ns))
-                return
-            # the chunks' message indexes: only the wanted records are read, merged in mcap's log-time order (ties:
-            # the chunk's offset, then the record's offset in it); a chunk is opened when the log time reaches it
-            pending: list = []
-            chunks = sorted((c for c in summary.chunk_indexes if ids.keys() & c.message_index_offsets.keys()
-                             and c.message_end_time >= lo and c.message_start_time < hi),
-                            key=lambda c: (c.message_start_time, c.chunk_start_offset))
-            for c in chunks + [None]:
-                while pending and (c is None or pending[0][0] < c.message_start_time):
-                    t, _, _, cid, publish, data = heapq.heappop(pending)
-                    schema = summary.schemas.get(ids[cid].schema_id)
-                    yield RawMessage(ids[cid].topic, schema.name if schema else "", t, publish, data)
-                if c is None:
-                    return
-                fh.seek(c.chunk_start_offset + 9)  # opcode and length
-                stream, size = get_chunk_data_stream(Chunk.read(ReadDataStream(fh)))
-                records = stream.read(size)
-                for cid in ids.keys() & c.message_index_offsets.keys():
-                    fh.seek(c.message_index_offsets[cid])
-                    for _, off in struct.iter_unpack("<QQ", fh.read(_INDEX.unpack(fh.read(_INDEX.size))[3])):
-                        _, length, cid, _, t, publish = _MESSAGE.unpack_from(records, off)
-                        if lo <= t < hi:
-                            heapq.heappush(pending, (t, c.chunk_start_offset, off, cid, publish,
-                                                     records[off + _MESSAGE.size:off + 9 + length]))
+            reader = make_reader(fh)
+            kwargs: dict[str, Any] = {"log_time_order": True}
+            if wanted is not None:
+                kwargs["topics"] = sorted(wanted)
+            if start_ns is not None:
+                kwargs["starting_at"] = int(start_ns)
+            if end_ns is not None:
+                kwargs["ending_before"] = int(end_ns)
+            for schema, channel, msg in reader.iter_messages(**kwargs):
+                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time, msg.publish_time,
+                                 msg.data)
 
     def decoded(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
                 end_ns: int | None = None) -> Iterator[tuple[RawMessage, Any]]:
