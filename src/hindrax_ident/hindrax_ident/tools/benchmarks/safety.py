@@ -216,7 +216,8 @@ def _rig(ctx, sim_time: bool = False):
 
     wait_until(lambda: r["cmd"].get_subscription_count() > 0 and r["arm"].service_is_ready()
                and r["estop"].service_is_ready() and sup.esc_client.service_is_ready(), 20, spin, "graph ready")
-    r.update(spin=spin, call=call, command=command, armed_at_1700=armed_at_1700, until_neutral=until_neutral)
+    r.update(spin=spin, call=call, command=command, armed_at_1700=armed_at_1700,
+             until_neutral=until_neutral)
     return r
 
 
@@ -227,10 +228,11 @@ def _close(r) -> None:
 
 
 def _ms_row(name: str, seconds, **extra) -> dict:
-    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus ``extra`` keys."""
+    """A row of times ``seconds`` (s): their median in ms, with ``max`` (ms) and ``n``, plus
+    ``extra`` keys."""
     ms = np.asarray(seconds, dtype=float) * 1e3
-    return {"name": name, "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)), "n": int(ms.size),
-            **extra}
+    return {"name": name, "value": float(np.median(ms)), "unit": "ms", "max": float(np.max(ms)),
+            "n": int(ms.size), **extra}
 
 
 def run(quick: bool = False) -> list[dict]:
@@ -260,7 +262,8 @@ def run(quick: bool = False) -> list[dict]:
         for _ in range(repeats):
             # watchdog: the controller stops
             r["armed_at_1700"]()
-            dt = r["until_neutral"]() - esc._steady_command  # from the last command the node took (steady clock)
+            # from the last command the node took (steady clock)
+            dt = r["until_neutral"]() - esc._steady_command
             times["watchdog"].append(dt)
             times["watchdog_beyond_timeout"].append(dt - watchdog_s)
             for name, event in events.items():  # from the event to neutral on the chip
@@ -281,7 +284,8 @@ def run(quick: bool = False) -> list[dict]:
             def keep_commanding():
                 r["command"]()
                 r["spin"]()
-            wait_until(lambda: esc.link.chip_reinits > reinits, 10, keep_commanding, "chip reset detected")
+            wait_until(lambda: esc.link.chip_reinits > reinits, 10, keep_commanding,
+                       "chip reset detected")
             times["chip_reset_detect"].append(esc.link.last_chip_reinit_monotonic - t0)
             times["chip_reset_recover"].append(r["until_neutral"](poll=keep_commanding) - t0)
         _close(r)
@@ -298,8 +302,10 @@ def run(quick: bool = False) -> list[dict]:
              "chip_reset_detect": "read-back every esc.readback_interval_s (0.25 s)",
              "chip_reset_recover": "re-initialised at neutral, disarmed",
              "clock_loss": "use_sim_time, /clock stops: steady-clock watchdog (includes the 0.5 s timeout)"}
-    rows = [_ms_row(f"{name}_ms" if name.startswith(("chip", "clock")) else f"neutral_after_{name}_ms", values,
-                    **({"note": notes[name]} if name in notes else {})) for name, values in times.items()]
+    plain = ("chip", "clock")  # the others are named for the time until neutral
+    rows = [_ms_row(f"{'' if name.startswith(plain) else 'neutral_after_'}{name}_ms", values,
+                    **({"note": notes[name]} if name in notes else {}))
+            for name, values in times.items()]
     # The participant-churn rows join this section from their own module (bench.BENCHMARKS): it imports _Layout.
     return (rows + run_processes(quick) + replay_rows(quick) + frozen_rows(quick) + partial_freeze_rows(quick)
             + gc_rows(quick))
@@ -523,7 +529,8 @@ class _Layout:
         t = time.monotonic()
         self.last_state = (t, msg.output_state)
         self.last_msg = msg
-        if self.arming:  # from before the request: the armed state may come before its answer is read
+        # from before the request: the armed state may come before its answer is read
+        if self.arming:
             if msg.armed:
                 self.seen_armed = True
             elif self.seen_armed:
@@ -771,10 +778,10 @@ def partial_freeze_rows(quick: bool = False) -> list[dict]:
         for _ in range(repeats):
             stopped.append(partial_freeze_stop_s(lay))
     return [_ms_row("partial_freeze_no_feed_outputs_stopped_ms", stopped, target=500.0,
-                    note=f"SIGSTOP of ESC and guard while the supervisor runs, armed at 1700 us, no watchdog "
-                         f"feed; the guard's pings stop, the unit's watchdog ({UNIT_WATCHDOG_S:g} s, systemd's "
-                         "behaviour emulated without its timer slack of up to 250 ms) kills the unit, the freed /OE "
-                         "line goes high")]
+                    note="SIGSTOP of ESC and guard while the supervisor runs, armed at 1700 us, "
+                         "no watchdog feed; the guard's pings stop, the unit's watchdog "
+                         f"({UNIT_WATCHDOG_S:g} s, systemd's behaviour emulated without its timer "
+                         "slack of up to 250 ms) kills the unit, the freed /OE line goes high")]
 
 
 def partial_freeze_stop_s(lay: _UnitLayout, timeout_s: float = 10.0) -> float:
@@ -902,7 +909,8 @@ def replay_rows(quick: bool = False) -> list[dict]:
                     "before the kill" + (f", {1e3 * float(np.median(by_replay)):.0f} ms median, "
                                          f"{1e3 * float(np.max(by_replay)):.0f} ms max after the replay process "
                                          "started" if by_replay else ""))
-    return [_ms_row("supervisor_killed_during_replay_thrust_after_kill_ms", after_kill, target=500.0, note=note),
+    return [_ms_row("supervisor_killed_during_replay_thrust_after_kill_ms", after_kill,
+                    target=500.0, note=note),
             {"name": "replay_alone_stopped_outputs", "value": len(by_replay), "unit": f"of {repeats} repeats",
              "note": stopped_note}]
 
@@ -931,9 +939,9 @@ def frozen_rows(quick: bool = False) -> list[dict]:
                     lay.signal(name, _signal.SIGCONT)
         refused, attempts, answer, granted_s = _guard_without_line(lay, hw)
     return [_ms_row("launch_frozen_outputs_stopped_ms", stopped, target=500.0,
-                    note=f"SIGSTOP of guard, ESC and supervisor while armed at 1700 us; the emulated watchdog "
-                         f"(t_W {WATCHDOG_TIMEOUT_S:g} s, fed at 10 Hz) ran out; the guard's own /OE line was "
-                         f"still low in {oe_low} of {len(stopped)}"),
+                    note="SIGSTOP of guard, ESC and supervisor while armed at 1700 us; the "
+                         f"emulated watchdog (t_W {WATCHDOG_TIMEOUT_S:g} s, fed at 10 Hz) ran out; "
+                         f"the guard's own /OE line was still low in {oe_low} of {len(stopped)}"),
             {"name": "guard_without_line_arming_refused", "value": refused, "unit": f"of {attempts} arm requests",
              "note": f"/OE line busy when the guard started; the ESC answered {answer[:140]!r}; line granted -> "
                      f"armed after {granted_s:.1f} s"}]
@@ -1071,4 +1079,5 @@ def run_processes(quick: bool = False) -> list[dict]:
                  "note": f"of {5 * (QUICK_REPEATS if quick else PROCESS_REPEATS) + 1} arm requests, the ESC "
                          "disarmed itself before 1700 us reached the wire (the bench armed again)"
                          + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")})
-    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name]) for name, values in times.items()]
+    return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name])
+                   for name, values in times.items()]
