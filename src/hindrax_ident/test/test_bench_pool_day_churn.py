@@ -42,6 +42,6 @@ def test_each_heartbeat_has_its_own_largest_gap_and_a_silent_one_is_infinite():
     watch = _Watch(_Node())
     watch.arrivals = {"supervisor": [0.0, 0.05, 0.10], "guard": [0.0, 0.12, 0.15], "esc": [0.0, 0.04, 0.08]}
     assert watch.gaps_s() == pytest.approx({"supervisor": 0.05, "guard": 0.12, "esc": 0.04})
-    assert watch.largest_gap_s() == (pytest.approx(0.12), "guard")
     watch.arrivals["esc"] = [0.0]
-    assert watch.largest_gap_s() == (float("inf"), "esc")
+    assert watch.gaps_s()["esc"] == float("inf")
+    assert watch.rows("x_", "", 100.0)[1]["value"] == float("inf")

@@ -81,25 +81,15 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
                 return [{"name": prefix + name, "value": None, "unit": unit, "note": why} for name, unit in
                         (("disarms", "disarms"), ("heartbeat_gap_max_ms", "ms"),
                          ("heartbeat_sent_gap_max_ms", "ms"), ("tick_gap_max_ms", "ms"))]
-            watch.armed, watch.disarms, watch.active = True, 0, True
+            watch.start()
             with cpu_bound_neighbours(NEIGHBOURS):
                 time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's thread)
             watch.active = False
             load = os.getloadavg()[0]
-            gap_s, who = watch.largest_gap_s()
-            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
-            beats = sum(len(v) for v in watch.arrivals.values())
     what = (f"armed at 1700 us for {duration_s:g} s beside {NEIGHBOURS} CPU-bound processes of another session "
             f"(1-minute load {load:.1f} at the end); safety processes "
             + ("real-time as vehicle.launch.xml starts them" if realtime else "at nice -5 only"))
-    rows = [
-        {"name": prefix + "disarms", "value": watch.disarms, "unit": "disarms", "target": 0, "note": what},
-        {"name": prefix + "heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms", "target": GAP_TARGET_MS,
-         "n": beats, "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
-        {"name": prefix + "heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
-         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
-        watch.tick_gap_row(prefix + "tick_gap_max_ms"),
-    ]
+    rows = watch.rows(prefix, what, GAP_TARGET_MS)
     return rows if realtime else [{k: v for k, v in r.items() if k != "target"} for r in rows]
 
 

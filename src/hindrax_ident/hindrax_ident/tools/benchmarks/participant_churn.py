@@ -162,15 +162,30 @@ class _Watch:
         return {name: max((b - a for a, b in zip(times, times[1:])), default=float("inf"))
                 for name, times in (self.sent if sent else self.arrivals).items()}
 
-    def largest_gap_s(self, sent: bool = False) -> tuple[float, str]:
-        """(largest gap between consecutive beats of one heartbeat, its name); inf when one heartbeat is silent.
-        ``sent``: between their send stamps (the sender late) instead of their arrivals here."""
-        who, worst = max(self.gaps_s(sent).items(), key=lambda item: item[1])
-        return worst, who
+    def start(self) -> None:
+        """Count from here on: the vehicle is armed, no disarm seen yet."""
+        self.armed, self.disarms, self.active = True, 0, True
+
+    def rows(self, prefix: str, what: str, target_ms: float, n: int | None = None) -> list[dict]:
+        """Rows ``<prefix>disarms`` (target 0, note ``what``; ``n``: the trials), ``<prefix>heartbeat_gap_max_ms``
+        (target ``target_ms``), ``<prefix>heartbeat_sent_gap_max_ms`` and ``<prefix>tick_gap_max_ms``."""
+        beats = sum(len(v) for v in self.arrivals.values())
+        rows = [{"name": prefix + "disarms", "value": self.disarms, "unit": "disarms", "target": 0,
+                 **({} if n is None else {"n": n}), "note": what}]
+        for sent, name, note in ((False, "heartbeat_gap_max_ms", "largest gap between two received beats of one "
+                                  f"heartbeat, over {beats} beats"),
+                                 (True, "heartbeat_sent_gap_max_ms", "the same between the beats' send stamps "
+                                  "(the sender late, not the delivery)")):
+            gaps = self.gaps_s(sent)
+            each = ", ".join(f"{k} {v * 1e3:.0f}" for k, v in gaps.items())
+            rows.append({"name": prefix + name, "value": max(gaps.values()) * 1e3, "unit": "ms",
+                         **({} if sent else {"target": target_ms}), "n": beats, "note": f"{note}; each (ms): {each}"})
+        return rows + [self.tick_gap_row(prefix + "tick_gap_max_ms")]
 
 
-def churn_rows(quick: bool = False, default_transports: bool = False) -> list[dict]:
-    """The ``participant_churn_*`` rows (module docstring); ``default_transports``: the comparison run."""
+def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
+    """The ``participant_churn_*`` rows of the ``safety`` section (module docstring); ``default_transports``: the
+    comparison run."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
     with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
         if default_transports:
@@ -181,16 +196,15 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
         try:
             lay.armed_at_1700()
             with hardware_priority() as refused:
-                watch.armed, watch.disarms, watch.active = True, 0, True
+                watch.start()
                 t0 = time.monotonic()
                 k = 0
                 while time.monotonic() - t0 < duration_s:
                     if k % 2 == 0:
                         argv = subscriber_argv(str(k), 3.0)
                     else:
-                        argv = [python_executable(), "-m", "hindrax_ident.tools.cli", "health",
-                                "--quiet", "--timeout",
-                                "3"]
+                        argv = [python_executable(), "-m", "hindrax_ident.tools.cli", "health", "--quiet",
+                                "--timeout", "3"]
                     started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
                                                     stderr=subprocess.DEVNULL))
                     k += 1
@@ -200,9 +214,6 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
                 watch.active = False
             for p in started:
                 p.wait(60)
-            gap_s, who = watch.largest_gap_s()
-            sent_gap_s, sent_who = watch.largest_gap_s(sent=True)
-            beats = sum(len(v) for v in watch.arrivals.values())
         finally:
             for p in started:
                 if p.poll() is None:
@@ -211,22 +222,7 @@ def churn_rows(quick: bool = False, default_transports: bool = False) -> list[di
             f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
             + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport")
             + f"; emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
-    return [
-        {"name": "participant_churn_disarms", "value": watch.disarms, "unit": "disarms", "target": 0,
-         "n": k, "note": what},
-        {"name": "participant_churn_heartbeat_gap_max_ms", "value": gap_s * 1e3, "unit": "ms",
-         "target": GAP_TARGET_MS, "n": beats,
-         "note": f"largest gap between two beats of one heartbeat ({who}), over {beats} beats"},
-        {"name": "participant_churn_heartbeat_sent_gap_max_ms", "value": sent_gap_s * 1e3, "unit": "ms", "n": beats,
-         "note": f"the same between the beats' send stamps (the sender late, not the delivery): {sent_who}"},
-        watch.tick_gap_row("participant_churn_tick_gap_max_ms"),
-    ]
-
-
-def run(quick: bool = False) -> list[dict]:
-    """The ``safety`` section's churn rows on the shipped transport (``make bench``;
-    :mod:`hindrax_ident.tools.bench`)."""
-    return churn_rows(quick)
+    return watch.rows("participant_churn_", what, GAP_TARGET_MS, n=k)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -236,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--default-transports", action="store_true",
                         help="LOCALHOST with rmw_fastrtps's shared memory + UDP instead of the vehicle's profile")
     args = parser.parse_args(argv)
-    print(json.dumps(churn_rows(args.quick, args.default_transports), indent=2))
+    print(json.dumps(run(args.quick, args.default_transports), indent=2))
     return 0
 
 

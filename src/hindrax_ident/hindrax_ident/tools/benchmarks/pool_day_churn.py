@@ -66,7 +66,7 @@ def run(quick: bool = False) -> list[dict]:
         with gateway_running(lay, topside):
             lay.armed_at_1700()
             with hardware_priority() as refused, cpu_bound_neighbours(NEIGHBOURS):
-                watch.armed, watch.disarms, watch.active = True, 0, True
+                watch.start()
                 for k in range(trials):
                     procs = [subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                              for argv, env in (
@@ -83,27 +83,11 @@ def run(quick: bool = False) -> list[dict]:
                                 p.kill()
                 watch.active = False
                 load = os.getloadavg()[0]
-        gaps, sent = watch.gaps_s(), watch.gaps_s(sent=True)
-        beats = sum(len(v) for v in watch.arrivals.values())
-    who = max(gaps, key=gaps.get)
-    sent_who = max(sent, key=sent.get)
-    each = ", ".join(f"{name} {gaps[name] * 1e3:.0f}" for name in gaps)
-    each_sent = ", ".join(f"{name} {sent[name] * 1e3:.0f}" for name in sent)
     what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with default transports, "
             f"one on the topside and `hindrax health` started together (exit codes {sorted(set(exits))}), armed and "
             f"commanded at 1700 us, 50 Hz, beside {NEIGHBOURS} CPU-bound processes (1-minute load {load:.1f} at the "
             f"end); emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
-    return [
-        {"name": "pool_day_churn_disarms", "value": watch.disarms, "unit": "disarms", "target": 0, "n": trials,
-         "note": what},
-        {"name": "pool_day_churn_heartbeat_gap_max_ms", "value": gaps[who] * 1e3, "unit": "ms",
-         "target": GAP_TARGET_MS, "n": beats,
-         "note": f"largest gap between two received beats of one heartbeat, over {beats} beats; each (ms): {each}"},
-        {"name": "pool_day_churn_heartbeat_sent_gap_max_ms", "value": sent[sent_who] * 1e3, "unit": "ms", "n": beats,
-         "note": f"the same between the beats' send stamps (the sender late, not the delivery); each (ms): "
-                 f"{each_sent}"},
-        watch.tick_gap_row("pool_day_churn_tick_gap_max_ms"),
-    ]
+    return watch.rows("pool_day_churn_", what, GAP_TARGET_MS, n=trials)
 
 
 if __name__ == "__main__":
