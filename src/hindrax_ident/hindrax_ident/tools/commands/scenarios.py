@@ -33,13 +33,13 @@ import json
 import math
 import os
 import subprocess
-import sys
 import time
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Sequence
 
 from ... import results_doc
-from .common import add_config_argument, load_vehicle
+from .common import CommandError, add_config_argument, load_vehicle
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
            "format_excitation_table"]
@@ -100,9 +100,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _truth_path(name: str) -> Path:
     p = Path(name)
-    if p.suffix in (".yaml", ".yml") and p.is_file():
-        return p
-    return scenario_dir() / f"{name}.yaml"
+    return p if p.suffix in (".yaml", ".yml") and p.is_file() else scenario_dir() / f"{name}.yaml"
+
+
+def _label(scenario: str) -> str:
+    """A scenario's name: a truth file's stem, or the name as given."""
+    return Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
 
 
 def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[str],
@@ -136,7 +139,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
 
     cfg = load_vehicle(config_path)
     truth = load_truth(cfg, _truth_path(scenario))
-    label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
+    label = _label(scenario)
     exc = str(or_default(cfg.identification.excitation, "ladder") if excitation is None else excitation)
     dur = excitation_duration_s
     if exc != "ladder":
@@ -145,26 +148,25 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     if cal:
         label = f"{label} [calibrate {','.join(cal)}]"
     wall0 = time.monotonic()
-    key = _cache_key(label.split(" [")[0], exc, dur) + (f"-calibrate-{'_'.join(cal)}" if cal else "")
-    cached = _cache_file(cache, key, seed, dofs, levels) if cache else None
+    cached = _cache_file(cache, scenario, exc, dur, cal, seed, dofs, levels) if cache else None
     if cached is not None and cached.is_file():
         idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
     else:
-        sim = Simulator(cfg, seed=seed, truth=truth)
-        if cal:
-            from ...identification.fit.calibration import identify_calibrated, joint_estimate
-            from ...identification.online.executive import calibration_forces, inclining_load
+        from ...identification.fit.calibration import identify_calibrated, joint_estimate
+        from ...identification.online.executive import calibration_forces, inclining_load
 
+        operator = {}
+        if cal:
             w_ballast, f_line = calibration_forces(cfg)
-            record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim, excitation=exc,
-                              excitation_duration_s=dur, calibrate=cal, ballast_weight_in_water_n=w_ballast,
-                              line_pull_n=f_line, inclining_load_n_m=inclining_load(cfg)).run()
+            operator = dict(calibrate=cal, ballast_weight_in_water_n=w_ballast, line_pull_n=f_line,
+                            inclining_load_n_m=inclining_load(cfg))
+        record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=Simulator(cfg, seed=seed, truth=truth),
+                          excitation=exc, excitation_duration_s=dur, **operator).run()
+        if cal:
             idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
             if idents:
                 joint_estimate(idents, cfg, record.calibration)
         else:
-            record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=sim, excitation=exc,
-                              excitation_duration_s=dur).run()
             idents, errors = identify_all_with_errors(record, cfg)
         aborted, abort_reason, campaign_wall = bool(record.aborted), record.abort_reason, time.monotonic() - wall0
         if cached is not None:
@@ -187,8 +189,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
                 continue
             v, s, tr = float(r.values[name]), float(r.std[name]), float(true[name])
             lo, hi = r.ci95[name]
-            rv, rs = r.online.get(name, (math.nan, math.nan))
-            rs = rls_std.get(name, math.nan)
+            rv, rs = r.online.get(name, (math.nan, math.nan))[0], rls_std.get(name, math.nan)
             rls = {"rls_value": float(rv), "rls_std": rs if math.isfinite(rs) else None,
                    "rls_covers": bool(math.isfinite(rs) and abs(float(rv) - tr) <= 1.96 * rs)}
             # the older interval: the fit's own std and the t quantile of (samples - parameters), no verdict
@@ -201,24 +202,21 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
                          "verdict": a[name]["verdict"], "reasons": a[name]["reasons"], "t_dof": a[name]["t_dof"],
                          "pool_time_s": float(r.pool_time_s)})
     return {"scenario": label, "excitation": exc, "calibrate": cal, "seed": int(seed), "wall_s": campaign_wall,
-            "aborted": aborted,
-            "abort_reason": abort_reason, "errors": errors, "cases": rows,
+            "aborted": aborted, "abort_reason": abort_reason, "errors": errors, "cases": rows,
             "dofs": {d: {"verdict": v["verdict"], "reasons": v["reasons"], "checks": v["checks"]}
                      for d, v in verdicts.items()}}
 
 
-def _cache_key(scenario: str, excitation: str | None, duration_s: float | None) -> str:
-    """Cache name of a case: the scenario for the ladder (None: taken as the ladder, the shipped default), else
-    ``<scenario>-<excitation>[-<duration>s]``."""
-    label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
-    if excitation in (None, "ladder"):
-        return label
-    return f"{label}-{excitation}{'' if duration_s is None else f'-{duration_s:g}s'}"
-
-
-def _cache_file(cache: str, scenario: str, seed: int, dofs: Sequence[str], levels: int | None) -> Path:
-    label = Path(scenario).stem if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
-    return Path(cache) / f"{label}-seed{seed}-{'_'.join(dofs)}-levels{levels}.pickle"
+def _cache_file(cache: str, scenario: str, excitation: str | None, duration_s: float | None,
+                calibrate: Sequence[str], seed: int, dofs: Sequence[str], levels: int | None) -> Path:
+    """The pickle of one case in ``cache``: ``<scenario>[-<excitation>[-<duration>s]][-calibrate-<steps>]-seed<seed>
+    -<dofs>-levels<levels>.pickle``, the excitation left out for the ladder (None: the shipped default)."""
+    key = _label(scenario)
+    if excitation not in (None, "ladder"):
+        key += f"-{excitation}{'' if duration_s is None else f'-{duration_s:g}s'}"
+    if calibrate:
+        key += f"-calibrate-{'_'.join(calibrate)}"
+    return Path(cache) / f"{key}-seed{seed}-{'_'.join(dofs)}-levels{levels}.pickle"
 
 
 def _case_star(args):
@@ -227,8 +225,7 @@ def _case_star(args):
     try:
         return run_case(*args)
     except Exception as exc:  # noqa: BLE001 - reported per case, the suite goes on
-        return {"scenario": Path(str(args[1])).stem if str(args[1]).endswith((".yaml", ".yml")) else str(args[1]),
-                "seed": int(args[2]), "wall_s": 0.0, "aborted": True, "abort_reason": "",
+        return {"scenario": _label(args[1]), "seed": int(args[2]), "wall_s": 0.0, "aborted": True, "abort_reason": "",
                 "error": f"{type(exc).__name__}: {exc}", "errors": {}, "cases": [], "dofs": {}}
 
 
@@ -353,7 +350,6 @@ def format_table(summary: dict, detail: bool = True) -> str:
 
 
 def _commit() -> str:
-    import os
     if os.environ.get("HINDRAX_COMMIT"):  # a run from an exported snapshot of a commit (no .git)
         return os.environ["HINDRAX_COMMIT"]
     try:
@@ -371,41 +367,32 @@ def run(args: argparse.Namespace) -> int:
     names = [s.strip() for s in (args.scenarios.split(",") if args.scenarios else scenario_names()) if s.strip()]
     missing = [n for n in names if not _truth_path(n).is_file()]
     if missing:
-        print(f"--scenarios: no truth file for {missing}; shipped: {', '.join(scenario_names())}", file=sys.stderr)
-        return 1
+        raise CommandError(f"--scenarios: no truth file for {missing}; shipped: {', '.join(scenario_names())}")
     dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
     if not dofs or any(d not in DOFS for d in dofs):
-        print(f"--dofs: {args.dofs!r}: comma-separated DOFs from {', '.join(DOFS)}", file=sys.stderr)
-        return 1
+        raise CommandError(f"--dofs: {args.dofs!r}: comma-separated DOFs from {', '.join(DOFS)}")
     if args.seeds < 1 or args.jobs < 1:
-        print("--seeds and --jobs must be >= 1", file=sys.stderr)
-        return 1
+        raise CommandError("--seeds and --jobs must be >= 1")
     if args.cached_only and not args.cache:
-        print("--cached-only needs --cache DIR", file=sys.stderr)
-        return 1
+        raise CommandError("--cached-only needs --cache DIR")
     from ...identification.online.excitation import EXCITATIONS
     excitations = [e.strip() for e in str(args.excitation).split(",") if e.strip()] if args.excitation else [None]
     if not excitations or any(e not in EXCITATIONS for e in excitations if e is not None):
-        print(f"--excitation: {args.excitation!r}: comma-separated from {', '.join(EXCITATIONS)}", file=sys.stderr)
-        return 1
+        raise CommandError(f"--excitation: {args.excitation!r}: comma-separated from {', '.join(EXCITATIONS)}")
     if args.excitation_duration is not None and not args.excitation_duration > 0:
-        print(f"--excitation-duration must be > 0 s, got {args.excitation_duration}", file=sys.stderr)
-        return 1
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    # seed-major: every scenario's seed 1 first, so that a suite cut short still covers every scenario
+        raise CommandError(f"--excitation-duration must be > 0 s, got {args.excitation_duration}")
     from ...identification.online.executive import CALIBRATION_STEPS
     cal = [c.strip() for c in str(args.calibrate or "").split(",") if c.strip()]
     if any(c not in CALIBRATION_STEPS for c in cal):
-        print(f"--calibrate: {args.calibrate!r}: comma-separated from {', '.join(CALIBRATION_STEPS)}", file=sys.stderr)
-        return 1
+        raise CommandError(f"--calibrate: {args.calibrate!r}: comma-separated from {', '.join(CALIBRATION_STEPS)}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    # seed-major: every scenario's seed 1 first, so that a suite cut short still covers every scenario
     jobs = [(args.config, n, seed, dofs, args.levels, args.cache, e, args.excitation_duration, cal)
             for seed in range(1, args.seeds + 1) for n in names for e in excitations]
     not_run = []
     if args.cached_only:
-        ckey = f"-calibrate-{'_'.join(cal)}" if cal else ""
-        keep = [j for j in jobs if _cache_file(args.cache, _cache_key(j[1], j[6], j[7]) + ckey, j[2], dofs,
-                                               args.levels).is_file()]
+        keep = [j for j in jobs if _cache_file(args.cache, j[1], j[6], j[7], cal, j[2], dofs, args.levels).is_file()]
         not_run = [f"{j[1]} seed {j[2]}" for j in jobs if j not in keep]
         jobs = keep
     wall0 = time.monotonic()
@@ -415,15 +402,9 @@ def run(args: argparse.Namespace) -> int:
     from ...identification.fit import dof_model  # noqa: F401
     from ...identification.online import estimators  # noqa: F401
     from ...sim import campaign, disturbances, simulator, truth  # noqa: F401
-    if args.jobs > 1:
-        import multiprocessing as mp
-        with mp.get_context("fork").Pool(args.jobs) as pool:
-            for res in pool.imap(_case_star, jobs):
-                results.append(res)
-                _say(res, wall0)
-    else:
-        for job in jobs:
-            res = _case_star(job)
+    import multiprocessing as mp
+    with mp.get_context("fork").Pool(args.jobs) if args.jobs > 1 else nullcontext() as pool:
+        for res in (pool.imap if pool else map)(_case_star, jobs):
             results.append(res)
             _say(res, wall0)
     summary = summarise(results)
@@ -431,12 +412,11 @@ def run(args: argparse.Namespace) -> int:
     doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names, "calibrate": cal,
            "levels": args.levels, "not_run": not_run,
            "wall_time_s": time.monotonic() - wall0, "summary": summary, "runs": results}
-    (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
     table = format_table(summary)
     if args.excitation:
         doc["excitation_table"] = format_excitation_table(results)
         table += "\n\n" + doc["excitation_table"]
-        (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
+    (out / "scenarios.json").write_text(json.dumps(doc, indent=1, default=_json_default))
     missing = f"; not run: {', '.join(not_run)}" if not_run else ""
     calib = f", calibrate {','.join(cal)}" if cal else ""
     (out / "scenarios.md").write_text(f"Scenario suite, {date}, commit {doc['commit']}, seeds 1-{args.seeds}, "
