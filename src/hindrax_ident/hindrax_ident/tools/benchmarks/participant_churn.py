@@ -167,25 +167,28 @@ class _Watch:
         self.armed, self.disarms, self.active = True, 0, True
 
     def rows(self, prefix: str, what: str, target_ms: float, n: int | None = None) -> list[dict]:
-        """Rows ``<prefix>disarms`` (target 0, note ``what``; ``n``: the trials), ``<prefix>heartbeat_gap_max_ms``
-        (target ``target_ms``), ``<prefix>heartbeat_sent_gap_max_ms`` and ``<prefix>tick_gap_max_ms``."""
+        """Rows ``<prefix>disarms`` (target 0, note ``what``; ``n``: the trials),
+        ``<prefix>heartbeat_gap_max_ms`` (target ``target_ms``),
+        ``<prefix>heartbeat_sent_gap_max_ms`` and ``<prefix>tick_gap_max_ms``."""
         beats = sum(len(v) for v in self.arrivals.values())
         rows = [{"name": prefix + "disarms", "value": self.disarms, "unit": "disarms", "target": 0,
                  **({} if n is None else {"n": n}), "note": what}]
-        for sent, name, note in ((False, "heartbeat_gap_max_ms", "largest gap between two received beats of one "
-                                  f"heartbeat, over {beats} beats"),
-                                 (True, "heartbeat_sent_gap_max_ms", "the same between the beats' send stamps "
-                                  "(the sender late, not the delivery)")):
+        for sent, name, note in (
+                (False, "heartbeat_gap_max_ms",
+                 f"largest gap between two received beats of one heartbeat, over {beats} beats"),
+                (True, "heartbeat_sent_gap_max_ms",
+                 "the same between the beats' send stamps (the sender late, not the delivery)")):
             gaps = self.gaps_s(sent)
             each = ", ".join(f"{k} {v * 1e3:.0f}" for k, v in gaps.items())
             rows.append({"name": prefix + name, "value": max(gaps.values()) * 1e3, "unit": "ms",
-                         **({} if sent else {"target": target_ms}), "n": beats, "note": f"{note}; each (ms): {each}"})
+                         **({} if sent else {"target": target_ms}), "n": beats,
+                         "note": f"{note}; each (ms): {each}"})
         return rows + [self.tick_gap_row(prefix + "tick_gap_max_ms")]
 
 
 def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
-    """The ``participant_churn_*`` rows of the ``safety`` section (module docstring); ``default_transports``: the
-    comparison run."""
+    """The ``participant_churn_*`` rows of the ``safety`` section (module docstring);
+    ``default_transports``: the comparison run."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
     with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
         if default_transports:
@@ -203,8 +206,8 @@ def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
                     if k % 2 == 0:
                         argv = subscriber_argv(str(k), 3.0)
                     else:
-                        argv = [python_executable(), "-m", "hindrax_ident.tools.cli", "health", "--quiet",
-                                "--timeout", "3"]
+                        argv = [python_executable(), "-m", "hindrax_ident.tools.cli", "health",
+                                "--quiet", "--timeout", "3"]
                     started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
                                                     stderr=subprocess.DEVNULL))
                     k += 1

@@ -12,8 +12,8 @@ import time
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["CommandError", "CONFIG_HELP", "WallProgress", "add_config_argument", "load_vehicle",
-           "remove_if_empty", "result_dir", "update_vehicle_file", "yaml_float"]
+__all__ = ["CommandError", "CONFIG_HELP", "WallProgress", "add_config_argument", "choices",
+           "load_vehicle", "remove_if_empty", "result_dir", "update_vehicle_file", "yaml_float"]
 
 CONFIG_HELP = "vehicle configuration (default ros_ws/config/hindrax.yaml)"
 
@@ -25,6 +25,17 @@ class CommandError(Exception):
 def add_config_argument(parser: argparse.ArgumentParser, default: Any = None) -> None:
     """``--config FILE``: the vehicle configuration (None or empty: the default file, :func:`load_vehicle`)."""
     parser.add_argument("--config", default=default, metavar="FILE", help=CONFIG_HELP)
+
+
+def choices(option: str, text: str | None, allowed, what: str, empty_ok: bool = True) -> list[str]:
+    """The comma-separated words of ``text`` (None or blank: none). Raises :class:`CommandError`
+    ``"<option>: unknown <what>(s) [...]; choose from ..."`` for a word not in ``allowed``, or for
+    none when not ``empty_ok``."""
+    words = [w.strip() for w in str(text or "").split(",") if w.strip()]
+    bad = [w for w in words if w not in allowed]
+    if bad or not (words or empty_ok):
+        raise CommandError(f"{option}: unknown {what}(s) {bad}; choose from {', '.join(allowed)}")
+    return words
 
 
 def load_vehicle(path: str | None = None) -> Any:

@@ -33,13 +33,14 @@ import signal
 import time
 from typing import Any, Callable
 
-from .common import CommandError
-from .vehicle import Target, add_vehicle_arguments, call_service, find_vehicle, with_ros
+from .common import CommandError, choices
+from .vehicle import Target, add_vehicle_arguments, call_service, find_vehicle, wait_for, with_ros
 
 __all__ = ["add_arguments", "run", "format_feedback", "format_status", "start_campaign", "call_continue"]
 
 _PHASE_NAMES = {0: "idle", 1: "positioning", 2: "running", 3: "returning", 4: "done", 5: "aborted"}
 _ROTATIONS = ("roll", "pitch", "yaw")
+_NO_STACK = "is the stack running (hindrax bringup)?"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -101,10 +102,7 @@ def _parse_calibrate(args: argparse.Namespace) -> list[str]:
     without one."""
     from ...identification.online.executive import CALIBRATION_STEPS
 
-    steps = [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
-    bad = [c for c in steps if c not in CALIBRATION_STEPS]
-    if bad:
-        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+    steps = choices("--calibrate", getattr(args, "calibrate", ""), CALIBRATION_STEPS, "step")
     if getattr(args, "calibration_only", False) and not steps:
         raise CommandError("--calibration-only needs --calibrate STEP[,STEP]")
     return steps
@@ -113,10 +111,7 @@ def _parse_calibrate(args: argparse.Namespace) -> list[str]:
 def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float]]:
     from hindrax_drivers.config import DOFS
 
-    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
-    bad = [d for d in dofs if d not in DOFS]
-    if bad:
-        raise CommandError(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
+    dofs = choices("--dofs", args.dofs, DOFS, "DOF")
     if args.levels < 0:
         raise CommandError(f"--levels: {args.levels} is not >= 0")
     try:
@@ -150,12 +145,8 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     client = ActionClient(node, RunIdentification, action_name)
     goals = GoalSender(node, client, action_name)
     spin = lambda: executor.spin_once(timeout_sec=0.1)  # noqa: E731
-    deadline = time.monotonic() + server_timeout_s
-    while not client.server_is_ready():
-        if time.monotonic() > deadline:
-            raise CommandError(f"no run_identification server within {server_timeout_s:g} s: is the stack running "
-                               "(hindrax bringup)?")
-        spin()
+    wait_for(executor, client.server_is_ready, server_timeout_s, "no run_identification server",
+             _NO_STACK)
     goal = RunIdentification.Goal(dofs=dofs, levels_per_dof=levels, level_fractions=fractions,
                                   calibrate=list(calibrate or []), calibration_only=bool(calibration_only))
     goal = sign(goal)
@@ -200,13 +191,11 @@ def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fract
     return bool(res.success), str(res.message)
 
 
-def _with_ros(body: Callable[[Any, Any], int]) -> int:
-    return with_ros(body, "hindrax_ident_cli")  # Ctrl-C is ours (cancel)
-
-
 def _on_vehicle(args: argparse.Namespace, body: Callable[[Any, Any, Target], Any]) -> Any:
     """``body(node, executor, target)`` with the vehicle the arguments name (:func:`find_vehicle`)."""
-    return _with_ros(lambda node, ex: body(node, ex, find_vehicle(node, ex, args.vehicle, args.discovery_timeout)))
+    def on_ros(node, ex):
+        return body(node, ex, find_vehicle(node, ex, args.vehicle, args.discovery_timeout))
+    return with_ros(on_ros, "hindrax_ident_cli")  # Ctrl-C is ours (cancel)
 
 
 def _start(args: argparse.Namespace) -> int:
@@ -234,12 +223,7 @@ def _status(args: argparse.Namespace) -> int:
         got: list = []
         node.create_subscription(ManeuverStatus, target.resolve("identification/status", "identification/status"),
                                  got.append, 10)
-        deadline = time.monotonic() + args.timeout
-        while not got and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-        if not got:
-            raise CommandError(f"no identification/status within {args.timeout:g} s: is the stack running "
-                               "(hindrax bringup)?")
+        wait_for(executor, lambda: got, args.timeout, "no identification/status", _NO_STACK)
         print(format_status(got[-1]), flush=True)
         return 0
 
@@ -255,8 +239,7 @@ def call_continue(node: Any, executor: Any, timeout_s: float, target: Target | N
 
     name = "identification/continue"
     srv, service, request = (target or Target("", False)).service(name, name, Trigger)
-    res = call_service(node, executor, (srv, service, request), timeout_s,
-                       "is the stack running (hindrax bringup)?",
+    res = call_service(node, executor, (srv, service, request), timeout_s, _NO_STACK,
                        "check with hindrax ident status before calling it again")
     return bool(res.success), str(res.message)
 

@@ -30,7 +30,8 @@ import os
 from pathlib import Path
 
 from ... import results_doc
-from .common import CommandError, WallProgress, add_config_argument, load_vehicle, result_dir
+from .common import (CommandError, WallProgress, add_config_argument, choices, load_vehicle,
+                     result_dir)
 
 __all__ = ["add_arguments", "run", "run_graph", "run_in_process", "format_summary"]
 
@@ -93,38 +94,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                  "faster), as `hindrax ident campaign`")
 
 
-def format_summary(identifications: dict) -> str:
-    """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error, verdict with its
-    first reason (a parameter at a bound: that one, it has no interval). A number that is not finite prints ``-``."""
+def _summary(identifications: dict) -> list[tuple[dict, str, str, str]]:
+    """Per row of :func:`~hindrax_ident.identification.assessment.report.summary_rows`: (the row,
+    its relative error or ``-``, its configured value or ``-``, its verdict with the first reason: a
+    parameter at a bound that one, it has no interval)."""
     from ...identification.assessment.report import summary_rows
 
-    def num(x, spec):
-        return format(x, spec) if x is not None and math.isfinite(x) else format("-", ">" + spec.split(".")[0])
-
-    lines = [f"{'DOF':6s} {'parameter':28s} {'identified':>12s} {'std':>9s} {'unit':9s} {'configured':>11s} "
-             f"{'rel.err':>8s}  verdict"]
+    out = []
     for r in summary_rows(identifications):
         err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f}%"
         tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
         bound = [x for x in r.get("reasons", []) if "bound" in x and "no interval" in x]
         why = f" ({(bound or r['reasons'])[0]})" if r.get("reasons") else ""
-        lines.append(f"{r['dof']:6s} {r['parameter']:28s} {num(r['value'], '12.5g')} {num(r['std'], '9.3g')} "
-                     f"{r['unit']:9s} {tr:>11s} {err:>8s}  {r.get('verdict', '-')}{why}")
+        out.append((r, err, tr, f"{r.get('verdict', '-')}{why}"))
+    return out
+
+
+def format_summary(identifications: dict) -> str:
+    """The end-of-run table: DOF, parameter, value +- std, unit, configured value, relative error,
+    verdict with its first reason (:func:`_summary`). A number that is not finite prints ``-``."""
+    def num(x, spec):
+        ok = x is not None and math.isfinite(x)
+        return format(x, spec) if ok else format("-", ">" + spec.split(".")[0])
+
+    lines = [f"{'DOF':6s} {'parameter':28s} {'identified':>12s} {'std':>9s} {'unit':9s} "
+             f"{'configured':>11s} {'rel.err':>8s}  verdict"]
+    for r, err, tr, verdict in _summary(identifications):
+        lines.append(f"{r['dof']:6s} {r['parameter']:28s} {num(r['value'], '12.5g')} "
+                     f"{num(r['std'], '9.3g')} {r['unit']:9s} {tr:>11s} {err:>8s}  {verdict}")
     return "\n".join(lines)
 
 
 def summary_markdown(identifications: dict) -> str:
-    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth, error, verdict)."""
-    from ...identification.assessment.report import summary_rows
-    rows = []
-    for r in summary_rows(identifications):
-        err = "-" if not math.isfinite(r["relative_error"]) else f"{100 * r['relative_error']:+.2f} %"
-        tr = "-" if r["truth"] is None else f"{r['truth']:.4g}"
-        why = f" ({r['reasons'][0]})" if r.get("reasons") else ""
-        rows.append([r["dof"], r["parameter"], f"{r['value']:.5g}", f"{r['std']:.3g}", r["unit"], tr, err,
-                     f"{r.get('verdict', '-')}{why}"])
-    return results_doc.markdown_table(["DOF", "parameter", "identified", "std", "unit", "configured (truth)",
-                                       "rel. error", "verdict"], rows)
+    """:func:`format_summary` as a Markdown table (value, std, the simulator's configured truth,
+    error, verdict)."""
+    header = ["DOF", "parameter", "identified", "std", "unit", "configured (truth)", "rel. error",
+              "verdict"]
+    return results_doc.markdown_table(header, [
+        [r["dof"], r["parameter"], f"{r['value']:.5g}", f"{r['std']:.3g}", r["unit"], tr, err, why]
+        for r, err, tr, why in _summary(identifications)])
 
 
 def _write_results(args: argparse.Namespace, identifications: dict, path: str, wall_s: float) -> None:
@@ -178,10 +186,7 @@ def _check_args(args) -> tuple[object, list[str]]:
             cfg = load_config(cfg.source, overrides)
         except ConfigError as exc:
             raise CommandError(f"--ballast-mass-kg/--ballast-volume-m3/--line-pull-n: {exc}") from exc
-    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
-    bad = [d for d in dofs if d not in DOFS]
-    if bad or not dofs:
-        raise CommandError(f"--dofs: unknown DOF(s) {bad}; choose from {', '.join(DOFS)}")
+    dofs = choices("--dofs", args.dofs, DOFS, "DOF", empty_ok=False)
     if args.levels is not None and args.levels < 1:
         raise CommandError("--levels must be >= 1")
     if args.rtf < 0:
@@ -189,22 +194,19 @@ def _check_args(args) -> tuple[object, list[str]]:
     dur = getattr(args, "excitation_duration", None)
     if dur is not None and not (5.0 <= dur <= 1800.0):
         raise CommandError(f"--excitation-duration {dur}: allowed 5-1800 s (identification.excitation_duration_s)")
-    from ...identification.online.executive import CALIBRATION_STEPS
-
-    cal = _calibration_steps(args)
-    bad = [c for c in cal if c not in CALIBRATION_STEPS]
-    if bad:
-        raise CommandError(f"--calibrate: unknown step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
     from ...identification.online.executive import expand_calibration
 
-    if "float" in expand_calibration(cal) and cfg.known_forces.float_net_buoyancy_n is None:
+    cal = expand_calibration(_calibration_steps(args))
+    if "float" in cal and cfg.known_forces.float_net_buoyancy_n is None:
         raise CommandError("--calibrate: the float step needs calibration.float_mass_kg and "
                            "calibration.float_volume_m3 in the vehicle file")
     return cfg, dofs
 
 
 def _calibration_steps(args) -> list[str]:
-    return [c.strip() for c in str(getattr(args, "calibrate", "") or "").split(",") if c.strip()]
+    from ...identification.online.executive import CALIBRATION_STEPS
+
+    return choices("--calibrate", getattr(args, "calibrate", ""), CALIBRATION_STEPS, "step")
 
 
 def _calibration_overrides(args) -> dict:

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ... import results_doc
-from .common import CommandError, add_config_argument, load_vehicle
+from .common import CommandError, add_config_argument, choices, load_vehicle
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
            "format_excitation_table"]
@@ -148,7 +148,7 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
     if cal:
         label = f"{label} [calibrate {','.join(cal)}]"
     wall0 = time.monotonic()
-    cached = _cache_file(cache, scenario, exc, dur, cal, seed, dofs, levels) if cache else None
+    cached = _cache_file(cache, scenario, seed, dofs, levels, exc, dur, cal) if cache else None
     if cached is not None and cached.is_file():
         idents, errors, aborted, abort_reason, campaign_wall = pickle.loads(cached.read_bytes())
     else:
@@ -160,8 +160,9 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
             w_ballast, f_line = calibration_forces(cfg)
             operator = dict(calibrate=cal, ballast_weight_in_water_n=w_ballast, line_pull_n=f_line,
                             inclining_load_n_m=inclining_load(cfg))
-        record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed, sim=Simulator(cfg, seed=seed, truth=truth),
-                          excitation=exc, excitation_duration_s=dur, **operator).run()
+        record = Campaign(cfg, dofs=list(dofs), levels=levels, seed=seed,
+                          sim=Simulator(cfg, seed=seed, truth=truth), excitation=exc,
+                          excitation_duration_s=dur, **operator).run()
         if cal:
             idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
             if idents:
@@ -207,10 +208,11 @@ def run_case(config_path: str | None, scenario: str, seed: int, dofs: Sequence[s
                      for d, v in verdicts.items()}}
 
 
-def _cache_file(cache: str, scenario: str, excitation: str | None, duration_s: float | None,
-                calibrate: Sequence[str], seed: int, dofs: Sequence[str], levels: int | None) -> Path:
-    """The pickle of one case in ``cache``: ``<scenario>[-<excitation>[-<duration>s]][-calibrate-<steps>]-seed<seed>
-    -<dofs>-levels<levels>.pickle``, the excitation left out for the ladder (None: the shipped default)."""
+def _cache_file(cache: str, scenario: str, seed: int, dofs: Sequence[str], levels: int | None,
+                excitation: str | None, duration_s: float | None, calibrate: Sequence[str]) -> Path:
+    """The pickle of one case in ``cache``: ``<scenario>[-<excitation>[-<duration>s]]``
+    ``[-calibrate-<steps>]-seed<seed>-<dofs>-levels<levels>.pickle``, the excitation left out for
+    the ladder (None: the shipped default)."""
     key = _label(scenario)
     if excitation not in (None, "ladder"):
         key += f"-{excitation}{'' if duration_s is None else f'-{duration_s:g}s'}"
@@ -225,7 +227,8 @@ def _case_star(args):
     try:
         return run_case(*args)
     except Exception as exc:  # noqa: BLE001 - reported per case, the suite goes on
-        return {"scenario": _label(args[1]), "seed": int(args[2]), "wall_s": 0.0, "aborted": True, "abort_reason": "",
+        return {"scenario": _label(args[1]), "seed": int(args[2]), "wall_s": 0.0, "aborted": True,
+                "abort_reason": "",
                 "error": f"{type(exc).__name__}: {exc}", "errors": {}, "cases": [], "dofs": {}}
 
 
@@ -367,24 +370,19 @@ def run(args: argparse.Namespace) -> int:
     names = [s.strip() for s in (args.scenarios.split(",") if args.scenarios else scenario_names()) if s.strip()]
     missing = [n for n in names if not _truth_path(n).is_file()]
     if missing:
-        raise CommandError(f"--scenarios: no truth file for {missing}; shipped: {', '.join(scenario_names())}")
-    dofs = [d.strip() for d in str(args.dofs).split(",") if d.strip()]
-    if not dofs or any(d not in DOFS for d in dofs):
-        raise CommandError(f"--dofs: {args.dofs!r}: comma-separated DOFs from {', '.join(DOFS)}")
+        raise CommandError(f"--scenarios: no truth file for {missing}; "
+                           f"shipped: {', '.join(scenario_names())}")
+    dofs = choices("--dofs", args.dofs, DOFS, "DOF", empty_ok=False)
     if args.seeds < 1 or args.jobs < 1:
         raise CommandError("--seeds and --jobs must be >= 1")
     if args.cached_only and not args.cache:
         raise CommandError("--cached-only needs --cache DIR")
     from ...identification.online.excitation import EXCITATIONS
-    excitations = [e.strip() for e in str(args.excitation).split(",") if e.strip()] if args.excitation else [None]
-    if not excitations or any(e not in EXCITATIONS for e in excitations if e is not None):
-        raise CommandError(f"--excitation: {args.excitation!r}: comma-separated from {', '.join(EXCITATIONS)}")
+    excitations = choices("--excitation", args.excitation, EXCITATIONS, "excitation") or [None]
     if args.excitation_duration is not None and not args.excitation_duration > 0:
         raise CommandError(f"--excitation-duration must be > 0 s, got {args.excitation_duration}")
     from ...identification.online.executive import CALIBRATION_STEPS
-    cal = [c.strip() for c in str(args.calibrate or "").split(",") if c.strip()]
-    if any(c not in CALIBRATION_STEPS for c in cal):
-        raise CommandError(f"--calibrate: {args.calibrate!r}: comma-separated from {', '.join(CALIBRATION_STEPS)}")
+    cal = choices("--calibrate", args.calibrate, CALIBRATION_STEPS, "step")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     # seed-major: every scenario's seed 1 first, so that a suite cut short still covers every scenario
@@ -392,7 +390,7 @@ def run(args: argparse.Namespace) -> int:
             for seed in range(1, args.seeds + 1) for n in names for e in excitations]
     not_run = []
     if args.cached_only:
-        keep = [j for j in jobs if _cache_file(args.cache, j[1], j[6], j[7], cal, j[2], dofs, args.levels).is_file()]
+        keep = [j for j in jobs if _cache_file(args.cache, *j[1:5], *j[6:]).is_file()]
         not_run = [f"{j[1]} seed {j[2]}" for j in jobs if j not in keep]
         jobs = keep
     wall0 = time.monotonic()
