@@ -3,12 +3,48 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Callable, Sequence
+import os
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any
+
+from hindrax_drivers.dds_transport import loopback_transport
+from hindrax_drivers.testing import wait_until
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.experimental.events_executor import EventsExecutor
+
+
+@contextmanager
+def spinning(ctx, *nodes, events: bool = False,
+             timeout_s: float = 0.1) -> Iterator[tuple[Any, Callable[[], None]]]:
+    """``nodes`` (of rclpy context ``ctx``) in one executor, a SingleThreadedExecutor or with
+    ``events`` rclpy's EventsExecutor (a node process's); yields (executor, spin): ``spin()`` is
+    one ``spin_once`` of at most ``timeout_s``. Shuts the executor down and destroys the nodes on
+    the way out."""
+    ex = (EventsExecutor if events else SingleThreadedExecutor)(context=ctx)
+    for node in nodes:
+        ex.add_node(node)
+    try:
+        yield ex, lambda: ex.spin_once(timeout_sec=timeout_s)
+    finally:
+        ex.shutdown()
+        for node in nodes:
+            node.destroy_node()
+
+
+def spin_for(duration_s: float, spin: Callable[[], None]) -> None:
+    """Call ``spin`` for ``duration_s`` of wall time (a measurement window)."""
+    end = time.monotonic() + duration_s
+    wait_until(lambda: time.monotonic() >= end, duration_s + 10, spin, "measurement window")
 
 
 def run_alone(run: Callable[[bool], list[dict]], argv: Sequence[str] | None = None) -> int:
     """Run one benchmark module alone (``python -m hindrax_ident.tools.benchmarks.<name>
-    [--quick]``): print the rows of ``run(quick)`` as JSON; returns the exit status 0."""
+    [--quick]``) on the vehicle's loopback transport: print the rows of ``run(quick)`` as JSON;
+    returns the exit status 0."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    loopback_transport()
     parser = argparse.ArgumentParser(description="one benchmark module's rows, as JSON")
     parser.add_argument("--quick", action="store_true", help="the reduced variant (bench --quick)")
     print(json.dumps(run(parser.parse_args(argv).quick), indent=2))

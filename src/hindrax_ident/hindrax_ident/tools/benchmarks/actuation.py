@@ -24,7 +24,6 @@ import numpy as np
 import rclpy
 from domain_coordinator import domain_id
 from geometry_msgs.msg import WrenchStamped
-from rclpy.experimental.events_executor import EventsExecutor
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.allocation.node import ThrustAllocationNode
@@ -34,6 +33,8 @@ from hindrax_drivers.pca9685.node import EscNode
 from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.srv import SetArmed
+
+from . import spinning
 
 
 def allocator_cost(quick: bool = False) -> list[dict]:
@@ -118,40 +119,37 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
         esc = EscNode(bus=bus, context=ctx, parameter_overrides=params)
         driver = rclpy.create_node("bench_driver", context=ctx)
         SafetyHeartbeats(driver)  # stand-in supervisor and output guard: the ESC arms only with their heartbeats
-        ex = EventsExecutor(context=ctx)
-        for n in (alloc, esc, driver):
-            ex.add_node(n)
-        pub = driver.create_publisher(WrenchStamped, "wrench", 10)
-        arm = driver.create_client(SetArmed, "esc/set_armed")
-        spin = lambda: ex.spin_once(timeout_sec=0.005)  # noqa: E731
-        wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready() and not esc.heartbeat_refusal()
-                   and esc.arming_remaining_s() == 0.0, 10, spin, "graph and the ESC's time at neutral")
-        fut = arm.call_async(SetArmed.Request(arm=True))
-        wait_until(fut.done, 5, spin, "armed")
-        if not fut.result().success:
-            raise RuntimeError(f"the ESC refused to arm: {fut.result().message}")
-        state = {"i": 0, "sent": 0}
+        with spinning(ctx, alloc, esc, driver, events=True, timeout_s=0.005) as (_ex, spin):
+            pub = driver.create_publisher(WrenchStamped, "wrench", 10)
+            arm = driver.create_client(SetArmed, "esc/set_armed")
+            wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready()
+                       and not esc.heartbeat_refusal() and esc.arming_remaining_s() == 0.0, 10,
+                       spin, "graph and the ESC's time at neutral")
+            fut = arm.call_async(SetArmed.Request(arm=True))
+            wait_until(fut.done, 5, spin, "armed")
+            if not fut.result().success:
+                raise RuntimeError(f"the ESC refused to arm: {fut.result().message}")
+            state = {"i": 0, "sent": 0}
 
-        def send() -> None:
-            w = levels[state["i"] % 2]
-            m = WrenchStamped()
-            m.header.frame_id = "base_link"
-            m.header.stamp = driver.get_clock().now().to_msg()
-            m.wrench.force.x = float(w[0])
-            pending.clear()
-            pending.update(t0=time.monotonic(), cpu0=time.process_time(), target=expected[state["i"] % 2])
-            pub.publish(m)
-            state["i"] += 1
-            state["sent"] += 1
+            def send() -> None:
+                w = levels[state["i"] % 2]
+                m = WrenchStamped()
+                m.header.frame_id = "base_link"
+                m.header.stamp = driver.get_clock().now().to_msg()
+                m.wrench.force.x = float(w[0])
+                pending.clear()
+                pending.update(t0=time.monotonic(), cpu0=time.process_time(),
+                               target=expected[state["i"] % 2])
+                pub.publish(m)
+                state["i"] += 1
+                state["sent"] += 1
 
-        driver.create_timer(1.0 / 50.0, send)
-        cpu0, wall0 = time.process_time(), time.monotonic()
-        wait_until(lambda: state["sent"] >= n_commands, n_commands / 50.0 + 30.0, spin, "commands sent")
-        cpu = time.process_time() - cpu0
-        wall = time.monotonic() - wall0
-        ex.shutdown()
-        for n in (alloc, esc, driver):
-            n.destroy_node()
+            driver.create_timer(1.0 / 50.0, send)
+            cpu0, wall0 = time.process_time(), time.monotonic()
+            wait_until(lambda: state["sent"] >= n_commands, n_commands / 50.0 + 30.0, spin,
+                       "commands sent")
+            cpu = time.process_time() - cpu0
+            wall = time.monotonic() - wall0
     lat_ms = np.array(latencies) * 1e3
     return [
         {"name": "wrench_to_registers_p50", "value": float(np.percentile(lat_ms, 50)), "unit": "ms"},

@@ -34,6 +34,8 @@ from hindrax_drivers.liveness import (SETTLE_S, HeartbeatPublisher, HeartbeatWat
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.msg import Heartbeat
 
+from . import run_alone
+
 BLOCKS = 5
 BOOT, GUARD_BOOT = 0x0123456789ABCDEF, 0x0FEDCBA987654321
 REASON = "armed, commanding"
@@ -55,14 +57,10 @@ def _heartbeat_bytes(seq: int) -> bytes:
     return heartbeat_cdr(BOOT, seq, time.monotonic_ns(), 0, REASON, 2, True, GUARD_BOOT, seq)
 
 
-def _read_beat(data: bytes) -> tuple:
-    return tuple(read_heartbeat(data))
-
-
 def codec_rows(n: int) -> list[dict]:
     """Build + read, no DDS (module docstring)."""
     kinds = {"status": lambda i: _read_status(deserialize_message(_status_bytes(i), DiagnosticStatus)),
-             "heartbeat": lambda i: _read_beat(_heartbeat_bytes(i))}
+             "heartbeat": lambda i: tuple(read_heartbeat(_heartbeat_bytes(i)))}
     per = {k: [] for k in kinds}
     for _ in range(BLOCKS):
         for kind, one in kinds.items():
@@ -93,7 +91,8 @@ def cycle_rows(n: int) -> list[dict]:
         pubs = {"status": tx.create_publisher(DiagnosticStatus, "status_beat", heartbeat_qos()),
                 "heartbeat": tx.create_publisher(Heartbeat, "heartbeat_beat", heartbeat_qos())}
         rx.create_subscription(DiagnosticStatus, "status_beat", count(_read_status), heartbeat_qos())
-        rx.create_subscription(Heartbeat, "heartbeat_beat", count(_read_beat), heartbeat_qos(), raw=True)
+        rx.create_subscription(Heartbeat, "heartbeat_beat", count(read_heartbeat), heartbeat_qos(),
+                               raw=True)
         build = {"status": _status_bytes, "heartbeat": _heartbeat_bytes}
         ex = EventsExecutor(context=rx_ctx)
         ex.add_node(rx)
@@ -166,5 +165,4 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
-    for row in run(quick=True):
-        print(f"{row['name']:40s} {row['value']:10.3f} {row['unit']}")
+    raise SystemExit(run_alone(run))

@@ -31,8 +31,9 @@ from hindrax_drivers.ms5837.emulator import Ms5837Emulator
 from hindrax_drivers.ms5837.node import Ms5837Node
 from hindrax_drivers.testing import config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
-from rclpy.experimental.events_executor import EventsExecutor
 from sensor_msgs.msg import FluidPressure, Imu
+
+from . import run_alone, spin_for, spinning
 
 
 def _percentiles(values_s: list[float]) -> tuple[float, float]:
@@ -51,21 +52,15 @@ def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s:
             msg_type, topic,
             lambda m: receipts.append((time.time_ns(), m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec)),
             50)
-        ex = EventsExecutor(context=ctx)
-        ex.add_node(node)
-        ex.add_node(probe)
-        spin = lambda: ex.spin_once(timeout_sec=0.1)  # noqa: E731 - blocks until work, like spin()
-        wait_until(lambda: len(receipts) >= 3, 15, spin, f"first {topic} messages")
-        receipts.clear()
-        published0 = node.diag.total_published
-        cpu0, wall0 = time.process_time(), time.monotonic()
-        end = wall0 + duration_s
-        wait_until(lambda: time.monotonic() >= end, duration_s + 10, spin, "benchmark run")
-        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-        published = node.diag.total_published - published0
-        ex.shutdown()
-        probe.destroy_node()
-        node.destroy_node()
+        # spin() blocks until there is work, as a node process's spin does
+        with spinning(ctx, node, probe, events=True) as (_ex, spin):
+            wait_until(lambda: len(receipts) >= 3, 15, spin, f"first {topic} messages")
+            receipts.clear()
+            published0 = node.diag.total_published
+            cpu0, wall0 = time.process_time(), time.monotonic()
+            spin_for(duration_s, spin)
+            cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+            published = node.diag.total_published - published0
     return cpu, wall, published, receipts
 
 
@@ -73,15 +68,10 @@ def _idle_load(duration_s: float) -> float:
     """CPU load (fraction of a core) of this process with an idle context and probe node: the DDS background."""
     with ros_context() as ctx:
         probe = rclpy.create_node("bench_idle", context=ctx)
-        ex = EventsExecutor(context=ctx)
-        ex.add_node(probe)
-        cpu0, wall0 = time.process_time(), time.monotonic()
-        end = wall0 + duration_s
-        wait_until(lambda: time.monotonic() >= end, duration_s + 10, lambda: ex.spin_once(timeout_sec=0.1), "idle")
-        load = (time.process_time() - cpu0) / (time.monotonic() - wall0)
-        ex.shutdown()
-        probe.destroy_node()
-    return load
+        with spinning(ctx, probe, events=True) as (_ex, spin):
+            cpu0, wall0 = time.process_time(), time.monotonic()
+            spin_for(duration_s, spin)
+            return (time.process_time() - cpu0) / (time.monotonic() - wall0)
 
 
 def _timed(cls: type, timed_read: Callable[[int], bool]) -> type:
@@ -185,5 +175,4 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":
-    for row in run(quick=True):
-        print(row)
+    raise SystemExit(run_alone(run))

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -38,6 +37,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 
+from . import run_alone
 from .machine import proc_cpu_s
 
 NOMINAL = (  # topic suffix, stream in make_test_bags.STREAMS (for the message), rate Hz, best effort
@@ -189,5 +189,4 @@ def subscribe_recorder_counts(node, depth: int) -> tuple[dict[str, int], "thread
 
 
 if __name__ == "__main__":
-    for r in run(quick="--quick" in sys.argv):
-        print(r)
+    raise SystemExit(run_alone(run))

@@ -41,8 +41,7 @@ I2C devices on the emulated bus, each node in its own rclpy context, polled ever
   recover = the AK09916 answers again (right after the failed re-initialisation) -> first ``imu/mag`` (the
   node retries every ``sensors.icm20948.mag_retry_interval_s``).
 
-Run alone: ``python -m hindrax_ident.tools.benchmarks.robustness`` (quick). ``make bench`` runs it
-full.
+Run alone: ``python -m hindrax_ident.tools.benchmarks.robustness [--quick]``.
 """
 from __future__ import annotations
 
@@ -72,10 +71,10 @@ from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.pty_device import PtyDevice
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
-from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.dds_transport import loopback_transport
+
+from . import run_alone, spinning
 
 #: Fuzzed inputs per parser (full run); ``quick``: a tenth.
 FUZZ_INPUTS = 100_000
@@ -335,14 +334,6 @@ def _until(predicate: Callable[[], Any], spin: Callable[[], None], timeout_s: fl
     return time.monotonic() - t0
 
 
-def _executor(ctx, *nodes):
-
-    ex = SingleThreadedExecutor(context=ctx)
-    for n in nodes:
-        ex.add_node(n)
-    return ex, (lambda: ex.spin_once(timeout_sec=0.002))
-
-
 def _dvl_faults() -> list[dict]:
 
     def truth(t):
@@ -355,8 +346,7 @@ def _dvl_faults() -> list[dict]:
     try:
         with ros_context() as ctx:
             node = Dvl75Node(context=ctx, parameter_overrides=config_parameters({"sensors.dvl75.port": dev.path}))
-            ex, spin = _executor(ctx, node)
-            try:
+            with spinning(ctx, node, timeout_s=0.002) as (_ex, spin):
                 _until(lambda: node._valid_count >= 5 and node.commands.sequences_completed >= 1, spin, 20, "data")
                 dev.disconnect()
                 detect = _until(lambda: node.diag.state == "reconnecting", spin, 10, "unplug detected")
@@ -377,9 +367,6 @@ def _dvl_faults() -> list[dict]:
                 out.append(_fault_row("DVL bottom-lock loss", detect, recover,
                                       "detect: lock lost -> first report not valid; recover: lock -> first valid "
                                       "(20 Hz pings)"))
-            finally:
-                ex.shutdown()
-                node.destroy_node()
     finally:
         dev.close()
     return out
@@ -402,8 +389,7 @@ def _icm_faults() -> list[dict]:
     with ros_context() as ctx:
         node = Icm20948Node(bus=bus, context=ctx, parameter_overrides=config_parameters(
             {"sensors.icm20948.estimate_gyro_bias": False}))
-        ex, spin = _executor(ctx, node)
-        try:
+        with spinning(ctx, node, timeout_s=0.002) as (_ex, spin):
             _until(lambda: node.diag.total_published >= 50, spin, 20, "IMU data")
             failures, published = node.diag.counts().get("i2c_failure", 0), node.diag.total_published
             bus.disconnected = True
@@ -442,16 +428,14 @@ def _icm_faults() -> list[dict]:
             _until(lambda: node.running and not node.mag_available, spin, 5, "running without magnetometer")
             mags = node.mag_samples
             emu.aux_connected = True
-            recover = _until(lambda: node.mag_samples > mags, spin, 3 * node.mag_retry_interval_s + 5,
+            retry_s = node.mag.retry_interval_s
+            recover = _until(lambda: node.mag_samples > mags, spin, 3 * retry_s + 5,
                              "imu/mag again")
             out.append(_fault_row("magnetometer NACK (AK09916 via I2C master)", detect, recover,
                                   "detect: NACK onset -> ERROR magnetometer (mag_stale_timeout_s 0.5 s; no "
                                   "frozen imu/mag published meanwhile); IMU continues without imu/mag; recover: "
                                   "AK09916 answers again (just after the failed re-initialisation) -> first "
-                                  f"imu/mag (retried every mag_retry_interval_s {node.mag_retry_interval_s:g} s)"))
-        finally:
-            ex.shutdown()
-            node.destroy_node()
+                                  f"imu/mag (retried every mag_retry_interval_s {retry_s:g} s)"))
     return out
 
 
@@ -461,8 +445,7 @@ def _ms5837_faults() -> list[dict]:
     bus = EmulatedI2CBus({0x76: emu}, seed=2)
     with ros_context() as ctx:
         node = Ms5837Node(bus=bus, context=ctx, parameter_overrides=config_parameters({"sensors.ms5837.rate_hz": 25.0}))
-        ex, spin = _executor(ctx, node)
-        try:
+        with spinning(ctx, node, timeout_s=0.002) as (_ex, spin):
             _until(lambda: node.diag.total_published >= 5, spin, 20, "pressure data")
             bus.disconnected = True
             emu.power_cycle()
@@ -473,9 +456,6 @@ def _ms5837_faults() -> list[dict]:
             published = node.diag.total_published
             bus.disconnected = False
             recover = _until(lambda: node.diag.total_published > published, spin, 10, "pressure after the outage")
-        finally:
-            ex.shutdown()
-            node.destroy_node()
     return [_fault_row("I2C outage 0.5 s with sensor power loss (MS5837, 25 Hz)", detect, recover,
                        "detect: outage -> ERROR (3 failed cycles); recover: bus back -> reset, PROM, first "
                        f"pressure (resets sent: {emu.resets})")]
@@ -503,9 +483,4 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import os
-
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    loopback_transport()
-    for row in run(quick=True):
-        print(row)
+    raise SystemExit(run_alone(run))

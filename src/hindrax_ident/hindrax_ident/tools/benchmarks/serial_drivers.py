@@ -27,7 +27,6 @@ import time
 
 import numpy as np
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import Range
 
 from hindrax_drivers.config import default_config_path, load_config
@@ -38,6 +37,8 @@ from hindrax_drivers.ping1d.node import Ping1dNode
 from hindrax_drivers.testing import config_parameters, ros_context, wait_until
 from hindrax_drivers.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import Dvl
+
+from . import run_alone, spin_for, spinning
 
 DVL_RATE_HZ = 20.0
 PING_INTERVAL_S = 0.025
@@ -90,26 +91,19 @@ def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str
                     if t_write is not None:
                         latencies[topic].append(time.monotonic_ns() - t_write)
                 probe.create_subscription(msg_type, topic, cb, 100)
-            ex = SingleThreadedExecutor(context=ctx)
-            ex.add_node(node)
-            ex.add_node(probe)
-            spin = lambda: ex.spin_once(timeout_sec=0.1)  # noqa: E731 - blocks until work, like spin()
-            first = subscriptions[0][0]
-            wait_until(lambda: len(latencies[first]) >= 20, 20, spin, f"{name}: first messages")
-            for v in latencies.values():
-                v.clear()
-            published0 = node.diag.total_published
-            reader0, emu0 = _thread_cpu_s("SerialTransport("), _thread_cpu_s("PtyDevice")
-            cpu0, wall0 = time.process_time(), time.monotonic()
-            end = wall0 + duration_s
-            wait_until(lambda: time.monotonic() >= end, duration_s + 10, spin, f"{name}: benchmark run")
-            cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-            reader = _thread_cpu_s("SerialTransport(") - reader0
-            emu = _thread_cpu_s("PtyDevice") - emu0
-            reports = node.diag.total_published - published0
-            ex.shutdown()
-            probe.destroy_node()
-            node.destroy_node()
+            with spinning(ctx, node, probe) as (_ex, spin):  # spin blocks until work, like spin()
+                first = subscriptions[0][0]
+                wait_until(lambda: len(latencies[first]) >= 20, 20, spin, f"{name}: first messages")
+                for v in latencies.values():
+                    v.clear()
+                published0 = node.diag.total_published
+                reader0, emu0 = _thread_cpu_s("SerialTransport("), _thread_cpu_s("PtyDevice")
+                cpu0, wall0 = time.process_time(), time.monotonic()
+                spin_for(duration_s, spin)
+                cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+                reader = _thread_cpu_s("SerialTransport(") - reader0
+                emu = _thread_cpu_s("PtyDevice") - emu0
+                reports = node.diag.total_published - published0
     finally:
         dev.close()
     return _rows(name, rate, reader, cpu - emu - reader, wall, reports, latencies)
@@ -201,5 +195,4 @@ def run(quick: bool = False) -> list[dict]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    for row in run(quick=True):
-        print(row)
+    raise SystemExit(run_alone(run))

@@ -9,21 +9,20 @@ Rows:
 """
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
 import rclpy
 from hindrax_drivers.testing import ros_context
 from nav_msgs.msg import Odometry
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from hindrax_drivers.config import default_config_path, load_config
-from hindrax_drivers.dds_transport import loopback_transport
 from hindrax_ident.sim.node import SimulatorNode
 from hindrax_ident.sim.simulator import Simulator
+
+from . import spinning
 
 
 def _simulator_rate(duration_s: float) -> tuple[float, float, int]:
@@ -44,9 +43,6 @@ def _simulator_rate(duration_s: float) -> tuple[float, float, int]:
 
 
 def _node_rate(wall_s: float) -> float:
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    loopback_transport()
-
     cfg = load_config(default_config_path(), overrides={"simulation.real_time_factor": 0.0})
     with ros_context() as ctx:
         sim_node = SimulatorNode(config=cfg, context=ctx)
@@ -54,20 +50,13 @@ def _node_rate(wall_s: float) -> float:
                                   parameter_overrides=[Parameter("use_sim_time", value=True)])
         probe.create_subscription(Clock, "/clock", lambda m: None, 10)
         probe.create_subscription(Odometry, "sim/odometry", lambda m: None, 10)
-        ex = SingleThreadedExecutor(context=ctx)
-        ex.add_node(sim_node)
-        ex.add_node(probe)
-        try:
+        with spinning(ctx, sim_node, probe, timeout_s=0.01) as (_ex, spin):
             for _ in range(20):
-                ex.spin_once(timeout_sec=0.01)
+                spin()
             t0_sim, t0 = sim_node.simulator.t_s, time.perf_counter()
             while time.perf_counter() - t0 < wall_s:
-                ex.spin_once(timeout_sec=0.01)
+                spin()
             return (sim_node.simulator.t_s - t0_sim) / (time.perf_counter() - t0)
-        finally:
-            ex.shutdown()
-            probe.destroy_node()
-            sim_node.destroy_node()
 
 
 def run(quick: bool = False) -> list[dict]:
