@@ -27,7 +27,7 @@ import math
 from pathlib import Path
 
 from ... import results_doc
-from .common import CommandError, WallProgress, add_config_argument, load_vehicle
+from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
 
 __all__ = ["add_arguments", "run"]
 
@@ -76,14 +76,6 @@ def _out_dir(cfg, out: str | None, prefix: str) -> Path:
     return Path(str(cfg.recording.output_root)) / f"{prefix}-{stamp}"
 
 
-def _list(text: str, allowed, what: str) -> list[str]:
-    items = [x.strip() for x in text.split(",") if x.strip()]
-    bad = [x for x in items if x not in allowed]
-    if bad or not items:
-        raise CommandError(f"--{what}: {', '.join(bad) or 'empty'}: choose from {', '.join(allowed)}")
-    return items
-
-
 def run(args: argparse.Namespace) -> int:
     """Dispatch on the subcommand."""
     which = getattr(args, "_control", "")
@@ -125,8 +117,8 @@ def _evaluate(args, cfg) -> int:
     from ...sim import control_evaluate as ev
     from ...sim.truth import TruthError, load_truth
 
-    maneuvers = _list(args.maneuvers, ev.MANEUVERS, "maneuvers")
-    models = _list(args.models, ev.MODELS, "models")
+    maneuvers = choices("--maneuvers", args.maneuvers, ev.MANEUVERS, "manoeuvre", empty_ok=False)
+    models = choices("--models", args.models, ev.MODELS, "model", empty_ok=False)
     try:
         truth = load_truth(cfg, args.truth)
     except TruthError as exc:

@@ -36,6 +36,8 @@ import numpy as np
 
 from hindrax_drivers.config import ConfigError
 
+from .common import CommandError, update_vehicle_file
+
 __all__ = ["add_arguments", "run", "read_two_columns", "write_thruster_curves"]
 
 
@@ -100,8 +102,6 @@ def write_thruster_curves(config_path: str, negative, positive, relative_std=Non
     Validates the result and restores the original text on failure (:func:`~.common.update_vehicle_file`).
     Raises ``ValueError`` (missing keys) or :class:`~hindrax_drivers.config.ConfigError`.
     """
-    from .common import update_vehicle_file
-
     values = {"thrusters.curve_negative": [float(c) for c in negative],
               "thrusters.curve_positive": [float(c) for c in positive]}
     if relative_std is not None:
@@ -121,8 +121,7 @@ def _free_decay(args) -> int:
         if getattr(args, "model", "linear") == "quadratic":
             out.update(quadratic_free_decay_keys(res, t, a))
     except (ValueError, EstimationError) as exc:
-        print(f"free-decay: {exc}", file=sys.stderr)
-        return 1
+        raise CommandError(f"free-decay: {exc}") from exc
     print(json.dumps(out))
     return 0
 
@@ -134,8 +133,7 @@ def _thruster_fit(args) -> int:
         pw, thrust = read_two_columns(args.file)
         fit = fit_thruster_curve(pw, thrust, neutral_us=args.neutral)
     except (ValueError, EstimationError) as exc:
-        print(f"thruster-fit: {exc}", file=sys.stderr)
-        return 1
+        raise CommandError(f"thruster-fit: {exc}") from exc
     out = fit.to_dict()
     rel = fit.relative_std()
     print(json.dumps({"negative": out["negative"], "positive": out["positive"],
@@ -144,12 +142,10 @@ def _thruster_fit(args) -> int:
         try:
             write_thruster_curves(args.write, fit.negative.coefficients, fit.positive.coefficients, rel)
         except ConfigError as exc:
-            print(f"thruster-fit: {args.write} would be invalid, left unchanged: {'; '.join(exc.lines())}",
-                  file=sys.stderr)
-            return 1
+            raise CommandError(f"thruster-fit: {args.write} would be invalid, left unchanged: "
+                               f"{'; '.join(exc.lines())}") from exc
         except (OSError, ValueError) as exc:
-            print(f"thruster-fit: {exc}", file=sys.stderr)
-            return 1
+            raise CommandError(f"thruster-fit: {exc}") from exc
         print(f"updated {args.write}", file=sys.stderr)
     return 0
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError
+from .common import CommandError, load_vehicle, remove_if_empty
 
 __all__ = ["add_arguments", "run", "format_table"]
 
@@ -148,14 +148,9 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.recording.reader import BagError
 
     from ...identification.bag_input.reader import FitOptions, TopicChoice, reads_as_campaign
-    from .common import remove_if_empty
     from .ident_bag import result_dir_for_bag
 
-    cfg = None
-    if args.config is not None:
-        from .common import load_vehicle
-
-        cfg = load_vehicle(args.config)
+    cfg = None if args.config is None else load_vehicle(args.config)
     for b in list(args.bags) + list(args.holdout):
         if not Path(b).exists():
             raise CommandError(f"ident fit: {b}: no such file or directory")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import CommandError
+from .common import CommandError, load_vehicle
 from .ident_fit import _num
 
 __all__ = ["add_arguments", "run"]
@@ -51,11 +51,7 @@ def run(args: argparse.Namespace) -> int:
         models, inertia = load_model(doc)
     except (OSError, yaml.YAMLError, ModelError, KeyError, TypeError, ValueError) as exc:
         raise CommandError(f"ident predict: {args.model}: {exc}") from exc
-    cfg = None
-    if args.config is not None:
-        from .common import load_vehicle
-
-        cfg = load_vehicle(args.config)
+    cfg = None if args.config is None else load_vehicle(args.config)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     choice = TopicChoice(args.wrench_topic, args.velocity_topic, args.imu_topic, args.depth_topic)

@@ -30,9 +30,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 
 import numpy as np
+
+from .common import CommandError, load_vehicle
 
 __all__ = ["add_arguments", "run"]
 
@@ -76,25 +77,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         parser.add_argument("--dof", choices=("roll", "pitch"), default="roll", help="DOF of the record")
 
 
-def _fail(which: str, msg: str) -> int:
-    print(f"{which}: {msg}", file=sys.stderr)
-    return 1
-
-
 def _priors(args) -> int:
     from ...estimation.least_squares import EstimationError
     from ...estimation.priors import Geometry, PriorInputs, empirical_priors, priors_from_config
 
     try:
         if args.config:
-            from .common import load_vehicle
-
             out = priors_from_config(load_vehicle(args.config), args.frontal_area_m2, args.side_area_m2,
                                      args.top_area_m2)
         else:
             missing = ["--" + n.replace("_", "-") for n, _ in _GEOMETRY if getattr(args, n) is None]
             if missing:
-                return _fail("priors", f"give --config FILE or all of the geometry; missing {' '.join(missing)}")
+                raise CommandError("priors: give --config FILE or all of the geometry; missing "
+                                   + " ".join(missing))
             g = Geometry(args.length_m, args.width_m, args.height_m, args.density_kg_m3, args.frontal_area_m2,
                          args.side_area_m2, args.top_area_m2)
             out = empirical_priors(g, PriorInputs(mass_kg=args.mass_kg, bg_m=args.bg_m,
@@ -102,7 +97,7 @@ def _priors(args) -> int:
                                                   pitch_inertia_kg_m2=args.pitch_inertia_kg_m2,
                                                   restoring_n_m_per_rad=args.restoring_n_m_per_rad))
     except EstimationError as exc:
-        return _fail("priors", str(exc))
+        raise CommandError(f"priors: {exc}") from exc
     print(json.dumps(out))
     return 0
 
@@ -119,19 +114,9 @@ def _inclining(args) -> int:
         res = restoring_from_inclining(arm, tilt, args.test_mass_kg, args.test_volume_m3, args.density,
                                        args.gravity, args.vehicle_mass_kg)
     except (ValueError, EstimationError) as exc:
-        return _fail("inclining", str(exc))
+        raise CommandError(f"inclining: {exc}") from exc
     print(json.dumps(res.to_dict()))
     return 0
-
-
-def _self_propelled_inertia(path: str, dof: str):
-    from ...identification.assessment.results import read_identification
-
-    doc = read_identification(path)
-    entry = doc["dofs"].get(dof)
-    if entry is None:
-        raise ValueError(f"{path}: no dofs.{dof}")
-    return float(entry["inertia"]["value"]), float(entry["inertia"]["std"])
 
 
 def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
@@ -141,9 +126,13 @@ def _compare_with_self_propelled(out: dict, path: str, dof: str) -> None:
     :func:`~hindrax_ident.identification.assessment.verdicts. free_decay_reason`: suspect beyond
     :data:`~hindrax_ident.identification.assessment.verdicts.REFERENCE_Z_MAX` combined std). Raises ``ValueError`` when
     ``path`` has no ``dofs.<dof>``."""
+    from ...identification.assessment.results import read_identification
     from ...identification.assessment.verdicts import REFERENCE_Z_MAX, apply_reference_verdicts
 
-    v, s = _self_propelled_inertia(path, dof)
+    entry = read_identification(path)["dofs"].get(dof)
+    if entry is None:
+        raise ValueError(f"{path}: no dofs.{dof}")
+    v, s = float(entry["inertia"]["value"]), float(entry["inertia"]["std"])
     doc = apply_reference_verdicts({"dofs": {dof: {"inertia": {"value": v, "std": s}}}, "free_decay": {dof: out}})
     sp = doc["free_decay"][dof]["self_propelled"]
     sp["rule"] = f"suspect when |free decay - self-propelled| > {REFERENCE_Z_MAX:g} combined std"
@@ -183,7 +172,7 @@ def _tilt_decay(args) -> int:
         if args.identification:
             _compare_with_self_propelled(out, args.identification, args.dof)
     except (ValueError, EstimationError) as exc:
-        return _fail("tilt-decay", str(exc))
+        raise CommandError(f"tilt-decay: {exc}") from exc
     print(json.dumps(out))
     return 0
 

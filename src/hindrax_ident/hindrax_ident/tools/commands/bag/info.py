@@ -6,7 +6,6 @@ on stderr when BAG is not a readable bag. Implementation: :mod:`hindrax_drivers.
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,10 +18,11 @@ def run(args: argparse.Namespace) -> int:
     from hindrax_drivers.recording.info import bag_info, format_bag_info
     from hindrax_drivers.recording.reader import BagError
 
+    from ..common import CommandError
+
     try:
         info = bag_info(args.bag)
     except (FileNotFoundError, BagError, OSError) as exc:
-        print(f"hindrax bag info: {exc}", file=sys.stderr)
-        return 1
+        raise CommandError(f"hindrax bag info: {exc}") from exc
     print(format_bag_info(info))
     return 0

@@ -8,7 +8,6 @@ per file and a total. Exit 0, or 1 with one line on stderr. Implementation:
 from __future__ import annotations
 
 import argparse
-import sys
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,14 +21,14 @@ def run(args: argparse.Namespace) -> int:
     """Run the command with the parsed ``args``; returns the process exit code."""
     from hindrax_drivers.recording.recover import RecoverError, recover_bag
 
+    from ..common import CommandError
+
     try:
         meta, results = recover_bag(args.bag, keep_original=args.keep_original)
     except (FileNotFoundError, RecoverError, OSError) as exc:
-        print(f"hindrax bag recover: {exc}", file=sys.stderr)
-        return 1
+        raise CommandError(f"hindrax bag recover: {exc}") from exc
     if meta.message_count == 0:
-        print(f"hindrax bag recover: {args.bag}: no complete message to recover", file=sys.stderr)
-        return 1
+        raise CommandError(f"hindrax bag recover: {args.bag}: no complete message to recover")
     for r in results:
         print(r.summary_line())
     print(f"{args.bag}: {meta.message_count} messages on {len(meta.topics)} topics in {len(meta.files)} file(s)")
