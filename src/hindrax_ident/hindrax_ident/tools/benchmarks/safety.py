@@ -43,16 +43,9 @@ supervisor is SIGKILLed :data:`REPLAY_LEAD_S` after the replay's first message:
 * ``replay_alone_stopped_outputs``: the repeats in which the replay itself stopped the outputs before the kill (a
   second heartbeat publisher is a fault), with the time from the replay process's start in the note.
 
-ROS 2 processes started while armed (:mod:`hindrax_ident.tools.benchmarks.participant_churn`, the same layout):
-``participant_churn_disarms`` (target 0) and ``participant_churn_heartbeat_gap_max_ms`` (target 100 ms). Beside two
-CPU-bound processes of another session (:mod:`hindrax_ident.tools.benchmarks.busy_neighbours`, the same layout):
-``busy_neighbours_disarms`` (target 0) and ``busy_neighbours_heartbeat_gap_max_ms`` (target 100 ms), and the same
-at nice -5 only for comparison. The pool day's churn check (:mod:`hindrax_ident.tools.benchmarks.pool_day_churn`,
-the same layout with the gateway, two CPU-bound neighbours; per trial a 1 s subscriber inside on default
-transports, one on the topside and ``hindrax health``): ``pool_day_churn_disarms`` (target 0 in 15 trials) and
-``pool_day_churn_heartbeat_gap_max_ms`` (target 150 ms). The authority rows
-(:mod:`hindrax_ident.tools.benchmarks.sealed_authority`, the same layout with the gateway):
-``internal_sockets_reachable_from_network`` and ``operator_*_requests_accepted`` (target 0).
+The same layout serves the section's other modules (their rows in their own docstrings):
+:mod:`.participant_churn`, :mod:`.busy_neighbours`, :mod:`.pool_day_churn` and
+:mod:`.sealed_authority`.
 
 The hardware watchdog on /OE (:func:`frozen_rows`, docs/watchdog.md): the bench's layout has it fitted
 (the emulated monostable ORed into /OE, ``esc.output_enable_feed_timeout_s`` 0.33 s, fed by the guard at 10 Hz):
@@ -1030,17 +1023,14 @@ def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
     lay.kill("supervisor")
     lay.start("supervisor", ("-p", "use_sim_time:=true"))
     pub = lay.probe.create_publisher(Clock, "/clock", 10)
-    state = {"ns": 1_000_000_000_000, "run": True}
+    state = {"ns": 1_000_000_000_000}
 
     def clock() -> None:
-        while state["run"]:
-            state["ns"] += 10_000_000
-            m = Clock()
-            m.clock.sec, m.clock.nanosec = divmod(state["ns"], 1_000_000_000)
-            pub.publish(m)
-            time.sleep(0.01)
-    th = threading.Thread(target=clock, daemon=True)
-    th.start()
+        state["ns"] += 10_000_000
+        m = Clock()
+        m.clock.sec, m.clock.nanosec = divmod(state["ns"], 1_000_000_000)
+        pub.publish(m)
+    timer = lay.probe.create_timer(0.01, clock)  # the layout's thread spins the probe
     out = []
     try:
         wait_until(lambda: pub.get_subscription_count() > 0 and lay.reset_client.service_is_ready(), 60, None,
@@ -1057,8 +1047,7 @@ def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
             wait_until(lambda: time.monotonic() > t_next, 5, None, "between steps")
             del lay.diag[n0:]
     finally:
-        state["run"] = False
-        th.join(2)
+        lay.probe.destroy_timer(timer)
         lay.signal("supervisor", _signal.SIGINT)
     return out
 
