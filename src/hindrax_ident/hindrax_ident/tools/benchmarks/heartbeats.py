@@ -68,11 +68,8 @@ def codec_rows(n: int) -> list[dict]:
             for i in range(1, n + 1):
                 one(i)
             per[kind].append((time.thread_time_ns() - t0) / n / 1e3)
-    med = {k: statistics.median(v) for k, v in per.items()}
-    return [*({"name": f"heartbeat_codec_cpu_us_{k}", "value": med[k], "unit": "us", "n": n * BLOCKS,
-               "note": f"one ESC beat built as bytes and read back ({k}), median of {BLOCKS} blocks"} for k in med),
-            {"name": "heartbeat_codec_cpu_ratio", "value": med["heartbeat"] / med["status"], "unit": "x",
-             "note": "Heartbeat / DiagnosticStatus, same process and run"}]
+    return _cpu_rows("codec", per, n,
+                     "one ESC beat built as bytes and read back ({k}), median of {blocks} blocks")
 
 
 def cycle_rows(n: int) -> list[dict]:
@@ -111,11 +108,20 @@ def cycle_rows(n: int) -> list[dict]:
         ex.shutdown()
         tx.destroy_node()
         rx.destroy_node()
+    return _cpu_rows("cycle", per, n,
+                     "process CPU per beat built, published, delivered to a second participant "
+                     "through the EventsExecutor and read ({k}), median of {blocks} alternating blocks")
+
+
+def _cpu_rows(what: str, per: dict[str, list[float]], n: int, note: str) -> list[dict]:
+    """Rows ``heartbeat_<what>_cpu_us_<kind>`` (the median of the blocks ``per[kind]``, us per
+    beat; ``note`` with ``{k}`` the kind, ``{blocks}`` their number) and
+    ``heartbeat_<what>_cpu_ratio``."""
     med = {k: statistics.median(v) for k, v in per.items()}
-    return [*({"name": f"heartbeat_cycle_cpu_us_{k}", "value": med[k], "unit": "us", "n": n * BLOCKS,
-               "note": f"process CPU per beat built, published, delivered to a second participant through the "
-                       f"EventsExecutor and read ({k}), median of {BLOCKS} alternating blocks"} for k in med),
-            {"name": "heartbeat_cycle_cpu_ratio", "value": med["heartbeat"] / med["status"], "unit": "x",
+    name = f"heartbeat_{what}_cpu"
+    return [*({"name": f"{name}_us_{k}", "value": med[k], "unit": "us", "n": n * BLOCKS,
+               "note": note.format(k=k, blocks=BLOCKS)} for k in med),
+            {"name": f"{name}_ratio", "value": med["heartbeat"] / med["status"], "unit": "x",
              "note": "Heartbeat / DiagnosticStatus, same process and run"}]
 
 

@@ -36,11 +36,6 @@ from sensor_msgs.msg import FluidPressure, Imu
 from . import run_alone, spin_for, spinning
 
 
-def _percentiles(values_s: list[float]) -> tuple[float, float]:
-    arr = np.array(values_s) * 1e3
-    return float(np.percentile(arr, 50)), float(np.percentile(arr, 99))
-
-
 def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s: float, extra_devices=None):
     """Spin node + probe for ``duration_s``; return (cpu_s, wall_s, published, receipts [(t_ns, stamp_ns)])."""
     bus = EmulatedI2CBus({address: emulator, **(extra_devices or {})})
@@ -128,8 +123,8 @@ def _icm20948(duration_s: float, idle: float) -> list[dict]:
     for t_rx, stamp in receipts:
         i = bisect.bisect_right(reads_ns, stamp) - 1  # the burst read just before the stamp
         if i >= 0:
-            latencies.append((t_rx - reads_ns[i]) * 1e-9)
-    p50, p99 = _percentiles(latencies)
+            latencies.append((t_rx - reads_ns[i]) * 1e-6)
+    p50, p99 = np.percentile(latencies, [50, 99])  # ms
     return [
         {"name": "icm20948_read_to_topic_p50", "value": p50, "unit": "ms", "target": "< 10 ms (one 100 Hz period)"},
         {"name": "icm20948_read_to_topic_p99", "value": p99, "unit": "ms"},
@@ -152,10 +147,9 @@ def _ms5837(duration_s: float, idle: float) -> list[dict]:
         # the first ADC read after it is D1's, one conversion earlier: matching on it measured the D2 conversion.)
         i = bisect.bisect_right(adc_reads_ns, t_rx) - 1
         if i >= 1 and adc_reads_ns[i - 1] > stamp:  # D1's read lies between the stamp and D2's read
-            latencies.append((t_rx - adc_reads_ns[i]) * 1e-9)
-        ages.append((t_rx - stamp) * 1e-9)
-    p50, p99 = _percentiles(latencies)
-    a50, a99 = _percentiles(ages)
+            latencies.append((t_rx - adc_reads_ns[i]) * 1e-6)
+        ages.append((t_rx - stamp) * 1e-6)
+    (p50, p99), (a50, a99) = np.percentile(latencies, [50, 99]), np.percentile(ages, [50, 99])  # ms
     return [
         {"name": "ms5837_read_to_topic_p50", "value": p50, "unit": "ms", "target": "< 5 ms"},
         {"name": "ms5837_read_to_topic_p99", "value": p99, "unit": "ms"},

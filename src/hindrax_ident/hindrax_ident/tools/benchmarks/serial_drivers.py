@@ -71,11 +71,6 @@ def _thread_cpu_s(name_prefix: str) -> float:
     return 0.0
 
 
-def _percentiles_ms(values_ns: list[int]) -> tuple[float, float]:
-    arr = np.array(values_ns, dtype=float) * 1e-6
-    return float(np.percentile(arr, 50)), float(np.percentile(arr, 99))
-
-
 def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str,
              rate: str) -> list[dict]:
     """Run node + probe for ``duration_s`` after a warm-up; the rows of :func:`_rows`."""
@@ -125,7 +120,7 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
     for label, values in latencies.items():
         if not values:
             continue
-        p50, p99 = _percentiles_ms(values)
+        p50, p99 = np.percentile(np.array(values, dtype=float) * 1e-6, [50, 99])
         rows.append({"name": f"{device} latency p50 bytes->{label}", "value": p50, "unit": "ms",
                      "note": f"{len(values)} samples"})
         rows.append({"name": f"{device} latency p99 bytes->{label}", "value": p99, "unit": "ms", "target": "< 10"})
