@@ -110,7 +110,8 @@ def cycle_rows(n: int) -> list[dict]:
         rx.destroy_node()
     return _cpu_rows("cycle", per, n,
                      "process CPU per beat built, published, delivered to a second participant "
-                     "through the EventsExecutor and read ({k}), median of {blocks} alternating blocks")
+                     "through the EventsExecutor and read ({k}), median of {blocks} alternating "
+                     "blocks")
 
 
 def _cpu_rows(what: str, per: dict[str, list[float]], n: int, note: str) -> list[dict]:

@@ -36,9 +36,9 @@ from sensor_msgs.msg import FluidPressure, Imu
 from . import run_alone, spin_for, spinning
 
 
-def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s: float, extra_devices=None):
+def _run(node_factory, emulator, address: int, msg_type, topic: str, duration_s: float):
     """Spin node + probe for ``duration_s``; return (cpu_s, wall_s, published, receipts [(t_ns, stamp_ns)])."""
-    bus = EmulatedI2CBus({address: emulator, **(extra_devices or {})})
+    bus = EmulatedI2CBus({address: emulator})
     receipts: list[tuple[int, int]] = []
     with ros_context() as ctx:
         node = node_factory(bus, ctx)

@@ -940,10 +940,10 @@ def frozen_rows(quick: bool = False) -> list[dict]:
                      f"armed after {granted_s:.1f} s"}]
 
 
-def _guard_without_line(lay: _Layout, hw: _Hardware, attempts: int = 5) -> tuple[int, int, str, float]:
-    """Restart the guard while its /OE line is busy, ask the ESC to arm ``attempts`` times (0.3 s apart, after the
-    guard heartbeats), then grant the line. Returns (refused, attempts, last refusal, seconds until an arm worked
-    after the grant)."""
+def _guard_without_line(lay: _Layout, hw: _Hardware) -> tuple[int, int, str, float]:
+    """Restart the guard while its /OE line is busy, ask the ESC to arm 5 times (0.3 s apart, after
+    the guard heartbeats), then grant the line. Returns (refused, attempts, last refusal, seconds until an
+    arm worked after the grant)."""
     lay.commanding = False
     if lay.procs.get("guard") is not None:
         lay.kill("guard")
@@ -953,7 +953,7 @@ def _guard_without_line(lay: _Layout, hw: _Hardware, attempts: int = 5) -> tuple
         heard = []
         sub = lay.probe.create_subscription(Heartbeat, "guard/heartbeat", heard.append, heartbeat_qos())
         wait_until(lambda: len(heard) >= 5, 60, None, "guard heartbeats")
-        refused, answer = 0, ""
+        refused, answer, attempts = 0, "", 5
         for _ in range(attempts):
             res = lay.call(lay.arm_client, lay.SetArmed.Request(arm=True))
             if res.success:

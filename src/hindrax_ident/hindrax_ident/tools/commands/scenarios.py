@@ -324,7 +324,7 @@ def _pct(a: int, n: int) -> str:
     return f"{100.0 * a / n:.0f} %" if n else "-"
 
 
-def format_table(summary: dict, detail: bool = True) -> str:
+def format_table(summary: dict) -> str:
     """Markdown: one line per scenario (coverage, suspect, ok, target), then per scenario, DOF and parameter."""
     lines = ["| scenario | cases | before: interval covers truth | after: interval covers truth | suspect | "
              "covered or suspect | target met | RLS std published (covers) |",
@@ -336,8 +336,6 @@ def format_table(summary: dict, detail: bool = True) -> str:
                      f"{s['suspect']} ({_pct(s['suspect'], s['cases'])}) | {s['ok']} ({_pct(s['ok'], s['cases'])}) | "
                      f"{'yes' if s['meets_target'] else 'no'} | {s.get('rls_published', 0)} "
                      f"({s.get('rls_published_covers', 0)}) |")
-    if not detail:
-        return "\n".join(lines)
     lines += ["", "| scenario | DOF | parameter | mean error | max abs z | covers | suspect | main reason |",
               "|---|---|---|---|---|---|---|---|"]
     for sc, s in summary.items():
