@@ -941,9 +941,9 @@ def frozen_rows(quick: bool = False) -> list[dict]:
 
 
 def _guard_without_line(lay: _Layout, hw: _Hardware) -> tuple[int, int, str, float]:
-    """Restart the guard while its /OE line is busy, ask the ESC to arm 5 times (0.3 s apart, after
-    the guard heartbeats), then grant the line. Returns (refused, attempts, last refusal, seconds until an
-    arm worked after the grant)."""
+    """Restart the guard while its /OE line is busy, ask the ESC to arm 5 times (0.3 s apart,
+    after the guard heartbeats), then grant the line. Returns (refused, attempts, last refusal,
+    seconds until an arm worked after the grant)."""
     lay.commanding = False
     if lay.procs.get("guard") is not None:
         lay.kill("guard")
