@@ -27,6 +27,7 @@ from typing import Iterator
 
 import numpy as np
 from hindrax_drivers.pca9685.emulator import Pca9685Emulator
+from hindrax_drivers.testing import child_process
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.socket_i2c import I2CSocketServer, SocketI2CBus
 
@@ -105,14 +106,10 @@ def run(quick: bool = False) -> list[dict]:
                          f"server in this process, {busy} busy Python threads beside it" +
                          (f", switch interval {switch_s * 1e3:g} ms" if switch_s else ""))
         path = str(Path(tmp) / "own.sock")
-        proc = subprocess.Popen([sys.executable, "-m", _MODULE, "--serve", path], stdout=subprocess.PIPE, text=True)
-        try:
+        with child_process([sys.executable, "-m", _MODULE, "--serve", path], stdout=subprocess.PIPE,
+                           text=True) as proc, _busy_threads(2):
             proc.stdout.readline()  # "serving"
-            with _busy_threads(2):
-                times = _measure(path, n)
-        finally:
-            proc.terminate()
-            proc.wait(10)
+            times = _measure(path, n)
         rows += _row("i2c_socket_round_trip_own_process", times,
                      "server in a process of its own; 2 busy Python threads in the process that started it")
     return rows

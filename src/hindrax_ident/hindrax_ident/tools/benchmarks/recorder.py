@@ -18,7 +18,6 @@ reserved ROS domain.
 """
 from __future__ import annotations
 
-import signal
 import subprocess
 import tempfile
 import threading
@@ -32,7 +31,8 @@ from domain_coordinator import domain_id
 from hindrax_drivers.recording.make_test_bags import STREAMS
 from hindrax_drivers.recording.metadata import read_metadata
 from hindrax_drivers.recording.msgtypes import message_class
-from hindrax_drivers.testing import child_env, python_executable, ros_context, wait_until
+from hindrax_drivers.testing import (child_env, child_process, interrupt, python_executable,
+                                     ros_context, wait_until)
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import serialize_message
@@ -66,12 +66,12 @@ def run(quick: bool = False) -> list[dict]:
     rows: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp, domain_id() as did:
         bag = Path(tmp) / "bench"
-        proc = subprocess.Popen(
-            [python_executable(), "-m", "hindrax_drivers.recording.recorder_node", "--ros-args",
-             "-p", "autostart:=true", "-p", f"output_dir:={bag}", "-p", "topic_regex:=^/bench/",
-             "-p", "discovery_period_s:=0.2", "-p", "status_period_s:=0.2"],
-            env=child_env(ROS_DOMAIN_ID=str(did)), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        try:
+        with child_process(
+                [python_executable(), "-m", "hindrax_drivers.recording.recorder_node", "--ros-args",
+                 "-p", "autostart:=true", "-p", f"output_dir:={bag}", "-p", "topic_regex:=^/bench/",
+                 "-p", "discovery_period_s:=0.2", "-p", "status_period_s:=0.2"],
+                env=child_env(ROS_DOMAIN_ID=str(did)), stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE) as proc:
             with ros_context(domain_id=did) as ctx:
                 node = rclpy.create_node("recorder_bench", context=ctx)
                 ex = SingleThreadedExecutor(context=ctx)
@@ -156,17 +156,12 @@ def run(quick: bool = False) -> list[dict]:
                              "target": ">= 1180 (2x nominal)", "note": "; ".join(ramp_note)})
                 ex.shutdown()
                 node.destroy_node()
-            proc.send_signal(signal.SIGINT)
-            proc.wait(30)
+            interrupt(proc, 30)
             meta = read_metadata(bag)
             size = sum(p.stat().st_size for p in bag.glob("*.mcap"))
             rows.append({"name": "bag bytes per message", "value": round(size / max(1, meta.message_count), 1),
                          "unit": "B", "note": f"{meta.message_count} messages, zstd chunks (repeated payloads compress "
                                                     "far better than real data)"})
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait(10)
     return rows
 
 

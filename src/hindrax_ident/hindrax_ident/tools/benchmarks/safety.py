@@ -95,8 +95,8 @@ from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.scheduling import PRIORITY_ENV
 from hindrax_drivers.supervisor.node import SupervisorNode
 from hindrax_drivers.testing import (AllocationStandIn, ConditionTimeout, GraphSettled,
-                                     SafetyHeartbeats, child_env, config_parameters,
-                                     python_executable, ros_context, wait_until)
+                                     SafetyHeartbeats, child_env, child_process, config_parameters,
+                                     interrupt, python_executable, ros_context, wait_until)
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_drivers.transport.gpio import EmulatedGpioLine, WatchdogFeedLine, WatchedOutputEnable
 from hindrax_drivers.transport.shared_emulation import SOCKET_ENV, EmulationServer
@@ -836,8 +836,7 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
         t_end = time.monotonic() + REPLAY_RECORD_S
         wait_until(lambda: time.monotonic() > t_end, REPLAY_RECORD_S + 5, None, "recording window")
     finally:
-        rec.send_signal(_signal.SIGINT)
-        rec.wait(30)
+        interrupt(rec, 30)
     lay.commanding = False
     reader = BagReader(bag)
     wanted = ("/supervisor/heartbeat", "/guard/heartbeat", "/esc/heartbeat", "/thrusters/command_pulse_width")
@@ -866,10 +865,9 @@ def replay_rows(quick: bool = False) -> list[dict]:
             k += 1
             lay.armed_at_1700()
             t_start = time.monotonic()  # the replay's participant and publishers may stop the outputs already
-            with open(tmp / f"replay{k}.log", "w") as log:
-                replay = subprocess.Popen([lay.py, "-c", _REPLAY, str(bag), f"{offset_s:.3f}"], env=lay.env,
-                                          stdout=subprocess.PIPE, stderr=log, text=True)
-            try:
+            with open(tmp / f"replay{k}.log", "w") as log, child_process(
+                    [lay.py, "-c", _REPLAY, str(bag), f"{offset_s:.3f}"], env=lay.env,
+                    stdout=subprocess.PIPE, stderr=log, text=True) as replay:
                 if hw.stopped_at is not None and hw.stopped_at < t_start:
                     spurious += 1
                     continue
@@ -891,9 +889,6 @@ def replay_rows(quick: bool = False) -> list[dict]:
                 except ConditionTimeout:
                     censored += 1
                     after_kill.append(REPLAY_CENSOR_S)
-            finally:
-                replay.kill()
-                replay.wait(10)
     note = ("bag of the armed layout replayed in a loop with every topic (heartbeats, commands), supervisor SIGKILLed "
             f"{REPLAY_LEAD_S:g} s into the replay; {censored} of {repeats} still had thrust "
             f"{REPLAY_CENSOR_S:g} s after the kill (counted as {REPLAY_CENSOR_S * 1e3:.0f} ms), {len(by_replay)} had "

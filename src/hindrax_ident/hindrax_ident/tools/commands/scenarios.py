@@ -244,33 +244,24 @@ def summarise(results: Sequence[dict]) -> dict:
             by.setdefault(res["scenario"], {}).setdefault((row["dof"], row["parameter"]), []).append(row)
     for sc, params in by.items():
         table = []
-        n_cases = n_cov = n_sus = n_ok = 0
-        meets = True
         for (dof, name), rows in params.items():
             extra = spread_reasons([r["value"] for r in rows], [r["std"] for r in rows])
             if extra:  # run-to-run spread: suspect in every case of this parameter
                 for r in rows:
-                    if r["verdict"] != "suspect":
-                        r["verdict"] = "suspect"
-                    r["reasons"] = list(r["reasons"]) + extra
+                    r["verdict"], r["reasons"] = "suspect", list(r["reasons"]) + extra
             cov = sum(r["covered"] for r in rows)
-            sus = sum(r["verdict"] == "suspect" for r in rows)
             ok = sum(r["covered"] or r["verdict"] == "suspect" for r in rows)
             errs = [r["rel_error"] for r in rows if r["rel_error"] is not None]
             zs = [abs(r["z"]) for r in rows if r["z"] is not None]
-            param_ok = cov >= 0.9 * len(rows) or ok == len(rows)
-            meets &= param_ok
-            reasons = sorted({x for r in rows for x in r["reasons"]})
-            table.append({"dof": dof, "parameter": name, "n": len(rows), "covered": cov, "suspect": sus, "ok": ok,
+            table.append({"dof": dof, "parameter": name, "n": len(rows), "covered": cov,
+                          "suspect": sum(r["verdict"] == "suspect" for r in rows), "ok": ok,
                           "mean_rel_error": (sum(errs) / len(errs)) if errs else None,
-                          "max_abs_z": max(zs) if zs else None, "meets": param_ok,
-                          "reasons": reasons[:4]})
-            n_cases += len(rows)
-            n_cov += cov
-            n_sus += sus
-            n_ok += ok
-        if sc == "none" and n_cases and n_sus > 0.1 * n_cases:
-            meets = False
+                          "max_abs_z": max(zs) if zs else None,
+                          "meets": cov >= 0.9 * len(rows) or ok == len(rows),
+                          "reasons": sorted({x for r in rows for x in r["reasons"]})[:4]})
+        n_cases, n_cov, n_sus, n_ok = (sum(p[k] for p in table)
+                                       for k in ("n", "covered", "suspect", "ok"))
+        meets = all(p["meets"] for p in table) and not (sc == "none" and n_sus > 0.1 * n_cases)
         all_rows = [r for rows in params.values() for r in rows]
         pub = [r for r in all_rows if r.get("rls_std") is not None]
         out[sc] = {"parameters": table, "cases": n_cases, "covered": n_cov, "suspect": n_sus, "ok": n_ok,
@@ -307,13 +298,13 @@ def format_excitation_table(results: Sequence[dict]) -> str:
              "error | intervals cover | inertia error at 100 s | quadratic damping error at 100 s | 1-sigma at 100 s "
              "(inertia / quadratic damping) |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    def mean(xs) -> float:
+        return sum(xs) / len(xs) if xs else math.nan
+
     for (sc, exc, dof), d in sorted(by.items(), key=lambda kv: (kv[0][0], kv[0][2], kv[0][1])):
-        pool = sum(d["pool"].values()) / max(1, len(d["pool"]))
-        mi = sum(d["inertia"]) / len(d["inertia"]) if d["inertia"] else math.nan
-        mq = sum(d["kq"]) / len(d["kq"]) if d["kq"] else math.nan
+        pool = mean(list(d["pool"].values())) if d["pool"] else 0.0
+        mi, mq, si, sq = (mean(d[key]) for key in ("inertia", "kq", "inertia_std", "kq_std"))
         k = math.sqrt(pool / 100.0) if pool > 0 else math.nan
-        si = sum(d["inertia_std"]) / len(d["inertia_std"]) if d["inertia_std"] else math.nan
-        sq = sum(d["kq_std"]) / len(d["kq_std"]) if d["kq_std"] else math.nan
         lines.append(f"| {sc} | {exc} | {dof} | {len(d['pool'])} | {pool:.0f} | {100 * mi:.1f} % | {100 * mq:.1f} % | "
                      f"{d['covered']}/{d['n']} | {100 * mi * k:.1f} % | {100 * mq * k:.1f} % | "
                      f"{100 * si * k:.1f} % / {100 * sq * k:.1f} % |")
