@@ -31,6 +31,7 @@ import sys
 import tempfile
 import time
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -248,37 +249,41 @@ def evaluate(bags: Bags, opts: FitOptions = FitOptions(), gray_box: bool = False
     return out
 
 
-def run(quick: bool = False, only: list[str] | None = None, keep: str | None = None) -> list[dict]:
-    """The ``make bench`` rows: per data set and DOF the three NRMSE and fit / ls."""
-    rows: list[dict] = []
-    names = [d.name for d in DATASETS] if not only else only
-    ctx = tempfile.TemporaryDirectory(prefix="ident_fit_bench_") if keep is None else None
-    root = Path(keep) if keep is not None else Path(ctx.name)
-    root.mkdir(parents=True, exist_ok=True)
-    try:
-        for data in DATASETS:
-            if data.name not in names:
+def evaluated(datasets, only: list[str] | None, keep: str | None, quick: bool = False,
+              gray_box: bool = False) -> Iterator[tuple[DataSet, float, float, dict]]:
+    """(data set, s to make its bags, s to fit and evaluate them, :func:`evaluate`'s result) per
+    data set of ``datasets`` named in ``only`` (all when None); the bags in ``keep`` (reused when
+    there), else in a temporary folder removed at the end."""
+    with tempfile.TemporaryDirectory(prefix="ident_fit_bench_") as tmp:
+        root = Path(keep or tmp)
+        root.mkdir(parents=True, exist_ok=True)
+        for data in datasets:
+            if only and data.name not in only:
                 continue
             t0 = time.monotonic()
             bags = make_bags(data, root, quick)
             t1 = time.monotonic()
-            res = evaluate(bags)
-            t2 = time.monotonic()
-            rows.append({"name": f"{data.name} bags / fit wall time", "value": round(t2 - t1, 1), "unit": "s",
-                         "note": f"bags {t1 - t0:.0f} s; {data.note}; RuntimeWarnings {res['runtime_warnings']}"})
-            for dof in DOFS_COMPARED:
-                r = res[dof]
-                rows.append({"name": f"{data.name} {dof} nrmse fit / ls / hold",
-                             "value": f"{r['fit']:.3f} / {r['ls']:.3f} / {r['hold']:.3f}", "unit": "",
-                             "target": "fit <= 0.9 ls and < hold",
-                             "note": f"cv {r.get('cv', math.nan):.3f}; noise floor {r.get('floor', math.nan):.3f}; "
-                                     f"{r['status']}; {r['samples']} samples; "
-                                     f"{r.get('model', '')}"})
-                rows.append({"name": f"{data.name} {dof} fit / ls", "value": round(r["fit"] / r["ls"], 3)
-                             if r["ls"] > 0 else math.nan, "unit": "", "target": "<= 0.9"})
-    finally:
-        if ctx is not None:
-            ctx.cleanup()
+            res = evaluate(bags, gray_box=gray_box)
+            yield data, t1 - t0, time.monotonic() - t1, res
+
+
+def run(quick: bool = False, only: list[str] | None = None, keep: str | None = None) -> list[dict]:
+    """The ``make bench`` rows: per data set and DOF the three NRMSE and fit / ls."""
+    rows: list[dict] = []
+    for data, bags_s, fit_s, res in evaluated(DATASETS, only, keep, quick):
+        rows.append({"name": f"{data.name} bags / fit wall time", "value": round(fit_s, 1),
+                     "unit": "s", "note": f"bags {bags_s:.0f} s; {data.note}; "
+                                          f"RuntimeWarnings {res['runtime_warnings']}"})
+        for dof in DOFS_COMPARED:
+            r = res[dof]
+            rows.append({"name": f"{data.name} {dof} nrmse fit / ls / hold",
+                         "value": f"{r['fit']:.3f} / {r['ls']:.3f} / {r['hold']:.3f}", "unit": "",
+                         "target": "fit <= 0.9 ls and < hold",
+                         "note": f"cv {r.get('cv', math.nan):.3f}; noise floor "
+                                 f"{r.get('floor', math.nan):.3f}; {r['status']}; {r['samples']} "
+                                 f"samples; {r.get('model', '')}"})
+            rows.append({"name": f"{data.name} {dof} fit / ls", "unit": "", "target": "<= 0.9",
+                         "value": round(r["fit"] / r["ls"], 3) if r["ls"] > 0 else math.nan})
     return rows
 
 

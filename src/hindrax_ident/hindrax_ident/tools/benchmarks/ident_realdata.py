@@ -29,8 +29,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import tempfile
-import time
 from pathlib import Path
 
 import matplotlib
@@ -41,7 +39,7 @@ from hindrax_ident import results_doc
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from .ident_fit import DOFS_COMPARED, DataSet, evaluate, make_bags  # noqa: E402
+from .ident_fit import DOFS_COMPARED, DataSet, evaluated  # noqa: E402
 
 #: Largest held-out NRMSE of the fit above the gray-box 1-DOF model's that still meets the target
 NESTED_MARGIN = 0.005
@@ -87,24 +85,9 @@ DATASETS: tuple[DataSet, ...] = (
 
 def run(only: list[str] | None = None, keep: str | None = None) -> dict:
     """{data set name: {"note", "bags_s", "fit_s", dof: row of :func:`.ident_fit.evaluate`}}."""
-    out: dict = {}
-    ctx = tempfile.TemporaryDirectory(prefix="ident_realdata_") if keep is None else None
-    root = Path(keep) if keep is not None else Path(ctx.name)
-    root.mkdir(parents=True, exist_ok=True)
-    try:
-        for data in DATASETS:
-            if only and data.name not in only:
-                continue
-            t0 = time.monotonic()
-            bags = make_bags(data, root)
-            t1 = time.monotonic()
-            res = evaluate(bags, gray_box=True)
-            out[data.name] = {"note": data.note, "bags_s": t1 - t0, "fit_s": time.monotonic() - t1,
-                              **{d: res[d] for d in DOFS_COMPARED}}
-    finally:
-        if ctx is not None:
-            ctx.cleanup()
-    return out
+    return {data.name: {"note": data.note, "bags_s": bags_s, "fit_s": fit_s,
+                        **{d: res[d] for d in DOFS_COMPARED}}
+            for data, bags_s, fit_s, res in evaluated(DATASETS, only, keep, gray_box=True)}
 
 
 def _f(x) -> str:

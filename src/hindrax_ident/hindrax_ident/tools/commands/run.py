@@ -212,14 +212,11 @@ def _calibration_steps(args) -> list[str]:
 def _calibration_overrides(args) -> dict:
     """``calibration.*`` keys given on the command line (``--ballast-mass-kg``, ``--ballast-volume-m3``,
     ``--line-pull-n``): {key: value} of those given."""
-    out = {}
-    for opt, key in (("ballast_mass_kg", "calibration.ballast_mass_kg"),
-                     ("ballast_volume_m3", "calibration.ballast_volume_m3"),
-                     ("line_pull_n", "calibration.line_pull_force_n")):
-        v = getattr(args, opt, None)
-        if v is not None:
-            out[key] = float(v)
-    return out
+    keys = {"ballast_mass_kg": "calibration.ballast_mass_kg",
+            "ballast_volume_m3": "calibration.ballast_volume_m3",
+            "line_pull_n": "calibration.line_pull_force_n"}
+    return {key: float(getattr(args, opt)) for opt, key in keys.items()
+            if getattr(args, opt, None) is not None}
 
 
 def run_graph(args: argparse.Namespace) -> int:

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Sequence
 
 from ... import results_doc
-from .common import CommandError, add_config_argument, choices, load_vehicle
+from .common import CommandError, WallProgress, add_config_argument, choices, load_vehicle
 
 __all__ = ["add_arguments", "run", "scenario_names", "run_case", "summarise", "format_table", "REPORTED",
            "format_excitation_table"]
@@ -382,8 +382,7 @@ def run(args: argparse.Namespace) -> int:
         keep = [j for j in jobs if _cache_file(args.cache, *j[1:5], *j[6:]).is_file()]
         not_run = [f"{j[1]} seed {j[2]}" for j in jobs if j not in keep]
         jobs = keep
-    wall0 = time.monotonic()
-    results = []
+    progress, results = WallProgress(), []
     # import everything the workers need before they fork (the tree may change during a long suite)
     from ...identification.assessment import verdicts  # noqa: F401
     from ...identification.fit import dof_model  # noqa: F401
@@ -393,12 +392,14 @@ def run(args: argparse.Namespace) -> int:
     with mp.get_context("fork").Pool(args.jobs) if args.jobs > 1 else nullcontext() as pool:
         for res in (pool.imap if pool else map)(_case_star, jobs):
             results.append(res)
-            _say(res, wall0)
+            extra = f", ERROR {res['error']}" if res.get("error") else (
+                f", ABORTED: {res['abort_reason']}" if res["aborted"] else "")
+            progress(f"{res['scenario']} seed {res['seed']}: {res['wall_s']:.0f} s{extra}")
     summary = summarise(results)
     date = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
     doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names, "calibrate": cal,
            "levels": args.levels, "not_run": not_run,
-           "wall_time_s": time.monotonic() - wall0, "summary": summary, "runs": results}
+           "wall_time_s": progress.elapsed(), "summary": summary, "runs": results}
     table = format_table(summary)
     if args.excitation:
         doc["excitation_table"] = format_excitation_table(results)
@@ -416,13 +417,6 @@ def run(args: argparse.Namespace) -> int:
                                f"{table}")
     print(f"output: {out / 'scenarios.json'}, {out / 'scenarios.md'} (wall time {doc['wall_time_s']:.0f} s)")
     return 0
-
-
-def _say(res: dict, wall0: float) -> None:
-    extra = f", ERROR {res['error']}" if res.get("error") else (
-        f", ABORTED: {res['abort_reason']}" if res["aborted"] else "")
-    print(f"[{time.monotonic() - wall0:6.0f} s] {res['scenario']} seed {res['seed']}: {res['wall_s']:.0f} s{extra}",
-          flush=True)
 
 
 def _json_default(x):
