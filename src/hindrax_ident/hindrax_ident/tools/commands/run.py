@@ -135,12 +135,32 @@ def summary_markdown(identifications: dict) -> str:
         for r, err, tr, why in _summary(identifications)])
 
 
-def _write_results(args: argparse.Namespace, identifications: dict, path: str, wall_s: float) -> None:
-    """Section ``run`` of ``--results-doc`` (docs/results.md): the end-of-run table of this campaign."""
-    body = (f"Campaign {path}, DOFs {args.dofs}, levels {args.levels or 'default'}, seed "
-            f"{'default' if args.seed is None else args.seed}, truth {getattr(args, 'truth', None) or 'default'}; "
-            f"wall time {wall_s:.0f} s on {os.cpu_count()} cores.\n\n" + summary_markdown(identifications))
-    results_doc.write_if_asked(args, "run", "The main job: identified against the simulator's truth", body)
+def _finish(args: argparse.Namespace, progress: WallProgress, out: Path, idents: dict, errors: dict,
+            ok: bool, where: str, extra: str = "") -> int:
+    """The end of a run: the DOFs without an estimate, the summary table and section ``run`` of
+    ``--results-doc`` (run ``where``), the output line; ``latest`` beside ``out`` points at it when
+    ``ok`` with an estimate (not for ``--out``). Returns the exit status: 0, or 1 without that."""
+    for dof, msg in errors.items():
+        progress(f"{dof}: no estimate ({msg})")
+    if idents:
+        print(format_summary(idents))
+        seed, truth = "default" if args.seed is None else args.seed, getattr(args, "truth", None)
+        body = (f"Campaign {where}, DOFs {args.dofs}, levels {args.levels or 'default'}, "
+                f"seed {seed}, truth {truth or 'default'}; wall time {progress.elapsed():.0f} s on "
+                f"{os.cpu_count()} cores.\n\n" + summary_markdown(idents))
+        title = "The main job: identified against the simulator's truth"
+        results_doc.write_if_asked(args, "run", title, body)
+    print(f"output: {out}  ({extra}wall time {progress.elapsed():.0f} s)")
+    if not (ok and idents):
+        return 1
+    if not args.out:
+        from ...output_dirs import point_latest
+
+        try:
+            point_latest(out)
+        except OSError as exc:
+            print(f"{out.parent / 'latest'}: not updated ({exc.strerror or exc})")
+    return 0
 
 
 def _output_dir(cfg, out: str | None, kind: str, dofs: list[str]) -> Path:
@@ -152,18 +172,6 @@ def _output_dir(cfg, out: str | None, kind: str, dofs: list[str]) -> Path:
     label = "all" if set(dofs) == set(DOFS) else "-".join(dofs)
     return result_dir(out, Path(str(root)), f"{kind}_{label}",
                       f"recording.output_root {root}: cannot create a run folder ({{why}})")
-
-
-def _completed(out: Path, explicit: bool) -> None:
-    """A run folder is complete: ``latest`` beside it points at it now (not for ``--out``)."""
-    if explicit:
-        return
-    from ...output_dirs import point_latest
-
-    try:
-        point_latest(out)
-    except OSError as exc:
-        print(f"{out.parent / 'latest'}: not updated ({exc.strerror or exc})")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -248,16 +256,8 @@ def run_graph(args: argparse.Namespace) -> int:
                                          progress))
     except ForeignVehicleError as exc:
         raise CommandError(f"hindrax run: {exc}") from exc
-    for dof, msg in outcome.errors.items():
-        progress(f"{dof}: no estimate ({msg})")
-    if outcome.identifications:
-        print(format_summary(outcome.identifications))
-        _write_results(args, outcome.identifications, "through the node graph", progress.elapsed())
-    print(f"output: {out}  (bag {outcome.bag_dir}; wall time {progress.elapsed():.0f} s)")
-    if outcome.success and outcome.identifications:
-        _completed(out, bool(args.out))
-        return 0
-    return 1
+    return _finish(args, progress, out, outcome.identifications, outcome.errors, outcome.success,
+                   "through the node graph", f"bag {outcome.bag_dir}; ")
 
 
 def run_in_process(args: argparse.Namespace) -> int:
@@ -292,8 +292,6 @@ def run_in_process(args: argparse.Namespace) -> int:
 
     # the calibration's per-direction scales applied, the thrust shares attached for the joint estimate
     idents, errors = identify_calibrated(record, cfg, identify_all_with_errors)
-    for dof, msg in errors.items():
-        progress(f"{dof}: no estimate ({msg})")
     out = _output_dir(cfg, args.out, "sim-in-process", dofs)
     if idents:
         note = (f"In-process simulator campaign, {record.t_s[-1]:.0f} s simulated, wall {record.wall_time_s:.0f} s"
@@ -302,10 +300,5 @@ def run_in_process(args: argparse.Namespace) -> int:
         write_outputs(out, idents, cfg, None, note, source="simulation", seed=record.seed,
                       calibration=record.calibration, sections=lambda doc: reference_sections(
                           doc, record, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std, progress))
-        print(format_summary(idents))
-        _write_results(args, idents, "in-process (no ROS graph)", progress.elapsed())
-    print(f"output: {out}  (wall time {progress.elapsed():.0f} s)")
-    if record.aborted or not idents:
-        return 1
-    _completed(out, bool(args.out))
-    return 0
+    return _finish(args, progress, out, idents, errors, not record.aborted,
+                   "in-process (no ROS graph)")
