@@ -63,15 +63,14 @@ def _busy_threads(n: int) -> Iterator[None]:
     joined when it ends, also on an error."""
     stop = threading.Event()
     threads = [threading.Thread(target=_busy, args=(stop,), daemon=True) for _ in range(n)]
+    for th in threads:
+        th.start()
     try:
-        for th in threads:
-            th.start()
         yield
     finally:
         stop.set()
         for th in threads:
-            if th.is_alive():
-                th.join()
+            th.join()
 
 
 def _measure(path: str, n: int) -> list[float]:

@@ -45,12 +45,20 @@ PING_INTERVAL_S = 0.025
 
 
 class _TimedEmulator:
-    """Wraps an emulator: records ``time.monotonic_ns()`` when ``poll`` returns the bytes of cycle keys."""
+    """The emulator ``make(sample)`` whose k-th truth sample is ``truth(k)``, keyed ``k % modulus``;
+    :attr:`written` maps a key to the ``time.monotonic_ns()`` at which ``poll`` returned its
+    bytes."""
 
-    def __init__(self, emulator, pending: list, written: dict) -> None:
-        self.emulator = emulator
-        self._pending = pending  # keys of the truth samples taken during the current poll
-        self._written = written  # key -> write time (ns)
+    def __init__(self, make, truth, modulus: int) -> None:
+        self.written: dict[int, int] = {}
+        self._pending: list[int] = []  # keys of the truth samples taken during the current poll
+        self._k = 0
+
+        def sample(_t: float):
+            k, self._k = self._k, self._k + 1
+            self._pending.append(k % modulus)
+            return truth(k)
+        self.emulator = make(sample)
 
     def feed_host_bytes(self, data: bytes) -> None:
         self.emulator.feed_host_bytes(data)
@@ -59,7 +67,7 @@ class _TimedEmulator:
         out = self.emulator.poll(t_s)
         now = time.monotonic_ns()
         for key in self._pending:
-            self._written[key] = now
+            self.written[key] = now
         self._pending.clear()
         return out
 
@@ -128,18 +136,11 @@ def _rows(device: str, rate: str, reader_s: float, other_s: float, wall_s: float
 
 
 def _bench_dvl(duration_s: float) -> list[dict]:
-    pending: list = []
-    written: dict = {}
-    counter = {"k": 0}
-
-    def truth(_t: float) -> DvlTruth:
-        k = counter["k"]
-        counter["k"] += 1
-        pending.append(k % 100)
-        return DvlTruth(velocity_frd_m_s=(0.2 + 0.01 * (k % 7), 0.0, 0.0), altitude_m=2.0 + (k % 100) * 0.01,
-                        confidence_pct=1 + k % 100)
-
-    emu = _TimedEmulator(Dvl75Emulator(truth, rate_hz=DVL_RATE_HZ), pending, written)
+    emu = _TimedEmulator(
+        lambda truth: Dvl75Emulator(truth, rate_hz=DVL_RATE_HZ),
+        lambda k: DvlTruth(velocity_frd_m_s=(0.2 + 0.01 * (k % 7), 0.0, 0.0),
+                           altitude_m=2.0 + (k % 100) * 0.01, confidence_pct=1 + k % 100), 100)
+    written = emu.written
 
     def data_key(msg):
         return written.get(int(round(msg.confidence_percent)) - 1) if msg.velocity_valid else None
@@ -157,19 +158,11 @@ def _bench_dvl(duration_s: float) -> list[dict]:
 
 def _bench_ping(duration_s: float) -> list[dict]:
     c = float(load_config(default_config_path()).sensors.ping1d.speed_of_sound_m_s)
-    pending: list = []
-    written: dict = {}
-    counter = {"k": 0}
-
-    def truth(_t: float) -> Ping1dTruth:
-        k = counter["k"]
-        counter["k"] += 1
-        pending.append(k % 1000)
-        return Ping1dTruth(altitude_m=1.0 + (k % 1000) * 0.001, confidence_pct=90)
-
-    emu = _TimedEmulator(Ping1dEmulator(truth, settings=Ping1dSettings(speed_of_sound_m_s=c,
-                                                                      ping_interval_s=PING_INTERVAL_S),
-                                        true_speed_of_sound_m_s=c), pending, written)
+    settings = Ping1dSettings(speed_of_sound_m_s=c, ping_interval_s=PING_INTERVAL_S)
+    emu = _TimedEmulator(
+        lambda truth: Ping1dEmulator(truth, settings=settings, true_speed_of_sound_m_s=c),
+        lambda k: Ping1dTruth(altitude_m=1.0 + (k % 1000) * 0.001, confidence_pct=90), 1000)
+    written = emu.written
 
     def range_key(msg):
         return written.get(int(round((msg.range - 1.0) / 0.001)) % 1000) if msg.range < 1e9 else None
