@@ -97,21 +97,17 @@ def format_status(msg: Any) -> str:
     return "  ".join(parts)
 
 
-def _parse_calibrate(args: argparse.Namespace) -> list[str]:
-    """The ``--calibrate`` steps. Raises :class:`CommandError` for an unknown step or ``--calibration-only``
-    without one."""
-    from ...identification.online.executive import CALIBRATION_STEPS
-
-    steps = choices("--calibrate", getattr(args, "calibrate", ""), CALIBRATION_STEPS, "step")
-    if getattr(args, "calibration_only", False) and not steps:
-        raise CommandError("--calibration-only needs --calibrate STEP[,STEP]")
-    return steps
-
-
-def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float]]:
+def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float], list[str]]:
+    """(DOFs, levels, fractions, calibration steps) of ``hindrax ident start``. Raises
+    :class:`CommandError` for a bad one, or ``--calibration-only`` without a step."""
     from hindrax_drivers.config import DOFS
 
+    from ...identification.online.executive import CALIBRATION_STEPS
+
     dofs = choices("--dofs", args.dofs, DOFS, "DOF")
+    steps = choices("--calibrate", args.calibrate, CALIBRATION_STEPS, "step")
+    if args.calibration_only and not steps:
+        raise CommandError("--calibration-only needs --calibrate STEP[,STEP]")
     if args.levels < 0:
         raise CommandError(f"--levels: {args.levels} is not >= 0")
     try:
@@ -120,7 +116,7 @@ def _parse(args: argparse.Namespace) -> tuple[list[str], int, list[float]]:
         raise CommandError(f"--fractions: not numbers: {args.fractions!r}") from None
     if any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in fractions):
         raise CommandError(f"--fractions: each must be in (0, 1], got {fractions}")
-    return dofs, int(args.levels), fractions
+    return dofs, int(args.levels), fractions, steps
 
 
 def start_campaign(node: Any, executor: Any, dofs: list[str], levels: int, fractions: list[float],
@@ -199,8 +195,7 @@ def _on_vehicle(args: argparse.Namespace, body: Callable[[Any, Any, Target], Any
 
 
 def _start(args: argparse.Namespace) -> int:
-    dofs, levels, fractions = _parse(args)
-    calibrate = _parse_calibrate(args)
+    dofs, levels, fractions, calibrate = _parse(args)
     interrupts = []
     previous = signal.signal(signal.SIGINT, lambda *_: interrupts.append(time.monotonic()))
     try:
