@@ -76,11 +76,9 @@ def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:
         # real-time from here on: every thread of this process, the emulation's serving threads included (one
         # per node process, started when it connected: a thread started under SCHED_RESET_ON_FORK would not be)
         with hardware_priority() as refused:
-            if refused:
-                why = f"not measured: {refused}"
-                return [{"name": prefix + name, "value": None, "unit": unit, "note": why} for name, unit in
-                        (("disarms", "disarms"), ("heartbeat_gap_max_ms", "ms"),
-                         ("heartbeat_sent_gap_max_ms", "ms"), ("tick_gap_max_ms", "ms"))]
+            if refused:  # the same rows, not measured
+                return [{**r, "value": None, "note": f"not measured: {refused}"}
+                        for r in watch.rows(prefix, "", GAP_TARGET_MS)]
             watch.start()
             with cpu_bound_neighbours(NEIGHBOURS):
                 time.sleep(duration_s)  # the measurement window itself (the probe spins in the layout's thread)
