@@ -15,14 +15,11 @@ the modules, and the memory, the vehicle's process holds (``test_bench_launch_la
 ``threading`` name as its OS thread name (:func:`name_os_threads`), so the benchmark's wake-ups and CPU by thread
 (``/proc/PID/task/*/comm``) name it.
 
-The launch's skeleton (the stack benchmark's floor): with ``HINDRAX_BENCH_TOPOLOGY=DIR`` (:data:`TOPOLOGY_ENV`) a
-SIGUSR1 makes the process write its nodes' endpoints to ``DIR/<pid>.json`` (:func:`topology`: names, publishers
-and subscriptions with type, QoS, raw and QoS event handlers, services, clients), as the running nodes declared
-them. :func:`skeleton_main` (``launch_node hindrax_ident.tools.benchmarks.launch_node:skeleton_main SPEC LABEL``)
-rebuilds one process of such a topology without logic: the same nodes and endpoints, every publisher sending one
-pre-serialised message from a timer at its measured rate (a node's publishers of one rate share a timer: one
-wake-up, as a node's tick), callbacks that do nothing, the same executor and process life
-(:func:`hindrax_drivers.node_common.run_nodes`); SIGUSR2 switches it to its next phase's rates.
+With ``HINDRAX_BENCH_TOPOLOGY=DIR`` (:data:`TOPOLOGY_ENV`) a SIGUSR1 makes the process write its nodes' endpoints,
+as declared, to ``DIR/<pid>.json`` (:func:`topology`). :func:`skeleton_main` rebuilds one process of such a topology
+without logic (the stack benchmark's floor): the same nodes and endpoints, one pre-serialised message per publisher
+sent from a timer at its rate (a node's publishers of one rate share a timer, one wake-up as a node's tick),
+callbacks that do nothing, the node processes' ``run_nodes``; SIGUSR2 switches it to its next phase's rates.
 """
 from __future__ import annotations
 
@@ -75,8 +72,7 @@ def _endpoint(e: Any, kind: str) -> dict:
     out: dict = {"topic": getattr(e, "topic_name", None) or e.srv_name,
                  "type": _type(getattr(e, "msg_type", None) or e.srv_type)}
     if kind in ("publishers", "subscriptions"):
-        out["qos"] = {k: getattr(v, "nanoseconds", v) for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
-        out["qos"] = {k: int(v) for k, v in out["qos"].items()}
+        out["qos"] = {k: int(getattr(v, "nanoseconds", v)) for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
         out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]] for h in e.event_handlers)
     if kind == "subscriptions":
         out["raw"] = bool(e.raw)
@@ -98,8 +94,7 @@ def topology(nodes: Any) -> dict:
 
 
 def _dump_topology_on_sigusr1(directory: str) -> None:
-    """Track every rclpy node this process builds; on SIGUSR1 write :func:`topology` of those still alive (not
-    destroyed, not the hidden ``_exit_`` holder) to ``directory/<pid>.json`` (whole or not at all)."""
+    """On SIGUSR1, :func:`topology` of the nodes this process built (but the ``_exit_`` holder) to ``<pid>.json``."""
     nodes: weakref.WeakSet = weakref.WeakSet()
     init = Node.__init__
 
@@ -144,7 +139,7 @@ class _SkeletonNode(Node):
 
 
 def _call_all(fns: list) -> None:
-    for fn in fns:
+    for fn in fns:  # noqa: SIM110 - calls, not a search
         fn()
 
 

@@ -71,9 +71,9 @@ environment, each topic at the launch's rate of each phase sending a message rec
 units of the launch's virtual pool CPU in the same phase (``..._per_pool``) and as the launch's over it
 (``launch_*_vs_skeleton_ratio_*``): the floor of moving the vehicle's messages between these processes, and the
 part above it that the nodes' logic costs. Not in it: the action server and its topics, timers that publish
-nothing. The bare baselines are skeletons too: ``cpu_bare_rclpy_same_topics``, one publisher process (depth 10,
-reliable) for the topics of the one-process idle phase; ``cpu_bare_rclpy_pub_sub``, that publisher for the topics
-of the launch layout's running phase plus one process subscribing every topic raw.
+nothing. It replaces the bare publisher + raw subscriber of the same topics. The bare baseline
+``cpu_bare_rclpy_same_topics`` is a skeleton too: one publisher process for the topics of the one-process idle phase.
+The participant probes are skeletons with no publisher.
 """
 from __future__ import annotations
 
@@ -89,7 +89,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import textwrap
 import threading
 import time
 from pathlib import Path
@@ -463,9 +462,12 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                                             **{SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}),
                                                    stdout=logs[lp.label],
                                                    stderr=subprocess.STDOUT)
-            for name, topics in PARTICIPANT_PROBES.items():  # what one more process costs (not in the totals)
+            (tmp / "probes.json").write_text(json.dumps({"processes": {  # skeletons with no publisher
+                name: _one_node(name, [], [_endpoint(t, ty, raw=True) for t, ty in topics])
+                for name, topics in PARTICIPANT_PROBES.items()}}))
+            for name in PARTICIPANT_PROBES:  # what one more process costs (not in the totals)
                 logs[name] = open(tmp / f"{name}.log", "w")
-                extra[name] = subprocess.Popen([py, "-c", _PARTICIPANT, name, json.dumps(topics)], env=env,
+                extra[name] = subprocess.Popen(_skeleton_argv(tmp / "probes.json", name), env=env,
                                                stdout=logs[name], stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
@@ -559,18 +561,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                 ex.shutdown()
                 probe.destroy_node()
         finally:
-            for name in reversed(list(procs)):
-                if procs[name].poll() is None:
-                    procs[name].send_signal(signal.SIGINT)
-            for p in extra.values():
-                if p.poll() is None:
-                    p.send_signal(signal.SIGINT)
-            for name, p in {**procs, **extra}.items():
-                try:
-                    p.wait(15)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(5)
+            _stop([*reversed(procs.values()), *extra.values()])
             for f in logs.values():
                 f.close()
     bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
@@ -579,6 +570,19 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
     out["bag"] = str(bags[0])
     _bag_rates(out)
     return out
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """SIGINT to every process still running, in order, then wait for each: 15 s, then SIGKILL."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(5)
 
 
 def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
@@ -671,21 +675,6 @@ PARTICIPANT_PROBES = {
                                       ["/pressure/fluid_pressure", "sensor_msgs/msg/FluidPressure"],
                                       ["/ping/altitude", "sensor_msgs/msg/Range"]],
 }
-_PARTICIPANT = textwrap.dedent('''
-    import importlib, json, sys
-    from rclpy.node import Node
-    from hindrax_drivers.node_common import run_nodes  # the node processes' entry point: the same executor and spin
-
-    class Probe(Node):
-        def __init__(self):
-            super().__init__(sys.argv[1])
-            for topic, type_name in json.loads(sys.argv[2]):
-                pkg, _, name = type_name.split("/")
-                self.create_subscription(getattr(importlib.import_module(pkg + ".msg"), name), topic, lambda _m: None,
-                                         10, raw=True)
-
-    sys.exit(run_nodes([Probe], []))
-''')
 
 
 # ---------------------------------------------------------------------------------------------- skeletons
@@ -705,19 +694,15 @@ def skeleton_spec(topology: dict, rates: list[dict[str, float]], payloads: dict[
 
 def topology_differences(launch: dict, skeleton: dict) -> list[str]:
     """What differs between two topologies (label -> :func:`~hindrax_ident.tools.benchmarks.launch_node.topology`),
-    rates and payloads ignored: one line per process missing on either side and per node or endpoint (topic, type,
-    QoS, raw, events) that only one side has. Empty when they are equal."""
+    rates and payloads ignored: a line per process, node or endpoint (topic, type, QoS, raw, events) only one has."""
     def items(t: dict) -> set:
-        return {(label, n["namespace"], n["name"], kind,
-                 json.dumps({k: v for k, v in e.items() if k not in ("rates", "payload")}, sort_keys=True))
-                for label, proc in t.items() for n in proc["nodes"]
-                for kind in ("publishers", "subscriptions", "services", "clients") for e in n[kind]} | {
-            (label, n["namespace"], n["name"], "node", "") for label, proc in t.items() for n in proc["nodes"]}
-    out = [f"process {p} only in the {side}" for side, a, b in (("launch", launch, skeleton),
-                                                               ("skeleton", skeleton, launch)) for p in set(a) - set(b)]
+        return {(label, n["namespace"], n["name"], kind, json.dumps({k: v for k, v in e.items() if k not in (
+            "rates", "payload")}, sort_keys=True)) for label, proc in t.items() for n in proc["nodes"]
+            for kind in ("publishers", "subscriptions", "services", "clients", "node") for e in n.get(kind, [{}])}
     a, b = items(launch), items(skeleton)
-    return (out + [f"only in the launch: {x}" for x in sorted(a - b)]
-            + [f"only in the skeleton: {x}" for x in sorted(b - a)])
+    sides = (("launch", launch, skeleton), ("skeleton", skeleton, launch))
+    return [f"process {p} only in the {side}" for side, x, y in sides for p in set(x) - set(y)] \
+        + [f"only in the launch: {x}" for x in sorted(a - b)] + [f"only in the skeleton: {x}" for x in sorted(b - a)]
 
 
 def read_topologies(procs: dict[str, subprocess.Popen], directory: Path, timeout_s: float = 30) -> dict:
@@ -733,12 +718,10 @@ def read_topologies(procs: dict[str, subprocess.Popen], directory: Path, timeout
 
 def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs: dict | None = None,
               stream_phase: str | None = None, check: dict | None = None) -> dict:
-    """Run the skeleton ``spec`` (:func:`skeleton_spec`; one process per label, each by launch_node's
-    ``skeleton_main`` with the launch file's launch-prefix and environment ``envs[label] = (prefix, env)``) and
-    measure it: ``phases`` (name, windows of ``duration_s``), SIGUSR2 between two (the next phase's rates), 2 s of
-    warm-up before each. stream_phase: the phase in which this process sends the pilot's 50 Hz wrench stream, as in
-    the launch layout. check: the launch's topology, which the skeleton's must equal (RuntimeError naming the
-    differences). Returns ``{"phases": {name: {"windows": [{"wall_s", "per_process"}]}}, "topology": ...}``."""
+    """Run the skeleton ``spec`` (:func:`skeleton_spec`, a process per label, ``envs[label] = (launch-prefix, env)``)
+    and measure ``phases`` (name, windows of ``duration_s``; SIGUSR2 and 2 s of warm-up before each), the pilot's
+    wrench stream on in ``stream_phase``. check: a topology the skeleton's must equal (else RuntimeError). Returns
+    ``{"phases": {name: {"windows": [{"wall_s", "per_process"}]}}, "topology": ...}``."""
     out: dict = {"phases": {}}
     with tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir, domain_id() as did:
         tmp = Path(tmpdir)
@@ -748,10 +731,8 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs
         try:
             for label in spec:
                 prefix, extra = (envs or {}).get(label, ([], {}))
-                procs[label] = subprocess.Popen([*prefix, python_executable(), "-m",
-                                                 "hindrax_ident.tools.benchmarks.launch_node",
-                                                 "hindrax_ident.tools.benchmarks.launch_node:skeleton_main",
-                                                 str(tmp / "spec.json"), label], env=dict(env, **extra),
+                procs[label] = subprocess.Popen([*prefix, *_skeleton_argv(tmp / "spec.json", label)],
+                                                env=dict(env, **extra),
                                                 stdout=(tmp / f"{label}.log").open("w"), stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
@@ -787,36 +768,33 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs
                 ex.shutdown()
                 probe.destroy_node()
         finally:
-            for p in procs.values():
-                if p.poll() is None:
-                    p.send_signal(signal.SIGINT)
-            for p in procs.values():
-                try:
-                    p.wait(15)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(5)
+            _stop(list(procs.values()))
     return out
 
 
-def _bare(spec: list, duration_s: float, with_subscriber: bool,
-          payloads: dict[str, str] | None = None) -> tuple[float, float]:
-    """(publisher CPU, subscriber CPU) in fractions of a core over ``duration_s``: the skeleton of one bare
-    publisher process (``spec``: (topic, type, rate), QoS depth 10 reliable volatile) and, with_subscriber, one
-    process subscribing every topic raw."""
-    qos = {"history": 1, "depth": 10, "reliability": 1, "durability": 2, "liveliness": 0, "deadline": 0,
-           "lifespan": 0, "liveliness_lease_duration": 0}
-    ends = [{"topic": t, "type": ty, "qos": qos, "events": []} for t, ty, _ in spec]
+def _skeleton_argv(spec_file: Path, label: str) -> list[str]:
+    return [python_executable(), "-m", "hindrax_ident.tools.benchmarks.launch_node",
+            "hindrax_ident.tools.benchmarks.launch_node:skeleton_main", str(spec_file), label]
 
-    def proc(name: str, pubs: list, subs: list) -> dict:
-        return {"nodes": [{"name": name, "namespace": "/", "publishers": pubs, "subscriptions": subs,
-                           "services": [], "clients": []}]}
-    topo = {"bare_publisher": proc("bare_publisher", ends, [])}
-    if with_subscriber:
-        topo["bare_subscriber"] = proc("bare_subscriber", [], [dict(e, raw=True) for e in ends])
-    run = _skeleton(skeleton_spec(topo, [{t: r for t, _, r in spec}], payloads), [("bare", 1)], duration_s)
-    cpu = run["phases"]["bare"]["windows"][0]["per_process"]
-    return cpu["bare_publisher"], cpu.get("bare_subscriber", 0.0)
+
+def _endpoint(topic: str, type_name: str, raw: bool | None = None) -> dict:
+    """A topic endpoint of a skeleton's topology: depth 10, reliable, volatile, no QoS event handler."""
+    qos = dict(history=1, depth=10, reliability=1, durability=2, liveliness=0, deadline=0, lifespan=0,
+               liveliness_lease_duration=0)
+    return {"topic": topic, "type": type_name, "qos": qos, "events": [], **({} if raw is None else {"raw": raw})}
+
+
+def _one_node(name: str, pubs: list, subs: list) -> dict:
+    return {"nodes": [{"name": name, "namespace": "/", "publishers": pubs, "subscriptions": subs, "services": [],
+                       "clients": []}]}
+
+
+def _bare(spec: list, duration_s: float) -> float:
+    """CPU of one bare publisher process (the skeleton of ``spec``: (topic, type, rate), :func:`_endpoint`'s QoS,
+    default-constructed messages) over ``duration_s``, fraction of a core."""
+    topo = {"bare": _one_node("bare_publisher", [_endpoint(t, ty) for t, ty, _ in spec], [])}
+    run = _skeleton(skeleton_spec(topo, [{t: r for t, _, r in spec}]), [("bare", 1)], duration_s)
+    return run["phases"]["bare"]["windows"][0]["per_process"]["bare"]
 
 
 def launch_skeleton(launch: dict, windows: int, duration_s: float) -> dict:
@@ -1046,7 +1024,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         launch_file: Path | None = None, baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
     windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
-    s; baselines: the bare rclpy baselines (they need the layouts' rates); launch_file: another launch file for the
+    s; baselines: the bare rclpy baseline and the launch's skeleton; launch_file: another launch file for the
     launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument); baseline: a git ref whose
     launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
     the baseline's (``..._vs_baseline``)."""
@@ -1096,7 +1074,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                              "note": "one process, identification running surge, recorder on"})
         if baselines:
             idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
-            bare_pub, _ = _bare(idle_spec, base_s, with_subscriber=False)
+            bare_pub = _bare(idle_spec, base_s)
             idle_msgs = sum(r for *_, r in idle_spec)
             rows += [
                 {"name": "cpu_bare_rclpy_same_topics", "value": 100 * bare_pub, "unit": "% of a core",
@@ -1112,17 +1090,6 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         idle = _phase_rates(launch, "idle")
         if baselines:
             rows += skeleton_rows(launch, launch_skeleton(launch, windows, duration_s))
-            launch_spec = _spec(running, types)
-            pubsub_pub, pubsub_sub = _bare(launch_spec, base_s, with_subscriber=True, payloads=launch["payloads"])
-            pubsub = pubsub_pub + pubsub_sub
-            launch_total = next(r["value"] for r in rows if r["name"] == "launch_running_cpu_total") / 100
-            rows += [
-                {"name": "cpu_bare_rclpy_pub_sub", "value": 100 * pubsub, "unit": "% of a core",
-                 "note": f"bare publisher {100 * pubsub_pub:.1f} % + bare raw subscriber {100 * pubsub_sub:.1f} %, "
-                         f"{len(launch_spec)} topics of the launch layout's running phase"},
-                {"name": "launch_vs_bare_pubsub_ratio", "value": launch_total / pubsub if pubsub else -1, "unit": "x",
-                 "target": "<= 1.2", "note": "launch_running_cpu_total / cpu_bare_rclpy_pub_sub"},
-            ]
         if before is not None:
             rows += baseline_rows(rows, before, baseline)
         for topic, rate in running.items():
@@ -1207,7 +1174,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--windows", type=int, default=None,
                         help=f"running windows of the launch layout (default {RUNNING_WINDOWS}); rows are medians")
     parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")
-    parser.add_argument("--no-baselines", action="store_true", help="skip the bare rclpy baselines")
+    parser.add_argument("--no-baselines", action="store_true",
+                        help="skip the bare rclpy baseline and the launch's skeleton")
     parser.add_argument("--py-spy", type=Path, default=None, metavar="DIR",
                         help="record every launch-layout process with py-spy during the first running window "
                              "(DIR/<process>.txt, raw collapsed stacks)")
