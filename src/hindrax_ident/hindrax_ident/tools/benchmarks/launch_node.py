@@ -83,12 +83,13 @@ def topology(nodes: Any) -> dict:
     """The endpoints of ``nodes`` (rclpy nodes of one process) as JSON data: ``{"nodes": [{"name", "namespace",
     "publishers", "subscriptions", "services", "clients"}]}``, each endpoint ``{"topic", "type"}`` (``pkg/msg/Name``)
     plus, for topics, ``qos`` (policies and durations in ns, ints), ``events`` (its QoS event handlers) and for a
-    subscription ``raw``; lists sorted, so that two processes built alike give equal data."""
+    subscription ``raw``; lists sorted; without the ``/parameter_events`` publisher every node makes itself."""
     out = []
     for node in nodes:
         entry: dict = {"name": node.get_name(), "namespace": node.get_namespace()}
         for kind in ("publishers", "subscriptions", "services", "clients"):
-            entry[kind] = sorted((_endpoint(e, kind) for e in getattr(node, kind)), key=json.dumps)
+            entry[kind] = sorted((_endpoint(e, kind) for e in getattr(node, kind)  # /parameter_events: every node's
+                                  if getattr(e, "topic_name", "") != "/parameter_events"), key=json.dumps)
         out.append(entry)
     return {"nodes": sorted(out, key=lambda n: (n["namespace"], n["name"]))}
 
@@ -127,40 +128,25 @@ def _events(kind: str, names: list) -> Any:
     return cls(use_default_callbacks=False, **{k: (lambda _e: None) for k in names})
 
 
-class _SkeletonNode(Node):
-    """A node whose publishers made without event callbacks (``/parameter_events``, which ``Node.__init__`` makes)
-    get the QoS event handlers :attr:`auto_events` names for their topic, as the real node's have."""
-
-    auto_events: dict[str, list] = {}
-
-    def create_publisher(self, *args: Any, event_callbacks: Any = None, **kwargs: Any) -> Any:
-        events = event_callbacks or _events("publishers", self.auto_events.get(args[1], []))
-        return super().create_publisher(*args, event_callbacks=events, **kwargs)
-
-
 def _call_all(fns: list) -> None:
     for fn in fns:  # noqa: SIM110 - calls, not a search
         fn()
 
 
 def skeleton_main() -> int:
-    """One process of the launch's skeleton (module docstring): ``sys.argv[1]``, a JSON file ``{"processes": {label:
-    {"nodes": [...]}}}`` (:func:`topology` of each process, each publisher with ``rates``, messages/s per phase, and
-    ``payload``, the CDR bytes to send, hex, or null: a default-constructed message); ``sys.argv[2]``, the label of
-    this process. Returns the exit status of :func:`~hindrax_drivers.node_common.run_nodes`."""
+    """One skeleton process (module docstring): argv ``SPEC LABEL``, SPEC a JSON file ``{"processes": {label:
+    topology}}`` whose publishers carry ``rates`` (messages/s per phase) and ``payload`` (CDR bytes, hex; null: a
+    default-constructed message). Returns :func:`~hindrax_drivers.node_common.run_nodes`'s exit status."""
     spec = json.loads(Path(sys.argv[1]).read_text())["processes"][sys.argv[2]]
     phase, timers = [0], []
 
     def build(nd: dict) -> Any:
         names = {s["topic"] for s in nd["services"]}
-        _SkeletonNode.auto_events = {p["topic"]: p["events"] for p in nd["publishers"]}
-        node = _SkeletonNode(nd["name"], namespace=nd["namespace"],
+        node = Node(nd["name"], namespace=nd["namespace"],
                     start_parameter_services=any(n.endswith("/get_parameters") for n in names))
-        have = {e["topic"] for kind in ("publishers", "services") for e in topology([node])["nodes"][0][kind]}
+        have = {e["topic"] for e in topology([node])["nodes"][0]["services"]}  # the parameter services
         groups: dict = {}
         for p in nd["publishers"]:
-            if p["topic"] in have:  # made with the node (/parameter_events)
-                continue
             cls = _interface(p["type"])
             pub = node.create_publisher(cls, p["topic"], _profile(p["qos"]),
                                         event_callbacks=_events("publishers", p["events"]))
