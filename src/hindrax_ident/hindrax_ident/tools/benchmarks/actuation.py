@@ -1,18 +1,17 @@
 """Actuation benchmark: wrench-in to PCA9685-registers-written latency and CPU per command at 50 Hz.
 
 One process, one EventsExecutor (as the vehicle's ``actuation_node``, which composes the two nodes:
-``hindrax_drivers.composition``): a publisher of geometry_msgs/WrenchStamped at 50 Hz, the thrust
-allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated I2C bus.
-Wrenches alternate between two surge levels so T1's pulse width changes with every command; latency is
-the time from ``publish()`` to the I2C write after which the emulator decodes the new pulse width on
-T1's channel, with every thread of the process scheduled as ``vehicle.launch.xml`` starts the actuation process
-(``SCHED_FIFO`` at its ``HINDRAX_REALTIME_PRIORITY``; nice 0 and a note where refused): at nice 0 the p99 is
-the time a shared machine's load keeps the process from a core. The ESC node writes a command when it arrives (event-driven output; its output tick is the
-watchdog, and writes a command that came sooner after the previous write than it lasted), taken by its subscription
-callback as in ``actuation_node``, so this is two deliveries inside the process
-(the wrench, the command), the allocation and one I2C block write (waiting for the next 50 Hz output tick instead of
-writing on arrival: 16.6 ms p99). CPU per command is the process CPU time (all three nodes
-and DDS) divided by the commands sent.
+``hindrax_drivers.composition``): a publisher of geometry_msgs/WrenchStamped at 50 Hz, the thrust allocation node
+and the ESC node writing to a register-exact PCA9685 emulator on an emulated I2C bus. Wrenches alternate between
+two surge levels so T1's pulse width changes with every command; latency is the time from ``publish()`` to the I2C
+write after which the emulator decodes the new pulse width on T1's channel, every thread scheduled as
+``vehicle.launch.xml`` starts the actuation process (``SCHED_FIFO`` at its ``HINDRAX_REALTIME_PRIORITY``; nice 0
+and a note where refused: there the p99 is mostly the time a shared machine's load keeps the process from a core).
+The ESC node writes a command when it arrives (event-driven output; its output tick is the watchdog, and writes a
+command that came sooner after the previous write than it lasted), taken by its subscription callback as in
+``actuation_node``, so this is two deliveries inside the process (the wrench, the command), the allocation and one
+I2C block write (waiting for the next 50 Hz output tick instead of writing on arrival: 16.6 ms p99). CPU per
+command is the process CPU time (all three nodes and DDS) divided by the commands sent.
 
 The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
 wrenches from 0.1 N to 30 N, with and without the deadband search (docs/architecture.md §9,
