@@ -30,13 +30,13 @@ publisher" needs no publisher in the graph at all (:meth:`HeartbeatIdentity.on_p
 other identity checks stay, and a dead or frozen peer is caught by its :class:`AliveAge` on the graph's clock.
 The QoS is the same in both modes (the writers and readers of a mixed graph keep matching).
 
-* :class:`AliveAge`: how long ago a peer was last heard, counted on ``time.monotonic`` from its beat but only over
-  time this process's executor was running (each gap between two :meth:`AliveAge.tick` calls counts at most
-  ``max_step_s``). A peer that dies or hangs in another process ages at wall-clock speed; this process's own stall
-  (a busy single-process graph, a SIGSTOP of this process) does not make every peer look dead when it resumes. On
-  simulated time the age is also counted on the graph's clock and the smaller of the two counts: a peer is late only
-  when its beat is late on the simulation's clock (a simulation slower than real time, or held, does not age it), and
-  the beats, paced by steady timers, are not made late by a simulation faster than real time.
+* :class:`AliveAge`: a peer's age, on ``time.monotonic`` from its beat, over the time this process's
+  executor ran (a gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``). A peer
+  that dies or hangs elsewhere ages at wall-clock speed; this process's own stall (a busy
+  single-process graph, a SIGSTOP) does not make every peer look dead when it resumes. On simulated
+  time the age is also counted on the graph's clock, and the smaller count holds: a peer is late
+  only when its beat is late on the simulation's clock (a slow or held simulation does not age it),
+  and the beats, paced by steady timers, are not made late by a simulation faster than real time.
 * :class:`ClockStepMonitor`: compares ROS time with the steady clock at each tick and reports a backward step of
   ROS time (``/clock`` restarted or a bag looped) and a stall (ROS time frozen while the steady clock runs), so a
   node can re-base its ROS-time checks and say so on ``/diagnostics``.
@@ -300,10 +300,10 @@ class HeartbeatWatch:
                                            simulated_now_s(self.node) is not None)
 
     def fresh(self, age: AliveAge, timeout_s: float) -> bool:
-        """Whether ``age`` (this peer's, just ticked) is within ``timeout_s``; when not, the beats already waiting on
-        the subscription are taken first (this process was starved and its timer ran before their callbacks), through
-        the same check and handler, the newest accepted aged from its send stamp (``steady_ns``: ``time.monotonic``
-        of the same host), so a peer that died is not made younger. :attr:`taken_late` counts the beats taken so."""
+        """Whether ``age`` (just ticked) is within ``timeout_s``; if not, the waiting beats (a
+        starved process's timer ran first) are taken through the same check and handler, the
+        newest aged from its send stamp (``steady_ns``, this host's ``time.monotonic``): a dead
+        peer is not made younger. :attr:`taken_late` counts them."""
         if not age.fresh(timeout_s):
             newest = None
             while (taken := self.subscription.handle.take_message(Heartbeat, True)) is not None:
@@ -338,7 +338,7 @@ class AliveAge:
         self.age_s = math.inf
 
     def heard(self, ago_s: float = 0.0) -> None:
-        """The peer spoke ``ago_s`` seconds ago (0: now). The next tick counts from now, not from the tick before."""
+        """The peer spoke ``ago_s`` s ago (0: now); the next tick counts from now, not the last."""
         ago = max(0.0, float(ago_s))
         graph = self._graph_now_s()
         self._heard_graph_s = None if graph is None else graph - ago
@@ -399,7 +399,7 @@ class ClockStepMonitor:
 
     ``ros_now_s``: the node's ROS time in seconds; ``tolerance_s``: a backward move smaller than this is jitter.
     :meth:`check` returns the step in seconds (negative) when ROS time went back, else 0.0; :attr:`steps_back`
-    counts them. :meth:`stalled_for_s` is how long ROS time has not moved while the steady clock ran.
+    counts them. :meth:`stalled_for_s`: how long ROS time has not moved while the steady clock ran.
     """
 
     def __init__(self, ros_now_s: Callable[[], float], tolerance_s: float = 0.05,

@@ -27,13 +27,13 @@ outputs, docs/watchdog.md). A disarm's neutral is never dropped nor overtaken by
   state; on every confirmed write or change of state, and repeated by the output tick when nothing went out for
   :data:`REPEAT_AFTER_PERIODS` periods: 25 Hz armed and under the identification's 25 Hz commands; disarmed at
   neutral every :data:`DISARMED_REPEAT_S`),
-  ``esc/heartbeat`` (hindrax_msgs/Heartbeat every second steady tick, at once in a tick two periods late:
-  ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest guard beat handled
-  ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign of life and release condition),
-  ``esc/output_state`` (the same state, latched: on every change of armed or output state and once a second,
-  :mod:`hindrax_drivers.esc_state`; for the nodes that need only "armed"), ``raw/pca9685`` (every I2C transaction),
-  ``/diagnostics``. Neutral is written on disarm, on any exception in the output path and on shutdown
-  (:meth:`EscNode.close`, SIGINT/SIGTERM via :func:`run_node`).
+  ``esc/heartbeat`` (hindrax_msgs/Heartbeat every second steady tick, at once in one two periods
+  late; ``output_state``, ``armed``, the reason as ``message``, ``boot_id``/``seq``, the newest
+  guard beat handled ``guard_boot_id``/``guard_seq``; ERROR while unknown; the output guard's sign
+  of life and release condition), ``esc/output_state`` (the same state, latched: on a change of
+  armed or output state and every 1 s, :mod:`hindrax_drivers.esc_state`; for nodes that need only
+  "armed"), ``raw/pca9685`` (every I2C transaction), ``/diagnostics``. Neutral is written on disarm,
+  on an exception in the output path and on shutdown (:meth:`EscNode.close`; SIGINT/SIGTERM).
 - Node parameters outside the vehicle file (read-only): ``heartbeat_timeout_s`` (:data:`.peers.HEARTBEAT_TIMEOUT`),
   ``steady_watchdog_timeout_s`` (:data:`STEADY_WATCHDOG`, default ``esc.watchdog_timeout_s``).
 
@@ -146,7 +146,7 @@ class EscNode(VehicleNode):
         self.create_subscription(Float64, "lights/brightness", self.on_lights, 10)
         self.create_service(SetArmed, "esc/set_armed", self.on_set_armed)
         self.heartbeat = HeartbeatPublisher(self, "esc")
-        self._heartbeat_tick, self._beat_s = 0, -math.inf  # safety ticks; time.monotonic() of the last beat
+        self._heartbeat_tick, self._beat_s = 0, -math.inf  # ticks; last beat, monotonic s
         self.tick_gaps = TickGaps()  # how late the safety tick (and its heartbeat) ran, on /diagnostics
         self.diagnostics = DiagnosticsPublisher(self, [self.diag], extra=self._diag_extra)
         self.lights_us = self.lights_off_us
@@ -365,7 +365,7 @@ class EscNode(VehicleNode):
             self._check_graph()
         self._feed_peers()
         self._heartbeat_tick += 1
-        if self._heartbeat_tick % 2 == 0 or t - self._beat_s >= 2.0 * self.period_s:  # 25 Hz; at once after a stall
+        if self._heartbeat_tick % 2 == 0 or t - self._beat_s >= 2 * self.period_s:  # 25 Hz, or late
             self._beat_s = t
             self._publish_heartbeat()
         self.core.set_peers(*self._peer_verdicts())  # the arming time starts in the tick that confirmed neutral

@@ -14,24 +14,165 @@ the modules, and the memory, the vehicle's process holds (``test_bench_launch_la
 (:data:`hindrax_drivers.ros_process.BEFORE_PROCESS_END`). Every Python thread the node starts takes its
 ``threading`` name as its OS thread name (:func:`name_os_threads`), so the benchmark's wake-ups and CPU by thread
 (``/proc/PID/task/*/comm``) name it.
+
+With ``HINDRAX_BENCH_TOPOLOGY=DIR`` (:data:`TOPOLOGY_ENV`) a SIGUSR1 makes the process write its nodes' endpoints,
+as declared, to ``DIR/<pid>.json`` (:func:`topology`). :func:`skeleton_main` rebuilds one process of such a topology
+without logic (the stack benchmark's floor): the same nodes and endpoints, one pre-serialised message per publisher
+sent from a timer at its rate (a node's publishers of one rate share a timer, one wake-up as a node's tick),
+callbacks that do nothing, the node processes' ``run_nodes``; SIGUSR2 switches it to its next phase's rates.
 """
 from __future__ import annotations
 
 import cProfile
 import ctypes
 import importlib
+import json
 import os
+import signal
 import sys
 import threading
+import weakref
+from functools import partial
 from pathlib import Path
+from typing import Any
 
+from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import serialize_message
+
+from hindrax_drivers.node_common import run_nodes
 from hindrax_drivers.ros_process import BEFORE_PROCESS_END
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
 
-__all__ = ["PROFILE_ENV", "SOCKET_ENV", "main", "name_os_threads"]
+__all__ = ["PROFILE_ENV", "SOCKET_ENV", "TOPOLOGY_ENV", "main", "name_os_threads", "skeleton_main", "topology"]
 
 #: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits
 PROFILE_ENV = "HINDRAX_BENCH_PROFILE"
+
+
+#: a directory: on SIGUSR1 the process writes its nodes' endpoints (:func:`topology`) to ``<pid>.json`` there
+TOPOLOGY_ENV = "HINDRAX_BENCH_TOPOLOGY"
+_QOS_KEYS = ("history", "depth", "reliability", "durability", "liveliness", "deadline", "lifespan",
+             "liveliness_lease_duration")
+#: a QoS event type's name (``RCL_SUBSCRIPTION_LIVELINESS_CHANGED``...) without its prefix -> the event callbacks' key
+_EVENT_KEYS = {"REQUESTED_DEADLINE_MISSED": "deadline", "OFFERED_DEADLINE_MISSED": "deadline",
+               "LIVELINESS_CHANGED": "liveliness", "LIVELINESS_LOST": "liveliness",
+               "REQUESTED_INCOMPATIBLE_QOS": "incompatible_qos", "OFFERED_INCOMPATIBLE_QOS": "incompatible_qos",
+               "MESSAGE_LOST": "message_lost", "INCOMPATIBLE_TYPE": "incompatible_type", "MATCHED": "matched"}
+
+
+def _type(cls: Any) -> str:
+    parts = cls.__module__.split(".")
+    return f"{parts[0]}/{parts[1]}/{cls.__name__}"
+
+
+def _endpoint(e: Any, kind: str) -> dict:
+    out: dict = {"topic": getattr(e, "topic_name", None) or e.srv_name,
+                 "type": _type(getattr(e, "msg_type", None) or e.srv_type)}
+    if kind in ("publishers", "subscriptions"):
+        out["qos"] = {k: int(getattr(v, "nanoseconds", v)) for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
+        out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]] for h in e.event_handlers)
+    if kind == "subscriptions":
+        out["raw"] = bool(e.raw)
+    return out
+
+
+def topology(nodes: Any) -> dict:
+    """The endpoints of ``nodes`` (rclpy nodes of one process) as JSON data: ``{"nodes": [{"name", "namespace",
+    "publishers", "subscriptions", "services", "clients"}]}``, each endpoint ``{"topic", "type"}`` (``pkg/msg/Name``)
+    plus, for topics, ``qos`` (policies and durations in ns, ints), ``events`` (its QoS event handlers) and for a
+    subscription ``raw``; lists sorted; without the ``/parameter_events`` publisher every node makes itself."""
+    out = []
+    for node in nodes:
+        entry: dict = {"name": node.get_name(), "namespace": node.get_namespace()}
+        for kind in ("publishers", "subscriptions", "services", "clients"):
+            entry[kind] = sorted((_endpoint(e, kind) for e in getattr(node, kind)  # /parameter_events: every node's
+                                  if getattr(e, "topic_name", "") != "/parameter_events"), key=json.dumps)
+        out.append(entry)
+    return {"nodes": sorted(out, key=lambda n: (n["namespace"], n["name"]))}
+
+
+def _dump_topology_on_sigusr1(directory: str) -> None:
+    """On SIGUSR1, :func:`topology` of the nodes this process built (but the ``_exit_`` holder) to ``<pid>.json``."""
+    nodes: weakref.WeakSet = weakref.WeakSet()
+    init = Node.__init__
+
+    def tracked_init(self: Any, *a: Any, **kw: Any) -> None:
+        init(self, *a, **kw)
+        nodes.add(self)
+
+    def dump(*_: Any) -> None:
+        alive = [n for n in list(nodes) if not n.get_name().startswith("_exit_")]
+        path = Path(directory) / f"{os.getpid()}.json"
+        path.with_suffix(".tmp").write_text(json.dumps(topology(alive)))
+        os.replace(path.with_suffix(".tmp"), path)
+
+    Node.__init__ = tracked_init
+    signal.signal(signal.SIGUSR1, dump)
+
+
+def _interface(type_name: str) -> Any:
+    pkg, kind, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+
+
+def _profile(qos: dict) -> Any:
+    return QoSProfile(**{k: Duration(nanoseconds=v) if k in ("deadline", "lifespan", "liveliness_lease_duration")
+                         else v for k, v in qos.items()})
+
+
+def _events(kind: str, names: list) -> Any:
+    cls = PublisherEventCallbacks if kind == "publishers" else SubscriptionEventCallbacks
+    return cls(use_default_callbacks=False, **{k: (lambda _e: None) for k in names})
+
+
+def _call_all(fns: list) -> None:
+    for fn in fns:  # noqa: SIM110 - calls, not a search
+        fn()
+
+
+def skeleton_main() -> int:
+    """One skeleton process (module docstring): argv ``SPEC LABEL``, SPEC a JSON file ``{"processes": {label:
+    topology}}`` whose publishers carry ``rates`` (messages/s per phase) and ``payload`` (CDR bytes, hex; null: a
+    default-constructed message). Returns :func:`~hindrax_drivers.node_common.run_nodes`'s exit status."""
+    spec = json.loads(Path(sys.argv[1]).read_text())["processes"][sys.argv[2]]
+    phase, timers = [0], []
+
+    def build(nd: dict) -> Any:
+        names = {s["topic"] for s in nd["services"]}
+        node = Node(nd["name"], namespace=nd["namespace"],
+                    start_parameter_services=any(n.endswith("/get_parameters") for n in names))
+        have = {e["topic"] for e in topology([node])["nodes"][0]["services"]}  # the parameter services
+        groups: dict = {}
+        for p in nd["publishers"]:
+            cls = _interface(p["type"])
+            pub = node.create_publisher(cls, p["topic"], _profile(p["qos"]),
+                                        event_callbacks=_events("publishers", p["events"]))
+            data = bytes.fromhex(p["payload"]) if p.get("payload") else serialize_message(cls())
+            for k, rate in enumerate(p["rates"]):
+                if rate > 0:
+                    groups.setdefault((k, round(rate) if rate >= 1 else rate), []).append(partial(pub.publish, data))
+        for (k, rate), sends in groups.items():
+            timers.append((k, node.create_timer(1.0 / rate, partial(_call_all, sends), autostart=k == 0)))
+        for s in nd["subscriptions"]:
+            node.create_subscription(_interface(s["type"]), s["topic"], lambda _m: None, _profile(s["qos"]),
+                                     raw=s["raw"], event_callbacks=_events("subscriptions", s["events"]))
+        for s in nd["services"]:
+            if s["topic"] not in have:
+                node.create_service(_interface(s["type"]), s["topic"], lambda _q, r: r)
+        for c in nd["clients"]:
+            node.create_client(_interface(c["type"]), c["topic"])
+        return node
+
+    def next_phase(*_: Any) -> None:
+        phase[0] += 1
+        for k, timer in timers:
+            timer.reset() if k == phase[0] else timer.cancel()
+
+    signal.signal(signal.SIGUSR2, next_phase)
+    return run_nodes([partial(build, nd) for nd in spec["nodes"]], [sys.argv[0]])
 
 
 #: prctl's option that names the calling thread (linux/prctl.h); the kernel keeps 15 bytes of it
@@ -62,6 +203,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     entry, rest = argv[0], argv[1:]
     name_os_threads()
+    if os.environ.get(TOPOLOGY_ENV):
+        _dump_topology_on_sigusr1(os.environ[TOPOLOGY_ENV])
     module_name, _, function = entry.partition(":")
     module = importlib.import_module(module_name)
     run = getattr(module, function or "main")

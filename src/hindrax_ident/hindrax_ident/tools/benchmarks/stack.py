@@ -60,12 +60,20 @@ layout is measured first in the same run (:func:`baseline_launch`), and the rows
 figures over its. The command path: ``actuation_wrench_to_registers_*``
 (:func:`~hindrax_ident.tools.benchmarks.actuation.wrench_to_registers`).
 
-Baselines (each a child process, plain rclpy, the EventsExecutor like every node process, one timer per topic
-publishing a default-constructed message of the topic's type at its measured rate):
-``cpu_bare_rclpy_same_topics``: publishers only, nobody subscribed (the historical baseline), for the topics of
-the one-process idle phase; ``cpu_bare_rclpy_pub_sub``: the same publisher process plus a bare subscriber process
-(raw CDR subscriptions to every topic, like the recorder without writing), for the topics of the launch layout's
-running phase: the bare cost of moving the same messages between processes.
+Skeletons: processes with the endpoints of a topology and no logic, each run by
+:func:`~hindrax_ident.tools.benchmarks.launch_node.skeleton_main` (rclpy, the EventsExecutor, the node processes'
+``run_nodes``): every publisher sends one pre-serialised message from a timer at its rate, every callback does
+nothing (:func:`_skeleton`). The launch's skeleton (``launch_skeleton_*``, :func:`launch_skeleton`): the launch's
+processes with the nodes, publishers (topic, type, QoS, events), subscriptions (the same, raw or not), services and
+clients each process declared in the same run (read from the running processes by SIGUSR1,
+:func:`read_topologies`; the skeleton's own are read back and must be equal), the launch file's launch-prefix and
+environment, each topic at the launch's rate of each phase sending a message recorded in its bag; its CPU is given in
+units of the launch's virtual pool CPU in the same phase (``..._per_pool``) and as the launch's over it
+(``launch_*_vs_skeleton_ratio_*``): the floor of moving the vehicle's messages between these processes, and the
+part above it that the nodes' logic costs. Not in it: the action server and its topics, timers that publish
+nothing. It replaces the bare publisher + raw subscriber of the same topics. The bare baseline
+``cpu_bare_rclpy_same_topics`` is a skeleton too: one publisher process for the topics of the one-process idle phase.
+The participant probes are skeletons with no publisher.
 """
 from __future__ import annotations
 
@@ -81,7 +89,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import textwrap
 import threading
 import time
 from pathlib import Path
@@ -107,7 +114,7 @@ from hindrax_msgs.srv import SetArmed
 
 from .launch_layout import launch_processes, package_share, read_ports_file
 from .actuation import wrench_to_registers
-from .launch_node import SOCKET_ENV
+from .launch_node import SOCKET_ENV, TOPOLOGY_ENV
 from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s, proc_cpu_s
 from .recorder import subscribe_recorder_counts
 
@@ -418,7 +425,8 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
     extra: dict[str, subprocess.Popen] = {}  # the participant probes (PARTICIPANT_PROBES)
     logs: dict[str, Any] = {}
     out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": None,
-                 "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}", "module": lp.module}
+                 "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}", "module": lp.module,
+                                          "prefix": list(lp.process.launch_prefix), "env": dict(lp.process.env)}
                                for lp in layout}}
     with domain_id() as did:
         env = child_env(ROS_DOMAIN_ID=str(did))
@@ -450,12 +458,16 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                 # docs/deployment.md §1; the DDS transport, hindrax_drivers.dds_transport)
                 procs[lp.label] = subprocess.Popen([*lp.process.launch_prefix, py, *wrap, lp.module,
                                                     *lp.ros_args(values_file), *bench],
-                                                   env=dict(env, **dict(lp.process.env), **{SOCKET_ENV: sock}),
+                                                   env=dict(env, **dict(lp.process.env),
+                                                            **{SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}),
                                                    stdout=logs[lp.label],
                                                    stderr=subprocess.STDOUT)
-            for name, topics in PARTICIPANT_PROBES.items():  # what one more process costs (not in the totals)
+            (tmp / "probes.json").write_text(json.dumps({"processes": {  # skeletons with no publisher
+                name: _one_node(name, [], [_endpoint(t, ty, raw=True) for t, ty in topics])
+                for name, topics in PARTICIPANT_PROBES.items()}}))
+            for name in PARTICIPANT_PROBES:  # what one more process costs (not in the totals)
                 logs[name] = open(tmp / f"{name}.log", "w")
-                extra[name] = subprocess.Popen([py, "-c", _PARTICIPANT, name, json.dumps(topics)], env=env,
+                extra[name] = subprocess.Popen(_skeleton_argv(tmp / "probes.json", name), env=env,
                                                stdout=logs[name], stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
@@ -542,23 +554,14 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                        goal_status=goal_status)
                 except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
                     raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
+                # every node's endpoints as it declared them, the recorder's subscriptions made: the skeleton's plan
+                out["topology"] = read_topologies({n: p for n, p in procs.items() if n != "pool"}, tmp)
                 for spy in spies:
                     spy.wait(duration_s + 30)
                 ex.shutdown()
                 probe.destroy_node()
         finally:
-            for name in reversed(list(procs)):
-                if procs[name].poll() is None:
-                    procs[name].send_signal(signal.SIGINT)
-            for p in extra.values():
-                if p.poll() is None:
-                    p.send_signal(signal.SIGINT)
-            for name, p in {**procs, **extra}.items():
-                try:
-                    p.wait(15)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(5)
+            _stop([*reversed(procs.values()), *extra.values()])
             for f in logs.values():
                 f.close()
     bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
@@ -567,6 +570,19 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
     out["bag"] = str(bags[0])
     _bag_rates(out)
     return out
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """SIGINT to every process still running, in order, then wait for each: 15 s, then SIGKILL."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait(5)
 
 
 def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
@@ -589,12 +605,14 @@ def _bag_rates(out: dict) -> None:
     decode = cdr_decoder("sensor_msgs/msg/Imu")
     for *_, w in spans:
         w["rates"] = collections.Counter()
+    out["payloads"] = payloads = {}  # one recorded message per topic, CDR bytes (hex): what the skeleton sends
     first = min(t0 for t0, _, _ in spans)
     last = max(t1 for _, t1, _ in spans)
     for m in reader.messages(start_ns=first, end_ns=last):
         for t0, t1, w in spans:
             if t0 <= m.log_time_ns < t1:
                 w["rates"][m.topic] += 1
+                payloads.setdefault(m.topic, bytes(m.data).hex())
                 if m.topic == IMU_TOPIC:
                     stamp = decode(m.data).header.stamp
                     imu[id(w)].append((m.log_time_ns, stamp.sec * 1_000_000_000 + stamp.nanosec))
@@ -657,75 +675,161 @@ PARTICIPANT_PROBES = {
                                       ["/pressure/fluid_pressure", "sensor_msgs/msg/FluidPressure"],
                                       ["/ping/altitude", "sensor_msgs/msg/Range"]],
 }
-_PARTICIPANT = textwrap.dedent('''
-    import importlib, json, sys
-    from rclpy.node import Node
-    from hindrax_drivers.node_common import run_nodes  # the node processes' entry point: the same executor and spin
-
-    class Probe(Node):
-        def __init__(self):
-            super().__init__(sys.argv[1])
-            for topic, type_name in json.loads(sys.argv[2]):
-                pkg, _, name = type_name.split("/")
-                self.create_subscription(getattr(importlib.import_module(pkg + ".msg"), name), topic, lambda _m: None,
-                                         10, raw=True)
-
-    sys.exit(run_nodes([Probe], []))
-''')
 
 
-# ---------------------------------------------------------------------------------------------- baselines
-#: the bare baseline process: argv mode (``publisher``: a timer per topic at its rate, a default-constructed message;
-#: ``subscriber``: raw subscriptions), spec, duration_s, and for a publisher optionally ``wait`` (for the subscriber)
-_BARE = textwrap.dedent('''
-    import importlib, json, sys, time
-    import rclpy
-    from rclpy.experimental.events_executor import EventsExecutor
-    mode, spec, duration = sys.argv[1], json.loads(sys.argv[2]), float(sys.argv[3])
-    rclpy.init(); node = rclpy.create_node("bare_" + mode)
-    got = [0]
-    def cb(_data): got[0] += 1
-    for topic, type_name, rate in spec:
-        pkg, _, name = type_name.split("/")
-        cls = getattr(importlib.import_module(pkg + ".msg"), name)
-        if mode == "subscriber":
-            node.create_subscription(cls, "/baseline" + topic, cb, 10, raw=True)
-        else:
-            pub = node.create_publisher(cls, "/baseline" + topic, 10)
-            node.create_timer(1.0 / rate, (lambda p, m: (lambda: p.publish(m)))(pub, cls()))
-    ex = EventsExecutor(); ex.add_node(node)
-    if mode == "subscriber":  # until the publisher's first message
-        while got[0] == 0:
-            ex.spin_once(timeout_sec=0.05)
-    elif len(sys.argv) > 4:  # wait for the subscriber process
-        t_end = time.monotonic() + 30
-        while time.monotonic() < t_end and node.count_subscribers("/baseline" + spec[0][0]) == 0:
-            ex.spin_once(timeout_sec=0.05)
-    t_end = time.monotonic() + duration
-    c0 = time.process_time()
-    while time.monotonic() < t_end:
-        ex.spin_once(timeout_sec=0.05)
-    print(json.dumps({"cpu_s": time.process_time() - c0, "received": got[0]}), flush=True)
-''')
+# ---------------------------------------------------------------------------------------------- skeletons
+def skeleton_spec(topology: dict, rates: list[dict[str, float]], payloads: dict[str, str] | None = None) -> dict:
+    """The processes of a skeleton (:func:`~hindrax_ident.tools.benchmarks.launch_node.skeleton_main`): ``topology``
+    (label -> :func:`~hindrax_ident.tools.benchmarks.launch_node.topology` of that process) with, on every
+    publisher, ``rates`` (one per phase: that phase's messages/s of its topic, shared equally by the topic's
+    publishers) and ``payload`` (``payloads``: topic -> CDR bytes, hex; else a default-constructed message)."""
+    count = collections.Counter(p["topic"] for t in topology.values() for n in t["nodes"] for p in n["publishers"])
+    out = json.loads(json.dumps(topology))
+    for n in (n for t in out.values() for n in t["nodes"]):
+        for p in n["publishers"]:
+            p["rates"] = [r.get(p["topic"], 0.0) / count[p["topic"]] for r in rates]
+            p["payload"] = (payloads or {}).get(p["topic"])
+    return out
 
 
-def _bare(spec: list, duration_s: float, with_subscriber: bool) -> tuple[float, float]:
-    """(publisher CPU, subscriber CPU) in fractions of a core, each over ``duration_s``."""
-    with domain_id() as did:
-        env = child_env(ROS_DOMAIN_ID=str(did))
-        args = [json.dumps(spec), str(duration_s)]
-        sub = None
-        if with_subscriber:
-            sub = subprocess.Popen([python_executable(), "-c", _BARE, "subscriber", *args], env=env,
-                                   stdout=subprocess.PIPE, text=True)
-        pub = subprocess.run([python_executable(), "-c", _BARE, "publisher", *args] + (["wait"] if sub else []),
-                             capture_output=True, text=True, env=env, timeout=duration_s + 90)
-        pub_cpu = json.loads(pub.stdout.strip().splitlines()[-1])["cpu_s"]
-        sub_cpu = 0.0
-        if sub is not None:
-            so, _ = sub.communicate(timeout=duration_s + 60)
-            sub_cpu = json.loads(so.strip().splitlines()[-1])["cpu_s"]
-    return pub_cpu / duration_s, sub_cpu / duration_s
+def topology_differences(launch: dict, skeleton: dict) -> list[str]:
+    """What differs between two topologies (label -> :func:`~hindrax_ident.tools.benchmarks.launch_node.topology`),
+    rates and payloads ignored: a line per process, node or endpoint (topic, type, QoS, raw, events) only one has."""
+    def items(t: dict) -> set:
+        return {(label, n["namespace"], n["name"], kind, json.dumps({k: v for k, v in e.items() if k not in (
+            "rates", "payload")}, sort_keys=True)) for label, proc in t.items() for n in proc["nodes"]
+            for kind in ("publishers", "subscriptions", "services", "clients", "node") for e in n.get(kind, [{}])}
+    a, b = items(launch), items(skeleton)
+    sides = (("launch", launch, skeleton), ("skeleton", skeleton, launch))
+    return [f"process {p} only in the {side}" for side, x, y in sides for p in set(x) - set(y)] \
+        + [f"only in the launch: {x}" for x in sorted(a - b)] + [f"only in the skeleton: {x}" for x in sorted(b - a)]
+
+
+def read_topologies(procs: dict[str, subprocess.Popen], directory: Path, timeout_s: float = 30) -> dict:
+    """Label -> :func:`~hindrax_ident.tools.benchmarks.launch_node.topology` of each process in ``procs`` (started
+    by launch_node with ``HINDRAX_BENCH_TOPOLOGY=directory``): sends SIGUSR1, reads ``<pid>.json``."""
+    for p in procs.values():
+        (directory / f"{p.pid}.json").unlink(missing_ok=True)
+        p.send_signal(signal.SIGUSR1)
+    paths = {label: directory / f"{p.pid}.json" for label, p in procs.items()}
+    wait_until(lambda: all(f.is_file() for f in paths.values()), timeout_s, None, "every process's topology")
+    return {label: json.loads(f.read_text()) for label, f in paths.items()}
+
+
+def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs: dict | None = None,
+              stream_phase: str | None = None, check: dict | None = None) -> dict:
+    """Run the skeleton ``spec`` (:func:`skeleton_spec`, a process per label, ``envs[label] = (launch-prefix, env)``)
+    and measure ``phases`` (name, windows of ``duration_s``; SIGUSR2 and 2 s of warm-up before each), the pilot's
+    wrench stream on in ``stream_phase``. check: a topology the skeleton's must equal (else RuntimeError). Returns
+    ``{"phases": {name: {"windows": [{"wall_s", "per_process"}]}}, "topology": ...}``."""
+    out: dict = {"phases": {}}
+    with tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir, domain_id() as did:
+        tmp = Path(tmpdir)
+        env = child_env(ROS_DOMAIN_ID=str(did), **{TOPOLOGY_ENV: tmpdir})
+        (tmp / "spec.json").write_text(json.dumps({"processes": spec}))
+        procs: dict[str, subprocess.Popen] = {}
+        try:
+            for label in spec:
+                prefix, extra = (envs or {}).get(label, ([], {}))
+                procs[label] = subprocess.Popen([*prefix, *_skeleton_argv(tmp / "spec.json", label)],
+                                                env=dict(env, **extra),
+                                                stdout=(tmp / f"{label}.log").open("w"), stderr=subprocess.STDOUT)
+            with ros_context(domain_id=did) as ctx:
+                probe = rclpy.create_node("bench_probe", context=ctx)
+                wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
+                stream = _SwitchedStream(probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
+                    _wrench_msg(probe.get_clock().now().to_msg())), autostart=False))
+                ex = SingleThreadedExecutor(context=ctx)
+                ex.add_node(probe)
+                spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
+                settled = GraphSettled(probe, quiet_s=GRAPH_QUIET_S,
+                                       min_nodes=sum(len(t["nodes"]) for t in spec.values()))
+                wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin, "the skeleton's graph settled")
+                out["topology"] = read_topologies(procs, tmp)
+                wrong = topology_differences(check, out["topology"]) if check is not None else []
+                if wrong:
+                    raise RuntimeError("the skeleton's topology is not the launch's:\n" + "\n".join(wrong[:20]))
+                for k, (phase, n) in enumerate(phases):
+                    if k:
+                        for p in procs.values():
+                            p.send_signal(signal.SIGUSR2)
+                    stream["on"] = phase == stream_phase
+                    warm = time.monotonic() + 2.0
+                    wait_until(lambda: time.monotonic() > warm, 30, spin, "skeleton warm-up")
+                    wins = []
+                    for _ in range(n):
+                        cpu0, wall0 = {lb: proc_cpu_s(p.pid) for lb, p in procs.items()}, time.monotonic()
+                        wait_until(lambda: time.monotonic() > wall0 + duration_s, duration_s + 30, spin, phase)
+                        wall = time.monotonic() - wall0
+                        wins.append({"wall_s": wall, "per_process": {lb: (proc_cpu_s(p.pid) - cpu0[lb]) / wall
+                                                                     for lb, p in procs.items()}})
+                    _check_alive(procs, tmp)
+                    out["phases"][phase] = {"windows": wins}
+                ex.shutdown()
+                probe.destroy_node()
+        finally:
+            _stop(list(procs.values()))
+    return out
+
+
+def _skeleton_argv(spec_file: Path, label: str) -> list[str]:
+    return [python_executable(), "-m", "hindrax_ident.tools.benchmarks.launch_node",
+            "hindrax_ident.tools.benchmarks.launch_node:skeleton_main", str(spec_file), label]
+
+
+def _endpoint(topic: str, type_name: str, raw: bool | None = None) -> dict:
+    """A topic endpoint of a skeleton's topology: depth 10, reliable, volatile, no QoS event handler."""
+    qos = dict(history=1, depth=10, reliability=1, durability=2, liveliness=0, deadline=0, lifespan=0,
+               liveliness_lease_duration=0)
+    return {"topic": topic, "type": type_name, "qos": qos, "events": [], **({} if raw is None else {"raw": raw})}
+
+
+def _one_node(name: str, pubs: list, subs: list) -> dict:
+    return {"nodes": [{"name": name, "namespace": "/", "publishers": pubs, "subscriptions": subs, "services": [],
+                       "clients": []}]}
+
+
+def _bare(spec: list, duration_s: float) -> float:
+    """CPU of one bare publisher process (the skeleton of ``spec``: (topic, type, rate), :func:`_endpoint`'s QoS,
+    default-constructed messages) over ``duration_s``, fraction of a core."""
+    topo = {"bare": _one_node("bare_publisher", [_endpoint(t, ty) for t, ty, _ in spec], [])}
+    run = _skeleton(skeleton_spec(topo, [{t: r for t, _, r in spec}]), [("bare", 1)], duration_s)
+    return run["phases"]["bare"]["windows"][0]["per_process"]["bare"]
+
+
+def launch_skeleton(launch: dict, windows: int, duration_s: float) -> dict:
+    """The launch layout's skeleton (:func:`_skeleton`), measured like the launch: its processes' topology as they
+    declared it (``launch["topology"]``, checked again on the skeleton), each topic at the launch's rate of each
+    phase with a recorded message, the running phase's ``windows`` and one idle window, the pilot's wrench stream in
+    the idle one (the launch's idle ``/wrench`` rate less that stream: the identification sends none then)."""
+    rates = [_phase_rates(launch, "running"), _phase_rates(launch, "idle")]
+    rates[1]["/wrench"] = max(0.0, rates[1].get("/wrench", 0.0) - WRENCH_RATE_HZ)
+    envs = {label: (p["prefix"], p["env"]) for label, p in launch["processes"].items()}
+    return _skeleton(skeleton_spec(launch["topology"], rates, launch["payloads"]), [("running", windows), ("idle", 1)],
+                     duration_s, envs, stream_phase="idle", check=launch["topology"])
+
+
+def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
+    """Per phase, the skeleton's CPU per process and in total in units of the launch's virtual pool CPU in that
+    phase's windows (median CPU over median pool CPU), and the launch's CPU over the skeleton's (``..._vs_skeleton_
+    ratio``), the note giving the part above the skeleton: the logic, what leaner code can still win."""
+    rows: list[dict] = []
+    for phase in ("running", "idle"):
+        lw, sw = launch["phases"][phase]["windows"], skel["phases"][phase]["windows"]
+        pool = _median([w["pool"] for w in lw])
+        sk = {n: _median([w["per_process"][n] for w in sw]) for n in sw[0]["per_process"]}
+        la = {n: _median([w["per_process"][n] for w in lw]) for n in sk}
+        sk["total"] = _median([sum(w["per_process"].values()) for w in sw])
+        la["total"] = _median([sum(w["per_process"].values()) for w in lw])
+        for n in sk:
+            rows += [{"name": f"launch_skeleton_{phase}_cpu_{n}_per_pool", "value": sk[n] / pool, "unit": "x",
+                      "target": ("<= 1.3" if phase == "running" else "<= 1.0") if n == "total" else "",
+                      "note": f"{100 * sk[n]:.1f} % of a core; the launch's endpoints, rates and messages without "
+                              f"logic; unit: the pool's {100 * pool:.1f} % in the launch's {phase} windows"},
+                     {"name": f"launch_{phase}_vs_skeleton_ratio_{n}", "value": la[n] / sk[n], "unit": "x",
+                      "note": f"launch {la[n] / pool:.3f} - skeleton {sk[n] / pool:.3f} = "
+                              f"{(la[n] - sk[n]) / pool:.3f} pool units above the skeleton (logic)"}]
+    return rows
 
 
 def _spec(rates: dict[str, float], types: dict[str, str]) -> list:
@@ -920,7 +1024,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         launch_file: Path | None = None, baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
     windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
-    s; baselines: the bare rclpy baselines (they need the layouts' rates); launch_file: another launch file for the
+    s; baselines: the bare rclpy baseline and the launch's skeleton; launch_file: another launch file for the
     launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument); baseline: a git ref whose
     launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
     the baseline's (``..._vs_baseline``)."""
@@ -970,7 +1074,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                              "note": "one process, identification running surge, recorder on"})
         if baselines:
             idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
-            bare_pub, _ = _bare(idle_spec, base_s, with_subscriber=False)
+            bare_pub = _bare(idle_spec, base_s)
             idle_msgs = sum(r for *_, r in idle_spec)
             rows += [
                 {"name": "cpu_bare_rclpy_same_topics", "value": 100 * bare_pub, "unit": "% of a core",
@@ -985,17 +1089,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         running = _phase_rates(launch, "running")
         idle = _phase_rates(launch, "idle")
         if baselines:
-            launch_spec = _spec(running, types)
-            pubsub_pub, pubsub_sub = _bare(launch_spec, base_s, with_subscriber=True)
-            pubsub = pubsub_pub + pubsub_sub
-            launch_total = next(r["value"] for r in rows if r["name"] == "launch_running_cpu_total") / 100
-            rows += [
-                {"name": "cpu_bare_rclpy_pub_sub", "value": 100 * pubsub, "unit": "% of a core",
-                 "note": f"bare publisher {100 * pubsub_pub:.1f} % + bare raw subscriber {100 * pubsub_sub:.1f} %, "
-                         f"{len(launch_spec)} topics of the launch layout's running phase"},
-                {"name": "launch_vs_bare_pubsub_ratio", "value": launch_total / pubsub if pubsub else -1, "unit": "x",
-                 "target": "<= 1.2", "note": "launch_running_cpu_total / cpu_bare_rclpy_pub_sub"},
-            ]
+            rows += skeleton_rows(launch, launch_skeleton(launch, windows, duration_s))
         if before is not None:
             rows += baseline_rows(rows, before, baseline)
         for topic, rate in running.items():
@@ -1080,7 +1174,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--windows", type=int, default=None,
                         help=f"running windows of the launch layout (default {RUNNING_WINDOWS}); rows are medians")
     parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")
-    parser.add_argument("--no-baselines", action="store_true", help="skip the bare rclpy baselines")
+    parser.add_argument("--no-baselines", action="store_true",
+                        help="skip the bare rclpy baseline and the launch's skeleton")
     parser.add_argument("--py-spy", type=Path, default=None, metavar="DIR",
                         help="record every launch-layout process with py-spy during the first running window "
                              "(DIR/<process>.txt, raw collapsed stacks)")
