@@ -28,9 +28,9 @@ import os
 import subprocess
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 
-from hindrax_drivers.testing import python_executable
+from hindrax_drivers.testing import child_process, python_executable
 
 from . import run_alone
 from .participant_churn import _VehicleLayout, _Watch, hardware_priority
@@ -52,18 +52,13 @@ def cpu_bound_neighbours(n: int = NEIGHBOURS) -> Iterator[list[subprocess.Popen]
     """``n`` processes ``python3 -c 'while True: pass'`` at normal priority, each in a session of its own (another
     service or a terminal on the Pi), for the block; killed on the way out. Raises RuntimeError if one inherited
     this process's real-time priority (it would starve the vehicle's processes, not stand beside them)."""
-    neighbours: list[subprocess.Popen] = []
-    try:
-        for _ in range(n):
-            neighbours.append(subprocess.Popen([python_executable(), "-c", "while True: pass"], start_new_session=True,
-                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-            if os.sched_getscheduler(neighbours[-1].pid) != os.SCHED_OTHER:
-                raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
+    with ExitStack() as stack:
+        neighbours = [stack.enter_context(child_process(
+            [python_executable(), "-c", "while True: pass"], start_new_session=True,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)) for _ in range(n)]
+        if any(os.sched_getscheduler(p.pid) != os.SCHED_OTHER for p in neighbours):
+            raise RuntimeError("a CPU-bound neighbour inherited this process's real-time priority")
         yield neighbours
-    finally:
-        for p in neighbours:
-            p.kill()
-            p.wait(10)
 
 
 def busy_rows(quick: bool = False, realtime: bool = True) -> list[dict]:

@@ -26,14 +26,14 @@ import os
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from typing import Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
 from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
-from hindrax_drivers.testing import python_executable, wait_until
+from hindrax_drivers.testing import child_process, python_executable, wait_until
 
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 
@@ -196,7 +196,7 @@ def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
             lay.env[RANGE_ENV] = "LOCALHOST"
         watch = _Watch(lay.probe)
         started: list[subprocess.Popen] = []
-        try:
+        with ExitStack() as stack:  # every process started is killed if still running at the end
             lay.armed_at_1700()
             with hardware_priority() as refused:
                 watch.start()
@@ -208,8 +208,8 @@ def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
                     else:
                         argv = [python_executable(), "-m", "hindrax_ident.tools.cli", "health",
                                 "--quiet", "--timeout", "3"]
-                    started.append(subprocess.Popen(argv, env=lay.env, stdout=subprocess.DEVNULL,
-                                                    stderr=subprocess.DEVNULL))
+                    started.append(stack.enter_context(child_process(
+                        argv, env=lay.env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)))
                     k += 1
                     next_start = t0 + k * PERIOD_S
                     wait_until(lambda: time.monotonic() >= next_start, PERIOD_S + 5.0, lambda: time.sleep(0.02),
@@ -217,10 +217,6 @@ def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
                 watch.active = False
             for p in started:
                 p.wait(60)
-        finally:
-            for p in started:
-                if p.poll() is None:
-                    p.kill()
     what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
             f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
             + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport")
