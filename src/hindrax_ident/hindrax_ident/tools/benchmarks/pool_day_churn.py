@@ -28,11 +28,13 @@ from __future__ import annotations
 
 import os
 import subprocess
+from contextlib import ExitStack
 from pathlib import Path
 
 import yaml
 from domain_coordinator import domain_id
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
+from hindrax_drivers.testing import child_process
 
 from . import run_alone
 from .busy_neighbours import cpu_bound_neighbours
@@ -63,24 +65,21 @@ def run(quick: bool = False) -> list[dict]:
         lay.ensure()
         internal_default = {k: v for k, v in lay.env.items() if k != PROFILE_ENV} | {RANGE_ENV: "LOCALHOST"}
         topside_env = internal_default | {"ROS_DOMAIN_ID": str(topside)}
+        health = [lay.py, "-m", "hindrax_ident.tools.cli", "health", "--quiet", "--timeout", "3"]
+        topics = topside_topics(vehicle)
+        quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
         with gateway_running(lay, topside):
             lay.armed_at_1700()
             with hardware_priority() as refused, cpu_bound_neighbours(NEIGHBOURS):
                 watch.start()
                 for k in range(trials):
-                    procs = [subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                             for argv, env in (
-                                 (subscriber_argv(f"internal_{k}", SUBSCRIBER_S), internal_default),
-                                 (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topside_topics(vehicle)), topside_env),
-                                 ([lay.py, "-m", "hindrax_ident.tools.cli", "health", "--quiet",
-                                   "--timeout", "3"],
-                                  lay.env))]
-                    try:
+                    specs = ((subscriber_argv(f"internal_{k}", SUBSCRIBER_S), internal_default),
+                             (subscriber_argv(f"topside_{k}", SUBSCRIBER_S, topics), topside_env),
+                             (health, lay.env))
+                    with ExitStack() as stack:
+                        procs = [stack.enter_context(child_process(argv, env=env, **quiet))
+                                 for argv, env in specs]
                         exits += [p.wait(TRIAL_TIMEOUT_S) for p in procs]
-                    finally:
-                        for p in procs:
-                            if p.poll() is None:
-                                p.kill()
                 watch.active = False
                 load = os.getloadavg()[0]
     what = (f"{trials} trials, each a {SUBSCRIBER_S:g} s subscriber on the internal domain with default transports, "
