@@ -101,13 +101,8 @@ def frd_to_flu(v) -> np.ndarray:
     return _vec3(v) @ R_FLU_FRD.T
 
 
-def enu_to_ned(v) -> np.ndarray:
-    """Vector(s) from odom ENU to world NED. v: (..., 3)."""
-    return _vec3(v) @ R_ENU_NED.T
-
-
 def ned_to_enu(v) -> np.ndarray:
-    """Vector(s) from world NED to odom ENU. v: (..., 3)."""
+    """Vector(s) from world NED to odom ENU, and back (its own inverse). v: (..., 3)."""
     return _vec3(v) @ R_ENU_NED.T
 
 
@@ -146,29 +141,6 @@ def twist_flu_to_frd(t) -> np.ndarray:
 def twist_frd_to_flu(nu) -> np.ndarray:
     """Body velocity nu = [u v w p q r] (FRD) to a base_link FLU twist [vx vy vz wx wy wz]. nu: (..., 6)."""
     return wrench_frd_to_flu(nu)
-
-
-def _rotate_covariance(cov, r: np.ndarray) -> np.ndarray:
-    c = np.asarray(cov, dtype=float)
-    if c.shape == (6, 6):
-        r = np.kron(np.eye(2), r)
-    elif c.shape != (3, 3):
-        raise ValueError(f"expected a 3x3 or 6x6 covariance, got shape {c.shape}")
-    return r @ c @ r.T
-
-
-def covariance_flu_to_frd(cov) -> np.ndarray:
-    """Covariance of a 3-vector (3x3) or of a twist/wrench (6x6, two 3-blocks) from FLU to FRD: R C R^T."""
-    return _rotate_covariance(cov, R_FLU_FRD)
-
-
-
-
-def covariance_enu_to_ned(cov) -> np.ndarray:
-    """Covariance of a 3-vector (3x3) or pose/twist (6x6) from ENU to NED axes: R C R^T."""
-    return _rotate_covariance(cov, R_ENU_NED)
-
-
 
 
 def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
