@@ -80,11 +80,7 @@ class DvlParseError(ValueError):
     count, malformed number, out-of-range value, non-printable bytes).  Source: docs/devices.md §1.2."""
 
 
-# ---------------------------------------------------------------------------------------------
 # Records
-# ---------------------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class DvlPositionDelta:
     """One ``$DVPDL`` sentence: motion since the previous ``$DVPDL`` (docs/devices.md §1.3.1).
@@ -241,11 +237,7 @@ class DvlCommand:
     argument: str
 
 
-# ---------------------------------------------------------------------------------------------
 # Checksum and sentence framing
-# ---------------------------------------------------------------------------------------------
-
-
 def _to_bytes(line: Union[bytes, bytearray, str]) -> bytes:
     if isinstance(line, str):
         return line.encode("utf-8", errors="replace")
@@ -312,11 +304,7 @@ def split_sentence(line: Union[bytes, bytearray, str]) -> Tuple[str, Tuple[str, 
     return parts[0], tuple(parts[1:]), checksum_ok
 
 
-# ---------------------------------------------------------------------------------------------
 # Field helpers
-# ---------------------------------------------------------------------------------------------
-
-
 def _int(field: str, name: str) -> int:
     if not _INT_RE.fullmatch(field):
         raise DvlParseError(f"field {name}: expected an integer, got {field[:20]!r}")
@@ -344,11 +332,7 @@ def _tf(flag: bool) -> str:
     return "T" if flag else "F"
 
 
-# ---------------------------------------------------------------------------------------------
 # $DVPDL
-# ---------------------------------------------------------------------------------------------
-
-
 def parse_dvpdl(fields: Sequence[str]) -> DvlPositionDelta:
     """Parse the 9 data fields of ``$DVPDL`` (``tu,dtu,adr,adp,ady,pdx,pdy,pdz,c``; docs/devices.md §1.3.1).
 
@@ -402,11 +386,7 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
     return format_sentence(body)
 
 
-# ---------------------------------------------------------------------------------------------
 # $DVEXT
-# ---------------------------------------------------------------------------------------------
-
-
 def _fmt_gain(gain_db: float) -> str:
     return "%d" % round(gain_db)
 
@@ -483,11 +463,7 @@ def format_dvext(record: DvlExtended) -> bytes:
     return format_sentence(",".join(parts))
 
 
-# ---------------------------------------------------------------------------------------------
 # $GPRMC
-# ---------------------------------------------------------------------------------------------
-
-
 def _parse_ddmm(value: str, hemi: str, deg_digits: int, name: str, positive: str,
                 negative: str) -> Optional[float]:
     if value == "" and hemi == "":
@@ -583,11 +559,7 @@ def format_dvtxt(text: str) -> bytes:
     return format_sentence("DVTXT," + text, with_checksum=False)
 
 
-# ---------------------------------------------------------------------------------------------
 # Line dispatcher
-# ---------------------------------------------------------------------------------------------
-
-
 def _printable(raw: bytes) -> bool:
     return all(0x20 <= b <= 0x7E or b == 0x09 for b in raw)
 
@@ -634,11 +606,7 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
     return DvlText(text=text, sentence_id="", checksum_ok=None)
 
 
-# ---------------------------------------------------------------------------------------------
 # Line framer
-# ---------------------------------------------------------------------------------------------
-
-
 class DvlLineFramer:
     """Incremental line splitter for the DVL byte stream (docs/devices.md §1.2: split on LF, strip CR).
 
@@ -720,11 +688,7 @@ class DvlLineFramer:
         return stripped
 
 
-# ---------------------------------------------------------------------------------------------
 # Commands (host -> DVL)
-# ---------------------------------------------------------------------------------------------
-
-
 def parse_command(line: Union[bytes, bytearray, str]) -> DvlCommand:
     """Split one host command line into keyword and argument (docs/devices.md §1.4: one ASCII line per
     command, LF-terminated, CR ignored).  Keywords are upper-cased (case sensitivity of the real

@@ -92,11 +92,7 @@ class Ping1dId(IntEnum):
     CONTINUOUS_STOP = 1401
 
 
-# ---------------------------------------------------------------------------------------------
 # Frame codec
-# ---------------------------------------------------------------------------------------------
-
-
 def checksum(data: bytes | bytearray) -> int:
     """Ping protocol checksum: sum of all bytes, modulo 2**16 (docs/devices.md §2.2)."""
     return sum(data) & 0xFFFF
@@ -252,9 +248,7 @@ class Ping1dFramer:
         return out
 
 
-# ---------------------------------------------------------------------------------------------
 # Typed payloads
-# ---------------------------------------------------------------------------------------------
 
 # Field conversions: "int" (raw integer), "bool" (u8 0/1), or an int divisor d with SI = raw / d.
 _Conv = Union[str, int]

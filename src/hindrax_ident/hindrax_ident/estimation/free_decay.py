@@ -75,9 +75,7 @@ __all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_accelerat
            "quadratic_free_decay_keys", "IncliningResult", "restoring_from_inclining"]
 
 
-# --------------------------------------------------------------------------------------
 # Closed-form relations ([Hindrax-AM] eqs. 2-12)
-# --------------------------------------------------------------------------------------
 def _zeta(z: float) -> float:
     z = float(z)
     if not (np.isfinite(z) and 0.0 <= z < 1.0):
@@ -161,9 +159,7 @@ def keulegan_carpenter(amplitude_m: float, characteristic_length_m: float) -> fl
                                                          "characteristic_length_m")
 
 
-# --------------------------------------------------------------------------------------
 # Signal processing
-# --------------------------------------------------------------------------------------
 def _sample_rate(t: np.ndarray) -> float:
     return 1.0 / float(np.median(np.diff(t)))
 
@@ -504,9 +500,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
         displacement_m=x, velocity_m_s=v, envelope_m=envelope)
 
 
-# --------------------------------------------------------------------------------------
 # Quadratic damping: output-error fit of the nonlinear free-decay ODE ([SmallROV] eqs. 12-16)
-# --------------------------------------------------------------------------------------
 #: Signals the ODE fit can compare with the record (``output``): what the sensor measured.
 DECAY_OUTPUTS = ("acceleration", "velocity", "displacement")
 
@@ -758,9 +752,7 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
     }
 
 
-# --------------------------------------------------------------------------------------
 # Inclining test: hydrostatic restoring stiffness in roll/pitch from a known moment
-# --------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class IncliningResult:
     """Result of :func:`restoring_from_inclining`.

@@ -41,9 +41,7 @@ class EstimationError(ValueError):
     """
 
 
-# --------------------------------------------------------------------------------------
 # Shared validation helpers (used by rls, filters, steady_windows, free_decay, ...)
-# --------------------------------------------------------------------------------------
 def positive(value: float, name: str) -> float:
     """``value`` as a float; EstimationError naming ``name`` unless it is finite and > 0."""
     value = float(value)
@@ -100,9 +98,7 @@ def check_time_vector(t, name: str = "t_s", min_samples: int = 2) -> np.ndarray:
     return t
 
 
-# --------------------------------------------------------------------------------------
 # Results
-# --------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class LsResult:
     """Result of an ordinary least-squares fit ([Hindrax-Drag] eqs. 6-8).
@@ -229,9 +225,7 @@ class DragFit(_NamedFit):
         return np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
 
 
-# --------------------------------------------------------------------------------------
 # Core estimator
-# --------------------------------------------------------------------------------------
 def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
                      rcond: Optional[float] = None) -> LsResult:
     """Ordinary least squares with parameter covariance ([Hindrax-Drag] eqs. 4-8).
@@ -297,9 +291,7 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
                     residuals=residuals, n=n, p=p, names=names)
 
 
-# --------------------------------------------------------------------------------------
 # Hydrodynamic models
-# --------------------------------------------------------------------------------------
 def _drag_regressors(v: np.ndarray, quadratic: bool, linear: bool, bias: bool) -> np.ndarray:
     cols = []
     if quadratic:
