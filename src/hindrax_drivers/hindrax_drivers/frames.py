@@ -92,13 +92,12 @@ def _vec3(v) -> np.ndarray:
 
 
 def flu_to_frd(v) -> np.ndarray:
-    """Vector(s) from base_link FLU to body FRD. v: (..., 3), any unit (m, m/s, rad/s, N, N m)."""
+    """Vector(s) from base_link FLU to body FRD, and back (:func:`frd_to_flu`). v: (..., 3), any unit (m, m/s,
+    rad/s, N, N m)."""
     return _vec3(v) @ R_FLU_FRD.T
 
 
-def frd_to_flu(v) -> np.ndarray:
-    """Vector(s) from body FRD to base_link FLU. v: (..., 3)."""
-    return _vec3(v) @ R_FLU_FRD.T
+frd_to_flu = flu_to_frd
 
 
 def ned_to_enu(v) -> np.ndarray:
@@ -124,23 +123,12 @@ def _wrench6(w) -> np.ndarray:
 
 
 def wrench_flu_to_frd(w) -> np.ndarray:
-    """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) from base_link FLU to body FRD tau = [X Y Z K M N]. w: (..., 6)."""
+    """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) from base_link FLU to body FRD tau = [X Y Z K M N], and back; a twist
+    [vx vy vz wx wy wz] (m/s, rad/s) to nu = [u v w p q r] alike (:func:`twist_flu_to_frd`). w: (..., 6)."""
     return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
 
 
-def wrench_frd_to_flu(w) -> np.ndarray:
-    """Wrench tau = [X Y Z K M N] (N, N m) from body FRD to base_link FLU. w: (..., 6)."""
-    return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
-
-
-def twist_flu_to_frd(t) -> np.ndarray:
-    """Twist [vx vy vz wx wy wz] (m/s, rad/s) from base_link FLU to nu = [u v w p q r] in FRD. t: (..., 6)."""
-    return wrench_flu_to_frd(t)
-
-
-def twist_frd_to_flu(nu) -> np.ndarray:
-    """Body velocity nu = [u v w p q r] (FRD) to a base_link FLU twist [vx vy vz wx wy wz]. nu: (..., 6)."""
-    return wrench_frd_to_flu(nu)
+wrench_frd_to_flu = twist_flu_to_frd = twist_frd_to_flu = wrench_flu_to_frd
 
 
 def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
@@ -149,15 +137,13 @@ def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
     q_xyzw: (..., 4) quaternion(s) in ROS order (x, y, z, w), normalised here. Returns (..., 4) in the same order.
     R_ned_frd = R_ned_enu . R_enu_flu . R_flu_frd, applied as the constant linear map :data:`_Q_ROS_MARINE` that
     the Hamilton product defines (the same result as composing scipy Rotations, without their cost per call).
-    Raises ValueError for a zero or non-finite quaternion.
+    Raises ValueError for a zero or non-finite quaternion. The same map takes the body in NED back to base_link in
+    odom (:func:`quaternion_marine_to_ros`): both factors are their own inverses.
     """
     return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
 
 
-def quaternion_marine_to_ros(q_xyzw) -> np.ndarray:
-    """Orientation of the body (FRD) in NED -> orientation of base_link (FLU) in odom (ENU). (..., 4) x,y,z,w (the
-    same map as :func:`quaternion_ros_to_marine`: both factors are their own inverses)."""
-    return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
+quaternion_marine_to_ros = quaternion_ros_to_marine
 
 
 def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:

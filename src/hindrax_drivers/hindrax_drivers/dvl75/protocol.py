@@ -36,7 +36,7 @@ import math
 import re
 from dataclasses import dataclass
 from functools import reduce
-from typing import Any, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Optional, Sequence, Tuple, Union
 
 __all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown",
            "DvlRecord", "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD",
@@ -565,7 +565,8 @@ def _printable(raw: bytes) -> bool:
 
 
 #: the data sentences, which must carry a checksum
-_DATA_PARSERS = {"DVPDL": parse_dvpdl, "DVEXT": parse_dvext, "GPRMC": parse_gprmc}
+_DATA_PARSERS: dict[str, Callable[[Sequence[str]], DvlRecord]] = {
+    "DVPDL": parse_dvpdl, "DVEXT": parse_dvext, "GPRMC": parse_gprmc}
 
 
 def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
