@@ -162,9 +162,8 @@ class ControllerNode(VehicleNode):
         self._streams: list = []
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
-        self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
-                                 esc_state_qos())
+        self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20)
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10)
@@ -188,35 +187,26 @@ class ControllerNode(VehicleNode):
         topics (about 80 messages/s in the pool layout). The first IMU message after opening is
         conditioned (:meth:`_on_imu`)."""
         self._imu_count = IDLE_IMU_EVERY - 1
+        sub, qos = self.create_subscription, sensor_input_qos(20)
         self._streams = [
-            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)),
-                            sensor_input_qos(20)),
-            self._subscribe(FluidPressure, "pressure/fluid_pressure",
-                            lambda m: self._add([sample_from_pressure(m)]), sensor_input_qos(20)),
-            self._subscribe(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
-            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]),
-                            sensor_input_qos(20)),
-        ]
+            sub(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), qos),
+            sub(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]), qos),
+            sub(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
+            sub(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), qos)]
 
     def _open_enabled_streams(self) -> None:
         """Subscribe to what only an enabled controller reads: ``wrench`` (other writers: a pilot's message makes it
         yield) and ``allocation/status`` (anti-windup); a disabled controller ignored both, and the pilot's 50 Hz
         stream cost it a callback per message."""
         if not self._enabled_streams:
-            self._enabled_streams = [self._subscribe(AllocationStatus, "allocation/status", self._on_allocation, 20),
-                                     self._subscribe(WrenchStamped, "wrench", self._on_wrench, 50)]
+            self._enabled_streams = [
+                self.create_subscription(AllocationStatus, "allocation/status", self._on_allocation, 20),
+                self.create_subscription(WrenchStamped, "wrench", self._on_wrench, 50)]
 
     def _close_enabled_streams(self) -> None:
         for sub in self._enabled_streams:
             self.destroy_subscription(sub)
         self._enabled_streams = []
-
-    def _subscribe(self, msg_type: Any, topic: str, handler: Any, qos: Any,
-                   raw: bool = False) -> Any:
-        """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
-        room for an executor held up on a loaded machine; the sensors' readers are best effort
-        (:func:`~hindrax_drivers.node_common.sensor_input_qos`)."""
-        return self.create_subscription(msg_type, topic, handler, qos, raw=raw)
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
@@ -283,10 +273,7 @@ class ControllerNode(VehicleNode):
                 timer.reset()
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
-        key = _key(msg)
-        if key in self._own:
-            return
-        if self.enabled:
+        if self.enabled and _key(msg) not in self._own:
             self._disable("yielded: another source publishes wrench (pilot)", zero=False)
 
     def _on_setpoint(self, msg: ControlSetpoint) -> None:
