@@ -126,7 +126,7 @@ class RecorderNode(VehicleNode):
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(StartRecording, "recorder/start", self._on_start)
         self.create_service(StopRecording, "recorder/stop", self._on_stop)
-        self._discovery_timer = self.create_timer(self._discovery_period_s, self._discover)
+        self.create_timer(self._discovery_period_s, self.discover_now)
         self.create_timer(self._status_period_s, self._publish_status)
         if self._min_free_bytes > 0.0:
             self.create_timer(self._disk_check_period_s, self.check_disk)
@@ -218,7 +218,7 @@ class RecorderNode(VehicleNode):
         self._gaps = SequenceGaps(self._publisher_count)
         self._skipped.clear()
         self.get_logger().info(f"recording {self._selection.describe()} to {out}")
-        self._discover()
+        self.discover_now()
         return out
 
     def stop_recording(self) -> BagMetadata | None:
@@ -256,10 +256,6 @@ class RecorderNode(VehicleNode):
             print(f"[{self.get_name()}] {text}", file=sys.stderr)
 
     # -- graph discovery --------------------------------------------------------------------------
-    def discover_now(self) -> None:
-        """Subscribe to newly published topics now (the discovery timer runs on ROS time, which may be frozen)."""
-        self._discover()
-
     def subscribed_to(self, topics) -> bool:
         """True while recording and every topic of ``topics`` (iterable of names) that the selection records has
         a subscription matched with at least one publisher: from then on none of their messages is missed."""
@@ -273,7 +269,9 @@ class RecorderNode(VehicleNode):
                 return False
         return True
 
-    def _discover(self) -> None:
+    def discover_now(self) -> None:
+        """Subscribe to newly published topics now (also the discovery timer's callback, on ROS time, which may be
+        frozen)."""
         if self._writer is None or self._selection is None:
             return
         for topic, types in self.get_topic_names_and_types():
@@ -322,9 +320,7 @@ class RecorderNode(VehicleNode):
                 sel = TopicSelection(tuple(request.topics), request.topic_regex)
             path = self.start_recording(request.output_dir, sel)
         except (RuntimeError, ValueError, OSError) as exc:
-            response.success = False
-            response.message = str(exc)
-            response.bag_path = str(self.bag_path or "")
+            response.success, response.message, response.bag_path = False, str(exc), str(self.bag_path or "")
             return response
         response.success = True
         response.bag_path = str(path)
@@ -332,22 +328,15 @@ class RecorderNode(VehicleNode):
         return response
 
     def _on_stop(self, request: StopRecording.Request, response: StopRecording.Response):
-        if self._writer is None:
-            response.success = False
-            response.message = "not recording"
-            response.bag_path = str(self._last_bag or "")
-            return response
-        try:
-            meta = self.stop_recording()
-        except Exception as exc:  # noqa: BLE001 - reported to the caller, the node keeps running
-            response.success = False
-            response.message = f"bag could not be finished: {exc}"
-            response.bag_path = str(self._last_bag or "")
-            return response
-        response.success = True
-        response.bag_path = str(self._last_bag)
-        response.message_count = int(meta.message_count if meta else 0)
-        response.message = f"{response.message_count} messages written"
+        response.success, response.message = False, "not recording"
+        if self._writer is not None:
+            try:
+                meta = self.stop_recording()
+                response.success, response.message_count = True, int(meta.message_count if meta else 0)
+                response.message = f"{response.message_count} messages written"
+            except Exception as exc:  # noqa: BLE001 - reported to the caller, the node keeps running
+                response.message = f"bag could not be finished: {exc}"
+        response.bag_path = str(self._last_bag or "")
         return response
 
     def status(self) -> DiagnosticStatus:
@@ -383,18 +372,16 @@ class RecorderNode(VehicleNode):
         arr.status = [self.status()]
         self._diag_pub.publish(arr)
 
-    def close(self) -> None:
-        """Finish any bag in progress: the clean-up of a composed process
-        (:func:`~hindrax_drivers.node_common.run_nodes`)."""
-        self.shutdown()
-
     def shutdown(self) -> None:
-        """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM)."""
+        """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM; as :meth:`close`, the clean-up of a
+        composed process, :func:`~hindrax_drivers.node_common.run_nodes`)."""
         try:
             self.stop_recording()
         except Exception as exc:  # noqa: BLE001 - exiting: report, never hide the bag path
             print(f"recorder: bag {self.bag_path} not finished cleanly: {exc}; run `hindrax bag recover "
                   f"{self.bag_path}`", file=sys.stderr)
+
+    close = shutdown
 
 
 def main(args: list[str] | None = None) -> int:
