@@ -81,11 +81,9 @@ from .sequence_gaps import SequenceGaps
 from .writer import WriterOptions
 from .writer_thread import ThreadedBagWriter
 
-_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 #: default ``drain_period_s``, s: the writer thread drains what the callbacks queued 10 times a second
 #: (docs/architecture.md §10.1)
 DRAIN_PERIOD_S = 0.1
-_DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
 
 
 class RecorderNode(VehicleNode):
@@ -295,7 +293,8 @@ class RecorderNode(VehicleNode):
                         == type_name]
             reliability, durability = recorder_policies(profiles)
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._queue_depth,
-                             reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
+                             reliability=ReliabilityPolicy.get_from_short_key(reliability),
+                             durability=DurabilityPolicy.get_from_short_key(durability))
             self._writer.add_topic(topic, type_name, profiles)
             on_message = WithMessageInfo(functools.partial(self._on_message, topic))
             self._subs[topic] = self.create_subscription(cls, topic, on_message, qos, raw=True)
