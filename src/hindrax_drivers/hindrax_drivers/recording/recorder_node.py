@@ -16,13 +16,11 @@ Behaviour
 - Data: one subscription callback per message on the node's executor, whatever the clock (the
   vehicle, the virtual pool and the tests take the same path). The subscriptions are raw: the
   callback gets the CDR bytes and they are written unchanged, never converted into a Python message
-  and back (an ``Imu`` taken as an object costs 77 us, as bytes 11 us:
-  :mod:`hindrax_drivers.lean_cdr`; at the stack's 430 msg/s that is about 2 % of a core). Log time =
+  and back (:mod:`hindrax_drivers.lean_cdr`). Log time =
   the node's clock in the callback (sim time with ``use_sim_time``, so a stepped simulation's bag
   depends on its seed only); publish time = the log time (not the DDS source timestamp, which is
   wall-clock time; the MCAP specification asks for the log time where the publish time is not
-  available). No reader of this project uses the publish time (a message's ``header.stamp`` is the
-  time of its data). Writing happens in one writer thread (the mcap writer is not thread-safe),
+  available). Writing happens in one writer thread (the mcap writer is not thread-safe),
   which drains what the callbacks queued every ``drain_period_s``.
 - Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
   (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
