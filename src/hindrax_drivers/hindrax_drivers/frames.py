@@ -92,8 +92,8 @@ def _vec3(v) -> np.ndarray:
 
 
 def flu_to_frd(v) -> np.ndarray:
-    """Vector(s) from base_link FLU to body FRD, and back (:func:`frd_to_flu`). v: (..., 3), any unit (m, m/s,
-    rad/s, N, N m)."""
+    """Vector(s) from base_link FLU to body FRD, and back (:func:`frd_to_flu`). v: (..., 3), any
+    unit (m, m/s, rad/s, N, N m)."""
     return _vec3(v) @ R_FLU_FRD.T
 
 
@@ -123,8 +123,8 @@ def _wrench6(w) -> np.ndarray:
 
 
 def wrench_flu_to_frd(w) -> np.ndarray:
-    """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) from base_link FLU to body FRD tau = [X Y Z K M N], and back; a twist
-    [vx vy vz wx wy wz] (m/s, rad/s) to nu = [u v w p q r] alike (:func:`twist_flu_to_frd`). w: (..., 6)."""
+    """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) base_link FLU -> body FRD tau = [X Y Z K M N], and back;
+    a twist (m/s, rad/s) -> nu = [u v w p q r] alike (:func:`twist_flu_to_frd`). w: (..., 6)."""
     return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
 
 
@@ -137,8 +137,8 @@ def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
     q_xyzw: (..., 4) quaternion(s) in ROS order (x, y, z, w), normalised here. Returns (..., 4) in the same order.
     R_ned_frd = R_ned_enu . R_enu_flu . R_flu_frd, applied as the constant linear map :data:`_Q_ROS_MARINE` that
     the Hamilton product defines (the same result as composing scipy Rotations, without their cost per call).
-    Raises ValueError for a zero or non-finite quaternion. The same map takes the body in NED back to base_link in
-    odom (:func:`quaternion_marine_to_ros`): both factors are their own inverses.
+    Raises ValueError for a zero or non-finite quaternion. The same map takes the body in NED back
+    to base_link in odom (:func:`quaternion_marine_to_ros`): both factors are their own inverses.
     """
     return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
 

@@ -181,8 +181,11 @@ class ProcessRunner:
         """What ``p`` is started with, as ``launch_ros`` builds it: its ``launch-prefix``, the executable, then
         :meth:`NodeProcess.ros_arguments` and this runner's extra arguments for it (writes its parameter files)."""
         self._params_dir.mkdir(parents=True, exist_ok=True)
-        write = lambda values: write_parameter_file(values, self._params_dir)  # noqa: E731 - as launch_ros, /**
-        return list(p.launch_prefix) + self._command(p) + p.ros_arguments(write) + self._extra_args.get(p.label, [])
+        def write(values: Mapping) -> Path:  # <param> runs as a file keyed /**, as launch_ros does
+            return write_parameter_file(values, self._params_dir)
+
+        return (list(p.launch_prefix) + self._command(p) + p.ros_arguments(write)
+                + self._extra_args.get(p.label, []))
 
     def log(self, label: str) -> str:
         """Everything process ``label`` wrote so far (all its runs)."""
@@ -203,8 +206,9 @@ class ProcessRunner:
 
     # -- internals --------------------------------------------------------------------------------
     def _spawn(self, slot: _Slot) -> None:
-        # this runner's environment, then the launch file's for the process (<set_env>, <env>), then extra_env
-        env = dict(self._env, **dict(slot.process.env), **self._extra_env.get(slot.process.label, {}))
+        # this runner's environment, then the launch file's (<set_env>, <env>), then extra_env
+        label = slot.process.label
+        env = dict(self._env, **dict(slot.process.env), **self._extra_env.get(label, {}))
         with open(slot.log_path, "a") as log:
             log.write(f"--- start {slot.starts + 1}: {' '.join(slot.command)}\n")
             log.flush()

@@ -5,11 +5,12 @@ reverse for the commands a driver sends.  No I/O, no clocks, no ROS.
 
 Source: docs/devices.md §0, §1.2-§1.5 (tags [D3]-[D21] there).
 
-Framing (docs/devices.md §1.2, verified on real captures): ``$`` + sentence id + ``,`` + fields + ``*`` + two hex
-digits + CR LF, the checksum the XOR of every byte strictly between ``$`` and ``*``. ``$DVPDL``, ``$DVEXT`` and
-``$GPRMC`` (§1.3) parse into dataclasses with SI field names; ``$DVTXT`` and bare lines into :class:`DvlText`; any
-other line (``$DVNVM``, ``IMU:``, ``GPS:$...``) into :class:`DvlUnknown`, not an error. Host -> DVL commands
-(§1.4) are plain ASCII lines without checksum, as the BlueOS driver sends them [D17].
+Framing (docs/devices.md §1.2, verified on real captures): ``$`` + sentence id + ``,`` + fields +
+``*`` + two hex digits + CR LF, the checksum the XOR of every byte strictly between ``$`` and ``*``.
+``$DVPDL``, ``$DVEXT`` and ``$GPRMC`` (§1.3) parse into dataclasses with SI field names; ``$DVTXT``
+and bare lines into :class:`DvlText`; any other line (``$DVNVM``, ``IMU:``, ``GPS:$...``) into
+:class:`DvlUnknown`, not an error. Host -> DVL commands (§1.4) are plain ASCII lines without
+checksum, as the BlueOS driver sends them [D17].
 
 Vendor-document errors handled here (docs/devices.md §0 item 2, §1.2): the ``$DVPDL`` example printed
 in Cerulean's documentation ends in ``*22`` although its checksum is ``6E``; this module rejects it,

@@ -266,8 +266,8 @@ class RecorderNode(VehicleNode):
         return True
 
     def discover_now(self) -> None:
-        """Subscribe to newly published topics now (also the discovery timer's callback, on ROS time, which may be
-        frozen)."""
+        """Subscribe to newly published topics now (also the discovery timer's callback, on ROS
+        time, which may be frozen)."""
         if self._writer is None or self._selection is None:
             return
         for topic, types in self.get_topic_names_and_types():
@@ -317,7 +317,8 @@ class RecorderNode(VehicleNode):
                 sel = TopicSelection(tuple(request.topics), request.topic_regex)
             path = self.start_recording(request.output_dir, sel)
         except (RuntimeError, ValueError, OSError) as exc:
-            response.success, response.message, response.bag_path = False, str(exc), str(self.bag_path or "")
+            response.success, response.message = False, str(exc)
+            response.bag_path = str(self.bag_path or "")
             return response
         response.success = True
         response.bag_path = str(path)
@@ -329,9 +330,10 @@ class RecorderNode(VehicleNode):
         if self._writer is not None:
             try:
                 meta = self.stop_recording()
-                response.success, response.message_count = True, int(meta.message_count if meta else 0)
+                response.message_count = int(meta.message_count if meta else 0)
+                response.success = True
                 response.message = f"{response.message_count} messages written"
-            except Exception as exc:  # noqa: BLE001 - reported to the caller, the node keeps running
+            except Exception as exc:  # noqa: BLE001 - reported to the caller, the node goes on
                 response.message = f"bag could not be finished: {exc}"
         response.bag_path = str(self._last_bag or "")
         return response
@@ -370,8 +372,8 @@ class RecorderNode(VehicleNode):
         self._diag_pub.publish(arr)
 
     def shutdown(self) -> None:
-        """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM; as :meth:`close`, the clean-up of a
-        composed process, :func:`~hindrax_drivers.node_common.run_nodes`)."""
+        """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM; as :meth:`close`,
+        the clean-up of a composed process, :func:`~hindrax_drivers.node_common.run_nodes`)."""
         try:
             self.stop_recording()
         except Exception as exc:  # noqa: BLE001 - exiting: report, never hide the bag path

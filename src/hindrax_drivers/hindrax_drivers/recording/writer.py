@@ -83,7 +83,8 @@ class WriterOptions:
     @classmethod
     def from_section(cls, recording: RecordingSection, **overrides: Any) -> "WriterOptions":
         """From the validated ``recording.*`` section (``VehicleConfig.recording``); ``overrides`` replace fields."""
-        keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s", "flush_interval_s")
+        keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s",
+                "flush_interval_s")
         return cls(**{**{k: getattr(recording, k) for k in keys}, **overrides})
 
 

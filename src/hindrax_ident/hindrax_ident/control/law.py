@@ -85,8 +85,8 @@ FLOOR_TIMEOUT_S = 1.0
 FLOOR_GRADIENT_WALK_PER_SQRT_M = 0.4
 #: ASSUMPTION: 1-sigma change of the floor's slope between a DVL beam's footprint and the altimeter's (dimensionless;
 #: the error of the local plane at horizontal distance d from the altimeter's footprint is this times d, added to the
-#: beam's range noise): without it a beam still on the old slope behind the altimeter's footprint holds the plane's
-#: gradient back (docs/control.md §6).
+#: beam's range noise): without it a beam still on the old slope behind the altimeter's footprint
+#: holds the plane's gradient back (docs/control.md §6).
 FLOOR_SLOPE_CHANGE_STD = 0.1
 #: Time constant of the low-pass on the time derivative of the floor gradient estimate, s: two reports of the DVL-75
 #: beams at their 10 Hz (docs/devices.md §1), the shortest window that smooths the steps of the 10 Hz updates.

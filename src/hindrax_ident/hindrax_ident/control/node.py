@@ -37,16 +37,11 @@ Publishes
     (REP-105, :mod:`.odometry`), while its sensor streams are open (not while an identification goal
     runs).
 CPU
-    Every input is a subscription callback on the node's executor, whatever the clock (the vehicle,
-    the virtual pool and the tests take the same path; about 80 messages/s while the streams are
-    open, 3 while a goal runs), each sensor sample counted at its arrival. While an identification
-    goal runs the controller cannot be enabled and its sensor streams are closed, so the tick slows
-    from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends (docs/architecture.md
-    §10.1). While disabled the streams stay open (``odom``, ``controller/status`` and the enable
-    checks read them) but the tick runs every :data:`ODOM_PERIOD_S` (the odometry rate) instead of
-    at ``control.rate_hz``, which it takes only while enabled, and one IMU message in
-    :data:`IDLE_IMU_EVERY` is conditioned (the IMU is taken as CDR bytes, decoded only when used:
-    :mod:`hindrax_drivers.lean_cdr`).
+    Every input is a subscription callback on the node's executor, whatever the clock, each sensor
+    sample counted at its arrival. The tick runs at ``control.rate_hz`` only while enabled: every
+    :data:`ODOM_PERIOD_S` while disabled (one IMU message in :data:`IDLE_IMU_EVERY` conditioned,
+    decoded from its CDR bytes only then), every :data:`GOAL_TICK_S` with the sensor streams closed
+    while an identification goal runs (docs/architecture.md §10.1).
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``,
     ``rate_hz``, ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""):
@@ -163,7 +158,8 @@ class ControllerNode(VehicleNode):
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
         self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20)
-        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state, esc_state_qos())
+        self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
+                                 esc_state_qos())
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10)
         self.pub_wrench = self.create_publisher(WrenchStamped, "wrench", 10)
         self.pub_status = self.create_publisher(ControllerStatus, "controller/status", 10)
@@ -190,7 +186,8 @@ class ControllerNode(VehicleNode):
         sub, qos = self.create_subscription, sensor_input_qos(20)
         self._streams = [
             sub(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), qos),
-            sub(FluidPressure, "pressure/fluid_pressure", lambda m: self._add([sample_from_pressure(m)]), qos),
+            sub(FluidPressure, "pressure/fluid_pressure",
+                lambda m: self._add([sample_from_pressure(m)]), qos),
             sub(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
             sub(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), qos)]
 
@@ -199,9 +196,10 @@ class ControllerNode(VehicleNode):
         yield) and ``allocation/status`` (anti-windup); a disabled controller ignored both, and the pilot's 50 Hz
         stream cost it a callback per message."""
         if not self._enabled_streams:
+            sub = self.create_subscription
             self._enabled_streams = [
-                self.create_subscription(AllocationStatus, "allocation/status", self._on_allocation, 20),
-                self.create_subscription(WrenchStamped, "wrench", self._on_wrench, 50)]
+                sub(AllocationStatus, "allocation/status", self._on_allocation, 20),
+                sub(WrenchStamped, "wrench", self._on_wrench, 50)]
 
     def _close_enabled_streams(self) -> None:
         for sub in self._enabled_streams:

@@ -53,9 +53,9 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
 
 def declared_rel(cfg: VehicleConfig | None) -> tuple[float, float]:
     """1-sigma relative thrust uncertainty [negative, positive]: the vehicle file's bollard-pull fit
-    (``thrusters.thrust_fit_uncertainty_rel``), else its declared ``thrusters.thrust_uncertainty_rel``, else (also
-    without a vehicle file: a commanded wrench is realised by thrust curves nobody measured here)
-    :data:`DEFAULT_THRUST_UNCERTAINTY_REL`."""
+    (``thrusters.thrust_fit_uncertainty_rel``), else its declared
+    ``thrusters.thrust_uncertainty_rel``, else (also without a vehicle file: a commanded wrench is
+    realised by thrust curves nobody measured here) :data:`DEFAULT_THRUST_UNCERTAINTY_REL`."""
     if cfg is None:
         return DEFAULT_THRUST_UNCERTAINTY_REL
     # the bollard-pull fit's own uncertainty (hindrax ident thruster-fit --write) replaces the declared one
