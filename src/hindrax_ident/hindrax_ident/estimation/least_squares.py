@@ -165,7 +165,7 @@ class _Param:
         self.std = name.endswith("_std")
         self.name = name[:-4] if self.std else name
 
-    def __get__(self, fit: "_NamedFit | None", owner: type) -> Optional[float]:
+    def __get__(self, fit: "DragFit | None", owner: type) -> Optional[float]:
         if fit is None:
             return self  # type: ignore[return-value]  # the class attribute (documentation)
         ls = fit.ls
@@ -174,8 +174,14 @@ class _Param:
         return float((ls.std if self.std else ls.theta)[ls.index(self.name)])
 
 
-class _NamedFit:
-    """Mixin giving value/std access by parameter name on top of an :class:`LsResult`."""
+@dataclass(frozen=True, eq=False)
+class DragFit:
+    """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
+
+    Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
+    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m); the last two only when
+    included in the model. Properties return ``None`` for terms not in the model.
+    """
 
     ls: LsResult
 
@@ -197,18 +203,6 @@ class _NamedFit:
         out["n"] = int(self.ls.n)
         out["residual_std"] = self.ls.residual_std
         return out
-
-
-@dataclass(frozen=True, eq=False)
-class DragFit(_NamedFit):
-    """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
-
-    Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
-    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m); the last two only when
-    included in the model. Properties return ``None`` for terms not in the model.
-    """
-
-    ls: LsResult
 
     def _regressors(self, velocity) -> np.ndarray:
         names = self.ls.names or ()
