@@ -84,17 +84,17 @@ def _unit_quaternions(q_xyzw) -> np.ndarray:
     return q / n[..., None]
 
 
-def _vec3(v) -> np.ndarray:
+def _last_axis(v, n: int, what: str = "vectors") -> np.ndarray:
     a = np.asarray(v, dtype=float)
-    if a.shape[-1] != 3:
-        raise ValueError(f"expected vectors of length 3 (shape (..., 3)), got shape {a.shape}")
+    if a.shape[-1] != n:
+        raise ValueError(f"expected {what} of length {n} (shape (..., {n})), got shape {a.shape}")
     return a
 
 
 def flu_to_frd(v) -> np.ndarray:
     """Vector(s) from base_link FLU to body FRD, and back (:func:`frd_to_flu`). v: (..., 3), any
     unit (m, m/s, rad/s, N, N m)."""
-    return _vec3(v) @ R_FLU_FRD.T
+    return _last_axis(v, 3) @ R_FLU_FRD.T
 
 
 frd_to_flu = flu_to_frd
@@ -102,7 +102,7 @@ frd_to_flu = flu_to_frd
 
 def ned_to_enu(v) -> np.ndarray:
     """Vector(s) from world NED to odom ENU, and back (its own inverse). v: (..., 3)."""
-    return _vec3(v) @ R_ENU_NED.T
+    return _last_axis(v, 3) @ R_ENU_NED.T
 
 
 def wrap_angle(angle_rad: float) -> float:
@@ -115,17 +115,10 @@ def wrap_angle(angle_rad: float) -> float:
 _WRENCH_FLU_FRD_SIGNS = np.tile(np.diag(R_FLU_FRD), 2)
 
 
-def _wrench6(w) -> np.ndarray:
-    a = np.asarray(w, dtype=float)
-    if a.shape[-1] != 6:
-        raise ValueError(f"expected 6-vectors [force(3), torque(3)] (shape (..., 6)), got shape {a.shape}")
-    return a
-
-
 def wrench_flu_to_frd(w) -> np.ndarray:
     """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) base_link FLU -> body FRD tau = [X Y Z K M N], and back;
     a twist (m/s, rad/s) -> nu = [u v w p q r] alike (:func:`twist_flu_to_frd`). w: (..., 6)."""
-    return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
+    return _last_axis(w, 6, "[force(3), torque(3)]") * _WRENCH_FLU_FRD_SIGNS
 
 
 wrench_frd_to_flu = twist_flu_to_frd = twist_frd_to_flu = wrench_flu_to_frd

@@ -215,8 +215,8 @@ class SupervisorNode(VehicleNode):
         new = self.core.trip("operator e-stop (supervisor/estop)")
         self._handle(new, force=True)
         response.success = True
-        response.message = f"tripped: {self.core.tripped}; disarm requested" if new else \
-            f"already tripped: {self.core.tripped}; disarm requested"
+        was = "tripped" if new else "already tripped"
+        response.message = f"{was}: {self.core.tripped}; disarm requested"
         return response
 
     def on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
