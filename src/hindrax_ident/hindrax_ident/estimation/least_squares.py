@@ -220,8 +220,7 @@ class DragFit:
 
 
 # Core estimator
-def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
-                     rcond: Optional[float] = None) -> LsResult:
+def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
     """Ordinary least squares with parameter covariance ([Hindrax-Drag] eqs. 4-8).
 
     theta = (X^T X)^-1 X^T y (eq. 6), sigma2 = |y - X theta|^2 / (n - p) (eq. 8),
@@ -236,8 +235,6 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
         X: (n, p) regressor matrix (finite).
         y: (n,) observations (finite), e.g. forces in N.
         names: optional p parameter names carried into the result.
-        rcond: relative singular-value threshold for the rank test on the equilibrated
-            matrix; default ``max(n, p) * eps`` (as ``numpy.linalg.matrix_rank``).
 
     Returns:
         :class:`LsResult`.
@@ -266,7 +263,7 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
         raise EstimationError(f"regressor column(s) {zero} are identically zero (rank deficient)")
     Xs = X / scale
     U, s, Vt = np.linalg.svd(Xs, full_matrices=False)
-    tol = (max(n, p) * np.finfo(float).eps if rcond is None else float(rcond)) * s[0]
+    tol = max(n, p) * np.finfo(float).eps * s[0]  # as numpy.linalg.matrix_rank
     rank = int(np.sum(s > tol))
     if rank < p:
         raise EstimationError(
