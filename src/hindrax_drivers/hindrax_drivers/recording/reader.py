@@ -223,8 +223,7 @@ class BagReader:
                 yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time, msg.publish_time,
                                  msg.data)
 
-    def decoded(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
-                end_ns: int | None = None) -> Iterator[tuple[RawMessage, Any]]:
+    def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas
         (``mcap_ros2.decoder.DecoderFactory``, the decoder an ``mcap`` reader uses).
 
@@ -234,7 +233,7 @@ class BagReader:
 
         factory = DecoderFactory()
         decoders: dict[str, Any] = {}
-        for m in self.messages(topics, start_ns, end_ns):
+        for m in self.messages(topics):
             dec = decoders.get(m.topic)
             if dec is None:
                 ch = self.channels[m.topic]
