@@ -46,8 +46,8 @@ def test_bare_type_names_resolve_in_the_same_package_and_dependencies_appear_onc
     # geometry_msgs/Wrench.msg says "Vector3 force" and "Vector3 torque" (no package): geometry_msgs/Vector3,
     # listed once, right after Wrench (depth first), before std_msgs/Header.
     text = msgdefs.message_definition("geometry_msgs/msg/WrenchStamped")
-    assert definitions_in(text) == ["geometry_msgs/Wrench", "geometry_msgs/Vector3", "std_msgs/Header",
-                                            "builtin_interfaces/Time"]
+    assert definitions_in(text) == ["geometry_msgs/Wrench", "geometry_msgs/Vector3",
+                                    "std_msgs/Header", "builtin_interfaces/Time"]
 
 
 def test_custom_message_definitions_come_from_the_installed_share_directory():
@@ -55,8 +55,8 @@ def test_custom_message_definitions_come_from_the_installed_share_directory():
     assert raw.startswith(msg_text("hindrax_msgs", "RawDeviceData"))
     assert definitions_in(raw) == ["std_msgs/Header", "builtin_interfaces/Time"]
     dvl = msgdefs.message_definition("hindrax_msgs/Dvl")  # short form accepted
-    assert definitions_in(dvl) == ["geometry_msgs/Quaternion", "geometry_msgs/Vector3", "std_msgs/Header",
-                                           "builtin_interfaces/Time"]
+    assert definitions_in(dvl) == ["geometry_msgs/Quaternion", "geometry_msgs/Vector3",
+                                   "std_msgs/Header", "builtin_interfaces/Time"]
 
 
 def test_every_definition_parses_with_mcap_ros2():
