@@ -513,8 +513,7 @@ def parse_gprmc(fields: Sequence[str]) -> DvlGprmc:
 
 
 def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float],
-                 longitude_deg: Optional[float], speed_m_s: float, track_rad: float,
-                 date_ddmmyy: str = "010120") -> bytes:
+                 longitude_deg: Optional[float], speed_m_s: float, track_rad: float) -> bytes:
     """Format ``$GPRMC`` as the DVL's GPS emulation does (docs/devices.md §1.3.3): ``hhmmss.ss`` time,
     lat ``ddmm.mmmm`` + N/S, lon ``dddmm.mmmm`` + E/W (empty when None), speed in knots and track in
     degrees (``%.2f``), date (the DVL always sends ``010120``), empty magnetic-variation fields.
@@ -545,9 +544,8 @@ def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float
     lat_s, ns = ddmm(latitude_deg, 2, "N", "S")
     lon_s, ew = ddmm(longitude_deg, 3, "E", "W")
     track_deg = math.degrees(track_rad) % 360.0
-    body = "GPRMC,%s,%s,%s,%s,%s,%s,%.2f,%.2f,%s,," % (
-        time_str, "A" if valid else "V", lat_s, ns, lon_s, ew, speed_m_s / KNOT_M_S, track_deg,
-        date_ddmmyy)
+    body = "GPRMC,%s,%s,%s,%s,%s,%s,%.2f,%.2f,010120,," % (
+        time_str, "A" if valid else "V", lat_s, ns, lon_s, ew, speed_m_s / KNOT_M_S, track_deg)
     return format_sentence(body)
 
 
