@@ -84,31 +84,25 @@ def _unit_quaternions(q_xyzw) -> np.ndarray:
     return q / n[..., None]
 
 
-def _vec3(v) -> np.ndarray:
+def _last_axis(v, n: int, what: str = "vectors") -> np.ndarray:
     a = np.asarray(v, dtype=float)
-    if a.shape[-1] != 3:
-        raise ValueError(f"expected vectors of length 3 (shape (..., 3)), got shape {a.shape}")
+    if a.shape[-1] != n:
+        raise ValueError(f"expected {what} of length {n} (shape (..., {n})), got shape {a.shape}")
     return a
 
 
 def flu_to_frd(v) -> np.ndarray:
-    """Vector(s) from base_link FLU to body FRD. v: (..., 3), any unit (m, m/s, rad/s, N, N m)."""
-    return _vec3(v) @ R_FLU_FRD.T
+    """Vector(s) from base_link FLU to body FRD, and back (:func:`frd_to_flu`). v: (..., 3), any
+    unit (m, m/s, rad/s, N, N m)."""
+    return _last_axis(v, 3) @ R_FLU_FRD.T
 
 
-def frd_to_flu(v) -> np.ndarray:
-    """Vector(s) from body FRD to base_link FLU. v: (..., 3)."""
-    return _vec3(v) @ R_FLU_FRD.T
-
-
-def enu_to_ned(v) -> np.ndarray:
-    """Vector(s) from odom ENU to world NED. v: (..., 3)."""
-    return _vec3(v) @ R_ENU_NED.T
+frd_to_flu = flu_to_frd
 
 
 def ned_to_enu(v) -> np.ndarray:
-    """Vector(s) from world NED to odom ENU. v: (..., 3)."""
-    return _vec3(v) @ R_ENU_NED.T
+    """Vector(s) from world NED to odom ENU, and back (its own inverse). v: (..., 3)."""
+    return _last_axis(v, 3) @ R_ENU_NED.T
 
 
 def wrap_angle(angle_rad: float) -> float:
@@ -121,54 +115,13 @@ def wrap_angle(angle_rad: float) -> float:
 _WRENCH_FLU_FRD_SIGNS = np.tile(np.diag(R_FLU_FRD), 2)
 
 
-def _wrench6(w) -> np.ndarray:
-    a = np.asarray(w, dtype=float)
-    if a.shape[-1] != 6:
-        raise ValueError(f"expected 6-vectors [force(3), torque(3)] (shape (..., 6)), got shape {a.shape}")
-    return a
-
-
 def wrench_flu_to_frd(w) -> np.ndarray:
-    """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) from base_link FLU to body FRD tau = [X Y Z K M N]. w: (..., 6)."""
-    return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
+    """Wrench [Fx Fy Fz Tx Ty Tz] (N, N m) base_link FLU -> body FRD tau = [X Y Z K M N], and back;
+    a twist (m/s, rad/s) -> nu = [u v w p q r] alike (:func:`twist_flu_to_frd`). w: (..., 6)."""
+    return _last_axis(w, 6, "[force(3), torque(3)]") * _WRENCH_FLU_FRD_SIGNS
 
 
-def wrench_frd_to_flu(w) -> np.ndarray:
-    """Wrench tau = [X Y Z K M N] (N, N m) from body FRD to base_link FLU. w: (..., 6)."""
-    return _wrench6(w) * _WRENCH_FLU_FRD_SIGNS
-
-
-def twist_flu_to_frd(t) -> np.ndarray:
-    """Twist [vx vy vz wx wy wz] (m/s, rad/s) from base_link FLU to nu = [u v w p q r] in FRD. t: (..., 6)."""
-    return wrench_flu_to_frd(t)
-
-
-def twist_frd_to_flu(nu) -> np.ndarray:
-    """Body velocity nu = [u v w p q r] (FRD) to a base_link FLU twist [vx vy vz wx wy wz]. nu: (..., 6)."""
-    return wrench_frd_to_flu(nu)
-
-
-def _rotate_covariance(cov, r: np.ndarray) -> np.ndarray:
-    c = np.asarray(cov, dtype=float)
-    if c.shape == (6, 6):
-        r = np.kron(np.eye(2), r)
-    elif c.shape != (3, 3):
-        raise ValueError(f"expected a 3x3 or 6x6 covariance, got shape {c.shape}")
-    return r @ c @ r.T
-
-
-def covariance_flu_to_frd(cov) -> np.ndarray:
-    """Covariance of a 3-vector (3x3) or of a twist/wrench (6x6, two 3-blocks) from FLU to FRD: R C R^T."""
-    return _rotate_covariance(cov, R_FLU_FRD)
-
-
-
-
-def covariance_enu_to_ned(cov) -> np.ndarray:
-    """Covariance of a 3-vector (3x3) or pose/twist (6x6) from ENU to NED axes: R C R^T."""
-    return _rotate_covariance(cov, R_ENU_NED)
-
-
+wrench_frd_to_flu = twist_flu_to_frd = twist_frd_to_flu = wrench_flu_to_frd
 
 
 def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
@@ -177,15 +130,13 @@ def quaternion_ros_to_marine(q_xyzw) -> np.ndarray:
     q_xyzw: (..., 4) quaternion(s) in ROS order (x, y, z, w), normalised here. Returns (..., 4) in the same order.
     R_ned_frd = R_ned_enu . R_enu_flu . R_flu_frd, applied as the constant linear map :data:`_Q_ROS_MARINE` that
     the Hamilton product defines (the same result as composing scipy Rotations, without their cost per call).
-    Raises ValueError for a zero or non-finite quaternion.
+    Raises ValueError for a zero or non-finite quaternion. The same map takes the body in NED back
+    to base_link in odom (:func:`quaternion_marine_to_ros`): both factors are their own inverses.
     """
     return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
 
 
-def quaternion_marine_to_ros(q_xyzw) -> np.ndarray:
-    """Orientation of the body (FRD) in NED -> orientation of base_link (FLU) in odom (ENU). (..., 4) x,y,z,w (the
-    same map as :func:`quaternion_ros_to_marine`: both factors are their own inverses)."""
-    return _unit_quaternions(q_xyzw) @ _Q_ROS_MARINE.T
+quaternion_marine_to_ros = quaternion_ros_to_marine
 
 
 def euler_ned_from_quaternion(q_xyzw) -> np.ndarray:

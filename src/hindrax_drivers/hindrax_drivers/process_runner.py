@@ -134,9 +134,7 @@ class ProcessRunner:
         """Resolve every executable (LookupError before anything starts), then start the processes in order."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self._params_dir.mkdir(parents=True, exist_ok=True)
-        slots = []
-        for p in self.processes:
-            slots.append(_Slot(p, self.argv(p), self.log_dir / f"{p.label}.log"))
+        slots = [_Slot(p, self.argv(p), self.log_dir / f"{p.label}.log") for p in self.processes]
         self._stopping.clear()
         for slot in slots:
             self._slots[slot.process.label] = slot
@@ -183,17 +181,11 @@ class ProcessRunner:
         """What ``p`` is started with, as ``launch_ros`` builds it: its ``launch-prefix``, the executable, then
         :meth:`NodeProcess.ros_arguments` and this runner's extra arguments for it (writes its parameter files)."""
         self._params_dir.mkdir(parents=True, exist_ok=True)
-        return list(p.launch_prefix) + self._command(p) + p.ros_arguments(self._write_values) + \
-            self._extra_args.get(p.label, [])
+        def write(values: Mapping) -> Path:  # <param> runs as a file keyed /**, as launch_ros does
+            return write_parameter_file(values, self._params_dir)
 
-    def environment(self, p: NodeProcess) -> dict[str, str]:
-        """The environment ``p`` is started with: this runner's, then the launch file's for it (``<set_env>``,
-        ``<env>``: :attr:`NodeProcess.env`, e.g. its real-time priority), then this runner's ``extra_env`` for it."""
-        return dict(self._env, **dict(p.env), **self._extra_env.get(p.label, {}))
-
-    def command(self, label: str) -> list[str]:
-        """The argv the process ``label`` is started with."""
-        return list(self._slots[label].command)
+        return (list(p.launch_prefix) + self._command(p) + p.ros_arguments(write)
+                + self._extra_args.get(p.label, []))
 
     def log(self, label: str) -> str:
         """Everything process ``label`` wrote so far (all its runs)."""
@@ -213,12 +205,10 @@ class ProcessRunner:
             return popen.pid
 
     # -- internals --------------------------------------------------------------------------------
-    def _write_values(self, values: Mapping) -> Path:
-        """A ``<param name value>`` run as a parameter file keyed ``/**`` (as ``launch_ros`` writes it)."""
-        return write_parameter_file(values, self._params_dir)
-
     def _spawn(self, slot: _Slot) -> None:
-        env = self.environment(slot.process)
+        # this runner's environment, then the launch file's (<set_env>, <env>), then extra_env
+        label = slot.process.label
+        env = dict(self._env, **dict(slot.process.env), **self._extra_env.get(label, {}))
         with open(slot.log_path, "a") as log:
             log.write(f"--- start {slot.starts + 1}: {' '.join(slot.command)}\n")
             log.flush()

@@ -46,7 +46,6 @@ from hindrax_drivers.ping1d.protocol import (
     decode_frame,
     decode_message,
     encode_frame,
-    is_legacy_request,
     request_frame,
 )
 
@@ -86,7 +85,7 @@ def test_encode_vectors():
     assert ProtocolVersion(1, 2, 3).encode() == REPLY_PROTOCOL_VERSION_123
     assert request_frame(1211) == GENERAL_REQUEST_1211
     assert GeneralRequest(1211).encode() == GENERAL_REQUEST_1211
-    assert request_frame(1211, legacy=True) == LEGACY_REQUEST_1211
+    assert encode_frame(1211) == LEGACY_REQUEST_1211
     assert DistanceSimple(distance_m=1.234, confidence_pct=87).encode(src_device_id=1) \
         == DISTANCE_SIMPLE_1234MM_87PCT_SRC1
     assert SetSpeedOfSound(speed_of_sound_m_s=1480.0).encode() == SET_SPEED_OF_SOUND_1480000
@@ -105,8 +104,7 @@ def test_decode_vectors():
     assert decode_message(ACK_1002) == Ack(1002)
     assert decode_message(CONTINUOUS_START_1300) == ContinuousStart(1300)
     legacy = decode_frame(LEGACY_REQUEST_1211)
-    assert legacy.message_id == 1211 and legacy.payload == b"" and is_legacy_request(legacy)
-    assert not is_legacy_request(decode_frame(GENERAL_REQUEST_1211))
+    assert legacy.message_id == 1211 and legacy.payload == b""
 
 
 # ------------------------------------------------------------------------------------------------
@@ -345,7 +343,7 @@ def test_emulator_set_speed_of_sound_acks_and_scales_distance():
     # distance = true range x configured c / true c (§2.6), 1 mm resolution
     assert replies[0].distance_m == pytest.approx(round(3.0 * 1480 / 1500, 3), abs=1e-9)
     assert replies[0].confidence_pct == 100
-    assert _exchange(emu, request_frame(1203, legacy=True), 0.21) == [SpeedOfSound(1480.0)]
+    assert _exchange(emu, encode_frame(1203), 0.21) == [SpeedOfSound(1480.0)]
 
 
 def test_emulator_continuous_profile_stream_at_ping_interval():

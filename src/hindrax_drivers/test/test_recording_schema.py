@@ -37,21 +37,26 @@ def test_imu_definition_is_msg_text_then_sorted_dependencies_depth_first():
     assert msgdefs.message_definition("sensor_msgs/msg/Imu") == expected
 
 
+def definitions_in(full_text: str) -> list[str]:
+    """The ``pkg/Type`` names listed by ``MSG:`` lines of a full definition, in order."""
+    return [line[5:].strip() for line in full_text.split("\n") if line.startswith("MSG: ")]
+
+
 def test_bare_type_names_resolve_in_the_same_package_and_dependencies_appear_once():
     # geometry_msgs/Wrench.msg says "Vector3 force" and "Vector3 torque" (no package): geometry_msgs/Vector3,
     # listed once, right after Wrench (depth first), before std_msgs/Header.
     text = msgdefs.message_definition("geometry_msgs/msg/WrenchStamped")
-    assert msgdefs.definitions_in(text) == ["geometry_msgs/Wrench", "geometry_msgs/Vector3", "std_msgs/Header",
-                                            "builtin_interfaces/Time"]
+    assert definitions_in(text) == ["geometry_msgs/Wrench", "geometry_msgs/Vector3",
+                                    "std_msgs/Header", "builtin_interfaces/Time"]
 
 
 def test_custom_message_definitions_come_from_the_installed_share_directory():
     raw = msgdefs.message_definition("hindrax_msgs/msg/RawDeviceData")
     assert raw.startswith(msg_text("hindrax_msgs", "RawDeviceData"))
-    assert msgdefs.definitions_in(raw) == ["std_msgs/Header", "builtin_interfaces/Time"]
+    assert definitions_in(raw) == ["std_msgs/Header", "builtin_interfaces/Time"]
     dvl = msgdefs.message_definition("hindrax_msgs/Dvl")  # short form accepted
-    assert msgdefs.definitions_in(dvl) == ["geometry_msgs/Quaternion", "geometry_msgs/Vector3", "std_msgs/Header",
-                                           "builtin_interfaces/Time"]
+    assert definitions_in(dvl) == ["geometry_msgs/Quaternion", "geometry_msgs/Vector3",
+                                   "std_msgs/Header", "builtin_interfaces/Time"]
 
 
 def test_every_definition_parses_with_mcap_ros2():

@@ -43,12 +43,17 @@ def test_model_acceleration_by_hand():
     assert model_terms("pitch", np.zeros(7)).shape == (7, 4)
 
 
+def _within_tick(lag, force_start, command, tick_s):
+    """The thrust at the start, middle and end of one tick (ThrustLag.over_ticks of one command)."""
+    return tuple(float(x[0]) for x in lag.over_ticks(np.array([command]), tick_s, force_start))
+
+
 def test_lagged_thrust_inside_a_tick():
     lag = ThrustLag(time_constant_s=0.1)
-    f = lag.within_tick(2.0, 10.0, 0.02)  # from 2 N towards a 10 N command
+    f = _within_tick(lag, 2.0, 10.0, 0.02)  # from 2 N towards a 10 N command
     assert f == pytest.approx((2.0, 10.0 - 8.0 * math.exp(-0.1), 10.0 - 8.0 * math.exp(-0.2)), abs=1e-12)
     # no lag: the command acts over the whole tick
-    assert ThrustLag(0.0).within_tick(2.0, 10.0, 0.02) == pytest.approx((10.0, 10.0, 10.0))
+    assert _within_tick(ThrustLag(0.0), 2.0, 10.0, 0.02) == pytest.approx((10.0, 10.0, 10.0))
 
 
 # ---------------------------------------------------------------------------------------------------- the integrator
@@ -92,7 +97,7 @@ def test_rk4_step_against_quadratic_damping():
 def test_rk4_step_with_the_lagged_thrust_integrates_the_impulse():
     lag = ThrustLag(0.1)
     # M = 1, no damping: v(h) = v0 + integral of f
-    v, _x = _simulate([1.0, 0.0, 0.0, 0.0], 0.3, lag.within_tick(2.0, 10.0, 0.02), 0.02, 1)
+    v, _x = _simulate([1.0, 0.0, 0.0, 0.0], 0.3, _within_tick(lag, 2.0, 10.0, 0.02), 0.02, 1)
     impulse = 10.0 * 0.02 + (2.0 - 10.0) * 0.1 * (1.0 - math.exp(-0.2))
     assert v == pytest.approx(0.3 + impulse, abs=1e-7)
 

@@ -148,12 +148,12 @@ def test_converged_flag():
     Phi = regressors(3000)
     y = Phi @ THETA + rng.normal(0, 0.3, Phi.shape[0])
     rls = RecursiveLeastSquares(4, forgetting=1.0)
-    assert not rls.converged(0.05)
+    assert not rls.converged_mask(0.05).all()
     update_batch(rls, Phi[:20], y[:20])
-    assert not rls.converged(0.05)           # fewer than 10 p samples
+    assert not rls.converged_mask(0.05).all()           # fewer than 10 p samples
     update_batch(rls, Phi[20:], y[20:])
-    assert not rls.converged(0.001)          # too strict
-    assert rls.converged(0.05)
+    assert not rls.converged_mask(0.001).all()          # too strict
+    assert rls.converged_mask(0.05).all()
 
 
 def test_six_parameter_model_shapes():

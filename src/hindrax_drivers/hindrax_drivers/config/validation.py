@@ -38,16 +38,15 @@ def schema_key(key: str, thruster_names: Iterable[str]) -> str | None:
     return None
 
 
-def validate_flat(flat: Mapping[str, Any], sections: Iterable[str] = SECTIONS,
-                  source: str = "") -> dict[str, Any]:
+def validate_flat(flat: Mapping[str, Any], source: str = "") -> dict[str, Any]:
     """Validate a flat dotted-key mapping against :data:`SCHEMA`.
 
-    Keys outside ``sections`` are an error (unknown section). Returns the coerced mapping.
+    Keys outside :data:`SECTIONS` are an error (unknown section). Returns the coerced mapping.
     Raises :class:`ConfigError` listing every issue (unknown keys, wrong types, out-of-range values,
     missing required keys, cross-key inconsistencies).
     """
     issues: list[ConfigIssue] = []
-    sections = tuple(sections)
+    sections = SECTIONS
     names_raw = flat.get("thrusters.names", [])
     names = [n for n in names_raw if isinstance(n, str)] if isinstance(names_raw, (list, tuple)) else []
     out: dict[str, Any] = {}

@@ -108,11 +108,6 @@ class VehicleConfig:
         """Value of a dotted key (KeyError if absent)."""
         return self.flat[key]
 
-    def section(self, prefix: str) -> dict[str, Any]:
-        """All keys under ``prefix.`` with the prefix removed, e.g. ``section("sensors.dvl75")``."""
-        p = prefix.rstrip(".") + "."
-        return {k[len(p):]: v for k, v in self.flat.items() if k.startswith(p)}
-
     # -- typed sections --
     vehicle = _TypedSection(VehicleSection, "rigid-body data.")
     environment = _TypedSection(EnvironmentSection, "water and gravity.")

@@ -117,7 +117,6 @@ class DvlFlash:
     static_ip: str = "0.0.0.0"
     host_address: str = "255.255.255.255:27000"
     fallback_address: str = "192.168.2.3"
-    mavlink_address: str = "192.168.2.2:6040"
     other: Dict[str, str] = field(default_factory=dict)
 
 

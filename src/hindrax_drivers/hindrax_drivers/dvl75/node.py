@@ -5,13 +5,11 @@ Run alone: ``python -m hindrax_drivers.dvl75.node --ros-args --params-file ros_w
 (device path or pyserial URL), ``baud_rate``, ``position_frd_m`` (lever arm), ``sensor_orientation_rpy_rad``,
 ``speed_of_sound_m_s``, ``velocity_std_m_s``. Node parameter ``stuck_limit_samples`` (default 50).
 
-Start-up (docs/devices.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as the BlueOS
-driver does [D17], the sequence of :func:`hindrax_drivers.dvl75.protocol.startup_commands`:
-``SEND-DVPDL ON`` (factory default is OFF), ``SEND-DVEXT ON``, ``SEND-GPRMC OFF``, ``RETWEET-IMU OFF``,
-``RETWEET-GPS OFF``, ``SET-SENSOR-ORIENTATION r,p,h`` (``sensor_orientation_rpy_rad`` in degrees),
-``SET-SPEED-OF-SOUND c``, ``RESUME`` and ``CONFIGURATION`` (its free-form reply is logged at debug level).
-The sequence is sent again when the DVL reboots (``tu`` goes backwards) and when ``$DVEXT`` keeps
-arriving without ``$DVPDL`` for ``MISSING_DVPDL_TIMEOUT_S``.
+Start-up (docs/devices.md §0 item 1, §1.4): after every (re)connect the node sends, 0.1 s apart as
+the BlueOS driver does [D17], :func:`hindrax_drivers.dvl75.protocol.startup_commands` (the
+CONFIGURATION reply is logged at debug level). The sequence is sent again when the DVL reboots
+(``tu`` goes backwards) and when ``$DVEXT`` keeps arriving without ``$DVPDL`` for
+``MISSING_DVPDL_TIMEOUT_S``.
 
 Publishes (QoS reliable, depth 10):
 

@@ -5,23 +5,12 @@ reverse for the commands a driver sends.  No I/O, no clocks, no ROS.
 
 Source: docs/devices.md §0, §1.2-§1.5 (tags [D3]-[D21] there).
 
-What is implemented
-- NMEA-style framing: ``$`` + sentence id + ``,`` + fields + ``*`` + two hex digits + CR LF; the checksum
-  is the XOR of every byte strictly between ``$`` and ``*`` (docs/devices.md §1.2, verified on real
-  captures).  Uppercase hex is emitted; both cases are accepted.
-- ``$DVPDL`` (position/angle deltas, §1.3.1) and ``$DVEXT`` (extended data, §1.3.2) are parsed
-  completely into dataclasses with SI field names.  ``$DVEXT`` keeps its trailing empty field
-  (``...,rd,*hh``), and its data-skips field is a *signed* integer (real captures show -1175).
-- ``$GPRMC`` as the DVL emits it (§1.3.3) is parsed too, because the same sentence is also a command.
-- ``$DVTXT`` (documented *without* checksum, §1.2) and bare free-form lines from older firmware are
-  returned as :class:`DvlText`; every other sentence or line (``$DVNVM``, ``IMU:``, ``GPS:$...``,
-  ``$DVKFA``...) is returned as :class:`DvlUnknown`.  Neither is an error.
-- :class:`DvlLineFramer` splits an arbitrary byte stream into lines (split on LF, strip CR, as the
-  BlueOS driver does [D17]) and counts discarded garbage bytes.
-- Command builders for host -> DVL lines (§1.4).  The commands are plain ASCII lines terminated by
-  LF with an optional CR; they carry **no** checksum (docs/devices.md §1.4 shows none, and the BlueOS
-  driver sends them bare).  Only NMEA sentences (``$GPRMC`` used as a position command) carry one,
-  built with :func:`format_sentence`.
+Framing (docs/devices.md §1.2, verified on real captures): ``$`` + sentence id + ``,`` + fields +
+``*`` + two hex digits + CR LF, the checksum the XOR of every byte strictly between ``$`` and ``*``.
+``$DVPDL``, ``$DVEXT`` and ``$GPRMC`` (§1.3) parse into dataclasses with SI field names; ``$DVTXT``
+and bare lines into :class:`DvlText`; any other line (``$DVNVM``, ``IMU:``, ``GPS:$...``) into
+:class:`DvlUnknown`, not an error. Host -> DVL commands (§1.4) are plain ASCII lines without
+checksum, as the BlueOS driver sends them [D17].
 
 Vendor-document errors handled here (docs/devices.md §0 item 2, §1.2): the ``$DVPDL`` example printed
 in Cerulean's documentation ends in ``*22`` although its checksum is ``6E``; this module rejects it,
@@ -48,7 +37,7 @@ import math
 import re
 from dataclasses import dataclass
 from functools import reduce
-from typing import Any, Iterable, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Optional, Sequence, Tuple, Union
 
 __all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlText", "DvlUnknown",
            "DvlRecord", "DvlCommand", "DvlLineFramer", "BEAM_NAMES", "BEAM_TILT_RAD",
@@ -56,8 +45,7 @@ __all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlT
            "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext", "parse_gprmc",
            "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
            "build_command", "cmd_send", "cmd_retweet", "cmd_set_sensor_orientation",
-           "cmd_set_speed_of_sound", "cmd_set_velocity_adjustment", "cmd_baud_rate", "cmd_resume",
-           "cmd_configuration", "startup_commands", "iter_records"]
+           "cmd_set_speed_of_sound", "cmd_resume", "cmd_configuration", "startup_commands"]
 
 #: Line terminator the DVL uses and the driver sends (CR LF; docs/devices.md §1.2, §1.4).
 LINE_TERMINATOR = b"\r\n"
@@ -93,11 +81,7 @@ class DvlParseError(ValueError):
     count, malformed number, out-of-range value, non-printable bytes).  Source: docs/devices.md §1.2."""
 
 
-# ---------------------------------------------------------------------------------------------
 # Records
-# ---------------------------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class DvlPositionDelta:
     """One ``$DVPDL`` sentence: motion since the previous ``$DVPDL`` (docs/devices.md §1.3.1).
@@ -254,11 +238,7 @@ class DvlCommand:
     argument: str
 
 
-# ---------------------------------------------------------------------------------------------
 # Checksum and sentence framing
-# ---------------------------------------------------------------------------------------------
-
-
 def _to_bytes(line: Union[bytes, bytearray, str]) -> bytes:
     if isinstance(line, str):
         return line.encode("utf-8", errors="replace")
@@ -325,11 +305,7 @@ def split_sentence(line: Union[bytes, bytearray, str]) -> Tuple[str, Tuple[str, 
     return parts[0], tuple(parts[1:]), checksum_ok
 
 
-# ---------------------------------------------------------------------------------------------
 # Field helpers
-# ---------------------------------------------------------------------------------------------
-
-
 def _int(field: str, name: str) -> int:
     if not _INT_RE.fullmatch(field):
         raise DvlParseError(f"field {name}: expected an integer, got {field[:20]!r}")
@@ -357,16 +333,7 @@ def _tf(flag: bool) -> str:
     return "T" if flag else "F"
 
 
-def _require_checksum(sentence_id: str, checksum_ok: Optional[bool]) -> None:
-    if checksum_ok is None:
-        raise DvlParseError(f"${sentence_id} sentence without checksum")
-
-
-# ---------------------------------------------------------------------------------------------
 # $DVPDL
-# ---------------------------------------------------------------------------------------------
-
-
 def parse_dvpdl(fields: Sequence[str]) -> DvlPositionDelta:
     """Parse the 9 data fields of ``$DVPDL`` (``tu,dtu,adr,adp,ady,pdx,pdy,pdz,c``; docs/devices.md §1.3.1).
 
@@ -420,27 +387,26 @@ def format_dvpdl(record: DvlPositionDelta) -> bytes:
     return format_sentence(body)
 
 
-# ---------------------------------------------------------------------------------------------
 # $DVEXT
-# ---------------------------------------------------------------------------------------------
-
-
 def _fmt_gain(gain_db: float) -> str:
     return "%d" % round(gain_db)
 
 
-#: $DVEXT fields 4-14 (after lock, GPS status and IMU calibration): (record attribute, field name, printf format);
-#: the angles are degrees on the wire (radians in the record), data_skips an integer
-_DVEXT_SCALARS = (("roll_rad", "roll", "%.1f"), ("pitch_rad", "pitch", "%.1f"), ("heading_rad", "heading", "%.1f"),
-                  ("data_skips", "data_skips", "%d"), ("velocity_up_m_s", "velocity_up", "%.3f"),
-                  ("altitude_m", "altitude", "%.2f"), ("velocity_north_m_s", "velocity_north", "%.3f"),
-                  ("velocity_east_m_s", "velocity_east", "%.3f"), ("latitude_deg", "latitude", "%.9f"),
-                  ("longitude_deg", "longitude", "%.9f"), ("ekf_elapsed_time_s", "elapsed_time", "%.3f"))
-#: $DVEXT fields 15-34, four each (quaternion w x y z, beams A-D): (attribute, field name, parse, format)
-_DVEXT_FOURS = (("orientation_wxyz", "q", _float, "%.6f".__mod__), ("beam_gain_db", "gain", _float, _fmt_gain),
-                ("beam_locked", "lock", _flag, _tf), ("beam_velocity_m_s", "velocity", _float, "%.4f".__mod__),
+#: $DVEXT fields 4-14 (after lock, GPS status and IMU calibration): (record attribute, field name,
+#: printf format); the angles are degrees on the wire (radians in the record), data_skips an integer
+_DVEXT_SCALARS = (("roll_rad", "roll", "%.1f"), ("pitch_rad", "pitch", "%.1f"),
+                  ("heading_rad", "heading", "%.1f"), ("data_skips", "data_skips", "%d"),
+                  ("velocity_up_m_s", "velocity_up", "%.3f"), ("altitude_m", "altitude", "%.2f"),
+                  ("velocity_north_m_s", "velocity_north", "%.3f"),
+                  ("velocity_east_m_s", "velocity_east", "%.3f"),
+                  ("latitude_deg", "latitude", "%.9f"), ("longitude_deg", "longitude", "%.9f"),
+                  ("ekf_elapsed_time_s", "elapsed_time", "%.3f"))
+#: $DVEXT fields 15-34, four each (quaternion w x y z, beams A-D): (attribute, field name, parse,
+#: format)
+_DVEXT_FOURS = (("orientation_wxyz", "q", _float, "%.6f".__mod__),
+                ("beam_gain_db", "gain", _float, _fmt_gain), ("beam_locked", "lock", _flag, _tf),
+                ("beam_velocity_m_s", "velocity", _float, "%.4f".__mod__),
                 ("beam_range_m", "range", _float, "%.3f".__mod__))
-
 
 def parse_dvext(fields: Sequence[str]) -> DvlExtended:
     """Parse the data fields of ``$DVEXT`` (docs/devices.md §1.3.2): 34 fields plus the trailing empty
@@ -467,8 +433,9 @@ def parse_dvext(fields: Sequence[str]) -> DvlExtended:
     for k, (attr, name, fmt) in enumerate(_DVEXT_SCALARS, start=3):
         value = _int(f[k], name) if fmt == "%d" else _float(f[k], name)
         scalars[attr] = math.radians(value) if attr.endswith("_rad") else value
-    fours: dict[str, Any] = {attr: tuple(parse(f[14 + 4 * j + k], f"{name}{'ABCD'[k]}") for k in range(4))
-                             for j, (attr, name, parse, _) in enumerate(_DVEXT_FOURS)}
+    fours: dict[str, Any] = {
+        attr: tuple(parse(f[14 + 4 * j + k], f"{name}{'ABCD'[k]}") for k in range(4))
+        for j, (attr, name, parse, _) in enumerate(_DVEXT_FOURS)}
     return DvlExtended(locked=locked, gps_status=gps, imu_calibration=cal,  # type: ignore[arg-type]
                        imu_calibration_raw=cal_raw, **scalars, **fours)
 
@@ -497,11 +464,7 @@ def format_dvext(record: DvlExtended) -> bytes:
     return format_sentence(",".join(parts))
 
 
-# ---------------------------------------------------------------------------------------------
 # $GPRMC
-# ---------------------------------------------------------------------------------------------
-
-
 def _parse_ddmm(value: str, hemi: str, deg_digits: int, name: str, positive: str,
                 negative: str) -> Optional[float]:
     if value == "" and hemi == "":
@@ -550,8 +513,7 @@ def parse_gprmc(fields: Sequence[str]) -> DvlGprmc:
 
 
 def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float],
-                 longitude_deg: Optional[float], speed_m_s: float, track_rad: float,
-                 date_ddmmyy: str = "010120") -> bytes:
+                 longitude_deg: Optional[float], speed_m_s: float, track_rad: float) -> bytes:
     """Format ``$GPRMC`` as the DVL's GPS emulation does (docs/devices.md §1.3.3): ``hhmmss.ss`` time,
     lat ``ddmm.mmmm`` + N/S, lon ``dddmm.mmmm`` + E/W (empty when None), speed in knots and track in
     degrees (``%.2f``), date (the DVL always sends ``010120``), empty magnetic-variation fields.
@@ -582,9 +544,8 @@ def format_gprmc(time_of_day_s: float, valid: bool, latitude_deg: Optional[float
     lat_s, ns = ddmm(latitude_deg, 2, "N", "S")
     lon_s, ew = ddmm(longitude_deg, 3, "E", "W")
     track_deg = math.degrees(track_rad) % 360.0
-    body = "GPRMC,%s,%s,%s,%s,%s,%s,%.2f,%.2f,%s,," % (
-        time_str, "A" if valid else "V", lat_s, ns, lon_s, ew, speed_m_s / KNOT_M_S, track_deg,
-        date_ddmmyy)
+    body = "GPRMC,%s,%s,%s,%s,%s,%s,%.2f,%.2f,010120,," % (
+        time_str, "A" if valid else "V", lat_s, ns, lon_s, ew, speed_m_s / KNOT_M_S, track_deg)
     return format_sentence(body)
 
 
@@ -597,13 +558,14 @@ def format_dvtxt(text: str) -> bytes:
     return format_sentence("DVTXT," + text, with_checksum=False)
 
 
-# ---------------------------------------------------------------------------------------------
 # Line dispatcher
-# ---------------------------------------------------------------------------------------------
-
-
 def _printable(raw: bytes) -> bool:
     return all(0x20 <= b <= 0x7E or b == 0x09 for b in raw)
+
+
+#: the data sentences, which must carry a checksum
+_DATA_PARSERS: dict[str, Callable[[Sequence[str]], DvlRecord]] = {
+    "DVPDL": parse_dvpdl, "DVEXT": parse_dvext, "GPRMC": parse_gprmc}
 
 
 def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
@@ -624,15 +586,11 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
         raise DvlParseError("empty line")
     if raw.startswith(b"$"):
         sentence_id, fields, checksum_ok = split_sentence(raw)
-        if sentence_id == "DVPDL":
-            _require_checksum(sentence_id, checksum_ok)
-            return parse_dvpdl(fields)
-        if sentence_id == "DVEXT":
-            _require_checksum(sentence_id, checksum_ok)
-            return parse_dvext(fields)
-        if sentence_id == "GPRMC":
-            _require_checksum(sentence_id, checksum_ok)
-            return parse_gprmc(fields)
+        parse = _DATA_PARSERS.get(sentence_id)
+        if parse is not None:
+            if checksum_ok is None:
+                raise DvlParseError(f"${sentence_id} sentence without checksum")
+            return parse(fields)
         if sentence_id == "DVTXT":
             return DvlText(text=",".join(fields), sentence_id="DVTXT", checksum_ok=checksum_ok)
         return DvlUnknown(sentence_id=sentence_id, fields=fields,
@@ -648,11 +606,7 @@ def parse_line(line: Union[bytes, bytearray, str]) -> DvlRecord:
     return DvlText(text=text, sentence_id="", checksum_ok=None)
 
 
-# ---------------------------------------------------------------------------------------------
 # Line framer
-# ---------------------------------------------------------------------------------------------
-
-
 class DvlLineFramer:
     """Incremental line splitter for the DVL byte stream (docs/devices.md §1.2: split on LF, strip CR).
 
@@ -677,8 +631,6 @@ class DvlLineFramer:
         self._skipping = False
         #: Total bytes discarded as garbage since construction.
         self.discarded_bytes = 0
-        #: Total lines returned since construction.
-        self.lines_out = 0
 
     def reset(self) -> None:
         """Drop any partial line (e.g. after a reconnect); counters are kept.  The partial line's
@@ -719,7 +671,6 @@ class DvlLineFramer:
                         out.append(line)
                 self._buf.clear()
             start = nl + 1
-        self.lines_out += len(out)
         return out
 
     def _clean(self, line: bytes) -> bytes:
@@ -737,11 +688,7 @@ class DvlLineFramer:
         return stripped
 
 
-# ---------------------------------------------------------------------------------------------
 # Commands (host -> DVL)
-# ---------------------------------------------------------------------------------------------
-
-
 def parse_command(line: Union[bytes, bytearray, str]) -> DvlCommand:
     """Split one host command line into keyword and argument (docs/devices.md §1.4: one ASCII line per
     command, LF-terminated, CR ignored).  Keywords are upper-cased (case sensitivity of the real
@@ -845,28 +792,6 @@ def cmd_set_speed_of_sound(speed_of_sound_m_s: float) -> bytes:
     return build_command("SET-SPEED-OF-SOUND", _num(speed_of_sound_m_s, 1))
 
 
-def cmd_set_velocity_adjustment(factor: float) -> bytes:
-    """``SET-VELOCITY-ADJUSTMENT <factor>`` multiplying each beam velocity (§1.4: 0.8..1.25, sticky).
-
-    Raises:
-        ValueError: outside 0.8..1.25.
-    """
-    if not 0.8 <= factor <= 1.25:
-        raise ValueError(f"velocity adjustment {factor} outside 0.8..1.25")
-    return build_command("SET-VELOCITY-ADJUSTMENT", _num(factor, 4))
-
-
-def cmd_baud_rate(baud: int) -> bytes:
-    """``BAUD-RATE <n>`` (docs/devices.md §1.1/§1.4: 9600..921600, sticky, applied at next boot).
-
-    Raises:
-        ValueError: outside 9600..921600.
-    """
-    if not 9600 <= int(baud) <= 921600:
-        raise ValueError(f"baud rate {baud} outside 9600..921600")
-    return build_command("BAUD-RATE", "%d" % int(baud))
-
-
 def cmd_resume() -> bytes:
     """``RESUME``: restart pinging (docs/devices.md §1.4)."""
     return build_command("RESUME")
@@ -907,14 +832,4 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
     if request_configuration:
         cmds.append(cmd_configuration())
     return cmds
-
-
-def iter_records(lines: Iterable[bytes]):
-    """Parse each line with :func:`parse_line`, yielding ``(record, None)`` or ``(None, error)``
-    so a caller can count parse errors without try/except at every call site."""
-    for line in lines:
-        try:
-            yield parse_line(line), None
-        except DvlParseError as exc:
-            yield None, exc
 

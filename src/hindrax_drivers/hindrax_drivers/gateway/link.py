@@ -10,8 +10,8 @@ kind) and the payload: a serialized ROS message (CDR), never decoded here. The k
   ``why``), ``topic`` (``name`` = a topside topic of the interface), ``accepted`` (``id``, ``ok``, ``why``),
   ``feedback`` (``id``), ``result`` (``id``, ``status``).
 
-:class:`Channel` sends from any thread (one lock) and receives in one reader thread; :class:`Pending` is a reply a
-thread waits for. Standard library only.
+:class:`Channel` sends from any thread (one lock) and receives in one reader thread. Standard
+library only.
 """
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ import struct
 import threading
 from typing import Any
 
-__all__ = ["Channel", "Pending"]
+__all__ = ["Channel"]
 
 _HEAD = struct.Struct("<II")
 #: the largest frame accepted, bytes (a message of the interface is far smaller; a larger one means a broken peer)
@@ -33,6 +33,7 @@ class Channel:
 
     def __init__(self, sock: socket.socket) -> None:
         self.sock = sock
+        self._reader = sock.makefile("rb")
         self._lock = threading.Lock()
 
     def send(self, header: dict[str, Any], payload: bytes = b"") -> bool:
@@ -62,17 +63,11 @@ class Channel:
             return None
 
     def _exactly(self, n: int) -> bytes | None:
-        chunks, left = [], n
-        while left:
-            try:
-                chunk = self.sock.recv(min(left, 1 << 20))
-            except OSError:
-                return None
-            if not chunk:
-                return None
-            chunks.append(chunk)
-            left -= len(chunk)
-        return b"".join(chunks)
+        try:
+            data = self._reader.read(n)
+        except (OSError, ValueError):  # ValueError: closed by another thread
+            return None
+        return data if len(data) == n else None
 
     def close(self) -> None:
         """Close this end (the other process sees the end of the channel)."""
@@ -80,22 +75,6 @@ class Channel:
             self.sock.shutdown(socket.SHUT_RDWR)
         except OSError:
             pass
+        self._reader.close()
         self.sock.close()
 
-
-class Pending:
-    """A reply one thread waits for and the reader thread delivers."""
-
-    def __init__(self) -> None:
-        self._done = threading.Event()
-        self.header: dict[str, Any] = {}
-        self.payload = b""
-
-    def deliver(self, header: dict[str, Any], payload: bytes) -> None:
-        """Called by the reader thread."""
-        self.header, self.payload = header, payload
-        self._done.set()
-
-    def wait(self, timeout_s: float) -> bool:
-        """True once delivered, False after ``timeout_s``."""
-        return self._done.wait(timeout_s)

@@ -42,6 +42,7 @@ import subprocess
 import sys
 import threading
 import time
+from concurrent.futures import Future
 from typing import Any, Callable, Sequence
 
 import rclpy
@@ -60,7 +61,7 @@ from ..sros2_policy import topside_enclaves
 from .bounds import RequestBounds
 from .interface import GATEWAY_NODE, STATUS_TOPIC, duplicate_problem, participants, relays
 from .internal import GatewaySettings, interface_type
-from .link import Channel, Pending
+from .link import Channel
 
 __all__ = ["Gateway", "main"]
 
@@ -96,7 +97,7 @@ class Gateway:
         """One line while another gateway answers to this vehicle's name (:func:`.interface.duplicate_problem`)."""
         self.last_refusal = ""
         self._ids = itertools.count(1)
-        self._pending: dict[int, Pending] = {}
+        self._pending: dict[int, Future] = {}
         self._goals: dict[int, queue.Queue] = {}
         self._last_estop_s = -math.inf
         self._operator_idle_s = -math.inf
@@ -225,17 +226,18 @@ class Gateway:
         """Call internal service ``name`` (type ``cls``) through the internal side and wait for its answer:
         (response, "") or (None, one-line reason)."""
         call_id = next(self._ids)
-        pending = self._pending[call_id] = Pending()
+        pending = self._pending[call_id] = Future()
         try:
             if not self.channel.send({"k": "call", "id": call_id, "name": name}, serialize_message(request)):
                 return None, "the gateway's internal side is gone"
-            if not pending.wait(self.settings.call_timeout_s):
-                return None, f"no answer within {self.settings.call_timeout_s:g} s"
+            head, payload = pending.result(timeout=self.settings.call_timeout_s)
+        except TimeoutError:
+            return None, f"no answer within {self.settings.call_timeout_s:g} s"
         finally:
             self._pending.pop(call_id, None)
-        if not pending.header.get("ok"):
-            return None, str(pending.header.get("why", "failed"))
-        return deserialize_message(pending.payload, cls.Response), ""
+        if not head.get("ok"):
+            return None, str(head.get("why", "failed"))
+        return deserialize_message(payload, cls.Response), ""
 
     def _run_goal(self, goal_handle: Any) -> Any:
         """The topside ``run_identification`` goal, checked, sent to the identification node; its feedback relayed,
@@ -300,8 +302,8 @@ class Gateway:
         while (frame := self.channel.recv()) is not None:
             head, payload = frame
             kind = head.get("k")
-            if kind == "answer" and head.get("id") in self._pending:
-                self._pending[head["id"]].deliver(head, payload)
+            if kind == "answer" and (pending := self._pending.get(head.get("id"))) is not None:
+                pending.set_result((head, payload))
             elif kind == "topic" and head.get("name") in self._out:
                 self.relayed["messages"] += 1
                 self._out[head["name"]].publish(payload)

@@ -5,10 +5,6 @@ Run alone: ``python -m hindrax_drivers.ping1d.node --ros-args --params-file ros_
 or pyserial URL), ``baud_rate``, ``speed_of_sound_m_s``, ``ping_interval_s``, ``mode_auto``,
 ``field_of_view_rad``, ``min_range_m``, ``max_range_m``. Node parameter ``stuck_limit_samples`` (default 50).
 
-Why not the PyPI ``bluerobotics-ping`` package: its 0.2.x ``Ping1D`` sends speed of sound 0 and fails
-several getters (docs/devices.md §0 item 4, §2.7); the protocol layer :mod:`hindrax_drivers.ping1d.protocol`
-is used instead.
-
 Start-up (docs/devices.md §2.1, §2.3, §2.4), after every (re)connect, 20 ms apart: the auto-baud sync byte
 ``U``; ``set_speed_of_sound`` (1002), ``set_ping_interval`` (1004), ``set_mode_auto`` (1003; in manual
 mode the device keeps its configured range and gain), ``set_ping_enable(1)`` (1006),

@@ -36,7 +36,7 @@ __all__ = ["Ping1dParseError", "Ping1dId", "Ping1dMessage", "Ping1dFramer", "Pin
            "PcbTemperature", "PingEnable", "Profile", "ContinuousStart", "ContinuousStop",
            "PAYLOAD_TYPES", "GAIN_INDEX_TO_GAIN", "HEADER_BYTES", "CHECKSUM_BYTES", "SYNC_BYTE",
            "checksum", "encode_frame", "decode_frame", "request_frame", "encode_message",
-           "decode_message", "is_legacy_request"]
+           "decode_message"]
 
 HEADER_BYTES = 8
 CHECKSUM_BYTES = 2
@@ -92,11 +92,7 @@ class Ping1dId(IntEnum):
     CONTINUOUS_STOP = 1401
 
 
-# ---------------------------------------------------------------------------------------------
 # Frame codec
-# ---------------------------------------------------------------------------------------------
-
-
 def checksum(data: bytes | bytearray) -> int:
     """Ping protocol checksum: sum of all bytes, modulo 2**16 (docs/devices.md §2.2)."""
     return sum(data) & 0xFFFF
@@ -164,23 +160,11 @@ def decode_frame(frame: Union[bytes, bytearray]) -> Ping1dMessage:
     return Ping1dMessage(message_id, frame[HEADER_BYTES: HEADER_BYTES + length], src, dst)
 
 
-def request_frame(requested_id: int, *, legacy: bool = False, src_device_id: int = 0,
-                  dst_device_id: int = 0) -> bytes:
-    """Frame asking the device for message ``requested_id`` (docs/devices.md §2.3): the official
-    ``general_request`` (id 6, u16 payload) or, with ``legacy=True``, a frame with that id and an
-    empty payload (what brping sends).
-
-    Raises:
-        ValueError: ids out of range.
-    """
-    if legacy:
-        return encode_frame(requested_id, b"", src_device_id, dst_device_id)
+def request_frame(requested_id: int, src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
+    """Frame asking the device for message ``requested_id`` (docs/devices.md §2.3): a
+    ``general_request`` (id 6, u16 payload; brping's legacy form, that id with an empty payload, is
+    ``encode_frame(requested_id)``). Raises ValueError for ids out of range."""
     return encode_message(GeneralRequest(requested_id), src_device_id, dst_device_id)
-
-
-def is_legacy_request(message: Ping1dMessage) -> bool:
-    """True for a zero-payload frame whose id is a gettable message (docs/devices.md §2.3)."""
-    return not message.payload and message.message_id in _GETTABLE_IDS
 
 
 class Ping1dFramer:
@@ -252,9 +236,7 @@ class Ping1dFramer:
         return out
 
 
-# ---------------------------------------------------------------------------------------------
 # Typed payloads
-# ---------------------------------------------------------------------------------------------
 
 # Field conversions: "int" (raw integer), "bool" (u8 0/1), or an int divisor d with SI = raw / d.
 _Conv = Union[str, int]
@@ -702,15 +684,6 @@ PAYLOAD_TYPES: Dict[int, Type[Ping1dPayload]] = {
         PingInterval, GainSetting, TransmitDuration, GeneralInfo, DistanceSimple, Distance,
         ProcessorTemperature, PcbTemperature, PingEnable, Profile, ContinuousStart, ContinuousStop)
 }
-
-# Messages a host can ask for (device -> host "get" messages, §2.4).
-_GETTABLE_IDS = frozenset({
-    Ping1dId.DEVICE_INFORMATION, Ping1dId.PROTOCOL_VERSION, Ping1dId.FIRMWARE_VERSION,
-    Ping1dId.DEVICE_ID, Ping1dId.VOLTAGE_5, Ping1dId.SPEED_OF_SOUND, Ping1dId.RANGE,
-    Ping1dId.MODE_AUTO, Ping1dId.PING_INTERVAL, Ping1dId.GAIN_SETTING, Ping1dId.TRANSMIT_DURATION,
-    Ping1dId.GENERAL_INFO, Ping1dId.DISTANCE_SIMPLE, Ping1dId.DISTANCE,
-    Ping1dId.PROCESSOR_TEMPERATURE, Ping1dId.PCB_TEMPERATURE, Ping1dId.PING_ENABLE, Ping1dId.PROFILE,
-})
 
 
 def encode_message(payload: Ping1dPayload, src_device_id: int = 0, dst_device_id: int = 0) -> bytes:

@@ -144,11 +144,6 @@ def type_description_hash(type_name: str, search: list[Path] | None = None) -> s
     raise DefinitionNotFoundError(f"{path}: no type hash for {full}")
 
 
-def definitions_in(full_text: str) -> list[str]:
-    """The ``pkg/Type`` names listed by ``MSG:`` lines of a full definition, in order."""
-    return [line[5:].strip() for line in full_text.split("\n") if line.startswith("MSG: ")]
-
-
 def _layout(full_text: str) -> list[str]:
     """The field and constant lines of a full definition: comments, blank lines and spacing dropped."""
     out = []

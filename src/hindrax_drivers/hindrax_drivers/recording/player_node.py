@@ -54,9 +54,6 @@ from .playback import PlayStats, play
 from .qos import playback_profile, profiles_from_yaml
 from .reader import BagError, BagReader
 
-_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
-_DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
-
 
 class PlayerError(ValueError):
     """The bag cannot be played as requested (message is one line)."""
@@ -167,8 +164,8 @@ class BagPlayerNode(Node):
             except ValueError:
                 prof = playback_profile([])
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                             reliability=_RELIABILITY.get(prof["reliability"], ReliabilityPolicy.RELIABLE),
-                             durability=_DURABILITY.get(prof["durability"], DurabilityPolicy.VOLATILE))
+                             reliability=ReliabilityPolicy.get_from_short_key(prof["reliability"]),
+                             durability=DurabilityPolicy.get_from_short_key(prof["durability"]))
             self.pubs[topic] = self.create_publisher(cls, topic, qos)
         if not self.pubs:
             raise PlayerError("nothing to publish: " + "; ".join(

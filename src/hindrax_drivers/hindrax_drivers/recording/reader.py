@@ -151,11 +151,6 @@ class BagReader:
         one (truncated: see :attr:`truncated_files`)."""
         return self._summaries.get(f)
 
-    def file_messages(self, f: Path, topics: Iterable[str] | None = None, start_ns: int | None = None,
-                      end_ns: int | None = None) -> Iterator[RawMessage]:
-        """:meth:`messages` of one file ``f`` of :attr:`files` (log-time order within the file)."""
-        yield from self._file_messages(f, set(topics) if topics is not None else None, start_ns, end_ns)
-
     @property
     def topics(self) -> dict[str, str]:
         """Topic name -> ``pkg/msg/Type``."""
@@ -204,10 +199,13 @@ class BagReader:
         """Raw messages of ``topics`` (all when None) with start_ns <= log time < end_ns, in log-time order."""
         wanted = set(topics) if topics is not None else None
         for f in self.files:
-            yield from self._file_messages(f, wanted, start_ns, end_ns)
+            yield from self.file_messages(f, wanted, start_ns, end_ns)
 
-    def _file_messages(self, f: Path, wanted: set[str] | None, start_ns: int | None,
-                       end_ns: int | None) -> Iterator[RawMessage]:
+    def file_messages(self, f: Path, topics: Iterable[str] | None = None,
+                      start_ns: int | None = None,
+                      end_ns: int | None = None) -> Iterator[RawMessage]:
+        """:meth:`messages` of one file ``f`` of :attr:`files` (log-time order within the file)."""
+        wanted = set(topics) if topics is not None else None
         summary = self._summaries.get(f)
         if summary is None:
             yield from _sorted_stream_messages(f, wanted, start_ns, end_ns)
@@ -225,8 +223,7 @@ class BagReader:
                 yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time, msg.publish_time,
                                  msg.data)
 
-    def decoded(self, topics: Iterable[str] | None = None, start_ns: int | None = None,
-                end_ns: int | None = None) -> Iterator[tuple[RawMessage, Any]]:
+    def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas
         (``mcap_ros2.decoder.DecoderFactory``, the decoder an ``mcap`` reader uses).
 
@@ -236,7 +233,7 @@ class BagReader:
 
         factory = DecoderFactory()
         decoders: dict[str, Any] = {}
-        for m in self.messages(topics, start_ns, end_ns):
+        for m in self.messages(topics):
             dec = decoders.get(m.topic)
             if dec is None:
                 ch = self.channels[m.topic]

@@ -16,13 +16,11 @@ Behaviour
 - Data: one subscription callback per message on the node's executor, whatever the clock (the
   vehicle, the virtual pool and the tests take the same path). The subscriptions are raw: the
   callback gets the CDR bytes and they are written unchanged, never converted into a Python message
-  and back (an ``Imu`` taken as an object costs 77 us, as bytes 11 us:
-  :mod:`hindrax_drivers.lean_cdr`; at the stack's 430 msg/s that is about 2 % of a core). Log time =
+  and back (:mod:`hindrax_drivers.lean_cdr`). Log time =
   the node's clock in the callback (sim time with ``use_sim_time``, so a stepped simulation's bag
   depends on its seed only); publish time = the log time (not the DDS source timestamp, which is
   wall-clock time; the MCAP specification asks for the log time where the publish time is not
-  available). No reader of this project uses the publish time (a message's ``header.stamp`` is the
-  time of its data). Writing happens in one writer thread (the mcap writer is not thread-safe),
+  available). Writing happens in one writer thread (the mcap writer is not thread-safe),
   which drains what the callbacks queued every ``drain_period_s``.
 - Start/stop: services ``recorder/start`` (hindrax_msgs/srv/StartRecording) and ``recorder/stop``
   (hindrax_msgs/srv/StopRecording), or ``autostart:=true``; stopping (also on SIGINT/SIGTERM) finishes
@@ -81,11 +79,9 @@ from .sequence_gaps import SequenceGaps
 from .writer import WriterOptions
 from .writer_thread import ThreadedBagWriter
 
-_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 #: default ``drain_period_s``, s: the writer thread drains what the callbacks queued 10 times a second
 #: (docs/architecture.md §10.1)
 DRAIN_PERIOD_S = 0.1
-_DURABILITY = {"volatile": DurabilityPolicy.VOLATILE, "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
 
 
 class RecorderNode(VehicleNode):
@@ -126,7 +122,7 @@ class RecorderNode(VehicleNode):
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_service(StartRecording, "recorder/start", self._on_start)
         self.create_service(StopRecording, "recorder/stop", self._on_stop)
-        self._discovery_timer = self.create_timer(self._discovery_period_s, self._discover)
+        self.create_timer(self._discovery_period_s, self.discover_now)
         self.create_timer(self._status_period_s, self._publish_status)
         if self._min_free_bytes > 0.0:
             self.create_timer(self._disk_check_period_s, self.check_disk)
@@ -218,7 +214,7 @@ class RecorderNode(VehicleNode):
         self._gaps = SequenceGaps(self._publisher_count)
         self._skipped.clear()
         self.get_logger().info(f"recording {self._selection.describe()} to {out}")
-        self._discover()
+        self.discover_now()
         return out
 
     def stop_recording(self) -> BagMetadata | None:
@@ -256,10 +252,6 @@ class RecorderNode(VehicleNode):
             print(f"[{self.get_name()}] {text}", file=sys.stderr)
 
     # -- graph discovery --------------------------------------------------------------------------
-    def discover_now(self) -> None:
-        """Subscribe to newly published topics now (the discovery timer runs on ROS time, which may be frozen)."""
-        self._discover()
-
     def subscribed_to(self, topics) -> bool:
         """True while recording and every topic of ``topics`` (iterable of names) that the selection records has
         a subscription matched with at least one publisher: from then on none of their messages is missed."""
@@ -273,7 +265,9 @@ class RecorderNode(VehicleNode):
                 return False
         return True
 
-    def _discover(self) -> None:
+    def discover_now(self) -> None:
+        """Subscribe to newly published topics now (also the discovery timer's callback, on ROS
+        time, which may be frozen)."""
         if self._writer is None or self._selection is None:
             return
         for topic, types in self.get_topic_names_and_types():
@@ -297,7 +291,8 @@ class RecorderNode(VehicleNode):
                         == type_name]
             reliability, durability = recorder_policies(profiles)
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self._queue_depth,
-                             reliability=_RELIABILITY[reliability], durability=_DURABILITY[durability])
+                             reliability=ReliabilityPolicy.get_from_short_key(reliability),
+                             durability=DurabilityPolicy.get_from_short_key(durability))
             self._writer.add_topic(topic, type_name, profiles)
             on_message = WithMessageInfo(functools.partial(self._on_message, topic))
             self._subs[topic] = self.create_subscription(cls, topic, on_message, qos, raw=True)
@@ -322,8 +317,7 @@ class RecorderNode(VehicleNode):
                 sel = TopicSelection(tuple(request.topics), request.topic_regex)
             path = self.start_recording(request.output_dir, sel)
         except (RuntimeError, ValueError, OSError) as exc:
-            response.success = False
-            response.message = str(exc)
+            response.success, response.message = False, str(exc)
             response.bag_path = str(self.bag_path or "")
             return response
         response.success = True
@@ -332,22 +326,16 @@ class RecorderNode(VehicleNode):
         return response
 
     def _on_stop(self, request: StopRecording.Request, response: StopRecording.Response):
-        if self._writer is None:
-            response.success = False
-            response.message = "not recording"
-            response.bag_path = str(self._last_bag or "")
-            return response
-        try:
-            meta = self.stop_recording()
-        except Exception as exc:  # noqa: BLE001 - reported to the caller, the node keeps running
-            response.success = False
-            response.message = f"bag could not be finished: {exc}"
-            response.bag_path = str(self._last_bag or "")
-            return response
-        response.success = True
-        response.bag_path = str(self._last_bag)
-        response.message_count = int(meta.message_count if meta else 0)
-        response.message = f"{response.message_count} messages written"
+        response.success, response.message = False, "not recording"
+        if self._writer is not None:
+            try:
+                meta = self.stop_recording()
+                response.message_count = int(meta.message_count if meta else 0)
+                response.success = True
+                response.message = f"{response.message_count} messages written"
+            except Exception as exc:  # noqa: BLE001 - reported to the caller, the node goes on
+                response.message = f"bag could not be finished: {exc}"
+        response.bag_path = str(self._last_bag or "")
         return response
 
     def status(self) -> DiagnosticStatus:
@@ -383,18 +371,16 @@ class RecorderNode(VehicleNode):
         arr.status = [self.status()]
         self._diag_pub.publish(arr)
 
-    def close(self) -> None:
-        """Finish any bag in progress: the clean-up of a composed process
-        (:func:`~hindrax_drivers.node_common.run_nodes`)."""
-        self.shutdown()
-
     def shutdown(self) -> None:
-        """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM)."""
+        """Finish any bag in progress (called on exit, also after SIGINT/SIGTERM; as :meth:`close`,
+        the clean-up of a composed process, :func:`~hindrax_drivers.node_common.run_nodes`)."""
         try:
             self.stop_recording()
         except Exception as exc:  # noqa: BLE001 - exiting: report, never hide the bag path
             print(f"recorder: bag {self.bag_path} not finished cleanly: {exc}; run `hindrax bag recover "
                   f"{self.bag_path}`", file=sys.stderr)
+
+    close = shutdown
 
 
 def main(args: list[str] | None = None) -> int:

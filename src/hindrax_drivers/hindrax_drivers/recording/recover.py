@@ -163,17 +163,16 @@ def _chunk_compression(path: Path) -> str:
     return "zstd"
 
 
-def recover_file(path: str | Path, keep_original: bool = False, force: bool = False,
-                 chunk_size_bytes: int = 1024 * 1024) -> FileRecovery:
+def recover_file(path: str | Path, keep_original: bool = False) -> FileRecovery:
     """Rewrite a truncated MCAP file as a complete one in place (atomic rename).
 
-    keep_original: keep the damaged file as ``<name>.truncated``. force: rewrite even a complete file.
+    keep_original: keep the damaged file as ``<name>.truncated``; a complete file is left as it is.
     Returns a :class:`FileRecovery`. Raises FileNotFoundError, :class:`RecoverError`.
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
-    if not force and is_complete(path):
+    if is_complete(path):
         res = FileRecovery(path, was_complete=True)
         with open(path, "rb") as f:
             summary = make_reader(f).get_summary()
@@ -194,7 +193,7 @@ def recover_file(path: str | Path, keep_original: bool = False, force: bool = Fa
     t_last = 0
     has_rosbag2_metadata = False
     with open(tmp, "wb") as out:
-        w = Writer(out, chunk_size=chunk_size_bytes, compression=compression)
+        w = Writer(out, chunk_size=1024 * 1024, compression=compression)
         w.start(profile="ros2", library="hindrax-recover")
         src_schemas: dict[int, Schema] = {}
         for rec in iter_file_records(path, res):

@@ -83,19 +83,15 @@ class WriterOptions:
     @classmethod
     def from_section(cls, recording: RecordingSection, **overrides: Any) -> "WriterOptions":
         """From the validated ``recording.*`` section (``VehicleConfig.recording``); ``overrides`` replace fields."""
-        kw: dict[str, Any] = {"compression": recording.compression, "chunk_size_bytes": recording.chunk_size_bytes,
-                              "split_size_bytes": recording.split_size_bytes,
-                              "split_duration_s": recording.split_duration_s,
-                              "flush_interval_s": recording.flush_interval_s}
-        kw.update(overrides)
-        return cls(**kw)
+        keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s",
+                "flush_interval_s")
+        return cls(**{**{k: getattr(recording, k) for k in keys}, **overrides})
 
 
 @dataclass
 class _Topic:
     info: TopicInfo
     definition: str
-    file_count: int = 0
 
 
 @dataclass
@@ -369,9 +365,7 @@ class BagWriter:
         meta = BagMetadata(files=list(self._files), topics=[t.info for t in self._topics.values()])
         f.writer.add_metadata("rosbag2", {"serialized_metadata": meta.serialized()})
         f.writer.finish()
-        f.stream.flush()
-        if self.options.fsync:
-            os.fsync(f.stream.fileno())
+        self._sync(f)
         f.stream.close()
 
     def _split(self) -> None:

@@ -7,11 +7,9 @@ order, closes the open chunk when ``flush_interval_s`` has passed (crash safety,
 and finishes the bag on :meth:`ThreadedBagWriter.close`.
 
 Hand-off: the producers append to a ``collections.deque`` (an atomic append, no lock, no wake-up) and the
-writer thread drains it every ``drain_period_s`` (and at once on :meth:`~ThreadedBagWriter.close`). A
-``queue.Queue`` woke the writer thread once per message (a lock, a condition notify and a thread switch each):
-with rclpy's EventsExecutor in the recorder process that hand-off was about a quarter of the recorder's CPU
-(recorder benchmark, 590 msg/s, interleaved runs: 8.7-8.8 % of a core with the queue, 6.2-6.5 % with the
-deque). What a crash loses grows by at most ``drain_period_s`` of messages.
+writer thread drains it every ``drain_period_s`` (and at once on :meth:`~ThreadedBagWriter.close`):
+no wake-up per message, as a ``queue.Queue`` would cost. What a crash loses grows by at most
+``drain_period_s`` of messages.
 
 Back-pressure: the queue holds at most ``max_queue`` messages; beyond that (disk stalled) messages are
 counted in :attr:`ThreadedBagWriter.dropped` instead of growing memory without bound. A file-system

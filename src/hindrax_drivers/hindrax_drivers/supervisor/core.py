@@ -141,7 +141,6 @@ class SupervisorCore:
     #: time (same base as ``t_s``) of the last DVL attitude / IMU tilt taken, None before any
     dvl_attitude_t: float | None = None
     imu_tilt_t: float | None = None
-    imu_tilt_rad: tuple[float, float] = (math.nan, math.nan)
     #: per sensor: samples not alive (stale, frozen) and why the last one was not
     not_alive: dict = field(default_factory=dict)
     not_alive_reason: dict = field(default_factory=dict)
@@ -283,7 +282,7 @@ class SupervisorCore:
         tilt = tilt_from_specific_force(specific_force_frd_m_s2)
         if tilt is None:
             return ""
-        self.imu_tilt_rad, self.imu_tilt_t = tilt, t_s
+        self.imu_tilt_t = t_s
         if self._dvl_attitude_fresh(t_s):
             return ""
         return self._check_attitude(tilt[0], tilt[1], "IMU accelerometer (no fresh DVL attitude)")

@@ -32,9 +32,8 @@ Publishes
     = the supervised quantities and, once the thrust stopped, ``disarm_cause``: ``<process>: <cause>; next:
     <step>``, :mod:`.disarm_cause`) on every change and at 1 Hz; ``/diagnostics`` (``hindrax/supervisor``).
 CPU (README "Performance on the Pi")
-    A :class:`~hindrax_drivers.vehicle_node.VehicleNode`: no QoS event handlers (rclpy's default is
-    one incompatible-QoS warning handler each, visited in Python on every spin): a sensor that stops
-    reaching the supervisor, for a QoS mismatch or any other reason, trips it through the
+    A :class:`~hindrax_drivers.vehicle_node.VehicleNode` (no QoS event handlers): a sensor that
+    stops reaching the supervisor, for a QoS mismatch or any other reason, trips the
     ``supervisor.min_rate.*`` checks (where not 0).
     Every input is a subscription callback on the node's executor, whatever the clock (the vehicle, the virtual
     pool and the tests take the same path): each sample is counted at the ROS time of its arrival and can trip at
@@ -216,8 +215,8 @@ class SupervisorNode(VehicleNode):
         new = self.core.trip("operator e-stop (supervisor/estop)")
         self._handle(new, force=True)
         response.success = True
-        response.message = f"tripped: {self.core.tripped}; disarm requested" if new else \
-            f"already tripped: {self.core.tripped}; disarm requested"
+        was = "tripped" if new else "already tripped"
+        response.message = f"{was}: {self.core.tripped}; disarm requested"
         return response
 
     def on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:

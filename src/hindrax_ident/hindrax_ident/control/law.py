@@ -48,7 +48,7 @@ Frames: body FRD, NED, SNAME order (docs/architecture.md §3); angles in rad, he
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -85,10 +85,8 @@ FLOOR_TIMEOUT_S = 1.0
 FLOOR_GRADIENT_WALK_PER_SQRT_M = 0.4
 #: ASSUMPTION: 1-sigma change of the floor's slope between a DVL beam's footprint and the altimeter's (dimensionless;
 #: the error of the local plane at horizontal distance d from the altimeter's footprint is this times d, added to the
-#: beam's range noise). A plane through points 0.1-0.3 m apart is wrong by the slope change times the distance where
-#: the slope changes (a pool's 1:3 to 1:12 break: 0.25): without this term the stern beam, still on the old slope
-#: 0.3 m behind the altimeter's footprint, holds the plane's gradient back for about 0.8 s at 0.4 m/s. Chosen on the
-#: default truth's altitude hold (vehicle-file hold, seed 1; 0, 0.05, 0.1, 0.15, 0.25 tried; docs/control.md §6).
+#: beam's range noise): without it a beam still on the old slope behind the altimeter's footprint
+#: holds the plane's gradient back (docs/control.md §6).
 FLOOR_SLOPE_CHANGE_STD = 0.1
 #: Time constant of the low-pass on the time derivative of the floor gradient estimate, s: two reports of the DVL-75
 #: beams at their 10 Hz (docs/devices.md §1), the shortest window that smooths the steps of the 10 Hz updates.
@@ -119,13 +117,7 @@ class ControlSettings:
     @classmethod
     def from_config(cls, cfg: VehicleConfig) -> "ControlSettings":
         """The ``control.*`` keys of the vehicle file (validated by its schema), defaults for the absent ones."""
-        c = cfg.control
-        given = {"rate_hz": c.rate_hz, "depth_bandwidth_rad_s": c.depth_bandwidth_rad_s,
-                 "heading_bandwidth_rad_s": c.heading_bandwidth_rad_s,
-                 "attitude_bandwidth_rad_s": c.attitude_bandwidth_rad_s,
-                 "velocity_bandwidth_rad_s": c.velocity_bandwidth_rad_s, "damping_ratio": c.damping_ratio,
-                 "hold_fraction": c.hold_fraction, "max_depth_rate_m_s": c.max_depth_rate_m_s,
-                 "max_yaw_rate_rad_s": c.max_yaw_rate_rad_s, "sensor_timeout_s": c.sensor_timeout_s}
+        given = {f.name: getattr(cfg.control, f.name) for f in fields(cls)}
         return cls(**{k: float(v) for k, v in given.items() if v is not None})
 
     def bandwidth(self, dof: str) -> float:

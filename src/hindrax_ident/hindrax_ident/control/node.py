@@ -37,16 +37,11 @@ Publishes
     (REP-105, :mod:`.odometry`), while its sensor streams are open (not while an identification goal
     runs).
 CPU
-    Every input is a subscription callback on the node's executor, whatever the clock (the vehicle,
-    the virtual pool and the tests take the same path; about 80 messages/s while the streams are
-    open, 3 while a goal runs), each sensor sample counted at its arrival. While an identification
-    goal runs the controller cannot be enabled and its sensor streams are closed, so the tick slows
-    from ``control.rate_hz`` to :data:`GOAL_TICK_S` until the goal ends (docs/architecture.md
-    §10.1). While disabled the streams stay open (``odom``, ``controller/status`` and the enable
-    checks read them) but the tick runs every :data:`ODOM_PERIOD_S` (the odometry rate) instead of
-    at ``control.rate_hz``, which it takes only while enabled, and one IMU message in
-    :data:`IDLE_IMU_EVERY` is conditioned (the IMU is taken as CDR bytes, decoded only when used:
-    :mod:`hindrax_drivers.lean_cdr`).
+    Every input is a subscription callback on the node's executor, whatever the clock, each sensor
+    sample counted at its arrival. The tick runs at ``control.rate_hz`` only while enabled: every
+    :data:`ODOM_PERIOD_S` while disabled (one IMU message in :data:`IDLE_IMU_EVERY` conditioned,
+    decoded from its CDR bytes only then), every :data:`GOAL_TICK_S` with the sensor streams closed
+    while an identification goal runs (docs/architecture.md §10.1).
 Parameters
     The vehicle configuration (``control.*``: bandwidths, rate limits, ``hold_fraction``,
     ``rate_hz``, ``sensor_timeout_s``); ``model_file`` (string, read-only, default ""):
@@ -162,7 +157,7 @@ class ControllerNode(VehicleNode):
         self._streams: list = []
         self._enabled_streams: list = []  # subscribed while enabled (_open_enabled_streams)
         self._open_streams()
-        self._subscribe(ManeuverStatus, "identification/status", self._on_ident_status, 20)
+        self.create_subscription(ManeuverStatus, "identification/status", self._on_ident_status, 20)
         self.create_subscription(DiagnosticStatus, ESC_STATE_TOPIC, self._on_esc_state,
                                  esc_state_qos())
         self.create_subscription(ControlSetpoint, "controller/setpoint", self._on_setpoint, 10)
@@ -188,35 +183,28 @@ class ControllerNode(VehicleNode):
         topics (about 80 messages/s in the pool layout). The first IMU message after opening is
         conditioned (:meth:`_on_imu`)."""
         self._imu_count = IDLE_IMU_EVERY - 1
+        sub, qos = self.create_subscription, sensor_input_qos(20)
         self._streams = [
-            self._subscribe(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)),
-                            sensor_input_qos(20)),
-            self._subscribe(FluidPressure, "pressure/fluid_pressure",
-                            lambda m: self._add([sample_from_pressure(m)]), sensor_input_qos(20)),
-            self._subscribe(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
-            self._subscribe(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]),
-                            sensor_input_qos(20)),
-        ]
+            sub(Dvl, "dvl/data", lambda m: self._add(samples_from_dvl(m)), qos),
+            sub(FluidPressure, "pressure/fluid_pressure",
+                lambda m: self._add([sample_from_pressure(m)]), qos),
+            sub(Imu, "imu/data_raw", self._on_imu, sensor_input_qos(50), raw=True),
+            sub(Range, "ping/altitude", lambda m: self._add([sample_from_range(m)]), qos)]
 
     def _open_enabled_streams(self) -> None:
         """Subscribe to what only an enabled controller reads: ``wrench`` (other writers: a pilot's message makes it
         yield) and ``allocation/status`` (anti-windup); a disabled controller ignored both, and the pilot's 50 Hz
         stream cost it a callback per message."""
         if not self._enabled_streams:
-            self._enabled_streams = [self._subscribe(AllocationStatus, "allocation/status", self._on_allocation, 20),
-                                     self._subscribe(WrenchStamped, "wrench", self._on_wrench, 50)]
+            sub = self.create_subscription
+            self._enabled_streams = [
+                sub(AllocationStatus, "allocation/status", self._on_allocation, 20),
+                sub(WrenchStamped, "wrench", self._on_wrench, 50)]
 
     def _close_enabled_streams(self) -> None:
         for sub in self._enabled_streams:
             self.destroy_subscription(sub)
         self._enabled_streams = []
-
-    def _subscribe(self, msg_type: Any, topic: str, handler: Any, qos: Any,
-                   raw: bool = False) -> Any:
-        """A topic input: a subscription callback (module docstring, "CPU"). The depths hold what arrives in 0.4-2 s,
-        room for an executor held up on a loaded machine; the sensors' readers are best effort
-        (:func:`~hindrax_drivers.node_common.sensor_input_qos`)."""
-        return self.create_subscription(msg_type, topic, handler, qos, raw=raw)
 
     def _close_streams(self) -> None:
         """Drop the streams while an identification goal runs (the controller cannot be enabled then), and forget the
@@ -283,10 +271,7 @@ class ControllerNode(VehicleNode):
                 timer.reset()
 
     def _on_wrench(self, msg: WrenchStamped) -> None:
-        key = _key(msg)
-        if key in self._own:
-            return
-        if self.enabled:
+        if self.enabled and _key(msg) not in self._own:
             self._disable("yielded: another source publishes wrench (pilot)", zero=False)
 
     def _on_setpoint(self, msg: ControlSetpoint) -> None:

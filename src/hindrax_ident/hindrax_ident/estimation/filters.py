@@ -200,8 +200,7 @@ class KinematicKalmanFilter:
 
 
 def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
-                      measurement_std: float = 0.01, initial_velocity_std: float = 1.0,
-                      initial_acceleration_std: float = 1.0):
+                      measurement_std: float = 0.01):
     """Offline position, velocity and acceleration from a whole record (Kalman + RTS smoother).
 
     Runs filterpy's ``KalmanFilter.batch_filter`` with per-interval F(dt), Q(dt) (non-uniform
@@ -212,8 +211,7 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
         t_s: (n,) strictly increasing sample times in s.
         z: (n,) measurements (position in m/rad or velocity in m/s, rad/s); NaN = missing.
         measured: ``'position'`` or ``'velocity'``.
-        jerk_psd, measurement_std, initial_velocity_std, initial_acceleration_std: as
-            :class:`KinematicKalmanFilter`.
+        jerk_psd, measurement_std: as :class:`KinematicKalmanFilter` (its default initial stds).
 
     Returns:
         ``(pos, vel, acc)``, each (n,). Samples before the first valid measurement are NaN. In velocity
@@ -236,8 +234,7 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
     kf = KalmanFilter(dim_x=3, dim_z=1)
     kf.H = _measurement_matrix(measured)
     kf.R = np.array([[float(measurement_std)**2]])
-    x0, P0 = _initial_state(measured, float(zs_arr[0]), float(measurement_std),
-                            float(initial_velocity_std), float(initial_acceleration_std))
+    x0, P0 = _initial_state(measured, float(zs_arr[0]), float(measurement_std), 1.0, 1.0)
     kf.x = x0
     kf.P = P0
     dts = np.diff(tt, prepend=tt[0])

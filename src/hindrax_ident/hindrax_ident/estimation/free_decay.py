@@ -24,7 +24,7 @@ the log decrement delta, and computes:
 
 Signal processing (our choices; [Hindrax-AM] only says "double integration" in MATLAB):
 
-* Release: the first sample whose |a - median(a)| exceeds ``release_threshold`` (0.5) times
+* Release: the first sample whose |a - median(a)| exceeds :data:`RELEASE_THRESHOLD` (0.5) times
   the largest deviation (at release the acceleration jumps to its largest value, -omega_n^2 A).
   The record is analysed from there on.
 * Displacement (:func:`displacement_from_acceleration`): the accelerometer bias is the
@@ -34,7 +34,7 @@ Signal processing (our choices; [Hindrax-AM] only says "double integration" in M
   velocity minus its mean (equilibrium reference). Optionally a zero-phase Butterworth
   high-pass (order 2, ``highpass_hz``) is applied to the velocity (odd padding: v is odd about
   the release) and to the displacement (even padding) to suppress the random-walk drift of
-  integrated noise; :func:`analyse_free_decay` uses ``highpass_fraction`` (0.1) times the
+  integrated noise; :func:`analyse_free_decay` uses :data:`HIGHPASS_FRACTION` (0.1) times the
   damped frequency. The high-pass removes the genuine
   low-frequency content of a decaying oscillation too (its integral is c A / k_eq), so it biases
   the displacement by about 2 sigma omega_c A / omega_n^2 near the release; this is why the peak
@@ -46,7 +46,7 @@ Signal processing (our choices; [Hindrax-AM] only says "double integration" in M
   slowly varying offset. For a linear oscillator H_k / H_{k+n} = x_k / x_{k+n} = exp(n delta)
   exactly, so delta = (1/n) ln(H_0 / H_n) is eq. 3 averaged over n periods, and the peak
   amplitudes are x_k = H_k / (1 + exp(-delta / 2)). Peaks are used while H_k exceeds both
-  ``min_peak_fraction`` (0.05) H_0 and 6 times the std of the linearly detrended displacement
+  :data:`MIN_PEAK_FRACTION` (0.05) H_0 and 6 times the std of the linearly detrended displacement
   over the last 20 % of the record (noise floor).
 * omega_d from the spacing of the interior extrema (peaks and troughs, release excluded, times
   refined by parabolic interpolation): least-squares slope of t_k against k is T_d / 2.
@@ -62,8 +62,7 @@ from typing import Any, Optional, Tuple
 
 import numpy as np
 
-from .drag_coefficient import (KINEMATIC_VISCOSITY_WATER_M2_S,
-                               characteristic_length_from_volume, reynolds_number)
+from .drag_coefficient import characteristic_length_from_volume, reynolds_number
 from .least_squares import (EstimationError, as_float_array, check_same_length, check_time_vector,
                             positive)
 
@@ -74,10 +73,15 @@ __all__ = ["FreeDecayResult", "analyse_free_decay", "displacement_from_accelerat
            "keulegan_carpenter", "DECAY_OUTPUTS", "QuadraticDecayFit", "fit_quadratic_free_decay",
            "quadratic_free_decay_keys", "IncliningResult", "restoring_from_inclining"]
 
+#: the release: |a - median(a)| above this fraction of its largest value (module docstring)
+RELEASE_THRESHOLD = 0.5
+#: the displacement's high-pass cut-off as a fraction of the damped frequency (module docstring)
+HIGHPASS_FRACTION = 0.1
+#: peaks smaller than this fraction of the first are not used (module docstring)
+MIN_PEAK_FRACTION = 0.05
 
-# --------------------------------------------------------------------------------------
+
 # Closed-form relations ([Hindrax-AM] eqs. 2-12)
-# --------------------------------------------------------------------------------------
 def _zeta(z: float) -> float:
     z = float(z)
     if not (np.isfinite(z) and 0.0 <= z < 1.0):
@@ -161,9 +165,7 @@ def keulegan_carpenter(amplitude_m: float, characteristic_length_m: float) -> fl
                                                          "characteristic_length_m")
 
 
-# --------------------------------------------------------------------------------------
 # Signal processing
-# --------------------------------------------------------------------------------------
 def _sample_rate(t: np.ndarray) -> float:
     return 1.0 / float(np.median(np.diff(t)))
 
@@ -381,11 +383,7 @@ def _fit_damped_sinusoid(t: np.ndarray, a: np.ndarray, omega0: float, sigma0: fl
 
 
 def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg: float,
-                       volume_m3: float, fluid_density_kg_m3: float = 1000.0,
-                       kinematic_viscosity_m2_s: float = KINEMATIC_VISCOSITY_WATER_M2_S,
-                       highpass_fraction: Optional[float] = 0.1,
-                       release_threshold: float = 0.5, min_peak_fraction: float = 0.05,
-                       max_periods: Optional[int] = None) -> FreeDecayResult:
+                       volume_m3: float, fluid_density_kg_m3: float = 1000.0) -> FreeDecayResult:
     """Full [Hindrax-AM] analysis of one free-decay record (module docstring for the method).
 
     Args:
@@ -395,13 +393,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
         stiffness_n_per_m: equivalent spring stiffness k_eq ([Hindrax-AM]: 1127.7 or 659.9 N/m).
         mass_kg: body (model) mass m_b ([Hindrax-AM]: 0.39 kg).
         volume_m3: displaced volume V of the body ([Hindrax-AM] model: 0.00056 m^3).
-        fluid_density_kg_m3: rho (default 1000).
-        kinematic_viscosity_m2_s: nu for Re (default 1.01e-6, [Hindrax-AM] section 4).
-        highpass_fraction: high-pass cut-off as a fraction of the damped frequency for the
-            displacement (None: no high-pass, only bias removal).
-        release_threshold: see :func:`find_release_index`.
-        min_peak_fraction: peaks smaller than this fraction of the first are not used.
-        max_periods: optional cap on the number of periods used for delta and omega_d.
+        fluid_density_kg_m3: rho (default 1000); Re uses nu = 1.01e-6 m^2/s ([Hindrax-AM] §4).
 
     Returns:
         :class:`FreeDecayResult`.
@@ -419,10 +411,8 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     mb = positive(mass_kg, "mass_kg")
     vol = positive(volume_m3, "volume_m3")
     rho = positive(fluid_density_kg_m3, "fluid_density_kg_m3")
-    if not (0.0 < min_peak_fraction < 1.0):
-        raise EstimationError(f"min_peak_fraction must be in (0, 1), got {min_peak_fraction}")
 
-    i_rel = find_release_index(a_all, release_threshold)
+    i_rel = find_release_index(a_all, RELEASE_THRESHOLD)
     t = t[i_rel:]
     a = a_all[i_rel:]
     if t.size < 16:
@@ -431,8 +421,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     if not f_est > 0:
         raise EstimationError("no oscillation found in the acceleration")
     fs = _sample_rate(t)
-    hp = None if highpass_fraction is None else float(highpass_fraction) * f_est
-    x, v = displacement_from_acceleration(t, a, highpass_hz=hp)
+    x, v = displacement_from_acceleration(t, a, highpass_hz=HIGHPASS_FRACTION * f_est)
     # the release is a displacement extremum of sign opposite to the acceleration there
     sign = -1.0 if a[0] - np.mean(a) > 0 else 1.0
     sx = sign * x
@@ -446,14 +435,12 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     for j in range(0, len(seq) - 1, 2):
         ip, it = seq[j][0], seq[j + 1][0]
         h = sx[ip] - sx[it]
-        if heights and (h < min_peak_fraction * heights[0] or h < noise_floor):
+        if heights and (h < MIN_PEAK_FRACTION * heights[0] or h < noise_floor):
             break
         if not heights and h <= 0:
             break
         peaks_idx.append(ip)
         heights.append(h)
-        if max_periods is not None and len(heights) > max_periods:
-            break
     if len(heights) < 2:
         raise EstimationError(
             "fewer than two peaks above the noise floor: cannot measure a period")
@@ -495,7 +482,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
         added_mass_error_percent=float(added_mass_error_percent(m7, m5)),
         damping_n_s_per_m=float(c), c_m=inertia_coefficient(m5, vol, rho),
         kc=keulegan_carpenter(x0, L),
-        reynolds=float(reynolds_number(u_max, L, kinematic_viscosity_m2_s)),
+        reynolds=float(reynolds_number(u_max, L)),
         first_peak_displacement_m=x0, max_velocity_m_s=u_max, n_periods=int(n_periods),
         omega_d_fit_rad_s=w_fit, omega_d_fit_std_rad_s=w_fit_std, zeta_fit=z_fit,
         zeta_fit_std=z_fit_std, stiffness_n_per_m=k, mass_kg=mb, volume_m3=vol,
@@ -504,9 +491,7 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
         displacement_m=x, velocity_m_s=v, envelope_m=envelope)
 
 
-# --------------------------------------------------------------------------------------
 # Quadratic damping: output-error fit of the nonlinear free-decay ODE ([SmallROV] eqs. 12-16)
-# --------------------------------------------------------------------------------------
 #: Signals the ODE fit can compare with the record (``output``): what the sensor measured.
 DECAY_OUTPUTS = ("acceleration", "velocity", "displacement")
 
@@ -758,9 +743,7 @@ def quadratic_free_decay_keys(res: "FreeDecayResult", t_s, acceleration_m_s2) ->
     }
 
 
-# --------------------------------------------------------------------------------------
 # Inclining test: hydrostatic restoring stiffness in roll/pitch from a known moment
-# --------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class IncliningResult:
     """Result of :func:`restoring_from_inclining`.

@@ -41,9 +41,7 @@ class EstimationError(ValueError):
     """
 
 
-# --------------------------------------------------------------------------------------
 # Shared validation helpers (used by rls, filters, steady_windows, free_decay, ...)
-# --------------------------------------------------------------------------------------
 def positive(value: float, name: str) -> float:
     """``value`` as a float; EstimationError naming ``name`` unless it is finite and > 0."""
     value = float(value)
@@ -100,9 +98,7 @@ def check_time_vector(t, name: str = "t_s", min_samples: int = 2) -> np.ndarray:
     return t
 
 
-# --------------------------------------------------------------------------------------
 # Results
-# --------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class LsResult:
     """Result of an ordinary least-squares fit ([Hindrax-Drag] eqs. 6-8).
@@ -169,7 +165,7 @@ class _Param:
         self.std = name.endswith("_std")
         self.name = name[:-4] if self.std else name
 
-    def __get__(self, fit: "_NamedFit | None", owner: type) -> Optional[float]:
+    def __get__(self, fit: "DragFit | None", owner: type) -> Optional[float]:
         if fit is None:
             return self  # type: ignore[return-value]  # the class attribute (documentation)
         ls = fit.ls
@@ -178,8 +174,14 @@ class _Param:
         return float((ls.std if self.std else ls.theta)[ls.index(self.name)])
 
 
-class _NamedFit:
-    """Mixin giving value/std access by parameter name on top of an :class:`LsResult`."""
+@dataclass(frozen=True, eq=False)
+class DragFit:
+    """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
+
+    Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
+    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m); the last two only when
+    included in the model. Properties return ``None`` for terms not in the model.
+    """
 
     ls: LsResult
 
@@ -202,18 +204,6 @@ class _NamedFit:
         out["residual_std"] = self.ls.residual_std
         return out
 
-
-@dataclass(frozen=True, eq=False)
-class DragFit(_NamedFit):
-    """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
-
-    Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
-    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m); the last two only when
-    included in the model. Properties return ``None`` for terms not in the model.
-    """
-
-    ls: LsResult
-
     def _regressors(self, velocity) -> np.ndarray:
         names = self.ls.names or ()
         return _drag_regressors(np.asarray(velocity, dtype=float), "quadratic_damping" in names,
@@ -229,11 +219,8 @@ class DragFit(_NamedFit):
         return np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
 
 
-# --------------------------------------------------------------------------------------
 # Core estimator
-# --------------------------------------------------------------------------------------
-def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
-                     rcond: Optional[float] = None) -> LsResult:
+def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
     """Ordinary least squares with parameter covariance ([Hindrax-Drag] eqs. 4-8).
 
     theta = (X^T X)^-1 X^T y (eq. 6), sigma2 = |y - X theta|^2 / (n - p) (eq. 8),
@@ -248,8 +235,6 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
         X: (n, p) regressor matrix (finite).
         y: (n,) observations (finite), e.g. forces in N.
         names: optional p parameter names carried into the result.
-        rcond: relative singular-value threshold for the rank test on the equilibrated
-            matrix; default ``max(n, p) * eps`` (as ``numpy.linalg.matrix_rank``).
 
     Returns:
         :class:`LsResult`.
@@ -278,7 +263,7 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
         raise EstimationError(f"regressor column(s) {zero} are identically zero (rank deficient)")
     Xs = X / scale
     U, s, Vt = np.linalg.svd(Xs, full_matrices=False)
-    tol = (max(n, p) * np.finfo(float).eps if rcond is None else float(rcond)) * s[0]
+    tol = max(n, p) * np.finfo(float).eps * s[0]  # as numpy.linalg.matrix_rank
     rank = int(np.sum(s > tol))
     if rank < p:
         raise EstimationError(
@@ -297,9 +282,7 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None,
                     residuals=residuals, n=n, p=p, names=names)
 
 
-# --------------------------------------------------------------------------------------
 # Hydrodynamic models
-# --------------------------------------------------------------------------------------
 def _drag_regressors(v: np.ndarray, quadratic: bool, linear: bool, bias: bool) -> np.ndarray:
     cols = []
     if quadratic:

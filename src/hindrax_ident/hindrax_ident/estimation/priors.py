@@ -222,15 +222,15 @@ def quadratic_damping_priors(g: Geometry, notes: Optional[list] = None) -> np.nd
 
 def linear_damping_priors(quadratic: Sequence[float] | np.ndarray, restoring_n_m_per_rad: Optional[float],
                           roll_inertia_kg_m2: Optional[float], pitch_inertia_kg_m2: Optional[float],
-                          roll_added_kg_m2: float, pitch_added_kg_m2: float,
-                          zeta: float = ZETA_ROLL_PITCH,
-                          ratio: float = LINEAR_TO_QUADRATIC_TRANSLATION) -> list:
+                          roll_added_kg_m2: float, pitch_added_kg_m2: float) -> list:
     """(6,) linear damping, kg/s and kg m^2/s ([NTNU-Thesis] eq. 3.18, App. A.2 "Linear Viscous Damping").
 
-    Roll and pitch 2 zeta (I + A) sqrt(C / (I + A)); surge, sway, heave ``ratio`` times the quadratic term;
+    Roll and pitch 2 zeta (I + A) sqrt(C / (I + A)) (:data:`ZETA_ROLL_PITCH`); surge, sway, heave
+    :data:`LINEAR_TO_QUADRATIC_TRANSLATION` times the quadratic term;
     yaw BQ66 BL55 / BQ55. Without a restoring coefficient or rigid inertias, roll, pitch and yaw are None.
     """
     bq = [float(x) for x in quadratic]
+    ratio, zeta = LINEAR_TO_QUADRATIC_TRANSLATION, ZETA_ROLL_PITCH
     bl: list = [ratio * bq[0], ratio * bq[1], ratio * bq[2], None, None, None]
     if restoring_n_m_per_rad and roll_inertia_kg_m2 and pitch_inertia_kg_m2:
         c = float(restoring_n_m_per_rad)

@@ -465,24 +465,6 @@ class RecursiveLeastSquares:
         """Number of explicit :meth:`reset_covariance` calls."""
         return self._covariance_resets
 
-    def converged(self, rel_tol: float = 0.05, abs_tol: float = 0.0,
-                  min_samples: Optional[int] = None) -> bool:
-        """True when every parameter satisfies std <= rel_tol * |theta| + abs_tol.
-
-        Args:
-            rel_tol: relative tolerance on the standard deviation.
-            abs_tol: absolute tolerance (useful for parameters near zero, e.g. a bias).
-            min_samples: minimum processed samples (default 10 * p).
-        """
-        if min_samples is None:
-            min_samples = 10 * self._p
-        if self._n < min_samples:
-            return False
-        std = self.std
-        if not np.all(np.isfinite(std)):
-            return False
-        return bool(np.all(std <= rel_tol * np.abs(self.theta) + abs_tol))
-
     def to_dict(self) -> dict:
         """Plain-float snapshot: parameters (value/std), n_samples, sigma2, excitation."""
         names = self.names or tuple(f"theta_{i}" for i in range(self._p))

@@ -18,11 +18,11 @@ Algorithm (all thresholds are arguments; defaults in brackets):
 3. Samples covered by at least one passing sub-window form the steady region; each maximal
    contiguous run of them lasting at least ``min_duration_s`` (after step 4) is reported, with
    its mean, standard deviation and slope of velocity and force.
-4. Edge trimming: leading and trailing samples of a region farther than ``edge_factor`` [2]
+4. Edge trimming: leading and trailing samples of a region farther than :data:`EDGE_FACTOR` (2)
    times ``max_std`` from the region mean are dropped (a 2 s window whose first samples are
    still in the tail of the transient can pass the std test, since its std dilutes the tail);
    the duration test is repeated after trimming. So every sample at a window's edges is within
-   ``edge_factor * max_std`` of the window mean.
+   ``EDGE_FACTOR * max_std`` of the window mean.
 
 Thresholds are absolute in the DOF's units: pick ``max_std`` above the velocity sensor noise
 (DVL ~ 0.01 m/s, filtered gyro ~ 0.005 rad/s) and ``max_slope`` well below the transient
@@ -40,6 +40,9 @@ import numpy as np
 from .least_squares import EstimationError, as_float_array, check_same_length, check_time_vector
 
 __all__ = ["SteadyWindow", "detect_steady_windows", "constant_force_segments"]
+
+#: edge trimming, in units of ``max_std`` (step 4 of the module algorithm)
+EDGE_FACTOR = 2.0
 
 
 @dataclass(frozen=True)
@@ -140,8 +143,7 @@ def _trim_edges(v: np.ndarray, s: int, e: int, tol: float) -> Tuple[int, int]:
 
 def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
                           max_slope: float = 0.02, max_std: float = 0.02,
-                          force_tolerance: float = 0.05,
-                          edge_factor: float = 2.0) -> List[SteadyWindow]:
+                          force_tolerance: float = 0.05) -> List[SteadyWindow]:
     """Find steady-velocity windows under constant force (module docstring for the algorithm).
 
     Args:
@@ -152,7 +154,6 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
         max_slope: maximum |LS slope| of the velocity inside a window (m/s^2 or rad/s^2).
         max_std: maximum velocity standard deviation inside a window (m/s or rad/s).
         force_tolerance: constant-command tolerance (N or N m).
-        edge_factor: edge trimming, in units of ``max_std`` (step 4 of the module algorithm).
 
     Returns:
         List of :class:`SteadyWindow` in time order (empty when nothing is steady).
@@ -165,7 +166,7 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
     f = as_float_array(force, "force", 1)
     check_same_length(t_s=t, velocity=v, force=f)
     for name, val in (("min_duration_s", min_duration_s), ("max_slope", max_slope),
-                      ("max_std", max_std), ("edge_factor", edge_factor)):
+                      ("max_std", max_std)):
         if not (np.isfinite(val) and val > 0):
             raise EstimationError(f"{name} must be > 0, got {val}")
     windows: List[SteadyWindow] = []
@@ -189,7 +190,7 @@ def detect_steady_windows(t_s, velocity, force, min_duration_s: float = 2.0,
         steady = np.cumsum(cover[:-1]) > 0
         edges = np.flatnonzero(np.diff(np.concatenate([[0], steady.astype(int), [0]])))
         for s, e in zip(edges[::2], edges[1::2]):
-            s, e = _trim_edges(vs, int(s), int(e), edge_factor * max_std)
+            s, e = _trim_edges(vs, int(s), int(e), EDGE_FACTOR * max_std)
             if e - s < 2 or ts[e - 1] - ts[s] < min_duration_s:
                 continue
             sl = slice(a + s, a + e)

@@ -180,14 +180,13 @@ class ThrusterCurveFit:
                 "neutral_us": float(self.neutral_us)}
 
 
-def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US,
-              scale_us: float = _SCALE_US) -> CubicFit:
+def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US) -> CubicFit:
     """LS fit of tau = c4 P^3 + c3 P^2 + c2 P + c1 ([Hindrax-Drag] eq. 1) with exact raw covariance.
 
     Args:
         pulse_width_us: (n,) pulse widths in us.
         thrust_n: (n,) measured bollard-pull thrust in N.
-        centre_us, scale_us: centring/scaling of P used internally (module docstring).
+        centre_us: centring of P used internally, scaled by 400 us (module docstring).
 
     Raises:
         EstimationError: fewer than 5 samples (n > p = 4), fewer than 4 distinct pulse widths,
@@ -196,17 +195,15 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US,
     P = as_float_array(pulse_width_us, "pulse_width_us", 1)
     F = as_float_array(thrust_n, "thrust_n", 1)
     check_same_length(pulse_width_us=P, thrust_n=F)
-    if not (np.isfinite(scale_us) and scale_us > 0):
-        raise EstimationError(f"scale_us must be > 0, got {scale_us}")
     if np.unique(P).size < 4:
         raise EstimationError("a cubic needs at least 4 distinct pulse widths")
-    s = (P - centre_us) / scale_us
+    s = (P - centre_us) / _SCALE_US
     ls = fit_linear_model(np.column_stack([s**3, s**2, s, np.ones_like(s)]), F,
                           names=("a3", "a2", "a1", "a0"))
     # ascending order for the transform
     a_asc = ls.theta[::-1]
     cov_asc = ls.covariance[::-1, ::-1]
-    T = _raw_transform(centre_us, scale_us)
+    T = _raw_transform(centre_us, _SCALE_US)
     c_asc = T @ a_asc
     cov_c_asc = T @ cov_asc @ T.T
     c_desc = c_asc[::-1]                    # (c4, c3, c2, c1)
@@ -216,7 +213,7 @@ def fit_cubic(pulse_width_us, thrust_n, centre_us: float = NEUTRAL_US,
                     c1=float(c_desc[3]), c4_std=float(std[0]), c3_std=float(std[1]),
                     c2_std=float(std[2]), c1_std=float(std[3]), covariance=cov_desc,
                     n=ls.n, residual_std_n=ls.residual_std, centre_us=float(centre_us),
-                    scale_us=float(scale_us), pulse_width_min_us=float(P.min()),
+                    scale_us=_SCALE_US, pulse_width_min_us=float(P.min()),
                     pulse_width_max_us=float(P.max()), ls=ls)
 
 

@@ -37,10 +37,6 @@ class ThrustLag:
         """The thrust after ``dt_s`` s of the held ``command`` from ``force`` (arrays broadcast, N or N m)."""
         return command + (force - command) * self.decay(dt_s)
 
-    def within_tick(self, force_start, command, tick_s: float) -> tuple:
-        """The thrust at 0, ``tick_s`` / 2 and ``tick_s`` into a tick holding ``command`` from ``force_start``."""
-        return tuple(self.advance(force_start, command, s) for s in (0.0, 0.5 * tick_s, tick_s))
-
     def over_ticks(self, commands: np.ndarray, tick_s: float, force_start: float | None = None
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(start, middle, end) of each tick of ``tick_s`` through the lag, for one command per tick (n,), the

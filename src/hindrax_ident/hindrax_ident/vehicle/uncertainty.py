@@ -7,7 +7,6 @@ read them here, so they agree on the same noise.
 from __future__ import annotations
 
 import math
-from typing import Sequence
 
 from hindrax_drivers.config import DOFS, VehicleConfig, or_default
 
@@ -52,14 +51,11 @@ def measurement_settings(cfg: VehicleConfig, dof: str) -> dict:
             "accel": False}
 
 
-def declared_rel(cfg: VehicleConfig | None, thruster_fit_rel: Sequence[float] | None = None
-                 ) -> tuple[float, float]:
-    """1-sigma relative thrust uncertainty [negative, positive]: a calibration's scale std (``thruster_fit_rel``),
-    else the vehicle file's bollard-pull fit (``thrusters.thrust_fit_uncertainty_rel``), else its declared
-    ``thrusters.thrust_uncertainty_rel``, else (also without a vehicle file: a commanded wrench is realised by thrust
-    curves nobody measured here) :data:`DEFAULT_THRUST_UNCERTAINTY_REL`."""
-    if thruster_fit_rel is not None:
-        return float(thruster_fit_rel[0]), float(thruster_fit_rel[1])
+def declared_rel(cfg: VehicleConfig | None) -> tuple[float, float]:
+    """1-sigma relative thrust uncertainty [negative, positive]: the vehicle file's bollard-pull fit
+    (``thrusters.thrust_fit_uncertainty_rel``), else its declared
+    ``thrusters.thrust_uncertainty_rel``, else (also without a vehicle file: a commanded wrench is
+    realised by thrust curves nobody measured here) :data:`DEFAULT_THRUST_UNCERTAINTY_REL`."""
     if cfg is None:
         return DEFAULT_THRUST_UNCERTAINTY_REL
     # the bollard-pull fit's own uncertainty (hindrax ident thruster-fit --write) replaces the declared one
