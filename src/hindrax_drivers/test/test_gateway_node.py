@@ -83,3 +83,24 @@ def test_a_goal_that_is_not_accepted_fails_on_the_topside_with_its_cause(frames,
     out, seen = _run_goal_against(frames)
     assert not out.success and out.message == message
     assert seen == ["aborted"]
+
+
+def test_a_second_answer_to_one_call_is_dropped_and_the_reader_reads_on():
+    """The internal side answering one call twice (a fault on the channel) leaves the first answer
+    with the caller and the channel's reader thread reading the frames after it."""
+    import queue
+    from concurrent.futures import Future
+    from types import SimpleNamespace
+
+    from hindrax_drivers.gateway.node import Gateway
+
+    answer = {"k": "answer", "id": 1, "ok": True}
+    result = ({"k": "result", "id": 2}, b"goal")
+    frames = iter([(answer, b"first"), (answer, b"again"), result, None])
+    pending, goal = Future(), queue.Queue()
+    gw = SimpleNamespace(channel=SimpleNamespace(recv=lambda: next(frames)), _pending={1: pending},
+                         _goals={2: goal}, _out={}, relayed={"messages": 0}, executors=[])
+    Gateway._read_channel(gw)
+    assert pending.result(timeout=0) == (answer, b"first")
+    assert goal.get_nowait() == result
+    assert goal.get_nowait() == ({"k": "gone"}, b"")

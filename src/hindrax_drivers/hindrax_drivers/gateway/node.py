@@ -302,8 +302,10 @@ class Gateway:
         while (frame := self.channel.recv()) is not None:
             head, payload = frame
             kind = head.get("k")
-            if kind == "answer" and (pending := self._pending.get(head.get("id"))) is not None:
-                pending.set_result((head, payload))
+            pending = self._pending.get(head.get("id")) if kind == "answer" else None
+            if pending is not None:
+                if not pending.done():  # a second answer to one call is dropped, not raised here
+                    pending.set_result((head, payload))
             elif kind == "topic" and head.get("name") in self._out:
                 self.relayed["messages"] += 1
                 self._out[head["name"]].publish(payload)
