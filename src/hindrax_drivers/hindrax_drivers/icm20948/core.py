@@ -1,32 +1,27 @@
-"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4). What the node (:mod:`.node`) runs
-from its timers, through injected I2C ports, so that it can be tested step by step against the register-exact emulator.
+"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4), run by the node
+(:mod:`.node`) from its timers through injected I2C ports, tested step by step against the
+register-exact emulator.
 
-- Settings (:class:`ImuSettings`, :func:`imu_config_from_settings`, :func:`imu_noise_variances`,
-  :func:`mag_mode_for_rate`): register fields, noise variances, AK09916 mode and publishing rates from
-  ``sensors.icm20948.*`` (docs/devices.md §4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the bank cached
-  (§4.1); a failed transfer or a DEVICE_RESET makes it unknown, so the next access selects it again.
-- :class:`StartupSequence` (§4.3), steps each returning the datasheet's wait: bank 0, WHO_AM_I 0xEA (a wrong identity
-  or an I2C failure ends the attempt; the node retries); DEVICE_RESET, 10 ms; wake, 20 ms; all axes on; bank 2
-  dividers, DLPF, full scale; the magnetometer (``i2c_master``: the I2C master, then WIA2 = 0x09 through SLV4, up to
-  :data:`MAG_ATTEMPTS` tries with I2C_MST_RST between; ``bypass``: BYPASS_EN, WIA1/WIA2 at 0x0C, soft reset,
-  continuous mode). A silent magnetometer is reported through ``on_magnetometer``, never a start-up failure;
-  ``magnetometer_only=True`` is that last part alone, which brings a lost AK09916 back without resetting the chip.
-- Gyro bias (:class:`GyroBiasEstimator`, :class:`GyroBias`): the mean over the first ``gyro_bias_duration_s`` of
-  data (published uncorrected meanwhile), subtracted only when every axis's gyro and accelerometer std shows a still
-  vehicle, else a WARN says why.
-- Each poll (:func:`read_poll`): with ``require_data_ready`` a poll whose INT_STATUS_1.RAW_DATA_0_RDY is not set
-  (chip and host clocks drift) publishes nothing (:class:`DataReadyGate`: counted ``not_ready``;
-  ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``; a failed status read publishes, as without the
-  gate, so a replay of an older bag publishes what it recorded).
-- Chip reset (power glitch): its data registers read 0 and stop updating, PWR_MGMT_1 reads 0x41 (asleep), USER_CTRL
-  0 (I2C master off). An all-zero block or ``frozen_check_samples`` identical blocks (:class:`FrozenBlockWatch`)
-  make the node read the state back (:func:`read_chip_reset`); a reset is counted ``chip_resets``, an ERROR, its
-  suspect samples unpublished, the start-up run again. The all-zero block is never published.
-- Magnetometer: in ``i2c_master`` mode I2C_MST_STATUS.SLV0_NACK means the block is old (:class:`MagNackFilter`:
-  not published, counted ``mag_nack``, until it changes). :class:`MagnetometerWatch`: new samples without overflow
-  at most ``MAG_PUBLISH_HZ``; none for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises
-  the magnetometer alone, one step per poll (``imu/data_raw`` goes on), retried every ``mag_retry_interval_s``
-  (counted ``mag_retries``) until the AK09916 answers.
+- Settings (:class:`ImuSettings`): register fields, noise variances, AK09916 mode and publishing
+  rates from ``sensors.icm20948.*`` (§4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the
+  bank cached (§4.1), unknown after a failed transfer or a DEVICE_RESET.
+- :class:`StartupSequence` (§4.3): steps each returning the datasheet's wait. A wrong WHO_AM_I or an
+  I2C failure ends the attempt (the node retries); a silent magnetometer is reported through
+  ``on_magnetometer``, never a start-up failure; ``magnetometer_only=True`` brings a lost AK09916
+  back without resetting the chip.
+- :class:`GyroBias`: the mean over the first ``gyro_bias_duration_s``, subtracted only when every
+  axis's gyro and accelerometer std shows a still vehicle, else a WARN says why.
+- :func:`read_poll`: one burst per poll. With ``require_data_ready`` a poll without
+  INT_STATUS_1.RAW_DATA_0_RDY publishes nothing (:class:`DataReadyGate`: counted ``not_ready``,
+  ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``).
+- Chip reset (power glitch: data registers 0 and frozen, PWR_MGMT_1 0x41, USER_CTRL 0): an all-zero
+  block or ``frozen_check_samples`` identical blocks (:class:`FrozenBlockWatch`) make the node read
+  the state back (:func:`read_chip_reset`); a reset is counted ``chip_resets``, an ERROR, its
+  samples unpublished, the start-up run again. An all-zero block is never published.
+- Magnetometer: an ``i2c_master`` block read under SLV0_NACK is old (:class:`MagNackFilter`, counted
+  ``mag_nack``). :class:`MagnetometerWatch`: none for ``mag_stale_timeout_s`` raises the ERROR
+  ``magnetometer`` and re-initialises the magnetometer alone, one step per poll, retried every
+  ``mag_retry_interval_s`` (``mag_retries``).
 """
 from __future__ import annotations
 
