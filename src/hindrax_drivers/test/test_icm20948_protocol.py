@@ -51,9 +51,6 @@ def test_ak09916_registers():
     assert (icm.AK09916_ADDRESS, icm.AK09916_WIA1_VALUE, icm.AK09916_WIA2_VALUE) == (0x0C, 0x48, 0x09)
     assert [r.address for r in (icm.AK_ST1, icm.AK_HXL, icm.AK_TMPS, icm.AK_ST2, icm.AK_CNTL2, icm.AK_CNTL3)] \
         == [0x10, 0x11, 0x17, 0x18, 0x31, 0x32]
-    assert [icm.ak09916_mode_for_rate(r) for r in (10, 20, 50, 100)] == [0x02, 0x04, 0x06, 0x08]
-    with pytest.raises(icm.Icm20948Error):
-        icm.ak09916_mode_for_rate(200)
 
 
 # ----------------------------------------------------------------------------- configuration (§4.4)

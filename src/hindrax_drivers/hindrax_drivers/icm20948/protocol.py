@@ -30,7 +30,7 @@ from ..transport.i2c import RegisterWrite
 __all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
            "flatten_writes", "reset_wake_sequence", "configure_sequence",
            "slave_read_writes", "slave_write_writes", "mag_master_sequence", "mag_bypass_sequence",
-           "ak09916_direct_init_writes", "ak09916_mode_for_rate", "parse_sensor_block",
+           "ak09916_direct_init_writes", "parse_sensor_block",
            "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
            "encode_sensor_block", "bank_select_value", "gyro_odr_hz", "accel_odr_hz"]
 
@@ -438,14 +438,6 @@ def ak09916_direct_init_writes(mode: int = AK_MODE_CONTINUOUS_100HZ) -> list[Reg
         raise Icm20948Error(f"0x{mode:02x} is not an AK09916 CNTL2 mode")
     return [RegisterWrite(AK_CNTL3.address, AK_CNTL3_SRST, AK_RESET_WAIT_S, "AK09916 soft reset"),
             RegisterWrite(AK_CNTL2.address, mode, 0.0, "AK09916 mode")]
-
-
-def ak09916_mode_for_rate(rate_hz: float) -> int:
-    """CNTL2 continuous mode for 10/20/50/100 Hz (docs/devices.md §4.5). Raises Icm20948Error otherwise."""
-    for mode, rate in AK_CONTINUOUS_MODE_RATE_HZ.items():
-        if math.isclose(rate, rate_hz):
-            return mode
-    raise Icm20948Error(f"AK09916 continuous rate must be 10, 20, 50 or 100 Hz, got {rate_hz}")
 
 
 # ------------------------------------------------------------------------------ conversions
