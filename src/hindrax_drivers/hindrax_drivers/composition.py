@@ -1,45 +1,31 @@
 """Composed processes: several node classes of this package in one process, spun by one executor.
 
-ROS 2 C++ composes nodes with ``rclcpp_components`` containers; rclpy has none, and every node class here
-already runs in any process (``bringup.py`` composes them all for the virtual pool). A *group* is a console script
-that builds a fixed list of node classes and spins them with the process's executor
-(:func:`hindrax_drivers.node_common.run_nodes`: the EventsExecutor, orderly shutdown, each node's ``close()``).
-Nodes keep their own names and read the same vehicle file, so a group runs from a launch file exactly like the
-nodes it composes (``<node pkg="hindrax_drivers" exec="sensors_node">`` without ``name``: a ``name`` would
-rename every node of the process). Every node keeps its own executable too (``ms5837_node`` ...).
+rclpy has no ``rclcpp_components`` containers. A *group* is a console script that builds a fixed
+list of node classes and spins them (:func:`hindrax_drivers.node_common.run_nodes`). Nodes keep
+their own names and read the same vehicle file, so a group runs from a launch file like the nodes it
+composes (``<node pkg="hindrax_drivers" exec="sensors_node">`` without ``name``, which would rename
+every node of the process). Every node keeps its own executable too (``ms5837_node`` ...).
 
-Why groups (docs/architecture.md §10, the measured gains): a message costs rclpy, rcl and Fast DDS work in the
-publishing process and in every subscribing process, most of it the wake-up of a thread whose caches are cold;
-nodes in one process share one participant, one set of DDS threads and one executor thread, and a message
-between them is delivered inside the process. What stays apart: the ESC output and the safety supervisor run in
-no process with anything heavy (docs/architecture.md §8), so that neither can be starved or killed by another
-node's work.
+Why groups (docs/architecture.md §10): nodes in one process share one participant, one set of DDS
+threads and one executor thread, and a message between them stays inside the process. The ESC output
+and the safety supervisor run in no process with anything heavy (docs/architecture.md §8).
 
 Groups (:data:`GROUPS`):
 
 ``sensors_node``
-    the four sensor drivers and the static transforms: DVL-75 and Ping1D (each keeps its serial port's reader
-    thread, which decodes and publishes), MS5837 and ICM-20948 on the shared I2C bus (each node opens the bus
-    itself; the kernel serialises the transfers), and ``static_tf`` (publishes ``/tf_static`` once, latched, then
-    only waits). One process instead of two saves a participant's memory (``make bench``,
-    ``launch_pss_mb_*``); the ICM-20948's polls share the executor and the GIL with the serial
-    reader threads and lose nothing by it (``launch_running_imu_*``). A light process of no
-    safety role: one driver's failure takes the others with it for the 2 s of the respawn (a campaign needs all four
-    sensors, so the supervisor stops it either way), and late subscribers get the transforms again from the new
-    process.
+    the four sensor drivers and ``static_tf``: DVL-75 and Ping1D (each with its serial reader
+    thread), MS5837 and ICM-20948 on the shared I2C bus (the kernel serialises the transfers). No
+    safety role: one driver's failure takes the others with it for the 2 s of the respawn (a
+    campaign needs all four sensors, so the supervisor stops it either way).
 ``actuation_node``
-    thrust allocation and ESC output: the allocation's commands reach the ESC on ``thrusters/command_pulse_width``
-    inside the process (one participant), taken by the ESC's subscription callback as from any other publisher
-    (the path the vehicle takes is the path the tests take). The ESC node is built last and so closed first on
-    exit: it writes neutral before anything else shuts down.
-
+    thrust allocation and ESC output: the allocation's commands reach the ESC's subscription
+    callback inside the process, as from any other publisher. The ESC node is built last and so
+    closed first on exit: it writes neutral before anything else shuts down.
 ``ident_control_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
-    the identification node and the controller: the two model-based nodes of hindrax_ident, both non-safety
-    (:mod:`hindrax_ident.composition` builds them; this package names them only): the same Python
-    modules are loaded once (``make bench``, ``launch_pss_mb_*``). While a campaign runs the
-    controller ticks every 0.2 s.
+    the identification node and the controller, both non-safety (:mod:`hindrax_ident.composition`
+    builds them; this package names them only).
 ``ident_record_node`` (hindrax_ident, :data:`IDENT_GROUPS`)
-    the same two and the recorder: the pool test's layout with recording on (hindrax_ident.composition).
+    the same two and the recorder: the pool test's layout with recording on.
 
 ``python -m hindrax_drivers.composition NODE[,NODE...] [--ros-args ...]`` composes any nodes of
 :data:`NODE_CLASSES` (for measurements; the launch files use the groups).

@@ -1,25 +1,20 @@
 """The vehicle's DDS transport: Fast DDS over UDPv4 bound to 127.0.0.1, no shared memory.
 
-Fast DDS 2.14's shared-memory transport runs a port health check when a process first sends to a new
-participant; it can sleep 333 ms holding the participant's send lock (Fast-DDS issue 6535), so starting any
-ROS 2 process (``hindrax health``, a topic echo, a respawned node) could silence a safety heartbeat past its
-0.2 s timeout and disarm the vehicle. The profile ``share/hindrax_drivers/config/fastdds_loopback.xml`` gives
-every participant one UDPv4 transport whose interface white list is 127.0.0.1: discovery (multicast joined on
-loopback) and data stay on the machine, as ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` keeps them, without the
-shared-memory transport (docs/architecture.md §11.4; the ``safety`` rows of ``make bench`` measure it).
+Fast DDS 2.14's shared-memory transport can sleep 333 ms holding a participant's send lock when it
+first sends to a new participant (Fast-DDS issue 6535): starting any ROS 2 process could silence a
+safety heartbeat past its 0.2 s timeout. The profile
+``share/hindrax_drivers/config/fastdds_loopback.xml`` gives every participant one UDPv4 transport
+white-listed to 127.0.0.1 (docs/architecture.md §11.4; the ``safety`` rows of ``make bench``).
 
-Why not simply LOCALHOST: under ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` rmw_fastrtps 8.4 replaces a
-participant's transports by its own shared-memory + UDPv4 pair, ignoring the profile's. So a process that asks
-for loopback discovery gets ``SYSTEM_DEFAULT`` (rmw leaves the transports alone) plus the profile
-(``FASTRTPS_DEFAULT_PROFILES_FILE``); ``test_dds_transport.py`` checks that every UDP socket of such a process is
-bound to 127.0.0.1 (or is a multicast group joined on loopback) and that it maps no Fast DDS shared memory.
-A process that asks for ``SUBNET`` (the topside, the gateway's topside side) keeps Fast DDS's default transports,
-with the topside profile's announcement period (``fastdds_topside.xml``: 0.5 s like the vehicle's).
+Not ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` alone: under it rmw_fastrtps 8.4 replaces the
+profile's transports by its own shared-memory + UDPv4 pair. So a process that asks for loopback gets
+``SYSTEM_DEFAULT`` plus the profile (``FASTRTPS_DEFAULT_PROFILES_FILE``; ``test_dds_transport.py``
+checks its sockets and that it maps no shared memory). ``SUBNET`` (the topside) keeps Fast DDS's
+default transports, with ``fastdds_topside.xml``'s 0.5 s announcement period.
 
-Applied by: ``vehicle.launch.xml`` (``<set_env>`` for every vehicle process), the ``hindrax`` command
-(:mod:`hindrax_ident.tools.cli`), the virtual pool's bring-up, the tests (conftest,
-:func:`hindrax_drivers.testing.child_env`) and ``make bench``. This module imports nothing but the standard
-library, so ``hindrax --help`` stays fast.
+Applied by ``vehicle.launch.xml`` (``<set_env>``), the ``hindrax`` command, the virtual pool's
+bring-up, the tests (:func:`hindrax_drivers.testing.child_env`) and ``make bench``. Standard library
+only, so ``hindrax --help`` stays fast.
 """
 from __future__ import annotations
 

@@ -1,31 +1,26 @@
-"""The ESC's latched output state, ``esc/output_state``: whether the ESC is armed and what is on the wire, for the
-nodes that need only that (the supervisor, the MS5837 driver's ``pressure/zero_depth``, the controller) and not the
-50 Hz widths of ``thrusters/pulse_width`` (the identification node and the recorder keep those).
+"""The ESC's latched output state, ``esc/output_state``: whether the ESC is armed and what is on the
+wire, for the nodes that need only that (the supervisor, the MS5837 driver's
+``pressure/zero_depth``, the controller) and not the 50 Hz widths of ``thrusters/pulse_width``.
 
-Message: diagnostic_msgs/DiagnosticStatus with the state of the ESC's ``esc/heartbeat`` (docs/architecture.md §8):
-level OK, or ERROR while the output state is unknown; ``message`` the state's name (``neutral``, ``commanding``,
-``unknown``); KeyValues ``output_state`` (the hindrax_msgs/ThrusterPwm ``OUTPUT_*`` constant, decimal text),
-``armed`` (``true`` / ``false``, as ``ThrusterPwm.armed``: false while unknown) and ``reason``. A standard type that
-tools read (at 1 Hz its key-value list costs nothing worth saving); ThrusterPwm with empty widths would say "no
-thruster" where it means "not a width report".
+Message: diagnostic_msgs/DiagnosticStatus with the state of the ESC's ``esc/heartbeat``
+(docs/architecture.md §8): level OK, or ERROR while the output state is unknown; ``message`` the
+state's name (``neutral``, ``commanding``, ``unknown``); KeyValues ``output_state`` (the
+hindrax_msgs/ThrusterPwm ``OUTPUT_*`` constant, decimal text), ``armed`` (``true`` / ``false``,
+false while unknown) and ``reason``. QoS (:func:`esc_state_qos`): reliable, transient local, keep
+last 1, so a late subscriber gets the current state at once.
 
-QoS (:func:`esc_state_qos`): reliable, transient local, keep last 1 (``/tf_static``'s latching): a subscriber that
-joins late, or re-subscribes, gets the current state at once from the ESC's writer.
+Publishing (:class:`EscStateLatch`, pure): on every change of (armed, output_state), and every
+:data:`REPUBLISH_PERIOD_S` of steady time.
 
-Publishing (:class:`EscStateLatch`, pure): on every change of (armed, output_state), and again every
-:data:`REPUBLISH_PERIOD_S` of steady time (a reader that missed a sample catches up within a second; a recorder's
-bag shows the state once a second).
+Reading (:func:`read_esc_state`, :func:`armed_after`): a message without a valid ``output_state``
+(0-2) or ``armed`` is malformed (None: counted, treated as OUTPUT_UNKNOWN, disarmed). An output
+state that became unknown while armed counts as still armed. When the ESC is gone the last state
+stays: each reader says in its docstring what that means for it.
 
-Reading (:func:`read_esc_state`, :func:`armed_after`): a message without a valid ``output_state`` (0-2) or
-``armed`` (``true``/``false``) is malformed (None: the node counts it and treats it as OUTPUT_UNKNOWN, disarmed). An
-output state that became unknown while armed may still be thrusting: it counts as still armed. When the ESC is gone
-the last state stays (the writer's latched sample is not withdrawn): each reader says in its docstring what that
-means for it.
-
-Arm lock (:class:`ArmedWatch`): the one reading of that state for refusing a change while the thrusters may run
-(``pressure/zero_depth``, and every vehicle key a node applies while running: surface pressure, thruster limits,
-trims, timeouts; :func:`hindrax_drivers.config.node_parameters.declare_vehicle_parameters`). It refuses while the
-last state says armed (or unknown after armed) and before any state has arrived (fail closed).
+Arm lock (:class:`ArmedWatch`): refuses a change while the thrusters may run
+(``pressure/zero_depth`` and every vehicle key a node applies while running,
+:func:`hindrax_drivers.config.node_parameters.declare_vehicle_parameters`): while the last state
+says armed (or unknown after armed) and before any state has arrived (fail closed).
 """
 from __future__ import annotations
 

@@ -1,28 +1,24 @@
-"""Light decoding and encoding of CDR bytes: ``rosbags``' generated (de)serialisers instead of rclpy's classes.
+"""Light decoding and encoding of CDR bytes: ``rosbags``' generated (de)serialisers instead of
+rclpy's classes.
 
-Taking or publishing a message as an rclpy object is mostly its conversion between Python and C structures, not DDS;
-rosbags' objects skip that. They have the ROS field names (nested messages as objects, numeric arrays as numpy
-arrays), so a handler written for the rclpy message reads them unchanged; they are read-only data, not rclpy messages
-(no ``publish``, no rclpy type checks). The bytes differ from rclpy's only in padding (rosbags zeroes it), and every
+Taking or publishing an rclpy message is mostly its conversion between Python and C structures;
+rosbags' objects skip that. They have the ROS field names (nested messages as objects, numeric
+arrays as numpy arrays), so a handler written for the rclpy message reads them unchanged, but they
+are read-only data (no rclpy type checks). The bytes differ from rclpy's only in padding, and every
 reader decodes them to the same message (test_lean_cdr.py).
 
-Used on the 50 Hz chain and the safety path (every input is a subscription callback, the one input path of every
-node): publishing as bytes (:func:`cdr_encoder`, ``Publisher.publish(bytes)``) the identification node's ``wrench``
-(:func:`wrench_stamped_cdr`), the allocation's command and the ESC's ``thrusters/pulse_width``
-(:func:`thruster_pwm_lean`, :func:`thruster_pwm_cdr`), the IMU (:func:`imu_cdr`) and the ESC's latched state
-(:func:`diagnostic_status_cdr`); decoding (:func:`cdr_decoder`) the supervisor's ``imu/data_raw``, whose freshness
-check compares the bytes, the allocation's ``wrench`` and the campaign bag reader's topics
-(``BagReader.installed_messages(lean=True)``, half rclpy's time). A node's other inputs stay rclpy objects: at the
-controller's input rates the two cost the same within the spread (docs/architecture.md §10).
+Used on the 50 Hz chain and the safety path (docs/architecture.md §10): the wrench, the allocation's
+command, the ESC's pulse widths and latched state and the IMU are published as bytes
+(:func:`cdr_encoder`, ``Publisher.publish(bytes)``); the supervisor's ``imu/data_raw``, the
+allocation's ``wrench`` and the campaign bag reader's topics are decoded with :func:`cdr_decoder`
+(``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class). ``hindrax_msgs`` types
+are registered from their installed ``.msg`` files
+(:func:`hindrax_drivers.recording.msgdefs.message_definition`), the standard ones come with rosbags'
+Jazzy store.
 
-:func:`cdr_decoder` returns ``bytes -> object`` for a ``pkg/msg/Type`` name or an rclpy message class. The project's
-own interfaces (``hindrax_msgs``) are registered from their installed ``.msg`` files
-(:func:`hindrax_drivers.recording.msgdefs.message_definition`), the standard ones come with rosbags' Jazzy store.
-
-The safety heartbeats (``hindrax_msgs/Heartbeat``, 20-25 Hz in three processes) are a fixed layout, fixed-size
-fields first and one string last: :func:`heartbeat_cdr` and :func:`read_heartbeat` pack and read it with
-:mod:`struct` at fixed offsets (about 1 us each here, where rosbags' generic code takes tens), and rclpy's own
-serialiser is the reference they are tested against.
+The safety heartbeats (``hindrax_msgs/Heartbeat``) are a fixed layout, fixed-size fields first and
+one string last: :func:`heartbeat_cdr` and :func:`read_heartbeat` pack and read it with
+:mod:`struct` at fixed offsets, tested against rclpy's own serialiser.
 """
 from __future__ import annotations
 
@@ -103,11 +99,9 @@ def _encoder(type_name: str) -> Callable[[Any], bytes]:
 
 
 def prepare(*msg_types: Any) -> None:
-    """Register ``msg_types`` (rclpy message classes or ``pkg/msg/Type`` names) and generate their rosbags code now,
-    as :func:`cdr_encoder` and :func:`cdr_decoder` do when they make a codec. A node calls it while it starts for
-    the types its callbacks and ticks (de)serialise: the first use costs 80 ms of CPU here for a ``ThrusterPwm``
-    (the type store, the ``.msg`` files, the generated code), which a tick of the ESC's executor paid while
-    its heartbeat waited. Raises as :func:`cdr_decoder`."""
+    """Register ``msg_types`` (rclpy message classes or ``pkg/msg/Type`` names) and generate their
+    rosbags code now, at a node's start: the first use costs tens of ms of CPU, which a tick of the
+    ESC's executor would otherwise pay while its heartbeat waits. Raises as :func:`cdr_decoder`."""
     for msg_type in msg_types:
         _compiled_store(type_name_of(msg_type))
 

@@ -1,45 +1,39 @@
-"""Heartbeats of the safety nodes: their identity, their ages, and ROS-time step detection (docs/architecture.md §8).
+"""Heartbeats of the safety nodes: their identity, their ages, and ROS-time step detection
+(docs/architecture.md §8).
 
 The pieces every safety node (ESC, output guard, supervisor) shares:
 
-* :class:`HeartbeatPublisher`: publishes a node's heartbeat (``hindrax_msgs/Heartbeat``) with the two fields that
-  make it hard to take for another process's: ``boot_id`` (random, non-zero, new at every node start) and ``seq``
-  (1, 2, 3 ... per beat).
-* :class:`HeartbeatIdentity`: the pure check a receiver runs on a peer's heartbeat: exactly one live publisher on
-  the topic, every publisher with the expected node name (``Node.get_publishers_info_by_topic``); ``seq`` strictly
-  increasing within one ``boot_id``; no ``boot_id`` change while armed. A forged publisher or a replayed bag of the
-  vehicle's own beats is a second publisher, a wrong node name, a sequence that goes back or a new boot while armed:
-  a fault, and a beat it rejects does not count as the peer being alive.
-* :class:`HeartbeatWatch`: the receiver's subscription that feeds it, taking the beats as bytes
-  (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: DDS AUTOMATIC
-  liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the subscription's liveliness event counts the *live*
-  publishers. Why not the graph's count alone: a SIGKILLed process's endpoints stay in the ROS graph until its
-  DDS participant lease runs out (20 s with Fast DDS's default), while its writer is no longer alive after one
-  heartbeat lease. A writer offering a longer lease (rclpy's default QoS: infinite) does not match at all: its
-  beats never arrive, while the graph still shows its node name.
-* :class:`PublisherNames`: the node names of a topic's publishers, asked of the graph only when DDS says something
-  changed (the subscription's matched, liveliness, incompatible-QoS and incompatible-type events), for
-  :data:`SETTLE_S` after such an event (a node name arrives in the graph after its endpoint matches), while a
-  publisher is still unnamed, and every :data:`BACKSTOP_S` (a change no event reports); not at every tick.
+* :class:`HeartbeatPublisher`: a node's heartbeat (``hindrax_msgs/Heartbeat``) with ``boot_id``
+  (random, non-zero, new at every node start) and ``seq`` (1, 2, 3 ... per beat), which make it hard
+  to take for another process's.
+* :class:`HeartbeatIdentity`: the pure check a receiver runs: exactly one live publisher on the
+  topic, every publisher with the expected node name; ``seq`` strictly increasing within one
+  ``boot_id``; no ``boot_id`` change while armed. A forged publisher or a replayed bag is a fault,
+  and a beat it rejects does not count as the peer being alive.
+* :class:`HeartbeatWatch`: the receiver's subscription, taking the beats as bytes
+  (:func:`hindrax_drivers.lean_cdr.read_heartbeat`). Heartbeats use :func:`heartbeat_qos`: AUTOMATIC
+  liveliness with a :data:`HEARTBEAT_LEASE_S` lease, so the liveliness event counts the *live*
+  publishers (a SIGKILLed process's endpoints stay in the graph until its participant lease runs
+  out, 20 s with Fast DDS's default). A writer offering a longer lease does not match at all.
+* :class:`PublisherNames`: the node names of a topic's publishers, asked of the graph only when DDS
+  says something changed (matched, liveliness, incompatible-QoS and incompatible-type events), for
+  :data:`SETTLE_S` after such an event, while a publisher is still unnamed, and every
+  :data:`BACKSTOP_S`.
 
-A liveness judgement follows the clock of the graph it protects. On the system clock (the vehicle) that is the
-above. On simulated time (``use_sim_time``: the node's ROS clock is driven by ``/clock`` or by an in-process
-simulator, :func:`simulated_now_s`) the DDS lease, which runs on the wall clock, cannot silence a peer: a process
-starved on a loaded machine loses its lease although on the graph's clock nothing was late. There "no live
-publisher" needs no publisher in the graph at all (:meth:`HeartbeatIdentity.on_publishers`, ``simulated``), the
-other identity checks stay, and a dead or frozen peer is caught by its :class:`AliveAge` on the graph's clock.
-The QoS is the same in both modes (the writers and readers of a mixed graph keep matching).
+On simulated time (``use_sim_time``, :func:`simulated_now_s`) the DDS lease, on the wall clock,
+cannot silence a peer (a process starved on a loaded machine would lose it although nothing was late
+on the graph's clock): "no live publisher" then needs no publisher in the graph at all
+(:meth:`HeartbeatIdentity.on_publishers`, ``simulated``), the other identity checks stay, and a dead
+or frozen peer is caught by its :class:`AliveAge`. The QoS is the same in both modes.
 
-* :class:`AliveAge`: a peer's age, on ``time.monotonic`` from its beat, over the time this process's
-  executor ran (a gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``). A peer
-  that dies or hangs elsewhere ages at wall-clock speed; this process's own stall (a busy
-  single-process graph, a SIGSTOP) does not make every peer look dead when it resumes. On simulated
-  time the age is also counted on the graph's clock, and the smaller count holds: a peer is late
-  only when its beat is late on the simulation's clock (a slow or held simulation does not age it),
-  and the beats, paced by steady timers, are not made late by a simulation faster than real time.
-* :class:`ClockStepMonitor`: compares ROS time with the steady clock at each tick and reports a backward step of
-  ROS time (``/clock`` restarted or a bag looped) and a stall (ROS time frozen while the steady clock runs), so a
-  node can re-base its ROS-time checks and say so on ``/diagnostics``.
+* :class:`AliveAge`: a peer's age on ``time.monotonic`` from its beat, over the time this process's
+  executor ran (a gap between two :meth:`AliveAge.tick` calls counts at most ``max_step_s``), so
+  this process's own stall does not make every peer look dead. On simulated time the age is also
+  counted on the graph's clock and the smaller count holds: a slow or held simulation ages no
+  peer, and the beats, paced by steady timers, are not made late by a fast one.
+* :class:`ClockStepMonitor`: reports a backward step of ROS time against the steady clock
+  (``/clock`` restarted, a bag looped) and a stall (ROS time frozen while the steady clock runs), so
+  a node can re-base its ROS-time checks and say so on ``/diagnostics``.
 """
 from __future__ import annotations
 

@@ -193,19 +193,15 @@ class RawDataPublisher:
     :meth:`i2c_tap` as an I2C helper's raw tap ``(kind 'read'|'write', address, register, data, t)``.
     Stamps are the node's ROS time at publication. Safe to call from transport threads.
 
-    Batching: between :meth:`begin_batch` and :meth:`flush` the taps are collected. Serial: :meth:`flush`
-    publishes the received chunks concatenated into one chunk (one message per parsed report; a host->device write
-    flushes first, so each message has one direction). I2C: the transactions of read cycles are kept until
-    ``i2c_period_s`` (default :data:`RAW_I2C_PERIOD_S`, ROS time) has passed since the oldest one, or
-    :data:`RAW_I2C_MAX_BYTES` are pending, and then published as one message: records
-    ``<direction u8, address u8, register i16, length u16 (little-endian), data>`` packed into ``data`` with
-    ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a plain message when there is only one transaction;
-    :func:`raw_transactions` unpacks both forms, in wire order. Why 0.1 s and not one message per read cycle: a
-    publish costs far more than its bytes (docs/architecture.md §10.1), and the ICM-20948 polls at 102 Hz and
-    the PCA9685 is written at up to 50 Hz; the I2C replay answers reads in their recorded order and does not use
-    the stamps (:mod:`~hindrax_drivers.recording.replay_devices`). What stays pending is published by
-    ``flush(force=True)``; a tap outside a batch publishes what is pending with it at once (start-up sequences,
-    error paths), so the order on the wire is kept.
+    Batching: between :meth:`begin_batch` and :meth:`flush` the taps are collected. Serial: one
+    message per parsed report (a host->device write flushes first: one direction per message). I2C:
+    kept until ``i2c_period_s`` (:data:`RAW_I2C_PERIOD_S`, ROS time) has passed since the oldest, or
+    :data:`RAW_I2C_MAX_BYTES` are pending (a publish costs far more than its bytes,
+    docs/architecture.md §10.1), then one message of records ``<direction u8, address u8, register
+    i16, length u16 (little-endian), data>`` with ``i2c_register = RAW_BATCH_REGISTER`` (-2), or a
+    plain message for one transaction; :func:`raw_transactions` unpacks both, in wire order.
+    ``flush(force=True)`` publishes what is pending; a tap outside a batch publishes it at once,
+    so the order on the wire is kept.
     """
 
     def __init__(self, node: Any, device_name: str, topic: str | None = None,

@@ -1,7 +1,7 @@
 """The life of an rclpy process, written once: init, run, orderly shutdown on SIGINT/SIGTERM.
 
-Every process entry point (a node run alone, :func:`~hindrax_drivers.node_common.run_node`; the whole graph,
-``hindrax bringup``; ``hindrax bag play|record``; the recorder and player nodes run alone) is::
+Every process entry point (:func:`~hindrax_drivers.node_common.run_node`, ``hindrax bringup``,
+``hindrax bag play|record``) is::
 
     with RosProcess(args, errors={ConfigError: "invalid configuration"}) as proc:
         node = proc.own(MyNode())
@@ -9,73 +9,38 @@ Every process entry point (a node run alone, :func:`~hindrax_drivers.node_common
         proc.spin()
     return proc.status
 
-On leaving the block, whatever the reason, the registered clean-ups run, last registered first (for a node
-from :meth:`RosProcess.own`: its ``close()`` if it has one, which is where the ESC node writes neutral, then the
-raw device data its ``raw`` publisher still holds (``RawDataPublisher.flush_pending``), then ``destroy_node()``),
-then the executor shuts down and the rclpy context is shut down if still up.
+On leaving the block the clean-ups run, last registered first (for a node from
+:meth:`RosProcess.own`: its ``close()``, where the ESC writes neutral, then
+``RawDataPublisher.flush_pending``, then ``destroy_node()``), then the executor and the context
+shut down.
 
-Exceptions leaving the block:
+Exceptions leaving the block: ``KeyboardInterrupt`` and ``ExternalShutdownException`` end the
+process normally; a type listed in ``errors`` is printed as one line ``"<prefix>: <first line>"``
+on stderr, status 1; any other is re-raised, except during a shutdown (a callback failing inside
+rcl, or a ``KeyboardInterrupt`` renamed by pybind11: the orderly shutdown, not a crash).
 
-- ``KeyboardInterrupt`` and rclpy's ``ExternalShutdownException`` (SIGINT/SIGTERM) end the process normally;
-- an exception of a type listed in ``errors`` (e.g. an invalid configuration) is printed as one line,
-  ``"<prefix>: <first line of the message>"``, on stderr and sets :attr:`RosProcess.status` to 1;
-- any other exception is re-raised, except while the context is already shutting down or after a SIGINT/SIGTERM:
-  a callback that was running when the signal arrived may then fail inside rcl ("publisher's context is
-  invalid"), and a ``KeyboardInterrupt`` raised while the main thread was inside a C extension's call back into
-  Python comes out renamed (pybind11: ``RuntimeError: Unable to convert call argument ...``); both are part of the
-  orderly shutdown, not a crash.
+The executor is rclpy's ``EventsExecutor`` (docs/architecture.md §10) unless ``HINDRAX_EXECUTOR``
+says ``single``; a subscription callback takes the message info only through
+:class:`WithMessageInfo` (rclpy 7.1, docs/architecture.md §11.5).
 
-The executor is rclpy's ``EventsExecutor`` (``rclpy.experimental``, Jazzy; it dispatches from a C++
-event queue instead of rebuilding a wait set in Python on every spin, docs/architecture.md §10)
-unless the environment variable ``HINDRAX_EXECUTOR`` says ``single`` (rclpy's
-``SingleThreadedExecutor``). Every node process stays within its limits in rclpy 7.1
-(docs/architecture.md §11.5): a subscription callback takes the message info only through
-:class:`WithMessageInfo`, no coroutine waits for long.
+Signals: any number of SIGINT/SIGTERM at any moment after start-up end the process with status 0. In
+the main thread Python's handlers are set before ``rclpy.init`` (rclpy's chain to them): while the
+block runs SIGINT raises ``KeyboardInterrupt`` and SIGTERM shuts the context down; with
+``interrupt=False`` (node processes) both are only recorded, :meth:`RosProcess.spin` returns at its
+next turn (:data:`SPIN_TIMEOUT_S`) and the context is shut down after the clean-ups, never under a
+running callback; from ``__exit__`` on both are absorbed; at the end the handlers found on entry are
+restored, unless a signal arrived (they then stay ignored: finalization would reset SIGINT, status
+-2). In another thread the handlers are left as they are.
 
-Signals: one SIGINT or SIGTERM, or any number of them at any moment after start-up, ends the process
-with status 0. Python raises ``KeyboardInterrupt`` in the main thread only when that thread next
-checks for signals, which could land it in a clean-up (status -2, the remaining clean-ups not run).
-So, in the main thread, :class:`RosProcess` sets Python's SIGINT and SIGTERM handlers before
-``rclpy.init`` (rclpy's then chain to them):
+``shutdown_budget_s`` (node processes: :data:`SHUTDOWN_BUDGET_S`): a shutdown still running after it
+writes every thread's traceback and exits with status 1 (``faulthandler``), before ``ros2 launch``'s
+SIGKILL. ``exit_process=True``: ``__exit__`` ends the process (``os._exit``) after the clean-ups; a
+hidden node (``_exit_<pid>``) holds the DDS participant to the end, since Fast DDS 2.14 can spin for
+seconds in ``set_listener(nullptr)`` (Fast-DDS issue 6513); main thread only, context still up.
 
-- while the block runs, SIGINT raises ``KeyboardInterrupt`` in it (a command may catch it), SIGTERM
-  only shuts the context down (rclpy's handler);
-- with ``interrupt=False`` (node processes, :func:`~hindrax_drivers.node_common.run_nodes`) rclpy
-  installs no handler (``SignalHandlerOptions.NO``): both signals are only recorded,
-  :meth:`RosProcess.spin` (``spin_once`` with a :data:`SPIN_TIMEOUT_S` timeout) returns at its next
-  turn, and the context is shut down after the clean-ups, never under a running callback (whose
-  publish would fail with "publisher's context is invalid");
-- from the first instruction of ``__exit__`` on, both are absorbed: every clean-up runs to its end;
-- at the end rclpy's handlers are uninstalled and the handlers found on entry restored, unless a
-  signal arrived: SIGINT and SIGTERM then stay ignored until the process has exited (the
-  interpreter's finalization would otherwise reset SIGINT to its default action, status -2).
-
-In another thread (a test running a node process in a thread) the handlers are left as they are.
-
-Bounded shutdown: with ``shutdown_budget_s`` (node processes: :data:`SHUTDOWN_BUDGET_S`),
-``__exit__`` first arms ``faulthandler.dump_traceback_later(..., exit=True)``: a shutdown still
-running after the budget writes every thread's traceback to stderr and ends the process with status
-1, before ``ros2 launch``'s SIGKILL at 10 s.
-
-Exit without the DDS participant's teardown: with ``exit_process=True`` (node processes run as
-programs, :func:`~hindrax_drivers.node_common.run_nodes`), ``__exit__`` ends the process itself
-(``os._exit`` with :attr:`RosProcess.status` after flushing stdout and stderr; 1 with the traceback
-for an exception that would have propagated) once the clean-ups and the executor's and context's
-shutdown are done. Fast DDS 2.14 can spin for seconds in
-``DomainParticipant::set_listener(nullptr)`` while peers remove their endpoints at once (Fast-DDS
-issue 6513), so a hidden node (``_exit_<pid>``, no global arguments, no rosout, no parameter
-services), made in the first node's clean-up after its ``close()``, holds the participant: every
-node is still destroyed (endpoints disposed, name off the graph) and the participant is left to the
-process's end (peers drop it at lease expiry). Only in the main thread, and only when the context is
-still up.
-
-Garbage collection: :meth:`RosProcess.spin` collects once and then freezes every object alive at
-start-up (``gc.freeze``) before it spins, so that a full collection, which holds the GIL while it
-traverses every object (tens of thousands in a node process), cannot stall the ESC's, the
-supervisor's or the guard's tick against their 0.2 s heartbeat timeouts (docs/architecture.md §8;
-``make bench``: ``gc_full_collection_cpu_ms_*``). The price: a frozen object that later ends up in a
-reference cycle is never collected; what is frozen is modules, classes, functions and the nodes,
-which live as long as the process.
+:meth:`RosProcess.spin` collects once and freezes (``gc.freeze``) every object alive at start-up, so
+that a full collection cannot stall the safety ticks against their 0.2 s heartbeat timeouts
+(docs/architecture.md §8; ``make bench``: ``gc_full_collection_cpu_ms_*``).
 
 rclpy is imported when the block is entered, not when this module is.
 """
@@ -105,7 +70,7 @@ __all__ = ["BEFORE_PROCESS_END", "EXECUTORS", "RosProcess", "SHUTDOWN_BUDGET_S",
 EXECUTORS = ("events", "single")
 
 #: the longest a node process's shutdown may take before it dumps its threads' tracebacks and exits with status 1
-#: (module docstring, "Bounded shutdown"): below ``ros2 launch``'s SIGKILL, 10 s after its SIGINT; the slowest
+#: (module docstring): below ``ros2 launch``'s SIGKILL, 10 s after its SIGINT; the slowest
 #: clean-up measured, the recorder finishing a bag, takes well under a second
 SHUTDOWN_BUDGET_S = 8.0
 
@@ -129,7 +94,7 @@ def executor_kind(environ: Mapping[str, str] | None = None) -> str:
 
 def freeze_startup_heap() -> int:
     """Collect the garbage of start-up once, then move every object still tracked by the garbage collector to its
-    permanent generation (``gc.collect()``, ``gc.freeze()``; module docstring, "Garbage collection"): no later
+    permanent generation (``gc.collect()``, ``gc.freeze()``; module docstring): no later
     collection traverses them again. Returns the number of frozen objects (``gc.get_freeze_count()``)."""
     gc.collect()
     gc.freeze()
@@ -188,7 +153,6 @@ class _EventsLoop:
     ``ExternalShutdownException`` then (handled by :class:`RosProcess`)."""
 
     def __init__(self) -> None:
-
         self._ex = EventsExecutor()
 
     def add_node(self, node: Any) -> bool:
@@ -217,9 +181,9 @@ class RosProcess:
     ``[]`` for a process whose arguments are not ROS arguments). errors: {exception type: message prefix}.
     executor: ``events`` or ``single`` to fix the executor, None to follow ``HINDRAX_EXECUTOR``. Raises
     ``ValueError`` for another value. interrupt: whether SIGINT raises ``KeyboardInterrupt`` in the block.
-    shutdown_budget_s: seconds the exit may take (module docstring, "Bounded shutdown"); None, unbounded.
-    exit_process: end the process on leaving the block, without the DDS participant's teardown (module docstring,
-    "Exit without the DDS participant's teardown"); only in the main thread.
+    shutdown_budget_s: seconds the exit may take (module docstring); None, unbounded.
+    exit_process: end the process on leaving the block, without the DDS participant's teardown
+    (module docstring); only in the main thread.
     """
 
     def __init__(self, args: Sequence[str] | None = None, errors: Mapping[type, str] | None = None,
@@ -232,10 +196,9 @@ class RosProcess:
         self.args = list(args) if args is not None else list(sys.argv)
         self.shutdown_budget_s = shutdown_budget_s
         """Seconds the exit may take before every thread's traceback is dumped and the process ends with status 1
-        (module docstring, "Bounded shutdown"); None: unbounded."""
+        (module docstring); None: unbounded."""
         self.exit_process = bool(exit_process)
-        """Whether leaving the block ends the process (module docstring, "Exit without the DDS participant's
-        teardown")."""
+        """Whether leaving the block ends the process (module docstring)."""
         self.interrupt = bool(interrupt)
         """Whether SIGINT raises ``KeyboardInterrupt`` in the block (module docstring, "Signals")."""
         self.errors = dict(errors or {})
@@ -248,11 +211,8 @@ class RosProcess:
         self._stopping = False
         self._previous: dict[int, Any] = {}
         self._holder: Any = None
-        self.frozen_objects = 0
-        """Objects frozen for the garbage collector by :meth:`spin` (0 before it)."""
 
     def __enter__(self) -> RosProcess:
-
         if threading.current_thread() is threading.main_thread():
             _uninstall_rclpy_handlers()  # an earlier context's (rclpy.try_shutdown leaves them): reinstalled below
             self._previous = {sig: signal.getsignal(sig) for sig in _STOP_SIGNALS}
@@ -304,11 +264,11 @@ class RosProcess:
 
     def spin(self, executor: Any = None) -> None:
         """Spin ``executor`` (default :attr:`executor`) until the context shuts down, after freezing the start-up
-        heap for the garbage collector (:func:`freeze_startup_heap`; module docstring, "Garbage collection"): call it
-        once every node of the process is built. Sets :attr:`frozen_objects`. With ``interrupt=False`` it returns
+        heap for the garbage collector (:func:`freeze_startup_heap`; module docstring): call it
+        once every node of the process is built. With ``interrupt=False`` it returns
         at most 0.1 s after a SIGINT or SIGTERM (module docstring, "Signals"); otherwise it raises what the
         executor's spin raises (``ExternalShutdownException`` on SIGINT/SIGTERM, handled on leaving the block)."""
-        self.frozen_objects = freeze_startup_heap()
+        freeze_startup_heap()
         executor = self.executor if executor is None else executor
         if self.interrupt:
             executor.spin()
@@ -341,7 +301,6 @@ class RosProcess:
         return node
 
     def __exit__(self, exc_type: type | None, exc: BaseException | None, tb: Any) -> bool:
-
         self._stopping = True  # first: from here on SIGINT and SIGTERM are absorbed (_on_signal)
         if self.shutdown_budget_s is not None:
             faulthandler.dump_traceback_later(self.shutdown_budget_s, exit=True)
@@ -367,7 +326,7 @@ class RosProcess:
             self._holder = _participant_holder()
 
     def _end_process(self, failure: BaseException | None) -> None:
-        """End the process now (module docstring, "Exit without the DDS participant's teardown"): the traceback of
+        """End the process now (module docstring): the traceback of
         ``failure`` and status 1, or :attr:`status`."""
         status = self.status
         if failure is not None:
@@ -421,7 +380,7 @@ class RosProcess:
 
 def _participant_holder() -> Any:
     """A hidden node whose only purpose is to keep the process's DDS participant (rmw_fastrtps destroys it with the
-    context's last node) until the process ends (module docstring, "Exit without the DDS participant's teardown").
+    context's last node) until the process ends (module docstring).
     No global arguments (a launch's ``-r __node:=esc`` would name it ``esc``), no rosout, no parameter services.
     None when the context is already shut down (the ordinary exit follows)."""
     if not rclpy.ok():

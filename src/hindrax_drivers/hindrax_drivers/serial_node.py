@@ -1,31 +1,24 @@
-"""Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one tap.
+"""Base class of the serial driver nodes (DVL-75, Ping1D): one transport, one state machine, one
+tap.
 
-What every serial device node needs, written once (docs/architecture.md §2 "the node owns a transport, calls the
-protocol layer, publishes, reports diagnostics"):
+- configuration ``<section>.port`` (device path or pyserial URL) and ``<section>.baud_rate``
+  (:func:`hindrax_drivers.node_common.load_node_config`: invalid -> one line, exit 1);
+- a :class:`~hindrax_drivers.transport.serial_transport.SerialTransport` (reader thread, reconnect
+  with backoff 0.05 s doubling to 1 s);
+- raw traffic on ``raw/<device>`` (``RawDataPublisher.serial_tap``), one message per parsed report;
+- ``/diagnostics`` state: ``disconnected`` (ERROR with the open error), ``connected`` (OK; WARN
+  "connected, no data" after ``NO_DATA_TIMEOUT_S`` without a publish), ``reconnecting`` (ERROR);
+  published at once on every change, and at 1 Hz;
+- a :class:`CommandSequencer` that sends the start-up commands after *every* (re)connect, spaced by
+  a gap, from its own thread;
+- :meth:`SerialDeviceNode.check_stuck`: one :class:`~hindrax_drivers.node_common.StuckDetector` per
+  named signal, the ERROR ``stuck`` while any is stuck; the subclass then stops publishing the stuck
+  values as valid (:attr:`SerialDeviceNode.stuck`).
 
-- the configuration (``<section>.port``: device path or pyserial URL, ``<section>.baud_rate``) read
-  through :func:`hindrax_drivers.node_common.load_node_config` (invalid -> one line, exit 1);
-- a :class:`~hindrax_drivers.transport.serial_transport.SerialTransport` (reader thread, reconnect with
-  backoff 0.05 s doubling to 1 s, so a device that comes back is re-opened within about 1 s);
-- raw traffic on ``raw/<device>`` (hindrax_msgs/RawDeviceData) through ``RawDataPublisher.serial_tap``,
-  one message per parsed report (the chunks received since the last one, concatenated);
-- device state on ``/diagnostics``: ``disconnected`` (never opened; ERROR with the open error),
-  ``connected`` (OK; WARN "connected, no data" when nothing was published for ``NO_DATA_TIMEOUT_S``),
-  ``reconnecting`` (ERROR, link lost); the status is published at once on every change, and at 1 Hz;
-- a :class:`CommandSequencer` that sends the device's start-up commands after *every* (re)connect,
-  spaced by a gap, from its own thread (the reader keeps reading meanwhile);
-- stuck-value detection: :meth:`SerialDeviceNode.check_stuck` keeps one
-  :class:`~hindrax_drivers.node_common.StuckDetector` per named signal and raises the diagnostics
-  ERROR ``stuck`` while any is stuck; the subclass then stops publishing the stuck values as valid
-  (:attr:`SerialDeviceNode.stuck`): a frozen reading is not a measurement.
-
-Threading: received bytes are decoded and published in the transport's reader thread (lowest
-latency; rclpy publishers are thread-safe), timers (diagnostics, housekeeping) run in the executor.
-Subclasses implement :meth:`handle_bytes` and :meth:`startup_commands`, and may override
-:meth:`on_link_up`, :meth:`housekeeping` and :meth:`extra_diagnostics`.
-
-Node parameter (besides the vehicle configuration): ``stuck_limit_samples`` (int >= 2, default 50):
-consecutive identical readings that count as a stuck sensor.
+Received bytes are decoded and published in the transport's reader thread; timers run in the
+executor. Subclasses implement :meth:`handle_bytes` and :meth:`startup_commands`, and may override
+:meth:`on_link_up`, :meth:`housekeeping` and :meth:`extra_diagnostics`. Node parameter
+``stuck_limit_samples`` (int >= 2, default 50): identical readings in a row that count as stuck.
 """
 from __future__ import annotations
 

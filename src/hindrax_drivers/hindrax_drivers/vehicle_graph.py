@@ -1,26 +1,21 @@
-"""What on a ROS graph speaks for a vehicle: the topics that command or vouch for it, and the processes that are it.
+"""What on a ROS graph speaks for a vehicle: the topics that command or vouch for it, and the
+processes that are it.
 
-The project's own tools must never speak for a vehicle they were not started as (docs/architecture.md,
-"Authority"): a replayed ``supervisor/heartbeat`` would answer for a dead supervisor, a replayed ``wrench`` or
-``thrusters/command_pulse_width`` would drive the thrusters, a second ``bringup --sim`` on the vehicle's domain would
-mix its ESC and supervisor into the vehicle's safety graph.
+The project's tools must never speak for a vehicle they were not started as (docs/architecture.md,
+"Authority"): a replayed ``supervisor/heartbeat`` would answer for a dead supervisor, a replayed
+``wrench`` would drive the thrusters, a second ``bringup --sim`` on the vehicle's domain would mix
+its ESC and supervisor into the vehicle's safety graph.
 
-Pure core:
-
-- :func:`vehicle_topic_reason` / :func:`split_vehicle_topics`: the safety and actuation topics (heartbeats,
-  ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*`` and ``output_guard/*``, the allocation's ``wrench`` and the
-  controller's ``setpoint``, action and service topics), in any namespace. ``hindrax bag play`` withholds them
-  unless asked with ``--safety-topics``.
-- :func:`foreign_vehicle_processes`: the ESCs and supervisors a graph shows beyond the caller's own (node names
-  ``esc`` / ``supervisor`` in any namespace, and any other node publishing their heartbeat topics), each as one
-  phrase naming the node.
-
-Graph side (rclpy, no executor needed): :func:`graph_view` reads a node's view of the graph, :func:`own_view` the
-caller's own nodes; :class:`ForeignVehicleWatch` applies :func:`foreign_vehicle_processes` to it over a discovery
-window, then every :data:`CHECK_PERIOD_S` for as long as the tool runs, and raises :class:`ForeignVehicleError`
-(one line naming the domain and the processes) when something is seen. :func:`refuse_before_start` runs the window
-from a bare look-out node before a tool creates anything: a refused tool must leave no trace on the vehicle's
-graph (its heartbeat publishers, even for the second before the refusal, disarm the vehicle's ESC).
+- :func:`vehicle_topic_reason` / :func:`split_vehicle_topics` (pure): the safety and actuation
+  topics (heartbeats, ``thrusters/*``, ``esc/*``, ``supervisor/*``, ``guard/*``, ``output_guard/*``,
+  ``wrench``, ``setpoint``, action and service topics) in any namespace; ``hindrax bag play``
+  withholds them unless asked with ``--safety-topics``.
+- :func:`foreign_vehicle_processes` (pure): the ESCs and supervisors a graph shows beyond the
+  caller's own, each as one phrase naming the node.
+- :func:`graph_view`, :func:`own_view`, :class:`ForeignVehicleWatch` (over a discovery window, then
+  every :data:`CHECK_PERIOD_S`; raises :class:`ForeignVehicleError`) and :func:`refuse_before_start`
+  (from a bare look-out node before a tool creates anything: its heartbeat publishers, even for a
+  second, would disarm the vehicle's ESC).
 """
 from __future__ import annotations
 

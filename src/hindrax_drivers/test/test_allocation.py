@@ -6,6 +6,7 @@ computed from the matrix and the curve limits alone.
 """
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,13 +14,8 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from hindrax_drivers.allocation.allocator import AXIS_NAMES, InvalidWrenchError, ThrustAllocator
-from hindrax_drivers.allocation.matrix import (
-    HINDRAX_HORIZONTAL_ANGLE_RAD,
-    ThrusterLayout,
-    hindrax_default_layout,
-    horizontal_direction,
-    thrust_allocation_matrix,
-)
+from hindrax_drivers.allocation.from_config import allocation_matrix_from_config
+from hindrax_drivers.allocation.matrix import thrust_allocation_matrix
 from hindrax_drivers.allocation.thrust_curve import ThrustCurve, hindrax_default_curve, point_reflection
 
 COS55 = math.cos(math.radians(55.0))
@@ -48,7 +44,14 @@ def cosine(a, b):
 
 @pytest.fixture(scope="module")
 def layout():
-    return hindrax_default_layout()
+    """The shipped vehicle file's thruster geometry (FRD, about the CG) and its matrix."""
+    from hindrax_drivers.config import default_config_path, load_config
+
+    cfg = load_config(default_config_path())
+    matrix = allocation_matrix_from_config(cfg)
+    t = cfg.thrusters
+    return SimpleNamespace(names=tuple(t.names), positions_m=t.positions_frd_m,
+                           directions=t.directions_frd, matrix=matrix.copy)
 
 
 @pytest.fixture(scope="module")
@@ -86,19 +89,11 @@ def test_matrix_rejects_bad_input(positions, directions):
         thrust_allocation_matrix(positions, directions)
 
 
-def test_horizontal_direction_is_seed_decomposition():
-    np.testing.assert_allclose(horizontal_direction(math.radians(55.0)), [COS55, SIN55, 0.0], atol=1e-15)
-    many = horizontal_direction(np.array([0.0, math.pi / 2]))
-    np.testing.assert_allclose(many, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], atol=1e-15)
-    with pytest.raises(ValueError):
-        horizontal_direction(math.nan)
-
-
 def test_default_layout_geometry(layout):
-    assert layout.names == ("T1", "T2", "T3", "T4", "T5", "T6", "T7", "T8")
-    assert HINDRAX_HORIZONTAL_ANGLE_RAD == pytest.approx(math.radians(55.0))
+    assert layout.names == ("t1", "t2", "t3", "t4", "t5", "t6", "t7", "t8")
     expected_dirs = [[COS55, SIN55, 0], [COS55, -SIN55, 0], [-COS55, SIN55, 0], [-COS55, -SIN55, 0]] + [[0, 0, 1]] * 4
-    np.testing.assert_allclose(layout.directions, expected_dirs, atol=1e-15)
+    # 55 deg, [Hindrax-Drag] section 4
+    np.testing.assert_allclose(layout.directions, expected_dirs, atol=1e-6)
     p = layout.positions_m
     # T1 front-starboard, T2 front-port, T3 rear-starboard, T4 rear-port (FRD: +x forward, +y starboard)
     assert p[0, 0] > 0 and p[0, 1] > 0 and p[1, 0] > 0 and p[1, 1] < 0
@@ -109,11 +104,6 @@ def test_default_layout_geometry(layout):
     assert np.all(np.abs(p[:, 0]) <= 0.59 / 2) and np.all(np.abs(p[:, 1]) <= 0.47 / 2)
     assert np.ptp(p[:, 2]) <= 0.40
     assert np.linalg.matrix_rank(layout.matrix()) == 6
-    for bad in ({"horizontal_z_m": math.nan}, {"vertical_x_m": "far"}, {"horizontal_angle_rad": None}):
-        with pytest.raises(ValueError):
-            hindrax_default_layout(**bad)
-    with pytest.raises(ValueError):
-        ThrusterLayout(names=("a", "a"), positions_m=np.zeros((2, 3)), directions=[[1, 0, 0], [1, 0, 0]])
 
 
 def test_seed_pairing_t1_t2_is_surge_with_pitch_moment_from_lower_layer(layout):
@@ -121,8 +111,8 @@ def test_seed_pairing_t1_t2_is_surge_with_pitch_moment_from_lower_layer(layout):
     force = 10.0
     tau = b @ np.array([force, force, 0, 0, 0, 0, 0, 0])
     z_h = layout.positions_m[0, 2]
-    expected = eq9_column([COS55 * force, SIN55 * force, 0], layout.positions_m[0]) + \
-        eq9_column([COS55 * force, -SIN55 * force, 0], layout.positions_m[1])
+    expected = eq9_column(layout.directions[0] * force, layout.positions_m[0]) + \
+        eq9_column(layout.directions[1] * force, layout.positions_m[1])
     np.testing.assert_allclose(tau, expected, atol=1e-12)
     assert tau[X] == pytest.approx(2 * COS55 * force)
     np.testing.assert_allclose(tau[[Y, Z, K, N]], 0.0, atol=1e-12)

@@ -12,6 +12,7 @@ import pytest
 from smbus2 import i2c_msg
 
 from hindrax_drivers.icm20948 import protocol as icm
+from hindrax_drivers.icm20948.core import imu_config_from_settings
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
 from hindrax_drivers.ms5837 import protocol as ms
 from hindrax_drivers.ms5837.emulator import Ms5837Emulator
@@ -346,8 +347,7 @@ def icm_setup(path: str):
     devices = {icm.ADDRESS_AD0_LOW: emulator, icm.AK09916_ADDRESS: emulator.aux_port}
     bus = EmulatedI2CBus(devices)
     dev = I2CDevice(bus, icm.ADDRESS_AD0_LOW, "icm20948", sleep=clock.sleep, clock=clock)
-    config = icm.imu_config_from_si(accel_range_m_s2=45.0, gyro_range_rad_s=math.radians(400),
-                                    sample_rate_hz=225.0)
+    config = imu_config_from_settings(8.0, 500.0, 3, 225.0)  # +-8 g, +-500 dps, DLPFCFG 3
     dev.write_byte_data(icm.REG_BANK_SEL_ADDRESS, icm.bank_select_value(0))
     assert dev.read_byte_data(icm.WHO_AM_I.address) == icm.WHO_AM_I_VALUE
     writes = [*icm.reset_wake_sequence(), *icm.configure_sequence(config)]

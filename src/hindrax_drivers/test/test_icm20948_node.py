@@ -23,7 +23,7 @@ from sensor_msgs.msg import Imu, MagneticField, Temperature
 from hindrax_drivers.config import default_config_path
 from hindrax_drivers.icm20948 import protocol as p
 from hindrax_drivers.icm20948.emulator import Icm20948Emulator
-from hindrax_drivers.icm20948.core import GyroBiasEstimator
+from hindrax_drivers.icm20948.core import STILL_STD_FACTOR, GyroBias
 from hindrax_drivers.icm20948.node import Icm20948Node
 from hindrax_drivers.node_common import unbatch_raw
 from hindrax_drivers.testing import child_env, child_process, config_parameters, interrupt, ros_context, wait_until
@@ -405,8 +405,15 @@ def test_gyro_bias_is_not_applied_when_the_vehicle_moves(rig):
     assert status.level == DiagnosticStatus.WARN and "not still" in status.message
 
 
+def _bias_window(gyro_std_threshold_rad_s: float, accel_std_threshold_m_s2: float) -> GyroBias:
+    bias = GyroBias(True, 1.0, gyro_var=(gyro_std_threshold_rad_s / STILL_STD_FACTOR) ** 2,
+                    accel_var=(accel_std_threshold_m_s2 / STILL_STD_FACTOR) ** 2)
+    assert bias.start()
+    return bias
+
+
 def test_gyro_bias_estimator_thresholds():
-    est = GyroBiasEstimator(1.0, gyro_std_threshold_rad_s=0.01, accel_std_threshold_m_s2=0.1)
+    est = _bias_window(gyro_std_threshold_rad_s=0.01, accel_std_threshold_m_s2=0.1)
     rng = np.random.default_rng(1)
     result = None
     for k in range(101):
@@ -414,7 +421,7 @@ def test_gyro_bias_estimator_thresholds():
                          np.array([0, 0, G0]) + rng.normal(0, 0.02, 3)) or result
     assert result is not None and result.still and result.samples == 101
     assert np.allclose(result.bias_rad_s, [0.02, 0.0, -0.01], atol=4 * 0.002 / math.sqrt(101))  # 4 sigma of the mean
-    moving = GyroBiasEstimator(1.0, 0.01, 0.1)
+    moving = _bias_window(0.01, 0.1)
     out = [moving.add(k * 0.01, np.array([0.05 * math.sin(k * 0.3), 0, 0]), np.zeros(3)) for k in range(101)]
     assert not out[-1].still and "not still" in out[-1].message
 

@@ -51,9 +51,6 @@ def test_ak09916_registers():
     assert (icm.AK09916_ADDRESS, icm.AK09916_WIA1_VALUE, icm.AK09916_WIA2_VALUE) == (0x0C, 0x48, 0x09)
     assert [r.address for r in (icm.AK_ST1, icm.AK_HXL, icm.AK_TMPS, icm.AK_ST2, icm.AK_CNTL2, icm.AK_CNTL3)] \
         == [0x10, 0x11, 0x17, 0x18, 0x31, 0x32]
-    assert [icm.ak09916_mode_for_rate(r) for r in (10, 20, 50, 100)] == [0x02, 0x04, 0x06, 0x08]
-    with pytest.raises(icm.Icm20948Error):
-        icm.ak09916_mode_for_rate(200)
 
 
 # ----------------------------------------------------------------------------- configuration (§4.4)
@@ -81,25 +78,6 @@ def test_output_data_rates():
     assert icm.gyro_odr_hz(4, 1, 3) == 225.0
     assert icm.gyro_odr_hz(4, 1, 0) == 1125.0         # divider ignored for DLPFCFG 0 and 7
     assert icm.gyro_odr_hz(4, 1, 7) == 1125.0
-
-
-def test_config_from_si():
-    cfg = icm.imu_config_from_si(accel_range_m_s2=3 * G, gyro_range_rad_s=math.radians(300),
-                                 accel_bandwidth_hz=50.0, gyro_bandwidth_hz=12.0, sample_rate_hz=225.0)
-    assert (cfg.accel_fs_sel, cfg.gyro_fs_sel) == (1, 1)           # +-4 g, +-500 dps
-    assert (cfg.accel_dlpfcfg, cfg.gyro_dlpfcfg) == (3, 5)         # 50.4 Hz, 11.6 Hz
-    assert (cfg.accel_smplrt_div, cfg.gyro_smplrt_div) == (4, 4)   # 225 Hz
-    assert icm.imu_config_from_si(accel_range_m_s2=2 * G).accel_fs_sel == 0
-    assert icm.imu_config_from_si(sample_rate_hz=102.27).gyro_smplrt_div == 10
-    assert icm.imu_config_from_si(sample_rate_hz=1125.0).gyro_smplrt_div == 0
-    assert icm.imu_config_from_si(accel_bandwidth_hz=None).accel_dlpfcfg is None
-    # Very wide request: DLPFCFG limited to 1..6 so the divider keeps working.
-    assert icm.imu_config_from_si(gyro_bandwidth_hz=1000.0).gyro_dlpfcfg == 1
-    for kwargs in ({"accel_range_m_s2": 17 * G}, {"gyro_range_rad_s": math.radians(2500)},
-                   {"sample_rate_hz": 2000.0}, {"sample_rate_hz": 1.0}, {"accel_bandwidth_hz": -1.0},
-                   {"gyro_range_rad_s": float("nan")}):
-        with pytest.raises(icm.Icm20948Error):
-            icm.imu_config_from_si(**kwargs)
 
 
 # ----------------------------------------------------------------------------- sequences (§4.3, §4.6)

@@ -111,11 +111,6 @@ def test_sequences_as_data():
 
 def test_esc_conventions():
     assert (pca.ESC_MIN_US, pca.ESC_NEUTRAL_US, pca.ESC_MAX_US) == (1100, 1500, 1900)
-    assert pca.clamp_esc_pulse_us(1000) == 1100 and pca.clamp_esc_pulse_us(2000) == 1900
-    assert pca.clamp_esc_pulse_us(1612.5) == 1612.5
-    for bad in (float("nan"), float("inf")):
-        with pytest.raises(pca.Pca9685Error):
-            pca.clamp_esc_pulse_us(bad)
     assert pca.esc_prescale(50) == 121
     assert pca.esc_prescale(200) == 30
     assert pca.esc_prescale(381.5) == 15

@@ -1,25 +1,18 @@
-"""hindrax_ident's composed processes: the identification node and the controller in one process, with or without
-the recorder.
+"""hindrax_ident's composed processes: the identification node and the controller in one process,
+with or without the recorder.
 
-Console script ``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their own names (``identification``,
-``controller``) and read the same vehicle file; one executor spins them
-(:func:`hindrax_drivers.composition.run_group`, the EventsExecutor like every node process). The group's node list
-is :data:`hindrax_drivers.composition.IDENT_GROUPS` (the launch-file readers, ``hindrax health`` and the SROS2
-policy, take the node names from there); this module maps them to their classes.
+``ident_control_node`` (``pool_test.launch.xml``): both nodes keep their names (``identification``,
+``controller``), read the same vehicle file and are spun by one executor
+(:func:`hindrax_drivers.composition.run_group`). The node list is
+:data:`hindrax_drivers.composition.IDENT_GROUPS`; this module maps it to classes.
+``ident_record_node`` (recording on, the default): the same two and the recorder
+(``hindrax_drivers.recording.recorder_node``; the other nodes ignore keys they do not declare).
 
-Why one process (docs/architecture.md §10.1): the two largest processes of the launch layout load mostly the same
-Python modules (numpy, the vehicle model, the control law, the sensor conditioning) once (``launch_pss_*``).
-Neither has a safety role (the supervisor, the output guard and the ESC's process stay alone, §8): a failure of
-one ends both, and the allocation's wrench timeout brings the thrusters to neutral as for any lost wrench source.
-While an identification goal runs the controller is disabled and ticks every 0.2 s, so the pair costs about what
-the identification node costs alone.
-
-Console script ``ident_record_node`` (``pool_test.launch.xml`` with recording on, its default): the same two nodes and
-the recorder (``hindrax_drivers.recording.recorder_node``, its parameters given to the process: the other nodes
-ignore keys they do not declare). Every sensor message both subscribe to then reaches one participant once instead
-of two, and the layout has one process, participant and executor less (docs/architecture.md §10.1,
-``launch_*_cpu_participant_idle``). The recorder has no safety role either; its bag writer keeps its own thread, and
-its subscriptions' keep-last depth (``queue_depth``, 1000) holds what arrives while an identification callback runs.
+Why (docs/architecture.md §10.1): both load mostly the same Python modules once (``launch_pss_*``),
+and every sensor message both take reaches one participant instead of two. None of them has a safety
+role (§8): a failure of one ends all, and the allocation's wrench timeout brings the thrusters to
+neutral as for any lost wrench source. The recorder's bag writer keeps its own thread, and its
+keep-last depth (``queue_depth``, 1000) holds what arrives while an identification callback runs.
 """
 from __future__ import annotations
 

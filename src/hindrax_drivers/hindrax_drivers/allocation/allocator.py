@@ -1,47 +1,35 @@
 """Thrust allocation: body wrench (FRD) -> thruster forces -> ESC pulse widths, pure numpy.
 
-Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] eq. 9 (``tau = B F``, tau = [X Y Z K M N]
-in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster ([Hindrax-Drag] eq. 1),
-:class:`ThrustAllocator` turns a requested wrench into forces and pulse widths:
+Given the thrust allocation matrix ``B`` (6, n) of [Hindrax-Drag] eq. 9 (``tau = B F``, tau = [X Y Z
+K M N] in N and N m, FRD, origin at the centre of gravity) and one thrust curve per thruster
+([Hindrax-Drag] eq. 1), :class:`ThrustAllocator` turns a requested wrench into forces and pulse
+widths:
 
-1. **Weighted minimum-norm solution.** ``F = B_W^+ tau`` with ``B_W^+ = W^-1/2 pinv(B W^-1/2)``,
-   ``W = diag(weights)``: among the forces that best reproduce tau (least squares, exact when tau is
-   in the range of B), the one minimising ``sum w_i F_i^2``. It is computed once, in the constructor
-   and in :meth:`ThrustAllocator.reconfigure`, never per call. Axes with zero authority (an all-zero
-   row of B, e.g. heave for a planar layout) are ignored by the pseudo-inverse: they get no force and
-   their achieved component is 0. With a rank-deficient B the least squares is in the plain Euclidean
-   metric of [X Y Z K M N].
-2. **Saturation.** Each thruster has its own reverse (< 0) and forward (> 0) limit taken from its
-   curve (times the battery ``voltage_scale``); they may differ.
+1. **Weighted minimum-norm solution.** ``F = B_W^+ tau`` with ``B_W^+ = W^-1/2 pinv(B W^-1/2)``, ``W
+   = diag(weights)``: of the least-squares forces, the one minimising ``sum w_i F_i^2``, computed
+   once per configuration (constructor, :meth:`ThrustAllocator.reconfigure`). An all-zero row of B
+   (an axis without authority) gets no force and an achieved 0.
+2. **Saturation.** Each thruster's reverse (< 0) and forward (> 0) limits come from its curve (times
+   the battery ``voltage_scale``).
 
-   * ``mode="uniform"``: the wrench is multiplied by the largest ``s`` in (0, 1] for which every
-     force is within its limits, so the direction of the allocated wrench is kept exactly.
-   * ``mode="priority"``: a staged scheme. The six axes are split into ordered ``priority_groups``
-     (default heave and yaw first, ``(("heave", "yaw"),)``; axes not listed form a last group). For
-     each group in order, the group's part of the wrench (the other axes set to zero) is allocated with
-     the same pseudo-inverse and added to the forces of the earlier groups with the largest factor in
-     [0, 1] that keeps all forces feasible. So a group is reproduced exactly (with the other axes
-     unaffected) whenever that is feasible on top of the earlier groups, and otherwise scaled down
-     along its own direction; later groups get what headroom is left. This is cheaper and more
-     predictable for a controller than a bounded least squares (``scipy.optimize.lsq_linear``), which
-     could change the direction of the reduced axes and has no exact equality on the prioritised ones.
-     The null space of B is not used to enlarge the feasible set (neither mode does that).
-3. **Deadband.** An ESC gives 0 N inside its deadband, so a thruster runs at 0 N or at least at its
-   smallest thrust outside it (about 1.2 N, docs/devices.md §5.2). When a force of step 2 falls in that gap,
-   the wrench ``B F`` of step 2 is allocated again by :class:`.deadband.DeadbandSearch`, which chooses which
-   thrusters run as well as how hard (a search over active sets of the semi-continuous least-squares problem,
-   after [JohansenFossen2013]): e.g. ``X = -2 N`` runs one symmetric pair of horizontal thrusters at 1.73 N
-   instead of four at 0.87 N. A request that thrusters outside their deadbands can produce is produced (to
-   the pulse-width step and the effort weight, :class:`ThrustAllocator`); other components are kept as small
-   as the deadband allows. When every force of step 2 is 0 or outside
-   the gap, step 2's forces are kept unchanged (and the search costs nothing).
-4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (monotone branch, with
-   saturation and the small-force rule of :mod:`.thrust_curve`), optionally put on the PWM generator's grid
-   (``pulse_width_step_us``, e.g. the PCA9685 count of docs/devices.md §5.1) at the nearest grid width that
-   is not in the deadband (a width outside the deadband never moves into it), and the
-   *actual* thrust at that pulse width is evaluated with the forward curve (deadband included). The
-   achieved wrench ``B @ force_n`` is what the thrusters will really apply according to the model, so
-   a controller can use it for anti-windup, and it reports every component nobody asked for.
+   * ``mode="uniform"``: the wrench is scaled by the largest ``s`` in (0, 1] keeping every force
+     within its limits: the direction is kept exactly.
+   * ``mode="priority"``: the axes are split into ordered ``priority_groups`` (default ``(("heave",
+     "yaw"),)``; the others form a last group). Each group's part of the wrench is allocated with
+     the same pseudo-inverse and added with the largest factor in [0, 1] that keeps all forces
+     feasible: a group is reproduced exactly when feasible on top of the earlier ones, else scaled
+     along its own direction (unlike ``scipy.optimize.lsq_linear``, which could turn the reduced
+     axes). The null space of B is not used.
+3. **Deadband.** An ESC gives 0 N inside its deadband (docs/devices.md §5.2). When a force of step 2
+   falls in that gap, ``B F`` is allocated again by :class:`.deadband.DeadbandSearch`, which chooses
+   which thrusters run as well as how hard (after [JohansenFossen2013]): ``X = -2 N`` runs one
+   symmetric pair at 1.73 N instead of four at 0.87 N. Otherwise step 2's forces are kept (the
+   search costs nothing).
+4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (:mod:`.thrust_curve`),
+   optionally put on the PWM generator's grid (``pulse_width_step_us``, docs/devices.md §5.1) at the
+   nearest width not in the deadband, and the *actual* thrust at that width is evaluated with the
+   forward curve. The achieved wrench ``B @ force_n`` is what the thrusters will apply according to
+   the model (for anti-windup).
 
 Non-finite wrenches raise :class:`InvalidWrenchError` (docs/architecture.md §8).
 """

@@ -1,56 +1,48 @@
 """Thrust allocation outside the ESC deadband: which thrusters run, and how hard, pure numpy.
 
-Why this module exists. An ESC gives no thrust inside its deadband (docs/devices.md §5.2, 1500 +- 25 us),
-so a thruster produces either 0 N or at least the thrust at the first pulse width outside it (about 1.2 N
-for the [Hindrax-Drag] eq. 1 curve at the PCA9685's step). The weighted pseudo-inverse spreads a small
-request over every thruster: ``[-2 0 0 0 0 0]`` asks each horizontal thruster for 0.87 N, which none can
-give (rounding each up overshoots and adds a pitch moment), while a symmetric pair at 1.74 N gives
-the -2 N exactly. This module chooses *which* thrusters run as well as how hard.
+An ESC gives no thrust inside its deadband (docs/devices.md §5.2, 1500 +- 25 us), so a thruster
+produces 0 N or at least the thrust at the first pulse width outside it (about 1.2 N for the
+[Hindrax-Drag] eq. 1 curve at the PCA9685's step). The weighted pseudo-inverse spreads a small
+request over every thruster: ``[-2 0 0 0 0 0]`` asks each horizontal thruster for 0.87 N, which none
+can give, while a symmetric pair at 1.74 N gives the -2 N exactly.
 
 Problem. Find the forces F (n,) minimising
 
     J(F) = || B F - tau ||^2 + rho * sum_i w_i F_i^2
 
-subject to ``F_i = 0`` or ``m_fwd_i <= F_i <= u_i`` or ``l_i <= F_i <= -m_rev_i``, where ``m_fwd`` and
-``m_rev`` are the smallest thrusts outside the deadband (on the pulse-width grid), ``l`` and ``u`` the
-saturation limits, ``w`` the allocation weights and ``rho`` the effort weight (see :class:`DeadbandSearch`);
-the residual is in the plain Euclidean metric of [X Y Z K M N], N and N m, as in the pseudo-inverse. The
-axes are not prioritised here: the priority of axes decides how saturation is shared (the allocator's step
-2, which fixes ``tau``), and what the deadband changes is of the size of one smallest thrust. It is the
-constrained least-squares allocation with a slack ``s = B F - tau`` of [JohansenFossen2013] (minimise
-``s^T Q s + u^T W u`` subject to ``B u = tau + s`` and the actuator bounds, here Q = I), with each thruster's bound
-made semi-continuous (0 or outside the deadband): a mixed-integer quadratic program, with a binary
-on/off and a sign per thruster.
+subject to ``F_i = 0`` or ``m_fwd_i <= F_i <= u_i`` or ``l_i <= F_i <= -m_rev_i``, where ``m_fwd``
+and ``m_rev`` are the smallest thrusts outside the deadband (on the pulse-width grid), ``l`` and
+``u`` the saturation limits, ``w`` the allocation weights and ``rho`` the effort weight
+(:class:`DeadbandSearch`); the residual is in the Euclidean metric of [X Y Z K M N], N and N m. The
+axes are not prioritised here (the allocator's step 2 fixes ``tau``). It is the constrained
+least-squares allocation with a slack ``s = B F - tau`` of [JohansenFossen2013] (Q = I) with each
+bound made semi-continuous: a mixed-integer quadratic program, with a binary on/off and a sign per
+thruster.
 
-Method: a search over active sets (which thrusters run, which sit at their smallest thrust), vectorised over
-all of them at once. It is the project's own: no maintained Python solver answers a mixed-integer QP in well
-under a millisecond (``scipy.optimize.milp``, HiGHS, takes only a linear objective and is tens of ms
-here).
+Method: a search over active sets, vectorised over all of them at once (no maintained Python solver
+answers a mixed-integer QP in well under a millisecond; ``scipy.optimize.milp`` takes only a linear
+objective and is tens of ms here).
 
-1. *Seeds.* Every subset S of thrusters that may run (2^n seeds, the others held at 0 N), with the forces of
-   S the least-squares solution of ``B_S F_S = tau`` of least W-norm (a weighted pseudo-inverse per subset,
-   computed once per configuration); and every choice of one thruster pinned at +m or -m, or of two with
-   each at +m, -m or 0 N, the others least squares (for n = 8: 256 + 16 + 224 = 496 seeds, one matrix
-   product of [tau, voltage_scale] per call). With rank(B) = 6 and n = 8 the exact solutions ``B F = tau``
-   form a 2-D affine family, on which the allowed forces are polygons bounded by the lines ``F_i = +-m_i``
-   and segments of the lines ``F_i = 0``. Their least-effort point is the pseudo-inverse solution, the
-   least-norm point of one such line, or a crossing of two, and the seeds hold all of these: the exact
-   solution of least effort is always a candidate, so the chosen forces have a squared wrench error of at
-   most rho times its effort (saturation limits are not seeded; they are reached by the repair).
-2. *Repair.* A seed whose forces fall inside a deadband gap (0 < |F_i| < m_i) or beyond a saturation limit
-   has those thrusters pinned at the nearest allowed value (+-m_i, l_i or u_i) and the others solved again,
-   until none does (at most n rounds: each pins one more thruster). Pinning cannot lower the residual, so a
-   seed whose residual plus the effort of its pinned thrusters already exceeds the best allowed J is dropped
-   (branch and bound).
-3. *Choice.* The allowed force vector of least J, the first one on a tie: the seed order is fixed, so the
-   result is a deterministic function of the request and the configuration.
+1. *Seeds.* Every subset S of thrusters that may run (2^n seeds), with the forces of S the
+   least-squares solution of ``B_S F_S = tau`` of least W-norm (a weighted pseudo-inverse per
+   subset, computed once per configuration); and every choice of one thruster pinned at +m or -m, or
+   of two with each at +m, -m or 0 N, the others least squares (for n = 8: 256 + 16 + 224 = 496
+   seeds, one matrix product per call). With rank(B) = 6 and n = 8 the exact solutions form a 2-D
+   affine family on which the allowed forces are polygons bounded by the lines ``F_i = +-m_i`` and
+   ``F_i = 0``; their least-effort point is the pseudo-inverse solution, the least-norm point of one
+   such line, or a crossing of two, all seeded: the exact solution of least effort is always a
+   candidate (saturation limits are reached by the repair).
+2. *Repair.* A seed with forces inside a deadband gap (0 < |F_i| < m_i) or beyond a saturation limit
+   has those thrusters pinned at the nearest allowed value and the others solved again, until none
+   is (at most n rounds). Pinning cannot lower the residual, so a seed whose residual plus pinned
+   effort already exceeds the best J is dropped (branch and bound).
+3. *Choice.* The allowed force vector of least J, the first on a tie: the seed order is fixed, so
+   the result is a deterministic function of the request and the configuration.
 
-For requests without an exact solution (e.g. a pitch moment smaller than the verticals' smallest pair makes)
-the search is a heuristic for the exact solve of all 3^n sign patterns (6561 box-constrained least squares
-for n = 8; ``test/test_allocation_deadband.py`` checks two fixed requests against it).
-The subsets are enumerated for n <= :data:`MAX_THRUSTERS` (4096 subsets); for more thrusters the allocator
-runs without the search. What a call costs: ``make bench`` (``actuation``: ``allocate_cpu_p50`` and
-``allocate_cpu_p99``, with and without the search).
+For requests without an exact solution the search is a heuristic for the exact solve of all 3^n sign
+patterns (``test/test_allocation_deadband.py`` checks two fixed requests against it). Subsets are
+enumerated for n <= :data:`MAX_THRUSTERS`; beyond, the allocator runs without the search. Cost:
+``make bench`` (``actuation``: ``allocate_cpu_p50``, ``allocate_cpu_p99``).
 """
 from __future__ import annotations
 

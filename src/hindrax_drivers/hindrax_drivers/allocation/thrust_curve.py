@@ -1,49 +1,32 @@
 """Thruster thrust curve: pulse width (us) <-> bollard-pull thrust (N), pure numpy.
 
-Model ([Hindrax-Drag], section 2.2.1, eq. 1 and Table 2): the thrust of one thruster is a cubic in the ESC
-pulse width P (us), ``tau = c4 P^3 + c3 P^2 + c2 P + c1``, with one cubic for negative rotation
-(1100-1500 us) and one for positive rotation (1500-1900 us); 1500 us stops the motor. Coefficient
-tuples are always ordered ``(c4, c3, c2, c1)``, i.e. highest power first (``numpy.polyval`` order).
+Model ([Hindrax-Drag], section 2.2.1, eq. 1 and Table 2): the thrust of one thruster is a cubic in
+the ESC pulse width P (us), ``tau = c4 P^3 + c3 P^2 + c2 P + c1``, one cubic for negative rotation
+(1100-1500 us) and one for positive (1500-1900 us); 1500 us stops the motor. Coefficient tuples are
+ordered ``(c4, c3, c2, c1)``, highest power first (``numpy.polyval`` order).
 
-Facts about [Hindrax-Drag]'s coefficients (computed, and asserted in ``test/test_thrust_curve.py``):
-
-* Table 2 negative row ``(-4.61e-7, 0.001794, -2.2726, 927.1827)``: -15.53 N at 1100 us and
-  -1.09 N at 1500 us (not zero). Its derivative has roots at about 1098.6 us and 1495.8 us, so the
-  cubic increases monotonically only on 1100-1495.8 us; between 1495.8 and 1500 us it falls again
-  (extremum -1.087 N at 1495.8 us). The slope at 1100 us is only 7.7e-4 N/us (the curve is nearly
-  flat at full reverse).
-* Table 2 positive row as printed ``(-3.52e-7, 1.82e-4, -0.3106, 174.3542)`` gives about -1070 N at
-  1500 us and -2173 N at 1900 us: unusable (``ThrustCurve`` rejects it, because it is negative and
-  decreasing on the forward side). Until a bollard-pull fit replaces it, the project's default
-  positive curve is the point reflection of the negative one about (1500 us, 0 N):
-  ``f_pos(P) = -f_neg(3000 - P)`` (docs/architecture.md §4), see :func:`point_reflection`.
+[Hindrax-Drag]'s Table 2 negative row gives -15.53 N at 1100 us and is monotone only up to 1495.8
+us; its positive row as printed is negative and decreasing on the forward side, which
+``ThrustCurve`` rejects (``test/test_thrust_curve.py`` asserts both). Until a bollard-pull fit
+replaces it, the default positive curve is the point reflection of the negative one about (1500 us,
+0 N) (docs/architecture.md §4, :func:`point_reflection`).
 
 ESC conventions (docs/devices.md §5.2, Blue Robotics Basic ESC): 1100 us full reverse, 1500 us stop,
-1900 us full forward, deadband 1500 +- 25 us (secondary source, marked UNVERIFIED there). The forward
-model returns 0 N inside the deadband; outside it the cubic applies.
+1900 us full forward, deadband 1500 +- 25 us (UNVERIFIED there). The forward model returns 0 N
+inside the deadband.
 
-Usable branches and the inverse. On each side only the monotone branch that starts at the range end
-(1100 or 1900 us) and runs towards neutral is used: it ends at the first extremum of the cubic, at the
-cubic's first zero crossing, or at the deadband edge, whichever is reached first. For the [Hindrax-Drag] curve
-with the default 25 us deadband the branches are 1100-1475 us (-15.53 N to -1.20 N) and
-1525-1900 us (+1.20 N to +15.53 N). Forces whose magnitude is smaller than the branch's smallest
-magnitude cannot be produced by the model; they map (policy ``small_force="nearest"``, default) to
-whichever of neutral (0 N) and the branch's inner end is nearer in force, which minimises the force
-error of the single thruster, or (``small_force="neutral"``) always to neutral. Forces beyond the
-curve's end saturate at the end (1100 or 1900 us). The caller gets the actual force back from
-:meth:`ThrustCurve.thrust_n`, so nothing is hidden.
+Inverse: on each side only the monotone branch from the range end towards neutral is used, ending at
+the cubic's first extremum, its first zero or the deadband edge, whichever comes first (1100-1475 us
+and 1525-1900 us for the default curve, +-1.20 N to +-15.53 N). A smaller force maps to whichever of
+0 N and the branch's inner end is nearer (``small_force="nearest"``, default) or to neutral
+(``"neutral"``); a larger one saturates at the end. :meth:`ThrustCurve.thrust_n` gives the force
+actually produced. Each branch is tabulated once on a grid of at most 0.005 us and inverted with
+``numpy.interp`` (vectorised, exact to the grid step; ``numpy.roots`` and ``brentq`` are one Python
+call per thruster), about 2.4 MB per distinct curve; the tests check it against ``numpy.roots``.
 
-Why our own inverse instead of ``numpy.roots`` or ``scipy.optimize.brentq``: both are scalar (one
-Python call per thruster and per sample, tens of microseconds each), while the allocator needs eight
-inverses every 10 ms. Each monotone branch is tabulated once at construction on a grid of at most
-0.005 us; ``numpy.interp`` on a strictly increasing table returns a pulse width inside the grid cell
-that brackets the exact root, so the inverse is exact to 0.005 us by construction, vectorised, and of
-fixed cost (about 2.4 MB of tables per distinct curve). The tests check it against ``numpy.roots``.
-
-Battery voltage: the ESCs are open loop, so thrust changes with supply voltage (docs/devices.md §5.3:
-full-throttle thrust scales roughly with V^1.2). Both directions accept ``voltage_scale``: the forward
-model multiplies the curve by it and the inverse divides the requested force by it.
-:func:`voltage_thrust_scale` gives that factor from a measured battery voltage.
+Battery voltage (docs/devices.md §5.3: full-throttle thrust roughly as V^1.2): both directions take
+``voltage_scale``, which multiplies the forward model and divides the requested force;
+:func:`voltage_thrust_scale` gives it from a battery voltage.
 """
 
 from __future__ import annotations

@@ -1,32 +1,27 @@
-"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4). What the node (:mod:`.node`) runs
-from its timers, through injected I2C ports, so that it can be tested step by step against the register-exact emulator.
+"""ICM-20948 driver core: pure, no rclpy, no clock, no sleep (docs/devices.md §4), run by the node
+(:mod:`.node`) from its timers through injected I2C ports, tested step by step against the
+register-exact emulator.
 
-- Settings (:class:`ImuSettings`, :func:`imu_config_from_settings`, :func:`imu_noise_variances`,
-  :func:`mag_mode_for_rate`): register fields, noise variances, AK09916 mode and publishing rates from
-  ``sensors.icm20948.*`` (docs/devices.md §4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the bank cached
-  (§4.1); a failed transfer or a DEVICE_RESET makes it unknown, so the next access selects it again.
-- :class:`StartupSequence` (§4.3), steps each returning the datasheet's wait: bank 0, WHO_AM_I 0xEA (a wrong identity
-  or an I2C failure ends the attempt; the node retries); DEVICE_RESET, 10 ms; wake, 20 ms; all axes on; bank 2
-  dividers, DLPF, full scale; the magnetometer (``i2c_master``: the I2C master, then WIA2 = 0x09 through SLV4, up to
-  :data:`MAG_ATTEMPTS` tries with I2C_MST_RST between; ``bypass``: BYPASS_EN, WIA1/WIA2 at 0x0C, soft reset,
-  continuous mode). A silent magnetometer is reported through ``on_magnetometer``, never a start-up failure;
-  ``magnetometer_only=True`` is that last part alone, which brings a lost AK09916 back without resetting the chip.
-- Gyro bias (:class:`GyroBiasEstimator`, :class:`GyroBias`): the mean over the first ``gyro_bias_duration_s`` of
-  data (published uncorrected meanwhile), subtracted only when every axis's gyro and accelerometer std shows a still
-  vehicle, else a WARN says why.
-- Each poll (:func:`read_poll`): with ``require_data_ready`` a poll whose INT_STATUS_1.RAW_DATA_0_RDY is not set
-  (chip and host clocks drift) publishes nothing (:class:`DataReadyGate`: counted ``not_ready``;
-  ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``; a failed status read publishes, as without the
-  gate, so a replay of an older bag publishes what it recorded).
-- Chip reset (power glitch): its data registers read 0 and stop updating, PWR_MGMT_1 reads 0x41 (asleep), USER_CTRL
-  0 (I2C master off). An all-zero block or ``frozen_check_samples`` identical blocks (:class:`FrozenBlockWatch`)
-  make the node read the state back (:func:`read_chip_reset`); a reset is counted ``chip_resets``, an ERROR, its
-  suspect samples unpublished, the start-up run again. The all-zero block is never published.
-- Magnetometer: in ``i2c_master`` mode I2C_MST_STATUS.SLV0_NACK means the block is old (:class:`MagNackFilter`:
-  not published, counted ``mag_nack``, until it changes). :class:`MagnetometerWatch`: new samples without overflow
-  at most ``MAG_PUBLISH_HZ``; none for ``mag_stale_timeout_s`` raises the ERROR ``magnetometer`` and re-initialises
-  the magnetometer alone, one step per poll (``imu/data_raw`` goes on), retried every ``mag_retry_interval_s``
-  (counted ``mag_retries``) until the AK09916 answers.
+- Settings (:class:`ImuSettings`): register fields, noise variances, AK09916 mode and publishing
+  rates from ``sensors.icm20948.*`` (§4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the
+  bank cached (§4.1), unknown after a failed transfer or a DEVICE_RESET.
+- :class:`StartupSequence` (§4.3): steps each returning the datasheet's wait. A wrong WHO_AM_I or an
+  I2C failure ends the attempt (the node retries); a silent magnetometer is reported through
+  ``on_magnetometer``, never a start-up failure; ``magnetometer_only=True`` brings a lost AK09916
+  back without resetting the chip.
+- :class:`GyroBias`: the mean over the first ``gyro_bias_duration_s``, subtracted only when every
+  axis's gyro and accelerometer std shows a still vehicle, else a WARN says why.
+- :func:`read_poll`: one burst per poll. With ``require_data_ready`` a poll without
+  INT_STATUS_1.RAW_DATA_0_RDY publishes nothing (:class:`DataReadyGate`: counted ``not_ready``,
+  ``not_ready_error_polls`` in a row raise the ERROR ``data_ready``).
+- Chip reset (power glitch: data registers 0 and frozen, PWR_MGMT_1 0x41, USER_CTRL 0): an all-zero
+  block or ``frozen_check_samples`` identical blocks (:class:`FrozenBlockWatch`) make the node read
+  the state back (:func:`read_chip_reset`); a reset is counted ``chip_resets``, an ERROR, its
+  samples unpublished, the start-up run again. An all-zero block is never published.
+- Magnetometer: an ``i2c_master`` block read under SLV0_NACK is old (:class:`MagNackFilter`, counted
+  ``mag_nack``). :class:`MagnetometerWatch`: none for ``mag_stale_timeout_s`` raises the ERROR
+  ``magnetometer`` and re-initialises the magnetometer alone, one step per poll, retried every
+  ``mag_retry_interval_s`` (``mag_retries``).
 """
 from __future__ import annotations
 
@@ -44,7 +39,7 @@ from .mounting import mounting_rotation
 __all__ = ["ACCEL_NOISE_BANDWIDTH_HZ", "ACCEL_NOISE_DENSITY_G_PER_SQRT_HZ", "BankedRegisters", "DataReadyGate",
            "FrozenBlockWatch", "ImuSettings", "PollResult", "read_poll", "MagNackFilter", "MagnetometerWatch",
            "chip_reset_problems", "diagnostic_values", "GYRO_NOISE_BANDWIDTH_HZ",
-           "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBias", "GyroBiasEstimator", "GyroBiasResult", "MAG_ATTEMPTS",
+           "GYRO_NOISE_DENSITY_DPS_PER_SQRT_HZ", "GyroBias", "GyroBiasResult", "MAG_ATTEMPTS",
            "STILL_STD_FACTOR", "StartupSequence", "StepResult", "imu_config_from_settings", "imu_noise_variances",
            "mag_mode_for_rate", "CHIP_STATE_LENGTH", "PollFailures", "read_asleep", "read_chip_reset"]
 
@@ -425,90 +420,70 @@ class GyroBiasResult:
     message: str
 
 
-class GyroBiasEstimator:
-    """Averages gyro samples over ``duration_s`` and decides whether the vehicle was still.
+class GyroBias:
+    """The start-up gyro-bias calibration (``sensors.icm20948.estimate_gyro_bias``).
 
     Args:
-        duration_s: averaging window (from the first sample), s.
-        gyro_std_threshold_rad_s, accel_std_threshold_m_s2: stillness thresholds on each axis's std.
+        enabled: estimate at all. duration_s: window from the first sample, s (> 0, else
+            ValueError). gyro_var, accel_var: per-axis noise variances (rad^2/s^2, m^2/s^4); still:
+            every axis's std at most :data:`STILL_STD_FACTOR` times theirs.
 
-    ``add(t_s, gyro_rad_s (3,), accel_m_s2 (3,))`` returns None until the window is complete (at least
-    two samples and ``duration_s`` elapsed), then a :class:`GyroBiasResult` (once).
-
-    Raises:
-        ValueError: ``duration_s`` not > 0.
+    :meth:`start` after each start-up begins the window once (True while it runs); :meth:`add` feeds
+    it and returns a :class:`GyroBiasResult` once (at least two samples and ``duration_s``);
+    ``bias_rad_s`` (3,) is what the node subtracts: zero until a still window gave one.
     """
 
-    def __init__(self, duration_s: float, gyro_std_threshold_rad_s: float, accel_std_threshold_m_s2: float):
+    def __init__(self, enabled: bool, duration_s: float, gyro_var: float, accel_var: float) -> None:
         if not duration_s > 0.0:
             raise ValueError(f"duration_s must be > 0, got {duration_s}")
-        self.duration_s = float(duration_s)
-        self.gyro_threshold = float(gyro_std_threshold_rad_s)
-        self.accel_threshold = float(accel_std_threshold_m_s2)
+        self.enabled, self.duration_s = bool(enabled), float(duration_s)
+        self.gyro_threshold = STILL_STD_FACTOR * math.sqrt(gyro_var)
+        self.accel_threshold = STILL_STD_FACTOR * math.sqrt(accel_var)
+        self.bias_rad_s = np.zeros(3)
+        self.estimating = False
+        self.result: GyroBiasResult | None = None
         self._t0: float | None = None
         self._gyro: list[np.ndarray] = []
         self._accel: list[np.ndarray] = []
-        self.result: GyroBiasResult | None = None
+
+    def start(self) -> bool:
+        """Begin the window unless disabled or done; True while estimating."""
+        if self.enabled and self.result is None:
+            self.estimating, self._t0, self._gyro, self._accel = True, None, [], []
+        return self.estimating
 
     def add(self, t_s: float, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> GyroBiasResult | None:
-        """Add one sample (time s, gyro rad/s (3,), accel m/s^2 (3,)); the result once the window is complete."""
-        if self.result is not None:
+        """One sample (s, rad/s (3,), m/s^2 (3,)); the result once, at the window's end."""
+        if not self.estimating:
             return None
-        if self._t0 is None:
-            self._t0 = t_s
+        self._t0 = t_s if self._t0 is None else self._t0
         self._gyro.append(np.asarray(gyro_rad_s, dtype=float))
         self._accel.append(np.asarray(accel_m_s2, dtype=float))
         if t_s - self._t0 < self.duration_s or len(self._gyro) < 2:
             return None
-        g = np.array(self._gyro)
-        a = np.array(self._accel)
+        g, a = np.array(self._gyro), np.array(self._accel)
         g_std, a_std = g.std(axis=0, ddof=1), a.std(axis=0, ddof=1)
         still = bool(np.all(g_std <= self.gyro_threshold) and np.all(a_std <= self.accel_threshold))
         bias = g.mean(axis=0)
         if still:
             message = (f"gyro bias {np.array2string(bias, precision=5)} rad/s from {len(g)} samples "
                        f"(std max {g_std.max():.2e} rad/s)")
+            self.bias_rad_s = bias
         else:
-            message = (f"vehicle not still during the gyro-bias estimate (gyro std max {g_std.max():.2e} rad/s, "
-                       f"limit {self.gyro_threshold:.2e}; accel std max {a_std.max():.2e} m/s^2, limit "
-                       f"{self.accel_threshold:.2e}): no bias applied")
+            message = (f"vehicle not still during the gyro-bias estimate (gyro std max "
+                       f"{g_std.max():.2e} rad/s, limit {self.gyro_threshold:.2e}; accel std max "
+                       f"{a_std.max():.2e} m/s^2, limit {self.accel_threshold:.2e}): "
+                       "no bias applied")
+        self.estimating = False
         self.result = GyroBiasResult(bias, g_std, a_std, len(g), still, message)
-        return self.result
-
-
-class GyroBias:
-    """The start-up gyro-bias calibration (``sensors.icm20948.estimate_gyro_bias``): ``bias_rad_s`` (3,) is what the
-    node subtracts (zero until a still window gave one); :meth:`start` after each start-up begins the window once
-    (True while it runs); :meth:`add` feeds it; ``result`` and :attr:`status` report it."""
-
-    def __init__(self, enabled: bool, duration_s: float, gyro_var: float, accel_var: float) -> None:
-        self.enabled, self.duration_s = bool(enabled), float(duration_s)
-        self.gyro_std, self.accel_std = STILL_STD_FACTOR * math.sqrt(gyro_var), STILL_STD_FACTOR * math.sqrt(accel_var)
-        self.bias_rad_s = np.zeros(3)
-        self.estimator: GyroBiasEstimator | None = None
-        self.result: GyroBiasResult | None = None
-
-    def start(self) -> bool:
-        """Begin the window unless disabled or done; True while estimating."""
-        if self.enabled and self.result is None:
-            self.estimator = GyroBiasEstimator(self.duration_s, self.gyro_std, self.accel_std)
-        return self.estimator is not None
-
-    def add(self, t_s: float, gyro_rad_s: np.ndarray, accel_m_s2: np.ndarray) -> GyroBiasResult | None:
-        """One sample (s, rad/s, m/s^2); the result once, when the window ends (applied if still)."""
-        if self.estimator is None:
-            return None
-        self.result = self.estimator.add(t_s, gyro_rad_s, accel_m_s2)
-        if self.result is not None:
-            self.estimator = None
-            if self.result.still:
-                self.bias_rad_s = self.result.bias_rad_s
         return self.result
 
     @property
     def status(self) -> str | None:
         """The diagnostics' ``gyro_bias_status``: the result's message, ``estimating``, or None."""
-        return self.result.message if self.result is not None else "estimating" if self.estimator else None
+        if self.result is not None:
+            return self.result.message
+        return "estimating" if self.estimating else None
 
 
 # ---------------------------------------------------------------------------------------- per-poll decisions

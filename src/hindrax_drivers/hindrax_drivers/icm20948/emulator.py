@@ -1,31 +1,25 @@
 """ICM-20948 and AK09916 device emulators (register-exact), for tests and simulation.
 
-:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of docs/devices.md §4.8:
+:class:`Icm20948Emulator` (0x68, or 0x69 with AD0 high) follows the checklist of docs/devices.md
+§4.8:
 
-* four 128-byte banks selected by REG_BANK_SEL (0x7F in every bank, bits 5:4), WHO_AM_I = 0xEA,
-  reset values PWR_MGMT_1 = 0x41 (asleep), LP_CONFIG = 0x40, ACCEL_CONFIG = 0x01,
-  GYRO_CONFIG_1 = 0x01 [UNVERIFIED]; DEVICE_RESET restores them, self-clears and selects bank 0
-  [assumed in §4.1];
-* burst reads/writes auto-increment (within the 0x00..0x7F register space);
+* four banks selected by REG_BANK_SEL (0x7F, bits 5:4), WHO_AM_I = 0xEA, reset values PWR_MGMT_1 =
+  0x41 (asleep), LP_CONFIG = 0x40, ACCEL_CONFIG = 0x01, GYRO_CONFIG_1 = 0x01 [UNVERIFIED];
+  DEVICE_RESET restores them and selects bank 0 [assumed in §4.1]; bursts auto-increment;
 * data registers follow a truth source ``t_s -> (specific_force_m_s2 (3,), angular_rate_rad_s (3,),
-  magnetic_field_t (3,), temperature_c)`` in the SENSOR (accel/gyro) frame, sampled at the output
-  data rate ticks of the current configuration, quantised with the configured full scale; they do
-  not update while SLEEP = 1; INT_STATUS_1.RAW_DATA_0_RDY is set on new data and clears on read;
-* the AK09916 (:class:`Ak09916Emulator`, own register file at 0x0C with auto-increment wrap,
-  DRDY/DOR/HOFL, ST2 read-lock and modes) is reachable (a) directly on the host bus through
-  :attr:`Icm20948Emulator.aux_port` when BYPASS_EN = 1 and I2C_MST_EN = 0 (otherwise the port NACKs),
-  and (b) through the I2C master: SLV0..SLV3 run once per master cycle (gyro ODR tick, and at once on
-  a rising edge of I2C_MST_EN), reads land in EXT_SLV_SENS_DATA in slave order, writes repeat every
-  cycle; SLV4 runs one transaction immediately and sets I2C_MST_STATUS.SLV4_DONE;
-* faults: ``stuck`` (data registers and magnetometer freeze), ``aux_connected = False``
-  (magnetometer NACKs: I2C_MST_STATUS.SLVn_NACK bits, EXT_SLV_SENS_DATA keeps the last sample read,
-  bypass port errno 121), :meth:`Icm20948Emulator.power_glitch` (both chips back to their power-on
-  state: ICM registers at reset values, asleep, data registers 0, I2C master off; AK09916 powered
-  down), ``data_ready_stuck_low`` (INT_STATUS_1.RAW_DATA_0_RDY always reads 0 while the data registers keep
-  updating); errno 121 on the host bus is injected by the bus.
+  magnetic_field_t (3,), temperature_c)`` in the SENSOR frame, sampled at the configured output data
+  rate and quantised with the full scale; frozen while SLEEP; INT_STATUS_1.RAW_DATA_0_RDY set on new
+  data, cleared on read;
+* the AK09916 (:class:`Ak09916Emulator`: DRDY/DOR/HOFL, ST2 read-lock, modes) is reached directly
+  through :attr:`Icm20948Emulator.aux_port` when BYPASS_EN = 1 and I2C_MST_EN = 0 (else it NACKs),
+  or through the I2C master: SLV0..SLV3 once per master cycle (gyro ODR tick, and at once on a
+  rising I2C_MST_EN) into EXT_SLV_SENS_DATA, SLV4 one transaction at once (SLV4_DONE);
+* faults: ``stuck``, ``aux_connected = False`` (SLVn_NACK, the last sample kept, bypass errno 121),
+  :meth:`Icm20948Emulator.power_glitch` (both chips to power-on state), ``data_ready_stuck_low``;
+  bus errors are injected by the bus.
 
-Not modelled: FIFO, DMP, interrupts pins, low-power cycling, self-test, the accel/gyro start-up
-delay after wake, filter dynamics (the DLPF only sets the output rate here).
+Not modelled: FIFO, DMP, interrupt pins, low-power cycling, self-test, the start-up delay after
+wake, filter dynamics (the DLPF only sets the output rate).
 """
 
 from __future__ import annotations

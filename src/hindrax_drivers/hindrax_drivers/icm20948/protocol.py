@@ -28,9 +28,9 @@ import numpy as np
 from ..transport.i2c import RegisterWrite
 
 __all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample", "MagSample",
-           "imu_config_from_si", "flatten_writes", "reset_wake_sequence", "configure_sequence",
+           "flatten_writes", "reset_wake_sequence", "configure_sequence",
            "slave_read_writes", "slave_write_writes", "mag_master_sequence", "mag_bypass_sequence",
-           "ak09916_direct_init_writes", "ak09916_mode_for_rate", "parse_sensor_block",
+           "ak09916_direct_init_writes", "parse_sensor_block",
            "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
            "encode_sensor_block", "bank_select_value", "gyro_odr_hz", "accel_odr_hz"]
 
@@ -159,9 +159,6 @@ ACCEL_BYPASS_ODR_HZ = 4500.0
 #: Gyro ODR with the DLPF bypassed: 9 kHz, from the datasheet spec table (NOT in docs/devices.md;
 #: only affects how often the emulator's data registers change).
 GYRO_BYPASS_ODR_HZ = 9000.0
-#: DLPF 3 dB bandwidths in Hz per DLPFCFG 0..7 with FCHOICE = 1 (docs/devices.md §4.4, from [I2]).
-GYRO_DLPF_3DB_HZ = (196.6, 151.8, 119.5, 51.2, 23.9, 11.6, 5.7, 361.4)
-ACCEL_DLPF_3DB_HZ = (246.0, 246.0, 111.4, 50.4, 23.9, 11.5, 5.7, 473.0)
 
 SENSOR_BLOCK_LENGTH = 14
 AK09916_BLOCK_LENGTH = 9
@@ -313,53 +310,6 @@ def _config_value(dlpfcfg: int | None, fs_sel: int) -> int:
     return (dlpfcfg << 3) | (fs_sel << 1) | 0x1
 
 
-def _pick_range(requested: float, ranges: Sequence[float], what: str) -> int:
-    if not (math.isfinite(requested) and requested > 0.0):
-        raise Icm20948Error(f"{what} must be finite and > 0, got {requested}")
-    for i, full_scale in enumerate(ranges):
-        if requested <= full_scale * (1.0 + 1e-9):
-            return i
-    raise Icm20948Error(f"{what} = {requested:g} exceeds the largest full scale {ranges[-1]:g}")
-
-
-def _pick_dlpf(bandwidth_hz: float | None, table: Sequence[float], what: str) -> int | None:
-    if bandwidth_hz is None:
-        return None
-    if not (math.isfinite(bandwidth_hz) and bandwidth_hz > 0.0):
-        raise Icm20948Error(f"{what} must be finite and > 0 (or None for DLPF bypass), got {bandwidth_hz}")
-    # DLPFCFG 1..6 only: with 0 or 7 the gyro sample-rate divider is ignored (docs/devices.md §4.4).
-    return min(range(1, 7), key=lambda cfg: (abs(math.log(table[cfg] / bandwidth_hz)), cfg))
-
-
-def imu_config_from_si(accel_range_m_s2: float = 2.0 * GRAVITY_M_S2,
-                       gyro_range_rad_s: float = math.radians(250.0),
-                       accel_bandwidth_hz: float | None = 50.4,
-                       gyro_bandwidth_hz: float | None = 51.2,
-                       sample_rate_hz: float = 225.0) -> ImuConfig:
-    """Register fields from SI settings (docs/devices.md §4.4).
-
-    * Full scale: the smallest range >= the requested magnitude (m/s^2, rad/s).
-    * DLPF: DLPFCFG 1..6 whose 3 dB bandwidth is closest (log scale) to the request; ``None``
-      bypasses the DLPF (FCHOICE = 0; the ODR is then fixed, see :func:`accel_odr_hz`).
-    * Sample rate: divider ``round(1125 / rate) - 1`` for both sensors, so they stay aligned.
-      The achieved rates are the config's ``accel_odr_hz``/``gyro_odr_hz``.
-
-    Raises:
-        Icm20948Error: non-positive/non-finite values, a range above +-16 g / +-2000 dps, or a
-        sample rate outside 1125/256 .. 1125 Hz.
-    """
-    accel_fs = _pick_range(accel_range_m_s2, [g * GRAVITY_M_S2 for g in ACCEL_RANGE_G], "accel_range_m_s2")
-    gyro_fs = _pick_range(gyro_range_rad_s, [math.radians(d) for d in GYRO_RANGE_DPS], "gyro_range_rad_s")
-    if not (math.isfinite(sample_rate_hz) and BASE_ODR_HZ / 256.0 <= sample_rate_hz <= BASE_ODR_HZ):
-        raise Icm20948Error(f"sample_rate_hz must be in {BASE_ODR_HZ / 256:.3f}..{BASE_ODR_HZ:g}, "
-                            f"got {sample_rate_hz}")
-    div = min(255, max(0, round(BASE_ODR_HZ / sample_rate_hz) - 1))
-    return ImuConfig(accel_fs_sel=accel_fs, gyro_fs_sel=gyro_fs,
-                     accel_dlpfcfg=_pick_dlpf(accel_bandwidth_hz, ACCEL_DLPF_3DB_HZ, "accel_bandwidth_hz"),
-                     gyro_dlpfcfg=_pick_dlpf(gyro_bandwidth_hz, GYRO_DLPF_3DB_HZ, "gyro_bandwidth_hz"),
-                     accel_smplrt_div=div, gyro_smplrt_div=div)
-
-
 # ------------------------------------------------------------------------------ sequences
 @dataclass(frozen=True)
 class BankedWrite:
@@ -488,14 +438,6 @@ def ak09916_direct_init_writes(mode: int = AK_MODE_CONTINUOUS_100HZ) -> list[Reg
         raise Icm20948Error(f"0x{mode:02x} is not an AK09916 CNTL2 mode")
     return [RegisterWrite(AK_CNTL3.address, AK_CNTL3_SRST, AK_RESET_WAIT_S, "AK09916 soft reset"),
             RegisterWrite(AK_CNTL2.address, mode, 0.0, "AK09916 mode")]
-
-
-def ak09916_mode_for_rate(rate_hz: float) -> int:
-    """CNTL2 continuous mode for 10/20/50/100 Hz (docs/devices.md §4.5). Raises Icm20948Error otherwise."""
-    for mode, rate in AK_CONTINUOUS_MODE_RATE_HZ.items():
-        if math.isclose(rate, rate_hz):
-            return mode
-    raise Icm20948Error(f"AK09916 continuous rate must be 10, 20, 50 or 100 Hz, got {rate_hz}")
 
 
 # ------------------------------------------------------------------------------ conversions

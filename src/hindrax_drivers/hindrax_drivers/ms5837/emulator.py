@@ -1,26 +1,22 @@
 """TE MS5837-30BA / -02BA device emulator (command-exact, I2C address 0x76).
 
-Plugs into :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`. It models the device
-side of docs/devices.md §3.1 and §3.8:
+For :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`; the device side of
+docs/devices.md §3.1 and §3.8:
 
-* commands: reset (0x1E), PROM read (0xA0 + 2k, 2 bytes MSB first), D1/D2 conversions with OSR
-  (0x40.../0x50...), ADC read (0x00 then 3 bytes MSB first);
-* ADC semantics: a read with no conversion done, a second read of the same result, or a read
-  before the conversion time has elapsed returns 0; a read during a conversion also corrupts that
-  conversion (its result becomes 0); starting a conversion while one runs gives an incorrect
-  result (modelled as 0);
-* PROM with a valid CRC-4 (§3.3), coefficients configurable (default: datasheet example values);
-* raw values from a truth source ``t_s -> (pressure_pa, temperature_c)`` sampled at the start of
-  each conversion, through the inversion of the compensation (§3.8, :func:`invert_to_raw`);
-* faults: stuck outputs (conversions repeat the last D1/D2), corrupted PROM CRC, a blank (all-zero)
-  PROM, raw ADC counts forced by the test (``raw_override``, e.g. a saturated 0xFFFFFF or datasheet
-  vectors), and a power cycle (:meth:`Ms5837Emulator.power_cycle`: until the next reset command every
-  ADC read returns 0, the PROM not being loaded, datasheet "Reset sequence"); bus-level NACKs are
-  injected by the bus.
+* commands: reset (0x1E), PROM read (0xA0 + 2k, MSB first), D1/D2 conversions with OSR, ADC read
+  (0x00, 3 bytes MSB first);
+* an ADC read with no conversion done, read twice, or before the conversion time returns 0; a read
+  during a conversion zeroes it, and so does a conversion started while one runs;
+* PROM with a valid CRC-4 (§3.3), coefficients configurable (default: datasheet example);
+* raw values from a truth source ``t_s -> (pressure_pa, temperature_c)`` at the start of each
+  conversion, through the inverse compensation (§3.8, :func:`invert_to_raw`);
+* faults: stuck outputs, corrupted or blank PROM, forced ADC counts (``raw_override``), a power
+  cycle (:meth:`Ms5837Emulator.power_cycle`: ADC reads 0 until the next reset); NACKs are injected
+  by the bus.
 
-Modelling choices (not in the datasheets we have): reset is instantaneous; conversion time per OSR
-is :data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S` (TE library waits, §3.1); unknown
-command bytes are ignored; reads not preceded by PROM/ADC commands return zeros.
+Modelling choices: reset is instantaneous; conversion time per OSR is
+:data:`~hindrax_drivers.ms5837.protocol.CONVERSION_TIME_S` (§3.1); unknown commands are ignored;
+reads not preceded by PROM/ADC commands return zeros.
 """
 
 from __future__ import annotations

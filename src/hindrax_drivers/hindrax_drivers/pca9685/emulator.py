@@ -2,31 +2,23 @@
 
 Models docs/devices.md §5.1:
 
-* register file with reset values MODE1 = 0x11 (SLEEP, ALLCALL), MODE2 = 0x04, PRE_SCALE = 0x1E,
-  every LEDn full OFF (OFF_H bit 4 = 1); reserved H bits 7:5 read 0; ALL_LED registers are
-  write-only (read 0) and write all 16 channels; TestMode (0xFF) and 0x46..0xF9 ignore writes;
-* auto-increment only when MODE1.AI = 1 (otherwise every byte of a burst goes to the same
-  register), wrapping 0x45 -> 0x00 and 0xFE -> 0x00 (0xFA..0xFE increments through 0xFE);
-* PRE_SCALE writes are ignored unless SLEEP = 1; values below 3 are forced to 3;
-* SLEEP/RESTART: setting SLEEP while any channel is active sets RESTART = 1 and stops the
-  outputs; after clearing SLEEP the previously active channels stay stopped until 1 is written to
-  RESTART (which clears it) or a PWM register is written (which also clears RESTART) [Q1 §7.3.1.1];
-  writing 0 to RESTART has no effect; EXTCLK can only be set while sleeping and only a reset
-  clears it;
-* software reset through the general call (address 0x00, data 0x06) via ``i2c_general_call``;
-* :meth:`Pca9685Emulator.pulse_width_us` decodes the high time each channel actually produces from
-  the registers, the prescale and the oscillator (0 when sleeping/stopped/full OFF, the full period
-  when full ON, inverted with MODE2.INVRT);
-* a write log ``(t_s, register, value)`` per data byte, for latency tests.
+* reset values MODE1 = 0x11, MODE2 = 0x04, PRE_SCALE = 0x1E, every LEDn full OFF; reserved H bits
+  7:5 read 0; ALL_LED registers are write-only and write all 16 channels; TestMode (0xFF) and
+  0x46..0xF9 ignore writes;
+* auto-increment only with MODE1.AI, wrapping 0x45 -> 0x00 and 0xFE -> 0x00;
+* PRE_SCALE written only while SLEEP, values below 3 forced to 3;
+* SLEEP/RESTART [Q1 §7.3.1.1]: sleeping with a channel active sets RESTART and stops the outputs,
+  which stay stopped after wake until RESTART is written 1 or a PWM register is written; EXTCLK set
+  only while sleeping, cleared only by a reset;
+* software reset through the general call (0x00, data 0x06, ``i2c_general_call``);
+* :meth:`Pca9685Emulator.pulse_width_us`: the high time each channel produces (0 when sleeping,
+  stopped or full OFF, the period when full ON, inverted with MODE2.INVRT);
+* a write log ``(t_s, register, value)`` per data byte;
+* /OE (active low, §7.4): ``output_enable_line`` (``is_high()``; None = tied low); while high every
+  output carries no pulse.
 
-* /OE (active low, datasheet §7.4): ``output_enable_line`` is an object with ``is_high()`` (an
-  :class:`~hindrax_drivers.transport.gpio.EmulatedGpioLine`, or a line served by
-  :mod:`~hindrax_drivers.transport.shared_emulation`); while it reads high every output carries no pulse
-  (:meth:`Pca9685Emulator.pulse_width_us` gives 0, "no signal", whatever the registers hold); None = /OE tied low.
-
-Not modelled: sub-addresses and All-Call address decoding, OUTNE (outputs low while /OE is high), OCH (updates apply at
-the end of the transaction, i.e. at STOP, matching the default OCH = 0), the 500 us oscillator
-start-up, the update-at-end-of-cycle timing.
+Not modelled: sub-addresses and All-Call decoding, OUTNE, OCH (updates apply at STOP), the
+oscillator's 500 us start-up, update at the end of the cycle.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ __all__ = [
     "frequency_for_prescale", "period_s", "count_duration_us", "pulse_width_to_counts",
     "counts_to_pulse_width_us", "high_time_counts", "channel_bytes_for_pulse", "channel_block_for_pulses",
     "set_frequency_sequence", "startup_sequence", "safe_startup_sequence", "oscillator_from_measurement",
-    "clamp_esc_pulse_us", "esc_prescale",
+    "esc_prescale",
     # the limits of hindrax_drivers.hardware_limits, re-exported for the driver's users
     "COUNTS_PER_PERIOD", "PRESCALE_MIN", "PRESCALE_MAX", "INTERNAL_OSCILLATOR_HZ", "ESC_MIN_US", "ESC_NEUTRAL_US",
     "ESC_MAX_US", "ESC_DEADBAND_US", "ESC_MIN_FREQUENCY_HZ", "ESC_MAX_FREQUENCY_HZ", "ESC_ARMING_HOLD_S",
@@ -302,16 +302,3 @@ def oscillator_from_measurement(measured_us: float, commanded_us: float, prescal
         raise Pca9685Error(f"{measured_us:g} us measured for {commanded_us:g} us commanded gives "
                            f"{f_true / 1e6:.3f} MHz, outside 20-30 MHz: check channel, trigger and units")
     return f_true
-
-
-def clamp_esc_pulse_us(pulse_width_us: float, min_us: float = ESC_MIN_US, max_us: float = ESC_MAX_US) -> float:
-    """Clamp an ESC command to [min_us, max_us] (defaults 1100..1900 us, docs/devices.md §5.2).
-
-    Raises:
-        Pca9685Error: NaN/infinite pulse, or min_us > max_us.
-    """
-    if not math.isfinite(pulse_width_us):
-        raise Pca9685Error(f"pulse_width_us must be finite, got {pulse_width_us}")
-    if not min_us <= max_us:
-        raise Pca9685Error(f"min_us ({min_us}) must be <= max_us ({max_us})")
-    return min(max(float(pulse_width_us), min_us), max_us)

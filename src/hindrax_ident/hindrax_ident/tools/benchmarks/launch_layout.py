@@ -1,24 +1,19 @@
-"""The vehicle's launch layout for the stack benchmark: the processes of the launch file, devices emulated.
+"""The vehicle's launch layout for the stack benchmark: the processes of the launch file, devices
+emulated.
 
-:func:`launch_processes` lists the processes of a ROS 2 launch XML file (``pool_test.launch.xml``, which
-includes ``vehicle.launch.xml``) through :func:`hindrax_drivers.launch_xml.read_launch`, the one reader of launch
-files in the project (the pool-day test and ``hindrax health`` use it too), each with its console script's
-function (the installed entry points). The stack benchmark starts exactly those processes, with the arguments
-``ros2 launch`` would give them, so it measures what the vehicle runs. The ``launch`` package itself is not
-installable here (docs/architecture.md §11.3).
+:func:`launch_processes` lists the processes of a launch XML file (``pool_test.launch.xml``, which
+includes ``vehicle.launch.xml``) through :func:`hindrax_drivers.launch_xml.read_launch`, the
+project's one reader of launch files, each with its console script's function; the benchmark starts
+them with the arguments ``ros2 launch`` would give (the ``launch`` package is not installable here,
+docs/architecture.md §11.3).
 
-One entry point, ``python -m hindrax_ident.tools.benchmarks.launch_layout pool ...``:
-
-``pool --socket PATH --ports-file FILE [--set KEY=VALUE ...]``
-    The virtual pool in its own process (excluded from the stack's CPU): the simulator at real-time factor 1
-    (no ``/clock`` and no ground-truth topics: every node runs on system time, as on the vehicle), the DVL-75 and Ping1D
-    emulators on pseudo-terminals served by their own threads, and the MS5837, ICM-20948 and PCA9685 emulators on an
-    :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
-    (:class:`I2CSocketServer`). The emulators run on ``time.monotonic`` (the drivers' clock here). The pty paths
-    are written to ``--ports-file`` (JSON, :func:`write_ports_file`: whole or not at all) once everything is up.
-
-The node processes run through :mod:`hindrax_ident.tools.benchmarks.launch_node`, which imports none of this
-module's simulator and emulators.
+``python -m hindrax_ident.tools.benchmarks.launch_layout pool --socket PATH --ports-file FILE [--set
+KEY=VALUE ...]``: the virtual pool in its own process (excluded from the stack's CPU): the simulator
+at real-time factor 1 (no ``/clock``, no ground truth: every node on system time), the serial
+emulators on pseudo-terminals, the I2C emulators on an
+:class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
+(:class:`I2CSocketServer`), all on ``time.monotonic``. The pty paths go to ``--ports-file`` (JSON,
+:func:`write_ports_file`: whole or not at all) once everything is up.
 """
 from __future__ import annotations
 

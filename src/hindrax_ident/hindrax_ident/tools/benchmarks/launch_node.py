@@ -1,25 +1,24 @@
-"""One node process of the stack benchmark's launch layout: a console script's function, as installed.
+"""One node process of the stack benchmark's launch layout: a console script's function, as
+installed.
 
 ``python -m hindrax_ident.tools.benchmarks.launch_node MODULE[:FUNCTION] --ros-args ...`` runs
-``MODULE.FUNCTION()``
-(default ``main``; a console script's target, e.g. ``hindrax_drivers.composition:i2c_sensors_main``) as the
-installed console script does. The I2C drivers reach the virtual pool's emulated bus through their own
-``open_smbus`` (:data:`SOCKET_ENV` set in the process's environment, :mod:`hindrax_drivers.transport.socket_i2c`),
-so nothing of the node is replaced. This module imports nothing else: no simulator, emulator or benchmark code
-(:mod:`hindrax_ident.tools.benchmarks.launch_layout` runs the pool in its own process), so a
-benchmarked process holds
-the modules, and the memory, the vehicle's process holds (``test_bench_launch_layout.py`` checks it). With
-``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`) the node runs under cProfile and writes
-``DIR/<module>.prof`` on exit (``python -m pstats``), also when the node process ends itself with ``os._exit``
-(:data:`hindrax_drivers.ros_process.BEFORE_PROCESS_END`). Every Python thread the node starts takes its
-``threading`` name as its OS thread name (:func:`name_os_threads`), so the benchmark's wake-ups and CPU by thread
-(``/proc/PID/task/*/comm``) name it.
+``MODULE.FUNCTION()`` (default ``main``, e.g. ``hindrax_drivers.composition:i2c_sensors_main``) as
+the installed console script does. The I2C drivers reach the virtual pool's emulated bus through
+their own ``open_smbus`` (:data:`SOCKET_ENV`, :mod:`hindrax_drivers.transport.socket_i2c`), so
+nothing of the node is replaced. This module imports no simulator, emulator or benchmark code, so a
+benchmarked process holds the modules and memory the vehicle's holds
+(``test_bench_launch_layout.py`` checks it).
 
-With ``HINDRAX_BENCH_TOPOLOGY=DIR`` (:data:`TOPOLOGY_ENV`) a SIGUSR1 makes the process write its nodes' endpoints,
-as declared, to ``DIR/<pid>.json`` (:func:`topology`). :func:`skeleton_main` rebuilds one process of such a topology
-without logic (the stack benchmark's floor): the same nodes and endpoints, one pre-serialised message per publisher
-sent from a timer at its rate (a node's publishers of one rate share a timer, one wake-up as a node's tick),
-callbacks that do nothing, the node processes' ``run_nodes``; SIGUSR2 switches it to its next phase's rates.
+``HINDRAX_BENCH_PROFILE=DIR`` (:data:`PROFILE_ENV`): cProfile, ``DIR/<module>.prof`` written on
+exit, ``os._exit`` included (:data:`hindrax_drivers.ros_process.BEFORE_PROCESS_END`). Every Python
+thread takes its ``threading`` name as its OS thread name (:func:`name_os_threads`), for the
+benchmark's figures by thread.
+
+``HINDRAX_BENCH_TOPOLOGY=DIR`` (:data:`TOPOLOGY_ENV`): a SIGUSR1 writes the process's nodes'
+endpoints to ``DIR/<pid>.json`` (:func:`topology`). :func:`skeleton_main` rebuilds one process of
+such a topology without logic: the same nodes and endpoints, one pre-serialised message per
+publisher from a timer at its rate (publishers of one rate share a timer), callbacks that do
+nothing; SIGUSR2 switches it to its next phase's rates.
 """
 from __future__ import annotations
 

@@ -1,79 +1,36 @@
-"""Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process and in the
-launch layout (the processes of the vehicle's launch file), messages per second per topic, and the cost of a bare
-rclpy process sending the same topics at the same rates.
+"""Stack benchmark: the Pi budget. CPU of every node and of the whole vehicle graph, in one process
+and in the launch layout, messages per second per topic, and the cost of a skeleton sending the same
+topics at the same rates.
 
-CPU is always process (or thread) CPU time over wall time: it does not count the time a process waited for a core,
-so it moves less with the load of a shared machine than latency does; it still grows with that load (other
-processes evict the caches a wake-up needs), by 20-40 % between a quiet and a loaded run of this two-core
-machine, so compare layouts in runs close in time, and repeat.
+CPU is process (or thread) CPU time over wall time. It still grows with the load of a shared machine
+(by 20-40 % between a quiet and a loaded run here), so compare layouts in runs close in time, and
+repeat.
 
-The graph: the four sensor drivers, the ESC node (PCA9685), the thrust allocation, the identification node
-(idle, then running a surge goal), the safety supervisor when the package has one
-(``hindrax_drivers.supervisor.node``), and the recorder with raw device data on (every topic except the
-simulator's ground truth ``sim/*`` and ``/clock``, which do not exist on the vehicle). Devices are emulated
-and their work is excluded from the stack's CPU. Two phases, each measured over ``duration_s`` of wall time:
+The graph: the sensor drivers, the ESC, the allocation, the identification node, the supervisor and
+the recorder (every topic except ``sim/*`` and ``/clock``), devices emulated and excluded from the
+stack's CPU. Two phases of ``duration_s`` each: ``running`` (the identification node runs a surge
+goal) and ``idle`` (goal cancelled, a 50 Hz ``wrench`` stream from the benchmark).
 
-* ``running`` (first, from the configured start position): the identification node running a surge goal (it
-  sends the wrench itself);
-* ``idle`` (after cancelling the goal): the identification node idle, a 50 Hz ``wrench`` stream from the
-  benchmark (the pilot's controller) keeping the allocation and ESC busy.
+``inproc``: the graph of ``hindrax run`` (:func:`hindrax_ident.bringup.build_graph`,
+``drive_clocks``) in one executor; per node the CPU of its callbacks less the emulators' time in
+them, plus its own threads; the rest is ``executor+dds``. ``launch``: the processes of
+:data:`LAUNCH_FILE` (:func:`.launch_layout.launch_processes`), the virtual pool in another process;
+CPU per process from ``/proc/<pid>/stat``; the running phase in :data:`RUNNING_WINDOWS` windows,
+each row their median. Rates and the IMU's timing (:func:`imu_timing`) come from the launch layout's
+bag.
 
-One process (``inproc``): the graph of ``hindrax run`` (:func:`hindrax_ident.bringup.build_graph` with
-``drive_clocks``: the simulator sets the nodes' clocks directly, no ``/clock`` messages) at real-time factor 1,
-in one SingleThreadedExecutor. Per node: CPU of its executor callbacks (``time.thread_time``) minus the time
-spent inside the I2C device emulators during them, plus its own threads (serial reader threads of the DVL-75
-and Ping1D drivers, the recorder's bag writer thread) from ``/proc/self/task/<tid>/stat``. ``executor+dds``:
-the rest of the process (rclpy's wait-set handling and the DDS threads). Whole stack = process CPU minus the
-simulator's steps, the emulators and the benchmark's own probe.
+Machine speed: n-body CPU before and after (:mod:`.machine`); the launch totals are also given at
+the reference machine's speed, per unit of the virtual pool's CPU and at :data:`REFERENCE_POOL_CPU`.
+Wake-ups per process and the DDS threads' CPU; :data:`PARTICIPANT_PROBES` give what one more process
+costs. ``--baseline GIT_REF`` measures that commit's launch layout first (:func:`baseline_launch`,
+rows ``..._vs_baseline``).
 
-Launch layout (``launch``): the processes ``ros2 launch hindrax_ident pool_test.launch.xml`` starts (the vehicle
-launch file with recording on, plus the identification node; read from the launch file by
-:func:`~hindrax_ident.tools.benchmarks.launch_layout.launch_processes`, so a process added to or merged in the
-launch file is measured as it will run), each its console script's function with the launch file's arguments
-(``-r __node:=``, ``--params-file``, ``-p``) plus the bench's device ports; the virtual pool in another process
-(:mod:`hindrax_ident.tools.benchmarks.launch_layout`: simulator at real time, serial emulators on pseudo-terminals,
-I2C emulators behind a Unix socket standing in for ``/dev/i2c-1``); every node on system time. CPU per process:
-user + system time from ``/proc/<pid>/stat`` (all threads). The running phase is measured in
-:data:`RUNNING_WINDOWS` consecutive windows (the goal must still run at the end of the last); each row is the
-median over the windows, the note lists every window's value.
-
-Messages per second per topic: counted in the launch layout's bag by log time within each window (the one-process
-graph: the recorder's counts). The IMU's timing in the running windows, from the same bag (:func:`imu_timing`): its
-rate, the largest gap between two messages and the age of a sample when the recorder receives it, so that a change of
-the process layout shows what it costs the 50 Hz sensor the supervisor watches (``launch_running_imu_*``).
-
-Machine speed: before and after the layouts, the CPU time of 5 million n-body steps here
-(:mod:`hindrax_ident.tools.benchmarks.machine`, ``machine_nbody_cpu_s``, their mean). The launch totals are also
-given at the speed of a reference machine (``launch_*_cpu_total_at_reference_speed``,
-``..._max_process_at_reference_speed``), per unit of the virtual pool's CPU in the same windows (the pool's code is
-the same in every run: ``launch_*_cpu_total_per_pool``) and at the pool's CPU on the reference machine,
-:data:`REFERENCE_POOL_CPU` (``..._at_reference_pool``): the figures to compare between machines. The targets stay
-on the figures measured here.
-
-Wake-ups: per process, the voluntary context switches of all its threads per window (each sleep ends in one;
-``launch_*_wakeups_*``; in the note the busiest threads by name, each with its CPU: a count of wake-ups says where a
-process sleeps, not where its CPU goes), and ``launch_*_cpu_dds_threads``: Fast DDS's own threads (``dds.*``) of
-every process together. What one more process costs: two probe processes run beside
-the layout, not in its totals (:data:`PARTICIPANT_PROBES`: a node process with nothing to do, and one subscribing to
-the four sensor topics the identification and the controller take). ``--baseline GIT_REF``: that commit's launch
-layout is measured first in the same run (:func:`baseline_launch`), and the rows ``..._vs_baseline`` give today's
-figures over its. The command path: ``actuation_wrench_to_registers_*``
-(:func:`~hindrax_ident.tools.benchmarks.actuation.wrench_to_registers`).
-
-Skeletons: processes with the endpoints of a topology and no logic, each run by
-:func:`~hindrax_ident.tools.benchmarks.launch_node.skeleton_main` (rclpy, the EventsExecutor, the node processes'
-``run_nodes``): every publisher sends one pre-serialised message from a timer at its rate, every callback does
-nothing (:func:`_skeleton`). The launch's skeleton (``launch_skeleton_*``, :func:`launch_skeleton`): the launch's
-processes with the nodes, publishers (topic, type, QoS, events), subscriptions (the same, raw or not), services and
-clients each process declared in the same run (read from the running processes by SIGUSR1,
-:func:`read_topologies`; the skeleton's own are read back and must be equal), the launch file's launch-prefix and
-environment, each topic at the launch's rate of each phase sending a message recorded in its bag; its CPU is given in
-units of the launch's virtual pool CPU in the same phase (``..._per_pool``) and as the launch's over it
-(``launch_*_vs_skeleton_ratio_*``): the floor of moving the vehicle's messages between these processes, and the
-part above it that the nodes' logic costs. Not in it: the action server and its topics, timers that publish
-nothing. It replaces the bare publisher + raw subscriber of the same topics. The bare baseline
-``cpu_bare_rclpy_same_topics`` is a skeleton too: one publisher process for the topics of the one-process idle phase.
-The participant probes are skeletons with no publisher.
+Skeletons (:func:`_skeleton`, run by :func:`.launch_node.skeleton_main`): the launch's processes
+with the same endpoints (read back by SIGUSR1, :func:`read_topologies`, and checked equal),
+launch-prefix and environment, each topic at the launch's rate with a recorded message, callbacks
+doing nothing: the floor of moving the vehicle's messages (``launch_skeleton_*``,
+``launch_*_vs_skeleton_ratio_*``). ``cpu_bare_rclpy_same_topics`` is one publisher process for the
+one-process idle phase's topics.
 """
 from __future__ import annotations
 
@@ -103,7 +60,7 @@ from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutEx
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path, load_config
 from hindrax_drivers.launch_xml import write_parameter_file
-from hindrax_drivers.lean_cdr import cdr_decoder
+from hindrax_drivers.lean_cdr import cdr_decoder, type_name_of
 from hindrax_drivers.recording.reader import BagReader
 from hindrax_drivers.recording.selection import TopicSelection
 from hindrax_drivers.testing import (ConditionTimeout, GraphSettled, child_env, python_executable, ros_context,
@@ -192,7 +149,6 @@ def _thread_cpu_s() -> dict[str, float]:
 
 
 def _wrench_msg(stamp: Any) -> Any:
-
     m = WrenchStamped()
     m.header.frame_id = "base_link"
     m.header.stamp = stamp
@@ -201,14 +157,8 @@ def _wrench_msg(stamp: Any) -> Any:
     return m
 
 
-def _goal() -> Any:
-
-    return RunIdentification.Goal(dofs=["surge"], levels_per_dof=3)
-
-
 class _SwitchedStream(dict):
-    """``{"on": bool}`` for :func:`_running_then_idle` that also starts (``True``) and cancels (``False``) the timer
-    sending the stream (an rclpy ``Timer``)."""
+    """``{"on": bool}`` for :func:`_running_then_idle` that also starts and cancels ``timer``."""
 
     def __init__(self, timer: Any) -> None:
         super().__init__(on=False)
@@ -217,10 +167,15 @@ class _SwitchedStream(dict):
     def __setitem__(self, key: str, value: bool) -> None:
         super().__setitem__(key, value)
         if key == "on":
-            if value:
-                self.timer.reset()
-            else:
-                self.timer.cancel()
+            self.timer.reset() if value else self.timer.cancel()
+
+
+def _wrench_stream(probe: Any) -> _SwitchedStream:
+    """The pilot's 50 Hz wrench stream from ``probe``, off until switched on: its timer runs only
+    while it is on, so the bench wakes no 50 Hz timer in the running phase."""
+    wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
+    return _SwitchedStream(probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
+        _wrench_msg(probe.get_clock().now().to_msg())), autostart=False))
 
 
 def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin: Any, spin_idle: Any,
@@ -236,7 +191,7 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
     have measured a running campaign)."""
     goals = GoalSender(probe, action, "run_identification")
     stream["on"] = False
-    handle = goals.send(_goal(), spin, 30)
+    handle = goals.send(RunIdentification.Goal(dofs=["surge"], levels_per_dof=3), spin, 30)
     if not handle.accepted:
         raise RuntimeError(f"{what}: the surge goal was rejected")
     if goal_status is not None:
@@ -263,7 +218,6 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
 
 # ---------------------------------------------------------------------------------------------- one process
 def _in_process(duration_s: float, tmp: Path) -> dict:
-
     cpu: dict[str, float] = collections.defaultdict(float)  # callbacks by node name
     emu: dict[str, float] = collections.defaultdict(float)  # emulator time inside callbacks, by node name
     current: list[str | None] = [None]
@@ -396,15 +350,12 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
 
         _running_then_idle(probe, action, stream, window, spin, spin_with_wrench, 60,
                            "in-process stack benchmark")
-        out["types"] = {pub.topic_name: _type_name(pub.msg_type) for n in graph.nodes.values() for pub in n.publishers}
+        out["types"] = {pub.topic_name: type_name_of(pub.msg_type) for n in graph.nodes.values()
+                        for pub in n.publishers}
         out["dropped"] = recorder._writer.dropped
         graph.shutdown()
         probe.destroy_node()
     return out
-
-
-def _type_name(cls: Any) -> str:
-    return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
 
 
 # ---------------------------------------------------------------------------------------------- launch layout
@@ -446,8 +397,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                      "-p", "esc.arming_time_s:=1.0"]
             if load_config(params).esc.oscillator_calibrated is not None:  # a required key: always (file validated)
                 bench += ["-p", "esc.oscillator_calibrated:=true"]
-            wrap = ["-m",
-                    "hindrax_ident.tools.benchmarks.launch_node"]  # no simulator in a node process
+            wrap = ["-m", "hindrax_ident.tools.benchmarks.launch_node"]  # no simulator here
             (tmp / "params").mkdir(exist_ok=True)
             values_file = functools.partial(write_parameter_file, directory=tmp / "params")
             for lp in layout:
@@ -472,14 +422,9 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
                 counts, lock = subscribe_recorder_counts(probe, 50)
-                wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
                 arm = probe.create_client(SetArmed, "esc/set_armed")
                 action = ActionClient(probe, RunIdentification, "run_identification")
-                # the pilot's wrench stream (idle phase): its timer runs only while the stream is on, so that this
-                # process (excluded from the totals, but on the same two cores) wakes no 50 Hz timer in the running
-                # phase
-                stream = _SwitchedStream(probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
-                    _wrench_msg(probe.get_clock().now().to_msg())), autostart=False))
+                stream = _wrench_stream(probe)
                 ex = SingleThreadedExecutor(context=ctx)
                 ex.add_node(probe)
                 spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
@@ -736,9 +681,7 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs
                                                 stdout=(tmp / f"{label}.log").open("w"), stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
-                wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
-                stream = _SwitchedStream(probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
-                    _wrench_msg(probe.get_clock().now().to_msg())), autostart=False))
+                stream = _wrench_stream(probe)
                 ex = SingleThreadedExecutor(context=ctx)
                 ex.add_node(probe)
                 spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
@@ -868,8 +811,7 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
     """Rows of the launch layout: per process, total, largest process and messages per second of each phase, each
     the median over the phase's windows (the notes list every window's value). ``nbody_s``: this machine's n-body
     time (:func:`~hindrax_ident.tools.benchmarks.machine.nbody_cpu_s`), for the total and the
-    largest process at the
-    reference machine's speed (``..._at_reference_speed``); None: no such rows."""
+    largest process at the reference machine's speed (``..._at_reference_speed``); None: none."""
     rows: list[dict] = []
     for phase in ("idle", "running"):
         wins = launch["phases"][phase]["windows"]
@@ -1164,8 +1106,7 @@ def baseline_rows(rows: list[dict], before: list[dict], ref: str) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m hindrax_ident.tools.benchmarks.stack``: the stack benchmark alone, with the
-    options ``make bench``
-    does not take (see ``--help``); prints the rows and writes them as JSON with ``--json``."""
+    options ``make bench`` does not take (``--help``); prints the rows (as JSON too: ``--json``)."""
     parser = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.stack",
                                      description="The Pi budget: CPU of the vehicle graph in the launch layout "
                                                  "(one process per <node> of pool_test.launch.xml) and in one "
