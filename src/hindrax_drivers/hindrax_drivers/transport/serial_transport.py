@@ -122,6 +122,7 @@ class SerialTransport:
         self.clock = clock
         self._ser: Optional[serial.SerialBase] = None
         self._ser_lock = threading.Lock()  # guards _ser swaps and writes
+        self._port_lost = threading.Condition(self._ser_lock)  # notified at a port's close, close()
         self._read_lock = threading.Lock()  # one reader at a time: the thread, or :meth:`pump`'s caller
         self._caller_reads = False
         self._stats_lock = threading.Lock()
@@ -176,7 +177,7 @@ class SerialTransport:
         """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since construction, as
         ``status().bytes_handled``) have been through the tap and ``on_data``, or ``timeout_s`` of wall time passed
         without a byte (a read in progress may add ``read_timeout_s``); True when they have. The first call takes
-        the reading over from the reader thread for good (it keeps only (re)opening the port)."""
+        the reading over from the reader thread for good (it then sleeps until the port is lost)."""
         if not self._caller_reads:
             self._caller_reads = True
             ser = self._ser
@@ -228,6 +229,7 @@ class SerialTransport:
         self._stop.set()
         with self._ser_lock:
             ser = self._ser
+            self._port_lost.notify_all()
         if ser is not None and hasattr(ser, "cancel_read"):
             try:
                 ser.cancel_read()
@@ -265,6 +267,7 @@ class SerialTransport:
     def _close_port_locked(self) -> None:
         ser, self._ser = self._ser, None
         self._connected_event.clear()
+        self._port_lost.notify_all()
         if ser is not None:
             try:
                 ser.close()
@@ -303,15 +306,15 @@ class SerialTransport:
         while not self._stop.is_set():
             with self._ser_lock:
                 ser = self._ser
+                if ser is not None and self._caller_reads:  # pump() reads; this thread re-opens
+                    self._port_lost.wait_for(lambda: self._ser is None or self._stop.is_set())
+                    continue
             if ser is None:
                 if self._open():
                     delay = self.reconnect_initial_s
                 else:
                     self._stop.wait(delay)
                     delay = min(delay * 2.0, self.reconnect_max_s)
-                continue
-            if self._caller_reads:  # :meth:`pump` reads; this thread only (re)opens the port
-                self._stop.wait(self.read_timeout_s)
                 continue
             with self._read_lock:
                 ok = self._read_chunk(ser)
