@@ -300,12 +300,14 @@ def test_close_joins_thread_and_loop_url_works():
 
 def test_caller_driven_device_and_pump_hand_every_byte_to_the_callback_in_the_calling_thread():
     """``PtyDevice(start=False).service(t)``: output only when the caller serves it, at the caller's time; the
-    transport's ``pump`` reads until the callback has run on every byte sent, in the calling thread (the lock-step a
+    transport's ``pump`` reads until the callback has run on every byte sent, in the calling thread
+    (the lock-step a
     simulator uses; the reader thread reads no more), and times out when nothing more comes."""
     emu = Dvl75Emulator(DvlTruth(velocity_frd_m_s=(0.2, 0.0, 0.0), altitude_m=1.5), rate_hz=10)
     dev = PtyDevice(emu, clock=lambda: 0.0, start=False)
     col, threads = Collector("dvl"), []
-    tr = SerialTransport(dev.path, on_data=lambda data: (threads.append(threading.current_thread()), col.on_data(data)))
+    tr = SerialTransport(dev.path, on_data=lambda data: (threads.append(threading.current_thread()),
+                                                         col.on_data(data)))
     try:
         assert tr.wait_connected(WAIT_S) and tr.status().connections == 1
         assert not dev.threaded and tr.pump(0, 0.0)

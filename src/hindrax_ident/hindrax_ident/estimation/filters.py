@@ -216,7 +216,8 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
             :class:`KinematicKalmanFilter`.
 
     Returns:
-        ``(pos, vel, acc)``, each (n,). Samples before the first valid measurement are NaN. In velocity
+        ``(pos, vel, acc)``, each (n,). Samples before the first valid measurement are NaN. In
+        velocity
         mode ``pos`` is the integrated velocity, 0 at the first valid sample.
 
     Raises:
