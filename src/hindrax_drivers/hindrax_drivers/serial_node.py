@@ -178,7 +178,8 @@ class SerialDeviceNode(VehicleNode):
         return int(value)
 
     def count_decoder_events(self, counts: dict[str, int]) -> None:
-        """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total: garbage bytes, bad
+        """Add to the diagnostics what the stream decoder's ``counts`` (kind -> running total:
+        garbage bytes, bad
         checksums, ...) grew by since the last call."""
         for kind, total in counts.items():
             delta = total - self._decoder_counts.get(kind, 0)

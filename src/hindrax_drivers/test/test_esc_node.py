@@ -336,9 +336,10 @@ def test_a_forged_supervisor_heartbeat_disarms_and_refuses_arming(esc):
 
 
 def test_a_late_safety_tick_beats_at_once(esc):
-    """A beat on every second safety tick only made a stalled ESC's beat gap its tick gap plus up to two periods (a
-    110 ms tick gap, a 165 ms beat gap in the busy-neighbours bench at nice -5; the guard's timeout is 200 ms): a tick
-    two periods after the last beat sends one whatever its parity, and the beats stay at every second tick."""
+    """A beat on every second safety tick only made a stalled ESC's beat gap its tick gap plus up to
+    two periods (a 110 ms tick gap, a 165 ms beat gap in the busy-neighbours bench at nice -5; the
+    guard's timeout is 200 ms): a tick two periods after the last beat sends one whatever its
+    parity, and the beats stay at every second tick."""
     node = esc["node"]
     node._heartbeat_tick = 0  # the next tick is one without a beat by its parity
     node._beat_s = time.monotonic() - 2.0 * node.period_s

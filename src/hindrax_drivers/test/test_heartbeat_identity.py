@@ -161,11 +161,13 @@ def test_alive_age_on_the_system_clock_is_the_steady_age():
 
 
 def test_alive_age_counts_from_the_beat_not_from_the_tick_before_it():
-    """The busy-neighbours bench at nice -5 disarmed on an ESC beat gap of 182 ms, under the guard's 0.2 s: the age
-    counted each tick-to-tick gap in full, from the tick before the beat was heard, so at the guard's 20 Hz ticks a
-    live peer read up to 50 ms older than its beat. A 180 ms gap between live beats, one tick 10 ms late: 165 ms."""
+    """The busy-neighbours bench at nice -5 disarmed on an ESC beat gap of 182 ms, under the guard's
+    0.2 s: the age counted each tick-to-tick gap in full, from the tick before the beat was heard,
+    so at the guard's 20 Hz ticks a live peer read up to 50 ms older than its beat. A 180 ms gap
+    between live beats, one tick 10 ms late: 165 ms."""
     c = Clocks()
-    age = AliveAge(0.2, clock=lambda: c.steady)  # the guard: ticks every 50 ms, max step = its timeout
+    # the guard: ticks every 50 ms, max step = its timeout
+    age = AliveAge(0.2, clock=lambda: c.steady)
     c.steady += 0.045
     age.heard()  # 45 ms after a tick
     for dt in (0.005, 0.05, 0.05, 0.06):  # the ticks at 50, 100, 150 and 210 ms

@@ -54,7 +54,8 @@ def test_message_encoding_without_decoder(tmp_path):
 
 
 def _same_fields(lean, ref, where: str) -> None:
-    """Every field of ``ref`` (mcap_ros2's object) has the same value in ``lean`` (rosbags' object), recursively."""
+    """Every field of ``ref`` (mcap_ros2's object) has the same value in ``lean`` (rosbags' object),
+    recursively."""
     import numpy as np
 
     for name in ref.__slots__:
@@ -66,14 +67,16 @@ def _same_fields(lean, ref, where: str) -> None:
             for i, (x, y) in enumerate(zip(a, b)):
                 _same_fields(x, y, f"{where}.{name}[{i}]")
         elif isinstance(b, (list, bytes)):
-            assert np.array_equal(np.asarray(a), np.asarray(list(b)), equal_nan=True), f"{where}.{name}"
+            assert np.array_equal(np.asarray(a), np.asarray(list(b)),
+                                  equal_nan=True), f"{where}.{name}"
         else:
             assert a == b or (a != a and b != b), f"{where}.{name}: {a!r} != {b!r}"
 
 
 def test_lean_installed_messages_read_what_the_bags_definitions_say():
-    """installed_messages(lean=True), the campaign reader's fast path (rosbags' decoder of the installed definitions),
-    gives field by field the values mcap_ros2 decodes from the bag's own definitions, for every topic of a bag
+    """installed_messages(lean=True), the campaign reader's fast path (rosbags' decoder of the
+    installed definitions), gives field by field the values mcap_ros2 decodes from the bag's own
+    definitions, for every topic of a bag
     recorded through the driver graph, in the same order."""
     from pathlib import Path
 
@@ -82,7 +85,8 @@ def test_lean_installed_messages_read_what_the_bags_definitions_say():
     lean, ref = list(bag.installed_messages(topics, lean=True)), list(bag.decoded(topics))
     assert [m for m, _ in lean] == [m for m, _ in ref]
     assert {m.topic for m, _ in lean} >= {"/imu/data_raw", "/dvl/data", "/thrusters/pulse_width",
-                                           "/pressure/fluid_pressure", "/ping/altitude", "/identification/status"}
+                                           "/pressure/fluid_pressure", "/ping/altitude",
+                                           "/identification/status"}
     for (m, a), (_, b) in zip(lean, ref):
         assert not hasattr(a, "get_fields_and_field_types"), "an rclpy object: not the lean decoder"
         _same_fields(a, b, m.topic)

@@ -184,12 +184,15 @@ def test_f2_esc_process_gone_while_armed_the_guard_drives_oe_high(rig):
 
 
 def test_f2_a_starved_guard_takes_the_waiting_beats_before_it_judges_a_dead_esc_still_stops(rig):
-    """The busy-neighbours bench at nice -5 disarmed once: a guard starved past its 0.2 s timeout ran its tick before
-    the callbacks of the ESC beats that had arrived meanwhile, and took a live ESC for a dead one. Starved here by
-    leaving the executor (the ESC beating on); its tick must take those beats first. A dead ESC must still stop the
+    """The busy-neighbours bench at nice -5 disarmed once: a guard starved past its 0.2 s timeout
+    ran its tick before the callbacks of the ESC beats that had arrived meanwhile, and took a live
+    ESC for a dead one. Starved here by leaving the executor (the ESC beating on); its tick must
+    take those beats first. A dead ESC must still stop the
     outputs: the beats waiting then are aged from their send stamps, older than the timeout."""
-    r = rig(guard=True, overrides={"esc.heartbeat_timeout_s": 1.0})  # the ESC does not disarm on the quiet guard
-    r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(), "guard released /OE at neutral")
+    # the ESC does not disarm on the quiet guard
+    r = rig(guard=True, overrides={"esc.heartbeat_timeout_s": 1.0})
+    r.wait(lambda: not r.guard.core.asserted and not r.line.is_high(),
+           "guard released /OE at neutral")
     r.arm_at_1700()
 
     def spin_for(seconds):
@@ -207,12 +210,15 @@ def test_f2_a_starved_guard_takes_the_waiting_beats_before_it_judges_a_dead_esc_
         r.guard.tick()  # its timer before the beats' callbacks
 
     starve_guard()
-    assert not r.guard.core.asserted and not r.line.is_high() and r.guard.watches["esc"].taken_late > 0
+    assert (not r.guard.core.asserted and not r.line.is_high()
+            and r.guard.watches["esc"].taken_late > 0)
     assert r.esc.armed and wire(r.emu)[0] > 1690
     taken = r.guard.watches["esc"].taken_late
-    starve_guard(esc_dies=True)  # the ESC dies while the guard is starved: its beats wait, the newest 0.3 s old
+    # the ESC dies while the guard is starved: its beats wait, the newest 0.3 s old
+    starve_guard(esc_dies=True)
     assert r.guard.watches["esc"].taken_late > taken
-    assert r.guard.core.asserted and r.line.is_high() and "ESC output state silent" in r.guard.core.reason
+    assert (r.guard.core.asserted and r.line.is_high()
+            and "ESC output state silent" in r.guard.core.reason)
 
 
 def test_f2_supervisor_breach_asserts_oe_too(rig):

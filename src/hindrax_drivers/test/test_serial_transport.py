@@ -300,12 +300,14 @@ def test_close_joins_thread_and_loop_url_works():
 
 def test_caller_driven_device_and_pump_hand_every_byte_to_the_callback_in_the_calling_thread():
     """``PtyDevice(start=False).service(t)``: output only when the caller serves it, at the caller's time; the
-    transport's ``pump`` reads until the callback has run on every byte sent, in the calling thread (the lock-step a
+    transport's ``pump`` reads until the callback has run on every byte sent, in the calling thread
+    (the lock-step a
     simulator uses; the reader thread reads no more), and times out when nothing more comes."""
     emu = Dvl75Emulator(DvlTruth(velocity_frd_m_s=(0.2, 0.0, 0.0), altitude_m=1.5), rate_hz=10)
     dev = PtyDevice(emu, clock=lambda: 0.0, start=False)
     col, threads = Collector("dvl"), []
-    tr = SerialTransport(dev.path, on_data=lambda data: (threads.append(threading.current_thread()), col.on_data(data)))
+    tr = SerialTransport(dev.path, on_data=lambda data: (threads.append(threading.current_thread()),
+                                                         col.on_data(data)))
     try:
         assert tr.wait_connected(WAIT_S) and tr.status().connections == 1
         assert not dev.threaded and tr.pump(0, 0.0)
@@ -320,6 +322,39 @@ def test_caller_driven_device_and_pump_hand_every_byte_to_the_callback_in_the_ca
         with pytest.raises(RuntimeError):
             dev.start()
             dev.service(2.0)
+    finally:
+        tr.close()
+        dev.close()
+
+
+def _voluntary_switches(thread: threading.Thread) -> int:
+    """The thread's voluntary context switches so far (Linux ``/proc``): one per wake-up."""
+    with open(f"/proc/self/task/{thread.native_id}/status") as status:
+        return next(int(line.split()[1]) for line in status
+                    if line.startswith("voluntary_ctxt_switches"))
+
+
+def test_while_the_caller_reads_the_reader_thread_sleeps_until_the_port_is_lost_and_reopens_it():
+    """After the first ``pump`` the reader thread does not wake while the port stays open (a caller
+    reading for 0.3 s with a 10 ms read timeout: no wake-up of it, where polling made 29); when a
+    read fails it wakes and re-opens the port once the device is back."""
+    emu = Dvl75Emulator(DvlTruth(velocity_frd_m_s=(0.2, 0.0, 0.0), altitude_m=1.5), rate_hz=10)
+    dev = PtyDevice(emu, clock=lambda: 0.0, start=False)
+    tr = SerialTransport(dev.path, read_timeout_s=0.01, reconnect_initial_s=0.01,
+                         reconnect_max_s=0.05)
+    try:
+        assert tr.wait_connected(WAIT_S)
+        reader = next(t for t in threading.enumerate() if t.name == f"SerialTransport({tr.port})")
+        assert not tr.pump(1, 0.1)  # takes the reading over; the reader thread's read returns
+        before = _voluntary_switches(reader)
+        assert not tr.pump(1, 0.3)  # nothing comes: 0.3 s of reads in this thread
+        assert _voluntary_switches(reader) - before <= 1
+        dev.disconnect()
+        assert not tr.pump(1, 0.1) and not tr.connected  # the read fails: the port is closed
+        dev.reconnect()
+        assert wait_until(lambda: tr.status().connections == 2)
+        dev.service(1.0)
+        assert tr.pump(dev.bytes_to_host, WAIT_S)
     finally:
         tr.close()
         dev.close()

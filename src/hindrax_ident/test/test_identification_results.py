@@ -160,8 +160,9 @@ def test_report_writes_html_and_pngs(cfg, tmp_path):
 
 
 def test_a_report_plot_is_laid_out_once_and_drawn_once(tmp_path, monkeypatch):
-    """The report's plots (a dozen per campaign) are laid out by tight_layout and then drawn once by savefig, not
-    twice (the placeholder engine tight_layout leaves makes savefig draw the figure before drawing it again)."""
+    """The report's plots (a dozen per campaign) are laid out by tight_layout and then drawn once by
+    savefig, not twice (the placeholder engine tight_layout leaves makes savefig draw the figure
+    before drawing it again)."""
     import matplotlib.figure
     import matplotlib.pyplot as plt
 
@@ -169,7 +170,8 @@ def test_a_report_plot_is_laid_out_once_and_drawn_once(tmp_path, monkeypatch):
 
     draws = []
     draw = matplotlib.figure.Figure.draw
-    monkeypatch.setattr(matplotlib.figure.Figure, "draw", lambda self, r: (draws.append(self), draw(self, r))[1])
+    monkeypatch.setattr(matplotlib.figure.Figure, "draw",
+                        lambda self, r: (draws.append(self), draw(self, r))[1])
     fig, ax = plt.subplots(2, 1)
     ax[0].plot([0.0, 1.0], [0.0, 1.0])
     ax[1].set_ylabel("a long label that tight_layout has to make room for")

@@ -92,18 +92,21 @@ def test_i2c_emulators_measure_the_vehicle_when_sampled_not_the_last_grid_sample
 
 
 def test_serial_lock_step_has_a_slow_driver_handle_every_byte_before_the_tick_ends():
-    """A driver hop slower than the hand-off timeout (a starved machine): when ``tick`` returns, the driver has
-    handled every byte sent at that tick, in the simulator's thread, so what it publishes is there before the other
-    nodes run at the tick and before simulated time moves on (the recorded data does not depend on the load)."""
+    """A driver hop slower than the hand-off timeout (a starved machine): when ``tick`` returns, the
+    driver has handled every byte sent at that tick, in the simulator's thread, so what it publishes
+    is there before the other nodes run at the tick and before simulated time moves on (the recorded
+    data does not depend on the load)."""
     t = [0.0]
-    pty = PtyDevice(Dvl75Emulator(DvlTruth(velocity_frd_m_s=(0.2, 0.0, 0.0), altitude_m=1.5), rate_hz=10),
+    pty = PtyDevice(Dvl75Emulator(DvlTruth(velocity_frd_m_s=(0.2, 0.0, 0.0), altitude_m=1.5),
+                                  rate_hz=10),
                     clock=lambda: t[0], start=False)
     threads, never = [], threading.Event()
 
     def slow_driver(_data: bytes) -> None:
         threads.append(threading.current_thread())
         if len(threads) == 1:
-            never.wait(HANDOFF_TIMEOUT_S + 0.2)  # the first message's handling outlasts the hand-off timeout
+            # the first message's handling outlasts the hand-off timeout
+            never.wait(HANDOFF_TIMEOUT_S + 0.2)
 
     transport = SerialTransport(pty.path, on_data=slow_driver)
     try:

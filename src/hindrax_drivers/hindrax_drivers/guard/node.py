@@ -337,7 +337,8 @@ class OutputGuardNode(VehicleNode):
         self._last_decision = time.monotonic()
         for kind, age in (("esc", self.esc_age), ("supervisor", self.supervisor_age)):
             age.tick()
-            self.watches[kind].fresh(age, self.timeout_s)  # a stale one's waiting beats taken first (starved)
+            # a stale one's waiting beats taken first (starved)
+            self.watches[kind].fresh(age, self.timeout_s)
         self.check_identity()
         self.core.on_stall(self.watchdog_ran_out())
         beat_seq = self.heartbeat.seq + 1  # the beat below carries this decision

@@ -255,7 +255,8 @@ def startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL) -> li
     Channel registers are not touched: at power-up every channel is full OFF (no pulses, which the
     ESC does not treat as a command, §5.2); the driver then writes 1500 us to every ESC channel.
     """
-    return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"), *set_frequency_sequence(prescale, mode1)]
+    return [RegisterWrite(MODE2, MODE2_OUTDRV, 0.0, "MODE2"),
+            *set_frequency_sequence(prescale, mode1)]
 
 
 def safe_startup_sequence(prescale: int, mode1: int = MODE1_AI | MODE1_ALLCALL

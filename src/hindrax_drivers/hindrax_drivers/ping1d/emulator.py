@@ -121,7 +121,8 @@ class Ping1dEmulator:
         seed: seed of the fault generator.
     Attributes:
         settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`),
-        streaming (streamed id -> destination device id), received (counts of accepted host messages by id).
+        streaming (streamed id -> destination device id), received (counts of accepted host messages
+        by id).
     """
 
     def __init__(self, truth_source: TruthSource, *, settings: Optional[Ping1dSettings] = None,

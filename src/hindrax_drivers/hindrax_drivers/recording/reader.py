@@ -169,11 +169,13 @@ class BagReader:
         same = msgdefs.matches_installed(ch.type, ch.definition, ch.metadata.get("topic_type_hash"))
         return cls if same else None
 
-    def installed_messages(self, topics: Iterable[str], lean: bool = False) -> Iterator[tuple[RawMessage, Any]]:
+    def installed_messages(self, topics: Iterable[str],
+                           lean: bool = False) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, instance of the installed class) pairs of ``topics`` in log-time order.
 
-        Records whose type has the installed layout (:meth:`installed_class`) go through rclpy's C deserializer
-        (``lean``: :func:`hindrax_drivers.lean_cdr.cdr_decoder`, read-only objects of the same fields, twice as fast);
+        Records whose type has the installed layout (:meth:`installed_class`) go through rclpy's C
+        deserializer (``lean``: :func:`hindrax_drivers.lean_cdr.cdr_decoder`, read-only objects of
+        the same fields, twice as fast);
         records of a type that changed since the bag was written are decoded from the bag's stored definition
         (:meth:`decoded`) and copied into the installed class field by field (:func:`.msgtypes.from_decoded`:
         a field the bag lacks keeps the installed default). One rule for every reader of old bags.
@@ -190,7 +192,8 @@ class BagReader:
         changed = {t: message_class(self.channels[t].type) for t, c in classes.items() if c is None}
         decode = {t: cdr_decoder(c) if lean else (lambda data, c=c: deserialize_message(data, c))
                   for t, c in classes.items() if c is not None}
-        for raw, obj in self.decoded(wanted) if changed else ((raw, None) for raw in self.messages(wanted)):
+        for raw, obj in (self.decoded(wanted) if changed
+                         else ((raw, None) for raw in self.messages(wanted))):
             dec = decode.get(raw.topic)
             yield raw, dec(raw.data) if dec is not None else from_decoded(changed[raw.topic], obj)
 
@@ -220,7 +223,8 @@ class BagReader:
             if end_ns is not None:
                 kwargs["ending_before"] = int(end_ns)
             for schema, channel, msg in reader.iter_messages(**kwargs):
-                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time, msg.publish_time,
+                yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time,
+                                 msg.publish_time,
                                  msg.data)
 
     def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:

@@ -8,10 +8,10 @@ uses, so the real parsing code runs on the recorded stream:
 
 - :class:`SerialReplayDevice` (a :class:`~hindrax_drivers.transport.pty_device.ByteStreamEmulator`, served on a
   pty by :class:`~hindrax_drivers.transport.pty_device.PtyDevice`): emits the recorded device->host chunks in
-  order, each once the replay clock reaches its recorded receive time (``paced=True``) or all at once
-  (``paced=False``, as fast as the driver reads). Host->device bytes are kept in :attr:`host_bytes` and
-  otherwise ignored (a serial device answers nothing here: the recorded replies are in the device->host
-  stream already).
+  order, each at the step of the replay clock that reaches its recorded receive time
+  (``paced=True``) or all at once (``paced=False``). Host->device bytes are kept in
+  :attr:`host_bytes` and otherwise ignored (a serial device answers nothing here: the recorded
+  replies are in the device->host stream already).
 - :class:`I2CReplayDevice` (one per I2C address on an
   :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`): answers each read transaction with the
   next recorded read data *of that register* (the register pointer is the first byte of the preceding
@@ -19,18 +19,22 @@ uses, so the real parsing code runs on the recorded stream:
   (:attr:`I2CReplayDevice.write_mismatches`). When a register's recorded reads are used up, reads NACK
   (``OSError`` errno 121, as an absent device): the driver counts an I2C failure and publishes nothing,
   so a replay never invents data.
-- :class:`ReplayHardware`: all of it for one bag (``dvl75`` and ``ping1d`` on ptys, every recorded I2C
-  device on one bus) with one :class:`ReplayClock`.
+- :class:`ReplayHardware`: all of it for one bag (``dvl75`` and ``ping1d`` on ptys served by the
+  caller, every recorded I2C device on one bus).
 - :class:`DriverReplay`: the driver nodes (DVL-75, Ping1D, MS5837, ICM-20948, ESC) on that hardware with
   ``use_sim_time``, a ``/clock`` publisher stepping through the recorded ``/clock`` values (or, without
   them, a 100 Hz grid over the recorded span), and a probe collecting every parsed message; it runs until
-  every recorded device->host byte and every recorded I2C read has been consumed.
+  every recorded device->host byte and every recorded I2C read has been consumed. The serial
+  devices run in lock-step with that clock, as in the simulator that records such bags: at each
+  step, every driver's clock already there, the chunks due are written and each driver reads and
+  handles them in the harness's thread (``SerialTransport.pump``) before time moves on, so every
+  chunk is received at its recorded time whatever the load (a rule on receive times, such as the
+  DVL node's "no ``$DVPDL`` for 1 s", sees the recorded gaps).
 
 What "the same" means after a replay (checked by ``test/test_bag_replay_drivers.py``): every parsed message
 is re-published, in the same order per topic, with every field equal (exact float equality: the same bytes
-go through the same code) except ``header.stamp`` where the driver stamps with its *receive* time
-(ROS time when the bytes or registers were read: a property of the run, not of the data). Counts per
-topic are equal. See :func:`compare_parsed` for the precise rule, including the DVL's device-time stamps.
+go through the same code), ``header.stamp`` included on the serial devices' topics (received at the
+recorded times); counts per topic are equal. See :func:`compare_parsed` for the precise rule.
 """
 from __future__ import annotations
 
@@ -63,46 +67,19 @@ from ..transport.pty_device import PtyDevice
 from .msgtypes import message_class
 from .reader import BagReader, iter_raw_device_data
 
-__all__ = ["ReplayClock", "SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay",
-           "PARSED_TOPICS", "RECEIVE_TIME_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed",
+__all__ = ["SerialReplayDevice", "I2CReplayDevice", "ReplayHardware", "DriverReplay",
+           "PARSED_TOPICS", "I2C_STAMPED", "serial_chunks", "i2c_transactions", "compare_parsed",
            "strip_stamp"]
 
 #: Parsed topics of the driver nodes (absolute names, :data:`~hindrax_drivers.devices.DEVICES`), with the device
 #: whose raw data they are parsed from.
 PARSED_TOPICS: dict[str, str] = {t: d.name for d in device_table.DEVICES for t in d.topics}
-#: Topics whose header stamp is the driver's receive time (ROS time of the read), so it differs between a
-#: run and its replay. ``/dvl/data`` and ``/dvl/twist`` are stamped with the DVL's own clock instead
-#: (``$DVPDL`` ``tu``) mapped to ROS time by the receive-time-based clock-offset estimate; see compare_parsed.
-RECEIVE_TIME_STAMPED = frozenset(PARSED_TOPICS) - {"/dvl/data", "/dvl/twist"}
+#: Topics of the I2C drivers, stamped with the ROS time of a read their own timers make: not
+#: lock-stepped with the replay (compare_parsed).
+I2C_STAMPED = frozenset(t for d in device_table.DEVICES if d.transport == device_table.I2C
+                        for t in d.topics)
 
 _NACK = errno.EREMOTEIO  # 121, what i2c-dev returns for an unanswered address
-
-
-class ReplayClock:
-    """The replay's ROS time (ns), set by the harness and read by the pty threads. Thread-safe.
-
-    It starts far in the past (-1e18 ns), so a paced replay device emits nothing before the harness has
-    connected the drivers and set the first time (a chunk recorded at ROS time 0, before the first /clock,
-    would otherwise be written to a pty nobody has opened yet, and be lost).
-    """
-
-    def __init__(self, t_ns: int = -(10 ** 18)) -> None:
-        self._lock = threading.Lock()
-        self._t_ns = int(t_ns)
-
-    @property
-    def t_ns(self) -> int:
-        with self._lock:
-            return self._t_ns
-
-    def set(self, t_ns: int) -> None:
-        """Move the clock to ``t_ns`` (ns, non-decreasing; an earlier value is ignored)."""
-        with self._lock:
-            self._t_ns = max(self._t_ns, int(t_ns))
-
-    def seconds(self) -> float:
-        """Current time, s (the ``clock`` of :class:`PtyDevice`)."""
-        return self.t_ns * 1e-9
 
 
 def serial_chunks(items: Iterable[tuple[int, Any]]) -> tuple[list[tuple[int, bytes]], list[tuple[int, bytes]]]:
@@ -273,14 +250,14 @@ class ReplayHardware:
             in the bag).
         paced: see :class:`SerialReplayDevice`.
     Attributes:
-        clock (ReplayClock), serial (name -> SerialReplayDevice), ptys (name -> PtyDevice), ports (name ->
-        pty path), i2c (address -> I2CReplayDevice), i2c_device_of (address -> device name), i2c_bus.
+        serial (name -> SerialReplayDevice), ptys (name -> PtyDevice without a thread: served by
+        :class:`DriverReplay`), ports (name -> pty path), i2c (address -> I2CReplayDevice),
+        i2c_device_of (address -> device name), i2c_bus.
     Raises:
         FileNotFoundError / BagError: bad bag path.
     """
 
     def __init__(self, bag_path: str | Path, devices: Iterable[str] | None = None, paced: bool = True) -> None:
-        self.clock = ReplayClock()
         self.serial: dict[str, SerialReplayDevice] = {}
         self.ptys: dict[str, Any] = {}
         self.ports: dict[str, str] = {}
@@ -298,7 +275,7 @@ class ReplayHardware:
                 dev = SerialReplayDevice(rx, paced=paced)
                 self.serial[name] = dev
                 self.recorded_host_bytes[name] = b"".join(d for _, d in tx)
-                self.ptys[name] = PtyDevice(dev, clock=self.clock.seconds, link_name=name)
+                self.ptys[name] = PtyDevice(dev, link_name=name, start=False)
                 self.ports[name] = str(self.ptys[name].path)
             elif table[name].output:
                 # an output device: its reads only echo the driver's writes, and the ESC node's read-back runs on the
@@ -363,13 +340,11 @@ def compare_parsed(recorded: dict[str, list[Any]], replayed: dict[str, list[Any]
     """Differences between recorded and replayed parsed messages, one line each ([] = the same).
 
     Rule: for every topic of :data:`PARSED_TOPICS` present in ``recorded``, the same number of messages, and
-    message k of the replay equals message k of the recording field by field (NaN == NaN), with
-    ``header.stamp`` excluded: on :data:`RECEIVE_TIME_STAMPED` topics it is the receive time of the run; on
-    ``/dvl/data`` and ``/dvl/twist`` it is the DVL's ``tu - dtu/2`` (compared exactly through
-    ``delta_time_s`` and the payload) plus the clock-offset estimate min(receive time - tu), and the recorded
-    receive time can differ from the recorded raw chunk's stamp by one /clock step (the reader thread reads
-    the ROS clock twice, for the raw tap and for parsing, while the executor may process a /clock message in
-    between), so about one run in three gives a different offset estimate: not compared (KNOWN GAP).
+    message k of the replay equals message k of the recording field by field (NaN == NaN),
+    ``header.stamp`` included on the serial devices' topics: their bytes are served in lock-step
+    with the replay clock (module docstring), so each chunk is received at its recorded time and
+    the DVL's device-time stamps (``tu - dtu/2`` plus the offset estimate min(receive time - tu))
+    are the recorded ones too. Excluded on :data:`I2C_STAMPED` topics.
     """
     problems: list[str] = []
     for topic in sorted(set(recorded) & set(PARSED_TOPICS)):
@@ -377,7 +352,8 @@ def compare_parsed(recorded: dict[str, list[Any]], replayed: dict[str, list[Any]
         if len(a) != len(b):
             problems.append(f"{topic}: {len(a)} recorded, {len(b)} replayed")
         for k, (x, y) in enumerate(zip(a, b)):
-            if not _equal(strip_stamp(x), strip_stamp(y)):
+            strip = strip_stamp if topic in I2C_STAMPED else (lambda m: m)
+            if not _equal(strip(x), strip(y)):
                 problems.append(f"{topic}[{k}]: recorded {x} != replayed {y}")
                 break
     return problems
@@ -462,23 +438,17 @@ class DriverReplay:
 
     # -- running
     def _set_clock(self, t_ns: int, wait_s: float) -> None:
-        """Publish /clock t_ns and spin until every node's clock shows it."""
-        self.hardware.clock.set(t_ns)
+        """Publish /clock t_ns, spin until every node's clock shows it, then serve the serial
+        devices at t_ns: their drivers read and handle the chunks due in this thread."""
         self._clock_pub.publish(self._clock_msg(clock=Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)))
         nodes = list(self.nodes.values())
         _spin_until(self.executor, lambda: all(n.get_clock().now().nanoseconds >= t_ns for n in nodes), wait_s,
                     f"all replay nodes at /clock {t_ns} ns")
+        for name, pty in self.hardware.ptys.items():
+            transport = self.nodes[name].transport
+            if pty.service(t_ns * 1e-9) and not transport.pump(pty.bytes_to_host, wait_s):
+                raise TimeoutError(f"replay: timed out waiting for {name} to handle {t_ns} ns")
         self.executor.spin_once(timeout_sec=0.0)  # timers that became due
-
-    def _serial_consumed(self) -> bool:
-        hw = self.hardware
-        for name, dev in hw.serial.items():
-            node = self.nodes.get(name)
-            if node is None:
-                continue
-            if hw.ptys[name].bytes_to_host > node.transport.status().bytes_handled:
-                return False
-        return True
 
     def consumed(self) -> bool:
         """True when every recorded device->host byte was read and handled (parsed, published) by its driver and
@@ -498,19 +468,19 @@ class DriverReplay:
         serial_nodes = [self.nodes[n] for n in self.hardware.serial if n in self.nodes]
         _spin_until(self.executor, lambda: all(n.transport.connected for n in serial_nodes), timeout_s,
                     "serial drivers connected to the replay ptys")
+        for node in serial_nodes:
+            node.transport.pump(0, 0.0)  # from now on the drivers read in this thread (_set_clock)
         timeline = list(self.timeline_ns)
         if not timeline:
             return
         step = (timeline[-1] - timeline[0]) // max(1, len(timeline) - 1) or 10_000_000
         for t in timeline:
             self._set_clock(t, timeout_s)
-            _spin_until(self.executor, self._serial_consumed, timeout_s, "serial bytes due read by the drivers")
         t = timeline[-1]
         end = t + int(extra_s * 1e9)
         while not self.consumed() and t < end:
             t += step
             self._set_clock(t, timeout_s)
-            _spin_until(self.executor, self._serial_consumed, timeout_s, "serial bytes due read by the drivers")
         _spin_until(self.executor, self._probe_has_all, timeout_s, "probe received every published message")
 
     def _probe_has_all(self) -> bool:

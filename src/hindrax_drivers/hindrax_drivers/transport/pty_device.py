@@ -296,7 +296,8 @@ class PtyDevice:
         self.bytes_dropped = 0
         #: Number of completed :meth:`reconnect` calls.
         self.reconnects = 0
-        #: The last exception raised by the emulator inside the service thread (the thread keeps running).
+        #: The last exception raised by the emulator inside the service thread (the thread keeps
+        #: running).
         self.last_error: Optional[str] = None
         self._open_pty()
         if start:

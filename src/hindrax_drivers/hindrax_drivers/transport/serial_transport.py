@@ -8,7 +8,8 @@ Features
 - Opens ``port`` with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a pyserial
   URL such as ``loop://`` / ``socket://host:port``), 8N1 at ``baudrate`` (both devices use
   115200 8N1, docs/devices.md §1.1 and §2.1).
-- Reader thread (or :meth:`SerialTransport.pump`'s caller) delivers every received chunk to ``on_data(bytes)``.
+- Reader thread (or :meth:`SerialTransport.pump`'s caller) delivers every received chunk to
+  ``on_data(bytes)``.
 - ``write(bytes)`` from any thread.
 - When the port disappears (read/write error, USB unplug, pty closed) the thread closes it and
   re-opens with exponential backoff (``reconnect_initial_s`` doubling up to ``reconnect_max_s``);
@@ -19,7 +20,8 @@ Features
   node can publish/record the raw traffic (docs/architecture.md §7).
 - Callback exceptions are caught and counted; they never kill the reader thread.
 - ``close()`` stops and joins the thread.
-- ``pump(n, timeout_s)`` reads in the calling thread until ``n`` received bytes have been through the callbacks
+- ``pump(n, timeout_s)`` reads in the calling thread until ``n`` received bytes have been through
+  the callbacks
   (a simulator's lock-step: :mod:`hindrax_ident.sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
@@ -122,7 +124,9 @@ class SerialTransport:
         self.clock = clock
         self._ser: Optional[serial.SerialBase] = None
         self._ser_lock = threading.Lock()  # guards _ser swaps and writes
-        self._read_lock = threading.Lock()  # one reader at a time: the thread, or :meth:`pump`'s caller
+        self._port_lost = threading.Condition(self._ser_lock)  # notified at a port's close, close()
+        # one reader at a time: the thread, or :meth:`pump`'s caller
+        self._read_lock = threading.Lock()
         self._caller_reads = False
         self._stats_lock = threading.Lock()
         self._stop = threading.Event()
@@ -173,10 +177,11 @@ class SerialTransport:
         return self._connected_event.wait(timeout_s)
 
     def pump(self, n_bytes: int, timeout_s: float) -> bool:
-        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since construction, as
-        ``status().bytes_handled``) have been through the tap and ``on_data``, or ``timeout_s`` of wall time passed
-        without a byte (a read in progress may add ``read_timeout_s``); True when they have. The first call takes
-        the reading over from the reader thread for good (it keeps only (re)opening the port)."""
+        """Read and handle received bytes in the calling thread until ``n_bytes`` (counted since
+        construction, as ``status().bytes_handled``) have been through the tap and ``on_data``, or
+        ``timeout_s`` of wall time passed without a byte (a read in progress may add
+        ``read_timeout_s``); True when they have. The first call takes
+        the reading over from the reader thread for good (it then sleeps until the port is lost)."""
         if not self._caller_reads:
             self._caller_reads = True
             ser = self._ser
@@ -228,6 +233,7 @@ class SerialTransport:
         self._stop.set()
         with self._ser_lock:
             ser = self._ser
+            self._port_lost.notify_all()
         if ser is not None and hasattr(ser, "cancel_read"):
             try:
                 ser.cancel_read()
@@ -265,6 +271,7 @@ class SerialTransport:
     def _close_port_locked(self) -> None:
         ser, self._ser = self._ser, None
         self._connected_event.clear()
+        self._port_lost.notify_all()
         if ser is not None:
             try:
                 ser.close()
@@ -303,6 +310,9 @@ class SerialTransport:
         while not self._stop.is_set():
             with self._ser_lock:
                 ser = self._ser
+                if ser is not None and self._caller_reads:  # pump() reads; this thread re-opens
+                    self._port_lost.wait_for(lambda: self._ser is None or self._stop.is_set())
+                    continue
             if ser is None:
                 if self._open():
                     delay = self.reconnect_initial_s
@@ -310,20 +320,19 @@ class SerialTransport:
                     self._stop.wait(delay)
                     delay = min(delay * 2.0, self.reconnect_max_s)
                 continue
-            if self._caller_reads:  # :meth:`pump` reads; this thread only (re)opens the port
-                self._stop.wait(self.read_timeout_s)
-                continue
             with self._read_lock:
                 ok = self._read_chunk(ser)
             if not ok and not self._stop.is_set():
                 self._stop.wait(delay)
 
     def _read_chunk(self, ser: Any) -> bool:
-        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and ``on_data``; False when
+        """Read what ``ser`` has (up to ``read_timeout_s`` for a first byte) for the tap and
+        ``on_data``; False when
         the read failed (the port is then closed, ``on_disconnect`` told)."""
         try:
             data = ser.read(max(1, ser.in_waiting))
-            data += ser.read(ser.in_waiting) if data else b""  # the rest of a message: one chunk, one callback
+            # the rest of a message: one chunk, one callback
+            data += ser.read(ser.in_waiting) if data else b""
         except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
             # TypeError/AttributeError: pyserial internals after a concurrent close().
             if self._stop.is_set():

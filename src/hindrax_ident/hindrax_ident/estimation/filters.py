@@ -214,7 +214,8 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
         jerk_psd, measurement_std: as :class:`KinematicKalmanFilter` (its default initial stds).
 
     Returns:
-        ``(pos, vel, acc)``, each (n,). Samples before the first valid measurement are NaN. In velocity
+        ``(pos, vel, acc)``, each (n,). Samples before the first valid measurement are NaN. In
+        velocity
         mode ``pos`` is the integrated velocity, 0 at the first valid sample.
 
     Raises:

@@ -71,7 +71,8 @@ def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
 
 def _save(fig, path: Path, dpi: int = 90) -> None:
     fig.tight_layout()
-    fig.set_layout_engine(None)  # tight_layout leaves a placeholder engine, for which savefig draws twice
+    # tight_layout leaves a placeholder engine, for which savefig draws twice
+    fig.set_layout_engine(None)
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
 

@@ -561,9 +561,11 @@ def spread_reasons(values: Sequence[float], stds: Sequence[float], factor: float
 REFERENCE_Z_MAX = 1.96
 
 
-def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay: tuple[float, float]) -> str | None:
+def free_decay_reason(dof: str, self_propelled: tuple[float, float],
+                      free_decay: tuple[float, float]) -> str | None:
     """The reason text when the free-decay inertia (value, std; kg m^2) contradicts the self-propelled one
-    (value, std): |I_sp - I_fd| > :data:`REFERENCE_Z_MAX` sqrt(std_sp^2 + std_fd^2); None when they agree. Raises
+    (value, std): |I_sp - I_fd| > :data:`REFERENCE_Z_MAX` sqrt(std_sp^2 + std_fd^2); None when they
+    agree. Raises
     ``ValueError`` for a negative std."""
     (v, sd), (vf, sf) = self_propelled, free_decay
     if sd < 0 or sf < 0:
@@ -573,7 +575,8 @@ def free_decay_reason(dof: str, self_propelled: tuple[float, float], free_decay:
     if abs(z) <= REFERENCE_Z_MAX:
         return None
     return (f"{dof} inertia {v:.4g} kg m^2 (self-propelled) differs from the free decay's {vf:.4g} +- {sf:.2g} kg m^2 "
-            f"(z = {z:+.1f}, beyond {REFERENCE_Z_MAX:g} combined std): the thrust curve (or the model) is off in {dof}")
+            f"(z = {z:+.1f}, beyond {REFERENCE_Z_MAX:g} combined std): "
+            f"the thrust curve (or the model) is off in {dof}")
 
 
 def apply_reference_verdicts(document: dict) -> dict:

@@ -177,7 +177,8 @@ def record_from_messages(messages, cfg: VehicleConfig, grid_s: float = 0.01) -> 
             f_lag[i], lag, wait = np.nan, f_cmd[i], settle
             continue
         if wait:
-            lag = f_cmd[i] if i and not known[i - 1] else lag  # the lag starts again from the first known force
+            # the lag starts again from the first known force
+            lag = f_cmd[i] if i and not known[i - 1] else lag
             wait -= 1
             f_lag[i] = np.nan
         else:
@@ -252,11 +253,13 @@ def record_from_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.
     if missing:
         raise BagContentError(f"{bag_path}: missing topic(s) {', '.join(missing)}")
     wanted = [tp for tp in present if tp.lstrip("/") in TOPICS]
-    # the installed types' lean decoder (a type changed since: from the bag's definition); a type not installed
+    # the installed types' lean decoder (a type changed since: from the bag's definition); a type
+    # not installed
     # here: every topic from the bag's definitions (mcap_ros2)
     try:
         return record_from_messages(((m.topic.lstrip("/"), obj)
-                                     for m, obj in reader.installed_messages(wanted, lean=True)), cfg, grid_s)
+                                     for m, obj in reader.installed_messages(wanted, lean=True)),
+                                    cfg, grid_s)
     except TypeNotInstalledError:
         return record_from_messages(((m.topic.lstrip("/"), obj) for m, obj in reader.decoded(wanted)), cfg, grid_s)
 

@@ -53,7 +53,8 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
                         ordered_samples)
 from .steps import undo_line
 
-__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem", "operator_prompt", "NEEDED_SENSORS",
+__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem", "operator_prompt",
+           "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
            "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED"]
 
@@ -114,7 +115,8 @@ class Event:
     """One thing the node does, in order; ``kind`` and its ``data`` are below.
 
     ``status`` (phase name: idle, positioning, running, returning, done, aborted; ExecutiveStatus or None;
-    message), ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus, operator prompt: the action
+    message), ``wrench`` (body FRD wrench (6,), N and N m), ``feedback`` (ExecutiveStatus, operator
+    prompt: the action
     feedback), ``estimates`` (the
     executive whose online estimates to publish), ``calibration`` (every step result since start, list of
     :func:`~..bag_input.calibration_topic.statuses` items), ``abort`` (the reason for ``supervisor/abort``),

@@ -360,7 +360,8 @@ class IdentificationNode(VehicleNode):
                 st, prompt = ev.data
                 self.core.run.handle.publish_feedback(RunIdentification.Feedback(
                     dof=st.dof, level_index=st.level_index, level_count=st.level_count,
-                    level_command=st.level_command, progress=st.progress, prompt=prompt, phase=st.phase,
+                    level_command=st.level_command, progress=st.progress, prompt=prompt,
+                    phase=st.phase,
                     step=st.message))
             elif ev.kind == "estimates":
                 stamp = self.get_clock().now().to_msg()
