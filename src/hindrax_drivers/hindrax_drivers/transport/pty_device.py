@@ -296,8 +296,7 @@ class PtyDevice:
         self.bytes_dropped = 0
         #: Number of completed :meth:`reconnect` calls.
         self.reconnects = 0
-        #: The last exception raised by the emulator inside the service thread (the thread keeps
-        #: running).
+        #: The last exception the emulator raised in the service thread (which keeps running).
         self.last_error: Optional[str] = None
         self._open_pty()
         if start:

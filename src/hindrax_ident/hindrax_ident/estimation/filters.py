@@ -215,8 +215,7 @@ def smooth_kinematics(t_s, z, measured: str = "position", jerk_psd: float = 1.0,
 
     Returns:
         ``(pos, vel, acc)``, each (n,). Samples before the first valid measurement are NaN. In
-        velocity
-        mode ``pos`` is the integrated velocity, 0 at the first valid sample.
+        velocity mode ``pos`` is the integrated velocity, 0 at the first valid sample.
 
     Raises:
         EstimationError: bad shapes, non-increasing time, infinite values, no valid sample.
