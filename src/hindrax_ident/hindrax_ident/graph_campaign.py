@@ -4,8 +4,8 @@
 emulators, drivers, ESC node, thrust allocation, identification node, recorder into ``out/bag``) on one
 SingleThreadedExecutor; wait for the sensors and the ESC arming time; arm through ``esc/set_armed`` (the
 operator's service); send one ``run_identification`` goal and report its feedback; disarm; close the bag;
-run the offline identification on the bag (:mod:`.identification.bag_input.reader`) and write ``identification.yaml``
-and the report. All waits are on simulated-time conditions with wall-clock deadlines.
+run the offline identification on the bag (:func:`.identification.assessment.pipeline.identify_bag`) and write
+``identification.yaml`` and the report. All waits are on simulated-time conditions with wall-clock deadlines.
 
 Calibration steps (``calibrate``, :data:`~.identification.online.executive.CALIBRATION_STEPS`): sent in the goal;
 :class:`VirtualOperator` plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for the ballast,
@@ -30,8 +30,6 @@ run``, a launch on the system clock) would feed its messages into the identifica
 from __future__ import annotations
 
 import contextlib
-import dataclasses
-import gc
 import math
 import os
 import time
@@ -53,11 +51,10 @@ from hindrax_msgs.action import RunIdentification
 from hindrax_msgs.srv import SetArmed
 
 from .bringup import build_graph
-from .identification.fit.calibration import identify_calibrated
 from .sim.campaign import PoolOperator
-from .identification.fit.campaign_fit import identify_all_with_errors
 from .identification.online.executive import calibration_forces, float_buoyancy, inclining_load
-from .identification.bag_input.reader import BagContentError, read_campaign
+from .identification.bag_input.reader import BagContentError
+from .identification.assessment.pipeline import identify_bag
 from .identification.assessment.report import write_outputs
 
 __all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
@@ -353,15 +350,10 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
-    gc.disable()  # the read and the fits make ~10^6 short-lived objects, few in cycles: no collector passes (1 s)
-    try:
-        record = read_campaign(bag_dir, cfg).campaign
-        idents, errors = identify_calibrated(dataclasses.replace(record, calibration=calibration), cfg,
-                                             identify_all_with_errors)
+    try:  # with the identification node's calibration results
+        record, idents, errors = identify_bag(bag_dir, cfg, calibration=calibration)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
-    finally:
-        gc.enable()
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors
     outcome.wall_time_s = time.monotonic() - wall0
     if idents:

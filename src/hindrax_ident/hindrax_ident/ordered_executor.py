@@ -19,6 +19,9 @@ that order by its handle pointer), taken again whenever an entity or a node come
 wakes the executor then: :meth:`LeanWaitExecutor.wake`). With no task in progress every entity is
 free to run (a callback group is busy, or an entity's handler pending, only inside a task), so the
 snapshot's lists go into the wait set as they are; otherwise each entity is asked as rclpy asks it.
+The snapshot's handles are marked in use (rclpy enters each at every wait) once, when it is taken,
+and released in the executor's thread when the next one is taken, or at ``shutdown``: an entity
+destroyed meanwhile (out of the snapshot from its wake on) is freed then.
 QoS event handlers (most waitables) enter their event handle into the wait set directly, without
 their Python wrappers. A wait over a subset of the nodes is rclpy's.
 
@@ -30,6 +33,7 @@ rclpy's.
 from __future__ import annotations
 
 import inspect
+import weakref
 from collections import deque
 from operator import methodcaller
 from typing import Any, Callable
@@ -89,6 +93,7 @@ class _Snapshot:
         self.nodes = nodes
         self.subs, self.timers, self.clients, self.services, self.guards = [], [], [], [], []
         self.waitables: list = []  # (waitable, node)
+        self.held = False  # its handles marked in use (LeanWaitExecutor)
         self.rank: dict = {}
         self.guard_rank: list = []  # (rank, kind, guard, node)
         counts = [0] * 6
@@ -141,6 +146,12 @@ def _exit_each(handles: list) -> None:
     deque(map(_EXIT, reversed(handles)), 0)
 
 
+def _release(held: list) -> None:
+    """Release the handles a snapshot holds (:func:`_exit_each`) and forget them."""
+    _exit_each(held)
+    held.clear()
+
+
 class LeanWaitExecutor(SingleThreadedExecutor):
     """A ``SingleThreadedExecutor`` whose nodes run in the order they were added and whose wait is
     :meth:`_wait_for_ready_callbacks` (module docstring). ``kwargs`` go to the executor
@@ -149,7 +160,17 @@ class LeanWaitExecutor(SingleThreadedExecutor):
     def __init__(self, **kw: Any) -> None:
         self._order: list = []
         self._snapshot: _Snapshot | None = None
+        self._held: list = []  # the snapshot's handles while they are marked in use
         super().__init__(**kw)
+        weakref.finalize(self, _release, self._held)
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        """rclpy's shutdown; then the snapshot's handles are released (its entities may go)."""
+        done = super().shutdown(timeout_sec)
+        if done:
+            self._snapshot = None
+            _release(self._held)
+        return done
 
     def wake(self) -> None:
         """rclpy's wake (an entity was created or destroyed, a task finished); the next wait takes a
@@ -195,7 +216,11 @@ class LeanWaitExecutor(SingleThreadedExecutor):
         while not yielded_work and not self._is_shutdown and not condition():
             snap = self._snapshot
             if snap is None:
-                snap = self._snapshot = _Snapshot(self.get_nodes())
+                _release(self._held)
+                snap = _Snapshot(self.get_nodes())
+                self._held.extend(_enter_each(snap.handles) or ())  # none when one is no longer valid
+                snap.held = bool(self._held) or not snap.handles
+                self._snapshot = snap
             nodes_to_use = snap.nodes
 
             # tasks in progress first
@@ -230,12 +255,12 @@ class LeanWaitExecutor(SingleThreadedExecutor):
             guards.append(self._sigint_gc)
 
             # handles marked in use while waiting, exited in reverse order: with every entity free
-            # the snapshot's all at once, else each free entity's
-            fast = None if busy else _enter_each(snap.handles)
-            entered: list = fast or []
+            # the snapshot's (held since it was taken), else each free entity's
+            fast = not busy and snap.held
+            entered: list = []
             try:
                 handles = []
-                for group in ((timers[len(snap.timers):], guards) if fast is not None else
+                for group in ((timers[len(snap.timers):], guards) if fast else
                               (subs, clients, services, timers, guards)):
                     kept = []
                     for entity in group:
@@ -247,7 +272,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
                         entered.append(h)
                         kept.append(h)
                     handles.append(kept)
-                if fast is not None:
+                if fast:
                     extra_tmr_h, gc_h = handles
                     sub_h, cli_h, srv_h = snap.sub_h, snap.cli_h, snap.srv_h
                     tmr_h = snap.tmr_h + extra_tmr_h

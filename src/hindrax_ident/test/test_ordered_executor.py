@@ -146,3 +146,31 @@ def test_plain_callbacks_run_at_once_and_their_errors_reach_the_spinner():
         with pytest.raises(ValueError, match="tick failed"):
             ex.spin_once(5.0)
         ex.shutdown()
+
+
+def test_snapshot_handles_held_from_one_wait_to_the_next(monkeypatch):
+    """The lean wait marks its snapshot's handles in use once, not at every wait; an entity destroyed
+    meanwhile is released at the next wait (a new snapshot), every handle at shutdown."""
+    import hindrax_ident.ordered_executor as oe
+
+    entered: list = []
+    enter = oe._ENTER
+    monkeypatch.setattr(oe, "_ENTER", lambda h: (entered.append(h), enter(h)))
+    with ros_context() as ctx:
+        ex = ordered_executor(context=ctx)
+        node = rclpy.create_node("held", context=ctx, start_parameter_services=False)
+        ex.add_node(node)
+        ran: list = []
+        sub = node.create_subscription(String, "held_topic", ran.append, 10)
+        node.create_timer(0.001, lambda: ran.append("tick"))
+        ex.spin_once(timeout_sec=1.0)
+        first = len(entered)
+        assert sub.handle in entered and sub.handle in ex._held
+        for _ in range(5):
+            ex.spin_once(timeout_sec=1.0)
+        assert len(entered) == first and ran.count("tick") >= 5  # waited, entered nothing more
+        node.destroy_subscription(sub)
+        ex.spin_once(timeout_sec=1.0)
+        assert len(entered) > first and sub.handle not in ex._held
+        assert ex.shutdown() and ex._held == []
+        node.destroy_node()

@@ -52,11 +52,12 @@ class SerialLockStep:
     """Serve one serial device emulator at the simulator's clock ticks and hold simulated time until its driver has
     handled every byte sent: the serial counterpart of the I2C emulators, which answer inside the driver's call.
 
-    :meth:`tick` (a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode`) writes what is due at tick
-    ``t``, the driver's clock already at ``t``, and has the driver read and handle it in the simulator's thread
-    (:meth:`~hindrax_drivers.transport.serial_transport.SerialTransport.pump`); :meth:`settled` (a step gate) lets
-    time advance only when all of it is handled: the driver stamps every message at the tick it was sent, whatever
-    the load.
+    :meth:`tick` (a clock listener of the :class:`~hindrax_ident.sim.node.SimulatorNode`) writes
+    what is due at tick ``t``, the driver's clock already at ``t``, and has the driver read and
+    handle it in the simulator's thread
+    (:meth:`~hindrax_drivers.transport.serial_transport.SerialTransport.pump`); :meth:`settled`
+    (a step gate) lets time advance only when all of it is handled: the driver stamps every
+    message at the tick it was sent, whatever the load.
 
     Bytes due while the driver's port is closed are dropped (a UART nobody listens to; pyserial flushes the input
     on open anyway). Counting restarts at every (re)connection of the transport. If the count ever disagrees (a
@@ -80,8 +81,8 @@ class SerialLockStep:
 
     def tick(self, _t_s: float = 0.0) -> None:
         """Send what the emulator has due now (its clock: the drivers' clock), if the driver's port is open, and
-        read it (up to :data:`HANDOFF_TIMEOUT_S` of wall time) until the driver has handled it: its messages are
-        then published before any other node runs at this tick, whatever the load."""
+        read it (up to :data:`HANDOFF_TIMEOUT_S` of wall time) until the driver has handled it: its
+        messages are then published before any other node runs at this tick, whatever the load."""
         st = self.transport.status()
         if not st.connected:
             self.pty.service(deliver=False)
@@ -90,7 +91,8 @@ class SerialLockStep:
             self._connection = st.connections
             self._written0, self._handled0 = self.pty.bytes_to_host, st.bytes_handled
         if self.pty.service():
-            self.transport.pump(self._handled0 + self.pty.bytes_to_host - self._written0, HANDOFF_TIMEOUT_S)
+            due = self._handled0 + self.pty.bytes_to_host - self._written0
+            self.transport.pump(due, HANDOFF_TIMEOUT_S)
 
     def startup_done(self) -> bool:
         """With simulated time frozen (call repeatedly, it serves the device at the frozen instant): True when the

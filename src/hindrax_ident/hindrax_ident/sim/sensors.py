@@ -1,8 +1,8 @@
 """Sensor truth and noise models: what each Hindrax device would measure in the virtual pool. Pure numpy.
 
 Each model samples the simulated vehicle at its own rate and returns a plain frozen dataclass holding the
-*measured* value (truth + bias + noise, with dropouts and lock rules). Device emulators (DVL-75, Ping1D,
-MS5837, ICM-20948) consume these as their truth source.
+*measured* value (truth + bias + noise, with dropouts and lock rules). Device emulators (DVL-75,
+Ping1D, MS5837, ICM-20948) consume these as their truth source.
 
 Configuration (all optional keys under ``simulation.sensors.<device>``; absent = no noise, no bias, no
 dropout, the device's configured or default rate):
@@ -105,8 +105,9 @@ class VehicleTruth:
 @dataclass(frozen=True)
 class DvlVelocitySample:
     """DVL-75 velocity report. velocity_frd_m_s: measured (NaN when not locked); locked: bottom lock;
-    altitude_m: true vertical distance DVL -> floor (NaN out of the water); beam_range_m: range along each beam A-D
-    (port, stern, starboard, bow) to the floor with the DVL's range noise (NaN for a beam without lock)."""
+    altitude_m: true vertical distance DVL -> floor (NaN out of the water); beam_range_m: range
+    along each beam A-D (port, stern, starboard, bow) to the floor with the DVL's range noise (NaN
+    for a beam without lock)."""
 
     stamp_s: float
     velocity_frd_m_s: tuple[float, float, float]
@@ -163,7 +164,8 @@ class PressureSample:
 
 @dataclass(frozen=True)
 class AltitudeSample:
-    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when invalid), valid flag."""
+    """Ping1D: distance (m) along the vehicle's down axis to the floor (measured; NaN when
+    invalid), valid flag."""
 
     stamp_s: float
     distance_m: float
@@ -213,8 +215,9 @@ class NoiseSpec:
 
     @classmethod
     def of(cls, section: Any, unit: str, default_rate_hz: float) -> "NoiseSpec":
-        """From a ``simulation.sensors.<device>`` section: its optional ``noise_std_<unit>``, ``bias_<unit>``,
-        ``rate_hz`` and ``dropout_probability`` (None: absent -> 0, 0, ``default_rate_hz``, 0)."""
+        """From a ``simulation.sensors.<device>`` section: its optional ``noise_std_<unit>``,
+        ``bias_<unit>``, ``rate_hz`` and ``dropout_probability`` (None: absent -> 0, 0,
+        ``default_rate_hz``, 0)."""
         return cls(float(or_default(getattr(section, f"noise_std_{unit}"), 0.0)),
                    float(or_default(getattr(section, f"bias_{unit}"), 0.0)),
                    float(or_default(section.rate_hz, default_rate_hz)),
@@ -375,7 +378,8 @@ class DvlAttitudeModel(SensorModel):
     """DVL-75 attitude (roll, pitch, yaw) with bias and noise."""
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
-        super().__init__("dvl75_attitude", NoiseSpec.of(config.simulation.sensors.dvl75_attitude, "rad", 10.0), seed)
+        spec = NoiseSpec.of(config.simulation.sensors.dvl75_attitude, "rad", 10.0)
+        super().__init__("dvl75_attitude", spec, seed)
 
     def measure(self, truth: VehicleTruth) -> DvlAttitudeSample:
         m = self._noisy3(truth.euler_rad)
@@ -385,7 +389,8 @@ class DvlAttitudeModel(SensorModel):
 class _ImuBase(SensorModel):
     def __init__(self, name: str, unit: str, config: VehicleConfig, seed: int) -> None:
         section = getattr(config.simulation.sensors, name)
-        super().__init__(name, NoiseSpec.of(section, unit, float(config.sensors.icm20948.sample_rate_hz)), seed)
+        rate_hz = float(config.sensors.icm20948.sample_rate_hz)
+        super().__init__(name, NoiseSpec.of(section, unit, rate_hz), seed)
         roll, pitch, yaw = config.sensors.icm20948.mounting_rpy_rad
         r_mount = Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()  # sensor -> base_link (FLU)
         self.sensor_from_frd = r_mount.T @ frames.R_FLU_FRD
@@ -428,11 +433,13 @@ class MagModel(_ImuBase):
 
     def __init__(self, config: VehicleConfig, seed: int) -> None:
         super().__init__("icm20948_mag", "t", config, seed)
-        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t, DEFAULT_EARTH_FIELD_NED_T)
+        field = or_default(config.simulation.sensors.icm20948_mag.earth_field_ned_t,
+                           DEFAULT_EARTH_FIELD_NED_T)
         self.earth_field_ned_t = np.asarray(field, dtype=float)
 
     def measure(self, truth: VehicleTruth) -> MagSample:
-        return MagSample(truth.t_s, self._noisy3(self._to_sensor(truth.rotation.T @ self.earth_field_ned_t)))
+        field_sensor = self._to_sensor(truth.rotation.T @ self.earth_field_ned_t)
+        return MagSample(truth.t_s, self._noisy3(field_sensor))
 
 
 class PressureModel(SensorModel):
@@ -460,7 +467,8 @@ class AltitudeModel(SensorModel):
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int) -> None:
         ping = config.sensors.ping1d
-        super().__init__("ping1d", NoiseSpec.of(config.simulation.sensors.ping1d, "m", 1 / ping.ping_interval_s), seed)
+        spec = NoiseSpec.of(config.simulation.sensors.ping1d, "m", 1 / ping.ping_interval_s)
+        super().__init__("ping1d", spec, seed)
         self.position_frd_m = np.asarray(ping.position_frd_m, dtype=float)
         self.min_range_m = float(ping.min_range_m)
         self.max_range_m = float(ping.max_range_m)

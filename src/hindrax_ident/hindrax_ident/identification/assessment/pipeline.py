@@ -3,10 +3,13 @@
 
 The commands parse their arguments and call these: ``hindrax ident fit`` (:func:`fit_bags` or, for a campaign bag,
 :func:`identify_bag`), ``hindrax ident bag`` (:func:`identify_bag`, :func:`write_campaign_outputs`), ``hindrax run``
-(:func:`.report.write_outputs` on the campaign's record). docs/identification.md §7.
+(:func:`identify_bag` with the identification node's calibration, :func:`.report.write_outputs`). The read and the
+fits run without the garbage collector (:func:`without_collector`). docs/identification.md §7.
 """
 from __future__ import annotations
 
+import contextlib
+import gc
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
@@ -24,7 +27,23 @@ from .report import write_fit_outputs, write_outputs
 from .results import build_document, reference_sections
 
 __all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_result", "core_options",
-           "write_any_outputs", "write_campaign_outputs"]
+           "write_any_outputs", "write_campaign_outputs", "without_collector"]
+
+
+@contextlib.contextmanager
+def without_collector():
+    """No garbage-collector passes inside (a context manager or a decorator), the collector as it was after: a bag's
+    read and fits make ~10^6 short-lived objects, few in cycles (about 1 s of ``hindrax run``'s offline phase)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
+@without_collector()
 
 
 def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig | None = None,
@@ -37,6 +56,7 @@ def fit_bags(bags: Sequence[str | Path], choice: TopicChoice, cfg: VehicleConfig
     return fit_read(read_any_topics(bags, choice, cfg, dofs, holdout, opts), holdout, opts)
 
 
+@without_collector()
 def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
              opts: FitOptions = FitOptions()) -> FitResult:
     """:func:`fit_bags` of bags already read (:func:`..bag_input.reader.read_any_topics` of the
@@ -50,17 +70,18 @@ def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
     return fit_records(records, core, design)
 
 
+@without_collector()
 def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
-                 opts: fit_core.CoreOptions | None = None):
+                 opts: fit_core.CoreOptions | None = None, calibration: dict | None = None):
     """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag: :func:`..bag_input.reader.read_campaign`,
     then :func:`..fit.campaign_fit.identify_all_with_errors` with the fit core's options ``opts`` (None: the
-    defaults). With calibration
-    results in the bag (``record.calibration``) the fits see the thrust-model force times the measured scales
-    (:func:`..fit.calibration.identify_calibrated`, as ``hindrax run``); ``record`` itself stays unscaled. Raises
-    ``ValueError`` for a non-positive scale in the bag."""
+    defaults). With calibration results (``calibration``, None: the bag's ``record.calibration``) the fits see the
+    thrust-model force times the measured scales (:func:`..fit.calibration.identify_calibrated`); ``record`` itself
+    stays as read. Raises :class:`..bag_input.from_bag.BagContentError` and ``ValueError`` for a non-positive scale."""
     record = read_campaign(bag_path, cfg, grid_s).campaign
     opts = fit_core.CoreOptions() if opts is None else opts
-    idents, errors = identify_calibrated(record, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
+    fitted = record if calibration is None else replace(record, calibration=calibration)
+    idents, errors = identify_calibrated(fitted, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
     return record, idents, errors
 
 
