@@ -51,7 +51,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from ..vehicle.rigid_body import rigid_body_mass_matrix, skew
 
 __all__ = ["STATE_SIZE", "skew", "rigid_body_mass_matrix", "coriolis_rigid_body",
-           "coriolis_added_mass", "damping_vector", "restoring_vector", "restoring_vector_euler",
+           "coriolis_added_mass", "damping_vector", "restoring_vector",
            "rotation_matrix_from_quaternion", "euler_from_rotation_matrix", "VehicleModel"]
 
 #: Length of the state vector [position NED (3), quaternion xyzw (4), nu (6)].
@@ -110,26 +110,6 @@ def restoring_vector(rotation_ned_from_body, weight_n: float, buoyancy_n: float,
     f_g = weight_n * down_body
     f_b = -buoyancy_n * down_body
     return -np.concatenate([f_g + f_b, np.cross(r_g_m, f_g) + np.cross(r_b_m, f_b)])
-
-
-def restoring_vector_euler(roll_rad: float, pitch_rad: float, weight_n: float, buoyancy_n: float, r_g_m,
-                           r_b_m) -> np.ndarray:
-    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in docs/identification.md §1.A.
-
-    Used to cross-check :func:`restoring_vector`. Angles in rad, forces in N, r_g and r_b (3,) in m (FRD).
-    """
-    xg, yg, zg = r_g_m
-    xb, yb, zb = r_b_m
-    w, b = weight_n, buoyancy_n
-    sph, cph, sth, cth = math.sin(roll_rad), math.cos(roll_rad), math.sin(pitch_rad), math.cos(pitch_rad)
-    return np.array([
-        (w - b) * sth,
-        -(w - b) * cth * sph,
-        -(w - b) * cth * cph,
-        -(yg * w - yb * b) * cth * cph + (zg * w - zb * b) * cth * sph,
-        (zg * w - zb * b) * sth + (xg * w - xb * b) * cth * cph,
-        -(xg * w - xb * b) * cth * sph - (yg * w - yb * b) * sth,
-    ])
 
 
 def rotation_matrix_from_quaternion(q_xyzw) -> np.ndarray:
