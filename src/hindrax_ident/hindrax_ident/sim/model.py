@@ -148,9 +148,7 @@ class VehicleModel:
     """
 
     def __init__(self, config: VehicleConfig, surface_fraction: SurfaceFraction | None = None) -> None:
-        self.config = config
         self.mass_kg = float(config.vehicle.mass_kg)
-        self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.weight_n = float(config.weight_n)
         self.buoyancy_n = float(config.buoyancy_n)
         self.r_g_m = np.array(config.vehicle.centre_of_gravity_frd_m, dtype=float)
