@@ -20,8 +20,8 @@ are the ESC node's constructor writes (PCA9685 configuration and first neutral),
 
 Simulated content is deterministic for a seed, but the exact message count is not (how the executor
 interleaves the driver timers with /clock steps varies with machine load), so tests check properties,
-not counts fixed in advance. Moved here from hindrax_drivers so that the drivers package does not import
-the simulator (one dependency direction).
+not counts fixed in advance. It lives here, not in hindrax_drivers, so that the drivers do not import the
+simulator.
 """
 from __future__ import annotations
 
@@ -65,31 +65,31 @@ def _spin_until(graph: Any, predicate: Callable[[], bool], timeout_s: float, wha
         graph.spin_once(0.005)
 
 
-def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any, overrides: dict | None = None,
-                         seed: int = SIM_SEED, config_path: str | Path | None = None, timeout_s: float = 60.0) -> dict:
-    """Record ``duration_s`` of simulated time of the whole driver graph into ``bag_dir`` (replaced).
+def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any,
+                         overrides: dict | None = None) -> dict:
+    """Record ``duration_s`` of simulated time of the whole driver graph (the shipped vehicle file, seed
+    :data:`SIM_SEED`) into ``bag_dir`` (replaced).
 
     Args:
         bag_dir: output bag directory (removed first if it exists).
         duration_s: simulated time to record, s.
         context: an initialised rclpy context.
         overrides: extra configuration overrides (dotted keys).
-        seed: simulation seed.
-        config_path: vehicle configuration (default: the shipped hindrax.yaml).
-        timeout_s: wall-clock limit of each wait.
     Returns:
         topic -> number of messages the graph's nodes published while recording (every one is in the bag).
     Raises:
-        TimeoutError: naming the condition not reached; ConfigError for bad overrides.
+        TimeoutError: naming the condition not reached (each wait: 60 s of wall time); ConfigError for bad
+        overrides.
     """
+    timeout_s = 60.0
     bag_dir = Path(bag_dir)
     if bag_dir.exists():
         shutil.rmtree(bag_dir)
     ov = {"simulation.real_time_factor": 0.0, "pool.start_position_ned_m": list(START_POSITION_NED_M),
           "recording.flush_interval_s": 60.0}
     ov.update(overrides or {})
-    graph = build_graph(config_path or default_config_path(), sim=True, record=True, record_dir=str(bag_dir),
-                        context=context, seed=seed, overrides=ov)
+    graph = build_graph(default_config_path(), sim=True, record=True, record_dir=str(bag_dir),
+                        context=context, seed=SIM_SEED, overrides=ov)
     sim_node = graph.nodes["simulator"]
     recorder = graph.nodes["recorder"]
     published: collections.Counter[str] = collections.Counter()
@@ -144,13 +144,10 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     return dict(published)
 
 
-def write_sim_bag(bag_dir: Path, duration_s: float, overrides: dict[str, Any], context: Any = None) -> int:
+def write_sim_bag(bag_dir: Path, duration_s: float, overrides: dict[str, Any]) -> int:
     """Record one bag (see :func:`record_simulated_run`); returns its message count."""
-    if context is None:
-        with ros_context() as ctx:
-            record_simulated_run(bag_dir, duration_s, context=ctx, overrides=overrides)
-    else:
-        record_simulated_run(bag_dir, duration_s, context=context, overrides=overrides)
+    with ros_context() as ctx:
+        record_simulated_run(bag_dir, duration_s, context=ctx, overrides=overrides)
     return sum(c.message_count for c in BagReader(bag_dir).channels.values())
 
 

@@ -58,6 +58,50 @@ def random_state(rng, position=(5.0, 3.0, 0.9)):
 
 
 # ----------------------------------------------------------------------------------- equations, matrix form
+def coriolis_rigid_body(mass_kg: float, r_g_m, inertia_o_kg_m2, nu) -> np.ndarray:
+    """C_RB(nu) (6x6), coordinate-free form (docs/identification.md, Fossen 2011).
+
+    C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)],
+    v = nu[:3] (m/s), w = nu[3:] (rad/s), r_g (3,) in m, inertia_o_kg_m2 (3, 3) about CO.
+    """
+    nu = np.asarray(nu, dtype=float)
+    v, w = nu[:3], nu[3:]
+    r_g = np.asarray(r_g_m, dtype=float)
+    i_o = np.asarray(inertia_o_kg_m2, dtype=float)
+    off = -mass_kg * mdl.skew(v) - mass_kg * mdl.skew(mdl.skew(w) @ r_g)
+    return np.block([[np.zeros((3, 3)), off], [off, mass_kg * mdl.skew(mdl.skew(v) @ r_g) - mdl.skew(i_o @ w)]])
+
+
+def coriolis_added_mass(added_mass, nu) -> np.ndarray:
+    """C_A(nu) (6x6) from the positive added-mass matrix M_A (6x6): [0, -S(a1); -S(a1), -S(a2)], a = M_A nu.
+
+    Fossen 2011; equals docs/identification.md §1.A, [NTNU-Thesis] eq. 2.83 for a diagonal M_A = -diag(X_udot ...
+    N_rdot).
+    """
+    a = np.asarray(added_mass, dtype=float) @ np.asarray(nu, dtype=float)
+    s1, s2 = mdl.skew(a[:3]), mdl.skew(a[3:])
+    return np.block([[np.zeros((3, 3)), -s1], [-s1, -s2]])
+
+
+def generalized_forces(model, state, tau) -> dict[str, np.ndarray]:
+    """Each term of the equations of motion at ``state`` (13,) and ``tau`` (6,) in matrix form, (6,) each: C_RB nu,
+    C_A nu, D(nu) nu, g(eta) with the free-surface buoyancy, and nu_dot = (M_RB + M_A)^-1 (tau - the others): the
+    reference the model's scalar fast path is checked against."""
+    s = np.asarray(state, dtype=float)
+    nu = s[7:13]
+    r = mdl.rotation_matrix_from_quaternion(s[3:7])
+    out = {
+        "coriolis_rigid_body": coriolis_rigid_body(model.mass_kg, model.r_g_m, model.inertia_o_kg_m2, nu) @ nu,
+        "coriolis_added_mass": coriolis_added_mass(model.added_mass_matrix, nu) @ nu,
+        "damping": mdl.damping_vector(nu, model.damping_linear_positive, model.damping_linear_negative,
+                                      model.damping_quadratic_positive, model.damping_quadratic_negative),
+        "restoring": mdl.restoring_vector(r, model.weight_n, model.buoyancy_n * model.buoyancy_fraction(s),
+                                          model.r_g_m, model.r_b_m),
+    }
+    out["nu_dot"] = model.mass_matrix_inverse @ (np.asarray(tau, dtype=float) - sum(out.values()))
+    return out
+
+
 def test_fast_path_equals_matrix_form(coupled_cfg):
     """The scalar fast path equals M^-1 (tau - C_RB nu - C_A nu - D nu - g) and the kinematics eta_dot = J nu."""
     model = mdl.VehicleModel(coupled_cfg)
@@ -66,7 +110,7 @@ def test_fast_path_equals_matrix_form(coupled_cfg):
         s = random_state(rng)
         tau = rng.normal(0, 10, 6)
         d = model.derivative(s, tau)
-        terms = model.generalized_forces(s, tau)
+        terms = generalized_forces(model, s, tau)
         assert np.allclose(d[7:], terms["nu_dot"], rtol=1e-10, atol=1e-12)
         r = Rotation.from_quat(s[3:7])
         assert np.allclose(d[:3], r.apply(s[7:10]), atol=1e-12)
@@ -92,10 +136,10 @@ def test_coriolis_rigid_body_is_newton_euler(coupled_cfg):
         v, w = nu[:3], nu[3:]
         expected = np.concatenate([m * (np.cross(w, v) + np.cross(w, np.cross(w, r_g))),
                                    m * np.cross(r_g, np.cross(w, v)) + np.cross(w, i_o @ w)])
-        c = mdl.coriolis_rigid_body(m, r_g, i_o, nu)
+        c = coriolis_rigid_body(m, r_g, i_o, nu)
         assert np.allclose(c @ nu, expected, atol=1e-12)
         assert np.allclose(c, -c.T)  # skew-symmetric: does no work
-        ca = mdl.coriolis_added_mass(coupled_cfg.added_mass_matrix, nu)
+        ca = coriolis_added_mass(coupled_cfg.added_mass_matrix, nu)
         assert np.allclose(ca, -ca.T)
 
 
@@ -109,12 +153,30 @@ def test_parallel_axis_inertia(coupled_cfg):
     assert np.allclose(mrb, mrb.T)
 
 
+def restoring_vector_euler(roll_rad: float, pitch_rad: float, weight_n: float, buoyancy_n: float, r_g_m,
+                           r_b_m) -> np.ndarray:
+    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in docs/identification.md §1.A:
+    the independent formulation :func:`restoring_vector` is checked against (rad, N, r_g and r_b in m, FRD)."""
+    xg, yg, zg = r_g_m
+    xb, yb, zb = r_b_m
+    w, b = weight_n, buoyancy_n
+    sph, cph, sth, cth = math.sin(roll_rad), math.cos(roll_rad), math.sin(pitch_rad), math.cos(pitch_rad)
+    return np.array([
+        (w - b) * sth,
+        -(w - b) * cth * sph,
+        -(w - b) * cth * cph,
+        -(yg * w - yb * b) * cth * cph + (zg * w - zb * b) * cth * sph,
+        (zg * w - zb * b) * sth + (xg * w - xb * b) * cth * cph,
+        -(xg * w - xb * b) * cth * sph - (yg * w - yb * b) * sth,
+    ])
+
+
 @pytest.mark.parametrize("roll,pitch", [(0.0, 0.0), (0.3, 0.0), (0.0, -0.4), (0.5, 0.7), (-1.2, 0.2)])
 def test_restoring_matches_fossen_eq_2_23(cfg, roll, pitch):
     r_g, r_b = np.array([0.01, -0.02, 0.03]), np.array([0.005, 0.01, -0.03])
     rot = Rotation.from_euler("ZYX", [0.7, pitch, roll]).as_matrix()
     got = mdl.restoring_vector(rot, cfg.weight_n, cfg.buoyancy_n, r_g, r_b)
-    expected = mdl.restoring_vector_euler(roll, pitch, cfg.weight_n, cfg.buoyancy_n, r_g, r_b)
+    expected = restoring_vector_euler(roll, pitch, cfg.weight_n, cfg.buoyancy_n, r_g, r_b)
     assert np.allclose(got, expected, atol=1e-12)
 
 

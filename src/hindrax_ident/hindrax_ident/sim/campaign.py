@@ -224,10 +224,6 @@ class Campaign:
             wall_time_s=time.monotonic() - self._wall0, seed=self.seed,
             final_pulse_width_us=np.array(self.sim.thrusters.pulse_width_us, copy=True))
 
-    def ladder(self, dof: str) -> list[float]:
-        """Levels of one DOF (N or N m), :meth:`~..identification.online.executive.Executive.ladder`."""
-        return self.executive.ladder(dof)
-
     def _neutral(self) -> None:
         """Command neutral pulse widths on every thruster (end of campaign or abort)."""
         self.sim.step(np.full(len(self.core.names), self.neutral_us))

@@ -21,7 +21,7 @@ import numpy as np
 
 from hindrax_drivers.config import VehicleConfig
 
-from .model import damping_vector
+from .model import damping_vector, rotation_matrix_from_quaternion
 from .truth import Disturbances
 
 __all__ = ["DisturbanceModel"]
@@ -36,7 +36,6 @@ class DisturbanceModel:
     """
 
     def __init__(self, config: VehicleConfig, dist: Disturbances, model, pool) -> None:
-        self.dist = dist
         self.model = model
         self.pool = pool
         t = config.thrusters
@@ -94,7 +93,7 @@ class DisturbanceModel:
         vc = self.current_ned(t_s)
         if not np.any(vc):
             return nu
-        r = _rotation(state)
+        r = rotation_matrix_from_quaternion(state[3:7])
         nu = nu.copy()
         nu[:3] -= r.T @ vc
         return nu
@@ -126,7 +125,7 @@ class DisturbanceModel:
         if np.any(self.drag_offset):
             out[3:] += np.cross(self.drag_offset, -d_r[:3])
         if self.tether_c > 0.0 or self.tether_tension > 0.0:
-            r = _rotation(state)
+            r = rotation_matrix_from_quaternion(state[3:7])
             pos = np.asarray(state[0:3], dtype=float)
             p_att = pos + r @ self.tether_r
             to_anchor = self.tether_anchor - p_att
@@ -144,12 +143,3 @@ class DisturbanceModel:
             dm = min(self.floor_fraction * self.ma33 * (self.floor_ref / h) ** 3, 0.5 * self.m33)
             out[2] -= dm * float(nu_dot_prev[2])
         return out.tolist()
-
-
-def _rotation(state) -> np.ndarray:
-    x, y, z, w = (float(v) for v in state[3:7])
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])

@@ -92,7 +92,6 @@ class LivePoolServer:
             os.unlink(self.socket_path)
         self._server = I2CSocketServer(self.hardware.i2c_bus, self.socket_path, lock=self.lock)
         self._stop = threading.Event()
-        self.lags = 0  # re-anchorings (the machine could not keep the wall clock)
         self._thread = threading.Thread(target=self._run, name="live-pool-step", daemon=True)
         self._thread.start()
 
@@ -101,7 +100,6 @@ class LivePoolServer:
         while not self._stop.is_set():
             due = self._sim0 + (time.monotonic() - self._wall0)
             if due - self.sim.t_s > MAX_LAG_S:
-                self.lags += 1
                 print(f"live pool: {due - self.sim.t_s:.2f} s behind the wall clock; re-anchoring",
                       file=sys.stderr, flush=True)
                 self._wall0, self._sim0 = time.monotonic(), self.sim.t_s
@@ -192,27 +190,25 @@ class LivePool(DriverEndpoints):
     """Client of a live pool process (module docstring): start it, reach its devices, act as the operator.
 
     config_path: the vehicle file; directory: a folder for the socket (default: a new temporary one); env: the
-    child's environment (default: this one); truth / seed: as :class:`LivePoolServer`; start_timeout_s: wall time
-    for the devices to come up. Use as a context manager. The driver-facing methods are those of
-    :class:`~hindrax_drivers.emulated_devices.DriverEndpoints` (``ports``, :meth:`ros_arguments`, :meth:`env`).
-    Raises RuntimeError when the process does not come up or does not answer within ``timeout_s``.
+    child's environment (default: this one); truth: as :class:`LivePoolServer`. Use as a context manager. The
+    driver-facing methods are those of :class:`~hindrax_drivers.emulated_devices.DriverEndpoints` (``ports``,
+    :meth:`ros_arguments`, :meth:`env`). Raises RuntimeError when the process does not come up within 60 s or
+    does not answer within 10 s.
     """
 
     def __init__(self, config_path: str | os.PathLike, directory: str | os.PathLike | None = None,
-                 env: Mapping[str, str] | None = None, truth: str | None = None, seed: int | None = None,
-                 start_timeout_s: float = 60.0, python: str = sys.executable) -> None:
+                 env: Mapping[str, str] | None = None, truth: str | None = None) -> None:
         self.directory = Path(directory or tempfile.mkdtemp(prefix="hindrax-live-pool-"))
         self.directory.mkdir(parents=True, exist_ok=True)
-        cmd = [python, "-m", "hindrax_ident.sim.live_pool", "--config", str(config_path),
+        cmd = [sys.executable, "-m", "hindrax_ident.sim.live_pool", "--config", str(config_path),
                "--directory", str(self.directory)]
         cmd += ["--truth", str(truth)] if truth else []
-        cmd += ["--seed", str(seed)] if seed is not None else []
         self._stderr = open(self.directory / "live_pool.log", "w")
         self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr,
                                       text=True, env=dict(env) if env is not None else None)
         self.pid: int = self._proc.pid
         """The pool process's id."""
-        hello = self._read(start_timeout_s)
+        hello = self._read(60.0)  # the devices come up within a minute
         self.ports: dict[str, str] = hello["ports"]
         self.socket_path: str = hello["i2c_socket"]
 

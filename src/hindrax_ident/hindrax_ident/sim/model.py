@@ -31,9 +31,8 @@ Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eq
 
 Fast path: :meth:`VehicleModel.derivative_list` evaluates the right-hand side on plain Python floats (3-vectors
 as scalars, the constant ``(M_RB + M_A)^-1`` precomputed), because numpy's per-call overhead dominates for
-6x6 problems. The matrix functions of this module (:func:`rigid_body_mass_matrix`, :func:`coriolis_rigid_body`,
-:func:`coriolis_added_mass`, :func:`damping_vector`, :func:`restoring_vector`) state the same equations in
-matrix form; the tests check the fast path against them.
+6x6 problems. The tests check it against the same equations in matrix form (C_RB and C_A as above, with
+:func:`rigid_body_mass_matrix`, :func:`damping_vector` and :func:`restoring_vector` of this module).
 
 State vector (13,): ``[x_n, y_e, z_d (m, NED), q_x, q_y, q_z, q_w, u, v, w (m/s), p, q, r (rad/s)]``.
 Not modelled: currents (nu is relative to still water), the variation of added mass and damping near the
@@ -50,8 +49,7 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..vehicle.rigid_body import rigid_body_mass_matrix, skew
 
-__all__ = ["STATE_SIZE", "skew", "rigid_body_mass_matrix", "coriolis_rigid_body",
-           "coriolis_added_mass", "damping_vector", "restoring_vector", "restoring_vector_euler",
+__all__ = ["STATE_SIZE", "skew", "rigid_body_mass_matrix", "damping_vector", "restoring_vector",
            "rotation_matrix_from_quaternion", "euler_from_rotation_matrix", "VehicleModel"]
 
 #: Length of the state vector [position NED (3), quaternion xyzw (4), nu (6)].
@@ -62,31 +60,6 @@ SurfaceFraction = Callable[[float, float, float, float], float]
 
 
 # --------------------------------------------------------------------------------------------- matrix forms
-def coriolis_rigid_body(mass_kg: float, r_g_m, inertia_o_kg_m2, nu) -> np.ndarray:
-    """C_RB(nu) (6x6), coordinate-free form (docs/identification.md, Fossen 2011).
-
-    C_RB = [0, -m S(v) - m S(S(w) r_g); -m S(v) - m S(S(w) r_g), m S(S(v) r_g) - S(I_o w)],
-    v = nu[:3] (m/s), w = nu[3:] (rad/s), r_g (3,) in m, inertia_o_kg_m2 (3, 3) about CO.
-    """
-    nu = np.asarray(nu, dtype=float)
-    v, w = nu[:3], nu[3:]
-    r_g = np.asarray(r_g_m, dtype=float)
-    i_o = np.asarray(inertia_o_kg_m2, dtype=float)
-    off = -mass_kg * skew(v) - mass_kg * skew(skew(w) @ r_g)
-    return np.block([[np.zeros((3, 3)), off], [off, mass_kg * skew(skew(v) @ r_g) - skew(i_o @ w)]])
-
-
-def coriolis_added_mass(added_mass, nu) -> np.ndarray:
-    """C_A(nu) (6x6) from the positive added-mass matrix M_A (6x6): [0, -S(a1); -S(a1), -S(a2)], a = M_A nu.
-
-    Fossen 2011; equals docs/identification.md §1.A, [NTNU-Thesis] eq. 2.83 for a diagonal M_A = -diag(X_udot ...
-    N_rdot).
-    """
-    a = np.asarray(added_mass, dtype=float) @ np.asarray(nu, dtype=float)
-    s1, s2 = skew(a[:3]), skew(a[3:])
-    return np.block([[np.zeros((3, 3)), -s1], [-s1, -s2]])
-
-
 def damping_vector(nu, linear_positive, linear_negative, quadratic_positive, quadratic_negative) -> np.ndarray:
     """D(nu) nu (6,): per DOF k_l v + k_q |v| v, the coefficients chosen by the sign of v ([Hindrax-Drag] eq. 2).
 
@@ -110,26 +83,6 @@ def restoring_vector(rotation_ned_from_body, weight_n: float, buoyancy_n: float,
     f_g = weight_n * down_body
     f_b = -buoyancy_n * down_body
     return -np.concatenate([f_g + f_b, np.cross(r_g_m, f_g) + np.cross(r_b_m, f_b)])
-
-
-def restoring_vector_euler(roll_rad: float, pitch_rad: float, weight_n: float, buoyancy_n: float, r_g_m,
-                           r_b_m) -> np.ndarray:
-    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in docs/identification.md §1.A.
-
-    Used to cross-check :func:`restoring_vector`. Angles in rad, forces in N, r_g and r_b (3,) in m (FRD).
-    """
-    xg, yg, zg = r_g_m
-    xb, yb, zb = r_b_m
-    w, b = weight_n, buoyancy_n
-    sph, cph, sth, cth = math.sin(roll_rad), math.cos(roll_rad), math.sin(pitch_rad), math.cos(pitch_rad)
-    return np.array([
-        (w - b) * sth,
-        -(w - b) * cth * sph,
-        -(w - b) * cth * cph,
-        -(yg * w - yb * b) * cth * cph + (zg * w - zb * b) * cth * sph,
-        (zg * w - zb * b) * sth + (xg * w - xb * b) * cth * cph,
-        -(xg * w - xb * b) * cth * sph - (yg * w - yb * b) * sth,
-    ])
 
 
 def rotation_matrix_from_quaternion(q_xyzw) -> np.ndarray:
@@ -168,9 +121,7 @@ class VehicleModel:
     """
 
     def __init__(self, config: VehicleConfig, surface_fraction: SurfaceFraction | None = None) -> None:
-        self.config = config
         self.mass_kg = float(config.vehicle.mass_kg)
-        self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.weight_n = float(config.weight_n)
         self.buoyancy_n = float(config.buoyancy_n)
         self.r_g_m = np.array(config.vehicle.centre_of_gravity_frd_m, dtype=float)
@@ -211,28 +162,6 @@ class VehicleModel:
         r = rotation_matrix_from_quaternion(np.asarray(state, dtype=float)[3:7])
         return float(self.surface_fraction(float(state[2]), r[2, 0], r[2, 1], r[2, 2]))
 
-    def generalized_forces(self, state, tau) -> dict[str, np.ndarray]:
-        """Each term of the equations of motion at ``state`` (13,) and ``tau`` (6,), in matrix form.
-
-        Returns a dict of (6,) arrays: ``coriolis_rigid_body`` (C_RB nu), ``coriolis_added_mass`` (C_A nu),
-        ``damping`` (D(nu) nu), ``restoring`` (g(eta), with the free-surface buoyancy), and ``nu_dot``
-        = (M_RB + M_A)^-1 (tau - C_RB nu - C_A nu - D nu - g). Slow (for tests and analysis).
-        """
-        s = np.asarray(state, dtype=float)
-        nu = s[7:13]
-        r = rotation_matrix_from_quaternion(s[3:7])
-        out = {
-            "coriolis_rigid_body": coriolis_rigid_body(self.mass_kg, self.r_g_m, self.inertia_o_kg_m2, nu) @ nu,
-            "coriolis_added_mass": coriolis_added_mass(self.added_mass_matrix, nu) @ nu,
-            "damping": damping_vector(nu, self.damping_linear_positive, self.damping_linear_negative,
-                                      self.damping_quadratic_positive, self.damping_quadratic_negative),
-            "restoring": restoring_vector(r, self.weight_n, self.buoyancy_n * self.buoyancy_fraction(s),
-                                          self.r_g_m, self.r_b_m),
-        }
-        rhs = np.asarray(tau, dtype=float) - sum(out.values())
-        out["nu_dot"] = self.mass_matrix_inverse @ rhs
-        return out
-
     def derivative(self, state, tau) -> np.ndarray:
         """State derivative (13,) at ``state`` (13,) for the body wrench ``tau`` (6,) about CO (FRD, N, N m)."""
         return np.array(self.derivative_list(np.asarray(state, dtype=float).tolist(),
@@ -242,8 +171,8 @@ class VehicleModel:
     def derivative_list(self, s: Sequence[float], tau: Sequence[float]) -> list[float]:
         """Fast state derivative on plain floats: ``s`` (13 floats), ``tau`` (6 floats) -> 13 floats.
 
-        Same equations as :meth:`generalized_forces` (checked by the tests), written with scalar 3-vector
-        algebra. The quaternion need not be exactly unit (the integrator renormalises after each step).
+        The equations of the module docstring (checked by the tests against their matrix form), written with
+        scalar 3-vector algebra. The quaternion need not be exactly unit (the integrator renormalises after each step).
         """
         _, _, z, qx, qy, qz, qw, u, v, w, p, q, r = s
         # rotation body FRD -> NED

@@ -36,12 +36,11 @@ on every control tick whatever the CPU load (a loaded machine otherwise lets the
 controller, which then overshoots its planned runs). A gate that has refused for :data:`GATE_TIMEOUT_S` of
 wall time is overridden with a warning, so a stalled node cannot freeze the simulation.
 
-Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`),
-``add_sensor_listener(cb(device, sample))``, ``add_step_listener(cb(simulator))``,
-``add_clock_listener(cb(t_s))`` (at every /clock tick, after the driven clocks moved), ``latest_sample(device)``,
-and the ``pulse_width_source`` constructor argument: a callable returning the widths (n,) in us the ESCs
-see (e.g. decoded from the PCA9685 emulator; None keeps the previous ones), called before every step; it
-replaces the ``thrusters/pulse_width`` subscription.
+Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`: its sensor listeners
+and latest samples), ``add_step_listener(cb(simulator))``, ``add_clock_listener(cb(t_s))`` (at every /clock
+tick, after the driven clocks moved), and the ``pulse_width_source`` constructor argument: a callable
+returning the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685 emulator; None keeps the previous
+ones), called before every step; it replaces the ``thrusters/pulse_width`` subscription.
 """
 from __future__ import annotations
 
@@ -68,7 +67,7 @@ from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.msg import ThrusterPwm
 
 from .pool import FACES
-from .simulator import PulseWidthError, SensorListener, Simulator
+from .simulator import PulseWidthError, Simulator
 
 __all__ = ["SimulatorNode", "PulseWidthSource", "time_msg", "main"]
 
@@ -151,10 +150,6 @@ class SimulatorNode(VehicleNode):
                  f"{self.real_time_factor:g} (0 = as fast as possible), /clock at {1 / self.clock_period_s:g} Hz")
 
     # ------------------------------------------------------------------ API
-    def add_sensor_listener(self, callback: SensorListener) -> None:
-        """Call ``callback(device, sample)`` for every new sensor sample (see :mod:`.sensors`)."""
-        self.simulator.add_sensor_listener(callback)
-
     def add_step_listener(self, callback: Callable[[Simulator], None]) -> None:
         """Call ``callback(simulator)`` after every integration step."""
         self._step_listeners.append(callback)
@@ -164,10 +159,6 @@ class SimulatorNode(VehicleNode):
         ``t_s`` and /clock is published: the instant an in-process emulator sends what is due, so that a driver
         reading it sees the same time on its own clock."""
         self._clock_listeners.append(callback)
-
-    def latest_sample(self, device: str) -> Any | None:
-        """Newest sample of a sensor device, or None."""
-        return self.simulator.latest_sample(device)
 
     @property
     def pulse_widths_us(self) -> np.ndarray:

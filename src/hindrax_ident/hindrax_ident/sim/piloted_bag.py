@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 from geometry_msgs.msg import TransformStamped, TwistWithCovarianceStamped, WrenchStamped
 from nav_msgs.msg import Odometry
-from rclpy.serialization import serialize_message
+from rclpy.serialization import serialize_message as _serialize
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import FluidPressure, Imu
 from tf2_msgs.msg import TFMessage
@@ -113,11 +113,6 @@ class PilotSettings:
                 raise ValueError(f"PilotSettings.{name}: {getattr(self, name)!r} is not one of {', '.join(allowed)}")
 
 
-def _serialize(msg) -> bytes:
-
-    return serialize_message(msg)
-
-
 def _stamp(header, t_ns: int) -> None:
     header.stamp.sec = int(t_ns // 1_000_000_000)
     header.stamp.nanosec = int(t_ns % 1_000_000_000)
@@ -173,9 +168,8 @@ class _Autopilot:
     """Lawnmower survey (module docstring): legs along the pool's x axis at the cruise speed, a sideways shift and
     a depth step at each end, heading along the leg."""
 
-    def __init__(self, s: PilotSettings, rng, lo, hi, start, inertia) -> None:
+    def __init__(self, s: PilotSettings, rng, lo, hi, start) -> None:
         self.s, self.rng, self.lo, self.hi = s, rng, lo, hi
-        self.m = np.asarray(inertia, dtype=float)  # rough inertias for the gains: surge, sway, heave, yaw
         self.leg_dir = 1.0 if rng.random() < 0.5 else -1.0
         self.lane_y = float(start[1])
         self.depth = float(start[2])
@@ -248,10 +242,9 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
     if s.pilot == "setpoints":
         pilot = _SetpointPilot(s, rng, lo, hi, start, float(sim.euler_rad[2]))
     else:
-        pilot = _Autopilot(s, rng, lo, hi, start, None)
+        pilot = _Autopilot(s, rng, lo, hi, start)
     core = None
     if s.actuation == "thrusters":
-
         core = AllocationCore(cfg)
         th = cfg.thrusters.thrusters
         neutral = float(cfg.thrusters.pulse_width_neutral_us)
@@ -285,7 +278,6 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
         out: list[tuple[int, str, bytes]] = []
         r_imu = frames.R_FLU_FRD  # imu_link axes in base_link: pi about x, the FLU <-> FRD rotation
         if s.imu and not dvl:
-
             w.add_topic("/imu", "sensor_msgs/msg/Imu")
             w.add_topic("/tf_static", "tf2_msgs/msg/TFMessage")
             tr = TransformStamped()

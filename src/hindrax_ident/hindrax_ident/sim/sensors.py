@@ -23,7 +23,7 @@ dropout, the device's configured or default rate):
 * ``dvl75_attitude`` (:class:`DvlAttitudeSample`): roll, pitch, yaw (Fossen ZYX, NED; yaw = heading from
   north) of the DVL's own IMU, plus bias and noise (rad), yaw wrapped to (-pi, pi].
 * ``icm20948_accel`` / ``icm20948_gyro`` / ``icm20948_mag`` ([Hindrax-Drag] Table 1, docs/devices.md §4): specific
-  force ``f = a - g`` at the IMU position (lever arm ``imu_position_frd_m``, default the CG origin):
+  force ``f = a - g`` at the body origin (:func:`specific_force_frd` takes a lever arm r):
   ``a = v_dot + w x v + w_dot x r + w x (w x r)``, ``g = R^T [0, 0, g]``, so a vehicle at rest reads
   ``-g`` along body z (up); angular rate ``w``; the earth magnetic field ``R^T B_ned``. All three in the
   ICM's sensor frame, given by ``sensors.icm20948.mounting_rpy_rad`` (rotation of the sensor frame in
@@ -402,16 +402,14 @@ class _ImuBase(SensorModel):
 class AccelModel(_ImuBase):
     """ICM-20948 accelerometer: specific force at the IMU position, sensor frame (module docstring)."""
 
-    def __init__(self, config: VehicleConfig, seed: int, imu_position_frd_m=(0.0, 0.0, 0.0),
+    def __init__(self, config: VehicleConfig, seed: int,
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
         super().__init__("icm20948_accel", "m_s2", config, seed)
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
-        self.position_frd_m = np.asarray(imu_position_frd_m, dtype=float)
         self.temperature_c = float(water_temperature_c)
 
     def measure(self, truth: VehicleTruth) -> AccelSample:
-        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2,
-                                               self.position_frd_m))
+        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2))
         m = f + self.extra_bias(truth.t_s) if self.disturbed else f
         return AccelSample(truth.t_s, self._noisy3(m), self.temperature_c)
 
@@ -490,14 +488,14 @@ class SensorSuite:
 
     config: the vehicle configuration. pool: the pool (None: no floor, walls or surface for the DVL and
     sonar). seed: noise seed (default ``simulation.seed``). devices: names to enable (default all of
-    :data:`DEVICE_INDEX`). imu_position_frd_m (3,): IMU lever arm from CO, FRD, m. water_temperature_c.
+    :data:`DEVICE_INDEX`). water_temperature_c.
 
     ``latest``: device name -> its newest sample. ``next_due_s``: the earliest time any device is due.
     Raises ``ValueError`` for an unknown device name.
     """
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int | None = None,
-                 devices: Sequence[str] | None = None, imu_position_frd_m=(0.0, 0.0, 0.0),
+                 devices: Sequence[str] | None = None,
                  water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
         seed = int(config.simulation.seed if seed is None else seed)
         names = list(DEVICE_INDEX) if devices is None else list(devices)
@@ -509,7 +507,7 @@ class SensorSuite:
             "dvl75_attitude": lambda: DvlAttitudeModel(config, seed),
             "ping1d": lambda: AltitudeModel(config, pool, seed),
             "ms5837": lambda: PressureModel(config, seed, water_temperature_c),
-            "icm20948_accel": lambda: AccelModel(config, seed, imu_position_frd_m, water_temperature_c),
+            "icm20948_accel": lambda: AccelModel(config, seed, water_temperature_c),
             "icm20948_gyro": lambda: GyroModel(config, seed),
             "icm20948_mag": lambda: MagModel(config, seed),
         }

@@ -55,7 +55,6 @@ class Simulator:
     sensors: True or None (all devices), False (none) or a sequence of device names (see :mod:`.sensors`).
     pool: False removes the pool (no walls, floor or free surface: a fully submerged vehicle in unbounded
         water), for model tests.
-    imu_position_frd_m: IMU lever arm from the body origin (FRD, m); the configuration has no such key.
     truth: the pool's truth (:mod:`.truth`): a truth file path, a :class:`~.truth.Truth`, or None (the shipped
         ``truth/default.yaml`` fills the keys ``config`` lacks: the sensor noise, no disturbance). The simulator
         runs on ``truth.config``; ``config`` is kept as ``vehicle_config`` (what the nodes believe).
@@ -65,8 +64,7 @@ class Simulator:
     """
 
     def __init__(self, config: VehicleConfig, *, seed: int | None = None, step_s: float | None = None,
-                 sensors: bool | Sequence[str] | None = True, pool: bool = True,
-                 imu_position_frd_m: Sequence[float] = (0.0, 0.0, 0.0), truth: Any = None) -> None:
+                 sensors: bool | Sequence[str] | None = True, pool: bool = True, truth: Any = None) -> None:
         if not isinstance(truth, Truth):
             truth = load_truth(config, truth)
         self.truth_model: Truth = truth
@@ -86,8 +84,7 @@ class Simulator:
             devices = []
         else:
             devices = list(sensors)
-        self.sensors = SensorSuite(config, self.pool, self.seed, devices=devices,
-                                   imu_position_frd_m=imu_position_frd_m)
+        self.sensors = SensorSuite(config, self.pool, self.seed, devices=devices)
         if self.pool is not None:
             self.pool.set_floor_gradient(truth.disturbances.floor.gradient)
         self.disturbances = DisturbanceModel(config, truth.disturbances, self.model, self.pool)

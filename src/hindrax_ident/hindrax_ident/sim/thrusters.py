@@ -20,8 +20,6 @@
 """
 from __future__ import annotations
 
-from typing import Sequence
-
 import numpy as np
 
 from hindrax_drivers.allocation.from_config import thrust_curve_from_config
@@ -91,24 +89,19 @@ class Thrusters:
         return np.asarray(self.curve.thrust_n(pw), dtype=float)
 
     def command(self, pulse_width_us) -> None:
-        """Set new wire pulse widths (n,) in us, held until the next command (None: keep the current ones).
-
-        Raises :class:`PulseWidthError` (and keeps the previous command) for bad widths.
-        """
-        if pulse_width_us is None:
-            return
-        force = self.thrust_from_pulse_width(pulse_width_us)
-        self.commanded_force_n = force
+        """Set new wire pulse widths (n,) in us, held until the next command. Raises :class:`PulseWidthError`
+        (and keeps the previous command) for bad widths."""
+        self.commanded_force_n = self.thrust_from_pulse_width(pulse_width_us)
         self.pulse_width_us = np.array(pulse_width_us, dtype=float).reshape(-1)
 
     def advance(self, dt_s: float) -> None:
         """Advance the lagged thrust by ``dt_s`` (exact for the held command)."""
         self.force_n = self.lag.advance(self.force_n, self.commanded_force_n, dt_s)
 
-    def wrench_co(self, force_n: Sequence[float] | None = None) -> np.ndarray:
-        """Body wrench [X Y Z K M N] (6,) about the body origin (FRD, N, N m) of ``force_n`` (default: current)."""
-        return self.matrix_co @ (self.force_n if force_n is None else np.asarray(force_n, dtype=float))
+    def wrench_co(self) -> np.ndarray:
+        """Body wrench [X Y Z K M N] (6,) of the current thrust about the body origin (FRD, N, N m)."""
+        return self.matrix_co @ self.force_n
 
-    def wrench_cg(self, force_n: Sequence[float] | None = None) -> np.ndarray:
-        """Body wrench [X Y Z K M N] (6,) about the CG (FRD, N, N m), [Hindrax-Drag] eq. 9."""
-        return self.matrix_cg @ (self.force_n if force_n is None else np.asarray(force_n, dtype=float))
+    def wrench_cg(self) -> np.ndarray:
+        """Body wrench [X Y Z K M N] (6,) of the current thrust about the CG (FRD, N, N m), [Hindrax-Drag] eq. 9."""
+        return self.matrix_cg @ self.force_n

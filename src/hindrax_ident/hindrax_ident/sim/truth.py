@@ -54,11 +54,11 @@ Disturbances (``disturbances:`` section; the physical source of each; all defaul
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Generic, Mapping, TypeVar
+from types import SimpleNamespace
+from typing import Any, Mapping
 
 import yaml
 from ament_index_python.packages import get_package_share_directory
@@ -134,116 +134,19 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
 }
 
 
-@dataclass(frozen=True)
-class ThrustDisturbance:
-    """``disturbances.thrust.*``: thrust scale factors (all, per thruster (empty: 1 each), per direction)."""
-
-    scale: float
-    per_thruster: tuple[float, ...]
-    positive: float
-    negative: float
-
-
-@dataclass(frozen=True)
-class BatteryDisturbance:
-    """``disturbances.battery.*``: a falling battery voltage (V, s) and the thrust exponent."""
-
-    voltage_start_v: float
-    voltage_end_v: float
-    nominal_voltage_v: float
-    duration_s: float
-    exponent: float
-
-
-@dataclass(frozen=True)
-class InflowDisturbance:
-    """``disturbances.inflow.*``: thrust loss per m/s of inflow."""
-
-    loss_per_m_s: float
-
-
-@dataclass(frozen=True)
-class HydrodynamicsDisturbance:
-    """``disturbances.hydrodynamics.*``: linear damping couplings (36, row-major) and the drag centre (FRD, m)."""
-
-    damping_coupling_linear: tuple[float, ...]
-    drag_centre_offset_frd_m: tuple[float, ...]
-
-
-@dataclass(frozen=True)
-class CurrentDisturbance:
-    """``disturbances.current.*``: mean and oscillating water current (NED, m/s) and its period (s)."""
-
-    velocity_ned_m_s: tuple[float, ...]
-    amplitude_ned_m_s: tuple[float, ...]
-    period_s: float
-
-
-@dataclass(frozen=True)
-class TetherDisturbance:
-    """``disturbances.tether.*``: anchor (NED, m), attachment (FRD, m), lumped drag and tension."""
-
-    anchor_ned_m: tuple[float, ...]
-    attachment_frd_m: tuple[float, ...]
-    drag_n_s2_m3: float
-    tension_n: float
-
-
-@dataclass(frozen=True)
-class FloorDisturbance:
-    """``disturbances.floor.*``: floor effect on heave added mass and DVL noise, and the floor gradient."""
-
-    heave_added_mass_fraction: float
-    reference_altitude_m: float
-    dvl_noise_gain: float
-    gradient: tuple[float, ...]
-
-
-@dataclass(frozen=True)
-class DvlDisturbance:
-    """``disturbances.dvl.*``: scale factor, misalignment (rad), latency (s) and wall multipath."""
-
-    scale_factor: float
-    misalignment_rpy_rad: tuple[float, ...]
-    latency_s: float
-    multipath_distance_m: float
-    multipath_dropout_probability: float
-
-
-@dataclass(frozen=True)
-class ImuDisturbance:
-    """``disturbances.imu.*``: bias random walks."""
-
-    gyro_bias_walk_rad_s_sqrt_s: float
-    accel_bias_walk_m_s2_sqrt_s: float
-
-
-@dataclass(frozen=True)
-class PressureDisturbance:
-    """``disturbances.pressure.*``: drift (Pa/s) and random walk."""
-
-    drift_pa_per_s: float
-    random_walk_pa_sqrt_s: float
-
-
-T = TypeVar("T")
-
-
-class _Group(Generic[T]):
-    """``Disturbances.<group>``: the typed ``disturbances.<group>.*`` values (the default where the
+class _Group:
+    """``Disturbances.<group>``: the ``disturbances.<group>.*`` values as attributes (the default where the
     file does not set a key), built on first use and kept."""
-
-    def __init__(self, cls: type[T]) -> None:
-        self.cls = cls
 
     def __set_name__(self, owner: type, name: str) -> None:
         self.name = name
 
-    def __get__(self, obj: Any, owner: type | None = None) -> T:
+    def __get__(self, obj: Any, owner: type | None = None) -> Any:
         if obj is None:
-            return self  # type: ignore[return-value]  # the class attribute
-        fields = dataclasses.fields(self.cls)  # type: ignore[arg-type]  # a dataclass
-        value = self.cls(**{f.name: obj.get(f"{self.name}.{f.name}") for f in fields})
+            return self
+        prefix = f"{self.name}."
+        value = SimpleNamespace(**{k[len(prefix):]: obj.get(k) for k in DISTURBANCE_SCHEMA
+                                   if k.startswith(prefix)})
         obj.__dict__[self.name] = value  # a plain attribute from now on, as a cached_property
         return value
 
@@ -252,22 +155,22 @@ class _Group(Generic[T]):
 class Disturbances:
     """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value.
 
-    Typed groups (built once; the default where the file does not set a key): ``thrust``, ``battery``, ``inflow``,
+    Groups (built once; the default where the file does not set a key): ``thrust``, ``battery``, ``inflow``,
     ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``, ``pressure``.
     """
 
     values: Mapping[str, Any] = field(default_factory=dict)
 
-    thrust = _Group(ThrustDisturbance)
-    battery = _Group(BatteryDisturbance)
-    inflow = _Group(InflowDisturbance)
-    hydrodynamics = _Group(HydrodynamicsDisturbance)
-    current = _Group(CurrentDisturbance)
-    tether = _Group(TetherDisturbance)
-    floor = _Group(FloorDisturbance)
-    dvl = _Group(DvlDisturbance)
-    imu = _Group(ImuDisturbance)
-    pressure = _Group(PressureDisturbance)
+    thrust = _Group()
+    battery = _Group()
+    inflow = _Group()
+    hydrodynamics = _Group()
+    current = _Group()
+    tether = _Group()
+    floor = _Group()
+    dvl = _Group()
+    imu = _Group()
+    pressure = _Group()
 
     def get(self, key: str) -> Any:
         """Value of ``disturbances.<key>`` (the default when the file does not set it)."""
@@ -289,11 +192,6 @@ class Disturbances:
     def active(self) -> list[str]:
         """The keys that differ from their defaults (empty: a pool that does what the vehicle file says)."""
         return sorted(k for k in self.values if self._differs(k))
-
-
-#: ``disturbances.<group>.*`` -> its typed dataclass (test_truth: matches DISTURBANCE_SCHEMA)
-DISTURBANCE_GROUPS: dict[str, type] = {n: g.cls for n, g in vars(Disturbances).items()
-                                       if isinstance(g, _Group)}
 
 
 def _validate_disturbances(flat: Mapping[str, Any], n_thrusters: int, source: str) -> Disturbances:
@@ -402,8 +300,7 @@ def with_floor_gradient(truth: Truth, gradient_ne) -> Truth:
     ``floor.gradient`` disturbance, module docstring). Raises :class:`TruthError` for a value out of range."""
     values = dict(truth.disturbances.values)
     values["floor.gradient"] = tuple(float(x) for x in gradient_ne)
-    flat = {k: v for k, v in values.items()}
-    dist = _validate_disturbances(flat, len(truth.config.thrusters.names), truth.source)
+    dist = _validate_disturbances(values, len(truth.config.thrusters.names), truth.source)
     return Truth(truth.config, dist, truth.vehicle, truth.overlay, truth.source)
 
 

@@ -90,10 +90,11 @@ THRUST_STEPS = ("ballast", "float", "line_pull", "line_pull_negative")
 def expand_calibration(steps: Iterable[str]) -> list[str]:
     """The step names with ``thrust`` replaced by :data:`THRUST_STEPS`, each name once, in the given order.
     Raises ``ValueError`` for a name not in :data:`CALIBRATION_STEPS`."""
+    bad = [s for s in steps if s not in CALIBRATION_STEPS]
+    if bad:
+        raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
     out: list[str] = []
     for s in steps:
-        if s not in CALIBRATION_STEPS:
-            raise ValueError(f"unknown calibration step(s) {[s]}; choose from {', '.join(CALIBRATION_STEPS)}")
         for x in (THRUST_STEPS if s == "thrust" else (s,)):
             if x not in out:
                 out.append(x)
@@ -251,9 +252,6 @@ class Executive:
             raise ValueError(f"level fractions must be in (0, 1], got {list(fractions)}")
         if not (math.isfinite(tick_s) and tick_s > 0.0):
             raise ValueError(f"tick_s must be > 0, got {tick_s}")
-        bad = [c for c in calibrate if c not in CALIBRATION_STEPS]
-        if bad:
-            raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
         calibrate = expand_calibration(calibrate)
         if float_buoyancy_n is None:
             float_buoyancy_n = float_buoyancy(cfg) if "float" in calibrate else 0.0
@@ -497,7 +495,7 @@ class Executive:
 
     def _finish(self) -> None:
         self.finished = True
-        self.ctx.clear_operator()  # nothing waits for the operator any more
+        self.ctx.awaiting = self.ctx.prompt = ""  # nothing waits for the operator any more
         self.ctx.active = -1
         self.ctx.end_run()
         self.f_lag = np.zeros_like(self.f_lag)  # the caller commands neutral thrust

@@ -273,7 +273,3 @@ class StepContext:
         self._continue = False  # operator_continue cleared awaiting and the prompt
         self.undo.pop(what, None)
         self.say(f"operator continued ({what}): holding")
-
-    def clear_operator(self) -> None:
-        """Nothing waits for the operator any more (end of the campaign)."""
-        self.awaiting, self.prompt = "", ""
