@@ -70,7 +70,7 @@ import numpy as np
 from hindrax_drivers.config import VehicleConfig
 
 from ...vehicle.uncertainty import declared_rel
-from ..fit.dof_model import thrust_weights
+from ..fit.dof_model import core_index, thrust_weights
 from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
@@ -358,16 +358,6 @@ def with_added_mass(a: dict, added_mass: float) -> dict:
     return a
 
 
-def _index_in(names: Sequence[str], core_names: Sequence[str]) -> list:
-    """Index in ``core_names`` of each of ``names`` (heave's ``*_positive``/``*_negative`` fall back on the one pair
-    of both directions), None when absent."""
-    out = []
-    for n in names:
-        base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
-        out.append(core_names.index(n) if n in core_names else core_names.index(base) if base in core_names else None)
-    return out
-
-
 def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(velocity, acceleration, force (n,), tick h s) of a fit core result's training segments
     (:class:`~..fit.fit_core.DofResult` ``train``: the smoothed velocity and acceleration and the input force at the
@@ -387,7 +377,7 @@ def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
     Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse, cv_nrmse_hold, persistence_margin, velocity,
     acceleration, force, h}."""
     core_names = list(core.names)
-    idx = _index_in(core_names if names is None else list(names), core_names)
+    idx = core_index(core_names if names is None else list(names), core_names)
     lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
     highs = [hi for _n, _k, _lo, hi in core.chosen.layout]
     ft = np.asarray(core.fold_theta, dtype=float) if core.fold_theta is not None else np.zeros((0, 0))
@@ -501,9 +491,7 @@ def thrust_curve_check(assessments: Mapping[str, dict], dofs: Sequence[str]) -> 
     """The ``thrust`` check across DOFs (module docstring), in place: when heave's bias differs from the configured
     net buoyancy (its ``bias_off`` check of :func:`assess`), every parameter of ``dofs`` other than heave is suspect."""
     heave = assessments.get("heave")
-    if heave is None or not dofs:
-        return
-    if not heave["checks"].get("bias_off"):
+    if heave is None or not dofs or not heave["checks"].get("bias_off"):
         return
     z = heave["checks"].get("bias_z", 0.0)
     reason = (f"heave bias differs from the configured net buoyancy (z = {z:+.1f}): the thrust curves do not "
@@ -639,10 +627,7 @@ def format_advice(parameter: str, advice: dict) -> str:
     runs of a named kind, their speed range and the pool time in minutes."""
     lo, hi, unit = advice["speed_range"]
     head = "" if advice.get("feasible", True) else "more of the same runs cannot fix it within a pool day: "
-    runs, kind = advice.get("runs"), advice.get("run_kind")
-    if runs is None:  # an advice written before the run counts
-        return (f"  to fix {parameter}: {advice['manoeuvre']}, speeds {lo:g}-{hi:g} {unit}, about "
-                f"{max(1, math.ceil(advice['seconds_more'] / 60.0))} min more")
+    runs, kind = advice["runs"], advice["run_kind"]
     return (f"  to fix {parameter}: {head}{runs} {kind} of about {advice['run_s']:.0f} s ({advice['manoeuvre']}), "
             f"speeds {lo:g}-{hi:g} {unit}: about {advice['minutes']} min of pool time")
 

@@ -31,8 +31,9 @@ from ...vehicle.fusion import smooth_with_acceleration, smooth_with_rate
 from ...vehicle.state import euler_rates
 from ...vehicle.uncertainty import measurement_settings
 from . import fit_core
-from .dof_model import (DofIdentification, parameter_names, parameter_units, regressor_matrix,
-                        restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
+from .dof_model import (DofIdentification, core_index, parameter_names, parameter_units,
+                        regressor_matrix, restoring_regressor, rigid_inertia, steady_state_fit,
+                        truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
            "dof_records", "identification_of", "identify_all_with_errors", "identify_dof"]
@@ -129,12 +130,9 @@ def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, si
     the rigid-body inertia, with the inertia's std."""
     names = parameter_names(dof)
     A = np.zeros((len(names), len(core.names)))
-    for i, n in enumerate(names):
-        base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
-        if n in core.names:
-            A[i, core.names.index(n)] = 1.0
-        elif base in core.names:
-            A[i, core.names.index(base)] = 1.0
+    for i, j in enumerate(core_index(names, list(core.names))):
+        if j is not None:
+            A[i, j] = 1.0
     theta = A @ core.theta
     cov = A @ core.covariance.cov @ A.T
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
