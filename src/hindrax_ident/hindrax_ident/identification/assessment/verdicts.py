@@ -113,10 +113,6 @@ def segment_count(dof: str, pool_time_s: float) -> int:
     return max(1, int(pool_time_s // SEGMENT_S))
 
 
-def _expected_bias(cfg: VehicleConfig, dof: str) -> float:
-    return float(cfg.buoyancy_n - cfg.weight_n) if dof == "heave" else 0.0
-
-
 @dataclass
 class FitEvidence:
     """What the verdicts of one DOF's fit are made from (:func:`assess`), whichever reader made the record.
@@ -438,7 +434,8 @@ def assess_dof(r: Any, cfg: VehicleConfig) -> dict:
         h=float(np.median(np.diff(t))) if have else 0.0,
         residual_rho=sig.get("residual_autocorrelation"), input_corr=sig.get("input_correlation"), steady=r.steady,
         windows=sig.get("windows") or [],
-        expected_bias=_expected_bias(cfg, r.dof), thrust_in_covariance=bool(joint.get("thrust_in_covariance")),
+        expected_bias=float(cfg.buoyancy_n - cfg.weight_n) if r.dof == "heave" else 0.0,
+        thrust_in_covariance=bool(joint.get("thrust_in_covariance")),
         fit_std=joint.get("fit_std"))
     if core is not None:  # bounds, folds, cross-validation, persistence and signals as hindrax ident fit takes them
         for key, value in core_evidence(core, names).items():

@@ -112,16 +112,15 @@ def _norm(name: str) -> str:
 
 def _select(path: Path, topics: dict[str, str], role: str, given: str | None, required: bool) -> tuple[str, str] | None:
     accepted = ACCEPTED[role]
+    cands = [t for t, ty in topics.items() if ty in accepted]
     if given is not None:
         name = given if given in topics else _norm(given) if _norm(given) in topics else None
         if name is None:
-            cands = [t for t, ty in topics.items() if ty in accepted]
             raise FitInputError(f"{path}: {role} topic {given} not in the bag (accepted types: {', '.join(accepted)}; "
                                 f"topics of those types: {', '.join(cands) or 'none'})")
         if topics[name] not in accepted:
             raise FitInputError(f"{path}: {role} topic {name} has type {topics[name]}; accepted: {', '.join(accepted)}")
         return name, topics[name]
-    cands = [t for t, ty in topics.items() if ty in accepted]
     if role == "depth":  # an odometry is the velocity source, not a depth source, unless asked for
         return None
     if len(cands) == 1:
@@ -554,17 +553,13 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
 
 
 # ------------------------------------------------------------------------------------------------ excitation
-def _kind(dof: str) -> str:
-    return "rotational" if dof in ("roll", "pitch", "yaw") else "translational"
-
-
 def excitation(pres: Sequence[Preprocessed], dof: str) -> dict:
     """{force_std, velocity_std, thresholds, excited} of a DOF over the bags' stretches."""
     k = DOFS.index(dof)
     f = np.concatenate([c.force[:, k] for p in pres for c in p.stretches]) if pres else np.zeros(0)
     v = np.concatenate([c.velocity[:, k] for p in pres for c in p.stretches]) if pres else np.zeros(0)
     v = v[np.isfinite(v)]
-    fmin, vmin = EXCITATION_MIN[_kind(dof)]
+    fmin, vmin = EXCITATION_MIN[fit_core.excited_kind(dof)]
     fs = float(np.std(f)) if f.size else 0.0
     vs = float(np.std(v)) if v.size else 0.0
     return {"force_std": fs, "velocity_std": vs, "force_std_min": fmin, "velocity_std_min": vmin,
