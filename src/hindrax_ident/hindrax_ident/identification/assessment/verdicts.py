@@ -36,7 +36,7 @@ and
      a level-to-level inconsistency. DOF-wide.
    * ``whiteness``: the lag-1 autocorrelation of the output-error residuals between consecutive samples is above
      :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit: a thrust lag or latency the vehicle file
-     does not have, a late DVL). In the scenario suite's no-disturbance runs it stayed at or below 0.06. DOF-wide.
+     does not have, a late DVL). DOF-wide.
      A measured position (heave's depth) is judged by the independence of its residuals from the input instead
      (:data:`INDEPENDENCE_Z`, :func:`~..fit.fit_core.input_correlation`): its residual is the double integral of
      every force the model does not have, so a few tenths of a newton of disturbance make consecutive depth samples
@@ -84,10 +84,7 @@ __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
 WHITENESS_MAX = 0.2
 #: Largest z of a measured position's residual-input cross-correlation a trusted fit may leave
-#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual test draws it. On the
-#: virtual pool's heave campaigns the right model leaves z 1.4-2.1 (scenarios without a force outside the model, the
-#: README's pool day on the wall clock with lag-1 autocorrelation 0.86: 1.5); a floor-dependent added mass, a weak
-#: reverse thrust or a thrust lag the vehicle file does not have 2.9-6.2, an inertia 30 % off 5.7-7.1.
+#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual test draws it.
 INDEPENDENCE_Z = 2.58
 #: Relative difference of the steady-state and transient quadratic damping flagged (with |z| > 3).
 METHODS_MAX = 0.05

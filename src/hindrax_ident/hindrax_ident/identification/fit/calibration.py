@@ -266,7 +266,6 @@ def _has_thrust(record: Any) -> bool:
 
 
 def _matrix(cfg) -> np.ndarray:
-
     return np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
 
 
