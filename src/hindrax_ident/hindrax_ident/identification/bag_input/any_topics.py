@@ -405,12 +405,13 @@ def _derivative(t: np.ndarray, x: np.ndarray, window_s: float = 0.5) -> np.ndarr
 _SUB = 10
 
 
-def _grid_stretches(pre: Preprocessed, grid_s: float, step_mean: bool = False, lag_s: float | None = None
-                    ) -> list[GridStretch]:
-    """Chunks on the uniform grid. Force: without ``step_mean`` its value at each grid time t_j; with it, its
-    mean over [t_j, t_j + grid_s) from ``_SUB`` sub-samples, the value the output-error simulation holds over the step
-    (the value at t_j would apply a change inside the step half a step late on average, read by the fit as a smaller
-    inertia). With a thruster lag (``lag_s``, default ``pre.lag_s``) the force is filtered on the sub-grid."""
+def _grid_stretches(pre: Preprocessed, grid_s: float, step_mean: bool = False,
+                    lag_s: float | None = None) -> list[GridStretch]:
+    """Chunks on the uniform grid. Force: without ``step_mean`` its value at each grid time t_j;
+    with it, its mean over [t_j, t_j + grid_s) from ``_SUB`` sub-samples, the value the output-error
+    simulation holds over the step (the value at t_j would apply a change inside the step half a
+    step late on average, read by the fit as a smaller inertia). With a thruster lag (``lag_s``,
+    default ``pre.lag_s``) the force is filtered on the sub-grid."""
     lag_s = pre.lag_s if lag_s is None else lag_s
     ft, fv = pre.force_times, pre.force_values
     sub = _SUB if step_mean else 1
@@ -424,7 +425,7 @@ def _grid_stretches(pre: Preprocessed, grid_s: float, step_mean: bool = False, l
         tf = lo2 + grid_s / sub * (np.arange(n * sub) + (0.5 if step_mean else 0.0))
         i = np.clip(np.searchsorted(ft, tf + 1e-9, side="right") - 1, 0, len(ft) - 1)
         force = fv[i]
-        if lag_s > 0:  # the thrust follows the commanded force through a first-order lag (exact for a held input)
+        if lag_s > 0:  # the thrust follows the command through a first-order lag (exact when held)
             lag = ThrustLag(lag_s)
             force = np.column_stack([lag.over_ticks(f, grid_s / sub)[0] for f in force.T])
         force = force.reshape(n, sub, -1).mean(axis=1)
@@ -578,7 +579,8 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
     (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
     out: dict[str, fit_core.DofRecord] = {}
     h = opts.grid_s
-    # the force's mean over each grid step, no lag: the fit core applies delay and lag (docs/identification.md §7)
+    # the force's mean over each grid step, no lag: the fit core applies delay and lag
+    # (docs/identification.md §7)
     stretches_of = [_grid_stretches(p, opts.grid_s, step_mean=True, lag_s=0.0) for p in pres]
     for dof in dofs:
         k = DOFS.index(dof)
