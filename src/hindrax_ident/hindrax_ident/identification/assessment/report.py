@@ -59,13 +59,13 @@ def summary_rows(identifications: Mapping[str, Any]) -> list[dict]:
             tr = r.truth.get(name)
             v = r.values[name]
             err = (v - tr) / abs(tr) if tr not in (None, 0.0) else math.nan
+            verdict, reasons, at_bound = _assessment(r, name)
             rows.append({"dof": dof, "parameter": name, "value": v, "std": r.std[name], "unit": r.units[name],
                          "ci95": r.ci95[name], "truth": tr, "relative_error": err,
                          "equation_error": r.equation_error.get(name, (math.nan, math.nan))[0],
                          "rls": r.online.get(name, (math.nan, math.nan))[0],
                          "steady": (r.steady or {}).get(name, (math.nan, math.nan))[0],
-                         "verdict": _assessment(r, name)[0], "reasons": _assessment(r, name)[1],
-                         "at_bound": _assessment(r, name)[2]})
+                         "verdict": verdict, "reasons": reasons, "at_bound": at_bound})
     return rows
 
 
@@ -195,23 +195,23 @@ def references_html(document: Mapping) -> str:
         parts.append("<h3>Known-force calibration</h3>" + _table(
             ("scale", "value", "std", "known force (N)", "method", "holding force (N)"), rows)
             + (f"<p>{html.escape(str(cal['applied_to']))}</p>" if cal.get("applied_to") else ""))
-    scales = (document.get("joint") or {}).get("scales") or {}
+    joint = document.get("joint") or {}
     srow = []
+    scales = {**(joint.get("scales") or {}), **(joint.get("group_means") or {})}
     for name, j in scales.items():
         v, sd = float(j["value"]), float(j["std"])
         z = (v - 1.0) / sd if sd > 0 else math.nan
         off = 1.0 / v - 1.0 if v > 0 else math.nan
-        steps = "; ".join(f"{m['step']} {_fmt(m['value'])} +- {_fmt(m['std'], 2)}" for m in j.get("measurements", []))
+        if "prior" in j:  # a scale (else a group's mean of its two directions)
+            steps = "; ".join(f"{m['step']} {_fmt(m['value'])} +- {_fmt(m['std'], 2)}"
+                              for m in j.get("measurements", []))
+            prior = f"{_fmt(j['prior'][0], 3)} +- {_fmt(j['prior'][1], 2)}"
+            head = (name, prior, steps, ", ".join(j.get("dofs", [])))
+        else:
+            head = (f"{name} mean of both directions", "-", "-", _USES_MEAN.get(name, ""))
         verdict = "curve off" if abs(z) > 1.96 else "curve agrees"
-        prior = f"{_fmt(j['prior'][0], 3)} +- {_fmt(j['prior'][1], 2)}"
-        srow.append((name, _fmt(v), _fmt(sd, 2), prior, steps, ", ".join(j.get("dofs", [])),
-                     f"{100 * off:+.1f} %", _fmt(z, 3), verdict))
-    for g, j in ((document.get("joint") or {}).get("group_means") or {}).items():
-        v, sd = float(j["value"]), float(j["std"])
-        z = (v - 1.0) / sd if sd > 0 else math.nan
-        srow.append((f"{g} mean of both directions", _fmt(v), _fmt(sd, 2), "-", "-",
-                     _USES_MEAN.get(g, ""), f"{100 * (1.0 / v - 1.0):+.1f} %", _fmt(z, 3),
-                     "curve off" if abs(z) > 1.96 else "curve agrees"))
+        srow.append((head[0], _fmt(v), _fmt(sd, 2), *head[1:], f"{100 * off:+.1f} %", _fmt(z, 3),
+                     verdict))
     if srow:
         parts.append("<h3>Thrust scales estimated jointly (docs/identification.md §6.2)</h3><p>posterior of each "
                      "scale s (true thrust / curve thrust, per thruster group and rotation direction) from its prior "

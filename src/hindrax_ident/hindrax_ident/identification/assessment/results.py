@@ -309,19 +309,12 @@ def to_config_overrides(document: Mapping) -> dict[str, float]:
     for dof, e in document["dofs"].items():
         base = f"hydrodynamics.{dof}."
         val = {k: float(v["value"]) for k, v in e.items() if isinstance(v, Mapping) and "value" in v}
-        if dof in ROTATIONAL_DOFS:
-            out[base + "added_mass_kg_m2"] = max(0.0, val["added_mass"])
-            out[base + "linear_damping_kg_m2_s"] = max(0.0, val["linear_damping"])
-            out[base + "quadratic_damping_kg_m2"] = max(0.0, val["quadratic_damping"])
-        elif dof == "heave":
-            out[base + "added_mass_kg"] = max(0.0, val["added_mass"])
-            for d in ("positive", "negative"):
-                out[base + f"linear_damping_{d}_kg_s"] = max(0.0, val[f"linear_damping_{d}"])
-                out[base + f"quadratic_damping_{d}_kg_m"] = max(0.0, val[f"quadratic_damping_{d}"])
-        else:
-            out[base + "added_mass_kg"] = max(0.0, val["added_mass"])
-            out[base + "linear_damping_kg_s"] = max(0.0, val["linear_damping"])
-            out[base + "quadratic_damping_kg_m"] = max(0.0, val["quadratic_damping"])
+        rot = dof in ROTATIONAL_DOFS
+        mass, lin, quad = ("kg_m2", "kg_m2_s", "kg_m2") if rot else ("kg", "kg_s", "kg_m")
+        out[base + f"added_mass_{mass}"] = max(0.0, val["added_mass"])
+        for d in ("_positive", "_negative") if dof == "heave" else ("",):
+            out[base + f"linear_damping{d}_{lin}"] = max(0.0, val[f"linear_damping{d}"])
+            out[base + f"quadratic_damping{d}_{quad}"] = max(0.0, val[f"quadratic_damping{d}"])
     return out
 
 
@@ -332,16 +325,16 @@ def _units(dof: str, names: Sequence[str]) -> dict:
     u = dict(parameter_units(dof))
     u.setdefault("quadratic_damping", u.get("quadratic_damping_positive", ""))
     u.setdefault("linear_damping", u.get("linear_damping_positive", ""))
-    force = "N m" if dof in ("roll", "pitch", "yaw") else "N"
+    force = "N m" if dof in ROTATIONAL_DOFS else "N"
     for n in names:
         if n.startswith("bias_run_"):
             u[n] = u.get("bias", force)
         if n.startswith("force_from_"):
             other = n[len("force_from_"):]
-            u[n] = f"{force}/({'N m' if other in ('roll', 'pitch', 'yaw') else 'N'})"
+            u[n] = f"{force}/({'N m' if other in ROTATIONAL_DOFS else 'N'})"
         if n.startswith("cross_"):
             other = n[len("cross_"):]
-            u[n] = f"{force}/({'rad/s' if other in ('roll', 'pitch', 'yaw') else 'm/s'})"
+            u[n] = f"{force}/({'rad/s' if other in ROTATIONAL_DOFS else 'm/s'})"
     u["reverse_thrust_gain"] = "1"
     u["saturation_gain"] = "1"
     return u
@@ -386,7 +379,7 @@ def _param_entries(r: Any, a: dict) -> dict:
     sd_sand = np.sqrt(np.maximum(np.diag(cov.sandwich), 0.0))
     entries: dict = {}
 
-    def put(name, i, unit, pname=None):
+    def put(i, unit, pname=None):
         v = a["parameters"][pname or c.names[i]]
         e = {"value": float(v["value"]), "std": float(v["std"]), "unit": unit,
              "ci95": [float(v["ci95"][0]), float(v["ci95"][1])], "t_dof": int(v["t_dof"]),
@@ -409,10 +402,10 @@ def _param_entries(r: Any, a: dict) -> dict:
     for i, name in enumerate(c.names):
         if r.dof == "heave" and name in ("quadratic_damping", "linear_damping"):
             for d in ("positive", "negative"):  # one coefficient for both directions
-                entries[f"{name}_{d}"] = put(name, i, units[f"{name}_{d}"])
+                entries[f"{name}_{d}"] = put(i, units[f"{name}_{d}"])
                 entries[f"{name}_{d}"]["note"] = "one coefficient for both directions (chosen by cross-validation)"
         else:
-            entries[name] = put(name, i, units.get(name, ""))
+            entries[name] = put(i, units.get(name, ""))
     # damping terms the chosen model leaves out: 0 exactly in that model
     wanted = (["quadratic_damping_positive", "quadratic_damping_negative", "linear_damping_positive",
                "linear_damping_negative"] if r.dof == "heave" else ["quadratic_damping", "linear_damping"])
@@ -424,7 +417,7 @@ def _param_entries(r: Any, a: dict) -> dict:
                           "reasons": list(a["reasons"]) if no_model else [],
                           "note": f"not in the model chosen by cross-validation ({c.terms.label})"}
     if "added_mass" in a["parameters"]:
-        am = put("inertia", c.names.index("inertia"), units["added_mass"], "added_mass")
+        am = put(c.names.index("inertia"), units["added_mass"], "added_mass")
         am.pop("fold_spread", None)
         am.pop("prior", None)
         am.pop("fit_value", None)
@@ -543,10 +536,7 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
         c = r.core
         e["method"] = "output-error (segment-wise, prediction error; docs/identification.md §7)"
         e["model"] = c.terms.label
-        e["terms"] = {"damping": c.terms.damping, "by_direction": c.terms.by_direction,
-                      "coriolis": c.terms.coriolis, "cross": c.terms.cross, "reverse_gain": c.terms.reverse_gain,
-                      "cross_force": c.terms.cross_force, "run_bias": c.terms.run_bias,
-                      "saturation": c.terms.saturation}
+        e["terms"] = dataclasses.asdict(c.terms)
         e["terms_meaning"] = {k: TERM_MEANING[k] for k, on in e["terms"].items() if on is True and k in TERM_MEANING}
         e["model_selection"] = model_selection(c)
         if c.persistence is not None:

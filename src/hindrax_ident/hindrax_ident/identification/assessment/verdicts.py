@@ -36,7 +36,7 @@ and
      a level-to-level inconsistency. DOF-wide.
    * ``whiteness``: the lag-1 autocorrelation of the output-error residuals between consecutive samples is above
      :data:`WHITENESS_MAX` (the model leaves a slow, systematic misfit: a thrust lag or latency the vehicle file
-     does not have, a late DVL). In the scenario suite's no-disturbance runs it stayed at or below 0.06. DOF-wide.
+     does not have, a late DVL). DOF-wide.
      A measured position (heave's depth) is judged by the independence of its residuals from the input instead
      (:data:`INDEPENDENCE_Z`, :func:`~..fit.fit_core.input_correlation`): its residual is the double integral of
      every force the model does not have, so a few tenths of a newton of disturbance make consecutive depth samples
@@ -70,7 +70,7 @@ import numpy as np
 from hindrax_drivers.config import VehicleConfig
 
 from ...vehicle.uncertainty import declared_rel
-from ..fit.dof_model import thrust_weights
+from ..fit.dof_model import core_index, thrust_weights
 from ..fit.fit_core import NO_MODEL_VERDICT, PERSISTENCE_MARGIN, SEGMENT_S, persistence
 
 __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "RLS_STD_DOFS", "rls_published_std",
@@ -84,10 +84,8 @@ __all__ = ["REFERENCE_Z_MAX", "free_decay_reason", "apply_reference_verdicts", "
 #: Residual lag-1 autocorrelation above which the fit is not trusted.
 WHITENESS_MAX = 0.2
 #: Largest z of a measured position's residual-input cross-correlation a trusted fit may leave
-#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual test draws it. On the
-#: virtual pool's heave campaigns the right model leaves z 1.4-2.1 (scenarios without a force outside the model, the
-#: README's pool day on the wall clock with lag-1 autocorrelation 0.86: 1.5); a floor-dependent added mass, a weak
-#: reverse thrust or a thrust lag the vehicle file does not have 2.9-6.2, an inertia 30 % off 5.7-7.1.
+#: (:func:`~..fit.fit_core.input_correlation`): the 99 % bound of each lag, as Ljung's residual
+#: test draws it.
 INDEPENDENCE_Z = 2.58
 #: Relative difference of the steady-state and transient quadratic damping flagged (with |z| > 3).
 METHODS_MAX = 0.05
@@ -111,10 +109,6 @@ def thrust_covariance(dof: str, names: Sequence[str], theta, rel: Sequence[float
 def segment_count(dof: str, pool_time_s: float) -> int:
     """Independent segments of the output-error fit (pool time / :data:`~..fit.fit_core.SEGMENT_S`, every DOF)."""
     return max(1, int(pool_time_s // SEGMENT_S))
-
-
-def _expected_bias(cfg: VehicleConfig, dof: str) -> float:
-    return float(cfg.buoyancy_n - cfg.weight_n) if dof == "heave" else 0.0
 
 
 @dataclass
@@ -358,16 +352,6 @@ def with_added_mass(a: dict, added_mass: float) -> dict:
     return a
 
 
-def _index_in(names: Sequence[str], core_names: Sequence[str]) -> list:
-    """Index in ``core_names`` of each of ``names`` (heave's ``*_positive``/``*_negative`` fall back on the one pair
-    of both directions), None when absent."""
-    out = []
-    for n in names:
-        base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
-        out.append(core_names.index(n) if n in core_names else core_names.index(base) if base in core_names else None)
-    return out
-
-
 def core_signals(core: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """(velocity, acceleration, force (n,), tick h s) of a fit core result's training segments
     (:class:`~..fit.fit_core.DofResult` ``train``: the smoothed velocity and acceleration and the input force at the
@@ -387,7 +371,7 @@ def core_evidence(core: Any, names: Sequence[str] | None = None) -> dict:
     Returns {lower_bounds, upper_bounds, fold_theta, cv_nrmse, cv_nrmse_hold, persistence_margin, velocity,
     acceleration, force, h}."""
     core_names = list(core.names)
-    idx = _index_in(core_names if names is None else list(names), core_names)
+    idx = core_index(core_names if names is None else list(names), core_names)
     lows = [lo for _n, _k, lo, _hi in core.chosen.layout]
     highs = [hi for _n, _k, _lo, hi in core.chosen.layout]
     ft = np.asarray(core.fold_theta, dtype=float) if core.fold_theta is not None else np.zeros((0, 0))
@@ -448,7 +432,8 @@ def assess_dof(r: Any, cfg: VehicleConfig) -> dict:
         h=float(np.median(np.diff(t))) if have else 0.0,
         residual_rho=sig.get("residual_autocorrelation"), input_corr=sig.get("input_correlation"), steady=r.steady,
         windows=sig.get("windows") or [],
-        expected_bias=_expected_bias(cfg, r.dof), thrust_in_covariance=bool(joint.get("thrust_in_covariance")),
+        expected_bias=float(cfg.buoyancy_n - cfg.weight_n) if r.dof == "heave" else 0.0,
+        thrust_in_covariance=bool(joint.get("thrust_in_covariance")),
         fit_std=joint.get("fit_std"))
     if core is not None:  # bounds, folds, cross-validation, persistence and signals as hindrax ident fit takes them
         for key, value in core_evidence(core, names).items():
@@ -501,9 +486,7 @@ def thrust_curve_check(assessments: Mapping[str, dict], dofs: Sequence[str]) -> 
     """The ``thrust`` check across DOFs (module docstring), in place: when heave's bias differs from the configured
     net buoyancy (its ``bias_off`` check of :func:`assess`), every parameter of ``dofs`` other than heave is suspect."""
     heave = assessments.get("heave")
-    if heave is None or not dofs:
-        return
-    if not heave["checks"].get("bias_off"):
+    if heave is None or not dofs or not heave["checks"].get("bias_off"):
         return
     z = heave["checks"].get("bias_z", 0.0)
     reason = (f"heave bias differs from the configured net buoyancy (z = {z:+.1f}): the thrust curves do not "
@@ -642,10 +625,7 @@ def format_advice(parameter: str, advice: dict) -> str:
     runs of a named kind, their speed range and the pool time in minutes."""
     lo, hi, unit = advice["speed_range"]
     head = "" if advice.get("feasible", True) else "more of the same runs cannot fix it within a pool day: "
-    runs, kind = advice.get("runs"), advice.get("run_kind")
-    if runs is None:  # an advice written before the run counts
-        return (f"  to fix {parameter}: {advice['manoeuvre']}, speeds {lo:g}-{hi:g} {unit}, about "
-                f"{max(1, math.ceil(advice['seconds_more'] / 60.0))} min more")
+    runs, kind = advice["runs"], advice["run_kind"]
     return (f"  to fix {parameter}: {head}{runs} {kind} of about {advice['run_s']:.0f} s ({advice['manoeuvre']}), "
             f"speeds {lo:g}-{hi:g} {unit}: about {advice['minutes']} min of pool time")
 

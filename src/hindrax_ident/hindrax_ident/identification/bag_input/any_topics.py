@@ -112,16 +112,15 @@ def _norm(name: str) -> str:
 
 def _select(path: Path, topics: dict[str, str], role: str, given: str | None, required: bool) -> tuple[str, str] | None:
     accepted = ACCEPTED[role]
+    cands = [t for t, ty in topics.items() if ty in accepted]
     if given is not None:
         name = given if given in topics else _norm(given) if _norm(given) in topics else None
         if name is None:
-            cands = [t for t, ty in topics.items() if ty in accepted]
             raise FitInputError(f"{path}: {role} topic {given} not in the bag (accepted types: {', '.join(accepted)}; "
                                 f"topics of those types: {', '.join(cands) or 'none'})")
         if topics[name] not in accepted:
             raise FitInputError(f"{path}: {role} topic {name} has type {topics[name]}; accepted: {', '.join(accepted)}")
         return name, topics[name]
-    cands = [t for t, ty in topics.items() if ty in accepted]
     if role == "depth":  # an odometry is the velocity source, not a depth source, unless asked for
         return None
     if len(cands) == 1:
@@ -406,14 +405,15 @@ def _derivative(t: np.ndarray, x: np.ndarray, window_s: float = 0.5) -> np.ndarr
 _SUB = 10
 
 
-def _grid_stretches(pre: Preprocessed, delay_s: float, grid_s: float, step_mean: bool = False) -> list[GridStretch]:
-    """Chunks on the uniform grid. Force: without ``step_mean`` its value at each grid time t_j (the delay
-    estimate's convention, :func:`estimate_delay`: the 50 ms of the piloted test bag come out 49 ms); with it, its
-    mean over [t_j, t_j + grid_s) from ``_SUB`` sub-samples, the value the output-error simulation holds over the step
-    (:func:`apply_delay`). The value at t_j applies a change inside the step at its end, half a step late on average,
-    and the fit reads that as a smaller inertia (campaign bag, 20 Hz grid: surge -3.3 %, sway -5.4 %, yaw -9.7 %;
-    with the step mean -0.5 %, +0.3 %, -4 %). With a thruster lag the force is filtered on the sub-grid."""
-    ft, fv = pre.force_times + delay_s, pre.force_values
+def _grid_stretches(pre: Preprocessed, grid_s: float, step_mean: bool = False,
+                    lag_s: float | None = None) -> list[GridStretch]:
+    """Chunks on the uniform grid. Force: without ``step_mean`` its value at each grid time t_j;
+    with it, its mean over [t_j, t_j + grid_s) from ``_SUB`` sub-samples, the value the output-error
+    simulation holds over the step (the value at t_j would apply a change inside the step half a
+    step late on average, read by the fit as a smaller inertia). With a thruster lag (``lag_s``,
+    default ``pre.lag_s``) the force is filtered on the sub-grid."""
+    lag_s = pre.lag_s if lag_s is None else lag_s
+    ft, fv = pre.force_times, pre.force_values
     sub = _SUB if step_mean else 1
     out = []
     for lo, hi in pre.spans:
@@ -425,8 +425,8 @@ def _grid_stretches(pre: Preprocessed, delay_s: float, grid_s: float, step_mean:
         tf = lo2 + grid_s / sub * (np.arange(n * sub) + (0.5 if step_mean else 0.0))
         i = np.clip(np.searchsorted(ft, tf + 1e-9, side="right") - 1, 0, len(ft) - 1)
         force = fv[i]
-        if pre.lag_s > 0:  # the thrust follows the commanded force through a first-order lag (exact for a held input)
-            lag = ThrustLag(pre.lag_s)
+        if lag_s > 0:  # the thrust follows the command through a first-order lag (exact when held)
+            lag = ThrustLag(lag_s)
             force = np.column_stack([lag.over_ticks(f, grid_s / sub)[0] for f in force.T])
         force = force.reshape(n, sub, -1).mean(axis=1)
         short = None
@@ -446,7 +446,7 @@ def _grid_stretches(pre: Preprocessed, delay_s: float, grid_s: float, step_mean:
 def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | None, opts: FitOptions,
                    t0: float | None = None) -> Preprocessed:
     """Read a bag's force, velocity, angular rate, attitude (and depth) and put them on one uniform grid (module
-    docstring), without the delay (:func:`estimate_delay` then :func:`apply_delay`). Raises :class:`FitInputError`
+    docstring), without the delay (the fit core's). Raises :class:`FitInputError`
     or :class:`hindrax_drivers.recording.reader.BagError`."""
     path = Path(path)
     streams, info = _read_streams(path, choice, cfg)
@@ -549,22 +549,18 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
         notes["thrust"] = (f"thrust curves and allocation matrix of {cfg.source} (ThrusterPwm: reversal and trim "
                            f"undone), widths acting esc.output_latency_s = {cfg.esc.output_latency_s:g} s "
                            f"late, first-order lag thrusters.time_constant_s = {pre.lag_s:g} s")
-    pre.stretches = _grid_stretches(pre, 0.0, opts.grid_s)
+    pre.stretches = _grid_stretches(pre, opts.grid_s)
     return pre
 
 
 # ------------------------------------------------------------------------------------------------ excitation
-def _kind(dof: str) -> str:
-    return "rotational" if dof in ("roll", "pitch", "yaw") else "translational"
-
-
 def excitation(pres: Sequence[Preprocessed], dof: str) -> dict:
     """{force_std, velocity_std, thresholds, excited} of a DOF over the bags' stretches."""
     k = DOFS.index(dof)
     f = np.concatenate([c.force[:, k] for p in pres for c in p.stretches]) if pres else np.zeros(0)
     v = np.concatenate([c.velocity[:, k] for p in pres for c in p.stretches]) if pres else np.zeros(0)
     v = v[np.isfinite(v)]
-    fmin, vmin = EXCITATION_MIN[_kind(dof)]
+    fmin, vmin = EXCITATION_MIN[fit_core.excited_kind(dof)]
     fs = float(np.std(f)) if f.size else 0.0
     vs = float(np.std(v)) if v.size else 0.0
     return {"force_std": fs, "velocity_std": vs, "force_std_min": fmin, "velocity_std_min": vmin,
@@ -572,17 +568,6 @@ def excitation(pres: Sequence[Preprocessed], dof: str) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------ to the core
-def _step_mean_stretches(pre: Preprocessed, opts: FitOptions) -> list[GridStretch]:
-    """The bag's stretches with the force's mean over each grid step (the value the output-error simulation holds over
-    it, :func:`_grid_stretches`), no delay and no lag: the fit core applies both (docs/identification.md §7)."""
-    lag = pre.lag_s
-    pre.lag_s = 0.0
-    try:
-        return _grid_stretches(pre, 0.0, opts.grid_s, step_mean=True)
-    finally:
-        pre.lag_s = lag
-
-
 def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOptions, moving: Sequence[str] = (),
                 force_from: Sequence[str] | None = None) -> dict[str, fit_core.DofRecord]:
     """One :class:`..fit.fit_core.DofRecord` per DOF of ``dofs`` from the preprocessed bags: per continuous stretch the
@@ -594,7 +579,9 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
     (``thrust_model``); a wrench is ``wrench`` (delay and lag estimated by the core)."""
     out: dict[str, fit_core.DofRecord] = {}
     h = opts.grid_s
-    stretches_of = [_step_mean_stretches(p, opts) for p in pres]
+    # the force's mean over each grid step, no lag: the fit core applies delay and lag
+    # (docs/identification.md §7)
+    stretches_of = [_grid_stretches(p, opts.grid_s, step_mean=True, lag_s=0.0) for p in pres]
     for dof in dofs:
         k = DOFS.index(dof)
         cross_names = tuple(d for d in moving if d != dof and d not in ("roll", "pitch"))

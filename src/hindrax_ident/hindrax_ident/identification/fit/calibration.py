@@ -49,8 +49,8 @@ from hindrax_drivers.config import DOFS
 from ...estimation.free_decay import fit_quadratic_free_decay
 from ...vehicle.thrust_lag import ThrustLag
 from ...vehicle.uncertainty import DEFAULT_THRUST_UNCERTAINTY_REL, declared_rel
-from .dof_model import thrust_weights
-from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, rigid_inertia_of, theta_priors
+from .dof_model import rigid_inertia, thrust_weights
+from .posterior import DEFAULT_PRIOR_STD_REL, prior_posterior, prior_std_rel_of, theta_priors
 
 __all__ = ["apply_thrust_calibration", "calibration_section", "thrust_scales", "decay_inertia",
            "DEFAULT_PRIOR_STD_REL", "scale_prior_stds", "scale_model", "ScaleModel", "joint_estimate",
@@ -266,7 +266,6 @@ def _has_thrust(record: Any) -> bool:
 
 
 def _matrix(cfg) -> np.ndarray:
-
     return np.asarray(AllocationCore(cfg).matrix_frd, dtype=float)
 
 
@@ -586,7 +585,7 @@ def joint_estimate(identifications: Mapping[str, Any], cfg, calibration: Mapping
         for n, v, sd in zip(names, theta, np.sqrt(np.clip(np.diag(cov), 0.0, None))):
             r.values[n] = float(v)
             r.std[n] = float(sd)
-        r.values["added_mass"] = r.values["inertia"] - rigid_inertia_of(cfg, dof)
+        r.values["added_mass"] = r.values["inertia"] - rigid_inertia(cfg, dof)
         r.std["added_mass"] = r.std["inertia"]
     sec = {"prior_std_rel": float(prior_std_rel),
            "method": ("Bayesian least squares ([Tarantola2005] Ch. 3; docs/identification.md §6.2): each DOF's "

@@ -31,8 +31,9 @@ from ...vehicle.fusion import smooth_with_acceleration, smooth_with_rate
 from ...vehicle.state import euler_rates
 from ...vehicle.uncertainty import measurement_settings
 from . import fit_core
-from .dof_model import (DofIdentification, parameter_names, parameter_units, regressor_matrix,
-                        restoring_regressor, rigid_inertia, steady_state_fit, truth_parameters)
+from .dof_model import (DofIdentification, core_index, parameter_names, parameter_units,
+                        regressor_matrix, restoring_regressor, rigid_inertia, steady_state_fit,
+                        truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
            "dof_records", "identification_of", "identify_all_with_errors", "identify_dof"]
@@ -69,13 +70,14 @@ def dof_record(record, dof: str, cfg: VehicleConfig) -> tuple[fit_core.DofRecord
     force = np.asarray(record.wrench_frd[sl, k], dtype=float)
     force_cmd = np.asarray(record.wrench_cmd_frd[sl, k], dtype=float)
     ms = measurement_settings(cfg, dof)
-    tm, zm = _log_arrays(record.sensors[ms["log"]], ms["column"], t[0] - 2.0, t[-1])
+    tm, zm = _log_matrix(record.sensors[ms["log"]], t[0] - 2.0, t[-1])
+    zm = zm[:, ms["column"]]
     if np.sum(np.isfinite(zm)) < 20:
         raise EstimationError(f"{dof}: too few sensor samples")
     aid = None
     if ms["accel"] and record.sensors.get("accel"):
-        ta, aa = _log_arrays(record.sensors["accel"], k, t[0] - 2.0, t[-1])
-        aid = AccelerometerAid(ta, aa, ms["accel_std"], ms["accel_jerk_psd"])
+        ta, aa = _log_matrix(record.sensors["accel"], t[0] - 2.0, t[-1])
+        aid = AccelerometerAid(ta, aa[:, k], ms["accel_std"], ms["accel_jerk_psd"])
     rr = None
     if dof in ("roll", "pitch"):
         roll_s, pitch_s, rate_bias = _smoothed_roll_pitch(record, cfg, t)
@@ -128,12 +130,9 @@ def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, si
     the rigid-body inertia, with the inertia's std."""
     names = parameter_names(dof)
     A = np.zeros((len(names), len(core.names)))
-    for i, n in enumerate(names):
-        base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
-        if n in core.names:
-            A[i, core.names.index(n)] = 1.0
-        elif base in core.names:
-            A[i, core.names.index(base)] = 1.0
+    for i, j in enumerate(core_index(names, list(core.names))):
+        if j is not None:
+            A[i, j] = 1.0
     theta = A @ core.theta
     cov = A @ core.covariance.cov @ A.T
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -205,15 +204,6 @@ def identify_dof(record, dof: str, cfg: VehicleConfig, opts: fit_core.CoreOption
 
 
 # ------------------------------------------------------------------------------------------------ conditioning
-def _log_arrays(log: list, column: int, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
-    if not log:
-        return np.zeros(0), np.zeros(0)
-    t = np.array([s[0] for s in log])
-    z = np.array([s[1][column] for s in log], dtype=float)
-    m = (t >= t0) & (t <= t1)
-    return t[m], z[m]
-
-
 @dataclass(frozen=True)
 class AccelerometerAid:
     """An accelerometer record aiding the smoother (:func:`~hindrax_ident.vehicle.fusion.smooth_with_acceleration`):
@@ -270,12 +260,7 @@ def rate_bias_against_angle(t_angle, angle, t_rate, rate) -> float:
     """Constant bias (rad/s) of a rate record against an angle record of the same axis: least squares of
     ``integral(rate) - angle = c + b (t - t0)`` at the angle times (the integral by the trapezoid rule at the rate
     times, interpolated). ``t_angle``, ``angle`` (m,), ``t_rate``, ``rate`` (n,); NaN samples ignored. Returns 0.0
-    with fewer than 3 usable angle samples or a rate record that does not span them.
-
-    Why: the still window that gives the gyro bias on board is short and the vehicle is rarely quite still
-    (a residual of 2-4 mrad/s in the graph campaign), and once the gyro aids the attitude
-    (:func:`~hindrax_ident.vehicle.fusion.smooth_with_rate`) such a bias tilts the smoothed angle between attitude
-    samples: roll and pitch quadratic damping std rose from about 1 % to 5-10 % (measured through the ROS graph)."""
+    with fewer than 3 usable angle samples or a rate record that does not span them."""
     ta, a = np.asarray(t_angle, dtype=float), np.asarray(angle, dtype=float)
     tr, r = np.asarray(t_rate, dtype=float), np.asarray(rate, dtype=float)
     okr = np.isfinite(r) & np.isfinite(tr)
@@ -306,9 +291,9 @@ def _attitude_and_euler_rates(record, t: np.ndarray):
 
 
 def _log_matrix(log: list, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
-    """(times (m,), values (m, 3)) of a three-component SensorState log within [t0, t1]."""
+    """(times (m,), values (m, k)) of a SensorState log within [t0, t1] (k = 6 when empty)."""
     if not log:
-        return np.zeros(0), np.zeros((0, 3))
+        return np.zeros(0), np.zeros((0, 6))
     t = np.array([s[0] for s in log])
     v = np.array([s[1] for s in log], dtype=float).reshape(len(log), -1)
     m = (t >= t0) & (t <= t1)

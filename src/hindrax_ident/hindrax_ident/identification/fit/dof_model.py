@@ -52,8 +52,19 @@ from ...estimation.steady_windows import detect_steady_windows
 from ...vehicle.rigid_body import rigid_body_mass_matrix
 from .output_error import model_terms
 
-__all__ = ["parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia",
+__all__ = ["core_index", "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia",
            "truth_parameters", "DofIdentification", "steady_state_fit", "thrust_weights"]
+
+def core_index(names: Sequence[str], core_names: Sequence[str]) -> list:
+    """Index in ``core_names`` (the fit core's) of each of ``names`` (heave's ``*_positive`` and
+    ``*_negative`` fall back on the one pair of both directions), None when absent."""
+    out = []
+    for n in names:
+        base = n.rsplit("_", 1)[0] if n.endswith(("_positive", "_negative")) else n
+        out.append(core_names.index(n) if n in core_names
+                   else core_names.index(base) if base in core_names else None)
+    return out
+
 
 def parameter_names(dof: str) -> list[str]:
     """Parameter names of a DOF's regression, in regressor-column order (module docstring)."""

@@ -600,31 +600,17 @@ class FitOutcome:
     message: str
 
 
-def _equation_error_start(sd: SegmentData, dof: str, layout: list, a: np.ndarray) -> np.ndarray:
+def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.ndarray:
     """Bounded equation-error least squares of the model on the smoothed velocity ``sd.v_s`` and acceleration ``a``
     (m, L) at the ticks, within the bounds of ``layout`` (scipy ``lsq_linear``): the physical start of the fit."""
     from scipy import optimize  # here, not at the top: node processes import this module (pyproject.toml, PLC0415)
 
     kinds = _kinds(layout)
     v = sd.v_s
-    rows = [a]
-    pos = v > 0
-    q = np.abs(v) * v
-    for k in kinds[1:]:
-        if k == "kq":
-            rows.append(q)
-        elif k == "kl":
-            rows.append(v)
-        elif k == "kq+":
-            rows.append(np.where(pos, q, 0.0))
-        elif k == "kq-":
-            rows.append(np.where(pos, 0.0, q))
-        elif k == "kl+":
-            rows.append(np.where(pos, v, 0.0))
-        elif k == "kl-":
-            rows.append(np.where(pos, 0.0, v))
-        elif k == "bias":
-            rows.append(np.ones_like(v))
+    pos, q = v > 0, np.abs(v) * v
+    terms = {"kq": q, "kl": v, "kq+": np.where(pos, q, 0.0), "kq-": np.where(pos, 0.0, q),
+             "kl+": np.where(pos, v, 0.0), "kl-": np.where(pos, 0.0, v), "bias": np.ones_like(v)}
+    rows = [a] + [terms[k] for k in kinds[1:] if k in terms]
     tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
     for c in range(len(tcols)):
         rows.append(-sd.cols[0][..., c])
@@ -941,7 +927,7 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
         svs = sds if sv is sd else [build_segments(rec, terms, tm, validation_s, excited_only=not rec.all_segments)
                                     for tm in tms]
         U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
-        start = np.stack([_equation_error_start(x, rec.dof, layout, x.a_s) for x in sds])
+        start = np.stack([_equation_error_start(x, layout, x.a_s) for x in sds])
         smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
         th = timing_grid.fit_batch(U, sd.v0, smp, train, start, sd.h, sd.cols[..., :start.shape[1] - 4])
         sse, n = timing_grid.held_out_sse(Uv, sv.v0, (sv.s_seg, sv.s_j, sv.s_a, sv.s_z), held, th, sv.h,
@@ -1130,7 +1116,7 @@ def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layo
     return th, sse, nn, sst, notes
 
 
-def _cv_summary(sd_val: SegmentData, folds: Folds, sse, nn, sst, fold_theta, layout) -> dict:
+def _cv_summary(sd_val: SegmentData, folds: Folds, sse, nn, sst) -> dict:
     n = float(np.sum(nn))
     if n < 2:
         return {"nrmse": math.nan, "samples": 0, "folds": 0}
@@ -1163,7 +1149,7 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     sv = build_segments(rec, terms, timing, opts.validation_s, inertia, excited_only=not rec.all_segments)
     layout = parameter_layout(rec.dof, terms, len(rec.cross_names), rec.cross_names, rec.force_names,
                               rec.run_count)
-    start = _equation_error_start(sd, rec.dof, layout, sd.a_s)
+    start = _equation_error_start(sd, layout, sd.a_s)
     if theta0 is not None and theta0.size == start.size:
         start = theta0
     fit = fit_terms(sd, rec.dof, layout, start, opts.robust, free_v0=free_v0)
@@ -1173,8 +1159,8 @@ def _candidate(rec: DofRecord, terms: Terms, timing: Timing, opts: CoreOptions, 
     folds = folds_cache[key]
     th, sse, nn, sst, notes = _cv(sd, sv, folds, rec.dof, layout, fit, opts.robust, free_v0) if folds.held else \
         (np.zeros((0, len(layout))), np.zeros(0), np.zeros(0), np.zeros(0), list(folds.notes))
-    cv = _cv_summary(sv, folds, sse, nn, sst, th, layout) if folds.held else {"nrmse": math.nan, "samples": 0,
-                                                                              "folds": 0}
+    cv = (_cv_summary(sv, folds, sse, nn, sst) if folds.held
+          else {"nrmse": math.nan, "samples": 0, "folds": 0})
     return Candidate(terms, layout, fit, sd, sv, th, sse, nn, cv, notes, free_v0)
 
 
@@ -1241,8 +1227,7 @@ def select_terms(rec: DofRecord, timing: Timing, opts: CoreOptions, inertia: np.
         tried.append(c)
         return c
 
-    other = None if inertia is None else np.delete(inertia, ["surge", "sway", "heave", "roll", "pitch",
-                                                             "yaw"].index(rec.dof))
+    other = None if inertia is None else np.delete(inertia, DOFS.index(rec.dof))
     cor = bool(rec.has_coupling and other is not None and np.isfinite(other).any())
     if stage in (0, 1):
         splits = (False, True) if rec.dof == "heave" else (False,)
@@ -1432,8 +1417,8 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
             terms = Terms("both", rec.dof == "heave")
             sd = build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
             layout = parameter_layout(rec.dof, terms)
-            first[dof] = fit_terms(sd, dof, layout, _equation_error_start(sd, dof, layout, sd.a_s), opts.robust,
-                                   max_nfev=40)
+            start = _equation_error_start(sd, layout, sd.a_s)
+            first[dof] = fit_terms(sd, dof, layout, start, opts.robust, max_nfev=40)
         except (EstimationError, ValueError, np.linalg.LinAlgError) as exc:
             errors[dof] = str(exc)
     inertia0 = inertia_vector(first)

@@ -23,9 +23,9 @@ from hindrax_drivers.config import DOFS, or_default
 
 from ...estimation.least_squares import EstimationError
 from ...estimation.priors import priors_from_config
-from ...vehicle.rigid_body import rigid_body_mass_matrix
+from .dof_model import rigid_inertia
 
-__all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "rigid_inertia_of", "prior_entries",
+__all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "prior_entries",
            "theta_priors", "prior_posterior"]
 
 #: Default 1-sigma of an empirical prior as a fraction of the prior's value (``identification.prior_std_rel``).
@@ -40,13 +40,6 @@ def prior_std_rel_of(cfg, prior_std_rel: float | None = None) -> float:
     if not (math.isfinite(prior_std_rel) and prior_std_rel >= 0):
         raise ValueError(f"prior_std_rel must be >= 0, got {prior_std_rel}")
     return float(prior_std_rel)
-
-
-def rigid_inertia_of(cfg, dof: str) -> float:
-    """Rigid-body mass (kg) or moment of inertia (kg m^2) of ``dof`` about the body origin, diag of M_RB
-    ([Fossen2011] eq. 3.44)."""
-    m = rigid_body_mass_matrix(cfg.vehicle.mass_kg, cfg.vehicle.centre_of_gravity_frd_m, cfg.inertia_matrix_kg_m2)
-    return float(m[DOFS.index(dof), DOFS.index(dof)])
 
 
 def _finite_or_none(x) -> float | None:
@@ -84,7 +77,7 @@ def theta_priors(dof: str, names: Sequence[str], cfg, prior_std_rel: float) -> d
         val = p.get(key) if key else None
         if val is None or not (math.isfinite(val) and val > 0):
             continue
-        mean = val + (rigid_inertia_of(cfg, dof) if n == "inertia" else 0.0)
+        mean = val + (rigid_inertia(cfg, dof) if n == "inertia" else 0.0)
         out[n] = (float(mean), float(prior_std_rel) * float(val))
     return out
 
