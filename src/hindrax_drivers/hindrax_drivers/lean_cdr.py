@@ -7,7 +7,7 @@ arrays as numpy arrays), so a handler written for the rclpy message reads them u
 are read-only data (no rclpy type checks). The bytes differ from rclpy's only in padding, and every
 reader decodes them to the same message (test_lean_cdr.py).
 
-Used on the 50 Hz chain and the safety path (docs/architecture.md §10): the wrench, the allocation's
+On the 50 Hz chain and the safety path (docs/architecture.md §10): the wrench, the allocation's
 command, the ESC's pulse widths and latched state and the IMU are published as bytes
 (:func:`cdr_encoder`, ``Publisher.publish(bytes)``); the supervisor's ``imu/data_raw``, the
 allocation's ``wrench`` and the campaign bag reader's topics are decoded with :func:`cdr_decoder`

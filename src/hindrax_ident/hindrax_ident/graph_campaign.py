@@ -4,8 +4,8 @@
 emulators, drivers, ESC node, thrust allocation, identification node, recorder into ``out/bag``) on one
 SingleThreadedExecutor; wait for the sensors and the ESC arming time; arm through ``esc/set_armed`` (the
 operator's service); send one ``run_identification`` goal and report its feedback; disarm; close the bag;
-run the offline identification on the bag (:func:`.identification.assessment.pipeline.identify_bag`) and write
-``identification.yaml`` and the report. All waits are on simulated-time conditions with wall-clock deadlines.
+identify the bag (:func:`.identification.assessment.pipeline.identify_bag`), write the report and
+``identification.yaml``. All waits are on simulated-time conditions with wall-clock deadlines.
 
 Calibration steps (``calibrate``, :data:`~.identification.online.executive.CALIBRATION_STEPS`): sent in the goal;
 :class:`VirtualOperator` plays the operator on the ROS interfaces. When the feedback ``prompt`` asks for the ballast,

@@ -218,7 +218,7 @@ class LeanWaitExecutor(SingleThreadedExecutor):
             if snap is None:
                 _release(self._held)
                 snap = _Snapshot(self.get_nodes())
-                self._held.extend(_enter_each(snap.handles) or ())  # none when one is no longer valid
+                self._held.extend(_enter_each(snap.handles) or ())  # none if one is not valid
                 snap.held = bool(self._held) or not snap.handles
                 self._snapshot = snap
             nodes_to_use = snap.nodes

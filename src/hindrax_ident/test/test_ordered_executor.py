@@ -149,8 +149,8 @@ def test_plain_callbacks_run_at_once_and_their_errors_reach_the_spinner():
 
 
 def test_snapshot_handles_held_from_one_wait_to_the_next(monkeypatch):
-    """The lean wait marks its snapshot's handles in use once, not at every wait; an entity destroyed
-    meanwhile is released at the next wait (a new snapshot), every handle at shutdown."""
+    """The lean wait marks its snapshot's handles in use once, not at every wait; an entity
+    destroyed meanwhile is released at the next wait (a new snapshot), every handle at shutdown."""
     import hindrax_ident.ordered_executor as oe
 
     entered: list = []

@@ -1,6 +1,6 @@
-"""The identification pipeline's entry points (``hindrax run``, ``hindrax ident bag``, ``hindrax ident fit``) read
-and fit with the garbage collector off and leave it as it was (:func:`~hindrax_ident.identification.assessment.
-pipeline.without_collector`); ``hindrax run`` hands its identification node's calibration to :func:`identify_bag`."""
+"""The identification pipeline's entry points (``hindrax run``, ``hindrax ident bag``, ``hindrax
+ident fit``) read and fit with the collector off (:func:`without_collector`), then as it was;
+``hindrax run`` hands its identification node's calibration to :func:`identify_bag`."""
 from __future__ import annotations
 
 import dataclasses
@@ -64,7 +64,9 @@ def test_collector_back_as_it_was_after_a_bad_bag(monkeypatch):
 
 def test_fit_bags_reads_and_fits_without_the_collector(monkeypatch):
     seen = []
-    monkeypatch.setattr(pipeline, "read_any_topics", lambda *a: seen.append(gc.isenabled()) or "records")
-    monkeypatch.setattr(pipeline, "fit_records", lambda records, *a: seen.append((records, gc.isenabled())))
+    monkeypatch.setattr(pipeline, "read_any_topics",
+                        lambda *a: seen.append(gc.isenabled()) or "records")
+    monkeypatch.setattr(pipeline, "fit_records",
+                        lambda records, *a: seen.append((records, gc.isenabled())))
     pipeline.fit_bags(["bag"], None)
     assert seen == [False, ("records", False)] and gc.isenabled()

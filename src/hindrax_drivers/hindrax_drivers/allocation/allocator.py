@@ -20,13 +20,13 @@ widths:
      feasible: a group is reproduced exactly when feasible on top of the earlier ones, else scaled
      along its own direction (unlike ``scipy.optimize.lsq_linear``, which could turn the reduced
      axes). The null space of B is not used.
-3. **Deadband.** An ESC gives 0 N inside its deadband (docs/devices.md §5.2). When a force of step 2
+3. **Deadband.** An ESC gives 0 N inside its deadband (docs/devices.md §5.2). If a force of step 2
    falls in that gap, ``B F`` is allocated again by :class:`.deadband.DeadbandSearch`, which chooses
    which thrusters run as well as how hard (after [JohansenFossen2013]): ``X = -2 N`` runs one
    symmetric pair at 1.73 N instead of four at 0.87 N. Otherwise step 2's forces are kept (the
    search costs nothing).
 4. **Pulse widths and achieved wrench.** Each force is inverted on its curve (:mod:`.thrust_curve`),
-   optionally put on the PWM generator's grid (``pulse_width_step_us``, docs/devices.md §5.1) at the
+   optionally on the PWM generator's grid (``pulse_width_step_us``, docs/devices.md §5.1) at the
    nearest width not in the deadband, and the *actual* thrust at that width is evaluated with the
    forward curve. The achieved wrench ``B @ force_n`` is what the thrusters will apply according to
    the model (for anti-windup).

@@ -5,7 +5,7 @@ register-exact emulator.
 - Settings (:class:`ImuSettings`): register fields, noise variances, AK09916 mode and publishing
   rates from ``sensors.icm20948.*`` (§4.4, §4.6). :class:`BankedRegisters`: REG_BANK_SEL with the
   bank cached (§4.1), unknown after a failed transfer or a DEVICE_RESET.
-- :class:`StartupSequence` (§4.3): steps each returning the datasheet's wait. A wrong WHO_AM_I or an
+- :class:`StartupSequence` (§4.3): steps each giving the datasheet's wait. A wrong WHO_AM_I or an
   I2C failure ends the attempt (the node retries); a silent magnetometer is reported through
   ``on_magnetometer``, never a start-up failure; ``magnetometer_only=True`` brings a lost AK09916
   back without resetting the chip.

@@ -3,8 +3,8 @@
 
 The commands parse their arguments and call these: ``hindrax ident fit`` (:func:`fit_bags` or, for a campaign bag,
 :func:`identify_bag`), ``hindrax ident bag`` (:func:`identify_bag`, :func:`write_campaign_outputs`), ``hindrax run``
-(:func:`identify_bag` with the identification node's calibration, :func:`.report.write_outputs`). The read and the
-fits run without the garbage collector (:func:`without_collector`). docs/identification.md §7.
+(:func:`identify_bag` with the identification node's calibration, :func:`.report.write_outputs`).
+Reads and fits run with the collector off (:func:`without_collector`); docs/identification.md §7.
 """
 from __future__ import annotations
 
@@ -32,8 +32,8 @@ __all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_resul
 
 @contextlib.contextmanager
 def without_collector():
-    """No garbage-collector passes inside (a context manager or a decorator), the collector as it was after: a bag's
-    read and fits make ~10^6 short-lived objects, few in cycles (about 1 s of ``hindrax run``'s offline phase)."""
+    """No GC pass inside (context manager or decorator), the collector restored after: a bag's read
+    and fits make ~10^6 short-lived objects, few in cycles (~1 s of ``hindrax run``'s fits)."""
     was = gc.isenabled()
     gc.disable()
     try:
@@ -75,13 +75,14 @@ def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
                  opts: fit_core.CoreOptions | None = None, calibration: dict | None = None):
     """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag: :func:`..bag_input.reader.read_campaign`,
     then :func:`..fit.campaign_fit.identify_all_with_errors` with the fit core's options ``opts`` (None: the
-    defaults). With calibration results (``calibration``, None: the bag's ``record.calibration``) the fits see the
-    thrust-model force times the measured scales (:func:`..fit.calibration.identify_calibrated`); ``record`` itself
-    stays as read. Raises :class:`..bag_input.from_bag.BagContentError` and ``ValueError`` for a non-positive scale."""
+    defaults). The fits see the thrust-model force times the ``calibration`` scales (None:
+    ``record.calibration``; :func:`..fit.calibration.identify_calibrated`); ``record`` stays as
+    read. Raises :class:`..bag_input.from_bag.BagContentError`, ``ValueError`` for a scale <= 0."""
     record = read_campaign(bag_path, cfg, grid_s).campaign
     opts = fit_core.CoreOptions() if opts is None else opts
     fitted = record if calibration is None else replace(record, calibration=calibration)
-    idents, errors = identify_calibrated(fitted, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
+    idents, errors = identify_calibrated(
+        fitted, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
     return record, idents, errors
 
 

@@ -1,16 +1,16 @@
 """Actuation benchmark: wrench-in to PCA9685-registers-written latency and CPU per command at 50 Hz.
 
-One process, one EventsExecutor (as the vehicle's ``actuation_node``, which composes the two nodes:
-``hindrax_drivers.composition``), every thread scheduled as ``vehicle.launch.xml`` starts that process
-(``SCHED_FIFO`` at its ``HINDRAX_REALTIME_PRIORITY``; where refused, nice 0 and a note: the p99 is then mostly the
-time a shared machine's load keeps the process from a core): a publisher of geometry_msgs/WrenchStamped at 50 Hz,
-the thrust allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated I2C bus.
-Wrenches alternate between two surge levels so T1's pulse width changes with every command; latency is the time
-from ``publish()`` to the I2C write after which the emulator decodes T1's new pulse width. The ESC node writes a
-command when its subscription callback takes it (event-driven output; the output tick is the watchdog), so this is
-two deliveries inside the process (the wrench, the command), the allocation and one I2C block write (waiting for
-the next 50 Hz output tick instead: 16.6 ms p99). CPU per command is the process CPU time (all three nodes and DDS)
-divided by the commands sent.
+One process, one EventsExecutor (as the vehicle's ``actuation_node``, composing the two nodes:
+``hindrax_drivers.composition``), every thread scheduled as ``vehicle.launch.xml`` starts that
+process (``SCHED_FIFO`` at its ``HINDRAX_REALTIME_PRIORITY``; if refused, nice 0 and a note: the p99
+is then mostly a shared machine's load): a publisher of geometry_msgs/WrenchStamped at 50 Hz, the
+thrust allocation node and the ESC node writing to a register-exact PCA9685 emulator on an emulated
+I2C bus. Wrenches alternate two surge levels so T1's pulse width changes with every command; latency
+is from ``publish()`` to the I2C write after which the emulator decodes T1's new pulse width. The
+ESC node writes a command when its subscription callback takes it (event-driven; the output tick is
+the watchdog), so this is two deliveries inside the process (the wrench, the command), the
+allocation and one I2C block write (waiting for the next 50 Hz output tick instead: 16.6 ms p99).
+CPU per command is the process CPU time (three nodes and DDS) over the commands sent.
 
 The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
 wrenches from 0.1 N to 30 N, with and without the deadband search (docs/architecture.md §9,
@@ -114,7 +114,7 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
     emu = TimedEmulator()
     bus = EmulatedI2CBus({cfg.esc.i2c_address: emu})
 
-    sched = apply_realtime_priority(vehicle_scheduling()["esc"][1])  # before the DDS threads, which inherit it
+    sched = apply_realtime_priority(vehicle_scheduling()["esc"][1])  # DDS threads inherit it
     # a reserved ROS domain: the bench publishes wrenches and arms, which must never reach another graph
     with domain_id() as did, ros_context(domain_id=did) as ctx:
         # the emulated PCA9685 runs at exactly esc.oscillator_hz: calibrated by construction
@@ -158,11 +158,13 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
     return [
         {"name": "wrench_to_registers_p50", "value": float(np.percentile(lat_ms, 50)), "unit": "ms"},
         {"name": "wrench_to_registers_p99", "value": float(np.percentile(lat_ms, 99)), "unit": "ms",
-         "target": "<= 3 ms (event-driven ESC output)", "note": f"SCHED_FIFO {sched.requested}" if sched.granted
-         else f"nice 0: {sched.reason or 'no priority in the launch file'}"},
+         "target": "<= 3 ms (event-driven ESC output)", "note": f"SCHED_FIFO {sched.requested}"
+         if sched.granted else f"nice 0: {sched.reason or 'no priority in the launch file'}"},
         {"name": "wrench_to_registers_cpu_p99", "value": float(np.percentile(np.array(cpu_latencies) * 1e3, 99)),
-         "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait for a core"},
-        {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count", "note": f"of {state['sent']} sent"},
+         "unit": "ms", "note": "process CPU time over the same interval: the work, not the wait "
+                               "for a core"},
+        {"name": "commands_measured", "value": int(lat_ms.size), "unit": "count",
+         "note": f"of {state['sent']} sent"},
         {"name": "cpu_per_command", "value": cpu / state["sent"] * 1e3, "unit": "ms",
          "note": "whole process: publisher + allocation + ESC node"},
         {"name": "cpu_load_at_50hz", "value": cpu / wall * 100.0, "unit": "% of a core"},

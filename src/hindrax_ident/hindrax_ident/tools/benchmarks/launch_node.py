@@ -45,21 +45,23 @@ from hindrax_drivers.node_common import run_nodes
 from hindrax_drivers.ros_process import BEFORE_PROCESS_END
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
 
-__all__ = ["PROFILE_ENV", "SOCKET_ENV", "TOPOLOGY_ENV", "main", "name_os_threads", "skeleton_main", "topology"]
+__all__ = ["PROFILE_ENV", "SOCKET_ENV", "TOPOLOGY_ENV", "main", "name_os_threads", "skeleton_main",
+           "topology"]
 
 #: a directory: each node process runs under cProfile and writes ``<module>.prof`` there when it exits
 PROFILE_ENV = "HINDRAX_BENCH_PROFILE"
 
 
-#: a directory: on SIGUSR1 the process writes its nodes' endpoints (:func:`topology`) to ``<pid>.json`` there
+#: a directory: on SIGUSR1 a process writes its endpoints (:func:`topology`) to ``<pid>.json`` there
 TOPOLOGY_ENV = "HINDRAX_BENCH_TOPOLOGY"
 _QOS_KEYS = ("history", "depth", "reliability", "durability", "liveliness", "deadline", "lifespan",
              "liveliness_lease_duration")
-#: a QoS event type's name (``RCL_SUBSCRIPTION_LIVELINESS_CHANGED``...) without its prefix -> the event callbacks' key
+#: an event type (``RCL_SUBSCRIPTION_LIVELINESS_CHANGED``...) less its prefix -> the callbacks' key
 _EVENT_KEYS = {"REQUESTED_DEADLINE_MISSED": "deadline", "OFFERED_DEADLINE_MISSED": "deadline",
                "LIVELINESS_CHANGED": "liveliness", "LIVELINESS_LOST": "liveliness",
-               "REQUESTED_INCOMPATIBLE_QOS": "incompatible_qos", "OFFERED_INCOMPATIBLE_QOS": "incompatible_qos",
-               "MESSAGE_LOST": "message_lost", "INCOMPATIBLE_TYPE": "incompatible_type", "MATCHED": "matched"}
+               "REQUESTED_INCOMPATIBLE_QOS": "incompatible_qos",
+               "OFFERED_INCOMPATIBLE_QOS": "incompatible_qos", "MESSAGE_LOST": "message_lost",
+               "INCOMPATIBLE_TYPE": "incompatible_type", "MATCHED": "matched"}
 
 
 def _type(cls: Any) -> str:
@@ -71,30 +73,33 @@ def _endpoint(e: Any, kind: str) -> dict:
     out: dict = {"topic": getattr(e, "topic_name", None) or e.srv_name,
                  "type": _type(getattr(e, "msg_type", None) or e.srv_type)}
     if kind in ("publishers", "subscriptions"):
-        out["qos"] = {k: int(getattr(v, "nanoseconds", v)) for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
-        out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]] for h in e.event_handlers)
+        out["qos"] = {k: int(getattr(v, "nanoseconds", v))
+                      for k in _QOS_KEYS for v in [getattr(e.qos_profile, k)]}
+        out["events"] = sorted(_EVENT_KEYS[h.event_type.name.split("_", 2)[2]]
+                               for h in e.event_handlers)
     if kind == "subscriptions":
         out["raw"] = bool(e.raw)
     return out
 
 
 def topology(nodes: Any) -> dict:
-    """The endpoints of ``nodes`` (rclpy nodes of one process) as JSON data: ``{"nodes": [{"name", "namespace",
-    "publishers", "subscriptions", "services", "clients"}]}``, each endpoint ``{"topic", "type"}`` (``pkg/msg/Name``)
-    plus, for topics, ``qos`` (policies and durations in ns, ints), ``events`` (its QoS event handlers) and for a
-    subscription ``raw``; lists sorted; without the ``/parameter_events`` publisher every node makes itself."""
+    """The endpoints of ``nodes`` (rclpy, one process) as JSON: ``{"nodes": [{"name", "namespace",
+    "publishers", "subscriptions", "services", "clients"}]}``, each ``{"topic", "type"}``
+    (``pkg/msg/Name``), topics with ``qos`` (durations in ns) and ``events`` (event handlers),
+    subscriptions with ``raw``; sorted; without each node's own ``/parameter_events`` publisher."""
     out = []
     for node in nodes:
         entry: dict = {"name": node.get_name(), "namespace": node.get_namespace()}
         for kind in ("publishers", "subscriptions", "services", "clients"):
-            entry[kind] = sorted((_endpoint(e, kind) for e in getattr(node, kind)  # /parameter_events: every node's
-                                  if getattr(e, "topic_name", "") != "/parameter_events"), key=json.dumps)
+            entry[kind] = sorted((_endpoint(e, kind) for e in getattr(node, kind)
+                                  if getattr(e, "topic_name", "") != "/parameter_events"),
+                                 key=json.dumps)
         out.append(entry)
     return {"nodes": sorted(out, key=lambda n: (n["namespace"], n["name"]))}
 
 
 def _dump_topology_on_sigusr1(directory: str) -> None:
-    """On SIGUSR1, :func:`topology` of the nodes this process built (but the ``_exit_`` holder) to ``<pid>.json``."""
+    """On SIGUSR1, :func:`topology` of this process's nodes (not ``_exit_``) to ``<pid>.json``."""
     nodes: weakref.WeakSet = weakref.WeakSet()
     init = Node.__init__
 
@@ -118,8 +123,8 @@ def _interface(type_name: str) -> Any:
 
 
 def _profile(qos: dict) -> Any:
-    return QoSProfile(**{k: Duration(nanoseconds=v) if k in ("deadline", "lifespan", "liveliness_lease_duration")
-                         else v for k, v in qos.items()})
+    dur = ("deadline", "lifespan", "liveliness_lease_duration")
+    return QoSProfile(**{k: Duration(nanoseconds=v) if k in dur else v for k, v in qos.items()})
 
 
 def _events(kind: str, names: list) -> Any:
@@ -133,9 +138,9 @@ def _call_all(fns: list) -> None:
 
 
 def skeleton_main() -> int:
-    """One skeleton process (module docstring): argv ``SPEC LABEL``, SPEC a JSON file ``{"processes": {label:
-    topology}}`` whose publishers carry ``rates`` (messages/s per phase) and ``payload`` (CDR bytes, hex; null: a
-    default-constructed message). Returns :func:`~hindrax_drivers.node_common.run_nodes`'s exit status."""
+    """One skeleton process: argv ``SPEC LABEL``, SPEC a JSON file ``{"processes": {label:
+    topology}}`` whose publishers carry ``rates`` (messages/s per phase) and ``payload`` (CDR hex;
+    null: a default message). Returns :func:`~hindrax_drivers.node_common.run_nodes`'s status."""
     spec = json.loads(Path(sys.argv[1]).read_text())["processes"][sys.argv[2]]
     phase, timers = [0], []
 
@@ -143,7 +148,7 @@ def skeleton_main() -> int:
         names = {s["topic"] for s in nd["services"]}
         node = Node(nd["name"], namespace=nd["namespace"],
                     start_parameter_services=any(n.endswith("/get_parameters") for n in names))
-        have = {e["topic"] for e in topology([node])["nodes"][0]["services"]}  # the parameter services
+        have = {e["topic"] for e in topology([node])["nodes"][0]["services"]}  # parameter services
         groups: dict = {}
         for p in nd["publishers"]:
             cls = _interface(p["type"])
@@ -152,12 +157,15 @@ def skeleton_main() -> int:
             data = bytes.fromhex(p["payload"]) if p.get("payload") else serialize_message(cls())
             for k, rate in enumerate(p["rates"]):
                 if rate > 0:
-                    groups.setdefault((k, round(rate) if rate >= 1 else rate), []).append(partial(pub.publish, data))
+                    key = (k, round(rate) if rate >= 1 else rate)
+                    groups.setdefault(key, []).append(partial(pub.publish, data))
         for (k, rate), sends in groups.items():
-            timers.append((k, node.create_timer(1.0 / rate, partial(_call_all, sends), autostart=k == 0)))
+            timer = node.create_timer(1.0 / rate, partial(_call_all, sends), autostart=k == 0)
+            timers.append((k, timer))
         for s in nd["subscriptions"]:
-            node.create_subscription(_interface(s["type"]), s["topic"], lambda _m: None, _profile(s["qos"]),
-                                     raw=s["raw"], event_callbacks=_events("subscriptions", s["events"]))
+            node.create_subscription(_interface(s["type"]), s["topic"], lambda _m: None,
+                                     _profile(s["qos"]), raw=s["raw"],
+                                     event_callbacks=_events("subscriptions", s["events"]))
         for s in nd["services"]:
             if s["topic"] not in have:
                 node.create_service(_interface(s["type"]), s["topic"], lambda _q, r: r)

@@ -376,9 +376,10 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
     extra: dict[str, subprocess.Popen] = {}  # the participant probes (PARTICIPANT_PROBES)
     logs: dict[str, Any] = {}
     out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": None,
-                 "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}", "module": lp.module,
-                                          "prefix": list(lp.process.launch_prefix), "env": dict(lp.process.env)}
-                               for lp in layout}}
+                 "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}",
+                                          "module": lp.module,
+                                          "prefix": list(lp.process.launch_prefix),
+                                          "env": dict(lp.process.env)} for lp in layout}}
     with domain_id() as did:
         env = child_env(ROS_DOMAIN_ID=str(did))
         try:
@@ -408,11 +409,11 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                 # docs/deployment.md §1; the DDS transport, hindrax_drivers.dds_transport)
                 procs[lp.label] = subprocess.Popen([*lp.process.launch_prefix, py, *wrap, lp.module,
                                                     *lp.ros_args(values_file), *bench],
-                                                   env=dict(env, **dict(lp.process.env),
-                                                            **{SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}),
+                                                   env=dict(env, **dict(lp.process.env), **{
+                                                       SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}),
                                                    stdout=logs[lp.label],
                                                    stderr=subprocess.STDOUT)
-            (tmp / "probes.json").write_text(json.dumps({"processes": {  # skeletons with no publisher
+            (tmp / "probes.json").write_text(json.dumps({"processes": {  # no publishers
                 name: _one_node(name, [], [_endpoint(t, ty, raw=True) for t, ty in topics])
                 for name, topics in PARTICIPANT_PROBES.items()}}))
             for name in PARTICIPANT_PROBES:  # what one more process costs (not in the totals)
@@ -499,8 +500,9 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                        goal_status=goal_status)
                 except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
                     raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
-                # every node's endpoints as it declared them, the recorder's subscriptions made: the skeleton's plan
-                out["topology"] = read_topologies({n: p for n, p in procs.items() if n != "pool"}, tmp)
+                # each node's declared endpoints, recorder subscriptions made: the skeleton's plan
+                declared = {n: p for n, p in procs.items() if n != "pool"}
+                out["topology"] = read_topologies(declared, tmp)
                 for spy in spies:
                     spy.wait(duration_s + 30)
                 ex.shutdown()
@@ -550,7 +552,7 @@ def _bag_rates(out: dict) -> None:
     decode = cdr_decoder("sensor_msgs/msg/Imu")
     for *_, w in spans:
         w["rates"] = collections.Counter()
-    out["payloads"] = payloads = {}  # one recorded message per topic, CDR bytes (hex): what the skeleton sends
+    out["payloads"] = payloads = {}  # a recorded message per topic (CDR hex): the skeleton sends it
     first = min(t0 for t0, _, _ in spans)
     last = max(t1 for _, t1, _ in spans)
     for m in reader.messages(start_ns=first, end_ns=last):
@@ -622,13 +624,15 @@ PARTICIPANT_PROBES = {
 }
 
 
-# ---------------------------------------------------------------------------------------------- skeletons
-def skeleton_spec(topology: dict, rates: list[dict[str, float]], payloads: dict[str, str] | None = None) -> dict:
-    """The processes of a skeleton (:func:`~hindrax_ident.tools.benchmarks.launch_node.skeleton_main`): ``topology``
-    (label -> :func:`~hindrax_ident.tools.benchmarks.launch_node.topology` of that process) with, on every
-    publisher, ``rates`` (one per phase: that phase's messages/s of its topic, shared equally by the topic's
-    publishers) and ``payload`` (``payloads``: topic -> CDR bytes, hex; else a default-constructed message)."""
-    count = collections.Counter(p["topic"] for t in topology.values() for n in t["nodes"] for p in n["publishers"])
+# ---------------------------------------------------------------------------------------- skeletons
+def skeleton_spec(topology: dict, rates: list[dict[str, float]],
+                  payloads: dict[str, str] | None = None) -> dict:
+    """The processes of a skeleton (:func:`~.launch_node.skeleton_main`): ``topology`` (label ->
+    :func:`~.launch_node.topology` of that process) with, on every publisher, ``rates`` (one per
+    phase: that phase's messages/s of its topic, shared equally by the topic's publishers) and
+    ``payload`` (``payloads``: topic -> CDR bytes, hex; else a default-constructed message)."""
+    count = collections.Counter(p["topic"] for t in topology.values() for n in t["nodes"]
+                                for p in n["publishers"])
     out = json.loads(json.dumps(topology))
     for n in (n for t in out.values() for n in t["nodes"]):
         for p in n["publishers"]:
@@ -638,37 +642,43 @@ def skeleton_spec(topology: dict, rates: list[dict[str, float]], payloads: dict[
 
 
 def topology_differences(launch: dict, skeleton: dict) -> list[str]:
-    """What differs between two topologies (label -> :func:`~hindrax_ident.tools.benchmarks.launch_node.topology`),
-    rates and payloads ignored: a line per process, node or endpoint (topic, type, QoS, raw, events) only one has."""
+    """Two topologies' differences (label -> :func:`~.launch_node.topology`), rates and payloads
+    ignored: a line per process, node or endpoint (topic, type, QoS, raw, events) only one has."""
     def items(t: dict) -> set:
-        return {(label, n["namespace"], n["name"], kind, json.dumps({k: v for k, v in e.items() if k not in (
-            "rates", "payload")}, sort_keys=True)) for label, proc in t.items() for n in proc["nodes"]
-            for kind in ("publishers", "subscriptions", "services", "clients", "node") for e in n.get(kind, [{}])}
+        kinds = ("publishers", "subscriptions", "services", "clients", "node")
+        return {(label, n["namespace"], n["name"], kind, json.dumps({k: v for k, v in e.items()
+                 if k not in ("rates", "payload")}, sort_keys=True)) for label, proc in t.items()
+                for n in proc["nodes"] for kind in kinds for e in n.get(kind, [{}])}
     a, b = items(launch), items(skeleton)
     sides = (("launch", launch, skeleton), ("skeleton", skeleton, launch))
     return [f"process {p} only in the {side}" for side, x, y in sides for p in set(x) - set(y)] \
-        + [f"only in the launch: {x}" for x in sorted(a - b)] + [f"only in the skeleton: {x}" for x in sorted(b - a)]
+        + [f"only in the launch: {x}" for x in sorted(a - b)] \
+        + [f"only in the skeleton: {x}" for x in sorted(b - a)]
 
 
-def read_topologies(procs: dict[str, subprocess.Popen], directory: Path, timeout_s: float = 30) -> dict:
-    """Label -> :func:`~hindrax_ident.tools.benchmarks.launch_node.topology` of each process in ``procs`` (started
-    by launch_node with ``HINDRAX_BENCH_TOPOLOGY=directory``): sends SIGUSR1, reads ``<pid>.json``."""
+def read_topologies(procs: dict[str, subprocess.Popen], directory: Path,
+                    timeout_s: float = 30) -> dict:
+    """Label -> :func:`~.launch_node.topology` of each process in ``procs`` (started by launch_node
+    with ``HINDRAX_BENCH_TOPOLOGY=directory``): sends SIGUSR1, reads ``<pid>.json``."""
     for p in procs.values():
         (directory / f"{p.pid}.json").unlink(missing_ok=True)
         p.send_signal(signal.SIGUSR1)
     paths = {label: directory / f"{p.pid}.json" for label, p in procs.items()}
-    wait_until(lambda: all(f.is_file() for f in paths.values()), timeout_s, None, "every process's topology")
+    wait_until(lambda: all(f.is_file() for f in paths.values()), timeout_s, None,
+               "every process's topology")
     return {label: json.loads(f.read_text()) for label, f in paths.items()}
 
 
-def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs: dict | None = None,
-              stream_phase: str | None = None, check: dict | None = None) -> dict:
-    """Run the skeleton ``spec`` (:func:`skeleton_spec`, a process per label, ``envs[label] = (launch-prefix, env)``)
-    and measure ``phases`` (name, windows of ``duration_s``; SIGUSR2 and 2 s of warm-up before each), the pilot's
-    wrench stream on in ``stream_phase``. check: a topology the skeleton's must equal (else RuntimeError). Returns
-    ``{"phases": {name: {"windows": [{"wall_s", "per_process"}]}}, "topology": ...}``."""
+def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
+              envs: dict | None = None, stream_phase: str | None = None,
+              check: dict | None = None) -> dict:
+    """Run ``spec`` (:func:`skeleton_spec`; ``envs[label] = (launch-prefix, env)``) and measure
+    ``phases`` (name, windows of ``duration_s``; SIGUSR2, 2 s warm-up first), the pilot's wrench
+    stream on in ``stream_phase``; ``check``: topology to match (else RuntimeError). Returns
+    ``{"phases": {name: {"windows": [{"wall_s", "per_process"}]}}, "topology"}``."""
     out: dict = {"phases": {}}
-    with tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir, domain_id() as did:
+    with (tempfile.TemporaryDirectory(prefix="hindrax-bench-skeleton-") as tmpdir,
+          domain_id() as did):
         tmp = Path(tmpdir)
         env = child_env(ROS_DOMAIN_ID=str(did), **{TOPOLOGY_ENV: tmpdir})
         (tmp / "spec.json").write_text(json.dumps({"processes": spec}))
@@ -676,9 +686,10 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs
         try:
             for label in spec:
                 prefix, extra = (envs or {}).get(label, ([], {}))
-                procs[label] = subprocess.Popen([*prefix, *_skeleton_argv(tmp / "spec.json", label)],
-                                                env=dict(env, **extra),
-                                                stdout=(tmp / f"{label}.log").open("w"), stderr=subprocess.STDOUT)
+                argv = [*prefix, *_skeleton_argv(tmp / "spec.json", label)]
+                procs[label] = subprocess.Popen(argv, env=dict(env, **extra),
+                                                stdout=(tmp / f"{label}.log").open("w"),
+                                                stderr=subprocess.STDOUT)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
                 stream = _wrench_stream(probe)
@@ -687,11 +698,13 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs
                 spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
                 settled = GraphSettled(probe, quiet_s=GRAPH_QUIET_S,
                                        min_nodes=sum(len(t["nodes"]) for t in spec.values()))
-                wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin, "the skeleton's graph settled")
+                wait_until(lambda: _check_alive(procs, tmp) and settled(), 120, spin,
+                           "the skeleton's graph settled")
                 out["topology"] = read_topologies(procs, tmp)
                 wrong = topology_differences(check, out["topology"]) if check is not None else []
                 if wrong:
-                    raise RuntimeError("the skeleton's topology is not the launch's:\n" + "\n".join(wrong[:20]))
+                    raise RuntimeError("the skeleton's topology is not the launch's:\n"
+                                       + "\n".join(wrong[:20]))
                 for k, (phase, n) in enumerate(phases):
                     if k:
                         for p in procs.values():
@@ -701,11 +714,13 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float, envs
                     wait_until(lambda: time.monotonic() > warm, 30, spin, "skeleton warm-up")
                     wins = []
                     for _ in range(n):
-                        cpu0, wall0 = {lb: proc_cpu_s(p.pid) for lb, p in procs.items()}, time.monotonic()
-                        wait_until(lambda: time.monotonic() > wall0 + duration_s, duration_s + 30, spin, phase)
+                        cpu0 = {lb: proc_cpu_s(p.pid) for lb, p in procs.items()}
+                        wall0 = time.monotonic()
+                        wait_until(lambda: time.monotonic() > wall0 + duration_s, duration_s + 30,
+                                   spin, phase)
                         wall = time.monotonic() - wall0
-                        wins.append({"wall_s": wall, "per_process": {lb: (proc_cpu_s(p.pid) - cpu0[lb]) / wall
-                                                                     for lb, p in procs.items()}})
+                        cpu = {lb: (proc_cpu_s(p.pid) - cpu0[lb]) / wall for lb, p in procs.items()}
+                        wins.append({"wall_s": wall, "per_process": cpu})
                     _check_alive(procs, tmp)
                     out["phases"][phase] = {"windows": wins}
                 ex.shutdown()
@@ -721,41 +736,43 @@ def _skeleton_argv(spec_file: Path, label: str) -> list[str]:
 
 
 def _endpoint(topic: str, type_name: str, raw: bool | None = None) -> dict:
-    """A topic endpoint of a skeleton's topology: depth 10, reliable, volatile, no QoS event handler."""
-    qos = dict(history=1, depth=10, reliability=1, durability=2, liveliness=0, deadline=0, lifespan=0,
-               liveliness_lease_duration=0)
-    return {"topic": topic, "type": type_name, "qos": qos, "events": [], **({} if raw is None else {"raw": raw})}
+    """A skeleton's topic endpoint: depth 10, reliable, volatile, no QoS event handler."""
+    qos = dict(history=1, depth=10, reliability=1, durability=2, liveliness=0, deadline=0,
+               lifespan=0, liveliness_lease_duration=0)
+    return {"topic": topic, "type": type_name, "qos": qos, "events": [],
+            **({} if raw is None else {"raw": raw})}
 
 
 def _one_node(name: str, pubs: list, subs: list) -> dict:
-    return {"nodes": [{"name": name, "namespace": "/", "publishers": pubs, "subscriptions": subs, "services": [],
-                       "clients": []}]}
+    return {"nodes": [{"name": name, "namespace": "/", "publishers": pubs, "subscriptions": subs,
+                       "services": [], "clients": []}]}
 
 
 def _bare(spec: list, duration_s: float) -> float:
-    """CPU of one bare publisher process (the skeleton of ``spec``: (topic, type, rate), :func:`_endpoint`'s QoS,
-    default-constructed messages) over ``duration_s``, fraction of a core."""
+    """CPU of one bare publisher process (the skeleton of ``spec``: (topic, type, rate),
+    :func:`_endpoint`'s QoS, default messages) over ``duration_s``, fraction of a core."""
     topo = {"bare": _one_node("bare_publisher", [_endpoint(t, ty) for t, ty, _ in spec], [])}
     run = _skeleton(skeleton_spec(topo, [{t: r for t, _, r in spec}]), [("bare", 1)], duration_s)
     return run["phases"]["bare"]["windows"][0]["per_process"]["bare"]
 
 
 def launch_skeleton(launch: dict, windows: int, duration_s: float) -> dict:
-    """The launch layout's skeleton (:func:`_skeleton`), measured like the launch: its processes' topology as they
-    declared it (``launch["topology"]``, checked again on the skeleton), each topic at the launch's rate of each
-    phase with a recorded message, the running phase's ``windows`` and one idle window, the pilot's wrench stream in
-    the idle one (the launch's idle ``/wrench`` rate less that stream: the identification sends none then)."""
+    """The launch layout's skeleton, measured like the launch: the topology its processes declared
+    (``launch["topology"]``, checked on the skeleton), each topic at the launch's rate per phase
+    with a recorded message, the running phase's ``windows`` and one idle window with the pilot's
+    wrench stream (the idle ``/wrench`` rate less it: no identification then)."""
     rates = [_phase_rates(launch, "running"), _phase_rates(launch, "idle")]
     rates[1]["/wrench"] = max(0.0, rates[1].get("/wrench", 0.0) - WRENCH_RATE_HZ)
     envs = {label: (p["prefix"], p["env"]) for label, p in launch["processes"].items()}
-    return _skeleton(skeleton_spec(launch["topology"], rates, launch["payloads"]), [("running", windows), ("idle", 1)],
-                     duration_s, envs, stream_phase="idle", check=launch["topology"])
+    spec = skeleton_spec(launch["topology"], rates, launch["payloads"])
+    return _skeleton(spec, [("running", windows), ("idle", 1)], duration_s, envs,
+                     stream_phase="idle", check=launch["topology"])
 
 
 def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
-    """Per phase, the skeleton's CPU per process and in total in units of the launch's virtual pool CPU in that
-    phase's windows (median CPU over median pool CPU), and the launch's CPU over the skeleton's (``..._vs_skeleton_
-    ratio``), the note giving the part above the skeleton: the logic, what leaner code can still win."""
+    """Per phase, the skeleton's CPU per process and in total, in units of the launch's pool CPU in
+    that phase (median CPU over median pool CPU), and the launch's CPU over the skeleton's
+    (``..._vs_skeleton_ratio``), its note the part above: the logic, what leaner code can win."""
     rows: list[dict] = []
     for phase in ("running", "idle"):
         lw, sw = launch["phases"][phase]["windows"], skel["phases"][phase]["windows"]
@@ -765,13 +782,16 @@ def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
         sk["total"] = _median([sum(w["per_process"].values()) for w in sw])
         la["total"] = _median([sum(w["per_process"].values()) for w in lw])
         for n in sk:
-            rows += [{"name": f"launch_skeleton_{phase}_cpu_{n}_per_pool", "value": sk[n] / pool, "unit": "x",
-                      "target": ("<= 1.3" if phase == "running" else "<= 1.0") if n == "total" else "",
-                      "note": f"{100 * sk[n]:.1f} % of a core; the launch's endpoints, rates and messages without "
-                              f"logic; unit: the pool's {100 * pool:.1f} % in the launch's {phase} windows"},
-                     {"name": f"launch_{phase}_vs_skeleton_ratio_{n}", "value": la[n] / sk[n], "unit": "x",
+            target = ("<= 1.3" if phase == "running" else "<= 1.0") if n == "total" else ""
+            rows += [{"name": f"launch_skeleton_{phase}_cpu_{n}_per_pool", "value": sk[n] / pool,
+                      "unit": "x", "target": target,
+                      "note": f"{100 * sk[n]:.1f} % of a core; the launch's endpoints, rates and "
+                              f"messages without logic; unit: the pool's {100 * pool:.1f} % in the "
+                              f"launch's {phase} windows"},
+                     {"name": f"launch_{phase}_vs_skeleton_ratio_{n}", "value": la[n] / sk[n],
+                      "unit": "x",
                       "note": f"launch {la[n] / pool:.3f} - skeleton {sk[n] / pool:.3f} = "
-                              f"{(la[n] - sk[n]) / pool:.3f} pool units above the skeleton (logic)"}]
+                      f"{(la[n] - sk[n]) / pool:.3f} pool units above the skeleton (logic)"}]
     return rows
 
 
@@ -966,7 +986,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         launch_file: Path | None = None, baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
     windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
-    s; baselines: the bare rclpy baseline and the launch's skeleton; launch_file: another launch file for the
+    s; baselines: bare rclpy and the launch's skeleton; launch_file: another launch file for the
     launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument); baseline: a git ref whose
     launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
     the baseline's (``..._vs_baseline``)."""
