@@ -187,6 +187,11 @@ class ProcessRunner:
         return (list(p.launch_prefix) + self._command(p) + p.ros_arguments(write)
                 + self._extra_args.get(p.label, []))
 
+    def environment(self, p: NodeProcess) -> dict[str, str]:
+        """The environment ``p`` is started with: this runner's, then the launch file's for it
+        (``<set_env>``, ``<env>``: its real-time priority), then this runner's ``extra_env`` for it."""
+        return dict(self._env, **dict(p.env), **self._extra_env.get(p.label, {}))
+
     def log(self, label: str) -> str:
         """Everything process ``label`` wrote so far (all its runs)."""
         try:
@@ -206,9 +211,7 @@ class ProcessRunner:
 
     # -- internals --------------------------------------------------------------------------------
     def _spawn(self, slot: _Slot) -> None:
-        # this runner's environment, then the launch file's (<set_env>, <env>), then extra_env
-        label = slot.process.label
-        env = dict(self._env, **dict(slot.process.env), **self._extra_env.get(label, {}))
+        env = self.environment(slot.process)
         with open(slot.log_path, "a") as log:
             log.write(f"--- start {slot.starts + 1}: {' '.join(slot.command)}\n")
             log.flush()
