@@ -189,7 +189,8 @@ class ProcessRunner:
 
     def environment(self, p: NodeProcess) -> dict[str, str]:
         """The environment ``p`` is started with: this runner's, then the launch file's for it
-        (``<set_env>``, ``<env>``: its real-time priority), then this runner's ``extra_env`` for it."""
+        (``<set_env>``, ``<env>``: its real-time priority), then this runner's ``extra_env`` for
+        it."""
         return dict(self._env, **dict(p.env), **self._extra_env.get(p.label, {}))
 
     def log(self, label: str) -> str:

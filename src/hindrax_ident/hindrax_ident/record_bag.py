@@ -19,9 +19,9 @@ only once it has written every message the drivers published. The only driver tr
 are the ESC node's constructor writes (PCA9685 configuration and first neutral), inside ``build_graph``.
 
 Simulated content is deterministic for a seed, but the exact message count is not (how the executor
-interleaves the driver timers with /clock steps varies with machine load), so tests check properties,
-not counts fixed in advance. It lives here, not in hindrax_drivers, so that the drivers do not import the
-simulator.
+interleaves the driver timers with /clock steps varies with machine load), so tests check
+properties, not counts fixed in advance. It lives here, not in hindrax_drivers, so that the drivers
+do not import the simulator.
 """
 from __future__ import annotations
 
@@ -67,8 +67,8 @@ def _spin_until(graph: Any, predicate: Callable[[], bool], timeout_s: float, wha
 
 def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any,
                          overrides: dict | None = None) -> dict:
-    """Record ``duration_s`` of simulated time of the whole driver graph (the shipped vehicle file, seed
-    :data:`SIM_SEED`) into ``bag_dir`` (replaced).
+    """Record ``duration_s`` of simulated time of the whole driver graph (the shipped vehicle file,
+    seed :data:`SIM_SEED`) into ``bag_dir`` (replaced).
 
     Args:
         bag_dir: output bag directory (removed first if it exists).
@@ -78,8 +78,8 @@ def record_simulated_run(bag_dir: str | Path, duration_s: float, *, context: Any
     Returns:
         topic -> number of messages the graph's nodes published while recording (every one is in the bag).
     Raises:
-        TimeoutError: naming the condition not reached (each wait: 60 s of wall time); ConfigError for bad
-        overrides.
+        TimeoutError: naming the condition not reached (each wait: 60 s of wall time); ConfigError
+        for bad overrides.
     """
     timeout_s = 60.0
     bag_dir = Path(bag_dir)

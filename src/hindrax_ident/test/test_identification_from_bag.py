@@ -148,8 +148,8 @@ def _same_record(a, b) -> None:
 
 
 def test_bag_record_is_the_messages_record_by_either_decoder(tmp_path, monkeypatch):
-    """record_from_bag decodes installed types with the lean decoder (a type not installed: every topic from the
-    bag's own definitions); both give the record of the rclpy messages themselves."""
+    """record_from_bag decodes installed types with the lean decoder (a type not installed: every
+    topic from the bag's own definitions); both give the record of the rclpy messages themselves."""
     from rclpy.serialization import serialize_message
 
     from hindrax_drivers.recording import reader

@@ -69,14 +69,16 @@ def coriolis_rigid_body(mass_kg: float, r_g_m, inertia_o_kg_m2, nu) -> np.ndarra
     r_g = np.asarray(r_g_m, dtype=float)
     i_o = np.asarray(inertia_o_kg_m2, dtype=float)
     off = -mass_kg * mdl.skew(v) - mass_kg * mdl.skew(mdl.skew(w) @ r_g)
-    return np.block([[np.zeros((3, 3)), off], [off, mass_kg * mdl.skew(mdl.skew(v) @ r_g) - mdl.skew(i_o @ w)]])
+    lower = mass_kg * mdl.skew(mdl.skew(v) @ r_g) - mdl.skew(i_o @ w)
+    return np.block([[np.zeros((3, 3)), off], [off, lower]])
 
 
 def coriolis_added_mass(added_mass, nu) -> np.ndarray:
-    """C_A(nu) (6x6) from the positive added-mass matrix M_A (6x6): [0, -S(a1); -S(a1), -S(a2)], a = M_A nu.
+    """C_A(nu) (6x6) from the positive added-mass matrix M_A (6x6): [0, -S(a1); -S(a1), -S(a2)],
+    a = M_A nu.
 
-    Fossen 2011; equals docs/identification.md §1.A, [NTNU-Thesis] eq. 2.83 for a diagonal M_A = -diag(X_udot ...
-    N_rdot).
+    Fossen 2011; equals docs/identification.md §1.A, [NTNU-Thesis] eq. 2.83 for a diagonal
+    M_A = -diag(X_udot ... N_rdot).
     """
     a = np.asarray(added_mass, dtype=float) @ np.asarray(nu, dtype=float)
     s1, s2 = mdl.skew(a[:3]), mdl.skew(a[3:])
@@ -84,18 +86,23 @@ def coriolis_added_mass(added_mass, nu) -> np.ndarray:
 
 
 def generalized_forces(model, state, tau) -> dict[str, np.ndarray]:
-    """Each term of the equations of motion at ``state`` (13,) and ``tau`` (6,) in matrix form, (6,) each: C_RB nu,
-    C_A nu, D(nu) nu, g(eta) with the free-surface buoyancy, and nu_dot = (M_RB + M_A)^-1 (tau - the others): the
-    reference the model's scalar fast path is checked against."""
+    """Each term of the equations of motion at ``state`` (13,) and ``tau`` (6,) in matrix form, (6,)
+    each: C_RB nu, C_A nu, D(nu) nu, g(eta) with the free-surface buoyancy, and nu_dot =
+    (M_RB + M_A)^-1 (tau - the others): the reference the model's scalar fast path is checked
+    against."""
     s = np.asarray(state, dtype=float)
     nu = s[7:13]
     r = mdl.rotation_matrix_from_quaternion(s[3:7])
     out = {
-        "coriolis_rigid_body": coriolis_rigid_body(model.mass_kg, model.r_g_m, model.inertia_o_kg_m2, nu) @ nu,
+        "coriolis_rigid_body":
+            coriolis_rigid_body(model.mass_kg, model.r_g_m, model.inertia_o_kg_m2, nu) @ nu,
         "coriolis_added_mass": coriolis_added_mass(model.added_mass_matrix, nu) @ nu,
-        "damping": mdl.damping_vector(nu, model.damping_linear_positive, model.damping_linear_negative,
-                                      model.damping_quadratic_positive, model.damping_quadratic_negative),
-        "restoring": mdl.restoring_vector(r, model.weight_n, model.buoyancy_n * model.buoyancy_fraction(s),
+        "damping": mdl.damping_vector(nu, model.damping_linear_positive,
+                                      model.damping_linear_negative,
+                                      model.damping_quadratic_positive,
+                                      model.damping_quadratic_negative),
+        "restoring": mdl.restoring_vector(r, model.weight_n,
+                                          model.buoyancy_n * model.buoyancy_fraction(s),
                                           model.r_g_m, model.r_b_m),
     }
     out["nu_dot"] = model.mass_matrix_inverse @ (np.asarray(tau, dtype=float) - sum(out.values()))
@@ -153,14 +160,16 @@ def test_parallel_axis_inertia(coupled_cfg):
     assert np.allclose(mrb, mrb.T)
 
 
-def restoring_vector_euler(roll_rad: float, pitch_rad: float, weight_n: float, buoyancy_n: float, r_g_m,
-                           r_b_m) -> np.ndarray:
-    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in docs/identification.md §1.A:
-    the independent formulation :func:`restoring_vector` is checked against (rad, N, r_g and r_b in m, FRD)."""
+def restoring_vector_euler(roll_rad: float, pitch_rad: float, weight_n: float,
+                           buoyancy_n: float, r_g_m, r_b_m) -> np.ndarray:
+    """g(eta) (6,) written out in Euler angles, Fossen eq. 2.23 as printed in docs/identification.md
+    §1.A: the independent formulation :func:`restoring_vector` is checked against (rad, N, r_g and
+    r_b in m, FRD)."""
     xg, yg, zg = r_g_m
     xb, yb, zb = r_b_m
     w, b = weight_n, buoyancy_n
-    sph, cph, sth, cth = math.sin(roll_rad), math.cos(roll_rad), math.sin(pitch_rad), math.cos(pitch_rad)
+    sph, cph = math.sin(roll_rad), math.cos(roll_rad)
+    sth, cth = math.sin(pitch_rad), math.cos(pitch_rad)
     return np.array([
         (w - b) * sth,
         -(w - b) * cth * sph,

@@ -29,10 +29,11 @@ Equations of motion (Fossen 2011; docs/identification.md §1.A, [NTNU-Thesis] eq
 * Kinematics with a unit quaternion q = (x, y, z, w) of the body FRD in NED (no Euler singularity):
   ``p_dot = R(q) v``, ``q_dot = 1/2 q (x) [w; 0]``. Euler angles (Fossen ZYX, [T] eq. 2.2) are an output only.
 
-Fast path: :meth:`VehicleModel.derivative_list` evaluates the right-hand side on plain Python floats (3-vectors
-as scalars, the constant ``(M_RB + M_A)^-1`` precomputed), because numpy's per-call overhead dominates for
-6x6 problems. The tests check it against the same equations in matrix form (C_RB and C_A as above, with
-:func:`rigid_body_mass_matrix`, :func:`damping_vector` and :func:`restoring_vector` of this module).
+Fast path: :meth:`VehicleModel.derivative_list` evaluates the right-hand side on plain Python floats
+(3-vectors as scalars, the constant ``(M_RB + M_A)^-1`` precomputed), because numpy's per-call
+overhead dominates for 6x6 problems. The tests check it against the same equations in matrix form
+(C_RB and C_A as above, with :func:`rigid_body_mass_matrix`, :func:`damping_vector` and
+:func:`restoring_vector` of this module).
 
 State vector (13,): ``[x_n, y_e, z_d (m, NED), q_x, q_y, q_z, q_w, u, v, w (m/s), p, q, r (rad/s)]``.
 Not modelled: currents (nu is relative to still water), the variation of added mass and damping near the
@@ -171,8 +172,9 @@ class VehicleModel:
     def derivative_list(self, s: Sequence[float], tau: Sequence[float]) -> list[float]:
         """Fast state derivative on plain floats: ``s`` (13 floats), ``tau`` (6 floats) -> 13 floats.
 
-        The equations of the module docstring (checked by the tests against their matrix form), written with
-        scalar 3-vector algebra. The quaternion need not be exactly unit (the integrator renormalises after each step).
+        The equations of the module docstring (checked by the tests against their matrix form),
+        written with scalar 3-vector algebra. The quaternion need not be exactly unit (the
+        integrator renormalises after each step).
         """
         _, _, z, qx, qy, qz, qw, u, v, w, p, q, r = s
         # rotation body FRD -> NED

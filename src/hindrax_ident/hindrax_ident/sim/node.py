@@ -36,11 +36,12 @@ on every control tick whatever the CPU load (a loaded machine otherwise lets the
 controller, which then overshoots its planned runs). A gate that has refused for :data:`GATE_TIMEOUT_S` of
 wall time is overridden with a warning, so a stalled node cannot freeze the simulation.
 
-Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`: its sensor listeners
-and latest samples), ``add_step_listener(cb(simulator))``, ``add_clock_listener(cb(t_s))`` (at every /clock
-tick, after the driven clocks moved), and the ``pulse_width_source`` constructor argument: a callable
-returning the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685 emulator; None keeps the previous
-ones), called before every step; it replaces the ``thrusters/pulse_width`` subscription.
+Python API for in-process device emulators: ``node.simulator`` (the :class:`Simulator`: its sensor
+listeners and latest samples), ``add_step_listener(cb(simulator))``, ``add_clock_listener(cb(t_s))``
+(at every /clock tick, after the driven clocks moved), and the ``pulse_width_source`` constructor
+argument: a callable returning the widths (n,) in us the ESCs see (e.g. decoded from the PCA9685
+emulator; None keeps the previous ones), called before every step; it replaces the
+``thrusters/pulse_width`` subscription.
 """
 from __future__ import annotations
 

@@ -409,7 +409,8 @@ class AccelModel(_ImuBase):
         self.temperature_c = float(water_temperature_c)
 
     def measure(self, truth: VehicleTruth) -> AccelSample:
-        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation, self.gravity_m_s2))
+        f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation,
+                                               self.gravity_m_s2))
         m = f + self.extra_bias(truth.t_s) if self.disturbed else f
         return AccelSample(truth.t_s, self._noisy3(m), self.temperature_c)
 

@@ -89,8 +89,8 @@ class Thrusters:
         return np.asarray(self.curve.thrust_n(pw), dtype=float)
 
     def command(self, pulse_width_us) -> None:
-        """Set new wire pulse widths (n,) in us, held until the next command. Raises :class:`PulseWidthError`
-        (and keeps the previous command) for bad widths."""
+        """Set new wire pulse widths (n,) in us, held until the next command. Raises
+        :class:`PulseWidthError` (and keeps the previous command) for bad widths."""
         self.commanded_force_n = self.thrust_from_pulse_width(pulse_width_us)
         self.pulse_width_us = np.array(pulse_width_us, dtype=float).reshape(-1)
 
@@ -99,9 +99,11 @@ class Thrusters:
         self.force_n = self.lag.advance(self.force_n, self.commanded_force_n, dt_s)
 
     def wrench_co(self) -> np.ndarray:
-        """Body wrench [X Y Z K M N] (6,) of the current thrust about the body origin (FRD, N, N m)."""
+        """Body wrench [X Y Z K M N] (6,) of the current thrust about the body origin, FRD: forces
+        in N, moments in N m."""
         return self.matrix_co @ self.force_n
 
     def wrench_cg(self) -> np.ndarray:
-        """Body wrench [X Y Z K M N] (6,) of the current thrust about the CG (FRD, N, N m), [Hindrax-Drag] eq. 9."""
+        """Body wrench [X Y Z K M N] (6,) of the current thrust about the CG (FRD, N, N m),
+        [Hindrax-Drag] eq. 9."""
         return self.matrix_cg @ self.force_n

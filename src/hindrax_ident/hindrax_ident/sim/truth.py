@@ -135,8 +135,8 @@ DISTURBANCE_SCHEMA: dict[str, tuple[Any, float, float, Any]] = {
 
 
 class _Group:
-    """``Disturbances.<group>``: the ``disturbances.<group>.*`` values as attributes (the default where the
-    file does not set a key), built on first use and kept."""
+    """``Disturbances.<group>``: the ``disturbances.<group>.*`` values as attributes (the default
+    where the file does not set a key), built on first use and kept."""
 
     def __set_name__(self, owner: type, name: str) -> None:
         self.name = name
@@ -155,8 +155,9 @@ class _Group:
 class Disturbances:
     """Validated ``disturbances.*`` values (module docstring); ``values`` maps every schema key to its value.
 
-    Groups (built once; the default where the file does not set a key): ``thrust``, ``battery``, ``inflow``,
-    ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``, ``pressure``.
+    Groups (built once; the default where the file does not set a key): ``thrust``, ``battery``,
+    ``inflow``, ``hydrodynamics``, ``current``, ``tether``, ``floor``, ``dvl``, ``imu``,
+    ``pressure``.
     """
 
     values: Mapping[str, Any] = field(default_factory=dict)

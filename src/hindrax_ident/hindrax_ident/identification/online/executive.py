@@ -92,7 +92,8 @@ def expand_calibration(steps: Iterable[str]) -> list[str]:
     Raises ``ValueError`` for a name not in :data:`CALIBRATION_STEPS`."""
     bad = [s for s in steps if s not in CALIBRATION_STEPS]
     if bad:
-        raise ValueError(f"unknown calibration step(s) {bad}; choose from {', '.join(CALIBRATION_STEPS)}")
+        raise ValueError(f"unknown calibration step(s) {bad}; "
+                         f"choose from {', '.join(CALIBRATION_STEPS)}")
     out: list[str] = []
     for s in steps:
         for x in (THRUST_STEPS if s == "thrust" else (s,)):

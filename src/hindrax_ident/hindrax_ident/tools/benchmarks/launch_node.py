@@ -41,6 +41,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import serialize_message
 
+from hindrax_drivers.gateway.internal import interface_type
 from hindrax_drivers.node_common import run_nodes
 from hindrax_drivers.ros_process import BEFORE_PROCESS_END
 from hindrax_drivers.transport.socket_i2c import SOCKET_ENV
@@ -117,11 +118,6 @@ def _dump_topology_on_sigusr1(directory: str) -> None:
     signal.signal(signal.SIGUSR1, dump)
 
 
-def _interface(type_name: str) -> Any:
-    pkg, kind, name = type_name.split("/")
-    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
-
-
 def _profile(qos: dict) -> Any:
     dur = ("deadline", "lifespan", "liveliness_lease_duration")
     return QoSProfile(**{k: Duration(nanoseconds=v) if k in dur else v for k, v in qos.items()})
@@ -151,7 +147,7 @@ def skeleton_main() -> int:
         have = {e["topic"] for e in topology([node])["nodes"][0]["services"]}  # parameter services
         groups: dict = {}
         for p in nd["publishers"]:
-            cls = _interface(p["type"])
+            cls = interface_type(p["type"])
             pub = node.create_publisher(cls, p["topic"], _profile(p["qos"]),
                                         event_callbacks=_events("publishers", p["events"]))
             data = bytes.fromhex(p["payload"]) if p.get("payload") else serialize_message(cls())
@@ -163,14 +159,14 @@ def skeleton_main() -> int:
             timer = node.create_timer(1.0 / rate, partial(_call_all, sends), autostart=k == 0)
             timers.append((k, timer))
         for s in nd["subscriptions"]:
-            node.create_subscription(_interface(s["type"]), s["topic"], lambda _m: None,
+            node.create_subscription(interface_type(s["type"]), s["topic"], lambda _m: None,
                                      _profile(s["qos"]), raw=s["raw"],
                                      event_callbacks=_events("subscriptions", s["events"]))
         for s in nd["services"]:
             if s["topic"] not in have:
-                node.create_service(_interface(s["type"]), s["topic"], lambda _q, r: r)
+                node.create_service(interface_type(s["type"]), s["topic"], lambda _q, r: r)
         for c in nd["clients"]:
-            node.create_client(_interface(c["type"]), c["topic"])
+            node.create_client(interface_type(c["type"]), c["topic"])
         return node
 
     def next_phase(*_: Any) -> None:

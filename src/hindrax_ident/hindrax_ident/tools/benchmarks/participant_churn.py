@@ -111,7 +111,8 @@ class _Watch:
         node.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._state, 50)
         #: status name -> the worst tick gap it reported on /diagnostics, (gap, thread CPU, process CPU) in ms
         self.tick_gaps: dict[str, tuple[float, float, float]] = {}
-        #: status name -> heartbeats its process took at a stale judgement (liveness.HeartbeatWatch.fresh)
+        #: status name -> heartbeats its process took at a stale judgement
+        #: (liveness.HeartbeatWatch.fresh)
         self.taken_late: dict[str, int] = {}
         self._active_since: float | None = None
         node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 50)
@@ -142,9 +143,10 @@ class _Watch:
         worst = max(v[0] for v in self.tick_gaps.values())
         each = "; ".join(f"{k} {g:.0f} ms ({t:.1f} / {p:.1f})" for k, (g, t, p) in sorted(self.tick_gaps.items()))
         return {"name": name, "value": worst, "unit": "ms",
-                "note": f"longest gap between two steady ticks of a safety process (reports covering the window "
-                        f"only), each with the CPU time in it (its executor thread / the whole process, ms): {each}; "
-                        f"heartbeats taken at a stale judgement: {self.taken_late or 'none reported'}"}
+                "note": f"longest gap between two steady ticks of a safety process (reports "
+                        f"covering the window only), each with the CPU time in it (its executor "
+                        f"thread / the whole process, ms): {each}; heartbeats taken at a stale "
+                        f"judgement: {self.taken_late or 'none reported'}"}
 
     def _beat(self, name: str, msg) -> None:
         if self.active:

@@ -123,10 +123,11 @@ def _wakeup_rates(before: tuple, after: tuple, wall_s: float) -> tuple[float, fl
 
 
 def _proc_mb(pid: int, key: str) -> float:
-    """A memory figure of a process, MB (10^6 bytes), NaN when absent: ``VmRSS`` (resident set size, from
-    /proc/PID/status) or ``Pss`` (proportional set size, /proc/PID/smaps_rollup: its private pages plus its share of
-    the pages it shares, the venv's libraries mapped by every node process, so the sum over processes is the memory
-    they hold together, unlike the sum of RSS, which counts shared pages once per process)."""
+    """A memory figure of a process, MB (10^6 bytes), NaN when absent: ``VmRSS`` (resident set size,
+    from /proc/PID/status) or ``Pss`` (proportional set size, /proc/PID/smaps_rollup: its private
+    pages plus its share of the pages it shares, the venv's libraries mapped by every node process,
+    so the sum over processes is the memory they hold together, unlike the sum of RSS, which counts
+    shared pages once per process)."""
     path = Path(f"/proc/{pid}/{'status' if key == 'VmRSS' else 'smaps_rollup'}")
     for line in path.read_text().splitlines():
         if line.startswith(key + ":"):
@@ -479,6 +480,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                         wake1 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
                         wall, t1_ns = time.monotonic() - wall0, time.time_ns()
                         alive()
+                        nodes = [(n, p) for n, p in procs.items() if n != "pool"]
                         results.append({"wall_s": wall, "t0_ns": t0_ns, "t1_ns": t1_ns,
                                         "per_process": {n: (cpu1[n] - cpu0[n]) / wall for n in procs if n != "pool"},
                                         "pool": (cpu1["pool"] - cpu0["pool"]) / wall,
@@ -489,9 +491,8 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                         "bench": (proc_cpu_s() - bench0) / wall,
                                         "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
                                         "goal_status": goal_status[0](),
-                                        "rss_mb": {n: _proc_mb(p.pid, "VmRSS") for n, p in procs.items()
-                                                   if n != "pool"},
-                                        "pss_mb": {n: _proc_mb(p.pid, "Pss") for n, p in procs.items() if n != "pool"}})
+                                        "rss_mb": {n: _proc_mb(p.pid, "VmRSS") for n, p in nodes},
+                                        "pss_mb": {n: _proc_mb(p.pid, "Pss") for n, p in nodes}})
                     out["phases"][phase] = {"windows": results}
 
                 goal_status = [lambda: None]
