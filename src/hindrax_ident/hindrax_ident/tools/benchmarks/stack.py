@@ -40,7 +40,6 @@ import functools
 import json
 import os
 import re
-import shutil
 import signal
 import statistics
 import subprocess
@@ -180,14 +179,13 @@ def _wrench_stream(probe: Any) -> _SwitchedStream:
 
 
 def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin: Any, spin_idle: Any,
-                       warm_timeout_s: float, what: str, goal_status: list | None = None) -> None:
+                       warm_timeout_s: float, what: str) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
     :class:`~hindrax_drivers.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s of
     warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
 
     stream: {"on": bool} switches the wrench stream; window(label) measures one window; spin / spin_idle: one
-    executor spin while running / while idle. goal_status: a one-item list whose item is set to a function
-    returning the goal's last action status code (action_msgs/GoalStatus) seen on the status topic. Raises
+    executor spin while running / while idle. Raises
     RuntimeError when the goal is rejected, or when it ended before the running window did (the window would not
     have measured a running campaign)."""
     goals = GoalSender(probe, action, "run_identification")
@@ -195,8 +193,6 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
     handle = goals.send(RunIdentification.Goal(dofs=["surge"], levels_per_dof=3), spin, 30)
     if not handle.accepted:
         raise RuntimeError(f"{what}: the surge goal was rejected")
-    if goal_status is not None:
-        goal_status[0] = lambda: goals.status(handle)
     warm = time.monotonic() + 3.0
     wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin, "running warm-up")
     window("running")
@@ -320,13 +316,12 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             emu.clear()
             sim_cpu[0] = 0.0
             threads0 = _thread_cpu_s()
-            main0, proc0, wall0 = time.thread_time(), time.process_time(), time.monotonic()
+            proc0, wall0 = time.process_time(), time.monotonic()
             sim_t0 = sim_node.simulator.t_s
             end = wall0 + duration_s
             wait_until(lambda: time.monotonic() > end, duration_s + 60, spin_with_wrench, f"{phase} window")
             wall = time.monotonic() - wall0
             proc = time.process_time() - proc0
-            main = time.thread_time() - main0
             threads1 = _thread_cpu_s()
             counts1 = writer.topic_counts()
             thr = {k: threads1.get(k, 0.0) - threads0.get(k, 0.0) for k in threads1}
@@ -337,17 +332,11 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             for name, port in hw.ports.items():
                 per[name] += sum(v for k, v in thr.items() if k == f"SerialTransport({port})")
             per["recorder"] += sum(v for k, v in thr.items() if k.startswith("bag-writer"))
-            emu_total = sum(emu.values())
-            probe_cpu = cpu.get("bench_probe", 0.0)
-            stack = proc - sim_cpu[0] - emu_total - probe_cpu
+            stack = proc - sim_cpu[0] - sum(emu.values()) - cpu.get("bench_probe", 0.0)
             per["executor+dds"] = stack - sum(per.values())
             rates = {t: (counts1.get(t, 0) - counts0.get(t, 0)) / wall for t in counts1}
-            out["phases"][phase] = {
-                "wall_s": wall, "per_node": {k: v / wall for k, v in per.items()}, "stack": stack / wall,
-                "process": proc / wall, "simulator": sim_cpu[0] / wall, "emulators": emu_total / wall,
-                "main_thread": main / wall, "rates": rates,
-                "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall,
-            }
+            out["phases"][phase] = {"per_node": {k: v / wall for k, v in per.items()}, "stack": stack / wall,
+                                    "rates": rates, "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall}
 
         _running_then_idle(probe, action, stream, window, spin, spin_with_wrench, 60,
                            "in-process stack benchmark")
@@ -360,26 +349,21 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------- launch layout
-def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | None = None,
-            launch_file: Path | None = None) -> dict:
-    """The launch layout: every process of ``launch_file`` (default :data:`LAUNCH_FILE`, recording on), the
-    virtual pool in another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the
-    idle phase); per window the CPU of every process and its wall-clock span (the rates come from the bag).
-    py_spy_dir: record every node process with ``py-spy`` during the first running window (raw collapsed stacks,
-    ``<label>.txt``)."""
+def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
+    """The launch layout: every process of :data:`LAUNCH_FILE` (recording on), the virtual pool in another.
+    ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the idle phase); per window
+    the CPU of every process and its wall-clock span (the rates come from the bag)."""
     py = python_executable()
     sock = str(tmp / "i2c.sock")
     ports_file = tmp / "ports.json"
     bag_root = tmp / "launch-bags"  # the launch files' output_dir: the root the recorder makes its bag beneath
-    launch_file = launch_file or package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1]
+    launch_file = package_share(LAUNCH_FILE[0]) / LAUNCH_FILE[1]
     layout = launch_processes(launch_file, {"output_dir": str(bag_root)})
     procs: dict[str, subprocess.Popen] = {}
     extra: dict[str, subprocess.Popen] = {}  # the participant probes (PARTICIPANT_PROBES)
     logs: dict[str, Any] = {}
-    out: dict = {"phases": {}, "launch_file": str(launch_file), "bag": None,
-                 "processes": {lp.label: {"executable": f"{lp.package}/{lp.executable}",
-                                          "module": lp.module,
-                                          "prefix": list(lp.process.launch_prefix),
+    out: dict = {"phases": {}, "launch_file": str(launch_file),
+                 "processes": {lp.label: {"prefix": list(lp.process.launch_prefix),
                                           "env": dict(lp.process.env)} for lp in layout}}
     with domain_id() as did:
         env = child_env(ROS_DOMAIN_ID=str(did))
@@ -462,14 +446,11 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                       f"{answer[0]}", flush=True)
                 warm = time.monotonic() + 3.0
                 wait_until(lambda: time.monotonic() > warm, 30, spin, "warm-up")
-                spies: list[subprocess.Popen] = []
 
                 def window(phase: str) -> None:
                     alive()
                     results = []
-                    for k in range(windows if phase == "running" else 1):
-                        if py_spy_dir is not None and phase == "running" and k == 0:
-                            spies.extend(_start_py_spy(procs, py_spy_dir, duration_s))
+                    for _ in range(windows if phase == "running" else 1):
                         cpu0 = {n: proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
                         wake0 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
                         bench0, load0 = proc_cpu_s(), os.getloadavg()[0]
@@ -490,22 +471,17 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1, py_spy_dir: Path | N
                                                              (wake1[n][0] - wake0[n][0]) / wall) for n in extra},
                                         "bench": (proc_cpu_s() - bench0) / wall,
                                         "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
-                                        "goal_status": goal_status[0](),
                                         "rss_mb": {n: _proc_mb(p.pid, "VmRSS") for n, p in nodes},
                                         "pss_mb": {n: _proc_mb(p.pid, "Pss") for n, p in nodes}})
                     out["phases"][phase] = {"windows": results}
 
-                goal_status = [lambda: None]
                 try:
-                    _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark",
-                                       goal_status=goal_status)
+                    _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark")
                 except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
                     raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
                 # each node's declared endpoints, recorder subscriptions made: the skeleton's plan
                 declared = {n: p for n, p in procs.items() if n != "pool"}
                 out["topology"] = read_topologies(declared, tmp)
-                for spy in spies:
-                    spy.wait(duration_s + 30)
                 ex.shutdown()
                 probe.destroy_node()
         finally:
@@ -531,17 +507,6 @@ def _stop(procs: list[subprocess.Popen]) -> None:
         except subprocess.TimeoutExpired:
             p.kill()
             p.wait(5)
-
-
-def _start_py_spy(procs: dict, out_dir: Path, duration_s: float) -> list:
-    """``py-spy record`` (raw collapsed stacks, non-blocking, 100 Hz, only samples that hold the GIL: Python's CPU,
-    not its waits in a socket or the executor) of every node process for ``duration_s``."""
-    exe = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    return [subprocess.Popen([exe, "record", "--nonblocking", "--gil", "-r", "100", "-d", str(int(round(duration_s))),
-                              "-f", "raw", "-o", str(out_dir / f"{name}.txt"), "-p", str(p.pid)],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            for name, p in procs.items() if name != "pool"]
 
 
 def _bag_rates(out: dict) -> None:
@@ -898,25 +863,22 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
                              "target": "<= 0.1" if phase == "idle" and name.startswith("ident_") else "<= 0.35"})
         if all("wakeups" in w for w in wins):
             for name in names:
-                threads = collections.Counter(wins[0]["wakeups"][name][2])
-                cpu = wins[0]["wakeups"][name][3] if len(wins[0]["wakeups"][name]) > 3 else {}
+                _, _, threads, cpu = wins[0]["wakeups"][name]
                 rows.append({"name": f"launch_{phase}_wakeups_{name}", "unit": "1/s",
                              "value": _median([w["wakeups"][name][0] for w in wins]),
                              "note": "voluntary context switches of every thread per second (each sleep ends in "
                                      "a wake-up); by thread (first window), wake-ups/s (its CPU, % of a core): "
                                      + ", ".join(f"{k} {v:.0f}" + (f" ({100 * cpu[k]:.1f})" if k in cpu else "")
-                                                 for k, v in threads.most_common(6))})
+                                                 for k, v in collections.Counter(threads).most_common(6))})
             rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
                          "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
-            if all(len(v) > 3 for w in wins for v in w["wakeups"].values()):
-                dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items() if k.startswith("dds."))
-                       for w in wins]
-                total = _median([sum(w["per_process"].values()) for w in wins])
-                rows.append({"name": f"launch_{phase}_cpu_dds_threads", "unit": "% of a core",
-                             "value": 100 * _median(dds),
-                             "note": f"Fast DDS's own threads (dds.ev event/timer, dds.udp receive, ...) of every "
-                                     f"process, {100 * _median(dds) / total:.0f} % of the total"
-                                     if total > 0 else "Fast DDS's own threads of every process"})
+            dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items() if k.startswith("dds."))
+                   for w in wins]
+            rows.append({"name": f"launch_{phase}_cpu_dds_threads", "unit": "% of a core",
+                         "value": 100 * _median(dds),
+                         "note": f"Fast DDS's own threads (dds.ev event/timer, dds.udp receive, ...) of every "
+                                 f"process, {100 * _median(dds) / total:.0f} % of the total"
+                                 if total > 0 else "Fast DDS's own threads of every process"})
         for name in wins[0].get("participants", {}):
             cpu = [w["participants"][name][0] for w in wins]
             topics = ", ".join(t for t, _ in PARTICIPANT_PROBES.get(name, [])) or "no topic"
@@ -983,12 +945,10 @@ def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
 
 
 def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
-        duration_s: float | None = None, baselines: bool = True, py_spy_dir: Path | None = None,
-        launch_file: Path | None = None, baseline: str | None = None) -> list[dict]:
+        duration_s: float | None = None, baselines: bool = True, baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
     windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
-    s; baselines: bare rclpy and the launch's skeleton; launch_file: another launch file for the
-    launch layout (default :data:`LAUNCH_FILE`; it must take an ``output_dir`` argument); baseline: a git ref whose
+    s; baselines: bare rclpy and the launch's skeleton; baseline: a git ref whose
     launch layout is measured first in the same run (:func:`baseline_launch`), for the rows of today's cost over
     the baseline's (``..._vs_baseline``)."""
     # windows: 10 s per phase and layout (the launch layout's running phase: 3 of them, medians), 8 s per baseline
@@ -1003,7 +963,7 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         if "inproc" in layouts:
             inproc = _in_process(duration_s, tmp)
         if "launch" in layouts:
-            launch = _launch(duration_s, tmp, windows=windows, py_spy_dir=py_spy_dir, launch_file=launch_file)
+            launch = _launch(duration_s, tmp, windows=windows)
             launch["types"] = BagReader(launch["bag"]).topics
     types = dict(launch["types"]) if launch else {}
     if inproc:
@@ -1138,12 +1098,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")
     parser.add_argument("--no-baselines", action="store_true",
                         help="skip the bare rclpy baseline and the launch's skeleton")
-    parser.add_argument("--py-spy", type=Path, default=None, metavar="DIR",
-                        help="record every launch-layout process with py-spy during the first running window "
-                             "(DIR/<process>.txt, raw collapsed stacks)")
-    parser.add_argument("--launch-file", type=Path, default=None,
-                        help="launch file of the launch layout (default: hindrax_ident's pool_test.launch.xml with "
-                             "output_dir set; another file must declare output_dir too)")
     parser.add_argument("--baseline", default=None, metavar="GIT_REF",
                         help="also measure the launch layout of this commit first, in the same run (a detached git "
                              "worktree, this venv, PYTHONPATH at it): rows ..._vs_baseline")
@@ -1155,8 +1109,7 @@ def main(argv: list[str] | None = None) -> int:
     if bad or not layouts:
         parser.error(f"--layouts {args.layouts!r}: choose from inproc, launch")
     rows = run(quick=args.quick, layouts=layouts, windows=args.windows, duration_s=args.window_s,
-               baselines=not args.no_baselines, py_spy_dir=args.py_spy, launch_file=args.launch_file,
-               baseline=args.baseline)
+               baselines=not args.no_baselines, baseline=args.baseline)
     width = max(len(r["name"]) for r in rows)
     for r in rows:
         print(f"{r['name']:<{width}} {r['value']:10.4g} {r.get('unit', ''):<12} {r.get('target', ''):<6} "
