@@ -33,10 +33,12 @@ def spinning(ctx, *nodes, events: bool = False,
             node.destroy_node()
 
 
-def spin_for(duration_s: float, spin: Callable[[], None]) -> None:
-    """Call ``spin`` for ``duration_s`` of wall time (a measurement window)."""
-    end = time.monotonic() + duration_s
-    wait_until(lambda: time.monotonic() >= end, duration_s + 10, spin, "measurement window")
+def spin_for(duration_s: float, spin: Callable[[], None] | None = None) -> tuple[float, float]:
+    """Call ``spin`` (None: wait) for ``duration_s`` of wall time (a measurement window, a warm-up);
+    returns (this process's CPU seconds, wall seconds) over it."""
+    cpu0, start = time.process_time(), time.monotonic()
+    wait_until(lambda: time.monotonic() >= start + duration_s, duration_s + 60, spin, "time window")
+    return time.process_time() - cpu0, time.monotonic() - start
 
 
 def run_alone(run: Callable[[bool], list[dict]], argv: Sequence[str] | None = None) -> int:

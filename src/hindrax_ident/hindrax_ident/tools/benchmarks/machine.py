@@ -15,11 +15,14 @@ Fast DDS) may scale differently between machines.
 """
 from __future__ import annotations
 
+import collections
 import math
 import os
+import threading
 import time
 
-__all__ = ["NBODY_STEPS", "REFERENCE_NBODY_CPU_S", "nbody_cpu_s", "nbody_energy", "proc_cpu_s"]
+__all__ = ["NBODY_STEPS", "REFERENCE_NBODY_CPU_S", "nbody_cpu_s", "nbody_energy", "proc_cpu_s",
+           "thread_cpu_s"]
 
 #: Steps of the published timings (Benchmarks Game n-body, argument 5000000).
 NBODY_STEPS = 5_000_000
@@ -106,3 +109,16 @@ def proc_cpu_s(pid: int | str = "self") -> float:
     with open(f"/proc/{pid}/stat") as f:
         fields = f.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def thread_cpu_s() -> dict[str, float]:
+    """CPU seconds so far per Python thread name of this process (threads of one name summed),
+    the calling thread excepted (``pthread_getcpuclockid``); threads that ended are left out."""
+    out: dict[str, float] = collections.defaultdict(float)
+    for t in threading.enumerate():
+        if t is not threading.current_thread() and t.ident is not None:
+            try:
+                out[t.name] += time.clock_gettime(time.pthread_getcpuclockid(t.ident))
+            except OSError:  # the thread ended meanwhile
+                pass
+    return out

@@ -109,6 +109,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
+from . import spin_for
 from .launch_layout import launch_processes, package_share
 from .machine import proc_cpu_s
 
@@ -833,8 +834,7 @@ def _record_vehicle_bag(lay: _Layout, tmp: Path) -> tuple[Path, float]:
                                 f"output_dir:={bag}"], env=lay.env, stdout=log, stderr=subprocess.STDOUT)
     try:
         wait_until(lambda: (bag / "metadata.yaml").exists() or any(bag.glob("*.mcap")), 30, None, "recorder started")
-        t_end = time.monotonic() + REPLAY_RECORD_S
-        wait_until(lambda: time.monotonic() > t_end, REPLAY_RECORD_S + 5, None, "recording window")
+        spin_for(REPLAY_RECORD_S)
     finally:
         interrupt(rec, 30)
     lay.commanding = False
@@ -956,8 +956,7 @@ def _guard_without_line(lay: _Layout, hw: _Hardware) -> tuple[int, int, str, flo
             else:
                 refused += 1
                 answer = res.message
-            deadline = time.monotonic() + 0.3
-            wait_until(lambda: time.monotonic() > deadline, 5, None, "next attempt")
+            spin_for(0.3)
         lay.probe.destroy_subscription(sub)
     finally:
         hw.line_busy = False
@@ -1008,9 +1007,9 @@ def _process_rows(repeats: int) -> dict[str, list]:
 
 def _cpu_share(pid: int, window_s: float) -> float:
     """CPU time of process ``pid`` (user + system, /proc) over ``window_s`` of wall time, in % of one core."""
-    c0, t0 = proc_cpu_s(pid), time.monotonic()
-    time.sleep(window_s)  # a measurement window, not a wait for a condition
-    return 100.0 * (proc_cpu_s(pid) - c0) / (time.monotonic() - t0)
+    c0 = proc_cpu_s(pid)
+    _, wall = spin_for(window_s)
+    return 100.0 * (proc_cpu_s(pid) - c0) / wall
 
 
 def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
@@ -1030,16 +1029,14 @@ def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
     try:
         wait_until(lambda: pub.get_subscription_count() > 0 and lay.reset_client.service_is_ready(), 60, None,
                    "supervisor on /clock")
-        t_ready = time.monotonic() + 2.0  # the supervisor's checks running on the received clock
-        wait_until(lambda: time.monotonic() > t_ready, 5, None, "settle")
+        spin_for(2.0)  # the supervisor's checks running on the received clock
         for k in range(repeats):
             n0 = len(lay.diag)
             t0 = time.monotonic()
             state["ns"] -= 100_000_000_000
             wait_until(lambda: len(lay.diag) > n0, 10, None, "clock step reported on /diagnostics")
             out.append(lay.diag[n0][0] - t0)
-            t_next = time.monotonic() + 1.5  # the 1 Hz diagnostics of this step are not the next step's report
-            wait_until(lambda: time.monotonic() > t_next, 5, None, "between steps")
+            spin_for(1.5)  # the 1 Hz diagnostics of this step are not the next step's report
             del lay.diag[n0:]
     finally:
         lay.probe.destroy_timer(timer)

@@ -22,7 +22,6 @@ subscribed to the output topics, in one SingleThreadedExecutor:
 """
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
@@ -39,6 +38,7 @@ from hindrax_drivers.transport.pty_device import PtyDevice
 from hindrax_msgs.msg import Dvl
 
 from . import run_alone, spin_for, spinning
+from .machine import thread_cpu_s
 
 DVL_RATE_HZ = 20.0
 PING_INTERVAL_S = 0.025
@@ -72,13 +72,6 @@ class _TimedEmulator:
         return out
 
 
-def _thread_cpu_s(name_prefix: str) -> float:
-    for t in threading.enumerate():
-        if t.name.startswith(name_prefix) and t.ident is not None:
-            return time.clock_gettime(time.pthread_getcpuclockid(t.ident))
-    return 0.0
-
-
 def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str,
              rate: str) -> list[dict]:
     """Run node + probe for ``duration_s`` after a warm-up; the rows of :func:`_rows`."""
@@ -100,12 +93,11 @@ def _measure(node_factory, emulator, subscriptions, duration_s: float, name: str
                 for v in latencies.values():
                     v.clear()
                 published0 = node.diag.total_published
-                reader0, emu0 = _thread_cpu_s("SerialTransport("), _thread_cpu_s("PtyDevice")
-                cpu0, wall0 = time.process_time(), time.monotonic()
-                spin_for(duration_s, spin)
-                cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-                reader = _thread_cpu_s("SerialTransport(") - reader0
-                emu = _thread_cpu_s("PtyDevice") - emu0
+                threads0 = thread_cpu_s()
+                cpu, wall = spin_for(duration_s, spin)
+                threads = {k: v - threads0.get(k, 0.0) for k, v in thread_cpu_s().items()}
+                reader = sum(v for k, v in threads.items() if k.startswith("SerialTransport("))
+                emu = sum(v for k, v in threads.items() if k.startswith("PtyDevice"))
                 reports = node.diag.total_published - published0
     finally:
         dev.close()

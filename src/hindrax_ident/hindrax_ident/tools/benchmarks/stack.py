@@ -45,7 +45,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -71,7 +70,8 @@ from hindrax_msgs.srv import SetArmed
 from .launch_layout import launch_processes, package_share, read_ports_file
 from .actuation import wrench_to_registers
 from .launch_node import SOCKET_ENV, TOPOLOGY_ENV
-from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s, proc_cpu_s
+from . import spin_for
+from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s, proc_cpu_s, thread_cpu_s
 from .recorder import subscribe_recorder_counts
 
 _CLK = os.sysconf("SC_CLK_TCK")
@@ -134,20 +134,6 @@ def _proc_mb(pid: int, key: str) -> float:
     return float("nan")
 
 
-def _thread_cpu_s() -> dict[str, float]:
-    """CPU seconds per Python thread name of this process (other than the calling thread)."""
-    out: dict[str, float] = collections.defaultdict(float)
-    me = threading.get_native_id()
-    for t in threading.enumerate():
-        if t.native_id == me:
-            continue
-        try:
-            out[t.name] += proc_cpu_s(f"self/task/{t.native_id}")
-        except (OSError, IndexError, ValueError, TypeError):
-            continue
-    return out
-
-
 def _wrench_msg(stamp: Any) -> Any:
     m = WrenchStamped()
     m.header.frame_id = "base_link"
@@ -179,7 +165,7 @@ def _wrench_stream(probe: Any) -> _SwitchedStream:
 
 
 def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin: Any, spin_idle: Any,
-                       warm_timeout_s: float, what: str) -> None:
+                       what: str) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
     :class:`~hindrax_drivers.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s of
     warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
@@ -193,8 +179,7 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
     handle = goals.send(RunIdentification.Goal(dofs=["surge"], levels_per_dof=3), spin, 30)
     if not handle.accepted:
         raise RuntimeError(f"{what}: the surge goal was rejected")
-    warm = time.monotonic() + 3.0
-    wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin, "running warm-up")
+    spin_for(3.0, spin)
     window("running")
     if goals.status(handle) in (4, 5, 6):  # SUCCEEDED, CANCELED, ABORTED: the campaign did not run throughout
         got: list = []
@@ -207,8 +192,7 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
                            f"window: {why}")
     wait_until(lambda: goals.cancel(handle), 30, spin, "goal cancel")
     stream["on"] = True
-    warm = time.monotonic() + 2.0
-    wait_until(lambda: time.monotonic() > warm, warm_timeout_s, spin_idle, "idle warm-up")
+    spin_for(2.0, spin_idle)
     window("idle")
     goals.destroy()
 
@@ -315,14 +299,10 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             cpu.clear()
             emu.clear()
             sim_cpu[0] = 0.0
-            threads0 = _thread_cpu_s()
-            proc0, wall0 = time.process_time(), time.monotonic()
+            threads0 = thread_cpu_s()
             sim_t0 = sim_node.simulator.t_s
-            end = wall0 + duration_s
-            wait_until(lambda: time.monotonic() > end, duration_s + 60, spin_with_wrench, f"{phase} window")
-            wall = time.monotonic() - wall0
-            proc = time.process_time() - proc0
-            threads1 = _thread_cpu_s()
+            proc, wall = spin_for(duration_s, spin_with_wrench)
+            threads1 = thread_cpu_s()
             counts1 = writer.topic_counts()
             thr = {k: threads1.get(k, 0.0) - threads0.get(k, 0.0) for k in threads1}
             per: dict[str, float] = {}
@@ -338,8 +318,7 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             out["phases"][phase] = {"per_node": {k: v / wall for k, v in per.items()}, "stack": stack / wall,
                                     "rates": rates, "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall}
 
-        _running_then_idle(probe, action, stream, window, spin, spin_with_wrench, 60,
-                           "in-process stack benchmark")
+        _running_then_idle(probe, action, stream, window, spin, spin_with_wrench, "in-process")
         out["types"] = {pub.topic_name: type_name_of(pub.msg_type) for n in graph.nodes.values()
                         for pub in n.publishers}
         out["dropped"] = recorder._writer.dropped
@@ -444,8 +423,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                     raise ConditionTimeout(f"{exc}: the ESC's last answer was {answer[0]!r}") from None
                 print(f"stack benchmark, launch layout ({len(layout)} processes of {launch_file.name}): "
                       f"{answer[0]}", flush=True)
-                warm = time.monotonic() + 3.0
-                wait_until(lambda: time.monotonic() > warm, 30, spin, "warm-up")
+                spin_for(3.0, spin)
 
                 def window(phase: str) -> None:
                     alive()
@@ -453,13 +431,11 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                     for _ in range(windows if phase == "running" else 1):
                         cpu0 = {n: proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
                         wake0 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
-                        bench0, load0 = proc_cpu_s(), os.getloadavg()[0]
-                        wall0, t0_ns = time.monotonic(), time.time_ns()
-                        end = wall0 + duration_s
-                        wait_until(lambda: time.monotonic() > end, duration_s + 30, spin, f"{phase} window")
+                        load0, t0_ns = os.getloadavg()[0], time.time_ns()
+                        bench, wall = spin_for(duration_s, spin)
                         cpu1 = {n: proc_cpu_s(p.pid) for n, p in {**procs, **extra}.items()}
                         wake1 = {n: _proc_wakeups(p.pid) for n, p in {**procs, **extra}.items()}
-                        wall, t1_ns = time.monotonic() - wall0, time.time_ns()
+                        t1_ns = time.time_ns()
                         alive()
                         nodes = [(n, p) for n, p in procs.items() if n != "pool"]
                         results.append({"wall_s": wall, "t0_ns": t0_ns, "t1_ns": t1_ns,
@@ -469,14 +445,14 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                                                     for n in procs if n != "pool"},
                                         "participants": {n: ((cpu1[n] - cpu0[n]) / wall,
                                                              (wake1[n][0] - wake0[n][0]) / wall) for n in extra},
-                                        "bench": (proc_cpu_s() - bench0) / wall,
+                                        "bench": bench / wall,
                                         "loadavg": 0.5 * (load0 + os.getloadavg()[0]),
                                         "rss_mb": {n: _proc_mb(p.pid, "VmRSS") for n, p in nodes},
                                         "pss_mb": {n: _proc_mb(p.pid, "Pss") for n, p in nodes}})
                     out["phases"][phase] = {"windows": results}
 
                 try:
-                    _running_then_idle(probe, action, stream, window, spin, spin, 30, "launch-layout benchmark")
+                    _running_then_idle(probe, action, stream, window, spin, spin, "launch layout")
                 except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
                     raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
                 # each node's declared endpoints, recorder subscriptions made: the skeleton's plan
@@ -676,15 +652,11 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
                         for p in procs.values():
                             p.send_signal(signal.SIGUSR2)
                     stream["on"] = phase == stream_phase
-                    warm = time.monotonic() + 2.0
-                    wait_until(lambda: time.monotonic() > warm, 30, spin, "skeleton warm-up")
+                    spin_for(2.0, spin)
                     wins = []
                     for _ in range(n):
                         cpu0 = {lb: proc_cpu_s(p.pid) for lb, p in procs.items()}
-                        wall0 = time.monotonic()
-                        wait_until(lambda: time.monotonic() > wall0 + duration_s, duration_s + 30,
-                                   spin, phase)
-                        wall = time.monotonic() - wall0
+                        _, wall = spin_for(duration_s, spin)
                         cpu = {lb: (proc_cpu_s(p.pid) - cpu0[lb]) / wall for lb, p in procs.items()}
                         wins.append({"wall_s": wall, "per_process": cpu})
                     _check_alive(procs, tmp)
