@@ -7,8 +7,8 @@ project's one reader of launch files, each with its console script's function; t
 them with the arguments ``ros2 launch`` would give (the ``launch`` package is not installable here,
 docs/architecture.md §11.3).
 
-``python -m hindrax_ident.tools.benchmarks.launch_layout pool --socket PATH --ports-file FILE [--set
-KEY=VALUE ...]``: the virtual pool in its own process (excluded from the stack's CPU): the simulator
+``python -m hindrax_ident.tools.benchmarks.launch_layout pool --socket PATH --ports-file FILE``:
+the virtual pool in its own process (excluded from the stack's CPU): the simulator
 at real-time factor 1 (no ``/clock``, no ground truth: every node on system time), the serial
 emulators on pseudo-terminals, the I2C emulators on an
 :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus` served over a Unix socket
@@ -46,8 +46,6 @@ from hindrax_ident.sim.simulator import Simulator
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 loopback_transport()  # the vehicle's transport (hindrax_drivers.dds_transport)
 
-
-
 #: the workspace's own packages: their share directory is the source package directory in a checkout
 OWN_PACKAGES = ("hindrax_drivers", "hindrax_ident")
 
@@ -69,19 +67,9 @@ class LaunchProcess:
         return self.process.name
 
     @property
-    def package(self) -> str:
-        """The ``pkg`` of the ``<node>``."""
-        return self.process.package
-
-    @property
-    def executable(self) -> str:
-        """The ``exec`` of the ``<node>``."""
-        return self.process.executable
-
-    @property
     def label(self) -> str:
         """The process's name in the benchmark's rows: the node name, else the executable without ``_node``."""
-        return self.name or re.sub(r"_node$", "", self.executable)
+        return self.name or re.sub(r"_node$", "", self.process.executable)
 
     def ros_args(self, write_values: Callable[[Mapping], Path]) -> list[str]:
         """``--ros-args`` as ``ros2 launch`` passes them (:meth:`NodeProcess.ros_arguments`): ``write_values``
@@ -128,8 +116,7 @@ def launch_processes(path: str | Path, arguments: Mapping[str, str] | None = Non
 
 def write_ports_file(path: str | Path, ports: Mapping[str, str]) -> None:
     """Write the pool's pseudo-terminal paths to ``path`` as JSON, atomically: a temporary file in the same folder,
-    then ``os.replace``, so that a reader waiting for ``path`` to exist never reads it empty or half written (the
-    stack benchmark once did, and failed on the empty file)."""
+    then ``os.replace``: a reader waiting for ``path`` never reads it empty or half written."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}-", dir=path.parent)
     try:
@@ -152,23 +139,15 @@ def read_ports_file(path: str | Path) -> dict | None:
 
 
 def _pool(argv: list[str]) -> int:
-
-
     parser = argparse.ArgumentParser(prog="launch_layout pool")
     parser.add_argument("--socket", required=True)
     parser.add_argument("--ports-file", required=True)
-    parser.add_argument("--config", default=str(default_config_path()))
-    parser.add_argument("--set", action="append", default=[], help="KEY=JSON configuration override")
     args = parser.parse_args(argv)
-    overrides = {"simulation.real_time_factor": 1.0}
-    for item in args.set:
-        key, _, value = item.partition("=")
-        overrides[key] = json.loads(value)
-    cfg = load_config(args.config, overrides)
+    cfg = load_config(default_config_path(), {"simulation.real_time_factor": 1.0})
     rclpy.init()
     lock = threading.Lock()
     simulator = Simulator(cfg)
-    truth = getattr(simulator, "config", cfg)  # the simulator's truth (vehicle file + simulation keys), as bringup
+    truth = simulator.config  # the simulator's truth (vehicle file + simulation keys), as bringup
     hardware = VirtualHardware(simulator, truth, seed=cfg.simulation.seed, serial_threads=True)
     hardware.use_clock(time.monotonic)
     node = SimulatorNode(config=cfg, simulator=simulator, pulse_width_source=hardware.pulse_widths_us)

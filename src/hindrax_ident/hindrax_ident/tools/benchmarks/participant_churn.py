@@ -13,30 +13,25 @@ safety process on such a start; the rows say whether it does:
   safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms);
   ``participant_churn_heartbeat_sent_gap_max_ms`` between their send stamps (the sender late, not the delivery).
 
-Run alone: ``python -m hindrax_ident.tools.benchmarks.participant_churn [--quick]
-[--default-transports]`` (prints the
-rows as JSON); ``--default-transports`` runs every process with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and no
-profile (rmw_fastrtps's shared memory + UDP), for comparison.
+Run alone: ``python -m hindrax_ident.tools.benchmarks.participant_churn [--quick]`` (prints the rows
+as JSON).
 """
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import subprocess
-import sys
 import time
 from contextlib import ExitStack, contextmanager
 from typing import Iterator
 
 from diagnostic_msgs.msg import DiagnosticArray
-from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.liveness import HEARTBEAT_NAMES
 from hindrax_drivers.scheduling import HARDWARE_STAND_IN_PRIORITY, set_every_thread
 from hindrax_drivers.testing import child_process, python_executable, wait_until
 
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 
+from . import run_alone
 from .safety import _Layout, running_layout
 
 #: a new participant every PERIOD_S seconds for DURATION_S seconds (QUICK_DURATION_S with --quick)
@@ -188,14 +183,10 @@ class _Watch:
         return rows + [self.tick_gap_row(prefix + "tick_gap_max_ms")]
 
 
-def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
-    """The ``participant_churn_*`` rows of the ``safety`` section (module docstring);
-    ``default_transports``: the comparison run."""
+def run(quick: bool = False) -> list[dict]:
+    """The ``participant_churn_*`` rows of the ``safety`` section (module docstring)."""
     duration_s = QUICK_DURATION_S if quick else DURATION_S
     with running_layout("hindrax-bench-churn-", layout=_VehicleLayout) as lay:
-        if default_transports:
-            lay.env = {k: v for k, v in lay.env.items() if k != PROFILE_ENV}
-            lay.env[RANGE_ENV] = "LOCALHOST"
         watch = _Watch(lay.probe)
         started: list[subprocess.Popen] = []
         with ExitStack() as stack:  # every process started is killed if still running at the end
@@ -220,22 +211,11 @@ def run(quick: bool = False, default_transports: bool = False) -> list[dict]:
             for p in started:
                 p.wait(60)
     what = (f"{k} ROS 2 processes started every {PERIOD_S:g} s for {duration_s:g} s (a 3 s subscriber and "
-            f"`hindrax health` alternately) while armed at 1700 us; safety processes on "
-            + ("Fast DDS's default transports (LOCALHOST)" if default_transports else "the UDP loopback transport")
-            + f"; emulated hardware {'not real-time: ' + refused if refused else 'real-time, above them'}")
+            f"`hindrax health` alternately) while armed at 1700 us; safety processes on the UDP "
+            f"loopback transport; emulated hardware "
+            f"{'not real-time: ' + refused if refused else 'real-time, above them'}")
     return watch.rows("participant_churn_", what, GAP_TARGET_MS, n=k)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the rows alone and print them as JSON."""
-    parser = argparse.ArgumentParser(prog="participant_churn")
-    parser.add_argument("--quick", action="store_true", help=f"{QUICK_DURATION_S:g} s instead of {DURATION_S:g} s")
-    parser.add_argument("--default-transports", action="store_true",
-                        help="LOCALHOST with rmw_fastrtps's shared memory + UDP instead of the vehicle's profile")
-    args = parser.parse_args(argv)
-    print(json.dumps(run(args.quick, args.default_transports), indent=2))
-    return 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(run_alone(run))
