@@ -83,12 +83,11 @@ def main(argv: list[str] | None = None) -> int:
         wall_s[name] = round(time.monotonic() - t0, 1)
         print(f"== {name}: {wall_s[name]:.0f} s", flush=True)
     wall_s["total"] = round(time.monotonic() - start, 1)
-    width = max((len(r["name"]) for r in rows), default=10)
-    print(f"\n{'benchmark':<14} {'measure':<{width}} {'value':>12} unit         target")
-    for r in rows:
-        value = r["value"]
-        shown = f"{value:12.4g}" if isinstance(value, (int, float)) else f"{value!s:>12}"
-        print(f"{r['benchmark']:<14} {r['name']:<{width}} {shown} {r.get('unit', ''):<12} {r.get('target', '')}")
+    table = results_doc.markdown_table(
+        ["benchmark", "measure", "value", "unit", "target", "note"],
+        [[r["benchmark"], r["name"], f"{r['value']:.4g}" if isinstance(r["value"], (int, float)) else r["value"],
+          r.get("unit", ""), r.get("target", ""), r.get("note", "")] for r in rows])
+    print("\n" + table)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     doc = {"date": _dt.datetime.now(_dt.timezone.utc).isoformat(), "machine": platform.platform(),
@@ -96,10 +95,6 @@ def main(argv: list[str] | None = None) -> int:
     (out / "results.json").write_text(json.dumps(doc, indent=2))
     print("\nwall time per section: " + ", ".join(f"{k} {v:.0f} s" for k, v in wall_s.items()))
     print(f"written {out / 'results.json'}")
-    table = results_doc.markdown_table(
-        ["benchmark", "measure", "value", "unit", "target", "note"],
-        [[r["benchmark"], r["name"], f"{r['value']:.4g}" if isinstance(r["value"], (int, float)) else r["value"],
-          r.get("unit", ""), r.get("target", ""), r.get("note", "")] for r in rows])
     results_doc.write_if_asked(
         args, "bench" if not args.only else "bench-" + "-".join(names),
         "Benchmarks (`make bench`)" if not args.only else f"Benchmarks: {', '.join(names)}",
