@@ -25,7 +25,6 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from domain_coordinator import domain_id
-from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.serialization import deserialize_message
 
 from hindrax_drivers.lean_cdr import diagnostic_status_cdr, heartbeat_cdr, read_heartbeat
@@ -34,7 +33,7 @@ from hindrax_drivers.liveness import (SETTLE_S, HeartbeatPublisher, HeartbeatWat
 from hindrax_drivers.testing import ros_context, wait_until
 from hindrax_msgs.msg import Heartbeat
 
-from . import run_alone
+from . import run_alone, spinning
 
 BLOCKS = 5
 BOOT, GUARD_BOOT = 0x0123456789ABCDEF, 0x0FEDCBA987654321
@@ -91,23 +90,20 @@ def cycle_rows(n: int) -> list[dict]:
         rx.create_subscription(Heartbeat, "heartbeat_beat", count(read_heartbeat), heartbeat_qos(),
                                raw=True)
         build = {"status": _status_bytes, "heartbeat": _heartbeat_bytes}
-        ex = EventsExecutor(context=rx_ctx)
-        ex.add_node(rx)
-        wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30,
-                   lambda: ex.spin_once(timeout_sec=0.05), "matched")
-        for _ in range(BLOCKS):
-            for kind, pub in pubs.items():
-                got["n"] = 0
-                t0 = time.process_time()
-                for i in range(1, n + 1):
-                    pub.publish(build[kind](i))
-                    target = i
-                    while got["n"] < target:
-                        ex.spin_once(timeout_sec=1.0)
-                per[kind].append((time.process_time() - t0) / n * 1e6)
-        ex.shutdown()
+        with spinning(rx_ctx, rx, events=True, timeout_s=0.05) as (ex, spin):
+            wait_until(lambda: all(p.get_subscription_count() for p in pubs.values()), 30, spin,
+                       "matched")
+            for _ in range(BLOCKS):
+                for kind, pub in pubs.items():
+                    got["n"] = 0
+                    t0 = time.process_time()
+                    for i in range(1, n + 1):
+                        pub.publish(build[kind](i))
+                        target = i
+                        while got["n"] < target:
+                            ex.spin_once(timeout_sec=1.0)
+                    per[kind].append((time.process_time() - t0) / n * 1e6)
         tx.destroy_node()
-        rx.destroy_node()
     return _cpu_rows("cycle", per, n,
                      "process CPU per beat built, published, delivered to a second participant "
                      "through the EventsExecutor and read ({k}), median of {blocks} alternating "
@@ -133,29 +129,27 @@ def graph_rows(seconds: float) -> list[dict]:
         rx = rclpy.create_node("esc", context=ctx)
         beat = HeartbeatPublisher(peer, "supervisor")
         watch = HeartbeatWatch(rx, "supervisor", lambda _b: None, lambda: False)
-        ex = EventsExecutor(context=ctx)
-        ex.add_node(rx)
-        wait_until(lambda: not watch.check() and watch.identity.seq, 30,
-                   lambda: (beat.publish(True, "ok"), ex.spin_once(timeout_sec=0.04)), "the peer trusted")
-        def ticks(duration_s: float) -> tuple[int, float]:  # a 25 Hz tick: beat, deliver, check
-            t0, checks = time.monotonic(), 0
-            while time.monotonic() - t0 < duration_s:
-                beat.publish(True, "ok")
-                ex.spin_once(timeout_sec=0.04)
-                watch.check()
-                checks += 1
-                time.sleep(max(0.0, t0 + checks * 0.04 - time.monotonic()))
-            return checks, time.monotonic() - t0
-        ticks(SETTLE_S + 0.1)  # past the discovery events' settle window
-        start = watch.publishers.queries
-        checks, elapsed = ticks(seconds)
-        queries = watch.publishers.queries - start
-        t1 = time.thread_time_ns()
-        for _ in range(200):
-            publisher_node_names(rx, "supervisor/heartbeat")
-        query_us = (time.thread_time_ns() - t1) / 200 / 1e3
-        ex.shutdown()
-        rx.destroy_node()
+        with spinning(ctx, rx, events=True, timeout_s=0.04) as (_ex, spin):
+            wait_until(lambda: not watch.check() and watch.identity.seq, 30,
+                       lambda: (beat.publish(True, "ok"), spin()), "the peer trusted")
+
+            def ticks(duration_s: float) -> tuple[int, float]:  # a 25 Hz tick: beat, deliver, check
+                t0, checks = time.monotonic(), 0
+                while time.monotonic() - t0 < duration_s:
+                    beat.publish(True, "ok")
+                    spin()
+                    watch.check()
+                    checks += 1
+                    time.sleep(max(0.0, t0 + checks * 0.04 - time.monotonic()))
+                return checks, time.monotonic() - t0
+            ticks(SETTLE_S + 0.1)  # past the discovery events' settle window
+            start = watch.publishers.queries
+            checks, elapsed = ticks(seconds)
+            queries = watch.publishers.queries - start
+            t1 = time.thread_time_ns()
+            for _ in range(200):
+                publisher_node_names(rx, "supervisor/heartbeat")
+            query_us = (time.thread_time_ns() - t1) / 200 / 1e3
         peer.destroy_node()
     return [{"name": "heartbeat_graph_queries_per_s", "value": queries / elapsed, "unit": "1/s",
              "note": f"one watch checked {checks / elapsed:.0f} times a second with its peer beating, no graph "

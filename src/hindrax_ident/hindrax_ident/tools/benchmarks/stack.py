@@ -56,7 +56,7 @@ from rclpy.action import ActionClient
 from rclpy.executors import ShutdownException, SingleThreadedExecutor, TimeoutException
 
 from hindrax_drivers.action_goal import GoalSender
-from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.config import default_config_path
 from hindrax_drivers.launch_xml import write_parameter_file
 from hindrax_drivers.lean_cdr import cdr_decoder, type_name_of
 from hindrax_drivers.recording.reader import BagReader
@@ -354,14 +354,11 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                                              stderr=subprocess.STDOUT)
             ports = wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and read_ports_file(ports_file), 60,
                                None, "pool process ready")
-            params = str(default_config_path())
             # the bench's devices: the serial emulators' pseudo-terminals, a short arming time, and the emulated
             # PCA9685's oscillator, exactly nominal: calibrated (the ESC refuses to arm otherwise). Vehicle keys,
             # so every process may get them: a node ignores the keys it does not declare.
             bench = ["-p", f"sensors.dvl75.port:={ports['dvl75']}", "-p", f"sensors.ping1d.port:={ports['ping1d']}",
-                     "-p", "esc.arming_time_s:=1.0"]
-            if load_config(params).esc.oscillator_calibrated is not None:  # a required key: always (file validated)
-                bench += ["-p", "esc.oscillator_calibrated:=true"]
+                     "-p", "esc.arming_time_s:=1.0", "-p", "esc.oscillator_calibrated:=true"]
             wrap = ["-m", "hindrax_ident.tools.benchmarks.launch_node"]  # no simulator here
             (tmp / "params").mkdir(exist_ok=True)
             values_file = functools.partial(write_parameter_file, directory=tmp / "params")
