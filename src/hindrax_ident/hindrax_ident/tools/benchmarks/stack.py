@@ -212,7 +212,13 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
         hw = graph.hardware
         names = {id(n): name for name, n in graph.nodes.items()}
 
-        def run_handler(handler: Any, node: Any) -> None:
+        def spin_once(timeout_sec: float | None = None) -> bool:
+            """Run one ready callback (waiting up to ``timeout_sec``), its thread CPU counted to
+            its node; False when none came."""
+            try:
+                handler, _entity, node = ex.wait_for_ready_callbacks(timeout_sec=timeout_sec)
+            except (TimeoutException, ShutdownException):
+                return False
             name = names.get(id(node), node.get_name() if node is not None else "(executor)")
             current[0] = name
             t0 = time.thread_time()
@@ -221,25 +227,15 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             current[0] = None
             if handler.exception() is not None:
                 raise handler.exception()
+            return True
 
-        def spin_until_idle(max_callbacks: int = 100_000) -> int:
-            for n in range(max_callbacks):
-                try:
-                    handler, _entity, node = ex.wait_for_ready_callbacks(0.0)
-                except (TimeoutException, ShutdownException):
-                    return n
-                run_handler(handler, node)
-            return max_callbacks
-
-        def ex_spin_once(timeout_sec: float | None = None) -> None:
-            try:
-                handler, _entity, node = ex.wait_for_ready_callbacks(timeout_sec=timeout_sec)
-            except (TimeoutException, ShutdownException):
-                return
-            run_handler(handler, node)
+        def spin_until_idle() -> None:  # as Graph.spin_until_idle, through spin_once
+            for _ in range(100_000):
+                if not spin_once(0.0):
+                    return
 
         graph.spin_until_idle = spin_until_idle
-        ex.spin_once = ex_spin_once
+        ex.spin_once = spin_once
         sim_node = graph.nodes["simulator"]
         advance = sim_node.advance_clock_period
 
