@@ -41,6 +41,16 @@ def spin_for(duration_s: float, spin: Callable[[], None] | None = None) -> tuple
     return time.process_time() - cpu0, time.monotonic() - start
 
 
+def call(client: Any, request: Any, spin: Callable[[], None] | None = None,
+         timeout_s: float = 10.0) -> Any:
+    """The answer to ``request`` from the service of rclpy ``client``, waited for up to
+    ``timeout_s`` (``spin``: one executor spin between checks; None: another thread spins).
+    Raises ConditionTimeout."""
+    fut = client.call_async(request)
+    wait_until(fut.done, timeout_s, spin, f"{client.srv_name} answer")
+    return fut.result()
+
+
 def run_alone(run: Callable[[bool], list[dict]], argv: Sequence[str] | None = None) -> int:
     """Run one benchmark module alone (``python -m hindrax_ident.tools.benchmarks.<name>
     [--quick]``) on the vehicle's loopback transport: print the rows of ``run(quick)`` as JSON;

@@ -36,7 +36,7 @@ from hindrax_drivers.testing import SafetyHeartbeats, config_parameters, ros_con
 from hindrax_drivers.transport.emulated_i2c import EmulatedI2CBus
 from hindrax_msgs.srv import SetArmed
 
-from . import spinning
+from . import call, spinning
 from .safety import vehicle_scheduling
 
 
@@ -129,10 +129,9 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
             wait_until(lambda: pub.get_subscription_count() > 0 and arm.service_is_ready()
                        and not esc.heartbeat_refusal() and esc.arming_remaining_s() == 0.0, 10,
                        spin, "graph and the ESC's time at neutral")
-            fut = arm.call_async(SetArmed.Request(arm=True))
-            wait_until(fut.done, 5, spin, "armed")
-            if not fut.result().success:
-                raise RuntimeError(f"the ESC refused to arm: {fut.result().message}")
+            res = call(arm, SetArmed.Request(arm=True), spin, 5)
+            if not res.success:
+                raise RuntimeError(f"the ESC refused to arm: {res.message}")
             state = {"sent": 0}
 
             def send() -> None:

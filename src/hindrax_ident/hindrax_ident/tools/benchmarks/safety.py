@@ -109,7 +109,7 @@ from hindrax_drivers.config import default_config_path, load_config
 from hindrax_msgs.msg import Heartbeat, ThrusterPwm
 from hindrax_msgs.srv import SetArmed
 
-from . import spin_for
+from . import call, spin_for
 from .launch_layout import launch_processes, package_share
 from .machine import proc_cpu_s
 
@@ -172,11 +172,6 @@ def _rig(ctx, sim_time: bool = False):
             r["clock"].publish(c)
         ex.spin_once(timeout_sec=timeout_s)
 
-    def call(client, request):
-        fut = client.call_async(request)
-        wait_until(fut.done, 10, spin, "service answer")
-        return fut.result()
-
     def command(width: float = 1700.0) -> None:
         r["cmd"].publish(ThrusterPwm(pulse_width_us=[width] * 8, armed=True))
 
@@ -184,17 +179,17 @@ def _rig(ctx, sim_time: bool = False):
         # the previous path's disarm (and any supervisor disarm request) has landed before the reset and re-arm
         emu.watch = False
         if esc.armed:  # the watchdog neutralises but stays armed
-            call(r["arm"], SetArmed.Request(arm=False))
+            call(r["arm"], SetArmed.Request(arm=False), spin)
         settled = lambda: not esc.armed and not sup.esc_armed and (  # noqa: E731
             sup.disarm_future is None or sup.disarm_future.done())
         wait_until(settled, 10, spin, "previous disarm settled")
         t_quiet = time.monotonic() + 0.3  # > DISARM_RETRY_S: no supervisor retry still on its way
         wait_until(lambda: time.monotonic() > t_quiet and settled(), 10, spin, "previous disarm settled")
-        call(r["reset"], Trigger.Request())
+        call(r["reset"], Trigger.Request(), spin)
         emu.watch, emu.neutral_at = False, None
         wait_until(lambda: esc.neutral_confirmed_time is not None and esc.arming_remaining_s() == 0.0
                    and not esc.heartbeat_refusal(), 20, spin, "ESC ready")
-        res = call(r["arm"], SetArmed.Request(arm=True))
+        res = call(r["arm"], SetArmed.Request(arm=True), spin)
         if not res.success:
             raise RuntimeError(f"arming refused: {res.message}")
 
@@ -210,7 +205,7 @@ def _rig(ctx, sim_time: bool = False):
 
     wait_until(lambda: r["cmd"].get_subscription_count() > 0 and r["arm"].service_is_ready()
                and r["estop"].service_is_ready() and sup.esc_client.service_is_ready(), 20, spin, "graph ready")
-    r.update(spin=spin, call=call, command=command, armed_at_1700=armed_at_1700,
+    r.update(spin=spin, command=command, armed_at_1700=armed_at_1700,
              until_neutral=until_neutral)
     return r
 

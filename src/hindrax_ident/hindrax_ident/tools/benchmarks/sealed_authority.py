@@ -36,7 +36,7 @@ from rclpy.executors import SingleThreadedExecutor
 
 from hindrax_msgs.srv import SignedTrigger
 
-from . import run_alone
+from . import call, run_alone
 from .safety import running_layout
 
 #: arm requests of each kind (unsigned, wrong key, replayed); with ``--quick``
@@ -64,13 +64,6 @@ def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
              "unit": f"of {len(got)} requests", "target": 0,
              "note": f"arm requests to the gateway from the topside, {KINDS.get(kind, kind)}; freshly signed arms "
                      "before and after them were accepted"} for kind, got in answers.items()]
-
-
-def _arm(executor, client, request):
-    """Send ``request`` through ``client`` and wait for the answer, spinning ``executor``."""
-    future = client.call_async(request)
-    wait_until(future.done, WAIT_S, lambda: executor.spin_once(timeout_sec=0.05), "gateway answer")
-    return future.result()
 
 
 @contextmanager
@@ -114,8 +107,9 @@ def run(quick: bool = False) -> list[dict]:
                 node = rclpy.create_node("bench_operator", context=ctx)
                 executor = SingleThreadedExecutor(context=ctx)
                 executor.add_node(node)
+                spin = lambda: executor.spin_once(timeout_sec=0.05)  # noqa: E731
                 client = node.create_client(SignedTrigger, f"/{vehicle}/arm")
-                wait_until(client.service_is_ready, WAIT_S, lambda: executor.spin_once(timeout_sec=0.1),
+                wait_until(client.service_is_ready, WAIT_S, spin,
                            f"/{vehicle}/arm on the topside")
                 signer = Signer(key, vehicle)
                 wait_until(lambda: lay.arm_client.service_is_ready() and lay.reset_client.service_is_ready(),
@@ -129,7 +123,7 @@ def run(quick: bool = False) -> list[dict]:
                     def attempt() -> bool:
                         lay.call(lay.reset_client, lay.Trigger.Request())
                         req = signer.sign_message("arm", SignedTrigger.Request())
-                        if _arm(executor, client, req).success:
+                        if call(client, req, spin, WAIT_S).success:
                             got.append(req)
                         return bool(got)
                     wait_until(attempt, WAIT_S, None, "a signed arm accepted")
@@ -140,10 +134,11 @@ def run(quick: bool = False) -> list[dict]:
                 other = Signer(bytes(32), vehicle)
                 answers = {"unsigned": [], "wrong_key": [], "replayed": []}
                 for _ in range(n):
-                    answers["unsigned"].append(_arm(executor, client, SignedTrigger.Request()).success)
+                    unsigned = SignedTrigger.Request()
+                    answers["unsigned"].append(call(client, unsigned, spin, WAIT_S).success)
                     wrong = other.sign_message("arm", SignedTrigger.Request())
-                    answers["wrong_key"].append(_arm(executor, client, wrong).success)
-                    answers["replayed"].append(_arm(executor, client, accepted).success)
+                    answers["wrong_key"].append(call(client, wrong, spin, WAIT_S).success)
+                    answers["replayed"].append(call(client, accepted, spin, WAIT_S).success)
                     if any(v[-1] for v in answers.values()):
                         lay.call(lay.arm_client, lay.SetArmed.Request(arm=False))
                 signed_arm()  # the path still worked after them

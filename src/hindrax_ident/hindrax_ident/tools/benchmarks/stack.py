@@ -70,7 +70,7 @@ from hindrax_msgs.srv import SetArmed
 from .launch_layout import launch_processes, package_share, read_ports_file
 from .actuation import wrench_to_registers
 from .launch_node import SOCKET_ENV, TOPOLOGY_ENV
-from . import spin_for
+from . import call, spin_for
 from .machine import REFERENCE_NBODY_CPU_S, nbody_cpu_s, proc_cpu_s, thread_cpu_s
 from .recorder import subscribe_recorder_counts
 
@@ -336,18 +336,15 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
     layout = launch_processes(launch_file, {"output_dir": str(bag_root)})
     procs: dict[str, subprocess.Popen] = {}
     extra: dict[str, subprocess.Popen] = {}  # the participant probes (PARTICIPANT_PROBES)
-    logs: dict[str, Any] = {}
     out: dict = {"phases": {}, "launch_file": str(launch_file),
                  "processes": {lp.label: {"prefix": list(lp.process.launch_prefix),
                                           "env": dict(lp.process.env)} for lp in layout}}
     with domain_id() as did:
         env = child_env(ROS_DOMAIN_ID=str(did))
         try:
-            logs["pool"] = open(tmp / "pool.log", "w")
-            pool_argv = [py, "-m", "hindrax_ident.tools.benchmarks.launch_layout", "pool",
-                         "--socket", sock, "--ports-file", str(ports_file)]
-            procs["pool"] = subprocess.Popen(pool_argv, env=env, stdout=logs["pool"],
-                                             stderr=subprocess.STDOUT)
+            pool = ["-m", "hindrax_ident.tools.benchmarks.launch_layout", "pool", "--socket", sock,
+                    "--ports-file", str(ports_file)]
+            procs["pool"] = _start(tmp, "pool", [py, *pool], env)
             ports = wait_until(lambda: _check_alive({"pool": procs["pool"]}, tmp) and read_ports_file(ports_file), 60,
                                None, "pool process ready")
             # the bench's devices: the serial emulators' pseudo-terminals, a short arming time, and the emulated
@@ -361,22 +358,17 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
             for lp in layout:
                 if lp.label in procs:
                     raise RuntimeError(f"{launch_file.name}: two processes named {lp.label}")
-                logs[lp.label] = open(tmp / f"{lp.label}.log", "w")
                 # the launch file's launch-prefix and environment too (the safety processes' real-time priority,
                 # docs/deployment.md §1; the DDS transport, hindrax_drivers.dds_transport)
-                procs[lp.label] = subprocess.Popen([*lp.process.launch_prefix, py, *wrap, lp.module,
-                                                    *lp.ros_args(values_file), *bench],
-                                                   env=dict(env, **dict(lp.process.env), **{
-                                                       SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}),
-                                                   stdout=logs[lp.label],
-                                                   stderr=subprocess.STDOUT)
+                argv = [*lp.process.launch_prefix, py, *wrap, lp.module, *lp.ros_args(values_file),
+                        *bench]
+                own = {**dict(lp.process.env), SOCKET_ENV: sock, TOPOLOGY_ENV: str(tmp)}
+                procs[lp.label] = _start(tmp, lp.label, argv, {**env, **own})
             (tmp / "probes.json").write_text(json.dumps({"processes": {  # no publishers
                 name: _one_node(name, [], [_endpoint(t, ty, raw=True) for t, ty in topics])
                 for name, topics in PARTICIPANT_PROBES.items()}}))
             for name in PARTICIPANT_PROBES:  # what one more process costs (not in the totals)
-                logs[name] = open(tmp / f"{name}.log", "w")
-                extra[name] = subprocess.Popen(_skeleton_argv(tmp / "probes.json", name), env=env,
-                                               stdout=logs[name], stderr=subprocess.STDOUT)
+                extra[name] = _start(tmp, name, _skeleton_argv(tmp / "probes.json", name), env)
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
                 counts, lock = subscribe_recorder_counts(probe, 50)
@@ -405,10 +397,9 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                 answer = [""]
 
                 def try_arm() -> bool:
-                    fut = arm.call_async(SetArmed.Request(arm=True))
-                    wait_until(fut.done, 10, spin, "arm answer")
-                    answer[0] = fut.result().message
-                    return fut.result().armed
+                    res = call(arm, SetArmed.Request(arm=True), spin)
+                    answer[0] = res.message
+                    return res.armed
 
                 try:
                     wait_until(try_arm, 30, spin, "armed")
@@ -455,14 +446,18 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                 probe.destroy_node()
         finally:
             _stop([*reversed(procs.values()), *extra.values()])
-            for f in logs.values():
-                f.close()
     bags = sorted(p for p in bag_root.iterdir() if p.is_dir()) if bag_root.exists() else []
     if len(bags) != 1:  # one recorder start (nothing respawns here)
         raise RuntimeError(f"expected one bag under {bag_root}, found {[b.name for b in bags]}")
     out["bag"] = str(bags[0])
     _bag_rates(out)
     return out
+
+
+def _start(tmp: Path, label: str, argv: list[str], env: dict) -> subprocess.Popen:
+    """``argv`` started with ``env``, its output in ``tmp/<label>.log``."""
+    with open(tmp / f"{label}.log", "w") as log:
+        return subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT)
 
 
 def _stop(procs: list[subprocess.Popen]) -> None:
@@ -622,9 +617,7 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
             for label in spec:
                 prefix, extra = (envs or {}).get(label, ([], {}))
                 argv = [*prefix, *_skeleton_argv(tmp / "spec.json", label)]
-                procs[label] = subprocess.Popen(argv, env=dict(env, **extra),
-                                                stdout=(tmp / f"{label}.log").open("w"),
-                                                stderr=subprocess.STDOUT)
+                procs[label] = _start(tmp, label, argv, dict(env, **extra))
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
                 stream = _wrench_stream(probe)
