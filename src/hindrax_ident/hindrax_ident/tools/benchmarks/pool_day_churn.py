@@ -29,9 +29,7 @@ from __future__ import annotations
 import os
 import subprocess
 from contextlib import ExitStack
-from pathlib import Path
 
-import yaml
 from domain_coordinator import domain_id
 from hindrax_drivers.dds_transport import PROFILE_ENV, RANGE_ENV
 from hindrax_drivers.testing import child_process
@@ -60,13 +58,12 @@ def run(quick: bool = False) -> list[dict]:
     trials = QUICK_TRIALS if quick else TRIALS
     exits: list[int] = []
     with running_layout("hindrax-bench-poolday-", layout=_VehicleLayout) as lay, domain_id() as topside:
-        vehicle = yaml.safe_load(Path(lay.config).read_text())["/**"]["ros__parameters"]["vehicle"]["name"]
         watch = _Watch(lay.probe)
         lay.ensure()
         internal_default = {k: v for k, v in lay.env.items() if k != PROFILE_ENV} | {RANGE_ENV: "LOCALHOST"}
         topside_env = internal_default | {"ROS_DOMAIN_ID": str(topside)}
         health = [lay.py, "-m", "hindrax_ident.tools.cli", "health", "--quiet", "--timeout", "3"]
-        topics = topside_topics(vehicle)
+        topics = topside_topics(lay.vehicle)
         quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
         with gateway_running(lay, topside):
             lay.armed_at_1700()

@@ -74,7 +74,7 @@ from hypothesis import strategies as st
 
 from hindrax_drivers.config import default_config_path, load_config
 
-from . import run_alone, spinning
+from . import run_alone, spin_for, spinning
 
 #: Fuzzed inputs per parser (full run); ``quick``: a tenth.
 FUZZ_INPUTS = 100_000
@@ -372,7 +372,7 @@ def _dvl_faults() -> list[dict]:
     return out
 
 
-def _fault_row(name: str, detect_s: float, recover_s: float | None, note: str) -> dict:
+def _fault_row(name: str, detect_s: float, recover_s: float, note: str) -> dict:
     return {"name": name, "detect_s": detect_s, "recover_s": recover_s, "note": note}
 
 
@@ -394,8 +394,7 @@ def _icm_faults() -> list[dict]:
             failures, published = node.diag.counts().get("i2c_failure", 0), node.diag.total_published
             bus.disconnected = True
             detect = _until(lambda: node.diag.counts().get("i2c_failure", 0) > failures, spin, 5, "I2C failure")
-            t_end = time.monotonic() + 0.3 - detect
-            _until(lambda: time.monotonic() >= t_end, spin, 5, "burst")
+            spin_for(0.3 - detect, spin)  # the rest of the burst
             published = node.diag.total_published
             bus.disconnected = False
             recover = _until(lambda: node.diag.total_published > published, spin, 5, "data after the burst")
@@ -451,8 +450,7 @@ def _ms5837_faults() -> list[dict]:
             emu.power_cycle()
             t0 = time.monotonic()
             detect = _until(lambda: node.diag.status().level == DiagnosticStatus.ERROR, spin, 10, "outage ERROR")
-            t_end = t0 + 0.5
-            _until(lambda: time.monotonic() >= t_end, spin, 5, "outage")
+            spin_for(t0 + 0.5 - time.monotonic(), spin)  # the rest of the outage
             published = node.diag.total_published
             bus.disconnected = False
             recover = _until(lambda: node.diag.total_published > published, spin, 10, "pressure after the outage")
@@ -462,7 +460,7 @@ def _ms5837_faults() -> list[dict]:
 
 
 def fault_timings() -> list[dict]:
-    """One row per injected fault: detect_s, recover_s (None when there is no recovery), note."""
+    """One row per injected fault: detect_s, recover_s, note."""
     return _dvl_faults() + _icm_faults() + _ms5837_faults()
 
 
@@ -477,8 +475,8 @@ def run(quick: bool = False) -> list[dict]:
     for f in fault_timings():
         rows.append({"name": f"{f['name']}: time to detect", "value": f["detect_s"] * 1e3, "unit": "ms",
                      "note": f["note"]})
-        if f["recover_s"] is not None:
-            rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3, "unit": "ms"})
+        rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3,
+                     "unit": "ms"})
     return rows
 
 

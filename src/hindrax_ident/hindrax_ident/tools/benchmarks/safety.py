@@ -468,7 +468,6 @@ def _config_file(tmp, feed: bool = True) -> str:
         params["esc"]["output_enable_feed_timeout_s"] = WATCHDOG_TIMEOUT_S
     path = tmp / "vehicle.yaml"
     path.write_text(yaml.safe_dump(doc))
-    load_config(path)  # the bench's file must validate like any vehicle file
     return str(path)
 
 
@@ -479,6 +478,7 @@ class _Layout:
 
         self.ctx, self.tmp, self.hw = ctx, tmp, hw
         self.config = _config_file(tmp, feed=self.feed)
+        self.vehicle = load_config(self.config).vehicle.name  # validated like any vehicle file
         # unbuffered logs: a failure prints the processes' last lines while they still run
         self.env = child_env(ROS_DOMAIN_ID=str(did), RCUTILS_LOGGING_BUFFERED_STREAM="0", PYTHONUNBUFFERED="1",
                              **{SOCKET_ENV: hw.server.path}, **self.unit_env())

@@ -27,7 +27,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import rclpy
-import yaml
 from domain_coordinator import domain_id
 from hindrax_drivers.operator_signing import KEYS_DIR_ENV, Signer, create_key, load_key
 from hindrax_drivers.proc_sockets import child_pids, exposed, udp_sockets
@@ -95,7 +94,7 @@ def run(quick: bool = False) -> list[dict]:
     n = QUICK_REQUESTS if quick else REQUESTS
     with running_layout("hindrax-bench-authority-") as lay, domain_id() as topside, \
             tempfile.TemporaryDirectory(prefix="hindrax-bench-keys-") as keys:
-        vehicle = yaml.safe_load(Path(lay.config).read_text())["/**"]["ros__parameters"]["vehicle"]["name"]
+        vehicle = lay.vehicle
         key = load_key(create_key(Path(keys) / f"{vehicle}.key"))
         lay.ensure()
         with gateway_running(lay, topside, keys) as gateway:
