@@ -47,7 +47,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import rclpy
 from domain_coordinator import domain_id
@@ -143,39 +143,28 @@ def _wrench_msg(stamp: Any) -> Any:
     return m
 
 
-class _SwitchedStream(dict):
-    """``{"on": bool}`` for :func:`_running_then_idle` that also starts and cancels ``timer``."""
-
-    def __init__(self, timer: Any) -> None:
-        super().__init__(on=False)
-        self.timer = timer
-
-    def __setitem__(self, key: str, value: bool) -> None:
-        super().__setitem__(key, value)
-        if key == "on":
-            self.timer.reset() if value else self.timer.cancel()
-
-
-def _wrench_stream(probe: Any) -> _SwitchedStream:
-    """The pilot's 50 Hz wrench stream from ``probe``, off until switched on: its timer runs only
-    while it is on, so the bench wakes no 50 Hz timer in the running phase."""
+def _wrench_stream(probe: Any) -> Callable[[bool], None]:
+    """The pilot's 50 Hz wrench stream from ``probe``, off until switched on (the returned
+    ``switch(on)``): its timer runs only while it is on, so the bench wakes no 50 Hz timer in the
+    running phase."""
     wrench = probe.create_publisher(WrenchStamped, "wrench", 10)
-    return _SwitchedStream(probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
-        _wrench_msg(probe.get_clock().now().to_msg())), autostart=False))
+    timer = probe.create_timer(1.0 / WRENCH_RATE_HZ, lambda: wrench.publish(
+        _wrench_msg(probe.get_clock().now().to_msg())), autostart=False)
+    return lambda on: timer.reset() if on else timer.cancel()
 
 
-def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin: Any, spin_idle: Any,
-                       what: str) -> None:
+def _running_then_idle(probe: Any, action: Any, switch: Callable[[bool], None], window: Any,
+                       spin: Any, spin_idle: Any, what: str) -> None:
     """The measured sequence of both layouts: the surge goal (sent through
     :class:`~hindrax_drivers.action_goal.GoalSender`, which survives a lost goal or cancel response), 3 s of
     warm-up, the "running" window, cancel, 2 s of warm-up with the pilot's wrench stream on, the "idle" window.
 
-    stream: {"on": bool} switches the wrench stream; window(label) measures one window; spin / spin_idle: one
+    switch(on) switches the wrench stream; window(label) measures one window; spin / spin_idle: one
     executor spin while running / while idle. Raises
     RuntimeError when the goal is rejected, or when it ended before the running window did (the window would not
     have measured a running campaign)."""
     goals = GoalSender(probe, action, "run_identification")
-    stream["on"] = False
+    switch(False)
     handle = goals.send(RunIdentification.Goal(dofs=["surge"], levels_per_dof=3), spin, 30)
     if not handle.accepted:
         raise RuntimeError(f"{what}: the surge goal was rejected")
@@ -191,7 +180,7 @@ def _running_then_idle(probe: Any, action: Any, stream: dict, window: Any, spin:
         raise RuntimeError(f"{what}: the surge goal ended (status {goals.status(handle)}) during the running "
                            f"window: {why}")
     wait_until(lambda: goals.cancel(handle), 30, spin, "goal cancel")
-    stream["on"] = True
+    switch(True)
     spin_for(2.0, spin_idle)
     window("idle")
     goals.destroy()
@@ -314,7 +303,8 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             out["phases"][phase] = {"per_node": {k: v / wall for k, v in per.items()}, "stack": stack / wall,
                                     "rates": rates, "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall}
 
-        _running_then_idle(probe, action, stream, window, spin, spin_with_wrench, "in-process")
+        _running_then_idle(probe, action, lambda on: stream.update(on=on), window, spin,
+                           spin_with_wrench, "in-process")
         out["types"] = {pub.topic_name: type_name_of(pub.msg_type) for n in graph.nodes.values()
                         for pub in n.publishers}
         out["dropped"] = recorder._writer.dropped
@@ -374,7 +364,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                 counts, lock = subscribe_recorder_counts(probe, 50)
                 arm = probe.create_client(SetArmed, "esc/set_armed")
                 action = ActionClient(probe, RunIdentification, "run_identification")
-                stream = _wrench_stream(probe)
+                switch = _wrench_stream(probe)
                 ex = SingleThreadedExecutor(context=ctx)
                 ex.add_node(probe)
                 spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
@@ -436,7 +426,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                     out["phases"][phase] = {"windows": results}
 
                 try:
-                    _running_then_idle(probe, action, stream, window, spin, spin, "launch layout")
+                    _running_then_idle(probe, action, switch, window, spin, spin, "launch layout")
                 except RuntimeError as exc:  # what the safety chain said (a disarm, a trip, a stale heartbeat)
                     raise RuntimeError(f"{exc}\n{_safety_log_lines(tmp, list(procs))}") from exc
                 # each node's declared endpoints, recorder subscriptions made: the skeleton's plan
@@ -620,7 +610,7 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
                 procs[label] = _start(tmp, label, argv, dict(env, **extra))
             with ros_context(domain_id=did) as ctx:
                 probe = rclpy.create_node("bench_probe", context=ctx)
-                stream = _wrench_stream(probe)
+                switch = _wrench_stream(probe)
                 ex = SingleThreadedExecutor(context=ctx)
                 ex.add_node(probe)
                 spin = lambda: ex.spin_once(timeout_sec=0.05)  # noqa: E731
@@ -637,7 +627,7 @@ def _skeleton(spec: dict, phases: list[tuple[str, int]], duration_s: float,
                     if k:
                         for p in procs.values():
                             p.send_signal(signal.SIGUSR2)
-                    stream["on"] = phase == stream_phase
+                    switch(phase == stream_phase)
                     spin_for(2.0, spin)
                     wins = []
                     for _ in range(n):
@@ -1045,33 +1035,25 @@ def baseline_rows(rows: list[dict], before: list[dict], ref: str) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m hindrax_ident.tools.benchmarks.stack``: the stack benchmark alone, with the
-    options ``make bench`` does not take (``--help``); prints the rows (as JSON too: ``--json``)."""
+    options ``make bench`` does not take (``--help``); prints the rows as JSON (to a file too:
+    ``--json``). :func:`baseline_launch` runs a baseline commit's this way."""
     parser = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.stack",
                                      description="The Pi budget: CPU of the vehicle graph in the launch layout "
                                                  "(one process per <node> of pool_test.launch.xml) and in one "
                                                  "process. CPU = process CPU time / wall time.")
-    parser.add_argument("--layouts", default="inproc,launch", help="inproc, launch or both (default both)")
+    parser.add_argument("--layouts", nargs="+", choices=("inproc", "launch"),
+                        default=("inproc", "launch"))
     parser.add_argument("--windows", type=int, default=None,
                         help=f"running windows of the launch layout (default {RUNNING_WINDOWS}); rows are medians")
     parser.add_argument("--window-s", type=float, default=None, help="window length, s (default 10)")
     parser.add_argument("--no-baselines", action="store_true",
                         help="skip the bare rclpy baseline and the launch's skeleton")
-    parser.add_argument("--baseline", default=None, metavar="GIT_REF",
-                        help="also measure the launch layout of this commit first, in the same run (a detached git "
-                             "worktree, this venv, PYTHONPATH at it): rows ..._vs_baseline")
     parser.add_argument("--quick", action="store_true", help="one 8 s window")
     parser.add_argument("--json", type=Path, default=None, help="also write the rows to this file")
     args = parser.parse_args(argv)
-    layouts = tuple(x for x in args.layouts.split(",") if x)
-    bad = [x for x in layouts if x not in ("inproc", "launch")]
-    if bad or not layouts:
-        parser.error(f"--layouts {args.layouts!r}: choose from inproc, launch")
-    rows = run(quick=args.quick, layouts=layouts, windows=args.windows, duration_s=args.window_s,
-               baselines=not args.no_baselines, baseline=args.baseline)
-    width = max(len(r["name"]) for r in rows)
-    for r in rows:
-        print(f"{r['name']:<{width}} {r['value']:10.4g} {r.get('unit', ''):<12} {r.get('target', ''):<6} "
-              f"{r.get('note', '')}")
+    rows = run(quick=args.quick, layouts=tuple(args.layouts), windows=args.windows,
+               duration_s=args.window_s, baselines=not args.no_baselines)
+    print(json.dumps(rows, indent=2))
     if args.json:
         args.json.write_text(json.dumps(rows, indent=2))
     return 0
