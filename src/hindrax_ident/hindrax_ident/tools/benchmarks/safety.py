@@ -963,43 +963,6 @@ def _guard_without_line(lay: _Layout, hw: _Hardware) -> tuple[int, int, str, flo
     return refused, attempts, answer, granted_s
 
 
-def _process_rows(repeats: int) -> dict[str, list]:
-    times: dict[str, list] = {k: [] for k in (
-        "supervisor_killed_outputs_stopped", "supervisor_hung_outputs_stopped", "esc_killed_oe_asserted",
-        "esc_hung_oe_asserted", "i2c_outage_state_unknown", "clock_step_back_detected")}
-    times["guard_cpu_percent"] = []
-    with running_layout("hindrax-bench-safety-") as lay:
-        hw = lay.hw
-        # the guard's cost while the vehicle is armed and commanded (50 Hz ESC state, 20 Hz heartbeats)
-        lay.armed_at_1700()
-        times["guard_cpu_percent"] = [_cpu_share(lay.procs["guard"].pid, 5.0 if repeats <= 3 else 10.0)]
-        for _ in range(repeats):
-            # the supervisor killed / hung until the outputs stop, then the ESC until /OE is high
-            for who, what, at in (("supervisor", "outputs_stopped", lambda: hw.stopped_at),
-                                  ("esc", "oe_asserted", lambda: hw.oe_at)):
-                for kind in ("killed", "hung"):
-                    lay.armed_at_1700()
-                    t0 = time.monotonic()
-                    if kind == "killed":
-                        lay.kill(who)
-                    else:
-                        lay.signal(who, _signal.SIGSTOP)
-                    wait_until(lambda: at() is not None, 10, None, what)
-                    times[f"{who}_{kind}_{what}"].append(at() - t0)
-                    if kind == "hung":
-                        lay.signal(who, _signal.SIGCONT)
-            lay.armed_at_1700()
-            t0 = time.monotonic()
-            hw.bus.disconnected = True
-            wait_until(lambda: lay.unknown_at is not None, 10, None, "output state unknown")
-            times["i2c_outage_state_unknown"].append(lay.unknown_at - t0)
-            hw.bus.disconnected = False
-        lay.commanding = False
-        times["clock_step_back_detected"] = _clock_rows(lay, lay.ctx, repeats)
-        times["rearms"] = lay.rearms
-    return times
-
-
 def _cpu_share(pid: int, window_s: float) -> float:
     """CPU time of process ``pid`` (user + system, /proc) over ``window_s`` of wall time, in % of one core."""
     c0 = proc_cpu_s(pid)
@@ -1040,20 +1003,51 @@ def _clock_rows(lay: _Layout, ctx, repeats: int) -> list[float]:
 
 
 def run_processes(quick: bool = False) -> list[dict]:
-    """Rows of the process, bus and clock failures (target: each <= 0.5 s), median and max in ms."""
-    times = _process_rows(QUICK_REPEATS if quick else PROCESS_REPEATS)
+    """Rows of the process, bus and clock failures (target: each <= 0.5 s), median and max in ms;
+    the guard's CPU and the ESC's disarms right after an arm."""
+    repeats = QUICK_REPEATS if quick else PROCESS_REPEATS
     notes = {"supervisor_killed_outputs_stopped": "SIGKILL: ESC heartbeat timeout 0.2 s and guard /OE",
              "supervisor_hung_outputs_stopped": "SIGSTOP: the same paths",
              "esc_killed_oe_asserted": "SIGKILL: guard sees esc/heartbeat silent for 0.2 s",
              "esc_hung_oe_asserted": "SIGSTOP: the same path",
              "i2c_outage_state_unknown": "PCA9685 NACKs: thrusters/pulse_width output_state UNKNOWN",
              "clock_step_back_detected": "/clock -100 s: supervisor /diagnostics errors.clock_step"}
-    rows = [{"name": "guard_cpu_percent", "value": times.pop("guard_cpu_percent")[0], "unit": "% of a core",
-             "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz timer)"}]
-    rearms = times.pop("rearms")
-    rows.append({"name": "esc_disarmed_right_after_arm", "value": len(rearms), "unit": "arms",
-                 "note": f"of {5 * (QUICK_REPEATS if quick else PROCESS_REPEATS) + 1} arm requests, the ESC "
-                         "disarmed itself before 1700 us reached the wire (the bench armed again)"
-                         + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")})
+    times: dict[str, list] = {k: [] for k in notes}
+    with running_layout("hindrax-bench-safety-") as lay:
+        hw = lay.hw
+        # the guard's cost while armed and commanded (50 Hz ESC state, 20 Hz heartbeats)
+        lay.armed_at_1700()
+        guard_cpu = _cpu_share(lay.procs["guard"].pid, 5.0 if quick else 10.0)
+        for _ in range(repeats):
+            # the supervisor killed / hung until the outputs stop, then the ESC until /OE is high
+            for who, what, at in (("supervisor", "outputs_stopped", lambda: hw.stopped_at),
+                                  ("esc", "oe_asserted", lambda: hw.oe_at)):
+                for kind in ("killed", "hung"):
+                    lay.armed_at_1700()
+                    t0 = time.monotonic()
+                    if kind == "killed":
+                        lay.kill(who)
+                    else:
+                        lay.signal(who, _signal.SIGSTOP)
+                    wait_until(lambda: at() is not None, 10, None, what)
+                    times[f"{who}_{kind}_{what}"].append(at() - t0)
+                    if kind == "hung":
+                        lay.signal(who, _signal.SIGCONT)
+            lay.armed_at_1700()
+            t0 = time.monotonic()
+            hw.bus.disconnected = True
+            wait_until(lambda: lay.unknown_at is not None, 10, None, "output state unknown")
+            times["i2c_outage_state_unknown"].append(lay.unknown_at - t0)
+            hw.bus.disconnected = False
+        lay.commanding = False
+        times["clock_step_back_detected"] = _clock_rows(lay, lay.ctx, repeats)
+        rearms = lay.rearms
+    rows = [{"name": "guard_cpu_percent", "value": guard_cpu, "unit": "% of a core",
+             "note": "output guard process while armed and commanded (EventsExecutor, 20 Hz "
+                     "timer)"},
+            {"name": "esc_disarmed_right_after_arm", "value": len(rearms), "unit": "arms",
+             "note": f"of {5 * repeats + 1} arm requests, the ESC disarmed itself before 1700 us "
+                     "reached the wire (the bench armed again)"
+                     + (f"; last ESC log line: {rearms[-1][-160:]}" if rearms else "")}]
     return rows + [_ms_row(f"{name}_ms", values, target=500.0, note=notes[name])
                    for name, values in times.items()]
