@@ -8,11 +8,8 @@ a terminal on the Pi), run for :data:`DURATION_S` seconds. This process stands f
 emulated PCA9685 and its /OE line) and watches the heartbeats; hardware is never starved by a CPU load, so for the
 run it takes ``SCHED_FIFO`` at :data:`HARDWARE_STAND_IN_PRIORITY`, above the safety processes.
 
-* ``busy_neighbours_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
-* ``busy_neighbours_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three
-  safety heartbeats, as this process received them (target <= 100 ms; the heartbeat timeouts are 200 ms), and
-  ``busy_neighbours_heartbeat_sent_gap_max_ms`` between their send stamps (``Heartbeat.steady_ns``: the sender
-  late, apart from the delivery);
+* ``busy_neighbours_*``: the rows of :meth:`.participant_churn._Watch.rows` (disarms, target 0;
+  heartbeat gaps as received, target :data:`GAP_TARGET_MS`, and between send stamps; tick gaps);
 * ``busy_neighbours_nice_only_*``: the same with the real-time priority withheld (the launch file's nice -5 only),
   no target: what the priority buys here. In this three-process layout little: the starvation that nice -5 let
   through was seen with the whole launch layout, the live pool and the suite's other worker on the two cores

@@ -13,13 +13,8 @@ day:
 * a :data:`SUBSCRIBER_S` s subscriber to the gateway's topside topics on the topside domain;
 * ``hindrax health --quiet`` on the internal domain (the Pi's shell).
 
-Rows:
-
-* ``pool_day_churn_disarms``: how often ``thrusters/pulse_width`` went from armed to disarmed (target 0);
-* ``pool_day_churn_heartbeat_gap_max_ms``: the largest gap between two consecutive beats of one of the three safety
-  heartbeats as this process received them (target :data:`GAP_TARGET_MS`; the heartbeat timeouts are 200 ms), each
-  heartbeat's largest gap in the note; ``..._sent_gap_max_ms`` between their send stamps (the sender late);
-* ``pool_day_churn_tick_gap_max_ms``: the longest tick gap a safety process reported on ``/diagnostics``.
+Rows: those of :meth:`.participant_churn._Watch.rows` (disarms, heartbeat gaps, tick gaps) with
+the prefix ``pool_day_churn_``, the heartbeat gap's target :data:`GAP_TARGET_MS`.
 
 Run alone: ``python -m hindrax_ident.tools.benchmarks.pool_day_churn [--quick]`` (prints the rows as
 JSON).
