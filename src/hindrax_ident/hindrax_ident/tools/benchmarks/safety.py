@@ -484,12 +484,10 @@ class _Layout:
                              **{SOCKET_ENV: hw.server.path}, **self.unit_env())
         self.py = python_executable()
         self.procs: dict = {}
-        self.SetArmed, self.Trigger, self.ThrusterPwm = SetArmed, Trigger, ThrusterPwm
         self.probe = rclpy.create_node("bench_safety_layout", context=ctx)
         self.arm_client = self.probe.create_client(SetArmed, "esc/set_armed")
         self.reset_client = self.probe.create_client(Trigger, "supervisor/reset")
         self.allocation = AllocationStandIn(ctx)  # the one commander the ESC accepts
-        self.cmd = self.allocation.pub
         self.commanding = False
         self.last_state: tuple[float, int] | None = None  # (monotonic receive time, output_state)
         self.last_msg = None  # the last thrusters/pulse_width (for the failure message)
@@ -500,7 +498,7 @@ class _Layout:
         self.last_esc_diag: str = ""
         self.unknown_at: float | None = None
         self.diag: list[tuple[float, object]] = []
-        self.probe.create_timer(0.02, lambda: self.commanding and self.cmd.publish(
+        self.probe.create_timer(0.02, lambda: self.commanding and self.allocation.pub.publish(
             ThrusterPwm(pulse_width_us=[1700.0] * 8, armed=True)))
         self.probe.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_state, 50)
         self.probe.create_subscription(DiagnosticArray, "/diagnostics", self._on_diag, 50)
@@ -524,7 +522,7 @@ class _Layout:
                 self.seen_armed = True
             elif self.seen_armed:
                 self.disarmed_after_arm = True
-        if msg.output_state == self.ThrusterPwm.OUTPUT_UNKNOWN and self.unknown_at is None:
+        if msg.output_state == ThrusterPwm.OUTPUT_UNKNOWN and self.unknown_at is None:
             self.unknown_at = t
 
     def _on_diag(self, msg) -> None:
@@ -620,13 +618,13 @@ class _Layout:
         if self.last_msg is not None and self.last_msg.armed:
             # still armed from the caller's previous step, its commands stopped above: disarm first, or the 1700 us
             # found on the wire below may be the old arm's, with the ESC watchdog's neutral still to come
-            self.call(self.arm_client, self.SetArmed.Request(arm=False))
+            self.call(self.arm_client, SetArmed.Request(arm=False))
             wait_until(lambda: not self.last_msg.armed and not self.hw.thrust(), 10, None, "disarmed")
-        self.call(self.reset_client, self.Trigger.Request())
+        self.call(self.reset_client, Trigger.Request())
         answer = [""]
 
         def arm() -> bool:
-            res = self.call(self.arm_client, self.SetArmed.Request(arm=True))
+            res = self.call(self.arm_client, SetArmed.Request(arm=True))
             answer[0] = res.message
             if not res.success:
                 time.sleep(0.05)  # the ESC refuses until the guard has released /OE: ask again
@@ -945,9 +943,9 @@ def _guard_without_line(lay: _Layout, hw: _Hardware) -> tuple[int, int, str, flo
         wait_until(lambda: len(heard) >= 5, 60, None, "guard heartbeats")
         refused, answer, attempts = 0, "", 5
         for _ in range(attempts):
-            res = lay.call(lay.arm_client, lay.SetArmed.Request(arm=True))
+            res = lay.call(lay.arm_client, SetArmed.Request(arm=True))
             if res.success:
-                lay.call(lay.arm_client, lay.SetArmed.Request(arm=False))
+                lay.call(lay.arm_client, SetArmed.Request(arm=False))
             else:
                 refused += 1
                 answer = res.message
@@ -956,10 +954,10 @@ def _guard_without_line(lay: _Layout, hw: _Hardware) -> tuple[int, int, str, flo
     finally:
         hw.line_busy = False
     t0 = time.monotonic()
-    wait_until(lambda: lay.call(lay.arm_client, lay.SetArmed.Request(arm=True)).success, 60, None,
+    wait_until(lambda: lay.call(lay.arm_client, SetArmed.Request(arm=True)).success, 60, None,
                "armed once the line is granted")
     granted_s = time.monotonic() - t0
-    lay.call(lay.arm_client, lay.SetArmed.Request(arm=False))
+    lay.call(lay.arm_client, SetArmed.Request(arm=False))
     return refused, attempts, answer, granted_s
 
 

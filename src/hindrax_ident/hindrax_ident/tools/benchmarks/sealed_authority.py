@@ -33,7 +33,8 @@ from hindrax_drivers.proc_sockets import child_pids, exposed, udp_sockets
 from hindrax_drivers.testing import ros_context, wait_until
 from rclpy.executors import SingleThreadedExecutor
 
-from hindrax_msgs.srv import SignedTrigger
+from hindrax_msgs.srv import SetArmed, SignedTrigger
+from std_srvs.srv import Trigger
 
 from . import call, run_alone
 from .safety import running_layout
@@ -120,13 +121,13 @@ def run(quick: bool = False) -> list[dict]:
                     got = []
 
                     def attempt() -> bool:
-                        lay.call(lay.reset_client, lay.Trigger.Request())
+                        lay.call(lay.reset_client, Trigger.Request())
                         req = signer.sign_message("arm", SignedTrigger.Request())
                         if call(client, req, spin, WAIT_S).success:
                             got.append(req)
                         return bool(got)
                     wait_until(attempt, WAIT_S, None, "a signed arm accepted")
-                    lay.call(lay.arm_client, lay.SetArmed.Request(arm=False))
+                    lay.call(lay.arm_client, SetArmed.Request(arm=False))
                     return got[0]
 
                 accepted = signed_arm()
@@ -139,7 +140,7 @@ def run(quick: bool = False) -> list[dict]:
                     answers["wrong_key"].append(call(client, wrong, spin, WAIT_S).success)
                     answers["replayed"].append(call(client, accepted, spin, WAIT_S).success)
                     if any(v[-1] for v in answers.values()):
-                        lay.call(lay.arm_client, lay.SetArmed.Request(arm=False))
+                        lay.call(lay.arm_client, SetArmed.Request(arm=False))
                 signed_arm()  # the path still worked after them
                 executor.shutdown()
                 node.destroy_node()

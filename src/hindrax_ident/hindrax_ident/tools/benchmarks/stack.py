@@ -576,15 +576,14 @@ def topology_differences(launch: dict, skeleton: dict) -> list[str]:
         + [f"only in the skeleton: {x}" for x in sorted(b - a)]
 
 
-def read_topologies(procs: dict[str, subprocess.Popen], directory: Path,
-                    timeout_s: float = 30) -> dict:
+def read_topologies(procs: dict[str, subprocess.Popen], directory: Path) -> dict:
     """Label -> :func:`~.launch_node.topology` of each process in ``procs`` (started by launch_node
     with ``HINDRAX_BENCH_TOPOLOGY=directory``): sends SIGUSR1, reads ``<pid>.json``."""
     for p in procs.values():
         (directory / f"{p.pid}.json").unlink(missing_ok=True)
         p.send_signal(signal.SIGUSR1)
     paths = {label: directory / f"{p.pid}.json" for label, p in procs.items()}
-    wait_until(lambda: all(f.is_file() for f in paths.values()), timeout_s, None,
+    wait_until(lambda: all(f.is_file() for f in paths.values()), 30, None,
                "every process's topology")
     return {label: json.loads(f.read_text()) for label, f in paths.items()}
 
