@@ -175,6 +175,10 @@ def _rig(ctx, sim_time: bool = False):
     def command(width: float = 1700.0) -> None:
         r["cmd"].publish(ThrusterPwm(pulse_width_us=[width] * 8, armed=True))
 
+    def commanding() -> None:  # one 1700 us command, then one spin
+        command()
+        spin()
+
     def armed_at_1700() -> None:
         # the previous path's disarm (and any supervisor disarm request) has landed before the reset and re-arm
         emu.watch = False
@@ -192,11 +196,8 @@ def _rig(ctx, sim_time: bool = False):
         res = call(r["arm"], SetArmed.Request(arm=True), spin)
         if not res.success:
             raise RuntimeError(f"arming refused: {res.message}")
-
-        def go():
-            command()
-            spin()
-        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, go, "1700 us on the wire")
+        wait_until(lambda: emu.pulse_width_us(0) > 1690.0 and sup.core.armed, 20, commanding,
+                   "1700 us on the wire")
         emu.watch = True
 
     def until_neutral(timeout_s: float = 10.0, poll=None) -> float:
@@ -205,7 +206,7 @@ def _rig(ctx, sim_time: bool = False):
 
     wait_until(lambda: r["cmd"].get_subscription_count() > 0 and r["arm"].service_is_ready()
                and r["estop"].service_is_ready() and sup.esc_client.service_is_ready(), 20, spin, "graph ready")
-    r.update(spin=spin, command=command, armed_at_1700=armed_at_1700,
+    r.update(spin=spin, command=command, commanding=commanding, armed_at_1700=armed_at_1700,
              until_neutral=until_neutral)
     return r
 
@@ -269,14 +270,10 @@ def run(quick: bool = False) -> list[dict]:
             t0 = time.monotonic()
             emu.reset()
             emu.watch, emu.neutral_at = True, None
-
-            def keep_commanding():
-                r["command"]()
-                r["spin"]()
-            wait_until(lambda: esc.link.chip_reinits > reinits, 10, keep_commanding,
+            wait_until(lambda: esc.link.chip_reinits > reinits, 10, r["commanding"],
                        "chip reset detected")
             times["chip_reset_detect"].append(esc.link.last_chip_reinit_monotonic - t0)
-            times["chip_reset_recover"].append(r["until_neutral"](poll=keep_commanding) - t0)
+            times["chip_reset_recover"].append(r["until_neutral"](poll=r["commanding"]) - t0)
         _close(r)
         # /clock loss: the steady-clock watchdog
         rs = _rig(ctx, sim_time=True)
