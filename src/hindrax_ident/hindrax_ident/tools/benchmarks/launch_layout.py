@@ -22,7 +22,6 @@ import importlib
 import json
 import os
 import re
-import sys
 import tempfile
 import threading
 import time
@@ -138,8 +137,11 @@ def read_ports_file(path: str | Path) -> dict | None:
     return ports if isinstance(ports, dict) else None
 
 
-def _pool(argv: list[str]) -> int:
-    parser = argparse.ArgumentParser(prog="launch_layout pool")
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (``argv`` without the program name; module docstring): runs the
+    virtual pool until interrupted; returns the exit code."""
+    parser = argparse.ArgumentParser(prog="python -m hindrax_ident.tools.benchmarks.launch_layout")
+    parser.add_argument("command", choices=["pool"])
     parser.add_argument("--socket", required=True)
     parser.add_argument("--ports-file", required=True)
     args = parser.parse_args(argv)
@@ -177,16 +179,6 @@ def _pool(argv: list[str]) -> int:
         if rclpy.ok():
             rclpy.shutdown()
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point (``argv`` without the program name); returns the exit code."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] != "pool":
-        print("usage: python -m hindrax_ident.tools.benchmarks.launch_layout pool ...",
-              file=sys.stderr)
-        return 2
-    return _pool(argv[1:])
 
 
 if __name__ == "__main__":
