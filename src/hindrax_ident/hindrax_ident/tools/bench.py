@@ -85,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     wall_s["total"] = round(time.monotonic() - start, 1)
     table = results_doc.markdown_table(
         ["benchmark", "measure", "value", "unit", "target", "note"],
-        [[r["benchmark"], r["name"], f"{r['value']:.4g}" if isinstance(r["value"], (int, float)) else r["value"],
+        [[r["benchmark"], r["name"],
+          f"{r['value']:.4g}" if isinstance(r["value"], (int, float)) else r["value"],
           r.get("unit", ""), r.get("target", ""), r.get("note", "")] for r in rows])
     print("\n" + table)
     out = Path(args.out)

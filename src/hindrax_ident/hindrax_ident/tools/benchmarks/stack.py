@@ -300,8 +300,9 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
             stack = proc - sim_cpu[0] - sum(emu.values()) - cpu.get("bench_probe", 0.0)
             per["executor+dds"] = stack - sum(per.values())
             rates = {t: (counts1.get(t, 0) - counts0.get(t, 0)) / wall for t in counts1}
-            out["phases"][phase] = {"per_node": {k: v / wall for k, v in per.items()}, "stack": stack / wall,
-                                    "rates": rates, "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall}
+            out["phases"][phase] = {"per_node": {k: v / wall for k, v in per.items()},
+                                    "stack": stack / wall, "rates": rates,
+                                    "sim_rtf": (sim_node.simulator.t_s - sim_t0) / wall}
 
         _running_then_idle(probe, action, lambda on: stream.update(on=on), window, spin,
                            spin_with_wrench, "in-process")
@@ -315,9 +316,10 @@ def _in_process(duration_s: float, tmp: Path) -> dict:
 
 # ---------------------------------------------------------------------------------------------- launch layout
 def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
-    """The launch layout: every process of :data:`LAUNCH_FILE` (recording on), the virtual pool in another.
-    ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the idle phase); per window
-    the CPU of every process and its wall-clock span (the rates come from the bag)."""
+    """The launch layout: every process of :data:`LAUNCH_FILE` (recording on), the virtual pool in
+    another. ``windows`` consecutive windows of ``duration_s`` in the running phase (one in the idle
+    phase); per window the CPU of every process and its wall-clock span (the rates come from the
+    bag)."""
     py = python_executable()
     sock = str(tmp / "i2c.sock")
     ports_file = tmp / "ports.json"
@@ -810,22 +812,24 @@ def launch_rows(launch: dict, nbody_s: float | None = None) -> list[dict]:
                              "target": "<= 0.1" if phase == "idle" and name.startswith("ident_") else "<= 0.35"})
         if all("wakeups" in w for w in wins):
             for name in names:
-                _, _, threads, cpu = wins[0]["wakeups"][name]
+                _, _, named, cpu = wins[0]["wakeups"][name]
+                threads = collections.Counter(named)
                 rows.append({"name": f"launch_{phase}_wakeups_{name}", "unit": "1/s",
                              "value": _median([w["wakeups"][name][0] for w in wins]),
                              "note": "voluntary context switches of every thread per second (each sleep ends in "
                                      "a wake-up); by thread (first window), wake-ups/s (its CPU, % of a core): "
                                      + ", ".join(f"{k} {v:.0f}" + (f" ({100 * cpu[k]:.1f})" if k in cpu else "")
-                                                 for k, v in collections.Counter(threads).most_common(6))})
+                                                 for k, v in threads.most_common(6))})
             rows.append({"name": f"launch_{phase}_wakeups_total", "unit": "1/s",
                          "value": _median([sum(v[0] for v in w["wakeups"].values()) for w in wins])})
-            dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items() if k.startswith("dds."))
-                   for w in wins]
+            dds = [sum(c for v in w["wakeups"].values() for k, c in v[3].items()
+                       if k.startswith("dds.")) for w in wins]
             rows.append({"name": f"launch_{phase}_cpu_dds_threads", "unit": "% of a core",
                          "value": 100 * _median(dds),
-                         "note": f"Fast DDS's own threads (dds.ev event/timer, dds.udp receive, ...) of every "
-                                 f"process, {100 * _median(dds) / total:.0f} % of the total"
-                                 if total > 0 else "Fast DDS's own threads of every process"})
+                         "note": f"Fast DDS's own threads (dds.ev event/timer, dds.udp receive, "
+                                 f"...) of every process, {100 * _median(dds) / total:.0f} % of "
+                                 "the total" if total > 0
+                                 else "Fast DDS's own threads of every process"})
         for name in wins[0].get("participants", {}):
             cpu = [w["participants"][name][0] for w in wins]
             topics = ", ".join(t for t, _ in PARTICIPANT_PROBES.get(name, [])) or "no topic"
@@ -892,7 +896,8 @@ def _phase_rates(launch: dict, phase: str) -> dict[str, float]:
 
 
 def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), windows: int | None = None,
-        duration_s: float | None = None, baselines: bool = True, baseline: str | None = None) -> list[dict]:
+        duration_s: float | None = None, baselines: bool = True,
+        baseline: str | None = None) -> list[dict]:
     """The stack benchmark's rows (module docstring). layouts: ``inproc`` and/or ``launch``; windows: running
     windows of the launch layout (default :data:`RUNNING_WINDOWS`, 1 with ``quick``); duration_s: window length,
     s; baselines: bare rclpy and the launch's skeleton; baseline: a git ref whose
