@@ -53,18 +53,20 @@ def _markers(name: str) -> tuple[str, str]:
 
 
 def commit() -> str:
-    """The commit of the package's source checkout (``git describe --always --dirty``); ``unknown`` when the
-    package is installed outside a git checkout (colcon install on the Pi)."""
+    """The commit of the package's source checkout (``git describe --always --dirty``);
+    ``unknown`` when the package is installed outside a git checkout (colcon install on the Pi)."""
     here = Path(__file__).resolve().parent
     try:
-        return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=here, capture_output=True,
-                              text=True, timeout=10, check=False).stdout.strip() or "unknown"
+        return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=here,
+                              capture_output=True, text=True, timeout=10,
+                              check=False).stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
         return "unknown"
 
 
 def provenance(command: str) -> str:
-    """One line naming the command, the date (UTC) and the commit the measurement was taken at (:func:`commit`)."""
+    """One line naming the command, the date (UTC) and the commit the measurement was taken at
+    (:func:`commit`)."""
     now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     return f"*Written by `{command}` on {now} at commit `{commit()}`.*"
 

@@ -343,13 +343,14 @@ class FloorEstimator:
     give the slope. Between points the vehicle moves by v dt, so the state advances as z_f += g . v dt
     (:meth:`predict_to`, with the measured horizontal velocity, NED). Process noise: the floor's depth and slope
     change as a random walk in time, and the slope also as a random walk in the distance travelled
-    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`): a floor's slope changes along the track, not while the vehicle
-    hovers. :meth:`floor_at` returns the depth and gradient now; without any range for
+    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`): a floor's slope changes along the track, not while
+    the vehicle hovers. :meth:`floor_at` returns the depth and gradient now; without any range for
     :data:`FLOOR_TIMEOUT_S` the floor is held (``stale``)."""
 
     def __init__(self) -> None:
         self.kf = LinearKalman(3)
-        self.q = np.diag([0.005, 0.02, 0.02]) ** 2  # random walk in time: depth m/sqrt(s), gradient 1/sqrt(s)
+        # random walk in time: depth 0.005 m/sqrt(s), gradient 0.02 1/sqrt(s)
+        self.q = np.diag([0.005, 0.02, 0.02]) ** 2
         self.q_per_m = np.diag([0.0, 1.0, 1.0]) * FLOOR_GRADIENT_WALK_PER_SQRT_M ** 2
         self.prior_std = 0.2  # 1-sigma of the gradient before the first point
         self.t_s: float | None = None
@@ -505,8 +506,10 @@ class Controller:
         self.floor = FloorEstimator()
         self._last_alt_stamp = -math.inf
         self._last_beam_stamp = -math.inf
-        self._gradient_prev: tuple[float, np.ndarray] | None = None  # (t_s, gradient) of the last altitude tick
-        self.gradient_rate = np.zeros(2)  # low-passed d/dt of the floor gradient estimate (north, east), 1/s
+        #: (t_s, gradient) of the last altitude tick
+        self._gradient_prev: tuple[float, np.ndarray] | None = None
+        #: low-passed d/dt of the floor gradient estimate (north, east), 1/s
+        self.gradient_rate = np.zeros(2)
 
     def _floor_gradient_rate(self, t_s: float, gradient: np.ndarray) -> np.ndarray:
         """The time derivative of the floor gradient estimate (north, east; 1/s), differenced between altitude ticks

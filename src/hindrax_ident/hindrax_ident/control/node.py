@@ -331,14 +331,16 @@ class ControllerNode(VehicleNode):
 
     def _on_enable(self, request, response):
         if request.data:
-            return self._answer_enable(response, "enabled", "not enabled", hold=self._setpoint is None)
+            hold = self._setpoint is None
+            return self._answer_enable(response, "enabled", "not enabled", hold)
         if self.enabled:
             self._disable("disabled on request", zero=True)
         response.success, response.message = True, self.message
         return response
 
     def _answer_enable(self, response, why: str, refused: str, hold: bool):
-        """Enable (first holding the current state when ``hold``) unless :meth:`_refusal` says why not."""
+        """Enable (first holding the current state when ``hold``) unless :meth:`_refusal` says
+        why not."""
         refusal = self._refusal()
         if refusal:
             response.success, response.message = False, f"{refused}: {refusal}"

@@ -307,12 +307,13 @@ class Executive:
             self.ctx.undo.update(dict(confirm))
 
     # ------------------------------------------------------------------ the shared state, by name
-    #: :class:`~.steps.StepContext` fields read on the executive by name (the context documents them): the
-    #: conditioned sensors ``state``, the pool ``box``, the allocation model ``core``, ``curve``, ``matrix``,
-    #: ``authority``, ``time_constant_s``, the step results, ``awaiting`` / ``prompt`` (operator), ``message``, ...
-    _SHARED = frozenset({"state", "box", "core", "curve", "matrix", "authority", "time_constant_s", "calibration",
-                         "inclining", "decays", "windows", "levels", "awaiting", "prompt", "message", "depth_hold_m",
-                         "t_s"})
+    #: :class:`~.steps.StepContext` fields read on the executive by name (the context documents
+    #: them): the conditioned sensors ``state``, the pool ``box``, the allocation model ``core``,
+    #: ``curve``, ``matrix``, ``authority``, ``time_constant_s``, the step results, ``awaiting``
+    #: and ``prompt`` (operator), ``message``, ...
+    _SHARED = frozenset({"state", "box", "core", "curve", "matrix", "authority", "time_constant_s",
+                         "calibration", "inclining", "decays", "windows", "levels", "awaiting",
+                         "prompt", "message", "depth_hold_m", "t_s"})
 
     def __getattr__(self, name: str) -> Any:
         if name in Executive._SHARED:

@@ -250,9 +250,10 @@ class IdentificationNode(VehicleNode):
             self._inputs = [self.create_subscription(msg_type, topic, handler, sensor_input_qos(depth))
                             for msg_type, topic, handler, depth in (
                                 (Dvl, "dvl/data", lambda m: add(samples_from_dvl(m)), 20),
-                                (FluidPressure, "pressure/fluid_pressure", lambda m: add([sample_from_pressure(m)]),
-                                 20),
-                                (Imu, "imu/data_raw", lambda m: add(samples_from_imu(m, self._mount_t)), 50),
+                                (FluidPressure, "pressure/fluid_pressure",
+                                 lambda m: add([sample_from_pressure(m)]), 20),
+                                (Imu, "imu/data_raw",
+                                 lambda m: add(samples_from_imu(m, self._mount_t)), 50),
                                 (Range, "ping/altitude", lambda m: add([sample_from_range(m)]), 20),
                                 (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))]
         else:
@@ -338,7 +339,8 @@ class IdentificationNode(VehicleNode):
         log = self.get_logger()
         for ev in events:
             if ev.kind == "status":
-                phase = getattr(ManeuverStatus, "PHASE_" + ev.data[0].upper())  # the core's phase names
+                # the core's phase names are ManeuverStatus.PHASE_<NAME>
+                phase = getattr(ManeuverStatus, "PHASE_" + ev.data[0].upper())
                 self._publish_status(phase, ev.data[1], ev.data[2])
             elif ev.kind == "wrench":
                 self._publish_wrench(ev.data[0], now)

@@ -386,8 +386,8 @@ def run(args: argparse.Namespace) -> int:
             progress(f"{res['scenario']} seed {res['seed']}: {res['wall_s']:.0f} s{extra}")
     summary = summarise(results)
     date = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
-    doc = {"date": date, "commit": results_doc.commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names, "calibrate": cal,
-           "levels": args.levels, "not_run": not_run,
+    doc = {"date": date, "commit": results_doc.commit(), "seeds": args.seeds, "dofs": dofs,
+           "scenarios": names, "calibrate": cal, "levels": args.levels, "not_run": not_run,
            "wall_time_s": progress.elapsed(), "summary": summary, "runs": results}
     table = format_table(summary)
     if args.excitation:
