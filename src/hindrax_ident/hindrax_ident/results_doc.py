@@ -52,20 +52,23 @@ def _markers(name: str) -> tuple[str, str]:
     return f"<!-- results:{name}:begin -->", f"<!-- results:{name}:end -->"
 
 
-def provenance(command: str) -> str:
-    """One line naming the command, the date (UTC) and the commit the measurement was taken at.
-
-    The commit comes from ``git describe --always --dirty`` in the package's source checkout; ``unknown``
-    when the package is installed outside a git checkout (colcon install on the Pi).
-    """
+def commit() -> str:
+    """The commit of the package's source checkout (``git describe --always --dirty``);
+    ``unknown`` when the package is installed outside a git checkout (colcon install on the Pi)."""
     here = Path(__file__).resolve().parent
     try:
-        commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=here, capture_output=True,
-                                text=True, timeout=10, check=False).stdout.strip() or "unknown"
+        return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=here,
+                              capture_output=True, text=True, timeout=10,
+                              check=False).stdout.strip() or "unknown"
     except (OSError, subprocess.SubprocessError):
-        commit = "unknown"
+        return "unknown"
+
+
+def provenance(command: str) -> str:
+    """One line naming the command, the date (UTC) and the commit the measurement was taken at
+    (:func:`commit`)."""
     now = _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    return f"*Written by `{command}` on {now} at commit `{commit}`.*"
+    return f"*Written by `{command}` on {now} at commit `{commit()}`.*"
 
 
 def write_section(path: str | Path, name: str, title: str, body: str, command: str,

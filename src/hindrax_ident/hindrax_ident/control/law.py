@@ -189,7 +189,6 @@ class ReferenceModel:
                  max_accel: float = math.inf) -> None:
         self.w, self.zeta, self.max_rate, self.angle = float(w), float(zeta), float(max_rate), bool(angle)
         self.max_accel = float(max_accel)
-        self.brake_factor = 1.0 / REFERENCE_ACCEL_FRACTION
         self.x = math.nan
         self.v = 0.0
         self.a = 0.0
@@ -221,7 +220,7 @@ class ReferenceModel:
             e = wrap_angle(r - self.x) if self.angle else r - self.x
             v0 = self.v
             a = w2 * e - c * v0
-            lim = am if a * v0 >= 0.0 else am * self.brake_factor  # speeding up / braking
+            lim = am if a * v0 >= 0.0 else am / REFERENCE_ACCEL_FRACTION  # speeding up / braking
             a = max(-lim, min(lim, a))
             self.v = max(-self.max_rate, min(self.max_rate, v0 + h * a))
             self.a = (self.v - v0) / h
@@ -344,18 +343,16 @@ class FloorEstimator:
     give the slope. Between points the vehicle moves by v dt, so the state advances as z_f += g . v dt
     (:meth:`predict_to`, with the measured horizontal velocity, NED). Process noise: the floor's depth and slope
     change as a random walk in time, and the slope also as a random walk in the distance travelled
-    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`, ``gradient_walk_per_sqrt_m``): a floor's slope changes along the
-    track, not while the vehicle hovers. :meth:`floor_at` returns the depth and gradient now; without any range for
+    (:data:`FLOOR_GRADIENT_WALK_PER_SQRT_M`): a floor's slope changes along the track, not while
+    the vehicle hovers. :meth:`floor_at` returns the depth and gradient now; without any range for
     :data:`FLOOR_TIMEOUT_S` the floor is held (``stale``)."""
 
-    def __init__(self, depth_walk_m_sqrt_s: float = 0.005, gradient_walk_per_sqrt_s: float = 0.02,
-                 gradient_prior_std: float = 0.2,
-                 gradient_walk_per_sqrt_m: float | None = None) -> None:
+    def __init__(self) -> None:
         self.kf = LinearKalman(3)
-        self.q = np.diag([depth_walk_m_sqrt_s ** 2, gradient_walk_per_sqrt_s ** 2, gradient_walk_per_sqrt_s ** 2])
-        walk_m = FLOOR_GRADIENT_WALK_PER_SQRT_M if gradient_walk_per_sqrt_m is None else gradient_walk_per_sqrt_m
-        self.q_per_m = np.diag([0.0, walk_m ** 2, walk_m ** 2])
-        self.prior_std = float(gradient_prior_std)
+        # random walk in time: depth 0.005 m/sqrt(s), gradient 0.02 1/sqrt(s)
+        self.q = np.diag([0.005, 0.02, 0.02]) ** 2
+        self.q_per_m = np.diag([0.0, 1.0, 1.0]) * FLOOR_GRADIENT_WALK_PER_SQRT_M ** 2
+        self.prior_std = 0.2  # 1-sigma of the gradient before the first point
         self.t_s: float | None = None
         self.last_update_s = -math.inf
 
@@ -385,7 +382,7 @@ class FloorEstimator:
             return
         dn, de = (float(x) for x in offset_ne_m)
         if self.t_s is None:
-            self.kf.x = np.array([[float(depth_m) - 0.0], [0.0], [0.0]])
+            self.kf.x = np.array([[float(depth_m)], [0.0], [0.0]])
             self.kf.P = np.diag([std_m ** 2, self.prior_std ** 2, self.prior_std ** 2])
             self.t_s = float(t_s)
         else:
@@ -473,20 +470,16 @@ class Controller:
                                               angle=dof != "heave", max_accel=self.reference_accel[dof])
         self.altitude_ref = ReferenceModel(s.depth_bandwidth_rad_s, s.damping_ratio, s.max_depth_rate_m_s,
                                            max_accel=self.reference_accel["heave"])
-        self.floor = FloorEstimator()
         self.ping_position_frd_m = np.asarray(ping_position_frd_m, dtype=float)
         self.dvl_position_frd_m = np.asarray(dvl_position_frd_m, dtype=float)
         self.dvl_beams_frd = None if dvl_beams_frd is None else np.asarray(dvl_beams_frd, dtype=float).reshape(4, 3)
-        self._last_alt_stamp = -math.inf
-        self._last_beam_stamp = -math.inf
         self.depth_m = math.nan
         self.altitude_m = math.nan
         self.heading_rad = math.nan
         self.velocity_frd_m_s = np.zeros(2)
         self.attitude_rad = np.zeros(2)
         self.mode = "none"  # vertical hold of the last tick: depth | altitude | waiting_altitude | none
-        self._gradient_prev: tuple[float, np.ndarray] | None = None  # (t_s, gradient) of the last altitude tick
-        self.gradient_rate = np.zeros(2)  # low-passed d/dt of the floor gradient estimate (north, east), 1/s
+        self.reset()
 
     # ------------------------------------------------------------------ reporting
     def gain_report(self) -> list[str]:
@@ -513,7 +506,9 @@ class Controller:
         self.floor = FloorEstimator()
         self._last_alt_stamp = -math.inf
         self._last_beam_stamp = -math.inf
-        self._gradient_prev = None
+        #: (t_s, gradient) of the last altitude tick
+        self._gradient_prev: tuple[float, np.ndarray] | None = None
+        #: low-passed d/dt of the floor gradient estimate (north, east), 1/s
         self.gradient_rate = np.zeros(2)
 
     def _floor_gradient_rate(self, t_s: float, gradient: np.ndarray) -> np.ndarray:

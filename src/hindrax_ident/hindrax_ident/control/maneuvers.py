@@ -33,16 +33,14 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from hindrax_drivers.dvl75.protocol import beam_directions_frd
 
 from .law import ControlInput, ControlSettings, Controller
-from .model import ControlModel, inertia_vector, model_from_config
+from .model import ControlModel, model_from_config
 from ..vehicle.state import SensorState, rotation_ned_from_body
 
-__all__ = ["DOF_INDEX", "TRANSLATIONAL", "ROTATIONAL", "SURFACE_CLEARANCE_M", "dof_authority",
+__all__ = ["DOF_INDEX", "SURFACE_CLEARANCE_M", "dof_authority",
            "level_ladder", "prior_inertia", "PoolBox", "HoldController"]
 
 #: DOF name -> index in nu / tau (SNAME order).
 DOF_INDEX = {d: i for i, d in enumerate(DOFS)}
-TRANSLATIONAL = ("surge", "sway", "heave")
-ROTATIONAL = ("roll", "pitch", "yaw")
 #: Clearance between the hull top and the free surface, m (the hull must not emerge: buoyancy would change).
 SURFACE_CLEARANCE_M = 0.1
 
@@ -163,20 +161,14 @@ class HoldController:
     :class:`DepthEstimator`; the latest ``state.depth_m`` while ``depth_estimate_m`` is NaN), or, when
     ``altitude_setpoint_m`` is finite, the Ping1D altitude; roll/pitch to ``attitude_setpoint_rad``; heading to
     ``heading_setpoint_rad``; surge/sway body velocity to ``velocity_setpoint_m_s``. A DOF in ``free`` gets 0 and, held
-    again, starts from its measured state. ``net_buoyancy_n`` and ``inertia`` are the model's.
+    again, starts from its measured state. ``net_buoyancy_n`` is the model's.
     ``note_allocation(requested_frd, achieved_frd)`` passes the allocation's result for the anti-windup.
     """
 
     def __init__(self, cfg: VehicleConfig, authority, natural_frequency_rad_s: float = 2.0,
                  hold_fraction: float = 0.6, model: ControlModel | None = None, velocity_gain: float = 1.5,
                  reference_accel=None, settings: ControlSettings | None = None) -> None:
-        self.cfg = cfg
-        self.authority = np.asarray(authority, dtype=float)
         self.model = model if model is not None else model_from_config(cfg)
-        self.inertia = inertia_vector(self.model)
-        self.wn = float(natural_frequency_rad_s)
-        self.hold_fraction = float(hold_fraction)
-        self.velocity_gain = float(velocity_gain)
         self.net_buoyancy_n = float(self.model.axis("heave").bias)  # FRD force holding depth (down)
         self.depth_setpoint_m = math.nan
         self.altitude_setpoint_m = math.nan
@@ -185,22 +177,17 @@ class HoldController:
         self.attitude_setpoint_rad = np.zeros(2)
         self.depth_rate_m_s = 0.0
         self.depth_estimate_m = math.nan
-        self.reference_accel = reference_accel
-        self.settings = settings
-        self.core = self._build(self.velocity_gain)
-
-    def _build(self, velocity_gain: float) -> Controller:
-        wn = self.wn
-        settings = self.settings or ControlSettings(
+        wn = float(natural_frequency_rad_s)
+        settings = settings or ControlSettings(
             depth_bandwidth_rad_s=wn, heading_bandwidth_rad_s=wn, attitude_bandwidth_rad_s=wn,
-            velocity_bandwidth_rad_s=velocity_gain * wn, hold_fraction=self.hold_fraction)
-        dvl = self.cfg.sensors.dvl75
-        roll, pitch, yaw = dvl.sensor_orientation_rpy_rad
-        beams = rotation_ned_from_body(roll, pitch, yaw) @ np.asarray(beam_directions_frd()).T
-        return Controller(self.model, self.authority, settings,
-                          ping_position_frd_m=self.cfg.sensors.ping1d.position_frd_m,
-                          dvl_position_frd_m=dvl.position_frd_m, dvl_beams_frd=beams.T,
-                          reference_accel=self.reference_accel)
+            velocity_bandwidth_rad_s=float(velocity_gain) * wn, hold_fraction=float(hold_fraction))
+        dvl = cfg.sensors.dvl75
+        rot = rotation_ned_from_body(*dvl.sensor_orientation_rpy_rad)
+        beams = rot @ np.asarray(beam_directions_frd()).T
+        self.core = Controller(self.model, np.asarray(authority, dtype=float), settings,
+                               ping_position_frd_m=cfg.sensors.ping1d.position_frd_m,
+                               dvl_position_frd_m=dvl.position_frd_m, dvl_beams_frd=beams.T,
+                               reference_accel=reference_accel)
 
     def reset_integral(self) -> None:
         """Clear the depth integrator."""
@@ -225,13 +212,9 @@ class HoldController:
                             dvl_beam_range_m=st.dvl_beam_range_m, dvl_beam_stamp_s=st.dvl_beam_stamp_s)
 
     def wrench(self, st: SensorState, free: Sequence[str] = (), dt_s: float = 0.02,
-               velocity_gain: float | None = None, t_s: float | None = None) -> np.ndarray:
+               t_s: float | None = None) -> np.ndarray:
         """FRD wrench (6,) of the holds (N, N m) for the DOFs not in ``free``, one tick of ``dt_s`` ending at ``t_s``
-        (default: the newest sample's time). ``velocity_gain`` (given): the velocity holds' bandwidth over the
-        position holds' from now on."""
-        if velocity_gain is not None and velocity_gain != self.velocity_gain and self.settings is None:
-            self.velocity_gain = float(velocity_gain)
-            self.core = self._build(self.velocity_gain)
+        (default: the newest sample's time)."""
         c = self.core
         c.depth_m = float(self.depth_setpoint_m)
         c.altitude_m = float(self.altitude_setpoint_m)

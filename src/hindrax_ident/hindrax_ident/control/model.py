@@ -48,7 +48,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
 import yaml
 
 from hindrax_drivers.config import DOFS, ROTATIONAL_DOFS, VehicleConfig
@@ -344,8 +343,3 @@ def _axis_from_entry(dof: str, entry: Mapping, file_axis: AxisModel, cfg: Vehicl
     return AxisModel(dof, float(inertia), float(rel), float(values["linear_damping_positive"]),
                      float(values["linear_damping_negative"]), float(values["quadratic_damping_positive"]),
                      float(values["quadratic_damping_negative"]), float(bias), float(restoring), sources)
-
-
-def inertia_vector(model: ControlModel) -> np.ndarray:
-    """(6,) rigid + added inertia of the model, SNAME order."""
-    return np.array([model.axes[d].inertia for d in DOFS], dtype=float)

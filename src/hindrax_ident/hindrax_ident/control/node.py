@@ -327,28 +327,27 @@ class ControllerNode(VehicleNode):
         self._apply_setpoint(msg)
 
     def _on_hold(self, _request, response):
-        why = self._refusal()
-        if why:
-            response.success, response.message = False, f"not holding: {why}"
-            return response
-        self._hold_current()
-        self._enable("holding the current state")
+        return self._answer_enable(response, "holding the current state", "not holding", hold=True)
+
+    def _on_enable(self, request, response):
+        if request.data:
+            hold = self._setpoint is None
+            return self._answer_enable(response, "enabled", "not enabled", hold)
+        if self.enabled:
+            self._disable("disabled on request", zero=True)
         response.success, response.message = True, self.message
         return response
 
-    def _on_enable(self, request, response):
-        if not request.data:
-            if self.enabled:
-                self._disable("disabled on request", zero=True)
-            response.success, response.message = True, self.message
+    def _answer_enable(self, response, why: str, refused: str, hold: bool):
+        """Enable (first holding the current state when ``hold``) unless :meth:`_refusal` says
+        why not."""
+        refusal = self._refusal()
+        if refusal:
+            response.success, response.message = False, f"{refused}: {refusal}"
             return response
-        why = self._refusal()
-        if why:
-            response.success, response.message = False, f"not enabled: {why}"
-            return response
-        if self._setpoint is None:
+        if hold:
             self._hold_current()
-        self._enable("enabled")
+        self._enable(why)
         response.success, response.message = True, self.message
         return response
 

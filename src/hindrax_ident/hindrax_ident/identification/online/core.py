@@ -53,7 +53,7 @@ from .executive import (CALIBRATION_STEPS, Executive, ExecutiveStatus, TickInput
                         ordered_samples)
 from .steps import undo_line
 
-__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem", "operator_prompt",
+__all__ = ["IdentificationCore", "GoalRun", "Event", "goal_problem",
            "NEEDED_SENSORS",
            "NOT_SUPERVISOR_ABORTS", "STATUS_PERIOD_S", "IDLE_STATUS_PERIOD_S", "ARMED_GRACE_S", "NOT_ARMED",
            "FUTURE_STAMP_TOLERANCE_S", "STALE_STAMP_TOLERANCE_S", "DISARMED"]
@@ -102,12 +102,6 @@ def goal_problem(dofs: Sequence[str], calibrate: Sequence[str], calibration_only
     if any(not (math.isfinite(x) and 0.0 < x <= 1.0) for x in fr):
         return f"level_fractions must be in (0, 1], got {fr}"
     return ""
-
-
-def operator_prompt(ex: Any) -> str:
-    """The operator prompt of an executive as sent in feedback and status: ``[<awaiting>] <prompt>``, "" when
-    nothing waits."""
-    return f"[{ex.awaiting}] {ex.prompt}" if ex.awaiting else ""
 
 
 @dataclass(frozen=True)
@@ -213,10 +207,6 @@ class IdentificationCore:
     def _new_cause(self, run: GoalRun) -> bool:
         """Whether the supervisor names a stop of the thrust newer than the campaign's start."""
         return bool(self.disarm_cause) and self.disarm_cause != run.cause_at_start
-
-    def _armed_now(self, run: GoalRun) -> bool:
-        """The ESC's armed flag, false once the supervisor names a stop newer than the campaign's start."""
-        return self.armed and not self._new_cause(run)
 
     def _disarm_message(self, run: GoalRun) -> str:
         """The result of a goal aborted as :data:`DISARMED`: with the supervisor's cause and next step."""
@@ -341,7 +331,8 @@ class IdentificationCore:
                     f"{self.samples_dropped} sensor samples left out, stamped more than {FUTURE_STAMP_TOLERANCE_S} s "
                     f"after or {STALE_STAMP_TOLERANCE_S} s before this node's clock ({t:.3f} s): a publisher on "
                     "another clock?",)))
-            w = ex.step(TickInput(t, max(0.0, t - previous), valid, self._armed_now(run), cancel))
+            armed = self.armed and not self._new_cause(run)  # a newer stop: disarmed
+            w = ex.step(TickInput(t, max(0.0, t - previous), valid, armed, cancel))
             if self.written is not None:
                 run.written_us = self.written
         self.last_tick_s = t
@@ -428,7 +419,7 @@ class IdentificationCore:
     def _progress(self, run: GoalRun, t: float, out: list[Event]) -> None:
         ex = run.executive
         st = ex.status()
-        prompt = operator_prompt(ex)
+        prompt = f"[{ex.awaiting}] {ex.prompt}" if ex.awaiting else ""  # feedback and status
         self._status_throttled(t, st.phase, st, prompt or st.message, out)
         key = (st.dof, st.level_index, math.copysign(1.0, st.level_command) if st.level_command else 0.0, prompt,
                st.message)

@@ -182,22 +182,6 @@ def _positive(x: float) -> bool:
     return math.isfinite(x) and x > 0
 
 
-class _Shared(property):
-    """A read-only property of the :class:`Executive` that reads the :class:`~.steps.StepContext` field of the same
-    name (``self.ctx.<name>``); the docstring says what the field holds."""
-
-    def __init__(self, doc: str):
-        super().__init__(self._read)
-        self.__doc__ = doc  # a property subclass would otherwise show its class docstring
-        self.name = ""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        self.name = name
-
-    def _read(self, executive: "Executive") -> Any:
-        return getattr(executive.ctx, self.name)
-
-
 def command_ticks(cfg: VehicleConfig, tick_s: float, command_rate_hz: float | None = None) -> int:
     """Control ticks of ``tick_s`` (s) a wrench command is held for (module docstring, "Command rate"):
     ``round(1 / (rate * tick_s))``, at least 1, with ``command_rate_hz`` (Hz) or else ``identification.command_rate_hz``
@@ -323,27 +307,18 @@ class Executive:
             self.ctx.undo.update(dict(confirm))
 
     # ------------------------------------------------------------------ the shared state, by name
-    state = _Shared("conditioned sensors (:class:`~...vehicle.state.SensorState`)")
-    box = _Shared("the pool box (:class:`~...control.maneuvers.PoolBox`)")
-    core = _Shared("the allocation model (AllocationCore)")
-    curve = _Shared("the thrust curve ([Hindrax-Drag] eq. 1)")
-    matrix = _Shared("thrust allocation matrix (6, m), FRD")
-    authority = _Shared("DOF -> (positive, negative) authority, N or N m")
-    time_constant_s = _Shared("thrust lag, s")
-    calibration = _Shared("thrust-scale step results (CampaignRecord)")
-    inclining = _Shared("inclining step results (CampaignRecord)")
-    decays = _Shared("free-decay windows (CampaignRecord)")
-    windows = _Shared("DOF -> (t_start, t_end) of its manoeuvres, s")
-    levels = _Shared("DOF -> commanded levels, N or N m")
-    awaiting = _Shared("what a step waits for the operator to do ('' when not waiting): attach_ballast, "
-                       "remove_ballast, attach_float, remove_float, apply_line_pull_<surge|sway>[_negative], "
-                       "release_line_<surge|sway>[_negative], attach_inclining_mass_<dof>, "
-                       "remove_inclining_mass_<dof>")
-    prompt = _Shared("the operator's instruction while :attr:`awaiting` ('' otherwise), e.g. 'calibration: "
-                     "attach the ballast (8.56 N in water), then call continue'")
-    message = _Shared("the current step's last message")
-    depth_hold_m = _Shared("depth held between manoeuvres, m")
-    t_s = _Shared("time of the current tick, s")
+    #: :class:`~.steps.StepContext` fields read on the executive by name (the context documents
+    #: them): the conditioned sensors ``state``, the pool ``box``, the allocation model ``core``,
+    #: ``curve``, ``matrix``, ``authority``, ``time_constant_s``, the step results, ``awaiting``
+    #: and ``prompt`` (operator), ``message``, ...
+    _SHARED = frozenset({"state", "box", "core", "curve", "matrix", "authority", "time_constant_s",
+                         "calibration", "inclining", "decays", "windows", "levels", "awaiting",
+                         "prompt", "message", "depth_hold_m", "t_s"})
+
+    def __getattr__(self, name: str) -> Any:
+        if name in Executive._SHARED:
+            return getattr(self.ctx, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     @property
     def undo(self) -> list[tuple[str, str]]:

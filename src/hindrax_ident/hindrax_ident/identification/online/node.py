@@ -124,12 +124,6 @@ from .executive import ExecutiveStatus, command_ticks
 
 __all__ = ["IdentificationNode", "hydro_estimate", "main"]
 
-#: the core's phase names as ManeuverStatus phases
-_PHASES = {"idle": ManeuverStatus.PHASE_IDLE, "positioning": ManeuverStatus.PHASE_POSITIONING,
-           "running": ManeuverStatus.PHASE_RUNNING, "returning": ManeuverStatus.PHASE_RETURNING,
-           "done": ManeuverStatus.PHASE_DONE, "aborted": ManeuverStatus.PHASE_ABORTED}
-
-
 def hydro_estimate(dof: str, estimator, stamp, method: str = "rls") -> HydroEstimate:
     """HydroEstimate of one :class:`~.estimators.OnlineDofEstimator` (RLS value, std, covariance, excitation).
 
@@ -252,11 +246,15 @@ class IdentificationNode(VehicleNode):
             self.core.forget_inputs()
             # (type, topic, handler, QoS depth): the depths hold what arrives in 0.4-2 s, many ticks
             # best effort (sensor_input_qos): the writers then run no reliability protocol for this reader
+            add = self.core.add_samples
             self._inputs = [self.create_subscription(msg_type, topic, handler, sensor_input_qos(depth))
                             for msg_type, topic, handler, depth in (
-                                (Dvl, "dvl/data", self._on_dvl, 20),
-                                (FluidPressure, "pressure/fluid_pressure", self._on_pressure, 20),
-                                (Imu, "imu/data_raw", self._on_imu, 50), (Range, "ping/altitude", self._on_range, 20),
+                                (Dvl, "dvl/data", lambda m: add(samples_from_dvl(m)), 20),
+                                (FluidPressure, "pressure/fluid_pressure",
+                                 lambda m: add([sample_from_pressure(m)]), 20),
+                                (Imu, "imu/data_raw",
+                                 lambda m: add(samples_from_imu(m, self._mount_t)), 50),
+                                (Range, "ping/altitude", lambda m: add([sample_from_range(m)]), 20),
                                 (ThrusterPwm, "thrusters/pulse_width", self._on_pwm, 20))]
         else:
             for sub in self._inputs:
@@ -268,18 +266,6 @@ class IdentificationNode(VehicleNode):
     def _on_esc_state(self, msg: DiagnosticStatus) -> None:
         state = read_esc_state(msg)
         self.core.armed = state is not None and state[1]  # malformed: disarmed
-
-    def _on_dvl(self, msg: Dvl) -> None:
-        self.core.add_samples(samples_from_dvl(msg))
-
-    def _on_imu(self, msg: Imu) -> None:
-        self.core.add_samples(samples_from_imu(msg, self._mount_t))
-
-    def _on_pressure(self, msg: FluidPressure) -> None:
-        self.core.add_samples([sample_from_pressure(msg)])
-
-    def _on_range(self, msg: Range) -> None:
-        self.core.add_samples([sample_from_range(msg)])
 
     def _on_pwm(self, msg: ThrusterPwm) -> None:
         self.core.on_pwm(msg.pulse_width_us, msg.armed)
@@ -353,7 +339,9 @@ class IdentificationNode(VehicleNode):
         log = self.get_logger()
         for ev in events:
             if ev.kind == "status":
-                self._publish_status(_PHASES[ev.data[0]], ev.data[1], ev.data[2])
+                # the core's phase names are ManeuverStatus.PHASE_<NAME>
+                phase = getattr(ManeuverStatus, "PHASE_" + ev.data[0].upper())
+                self._publish_status(phase, ev.data[1], ev.data[2])
             elif ev.kind == "wrench":
                 self._publish_wrench(ev.data[0], now)
             elif ev.kind == "feedback":

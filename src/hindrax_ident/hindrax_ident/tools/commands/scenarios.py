@@ -32,7 +32,6 @@ import datetime as _dt
 import json
 import math
 import os
-import subprocess
 import time
 from contextlib import nullcontext
 from pathlib import Path
@@ -341,16 +340,6 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def _commit() -> str:
-    if os.environ.get("HINDRAX_COMMIT"):  # a run from an exported snapshot of a commit (no .git)
-        return os.environ["HINDRAX_COMMIT"]
-    try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                              cwd=Path(__file__).resolve().parent, timeout=10).stdout.strip() or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the suite (module docstring)."""
     from hindrax_drivers.config import DOFS
@@ -397,8 +386,8 @@ def run(args: argparse.Namespace) -> int:
             progress(f"{res['scenario']} seed {res['seed']}: {res['wall_s']:.0f} s{extra}")
     summary = summarise(results)
     date = _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
-    doc = {"date": date, "commit": _commit(), "seeds": args.seeds, "dofs": dofs, "scenarios": names, "calibrate": cal,
-           "levels": args.levels, "not_run": not_run,
+    doc = {"date": date, "commit": results_doc.commit(), "seeds": args.seeds, "dofs": dofs,
+           "scenarios": names, "calibrate": cal, "levels": args.levels, "not_run": not_run,
            "wall_time_s": progress.elapsed(), "summary": summary, "runs": results}
     table = format_table(summary)
     if args.excitation:

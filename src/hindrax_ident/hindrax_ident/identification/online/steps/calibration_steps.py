@@ -283,15 +283,11 @@ class TiltDecay(Step):
     :attr:`~.context.StepContext.decays`. Rigid + added inertia follow offline from the gyro rate and the inclining
     stiffness (:func:`~..calibration.decay_inertia`)."""
 
-    def __init__(self, dof: str, angle_rad: float = TILT_DECAY_ANGLE_RAD, ramp_s: float = TILT_DECAY_RAMP_S,
-                 hold_s: float = TILT_DECAY_HOLD_S, record_s: float = TILT_DECAY_RECORD_S) -> None:
+    def __init__(self, dof: str) -> None:
         if dof not in ("roll", "pitch"):
             raise ValueError(f"TiltDecay: roll or pitch, got {dof!r}")
         self.dof = dof
         self.name = f"tilt decay {dof}"
-        self.angle_rad = _positive("tilt angle", angle_rad)
-        self.ramp_s, self.hold_s = _positive("ramp_s", ramp_s), _positive("hold_s", hold_s)
-        self.record_s = _positive("record_s", record_s)
 
     def run(self, ctx: StepContext) -> Wrenches:
         dof = self.dof
@@ -299,16 +295,16 @@ class TiltDecay(Step):
         v = ctx.cfg.vehicle
         bg = float(v.centre_of_gravity_frd_m[2]) - float(v.centre_of_buoyancy_frd_m[2])
         c0 = float(ctx.cfg.weight_n) * bg
-        moment = min(c0 * self.angle_rad, 0.8 * min(ctx.authority[dof]))
+        moment = min(c0 * TILT_DECAY_ANGLE_RAD, 0.8 * min(ctx.authority[dof]))
         yield from ctx.move_to_centre()
         ctx.say(f"free decay ({dof}): tilt with the vertical thrusters, then release")
-        n_ramp = int(round(self.ramp_s / ctx.tick_s))
-        for i in range(n_ramp + int(round(self.hold_s / ctx.tick_s))):
+        n_ramp = int(round(TILT_DECAY_RAMP_S / ctx.tick_s))
+        for i in range(n_ramp + int(round(TILT_DECAY_HOLD_S / ctx.tick_s))):
             w = np.asarray(ctx.ctrl.wrench(ctx.state, (dof,), ctx.tick_s), dtype=float)
             w[k] = moment * min(1.0, i / max(n_ramp, 1))
             yield w
         t0 = ctx.t_s
-        for _ in range(int(round(self.record_s / ctx.tick_s))):
+        for _ in range(int(round(TILT_DECAY_RECORD_S / ctx.tick_s))):
             w = np.asarray(ctx.ctrl.wrench(ctx.state, (dof,), ctx.tick_s), dtype=float)
             w[k] = 0.0
             yield w

@@ -80,9 +80,13 @@ class StepContext:
         self.calibration: dict = {}
         self.inclining: dict = {}
         self.decays: dict[str, tuple[float, float]] = {}
-        #: what a step waits for the operator to do ("" when not waiting), e.g. attach_ballast
+        #: what a step waits for the operator to do ("" when not waiting): attach_ballast,
+        #: remove_ballast, attach_float, remove_float, apply_line_pull_<surge|sway>[_negative],
+        #: release_line_<surge|sway>[_negative], attach_inclining_mass_<dof>,
+        #: remove_inclining_mass_<dof>
         self.awaiting = ""
-        #: the operator's instruction while :attr:`awaiting` ("" otherwise)
+        #: the operator's instruction while :attr:`awaiting` ("" otherwise), e.g. 'calibration:
+        #: attach the ballast (8.56 N in water), then call continue'
         self.prompt = ""
         self._continue = False
         #: loads asked for and not yet removed: {remove code: instruction}, e.g. {"remove_ballast": "calibration:
