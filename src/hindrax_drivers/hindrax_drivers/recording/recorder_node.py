@@ -395,14 +395,7 @@ def main(args: list[str] | None = None) -> int:
         except (ConfigError, ValueError) as exc:
             print(f"recorder: {str(exc).splitlines()[0]}", file=sys.stderr)
             return 1
-
-        def finish() -> None:
-            node.shutdown()  # finishes the bag
-            proc.executor.remove_node(node)
-            node.destroy_node()
-
-        proc.at_exit(finish)
-        proc.executor.add_node(node)
+        proc.executor.add_node(proc.own(node))  # on exit: close() finishes the bag
         proc.spin()
     return proc.status
 
