@@ -160,11 +160,7 @@ def _load(path: str | Path) -> VehicleConfig:
 
 
 def _plain(value: Any) -> Any:
-    if isinstance(value, array.array):
-        return list(value)
-    if isinstance(value, tuple):
-        return list(value)
-    return value
+    return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
 def vehicle_overrides(node: Any) -> dict[str, Any]:
@@ -281,8 +277,8 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
         defaults = file_cfg.to_ros_parameters()
 
     source = config_file or (file_cfg.source if file_cfg else "")
-    check_whole_vehicle(vehicle_overrides(node), defaults,
-                        f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else ""))
+    src = f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else "")
+    check_whole_vehicle(vehicle_overrides(node), defaults, src)
     values: dict[str, Any] = {}
 
     def declare(key: str) -> Any:
@@ -292,7 +288,7 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
         try:
             p = node.declare_parameter(key, defaults.get(key), desc)
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:  # pragma: no cover
-            raise ConfigError([ConfigIssue(key, str(exc), SCHEMA[_generic(key)].allowed())], source) from exc
+            raise ConfigError([ConfigIssue(key, str(exc), spec.allowed())], source) from exc
         v = _plain(p.value)
         values[key] = v
         return v
@@ -307,7 +303,6 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     overridden = any(values[k] is not None and values[k] != defaults.get(k) for k in declared)
     if default_error is not None and not overridden:
         raise default_error
-    src = f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else "")
     valid = validate_selection(values, generic, source=src)
 
     # Canonical types (an integer written for a float key becomes a float), then the final descriptors:
