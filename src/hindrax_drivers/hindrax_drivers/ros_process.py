@@ -179,15 +179,10 @@ class RosProcess:
         if executor is not None and executor not in EXECUTORS:
             raise ValueError(f"executor={executor!r}: allowed values are {', '.join(EXECUTORS)}")
         self.executor_kind = executor
-        """``events`` or ``single``; None: from ``HINDRAX_EXECUTOR`` (:func:`executor_kind`)."""
         self.args = list(args) if args is not None else list(sys.argv)
         self.shutdown_budget_s = shutdown_budget_s
-        """Seconds the exit may take before every thread's traceback is dumped and the process ends with status 1
-        (module docstring); None: unbounded."""
         self.exit_process = bool(exit_process)
-        """Whether leaving the block ends the process (module docstring)."""
         self.interrupt = bool(interrupt)
-        """Whether SIGINT raises ``KeyboardInterrupt`` in the block (module docstring, "Signals")."""
         self.errors = dict(errors or {})
         self.status = 0
         """Exit status: 0, or 1 after an exception listed in ``errors`` (a command may set it too)."""
