@@ -305,8 +305,7 @@ class RecorderNode(VehicleNode):
         writer = self._writer
         if writer is None:
             return
-        now_ns = self.get_clock().now().nanoseconds
-        writer.write(topic, now_ns, data, now_ns)
+        writer.write(topic, self.get_clock().now().nanoseconds, data)
         self._gaps.observe(topic, info.get("publication_sequence_number"))
 
     # -- services and status ----------------------------------------------------------------------
