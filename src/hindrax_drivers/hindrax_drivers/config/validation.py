@@ -53,7 +53,8 @@ def validate_flat(flat: Mapping[str, Any], source: str = "") -> dict[str, Any]:
         if value is None and key in NULLABLE_KEYS:
             continue  # e.g. esc.output_enable_gpio: null (not wired)
         if key.split(".")[0] not in SECTIONS:
-            issues.append(ConfigIssue(key, value, "no such key (sections: " + ", ".join(SECTIONS) + ")"))
+            sections = ", ".join(SECTIONS)
+            issues.append(ConfigIssue(key, value, f"no such key (sections: {sections})"))
             continue
         skey = schema_key(key, names)
         if skey is None:
