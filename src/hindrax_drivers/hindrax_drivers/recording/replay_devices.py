@@ -185,9 +185,7 @@ class I2CReplayDevice:
     def i2c_write(self, data: bytes) -> None:
         """One write transaction (see the class docstring)."""
         with self._lock:
-            if self._pending is not None:
-                self._commit_write(self._pending)
-                self._pending = None
+            self.flush()  # a pending one-byte write had no read after it (RLock: re-entered)
             if len(data) == 1:
                 self._pending = bytes(data)  # pointer of a following read, or a command byte
             elif data:

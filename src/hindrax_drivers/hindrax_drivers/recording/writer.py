@@ -81,11 +81,11 @@ class WriterOptions:
             raise ValueError("split_size_bytes, split_duration_s and flush_interval_s must be >= 0")
 
     @classmethod
-    def from_section(cls, recording: RecordingSection, **overrides: Any) -> "WriterOptions":
-        """From the validated ``recording.*`` section (``VehicleConfig.recording``); ``overrides`` replace fields."""
+    def from_section(cls, recording: RecordingSection) -> "WriterOptions":
+        """From the validated ``recording.*`` section (``VehicleConfig.recording``)."""
         keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s",
                 "flush_interval_s")
-        return cls(**{**{k: getattr(recording, k) for k in keys}, **overrides})
+        return cls(**{k: getattr(recording, k) for k in keys})
 
 
 @dataclass
