@@ -48,7 +48,7 @@ from .. import config as _c
 from . import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
 from .sections import cross_checks
 
-__all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
+__all__ = ["select_schema_keys", "concrete_keys", "validate_selection",
            "declare_vehicle_parameters", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
            "check_whole_vehicle", "declare_node_parameter"]
 
@@ -126,16 +126,10 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
     return out
 
 
-def parameter_descriptor(key: str, read_only: bool = True):
-    """``rcl_interfaces/ParameterDescriptor`` of a vehicle key from its SCHEMA entry.
-
-    description: the schema's one-line meaning; additional_constraints: "allowed <range>"; ranges for
-    scalar numbers with both bounds; read_only as given. The type is left to the caller.
-    """
-    return _descriptor(key, SCHEMA[_generic(key)], read_only)
-
-
 def _descriptor(name: str, spec: Spec, read_only: bool) -> ParameterDescriptor:
+    """``rcl_interfaces/ParameterDescriptor`` of a parameter from its Spec: description,
+    additional_constraints "allowed <range>", ranges for scalar numbers with both bounds; the
+    type is left to the caller."""
     d = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                             read_only=read_only)
     if spec.kind == "float" and spec.lo is not None and spec.hi is not None:
@@ -313,7 +307,8 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     for key in declared:
         if key not in valid:
             continue  # optional key with no value: stays declared without one
-        d = parameter_descriptor(key, read_only=not _matches(_generic(key), dynamic) and not _matches(key, dynamic))
+        writable = _matches(_generic(key), dynamic) or _matches(key, dynamic)
+        d = _descriptor(key, SCHEMA[_generic(key)], read_only=not writable)
         d.type = Parameter(key, value=valid[key]).type_.value
         node.set_descriptor(key, d)
 
