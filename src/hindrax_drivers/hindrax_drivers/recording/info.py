@@ -72,11 +72,8 @@ def bag_info(path: str | Path) -> BagInfo:
         n = ch.message_count
         t0, t1 = first.get(name, 0), last.get(name, 0)
         rate = (n - 1) / ((t1 - t0) / 1e9) if n >= 2 and t1 > t0 else 0.0
-        rel = ""
-        if "best_effort" in ch.metadata.get("offered_qos_profiles", ""):
-            rel = "best_effort"
-        elif "reliable" in ch.metadata.get("offered_qos_profiles", ""):
-            rel = "reliable"
+        qos = ch.metadata.get("offered_qos_profiles", "")
+        rel = "best_effort" if "best_effort" in qos else "reliable" if "reliable" in qos else ""
         topics.append(TopicSummary(name, ch.type, n, t0, t1, rate, rel))
     total = sum(t.message_count for t in topics)
     starts = [t.first_ns for t in topics if t.message_count]
