@@ -60,10 +60,7 @@ def ros_context(domain_id: int | None = None) -> Iterator[Any]:
     refused (docs/architecture.md §8)."""
     loopback_transport()
     ctx = Context()
-    kwargs = {}
-    if domain_id is not None:
-        kwargs["domain_id"] = domain_id
-    rclpy.init(context=ctx, **kwargs)
+    rclpy.init(context=ctx, domain_id=domain_id)
     try:
         yield ctx
     finally:

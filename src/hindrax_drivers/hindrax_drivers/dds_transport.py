@@ -38,8 +38,7 @@ _PACKAGE = "hindrax_drivers"
 #: how often every participant announces itself (``leaseAnnouncement`` of the profiles, Fast DDS's default 3 s), s
 ANNOUNCE_PERIOD_S = 0.5
 #: a participant that is running is seen by a new one within this, s: three announcement periods (a missed first
-#: exchange and a missed periodic announcement, and the delivery); measured, a new participant finding 8 others at
-#: load 13-16 took at most 0.39 s (15 trials)
+#: exchange and a missed periodic announcement, and the delivery)
 DISCOVERY_BOUND_S = 3 * ANNOUNCE_PERIOD_S
 #: :func:`wait_discovered` gives up on a graph that keeps changing after this, s
 DISCOVERY_CAP_S = 8.0

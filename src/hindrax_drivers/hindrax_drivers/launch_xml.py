@@ -90,7 +90,6 @@ class NodeProcess:
     exec_name: str | None = None
     respawn: bool = False
     respawn_delay_s: float = 0.0
-    output: str = "log"
     env: tuple[tuple[str, str], ...] = ()
     source: Path = field(default=Path(), compare=False)
 
@@ -279,8 +278,8 @@ class _Reader:
             parameters=tuple(p if isinstance(p, Path) else dict(p) for p in params), remaps=tuple(remaps),
             arguments=tuple(sub(el.get("args", "")).split()), launch_prefix=tuple(shlex.split(sub(el.get(
                 "launch-prefix", "")))), exec_name=sub(el.get("exec_name")) if el.get("exec_name") else None,
-            respawn=respawn in _TRUE, respawn_delay_s=delay,
-            output=el.get("output", "log"), env=tuple(node_env.items()), source=path)
+            respawn=respawn in _TRUE, respawn_delay_s=delay, env=tuple(node_env.items()),
+            source=path)
 
     def sub(self, text: str, scope: Mapping[str, str], path: Path) -> str:
         """``text`` with its substitutions done (module docstring)."""

@@ -444,33 +444,31 @@ def load_node_config(node: Any, keys: Sequence[str] | None = None, *, dynamic: S
 
 def run_node(factory: Callable[[], Any], args: Sequence[str] | None = None, executor: str | None = None,
              exit_process: bool = True) -> int:
-    """Process entry point of a node: init, build the node, spin the process's executor, shut down cleanly.
-
-    factory: creates the node after ``rclpy.init``. executor: ``events``, ``single`` or None for the default
-    (:mod:`hindrax_drivers.ros_process`: the EventsExecutor unless ``HINDRAX_EXECUTOR=single``). Returns the exit
-    status: 0 on SIGINT/SIGTERM,
-    1 on an invalid configuration (one line on stderr naming key, value, allowed range). The process life
-    (clean-up with the node's ``close()``, shutdown on signals) is :class:`~hindrax_drivers.ros_process.RosProcess`.
-    exit_process: in the main thread the process ends on
-    return, without the DDS participant's teardown (:mod:`hindrax_drivers.ros_process`, "Exit without the DDS
-    participant's teardown"): the exit status above becomes the process's, and nothing runs after; False returns it.
-    """
+    """Process entry point of one node (``factory`` creates it after ``rclpy.init``):
+    :func:`run_nodes`."""
     return run_nodes([factory], args, executor, exit_process)
 
 
 def run_nodes(factories: Sequence[Callable[[], Any]], args: Sequence[str] | None = None,
               executor: str | None = None, exit_process: bool = True) -> int:
-    """Process entry point of several nodes composed in one process (:mod:`hindrax_drivers.composition`): the nodes
-    are built in order after ``rclpy.init`` and spun by one executor; on exit they are closed and destroyed in the
-    reverse order (the last built first). Same arguments, exit
-    status and shutdown as :func:`run_node`; an exception out of any node's callback ends the whole process (every
-    node's ``close()`` still runs). SIGINT shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a
-    callback (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``). Before ``rclpy.init`` the
-    process takes the real-time priority its environment asks for (:mod:`hindrax_drivers.scheduling`; a bad value
-    of ``HINDRAX_REALTIME_PRIORITY`` is an invalid configuration), and logs the outcome once its nodes are built. A
-    shutdown that takes longer than :data:`~hindrax_drivers.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every thread's
-    traceback to stderr and exits with status 1 (:class:`~hindrax_drivers.ros_process.RosProcess`). exit_process: as
-    for :func:`run_node`."""
+    """Process entry point of nodes composed in one process (:mod:`hindrax_drivers.composition`):
+    the nodes are built in order after ``rclpy.init`` and spun by one executor; on exit they are
+    closed and destroyed in the reverse order (the last built first). executor: ``events``,
+    ``single`` or None for the default (:mod:`hindrax_drivers.ros_process`: the EventsExecutor
+    unless ``HINDRAX_EXECUTOR=single``). Returns the exit status: 0 on SIGINT/SIGTERM, 1 on an
+    invalid configuration (one line on stderr naming key, value, allowed range); an exception out
+    of any node's callback ends the whole process (every node's ``close()`` still runs). SIGINT
+    shuts the process down like SIGTERM, without a ``KeyboardInterrupt`` in a callback
+    (:class:`~hindrax_drivers.ros_process.RosProcess`, ``interrupt=False``). Before
+    ``rclpy.init`` the process takes the real-time priority its environment asks for
+    (:mod:`hindrax_drivers.scheduling`; a bad value of ``HINDRAX_REALTIME_PRIORITY`` is an
+    invalid configuration), and logs the outcome once its nodes are built. A shutdown that takes
+    longer than :data:`~hindrax_drivers.ros_process.SHUTDOWN_BUDGET_S` (8 s) writes every
+    thread's traceback to stderr and exits with status 1
+    (:class:`~hindrax_drivers.ros_process.RosProcess`). exit_process: in the main thread the
+    process ends on return, without the DDS participant's teardown
+    (:mod:`hindrax_drivers.ros_process`): the exit status becomes the process's; False returns
+    it."""
     try:
         sched = apply_realtime_priority()
     except ValueError as exc:

@@ -44,15 +44,12 @@ def installed_command(process: NodeProcess) -> list[str]:
     Raises ``LookupError`` naming the places searched."""
     searched = []
     try:
-        try:
-            exe = Path(get_package_prefix(process.package)) / "lib" / process.package / process.executable
-            if os.access(exe, os.X_OK):
-                return [str(exe)]
-            searched.append(str(exe))
-        except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
-            searched.append(f"ament index (no package {process.package})")
-    except ImportError:
-        searched.append("ament index (ament_index_python missing)")
+        exe = Path(get_package_prefix(process.package), "lib", process.package, process.executable)
+        if os.access(exe, os.X_OK):
+            return [str(exe)]
+        searched.append(str(exe))
+    except (PackageNotFoundError, OSError):  # OSError: AMENT_PREFIX_PATH unset
+        searched.append(f"ament index (no package {process.package})")
     script = Path(sys.executable).parent / process.executable
     if os.access(script, os.X_OK) and _console_script_of(process.package, process.executable):
         return [str(script)]
@@ -133,7 +130,6 @@ class ProcessRunner:
     def start(self) -> None:
         """Resolve every executable (LookupError before anything starts), then start the processes in order."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        self._params_dir.mkdir(parents=True, exist_ok=True)
         slots = [_Slot(p, self.argv(p), self.log_dir / f"{p.label}.log") for p in self.processes]
         self._stopping.clear()
         for slot in slots:

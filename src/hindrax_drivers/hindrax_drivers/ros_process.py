@@ -145,8 +145,7 @@ class WithMessageInfo:
 
 
 class _EventsLoop:
-    """rclpy's ``EventsExecutor`` behind the executor methods this package uses (add_node, remove_node,
-    get_nodes, spin, spin_once, shutdown).
+    """rclpy's ``EventsExecutor`` (every other method passed through) with its own :meth:`spin`.
 
     Its own ``spin()`` (rclpy 7.x, Jazzy) does not return when SIGINT/SIGTERM shut the context down, so
     :meth:`spin` is a loop of ``spin_once`` (:func:`_spin_while`), which raises rclpy's
@@ -155,23 +154,11 @@ class _EventsLoop:
     def __init__(self) -> None:
         self._ex = EventsExecutor()
 
-    def add_node(self, node: Any) -> bool:
-        return self._ex.add_node(node)
-
-    def remove_node(self, node: Any) -> None:
-        self._ex.remove_node(node)
-
-    def get_nodes(self) -> list:
-        return self._ex.get_nodes()
-
-    def spin_once(self, timeout_sec: float | None = None) -> None:
-        self._ex.spin_once(timeout_sec=timeout_sec)
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._ex, name)
 
     def spin(self) -> None:
         _spin_while(self._ex, lambda: True)
-
-    def shutdown(self, timeout_sec: float | None = None) -> bool:
-        return self._ex.shutdown(timeout_sec) if timeout_sec is not None else self._ex.shutdown()
 
 
 class RosProcess:
@@ -192,15 +179,10 @@ class RosProcess:
         if executor is not None and executor not in EXECUTORS:
             raise ValueError(f"executor={executor!r}: allowed values are {', '.join(EXECUTORS)}")
         self.executor_kind = executor
-        """``events`` or ``single``; None: from ``HINDRAX_EXECUTOR`` (:func:`executor_kind`)."""
         self.args = list(args) if args is not None else list(sys.argv)
         self.shutdown_budget_s = shutdown_budget_s
-        """Seconds the exit may take before every thread's traceback is dumped and the process ends with status 1
-        (module docstring); None: unbounded."""
         self.exit_process = bool(exit_process)
-        """Whether leaving the block ends the process (module docstring)."""
         self.interrupt = bool(interrupt)
-        """Whether SIGINT raises ``KeyboardInterrupt`` in the block (module docstring, "Signals")."""
         self.errors = dict(errors or {})
         self.status = 0
         """Exit status: 0, or 1 after an exception listed in ``errors`` (a command may set it too)."""

@@ -34,7 +34,7 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from typing import Iterable, Mapping
 
-from .gateway.interface import GATEWAY_NODE, INTERFACE, Relay
+from .gateway.interface import GATEWAY_NODE, INTERFACE
 
 __all__ = ["TOOLS_ENCLAVE", "governance", "INTERNAL_ACTIONS",
            "INTERNAL_ENCLAVE_ROOT", "INTERNAL_SERVICES", "INTERNAL_TOPICS", "NODE_SERVICES",
@@ -148,33 +148,33 @@ def internal_policy(enclaves: Mapping[str, Iterable[str]]) -> str:
     return _policy(doc)
 
 
-def _names(vehicle_name: str, relays: Iterable[Relay]) -> list[str]:
-    return [f"/{vehicle_name}/{r.topside}" for r in relays]
-
-
-def topside_policy(vehicle_name: str, interface: Iterable[Relay] = INTERFACE) -> str:
-    """The topside domain's policy for ``vehicle_name`` (module docstring): the gateway serves ``interface``, the
-    operator may use all of it, every other topside participant e-stop (``who == "anyone"``) and telemetry."""
-    relays = list(interface)
-    of = lambda kind, who=None: [r for r in relays if r.kind == kind and (who is None or r.who in who)]  # noqa: E731
+def topside_policy(vehicle_name: str) -> str:
+    """The topside domain's policy for ``vehicle_name`` (module docstring): the gateway serves
+    the interface (:data:`~hindrax_drivers.gateway.interface.INTERFACE`), the operator may use
+    all of it, every other topside participant e-stop (``who == "anyone"``) and telemetry."""
     ns = f"/{vehicle_name}"
+
+    def names(kind: str, who: tuple[str, ...] | None = None) -> list[str]:
+        return [f"{ns}/{r.topside}" for r in INTERFACE
+                if r.kind == kind and (who is None or r.who in who)]
+
     roles = topside_enclaves(vehicle_name)
     gateway = _node_rules() + [
-        ("topics", {"publish": "ALLOW"}, _names(vehicle_name, of("topic_out"))),
-        ("topics", {"subscribe": "ALLOW"}, _names(vehicle_name, of("topic_in"))),
-        ("services", {"reply": "ALLOW"}, _names(vehicle_name, of("service"))),
-        ("actions", {"execute": "ALLOW"}, _names(vehicle_name, of("action")))]
+        ("topics", {"publish": "ALLOW"}, names("topic_out")),
+        ("topics", {"subscribe": "ALLOW"}, names("topic_in")),
+        ("services", {"reply": "ALLOW"}, names("service")),
+        ("actions", {"execute": "ALLOW"}, names("action"))]
     operator = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
-                ("topics", {"subscribe": "ALLOW"}, _names(vehicle_name, of("topic_out"))),
-                ("topics", {"publish": "ALLOW"}, _names(vehicle_name, of("topic_in"))),
-                ("services", {"request": "ALLOW"}, _names(vehicle_name, of("service"))),
-                ("actions", {"call": "ALLOW"}, _names(vehicle_name, of("action")))]
+                ("topics", {"subscribe": "ALLOW"}, names("topic_out")),
+                ("topics", {"publish": "ALLOW"}, names("topic_in")),
+                ("services", {"request": "ALLOW"}, names("service")),
+                ("actions", {"call": "ALLOW"}, names("action"))]
     anyone = [("topics", {"publish": "ALLOW", "subscribe": "ALLOW"}, list(NODE_TOPICS)),
-              ("topics", {"subscribe": "ALLOW"}, _names(vehicle_name, of("topic_out", ("read", "anyone")))),
-              ("services", {"request": "ALLOW"}, _names(vehicle_name, of("service", ("anyone",)))),
-              ("services", {"request": "DENY"}, _names(vehicle_name, of("service", ("operator",)))),
-              ("actions", {"call": "DENY"}, _names(vehicle_name, of("action", ("operator",)))),
-              ("topics", {"publish": "DENY"}, _names(vehicle_name, of("topic_in", ("operator",))))]
+              ("topics", {"subscribe": "ALLOW"}, names("topic_out", ("read", "anyone"))),
+              ("services", {"request": "ALLOW"}, names("service", ("anyone",))),
+              ("services", {"request": "DENY"}, names("service", ("operator",))),
+              ("actions", {"call": "DENY"}, names("action", ("operator",))),
+              ("topics", {"publish": "DENY"}, names("topic_in", ("operator",)))]
     # the gateway's topside context holds GATEWAY_NODE and its _operator and _campaign siblings (gateway/node.py):
     # the interface on the first profile, each node's own parameter services on its own
     siblings = [(ns, f"{GATEWAY_NODE}_{suffix}", _node_rules()) for suffix in ("operator", "campaign")]

@@ -160,22 +160,11 @@ class AllocationStandIn:
     """Stand-in for the thrust allocation as the ESC's commander, for tests and benchmarks that drive an ESC node
     with pulse widths directly: a node named ``thrust_allocation`` (the only publisher the ESC accepts on
     ``thrusters/command_pulse_width``, :func:`hindrax_drivers.pca9685.core.command_source_fault`) in ``context``
-    with :attr:`pub` on that topic. :meth:`command` publishes one armed command now; :meth:`destroy` when done.
-    The node needs no executor."""
+    with :attr:`pub` on that topic; :meth:`destroy` when done. The node needs no executor."""
 
     def __init__(self, context=None) -> None:
         self.node = rclpy.create_node("thrust_allocation", context=context)
         self.pub = self.node.create_publisher(ThrusterPwm, "thrusters/command_pulse_width", heartbeat_qos())
-
-    def command(self, widths, armed: bool = True) -> None:
-        """Publish ``widths`` (thruster order, us), stamped now."""
-        m = ThrusterPwm(pulse_width_us=[float(w) for w in widths], armed=armed)
-        m.header.stamp = self.node.get_clock().now().to_msg()
-        self.pub.publish(m)
-
-    def publish(self, msg) -> None:
-        """Publish a ThrusterPwm as it is."""
-        self.pub.publish(msg)
 
     def destroy(self) -> None:
         """Destroy the stand-in's node."""

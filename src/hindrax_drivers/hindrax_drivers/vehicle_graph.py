@@ -251,7 +251,7 @@ def _refuse_heartbeat_endpoint(lookout: Any, watch: ForeignVehicleWatch) -> None
     """Raise :class:`ForeignVehicleError` when any publisher of a safety heartbeat is on the domain, its node named
     or not yet: the look-out has none of its own, and rmw knows an endpoint before its node's name arrives."""
     for name, _types in lookout.get_topic_names_and_types():
-        role = next((r for t, r in HEARTBEAT_TOPICS.items() if name.endswith("/" + t)), None)
+        role = _role_of_topic(name)
         if role is not None and lookout.count_publishers(name) > 0:
             domain = lookout.context.get_domain_id()
             raise ForeignVehicleError(f"{watch.what}: ROS domain {domain} already has a publisher of {name} "

@@ -208,7 +208,7 @@ class ThrustAllocator:
         wrench error; :data:`DEFAULT_EFFORT_WEIGHT` without a step.
 
     Raises ``ValueError`` for invalid configuration. Read-only attributes: ``matrix`` (6, n),
-    ``pseudo_inverse`` (n, 6), ``curves`` (n ThrustCurve), ``weights`` (n,), ``mode``,
+    ``pseudo_inverse`` (n, 6), ``curves`` (n ThrustCurve), ``mode``,
     ``priority_groups`` (tuples of axis indices, final group included), ``zero_authority_axes`` (6,)
     bool, ``n_thrusters``.
     """
@@ -295,8 +295,8 @@ class ThrustAllocator:
                                     grid.smallest_reverse_n)
 
         # All valid: commit.
-        self._matrix, self._pinv, self._weights = b, pinv, w
-        for arr in (self._matrix, self._pinv, self._weights):
+        self._matrix, self._pinv = b, pinv
+        for arr in (self._matrix, self._pinv):
             arr.flags.writeable = False
         self._curves = tuple(curve_list)
         self._curves_arg, self._weights_arg = curve_arg, weights_arg
@@ -353,11 +353,6 @@ class ThrustAllocator:
         return self._curves
 
     @property
-    def weights(self) -> np.ndarray:
-        """Weights (n,) of the minimum-norm solution (read-only array)."""
-        return self._weights
-
-    @property
     def mode(self) -> str:
         """``"uniform"`` or ``"priority"``."""
         return self._mode
@@ -366,11 +361,6 @@ class ThrustAllocator:
     def priority_groups(self) -> tuple[tuple[int, ...], ...]:
         """Axis-index groups in priority order, final catch-all group included."""
         return self._groups
-
-    @property
-    def pulse_width_step_us(self) -> float | None:
-        """Quantisation step of the pulse widths (us) or ``None``."""
-        return self._step_us
 
     @property
     def search(self) -> DeadbandSearch | None:

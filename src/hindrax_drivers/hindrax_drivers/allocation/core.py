@@ -43,7 +43,7 @@ class FluAllocation:
     frd: AllocationResult
 
     def to_json_dict(self) -> dict:
-        """The keys `hindrax allocate` prints (issue: force_n, pulse_width_us, achieved_wrench, scale, saturated)."""
+        """The keys `hindrax allocate` prints."""
         return {
             "force_n": [round(float(x), 6) for x in self.force_n],
             "pulse_width_us": [round(float(x), 3) for x in self.pulse_width_us],
@@ -71,25 +71,21 @@ class AllocationCore:
         self.names = cfg.thrusters.names
         self.neutral_us = cfg.thrusters.pulse_width_neutral_us
         self.max_excess_ratio = float(cfg.thrusters.max_wrench_excess_ratio)
-        self._capacity_scale: float | None = None
-        self._capacity = (np.zeros(6), np.zeros(6))
+        lower, upper = self.allocator.force_limits_n()
+        b = self.allocator.matrix
+        self._capacity = (np.minimum(b * lower, b * upper).sum(axis=1),
+                          np.maximum(b * lower, b * upper).sum(axis=1))
 
-    def wrench_capacity_frd(self, voltage_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    def wrench_capacity_frd(self) -> tuple[np.ndarray, np.ndarray]:
         """``(lowest, highest)`` (6,) each axis of the body FRD wrench can reach, N and N m: for axis k the extremes
         of ``sum_i B[k, i] F_i`` over the force box ``lower_i <= F_i <= upper_i`` (each thruster at the limit
         that pushes that axis most; the other axes left free), so no allocation reaches beyond them."""
-        if voltage_scale != self._capacity_scale:
-            lower, upper = self.allocator.force_limits_n(voltage_scale)
-            b = self.allocator.matrix
-            self._capacity = (np.minimum(b * lower, b * upper).sum(axis=1),
-                              np.maximum(b * lower, b * upper).sum(axis=1))
-            self._capacity_scale = voltage_scale
         return self._capacity
 
-    def excess_problem(self, wrench_frd: np.ndarray, voltage_scale: float = 1.0) -> str:
+    def excess_problem(self, wrench_frd: np.ndarray) -> str:
         """Why the FRD wrench (6,) is beyond ``max_wrench_excess_ratio`` times the capacity ('' when it is not).
         An axis no thruster moves (capacity 0 both ways) is not checked: nothing can be produced there."""
-        low, high = self.wrench_capacity_frd(voltage_scale)
+        low, high = self.wrench_capacity_frd()
         reach = np.where(wrench_frd >= 0.0, high, -low)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(reach > 0.0, np.abs(wrench_frd) / np.where(reach > 0.0, reach, 1.0), 0.0)
@@ -111,7 +107,7 @@ class AllocationCore:
         """(n,) neutral pulse widths, us."""
         return np.full(len(self.names), self.neutral_us)
 
-    def allocate(self, wrench_flu, voltage_scale: float = 1.0) -> FluAllocation:
+    def allocate(self, wrench_flu) -> FluAllocation:
         """Allocate a base_link wrench [Fx Fy Fz Tx Ty Tz] (N, N m). Raises InvalidWrenchError."""
         try:
             w = np.asarray(wrench_flu, dtype=float)
@@ -120,10 +116,10 @@ class AllocationCore:
         if w is None or w.shape != (6,) or not np.isfinite(w).all():
             raise InvalidWrenchError(f"wrench must be 6 finite numbers (N, N m), got {wrench_flu!r}")
         w_frd = frames.wrench_flu_to_frd(w)
-        excess = self.excess_problem(w_frd, voltage_scale)
+        excess = self.excess_problem(w_frd)
         if excess:
             raise InvalidWrenchError(excess)
-        result = self.allocator.allocate(w_frd, voltage_scale=voltage_scale)
+        result = self.allocator.allocate(w_frd)
         return FluAllocation(
             requested_wrench_flu=w,
             achieved_wrench_flu=frames.wrench_frd_to_flu(result.achieved_wrench),

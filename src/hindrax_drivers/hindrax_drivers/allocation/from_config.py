@@ -1,8 +1,7 @@
 """Build the thrust model (curves, thrust allocation matrix, allocator) from the vehicle configuration.
 
 The allocation node, the ``hindrax allocate`` command, the simulator and the identification regression all
-call these functions, so every one of them uses the same curves and matrix (issue: "the force in the
-regression is the thrust model's output ... through the same curves and matrix as the allocation").
+call these functions, so every one of them uses the same curves and matrix.
 """
 from __future__ import annotations
 
@@ -38,11 +37,11 @@ def pca9685_pulse_step_us(cfg: VehicleConfig) -> float:
     return pca.count_duration_us(pca.prescale_for_frequency(cfg.esc.pwm_frequency_hz, f_osc), f_osc)
 
 
-def allocator_from_config(cfg: VehicleConfig, quantise: bool = True) -> ThrustAllocator:
+def allocator_from_config(cfg: VehicleConfig) -> ThrustAllocator:
     """The ThrustAllocator of the configuration: weighted pseudo-inverse with the per-thruster allocation
-    weights, the configured saturation mode and priority DOFs, and (``quantise``) the PCA9685 pulse step."""
+    weights, the configured saturation mode and priority DOFs, and the PCA9685 pulse step."""
     t = cfg.thrusters
     weights = np.array([th.allocation_weight for th in t.thrusters])
     return ThrustAllocator(allocation_matrix_from_config(cfg), thrust_curve_from_config(cfg), weights=weights,
                            mode=t.allocation_mode, priority_groups=(tuple(t.priority_dofs),),
-                           pulse_width_step_us=pca9685_pulse_step_us(cfg) if quantise else None)
+                           pulse_width_step_us=pca9685_pulse_step_us(cfg))

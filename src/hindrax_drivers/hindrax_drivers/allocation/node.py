@@ -45,9 +45,9 @@ from .allocator import InvalidWrenchError
 from .core import AllocationCore
 
 BASE_FRAME = "base_link"
-#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of state, s (5 Hz: a
-#: topside display, the controller's anti-windup; a change of saturation or rejection goes out at once; 10 Hz before,
-#: docs/architecture.md §10.1)
+#: least interval between two ``thrusters/forces`` / ``allocation/status`` without a change of
+#: state, s (5 Hz: a topside display, the controller's anti-windup; a change of saturation or
+#: rejection goes out at once)
 STATUS_PERIOD_S = 0.2
 STATUS_PERIOD_NS = int(STATUS_PERIOD_S * 1e9)
 
@@ -109,8 +109,6 @@ class ThrustAllocationNode(VehicleNode):
         #: ROS time of the last wrench received, ns (None before the first)
         self.last_wrench_ns: int | None = None
         self.stale_reported = True  # nothing to report before the first wrench
-        self.rejected = 0
-        self.allocations = 0
         self._held: tuple | None = None  # what the next forces and status carry, not yet published
         self._last_status_key: tuple = ()
         self._last_status_ns = -(1 << 62)
@@ -161,7 +159,6 @@ class ThrustAllocationNode(VehicleNode):
         except InvalidWrenchError as exc:
             self.reject(msg, w, str(exc), now_ns)
             return
-        self.allocations += 1
         self.publish(msg, result.pulse_width_us, result.force_n, w, result.achieved_wrench_flu, result.scale,
                      result.saturated, rejected=False,
                      reason="saturated: scaled" if bool(np.any(result.saturated)) else "", now_ns=now_ns)
@@ -182,7 +179,6 @@ class ThrustAllocationNode(VehicleNode):
 
     def reject(self, msg: WrenchStamped | None, requested: np.ndarray, reason: str, now_ns: int | None = None) -> None:
         """Command neutral and report why (``now_ns``: ROS time of the decision, ns; read when None)."""
-        self.rejected += 1
         self.get_logger().warn(f"wrench rejected: {reason}", throttle_duration_sec=1.0)
         n = len(self.core.names)
         req = np.where(np.isfinite(requested), requested, 0.0)

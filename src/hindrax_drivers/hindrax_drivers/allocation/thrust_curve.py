@@ -281,11 +281,6 @@ class ThrustCurve:
         return self._dead
 
     @property
-    def small_force(self) -> str:
-        """Policy of the inverse for forces below the smallest producible magnitude."""
-        return self._small_force
-
-    @property
     def reverse_branch_us(self) -> tuple[float, float]:
         """``(pulse_width_min_us, inner end)`` of the monotone negative branch (us)."""
         return self._neg_branch

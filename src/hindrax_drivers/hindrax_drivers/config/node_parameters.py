@@ -48,7 +48,7 @@ from .. import config as _c
 from . import SCHEMA, SECTIONS, ConfigError, ConfigIssue, Spec, VehicleConfig
 from .sections import cross_checks
 
-__all__ = ["select_schema_keys", "concrete_keys", "validate_selection", "parameter_descriptor",
+__all__ = ["select_schema_keys", "concrete_keys", "validate_selection",
            "declare_vehicle_parameters", "CONFIG_FILE_PARAMETER", "vehicle_overrides",
            "check_whole_vehicle", "declare_node_parameter"]
 
@@ -126,16 +126,10 @@ def validate_selection(flat: Mapping[str, Any], generic: Sequence[str], source: 
     return out
 
 
-def parameter_descriptor(key: str, read_only: bool = True):
-    """``rcl_interfaces/ParameterDescriptor`` of a vehicle key from its SCHEMA entry.
-
-    description: the schema's one-line meaning; additional_constraints: "allowed <range>"; ranges for
-    scalar numbers with both bounds; read_only as given. The type is left to the caller.
-    """
-    return _descriptor(key, SCHEMA[_generic(key)], read_only)
-
-
 def _descriptor(name: str, spec: Spec, read_only: bool) -> ParameterDescriptor:
+    """``rcl_interfaces/ParameterDescriptor`` of a parameter from its Spec: description,
+    additional_constraints "allowed <range>", ranges for scalar numbers with both bounds; the
+    type is left to the caller."""
     d = ParameterDescriptor(name=name, description=spec.doc, additional_constraints=f"allowed {spec.allowed()}",
                             read_only=read_only)
     if spec.kind == "float" and spec.lo is not None and spec.hi is not None:
@@ -160,11 +154,7 @@ def _load(path: str | Path) -> VehicleConfig:
 
 
 def _plain(value: Any) -> Any:
-    if isinstance(value, array.array):
-        return list(value)
-    if isinstance(value, tuple):
-        return list(value)
-    return value
+    return list(value) if isinstance(value, (array.array, tuple)) else value
 
 
 def vehicle_overrides(node: Any) -> dict[str, Any]:
@@ -281,8 +271,8 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
         defaults = file_cfg.to_ros_parameters()
 
     source = config_file or (file_cfg.source if file_cfg else "")
-    check_whole_vehicle(vehicle_overrides(node), defaults,
-                        f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else ""))
+    src = f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else "")
+    check_whole_vehicle(vehicle_overrides(node), defaults, src)
     values: dict[str, Any] = {}
 
     def declare(key: str) -> Any:
@@ -292,7 +282,7 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
         try:
             p = node.declare_parameter(key, defaults.get(key), desc)
         except (InvalidParameterValueException, InvalidParameterTypeException) as exc:  # pragma: no cover
-            raise ConfigError([ConfigIssue(key, str(exc), SCHEMA[_generic(key)].allowed())], source) from exc
+            raise ConfigError([ConfigIssue(key, str(exc), spec.allowed())], source) from exc
         v = _plain(p.value)
         values[key] = v
         return v
@@ -307,7 +297,6 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     overridden = any(values[k] is not None and values[k] != defaults.get(k) for k in declared)
     if default_error is not None and not overridden:
         raise default_error
-    src = f"parameters of {node.get_name()}" + (f" (defaults from {source})" if source else "")
     valid = validate_selection(values, generic, source=src)
 
     # Canonical types (an integer written for a float key becomes a float), then the final descriptors:
@@ -318,7 +307,8 @@ def declare_vehicle_parameters(node: Any, keys: Sequence[str] | None = None, *, 
     for key in declared:
         if key not in valid:
             continue  # optional key with no value: stays declared without one
-        d = parameter_descriptor(key, read_only=not _matches(_generic(key), dynamic) and not _matches(key, dynamic))
+        writable = _matches(_generic(key), dynamic) or _matches(key, dynamic)
+        d = _descriptor(key, SCHEMA[_generic(key)], read_only=not writable)
         d.type = Parameter(key, value=valid[key]).type_.value
         node.set_descriptor(key, d)
 

@@ -175,34 +175,24 @@ def check_value(key: str, spec: Spec, value: Any) -> tuple[Any, ConfigIssue | No
         x = float(x)
         return x if math.isfinite(x) else None
 
+    def in_range(x: float) -> bool:
+        return (spec.lo is None or x >= spec.lo) and (spec.hi is None or x <= spec.hi)
+
     if spec.kind == FLOAT:
         x = number(value)
-        if x is None:
-            return value, bad
-        if (spec.lo is not None and x < spec.lo) or (spec.hi is not None and x > spec.hi):
-            return value, bad
-        return x, None
+        return (x, None) if x is not None and in_range(x) else (value, bad)
     if spec.kind == INT:
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
             return value, bad
         x = int(value)
-        if spec.choices is not None and x not in spec.choices:
-            return value, bad
-        if (spec.lo is not None and x < spec.lo) or (spec.hi is not None and x > spec.hi):
-            return value, bad
-        return x, None
+        ok = (spec.choices is None or x in spec.choices) and in_range(x)
+        return (x, None) if ok else (value, bad)
     if spec.kind == STR:
-        if not isinstance(value, str):
-            return value, bad
-        if spec.choices is not None and value not in spec.choices:
-            return value, bad
-        if spec.pattern is not None and re.fullmatch(spec.pattern[0], value) is None:
-            return value, bad
-        return value, None
+        ok = (isinstance(value, str) and (spec.choices is None or value in spec.choices)
+              and (spec.pattern is None or re.fullmatch(spec.pattern[0], value) is not None))
+        return value, None if ok else bad
     if spec.kind == BOOL:
-        if not isinstance(value, bool):
-            return value, bad
-        return value, None
+        return value, None if isinstance(value, bool) else bad
     if spec.kind == FLOATS:
         if not isinstance(value, (list, tuple, np.ndarray)):
             return value, bad
@@ -212,7 +202,7 @@ def check_value(key: str, spec: Spec, value: Any) -> tuple[Any, ConfigIssue | No
             return value, bad
         if spec.length is not None and len(xs) != spec.length:
             return value, bad
-        if any((spec.lo is not None and x < spec.lo) or (spec.hi is not None and x > spec.hi) for x in xs):
+        if not all(in_range(x) for x in xs):
             return value, bad
         if spec.unit_vector and abs(math.sqrt(sum(x * x for x in xs)) - 1.0) > 1e-3:
             return value, bad

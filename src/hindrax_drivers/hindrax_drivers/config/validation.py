@@ -46,15 +46,15 @@ def validate_flat(flat: Mapping[str, Any], source: str = "") -> dict[str, Any]:
     missing required keys, cross-key inconsistencies).
     """
     issues: list[ConfigIssue] = []
-    sections = SECTIONS
     names_raw = flat.get("thrusters.names", [])
     names = [n for n in names_raw if isinstance(n, str)] if isinstance(names_raw, (list, tuple)) else []
     out: dict[str, Any] = {}
     for key, value in flat.items():
         if value is None and key in NULLABLE_KEYS:
             continue  # e.g. esc.output_enable_gpio: null (not wired)
-        if key.split(".")[0] not in sections:
-            issues.append(ConfigIssue(key, value, "no such key (sections: " + ", ".join(sections) + ")"))
+        if key.split(".")[0] not in SECTIONS:
+            sections = ", ".join(SECTIONS)
+            issues.append(ConfigIssue(key, value, f"no such key (sections: {sections})"))
             continue
         skey = schema_key(key, names)
         if skey is None:
@@ -67,7 +67,7 @@ def validate_flat(flat: Mapping[str, Any], source: str = "") -> dict[str, Any]:
             out[key] = coerced
     # required keys
     for skey, spec in SCHEMA.items():
-        if skey.split(".")[0] not in sections or is_optional(skey):
+        if is_optional(skey):
             continue
         concrete = [skey.replace(THRUSTER, n) for n in names] if THRUSTER in skey else [skey]
         for key in concrete:

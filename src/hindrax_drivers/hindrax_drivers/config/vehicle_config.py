@@ -64,8 +64,7 @@ def build_section(cls: type[_S], flat: Mapping[str, Any]) -> _S:
             kw[f.name] = tuple(v) if isinstance(v, (list, tuple, np.ndarray)) else v
         else:
             kw[f.name] = None if is_optional(key) else ABSENT
-    built: _S = cls.build(kw)
-    return built
+    return cls.build(kw)
 
 
 class _TypedSection(Generic[_S]):

@@ -72,11 +72,8 @@ def bag_info(path: str | Path) -> BagInfo:
         n = ch.message_count
         t0, t1 = first.get(name, 0), last.get(name, 0)
         rate = (n - 1) / ((t1 - t0) / 1e9) if n >= 2 and t1 > t0 else 0.0
-        rel = ""
-        if "best_effort" in ch.metadata.get("offered_qos_profiles", ""):
-            rel = "best_effort"
-        elif "reliable" in ch.metadata.get("offered_qos_profiles", ""):
-            rel = "reliable"
+        qos = ch.metadata.get("offered_qos_profiles", "")
+        rel = "best_effort" if "best_effort" in qos else "reliable" if "reliable" in qos else ""
         topics.append(TopicSummary(name, ch.type, n, t0, t1, rate, rel))
     total = sum(t.message_count for t in topics)
     starts = [t.first_ns for t in topics if t.message_count]
@@ -87,9 +84,8 @@ def bag_info(path: str | Path) -> BagInfo:
 
 
 def _exact_times(reader: BagReader, first: dict[str, int], last: dict[str, int]) -> None:
-    """First/last log time per topic of the summarised files (reads the first and last chunk of each)."""
-    exact_first: dict[str, int] = {}
-    exact_last: dict[str, int] = {}
+    """First/last log time per topic of the summarised files (reads the first and last chunk of
+    each), merged into ``first`` and ``last``."""
     for f in reader.files:
         summary = reader.summary(f)
         if summary is None:
@@ -98,15 +94,11 @@ def _exact_times(reader: BagReader, first: dict[str, int], last: dict[str, int])
             r = make_reader(fh)
             for topic in {c.topic for c in summary.channels.values()}:
                 for _s, _c, m in r.iter_messages(topics=[topic], log_time_order=True):
-                    exact_first[topic] = min(exact_first.get(topic, m.log_time), m.log_time)
+                    first[topic] = min(first.get(topic, m.log_time), m.log_time)
                     break
                 for _s, _c, m in r.iter_messages(topics=[topic], log_time_order=True, reverse=True):
-                    exact_last[topic] = max(exact_last.get(topic, m.log_time), m.log_time)
+                    last[topic] = max(last.get(topic, m.log_time), m.log_time)
                     break
-    for topic, t in exact_first.items():
-        first[topic] = min(first.get(topic, t), t)
-    for topic, t in exact_last.items():
-        last[topic] = max(last.get(topic, t), t)
 
 
 def format_bag_info(info: BagInfo) -> str:
@@ -142,4 +134,3 @@ def _size(n: int) -> str:
         if n < 1024 or unit == "GiB":
             return f"{n:.1f} {unit}" if unit != "B" else f"{n} B"
         n /= 1024
-    return f"{n} B"

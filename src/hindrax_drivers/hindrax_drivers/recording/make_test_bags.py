@@ -26,6 +26,7 @@ from sensor_msgs.msg import FluidPressure, Imu, MagneticField, Range
 
 from hindrax_msgs.msg import Dvl, RawDeviceData, ThrusterPwm
 
+from ..dvl75.protocol import format_sentence
 from .qos import default_profile
 from .writer import BagWriter, WriterOptions
 
@@ -144,14 +145,6 @@ def _wrench(t: float, rng: np.random.Generator) -> Any:
     return m
 
 
-def nmea_checksum(body: str) -> int:
-    """XOR of the characters between ``$`` and ``*`` (NMEA 0183)."""
-    c = 0
-    for ch in body.encode("ascii"):
-        c ^= ch
-    return c
-
-
 def _raw_dvl(t: float, rng: np.random.Generator) -> Any:
     m = _stamp(RawDeviceData(), t, "")
     body = (f"DVEXT,{int(round(t * 1000))},{surge_velocity_m_s(t):.3f},0.000,0.000,0.800,95,1,"
@@ -160,7 +153,7 @@ def _raw_dvl(t: float, rng: np.random.Generator) -> Any:
     m.transport = RawDeviceData.TRANSPORT_SERIAL
     m.direction = RawDeviceData.DIRECTION_DEVICE_TO_HOST
     m.i2c_register = -1
-    m.data = f"${body}*{nmea_checksum(body):02X}\r\n".encode("ascii")
+    m.data = format_sentence(body)
     return m
 
 
@@ -201,7 +194,6 @@ STREAMS: tuple[StreamSpec, ...] = (
 )
 """The synthetic topics (see module docstring)."""
 
-#: bag name -> (duration s, WriterOptions)
 #: bag name -> (duration s, WriterOptions)
 BAGS: dict[str, tuple[float, WriterOptions]] = {
     "sensors_4s": (4.0, WriterOptions(chunk_size_bytes=64 * 1024, fsync=False)),

@@ -27,6 +27,7 @@ Pure (PyYAML only). Errors: :class:`MetadataError` (a ``ValueError``) naming the
 """
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -105,13 +106,9 @@ class BagMetadata:
         return min(times) if times else 0
 
     @property
-    def end_time_ns(self) -> int:
-        ends = [f.starting_time_ns + f.duration_ns for f in self.files if f.message_count]
-        return max(ends) if ends else 0
-
-    @property
     def duration_ns(self) -> int:
-        return max(0, self.end_time_ns - self.starting_time_ns) if self.message_count else 0
+        ends = [f.starting_time_ns + f.duration_ns for f in self.files if f.message_count]
+        return max(0, max(ends) - self.starting_time_ns) if ends else 0
 
     @property
     def relative_file_paths(self) -> list[str]:
@@ -173,16 +170,12 @@ def write_metadata(bag_dir: str | Path, metadata: BagMetadata, fsync: bool = Tru
 
 
 def _fsync_dir(path: Path) -> None:
-    try:
+    with contextlib.suppress(OSError):
         fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def metadata_from_mapping(info: Mapping[str, Any], source: str = "metadata") -> BagMetadata:

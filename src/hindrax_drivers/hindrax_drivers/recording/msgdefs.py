@@ -98,15 +98,13 @@ def msg_dependencies(text: str, package: str) -> list[str]:
     return sorted(deps)
 
 
-def message_definition(type_name: str, search: list[Path] | None = None) -> str:
-    """Full ``ros2msg`` definition of ``type_name`` (``pkg/msg/Type``) as rosbag2 Jazzy writes it.
-
-    search: share directories (default :func:`share_directories`). Raises
-    :class:`DefinitionNotFoundError` when the type or one of its dependencies has no ``.msg`` file, and
-    ValueError for a malformed type name.
+def message_definition(type_name: str) -> str:
+    """Full ``ros2msg`` definition of ``type_name`` (``pkg/msg/Type``) as rosbag2 Jazzy writes it,
+    from the :func:`share_directories`. Raises :class:`DefinitionNotFoundError` when the type or one
+    of its dependencies has no ``.msg`` file, and ValueError for a malformed type name.
     """
     pkg, name = split_type_name(type_name)
-    dirs = tuple(search if search is not None else share_directories())
+    dirs = tuple(share_directories())
     seen: set[str] = set()
 
     def append(pkg_: str, name_: str, depth: int) -> str:
@@ -125,13 +123,13 @@ def message_definition(type_name: str, search: list[Path] | None = None) -> str:
     return append(pkg, name, 50)
 
 
-def type_description_hash(type_name: str, search: list[Path] | None = None) -> str:
+def type_description_hash(type_name: str) -> str:
     """RIHS01 type hash of ``type_name`` from ``share/<pkg>/msg/<Type>.json`` (e.g. ``"RIHS01_6f61..."``).
 
     Raises :class:`DefinitionNotFoundError` when the JSON file is missing or has no hash for the type.
     """
     pkg, name = split_type_name(type_name)
-    dirs = tuple(search if search is not None else share_directories())
+    dirs = tuple(share_directories())
     path = _interface_file(pkg, name, ".json", dirs)
     full = f"{pkg}/msg/{name}"
     try:
@@ -154,8 +152,7 @@ def _layout(full_text: str) -> list[str]:
     return out
 
 
-def matches_installed(type_name: str, definition: str, type_hash: str | None = None,
-                      search: list[Path] | None = None) -> bool:
+def matches_installed(type_name: str, definition: str, type_hash: str | None = None) -> bool:
     """True when a recorded type has the wire layout of the installed one, so the installed Python class
     (and rclpy's C deserializer) can decode its messages.
 
@@ -167,7 +164,7 @@ def matches_installed(type_name: str, definition: str, type_hash: str | None = N
     """
     try:
         if type_hash:
-            return type_hash == type_description_hash(type_name, search)
-        return _layout(definition) == _layout(message_definition(type_name, search))
+            return type_hash == type_description_hash(type_name)
+        return _layout(definition) == _layout(message_definition(type_name))
     except (DefinitionNotFoundError, ValueError):
         return False

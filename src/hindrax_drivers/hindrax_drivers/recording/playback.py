@@ -21,7 +21,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable
 
 
 @dataclass
@@ -70,7 +70,7 @@ def play(messages: Callable[[], Iterable[Any]], publish: Callable[[Any], None], 
         next_tick = wall0
         last_clock = None
         stats.passes += 1
-        for m in _iter(messages()):
+        for m in messages():
             due = due_wall_time_s(m.log_time_ns, origin_ns, wall0, rate)
             while True:
                 if stop.is_set():
@@ -98,7 +98,3 @@ def play(messages: Callable[[], Iterable[Any]], publish: Callable[[Any], None], 
             break
     stats.stopped = stop.is_set()
     return stats
-
-
-def _iter(it: Iterable[Any]) -> Iterator[Any]:
-    yield from it

@@ -46,6 +46,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from ..node_common import time_from_ns
 from ..ros_process import RosProcess
 from ..vehicle_graph import (DISCOVERY_WINDOW_S, ForeignVehicleError, ForeignVehicleWatch, GraphView,
                              split_vehicle_topics)
@@ -243,9 +244,7 @@ class BagPlayerNode(Node):
             self.pubs[m.topic].publish(m.data)
 
         def publish_clock(t_ns: int) -> None:
-            msg = Clock()
-            msg.clock.sec, msg.clock.nanosec = divmod(int(t_ns), 1_000_000_000)
-            self.clock_pub.publish(msg)
+            self.clock_pub.publish(Clock(clock=time_from_ns(t_ns)))
 
         self.get_logger().info(
             f"playing {len(topics)} topic(s) from {self.reader.path} at rate {self.rate:g}"

@@ -52,15 +52,11 @@ def default_profile(reliability: str = "reliable", durability: str = "volatile",
 
 
 def _policy_name(value: Any) -> str:
-    name = getattr(value, "name", None)
-    if name is None:
-        return str(value).lower()
-    return str(name).lower()
+    return str(getattr(value, "name", value)).lower()
 
 
 def _duration_ns(value: Any) -> int:
-    ns = getattr(value, "nanoseconds", value)
-    return int(ns)
+    return int(getattr(value, "nanoseconds", value))
 
 
 def profile_from_rclpy(qos: Any) -> dict:

@@ -106,7 +106,6 @@ class BagReader:
         self.end_ns = t1 if self.end_ns is None else max(self.end_ns, t1)
 
     def _scan(self, f: Path) -> None:
-        summary = None
         try:
             with open(f, "rb") as fh:
                 summary = make_reader(fh).get_summary()
@@ -214,18 +213,12 @@ class BagReader:
             yield from _sorted_stream_messages(f, wanted, start_ns, end_ns)
             return
         with open(f, "rb") as fh:
-            reader = make_reader(fh)
-            kwargs: dict[str, Any] = {"log_time_order": True}
-            if wanted is not None:
-                kwargs["topics"] = sorted(wanted)
-            if start_ns is not None:
-                kwargs["starting_at"] = int(start_ns)
-            if end_ns is not None:
-                kwargs["ending_before"] = int(end_ns)
-            for schema, channel, msg in reader.iter_messages(**kwargs):
+            for schema, channel, msg in make_reader(fh).iter_messages(
+                    topics=None if wanted is None else sorted(wanted), log_time_order=True,
+                    starting_at=None if start_ns is None else int(start_ns),
+                    ending_before=None if end_ns is None else int(end_ns)):
                 yield RawMessage(channel.topic, schema.name if schema else "", msg.log_time,
-                                 msg.publish_time,
-                                 msg.data)
+                                 msg.publish_time, msg.data)
 
     def decoded(self, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:
         """(raw message, decoded object) pairs, decoded by mcap_ros2 from the stored schemas

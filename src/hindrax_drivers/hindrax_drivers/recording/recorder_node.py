@@ -305,8 +305,7 @@ class RecorderNode(VehicleNode):
         writer = self._writer
         if writer is None:
             return
-        now_ns = self.get_clock().now().nanoseconds
-        writer.write(topic, now_ns, data, now_ns)
+        writer.write(topic, self.get_clock().now().nanoseconds, data)
         self._gaps.observe(topic, info.get("publication_sequence_number"))
 
     # -- services and status ----------------------------------------------------------------------
@@ -395,14 +394,7 @@ def main(args: list[str] | None = None) -> int:
         except (ConfigError, ValueError) as exc:
             print(f"recorder: {str(exc).splitlines()[0]}", file=sys.stderr)
             return 1
-
-        def finish() -> None:
-            node.shutdown()  # finishes the bag
-            proc.executor.remove_node(node)
-            node.destroy_node()
-
-        proc.at_exit(finish)
-        proc.executor.add_node(node)
+        proc.executor.add_node(proc.own(node))  # on exit: close() finishes the bag
         proc.spin()
     return proc.status
 

@@ -9,8 +9,7 @@ uses, so the real parsing code runs on the recorded stream:
 - :class:`SerialReplayDevice` (a :class:`~hindrax_drivers.transport.pty_device.ByteStreamEmulator`, served on a
   pty by :class:`~hindrax_drivers.transport.pty_device.PtyDevice`): emits the recorded device->host chunks in
   order, each at the step of the replay clock that reaches its recorded receive time
-  (``paced=True``) or all at once (``paced=False``). Host->device bytes are kept in
-  :attr:`host_bytes` and otherwise ignored (a serial device answers nothing here: the recorded
+  (``paced=True``) or all at once (``paced=False``). Host->device bytes are ignored (the recorded
   replies are in the device->host stream already).
 - :class:`I2CReplayDevice` (one per I2C address on an
   :class:`~hindrax_drivers.transport.emulated_i2c.EmulatedI2CBus`): answers each read transaction with the
@@ -49,7 +48,6 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 import rclpy
-from builtin_interfaces.msg import Time
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
@@ -60,7 +58,7 @@ from hindrax_msgs.msg import RawDeviceData
 
 from .. import devices as device_table
 from ..config import load_config
-from ..node_common import raw_transactions
+from ..node_common import raw_transactions, time_from_ns
 from ..pca9685.emulator import Pca9685Emulator
 from ..transport.emulated_i2c import EmulatedI2CBus
 from ..transport.pty_device import PtyDevice
@@ -130,20 +128,16 @@ class SerialReplayDevice:
         chunks: ``(t_ns, data)`` device->host chunks in recorded order (ROS time of receipt, ns).
         paced: emit a chunk only once ``poll(t_s)`` reaches its time; False: emit everything at the first poll.
     Attributes:
-        emitted_bytes, total_bytes: bytes handed to the pty so far / recorded in all.
-        host_bytes: every byte the host (driver) wrote.
+        total_bytes: device->host bytes recorded in all.
     """
 
     def __init__(self, chunks: Iterable[tuple[int, bytes]], paced: bool = True) -> None:
         self._chunks = collections.deque((int(t), bytes(d)) for t, d in chunks)
         self.paced = bool(paced)
         self.total_bytes = sum(len(d) for _, d in self._chunks)
-        self.emitted_bytes = 0
-        self.host_bytes = bytearray()
 
     def feed_host_bytes(self, data: bytes) -> None:
-        """Host->device bytes: kept in :attr:`host_bytes`, never answered (the answers are recorded)."""
-        self.host_bytes += data
+        """Host->device bytes: never answered (the answers are recorded)."""
 
     def poll(self, t_s: float) -> bytes:
         """The recorded chunks due by ``t_s`` (s of ROS time; 1 us tolerance for the float conversion)."""
@@ -151,7 +145,6 @@ class SerialReplayDevice:
         out = bytearray()
         while self._chunks and self._chunks[0][0] <= limit_ns:
             out += self._chunks.popleft()[1]
-        self.emitted_bytes += len(out)
         return bytes(out)
 
     @property
@@ -170,8 +163,7 @@ class I2CReplayDevice:
     Args:
         transactions: the recorded traffic of this address (:func:`i2c_transactions`).
     Attributes:
-        reads_served, reads_refused (no recorded data left, wrong length), writes_matched,
-        write_mismatches (list of (index, recorded, replayed)), writes_extra (beyond the recording).
+        write_mismatches: list of (index, recorded, replayed); writes past the recording: ignored.
     """
 
     def __init__(self, transactions: I2CTransactions) -> None:
@@ -180,29 +172,20 @@ class I2CReplayDevice:
         self._writes = list(transactions.writes)
         self._write_index = 0
         self._pending: bytes | None = None
-        self.reads_served = 0
-        self.reads_refused = 0
-        self.writes_matched = 0
-        self.writes_extra = 0
         self.write_mismatches: list[tuple[int, bytes, bytes]] = []
 
     def _commit_write(self, data: bytes) -> None:
         if self._write_index >= len(self._writes):
-            self.writes_extra += 1
             return
         expected = self._writes[self._write_index]
         self._write_index += 1
-        if expected == data:
-            self.writes_matched += 1
-        else:
+        if expected != data:
             self.write_mismatches.append((self._write_index - 1, expected, bytes(data)))
 
     def i2c_write(self, data: bytes) -> None:
         """One write transaction (see the class docstring)."""
         with self._lock:
-            if self._pending is not None:
-                self._commit_write(self._pending)
-                self._pending = None
+            self.flush()  # a pending one-byte write had no read after it (RLock: re-entered)
             if len(data) == 1:
                 self._pending = bytes(data)  # pointer of a following read, or a command byte
             elif data:
@@ -216,9 +199,7 @@ class I2CReplayDevice:
             self._pending = None
             queue = self._reads.get(register)
             if not queue or len(queue[0]) != n:
-                self.reads_refused += 1
                 raise OSError(_NACK, f"replay: no recorded {n}-byte read of register {register} left")
-            self.reads_served += 1
             return queue.popleft()
 
     def flush(self) -> None:
@@ -264,7 +245,6 @@ class ReplayHardware:
         self.i2c: dict[int, I2CReplayDevice] = {}
         self.outputs: dict[int, Any] = {}  # PCA9685: emulated, not replayed (see below)
         self.i2c_device_of: dict[int, str] = {}
-        self.recorded_host_bytes: dict[str, bytes] = {}
         table = {d.name: d for d in device_table.DEVICES}
         for name in tuple(devices) if devices is not None else table:
             items = list(iter_raw_device_data(bag_path, name))
@@ -274,7 +254,6 @@ class ReplayHardware:
                     continue
                 dev = SerialReplayDevice(rx, paced=paced)
                 self.serial[name] = dev
-                self.recorded_host_bytes[name] = b"".join(d for _, d in tx)
                 self.ptys[name] = PtyDevice(dev, link_name=name, start=False)
                 self.ports[name] = str(self.ptys[name].path)
             elif table[name].output:
@@ -376,7 +355,6 @@ class DriverReplay:
     def __init__(self, bag_path: str | Path, config_path: str | Path, context: Any, overrides: dict | None = None,
                  clock_period_s: float = 0.01) -> None:
         self.bag_path = Path(bag_path)
-        self.context = context
         reader = BagReader(self.bag_path)
         self.timeline_ns = self._timeline(reader, clock_period_s)
         self.hardware = ReplayHardware(self.bag_path)
@@ -398,7 +376,6 @@ class DriverReplay:
                 self._count(pub)
         self.probe = rclpy.create_node("replay_probe", context=context)
         self._clock_pub = self.probe.create_publisher(Clock, "/clock", QoSProfile(depth=1))
-        self._clock_msg = Clock
         self.received: dict[str, list[Any]] = {t: [] for t in PARSED_TOPICS}
         self.received["/thrusters/pulse_width"] = []
         for topic in self.received:
@@ -440,7 +417,7 @@ class DriverReplay:
     def _set_clock(self, t_ns: int, wait_s: float) -> None:
         """Publish /clock t_ns, spin until every node's clock shows it, then serve the serial
         devices at t_ns: their drivers read and handle the chunks due in this thread."""
-        self._clock_pub.publish(self._clock_msg(clock=Time(sec=t_ns // 1_000_000_000, nanosec=t_ns % 1_000_000_000)))
+        self._clock_pub.publish(Clock(clock=time_from_ns(t_ns)))
         nodes = list(self.nodes.values())
         _spin_until(self.executor, lambda: all(n.get_clock().now().nanoseconds >= t_ns for n in nodes), wait_s,
                     f"all replay nodes at /clock {t_ns} ns")

@@ -25,7 +25,7 @@ class TopicSelection:
 
     topics: explicit names (a leading "/" is added when missing). regex: Python regular expression
     matched with ``re.search`` against full topic names (in addition to ``topics``). all_topics: every
-    non-hidden topic (hidden ones only with include_hidden). exclude_regex: topics never recorded.
+    non-hidden topic. exclude_regex: topics never recorded.
     Empty topics + empty regex + all_topics False selects nothing.
 
     Raises ValueError (one line) for an invalid regular expression.
@@ -34,7 +34,6 @@ class TopicSelection:
     topics: tuple[str, ...] = ()
     regex: str = ""
     all_topics: bool = False
-    include_hidden: bool = False
     exclude_regex: str = ""
     _compiled: tuple = field(default=(), compare=False, repr=False)
 
@@ -61,9 +60,7 @@ class TopicSelection:
             return True
         if inc is not None and inc.search(topic):
             return True
-        if self.all_topics:
-            return self.include_hidden or not is_hidden(topic)
-        return False
+        return self.all_topics and not is_hidden(topic)
 
     def describe(self) -> str:
         parts = []

@@ -81,11 +81,11 @@ class WriterOptions:
             raise ValueError("split_size_bytes, split_duration_s and flush_interval_s must be >= 0")
 
     @classmethod
-    def from_section(cls, recording: RecordingSection, **overrides: Any) -> "WriterOptions":
-        """From the validated ``recording.*`` section (``VehicleConfig.recording``); ``overrides`` replace fields."""
+    def from_section(cls, recording: RecordingSection) -> "WriterOptions":
+        """From the validated ``recording.*`` section (``VehicleConfig.recording``)."""
         keys = ("compression", "chunk_size_bytes", "split_size_bytes", "split_duration_s",
                 "flush_interval_s")
-        return cls(**{**{k: getattr(recording, k) for k in keys}, **overrides})
+        return cls(**{k: getattr(recording, k) for k in keys})
 
 
 @dataclass
@@ -204,7 +204,8 @@ class BagWriter:
         assert f is not None
         size = len(data) + len(topic) + _MESSAGE_RECORD_OVERHEAD_BYTES
         if f.message_count and self._should_split(f, log_time_ns, size):
-            self._split()
+            self._close_file()
+            self._open_file()
             f = self._file
             assert f is not None
         seq = f.sequence.get(topic, 0) + 1
@@ -367,7 +368,3 @@ class BagWriter:
         f.writer.finish()
         self._sync(f)
         f.stream.close()
-
-    def _split(self) -> None:
-        self._close_file()
-        self._open_file()

@@ -2,7 +2,7 @@
 
 ``mcap.writer.Writer`` is not thread-safe and a chunk close (compression + fsync) can take milliseconds
 to tens of milliseconds on an SD card, so the recorder node's subscription callbacks only enqueue
-``(topic, log_time_ns, data, publish_time_ns)`` and this thread owns the BagWriter: it writes in arrival
+``(topic, log_time_ns, data)`` and this thread owns the BagWriter: it writes in arrival
 order, closes the open chunk when ``flush_interval_s`` has passed (crash safety, see :mod:`.writer`)
 and finishes the bag on :meth:`ThreadedBagWriter.close`.
 
@@ -57,18 +57,18 @@ class ThreadedBagWriter:
         self._thread.start()
 
     # -- producer side (any thread) ---------------------------------------------------------------
-    def add_topic(self, name: str, type_name: str, offered_qos_profiles: Iterable[Mapping[str, Any]] = (),
-                  definition: str | None = None, type_hash: str | None = None) -> None:
+    def add_topic(self, name: str, type_name: str,
+                  offered_qos_profiles: Iterable[Mapping[str, Any]] = ()) -> None:
         """Queue a topic registration (see :meth:`BagWriter.add_topic`); ordered before later writes."""
-        self._queue.append(("topic", name, type_name, [dict(p) for p in offered_qos_profiles], definition,
-                            type_hash))
+        self._queue.append(("topic", name, type_name, [dict(p) for p in offered_qos_profiles]))
 
-    def write(self, topic: str, log_time_ns: int, data: bytes, publish_time_ns: int | None = None) -> bool:
-        """Queue one message; False (and counted in :attr:`dropped`) if the queue is full or closed."""
+    def write(self, topic: str, log_time_ns: int, data: bytes) -> bool:
+        """Queue one message (publish time = log time); False (and counted in
+        :attr:`dropped`) if the queue is full or closed."""
         if self._closed or self.error is not None or len(self._queue) >= self._max_queue:
             self.dropped += 1
             return False
-        self._queue.append(("msg", topic, log_time_ns, data, publish_time_ns))
+        self._queue.append(("msg", topic, log_time_ns, data))
         return True
 
     def topic_counts(self) -> dict[str, int]:
@@ -131,14 +131,14 @@ class ThreadedBagWriter:
 
     def _handle(self, w: BagWriter, item: tuple) -> None:
         if item[0] == "msg":
-            _, topic, t_ns, data, pub_ns = item
-            w.write(topic, t_ns, data, pub_ns)
+            _, topic, t_ns, data = item
+            w.write(topic, t_ns, data)
             self.written += 1
             with self._lock:
                 self._topic_counts[topic] = self._topic_counts.get(topic, 0) + 1
         else:
-            _, name, type_name, qos, definition, type_hash = item
-            w.add_topic(name, type_name, qos, definition, type_hash)
+            _, name, type_name, qos = item
+            w.add_topic(name, type_name, qos)
             with self._lock:
                 self._topic_counts.setdefault(name, 0)
 

@@ -152,7 +152,6 @@ class SupervisorCore:
         self._stamps = {s: collections.deque() for s in SENSORS}
         self.not_alive = {s: 0 for s in SENSORS}
         self.not_alive_reason = {s: "" for s in SENSORS}
-        self._identical = {}
 
     # ------------------------------------------------------------------ state
     def set_armed(self, t_s: float, armed: bool) -> str:
@@ -235,10 +234,10 @@ class SupervisorCore:
         if not self.alive("pressure", t_s, stamp_s, (float(depth_m),)):
             return ""
         self.on_message("pressure", t_s)
-        if math.isfinite(depth_m):
-            self.depth_m = float(depth_m)
-            if depth_m > self.limits.max_depth_m:
-                return self._breach(f"depth {depth_m:.2f} m beyond supervisor.max_depth_m {self.limits.max_depth_m:g}")
+        self.depth_m = float(depth_m)
+        if depth_m > self.limits.max_depth_m:
+            return self._breach(f"depth {depth_m:.2f} m beyond supervisor.max_depth_m "
+                                f"{self.limits.max_depth_m:g}")
         return ""
 
     def on_altitude(self, t_s: float, altitude_m: float, stamp_s: float | None = None) -> str:
@@ -253,11 +252,10 @@ class SupervisorCore:
         if not self.alive("altimeter", t_s, None, (float(altitude_m),)):
             return ""
         self.on_message("altimeter", t_s)
-        if math.isfinite(altitude_m):
-            self.altitude_m = float(altitude_m)
-            if altitude_m < self.limits.min_altitude_m:
-                return self._breach(f"altitude {altitude_m:.2f} m below supervisor.min_altitude_m "
-                                    f"{self.limits.min_altitude_m:g}")
+        self.altitude_m = float(altitude_m)
+        if altitude_m < self.limits.min_altitude_m:
+            return self._breach(f"altitude {altitude_m:.2f} m below supervisor.min_altitude_m "
+                                f"{self.limits.min_altitude_m:g}")
         return ""
 
     def on_attitude(self, roll_rad: float, pitch_rad: float, yaw_rad: float, t_s: float | None = None) -> str:

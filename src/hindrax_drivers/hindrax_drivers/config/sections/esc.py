@@ -83,8 +83,6 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
     if "esc.output_enable_gpio.chip" in c and "esc.output_enable_gpio.line" not in c:
         issues.append(ConfigIssue("esc.output_enable_gpio.line", "<missing>", "a line offset with "
                                   "esc.output_enable_gpio.chip"))
-    # the hardware watchdog on /OE (docs/watchdog.md): its feed needs a rate and the circuit's timeout, and at least
-    # three rising edges per timeout, so that one late guard tick does not stop the outputs
     if c.get("esc.output_enable_feed_gpio.chip"):
         for key in ("esc.output_enable_feed_gpio.line", "esc.output_enable_feed_rate_hz",
                     "esc.output_enable_feed_timeout_s"):
@@ -95,7 +93,6 @@ def cross_checks(c: Mapping[str, Any]) -> list[ConfigIssue]:
             if c["esc.output_enable_feed_rate_hz"] < low:
                 issues.append(ConfigIssue("esc.output_enable_feed_rate_hz", c["esc.output_enable_feed_rate_hz"],
                                           f">= {low:g} Hz: three rising edges per esc.output_enable_feed_timeout_s"))
-    # the ESC and the guard must hear several supervisor heartbeats (one per supervisor check) within their timeouts
     for key in ("esc.heartbeat_timeout_s", "esc.guard_heartbeat_timeout_s"):
         if key in c and "supervisor.check_rate_hz" in c:
             period = 1.0 / c["supervisor.check_rate_hz"]

@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, ClassVar, Mapping
 
 import numpy as np
@@ -185,39 +185,17 @@ def thrusters_config(f: Mapping[str, Any]) -> ThrustersConfig:
     def unit(v: Any) -> np.ndarray:
         return np.asarray(v, dtype=float) / np.linalg.norm(v)
 
-    def array(v: Any) -> np.ndarray:
-        return np.asarray(v, dtype=float)
+    def build(cls: Any, prefix: str, convert: Mapping[str, Any], **given: Any) -> Any:
+        values = {k.name: get(f"{prefix}.{k.name}", convert.get(k.name))
+                  for k in fields(cls) if k.name not in given}
+        return cls.build({**values, **given}, prefix=prefix)
 
-    ts = tuple(
-        ThrusterConfig.build(dict(
-            name=n,
-            position_frd_m=get(f"thrusters.{n}.position_frd_m", array),
-            direction_frd=get(f"thrusters.{n}.direction_frd", unit),
-            esc_channel=get(f"thrusters.{n}.esc_channel"),
-            reversed=get(f"thrusters.{n}.reversed"),
-            trim_us=get(f"thrusters.{n}.trim_us"),
-            allocation_weight=get(f"thrusters.{n}.allocation_weight"),
-        ), prefix=f"thrusters.{n}")
-        for n in f["thrusters.names"]
-    )
-    built: ThrustersConfig = ThrustersConfig.build(dict(
-        thrusters=ts,
-        pulse_width_min_us=get("thrusters.pulse_width_min_us"),
-        pulse_width_neutral_us=get("thrusters.pulse_width_neutral_us"),
-        pulse_width_max_us=get("thrusters.pulse_width_max_us"),
-        deadband_us=get("thrusters.deadband_us"),
-        curve_negative=get("thrusters.curve_negative", tuple),
-        curve_positive=get("thrusters.curve_positive", tuple),
-        time_constant_s=get("thrusters.time_constant_s"),
-        allocation_mode=get("thrusters.allocation_mode"),
-        priority_dofs=get("thrusters.priority_dofs", tuple),
-        max_wrench_excess_ratio=get("thrusters.max_wrench_excess_ratio"),
-        wrench_timeout_s=get("thrusters.wrench_timeout_s"),
-        wrench_future_margin_s=get("thrusters.wrench_future_margin_s"),
-        thrust_uncertainty_rel=get("thrusters.thrust_uncertainty_rel", _float_tuple),
-        thrust_fit_uncertainty_rel=get("thrusters.thrust_fit_uncertainty_rel", _float_tuple),
-    ))
-    return built
+    per_thruster = {"position_frd_m": lambda v: np.asarray(v, dtype=float), "direction_frd": unit}
+    shared = {"curve_negative": tuple, "curve_positive": tuple, "priority_dofs": tuple,
+              "thrust_uncertainty_rel": _float_tuple, "thrust_fit_uncertainty_rel": _float_tuple}
+    ts = tuple(build(ThrusterConfig, f"thrusters.{n}", per_thruster, name=n)
+               for n in f["thrusters.names"])
+    return build(ThrustersConfig, "thrusters", shared, thrusters=ts)
 
 
 def _float_tuple(value: Any) -> tuple[float, ...]:
