@@ -34,7 +34,7 @@ from scipy import stats  # noqa: E402
 from hindrax_drivers.config import VehicleConfig  # noqa: E402
 
 from ..fit import fit_core  # noqa: E402
-from ..fit.dof_model import _rest_terms, truth_parameters  # noqa: E402
+from ..fit.dof_model import model_terms, truth_parameters  # noqa: E402
 from .results import build_results, training_lines, write_identification  # noqa: E402
 
 __all__ = ["write_report", "write_outputs", "summary_rows", "write_fit_outputs", "residual_acf"]
@@ -91,7 +91,7 @@ def _force_velocity_plot(r, path: Path) -> None:
         ax.plot(wv, wf, "s", color="C3", label="steady-window means ([Hindrax-Drag])")
     vmax = float(np.nanmax(np.abs(v[ok]))) if np.any(ok) else 1.0
     grid = np.linspace(-vmax, vmax, 201)
-    rest = _rest_terms(r.dof, grid, np.zeros_like(grid))
+    rest = model_terms(r.dof, grid, np.zeros_like(grid))
     names = list(r.names)[1:]
     theta = np.array([r.values[n] for n in names])
     curve = rest @ theta
