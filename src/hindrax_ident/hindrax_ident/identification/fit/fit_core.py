@@ -375,9 +375,6 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     L = max(10, int(round(seconds / h)))
     fmin, vmin = EXCITATION_MIN[excited_kind(rec.dof)]
     k_dof = DOFS.index(rec.dof)
-    ncol = (1 if rec.dof in ("roll", "pitch") else 0) + (len(rec.cross_names) if terms.cross else 0) + \
-        (len(rec.force_names) if terms.cross_force else 0) + (1 if terms.reverse_gain else 0) + \
-        (rec.run_count - 1 if terms.run_bias and rec.run_count >= 2 else 0) + (1 if terms.saturation else 0)
     U, C, V0, X0, G, SP, EX, VS, AS, FF = [], [], [], [], [], [], [], [], [], []
     s_seg, s_j, s_a, s_z = [], [], [], []
     for ci, ch in enumerate(rec.chunks):
@@ -470,7 +467,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     if not V0:
         raise EstimationError(f"{rec.dof}: no segment of {seconds:g} s with the DOF moving and at least 3 "
                               "measurements")
-    return SegmentData(h, L, np.stack(U, axis=1), np.stack(C, axis=1) if ncol else np.zeros((3, len(V0), L, 0)),
+    return SegmentData(h, L, np.stack(U, axis=1), np.stack(C, axis=1),
                        np.array(V0), np.array(X0), np.concatenate(s_seg), np.concatenate(s_j), np.concatenate(s_a),
                        np.concatenate(s_z), np.array(G, dtype=int), np.array(SP, dtype=float), np.array(EX),
                        np.array(VS), np.array(AS), np.array(FF), rec.measured)
@@ -479,6 +476,12 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
 # ------------------------------------------------------------------------------------------------ simulation
 def _kinds(layout: list) -> list[str]:
     return [k for _n, k, _lo, _hi in layout]
+
+
+def _column_params(layout: list) -> list[int]:
+    """Indices of the parameters multiplying the time-dependent columns :attr:`SegmentData.cols`."""
+    return [i for i, k in enumerate(_kinds(layout))
+            if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
 
 
 def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None = None,
@@ -501,7 +504,7 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     b = col("bias")
     split = kqp is not None or klp is not None
     # time-dependent regressors x their parameters, added to the input once for all ticks
-    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
+    tk = _column_params(layout)
     U = np.broadcast_to(sd.u[:, None], (3, B) + sd.u.shape[1:])
     if tk:
         U = U + np.einsum("smlc,bc->sbml", sd.cols, P[:, tk])
@@ -587,7 +590,7 @@ def _residuals(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | No
 @dataclass
 class FitOutcome:
     """theta (p,) of ``layout``; v0 (m,) the fitted initial velocities (measured position) or None; the residuals
-    (k,) and the robust weights (k,) at the optimum; J (k, p + m_free) the Jacobian; cost; success."""
+    (k,) and the robust weights (k,) at the optimum; J (k, p + m_free) the Jacobian; f_scale."""
 
     layout: list
     theta: np.ndarray
@@ -596,8 +599,6 @@ class FitOutcome:
     weights: np.ndarray
     jac: np.ndarray
     f_scale: float
-    success: bool
-    message: str
 
 
 def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.ndarray:
@@ -611,8 +612,7 @@ def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.nd
     terms = {"kq": q, "kl": v, "kq+": np.where(pos, q, 0.0), "kq-": np.where(pos, 0.0, q),
              "kl+": np.where(pos, v, 0.0), "kl-": np.where(pos, 0.0, v), "bias": np.ones_like(v)}
     rows = [a] + [terms[k] for k in kinds[1:] if k in terms]
-    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
-    for c in range(len(tcols)):
+    for c in range(len(_column_params(layout))):
         rows.append(-sd.cols[0][..., c])
     A = np.stack(rows, axis=-1)
     y = sd.u[0]
@@ -661,8 +661,7 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     last: dict = {}
     # without time-dependent regressors a row's residuals do not depend on its batch: fun simulates
     # x's forward steps too (least_squares next asks the Jacobian at the point it last evaluated)
-    with_steps = not any(k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)
-                         for k in _kinds(layout))
+    with_steps = not _column_params(layout)
 
     def batch(x):
         """Residuals at x (row 0) and its forward steps (rows 1..) in one simulation, kept."""
@@ -711,8 +710,8 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     r = sol.fun
     w = (1.0 + (r / f_scale) ** 2) ** -0.5 if robust else np.ones_like(r)
     th, v0 = split(sol.x)
-    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac, float(f_scale),
-                      bool(sol.success), str(sol.message))
+    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac,
+                      float(f_scale))
 
 
 # ------------------------------------------------------------------------------------------------ covariance
@@ -1062,7 +1061,6 @@ def make_folds(sd_train: SegmentData, sd_val: SegmentData, k: int) -> Folds:
     validation segment's time span is left out of that fold's training. Fewer excited validation segments than
     ``k``: that many folds (at least 2)."""
     exc = np.flatnonzero(sd_val.excited)
-    notes: list = []
     if exc.size < 2:
         return Folds([], [], [f"{exc.size} validation segment(s) move the DOF: no cross-validation possible"])
     k = max(2, min(k, exc.size))
@@ -1075,7 +1073,7 @@ def make_folds(sd_train: SegmentData, sd_val: SegmentData, k: int) -> Folds:
         for (a, b), g in zip(spans, grp):
             keep &= ~((sd_train.group == g) & (sd_train.span[:, 1] >= a) & (sd_train.span[:, 0] <= b))
         train.append(np.flatnonzero(keep))
-    return Folds(held, train, notes)
+    return Folds(held, train, [])
 
 
 def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layout: list, full: FitOutcome,
@@ -1093,10 +1091,9 @@ def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layo
             notes.append(f"fold {i + 1}: its training part has no segment moving {dof}")
             continue
         start = full.theta.copy()
-        tk = [j for j, (_n, k, _lo, _hi) in enumerate(layout) if k in ("restoring", "reverse")
-              or k.startswith(_COLUMN_PREFIXES)]
-        for c, j in enumerate(tk):  # a regressor absent from this fold's training (a held-out run): 0, not the
-            if c < tr.cols.shape[-1] and not np.any(tr.cols[0][..., c]):  # full fit's value (that would leak)
+        # a regressor absent from this fold's training (a held-out run): 0, not the full fit's value
+        for c, j in enumerate(_column_params(layout)):
+            if c < tr.cols.shape[-1] and not np.any(tr.cols[0][..., c]):
                 start[j] = 0.0
         try:
             f = fit_terms(tr, dof, layout, start, robust, full.f_scale, max_nfev=25, free_v0=free_v0)
