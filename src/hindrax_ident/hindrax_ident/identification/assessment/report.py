@@ -347,16 +347,16 @@ def _num(x) -> str:
 
 def _plot(r, path: Path, h: float) -> None:
     p = r.plot
-    meas, pred, valid = p["measured"], p["predicted"], p["valid"]
+    meas, pred = p["measured"], p["predicted"]
     m, L = meas.shape
     fig, ax = plt.subplots(figsize=(11, 3.2))
     for i in range(min(m, 12)):  # at most 12 segments: 2 minutes
         t = (i * L + np.arange(L)) * h
-        ok = valid[i]
-        ax.plot(t[ok], meas[i, ok], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
-        ax.plot(t[ok], pred[i, ok], "C1-", lw=1.2,
+        ax.plot(t, meas[i], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
+        ax.plot(t, pred[i], "C1-", lw=1.2,
                 label="predicted (open loop from the segment start)" if i == 0 else None)
-        ax.plot(t[ok], np.full(ok.sum(), meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
+        ax.plot(t, np.full(L, meas[i, 0]), "C2:", lw=1,
+                label="held initial value" if i == 0 else None)
         ax.axvline(t[0], color="0.85", lw=0.8)
     _save_velocity_plot(fig, ax, r.dof, "validation time, s (segments end to end)", f"{r.dof}: {p['data']} data",
                         path)
