@@ -903,7 +903,7 @@ GRID_BATCH = 6
 
 
 def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentData, folds: "Folds",
-                   segment_s: float, validation_s: float, excited_only: bool) -> np.ndarray:
+                   opts: CoreOptions) -> np.ndarray:
     """Cross-validated simulation-error mse of the 1-DOF model (:mod:`.timing_grid`) at each (delay, lag) of
     ``points``: per point the inputs rebuilt with that timing, per fold a fit on its training segments and the
     prediction of its held-out ones (:func:`make_folds`; without folds, the training error on all segments)."""
@@ -922,9 +922,10 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     for a in range(0, len(points), GRID_BATCH):
         batch = points[a:a + GRID_BATCH]
         tms = [Timing(d, lag, "estimated") for d, lag in batch]
-        sds = [build_segments(rec, terms, tm, segment_s, excited_only=excited_only) for tm in tms]
-        svs = sds if sv is sd else [build_segments(rec, terms, tm, validation_s, excited_only=not rec.all_segments)
-                                    for tm in tms]
+        sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
+               for tm in tms]
+        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s,
+                                                   excited_only=not rec.all_segments) for tm in tms]
         U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
         start = np.stack([_equation_error_start(x, layout, x.a_s) for x in sds])
         smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
@@ -935,8 +936,7 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     return out
 
 
-def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGMENT_S,
-                    validation_s: float = VALIDATION_S, folds: int = 4, excited_only: bool = True) -> Timing:
+def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
     """The input delay and first-order thrust lag of a commanded wrench (module docstring, step 1), chosen by the
     cross-validated simulation error of the 1-DOF model ``M v' = u(t - d) - k_q |v| v - k_l v - b`` with the lag
     (:func:`_timing_scores`, each grid point a full fit per fold): a coarse grid (delay every
@@ -946,15 +946,15 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGME
     (``rec.lag_s``, no delay). Raises :class:`EstimationError` when no segment moves the DOF."""
     if rec.force_source != "wrench":
         return Timing(0.0, rec.lag_s, "known")
-    bound, why = resolvable_delay(rec, max_delay_s, segment_s)
-    zero = Timing()
-    sd = build_segments(rec, Terms("both"), zero, segment_s, excited_only=excited_only)
-    sv = build_segments(rec, Terms("both"), zero, validation_s, excited_only=not rec.all_segments)
-    fo = make_folds(sd, sv, folds)
+    bound, why = resolvable_delay(rec, opts.max_delay_s, opts.segment_s)
+    zero, both = Timing(), Terms("both")
+    sd = build_segments(rec, both, zero, opts.segment_s, excited_only=_excited_only(rec, opts))
+    sv = build_segments(rec, both, zero, opts.validation_s, excited_only=not rec.all_segments)
+    fo = make_folds(sd, sv, opts.folds)
     step = max(rec.h, DELAY_STEP_S)
     coarse = [(round(float(d), 6), lag) for lag in LAGS_S for d in np.arange(0.0, bound + 1e-9, step)
               if d + lag <= bound + 1e-9]
-    scores = dict(zip(coarse, _timing_scores(rec, coarse, sd, sv, fo, segment_s, validation_s, excited_only)))
+    scores = dict(zip(coarse, _timing_scores(rec, coarse, sd, sv, fo, opts)))
     d0, lag0 = min(scores, key=scores.get)
     i = LAGS_S.index(lag0)
     lags = {lag0, 0.5 * (lag0 + LAGS_S[i - 1]) if i > 0 else lag0,
@@ -962,7 +962,7 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGME
     fine = [(round(d0 + x, 6), lag) for lag in sorted(lags) for x in FINE_DELAYS_S
             if d0 + x >= 0.0 and d0 + x + lag <= bound + 1e-9 and (round(d0 + x, 6), lag) not in scores]
     if fine:
-        scores.update(zip(fine, _timing_scores(rec, fine, sd, sv, fo, segment_s, validation_s, excited_only)))
+        scores.update(zip(fine, _timing_scores(rec, fine, sd, sv, fo, opts)))
     d, lag = min(scores, key=scores.get)
     curve = tuple((round(a, 4), round(b, 4), float(c)) for (a, b), c in sorted(scores.items()))
     return with_edge(Timing(d, lag, "estimated (output-error cross-validation)", curve, bound, why), rec.h)
@@ -1371,17 +1371,12 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
                      else None, training)
 
 
-def _timing(rec: DofRecord, opts: CoreOptions) -> Timing:
-    return estimate_timing(rec, opts.max_delay_s, opts.segment_s, opts.validation_s, opts.folds,
-                           _excited_only(rec, opts))
-
-
 def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None
                  ) -> DofResult:
     """Timing, terms by cross-validation (or ``opts.terms``), fit and intervals of one DOF (module docstring).
     ``inertia`` (6,): the other DOFs' inertias for the Coriolis candidate (NaN: unknown). Raises
     :class:`EstimationError`."""
-    timing = _timing(rec, opts)
+    timing = estimate_timing(rec, opts)
     if opts.select and rec.terms is None:
         chosen, tried = select_terms(rec, timing, opts, inertia)
     else:
@@ -1410,7 +1405,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     timings, base, tried, errors, first = {}, {}, {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
         try:
-            tm = timings[dof] = _timing(rec, opts)
+            tm = timings[dof] = estimate_timing(rec, opts)
             terms = Terms("both", rec.dof == "heave")
             sd = build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
             layout = parameter_layout(rec.dof, terms)
