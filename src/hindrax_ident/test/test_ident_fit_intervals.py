@@ -84,7 +84,8 @@ def test_cluster_covariance_by_hand():
     sd = fit_core.SegmentData(0.1, 4, np.zeros((3, m, 4)), np.zeros((3, m, 4, 0)), np.zeros(m), np.zeros(m), seg,
                               np.ones(8, int), np.zeros(8), np.zeros(8), np.zeros(m, int), np.zeros((m, 2)),
                               np.ones(m, bool), np.zeros((m, 4)), np.zeros((m, 4)), np.zeros((m, 4)))
-    fit = fit_core.FitOutcome([("a", "inertia", 0.0, np.inf)], np.array([1.0]), None, r, np.ones(8), J, 1.0, True, "")
+    fit = fit_core.FitOutcome([("a", "inertia", 0.0, np.inf)], np.array([1.0]), None, r,
+                              np.ones(8), J, 1.0)
     cov = fit_core.cluster_covariance(fit, sd, min_clusters=2)
     jj = float(J[:, 0] @ J[:, 0])
     scores = np.array([J[seg == g, 0] @ r[seg == g] for g in range(m)])

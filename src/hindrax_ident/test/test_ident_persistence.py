@@ -90,7 +90,7 @@ def test_a_delay_beyond_the_searched_range_is_reported_at_its_edge(synthetic_run
         late = np.concatenate([np.full(lag_ticks, force[0]), force[:-lag_ticks]])
         chunks.append(syn.measured_chunk(rng, syn.first_order(late, M, D, h), force, h, 0.003, group=c))
     rec = fit_core.DofRecord("surge", h, "velocity", chunks, "wrench")
-    short = fit_core.estimate_timing(rec, 0.3)
+    short = fit_core.estimate_timing(rec, fit_core.CoreOptions(max_delay_s=0.3))
     assert short.bound_s == pytest.approx(0.3) and short.at_edge and "edge of its range" in short.edge_note
-    full = fit_core.estimate_timing(rec, 1.0)
+    full = fit_core.estimate_timing(rec, fit_core.CoreOptions(max_delay_s=1.0))
     assert not full.at_edge and abs(full.delay_s - lag_ticks * h) < 0.1

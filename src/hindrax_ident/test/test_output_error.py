@@ -1,6 +1,6 @@
-"""The output-error pieces (identification/fit/output_error.py, identification/fit/fit_core.py) against hand-computed
-values and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the core's
-Runge-Kutta step, the segment bookkeeping of the fit core, and the core's whole fit on records
+"""The output-error pieces (identification/fit/dof_model.py, identification/fit/fit_core.py) against
+hand-computed values and analytic solutions: the one-DOF model, the lagged thrust inside a tick, the
+core's Runge-Kutta step, the segment bookkeeping of the fit core, and its whole fit on records
 integrated by an independent solver (scipy's solve_ivp), with RuntimeWarnings turned into errors."""
 import math
 
@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 
 from hindrax_ident.estimation.least_squares import EstimationError
 from hindrax_ident.identification.fit import fit_core
-from hindrax_ident.identification.fit.output_error import model_terms
+from hindrax_ident.identification.fit.dof_model import model_terms
 from hindrax_ident.vehicle.thrust_lag import ThrustLag
 
 pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.filterwarnings("error::RuntimeWarning")
 
 # ---------------------------------------------------------------------------------------------------- the model
 class DofModel:
-    """The one-DOF model of output_error: nu_dot = (tau - model_terms . theta[1:]) / M."""
+    """The one-DOF model of dof_model: nu_dot = (tau - model_terms . theta[1:]) / M."""
 
     def __init__(self, dof, theta):
         self.dof, self.theta = dof, np.asarray(theta, dtype=float)

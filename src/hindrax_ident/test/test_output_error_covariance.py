@@ -20,7 +20,7 @@ def _at_least_cluster_robust(naive, J, r, cluster, _p):
                               np.zeros((m, 2)), np.ones(m, bool), np.zeros((m, 2)), np.zeros((m, 2)),
                               np.zeros((m, 2)))
     fit = fit_core.FitOutcome([("a", "bias", -np.inf, np.inf)] * J.shape[1], np.zeros(J.shape[1]), None, r,
-                              np.ones(r.size), J, 1.0, True, "")
+                              np.ones(r.size), J, 1.0)
     return fit_core.cluster_covariance(fit, sd, min_clusters=3).cov
 
 
@@ -69,6 +69,7 @@ def test_too_few_clusters_leave_the_model_based_covariance():
     sd = fit_core.SegmentData(1.0, 2, np.zeros((3, 2, 2)), np.zeros((3, 2, 2, 0)), np.zeros(2), np.zeros(2),
                               np.array([0, 0, 0, 1, 1, 1]), np.zeros(6, int), np.zeros(6), np.zeros(6), np.arange(2),
                               np.zeros((2, 2)), np.ones(2, bool), np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)))
-    fit = fit_core.FitOutcome([("a", "bias", -np.inf, np.inf)] * 2, np.zeros(2), None, r, np.ones(6), J, 1.0, True, "")
+    fit = fit_core.FitOutcome([("a", "bias", -np.inf, np.inf)] * 2, np.zeros(2), None, r,
+                              np.ones(6), J, 1.0)
     cov = fit_core.cluster_covariance(fit, sd, min_clusters=3)
     assert cov.clusters == 2 and np.array_equal(cov.cov, cov.model)

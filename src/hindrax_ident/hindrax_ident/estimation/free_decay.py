@@ -453,11 +453,8 @@ def analyse_free_decay(t_s, acceleration_m_s2, stiffness_n_per_m: float, mass_kg
     last = 2 * n_periods  # index in seq of the last used peak
     times = np.array([_parabolic_time(t, sx * seq[j][1], seq[j][0])
                       for j in range(1, min(len(seq), last + 2))])
-    if times.size >= 2:
-        kk = np.arange(times.size)
-        half_period = float(np.polyfit(kk, times, 1)[0])
-    else:  # pragma: no cover - two peaks imply at least one trough and one interior peak
-        half_period = 0.5 * (t[peaks_idx[1]] - t[peaks_idx[0]])
+    # two peaks above the noise give at least three interior extrema
+    half_period = float(np.polyfit(np.arange(times.size), times, 1)[0])
     omega_d = np.pi / half_period
 
     amp = heights_arr / (1.0 + np.exp(-0.5 * delta))

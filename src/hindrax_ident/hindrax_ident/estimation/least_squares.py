@@ -156,7 +156,7 @@ class LsResult:
 
 class _Param:
     """A fit's attribute ``<name>``: the fitted value of parameter ``<name>``; ``<name>_std``: its
-    standard deviation (from the fit's :class:`LsResult`); None when the model lacks it."""
+    standard deviation (from the fit's :class:`LsResult`)."""
 
     def __init__(self, doc: str) -> None:
         self.__doc__ = doc
@@ -165,12 +165,10 @@ class _Param:
         self.std = name.endswith("_std")
         self.name = name[:-4] if self.std else name
 
-    def __get__(self, fit: "DragFit | None", owner: type) -> Optional[float]:
+    def __get__(self, fit: "DragFit | None", owner: type) -> float:
         if fit is None:
             return self  # type: ignore[return-value]  # the class attribute (documentation)
         ls = fit.ls
-        if ls.names is None or self.name not in ls.names:
-            return None
         return float((ls.std if self.std else ls.theta)[ls.index(self.name)])
 
 
@@ -179,14 +177,12 @@ class DragFit:
     """Steady-state drag fit of [Hindrax-Drag] eq. 2: F = k_q |v| v + k_l v + b.
 
     Parameter names in ``ls.names``: ``quadratic_damping`` (N/(m/s)^2 or N m/(rad/s)^2),
-    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m); the last two only when
-    included in the model. Properties return ``None`` for terms not in the model.
+    ``linear_damping`` (N/(m/s) or N m/(rad/s)), ``bias`` (N or N m).
     """
 
     ls: LsResult
 
-    quadratic_damping = _Param("Quadratic damping k_q of [Hindrax-Drag] eq. 2 (None when not "
-                                "fitted, e.g. fitted per direction).")
+    quadratic_damping = _Param("Quadratic damping k_q of [Hindrax-Drag] eq. 2.")
     quadratic_damping_std = _Param("Standard deviation of k_q ([Hindrax-Drag] eq. 7).")
     linear_damping = _Param("Linear damping k_l of [Hindrax-Drag] eq. 2 (Table 3 second column).")
     linear_damping_std = _Param("Standard deviation of k_l.")
@@ -204,19 +200,9 @@ class DragFit:
         out["residual_std"] = self.ls.residual_std
         return out
 
-    def _regressors(self, velocity) -> np.ndarray:
-        names = self.ls.names or ()
-        return _drag_regressors(np.asarray(velocity, dtype=float), "quadratic_damping" in names,
-                                "linear_damping" in names, "bias" in names)
-
     def predict(self, velocity) -> np.ndarray:
         """Model force F(v) (same units as the fitted force) at ``velocity`` (array-like)."""
-        return self._regressors(velocity) @ self.ls.theta
-
-    def predict_std(self, velocity) -> np.ndarray:
-        """Standard deviation of the fitted mean force at ``velocity`` (for plot bands)."""
-        X = self._regressors(velocity)
-        return np.sqrt(np.einsum("ij,jk,ik->i", X, self.ls.covariance, X))
+        return _drag_regressors(np.asarray(velocity, dtype=float)) @ self.ls.theta
 
 
 # Core estimator
@@ -283,18 +269,12 @@ def fit_linear_model(X, y, names: Optional[Sequence[str]] = None) -> LsResult:
 
 
 # Hydrodynamic models
-def _drag_regressors(v: np.ndarray, quadratic: bool, linear: bool, bias: bool) -> np.ndarray:
-    cols = []
-    if quadratic:
-        cols.append(np.abs(v) * v)
-    if linear:
-        cols.append(v)
-    if bias:
-        cols.append(np.ones_like(v))
-    return np.column_stack(cols)
+def _drag_regressors(v: np.ndarray) -> np.ndarray:
+    """The regressors (n, 3) [|v| v, v, 1] of [Hindrax-Drag] eq. 2 at the velocities ``v`` (n,)."""
+    return np.column_stack([np.abs(v) * v, v, np.ones_like(v)])
 
 
-def fit_drag(velocity, force, include_linear: bool = True, include_bias: bool = True) -> DragFit:
+def fit_drag(velocity, force) -> DragFit:
     """Fit [Hindrax-Drag] eq. 2, F = k_q |v| v + k_l v + b, by least squares (eqs. 3-8).
 
     The regressor row is [|v| v, v, 1]: eq. 3 prints x^2, but eq. 2 and its text use |v| v to
@@ -303,8 +283,6 @@ def fit_drag(velocity, force, include_linear: bool = True, include_bias: bool = 
     Args:
         velocity: (n,) steady velocity samples in m/s (rad/s for roll/pitch/yaw), body frame.
         force: (n,) applied thrust in N (moment in N m) balancing the drag at that velocity.
-        include_linear: include the k_l v term (set False for a pure quadratic model).
-        include_bias: include b (set False for zero-intercept fits, docs/identification.md §3 C8).
 
     Returns:
         :class:`DragFit` (values and standard deviations of k_q, k_l, b).
@@ -315,11 +293,6 @@ def fit_drag(velocity, force, include_linear: bool = True, include_bias: bool = 
     v = as_float_array(velocity, "velocity", 1)
     f = as_float_array(force, "force", 1)
     check_same_length(velocity=v, force=f)
-    names = ["quadratic_damping"]
-    if include_linear:
-        names.append("linear_damping")
-    if include_bias:
-        names.append("bias")
-    X = _drag_regressors(v, True, include_linear, include_bias)
-    return DragFit(ls=fit_linear_model(X, f, names))
+    names = ["quadratic_damping", "linear_damping", "bias"]
+    return DragFit(ls=fit_linear_model(_drag_regressors(v), f, names))
 

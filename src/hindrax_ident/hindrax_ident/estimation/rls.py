@@ -197,26 +197,11 @@ class RecursiveLeastSquares:
         self._gate_open = False
         self._theta_c: Optional[np.ndarray] = None   # cached constrained estimate (None = recompute)
 
-    def reset_covariance(self, covariance=None) -> None:
-        """Restart P (to P0 or to ``covariance`` * I / matrix) keeping theta and statistics.
-
-        Use after a known parameter change (e.g. payload change) to re-open adaptation. The
-        reported covariance restarts at sigma2_hat * P (current theta treated as a prior).
-
-        Raises:
-            EstimationError: a non-positive scalar or a non-SPD / wrongly sized matrix.
-        """
-        if covariance is None:
-            P = self._P0.copy()
-        else:
-            c = np.asarray(covariance, dtype=float)
-            P = float(c) * np.eye(self._p) if c.ndim == 0 else 0.5 * (c + c.T)
-            if P.shape != (self._p, self._p) or not np.all(np.isfinite(P)) \
-                    or np.linalg.eigvalsh(P)[0] <= 0:
-                raise EstimationError("covariance must be > 0 or a positive definite "
-                                      f"({self._p}, {self._p}) matrix")
-        self._P = P
-        self._Q = np.linalg.inv(P)
+    def reset_covariance(self) -> None:
+        """Restart P at P0 keeping theta and statistics (after a parameter change: adaptation
+        re-opens; the reported covariance restarts at sigma2_hat * P, theta taken as a prior)."""
+        self._P = self._P0.copy()
+        self._Q = np.linalg.inv(self._P)
         self._covariance_resets += 1
         self._theta_c = None
 
@@ -340,11 +325,6 @@ class RecursiveLeastSquares:
         return self._p
 
     @property
-    def forgetting(self) -> float:
-        """Forgetting factor lambda."""
-        return self._lambda
-
-    @property
     def theta(self) -> np.ndarray:
         """(p,) current estimate (copy), constrained to the lower bounds when given (module docstring)."""
         if self._lb is None:
@@ -462,7 +442,7 @@ class RecursiveLeastSquares:
 
     @property
     def covariance_resets(self) -> int:
-        """Number of explicit :meth:`reset_covariance` calls."""
+        """Number of :meth:`reset_covariance` calls."""
         return self._covariance_resets
 
     def to_dict(self) -> dict:

@@ -34,7 +34,7 @@ from scipy import stats  # noqa: E402
 from hindrax_drivers.config import VehicleConfig  # noqa: E402
 
 from ..fit import fit_core  # noqa: E402
-from ..fit.dof_model import _rest_terms, truth_parameters  # noqa: E402
+from ..fit.dof_model import model_terms, truth_parameters  # noqa: E402
 from .results import build_results, training_lines, write_identification  # noqa: E402
 
 __all__ = ["write_report", "write_outputs", "summary_rows", "write_fit_outputs", "residual_acf"]
@@ -91,7 +91,7 @@ def _force_velocity_plot(r, path: Path) -> None:
         ax.plot(wv, wf, "s", color="C3", label="steady-window means ([Hindrax-Drag])")
     vmax = float(np.nanmax(np.abs(v[ok]))) if np.any(ok) else 1.0
     grid = np.linspace(-vmax, vmax, 201)
-    rest = _rest_terms(r.dof, grid, np.zeros_like(grid))
+    rest = model_terms(r.dof, grid, np.zeros_like(grid))
     names = list(r.names)[1:]
     theta = np.array([r.values[n] for n in names])
     curve = rest @ theta
@@ -347,16 +347,16 @@ def _num(x) -> str:
 
 def _plot(r, path: Path, h: float) -> None:
     p = r.plot
-    meas, pred, valid = p["measured"], p["predicted"], p["valid"]
+    meas, pred = p["measured"], p["predicted"]
     m, L = meas.shape
     fig, ax = plt.subplots(figsize=(11, 3.2))
     for i in range(min(m, 12)):  # at most 12 segments: 2 minutes
         t = (i * L + np.arange(L)) * h
-        ok = valid[i]
-        ax.plot(t[ok], meas[i, ok], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
-        ax.plot(t[ok], pred[i, ok], "C1-", lw=1.2,
+        ax.plot(t, meas[i], "k.", ms=2, label="measured (smoothed)" if i == 0 else None)
+        ax.plot(t, pred[i], "C1-", lw=1.2,
                 label="predicted (open loop from the segment start)" if i == 0 else None)
-        ax.plot(t[ok], np.full(ok.sum(), meas[i, 0]), "C2:", lw=1, label="held initial value" if i == 0 else None)
+        ax.plot(t, np.full(L, meas[i, 0]), "C2:", lw=1,
+                label="held initial value" if i == 0 else None)
         ax.axvline(t[0], color="0.85", lw=0.8)
     _save_velocity_plot(fig, ax, r.dof, "validation time, s (segments end to end)", f"{r.dof}: {p['data']} data",
                         path)

@@ -590,13 +590,13 @@ def build_document(res: Any, cfg: VehicleConfig | None, bags: Sequence[str | Pat
 
 
 # ------------------------------------------------------------------------------------------------ references
-def free_decay_section(record, cfg, idents: dict, restoring_n_m_per_rad: float | None, restoring_std: float,
+def free_decay_section(record, cfg, restoring_n_m_per_rad: float | None, restoring_std: float,
                        progress) -> dict:
     """identification.yaml ``free_decay``: per roll/pitch the inertia from the campaign's free decay
-    (:func:`~..fit.calibration.decay_inertia`) and, when that DOF was identified
-    self-propelled, the comparison: verdict suspect when they differ by more than 1.96 combined std. The
-    restoring stiffness: the record's inclining step, else ``restoring_n_m_per_rad`` (``restoring_std``), else the
-    vehicle file's m g BG; ``progress(text)`` says why a DOF has no estimate."""
+    (:func:`~..fit.calibration.decay_inertia`; :func:`~.verdicts.apply_reference_verdicts`
+    compares it with the self-propelled one). The restoring stiffness: the record's inclining
+    step, else ``restoring_n_m_per_rad`` (``restoring_std``), else the vehicle file's m g BG;
+    ``progress(text)`` says why a DOF has no estimate."""
     # strictly increasing gyro stamps (the identification node moves samples that arrive after their tick to the tick
     # time, executive.ordered_samples, so its log can repeat a stamp); the in-process log is unchanged by this
     gyro, last = [], -math.inf
@@ -622,13 +622,6 @@ def free_decay_section(record, cfg, idents: dict, restoring_n_m_per_rad: float |
                                  "--restoring-n-m-per-rad (inclining test)" if measured else
                                  "vehicle file m g BG (not measured: run hindrax ident inclining or --calibrate "
                                  "inclining)")
-        r = idents.get(dof)
-        if r is not None:
-            v, sd = float(r.values["inertia"]), float(r.std["inertia"])
-            comb = math.hypot(sd, e["total_inertia_kg_m2_std"])
-            z = abs(e["total_inertia_kg_m2"] - v) / comb if comb > 0 else math.inf
-            e["self_propelled"] = {"inertia_kg_m2": v, "inertia_kg_m2_std": sd, "z": z,
-                                   "verdict": "suspect" if z > 1.96 else "agrees"}
         out[dof] = e
     return out
 
@@ -641,5 +634,6 @@ def reference_sections(doc: dict, record, cfg, idents: dict, restoring_n_m_per_r
         doc["inclining"] = {k: {kk: ([float(x) for x in vv] if isinstance(vv, list) else vv)
                                 for kk, vv in v.items()} for k, v in record.inclining.items()}
     if getattr(record, "decays", None):
-        doc["free_decay"] = free_decay_section(record, cfg, idents, restoring_n_m_per_rad, restoring_std, progress)
+        doc["free_decay"] = free_decay_section(record, cfg, restoring_n_m_per_rad, restoring_std,
+                                               progress)
         apply_reference_verdicts(doc)  # free decay vs self-propelled inertia: suspect beyond 1.96 combined std

@@ -392,13 +392,13 @@ class Preprocessed:
     shortfall_values: np.ndarray | None = None
 
 
-def _derivative(t: np.ndarray, x: np.ndarray, window_s: float = 0.5) -> np.ndarray:
-    """Savitzky-Golay derivative of x (n,) sampled on the uniform grid t."""
-    h = float(np.median(np.diff(t)))
+def _savgol(x: np.ndarray, h: float, window_s: float, deriv: int = 0) -> np.ndarray:
+    """Savitzky-Golay smoothing (``deriv`` 0) or derivative (1) of x (n,) on a uniform grid of
+    step h s, quadratic over ``window_s``; shorter than the window: x or its finite differences."""
     win = max(5, int(round(window_s / h)) | 1)
     if len(x) < win:
-        return np.gradient(x, h)
-    return signal.savgol_filter(x, win, 2, deriv=1, delta=h)
+        return x if deriv == 0 else np.gradient(x, h)
+    return signal.savgol_filter(x, win, 2, deriv=deriv, delta=h)
 
 
 #: sub-samples per grid step for the force's mean over the step (:func:`_grid_stretches` with ``step_mean``)
@@ -504,10 +504,9 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
     if source == "velocity topic":
         notes["angular_rate_repeated_values_dropped"] = n_rep_a
     # one velocity table on the linear velocity's times, angular interpolated onto them when sources differ
-    if np.isfinite(ang_v).any():
-        ang_on = np.column_stack([np.interp(lin_t, ang_t, ang_v[:, k], left=np.nan, right=np.nan) for k in range(3)])
-        if source == "velocity topic":
-            ang_on = np.column_stack([np.interp(lin_t, ang_t, ang_v[:, k]) for k in range(3)])
+    if np.isfinite(ang_v).any():  # only the velocity topic's own rates are held beyond their ends
+        edge = {} if source == "velocity topic" else {"left": np.nan, "right": np.nan}
+        ang_on = np.column_stack([np.interp(lin_t, ang_t, ang_v[:, k], **edge) for k in range(3)])
     else:
         ang_on = np.full((len(lin_t), 3), np.nan)
     vel = np.column_stack([lin_v, ang_on])
@@ -515,7 +514,7 @@ def preprocess_bag(path: str | Path, choice: TopicChoice, cfg: VehicleConfig | N
         dt_, tb = streams["depth"].times()
         dt_, dz = _sorted(dt_, np.asarray(streams["depth"].val, dtype=float)[:, 0:1])
         h = float(np.median(np.diff(dt_)))
-        wz = _derivative(dt_, dz[:, 0], 1.0) if len(dt_) > 7 else np.gradient(dz[:, 0], h)
+        wz = _savgol(dz[:, 0], h, 1.0, 1) if len(dt_) > 7 else np.gradient(dz[:, 0], h)
         zdot = np.interp(lin_t, dt_, wz, left=np.nan, right=np.nan)  # NED down rate of the body origin
         notes["heave_velocity"] = f"derivative of the depth {streams['depth'].topic} (Savitzky-Golay, 1 s window)"
         if attitude is not None:  # z_dot = R[2, :] nu_lin (Fossen eq. 2.40): body w from the depth rate
@@ -605,12 +604,7 @@ def dof_records(pres: Sequence[Preprocessed], dofs: Sequence[str], opts: FitOpti
                     rest = np.nan_to_num(restoring_regressor(dof, c.attitude[:, 0], c.attitude[:, 1]))
                 cross = np.column_stack([np.nan_to_num(c.velocity[:, DOFS.index(d)]) for d in cross_names]) \
                     if cross_names else None
-                win = max(5, int(round(0.5 / h)) | 1)
-                if len(v) >= win:
-                    vs = signal.savgol_filter(v, win, 2)
-                    acc = signal.savgol_filter(v, win, 2, deriv=1, delta=h)
-                else:
-                    vs, acc = v, np.gradient(v, h)
+                vs, acc = _savgol(v, h, 0.5), _savgol(v, h, 0.5, 1)
                 xf = c.force[:, [DOFS.index(d) for d in force_names]].copy() if force_names else None
                 chunks.append(fit_core.Chunk(c.force[:, k].copy(), vs, np.zeros_like(vs), acc, pos[good], z[good],
                                              rest, fit_core.coriolis_products(c.velocity)[:, k, :], cross, b,

@@ -119,25 +119,16 @@ class ScaleModel:
         """Posterior mean and covariance of [scales, nuisances] (linear Gaussian: weighted least squares with the
         priors as rows)."""
         ns, nr = len(self.names), len(self.nuisance)
-        a, b = [], []
-        for c, ri, rhs, sd, _ in self.rows:
-            row = np.zeros(ns + nr)
-            row[:ns] = c
+        # the priors as rows of the same form: s_k = mean, and -R = -mean for a nuisance
+        eye = np.eye(ns)
+        rows = (list(self.rows) + [(eye[k], -1, m, sd, "") for k, (m, sd) in enumerate(self.prior)]
+                + [(np.zeros(ns), ri, -m, sd, "") for ri, (m, sd) in self.nuisance_prior.items()])
+        a, b = np.zeros((len(rows), ns + nr)), np.zeros(len(rows))
+        for i, (c, ri, rhs, sd, _) in enumerate(rows):
+            a[i, :ns] = c
             if ri >= 0:
-                row[ns + ri] = -1.0
-            a.append(row / sd)
-            b.append(rhs / sd)
-        for k in range(ns):
-            row = np.zeros(ns + nr)
-            row[k] = 1.0 / self.prior[k, 1]
-            a.append(row)
-            b.append(self.prior[k, 0] / self.prior[k, 1])
-        for ri, (m, sd) in self.nuisance_prior.items():
-            row = np.zeros(ns + nr)
-            row[ns + ri] = 1.0 / sd
-            a.append(row)
-            b.append(m / sd)
-        a, b = np.array(a), np.array(b)
+                a[i, ns + ri] = -1.0
+            a[i], b[i] = a[i] / sd, rhs / sd
         cov = np.linalg.inv(a.T @ a)
         return cov @ a.T @ b, cov
 

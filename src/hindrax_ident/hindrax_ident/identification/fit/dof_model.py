@@ -50,10 +50,10 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 from ...estimation.least_squares import EstimationError, fit_drag
 from ...estimation.steady_windows import detect_steady_windows
 from ...vehicle.rigid_body import rigid_body_mass_matrix
-from .output_error import model_terms
 
-__all__ = ["core_index", "parameter_names", "parameter_units", "regressor_matrix", "rigid_inertia",
-           "truth_parameters", "DofIdentification", "steady_state_fit", "thrust_weights"]
+__all__ = ["core_index", "model_terms", "parameter_names", "parameter_units", "regressor_matrix",
+           "rigid_inertia", "truth_parameters", "DofIdentification", "steady_state_fit",
+           "thrust_weights"]
 
 def core_index(names: Sequence[str], core_names: Sequence[str]) -> list:
     """Index in ``core_names`` (the fit core's) of each of ``names`` (heave's ``*_positive`` and
@@ -100,14 +100,30 @@ def restoring_regressor(dof: str, roll_rad, pitch_rad) -> np.ndarray:
     return np.sin(pitch_rad)
 
 
-#: the model's columns after the inertia column (:func:`.output_error.model_terms`)
-_rest_terms = model_terms
+def model_terms(dof: str, velocity, restoring=None) -> np.ndarray:
+    """The model's columns after the inertia column, shape (..., p - 1), for velocity (...)
+    and, roll and pitch, the restoring regressor s(eta) (...; zeros when None):
+    ``[|nu| nu, nu, 1 (, s)]``; heave
+    ``[|w| w (w > 0), |w| w (w <= 0), w (w > 0), w (w <= 0), 1]``."""
+    v = np.asarray(velocity, dtype=float)
+    q = np.abs(v) * v
+    one = np.ones_like(v)
+    if dof == "heave":
+        pos = v > 0
+        cols = [np.where(pos, q, 0.0), np.where(pos, 0.0, q), np.where(pos, v, 0.0),
+                np.where(pos, 0.0, v), one]
+    else:
+        cols = [q, v, one]
+        if dof in ("roll", "pitch"):
+            cols.append(np.zeros_like(v) if restoring is None
+                        else np.asarray(restoring, dtype=float))
+    return np.stack(cols, axis=-1)
 
 
 def regressor_matrix(dof: str, acceleration, velocity, restoring=None) -> np.ndarray:
     """Regressor (n, p): [nu_dot, |nu| nu (per sign for heave), nu (per sign for heave), 1, (s(eta))]."""
     a = np.asarray(acceleration, dtype=float)
-    return np.concatenate([a[..., None], _rest_terms(dof, velocity, restoring)], axis=-1)
+    return np.concatenate([a[..., None], model_terms(dof, velocity, restoring)], axis=-1)
 
 
 def rigid_inertia(cfg: VehicleConfig, dof: str) -> float:
@@ -238,9 +254,7 @@ def thrust_weights(dof: str, names: Sequence[str]) -> np.ndarray:
         # b = 1), every other parameter only the forward one
         for i, n in enumerate(names):
             w[i] = (-1.0, 1.0) if n == "reverse_thrust_gain" else (1.0, 0.0)
-        w[[i for i, n in enumerate(names) if n == "saturation_gain"]] = 0.0  # a ratio of two thrusts: no scale
-        return w
-    if dof == "heave":
+    elif dof == "heave":
         for i, n in enumerate(names):
             if n.endswith("_positive") or n == "bias":
                 w[i] = (1.0, 0.0)

@@ -102,15 +102,13 @@ def fit_records(bags, opts: fit_core.CoreOptions, design: str) -> FitResult:
         fit.validation["cross_validation"] = dict(r.cv)
         cand = r.chosen
         if cand.cv.get("samples", 0):
-            fit.plot = {"data": "cross-validation", "measured": cand.val.v_s, "predicted": fit_core.predict_validation(
-                cand.val, cand.layout, r.theta), "valid": np.ones_like(cand.val.v_s, dtype=bool),
-                "segments": cand.val}
+            fit.plot = {"data": "cross-validation", "measured": cand.val.v_s, "segments": cand.val,
+                        "predicted": fit_core.predict_validation(cand.val, cand.layout, r.theta)}
         if dof in hrecs and hrecs[dof].chunks:
             try:
                 m, sd, vp = _holdout(hrecs[dof], r, opts, inertia)
                 fit.validation["holdout"] = m
-                fit.plot = {"data": "holdout", "measured": sd.v_s, "predicted": vp,
-                            "valid": np.ones_like(sd.v_s, dtype=bool), "segments": sd}
+                fit.plot = {"data": "holdout", "measured": sd.v_s, "predicted": vp, "segments": sd}
             except EstimationError as exc:
                 fit.validation["holdout_note"] = str(exc)
         out[dof] = fit

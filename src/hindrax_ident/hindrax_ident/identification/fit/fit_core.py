@@ -375,9 +375,6 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     L = max(10, int(round(seconds / h)))
     fmin, vmin = EXCITATION_MIN[excited_kind(rec.dof)]
     k_dof = DOFS.index(rec.dof)
-    ncol = (1 if rec.dof in ("roll", "pitch") else 0) + (len(rec.cross_names) if terms.cross else 0) + \
-        (len(rec.force_names) if terms.cross_force else 0) + (1 if terms.reverse_gain else 0) + \
-        (rec.run_count - 1 if terms.run_bias and rec.run_count >= 2 else 0) + (1 if terms.saturation else 0)
     U, C, V0, X0, G, SP, EX, VS, AS, FF = [], [], [], [], [], [], [], [], [], []
     s_seg, s_j, s_a, s_z = [], [], [], []
     for ci, ch in enumerate(rec.chunks):
@@ -470,7 +467,7 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
     if not V0:
         raise EstimationError(f"{rec.dof}: no segment of {seconds:g} s with the DOF moving and at least 3 "
                               "measurements")
-    return SegmentData(h, L, np.stack(U, axis=1), np.stack(C, axis=1) if ncol else np.zeros((3, len(V0), L, 0)),
+    return SegmentData(h, L, np.stack(U, axis=1), np.stack(C, axis=1),
                        np.array(V0), np.array(X0), np.concatenate(s_seg), np.concatenate(s_j), np.concatenate(s_a),
                        np.concatenate(s_z), np.array(G, dtype=int), np.array(SP, dtype=float), np.array(EX),
                        np.array(VS), np.array(AS), np.array(FF), rec.measured)
@@ -479,6 +476,12 @@ def build_segments(rec: DofRecord, terms: Terms, timing: Timing, seconds: float,
 # ------------------------------------------------------------------------------------------------ simulation
 def _kinds(layout: list) -> list[str]:
     return [k for _n, k, _lo, _hi in layout]
+
+
+def _column_params(layout: list) -> list[int]:
+    """Indices of the parameters multiplying the time-dependent columns :attr:`SegmentData.cols`."""
+    return [i for i, k in enumerate(_kinds(layout))
+            if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
 
 
 def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None = None,
@@ -501,7 +504,7 @@ def simulate(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | None
     b = col("bias")
     split = kqp is not None or klp is not None
     # time-dependent regressors x their parameters, added to the input once for all ticks
-    tk = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
+    tk = _column_params(layout)
     U = np.broadcast_to(sd.u[:, None], (3, B) + sd.u.shape[1:])
     if tk:
         U = U + np.einsum("smlc,bc->sbml", sd.cols, P[:, tk])
@@ -587,7 +590,7 @@ def _residuals(sd: SegmentData, layout: list, P: np.ndarray, v0: np.ndarray | No
 @dataclass
 class FitOutcome:
     """theta (p,) of ``layout``; v0 (m,) the fitted initial velocities (measured position) or None; the residuals
-    (k,) and the robust weights (k,) at the optimum; J (k, p + m_free) the Jacobian; cost; success."""
+    (k,) and the robust weights (k,) at the optimum; J (k, p + m_free) the Jacobian; f_scale."""
 
     layout: list
     theta: np.ndarray
@@ -596,8 +599,6 @@ class FitOutcome:
     weights: np.ndarray
     jac: np.ndarray
     f_scale: float
-    success: bool
-    message: str
 
 
 def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.ndarray:
@@ -611,8 +612,7 @@ def _equation_error_start(sd: SegmentData, layout: list, a: np.ndarray) -> np.nd
     terms = {"kq": q, "kl": v, "kq+": np.where(pos, q, 0.0), "kq-": np.where(pos, 0.0, q),
              "kl+": np.where(pos, v, 0.0), "kl-": np.where(pos, 0.0, v), "bias": np.ones_like(v)}
     rows = [a] + [terms[k] for k in kinds[1:] if k in terms]
-    tcols = [i for i, k in enumerate(kinds) if k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)]
-    for c in range(len(tcols)):
+    for c in range(len(_column_params(layout))):
         rows.append(-sd.cols[0][..., c])
     A = np.stack(rows, axis=-1)
     y = sd.u[0]
@@ -661,8 +661,7 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     last: dict = {}
     # without time-dependent regressors a row's residuals do not depend on its batch: fun simulates
     # x's forward steps too (least_squares next asks the Jacobian at the point it last evaluated)
-    with_steps = not any(k in ("restoring", "reverse") or k.startswith(_COLUMN_PREFIXES)
-                         for k in _kinds(layout))
+    with_steps = not _column_params(layout)
 
     def batch(x):
         """Residuals at x (row 0) and its forward steps (rows 1..) in one simulation, kept."""
@@ -711,8 +710,8 @@ def fit_terms(sd: SegmentData, dof: str, layout: list, theta0: np.ndarray, robus
     r = sol.fun
     w = (1.0 + (r / f_scale) ** 2) ** -0.5 if robust else np.ones_like(r)
     th, v0 = split(sol.x)
-    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac, float(f_scale),
-                      bool(sol.success), str(sol.message))
+    return FitOutcome(layout, th.copy(), None if v0 is None else v0[0].copy(), r, w, sol.jac,
+                      float(f_scale))
 
 
 # ------------------------------------------------------------------------------------------------ covariance
@@ -904,7 +903,7 @@ GRID_BATCH = 6
 
 
 def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentData, folds: "Folds",
-                   segment_s: float, validation_s: float, excited_only: bool) -> np.ndarray:
+                   opts: CoreOptions) -> np.ndarray:
     """Cross-validated simulation-error mse of the 1-DOF model (:mod:`.timing_grid`) at each (delay, lag) of
     ``points``: per point the inputs rebuilt with that timing, per fold a fit on its training segments and the
     prediction of its held-out ones (:func:`make_folds`; without folds, the training error on all segments)."""
@@ -923,9 +922,10 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     for a in range(0, len(points), GRID_BATCH):
         batch = points[a:a + GRID_BATCH]
         tms = [Timing(d, lag, "estimated") for d, lag in batch]
-        sds = [build_segments(rec, terms, tm, segment_s, excited_only=excited_only) for tm in tms]
-        svs = sds if sv is sd else [build_segments(rec, terms, tm, validation_s, excited_only=not rec.all_segments)
-                                    for tm in tms]
+        sds = [build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
+               for tm in tms]
+        svs = sds if sv is sd else [build_segments(rec, terms, tm, opts.validation_s,
+                                                   excited_only=not rec.all_segments) for tm in tms]
         U, Uv = np.stack([x.u for x in sds], axis=1), np.stack([x.u for x in svs], axis=1)
         start = np.stack([_equation_error_start(x, layout, x.a_s) for x in sds])
         smp = (sd.s_seg, sd.s_j, sd.s_a, sd.s_z)
@@ -936,8 +936,7 @@ def _timing_scores(rec: DofRecord, points: list, sd: SegmentData, sv: SegmentDat
     return out
 
 
-def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGMENT_S,
-                    validation_s: float = VALIDATION_S, folds: int = 4, excited_only: bool = True) -> Timing:
+def estimate_timing(rec: DofRecord, opts: CoreOptions) -> Timing:
     """The input delay and first-order thrust lag of a commanded wrench (module docstring, step 1), chosen by the
     cross-validated simulation error of the 1-DOF model ``M v' = u(t - d) - k_q |v| v - k_l v - b`` with the lag
     (:func:`_timing_scores`, each grid point a full fit per fold): a coarse grid (delay every
@@ -947,15 +946,15 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGME
     (``rec.lag_s``, no delay). Raises :class:`EstimationError` when no segment moves the DOF."""
     if rec.force_source != "wrench":
         return Timing(0.0, rec.lag_s, "known")
-    bound, why = resolvable_delay(rec, max_delay_s, segment_s)
-    zero = Timing()
-    sd = build_segments(rec, Terms("both"), zero, segment_s, excited_only=excited_only)
-    sv = build_segments(rec, Terms("both"), zero, validation_s, excited_only=not rec.all_segments)
-    fo = make_folds(sd, sv, folds)
+    bound, why = resolvable_delay(rec, opts.max_delay_s, opts.segment_s)
+    zero, both = Timing(), Terms("both")
+    sd = build_segments(rec, both, zero, opts.segment_s, excited_only=_excited_only(rec, opts))
+    sv = build_segments(rec, both, zero, opts.validation_s, excited_only=not rec.all_segments)
+    fo = make_folds(sd, sv, opts.folds)
     step = max(rec.h, DELAY_STEP_S)
     coarse = [(round(float(d), 6), lag) for lag in LAGS_S for d in np.arange(0.0, bound + 1e-9, step)
               if d + lag <= bound + 1e-9]
-    scores = dict(zip(coarse, _timing_scores(rec, coarse, sd, sv, fo, segment_s, validation_s, excited_only)))
+    scores = dict(zip(coarse, _timing_scores(rec, coarse, sd, sv, fo, opts)))
     d0, lag0 = min(scores, key=scores.get)
     i = LAGS_S.index(lag0)
     lags = {lag0, 0.5 * (lag0 + LAGS_S[i - 1]) if i > 0 else lag0,
@@ -963,7 +962,7 @@ def estimate_timing(rec: DofRecord, max_delay_s: float, segment_s: float = SEGME
     fine = [(round(d0 + x, 6), lag) for lag in sorted(lags) for x in FINE_DELAYS_S
             if d0 + x >= 0.0 and d0 + x + lag <= bound + 1e-9 and (round(d0 + x, 6), lag) not in scores]
     if fine:
-        scores.update(zip(fine, _timing_scores(rec, fine, sd, sv, fo, segment_s, validation_s, excited_only)))
+        scores.update(zip(fine, _timing_scores(rec, fine, sd, sv, fo, opts)))
     d, lag = min(scores, key=scores.get)
     curve = tuple((round(a, 4), round(b, 4), float(c)) for (a, b), c in sorted(scores.items()))
     return with_edge(Timing(d, lag, "estimated (output-error cross-validation)", curve, bound, why), rec.h)
@@ -1062,7 +1061,6 @@ def make_folds(sd_train: SegmentData, sd_val: SegmentData, k: int) -> Folds:
     validation segment's time span is left out of that fold's training. Fewer excited validation segments than
     ``k``: that many folds (at least 2)."""
     exc = np.flatnonzero(sd_val.excited)
-    notes: list = []
     if exc.size < 2:
         return Folds([], [], [f"{exc.size} validation segment(s) move the DOF: no cross-validation possible"])
     k = max(2, min(k, exc.size))
@@ -1075,7 +1073,7 @@ def make_folds(sd_train: SegmentData, sd_val: SegmentData, k: int) -> Folds:
         for (a, b), g in zip(spans, grp):
             keep &= ~((sd_train.group == g) & (sd_train.span[:, 1] >= a) & (sd_train.span[:, 0] <= b))
         train.append(np.flatnonzero(keep))
-    return Folds(held, train, notes)
+    return Folds(held, train, [])
 
 
 def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layout: list, full: FitOutcome,
@@ -1093,10 +1091,9 @@ def _cv(sd_train: SegmentData, sd_val: SegmentData, folds: Folds, dof: str, layo
             notes.append(f"fold {i + 1}: its training part has no segment moving {dof}")
             continue
         start = full.theta.copy()
-        tk = [j for j, (_n, k, _lo, _hi) in enumerate(layout) if k in ("restoring", "reverse")
-              or k.startswith(_COLUMN_PREFIXES)]
-        for c, j in enumerate(tk):  # a regressor absent from this fold's training (a held-out run): 0, not the
-            if c < tr.cols.shape[-1] and not np.any(tr.cols[0][..., c]):  # full fit's value (that would leak)
+        # a regressor absent from this fold's training (a held-out run): 0, not the full fit's value
+        for c, j in enumerate(_column_params(layout)):
+            if c < tr.cols.shape[-1] and not np.any(tr.cols[0][..., c]):
                 start[j] = 0.0
         try:
             f = fit_terms(tr, dof, layout, start, robust, full.f_scale, max_nfev=25, free_v0=free_v0)
@@ -1374,17 +1371,12 @@ def finish(rec: DofRecord, chosen: Candidate, tried: list, timing: Timing, opts:
                      else None, training)
 
 
-def _timing(rec: DofRecord, opts: CoreOptions) -> Timing:
-    return estimate_timing(rec, opts.max_delay_s, opts.segment_s, opts.validation_s, opts.folds,
-                           _excited_only(rec, opts))
-
-
 def identify_dof(rec: DofRecord, opts: CoreOptions = CoreOptions(), inertia: np.ndarray | None = None
                  ) -> DofResult:
     """Timing, terms by cross-validation (or ``opts.terms``), fit and intervals of one DOF (module docstring).
     ``inertia`` (6,): the other DOFs' inertias for the Coriolis candidate (NaN: unknown). Raises
     :class:`EstimationError`."""
-    timing = _timing(rec, opts)
+    timing = estimate_timing(rec, opts)
     if opts.select and rec.terms is None:
         chosen, tried = select_terms(rec, timing, opts, inertia)
     else:
@@ -1413,7 +1405,7 @@ def identify_dofs(records: dict, opts: CoreOptions = CoreOptions()) -> tuple[dic
     timings, base, tried, errors, first = {}, {}, {}, {}, {}
     for dof, rec in records.items():  # timing, and a first fit of every DOF for the inertias of the Coriolis force
         try:
-            tm = timings[dof] = _timing(rec, opts)
+            tm = timings[dof] = estimate_timing(rec, opts)
             terms = Terms("both", rec.dof == "heave")
             sd = build_segments(rec, terms, tm, opts.segment_s, excited_only=_excited_only(rec, opts))
             layout = parameter_layout(rec.dof, terms)
