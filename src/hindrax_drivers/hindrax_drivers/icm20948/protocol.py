@@ -268,16 +268,6 @@ class ImuConfig:
         return GYRO_LSB_PER_DPS[self.gyro_fs_sel]
 
     @property
-    def accel_range_m_s2(self) -> float:
-        """Accel full scale, m/s^2."""
-        return ACCEL_RANGE_G[self.accel_fs_sel] * GRAVITY_M_S2
-
-    @property
-    def gyro_range_rad_s(self) -> float:
-        """Gyro full scale, rad/s."""
-        return math.radians(GYRO_RANGE_DPS[self.gyro_fs_sel])
-
-    @property
     def accel_odr_hz(self) -> float:
         """Accel output data rate, Hz (:func:`accel_odr_hz`)."""
         return accel_odr_hz(self.accel_smplrt_div, self.accel_dlpfcfg is not None)
