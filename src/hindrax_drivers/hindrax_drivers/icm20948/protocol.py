@@ -364,8 +364,7 @@ def configure_sequence(config: ImuConfig) -> list[BankedWrite]:
     ]
 
 
-def slave_read_writes(slave: int, address: int, register: int, length: int,
-                      byte_swap: bool = False) -> list[BankedWrite]:
+def slave_read_writes(slave: int, address: int, register: int, length: int) -> list[BankedWrite]:
     """Configure I2C master slave ``slave`` to read ``length`` bytes each cycle (docs/devices.md §4.6b).
 
     The slave is disabled first, so no master cycle can run with a half-updated configuration;
@@ -374,9 +373,8 @@ def slave_read_writes(slave: int, address: int, register: int, length: int,
     if not 1 <= length <= 15:
         raise Icm20948Error(f"slave read length must be 1..15, got {length}")
     a, r, c, _ = slave_registers(slave)
-    ctrl = I2C_SLV_CTRL_EN | length | (I2C_SLV_CTRL_BYTE_SW if byte_swap else 0)
     return [BankedWrite(c, 0x00), BankedWrite(a, I2C_SLV_ADDR_RNW | (address & 0x7F)),
-            BankedWrite(r, register & 0xFF), BankedWrite(c, ctrl)]
+            BankedWrite(r, register & 0xFF), BankedWrite(c, I2C_SLV_CTRL_EN | length)]
 
 
 def slave_write_writes(slave: int, address: int, register: int, value: int,

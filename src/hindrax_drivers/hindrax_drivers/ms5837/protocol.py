@@ -245,18 +245,17 @@ def crc4(words: Sequence[int]) -> int:
     return (rem >> 12) & 0xF
 
 
-def prom_with_crc(word0: int, coefficients: Sequence[int], word7: int = 0) -> tuple[int, ...]:
+def prom_with_crc(word0: int, coefficients: Sequence[int]) -> tuple[int, ...]:
     """Build an 8-word PROM image with a valid CRC nibble (device side; docs/devices.md §3.2-3.3).
 
     Args:
         word0: product/version and factory bits (bits 11:0; bits 15:12 are replaced by the CRC).
-        coefficients: C1..C6 (6 ints, 0..65535).
-        word7: content of word 7 (not covered by the CRC).
+        coefficients: C1..C6 (6 ints, 0..65535); word 7 (not covered by the CRC) is 0.
     """
     coeffs = [int(c) for c in coefficients]
     if len(coeffs) != 6:
         raise Ms5837Error(f"need 6 coefficients C1..C6, got {len(coeffs)}")
-    words = _prom_words([word0 & 0x0FFF, *coeffs, word7])
+    words = _prom_words([word0 & 0x0FFF, *coeffs, 0])
     words[0] = (crc4(words) << 12) | words[0]
     return tuple(words)
 
