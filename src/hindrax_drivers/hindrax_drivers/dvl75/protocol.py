@@ -44,8 +44,8 @@ __all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlT
            "beam_directions_frd", "LINE_TERMINATOR", "KNOT_M_S", "nmea_checksum", "format_sentence",
            "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext", "parse_gprmc",
            "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
-           "build_command", "cmd_send", "cmd_retweet", "cmd_set_sensor_orientation",
-           "cmd_set_speed_of_sound", "cmd_resume", "cmd_configuration", "startup_commands"]
+           "build_command", "cmd_send", "cmd_set_sensor_orientation", "cmd_set_speed_of_sound",
+           "startup_commands"]
 
 #: Line terminator the DVL uses and the driver sends (CR LF; docs/devices.md §1.2, §1.4).
 LINE_TERMINATOR = b"\r\n"
@@ -734,10 +734,6 @@ def _num(value: float, decimals: int = 3) -> str:
     return "0" if text in ("-0", "") else text
 
 
-def _on_off(enabled: bool) -> str:
-    return "ON" if enabled else "OFF"
-
-
 _SEND_TARGETS = ("DVPDL", "DVEXT", "GPRMC", "FREEFORM", "DVKFA", "DVKFB", "DVFKA", "DVFKB")
 
 
@@ -752,19 +748,7 @@ def cmd_send(message: str, enabled: bool) -> bytes:
     name = message.upper()
     if name not in _SEND_TARGETS:
         raise ValueError(f"unknown SEND- target {message!r}; expected one of {_SEND_TARGETS}")
-    return build_command(f"SEND-{name}", _on_off(enabled))
-
-
-def cmd_retweet(source: str, enabled: bool) -> bytes:
-    """``RETWEET-GPS|RETWEET-IMU ON|OFF`` (docs/devices.md §1.4, sticky).
-
-    Raises:
-        ValueError: source not GPS or IMU.
-    """
-    name = source.upper()
-    if name not in ("GPS", "IMU"):
-        raise ValueError(f"retweet source must be GPS or IMU, got {source!r}")
-    return build_command(f"RETWEET-{name}", _on_off(enabled))
+    return build_command(f"SEND-{name}", "ON" if enabled else "OFF")
 
 
 def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: float) -> bytes:
@@ -792,16 +776,6 @@ def cmd_set_speed_of_sound(speed_of_sound_m_s: float) -> bytes:
     return build_command("SET-SPEED-OF-SOUND", _num(speed_of_sound_m_s, 1))
 
 
-def cmd_resume() -> bytes:
-    """``RESUME``: restart pinging (docs/devices.md §1.4)."""
-    return build_command("RESUME")
-
-
-def cmd_configuration() -> bytes:
-    """``CONFIGURATION``: dump the configuration as free-form lines (docs/devices.md §1.4)."""
-    return build_command("CONFIGURATION")
-
-
 def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 0.0, 0.0),
                      speed_of_sound_m_s: Optional[float] = None,
                      request_configuration: bool = True) -> list:
@@ -818,18 +792,13 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
     Raises:
         ValueError: out-of-range arguments (see the individual builders).
     """
-    cmds = [
-        cmd_send("DVPDL", True),
-        cmd_send("DVEXT", True),
-        cmd_send("GPRMC", False),
-        cmd_retweet("IMU", False),
-        cmd_retweet("GPS", False),
-        cmd_set_sensor_orientation(*sensor_orientation_rad),
-    ]
+    cmds = [cmd_send("DVPDL", True), cmd_send("DVEXT", True), cmd_send("GPRMC", False),
+            build_command("RETWEET-IMU", "OFF"), build_command("RETWEET-GPS", "OFF"),
+            cmd_set_sensor_orientation(*sensor_orientation_rad)]
     if speed_of_sound_m_s is not None:
         cmds.append(cmd_set_speed_of_sound(speed_of_sound_m_s))
-    cmds.append(cmd_resume())
+    cmds.append(build_command("RESUME"))  # restart pinging
     if request_configuration:
-        cmds.append(cmd_configuration())
+        cmds.append(build_command("CONFIGURATION"))  # dumped as free-form lines
     return cmds
 
