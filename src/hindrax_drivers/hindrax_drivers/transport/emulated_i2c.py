@@ -80,7 +80,8 @@ class I2CDeviceEmulator(Protocol):
         """Handle one read transaction of ``n`` bytes."""
 
 
-def _check_byte(name: str, value: int) -> int:
+def check_byte(name: str, value: int) -> int:
+    """``value`` if it is an int in 0..255 (not a bool); ValueError naming ``name`` otherwise."""
     if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 0xFF:
         raise ValueError(f"{name} must be an int in 0..255, got {value!r}")
     return value
@@ -256,87 +257,74 @@ class EmulatedI2CBus:
             raise RuntimeError(f"emulator at 0x{address:02x} returned {len(data)} bytes, expected {n}")
         return data
 
+    def _call(self, address: int, write: bytes | None, read: int | None = None) -> bytes:
+        """One SMBus call under the bus lock: ``write`` as one write transaction, then a read of
+        ``read`` bytes (repeated start); returns the bytes read (b"" without a read)."""
+        with self._lock:
+            self._begin(address)
+            if write is not None:
+                self._write(address, write)
+            return b"" if read is None else self._read(address, read)
+
     # ----------------------------------------------------------------- smbus2 API
     def write_quick(self, i2c_addr: int, force: bool | None = None) -> None:
         """SMBus quick command: a zero-length write (address probe)."""
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, b"")
+        self._call(i2c_addr, b"")
 
     def write_byte(self, i2c_addr: int, value: int, force: bool | None = None) -> None:
         """SMBus send byte: one write transaction of the single byte ``value``."""
-        _check_byte("value", value)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([value]))
+        check_byte("value", value)
+        self._call(i2c_addr, bytes([value]))
 
     def read_byte(self, i2c_addr: int, force: bool | None = None) -> int:
         """SMBus receive byte: one 1-byte read transaction from the device's current pointer."""
-        with self._lock:
-            self._begin(i2c_addr)
-            return self._read(i2c_addr, 1)[0]
+        return self._call(i2c_addr, None, 1)[0]
 
     def write_byte_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
         """SMBus write byte data: one write transaction ``[register, value]``."""
-        _check_byte("register", register)
-        _check_byte("value", value)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register, value]))
+        check_byte("register", register)
+        check_byte("value", value)
+        self._call(i2c_addr, bytes([register, value]))
 
     def read_byte_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
         """SMBus read byte data: write ``[register]``, repeated start, read 1 byte."""
-        _check_byte("register", register)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]))
-            return self._read(i2c_addr, 1)[0]
+        check_byte("register", register)
+        return self._call(i2c_addr, bytes([register]), 1)[0]
 
     def write_word_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
         """SMBus write word data: ``[register, value & 0xFF, value >> 8]`` (little-endian word)."""
-        _check_byte("register", register)
+        check_byte("register", register)
         if not isinstance(value, int) or not 0 <= value <= 0xFFFF:
             raise ValueError(f"word value must be in 0..65535, got {value!r}")
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register, value & 0xFF, value >> 8]))
+        self._call(i2c_addr, bytes([register, value & 0xFF, value >> 8]))
 
     def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
         """SMBus read word data: write ``[register]``, read 2 bytes, return them little-endian.
 
         Source: SMBus specification; docs/devices.md §3.1 (swap for MSB-first devices).
         """
-        _check_byte("register", register)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]))
-            data = self._read(i2c_addr, 2)
-            return data[0] | (data[1] << 8)
+        check_byte("register", register)
+        return int.from_bytes(self._call(i2c_addr, bytes([register]), 2), "little")
 
     def write_i2c_block_data(
         self, i2c_addr: int, register: int, data: Iterable[int], force: bool | None = None
     ) -> None:
         """I2C block write: one write transaction ``[register, *data]``, at most 32 data bytes."""
-        _check_byte("register", register)
+        check_byte("register", register)
         payload = _check_bytes("data", data)
         if len(payload) > I2C_SMBUS_BLOCK_MAX:
             raise ValueError("Data length cannot exceed 32 bytes")
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]) + payload)
+        self._call(i2c_addr, bytes([register]) + payload)
 
     def read_i2c_block_data(
         self, i2c_addr: int, register: int, length: int, force: bool | None = None
     ) -> list[int]:
         """I2C block read: write ``[register]``, repeated start, read ``length`` (1..32) bytes."""
-        _check_byte("register", register)
+        check_byte("register", register)
         if not isinstance(length, int) or length < 0 or length > I2C_SMBUS_BLOCK_MAX:
             raise ValueError("Desired block length over 32 bytes" if isinstance(length, int) and length > 32
                              else f"length must be 0..32, got {length!r}")
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]))
-            return list(self._read(i2c_addr, length))
+        return list(self._call(i2c_addr, bytes([register]), length))
 
     def i2c_rdwr(self, *i2c_msgs: object) -> None:
         """Combined transfer of ``smbus2.i2c_msg`` messages (one ioctl, repeated starts).
