@@ -642,35 +642,26 @@ class DvlLineFramer:
     def feed(self, data: Union[bytes, bytearray]) -> list:
         """Add a chunk; return the complete lines it finishes (list of bytes, no CR/LF)."""
         out: list = []
-        data = bytes(data)
-        start = 0
-        while True:
-            nl = data.find(b"\n", start)
-            if nl < 0:
-                rest = data[start:]
-                if self._skipping:
-                    self.discarded_bytes += len(rest)
-                else:
-                    self._buf += rest
-                    if len(self._buf) > self.max_line_bytes:
-                        self.discarded_bytes += len(self._buf)
-                        self._buf.clear()
-                        self._skipping = True
-                break
-            segment = data[start:nl]
-            if self._skipping:
+        *segments, rest = bytes(data).split(b"\n")
+        for segment in segments:
+            if self._skipping:  # the end of an over-long line
                 self.discarded_bytes += len(segment)
                 self._skipping = False
-            else:
-                self._buf += segment
-                if len(self._buf) > self.max_line_bytes:
-                    self.discarded_bytes += len(self._buf)
-                else:
-                    line = self._clean(bytes(self._buf))
-                    if line:
-                        out.append(line)
+                continue
+            self._buf += segment
+            if len(self._buf) > self.max_line_bytes:
+                self.discarded_bytes += len(self._buf)
+            elif line := self._clean(bytes(self._buf)):
+                out.append(line)
+            self._buf.clear()
+        if self._skipping:
+            self.discarded_bytes += len(rest)
+        else:
+            self._buf += rest
+            if len(self._buf) > self.max_line_bytes:
+                self.discarded_bytes += len(self._buf)
                 self._buf.clear()
-            start = nl + 1
+                self._skipping = True
         return out
 
     def _clean(self, line: bytes) -> bytes:
