@@ -1,20 +1,9 @@
 """Serve an I/O-free byte-stream device emulator on a pseudo-terminal; the emulators' fault helper.
 
-Two things every serial device emulator in this package shares (docs/architecture.md §2, §6):
-
-1. :class:`PtyDevice` runs an emulator -- any object with ``feed_host_bytes(data: bytes)`` and
-   ``poll(t_s: float) -> bytes`` (:class:`ByteStreamEmulator`) -- behind a Linux pseudo-terminal in
-   a background thread, so the *real* pyserial code path of a driver runs against it.  The driver
-   opens :attr:`PtyDevice.path`, a symlink in a private temporary directory that stays the same
-   across :meth:`PtyDevice.disconnect` / :meth:`PtyDevice.reconnect` (the device "disappears": the
-   pty master is closed so the driver's reads fail, the symlink is removed so re-opening fails; on
-   reconnect a fresh pty is created and the symlink is re-pointed).  Simulation time drives the
-   emulator through the ``clock`` callable.
-
-2. :class:`StreamFaults` is the fault-injection state the DVL-75 and Ping1D emulators share
-   (garbage bytes, corrupted checksums, truncated and dropped messages, stuck values, a silent
-   "disconnected" device).  Protocol-specific corruption (where a checksum lives) is passed in by
-   the emulator.  :class:`PeriodicSchedule` gives both emulators drift-free output instants.
+What every serial device emulator in this package shares (docs/architecture.md §2, §6):
+:class:`PtyDevice` runs one (:class:`ByteStreamEmulator`) behind a Linux pseudo-terminal, so the
+*real* pyserial code path of a driver runs against it; :class:`StreamFaults` is the fault injection
+of the DVL-75 and Ping1D emulators; :class:`PeriodicSchedule` gives both drift-free output instants.
 
 Why our own code: pyserial's ``loop://`` and ``socket://`` URL handlers do not exercise the
 termios, select and fd code path a real ``/dev/ttyUSB*`` uses, and ``socat`` would be an external
@@ -331,7 +320,8 @@ class PtyDevice:
 
     @property
     def path(self) -> str:
-        """Stable device path (symlink) the driver should open; valid across reconnects."""
+        """Stable device path the driver opens: a symlink in a private temporary directory,
+        re-pointed to the new pty at each :meth:`reconnect`."""
         return self._link
 
     @property
