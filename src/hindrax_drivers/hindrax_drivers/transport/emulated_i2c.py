@@ -6,19 +6,11 @@ Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an
 AK09916, PCA9685).
 
 Why our own code: smbus2 itself has no emulated adapter, and an emulated bus must model what the
-Linux i2c-dev driver does on the wire, so that the real driver code paths run unchanged:
-
-* every SMBus call is broken into the I2C transactions the kernel issues, e.g.
-  ``read_i2c_block_data(addr, reg, n)`` is a 1-byte write of ``reg`` followed (repeated start) by an
-  ``n``-byte read; ``read_word_data`` returns the two bytes little-endian (docs/devices.md §3.1 "SMBus
-  detail");
-* each device emulator sees only ``i2c_write(data)`` (one write transaction; ``data[0]`` is the
-  register or command byte) and ``i2c_read(n)`` (one read transaction continuing from the device's
-  internal pointer/state), exactly what a real slave sees;
-* an address nobody acknowledges fails with ``OSError(errno.EREMOTEIO)`` (121, "Remote I/O error"),
-  like Linux;
-* bus-level fault injection: a seeded fraction of SMBus calls fails with errno 121 before reaching
-  the device, a global "disconnect" switch, and per-address disconnects.
+Linux i2c-dev driver does on the wire, so that the real driver code paths run unchanged: every SMBus
+call is broken into the I2C transactions the kernel issues (``read_i2c_block_data(addr, reg, n)`` is
+a 1-byte write of ``reg``, then, after a repeated start, an ``n``-byte read), each device emulator
+sees exactly what a real slave sees (:class:`I2CDeviceEmulator`), and an address nobody acknowledges
+fails with errno 121 as on Linux.
 
 The module also provides :class:`RegisterPointerEmulator`, the shared base of every register-file
 device emulator (write = set pointer then data with auto-increment; read = continue from pointer).
@@ -45,18 +37,9 @@ GENERAL_CALL_ADDRESS = 0x00
 
 
 def remote_io_error(address: int, detail: str = "") -> OSError:
-    """Build the ``OSError(errno.EREMOTEIO)`` Linux raises when a slave does not acknowledge.
-
-    Args:
-        address: 7-bit slave address (only used in the message).
-        detail: optional extra text (e.g. "injected fault").
-
-    Returns:
-        ``OSError`` with ``errno == 121`` and ``strerror == "Remote I/O error"``.
-
-    Source: Linux i2c-dev returns -EREMOTEIO on an address NACK for most adapters (including the
-    Raspberry Pi's bcm2835 driver); the brief fixes errno 121 as the emulated failure.
-    """
+    """``OSError(errno.EREMOTEIO)`` (121, "Remote I/O error"): what Linux i2c-dev returns when the
+    slave at ``address`` does not acknowledge (most adapters, the Raspberry Pi's bcm2835 included);
+    ``address`` and ``detail`` (e.g. "injected fault") go into its ``filename``."""
     err = OSError(errno.EREMOTEIO, "Remote I/O error")
     err.filename = f"i2c address 0x{address:02x}" + (f" ({detail})" if detail else "")
     return err
@@ -104,10 +87,7 @@ class EmulatedI2CBus:
             the device (seeded, reproducible).
         seed: seed of the fault-injection RNG.
 
-    Implemented smbus2 methods (same signatures, ``force`` accepted and ignored): ``write_quick``,
-    ``write_byte``, ``read_byte``, ``write_byte_data``, ``read_byte_data``, ``write_word_data``,
-    ``read_word_data``, ``write_i2c_block_data``, ``read_i2c_block_data``, ``i2c_rdwr``,
-    ``open``, ``close``, context manager.
+    The smbus2 methods below keep smbus2's signatures (``force`` accepted and ignored).
 
     Errors: ``OSError(121)`` for an unknown/disconnected address or an injected fault;
     ``OSError(errno.EBADF)`` after ``close()``; ``ValueError`` for out-of-range arguments
