@@ -22,13 +22,7 @@ Why our own code: there is no maintained Python parser for these sentences (the 
 [D18] only adds two sentence types and raises generic errors), and the checksum, signed fields and
 trailing empty field need exact control.
 
-Frames (docs/devices.md §1.3.1, §1.5)
-- ``$DVPDL`` deltas: DVL "ArduSub" vehicle frame = FRD: X bow (+forward), Y starboard (+right), Z down,
-  rotations right-handed about those axes (i.e. the Fossen/SNAME body frame).
-- ``$DVEXT`` roll/pitch/heading: DVL Euler angles about X bow, Y port, Z up (right-handed, so positive
-  pitch is bow-down [DERIVED]), heading compass-style (clockwise from north, 0..2*pi).
-- ``$DVEXT`` quaternion: orientation of the FLU body in the ENU world (neutral = bow east).
-- ``$DVEXT`` north/east/up velocities: world ENU components.
+Frames (docs/devices.md §1.3.1, §1.5): each record's docstring gives the frame of each field.
 """
 
 from __future__ import annotations
