@@ -54,8 +54,8 @@ class StreamFaults:
     (docs/architecture.md §2). Thread-safe: test code may call it while a PtyDevice thread polls.
 
     Per-message faults are queued and consumed, in this order of precedence, by the next messages
-    passed through :meth:`apply`: drop, truncate, corrupt checksum.  Garbage is emitted at the next
-    :meth:`take_garbage` (the emulator calls it at the start of every poll).
+    passed through :meth:`apply`: drop, truncate, corrupt checksum.  Garbage goes out first at the
+    next :meth:`transmit` (the emulator calls it at every poll).
 
     Args:
         garbage_alphabet: bytes random garbage is drawn from (the DVL emulator uses 0x80-0xFF, i.e.
@@ -117,11 +117,6 @@ class StreamFaults:
             self._disconnected = bool(disconnected)
 
     @property
-    def stuck(self) -> bool:
-        """True while values are frozen (see :meth:`set_stuck`)."""
-        return self._stuck
-
-    @property
     def disconnected(self) -> bool:
         """True while the device is silent (see :meth:`set_disconnected`)."""
         return self._disconnected
@@ -135,18 +130,13 @@ class StreamFaults:
             self._held, self._has_held = value, True
             return value
 
-    def take_garbage(self) -> bytes:
-        """Pop the queued garbage (empty bytes if none)."""
-        with self._lock:
-            data = bytes(self._garbage)
-            self._garbage.clear()
-            return data
-
     def transmit(self, messages: Iterable[bytes],
                  corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
         """The bytes a device sends at one poll: the queued garbage, then each of ``messages``
         through :meth:`apply`; b"" while disconnected (the garbage is taken all the same)."""
-        garbage = self.take_garbage()
+        with self._lock:
+            garbage = bytes(self._garbage)
+            self._garbage.clear()
         if self.disconnected:
             return b""
         return garbage + b"".join(self.apply(m, corrupt_checksum) for m in messages)
@@ -194,11 +184,6 @@ class PeriodicSchedule:
     def period_s(self) -> float:
         """Current period, s."""
         return self._period_s
-
-    @property
-    def started(self) -> bool:
-        """True after :meth:`restart`."""
-        return self._anchor_s is not None
 
     def restart(self, t0_s: float, first_tick_in_periods: int = 1) -> None:
         """Next tick at ``t0_s + first_tick_in_periods * period``."""
