@@ -27,20 +27,33 @@ from typing import Any, Iterable, List, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import ParameterDescriptor
+from sensor_msgs.msg import Range
 
 from .config import ConfigError, ConfigIssue, build_section
 from .config.typed_sections import SensorsDvl75Section, SensorsPing1dSection
-from .node_common import DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector, load_node_config
+from .node_common import (DeviceDiagnostics, DiagnosticsPublisher, RawDataPublisher, StuckDetector,
+                          load_node_config, time_from_ns)
 from .transport.serial_transport import SerialTransport, SerialTransportError
 from .vehicle_node import VehicleNode
 
-__all__ = ["SerialDeviceNode", "CommandSequencer", "NO_DATA_TIMEOUT_S"]
+__all__ = ["SerialDeviceNode", "CommandSequencer", "NO_DATA_TIMEOUT_S", "range_message"]
 
 #: Connected but nothing published for this long (ROS time): diagnostics WARN "connected, no data", s.
 NO_DATA_TIMEOUT_S = 2.0
 _HOUSEKEEPING_PERIOD_S = 0.25
 #: Received bytes collected for raw/<device> are published at the latest when they exceed this, bytes.
 RAW_FLUSH_BYTES = 4096
+
+
+def range_message(stamp_ns: int, frame_id: str, field_of_view_rad: float, min_range_m: float,
+                  max_range_m: float, range_m: float) -> Range:
+    """An ULTRASOUND ``sensor_msgs/Range`` stamped ``stamp_ns`` (ns); variance 0 (unknown, as
+    Range.msg defines: no accuracy is documented)."""
+    msg = Range(radiation_type=Range.ULTRASOUND, field_of_view=float(field_of_view_rad),
+                min_range=float(min_range_m), max_range=float(max_range_m), range=float(range_m),
+                variance=0.0)
+    msg.header.stamp, msg.header.frame_id = time_from_ns(stamp_ns), frame_id
+    return msg
 
 
 class CommandSequencer:

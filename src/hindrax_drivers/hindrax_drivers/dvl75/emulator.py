@@ -55,15 +55,19 @@ from scipy.spatial.transform import Rotation
 from .. import frames
 from ..frames import wrap_angle
 from ..transport.pty_device import PeriodicSchedule, StreamFaults
-from .protocol import (DvlExtended, DvlGprmc, DvlLineFramer, DvlParseError, DvlPositionDelta,
-                       format_dvext, format_dvpdl, format_dvtxt, format_gprmc, parse_command,
-                       parse_line)
+from .protocol import (BEAM_TILT_RAD, DvlExtended, DvlGprmc, DvlLineFramer, DvlParseError,
+                       DvlPositionDelta, beam_directions_frd, format_dvext, format_dvpdl,
+                       format_dvtxt, format_gprmc, parse_command, parse_line)
 
 __all__ = ["from_config", "DvlTruth", "DvlFlash", "Dvl75Emulator", "EARTH_RADIUS_M"]
 
 #: Mean Earth radius used for dead-reckoned latitude/longitude [EMULATOR].
 EARTH_RADIUS_M = 6371000.0
 _GPS_FRESH_S = 1.5  # SET-POSITION counts as a fix, fresh for 1.5 s (docs/devices.md §1.3.2, §1.4)
+_IMU_CALIBRATION = "3333"  # $DVEXT field 3: every IMU part fully calibrated
+_DEFAULT_GAIN_DB = 25.0  # per-beam gain when the truth gives none (the capture shows 25)
+_MAX_TILT_RAD = math.radians(20.0)  # lock envelope (docs/devices.md §1.1)
+_MAX_BACKLOG_S = 1.0  # when polled late, cycles older than this are skipped rather than emitted
 
 
 @dataclass(frozen=True)
@@ -159,10 +163,7 @@ class Dvl75Emulator:
         flash: sticky settings; default factory settings.
         beam_tilt_rad: beam angle from the sensor axis for the geometric beam model [EMULATOR].
         true_speed_of_sound_m_s: water's true c; None = equal to the configured c (no scale error).
-        imu_calibration: ``$DVEXT`` field 3 text (4 digits 0-3, e.g. "3333").
-        default_gain_db: per-beam gain reported when the truth gives none (the capture shows 25).
-        min_altitude_m, max_altitude_m, max_tilt_rad: lock envelope (docs/devices.md §1.1).
-        max_backlog_s: when polled late, cycles older than this are skipped rather than emitted.
+        min_altitude_m, max_altitude_m: lock envelope (docs/devices.md §1.1).
         seed: seed of the fault generator.
     Attributes:
         faults: :class:`StreamFaults` (garbage, bad checksums, truncated/dropped lines, stuck values,
@@ -173,11 +174,9 @@ class Dvl75Emulator:
     """
 
     def __init__(self, truth_source: TruthSource, *, rate_hz: float = 10.0,
-                 flash: Optional[DvlFlash] = None, beam_tilt_rad: float = math.radians(22.5),
-                 true_speed_of_sound_m_s: Optional[float] = None, imu_calibration: str = "3333",
-                 default_gain_db: float = 25.0, min_altitude_m: float = 0.3,
-                 max_altitude_m: float = 40.0, max_tilt_rad: float = math.radians(20.0),
-                 max_backlog_s: float = 1.0, seed: int = 0) -> None:
+                 flash: Optional[DvlFlash] = None, beam_tilt_rad: float = BEAM_TILT_RAD,
+                 true_speed_of_sound_m_s: Optional[float] = None, min_altitude_m: float = 0.3,
+                 max_altitude_m: float = 40.0, seed: int = 0) -> None:
         if isinstance(truth_source, DvlTruth):
             constant = truth_source
             truth_source = lambda _t: constant  # noqa: E731
@@ -185,15 +184,10 @@ class Dvl75Emulator:
         self._schedule = PeriodicSchedule(0.1)
         self.set_rate_hz(rate_hz)
         self.flash = flash if flash is not None else DvlFlash()
-        s, c = math.sin(beam_tilt_rad), math.cos(beam_tilt_rad)
-        self._beam_dirs = np.array([[0.0, -s, c], [-s, 0.0, c], [0.0, s, c], [s, 0.0, c]])
+        self._beam_dirs = np.array(beam_directions_frd(beam_tilt_rad))
         self.true_speed_of_sound_m_s = true_speed_of_sound_m_s
-        self.imu_calibration = imu_calibration
-        self.default_gain_db = float(default_gain_db)
         self.min_altitude_m = float(min_altitude_m)
         self.max_altitude_m = float(max_altitude_m)
-        self.max_tilt_rad = float(max_tilt_rad)
-        self.max_backlog_s = float(max_backlog_s)
         self.faults = StreamFaults(garbage_alphabet=bytes(range(0x80, 0x100)), seed=seed)
         self.sent_counts: Dict[str, int] = {}
         self.commands_received: List[str] = []
@@ -243,7 +237,7 @@ class Dvl75Emulator:
                 self.reboot(t_s)
             self._now = t_s
             if not self._paused:
-                for t_cycle in self._schedule.due(t_s, self.max_backlog_s):
+                for t_cycle in self._schedule.due(t_s, _MAX_BACKLOG_S):
                     self._cycle(t_cycle)
             messages, self._pending = self._pending, []
             return self.faults.transmit(messages, _corrupt_nmea_checksum)
@@ -295,7 +289,7 @@ class Dvl75Emulator:
         if not self.min_altitude_m <= alt <= self.max_altitude_m:
             return False
         tilt = math.acos(max(-1.0, min(1.0, math.cos(truth.roll_rad) * math.cos(truth.pitch_rad))))
-        return tilt <= self.max_tilt_rad
+        return tilt <= _MAX_TILT_RAD
 
     def _cycle(self, t: float) -> None:
         """One ping cycle at time ``t``: queues the enabled sentences, ``$DVEXT`` before ``$DVPDL`` (the order on the
@@ -375,15 +369,14 @@ class Dvl75Emulator:
             beam_range.append(float(truth.beam_range_m[k]) if truth.beam_range_m is not None
                               else alt / down * range_scale)
         gains = (tuple(float(g) for g in truth.beam_gain_db) if truth.beam_gain_db is not None
-                 else (self.default_gain_db,) * 4)
+                 else (_DEFAULT_GAIN_DB,) * 4)
         # the DVL reports base_link (FLU) in ENU (docs/devices.md §1.5, REP-103)
         qx, qy, qz, qw = frames.quaternion_marine_to_ros(Rotation.from_matrix(r_nb).as_quat())
-        cal = self.imu_calibration
         return DvlExtended(
             locked=locked,
             gps_status="A" if gps_fresh else "X",
-            imu_calibration=tuple(int(ch) for ch in cal) if re.fullmatch(r"[0-3]{4}", cal) else None,
-            imu_calibration_raw=cal,
+            imu_calibration=tuple(int(ch) for ch in _IMU_CALIBRATION),  # type: ignore[arg-type]
+            imu_calibration_raw=_IMU_CALIBRATION,
             roll_rad=truth.roll_rad,
             pitch_rad=-truth.pitch_rad,
             heading_rad=truth.yaw_rad % (2.0 * math.pi),

@@ -61,7 +61,7 @@ from hindrax_msgs.msg import Dvl
 from ..config.typed_sections import SensorsDvl75Section
 from ..device_clock import DeviceClockSync
 from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
-from ..serial_node import SerialDeviceNode
+from ..serial_node import SerialDeviceNode, range_message
 from .protocol import DvlExtended, DvlGprmc, DvlPositionDelta, DvlText, startup_commands
 from .report import DvlReport, DvlReportBuilder, altitude_range_m
 from .stream import DvlStreamDecoder
@@ -191,16 +191,9 @@ class Dvl75Node(SerialDeviceNode):
                                    ext.velocity_north_m_s, ext.velocity_east_m_s, ext.velocity_up_m_s))
         if self.stuck:
             return  # a stuck DVL's altitude is not published (ERROR "stuck" in /diagnostics)
-        rng = Range()
-        rng.header.stamp = time_from_ns(receive_ns)
-        rng.header.frame_id = self.frames["frame_id"]
-        rng.radiation_type = Range.ULTRASOUND
-        rng.field_of_view = float(ALTITUDE_FIELD_OF_VIEW_RAD)
-        rng.min_range = float(ALTITUDE_MIN_RANGE_M)
-        rng.max_range = float(ALTITUDE_MAX_RANGE_M)
-        rng.range = float(altitude_range_m(ext))
-        rng.variance = 0.0  # Range.msg: 0 = variance unknown (no accuracy is documented)
-        self.pub_altitude.publish(rng)
+        self.pub_altitude.publish(range_message(
+            receive_ns, self.frames["frame_id"], ALTITUDE_FIELD_OF_VIEW_RAD, ALTITUDE_MIN_RANGE_M,
+            ALTITUDE_MAX_RANGE_M, altitude_range_m(ext)))
         if self._last_dvpdl_ns is None or receive_ns - self._last_dvpdl_ns > DVEXT_ONLY_AFTER_S * 1e9:
             self._publish(self.builder.from_extended(ext), receive_ns, receive_ns)
 

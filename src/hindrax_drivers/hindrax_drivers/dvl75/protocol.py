@@ -22,13 +22,7 @@ Why our own code: there is no maintained Python parser for these sentences (the 
 [D18] only adds two sentence types and raises generic errors), and the checksum, signed fields and
 trailing empty field need exact control.
 
-Frames (docs/devices.md §1.3.1, §1.5)
-- ``$DVPDL`` deltas: DVL "ArduSub" vehicle frame = FRD: X bow (+forward), Y starboard (+right), Z down,
-  rotations right-handed about those axes (i.e. the Fossen/SNAME body frame).
-- ``$DVEXT`` roll/pitch/heading: DVL Euler angles about X bow, Y port, Z up (right-handed, so positive
-  pitch is bow-down [DERIVED]), heading compass-style (clockwise from north, 0..2*pi).
-- ``$DVEXT`` quaternion: orientation of the FLU body in the ENU world (neutral = bow east).
-- ``$DVEXT`` north/east/up velocities: world ENU components.
+Frames (docs/devices.md §1.3.1, §1.5): each record's docstring gives the frame of each field.
 """
 
 from __future__ import annotations
@@ -44,8 +38,8 @@ __all__ = ["DvlParseError", "DvlPositionDelta", "DvlExtended", "DvlGprmc", "DvlT
            "beam_directions_frd", "LINE_TERMINATOR", "KNOT_M_S", "nmea_checksum", "format_sentence",
            "split_sentence", "parse_line", "parse_dvpdl", "parse_dvext", "parse_gprmc",
            "format_dvpdl", "format_dvext", "format_gprmc", "format_dvtxt", "parse_command",
-           "build_command", "cmd_send", "cmd_retweet", "cmd_set_sensor_orientation",
-           "cmd_set_speed_of_sound", "cmd_resume", "cmd_configuration", "startup_commands"]
+           "build_command", "cmd_send", "cmd_set_sensor_orientation", "cmd_set_speed_of_sound",
+           "startup_commands"]
 
 #: Line terminator the DVL uses and the driver sends (CR LF; docs/devices.md §1.2, §1.4).
 LINE_TERMINATOR = b"\r\n"
@@ -642,35 +636,26 @@ class DvlLineFramer:
     def feed(self, data: Union[bytes, bytearray]) -> list:
         """Add a chunk; return the complete lines it finishes (list of bytes, no CR/LF)."""
         out: list = []
-        data = bytes(data)
-        start = 0
-        while True:
-            nl = data.find(b"\n", start)
-            if nl < 0:
-                rest = data[start:]
-                if self._skipping:
-                    self.discarded_bytes += len(rest)
-                else:
-                    self._buf += rest
-                    if len(self._buf) > self.max_line_bytes:
-                        self.discarded_bytes += len(self._buf)
-                        self._buf.clear()
-                        self._skipping = True
-                break
-            segment = data[start:nl]
-            if self._skipping:
+        *segments, rest = bytes(data).split(b"\n")
+        for segment in segments:
+            if self._skipping:  # the end of an over-long line
                 self.discarded_bytes += len(segment)
                 self._skipping = False
-            else:
-                self._buf += segment
-                if len(self._buf) > self.max_line_bytes:
-                    self.discarded_bytes += len(self._buf)
-                else:
-                    line = self._clean(bytes(self._buf))
-                    if line:
-                        out.append(line)
+                continue
+            self._buf += segment
+            if len(self._buf) > self.max_line_bytes:
+                self.discarded_bytes += len(self._buf)
+            elif line := self._clean(bytes(self._buf)):
+                out.append(line)
+            self._buf.clear()
+        if self._skipping:
+            self.discarded_bytes += len(rest)
+        else:
+            self._buf += rest
+            if len(self._buf) > self.max_line_bytes:
+                self.discarded_bytes += len(self._buf)
                 self._buf.clear()
-            start = nl + 1
+                self._skipping = True
         return out
 
     def _clean(self, line: bytes) -> bytes:
@@ -734,10 +719,6 @@ def _num(value: float, decimals: int = 3) -> str:
     return "0" if text in ("-0", "") else text
 
 
-def _on_off(enabled: bool) -> str:
-    return "ON" if enabled else "OFF"
-
-
 _SEND_TARGETS = ("DVPDL", "DVEXT", "GPRMC", "FREEFORM", "DVKFA", "DVKFB", "DVFKA", "DVFKB")
 
 
@@ -752,19 +733,7 @@ def cmd_send(message: str, enabled: bool) -> bytes:
     name = message.upper()
     if name not in _SEND_TARGETS:
         raise ValueError(f"unknown SEND- target {message!r}; expected one of {_SEND_TARGETS}")
-    return build_command(f"SEND-{name}", _on_off(enabled))
-
-
-def cmd_retweet(source: str, enabled: bool) -> bytes:
-    """``RETWEET-GPS|RETWEET-IMU ON|OFF`` (docs/devices.md §1.4, sticky).
-
-    Raises:
-        ValueError: source not GPS or IMU.
-    """
-    name = source.upper()
-    if name not in ("GPS", "IMU"):
-        raise ValueError(f"retweet source must be GPS or IMU, got {source!r}")
-    return build_command(f"RETWEET-{name}", _on_off(enabled))
+    return build_command(f"SEND-{name}", "ON" if enabled else "OFF")
 
 
 def cmd_set_sensor_orientation(roll_rad: float, pitch_rad: float, heading_rad: float) -> bytes:
@@ -792,16 +761,6 @@ def cmd_set_speed_of_sound(speed_of_sound_m_s: float) -> bytes:
     return build_command("SET-SPEED-OF-SOUND", _num(speed_of_sound_m_s, 1))
 
 
-def cmd_resume() -> bytes:
-    """``RESUME``: restart pinging (docs/devices.md §1.4)."""
-    return build_command("RESUME")
-
-
-def cmd_configuration() -> bytes:
-    """``CONFIGURATION``: dump the configuration as free-form lines (docs/devices.md §1.4)."""
-    return build_command("CONFIGURATION")
-
-
 def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 0.0, 0.0),
                      speed_of_sound_m_s: Optional[float] = None,
                      request_configuration: bool = True) -> list:
@@ -818,18 +777,13 @@ def startup_commands(sensor_orientation_rad: Tuple[float, float, float] = (0.0, 
     Raises:
         ValueError: out-of-range arguments (see the individual builders).
     """
-    cmds = [
-        cmd_send("DVPDL", True),
-        cmd_send("DVEXT", True),
-        cmd_send("GPRMC", False),
-        cmd_retweet("IMU", False),
-        cmd_retweet("GPS", False),
-        cmd_set_sensor_orientation(*sensor_orientation_rad),
-    ]
+    cmds = [cmd_send("DVPDL", True), cmd_send("DVEXT", True), cmd_send("GPRMC", False),
+            build_command("RETWEET-IMU", "OFF"), build_command("RETWEET-GPS", "OFF"),
+            cmd_set_sensor_orientation(*sensor_orientation_rad)]
     if speed_of_sound_m_s is not None:
         cmds.append(cmd_set_speed_of_sound(speed_of_sound_m_s))
-    cmds.append(cmd_resume())
+    cmds.append(build_command("RESUME"))  # restart pinging
     if request_configuration:
-        cmds.append(cmd_configuration())
+        cmds.append(build_command("CONFIGURATION"))  # dumped as free-form lines
     return cmds
 

@@ -55,6 +55,8 @@ __all__ = ["DvlReport", "DvlReportBuilder", "UNKNOWN_COVARIANCE_3X3", "altitude_
 #: Row-major 3x3 "unknown" covariance of hindrax_msgs/Dvl and sensor_msgs (element 0 = -1).
 UNKNOWN_COVARIANCE_3X3: Tuple[float, ...] = (-1.0,) + (0.0,) * 8
 _NAN3 = (math.nan, math.nan, math.nan)
+#: 6x6 twist covariance, every element unknown (-1 on the diagonal)
+_UNKNOWN_TWIST = tuple(float(x) for x in (-np.eye(6)).ravel())
 
 
 @dataclass(frozen=True)
@@ -154,7 +156,6 @@ class DvlReportBuilder:
         twist[:3, :3] = np.eye(3) * var
         twist[3:, 3:] = -np.eye(3)
         self._twist_cov = tuple(float(x) for x in twist.ravel())
-        self._unknown_twist = tuple(float(x) for x in (-np.eye(6)).ravel())
 
     # -- inputs
     def update_extended(self, ext: DvlExtended, receive_ns: int) -> None:
@@ -227,12 +228,8 @@ class DvlReportBuilder:
         (e.g. a stuck device): everything else (attitude, altitude, beams) is kept."""
         return replace(report, velocity_valid=False, velocity_flu_m_s=_NAN3, delta_position_flu_m=_NAN3,
                        velocity_covariance=UNKNOWN_COVARIANCE_3X3,
-                       twist_covariance=tuple(float(x) for x in (-np.eye(6)).ravel()),
+                       twist_covariance=_UNKNOWN_TWIST,
                        rejection=report.rejection or reason)
-
-    def twist_covariance(self, valid: bool) -> Tuple[float, ...]:
-        """36-element twist covariance (see :class:`DvlReport`); all-unknown when not valid."""
-        return self._twist_cov if valid else self._unknown_twist
 
     def _report(self, ext: Optional[DvlExtended], *, device_time_ns, valid, velocity, delta, delta_time_s,
                 confidence, lock_fallback, rejection: str = "") -> DvlReport:
@@ -253,7 +250,8 @@ class DvlReportBuilder:
         return DvlReport(
             device_time_ns=device_time_ns, velocity_valid=bool(valid), velocity_flu_m_s=velocity,
             velocity_covariance=self._vel_cov if valid else UNKNOWN_COVARIANCE_3X3,
-            twist_covariance=self.twist_covariance(valid), delta_position_flu_m=delta,
+            twist_covariance=self._twist_cov if valid else _UNKNOWN_TWIST,
+            delta_position_flu_m=delta,
             delta_time_s=float(delta_time_s), confidence_pct=confidence, bottom_lock=bool(lock),
             altitude_m=float(altitude), beam_range_m=ranges, beam_velocity_m_s=beam_vel,  # type: ignore[arg-type]
             beam_lock=beam_lock, orientation_xyzw=orientation, rejection=rejection)  # type: ignore[arg-type]

@@ -100,9 +100,8 @@ class ImuSettings:
                 f"dps, DLPFCFG {c.gyro_dlpfcfg})")
 
     @classmethod
-    def from_section(cls, s: Any, temperature_hz: float = TEMPERATURE_PUBLISH_HZ,
-                     mag_hz: float = MAG_PUBLISH_HZ) -> "ImuSettings":
-        """s: the validated ``sensors.icm20948`` section; temperature_hz, mag_hz: the highest publishing rates, Hz."""
+    def from_section(cls, s: Any) -> "ImuSettings":
+        """s: the validated ``sensors.icm20948`` section."""
         rate = float(s.sample_rate_hz)
         config = imu_config_from_settings(s.accel_full_scale_g, s.gyro_full_scale_dps, s.dlpf_config, rate)
         odr, rot = config.accel_odr_hz, mounting_rotation(s.mounting_rpy_rad)
@@ -115,9 +114,11 @@ class ImuSettings:
         if not 0 < int(s.dlpf_config) < 7:
             warnings.append(f"dlpf_config {int(s.dlpf_config)}: the gyro ignores its sample-rate divider "
                             f"(docs/devices.md §4.4) and runs at 1125 Hz; polled at {odr:.2f} Hz")
+        temperature_every = max(1, round(odr / TEMPERATURE_PUBLISH_HZ))
+        mag_every = max(1, round(min(p.AK_CONTINUOUS_MODE_RATE_HZ[mag_mode], odr) / MAG_PUBLISH_HZ))
         return cls(config, odr, mag_mode, rot, a_var, g_var, (rot * a_var) @ rot.T, (rot * g_var) @ rot.T,
-                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, max(1, round(odr / temperature_hz)),
-                   max(1, round(min(p.AK_CONTINUOUS_MODE_RATE_HZ[mag_mode], odr) / mag_hz)), tuple(warnings))
+                   (1.0 / p.TEMP_SENSITIVITY_LSB_PER_C) ** 2, temperature_every, mag_every,
+                   tuple(warnings))
 
 
 def imu_config_from_settings(accel_full_scale_g: float, gyro_full_scale_dps: float, dlpf_config: int,

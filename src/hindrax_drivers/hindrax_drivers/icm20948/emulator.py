@@ -40,6 +40,8 @@ __all__ = ["from_config", "Icm20948Emulator", "Ak09916Emulator", "ImuTruth"]
 #: so one decoded object serves every transaction until a register changes)
 _decoded_config = functools.lru_cache(maxsize=16)(p.ImuConfig.from_registers)
 
+_SINGLE_MEASUREMENT_TIME_S = 0.01  # CNTL2 = 0x01 to DRDY, s (not in docs/devices.md; assumed)
+
 #: Truth source in the sensor frame: t_s -> (specific_force_m_s2 (3,), angular_rate_rad_s (3,),
 #: magnetic_field_t (3,), temperature_c).
 ImuTruth = Callable[[float], "tuple[Sequence[float], Sequence[float], Sequence[float], float]"]
@@ -52,7 +54,6 @@ class Ak09916Emulator(RegisterPointerEmulator):
         field_truth: ``t_s -> magnetic_field_t (3,)`` in the ICM accel/gyro frame; the emulator
             applies the axis flip of §4.7 (hx = Bx, hy = -By, hz = -Bz).
         clock: monotonic clock, s.
-        single_measurement_time_s: time from CNTL2 = 0x01 to DRDY (not in docs/devices.md; assumed).
 
     Semantics: continuous modes measure every 1/rate s from the mode write; a measurement that
     finds unread data (DRDY = 1), or arrives while a read is in progress (a data register was read
@@ -63,12 +64,10 @@ class Ak09916Emulator(RegisterPointerEmulator):
     """
 
     def __init__(self, field_truth: Callable[[float], Sequence[float]],
-                 clock: Callable[[], float] = time.monotonic,
-                 single_measurement_time_s: float = 0.01) -> None:
+                 clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__()
         self.field_truth = field_truth
         self.clock = clock
-        self.single_measurement_time_s = float(single_measurement_time_s)
         self.stuck = False
         self.measurements = 0
         self._soft_reset()
@@ -175,7 +174,7 @@ class Ak09916Emulator(RegisterPointerEmulator):
                 self._mode_start_t = now
                 self._last_k = 0
             elif mode == p.AK_MODE_SINGLE:
-                self._single_done_t = now + self.single_measurement_time_s
+                self._single_done_t = now + _SINGLE_MEASUREMENT_TIME_S
 
 
 class _AuxBusPort:
@@ -208,10 +207,9 @@ class Icm20948Emulator(RegisterPointerEmulator):
         truth: :data:`ImuTruth` in the sensor frame.
         clock: monotonic clock, s.
         address: 0x68 (AD0 low) or 0x69 (AD0 high); informational (the bus maps addresses).
-        magnetometer: an :class:`Ak09916Emulator` to use; default: one fed by ``truth``'s field.
 
     Attributes:
-        magnetometer: the AK09916 emulator.
+        magnetometer: the AK09916 emulator, fed by ``truth``'s field.
         aux_port: device to attach at 0x0C on the host bus for the bypass path.
         aux_connected: fault switch for the AK09916 (False = it NACKs).
         data_ready_stuck_low: fault switch: INT_STATUS_1.RAW_DATA_0_RDY always reads 0 (the data registers
@@ -220,14 +218,14 @@ class Icm20948Emulator(RegisterPointerEmulator):
     """
 
     def __init__(self, truth: ImuTruth, clock: Callable[[], float] = time.monotonic,
-                 address: int = p.ADDRESS_AD0_LOW, magnetometer: Ak09916Emulator | None = None) -> None:
+                 address: int = p.ADDRESS_AD0_LOW) -> None:
         super().__init__()
         if address not in (p.ADDRESS_AD0_LOW, p.ADDRESS_AD0_HIGH):
             raise ValueError(f"ICM-20948 address must be 0x68 or 0x69, got 0x{address:02x}")
         self.address = address
         self.truth = truth
         self.clock = clock
-        self.magnetometer = magnetometer or Ak09916Emulator(lambda t: self._truth_at(t)[2], clock)
+        self.magnetometer = Ak09916Emulator(lambda t: self._truth_at(t)[2], clock)
         self.aux_port = _AuxBusPort(self)
         self.aux_connected = True
         self.data_ready_stuck_low = False

@@ -268,16 +268,6 @@ class ImuConfig:
         return GYRO_LSB_PER_DPS[self.gyro_fs_sel]
 
     @property
-    def accel_range_m_s2(self) -> float:
-        """Accel full scale, m/s^2."""
-        return ACCEL_RANGE_G[self.accel_fs_sel] * GRAVITY_M_S2
-
-    @property
-    def gyro_range_rad_s(self) -> float:
-        """Gyro full scale, rad/s."""
-        return math.radians(GYRO_RANGE_DPS[self.gyro_fs_sel])
-
-    @property
     def accel_odr_hz(self) -> float:
         """Accel output data rate, Hz (:func:`accel_odr_hz`)."""
         return accel_odr_hz(self.accel_smplrt_div, self.accel_dlpfcfg is not None)
@@ -374,8 +364,7 @@ def configure_sequence(config: ImuConfig) -> list[BankedWrite]:
     ]
 
 
-def slave_read_writes(slave: int, address: int, register: int, length: int,
-                      byte_swap: bool = False) -> list[BankedWrite]:
+def slave_read_writes(slave: int, address: int, register: int, length: int) -> list[BankedWrite]:
     """Configure I2C master slave ``slave`` to read ``length`` bytes each cycle (docs/devices.md §4.6b).
 
     The slave is disabled first, so no master cycle can run with a half-updated configuration;
@@ -384,9 +373,8 @@ def slave_read_writes(slave: int, address: int, register: int, length: int,
     if not 1 <= length <= 15:
         raise Icm20948Error(f"slave read length must be 1..15, got {length}")
     a, r, c, _ = slave_registers(slave)
-    ctrl = I2C_SLV_CTRL_EN | length | (I2C_SLV_CTRL_BYTE_SW if byte_swap else 0)
     return [BankedWrite(c, 0x00), BankedWrite(a, I2C_SLV_ADDR_RNW | (address & 0x7F)),
-            BankedWrite(r, register & 0xFF), BankedWrite(c, ctrl)]
+            BankedWrite(r, register & 0xFF), BankedWrite(c, I2C_SLV_CTRL_EN | length)]
 
 
 def slave_write_writes(slave: int, address: int, register: int, value: int,

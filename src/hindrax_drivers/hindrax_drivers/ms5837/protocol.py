@@ -24,8 +24,8 @@ from typing import Sequence
 
 __all__ = ["Ms5837Error", "Variant", "ADDRESS", "CMD_RESET", "CMD_ADC_READ", "CMD_PROM_READ_BASE",
            "CMD_CONVERT_D1_BASE", "CMD_CONVERT_D2_BASE", "OSR_VALUES", "CONVERSION_TIME_S",
-           "RESET_TIME_S", "ADC_MAX", "PRODUCT_CODE_30BA26", "PRODUCT_CODE_02BA01",
-           "PRODUCT_CODE_02BA21", "EXAMPLE_COEFFICIENTS_30BA", "EXAMPLE_COEFFICIENTS_02BA",
+           "RESET_TIME_S", "ADC_MAX", "PRODUCT_CODE_30BA26", "EXAMPLE_COEFFICIENTS_30BA",
+           "EXAMPLE_COEFFICIENTS_02BA",
            "EXAMPLE_WORD0_30BA", "EXAMPLE_WORD0_02BA", "EXAMPLE_D1_30BA", "EXAMPLE_D2_30BA",
            "EXAMPLE_D1_02BA", "EXAMPLE_D2_02BA", "GRAVITY_M_S2", "FRESH_WATER_DENSITY_KG_M3",
            "SALT_WATER_DENSITY_KG_M3", "STANDARD_SURFACE_PRESSURE_PA", "TEMPERATURE_MIN_C",
@@ -67,10 +67,8 @@ RESET_TIME_S = 0.010
 #: Largest 24-bit ADC value (docs/devices.md §3.4).
 ADC_MAX = (1 << 24) - 1
 
-#: Product-code values (PROM word 0 bits 11:5) per docs/devices.md §3.2; unreliable for detection (§3.9).
+#: 30BA product code (PROM word 0 bits 11:5, docs/devices.md §3.2), unreliable (§3.9).
 PRODUCT_CODE_30BA26 = 0b0011010
-PRODUCT_CODE_02BA01 = 0b0000000
-PRODUCT_CODE_02BA21 = 0b0010101
 
 #: Datasheet typical coefficients C1..C6 and example ADC values (docs/devices.md §3.7).
 EXAMPLE_COEFFICIENTS_30BA = (34982, 36352, 20328, 22354, 26646, 26146)
@@ -247,18 +245,17 @@ def crc4(words: Sequence[int]) -> int:
     return (rem >> 12) & 0xF
 
 
-def prom_with_crc(word0: int, coefficients: Sequence[int], word7: int = 0) -> tuple[int, ...]:
+def prom_with_crc(word0: int, coefficients: Sequence[int]) -> tuple[int, ...]:
     """Build an 8-word PROM image with a valid CRC nibble (device side; docs/devices.md §3.2-3.3).
 
     Args:
         word0: product/version and factory bits (bits 11:0; bits 15:12 are replaced by the CRC).
-        coefficients: C1..C6 (6 ints, 0..65535).
-        word7: content of word 7 (not covered by the CRC).
+        coefficients: C1..C6 (6 ints, 0..65535); word 7 (not covered by the CRC) is 0.
     """
     coeffs = [int(c) for c in coefficients]
     if len(coeffs) != 6:
         raise Ms5837Error(f"need 6 coefficients C1..C6, got {len(coeffs)}")
-    words = _prom_words([word0 & 0x0FFF, *coeffs, word7])
+    words = _prom_words([word0 & 0x0FFF, *coeffs, 0])
     words[0] = (crc4(words) << 12) | words[0]
     return tuple(words)
 

@@ -51,13 +51,12 @@ class Pca9685Emulator(RegisterPointerEmulator):
             23-27 MHz, docs/devices.md §5.1) used to decode pulse widths.
         clock: clock for the write log timestamps, s.
         external_clock_hz: frequency used once EXTCLK is latched (None: keep ``oscillator_hz``).
-        write_log_max: maximum entries kept in the write log (oldest dropped).
         output_enable_line: the /OE line (``is_high()``: outputs off), or None (tied low: always enabled).
     """
 
     def __init__(self, oscillator_hz: float = p.INTERNAL_OSCILLATOR_HZ,
                  clock: Callable[[], float] = time.monotonic, external_clock_hz: float | None = None,
-                 write_log_max: int = 100_000, output_enable_line=None) -> None:
+                 output_enable_line=None) -> None:
         super().__init__()
         self.output_enable_line = output_enable_line
         if not oscillator_hz > 0.0:
@@ -65,7 +64,7 @@ class Pca9685Emulator(RegisterPointerEmulator):
         self.oscillator_hz = float(oscillator_hz)
         self.external_clock_hz = external_clock_hz
         self.clock = clock
-        self.write_log: collections.deque[WriteLogEntry] = collections.deque(maxlen=write_log_max)
+        self.write_log: collections.deque[WriteLogEntry] = collections.deque(maxlen=100_000)
         self._widths: tuple = (None, [])  # (what pulse_widths_us computed them from, widths)
         self._power_on_reset()
 

@@ -13,12 +13,12 @@ Behaviour (docs/devices.md §2.1-§2.6, the §2.6 checklist):
   (§2.3).  Replies use src = the device id (default 1, as in the §2.5 reply vectors) and dst = the
   requester's src.
 - Set messages (1000-1006) are validated and applied to :class:`Ping1dSettings`, then ACKed
-  (``ack_sets``; whether the firmware ACKs is unverified, §2.3).  Invalid values, wrong payload
+  (whether the firmware ACKs is unverified, §2.3).  Invalid values, wrong payload
   sizes and unknown ids are NACKed with a text reason.
 - ``continuous_start(1300)`` streams ``profile`` at every ping; 1211 and 1212 are accepted too
   [EMULATOR extension: only 1300 is documented, §2.4].  ``continuous_stop`` ends streaming.
 - Frames are accepted when dst is this device, 255 (broadcast), or src = dst = 0 (legacy), per the
-  early protocol draft [P10] (unverified for current firmware; ``enforce_dst=False`` accepts all).
+  early protocol draft [P10] (unverified for current firmware).
 
 Truth -> measurement [EMULATOR choices where marked]:
 - Truth = the true acoustic range to the bottom ``altitude_m`` (+ confidence).  The device pings every
@@ -54,6 +54,10 @@ __all__ = ["from_config", "Ping1dTruth", "Ping1dSettings", "Ping1dMeasurement", 
 
 _BROADCAST_ID = 0xFF
 _MIN_PING_INTERVAL_S = 0.01  # [EMULATOR]
+_FIRMWARE_VERSION = (3, 29)  # (major, minor) in firmware_version / general_info
+_PROFILE_POINTS = 200  # samples per profile, as brping's simulator [P4]
+_MAX_RANGE_M = 100.0  # longest detectable range (Ping2, §2.1)
+_MAX_BACKLOG_S = 1.0  # when polled late, pings older than this are skipped
 _STREAMABLE = (Ping1dId.PROFILE, Ping1dId.DISTANCE, Ping1dId.DISTANCE_SIMPLE)
 
 
@@ -111,13 +115,7 @@ class Ping1dEmulator:
             constant :class:`Ping1dTruth`.
         settings: initial settings (default :class:`Ping1dSettings`).
         true_speed_of_sound_m_s: water's true c; reported distance scales by configured c / true c.
-        firmware_version: (major, minor) reported in firmware_version / general_info.
         protocol_version: (major, minor, patch) reported in protocol_version.
-        ack_sets: send ACK after an accepted set/control message.
-        enforce_dst: drop frames not addressed to this device (see module docstring).
-        profile_points: samples per profile (200 as brping's simulator [P4]).
-        max_range_m: longest detectable range (Ping2: 100 m, §2.1).
-        max_backlog_s: when polled late, pings older than this are skipped.
         seed: seed of the fault generator.
     Attributes:
         settings, faults (:class:`StreamFaults`), measurement (latest :class:`Ping1dMeasurement`),
@@ -126,10 +124,8 @@ class Ping1dEmulator:
     """
 
     def __init__(self, truth_source: TruthSource, *, settings: Optional[Ping1dSettings] = None,
-                 true_speed_of_sound_m_s: float = 1500.0, firmware_version: tuple = (3, 29),
-                 protocol_version: tuple = (1, 0, 0), ack_sets: bool = True,
-                 enforce_dst: bool = True, profile_points: int = 200, max_range_m: float = 100.0,
-                 max_backlog_s: float = 1.0, seed: int = 0) -> None:
+                 true_speed_of_sound_m_s: float = 1500.0, protocol_version: tuple = (1, 0, 0),
+                 seed: int = 0) -> None:
         if isinstance(truth_source, Ping1dTruth):
             constant = truth_source
             truth_source = lambda _t: constant  # noqa: E731
@@ -138,16 +134,7 @@ class Ping1dEmulator:
         self._truth_source = truth_source
         self.settings = settings if settings is not None else Ping1dSettings()
         self.true_speed_of_sound_m_s = float(true_speed_of_sound_m_s)
-        self.firmware_version = tuple(firmware_version)
         self.protocol_version = tuple(protocol_version)
-        self.ack_sets = bool(ack_sets)
-        self.enforce_dst = bool(enforce_dst)
-        self.profile_points = int(profile_points)
-        self.max_range_m = float(max_range_m)
-        self.max_backlog_s = float(max_backlog_s)
-        self.voltage_5_v = 5.0
-        self.processor_temperature_degc = 35.0
-        self.pcb_temperature_degc = 30.0
         self.faults = StreamFaults(seed=seed)
         self.framer = Ping1dFramer()
         self.measurement = Ping1dMeasurement()
@@ -185,7 +172,7 @@ class Ping1dEmulator:
             self._was_enabled = enabled
             if enabled:
                 self._schedule.set_period(self._interval_s())
-                for t_ping in self._schedule.due(t_s, self.max_backlog_s):
+                for t_ping in self._schedule.due(t_s, _MAX_BACKLOG_S):
                     self._ping(t_ping)
             inbox, self._inbox = self._inbox, []
             for message in inbox:
@@ -208,12 +195,12 @@ class Ping1dEmulator:
         truth = self.faults.hold(self._truth(t_s))
         d_true = truth.altitude_m
         distance = None
-        if d_true is not None and math.isfinite(d_true) and 0.0 < d_true <= self.max_range_m:
+        if d_true is not None and math.isfinite(d_true) and 0.0 < d_true <= _MAX_RANGE_M:
             distance = d_true * s.speed_of_sound_m_s / self.true_speed_of_sound_m_s
         if s.mode_auto:
             scan_start = 0.0
-            want = 1.5 * distance if distance is not None else self.max_range_m
-            scan_length = min(self.max_range_m, max(1.0, math.ceil(want)))
+            want = 1.5 * distance if distance is not None else _MAX_RANGE_M
+            scan_length = min(_MAX_RANGE_M, max(1.0, math.ceil(want)))
             gain = min(6, max(0, int(distance // 5))) if distance is not None else 6
         else:
             scan_start, scan_length, gain = s.scan_start_m, s.scan_length_m, s.gain_setting
@@ -233,11 +220,11 @@ class Ping1dEmulator:
             self._reply(mid, dst)
 
     def _profile(self, distance_m: Optional[float], scan_start_m: float, scan_length_m: float) -> bytes:
-        n = self.profile_points
-        r = scan_start_m + (np.arange(n) + 0.5) * scan_length_m / max(n, 1)
+        n = _PROFILE_POINTS
+        r = scan_start_m + (np.arange(n) + 0.5) * scan_length_m / n
         amplitude = 40.0 * np.exp(-r / 0.3)  # transducer ring-down [EMULATOR]
         if distance_m is not None:
-            sigma = max(scan_length_m / max(n, 1), 0.05)
+            sigma = max(scan_length_m / n, 0.05)
             amplitude = amplitude + 220.0 * np.exp(-0.5 * ((r - distance_m) / sigma) ** 2)
         return np.clip(np.round(amplitude), 0, 255).astype(np.uint8).tobytes()
 
@@ -249,8 +236,6 @@ class Ping1dEmulator:
         self._send(Nack(nacked_id & 0xFFFF, reason), dst)
 
     def _addressed_to_me(self, m: Ping1dMessage) -> bool:
-        if not self.enforce_dst:
-            return True
         return (m.dst_device_id in (self.settings.device_id, _BROADCAST_ID)
                 or (m.src_device_id == 0 and m.dst_device_id == 0))
 
@@ -279,8 +264,7 @@ class Ping1dEmulator:
             except (Ping1dParseError, ValueError) as exc:
                 self._nack(mid, str(exc)[:100], src)
                 return
-            if self.ack_sets:
-                self._send(Ack(mid), src)
+            self._send(Ack(mid), src)
             return
         self._nack(mid, "unknown or unsupported message id", src)
 
@@ -328,12 +312,11 @@ def _distance_fields(e: Ping1dEmulator) -> tuple:
 
 
 _GETTERS: Dict[int, Callable[[Ping1dEmulator], Ping1dPayload]] = {
-    Ping1dId.DEVICE_INFORMATION: lambda e: DeviceInformation(1, 1, e.firmware_version[0],
-                                                             e.firmware_version[1], 0, 0),
+    Ping1dId.DEVICE_INFORMATION: lambda e: DeviceInformation(1, 1, *_FIRMWARE_VERSION, 0, 0),
     Ping1dId.PROTOCOL_VERSION: lambda e: ProtocolVersion(*e.protocol_version, 0),
-    Ping1dId.FIRMWARE_VERSION: lambda e: FirmwareVersion(1, 1, *e.firmware_version),
+    Ping1dId.FIRMWARE_VERSION: lambda e: FirmwareVersion(1, 1, *_FIRMWARE_VERSION),
     Ping1dId.DEVICE_ID: lambda e: DeviceId(e.settings.device_id),
-    Ping1dId.VOLTAGE_5: lambda e: Voltage5(e.voltage_5_v),
+    Ping1dId.VOLTAGE_5: lambda e: Voltage5(5.0),
     Ping1dId.SPEED_OF_SOUND: lambda e: SpeedOfSound(e.settings.speed_of_sound_m_s),
     Ping1dId.RANGE: lambda e: Range(e.measurement.scan_start_m, e.measurement.scan_length_m)
     if e.settings.mode_auto else Range(e.settings.scan_start_m, e.settings.scan_length_m),
@@ -343,14 +326,14 @@ _GETTERS: Dict[int, Callable[[Ping1dEmulator], Ping1dPayload]] = {
                                                  else e.settings.gain_setting),
     Ping1dId.TRANSMIT_DURATION: lambda e: TransmitDuration(e.measurement.transmit_duration_s),
     Ping1dId.GENERAL_INFO: lambda e: GeneralInfo(
-        e.firmware_version[0], e.firmware_version[1], e.voltage_5_v, e.settings.ping_interval_s,
+        *_FIRMWARE_VERSION, 5.0, e.settings.ping_interval_s,
         e.measurement.gain_setting if e.settings.mode_auto else e.settings.gain_setting,
         e.settings.mode_auto),
     Ping1dId.DISTANCE_SIMPLE: lambda e: DistanceSimple(e.measurement.distance_m,
                                                        e.measurement.confidence_pct),
     Ping1dId.DISTANCE: lambda e: Distance(*_distance_fields(e)),
-    Ping1dId.PROCESSOR_TEMPERATURE: lambda e: ProcessorTemperature(e.processor_temperature_degc),
-    Ping1dId.PCB_TEMPERATURE: lambda e: PcbTemperature(e.pcb_temperature_degc),
+    Ping1dId.PROCESSOR_TEMPERATURE: lambda e: ProcessorTemperature(35.0),
+    Ping1dId.PCB_TEMPERATURE: lambda e: PcbTemperature(30.0),
     Ping1dId.PING_ENABLE: lambda e: PingEnable(e.settings.ping_enabled),
     Ping1dId.PROFILE: lambda e: Profile(*_distance_fields(e), e.measurement.profile_data),
 }

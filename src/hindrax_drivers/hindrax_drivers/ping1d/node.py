@@ -44,8 +44,8 @@ from sensor_msgs.msg import Range
 from std_msgs.msg import Float32
 
 from ..config.typed_sections import SensorsPing1dSection
-from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node, time_from_ns
-from ..serial_node import SerialDeviceNode
+from ..node_common import DEFAULT_QOS_DEPTH, declare_frame_ids, run_node
+from ..serial_node import SerialDeviceNode, range_message
 from .protocol import (SYNC_BYTE, Ack, AsciiText, ContinuousStart, Distance, DistanceSimple,
                        FirmwareVersion, GeneralInfo, Nack, Ping1dId, Profile, SetModeAuto,
                        SetPingEnable, SetPingInterval, SetSpeedOfSound, SpeedOfSound, request_frame)
@@ -175,19 +175,12 @@ class Ping1dNode(SerialDeviceNode):
         self._last_distance_ns = receive_ns
         if self.check_stuck("distance", (p.distance_m, p.confidence_pct, getattr(p, "profile_data", None))):
             return  # a stuck sonar's distance is not published (ERROR "stuck" in /diagnostics)
-        stamp = time_from_ns(receive_ns)
-        rng = Range()
-        rng.header.stamp = stamp
-        rng.header.frame_id = self.frames["frame_id"]
-        rng.radiation_type = Range.ULTRASOUND
-        rng.field_of_view = self.field_of_view_rad
-        rng.min_range = self.min_range_m
-        rng.max_range = self.max_range_m
-        rng.range = rep117_range(float(p.distance_m), p.confidence_pct, self.min_range_m, self.max_range_m)
-        if p.confidence_pct > 0 and math.isinf(rng.range):
+        lo, hi = self.min_range_m, self.max_range_m
+        distance = rep117_range(float(p.distance_m), p.confidence_pct, lo, hi)
+        if p.confidence_pct > 0 and math.isinf(distance):
             self.diag.count("out_of_range")
-        rng.variance = 0.0  # Range.msg: 0 = variance unknown (no accuracy is documented)
-        self.pub_range.publish(rng)
+        self.pub_range.publish(range_message(receive_ns, self.frames["frame_id"],
+                                             self.field_of_view_rad, lo, hi, distance))
         self.pub_confidence.publish(Float32(data=float(p.confidence_pct)))
         self.mark_published(receive_ns)
 

@@ -259,9 +259,7 @@ class Ping1dPayload:
                 non-integral where an integer is required, non-ASCII text).
         """
         names = [f.name for f in dc_fields(self)]  # type: ignore[arg-type]
-        raw = []
-        for name, (code, conv) in zip(names, self.LAYOUT):
-            raw.append(_to_raw(getattr(self, name), conv, name))
+        raw = [_to_raw(getattr(self, n), conv, n) for n, (_, conv) in zip(names, self.LAYOUT)]
         try:
             data = struct.pack("<" + "".join(code for code, _ in self.LAYOUT), *raw)
         except struct.error as exc:

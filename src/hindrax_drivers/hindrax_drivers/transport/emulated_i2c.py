@@ -6,19 +6,11 @@ Raspberry Pi that is ``smbus2.SMBus(1)``; in tests and in the simulator it is an
 AK09916, PCA9685).
 
 Why our own code: smbus2 itself has no emulated adapter, and an emulated bus must model what the
-Linux i2c-dev driver does on the wire, so that the real driver code paths run unchanged:
-
-* every SMBus call is broken into the I2C transactions the kernel issues, e.g.
-  ``read_i2c_block_data(addr, reg, n)`` is a 1-byte write of ``reg`` followed (repeated start) by an
-  ``n``-byte read; ``read_word_data`` returns the two bytes little-endian (docs/devices.md §3.1 "SMBus
-  detail");
-* each device emulator sees only ``i2c_write(data)`` (one write transaction; ``data[0]`` is the
-  register or command byte) and ``i2c_read(n)`` (one read transaction continuing from the device's
-  internal pointer/state), exactly what a real slave sees;
-* an address nobody acknowledges fails with ``OSError(errno.EREMOTEIO)`` (121, "Remote I/O error"),
-  like Linux;
-* bus-level fault injection: a seeded fraction of SMBus calls fails with errno 121 before reaching
-  the device, a global "disconnect" switch, and per-address disconnects.
+Linux i2c-dev driver does on the wire, so that the real driver code paths run unchanged: every SMBus
+call is broken into the I2C transactions the kernel issues (``read_i2c_block_data(addr, reg, n)`` is
+a 1-byte write of ``reg``, then, after a repeated start, an ``n``-byte read), each device emulator
+sees exactly what a real slave sees (:class:`I2CDeviceEmulator`), and an address nobody acknowledges
+fails with errno 121 as on Linux.
 
 The module also provides :class:`RegisterPointerEmulator`, the shared base of every register-file
 device emulator (write = set pointer then data with auto-increment; read = continue from pointer).
@@ -45,18 +37,9 @@ GENERAL_CALL_ADDRESS = 0x00
 
 
 def remote_io_error(address: int, detail: str = "") -> OSError:
-    """Build the ``OSError(errno.EREMOTEIO)`` Linux raises when a slave does not acknowledge.
-
-    Args:
-        address: 7-bit slave address (only used in the message).
-        detail: optional extra text (e.g. "injected fault").
-
-    Returns:
-        ``OSError`` with ``errno == 121`` and ``strerror == "Remote I/O error"``.
-
-    Source: Linux i2c-dev returns -EREMOTEIO on an address NACK for most adapters (including the
-    Raspberry Pi's bcm2835 driver); the brief fixes errno 121 as the emulated failure.
-    """
+    """``OSError(errno.EREMOTEIO)`` (121, "Remote I/O error"): what Linux i2c-dev returns when the
+    slave at ``address`` does not acknowledge (most adapters, the Raspberry Pi's bcm2835 included);
+    ``address`` and ``detail`` (e.g. "injected fault") go into its ``filename``."""
     err = OSError(errno.EREMOTEIO, "Remote I/O error")
     err.filename = f"i2c address 0x{address:02x}" + (f" ({detail})" if detail else "")
     return err
@@ -80,7 +63,8 @@ class I2CDeviceEmulator(Protocol):
         """Handle one read transaction of ``n`` bytes."""
 
 
-def _check_byte(name: str, value: int) -> int:
+def check_byte(name: str, value: int) -> int:
+    """``value`` if it is an int in 0..255 (not a bool); ValueError naming ``name`` otherwise."""
     if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 0xFF:
         raise ValueError(f"{name} must be an int in 0..255, got {value!r}")
     return value
@@ -103,10 +87,7 @@ class EmulatedI2CBus:
             the device (seeded, reproducible).
         seed: seed of the fault-injection RNG.
 
-    Implemented smbus2 methods (same signatures, ``force`` accepted and ignored): ``write_quick``,
-    ``write_byte``, ``read_byte``, ``write_byte_data``, ``read_byte_data``, ``write_word_data``,
-    ``read_word_data``, ``write_i2c_block_data``, ``read_i2c_block_data``, ``i2c_rdwr``,
-    ``open``, ``close``, context manager.
+    The smbus2 methods below keep smbus2's signatures (``force`` accepted and ignored).
 
     Errors: ``OSError(121)`` for an unknown/disconnected address or an injected fault;
     ``OSError(errno.EBADF)`` after ``close()``; ``ValueError`` for out-of-range arguments
@@ -256,87 +237,74 @@ class EmulatedI2CBus:
             raise RuntimeError(f"emulator at 0x{address:02x} returned {len(data)} bytes, expected {n}")
         return data
 
+    def _call(self, address: int, write: bytes | None, read: int | None = None) -> bytes:
+        """One SMBus call under the bus lock: ``write`` as one write transaction, then a read of
+        ``read`` bytes (repeated start); returns the bytes read (b"" without a read)."""
+        with self._lock:
+            self._begin(address)
+            if write is not None:
+                self._write(address, write)
+            return b"" if read is None else self._read(address, read)
+
     # ----------------------------------------------------------------- smbus2 API
     def write_quick(self, i2c_addr: int, force: bool | None = None) -> None:
         """SMBus quick command: a zero-length write (address probe)."""
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, b"")
+        self._call(i2c_addr, b"")
 
     def write_byte(self, i2c_addr: int, value: int, force: bool | None = None) -> None:
         """SMBus send byte: one write transaction of the single byte ``value``."""
-        _check_byte("value", value)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([value]))
+        check_byte("value", value)
+        self._call(i2c_addr, bytes([value]))
 
     def read_byte(self, i2c_addr: int, force: bool | None = None) -> int:
         """SMBus receive byte: one 1-byte read transaction from the device's current pointer."""
-        with self._lock:
-            self._begin(i2c_addr)
-            return self._read(i2c_addr, 1)[0]
+        return self._call(i2c_addr, None, 1)[0]
 
     def write_byte_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
         """SMBus write byte data: one write transaction ``[register, value]``."""
-        _check_byte("register", register)
-        _check_byte("value", value)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register, value]))
+        check_byte("register", register)
+        check_byte("value", value)
+        self._call(i2c_addr, bytes([register, value]))
 
     def read_byte_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
         """SMBus read byte data: write ``[register]``, repeated start, read 1 byte."""
-        _check_byte("register", register)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]))
-            return self._read(i2c_addr, 1)[0]
+        check_byte("register", register)
+        return self._call(i2c_addr, bytes([register]), 1)[0]
 
     def write_word_data(self, i2c_addr: int, register: int, value: int, force: bool | None = None) -> None:
         """SMBus write word data: ``[register, value & 0xFF, value >> 8]`` (little-endian word)."""
-        _check_byte("register", register)
+        check_byte("register", register)
         if not isinstance(value, int) or not 0 <= value <= 0xFFFF:
             raise ValueError(f"word value must be in 0..65535, got {value!r}")
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register, value & 0xFF, value >> 8]))
+        self._call(i2c_addr, bytes([register, value & 0xFF, value >> 8]))
 
     def read_word_data(self, i2c_addr: int, register: int, force: bool | None = None) -> int:
         """SMBus read word data: write ``[register]``, read 2 bytes, return them little-endian.
 
         Source: SMBus specification; docs/devices.md §3.1 (swap for MSB-first devices).
         """
-        _check_byte("register", register)
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]))
-            data = self._read(i2c_addr, 2)
-            return data[0] | (data[1] << 8)
+        check_byte("register", register)
+        return int.from_bytes(self._call(i2c_addr, bytes([register]), 2), "little")
 
     def write_i2c_block_data(
         self, i2c_addr: int, register: int, data: Iterable[int], force: bool | None = None
     ) -> None:
         """I2C block write: one write transaction ``[register, *data]``, at most 32 data bytes."""
-        _check_byte("register", register)
+        check_byte("register", register)
         payload = _check_bytes("data", data)
         if len(payload) > I2C_SMBUS_BLOCK_MAX:
             raise ValueError("Data length cannot exceed 32 bytes")
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]) + payload)
+        self._call(i2c_addr, bytes([register]) + payload)
 
     def read_i2c_block_data(
         self, i2c_addr: int, register: int, length: int, force: bool | None = None
     ) -> list[int]:
         """I2C block read: write ``[register]``, repeated start, read ``length`` (1..32) bytes."""
-        _check_byte("register", register)
+        check_byte("register", register)
         if not isinstance(length, int) or length < 0 or length > I2C_SMBUS_BLOCK_MAX:
             raise ValueError("Desired block length over 32 bytes" if isinstance(length, int) and length > 32
                              else f"length must be 0..32, got {length!r}")
-        with self._lock:
-            self._begin(i2c_addr)
-            self._write(i2c_addr, bytes([register]))
-            return list(self._read(i2c_addr, length))
+        return list(self._call(i2c_addr, bytes([register]), length))
 
     def i2c_rdwr(self, *i2c_msgs: object) -> None:
         """Combined transfer of ``smbus2.i2c_msg`` messages (one ioctl, repeated starts).

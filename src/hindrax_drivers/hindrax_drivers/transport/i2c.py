@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Optional, Sequence
 
+from .emulated_i2c import I2C_SMBUS_BLOCK_MAX, check_byte
 from .socket_i2c import SOCKET_ENV, SocketI2CBus
 
 __all__ = ["BusHandle", "I2CDevice", "I2CError", "I2CStats", "RawTap", "RegisterWrite", "open_smbus"]
@@ -35,7 +36,6 @@ __all__ = ["BusHandle", "I2CDevice", "I2CError", "I2CStats", "RawTap", "Register
 #: written after the register byte, or the bytes read.
 RawTap = Callable[[str, int, Optional[int], bytes, float], None]
 
-_SMBUS_BLOCK_MAX = 32
 
 
 class I2CError(OSError):
@@ -253,19 +253,13 @@ class I2CDevice:
         if self.raw_tap is not None:
             self.raw_tap(kind, self.address, register, bytes(data), float(self._clock()))
 
-    @staticmethod
-    def _byte(name: str, value: int) -> int:
-        if not isinstance(value, int) or isinstance(value, bool) or not 0 <= value <= 0xFF:
-            raise ValueError(f"{name} must be an int in 0..255, got {value!r}")
-        return value
-
     # ------------------------------------------------------------------ operations
     def write_byte(self, value: int) -> None:
         """Send one command byte (SMBus send byte), e.g. an MS5837 command.
 
         Raw tap: ``("write", address, value, b"")``.
         """
-        self._byte("value", value)
+        check_byte("value", value)
         with self.lock:
             self._run(f"write_byte(0x{value:02x})", lambda: self.bus.write_byte(self.address, value))
             self._tap("write", value, b"")
@@ -285,8 +279,8 @@ class I2CDevice:
 
         Raw tap: ``("write", address, register, bytes([value]))``.
         """
-        self._byte("register", register)
-        self._byte("value", value)
+        check_byte("register", register)
+        check_byte("value", value)
         with self.lock:
             self._run(f"write_byte_data(0x{register:02x}, 0x{value:02x})",
                       lambda: self.bus.write_byte_data(self.address, register, value))
@@ -297,7 +291,7 @@ class I2CDevice:
 
         Raw tap: ``("read", address, register, bytes([value]))``.
         """
-        self._byte("register", register)
+        check_byte("register", register)
         with self.lock:
             value = int(self._run(f"read_byte_data(0x{register:02x})",
                                   lambda: self.bus.read_byte_data(self.address, register)))
@@ -310,10 +304,10 @@ class I2CDevice:
         Up to 32 bytes use ``write_i2c_block_data``; longer writes use ``i2c_rdwr`` (one message).
         Raw tap: ``("write", address, register, data)``.
         """
-        self._byte("register", register)
+        check_byte("register", register)
         payload = bytes(data)
         with self.lock:
-            if len(payload) <= _SMBUS_BLOCK_MAX:
+            if len(payload) <= I2C_SMBUS_BLOCK_MAX:
                 call = lambda: self.bus.write_i2c_block_data(self.address, register, list(payload))  # noqa: E731
             else:
                 from smbus2 import i2c_msg  # lazy: only long transfers need it
@@ -331,11 +325,11 @@ class I2CDevice:
         Returns:
             ``bytes`` of length ``length``.
         """
-        self._byte("register", register)
+        check_byte("register", register)
         if not isinstance(length, int) or length < 1:
             raise ValueError(f"length must be an int >= 1, got {length!r}")
         with self.lock:
-            if length <= _SMBUS_BLOCK_MAX:
+            if length <= I2C_SMBUS_BLOCK_MAX:
                 def call() -> bytes:
                     return bytes(self.bus.read_i2c_block_data(self.address, register, length))
             else:

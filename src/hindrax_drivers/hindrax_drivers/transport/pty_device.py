@@ -1,20 +1,9 @@
 """Serve an I/O-free byte-stream device emulator on a pseudo-terminal; the emulators' fault helper.
 
-Two things every serial device emulator in this package shares (docs/architecture.md §2, §6):
-
-1. :class:`PtyDevice` runs an emulator -- any object with ``feed_host_bytes(data: bytes)`` and
-   ``poll(t_s: float) -> bytes`` (:class:`ByteStreamEmulator`) -- behind a Linux pseudo-terminal in
-   a background thread, so the *real* pyserial code path of a driver runs against it.  The driver
-   opens :attr:`PtyDevice.path`, a symlink in a private temporary directory that stays the same
-   across :meth:`PtyDevice.disconnect` / :meth:`PtyDevice.reconnect` (the device "disappears": the
-   pty master is closed so the driver's reads fail, the symlink is removed so re-opening fails; on
-   reconnect a fresh pty is created and the symlink is re-pointed).  Simulation time drives the
-   emulator through the ``clock`` callable.
-
-2. :class:`StreamFaults` is the fault-injection state the DVL-75 and Ping1D emulators share
-   (garbage bytes, corrupted checksums, truncated and dropped messages, stuck values, a silent
-   "disconnected" device).  Protocol-specific corruption (where a checksum lives) is passed in by
-   the emulator.  :class:`PeriodicSchedule` gives both emulators drift-free output instants.
+What every serial device emulator in this package shares (docs/architecture.md §2, §6):
+:class:`PtyDevice` runs one (:class:`ByteStreamEmulator`) behind a Linux pseudo-terminal, so the
+*real* pyserial code path of a driver runs against it; :class:`StreamFaults` is the fault injection
+of the DVL-75 and Ping1D emulators; :class:`PeriodicSchedule` gives both drift-free output instants.
 
 Why our own code: pyserial's ``loop://`` and ``socket://`` URL handlers do not exercise the
 termios, select and fd code path a real ``/dev/ttyUSB*`` uses, and ``socat`` would be an external
@@ -65,8 +54,8 @@ class StreamFaults:
     (docs/architecture.md §2). Thread-safe: test code may call it while a PtyDevice thread polls.
 
     Per-message faults are queued and consumed, in this order of precedence, by the next messages
-    passed through :meth:`apply`: drop, truncate, corrupt checksum.  Garbage is emitted at the next
-    :meth:`take_garbage` (the emulator calls it at the start of every poll).
+    passed through :meth:`apply`: drop, truncate, corrupt checksum.  Garbage goes out first at the
+    next :meth:`transmit` (the emulator calls it at every poll).
 
     Args:
         garbage_alphabet: bytes random garbage is drawn from (the DVL emulator uses 0x80-0xFF, i.e.
@@ -128,11 +117,6 @@ class StreamFaults:
             self._disconnected = bool(disconnected)
 
     @property
-    def stuck(self) -> bool:
-        """True while values are frozen (see :meth:`set_stuck`)."""
-        return self._stuck
-
-    @property
     def disconnected(self) -> bool:
         """True while the device is silent (see :meth:`set_disconnected`)."""
         return self._disconnected
@@ -146,18 +130,13 @@ class StreamFaults:
             self._held, self._has_held = value, True
             return value
 
-    def take_garbage(self) -> bytes:
-        """Pop the queued garbage (empty bytes if none)."""
-        with self._lock:
-            data = bytes(self._garbage)
-            self._garbage.clear()
-            return data
-
     def transmit(self, messages: Iterable[bytes],
                  corrupt_checksum: Callable[[bytes], bytes]) -> bytes:
         """The bytes a device sends at one poll: the queued garbage, then each of ``messages``
         through :meth:`apply`; b"" while disconnected (the garbage is taken all the same)."""
-        garbage = self.take_garbage()
+        with self._lock:
+            garbage = bytes(self._garbage)
+            self._garbage.clear()
         if self.disconnected:
             return b""
         return garbage + b"".join(self.apply(m, corrupt_checksum) for m in messages)
@@ -205,11 +184,6 @@ class PeriodicSchedule:
     def period_s(self) -> float:
         """Current period, s."""
         return self._period_s
-
-    @property
-    def started(self) -> bool:
-        """True after :meth:`restart`."""
-        return self._anchor_s is not None
 
     def restart(self, t0_s: float, first_tick_in_periods: int = 1) -> None:
         """Next tick at ``t0_s + first_tick_in_periods * period``."""
@@ -331,7 +305,8 @@ class PtyDevice:
 
     @property
     def path(self) -> str:
-        """Stable device path (symlink) the driver should open; valid across reconnects."""
+        """Stable device path the driver opens: a symlink in a private temporary directory,
+        re-pointed to the new pty at each :meth:`reconnect`."""
         return self._link
 
     @property

@@ -4,25 +4,13 @@ docs/architecture.md §2: transports are injected; serial goes through pyserial 
 simulator use pseudo-terminals so the real pyserial code path runs).  This module owns a port, reads it
 in a background thread and hands byte chunks to a callback; drivers stay protocol-only.
 
-Features
-- Opens ``port`` with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a pyserial
-  URL such as ``loop://`` / ``socket://host:port``), 8N1 at ``baudrate`` (both devices use
-  115200 8N1, docs/devices.md §1.1 and §2.1).
-- Reader thread (or :meth:`SerialTransport.pump`'s caller) delivers every received chunk to
-  ``on_data(bytes)``.
-- ``write(bytes)`` from any thread.
-- When the port disappears (read/write error, USB unplug, pty closed) the thread closes it and
-  re-opens with exponential backoff (``reconnect_initial_s`` doubling up to ``reconnect_max_s``);
-  ``on_connect()`` runs after every successful open so the driver can resend its start-up commands
-  (the DVL's ``SEND-DVPDL ON`` etc.).
-- State for diagnostics: connected, last_error, bytes_rx/tx, reconnects, open failures.
-- Raw-data tap ``on_raw(direction, data, t_monotonic_s)`` with direction ``'rx'`` or ``'tx'``, so a ROS
-  node can publish/record the raw traffic (docs/architecture.md §7).
-- Callback exceptions are caught and counted; they never kill the reader thread.
-- ``close()`` stops and joins the thread.
-- ``pump(n, timeout_s)`` reads in the calling thread until ``n`` received bytes have been through
-  the callbacks
-  (a simulator's lock-step: :mod:`hindrax_ident.sim.hardware`).
+The port is opened with ``serial.serial_for_url`` (a device path such as ``/dev/ttyUSB0`` or a
+pyserial URL), 8N1 (both devices use 115200 8N1, docs/devices.md §1.1 and §2.1). When it disappears
+(read/write error, USB unplug, pty closed) the reader thread closes it and re-opens it with
+exponential backoff; ``on_connect()`` after every open lets the driver resend its start-up commands.
+Callback exceptions are caught and counted: they never kill the reader thread. The raw tap lets a
+node record the traffic (docs/architecture.md §7); :meth:`SerialTransport.pump` reads in the
+caller's thread instead (a simulator's lock-step: :mod:`hindrax_ident.sim.hardware`).
 
 Why our own code rather than ``serial.threaded.ReaderThread``: that helper ends its thread on the first
 error and has no reconnect, state, or tap.
@@ -33,7 +21,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Optional
+from typing import Any, Callable, Optional
 
 import serial
 
@@ -88,9 +76,7 @@ class SerialTransport:
         on_disconnect: called with the error text when the port is lost (from the reader thread, or
             from the writing thread when a write fails).
         reconnect_initial_s, reconnect_max_s: backoff bounds between open attempts, s.
-        read_timeout_s: pyserial read timeout (bounds close() latency), s.
-        write_timeout_s: pyserial write timeout, s.
-        serial_kwargs: extra keyword arguments for ``serial.serial_for_url``.
+        read_timeout_s: pyserial read timeout (bounds close() latency), s (writes: 1 s).
         clock: monotonic clock for tap timestamps (default ``time.monotonic``).
         start: start the reader thread immediately (it opens the port itself).
     Raises:
@@ -103,13 +89,12 @@ class SerialTransport:
                  on_connect: Optional[Callable[[], None]] = None,
                  on_disconnect: Optional[Callable[[str], None]] = None,
                  reconnect_initial_s: float = 0.05, reconnect_max_s: float = 1.0,
-                 read_timeout_s: float = 0.05, write_timeout_s: float = 1.0,
-                 serial_kwargs: Optional[Dict[str, Any]] = None,
+                 read_timeout_s: float = 0.05,
                  clock: Callable[[], float] = time.monotonic, start: bool = True) -> None:
         if reconnect_initial_s <= 0 or reconnect_max_s < reconnect_initial_s:
             raise ValueError("need 0 < reconnect_initial_s <= reconnect_max_s")
-        if read_timeout_s <= 0 or write_timeout_s <= 0:
-            raise ValueError("timeouts must be positive")
+        if read_timeout_s <= 0:
+            raise ValueError("read_timeout_s must be positive")
         self.port = port
         self.baudrate = int(baudrate)
         self.on_data = on_data
@@ -119,8 +104,6 @@ class SerialTransport:
         self.reconnect_initial_s = float(reconnect_initial_s)
         self.reconnect_max_s = float(reconnect_max_s)
         self.read_timeout_s = float(read_timeout_s)
-        self.write_timeout_s = float(write_timeout_s)
-        self.serial_kwargs = dict(serial_kwargs or {})
         self.clock = clock
         self._ser: Optional[serial.SerialBase] = None
         self._ser_lock = threading.Lock()  # guards _ser swaps and writes
@@ -282,8 +265,7 @@ class SerialTransport:
         try:
             ser = serial.serial_for_url(self.port, baudrate=self.baudrate, bytesize=serial.EIGHTBITS,
                                         parity=serial.PARITY_NONE, stopbits=serial.STOPBITS_ONE,
-                                        timeout=self.read_timeout_s, write_timeout=self.write_timeout_s,
-                                        **self.serial_kwargs)
+                                        timeout=self.read_timeout_s, write_timeout=1.0)
         except (serial.SerialException, OSError, ValueError) as exc:
             with self._stats_lock:
                 self._open_failures += 1

@@ -28,13 +28,13 @@ import threading
 from multiprocessing.connection import Client, Listener
 from typing import Any, Mapping
 
+from .socket_i2c import SMBUS_METHODS, forward_smbus_methods
+
 __all__ = ["SOCKET_ENV", "EmulationServer", "SharedI2CBus", "SharedGpioLine", "open_shared_bus", "open_shared_line"]
 
 #: environment variable naming the server's Unix socket
 SOCKET_ENV = "HINDRAX_EMULATION_SOCKET"
 
-_BUS_METHODS = ("write_quick", "write_byte", "read_byte", "write_byte_data", "read_byte_data", "write_word_data",
-                "read_word_data", "write_i2c_block_data", "read_i2c_block_data")
 _LINE_METHODS = ("set_high", "is_high", "release")
 
 
@@ -83,7 +83,7 @@ class EmulationServer:
                 except (EOFError, OSError):
                     return
                 try:
-                    if target == "i2c" and name in _BUS_METHODS and self.bus is not None:
+                    if target == "i2c" and name in SMBUS_METHODS and self.bus is not None:
                         with self.lock:
                             result = getattr(self.bus, name)(*args)
                     elif target in self.lines and name in _LINE_METHODS:
@@ -136,37 +136,14 @@ class _Client:
             pass
 
 
+@forward_smbus_methods
 class SharedI2CBus(_Client):
     """Client side of :class:`EmulationServer`'s bus: the ``smbus2.SMBus`` methods the drivers use.
 
     Raises ``OSError`` with the emulator's errno (121 for a NACK), as ``smbus2`` does."""
 
-    def write_quick(self, addr, force=None):
-        return self._call("i2c", "write_quick", addr)
-
-    def write_byte(self, addr, value, force=None):
-        return self._call("i2c", "write_byte", addr, value)
-
-    def read_byte(self, addr, force=None):
-        return self._call("i2c", "read_byte", addr)
-
-    def write_byte_data(self, addr, register, value, force=None):
-        return self._call("i2c", "write_byte_data", addr, register, value)
-
-    def read_byte_data(self, addr, register, force=None):
-        return self._call("i2c", "read_byte_data", addr, register)
-
-    def write_word_data(self, addr, register, value, force=None):
-        return self._call("i2c", "write_word_data", addr, register, value)
-
-    def read_word_data(self, addr, register, force=None):
-        return self._call("i2c", "read_word_data", addr, register)
-
-    def write_i2c_block_data(self, addr, register, data, force=None):
-        return self._call("i2c", "write_i2c_block_data", addr, register, list(data))
-
-    def read_i2c_block_data(self, addr, register, length, force=None):
-        return self._call("i2c", "read_i2c_block_data", addr, register, length)
+    def _bus_call(self, name: str, *args: Any) -> Any:
+        return self._call("i2c", name, *args)
 
 
 class SharedGpioLine(_Client):

@@ -33,13 +33,31 @@ from smbus2 import i2c_msg
 from ..scheduling import set_this_thread
 from .emulated_i2c import I2C_M_RD
 
-__all__ = ["SOCKET_ENV", "I2CSocketServer", "SocketI2CBus"]
+__all__ = ["SOCKET_ENV", "SMBUS_METHODS", "I2CSocketServer", "SocketI2CBus",
+           "forward_smbus_methods"]
 
 #: environment variable: path of an :class:`I2CSocketServer` socket that ``open_smbus`` connects to instead of
 #: opening ``/dev/i2c-N`` (tests and benchmarks only)
 SOCKET_ENV = "HINDRAX_I2C_SOCKET"
+#: the ``smbus2.SMBus`` methods a client forwards to the emulated bus
+SMBUS_METHODS = ("write_quick", "write_byte", "read_byte", "write_byte_data", "read_byte_data",
+                 "write_word_data", "read_word_data", "write_i2c_block_data", "read_i2c_block_data")
 
 
+def forward_smbus_methods(cls: type) -> type:
+    """Class decorator: each of :data:`SMBUS_METHODS` on ``cls`` as
+    ``self._bus_call(name, addr, *args)`` (``force`` ignored; block data sent as a list)."""
+    def forward(name: str) -> Any:
+        def method(self: Any, addr: int, *args: Any, force: Any = None) -> Any:
+            return self._bus_call(name, addr, *(a if isinstance(a, int) else list(a) for a in args))
+        method.__name__ = method.__qualname__ = name
+        return method
+    for name in SMBUS_METHODS:
+        setattr(cls, name, forward(name))
+    return cls
+
+
+@forward_smbus_methods
 class SocketI2CBus:
     """Client side of :class:`I2CSocketServer`: the ``smbus2.SMBus`` methods the drivers use, forwarded.
 
@@ -56,7 +74,7 @@ class SocketI2CBus:
         self._lock = threading.Lock()
         self._lost = False
 
-    def _call(self, name: str, *args: Any) -> Any:
+    def _bus_call(self, name: str, *args: Any) -> Any:
         with self._lock:
             if self._lost:
                 raise OSError(errno.ENODEV, f"emulated I2C bus {self.path}: connection lost")
@@ -70,24 +88,6 @@ class SocketI2CBus:
             return value
         raise OSError(*value)
 
-    def write_byte(self, addr, value, force=None):
-        return self._call("write_byte", addr, value)
-
-    def read_byte(self, addr, force=None):
-        return self._call("read_byte", addr)
-
-    def write_byte_data(self, addr, register, value, force=None):
-        return self._call("write_byte_data", addr, register, value)
-
-    def read_byte_data(self, addr, register, force=None):
-        return self._call("read_byte_data", addr, register)
-
-    def write_i2c_block_data(self, addr, register, data, force=None):
-        return self._call("write_i2c_block_data", addr, register, list(data))
-
-    def read_i2c_block_data(self, addr, register, length, force=None):
-        return self._call("read_i2c_block_data", addr, register, length)
-
     def i2c_rdwr(self, *i2c_msgs):
         """``smbus2.i2c_msg`` transfers (ctypes, not picklable) sent as (address, flags, bytes or
         length); the read messages' buffers are filled from the answer, as the kernel fills them."""
@@ -95,7 +95,7 @@ class SocketI2CBus:
                  int(m.len) if m.flags & I2C_M_RD else ctypes.string_at(m.buf, m.len))
                 for m in i2c_msgs]
         reads = (m for m in i2c_msgs if m.flags & I2C_M_RD)
-        for m, data in zip(reads, self._call("i2c_rdwr", spec)):
+        for m, data in zip(reads, self._bus_call("i2c_rdwr", spec)):
             ctypes.memmove(m.buf, data, m.len)
 
     def close(self) -> None:
