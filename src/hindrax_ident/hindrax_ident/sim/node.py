@@ -136,9 +136,8 @@ class SimulatorNode(VehicleNode):
         self._pub_odom = self.create_publisher(Odometry, "sim/odometry", 10)
         self._pub_wrench = self.create_publisher(WrenchStamped, "sim/wrench", 10)
         self._pub_contact = self.create_publisher(DiagnosticArray, "sim/contact", 10)
-        self._sub = None
         if pulse_width_source is None:
-            self._sub = self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pulse_width, 10)
+            self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pulse_width, 10)
 
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._wall_anchor = time.monotonic()

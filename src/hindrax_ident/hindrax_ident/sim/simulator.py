@@ -120,11 +120,8 @@ class Simulator:
             self.pool.set_floor_gradient(truth.disturbances.floor.gradient)
         self.disturbances = DisturbanceModel(config, truth.disturbances, self.model, self.pool)
         self.sensors.apply_disturbances(truth.disturbances, self._delayed_state)
-        self._history: deque = deque()
         self._keep_history_s = float(truth.disturbances.dvl.latency_s)
         self._listeners: list[SensorListener] = []
-        self._external = [0.0] * 6
-        self._last_pw: np.ndarray | None = None
         self._neutral = np.full(self.thrusters.n, self.thrusters.neutral_us)
         self._lag_half = self.thrusters.lag.decay(0.5 * self.step_s)
         self._lag_full = self.thrusters.lag.decay(self.step_s)
@@ -159,7 +156,7 @@ class Simulator:
         self._k = 0
         self._t = 0.0
         self._external = [0.0] * 6
-        self._last_pw = None
+        self._last_pw: np.ndarray | None = None
         self._esc_queue: deque = deque()
         self._base_force = np.zeros(self.thrusters.n)
         self._dist_wrench = [0.0] * 6
