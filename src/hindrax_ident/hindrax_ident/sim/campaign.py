@@ -196,12 +196,10 @@ class Campaign:
         if ex.awaiting:  # the virtual pool's operator: do what the step asks, then continue
             self.operator.act(ex.awaiting, self.sim.rotation)
             ex.operator_continue()
-        if ex.calibrate or self.operator.active or self._external_used:
-            self._external_used = True  # the simulator holds the last external wrench: keep setting it
-            self.sim.advance(self.tick_s, wire,
-                             external_wrench_frd=self.operator.external_wrench_frd(self.sim.rotation))
-        else:
-            self.sim.advance(self.tick_s, wire)
+        # once set, the simulator holds the last external wrench: keep setting it
+        self._external_used = bool(ex.calibrate or self.operator.active or self._external_used)
+        ext = self.operator.external_wrench_frd(self.sim.rotation) if self._external_used else None
+        self.sim.advance(self.tick_s, wire, external_wrench_frd=ext)
         pending, self._pending = self._pending, []
         w = ex.step(TickInput(t_s=self.sim.t_s, elapsed_s=self.tick_s, samples=pending))
         if w is not None and self.rtf > 0.0:

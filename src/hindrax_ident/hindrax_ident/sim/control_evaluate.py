@@ -139,19 +139,16 @@ def reference_limits(cfg: VehicleConfig, setup: EvaluationSetup) -> dict:
 def make_hold(kind: str, cfg: VehicleConfig, setup: EvaluationSetup, model: ControlModel | None = None):
     """The hold of one :data:`MODELS` entry (``identified`` needs ``model``). Raises ``ValueError`` for an unknown
     kind."""
+    if kind not in MODELS:
+        raise ValueError(f"unknown model {kind!r}; one of {', '.join(MODELS)}")
+    if kind == "identified" and model is None:
+        raise ValueError("the identified hold needs a model")
     auth = _authority(cfg)
     if kind == "pd_hold":
         return LegacyPDHold(cfg, auth, setup.bandwidth_rad_s, setup.hold_fraction)
-    limits = reference_limits(cfg, setup)
-    if kind == "vehicle_file":
-        return HoldController(cfg, auth, setup.bandwidth_rad_s, setup.hold_fraction, model_from_config(cfg),
-                              setup.velocity_gain, limits)
-    if kind == "identified":
-        if model is None:
-            raise ValueError("the identified hold needs a model")
-        return HoldController(cfg, auth, setup.bandwidth_rad_s, setup.hold_fraction, model, setup.velocity_gain,
-                              limits)
-    raise ValueError(f"unknown model {kind!r}; one of {', '.join(MODELS)}")
+    law_model = model if kind == "identified" else model_from_config(cfg)
+    return HoldController(cfg, auth, setup.bandwidth_rad_s, setup.hold_fraction, law_model,
+                          setup.velocity_gain, reference_limits(cfg, setup))
 
 
 def _true_altitude(sim: Simulator, ping_frd: np.ndarray) -> float:
@@ -401,10 +398,7 @@ def write_outputs(out_dir: str | Path, cases: Sequence[CaseResult], info: Mappin
 
 
 def _report(folder: Path, cases: Sequence[CaseResult], info: Mapping[str, Any], summary: Sequence[dict]) -> None:
-
-
     matplotlib.use("Agg")
-
     colours = {"identified": "tab:green", "vehicle_file": "tab:orange", "pd_hold": "tab:red"}
     parts = ["<html><head><meta charset='utf-8'><title>Hindrax control evaluation</title></head><body>",
              "<h1>Closed-loop evaluation (hindrax control evaluate)</h1>",

@@ -23,8 +23,7 @@ from .campaign import Campaign
 from ..identification.fit.campaign_fit import identify_all_with_errors
 from ..identification.assessment.results import build_results, write_identification
 from .simulator import Simulator
-from .truth import load_truth
-from .truth import truth_dir as shipped
+from .truth import load_truth, truth_dir as shipped
 from .control_evaluate import EvaluationSetup, evaluate, jsonable, ratios, setup_dict, write_outputs
 from ..control.model import ControlModel, load_model, model_from_config
 

@@ -44,8 +44,6 @@ def truth_keywords(config: VehicleConfig, device: device_table.Device) -> dict[s
 RESYNC_AFTER_S = 1.0
 #: Wall time a clock tick waits for a driver to handle the bytes it was just sent, s (then the gate holds on).
 HANDOFF_TIMEOUT_S = 0.5
-#: devices whose first sample must exist before an emulator can answer
-_DEVICES = ("dvl75", "dvl75_attitude", "ping1d", "ms5837", "icm20948_accel", "icm20948_gyro", "icm20948_mag")
 
 
 class SerialLockStep:
@@ -207,7 +205,7 @@ class VirtualHardware:
     def _ensure_samples(self) -> None:
         """Step the unpowered simulator until every device has produced a first sample (<= 1 s simulated)."""
         for _ in range(int(1.0 / self.sim.step_s) + 1):
-            if all(self.sim.latest_sample(d) is not None for d in _DEVICES if d in self.sim.sensors.models):
+            if all(self.sim.latest_sample(d) is not None for d in self.sim.sensors.models):
                 return
             self.sim.step(None)
 
@@ -231,9 +229,8 @@ class VirtualHardware:
             return Ping1dTruth(altitude_m=None, confidence_pct=0.0)
         return Ping1dTruth(altitude_m=float(s.distance_m), confidence_pct=100.0)
 
-    # The I2C devices sample the vehicle when the emulator asks (start of an MS5837 conversion, an ICM-20948
-    # output-data-rate tick), as the real parts do; the newest rate-grid sample would be up to one model period
-    # old (100 ms for the pressure model) and showed up as a 60 ms late depth in graph bags.
+    # The I2C devices sample the vehicle when the emulator asks (start of an MS5837 conversion, an
+    # ICM-20948 data-rate tick), as the real parts do, not the newest grid sample (<= 100 ms old).
     def _ms5837_truth(self, _t: float) -> tuple[float, float]:
         s = self.sim.measure("ms5837")
         return (float(s.pressure_pa), float(s.temperature_c))

@@ -50,11 +50,8 @@ from hindrax_drivers.config import DOFS, VehicleConfig
 
 from ..vehicle.rigid_body import rigid_body_mass_matrix, skew
 
-__all__ = ["STATE_SIZE", "skew", "rigid_body_mass_matrix", "damping_vector", "restoring_vector",
+__all__ = ["skew", "rigid_body_mass_matrix", "damping_vector", "restoring_vector",
            "rotation_matrix_from_quaternion", "euler_from_rotation_matrix", "VehicleModel"]
-
-#: Length of the state vector [position NED (3), quaternion xyzw (4), nu (6)].
-STATE_SIZE = 13
 
 #: A free-surface model: (depth of CO m, R20, R21, R22) -> submerged fraction in [0, 1] (see pool.FreeSurface).
 SurfaceFraction = Callable[[float, float, float, float], float]

@@ -68,7 +68,7 @@ from hindrax_drivers.vehicle_node import VehicleNode
 from hindrax_msgs.msg import ThrusterPwm
 
 from .pool import FACES
-from .simulator import PulseWidthError, Simulator
+from .simulator import PulseWidthError, Simulator, fill_odometry, fill_wrench
 
 __all__ = ["SimulatorNode", "PulseWidthSource", "time_msg", "main"]
 
@@ -136,9 +136,8 @@ class SimulatorNode(VehicleNode):
         self._pub_odom = self.create_publisher(Odometry, "sim/odometry", 10)
         self._pub_wrench = self.create_publisher(WrenchStamped, "sim/wrench", 10)
         self._pub_contact = self.create_publisher(DiagnosticArray, "sim/contact", 10)
-        self._sub = None
         if pulse_width_source is None:
-            self._sub = self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pulse_width, 10)
+            self.create_subscription(ThrusterPwm, "thrusters/pulse_width", self._on_pulse_width, 10)
 
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._wall_anchor = time.monotonic()
@@ -310,27 +309,14 @@ class SimulatorNode(VehicleNode):
     def _publish_truth(self, t: float) -> None:
         sim = self.simulator
         stamp = time_msg(t)
-        odom = Odometry()
+        twist = frames.twist_frd_to_flu(sim.nu)
+        odom = fill_odometry(Odometry(), sim.position_ned_m, sim.quaternion_xyzw, twist)
         odom.header.stamp = stamp
-        odom.header.frame_id = "odom"
-        odom.child_frame_id = "base_link"
-        px, py, pz = frames.ned_to_enu(sim.position_ned_m)
-        pos = odom.pose.pose.position
-        pos.x, pos.y, pos.z = float(px), float(py), float(pz)
-        qx, qy, qz, qw = frames.quaternion_marine_to_ros(sim.quaternion_xyzw)
-        o = odom.pose.pose.orientation
-        o.x, o.y, o.z, o.w = float(qx), float(qy), float(qz), float(qw)
-        tw = frames.twist_frd_to_flu(sim.nu)
-        lin, ang = odom.twist.twist.linear, odom.twist.twist.angular
-        lin.x, lin.y, lin.z, ang.x, ang.y, ang.z = (float(v) for v in tw)
         self._pub_odom.publish(odom)
-
-        w = frames.wrench_frd_to_flu(sim.wrench_frd)
         msg = WrenchStamped()
         msg.header.stamp = stamp
         msg.header.frame_id = "base_link"
-        f, tq = msg.wrench.force, msg.wrench.torque
-        f.x, f.y, f.z, tq.x, tq.y, tq.z = (float(v) for v in w)
+        fill_wrench(msg.wrench, frames.wrench_frd_to_flu(sim.wrench_frd))
         self._pub_wrench.publish(msg)
 
     def _publish_contact(self, t: float) -> None:

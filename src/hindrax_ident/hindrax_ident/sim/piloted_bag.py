@@ -62,7 +62,7 @@ from hindrax_drivers.config import VehicleConfig
 from hindrax_drivers.recording.writer import BagWriter, WriterOptions
 from hindrax_msgs.msg import AllocationStatus
 
-from .simulator import Simulator
+from .simulator import Simulator, fill_odometry, fill_wrench
 
 __all__ = ["PilotSettings", "write_piloted_bag"]
 
@@ -113,9 +113,10 @@ class PilotSettings:
                 raise ValueError(f"PilotSettings.{name}: {getattr(self, name)!r} is not one of {', '.join(allowed)}")
 
 
-def _stamp(header, t_ns: int) -> None:
+def _stamp(header, t_ns: int, frame_id: str) -> None:
     header.stamp.sec = int(t_ns // 1_000_000_000)
     header.stamp.nanosec = int(t_ns % 1_000_000_000)
+    header.frame_id = frame_id
 
 
 class _SetpointPilot:
@@ -210,11 +211,9 @@ def _allocation_status(res, stamp_ns: int) -> AllocationStatus:
     stamped ``stamp_ns``."""
     st = AllocationStatus(scale=float(res.scale), thruster_saturated=[bool(x) for x in res.saturated],
                           saturated=bool(np.any(res.saturated)))
-    _stamp(st.header, stamp_ns)
-    st.header.frame_id = "base_link"
-    for wrench, vec in ((st.requested_wrench, res.requested_wrench_flu), (st.achieved_wrench, res.achieved_wrench_flu)):
-        wrench.force.x, wrench.force.y, wrench.force.z = (float(x) for x in vec[:3])
-        wrench.torque.x, wrench.torque.y, wrench.torque.z = (float(x) for x in vec[3:])
+    _stamp(st.header, stamp_ns, "base_link")
+    fill_wrench(st.requested_wrench, res.requested_wrench_flu)
+    fill_wrench(st.achieved_wrench, res.achieved_wrench_flu)
     return st
 
 
@@ -281,8 +280,8 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
             w.add_topic("/imu", "sensor_msgs/msg/Imu")
             w.add_topic("/tf_static", "tf2_msgs/msg/TFMessage")
             tr = TransformStamped()
-            _stamp(tr.header, EPOCH_NS)
-            tr.header.frame_id, tr.child_frame_id = "base_link", "imu_link"
+            _stamp(tr.header, EPOCH_NS, "base_link")
+            tr.child_frame_id = "imu_link"
             tr.transform.rotation.x, tr.transform.rotation.w = 1.0, 0.0
             w.write("/tf_static", EPOCH_NS, _serialize(TFMessage(transforms=[tr])))
 
@@ -305,8 +304,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                 elif dev == "icm20948_accel":
                     accel_flu = flu_from_sensor @ np.asarray(smp.specific_force_m_s2, dtype=float)
                     im = Imu()
-                    _stamp(im.header, t_ns)
-                    im.header.frame_id = "base_link"
+                    _stamp(im.header, t_ns, "base_link")
                     wf = frames.frd_to_flu(gyro_frd)
                     im.angular_velocity.x, im.angular_velocity.y, im.angular_velocity.z = (float(x) for x in wf)
                     (im.linear_acceleration.x, im.linear_acceleration.y,
@@ -319,8 +317,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                         continue
                     v = v - np.cross(gyro_frd, r_dvl)  # to the body origin, with the gyro, as a DVL driver does
                     tm = TwistWithCovarianceStamped()
-                    _stamp(tm.header, t_ns)
-                    tm.header.frame_id = "base_link"
+                    _stamp(tm.header, t_ns, "base_link")
                     vf = frames.frd_to_flu(v)
                     tm.twist.twist.linear.x, tm.twist.twist.linear.y, tm.twist.twist.linear.z = (float(x) for x in vf)
                     cov = np.zeros(36)
@@ -330,8 +327,7 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                     out.append((t_ns + late_ns(), "/dvl/twist", _serialize(tm)))
                 elif dev == "ms5837":
                     pm = FluidPressure()
-                    _stamp(pm.header, t_ns)
-                    pm.header.frame_id = "pressure_link"
+                    _stamp(pm.header, t_ns, "pressure_link")
                     pm.fluid_pressure = float(smp.pressure_pa)
                     out.append((t_ns + int(rng.uniform(0.0, 0.02) * 1e9), "/pressure", _serialize(pm)))
 
@@ -346,35 +342,20 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
             pending.append((t + s.delay_s, wrench_frd, t_ns))
             # commanded wrench, FLU
             wm = WrenchStamped()
-            _stamp(wm.header, t_ns)
-            wm.header.frame_id = "base_link"
-            wf = frames.wrench_frd_to_flu(wrench_frd)
-            wm.wrench.force.x, wm.wrench.force.y, wm.wrench.force.z = (float(x) for x in wf[:3])
-            wm.wrench.torque.x, wm.wrench.torque.y, wm.wrench.torque.z = (float(x) for x in wf[3:])
+            _stamp(wm.header, t_ns, "base_link")
+            fill_wrench(wm.wrench, frames.wrench_frd_to_flu(wrench_frd))
             if not dvl:
                 # odometry of the state now (velocity held between updates)
                 if k % vel_every == 0:
                     noise = np.concatenate([rng.normal(0, s.noise_linear_m_s, 3),
                                             rng.normal(0, s.noise_angular_rad_s, 3)])
                     twist_held = frames.twist_frd_to_flu(np.asarray(nu, dtype=float)) + noise
-                om = Odometry()
-                _stamp(om.header, t_ns)
-                om.header.frame_id = "odom"
-                om.child_frame_id = "base_link"
-                p_enu = frames.ned_to_enu(pos)
-                om.pose.pose.position.x, om.pose.pose.position.y, om.pose.pose.position.z = (float(x) for x in p_enu)
-                q = frames.quaternion_marine_to_ros(sim.quaternion_xyzw)
-                (om.pose.pose.orientation.x, om.pose.pose.orientation.y, om.pose.pose.orientation.z,
-                 om.pose.pose.orientation.w) = (float(x) for x in q)
-                (om.twist.twist.linear.x, om.twist.twist.linear.y,
-                 om.twist.twist.linear.z) = (float(x) for x in twist_held[:3])
-                om.twist.twist.angular.x, om.twist.twist.angular.y, om.twist.twist.angular.z = (
-                    float(x) for x in twist_held[3:])
+                om = fill_odometry(Odometry(), pos, sim.quaternion_xyzw, twist_held)
+                _stamp(om.header, t_ns, "odom")
                 if s.imu:
                     om.twist.twist.angular.x = om.twist.twist.angular.y = om.twist.twist.angular.z = 0.0
                     im = Imu()
-                    _stamp(im.header, t_ns)
-                    im.header.frame_id = "imu_link"
+                    _stamp(im.header, t_ns, "imu_link")
                     w_imu = r_imu.T @ frames.frd_to_flu(np.asarray(nu[3:], dtype=float)) + rng.normal(
                         0, s.noise_angular_rad_s, 3)
                     im.angular_velocity.x, im.angular_velocity.y, im.angular_velocity.z = (float(x) for x in w_imu)
@@ -413,12 +394,9 @@ def write_piloted_bag(bag_dir: str | Path, cfg: VehicleConfig, seed: int = 0,
                     on_samples(samples)
             if len(out) > 200 or k == n_ticks - 1:  # write in receive order (bounded lateness)
                 out.sort(key=lambda x: x[0])
-                horizon = EPOCH_NS + int(round((t - 0.5) * 1e9)) if k < n_ticks - 1 else None
-                keep = []
-                for item in out:
-                    if horizon is None or item[0] < horizon:
-                        w.write(item[1], item[0], item[2])
-                    else:
-                        keep.append(item)
-                out = keep
+                horizon = EPOCH_NS + int(round((t - 0.5) * 1e9)) if k < n_ticks - 1 else math.inf
+                for log_ns, topic, data in out:
+                    if log_ns < horizon:
+                        w.write(topic, log_ns, data)
+                out = [item for item in out if item[0] >= horizon]
     return bag

@@ -342,11 +342,9 @@ class DvlVelocityModel(SensorModel):
         if self.pool is None:  # unbounded water: no floor to measure, treated as locked
             return True, math.nan
         altitude = self.pool.altitude_m(point_ned_m)
-        ok = self.min_altitude_m <= altitude <= self.max_altitude_m
-        near_wall = self.pool.wall_distance_m(point_ned_m) < self.wall_lock_loss_distance_m
-        if self.wall_lock_loss_distance_m > 0.0 and near_wall:
-            ok = False
-        return ok, altitude
+        near_wall = self.wall_lock_loss_distance_m > 0.0 and \
+            self.pool.wall_distance_m(point_ned_m) < self.wall_lock_loss_distance_m
+        return self.min_altitude_m <= altitude <= self.max_altitude_m and not near_wall, altitude
 
     def measure(self, truth: VehicleTruth) -> DvlVelocitySample | None:
         point = truth.position_ned_m + truth.rotation @ self.position_frd_m
@@ -402,17 +400,15 @@ class _ImuBase(SensorModel):
 class AccelModel(_ImuBase):
     """ICM-20948 accelerometer: specific force at the IMU position, sensor frame (module docstring)."""
 
-    def __init__(self, config: VehicleConfig, seed: int,
-                 water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
+    def __init__(self, config: VehicleConfig, seed: int) -> None:
         super().__init__("icm20948_accel", "m_s2", config, seed)
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
-        self.temperature_c = float(water_temperature_c)
 
     def measure(self, truth: VehicleTruth) -> AccelSample:
         f = self._to_sensor(specific_force_frd(truth.nu, truth.nu_dot, truth.rotation,
                                                self.gravity_m_s2))
         m = f + self.extra_bias(truth.t_s) if self.disturbed else f
-        return AccelSample(truth.t_s, self._noisy3(m), self.temperature_c)
+        return AccelSample(truth.t_s, self._noisy3(m), DEFAULT_WATER_TEMPERATURE_C)
 
 
 class GyroModel(_ImuBase):
@@ -444,21 +440,20 @@ class MagModel(_ImuBase):
 class PressureModel(SensorModel):
     """MS5837 absolute pressure at the port position (module docstring)."""
 
-    def __init__(self, config: VehicleConfig, seed: int,
-                 water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
+    def __init__(self, config: VehicleConfig, seed: int) -> None:
         super().__init__("ms5837", NoiseSpec.of(config.simulation.sensors.ms5837, "pa",
                                                 float(config.sensors.ms5837.rate_hz)), seed)
         self.position_frd_m = np.asarray(config.sensors.ms5837.position_frd_m, dtype=float)
         self.density_kg_m3 = float(config.environment.water_density_kg_m3)
         self.gravity_m_s2 = float(config.environment.gravity_m_s2)
         self.surface_pressure_pa = float(config.environment.surface_pressure_pa)
-        self.temperature_c = float(water_temperature_c)
 
     def measure(self, truth: VehicleTruth) -> PressureSample:
         depth = float(truth.position_ned_m[2] + truth.rotation[2] @ self.position_frd_m)
         p = pressure_at_depth_pa(depth, self.density_kg_m3, self.gravity_m_s2, self.surface_pressure_pa)
         m = p + float(self.extra_bias(truth.t_s)[0]) if self.disturbed else p
-        return PressureSample(truth.t_s, self._noisy1(m), self.temperature_c, p, max(depth, 0.0))
+        temperature_c = DEFAULT_WATER_TEMPERATURE_C
+        return PressureSample(truth.t_s, self._noisy1(m), temperature_c, p, max(depth, 0.0))
 
 
 class AltitudeModel(SensorModel):
@@ -489,15 +484,14 @@ class SensorSuite:
 
     config: the vehicle configuration. pool: the pool (None: no floor, walls or surface for the DVL and
     sonar). seed: noise seed (default ``simulation.seed``). devices: names to enable (default all of
-    :data:`DEVICE_INDEX`). water_temperature_c.
+    :data:`DEVICE_INDEX`).
 
     ``latest``: device name -> its newest sample. ``next_due_s``: the earliest time any device is due.
     Raises ``ValueError`` for an unknown device name.
     """
 
     def __init__(self, config: VehicleConfig, pool: Pool | None, seed: int | None = None,
-                 devices: Sequence[str] | None = None,
-                 water_temperature_c: float = DEFAULT_WATER_TEMPERATURE_C) -> None:
+                 devices: Sequence[str] | None = None) -> None:
         seed = int(config.simulation.seed if seed is None else seed)
         names = list(DEVICE_INDEX) if devices is None else list(devices)
         unknown = [n for n in names if n not in DEVICE_INDEX]
@@ -507,8 +501,8 @@ class SensorSuite:
             "dvl75": lambda: DvlVelocityModel(config, pool, seed),
             "dvl75_attitude": lambda: DvlAttitudeModel(config, seed),
             "ping1d": lambda: AltitudeModel(config, pool, seed),
-            "ms5837": lambda: PressureModel(config, seed, water_temperature_c),
-            "icm20948_accel": lambda: AccelModel(config, seed, water_temperature_c),
+            "ms5837": lambda: PressureModel(config, seed),
+            "icm20948_accel": lambda: AccelModel(config, seed),
             "icm20948_gyro": lambda: GyroModel(config, seed),
             "icm20948_mag": lambda: MagModel(config, seed),
         }
@@ -550,13 +544,9 @@ class SensorSuite:
 
     def measure(self, name: str, truth: VehicleTruth, dropout: bool = False) -> Any | None:
         """One sample of device ``name`` on ``truth``, off its rate grid (noise and bias; with ``dropout`` the
-        device's ``dropout_probability`` applies and a dropped sample is None).
-
-        For the device emulators, which sample their truth when the real device would (the MS5837 at the start
-        of a conversion, the ICM-20948 at its output data rate): reading the newest grid sample instead would
-        add up to one model period (100 ms for the MS5837) of staleness that the real sensor does not have.
-        The grid (``latest``, :meth:`update`) is unchanged. Raises ``KeyError`` for a disabled device.
-        """
+        device's ``dropout_probability`` applies and a dropped sample is None), for the device
+        emulators, which sample when the real device would (:mod:`.hardware`). The grid (``latest``,
+        :meth:`update`) is unchanged. Raises ``KeyError`` for a disabled device."""
         model = self.models[name]
         if dropout and model.spec.dropout_probability > 0.0 and model.rng.random() < model.spec.dropout_probability:
             return None

@@ -38,10 +38,40 @@ from .thrusters import PulseWidthError, Thrusters
 from .truth import Truth, load_truth
 from .disturbances import DisturbanceModel
 
-__all__ = ["Simulator", "SensorListener", "PulseWidthError"]
+__all__ = ["Simulator", "SensorListener", "PulseWidthError", "fill_odometry", "fill_wrench"]
 
 #: Callback receiving each new sensor sample: (device name, sample dataclass).
 SensorListener = Callable[[str, Any], None]
+
+
+def _wrench6(wrench_frd) -> list[float]:
+    """An external wrench as 6 floats; ``ValueError`` unless 6 finite numbers."""
+    try:
+        w = [float(x) for x in wrench_frd]
+    except (TypeError, ValueError):
+        w = []
+    if len(w) != 6 or not all(math.isfinite(x) for x in w):
+        raise ValueError(f"external_wrench_frd must be 6 finite numbers, got {wrench_frd!r}")
+    return w
+
+
+def fill_odometry(odom: Any, position_ned_m, quaternion_xyzw, twist_flu) -> Any:
+    """Set a nav_msgs/msg/Odometry ``odom`` (frame ``odom``, ENU; child ``base_link``) from the body
+    position (3,) NED m, the quaternion (4,) xyzw of FRD in NED and the twist (6,) in base_link
+    FLU."""
+    odom.header.frame_id, odom.child_frame_id = "odom", "base_link"
+    p, o = odom.pose.pose.position, odom.pose.pose.orientation
+    p.x, p.y, p.z = (float(v) for v in frames.ned_to_enu(position_ned_m))
+    o.x, o.y, o.z, o.w = (float(v) for v in frames.quaternion_marine_to_ros(quaternion_xyzw))
+    lin, ang = odom.twist.twist.linear, odom.twist.twist.angular
+    lin.x, lin.y, lin.z, ang.x, ang.y, ang.z = (float(v) for v in twist_flu)
+    return odom
+
+
+def fill_wrench(wrench: Any, wrench_flu) -> None:
+    """Set a geometry_msgs/msg/Wrench from [Fx Fy Fz Tx Ty Tz] (6,), N and N m."""
+    f, tq = wrench.force, wrench.torque
+    f.x, f.y, f.z, tq.x, tq.y, tq.z = (float(v) for v in wrench_flu)
 
 
 class Simulator:
@@ -90,11 +120,8 @@ class Simulator:
             self.pool.set_floor_gradient(truth.disturbances.floor.gradient)
         self.disturbances = DisturbanceModel(config, truth.disturbances, self.model, self.pool)
         self.sensors.apply_disturbances(truth.disturbances, self._delayed_state)
-        self._history: deque = deque()
         self._keep_history_s = float(truth.disturbances.dvl.latency_s)
         self._listeners: list[SensorListener] = []
-        self._external = [0.0] * 6
-        self._last_pw: np.ndarray | None = None
         self._neutral = np.full(self.thrusters.n, self.thrusters.neutral_us)
         self._lag_half = self.thrusters.lag.decay(0.5 * self.step_s)
         self._lag_full = self.thrusters.lag.decay(self.step_s)
@@ -129,7 +156,7 @@ class Simulator:
         self._k = 0
         self._t = 0.0
         self._external = [0.0] * 6
-        self._last_pw = None
+        self._last_pw: np.ndarray | None = None
         self._esc_queue: deque = deque()
         self._base_force = np.zeros(self.thrusters.n)
         self._dist_wrench = [0.0] * 6
@@ -163,14 +190,7 @@ class Simulator:
         Returns the new ``(device, sample)`` pairs of this step. Raises :class:`PulseWidthError` (state
         unchanged) for bad widths and ``ValueError`` for a bad wrench.
         """
-        new_external = None
-        if external_wrench_frd is not None:
-            try:
-                new_external = [float(x) for x in external_wrench_frd]
-            except (TypeError, ValueError):
-                new_external = []
-            if len(new_external) != 6 or not all(math.isfinite(x) for x in new_external):
-                raise ValueError(f"external_wrench_frd must be 6 finite numbers, got {external_wrench_frd!r}")
+        new_external = None if external_wrench_frd is None else _wrench6(external_wrench_frd)
         thr = self.thrusters
         dist = self.disturbances
         pw = self._neutral if not armed else pulse_widths_us
@@ -259,10 +279,7 @@ class Simulator:
         :meth:`step`'s ``external_wrench_frd`` does, for a plant stepped by someone else (the simulator node): e.g.
         the known force of a calibration step (:mod:`hindrax_ident.graph_campaign`). Raises
         ``ValueError`` unless 6 finite numbers."""
-        w = [float(x) for x in wrench_frd]
-        if len(w) != 6 or not all(math.isfinite(x) for x in w):
-            raise ValueError(f"external_wrench_frd must be 6 finite numbers, got {wrench_frd!r}")
-        self._external = w
+        self._external = _wrench6(wrench_frd)
 
     # ------------------------------------------------------------------ truth
     @property

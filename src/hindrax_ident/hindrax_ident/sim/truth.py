@@ -204,25 +204,19 @@ def _validate_disturbances(flat: Mapping[str, Any], n_thrusters: int, source: st
                           f"{', '.join(sorted({k.split('.')[0] for k in DISTURBANCE_SCHEMA}))}.*)")
             continue
         _, lo, hi, length = DISTURBANCE_SCHEMA[key]
-        if length is None:
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(float(value)) \
-                and lo <= float(value) <= hi
-            if not ok:
-                issues.append(f"disturbances.{key}: {value!r}: a number in [{lo:g}, {hi:g}]")
-            else:
-                out[key] = float(value)
-            continue
-        want = n_thrusters if length == "n" else length
-        ok = isinstance(value, (list, tuple)) and len(value) == want and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(float(x))
-            and lo <= float(x) <= hi for x in value)
-        if not ok:
-            issues.append(f"disturbances.{key}: {value!r}: {want} numbers in [{lo:g}, {hi:g}]")
+        want = 1 if length is None else n_thrusters if length == "n" else length
+        xs = [value] if length is None else value
+        if not (isinstance(xs, (list, tuple)) and len(xs) == want and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(float(x))
+                and lo <= float(x) <= hi for x in xs)):
+            what = "a number" if length is None else f"{want} numbers"
+            issues.append(f"disturbances.{key}: {value!r}: {what} in [{lo:g}, {hi:g}]")
         else:
-            out[key] = tuple(float(x) for x in value)
-    for a, b in (("battery.voltage_start_v", "battery.voltage_end_v"),):
-        if (a in out) != (b in out):
-            issues.append(f"disturbances.{a if a not in out else b}: <missing>: set both battery voltages")
+            out[key] = float(value) if length is None else tuple(float(x) for x in value)
+    a, b = "battery.voltage_start_v", "battery.voltage_end_v"
+    if (a in out) != (b in out):
+        missing = a if a not in out else b
+        issues.append(f"disturbances.{missing}: <missing>: set both battery voltages")
     if issues:
         raise TruthError(f"{source}: " + "; ".join(issues))
     return Disturbances(out)
