@@ -208,12 +208,7 @@ class OnlineDofEstimator:
         tol_abs = [(0.02 if self.dof in ("roll", "pitch", "yaw") else 0.1) if n in ("bias",) or n.startswith("linear")
                    else 0.0 for n in self.names]
         rel = np.array([0.5 if n.startswith("linear") else 0.0 if n == "bias" else self.rel_tol for n in self.names])
-        std = self.rls.std
-        ok = np.isfinite(std) & (std <= rel * np.abs(self.rls.theta) + np.asarray(tol_abs))
-        ok &= ~self.rls.at_bound()  # held on a physical-sign bound: its std is not an interval around the truth
-        if self.rls.n_samples < 500 or self.rls.excitation_normalised < self.rls.min_excitation:
-            ok[:] = False
-        return np.where(ok, std, np.nan)
+        return self.rls.published_std(rel, np.asarray(tol_abs), min_samples=500)
 
     def result(self) -> dict:
         """Final {name: (value, std)} plus n_samples, excitation, converged_at_s."""
