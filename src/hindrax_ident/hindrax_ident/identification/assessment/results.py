@@ -56,7 +56,8 @@ from ...estimation.least_squares import EstimationError
 from ..fit.calibration import calibration_section, decay_inertia, joint_estimate
 from ..fit.dof_model import parameter_units, rigid_inertia
 from ..fit.fit_core import NO_MODEL_VERDICT
-from ..fit.posterior import prior_entries, prior_posterior, prior_std_rel_of, theta_priors
+from ..fit.posterior import (finite_or_none as _f, prior_entries, prior_posterior, prior_std_rel_of,
+                             theta_priors)
 from ...vehicle.uncertainty import declared_rel
 from ...vehicle.vehicle_match import vehicle_parameters
 from .verdicts import (FitEvidence, apply_reference_verdicts, apply_verdicts, assess, core_evidence, model_selection,
@@ -79,10 +80,6 @@ def REQUIRED_PARAMETERS(dof: str) -> tuple[str, ...]:  # noqa: N802 - reads like
                 "linear_damping_negative") if dof == "heave" else ("quadratic_damping", "linear_damping"))
     extra = ("restoring",) if dof in ("roll", "pitch") else ()
     return ("inertia", "added_mass") + damping + ("bias",) + extra
-
-
-def _f(x) -> float | None:
-    return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
 
 
 #: Projected area of each translational DOF from the configured bounding box (vehicle.length_m, width_m,

@@ -25,7 +25,7 @@ from ...estimation.least_squares import EstimationError
 from ...estimation.priors import priors_from_config
 from .dof_model import rigid_inertia
 
-__all__ = ["DEFAULT_PRIOR_STD_REL", "prior_std_rel_of", "prior_entries",
+__all__ = ["DEFAULT_PRIOR_STD_REL", "finite_or_none", "prior_std_rel_of", "prior_entries",
            "theta_priors", "prior_posterior"]
 
 #: Default 1-sigma of an empirical prior as a fraction of the prior's value (``identification.prior_std_rel``).
@@ -42,7 +42,8 @@ def prior_std_rel_of(cfg, prior_std_rel: float | None = None) -> float:
     return float(prior_std_rel)
 
 
-def _finite_or_none(x) -> float | None:
+def finite_or_none(x) -> float | None:
+    """``x`` as a float, None for None, NaN or inf (JSON and YAML have no NaN)."""
     return None if x is None or (isinstance(x, float) and not math.isfinite(x)) else float(x)
 
 
@@ -57,7 +58,8 @@ def prior_entries(cfg) -> dict[str, dict]:
         return {}
     src = "[NTNU-Thesis] App. A.1/A.2 empirical estimate, solid prism of the configured box"
     keys = ("added_mass", "linear_damping", "quadratic_damping")
-    return {dof: {**{k: _finite_or_none(p[k][i]) for k in keys}, "source": src} for i, dof in enumerate(DOFS)}
+    return {dof: {**{k: finite_or_none(p[k][i]) for k in keys}, "source": src}
+            for i, dof in enumerate(DOFS)}
 
 
 def theta_priors(dof: str, names: Sequence[str], cfg, prior_std_rel: float) -> dict[str, tuple[float, float]]:
