@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import multiprocessing
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
@@ -145,7 +146,6 @@ class OverlappedFits:
     :meth:`close` ends the process."""
 
     def __init__(self, bag_dir: str | Path, cfg: VehicleConfig) -> None:
-        import multiprocessing
         ctx = multiprocessing.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self._proc = ctx.Process(target=_overlap_worker, args=(child, Path(bag_dir), cfg),
