@@ -54,7 +54,7 @@ from .bringup import build_graph
 from .sim.campaign import PoolOperator
 from .identification.online.executive import calibration_forces, float_buoyancy, inclining_load
 from .identification.bag_input.reader import BagContentError
-from .identification.assessment.pipeline import identify_bag
+from .identification.assessment.pipeline import OverlappedFits, identify_bag
 from .identification.assessment.report import write_outputs
 
 __all__ = ["GraphCampaignOutcome", "VirtualOperator", "parse_prompt", "run_graph_campaign"]
@@ -267,12 +267,23 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                                        inclining_load_n_m=inclining_load(cfg), float_buoyancy_n=float_buoyancy(cfg))
             graph.nodes["simulator"].add_step_listener(operator.on_step)
 
+        # the offline fits of each DOF overlap the campaign's next ones (pipeline.OverlappedFits):
+        # a DOF is named 1 s simulated and a recorder flush interval (wall) after it ended
+        overlap = OverlappedFits(bag_dir, cfg) if dofs and not calibrate else None
+        ended: list = []  # (dof, sim time, wall time) of the DOFs finished and not yet named
+        flush_s = float(cfg.recording.flush_interval_s)
+
         def spin() -> None:
             graph.spin_once(0.01)
             if operator is not None:
                 operator.poll()
+            if ended and sim.t_s >= ended[-1][1] + 1.0 and \
+                    time.monotonic() >= ended[-1][2] + flush_s + 0.5:
+                overlap.done([d for d, _, _ in ended])
+                ended.clear()
 
         calibration: dict = {}
+        keep = False  # the overlapped fits are wanted: the campaign ended normally
         try:
             say(f"graph up: {', '.join(graph.nodes)}; recording to {bag_dir}")
             # Simulated time starts only when discovery, port opening and the devices' start-up exchanges are
@@ -299,6 +310,8 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
                 f = fb.feedback
                 if operator is not None:
                     operator.on_prompt(f.prompt)
+                if overlap is not None and last[0] is not None and f.dof and f.dof != last[0][0]:
+                    ended.append((last[0][0], sim.t_s, time.monotonic()))
                 key = (f.dof, f.level_index, math.copysign(1.0, f.level_command) if f.level_command else 0.0)
                 # a new DOF or level always prints; a sign change within one (a ladder's reverse run, or the
                 # many of a broadband excitation's force) at most every 5 s of simulated time
@@ -340,7 +353,10 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
             node_record = graph.nodes["identification"].last_record
             calibration = dict(node_record.calibration) if node_record is not None else {}
             outcome.node_record = node_record
+            keep = True
         finally:
+            if overlap is not None and not keep:
+                overlap.close()
             outcome.sim_time_s = sim.t_s
             graph.shutdown()
             client.destroy_node()
@@ -350,8 +366,12 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
+    done = overlap.result() if overlap is not None else None
+    if overlap is not None:
+        say(f"fitted while the campaign ran: {', '.join(overlap.early) or 'none'}" if done else
+            f"overlapped fits failed ({overlap.error}): identifying serially")
     try:  # with the identification node's calibration results
-        record, idents, errors = identify_bag(bag_dir, cfg, calibration=calibration)
+        record, idents, errors = done or identify_bag(bag_dir, cfg, calibration=calibration)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors

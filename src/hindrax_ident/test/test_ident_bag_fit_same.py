@@ -13,6 +13,11 @@ and quadratic damping) driven by the thrust model of the written widths (allocat
 Both commands must read it as the campaign (its DOF windows from the status) and go through the one fit core: every
 ``value`` and ``ci95`` of identification.yaml equal, and the fit near the vehicle file's surge parameters (so the
 equality is not that of two empty fits). RuntimeWarning is an error.
+
+The offline fits overlapped with the campaign (``hindrax run``; :class:`~hindrax_ident.
+identification.assessment.pipeline.OverlappedFits`) give the serial ``identify_bag``'s: a DOF's
+fit on the bag still being written, once ready, is the whole bag's; the worker's result is the
+serial one.
 """
 from __future__ import annotations
 
@@ -24,6 +29,10 @@ import yaml
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.config import default_config_path, load_config
+from hindrax_drivers.recording.reader import BagReader
+from hindrax_ident.identification.assessment.pipeline import OverlappedFits, _ready, identify_bag
+from hindrax_ident.identification.bag_input import from_bag
+from hindrax_ident.identification.fit.campaign_fit import fit_dofs
 from hindrax_ident.tools import cli
 from hindrax_ident.identification.fit.dof_model import truth_parameters
 from hindrax_ident.vehicle.signals import thrust_of_written_widths
@@ -160,7 +169,6 @@ def test_one_verdict_path_for_both_document_builders(tmp_path):
     reasons only from its steady windows (evidence the generic reader does not have) and the residual whiteness.
     Fails when either builder changes its priors, thrust term, intervals or per-parameter checks alone. (The
     whiteness check is the designed campaign's only.)"""
-    from hindrax_ident.identification.assessment.pipeline import identify_bag
     from hindrax_ident.identification.assessment.results import build_document
     from hindrax_ident.identification.fit import fit_any
     from hindrax_ident.identification.assessment.results import build_results
@@ -248,3 +256,57 @@ def test_a_parameter_at_its_bound_says_so_instead_of_an_interval(tmp_path, capsy
     row = next(x for x in printed.splitlines() if x.startswith("surge  linear_damping"))
     assert "at its lower bound 0" in row and "no interval" in row and "nan" not in printed
     assert "none: at its bound 0" in (out / "report" / "index.html").read_text()
+
+
+@pytest.fixture(scope="module")
+def surge_bag(tmp_path_factory):
+    cfg = load_config(default_config_path())
+    bag = tmp_path_factory.mktemp("overlap") / "campaign"
+    write_surge_campaign_bag(bag, cfg)
+    return cfg, bag
+
+
+def _same_fit(a, b) -> None:
+    assert list(a.names) == list(b.names)
+    np.testing.assert_array_equal(a.theta, b.theta)
+    np.testing.assert_array_equal(a.covariance.cov, b.covariance.cov)
+
+
+def test_a_ready_dof_fitted_on_a_prefix_of_the_bag_is_the_whole_bags_fit(surge_bag):
+    cfg, bag = surge_bag
+    reader = BagReader(bag)
+    wanted = [tp for tp in reader.topics if tp.lstrip("/") in from_bag.TOPICS]
+    msgs = [(m.topic.lstrip("/"), obj) for m, obj in reader.installed_messages(wanted, lean=True)]
+    full = from_bag.record_from_messages(msgs, cfg)
+    end = full.windows["surge"][1]
+
+    def upto(t_s: float):
+        return from_bag.record_from_messages([(tp, m) for tp, m in msgs
+                                              if from_bag._stamp(m) <= t_s], cfg)
+
+    # the bag as written to the window's end is not ready; to a sensor sample past the margin, it
+    # is (the bag ends 1 s after the window: a margin of 0.5 s here)
+    assert not _ready(upto(end), "surge", 0.5)
+    prefix = upto(end + 0.55)
+    assert _ready(prefix, "surge", 0.5) and prefix.t_s.size < full.t_s.size
+    _same_fit(fit_dofs(prefix, cfg)[0]["surge"][0], fit_dofs(full, cfg)[0]["surge"][0])
+
+
+def test_overlapped_fits_give_the_serial_identification(surge_bag):
+    cfg, bag = surge_bag
+    overlap = OverlappedFits(bag, cfg)
+    overlap.done(["surge"])
+    record, idents, errors = overlap.result()
+    assert overlap.early == ["surge"] and not errors  # fitted by the worker before the end
+    serial_record, serial, _errors = identify_bag(bag, cfg)
+    assert set(idents) == set(serial) == {"surge"}
+    _same_fit(idents["surge"].signals["core"], serial["surge"].signals["core"])
+    assert idents["surge"].values == serial["surge"].values
+    assert idents["surge"].std == serial["surge"].std
+    np.testing.assert_array_equal(record.t_s, serial_record.t_s)
+
+
+def test_a_failed_worker_says_why_and_gives_no_result(tmp_path):
+    overlap = OverlappedFits(tmp_path / "no_bag", load_config(default_config_path()))
+    overlap.done(["surge"])
+    assert overlap.result() is None and "no_bag" in overlap.error

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import multiprocessing
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
@@ -21,13 +22,14 @@ from ..bag_input.from_bag import truncation
 from ..bag_input.reader import BagRecords, read_any_topics, read_campaign
 from ..fit import fit_core
 from ..fit.calibration import identify_calibrated
-from ..fit.campaign_fit import identify_all_with_errors
+from ..fit.campaign_fit import fit_dofs, identify_all_with_errors
 from ..fit.fit_any import DofFit, FitResult, fit_records
 from .report import write_fit_outputs, write_outputs
 from .results import build_document, reference_sections
 
 __all__ = ["fit_bags", "fit_read", "identify_bag", "truncation", "campaign_result", "core_options",
-           "write_any_outputs", "write_campaign_outputs", "without_collector"]
+           "write_any_outputs", "write_campaign_outputs", "without_collector",
+           "OverlappedFits"]
 
 
 @contextlib.contextmanager
@@ -72,18 +74,114 @@ def fit_read(records: BagRecords, holdout: Sequence[str | Path] = (),
 
 @without_collector()
 def identify_bag(bag_path: str | Path, cfg: VehicleConfig, grid_s: float = 0.01,
-                 opts: fit_core.CoreOptions | None = None, calibration: dict | None = None):
+                 opts: fit_core.CoreOptions | None = None, calibration: dict | None = None,
+                 fitted: dict | None = None):
     """(record, {dof: DofIdentification}, {dof: error}) of a campaign bag: :func:`..bag_input.reader.read_campaign`,
     then :func:`..fit.campaign_fit.identify_all_with_errors` with the fit core's options ``opts`` (None: the
     defaults). The fits see the thrust-model force times the ``calibration`` scales (None:
     ``record.calibration``; :func:`..fit.calibration.identify_calibrated`); ``record`` stays as
-    read. Raises :class:`..bag_input.from_bag.BagContentError`, ``ValueError`` for a scale <= 0."""
+    read. fitted: DOFs fitted on this bag while it was written (:class:`OverlappedFits`; no
+    calibration). Raises :class:`..bag_input.from_bag.BagContentError`, ``ValueError`` for a
+    scale <= 0 or ``fitted`` with a calibration."""
     record = read_campaign(bag_path, cfg, grid_s).campaign
     opts = fit_core.CoreOptions() if opts is None else opts
-    fitted = record if calibration is None else replace(record, calibration=calibration)
-    idents, errors = identify_calibrated(
-        fitted, cfg, lambda rec, c: identify_all_with_errors(rec, c, opts))
+    scaled = record if calibration is None else replace(record, calibration=calibration)
+    if fitted and scaled.calibration:
+        raise ValueError("identify_bag: fits made before the calibration scales are known")
+    idents, errors = identify_calibrated(scaled, cfg, lambda rec, c: identify_all_with_errors(
+        rec, c, opts, fitted if rec is scaled else None))
     return record, idents, errors
+
+
+def _ready(record, dof: str, margin_s: float = 1.0) -> bool:
+    """True when a record read from a bag still being written holds ``dof``'s whole window and
+    every sensor log a sample ``margin_s`` past it (a log's samples arrive in stamp order): the
+    DOF's fit is then the whole bag's (:func:`..fit.campaign_fit.fit_dofs`)."""
+    w = record.windows.get(dof)
+    return w is not None and record.t_s[-1] >= w[1] + margin_s and all(
+        log[-1][0] >= w[1] + margin_s for log in record.sensors.values() if log)
+
+
+def _receive(conn):
+    """The next message, False when the other end has closed."""
+    try:
+        return conn.recv()
+    except EOFError:
+        return False
+
+
+@without_collector()
+def _overlap_worker(conn, bag_dir: Path, cfg: VehicleConfig) -> None:
+    """:class:`OverlappedFits`' process: each list of DOFs received is fitted on the bag as
+    written so far (a DOF not yet :func:`_ready` waits for the next list); None:
+    :func:`identify_bag` of the closed bag with those fits, sent back as ("ok", (record, idents,
+    errors), DOFs fitted before) or ("error", message, [])."""
+    fitted: dict = {}
+    todo: list = []
+    opts = fit_core.CoreOptions()
+    while (msg := _receive(conn)) is not None:
+        if msg is False:
+            return
+        todo += [d for d in msg if d not in todo]
+        try:
+            record = read_campaign(bag_dir, cfg).campaign
+            new, _ = fit_dofs(record, cfg, opts, [d for d in todo if _ready(record, d)])
+            fitted.update(new)
+            todo = [d for d in todo if d not in fitted]
+        except Exception:  # noqa: BLE001 -- a bag not readable yet: its DOFs fitted at the end
+            pass
+    try:
+        conn.send(("ok", identify_bag(bag_dir, cfg, opts=opts, fitted=fitted), list(fitted)))
+    except Exception as exc:  # noqa: BLE001 -- reported; the caller identifies serially
+        conn.send(("error", f"{type(exc).__name__}: {exc}", []))
+
+
+class OverlappedFits:
+    """The offline identification of a campaign bag overlapped with the campaign writing it.
+
+    A spawned process (started with the campaign, so its imports cost no wall time; forking an
+    rclpy process is unsafe) fits each DOF (:func:`..fit.campaign_fit.fit_dofs`) on the bag as
+    written once :meth:`done` names it; :meth:`result` then identifies the closed bag with those
+    fits (:func:`identify_bag`): what :func:`identify_bag` gives alone. Without a calibration.
+    :meth:`close` ends the process."""
+
+    def __init__(self, bag_dir: str | Path, cfg: VehicleConfig) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_overlap_worker, args=(child, Path(bag_dir), cfg),
+                                 daemon=True)
+        self._proc.start()
+        child.close()
+        self.error, self.early = "", []
+
+    def done(self, dofs: Sequence[str]) -> None:
+        """The campaign has finished ``dofs`` (their data on disk now or soon: re-tried later)."""
+        try:
+            self._conn.send(list(dofs))
+        except OSError:
+            pass  # the process is gone: result() says so
+
+    def result(self):
+        """(record, idents, errors) of the closed bag as :func:`identify_bag` gives them, or None
+        when the process failed (the message in :attr:`error`); :attr:`early`: the DOFs fitted
+        while the bag was written."""
+        try:
+            self._conn.send(None)
+            status, value, self.early = self._conn.recv()
+        except (OSError, EOFError) as exc:
+            status, value = "error", f"worker lost: {exc}"
+        self.close()
+        if status != "ok":
+            self.error = value
+            return None
+        return value
+
+    def close(self) -> None:
+        """End the process (idempotent)."""
+        self._conn.close()
+        if self._proc.is_alive():
+            self._proc.terminate()
+        self._proc.join(5)
 
 
 def campaign_result(idents: dict, folds: int, opts: fit_core.CoreOptions) -> FitResult:

@@ -36,7 +36,8 @@ from .dof_model import (DofIdentification, core_index, parameter_names, paramete
                         truth_parameters)
 
 __all__ = ["CampaignSignals", "AccelerometerAid", "RateAid", "rate_bias_against_angle", "dof_record",
-           "dof_records", "identification_of", "identify_all_with_errors", "identify_dof"]
+           "dof_records", "fit_dofs", "identification_of", "identify_all_with_errors",
+           "identify_dof"]
 
 
 @dataclass
@@ -101,12 +102,12 @@ def dof_record(record, dof: str, cfg: VehicleConfig) -> tuple[fit_core.DofRecord
     return rec, CampaignSignals(t, force, force_cmd, np.asarray(record.run_id[sl]), x_s, v_s, a_s, rr)
 
 
-def dof_records(record, cfg: VehicleConfig) -> tuple[dict, dict, dict]:
-    """({dof: DofRecord}, {dof: CampaignSignals}, {dof: error message}) of every DOF with a window in ``record``
-    (:func:`dof_record`)."""
+def dof_records(record, cfg: VehicleConfig, dofs=DOFS) -> tuple[dict, dict, dict]:
+    """({dof: DofRecord}, {dof: CampaignSignals}, {dof: error message}) of every DOF of ``dofs``
+    with a window in ``record`` (:func:`dof_record`)."""
     recs, sigs, errors = {}, {}, {}
     for dof in DOFS:
-        if dof not in record.windows:
+        if dof not in record.windows or dof not in dofs:
             continue
         try:
             recs[dof], sigs[dof] = dof_record(record, dof, cfg)
@@ -179,16 +180,31 @@ def identification_of(dof: str, cfg: VehicleConfig, core: fit_core.DofResult, si
                  "online_history": online.history if online is not None else {}})
 
 
-def identify_all_with_errors(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions()
-                             ) -> tuple[dict, dict]:
-    """({dof: DofIdentification}, {dof: error message}) for every DOF run in ``record``: the campaign reader
-    (:func:`dof_records`) and the fit core (:func:`~.fit_core.identify_dofs`; ``opts`` default the defaults of
-    ``hindrax ident fit``), docs/identification.md §7; then :func:`identification_of`."""
-    recs, sigs, errors = dof_records(record, cfg)
+def fit_dofs(record, cfg: VehicleConfig, opts: fit_core.CoreOptions = fit_core.CoreOptions(),
+             dofs=DOFS) -> tuple[dict, dict]:
+    """({dof: (DofResult, CampaignSignals)}, {dof: error message}) of the DOFs of ``dofs`` run in
+    ``record``: the campaign reader (:func:`dof_records`) and the fit core
+    (:func:`~.fit_core.identify_dofs`; ``opts`` default the defaults of ``hindrax ident fit``),
+    docs/identification.md §7. A DOF's result depends on the record to the end of its window
+    only (each sensor log to a sample past it): a bag still being written gives it too."""
+    recs, sigs, errors = dof_records(record, cfg, dofs)
     results, errs = fit_core.identify_dofs(recs, opts)
     errors.update(errs)
-    out = {dof: identification_of(dof, cfg, results[dof], sigs[dof], record.online.get(dof))
-           for dof in DOFS if dof in results}
+    return {d: (results[d], sigs[d]) for d in results}, errors
+
+
+def identify_all_with_errors(record, cfg: VehicleConfig,
+                             opts: fit_core.CoreOptions = fit_core.CoreOptions(),
+                             fitted: dict | None = None) -> tuple[dict, dict]:
+    """({dof: DofIdentification}, {dof: error message}) for every DOF run in ``record``:
+    :func:`fit_dofs` of the DOFs not in ``fitted`` (results of :func:`fit_dofs` already made, on
+    the bag while it was written), then :func:`identification_of` with the record's online
+    estimates."""
+    fitted = dict(fitted or {})
+    new, errors = fit_dofs(record, cfg, opts, [d for d in DOFS if d not in fitted])
+    fitted.update(new)
+    out = {dof: identification_of(dof, cfg, *fitted[dof], record.online.get(dof))
+           for dof in DOFS if dof in fitted and dof in record.windows}
     return out, {d: errors[d] for d in DOFS if d in errors}
 
 
