@@ -366,12 +366,13 @@ def _run(config_path, out, dofs, levels, seed, real_time_factor, overrides, say,
         outcome.wall_time_s = time.monotonic() - wall0
         return outcome
     say("offline identification from the bag")
-    done = overlap.result() if overlap is not None else None
+    fitted = overlap.result() if overlap is not None else None
     if overlap is not None:
-        say(f"fitted while the campaign ran: {', '.join(overlap.early) or 'none'}" if done else
-            f"overlapped fits failed ({overlap.error}): identifying serially")
+        say(f"fitted while the campaign ran: {', '.join(fitted) or 'none'}" if fitted is not None
+            else f"overlapped fits lost ({overlap.error}): identifying serially")
     try:  # with the identification node's calibration results
-        record, idents, errors = done or identify_bag(bag_dir, cfg, calibration=calibration)
+        record, idents, errors = identify_bag(bag_dir, cfg, calibration=calibration,
+                                              fitted=None if calibration else fitted)
     except BagContentError as exc:
         record, idents, errors = None, {}, {"bag": str(exc)}
     outcome.record, outcome.identifications, outcome.errors = record, idents, errors

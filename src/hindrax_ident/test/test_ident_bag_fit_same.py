@@ -296,17 +296,25 @@ def test_overlapped_fits_give_the_serial_identification(surge_bag):
     cfg, bag = surge_bag
     overlap = OverlappedFits(bag, cfg)
     overlap.done(["surge"])
-    record, idents, errors = overlap.result()
-    assert overlap.early == ["surge"] and not errors  # fitted by the worker before the end
+    fitted = overlap.result()
+    assert list(fitted) == ["surge"]  # fitted by the worker before the end
+    record, idents, errors = identify_bag(bag, cfg, fitted=fitted)
     serial_record, serial, _errors = identify_bag(bag, cfg)
-    assert set(idents) == set(serial) == {"surge"}
+    assert not errors and set(idents) == set(serial) == {"surge"}
     _same_fit(idents["surge"].signals["core"], serial["surge"].signals["core"])
     assert idents["surge"].values == serial["surge"].values
     assert idents["surge"].std == serial["surge"].std
     np.testing.assert_array_equal(record.t_s, serial_record.t_s)
 
 
-def test_a_failed_worker_says_why_and_gives_no_result(tmp_path):
+def test_a_bag_not_readable_yet_leaves_its_dofs_to_the_serial_fit(tmp_path):
     overlap = OverlappedFits(tmp_path / "no_bag", load_config(default_config_path()))
     overlap.done(["surge"])
-    assert overlap.result() is None and "no_bag" in overlap.error
+    assert overlap.result() == {} and overlap.error == ""
+
+
+def test_a_lost_worker_says_why_and_gives_no_fits(tmp_path):
+    overlap = OverlappedFits(tmp_path / "no_bag", load_config(default_config_path()))
+    overlap._proc.kill()
+    overlap._proc.join(10)
+    assert overlap.result() is None and "worker lost" in overlap.error

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import multiprocessing
+import os
 from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
@@ -112,10 +113,11 @@ def _receive(conn):
 
 @without_collector()
 def _overlap_worker(conn, bag_dir: Path, cfg: VehicleConfig) -> None:
-    """:class:`OverlappedFits`' process: each list of DOFs received is fitted on the bag as
-    written so far (a DOF not yet :func:`_ready` waits for the next list); None:
-    :func:`identify_bag` of the closed bag with those fits, sent back as ("ok", (record, idents,
-    errors), DOFs fitted before) or ("error", message, [])."""
+    """:class:`OverlappedFits`' process, at nice +10 (the campaign's graph keeps its core when the
+    second one is busy): each list of DOFs received is fitted on the bag as written so far (a DOF
+    not yet :func:`_ready` waits for the next list; a bag not readable yet leaves them for
+    :func:`identify_bag`); None: the fits made, {dof: (DofResult, CampaignSignals)}, sent back."""
+    os.nice(10)
     fitted: dict = {}
     todo: list = []
     opts = fit_core.CoreOptions()
@@ -123,27 +125,22 @@ def _overlap_worker(conn, bag_dir: Path, cfg: VehicleConfig) -> None:
         if msg is False:
             return
         todo += [d for d in msg if d not in todo]
-        try:
+        with contextlib.suppress(Exception):
             record = read_campaign(bag_dir, cfg).campaign
             new, _ = fit_dofs(record, cfg, opts, [d for d in todo if _ready(record, d)])
             fitted.update(new)
             todo = [d for d in todo if d not in fitted]
-        except Exception:  # noqa: BLE001 -- a bag not readable yet: its DOFs fitted at the end
-            pass
-    try:
-        conn.send(("ok", identify_bag(bag_dir, cfg, opts=opts, fitted=fitted), list(fitted)))
-    except Exception as exc:  # noqa: BLE001 -- reported; the caller identifies serially
-        conn.send(("error", f"{type(exc).__name__}: {exc}", []))
+    conn.send(fitted)
 
 
 class OverlappedFits:
-    """The offline identification of a campaign bag overlapped with the campaign writing it.
+    """Fits of a campaign bag's DOFs made while the campaign writes it.
 
     A spawned process (started with the campaign, so its imports cost no wall time; forking an
     rclpy process is unsafe) fits each DOF (:func:`..fit.campaign_fit.fit_dofs`) on the bag as
-    written once :meth:`done` names it; :meth:`result` then identifies the closed bag with those
-    fits (:func:`identify_bag`): what :func:`identify_bag` gives alone. Without a calibration.
-    :meth:`close` ends the process."""
+    written once :meth:`done` names it; :meth:`result` returns those fits for
+    ``identify_bag(..., fitted=)``, which then gives what it gives alone (a ready DOF's fit on a
+    prefix is the whole bag's). Without a calibration. :meth:`close` ends the process."""
 
     def __init__(self, bag_dir: str | Path, cfg: VehicleConfig) -> None:
         ctx = multiprocessing.get_context("spawn")
@@ -152,29 +149,23 @@ class OverlappedFits:
                                  daemon=True)
         self._proc.start()
         child.close()
-        self.error, self.early = "", []
+        self.error = ""
 
     def done(self, dofs: Sequence[str]) -> None:
         """The campaign has finished ``dofs`` (their data on disk now or soon: re-tried later)."""
-        try:
+        with contextlib.suppress(OSError):  # the process is gone: result() says so
             self._conn.send(list(dofs))
-        except OSError:
-            pass  # the process is gone: result() says so
 
-    def result(self):
-        """(record, idents, errors) of the closed bag as :func:`identify_bag` gives them, or None
-        when the process failed (the message in :attr:`error`); :attr:`early`: the DOFs fitted
-        while the bag was written."""
+    def result(self) -> dict | None:
+        """The fits made, {dof: (DofResult, CampaignSignals)} (possibly empty), or None when the
+        process was lost (the reason in :attr:`error`). Ends the process."""
         try:
             self._conn.send(None)
-            status, value, self.early = self._conn.recv()
+            fitted = self._conn.recv()
         except (OSError, EOFError) as exc:
-            status, value = "error", f"worker lost: {exc}"
+            fitted, self.error = None, f"worker lost: {type(exc).__name__} {exc}".strip()
         self.close()
-        if status != "ok":
-            self.error = value
-            return None
-        return value
+        return fitted
 
     def close(self) -> None:
         """End the process (idempotent)."""
