@@ -47,7 +47,7 @@ _domain_ctx = None
 #: the readers of a shared run) runs as one unit where its listed test stands (its tests run there, in file order),
 #: with the seconds of the whole group (its parts of 5 s and more).
 LONGEST_FIRST = """
-285 test_pool_day.py::test_pool_day_as_the_readme_writes_it
+348 test_pool_day.py::test_pool_day_as_the_readme_writes_it
  95 test_run_end_to_end.py::test_hindrax_run_surge_and_heave_through_the_graph
  54 test_ident_fit.py::test_ident_fit_recovers_the_truth_and_predicts_a_held_out_bag
  32 test_calibration_topic.py::test_node_publishes_the_step_result_when_the_ballast_step_ends_and_the_recorder_stores_it
