@@ -209,7 +209,7 @@ def write_campaign_outputs(out: Path, record, idents: dict, cfg: VehicleConfig, 
         note += "; TRUNCATED: " + "; ".join(lacking)
 
     def sections(doc: dict) -> None:
-        reference_sections(doc, record, cfg, idents, restoring_n_m_per_rad, restoring_std, progress)
+        reference_sections(doc, record, cfg, restoring_n_m_per_rad, restoring_std, progress)
         if lacking:
             doc["provenance"]["truncated"] = list(lacking)
 

@@ -623,7 +623,7 @@ def free_decay_section(record, cfg, restoring_n_m_per_rad: float | None, restori
     return out
 
 
-def reference_sections(doc: dict, record, cfg, idents: dict, restoring_n_m_per_rad: float | None = None,
+def reference_sections(doc: dict, record, cfg, restoring_n_m_per_rad: float | None = None,
                        restoring_std: float = 0.0, progress=print) -> None:
     """identification.yaml ``inclining`` (restoring stiffness per DOF from the inclining step) and ``free_decay``
     (:func:`free_decay_section`, with the reference verdicts) of a campaign record that has them; in place."""

@@ -252,7 +252,7 @@ def run_graph(args: argparse.Namespace) -> int:
                                      progress=progress, truth=getattr(args, "truth", None),
                                      calibrate=_calibration_steps(args),
                                      sections=lambda doc, rec, idents: reference_sections(
-                                         doc, rec, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std,
+                                         doc, rec, cfg, args.restoring_n_m_per_rad, args.restoring_std,
                                          progress))
     except ForeignVehicleError as exc:
         raise CommandError(f"hindrax run: {exc}") from exc
@@ -299,6 +299,6 @@ def run_in_process(args: argparse.Namespace) -> int:
         # thrust scales estimated jointly with the fits (calibration.joint_estimate), calibration section
         write_outputs(out, idents, cfg, None, note, source="simulation", seed=record.seed,
                       calibration=record.calibration, sections=lambda doc: reference_sections(
-                          doc, record, cfg, idents, args.restoring_n_m_per_rad, args.restoring_std, progress))
+                          doc, record, cfg, args.restoring_n_m_per_rad, args.restoring_std, progress))
     return _finish(args, progress, out, idents, errors, not record.aborted,
                    "in-process (no ROS graph)")
