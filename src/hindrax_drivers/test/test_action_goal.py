@@ -178,7 +178,8 @@ def test_lost_cancel_request_is_sent_again_until_the_goal_is_cancelling():
         spin = lambda: ex.spin_once(timeout_sec=0.01)  # noqa: E731
         try:
             wait_until(client.server_is_ready, 20, spin, "action server discovered")
-            sender = GoalSender(client_node, client, "run_identification", resend_every_s=0.3)
+            # 1.5 s: the status showing the resent cancel must come within one period, else a third is sent
+            sender = GoalSender(client_node, client, "run_identification", resend_every_s=1.5)
             handle = sender.send(RunIdentification.Goal(dofs=["sway"]), spin, 20)
             assert handle.accepted
             calls = _lose_first(handle, "cancel_goal_async", send=False)
