@@ -336,6 +336,7 @@ _US = 1000000  # µs -> s
 _CC = 100  # centi-degC -> degC
 _PY_TYPE = {"int": int, "bool": bool}  # a divisor conversion gives a float
 _TAIL_TYPE = {"text": (str, ""), "profile": (bytes, b"")}
+_WIRE = {"B": "u8", "H": "u16", "I": "u32", "text": "char[]", "profile": "u16 length + u8[]"}
 
 #: message id -> payload class, for every message in docs/devices.md §2.4 (see :func:`_payload`).
 PAYLOAD_TYPES: Dict[int, Type[Ping1dPayload]] = {}
@@ -347,9 +348,9 @@ def _payload(message_id: Ping1dId, note: str, *layout: tuple,
     ``SetRange``), and register it in :data:`PAYLOAD_TYPES`.
 
     ``layout``: one ``(field, struct code, conversion[, default])`` per fixed field, in wire order;
-    ``tail``: ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). ``note`` ends the class
-    docstring; its sections are of docs/devices.md, §2.4 (the message table) unless it says
-    otherwise.
+    ``tail``: ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). The class docstring
+    gives the wire layout, then ``note``; its sections are of docs/devices.md, §2.4 (the message
+    table) unless it says otherwise.
     """
     fields: list = [(name, _PY_TYPE.get(conv, float),
                      field(default=default[0] if default else MISSING))
@@ -358,10 +359,12 @@ def _payload(message_id: Ping1dId, note: str, *layout: tuple,
         tail_type, tail_default = _TAIL_TYPE[tail[1]]
         fields.append((tail[0], tail_type, field(default=tail_default)))
     name = "".join(word.capitalize() for word in message_id.name.split("_"))
+    wire = [f"{row[0]} {_WIRE[row[1]]}" for row in (*layout, *([tail] if tail else []))]
     cls = make_dataclass(name, fields, bases=(Ping1dPayload,), frozen=True, namespace={
         "MESSAGE_ID": message_id, "LAYOUT": tuple((code, conv) for _, code, conv, *_ in layout),
         "TAIL": None if tail is None else tail[1], "__module__": __name__,
-        "__doc__": f"id {message_id.value} {message_id.name.lower()}: {note}"})
+        "__doc__": f"id {message_id.value} {message_id.name.lower()} "
+                   f"({', '.join(wire) or 'no payload'}): {note}"})
     PAYLOAD_TYPES[message_id] = cls
     return cls
 
@@ -374,7 +377,7 @@ _DISTANCE_LAYOUT = (("distance_m", "I", _MM), ("confidence_pct", "H", "int"),
 Ack = _payload(Ping1dId.ACK, "id of the acknowledged message (§2.3).", ("acked_id", "H", "int"))
 Nack = _payload(Ping1dId.NACK, "id, then ASCII text, not necessarily NUL-terminated (§2.3).",
                 ("nacked_id", "H", "int"), tail=("message", "text"))
-AsciiText = _payload(Ping1dId.ASCII_TEXT, "char[].", tail=("text", "text"))
+AsciiText = _payload(Ping1dId.ASCII_TEXT, "§2.4.", tail=("text", "text"))
 DeviceInformation = _payload(
     Ping1dId.DEVICE_INFORMATION, "device_type 0 unknown, 1 Ping Echosounder, 2 Ping360.",
     ("device_type", "B", "int"), ("device_revision", "B", "int"),
@@ -396,12 +399,12 @@ SetPingInterval = _payload(Ping1dId.SET_PING_INTERVAL, "ms between pings (vector
 SetGainSetting = _payload(Ping1dId.SET_GAIN_SETTING, "index 0..6 of :data:`GAIN_INDEX_TO_GAIN`.",
                           ("gain_setting", "B", "int"))
 SetPingEnable = _payload(Ping1dId.SET_PING_ENABLE, "0 off / 1 on.", ("enabled", "B", "bool"))
-GotoBootloader = _payload(Ping1dId.GOTO_BOOTLOADER, "no payload.")
+GotoBootloader = _payload(Ping1dId.GOTO_BOOTLOADER, "§2.4.")
 FirmwareVersion = _payload(
     Ping1dId.FIRMWARE_VERSION, "device_model 1 = Ping1D.", ("device_type", "B", "int"),
     ("device_model", "B", "int"), ("firmware_version_major", "H", "int"),
     ("firmware_version_minor", "H", "int"))
-DeviceId = _payload(Ping1dId.DEVICE_ID, "u8.", ("device_id", "B", "int"))
+DeviceId = _payload(Ping1dId.DEVICE_ID, "§2.4.", ("device_id", "B", "int"))
 Voltage5 = _payload(Ping1dId.VOLTAGE_5, "mV -> V.", ("voltage_5_v", "H", _MM))
 SpeedOfSound = _payload(Ping1dId.SPEED_OF_SOUND, "mm/s -> m/s.", ("speed_of_sound_m_s", "I", _MM))
 Range = _payload(Ping1dId.RANGE, "mm -> m.", ("scan_start_m", "I", _MM),
@@ -414,24 +417,24 @@ GainSetting = _payload(Ping1dId.GAIN_SETTING, "**u32** gain index (the set messa
 TransmitDuration = _payload(Ping1dId.TRANSMIT_DURATION, "µs -> s.",
                             ("transmit_duration_s", "H", _US))
 GeneralInfo = _payload(
-    Ping1dId.GENERAL_INFO, "10 bytes.", ("firmware_version_major", "H", "int"),
-    ("firmware_version_minor", "H", "int"), ("voltage_5_v", "H", _MM),
-    ("ping_interval_s", "H", _MM), ("gain_setting", "B", "int"), ("mode_auto", "B", "bool"))
+    Ping1dId.GENERAL_INFO, "10 bytes; voltage_5 in mV, ping_interval in ms.",
+    ("firmware_version_major", "H", "int"), ("firmware_version_minor", "H", "int"),
+    ("voltage_5_v", "H", _MM), ("ping_interval_s", "H", _MM), ("gain_setting", "B", "int"),
+    ("mode_auto", "B", "bool"))
 DistanceSimple = _payload(Ping1dId.DISTANCE_SIMPLE, "5 bytes (vector §2.5).",
                           ("distance_m", "I", _MM), ("confidence_pct", "B", "int"))
 Distance = _payload(
-    Ping1dId.DISTANCE, "24 bytes: distance (u32 mm @0), confidence (u16 % @4), transmit_duration "
-    "(u16 µs @6), ping_number (u32 @8), scan_start (u32 mm @12), scan_length (u32 mm @16), "
-    "gain_setting (u32 @20).", *_DISTANCE_LAYOUT)
+    Ping1dId.DISTANCE, "24 bytes, fields at @0, 4, 6, 8, 12, 16, 20; distance and scan in mm, "
+    "confidence in %, transmit_duration in µs.", *_DISTANCE_LAYOUT)
 ProcessorTemperature = _payload(Ping1dId.PROCESSOR_TEMPERATURE, "centi-degC -> degC.",
                                 ("temperature_degc", "H", _CC))
 PcbTemperature = _payload(Ping1dId.PCB_TEMPERATURE, "centi-degC -> degC.",
                           ("temperature_degc", "H", _CC))
-PingEnable = _payload(Ping1dId.PING_ENABLE, "0/1.", ("enabled", "B", "bool"))
+PingEnable = _payload(Ping1dId.PING_ENABLE, "0 off / 1 on.", ("enabled", "B", "bool"))
 Profile = _payload(
-    Ping1dId.PROFILE, "the 1212 distance fields (24 B), u16 profile_data_length @24, u8[] "
-    "profile_data @26 (first sample nearest the transducer, spanning scan_start .. scan_start + "
-    "scan_length).", *_DISTANCE_LAYOUT, tail=("profile_data", "profile"))
+    Ping1dId.PROFILE, "the 1212 fields (24 B), the length @24, the samples @26 (first nearest the "
+    "transducer, spanning scan_start .. scan_start + scan_length).", *_DISTANCE_LAYOUT,
+    tail=("profile_data", "profile"))
 ContinuousStart = _payload(Ping1dId.CONTINUOUS_START, "id to stream, 1300 = profile (vector §2.5).",
                            ("requested_id", "H", "int"))
 ContinuousStop = _payload(Ping1dId.CONTINUOUS_STOP, "id to stop.", ("requested_id", "H", "int"))
