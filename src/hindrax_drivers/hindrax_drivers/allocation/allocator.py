@@ -43,7 +43,7 @@ from typing import Sequence
 import numpy as np
 
 from .deadband import MAX_THRUSTERS, ZERO_FORCE_N, DeadbandSearch
-from .thrust_curve import ThrustCurve, check_voltage_scale, forward_thrust
+from .thrust_curve import ThrustCurve, check_positive, forward_thrust
 
 __all__ = ["AXIS_NAMES", "DEFAULT_PRIORITY_GROUPS", "InvalidWrenchError", "AllocationResult",
            "DEFAULT_EFFORT_WEIGHT", "ThrustAllocator", "weighted_pseudo_inverse"]
@@ -269,23 +269,13 @@ class ThrustAllocator:
         groups = self._parse_groups(groups_arg)
         step = self._step_us if pulse_width_step_us is keep else pulse_width_step_us
         if step is not None:
-            try:
-                step = float(step)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"pulse_width_step_us must be None or a positive number, got {step!r}") from exc
-            if not (math.isfinite(step) and step > 0.0):
-                raise ValueError(f"pulse_width_step_us must be None or a finite positive number, got {step!r}")
+            step = check_positive(step, "pulse_width_step_us")
         search_on = self._search_on if deadband_search is keep else deadband_search
         if not isinstance(search_on, (bool, np.bool_)):
             raise ValueError(f"deadband_search must be True or False, got {search_on!r}")
         rho_arg = self._effort_weight_arg if effort_weight is keep else effort_weight
         if rho_arg is not None:
-            try:
-                rho_arg = float(rho_arg)
-            except (TypeError, ValueError) as exc:
-                raise ValueError(f"effort_weight must be None or a number >= 0, got {rho_arg!r}") from exc
-            if not (math.isfinite(rho_arg) and rho_arg >= 0.0):
-                raise ValueError(f"effort_weight must be None or a finite number >= 0, got {rho_arg!r}")
+            rho_arg = check_positive(rho_arg, "effort_weight", allow_zero=True)
         grid = _PulseGrid(curve_list, step)
         rho = rho_arg if rho_arg is not None else (grid.effort_weight() if step is not None else DEFAULT_EFFORT_WEIGHT)
         search = None
@@ -380,7 +370,7 @@ class ThrustAllocator:
     def force_limits_n(self, voltage_scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """``(lower, upper)`` force limits (n,) in N: each curve's max reverse (< 0) and forward (> 0)
         thrust times ``voltage_scale``. Raises ``ValueError`` for a non-finite or non-positive scale."""
-        s = check_voltage_scale(voltage_scale)
+        s = check_positive(voltage_scale, "voltage_scale")
         return s * self._base_lower, s * self._base_upper
 
     # ----------------------------------------------------------------- allocation
@@ -424,7 +414,7 @@ class ThrustAllocator:
             raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}") from exc
         if tau.shape != (6,) or not np.isfinite(tau).all():
             raise InvalidWrenchError(f"wrench must be 6 finite numbers [X Y Z K M N], got {wrench!r}")
-        s_v = check_voltage_scale(voltage_scale)
+        s_v = check_positive(voltage_scale, "voltage_scale")
         key = tau.tobytes()
         last = self._last
         if last is not None and last[0] == key and last[1] == s_v:

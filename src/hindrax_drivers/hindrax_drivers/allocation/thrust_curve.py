@@ -39,7 +39,7 @@ import numpy as np
 __all__ = ["ThrustCurveError", "HINDRAX_DRAG_NEGATIVE_COEFFS",
            "HINDRAX_DRAG_POSITIVE_COEFFS_AS_PRINTED", "HINDRAX_NOMINAL_VOLTAGE_V",
            "BASIC_ESC_DEADBAND_US", "point_reflection", "voltage_thrust_scale",
-           "check_voltage_scale", "ThrustCurve", "hindrax_default_curve", "forward_thrust"]
+           "check_positive", "ThrustCurve", "hindrax_default_curve", "forward_thrust"]
 
 #: [Hindrax-Drag] Table 2, negative direction, ``(c4, c3, c2, c1)`` of eq. 1 (N, P in us).
 HINDRAX_DRAG_NEGATIVE_COEFFS: tuple[float, float, float, float] = (-4.61e-7, 0.001794, -2.2726, 927.1827)
@@ -106,16 +106,17 @@ def voltage_thrust_scale(battery_voltage_v: float, nominal_voltage_v: float = HI
     return float((battery_voltage_v / nominal_voltage_v) ** exponent)
 
 
-def check_voltage_scale(voltage_scale: float) -> float:
-    """``voltage_scale`` as a float. Raises :class:`ThrustCurveError` (a ValueError) naming it when
-    it is not a finite positive number."""
+def check_positive(value: float, name: str, allow_zero: bool = False) -> float:
+    """``value`` as a float. Raises :class:`ThrustCurveError` (a ValueError) naming it when it is not
+    a finite number > 0 (>= 0 with ``allow_zero``)."""
+    kind = "a finite number >= 0" if allow_zero else "a finite positive number"
     try:
-        value = float(voltage_scale)
+        out = float(value)
     except (TypeError, ValueError) as exc:
-        raise ThrustCurveError(f"voltage_scale must be a finite positive number, got {voltage_scale!r}") from exc
-    if not (math.isfinite(value) and value > 0.0):
-        raise ThrustCurveError(f"voltage_scale must be a finite positive number, got {voltage_scale!r}")
-    return value
+        raise ThrustCurveError(f"{name} must be {kind}, got {value!r}") from exc
+    if not (math.isfinite(out) and (out >= 0.0 if allow_zero else out > 0.0)):
+        raise ThrustCurveError(f"{name} must be {kind}, got {value!r}")
+    return out
 
 
 def _finite_array(values, name: str) -> np.ndarray:
@@ -323,7 +324,7 @@ class ThrustCurve:
 
         Raises :class:`ThrustCurveError` for a non-finite or non-positive ``voltage_scale``.
         """
-        s = check_voltage_scale(voltage_scale)
+        s = check_positive(voltage_scale, "voltage_scale")
         return (s * self.max_reverse_n, s * self.max_forward_n)
 
     # ----------------------------------------------------------------- forward model
@@ -338,7 +339,7 @@ class ThrustCurve:
         Source: [Hindrax-Drag] eq. 1, docs/devices.md §5.2. Raises :class:`ThrustCurveError` for non-finite
         input or a bad ``voltage_scale``.
         """
-        s = check_voltage_scale(voltage_scale)
+        s = check_positive(voltage_scale, "voltage_scale")
         p = _finite_array(pulse_width_us, "pulse_width_us")
         return _out(s * forward_thrust(p, *self.forward_parameters))
 
@@ -353,7 +354,7 @@ class ThrustCurve:
         ``small_force`` (module docstring). Source: inverse of [Hindrax-Drag] eq. 1. Raises
         :class:`ThrustCurveError` for non-finite input or a bad ``voltage_scale``.
         """
-        s = check_voltage_scale(voltage_scale)
+        s = check_positive(voltage_scale, "voltage_scale")
         return _out(self._pulse_width_unchecked(_finite_array(force_n, "force_n"), s))
 
     def _pulse_width_unchecked(self, force: np.ndarray, s: float) -> np.ndarray:

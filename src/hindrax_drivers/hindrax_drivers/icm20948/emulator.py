@@ -368,24 +368,30 @@ class Icm20948Emulator(RegisterPointerEmulator):
                 i += 1
         return bytes(out)
 
+    def _transfer(self, addr: int, reg: int, ctrl: int, value: int, length: int) -> bytes:
+        """One slave transaction (docs/devices.md §4.6b): with RNW set in ``addr``, ``reg`` (unless
+        REG_DIS) then a read of ``length`` bytes; else a write of ``value`` (after ``reg`` unless
+        REG_DIS), returning b"". OSError when no device answers at ``addr``."""
+        device = self._aux_device(addr & 0x7F)
+        if device is None:
+            raise remote_io_error(addr & 0x7F)
+        if not addr & p.I2C_SLV_ADDR_RNW:
+            device.i2c_write(bytes([value] if ctrl & p.I2C_SLV_CTRL_REG_DIS else [reg, value]))
+            return b""
+        if not ctrl & p.I2C_SLV_CTRL_REG_DIS:
+            device.i2c_write(bytes([reg]))
+        return device.i2c_read(length) if length else b""
+
     def _run_slv4(self) -> None:
         ctrl = self._get(p.I2C_SLV4_CTRL)
         if not ctrl & p.I2C_SLV_CTRL_EN:
             return
         addr = self._get(p.I2C_SLV4_ADDR)
-        reg = self._get(p.I2C_SLV4_REG)
         status = p.I2C_MST_STATUS_SLV4_DONE
-        device = self._aux_device(addr & 0x7F)
         try:
-            if device is None:
-                raise remote_io_error(addr & 0x7F)
+            data = self._transfer(addr, self._get(p.I2C_SLV4_REG), ctrl, self._get(p.I2C_SLV4_DO), 1)
             if addr & p.I2C_SLV_ADDR_RNW:
-                if not ctrl & p.I2C_SLV_CTRL_REG_DIS:
-                    device.i2c_write(bytes([reg]))
-                self._set(p.I2C_SLV4_DI, device.i2c_read(1)[0])
-            else:
-                payload = [self._get(p.I2C_SLV4_DO)]
-                device.i2c_write(bytes(payload if ctrl & p.I2C_SLV_CTRL_REG_DIS else [reg, *payload]))
+                self._set(p.I2C_SLV4_DI, data[0])
         except OSError:
             status |= p.I2C_MST_STATUS_SLV4_NACK
         self._set(p.I2C_SLV4_CTRL, ctrl & ~p.I2C_SLV_CTRL_EN)
@@ -404,22 +410,13 @@ class Icm20948Emulator(RegisterPointerEmulator):
                 continue
             addr, reg = self._get(addr_r), self._get(reg_r)
             length = ctrl & p.I2C_SLV_CTRL_LENG_MASK
-            device = self._aux_device(addr & 0x7F)
             try:
-                if device is None:
-                    raise remote_io_error(addr & 0x7F)
+                data = self._transfer(addr, reg, ctrl, self._get(do_r), length)
                 if addr & p.I2C_SLV_ADDR_RNW:
-                    if not ctrl & p.I2C_SLV_CTRL_REG_DIS:
-                        device.i2c_write(bytes([reg]))
-                    data = device.i2c_read(length) if length else b""
                     if ctrl & p.I2C_SLV_CTRL_BYTE_SW:
                         data = self._byte_swap(data, reg, bool(ctrl & p.I2C_SLV_CTRL_GRP))
-                    room = max(0, p.EXT_SLV_SENS_DATA_LENGTH - offset)
-                    data = data[:room]
+                    data = data[:max(0, p.EXT_SLV_SENS_DATA_LENGTH - offset)]
                     self._banks[0][ext_start + offset:ext_start + offset + len(data)] = data
-                else:
-                    value = self._get(do_r)
-                    device.i2c_write(bytes([value] if ctrl & p.I2C_SLV_CTRL_REG_DIS else [reg, value]))
             except OSError:
                 status |= 1 << n
             if addr & p.I2C_SLV_ADDR_RNW:

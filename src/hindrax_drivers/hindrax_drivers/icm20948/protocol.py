@@ -32,7 +32,7 @@ __all__ = ["Icm20948Error", "Register", "BankedWrite", "ImuConfig", "ImuSample",
            "slave_read_writes", "slave_write_writes", "mag_master_sequence", "mag_bypass_sequence",
            "ak09916_direct_init_writes", "parse_sensor_block",
            "parse_ak09916_block", "accel_to_raw", "gyro_to_raw", "temperature_to_raw", "mag_to_raw",
-           "encode_sensor_block", "bank_select_value", "gyro_odr_hz", "accel_odr_hz"]
+           "bank_select_value", "gyro_odr_hz", "accel_odr_hz"]
 
 
 class Icm20948Error(ValueError):
@@ -571,13 +571,3 @@ def mag_to_raw(magnetic_field_t: Sequence[float]) -> tuple[tuple[int, int, int],
     overflow = bool(np.any(np.abs(counts) > AK09916_MAX_COUNTS))
     clipped = np.clip(counts, -AK09916_MAX_COUNTS, AK09916_MAX_COUNTS)
     return tuple(int(v) for v in clipped), overflow  # type: ignore[return-value]
-
-
-def encode_sensor_block(accel_raw: Sequence[int], gyro_raw: Sequence[int], temp_raw: int) -> bytes:
-    """Device side: the 14 bytes at 0x2D..0x3A, int16 big-endian (docs/devices.md §4.2)."""
-    values = [*accel_raw, *gyro_raw, temp_raw]
-    if len(values) != 7:
-        raise Icm20948Error("need 3 accel, 3 gyro and 1 temperature values")
-    if any(not isinstance(v, (int, np.integer)) or not -32768 <= int(v) <= 32767 for v in values):
-        raise Icm20948Error(f"raw values must be int16, got {values}")
-    return np.asarray(values, dtype=">i2").tobytes()

@@ -34,7 +34,7 @@ __all__ = ["Ms5837Error", "Variant", "ADDRESS", "CMD_RESET", "CMD_ADC_READ", "CM
            "conversion_time_s", "parse_adc", "encode_adc", "parse_prom_word", "encode_prom_word",
            "crc4", "prom_with_crc", "Calibration", "detect_variant", "Compensation", "Reading",
            "first_order", "second_order", "compensate", "pressure_pa_from_counts",
-           "pressure_counts_per_pa", "depth_m", "pressure_pa_at_depth"]
+           "pressure_counts_per_pa", "depth_m"]
 
 
 class Ms5837Error(ValueError):
@@ -89,8 +89,6 @@ STANDARD_SURFACE_PRESSURE_PA = 101300.0
 #: Specified operating temperature range (docs/devices.md §3.4).
 TEMPERATURE_MIN_C = -40.0
 TEMPERATURE_MAX_C = 85.0
-
-_KELVIN_OFFSET = 273.15
 
 
 @dataclass(frozen=True)
@@ -279,7 +277,7 @@ class Calibration:
     Attributes:
         words: the 8 PROM words (word 7 may be 0).
     Properties: ``c1``..``c6`` (C1 SENS_T1, C2 OFF_T1, C3 TCS, C4 TCO, C5 T_REF, C6 TEMPSENS),
-    ``crc`` (stored nibble), ``product_code`` (bits 11:5 of word 0), ``factory_bits`` (bits 4:0).
+    ``crc`` (stored nibble), ``product_code`` (bits 11:5 of word 0; bits 4:0 are factory settings).
     """
 
     words: tuple[int, ...]
@@ -322,11 +320,6 @@ class Calibration:
     def product_code(self) -> int:
         """Product/version code (word 0 bits 11:5; unreliable, §3.9)."""
         return (self.words[0] >> 5) & 0x7F
-
-    @property
-    def factory_bits(self) -> int:
-        """Factory settings (word 0 bits 4:0)."""
-        return self.words[0] & 0x1F
 
 
 def prom_sanity_issue(calibration: Calibration) -> str:
@@ -507,11 +500,6 @@ class Reading:
     compensation: Compensation = field(repr=False)
     temperature_in_range: bool = True
 
-    @property
-    def temperature_k(self) -> float:
-        """Temperature in kelvin."""
-        return self.temperature_c + _KELVIN_OFFSET
-
 
 def compensate(d1: int, d2: int, calibration: Calibration, variant: Variant,
                apply_second_order: bool = True) -> Reading:
@@ -559,11 +547,3 @@ def depth_m(pressure_pa: float, fluid_density_kg_m3: float = FRESH_WATER_DENSITY
     """
     _check_density_gravity(fluid_density_kg_m3, gravity_m_s2)
     return (pressure_pa - surface_pressure_pa) / (fluid_density_kg_m3 * gravity_m_s2)
-
-
-def pressure_pa_at_depth(depth_m_: float, fluid_density_kg_m3: float = FRESH_WATER_DENSITY_KG_M3,
-                         surface_pressure_pa: float = STANDARD_SURFACE_PRESSURE_PA,
-                         gravity_m_s2: float = GRAVITY_M_S2) -> float:
-    """Inverse of :func:`depth_m`: absolute pressure in Pa at ``depth_m_`` metres (hydrostatics)."""
-    _check_density_gravity(fluid_density_kg_m3, gravity_m_s2)
-    return surface_pressure_pa + depth_m_ * fluid_density_kg_m3 * gravity_m_s2

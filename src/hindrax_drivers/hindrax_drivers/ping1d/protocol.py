@@ -6,14 +6,9 @@ No I/O, no clocks, no ROS.  Source: docs/devices.md §2.2-§2.5 (tags [P1]-[P10]
 Frame (little-endian, docs/devices.md §2.2): ``'B' 'R'``, u16 payload_length, u16 message_id,
 u8 src_device_id, u8 dst_device_id, payload, u16 checksum = (sum of every preceding byte) & 0xFFFF.
 
-Why our own codec instead of the PyPI package ``bluerobotics-ping`` (``brping``): every 0.2.x release
-(0.2.0 ... 0.2.5) has a broken ``Ping1D`` class (docs/devices.md §0 item 4, §2.7): the S500 definitions
-overwrite the Ping1D ones in ``definitions.payload_dict_all``, so ``get_distance_simple()`` raises
-AttributeError, ``get_processor_temperature()`` fails to unpack, ``set_range``/``set_ping_interval``
-verification fail, and ``set_speed_of_sound(x)`` actually transmits **0 mm/s**.  The library also polls
-with blocking sleeps, has no locking and reports errors with ``print``.  The protocol is small; this
-module implements it exactly (verified against the byte-exact vectors of §2.5) with a declared parse
-error and a streaming framer that resynchronises on ``BR``.
+Our own codec, not the PyPI package ``bluerobotics-ping``: its 0.2.x ``Ping1D`` class is broken
+(docs/devices.md §0 item 4, §2.7). This one is verified against the byte-exact vectors of §2.5, with a
+declared parse error and a streaming framer that resynchronises on ``BR``.
 
 Units: payload fields are converted to SI on decode (mm -> m, mm/s -> m/s, ms/µs -> s, mV -> V,
 centi-degC -> degC; confidence stays in %), and back on encode with rounding to the wire resolution.
@@ -23,9 +18,9 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass, fields as dc_fields
+from dataclasses import MISSING, dataclass, field, fields as dc_fields, make_dataclass
 from enum import IntEnum
-from typing import ClassVar, Dict, Optional, Tuple, Type, Union
+from typing import Any, ClassVar, Dict, Optional, Tuple, Type, Union
 
 __all__ = ["Ping1dParseError", "Ping1dId", "Ping1dMessage", "Ping1dFramer", "Ping1dPayload", "Ack",
            "Nack", "AsciiText", "DeviceInformation", "ProtocolVersion", "GeneralRequest",
@@ -243,9 +238,9 @@ _Conv = Union[str, int]
 
 
 class Ping1dPayload:
-    """Base of the typed payload dataclasses.  Subclasses declare ``MESSAGE_ID``, ``LAYOUT`` (one
-    ``(struct code, conversion)`` per dataclass field, in wire order) and optionally ``TAIL``
-    (``"text"``: trailing char[]; ``"profile"``: u16 length + u8[] samples)."""
+    """Base of the typed payload dataclasses (declared by :func:`_payload`): ``MESSAGE_ID``,
+    ``LAYOUT`` (one ``(struct code, conversion)`` per fixed field, in wire order) and ``TAIL``
+    (``"text"``: trailing char[]; ``"profile"``: u16 length + u8[] samples; None)."""
 
     MESSAGE_ID: ClassVar[int]
     LAYOUT: ClassVar[Tuple[Tuple[str, _Conv], ...]] = ()
@@ -339,349 +334,110 @@ def _from_raw(raw: int, conv: _Conv, name: str):
 _MM = 1000  # mm -> m, mm/s -> m/s, ms -> s, mV -> V
 _US = 1000000  # µs -> s
 _CC = 100  # centi-degC -> degC
-
-
-@dataclass(frozen=True)
-class Ack(Ping1dPayload):
-    """id 1 ack: ``acked_id`` u16 (docs/devices.md §2.3-§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.ACK
-    LAYOUT: ClassVar = (("H", "int"),)
-    acked_id: int
-
-
-@dataclass(frozen=True)
-class Nack(Ping1dPayload):
-    """id 2 nack: ``nacked_id`` u16 + ASCII text, not necessarily NUL-terminated (§2.3)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.NACK
-    LAYOUT: ClassVar = (("H", "int"),)
-    TAIL: ClassVar = "text"
-    nacked_id: int
-    message: str = ""
-
-
-@dataclass(frozen=True)
-class AsciiText(Ping1dPayload):
-    """id 3 ascii_text: char[] (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.ASCII_TEXT
-    TAIL: ClassVar = "text"
-    text: str = ""
-
-
-@dataclass(frozen=True)
-class DeviceInformation(Ping1dPayload):
-    """id 4 device_information: device_type (0 unknown, 1 Ping Echosounder, 2 Ping360), device
-    revision, firmware major/minor/patch, reserved; 6 x u8 (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.DEVICE_INFORMATION
-    LAYOUT: ClassVar = (("B", "int"),) * 6
-    device_type: int
-    device_revision: int
-    firmware_version_major: int
-    firmware_version_minor: int
-    firmware_version_patch: int
-    reserved: int = 0
-
-
-@dataclass(frozen=True)
-class ProtocolVersion(Ping1dPayload):
-    """id 5 protocol_version: major, minor, patch, reserved; 4 x u8 (§2.4, vector §2.5)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.PROTOCOL_VERSION
-    LAYOUT: ClassVar = (("B", "int"),) * 4
-    version_major: int
-    version_minor: int
-    version_patch: int
-    reserved: int = 0
-
-
-@dataclass(frozen=True)
-class GeneralRequest(Ping1dPayload):
-    """id 6 general_request: u16 ``requested_id``; the device answers with that message (§2.3)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.GENERAL_REQUEST
-    LAYOUT: ClassVar = (("H", "int"),)
-    requested_id: int
-
-
-@dataclass(frozen=True)
-class SetDeviceId(Ping1dPayload):
-    """id 1000 set_device_id: u8 device_id 0..254 (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_DEVICE_ID
-    LAYOUT: ClassVar = (("B", "int"),)
-    device_id: int
-
-
-@dataclass(frozen=True)
-class SetRange(Ping1dPayload):
-    """id 1001 set_range: u32 scan_start mm, u32 scan_length mm (min 1000 mm); manual mode (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_RANGE
-    LAYOUT: ClassVar = (("I", _MM), ("I", _MM))
-    scan_start_m: float
-    scan_length_m: float
-
-
-@dataclass(frozen=True)
-class SetSpeedOfSound(Ping1dPayload):
-    """id 1002 set_speed_of_sound: u32 mm/s (about 1 500 000 in water) (§2.4, vector §2.5)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_SPEED_OF_SOUND
-    LAYOUT: ClassVar = (("I", _MM),)
-    speed_of_sound_m_s: float
-
-
-@dataclass(frozen=True)
-class SetModeAuto(Ping1dPayload):
-    """id 1003 set_mode_auto: u8 0 manual / 1 auto (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_MODE_AUTO
-    LAYOUT: ClassVar = (("B", "bool"),)
-    auto: bool
-
-
-@dataclass(frozen=True)
-class SetPingInterval(Ping1dPayload):
-    """id 1004 set_ping_interval: u16 ms between pings (§2.4, vector §2.5)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_PING_INTERVAL
-    LAYOUT: ClassVar = (("H", _MM),)
-    ping_interval_s: float
-
-
-@dataclass(frozen=True)
-class SetGainSetting(Ping1dPayload):
-    """id 1005 set_gain_setting: u8 gain index 0..6 (see :data:`GAIN_INDEX_TO_GAIN`) (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_GAIN_SETTING
-    LAYOUT: ClassVar = (("B", "int"),)
-    gain_setting: int
-
-
-@dataclass(frozen=True)
-class SetPingEnable(Ping1dPayload):
-    """id 1006 set_ping_enable: u8 0 off / 1 on (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SET_PING_ENABLE
-    LAYOUT: ClassVar = (("B", "bool"),)
-    enabled: bool
-
-
-@dataclass(frozen=True)
-class GotoBootloader(Ping1dPayload):
-    """id 1100 goto_bootloader: no payload (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.GOTO_BOOTLOADER
-
-
-@dataclass(frozen=True)
-class FirmwareVersion(Ping1dPayload):
-    """id 1200 firmware_version: u8 device_type, u8 device_model (1 = Ping1D), u16 firmware major,
-    u16 firmware minor (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.FIRMWARE_VERSION
-    LAYOUT: ClassVar = (("B", "int"), ("B", "int"), ("H", "int"), ("H", "int"))
-    device_type: int
-    device_model: int
-    firmware_version_major: int
-    firmware_version_minor: int
-
-
-@dataclass(frozen=True)
-class DeviceId(Ping1dPayload):
-    """id 1201 device_id: u8 (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.DEVICE_ID
-    LAYOUT: ClassVar = (("B", "int"),)
-    device_id: int
-
-
-@dataclass(frozen=True)
-class Voltage5(Ping1dPayload):
-    """id 1202 voltage_5: u16 mV -> V (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.VOLTAGE_5
-    LAYOUT: ClassVar = (("H", _MM),)
-    voltage_5_v: float
-
-
-@dataclass(frozen=True)
-class SpeedOfSound(Ping1dPayload):
-    """id 1203 speed_of_sound: u32 mm/s -> m/s (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.SPEED_OF_SOUND
-    LAYOUT: ClassVar = (("I", _MM),)
-    speed_of_sound_m_s: float
-
-
-@dataclass(frozen=True)
-class Range(Ping1dPayload):
-    """id 1204 range: u32 scan_start mm, u32 scan_length mm -> m (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.RANGE
-    LAYOUT: ClassVar = (("I", _MM), ("I", _MM))
-    scan_start_m: float
-    scan_length_m: float
-
-
-@dataclass(frozen=True)
-class ModeAuto(Ping1dPayload):
-    """id 1205 mode_auto: u8 0 manual / 1 auto (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.MODE_AUTO
-    LAYOUT: ClassVar = (("B", "bool"),)
-    auto: bool
-
-
-@dataclass(frozen=True)
-class PingInterval(Ping1dPayload):
-    """id 1206 ping_interval: u16 ms -> s (a minimum; the actual interval may be longer) (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.PING_INTERVAL
-    LAYOUT: ClassVar = (("H", _MM),)
-    ping_interval_s: float
-
-
-@dataclass(frozen=True)
-class GainSetting(Ping1dPayload):
-    """id 1207 gain_setting: **u32** gain index (the set message is u8) (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.GAIN_SETTING
-    LAYOUT: ClassVar = (("I", "int"),)
-    gain_setting: int
-
-
-@dataclass(frozen=True)
-class TransmitDuration(Ping1dPayload):
-    """id 1208 transmit_duration: u16 µs -> s (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.TRANSMIT_DURATION
-    LAYOUT: ClassVar = (("H", _US),)
-    transmit_duration_s: float
-
-
-@dataclass(frozen=True)
-class GeneralInfo(Ping1dPayload):
-    """id 1210 general_info: u16 fw major, u16 fw minor, u16 voltage_5 mV, u16 ping_interval ms,
-    u8 gain_setting, u8 mode_auto; 10 bytes (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.GENERAL_INFO
-    LAYOUT: ClassVar = (("H", "int"), ("H", "int"), ("H", _MM), ("H", _MM), ("B", "int"), ("B", "bool"))
-    firmware_version_major: int
-    firmware_version_minor: int
-    voltage_5_v: float
-    ping_interval_s: float
-    gain_setting: int
-    mode_auto: bool
-
-
-@dataclass(frozen=True)
-class DistanceSimple(Ping1dPayload):
-    """id 1211 distance_simple: u32 distance mm -> m, u8 confidence %; 5 bytes (§2.4, vector §2.5)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.DISTANCE_SIMPLE
-    LAYOUT: ClassVar = (("I", _MM), ("B", "int"))
-    distance_m: float
-    confidence_pct: int
-
-
-_DISTANCE_LAYOUT = (("I", _MM), ("H", "int"), ("H", _US), ("I", "int"), ("I", _MM), ("I", _MM),
-                    ("I", "int"))
-
-
-@dataclass(frozen=True)
-class Distance(Ping1dPayload):
-    """id 1212 distance, 24 bytes (§2.4): distance (u32 mm @0), confidence (u16 % @4),
-    transmit_duration (u16 µs @6), ping_number (u32 @8), scan_start (u32 mm @12), scan_length
-    (u32 mm @16), gain_setting (u32 @20)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.DISTANCE
-    LAYOUT: ClassVar = _DISTANCE_LAYOUT
-    distance_m: float
-    confidence_pct: int
-    transmit_duration_s: float
-    ping_number: int
-    scan_start_m: float
-    scan_length_m: float
-    gain_setting: int
-
-
-@dataclass(frozen=True)
-class ProcessorTemperature(Ping1dPayload):
-    """id 1213 processor_temperature: u16 centi-degC -> degC (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.PROCESSOR_TEMPERATURE
-    LAYOUT: ClassVar = (("H", _CC),)
-    temperature_degc: float
-
-
-@dataclass(frozen=True)
-class PcbTemperature(Ping1dPayload):
-    """id 1214 pcb_temperature: u16 centi-degC -> degC (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.PCB_TEMPERATURE
-    LAYOUT: ClassVar = (("H", _CC),)
-    temperature_degc: float
-
-
-@dataclass(frozen=True)
-class PingEnable(Ping1dPayload):
-    """id 1215 ping_enable: u8 0/1 (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.PING_ENABLE
-    LAYOUT: ClassVar = (("B", "bool"),)
-    enabled: bool
-
-
-@dataclass(frozen=True)
-class Profile(Ping1dPayload):
-    """id 1300 profile (§2.4): the 1212 distance fields (24 B), u16 profile_data_length @24, u8[]
-    profile_data @26 (first sample nearest the transducer, spanning scan_start .. scan_start +
-    scan_length)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.PROFILE
-    LAYOUT: ClassVar = _DISTANCE_LAYOUT
-    TAIL: ClassVar = "profile"
-    distance_m: float
-    confidence_pct: int
-    transmit_duration_s: float
-    ping_number: int
-    scan_start_m: float
-    scan_length_m: float
-    gain_setting: int
-    profile_data: bytes = b""
-
-
-@dataclass(frozen=True)
-class ContinuousStart(Ping1dPayload):
-    """id 1400 continuous_start: u16 id to stream (1300 = profile) (§2.4, vector §2.5)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.CONTINUOUS_START
-    LAYOUT: ClassVar = (("H", "int"),)
-    requested_id: int
-
-
-@dataclass(frozen=True)
-class ContinuousStop(Ping1dPayload):
-    """id 1401 continuous_stop: u16 id (§2.4)."""
-
-    MESSAGE_ID: ClassVar[int] = Ping1dId.CONTINUOUS_STOP
-    LAYOUT: ClassVar = (("H", "int"),)
-    requested_id: int
-
-
-#: message id -> payload class, for every message in docs/devices.md §2.4.
-PAYLOAD_TYPES: Dict[int, Type[Ping1dPayload]] = {
-    cls.MESSAGE_ID: cls for cls in (
-        Ack, Nack, AsciiText, DeviceInformation, ProtocolVersion, GeneralRequest, SetDeviceId,
-        SetRange, SetSpeedOfSound, SetModeAuto, SetPingInterval, SetGainSetting, SetPingEnable,
-        GotoBootloader, FirmwareVersion, DeviceId, Voltage5, SpeedOfSound, Range, ModeAuto,
-        PingInterval, GainSetting, TransmitDuration, GeneralInfo, DistanceSimple, Distance,
-        ProcessorTemperature, PcbTemperature, PingEnable, Profile, ContinuousStart, ContinuousStop)
-}
+_PY_TYPE = {"int": int, "bool": bool}  # a divisor conversion gives a float
+_TAIL_TYPE = {"text": (str, ""), "profile": (bytes, b"")}
+_WIRE = {"B": "u8", "H": "u16", "I": "u32", "text": "char[]", "profile": "u16 length + u8[]"}
+
+#: message id -> payload class, for every message in docs/devices.md §2.4 (see :func:`_payload`).
+PAYLOAD_TYPES: Dict[int, Type[Ping1dPayload]] = {}
+
+
+def _payload(message_id: Ping1dId, note: str, *layout: tuple,
+             tail: Optional[Tuple[str, str]] = None) -> Any:
+    """Declare the frozen payload dataclass of ``message_id``, named after it (``SET_RANGE`` ->
+    ``SetRange``), and register it in :data:`PAYLOAD_TYPES`.
+
+    ``layout``: one ``(field, struct code, conversion[, default])`` per fixed field, in wire order;
+    ``tail``: ``(field, "text" | "profile")`` (see :class:`Ping1dPayload`). The class docstring
+    gives the wire layout, then ``note``; its sections are of docs/devices.md, §2.4 (the message
+    table) unless it says otherwise.
+    """
+    fields: list = [(name, _PY_TYPE.get(conv, float),
+                     field(default=default[0] if default else MISSING))
+                    for name, _, conv, *default in layout]
+    if tail is not None:
+        tail_type, tail_default = _TAIL_TYPE[tail[1]]
+        fields.append((tail[0], tail_type, field(default=tail_default)))
+    name = "".join(word.capitalize() for word in message_id.name.split("_"))
+    wire = [f"{row[0]} {_WIRE[row[1]]}" for row in (*layout, *([tail] if tail else []))]
+    cls = make_dataclass(name, fields, bases=(Ping1dPayload,), frozen=True, namespace={
+        "MESSAGE_ID": message_id, "LAYOUT": tuple((code, conv) for _, code, conv, *_ in layout),
+        "TAIL": None if tail is None else tail[1], "__module__": __name__,
+        "__doc__": f"id {message_id.value} {message_id.name.lower()} "
+                   f"({', '.join(wire) or 'no payload'}): {note}"})
+    PAYLOAD_TYPES[message_id] = cls
+    return cls
+
+
+_DISTANCE_LAYOUT = (("distance_m", "I", _MM), ("confidence_pct", "H", "int"),
+                    ("transmit_duration_s", "H", _US), ("ping_number", "I", "int"),
+                    ("scan_start_m", "I", _MM), ("scan_length_m", "I", _MM),
+                    ("gain_setting", "I", "int"))
+
+Ack = _payload(Ping1dId.ACK, "id of the acknowledged message (§2.3).", ("acked_id", "H", "int"))
+Nack = _payload(Ping1dId.NACK, "id, then ASCII text, not necessarily NUL-terminated (§2.3).",
+                ("nacked_id", "H", "int"), tail=("message", "text"))
+AsciiText = _payload(Ping1dId.ASCII_TEXT, "§2.4.", tail=("text", "text"))
+DeviceInformation = _payload(
+    Ping1dId.DEVICE_INFORMATION, "device_type 0 unknown, 1 Ping Echosounder, 2 Ping360.",
+    ("device_type", "B", "int"), ("device_revision", "B", "int"),
+    ("firmware_version_major", "B", "int"), ("firmware_version_minor", "B", "int"),
+    ("firmware_version_patch", "B", "int"), ("reserved", "B", "int", 0))
+ProtocolVersion = _payload(
+    Ping1dId.PROTOCOL_VERSION, "vector §2.5.", ("version_major", "B", "int"),
+    ("version_minor", "B", "int"), ("version_patch", "B", "int"), ("reserved", "B", "int", 0))
+GeneralRequest = _payload(Ping1dId.GENERAL_REQUEST, "the device answers with that message (§2.3).",
+                          ("requested_id", "H", "int"))
+SetDeviceId = _payload(Ping1dId.SET_DEVICE_ID, "0..254.", ("device_id", "B", "int"))
+SetRange = _payload(Ping1dId.SET_RANGE, "mm, length >= 1000 mm; selects manual mode.",
+                    ("scan_start_m", "I", _MM), ("scan_length_m", "I", _MM))
+SetSpeedOfSound = _payload(Ping1dId.SET_SPEED_OF_SOUND, "mm/s, about 1 500 000 in water "
+                           "(vector §2.5).", ("speed_of_sound_m_s", "I", _MM))
+SetModeAuto = _payload(Ping1dId.SET_MODE_AUTO, "0 manual / 1 auto.", ("auto", "B", "bool"))
+SetPingInterval = _payload(Ping1dId.SET_PING_INTERVAL, "ms between pings (vector §2.5).",
+                           ("ping_interval_s", "H", _MM))
+SetGainSetting = _payload(Ping1dId.SET_GAIN_SETTING, "index 0..6 of :data:`GAIN_INDEX_TO_GAIN`.",
+                          ("gain_setting", "B", "int"))
+SetPingEnable = _payload(Ping1dId.SET_PING_ENABLE, "0 off / 1 on.", ("enabled", "B", "bool"))
+GotoBootloader = _payload(Ping1dId.GOTO_BOOTLOADER, "§2.4.")
+FirmwareVersion = _payload(
+    Ping1dId.FIRMWARE_VERSION, "device_model 1 = Ping1D.", ("device_type", "B", "int"),
+    ("device_model", "B", "int"), ("firmware_version_major", "H", "int"),
+    ("firmware_version_minor", "H", "int"))
+DeviceId = _payload(Ping1dId.DEVICE_ID, "§2.4.", ("device_id", "B", "int"))
+Voltage5 = _payload(Ping1dId.VOLTAGE_5, "mV -> V.", ("voltage_5_v", "H", _MM))
+SpeedOfSound = _payload(Ping1dId.SPEED_OF_SOUND, "mm/s -> m/s.", ("speed_of_sound_m_s", "I", _MM))
+Range = _payload(Ping1dId.RANGE, "mm -> m.", ("scan_start_m", "I", _MM),
+                 ("scan_length_m", "I", _MM))
+ModeAuto = _payload(Ping1dId.MODE_AUTO, "0 manual / 1 auto.", ("auto", "B", "bool"))
+PingInterval = _payload(Ping1dId.PING_INTERVAL, "ms -> s, a minimum (the actual interval may be "
+                        "longer).", ("ping_interval_s", "H", _MM))
+GainSetting = _payload(Ping1dId.GAIN_SETTING, "**u32** gain index (the set message is u8).",
+                       ("gain_setting", "I", "int"))
+TransmitDuration = _payload(Ping1dId.TRANSMIT_DURATION, "µs -> s.",
+                            ("transmit_duration_s", "H", _US))
+GeneralInfo = _payload(
+    Ping1dId.GENERAL_INFO, "10 bytes; voltage_5 in mV, ping_interval in ms.",
+    ("firmware_version_major", "H", "int"), ("firmware_version_minor", "H", "int"),
+    ("voltage_5_v", "H", _MM), ("ping_interval_s", "H", _MM), ("gain_setting", "B", "int"),
+    ("mode_auto", "B", "bool"))
+DistanceSimple = _payload(Ping1dId.DISTANCE_SIMPLE, "5 bytes (vector §2.5).",
+                          ("distance_m", "I", _MM), ("confidence_pct", "B", "int"))
+Distance = _payload(
+    Ping1dId.DISTANCE, "24 bytes, fields at @0, 4, 6, 8, 12, 16, 20; distance and scan in mm, "
+    "confidence in %, transmit_duration in µs.", *_DISTANCE_LAYOUT)
+ProcessorTemperature = _payload(Ping1dId.PROCESSOR_TEMPERATURE, "centi-degC -> degC.",
+                                ("temperature_degc", "H", _CC))
+PcbTemperature = _payload(Ping1dId.PCB_TEMPERATURE, "centi-degC -> degC.",
+                          ("temperature_degc", "H", _CC))
+PingEnable = _payload(Ping1dId.PING_ENABLE, "0 off / 1 on.", ("enabled", "B", "bool"))
+Profile = _payload(
+    Ping1dId.PROFILE, "the 1212 fields (24 B), the length @24, the samples @26 (first nearest the "
+    "transducer, spanning scan_start .. scan_start + scan_length).", *_DISTANCE_LAYOUT,
+    tail=("profile_data", "profile"))
+ContinuousStart = _payload(Ping1dId.CONTINUOUS_START, "id to stream, 1300 = profile (vector §2.5).",
+                           ("requested_id", "H", "int"))
+ContinuousStop = _payload(Ping1dId.CONTINUOUS_STOP, "id to stop.", ("requested_id", "H", "int"))
 
 
 def encode_message(payload: Ping1dPayload, src_device_id: int = 0, dst_device_id: int = 0) -> bytes:
