@@ -40,8 +40,6 @@ I2C devices on the emulated bus, each node in its own rclpy context, polled ever
 - magnetometer NACK (AK09916 behind the ICM's I2C master): detect = NACK onset -> ERROR ``magnetometer``;
   recover = the AK09916 answers again (right after the failed re-initialisation) -> first ``imu/mag`` (the
   node retries every ``sensors.icm20948.mag_retry_interval_s``).
-
-Run alone: ``python -m hindrax_ident.tools.benchmarks.robustness [--quick]``.
 """
 from __future__ import annotations
 
