@@ -9,8 +9,8 @@ I2C bus. Wrenches alternate two surge levels so T1's pulse width changes with ev
 is from ``publish()`` to the I2C write after which the emulator decodes T1's new pulse width. The
 ESC node writes a command when its subscription callback takes it (event-driven; the output tick is
 the watchdog), so this is two deliveries inside the process (the wrench, the command), the
-allocation and one I2C block write (waiting for the next 50 Hz output tick instead: 16.6 ms p99).
-CPU per command is the process CPU time (three nodes and DDS) over the commands sent.
+allocation and one I2C block write. CPU per command is the process CPU time (three nodes and DDS)
+over the commands sent.
 
 The allocator alone (:func:`allocator_cost`): thread CPU time of one ``AllocationCore.allocate`` call over random
 wrenches from 0.1 N to 30 N, with and without the deadband search (docs/architecture.md §9,
