@@ -457,11 +457,6 @@ def _ms5837_faults() -> list[dict]:
                        f"pressure (resets sent: {emu.resets})")]
 
 
-def fault_timings() -> list[dict]:
-    """One row per injected fault: detect_s, recover_s, note."""
-    return _dvl_faults() + _icm_faults() + _ms5837_faults()
-
-
 # ---------------------------------------------------------------------------------------------- bench rows
 def run(quick: bool = False) -> list[dict]:
     """Benchmark rows (see the module docstring). ``quick``: 10k fuzzed inputs per parser."""
@@ -470,7 +465,7 @@ def run(quick: bool = False) -> list[dict]:
         rows.append({"name": f"fuzz {r['name']}: crashes", "value": r["crashes"], "unit": "crashes",
                      "target": "0", "note": f"{r['inputs']} inputs ({r['accepted']} decoded) in {r['seconds']:.1f} s"
                                             + (f"; first: {r['first']}" if r["first"] else "")})
-    for f in fault_timings():
+    for f in _dvl_faults() + _icm_faults() + _ms5837_faults():
         rows.append({"name": f"{f['name']}: time to detect", "value": f["detect_s"] * 1e3, "unit": "ms",
                      "note": f["note"]})
         rows.append({"name": f"{f['name']}: time to recover", "value": f["recover_s"] * 1e3,

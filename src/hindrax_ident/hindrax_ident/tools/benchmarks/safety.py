@@ -435,10 +435,6 @@ class _Hardware:
         times = [t for t in (self.stopped_at, self.feed.expires_at() if ran_out else None) if t is not None]
         return min(times) if times else time.monotonic()
 
-    def arm_watch(self) -> None:
-        self.stopped_at = self.oe_at = None
-        self.watch = True
-
 
 def _config_file(tmp, feed: bool = True) -> str:
     """The shipped vehicle file with /OE wired, no sensors watched, no arming hold (the bench's own file); ``feed``:
@@ -647,7 +643,8 @@ class _Layout:
         else:
             raise RuntimeError(f"the ESC disarmed itself after each of {ARM_ATTEMPTS} arms: {self.rearms[-3:]}")
         self.unknown_at = None
-        self.hw.arm_watch()
+        self.hw.stopped_at = self.hw.oe_at = None
+        self.hw.watch = True
 
 
 @contextmanager

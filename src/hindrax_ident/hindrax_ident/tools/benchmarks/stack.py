@@ -363,9 +363,7 @@ def _launch(duration_s: float, tmp: Path, windows: int = 1) -> dict:
                 action = ActionClient(probe, RunIdentification, "run_identification")
                 switch = _wrench_stream(probe)
 
-                def alive() -> bool:
-                    return _check_alive(procs, tmp)
-
+                alive = functools.partial(_check_alive, procs, tmp)
                 sensors = ("/dvl/data", "/imu/data_raw", "/pressure/fluid_pressure", "/ping/altitude")
                 wait_until(lambda: alive() and all(counts.get(t, 0) > 5 for t in sensors), 120, spin,
                            "every sensor topic recorded")
@@ -895,12 +893,6 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
         if "launch" in layouts:
             launch = _launch(duration_s, tmp, windows=windows)
             launch["types"] = BagReader(launch["bag"]).topics
-    types = dict(launch["types"]) if launch else {}
-    if inproc:
-        types.update(inproc["types"])
-    types.setdefault("/rosout", "rcl_interfaces/msg/Log")
-    types.setdefault("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
-
     nbody_after = nbody_cpu_s()
     nbody_s = (nbody_before + nbody_after) / 2
     rows: list[dict] = [
@@ -926,6 +918,10 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
                 rows.append({"name": "inproc_running_cpu_stack", "value": 100 * ph["stack"], "unit": "% of a core",
                              "note": "one process, identification running surge, recorder on"})
         if baselines:
+            # the topics' types: the launch layout's bag, the graph's publishers, and two of rcl's
+            types = {"/rosout": "rcl_interfaces/msg/Log",
+                     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+                     **(launch["types"] if launch else {}), **inproc["types"]}
             idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
             bare_pub = _bare(idle_spec, base_s)
             idle_msgs = sum(r for *_, r in idle_spec)
