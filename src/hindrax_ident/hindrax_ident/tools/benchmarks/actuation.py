@@ -25,6 +25,7 @@ import numpy as np
 import rclpy
 from domain_coordinator import domain_id
 from geometry_msgs.msg import WrenchStamped
+from std_msgs.msg import Header
 
 from hindrax_drivers.allocation.core import AllocationCore
 from hindrax_drivers.allocation.node import ThrustAllocationNode
@@ -135,11 +136,9 @@ def wrench_to_registers(n_commands: int) -> list[dict]:
             state = {"sent": 0}
 
             def send() -> None:
-                w = levels[state["sent"] % 2]
-                m = WrenchStamped()
-                m.header.frame_id = "base_link"
-                m.header.stamp = driver.get_clock().now().to_msg()
-                m.wrench.force.x = float(w[0])
+                stamp = driver.get_clock().now().to_msg()
+                m = WrenchStamped(header=Header(frame_id="base_link", stamp=stamp))
+                m.wrench.force.x = float(levels[state["sent"] % 2][0])
                 pending.clear()
                 pending.update(t0=time.monotonic(), cpu0=time.process_time(),
                                target=expected[state["sent"] % 2])

@@ -51,9 +51,10 @@ from typing import Any, Callable
 
 import rclpy
 from domain_coordinator import domain_id
-from geometry_msgs.msg import WrenchStamped
+from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
 from rclpy.action import ActionClient
 from rclpy.executors import ShutdownException, TimeoutException
+from std_msgs.msg import Header
 
 from hindrax_drivers.action_goal import GoalSender
 from hindrax_drivers.config import default_config_path
@@ -135,12 +136,8 @@ def _proc_mb(pid: int, key: str) -> float:
 
 
 def _wrench_msg(stamp: Any) -> Any:
-    m = WrenchStamped()
-    m.header.frame_id = "base_link"
-    m.header.stamp = stamp
-    m.wrench.force.x = 6.0
-    m.wrench.torque.z = 0.5
-    return m
+    return WrenchStamped(header=Header(frame_id="base_link", stamp=stamp),
+                         wrench=Wrench(force=Vector3(x=6.0), torque=Vector3(z=0.5)))
 
 
 def _wrench_stream(probe: Any) -> Callable[[bool], None]:
