@@ -683,10 +683,6 @@ def skeleton_rows(launch: dict, skel: dict) -> list[dict]:
     return rows
 
 
-def _spec(rates: dict[str, float], types: dict[str, str]) -> list:
-    return [(t, types[t], r) for t, r in sorted(rates.items()) if r > 0.05 and t in types]
-
-
 # ---------------------------------------------------------------------------------------------- rows
 #: Assumed slowdown of this stack on a Raspberry Pi 4 against this machine (planning figure, not measured on a Pi).
 #: Basis: the Benchmarks Game n-body program in Python, 5 million steps: 158.3 s on a Raspberry Pi 4 Model B at
@@ -919,7 +915,8 @@ def run(quick: bool = False, layouts: tuple[str, ...] = ("inproc", "launch"), wi
             types = {"/rosout": "rcl_interfaces/msg/Log",
                      "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
                      **(launch["types"] if launch else {}), **inproc["types"]}
-            idle_spec = _spec(inproc["phases"]["idle"]["rates"], types)
+            idle_rates = sorted(inproc["phases"]["idle"]["rates"].items())
+            idle_spec = [(t, types[t], r) for t, r in idle_rates if r > 0.05 and t in types]
             bare_pub = _bare(idle_spec, base_s)
             idle_msgs = sum(r for *_, r in idle_spec)
             rows += [
