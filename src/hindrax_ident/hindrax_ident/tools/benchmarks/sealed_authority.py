@@ -2,10 +2,9 @@
 operator requests.
 
 The layout of :func:`hindrax_ident.tools.benchmarks.safety.run_processes` (the ESC node, the
-supervisor and the output
-guard, each in its own process on the vehicle's transport) with the gateway beside them, started as
-``python -m hindrax_drivers.gateway.node`` on the layout's internal domain and a topside domain of its own, with an
-operator key for the vehicle (``HINDRAX_KEYS_DIR``):
+supervisor and the output guard, each in its own process on the vehicle's transport) with the
+gateway beside them, started as ``python -m hindrax_drivers.gateway.node`` on the layout's internal
+domain and a topside domain of its own, with an operator key for the vehicle (``HINDRAX_KEYS_DIR``):
 
 * ``internal_sockets_reachable_from_network``: UDP sockets (:mod:`hindrax_drivers.proc_sockets`) of the ESC,
   supervisor, guard and the gateway's internal process bound outside 127.0.0.1 and the multicast groups (target
@@ -65,9 +64,9 @@ def signing_rows(answers: dict[str, list[bool]]) -> list[dict]:
 def gateway_running(lay, topside: int, keys_dir: str | None = None) -> Iterator[subprocess.Popen]:
     """The gateway (``python -m hindrax_drivers.gateway.node``) beside the layout ``lay``
     (:func:`~hindrax_ident.tools.benchmarks.safety.running_layout`), on its internal domain and the
-    topside domain
-    ``topside`` (LOCALHOST, the shipped file's range), with operator keys from ``keys_dir`` (none: every operator
-    request refused); yields its process once its internal participant has sockets, and stops it on the way out."""
+    topside domain ``topside`` (LOCALHOST, the shipped file's range), with operator keys from
+    ``keys_dir`` (none: every operator request refused); yields its process once its internal
+    participant has sockets, and stops it on the way out."""
     env = dict(lay.env, **({KEYS_DIR_ENV: keys_dir} if keys_dir else {}))
     argv = [lay.py, "-m", "hindrax_drivers.gateway.node", "--ros-args", "--params-file", lay.config,
             "-p", f"topside_domain_id:={topside}"]
