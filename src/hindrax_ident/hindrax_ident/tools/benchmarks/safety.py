@@ -129,7 +129,6 @@ TICK_US = 1.3  # one PCA9685 count at 200 Hz is 1.24 us (docs/devices.md §5.1)
 
 
 def _rig(ctx, sim_time: bool = False):
-
     class TimedEmulator(Pca9685Emulator):
         """Records the monotonic time of the first transaction that leaves every thruster channel at neutral."""
 
@@ -378,7 +377,6 @@ class _Hardware:
     holds it)."""
 
     def __init__(self, sock: str, feed: bool = True) -> None:
-
         hw = self
         self.line_busy = False
 
@@ -462,7 +460,6 @@ class _Layout:
     """The three node processes, restartable, with a probe (commands at 50 Hz, arm/disarm, state) in this one."""
 
     def __init__(self, ctx, did: int, tmp, hw: _Hardware) -> None:
-
         self.ctx, self.tmp, self.hw = ctx, tmp, hw
         self.config = _config_file(tmp, feed=self.feed)
         self.vehicle = load_config(self.config).vehicle.name  # validated like any vehicle file
@@ -535,7 +532,6 @@ class _Layout:
     new_session = False
 
     def start(self, name: str, extra: tuple = ()) -> None:
-
         # scheduled as vehicle.launch.xml starts the safety processes (real-time, nice -5 where refused;
         # docs/deployment.md §1): on a machine shared with other jobs a 0.33 s gap in the guard's feed would be the
         # machine's load, not the failure measured
@@ -556,13 +552,11 @@ class _Layout:
         self.procs[name].send_signal(sig)
 
     def kill(self, name: str) -> None:
-
         p = self.procs.pop(name)
         p.send_signal(_signal.SIGKILL)
         p.wait(10)
 
     def close(self) -> None:
-
         self.commanding = False
         for name in list(self.procs):
             p = self.procs.pop(name)

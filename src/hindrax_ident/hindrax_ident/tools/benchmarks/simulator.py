@@ -26,7 +26,6 @@ from . import spinning
 
 
 def _simulator_rate(duration_s: float) -> tuple[float, float, int]:
-
     cfg = load_config(default_config_path())
     sim = Simulator(cfg)
     sim.reset(position_ned_m=[5.0, 3.0, 0.9])
